@@ -1,0 +1,5 @@
+"""Camera calibration: boards, detection, intrinsic + stereo solve, reports, the ``ghcal`` CLI.
+
+``calibration.formats`` imports and exports foreign calibration files (OpenCV YAML,
+anipose TOML). The rig file itself lives in :mod:`ghnerf_runtime.rig_file`.
+"""

@@ -1,0 +1,173 @@
+"""Validation shared by the foreign-format readers, and the default working volume."""
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+from ghnerf_runtime.errors import GeometryError, RigFileError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+
+DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
+#: Foreign files often print rotations with few digits: rotations whose ``|R R^T - I|``
+#: is within this are accepted and snapped to the nearest rotation (SVD).
+FOREIGN_ROTATION_TOLERANCE = 1e-4
+
+#: Default working volume: distance in front of the cameras and cube side, metres.
+DEFAULT_VOLUME_DISTANCE_M = 2.5
+DEFAULT_VOLUME_SIDE_M = 2.5
+
+
+def show(value: Any, limit: int = 120) -> str:
+    text = np.array2string(value, precision=6, separator=", ") if isinstance(value, np.ndarray) else repr(value)
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def fail(path, field: str | None, message: str) -> RigFileError:
+    return RigFileError(message, path=None if path is None else str(path), field=field)
+
+
+def join(field: str, key: str) -> str:
+    """``cameras[0]`` + ``K`` -> ``cameras[0].K``; an empty parent gives just the key."""
+    return f"{field}.{key}" if field else key
+
+
+def check_units(units_to_metres: float) -> float:
+    value = float(units_to_metres)
+    if not (math.isfinite(value) and value > 0):
+        raise GeometryError(f"units_to_metres must be a positive finite number, got {units_to_metres!r}")
+    return value
+
+
+def as_array(path, field: str, value: Any, shapes: Sequence[tuple[int, ...]], what: str) -> np.ndarray:
+    """``value`` as a finite float array reshaped to the first of ``shapes`` it fits (by size)."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise fail(path, field, f"must be {what}, got {show(value)}") from None
+    for shape in shapes:
+        if arr.size == int(np.prod(shape)) and (arr.ndim <= 1 or arr.shape == shape or 1 in arr.shape):
+            arr = arr.reshape(shape)
+            break
+    else:
+        raise fail(path, field, f"must be {what}, got shape {arr.shape}: {show(arr)}")
+    if not np.all(np.isfinite(arr)):
+        raise fail(path, field, f"must contain only finite numbers, got {show(arr)}")
+    return arr
+
+
+def rotation(path, field: str, value: Any) -> np.ndarray:
+    """A 3x3 rotation matrix, or a Rodrigues 3-vector (converted with ``cv2.Rodrigues``)."""
+    import cv2
+
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.size == 3:
+        arr = as_array(path, field, arr, [(3,)], "a 3x3 rotation matrix or a Rodrigues 3-vector")
+        R, _ = cv2.Rodrigues(arr.reshape(3, 1))
+        return R
+    R = as_array(path, field, arr, [(3, 3)], "a 3x3 rotation matrix or a Rodrigues 3-vector")
+    dev = float(np.abs(R @ R.T - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if dev > FOREIGN_ROTATION_TOLERANCE or abs(det - 1.0) > FOREIGN_ROTATION_TOLERANCE:
+        raise fail(path, field, f"must be a rotation (orthonormal, det +1): max |R R^T - I| = {dev:.3g}, "
+                                f"det = {det:.6g}, got {show(R)}")
+    if dev > 1e-12:
+        u, _, vt = np.linalg.svd(R)
+        R = u @ vt
+    return R
+
+
+def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any, dist: Any, R: Any, t: Any,
+                K_key: str = "K", dist_key: str = "distortion", R_key: str = "R", t_key: str = "T",
+                size_keys: tuple[str, str] = ("width", "height")) -> Camera:
+    """Validate each parameter (errors name ``field.<key>``) and build the camera."""
+    for what, key, v in (("width", size_keys[0], width), ("height", size_keys[1], height)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or v <= 0 or v != int(v):
+            raise fail(path, join(field, key), f"image {what} must be a positive integer, got {show(v)}")
+    K = as_array(path, join(field, K_key), K, [(3, 3)], "a 3x3 camera matrix")
+    if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
+        raise fail(path, join(field, K_key),
+                   f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {show(K)}")
+    try:
+        d = np.asarray(dist if dist is not None else [], dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise fail(path, join(field, dist_key), f"must be a list of numbers, got {show(dist)}") from None
+    if d.size not in DISTORTION_LENGTHS or not np.all(np.isfinite(d)):
+        raise fail(path, join(field, dist_key),
+                   f"must be 0, 4, 5, 8, 12 or 14 finite OpenCV coefficients, got {d.size}: {show(d)}")
+    if d.size == 14 and np.any(d[12:] != 0):
+        raise fail(path, join(field, dist_key), f"tilt terms tx, ty must be 0, got {show(d[12:])}")
+    R = rotation(path, join(field, R_key), R)
+    t = as_array(path, join(field, t_key), t, [(3,)], "a 3-vector")
+    try:
+        return Camera(str(name), int(width), int(height), K, dist=d, R=R, t=t)
+    except GeometryError as e:  # pragma: no cover - checked above
+        raise fail(path, field, str(e)) from e
+
+
+def make_rig(path, cameras: Sequence[Camera], fields: Sequence[str], *, volume: WorkingVolume | None,
+             rig_id: str, metadata: dict, list_field: str) -> Rig:
+    if len(cameras) < 2:
+        raise fail(path, list_field, f"a rig needs at least two cameras, got {len(cameras)}")
+    seen: dict[str, str] = {}
+    for cam, field in zip(cameras, fields):
+        if cam.name in seen:
+            raise fail(path, join(field, "name"), f"duplicate camera name {cam.name!r} (also {seen[cam.name]})")
+        seen[cam.name] = field
+    if volume is not None and not isinstance(volume, WorkingVolume):
+        raise GeometryError(f"volume must be a WorkingVolume or None, got {type(volume).__name__}")
+    return Rig(tuple(cameras), volume if volume is not None else default_working_volume(cameras),
+               rig_id=rig_id, metadata=metadata)
+
+
+def default_working_volume(
+    cameras: Sequence[Camera],
+    *,
+    distance_m: float = DEFAULT_VOLUME_DISTANCE_M,
+    side_m: float = DEFAULT_VOLUME_SIDE_M,
+) -> WorkingVolume:
+    """A working volume for calibrations that carry none: a cube in front of the cameras.
+
+    The cube is axis-aligned in the rig frame, ``side_m`` on a side, centred on:
+
+    1. the point closest (least squares) to the cameras' optical axes, when the axes
+       converge, i.e. the smallest eigenvalue of ``sum_i (I - a_i a_i^T)`` exceeds
+       ``sin^2(2 deg)`` per camera, and that point lies between 0.3 m and 20 m in front of
+       every camera; otherwise
+    2. the mean camera centre plus ``distance_m`` along the mean optical axis (a parallel
+       stereo pair), or the mean camera centre itself when the axes cancel out (cameras
+       facing each other).
+
+    It is a starting point; the calibration tool should let the user edit it.
+
+    Args:
+        cameras: the rig's cameras (at least one), rig frame in metres.
+        distance_m: distance in front of the cameras for the parallel case.
+        side_m: side of the cube.
+
+    Returns:
+        The :class:`WorkingVolume`.
+    """
+    if not cameras:
+        raise GeometryError("default_working_volume needs at least one camera")
+    if not (distance_m > 0 and side_m > 0):
+        raise GeometryError(f"distance_m and side_m must be positive, got {distance_m}, {side_m}")
+    centres = np.stack([c.center for c in cameras])
+    axes = np.stack([c.R[2] for c in cameras])  # optical axes in the rig frame
+    proj = np.eye(3)[None] - axes[:, :, None] * axes[:, None, :]
+    A = proj.sum(axis=0)
+    centre = None
+    if np.linalg.eigvalsh(A)[0] > len(cameras) * np.sin(np.radians(2.0)) ** 2:
+        p = np.linalg.solve(A, np.einsum("cij,cj->i", proj, centres))
+        depth = np.einsum("ci,ci->c", p - centres, axes)
+        if np.all((depth > 0.3) & (depth < 20.0)):
+            centre = p
+    if centre is None:
+        mean_axis = axes.mean(axis=0)
+        norm = np.linalg.norm(mean_axis)
+        centre = centres.mean(axis=0) + (distance_m * mean_axis / norm if norm > 0.5 else 0.0)
+    half = 0.5 * side_m
+    return WorkingVolume(centre - half, centre + half)

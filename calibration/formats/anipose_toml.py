@@ -1,0 +1,201 @@
+"""anipose / aniposelib ``calibration.toml``: read with ``tomllib``, written by a small emitter.
+
+Layout (as aniposelib's ``CameraGroup.dump`` writes it): one table per camera, in file
+order, plus an optional ``[metadata]`` table::
+
+    [cam_0]
+    name = "left"
+    size = [1280, 800]                       # width, height (pixels)
+    matrix = [[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]
+    distortions = [k1, k2, p1, p2, k3]       # OpenCV order
+    rotation = [rx, ry, rz]                  # Rodrigues vector, world -> camera
+    translation = [tx, ty, tz]               # world -> camera, in the board's units
+
+    [metadata]
+    adjusted = false
+    error = 0.31
+
+Keys read per camera table: ``name`` (string or integer; default the table name),
+``size``, ``matrix``, ``distortions``, ``rotation``, ``translation`` (all required) and
+``fisheye`` (if true the file is rejected: the fisheye model is not supported). Other
+keys are ignored. Every top-level table except ``metadata`` is a camera; from
+``metadata`` only an optional ``rig_id`` string is read (our exporter writes it;
+aniposelib ignores it).
+
+Units: anipose's translations are in whatever unit the calibration board was measured
+in (often millimetres), so ``units_to_metres`` is a required argument. The world frame
+is anipose's (usually the first camera or the board), not our floor-origin rig frame.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from calibration.formats._common import as_array, check_units, fail, make_camera, make_rig, show
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import write_text_atomic
+
+_CAMERA_KEYS = ("size", "matrix", "distortions", "rotation", "translation")
+
+__all__ = ["read_anipose_toml", "write_anipose_toml", "dumps_anipose_toml"]
+
+
+def read_anipose_toml(
+    path: str | os.PathLike,
+    *,
+    units_to_metres: float,
+    volume: WorkingVolume | None = None,
+    rig_id: str | None = None,
+) -> Rig:
+    """Read an anipose ``calibration.toml``.
+
+    Args:
+        path: the TOML file.
+        units_to_metres: metres per unit of ``translation`` (0.001 when the board was
+            measured in millimetres). Required: anipose files do not say.
+        volume: the working volume; default :func:`default_working_volume`.
+        rig_id: default ``metadata.rig_id`` from the file, else the file's stem.
+
+    Returns:
+        The :class:`Rig`, cameras in file order, metadata
+        ``{"source": {"format": "anipose-toml", "path", "units_to_metres"}}``.
+
+    Raises:
+        RigFileError: naming the file and the field (``cam_1.matrix``); invalid TOML
+            gives tomllib's line and column.
+    """
+    units = check_units(units_to_metres)
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except OSError as e:
+        raise fail(path, None, f"cannot read: {e.strerror or e}") from e
+    except UnicodeDecodeError as e:
+        raise fail(path, None, f"not UTF-8 text (byte {e.start}): {e.reason}") from e
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise fail(path, None, f"invalid TOML: {e}") from e
+
+    cameras, fields = [], []
+    file_rig_id = None
+    for section, table in doc.items():
+        if not isinstance(table, dict):
+            raise fail(path, section, f"top-level key must be a camera table, got {show(table)}")
+        if section == "metadata":
+            if "rig_id" in table:
+                file_rig_id = table["rig_id"]
+                if not isinstance(file_rig_id, str) or not file_rig_id:
+                    raise fail(path, "metadata.rig_id", f"must be a non-empty string, got {show(file_rig_id)}")
+            continue
+        cameras.append(_camera(path, section, table, units))
+        fields.append(section)
+    metadata = {"source": {"format": "anipose-toml", "path": str(path), "units_to_metres": units}}
+    return make_rig(path, cameras, fields, volume=volume, rig_id=rig_id or file_rig_id or p.stem,
+                    metadata=metadata, list_field="cam_0")
+
+
+def _camera(path, section: str, table: dict, units: float):
+    if table.get("fisheye", False):
+        raise fail(path, f"{section}.fisheye", "the fisheye model is not supported (only the OpenCV pinhole model)")
+    for key in _CAMERA_KEYS:
+        if key not in table:
+            raise fail(path, f"{section}.{key}", f"missing required key {key!r} in camera table [{section}]")
+    name = table.get("name", section)
+    if isinstance(name, bool) or not isinstance(name, (str, int)) or name == "":
+        raise fail(path, f"{section}.name", f"must be a non-empty string, got {show(name)}")
+    size = table["size"]
+    if not isinstance(size, list) or len(size) != 2:
+        raise fail(path, f"{section}.size", f"must be [width, height], got {show(size)}")
+    rvec = as_array(path, f"{section}.rotation", _numbers(path, f"{section}.rotation", table["rotation"]), [(3,)],
+                    "a Rodrigues 3-vector")
+    R, _ = cv2.Rodrigues(rvec.reshape(3, 1))
+    t = as_array(path, f"{section}.translation", _numbers(path, f"{section}.translation", table["translation"]),
+                 [(3,)], "a 3-vector")
+    return make_camera(
+        path, section, name=str(name), width=size[0], height=size[1],
+        K=_numbers(path, f"{section}.matrix", table["matrix"]),
+        dist=_numbers(path, f"{section}.distortions", table["distortions"]),
+        R=R, t=t * units, K_key="matrix", dist_key="distortions", R_key="rotation", t_key="translation",
+        size_keys=("size", "size"),
+    )
+
+
+def _numbers(path, field: str, value: Any) -> Any:
+    """Reject booleans and strings hiding in TOML arrays (numpy would coerce them)."""
+    def walk(v):
+        if isinstance(v, list):
+            for x in v:
+                walk(x)
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise fail(path, field, f"must contain only numbers, got {show(value)}")
+    walk(value)
+    return value
+
+
+# --------------------------------------------------------------------------- writer
+def _toml_string(s: str) -> str:
+    out = ['"']
+    for ch in s:
+        code = ord(ch)
+        if ch == '"':
+            out.append('\\"')
+        elif ch == "\\":
+            out.append("\\\\")
+        elif ch in "\b\t\n\f\r":
+            out.append({"\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}[ch])
+        elif code < 0x20 or code == 0x7F:
+            out.append(f"\\u{code:04X}")
+        else:
+            out.append(ch)
+    out.append('"')
+    return "".join(out)
+
+
+def _toml_float(x: float) -> str:
+    x = float(x)
+    if not math.isfinite(x):
+        raise ValueError(f"non-finite number {x}")
+    text = repr(x)  # shortest round-trip form; always has '.', 'e' or is 'inf'/'nan'
+    return text if any(c in text for c in ".e") else text + ".0"
+
+
+def _toml_array(values) -> str:
+    return "[" + ", ".join(_toml_float(v) for v in values) + "]"
+
+
+def dumps_anipose_toml(rig: Rig, *, units_to_metres: float) -> str:
+    """The ``calibration.toml`` text for ``rig`` (see the module docstring for the layout).
+
+    Args:
+        rig: the rig.
+        units_to_metres: metres per unit of the written ``translation`` (0.001 writes mm).
+    """
+    units = check_units(units_to_metres)
+    lines = [f"# anipose calibration written by ghnerf; translation unit = {units!r} m, rotation = Rodrigues (world -> camera)"]
+    for i, cam in enumerate(rig.cameras):
+        rvec, _ = cv2.Rodrigues(np.ascontiguousarray(cam.R))
+        dist = cam.dist if cam.dist.size else np.zeros(5)
+        lines += [
+            "",
+            f"[cam_{i}]",
+            f"name = {_toml_string(cam.name)}",
+            f"size = [{int(cam.width)}, {int(cam.height)}]",
+            "matrix = [" + ", ".join(_toml_array(row) for row in cam.K) + "]",
+            f"distortions = {_toml_array(dist)}",
+            f"rotation = {_toml_array(rvec.reshape(-1))}",
+            f"translation = {_toml_array(cam.t / units)}",
+        ]
+    lines += ["", "[metadata]", "adjusted = false", f"rig_id = {_toml_string(rig.rig_id)}", ""]
+    return "\n".join(lines)
+
+
+def write_anipose_toml(rig: Rig, path: str | os.PathLike, *, units_to_metres: float) -> None:
+    """Write ``rig`` as an anipose ``calibration.toml`` (atomically); the working volume is not stored."""
+    write_text_atomic(path, dumps_anipose_toml(rig, units_to_metres=units_to_metres))

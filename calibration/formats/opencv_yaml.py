@@ -1,0 +1,324 @@
+"""OpenCV ``FileStorage`` YAML camera files, read and written by ``cv2.FileStorage``.
+
+Three layouts are read; the keys are exactly these (anything else in the file, such as
+``calibration_time`` or ``avg_reprojection_error``, is ignored):
+
+Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level keys:
+    ``camera_matrix`` or ``K``              3x3 matrix (required)
+    ``distortion_coefficients`` or ``D``    Nx1 / 1xN matrix or sequence, N in 0/4/5/8/12/14 (required)
+    ``image_width`` + ``image_height``      integers, or ``image_size`` [w, h]; else the
+                                            ``image_size`` argument (required one way)
+    ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
+    ``T``                                   3-vector, file units (optional, default 0)
+    ``name``                                string (optional; default the file's stem)
+
+Multi-camera (our export; one map per camera, in rig order):
+    ``cameras``     sequence of maps, each with the single-camera keys above; ``R`` and
+                    ``T`` are required there (rig -> camera, ``X_cam = R X + T``), and
+                    ``name`` defaults to ``cam<i>``
+    ``rig_id``      string (optional)
+
+Stereo pair (OpenCV's ``stereo_calib`` sample: ``intrinsics.yml`` + ``extrinsics.yml``):
+    ``M1``, ``D1``, ``M2``, ``D2``   intrinsics of cameras 1 and 2 (required)
+    ``R``, ``T``                     camera 1 -> camera 2 (required; from this file or
+                                     ``extrinsics_path``); ``R1 R2 P1 P2 Q`` are ignored
+    ``image_width`` + ``image_height`` or ``image_size``: optional (stereo_calib writes
+                                     neither, so pass ``image_size``)
+    The rig frame is camera 1's frame; cameras are named ``left`` and ``right``.
+
+Matrices may be ``!!opencv-matrix`` nodes or plain (nested) sequences. Translations are
+multiplied by ``units_to_metres`` on reading and divided by it on writing; OpenCV
+calibrations come out in the units of the board's square size. Writers produce the
+multi-camera / single-camera layouts with 17 significant digits (lossless) and replace
+the file atomically.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+import cv2
+import numpy as np
+
+from calibration.formats._common import as_array, check_units, fail, join, make_camera, make_rig, rotation, show
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import write_text_atomic
+
+_K_KEYS = ("camera_matrix", "K")
+_D_KEYS = ("distortion_coefficients", "D")
+
+__all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "write_opencv_rig"]
+
+
+# --------------------------------------------------------------------------- reading helpers
+def _open(path) -> cv2.FileStorage:
+    p = Path(path)
+    if not p.is_file():
+        raise fail(path, None, "no such file" if not p.exists() else "not a regular file")
+    try:
+        fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
+    except (cv2.error, SystemError) as e:
+        cause = e.__cause__ or e
+        msg = str(cause).split("error: ", 1)[-1].strip()
+        raise fail(path, None, f"cannot parse OpenCV YAML: {msg}") from e
+    if not fs.isOpened():
+        raise fail(path, None, "cannot open as an OpenCV FileStorage file")
+    return fs
+
+
+def _keys(node) -> tuple[str, ...]:
+    return tuple(node.keys()) if node.isMap() else ()
+
+
+def _numeric(node, path, field: str) -> np.ndarray | None:
+    """A number, matrix or (nested) sequence of numbers; None when the node is missing."""
+    if node.empty() or node.isNone():
+        return None
+    if node.isInt() or node.isReal():
+        return np.array(node.real())
+    if node.isString():
+        raise fail(path, field, f"must be a number or a matrix, got the string {node.string()!r}")
+    if node.isMap():
+        if "data" not in _keys(node):
+            raise fail(path, field, f"must be a number or a matrix, got a map with keys {list(_keys(node))}")
+        try:
+            mat = node.mat()
+        except cv2.error as e:
+            msg = str(e).split("error: ", 1)[-1].strip()
+            raise fail(path, field, f"malformed !!opencv-matrix: {msg}") from e
+        if mat is None:  # OpenCV reads a 0-element matrix as None
+            return np.zeros(0)
+        return np.asarray(mat, dtype=np.float64)
+    if node.isSeq():
+        items = [_numeric(node.at(i), path, f"{field}[{i}]") for i in range(node.size())]
+        if any(item is None for item in items):
+            raise fail(path, field, "must be a sequence of numbers, got an empty element")
+        try:
+            return np.array(items, dtype=np.float64)
+        except ValueError:
+            raise fail(path, field, "must be a rectangular (nested) sequence of numbers") from None
+    raise fail(path, field, "must be a number or a matrix")
+
+
+def _pick(node, keys: Sequence[str], path, field: str, required: bool = True) -> tuple[str, Any]:
+    """The one alias of ``keys`` present in map ``node``, and its numeric value."""
+    present = [k for k in keys if k in _keys(node)]
+    if len(present) > 1:
+        raise fail(path, join(field, present[1]), f"both {present[0]!r} and {present[1]!r} are given; use one")
+    if not present:
+        if required:
+            raise fail(path, join(field, keys[0]), f"missing required key {' or '.join(map(repr, keys))}")
+        return keys[0], None
+    key = present[0]
+    value = _numeric(node.getNode(key), path, join(field, key))
+    if value is None:
+        raise fail(path, join(field, key), "is empty")
+    return key, value
+
+
+def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str, str]]:
+    """Width, height and the keys they came from (for error messages)."""
+    keys = _keys(node)
+    if "image_width" in keys or "image_height" in keys:
+        w = _numeric(node.getNode("image_width"), path, join(field, "image_width"))
+        h = _numeric(node.getNode("image_height"), path, join(field, "image_height"))
+        if w is None or h is None:
+            raise fail(path, join(field, "image_width" if w is None else "image_height"), "missing (both image_width and image_height are needed)")
+        if w.size != 1 or h.size != 1:
+            raise fail(path, join(field, "image_width"), f"image_width and image_height must be numbers, got {show(w)}, {show(h)}")
+        return float(w.reshape(-1)[0]), float(h.reshape(-1)[0]), ("image_width", "image_height")
+    if "image_size" in keys:
+        size = _numeric(node.getNode("image_size"), path, join(field, "image_size"))
+        if size is None or size.size != 2:
+            raise fail(path, join(field, "image_size"), f"must be [width, height], got {show(size)}")
+        w, h = (float(v) for v in size.reshape(-1))
+        return w, h, ("image_size", "image_size")
+    if image_size is not None:
+        w, h = image_size
+        return w, h, ("image_size argument", "image_size argument")
+    raise fail(path, join(field, "image_width"),
+               "missing image size: give image_width + image_height or image_size in the file, or the image_size argument")
+
+
+def _string(node, path, field: str) -> str | None:
+    if node.empty() or node.isNone():
+        return None
+    if not node.isString() or not node.string():
+        got = node.real() if node.isInt() or node.isReal() else "an empty or non-scalar node"
+        raise fail(path, field, f"must be a non-empty string, got {got}")
+    return node.string()
+
+
+def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool) -> Camera:
+    name = _string(node.getNode("name"), path, join(field, "name")) if "name" in _keys(node) else None
+    k_key, K = _pick(node, _K_KEYS, path, field)
+    d_key, D = _pick(node, _D_KEYS, path, field)
+    w, h, size_keys = _image_size(node, path, field, image_size)
+    keys = _keys(node)
+    if need_pose or "R" in keys or "T" in keys:
+        _, R = _pick(node, ("R",), path, field)
+        _, T = _pick(node, ("T",), path, field)
+    else:
+        R, T = np.eye(3), np.zeros(3)
+    return make_camera(path, field, name=name or default_name, width=w, height=h, K=K, dist=D, R=R,
+                       t=np.asarray(T, dtype=np.float64) * units, K_key=k_key, dist_key=d_key,
+                       size_keys=size_keys)
+
+
+# --------------------------------------------------------------------------- public readers
+def read_opencv_camera(path: str | os.PathLike, *, name: str | None = None, image_size: tuple[int, int] | None = None,
+                       units_to_metres: float = 1.0) -> Camera:
+    """Read the single-camera layout (see the module docstring for the keys).
+
+    Args:
+        path: the YAML file.
+        name: camera name; default the file's ``name`` key, else the file's stem.
+        image_size: ``(width, height)`` when the file has no image size.
+        units_to_metres: metres per unit of ``T`` in the file.
+
+    Returns:
+        The :class:`Camera` (identity pose unless the file has ``R``/``T``).
+
+    Raises:
+        RigFileError: naming the file and the key, e.g. ``camera_matrix``.
+    """
+    units = check_units(units_to_metres)
+    fs = _open(path)
+    try:
+        root = fs.root()
+        if "cameras" in _keys(root) or "M1" in _keys(root):
+            raise fail(path, None, "this is a multi-camera file; use read_opencv_rig")
+        cam = _camera(root, path, "", default_name=Path(path).stem, image_size=image_size, units=units, need_pose=False)
+    finally:
+        fs.release()
+    return cam if name is None else Camera(name, cam.width, cam.height, cam.K, cam.dist, cam.R, cam.t)
+
+
+def read_opencv_rig(
+    path: str | os.PathLike,
+    *,
+    extrinsics_path: str | os.PathLike | None = None,
+    image_size: tuple[int, int] | None = None,
+    volume: WorkingVolume | None = None,
+    rig_id: str | None = None,
+    units_to_metres: float = 1.0,
+) -> Rig:
+    """Read the multi-camera or the stereo_calib layout (see the module docstring).
+
+    Args:
+        path: the YAML file (``intrinsics.yml`` for the stereo_calib layout).
+        extrinsics_path: stereo_calib's ``extrinsics.yml`` when ``R``/``T`` are not in ``path``.
+        image_size: ``(width, height)`` for cameras whose entry has no image size.
+        volume: the working volume; default :func:`default_working_volume`.
+        rig_id: default the file's ``rig_id``, else the file's stem.
+        units_to_metres: metres per unit of ``T`` in the file.
+
+    Returns:
+        The :class:`Rig`, metadata ``{"source": {"format", "path", "units_to_metres"}}``.
+
+    Raises:
+        RigFileError: naming the file and the field, e.g. ``cameras[1].camera_matrix``.
+    """
+    units = check_units(units_to_metres)
+    fs = _open(path)
+    try:
+        root = fs.root()
+        keys = _keys(root)
+        if "cameras" in keys:
+            layout = "opencv-yaml"
+            seq = root.getNode("cameras")
+            if not seq.isSeq():
+                raise fail(path, "cameras", "must be a sequence of camera maps")
+            cameras, fields = [], []
+            for i in range(seq.size()):
+                field = f"cameras[{i}]"
+                node = seq.at(i)
+                if not node.isMap():
+                    raise fail(path, field, "must be a map of camera keys")
+                cameras.append(_camera(node, path, field, default_name=f"cam{i}", image_size=image_size, units=units,
+                                       need_pose=True))
+                fields.append(field)
+            file_rig_id = _string(root.getNode("rig_id"), path, "rig_id") if "rig_id" in keys else None
+            list_field = "cameras"
+        elif "M1" in keys:
+            layout = "opencv-stereo-calib"
+            cameras, fields = _stereo_calib(fs, path, extrinsics_path, image_size, units)
+            file_rig_id, list_field = None, "M1"
+        else:
+            raise fail(path, None, "no known layout: expected a 'cameras' sequence (multi-camera) or 'M1', 'D1', "
+                                   f"'M2', 'D2', 'R', 'T' (stereo_calib); found keys {list(keys)}")
+    finally:
+        fs.release()
+    metadata = {"source": {"format": layout, "path": str(path), "units_to_metres": units}}
+    return make_rig(path, cameras, fields, volume=volume, rig_id=rig_id or file_rig_id or Path(path).stem,
+                    metadata=metadata, list_field=list_field)
+
+
+def _stereo_calib(fs, path, extrinsics_path, image_size, units) -> tuple[list[Camera], list[str]]:
+    root = fs.root()
+    *size, size_keys = _image_size(root, path, "", image_size)
+    ext_fs, ext_path = (None, path) if extrinsics_path is None else (_open(extrinsics_path), extrinsics_path)
+    try:
+        ext_root = root if ext_fs is None else ext_fs.root()
+        _, R = _pick(ext_root, ("R",), ext_path, "")
+        _, T = _pick(ext_root, ("T",), ext_path, "")
+    finally:
+        if ext_fs is not None:
+            ext_fs.release()
+    # Validate R/T here so that their errors name the file they came from.
+    R = rotation(ext_path, "R", R)
+    T = as_array(ext_path, "T", T, [(3,)], "a 3-vector") * units
+    cams = []
+    for i, (name, rot, trans) in enumerate((("left", np.eye(3), np.zeros(3)), ("right", R, T)), start=1):
+        _, K = _pick(root, (f"M{i}",), path, "")
+        _, D = _pick(root, (f"D{i}",), path, "")
+        cams.append(make_camera(path, "", name=name, width=size[0], height=size[1], K=K, dist=D, R=rot, t=trans,
+                                K_key=f"M{i}", dist_key=f"D{i}", size_keys=size_keys))
+    return cams, ["", ""]
+
+
+# --------------------------------------------------------------------------- writers
+def _write_camera(fs: cv2.FileStorage, cam: Camera, units: float, with_name: bool) -> None:
+    if with_name:
+        fs.write("name", cam.name)
+    fs.write("image_width", int(cam.width))
+    fs.write("image_height", int(cam.height))
+    fs.write("camera_matrix", np.ascontiguousarray(cam.K))
+    fs.write("distortion_coefficients", np.ascontiguousarray(cam.dist.reshape(1, -1)))
+    fs.write("R", np.ascontiguousarray(cam.R))
+    fs.write("T", np.ascontiguousarray((cam.t / units).reshape(3, 1)))
+
+
+def _memory_writer() -> cv2.FileStorage:
+    return cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | cv2.FILE_STORAGE_FORMAT_YAML)
+
+
+def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
+    """Write the multi-camera layout (``rig_id`` + ``cameras``); the working volume is not stored.
+
+    Args:
+        rig: the rig.
+        path: destination, replaced atomically.
+        units_to_metres: metres per unit of the written ``T`` (1.0: metres).
+    """
+    units = check_units(units_to_metres)
+    fs = _memory_writer()
+    fs.writeComment(" ghnerf rig exported as OpenCV YAML; R, T map rig -> camera (X_cam = R X + T)")
+    fs.write("rig_id", rig.rig_id)
+    fs.startWriteStruct("cameras", cv2.FileNode_SEQ)
+    for cam in rig.cameras:
+        fs.startWriteStruct("", cv2.FileNode_MAP)
+        _write_camera(fs, cam, units, with_name=True)
+        fs.endWriteStruct()
+    fs.endWriteStruct()
+    write_text_atomic(path, fs.releaseAndGetString())
+
+
+def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
+    """Write the single-camera layout, plus ``name``, ``R`` and ``T`` (readers that do not know them ignore them)."""
+    units = check_units(units_to_metres)
+    fs = _memory_writer()
+    _write_camera(fs, camera, units, with_name=True)
+    write_text_atomic(path, fs.releaseAndGetString())

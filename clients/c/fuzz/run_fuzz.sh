@@ -1,0 +1,53 @@
+#!/bin/sh
+# Fuzz the C decoder with libFuzzer for a bounded time and report.
+#
+# usage: clients/c/fuzz/run_fuzz.sh [SECONDS]        (default 60)
+#   CC       clang with libFuzzer (default: clang, then clang-14..19)
+#   OUT      work directory (default: clients/c/build/fuzz)
+#
+# Seeds the corpus with the shared vectors, runs with ASan + UBSan, prints the
+# libFuzzer summary and exits 0 if no crash was found, 1 if one was (the
+# reproducer is under $OUT/crashes/), 77 if no libFuzzer-capable clang exists.
+set -eu
+
+secs=${1:-60}
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/../../.." && pwd)
+out=${OUT:-$root/clients/c/build/fuzz}
+
+if [ -z "${CC:-}" ]; then
+    for c in clang clang-19 clang-18 clang-17 clang-16 clang-15 clang-14; do
+        if command -v "$c" >/dev/null 2>&1; then CC=$c; break; fi
+    done
+fi
+if [ -z "${CC:-}" ]; then
+    echo "run_fuzz: no clang found (apt-get install clang); libFuzzer needs clang" >&2
+    exit 77
+fi
+
+mkdir -p "$out/corpus" "$out/crashes"
+if ! "$CC" -g -O1 -std=c99 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
+        -I"$root/clients/c" "$root/clients/c/ghjoints.c" "$here/fuzz_ghjoints.c" \
+        -o "$out/fuzz_ghjoints" 2>"$out/build.log"; then
+    echo "run_fuzz: $CC cannot build with -fsanitize=fuzzer (see $out/build.log)" >&2
+    exit 77
+fi
+cp "$root"/tests/vectors/joint_stream/*.bin "$out/corpus/"
+
+echo "run_fuzz: $CC, ${secs}s, corpus $out/corpus"
+set +e
+"$out/fuzz_ghjoints" -max_total_time="$secs" -print_final_stats=1 -max_len=4096 \
+    -artifact_prefix="$out/crashes/" "$out/corpus" >"$out/fuzz.log" 2>&1
+rc=$?
+set -e
+
+runs=$(grep -E '^stat::number_of_executed_units' "$out/fuzz.log" | awk '{print $2}')
+cov=$(grep -E '^#[0-9]+' "$out/fuzz.log" | tail -1 | sed -n 's/.*cov: \([0-9]*\).*/\1/p')
+crashes=$(find "$out/crashes" -type f | wc -l)
+echo "run_fuzz: executions=${runs:-?} coverage_edges=${cov:-?} corpus=$(ls "$out/corpus" | wc -l) crashes=$crashes exit=$rc"
+if [ "$rc" -ne 0 ] || [ "$crashes" -ne 0 ]; then
+    tail -30 "$out/fuzz.log"
+    echo "run_fuzz: FAILED, reproducers in $out/crashes/" >&2
+    exit 1
+fi
+echo "run_fuzz: OK"

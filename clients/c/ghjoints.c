@@ -1,0 +1,257 @@
+/*
+ * ghjoints.c - joint-stream decoder (see ghjoints.h and docs/protocol.md).
+ *
+ * COBS is decoded one byte at a time into d->buf, so no byte is stored twice
+ * and the frame never needs to be held encoded. Every index into a buffer is
+ * checked against a length first; nothing here allocates.
+ */
+#include "ghjoints.h"
+
+#include <string.h>
+
+/* CRC-16/IBM-3740 by nibbles: a 32-byte table instead of 512, 2 lookups per byte. */
+static const uint16_t crc_nibble[16] = {
+    0x0000, 0x1021, 0x2042, 0x3063, 0x4084, 0x50A5, 0x60C6, 0x70E7,
+    0x8108, 0x9129, 0xA14A, 0xB16B, 0xC18C, 0xD1AD, 0xE1CE, 0xF1EF,
+};
+
+uint16_t ghj_crc16(uint16_t crc, const uint8_t *data, size_t len)
+{
+    size_t i;
+    for (i = 0; i < len; i++) {
+        crc = (uint16_t)((crc << 4) ^ crc_nibble[(crc >> 12) ^ (data[i] >> 4)]);
+        crc = (uint16_t)((crc << 4) ^ crc_nibble[(crc >> 12) ^ (data[i] & 0x0Fu)]);
+    }
+    return crc;
+}
+
+static uint16_t rd_u16(const uint8_t *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
+
+static int16_t rd_i16(const uint8_t *p)
+{
+    uint16_t u = rd_u16(p);
+    /* Portable two's-complement conversion without implementation-defined casts. */
+    return (u & 0x8000u) ? (int16_t)(-(int32_t)(0x10000u - u)) : (int16_t)u;
+}
+
+static uint32_t rd_u32(const uint8_t *p)
+{
+    return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
+}
+
+static uint64_t rd_u64(const uint8_t *p) { return (uint64_t)rd_u32(p) | ((uint64_t)rd_u32(p + 4) << 32); }
+
+static size_t mask_len(size_t count) { return (count + 7u) / 8u; }
+
+static uint8_t bit(const uint8_t *mask, size_t i)
+{
+    unsigned byte = mask[i / 8u];
+    return (uint8_t)((byte >> (unsigned)(i % 8u)) & 1u);
+}
+
+static ghj_result parse_joints(const uint8_t *p, size_t n, ghj_joints *out)
+{
+    size_t i, off, count;
+    if (n < 2u) return GHJ_ERR_MALFORMED;
+    count = p[1];
+    if (count > 64u || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
+    off = 2u + mask_len(count);
+    if (n < off + 7u * count) return GHJ_ERR_MALFORMED;
+    out->joint_set = p[0];
+    out->count = (uint8_t)count;
+    for (i = 0; i < count; i++) {
+        const uint8_t *j = p + off + 7u * i;
+        out->joints[i].x = rd_i16(j);
+        out->joints[i].y = rd_i16(j + 2);
+        out->joints[i].z = rd_i16(j + 4);
+        out->joints[i].conf = j[6];
+        out->joints[i].missing = bit(p + 2, i);
+    }
+    return GHJ_PACKET;
+}
+
+static ghj_result parse_joints2d(const uint8_t *p, size_t n, ghj_joints2d *out)
+{
+    size_t i, off, count;
+    if (n < 3u) return GHJ_ERR_MALFORMED;
+    count = p[2];
+    if (count > 64u || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
+    off = 3u + mask_len(count);
+    if (n < off + 5u * count) return GHJ_ERR_MALFORMED;
+    out->camera = p[0];
+    out->joint_set = p[1];
+    out->count = (uint8_t)count;
+    for (i = 0; i < count; i++) {
+        const uint8_t *j = p + off + 5u * i;
+        out->joints[i].u = rd_i16(j);
+        out->joints[i].v = rd_i16(j + 2);
+        out->joints[i].conf = j[4];
+        out->joints[i].missing = bit(p + 3, i);
+    }
+    return GHJ_PACKET;
+}
+
+static ghj_result parse_status(const uint8_t *p, size_t n, ghj_status *out)
+{
+    if (n < 16u) return GHJ_ERR_MALFORMED;
+    out->fps_centi = rd_u16(p);
+    out->latency_us = rd_u32(p + 2);
+    out->dropped = rd_u32(p + 6);
+    out->decimated = rd_u32(p + 10);
+    out->fault = rd_u16(p + 14);
+    return GHJ_PACKET;
+}
+
+/* Copies a length-prefixed printable-ASCII string at p[*off]; advances *off. */
+static int take_ascii(const uint8_t *p, size_t n, size_t *off, size_t max_len, char *dst)
+{
+    size_t i, len;
+    if (*off + 1u > n) return 0;
+    len = p[*off];
+    if (len > max_len || *off + 1u + len > n) return 0;
+    for (i = 0; i < len; i++) {
+        uint8_t c = p[*off + 1u + i];
+        if (c < 0x20u || c > 0x7Eu) return 0;
+        dst[i] = (char)c;
+    }
+    dst[len] = '\0';
+    *off += 1u + len;
+    return 1;
+}
+
+static ghj_result parse_hello(const uint8_t *p, size_t n, ghj_hello *out)
+{
+    size_t off = 5u, c;
+    if (n < 5u) return GHJ_ERR_MALFORMED;
+    out->protocol_version = p[0];
+    out->joint_set = p[1];
+    out->joint_count = p[2];
+    out->units = p[3];
+    out->frame = p[4];
+    if (out->joint_count > 64u) return GHJ_ERR_MALFORMED;
+    if (!take_ascii(p, n, &off, GHJ_MAX_RIG_ID_LEN, out->rig_id)) return GHJ_ERR_MALFORMED;
+    if (off + 1u > n) return GHJ_ERR_MALFORMED;
+    if (p[off] > GHJ_MAX_CAMERAS) return GHJ_ERR_MALFORMED;
+    out->n_cameras = p[off];
+    off += 1u;
+    for (c = 0; c < out->n_cameras; c++) {
+        if (!take_ascii(p, n, &off, GHJ_MAX_CAMERA_NAME_LEN, out->cameras[c])) return GHJ_ERR_MALFORMED;
+    }
+    return GHJ_PACKET;
+}
+
+ghj_result ghj_parse_packet(const uint8_t *packet, size_t len, ghj_packet *out)
+{
+    const uint8_t *payload;
+    size_t plen;
+    if (len > GHJ_MAX_PACKET_LEN) return GHJ_ERR_OVERSIZE;
+    if (len < GHJ_HEADER_LEN + GHJ_CRC_LEN) return GHJ_ERR_SHORT;
+    if (ghj_crc16(0xFFFFu, packet, len - GHJ_CRC_LEN) != rd_u16(packet + len - GHJ_CRC_LEN)) return GHJ_ERR_CRC;
+    if (packet[0] != GHJ_PROTOCOL_VERSION) return GHJ_ERR_VERSION;
+    out->header.version = packet[0];
+    out->header.msg_type = packet[1];
+    out->header.flags = packet[2];
+    out->header.seq = rd_u32(packet + 3);
+    out->header.capture_us = rd_u64(packet + 7);
+    out->header.send_us = rd_u64(packet + 15);
+    payload = packet + GHJ_HEADER_LEN;
+    plen = len - GHJ_HEADER_LEN - GHJ_CRC_LEN;
+    switch (packet[1]) {
+    case GHJ_MSG_JOINTS: return parse_joints(payload, plen, &out->u.joints);
+    case GHJ_MSG_JOINTS_2D: return parse_joints2d(payload, plen, &out->u.joints2d);
+    case GHJ_MSG_STATUS: return parse_status(payload, plen, &out->u.status);
+    case GHJ_MSG_HELLO: return parse_hello(payload, plen, &out->u.hello);
+    default: return GHJ_SKIPPED; /* the protocol may grow: skip, do not fail */
+    }
+}
+
+void ghj_init(ghj_decoder *d)
+{
+    memset(d, 0, sizeof *d);
+}
+
+static void count_result(ghj_stats *s, ghj_result r)
+{
+    s->frames++;
+    switch (r) {
+    case GHJ_PACKET: s->messages++; break;
+    case GHJ_SKIPPED: s->skipped++; break;
+    case GHJ_ERR_OVERSIZE: s->err_oversize++; break;
+    case GHJ_ERR_COBS: s->err_cobs++; break;
+    case GHJ_ERR_SHORT: s->err_short++; break;
+    case GHJ_ERR_CRC: s->err_crc++; break;
+    case GHJ_ERR_VERSION: s->err_version++; break;
+    case GHJ_ERR_MALFORMED: s->err_malformed++; break;
+    case GHJ_NONE: break;
+    }
+}
+
+static ghj_result end_frame(ghj_decoder *d, ghj_packet *out)
+{
+    ghj_result r;
+    if (d->enc_len == 0u) return GHJ_NONE; /* consecutive delimiters: idle or resync */
+    if (d->enc_len > GHJ_MAX_FRAME_LEN) {
+        r = GHJ_ERR_OVERSIZE;
+    } else if (d->block_left != 0u) {
+        r = GHJ_ERR_COBS;
+    } else if (d->dec_len > GHJ_MAX_PACKET_LEN) {
+        r = GHJ_ERR_OVERSIZE;
+    } else {
+        r = ghj_parse_packet(d->buf, d->dec_len, out);
+    }
+    count_result(&d->stats, r);
+    d->enc_len = 0u;
+    d->dec_len = 0u;
+    d->block_left = 0u;
+    d->zero_pending = 0u;
+    return r;
+}
+
+ghj_result ghj_feed_byte(ghj_decoder *d, uint8_t byte, ghj_packet *out)
+{
+    if (byte == 0u) return end_frame(d, out);
+    if (d->enc_len > GHJ_MAX_FRAME_LEN) return GHJ_NONE; /* already too long: wait for 0x00 */
+    d->enc_len++;
+    if (d->enc_len > GHJ_MAX_FRAME_LEN) return GHJ_NONE;
+    /* dec_len < enc_len <= GHJ_MAX_FRAME_LEN always (the first byte is a code),
+     * so the stores below stay inside buf. */
+    if (d->block_left == 0u) {
+        if (d->zero_pending) d->buf[d->dec_len++] = 0u;
+        d->block_left = (uint8_t)(byte - 1u);
+        d->zero_pending = (uint8_t)(byte != 0xFFu);
+    } else {
+        d->buf[d->dec_len++] = byte;
+        d->block_left--;
+    }
+    return GHJ_NONE;
+}
+
+size_t ghj_feed(ghj_decoder *d, const uint8_t *data, size_t len, ghj_result *result, ghj_packet *out)
+{
+    size_t i;
+    for (i = 0; i < len; i++) {
+        ghj_result r = ghj_feed_byte(d, data[i], out);
+        if (r != GHJ_NONE) {
+            *result = r;
+            return i + 1u;
+        }
+    }
+    *result = GHJ_NONE;
+    return len;
+}
+
+const char *ghj_result_name(ghj_result r)
+{
+    switch (r) {
+    case GHJ_NONE: return "none";
+    case GHJ_PACKET: return "packet";
+    case GHJ_SKIPPED: return "skipped";
+    case GHJ_ERR_OVERSIZE: return "oversize";
+    case GHJ_ERR_COBS: return "cobs";
+    case GHJ_ERR_SHORT: return "short";
+    case GHJ_ERR_CRC: return "crc";
+    case GHJ_ERR_VERSION: return "version";
+    case GHJ_ERR_MALFORMED: return "malformed";
+    }
+    return "unknown";
+}

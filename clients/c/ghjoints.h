@@ -1,0 +1,193 @@
+/*
+ * ghjoints.h - decoder for the joint stream (docs/protocol.md), for firmware.
+ *
+ * C99, no malloc, no stdio, fixed-size buffers. Drop ghjoints.h and ghjoints.c
+ * into a firmware project, feed it the bytes you receive (UART, USB CDC, UDP
+ * payloads, in any chunking) and get decoded packets back. Garbage, corrupted
+ * and truncated frames are reported and skipped; decoding resumes at the next
+ * 0x00 delimiter.
+ *
+ * RAM: one ghj_decoder (about 560 bytes) plus one ghj_packet (about 540 bytes
+ * with GHJ_MAX_JOINTS = 64). Define GHJ_MAX_JOINTS smaller (e.g. 25) before
+ * including this header, identically in every file, to save RAM; packets with
+ * more joints are then reported as GHJ_ERR_MALFORMED.
+ *
+ * Example (see docs/c-decoder.md):
+ *
+ *     static ghj_decoder dec;
+ *     static ghj_packet pkt;
+ *     ghj_init(&dec);
+ *     for (;;) {
+ *         int c = uart_getc_nonblocking();
+ *         if (c < 0) continue;
+ *         if (ghj_feed_byte(&dec, (uint8_t)c, &pkt) == GHJ_PACKET
+ *             && pkt.header.msg_type == GHJ_MSG_JOINTS) {
+ *             drive_servos(&pkt.u.joints);
+ *         }
+ *     }
+ */
+#ifndef GHJOINTS_H
+#define GHJOINTS_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define GHJ_PROTOCOL_VERSION 1u
+#define GHJ_HEADER_LEN 23u
+#define GHJ_CRC_LEN 2u
+#define GHJ_MAX_PACKET_LEN 512u /* decoded packet: header + payload + CRC */
+#define GHJ_MAX_FRAME_LEN 515u  /* COBS-encoded bytes between delimiters */
+#ifndef GHJ_MAX_JOINTS
+#define GHJ_MAX_JOINTS 64u
+#endif
+#define GHJ_MAX_RIG_ID_LEN 32u
+#define GHJ_MAX_CAMERAS 8u
+#define GHJ_MAX_CAMERA_NAME_LEN 16u
+
+/* Message types (header byte 1). */
+#define GHJ_MSG_HELLO 0x01u
+#define GHJ_MSG_STATUS 0x02u
+#define GHJ_MSG_JOINTS 0x10u
+#define GHJ_MSG_JOINTS_2D 0x11u
+
+/* Header flags (header byte 2). */
+#define GHJ_FLAG_DECIMATED 0x01u /* sender skips frames on purpose to fit the link */
+#define GHJ_FLAG_DROPPED 0x02u   /* sender dropped frames since the previous JOINTS */
+
+/* STATUS fault codes. */
+#define GHJ_FAULT_OK 0u
+#define GHJ_FAULT_RATE_LIMITED 1u
+#define GHJ_FAULT_QUEUE_OVERFLOW 2u
+#define GHJ_FAULT_LINK_ERRORS 3u
+#define GHJ_FAULT_ESTIMATOR_STALLED 4u
+#define GHJ_FAULT_CAMERA_FAULT 5u
+
+/* What one call produced. Errors are negative; each frame gives exactly one
+ * non-GHJ_NONE result. The checks run in the order listed. */
+typedef enum {
+    GHJ_NONE = 0,            /* no complete frame yet, or an empty frame */
+    GHJ_PACKET = 1,          /* *out holds a decoded message */
+    GHJ_SKIPPED = 2,         /* valid packet of a type this decoder does not know */
+    GHJ_ERR_OVERSIZE = -1,   /* frame > GHJ_MAX_FRAME_LEN or packet > GHJ_MAX_PACKET_LEN */
+    GHJ_ERR_COBS = -2,       /* frame ended inside a COBS block */
+    GHJ_ERR_SHORT = -3,      /* shorter than header + CRC */
+    GHJ_ERR_CRC = -4,        /* CRC-16/IBM-3740 mismatch */
+    GHJ_ERR_VERSION = -5,    /* protocol version other than GHJ_PROTOCOL_VERSION */
+    GHJ_ERR_MALFORMED = -6   /* payload shorter than its fields, or a field out of range */
+} ghj_result;
+
+typedef struct {
+    uint8_t version;
+    uint8_t msg_type;
+    uint8_t flags;
+    uint32_t seq;        /* frame sequence; gaps = frames that did not arrive */
+    uint64_t capture_us; /* capture time, sender's monotonic microseconds */
+    uint64_t send_us;    /* time the sender wrote the packet, same clock */
+} ghj_header;
+
+typedef struct {
+    int16_t x, y, z; /* millimetres, rig frame: x right, y down, z forward */
+    uint8_t conf;    /* 1..255 when present, 0 when missing */
+    uint8_t missing; /* 1 = not estimated; x, y, z are 0 */
+} ghj_joint3d;
+
+typedef struct {
+    int16_t u, v; /* pixels * 4 */
+    uint8_t conf;
+    uint8_t missing;
+} ghj_joint2d;
+
+typedef struct {
+    uint8_t joint_set; /* 0 = BODY_25 */
+    uint8_t count;
+    ghj_joint3d joints[GHJ_MAX_JOINTS];
+} ghj_joints;
+
+typedef struct {
+    uint8_t camera;
+    uint8_t joint_set;
+    uint8_t count;
+    ghj_joint2d joints[GHJ_MAX_JOINTS];
+} ghj_joints2d;
+
+typedef struct {
+    uint16_t fps_centi;
+    uint32_t latency_us;
+    uint32_t dropped;
+    uint32_t decimated;
+    uint16_t fault;
+} ghj_status;
+
+typedef struct {
+    uint8_t protocol_version;
+    uint8_t joint_set;
+    uint8_t joint_count;
+    uint8_t units; /* 0 = millimetres */
+    uint8_t frame; /* 0 = rig frame */
+    char rig_id[GHJ_MAX_RIG_ID_LEN + 1]; /* NUL-terminated printable ASCII */
+    uint8_t n_cameras;
+    char cameras[GHJ_MAX_CAMERAS][GHJ_MAX_CAMERA_NAME_LEN + 1];
+} ghj_hello;
+
+typedef struct {
+    ghj_header header;
+    union {
+        ghj_joints joints;     /* header.msg_type == GHJ_MSG_JOINTS */
+        ghj_joints2d joints2d; /* GHJ_MSG_JOINTS_2D */
+        ghj_status status;     /* GHJ_MSG_STATUS */
+        ghj_hello hello;       /* GHJ_MSG_HELLO */
+    } u;
+} ghj_packet;
+
+typedef struct {
+    uint32_t frames; /* non-empty frames = sum of the counters below */
+    uint32_t messages;
+    uint32_t skipped;
+    uint32_t err_oversize;
+    uint32_t err_cobs;
+    uint32_t err_short;
+    uint32_t err_crc;
+    uint32_t err_version;
+    uint32_t err_malformed;
+} ghj_stats;
+
+typedef struct {
+    uint8_t buf[GHJ_MAX_FRAME_LEN]; /* decoded bytes of the frame in progress */
+    uint16_t enc_len;               /* encoded bytes seen; GHJ_MAX_FRAME_LEN + 1 = too long */
+    uint16_t dec_len;
+    uint8_t block_left;   /* data bytes left in the current COBS block; 0 = next is a code */
+    uint8_t zero_pending; /* previous block implies a 0x00 if more data follows */
+    ghj_stats stats;
+} ghj_decoder;
+
+/* Reset the decoder (also use after a link reconnects). */
+void ghj_init(ghj_decoder *d);
+
+/* Feed one received byte. Returns GHJ_NONE until a frame ends; *out is written
+ * only when GHJ_PACKET is returned. */
+ghj_result ghj_feed_byte(ghj_decoder *d, uint8_t byte, ghj_packet *out);
+
+/* Feed up to len bytes, stopping after the first byte that ends a frame.
+ * Returns the number of bytes consumed; *result is that frame's result, or
+ * GHJ_NONE if all bytes were consumed without a frame ending. */
+size_t ghj_feed(ghj_decoder *d, const uint8_t *data, size_t len, ghj_result *result, ghj_packet *out);
+
+/* Decode one already COBS-decoded packet (header + payload + CRC). */
+ghj_result ghj_parse_packet(const uint8_t *packet, size_t len, ghj_packet *out);
+
+/* CRC-16/IBM-3740: poly 0x1021, init 0xFFFF, no reflection, no xorout.
+ * Start with crc = 0xFFFF; ghj_crc16(0xFFFF, "123456789", 9) == 0x29B1. */
+uint16_t ghj_crc16(uint16_t crc, const uint8_t *data, size_t len);
+
+/* "packet", "skipped", "oversize", "cobs", ... (for logs). */
+const char *ghj_result_name(ghj_result r);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* GHJOINTS_H */

@@ -1,0 +1,28 @@
+"""Camera drivers: ``open_rig(url)`` gives synchronised frame pairs from a calibrated two-camera rig.
+
+Backends (imported only when chosen): ``sim://`` (simulated rig filming a synthetic person),
+``replay://DIR`` (a recording), ``record+<url>`` (record while passing through),
+``depthai://[device-id]`` (Luxonis OAK through depthai 3.x).
+"""
+from drivers.base import RigSource
+from drivers.clock import ManualClock, MonotonicClock
+from drivers.errors import (
+    BackendNotAvailableError,
+    DriverError,
+    EndOfStream,
+    RigConfigError,
+    RigDisconnectedError,
+    RigInitializationError,
+    RigOperationError,
+    RigTimeoutError,
+)
+from drivers.frames import CameraTruth, Frame, FramePair
+from drivers.pairing import DropPolicy, PairingConfig, PairingStats
+from drivers.registry import BACKENDS, create_rig_source, open_rig
+
+__all__ = [
+    "BACKENDS", "BackendNotAvailableError", "CameraTruth", "DriverError", "DropPolicy", "EndOfStream",
+    "Frame", "FramePair", "ManualClock", "MonotonicClock", "PairingConfig", "PairingStats",
+    "RigConfigError", "RigDisconnectedError", "RigInitializationError", "RigOperationError",
+    "RigSource", "RigTimeoutError", "create_rig_source", "open_rig",
+]

@@ -1,0 +1,102 @@
+"""Everything that needs an attached device, behind one small interface.
+
+:class:`DeviceLink` is what :class:`~drivers.backends.depthai.source.DepthaiRigSource`
+needs from a device: start the stereo pipeline, read the calibration, hand over
+the next Sync group, stop. :class:`DaiDeviceLink` implements it with depthai.
+Tests implement it with a host-only depthai pipeline (tests/drivers), which
+exercises the same Sync stage and message types without hardware.
+
+Links raise depthai's own exceptions; the source converts them at its boundary.
+"""
+from __future__ import annotations
+
+import datetime
+import logging
+from dataclasses import dataclass
+from typing import Protocol
+
+import depthai as dai
+
+from drivers.backends.depthai.options import board_socket
+from drivers.backends.depthai.pipeline import build_sync_stage
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class StereoRequest:
+    """What to stream: which device and sockets, at what rate and size, synced how tightly."""
+
+    device_id: str | None
+    left: str
+    right: str
+    fps: float
+    width: int
+    height: int
+    tolerance_ms: float
+    queue_size: int
+
+
+class DeviceLink(Protocol):
+    """A started stereo stream on one device."""
+
+    def start(self, request: StereoRequest) -> None:
+        """Connect, build the pipeline (two cameras -> Sync -> host queue) and start it."""
+
+    def device_id(self) -> str:
+        """The connected device's id (for the rig id and logs)."""
+
+    def calibration(self) -> dai.CalibrationHandler:
+        """The device's calibration (EEPROM)."""
+
+    def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
+        """The next synced group with ``left`` and ``right`` ImgFrames, or ``None`` after ``timeout_s``."""
+
+    def close(self) -> None:
+        """Stop the pipeline and release the device. Safe to call more than once."""
+
+
+class DaiDeviceLink:
+    """:class:`DeviceLink` on a real OAK device through depthai 3.x."""
+
+    def __init__(self) -> None:
+        self._device: dai.Device | None = None
+        self._pipeline: dai.Pipeline | None = None
+        self._queue: dai.MessageQueue | None = None
+
+    def start(self, request: StereoRequest) -> None:
+        self._device = dai.Device(request.device_id) if request.device_id else dai.Device()
+        pipeline = dai.Pipeline(self._device)
+        self._pipeline = pipeline
+        outputs = []
+        for socket in (request.left, request.right):
+            cam = pipeline.create(dai.node.Camera).build(board_socket(socket), sensorFps=request.fps)
+            outputs.append(
+                cam.requestOutput((request.width, request.height), resizeMode=dai.ImgResizeMode.CROP, fps=request.fps)
+            )
+        self._queue = build_sync_stage(
+            pipeline, outputs[0], outputs[1], tolerance_ms=request.tolerance_ms, queue_size=request.queue_size
+        )
+        pipeline.start()
+        log.info("depthai device %s streaming %s+%s at %.0f fps", self.device_id(), request.left, request.right, request.fps)
+
+    def device_id(self) -> str:
+        return self._device.getDeviceId() if self._device is not None else ""
+
+    def calibration(self) -> dai.CalibrationHandler:
+        assert self._device is not None, "start() first"
+        return self._device.readCalibration()
+
+    def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
+        assert self._queue is not None, "start() first"
+        return self._queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
+
+    def close(self) -> None:
+        pipeline, device = self._pipeline, self._device
+        self._pipeline = self._device = self._queue = None
+        try:
+            if pipeline is not None:
+                pipeline.stop()
+        finally:
+            if device is not None:
+                device.close()

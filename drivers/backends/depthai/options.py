@@ -1,0 +1,89 @@
+"""URL options of ``depthai://``, validated once into :class:`DepthaiOptions`.
+
+``depthai://[device-id]?left=CAM_B&right=CAM_C&fps=30&width=640&height=400``
+
+* target: a device id (MX id / serial) or name; empty = the first device found.
+* ``left``, ``right``: board sockets of the stereo pair (``CAM_A`` .. ``CAM_J``);
+  the first is the rig's first camera. Default ``CAM_B`` / ``CAM_C`` (OAK-D mono pair).
+* ``fps`` (30), ``width`` (640), ``height`` (400): output stream; the sensor image
+  is centre-cropped to the output aspect ratio, then scaled.
+* ``mount_height``: height of the cameras above the floor, metres (default 1.0,
+  logged as an assumption): places the rig frame's origin on the floor (see
+  :mod:`.calibration`). ``height`` is the image height, hence the name.
+* ``rig``: path to a rig file to use instead of the device's calibration.
+* ``tolerance_ms``, ``policy``: pairing; the Sync node's threshold is ``tolerance_ms``.
+* ``queue``: depth of the host output queue (default 4; older groups are dropped).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import depthai as dai
+
+from drivers.errors import RigConfigError
+from drivers.pairing import DropPolicy, PairingConfig
+from drivers.url import RigUrl
+
+DEFAULT_MOUNT_HEIGHT_M = 1.0
+_SOCKETS = tuple(name for name in dai.CameraBoardSocket.__members__ if name.startswith("CAM_"))
+
+
+def board_socket(name: str) -> dai.CameraBoardSocket:
+    """The ``dai.CameraBoardSocket`` called ``name`` (``CAM_B``...)."""
+    return dai.CameraBoardSocket.__members__[name]
+
+
+@dataclass(frozen=True)
+class DepthaiOptions:
+    """Validated ``depthai://`` options (see the module docstring)."""
+
+    device_id: str | None = None
+    left: str = "CAM_B"
+    right: str = "CAM_C"
+    fps: float = 30.0
+    width: int = 640
+    height: int = 400
+    mount_height_m: float | None = None  # None: not given (DEFAULT_MOUNT_HEIGHT_M is assumed)
+    rig_path: Path | None = None
+    queue_size: int = 4
+    pairing: PairingConfig = PairingConfig()
+
+    @classmethod
+    def from_url(cls, url: RigUrl) -> "DepthaiOptions":
+        ids = [part for part in url.target.split(",") if part]
+        if len(ids) > 1:
+            raise RigConfigError(
+                f"rig URL {url.url!r}: two-device rigs (depthai://ID1,ID2) are not supported by this build; "
+                "use one device's stereo pair"
+            )
+        left = url.take_str("left", "CAM_B", choices=_SOCKETS) or "CAM_B"
+        right = url.take_str("right", "CAM_C", choices=_SOCKETS) or "CAM_C"
+        if left == right:
+            raise RigConfigError(f"rig URL {url.url!r}: options left and right name the same socket {left}")
+        fps = url.take_float("fps", 30.0, lo=1.0, hi=240.0)
+        width = url.take_int("width", 640, lo=16, hi=8192)
+        height = url.take_int("height", 400, lo=16, hi=8192)
+        mount = url.options.get("mount_height")
+        mount_height = url.take_float("mount_height", DEFAULT_MOUNT_HEIGHT_M, lo=0.0, hi=10.0)
+        rig = url.take_str("rig")
+        if rig is not None and mount is not None:
+            raise RigConfigError(
+                f"rig URL {url.url!r}: give rig= (a rig file) or mount_height= (with the device calibration), not both"
+            )
+        tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=1000.0)
+        policy = url.take_str("policy", DropPolicy.LATEST.value, choices=tuple(p.value for p in DropPolicy))
+        queue_size = url.take_int("queue", 4, lo=1, hi=64)
+        url.finish()
+        return cls(
+            device_id=ids[0] if ids else None,
+            left=left,
+            right=right,
+            fps=fps,
+            width=width,
+            height=height,
+            mount_height_m=mount_height if mount is not None else None,
+            rig_path=Path(rig) if rig else None,
+            queue_size=queue_size,
+            pairing=PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)),
+        )

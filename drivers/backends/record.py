@@ -1,0 +1,279 @@
+"""``record+<url>``: pass frames through from any backend while writing them as a recording.
+
+pyserial's ``spy://`` idea: the recorder wraps the inner source, hands every frame
+on unchanged and copies it to a directory that ``replay://`` plays back
+(layout: docs/recording-format.md).
+
+URL syntax: the recorder's own options sit in the same query as the inner
+backend's and are removed before the inner URL is parsed::
+
+    record+sim://?fps=30&seed=3&out=/data/take1
+    record+depthai://?fps=30&out=/data/take2&image_format=jpg&jpeg_quality=90
+
+Recorder options (inner backends never see them, so none may reuse these names):
+
+* ``out`` (required, or the ``out=`` keyword argument): the directory; it must
+  not exist or be empty.
+* ``image_format``: ``png`` (default, lossless) or ``jpg``.
+* ``jpeg_quality``: 1..100 (default 95).
+* ``write_queue``: frames buffered for the writers (default 64).
+* ``writers``: writer threads (default 2; encoding releases the GIL).
+
+Recording never stalls the reader: frames go into a bounded queue drained by
+writer threads; when it is full the frame is not recorded and counted in
+``stats.writes_dropped``. Every frame the inner camera delivered is recorded,
+paired or not, so a replay meets the same pairing situations. A write failure
+(disk full...) is raised once from the next ``read()`` as
+:class:`RigOperationError`; after that frames pass through unrecorded.
+"""
+from __future__ import annotations
+
+import datetime
+import logging
+import queue
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import quote, urlencode
+
+from drivers.base import RigSource
+from drivers.backends.recording_format import (
+    IMAGE_FORMATS,
+    FRAMES,
+    FrameRow,
+    Manifest,
+    camera_dir_name,
+    encode_image,
+    frame_has_truth,
+    write_manifest,
+    write_truth,
+)
+from drivers.errors import RigConfigError, RigInitializationError, RigOperationError
+from drivers.frames import Frame
+from drivers.pairing import PairingStats
+from drivers.url import RigUrl
+
+log = logging.getLogger(__name__)
+
+#: Options the recorder consumes from the URL.
+RECORD_OPTIONS = ("out", "image_format", "jpeg_quality", "write_queue", "writers")
+
+
+@dataclass(frozen=True)
+class RecordOptions:
+    """How and where to record (see the module docstring for the URL options)."""
+
+    out: Path
+    image_format: str = "png"
+    jpeg_quality: int = 95
+    write_queue: int = 64
+    writers: int = 2
+
+    @classmethod
+    def take_from(cls, url: RigUrl, out: str | Path | None = None) -> "RecordOptions":
+        """Consume the recorder's options from ``url`` (the ``out`` keyword wins over ``out=``)."""
+        url_out = url.take_str("out")
+        target = out if out is not None else url_out
+        if not target:
+            raise RigConfigError(f"rig URL 'record+{url.url}': option out=DIR (the recording directory) is required")
+        return cls(
+            out=Path(target),
+            image_format=url.take_str("image_format", "png", choices=tuple(IMAGE_FORMATS)) or "png",
+            jpeg_quality=url.take_int("jpeg_quality", 95, lo=1, hi=100),
+            write_queue=url.take_int("write_queue", 64, lo=1, hi=10_000),
+            writers=url.take_int("writers", 2, lo=1, hi=16),
+        )
+
+
+@dataclass
+class RecordingStats(PairingStats):
+    """Pairing counters plus what the recorder wrote and what it had to skip."""
+
+    frames_written: int = 0
+    writes_dropped: int = 0
+
+
+def inner_url_text(url: RigUrl) -> str:
+    """The URL text for what is left of ``url`` once the recorder took its options."""
+    text = f"{url.scheme}://{quote(url.target, safe='/:,@')}"
+    return f"{text}?{urlencode(url.options)}" if url.options else text
+
+
+class RecordingWriter:
+    """Writes frames into a recording directory from worker threads fed by a bounded queue."""
+
+    def __init__(self, directory: Path, manifest: Manifest, options: RecordOptions) -> None:
+        self.directory = directory
+        self.manifest = manifest
+        self.options = options
+        self.frames_written = 0
+        self.writes_dropped = 0
+        self.error: BaseException | None = None
+        self._queue: queue.Queue[tuple[Frame, FrameRow] | None] = queue.Queue(options.write_queue)
+        self._per_camera: dict[str, int] = {}
+        self._journal_lock = threading.Lock()
+        self._journal = None
+        self._threads: list[threading.Thread] = []
+
+    def start(self) -> None:
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+            if any(self.directory.iterdir()):
+                raise RigInitializationError(
+                    f"recording directory {self.directory} is not empty; choose a new out= directory"
+                )
+            for cam in self.manifest.rig.names:
+                name = camera_dir_name(self.manifest.rig, cam)
+                (self.directory / "images" / name).mkdir(parents=True)
+                (self.directory / "truth" / name).mkdir(parents=True)
+            self._journal = open(self.directory / FRAMES, "a", encoding="utf-8")
+        except OSError as e:
+            raise RigInitializationError(f"cannot create recording directory {self.directory}: {e}") from e
+        write_manifest(self.directory, self.manifest)
+        for i in range(self.options.writers):
+            thread = threading.Thread(target=self._run, name=f"rig-recorder-{i}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        log.info("recording to %s (%s images)", self.directory, self.options.image_format)
+
+    def submit(self, frame: Frame) -> None:
+        """Queue ``frame`` for writing; never blocks (a full queue or a failed writer drops it, counted)."""
+        if self.error is not None:
+            self.writes_dropped += 1
+            return
+        n = self._per_camera.get(frame.camera, 0)
+        cam_dir = camera_dir_name(self.manifest.rig, frame.camera)
+        ext = IMAGE_FORMATS[self.options.image_format]
+        row = FrameRow(
+            camera=frame.camera,
+            index=frame.index,
+            timestamp_ns=frame.timestamp_ns,
+            image=f"images/{cam_dir}/{n:08d}{ext}",
+            truth=f"truth/{cam_dir}/{n:08d}.npz" if frame_has_truth(frame) else None,
+            scene_time_s=frame.scene_time_s,
+        )
+        try:
+            self._queue.put_nowait((frame, row))
+        except queue.Full:
+            self.writes_dropped += 1
+            return
+        self._per_camera[frame.camera] = n + 1
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            if self.error is not None:
+                continue  # drain without writing: the recording already failed
+            frame, row = item
+            try:
+                data = encode_image(frame.image, self.options.image_format, self.options.jpeg_quality)
+                (self.directory / row.image).write_bytes(data)
+                if row.truth is not None:
+                    write_truth(self.directory / row.truth, frame.truth, frame.joints_3d)
+                with self._journal_lock:  # the row goes in only once its files are complete
+                    assert self._journal is not None
+                    self._journal.write(row.to_json() + "\n")
+                    self._journal.flush()
+                    self.frames_written += 1
+            except BaseException as e:  # noqa: BLE001 - reported to the reader thread, see module doc
+                log.error("recording to %s failed at %s: %s", self.directory, row.image, e)
+                self.error = e
+
+    def close(self, counters: dict) -> None:
+        """Write what is queued, then finalise the manifest (``complete: true``)."""
+        for _ in self._threads:
+            self._queue.put(None)
+        for thread in self._threads:
+            thread.join()
+        if self._journal is not None:
+            self._journal.close()
+        self.manifest.complete = self.error is None
+        self.manifest.counters = dict(counters, frames_written=self.frames_written, writes_dropped=self.writes_dropped)
+        write_manifest(self.directory, self.manifest)
+        log.info(
+            "recording %s closed: %d frames written, %d dropped", self.directory, self.frames_written, self.writes_dropped
+        )
+
+
+class RecordingRigSource(RigSource):
+    """Any rig source, recorded as it is read. Build it with ``record+<url>`` (see the module docstring).
+
+    Args:
+        inner: the (unopened) source to record.
+        options: where and how to record.
+    """
+
+    scheme = "record"
+
+    def __init__(self, inner: RigSource, options: RecordOptions, *, source_url: str = "") -> None:
+        # The inner source's rig may only be known once it is open (depthai): adopted in _open().
+        super().__init__(inner._rig, pairing=inner.pairing, clock=inner.clock)
+        self.inner = inner
+        self.options = options
+        self._source_url = source_url
+        self._writer: RecordingWriter | None = None
+        self._reported_error = False
+
+    @classmethod
+    def wrap(cls, inner_url: RigUrl, factory: Callable[..., RigSource], **kwargs) -> "RecordingRigSource":
+        """Take the recorder's options out of ``inner_url`` and build the inner source with ``factory``.
+
+        Keyword arguments go to the inner backend, except ``out`` (the recording directory).
+        """
+        options = RecordOptions.take_from(inner_url, kwargs.pop("out", None))
+        text = inner_url_text(inner_url)
+        return cls(factory(text, **kwargs), options, source_url=text)
+
+    @classmethod
+    def from_url(cls, url: RigUrl, **kwargs) -> "RecordingRigSource":
+        raise RigConfigError(
+            f"rig URL {url.url!r}: the recorder wraps another URL: write record+<url>, e.g. record+sim://?out=DIR"
+        )
+
+    @property
+    def stats(self) -> RecordingStats:
+        base = super().stats
+        writer = self._writer
+        return RecordingStats(
+            **vars(base),
+            frames_written=writer.frames_written if writer else 0,
+            writes_dropped=writer.writes_dropped if writer else 0,
+        )
+
+    def _open(self) -> None:
+        self.inner.open()
+        try:
+            self._set_rig(self.inner.rig)
+            manifest = Manifest(
+                rig=self.inner.rig,
+                image_format=self.options.image_format,
+                source=self._source_url,
+                created_utc=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            )
+            self._writer = RecordingWriter(self.options.out, manifest, self.options)
+            self._writer.start()
+        except BaseException:
+            self.inner.close()
+            raise
+
+    def _read_frame(self, timeout_s: float) -> Frame | None:
+        writer = self._writer
+        assert writer is not None
+        if writer.error is not None and not self._reported_error:
+            self._reported_error = True
+            raise RigOperationError(f"recording to {writer.directory} failed: {writer.error}") from writer.error
+        frame = self.inner._read_frame(timeout_s)
+        if frame is not None:
+            writer.submit(frame)
+        return frame
+
+    def _close(self) -> None:
+        try:
+            self.inner.close()
+        finally:
+            if self._writer is not None:
+                counters = {k: v for k, v in vars(super().stats).items()}
+                self._writer.close(counters)

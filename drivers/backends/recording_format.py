@@ -1,0 +1,277 @@
+"""The on-disk layout of a rig recording (docs/recording-format.md), shared by ``record+`` and ``replay://``.
+
+A recording is a directory::
+
+    manifest.json        format, version, rig (rig-file dict), image format, source, complete flag, counters
+    frames.jsonl         one JSON row per frame, appended as frames are written
+    images/<camera>/00000000.png   (or .jpg)
+    truth/<camera>/00000000.npz    ground truth, when the source had it
+
+Rows live in a JSON-lines journal rather than inside ``manifest.json`` so that a
+recording cut short (power loss, crash) keeps every frame written so far and
+nothing is rewritten per frame. Every load error names the file and the field.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from drivers.errors import RigInitializationError, RigOperationError
+from drivers.frames import CameraTruth, Frame
+from ghnerf_runtime.errors import RigFileError
+from ghnerf_runtime.geometry import Rig
+from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
+
+FORMAT = "ghnerf-rig-recording"
+VERSION = 1
+MANIFEST = "manifest.json"
+FRAMES = "frames.jsonl"
+IMAGE_FORMATS = {"png": ".png", "jpg": ".jpg"}
+_TRUTH_FIELDS = ("joints_2d", "visible", "mask", "depth", "part_labels")
+_MANIFEST_KEYS = ("format", "version", "rig", "image_format", "source", "created_utc", "complete", "counters")
+_ROW_KEYS = ("camera", "index", "timestamp_ns", "image", "truth", "scene_time_s")
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+@dataclass(frozen=True)
+class FrameRow:
+    """One line of ``frames.jsonl``: where one frame's image and truth are, and when it was captured."""
+
+    camera: str
+    index: int
+    timestamp_ns: int
+    image: str  # path relative to the recording directory
+    truth: str | None = None  # npz path relative to the recording directory
+    scene_time_s: float | None = None
+
+    def to_json(self) -> str:
+        return json.dumps(
+            {
+                "camera": self.camera,
+                "index": self.index,
+                "timestamp_ns": self.timestamp_ns,
+                "image": self.image,
+                "truth": self.truth,
+                "scene_time_s": self.scene_time_s,
+            },
+            allow_nan=False,
+        )
+
+
+@dataclass
+class Manifest:
+    """Everything about a recording except the frame rows."""
+
+    rig: Rig
+    image_format: str = "png"
+    source: str = ""
+    created_utc: str = ""
+    complete: bool = False  # set when the recorder closed cleanly
+    counters: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "rig": rig_to_dict(self.rig),
+            "image_format": self.image_format,
+            "source": self.source,
+            "created_utc": self.created_utc,
+            "complete": self.complete,
+            "counters": self.counters,
+        }
+
+
+def camera_dir_name(rig: Rig, camera: str) -> str:
+    """A file-system-safe directory name for a camera (its name, or ``cam<i>`` when the name is unsafe)."""
+    if _SAFE_NAME.match(camera) and camera not in (".", ".."):
+        return camera
+    return f"cam{rig.names.index(camera)}"
+
+
+def write_manifest(directory: Path, manifest: Manifest) -> None:
+    """Atomically (re)write ``manifest.json``."""
+    try:
+        write_text_atomic(directory / MANIFEST, json.dumps(manifest.to_dict(), indent=1, allow_nan=False) + "\n")
+    except RigFileError as e:
+        raise RigOperationError(f"cannot write recording manifest {directory / MANIFEST}: {e}") from e
+
+
+def _fail(path: Path, field_name: str | None, message: str) -> RigInitializationError:
+    where = f"recording file {path}" + (f", field {field_name!r}" if field_name else "")
+    return RigInitializationError(f"{where}: {message}")
+
+
+def read_manifest(directory: Path) -> Manifest:
+    """Load and validate ``manifest.json``.
+
+    Raises:
+        RigInitializationError: naming the file and field (missing, unknown or ill-typed key,
+            wrong format or version, invalid rig).
+    """
+    path = directory / MANIFEST
+    if not directory.is_dir():
+        raise RigInitializationError(f"recording directory {directory} does not exist")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise _fail(path, None, "missing: not a recording directory (no manifest.json)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise _fail(path, None, f"cannot read: {e}") from e
+    except json.JSONDecodeError as e:
+        raise _fail(path, None, f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from e
+    if not isinstance(data, dict):
+        raise _fail(path, None, f"must be a JSON object, got {type(data).__name__}")
+    if data.get("format") != FORMAT:
+        raise _fail(path, "format", f"must be {FORMAT!r}, got {data.get('format')!r}")
+    if data.get("version") != VERSION:
+        raise _fail(path, "version", f"unsupported version {data.get('version')!r}; this build reads {VERSION}")
+    for key in _MANIFEST_KEYS:
+        if key not in data:
+            raise _fail(path, key, "missing")
+    unknown = sorted(set(data) - set(_MANIFEST_KEYS))
+    if unknown:
+        raise _fail(path, unknown[0], f"unknown key(s) {unknown}")
+    if data["image_format"] not in IMAGE_FORMATS:
+        raise _fail(path, "image_format", f"must be one of {sorted(IMAGE_FORMATS)}, got {data['image_format']!r}")
+    for key, kind in (("source", str), ("created_utc", str), ("complete", bool), ("counters", dict)):
+        if not isinstance(data[key], kind):
+            raise _fail(path, key, f"must be a {kind.__name__}, got {data[key]!r}")
+    try:
+        rig = rig_from_dict(data["rig"])
+    except RigFileError as e:
+        raise _fail(path, f"rig.{e.field}" if e.field else "rig", str(e)) from e
+    return Manifest(rig, data["image_format"], data["source"], data["created_utc"], data["complete"], data["counters"])
+
+
+def _check_row(path: Path, line_no: int, obj: Any, rig: Rig) -> FrameRow:
+    where = f"line {line_no}"
+    if not isinstance(obj, dict):
+        raise _fail(path, None, f"{where}: a row must be a JSON object, got {obj!r}")
+    for key in _ROW_KEYS:
+        if key not in obj:
+            raise _fail(path, key, f"{where}: missing")
+    unknown = sorted(set(obj) - set(_ROW_KEYS))
+    if unknown:
+        raise _fail(path, unknown[0], f"{where}: unknown key(s) {unknown}")
+    if obj["camera"] not in rig.names:
+        raise _fail(path, "camera", f"{where}: {obj['camera']!r} is not a camera of the rig {list(rig.names)}")
+    for key in ("index", "timestamp_ns"):
+        if isinstance(obj[key], bool) or not isinstance(obj[key], int):
+            raise _fail(path, key, f"{where}: must be an integer, got {obj[key]!r}")
+    for key in ("image", "truth"):
+        value = obj[key]
+        if value is None and key == "truth":
+            continue
+        if not isinstance(value, str) or not value or Path(value).is_absolute() or ".." in Path(value).parts:
+            raise _fail(path, key, f"{where}: must be a relative path inside the recording, got {value!r}")
+    st = obj["scene_time_s"]
+    if st is not None and (isinstance(st, bool) or not isinstance(st, (int, float)) or not math.isfinite(st)):
+        raise _fail(path, "scene_time_s", f"{where}: must be a finite number or null, got {st!r}")
+    return FrameRow(
+        obj["camera"], obj["index"], obj["timestamp_ns"], obj["image"], obj["truth"],
+        None if st is None else float(st),
+    )
+
+
+def read_rows(directory: Path, manifest: Manifest) -> list[FrameRow]:
+    """Load ``frames.jsonl``.
+
+    A recording that was not closed cleanly (``complete: false``) may end in a
+    half-written line; that line is ignored. Anywhere else a bad line is an error.
+
+    Raises:
+        RigInitializationError: naming the file, line and field.
+    """
+    path = directory / FRAMES
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        raise _fail(path, None, "missing (every recording has a frame journal, even an empty one)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise _fail(path, None, f"cannot read: {e}") from e
+    rows = []
+    for n, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            obj = json.loads(line)
+        except json.JSONDecodeError as e:
+            if n == len(lines) and not manifest.complete:
+                break  # torn final write of an interrupted recording
+            raise _fail(path, None, f"line {n}: invalid JSON: {e.msg}") from e
+        rows.append(_check_row(path, n, obj, manifest.rig))
+    return rows
+
+
+# ------------------------------------------------------------------ payloads
+def encode_image(image: np.ndarray, image_format: str, jpeg_quality: int) -> bytes:
+    ext = IMAGE_FORMATS[image_format]
+    params = [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if image_format == "jpg" else [cv2.IMWRITE_PNG_COMPRESSION, 1]
+    ok, buf = cv2.imencode(ext, image, params)
+    if not ok:
+        raise RigOperationError(f"OpenCV could not encode a {image.shape} image as {image_format}")
+    return buf.tobytes()
+
+
+def load_image(path: Path) -> np.ndarray:
+    """Decode a recorded image as ``(H, W, 3)`` uint8 BGR.
+
+    Raises:
+        RigOperationError: naming the file when it is missing or cannot be decoded.
+    """
+    try:
+        data = np.fromfile(path, dtype=np.uint8)
+    except OSError as e:
+        raise RigOperationError(f"recording image {path} cannot be read: {e.strerror or e}") from e
+    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    if image is None:
+        raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
+    return image
+
+
+def write_truth(path: Path, truth: CameraTruth | None, joints_3d: np.ndarray | None) -> None:
+    """Store ground truth as an npz archive (deflate level 1: the maps compress ~100x, quickly)."""
+    arrays: dict[str, np.ndarray] = {}
+    if truth is not None:
+        arrays.update({name: np.asarray(getattr(truth, name)) for name in _TRUTH_FIELDS})
+    if joints_3d is not None:
+        arrays["joints_3d"] = np.asarray(joints_3d)
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as archive:
+        for name, array in arrays.items():
+            with archive.open(f"{name}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.ascontiguousarray(array), allow_pickle=False)
+
+
+def load_truth(path: Path) -> tuple[CameraTruth | None, np.ndarray | None]:
+    """Read what :func:`write_truth` stored.
+
+    Raises:
+        RigOperationError: naming the file (and the array) when it is missing or corrupt.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {name: archive[name] for name in archive.files}
+    except FileNotFoundError as e:
+        raise RigOperationError(f"recording truth file {path} is missing") from e
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
+        raise RigOperationError(f"recording truth file {path} is corrupt: {e}") from e
+    joints_3d = arrays.pop("joints_3d", None)
+    if not arrays:
+        return None, joints_3d
+    missing = [name for name in _TRUTH_FIELDS if name not in arrays]
+    if missing:
+        raise RigOperationError(f"recording truth file {path}: array(s) {missing} missing")
+    return CameraTruth(**{name: arrays[name] for name in _TRUTH_FIELDS}), joints_3d
+
+
+def frame_has_truth(frame: Frame) -> bool:
+    return frame.truth is not None or frame.joints_3d is not None

@@ -1,0 +1,231 @@
+"""The pre-rendered motion loop of ``sim://``: every frame of both cameras, rendered once.
+
+Rendering a frame costs far more than a 30 fps frame period on a small CPU, but
+the synthetic motion repeats, so a simulated frame is a function of (camera,
+frame index modulo the loop length). :class:`FrameLoop` renders the whole loop
+with a small thread pool (the renderer is numpy, which releases the GIL) into
+preallocated arrays, and can keep the result in an on-disk cache directory of
+``.npy`` files (memory-mapped when loaded, so a cached loop opens instantly and
+the OS shares its pages between processes).
+
+The cache directory's name is a hash of everything that changes the pixels;
+entries are written to a temporary directory and renamed into place, so readers
+never see half an entry. Cache problems are logged and never fatal.
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import logging
+import os
+import shutil
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drivers.errors import RigInitializationError
+from drivers.frames import CameraTruth
+
+log = logging.getLogger(__name__)
+
+_CAMERA_FIELDS = ("image", "mask", "depth", "part_labels", "joints_2d", "visible", "joints_3d", "scene_time_s")
+CACHE_LAYOUT = 1  # bump when the files below change meaning
+
+
+@dataclass(frozen=True, eq=False)
+class LoopFrame:
+    """One rendered frame: image, ground truth, the scene instant it shows and the 3D joints then."""
+
+    image: np.ndarray
+    truth: CameraTruth
+    scene_time_s: float
+    joints_3d: np.ndarray
+
+
+@dataclass(frozen=True)
+class FillReport:
+    """How a loop became ready."""
+
+    source: str  # "rendered" or "disk"
+    frames: int
+    wall_s: float
+    render_s_per_frame: float  # mean time of one render call (0 when loaded from disk)
+
+
+RenderFn = Callable[[int, int], LoopFrame]  # (camera position 0/1, loop frame) -> frame
+
+
+def default_cache_root() -> Path:
+    """``$XDG_CACHE_HOME/ghnerf-sim``, else ``~/.cache/ghnerf-sim``."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "ghnerf-sim"
+
+
+class FrameLoop:
+    """All ``cameras x length`` frames of the loop, in arrays.
+
+    Args:
+        render: renders one frame; called from worker threads.
+        length: frames per camera in the loop.
+        cameras: number of cameras (2).
+        workers: render threads.
+        cache_dir: this loop's cache entry (``root/<key>``), or ``None`` for no disk cache.
+    """
+
+    def __init__(self, render: RenderFn, length: int, *, cameras: int = 2, workers: int = 2,
+                 cache_dir: Path | None = None) -> None:
+        self._render = render
+        self.length = length
+        self.cameras = cameras
+        self.workers = max(1, workers)
+        self.cache_dir = cache_dir
+        self._arrays: dict[str, np.ndarray] = {}
+        self._cancel = threading.Event()
+        self._render_time = 0.0
+        self._time_lock = threading.Lock()
+        self.ready = False
+
+    # ------------------------------------------------------------------ fill
+    def fill(self, progress: Callable[[int, int, float], None] | None = None) -> FillReport:
+        """Make every frame available: load the disk cache, else render (and store) the loop.
+
+        Args:
+            progress: called about every 2 s while rendering with (done, total, elapsed seconds).
+
+        Raises:
+            RigInitializationError: rendering failed (the renderer's error is the cause)
+                or :meth:`close` was called meanwhile.
+        """
+        t0 = time.perf_counter()
+        if self.cache_dir is not None and self._load():
+            self.ready = True
+            return FillReport("disk", self.cameras * self.length, time.perf_counter() - t0, 0.0)
+        self._render_all(progress)
+        self.ready = True
+        wall = time.perf_counter() - t0
+        if self.cache_dir is not None:
+            self._store()
+        total = self.cameras * self.length
+        return FillReport("rendered", total, wall, self._render_time / total)
+
+    def _timed_render(self, camera: int, j: int) -> LoopFrame:
+        if self._cancel.is_set():
+            raise RigInitializationError("sim pre-render cancelled (source closed)")
+        t = time.perf_counter()
+        frame = self._render(camera, j)
+        with self._time_lock:
+            self._render_time += time.perf_counter() - t
+        return frame
+
+    def _render_all(self, progress) -> None:
+        first = self._timed_render(0, 0)  # its shapes and dtypes size the arrays
+        self._allocate(first)
+        self._put(0, 0, first)
+        jobs = [(c, j) for j in range(self.length) for c in range(self.cameras)][1:]
+        t0 = time.perf_counter()
+        with concurrent.futures.ThreadPoolExecutor(self.workers, thread_name_prefix="sim-render") as pool:
+            futures = {pool.submit(self._timed_render, c, j): (c, j) for c, j in jobs}
+            pending = set(futures)
+            try:
+                while pending:
+                    done, pending = concurrent.futures.wait(pending, timeout=2.0)
+                    for future in done:
+                        c, j = futures[future]
+                        self._put(c, j, future.result())
+                    if pending and progress is not None:
+                        progress(len(futures) - len(pending) + 1, len(futures) + 1, time.perf_counter() - t0)
+            except BaseException as e:
+                self._cancel.set()
+                for future in pending:
+                    future.cancel()
+                if isinstance(e, RigInitializationError):
+                    raise
+                raise RigInitializationError(f"sim pre-render failed: {e}") from e
+
+    def _allocate(self, first: LoopFrame) -> None:
+        for name, value in self._fields(first).items():
+            value = np.asarray(value)
+            self._arrays[name] = np.empty((self.cameras, self.length) + value.shape, dtype=value.dtype)
+
+    @staticmethod
+    def _fields(frame: LoopFrame) -> dict[str, np.ndarray]:
+        t = frame.truth
+        return {
+            "image": frame.image, "mask": t.mask, "depth": t.depth, "part_labels": t.part_labels,
+            "joints_2d": t.joints_2d, "visible": t.visible, "joints_3d": frame.joints_3d,
+            "scene_time_s": np.float64(frame.scene_time_s),
+        }
+
+    def _put(self, camera: int, j: int, frame: LoopFrame) -> None:
+        for name, value in self._fields(frame).items():
+            self._arrays[name][camera, j] = value
+
+    # ------------------------------------------------------------------ access
+    def frame(self, camera: int, j: int) -> LoopFrame:
+        """Frame ``j`` of ``camera``. The image is a fresh copy (consumers may draw on it);
+        truth arrays are read-only views shared by every pass of the loop."""
+        a = self._arrays
+        truth = CameraTruth(
+            joints_2d=_readonly(a["joints_2d"][camera, j]), visible=_readonly(a["visible"][camera, j]),
+            mask=_readonly(a["mask"][camera, j]), depth=_readonly(a["depth"][camera, j]),
+            part_labels=_readonly(a["part_labels"][camera, j]),
+        )
+        return LoopFrame(
+            image=np.array(a["image"][camera, j]),
+            truth=truth,
+            scene_time_s=float(a["scene_time_s"][camera, j]),
+            joints_3d=_readonly(a["joints_3d"][camera, j]),
+        )
+
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in self._arrays.values())
+
+    def close(self) -> None:
+        self._cancel.set()
+
+    # ------------------------------------------------------------------ disk
+    def _load(self) -> bool:
+        assert self.cache_dir is not None
+        meta_path = self.cache_dir / "meta.json"
+        if not meta_path.is_file():
+            return False
+        try:
+            meta = json.loads(meta_path.read_text())
+            if meta.get("layout") != CACHE_LAYOUT or meta.get("shape") != [self.cameras, self.length]:
+                raise ValueError(f"layout/shape mismatch: {meta}")
+            arrays = {name: np.load(self.cache_dir / f"{name}.npy", mmap_mode="r") for name in _CAMERA_FIELDS}
+            for name, array in arrays.items():
+                if array.shape[:2] != (self.cameras, self.length):
+                    raise ValueError(f"{name}.npy has shape {array.shape}")
+        except (OSError, ValueError) as e:
+            log.warning("sim cache entry %s unusable (%s); rendering again", self.cache_dir, e)
+            return False
+        self._arrays = arrays
+        log.info("sim loop loaded from cache %s", self.cache_dir)
+        return True
+
+    def _store(self) -> None:
+        assert self.cache_dir is not None
+        tmp = self.cache_dir.with_name(f".{self.cache_dir.name}.{uuid.uuid4().hex[:8]}.tmp")
+        try:
+            tmp.mkdir(parents=True)
+            for name, array in self._arrays.items():
+                np.save(tmp / f"{name}.npy", array)
+            (tmp / "meta.json").write_text(json.dumps({"layout": CACHE_LAYOUT, "shape": [self.cameras, self.length]}))
+            os.replace(tmp, self.cache_dir)
+            log.info("sim loop stored in cache %s (%.0f MB)", self.cache_dir, self.nbytes() / 1e6)
+        except OSError as e:
+            # A concurrent writer may have won the rename; either way the cache is optional.
+            log.warning("sim cache entry %s not stored: %s", self.cache_dir, e)
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _readonly(array: np.ndarray) -> np.ndarray:
+    view = array.view()
+    view.flags.writeable = False
+    return view

@@ -1,0 +1,165 @@
+"""The rig source base class: public behaviour written once, backends fill small hooks.
+
+A backend implements :meth:`RigSource._open`, :meth:`RigSource._read_frame` and
+:meth:`RigSource._close`. The base class owns pairing (:mod:`drivers.pairing`),
+timeouts, counters, iteration and the context manager.
+"""
+from __future__ import annotations
+
+import abc
+import logging
+from collections.abc import Iterator
+from typing import ClassVar
+
+from drivers.clock import Clock, MonotonicClock
+from drivers.errors import EndOfStream, RigDisconnectedError, RigOperationError, RigTimeoutError
+from drivers.frames import Frame, FramePair
+from drivers.pairing import FramePairer, PairingConfig, PairingStats
+from drivers.url import RigUrl
+from ghnerf_runtime.geometry import Rig
+
+log = logging.getLogger(__name__)
+
+
+class RigSource(abc.ABC):
+    """A calibrated two-camera source of synchronised frame pairs.
+
+    Use through :func:`drivers.open_rig`::
+
+        with drivers.open_rig("sim://?fps=30") as source:
+            pair = source.read(timeout_s=1.0)
+
+    Args:
+        rig: the calibration the frames belong to (first two cameras are the pair).
+            ``None`` for hardware backends that learn it from the device: they call
+            :meth:`_set_rig` in :meth:`_open` (a constructor must not open hardware).
+        pairing: timestamp tolerance and drop policy.
+        clock: time source for timeouts (and, in simulated backends, for timing).
+    """
+
+    #: URL scheme this backend answers to.
+    scheme: ClassVar[str] = ""
+
+    def __init__(
+        self, rig: Rig | None, *, pairing: PairingConfig | None = None, clock: Clock | None = None
+    ) -> None:
+        self._rig: Rig | None = None
+        self.clock: Clock = clock or MonotonicClock()
+        self.pairing = pairing or PairingConfig()
+        self._pairer: FramePairer | None = None  # built with the rig: it pairs the rig's camera names
+        self._is_open = False
+        self._closed = False
+        if rig is not None:
+            self._set_rig(rig)
+
+    def _set_rig(self, rig: Rig) -> None:
+        """Adopt the rig (at construction, or in :meth:`_open` once the device told us its calibration)."""
+        self._rig = rig
+        self._pairer = FramePairer((rig.pair[0].name, rig.pair[1].name), self.pairing)
+
+    # ------------------------------------------------------------------ hooks
+    @classmethod
+    @abc.abstractmethod
+    def from_url(cls, url: RigUrl, **kwargs) -> "RigSource":
+        """Build an (unopened) source from a parsed URL; consume options, then ``url.finish()``."""
+
+    @abc.abstractmethod
+    def _open(self) -> None:
+        """Start the cameras. Raise :class:`RigInitializationError` on failure."""
+
+    @abc.abstractmethod
+    def _read_frame(self, timeout_s: float) -> Frame | None:
+        """The next frame from either camera, in capture order per camera.
+
+        Return ``None`` when nothing arrived within ``timeout_s``; raise
+        :class:`RigDisconnectedError` when a camera has gone (or
+        :class:`EndOfStream` when a recording is exhausted).
+        """
+
+    @abc.abstractmethod
+    def _close(self) -> None:
+        """Release the cameras. Called once."""
+
+    # ---------------------------------------------------------- public API
+    @property
+    def rig(self) -> Rig:
+        if self._rig is None:
+            raise RigOperationError(f"{type(self).__name__} learns its rig from the device; open() it first")
+        return self._rig
+
+    @property
+    def is_open(self) -> bool:
+        return self._is_open
+
+    @property
+    def stats(self) -> PairingStats:
+        """A snapshot of the pairing counters (frames in, pairs out, unpaired, dropped, gaps)."""
+        if self._pairer is None:
+            return PairingStats()
+        return self._pairer.stats.snapshot()
+
+    def open(self) -> "RigSource":
+        if self._closed:
+            raise RigOperationError(f"{type(self).__name__} was closed; open a new source")
+        if not self._is_open:
+            self._open()
+            if self._rig is None:
+                self._close()
+                raise RigOperationError(f"{type(self).__name__}._open() did not set the rig")
+            self._is_open = True
+        return self
+
+    def read(self, timeout_s: float = 1.0) -> FramePair:
+        """Block until the next synchronised pair, at most ``timeout_s`` seconds.
+
+        Raises:
+            RigTimeoutError: no pair within the timeout (frames may still be flowing
+                but none pair within tolerance: see :attr:`stats`).
+            RigDisconnectedError: a camera vanished; the source stays usable for
+                backends that reconnect, otherwise close it.
+            EndOfStream: a finite source (a recording) is exhausted.
+        """
+        if not self._is_open:
+            raise RigOperationError(f"{type(self).__name__} is not open; call open() or use open_rig()")
+        pairer = self._pairer
+        assert pairer is not None  # open() guarantees the rig, hence the pairer
+        deadline = self.clock.now_ns() + int(timeout_s * 1e9)
+        while True:
+            ready = pairer.pop()
+            if ready is not None:
+                sequence, first, second = ready
+                return FramePair(frames=(first, second), sequence=sequence, rig=self.rig)
+            remaining = (deadline - self.clock.now_ns()) / 1e9
+            if remaining <= 0:
+                raise RigTimeoutError(
+                    f"no frame pair within {timeout_s:.3f} s from {type(self).__name__} (stats: {self.stats})"
+                )
+            try:
+                frame = self._read_frame(remaining)
+            except RigDisconnectedError:
+                pairer.reset()
+                raise
+            if frame is not None:
+                pairer.push(frame)
+
+    def __iter__(self) -> Iterator[FramePair]:
+        """Pairs until the source ends (a recording's end stops iteration; other errors propagate)."""
+        while True:
+            try:
+                yield self.read()
+            except EndOfStream:
+                return
+
+    def close(self) -> None:
+        if self._is_open and not self._closed:
+            try:
+                self._close()
+            finally:
+                self._is_open = False
+        self._closed = True
+
+    def __enter__(self) -> "RigSource":
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()

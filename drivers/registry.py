@@ -1,0 +1,54 @@
+"""Backend registry: URL scheme -> (module, class), imported only when chosen.
+
+``record+<url>`` wraps any other URL in the recorder (pyserial's ``spy://`` idea).
+"""
+from __future__ import annotations
+
+import importlib
+
+from drivers.base import RigSource
+from drivers.errors import BackendNotAvailableError
+from drivers.url import RigUrl
+
+#: scheme -> (module, class name). Extend by adding an entry; nothing is imported until chosen.
+BACKENDS: dict[str, tuple[str, str]] = {
+    "sim": ("drivers.backends.sim", "SimRigSource"),
+    "replay": ("drivers.backends.replay", "ReplayRigSource"),
+    "depthai": ("drivers.backends.depthai", "DepthaiRigSource"),
+}
+
+RECORD_PREFIX = "record+"
+
+
+def backend_class(scheme: str, backends: dict[str, tuple[str, str]] | None = None) -> type[RigSource]:
+    """Import and return the class for ``scheme``."""
+    table = BACKENDS if backends is None else backends
+    if scheme not in table:
+        raise BackendNotAvailableError(f"unknown rig backend {scheme!r}; known: {sorted(table)} (and record+<url>)")
+    module_name, class_name = table[scheme]
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise BackendNotAvailableError(f"rig backend {scheme!r} cannot be loaded: {e}") from e
+    return getattr(module, class_name)
+
+
+def open_rig(url: str, **kwargs) -> RigSource:
+    """Open a rig source by URL and return it (already opened; use it as a context manager).
+
+    Examples: ``sim://``, ``sim://?fps=30&seed=3&motion=wave``, ``replay:///data/take1``,
+    ``record+sim://?out=/tmp/take1``, ``depthai://`` (first device) or ``depthai://<device-id>``.
+    Keyword arguments (``clock=``, ``pairing=``, ``rig=`` ...) go to the backend.
+    """
+    return create_rig_source(url, **kwargs).open()
+
+
+def create_rig_source(url: str, **kwargs) -> RigSource:
+    """Like :func:`open_rig` but returns the source unopened."""
+    if url.startswith(RECORD_PREFIX):
+        from drivers.backends.record import RecordingRigSource
+
+        inner_url = RigUrl.parse(url[len(RECORD_PREFIX):])
+        return RecordingRigSource.wrap(inner_url, create_rig_source, **kwargs)
+    parsed = RigUrl.parse(url)
+    return backend_class(parsed.scheme).from_url(parsed, **kwargs)

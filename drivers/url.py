@@ -1,0 +1,95 @@
+"""Rig URLs: ``scheme://target?option=value&...`` with typed, validated options.
+
+Every option a backend reads is taken through a typed getter; whatever is left
+afterwards is an unknown option and :meth:`RigUrl.finish` rejects it by name,
+so a typo such as ``sim://?fsp=60`` fails loudly instead of being ignored.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from urllib.parse import parse_qsl, unquote, urlsplit
+
+from drivers.errors import RigConfigError
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+@dataclass
+class RigUrl:
+    """A parsed rig URL.
+
+    Attributes:
+        url: the original text, for error messages.
+        scheme: backend name (``sim``, ``replay``, ``depthai``...).
+        target: what follows ``scheme://`` up to ``?`` (a path, a device id, or empty).
+        options: the query options not consumed yet.
+    """
+
+    url: str
+    scheme: str
+    target: str
+    options: dict[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, url: str) -> "RigUrl":
+        if not isinstance(url, str) or "://" not in url:
+            raise RigConfigError(f"rig URL must look like 'scheme://target?options', got {url!r}")
+        parts = urlsplit(url)
+        target = unquote(parts.netloc + parts.path)
+        options: dict[str, str] = {}
+        for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):
+            if key in options:
+                raise RigConfigError(f"rig URL {url!r}: option {key!r} given twice")
+            options[key] = value
+        return cls(url=url, scheme=parts.scheme.lower(), target=target, options=options)
+
+    def _error(self, name: str, value: str, expected: str) -> RigConfigError:
+        return RigConfigError(f"rig URL {self.url!r}: option {name}={value!r} must be {expected}")
+
+    def take_str(self, name: str, default: str | None = None, choices: tuple[str, ...] | None = None) -> str | None:
+        value = self.options.pop(name, None)
+        if value is None:
+            return default
+        if choices is not None and value not in choices:
+            raise self._error(name, value, f"one of {list(choices)}")
+        return value
+
+    def take_float(self, name: str, default: float, lo: float | None = None, hi: float | None = None) -> float:
+        raw = self.options.pop(name, None)
+        if raw is None:
+            return default
+        try:
+            value = float(raw)
+        except ValueError:
+            raise self._error(name, raw, "a number") from None
+        if value != value or (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self._error(name, raw, f"in [{lo}, {hi}]")
+        return value
+
+    def take_int(self, name: str, default: int, lo: int | None = None, hi: int | None = None) -> int:
+        raw = self.options.pop(name, None)
+        if raw is None:
+            return default
+        try:
+            value = int(raw, 0)
+        except ValueError:
+            raise self._error(name, raw, "an integer") from None
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self._error(name, raw, f"an integer in [{lo}, {hi}]")
+        return value
+
+    def take_bool(self, name: str, default: bool) -> bool:
+        raw = self.options.pop(name, None)
+        if raw is None:
+            return default
+        if raw.lower() in _TRUE or raw == "":
+            return True
+        if raw.lower() in _FALSE:
+            return False
+        raise self._error(name, raw, "a boolean (1/0, true/false)")
+
+    def finish(self) -> None:
+        """Raise if options remain that no one consumed."""
+        if self.options:
+            raise RigConfigError(f"rig URL {self.url!r}: unknown option(s) {sorted(self.options)}")

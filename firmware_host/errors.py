@@ -1,0 +1,75 @@
+"""Typed errors for firmware_host.
+
+Vendor exceptions (pyserial, pyusb, OSError) are converted at the boundary
+with ``raise ... from e`` so callers only need to catch these.
+"""
+from __future__ import annotations
+
+
+class FirmwareHostError(Exception):
+    """Base class of every error raised by firmware_host."""
+
+
+class SinkError(FirmwareHostError):
+    """A joint-stream output failed."""
+
+
+class SinkConfigError(SinkError, ValueError):
+    """A sink URL or keyword is invalid; the message names the URL, field and value."""
+
+    def __init__(self, url: str, field: str, value: object, reason: str) -> None:
+        self.url = url
+        self.field = field
+        self.value = value
+        super().__init__(f"{url}: invalid {field}={value!r}: {reason}")
+
+
+class SinkUnavailableError(SinkError):
+    """The link is absent or went away (unplugged, refused); the sink retries with backoff."""
+
+    def __init__(self, url: str, reason: str) -> None:
+        self.url = url
+        super().__init__(f"{url}: unavailable: {reason}")
+
+
+class SinkWriteError(SinkError):
+    """One write failed but the link is still up (endpoint stall, timeout): the frame is dropped."""
+
+    def __init__(self, url: str, reason: str) -> None:
+        self.url = url
+        super().__init__(f"{url}: write failed: {reason}")
+
+
+class SinkClosedError(SinkError):
+    """A frame was sent to a sink after ``close()``."""
+
+
+class ProtocolError(FirmwareHostError, ValueError):
+    """Base class of joint-protocol encoding and decoding errors."""
+
+
+class EncodeError(ProtocolError):
+    """A message field cannot be represented on the wire; names the field and value."""
+
+    def __init__(self, field: str, value: object, reason: str) -> None:
+        self.field = field
+        self.value = value
+        super().__init__(f"cannot encode {field}={value!r}: {reason}")
+
+
+class FrameError(ProtocolError):
+    """A received frame was rejected. ``code`` is one of the decoder error codes
+    (``oversize``, ``cobs``, ``short``, ``crc``, ``version``, ``malformed``)
+    documented in docs/protocol.md."""
+
+    def __init__(self, code: str, detail: str) -> None:
+        self.code = code
+        super().__init__(f"{code}: {detail}")
+
+
+class UnknownMessageType(ProtocolError):
+    """A well-formed packet of a type this decoder does not know; decoders skip it."""
+
+    def __init__(self, msg_type: int) -> None:
+        self.msg_type = msg_type
+        super().__init__(f"unknown message type 0x{msg_type:02x}")

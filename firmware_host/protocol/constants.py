@@ -1,0 +1,76 @@
+"""Wire constants of the joint-stream protocol (docs/protocol.md is the spec)."""
+from __future__ import annotations
+
+import enum
+import struct
+
+PROTOCOL_VERSION = 1
+
+# Header: version u8, msg_type u8, flags u8, seq u32, capture_us u64, send_us u64.
+HEADER = struct.Struct("<BBBIQQ")
+HEADER_LEN = HEADER.size  # 23
+CRC_LEN = 2
+MIN_PACKET_LEN = HEADER_LEN + CRC_LEN
+
+# Bounds that let a microcontroller decode with fixed buffers.
+MAX_PACKET_LEN = 512  # decoded packet, header + payload + CRC
+MAX_FRAME_LEN = 515  # COBS-encoded bytes between two delimiters
+MAX_JOINTS = 64
+MAX_RIG_ID_LEN = 32
+MAX_CAMERAS = 8
+MAX_CAMERA_NAME_LEN = 16
+
+U32_MAX = 0xFFFF_FFFF
+U64_MAX = 0xFFFF_FFFF_FFFF_FFFF
+
+
+class MsgType(enum.IntEnum):
+    HELLO = 0x01
+    STATUS = 0x02
+    JOINTS = 0x10
+    JOINTS_2D = 0x11
+
+
+class Flags(enum.IntFlag):
+    NONE = 0
+    # The sender is deliberately skipping frames to stay within the link's capacity.
+    DECIMATED = 0x01
+    # The sender dropped at least one frame (queue overflow or failed write)
+    # since the previous JOINTS packet on this link.
+    DROPPED = 0x02
+
+
+class JointSet(enum.IntEnum):
+    BODY_25 = 0
+
+
+class Units(enum.IntEnum):
+    MILLIMETRES = 0
+
+
+class CoordFrame(enum.IntEnum):
+    # x right, y down, z forward (away from the cameras), origin from the rig file.
+    RIG = 0
+
+
+class Fault(enum.IntEnum):
+    OK = 0
+    RATE_LIMITED = 1  # link cannot carry the requested rate; decimating
+    QUEUE_OVERFLOW = 2  # frames dropped because the link fell behind
+    LINK_ERRORS = 3  # writes failed or the link reconnected
+    ESTIMATOR_STALLED = 4  # set by the daemon
+    CAMERA_FAULT = 5  # set by the daemon
+
+
+# Per-joint wire sizes.
+JOINT3D_BYTES = 7  # int16 x, y, z (mm) + u8 confidence
+JOINT2D_BYTES = 5  # int16 u, v (quarter pixels) + u8 confidence
+UV_SCALE = 4  # 2D coordinates are sent in 1/4 pixel
+
+# Decoder event codes, in the order the checks are made.
+ERROR_CODES = ("oversize", "cobs", "short", "crc", "version", "malformed")
+
+
+def mask_len(count: int) -> int:
+    """Bytes of the missing-joint bit mask for ``count`` joints."""
+    return (count + 7) // 8

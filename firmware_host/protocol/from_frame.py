@@ -1,0 +1,41 @@
+"""JointFrame (floats from the estimator) -> wire messages."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from firmware_host.protocol.constants import U32_MAX, MsgType
+from firmware_host.protocol.messages import JointFrame, Joints, Joints2D, make_header
+from firmware_host.protocol.quantize import quantise_joints_2d, quantise_joints_3d
+
+
+def wire_seq(sequence: int) -> int:
+    """Producer sequence -> the u32 on the wire (wraps; receivers count gaps modulo 2**32)."""
+    return sequence & U32_MAX
+
+
+def joints_message(frame: JointFrame, send_us: int, flags: int = 0) -> Joints:
+    xyz, conf, missing = quantise_joints_3d(frame.joints_3d)
+    header = make_header(MsgType.JOINTS, wire_seq(frame.sequence), frame.capture_time_us, send_us, flags)
+    return Joints(header, frame.joint_set, xyz, conf, missing)
+
+
+def camera_index(key: str | int, cameras: Sequence[str]) -> int:
+    """Index of a ``joints_2d`` key: ints are used as-is, names are looked up in
+    ``cameras`` (the order announced in HELLO)."""
+    if isinstance(key, int):
+        return key
+    try:
+        return list(cameras).index(key)
+    except ValueError:
+        raise KeyError(f"camera {key!r} is not in the announced cameras {list(cameras)!r}") from None
+
+
+def joints2d_messages(
+    frame: JointFrame, send_us: int, cameras: Sequence[str], flags: int = 0
+) -> list[Joints2D]:
+    out = []
+    for key in sorted(frame.joints_2d, key=lambda k: camera_index(k, cameras)):
+        uv, conf, missing = quantise_joints_2d(frame.joints_2d[key])
+        header = make_header(MsgType.JOINTS_2D, wire_seq(frame.sequence), frame.capture_time_us, send_us, flags)
+        out.append(Joints2D(header, camera_index(key, cameras), frame.joint_set, uv, conf, missing))
+    return out

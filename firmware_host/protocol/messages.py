@@ -1,0 +1,166 @@
+"""Data types: the sink input (``JointFrame``) and the decoded wire messages.
+
+``JointFrame`` carries floats as the estimator produces them. The wire messages
+carry the quantised integers exactly as they travel, so the Python and C
+decoders can be compared field for field (``to_json`` gives the canonical form
+used by the test vectors).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Union
+
+import numpy as np
+
+from firmware_host.protocol.constants import PROTOCOL_VERSION, MsgType
+
+
+@dataclass(frozen=True)
+class JointFrame:
+    """One estimated pose, the input of every sink.
+
+    Coordinates are in the rig frame: x right, y down, z forward (away from the
+    cameras), metres, origin as defined by the rig file.
+    """
+
+    sequence: int
+    """Frame counter of the producer; gaps in it are frames that never reached a receiver."""
+    capture_time_us: int
+    """Capture time of the frame pair, monotonic microseconds (same clock as the sinks' ``clock_us``)."""
+    joint_set: int
+    """0 = BODY_25 (OpenPose order)."""
+    joints_3d: np.ndarray
+    """(J, 4) float: x, y, z in metres and confidence 0..1; NaN or confidence 0 = missing."""
+    joints_2d: Mapping[Union[str, int], np.ndarray] = field(default_factory=dict)
+    """Optional per-camera (J, 3) float: u, v in pixels and confidence 0..1."""
+
+    def __post_init__(self) -> None:
+        j = np.asarray(self.joints_3d)
+        if j.ndim != 2 or j.shape[1] != 4:
+            raise ValueError(f"JointFrame.joints_3d must have shape (J, 4), got {j.shape}")
+        for cam, uv in self.joints_2d.items():
+            a = np.asarray(uv)
+            if a.ndim != 2 or a.shape[1] != 3:
+                raise ValueError(f"JointFrame.joints_2d[{cam!r}] must have shape (J, 3), got {a.shape}")
+
+
+@dataclass(frozen=True)
+class Header:
+    version: int
+    msg_type: int
+    flags: int
+    seq: int
+    capture_us: int
+    send_us: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "version": self.version,
+            "flags": self.flags,
+            "seq": self.seq,
+            "capture_us": self.capture_us,
+            "send_us": self.send_us,
+        }
+
+
+def make_header(msg_type: MsgType, seq: int, capture_us: int, send_us: int, flags: int = 0) -> Header:
+    return Header(PROTOCOL_VERSION, int(msg_type), int(flags), seq, capture_us, send_us)
+
+
+@dataclass(frozen=True, eq=False)
+class Joints:
+    """JOINTS: 3D joints in millimetres. Arrays: xyz_mm (J,3) int16, conf (J,) uint8, missing (J,) bool."""
+
+    header: Header
+    joint_set: int
+    xyz_mm: np.ndarray
+    conf: np.ndarray
+    missing: np.ndarray
+
+    def to_json(self) -> dict[str, Any]:
+        rows = [
+            [int(x), int(y), int(z), int(c), int(m)]
+            for (x, y, z), c, m in zip(self.xyz_mm.tolist(), self.conf.tolist(), self.missing.tolist(), strict=True)
+        ]
+        return {"type": "JOINTS", **self.header.to_json(), "joint_set": self.joint_set, "joints": rows}
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Joints) and self.to_json() == other.to_json()
+
+
+@dataclass(frozen=True, eq=False)
+class Joints2D:
+    """JOINTS_2D: one camera's 2D joints. uv_q (J,2) int16 in quarter pixels, conf, missing."""
+
+    header: Header
+    camera: int
+    joint_set: int
+    uv_q: np.ndarray
+    conf: np.ndarray
+    missing: np.ndarray
+
+    def to_json(self) -> dict[str, Any]:
+        rows = [
+            [int(u), int(v), int(c), int(m)]
+            for (u, v), c, m in zip(self.uv_q.tolist(), self.conf.tolist(), self.missing.tolist(), strict=True)
+        ]
+        return {
+            "type": "JOINTS_2D",
+            **self.header.to_json(),
+            "camera": self.camera,
+            "joint_set": self.joint_set,
+            "joints": rows,
+        }
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Joints2D) and self.to_json() == other.to_json()
+
+
+@dataclass(frozen=True)
+class Status:
+    header: Header
+    fps_centi: int  # frames per second x 100 actually sent on this link
+    latency_us: int  # send_us - capture_us of the latest frame
+    dropped: int  # frames dropped by this sender (queue overflow + failed writes), total
+    decimated: int  # frames skipped on purpose to fit the link, total
+    fault: int  # constants.Fault
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "type": "STATUS",
+            **self.header.to_json(),
+            "fps_centi": self.fps_centi,
+            "latency_us": self.latency_us,
+            "dropped": self.dropped,
+            "decimated": self.decimated,
+            "fault": self.fault,
+        }
+
+
+@dataclass(frozen=True)
+class Hello:
+    header: Header
+    protocol_version: int
+    joint_set: int
+    joint_count: int
+    units: int  # constants.Units
+    frame: int  # constants.CoordFrame
+    rig_id: str
+    cameras: tuple[str, ...]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "type": "HELLO",
+            **self.header.to_json(),
+            "protocol_version": self.protocol_version,
+            "joint_set": self.joint_set,
+            "joint_count": self.joint_count,
+            "units": self.units,
+            "frame": self.frame,
+            "rig_id": self.rig_id,
+            "cameras": list(self.cameras),
+        }
+
+
+Message = Union[Joints, Joints2D, Status, Hello]

@@ -1,0 +1,44 @@
+"""Float joints -> wire integers (pure numpy).
+
+Rules (docs/protocol.md, "Quantisation"):
+- coordinates are rounded to the nearest millimetre (3D) or quarter pixel (2D);
+- a joint is missing when any coordinate or its confidence is NaN, its
+  confidence is <= 0, or a coordinate does not fit in int16; a missing joint is
+  sent as zeros with its bit set in the mask;
+- confidence 0..1 maps to 1..255 for present joints, so 0 always means missing.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from firmware_host.protocol.constants import UV_SCALE
+
+_I16_MIN, _I16_MAX = -32768, 32767
+
+
+def _quantise(values: np.ndarray, conf: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    scaled = np.rint(values.astype(np.float64) * scale)
+    conf = conf.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        missing = (
+            np.isnan(scaled).any(axis=1)
+            | ~(conf > 0.0)  # also true for NaN confidence
+            | (scaled < _I16_MIN).any(axis=1)
+            | (scaled > _I16_MAX).any(axis=1)
+        )
+        q = np.where(missing[:, None], 0.0, scaled).astype(np.int16)
+        c = np.clip(np.rint(conf * 255.0), 1.0, 255.0)
+        c = np.where(missing, 0.0, c).astype(np.uint8)
+    return q, c, missing
+
+
+def quantise_joints_3d(joints_3d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(J,4) metres + confidence -> (xyz_mm int16 (J,3), conf uint8 (J,), missing bool (J,))."""
+    j = np.asarray(joints_3d)
+    return _quantise(j[:, :3], j[:, 3], 1000.0)
+
+
+def quantise_joints_2d(joints_2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(J,3) pixels + confidence -> (uv quarter-pixels int16 (J,2), conf uint8, missing bool)."""
+    j = np.asarray(joints_2d)
+    return _quantise(j[:, :2], j[:, 2], float(UV_SCALE))

@@ -1,0 +1,304 @@
+"""The sink base class: owns the public behaviour, backends fill four small hooks.
+
+Behaviour written once here:
+
+- ``send()`` never blocks: it admits the frame through the rate limiter and
+  appends it to a bounded queue, dropping (and counting) the oldest when full;
+- a worker thread connects, delivers queued frames and, when the link goes
+  away, disconnects and reconnects with exponential backoff;
+- every frame submitted ends up in exactly one counter: ``sent``,
+  ``decimated``, ``dropped_queue``, ``dropped_error``, ``dropped_close``, or
+  is still ``queued`` / ``in_flight``.
+
+Backend hooks: ``_connect``, ``_disconnect``, ``_deliver`` and optionally
+``_on_connected`` and ``link_capacity_fps``.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from abc import ABC, abstractmethod
+from collections import deque
+from dataclasses import dataclass
+from typing import Optional
+
+from firmware_host.errors import SinkClosedError, SinkUnavailableError, SinkWriteError
+from firmware_host.protocol.constants import Flags
+from firmware_host.protocol.messages import JointFrame
+from firmware_host.sinks.backoff import Backoff
+from firmware_host.sinks.options import SinkOptions
+from firmware_host.sinks.rate import RateLimiter
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SinkStats:
+    submitted: int
+    sent: int
+    decimated: int  # skipped on purpose to fit the link
+    dropped_queue: int  # oldest frame pushed out of a full queue
+    dropped_error: int  # write failed (stall, timeout, unplug)
+    dropped_close: int  # still queued when close() gave up
+    queued: int
+    in_flight: int
+    connected: bool
+    connects: int
+    connect_failures: int
+    disconnects: int
+    last_error: Optional[str]
+
+    @property
+    def dropped(self) -> int:
+        return self.dropped_queue + self.dropped_error + self.dropped_close
+
+    @property
+    def accounted(self) -> int:
+        """Equals ``submitted`` at every instant: no frame is lost silently."""
+        return self.sent + self.decimated + self.dropped + self.queued + self.in_flight
+
+
+class Sink(ABC):
+    """A joint-stream output. Create with ``open_sink(url)`` (which also starts it)."""
+
+    scheme: str = ""
+
+    def __init__(self, url: str, options: SinkOptions) -> None:
+        self.url = url
+        self.options = options
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        # Queued items are [frame, flags]: flags describe the gap just before that frame.
+        self._queue: deque[list] = deque()
+        self._thread: Optional[threading.Thread] = None
+        self._closed = False
+        self._limiter: Optional[RateLimiter] = None
+        self._warned_decimation = False
+        # Counters, guarded by _cond.
+        self._submitted = self._sent = self._decimated = 0
+        self._dropped_queue = self._dropped_error = self._dropped_close = 0
+        self._in_flight = 0
+        self._connected = False
+        self._connects = self._connect_failures = self._disconnects = 0
+        self._last_error: Optional[str] = None
+        # Gap reasons not yet attached to a frame (see protocol Flags): decimation
+        # since the last admitted frame, and failed deliveries since the last pop.
+        self._gap_flags = 0
+        self._error_flags = 0
+
+    # ---- hooks -------------------------------------------------------------
+
+    @abstractmethod
+    def _connect(self) -> None:
+        """Open the link. :raises SinkUnavailableError: when it cannot be opened now."""
+
+    @abstractmethod
+    def _disconnect(self) -> None:
+        """Release the link; must not raise."""
+
+    @abstractmethod
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        """Write one frame.
+
+        :raises SinkWriteError: the frame is lost but the link is still up.
+        :raises SinkUnavailableError: the link went away; the sink reconnects.
+        """
+
+    def _on_connected(self) -> None:
+        """Called after each successful connect (e.g. to announce HELLO); may raise like _deliver."""
+
+    def link_capacity_fps(self) -> Optional[float]:
+        """Highest frame rate the link carries, or None when it is not the bottleneck."""
+        return None
+
+    # ---- public API ------------------------------------------------------------
+
+    def effective_max_fps(self) -> Optional[float]:
+        caps = [c for c in (self.options.max_fps, self.link_capacity_fps()) if c is not None]
+        return min(caps) if caps else None
+
+    def start(self) -> "Sink":
+        if self._thread is not None:
+            return self
+        cap = self.effective_max_fps()
+        self._limiter = RateLimiter(cap)
+        if cap is not None and self.options.fps is not None and self.options.fps > cap:
+            self._warned_decimation = True
+            _log.warning(
+                "%s: %.1f fps requested but this link carries at most %.1f joint frames/s; "
+                "decimating to fit (gaps are flagged DECIMATED and counted)",
+                self.url, self.options.fps, cap,
+            )
+        self._thread = threading.Thread(target=self._run, name=f"sink {self.url}", daemon=True)
+        self._thread.start()
+        return self
+
+    def send(self, frame: JointFrame) -> None:
+        """Queue a frame for sending; never blocks, never raises for link problems.
+
+        :raises SinkClosedError: after ``close()``.
+        """
+        warn_fps: Optional[float] = None
+        with self._cond:
+            if self._closed:
+                raise SinkClosedError(f"{self.url}: send() after close()")
+            self._submitted += 1
+            limiter = self._limiter
+            if limiter is not None and not limiter.admit(frame.capture_time_us):
+                self._decimated += 1
+                self._gap_flags |= Flags.DECIMATED
+                if not self._warned_decimation:
+                    warn_fps = limiter.max_fps
+                self._warned_decimation = True
+            else:
+                item = [frame, self._gap_flags]
+                self._gap_flags = 0
+                if len(self._queue) >= self.options.queue:
+                    _, lost_flags = self._queue.popleft()
+                    self._dropped_queue += 1
+                    # The gap now sits before the new oldest frame.
+                    heir = self._queue[0] if self._queue else item
+                    heir[1] |= lost_flags | Flags.DROPPED
+                self._queue.append(item)
+                self._cond.notify_all()
+        if warn_fps is not None:  # logged outside the lock: handlers may be slow
+            _log.warning("%s: frames arrive faster than %.1f fps; decimating", self.url, warn_fps)
+
+    def stats(self) -> SinkStats:
+        with self._cond:
+            return SinkStats(
+                submitted=self._submitted,
+                sent=self._sent,
+                decimated=self._decimated,
+                dropped_queue=self._dropped_queue,
+                dropped_error=self._dropped_error,
+                dropped_close=self._dropped_close,
+                queued=len(self._queue),
+                in_flight=self._in_flight,
+                connected=self._connected,
+                connects=self._connects,
+                connect_failures=self._connect_failures,
+                disconnects=self._disconnects,
+                last_error=self._last_error,
+            )
+
+    def wait_drained(self, timeout: float) -> bool:
+        """Block until nothing is queued or in flight (for shutdown and tests)."""
+        with self._cond:
+            return self._cond.wait_for(lambda: not self._queue and not self._in_flight, timeout)
+
+    def wait_connected(self, timeout: float) -> bool:
+        with self._cond:
+            return self._cond.wait_for(lambda: self._connected, timeout)
+
+    def close(self, timeout: float = 1.0) -> SinkStats:
+        """Stop accepting frames, deliver what is queued if the link is up, release it.
+
+        Frames still queued after ``timeout`` are counted as ``dropped_close``.
+        """
+        with self._cond:
+            if self._closed:
+                return self.stats()
+            self._closed = True
+            self._cond.notify_all()
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+        with self._cond:
+            self._dropped_close += len(self._queue)
+            self._queue.clear()
+        if self._thread is None or not self._thread.is_alive():
+            self._release()
+        return self.stats()
+
+    def __enter__(self) -> "Sink":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.url}>"
+
+    # ---- worker ------------------------------------------------------------------
+
+    def _release(self) -> None:
+        with self._cond:
+            was = self._connected
+            self._connected = False
+        if was:
+            self._disconnect()
+
+    def _fail(self, e: Exception, counter: str) -> None:
+        with self._cond:
+            setattr(self, counter, getattr(self, counter) + 1)
+            self._last_error = str(e)
+            self._cond.notify_all()
+
+    def _try_connect(self, backoff: Backoff) -> bool:
+        try:
+            self._connect()
+            with self._cond:
+                self._connected = True
+                self._connects += 1
+                self._cond.notify_all()
+            self._on_connected()
+        except SinkUnavailableError as e:
+            self._release()
+            self._fail(e, "_connect_failures")
+            _log.info("%s: %s; retrying", self.url, e)
+            self._stop.wait(backoff.next_delay())
+            return False
+        except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: keep the link
+            self._fail(e, "_connect_failures")
+        backoff.reset()
+        return True
+
+    def _next_frame(self) -> Optional[tuple[JointFrame, int]]:
+        with self._cond:
+            self._cond.wait_for(lambda: self._queue or self._closed)
+            if not self._queue:
+                return None
+            frame, flags = self._queue.popleft()
+            self._in_flight = 1
+            flags |= self._error_flags
+            self._error_flags = 0
+            return frame, flags
+
+    def _run(self) -> None:
+        backoff = Backoff(self.options.backoff)
+        while not (self._closed and not self._queue):
+            if not self._connected:
+                if self._closed:
+                    break  # nothing to flush into
+                self._try_connect(backoff)
+                continue
+            item = self._next_frame()
+            if item is None:
+                break
+            frame, flags = item
+            error: Optional[str] = None
+            try:
+                self._deliver(frame, flags)
+            except SinkWriteError as e:
+                error = str(e)
+            except SinkUnavailableError as e:
+                error = str(e)
+                _log.warning("%s: link lost (%s); reconnecting", self.url, e)
+                self._release()
+                with self._cond:
+                    self._disconnects += 1
+            except Exception as e:  # a bug in a backend must not kill the worker silently
+                error = f"{type(e).__name__}: {e}"
+                _log.exception("%s: frame %d could not be delivered", self.url, frame.sequence)
+            with self._cond:
+                if error is None:
+                    self._sent += 1
+                else:
+                    self._dropped_error += 1
+                    self._last_error = error
+                    # The next frame that gets through tells the receiver about this gap.
+                    self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
+                self._in_flight = 0
+                self._cond.notify_all()
+        self._release()

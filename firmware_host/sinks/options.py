@@ -1,0 +1,63 @@
+"""Options every sink understands, from the URL query or keyword arguments."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+from firmware_host.errors import SinkConfigError
+from firmware_host.sinks.backoff import BackoffPolicy
+from firmware_host.sinks.url import SinkUrl, boolean, positive_float, positive_int
+
+
+def monotonic_us() -> int:
+    return time.monotonic_ns() // 1000
+
+
+@dataclass(frozen=True)
+class SinkOptions:
+    queue: int = 4
+    """Frames held while the link is busy or away; when full the oldest is dropped and counted."""
+    fps: Optional[float] = None
+    """The producer's nominal rate, used to warn up front when the link cannot carry it."""
+    max_fps: Optional[float] = None
+    """Cap on the rate sent, on top of the link's own capacity."""
+    status_s: float = 1.0
+    """Period of STATUS (and repeated HELLO) packets on protocol sinks."""
+    send_2d: bool = False
+    """Also send JOINTS_2D for each camera in ``JointFrame.joints_2d``."""
+    rig_id: str = ""
+    """Announced in HELLO (printable ASCII, at most 32 characters)."""
+    cameras: tuple[str, ...] = ()
+    """Camera names in index order, announced in HELLO; names in joints_2d map to these indices."""
+    joint_count: int = 25
+    """Joints per frame, used to size the link budget before the first frame."""
+    backoff: BackoffPolicy = field(default_factory=BackoffPolicy)
+    """Reconnect schedule after a failed connect or an unplug."""
+    clock_us: Callable[[], int] = monotonic_us
+    """Clock for send timestamps; must be the clock of ``JointFrame.capture_time_us``."""
+
+    @classmethod
+    def take(cls, u: SinkUrl, kw: dict) -> "SinkOptions":
+        """Pop the common options from the URL query and ``kw`` (kw wins)."""
+        opts = cls(
+            queue=u.take("queue", positive_int, cls.queue, kw),
+            fps=u.take("fps", positive_float, None, kw),
+            max_fps=u.take("max_fps", positive_float, None, kw),
+            status_s=u.take("status_s", positive_float, cls.status_s, kw),
+            send_2d=u.take("send_2d", boolean, cls.send_2d, kw),
+            rig_id=u.take("rig_id", str, cls.rig_id, kw),
+            cameras=tuple(u.take("cameras", lambda s: [c for c in s.split(",") if c], (), kw)),
+            joint_count=u.take("joint_count", positive_int, cls.joint_count, kw),
+            backoff=kw.pop("backoff", BackoffPolicy()),
+            clock_us=kw.pop("clock_us", monotonic_us),
+        )
+        if opts.queue < 1:
+            raise SinkConfigError(u.url, "queue", opts.queue, "must be >= 1")
+        return opts
+
+
+def reject_unknown_kw(url: str, kw: dict) -> None:
+    if kw:
+        key = sorted(kw)[0]
+        raise SinkConfigError(url, key, kw[key], "unknown keyword argument")

@@ -1,0 +1,128 @@
+"""Sinks that speak the binary joint protocol (serial, USB, UDP, file, memory).
+
+Per link: a 0x00 and HELLO + STATUS on every (re)connect, then JOINTS (and
+JOINTS_2D when asked) per frame, and HELLO + STATUS again every ``status_s``
+so receivers that start late learn the stream's parameters.
+"""
+from __future__ import annotations
+
+from abc import abstractmethod
+from typing import Optional
+
+from firmware_host.errors import EncodeError, SinkConfigError
+from firmware_host.protocol.constants import (
+    PROTOCOL_VERSION,
+    U32_MAX,
+    CoordFrame,
+    Fault,
+    JointSet,
+    MsgType,
+    Units,
+)
+from firmware_host.protocol.encoder import encode, joints2d_packet_len, joints_packet_len, wire_len
+from firmware_host.protocol.from_frame import joints2d_messages, joints_message, wire_seq
+from firmware_host.protocol.messages import Hello, JointFrame, Message, Status, make_header
+from firmware_host.sinks.base import Sink, SinkStats
+from firmware_host.sinks.options import SinkOptions
+
+
+class ProtocolSink(Sink):
+    def __init__(self, url: str, options: SinkOptions) -> None:
+        super().__init__(url, options)
+        self._joint_set = int(JointSet.BODY_25)
+        self._last_seq = 0
+        self._last_capture_us = 0
+        self._resync = True
+        self._fault = int(Fault.OK)
+        self._status_due_us: Optional[int] = None
+        self._window = (0, 0)  # (time of last STATUS, frames sent by then)
+        self._prev_stats: Optional[SinkStats] = None
+        try:  # validate HELLO fields now, so a bad rig_id fails at open_sink()
+            encode(self._hello(0))
+        except EncodeError as e:
+            raise SinkConfigError(url, e.field.split(".")[-1], e.value, str(e)) from e
+
+    # ---- backend hook -----------------------------------------------------------
+
+    @abstractmethod
+    def _write_bytes(self, data: bytes) -> None:
+        """Write framed packets. Raise SinkWriteError / SinkUnavailableError like ``_deliver``."""
+
+    def _write_messages(self, messages: list[Message]) -> None:
+        data = b"".join(encode(m) for m in messages)
+        if self._resync:
+            # A leading delimiter ends whatever partial frame the receiver holds.
+            data = b"\x00" + data
+        self._write_bytes(data)
+        self._resync = False
+
+    # ---- link budget ------------------------------------------------------------
+
+    def frame_bytes(self) -> int:
+        """Wire bytes per joint frame (JOINTS, plus JOINTS_2D per camera if enabled)."""
+        n = self.options.joint_count
+        total = wire_len(joints_packet_len(n))
+        if self.options.send_2d:
+            total += max(1, len(self.options.cameras)) * wire_len(joints2d_packet_len(n))
+        return total
+
+    def set_fault(self, fault: int) -> None:
+        """Report a daemon-level fault (e.g. Fault.ESTIMATOR_STALLED) in STATUS; Fault.OK clears it."""
+        self._fault = int(fault)
+
+    # ---- Sink hooks --------------------------------------------------------------
+
+    def _on_connected(self) -> None:
+        self._resync = True
+        now = self.options.clock_us()
+        self._status_due_us = now + int(self.options.status_s * 1e6)
+        self._write_messages([self._hello(now), self._status(now)])
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        now = self.options.clock_us()
+        self._joint_set = frame.joint_set
+        self._last_seq = wire_seq(frame.sequence)
+        self._last_capture_us = frame.capture_time_us
+        messages: list[Message] = [joints_message(frame, now, flags)]
+        if self.options.send_2d and frame.joints_2d:
+            messages += joints2d_messages(frame, now, self.options.cameras, flags)
+        if self._status_due_us is None or now >= self._status_due_us:
+            self._status_due_us = now + int(self.options.status_s * 1e6)
+            messages += [self._hello(now), self._status(now)]
+        self._write_messages(messages)
+
+    # ---- messages ------------------------------------------------------------------
+
+    def _hello(self, now: int) -> Hello:
+        h = make_header(MsgType.HELLO, self._last_seq, now, now)
+        return Hello(
+            h, PROTOCOL_VERSION, self._joint_set, self.options.joint_count, int(Units.MILLIMETRES),
+            int(CoordFrame.RIG), self.options.rig_id, tuple(self.options.cameras),
+        )
+
+    def _status(self, now: int) -> Status:
+        s = self.stats()
+        prev = self._prev_stats or s
+        t0, sent0 = self._window
+        fps_centi = round(100 * (s.sent - sent0) * 1e6 / (now - t0)) if t0 and now > t0 else 0
+        self._window, self._prev_stats = (now, s.sent), s
+        if self._fault != Fault.OK:
+            fault = self._fault
+        elif s.decimated > prev.decimated:
+            fault = int(Fault.RATE_LIMITED)
+        elif s.dropped_queue > prev.dropped_queue:
+            fault = int(Fault.QUEUE_OVERFLOW)
+        elif s.dropped_error > prev.dropped_error or s.disconnects > prev.disconnects:
+            fault = int(Fault.LINK_ERRORS)
+        else:
+            fault = int(Fault.OK)
+        h = make_header(MsgType.STATUS, self._last_seq, self._last_capture_us or now, now)
+        latency = max(0, now - self._last_capture_us) if self._last_capture_us else 0
+        return Status(
+            h,
+            fps_centi=min(fps_centi, 0xFFFF),
+            latency_us=min(latency, U32_MAX),
+            dropped=min(s.dropped, U32_MAX),
+            decimated=min(s.decimated, U32_MAX),
+            fault=fault,
+        )

@@ -1,0 +1,107 @@
+"""Sink URL parsing: scheme, location and typed query parameters.
+
+Every error names the URL, the parameter and the value (SinkConfigError).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Optional, TypeVar
+from urllib.parse import parse_qs, urlsplit
+
+from firmware_host.errors import SinkConfigError
+
+T = TypeVar("T")
+
+
+@dataclass
+class SinkUrl:
+    url: str
+    scheme: str
+    netloc: str
+    path: str
+    query: dict[str, str]
+
+    def take(self, key: str, convert: Callable[[str], T], default: T, kw: Optional[dict] = None) -> T:
+        """Remove ``key`` from the query (and from ``kw``, which wins) and convert it.
+
+        Keyword values that are strings or numbers go through the same check as
+        query values; other objects (tuples, policies) are taken as they are.
+        """
+        raw: object = self.query.pop(key, None)
+        if kw is not None and key in kw:
+            raw = kw.pop(key)
+            if isinstance(raw, bool) or not isinstance(raw, (str, int, float)):
+                return raw  # type: ignore[return-value]
+        if raw is None:
+            return default
+        try:
+            return convert(str(raw))
+        except (ValueError, TypeError) as e:
+            raise SinkConfigError(self.url, key, raw, str(e) or "bad value") from e
+
+    def reject_leftovers(self) -> None:
+        """Unknown query keys are an error, so a typo is never silently ignored."""
+        if self.query:
+            key = sorted(self.query)[0]
+            raise SinkConfigError(self.url, key, self.query[key], "unknown parameter")
+
+
+def parse_url(url: str) -> SinkUrl:
+    parts = urlsplit(url)
+    if not parts.scheme:
+        raise SinkConfigError(url, "scheme", "", "expected e.g. serial://, usb://, udp://, vmc://, file://, memory://")
+    query: dict[str, str] = {}
+    for key, values in parse_qs(parts.query, keep_blank_values=True, strict_parsing=False).items():
+        if len(values) > 1:
+            raise SinkConfigError(url, key, values, "given more than once")
+        query[key] = values[0]
+    return SinkUrl(url, parts.scheme.lower(), parts.netloc, parts.path, query)
+
+
+def positive_int(raw: str) -> int:
+    v = int(raw, 0)  # accepts 0x01 for endpoints
+    if v <= 0:
+        raise ValueError("must be > 0")
+    return v
+
+
+def non_negative_int(raw: str) -> int:
+    v = int(raw, 0)
+    if v < 0:
+        raise ValueError("must be >= 0")
+    return v
+
+
+def positive_float(raw: str) -> float:
+    v = float(raw)
+    if not v > 0:
+        raise ValueError("must be > 0")
+    return v
+
+
+def boolean(raw: str) -> bool:
+    low = raw.strip().lower()
+    if low in ("1", "true", "yes", "on"):
+        return True
+    if low in ("0", "false", "no", "off"):
+        return False
+    raise ValueError("expected 0/1, true/false, yes/no or on/off")
+
+
+def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]:
+    """``host:port`` from the URL's location; IPv6 hosts in brackets."""
+    parts = urlsplit(u.url)
+    host = parts.hostname
+    if not host:
+        raise SinkConfigError(u.url, "host", u.netloc, "missing host")
+    try:
+        port = parts.port
+    except ValueError as e:
+        raise SinkConfigError(u.url, "port", u.netloc, str(e)) from e
+    if port is None:
+        if default_port is None:
+            raise SinkConfigError(u.url, "port", u.netloc, "missing port")
+        port = default_port
+    if port == 0:
+        raise SinkConfigError(u.url, "port", port, "must be 1..65535")
+    return host, port

@@ -1,0 +1,53 @@
+"""vmc://host:39539 - the VMC protocol (OSC over UDP) for VSeeFace / Unity-style receivers.
+
+One OSC bundle per frame: /VMC/Ext/OK, /VMC/Ext/T, Root/Pos (hip position) and
+Bone/Pos (local rotations) solved by ``vmc_pose``. VMC has no sequence
+numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
+report what it decimated or dropped. ``max_fps`` caps the rate (receivers
+render at display rate; 60 is plenty).
+"""
+from __future__ import annotations
+
+from typing import Any, Optional
+
+from firmware_host.protocol.messages import JointFrame
+from firmware_host.sinks.base import Sink
+from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
+from firmware_host.sinks.udp_sink import DatagramLink
+from firmware_host.sinks.url import SinkUrl, host_port, parse_url
+from firmware_host.sinks.vmc_osc import build_bundle
+from firmware_host.sinks.vmc_pose import solve_pose
+
+VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
+
+
+class VmcSink(Sink):
+    scheme = "vmc"
+
+    def __init__(self, url: str, host: str, port: int, options: SinkOptions) -> None:
+        super().__init__(url, options)
+        self._link = DatagramLink(url, host, port)
+        self._t0_us: Optional[int] = None
+
+    @classmethod
+    def from_url(cls, url: str, **kw: Any) -> "VmcSink":
+        u: SinkUrl = parse_url(url)
+        host, port = host_port(u, VMC_DEFAULT_PORT)
+        options = SinkOptions.take(u, kw)
+        u.reject_leftovers()
+        reject_unknown_kw(url, kw)
+        return cls(url, host, port, options)
+
+    def _connect(self) -> None:
+        self._link.open()
+
+    def _disconnect(self) -> None:
+        self._link.close()
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        if self._t0_us is None:
+            self._t0_us = frame.capture_time_us
+        # Seconds since the first frame, not since boot: OSC floats are float32
+        # (about 1 ms resolution after an hour, 2 ms after four).
+        t = (frame.capture_time_us - self._t0_us) / 1e6
+        self._link.send(build_bundle(solve_pose(frame.joints_3d), t))

@@ -1,0 +1,545 @@
+"""The training-to-runtime model contract, written once (torch-free).
+
+The exporter (``training/export``) builds a :class:`ModelContract` from the
+model config, stamps it into every ONNX file's ``metadata_props`` with
+:meth:`ModelContract.to_metadata`, and the runtime reads it back with
+:meth:`ModelContract.from_metadata` and refuses a model whose contract does not
+match what it was built for (the error names the metadata key or the tensor).
+
+What the contract fixes
+-----------------------
+* **Images**: the ``encoder`` graph takes ``images`` ``(S, 3, H, W)`` float32,
+  **RGB** channel order (OpenCV frames are BGR: flip them), values in
+  ``[0, 1]`` (``uint8 / 255``), undistorted (ideal pinhole with the ``K`` passed
+  to the other graphs), resized to the contract resolution. The ImageNet
+  mean/std normalisation is applied *inside* the graph (so a torchvision
+  ResNet18 state dict applies unchanged); the host must not apply it again.
+* **Pixels**: pixel centres at integer coordinates (``Camera.resized`` follows
+  it); every ``K`` and every ``ray_uv`` is expressed at the contract
+  resolution ``H x W``.
+* **Cameras**: the host computes every camera matrix (no matrix inverse runs in
+  a graph): see :func:`source_projections`, :func:`target_inputs`,
+  :func:`target_projections`, :func:`near_far_from_box`, :func:`ray_grid`.
+  Extrinsics map rig points into the camera (``X_cam = R X + t``).
+* **Joints**: 25 BODY_25 joints in :data:`ghnerf_runtime.body25.JOINT_NAMES`
+  order; heatmaps are sigmoid values in ``[0, 1]`` volume-rendered with the
+  colour weights (so a ray that hits nothing has heatmap 0).
+* **Background**: rendered colour is composited over ``background`` (black).
+
+Graphs (names are stable API; see ``docs/model.md``)
+----------------------------------------------------
+``encoder``: ``images`` -> multi-scale image features (+ human features).
+``volume``: features + cameras -> regularised cost volume of the *target*
+frustum and per-pixel depth statistics. ``render`` / ``render_heat``:
+per-sample heads and compositing along host-chosen rays (``render_heat`` skips
+colour: use it with the source cameras as targets to get the heatmaps of each
+source view; ``render_rgb`` skips heatmaps and the human features: the novel
+view). ``query``: the joint heatmap head at arbitrary 3D points
+(volumetric heatmaps for 3D joints).
+
+Symbolic dimensions: ``S`` sources (fixed, 2), ``B`` targets, ``R`` rays,
+``N`` query points; the exporter leaves ``B``, ``R`` and ``N`` dynamic.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field, replace
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from ghnerf_runtime.body25 import JOINT_NAMES
+from ghnerf_runtime.errors import RuntimeErrorBase
+
+#: Contract format version. A different *major* is refused by :meth:`ModelContract.from_metadata`.
+CONTRACT_VERSION = "1.0.0"
+#: Prefix of every metadata key the contract writes.
+META_PREFIX = "ghnerf."
+#: Graph names in pipeline order.
+GRAPH_NAMES = ("encoder", "volume", "render", "render_heat", "render_rgb", "query")
+#: ImageNet statistics, applied in the encoder graph after ``images`` (RGB, [0, 1]).
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+#: Channels of the ``depth_stats`` tensor, in order.
+DEPTH_STATS_CHANNELS = ("mean", "std", "lo", "hi")
+
+
+class ContractError(RuntimeErrorBase, ValueError):
+    """The model contract (or a model's metadata) is malformed or does not match.
+
+    ``key`` names the metadata key or tensor that was wrong; the message repeats it.
+    """
+
+    def __init__(self, message: str, *, key: str | None = None):
+        super().__init__(f"{key}: {message}" if key else message)
+        self.key = key
+
+
+# --------------------------------------------------------------------------- specs
+Dim = int | str
+
+
+@dataclass(frozen=True)
+class TensorSpec:
+    """One graph input or output: name, shape (ints or symbolic names), dtype, meaning."""
+
+    name: str
+    shape: tuple[Dim, ...]
+    dtype: str = "float32"
+    doc: str = ""
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "shape": list(self.shape), "dtype": self.dtype, "doc": self.doc}
+
+    @staticmethod
+    def from_json(obj: Any, key: str) -> "TensorSpec":
+        try:
+            shape = tuple(d if isinstance(d, str) else int(d) for d in obj["shape"])
+            return TensorSpec(str(obj["name"]), shape, str(obj.get("dtype", "float32")), str(obj.get("doc", "")))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ContractError(f"malformed tensor spec {obj!r} ({e})", key=key) from e
+
+
+@dataclass(frozen=True)
+class GraphSpec:
+    """Inputs and outputs of one exported graph."""
+
+    name: str
+    inputs: tuple[TensorSpec, ...]
+    outputs: tuple[TensorSpec, ...]
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.inputs)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.outputs)
+
+    def tensor(self, name: str) -> TensorSpec:
+        for t in self.inputs + self.outputs:
+            if t.name == name:
+                return t
+        raise ContractError(f"graph {self.name!r} has no tensor {name!r}", key=name)
+
+    def to_json(self) -> dict:
+        return {"name": self.name, "inputs": [t.to_json() for t in self.inputs],
+                "outputs": [t.to_json() for t in self.outputs]}
+
+    @staticmethod
+    def from_json(obj: Any, key: str) -> "GraphSpec":
+        try:
+            return GraphSpec(
+                str(obj["name"]),
+                tuple(TensorSpec.from_json(t, key) for t in obj["inputs"]),
+                tuple(TensorSpec.from_json(t, key) for t in obj["outputs"]),
+            )
+        except (KeyError, TypeError) as e:
+            raise ContractError(f"malformed graph spec ({e})", key=key) from e
+
+
+@dataclass(frozen=True)
+class LevelSpec:
+    """One level of the coarse-to-fine cascade.
+
+    Attributes:
+        volume_stride: cost volume resolution is ``H / volume_stride`` x ``W / volume_stride``.
+        planes: depth planes of the cost volume.
+        samples: samples per ray when this level is rendered.
+        spacing: ``"inverse"`` (planes uniform in 1/z between near and far; level 0) or
+            ``"linear"`` (uniform in z between the per-pixel ``lo`` and ``hi`` maps).
+        feature: which encoder output the cost volume is built from (``"feat_s4"``...).
+        sampling: ``"interval"`` (samples in mean +- k std of the level's depth distribution) or
+            ``"planes"`` (the ray samples are the level's planes, spanning ``lo..hi``).
+    """
+
+    volume_stride: int
+    planes: int
+    samples: int
+    spacing: str
+    feature: str
+    sampling: str = "interval"
+
+    def to_json(self) -> dict:
+        return {"volume_stride": self.volume_stride, "planes": self.planes, "samples": self.samples,
+                "spacing": self.spacing, "feature": self.feature, "sampling": self.sampling}
+
+
+@dataclass(frozen=True)
+class Normalisation:
+    """How images enter the ``encoder`` graph."""
+
+    channel_order: str = "RGB"
+    value_range: tuple[float, float] = (0.0, 1.0)
+    mean: tuple[float, float, float] = IMAGENET_MEAN
+    std: tuple[float, float, float] = IMAGENET_STD
+    mean_std_in_graph: bool = True
+
+    def to_json(self) -> dict:
+        return {"channel_order": self.channel_order, "value_range": list(self.value_range),
+                "mean": list(self.mean), "std": list(self.std), "mean_std_in_graph": self.mean_std_in_graph}
+
+
+# ------------------------------------------------------------------------ contract
+@dataclass(frozen=True)
+class ModelContract:
+    """Everything the runtime must know to feed the graphs and read their outputs.
+
+    Build it with :meth:`build` (the exporter does, from the model config).
+    """
+
+    height: int
+    width: int
+    variant: str  # "ghnerf" (with the human encoder) or "baseline" (ENeRF + heatmap)
+    levels: tuple[LevelSpec, ...]
+    channels: Mapping[str, int]  # feat_s1, feat_s2, feat_s4, human_feat, volume
+    strides: Mapping[str, int]  # encoder output -> stride w.r.t. the input
+    render_feature: str = "feat_s1"
+    heatmap_stride: int = 4
+    num_sources: int = 2
+    joint_names: tuple[str, ...] = JOINT_NAMES
+    normalisation: Normalisation = field(default_factory=Normalisation)
+    background: float = 0.0
+    opset: int = 17
+    version: str = CONTRACT_VERSION
+    model_version: str = "0.1.0"
+    graphs: tuple[GraphSpec, ...] = ()
+
+    # ------------------------------------------------------------------ build
+    @classmethod
+    def build(cls, *, height: int, width: int, variant: str, levels: Sequence[LevelSpec],
+              channels: Mapping[str, int], strides: Mapping[str, int], **kwargs) -> "ModelContract":
+        """A contract with its graph specs derived from the sizes given."""
+        contract = cls(height=int(height), width=int(width), variant=variant, levels=tuple(levels),
+                       channels=dict(channels), strides=dict(strides), **kwargs)
+        contract = replace(contract, graphs=contract._derive_graphs())
+        contract.validate()
+        return contract
+
+    @property
+    def has_human(self) -> bool:
+        return self.variant == "ghnerf"
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.joint_names)
+
+    def graph(self, name: str) -> GraphSpec:
+        for g in self.graphs:
+            if g.name == name:
+                return g
+        raise ContractError(f"no graph {name!r}; graphs: {[g.name for g in self.graphs]}", key="graphs")
+
+    def _size(self, key: str) -> tuple[int, int]:
+        s = self.strides[key]
+        return self.height // s, self.width // s
+
+    def _derive_graphs(self) -> tuple[GraphSpec, ...]:
+        S, H, W, J = self.num_sources, self.height, self.width, self.num_joints
+        last = self.levels[-1]
+        hv, wv = H // last.volume_stride, W // last.volume_stride
+        feats = [TensorSpec(k, (S, self.channels[k], *self._size(k)), doc=f"image features at 1/{self.strides[k]}")
+                 for k in ("feat_s1", "feat_s2", "feat_s4")]
+        human = ([TensorSpec("human_feat", (S, self.channels["human_feat"], *self._size("human_feat")),
+                             doc="pixel-aligned human (ResNet18) features")] if self.has_human else [])
+        images = TensorSpec("images", (S, 3, H, W), doc="source images, RGB, [0, 1], undistorted")
+        src_P = TensorSpec("src_P", (S, 3, 4), doc="K [R|t] of each source at the contract resolution")
+        tgt_K_inv = TensorSpec("tgt_K_inv", ("B", 3, 3), doc="inverse intrinsics of each target")
+        tgt_c2w = TensorSpec("tgt_c2w", ("B", 3, 4), doc="[R^T | camera centre] of each target (camera -> rig)")
+        near_far = TensorSpec("near_far", ("B", 2), doc="depth range (camera z, metres) of the subject box")
+        volume = TensorSpec("volume", ("B", self.channels["volume"], last.planes, hv, wv),
+                            doc="regularised feature volume of the last level, target frustum")
+        stats = TensorSpec("depth_stats", ("B", 4, hv, wv),
+                           doc="per-pixel depth mean, std and plane range lo, hi of the last level (metres)")
+        used_feats = sorted({lv.feature for lv in self.levels})
+        render_feat = next(f for f in feats if f.name == self.render_feature)
+        per_sample_in = [images, render_feat, *human, volume, stats, src_P]
+        src_centers = TensorSpec("src_centers", (S, 3), doc="source camera centres (rig)")
+        rgb = TensorSpec("rgb", ("B", "R", 3), doc=f"colour, RGB [0, 1], over background {self.background}")
+        ray_uv = TensorSpec("ray_uv", ("B", "R", 2), doc="pixel (u, v) of each ray in the target, contract resolution")
+        heat = TensorSpec("heatmaps", ("B", "R", J), doc="volume-rendered joint heatmaps, BODY_25 order")
+        depth = TensorSpec("depth", ("B", "R"), doc="expected camera depth of each ray (metres)")
+        acc = TensorSpec("acc", ("B", "R"), doc="accumulated opacity of each ray")
+        return (
+            GraphSpec("encoder", (images,), (*feats, *human)),
+            GraphSpec("volume", (*[f for f in feats if f.name in used_feats], src_P, tgt_K_inv, tgt_c2w, near_far),
+                      (volume, stats)),
+            GraphSpec("render", (*per_sample_in, src_centers, tgt_K_inv, tgt_c2w, ray_uv), (rgb, heat, depth, acc)),
+            GraphSpec("render_heat", (*per_sample_in, tgt_K_inv, tgt_c2w, ray_uv), (heat, depth, acc)),
+            GraphSpec("render_rgb", (images, render_feat, volume, stats, src_P, src_centers, tgt_K_inv, tgt_c2w,
+                                     ray_uv), (rgb, depth, acc)),
+            GraphSpec("query", (*per_sample_in, TensorSpec("tgt_P", ("B", 3, 4), doc="K [R|t] of the volume's target"),
+                                TensorSpec("points", ("B", "N", 3), doc="rig-frame query points (metres)")),
+                      (TensorSpec("joint_heat", ("B", "N", J), doc="joint heatmap head at each point (sigmoid)"),
+                       TensorSpec("density", ("B", "N"), doc="density at each point (softplus)"))),
+        )
+
+    # --------------------------------------------------------------- validate
+    def validate(self) -> None:
+        """Raise :class:`ContractError` (naming the key) unless the contract is self-consistent."""
+        def fail(key: str, msg: str) -> None:
+            raise ContractError(msg, key=META_PREFIX + key)
+
+        if self.version.split(".")[0] != CONTRACT_VERSION.split(".")[0]:
+            fail("contract_version", f"contract version {self.version} is incompatible with {CONTRACT_VERSION}")
+        if not (64 <= self.height <= 256 and 64 <= self.width <= 256):
+            fail("resolution", f"resolution must be within 64..256, got {self.width}x{self.height}")
+        if self.variant not in ("ghnerf", "baseline"):
+            fail("variant", f"variant must be 'ghnerf' or 'baseline', got {self.variant!r}")
+        if tuple(self.joint_names) != JOINT_NAMES:
+            fail("joint_names", f"joint names must be BODY_25 in OpenPose order {list(JOINT_NAMES)}, "
+                                f"got {list(self.joint_names)}")
+        if self.num_sources != 2:
+            fail("num_sources", f"the runtime feeds exactly 2 source views, got {self.num_sources}")
+        n = self.normalisation
+        if n.channel_order not in ("RGB", "BGR") or len(n.mean) != 3 or len(n.std) != 3 or min(n.std) <= 0:
+            fail("normalisation", f"bad normalisation {n.to_json()}")
+        if not self.levels:
+            fail("levels", "at least one level is required")
+        needed = {"feat_s1", "feat_s2", "feat_s4", "volume"} | ({"human_feat"} if self.has_human else set())
+        if missing := needed - set(self.channels):
+            fail("channels", f"missing channel counts {sorted(missing)}")
+        if missing := (needed - {"volume"}) - set(self.strides):
+            fail("strides", f"missing strides {sorted(missing)}")
+        for i, lv in enumerate(self.levels):
+            if (lv.spacing not in ("inverse", "linear") or lv.sampling not in ("interval", "planes")
+                    or lv.planes < 2 or lv.samples < 1 or lv.volume_stride < 1):
+                fail("levels", f"level {i} is invalid: {lv.to_json()}")
+            if lv.feature not in self.strides:
+                fail("levels", f"level {i} uses unknown feature {lv.feature!r}")
+            if self.height % lv.volume_stride or self.width % lv.volume_stride:
+                fail("levels", f"level {i} stride {lv.volume_stride} does not divide {self.width}x{self.height}")
+        if self.render_feature not in self.strides:
+            fail("render_feature", f"unknown render feature {self.render_feature!r}")
+        if self.heatmap_stride < 1 or self.height % self.heatmap_stride or self.width % self.heatmap_stride:
+            fail("heatmap_stride", f"heatmap stride {self.heatmap_stride} must divide {self.width}x{self.height}")
+
+    # --------------------------------------------------------------- metadata
+    def to_metadata(self, graph: str | None = None, precision: str = "fp32") -> dict[str, str]:
+        """The contract as flat ``metadata_props`` (all strings); ``graph`` names the file's graph."""
+        p = META_PREFIX
+        meta = {
+            p + "contract_version": self.version,
+            p + "model_version": self.model_version,
+            p + "variant": self.variant,
+            p + "resolution": f"{self.width}x{self.height}",
+            p + "num_sources": str(self.num_sources),
+            p + "joint_names": json.dumps(list(self.joint_names)),
+            p + "normalisation": json.dumps(self.normalisation.to_json()),
+            p + "levels": json.dumps([lv.to_json() for lv in self.levels]),
+            p + "channels": json.dumps(dict(self.channels)),
+            p + "strides": json.dumps(dict(self.strides)),
+            p + "render_feature": self.render_feature,
+            p + "heatmap_stride": str(self.heatmap_stride),
+            p + "background": repr(float(self.background)),
+            p + "opset": str(self.opset),
+            p + "graphs": json.dumps([g.to_json() for g in self.graphs]),
+            p + "precision": precision,
+        }
+        if graph is not None:
+            if graph not in GRAPH_NAMES:
+                raise ContractError(f"unknown graph {graph!r}; expected one of {GRAPH_NAMES}", key=p + "graph")
+            meta[p + "graph"] = graph
+        return meta
+
+    @classmethod
+    def from_metadata(cls, props: Mapping[str, str]) -> "ModelContract":
+        """Parse :meth:`to_metadata` output; every error names the offending key."""
+        p = META_PREFIX
+
+        def get(key: str) -> str:
+            if p + key not in props:
+                raise ContractError("missing from the model metadata (not a GHNeRF export, or too old)",
+                                    key=p + key)
+            return props[p + key]
+
+        def parse(key: str, fn):
+            raw = get(key)
+            try:
+                return fn(raw)
+            except ContractError:
+                raise
+            except (ValueError, TypeError, KeyError, json.JSONDecodeError) as e:
+                raise ContractError(f"cannot parse {raw!r} ({e})", key=p + key) from e
+
+        version = get("contract_version")
+        if version.split(".")[0] != CONTRACT_VERSION.split(".")[0]:
+            raise ContractError(f"model contract version {version} is incompatible with this runtime's "
+                                f"{CONTRACT_VERSION}", key=p + "contract_version")
+
+        def resolution(raw: str) -> tuple[int, int]:
+            w, h = raw.lower().split("x")
+            return int(w), int(h)
+
+        def levels(raw: str) -> tuple[LevelSpec, ...]:
+            return tuple(LevelSpec(int(d["volume_stride"]), int(d["planes"]), int(d["samples"]), str(d["spacing"]),
+                                   str(d["feature"]), str(d.get("sampling", "interval"))) for d in json.loads(raw))
+
+        def normalisation(raw: str) -> Normalisation:
+            d = json.loads(raw)
+            return Normalisation(str(d["channel_order"]), tuple(map(float, d["value_range"])),
+                                 tuple(map(float, d["mean"])), tuple(map(float, d["std"])),
+                                 bool(d["mean_std_in_graph"]))
+
+        def int_map(raw: str) -> dict[str, int]:
+            d = json.loads(raw)
+            if not isinstance(d, dict):
+                raise ValueError("expected a JSON object")
+            return {str(k): int(v) for k, v in d.items()}
+
+        def graphs(raw: str) -> tuple[GraphSpec, ...]:
+            return tuple(GraphSpec.from_json(g, p + "graphs") for g in json.loads(raw))
+
+        width, height = parse("resolution", resolution)
+        contract = cls(
+            height=height, width=width,
+            variant=get("variant"),
+            levels=parse("levels", levels),
+            channels=parse("channels", int_map),
+            strides=parse("strides", int_map),
+            render_feature=get("render_feature"),
+            heatmap_stride=parse("heatmap_stride", int),
+            num_sources=parse("num_sources", int),
+            joint_names=parse("joint_names", lambda r: tuple(str(x) for x in json.loads(r))),
+            normalisation=parse("normalisation", normalisation),
+            background=parse("background", float),
+            opset=parse("opset", int),
+            version=version,
+            model_version=get("model_version"),
+            graphs=parse("graphs", graphs),
+        )
+        contract.validate()
+        expected = contract._derive_graphs()
+        if tuple(g.to_json() for g in contract.graphs) != tuple(g.to_json() for g in expected):
+            raise ContractError("graph specs disagree with the sizes in the other keys", key=p + "graphs")
+        return contract
+
+    @staticmethod
+    def graph_of(props: Mapping[str, str]) -> str:
+        """Which graph an ONNX file holds, from its metadata."""
+        key = META_PREFIX + "graph"
+        if key not in props:
+            raise ContractError("missing from the model metadata", key=key)
+        if props[key] not in GRAPH_NAMES:
+            raise ContractError(f"unknown graph {props[key]!r}; expected one of {GRAPH_NAMES}", key=key)
+        return props[key]
+
+    def same_model(self, other: "ModelContract") -> bool:
+        """True when two files' contracts describe the same model (the graph key aside)."""
+        return self.to_metadata() == other.to_metadata()
+
+    def check_io(self, graph: str, inputs: Mapping[str, Sequence], outputs: Mapping[str, Sequence]) -> None:
+        """Check a session's I/O (name -> shape, symbolic dims as str/None) against the graph spec.
+
+        Raises:
+            ContractError: naming the first missing, extra or mis-shaped tensor.
+        """
+        spec = self.graph(graph)
+        for kind, expected, actual in (("input", spec.inputs, inputs), ("output", spec.outputs, outputs)):
+            names = [t.name for t in expected]
+            if extra := sorted(set(actual) - set(names)):
+                raise ContractError(f"graph {graph!r} has unexpected {kind}s {extra}", key=extra[0])
+            for t in expected:
+                if t.name not in actual:
+                    raise ContractError(f"graph {graph!r} lacks {kind} {t.name!r}", key=t.name)
+                shape = tuple(actual[t.name])
+                if len(shape) != len(t.shape) or any(
+                    isinstance(e, int) and isinstance(a, int) and a != e for e, a in zip(t.shape, shape)
+                ):
+                    raise ContractError(f"graph {graph!r} {kind} shape {list(shape)} != contract {list(t.shape)}",
+                                        key=t.name)
+
+
+# ----------------------------------------------------------------- camera inputs
+def _cam_arrays(camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    K = np.asarray(camera.K, dtype=np.float64)
+    R = np.asarray(camera.R, dtype=np.float64)
+    t = np.asarray(camera.t, dtype=np.float64).reshape(-1)
+    if K.shape != (3, 3) or R.shape != (3, 3) or t.shape != (3,):
+        raise ContractError(f"camera needs K (3,3), R (3,3), t (3,), got {K.shape}, {R.shape}, {t.shape}",
+                            key="camera")
+    return K, R, t
+
+
+def _check_size(cameras: Iterable, height: int, width: int) -> list:
+    cams = list(cameras)
+    for c in cams:
+        if (getattr(c, "width", width), getattr(c, "height", height)) != (width, height):
+            raise ContractError(f"camera {getattr(c, 'name', '?')!r} is {c.width}x{c.height}; resize it to the "
+                                f"contract resolution {width}x{height} (Camera.resized)", key="camera")
+    return cams
+
+
+def source_projections(cameras: Sequence, height: int, width: int) -> np.ndarray:
+    """``src_P`` ``(S, 3, 4)`` float32: ``K [R | t]`` of each source at the contract resolution."""
+    out = []
+    for c in _check_size(cameras, height, width):
+        K, R, t = _cam_arrays(c)
+        out.append(K @ np.hstack([R, t[:, None]]))
+    return np.stack(out).astype(np.float32)
+
+
+def source_centers(cameras: Sequence) -> np.ndarray:
+    """``src_centers`` ``(S, 3)`` float32: camera centres in the rig frame."""
+    out = []
+    for c in cameras:
+        _, R, t = _cam_arrays(c)
+        out.append(-R.T @ t)
+    return np.stack(out).astype(np.float32)
+
+
+def target_inputs(cameras: Sequence, height: int, width: int) -> dict[str, np.ndarray]:
+    """``tgt_K_inv`` ``(B, 3, 3)`` and ``tgt_c2w`` ``(B, 3, 4)`` (``[R^T | centre]``) float32."""
+    k_inv, c2w = [], []
+    for c in _check_size(cameras, height, width):
+        K, R, t = _cam_arrays(c)
+        k_inv.append(np.linalg.inv(K))
+        c2w.append(np.hstack([R.T, (-R.T @ t)[:, None]]))
+    return {"tgt_K_inv": np.stack(k_inv).astype(np.float32), "tgt_c2w": np.stack(c2w).astype(np.float32)}
+
+
+def target_projections(cameras: Sequence, height: int, width: int) -> np.ndarray:
+    """``tgt_P`` ``(B, 3, 4)`` float32 for the ``query`` graph (same as :func:`source_projections`)."""
+    return source_projections(cameras, height, width)
+
+
+def near_far_from_box(camera, corners: np.ndarray, margin: float = 0.1, min_near: float = 0.05) -> np.ndarray:
+    """Depth range ``(2,)`` float32 of a rig-frame box seen from ``camera``.
+
+    ``corners`` ``(8, 3)`` are the box corners (``WorkingVolume.corners()`` or a box
+    around the subject); the box is grown by ``margin`` metres before the camera
+    depths of its corners are taken. ``near`` is clamped to ``min_near``.
+    """
+    corners = np.asarray(corners, dtype=np.float64)
+    if corners.ndim != 2 or corners.shape[1] != 3:
+        raise ContractError(f"corners must have shape (8, 3), got {corners.shape}", key="corners")
+    lo, hi = corners.min(0) - margin, corners.max(0) + margin
+    idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
+    box = np.where(idx == 1, hi, lo)
+    _, R, t = _cam_arrays(camera)
+    z = (box @ R.T + t)[:, 2]
+    near = max(float(z.min()), min_near)
+    far = max(float(z.max()), near + 1e-3)
+    return np.array([near, far], dtype=np.float32)
+
+
+def ray_grid(height: int, width: int, stride: int = 1) -> np.ndarray:
+    """``ray_uv`` ``(R, 2)`` float32: the centres of ``stride x stride`` pixel blocks, row-major.
+
+    Rendering these rays gives an ``(H / stride, W / stride)`` image whose pixel
+    centres follow the integer-centre convention (``cv2.resize`` of it back to
+    ``H x W`` lines up with the full-resolution image).
+    """
+    if stride < 1 or height % stride or width % stride:
+        raise ContractError(f"stride {stride} must divide {width}x{height}", key="stride")
+    us = (np.arange(width // stride) + 0.5) * stride - 0.5
+    vs = (np.arange(height // stride) + 0.5) * stride - 0.5
+    u, v = np.meshgrid(us, vs)
+    return np.stack([u.ravel(), v.ravel()], axis=-1).astype(np.float32)
+
+
+__all__ = [
+    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "IMAGENET_MEAN", "IMAGENET_STD",
+    "ContractError", "TensorSpec", "GraphSpec", "LevelSpec", "Normalisation", "ModelContract",
+    "source_projections", "source_centers", "target_inputs", "target_projections", "near_far_from_box", "ray_grid",
+]

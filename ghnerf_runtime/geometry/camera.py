@@ -1,0 +1,271 @@
+"""Pinhole camera with OpenCV lens distortion: projection, undistortion, rays.
+
+Conventions (documented in docs/rig-file.md):
+
+* Rig frame: metres, right-handed, x to the right of the rig, y down (gravity),
+  z forward (horizontal, towards the subject), origin on the floor below the
+  midpoint of the camera centres. A standing person has negative y.
+* Extrinsics map rig (world) points into the camera: ``X_cam = R @ X + t``.
+* Camera frame: OpenCV (x right, y down, z along the optical axis).
+* Distortion: OpenCV's rational + thin-prism model with 4, 5, 8, 12 or 14
+  coefficients ``k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4 [tx ty]]]]``. The tilt
+  terms (tx, ty) must be zero: no supported sensor uses them.
+
+Pure numpy, arrays in and arrays out, batch dimensions first, shapes checked
+on entry.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ghnerf_runtime.errors import GeometryError, ShapeError
+
+_DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
+
+
+def check_last_dim(name: str, array: np.ndarray, size: int) -> np.ndarray:
+    """Return ``array`` as float64, raising :class:`ShapeError` unless its last axis is ``size``."""
+    array = np.asarray(array, dtype=np.float64)
+    if array.ndim < 1 or array.shape[-1] != size:
+        raise ShapeError(f"{name} must have shape (..., {size}), got {array.shape}")
+    return array
+
+
+def _as_dist(coefficients) -> np.ndarray:
+    dist = np.asarray(coefficients, dtype=np.float64).reshape(-1)
+    if dist.size not in _DIST_LENGTHS:
+        raise GeometryError(f"dist must have 0, 4, 5, 8, 12 or 14 coefficients, got {dist.size}")
+    if dist.size == 14 and np.any(dist[12:] != 0.0):
+        raise GeometryError(f"dist tilt terms tx, ty must be 0, got {dist[12:].tolist()}")
+    full = np.zeros(12)
+    full[: min(dist.size, 12)] = dist[:12]
+    return full
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """One calibrated camera of the rig.
+
+    Attributes:
+        name: unique name within the rig (``"left"``, ``"cam0"``...).
+        width, height: image size in pixels.
+        K: 3x3 intrinsic matrix (pixels).
+        dist: OpenCV distortion coefficients (0, 4, 5, 8, 12 or 14 values).
+        R: 3x3 rotation, rig -> camera.
+        t: 3-vector translation, rig -> camera, metres.
+    """
+
+    name: str
+    width: int
+    height: int
+    K: np.ndarray
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    t: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        where = f"camera {self.name!r}"
+        if not isinstance(self.name, str) or not self.name:
+            raise GeometryError(f"camera name must be a non-empty string, got {self.name!r}")
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise GeometryError(f"{where}: image size must be positive, got {self.width}x{self.height}")
+        K = np.asarray(self.K, dtype=np.float64)
+        R = np.asarray(self.R, dtype=np.float64)
+        t = np.asarray(self.t, dtype=np.float64).reshape(-1)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            raise GeometryError(f"{where}: K must be a finite 3x3 matrix, got {K.tolist()}")
+        if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
+            raise GeometryError(
+                f"{where}: K must be upper-triangular with fx, fy > 0 and K[2,2] == 1 (singular or "
+                f"non-pinhole K), got {K.tolist()}"
+            )
+        if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+            raise GeometryError(f"{where}: R must be a finite 3x3 matrix, got shape {R.shape}")
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+            raise GeometryError(f"{where}: R must be a proper rotation (orthonormal, det +1)")
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise GeometryError(f"{where}: t must be a finite 3-vector, got {t.tolist()}")
+        dist = np.asarray(self.dist, dtype=np.float64).reshape(-1)
+        try:
+            _as_dist(dist)
+        except GeometryError as e:
+            raise GeometryError(f"{where}: {e}") from None
+        if not np.all(np.isfinite(dist)):
+            raise GeometryError(f"{where}: dist must be finite, got {dist.tolist()}")
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        for name, value in (("K", K), ("R", R), ("t", t), ("dist", dist)):
+            value = value.copy()
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def center(self) -> np.ndarray:
+        """Camera centre in the rig frame (metres)."""
+        return -self.R.T @ self.t
+
+    @property
+    def P(self) -> np.ndarray:
+        """3x4 projection matrix ``K [R | t]`` for *undistorted* pixel coordinates."""
+        return self.K @ np.hstack([self.R, self.t[:, None]])
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.dist != 0.0))
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) in pixels."""
+        return self.width, self.height
+
+    # --------------------------------------------------------------- transforms
+    def to_camera(self, points: np.ndarray) -> np.ndarray:
+        """Rig-frame points ``(..., 3)`` to camera-frame points ``(..., 3)``."""
+        points = check_last_dim("points", points, 3)
+        return points @ self.R.T + self.t
+
+    def distort(self, xy: np.ndarray) -> np.ndarray:
+        """Apply the lens model to normalised coordinates ``(..., 2)``."""
+        xy = check_last_dim("xy", xy, 2)
+        k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = _as_dist(self.dist)
+        x, y = xy[..., 0], xy[..., 1]
+        r2 = x * x + y * y
+        r4, r6 = r2 * r2, r2 * r2 * r2
+        radial = (1 + k1 * r2 + k2 * r4 + k3 * r6) / (1 + k4 * r2 + k5 * r4 + k6 * r6)
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+        return np.stack([xd, yd], axis=-1)
+
+    def undistort_normalized(self, xy_distorted: np.ndarray, iterations: int = 20) -> np.ndarray:
+        """Invert :meth:`distort` by fixed-point iteration (as ``cv2.undistortPoints`` does)."""
+        xy_d = check_last_dim("xy_distorted", xy_distorted, 2)
+        if not self.has_distortion:
+            return xy_d.copy()
+        xy = xy_d.copy()
+        for _ in range(iterations):
+            # Residual form converges for the moderate distortion of real lenses
+            # and, unlike a pure fixed point, corrects the tangential terms too.
+            step = self.distort(xy) - xy_d
+            xy = xy - step
+            if np.all(np.abs(step) < 1e-13):  # converged: stop early, most calls need few steps
+                break
+        return xy
+
+    def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted pixel coordinates ``(..., 2)`` -> undistorted normalised coordinates."""
+        uv = check_last_dim("uv", uv, 2)
+        fx, fy, cx, cy, skew = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.K[0, 1]
+        y = (uv[..., 1] - cy) / fy
+        x = (uv[..., 0] - cx - skew * y) / fx
+        return self.undistort_normalized(np.stack([x, y], axis=-1))
+
+    def normalized_to_pixels(self, xy: np.ndarray, distort: bool = True) -> np.ndarray:
+        """Normalised coordinates ``(..., 2)`` -> pixel coordinates, optionally through the lens."""
+        xy = check_last_dim("xy", xy, 2)
+        if distort and self.has_distortion:
+            xy = self.distort(xy)
+        u = self.K[0, 0] * xy[..., 0] + self.K[0, 1] * xy[..., 1] + self.K[0, 2]
+        v = self.K[1, 1] * xy[..., 1] + self.K[1, 2]
+        return np.stack([u, v], axis=-1)
+
+    def undistort_pixels(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted pixels -> the pixels an ideal (distortion-free) camera with the same K sees."""
+        return self.normalized_to_pixels(self.pixels_to_normalized(uv), distort=False)
+
+    def project(self, points: np.ndarray, distort: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Project rig-frame points.
+
+        Args:
+            points: ``(..., 3)`` rig-frame points, metres.
+            distort: apply the lens model (``False`` gives ideal pinhole pixels).
+
+        Returns:
+            ``uv`` ``(..., 2)`` pixels and ``depth`` ``(...)`` (camera z, metres). Points at or
+            behind the camera plane get ``uv = NaN`` and their (non-positive) depth, so callers
+            can flag them; nothing else is ever NaN.
+
+        Example:
+            >>> cam = Camera("c", 640, 480, [[500, 0, 320], [0, 500, 240], [0, 0, 1]])
+            >>> uv, z = cam.project([0.0, 0.0, 2.0])
+            >>> uv.tolist(), float(z)
+            ([320.0, 240.0], 2.0)
+        """
+        pc = self.to_camera(points)
+        z = pc[..., 2]
+        in_front = z > 1e-9
+        safe_z = np.where(in_front, z, 1.0)
+        xy = pc[..., :2] / safe_z[..., None]
+        uv = self.normalized_to_pixels(xy, distort=distort)
+        uv = np.where(in_front[..., None], uv, np.nan)
+        return uv, z
+
+    def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rays through distorted pixel coordinates ``(..., 2)``.
+
+        Returns ``origins`` ``(..., 3)`` (the camera centre) and unit ``directions`` ``(..., 3)``,
+        both in the rig frame.
+        """
+        xy = self.pixels_to_normalized(uv)
+        d_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+        d = d_cam @ self.R  # R^T d for row vectors
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        return np.broadcast_to(self.center, d.shape).copy(), d
+
+    def pixel_grid(self, stride: int = 1) -> np.ndarray:
+        """Pixel-centre coordinates ``(H', W', 2)`` of the image, every ``stride`` pixels."""
+        us = np.arange(0, self.width, stride, dtype=np.float64)
+        vs = np.arange(0, self.height, stride, dtype=np.float64)
+        u, v = np.meshgrid(us, vs)
+        return np.stack([u, v], axis=-1)
+
+    # ---------------------------------------------------------- derived cameras
+    def with_pose(self, R: np.ndarray, t: np.ndarray) -> "Camera":
+        return replace(self, R=np.asarray(R, float), t=np.asarray(t, float))
+
+    def cropped(self, x0: float, y0: float, width: int, height: int) -> "Camera":
+        """The camera seen through a crop window whose top-left pixel is ``(x0, y0)``."""
+        K = self.K.copy()
+        K[0, 2] -= x0
+        K[1, 2] -= y0
+        return replace(self, K=K, width=int(width), height=int(height))
+
+    def resized(self, width: int, height: int) -> "Camera":
+        """The camera after resizing its image to ``width`` x ``height`` (pixel-centre convention)."""
+        sx, sy = width / self.width, height / self.height
+        S = np.array([[sx, 0, 0.5 * sx - 0.5], [0, sy, 0.5 * sy - 0.5], [0, 0, 1.0]])
+        return replace(self, K=S @ self.K, width=int(width), height=int(height))
+
+    def without_distortion(self) -> "Camera":
+        return replace(self, dist=np.zeros(5))
+
+
+def look_at(eye, target, up=(0.0, -1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Extrinsics ``(R, t)`` of a camera at ``eye`` looking at ``target``.
+
+    ``up`` is the rig-frame direction that should appear up in the image (the rig
+    frame is y-down, so the default is ``-y``).
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - eye
+    norm = np.linalg.norm(forward)
+    if norm < 1e-12:
+        raise GeometryError("look_at: eye and target coincide")
+    z = forward / norm
+    x = np.cross(-np.asarray(up, dtype=np.float64), z)
+    if np.linalg.norm(x) < 1e-9:
+        raise GeometryError("look_at: viewing direction is parallel to up")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])  # rows: camera axes in rig coordinates
+    return R, -R @ eye
+
+
+def intrinsics_from_fov(width: int, height: int, hfov_deg: float) -> np.ndarray:
+    """A square-pixel K with the principal point at the image centre."""
+    if not 1.0 < hfov_deg < 179.0:
+        raise GeometryError(f"horizontal field of view must be in (1, 179) degrees, got {hfov_deg}")
+    f = 0.5 * width / np.tan(np.radians(hfov_deg) / 2)
+    return np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])

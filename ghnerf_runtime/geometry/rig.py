@@ -1,0 +1,99 @@
+"""A rig: named calibrated cameras plus the working volume where a person can stand."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ghnerf_runtime.errors import GeometryError
+from ghnerf_runtime.geometry.camera import Camera, check_last_dim
+
+
+@dataclass(frozen=True, eq=False)
+class WorkingVolume:
+    """Axis-aligned box in the rig frame (metres) where the subject can be."""
+
+    min_corner: np.ndarray
+    max_corner: np.ndarray
+
+    def __post_init__(self) -> None:
+        lo = np.asarray(self.min_corner, dtype=np.float64).reshape(-1)
+        hi = np.asarray(self.max_corner, dtype=np.float64).reshape(-1)
+        if lo.shape != (3,) or hi.shape != (3,) or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise GeometryError(f"working volume corners must be finite 3-vectors, got {lo.tolist()}, {hi.tolist()}")
+        if np.any(hi <= lo):
+            raise GeometryError(f"working volume max {hi.tolist()} must exceed min {lo.tolist()} on every axis")
+        for name, value in (("min_corner", lo), ("max_corner", hi)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def center(self) -> np.ndarray:
+        return 0.5 * (self.min_corner + self.max_corner)
+
+    @property
+    def size(self) -> np.ndarray:
+        return self.max_corner - self.min_corner
+
+    def corners(self) -> np.ndarray:
+        """The 8 corners ``(8, 3)``."""
+        lo, hi = self.min_corner, self.max_corner
+        idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
+        return np.where(idx == 1, hi, lo)
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        points = check_last_dim("points", points, 3)
+        return np.all((points >= self.min_corner) & (points <= self.max_corner), axis=-1)
+
+    def grown(self, margin: float) -> "WorkingVolume":
+        return WorkingVolume(self.min_corner - margin, self.max_corner + margin)
+
+
+@dataclass(frozen=True, eq=False)
+class Rig:
+    """Two or more named cameras sharing the rig frame, plus the working volume.
+
+    Camera order is meaningful: the first two cameras are the stereo pair the
+    drivers deliver and the model consumes.
+    """
+
+    cameras: tuple[Camera, ...]
+    volume: WorkingVolume
+    rig_id: str = "rig"
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        cameras = tuple(self.cameras)
+        if len(cameras) < 2:
+            raise GeometryError(f"a rig needs at least two cameras, got {len(cameras)}")
+        names = [c.name for c in cameras]
+        if len(set(names)) != len(names):
+            raise GeometryError(f"camera names must be unique, got {names}")
+        object.__setattr__(self, "cameras", cameras)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.cameras)
+
+    def camera(self, name: str) -> Camera:
+        for cam in self.cameras:
+            if cam.name == name:
+                return cam
+        raise KeyError(f"rig {self.rig_id!r} has no camera {name!r}; cameras: {list(self.names)}")
+
+    def __getitem__(self, name: str) -> Camera:
+        return self.camera(name)
+
+    @property
+    def pair(self) -> tuple[Camera, Camera]:
+        """The first two cameras: the stereo pair."""
+        return self.cameras[0], self.cameras[1]
+
+    @property
+    def baseline(self) -> float:
+        a, b = self.pair
+        return float(np.linalg.norm(a.center - b.center))
+
+    def projection_matrices(self) -> np.ndarray:
+        """``(C, 3, 4)`` projection matrices for undistorted pixels."""
+        return np.stack([c.P for c in self.cameras])

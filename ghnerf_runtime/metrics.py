@@ -1,0 +1,454 @@
+"""Evaluation metrics, defined once for training evaluation and the runtime alike.
+
+Every definition here is restated in ``docs/metrics.md``; change both together.
+
+* :func:`pck` -- PCK@alpha of 2D joints against a per-sample torso reference length.
+* :func:`mpjpe` -- mean per-joint 3D position error, millimetres (inputs in metres).
+* :func:`masked_psnr`, :func:`masked_ssim` -- image quality inside a mask.
+* :func:`heatmap_mse` -- mean squared error between heatmaps.
+* :func:`gaussian_heatmaps` -- the ground-truth heatmap generator (training targets, tests).
+
+Conventions: numpy only, batch dimensions first, shapes checked on entry
+(:class:`~ghnerf_runtime.errors.ShapeError`). Metrics return small result objects
+holding the value *and* the counts behind it. The value is ``nan`` only where
+the metric is undefined (nothing to evaluate); each function says when.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from ghnerf_runtime.body25 import JOINT_INDEX, MID_HIP, NECK
+from ghnerf_runtime.errors import ShapeError
+
+#: BODY_25 joints whose bounding box gives the fallback PCK reference length:
+#: Neck, RShoulder, LShoulder, MidHip, RHip, LHip.
+TORSO_BOX_JOINTS: tuple[int, ...] = tuple(
+    JOINT_INDEX[n] for n in ("Neck", "RShoulder", "LShoulder", "MidHip", "RHip", "LHip")
+)
+
+# SSIM constants of Wang et al. 2004 ("Image quality assessment: from error
+# visibility to structural similarity", IEEE TIP 13(4)): 11x11 Gaussian window,
+# sigma 1.5, K1 = 0.01, K2 = 0.03.
+SSIM_WINDOW = 11
+SSIM_SIGMA = 1.5
+SSIM_K1 = 0.01
+SSIM_K2 = 0.03
+
+__all__ = [
+    "TORSO_BOX_JOINTS", "PckResult", "MpjpeResult", "ImageMetricResult", "MseResult",
+    "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse", "gaussian_heatmaps",
+]
+
+
+# ------------------------------------------------------------------ results
+@dataclass(frozen=True, eq=False)
+class PckResult:
+    """PCK over a batch, pooled over every evaluated joint of every sample.
+
+    Attributes:
+        value: ``num_correct / num_evaluated``; ``nan`` when ``num_evaluated == 0``.
+        correct: ``(..., J)`` bool, True where the joint was evaluated and correct.
+        evaluated: ``(..., J)`` bool, True where the truth is valid and the sample has a
+            reference length.
+        reference: ``(...)`` reference length per sample (pixels); ``0.0`` where none.
+        num_evaluated: joints that entered the score.
+        num_correct: evaluated joints within ``alpha * reference`` of the truth.
+        num_missing: joints excluded because their truth is not valid.
+        num_unreferenced: joints with valid truth excluded because their sample had
+            no usable reference length.
+        num_pred_missing: evaluated joints with no prediction (scored as wrong).
+    """
+
+    value: float
+    correct: np.ndarray
+    evaluated: np.ndarray
+    reference: np.ndarray
+    num_evaluated: int
+    num_correct: int
+    num_missing: int
+    num_unreferenced: int
+    num_pred_missing: int
+
+
+@dataclass(frozen=True, eq=False)
+class MpjpeResult:
+    """MPJPE over a batch, pooled over every evaluated joint.
+
+    Attributes:
+        value: mean error in millimetres; ``nan`` when ``num_evaluated == 0``.
+        errors: ``(..., J)`` per-joint error in millimetres; ``0.0`` where not evaluated.
+        evaluated: ``(..., J)`` bool.
+        num_evaluated: joints that entered the mean.
+        num_missing: joints excluded because the truth is not valid.
+        num_pred_missing: joints with valid truth excluded because the prediction is
+            missing (``pred_valid`` False or non-finite). Report it next to the value:
+            a method that drops hard joints looks better otherwise.
+    """
+
+    value: float
+    errors: np.ndarray
+    evaluated: np.ndarray
+    num_evaluated: int
+    num_missing: int
+    num_pred_missing: int
+
+
+@dataclass(frozen=True, eq=False)
+class ImageMetricResult:
+    """A per-image metric (PSNR, SSIM) and its mean over the batch.
+
+    Attributes:
+        value: mean of ``per_image`` over images with a non-empty mask; ``nan`` when
+            every mask is empty.
+        per_image: ``(...)`` value per image; ``nan`` where that image's mask is empty.
+        num_pixels: ``(...)`` int, mask pixels per image.
+        num_images: images that entered ``value``.
+    """
+
+    value: float
+    per_image: np.ndarray
+    num_pixels: np.ndarray
+    num_images: int
+
+
+@dataclass(frozen=True, eq=False)
+class MseResult:
+    """A mean squared error and how many values it averages (``nan`` when none)."""
+
+    value: float
+    count: int
+
+
+# ------------------------------------------------------------------ helpers
+def _points(name: str, array, dim: int) -> np.ndarray:
+    a = np.asarray(array, dtype=np.float64)
+    if a.ndim < 2 or a.shape[-1] != dim:
+        raise ShapeError(f"{name} must have shape (..., J, {dim}), got {a.shape}")
+    return a
+
+
+def _mask(name: str, array, shape: tuple[int, ...]) -> np.ndarray:
+    a = np.asarray(array)
+    if a.shape != shape:
+        raise ShapeError(f"{name} must have shape {shape}, got {a.shape}")
+    return a.astype(bool)
+
+
+def _mean_or_nan(total: float, count: int) -> float:
+    return float(total / count) if count > 0 else float("nan")
+
+
+# ---------------------------------------------------------------------- PCK
+def _reference_lengths(true_2d: np.ndarray, valid: np.ndarray, torso_joints: tuple[int, int],
+                       box_joints: Sequence[int]) -> np.ndarray:
+    """Per-sample reference length ``(...)``: neck--mid-hip, else torso-box diagonal, else 0."""
+    a, b = torso_joints
+    both = valid[..., a] & valid[..., b]
+    direct = np.linalg.norm(true_2d[..., a, :] - true_2d[..., b, :], axis=-1)
+
+    box = list(box_joints)
+    pts, ok = true_2d[..., box, :], valid[..., box]
+    lo = np.where(ok[..., None], pts, np.inf).min(axis=-2)
+    hi = np.where(ok[..., None], pts, -np.inf).max(axis=-2)
+    # A box needs two valid joints; fewer gives -inf/inf extents that are zeroed below.
+    diag = np.where(ok.sum(axis=-1) >= 2, np.linalg.norm(np.nan_to_num(hi - lo, posinf=0, neginf=0), axis=-1), 0.0)
+
+    ref = np.where(both, direct, diag)
+    return np.where(np.isfinite(ref) & (ref > 0), ref, 0.0)
+
+
+def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP), alpha: float = 0.2, *,
+        pred_valid=None, box_joints: Sequence[int] = TORSO_BOX_JOINTS) -> PckResult:
+    """Percentage of correct keypoints, PCK@alpha.
+
+    A joint is *correct* when its prediction lies within ``alpha * reference`` (inclusive)
+    of the truth. The reference length is per sample, from the **true** joints:
+
+    1. the distance between ``torso_joints`` (neck and mid-hip) when both are valid;
+    2. otherwise the diagonal of the bounding box of the valid ``box_joints`` (neck,
+       shoulders, hips; at least two valid);
+    3. otherwise none: the sample's joints are excluded and counted in
+       ``num_unreferenced``. A zero-length reference counts as none.
+
+    The fallback diagonal is about 1.2x the neck--mid-hip distance of an upright adult, so
+    it is slightly more lenient; it only applies when a torso joint is missing.
+
+    Joints whose truth is not valid are excluded and counted (``num_missing``). Joints with
+    valid truth but no prediction (``pred_valid`` False, or a non-finite prediction) are
+    evaluated and scored wrong. The score pools every evaluated joint of the batch.
+
+    Args:
+        pred_2d: ``(..., J, 2)`` predicted pixels.
+        true_2d: ``(..., J, 2)`` true pixels (same image space as ``pred_2d``).
+        valid: ``(..., J)`` bool, truth is visible and labelled.
+        torso_joints: the two joints whose distance is the reference length.
+        alpha: threshold as a fraction of the reference length.
+        pred_valid: optional ``(..., J)`` bool, the predictor produced the joint.
+        box_joints: joints whose bounding-box diagonal is the fallback reference.
+
+    Returns:
+        :class:`PckResult`; ``value`` is ``nan`` (undefined) when no joint was evaluated.
+
+    Example:
+        >>> true = np.array([[0.0, 0.0], [0.0, 10.0], [5.0, 5.0]])
+        >>> pred = true + [[1.0, 0.0], [3.0, 0.0], [0.0, 0.0]]
+        >>> r = pck(pred, true, [True, True, True], torso_joints=(0, 1), box_joints=(0, 1))
+        >>> r.value, r.correct.tolist()
+        (0.6666666666666666, [True, False, True])
+    """
+    pred = _points("pred_2d", pred_2d, 2)
+    true = _points("true_2d", true_2d, 2)
+    if pred.shape != true.shape:
+        raise ShapeError(f"pred_2d {pred.shape} and true_2d {true.shape} must match")
+    valid_b = _mask("valid", valid, true.shape[:-1])
+    pred_ok = np.ones(valid_b.shape, bool) if pred_valid is None else _mask("pred_valid", pred_valid, valid_b.shape)
+    num_joints = true.shape[-2]
+    for j in (*torso_joints, *box_joints):
+        if not 0 <= int(j) < num_joints:
+            raise ShapeError(f"torso/box joint index {j} out of range for {num_joints} joints")
+    if not (np.isfinite(alpha) and alpha > 0):
+        raise ValueError(f"alpha must be a positive number, got {alpha}")
+
+    valid_b = valid_b & np.all(np.isfinite(true), axis=-1)  # non-finite truth cannot be valid
+    ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
+    evaluated = valid_b & (ref > 0)[..., None]
+    pred_ok = pred_ok & np.all(np.isfinite(pred), axis=-1)
+    dist = np.linalg.norm(np.where(pred_ok[..., None], pred - true, 0.0), axis=-1)
+    correct = evaluated & pred_ok & (dist <= alpha * ref[..., None])
+
+    n_eval = int(evaluated.sum())
+    n_ok = int(correct.sum())
+    return PckResult(
+        value=_mean_or_nan(n_ok, n_eval), correct=correct, evaluated=evaluated, reference=ref,
+        num_evaluated=n_eval, num_correct=n_ok, num_missing=int((~valid_b).sum()),
+        num_unreferenced=int((valid_b & ~evaluated).sum()), num_pred_missing=int((evaluated & ~pred_ok).sum()),
+    )
+
+
+# -------------------------------------------------------------------- MPJPE
+def mpjpe(pred_3d, true_3d, valid, *, pred_valid=None) -> MpjpeResult:
+    """Mean per-joint position error in millimetres (inputs in metres, rig frame).
+
+    The mean of the Euclidean distances between predicted and true joints, pooled over
+    every evaluated joint of the batch. No alignment (no root or Procrustes alignment).
+    Joints with invalid truth are excluded and counted (``num_missing``); joints with no
+    prediction are excluded and counted separately (``num_pred_missing``).
+
+    Args:
+        pred_3d: ``(..., J, 3)`` metres.
+        true_3d: ``(..., J, 3)`` metres.
+        valid: ``(..., J)`` bool, truth is available.
+        pred_valid: optional ``(..., J)`` bool, the predictor produced the joint.
+
+    Returns:
+        :class:`MpjpeResult`; ``value`` is ``nan`` (undefined) when no joint was evaluated.
+
+    Example:
+        >>> r = mpjpe([[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]], [[0.003, 0.004, 1.0], [0.0, 0.0, 2.0]], [True, True])
+        >>> round(r.value, 6), r.num_evaluated
+        (2.5, 2)
+    """
+    pred = _points("pred_3d", pred_3d, 3)
+    true = _points("true_3d", true_3d, 3)
+    if pred.shape != true.shape:
+        raise ShapeError(f"pred_3d {pred.shape} and true_3d {true.shape} must match")
+    valid_b = _mask("valid", valid, true.shape[:-1]) & np.all(np.isfinite(true), axis=-1)
+    pred_ok = np.ones(valid_b.shape, bool) if pred_valid is None else _mask("pred_valid", pred_valid, valid_b.shape)
+    pred_ok = pred_ok & np.all(np.isfinite(pred), axis=-1)
+    evaluated = valid_b & pred_ok
+    errors = np.where(evaluated, np.linalg.norm(np.where(evaluated[..., None], pred - true, 0.0), axis=-1), 0.0)
+    errors_mm = 1000.0 * errors
+    n = int(evaluated.sum())
+    return MpjpeResult(value=_mean_or_nan(float(errors_mm.sum()), n), errors=errors_mm, evaluated=evaluated,
+                       num_evaluated=n, num_missing=int((~valid_b).sum()),
+                       num_pred_missing=int((valid_b & ~pred_ok).sum()))
+
+
+# ------------------------------------------------------------- image metrics
+def _image_args(pred, target, mask) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Images as ``(N, H, W, C)`` float64 and the mask as ``(N, H, W)`` bool.
+
+    The mask decides the layout: ``mask.shape == pred.shape[:-1]`` means channel-last
+    images ``(..., H, W, C)``; ``mask.shape == pred.shape`` means single-channel images
+    ``(..., H, W)``.
+    """
+    p = np.asarray(pred, dtype=np.float64)
+    t = np.asarray(target, dtype=np.float64)
+    m = np.asarray(mask)
+    if p.shape != t.shape:
+        raise ShapeError(f"pred {p.shape} and target {t.shape} must have the same shape")
+    if m.shape == p.shape and p.ndim >= 2:
+        p, t = p[..., None], t[..., None]
+    elif not (p.ndim >= 3 and m.shape == p.shape[:-1]):
+        raise ShapeError(f"mask must have shape (..., H, W) matching pred (..., H, W[, C]); got mask {m.shape}, "
+                         f"pred {p.shape}")
+    h, w, c = p.shape[-3:]
+    return p.reshape(-1, h, w, c), t.reshape(-1, h, w, c), m.astype(bool).reshape(-1, h, w)
+
+
+def _per_image_result(values: np.ndarray, counts: np.ndarray, batch_shape: tuple[int, ...]) -> ImageMetricResult:
+    has = counts > 0
+    values = np.where(has, values, np.nan)
+    n = int(has.sum())
+    mean = float(values[has].mean()) if n else float("nan")
+    return ImageMetricResult(value=mean, per_image=values.reshape(batch_shape),
+                             num_pixels=counts.reshape(batch_shape), num_images=n)
+
+
+def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResult:
+    """Peak signal-to-noise ratio inside a mask, per image, in dB.
+
+    ``PSNR = 10 log10(data_range^2 / MSE)`` where MSE averages the squared error over every
+    channel of the mask pixels of one image. Identical images give ``+inf``. The batch
+    value is the mean of the per-image PSNRs (as NeRF papers report it), not the PSNR of
+    the pooled MSE.
+
+    Args:
+        pred: ``(..., H, W, C)`` or ``(..., H, W)`` images (the mask shape decides which).
+        target: same shape as ``pred``.
+        mask: ``(..., H, W)`` bool, pixels to score.
+        data_range: peak value (1.0 for [0, 1] images, 255 for 8-bit).
+
+    Returns:
+        :class:`ImageMetricResult`; ``nan`` (undefined) for images with an empty mask.
+
+    Example:
+        >>> a = np.zeros((4, 4)); b = a + 0.1
+        >>> round(masked_psnr(a, b, np.ones((4, 4), bool)).value, 6)
+        20.0
+    """
+    p, t, m = _image_args(pred, target, mask)
+    batch_shape = np.asarray(mask).shape[:-2]
+    counts = m.sum(axis=(1, 2))
+    sq = ((p - t) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
+    mse = np.where(counts > 0, (sq * m).sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
+    with np.errstate(divide="ignore"):
+        values = 10.0 * np.log10(data_range ** 2 / mse)
+    return _per_image_result(values, counts, batch_shape)
+
+
+def _ssim_map(x: np.ndarray, y: np.ndarray, m: np.ndarray, data_range: float) -> np.ndarray:
+    """SSIM map ``(H, W)`` of one channel with a mask-normalised Gaussian window."""
+    def window_sum(a: np.ndarray) -> np.ndarray:
+        # Constant (zero) border: pixels outside the image weigh like pixels outside the mask.
+        return cv2.GaussianBlur(a, (SSIM_WINDOW, SSIM_WINDOW), SSIM_SIGMA, borderType=cv2.BORDER_CONSTANT)
+
+    w = window_sum(m)
+    inv_w = np.where(w > 1e-12, 1.0 / np.maximum(w, 1e-12), 0.0)
+    mx, my = window_sum(m * x) * inv_w, window_sum(m * y) * inv_w
+    # Variances can come out a hair negative from cancellation; clamp.
+    vx = np.maximum(window_sum(m * x * x) * inv_w - mx * mx, 0.0)
+    vy = np.maximum(window_sum(m * y * y) * inv_w - my * my, 0.0)
+    cxy = window_sum(m * x * y) * inv_w - mx * my
+    c1, c2 = (SSIM_K1 * data_range) ** 2, (SSIM_K2 * data_range) ** 2
+    return ((2 * mx * my + c1) * (2 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2))
+
+
+def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResult:
+    """Structural similarity (Wang et al. 2004) averaged over the mask pixels, per image.
+
+    Local statistics use an 11x11 Gaussian window (sigma 1.5) **restricted to the mask**:
+    each weighted mean, variance and covariance is a window sum over mask pixels divided by
+    the window weight of mask pixels, so pixels outside the mask (and outside the image)
+    never influence the score. ``K1 = 0.01``, ``K2 = 0.03``, ``L = data_range``. The SSIM
+    map is averaged over mask pixels and then over channels. With a full mask this is
+    standard Gaussian-window SSIM except within 5 pixels of the image border, where the
+    window is renormalised instead of cropped.
+
+    Args:
+        pred: ``(..., H, W, C)`` or ``(..., H, W)`` images (the mask shape decides which).
+        target: same shape as ``pred``.
+        mask: ``(..., H, W)`` bool.
+        data_range: peak value (1.0 for [0, 1] images).
+
+    Returns:
+        :class:`ImageMetricResult`; ``nan`` (undefined) for images with an empty mask.
+
+    Example:
+        >>> img = np.random.default_rng(0).random((16, 16))
+        >>> round(masked_ssim(img, img, np.ones((16, 16), bool)).value, 9)
+        1.0
+    """
+    p, t, m = _image_args(pred, target, mask)
+    batch_shape = np.asarray(mask).shape[:-2]
+    counts = m.sum(axis=(1, 2))
+    values = np.full(len(p), np.nan)
+    for i in range(len(p)):
+        if counts[i] == 0:
+            continue
+        mi = m[i].astype(np.float64)
+        per_channel = [(_ssim_map(p[i, ..., c], t[i, ..., c], mi, data_range)[m[i]]).mean()
+                       for c in range(p.shape[-1])]
+        values[i] = float(np.mean(per_channel))
+    return _per_image_result(values, counts, batch_shape)
+
+
+# ------------------------------------------------------------------ heatmaps
+def heatmap_mse(pred, target, valid=None) -> MseResult:
+    """Mean squared error between heatmaps, over every pixel of every included joint.
+
+    Args:
+        pred: ``(..., J, H, W)``.
+        target: same shape (usually :func:`gaussian_heatmaps`).
+        valid: optional ``(..., J)`` bool: joints to include (default all: a joint with no
+            visible truth has an all-zero target, so a spurious peak for it is penalised).
+
+    Returns:
+        :class:`MseResult`; ``nan`` (undefined) when no joint is included. Non-finite
+        predictions propagate into the value on purpose: a broken model must not look good.
+
+    Example:
+        >>> heatmap_mse(np.full((2, 3, 3), 0.5), np.zeros((2, 3, 3))).value
+        0.25
+    """
+    p = np.asarray(pred, dtype=np.float64)
+    t = np.asarray(target, dtype=np.float64)
+    if p.shape != t.shape or p.ndim < 3:
+        raise ShapeError(f"pred {p.shape} and target {t.shape} must have the same shape (..., J, H, W)")
+    per_joint = ((p - t) ** 2).sum(axis=(-2, -1))
+    keep = np.ones(p.shape[:-2], bool) if valid is None else _mask("valid", valid, p.shape[:-2])
+    count = int(keep.sum()) * p.shape[-2] * p.shape[-1]
+    return MseResult(value=_mean_or_nan(float(per_joint[keep].sum()), count), count=count)
+
+
+def gaussian_heatmaps(joints_2d, visible, size: int | tuple[int, int], sigma: float) -> np.ndarray:
+    """Ground-truth joint heatmaps: one unnormalised Gaussian (peak 1) per visible joint.
+
+    ``h(u, v) = exp(-((u - x)^2 + (v - y)^2) / (2 sigma^2))`` evaluated at pixel centres
+    (integer coordinates, OpenCV convention), no truncation. Joints not visible, or with
+    non-finite coordinates, get an all-zero map. The value is exactly 1 only when the joint
+    sits on a pixel centre.
+
+    Args:
+        joints_2d: ``(..., J, 2)`` joint positions **in heatmap pixels** (convert image or
+            model-input pixels first, e.g. ``keypoints.model_to_heatmap_pixels``).
+        visible: ``(..., J)`` bool.
+        size: heatmap ``(H, W)``, or one int for a square map.
+        sigma: Gaussian standard deviation in heatmap pixels (> 0).
+
+    Returns:
+        ``(..., J, H, W)`` float32.
+
+    Example:
+        >>> h = gaussian_heatmaps([[1.0, 2.0]], [True], (4, 3), sigma=1.0)
+        >>> h.shape, float(h[0, 2, 1])
+        ((1, 4, 3), 1.0)
+    """
+    joints = _points("joints_2d", joints_2d, 2)
+    vis = _mask("visible", visible, joints.shape[:-1]) & np.all(np.isfinite(joints), axis=-1)
+    h, w = (int(size), int(size)) if np.ndim(size) == 0 else (int(size[0]), int(size[1]))
+    if h < 1 or w < 1:
+        raise ShapeError(f"heatmap size must be positive, got {(h, w)}")
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be a positive number, got {sigma}")
+    x = np.where(vis, joints[..., 0], 0.0)[..., None]
+    y = np.where(vis, joints[..., 1], 0.0)[..., None]
+    # Separable: exp(-dx^2) * exp(-dy^2) as an outer product, cheap for any batch size.
+    gx = np.exp(-((np.arange(w) - x) ** 2) / (2 * sigma * sigma))
+    gy = np.exp(-((np.arange(h) - y) ** 2) / (2 * sigma * sigma))
+    maps = gy[..., :, None] * gx[..., None, :]
+    return (maps * vis[..., None, None]).astype(np.float32)

@@ -1,0 +1,430 @@
+"""The versioned JSON rig file: load, validate, save (atomically).
+
+The format is specified in docs/rig-file.md; docs/examples/rig.json is a complete
+example. In short::
+
+    {
+      "format": "ghnerf-rig",
+      "version": 1,
+      "rig_id": "bench-01",
+      "units": "m",
+      "cameras": [
+        {"name": "left", "width": 1280, "height": 800,
+         "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
+         "distortion": {"model": "opencv", "coefficients": [k1, k2, p1, p2, k3]},
+         "R": [[...], [...], [...]],   # rig -> camera rotation
+         "t": [tx, ty, tz]},           # rig -> camera translation, metres
+        ...
+      ],
+      "working_volume": {"min": [x, y, z], "max": [x, y, z]},
+      "metadata": {...}                 # optional, free-form JSON object
+    }
+
+Every error is a :class:`~ghnerf_runtime.errors.RigFileError` that names the file,
+the field path (``cameras[1].K``) and the offending value. Unknown keys are errors.
+This is the only module of ``ghnerf_runtime`` that touches the file system.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import uuid
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ghnerf_runtime.errors import GeometryError, RigFileError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+
+FORMAT = "ghnerf-rig"
+VERSION = 1
+UNITS = "m"
+DISTORTION_MODELS = ("opencv",)
+DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
+#: Tolerance on ``|R R^T - I|`` and ``det R - 1`` for a rotation to be accepted.
+ROTATION_TOLERANCE = 1e-6
+
+_TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
+_TOP_OPTIONAL = ("metadata",)
+_CAMERA_KEYS = ("name", "width", "height", "K", "distortion", "R", "t")
+_DISTORTION_KEYS = ("model", "coefficients")
+_VOLUME_KEYS = ("min", "max")
+
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "load_rig",
+    "save_rig",
+    "rig_to_dict",
+    "rig_from_dict",
+    "dumps_rig",
+    "loads_rig",
+    "write_text_atomic",
+]
+
+
+# --------------------------------------------------------------------------- helpers
+def _show(value: Any, limit: int = 120) -> str:
+    """Short printable form of a (JSON) value for error messages."""
+    try:
+        text = json.dumps(value, allow_nan=True, default=repr)
+    except (TypeError, ValueError):
+        text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+class _Object(dict):
+    """A JSON object that remembers keys which appeared more than once."""
+
+    duplicates: tuple[str, ...] = ()
+
+
+def _object_hook(pairs: list[tuple[str, Any]]) -> _Object:
+    obj = _Object()
+    dups = []
+    for key, value in pairs:
+        if key in obj:
+            dups.append(key)
+        obj[key] = value
+    obj.duplicates = tuple(dups)
+    return obj
+
+
+class _Checker:
+    """Validation with the file name bound, so every error names file + field."""
+
+    def __init__(self, path: str | None):
+        self.path = path
+
+    def fail(self, field: str | None, message: str) -> RigFileError:
+        return RigFileError(message, path=self.path, field=field)
+
+    def mapping(self, value: Any, field: str, required: tuple, optional: tuple = ()) -> dict:
+        label = field or "the document"
+        if not isinstance(value, dict):
+            return self._raise(field, f"{label} must be a JSON object, got {type(value).__name__} {_show(value)}")
+        for key in getattr(value, "duplicates", ()):
+            self._raise(_join(field, key), f"duplicate key {key!r}")
+        allowed = required + optional
+        for key in value:
+            if key not in allowed:
+                self._raise(_join(field, key), f"unknown key {key!r} in {label} (allowed: {', '.join(allowed)})")
+        for key in required:
+            if key not in value:
+                self._raise(_join(field, key), f"missing required key {key!r} in {label}")
+        return value
+
+    def _raise(self, field, message):
+        raise self.fail(field, message)
+
+    def string(self, value: Any, field: str) -> str:
+        if not isinstance(value, str) or not value:
+            self._raise(field, f"must be a non-empty string, got {_show(value)}")
+        return value
+
+    def positive_int(self, value: Any, field: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+            self._raise(field, f"must be a positive integer, got {_show(value)}")
+        return value
+
+    def array(self, value: Any, field: str, shape: tuple | None = None, what: str = "") -> np.ndarray:
+        """A nested list of finite numbers of the given shape (``None`` entries mean any length)."""
+        expect = what or ("x".join("N" if s is None else str(s) for s in shape) + " array of numbers" if shape else "list of numbers")
+        found = _shape_of(value)
+        if found is None:
+            self._raise(field, f"must be a {expect}, got {_show(value)}")
+        if shape is not None and (len(found) != len(shape) or any(s is not None and s != f for s, f in zip(shape, found))):
+            self._raise(field, f"must be a {expect}, got shape {'x'.join(map(str, found)) or 'scalar'}: {_show(value)}")
+        arr = np.asarray(value, dtype=np.float64)
+        if not np.all(np.isfinite(arr)):
+            self._raise(field, f"must contain only finite numbers, got {_show(value)}")
+        return arr
+
+
+def _join(parent: str, key: str) -> str:
+    return f"{parent}.{key}" if parent else key
+
+
+def _shape_of(value: Any) -> tuple | None:
+    """Shape of a rectangular nested list of numbers, or None if it is not one."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, (int, float)):
+        return ()
+    if not isinstance(value, list):
+        return None
+    if not value:
+        return (0,)
+    shapes = {_shape_of(v) for v in value}
+    if len(shapes) != 1 or None in shapes:
+        return None
+    return (len(value),) + shapes.pop()
+
+
+# --------------------------------------------------------------------------- dict <-> Rig
+def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
+    """Validate a parsed rig document and build the :class:`Rig`.
+
+    Args:
+        data: the parsed JSON document (a dict).
+        path: the file it came from, used only in error messages.
+
+    Returns:
+        The rig; cameras keep the file's order (the first two are the stereo pair).
+
+    Raises:
+        RigFileError: naming ``path`` and the field path (e.g. ``cameras[1].K``) and
+            showing the bad value: missing, unknown or duplicate keys, wrong types or
+            shapes, non-finite numbers, an unsupported format/version/units/distortion
+            model, a K that is not a pinhole matrix, an R that is not a rotation, a
+            working volume with ``max <= min``, duplicate camera names.
+    """
+    chk = _Checker(None if path is None else str(path))
+    if not isinstance(data, dict):
+        chk._raise(None, f"the document must be a JSON object, got {type(data).__name__} {_show(data)}")
+    for key in ("format", "version"):
+        if key not in data:
+            chk._raise(key, f"missing required key {key!r} in the document")
+    fmt = data["format"]
+    if fmt != FORMAT:
+        chk._raise("format", f"must be {FORMAT!r} (this is not a ghnerf rig file?), got {_show(fmt)}")
+    version = data["version"]
+    if isinstance(version, bool) or not isinstance(version, int):
+        chk._raise("version", f"must be an integer, got {_show(version)}")
+    if version != VERSION:
+        chk._raise("version", f"unsupported version {version}: this build reads version {VERSION} only")
+    chk.mapping(data, "", _TOP_REQUIRED, _TOP_OPTIONAL)
+
+    rig_id = chk.string(data["rig_id"], "rig_id")
+    if data["units"] != UNITS:
+        chk._raise("units", f"must be {UNITS!r} (metres), got {_show(data['units'])}")
+
+    cams_raw = data["cameras"]
+    if not isinstance(cams_raw, list):
+        chk._raise("cameras", f"must be a list of camera objects, got {_show(cams_raw)}")
+    if len(cams_raw) < 2:
+        chk._raise("cameras", f"a rig needs at least two cameras, got {len(cams_raw)}")
+    cameras = []
+    seen: dict[str, int] = {}
+    for i, raw in enumerate(cams_raw):
+        cam = _camera_from_dict(chk, raw, f"cameras[{i}]")
+        if cam.name in seen:
+            chk._raise(f"cameras[{i}].name", f"duplicate camera name {cam.name!r} (also cameras[{seen[cam.name]}])")
+        seen[cam.name] = i
+        cameras.append(cam)
+
+    vol = chk.mapping(data["working_volume"], "working_volume", _VOLUME_KEYS)
+    lo = chk.array(vol["min"], "working_volume.min", (3,), "3-vector of numbers")
+    hi = chk.array(vol["max"], "working_volume.max", (3,), "3-vector of numbers")
+    if np.any(hi <= lo):
+        chk._raise("working_volume", f"max {hi.tolist()} must exceed min {lo.tolist()} on every axis")
+    metadata = data.get("metadata", {})
+    if not isinstance(metadata, dict):
+        chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
+    try:
+        return Rig(tuple(cameras), WorkingVolume(lo, hi), rig_id=rig_id, metadata=_plain(metadata))
+    except GeometryError as e:  # pragma: no cover - every case is checked above
+        raise chk.fail(None, str(e)) from e
+
+
+def _plain(value: Any) -> Any:
+    """Drop the duplicate-tracking dict subclass from parsed metadata."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
+    raw = chk.mapping(raw, field, _CAMERA_KEYS)
+    name = chk.string(raw["name"], f"{field}.name")
+    width = chk.positive_int(raw["width"], f"{field}.width")
+    height = chk.positive_int(raw["height"], f"{field}.height")
+
+    K = chk.array(raw["K"], f"{field}.K", (3, 3))
+    if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
+        chk._raise(
+            f"{field}.K",
+            f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {K.tolist()}",
+        )
+
+    dist_raw = chk.mapping(raw["distortion"], f"{field}.distortion", _DISTORTION_KEYS)
+    model = dist_raw["model"]
+    if model not in DISTORTION_MODELS:
+        chk._raise(f"{field}.distortion.model", f"unsupported distortion model {_show(model)} (supported: {', '.join(DISTORTION_MODELS)})")
+    coef_field = f"{field}.distortion.coefficients"
+    dist = chk.array(dist_raw["coefficients"], coef_field, (None,), "list of numbers")
+    if dist.size not in DISTORTION_LENGTHS:
+        chk._raise(coef_field, f"must have 0, 4, 5, 8, 12 or 14 coefficients, got {dist.size}: {dist.tolist()}")
+    if dist.size == 14 and np.any(dist[12:] != 0):
+        chk._raise(coef_field, f"tilt terms tx, ty (the last two) must be 0, got {dist[12:].tolist()}")
+
+    R = chk.array(raw["R"], f"{field}.R", (3, 3))
+    dev = float(np.abs(R @ R.T - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if dev > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
+        chk._raise(
+            f"{field}.R",
+            f"must be a rotation matrix (orthonormal, det +1): max |R R^T - I| = {dev:.3g}, det = {det:.6g}, "
+            f"got {R.tolist()}",
+        )
+    t = chk.array(raw["t"], f"{field}.t", (3,), "3-vector of numbers")
+    try:
+        return Camera(name, width, height, K, dist=dist, R=R, t=t)
+    except GeometryError as e:  # pragma: no cover - every case is checked above
+        raise chk.fail(field, str(e)) from e
+
+
+def rig_to_dict(rig: Rig, *, path: str | os.PathLike | None = None) -> dict:
+    """The rig as a plain JSON-ready dict (the layout of docs/rig-file.md).
+
+    Args:
+        rig: the rig.
+        path: the file it is meant for, used only in error messages.
+
+    Raises:
+        RigFileError: ``rig.metadata`` is not JSON-serialisable (field ``metadata``).
+    """
+    try:
+        metadata = json.loads(json.dumps(rig.metadata, allow_nan=False))
+    except (TypeError, ValueError) as e:
+        raise RigFileError(
+            f"must be JSON-serialisable (finite numbers, string keys), got {_show(rig.metadata)}: {e}",
+            path=None if path is None else str(path),
+            field="metadata",
+        ) from e
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "rig_id": rig.rig_id,
+        "units": UNITS,
+        "cameras": [
+            {
+                "name": cam.name,
+                "width": int(cam.width),
+                "height": int(cam.height),
+                "K": cam.K.tolist(),
+                "distortion": {"model": "opencv", "coefficients": cam.dist.tolist()},
+                "R": cam.R.tolist(),
+                "t": cam.t.tolist(),
+            }
+            for cam in rig.cameras
+        ],
+        "working_volume": {"min": rig.volume.min_corner.tolist(), "max": rig.volume.max_corner.tolist()},
+        "metadata": metadata,
+    }
+
+
+# --------------------------------------------------------------------------- text
+def _emit(value: Any, indent: int) -> str:
+    """JSON with one line per matrix row / short vector; exact (repr) floats."""
+    pad, inner = " " * indent, " " * (indent + 2)
+    if isinstance(value, dict):
+        if not value:
+            return "{}"
+        items = [f"{inner}{json.dumps(str(k), ensure_ascii=False)}: {_emit(v, indent + 2)}" for k, v in value.items()]
+        return "{\n" + ",\n".join(items) + "\n" + pad + "}"
+    if isinstance(value, list):
+        if all(not isinstance(v, (dict, list)) for v in value):
+            return "[" + ", ".join(_emit(v, 0) for v in value) + "]"
+        return "[\n" + ",\n".join(inner + _emit(v, indent + 2) for v in value) + "\n" + pad + "]"
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"non-finite number {value}")
+    return json.dumps(value, ensure_ascii=False, allow_nan=False)
+
+
+def dumps_rig(rig: Rig, *, path: str | os.PathLike | None = None) -> str:
+    """The rig file text (UTF-8 JSON, trailing newline). ``path`` is used only in errors."""
+    return _emit(rig_to_dict(rig, path=path), 0) + "\n"
+
+
+def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
+    """Parse and validate rig file text. ``path`` is used only in error messages."""
+    where = None if path is None else str(path)
+    try:
+        # NaN/Infinity literals parse to floats here and are then rejected with the field name.
+        data = json.loads(text, object_pairs_hook=_object_hook)
+    except json.JSONDecodeError as e:
+        raise RigFileError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}", path=where) from e
+    return rig_from_dict(data, path=path)
+
+
+def load_rig(path: str | os.PathLike) -> Rig:
+    """Read and validate a rig file.
+
+    Raises:
+        RigFileError: the file cannot be read, is not UTF-8, is not valid JSON (the message
+            gives line and column) or fails validation (see :func:`rig_from_dict`).
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise RigFileError(f"cannot read rig file: {e.strerror or e}", path=str(path)) from e
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise RigFileError(f"not UTF-8 text (byte {e.start}): {e.reason}", path=str(path)) from e
+    return loads_rig(text, path=path)
+
+
+def save_rig(rig: Rig, path: str | os.PathLike) -> None:
+    """Write ``rig`` to ``path`` atomically (see :func:`write_text_atomic`).
+
+    The text is produced and checked in memory before the file system is touched, so a
+    rig that cannot be written (e.g. non-JSON metadata) leaves the old file as it was.
+
+    Raises:
+        RigFileError: the rig cannot be serialised, or the file cannot be written.
+    """
+    write_text_atomic(path, dumps_rig(rig, path=path))
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    """Replace ``path`` with ``text`` (UTF-8) so that readers see the old or the new file, never half.
+
+    Writes a temporary file in the same directory, flushes and fsyncs it, renames it over
+    ``path`` (``os.replace`` is atomic on POSIX and Windows) and fsyncs the directory. An
+    existing file's permission bits are kept; a new file gets the usual ``0666 & ~umask``.
+    On any failure the temporary file is removed and the old file is untouched.
+
+    Raises:
+        RigFileError: the file cannot be written.
+    """
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    tmp = directory / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp"
+    data = text.encode("utf-8")
+    try:
+        mode = path.stat().st_mode & 0o7777 if path.exists() else None
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+            if mode is not None:
+                os.chmod(tmp, mode)
+            os.replace(tmp, path)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
+            raise
+        try:  # make the rename itself durable; not possible on every platform
+            dir_fd = os.open(directory, os.O_RDONLY)
+        except OSError:
+            return
+        try:
+            os.fsync(dir_fd)
+        except OSError:
+            pass
+        finally:
+            os.close(dir_fd)
+    except OSError as e:
+        raise RigFileError(f"cannot write file: {e.strerror or e}", path=str(path)) from e

@@ -1,0 +1,422 @@
+"""Foreign calibration formats: round trips, real-world layouts checked with OpenCV, errors name file + field."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration.formats import (
+    default_working_volume,
+    dumps_anipose_toml,
+    read_anipose_toml,
+    read_opencv_camera,
+    read_opencv_rig,
+    write_anipose_toml,
+    write_opencv_camera,
+    write_opencv_rig,
+)
+from ghnerf_runtime.errors import GeometryError, RigFileError
+from ghnerf_runtime.geometry.camera import Camera, look_at
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import load_rig
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "rig.json"
+
+
+@pytest.fixture
+def rig() -> Rig:
+    """The committed example plus a third camera with 8 coefficients and a big rotation."""
+    base = load_rig(EXAMPLE)
+    R, t = look_at((1.7, -0.4, 1.2), (0.0, -1.0, 3.0))
+    K = np.array([[1402.5, 0.0, 961.25], [0.0, 1400.75, 538.5], [0.0, 0.0, 1.0]])
+    side = Camera("side cam", 1920, 1080, K, [0.12, -0.03, 1e-4, -2e-4, 0.01, 0.2, -0.01, 0.004], R, t)
+    return Rig(base.cameras + (side,), base.volume, rig_id=base.rig_id)
+
+
+def assert_cameras_close(a: Rig, b: Rig, atol=1e-9):
+    assert a.names == b.names
+    for ca, cb in zip(a.cameras, b.cameras):
+        assert (ca.width, ca.height) == (cb.width, cb.height)
+        np.testing.assert_allclose(cb.K, ca.K, atol=atol)
+        np.testing.assert_allclose(cb.R, ca.R, atol=atol)
+        np.testing.assert_allclose(cb.t, ca.t, atol=atol)
+        n = max(ca.dist.size, cb.dist.size)
+        np.testing.assert_allclose(np.pad(cb.dist, (0, n - cb.dist.size)), np.pad(ca.dist, (0, n - ca.dist.size)), atol=atol)
+
+
+# ----------------------------------------------------------------------------- round trips
+@pytest.mark.parametrize("units", [1.0, 0.001])
+def test_yaml_round_trip(rig, tmp_path, units):
+    path = tmp_path / "rig.yaml"
+    write_opencv_rig(rig, path, units_to_metres=units)
+    assert path.read_text().startswith("%YAML")
+    back = read_opencv_rig(path, volume=rig.volume, units_to_metres=units)
+    assert_cameras_close(rig, back)
+    assert back.rig_id == rig.rig_id
+    assert back.metadata["source"] == {"format": "opencv-yaml", "path": str(path), "units_to_metres": units}
+    np.testing.assert_array_equal(back.volume.min_corner, rig.volume.min_corner)
+
+
+@pytest.mark.parametrize("units", [1.0, 0.001])
+def test_toml_round_trip(rig, tmp_path, units):
+    path = tmp_path / "calibration.toml"
+    write_anipose_toml(rig, path, units_to_metres=units)
+    back = read_anipose_toml(path, units_to_metres=units, volume=rig.volume)
+    assert_cameras_close(rig, back)
+    assert back.rig_id == rig.rig_id
+
+
+def test_single_camera_round_trip(rig, tmp_path):
+    cam = rig.cameras[2]
+    write_opencv_camera(cam, tmp_path / "side.yml", units_to_metres=0.01)
+    back = read_opencv_camera(tmp_path / "side.yml", units_to_metres=0.01)
+    assert back.name == "side cam"
+    for attr in ("K", "dist", "R", "t"):
+        np.testing.assert_allclose(getattr(back, attr), getattr(cam, attr), atol=1e-9)
+    assert read_opencv_camera(tmp_path / "side.yml", name="other").name == "other"
+
+
+def test_zero_distortion_round_trips(tmp_path):
+    base = load_rig(EXAMPLE)
+    rig = Rig(tuple(c.without_distortion() for c in base.cameras), base.volume)
+    write_opencv_rig(rig, tmp_path / "r.yaml")
+    assert_cameras_close(rig, read_opencv_rig(tmp_path / "r.yaml"))
+    write_anipose_toml(rig, tmp_path / "c.toml", units_to_metres=1.0)
+    assert_cameras_close(rig, read_anipose_toml(tmp_path / "c.toml", units_to_metres=1.0))
+
+
+# ----------------------------------------------------------------------------- real-world layouts
+ANIPOSE_TOML = """\
+[cam_0]
+name = "A"
+size = [ 1920, 1080,]
+matrix = [ [ 1423.5, 0.0, 959.5,], [ 0.0, 1421.25, 539.5,], [ 0.0, 0.0, 1.0,],]
+distortions = [ -0.12, 0.08, 0.0, 0.0, 0.0,]
+rotation = [ 0.0, 0.0, 0.0,]
+translation = [ 0.0, 0.0, 0.0,]
+
+[cam_1]
+name = "B"
+size = [ 1920, 1080,]
+matrix = [ [ 1418.0, 0.0, 962.0,], [ 0.0, 1417.5, 541.0,], [ 0.0, 0.0, 1.0,],]
+distortions = [ -0.11, 0.07, 0.001, -0.0005, 0.0,]
+rotation = [ 0.012, -0.523, 0.004,]
+translation = [ 1480.3, -4.1, 410.7,]
+
+[metadata]
+adjusted = false
+error = 0.4213
+"""
+
+
+def test_anipose_file_matches_opencv_projection(tmp_path):
+    path = tmp_path / "calibration.toml"
+    path.write_text(ANIPOSE_TOML)
+    rig = read_anipose_toml(path, units_to_metres=0.001)
+    assert rig.names == ("A", "B") and rig.rig_id == "calibration"
+    assert rig.cameras[0].size == (1920, 1080)
+    # A point in anipose units (mm), projected by OpenCV with the file's rvec/tvec, must
+    # land where our camera projects the same point in metres.
+    X_mm = np.array([[150.0, -300.0, 2800.0], [-400.0, 200.0, 3500.0]])
+    expected, _ = cv2.projectPoints(X_mm, np.array([0.012, -0.523, 0.004]), np.array([1480.3, -4.1, 410.7]),
+                                    rig.cameras[1].K, rig.cameras[1].dist)
+    uv, _ = rig.cameras[1].project(X_mm * 0.001)
+    np.testing.assert_allclose(uv, expected.reshape(-1, 2), atol=1e-9)
+    assert rig.baseline == pytest.approx(np.linalg.norm(rig.cameras[1].center), rel=1e-12)
+
+
+def test_anipose_units_are_required(tmp_path):
+    path = tmp_path / "calibration.toml"
+    path.write_text(ANIPOSE_TOML)
+    with pytest.raises(TypeError):
+        read_anipose_toml(path)  # type: ignore[call-arg]
+    with pytest.raises(GeometryError, match="units_to_metres"):
+        read_anipose_toml(path, units_to_metres=0.0)
+    with pytest.raises(GeometryError, match="units_to_metres"):
+        write_opencv_rig(read_anipose_toml(path, units_to_metres=1.0), tmp_path / "x.yaml", units_to_metres=-1)
+
+
+def test_toml_writer_escapes_and_is_anipose_shaped(rig):
+    tricky = Rig((Camera('a "quoted"\\ \t name', 640, 480, rig.cameras[0].K), rig.cameras[1]), rig.volume,
+                 rig_id="id\n2")
+    text = dumps_anipose_toml(tricky, units_to_metres=0.001)
+    import tomllib
+
+    doc = tomllib.loads(text)
+    assert doc["cam_0"]["name"] == 'a "quoted"\\ \t name' and doc["metadata"]["rig_id"] == "id\n2"
+    assert set(doc["cam_1"]) == {"name", "size", "matrix", "distortions", "rotation", "translation"}
+    assert doc["cam_1"]["translation"][0] == pytest.approx(rig.cameras[1].t[0] * 1000)
+
+
+OPENCV_SAMPLE = """\
+%YAML:1.0
+---
+calibration_time: "Thu Nov 21 10:12:45 2024"
+nr_of_frames: 25
+image_width: 640
+image_height: 480
+board_width: 9
+board_height: 6
+square_size: 25.
+fix_aspect_ratio: 1.
+flags: 2
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 6.5746697944293521e+02, 0., 3.1950000000000000e+02, 0.,
+       6.5746697944293521e+02, 2.3950000000000000e+02, 0., 0., 1. ]
+distortion_coefficients: !!opencv-matrix
+   rows: 5
+   cols: 1
+   dt: d
+   data: [ -4.1802327176423804e-01, 5.0715244063187526e-01, 0., 0.,
+       -5.7843597214487474e-01 ]
+avg_reprojection_error: 3.9223999999999997e-01
+"""
+
+
+def test_opencv_calibration_sample_file(tmp_path):
+    path = tmp_path / "out_camera_data.yml"
+    path.write_text(OPENCV_SAMPLE)
+    cam = read_opencv_camera(path)
+    assert cam.name == "out_camera_data" and cam.size == (640, 480)
+    assert cam.K[0, 0] == 6.5746697944293521e02 and cam.dist.tolist()[-1] == -5.7843597214487474e-01
+    np.testing.assert_array_equal(cam.R, np.eye(3))
+    with pytest.raises(RigFileError, match="no known layout") as info:
+        read_opencv_rig(path)
+    assert info.value.path == str(path)
+
+
+def test_opencv_aliases_and_plain_sequences(tmp_path):
+    path = tmp_path / "cam.yaml"
+    path.write_text("%YAML:1.0\n---\nname: front\nimage_size: [800, 600]\nK: [[500, 0, 400], [0, 500, 300], [0, 0, 1]]\n"
+                    "D: [0.1, -0.01, 0, 0]\nR: [0.0, 0.1, 0.0]\nT: [100, 0, 0]\n")
+    cam = read_opencv_camera(path, units_to_metres=0.001)
+    assert cam.name == "front" and cam.size == (800, 600) and cam.dist.size == 4
+    np.testing.assert_allclose(cam.R, cv2.Rodrigues(np.array([0.0, 0.1, 0.0]))[0])
+    np.testing.assert_allclose(cam.t, [0.1, 0.0, 0.0])
+
+
+def _write_stereo_calib(tmp_path, T_mm):
+    """intrinsics.yml + extrinsics.yml exactly as OpenCV's stereo_calib sample writes them."""
+    K1 = np.array([[700.0, 0, 322.0], [0, 701.0, 241.0], [0, 0, 1]])
+    K2 = np.array([[705.0, 0, 318.0], [0, 704.0, 243.0], [0, 0, 1]])
+    D1, D2 = np.array([[-0.2, 0.05, 0.001, 0.0, 0.0]]), np.array([[-0.21, 0.06, 0.0, 0.001, 0.0]])
+    R, _ = cv2.Rodrigues(np.array([0.01, -0.05, 0.002]))
+    fs = cv2.FileStorage(str(tmp_path / "intrinsics.yml"), cv2.FILE_STORAGE_WRITE)
+    for key, value in (("M1", K1), ("D1", D1), ("M2", K2), ("D2", D2)):
+        fs.write(key, value)
+    fs.release()
+    fs = cv2.FileStorage(str(tmp_path / "extrinsics.yml"), cv2.FILE_STORAGE_WRITE)
+    for key, value in (("R", R), ("T", np.asarray(T_mm, float).reshape(3, 1)), ("R1", np.eye(3)), ("R2", np.eye(3)),
+                       ("P1", np.eye(3, 4)), ("P2", np.eye(3, 4)), ("Q", np.eye(4))):
+        fs.write(key, value)
+    fs.release()
+    return K2, D2, R
+
+
+def test_opencv_stereo_calib_layout(tmp_path):
+    K2, D2, R = _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    rig = read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml",
+                          image_size=(640, 480), units_to_metres=0.001)
+    left, right = rig.pair
+    assert rig.names == ("left", "right") and right.size == (640, 480)
+    np.testing.assert_array_equal(left.R, np.eye(3))
+    np.testing.assert_allclose(right.t, [-0.06, 0.0005, 0.001], atol=1e-15)
+    X = np.array([[0.1, -0.05, 2.0], [-0.3, 0.2, 3.0]])  # camera-1 frame, metres
+    expected, _ = cv2.projectPoints(X * 1000, cv2.Rodrigues(R)[0], np.array([-60.0, 0.5, 1.0]), K2, D2)
+    np.testing.assert_allclose(right.project(X)[0], expected.reshape(-1, 2), atol=1e-9)
+    assert rig.metadata["source"]["format"] == "opencv-stereo-calib"
+
+
+def test_stereo_calib_errors_name_the_right_file(tmp_path):
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    with pytest.raises(RigFileError, match="missing image size") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml")
+    assert info.value.field == "image_width"
+    with pytest.raises(RigFileError) as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", image_size=(640, 480))  # R, T live in the other file
+    assert info.value.path == str(tmp_path / "intrinsics.yml") and info.value.field == "R"
+    (tmp_path / "bad_ext.yml").write_text("%YAML:1.0\n---\nR: [1, 2, 3, 4]\nT: [0, 0, 0]\n")
+    with pytest.raises(RigFileError) as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "bad_ext.yml", image_size=(640, 480))
+    assert info.value.path == str(tmp_path / "bad_ext.yml") and info.value.field == "R"
+
+
+# ----------------------------------------------------------------------------- errors
+def _multi_yaml(cameras: list[dict]) -> str:
+    lines = ["%YAML:1.0", "---", "cameras:"]
+    for cam in cameras:
+        lines.append("   -")
+        lines += [f"      {k}: {v}" for k, v in cam.items()]
+    return "\n".join(lines) + "\n"
+
+
+GOOD_CAM = {
+    "name": "a",
+    "image_width": 640,
+    "image_height": 480,
+    "camera_matrix": "[[600, 0, 320], [0, 600, 240], [0, 0, 1]]",
+    "distortion_coefficients": "[0, 0, 0, 0, 0]",
+    "R": "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]",
+    "T": "[0.1, 0, 0]",
+}
+
+
+def _cams(**overrides):
+    second = dict(GOOD_CAM, name="b", T="[-0.1, 0, 0]")
+    for key, value in overrides.items():
+        if value is None:
+            del second[key]
+        else:
+            second[key] = value
+    return [dict(GOOD_CAM), second]
+
+
+YAML_ERRORS = {
+    "missing camera_matrix": (_cams(camera_matrix=None), "cameras[1].camera_matrix", "missing required key"),
+    "K 2x2": (_cams(camera_matrix="[[1, 0], [0, 1]]"), "cameras[1].camera_matrix", "shape (2, 2)"),
+    "K not pinhole": (_cams(camera_matrix="[[600, 0, 320], [0, 600, 240], [0, 0, 3]]"), "cameras[1].camera_matrix", "3."),
+    "K string": (_cams(camera_matrix='"abc"'), "cameras[1].camera_matrix", "'abc'"),
+    "K bad element": (_cams(camera_matrix="[[600, 0, x], [0, 600, 240], [0, 0, 1]]"), "cameras[1].camera_matrix[0][2]", "'x'"),
+    "both aliases": (_cams(K="[[600, 0, 320], [0, 600, 240], [0, 0, 1]]"), "cameras[1].K", "both"),
+    "dist count": (_cams(distortion_coefficients="[0.1, 0.2, 0.3]"), "cameras[1].distortion_coefficients", "got 3"),
+    "R not rotation": (_cams(R="[[1, 0, 0], [0, 1, 0], [0, 0, -1]]"), "cameras[1].R", "det = -1"),
+    "R missing": (_cams(R=None), "cameras[1].R", "missing"),
+    "T shape": (_cams(T="[1, 2]"), "cameras[1].T", "3-vector"),
+    "T nan": (_cams(T="[.nan, 0, 0]"), "cameras[1].T", "finite"),
+    "no image size": (_cams(image_width=None, image_height=None), "cameras[1].image_width", "missing image size"),
+    "width only": (_cams(image_height=None), "cameras[1].image_height", "missing"),
+    "width fractional": (_cams(image_width=640.5), "cameras[1].image_width", "640.5"),
+    "duplicate name": (_cams(name="a"), "cameras[1].name", "duplicate camera name 'a'"),
+    "name number": (_cams(name=5), "cameras[1].name", "string"),
+    "one camera": ([dict(GOOD_CAM)], "cameras", "at least two"),
+}
+
+
+@pytest.mark.parametrize("case", list(YAML_ERRORS))
+def test_yaml_errors_name_file_and_field(case, tmp_path):
+    cams, field, text = YAML_ERRORS[case]
+    path = tmp_path / "rig.yaml"
+    path.write_text(_multi_yaml(cams))
+    with pytest.raises(RigFileError) as info:
+        read_opencv_rig(path)
+    assert info.value.path == str(path) and info.value.field == field
+    assert str(path) in str(info.value) and text in str(info.value), str(info.value)
+
+
+def test_yaml_good_file_reads(tmp_path):
+    path = tmp_path / "rig.yaml"
+    path.write_text(_multi_yaml(_cams()))
+    rig = read_opencv_rig(path)
+    assert rig.names == ("a", "b") and rig.rig_id == "rig"
+
+
+def test_yaml_unparseable_and_missing_files(tmp_path):
+    path = tmp_path / "broken.yaml"
+    path.write_text("%YAML:1.0\n---\ncameras:\n  - name: a\n   bad: [1, 2\n")
+    with pytest.raises(RigFileError, match="cannot parse OpenCV YAML") as info:
+        read_opencv_rig(path)
+    assert info.value.path == str(path) and "broken.yaml(" in str(info.value)  # OpenCV's file(line) marker
+    with pytest.raises(RigFileError, match="no such file"):
+        read_opencv_rig(tmp_path / "nope.yaml")
+    (tmp_path / "empty.yaml").write_text("")
+    with pytest.raises(RigFileError, match="cannot parse"):
+        read_opencv_camera(tmp_path / "empty.yaml")
+    matrix = tmp_path / "matrix.yaml"
+    matrix.write_text("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n  data: [1, 2]\n"
+                      "distortion_coefficients: [0, 0, 0, 0]\nimage_size: [4, 4]\n")
+    with pytest.raises(RigFileError, match="malformed !!opencv-matrix") as info:
+        read_opencv_camera(matrix)
+    assert info.value.field == "camera_matrix"
+
+
+def _toml_with(section: str, key: str, value: str | None) -> str:
+    out, current = [], None
+    for line in ANIPOSE_TOML.splitlines():
+        if line.startswith("["):
+            current = line.strip("[]")
+        if current == section and line.split(" = ")[0] == key:
+            if value is None:
+                continue
+            line = f"{key} = {value}"
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
+TOML_ERRORS = {
+    "missing matrix": (_toml_with("cam_1", "matrix", None), "cam_1.matrix", "missing required key 'matrix'"),
+    "bool in matrix": (_toml_with("cam_1", "matrix", "[[true, 0, 1], [0, 1, 1], [0, 0, 1]]"), "cam_1.matrix", "True"),
+    "string in distortions": (_toml_with("cam_0", "distortions", '["a", 0, 0, 0]'), "cam_0.distortions", "'a'"),
+    "matrix shape": (_toml_with("cam_1", "matrix", "[1.0, 2.0]"), "cam_1.matrix", "3x3"),
+    "rotation length": (_toml_with("cam_1", "rotation", "[0.1, 0.2]"), "cam_1.rotation", "Rodrigues"),
+    "translation nan": (_toml_with("cam_1", "translation", "[nan, 0.0, 0.0]"), "cam_1.translation", "finite"),
+    "size": (_toml_with("cam_0", "size", "[1920]"), "cam_0.size", "[1920]"),
+    "size string": (_toml_with("cam_0", "size", '["1920", 1080]'), "cam_0.size", "'1920'"),
+    "fisheye": (ANIPOSE_TOML.replace('name = "B"', 'name = "B"\nfisheye = true'), "cam_1.fisheye", "fisheye"),
+    "name bool": (_toml_with("cam_0", "name", "false"), "cam_0.name", "False"),
+    "duplicate name": (_toml_with("cam_1", "name", '"A"'), "cam_1.name", "duplicate camera name 'A'"),
+    "stray value": ("scale = 2\n" + ANIPOSE_TOML, "scale", "camera table"),
+    "K not pinhole": (_toml_with("cam_0", "matrix", "[[1.0, 0, 1], [0, 1, 1], [0, 0, 0]]"), "cam_0.matrix", "pinhole"),
+}
+
+
+@pytest.mark.parametrize("case", list(TOML_ERRORS))
+def test_toml_errors_name_file_and_field(case, tmp_path):
+    text, field, snippet = TOML_ERRORS[case]
+    path = tmp_path / "calibration.toml"
+    path.write_text(text)
+    with pytest.raises(RigFileError) as info:
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.path == str(path) and info.value.field == field
+    assert str(path) in str(info.value) and snippet in str(info.value), str(info.value)
+
+
+def test_toml_syntax_error_has_line(tmp_path):
+    path = tmp_path / "calibration.toml"
+    path.write_text(ANIPOSE_TOML.replace("size = [ 1920, 1080,]", "size = [ 1920, 1080", 1))
+    with pytest.raises(RigFileError, match=r"invalid TOML: .*line \d+") as info:
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.path == str(path)
+    with pytest.raises(RigFileError, match="cannot read"):
+        read_anipose_toml(tmp_path / "missing.toml", units_to_metres=0.001)
+
+
+# ----------------------------------------------------------------------------- working volume
+def test_default_volume_parallel_rig():
+    rig = load_rig(EXAMPLE)  # nearly parallel stereo pair
+    vol = default_working_volume(rig.cameras)
+    axis = rig.cameras[0].R[2]
+    expected = np.mean([c.center for c in rig.cameras], axis=0) + 2.5 * np.mean([c.R[2] for c in rig.cameras], axis=0) / np.linalg.norm(np.mean([c.R[2] for c in rig.cameras], axis=0))
+    np.testing.assert_allclose(vol.center, expected, atol=1e-12)
+    np.testing.assert_allclose(vol.size, [2.5, 2.5, 2.5])
+    assert axis @ (vol.center - rig.cameras[0].center) > 2.0
+
+
+def test_default_volume_converging_and_facing_rigs():
+    target = np.array([0.3, -1.0, 3.0])
+    cams = [Camera(f"c{i}", 640, 480, np.diag([500.0, 500, 1]) + np.array([[0, 0, 320], [0, 0, 240], [0, 0, 0]]),
+                   np.zeros(5), *look_at(eye, target)) for i, eye in enumerate([(-1.5, -1.5, 0), (1.5, -1.4, 0.2)])]
+    vol = default_working_volume(cams, side_m=2.0)
+    np.testing.assert_allclose(vol.center, target, atol=1e-9)
+    np.testing.assert_allclose(vol.size, 2.0)
+    facing = [Camera("a", 640, 480, cams[0].K, np.zeros(5), *look_at((0, -1, 0), (0, -1, 4))),
+              Camera("b", 640, 480, cams[0].K, np.zeros(5), *look_at((0, -1, 4), (0, -1, 0)))]
+    np.testing.assert_allclose(default_working_volume(facing).center, [0, -1, 2], atol=1e-9)
+    with pytest.raises(GeometryError):
+        default_working_volume([])
+
+
+def test_imported_rig_gets_default_volume(tmp_path):
+    path = tmp_path / "calibration.toml"
+    path.write_text(ANIPOSE_TOML)
+    rig = read_anipose_toml(path, units_to_metres=0.001)
+    vol = default_working_volume(rig.cameras)
+    np.testing.assert_array_equal(rig.volume.min_corner, vol.min_corner)
+    with pytest.raises(GeometryError, match="WorkingVolume"):
+        read_anipose_toml(path, units_to_metres=0.001, volume=([0, 0, 0], [1, 1, 1]))  # type: ignore[arg-type]
+    custom = WorkingVolume([-1, -2, 1], [1, 0, 4])
+    assert read_anipose_toml(path, units_to_metres=0.001, volume=custom).volume is custom

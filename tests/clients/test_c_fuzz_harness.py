@@ -1,0 +1,45 @@
+"""The fuzz harness builds, holds its contracts on the vectors, and run_fuzz.sh works when clang is there."""
+from __future__ import annotations
+
+import random
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from tests.clients.c_build import C_DIR, VECTOR_DIR, compile_c, require_compiler, sanitizer_flags
+
+
+def test_harness_replays_vectors_and_random_inputs(tmp_path: Path) -> None:
+    cc = require_compiler()
+    exe = compile_c(cc, tmp_path / "fuzz_replay", [C_DIR / "ghjoints.c", C_DIR / "fuzz" / "fuzz_ghjoints.c"],
+                    ["-DGHJ_FUZZ_STANDALONE", *sanitizer_flags(cc, tmp_path)])
+    rng = random.Random(7)
+    inputs = sorted(VECTOR_DIR.glob("*.bin"))
+    for i in range(40):
+        p = tmp_path / f"rand{i}.bin"
+        p.write_bytes(bytes(rng.choice([0, 1, 0xFF, rng.randrange(256)]) for _ in range(rng.randrange(2000))))
+        inputs.append(p)
+    proc = subprocess.run([str(exe), *map(str, inputs)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert f"replayed {len(inputs)} inputs" in proc.stdout
+
+
+def _libfuzzer_clang() -> str | None:
+    for c in ("clang", "clang-19", "clang-18", "clang-17", "clang-16", "clang-15", "clang-14"):
+        if shutil.which(c):
+            return c
+    return None
+
+
+@pytest.mark.slow
+def test_run_fuzz_script_for_a_few_seconds(tmp_path: Path) -> None:
+    if _libfuzzer_clang() is None:
+        pytest.skip("no clang: libFuzzer needs clang (apt-get install clang)")
+    proc = subprocess.run([str(C_DIR / "fuzz" / "run_fuzz.sh"), "3"], capture_output=True, text=True,
+                          env={"PATH": "/usr/bin:/bin:/usr/local/bin", "OUT": str(tmp_path)}, timeout=120)
+    if proc.returncode == 77:
+        pytest.skip(proc.stderr.strip())
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "crashes=0" in proc.stdout and "run_fuzz: OK" in proc.stdout

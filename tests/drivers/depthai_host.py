@@ -1,0 +1,109 @@
+"""A DeviceLink with no device: a host-only depthai pipeline (``dai.Pipeline(False)``).
+
+Two ThreadedHostNodes play the cameras: they send real ``dai.ImgFrame``s (GRAY8,
+like OAK mono sensors) stamped on depthai's host clock, through the production
+Sync stage (:func:`drivers.backends.depthai.pipeline.build_sync_stage`), into a
+real ``dai.MessageQueue``. The calibration is a real ``dai.CalibrationHandler``
+loaded from a JSON EEPROM dump. What cannot run without hardware is only
+``Camera.build()`` (depthai: "Device pointer is not valid") and reading an EEPROM.
+Test-only: lives in tests/, never in production code.
+"""
+from __future__ import annotations
+
+import datetime
+import time
+from pathlib import Path
+
+import depthai as dai
+import numpy as np
+
+from drivers.backends.depthai.link import StereoRequest
+from drivers.backends.depthai.pipeline import build_sync_stage
+
+CALIBRATION = Path(__file__).parent / "fixtures" / "oak_d_calibration.json"
+
+
+def stamp(image_frame: dai.ImgFrame, t_ns: int) -> None:
+    delta = datetime.timedelta(microseconds=t_ns // 1000)
+    image_frame.setTimestamp(delta)
+    image_frame.setTimestampDevice(delta)
+
+
+class CameraNode(dai.node.ThreadedHostNode):
+    """Sends GRAY8 frames at ``fps``; frame k is due at ``start_ns + k/fps + offset``, pixel value k % 256."""
+
+    def __init__(self, fps: float, size: tuple[int, int], start_ns: int, offset_ms: float = 0.0,
+                 drop: float = 0.0, seed: int = 0) -> None:
+        super().__init__()
+        self.out = self.createOutput()
+        self.fps, self.size, self.start_ns = fps, size, start_ns
+        self.offset_ns = int(offset_ms * 1e6)
+        self.drop = drop
+        self.rng = np.random.default_rng(seed)
+        self.sent: list[tuple[int, int]] = []  # (index, timestamp_ns) actually sent
+
+    def run(self) -> None:
+        k = 0
+        while self.isRunning():
+            due = self.start_ns + int(k * 1e9 / self.fps) + self.offset_ns
+            while self.isRunning() and time.monotonic_ns() < due:
+                time.sleep(min(0.005, max(due - time.monotonic_ns(), 0) / 1e9))
+            if not self.isRunning():
+                return
+            if self.rng.random() >= self.drop:
+                frame = dai.ImgFrame()
+                frame.setCvFrame(np.full((self.size[1], self.size[0]), k % 256, np.uint8), dai.ImgFrame.Type.GRAY8)
+                stamp(frame, due)
+                frame.setSequenceNum(k)
+                self.out.send(frame)
+                self.sent.append((k, due))
+            k += 1
+
+
+class HostPipelineLink:
+    """:class:`~drivers.backends.depthai.link.DeviceLink` on a host-only pipeline (see module docstring)."""
+
+    def __init__(self, *, offset_ms: float = 0.0, drop: float = 0.0, calibration: Path = CALIBRATION,
+                 fps: float | None = None) -> None:
+        self.offset_ms, self.drop, self.calibration_path, self.fps = offset_ms, drop, calibration, fps
+        self.pipeline: dai.Pipeline | None = None
+        self.queue: dai.MessageQueue | None = None
+        self.cameras: list[CameraNode] = []
+        self.closed = 0
+
+    def start(self, request: StereoRequest) -> None:
+        self.request = request
+        pipeline = dai.Pipeline(False)
+        fps = self.fps or request.fps
+        start = time.monotonic_ns() + 20_000_000
+        size = (request.width, request.height)
+        self.cameras = [
+            pipeline.create(CameraNode, fps, size, start, 0.0, self.drop, 1),
+            pipeline.create(CameraNode, fps, size, start, self.offset_ms, self.drop, 2),
+        ]
+        self.queue = build_sync_stage(
+            pipeline, self.cameras[0].out, self.cameras[1].out,
+            tolerance_ms=request.tolerance_ms, queue_size=request.queue_size,
+        )
+        pipeline.start()
+        self.pipeline = pipeline
+
+    def device_id(self) -> str:
+        return "host-pipeline"
+
+    def calibration(self) -> dai.CalibrationHandler:
+        return dai.CalibrationHandler(self.calibration_path)
+
+    def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
+        assert self.queue is not None
+        return self.queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
+
+    def unplug(self) -> None:
+        """Stop the pipeline under the reader, as a lost device does: its queue closes."""
+        if self.pipeline is not None:
+            self.pipeline.stop()
+
+    def close(self) -> None:
+        self.closed += 1
+        if self.pipeline is not None and self.pipeline.isRunning():
+            self.pipeline.stop()

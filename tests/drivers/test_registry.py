@@ -1,0 +1,72 @@
+"""The backend registry: unknown schemes, lazy imports, record+ wrapping."""
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from drivers import BACKENDS, BackendNotAvailableError, RigConfigError, create_rig_source
+from drivers.registry import backend_class
+
+
+def test_unknown_scheme_names_it_and_lists_the_known_ones():
+    with pytest.raises(BackendNotAvailableError) as info:
+        create_rig_source("v4l2:///dev/video0")
+    assert "'v4l2'" in str(info.value)
+    for known in ("sim", "replay", "depthai"):
+        assert known in str(info.value)
+
+
+def test_a_backend_module_that_cannot_import_is_not_available():
+    table = {"ghost": ("drivers.backends.no_such_module", "Ghost")}
+    with pytest.raises(BackendNotAvailableError, match="ghost"):
+        backend_class("ghost", table)
+
+
+def test_registry_entries_resolve_to_rig_sources_with_their_scheme():
+    from drivers import RigSource
+
+    for scheme in BACKENDS:
+        cls = backend_class(scheme)
+        assert issubclass(cls, RigSource) and cls.scheme == scheme
+
+
+def test_record_without_out_is_a_config_error():
+    with pytest.raises(RigConfigError, match="out="):
+        create_rig_source("record+sim://?fps=30")
+
+
+def _run(code: str) -> str:
+    result = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_importing_drivers_imports_no_backend_and_not_depthai():
+    out = _run(
+        """
+        import sys
+        import drivers
+        loaded = sorted(m for m in sys.modules if m == "depthai" or m.startswith("drivers.backends."))
+        print(loaded)
+        """
+    )
+    assert out.strip() == "[]"
+
+
+def test_opening_sim_and_replay_never_imports_depthai(tmp_path):
+    out = _run(
+        f"""
+        import sys
+        from drivers import ManualClock, open_rig
+        url = "record+sim://?width=32&height=24&cache=off&out={tmp_path / 'take'}"
+        with open_rig(url, clock=ManualClock()) as rig:
+            rig.read(timeout_s=1.0)
+        with open_rig("replay://{tmp_path / 'take'}?speed=free") as rig:
+            rig.read(timeout_s=1.0)
+        print("depthai" in sys.modules)
+        """
+    )
+    assert out.strip().splitlines()[-1] == "False"

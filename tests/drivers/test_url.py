@@ -1,0 +1,73 @@
+"""RigUrl: typed options, defaults, range checks, unknown options rejected by name."""
+import pytest
+
+from drivers import RigConfigError, create_rig_source
+from drivers.url import RigUrl
+
+
+def test_parse_scheme_target_and_options():
+    url = RigUrl.parse("Replay:///data/take%201?speed=free&loop=1")
+    assert url.scheme == "replay"
+    assert url.target == "/data/take 1"
+    assert url.options == {"speed": "free", "loop": "1"}
+
+
+def test_typed_getters_convert_and_consume():
+    url = RigUrl.parse("sim://?fps=60&seed=0x10&noise=2.5&cache=off&on=yes&off=0&flag")
+    assert url.take_float("fps", 30.0) == 60.0
+    assert url.take_int("seed", 0) == 16
+    assert url.take_float("noise", 0.0, lo=0.0) == 2.5
+    assert url.take_str("cache", "auto") == "off"
+    assert url.take_bool("on", False) is True
+    assert url.take_bool("off", True) is False
+    assert url.take_bool("flag", False) is True  # bare key means true
+    assert url.take_float("absent", 1.5) == 1.5  # defaults when missing
+    url.finish()  # everything was consumed
+
+
+@pytest.mark.parametrize(
+    ("query", "getter", "expected_words"),
+    [
+        ("fps=fast", lambda u: u.take_float("fps", 30.0), ["fps='fast'", "a number"]),
+        ("fps=-1", lambda u: u.take_float("fps", 30.0, lo=0.0), ["fps='-1'", "[0.0, None]"]),
+        ("fps=nan", lambda u: u.take_float("fps", 30.0), ["fps='nan'"]),
+        ("seed=1.5", lambda u: u.take_int("seed", 0), ["seed='1.5'", "an integer"]),
+        ("loop=maybe", lambda u: u.take_bool("loop", False), ["loop='maybe'", "boolean"]),
+        ("policy=best", lambda u: u.take_str("policy", "latest", choices=("latest", "all")), ["policy='best'", "latest"]),
+    ],
+)
+def test_bad_values_name_the_option_and_the_value(query, getter, expected_words):
+    url = RigUrl.parse(f"sim://?{query}")
+    with pytest.raises(RigConfigError) as info:
+        getter(url)
+    for word in expected_words:
+        assert word in str(info.value)
+
+
+def test_unknown_option_is_rejected_by_name():
+    url = RigUrl.parse("sim://?fps=30&fsp=60")
+    url.take_float("fps", 30.0)
+    with pytest.raises(RigConfigError, match="fsp"):
+        url.finish()
+
+
+def test_duplicate_option_is_rejected():
+    with pytest.raises(RigConfigError, match="fps"):
+        RigUrl.parse("sim://?fps=30&fps=60")
+
+
+@pytest.mark.parametrize("text", ["sim", "", "/data/take1"])
+def test_not_a_url(text):
+    with pytest.raises(RigConfigError):
+        RigUrl.parse(text)
+
+
+@pytest.mark.parametrize(
+    "url",
+    ["sim://?fsp=60", "replay:///nonexistent?sped=free", "record+sim://?out=/tmp/x&bogus=1", "depthai://?widht=640"],
+)
+def test_every_backend_rejects_unknown_options_by_name(url):
+    """Backends validate the URL before touching anything (no device, no files)."""
+    name = {"sim": "fsp", "rep": "sped", "rec": "bogus", "dep": "widht"}[url[:3]]
+    with pytest.raises(RigConfigError, match=name):
+        create_rig_source(url)

@@ -1,0 +1,163 @@
+"""A pyusb backend (usb.backend.IBackend) with one simulated vendor-class device.
+
+It lets ``usb.core.find(backend=...)``, ``Device.set_configuration``,
+``usb.util.claim_interface``, ``Device.write`` and ``Device.clear_halt`` run
+through pyusb's real code. The device has one configuration with one
+interface holding a bulk OUT endpoint (0x01) and a bulk IN endpoint (0x81).
+
+Modelled: descriptors for enumeration; configuration state; bulk OUT writes
+(bytes are appended to ``device.received``); a stalled endpoint (writes raise
+USBError with errno EPIPE until ``clear_halt``); disappearance (the device
+leaves enumeration and every call on an open handle raises USBError with
+errno ENODEV, also after it comes back: a replugged device needs a new handle).
+
+Not modelled: control transfers and string descriptors, IN/interrupt/iso
+transfers, timing and timeouts, packet sizes and short packets, kernel
+drivers (never active), alternate settings, hubs and parents, more than one
+device or configuration.
+"""
+from __future__ import annotations
+
+import errno
+import threading
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import usb.backend
+import usb.core
+
+
+@dataclass
+class FakeDevice:
+    vid: int = 0x1209
+    pid: int = 0x0001
+    received: bytearray = field(default_factory=bytearray)
+    present: bool = True
+    stalled: bool = False
+    configuration: int = 0  # 0 = unconfigured
+    claimed: set = field(default_factory=set)
+    generation: int = 0  # bumped on every unplug: old handles go stale
+    writes: int = 0
+    halts_cleared: int = 0
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def unplug(self) -> None:
+        with self.lock:
+            self.present = False
+            self.generation += 1
+            self.configuration = 0
+            self.claimed.clear()
+
+    def plug(self) -> None:
+        with self.lock:
+            self.present = True
+            self.stalled = False
+
+    def take(self) -> bytes:
+        with self.lock:
+            data = bytes(self.received)
+            self.received.clear()
+            return data
+
+
+_ENODEV = usb.core.USBError("No such device (it may have been disconnected)", error_code=-4, errno=errno.ENODEV)
+
+
+class FakeBackend(usb.backend.IBackend):
+    def __init__(self, device: FakeDevice) -> None:
+        super().__init__()
+        self.device = device
+
+    # ---- enumeration and descriptors ----
+
+    def enumerate_devices(self):
+        if self.device.present:
+            yield self.device
+
+    def get_parent(self, dev):
+        return None
+
+    def get_device_descriptor(self, dev):
+        return SimpleNamespace(
+            bLength=18, bDescriptorType=1, bcdUSB=0x0200, bDeviceClass=0xFF, bDeviceSubClass=0,
+            bDeviceProtocol=0, bMaxPacketSize0=64, idVendor=dev.vid, idProduct=dev.pid, bcdDevice=0x0100,
+            iManufacturer=0, iProduct=0, iSerialNumber=0, bNumConfigurations=1, address=5, bus=1,
+            port_number=1, port_numbers=(1,), speed=2,
+        )
+
+    def get_configuration_descriptor(self, dev, config):
+        if config != 0:
+            raise IndexError(config)
+        return SimpleNamespace(
+            bLength=9, bDescriptorType=2, wTotalLength=32, bNumInterfaces=1, bConfigurationValue=1,
+            iConfiguration=0, bmAttributes=0x80, bMaxPower=50, extra_descriptors=b"",
+        )
+
+    def get_interface_descriptor(self, dev, intf, alt, config):
+        if (intf, alt, config) != (0, 0, 0):
+            raise IndexError((intf, alt, config))  # pyusb iterates until IndexError
+        return SimpleNamespace(
+            bLength=9, bDescriptorType=4, bInterfaceNumber=0, bAlternateSetting=0, bNumEndpoints=2,
+            bInterfaceClass=0xFF, bInterfaceSubClass=0, bInterfaceProtocol=0, iInterface=0,
+            extra_descriptors=b"",
+        )
+
+    def get_endpoint_descriptor(self, dev, ep, intf, alt, config):
+        if (intf, alt, config) != (0, 0, 0) or ep not in (0, 1):
+            raise IndexError((ep, intf, alt, config))
+        return SimpleNamespace(
+            bLength=7, bDescriptorType=5, bEndpointAddress=(0x01, 0x81)[ep], bmAttributes=0x02,
+            wMaxPacketSize=64, bInterval=0, bRefresh=0, bSynchAddress=0, extra_descriptors=b"",
+        )
+
+    # ---- handles ----
+
+    def _check(self, handle) -> FakeDevice:
+        dev = handle.device
+        if not dev.present or handle.generation != dev.generation:
+            raise _ENODEV
+        return dev
+
+    def open_device(self, dev):
+        if not dev.present:
+            raise _ENODEV
+        return SimpleNamespace(device=dev, generation=dev.generation)
+
+    def close_device(self, dev_handle):
+        pass
+
+    def set_configuration(self, dev_handle, config_value):
+        self._check(dev_handle).configuration = config_value
+
+    def get_configuration(self, dev_handle):
+        return self._check(dev_handle).configuration
+
+    def claim_interface(self, dev_handle, intf):
+        self._check(dev_handle).claimed.add(intf)
+
+    def release_interface(self, dev_handle, intf):
+        self._check(dev_handle).claimed.discard(intf)
+
+    def is_kernel_driver_active(self, dev_handle, intf):
+        return False
+
+    # ---- transfers ----
+
+    def bulk_write(self, dev_handle, ep, intf, data, timeout):
+        dev = self._check(dev_handle)
+        if intf not in dev.claimed:
+            raise usb.core.USBError("interface not claimed", error_code=-5, errno=errno.EBUSY)
+        if ep != 0x01:
+            raise usb.core.USBError("invalid endpoint", error_code=-2, errno=errno.EINVAL)
+        with dev.lock:
+            dev.writes += 1
+            if dev.stalled:
+                raise usb.core.USBError("Pipe error", error_code=-9, errno=errno.EPIPE)
+            dev.received += bytes(data)
+        return len(data)
+
+    def clear_halt(self, dev_handle, ep):
+        dev = self._check(dev_handle)
+        with dev.lock:
+            dev.stalled = False
+            dev.halts_cleared += 1

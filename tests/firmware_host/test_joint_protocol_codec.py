@@ -1,0 +1,189 @@
+"""Encoder, quantisation and streaming decoder of the joint protocol."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from firmware_host.errors import EncodeError
+from firmware_host.protocol import (
+    Flags,
+    Hello,
+    JointFrame,
+    Joints,
+    MsgType,
+    Status,
+    StreamDecoder,
+    decode_stream,
+    encode,
+    encode_packet,
+    joints_message,
+    joints_packet_len,
+    make_header,
+    parse_packet,
+    wire_len,
+)
+from firmware_host.protocol.constants import U32_MAX
+from firmware_host.protocol.from_frame import joints2d_messages
+from firmware_host.protocol.quantize import quantise_joints_2d, quantise_joints_3d
+
+header = st.builds(
+    make_header,
+    st.sampled_from([MsgType.JOINTS]),
+    st.integers(0, U32_MAX),
+    st.integers(0, 2**64 - 1),
+    st.integers(0, 2**64 - 1),
+    st.integers(0, 255),
+)
+
+
+@st.composite
+def joints_messages(draw: st.DrawFn) -> Joints:
+    n = draw(st.integers(0, 64))
+    xyz = draw(hnp.arrays(np.int16, (n, 3)))
+    conf = draw(hnp.arrays(np.uint8, (n,)))
+    missing = draw(hnp.arrays(np.bool_, (n,)))
+    return Joints(draw(header), draw(st.integers(0, 255)), xyz, conf, missing)
+
+
+@settings(max_examples=200, deadline=None)
+@given(joints_messages())
+def test_joints_round_trip(msg: Joints) -> None:
+    wire = encode(msg)
+    assert wire.endswith(b"\x00") and wire.count(0) == 1  # COBS leaves one zero: the delimiter
+    events, stats = decode_stream(wire)
+    assert stats.messages == 1
+    assert events[0].message == msg
+
+
+def test_every_message_type_round_trips() -> None:
+    hello = Hello(make_header(MsgType.HELLO, 3, 10, 11), 1, 0, 25, 0, 0, "rig 7", ("left", "right"))
+    status = Status(make_header(MsgType.STATUS, 4, 12, 13), 2997, 41000, 2, 30, 1)
+    frame = JointFrame(5, 14, 0, np.random.default_rng(0).random((25, 4)),
+                       {"right": np.full((25, 3), 100.25), 0: np.full((25, 3), 7.5)})
+    msgs = [hello, status, joints_message(frame, 15), *joints2d_messages(frame, 15, ("left", "right"))]
+    events, _ = decode_stream(b"".join(encode(m) for m in msgs))
+    assert [e.message for e in events] == msgs
+    assert [m.camera for m in msgs[3:]] == [0, 1]  # sorted by announced index
+
+
+def test_body25_frame_is_206_bytes_and_208_on_the_wire() -> None:
+    frame = JointFrame(1, 2, 0, np.random.default_rng(1).random((25, 4)))
+    packet = encode_packet(joints_message(frame, 3))
+    assert len(packet) == joints_packet_len(25) == 206
+    assert len(encode(joints_message(frame, 3))) == wire_len(206) == 208
+
+
+def test_quantisation_rules() -> None:
+    j = np.array(
+        [
+            [1.0004, -0.0006, 2.5, 1.0],  # rounds to mm
+            [np.nan, 0.0, 1.0, 0.9],  # NaN coordinate -> missing
+            [0.1, 0.1, 0.1, 0.0],  # confidence 0 -> missing
+            [0.1, 0.1, 0.1, np.nan],  # NaN confidence -> missing
+            [40.0, 0.0, 1.0, 0.9],  # beyond int16 mm (32.767 m) -> missing
+            [0.0, 0.0, 0.0, 0.0001],  # tiny confidence stays present: 1, never 0
+        ]
+    )
+    xyz, conf, missing = quantise_joints_3d(j)
+    assert xyz[0].tolist() == [1000, -1, 2500] and conf[0] == 255
+    assert missing.tolist() == [False, True, True, True, True, False]
+    assert (xyz[missing] == 0).all() and (conf[missing] == 0).all()
+    assert conf[5] == 1
+    uv, conf2, missing2 = quantise_joints_2d(np.array([[10.1, 20.9, 0.5], [9000.0, 0.0, 1.0]]))
+    assert uv[0].tolist() == [40, 84] and conf2[0] == 128 and missing2.tolist() == [False, True]
+
+
+def test_sequence_wraps_modulo_2_32() -> None:
+    frame = JointFrame(2**32 + 5, 0, 0, np.zeros((25, 4)))
+    assert joints_message(frame, 0).header.seq == 5
+
+
+@pytest.mark.parametrize(
+    ("msg", "field"),
+    [
+        (Hello(make_header(MsgType.HELLO, 0, 0, 0), 1, 0, 25, 0, 0, "caf\u00e9", ()), "hello.rig_id"),
+        (Hello(make_header(MsgType.HELLO, 0, 0, 0), 1, 0, 25, 0, 0, "x" * 33, ()), "hello.rig_id"),
+        (Hello(make_header(MsgType.HELLO, 0, 0, 0), 1, 0, 25, 0, 0, "r", ("c",) * 9), "hello.cameras"),
+        (Status(make_header(MsgType.STATUS, 0, 0, 0), 70000, 0, 0, 0, 0), "status.fps_centi"),
+        (Status(make_header(MsgType.STATUS, 0, -1, 0), 0, 0, 0, 0, 0), "header.capture_us"),
+        (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((65, 3), np.int16), np.zeros(65, np.uint8),
+                np.zeros(65, bool)), "joints.count"),
+    ],
+)
+def test_encode_errors_name_the_field(msg: object, field: str) -> None:
+    with pytest.raises(EncodeError, match=field.replace(".", r"\.")) as info:
+        encode(msg)  # type: ignore[arg-type]
+    assert info.value.field == field
+
+
+def test_joint_frame_checks_shapes() -> None:
+    with pytest.raises(ValueError, match=r"joints_3d must have shape \(J, 4\)"):
+        JointFrame(0, 0, 0, np.zeros((25, 3)))
+    with pytest.raises(ValueError, match=r"joints_2d\['left'\]"):
+        JointFrame(0, 0, 0, np.zeros((25, 4)), {"left": np.zeros((25, 2))})
+
+
+def test_unknown_camera_name_is_a_clear_error() -> None:
+    frame = JointFrame(0, 0, 0, np.zeros((25, 4)), {"middle": np.zeros((25, 3))})
+    with pytest.raises(KeyError, match="middle"):
+        joints2d_messages(frame, 0, ("left", "right"))
+
+
+def test_parse_packet_reports_codes() -> None:
+    good = encode_packet(Status(make_header(MsgType.STATUS, 1, 2, 3), 1, 2, 3, 4, 5))
+    assert isinstance(parse_packet(good), Status)
+    from firmware_host.errors import FrameError, UnknownMessageType
+
+    with pytest.raises(FrameError) as e:
+        parse_packet(good[:-1] + bytes([good[-1] ^ 1]))
+    assert e.value.code == "crc"
+    with pytest.raises(FrameError) as e:
+        parse_packet(good[:10])
+    assert e.value.code == "short"
+    from firmware_host.protocol.encoder import seal
+
+    with pytest.raises(UnknownMessageType) as u:
+        parse_packet(seal(bytes([1, 0x55]) + good[2:-2]))
+    assert u.value.msg_type == 0x55
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.integers(1, 300), min_size=1, max_size=30), st.binary(max_size=200))
+def test_chunking_does_not_change_the_result(cuts: list[int], garbage: bytes) -> None:
+    frames = [JointFrame(i, i * 1000, 0, np.full((25, 4), 0.5)) for i in range(4)]
+    data = garbage + b"".join(encode(joints_message(f, 0, Flags.DROPPED)) for f in frames) + garbage
+    whole, _ = decode_stream(data)
+    d = StreamDecoder()
+    pieces, pos, i = [], 0, 0
+    while pos < len(data):
+        step = cuts[i % len(cuts)]
+        pieces += d.feed(data[pos : pos + step])
+        pos, i = pos + step, i + 1
+    assert [e.to_json() for e in pieces] == [e.to_json() for e in whole]
+    # The four frames survive whatever garbage surrounds them, except one glued to garbage.
+    seqs = [e.message.header.seq for e in whole if e.message is not None]
+    assert set(seqs) >= {1, 2, 3}
+
+
+def test_decoder_memory_is_bounded() -> None:
+    d = StreamDecoder()
+    for _ in range(100):
+        assert d.feed(b"\x41" * 10_000) == []
+    assert len(d._buf) == 0  # discarded, not accumulated
+    assert [e.code for e in d.feed(b"\x00")] == ["oversize"]
+
+
+def test_worked_example_in_docs_encodes_exactly() -> None:
+    # docs/protocol.md, "Worked example": the same STATUS message, header to delimiter.
+    msg = Status(make_header(MsgType.STATUS, 42, 1_000_000, 1_031_656), 3000, 42000, 3, 120, 1)
+    assert encode_packet(msg).hex(" ") == (
+        "01 02 00 2a 00 00 00 40 42 0f 00 00 00 00 00 e8 bd 0f 00 00 00 00 00 "
+        "b8 0b 10 a4 00 00 03 00 00 00 78 00 00 00 01 00 d5 f8"
+    )
+    assert encode(msg).hex(" ") == (
+        "03 01 02 02 2a 01 01 04 40 42 0f 01 01 01 01 04 e8 bd 0f 01 01 01 01 05 "
+        "b8 0b 10 a4 01 02 03 01 01 02 78 01 01 02 01 03 d5 f8 00"
+    )

@@ -1,0 +1,186 @@
+"""Sink base behaviour: bounded queue, accounting, reconnect with backoff, flags, close.
+
+A small scripted backend (defined here, in the tests) stands in for a link so
+each failure can be triggered exactly when wanted.
+"""
+from __future__ import annotations
+
+import threading
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from firmware_host.errors import SinkClosedError, SinkUnavailableError, SinkWriteError
+from firmware_host.protocol import Flags, JointFrame
+from firmware_host.sinks import Sink, SinkOptions
+from firmware_host.sinks.backoff import Backoff, BackoffPolicy
+from firmware_host.sinks.rate import RateLimiter, serial_capacity_fps
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, wait_until
+
+
+class ScriptedSink(Sink):
+    """A link whose connects and writes fail on command; ``gate`` blocks writes."""
+
+    def __init__(self, **opts: object) -> None:
+        super().__init__("scripted://", SinkOptions(backoff=FAST_BACKOFF, **opts))  # type: ignore[arg-type]
+        self.connect_failures_left = 0
+        self.fail_next: list[Exception] = []
+        self.gate = threading.Event()
+        self.gate.set()
+        self.delivered: list[tuple[int, int]] = []
+        self.connect_calls = 0
+
+    def _connect(self) -> None:
+        self.connect_calls += 1
+        if self.connect_failures_left:
+            self.connect_failures_left -= 1
+            raise SinkUnavailableError(self.url, "not plugged in")
+
+    def _disconnect(self) -> None:
+        pass
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        self.gate.wait()
+        if self.fail_next:
+            raise self.fail_next.pop(0)
+        self.delivered.append((frame.sequence, flags))
+
+
+def test_queue_drops_the_oldest_and_counts_it() -> None:
+    sink = ScriptedSink(queue=3).start()
+    sink.gate.clear()  # the link stalls on the first frame
+    sink.send(make_frame(0))
+    wait_until(lambda: sink.stats().in_flight == 1, what="frame 0 in flight")
+    for seq in range(1, 11):
+        sink.send(make_frame(seq))  # returns at once although nothing moves
+    s = sink.stats()
+    assert (s.queued, s.dropped_queue, s.submitted) == (3, 7, 11)
+    assert s.accounted == s.submitted
+    sink.gate.set()
+    assert sink.wait_drained(5)
+    assert [seq for seq, _ in sink.delivered] == [0, 8, 9, 10]  # newest kept
+    assert sink.delivered[1][1] & Flags.DROPPED  # the first frame after the gap says so
+    assert not sink.delivered[2][1] & Flags.DROPPED
+    s = sink.close()
+    assert (s.sent, s.dropped, s.accounted) == (4, 7, 11)
+
+
+def test_connect_retries_with_backoff_while_producer_keeps_going() -> None:
+    sink = ScriptedSink(queue=2)
+    sink.connect_failures_left = 5
+    sink.start()
+    for seq in range(10):
+        sink.send(make_frame(seq))
+    wait_until(lambda: sink.stats().connected, what="connect after 5 failures")
+    assert sink.wait_drained(5)
+    s = sink.close()
+    assert s.connect_failures == 5 and s.connects == 1
+    assert s.last_error is not None and "not plugged in" in s.last_error
+    assert s.sent + s.dropped_queue == 10 and s.sent >= 2
+
+
+def test_unplug_mid_stream_reconnects_and_counts_the_lost_frame() -> None:
+    sink = ScriptedSink().start()
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.fail_next.append(SinkUnavailableError("scripted://", "unplugged"))
+    sink.connect_failures_left = 2
+    sink.send(make_frame(1))
+    wait_until(lambda: sink.stats().connects == 2, what="reconnect")
+    sink.send(make_frame(2))
+    assert sink.wait_drained(5)
+    s = sink.close()
+    assert (s.sent, s.dropped_error, s.disconnects, s.connect_failures) == (2, 1, 1, 2)
+    assert sink.delivered[-1] == (2, int(Flags.DROPPED))
+
+
+def test_write_error_keeps_the_link() -> None:
+    sink = ScriptedSink().start()
+    sink.fail_next.append(SinkWriteError("scripted://", "stall"))
+    sink.send(make_frame(0))
+    sink.send(make_frame(1))
+    assert sink.wait_drained(5)
+    s = sink.close()
+    assert (s.sent, s.dropped_error, s.disconnects, s.connects) == (1, 1, 0, 1)
+    assert "stall" in (s.last_error or "")
+
+
+def test_backend_bug_is_counted_not_fatal() -> None:
+    sink = ScriptedSink().start()
+    sink.fail_next.append(ZeroDivisionError("oops"))
+    sink.send(make_frame(0))
+    sink.send(make_frame(1))
+    assert sink.wait_drained(5)
+    s = sink.close()
+    assert (s.sent, s.dropped_error) == (1, 1) and "ZeroDivisionError" in (s.last_error or "")
+
+
+def test_close_counts_what_could_not_be_flushed() -> None:
+    sink = ScriptedSink(queue=8)
+    sink.connect_failures_left = 10**6  # never connects
+    sink.start()
+    for seq in range(5):
+        sink.send(make_frame(seq))
+    s = sink.close(timeout=2)
+    assert (s.sent, s.dropped_close, s.queued, s.accounted) == (0, 5, 0, 5)
+    with pytest.raises(SinkClosedError, match="scripted://"):
+        sink.send(make_frame(6))
+
+
+def test_close_flushes_a_live_link() -> None:
+    sink = ScriptedSink(queue=8).start()
+    wait_until(lambda: sink.stats().connected, what="connected")
+    for seq in range(8):
+        sink.send(make_frame(seq))
+    s = sink.close(timeout=5)
+    assert s.sent == 8 and s.dropped == 0
+
+
+def test_decimation_flags_and_counts() -> None:
+    sink = ScriptedSink(queue=64, max_fps=10).start()
+    for seq in range(30):  # 30 fps for one second into a 10 fps cap
+        sink.send(make_frame(seq))
+    assert sink.wait_drained(5)
+    s = sink.close()
+    # 0.97 s of capture at <= 10 fps, plus the limiter's one-frame jitter tolerance.
+    assert 9 <= s.sent <= 11 and s.sent + s.decimated == 30 and s.accounted == 30
+    for (prev, _), (seq, flags) in zip(sink.delivered, sink.delivered[1:]):
+        assert bool(flags & Flags.DECIMATED) == (seq - prev > 1)
+
+
+def test_backoff_sequence() -> None:
+    b = Backoff(BackoffPolicy(initial_s=0.1, factor=2, max_s=0.5))
+    assert [b.next_delay() for _ in range(5)] == [0.1, 0.2, 0.4, 0.5, 0.5]
+    b.reset()
+    assert b.next_delay() == 0.1
+    with pytest.raises(ValueError):
+        BackoffPolicy(initial_s=0)
+
+
+def test_rate_limiter_uses_the_link_fully_without_exceeding_it() -> None:
+    cap = serial_capacity_fps(115200, 208)
+    assert 49.8 < cap < 49.9
+    lim = RateLimiter(cap)
+    admitted = [t for t in range(0, 10_000_000, 16_667) if lim.admit(t)]  # 60 fps for 10 s
+    rate = (len(admitted) - 1) / ((admitted[-1] - admitted[0]) / 1e6)
+    assert 45 < rate <= cap
+
+
+@settings(deadline=None)
+@given(st.floats(1, 500), st.lists(st.integers(0, 40_000), min_size=2, max_size=400))
+def test_rate_limiter_never_exceeds_its_cap(max_fps: float, gaps: list[int]) -> None:
+    lim = RateLimiter(max_fps)
+    t, admitted = 0, []
+    for g in gaps:
+        t += g
+        if lim.admit(t):
+            admitted.append(t)
+    span_s = (admitted[-1] - admitted[0]) / 1e6
+    # GCRA: at most one frame per interval on average, plus one frame of burst tolerance.
+    assert len(admitted) <= max_fps * span_s + 2
+
+
+def test_rate_limiter_without_cap_admits_everything() -> None:
+    lim = RateLimiter(None)
+    assert all(lim.admit(t) for t in range(0, 1000, 1))

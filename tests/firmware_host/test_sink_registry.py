@@ -1,0 +1,72 @@
+"""open_sink(): scheme registry, lazy imports, typed configuration errors."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from firmware_host.errors import SinkConfigError
+from firmware_host.sinks import BACKENDS, open_sink, sink_class
+
+
+def test_every_scheme_resolves_to_its_backend() -> None:
+    for scheme in BACKENDS:
+        assert sink_class(f"{scheme}://x").scheme == scheme
+
+
+def test_importing_sinks_loads_no_backend_library() -> None:
+    code = (
+        "import sys, firmware_host.sinks, firmware_host.protocol;"
+        "print(sorted(m for m in ('serial', 'usb', 'pythonosc', 'libusb_package') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+@pytest.mark.parametrize(
+    ("url", "kw", "field", "value"),
+    [
+        ("ftp://host", {}, "scheme", "ftp"),
+        ("joints", {}, "scheme", ""),
+        ("serial:///dev/ttyACM0?baud=fast", {}, "baud", "fast"),
+        ("serial:///dev/ttyACM0?baud=-9600", {}, "baud", "-9600"),
+        ("serial:///dev/ttyACM0?bauds=9600", {}, "bauds", "9600"),
+        ("serial:///dev/ttyACM0?baud=1&baud=2", {}, "baud", ["1", "2"]),
+        ("serial://", {}, "port", ""),
+        ("usb://1209:0001", {}, "ep", None),
+        ("usb://1209:0001?ep=0x81", {}, "ep", "0x81"),
+        ("usb://12345", {"ep": 1}, "VID:PID", "12345"),
+        ("udp://127.0.0.1", {}, "port", "127.0.0.1"),
+        ("udp://:9000", {}, "host", ":9000"),
+        ("memory://?queue=0", {}, "queue", "0"),
+        ("memory://", {"rig_id": "caf\u00e9"}, "rig_id", "caf\u00e9"),
+        ("memory://", {"colour": "red"}, "colour", "red"),
+        ("memory://?send_2d=maybe", {}, "send_2d", "maybe"),
+        ("serial:///dev/ttyACM0", {"baud": 0}, "baud", 0),
+        ("memory://", {"max_fps": -1.0}, "max_fps", -1.0),
+    ],
+)
+def test_config_errors_name_url_field_and_value(url: str, kw: dict, field: str, value: object) -> None:
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url, **kw)
+    err = info.value
+    assert isinstance(err, ValueError)
+    assert (err.url, err.field, err.value) == (url, field, value)
+    assert url in str(err) and field in str(err)
+
+
+def test_keywords_override_the_query() -> None:
+    sink = open_sink("serial:///dev/null-not-a-port?baud=9600", baud=921600)
+    try:
+        assert sink.baud == 921600  # type: ignore[attr-defined]
+    finally:
+        sink.close()
+
+
+def test_vmc_default_port() -> None:
+    sink = open_sink("vmc://127.0.0.1")
+    try:
+        assert sink._link.port == 39539  # type: ignore[attr-defined]
+    finally:
+        sink.close()

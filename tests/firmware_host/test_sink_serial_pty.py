@@ -1,0 +1,165 @@
+"""serial:// over a real pty pair, through pyserial.
+
+The sink opens a symlink to the pty's /dev/pts/N slave, the way a real device
+is reached through /dev/serial/by-id/...: closing the master is the unplug
+(the slave node disappears and writes fail with EIO), and pointing the
+symlink at a fresh pty is the replug.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import select
+import threading
+from pathlib import Path
+
+import pytest
+
+from firmware_host.protocol import Flags, Hello, Joints
+from firmware_host.sinks import open_sink
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
+
+
+class PtyPort:
+    """One pty pair at ``link``; a thread drains the master into ``data``."""
+
+    def __init__(self, link: Path) -> None:
+        self.link = link
+        self.master, slave = os.openpty()
+        self.slave_name = os.ttyname(slave)
+        os.close(slave)  # the sink opens it by name
+        tmp = link.with_suffix(".tmp")
+        os.symlink(self.slave_name, tmp)
+        os.replace(tmp, link)  # atomic swap, like udev
+        self._lock = threading.Lock()
+        self._data = bytearray()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._drain, daemon=True)
+        self._thread.start()
+
+    def _drain(self) -> None:
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.master], [], [], 0.01)
+            if ready:
+                try:
+                    chunk = os.read(self.master, 65536)
+                except OSError:  # EIO while no slave is open
+                    continue
+                with self._lock:
+                    self._data += chunk
+
+    @property
+    def data(self) -> bytes:
+        with self._lock:
+            return bytes(self._data)
+
+    def unplug(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.link.unlink()
+        os.close(self.master)
+
+
+@pytest.fixture
+def link(tmp_path: Path) -> Path:
+    return tmp_path / "ttyJOINTS"
+
+
+def test_frames_arrive_in_order_after_hello(link: Path) -> None:
+    port = PtyPort(link)
+    # By its /dev/pts/N name here; the other tests go through the symlink.
+    sink = open_sink(f"serial://{port.slave_name}?baud=921600&queue=32", backoff=FAST_BACKOFF, rig_id="bench-1")
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(20):
+            sink.send(make_frame(seq))
+        wait_until(lambda: len(joints_seqs(messages_of(port.data))) == 20, what="20 frames on the pty")
+        msgs = messages_of(port.data)
+        assert isinstance(msgs[0], Hello) and msgs[0].rig_id == "bench-1"
+        assert port.data[0] == 0  # leading delimiter resynchronises the receiver
+        assert joints_seqs(msgs) == list(range(20))
+        assert all(m.header.flags == 0 for m in msgs if isinstance(m, Joints))
+    finally:
+        stats = sink.close()
+        port.unplug()
+    assert stats.sent == 20 and stats.dropped == 0
+
+
+def test_low_baud_is_decimated_with_a_warning(link: Path, caplog: pytest.LogCaptureFixture) -> None:
+    port = PtyPort(link)
+    url = f"serial://{link}?baud=115200&fps=60&queue=200"
+    with caplog.at_level(logging.WARNING, logger="firmware_host.sinks"):
+        sink = open_sink(url, backoff=FAST_BACKOFF)
+    assert any(url in r.getMessage() and "decimating" in r.getMessage() for r in caplog.records)
+    capacity = sink.link_capacity_fps()
+    assert 49 < capacity < 50  # 208 bytes per frame, 11520 bytes/s, 10 % headroom
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(120):  # two seconds of capture at 60 fps
+            sink.send(make_frame(seq, period_us=16_667))
+        assert sink.wait_drained(5)
+        wait_until(lambda: len(joints_seqs(messages_of(port.data))) == sink.stats().sent, what="all sent frames")
+    finally:
+        stats = sink.close()
+        port.unplug()
+    joints = [m for m in messages_of(port.data) if isinstance(m, Joints)]
+    span_s = (joints[-1].header.capture_us - joints[0].header.capture_us) / 1e6
+    assert len(joints) <= capacity * span_s + 2  # never more than the UART carries
+    assert stats.decimated == 120 - len(joints) and stats.dropped == 0
+    # DECIMATED marks exactly the frames that follow a deliberate gap.
+    for prev, m in zip(joints, joints[1:]):
+        gap = m.header.seq - prev.header.seq > 1
+        assert bool(m.header.flags & Flags.DECIMATED) == gap
+
+
+def test_unplug_is_detected_retried_and_recovered(link: Path) -> None:
+    port = PtyPort(link)
+    sink = open_sink(f"serial://{link}?baud=921600&queue=16", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(10):
+            sink.send(make_frame(seq))
+        wait_until(lambda: len(joints_seqs(messages_of(port.data))) == 10, what="frames before unplug")
+        before = port.data
+        port.unplug()
+
+        # Unplugged: the producer keeps sending, the sink notices, retries, and counts drops.
+        for seq in range(10, 40):
+            sink.send(make_frame(seq))
+            if seq == 10:
+                wait_until(lambda: sink.stats().disconnects == 1, what="unplug detected")
+        wait_until(lambda: sink.stats().connect_failures >= 3, what="retries while the port is gone")
+        s = sink.stats()
+        assert not s.connected and s.dropped >= 30 - 16 and s.accounted == s.submitted
+
+        port = PtyPort(link)  # replug: a new pty behind the same path
+        wait_until(lambda: sink.stats().connected, what="reconnect")
+        for seq in range(40, 50):
+            sink.send(make_frame(seq))
+        assert sink.wait_drained(5)
+        wait_until(lambda: 40 in joints_seqs(messages_of(port.data)) and 49 in joints_seqs(messages_of(port.data)),
+                   what="frames after replug")
+        after = port.data
+    finally:
+        stats = sink.close()
+        port.unplug()
+
+    assert after[0] == 0 and isinstance(messages_of(after)[0], Hello)  # resync + HELLO on the new link
+    received = joints_seqs(messages_of(before)) + joints_seqs(messages_of(after))
+    assert received == sorted(received) and received[-1] == 49
+    # Nothing is lost silently: every gap in the sequence is a counted drop.
+    assert len(received) == stats.sent
+    assert 50 - len(received) == stats.dropped
+    assert stats.disconnects == 1 and stats.connects == 2
+    first_after = next(m for m in messages_of(after) if isinstance(m, Joints))
+    assert first_after.header.flags & Flags.DROPPED
+
+
+def test_missing_port_keeps_retrying_without_blocking(tmp_path: Path) -> None:
+    sink = open_sink(f"serial://{tmp_path}/nothing-here?baud=115200&queue=2", backoff=FAST_BACKOFF)
+    for seq in range(50):
+        sink.send(make_frame(seq))  # returns at once although there is no port
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
+    s = sink.close()
+    assert s.sent == 0 and s.dropped == 50
+    assert "nothing-here" in (s.last_error or "")

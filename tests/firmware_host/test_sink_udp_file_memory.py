@@ -1,0 +1,110 @@
+"""udp:// on 127.0.0.1, file:// JSON lines, memory:// buffer."""
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+
+import numpy as np
+
+from firmware_host.protocol import Fault, Hello, Joints, Joints2D, StreamDecoder
+from firmware_host.protocol.messages import Status
+from firmware_host.sinks import open_sink
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
+
+
+def test_udp_one_packet_per_datagram() -> None:
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(5)
+    port = rx.getsockname()[1]
+    sink = open_sink(f"udp://127.0.0.1:{port}?queue=16&send_2d=1", backoff=FAST_BACKOFF,
+                     cameras=("left", "right"))
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(5):
+            sink.send(make_frame(seq, joints_2d={"left": np.full((25, 3), 10.0), "right": np.full((25, 3), 20.0)}))
+        datagrams = []
+        while sum(1 for d in datagrams if isinstance(d, Joints)) < 5:
+            data = rx.recv(2048)
+            d = StreamDecoder()
+            events = d.feed(data)
+            assert len(events) == 1 and data.endswith(b"\x00")  # exactly one framed packet
+            datagrams.append(events[0].message)
+    finally:
+        stats = sink.close()
+        rx.close()
+    assert isinstance(datagrams[0], Hello) and isinstance(datagrams[1], Status)
+    assert joints_seqs(datagrams) == list(range(5))
+    cams = [(m.header.seq, m.camera) for m in datagrams if isinstance(m, Joints2D)]
+    assert cams[:2] == [(0, 0), (0, 1)]
+    assert stats.sent == 5
+
+
+def test_file_sink_writes_canonical_json_lines(tmp_path: Path) -> None:
+    path = tmp_path / "joints.jsonl"
+    sink = open_sink(f"file://{path}", backoff=FAST_BACKOFF, rig_id="rec")
+    assert sink.wait_connected(5)
+    for seq in range(3):
+        sink.send(make_frame(seq))
+    assert sink.wait_drained(5)
+    sink.close()
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert [ln["type"] for ln in lines[:2]] == ["HELLO", "STATUS"] and lines[0]["rig_id"] == "rec"
+    joints = [ln for ln in lines if ln["type"] == "JOINTS"]
+    assert [j["seq"] for j in joints] == [0, 1, 2]
+    # The same canonical form the decoders and vectors use: mm integers and 0..255 confidence.
+    mem = open_sink("memory://", backoff=FAST_BACKOFF)
+    mem.send(make_frame(0))
+    assert mem.wait_drained(5)
+    mem.close()
+    wire = next(m for m in messages_of(mem.read()) if isinstance(m, Joints))
+    assert {k: v for k, v in joints[0].items() if k != "send_us"} == {
+        k: v for k, v in wire.to_json().items() if k != "send_us"
+    }
+
+
+def test_file_sink_reopens_after_the_file_goes_away(tmp_path: Path) -> None:
+    folder = tmp_path / "usb-stick"
+    sink = open_sink(f"file://{folder}/joints.jsonl", backoff=FAST_BACKOFF)
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="retries while the folder is missing")
+    folder.mkdir()
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.close()
+    assert '"seq":0' in (folder / "joints.jsonl").read_text()
+
+
+def test_memory_sink_bounded_buffer_counts_overflow() -> None:
+    sink = open_sink("memory://?max_bytes=1000&queue=16", backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    for seq in range(6):  # HELLO+STATUS ~100 bytes, then 208 per frame: 4 fit
+        sink.send(make_frame(seq))
+    assert sink.wait_drained(5)
+    stats = sink.close()
+    assert stats.sent == 4 and stats.dropped_error == 2 and "buffer full" in (stats.last_error or "")
+    assert joints_seqs(messages_of(sink.read())) == [0, 1, 2, 3]
+
+
+def test_status_reports_drops_to_the_receiver() -> None:
+    t = [0]
+
+    def clock() -> int:  # a controllable clock: each call advances 0.4 s
+        t[0] += 400_000
+        return t[0]
+
+    sink = open_sink("memory://?queue=1&status_s=1", backoff=FAST_BACKOFF, clock_us=clock)
+    assert sink.wait_connected(5)
+    for seq in range(20):  # a burst into a queue of one: most are dropped
+        sink.send(make_frame(seq))
+    assert sink.wait_drained(5)
+    for seq in range(20, 25):  # then a calm stream, long enough for a STATUS to fall due
+        sink.send(make_frame(seq))
+        assert sink.wait_drained(5)
+    stats = sink.close()
+    statuses = [m for m in messages_of(sink.read()) if isinstance(m, Status)]
+    assert stats.dropped > 0 and statuses[-1].dropped == stats.dropped
+    # The first STATUS after the drops names the cause; later ones are back to OK.
+    first = next(st for st in statuses if st.dropped > 0)
+    assert first.fault == Fault.QUEUE_OVERFLOW and statuses[-1].fault == Fault.OK

@@ -1,0 +1,197 @@
+"""Camera model: checked against OpenCV (projectPoints, undistortPoints) and geometry identities."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ghnerf_runtime.errors import GeometryError, ShapeError
+from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
+
+# OpenCV's model has no skew term, so comparisons with cv2 use K[0, 1] == 0 (skew is tested apart).
+K = np.array([[610.0, 0.0, 322.5], [0.0, 605.0, 241.0], [0.0, 0.0, 1.0]])
+DISTORTIONS = {
+    "none": np.zeros(0),
+    "4": np.array([-0.12, 0.03, 0.001, -0.0015]),
+    "5": np.array([-0.21, 0.05, 0.0008, -0.0011, -0.004]),
+    "8": np.array([0.11, -0.05, 0.0009, 0.0012, 0.002, 0.31, -0.04, 0.01]),
+    "12": np.array([-0.15, 0.04, 0.0005, -0.0007, -0.002, 0.0, 0.0, 0.0, 0.001, -0.0004, 0.0008, 0.0003]),
+    "14": np.array([-0.15, 0.04, 0.0005, -0.0007, -0.002, 0.01, 0.0, 0.0, 0.001, -0.0004, 0.0008, 0.0003, 0.0, 0.0]),
+}
+
+
+def make_camera(dist=np.zeros(5), eye=(0.3, -1.4, -0.2), target=(0.0, -1.0, 3.0)) -> Camera:
+    R, t = look_at(eye, target)
+    return Camera("cam", 640, 480, K, dist, R, t)
+
+
+def scene_points(n=200, seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.uniform([-1.0, -2.0, 2.0], [1.0, 0.0, 4.0], size=(n, 3))
+
+
+@pytest.mark.parametrize("name", list(DISTORTIONS))
+def test_project_matches_cv2_project_points(name):
+    cam = make_camera(DISTORTIONS[name])
+    X = scene_points()
+    uv, depth = cam.project(X)
+    rvec, _ = cv2.Rodrigues(cam.R)
+    expected, _ = cv2.projectPoints(X, rvec, cam.t, cam.K, cam.dist if cam.dist.size else None)
+    np.testing.assert_allclose(uv, expected.reshape(-1, 2), atol=1e-9)
+    np.testing.assert_allclose(depth, (X @ cam.R.T + cam.t)[:, 2], atol=1e-12)
+
+
+def test_project_batch_dims_and_single_point():
+    cam = make_camera(DISTORTIONS["5"])
+    X = scene_points(24).reshape(2, 3, 4, 3)
+    uv, depth = cam.project(X)
+    assert uv.shape == (2, 3, 4, 2) and depth.shape == (2, 3, 4)
+    uv0, d0 = cam.project(X[1, 2, 3])
+    np.testing.assert_allclose(uv0, uv[1, 2, 3])
+    assert uv0.shape == (2,) and d0.shape == ()
+
+
+@pytest.mark.parametrize("name", ["4", "5", "8", "12"])
+def test_undistortion_matches_cv2_and_round_trips(name):
+    cam = make_camera(DISTORTIONS[name])
+    uv, _ = cam.project(scene_points())
+    xy = cam.pixels_to_normalized(uv)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+    expected = cv2.undistortPoints(uv.reshape(-1, 1, 2), cam.K, cam.dist, criteria=criteria).reshape(-1, 2)
+    np.testing.assert_allclose(xy, expected, atol=1e-9)
+    # Round trip: normalised -> distorted pixels -> normalised.
+    np.testing.assert_allclose(cam.normalized_to_pixels(xy), uv, atol=1e-8)
+    # undistort_pixels gives the ideal pinhole projection.
+    ideal, _ = cam.project(scene_points(), distort=False)
+    np.testing.assert_allclose(cam.undistort_pixels(uv), ideal, atol=1e-7)
+
+
+def test_skew_round_trip():
+    Ks = K.copy()
+    Ks[0, 1] = 2.5
+    R, t = look_at((0.3, -1.4, -0.2), (0.0, -1.0, 3.0))
+    cam = Camera("skew", 640, 480, Ks, DISTORTIONS["5"], R, t)
+    X = scene_points(40)
+    uv, _ = cam.project(X)
+    pc = X @ R.T + t
+    np.testing.assert_allclose(cam.pixels_to_normalized(uv), pc[:, :2] / pc[:, 2:], atol=1e-9)
+
+
+def test_rays_pass_through_projected_points():
+    cam = make_camera(DISTORTIONS["5"])
+    X = scene_points(50)
+    uv, depth = cam.project(X)
+    origins, dirs = cam.rays(uv)
+    np.testing.assert_allclose(origins, np.broadcast_to(cam.center, X.shape))
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=-1), 1.0)
+    to_point = X - cam.center
+    s = np.einsum("ij,ij->i", to_point, dirs)
+    assert np.all(s > 0)  # rays point towards the scene
+    np.testing.assert_allclose(origins + s[:, None] * dirs, X, atol=1e-8)
+    # Any point along the ray projects back to the same pixel.
+    uv2, _ = cam.project(origins + 0.5 * s[:, None] * dirs)
+    np.testing.assert_allclose(uv2, uv, atol=1e-7)
+
+
+def test_cropped_and_resized_are_consistent():
+    cam = make_camera(DISTORTIONS["5"])
+    X = scene_points(30)
+    uv, _ = cam.project(X)
+    crop = cam.cropped(100, 40, 320, 240)
+    assert crop.size == (320, 240)
+    np.testing.assert_allclose(crop.project(X)[0], uv - [100, 40], atol=1e-9)
+    small = cam.resized(320, 240)
+    # Pixel-centre convention: pixel centres map as u' = (u + 0.5) * s - 0.5.
+    np.testing.assert_allclose(small.project(X)[0], (uv + 0.5) * 0.5 - 0.5, atol=1e-9)
+    back = small.resized(640, 480)
+    np.testing.assert_allclose(back.K, cam.K, atol=1e-12)
+    # cv2.resize agrees on where a feature lands: a bright pixel moved by the same map.
+    img = np.zeros((480, 640), np.float32)
+    img[200:204, 300:304] = 1.0
+    out = cv2.resize(img, (320, 240), interpolation=cv2.INTER_AREA)
+    ys, xs = np.nonzero(out > 0.5)
+    np.testing.assert_allclose([xs.mean(), ys.mean()], (np.array([301.5, 201.5]) + 0.5) * 0.5 - 0.5)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(K=np.eye(2)), "K must be a finite 3x3"),
+        (dict(K=[[600, 0, 320], [0, 0, 240], [0, 0, 1]]), "singular"),
+        (dict(K=[[600, 0, 320], [0, 600, 240], [0.1, 0, 1]]), "upper-triangular"),
+        (dict(K=[[np.nan, 0, 320], [0, 600, 240], [0, 0, 1]]), "finite"),
+        (dict(R=np.diag([1.0, 1.0, -1.0])), "proper rotation"),
+        (dict(R=np.eye(3) * 1.01), "proper rotation"),
+        (dict(t=[0.0, 0.0]), "t must be"),
+        (dict(dist=[0.1, 0.2, 0.3]), "0, 4, 5, 8, 12 or 14"),
+        (dict(dist=[0.0] * 12 + [0.01, 0.0]), "tilt"),
+        (dict(dist=[np.inf, 0, 0, 0]), "finite"),
+        (dict(width=0), "image size"),
+        (dict(name=""), "name"),
+    ],
+)
+def test_invalid_parameters_raise(kwargs, match):
+    args = dict(name="c", width=640, height=480, K=K)
+    args.update(kwargs)
+    with pytest.raises(GeometryError, match=match):
+        Camera(**args)
+
+
+def test_shape_errors():
+    cam = make_camera()
+    with pytest.raises(ShapeError):
+        cam.project(np.zeros((4, 2)))
+    with pytest.raises(ShapeError):
+        cam.pixels_to_normalized(np.zeros((4, 3)))
+
+
+def test_points_behind_camera_are_flagged():
+    cam = Camera("c", 640, 480, K)
+    uv, depth = cam.project(np.array([[0.1, 0.2, 2.0], [0.1, 0.2, -2.0], [0.0, 0.0, 0.0]]))
+    assert np.all(np.isfinite(uv[0])) and np.all(np.isnan(uv[1:]))
+    assert depth[0] == 2.0 and depth[1] == -2.0 and depth[2] == 0.0
+
+
+def test_look_at_axes():
+    eye, target = np.array([1.0, -1.5, -0.5]), np.array([0.0, -1.0, 3.0])
+    R, t = look_at(eye, target)
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    cam = Camera("c", 640, 480, K, R=R, t=t)
+    np.testing.assert_allclose(cam.center, eye, atol=1e-12)
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    np.testing.assert_allclose(R[2], forward, atol=1e-12)  # optical axis towards the target
+    assert abs(R[0, 1]) < 1e-12  # image x axis is horizontal (no roll)
+    assert R[1, 1] > 0  # image down is rig down (+y)
+    uv, depth = cam.project(target)
+    np.testing.assert_allclose(uv, K[:2, 2], atol=1e-9)
+    assert depth > 0
+    with pytest.raises(GeometryError):
+        look_at(eye, eye)
+    with pytest.raises(GeometryError):
+        look_at([0, 0, 0], [0, -1, 0])  # looking straight up
+
+
+def test_intrinsics_from_fov():
+    Kf = intrinsics_from_fov(640, 480, 90.0)
+    assert Kf[0, 0] == pytest.approx(320.0) and Kf[0, 2] == 319.5 and Kf[1, 2] == 239.5
+    with pytest.raises(GeometryError):
+        intrinsics_from_fov(640, 480, 180.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    k=st.lists(st.floats(-0.2, 0.2), min_size=5, max_size=5),
+    eye=st.tuples(st.floats(-1, 1), st.floats(-2, -0.5), st.floats(-1, 0.5)),
+    seed=st.integers(0, 2**16),
+)
+def test_projection_matches_cv2_random(k, eye, seed):
+    dist = np.array(k) * [1, 0.25, 0.01, 0.01, 0.1]
+    cam = make_camera(dist, eye=eye)
+    X = scene_points(20, seed)
+    uv, _ = cam.project(X)
+    rvec, _ = cv2.Rodrigues(cam.R)
+    expected, _ = cv2.projectPoints(X, rvec, cam.t, cam.K, cam.dist)
+    np.testing.assert_allclose(uv, expected.reshape(-1, 2), atol=1e-8)

@@ -1,0 +1,241 @@
+"""Heatmap decoding: subpixel accuracy on known Gaussians, degenerate maps, mapping back to the frame."""
+from __future__ import annotations
+
+import doctest
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from ghnerf_runtime import keypoints
+from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.geometry.camera import Camera, look_at
+from ghnerf_runtime.geometry.rig import WorkingVolume
+from ghnerf_runtime.keypoints import (
+    MISSING_FILL, KeypointConfigError, KeypointDecoderConfig, decode_keypoints, heatmap_to_image_pixels,
+    heatmap_to_model_pixels, model_to_heatmap_pixels, model_to_image_pixels,
+)
+from ghnerf_runtime.metrics import gaussian_heatmaps
+from ghnerf_runtime.preprocess import Roi, crop_camera, roi_from_volume
+
+SIZE = 64
+
+
+def blobs(centres: np.ndarray, sigma: float, size: int = SIZE) -> np.ndarray:
+    return gaussian_heatmaps(centres, np.ones(len(centres), bool), size, sigma)
+
+
+def assert_missing_and_finite(kp, where):
+    assert not kp.valid[where].any()
+    assert np.all(kp.confidence[where] == 0.0)
+    assert np.all(kp.uv[where] == MISSING_FILL)
+    for arr in (kp.uv, kp.confidence, kp.runner_up):
+        assert np.all(np.isfinite(arr))
+
+
+# ---------------------------------------------------------------- smoke / shape
+def test_doctests():
+    assert doctest.testmod(keypoints, raise_on_error=False).failed == 0
+
+
+def test_shapes_and_dtypes_single_and_batched():
+    hm = blobs(np.array([[10.0, 20.0], [30.0, 40.0], [50.0, 5.5]]), 2.0)
+    kp = decode_keypoints(hm)
+    assert kp.uv.shape == (3, 2) and kp.confidence.shape == (3,) and kp.valid.shape == (3,)
+    assert kp.confidence.dtype == np.float32 and kp.valid.dtype == bool
+    batched = decode_keypoints(np.stack([hm, hm[::-1]]))
+    assert batched.uv.shape == (2, 3, 2)
+    np.testing.assert_array_equal(batched.uv[0], kp.uv)
+    np.testing.assert_array_equal(batched.uv[1], kp.uv[::-1])
+
+
+@pytest.mark.parametrize("shape", [(64, 64), (1, 2, 3, 8, 8), (3, 0, 8)])
+def test_bad_shapes_raise(shape):
+    with pytest.raises(ShapeError):
+        decode_keypoints(np.zeros(shape, np.float32))
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"sigma": -1.0}, {"sigma": float("nan")}, {"threshold": 0.0}, {"threshold": 1.0},
+    {"refine": "argmax"}, {"centroid_radius": 0}, {"max_region_frac": 0.0},
+])
+def test_config_validated_once(kwargs):
+    with pytest.raises(KeypointConfigError) as info:
+        KeypointDecoderConfig(**kwargs)
+    assert next(iter(kwargs)) in str(info.value)
+    assert isinstance(info.value, ValueError)
+
+
+# --------------------------------------------------------------------- accuracy
+@pytest.mark.parametrize("sigma", [1.5, 2.0, 2.5, 3.0])
+def test_subpixel_error_on_noise_free_gaussians(sigma):
+    rng = np.random.default_rng(int(sigma * 10))
+    centres = rng.uniform(0.0, SIZE - 1.0, size=(50, 2))  # includes peaks near and on the border
+    centres[:25] = rng.uniform(8, SIZE - 9, size=(25, 2))
+    kp = decode_keypoints(blobs(centres, sigma))
+    assert kp.valid.all()
+    err = np.linalg.norm(kp.uv - centres, axis=-1)
+    assert err.max() < 0.05, err.max()
+    # Confidence is the filtered peak: a unit Gaussian filtered with sigma_f = 1 peaks at about
+    # sigma^2 / (sigma^2 + 1), a little less off the pixel grid.
+    expected = sigma ** 2 / (sigma ** 2 + 1.0)
+    assert np.all(kp.confidence[:25] <= expected * 1.01) and np.all(kp.confidence[:25] >= expected * 0.9)
+
+
+def test_quadratic_beats_centroid_and_integer_peak():
+    """The comparison behind the default refine method (numbers in the module docstring)."""
+    rng = np.random.default_rng(3)
+    errors = {}
+    for method in ("quadratic", "centroid", "none"):
+        errs = []
+        for sigma in (1.5, 3.0):
+            centres = rng.uniform(8, SIZE - 9, size=(100, 2))
+            hm = blobs(centres, sigma) + rng.normal(0, 0.02, (100, SIZE, SIZE)).astype(np.float32)
+            kp = decode_keypoints(hm, KeypointDecoderConfig(refine=method))
+            errs.append(np.linalg.norm(kp.uv - centres, axis=-1).mean())
+        errors[method] = max(errs)
+    assert errors["quadratic"] < 0.08
+    assert errors["quadratic"] < 0.5 * errors["centroid"] < errors["none"]
+
+
+def test_no_filter_is_exact_too():
+    centres = np.array([[0.0, 31.2], [63.0, 12.7], [20.35, 44.6]])
+    kp = decode_keypoints(blobs(centres, 2.0), KeypointDecoderConfig(sigma=0.0))
+    np.testing.assert_allclose(kp.uv, centres, atol=1e-3)
+
+
+def test_two_blobs_stronger_wins_and_runner_up_reported():
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+    strong = np.exp(-((xx - 40.3) ** 2 + (yy - 12.8) ** 2) / (2 * 2.0 ** 2))
+    weak = 0.6 * np.exp(-((xx - 15.0) ** 2 + (yy - 50.0) ** 2) / (2 * 2.0 ** 2))
+    kp = decode_keypoints((strong + weak)[None].astype(np.float32))
+    np.testing.assert_allclose(kp.uv[0], [40.3, 12.8], atol=0.05)
+    assert kp.valid[0]
+    assert 0.4 < kp.runner_up[0] < kp.confidence[0]
+    single = decode_keypoints(strong[None].astype(np.float32))
+    assert single.runner_up[0] == 0.0
+
+
+def test_oblique_anisotropic_blob():
+    yy, xx = np.mgrid[:SIZE, :SIZE].astype(np.float64)
+    c, s = np.cos(0.6), np.sin(0.6)
+    dx, dy = xx - 30.4, yy - 33.7
+    a, b = c * dx + s * dy, -s * dx + c * dy
+    hm = np.exp(-(a ** 2 / (2 * 3.5 ** 2) + b ** 2 / (2 * 1.5 ** 2)))[None].astype(np.float32)
+    kp = decode_keypoints(hm)
+    np.testing.assert_allclose(kp.uv[0], [30.4, 33.7], atol=0.05)
+
+
+# ---------------------------------------------------------------- degenerate maps
+def test_degenerate_maps_are_missing_with_finite_outputs():
+    rng = np.random.default_rng(0)
+    good = blobs(np.array([[20.2, 30.7]]), 2.0)[0]
+    maps = np.stack([
+        np.zeros((SIZE, SIZE)),                       # 0 all zero
+        np.ones((SIZE, SIZE)),                        # 1 saturated
+        rng.uniform(0, 1, (SIZE, SIZE)),              # 2 uniform noise
+        rng.uniform(0, 0.05, (SIZE, SIZE)),           # 3 faint noise, below threshold
+        np.where(np.arange(SIZE) == 5, np.nan, good),  # 4 a NaN row
+        np.full((SIZE, SIZE), np.inf),                # 5 Inf
+        np.full((SIZE, SIZE), -np.inf),               # 6 -Inf
+        0.05 * good,                                  # 7 real blob, below threshold
+        good,                                         # 8 the control
+    ]).astype(np.float32)
+    kp = decode_keypoints(maps)
+    assert_missing_and_finite(kp, slice(0, 8))
+    assert kp.valid[8]
+    np.testing.assert_allclose(kp.uv[8], [20.2, 30.7], atol=0.05)
+
+
+def test_one_bad_joint_does_not_spoil_the_batch():
+    hm = blobs(np.array([[10.0, 10.0], [40.0, 40.0]]), 2.0)
+    hm[0, 3, 3] = np.nan
+    kp = decode_keypoints(hm)
+    assert kp.valid.tolist() == [False, True]
+    np.testing.assert_allclose(kp.uv[1], [40.0, 40.0], atol=0.05)
+
+
+def test_threshold_and_region_fraction_are_honoured():
+    hm = blobs(np.array([[30.0, 30.0]]), 2.0) * 0.5
+    assert decode_keypoints(hm, KeypointDecoderConfig(threshold=0.3)).valid[0]
+    assert not decode_keypoints(hm, KeypointDecoderConfig(threshold=0.6)).valid[0]
+    wide = blobs(np.array([[30.0, 30.0]]), 12.0)
+    assert not decode_keypoints(wide).valid[0]  # its region covers more than a quarter of the map
+    assert decode_keypoints(wide, KeypointDecoderConfig(max_region_frac=1.0)).valid[0]
+
+
+# ------------------------------------------------------------------ coordinates
+def test_heatmap_model_pixel_conversion():
+    uv = np.array([[0.0, 0.0], [31.0, 15.5]])
+    model = heatmap_to_model_pixels(uv, 32, 128)
+    np.testing.assert_allclose(model, [[1.5, 1.5], [125.5, 63.5]])  # block centres, stride 4
+    np.testing.assert_allclose(model_to_heatmap_pixels(model, 32, 128), uv)
+    np.testing.assert_allclose(heatmap_to_model_pixels(uv, (32, 16), (128, 64)), [[1.5, 1.5], [125.5, 63.5]])
+    with pytest.raises(ShapeError):
+        heatmap_to_model_pixels(uv, (32, 16, 4), 128)
+
+
+def _rig_camera() -> Camera:
+    K = np.array([[560.0, 0.0, 331.0], [0.0, 556.0, 236.5], [0.0, 0.0, 1.0]])
+    R, t = look_at((0.4, -1.3, -0.5), (0.0, -0.9, 3.0))
+    return Camera("left", 640, 480, K, np.array([-0.24, 0.07, 0.0009, -0.0012, -0.01]), R, t)
+
+
+def test_decoded_keypoints_map_back_to_projected_joints():
+    """3D joints -> crop camera -> heatmap Gaussians -> decode -> frame pixels == Camera.project."""
+    cam = _rig_camera()
+    volume = WorkingVolume([-1.0, -2.0, 2.0], [1.0, 0.0, 4.0])
+    roi = roi_from_volume(cam, volume, margin=0.05)
+    model_size, heat_size = 128, 32
+    rng = np.random.default_rng(7)
+    joints = rng.uniform([-0.6, -1.8, 2.5], [0.6, -0.1, 3.5], size=(25, 3))
+
+    crop = crop_camera(cam, roi, model_size)
+    uv_model, _ = crop.project(joints)
+    uv_heat = model_to_heatmap_pixels(uv_model, heat_size, model_size)
+    inside = np.all((uv_heat >= 0) & (uv_heat <= heat_size - 1), axis=-1)
+    assert inside.sum() >= 20
+    hm = gaussian_heatmaps(uv_heat, inside, heat_size, sigma=1.5)
+    kp = decode_keypoints(hm)
+    assert np.array_equal(kp.valid, inside)
+
+    px_per_heat = roi.size / heat_size
+    uv_img = heatmap_to_image_pixels(kp.uv, cam, roi, model_size, heat_size, valid=kp.valid)
+    truth, _ = cam.project(joints)
+    err = np.linalg.norm(uv_img[inside] - truth[inside], axis=-1)
+    assert err.max() < 0.05 * px_per_heat, (err.max(), px_per_heat)
+    assert np.all(uv_img[~inside] == MISSING_FILL)
+
+    undist = heatmap_to_image_pixels(kp.uv, cam, roi, model_size, heat_size, distort=False)
+    ideal, _ = cam.project(joints, distort=False)
+    assert np.linalg.norm(undist[inside] - ideal[inside], axis=-1).max() < 0.05 * px_per_heat
+
+
+def test_model_to_image_matches_roi_affine_without_distortion():
+    cam = _rig_camera()
+    roi = Roi(100, 40, 300)
+    uv = np.array([[0.0, 0.0], [127.0, 64.0]])
+    np.testing.assert_allclose(model_to_image_pixels(uv, cam, roi, 128, distort=False),
+                               roi.model_to_image(uv, 128), atol=1e-9)
+
+
+# ------------------------------------------------------------------- properties
+
+_values = st.one_of(st.floats(-2.0, 2.0, width=32), st.sampled_from([np.nan, np.inf, -np.inf, 0.0, 1.0]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(hm=arrays(np.float32, st.tuples(st.integers(1, 3), st.integers(1, 9), st.integers(1, 9)), elements=_values),
+       sigma=st.sampled_from([0.0, 0.7, 1.0, 2.0]), refine=st.sampled_from(["quadratic", "centroid", "none"]))
+def test_outputs_always_finite_and_consistent(hm, sigma, refine):
+    cfg = KeypointDecoderConfig(sigma=sigma, refine=refine)
+    kp = decode_keypoints(hm, cfg)
+    for arr in (kp.uv, kp.confidence, kp.runner_up):
+        assert np.all(np.isfinite(arr))
+    h, w = hm.shape[-2:]
+    assert np.all(kp.confidence[kp.valid] > cfg.threshold) and np.all(kp.confidence[~kp.valid] == 0)
+    assert np.all(kp.uv[~kp.valid] == MISSING_FILL)
+    assert np.all(kp.uv[kp.valid] >= -1.0) and np.all(kp.uv[kp.valid] <= [w, h])
+    assert not np.any(kp.valid & ~np.isfinite(hm).all(axis=(-2, -1)))

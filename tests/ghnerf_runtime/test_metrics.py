@@ -1,0 +1,256 @@
+"""Metrics: hand-computed values, masks, missing joints, and degenerate inputs without NaN surprises."""
+from __future__ import annotations
+
+import doctest
+import math
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from ghnerf_runtime import metrics
+from ghnerf_runtime.body25 import JOINT_INDEX, MID_HIP, NECK, NUM_JOINTS
+from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.metrics import (
+    TORSO_BOX_JOINTS, gaussian_heatmaps, heatmap_mse, masked_psnr, masked_ssim, mpjpe, pck,
+)
+
+
+def test_doctests():
+    assert doctest.testmod(metrics, raise_on_error=False).failed == 0
+
+
+# --------------------------------------------------------------------------- PCK
+# Toy skeleton: joint 0 "neck", 1 "mid-hip", 2 "shoulder", 3 "wrist".
+TRUE = np.array([[0.0, 0.0], [0.0, 10.0], [6.0, 2.0], [5.0, 5.0]])
+TOY = dict(torso_joints=(0, 1), box_joints=(0, 1, 2))
+
+
+def test_pck_three_joint_toy_example():
+    true = TRUE[[0, 1, 3]]
+    pred = true + [[1.0, 0.0], [0.0, 3.0], [0.0, 2.0]]  # 1 px, 3 px, exactly 2 px (= 0.2 x 10)
+    r = pck(pred, true, [True, True, True], torso_joints=(0, 1), box_joints=(0, 1))
+    assert r.reference == pytest.approx(10.0)
+    assert r.correct.tolist() == [True, False, True]  # the threshold is inclusive
+    assert (r.value, r.num_evaluated, r.num_correct, r.num_missing) == (pytest.approx(2 / 3), 3, 2, 0)
+
+
+def test_pck_missing_joints_are_excluded_and_counted():
+    pred = TRUE + [[1.0, 0.0], [0.0, 3.0], [0.0, 0.0], [9.0, 9.0]]
+    r = pck(pred, TRUE, [True, True, True, False], **TOY)
+    assert r.evaluated.tolist() == [True, True, True, False]
+    assert (r.num_evaluated, r.num_correct, r.num_missing) == (3, 2, 1)
+    assert r.value == pytest.approx(2 / 3)
+
+
+def test_pck_falls_back_to_torso_box_diagonal():
+    # Neck missing: box of mid-hip (0, 10) and shoulder (6, 2) -> diagonal sqrt(36 + 64) = 10.
+    pred = TRUE + [[0.0, 0.0], [0.0, 1.9], [2.1, 0.0], [0.0, 0.0]]
+    r = pck(pred, TRUE, [False, True, True, True], **TOY)
+    assert r.reference == pytest.approx(10.0)
+    assert r.correct.tolist() == [False, True, False, True]
+    assert (r.num_evaluated, r.num_correct, r.num_missing) == (3, 2, 1)
+
+
+def test_pck_without_reference_is_undefined_but_counted():
+    r = pck(TRUE, TRUE, [False, True, False, True], **TOY)  # one box joint only: no reference
+    assert math.isnan(r.value)
+    assert (r.num_evaluated, r.num_unreferenced, r.num_missing) == (0, 2, 2)
+    empty = pck(TRUE, TRUE, [False] * 4, **TOY)
+    assert math.isnan(empty.value) and empty.num_evaluated == 0 and empty.num_missing == 4
+
+
+def test_pck_missing_predictions_count_as_wrong():
+    pred = TRUE.copy()
+    pred[3] = np.nan
+    r = pck(pred, TRUE, [True] * 4, pred_valid=[True, False, True, True], **TOY)
+    assert r.correct.tolist() == [True, False, True, False]
+    assert (r.num_evaluated, r.num_pred_missing, r.value) == (4, 2, 0.5)
+
+
+def test_pck_pools_a_batch_with_per_sample_references():
+    true = np.stack([TRUE, 3.0 * TRUE])  # references 10 and 30
+    pred = true + [[5.0, 0.0]] * 4  # 5 px off: wrong at 2 px tolerance, right at 6 px
+    r = pck(pred, true, np.ones((2, 4), bool), **TOY)
+    np.testing.assert_allclose(r.reference, [10.0, 30.0])
+    assert r.correct.tolist() == [[False] * 4, [True] * 4]
+    assert r.value == 0.5
+
+
+def test_pck_body25_defaults():
+    rng = np.random.default_rng(0)
+    true = rng.uniform(0, 100, size=(3, NUM_JOINTS, 2))
+    true[:, NECK] = [50.0, 20.0]
+    true[:, MID_HIP] = [50.0, 70.0]  # reference 50 -> 10 px tolerance
+    pred = true + [[9.0, 0.0]]
+    pred[:, JOINT_INDEX["LWrist"]] += [0.0, 5.0]  # sqrt(81 + 25) > 10
+    r = pck(pred, true, np.ones((3, NUM_JOINTS), bool))
+    assert r.num_evaluated == 75 and r.num_correct == 72
+    assert set(TORSO_BOX_JOINTS) == {JOINT_INDEX[n] for n in ("Neck", "RShoulder", "LShoulder", "MidHip", "RHip", "LHip")}
+
+
+def test_pck_shape_errors():
+    with pytest.raises(ShapeError):
+        pck(TRUE, TRUE[:3], [True] * 4, **TOY)
+    with pytest.raises(ShapeError):
+        pck(TRUE, TRUE, [True] * 3, **TOY)
+    with pytest.raises(ShapeError):
+        pck(TRUE, TRUE, [True] * 4)  # default BODY_25 torso indices do not fit 4 joints
+
+
+# ------------------------------------------------------------------------- MPJPE
+def test_mpjpe_millimetres_hand_computed():
+    true = np.array([[0.0, 0.0, 2.0], [0.1, -1.0, 3.0], [0.5, 0.5, 2.5]])
+    pred = true + [[0.003, 0.004, 0.0], [0.0, 0.0, 0.010], [1.0, 1.0, 1.0]]
+    r = mpjpe(pred, true, [True, True, False])
+    np.testing.assert_allclose(r.errors, [5.0, 10.0, 0.0], atol=1e-9)
+    assert r.value == pytest.approx(7.5)
+    assert (r.num_evaluated, r.num_missing, r.num_pred_missing) == (2, 1, 0)
+
+
+def test_mpjpe_missing_predictions_and_empty():
+    true = np.zeros((2, 3, 3))
+    pred = np.full((2, 3, 3), 0.002)
+    pred[0, 0] = np.nan
+    r = mpjpe(pred, true, np.ones((2, 3), bool))
+    assert r.num_evaluated == 5 and r.num_pred_missing == 1
+    assert r.value == pytest.approx(1000 * 0.002 * math.sqrt(3))
+    assert np.all(np.isfinite(r.errors))
+    empty = mpjpe(pred, true, np.zeros((2, 3), bool))
+    assert math.isnan(empty.value) and empty.num_evaluated == 0 and empty.num_missing == 6
+    with pytest.raises(ShapeError):
+        mpjpe(pred[..., :2], true[..., :2], np.ones((2, 3), bool))
+
+
+# ------------------------------------------------------------------------- PSNR
+def test_psnr_of_a_known_mse():
+    target = np.random.default_rng(0).random((2, 16, 16, 3))
+    pred = target + 0.1  # MSE 0.01 -> 20 dB
+    r = masked_psnr(pred, target, np.ones((2, 16, 16), bool))
+    np.testing.assert_allclose(r.per_image, [20.0, 20.0])
+    assert r.value == pytest.approx(20.0) and r.num_images == 2
+    r255 = masked_psnr(np.full((8, 8), 10.0), np.zeros((8, 8)), np.ones((8, 8), bool), data_range=255.0)
+    assert r255.value == pytest.approx(10 * math.log10(255 ** 2 / 100))
+
+
+def test_psnr_ignores_pixels_outside_the_mask():
+    target = np.zeros((10, 10))
+    pred = np.full((10, 10), 1000.0)
+    mask = np.zeros((10, 10), bool)
+    mask[2:5, 2:5] = True
+    pred[mask] = 0.05  # MSE inside = 0.0025 -> 26.02 dB
+    r = masked_psnr(pred, target, mask)
+    assert r.value == pytest.approx(10 * math.log10(1 / 0.0025))
+    assert r.num_pixels == 9
+
+
+def test_psnr_empty_mask_and_identical_images():
+    img = np.random.default_rng(1).random((2, 8, 8))
+    mask = np.ones((2, 8, 8), bool)
+    mask[1] = False
+    r = masked_psnr(img, img, mask)
+    assert r.per_image[0] == math.inf and math.isnan(r.per_image[1]) and r.num_images == 1
+    none = masked_psnr(img, img, np.zeros((2, 8, 8), bool))
+    assert math.isnan(none.value) and none.num_images == 0
+
+
+# ------------------------------------------------------------------------- SSIM
+def test_ssim_identical_images_is_one():
+    img = np.random.default_rng(2).random((2, 24, 24, 3))
+    r = masked_ssim(img, img, np.ones((2, 24, 24), bool))
+    np.testing.assert_allclose(r.per_image, 1.0, atol=1e-9)
+
+
+def test_ssim_of_constant_images_hand_computed():
+    # Flat images: variances are 0, so SSIM = (2 mx my + C1) / (mx^2 + my^2 + C1).
+    c1 = (0.01 * 1.0) ** 2
+    r = masked_ssim(np.full((16, 16), 0.5), np.full((16, 16), 0.6), np.ones((16, 16), bool))
+    assert r.value == pytest.approx((2 * 0.5 * 0.6 + c1) / (0.25 + 0.36 + c1), rel=1e-9)
+
+
+def test_ssim_matches_direct_window_sum_at_an_interior_pixel():
+    rng = np.random.default_rng(3)
+    x, y = rng.random((32, 32)), rng.random((32, 32))
+    y = 0.7 * x + 0.3 * y  # correlated
+    g = cv2.getGaussianKernel(11, 1.5)
+    w = g @ g.T
+    r0, c0 = 16, 15
+    px, py = x[r0 - 5:r0 + 6, c0 - 5:c0 + 6], y[r0 - 5:r0 + 6, c0 - 5:c0 + 6]
+    mx, my = (w * px).sum(), (w * py).sum()
+    vx, vy = (w * px * px).sum() - mx ** 2, (w * py * py).sum() - my ** 2
+    cxy = (w * px * py).sum() - mx * my
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    expected = (2 * mx * my + c1) * (2 * cxy + c2) / ((mx ** 2 + my ** 2 + c1) * (vx + vy + c2))
+    # The per-pixel map is private; the public value is its mean over the mask.
+    ssim_map = metrics._ssim_map(x, y, np.ones((32, 32)), 1.0)
+    assert ssim_map[r0, c0] == pytest.approx(expected, rel=1e-9)
+    assert masked_ssim(x, y, np.ones((32, 32), bool)).value == pytest.approx(ssim_map.mean(), rel=1e-12)
+
+
+def test_ssim_masked_ignores_outside_pixels():
+    rng = np.random.default_rng(4)
+    target = rng.random((40, 40, 3))
+    pred = np.clip(target + rng.normal(0, 0.05, target.shape), 0, 1)
+    mask = np.zeros((40, 40), bool)
+    mask[10:30, 12:28] = True
+    base = masked_ssim(pred, target, mask)
+    wrecked = pred.copy()
+    wrecked[~mask] = rng.random(((~mask).sum(), 3))
+    assert masked_ssim(wrecked, target, mask).value == pytest.approx(base.value, abs=1e-12)
+    assert 0.5 < base.value < 1.0
+    assert math.isnan(masked_ssim(pred, target, np.zeros((40, 40), bool)).value)
+
+
+def test_image_metric_shape_errors():
+    with pytest.raises(ShapeError):
+        masked_psnr(np.zeros((8, 8, 3)), np.zeros((8, 8, 3)), np.ones((8, 7), bool))
+    with pytest.raises(ShapeError):
+        masked_ssim(np.zeros((8, 8)), np.zeros((8, 9)), np.ones((8, 8), bool))
+
+
+# ---------------------------------------------------------------------- heatmaps
+def test_heatmap_mse_and_valid_selection():
+    target = np.zeros((2, 3, 4, 4))
+    pred = np.zeros((2, 3, 4, 4))
+    pred[0, 1] = 0.5
+    assert heatmap_mse(pred, target).value == pytest.approx(0.25 / 6)
+    sel = heatmap_mse(pred, target, valid=[[False, True, False], [False, False, False]])
+    assert sel.value == pytest.approx(0.25) and sel.count == 16
+    none = heatmap_mse(pred, target, valid=np.zeros((2, 3), bool))
+    assert math.isnan(none.value) and none.count == 0
+    with pytest.raises(ShapeError):
+        heatmap_mse(pred, target[..., :3])
+
+
+def test_gaussian_heatmaps():
+    joints = np.array([[[3.0, 5.0], [1.5, 2.5], [np.nan, 1.0]]])
+    h = gaussian_heatmaps(joints, [[True, False, True]], (8, 6), sigma=2.0)
+    assert h.shape == (1, 3, 8, 6) and h.dtype == np.float32
+    assert h[0, 0, 5, 3] == 1.0 and h[0, 0].max() == 1.0
+    assert h[0, 0, 5, 4] == pytest.approx(math.exp(-1 / 8))  # one pixel away, sigma 2
+    assert h[0, 0, 4, 2] == pytest.approx(math.exp(-2 / 8))
+    assert np.all(h[0, 1] == 0) and np.all(h[0, 2] == 0)  # not visible; non-finite
+    sq = gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=1.0)
+    np.testing.assert_allclose(sq[0], sq[0].T)
+    with pytest.raises(ValueError):
+        gaussian_heatmaps([[2.0, 2.0]], [True], 5, sigma=0.0)
+
+
+# ------------------------------------------------------------------- properties
+@settings(max_examples=60, deadline=None)
+@given(data=st.data(), batch=st.integers(1, 3))
+def test_pck_counts_add_up(data, batch):
+    coords = st.one_of(st.floats(-50, 50), st.just(np.nan))
+    true = data.draw(arrays(np.float64, (batch, 4, 2), elements=coords))
+    pred = data.draw(arrays(np.float64, (batch, 4, 2), elements=coords))
+    valid = data.draw(arrays(bool, (batch, 4)))
+    r = pck(pred, true, valid, **TOY)
+    assert r.num_evaluated + r.num_missing + r.num_unreferenced == batch * 4
+    assert r.num_correct <= r.num_evaluated and r.num_pred_missing <= r.num_evaluated
+    assert math.isnan(r.value) == (r.num_evaluated == 0)
+    if r.num_evaluated:
+        assert 0.0 <= r.value <= 1.0
+    assert np.all(np.isfinite(r.reference)) and not np.any(r.correct & ~r.evaluated)

@@ -1,0 +1,246 @@
+"""ROI, crop camera and undistort-crop maps: checked against OpenCV and against rendered dots."""
+from __future__ import annotations
+
+import doctest
+
+import cv2
+import numpy as np
+import pytest
+
+from ghnerf_runtime import preprocess
+from ghnerf_runtime.contract import Normalisation
+from ghnerf_runtime.errors import GeometryError, ShapeError
+from ghnerf_runtime.geometry.camera import Camera, look_at
+from ghnerf_runtime.geometry.rig import WorkingVolume
+from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints
+from ghnerf_runtime.preprocess import (
+    Roi, apply_crop_maps, build_undistort_crop_maps, crop_camera, preprocess_image, roi_from_joints,
+    roi_from_volume, undistorted_image_bounds,
+)
+
+K = np.array([[560.0, 0.0, 331.0], [0.0, 556.0, 236.5], [0.0, 0.0, 1.0]])
+DIST = np.array([-0.24, 0.07, 0.0009, -0.0012, -0.01])
+VOLUME = WorkingVolume([-1.0, -2.0, 2.0], [1.0, 0.0, 4.0])
+
+
+def make_camera(dist=DIST, K=K) -> Camera:
+    R, t = look_at((0.3, -1.2, -0.4), (0.0, -0.9, 3.0))
+    return Camera("left", 640, 480, K, dist, R, t)
+
+
+def smooth_image(h=480, w=640) -> np.ndarray:
+    """Low-frequency colour pattern: interpolation differences stay well below a grey level."""
+    yy, xx = np.mgrid[:h, :w].astype(np.float64)
+    img = np.stack([
+        128 + 100 * np.sin(xx / 23.0) * np.cos(yy / 31.0),
+        128 + 90 * np.cos((xx + yy) / 41.0),
+        128 + 80 * np.sin(xx / 53.0 - yy / 29.0),
+    ], axis=-1)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+# --------------------------------------------------------------------------- ROI
+def test_doctests():
+    assert doctest.testmod(preprocess, raise_on_error=False).failed == 0
+
+
+@pytest.mark.parametrize("args", [(0, 0, 0), (0.5, 0, 10), (0, 0, -3), (True, 0, 4)])
+def test_roi_validation(args):
+    with pytest.raises(GeometryError):
+        Roi(*args)
+
+
+def test_roi_transforms_are_inverse_and_match_crop_camera():
+    cam = make_camera()
+    roi = Roi(-20, 35, 333)
+    uv = np.random.default_rng(0).uniform(-50, 600, size=(4, 5, 2))
+    model = roi.image_to_model(uv, 128)
+    np.testing.assert_allclose(roi.model_to_image(model, 128), uv, atol=1e-9)
+    A = roi.affine(128)
+    np.testing.assert_allclose(uv @ A[:, :2].T + A[:, 2], model, atol=1e-9)
+    # The crop camera's projection is the ideal projection pushed through the ROI transform.
+    X = np.random.default_rng(1).uniform([-0.8, -1.8, 2.2], [0.8, -0.1, 3.8], size=(30, 3))
+    crop = crop_camera(cam, roi, 128)
+    ideal, _ = cam.project(X, distort=False)
+    np.testing.assert_allclose(crop.project(X)[0], roi.image_to_model(ideal, 128), atol=1e-8)
+    assert crop.size == (128, 128) and not crop.has_distortion
+
+
+def test_roi_from_volume_contains_projected_volume_and_is_square():
+    cam = make_camera()
+    volume = WorkingVolume([-0.5, -1.9, 2.5], [0.5, 0.0, 3.5])  # fully in view
+    roi = roi_from_volume(cam, volume)
+    uv, _ = cam.project(volume.corners(), distort=False)
+    assert np.all(uv >= [roi.x0 - 0.5, roi.y0 - 0.5]) and np.all(uv <= [roi.x0 + roi.size - 0.5,
+                                                                       roi.y0 + roi.size - 0.5])
+    assert roi.size <= np.max(uv.max(0) - uv.min(0)) + 2  # tight: only rounding slack
+    # Same ROI from the corner array; a margin grows it.
+    assert roi_from_volume(cam, volume.corners()) == roi
+    assert roi_from_volume(cam, volume, margin=0.2).size > roi.size
+
+
+def test_roi_from_volume_clips_to_the_image_and_keeps_the_square():
+    cam = make_camera()
+    roi = roi_from_volume(cam, VOLUME)  # the working volume overflows the view
+    lo, hi = undistorted_image_bounds(cam)
+    uv, _ = cam.project(VOLUME.corners(), distort=False)
+    visible_lo, visible_hi = np.maximum(uv.min(0), lo), np.minimum(uv.max(0), hi)
+    assert roi.x0 - 0.5 <= visible_lo[0] and roi.x0 + roi.size - 0.5 >= visible_hi[0]
+    assert roi.y0 - 0.5 <= visible_lo[1] and roi.y0 + roi.size - 0.5 >= visible_hi[1]
+    assert roi.size <= np.max(hi - lo) + 2
+
+
+def test_roi_from_volume_behind_camera():
+    cam = make_camera()
+    # A box around the camera: part of it is behind; the ROI is the whole (square) view.
+    around = WorkingVolume([-1.0, -2.5, -1.5], [1.0, 0.5, 4.0])
+    roi = roi_from_volume(cam, around)
+    lo, hi = undistorted_image_bounds(cam)
+    assert roi.size == pytest.approx(np.max(hi - lo), abs=2)
+    behind = WorkingVolume([-1.0, -2.0, -4.0], [1.0, 0.0, -2.0])
+    with pytest.raises(GeometryError, match="behind"):
+        roi_from_volume(cam, behind)
+    with pytest.raises(GeometryError, match="outside the image"):
+        roi_from_volume(cam, WorkingVolume([20.0, -2.0, 2.0], [22.0, 0.0, 4.0]))
+    with pytest.raises(ShapeError):
+        roi_from_volume(cam, np.zeros((8, 2)))
+
+
+def test_roi_from_joints_3d_and_2d_agree_and_track():
+    cam = make_camera()
+    rng = np.random.default_rng(2)
+    joints = rng.uniform([-0.3, -1.7, 2.8], [0.3, -0.1, 3.2], size=(25, 3))
+    conf = np.ones(25)
+    conf[:3] = 0.0  # ignored joints
+    joints[:3] = [5.0, 5.0, 50.0]
+    roi3 = roi_from_joints(cam, joints, conf, margin_frac=0.1)
+    uv, _ = cam.project(joints)
+    roi2 = roi_from_joints(cam, uv, conf, margin_frac=0.1)
+    assert roi3 == roi2
+    ideal, _ = cam.project(joints[3:], distort=False)
+    span = ideal.max(0) - ideal.min(0)
+    assert roi3.size == pytest.approx(1.2 * span.max(), abs=2)
+    assert np.all(ideal >= [roi3.x0, roi3.y0]) and np.all(ideal <= [roi3.x0 + roi3.size, roi3.y0 + roi3.size])
+    # min_size, too few joints, shape checks.
+    assert roi_from_joints(cam, joints[3:6], np.ones(3), min_size=200).size == 200
+    assert roi_from_joints(cam, joints, np.zeros(25)) is None
+    assert roi_from_joints(cam, np.full((25, 2), np.nan), np.ones(25)) is None
+    with pytest.raises(ShapeError):
+        roi_from_joints(cam, joints, np.ones(24))
+
+
+# -------------------------------------------------------------------------- maps
+def _reference_crop(image, cam, roi, out_size, interpolation):
+    """cv2.undistort to the ideal camera, crop the ROI, resize: three passes."""
+    und = cv2.undistort(image, cam.K, cam.dist)
+    crop = und[roi.y0:roi.y0 + roi.size, roi.x0:roi.x0 + roi.size]
+    return cv2.resize(crop, (out_size, out_size), interpolation=interpolation)
+
+
+@pytest.mark.parametrize("size, interpolation, level", [(150, cv2.INTER_LINEAR, 0), (256, cv2.INTER_AREA, 1),
+                                                        (400, cv2.INTER_AREA, 2)])
+def test_maps_agree_with_cv2_undistort_crop_resize(size, interpolation, level):
+    cam = make_camera()
+    image = smooth_image()
+    roi = Roi(180, 40, size)
+    maps = build_undistort_crop_maps(cam, roi, 128)
+    assert maps.level == level and maps.map_x.dtype == np.float32 and maps.map_x.shape == (128, 128)
+    ours = apply_crop_maps(image, maps).astype(np.float64)
+    ref = _reference_crop(image, cam, roi, 128, interpolation).astype(np.float64)
+    diff = np.abs(ours - ref)[2:-2, 2:-2]
+    assert diff.mean() < 0.6 and diff.max() <= 4, (diff.mean(), diff.max())
+
+
+def test_level_zero_maps_are_plain_remap_tables():
+    cam = make_camera()
+    roi = Roi(180, 40, 140)
+    maps = build_undistort_crop_maps(cam, roi, 128)
+    assert maps.level == 0
+    crop = crop_camera(cam, roi, 128)
+    expected = cam.normalized_to_pixels(crop.pixels_to_normalized(crop.pixel_grid()), distort=True)
+    np.testing.assert_allclose(maps.map_x, expected[..., 0], atol=1e-3)
+    np.testing.assert_allclose(maps.map_y, expected[..., 1], atol=1e-3)
+    image = smooth_image()
+    direct = cv2.remap(image, maps.map_x, maps.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    assert np.abs(direct.astype(int) - apply_crop_maps(image, maps).astype(int)).max() <= 1
+
+
+def test_skewed_camera_uses_the_camera_model():
+    Ks = K.copy()
+    Ks[0, 1] = 3.0
+    cam = make_camera(K=Ks)
+    roi = Roi(40, -20, 560)
+    maps = build_undistort_crop_maps(cam, roi, 128, antialias=False)
+    crop = crop_camera(cam, roi, 128)
+    X = np.array([[0.1, -1.0, 3.0], [-0.4, -1.5, 2.6]])
+    uv_model, _ = crop.project(X)
+    uv_frame, _ = cam.project(X)
+    # Sample the maps bilinearly at the model pixel: it must point at the frame pixel.
+    got = [cv2.remap(m, uv_model[:, :1].astype(np.float32), uv_model[:, 1:].astype(np.float32),
+                     cv2.INTER_LINEAR)[:, 0] for m in (maps.map_x, maps.map_y)]
+    np.testing.assert_allclose(np.stack(got, -1), uv_frame, atol=0.01)
+
+
+def _render_dots(cam: Camera, points: np.ndarray, sigma_px: float) -> np.ndarray:
+    uv, _ = cam.project(points)
+    yy, xx = np.mgrid[:cam.height, :cam.width].astype(np.float64)
+    img = np.zeros((cam.height, cam.width))
+    for u, v in uv:
+        img += 255 * np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * sigma_px ** 2))
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("antialias", [True, False])
+def test_dot_lands_where_crop_camera_projects_it(antialias):
+    cam = make_camera()
+    roi = Roi(60, -30, 512)  # scale 4: two box levels when antialiased; partly off the frame
+    points = np.array([[0.0, -1.0, 3.0], [-0.7, -1.5, 2.6], [0.6, -0.3, 2.4], [0.5, -1.8, 3.4]])
+    sigma_model = 2.0
+    frame = _render_dots(cam, points, sigma_px=sigma_model * roi.size / 128)
+    maps = build_undistort_crop_maps(cam, roi, 128, antialias=antialias)
+    assert maps.level == (2 if antialias else 0)
+    crop = apply_crop_maps(frame, maps).astype(np.float32) / 255.0
+    expected, _ = crop_camera(cam, roi, 128).project(points)
+    for uv in expected:  # decode each dot in its own window so the others do not compete
+        heat = np.zeros_like(crop)
+        u, v = np.round(uv).astype(int)
+        heat[v - 8:v + 9, u - 8:u + 9] = crop[v - 8:v + 9, u - 8:u + 9]
+        kp = decode_keypoints(heat[None], KeypointDecoderConfig(sigma=0.0))
+        assert kp.valid[0]
+        assert np.linalg.norm(kp.uv[0] - uv) < 0.1, (kp.uv[0], uv)
+
+
+def test_padding_outside_the_frame_is_zero():
+    cam = make_camera(dist=np.zeros(5))
+    maps = build_undistort_crop_maps(cam, Roi(-320, 0, 640), 128)
+    out = apply_crop_maps(np.full((480, 640, 3), 200, np.uint8), maps)
+    # The square leaves the frame on the left (x < 0) and at the bottom (y >= 480): zeros there.
+    assert np.all(out[:, :60] == 0) and np.all(out[100:] == 0) and np.all(out[:90, 70:] == 200)
+
+
+# ---------------------------------------------------------------- normalisation
+def test_preprocess_image_channel_order_and_normalisation():
+    cam = make_camera()
+    maps = build_undistort_crop_maps(cam, Roi(200, 100, 128), 64)
+    frame = np.empty((480, 640, 3), np.uint8)
+    frame[...] = (10, 20, 30)  # B, G, R
+    rgb = preprocess_image(frame, maps, Normalisation())
+    assert rgb.shape == (3, 64, 64) and rgb.dtype == np.float32 and rgb.flags.c_contiguous
+    np.testing.assert_allclose(rgb[:, 32, 32], [30 / 255, 20 / 255, 10 / 255], atol=1e-6)
+    bgr = preprocess_image(frame, maps, Normalisation(channel_order="BGR"))
+    np.testing.assert_allclose(bgr[:, 32, 32], [10 / 255, 20 / 255, 30 / 255], atol=1e-6)
+    host = Normalisation(mean=(0.5, 0.4, 0.3), std=(0.2, 0.25, 0.5), mean_std_in_graph=False,
+                         value_range=(0.0, 1.0))
+    x = preprocess_image(frame, maps, host)
+    np.testing.assert_allclose(x[:, 32, 32], (np.array([30, 20, 10]) / 255 - [0.5, 0.4, 0.3]) / [0.2, 0.25, 0.5],
+                               atol=1e-5)
+    sym = preprocess_image(frame, maps, Normalisation(value_range=(-1.0, 1.0)))
+    np.testing.assert_allclose(sym[:, 32, 32], np.array([30, 20, 10]) / 127.5 - 1, atol=1e-6)
+
+
+@pytest.mark.parametrize("frame", [np.zeros((480, 640), np.uint8), np.zeros((480, 640, 3), np.float32),
+                                   np.zeros((240, 320, 3), np.uint8)])
+def test_preprocess_image_rejects_wrong_frames(frame):
+    maps = build_undistort_crop_maps(make_camera(), Roi(200, 100, 128), 64)
+    with pytest.raises(ShapeError):
+        preprocess_image(frame, maps, Normalisation())

@@ -1,0 +1,254 @@
+"""Rig file: the committed example loads, round trips are exact, every error names file + field."""
+from __future__ import annotations
+
+import copy
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.errors import RigFileError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import (
+    dumps_rig,
+    load_rig,
+    loads_rig,
+    rig_from_dict,
+    rig_to_dict,
+    save_rig,
+    write_text_atomic,
+)
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "rig.json"
+
+
+@pytest.fixture
+def example_dict() -> dict:
+    return json.loads(EXAMPLE.read_text())
+
+
+def assert_same_rig(a: Rig, b: Rig):
+    assert a.rig_id == b.rig_id and a.names == b.names and a.metadata == b.metadata
+    for ca, cb in zip(a.cameras, b.cameras):
+        assert (ca.width, ca.height) == (cb.width, cb.height)
+        for attr in ("K", "dist", "R", "t"):
+            np.testing.assert_array_equal(getattr(ca, attr), getattr(cb, attr))
+    np.testing.assert_array_equal(a.volume.min_corner, b.volume.min_corner)
+    np.testing.assert_array_equal(a.volume.max_corner, b.volume.max_corner)
+
+
+def test_example_loads():
+    rig = load_rig(EXAMPLE)
+    assert rig.rig_id == "bench-01" and rig.names == ("left", "right")
+    assert rig.baseline == pytest.approx(0.075, abs=1e-6)
+    # Cameras sit 1.2 m above the floor (y down) and look forward (+z).
+    for cam in rig.cameras:
+        assert cam.center[1] == pytest.approx(-1.2, abs=1e-6)
+        assert cam.R[2, 2] > 0.9
+    assert rig.volume.contains(np.array([0.0, -1.0, 2.5]))
+
+
+def test_round_trip_exact(tmp_path):
+    rig = load_rig(EXAMPLE)
+    out = tmp_path / "rig.json"
+    save_rig(rig, out)
+    again = load_rig(out)
+    assert_same_rig(rig, again)
+    assert out.read_text() == EXAMPLE.read_text()  # the committed example is in canonical form
+    assert_same_rig(rig, rig_from_dict(rig_to_dict(rig)))
+
+
+def test_round_trip_awkward_values(tmp_path):
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    K = np.array([[612.123456789012345, 0.25, 319.9999999999], [0.0, 611.0000000001, 240.1], [0.0, 0.0, 1.0]])
+    cams = (
+        Camera("café ☕", 641, 479, K, [1e-17, -0.3, 1 / 3, 2 / 3, 0.1, 0.2, 0.3, 0.4, 0, 0, 0, 0, 0, 0], R, [1e-9, -2.5, 3.0]),
+        Camera("b", 10, 10, K, [], np.eye(3), [0.0, 0.0, 0.0]),
+    )
+    rig = Rig(cams, WorkingVolume([-1, -2, 0.5], [1, 0, 4]), rig_id="x", metadata={"n": [1, 2.5, None, True], "s": "q\"\\"})
+    save_rig(rig, tmp_path / "r.json")
+    assert_same_rig(rig, load_rig(tmp_path / "r.json"))
+    assert load_rig(tmp_path / "r.json").cameras[1].dist.size == 0
+
+
+def test_metadata_is_optional(example_dict):
+    del example_dict["metadata"]
+    assert rig_from_dict(example_dict).metadata == {}
+
+
+def _set(path, value):
+    def mutate(d):
+        *parents, last = path
+        node = d
+        for p in parents:
+            node = node[p]
+        node[last] = value
+    return mutate
+
+
+def _del(path):
+    def mutate(d):
+        *parents, last = path
+        node = d
+        for p in parents:
+            node = node[p]
+        del node[last]
+    return mutate
+
+
+# (mutation, field path named by the error, text the message must contain)
+ERROR_CASES = {
+    "missing format": (_del(["format"]), "format", "missing"),
+    "wrong format": (_set(["format"], "other"), "format", '"other"'),
+    "version string": (_set(["version"], "1"), "version", '"1"'),
+    "version too new": (_set(["version"], 2), "version", "unsupported version 2"),
+    "missing version": (_del(["version"]), "version", "missing"),
+    "unknown top key": (_set(["colour"], "red"), "colour", "unknown key 'colour'"),
+    "missing cameras": (_del(["cameras"]), "cameras", "missing required key 'cameras'"),
+    "units mm": (_set(["units"], "mm"), "units", '"mm"'),
+    "empty rig_id": (_set(["rig_id"], ""), "rig_id", '""'),
+    "rig_id number": (_set(["rig_id"], 7), "rig_id", "7"),
+    "cameras not list": (_set(["cameras"], {"a": 1}), "cameras", '{"a": 1}'),
+    "one camera": (lambda d: d["cameras"].pop(), "cameras", "at least two cameras, got 1"),
+    "camera not object": (_set(["cameras", 1], [1, 2]), "cameras[1]", "[1, 2]"),
+    "unknown camera key": (_set(["cameras", 1, "serial"], "x"), "cameras[1].serial", "unknown key 'serial'"),
+    "missing K": (_del(["cameras", 1, "K"]), "cameras[1].K", "missing required key 'K'"),
+    "K 2x2": (_set(["cameras", 1, "K"], [[1, 0], [0, 1]]), "cameras[1].K", "[[1, 0], [0, 1]]"),
+    "K ragged": (_set(["cameras", 1, "K"], [[1, 0, 0], [0, 1], [0, 0, 1]]), "cameras[1].K", "[[1, 0, 0], [0, 1]"),
+    "K string entry": (_set(["cameras", 0, "K", 0, 0], "600"), "cameras[0].K", '"600"'),
+    "K bool entry": (_set(["cameras", 0, "K", 0, 1], True), "cameras[0].K", "true"),
+    "K NaN": (_set(["cameras", 0, "K", 0, 0], float("nan")), "cameras[0].K", "NaN"),
+    "K not pinhole": (_set(["cameras", 0, "K", 2], [0, 0, 2]), "cameras[0].K", "pinhole"),
+    "K negative f": (_set(["cameras", 0, "K", 0, 0], -5.0), "cameras[0].K", "-5.0"),
+    "width float": (_set(["cameras", 0, "width"], 1280.0), "cameras[0].width", "1280.0"),
+    "width bool": (_set(["cameras", 0, "width"], True), "cameras[0].width", "true"),
+    "height zero": (_set(["cameras", 0, "height"], 0), "cameras[0].height", "0"),
+    "name empty": (_set(["cameras", 0, "name"], ""), "cameras[0].name", '""'),
+    "duplicate name": (_set(["cameras", 1, "name"], "left"), "cameras[1].name", "duplicate camera name 'left'"),
+    "R reflection": (_set(["cameras", 1, "R"], [[1, 0, 0], [0, 1, 0], [0, 0, -1]]), "cameras[1].R", "det = -1"),
+    "R scaled": (_set(["cameras", 1, "R"], [[2, 0, 0], [0, 2, 0], [0, 0, 2]]), "cameras[1].R", "[[2.0, 0.0, 0.0]"),
+    "R shape": (_set(["cameras", 1, "R"], [1, 0, 0]), "cameras[1].R", "[1, 0, 0]"),
+    "t shape": (_set(["cameras", 1, "t"], [0, 0]), "cameras[1].t", "[0, 0]"),
+    "t inf": (_set(["cameras", 1, "t", 2], float("inf")), "cameras[1].t", "Infinity"),
+    "distortion not object": (_set(["cameras", 0, "distortion"], [0.1]), "cameras[0].distortion", "[0.1]"),
+    "distortion model": (_set(["cameras", 0, "distortion", "model"], "fisheye"), "cameras[0].distortion.model", '"fisheye"'),
+    "distortion count": (_set(["cameras", 0, "distortion", "coefficients"], [0.1, 0.2, 0.3]),
+                         "cameras[0].distortion.coefficients", "[0.1, 0.2, 0.3]"),
+    "distortion tilt": (_set(["cameras", 0, "distortion", "coefficients"], [0.0] * 13 + [0.5]),
+                        "cameras[0].distortion.coefficients", "0.5"),
+    "distortion unknown key": (_set(["cameras", 0, "distortion", "k1"], 0.1), "cameras[0].distortion.k1", "unknown key"),
+    "distortion missing": (_del(["cameras", 0, "distortion", "coefficients"]), "cameras[0].distortion.coefficients", "missing"),
+    "volume min >= max": (_set(["working_volume", "min"], [2, -2.2, 1.0]), "working_volume", "[2.0, -2.2, 1.0]"),
+    "volume shape": (_set(["working_volume", "max"], [1, 2]), "working_volume.max", "[1, 2]"),
+    "volume unknown key": (_set(["working_volume", "centre"], [0, 0, 0]), "working_volume.centre", "unknown key"),
+    "metadata list": (_set(["metadata"], [1, 2]), "metadata", "[1, 2]"),
+}
+
+
+@pytest.mark.parametrize("case", list(ERROR_CASES))
+def test_errors_name_file_field_and_value(case, example_dict, tmp_path):
+    mutate, field, text = ERROR_CASES[case]
+    mutate(example_dict)
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(example_dict, indent=2))  # NaN/Infinity written as JSON extensions
+    with pytest.raises(RigFileError) as info:
+        load_rig(path)
+    err = info.value
+    assert err.path == str(path)
+    assert err.field == field
+    message = str(err)
+    assert str(path) in message and repr(field) in message
+    assert text in message, message
+
+
+def test_top_level_not_object(tmp_path):
+    path = tmp_path / "list.json"
+    path.write_text("[1, 2]")
+    with pytest.raises(RigFileError, match=r"must be a JSON object, got list \[1, 2\]") as info:
+        load_rig(path)
+    assert info.value.path == str(path)
+
+
+def test_duplicate_key_named(example_dict, tmp_path):
+    text = json.dumps(example_dict, indent=2).replace('"width": 1280,', '"width": 1280, "width": 640,', 1)
+    path = tmp_path / "dup.json"
+    path.write_text(text)
+    with pytest.raises(RigFileError, match="duplicate key 'width'") as info:
+        load_rig(path)
+    assert info.value.field == "cameras[0].width"
+
+
+def test_invalid_json_gives_line_and_column(tmp_path):
+    path = tmp_path / "broken.json"
+    path.write_text('{\n  "format": "ghnerf-rig",\n  "version": 1,,\n}\n')
+    with pytest.raises(RigFileError, match=r"invalid JSON at line 3, column 16") as info:
+        load_rig(path)
+    assert info.value.path == str(path) and str(path) in str(info.value)
+
+
+def test_unreadable_files(tmp_path):
+    with pytest.raises(RigFileError, match="cannot read") as info:
+        load_rig(tmp_path / "missing.json")
+    assert info.value.path == str(tmp_path / "missing.json")
+    bad = tmp_path / "latin1.json"
+    bad.write_bytes(b'{"rig_id": "caf\xe9"}')
+    with pytest.raises(RigFileError, match="not UTF-8"):
+        load_rig(bad)
+    with pytest.raises(RigFileError, match="invalid JSON"):
+        loads_rig("", path="inline")
+
+
+def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
+    rig = load_rig(EXAMPLE)
+    path = tmp_path / "rig.json"
+    save_rig(rig, path)
+    os.chmod(path, 0o640)
+    before = path.read_bytes()
+
+    def crash(src, dst):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", crash)
+    changed = Rig(rig.cameras, rig.volume, rig_id="changed")
+    with pytest.raises(RigFileError, match="No space left") as info:
+        save_rig(changed, path)
+    assert info.value.path == str(path)
+    monkeypatch.undo()
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.json"]  # no temp file left behind
+    save_rig(changed, path)
+    assert load_rig(path).rig_id == "changed"
+    assert (path.stat().st_mode & 0o777) == 0o640  # permissions kept
+
+
+def test_unserialisable_metadata_fails_before_touching_the_file(tmp_path):
+    rig = load_rig(EXAMPLE)
+    path = tmp_path / "rig.json"
+    save_rig(rig, path)
+    before = path.read_bytes()
+    bad = Rig(rig.cameras, rig.volume, metadata={"when": object()})
+    with pytest.raises(RigFileError) as info:
+        save_rig(bad, path)
+    assert info.value.field == "metadata" and info.value.path == str(path)
+    with pytest.raises(RigFileError):
+        save_rig(Rig(rig.cameras, rig.volume, metadata={"x": float("nan")}), path)
+    assert path.read_bytes() == before
+
+
+def test_write_text_atomic_new_file(tmp_path):
+    target = tmp_path / "sub" / "f.txt"
+    with pytest.raises(RigFileError, match="cannot write"):
+        write_text_atomic(target, "x")  # directory does not exist
+    target.parent.mkdir()
+    write_text_atomic(target, "héllo\n")
+    assert target.read_text(encoding="utf-8") == "héllo\n"
+
+
+def test_dumps_is_stable():
+    rig = load_rig(EXAMPLE)
+    text = dumps_rig(rig)
+    assert dumps_rig(loads_rig(text)) == text
+    assert copy.deepcopy(rig_to_dict(rig)) == json.loads(text)

@@ -1,0 +1,413 @@
+"""Triangulation, kornia-style: smoke, shapes, exceptions, accuracy, degenerate cases, solver agreement."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ghnerf_runtime.errors import GeometryError, ShapeError
+from ghnerf_runtime.geometry.camera import Camera, look_at
+from ghnerf_runtime.geometry.triangulation import (
+    TriangulationResult,
+    triangulate_dlt,
+    triangulate_midpoint,
+    triangulate_robust,
+)
+
+K = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+DIST = np.array([-0.18, 0.04, 0.0006, -0.0009, -0.003])
+TARGET = np.array([0.0, -1.0, 3.0])
+
+
+def generate_scene(num_cameras=2, num_joints=25, *, dist=None, seed=0, spread=1.0):
+    """Cameras on an arc about 1.4 m high looking at a person-sized box around TARGET."""
+    rng = np.random.default_rng(seed)
+    cams = []
+    for i, x in enumerate(np.linspace(-spread, spread, num_cameras)):
+        eye = (x, -1.4 + 0.05 * i, 0.3 * abs(x))
+        R, t = look_at(eye, TARGET)
+        cams.append(Camera(f"c{i}", 640, 480, K, np.zeros(5) if dist is None else dist, R, t))
+    points = TARGET + rng.uniform([-0.5, -0.8, -0.4], [0.5, 0.8, 0.4], size=(num_joints, 3))
+    uv = np.stack([c.project(points)[0] for c in cams])  # (C, J, 2)
+    return cams, points, uv
+
+
+def assert_finite(res: TriangulationResult):
+    for name in ("points", "reprojection_error", "ray_angle_deg"):
+        assert np.all(np.isfinite(getattr(res, name))), name
+
+
+# ----------------------------------------------------------------------------- smoke / shapes
+@pytest.mark.parametrize("solver", [triangulate_dlt, triangulate_midpoint, triangulate_robust])
+@pytest.mark.parametrize("num_cameras", [2, 3, 4])
+def test_smoke(solver, num_cameras):
+    cams, points, uv = generate_scene(num_cameras, 7)
+    res = solver(uv, cams)
+    assert res.points.shape == (7, 3) and res.points.dtype == np.float64
+    assert res.reprojection_error.shape == (7, num_cameras)
+    assert res.ray_angle_deg.shape == res.num_views.shape == res.valid.shape == (7,)
+    assert res.used.shape == (7, num_cameras)
+    assert res.valid.dtype == bool and np.issubdtype(res.num_views.dtype, np.integer)
+    assert np.all(res.valid) and np.all(res.num_views == num_cameras)
+    assert res.conditioning is res.ray_angle_deg
+
+
+def test_batch_dims_and_float32():
+    cams, points, uv = generate_scene(3, 5)
+    uv_b = np.stack([uv, uv + 0.0])[None]  # (1, 2, C, J, 2)
+    w = np.ones((1, 2, 3, 5))
+    res = triangulate_dlt(uv_b.astype(np.float32), cams, w)
+    assert res.points.shape == (1, 2, 5, 3) and res.reprojection_error.shape == (1, 2, 5, 3)
+    np.testing.assert_allclose(res.points[0, 1], points, atol=2e-4)  # float32 pixel rounding
+    single = triangulate_dlt(uv, cams)
+    np.testing.assert_allclose(triangulate_dlt(uv_b, cams).points[0, 0], single.points, atol=1e-12)
+
+
+def test_zero_joints():
+    cams, _, uv = generate_scene(2, 3)
+    res = triangulate_dlt(uv[:, :0], cams)
+    assert res.points.shape == (0, 3) and res.valid.shape == (0,)
+
+
+@pytest.mark.parametrize(
+    "uv_shape, weights_shape, match",
+    [
+        ((2, 5), None, r"uv must have shape \(\.\.\., C, J, 2\)"),
+        ((2, 5, 3), None, r"uv must have shape"),
+        ((3, 5, 2), None, "3 cameras on axis -3 but 2 cameras"),
+        ((2, 5, 2), (3, 5), "weights must broadcast"),
+    ],
+)
+def test_shape_errors(uv_shape, weights_shape, match):
+    cams, _, _ = generate_scene(2, 5)
+    weights = None if weights_shape is None else np.ones(weights_shape)
+    with pytest.raises(ShapeError, match=match):
+        triangulate_dlt(np.zeros(uv_shape), cams, weights)
+
+
+def test_camera_argument_errors():
+    cams, _, uv = generate_scene(2, 5)
+    with pytest.raises(ShapeError, match="one Camera"):
+        triangulate_dlt(uv, cams[0])
+    with pytest.raises(ShapeError, match="must not be empty"):
+        triangulate_dlt(np.zeros((0, 5, 2)), [])
+    with pytest.raises(ShapeError, match=r"\(C, 3, 4\)"):
+        triangulate_dlt(uv, np.zeros((2, 3, 3)))
+    with pytest.raises(ShapeError, match=r"cameras\[1\] projection matrix must have shape"):
+        triangulate_dlt(uv, [cams[0].P, np.eye(3)])
+    with pytest.raises(GeometryError, match=r"cameras\[1\].*finite"):
+        triangulate_dlt(uv, [cams[0].P, np.full((3, 4), np.nan)])
+    with pytest.raises(GeometryError, match=r"cameras\[0\].*singular"):
+        triangulate_dlt(uv, [np.zeros((3, 4)), cams[1].P])
+    with pytest.raises(GeometryError, match="no lens model"):
+        triangulate_dlt(uv, [c.P for c in cams], undistorted=False)
+    with pytest.raises(GeometryError, match="max_reprojection_error"):
+        triangulate_robust(uv, cams, max_reprojection_error=0.0)
+
+
+# ----------------------------------------------------------------------------- accuracy
+@pytest.mark.parametrize("num_cameras", [2, 3, 5])
+def test_noise_free_exact(num_cameras):
+    cams, points, uv = generate_scene(num_cameras, 25)
+    res = triangulate_dlt(uv, cams)
+    np.testing.assert_allclose(res.points, points, atol=1e-9)
+    assert res.reprojection_error.max() < 1e-8
+    assert np.all(res.valid)
+
+
+def test_noise_free_with_distortion():
+    cams, points, uv = generate_scene(3, 25, dist=DIST)
+    res = triangulate_dlt(uv, cams)  # distorted pixels, undistorted internally
+    np.testing.assert_allclose(res.points, points, atol=1e-9)
+    assert res.reprojection_error.max() < 1e-8
+    # Ignoring the lens is measurably wrong: the test would catch a skipped undistortion.
+    wrong = triangulate_dlt(uv, cams, undistorted=True)
+    assert np.abs(wrong.points - points).max() > 1e-3
+
+
+def test_pre_undistorted_pixels_and_projection_matrices():
+    cams, points, uv = generate_scene(3, 25, dist=DIST)
+    ideal = np.stack([c.undistort_pixels(uv[i]) for i, c in enumerate(cams)])
+    res = triangulate_dlt(ideal, cams, undistorted=True)
+    np.testing.assert_allclose(res.points, points, atol=1e-9)
+    P = np.stack([c.P for c in cams])
+    for cams_arg in (P, list(P)):
+        np.testing.assert_allclose(triangulate_dlt(ideal, cams_arg).points, points, atol=1e-9)
+    # Mixed: with undistorted=None the Camera entry would take distorted pixels.
+    mixed = [cams[0], P[1], P[2]]
+    np.testing.assert_allclose(triangulate_dlt(ideal, mixed, undistorted=True).points, points, atol=1e-9)
+    uv_mixed = np.stack([uv[0], ideal[1], ideal[2]])
+    np.testing.assert_allclose(triangulate_dlt(uv_mixed, mixed).points, points, atol=1e-9)
+    # Projection matrices with arbitrary scale and sign give the same answer.
+    res_s = triangulate_dlt(ideal, P * np.array([-3.0, 0.01, 7.0])[:, None, None])
+    np.testing.assert_allclose(res_s.points, points, atol=1e-9)
+    assert np.all(res_s.valid)
+
+
+def test_agrees_with_cv2_triangulate_points():
+    cams, points, uv = generate_scene(2, 25)
+    rng = np.random.default_rng(3)
+    noisy = uv + rng.normal(0, 0.7, uv.shape)
+    X = cv2.triangulatePoints(cams[0].P, cams[1].P, noisy[0].T.copy(), noisy[1].T.copy())
+    ours = triangulate_dlt(noisy, cams)
+    # Different (but both linear) normalisations: agreement to well under the noise effect.
+    np.testing.assert_allclose(ours.points, (X[:3] / X[3]).T, atol=3e-4)
+
+
+def test_noisy_observations_bounded():
+    cams, points, uv = generate_scene(2, 25, seed=1)
+    rng = np.random.default_rng(1)
+    sigma = 0.5
+    res = triangulate_dlt(uv + rng.normal(0, sigma, uv.shape), cams)
+    assert np.all(res.valid)
+    err = np.linalg.norm(res.points - points, axis=-1)
+    # Baseline 2 m at about 3 m with f = 600: depth error ~ sigma * Z^2 / (f * B) ~ 4 mm.
+    assert np.median(err) < 0.006 and err.max() < 0.02
+    assert res.mean_reprojection_error().max() < 4 * sigma
+
+
+def test_noisy_more_views_help():
+    errs = []
+    for C in (2, 5):
+        cams, points, uv = generate_scene(C, 200, seed=2)
+        rng = np.random.default_rng(2)
+        res = triangulate_dlt(uv + rng.normal(0, 1.0, uv.shape), cams)
+        errs.append(np.sqrt(np.mean(np.sum((res.points - points) ** 2, -1))))
+    assert errs[1] < errs[0]
+
+
+def test_ray_angle_is_the_angle_at_the_point():
+    cams, points, uv = generate_scene(2, 25)
+    res = triangulate_dlt(uv, cams)
+    a, b = points - cams[0].center, points - cams[1].center
+    cos = np.abs(np.einsum("ij,ij->i", a, b)) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
+    np.testing.assert_allclose(res.ray_angle_deg, np.degrees(np.arccos(cos)), atol=1e-6)
+
+
+# ----------------------------------------------------------------------------- weights
+def test_weights_ignore_and_scale():
+    cams, points, uv = generate_scene(3, 10)
+    bad = uv.copy()
+    bad[1, 4] += [30.0, 40.0]  # wrong detection, 50 px off
+    w = np.ones((3, 10))
+    w[1, 4] = 0.0
+    res = triangulate_dlt(bad, cams, w)
+    np.testing.assert_allclose(res.points, points, atol=1e-9)
+    assert res.num_views[4] == 2 and not res.used[4, 1]
+    assert res.reprojection_error[4, 1] == pytest.approx(50.0, abs=1e-6)  # reported though unused
+    # A uniform weight scale changes nothing; NaN weight is "ignore".
+    np.testing.assert_allclose(triangulate_dlt(uv, cams, np.full((3, 10), 0.3)).points, points, atol=1e-9)
+    w[1, 4] = np.nan
+    np.testing.assert_allclose(triangulate_dlt(bad, cams, w).points, points, atol=1e-9)
+    # A small weight pulls the point less than a full one.
+    w[1, 4] = 0.05
+    low = triangulate_dlt(bad, cams, w).points[4]
+    full = triangulate_dlt(bad, cams).points[4]
+    assert np.linalg.norm(low - points[4]) < 0.3 * np.linalg.norm(full - points[4])
+
+
+def test_weights_broadcast():
+    cams, points, uv = generate_scene(2, 6)
+    res = triangulate_dlt(uv, cams, np.array([1.0, 0.5])[:, None])
+    np.testing.assert_allclose(res.points, points, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- degenerate cases
+@pytest.mark.parametrize("solver", [triangulate_dlt, triangulate_midpoint, triangulate_robust])
+def test_degenerate_cases_are_invalid_and_finite(solver):
+    cams, points, uv = generate_scene(2, 6)
+    uv = uv.copy()
+    w = np.ones((2, 6))
+    uv[0, 0] = np.nan  # one view left
+    w[1, 1] = 0.0  # one view left
+    uv[:, 2] = np.nan  # no views
+    uv[1, 3, 0] = np.inf
+    uv[0, 4] = [1e300, -1e300]  # absurd but finite
+    res = solver(uv, cams, w)
+    assert_finite(res)
+    assert res.valid[:4].tolist() == [False, False, False, False] and res.valid[5]
+    assert res.num_views.tolist() == [1, 1, 0, 1, 2, 2]
+    assert np.all(res.points[~res.valid] == 0.0)
+    assert np.all(res.reprojection_error[~res.valid] == 0.0)
+    np.testing.assert_allclose(res.points[5], points[5], atol=1e-9)
+
+
+@pytest.mark.parametrize("solver", [triangulate_dlt, triangulate_midpoint])
+def test_parallel_rays(solver):
+    # Two cameras with the same orientation seeing a point at the same normalised
+    # coordinates: the rays are parallel (the point is at infinity).
+    cams = [Camera("a", 640, 480, K, t=[0.5, 0, 0]), Camera("b", 640, 480, K, t=[-0.5, 0, 0])]
+    uv = np.array([[[400.0, 250.0]], [[400.0, 250.0]]])
+    res = solver(uv, cams)
+    assert not res.valid[0] and res.ray_angle_deg[0] == pytest.approx(0.0, abs=1e-9)
+    assert_finite(res)
+    # Nearly parallel (far point): below the threshold -> invalid; raising the threshold matters.
+    uv2 = uv.copy()
+    uv2[1, 0, 0] -= 0.5  # 0.5 px disparity, 1 m baseline -> 1200 m away, 0.05 deg
+    res2 = solver(uv2, cams)
+    assert not res2.valid[0] and 0 < res2.ray_angle_deg[0] < 0.1
+    assert solver(uv2, cams, min_ray_angle_deg=0.01).valid[0]
+
+
+@pytest.mark.parametrize("solver", [triangulate_dlt, triangulate_midpoint])
+def test_point_behind_cameras(solver):
+    cams, _, _ = generate_scene(2, 1)
+    behind = np.array([[0.2, -1.2, -3.0]])  # behind both cameras (they look towards +z)
+    uv = []
+    for c in cams:  # project ignoring cheirality, as a bad matcher might "see" it
+        ph = np.c_[behind, np.ones(1)] @ c.P.T
+        uv.append(ph[:, :2] / ph[:, 2:])
+    res = solver(np.stack(uv), cams, undistorted=True)
+    assert not res.valid[0]
+    assert_finite(res)
+
+
+def test_coincident_centres_invalid():
+    R, _ = look_at((0, -1, 0), (0.2, -1, 3))
+    cams = [Camera("a", 640, 480, K, R=np.eye(3), t=[0, 1, 0]), Camera("b", 640, 480, K, R=R, t=-R @ [0, -1, 0])]
+    uv = np.array([[[300.0, 200.0]], [[330.0, 210.0]]])
+    res = triangulate_dlt(uv, cams)
+    assert not res.valid[0]
+    assert_finite(res)
+
+
+def test_single_camera():
+    cams, _, uv = generate_scene(2, 4)
+    res = triangulate_dlt(uv[:1], cams[:1])
+    assert not np.any(res.valid) and np.all(res.num_views == 1)
+    assert_finite(res)
+
+
+# ----------------------------------------------------------------------------- solver agreement
+def test_dlt_and_midpoint_agree():
+    cams, points, uv = generate_scene(2, 25)
+    np.testing.assert_allclose(triangulate_midpoint(uv, cams).points, points, atol=1e-9)
+    rng = np.random.default_rng(5)
+    noisy = uv + rng.normal(0, 0.5, uv.shape)
+    dlt, mid = triangulate_dlt(noisy, cams), triangulate_midpoint(noisy, cams)
+    assert np.all(dlt.valid & mid.valid)
+    np.testing.assert_allclose(dlt.points, mid.points, atol=1e-3)
+    np.testing.assert_allclose(dlt.ray_angle_deg, mid.ray_angle_deg, atol=1e-12)
+
+
+def test_midpoint_two_views_is_midpoint_of_common_perpendicular():
+    cams, _, uv = generate_scene(2, 3)
+    noisy = uv + np.array([[[3.0, -2.0]], [[-4.0, 1.0]]])
+    res = triangulate_midpoint(noisy, cams)
+    (o1, d1), (o2, d2) = cams[0].rays(noisy[0]), cams[1].rays(noisy[1])
+    for j in range(3):
+        # Closest points o1 + s d1, o2 + u d2: solve the 2x2 normal equations.
+        A = np.array([[d1[j] @ d1[j], -d1[j] @ d2[j]], [d1[j] @ d2[j], -d2[j] @ d2[j]]])
+        b = np.array([(o2[j] - o1[j]) @ d1[j], (o2[j] - o1[j]) @ d2[j]])
+        s, u = np.linalg.solve(A, b)
+        np.testing.assert_allclose(res.points[j], 0.5 * (o1[j] + s * d1[j] + o2[j] + u * d2[j]), atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- robust
+def test_robust_drops_the_bad_view():
+    cams, points, uv = generate_scene(4, 25, dist=DIST)
+    bad = uv.copy()
+    bad[2, 3] += [35.0, -20.0]
+    bad[0, 7] += [-60.0, 10.0]
+    res = triangulate_robust(bad, cams, max_reprojection_error=3.0)
+    assert np.all(res.valid)
+    np.testing.assert_allclose(res.points, points, atol=1e-8)
+    assert not res.used[3, 2] and not res.used[7, 0] and res.used.sum() == 4 * 25 - 2
+    # Plain DLT is pulled off by the outliers.
+    assert np.linalg.norm(triangulate_dlt(bad, cams).points[3] - points[3]) > 1e-3
+
+
+def test_robust_two_bad_views_of_five():
+    cams, points, uv = generate_scene(5, 4)
+    bad = uv.copy()
+    bad[1, 2] += 40.0
+    bad[3, 2] -= 30.0
+    res = triangulate_robust(bad, cams, max_reprojection_error=2.0)
+    assert res.valid[2] and res.num_views[2] == 3
+    np.testing.assert_allclose(res.points[2], points[2], atol=1e-8)
+
+
+def test_robust_two_views_that_disagree_are_invalid():
+    cams, points, uv = generate_scene(2, 3)
+    bad = uv.copy()
+    bad[1, 1, 1] += 30.0  # vertical offset: violates the epipolar constraint
+    res = triangulate_robust(bad, cams, max_reprojection_error=3.0)
+    assert res.valid.tolist() == [True, False, True]
+    assert_finite(res)
+
+
+def test_robust_clean_data_unchanged():
+    cams, _, uv = generate_scene(3, 10)
+    rng = np.random.default_rng(0)
+    noisy = uv + rng.normal(0, 0.3, uv.shape)
+    np.testing.assert_allclose(triangulate_robust(noisy, cams).points, triangulate_dlt(noisy, cams).points)
+
+
+# ----------------------------------------------------------------------------- property tests
+rig_strategy = st.fixed_dictionaries(
+    {
+        "C": st.integers(2, 4),
+        "eyes": st.lists(st.tuples(st.floats(-2, 2), st.floats(-2.2, -0.3), st.floats(-1.0, 1.0)), min_size=4, max_size=4),
+        "f": st.floats(300, 1500),
+        "k1": st.floats(-0.25, 0.1),
+        "seed": st.integers(0, 2**16),
+    }
+)
+
+
+def random_rig(p):
+    cams = []
+    for i in range(p["C"]):
+        eye = np.array(p["eyes"][i]) + [0.25 * i, 0, 0]  # keep centres apart
+        R, t = look_at(eye, TARGET)
+        Ki = np.array([[p["f"], 0, 320], [0, p["f"] * 1.001, 240], [0, 0, 1]])
+        cams.append(Camera(f"c{i}", 640, 480, Ki, [p["k1"], 0.01, 0, 0, 0], R, t))
+    rng = np.random.default_rng(p["seed"])
+    points = TARGET + rng.uniform(-0.6, 0.6, size=(8, 3))
+    uv = np.stack([c.project(points)[0] for c in cams])
+    return cams, points, uv
+
+
+@settings(max_examples=40, deadline=None)
+@given(rig_strategy)
+def test_random_rigs_recover_points(p):
+    cams, points, uv = random_rig(p)
+    res = triangulate_dlt(uv, cams)
+    ok = res.ray_angle_deg > 1.0  # generated eyes can be close; well-conditioned joints must be exact
+    assert np.all(res.valid[ok])
+    np.testing.assert_allclose(res.points[ok], points[ok], atol=1e-7)
+    mid = triangulate_midpoint(uv, cams)
+    np.testing.assert_allclose(mid.points[ok], points[ok], atol=1e-7)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    rig_strategy,
+    st.lists(st.sampled_from([1.0, 0.0, 0.5, np.nan, np.inf, -1.0]), min_size=32, max_size=32),
+    st.lists(st.sampled_from(["ok", "nan", "inf", "huge"]), min_size=32, max_size=32),
+)
+def test_outputs_always_finite(p, weights, corruption):
+    cams, points, uv = random_rig(p)
+    C, J = uv.shape[:2]
+    w = np.array(weights[: C * J]).reshape(C, J) if C * J <= 32 else np.ones((C, J))
+    uv = uv.copy()
+    for k, kind in enumerate(corruption[: C * J]):
+        c, j = divmod(k, J)
+        if kind != "ok":
+            uv[c, j] = {"nan": np.nan, "inf": np.inf, "huge": 1e200}[kind]
+    for solver in (triangulate_dlt, triangulate_midpoint, triangulate_robust):
+        res = solver(uv, cams, w)
+        assert_finite(res)
+        assert np.all(res.points[~res.valid] == 0)
+        assert np.all(res.num_views[res.valid] >= 2)
+
+
+def test_docstring_examples():
+    import doctest
+
+    import ghnerf_runtime.geometry.triangulation as module
+
+    result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted >= 10 and result.failed == 0

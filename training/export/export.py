@@ -1,0 +1,189 @@
+"""Export the model as the contract's ONNX graphs, each stamped with the contract metadata.
+
+Graph split (``ghnerf_runtime.contract`` has the exact input/output specs):
+
+* ``encoder``: batch of source images -> multi-scale features + human features (2D convs: int8).
+* ``volume``: features + host camera matrices -> regularised cost volume and depth statistics of each
+  target frustum (3D convs, sampling, softmax: float).
+* ``render`` / ``render_heat`` / ``render_rgb``: per-sample heads + compositing along host-chosen rays
+  (everything / heatmaps for the source views / colour for the novel view); head 1x1 convs int8;
+  sampling, softmax, compositing float.
+* ``query``: heads at arbitrary rig points (volumetric joint heatmaps).
+
+Targets (``B``), rays (``R``) and points (``N``) are dynamic axes; everything else is fixed. The
+TorchScript exporter is used (``dynamo=False``): it needs no onnxscript and handles these ops.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+from torch import Tensor, nn
+
+from ghnerf_runtime.contract import GRAPH_NAMES, GraphSpec, ModelContract, ray_grid
+from training.model.camera_inputs import box_corners, orbit_camera, scene_inputs, synthetic_rig
+from training.model.ghnerf import GHNeRF
+
+log = logging.getLogger(__name__)
+
+DEFAULT_OPSET = 17
+
+
+class _GraphModule(nn.Module):
+    """Positional-args adapter: contract input order in, contract output order out."""
+
+    def __init__(self, model: GHNeRF, spec: GraphSpec):
+        super().__init__()
+        self.model = model
+        self.spec = spec
+
+    def named(self, args: tuple[Tensor, ...]) -> dict[str, Tensor]:
+        return dict(zip(self.spec.input_names, args))
+
+    def enc(self, d: dict[str, Tensor]) -> dict[str, Tensor]:
+        return {k: d[k] for k in ("images", "feat_s1", "feat_s2", "feat_s4", "human_feat") if k in d}
+
+
+class EncoderGraph(_GraphModule):
+    def forward(self, images: Tensor):
+        enc = self.model.encode(images)
+        return tuple(enc[n] for n in self.spec.output_names)
+
+
+class VolumeGraph(_GraphModule):
+    def forward(self, *args: Tensor):
+        d = self.named(args)
+        last = self.model.volumes(self.enc(d), d["src_P"], d["tgt_K_inv"], d["tgt_c2w"], d["near_far"])[-1]
+        return last["volume"], last["stats"]
+
+
+class RenderGraph(_GraphModule):
+    def forward(self, *args: Tensor):
+        d = self.named(args)
+        level = len(self.model.config.levels) - 1
+        out = self.model.render(level, self.enc(d), d["volume"], d["depth_stats"], d["src_P"], d["tgt_K_inv"],
+                                d["tgt_c2w"], d["ray_uv"], src_centers=d.get("src_centers"),
+                                heat="heatmaps" in self.spec.output_names)
+        return tuple(out[n] for n in self.spec.output_names)
+
+
+class QueryGraph(_GraphModule):
+    def forward(self, *args: Tensor):
+        d = self.named(args)
+        out = self.model.query(self.enc(d), d["volume"], d["depth_stats"], d["src_P"], d["tgt_P"], d["points"])
+        return out["joint_heat"], out["density"]
+
+
+GRAPH_MODULES = {"encoder": EncoderGraph, "volume": VolumeGraph, "render": RenderGraph,
+                 "render_heat": RenderGraph, "render_rgb": RenderGraph, "query": QueryGraph}
+
+
+@dataclass
+class ExampleInputs:
+    """Consistent example inputs for every graph (torch), from the model itself in eval mode."""
+
+    tensors: dict[str, Tensor]
+
+    def for_graph(self, spec: GraphSpec) -> tuple[Tensor, ...]:
+        return tuple(self.tensors[n] for n in spec.input_names)
+
+    def numpy(self, spec: GraphSpec) -> dict[str, np.ndarray]:
+        return {n: self.tensors[n].detach().cpu().numpy() for n in spec.input_names}
+
+
+@torch.no_grad()
+def example_inputs(model: GHNeRF, images: Tensor | None = None, targets: int = 2, ray_stride: int | None = None,
+                   points: int = 64, seed: int = 0) -> ExampleInputs:
+    """Inputs for every graph: a synthetic rig (two sources + novel targets), images, rays, points.
+
+    ``targets`` targets: the two sources first, then novel cameras around the subject.
+    """
+    cfg = model.config
+    H, W = cfg.height, cfg.width
+    g = torch.Generator().manual_seed(seed)
+    src = synthetic_rig(H, W)
+    tgts = (src + [orbit_camera(H, W, 25.0 * (i + 1), name=f"novel{i}") for i in range(max(0, targets - 2))])
+    tgts = tgts[:targets]
+    cams = {k: torch.from_numpy(v) for k, v in scene_inputs(src, tgts, box_corners(), H, W).items()}
+    if images is None:
+        images = torch.rand(2, 3, H, W, generator=g)
+    stride = ray_stride or cfg.heatmap_stride
+    uv = torch.from_numpy(ray_grid(H, W, stride))
+    t = {**cams, "images": images, "ray_uv": uv.unsqueeze(0).expand(len(tgts), -1, -1).contiguous()}
+    was_training = model.training
+    model.eval()
+    enc = model.encode(images)
+    t.update(enc)
+    last = model.volumes(enc, cams["src_P"], cams["tgt_K_inv"], cams["tgt_c2w"], cams["near_far"])[-1]
+    t["volume"], t["depth_stats"] = last["volume"], last["stats"]
+    centre = torch.tensor([0.0, -0.95, 3.0])
+    t["points"] = (centre + torch.rand(len(tgts), points, 3, generator=g) * torch.tensor([0.8, 1.8, 0.8])
+                   - torch.tensor([0.4, 0.9, 0.4]))
+    model.train(was_training)
+    return ExampleInputs(t)
+
+
+def _dynamic_axes(spec: GraphSpec) -> dict[str, dict[int, str]]:
+    axes: dict[str, dict[int, str]] = {}
+    for t in spec.inputs + spec.outputs:
+        dyn = {i: d for i, d in enumerate(t.shape) if isinstance(d, str)}
+        if dyn:
+            axes[t.name] = dyn
+    return axes
+
+
+def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precision: str) -> None:
+    """Write the contract into ``metadata_props`` of the ONNX file at ``path`` (in place)."""
+    m = onnx.load(str(path))
+    props = contract.to_metadata(graph=graph, precision=precision)
+    keep = [p for p in m.metadata_props if p.key not in props]
+    del m.metadata_props[:]
+    m.metadata_props.extend(keep)
+    onnx.helper.set_model_props(m, {**{p.key: p.value for p in keep}, **props})
+    m.producer_name = "ghnerf-training"
+    m.doc_string = f"GHNeRF graph {graph!r} ({contract.variant}, {contract.width}x{contract.height}, {precision})"
+    onnx.save(m, str(path))
+
+
+def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInputs | None = None,
+                 opset: int = DEFAULT_OPSET) -> Path:
+    """Export one graph (fp32) to ``path`` with the contract stamped in."""
+    if graph not in GRAPH_NAMES:
+        raise ValueError(f"unknown graph {graph!r}; graphs: {GRAPH_NAMES}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    contract = model.contract(opset=opset)
+    spec = contract.graph(graph)
+    inputs = inputs or example_inputs(model)
+    wrapper = GRAPH_MODULES[graph](model, spec).eval()
+    was_training = model.training
+    model.eval()
+    try:
+        with torch.no_grad():
+            torch.onnx.export(
+                wrapper, inputs.for_graph(spec), str(path), dynamo=False, opset_version=opset,
+                input_names=list(spec.input_names), output_names=list(spec.output_names),
+                dynamic_axes=_dynamic_axes(spec), do_constant_folding=True,
+            )
+    finally:
+        model.train(was_training)
+    stamp_metadata(path, contract, graph, "fp32")
+    onnx.checker.check_model(str(path))
+    log.info("exported %s -> %s", graph, path)
+    return path
+
+
+def export_all(model: GHNeRF, out_dir: str | Path, graphs: tuple[str, ...] = GRAPH_NAMES,
+               opset: int = DEFAULT_OPSET, inputs: ExampleInputs | None = None) -> dict[str, Path]:
+    """Export every graph as ``<out_dir>/<graph>.onnx`` (fp32). Returns graph -> path."""
+    out_dir = Path(out_dir)
+    inputs = inputs or example_inputs(model)
+    return {g: export_graph(model, g, out_dir / f"{g}.onnx", inputs, opset) for g in graphs}
+
+
+__all__ = ["export_all", "export_graph", "example_inputs", "ExampleInputs", "stamp_metadata", "GRAPH_MODULES",
+           "DEFAULT_OPSET"]

@@ -1,0 +1,123 @@
+"""Parity checks (torch vs onnxruntime fp32, int8 vs fp32) and a small latency benchmark.
+
+Figures are plain dicts so tests can bound them and the exporter can write them
+into a model card.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import onnxruntime as ort
+import torch
+
+from ghnerf_runtime.contract import ModelContract
+from training.export.export import GRAPH_MODULES, ExampleInputs
+
+
+def make_session(path: str | Path, threads: int = 2) -> ort.InferenceSession:
+    """A CPU session with ``threads`` intra-op threads (the device has 2 cores)."""
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = threads
+    so.inter_op_num_threads = 1
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+
+
+def _stats(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
+    d = np.abs(a.astype(np.float64) - b.astype(np.float64))
+    scale = float(np.abs(b).max()) or 1.0
+    return {"max_abs": float(d.max()), "mean_abs": float(d.mean()), "ref_max": scale}
+
+
+@torch.no_grad()
+def torch_vs_ort(model, paths: Mapping[str, Path], inputs: ExampleInputs, threads: int = 2
+                 ) -> dict[str, dict[str, dict[str, float]]]:
+    """Per graph and output: difference between the torch graph module and the ONNX file on ``inputs``."""
+    contract = model.contract()
+    was_training = model.training
+    model.eval()
+    report: dict[str, dict[str, dict[str, float]]] = {}
+    try:
+        for graph, path in paths.items():
+            spec = contract.graph(graph)
+            ref = GRAPH_MODULES[graph](model, spec)(*inputs.for_graph(spec))
+            got = make_session(path, threads).run(list(spec.output_names), inputs.numpy(spec))
+            report[graph] = {n: _stats(g, r.numpy()) for n, g, r in zip(spec.output_names, got, ref)}
+    finally:
+        model.train(was_training)
+    return report
+
+
+def run_pipeline(sessions: Mapping[str, ort.InferenceSession], contract: ModelContract,
+                 inputs: Mapping[str, np.ndarray], render_graph: str = "render_heat") -> dict[str, np.ndarray]:
+    """encoder -> volume -> ``render_graph`` through onnxruntime; ``inputs`` holds images + camera inputs."""
+    env = dict(inputs)
+    for graph in ("encoder", "volume", render_graph):
+        spec = contract.graph(graph)
+        outs = sessions[graph].run(list(spec.output_names), {n: env[n] for n in spec.input_names})
+        env.update(zip(spec.output_names, outs))
+    return env
+
+
+def _peak_shift(a: np.ndarray, b: np.ndarray, grid: int) -> float:
+    """Mean pixel distance (in rays) between per-joint argmax of two ``(B, R, J)`` heatmaps on a grid."""
+    B, R, J = a.shape
+    ia, ib = a.argmax(1), b.argmax(1)  # (B, J)
+    ya, xa = np.divmod(ia, grid)
+    yb, xb = np.divmod(ib, grid)
+    return float(np.mean(np.hypot(ya - yb, xa - xb)))
+
+
+def int8_vs_fp32(fp32: Mapping[str, Path], int8: Mapping[str, Path], contract: ModelContract,
+                 inputs: ExampleInputs, threads: int = 2) -> dict:
+    """Per-graph output differences (same inputs) and end-to-end differences of the keypoint pipeline.
+
+    End to end (encoder -> volume -> render_heat, every graph in its own precision): heatmap max/mean abs
+    difference, mean shift of each joint's heatmap argmax (in rays), depth mean abs difference (metres).
+    """
+    report: dict = {"graphs": {}, "pipeline": {}}
+    sess_f = {g: make_session(p, threads) for g, p in fp32.items()}
+    sess_q = {g: make_session(p, threads) for g, p in int8.items()}
+    for graph in int8:
+        spec = contract.graph(graph)
+        feeds = inputs.numpy(spec)
+        a = sess_q[graph].run(list(spec.output_names), feeds)
+        b = sess_f[graph].run(list(spec.output_names), feeds)
+        report["graphs"][graph] = {n: _stats(x, y) for n, x, y in zip(spec.output_names, a, b)}
+    if all(g in sess_q for g in ("encoder", "volume", "render_heat")):
+        base = {k: inputs.tensors[k].numpy() for k in ("images", "src_P", "tgt_K_inv", "tgt_c2w", "near_far",
+                                                        "ray_uv")}
+        pf = run_pipeline(sess_f, contract, base)
+        pq = run_pipeline(sess_q, contract, base)
+        R = base["ray_uv"].shape[1]
+        grid = int(round(np.sqrt(R)))
+        report["pipeline"] = {
+            "heatmaps": _stats(pq["heatmaps"], pf["heatmaps"]),
+            "peak_shift_rays": _peak_shift(pq["heatmaps"], pf["heatmaps"], grid) if grid * grid == R else None,
+            "depth_mean_abs_m": float(np.abs(pq["depth"] - pf["depth"]).mean()),
+            "acc_max_abs": float(np.abs(pq["acc"] - pf["acc"]).max()),
+        }
+    return report
+
+
+def benchmark(session: ort.InferenceSession, feeds: Mapping[str, np.ndarray], repeats: int = 30,
+              warmup: int = 5) -> dict[str, float]:
+    """Latency of ``session.run`` in ms: median and minimum over ``repeats`` runs after ``warmup``.
+
+    On a shared machine the minimum is the better estimate of the uncontended latency.
+    """
+    for _ in range(warmup):
+        session.run(None, dict(feeds))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        session.run(None, dict(feeds))
+        times.append(time.perf_counter() - t)
+    times_ms = np.asarray(times) * 1e3
+    return {"median_ms": float(np.median(times_ms)), "min_ms": float(times_ms.min())}
+
+
+__all__ = ["make_session", "torch_vs_ort", "run_pipeline", "int8_vs_fp32", "benchmark"]

@@ -1,0 +1,159 @@
+"""Static int8 QDQ quantization of the exported graphs (onnxruntime.quantization).
+
+Policy (MODEL.md measurements on a 2-core CPU): dynamic quantization is 5-7x
+*slower* than fp32 for convolutions, 3D convolutions are 5x slower in int8, so
+
+* ``encoder``: every 2D Conv (FeatureNet + ResNet18 trunk + projections) -> int8
+  (activations uint8 per-tensor, weights int8 per-channel).
+* ``render`` / ``render_heat`` / ``render_rgb`` / ``query``: the head layers, which are 1x1 Convs (the
+  model's per-point matrix products) -> int8. The camera MatMuls (3x3, 3x4 geometry), GridSample,
+  softmax / sigmoid, and the compositing (Exp, Log, CumSum) stay float: quantizing geometry would
+  move points by whole pixels, and the compositing needs the dynamic range.
+* ``volume``: stays float entirely (3D convs, plane sweep, softmax over planes).
+
+Weights are quantized with ``reduce_range`` (7-bit) by default: on AVX2 CPUs without VNNI (this
+machine, and typical edge x86) u8s8 products can saturate otherwise.
+
+Calibration: a :class:`FeedsReader` replays input dicts collected by running the float pipeline on
+calibration frames (:func:`calibration_feeds`).
+"""
+from __future__ import annotations
+
+import logging
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+import onnx
+from onnxruntime.quantization import (
+    CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static,
+)
+from onnxruntime.quantization.shape_inference import quant_pre_process
+
+from ghnerf_runtime.contract import ModelContract
+
+log = logging.getLogger(__name__)
+
+
+class FeedsReader(CalibrationDataReader):
+    """A CalibrationDataReader over a list of ``{input name: array}`` dicts."""
+
+    def __init__(self, feeds: Sequence[dict[str, np.ndarray]]):
+        if not feeds:
+            raise ValueError("calibration needs at least one feed dict")
+        self.feeds = list(feeds)
+        self._it = iter(self.feeds)
+
+    def get_next(self) -> dict[str, np.ndarray] | None:
+        return next(self._it, None)
+
+    def rewind(self) -> None:
+        self._it = iter(self.feeds)
+
+
+@dataclass
+class QuantPolicy:
+    """How one graph is quantized (``None`` policy: left float)."""
+
+    op_types: tuple[str, ...] = ("Conv",)
+    """Op types given QDQ pairs; everything else stays float."""
+    per_channel: bool = True
+    reduce_range: bool = True
+    """7-bit weights: avoids u8s8 saturation on AVX2 without VNNI."""
+    calibrate_method: str = "MinMax"
+    """``MinMax``, ``Percentile`` or ``Entropy``."""
+    exclude_name_contains: tuple[str, ...] = ()
+    """Nodes whose name contains any of these stay float."""
+    extra_options: dict = field(default_factory=dict)
+
+
+#: Default policy per graph; ``None`` = stays float.
+POLICIES: dict[str, QuantPolicy | None] = {
+    "encoder": QuantPolicy(),
+    "volume": None,
+    "render": QuantPolicy(),
+    "render_heat": QuantPolicy(),
+    "render_rgb": QuantPolicy(),
+    "query": QuantPolicy(),
+}
+
+
+def _nodes_to_exclude(model: onnx.ModelProto, policy: QuantPolicy) -> list[str]:
+    return [n.name for n in model.graph.node if any(s in n.name for s in policy.exclude_name_contains)]
+
+
+def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],
+                   policy: QuantPolicy | None, graph: str) -> Path:
+    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract."""
+    from training.export.export import stamp_metadata
+
+    fp32_path, out_path = Path(fp32_path), Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    contract = ModelContract.from_metadata({p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props})
+    if policy is None:
+        shutil.copyfile(fp32_path, out_path)
+        stamp_metadata(out_path, contract, graph, "fp32")
+        return out_path
+    with tempfile.TemporaryDirectory() as tmp:
+        pre = Path(tmp) / "pre.onnx"
+        try:
+            quant_pre_process(str(fp32_path), str(pre), skip_symbolic_shape=False)
+        except Exception as e:  # symbolic shape inference can fail on exotic graphs; quantize unprepared
+            log.warning("quant_pre_process failed for %s (%s); quantizing the raw graph", graph, e)
+            shutil.copyfile(fp32_path, pre)
+        model = onnx.load(str(pre))
+        quantize_static(
+            str(pre), str(out_path), FeedsReader(feeds),
+            quant_format=QuantFormat.QDQ,
+            op_types_to_quantize=list(policy.op_types),
+            nodes_to_exclude=_nodes_to_exclude(model, policy),
+            per_channel=policy.per_channel,
+            reduce_range=policy.reduce_range,
+            activation_type=QuantType.QUInt8,
+            weight_type=QuantType.QInt8,
+            calibrate_method=getattr(CalibrationMethod, policy.calibrate_method),
+            extra_options=dict(policy.extra_options),
+        )
+    stamp_metadata(out_path, contract, graph, "int8")
+    log.info("quantized %s -> %s", graph, out_path)
+    return out_path
+
+
+def quantize_all(fp32_paths: dict[str, Path], out_dir: str | Path, feeds: dict[str, list[dict[str, np.ndarray]]],
+                 policies: dict[str, QuantPolicy | None] | None = None, suffix: str = ".int8") -> dict[str, Path]:
+    """Quantize every graph in ``fp32_paths`` to ``<out_dir>/<graph><suffix>.onnx``."""
+    policies = {**POLICIES, **(policies or {})}
+    out_dir = Path(out_dir)
+    return {g: quantize_graph(p, out_dir / f"{g}{suffix}.onnx", feeds[g], policies.get(g), g)
+            for g, p in fp32_paths.items()}
+
+
+def calibration_feeds(model, frames: Iterable, graphs: Sequence[str], rays_per_target: int | None = None
+                      ) -> dict[str, list[dict[str, np.ndarray]]]:
+    """Inputs of every graph for each calibration frame, from the float torch model.
+
+    Args:
+        model: the :class:`~training.model.ghnerf.GHNeRF` (eval mode is set temporarily).
+        frames: items accepted by :func:`training.export.export.example_inputs` as ``images``
+            (``(2, 3, H, W)`` RGB [0, 1] tensors), or ready :class:`ExampleInputs`.
+        rays_per_target: subsample the rays (calibration cost), default all.
+    """
+    from training.export.export import ExampleInputs, example_inputs
+
+    contract = model.contract()
+    feeds: dict[str, list[dict[str, np.ndarray]]] = {g: [] for g in graphs}
+    for i, frame in enumerate(frames):
+        ex = frame if isinstance(frame, ExampleInputs) else example_inputs(model, images=frame, seed=i)
+        for g in graphs:
+            d = ex.numpy(contract.graph(g))
+            if rays_per_target and "ray_uv" in d and d["ray_uv"].shape[1] > rays_per_target:
+                idx = np.linspace(0, d["ray_uv"].shape[1] - 1, rays_per_target).astype(int)
+                d["ray_uv"] = np.ascontiguousarray(d["ray_uv"][:, idx])
+            feeds[g].append(d)
+    return feeds
+
+
+__all__ = ["FeedsReader", "QuantPolicy", "POLICIES", "quantize_graph", "quantize_all", "calibration_feeds"]

@@ -1,0 +1,94 @@
+"""Training losses: ``l_col + 0.5 l_heat`` (+ SSIM patch loss as the perceptual substitute,
++ optional ``0.01 l_coord``), summed over the cascade levels (ENeRF supervises every level).
+
+GHNeRF uses ``l_col + 0.01 l_perc + 0.5 l_heat`` with a VGG perceptual loss; no VGG
+weights are obtainable here, so ``l_perc`` is replaced by ``1 - SSIM`` over ray
+patches (needs the rays of a target to form a ``patch_shape`` patch, row-major).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from training.model.config import Config
+
+
+@dataclass
+class LossConfig(Config):
+    """Loss weights."""
+
+    colour_weight: float = 1.0
+    """l_col: MSE of the rendered colour."""
+    heat_weight: float = 0.5
+    """l_heat: MSE of the rendered joint heatmaps (GHNeRF: 0.5)."""
+    ssim_weight: float = 0.01
+    """1 - SSIM over ray patches, the stand-in for GHNeRF's 0.01 l_perc (VGG). 0 disables."""
+    coord_weight: float = 0.0
+    """l_coord: MSE of g_co's regressed sample coordinates (metres); GHNeRF's optional 0.01."""
+    level_weights: tuple[float, ...] = ()
+    """Weight of each cascade level, coarse to fine (empty: 1.0 each)."""
+    ssim_window: int = 7
+    """SSIM window (uniform), in rays."""
+
+
+def ssim(x: Tensor, y: Tensor, window: int = 7, c1: float = 0.01 ** 2, c2: float = 0.03 ** 2) -> Tensor:
+    """Mean SSIM of images ``(B, C, h, w)`` in ``[0, 1]`` with a uniform ``window`` (valid positions only)."""
+    window = min(window, x.shape[-1], x.shape[-2])
+    mu_x, mu_y = F.avg_pool2d(x, window, 1), F.avg_pool2d(y, window, 1)
+    sxx = F.avg_pool2d(x * x, window, 1) - mu_x ** 2
+    syy = F.avg_pool2d(y * y, window, 1) - mu_y ** 2
+    sxy = F.avg_pool2d(x * y, window, 1) - mu_x * mu_y
+    num = (2 * mu_x * mu_y + c1) * (2 * sxy + c2)
+    den = (mu_x ** 2 + mu_y ** 2 + c1) * (sxx + syy + c2)
+    return (num / den).mean()
+
+
+def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
+                   patch_shape: tuple[int, int] | None = None) -> dict[str, Tensor]:
+    """Loss terms and their weighted total (``"loss"``).
+
+    Args:
+        outputs: :meth:`GHNeRF.forward` output (``{"levels": [...]}``).
+        batch: ``rgb`` ``(B, R, 3)`` target colour (subject over the model's background), ``heatmaps``
+            ``(B, R, J)`` Gaussian ground-truth heatmaps of the same rays.
+        patch_shape: ``(h, w)`` with ``h * w == R`` when the rays of each target form a row-major patch
+            (enables the SSIM term).
+
+    Returns:
+        ``loss`` plus per level ``l{i}_col``, ``l{i}_heat`` [, ``l{i}_ssim``, ``l{i}_coord``].
+    """
+    levels = outputs["levels"]
+    weights = config.level_weights or (1.0,) * len(levels)
+    if len(weights) != len(levels):
+        raise ValueError(f"level_weights has {len(weights)} entries for {len(levels)} levels")
+    terms: dict[str, Tensor] = {}
+    total = torch.zeros((), device=batch["rgb"].device)
+    for i, (out, lw) in enumerate(zip(levels, weights)):
+        level_total = torch.zeros_like(total)
+        if "rgb" in out and config.colour_weight:
+            terms[f"l{i}_col"] = F.mse_loss(out["rgb"], batch["rgb"])
+            level_total = level_total + config.colour_weight * terms[f"l{i}_col"]
+        if "heatmaps" in out and config.heat_weight:
+            terms[f"l{i}_heat"] = F.mse_loss(out["heatmaps"], batch["heatmaps"])
+            level_total = level_total + config.heat_weight * terms[f"l{i}_heat"]
+        if "rgb" in out and config.ssim_weight and patch_shape is not None:
+            h, w = patch_shape
+            B, R, _ = out["rgb"].shape
+            if h * w != R:
+                raise ValueError(f"patch_shape {patch_shape} does not match {R} rays")
+            pred = out["rgb"].transpose(1, 2).reshape(B, 3, h, w)
+            gt = batch["rgb"].transpose(1, 2).reshape(B, 3, h, w)
+            terms[f"l{i}_ssim"] = 1.0 - ssim(pred, gt, config.ssim_window)
+            level_total = level_total + config.ssim_weight * terms[f"l{i}_ssim"]
+        if config.coord_weight and "coord" in out:
+            terms[f"l{i}_coord"] = F.mse_loss(out["coord"], out["points"].detach())
+            level_total = level_total + config.coord_weight * terms[f"l{i}_coord"]
+        total = total + lw * level_total
+    terms["loss"] = total
+    return terms
+
+
+__all__ = ["LossConfig", "ssim", "compute_losses"]

@@ -1,0 +1,177 @@
+"""ResNet18 human encoder (GHNeRF's second encoder), pixelNeRF-style multi-level features.
+
+The trunk's module names follow torchvision's ``resnet18`` exactly (``conv1``,
+``bn1``, ``layer1``..``layer4``, each a list of ``BasicBlock`` with ``conv1``,
+``bn1``, ``conv2``, ``bn2`` and ``downsample.0`` / ``downsample.1``), so a
+torchvision state dict loads with strict key matching for the layers in use
+(:func:`load_torchvision_resnet18`). Only the layers up to ``num_layers`` are
+built; torchvision's ``fc`` (and ``layer4`` when ``num_layers == 3``) are
+dropped on load. From scratch by default (no ImageNet weights on these
+machines); ``init`` takes the path of a torchvision-format ``resnet18.pth``.
+
+Head: the stem (after max-pool, 64 ch @ 1/4) and every layer output go through
+their own 1x1 conv to ``out_channels``, are bilinearly resized to
+``out_stride`` and summed. Because the 1x1 conv and bilinear resize are both
+linear, this equals pixelNeRF's "upsample, concatenate, project" but runs the
+projection at each level's low resolution.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from training.model.config import Config
+
+#: Channels and strides of the trunk outputs used by the head.
+TRUNK_LEVELS = {"stem": (64, 4), "layer1": (64, 4), "layer2": (128, 8), "layer3": (256, 16), "layer4": (512, 32)}
+
+
+@dataclass
+class HumanEncoderConfig(Config):
+    """ResNet18 human encoder."""
+
+    num_layers: int = 3
+    """Residual layers used (2, 3 or 4). MODEL.md: to layer3 int8 1.5 ms, to layer4 1.9 ms at 128^2."""
+    out_channels: int = 32
+    """Channels of ``human_feat`` (pixel-aligned human features)."""
+    out_stride: int = 4
+    """Stride of ``human_feat`` w.r.t. the input image."""
+    init: str | None = None
+    """Path of a torchvision-format resnet18 state dict (ImageNet weights), or None for scratch."""
+
+
+class BasicBlock(nn.Module):
+    """torchvision's ``BasicBlock`` layout (same attribute names, same keys)."""
+
+    expansion = 1
+
+    def __init__(self, inplanes: int, planes: int, stride: int = 1):
+        super().__init__()
+        self.conv1 = nn.Conv2d(inplanes, planes, 3, stride, 1, bias=False)
+        self.bn1 = nn.BatchNorm2d(planes)
+        self.relu = nn.ReLU(inplace=True)
+        self.conv2 = nn.Conv2d(planes, planes, 3, 1, 1, bias=False)
+        self.bn2 = nn.BatchNorm2d(planes)
+        self.downsample: nn.Module | None = None
+        if stride != 1 or inplanes != planes:
+            self.downsample = nn.Sequential(nn.Conv2d(inplanes, planes, 1, stride, bias=False), nn.BatchNorm2d(planes))
+
+    def forward(self, x: Tensor) -> Tensor:
+        identity = x if self.downsample is None else self.downsample(x)
+        out = self.relu(self.bn1(self.conv1(x)))
+        out = self.bn2(self.conv2(out))
+        return self.relu(out + identity)
+
+
+class ResNet18Trunk(nn.Module):
+    """torchvision ``resnet18`` without ``avgpool``/``fc``, cut after ``num_layers`` layers."""
+
+    def __init__(self, num_layers: int = 4):
+        super().__init__()
+        if num_layers not in (1, 2, 3, 4):
+            raise ValueError(f"num_layers must be 1..4, got {num_layers}")
+        self.num_layers = num_layers
+        self.conv1 = nn.Conv2d(3, 64, 7, 2, 3, bias=False)
+        self.bn1 = nn.BatchNorm2d(64)
+        self.relu = nn.ReLU(inplace=True)
+        self.maxpool = nn.MaxPool2d(3, 2, 1)
+        inplanes = 64
+        for i, planes in enumerate((64, 128, 256, 512)[:num_layers]):
+            stride = 1 if i == 0 else 2
+            self.add_module(f"layer{i + 1}", nn.Sequential(BasicBlock(inplanes, planes, stride),
+                                                           BasicBlock(planes, planes, 1)))
+            inplanes = planes
+        for m in self.modules():
+            if isinstance(m, nn.Conv2d):
+                nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
+        # Zero-init the last BN of each block (torchvision's zero_init_residual): stabler from scratch.
+        for m in self.modules():
+            if isinstance(m, BasicBlock):
+                nn.init.zeros_(m.bn2.weight)
+
+    @property
+    def level_names(self) -> list[str]:
+        return ["stem"] + [f"layer{i + 1}" for i in range(self.num_layers)]
+
+    def forward(self, x: Tensor) -> dict[str, Tensor]:
+        out = {"stem": self.maxpool(self.relu(self.bn1(self.conv1(x))))}
+        h = out["stem"]
+        for i in range(self.num_layers):
+            h = getattr(self, f"layer{i + 1}")(h)
+            out[f"layer{i + 1}"] = h
+        return out
+
+
+def used_keys_filter(state_dict: Mapping[str, Tensor], num_layers: int) -> dict[str, Tensor]:
+    """Keep the keys of a torchvision resnet18 state dict that a ``num_layers`` trunk uses."""
+    dropped = ("fc.",) + tuple(f"layer{i}." for i in range(num_layers + 1, 5))
+    return {k: v for k, v in state_dict.items() if not k.startswith(dropped)}
+
+
+def load_torchvision_resnet18(trunk: ResNet18Trunk, source: str | Path | Mapping[str, Tensor]) -> list[str]:
+    """Load torchvision resnet18 weights into ``trunk`` with strict key matching for the used layers.
+
+    Args:
+        trunk: the trunk to fill.
+        source: a path to a ``torch.save``'d state dict (``resnet18-f37072fd.pth``) or the dict itself;
+            a checkpoint wrapping it under ``"state_dict"`` or ``"model"`` is unwrapped.
+
+    Returns:
+        The keys that were dropped because the trunk does not use them (``fc.*``, deeper layers).
+
+    Raises:
+        KeyError / RuntimeError: a used key is missing, unexpected or mis-shaped (torch's strict load message).
+    """
+    if isinstance(source, (str, Path)):
+        state = torch.load(str(source), map_location="cpu", weights_only=True)
+    else:
+        state = dict(source)
+    for wrapper in ("state_dict", "model"):
+        if wrapper in state and isinstance(state[wrapper], Mapping):
+            state = dict(state[wrapper])
+    state = {k.removeprefix("module."): v for k, v in state.items()}
+    used = used_keys_filter(state, trunk.num_layers)
+    trunk.load_state_dict(used, strict=True)
+    return sorted(set(state) - set(used))
+
+
+class HumanEncoder(nn.Module):
+    """ResNet18 trunk + per-level 1x1 projections summed at ``out_stride``."""
+
+    def __init__(self, config: HumanEncoderConfig):
+        super().__init__()
+        self.config = config
+        self.trunk = ResNet18Trunk(config.num_layers)
+        self.proj = nn.ModuleDict({
+            name: nn.Conv2d(TRUNK_LEVELS[name][0], config.out_channels, 1) for name in self.trunk.level_names
+        })
+        if config.init:
+            load_torchvision_resnet18(self.trunk, config.init)
+
+    @property
+    def out_channels(self) -> int:
+        return self.config.out_channels
+
+    def forward(self, x: Tensor) -> Tensor:
+        """``x`` ``(S, 3, H, W)`` normalised images -> ``(S, out_channels, H / out_stride, W / out_stride)``."""
+        H, W = x.shape[-2:]
+        size = (H // self.config.out_stride, W // self.config.out_stride)
+        feats = self.trunk(x)
+        out = None
+        for name, f in feats.items():
+            p = self.proj[name](f)
+            if p.shape[-2:] != size:
+                p = F.interpolate(p, size=size, mode="bilinear", align_corners=False)
+            out = p if out is None else out + p
+        return out
+
+
+HumanEncoderConfig._target = HumanEncoder
+
+__all__ = ["HumanEncoderConfig", "HumanEncoder", "ResNet18Trunk", "BasicBlock", "load_torchvision_resnet18",
+           "used_keys_filter", "TRUNK_LEVELS"]

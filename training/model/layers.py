@@ -1,0 +1,32 @@
+"""Small building blocks shared by the 2D and 3D networks."""
+from __future__ import annotations
+
+from torch import nn
+
+
+def conv_bn_relu(cin: int, cout: int, kernel: int = 3, stride: int = 1, norm: bool = True) -> nn.Sequential:
+    """``Conv2d -> BatchNorm2d -> ReLU`` (BatchNorm folds into the conv at export)."""
+    layers: list[nn.Module] = [nn.Conv2d(cin, cout, kernel, stride, kernel // 2, bias=not norm)]
+    if norm:
+        layers.append(nn.BatchNorm2d(cout))
+    layers.append(nn.ReLU(inplace=True))
+    return nn.Sequential(*layers)
+
+
+def conv_bn_relu_3d(cin: int, cout: int, kernel: int = 3, stride: int = 1, norm: bool = True) -> nn.Sequential:
+    """``Conv3d -> BatchNorm3d -> ReLU``."""
+    layers: list[nn.Module] = [nn.Conv3d(cin, cout, kernel, stride, kernel // 2, bias=not norm)]
+    if norm:
+        layers.append(nn.BatchNorm3d(cout))
+    layers.append(nn.ReLU(inplace=True))
+    return nn.Sequential(*layers)
+
+
+def mlp(dims: list[int], last_activation: bool = False) -> nn.Sequential:
+    """``Linear -> ReLU -> ... -> Linear`` over the last axis (exports as MatMul + Add)."""
+    layers: list[nn.Module] = []
+    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        layers.append(nn.Linear(a, b))
+        if i < len(dims) - 2 or last_activation:
+            layers.append(nn.ReLU(inplace=True))
+    return nn.Sequential(*layers)
