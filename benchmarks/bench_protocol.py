@@ -3,7 +3,8 @@
     python benchmarks/bench_protocol.py [--frames 20000] [--repeats 7]
 
 Measures quantisation + packing + CRC-16 + COBS + delimiter (``encode(joints_message(frame))``),
-and for reference the stream decoder on the same bytes. Prints the median time
+and for reference the stream decoder on the same bytes and the VMC output's
+per-frame work (bone solve + OSC bundle), which runs on the sink's worker thread. Prints the median time
 per frame over ``--repeats`` runs and the frames per second it implies.
 Figures go in docs/protocol.md with the command that produced them.
 """
@@ -21,6 +22,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 
 from firmware_host.protocol import JointFrame, StreamDecoder, encode, joints_message  # noqa: E402
+from firmware_host.sinks.vmc_osc import build_bundle  # noqa: E402
+from firmware_host.sinks.vmc_pose import solve_pose  # noqa: E402
 
 
 def _frames(n: int) -> list[JointFrame]:
@@ -51,10 +54,13 @@ def main() -> None:
     wire = [encode(joints_message(f, 0)) for f in frames]
     decoder = StreamDecoder()
     decode_s = _time_per_item(decoder.feed, wire, args.repeats)
+    vmc_frames = frames[: max(1, args.frames // 50)]
+    vmc_s = _time_per_item(lambda f: build_bundle(solve_pose(f.joints_3d), 0.0), vmc_frames, args.repeats)
     print(f"python {platform.python_version()} numpy {np.__version__} on {platform.machine()}, "
           f"{args.frames} frames x {args.repeats} runs, {len(wire[0])} wire bytes per frame")
     print(f"encode (quantise+pack+crc+cobs): median {encode_s * 1e6:.1f} us/frame = {1 / encode_s:,.0f} frames/s")
     print(f"decode (stream decoder):          median {decode_s * 1e6:.1f} us/frame = {1 / decode_s:,.0f} frames/s")
+    print(f"vmc (bone solve + OSC bundle):    median {vmc_s * 1e6:.1f} us/frame = {1 / vmc_s:,.0f} frames/s")
 
 
 if __name__ == "__main__":

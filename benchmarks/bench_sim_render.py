@@ -1,7 +1,7 @@
 """Median render time of the simulated scene: a 640x480 pair of the default rig, and single
 small target views (128x128, 256x256) as the training dataset renders them.
 
-Usage: ``python benchmarks/bench_sim_render.py [--repeats 60] [--motion walk] [--no-truth]``
+Usage: ``.venv/bin/python benchmarks/bench_sim_render.py [--repeats 60] [--motion walk] [--no-truth]``
 
 Each measurement renders a new scene time (so poses are never reused); "cached" views reuse a
 camera (its rays and room background are cached), "fresh" views use a new camera every time.
@@ -9,12 +9,16 @@ camera (its rays and room background are cached), "fresh" views use a new camera
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from drivers.sim import RigPlacement, SceneConfig, SimScene
-from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script without installing
+
+from drivers.sim import RigPlacement, SceneConfig, SimScene  # noqa: E402
+from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at  # noqa: E402
 
 
 def _median_ms(fn, repeats: int) -> tuple[float, float]:

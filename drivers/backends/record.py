@@ -18,10 +18,13 @@ Recorder options (inner backends never see them, so none may reuse these names):
 * ``jpeg_quality``: 1..100 (default 95).
 * ``write_queue``: frames buffered for the writers (default 64).
 * ``writers``: writer threads (default 2; encoding releases the GIL).
+* ``lossless``: ``1`` makes the reader wait for a free queue slot instead of
+  dropping the frame: for offline recording (e.g. ``record+sim`` on a
+  ``ManualClock``, which reads faster than real time), never for a live rig.
 
-Recording never stalls the reader: frames go into a bounded queue drained by
-writer threads; when it is full the frame is not recorded and counted in
-``stats.writes_dropped``. Every frame the inner camera delivered is recorded,
+Recording never stalls the reader (unless ``lossless=1``): frames go into a
+bounded queue drained by writer threads; when it is full the frame is not
+recorded and counted in ``stats.writes_dropped``. Every frame the inner camera delivered is recorded,
 paired or not, so a replay meets the same pairing situations. A write failure
 (disk full...) is raised once from the next ``read()`` as
 :class:`RigOperationError`; after that frames pass through unrecorded.
@@ -57,7 +60,7 @@ from drivers.url import RigUrl
 log = logging.getLogger(__name__)
 
 #: Options the recorder consumes from the URL.
-RECORD_OPTIONS = ("out", "image_format", "jpeg_quality", "write_queue", "writers")
+RECORD_OPTIONS = ("out", "image_format", "jpeg_quality", "write_queue", "writers", "lossless")
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,7 @@ class RecordOptions:
     jpeg_quality: int = 95
     write_queue: int = 64
     writers: int = 2
+    lossless: bool = False
 
     @classmethod
     def take_from(cls, url: RigUrl, out: str | Path | None = None) -> "RecordOptions":
@@ -83,6 +87,7 @@ class RecordOptions:
             jpeg_quality=url.take_int("jpeg_quality", 95, lo=1, hi=100),
             write_queue=url.take_int("write_queue", 64, lo=1, hi=10_000),
             writers=url.take_int("writers", 2, lo=1, hi=16),
+            lossless=url.take_bool("lossless", False),
         )
 
 
@@ -138,7 +143,7 @@ class RecordingWriter:
         log.info("recording to %s (%s images)", self.directory, self.options.image_format)
 
     def submit(self, frame: Frame) -> None:
-        """Queue ``frame`` for writing; never blocks (a full queue or a failed writer drops it, counted)."""
+        """Queue ``frame`` for writing; a full queue or a failed writer drops it, counted (``lossless``: waits)."""
         if self.error is not None:
             self.writes_dropped += 1
             return
@@ -154,7 +159,7 @@ class RecordingWriter:
             scene_time_s=frame.scene_time_s,
         )
         try:
-            self._queue.put_nowait((frame, row))
+            self._queue.put((frame, row), block=self.options.lossless)
         except queue.Full:
             self.writes_dropped += 1
             return

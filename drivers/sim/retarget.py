@@ -119,11 +119,10 @@ def map_joints(clip: BvhClip) -> dict[str, int]:
     common = [k for k in chain_r if k in chain_l]
     if common and common[0] != found["pelvis"]:
         found["chest"] = common[0]
-        between = [k for k in _ancestors(clip, common[0])[1:] if k != found["pelvis"]]
-        if found["pelvis"] in _ancestors(clip, common[0]):
-            between = between[: _ancestors(clip, common[0]).index(found["pelvis"]) - 1]
-            if between:
-                found["spine"] = between[len(between) // 2]
+        chain = _ancestors(clip, common[0])
+        between = chain[1 : chain.index(found["pelvis"])] if found["pelvis"] in chain else []
+        if between:
+            found["spine"] = between[len(between) // 2]
     return found
 
 

@@ -13,7 +13,7 @@ backend adds those on top of this scene).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +29,14 @@ from drivers.sim.retarget import BvhMotion
 from drivers.sim.rotations import rot_y
 from drivers.sim.sensor import SensorModel
 from drivers.sim.skeleton import BodyParams, Skeleton
+from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.geometry import Camera, WorkingVolume
 
 # Independent random streams derived from the seed, one per purpose.
 _BODY, _LOOK, _ROOM, _RANDOM_SCENE = 1, 2, 3, 4
 # Body frame (x left, y up, z forward) -> rig frame for a person facing the rig (heading 0).
 _FACING_RIG = np.diag([1.0, -1.0, -1.0])
+_MID_HIP = JOINT_INDEX["MidHip"]
 
 
 @dataclass(frozen=True)
@@ -117,6 +119,9 @@ def _is_numeric(value) -> bool:
 
 class SimScene:
     """A simulated person in a room, renderable from any calibrated camera at any time.
+
+    Holds small caches (the last pose, per-camera rays and backgrounds), so one instance must not
+    be shared between threads; build one per thread (same config, same output).
 
     Args:
         config: the scene; ``None`` uses ``SceneConfig()`` (seed 0, waving).
@@ -209,8 +214,9 @@ def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Seq
     heading, light, exposure and noise.
 
     Args:
-        volume: where the person may stand (their standing point stays 0.3 m inside it in x and
-            z); default: the working volume of the default :class:`RigPlacement`.
+        volume: where the person may be: the pelvis stays 0.3 m inside it in x and z over the
+            whole motion loop (when the volume is large enough); default: the working volume of
+            the default :class:`RigPlacement`.
         motions: procedural motion names to choose from.
     """
     from drivers.sim.placement import RigPlacement  # local: placement is only needed for the default volume
@@ -244,4 +250,14 @@ def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Seq
             shot_noise=float(rng.uniform(0.0, 0.5)),
         ),
     )
-    return SimScene(config)
+    scene = SimScene(config)
+    # Motions that travel (walking a circle) must keep the whole loop inside the volume: shift
+    # the standing point so the pelvis' path fits (centred when it cannot fit).
+    path = np.array([scene.joints_3d(t)[_MID_HIP, [0, 2]] for t in np.linspace(0.0, scene.period_s, 16, endpoint=False)])
+    lo_xz, hi_xz = lo[[0, 2]] + inset[[0, 2]], hi[[0, 2]] - inset[[0, 2]]
+    span_lo, span_hi = path.min(axis=0), path.max(axis=0)
+    shift = np.where(span_hi - span_lo > hi_xz - lo_xz, 0.5 * (lo_xz + hi_xz) - 0.5 * (span_lo + span_hi),
+                     np.maximum(lo_xz - span_lo, 0.0) + np.minimum(hi_xz - span_hi, 0.0))
+    if np.any(np.abs(shift) > 1e-9):
+        scene = SimScene(replace(config, position_xz=(x + float(shift[0]), z + float(shift[1]))))
+    return scene

@@ -229,13 +229,7 @@ class Sink(ABC):
         if was:
             self._disconnect()
 
-    def _fail(self, e: Exception, counter: str) -> None:
-        with self._cond:
-            setattr(self, counter, getattr(self, counter) + 1)
-            self._last_error = str(e)
-            self._cond.notify_all()
-
-    def _try_connect(self, backoff: Backoff) -> bool:
+    def _try_connect(self, backoff: Backoff) -> None:
         try:
             self._connect()
             with self._cond:
@@ -243,16 +237,22 @@ class Sink(ABC):
                 self._connects += 1
                 self._cond.notify_all()
             self._on_connected()
-        except SinkUnavailableError as e:
+        except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: the link itself is up
+            with self._cond:
+                self._last_error = str(e)
+        except Exception as e:  # SinkUnavailableError, or a backend bug: retry later either way
+            if isinstance(e, SinkUnavailableError):
+                _log.info("%s: %s; retrying", self.url, e)
+            else:
+                _log.exception("%s: connect failed unexpectedly; retrying", self.url)
             self._release()
-            self._fail(e, "_connect_failures")
-            _log.info("%s: %s; retrying", self.url, e)
+            with self._cond:
+                self._connect_failures += 1
+                self._last_error = str(e) if isinstance(e, SinkUnavailableError) else f"{type(e).__name__}: {e}"
+                self._cond.notify_all()
             self._stop.wait(backoff.next_delay())
-            return False
-        except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: keep the link
-            self._fail(e, "_connect_failures")
+            return
         backoff.reset()
-        return True
 
     def _next_frame(self) -> Optional[tuple[JointFrame, int]]:
         with self._cond:

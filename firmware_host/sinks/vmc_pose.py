@@ -61,10 +61,19 @@ def rig_to_unity(points: np.ndarray) -> np.ndarray:
     return np.asarray(points, dtype=np.float64) * _FLIP_Y
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    # np.cross costs ~20 us per call on 3-vectors (axis juggling); this is ~3x cheaper.
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a*b of (..., 4) (x, y, z, w) quaternions: rotate by b, then a."""
-    ax, ay, az, aw = np.moveaxis(np.asarray(a, np.float64), -1, 0)
-    bx, by, bz, bw = np.moveaxis(np.asarray(b, np.float64), -1, 0)
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
     return np.stack(
         [
             aw * bx + ax * bw + ay * bz - az * by,
@@ -84,8 +93,9 @@ def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate (..., 3) vectors by unit (..., 4) quaternions."""
     q = np.asarray(q, np.float64)
     u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    v = np.asarray(v, np.float64)
+    t = 2.0 * _cross(u, v)
+    return v + w * t + _cross(u, t)
 
 
 def quat_from_matrix(m: np.ndarray) -> np.ndarray:
@@ -116,12 +126,12 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     b = b / np.linalg.norm(b)
     d = float(np.dot(a, b))
     if d < -1.0 + 1e-9:  # opposite: any axis perpendicular to a, 180 degrees
-        axis = np.cross(a, [1.0, 0.0, 0.0])
+        axis = _cross(a, np.array([1.0, 0.0, 0.0]))
         if np.linalg.norm(axis) < 1e-6:
-            axis = np.cross(a, [0.0, 1.0, 0.0])
+            axis = _cross(a, np.array([0.0, 1.0, 0.0]))
         axis /= np.linalg.norm(axis)
         return np.array([*axis, 0.0])
-    q = np.array([*np.cross(a, b), 1.0 + d])
+    q = np.array([*_cross(a, b), 1.0 + d])
     return q / np.linalg.norm(q)
 
 
@@ -151,7 +161,7 @@ def frame_from_axes(right: np.ndarray, up: np.ndarray) -> Optional[np.ndarray]:
     if not np.isfinite(n) or n < 1e-6:
         return None
     y /= n
-    return quat_from_matrix(np.stack([x, y, np.cross(x, y)], axis=1))
+    return quat_from_matrix(np.stack([x, y, _cross(x, y)], axis=1))
 
 
 def frame_from_right_forward(right: np.ndarray, forward: np.ndarray) -> Optional[np.ndarray]:
@@ -163,7 +173,7 @@ def frame_from_right_forward(right: np.ndarray, forward: np.ndarray) -> Optional
     if not np.isfinite(n) or n < 1e-6:
         return None
     z /= n
-    return quat_from_matrix(np.stack([x, np.cross(z, x), z], axis=1))
+    return quat_from_matrix(np.stack([x, _cross(z, x), z], axis=1))
 
 
 # ---- the skeleton -----------------------------------------------------------------------

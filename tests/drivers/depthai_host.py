@@ -11,6 +11,7 @@ Test-only: lives in tests/, never in production code.
 from __future__ import annotations
 
 import datetime
+import threading
 import time
 from pathlib import Path
 
@@ -41,8 +42,15 @@ class CameraNode(dai.node.ThreadedHostNode):
         self.drop = drop
         self.rng = np.random.default_rng(seed)
         self.sent: list[tuple[int, int]] = []  # (index, timestamp_ns) actually sent
+        self.finished = threading.Event()
 
     def run(self) -> None:
+        try:
+            self._run()
+        finally:
+            self.finished.set()
+
+    def _run(self) -> None:
         k = 0
         while self.isRunning():
             due = self.start_ns + int(k * 1e9 / self.fps) + self.offset_ns
@@ -107,3 +115,7 @@ class HostPipelineLink:
         self.closed += 1
         if self.pipeline is not None and self.pipeline.isRunning():
             self.pipeline.stop()
+        # stop() only signals. The pipeline's destructor joins the node threads while holding
+        # the GIL, and these Python nodes need the GIL to finish: wait for them here.
+        for camera in self.cameras:
+            camera.finished.wait(2.0)

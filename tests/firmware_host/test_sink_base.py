@@ -116,6 +116,19 @@ def test_backend_bug_is_counted_not_fatal() -> None:
     assert (s.sent, s.dropped_error) == (1, 1) and "ZeroDivisionError" in (s.last_error or "")
 
 
+def test_unexpected_connect_error_is_retried() -> None:
+    class Flaky(ScriptedSink):
+        def _connect(self) -> None:
+            self.connect_calls += 1
+            if self.connect_calls == 1:
+                raise RuntimeError("driver bug")
+
+    sink = Flaky().start()
+    assert sink.wait_connected(5)
+    s = sink.close()
+    assert s.connect_failures == 1 and s.connects == 1 and "RuntimeError: driver bug" in (s.last_error or "")
+
+
 def test_close_counts_what_could_not_be_flushed() -> None:
     sink = ScriptedSink(queue=8)
     sink.connect_failures_left = 10**6  # never connects

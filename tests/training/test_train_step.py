@@ -47,7 +47,7 @@ def test_two_iterations(variant):
             if p.grad is not None:
                 assert torch.all(torch.isfinite(p.grad))
         opt.step()
-        losses.append(float(terms["loss"]))
+        losses.append(float(terms["loss"].detach()))
     assert all(math.isfinite(v) for v in losses)
     assert {"l0_col", "l0_heat", "l0_ssim", "l1_col", "l1_heat", "l1_coord", "loss"} <= set(terms)
     changed = sum(not torch.equal(a, b.detach()) for a, b in zip(before, model.parameters()))

@@ -5,8 +5,9 @@ Policy (MODEL.md measurements on a 2-core CPU): dynamic quantization is 5-7x
 
 * ``encoder``: every 2D Conv (FeatureNet + ResNet18 trunk + projections) -> int8
   (activations uint8 per-tensor, weights int8 per-channel).
-* ``render`` / ``render_heat`` / ``render_rgb`` / ``query``: the head layers, which are 1x1 Convs (the
-  model's per-point matrix products) -> int8. The camera MatMuls (3x3, 3x4 geometry), GridSample,
+* ``render`` / ``render_heat`` / ``render_rgb`` / ``query``: the hidden head layers, which are 1x1 Convs
+  (the model's per-point matrix products) -> int8; each head's output layer stays float so densities and
+  logits are not rounded to 8 bits before softplus / sigmoid / softmax. The camera MatMuls (3x3, 3x4 geometry), GridSample,
   softmax / sigmoid, and the compositing (Exp, Log, CumSum) stay float: quantizing geometry would
   move points by whole pixels, and the compositing needs the dynamic range.
 * ``volume``: stays float entirely (3D convs, plane sweep, softmax over planes).
@@ -70,14 +71,18 @@ class QuantPolicy:
     extra_options: dict = field(default_factory=dict)
 
 
+#: Last layer of each head: left float so densities, heatmap logits and blend logits reach the
+#: softplus / sigmoid / softmax and the compositing at full precision (and they are tiny).
+HEAD_OUTPUT_LAYERS = ("/g_sigma/", "/g_h_out/", "/g_c/g_c.2/", "/g_co/g_co.2/")
+
 #: Default policy per graph; ``None`` = stays float.
 POLICIES: dict[str, QuantPolicy | None] = {
     "encoder": QuantPolicy(),
     "volume": None,
-    "render": QuantPolicy(),
-    "render_heat": QuantPolicy(),
-    "render_rgb": QuantPolicy(),
-    "query": QuantPolicy(),
+    "render": QuantPolicy(exclude_name_contains=HEAD_OUTPUT_LAYERS),
+    "render_heat": QuantPolicy(exclude_name_contains=HEAD_OUTPUT_LAYERS),
+    "render_rgb": QuantPolicy(exclude_name_contains=HEAD_OUTPUT_LAYERS),
+    "query": QuantPolicy(exclude_name_contains=HEAD_OUTPUT_LAYERS),
 }
 
 
@@ -156,4 +161,4 @@ def calibration_feeds(model, frames: Iterable, graphs: Sequence[str], rays_per_t
     return feeds
 
 
-__all__ = ["FeedsReader", "QuantPolicy", "POLICIES", "quantize_graph", "quantize_all", "calibration_feeds"]
+__all__ = ["FeedsReader", "QuantPolicy", "POLICIES", "HEAD_OUTPUT_LAYERS", "quantize_graph", "quantize_all", "calibration_feeds"]

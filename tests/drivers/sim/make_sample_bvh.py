@@ -4,7 +4,7 @@ The clip is the procedural ``jumping_jacks`` motion on the default body, exporte
 common BVH files look: CMU joint names plus toe joints, a T-pose rest, Z-X-Y Euler channels,
 centimetres, 30 fps, one loop without a repeated first frame. Run from the repository root:
 
-    .venv/bin/python tests/drivers/sim/make_sample_bvh.py
+    .venv/bin/python -m tests.drivers.sim.make_sample_bvh
 """
 from __future__ import annotations
 

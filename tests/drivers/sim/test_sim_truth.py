@@ -6,7 +6,7 @@ import pytest
 
 from drivers.sim import PART_ID, PART_NAMES, RigPlacement, SceneConfig, SensorModel, SimScene
 from drivers.sim.body import PosedBody
-from ghnerf_runtime.body25 import JOINT_INDEX, JOINT_NAMES
+from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at
 
 CASES = [("wave", 0.3, 0.0), ("walk", 1.7, 0.0), ("squat", 1.1, 35.0), ("reach", 0.9, 180.0), ("turn", 2.2, 0.0)]
@@ -205,3 +205,25 @@ def _distance_to_surface(posed: PosedBody, x: np.ndarray) -> float:
         if np.any(_inside(posed, x + r * dirs) != inside_here):
             return float(r)
     return np.inf
+
+
+@pytest.mark.parametrize("dist,eye", [
+    ((), (0.0, -1.3, 0.0)),
+    ((-0.3, 0.09, 0.002, -0.001, -0.01), (0.4, -1.0, 1.6)),  # strong barrel, close: parts leave the view
+    ((), (0.1, -1.0, 2.75)),  # inside the arms' reach: primitives cross the near plane
+])
+def test_culling_drops_no_pixel(dist, eye, monkeypatch):
+    from drivers.sim.raycast import RayGrid, rasterize
+
+    scene = _scene("arm_circles")
+    R, t = look_at(eye, [0.0, -1.1, 3.0])
+    cam = Camera("c", 200, 150, intrinsics_from_fov(200, 150, 70), np.asarray(dist or np.zeros(5)), R, t)
+    local = scene.posed(0.4).transformed(cam.R, cam.t)
+    grid = RayGrid.for_camera(cam)
+    culled = rasterize(local, grid)
+    n = len(local.ell_center) + len(local.cone_a)
+    monkeypatch.setattr(RayGrid, "windows", lambda self, body: np.tile([0, cam.height, 0, cam.width], (n, 1)))
+    full = rasterize(local, grid)
+    np.testing.assert_array_equal(culled.depth, full.depth)
+    np.testing.assert_array_equal(culled.prim, full.prim)
+    assert full.fg_pixel.size > 0

@@ -1,0 +1,29 @@
+"""Shared fixtures of the driver tests."""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+# Threads our backends start (render pool, recorder); none may outlive a test.
+_OUR_THREADS = ("sim-render", "rig-recorder")
+
+
+@pytest.fixture(scope="session")
+def sim_cache(tmp_path_factory):
+    """One pre-render cache for the whole run, so each sim loop is rendered once."""
+    return tmp_path_factory.mktemp("sim-cache")
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_backend_threads():
+    """python-can's leak check, for threads: a closed source leaves nothing running."""
+    yield
+    deadline = time.monotonic() + 2.0
+    while True:
+        leaked = [t.name for t in threading.enumerate() if t.name.startswith(_OUR_THREADS)]
+        if not leaked or time.monotonic() > deadline:
+            break
+        time.sleep(0.01)
+    assert not leaked, f"backend threads still running after the test: {leaked}"

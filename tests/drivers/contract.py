@@ -1,0 +1,147 @@
+"""The rig-source contract: one suite every backend must pass (python-can's back2back idea).
+
+A backend's test module subclasses :class:`RigSourceContract` (the name does not
+start with ``Test``, so pytest collects only the subclasses) and provides:
+
+* :meth:`RigSourceContract.make_source`: an unopened source delivering pairs;
+* :meth:`RigSourceContract.make_stalling_source`: one whose pairs stop (or come
+  slower than ``stall_timeout_s``) after the first pair.
+
+``realtime`` says whether the source runs on the real clock (then timing checks
+get ``slack_s`` of scheduling slack) or on a ``ManualClock`` (exact).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from drivers import FramePair, RigOperationError, RigSource, RigTimeoutError
+
+
+class RigSourceContract:
+    """Mix into a ``Test...`` class; see the module docstring."""
+
+    #: pairs read by the shared session
+    n_pairs = 20
+    #: first-read timeout (device start-up)
+    first_timeout_s = 5.0
+    #: timeout used by the stall test
+    stall_timeout_s = 0.25
+    #: real clock (True) or ManualClock (False)
+    realtime = False
+    slack_s = 0.25
+
+    # --------------------------------------------------------------- hooks
+    @classmethod
+    def make_source(cls) -> RigSource:  # pragma: no cover - provided by subclasses
+        raise NotImplementedError
+
+    @classmethod
+    def make_stalling_source(cls) -> RigSource:  # pragma: no cover - provided by subclasses
+        raise NotImplementedError
+
+    # ------------------------------------------------------------ fixtures
+    @pytest.fixture(scope="class")
+    @classmethod
+    def session(cls):
+        """Open once per backend, read ``n_pairs`` pairs: (source, pairs, stats after reading)."""
+        source = cls.make_source()
+        with source:
+            pairs = [source.read(timeout_s=cls.first_timeout_s if i == 0 else 2.0) for i in range(cls.n_pairs)]
+            stats = source.stats
+        return source, pairs, stats
+
+    # --------------------------------------------------------------- tests
+    def test_pairs_arrive(self, session):
+        _, pairs, _ = session
+        assert len(pairs) == self.n_pairs
+        assert all(isinstance(p, FramePair) for p in pairs)
+
+    def test_pairs_are_the_rigs_stereo_pair_in_order(self, session):
+        source, pairs, _ = session
+        names = (source.rig.pair[0].name, source.rig.pair[1].name)
+        for pair in pairs:
+            assert (pair.frames[0].camera, pair.frames[1].camera) == names
+            assert pair.rig is source.rig
+
+    def test_sequence_strictly_increases(self, session):
+        _, pairs, _ = session
+        seqs = [p.sequence for p in pairs]
+        assert all(b > a for a, b in zip(seqs, seqs[1:])), seqs
+
+    def test_pair_skew_within_tolerance(self, session):
+        source, pairs, _ = session
+        tolerance_ns = source.pairing.tolerance_ms * 1e6
+        assert all(p.skew_ns <= tolerance_ns for p in pairs), [p.skew_ns for p in pairs]
+
+    def test_timestamps_and_indices_increase_per_camera(self, session):
+        _, pairs, _ = session
+        for cam in (0, 1):
+            stamps = [p.frames[cam].timestamp_ns for p in pairs]
+            indices = [p.frames[cam].index for p in pairs]
+            assert all(b > a for a, b in zip(stamps, stamps[1:])), stamps
+            assert all(b > a for a, b in zip(indices, indices[1:])), indices
+            assert all(isinstance(t, int) for t in stamps)
+
+    def test_images_have_the_rig_camera_sizes(self, session):
+        source, pairs, _ = session
+        for pair in pairs:
+            for frame, cam in zip(pair.frames, source.rig.pair):
+                assert isinstance(frame.image, np.ndarray)
+                assert frame.image.dtype == np.uint8
+                assert frame.image.shape == (cam.height, cam.width, 3)
+
+    def test_stats_count_what_was_read(self, session):
+        source, pairs, stats = session
+        names = source.rig.pair[0].name, source.rig.pair[1].name
+        assert stats.pairs_out == len(pairs)
+        for name in names:
+            assert stats.frames_in[name] >= len(pairs)
+            assert stats.unpaired[name] >= 0 and stats.camera_gaps[name] >= 0
+        assert stats.pairs_out + stats.pairs_dropped == pairs[-1].sequence + 1
+
+    def test_read_times_out_when_frames_stop(self):
+        with self.make_stalling_source() as source:
+            source.read(timeout_s=self.first_timeout_s)
+            t_clock, t_wall = source.clock.now_ns(), time.monotonic()
+            with pytest.raises(RigTimeoutError):
+                source.read(timeout_s=self.stall_timeout_s)
+            waited = (source.clock.now_ns() - t_clock) / 1e9
+            wall = time.monotonic() - t_wall
+        assert waited >= self.stall_timeout_s - 1e-9
+        if self.realtime:
+            assert wall <= self.stall_timeout_s + self.slack_s
+        else:
+            assert waited == pytest.approx(self.stall_timeout_s, abs=1e-6)
+            assert wall < 1.0  # the manual clock never really sleeps
+
+    def test_timeout_is_also_a_builtin_timeout_error(self):
+        assert issubclass(RigTimeoutError, TimeoutError)
+
+    def test_context_manager_opens_and_closes(self):
+        source = self.make_source()
+        assert not source.is_open
+        with source as entered:
+            assert entered is source and source.is_open
+            source.read(timeout_s=self.first_timeout_s)
+        assert not source.is_open
+
+    def test_close_is_idempotent_and_read_after_close_raises(self):
+        source = self.make_source().open()
+        source.read(timeout_s=self.first_timeout_s)
+        source.close()
+        source.close()
+        with pytest.raises(RigOperationError):
+            source.read(timeout_s=0.1)
+        with pytest.raises(RigOperationError):
+            source.open()  # a closed source stays closed
+
+    def test_read_before_open_raises(self):
+        source = self.make_source()
+        try:
+            with pytest.raises(RigOperationError):
+                source.read(timeout_s=0.1)
+        finally:
+            source.close()

@@ -1,0 +1,53 @@
+"""The rig-source contract on ``replay://``, playing recordings made by ``record+sim://``."""
+import pytest
+
+from drivers import ManualClock, create_rig_source, open_rig
+from tests.drivers.contract import RigSourceContract
+
+
+def record(out, sim_options: str, cache, pairs: int) -> None:
+    with open_rig(f"record+sim://?{sim_options}&cache={cache}&out={out}", clock=ManualClock()) as source:
+        for _ in range(pairs):
+            source.read(timeout_s=5.0)
+
+
+@pytest.fixture(scope="module")
+def takes(tmp_path_factory, sim_cache):
+    """A 40-pair take with jitter, offset and drops, and a 0.5 fps take (pairs 2 s apart)."""
+    root = tmp_path_factory.mktemp("replay-contract")
+    record(root / "take", "width=160&height=120&jitter_ms=1&offset_ms=2&drop=0.05&seed=2", sim_cache, 40)
+    record(root / "slow", "width=160&height=120&fps=0.5", sim_cache, 3)
+    return root / "take", root / "slow"
+
+
+class TestReplayContract(RigSourceContract):
+    """Recorded-speed playback on a ManualClock: the recorded timing, exactly."""
+
+    n_pairs = 30
+
+    @pytest.fixture(autouse=True, scope="class")
+    @classmethod
+    def _takes(cls, takes):
+        cls.take, cls.slow_take = takes
+
+    @classmethod
+    def make_source(cls):
+        return create_rig_source(f"replay://{cls.take}?speed=recorded&policy=all", clock=ManualClock())
+
+    @classmethod
+    def make_stalling_source(cls):
+        return create_rig_source(f"replay://{cls.slow_take}", clock=ManualClock())
+
+
+class TestReplayContractFreeRunning(TestReplayContract):
+    """Free-running playback on the real clock; the slow take still waits at recorded speed."""
+
+    realtime = True
+
+    @classmethod
+    def make_source(cls):
+        return create_rig_source(f"replay://{cls.take}?speed=free")
+
+    @classmethod
+    def make_stalling_source(cls):
+        return create_rig_source(f"replay://{cls.slow_take}?speed=recorded")

@@ -1,0 +1,330 @@
+"""``record+<url>`` and ``replay://``: exact round trips, the file format, and every way a take can be broken."""
+import json
+import time
+
+import numpy as np
+import pytest
+
+from drivers import (
+    EndOfStream,
+    ManualClock,
+    RigConfigError,
+    RigInitializationError,
+    RigOperationError,
+    create_rig_source,
+    open_rig,
+)
+from drivers.backends import record as record_module
+from drivers.backends.record import inner_url_text
+from drivers.backends.recording_format import FRAMES, MANIFEST, read_manifest
+from drivers.url import RigUrl
+
+SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
+
+
+def record(out, cache, pairs=30, sim=SIM, **record_options):
+    extra = "".join(f"&{k}={v}" for k, v in record_options.items())
+    with open_rig(f"record+{sim}&cache={cache}&out={out}{extra}", clock=ManualClock()) as source:
+        read = [source.read(timeout_s=5.0) for _ in range(pairs)]
+    return read, source.stats  # after close: the writers have finished
+
+
+def replay_all(take, options="speed=free"):
+    with open_rig(f"replay://{take}?{options}&policy=all") as source:
+        return list(source)
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory, sim_cache):
+    out = tmp_path_factory.mktemp("rr") / "take"
+    pairs, stats = record(out, sim_cache, lossless=1)  # the ManualClock reads faster than real time
+    return out, pairs, stats
+
+
+def assert_same_frame(a, b, exact_image=True):
+    assert (a.camera, a.index, a.timestamp_ns, a.scene_time_s) == (b.camera, b.index, b.timestamp_ns, b.scene_time_s)
+    if exact_image:
+        assert np.array_equal(a.image, b.image)
+    for name in ("joints_2d", "visible", "mask", "depth", "part_labels"):
+        x, y = getattr(a.truth, name), getattr(b.truth, name)
+        assert x.dtype == y.dtype and np.array_equal(x, y), name
+    assert np.array_equal(a.joints_3d, b.joints_3d)
+
+
+# ----------------------------------------------------------------- round trip
+def test_round_trip_is_exact(take):
+    out, live, _ = take
+    replayed = replay_all(out)
+    assert len(replayed) == len(live)
+    for a, b in zip(live, replayed):
+        assert a.sequence == b.sequence
+        for fa, fb in zip(a.frames, b.frames):
+            assert_same_frame(fa, fb)
+    assert replayed[0].rig.names == live[0].rig.names
+    for ca, cb in zip(live[0].rig.cameras, replayed[0].rig.cameras):
+        assert np.allclose(ca.K, cb.K) and np.allclose(ca.R, cb.R) and np.allclose(ca.t, cb.t)
+
+
+def test_replay_reproduces_the_live_pairing_situation(take):
+    """Every delivered frame is recorded (paired or not), so drops and unpaired frames replay too."""
+    out, _, live_stats = take
+    with open_rig(f"replay://{out}?speed=free&policy=all") as source:
+        list(source)
+        stats = source.stats
+    assert stats.frames_in == live_stats.frames_in
+    assert stats.camera_gaps == live_stats.camera_gaps
+    assert live_stats.frames_written == sum(live_stats.frames_in.values())
+    assert live_stats.writes_dropped == 0
+
+
+def test_manifest_and_journal_describe_the_take(take):
+    out, _, stats = take
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert manifest["format"] == "ghnerf-rig-recording" and manifest["version"] == 1
+    assert manifest["complete"] is True and manifest["image_format"] == "png"
+    assert manifest["rig"]["format"] == "ghnerf-rig"
+    assert manifest["source"].startswith("sim://") and "out=" not in manifest["source"]
+    assert manifest["counters"]["frames_written"] == stats.frames_written
+    rows = [json.loads(line) for line in (out / FRAMES).read_text().splitlines()]
+    assert len(rows) == stats.frames_written
+    assert set(rows[0]) == {"camera", "index", "timestamp_ns", "image", "truth", "scene_time_s"}
+    assert (out / rows[0]["image"]).is_file() and rows[0]["image"].endswith(".png")
+    assert (out / rows[0]["truth"]).is_file()
+
+
+def test_recorded_speed_honours_the_recorded_timing(take):
+    out, live, _ = take
+    clock = ManualClock(123_000_000_000)
+    with open_rig(f"replay://{out}?policy=all", clock=clock) as source:
+        t_first = live[0].frames[0].timestamp_ns
+        for pair in live[:10]:
+            got = source.read(timeout_s=5.0)
+            assert got.timestamps_ns == pair.timestamps_ns  # recorded stamps, unchanged
+            # delivered when the clock reached the later frame's recorded offset
+            assert clock.now_ns() - 123_000_000_000 == max(got.timestamps_ns) - t_first
+
+
+def test_speed_factor_scales_waiting(take):
+    out, live, _ = take
+    clock = ManualClock()
+    with open_rig(f"replay://{out}?speed=2&policy=all", clock=clock) as source:
+        first = source.read(timeout_s=5.0)
+        for _ in range(9):
+            last = source.read(timeout_s=5.0)
+    assert clock.now_ns() == pytest.approx((max(last.timestamps_ns) - min(first.timestamps_ns[:1])) / 2, abs=2)
+
+
+def test_end_of_stream_and_loop(take):
+    out, live, _ = take
+    with open_rig(f"replay://{out}?speed=free&policy=all") as source:
+        for _ in live:
+            source.read(timeout_s=1.0)
+        with pytest.raises(EndOfStream):
+            source.read(timeout_s=1.0)
+    with open_rig(f"replay://{out}?speed=free&loop=1&policy=all") as source:
+        pairs = [source.read(timeout_s=1.0) for _ in range(2 * len(live) + 5)]
+    for cam in (0, 1):
+        stamps = [p.frames[cam].timestamp_ns for p in pairs]
+        indices = [p.frames[cam].index for p in pairs]
+        assert all(b > a for a, b in zip(stamps, stamps[1:]))
+        assert all(b > a for a, b in zip(indices, indices[1:]))
+    assert np.array_equal(pairs[len(live)].images[0], pairs[0].images[0])  # second pass, same pictures
+
+
+def test_jpeg_recording(tmp_path, sim_cache):
+    live, _ = record(tmp_path / "jpg", sim_cache, pairs=5, image_format="jpg", jpeg_quality=90, lossless=1)
+    assert read_manifest(tmp_path / "jpg").image_format == "jpg"
+    replayed = replay_all(tmp_path / "jpg")
+    for a, b in zip(live, replayed):
+        for fa, fb in zip(a.frames, b.frames):
+            assert_same_frame(fa, fb, exact_image=False)
+            error = float(np.abs(fa.image.astype(int) - fb.image.astype(int)).mean())
+            assert error < 8, error  # noisy 40x30 images: JPEG at 90 keeps them close
+
+
+# ----------------------------------------------------------------- recorder behaviour
+def test_recorder_options_never_reach_the_inner_backend(tmp_path):
+    url = RigUrl.parse("sim://?fps=30&out=/tmp/x&image_format=jpg&width=64")
+    options = record_module.RecordOptions.take_from(url)
+    assert (str(options.out), options.image_format) == ("/tmp/x", "jpg")
+    assert inner_url_text(url) == "sim://?fps=30&width=64"
+    assert inner_url_text(RigUrl.parse("replay:///data/my%20take?loop=1")) == "replay:///data/my%20take?loop=1"
+    with pytest.raises(RigConfigError, match="image_format"):
+        create_rig_source(f"record+sim://?out={tmp_path}&image_format=tiff")
+
+
+def test_out_keyword_and_non_empty_directory(tmp_path, sim_cache):
+    source = create_rig_source(f"record+sim://?width=32&height=24&cache={sim_cache}", out=tmp_path / "kw",
+                               clock=ManualClock())
+    with source:
+        source.read(timeout_s=1.0)
+    assert (tmp_path / "kw" / MANIFEST).is_file()
+    with pytest.raises(RigInitializationError, match="not empty"):
+        open_rig(f"record+sim://?width=32&height=24&cache={sim_cache}&out={tmp_path / 'kw'}", clock=ManualClock())
+
+
+def test_a_slow_disk_never_stalls_the_reader(tmp_path, sim_cache, monkeypatch):
+    real_encode = record_module.encode_image
+
+    def slow_encode(*args):
+        time.sleep(0.02)  # a disk far too slow for 200 frames/s
+        return real_encode(*args)
+
+    monkeypatch.setattr(record_module, "encode_image", slow_encode)
+    url = f"record+sim://?width=40&height=30&fps=100&cache={sim_cache}&out={tmp_path / 'slow'}&write_queue=2&writers=1"
+    with open_rig(url) as source:  # the real clock: 100 pairs per second
+        t0 = time.monotonic()
+        pairs = [source.read(timeout_s=1.0) for _ in range(40)]
+        read_time = time.monotonic() - t0
+    stats = source.stats
+    assert [p.sequence for p in pairs] == list(range(40))  # the reader kept up with the camera
+    assert read_time < 0.39 + 0.2
+    assert stats.writes_dropped > 20
+    assert stats.frames_written + stats.writes_dropped == sum(stats.frames_in.values())
+    with open_rig(f"replay://{tmp_path / 'slow'}?speed=free&policy=all") as source:
+        list(source)
+        assert sum(source.stats.frames_in.values()) == stats.frames_written
+        assert sum(source.stats.camera_gaps.values()) > 0  # what was not written shows as gaps
+
+
+def test_a_failing_writer_is_reported_once_then_frames_pass_through(tmp_path, sim_cache, monkeypatch):
+    def broken(*args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(record_module, "encode_image", broken)
+    out = tmp_path / "full"
+    with open_rig(f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}", clock=ManualClock()) as source:
+        source.read(timeout_s=1.0)
+        deadline = time.monotonic() + 2
+        while source._writer.error is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with pytest.raises(RigOperationError, match="No space left"):
+            source.read(timeout_s=1.0)
+        source.read(timeout_s=1.0)  # the camera keeps working
+    assert read_manifest(out).complete is False
+
+
+# ----------------------------------------------------------------- broken takes
+@pytest.fixture
+def copy_of_take(take, tmp_path):
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(take[0], out)
+    return out
+
+
+def edit_manifest(path, change):
+    data = json.loads((path / MANIFEST).read_text())
+    change(data)
+    (path / MANIFEST).write_text(json.dumps(data))
+
+
+def test_not_a_recording(tmp_path):
+    with pytest.raises(RigInitializationError, match="does not exist"):
+        create_rig_source(f"replay://{tmp_path / 'nowhere'}")
+    with pytest.raises(RigInitializationError, match="manifest.json"):
+        create_rig_source(f"replay://{tmp_path}")
+
+
+def test_manifest_that_is_not_json_names_the_file_and_line(copy_of_take):
+    (copy_of_take / MANIFEST).write_text('{"format": "ghnerf-rig-recording",\n "version": }')
+    with pytest.raises(RigInitializationError) as info:
+        create_rig_source(f"replay://{copy_of_take}")
+    assert str(copy_of_take / MANIFEST) in str(info.value) and "line 2" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda d: d.update(version=99), "version"),
+        (lambda d: d.pop("rig"), "rig"),
+        (lambda d: d.update(image_format="bmp"), "image_format"),
+        (lambda d: d.update(complete="yes"), "complete"),
+        (lambda d: d.update(extra=1), "extra"),
+        (lambda d: d["rig"]["cameras"][1].pop("K"), "rig.cameras[1].K"),
+        (lambda d: d["rig"]["cameras"][0].update(width=-5), "rig.cameras[0].width"),
+    ],
+)
+def test_corrupt_manifest_names_the_file_and_the_field(copy_of_take, change, field):
+    edit_manifest(copy_of_take, change)
+    with pytest.raises(RigInitializationError) as info:
+        create_rig_source(f"replay://{copy_of_take}")
+    assert str(copy_of_take / MANIFEST) in str(info.value)
+    assert f"field {field!r}" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (lambda r: r.update(timestamp_ns="soon"), "timestamp_ns"),
+        (lambda r: r.update(camera="middle"), "camera"),
+        (lambda r: r.pop("index"), "index"),
+        (lambda r: r.update(image="../../etc/passwd"), "image"),
+        (lambda r: r.update(scene_time_s=float("nan")), "scene_time_s"),
+    ],
+)
+def test_corrupt_journal_row_names_file_line_and_field(copy_of_take, change, field):
+    lines = (copy_of_take / FRAMES).read_text().splitlines()
+    row = json.loads(lines[4])
+    change(row)
+    lines[4] = json.dumps(row)
+    (copy_of_take / FRAMES).write_text("\n".join(lines) + "\n")
+    with pytest.raises(RigInitializationError) as info:
+        create_rig_source(f"replay://{copy_of_take}")
+    message = str(info.value)
+    assert str(copy_of_take / FRAMES) in message and "line 5" in message and f"field {field!r}" in message
+
+
+def test_torn_last_line_is_tolerated_only_in_an_interrupted_take(copy_of_take):
+    with open(copy_of_take / FRAMES, "a") as f:
+        f.write('{"camera": "left", "ind')
+    with pytest.raises(RigInitializationError, match="invalid JSON"):
+        create_rig_source(f"replay://{copy_of_take}")
+    edit_manifest(copy_of_take, lambda d: d.update(complete=False))
+    source = create_rig_source(f"replay://{copy_of_take}")  # plays what it holds
+    source.close()
+
+
+def test_missing_image_file_is_named_at_open(copy_of_take):
+    row = json.loads((copy_of_take / FRAMES).read_text().splitlines()[3])
+    (copy_of_take / row["image"]).unlink()
+    source = create_rig_source(f"replay://{copy_of_take}")
+    with pytest.raises(RigInitializationError) as info:
+        source.open()
+    assert str(copy_of_take / row["image"]) in str(info.value)
+
+
+def first_row(take):
+    """The journal row replayed first (the earliest capture)."""
+    rows = [json.loads(line) for line in (take / FRAMES).read_text().splitlines()]
+    return min(rows, key=lambda r: r["timestamp_ns"])
+
+
+@pytest.mark.parametrize(("key", "garbage"), [("image", b"\x89PNG garbage"), ("truth", b"PK nonsense")])
+def test_corrupt_image_or_truth_file_is_named_when_read(copy_of_take, key, garbage):
+    row = first_row(copy_of_take)
+    (copy_of_take / row[key]).write_bytes(garbage)
+    with open_rig(f"replay://{copy_of_take}?speed=free") as source:
+        with pytest.raises(RigOperationError) as info:
+            source.read(timeout_s=1.0)
+    assert str(copy_of_take / row[key]) in str(info.value) and "corrupt" in str(info.value)
+
+
+def test_image_of_the_wrong_size_is_named(copy_of_take):
+    import cv2
+
+    row = first_row(copy_of_take)
+    cv2.imwrite(str(copy_of_take / row["image"]), np.zeros((10, 10, 3), np.uint8))
+    with open_rig(f"replay://{copy_of_take}?speed=free") as source:
+        with pytest.raises(RigOperationError, match="10x10"):
+            source.read(timeout_s=1.0)
+
+
+def test_replay_option_errors():
+    with pytest.raises(RigConfigError, match="speed"):
+        create_rig_source("replay:///x?speed=fast")
+    with pytest.raises(RigConfigError, match="speed"):
+        create_rig_source("replay:///x?speed=-1")
+    with pytest.raises(RigConfigError, match="directory"):
+        create_rig_source("replay://")

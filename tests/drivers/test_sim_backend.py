@@ -1,0 +1,133 @@
+"""``sim://`` beyond timing: options, the pre-rendered loop and its disk cache, ground truth."""
+import logging
+
+import numpy as np
+import pytest
+
+from drivers import ManualClock, RigConfigError, create_rig_source, open_rig
+from drivers.backends.sim_loop import default_cache_root
+from drivers.sim import SAMPLE_BVH, SceneConfig, SensorModel, SimScene
+
+SMALL = "width=48&height=36"
+
+
+def test_options_reach_the_rig_placement():
+    source = create_rig_source("sim://?baseline=0.5&mount_height=1.6&distance=2.5&width=64&height=48&cache=off")
+    rig = source.rig
+    assert rig.baseline == pytest.approx(0.5)
+    for cam in rig.pair:
+        assert cam.center[1] == pytest.approx(-1.6)  # y is down: 1.6 m above the floor
+        assert (cam.width, cam.height) == (64, 48)
+    source.close()
+
+
+@pytest.mark.parametrize(
+    ("url", "names"),
+    [
+        ("sim://?motion=moonwalk", ["motion", "moonwalk"]),
+        ("sim://?motion=wave&bvh=x.bvh", ["motion=", "bvh="]),
+        ("sim://?bvh=/no/such/file.bvh", ["bvh", "/no/such/file.bvh"]),
+        ("sim://?drop=1.5", ["drop"]),
+        ("sim://?fps=0", ["fps"]),
+        ("sim://?width=8", ["width"]),
+        ("sim://?baseline=9", ["baseline"]),
+        ("sim://?policy=newest", ["policy"]),
+        ("sim://?unplug_after_s=-1", ["unplug_after_s"]),
+    ],
+)
+def test_bad_options_are_config_errors_naming_the_option(url, names):
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(url)
+    for name in names:
+        assert name in str(info.value)
+
+
+def test_first_open_renders_second_loads_the_disk_cache(tmp_path):
+    url = f"sim://?{SMALL}&seed=4&cache={tmp_path}"
+    with open_rig(url, clock=ManualClock()) as first:
+        assert first.fill_report.source == "rendered"
+        a = [first.read(timeout_s=1.0) for _ in range(5)]
+    assert len(list(tmp_path.iterdir())) == 1  # one entry, named by the key
+    with open_rig(url, clock=ManualClock()) as second:
+        assert second.fill_report.source == "disk"
+        b = [second.read(timeout_s=1.0) for _ in range(5)]
+    for pa, pb in zip(a, b):
+        for fa, fb in zip(pa.frames, pb.frames):
+            assert np.array_equal(fa.image, fb.image)
+            assert np.array_equal(fa.truth.depth, fb.truth.depth)
+            assert np.array_equal(fa.joints_3d, fb.joints_3d)
+
+
+def test_cache_key_changes_with_what_changes_the_pixels():
+    def key(options):
+        return create_rig_source(f"sim://?{SMALL}&cache=off&{options}").cache_key()
+
+    base = key("seed=1")
+    assert key("seed=1") == base
+    for other in ("seed=2", "seed=1&noise=3", "seed=1&offset_ms=5", "seed=1&fps=25", "seed=1&baseline=0.8",
+                  "seed=1&motion=squat"):
+        assert key(other) != base, other
+    assert key("seed=1&jitter_ms=3&drop=0.2") == base  # timing only: same pixels
+
+
+def test_corrupt_cache_entry_is_rendered_again(tmp_path, caplog):
+    url = f"sim://?{SMALL}&seed=6&cache={tmp_path}"
+    open_rig(url, clock=ManualClock()).close()
+    entry = next(tmp_path.iterdir())
+    (entry / "image.npy").write_bytes(b"not numpy")
+    with caplog.at_level(logging.WARNING):
+        with open_rig(url, clock=ManualClock()) as source:
+            assert source.fill_report.source == "rendered"
+            source.read(timeout_s=1.0)
+    assert "unusable" in caplog.text
+
+
+def test_cache_off_writes_nothing_and_the_default_honours_xdg(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert default_cache_root() == tmp_path / "ghnerf-sim"
+    with open_rig(f"sim://?{SMALL}&cache=off", clock=ManualClock()) as source:
+        source.read(timeout_s=1.0)
+    assert list(tmp_path.iterdir()) == []
+    with open_rig(f"sim://?{SMALL}", clock=ManualClock()) as source:
+        source.read(timeout_s=1.0)
+    assert len(list((tmp_path / "ghnerf-sim").iterdir())) == 1
+
+
+def test_frames_show_their_scene_time_with_matching_truth(sim_cache):
+    """Pre-rendered frames equal a fresh render of the scene at the frame's scene_time_s."""
+    with open_rig(f"sim://?{SMALL}&seed=3&noise=2&offset_ms=7&cache={sim_cache}", clock=ManualClock()) as source:
+        pairs = [source.read(timeout_s=1.0) for _ in range(source.loop_frames + 3)]
+        scene = SimScene(SceneConfig(seed=3, sensor=SensorModel(read_noise=2.0)))
+        period, n = source.period_s, source.loop_frames
+        for pair in (pairs[1], pairs[n + 1]):  # the same loop frame on two passes
+            for cam, frame in zip(source.rig.pair, pair.frames):
+                j = frame.index % n
+                expected_t = (j * period / n + (0.007 if cam.name == "right" else 0.0)) % period
+                assert frame.scene_time_s == pytest.approx(expected_t)
+                image, truth = scene.render(cam, frame.scene_time_s)
+                assert np.array_equal(frame.image, image)
+                assert np.array_equal(frame.truth.joints_2d, truth.joints_2d)
+                assert np.array_equal(frame.truth.mask, truth.mask)
+                assert np.allclose(frame.joints_3d, scene.joints_3d(frame.scene_time_s))
+        # the pair's 3D truth is the first camera's instant
+        assert np.array_equal(pairs[1].joints_3d, pairs[1].frames[0].joints_3d)
+
+
+def test_images_are_private_copies_truth_is_read_only(sim_cache):
+    with open_rig(f"sim://?{SMALL}&cache={sim_cache}", clock=ManualClock()) as source:
+        first = source.read(timeout_s=1.0)
+        first.frames[0].image[:] = 0  # a consumer drawing on its frame...
+        for _ in range(source.loop_frames - 1):
+            source.read(timeout_s=1.0)
+        again = source.read(timeout_s=1.0)  # ...does not change the loop
+        assert again.frames[0].index % source.loop_frames == 0
+        assert again.frames[0].image.any()
+        with pytest.raises(ValueError):
+            again.frames[0].truth.depth[0, 0] = 1.0
+
+
+def test_bvh_motion_loops_over_the_clip(sim_cache):
+    with open_rig(f"sim://?{SMALL}&bvh={SAMPLE_BVH}&fps=10&cache={sim_cache}", clock=ManualClock()) as source:
+        assert source.loop_frames == max(1, round(source.period_s * 10))
+        pair = source.read(timeout_s=1.0)
+        assert pair.joints_3d.shape == (25, 3)

@@ -1,0 +1,64 @@
+"""Export round trip on the tiny preset: every contract graph, torch vs onnxruntime fp32 parity,
+dynamic targets/rays/points, contract metadata, and the ONNX-friendliness rules."""
+from __future__ import annotations
+
+import pytest
+
+torch = pytest.importorskip("torch")
+onnx = pytest.importorskip("onnx")
+ort = pytest.importorskip("onnxruntime")
+
+from ghnerf_runtime.contract import GRAPH_NAMES, ModelContract  # noqa: E402
+from training.configs import preset  # noqa: E402
+from training.export.export import example_inputs, export_all  # noqa: E402
+from training.export.parity import make_session, torch_vs_ort  # noqa: E402
+from training.model import GHNeRF  # noqa: E402
+
+FORBIDDEN_OPS = {"Inverse", "Det", "NonZero", "Loop", "If", "Scan", "SequenceConstruct"}
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    torch.manual_seed(0)
+    model = GHNeRF(preset("tiny")).eval()
+    out = tmp_path_factory.mktemp("onnx")
+    paths = export_all(model, out, inputs=example_inputs(model, targets=2))
+    return model, paths
+
+
+def test_every_graph_exported_with_contract(exported):
+    model, paths = exported
+    assert set(paths) == set(GRAPH_NAMES)
+    expected = model.contract()
+    for graph, path in paths.items():
+        m = onnx.load(str(path))
+        props = {p.key: p.value for p in m.metadata_props}
+        contract = ModelContract.from_metadata(props)
+        assert contract.same_model(expected)
+        assert ModelContract.graph_of(props) == graph
+        assert props["ghnerf.precision"] == "fp32"
+        ops = {n.op_type for n in m.graph.node}
+        assert not ops & FORBIDDEN_OPS, f"{graph} uses {ops & FORBIDDEN_OPS}"
+        for n in m.graph.node:  # only 4-D GridSample (5-D would need opset >= 20)
+            assert n.op_type != "CumProd"
+        spec = contract.graph(graph)
+        sess = make_session(path)
+        contract.check_io(graph, {i.name: i.shape for i in sess.get_inputs()},
+                          {o.name: o.shape for o in sess.get_outputs()})
+
+
+def test_torch_vs_ort_fp32_parity(exported):
+    model, paths = exported
+    for ex in (example_inputs(model, targets=2), example_inputs(model, targets=3, ray_stride=2, points=33, seed=3)):
+        report = torch_vs_ort(model, paths, ex)
+        for graph, outputs in report.items():
+            for name, st in outputs.items():
+                assert st["max_abs"] <= 1e-4 * max(1.0, st["ref_max"]), (graph, name, st)
+
+
+def test_no_inverse_and_static_channel_dims(exported):
+    _, paths = exported
+    sess = make_session(paths["volume"])
+    dims = {i.name: i.shape for i in sess.get_inputs()}
+    assert dims["tgt_K_inv"][1:] == [3, 3] and isinstance(dims["tgt_K_inv"][0], str)
+    assert dims["src_P"] == [2, 3, 4]

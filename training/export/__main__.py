@@ -1,0 +1,3 @@
+from training.export.cli import main
+
+raise SystemExit(main())

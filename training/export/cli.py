@@ -1,0 +1,124 @@
+"""``python -m training.export``: export a preset (or checkpoint) to ONNX, quantize, check parity, time it.
+
+Example::
+
+    python -m training.export --preset edge128 --out out/edge128 --int8 --bench --report out/edge128/report.json
+
+Without a checkpoint the weights are random (useful for latency and plumbing, not accuracy). The
+calibration frames are random images on a synthetic rig unless ``--calib-npz`` gives real frames
+(``images`` array ``(F, 2, 3, H, W)`` RGB in [0, 1]).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ghnerf_runtime.contract import GRAPH_NAMES
+from training.configs import PRESETS, preset
+from training.export.export import ExampleInputs, example_inputs, export_all
+from training.export.parity import benchmark, int8_vs_fp32, make_session, torch_vs_ort
+from training.export.quantize import calibration_feeds, quantize_all
+from training.model import GHNeRF
+
+log = logging.getLogger("training.export")
+
+#: Per-graph timing scenarios: (graph, label, targets, ray stride, points); targets 2 = the two sources.
+SCENARIOS = (
+    ("encoder", "S=2", 2, None, 0),
+    ("volume", "B=2 (source views)", 2, None, 0),
+    ("render_heat", "B=2 R=2x(H/4)^2", 2, 4, 0),
+    ("volume", "B=1 (novel view)", 1, None, 0),
+    ("render_rgb", "B=1 R=H^2", 1, 1, 0),
+    ("render_rgb", "B=1 R=(H/2)^2", 1, 2, 0),
+    ("render", "B=1 R=H^2", 1, 1, 0),
+    ("query", "B=2 N=16^3", 2, None, 4096),
+)
+
+
+def _inputs(model: GHNeRF, targets: int, stride: int | None, points: int) -> ExampleInputs:
+    """Example inputs with ``targets`` targets: 2 = both sources, 1 = one novel camera."""
+    if targets == 2:
+        return example_inputs(model, targets=2, ray_stride=stride, points=max(points, 1))
+    ex = example_inputs(model, targets=3, ray_stride=stride, points=max(points, 1))
+    per_target = {"tgt_K_inv", "tgt_c2w", "tgt_P", "near_far", "ray_uv", "points", "volume", "depth_stats"}
+    return ExampleInputs({k: (v[2:3] if k in per_target else v) for k, v in ex.tensors.items()})
+
+
+def time_graphs(model: GHNeRF, paths: dict[str, Path], threads: int = 2, repeats: int = 30) -> list[dict]:
+    contract = model.contract()
+    rows = []
+    cache: dict = {}
+    for graph, label, targets, stride, points in SCENARIOS:
+        if graph not in paths:
+            continue
+        key = (targets, stride, points)
+        if key not in cache:
+            cache[key] = _inputs(model, targets, stride, points)
+        sess = make_session(paths[graph], threads)
+        t = benchmark(sess, cache[key].numpy(contract.graph(graph)), repeats=repeats)
+        rows.append({"graph": graph, "case": label, **t})
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.export", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--preset", default="edge128", choices=sorted(PRESETS))
+    ap.add_argument("--checkpoint", help="state dict (.pt) of the model; default: random weights")
+    ap.add_argument("--out", required=True, help="output folder for <graph>.onnx / <graph>.int8.onnx")
+    ap.add_argument("--graphs", default=",".join(GRAPH_NAMES))
+    ap.add_argument("--opset", type=int, default=17)
+    ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
+    ap.add_argument("--calib-frames", type=int, default=8, help="random calibration frames (no --calib-npz)")
+    ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) RGB [0, 1]")
+    ap.add_argument("--bench", action="store_true", help="time every graph (fp32 and int8)")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--report", help="write the figures as JSON here")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    torch.set_num_threads(args.threads)
+    torch.manual_seed(0)
+
+    model = GHNeRF(preset(args.preset)).eval()
+    if args.checkpoint:
+        state = torch.load(args.checkpoint, map_location="cpu", weights_only=True)
+        model.load_state_dict(state.get("model", state))
+    graphs = tuple(g for g in args.graphs.split(",") if g)
+    out = Path(args.out)
+    report: dict = {"preset": args.preset, "parameters": model.parameter_counts(),
+                    "contract": {"resolution": f"{model.config.width}x{model.config.height}"}}
+    fp32 = export_all(model, out, graphs=graphs, opset=args.opset, inputs=example_inputs(model))
+    report["fp32_parity"] = torch_vs_ort(model, fp32, example_inputs(model, targets=3, ray_stride=2, seed=1))
+    int8 = {}
+    if args.int8:
+        H, W = model.config.height, model.config.width
+        if args.calib_npz:
+            frames = [torch.from_numpy(f) for f in np.load(args.calib_npz)["images"].astype(np.float32)]
+        else:
+            g = torch.Generator().manual_seed(1)
+            frames = [torch.rand(2, 3, H, W, generator=g) for _ in range(args.calib_frames)]
+        calib = [example_inputs(model, images=f, targets=3, ray_stride=2, seed=i) for i, f in enumerate(frames)]
+        int8 = quantize_all(fp32, out, calibration_feeds(model, calib, graphs, rays_per_target=2048))
+        report["int8_vs_fp32"] = int8_vs_fp32(fp32, int8, model.contract(),
+                                              example_inputs(model, targets=2, seed=7))
+    if args.bench:
+        report["latency_fp32"] = time_graphs(model, fp32, args.threads)
+        if int8:
+            report["latency_int8"] = time_graphs(model, int8, args.threads)
+        report["load_average"] = os.getloadavg()
+    text = json.dumps(report, indent=2, default=float)
+    if args.report:
+        Path(args.report).write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
