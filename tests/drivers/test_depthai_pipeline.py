@@ -1,0 +1,261 @@
+"""depthai without hardware, for real: host-only pipelines, the production Sync stage, real messages and errors."""
+import datetime
+import subprocess
+import sys
+import textwrap
+import time
+
+import depthai as dai
+import numpy as np
+import pytest
+
+from drivers import (
+    RigConfigError,
+    RigDisconnectedError,
+    RigInitializationError,
+    RigOperationError,
+    RigTimeoutError,
+    create_rig_source,
+    open_rig,
+)
+from drivers.backends.depthai.convert import (
+    LEFT,
+    RIGHT,
+    depthai_errors,
+    frame_from_img,
+    frames_from_group,
+    timedelta_to_ns,
+)
+from drivers.backends.depthai.link import StereoRequest
+from drivers.backends.depthai.options import DepthaiOptions
+from drivers.url import RigUrl
+from tests.drivers.depthai_host import HostPipelineLink, stamp
+
+URL = "depthai://?width=160&height=100&mount_height=1.2"
+
+
+def request(**changes) -> StereoRequest:
+    base = dict(device_id=None, left="CAM_B", right="CAM_C", fps=30.0, width=160, height=100,
+                tolerance_ms=5.0, queue_size=4)
+    base.update(changes)
+    return StereoRequest(**base)
+
+
+@pytest.fixture
+def link():
+    link = HostPipelineLink()
+    yield link
+    link.close()
+
+
+@pytest.fixture(scope="module")
+def rig():
+    source = create_rig_source(URL, link_factory=HostPipelineLink)
+    with source:
+        return source.rig
+
+
+# ----------------------------------------------------------------- clocks and conversion
+def test_depthai_host_clock_is_time_monotonic_ns():
+    """``getTimestamp()`` is on dai::Clock, i.e. the clock our timestamps use."""
+    before = time.monotonic_ns()
+    now = timedelta_to_ns(dai.Clock.now())
+    after = time.monotonic_ns()
+    assert before - 1_000 <= now <= after + 1_000  # timedelta keeps microseconds
+
+
+def test_timedelta_to_ns_is_exact():
+    delta = datetime.timedelta(days=2, seconds=3, microseconds=456_789)
+    assert timedelta_to_ns(delta) == (2 * 86_400 + 3) * 10**9 + 456_789_000
+
+
+def test_gray_img_frame_becomes_a_bgr_frame(rig):
+    message = dai.ImgFrame()
+    message.setCvFrame(np.arange(160 * 100, dtype=np.uint32).reshape(100, 160).astype(np.uint8), dai.ImgFrame.Type.GRAY8)
+    stamp(message, 1_234_567_000)
+    message.setSequenceNum(42)
+    frame = frame_from_img(message, "left", rig)
+    assert frame.image.shape == (100, 160, 3) and frame.image.dtype == np.uint8
+    assert np.array_equal(frame.image[..., 0], frame.image[..., 2])
+    assert (frame.timestamp_ns, frame.index, frame.camera) == (1_234_567_000, 42, "left")
+
+
+def test_colour_img_frame_keeps_its_colours(rig):
+    bgr = np.zeros((100, 160, 3), np.uint8)
+    bgr[..., 2] = 200  # red
+    message = dai.ImgFrame()
+    message.setCvFrame(bgr, dai.ImgFrame.Type.BGR888i)
+    assert np.array_equal(frame_from_img(message, "right", rig).image, bgr)
+
+
+def test_wrong_size_image_is_an_operation_error(rig):
+    message = dai.ImgFrame()
+    message.setCvFrame(np.zeros((10, 16), np.uint8), dai.ImgFrame.Type.GRAY8)
+    with pytest.raises(RigOperationError, match="16x10"):
+        frame_from_img(message, "left", rig)
+
+
+def test_group_without_both_cameras_is_an_operation_error(rig):
+    group = dai.MessageGroup()
+    message = dai.ImgFrame()
+    message.setCvFrame(np.zeros((100, 160), np.uint8), dai.ImgFrame.Type.GRAY8)
+    group[LEFT] = message
+    with pytest.raises(RigOperationError, match="'right'"):
+        frames_from_group(group, rig)
+    group[RIGHT] = dai.Buffer()
+    with pytest.raises(RigOperationError, match="not an ImgFrame"):
+        frames_from_group(group, rig)
+
+
+# ----------------------------------------------------------------- the Sync stage on a host pipeline
+def test_sync_stage_groups_real_frames_within_tolerance(link, rig):
+    link.offset_ms = 2.0
+    link.start(request(tolerance_ms=5.0))
+    groups = [link.next_group(2.0) for _ in range(10)]
+    assert all(isinstance(g, dai.MessageGroup) for g in groups)
+    sent = {cam: dict(node.sent) for cam, node in zip((LEFT, RIGHT), link.cameras)}
+    for group in groups:
+        assert group.isSynced(5_000_000)
+        left, right = frames_from_group(group, rig)
+        assert left.index == right.index
+        assert right.timestamp_ns - left.timestamp_ns == 2_000_000
+        # the timestamps the camera nodes stamped, to the microsecond
+        assert left.timestamp_ns == sent[LEFT][left.index] // 1000 * 1000
+        assert int(left.image[0, 0, 0]) == left.index % 256
+
+
+def test_sync_stage_never_emits_pairs_further_apart_than_the_threshold(link):
+    link.offset_ms = 12.0
+    link.start(request(tolerance_ms=5.0))
+    assert link.next_group(0.4) is None
+
+
+def test_closed_queue_becomes_rig_disconnected_with_the_cause(link):
+    link.start(request())
+    assert link.next_group(2.0) is not None
+    link.unplug()
+    with pytest.raises(RigDisconnectedError, match="queue closed") as info:
+        with depthai_errors("reading", RigDisconnectedError):
+            link.next_group(1.0)
+    assert isinstance(info.value.__cause__, dai.MessageQueue.QueueException)
+
+
+def test_runtime_errors_become_the_requested_error_with_the_cause():
+    with pytest.raises(RigInitializationError, match="opening: no device") as info:
+        with depthai_errors("opening", RigInitializationError):
+            raise RuntimeError("no device")
+    assert isinstance(info.value.__cause__, RuntimeError)
+    with pytest.raises(RigConfigError):  # our own errors pass through untouched
+        with depthai_errors("opening", RigInitializationError):
+            raise RigConfigError("bad")
+
+
+# ----------------------------------------------------------------- the backend on the host link
+def test_backend_delivers_pairs_from_real_groups():
+    link = HostPipelineLink(offset_ms=1.0)
+    with open_rig(f"{URL}&tolerance_ms=4", link_factory=lambda: link) as source:
+        assert source.rig.rig_id == "oak-host-pipeline"
+        assert source.rig.baseline == pytest.approx(0.075, abs=1e-3)
+        pairs = [source.read(timeout_s=3.0) for _ in range(15)]
+        assert link.request.tolerance_ms == 4.0  # the Sync threshold is the pairing tolerance
+    assert [p.frames[0].index for p in pairs] == sorted({p.frames[0].index for p in pairs})
+    assert all(p.skew_ns == 1_000_000 for p in pairs)
+    assert link.closed == 1
+
+
+def test_dropped_frames_show_as_gaps():
+    link = HostPipelineLink(drop=0.3)
+    with open_rig(URL, link_factory=lambda: link) as source:
+        for _ in range(15):
+            source.read(timeout_s=3.0)
+        assert sum(source.stats.camera_gaps.values()) > 0
+
+
+def test_unplug_while_reading_raises_rig_disconnected():
+    link = HostPipelineLink()
+    with open_rig(URL, link_factory=lambda: link) as source:
+        source.read(timeout_s=3.0)
+        link.unplug()
+        with pytest.raises(RigDisconnectedError):
+            for _ in range(10):  # the queue may still hold a group or two
+                source.read(timeout_s=1.0)
+
+
+def test_no_group_in_time_is_a_timeout():
+    with open_rig(f"{URL}&fps=1", link_factory=HostPipelineLink) as source:
+        source.read(timeout_s=3.0)
+        with pytest.raises(RigTimeoutError):
+            source.read(timeout_s=0.2)
+
+
+def test_rig_file_overrides_the_device_calibration(tmp_path, rig):
+    from ghnerf_runtime.rig_file import save_rig
+
+    save_rig(rig, tmp_path / "rig.json")
+    source = create_rig_source(f"depthai://?width=160&height=100&rig={tmp_path / 'rig.json'}", link_factory=HostPipelineLink)
+    assert source.rig.baseline == pytest.approx(rig.baseline)  # known before open: no device needed
+    source.close()
+    with pytest.raises(RigConfigError, match="width=/height="):
+        create_rig_source(f"depthai://?width=320&height=200&rig={tmp_path / 'rig.json'}")
+    with pytest.raises(RigConfigError, match="rig="):
+        create_rig_source(f"depthai://?rig={tmp_path / 'rig.json'}&mount_height=1")
+    with pytest.raises(RigConfigError, match="nope.json"):
+        create_rig_source(f"depthai://?rig={tmp_path / 'nope.json'}")
+
+
+def test_rig_is_unknown_until_open():
+    source = create_rig_source(URL, link_factory=HostPipelineLink)
+    with pytest.raises(RigOperationError, match="open"):
+        source.rig
+    source.close()
+
+
+def test_record_a_depthai_source_and_replay_it(tmp_path):
+    """kwargs pass through record+ to the inner backend; frames without truth record without truth files."""
+    with open_rig(f"record+{URL}&out={tmp_path / 'oak'}", link_factory=HostPipelineLink) as source:
+        live = [source.read(timeout_s=3.0) for _ in range(5)]
+    with open_rig(f"replay://{tmp_path / 'oak'}?speed=free&policy=all") as replay:
+        replayed = list(replay)
+    assert [p.timestamps_ns for p in replayed[: len(live)]] == [p.timestamps_ns for p in live]
+    assert all(f.truth is None and f.joints_3d is None for p in replayed for f in p.frames)
+    assert np.array_equal(replayed[0].images[0], live[0].images[0])
+
+
+# ----------------------------------------------------------------- options and the real link without a device
+@pytest.mark.parametrize(
+    ("url", "word"),
+    [
+        ("depthai://A,B", "two-device"),
+        ("depthai://?left=CAM_B&right=CAM_B", "same socket"),
+        ("depthai://?left=CAM_Z", "left"),
+        ("depthai://?fps=0", "fps"),
+        ("depthai://?queue=0", "queue"),
+    ],
+)
+def test_option_errors(url, word):
+    with pytest.raises(RigConfigError, match=word):
+        DepthaiOptions.from_url(RigUrl.parse(url))
+
+
+def test_options_defaults():
+    options = DepthaiOptions.from_url(RigUrl.parse("depthai://14442C10D13EABCE00"))
+    assert (options.device_id, options.left, options.right, options.fps) == ("14442C10D13EABCE00", "CAM_B", "CAM_C", 30.0)
+    assert (options.width, options.height, options.mount_height_m, options.pairing.policy.value) == (640, 400, None, "latest")
+
+
+def test_real_link_without_a_device_is_an_initialization_error():
+    """The production DaiDeviceLink, for real: depthai searches, finds nothing, we convert its error."""
+    code = textwrap.dedent(
+        """
+        from drivers import RigInitializationError, open_rig
+        try:
+            open_rig("depthai://?fps=30")
+        except RigInitializationError as e:
+            print("converted:", type(e.__cause__).__name__, e)
+        """
+    )
+    env = {"DEPTHAI_SEARCH_TIMEOUT": "300", "PATH": "/usr/bin:/bin"}
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env,
+                            cwd=str(__import__("pathlib").Path(__file__).parents[2]))
+    assert "converted: RuntimeError" in result.stdout, result.stdout + result.stderr
+    assert "starting depthai device" in result.stdout
