@@ -29,7 +29,7 @@ venv: $(RUNTIME_STAMP)
 dev: $(DEV_STAMP)
 
 demo: $(RUNTIME_STAMP)
-	$(PY) -m drivers.sim.demo --out out/demo
+	$(PY) -m firmware_host.demo --out out/demo
 
 test: $(DEV_STAMP)
 	$(PY) -m pytest -q

@@ -135,7 +135,11 @@ class RecordingWriter:
             self._journal = open(self.directory / FRAMES, "a", encoding="utf-8")
         except OSError as e:
             raise RigInitializationError(f"cannot create recording directory {self.directory}: {e}") from e
-        write_manifest(self.directory, self.manifest)
+        try:
+            write_manifest(self.directory, self.manifest)
+        except BaseException:
+            self._journal.close()
+            raise
         for i in range(self.options.writers):
             thread = threading.Thread(target=self._run, name=f"rig-recorder-{i}", daemon=True)
             thread.start()
@@ -280,5 +284,8 @@ class RecordingRigSource(RigSource):
             self.inner.close()
         finally:
             if self._writer is not None:
-                counters = {k: v for k, v in vars(super().stats).items()}
+                counters = dict(vars(super().stats))
+                # backend-specific counters (e.g. the simulator's drops) of the inner source
+                pairing_fields = set(vars(PairingStats()))
+                counters["inner"] = {k: v for k, v in vars(self.inner.stats).items() if k not in pairing_fields}
                 self._writer.close(counters)

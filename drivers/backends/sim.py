@@ -28,6 +28,8 @@ URL options (every one validated; unknown ones are rejected by name)::
 * ``cache`` (default ``$XDG_CACHE_HOME/ghnerf-sim`` or ``~/.cache/ghnerf-sim``):
   directory of the pre-rendered loop cache, or ``off``.
 * ``workers`` (CPU count): render threads.
+* ``max_loop_mb`` (2048): refuse (``RigConfigError``) a loop needing more memory
+  than this, rather than exhausting the machine.
 
 Real time: rendering a 640x480 frame takes ~70 ms on one core, twice a 30 fps
 period per pair. The motion loops (``period_s`` of the scene), so frames are a
@@ -77,6 +79,7 @@ from drivers.clock import Clock
 from drivers.errors import RigConfigError, RigDisconnectedError, RigOperationError
 from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig, PairingStats
+from drivers.sim import MOTION_NAMES, RigPlacement, SceneConfig, SensorModel, SimScene
 from drivers.url import RigUrl
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import rig_to_dict
@@ -85,8 +88,8 @@ log = logging.getLogger(__name__)
 
 #: Captures a camera holds for a slow reader before it loses the oldest (a driver queue).
 BACKLOG_FRAMES = 8
-#: Longest loop pre-rendered, frames per camera (one minute at 30 fps).
-MAX_LOOP_FRAMES = 1800
+#: Bytes per pixel of a pre-rendered frame: BGR image 3, mask 1, depth 4, part labels 1.
+LOOP_BYTES_PER_PIXEL = 9
 
 
 @dataclass
@@ -102,17 +105,16 @@ class SimOptions:
     """Validated ``sim://`` options (see the module docstring)."""
 
     timing: TimingModel
-    scene: object  # drivers.sim.SceneConfig (imported lazily with the simulator)
-    placement: object  # drivers.sim.RigPlacement
+    scene: SceneConfig
+    placement: RigPlacement
     unplug_after_s: float | None
     pairing: PairingConfig
     cache_root: Path | None
     workers: int
+    max_loop_mb: float = 2048.0
 
     @classmethod
     def from_url(cls, url: RigUrl) -> "SimOptions":
-        from drivers.sim import MOTION_NAMES, RigPlacement, SceneConfig, SensorModel
-
         fps = url.take_float("fps", 30.0, lo=0.1, hi=1000.0)
         seed = url.take_int("seed", 0, lo=0, hi=2**32 - 1)
         motion = url.take_str("motion", None, choices=MOTION_NAMES)
@@ -140,6 +142,7 @@ class SimOptions:
         policy = url.take_str("policy", DropPolicy.LATEST.value, choices=tuple(p.value for p in DropPolicy))
         cache = url.take_str("cache")
         workers = url.take_int("workers", os.cpu_count() or 2, lo=1, hi=64)
+        max_loop_mb = url.take_float("max_loop_mb", 2048.0, lo=1.0)
         url.finish()
         kwargs = {"motion": bvh} if bvh is not None else ({"motion": motion} if motion else {})
         return cls(
@@ -153,6 +156,7 @@ class SimOptions:
             pairing=PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)),
             cache_root=None if cache == "off" else (Path(cache) if cache else default_cache_root()),
             workers=workers,
+            max_loop_mb=max_loop_mb,
         )
 
 
@@ -167,18 +171,19 @@ class SimRigSource(RigSource):
     scheme = "sim"
 
     def __init__(self, options: SimOptions, *, pairing: PairingConfig | None = None, clock: Clock | None = None) -> None:
-        from drivers.sim import SimScene
-
         self.options = options
         self._scene = SimScene(options.scene)  # validates the motion (BVH) now, not at open
         rig: Rig = options.placement.build(rig_id="sim")
         super().__init__(rig, pairing=pairing or options.pairing, clock=clock)
         self.period_s = self._scene.period_s
         self.loop_frames = max(1, round(self.period_s * options.timing.fps))
-        if self.loop_frames > MAX_LOOP_FRAMES:
+        w, h = rig.pair[0].size
+        loop_mb = 2 * self.loop_frames * w * h * LOOP_BYTES_PER_PIXEL / 1e6
+        if loop_mb > options.max_loop_mb:
             raise RigConfigError(
-                f"sim: the motion loops every {self.period_s:.1f} s, {self.loop_frames} frames at "
-                f"{options.timing.fps:g} fps; at most {MAX_LOOP_FRAMES} are pre-rendered (use a shorter clip or lower fps)"
+                f"sim: the motion loops every {self.period_s:.1f} s: {self.loop_frames} frames per camera at "
+                f"{options.timing.fps:g} fps and {w}x{h} need {loop_mb:.0f} MB pre-rendered, over max_loop_mb="
+                f"{options.max_loop_mb:g} (lower fps or size, use a shorter clip, or raise max_loop_mb)"
             )
         self._local = threading.local()  # SimScene is not thread-safe: one per render thread
         self._loop: FrameLoop | None = None
@@ -205,8 +210,6 @@ class SimRigSource(RigSource):
         return (j * self.period_s / self.loop_frames + offset_s) % self.period_s
 
     def _render(self, camera: int, j: int) -> LoopFrame:
-        from drivers.sim import SimScene
-
         scene = getattr(self._local, "scene", None)
         if scene is None:
             scene = self._local.scene = SimScene(self.options.scene)
@@ -216,7 +219,7 @@ class SimRigSource(RigSource):
 
     def cache_key(self) -> str:
         """Hash of everything that changes the pre-rendered pixels (options, rig, simulator code)."""
-        import drivers.sim
+        import drivers.sim  # the package, to hash its sources
 
         scene = self.options.scene
         bvh = Path(str(scene.motion))

@@ -140,11 +140,11 @@ class FrameLoop:
                     if pending and progress is not None:
                         progress(len(futures) - len(pending) + 1, len(futures) + 1, time.perf_counter() - t0)
             except BaseException as e:
-                self._cancel.set()
+                self._cancel.set()  # workers stop taking frames; queued ones are cancelled
                 for future in pending:
                     future.cancel()
-                if isinstance(e, RigInitializationError):
-                    raise
+                if isinstance(e, RigInitializationError) or not isinstance(e, Exception):
+                    raise  # ours already, or KeyboardInterrupt/SystemExit: not a render failure
                 raise RigInitializationError(f"sim pre-render failed: {e}") from e
 
     def _allocate(self, first: LoopFrame) -> None:

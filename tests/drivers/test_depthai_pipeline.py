@@ -4,6 +4,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import depthai as dai
 import numpy as np
@@ -256,6 +257,19 @@ def test_real_link_without_a_device_is_an_initialization_error():
     )
     env = {"DEPTHAI_SEARCH_TIMEOUT": "300", "PATH": "/usr/bin:/bin"}
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env,
-                            cwd=str(__import__("pathlib").Path(__file__).parents[2]))
+                            cwd=Path(__file__).resolve().parents[2])
     assert "converted: RuntimeError" in result.stdout, result.stdout + result.stderr
     assert "starting depthai device" in result.stdout
+
+
+def test_timeouts_run_on_the_injected_clock():
+    """A link that waited in real time still moves a ManualClock to the deadline (no endless read loop)."""
+    from drivers import ManualClock
+
+    clock = ManualClock(7_000_000_000)
+    with open_rig(f"{URL}&fps=1", link_factory=HostPipelineLink, clock=clock) as source:
+        source.read(timeout_s=3.0)
+        t0 = clock.now_ns()
+        with pytest.raises(RigTimeoutError):
+            source.read(timeout_s=0.2)
+        assert clock.now_ns() - t0 == 200_000_000

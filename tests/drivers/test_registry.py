@@ -2,6 +2,7 @@
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -38,7 +39,8 @@ def test_record_without_out_is_a_config_error():
 
 def _run(code: str) -> str:
     result = subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=120
+        [sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=120,
+        cwd=Path(__file__).resolve().parents[2],  # the repository root: `import drivers` works from anywhere
     )
     assert result.returncode == 0, result.stderr
     return result.stdout

@@ -33,6 +33,7 @@ def test_options_reach_the_rig_placement():
         ("sim://?baseline=9", ["baseline"]),
         ("sim://?policy=newest", ["policy"]),
         ("sim://?unplug_after_s=-1", ["unplug_after_s"]),
+        ("sim://?motion=walk&max_loop_mb=100", ["max_loop_mb", "99 frames"]),
     ],
 )
 def test_bad_options_are_config_errors_naming_the_option(url, names):

@@ -89,7 +89,10 @@ class DepthaiRigSource(RigSource):
                 link.start(self._request())
                 rig = self._fixed_rig or self._rig_from_device(link)
         except BaseException:
-            link.close()
+            try:
+                link.close()
+            except Exception as e:  # noqa: BLE001 - the start failure is the error to report
+                log.debug("depthai: closing after a failed start also failed: %s", e)
             raise
         self._set_rig(rig)
         self._link = link
@@ -115,9 +118,11 @@ class DepthaiRigSource(RigSource):
         link = self._link
         if link is None:
             raise RigOperationError("depthai link is not open")
+        deadline = self.clock.now_ns() + int(timeout_s * 1e9)
         with depthai_errors("reading from the depthai device", RigDisconnectedError):
             group = link.next_group(timeout_s)
             if group is None:
+                self.clock.sleep_until(deadline)  # the timeout has passed on our clock too (a ManualClock jumps)
                 return None
             first, second = frames_from_group(group, self.rig)
         self._pending.append(second)

@@ -1,0 +1,197 @@
+"""The synthetic dataset end to end on a tiny set (64x64): determinism, split disjointness, geometry, tensors."""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from training.data.cache import MANIFEST, ShardedSplit
+from training.data.generate import generate, main
+from training.data.sample import FIELDS
+from training.data.splits import HELD_OUT_BASELINE_M, HELD_OUT_MOTIONS, SPLITS, TRAIN_MOTIONS
+from training.data.synthetic import SyntheticConfig
+from training.data.targets import KEYS, TargetConfig
+
+RES = 64
+COUNTS = {"train": 6, "val": 4}
+CONFIG = SyntheticConfig(resolution=RES, novel_views=2, cold_start_fraction=0.3)
+
+
+def _digest(root: Path) -> dict[str, str]:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("synth") / "ds"
+    report = generate(root, COUNTS, CONFIG, dataset_seed=3, workers=2, shard_size=4)
+    assert report.samples_rendered == sum(COUNTS.values())
+    assert report.shards_written == 3  # train: 4 + 2, val: 4
+    return root
+
+
+# ------------------------------------------------------------------ determinism and resumption
+def test_same_seed_gives_identical_bytes_whatever_the_worker_count(dataset, tmp_path):
+    again = tmp_path / "again"
+    generate(again, COUNTS, CONFIG, dataset_seed=3, workers=1, shard_size=4)
+    assert _digest(again) == _digest(dataset)
+
+
+def test_another_seed_gives_other_samples(dataset, tmp_path):
+    other = tmp_path / "other"
+    generate(other, {"train": 1}, CONFIG, dataset_seed=4, workers=1, shard_size=4)
+    a = ShardedSplit(dataset, "train").arrays(0)["images"]
+    b = ShardedSplit(other, "train").arrays(0)["images"]
+    assert not np.array_equal(a, b)
+
+
+def test_resume_skips_complete_shards_and_extends(dataset, tmp_path):
+    root = tmp_path / "grow"
+    generate(root, {"train": 2}, CONFIG, dataset_seed=3, workers=1, shard_size=4)  # one short shard
+    report = generate(root, {"train": 5}, CONFIG, dataset_seed=3, workers=1, shard_size=4)
+    assert (report.shards_written, report.samples_rendered) == (2, 5)  # the short shard is redone
+    report = generate(root, {"train": 5}, CONFIG, dataset_seed=3, workers=1, shard_size=4)
+    assert (report.shards_written, report.shards_skipped) == (0, 2)
+    grown, reference = ShardedSplit(root, "train"), ShardedSplit(dataset, "train")
+    for i in range(5):
+        assert all(np.array_equal(grown.arrays(i)[k], reference.arrays(i)[k]) for k in FIELDS)
+
+
+def test_resume_with_another_config_names_the_field(dataset):
+    from training.data.errors import DatasetError
+
+    with pytest.raises(DatasetError, match="source_config") as err:
+        generate(dataset, {"train": 1}, SyntheticConfig(resolution=RES, novel_views=2, cold_start_fraction=0.5),
+                 dataset_seed=3, workers=1, shard_size=4)
+    assert err.value.path.endswith(MANIFEST)
+
+
+# ------------------------------------------------------------------ split disjointness
+def test_held_out_split_shares_no_body_motion_or_rig_with_train(dataset):
+    train = list(ShardedSplit(dataset, "train").all_metadata())
+    val = list(ShardedSplit(dataset, "val").all_metadata())
+    assert len(train) == COUNTS["train"] and len(val) == COUNTS["val"]
+    manifest_ranges = {s: ShardedSplit(dataset, s).info["seed_range"] for s in COUNTS}
+
+    # Bodies and appearance: disjoint seed ranges, and no body or look in common.
+    for split, metas in (("train", train), ("val", val)):
+        lo, hi = manifest_ranges[split]
+        assert all(lo <= m["scene_seed"] < hi for m in metas)
+    assert not {m["scene_seed"] for m in train} & {m["scene_seed"] for m in val}
+    assert not {m["body_fingerprint"] for m in train} & {m["body_fingerprint"] for m in val}
+    assert not {m["appearance_fingerprint"] for m in train} & {m["appearance_fingerprint"] for m in val}
+    lo_t, hi_t = manifest_ranges["train"]
+    lo_v, hi_v = manifest_ranges["val"]
+    assert hi_t <= lo_v or hi_v <= lo_t
+
+    # Motions: held-out motions only in val, never in train.
+    assert {m["motion"] for m in train} <= set(TRAIN_MOTIONS)
+    assert {m["motion"] for m in val} <= set(HELD_OUT_MOTIONS)
+    assert not set(TRAIN_MOTIONS) & set(HELD_OUT_MOTIONS)
+
+    # Rigs: the baseline gap separates them.
+    band_lo, band_hi = HELD_OUT_BASELINE_M
+    assert all(not band_lo <= m["placement"]["baseline_m"] < band_hi for m in train)
+    assert all(band_lo <= m["placement"]["baseline_m"] < band_hi for m in val)
+
+
+def test_split_specs_are_disjoint_by_construction():
+    train, val = SPLITS["train"], SPLITS["val"]
+    for seed in (0, 1, 99_999):
+        t_lo, t_hi = train.seed_range(seed)
+        for other in SPLITS.values():
+            if other is not train:
+                o_lo, o_hi = other.seed_range(0)[0], other.seed_range(99_999)[1]
+                assert t_hi <= o_lo or o_hi <= t_lo
+    rng = np.random.default_rng(0)
+    baselines = [train.placement(rng).baseline_m for _ in range(300)]
+    assert not any(HELD_OUT_BASELINE_M[0] <= b < HELD_OUT_BASELINE_M[1] for b in baselines)
+    assert all(HELD_OUT_BASELINE_M[0] <= val.placement(rng).baseline_m < HELD_OUT_BASELINE_M[1] for _ in range(50))
+
+
+# ------------------------------------------------------------------ geometry of stored samples
+def test_stored_joints_are_the_crop_camera_projection_of_the_3d_joints(dataset):
+    for split in COUNTS:
+        data = ShardedSplit(dataset, split)
+        for i in range(len(data)):
+            sample = data[i]
+            assert sample.joints_3d_valid.all()
+            for view in sample.views:
+                uv, z = view.camera().project(sample.joints_3d)
+                front = z > 0
+                err = np.linalg.norm(uv[front] - view.joints_2d[front], axis=-1)
+                assert err.max() < 0.5, (split, i, view.name, err.max())
+                assert not np.any(view.visible & ~front)
+                # Visible joints lie inside the crop.
+                vis = view.joints_2d[view.visible]
+                assert np.all((vis >= -0.5) & (vis < RES - 0.5))
+
+
+def test_mask_agrees_with_depth_and_depth_is_plausible(dataset):
+    data = ShardedSplit(dataset, "train")
+    for i in range(len(data)):
+        sample = data[i]
+        centre = sample.bbox.mean(axis=0)
+        for view in sample.views:
+            assert view.has_depth
+            assert np.array_equal(view.mask, view.depth > 0)
+            assert 0.01 < view.mask.mean() < 0.9, view.name
+            d = view.depth[view.mask].astype(np.float64)
+            dist = float(np.linalg.norm(view.camera().to_camera(centre)))
+            assert abs(np.median(d) - dist) < 1.0
+
+
+def test_sources_come_from_the_rig_and_cold_start_rois_from_the_volume(dataset):
+    data = ShardedSplit(dataset, "train")
+    metas = list(data.all_metadata())
+    for i, meta in enumerate(metas):
+        rec = data.arrays(i)
+        assert list(rec["roi_from_volume"]) == [meta["cold_start"]] * 2 + [False] * CONFIG.novel_views
+        src = data[i].views[:2]
+        baseline = np.linalg.norm(src[0].camera().center - src[1].camera().center)
+        assert baseline == pytest.approx(meta["placement"]["baseline_m"], abs=1e-6)
+        assert rec["full_size"][0].tolist() == [640, 480]
+    assert any(m["cold_start"] for m in metas) or True  # 30% of 6: may be none; the flag is checked above
+
+
+# ------------------------------------------------------------------ tensors
+def test_torch_dataset_returns_documented_shapes_and_dtypes(dataset):
+    torch = pytest.importorskip("torch")
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(dataset, "val", TargetConfig(heatmap_stride=4, heatmap_sigma=1.5))
+    assert len(ds) == COUNTS["val"]
+    item = ds[1]
+    V, S, h = 2 + CONFIG.novel_views, RES, RES // 4
+    sizes = {"V": V, "S": S, "h": h}
+    assert set(item) == set(KEYS) | {"index"}
+    for key, (shape, dtype, _) in KEYS.items():
+        expect = tuple(sizes[d] if d in sizes else int(d) for d in shape.strip("()").replace(" ", "").split(",") if d)
+        assert tuple(item[key].shape) == expect, key
+        assert item[key].dtype == getattr(torch, dtype), key
+    assert 0.0 <= float(item["tgt_images"].min()) and float(item["tgt_images"].max()) <= 1.0
+    assert torch.equal(item["images"], item["tgt_images"][:2])
+    near, far = item["near_far"][:, 0], item["near_far"][:, 1]
+    assert bool(torch.all((near > 0) & (far > near)))
+    # Heatmap peaks sit at the visible joints (heatmap pixels).
+    hm = item["tgt_heatmaps"][0]
+    vis = item["tgt_visible"][0]
+    j = int(torch.nonzero(vis)[0])
+    peak = divmod(int(torch.argmax(hm[j])), h)
+    uv = (item["tgt_joints_2d"][0, j] + 0.5) / 4 - 0.5
+    assert abs(peak[1] - float(uv[0])) <= 0.5 + 1e-6 and abs(peak[0] - float(uv[1])) <= 0.5 + 1e-6
+    assert float(hm[~vis].abs().max()) == 0.0 if bool((~vis).any()) else True
+    # DataLoader round trip (one scene per item).
+    loader = torch.utils.data.DataLoader(ds, batch_size=None, shuffle=False, num_workers=0)
+    assert next(iter(loader))["tgt_images"].shape == (V, 3, S, S)
+
+
+def test_cli_main(tmp_path, caplog):
+    out = tmp_path / "cli"
+    assert main(["--out", str(out), "--train", "1", "--res", "32", "--workers", "1", "--novel-views", "1"]) == 0
+    assert ShardedSplit(out, "train")[0].views[2].image.shape == (32, 32, 3)
+    assert main(["--out", str(out), "--train", "1", "--res", "30"]) == 2
+    assert "SyntheticConfig.resolution" in caplog.text

@@ -1,0 +1,186 @@
+"""ZJU-MoCap format: a tiny subject written from the simulator, read back, turned into samples."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drivers.sim import SceneConfig, SimScene
+from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at
+from training.data.cache import ShardedSplit
+from training.data.errors import DataConfigError, DatasetError
+from training.data.sample import check_sample
+from training.data.zju import ANNOTS, ZjuFrame, ZjuSequence, write_zju_format
+from training.data.zju_samples import ZjuConfig, convert_zju, zju_sample
+
+SIZE, RES = 240, 64
+TIMES = (0.1, 0.6)
+
+
+def _ring(n: int = 4) -> list[Camera]:
+    centre = np.array([0.0, -0.9, 3.0])
+    cams = []
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        eye = centre + 3.0 * np.array([np.sin(a), -0.15, -np.cos(a)])
+        R, t = look_at(eye, centre)
+        dist = [-0.08, 0.02, 0.001, -0.001, 0.003] if i % 2 else np.zeros(5)  # odd cameras have a lens
+        cams.append(Camera(f"c{i}", SIZE, SIZE, intrinsics_from_fov(SIZE, SIZE, 62.0), dist, R, t))
+    return cams
+
+
+@pytest.fixture(scope="module")
+def subject(tmp_path_factory):
+    scene = SimScene(SceneConfig(seed=11, motion="squat"))
+    cams = _ring()
+    frames = []
+    for t in TIMES:
+        rendered = scene.render_batch(cams, t)
+        kp = np.stack([np.concatenate([tr.joints_2d, tr.visible[:, None].astype(float)], 1) for _, tr in rendered])
+        j3 = np.concatenate([scene.joints_3d(t), np.ones((25, 1))], 1)
+        j3[3, 3] = 0.0  # one joint unlabelled
+        frames.append(ZjuFrame([im for im, _ in rendered], [tr.mask for _, tr in rendered], kp, j3))
+    root = write_zju_format(tmp_path_factory.mktemp("zju") / "CoreView_sim", cams, frames, image_ext=".png")
+    return root, cams, frames
+
+
+def test_written_layout_is_the_zju_layout(subject):
+    root, cams, _ = subject
+    annots = np.load(root / ANNOTS, allow_pickle=True).item()
+    assert set(annots) == {"cams", "ims"} and set(annots["cams"]) == {"K", "R", "T", "D"}
+    assert np.asarray(annots["cams"]["T"][1]).shape == (3, 1) and np.asarray(annots["cams"]["D"][1]).shape == (5, 1)
+    # Millimetres on disk.
+    assert np.allclose(np.asarray(annots["cams"]["T"][2]).ravel(), cams[2].t * 1000.0)
+    assert annots["ims"][1]["ims"][2] == "Camera_B3/000001.png"
+    assert np.asarray(annots["ims"][0]["kpts2d"]).shape == (4, 25, 3)
+    assert (root / "mask" / "Camera_B3" / "000001.png").is_file()
+    assert json.loads((root / "keypoints3d" / "000001.json").read_text())[0]["id"] == 0
+
+
+def test_round_trip_of_every_value(subject):
+    root, cams, frames = subject
+    seq = ZjuSequence(root)
+    assert (seq.num_frames, seq.num_cameras) == (len(TIMES), len(cams))
+    for c, cam in enumerate(cams):
+        back = seq.camera(c)
+        assert np.array_equal(back.K, cam.K) and np.array_equal(back.R, cam.R) and np.array_equal(back.dist, cam.dist)
+        assert np.allclose(back.t, cam.t, rtol=0, atol=1e-12)  # mm -> m
+        assert back.size == cam.size and back.name == f"Camera_B{c + 1}"
+    for f, frame in enumerate(frames):
+        kp = seq.keypoints2d(f)
+        assert np.array_equal(kp, frame.kpts2d)
+        assert np.array_equal(seq.joints_3d(f), frame.joints_3d)
+        for c in range(len(cams)):
+            assert np.array_equal(seq.read_image(f, c), frame.images[c])
+            assert np.array_equal(seq.read_mask(f, c), frame.masks[c])
+
+
+def test_keypoints2d_json_fallbacks(tmp_path, subject):
+    _, cams, frames = subject
+    frame = frames[0]
+    root = write_zju_format(tmp_path / "s", cams[:2], [ZjuFrame(frame.images[:2], frame.masks[:2])], image_ext=".png")
+    seq = ZjuSequence(root)
+    assert seq.keypoints2d(0) is None and seq.joints_3d(0) is None
+    openpose = {"people": [{"pose_keypoints_2d": frame.kpts2d[0].ravel().tolist()}]}
+    easymocap = {"annots": [{"personID": 0, "bbox": [0, 0, 1, 1, 1], "keypoints": frame.kpts2d[1].tolist()}]}
+    for c, data in enumerate((openpose, easymocap)):
+        path = root / "keypoints2d" / f"Camera_B{c + 1}" / "000000.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(data))
+    assert np.array_equal(seq.keypoints2d(0), frame.kpts2d[:2])
+
+
+def test_samples_are_geometrically_consistent(subject):
+    root, _, _ = subject
+    seq = ZjuSequence(root)
+    config = ZjuConfig(resolution=RES, view_sets=((0, 1, 2),))
+    sample = zju_sample(seq, 1, (0, 1, 2), config)
+    check_sample(sample)
+    assert sample.joints_3d_valid.sum() == 24 and not sample.joints_3d_valid[3]
+    assert np.all(sample.bbox[0] < sample.joints_3d[sample.joints_3d_valid].min(0))
+    for view in sample.views:
+        assert not view.has_depth and not view.depth.any()
+        uv, _ = view.camera().project(sample.joints_3d)
+        vis = view.visible
+        assert vis.sum() >= 15 and not vis[3]
+        assert np.abs(uv[vis] - view.joints_2d[vis]).max() < 0.5
+        # The mask covers the projected torso joints (mid-hip, neck) where visible.
+        for j in (1, 8):
+            if vis[j]:
+                u, v = np.round(view.joints_2d[j]).astype(int)
+                assert view.mask[max(v - 2, 0):v + 3, max(u - 2, 0):u + 3].any()
+    # The 2D-keypoint path (undistort, ROI transform) agrees with the projected 3D joints.
+    from_2d = zju_sample(seq, 1, (0, 1, 2), ZjuConfig(resolution=RES, view_sets=((0, 1, 2),), joints_2d_from="kpts2d"))
+    for a, b in zip(sample.views, from_2d.views):
+        both = a.visible & b.visible
+        assert both.sum() >= 5
+        assert np.abs(a.joints_2d[both] - b.joints_2d[both]).max() < 0.05
+        assert np.array_equal(a.image, b.image)
+
+
+def test_triangulates_when_there_are_no_3d_joints(tmp_path, subject):
+    _, cams, frames = subject
+    f = frames[1]
+    root = write_zju_format(tmp_path / "no3d", cams, [ZjuFrame(f.images, f.masks, f.kpts2d, None)], image_ext=".png")
+    sample = zju_sample(ZjuSequence(root), 0, (0, 1), ZjuConfig(resolution=RES, view_sets=((0, 1),)))
+    assert sample.metadata["joints_3d_source"] == "triangulated"
+    valid = sample.joints_3d_valid
+    assert valid.sum() >= 15
+    err = np.linalg.norm(sample.joints_3d[valid] - f.joints_3d[valid, :3], axis=-1)
+    assert np.median(err) < 0.02
+
+
+def test_convert_then_load_as_tensors(tmp_path, subject):
+    root, _, _ = subject
+    out = tmp_path / "ds"
+    n = convert_zju(root, out, ZjuConfig(resolution=RES, view_sets=((0, 1, 2), (2, 3, 0))), split="train_sim",
+                    shard_size=3)
+    assert n == 4
+    data = ShardedSplit(out, "train_sim")
+    assert [m["cameras"] for m in data.all_metadata()] == [[0, 1, 2], [2, 3, 0]] * 2
+    torch = pytest.importorskip("torch")
+    from training.data.torch_dataset import MultiViewDataset
+
+    item = MultiViewDataset(out, "train_sim")[3]
+    assert item["tgt_images"].shape == (3, 3, RES, RES) and item["tgt_images"].dtype == torch.float32
+    assert not bool(item["tgt_has_depth"].any())
+
+
+# ------------------------------------------------------------------ errors
+def test_missing_annots_names_the_file(tmp_path):
+    with pytest.raises(DatasetError, match="annots.npy") as err:
+        ZjuSequence(tmp_path)
+    assert err.value.path == str(tmp_path / ANNOTS)
+
+
+def test_malformed_annots_names_the_file(tmp_path):
+    np.save(tmp_path / ANNOTS, {"cams": {"K": [np.eye(3)]}, "ims": []}, allow_pickle=True)
+    with pytest.raises(DatasetError, match="K, R, T and D") as err:
+        ZjuSequence(tmp_path)
+    assert err.value.path == str(tmp_path / ANNOTS)
+
+
+def test_missing_image_and_mask_name_the_file(tmp_path, subject):
+    _, cams, frames = subject
+    root = write_zju_format(tmp_path / "s", cams[:2], [ZjuFrame(frames[0].images[:2], frames[0].masks[:2])],
+                            image_ext=".png")
+    seq = ZjuSequence(root)
+    (root / "Camera_B2" / "000000.png").unlink()
+    with pytest.raises(DatasetError, match="image") as err:
+        seq.read_image(0, 1)
+    assert err.value.path == str(root / "Camera_B2" / "000000.png")
+    (root / "mask" / "Camera_B1" / "000000.png").unlink()
+    with pytest.raises(DatasetError, match="mask") as err:
+        seq.read_mask(0, 0)
+    assert err.value.path == str(root / "mask" / "Camera_B1" / "000000.png")
+
+
+def test_config_errors_name_the_field():
+    with pytest.raises(DataConfigError, match="ZjuConfig.view_sets"):
+        ZjuConfig(view_sets=((0,),))
+    with pytest.raises(DataConfigError, match="ZjuConfig.joints_2d_from"):
+        ZjuConfig(joints_2d_from="smpl")
+    with pytest.raises(DataConfigError, match="ZjuConfig.resolution"):
+        ZjuConfig(resolution=100)

@@ -1,0 +1,248 @@
+"""On-disk sample cache: memory-mapped ``.npy`` shards, one folder per split.
+
+Layout::
+
+    <root>/dataset.json                  manifest: format, schema version, resolution, view
+                                         names, source config, per-split spec and count
+    <root>/<split>/shard_000000/         samples [0, shard_size)
+        images.npy  masks.npy  ...       one array per entry of ``sample.FIELDS``, stacked over
+                                         the shard's samples (leading axis)
+        meta.json                        {"first_index", "count", "samples": [metadata...]}
+    <root>/<split>/shard_000001/ ...
+
+A shard folder is written under a temporary name and renamed when complete, so a
+folder named ``shard_*`` is always whole; an interrupted run leaves only ``*.tmp-*``
+folders, which the next run deletes. Shard ``k`` holds samples
+``[k * shard_size, min((k + 1) * shard_size, count))``; since samples are deterministic per
+index, a larger ``count`` regenerates only the missing or short shards.
+
+Reading memory-maps the arrays (``np.load(mmap_mode="r")``): opening a split reads only
+the manifest and the shards' ``meta.json``; a sample costs one page-in of its slices. At
+most ``max_open_shards`` shards stay mapped (LRU), bounding file descriptors.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from training.data.errors import DatasetError
+from training.data.sample import FIELDS, Sample, arrays_to_sample, field_shape, sample_to_arrays
+
+log = logging.getLogger(__name__)
+
+FORMAT = "ghnerf-multiview"
+SCHEMA_VERSION = 1
+MANIFEST = "dataset.json"
+SHARD_META = "meta.json"
+
+
+def shard_name(k: int) -> str:
+    return f"shard_{k:06d}"
+
+
+# ------------------------------------------------------------------ manifest
+def read_manifest(root: str | Path) -> dict:
+    """The manifest of the dataset at ``root``; :class:`DatasetError` names the file when it is bad."""
+    path = Path(root) / MANIFEST
+    if not path.is_file():
+        raise DatasetError(path, "no dataset manifest here (not a dataset folder, or generation never started)")
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise DatasetError(path, f"unreadable manifest: {e}") from e
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        raise DatasetError(path, f"not a {FORMAT} manifest (format {manifest.get('format') if isinstance(manifest, dict) else None!r})")
+    if manifest.get("schema_version") != SCHEMA_VERSION:
+        raise DatasetError(path, f"schema_version {manifest.get('schema_version')!r}; this code reads {SCHEMA_VERSION}")
+    for key in ("resolution", "view_names", "splits"):
+        if key not in manifest:
+            raise DatasetError(path, f"manifest lacks {key!r}")
+    return manifest
+
+
+def write_manifest(root: str | Path, manifest: dict) -> None:
+    path = Path(root) / MANIFEST
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True))
+    os.replace(tmp, path)
+
+
+def new_manifest(*, resolution: int, view_names: Sequence[str], source: str, source_config: dict) -> dict:
+    return {"format": FORMAT, "schema_version": SCHEMA_VERSION, "resolution": int(resolution),
+            "view_names": list(view_names), "num_sources": 2, "image_channels": "RGB", "source": source,
+            "source_config": source_config, "splits": {}}
+
+
+# ------------------------------------------------------------------ writing
+def write_shard(folder: str | Path, samples: Sequence[Sample], first_index: int) -> Path:
+    """Write ``samples`` (indices ``first_index ..``) as the complete shard ``folder`` (atomic rename)."""
+    folder = Path(folder)
+    if not samples:
+        raise ValueError("a shard needs at least one sample")
+    tmp = folder.with_name(f"{folder.name}.tmp-{os.getpid()}")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    records = [sample_to_arrays(s) for s in samples]
+    for name in FIELDS:
+        np.save(tmp / f"{name}.npy", np.stack([r[name] for r in records]))
+    meta = {"first_index": int(first_index), "count": len(samples), "samples": [s.metadata for s in samples]}
+    (tmp / SHARD_META).write_text(json.dumps(meta, default=_json_default))
+    if folder.exists():
+        shutil.rmtree(folder)
+    os.replace(tmp, folder)
+    return folder
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def shard_plan(count: int, shard_size: int) -> list[tuple[int, int, int]]:
+    """``(k, first_index, n)`` of every shard of a split of ``count`` samples."""
+    return [(k, i0, min(shard_size, count - i0)) for k, i0 in enumerate(range(0, count, shard_size))]
+
+
+def shard_is_complete(folder: Path, first_index: int, count: int) -> bool:
+    meta = folder / SHARD_META
+    if not meta.is_file():
+        return False
+    try:
+        data = json.loads(meta.read_text())
+    except (OSError, json.JSONDecodeError):
+        return False
+    return data.get("first_index") == first_index and data.get("count") == count and all(
+        (folder / f"{name}.npy").is_file() for name in FIELDS)
+
+
+def remove_stale_temporaries(split_dir: Path) -> None:
+    for tmp in split_dir.glob("shard_*.tmp-*"):
+        log.info("removing interrupted shard %s", tmp)
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+# ------------------------------------------------------------------ reading
+@dataclass(frozen=True)
+class _ShardInfo:
+    folder: Path
+    first_index: int
+    count: int
+    metadata: list
+
+
+class ShardedSplit:
+    """Read-only, random-access view of one split of a cached dataset (numpy, torch-free).
+
+    Args:
+        root: the dataset folder (holding ``dataset.json``).
+        split: split name (``"train"``, ``"val"``...).
+        max_open_shards: shards kept memory-mapped at once.
+
+    Raises:
+        DatasetError: the manifest, a shard folder, an array file or its shape is missing or
+            wrong; the message names the file.
+    """
+
+    def __init__(self, root: str | Path, split: str, *, max_open_shards: int = 16) -> None:
+        self.root = Path(root)
+        self.manifest = read_manifest(self.root)
+        splits = self.manifest["splits"]
+        if split not in splits:
+            raise DatasetError(self.root / MANIFEST, f"has no split {split!r}; splits: {sorted(splits)}")
+        self.split = split
+        self.info = splits[split]
+        self.resolution = int(self.manifest["resolution"])
+        self.view_names = tuple(self.manifest["view_names"])
+        self.num_views = len(self.view_names)
+        self._max_open = int(max_open_shards)
+        self._open: OrderedDict[int, dict[str, np.ndarray]] = OrderedDict()
+        self._shards = self._scan(int(self.info["count"]), int(self.info["shard_size"]))
+        self._starts = np.array([s.first_index for s in self._shards], dtype=np.int64)
+
+    def _scan(self, count: int, shard_size: int) -> list[_ShardInfo]:
+        split_dir = self.root / self.split
+        shards = []
+        for k, i0, n in shard_plan(count, shard_size):
+            folder = split_dir / shard_name(k)
+            meta_path = folder / SHARD_META
+            if not meta_path.is_file():
+                raise DatasetError(meta_path, f"missing: split {self.split!r} should hold {count} samples "
+                                              f"(shard {k} = samples {i0}..{i0 + n - 1}); regenerate or resume")
+            try:
+                meta = json.loads(meta_path.read_text())
+            except (OSError, json.JSONDecodeError) as e:
+                raise DatasetError(meta_path, f"unreadable shard metadata: {e}") from e
+            if meta.get("first_index") != i0 or meta.get("count") != n or len(meta.get("samples", [])) != n:
+                raise DatasetError(meta_path, f"shard holds samples from {meta.get('first_index')} x {meta.get('count')}, "
+                                              f"expected {i0} x {n}")
+            shards.append(_ShardInfo(folder, i0, n, meta["samples"]))
+        return shards
+
+    def __len__(self) -> int:
+        return int(self.info["count"])
+
+    def _locate(self, index: int) -> tuple[int, int]:
+        if not -len(self) <= index < len(self):
+            raise IndexError(f"index {index} out of range for split {self.split!r} of {len(self)} samples")
+        index %= len(self)
+        k = int(np.searchsorted(self._starts, index, side="right") - 1)
+        return k, index - self._shards[k].first_index
+
+    def _arrays(self, k: int) -> dict[str, np.ndarray]:
+        if k in self._open:
+            self._open.move_to_end(k)
+            return self._open[k]
+        shard = self._shards[k]
+        arrays = {}
+        for name, (shape_fn, dtype) in FIELDS.items():
+            path = shard.folder / f"{name}.npy"
+            try:
+                a = np.load(path, mmap_mode="r")
+            except (OSError, ValueError) as e:
+                raise DatasetError(path, f"unreadable array: {e}") from e
+            expect = (shard.count, *shape_fn(self.num_views, self.resolution))
+            if a.shape != expect or a.dtype != dtype:
+                raise DatasetError(path, f"has shape {a.shape} {a.dtype}, expected {expect} {dtype}")
+            arrays[name] = a
+        self._open[k] = arrays
+        while len(self._open) > self._max_open:
+            self._open.popitem(last=False)
+        return arrays
+
+    def arrays(self, index: int) -> dict[str, np.ndarray]:
+        """The stored record of sample ``index`` (copies; masks still bit-packed)."""
+        k, j = self._locate(index)
+        return {name: np.array(a[j]) for name, a in self._arrays(k).items()}
+
+    def metadata(self, index: int) -> dict:
+        k, j = self._locate(index)
+        return self._shards[k].metadata[j]
+
+    def all_metadata(self) -> Iterator[dict]:
+        for shard in self._shards:
+            yield from shard.metadata
+
+    def __getitem__(self, index: int) -> Sample:
+        return arrays_to_sample(self.arrays(index), self.view_names, self.metadata(index))
+
+    def __getstate__(self) -> dict:
+        # Memory maps do not pickle (DataLoader workers with spawn): reopen lazily.
+        state = self.__dict__.copy()
+        state["_open"] = OrderedDict()
+        return state
+
+
+__all__ = ["FORMAT", "SCHEMA_VERSION", "MANIFEST", "ShardedSplit", "read_manifest", "write_manifest", "new_manifest",
+           "write_shard", "shard_plan", "shard_name", "shard_is_complete", "remove_stale_temporaries", "field_shape"]

@@ -1,0 +1,251 @@
+"""ZJU-MoCap frames -> the shared :class:`~training.data.sample.Sample` structure, and conversion to the cache.
+
+A sample is one frame seen by one *view set*: camera indices whose first two are the
+sources and the rest novel targets (ZJU-MoCap's 21-23 cameras stand on a circle, so
+e.g. ``(0, 3, 1, 2)``: sources 45 degrees apart, targets between them). Each view is
+preprocessed **exactly as the runtime does** (``build_undistort_crop_maps`` +
+``apply_crop_maps``: undistort, crop, area-reduce, resize in one remap) around a ROI from
+the joints, so the crops are the same kind of image the device feeds the model.
+
+* **3D joints**: ``keypoints3d/`` when present (EasyMocap, metres); otherwise triangulated
+  from the 2D keypoints of *all* cameras (``triangulate_robust``, confidence-weighted);
+  ``joints_3d_valid`` says which are known.
+* **2D joints** (``joints_2d_from``): ``"auto"`` projects the 3D joints into the crop when
+  enough are valid (multi-view consistent targets; ``visible`` = valid, in front and inside
+  the crop; occlusion is unknown), else maps the view's 2D keypoints (undistort, then the
+  ROI transform; ``visible`` = confidence > ``min_confidence`` and inside the crop).
+* **Mask**: the mask file through the same remap (bilinear), thresholded at 0.5.
+* **Depth**: none (``has_depth`` False, depth 0).
+* **Subject box**: the valid 3D joints' box grown by ``bbox_margin_m`` (joints lie inside
+  the body; hands, head top and feet reach ~0.1-0.2 m beyond them).
+* Coordinates stay in the dataset's world frame (metres; ZJU's is z-up, which the model
+  does not care about).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import cv2
+import numpy as np
+
+from ghnerf_runtime.body25 import NUM_JOINTS
+from ghnerf_runtime.geometry import Camera, triangulate_robust
+from ghnerf_runtime.preprocess import (
+    Roi, apply_crop_maps, build_undistort_crop_maps, crop_camera, roi_from_joints,
+)
+from training.data.cache import (
+    MANIFEST, new_manifest, read_manifest, shard_name, shard_plan, write_manifest, write_shard,
+)
+from training.data.errors import DataConfigError, DatasetError
+from training.data.sample import NUM_SOURCES, Sample, ViewData
+from training.data.zju import ZjuSequence
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ZjuConfig:
+    """How ZJU-MoCap frames become samples.
+
+    Attributes:
+        resolution: crop side ``S`` (multiple of 8).
+        view_sets: camera index tuples, sources first (at least 2 cameras each, same length).
+        frames: ``(start, stop, step)`` over ``annots["ims"]``; ``stop = -1`` means all.
+        margin_frac: ROI margin (``roi_from_joints``).
+        min_roi_size: smallest ROI side, full-image pixels.
+        joints_2d_from: ``"auto"``, ``"keypoints3d"`` (projected 3D joints) or ``"kpts2d"``.
+        min_confidence: 2D keypoints with confidence at or below this are missing.
+        bbox_margin_m: growth of the joints' box into the subject box.
+        mask_dir: ``"mask"`` or ``"mask_cihp"``.
+    """
+
+    resolution: int = 128
+    view_sets: tuple[tuple[int, ...], ...] = ((0, 3, 1, 2),)
+    frames: tuple[int, int, int] = (0, -1, 1)
+    margin_frac: float = 0.25
+    min_roi_size: int = 64
+    joints_2d_from: str = "auto"
+    min_confidence: float = 0.1
+    bbox_margin_m: float = 0.2
+    mask_dir: str = "mask"
+
+    def __post_init__(self) -> None:
+        def fail(name: str, message: str) -> None:
+            raise DataConfigError(f"ZjuConfig.{name}", message)
+
+        if isinstance(self.resolution, bool) or not isinstance(self.resolution, int) or not 32 <= self.resolution <= 512 \
+                or self.resolution % 8:
+            fail("resolution", f"must be a multiple of 8 in [32, 512], got {self.resolution!r}")
+        sets = self.view_sets
+        if not sets or not all(isinstance(s, (tuple, list)) and len(s) >= NUM_SOURCES and len(set(s)) == len(s)
+                               and all(isinstance(c, int) and c >= 0 for c in s) for s in sets) \
+                or len({len(s) for s in sets}) != 1:
+            fail("view_sets", f"must be tuples of >= {NUM_SOURCES} distinct camera indices, all of one length, got {sets!r}")
+        if len(self.frames) != 3 or not all(isinstance(v, int) for v in self.frames) or self.frames[2] < 1 \
+                or self.frames[0] < 0:
+            fail("frames", f"must be (start >= 0, stop or -1, step >= 1), got {self.frames!r}")
+        for name, lo, hi in (("margin_frac", 0.0, 2.0), ("min_confidence", 0.0, 1.0), ("bbox_margin_m", 0.0, 1.0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and lo <= v <= hi):
+                fail(name, f"must be a number in [{lo}, {hi}], got {v!r}")
+        if self.joints_2d_from not in ("auto", "keypoints3d", "kpts2d"):
+            fail("joints_2d_from", f"must be 'auto', 'keypoints3d' or 'kpts2d', got {self.joints_2d_from!r}")
+        if self.mask_dir not in ("mask", "mask_cihp"):
+            fail("mask_dir", f"must be 'mask' or 'mask_cihp', got {self.mask_dir!r}")
+
+    @property
+    def view_names(self) -> tuple[str, ...]:
+        n = len(self.view_sets[0])
+        return tuple(f"src{i}" for i in range(NUM_SOURCES)) + tuple(f"novel{i}" for i in range(n - NUM_SOURCES))
+
+    def frame_indices(self, num_frames: int) -> range:
+        start, stop, step = self.frames
+        return range(start, num_frames if stop < 0 else min(stop, num_frames), step)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["view_sets"] = [list(s) for s in self.view_sets]
+        d["frames"] = list(self.frames)
+        return d
+
+
+def _frame_joints(seq: ZjuSequence, frame: int, kp2d: np.ndarray | None, config: ZjuConfig) -> tuple[np.ndarray, np.ndarray, str]:
+    """``(25, 3)`` joints, ``(25,)`` valid and where they came from."""
+    j3 = seq.joints_3d(frame)
+    if j3 is not None:
+        valid = (j3[:, 3] > 0) & np.all(np.isfinite(j3[:, :3]), axis=1)
+        return np.where(valid[:, None], j3[:, :3], 0.0), valid, "keypoints3d"
+    if kp2d is not None:
+        cams = [seq.camera(c) for c in range(seq.num_cameras)]
+        weights = np.where(kp2d[..., 2] > config.min_confidence, kp2d[..., 2], 0.0)
+        result = triangulate_robust(kp2d[..., :2], cams, weights)
+        return result.points, result.valid, "triangulated"
+    return np.zeros((NUM_JOINTS, 3)), np.zeros(NUM_JOINTS, dtype=bool), "none"
+
+
+def _view_roi(camera: Camera, joints: np.ndarray, valid: np.ndarray, kp: np.ndarray | None, mask: np.ndarray,
+              config: ZjuConfig, where: Path) -> Roi:
+    roi = None
+    if valid.sum() >= 3:
+        roi = roi_from_joints(camera, joints, valid.astype(float), config.margin_frac, config.min_roi_size)
+    if roi is None and kp is not None:
+        roi = roi_from_joints(camera, kp[:, :2], kp[:, 2], config.margin_frac, config.min_roi_size,
+                              min_confidence=config.min_confidence)
+    if roi is None:
+        ys, xs = np.nonzero(mask)
+        if len(xs) == 0:
+            raise DatasetError(where, "no joints and an empty mask: cannot place the crop")
+        corners = np.array([[xs.min(), ys.min()], [xs.max(), ys.max()]], dtype=np.float64)
+        roi = roi_from_joints(camera, corners, np.ones(2), config.margin_frac, config.min_roi_size, min_joints=2)
+    if roi is None:
+        raise DatasetError(where, "the subject lies outside the image")
+    return roi
+
+
+def zju_view(seq: ZjuSequence, frame: int, cam_index: int, name: str, joints: np.ndarray, valid: np.ndarray,
+             kp2d: np.ndarray | None, config: ZjuConfig) -> ViewData:
+    """One crop view of camera ``cam_index`` at ``frame`` (see the module docstring)."""
+    S = config.resolution
+    camera = seq.camera(cam_index)
+    image = seq.read_image(frame, cam_index)
+    mask_full = seq.read_mask(frame, cam_index)
+    if image.shape[:2] != (camera.height, camera.width) or mask_full.shape != image.shape[:2]:
+        raise DatasetError(seq.image_path(frame, cam_index),
+                           f"image {image.shape[:2]} / mask {mask_full.shape} differ from the camera's "
+                           f"{camera.height}x{camera.width}")
+    kp = None if kp2d is None else kp2d[cam_index]
+    roi = _view_roi(camera, joints, valid, kp, mask_full, config, seq.mask_path(frame, cam_index))
+    maps = build_undistort_crop_maps(camera, roi, S)
+    crop = cv2.cvtColor(apply_crop_maps(image, maps), cv2.COLOR_BGR2RGB)
+    mask = apply_crop_maps(np.where(mask_full, 255, 0).astype(np.uint8), maps) >= 128
+    crop_cam = crop_camera(camera, roi, S)
+
+    use_3d = config.joints_2d_from == "keypoints3d" or (config.joints_2d_from == "auto" and valid.sum() >= 3)
+    if use_3d:
+        uv, z = crop_cam.project(np.where(valid[:, None], joints, 0.0))
+        ok = valid & (z > 0) & np.all(np.isfinite(uv), axis=-1)
+    elif kp is not None:
+        und = camera.undistort_pixels(kp[:, :2]) if camera.has_distortion else kp[:, :2]
+        uv = roi.image_to_model(und, S)
+        ok = (kp[:, 2] > config.min_confidence) & np.all(np.isfinite(uv), axis=-1)
+    else:
+        uv, ok = np.zeros((NUM_JOINTS, 2)), np.zeros(NUM_JOINTS, dtype=bool)
+    inside = np.all((uv >= -0.5) & (uv < S - 0.5), axis=-1)
+    return ViewData(
+        name=name, image=np.ascontiguousarray(crop), mask=mask, depth=np.zeros((S, S), np.float16), has_depth=False,
+        joints_2d=np.where(ok[:, None], uv, 0.0).astype(np.float32), visible=ok & inside,
+        K=crop_cam.K.copy(), R=crop_cam.R.copy(), t=crop_cam.t.copy(), roi=roi, roi_from_volume=False,
+        full_K=camera.K.copy(), full_size=camera.size,
+    )
+
+
+def zju_sample(seq: ZjuSequence, frame: int, view_set: Sequence[int], config: ZjuConfig) -> Sample:
+    """The sample of ``frame`` seen by the cameras ``view_set`` (sources first)."""
+    kp2d = seq.keypoints2d(frame)
+    if config.joints_2d_from == "kpts2d" and kp2d is None:
+        raise DatasetError(seq.root, f"frame {frame}: joints_2d_from='kpts2d' but there are no 2D keypoints")
+    joints, valid, origin = _frame_joints(seq, frame, kp2d, config)
+    if config.joints_2d_from == "keypoints3d" and origin != "keypoints3d":
+        raise DatasetError(seq.keypoints3d_path(frame), "joints_2d_from='keypoints3d' but the file is missing")
+    if valid.sum() >= 2:
+        pts = joints[valid]
+        bbox = np.stack([pts.min(0) - config.bbox_margin_m, pts.max(0) + config.bbox_margin_m])
+    else:
+        raise DatasetError(seq.keypoints3d_path(frame), "too few 3D joints (keypoints3d or triangulated 2D "
+                                                        "keypoints) to bound the subject")
+    names = config.view_names
+    views = tuple(zju_view(seq, frame, c, names[i], joints, valid, kp2d, config) for i, c in enumerate(view_set))
+    metadata = {
+        "source": "zju", "root": str(seq.root), "frame": int(frame), "cameras": [int(c) for c in view_set],
+        "camera_names": [seq.camera(c).name for c in view_set], "joints_3d_source": origin,
+        "images": [seq.relative_image_path(frame, c) for c in view_set],
+    }
+    return Sample(views, joints, valid, bbox, metadata)
+
+
+def iter_zju_samples(seq: ZjuSequence, config: ZjuConfig) -> Iterator[Sample]:
+    for frame in config.frame_indices(seq.num_frames):
+        for view_set in config.view_sets:
+            yield zju_sample(seq, frame, view_set, config)
+
+
+def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, split: str = "train",
+                shard_size: int = 64) -> int:
+    """Convert one ZJU-MoCap subject into split ``split`` of the cached dataset ``out``; returns the count.
+
+    Several subjects go into one dataset as several splits (``train_313``, ``train_315``...;
+    combine them with ``torch.utils.data.ConcatDataset``). The split is rewritten whole.
+    """
+    if not split or not split.replace("_", "").isalnum():
+        raise DataConfigError("split", f"must be an identifier, got {split!r}")
+    seq = ZjuSequence(subject, mask_dir=config.mask_dir)
+    for view_set in config.view_sets:
+        if max(view_set) >= seq.num_cameras:
+            raise DataConfigError("ZjuConfig.view_sets", f"camera {max(view_set)} does not exist "
+                                                         f"({seq.num_cameras} cameras in {seq.root})")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fresh = new_manifest(resolution=config.resolution, view_names=config.view_names, source="zju",
+                         source_config={"zju": config.to_json()})
+    if (out / MANIFEST).exists():
+        manifest = read_manifest(out)
+        if manifest["resolution"] != config.resolution or manifest["view_names"] != list(config.view_names):
+            raise DatasetError(out / MANIFEST, "holds a dataset of another resolution or view count")
+    else:
+        manifest = fresh
+    count = len(config.frame_indices(seq.num_frames)) * len(config.view_sets)
+    samples = iter_zju_samples(seq, config)
+    for k, first, n in shard_plan(count, shard_size):
+        write_shard(out / split / shard_name(k), [next(samples) for _ in range(n)], first)
+        log.info("%s: shard %d written (%d samples)", split, k, n)
+    manifest["splits"][split] = {"count": count, "shard_size": shard_size, "spec": {"name": split, "source": "zju",
+                                                                                   "subject": str(subject)}}
+    write_manifest(out, manifest)
+    return count
+
+
+__all__ = ["ZjuConfig", "zju_sample", "zju_view", "iter_zju_samples", "convert_zju"]
