@@ -40,7 +40,7 @@ def edge128() -> ModelConfig:
     return ModelConfig(
         height=128, width=128,
         features=FeatureNetConfig(channels=(8, 16, 32), full_res_convs=1, full_res_smooth=False),
-        human=HumanEncoderConfig(num_layers=3, out_channels=16, out_stride=4),
+        human=HumanEncoderConfig(num_layers=3, out_channels=16, out_stride=4, input_scale=0.5),
         cost_volume=CostVolumeConfig(groups=8),
         levels=(
             LevelConfig(volume_stride=8, planes=16, samples=8, feature="feat_s4", range_scale=1.5,

@@ -34,7 +34,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from training.data.errors import DatasetError
-from training.data.sample import FIELDS, Sample, arrays_to_sample, field_shape, sample_to_arrays
+from training.data.sample import FIELDS, Sample, arrays_to_sample, sample_to_arrays
 
 log = logging.getLogger(__name__)
 
@@ -245,4 +245,4 @@ class ShardedSplit:
 
 
 __all__ = ["FORMAT", "SCHEMA_VERSION", "MANIFEST", "ShardedSplit", "read_manifest", "write_manifest", "new_manifest",
-           "write_shard", "shard_plan", "shard_name", "shard_is_complete", "remove_stale_temporaries", "field_shape"]
+           "write_shard", "shard_plan", "shard_name", "shard_is_complete", "remove_stale_temporaries"]

@@ -32,7 +32,7 @@ import numpy as np
 from drivers.sim import SimScene, random_scene
 from ghnerf_runtime.geometry import Camera, Rig, intrinsics_from_fov, look_at
 from ghnerf_runtime.preprocess import Roi, roi_from_joints, roi_from_volume
-from training.data.errors import DataConfigError
+from training.data.errors import DataConfigError, DataError
 from training.data.sample import NUM_SOURCES, Sample
 from training.data.splits import SplitSpec, check_dataset_seed
 from training.data.views import render_view
@@ -190,7 +190,7 @@ def make_sample(spec: SplitSpec, dataset_seed: int, index: int, config: Syntheti
         cam, meta = _novel_camera(f"novel{k}", 0.5 * (lo + hi), rng, config)
         roi = _joint_roi(cam, track, config) or roi_from_joints(cam, joints, np.ones(25), 0.2)
         if roi is None:
-            raise RuntimeError(f"sample {index}: the subject is outside novel camera {k} (scene seed {scene_seed})")
+            raise DataError(f"sample {index}: the subject is outside novel camera {k} (scene seed {scene_seed})")
         cameras.append((cam, roi, False))
         novel_meta.append(meta)
 

@@ -130,6 +130,11 @@ class ModelConfig(Config):
             raise ConfigError(f"heatmap_stride: {self.heatmap_stride} must divide {W}x{H}")
         if self.use_human_encoder and (H % self.human.out_stride or W % self.human.out_stride):
             raise ConfigError(f"human.out_stride: {self.human.out_stride} must divide {W}x{H}")
+        if self.use_human_encoder:
+            s = self.human.input_scale
+            if not (0 < s <= 1) or (H * s) % 16 or (W * s) % 16:
+                raise ConfigError(f"human.input_scale: {s} must be in (0, 1] and give a trunk input divisible by "
+                                  f"16 (got {W * s}x{H * s})")
         if self.heads.num_joints != NUM_JOINTS:
             raise ConfigError(f"heads.num_joints: BODY_25 has {NUM_JOINTS} joints, got {self.heads.num_joints}")
 

@@ -88,7 +88,11 @@ class Heads(nn.Module):
         V = config.feature_dim
         self.g_nerf = pointwise_mlp([2 * img_channels + voxel_channels, config.nerf_hidden, V], last_activation=True)
         self.g_sigma = nn.Conv2d(V, 1, 1)
-        self.g_c = pointwise_mlp([V + img_channels + 5, config.colour_hidden, 1])
+        # g_c = Linear([V, f_img_s, d_t - d_s, <d_t, d_s>, visible_s]) -> ReLU -> Linear, per source view; the
+        # first layer is split so its V part runs once for all views (no per-view copy of V).
+        self.g_c_v = nn.Conv2d(V, config.colour_hidden, 1)
+        self.g_c_f = nn.Conv2d(img_channels + 5, config.colour_hidden, 1, bias=False)
+        self.g_c_out = nn.Conv2d(config.colour_hidden, 1, 1)
         # g_h = Linear([V, pooled f_h]) -> ReLU -> Linear -> sigmoid. The first layer is split into the V part
         # and the f_h part (same function) so f_h may be given once per ray and broadcast over its samples.
         self.g_h_v = nn.Conv2d(V, config.heat_hidden, 1)
@@ -137,8 +141,8 @@ class Heads(nn.Module):
         S, _, Q, M = f_img.shape
         diff = (d_target - d_source).reshape(S, 3, Q, M)
         dot = (d_target * d_source).sum(dim=1, keepdim=True).reshape(S, 1, Q, M)
-        x = torch.cat([V.expand(S, -1, -1, -1), f_img, diff, dot, visible], dim=1)
-        logits = self.g_c(x) - 30.0 * (1.0 - visible)  # (S, 1, Q, M)
+        hidden = torch.relu(self.g_c_f(torch.cat([f_img, diff, dot, visible], dim=1)) + self.g_c_v(V))
+        logits = self.g_c_out(hidden) - 30.0 * (1.0 - visible)  # (S, 1, Q, M)
         rgb = f_img[:, -3:]
         if S == 2:  # softmax over two views is a sigmoid of the difference (no softmax over axis 0)
             w0 = torch.sigmoid(logits[0] - logits[1])
