@@ -31,8 +31,8 @@ URL options (every one validated; unknown ones are rejected by name)::
 * ``max_loop_mb`` (2048): refuse (``RigConfigError``) a loop needing more memory
   than this, rather than exhausting the machine.
 
-Real time: rendering a 640x480 frame takes ~70 ms on one core, twice a 30 fps
-period per pair. The motion loops (``period_s`` of the scene), so frames are a
+Real time: rendering a 640x480 pair can take longer than a 30 fps period on a
+2-core machine (``benchmarks/bench_sim_render.py`` prints the figure). The motion loops (``period_s`` of the scene), so frames are a
 function of (camera, frame index modulo the loop length): ``open()`` renders the
 whole loop (both cameras) with a thread pool, or loads it from the disk cache,
 logging progress, and returns only when every frame is in memory. After open a

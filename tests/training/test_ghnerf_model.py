@@ -122,3 +122,14 @@ def test_config_errors_name_the_field():
         bad = preset("tiny")
         bad.levels = (bad.levels[0], replace(bad.levels[1], samples=3))
         bad.validate()
+
+
+@pytest.mark.parametrize("size", [96, 256])
+def test_other_resolutions(size):
+    cfg = replace(preset("tiny"), height=size, width=size)
+    m = GHNeRF(cfg).eval()
+    images, cam, uv = inputs(cfg, stride=16, novel=False)
+    with torch.no_grad():
+        out = m(images, cam["src_P"], cam["src_centers"], cam["tgt_K_inv"], cam["tgt_c2w"], cam["near_far"], uv)
+    assert out["levels"][-1]["heatmaps"].shape == (2, (size // 16) ** 2, 25)
+    assert m.contract().graph("encoder").tensor("images").shape == (2, 3, size, size)

@@ -61,7 +61,7 @@ def time_graphs(model: GHNeRF, paths: dict[str, Path], threads: int = 2, repeats
         key = (targets, stride, points)
         if key not in cache:
             cache[key] = _inputs(model, targets, stride, points)
-        sess = make_session(paths[graph], threads)
+        sess = make_session(paths[graph], threads, spin=True)  # one graph at a time: spinning helps
         t = benchmark(sess, cache[key].numpy(contract.graph(graph)), repeats=repeats)
         rows.append({"graph": graph, "case": label, **t})
     return rows

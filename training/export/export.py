@@ -16,6 +16,7 @@ TorchScript exporter is used (``dynamo=False``): it needs no onnxscript and hand
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -163,7 +164,13 @@ def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInp
     was_training = model.training
     model.eval()
     try:
-        with torch.no_grad():
+        with torch.no_grad(), warnings.catch_warnings():
+            # Python branches on shapes (two views, square maps, sample count, map sizes) only read axes that
+            # the contract fixes, so the tracer's "might not generalize" warning does not apply; the dynamic
+            # axes (targets, rays, points) never reach a Python branch (tested with other B/R/N).
+            warnings.simplefilter("ignore", torch.jit.TracerWarning)
+            warnings.filterwarnings("ignore", message=".*legacy TorchScript-based ONNX export.*")
+            warnings.filterwarnings("ignore", message="The feature will be removed.*")
             torch.onnx.export(
                 wrapper, inputs.for_graph(spec), str(path), dynamo=False, opset_version=opset,
                 input_names=list(spec.input_names), output_names=list(spec.output_names),

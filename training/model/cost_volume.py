@@ -48,11 +48,13 @@ def build_cost_volume(
     z = depths.reshape(B, 1, D, h * w)
     points = origin.unsqueeze(3) + z * direction.unsqueeze(2)  # (B, 3, D, hw)
     grid, _ = project_planar(src_P, points.transpose(0, 1).reshape(3, -1), height, width)  # (S, 2, B*D*hw)
-    f = grid_sample(features, planar_to_grid(grid, B * D * h))  # (S, C, B*D*h, w), channels first
-    if S == 2:  # exact two-view shortcut: onnxruntime reduces slowly over the view axis
-        half = 0.5 * (f[0] - f[1])
-        var = half * half
+    grid = planar_to_grid(grid, B * D * h)  # (S, B*D*h, w, 2)
+    if S == 2:  # exact two-view shortcut: onnxruntime reduces slowly over the view axis, and sampling each
+        # view on its own avoids splitting the large sampled tensor afterwards
+        half = 0.5 * (grid_sample(features[0:1], grid[0:1])[0] - grid_sample(features[1:2], grid[1:2])[0])
+        var = half * half  # (C, B*D*h, w)
     else:
+        f = grid_sample(features, grid)  # (S, C, B*D*h, w), channels first
         d = f - f.mean(dim=0, keepdim=True)
         var = (d * d).mean(dim=0)
     var = var.reshape(groups, C // groups, B, D, h, w).mean(dim=1)  # (G, B, D, h, w)

@@ -219,12 +219,17 @@ class GHNeRF(nn.Module):
         return "inverse" if level == 0 else "linear"
 
     # -------------------------------------------------------------- per point
-    def _sample_images(self, enc: dict[str, Tensor], grid: Tensor) -> Tensor:
-        """Source features + RGB at ``grid`` ``(S, Q, M, 2)`` -> ``f_img`` ``(S, Ci, Q, M)`` (RGB last)."""
+    def _sample_views(self, maps: Tensor, grid: Tensor) -> list[Tensor]:
+        """``maps`` ``(S, C, h, w)`` at ``grid`` ``(S, Q, M, 2)`` -> per view ``(1, C, Q, M)``."""
+        return [grid_sample(maps[s:s + 1], grid[s:s + 1]) for s in range(maps.shape[0])]
+
+    def _sample_images(self, enc: dict[str, Tensor], grid: Tensor) -> list[Tensor]:
+        """Source features + RGB at ``grid`` ``(S, Q, M, 2)`` -> ``f_img`` per view ``(1, Ci, Q, M)``, RGB last."""
         feat = enc[self.config.render_feature]
         if feat.shape[-2:] == enc["images"].shape[-2:]:
-            return grid_sample(torch.cat([feat, enc["images"]], dim=1), grid)
-        return torch.cat([grid_sample(feat, grid), grid_sample(enc["images"], grid)], dim=1)
+            return self._sample_views(torch.cat([feat, enc["images"]], dim=1), grid)
+        return [torch.cat([f, c], dim=1) for f, c in zip(self._sample_views(feat, grid),
+                                                           self._sample_views(enc["images"], grid))]
 
     def _point_outputs(self, level: int, enc: dict[str, Tensor], points: Tensor, f_voxel: Tensor, src_P: Tensor,
                        *, heat: bool = True, human_points: Tensor | None = None,
@@ -241,7 +246,7 @@ class GHNeRF(nn.Module):
         flat = points.reshape(3, B * N * M)
         grid, visible = project_planar(src_P, flat, self.H, self.W)  # (S, 2, L), (S, 1, L)
         grid = planar_to_grid(grid, B * N)  # (S, B*N, M, 2)
-        f_img = self._sample_images(enc, grid)  # (S, Ci, B*N, M)
+        f_img = self._sample_images(enc, grid)  # per view (1, Ci, B*N, M)
         V = heads.nerf_feature(f_img, f_voxel)
         out = {"sigma": heads.density(V).reshape(B, N, M)}
         if heat:
@@ -249,17 +254,16 @@ class GHNeRF(nn.Module):
             if self.human is not None:
                 if human_points is not None:
                     hgrid, _ = project_planar(src_P, human_points.reshape(3, B * M), self.H, self.W)
-                    f_h = grid_sample(enc["human_feat"], planar_to_grid(hgrid, B))  # (S, Ch, B, M)
-                    f_h = f_h.unsqueeze(3)  # (S, Ch, B, 1, M)
+                    f_h = self._sample_views(enc["human_feat"], planar_to_grid(hgrid, B))  # (1, Ch, B, M)
                 else:
-                    f_h = grid_sample(enc["human_feat"], grid)
-                    f_h = f_h.reshape(S, f_h.shape[1], B, N, M)
+                    f_h = self._sample_views(enc["human_feat"], grid)  # (1, Ch, B*N, M)
             out["heat"] = heads.heat(V, f_h, B).reshape(-1, B, N, M)
         if colour is not None:
             centers, d_target = colour
-            d_source = unit(flat.unsqueeze(0) - centers.unsqueeze(2), dim=1).reshape(S, 3, B, N, M)
             d_t = d_target.transpose(0, 1).unsqueeze(0).unsqueeze(3)  # (1, 3, B, 1, M)
-            out["rgb"] = heads.colour(V, f_img, d_t, d_source, visible.reshape(S, 1, B * N, M)).reshape(3, B, N, M)
+            d_source = [unit(flat - centers[s].reshape(3, 1), dim=0).reshape(1, 3, B, N, M) for s in range(S)]
+            vis = [visible[s:s + 1].reshape(1, 1, B * N, M) for s in range(S)]
+            out["rgb"] = heads.colour(V, f_img, d_t, d_source, vis).reshape(3, B, N, M)
         if coord:
             out["coord"] = heads.coord(V).reshape(3, B, N, M)
         return out

@@ -56,16 +56,17 @@ def pointwise_mlp(dims: list[int], last_activation: bool = False) -> nn.Sequenti
     return nn.Sequential(*layers)
 
 
-def pool_views(x: Tensor) -> Tensor:
-    """``(S, C, P, N)`` -> ``(1, 2C, P, N)``: mean and (biased) variance across the source views.
+def pool_views(views: list[Tensor]) -> Tensor:
+    """Per-view ``(1, C, P, N)`` tensors -> ``(1, 2C, P, N)``: mean and (biased) variance across the views.
 
-    Two views (the product) take an exact shortcut without reductions over the view axis,
-    which onnxruntime runs slowly.
+    Views are kept as separate tensors (sampled one by one) because slicing a stacked view axis copies
+    in onnxruntime; two views (the product) take an exact shortcut without reductions.
     """
-    if x.shape[0] == 2:
-        a, b = x[0:1], x[1:2]
+    if len(views) == 2:
+        a, b = views
         half = 0.5 * (a - b)
         return torch.cat([0.5 * (a + b), half * half], dim=1)
+    x = torch.cat(views, dim=0)
     mean = x.mean(dim=0, keepdim=True)
     d = x - mean
     return torch.cat([mean, (d * d).mean(dim=0, keepdim=True)], dim=1)
@@ -100,55 +101,59 @@ class Heads(nn.Module):
         self.g_h_out = nn.Conv2d(config.heat_hidden, config.num_joints, 1)
         self.g_co = pointwise_mlp([V, config.feature_dim, 3]) if config.coord_head else None
 
-    def nerf_feature(self, f_img: Tensor, f_voxel: Tensor) -> Tensor:
-        """``f_img`` ``(S, Ci, Q, M)``, ``f_voxel`` ``(1, Cv, Q, M)`` -> ``V`` ``(1, feature_dim, Q, M)``."""
+    def nerf_feature(self, f_img: list[Tensor], f_voxel: Tensor) -> Tensor:
+        """``f_img`` per view ``(1, Ci, Q, M)``, ``f_voxel`` ``(1, Cv, Q, M)`` -> ``V`` ``(1, feature_dim, Q, M)``."""
         return self.g_nerf(torch.cat([pool_views(f_img), f_voxel], dim=1))
 
     def density(self, V: Tensor) -> Tensor:
         """``(1, Vd, Q, M)`` -> ``(Q, M)``."""
         return F.softplus(self.g_sigma(V))[0, 0]
 
-    def heat(self, V: Tensor, f_h: Tensor | None, batch: int) -> Tensor:
+    def heat(self, V: Tensor, f_h: list[Tensor] | None, batch: int) -> Tensor:
         """Joint heatmap values in ``[0, 1]``.
 
         Args:
             V: ``(1, Vd, Q, M)`` with ``Q = batch * N``.
-            f_h: ``(S, Ch, batch, n, M)`` human features with ``n = N`` (per sample) or ``n = 1`` (per ray,
-                broadcast over the samples), or None (baseline).
+            f_h: per view ``(1, Ch, batch * n, M)`` human features with ``n = N`` (per sample) or ``n = 1``
+                (per ray, broadcast over the samples), or None (baseline).
 
         Returns:
             ``(J, Q, M)``.
         """
         h = self.g_h_v(V)
         if f_h is not None and self.g_h_h is not None:
-            S, Ch, B, n, M = f_h.shape
-            hh = self.g_h_h(pool_views(f_h.reshape(S, Ch, B * n, M)))  # (1, hidden, B*n, M)
-            hidden = h.shape[1]
-            h = (h.reshape(1, hidden, batch, -1, M) + hh.reshape(1, hidden, batch, n, M)).reshape(h.shape)
+            hh = self.g_h_h(pool_views(f_h))  # (1, hidden, batch*n, M)
+            hidden, M = h.shape[1], h.shape[3]
+            h = (h.reshape(1, hidden, batch, -1, M) + hh.reshape(1, hidden, batch, -1, M)).reshape(h.shape)
         return torch.sigmoid(self.g_h_out(torch.relu(h)))[0]
 
-    def colour(self, V: Tensor, f_img: Tensor, d_target: Tensor, d_source: Tensor, visible: Tensor) -> Tensor:
-        """Blend source colours (the last 3 channels of ``f_img``).
+    def colour(self, V: Tensor, f_img: list[Tensor], d_target: Tensor, d_source: list[Tensor],
+               visible: list[Tensor]) -> Tensor:
+        """Blend source colours (the last 3 channels of each view's ``f_img``).
 
         Args:
-            V: ``(1, Vd, Q, M)``; f_img: ``(S, Ci, Q, M)``;
-            d_target: ``(1, 3, B, 1, M)`` unit target ray directions; d_source: ``(S, 3, B, N, M)`` unit
-            directions source centre -> point (``Q = B * N``); visible: ``(S, 1, Q, M)`` 1.0 inside the source.
+            V: ``(1, Vd, Q, M)``; f_img: per view ``(1, Ci, Q, M)``;
+            d_target: ``(1, 3, B, 1, M)`` unit target ray directions; d_source: per view ``(1, 3, B, N, M)``
+            unit directions source centre -> point (``Q = B * N``); visible: per view ``(1, 1, Q, M)``,
+            1.0 inside the source image.
 
         Returns:
             ``(3, Q, M)`` colour.
         """
-        S, _, Q, M = f_img.shape
-        diff = (d_target - d_source).reshape(S, 3, Q, M)
-        dot = (d_target * d_source).sum(dim=1, keepdim=True).reshape(S, 1, Q, M)
-        hidden = torch.relu(self.g_c_f(torch.cat([f_img, diff, dot, visible], dim=1)) + self.g_c_v(V))
-        logits = self.g_c_out(hidden) - 30.0 * (1.0 - visible)  # (S, 1, Q, M)
-        rgb = f_img[:, -3:]
-        if S == 2:  # softmax over two views is a sigmoid of the difference (no softmax over axis 0)
-            w0 = torch.sigmoid(logits[0] - logits[1])
+        _, _, Q, M = f_img[0].shape
+        v_part = self.g_c_v(V)
+        logits = []
+        for f, d_s, vis in zip(f_img, d_source, visible):
+            diff = (d_target - d_s).reshape(1, 3, Q, M)
+            dot = (d_target * d_s).sum(dim=1, keepdim=True).reshape(1, 1, Q, M)
+            hidden = torch.relu(self.g_c_f(torch.cat([f, diff, dot, vis], dim=1)) + v_part)
+            logits.append(self.g_c_out(hidden) - 30.0 * (1.0 - vis))  # (1, 1, Q, M)
+        rgb = [f[0, -3:] for f in f_img]
+        if len(f_img) == 2:  # softmax over two views is a sigmoid of the difference
+            w0 = torch.sigmoid(logits[0] - logits[1])[0]
             return rgb[1] + w0 * (rgb[0] - rgb[1])
-        w = torch.softmax(logits, dim=0)
-        return (w * rgb).sum(dim=0)
+        w = torch.softmax(torch.cat(logits, dim=0), dim=0)
+        return (w * torch.stack(rgb)).sum(dim=0)
 
     def coord(self, V: Tensor) -> Tensor:
         """``(1, Vd, Q, M)`` -> ``(3, Q, M)``."""

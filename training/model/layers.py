@@ -21,12 +21,3 @@ def conv_bn_relu_3d(cin: int, cout: int, kernel: int = 3, stride: int = 1, norm:
     layers.append(nn.ReLU(inplace=True))
     return nn.Sequential(*layers)
 
-
-def mlp(dims: list[int], last_activation: bool = False) -> nn.Sequential:
-    """``Linear -> ReLU -> ... -> Linear`` over the last axis (exports as MatMul + Add)."""
-    layers: list[nn.Module] = []
-    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
-        layers.append(nn.Linear(a, b))
-        if i < len(dims) - 2 or last_activation:
-            layers.append(nn.ReLU(inplace=True))
-    return nn.Sequential(*layers)
