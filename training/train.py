@@ -1,0 +1,613 @@
+"""``ghnerf-train`` (``python -m training.train``): train GHNeRF (or the baseline) on a cached dataset.
+
+Example::
+
+    python -m training.train --config training/train_configs/edge128.json --out runs/edge128
+    python -m training.train --config training/train_configs/edge128.json --out runs/edge128 --resume
+    torchrun --nproc_per_node 2 -m training.train --config ... --out ...     # DDP (nccl on GPU, gloo on CPU)
+
+One step = one scene (2 source images) per process and ``targets_per_iter`` target cameras of it
+(half sources, half novel views). Per target, rays are drawn (see :func:`sample_rays`):
+
+* ``heat_rays`` rays on the heatmap grid (``contract.ray_grid`` at ``heatmap_stride``: 32x32 at 128),
+  ``mask_fraction`` (0.75, as in ENeRF/GHNeRF) of them on grid cells touching the subject mask;
+  they carry colour and heatmap supervision;
+* one ``patch_size`` x ``patch_size`` block of full-resolution rays centred on a random subject pixel;
+  it carries colour, heatmap and the SSIM patch loss (the perceptual-loss substitute).
+
+Targets: colour is the subject over the model's background (black), bilinearly sampled at the ray;
+heatmaps are the dataset's Gaussians (``metrics.gaussian_heatmaps``, sigma 1.5 heatmap pixels)
+evaluated at the ray in model pixels (sigma ``1.5 * stride``), identical to ``tgt_heatmaps`` on the grid.
+
+Checkpoints (``ckpt_XXXXXXX.pt`` and ``last.pt``) hold the model, the optimiser, the step, the config
+and every RNG state, so ``--resume`` continues bit-identically to an uninterrupted run (on CPU).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import sys
+import time
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any, Literal, Mapping
+
+import numpy as np
+import torch
+import torch.distributed as dist
+import torch.nn.functional as F
+from torch import Tensor
+
+from ghnerf_runtime.contract import ray_grid
+from training.configs import PRESETS, preset
+from training.losses import LossConfig, compute_losses
+from training.model import GHNeRF, ModelConfig
+from training.model.config import Config, ConfigError
+
+CHECKPOINT_VERSION = 1
+HEATMAP_SIGMA_HM_PX = 1.5
+"""Gaussian sigma of the ground-truth heatmaps in heatmap pixels (``TargetConfig.heatmap_sigma``)."""
+
+
+# ---------------------------------------------------------------------------------------------- config
+@dataclass
+class TrainConfig(Config):
+    """Everything a training run needs; validated once by :meth:`from_dict` / :meth:`validate`."""
+
+    preset: str = "edge128"
+    """Model preset of ``training.configs`` (``tiny``, ``edge128``, ``edge128_baseline``)."""
+    data: str = "data/edge128"
+    """Dataset folder (``dataset.json``), made by ``python -m training.data.generate``."""
+    split: str = "train"
+    """Training split."""
+    iterations: int = 1000
+    """Optimiser steps (one scene per process per step)."""
+    targets_per_iter: int = 2
+    """Target cameras per scene and step: ceil(n/2) source views (heatmaps in the sources) + the rest novel."""
+    heat_rays: int = 256
+    """Rays per target on the heatmap grid (``heatmap_stride``), colour + heatmap supervision."""
+    patch_size: int = 12
+    """Side of the full-resolution ray patch per target (colour + heatmap + SSIM); 0 disables it."""
+    mask_fraction: float = 0.75
+    """Fraction of grid rays (and patch centres) drawn inside the subject mask."""
+    lr: float = 5e-4
+    """Adam learning rate."""
+    lr_decay_every: int = 0
+    """Multiply the learning rate by ``lr_decay_gamma`` every this many steps (0: constant)."""
+    lr_decay_gamma: float = 0.5
+    """Step decay factor."""
+    grad_clip: float = 0.0
+    """Clip the global gradient norm (0: off)."""
+    loss: LossConfig = field(default_factory=LossConfig)
+    """Loss weights (``l_col + 0.5 l_heat + ssim_weight * (1 - SSIM) [+ coord_weight * l_coord]``)."""
+    seed: int = 0
+    """Seed of the weights, data order, ray sampling and stratified samples."""
+    checkpoint_every: int = 500
+    """Save a checkpoint every this many steps (and at the end)."""
+    log_every: int = 25
+    """Progress line / log record every this many steps."""
+    pck_every: int = 100
+    """Render the source heatmap grids of the current scene every this many steps for the PCK in the log (0: off)."""
+    threads: int = 0
+    """torch CPU threads (0: ``os.cpu_count()``)."""
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    """``auto``: cuda when present, else CPU."""
+    init: str = ""
+    """torchvision-format resnet18 state dict for the human encoder ('' = from scratch)."""
+    max_minutes: float = 0.0
+    """Stop (with a checkpoint) after this wall time (0: no limit). The run then counts as finished early."""
+
+    def validate(self) -> None:
+        def fail(key: str, why: str) -> None:
+            raise ConfigError(f"{key}: {why}")
+
+        if self.preset not in PRESETS:
+            fail("preset", f"unknown preset {self.preset!r}; presets: {sorted(PRESETS)}")
+        for key in ("iterations", "targets_per_iter", "heat_rays", "checkpoint_every", "log_every"):
+            if getattr(self, key) < 1:
+                fail(key, f"must be >= 1, got {getattr(self, key)}")
+        for key in ("patch_size", "lr_decay_every", "threads", "pck_every"):
+            if getattr(self, key) < 0:
+                fail(key, f"must be >= 0, got {getattr(self, key)}")
+        if self.patch_size == 1:
+            fail("patch_size", "must be 0 (off) or >= 2")
+        if not 0.0 <= self.mask_fraction <= 1.0:
+            fail("mask_fraction", f"must be in [0, 1], got {self.mask_fraction}")
+        if not (self.lr > 0 and math.isfinite(self.lr)):
+            fail("lr", f"must be a positive number, got {self.lr}")
+        if not 0 < self.lr_decay_gamma <= 1:
+            fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
+        if self.grad_clip < 0 or self.max_minutes < 0:
+            fail("grad_clip" if self.grad_clip < 0 else "max_minutes", "must be >= 0")
+        for f in fields(LossConfig):
+            v = getattr(self.loss, f.name)
+            if isinstance(v, float) and (v < 0 or not math.isfinite(v)):
+                fail(f"loss.{f.name}", f"must be a finite number >= 0, got {v}")
+        if self.loss.ssim_window < 1:
+            fail("loss.ssim_window", "must be >= 1")
+        if not self.data:
+            fail("data", "must name the dataset folder")
+
+    def model_config(self) -> ModelConfig:
+        return preset(self.preset)
+
+
+def load_config_file(path: str | Path) -> dict:
+    """A JSON or TOML (``.toml``) file as a dict."""
+    path = Path(path)
+    try:
+        if path.suffix == ".toml":
+            with open(path, "rb") as fh:
+                return tomllib.load(fh)
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"config file {path}: {e}") from e
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def apply_overrides(data: dict, overrides: list[str]) -> dict:
+    """``key=value`` (dotted keys for nested configs, JSON values) on top of ``data``."""
+    out = json.loads(json.dumps(data))
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"{item}: override must be key=value")
+        key, value = item.split("=", 1)
+        node = out
+        parts = key.strip().split(".")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+            if not isinstance(node, dict):
+                raise ConfigError(f"{key}: {p} is not a section")
+        node[parts[-1]] = _parse_value(value)
+    return out
+
+
+def build_config(data: Mapping[str, Any]) -> TrainConfig:
+    """Validate a config dict once; unknown keys and bad values raise :class:`ConfigError` naming the key."""
+    data = dict(data)
+    data.pop("$comment", None)
+    cfg = TrainConfig.from_dict(data)
+    cfg.validate()
+    return cfg
+
+
+# ------------------------------------------------------------------------------------------ runtime
+@dataclass
+class DistInfo:
+    rank: int = 0
+    world: int = 1
+    local_rank: int = 0
+
+    @property
+    def main(self) -> bool:
+        return self.rank == 0
+
+
+def setup_distributed(device_kind: str) -> DistInfo:
+    """Join the process group torchrun (or a test) describes in the environment; no-op for one process."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return DistInfo()
+    if not dist.is_initialized():
+        dist.init_process_group(backend="nccl" if device_kind == "cuda" else "gloo")
+    return DistInfo(dist.get_rank(), dist.get_world_size(), int(os.environ.get("LOCAL_RANK", "0")))
+
+
+def pick_device(kind: str, info: DistInfo) -> torch.device:
+    if kind == "cuda" or (kind == "auto" and torch.cuda.is_available()):
+        torch.cuda.set_device(info.local_rank)
+        return torch.device("cuda", info.local_rank)
+    return torch.device("cpu")
+
+
+def seed_everything(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed % 2 ** 32)
+    torch.manual_seed(seed)
+
+
+def rng_state(gen: torch.Generator) -> dict:
+    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate(),
+             "rays": gen.get_state()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def set_rng_state(state: dict, gen: torch.Generator) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    gen.set_state(state["rays"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+# ----------------------------------------------------------------------------------------- sampling
+def pick_targets(item: dict, n: int, gen: torch.Generator) -> Tensor:
+    """Indices of ``n`` target views: ceil(n/2) sources, the rest novel views (sources if none)."""
+    is_src = item["tgt_is_source"]
+    src = torch.nonzero(is_src).flatten()
+    nov = torch.nonzero(~is_src).flatten()
+    n_src = n if len(nov) == 0 else min(len(src), (n + 1) // 2)
+    n_nov = n - n_src
+    pick_s = src[torch.randperm(len(src), generator=gen)[:n_src]] if n_src <= len(src) else \
+        src[torch.randint(len(src), (n_src,), generator=gen)]
+    if n_nov == 0:
+        return pick_s
+    pick_n = nov[torch.randint(len(nov), (n_nov,), generator=gen)] if n_nov > len(nov) else \
+        nov[torch.randperm(len(nov), generator=gen)[:n_nov]]
+    return torch.cat([pick_s, pick_n])
+
+
+def _choose(weights_inside: Tensor, count: int, fraction: float, gen: torch.Generator) -> Tensor:
+    """``count`` indices of a flat boolean map: ``round(fraction * count)`` inside (if any), rest anywhere."""
+    n = weights_inside.numel()
+    inside = torch.nonzero(weights_inside.flatten()).flatten()
+    n_in = int(round(fraction * count)) if len(inside) else 0
+    idx_in = inside[torch.randint(len(inside), (n_in,), generator=gen)] if n_in else inside[:0]
+    idx_any = torch.randint(n, (count - n_in,), generator=gen)
+    return torch.cat([idx_in, idx_any])
+
+
+def sample_rays(masks: Tensor, heat_rays: int, patch: int, stride: int, fraction: float,
+                gen: torch.Generator) -> Tensor:
+    """Ray pixels ``(B, heat_rays + patch**2, 2)`` (model pixels, centres at integers) for masks ``(B, H, W)``.
+
+    The first ``heat_rays`` lie on the ``stride`` grid (``contract.ray_grid``), ``fraction`` of them in
+    cells touching the mask; the last ``patch**2`` form a row-major ``patch x patch`` block of pixels.
+    """
+    B, H, W = masks.shape
+    grid = torch.from_numpy(ray_grid(H, W, stride))  # (h*w, 2)
+    cells = F.max_pool2d(masks[:, None].float(), stride)[:, 0] > 0  # (B, h, w)
+    out = []
+    for b in range(B):
+        uv = grid[_choose(cells[b], heat_rays, fraction, gen)]
+        if patch:
+            inside = torch.nonzero(masks[b].flatten()).flatten()
+            if len(inside) and float(torch.rand((), generator=gen)) < fraction:
+                centre = inside[torch.randint(len(inside), (), generator=gen)]
+            else:
+                centre = torch.randint(H * W, (), generator=gen)
+            cy, cx = int(centre) // W, int(centre) % W
+            top = min(max(cy - patch // 2, 0), H - patch)
+            left = min(max(cx - patch // 2, 0), W - patch)
+            ys, xs = torch.meshgrid(torch.arange(top, top + patch), torch.arange(left, left + patch), indexing="ij")
+            uv = torch.cat([uv, torch.stack([xs.flatten(), ys.flatten()], -1).float()])
+        out.append(uv)
+    return torch.stack(out)
+
+
+def bilinear_at(images: Tensor, uv: Tensor) -> Tensor:
+    """``images`` ``(B, C, H, W)`` at pixels ``uv`` ``(B, M, 2)`` (centres at integers) -> ``(B, M, C)``."""
+    H, W = images.shape[-2:]
+    g = torch.stack([(uv[..., 0] + 0.5) / W * 2 - 1, (uv[..., 1] + 0.5) / H * 2 - 1], -1)
+    out = F.grid_sample(images, g[:, None], mode="bilinear", padding_mode="border", align_corners=False)
+    return out[:, :, 0].transpose(1, 2)
+
+
+def heatmaps_at(joints_2d: Tensor, visible: Tensor, uv: Tensor, sigma_px: float) -> Tensor:
+    """Gaussian heatmaps (peak 1, zero for invisible joints) at rays ``uv`` ``(B, M, 2)`` -> ``(B, M, J)``.
+
+    ``joints_2d`` ``(B, J, 2)`` and ``uv`` in model pixels, ``sigma_px`` in model pixels.
+    """
+    d2 = ((uv[:, :, None, :] - joints_2d[:, None, :, :]) ** 2).sum(-1)  # (B, M, J)
+    vis = visible & torch.isfinite(joints_2d).all(-1)
+    return torch.exp(-d2 / (2 * sigma_px ** 2)) * vis[:, None, :].float()
+
+
+def make_batch(item: dict, cfg: TrainConfig, mcfg: ModelConfig, gen: torch.Generator) -> dict[str, Tensor]:
+    """Model inputs and ray targets of one scene: the step's targets and rays."""
+    t = pick_targets(item, cfg.targets_per_iter, gen)
+    masks = item["tgt_masks"][t]
+    stride = mcfg.heatmap_stride
+    uv = sample_rays(masks, cfg.heat_rays, cfg.patch_size, stride, cfg.mask_fraction, gen)
+    bg = mcfg.background
+    img = item["tgt_images"][t]
+    m = masks[:, None].float()
+    comp = img * m + bg * (1 - m)
+    H = img.shape[-1]
+    scale = H / mcfg.height  # dataset at model resolution; guard anyway
+    if scale != 1:
+        raise ValueError(f"dataset resolution {H} does not match the model's {mcfg.height}")
+    return {
+        "images": item["images"], "src_P": item["src_P"], "src_centers": item["src_centers"],
+        "tgt_K_inv": item["tgt_K_inv"][t], "tgt_c2w": item["tgt_c2w"][t], "near_far": item["near_far"][t],
+        "ray_uv": uv, "rgb": bilinear_at(comp, uv),
+        "heatmaps": heatmaps_at(item["tgt_joints_2d"][t], item["tgt_visible"][t], uv, HEATMAP_SIGMA_HM_PX * stride),
+        "targets": t,
+    }
+
+
+# -------------------------------------------------------------------------------------------- losses
+def step_losses(out: dict, batch: dict, cfg: TrainConfig) -> dict[str, Tensor]:
+    """All rays: colour + heatmap (+ coord); the patch rays also SSIM (``training.losses``)."""
+    lc = cfg.loss
+    no_ssim = LossConfig(colour_weight=lc.colour_weight, heat_weight=lc.heat_weight, ssim_weight=0.0,
+                         coord_weight=lc.coord_weight, level_weights=lc.level_weights, ssim_window=lc.ssim_window)
+    terms = compute_losses(out, batch, no_ssim)
+    P = cfg.patch_size
+    if P and lc.ssim_weight:
+        only_ssim = LossConfig(colour_weight=0.0, heat_weight=0.0, ssim_weight=lc.ssim_weight, coord_weight=0.0,
+                               level_weights=lc.level_weights, ssim_window=lc.ssim_window)
+        sliced = {"levels": [{"rgb": lv["rgb"][:, -P * P:]} for lv in out["levels"]]}
+        extra = compute_losses(sliced, {"rgb": batch["rgb"][:, -P * P:]}, only_ssim, patch_shape=(P, P))
+        terms.update({k: v for k, v in extra.items() if k != "loss"})
+        terms["loss"] = terms["loss"] + extra["loss"]
+    return terms
+
+
+def psnr_of(pred: Tensor, target: Tensor) -> float:
+    mse = float(F.mse_loss(pred.detach(), target))
+    return 10 * math.log10(1.0 / max(mse, 1e-10))
+
+
+@torch.no_grad()
+def source_pck(model: GHNeRF, item: dict, device: torch.device) -> float:
+    """PCK@0.2 of the keypoints decoded from the rendered heatmap grids of both source views of ``item``."""
+    from training.evaluate import render_heatmap_grids, keypoints_from_heatmaps  # lazy: avoids a cycle
+    from ghnerf_runtime.metrics import pck
+
+    was = model.training
+    model.eval()
+    src = torch.nonzero(item["tgt_is_source"]).flatten()
+    hm = render_heatmap_grids(model, {k: v.to(device) for k, v in item.items()}, src.to(device))  # (S, J, h, w)
+    model.train(was)
+    uv = keypoints_from_heatmaps(hm.cpu().numpy(), model.config.height)
+    res = pck(uv, item["tgt_joints_2d"][src].numpy(), item["tgt_visible"][src].numpy())
+    return float(res.value)
+
+
+# --------------------------------------------------------------------------------------- checkpoints
+def unwrap(model: torch.nn.Module) -> GHNeRF:
+    return model.module if hasattr(model, "module") else model  # type: ignore[return-value]
+
+
+def save_checkpoint(path: Path, model, opt, step: int, cfg: TrainConfig, gen: torch.Generator,
+                    extra: dict | None = None) -> None:
+    state = {"version": CHECKPOINT_VERSION, "model": unwrap(model).state_dict(), "optimizer": opt.state_dict(),
+             "step": step, "config": asdict(cfg), "model_config": unwrap(model).config.to_dict(),
+             "rng": rng_state(gen), "extra": extra or {}}
+    tmp = path.with_suffix(".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_model(path: str | Path, map_location: str | torch.device = "cpu") -> tuple[GHNeRF, dict]:
+    """A trained model (eval mode) and its checkpoint dict from a ``.pt`` checkpoint."""
+    ck = torch.load(str(path), map_location=map_location, weights_only=False)
+    mcfg = ModelConfig.from_dict(ck["model_config"])
+    model = GHNeRF(mcfg)
+    model.load_state_dict(ck["model"])
+    return model.eval(), ck
+
+
+# ------------------------------------------------------------------------------------------ progress
+class Progress:
+    """One status line: ``\\r``-updated on a terminal, one line per update otherwise (log files)."""
+
+    def __init__(self, total: int, start: int, stream=sys.stderr, enabled: bool = True):
+        self.total, self.start, self.stream, self.enabled = total, start, stream, enabled
+        self.t0 = time.monotonic()
+        self.tty = hasattr(stream, "isatty") and stream.isatty()
+
+    def update(self, step: int, fields_: dict[str, float]) -> str:
+        done = step - self.start
+        el = time.monotonic() - self.t0
+        rate = el / max(done, 1)
+        eta = rate * (self.total - step)
+        w = 24
+        fill = int(w * step / max(self.total, 1))
+        bar = "#" * fill + "-" * (w - fill)
+        vals = " ".join(f"{k} {v:.4g}" for k, v in fields_.items())
+        line = (f"[{bar}] {step}/{self.total} {vals} | {rate:.2f} s/it elapsed {el / 60:.1f} min "
+                f"eta {eta / 60:.1f} min")
+        if self.enabled:
+            self.stream.write(("\r" + line) if self.tty else line + "\n")
+            self.stream.flush()
+        return line
+
+    def close(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+
+
+# ------------------------------------------------------------------------------------------- training
+def scene_order(n: int, epoch: int, seed: int, info: DistInfo) -> list[int]:
+    """This rank's scene indices of ``epoch`` (``DistributedSampler``: same shuffle on every rank)."""
+    from torch.utils.data.distributed import DistributedSampler
+
+    sampler = DistributedSampler(range(n), num_replicas=info.world, rank=info.rank, shuffle=True, seed=seed,
+                                 drop_last=True)
+    sampler.set_epoch(epoch)
+    return list(sampler)
+
+
+def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet: bool = False,
+          dataset=None) -> dict:
+    """Run (or resume) training; returns a summary (also written to ``out_dir/summary.json`` by rank 0)."""
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    out_dir = Path(out_dir)
+    device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
+    info = setup_distributed(device_kind)
+    device = pick_device(cfg.device, info)
+    if device.type == "cpu":
+        torch.set_num_threads(cfg.threads or os.cpu_count() or 1)
+    if info.main:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    mcfg = cfg.model_config()
+    ds = dataset or MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=mcfg.heatmap_stride))
+    if len(ds) < info.world:
+        raise ValueError(f"split {cfg.split!r} has {len(ds)} scenes for {info.world} processes")
+
+    seed_everything(cfg.seed)  # same initial weights on every rank
+    model = GHNeRF(mcfg).to(device).train()
+    if cfg.init:
+        if model.human is None:
+            raise ConfigError("init: the preset has no human encoder")
+        from training.model.human_encoder import load_torchvision_resnet18
+        load_torchvision_resnet18(model.human.trunk, cfg.init)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    gen = torch.Generator().manual_seed(cfg.seed * 1000 + info.rank + 1)
+    seed_everything(cfg.seed + 7919 * info.rank + 1)  # per-rank stratified-sample noise
+    step = 0
+    last = out_dir / "last.pt"
+    if resume and last.exists():
+        ck = torch.load(str(last), map_location=device, weights_only=False)
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["optimizer"])
+        step = int(ck["step"])
+        if info.world == 1 or "rng_ranks" not in ck["extra"]:
+            set_rng_state(ck["rng"], gen)
+        else:
+            set_rng_state(ck["extra"]["rng_ranks"][info.rank], gen)
+    ddp_model: torch.nn.Module = model
+    if info.world > 1:
+        from torch.nn.parallel import DistributedDataParallel as DDP
+        find_unused = bool(mcfg.heads.coord_head and not cfg.loss.coord_weight)
+        ddp_model = DDP(model, device_ids=[device.index] if device.type == "cuda" else None,
+                        find_unused_parameters=find_unused)
+
+    log_path = out_dir / "log.jsonl"
+    prog = Progress(cfg.iterations, step, enabled=info.main and not quiet)
+    per_epoch = len(ds) // info.world
+    t_start = time.monotonic()
+    stopped_early = False
+    window: dict[str, list[float]] = {}
+    last_pck = float("nan")
+    item = None
+
+    def checkpoint(s: int) -> None:
+        extra = {}
+        if info.world > 1:
+            states = [None] * info.world
+            dist.all_gather_object(states, rng_state(gen))
+            extra["rng_ranks"] = states
+        if info.main:
+            save_checkpoint(last, model, opt, s, cfg, gen, extra)
+            if s % cfg.checkpoint_every == 0:
+                save_checkpoint(out_dir / f"ckpt_{s:07d}.pt", model, opt, s, cfg, gen, extra)
+
+    while step < cfg.iterations:
+        epoch, offset = divmod(step, per_epoch)
+        order = scene_order(len(ds), epoch, cfg.seed, info)
+        for idx in order[offset:]:
+            if step >= cfg.iterations:
+                break
+            item = ds[idx]
+            batch = make_batch(item, cfg, mcfg, gen)
+            batch = {k: v.to(device) for k, v in batch.items()}
+            lr = cfg.lr * (cfg.lr_decay_gamma ** (step // cfg.lr_decay_every) if cfg.lr_decay_every else 1.0)
+            for g in opt.param_groups:
+                g["lr"] = lr
+            out = ddp_model(batch["images"], batch["src_P"], batch["src_centers"], batch["tgt_K_inv"],
+                            batch["tgt_c2w"], batch["near_far"], batch["ray_uv"], perturb=True)
+            terms = step_losses(out, batch, cfg)
+            opt.zero_grad(set_to_none=True)
+            terms["loss"].backward()
+            if cfg.grad_clip:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+            opt.step()
+            step += 1
+            loss_v = float(terms["loss"].detach())
+            if not math.isfinite(loss_v):
+                raise FloatingPointError(f"loss is {loss_v} at step {step}")
+            window.setdefault("loss", []).append(loss_v)
+            window.setdefault("psnr", []).append(psnr_of(out["levels"][-1]["rgb"], batch["rgb"]))
+            window.setdefault("heat", []).append(float(terms[f"l{len(out['levels']) - 1}_heat"].detach()))
+            if cfg.pck_every and step % cfg.pck_every == 0 and info.main:
+                last_pck = source_pck(model, item, device)
+            if step % cfg.log_every == 0 or step == cfg.iterations:
+                rec = {k: float(np.mean(v)) for k, v in window.items()}
+                rec["pck"] = last_pck
+                window = {}
+                if info.main:
+                    prog.update(step, {"loss": rec["loss"], "psnr": rec["psnr"], "pck": rec["pck"]})
+                    with open(log_path, "a") as fh:
+                        fh.write(json.dumps({"step": step, "lr": lr, "time_s": round(time.monotonic() - t_start, 2),
+                                             **rec}) + "\n")
+            if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
+                checkpoint(step)
+            if cfg.max_minutes and time.monotonic() - t_start > 60 * cfg.max_minutes and step < cfg.iterations:
+                stopped_early = True
+                checkpoint(step)
+                break
+        if stopped_early:
+            break
+    prog.close()
+    if step % cfg.checkpoint_every and not stopped_early and step == cfg.iterations and not last.exists():
+        checkpoint(step)
+    summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
+               "wall_s": round(time.monotonic() - t_start, 1), "world_size": info.world, "device": str(device),
+               "threads": torch.get_num_threads(), "checkpoint": str(last)}
+    if info.main:
+        (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+# ------------------------------------------------------------------------------------------------ CLI
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="ghnerf-train", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--config", help="JSON or TOML train config (training/train_configs/*.json)")
+    p.add_argument("--out", required=True, help="run folder: checkpoints, log.jsonl, config.json")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt when it exists")
+    p.add_argument("--init", help="torchvision resnet18 state dict for the human encoder")
+    p.add_argument("--preset", choices=sorted(PRESETS))
+    p.add_argument("--data")
+    p.add_argument("--iterations", type=int)
+    p.add_argument("--threads", type=int)
+    p.add_argument("--seed", type=int)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any config key (dotted for nested, JSON value), e.g. --set loss.heat_weight=0.5")
+    p.add_argument("--validate-config", action="store_true", help="check the config and exit")
+    p.add_argument("--quiet", action="store_true")
+    return p.parse_args(argv)
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    data = load_config_file(args.config) if args.config else {}
+    sets = list(args.set)
+    for key in ("preset", "data", "iterations", "threads", "seed", "init"):
+        v = getattr(args, key)
+        if v is not None:
+            sets.append(f"{key}={json.dumps(v)}")
+    return build_config(apply_overrides(data, sets))
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        cfg = config_from_args(args)
+    except ConfigError as e:
+        print(f"ghnerf-train: config error: {e}", file=sys.stderr)
+        return 2
+    if args.validate_config:
+        print(json.dumps(asdict(cfg), indent=1))
+        return 0
+    out = Path(args.out)
+    if int(os.environ.get("RANK", "0")) == 0:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
+    summary = train(cfg, out, resume=args.resume, quiet=args.quiet)
+    if int(os.environ.get("RANK", "0")) == 0:
+        print(json.dumps(summary))
+    if dist.is_initialized():
+        dist.destroy_process_group()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
