@@ -29,3 +29,53 @@ class RigFileError(RuntimeErrorBase, ValueError):
         super().__init__(f"{where}: {message}" if where else message)
         self.path = path
         self.field = field
+
+
+class ConfigError(RuntimeErrorBase, ValueError):
+    """A runtime configuration value or key is invalid.
+
+    ``key`` is the dotted path of the offending key (``"joints3d.method"``); the message
+    starts with it.
+    """
+
+    def __init__(self, message: str, *, key: str | None = None):
+        super().__init__(f"{key}: {message}" if key else message)
+        self.key = key
+
+
+class ModelError(RuntimeErrorBase):
+    """Root of the errors about model files (loading them, their contract, running them).
+
+    ``path`` names the file (or folder) concerned; the message starts with it.
+    """
+
+    def __init__(self, message: str, *, path: str | None = None):
+        super().__init__(f"{path}: {message}" if path else message)
+        self.path = path
+
+
+class ModelLoadError(ModelError, OSError):
+    """A model file is missing, unreadable or not a valid ONNX model (truncated, corrupt)."""
+
+
+class ModelContractError(ModelError, ValueError):
+    """A model file's contract (metadata, graph I/O) does not match what the runtime needs.
+
+    ``key`` names the metadata key or tensor that is wrong (e.g. ``"ghnerf.contract_version"``,
+    ``"images"``); both ``path`` and ``key`` appear in the message.
+    """
+
+    def __init__(self, message: str, *, path: str | None = None, key: str | None = None):
+        super().__init__(f"{key}: {message}" if key else message, path=path)
+        self.key = key
+
+
+class ModelRunError(ModelError):
+    """onnxruntime failed while running a graph (the message names the graph and file)."""
+
+
+class FrameError(RuntimeErrorBase, ValueError):
+    """A frame handed to the estimator has the wrong shape or type for its camera.
+
+    A *bad* frame (black, saturated, noise) is not an error: its joints come back missing.
+    """

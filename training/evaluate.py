@@ -1,34 +1,340 @@
-"""``ghnerf-eval`` (``python -m training.evaluate``): held-out metrics of a checkpoint or ONNX graphs."""
+"""``ghnerf-eval`` (``python -m training.evaluate``): held-out metrics of a checkpoint or of ONNX graphs.
+
+Example::
+
+    python -m training.evaluate --data data/edge128 --split val \\
+        --model ghnerf=runs/edge128/last.pt --model ghnerf_fp32=models/ghnerf \\
+        --model ghnerf_int8=models/ghnerf#int8 --model baseline=runs/edge128_baseline/last.pt --out metrics.json
+
+A model spec is a torch checkpoint (``*.pt``), a folder of exported graphs (``<graph>.onnx``, fp32) or
+such a folder with ``#int8`` (``<graph>.int8.onnx``), run through onnxruntime with 2 threads.
+
+Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_runtime.metrics``:
+
+* **Source views** (targets = the two source cameras, what the device renders): heatmaps on the
+  heatmap grid (``contract.ray_grid`` at ``heatmap_stride``; 32x32 at 128), graph ``render_heat``.
+  - ``heatmap_mse`` against the dataset's Gaussian heatmaps (all 25 joints; invisible joints have
+    all-zero truth);
+  - 2D joints: ``keypoints.decode_keypoints`` (OpenPose style) -> heatmap pixels ->
+    ``keypoints.heatmap_to_model_pixels`` (crop pixels, centres at integers); ``pck`` at alpha 0.2 of
+    the neck--mid-hip distance (fallback: torso box diagonal; see ``metrics.pck``) against
+    ``tgt_joints_2d``, truth valid where ``tgt_visible``; undecoded joints count as wrong;
+  - 3D joints: ``geometry.triangulate_dlt`` of the decoded joints of both sources with the crop
+    projection matrices ``src_P``; ``mpjpe`` (mm, rig frame) against ``joints_3d``; joints that
+    cannot be triangulated (not decoded in both views) are excluded and counted (``mpjpe_pred_missing``).
+* **Novel views** (targets 2..V-1): the full-resolution image (graph ``render_rgb``), ``masked_psnr`` and
+  ``masked_ssim`` inside the subject mask against the target composited over the model background.
+
+Scores pool every joint / image of the split (PCK: correct / evaluated; MPJPE: mean over joints;
+PSNR/SSIM/heatmap MSE: mean over views).
+"""
 from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Protocol
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from ghnerf_runtime.contract import ray_grid
+from ghnerf_runtime.contract import ModelContract, ray_grid
+from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
+from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, pck
+
+PCK_ALPHA = 0.2
+
+
+# ------------------------------------------------------------------------------------------ renderers
+class Renderer(Protocol):
+    """Renders one scene: heatmaps of targets on rays, colour of targets on rays."""
+
+    height: int
+    width: int
+    heatmap_stride: int
+    background: float
+
+    def heatmaps(self, scene: Mapping[str, np.ndarray], targets: np.ndarray, ray_uv: np.ndarray) -> np.ndarray:
+        """``(T, R, J)`` heatmaps of the views ``targets`` at ``ray_uv`` ``(R, 2)``."""
+
+    def colour(self, scene: Mapping[str, np.ndarray], targets: np.ndarray, ray_uv: np.ndarray) -> np.ndarray:
+        """``(T, R, 3)`` colour."""
+
+
+def _cams(scene: Mapping[str, np.ndarray], targets: np.ndarray, ray_uv: np.ndarray) -> dict[str, np.ndarray]:
+    T = len(targets)
+    return {"images": scene["images"], "src_P": scene["src_P"], "src_centers": scene["src_centers"],
+            "tgt_K_inv": scene["tgt_K_inv"][targets], "tgt_c2w": scene["tgt_c2w"][targets],
+            "near_far": scene["near_far"][targets],
+            "ray_uv": np.ascontiguousarray(np.broadcast_to(ray_uv, (T, *ray_uv.shape)), dtype=np.float32)}
+
+
+class TorchRenderer:
+    """The torch model (eval mode, no grad), same graph split as the export (last cascade level)."""
+
+    def __init__(self, model, device: str | torch.device = "cpu", chunk: int = 8192):
+        self.model = model.eval()
+        cfg = model.config
+        self.height, self.width, self.heatmap_stride = cfg.height, cfg.width, cfg.heatmap_stride
+        self.background = cfg.background
+        self.device = torch.device(device)
+        self.chunk = chunk
+
+    @torch.no_grad()
+    def _render(self, scene, targets, ray_uv, heat: bool) -> Tensor:
+        d = {k: torch.from_numpy(np.asarray(v)).to(self.device) for k, v in _cams(scene, targets, ray_uv).items()}
+        m = self.model
+        enc = m.encode(d["images"])
+        vols = m.volumes(enc, d["src_P"], d["tgt_K_inv"], d["tgt_c2w"], d["near_far"])
+        v, lvl = vols[-1], len(vols) - 1
+        outs = []
+        for i in range(0, d["ray_uv"].shape[1], self.chunk):
+            o = m.render(lvl, enc, v["volume"], v["stats"], d["src_P"], d["tgt_K_inv"], d["tgt_c2w"],
+                         d["ray_uv"][:, i:i + self.chunk], src_centers=None if heat else d["src_centers"],
+                         heat=heat)
+            outs.append(o["heatmaps"] if heat else o["rgb"])
+        return torch.cat(outs, 1).cpu()
+
+    def heatmaps(self, scene, targets, ray_uv):
+        return self._render(scene, targets, ray_uv, heat=True).numpy()
+
+    def colour(self, scene, targets, ray_uv):
+        return self._render(scene, targets, ray_uv, heat=False).numpy()
+
+
+class OnnxRenderer:
+    """Exported graphs through onnxruntime (``training.export.parity.run_pipeline``)."""
+
+    def __init__(self, folder: str | Path, precision: str = "fp32", threads: int = 2):
+        import onnx
+
+        from training.export.parity import make_session
+
+        folder = Path(folder)
+        suffix = ".int8.onnx" if precision == "int8" else ".onnx"
+        self.paths = {g: folder / f"{g}{suffix}" for g in ("encoder", "volume", "render_heat", "render_rgb")}
+        missing = [str(p) for p in self.paths.values() if not p.exists()]
+        if missing:
+            raise FileNotFoundError(f"missing ONNX graphs: {missing}")
+        props = {p.key: p.value for p in onnx.load(str(self.paths["encoder"]), load_external_data=False).metadata_props}
+        self.contract = ModelContract.from_metadata(props)
+        self.sessions = {g: make_session(p, threads) for g, p in self.paths.items()}
+        self.height, self.width = self.contract.height, self.contract.width
+        self.heatmap_stride = self.contract.heatmap_stride
+        self.background = self.contract.background
+
+    def _run(self, scene, targets, ray_uv, graph: str) -> dict[str, np.ndarray]:
+        from training.export.parity import run_pipeline
+
+        feeds = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in _cams(scene, targets, ray_uv).items()}
+        return run_pipeline(self.sessions, self.contract, feeds, render_graph=graph)
+
+    def heatmaps(self, scene, targets, ray_uv):
+        return self._run(scene, targets, ray_uv, "render_heat")["heatmaps"]
+
+    def colour(self, scene, targets, ray_uv):
+        return self._run(scene, targets, ray_uv, "render_rgb")["rgb"]
 
 
 @torch.no_grad()
 def render_heatmap_grids(model, item: dict, targets: Tensor) -> Tensor:
-    """Heatmaps ``(T, J, h, w)`` rendered on the heatmap grid of the views ``targets`` of scene ``item``."""
+    """Heatmaps ``(T, J, h, w)`` of the views ``targets`` of ``item`` (torch tensors) on the heatmap grid."""
     cfg = model.config
     H, W, s = cfg.height, cfg.width, cfg.heatmap_stride
-    uv = torch.from_numpy(ray_grid(H, W, s)).to(item["images"].device)
-    T = len(targets)
-    enc = model.encode(item["images"])
-    vols = model.volumes(enc, item["src_P"], item["tgt_K_inv"][targets], item["tgt_c2w"][targets],
-                         item["near_far"][targets])
-    v = vols[-1]
-    out = model.render(len(vols) - 1, enc, v["volume"], v["stats"], item["src_P"], item["tgt_K_inv"][targets],
-                       item["tgt_c2w"][targets], uv.expand(T, -1, -1), heat=True)
-    hm = out["heatmaps"]  # (T, R, J)
-    return hm.transpose(1, 2).reshape(T, -1, H // s, W // s)
+    dev = item["images"].device
+    r = TorchRenderer(model, dev)
+    scene = {k: v.cpu().numpy() for k, v in item.items() if k in ("images", "src_P", "src_centers", "tgt_K_inv",
+                                                                   "tgt_c2w", "near_far")}
+    hm = r.heatmaps(scene, targets.cpu().numpy(), ray_grid(H, W, s))
+    return torch.from_numpy(hm).transpose(1, 2).reshape(len(targets), -1, H // s, W // s)
 
 
+# ------------------------------------------------------------------------------------------- metrics
 def keypoints_from_heatmaps(heatmaps: np.ndarray, model_size: int,
                             config: KeypointDecoderConfig | None = None) -> np.ndarray:
-    """Decoded joints ``(..., J, 2)`` in model (crop) pixels; NaN where no peak was found."""
-    kp = decode_keypoints(np.asarray(heatmaps, np.float32), config)
-    uv = heatmap_to_model_pixels(kp.uv, heatmaps.shape[-1], model_size)
+    """Decoded joints ``(..., J, 2)`` in model (crop) pixels from ``(..., J, h, w)`` heatmaps; NaN where none."""
+    heatmaps = np.asarray(heatmaps, np.float32)
+    kp = decode_keypoints(heatmaps, config)
+    h, w = heatmaps.shape[-2:]
+    uv = heatmap_to_model_pixels(kp.uv, (w, h), model_size)
     return np.where(kp.valid[..., None], uv, np.nan)
+
+
+@dataclass
+class Accumulator:
+    """Pools per-scene results into split scores."""
+
+    pck_correct: int = 0
+    pck_evaluated: int = 0
+    pck_missing: int = 0
+    pck_pred_missing: int = 0
+    mpjpe_sum_mm: float = 0.0
+    mpjpe_joints: int = 0
+    mpjpe_missing: int = 0
+    mpjpe_pred_missing: int = 0
+    heat_mse: list[float] = field(default_factory=list)
+    psnr: list[float] = field(default_factory=list)
+    ssim: list[float] = field(default_factory=list)
+    scenes: int = 0
+
+    def add(self, m: dict) -> None:
+        self.scenes += 1
+        p, e, hm = m["pck"], m["mpjpe"], m["heatmap_mse"]
+        self.pck_correct += p.num_correct
+        self.pck_evaluated += p.num_evaluated
+        self.pck_missing += p.num_missing
+        self.pck_pred_missing += p.num_pred_missing
+        self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
+        self.mpjpe_joints += e.num_evaluated
+        self.mpjpe_missing += e.num_missing
+        self.mpjpe_pred_missing += e.num_pred_missing
+        self.heat_mse.append(hm.value)
+        if m.get("psnr") is not None:
+            # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
+            self.psnr.extend(float(v) for v in np.ravel(m["psnr"].per_image) if not np.isnan(v))
+            self.ssim.extend(float(v) for v in np.ravel(m["ssim"].per_image) if not np.isnan(v))
+
+    def result(self) -> dict:
+        def mean(v):
+            v = [x for x in v if not np.isnan(x)]
+            return float(np.mean(v)) if v else float("nan")
+
+        return {
+            "scenes": self.scenes,
+            "pck@0.2": self.pck_correct / self.pck_evaluated if self.pck_evaluated else float("nan"),
+            "pck_evaluated_joints": self.pck_evaluated, "pck_missing_truth": self.pck_missing,
+            "pck_undecoded": self.pck_pred_missing,
+            "mpjpe_mm": self.mpjpe_sum_mm / self.mpjpe_joints if self.mpjpe_joints else float("nan"),
+            "mpjpe_evaluated_joints": self.mpjpe_joints, "mpjpe_missing_truth": self.mpjpe_missing,
+            "mpjpe_pred_missing": self.mpjpe_pred_missing,
+            "heatmap_mse": mean(self.heat_mse),
+            "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
+        }
+
+
+def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, novel_rgb: np.ndarray | None,
+                  novel_targets: np.ndarray, background: float = 0.0,
+                  decoder: KeypointDecoderConfig | None = None) -> dict:
+    """Metrics of one scene from rendered outputs (pure; the tests feed it known answers).
+
+    Args:
+        scene: numpy ``MultiViewDataset`` item.
+        source_heatmaps: ``(2, J, h, w)`` heatmaps rendered in the two source views (targets 0, 1).
+        novel_rgb: ``(T, 3, H, W)`` colour rendered in the views ``novel_targets`` (or None).
+    """
+    S = source_heatmaps.shape[0]
+    H = scene["tgt_images"].shape[-1]
+    hm_true = scene["tgt_heatmaps"][:S]
+    out = {"heatmap_mse": heatmap_mse(source_heatmaps, hm_true)}
+    uv = keypoints_from_heatmaps(source_heatmaps, H, decoder)  # (S, J, 2) crop pixels, NaN = none
+    decoded = np.isfinite(uv).all(-1)
+    out["pck"] = pck(np.nan_to_num(uv), scene["tgt_joints_2d"][:S], scene["tgt_visible"][:S], alpha=PCK_ALPHA,
+                     pred_valid=decoded)
+    tri = triangulate_dlt(uv, np.asarray(scene["src_P"], np.float64))
+    out["mpjpe"] = mpjpe(tri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=tri.valid)
+    out["keypoints_2d"], out["joints_3d"] = uv, np.where(tri.valid[:, None], tri.points, np.nan)
+    out["psnr"] = out["ssim"] = None
+    if novel_rgb is not None and len(novel_targets):
+        img = scene["tgt_images"][novel_targets]
+        m = scene["tgt_masks"][novel_targets]
+        truth = img * m[:, None] + background * (1 - m[:, None])
+        pred = np.clip(novel_rgb, 0, 1)
+        # metrics take channels-last images (..., H, W, C) or (..., H, W)
+        out["psnr"] = masked_psnr(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
+        out["ssim"] = masked_ssim(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
+    return out
+
+
+def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, progress: bool = True) -> dict:
+    """Pooled metrics of ``renderer`` over ``dataset`` (``MultiViewDataset``)."""
+    H, W, s = renderer.height, renderer.width, renderer.heatmap_stride
+    grid_h, grid_1 = ray_grid(H, W, s), ray_grid(H, W, 1)
+    acc = Accumulator()
+    n = min(limit, len(dataset)) if limit else len(dataset)
+    t0 = time.monotonic()
+    for i in range(n):
+        scene = {k: v.numpy() for k, v in dataset[i].items()}
+        src = np.flatnonzero(scene["tgt_is_source"])
+        nov = np.flatnonzero(~scene["tgt_is_source"])
+        hm = renderer.heatmaps(scene, src, grid_h)  # (2, R, J)
+        hm = hm.transpose(0, 2, 1).reshape(len(src), -1, H // s, W // s)
+        rgb = None
+        if novel and len(nov):
+            rgb = renderer.colour(scene, nov, grid_1).reshape(len(nov), H, W, 3).transpose(0, 3, 1, 2)
+        acc.add(scene_metrics(scene, hm, rgb, nov, renderer.background))
+        if progress and (i + 1) % 32 == 0:
+            print(f"  eval {i + 1}/{n} {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
+    res = acc.result()
+    res["wall_s"] = round(time.monotonic() - t0, 1)
+    return res
+
+
+def make_renderer(spec: str, threads: int = 2) -> tuple[Renderer, dict]:
+    """A renderer and a description from a model spec (``x.pt``, ``folder`` or ``folder#int8``)."""
+    path, _, precision = spec.partition("#")
+    p = Path(path)
+    if p.suffix == ".pt":
+        from training.train import load_model
+
+        model, ck = load_model(p)
+        return TorchRenderer(model), {"kind": "torch", "path": str(p), "step": ck.get("step"),
+                                      "variant": "ghnerf" if model.human is not None else "baseline"}
+    precision = precision or "fp32"
+    if precision not in ("fp32", "int8"):
+        raise ValueError(f"{spec}: precision must be fp32 or int8")
+    r = OnnxRenderer(p, precision, threads)
+    return r, {"kind": f"onnx-{precision}", "path": str(p), "variant": r.contract.variant}
+
+
+def _clean(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="ghnerf-eval", description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--data", default="data/edge128")
+    ap.add_argument("--split", default="val", help="held-out split (default val: unseen bodies, motions, rigs)")
+    ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC",
+                    help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable")
+    ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
+    ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--out", help="write the JSON here (also printed)")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    results: dict = {"data": args.data, "split": args.split, "pck_alpha": PCK_ALPHA,
+                     "pck_reference": "neck--mid-hip distance (fallback: torso box diagonal)", "models": {}}
+    for item in args.model:
+        label, sep, spec = item.partition("=")
+        if not sep:
+            label, spec = Path(item).stem, item
+        renderer, desc = make_renderer(spec, args.threads)
+        ds = MultiViewDataset(args.data, args.split, TargetConfig(heatmap_stride=renderer.heatmap_stride))
+        print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
+        results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
+    text = json.dumps(_clean(results), indent=1)
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -24,6 +24,10 @@ class LossConfig(Config):
     """l_col: MSE of the rendered colour."""
     heat_weight: float = 0.5
     """l_heat: MSE of the rendered joint heatmaps (GHNeRF: 0.5)."""
+    heat_positive_weight: float = 20.0
+    """Per-ray weight ``1 + w * target`` of the heatmap MSE. Positives are a few per cent of the
+    rays, so plain MSE sits at the all-zero solution for thousands of steps; weighting them keeps
+    the minimiser at the target but makes peaks appear early (0 gives GHNeRF's plain MSE)."""
     ssim_weight: float = 0.01
     """1 - SSIM over ray patches, the stand-in for GHNeRF's 0.01 l_perc (VGG). 0 disables."""
     coord_weight: float = 0.0
@@ -72,7 +76,9 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
             terms[f"l{i}_col"] = F.mse_loss(out["rgb"], batch["rgb"])
             level_total = level_total + config.colour_weight * terms[f"l{i}_col"]
         if "heatmaps" in out and config.heat_weight:
-            terms[f"l{i}_heat"] = F.mse_loss(out["heatmaps"], batch["heatmaps"])
+            target = batch["heatmaps"]
+            weight = 1.0 + config.heat_positive_weight * target
+            terms[f"l{i}_heat"] = (weight * (out["heatmaps"] - target) ** 2).mean()
             level_total = level_total + config.heat_weight * terms[f"l{i}_heat"]
         if "rgb" in out and config.ssim_weight and patch_shape is not None:
             h, w = patch_shape

@@ -32,7 +32,7 @@ import random
 import sys
 import time
 import tomllib
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal, Mapping
 
@@ -93,7 +93,7 @@ class TrainConfig(Config):
     pck_every: int = 100
     """Render the source heatmap grids of the current scene every this many steps for the PCK in the log (0: off)."""
     threads: int = 0
-    """torch CPU threads (0: ``os.cpu_count()``)."""
+    """torch CPU threads per process (0: ``os.cpu_count()`` / processes on this machine)."""
     device: Literal["auto", "cpu", "cuda"] = "auto"
     """``auto``: cuda when present, else CPU."""
     init: str = ""
@@ -333,13 +333,10 @@ def make_batch(item: dict, cfg: TrainConfig, mcfg: ModelConfig, gen: torch.Gener
 def step_losses(out: dict, batch: dict, cfg: TrainConfig) -> dict[str, Tensor]:
     """All rays: colour + heatmap (+ coord); the patch rays also SSIM (``training.losses``)."""
     lc = cfg.loss
-    no_ssim = LossConfig(colour_weight=lc.colour_weight, heat_weight=lc.heat_weight, ssim_weight=0.0,
-                         coord_weight=lc.coord_weight, level_weights=lc.level_weights, ssim_window=lc.ssim_window)
-    terms = compute_losses(out, batch, no_ssim)
+    terms = compute_losses(out, batch, replace(lc, ssim_weight=0.0))
     P = cfg.patch_size
     if P and lc.ssim_weight:
-        only_ssim = LossConfig(colour_weight=0.0, heat_weight=0.0, ssim_weight=lc.ssim_weight, coord_weight=0.0,
-                               level_weights=lc.level_weights, ssim_window=lc.ssim_window)
+        only_ssim = replace(lc, colour_weight=0.0, heat_weight=0.0, coord_weight=0.0)
         sliced = {"levels": [{"rgb": lv["rgb"][:, -P * P:]} for lv in out["levels"]]}
         extra = compute_losses(sliced, {"rgb": batch["rgb"][:, -P * P:]}, only_ssim, patch_shape=(P, P))
         terms.update({k: v for k, v in extra.items() if k != "loss"})
@@ -434,19 +431,50 @@ def scene_order(n: int, epoch: int, seed: int, info: DistInfo) -> list[int]:
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet: bool = False,
-          dataset=None) -> dict:
-    """Run (or resume) training; returns a summary (also written to ``out_dir/summary.json`` by rank 0)."""
-    from training.data.targets import TargetConfig
-    from training.data.torch_dataset import MultiViewDataset
+          dataset=None) -> tuple[dict, GHNeRF]:
+    """Run (or resume) training.
 
+    Returns the summary (also written to ``out_dir/summary.json`` by rank 0) and the trained model
+    (this rank's copy). ``dataset`` replaces the ``MultiViewDataset`` of ``cfg.data`` (tests).
+    """
     out_dir = Path(out_dir)
     device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
     info = setup_distributed(device_kind)
     device = pick_device(cfg.device, info)
     if device.type == "cpu":
-        torch.set_num_threads(cfg.threads or os.cpu_count() or 1)
+        # never oversubscribe: OpenMP threads spin-wait, a 2-thread run beside another busy process ran >10x slower
+        local_world = int(os.environ.get("LOCAL_WORLD_SIZE", info.world))
+        torch.set_num_threads(cfg.threads or max(1, (os.cpu_count() or 1) // local_world))
+        torch.set_flush_denormal(True)
     if info.main:
         out_dir.mkdir(parents=True, exist_ok=True)
+        _take_lock(out_dir / "train.pid")
+        (out_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
+    try:
+        return _train(cfg, out_dir, info, device, resume=resume, quiet=quiet, dataset=dataset)
+    finally:
+        if info.main:
+            (out_dir / "train.pid").unlink(missing_ok=True)
+
+
+def _take_lock(path: Path) -> None:
+    """One training process per run folder: refuse when ``path`` names a live process."""
+    if path.exists():
+        try:
+            pid = int(path.read_text().strip())
+            os.kill(pid, 0)
+            if pid != os.getpid():
+                raise RuntimeError(f"{path.parent}: another training process ({pid}) is using this run folder")
+        except (ValueError, ProcessLookupError, PermissionError):
+            pass  # stale lock
+    path.write_text(str(os.getpid()))
+
+
+def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device, *, resume: bool, quiet: bool,
+           dataset) -> tuple[dict, GHNeRF]:
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
     mcfg = cfg.model_config()
     ds = dataset or MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=mcfg.heatmap_stride))
     if len(ds) < info.world:
@@ -540,21 +568,23 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
                                              **rec}) + "\n")
             if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
                 checkpoint(step)
-            if cfg.max_minutes and time.monotonic() - t_start > 60 * cfg.max_minutes and step < cfg.iterations:
-                stopped_early = True
-                checkpoint(step)
-                break
+            if cfg.max_minutes and step % cfg.log_every == 0 and step < cfg.iterations:
+                over = torch.tensor([float(time.monotonic() - t_start > 60 * cfg.max_minutes)], device=device)
+                if info.world > 1:  # every rank must take the same decision (rank 0's clock)
+                    dist.broadcast(over, 0)
+                if over.item():
+                    stopped_early = True
+                    checkpoint(step)
+                    break
         if stopped_early:
             break
     prog.close()
-    if step % cfg.checkpoint_every and not stopped_early and step == cfg.iterations and not last.exists():
-        checkpoint(step)
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
                "wall_s": round(time.monotonic() - t_start, 1), "world_size": info.world, "device": str(device),
                "threads": torch.get_num_threads(), "checkpoint": str(last)}
     if info.main:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
-    return summary
+    return summary, model
 
 
 # ------------------------------------------------------------------------------------------------ CLI
@@ -598,10 +628,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(asdict(cfg), indent=1))
         return 0
     out = Path(args.out)
-    if int(os.environ.get("RANK", "0")) == 0:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
-    summary = train(cfg, out, resume=args.resume, quiet=args.quiet)
+    summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
     if int(os.environ.get("RANK", "0")) == 0:
         print(json.dumps(summary))
     if dist.is_initialized():

@@ -192,6 +192,7 @@ def test_projection_matches_cv2_random(k, eye, seed):
     cam = make_camera(dist, eye=eye)
     X = scene_points(20, seed)
     uv, _ = cam.project(X)
-    rvec, _ = cv2.Rodrigues(cam.R)
-    expected, _ = cv2.projectPoints(X, rvec, cam.t, cam.K, cam.dist)
+    # Hand OpenCV camera-frame points: cv2.Rodrigues rounds rotations below ~1e-5 rad to
+    # identity (hypothesis found one), which would test OpenCV's rvec, not our projection.
+    expected, _ = cv2.projectPoints(X @ cam.R.T + cam.t, np.zeros(3), np.zeros(3), cam.K, cam.dist)
     np.testing.assert_allclose(uv, expected.reshape(-1, 2), atol=1e-8)

@@ -1,0 +1,136 @@
+"""Shared pieces of the runtime benchmarks and tests: the *oracle* session, and re-exports of the
+simulator sequences (``ghnerf_runtime.cli.simdata``).
+
+Not part of the runtime; used by ``benchmarks/compare_3d_methods.py``,
+``benchmarks/bench_runtime_regions.py`` and the runtime tests.
+
+Oracle session
+    :class:`OracleSession` has the :class:`~ghnerf_runtime.session.ModelSession` interface and
+    answers every graph with what a perfectly trained model is trained to produce, computed
+    from the ground truth: Gaussian joint heatmaps (sigma 1.5 heatmap cells, as the training
+    targets) at the true joints' projections (0 for joints the truth marks occluded), a
+    heatmap-weighted joint depth, and a 3D Gaussian response for the ``query`` graph. Running
+    the estimator on it measures the error of everything *around* the model (crops, decoding,
+    coordinate mapping, the 3D methods) and checks the geometry end to end, whatever the state
+    of training. It is a reference, not a stand-in for the model's accuracy.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.cli.simdata import (  # noqa: E402,F401  (re-exported)
+    Accuracy,
+    Sequence,
+    default_cache_dir,
+    load_sequences,
+    percentiles,
+)
+from ghnerf_runtime.contract import LevelSpec, ModelContract  # noqa: E402
+
+
+def edge128_contract() -> ModelContract:
+    """The ``edge128`` preset's contract, built without torch (for oracle runs without a model)."""
+    return ModelContract.build(
+        height=128, width=128, variant="ghnerf",
+        levels=(LevelSpec(8, 16, 8, "inverse", "feat_s4", "interval"),
+                LevelSpec(4, 4, 4, "linear", "feat_s2", "planes")),
+        channels={"feat_s1": 8, "feat_s2": 16, "feat_s4": 16, "volume": 8, "human_feat": 16},
+        strides={"feat_s1": 1, "feat_s2": 2, "feat_s4": 4, "human_feat": 4},
+    )
+
+
+# ------------------------------------------------------------------ oracle
+class OracleSession:
+    """The :class:`ModelSession` interface answered from the ground truth (module docstring).
+
+    Set the truth of the pair before each ``estimate``: :meth:`set_truth`.
+
+    Args:
+        contract: the contract to mimic (from any exported model of the wanted resolution).
+        heat_sigma_cells: heatmap Gaussian sigma in heatmap cells (training targets: 1.5).
+        query_sigma_m: 3D Gaussian sigma of the ``query`` response.
+    """
+
+    def __init__(self, contract: ModelContract, heat_sigma_cells: float = 1.5, query_sigma_m: float = 0.05) -> None:
+        self.contract = contract
+        self.sigma_px = heat_sigma_cells * contract.heatmap_stride
+        self.query_sigma = query_sigma_m
+        self.graphs = tuple(g.name for g in contract.graphs)
+        self.run_counts = {g: 0 for g in self.graphs}
+        self.truth: np.ndarray | None = None
+        self.visible: np.ndarray | None = None
+
+    def set_truth(self, joints_3d: np.ndarray | None, visible: np.ndarray | None = None) -> None:
+        """``(25, 3)`` true joints (``None``: nobody), optional ``(2, 25)`` visibility per source."""
+        self.truth = None if joints_3d is None else np.asarray(joints_3d, np.float64)
+        self.visible = None if visible is None else np.asarray(visible, bool)
+
+    def has(self, graph: str) -> bool:
+        return graph in self.graphs
+
+    def _zeros(self, spec, **dims) -> np.ndarray:
+        return np.zeros([dims[d] if isinstance(d, str) else d for d in spec.shape], np.float32)
+
+    def run(self, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        self.run_counts[graph] += 1
+        spec = self.contract.graph(graph)
+        J = self.contract.num_joints
+        if graph == "encoder":
+            return {t.name: self._zeros(t) for t in spec.outputs}
+        if graph == "volume":
+            B = len(feeds["tgt_K_inv"])
+            return {t.name: self._zeros(t, B=B) for t in spec.outputs}
+        if graph == "query":
+            pts = np.asarray(feeds["points"], np.float64)  # (B, N, 3)
+            if self.truth is None:
+                heat = np.zeros(pts.shape[:2] + (J,), np.float32)
+            else:
+                d2 = ((pts[:, :, None, :] - self.truth[None, None]) ** 2).sum(-1)
+                heat = np.exp(-d2 / (2 * self.query_sigma ** 2)).astype(np.float32)
+            return {"joint_heat": heat, "density": np.ones(pts.shape[:2], np.float32)}
+        # render graphs
+        k_inv = np.asarray(feeds["tgt_K_inv"], np.float64)
+        c2w = np.asarray(feeds["tgt_c2w"], np.float64)
+        rays = np.asarray(feeds["ray_uv"], np.float64)  # (B, R, 2)
+        B, R = rays.shape[:2]
+        heat = np.zeros((B, R, J), np.float32)
+        depth = np.zeros((B, R), np.float32)
+        if self.truth is not None:
+            for b in range(B):
+                K = np.linalg.inv(k_inv[b])
+                Rm, centre = c2w[b, :, :3].T, c2w[b, :, 3]
+                pc = (self.truth - centre) @ Rm.T
+                z = pc[:, 2]
+                uv = (pc @ K.T)[:, :2] / np.where(z > 1e-6, z, 1.0)[:, None]
+                d2 = ((rays[b, :, None, :] - uv[None]) ** 2).sum(-1)  # (R, J)
+                h = np.exp(-d2 / (2 * self.sigma_px ** 2)) * (z > 1e-6)[None]
+                if self.visible is not None and B == 2 and graph == "render_heat":
+                    h = h * self.visible[b][None]
+                heat[b] = h
+                w = h.sum(-1)
+                depth[b] = np.where(w > 1e-6, (h * z[None]).sum(-1) / np.maximum(w, 1e-6), 0.0)
+        acc = np.clip(heat.max(-1) * 2, 0, 1).astype(np.float32)
+        out = {"heatmaps": heat, "depth": depth, "acc": acc}
+        if graph in ("render", "render_rgb"):
+            out["rgb"] = np.repeat(acc[..., None], 3, axis=-1) * 0.8
+        return {t.name: out[t.name] for t in spec.outputs}
+
+
+def contract_of(model_dir: str | os.PathLike) -> ModelContract:
+    """The contract stamped in a model folder's encoder (used to build an :class:`OracleSession`)."""
+    import onnxruntime as ort
+
+    from ghnerf_runtime.session import resolve_model_dir
+
+    files = sorted(resolve_model_dir(model_dir).glob("encoder*.onnx"))
+    if not files:
+        raise FileNotFoundError(f"{model_dir}: no encoder*.onnx")
+    sess = ort.InferenceSession(str(files[0]), providers=["CPUExecutionProvider"])
+    return ModelContract.from_metadata(sess.get_modelmeta().custom_metadata_map)

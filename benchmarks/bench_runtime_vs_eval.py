@@ -1,0 +1,122 @@
+"""Does the runtime reproduce the training evaluation? Like-for-like on the dataset's held-out scenes.
+
+    .venv/bin/python benchmarks/bench_runtime_vs_eval.py --model-dir models [--data data/edge128] [--limit 32]
+
+For each of the first ``--limit`` scenes of the dataset split (default ``val``), PCK@0.2 of the
+two source views three ways:
+
+* **A, dataset path** -- the stored crops (rendered at 2x and box-filtered), the stored crop
+  cameras, near/far of the true body box + 0.1 m: what ``training/evaluate.py`` (``ghnerf-eval``)
+  measures; A must equal its ``pck@0.2`` on the same scenes.
+* **B, runtime preprocessing** -- the same scene re-rendered as full 640x480 camera frames
+  (``drivers.sim``, same seed, rig and time), cropped by ``preprocess_image`` with the *stored*
+  ROI; same cameras and near/far. B - A is the cost of the runtime's resampling (and of a
+  different sensor-noise draw).
+* **C, the estimator** -- ``Estimator.estimate`` on the full frames, its crop and sweep box placed
+  from the true joints (as a track would): the runtime's own crops, margins, ray restriction and
+  decoding, 2D compared in the original images.
+
+A tool (imports ``training.data`` and ``drivers``); not a test.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.contract import (  # noqa: E402
+    near_far_from_box,
+    ray_grid,
+    source_centers,
+    source_projections,
+    target_inputs,
+)
+from ghnerf_runtime.estimator import Estimator  # noqa: E402
+from ghnerf_runtime.geometry import Camera  # noqa: E402
+from ghnerf_runtime.keypoints import decode_keypoints, heatmap_to_model_pixels  # noqa: E402
+from ghnerf_runtime.metrics import pck  # noqa: E402
+from ghnerf_runtime.preprocess import Roi, build_undistort_crop_maps, preprocess_image  # noqa: E402
+from ghnerf_runtime.session import ModelSession  # noqa: E402
+from ghnerf_runtime.tracking import box_corners, track_from_joints  # noqa: E402
+
+
+def _decode(session: ModelSession, images: np.ndarray, cams, near_far: np.ndarray):
+    c = session.contract
+    S, g = c.height, c.height // c.heatmap_stride
+    env = {"images": images, "src_P": source_projections(cams, S, S), "src_centers": source_centers(cams),
+           **target_inputs(cams, S, S), "near_far": near_far,
+           "ray_uv": np.ascontiguousarray(np.broadcast_to(ray_grid(S, S, c.heatmap_stride), (2, g * g, 2)))}
+    env.update(session.run("encoder", env))
+    env.update(session.run("volume", env))
+    hm = session.run("render_heat", env)["heatmaps"].reshape(2, g, g, -1).transpose(0, 3, 1, 2)
+    kp = decode_keypoints(np.ascontiguousarray(hm))
+    return heatmap_to_model_pixels(kp.uv, g, S), kp.valid
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--data", default="data/edge128")
+    ap.add_argument("--split", default="val")
+    ap.add_argument("--limit", type=int, default=32)
+    args = ap.parse_args(argv)
+
+    from drivers.sim import RigPlacement, random_scene
+    from training.data.cache import ShardedSplit
+    from training.data.splits import split_spec
+
+    session = ModelSession.load(SessionConfig(model_dir=args.model_dir, precision=args.precision),
+                                ("encoder", "volume", "render_heat"))
+    S = session.contract.height
+    split = ShardedSplit(args.data, args.split)
+    motions = split_spec(args.split).motions
+    rows = {k: ([], [], [], []) for k in "ABC"}
+    diffs = []
+    for idx in range(min(args.limit, len(split))):
+        a, meta = split.arrays(idx), split.metadata(idx)
+        pl = dict(meta["placement"])
+        placement = RigPlacement(**{**pl, "names": tuple(pl["names"]), "distortion": tuple(pl["distortion"])})
+        rig = placement.build()
+        scene = random_scene(meta["scene_seed"], volume=rig.volume, motions=motions)
+        t = meta["t"]
+        if not np.allclose(scene.joints_3d(t), a["joints_3d"], atol=1e-6):
+            print(f"scene {idx}: re-rendered scene differs from the stored one; skipped", file=sys.stderr)
+            continue
+        cams = [Camera(f"src{i}", S, S, a["K"][i], np.zeros(5), a["R"][i], a["t"][i]) for i in range(2)]
+        near_far = np.stack([near_far_from_box(cam, box_corners(a["bbox"]), 0.1) for cam in cams])
+        stored = np.ascontiguousarray((a["images"][:2].astype(np.float32) / 255.0).transpose(0, 3, 1, 2))
+        full = [scene.render(cam, t, with_truth=False)[0] for cam in rig.pair]
+        ours = np.stack([preprocess_image(full[i], build_undistort_crop_maps(rig.pair[i], Roi(*a["roi"][i]), S),
+                                          session.contract.normalisation) for i in range(2)])
+        diffs.append(float(np.abs(stored - ours).mean() * 255))
+        for key, images in (("A", stored), ("B", ours)):
+            uv, ok = _decode(session, images, cams, near_far)
+            for lst, v in zip(rows[key], (uv, a["joints_2d"][:2], a["visible"][:2], ok)):
+                lst.append(v)
+        est = Estimator(session, rig, EstimatorConfig())
+        est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
+        r = est.estimate(tuple(full))
+        truth = np.stack([cam.project(a["joints_3d"])[0] for cam in rig.pair])
+        pred = np.stack([r.joints_2d[n] for n in rig.names[:2]])
+        found = ~np.stack([r.missing_2d[n] for n in rig.names[:2]])
+        for lst, v in zip(rows["C"], (pred, truth, a["visible"][:2], found)):
+            lst.append(v)
+    print(f"model {args.model_dir} ({args.precision}), {args.data}/{args.split}, {len(diffs)} scenes")
+    labels = {"A": "dataset crops (= ghnerf-eval)", "B": "runtime preprocessing, stored ROI",
+              "C": "Estimator, crop placed from the true joints"}
+    for key, (p, tr, v, ok) in rows.items():
+        res = pck(np.array(p), np.array(tr), np.array(v), pred_valid=np.array(ok))
+        print(f"  {key} {labels[key]:<46} PCK@0.2 {res.value:.3f}  ({res.num_evaluated} joints, "
+              f"{res.num_pred_missing} not decoded)")
+    print(f"  mean |stored crop - runtime crop|: {np.mean(diffs):.2f} levels of 255")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

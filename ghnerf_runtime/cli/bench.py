@@ -1,0 +1,199 @@
+"""``ghnerf-bench``: runtime latency and accuracy on held-out-like simulator sequences (a tool).
+
+Subcommands::
+
+    ghnerf-bench runtime [--model-dir models] [--sequences 10] [--frames 30] [--precisions fp32,int8,auto]
+    ghnerf-bench sim-pair --out examples/sim       # the reproducible example of docs/runtime.md
+
+``runtime`` renders the sequences once (cached in ``~/.cache/ghnerf-bench``), then for every
+precision and for "keypoints" and "keypoints + novel view" runs the estimator over every pair
+and prints each stage's median and p99 (ms), the end-to-end median/p99 and throughput, and the
+accuracy against the simulator's truth (PCK@0.2 in both images, MPJPE in the rig frame, with
+the counts of missing joints). The first pairs of each run are warm-up and not counted. Not a
+timed test: the figures depend on the machine and its load (the load average is printed).
+
+This module is a tool, not the runtime library: it imports ``drivers`` (through
+:mod:`ghnerf_runtime.cli.simdata`) only inside the commands.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+import time
+
+import numpy as np
+
+from ghnerf_runtime.config import THREE_D_METHODS, EstimatorConfig, Joints3DConfig, NovelViewConfig, SessionConfig
+from ghnerf_runtime.errors import RuntimeErrorBase
+from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
+from ghnerf_runtime.novel_view import NovelViewRequest
+from ghnerf_runtime.session import ModelSession
+from ghnerf_runtime.tracking import track_from_joints
+
+log = logging.getLogger("ghnerf-bench")
+
+__all__ = ["main", "run_runtime_bench", "STAGE_GROUPS"]
+
+#: Printed columns: the issue's stage names -> estimator stage keys.
+STAGE_GROUPS = {
+    "preprocess": ("preprocess",),
+    "encoders": ("encoder",),
+    "depth (volume)": ("volume",),
+    "rendering (heat)": ("render_heat",),
+    "decoding (2D+3D)": ("decode_2d", "joints_3d"),
+    "novel view": NOVEL_STAGES,
+    "total": ("total",),
+}
+
+
+def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, oracle=None,
+              accuracy=None, track_from_truth: bool = False) -> tuple[dict[str, list[float]], float]:
+    """Run the estimator over every pair of every sequence (a fresh track per sequence).
+
+    ``track_from_truth``: before each pair (but the first of a sequence), the track is set from
+    the previous pair's *true* joints, as a trained model's own joints would set it; this times
+    the tracked path (smaller crops, subject rays only) with untrained weights.
+
+    Returns per-stage lists of ms (warm-up pairs excluded) and the wall time of the counted pairs.
+    """
+    stages: dict[str, list[float]] = {k: [] for k in (*KEYPOINT_STAGES, *NOVEL_STAGES, "total")}
+    request = NovelViewRequest(alpha=0.5) if novel else None
+    wall = 0.0
+    n = 0
+    for seq in sequences:
+        est = Estimator(estimator.session, seq.rig, estimator.config)
+        for i in range(len(seq)):
+            images = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
+            if oracle is not None:
+                oracle.set_truth(seq.joints_3d[i], seq.visible[i])
+            if track_from_truth and i > 0:
+                est.tracker.track = track_from_joints(seq.joints_3d[i - 1], np.ones(25), np.ones(25, bool),
+                                                      est.config.tracking, i - 1)
+            t = time.perf_counter()
+            result = est.estimate(images, sequence=i, novel_view=request)
+            dt = time.perf_counter() - t
+            n += 1
+            if n <= warmup:
+                continue
+            wall += dt
+            for k in stages:
+                stages[k].append(result.timing_ms.get(k, 0.0))
+            if accuracy is not None:
+                accuracy.add(result, seq, i)
+    return stages, wall
+
+
+def _row(stages: dict[str, list[float]], wall: float) -> dict:
+    from ghnerf_runtime.cli.simdata import percentiles
+
+    out = {}
+    for name, keys in STAGE_GROUPS.items():
+        vals = np.sum([stages[k] for k in keys], axis=0) if stages["total"] else []
+        out[name] = percentiles(vals)
+    count = len(stages["total"])
+    out["pairs"] = count
+    out["pairs_per_s"] = count / wall if wall > 0 else float("nan")
+    return out
+
+
+def run_runtime_bench(args) -> dict:
+    from ghnerf_runtime.cli.simdata import Accuracy, load_sequences
+
+    sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
+    report = {"model_dir": args.model_dir, "pairs_per_run": sum(len(s) for s in sequences) - args.warmup,
+              "sequences": [s.info for s in sequences], "method": args.method, "runs": [],
+              "load_average_start": os.getloadavg(), "cpus": os.cpu_count()}
+    for precision in args.precisions:
+        cfg = EstimatorConfig(
+            session=SessionConfig(model_dir=args.model_dir, precision=precision, threads=args.threads,
+                                  thread_pool=args.thread_pool),
+            joints3d=Joints3DConfig(method=args.method),
+            novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
+        session = ModelSession.load(cfg.session, cfg.required_graphs())
+        report["model"] = session.describe()
+        for mode in args.modes:
+            acc = Accuracy()
+            est = Estimator(session, sequences[0].rig, cfg)
+            stages, wall = run_pairs(est, sequences, novel=(mode == "novel"), warmup=args.warmup, accuracy=acc,
+                                     track_from_truth=args.track_from_truth)
+            row = {"precision": precision, "mode": "keypoints" if mode == "keypoints" else "keypoints+novel",
+                   "track_from_truth": args.track_from_truth,
+                   "files": {g: f.precision for g, f in session.files.items()}, **_row(stages, wall),
+                   "accuracy": acc.summary(), "load_average": os.getloadavg()[0]}
+            report["runs"].append(row)
+            _print_row(row)
+    return report
+
+
+def _print_row(row: dict) -> None:
+    cols = " ".join(f"{name.split(' ')[0]} {row[name]['median']:.2f}/{row[name]['p99']:.2f}"
+                    for name in STAGE_GROUPS)
+    tracked = " (tracked from truth)" if row.get("track_from_truth") else ""
+    acc = row["accuracy"]
+    print(f"{row['precision']:>4} {row['mode'] + tracked:<16} ms median/p99: {cols} | "
+          f"{row['pairs_per_s']:.1f} pairs/s | "
+          f"PCK@0.2 {acc.get('pck@0.2', float('nan')):.3f} MPJPE {acc.get('mpjpe_mm', float('nan')):.1f} mm "
+          f"(3D found {acc.get('found_3d_frac', float('nan')):.2f}) | load {row['load_average']:.2f}", flush=True)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="ghnerf-bench", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    rt = sub.add_parser("runtime", help="per-stage latency and accuracy of the estimator")
+    rt.add_argument("--model-dir", default="models")
+    rt.add_argument("--sequences", type=int, default=10, help="held-out-like sequences (one rig and subject each)")
+    rt.add_argument("--frames", type=int, default=30, help="pairs per sequence (30 fps)")
+    rt.add_argument("--precisions", default="fp32,int8,auto", type=lambda s: [p for p in s.split(",") if p])
+    rt.add_argument("--modes", default="keypoints,novel", type=lambda s: [p for p in s.split(",") if p])
+    rt.add_argument("--method", default="triangulate", choices=THREE_D_METHODS)
+    rt.add_argument("--novel-stride", type=int, default=1, choices=(1, 2, 4))
+    rt.add_argument("--threads", type=int, default=2)
+    rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
+    rt.add_argument("--warmup", type=int, default=10, help="pairs not counted at the start of each run")
+    rt.add_argument("--track-from-truth", action="store_true",
+                    help="place each crop from the previous pair's true joints (times the tracked path with an "
+                         "untrained model; accuracy is then not the estimator's own)")
+    rt.add_argument("--seen-motions", action="store_true", help="training motions instead of the held-out ones")
+    rt.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench; 'off')")
+    rt.add_argument("--json", help="write the full report here")
+    sp = sub.add_parser("sim-pair", help="write a simulated pair (or short clip) and its rig file")
+    sp.add_argument("--out", required=True)
+    sp.add_argument("--frames", type=int, default=1, help=">1 writes <camera>.mp4 clips instead of PNGs")
+    sp.add_argument("--seed", type=int, default=3)
+    sp.add_argument("--motion", default="wave")
+    sp.add_argument("--t", type=float, default=0.4, help="scene time of the first frame (s)")
+    ap.add_argument("-v", "--verbose", action="store_true")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        if args.command == "sim-pair":
+            from ghnerf_runtime.cli.simdata import write_sim_example
+
+            paths = write_sim_example(args.out, seed=args.seed, motion=args.motion, t=args.t, frames=args.frames)
+            print(json.dumps(paths, indent=2))
+            return 0
+        bad = [p for p in args.precisions if p not in ("fp32", "int8", "auto")]
+        if bad or any(m not in ("keypoints", "novel") for m in args.modes):
+            print("ghnerf-bench: error: precisions are fp32,int8,auto and modes keypoints,novel", file=sys.stderr)
+            return 2
+        print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs; model {args.model_dir}", flush=True)
+        report = run_runtime_bench(args)
+        if args.json:
+            with open(args.json, "w", encoding="utf-8") as fh:
+                json.dump(report, fh, indent=2, default=float)
+        return 0
+    except (RuntimeErrorBase, OSError) as e:
+        print(f"ghnerf-bench: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,231 @@
+"""``ghnerf-run``: joints from two images (or two videos) of a calibrated rig, as JSON.
+
+Examples::
+
+    ghnerf-run --rig rig.json --images left.png right.png --out joints.json
+    ghnerf-run --rig rig.json --videos left.mp4 right.mp4 --out joints.jsonl \\
+        --novel-view novel.mp4 --overlay overlay.mp4
+    ghnerf-run --rig rig.json --images l.png r.png --model-dir /opt/models/edge128 --method volumetric
+
+Images are given in the rig file's camera order (its first two cameras). Output: one JSON
+object per frame pair (``docs/runtime.md``: ``joint_names``, ``joints_3d`` as
+``[x, y, z, confidence]`` metres in the rig frame, ``joints_2d`` per camera name as
+``[u, v, confidence]`` pixels of the original image, ``missing``, ``timing_ms``...). A ``.json``
+output holds a list of those objects; ``.jsonl`` (and stdout) one object per line. Missing
+joints have confidence 0 and coordinates 0; no NaN is ever written.
+
+Exit status: 0 on success, 2 for a usage, config, rig, model or input error (the message names
+the file and what is wrong).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from ghnerf_runtime.config import THREE_D_METHODS, EstimatorConfig, config_to_dict, load_config
+from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
+from ghnerf_runtime.estimator import Estimator, PairResult
+from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
+from ghnerf_runtime.rig_file import load_rig
+
+log = logging.getLogger("ghnerf-run")
+
+__all__ = ["main", "build_parser", "overlay_image"]
+
+
+class UsageError(RuntimeErrorBase):
+    """Bad command-line input (unreadable image, mismatched videos...)."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="ghnerf-run", description=__doc__.split("\n\n")[0],
+                                 epilog="Schema and examples: docs/runtime.md")
+    ap.add_argument("--rig", required=True, help="rig file (docs/rig-file.md)")
+    src = ap.add_mutually_exclusive_group(required=True)
+    src.add_argument("--images", nargs=2, metavar=("FIRST", "SECOND"), help="one image per camera, rig order")
+    src.add_argument("--videos", nargs=2, metavar=("FIRST", "SECOND"), help="one video per camera, rig order")
+    ap.add_argument("--out", default="-", help="joints output: .json (a list), .jsonl or - (stdout, one object "
+                                               "per line); default -")
+    ap.add_argument("--config", help="estimator config (JSON, docs/runtime.md); flags below override it")
+    ap.add_argument("--model-dir", help="model folder (default: the config's, else ./models)")
+    ap.add_argument("--precision", choices=("auto", "fp32", "int8"), help="graph file precision")
+    ap.add_argument("--method", choices=THREE_D_METHODS, help="3D joint method")
+    ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
+    ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
+    ap.add_argument("--novel-alpha", type=float, default=0.5, help="novel camera between the rig cameras: 0 = first, "
+                                                                   "1 = second (default 0.5)")
+    ap.add_argument("--novel-overlay", choices=("none", "skeleton", "heatmap"), default="none")
+    ap.add_argument("--novel-stride", type=int, choices=(1, 2, 4), help="render every n-th novel-view pixel")
+    ap.add_argument("--overlay", metavar="PATH", help="both input frames with the 2D joints drawn: .png or .mp4")
+    ap.add_argument("--max-frames", type=int, help="stop after this many pairs (videos)")
+    ap.add_argument("--validate-config", action="store_true", help="check the config, print it, exit")
+    ap.add_argument("-v", "--verbose", action="store_true")
+    return ap
+
+
+def _config(args) -> EstimatorConfig:
+    cfg = load_config(args.config) if args.config else EstimatorConfig()
+    session = cfg.session
+    if args.model_dir:
+        session = replace(session, model_dir=args.model_dir)
+    if args.precision:
+        session = replace(session, precision=args.precision)
+    if args.threads:
+        session = replace(session, threads=args.threads)
+    cfg = replace(cfg, session=session)
+    if args.method:
+        cfg = replace(cfg, joints3d=replace(cfg.joints3d, method=args.method))
+    if args.novel_view:
+        nv = replace(cfg.novel_view, enabled=True, heatmaps=cfg.novel_view.heatmaps or args.novel_overlay == "heatmap")
+        if args.novel_stride:
+            nv = replace(nv, stride=args.novel_stride)
+        cfg = replace(cfg, novel_view=nv)
+    return cfg
+
+
+def _read_image(path: str) -> np.ndarray:
+    img = cv2.imread(path, cv2.IMREAD_COLOR)
+    if img is None:
+        raise UsageError(f"{path}: cannot read the image (missing file or unknown format)")
+    return img
+
+
+def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    if args.images:
+        yield _read_image(args.images[0]), _read_image(args.images[1])
+        return
+    caps = []
+    for path in args.videos:
+        cap = cv2.VideoCapture(path)
+        if not cap.isOpened():
+            raise UsageError(f"{path}: cannot open the video")
+        caps.append(cap)
+    try:
+        n = 0
+        while args.max_frames is None or n < args.max_frames:
+            frames = [cap.read() for cap in caps]
+            ok = [f[0] for f in frames]
+            if not any(ok):
+                return
+            if not all(ok):
+                log.warning("videos end at different frames; stopping at pair %d", n)
+                return
+            yield frames[0][1], frames[1][1]
+            n += 1
+    finally:
+        for cap in caps:
+            cap.release()
+
+
+def overlay_image(images, result: PairResult) -> np.ndarray:
+    """Both frames side by side with each camera's decoded 2D joints drawn (BGR uint8)."""
+    panels = []
+    for img, name in zip(images, result.joints_2d):
+        scale = max(1, round(max(img.shape[:2]) / 480))
+        panels.append(draw_skeleton(img, result.joints_2d[name], ~result.missing_2d[name], thickness=2 * scale))
+    h = max(p.shape[0] for p in panels)
+    panels = [cv2.copyMakeBorder(p, 0, h - p.shape[0], 0, 0, cv2.BORDER_CONSTANT, value=0) for p in panels]
+    return np.hstack(panels)
+
+
+class _Sink:
+    """A PNG (the last frame wins) or an MP4 that grows frame by frame."""
+
+    def __init__(self, path: str, fps: float = 30.0) -> None:
+        self.path = path
+        self.video = Path(path).suffix.lower() in (".mp4", ".avi", ".mkv")
+        self.writer = None
+        self.fps = fps
+        self.last = None
+
+    def add(self, image: np.ndarray) -> None:
+        if not self.video:
+            self.last = image
+            return
+        if self.writer is None:
+            self.writer = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*"mp4v"), self.fps,
+                                          (image.shape[1], image.shape[0]))
+            if not self.writer.isOpened():
+                raise UsageError(f"{self.path}: cannot write a video here")
+        self.writer.write(image)
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.release()
+        if self.last is not None and not cv2.imwrite(self.path, self.last):
+            raise UsageError(f"{self.path}: cannot write the image (unknown extension or no permission)")
+
+
+def _run(args) -> int:
+    cfg = _config(args)
+    if args.validate_config:
+        print(json.dumps(config_to_dict(cfg), indent=2))
+        return 0
+    rig = load_rig(args.rig)
+    estimator = Estimator.from_config(rig, cfg)
+    log.info("model %s", json.dumps(estimator.session.describe()))
+    request = NovelViewRequest(alpha=args.novel_alpha, overlay=args.novel_overlay) if args.novel_view else None
+    fps = 30.0
+    if args.videos:
+        cap = cv2.VideoCapture(args.videos[0])
+        fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
+        cap.release()
+    novel = _Sink(args.novel_view, fps) if args.novel_view else None
+    overlay = _Sink(args.overlay, fps) if args.overlay else None
+    to_stdout = args.out == "-"
+    as_list = not to_stdout and Path(args.out).suffix.lower() == ".json"
+    out = sys.stdout if to_stdout else open(args.out, "w", encoding="utf-8")
+    frames = []
+    try:
+        for seq, images in enumerate(_pairs(args)):
+            try:
+                result = estimator.estimate(images, sequence=seq, novel_view=request)
+            except FrameError as e:
+                names = args.images or args.videos
+                raise UsageError(f"{names[0]}, {names[1]}: {e}") from e
+            obj = result.to_json()
+            if as_list:
+                frames.append(obj)
+            else:
+                out.write(json.dumps(obj, allow_nan=False) + "\n")
+                out.flush()
+            if novel is not None:
+                # A pair whose frames were rejected has no novel view: keep the video in step with black.
+                novel.add(result.novel_view.image if result.novel_view is not None
+                          else np.zeros((estimator.size, estimator.size, 3), np.uint8))
+            if overlay is not None:
+                overlay.add(overlay_image(images, result))
+            log.info("pair %d: %d/25 joints, %.1f ms", seq, result.num_found, result.timing_ms["total"])
+        if as_list:
+            json.dump(frames, out, allow_nan=False)
+            out.write("\n")
+    finally:
+        if not to_stdout:
+            out.close()
+        for sink in (novel, overlay):
+            if sink is not None:
+                sink.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return _run(args)
+    except (RuntimeErrorBase, OSError) as e:
+        print(f"ghnerf-run: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

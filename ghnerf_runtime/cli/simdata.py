@@ -1,0 +1,228 @@
+"""Simulator data for the runtime's tools: held-out-like sequences (rendered once, cached) and
+accuracy bookkeeping; and the reproducible example pair of ``docs/runtime.md``.
+
+A *tool* module: it imports ``drivers`` (the simulator), lazily, inside the functions that
+render. The runtime library (session, estimator, ...) never imports it.
+
+Held-out-like sequences
+    Each sequence is one random rig and one random scene, drawn as the ``val`` split draws them
+    (``training/data/splits.py``): unseen bodies, rooms, light and sensors (scene seeds
+    ``3 * 2**50 + k``, a range no dataset split uses), source baselines in the held-out band
+    0.85-1.05 m, and the held-out motions ``jumping_jacks`` and ``reach`` (``seen_motions``
+    uses the training motions instead). Unlike the training samples (single instants), a
+    sequence is ``frames`` consecutive instants at ``fps``, so tracking is exercised.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ghnerf_runtime.geometry import Rig
+from ghnerf_runtime.metrics import mpjpe, pck
+from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
+
+log = logging.getLogger(__name__)
+
+__all__ = ["SEED_BASE", "HELD_OUT_MOTIONS", "SEEN_MOTIONS", "Sequence", "load_sequences", "Accuracy",
+           "default_cache_dir", "write_sim_example", "percentiles"]
+
+#: Scene seeds of the bench sequences: 3 * 2**50 + k, outside every dataset split's range.
+SEED_BASE = 3 * 2 ** 50
+HELD_OUT_MOTIONS = ("jumping_jacks", "reach")
+SEEN_MOTIONS = ("stand", "walk", "wave", "squat", "arm_circles", "turn")
+HELD_OUT_BASELINE_M = (0.85, 1.05)
+#: Bump when the rendering recipe changes (invalidates caches).
+RECIPE_VERSION = 1
+
+
+def default_cache_dir() -> Path:
+    root = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(root) / "ghnerf-bench"
+
+
+# ------------------------------------------------------------------ sequences
+@dataclass(frozen=True, eq=False)
+class Sequence:
+    """One rendered sequence.
+
+    Attributes:
+        rig: the sequence's rig.
+        images: ``(F, 2, H, W, 3)`` uint8 BGR.
+        joints_3d: ``(F, 25, 3)`` truth, rig frame, metres.
+        joints_2d: ``(F, 2, 25, 2)`` truth in the (distorted) images.
+        visible: ``(F, 2, 25)`` bool (in the image, in front, not occluded by the body).
+        info: motion, seed, baseline.
+    """
+
+    rig: Rig
+    images: np.ndarray
+    joints_3d: np.ndarray
+    joints_2d: np.ndarray
+    visible: np.ndarray
+    info: dict
+
+    def __len__(self) -> int:
+        return len(self.images)
+
+
+def _render_sequence(k: int, frames: int, fps: float, width: int, height: int, motions: tuple[str, ...],
+                     seed_base: int) -> Sequence:
+    from drivers.sim import RigPlacement, random_scene  # tool only: the runtime library never imports drivers
+
+    seed = seed_base + k
+    rng = np.random.default_rng([seed, 7])
+    base = RigPlacement.random(rng, width=width, height=height)
+    placement = replace(base, baseline_m=float(rng.uniform(*HELD_OUT_BASELINE_M)))
+    rig = placement.build(rig_id=f"bench-{k}")
+    scene = random_scene(seed, volume=rig.volume, motions=motions)
+    t0 = float(rng.uniform(0.0, scene.period_s))
+    imgs = np.empty((frames, 2, height, width, 3), np.uint8)
+    j3 = np.empty((frames, 25, 3))
+    j2 = np.empty((frames, 2, 25, 2))
+    vis = np.empty((frames, 2, 25), bool)
+    for i in range(frames):
+        t = t0 + i / fps
+        for c, cam in enumerate(rig.pair):
+            img, truth = scene.render(cam, t)
+            imgs[i, c] = img
+            j2[i, c] = truth.joints_2d
+            vis[i, c] = truth.visible
+        j3[i] = scene.joints_3d(t)
+    info = {"index": k, "scene_seed": seed, "motion": str(scene.config.motion), "baseline_m": placement.baseline_m,
+            "distance_m": placement.distance_m, "fps": fps, "t0": t0}
+    return Sequence(rig, imgs, j3, j2, vis, info)
+
+
+def load_sequences(num_sequences: int = 10, frames: int = 30, *, fps: float = 30.0, width: int = 640,
+                   height: int = 480, seen_motions: bool = False, cache_dir: str | os.PathLike | None = None,
+                   seed_base: int = SEED_BASE) -> list[Sequence]:
+    """Held-out-like sequences, rendered on first use and cached (``cache_dir``, default
+    ``~/.cache/ghnerf-bench``; ``"off"`` disables). About 0.1-0.3 s per frame to render."""
+    motions = SEEN_MOTIONS if seen_motions else HELD_OUT_MOTIONS
+    key = json.dumps([RECIPE_VERSION, num_sequences, frames, fps, width, height, motions, seed_base])
+    digest = hashlib.sha1(key.encode()).hexdigest()[:12]
+    folder = None if str(cache_dir) == "off" else Path(cache_dir or default_cache_dir()) / f"seq-{digest}"
+    out = []
+    for k in range(num_sequences):
+        path = folder / f"{k:03d}" if folder else None
+        if path is not None and (path / "done").is_file():
+            arrays = {n: np.load(path / f"{n}.npy", mmap_mode="r") for n in ("images", "joints_3d", "joints_2d",
+                                                                              "visible")}
+            rig = loads_rig((path / "rig.json").read_text())
+            out.append(Sequence(rig, arrays["images"], np.asarray(arrays["joints_3d"]),
+                                np.asarray(arrays["joints_2d"]), np.asarray(arrays["visible"]),
+                                json.loads((path / "info.json").read_text())))
+            continue
+        t = time.perf_counter()
+        seq = _render_sequence(k, frames, fps, width, height, motions, seed_base)
+        log.info("rendered sequence %d/%d (%s, %d frames) in %.1f s", k + 1, num_sequences, seq.info["motion"],
+                 frames, time.perf_counter() - t)
+        if path is not None:
+            path.mkdir(parents=True, exist_ok=True)
+            for n in ("images", "joints_3d", "joints_2d", "visible"):
+                np.save(path / f"{n}.npy", getattr(seq, n))
+            (path / "rig.json").write_text(dumps_rig(seq.rig))
+            (path / "info.json").write_text(json.dumps(seq.info))
+            (path / "done").write_text("ok")
+        out.append(seq)
+    return out
+
+
+# ------------------------------------------------------------------ accuracy
+class Accuracy:
+    """Pools predictions over pairs; PCK@0.2 per camera image and MPJPE (docs/metrics.md).
+
+    ``summary()`` also splits the 3D figures between tracked pairs and cold starts (crop and
+    sweep from the working volume), which behave differently.
+    """
+
+    def __init__(self) -> None:
+        self.p2, self.t2, self.v2, self.pv2 = [], [], [], []
+        self.p3, self.t3, self.pv3, self.tracked = [], [], [], []
+
+    def add(self, result, seq: Sequence, i: int) -> None:
+        names = list(result.joints_2d)
+        for c, name in enumerate(names):
+            self.p2.append(result.joints_2d[name])
+            self.t2.append(seq.joints_2d[i, c])
+            self.v2.append(seq.visible[i, c])
+            self.pv2.append(~result.missing_2d[name])
+        self.p3.append(result.joints_3d)
+        self.t3.append(seq.joints_3d[i])
+        self.pv3.append(~result.missing)
+        self.tracked.append(bool(result.tracked))
+
+    def summary(self) -> dict:
+        if not self.p3:
+            return {}
+        pk = pck(np.array(self.p2), np.array(self.t2), np.array(self.v2), pred_valid=np.array(self.pv2))
+        ones = np.ones((len(self.p3), 25), bool)
+        p3, t3, pv3, tracked = np.array(self.p3), np.array(self.t3), np.array(self.pv3), np.array(self.tracked)
+        mp = mpjpe(p3, t3, ones, pred_valid=pv3)
+        out = {"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated, "pck_pred_missing": pk.num_pred_missing,
+               "mpjpe_mm": mp.value, "mpjpe_evaluated": mp.num_evaluated, "mpjpe_pred_missing": mp.num_pred_missing,
+               "found_3d_frac": float(pv3.mean()), "tracked_frac": float(tracked.mean())}
+        for name, sel in (("tracked", tracked), ("cold", ~tracked)):
+            if sel.any():
+                m = mpjpe(p3[sel], t3[sel], ones[sel], pred_valid=pv3[sel])
+                out[f"mpjpe_mm_{name}"] = m.value
+                out[f"found_3d_frac_{name}"] = float(pv3[sel].mean())
+        return out
+
+
+def percentiles(values, qs=(50, 99)) -> dict:
+    """``{"median": ..., "p99": ...}`` of a list of numbers (nan when empty)."""
+    a = np.asarray(values, np.float64)
+    if a.size == 0:
+        return {("median" if q == 50 else f"p{q}"): float("nan") for q in qs}
+    return {("median" if q == 50 else f"p{q}"): float(np.percentile(a, q)) for q in qs}
+
+
+def write_sim_example(out_dir: str | os.PathLike, *, seed: int = 3, motion: str = "wave", t: float = 0.4,
+                      frames: int = 1, fps: float = 30.0, width: int = 640, height: int = 480) -> dict:
+    """Write a simulated pair (or ``frames`` pairs) and its rig file: the docs' reproducible example.
+
+    Files: ``rig.json``; ``<camera>.png`` per camera (``frames == 1``) or ``<camera>.mp4``
+    (``mp4v``) otherwise; ``truth.json`` (true 3D joints per frame, metres). Returns the paths
+    written (key per camera name, ``rig``, ``truth``).
+    """
+    from drivers.sim import RigPlacement, SceneConfig, SimScene  # tool only
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rig = RigPlacement(width=width, height=height).build(rig_id="sim-example")
+    scene = SimScene(SceneConfig(seed=seed, motion=motion))
+    save_rig(rig, out / "rig.json")
+    paths = {"rig": str(out / "rig.json")}
+    truth = []
+    writers = {}
+    for i in range(frames):
+        ti = t + i / fps
+        for cam in rig.pair:
+            img, _ = scene.render(cam, ti, with_truth=False)
+            if frames == 1:
+                path = out / f"{cam.name}.png"
+                cv2.imwrite(str(path), img)
+                paths[cam.name] = str(path)
+            else:
+                if cam.name not in writers:
+                    path = out / f"{cam.name}.mp4"
+                    writers[cam.name] = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps,
+                                                        (width, height))
+                    paths[cam.name] = str(path)
+                writers[cam.name].write(img)
+        truth.append(np.round(scene.joints_3d(ti), 5).tolist())
+    for w in writers.values():
+        w.release()
+    (out / "truth.json").write_text(json.dumps({"joints_3d": truth, "seed": seed, "motion": motion, "t": t,
+                                                "fps": fps}))
+    paths["truth"] = str(out / "truth.json")
+    return paths

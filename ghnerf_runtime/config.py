@@ -1,0 +1,440 @@
+"""Configuration of the runtime: one frozen dataclass per component, nested under one root.
+
+Every dataclass validates itself on construction (``__post_init__``); :func:`config_from_dict`
+builds the tree from plain data (a JSON file) and rejects unknown keys by their dotted path,
+so a typo in a device config fails at load with ``ConfigError("joints3d.metod: unknown key
+...")`` rather than being ignored. Nothing here reads the environment or a global file: the
+caller passes one explicit path (:func:`load_config`).
+
+Tree (defaults in the classes)::
+
+    EstimatorConfig
+      session      SessionConfig        model folder, precision per graph, threads, warm-up
+      roi          RoiConfig            crop window: working volume or tracked joints
+      tracking     TrackingConfig       when to keep / drop the track, subject box margins
+      frame_check  FrameCheckConfig     black / saturated / noise frames
+      rays         RaysConfig           which heatmap rays are rendered
+      decoder      KeypointDecoderConfig  (ghnerf_runtime.keypoints) 2D peak decoding
+      joints3d     Joints3DConfig       3D method and its parameters
+      novel_view   NovelViewConfig      novel-view rendering (off by default)
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import numbers
+import os
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from ghnerf_runtime.errors import ConfigError
+from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
+
+__all__ = [
+    "PRECISIONS", "THREE_D_METHODS", "SessionConfig", "RoiConfig", "TrackingConfig", "FrameCheckConfig",
+    "RaysConfig", "Joints3DConfig", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
+    "load_config",
+]
+
+#: Precision choices of :class:`SessionConfig`.
+PRECISIONS = ("fp32", "int8", "auto")
+#: 3D joint methods of :class:`Joints3DConfig`.
+THREE_D_METHODS = ("triangulate", "volumetric", "depth_centroid")
+_GRAPHS = ("encoder", "volume", "render", "render_heat", "render_rgb", "query")
+
+
+# ------------------------------------------------------------------ checks
+def _fail(cls: type, name: str, why: str, value: Any) -> None:
+    raise ConfigError(f"{why}, got {value!r}", key=f"{cls.__name__}.{name}")
+
+
+def _is_real(value: Any) -> bool:
+    return (isinstance(value, numbers.Real) and not isinstance(value, bool) and value == value
+            and abs(value) != float("inf"))
+
+
+def _number(obj: Any, name: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
+    value = getattr(obj, name)
+    ok = _is_real(value) and (value > lo if lo_open else value >= lo) and value <= hi
+    if not ok:
+        _fail(type(obj), name, f"must be a number in {'(' if lo_open else '['}{lo}, {hi}]", value)
+
+
+def _integer(obj: Any, name: str, lo: int, hi: int) -> None:
+    value = getattr(obj, name)
+    if not (isinstance(value, numbers.Integral) and not isinstance(value, bool) and lo <= value <= hi):
+        _fail(type(obj), name, f"must be an integer in [{lo}, {hi}]", value)
+
+
+def _boolean(obj: Any, name: str) -> None:
+    if not isinstance(getattr(obj, name), bool):
+        _fail(type(obj), name, "must be true or false", getattr(obj, name))
+
+
+def _choice(obj: Any, name: str, choices: tuple) -> None:
+    if getattr(obj, name) not in choices:
+        _fail(type(obj), name, f"must be one of {list(choices)}", getattr(obj, name))
+
+
+# ------------------------------------------------------------------ components
+@dataclass(frozen=True)
+class SessionConfig:
+    """How the model is loaded and run (:class:`ghnerf_runtime.session.ModelSession`).
+
+    Attributes:
+        model_dir: folder holding ``<graph>.onnx`` (fp32) and ``<graph>.int8.onnx`` files, as
+            ``python -m training.export`` writes them (and optionally ``model_card.json``).
+            Switching to another model is only this path.
+        precision: ``"fp32"``: the fp32 file of every graph; ``"int8"``: the int8 file of every
+            graph that has one; ``"auto"``: the faster file per graph as measured on the
+            2-core target (:data:`ghnerf_runtime.session.AUTO_PRECISION`).
+        precision_overrides: graph -> ``"fp32"`` / ``"int8"``, applied after ``precision``.
+        threads: intra-op threads (the device has 2 cores).
+        thread_pool: ``"per_session"``: each graph session owns a pool of ``threads`` whose
+            workers do not spin (measured as fast as a global pool here, and it keeps no
+            process-wide state); ``"global"``: one onnxruntime pool for every session of the
+            process (``set_global_thread_pool_sizes``; once set, every onnxruntime session of
+            the process must use it, so only for the device daemon).
+        allow_spinning: let idle pool workers busy-wait (only useful when one graph runs alone).
+        warmup: run every loaded graph once at load, at the shapes the estimator uses.
+        expected_resolution: refuse a model whose contract resolution is not this square size
+            (``None``: accept any the contract allows).
+        expected_variant: refuse a model of another variant (``"ghnerf"`` / ``"baseline"``).
+    """
+
+    model_dir: str = "models"
+    precision: str = "auto"
+    precision_overrides: Mapping[str, str] = field(default_factory=dict)
+    threads: int = 2
+    thread_pool: str = "per_session"
+    allow_spinning: bool = False
+    warmup: bool = True
+    expected_resolution: int | None = None
+    expected_variant: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.model_dir, (str, os.PathLike)) or not str(self.model_dir):
+            _fail(type(self), "model_dir", "must be a non-empty path", self.model_dir)
+        object.__setattr__(self, "model_dir", str(self.model_dir))
+        _choice(self, "precision", PRECISIONS)
+        if not isinstance(self.precision_overrides, Mapping):
+            _fail(type(self), "precision_overrides", "must be a mapping graph -> precision", self.precision_overrides)
+        for graph, prec in self.precision_overrides.items():
+            if graph not in _GRAPHS or prec not in ("fp32", "int8"):
+                _fail(type(self), "precision_overrides", f"keys must be graphs {list(_GRAPHS)} and values "
+                                                         "'fp32' or 'int8'", dict(self.precision_overrides))
+        object.__setattr__(self, "precision_overrides", dict(self.precision_overrides))
+        _integer(self, "threads", 1, 64)
+        _choice(self, "thread_pool", ("per_session", "global"))
+        _boolean(self, "allow_spinning")
+        _boolean(self, "warmup")
+        if self.expected_resolution is not None:
+            _integer(self, "expected_resolution", 64, 256)
+        if self.expected_variant is not None:
+            _choice(self, "expected_variant", ("ghnerf", "baseline"))
+
+
+@dataclass(frozen=True)
+class RoiConfig:
+    """The crop window of each camera (:mod:`ghnerf_runtime.preprocess`).
+
+    Attributes:
+        volume_margin_m: metres added around the working volume for the cold-start ROI
+            (training used 0).
+        joint_margin_frac: tracked ROI: the joints' box grows by this fraction of its longer side
+            on every side (training drew 0.10-0.35).
+        min_size_px: smallest tracked ROI side, full-image pixels (training: 64).
+        snap_px: tracked ROI corners and size are rounded to multiples of this (pixels), so a
+            slowly moving subject reuses cached remap tables (measured on held-out sequences:
+            23 % of crops reused at 1, 38 % at 4, 52 % at 8; a miss costs ~0.8 ms); 1 disables.
+        map_cache_size: remap tables kept per camera (least recently used are dropped).
+    """
+
+    volume_margin_m: float = 0.0
+    joint_margin_frac: float = 0.25
+    min_size_px: int = 64
+    snap_px: int = 8
+    map_cache_size: int = 32
+
+    def __post_init__(self) -> None:
+        _number(self, "volume_margin_m", 0.0, 2.0)
+        _number(self, "joint_margin_frac", 0.0, 2.0)
+        _integer(self, "min_size_px", 8, 4096)
+        _integer(self, "snap_px", 1, 64)
+        _integer(self, "map_cache_size", 1, 4096)
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Following the subject from one pair to the next (:mod:`ghnerf_runtime.tracking`).
+
+    Attributes:
+        enabled: use the previous pair's joints for the ROI and the subject box; off: always
+            the working volume.
+        min_joints: keep the track only when at least this many 3D joints were found
+            (otherwise the next pair starts from the working volume again).
+        min_confidence: joints below this confidence do not count for the track.
+        box_margin_m: the subject box is the tracked joints' box grown by this (the body
+            reaches past its joints: head top, hands, flesh); near/far and ray limits use it.
+        near_far_margin_m: extra metres around the subject box for the plane sweep's
+            near/far (training: 0.1 around the body box).
+        max_box_size_m: a tracked box larger than this on any axis is implausible for one
+            person: the track is dropped.
+        refine_cold_start: when a cold-start pair (crop and sweep from the working volume)
+            yields a track, run that pair again on the subject's crop and box and report the
+            second pass (costs one more keypoint pass on cold pairs only; the first pair's sweep
+            spans the whole volume, coarser than the subject box the model was trained on).
+    """
+
+    enabled: bool = True
+    min_joints: int = 6
+    min_confidence: float = 0.1
+    box_margin_m: float = 0.2
+    near_far_margin_m: float = 0.1
+    max_box_size_m: float = 3.0
+    refine_cold_start: bool = False
+
+    def __post_init__(self) -> None:
+        _boolean(self, "enabled")
+        _boolean(self, "refine_cold_start")
+        _integer(self, "min_joints", 2, 25)
+        _number(self, "min_confidence", 0.0, 1.0)
+        _number(self, "box_margin_m", 0.0, 2.0)
+        _number(self, "near_far_margin_m", 0.0, 2.0)
+        _number(self, "max_box_size_m", 0.1, 20.0)
+
+
+@dataclass(frozen=True)
+class FrameCheckConfig:
+    """Cheap checks on each model input that skip the model for frames that cannot show anyone.
+
+    Measured on the 8-bit crop (before normalisation), per camera.
+
+    Attributes:
+        enabled: run the checks.
+        min_std: a crop whose standard deviation (8-bit levels) is below this is flat
+            (black, saturated, lens cap): no joints from that camera.
+        max_noise_ratio: share of the crop's variance that is pixel-scale detail
+            (``var(x - box3(x)) / var(x)``). Measured on model inputs: white noise 0.48-0.79
+            (depending on how the crop resamples it), simulator frames 0.008-0.08. Above this
+            the crop is treated as noise: no joints from that camera.
+    """
+
+    enabled: bool = True
+    min_std: float = 2.0
+    max_noise_ratio: float = 0.3
+
+    def __post_init__(self) -> None:
+        _boolean(self, "enabled")
+        _number(self, "min_std", 0.0, 128.0)
+        _number(self, "max_noise_ratio", 0.0, 1.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class RaysConfig:
+    """Which heatmap rays ``render_heat`` renders in each source view.
+
+    Attributes:
+        restrict_to_subject: render only the rays inside the projected subject box (when
+            tracked); the others are heatmap 0 (what the model renders for empty rays).
+        margin_cells: heatmap cells added around the projected box.
+        align_cells: the rendered block's sides are rounded up to a multiple of this, so a few
+            ray counts recur and onnxruntime reuses its memory plans.
+    """
+
+    restrict_to_subject: bool = True
+    margin_cells: int = 2
+    align_cells: int = 4
+
+    def __post_init__(self) -> None:
+        _boolean(self, "restrict_to_subject")
+        _integer(self, "margin_cells", 0, 64)
+        _integer(self, "align_cells", 1, 64)
+
+
+@dataclass(frozen=True)
+class Joints3DConfig:
+    """How 3D joints are made from the model outputs (:mod:`ghnerf_runtime.joints3d`).
+
+    Attributes:
+        method: ``"triangulate"`` (DLT of both views' 2D peaks, per-joint reprojection check),
+            ``"volumetric"`` (the ``query`` graph on a grid in the subject box) or
+            ``"depth_centroid"`` (heatmap-weighted centroid of the rendered depth points around
+            each peak). Comparison: ``docs/runtime.md``.
+        single_view_fallback: triangulation: a joint that is not triangulated (seen in one view
+            only, or the views disagree) takes the depth-centroid estimate instead, at half its
+            confidence (off until measured on the trained model; docs/runtime.md).
+        max_reprojection_px: triangulation: a joint whose reprojection error exceeds this in
+            either view (model-input pixels) is missing (the views disagree).
+        min_view_confidence: a 2D peak below this does not enter the 3D estimate.
+        max_outside_box_m: a 3D joint further than this outside the sweep box (the tracked
+            subject box, or the working volume) or outside the working volume is missing (so a
+            track cannot drift out of the volume either). Two views cannot catch an error
+            along the epipolar line (it only moves the point in depth); this catches the gross ones.
+        grid: volumetric: about ``grid**3`` query points, in near-cubic cells over the box.
+        min_volumetric_response: volumetric: a joint whose best response (mean of both
+            views' sigmoid) is below this is missing.
+        centroid_radius_cells: depth centroid: window half-width around the peak (heatmap cells).
+        surface_offset_m: depth centroid: metres added along the ray behind the rendered surface
+            (joints lie inside the body).
+    """
+
+    method: str = "triangulate"
+    single_view_fallback: bool = False
+    max_reprojection_px: float = 6.0
+    min_view_confidence: float = 0.1
+    max_outside_box_m: float = 0.5
+    grid: int = 16
+    min_volumetric_response: float = 0.1
+    centroid_radius_cells: int = 2
+    surface_offset_m: float = 0.03
+
+    def __post_init__(self) -> None:
+        _choice(self, "method", THREE_D_METHODS)
+        _boolean(self, "single_view_fallback")
+        _number(self, "max_reprojection_px", 0.0, 1000.0, lo_open=True)
+        _number(self, "min_view_confidence", 0.0, 1.0)
+        _number(self, "max_outside_box_m", 0.0, 100.0)
+        _integer(self, "grid", 4, 48)
+        _number(self, "min_volumetric_response", 0.0, 1.0)
+        _integer(self, "centroid_radius_cells", 0, 8)
+        _number(self, "surface_offset_m", -0.5, 0.5)
+
+
+@dataclass(frozen=True)
+class NovelViewConfig:
+    """Novel-view rendering (:mod:`ghnerf_runtime.novel_view`).
+
+    Attributes:
+        enabled: load the colour graph(s) so novel views can be requested. When off, no colour
+            graph is loaded or run.
+        stride: render every ``stride``-th pixel (1: the full contract resolution; 2: a quarter
+            of the rays, upsampled).
+        heatmaps: also render joint heatmaps at the novel camera (``render`` graph: colour and
+            heatmaps in one pass; costs more).
+        rays_in_box_only: render only the rays inside the projected subject box (the rest is
+            background).
+        crop_to_subject: a requested camera is cropped (in its own image) to the subject, as
+            the model sees the sources; off: its whole image is resized to the model resolution.
+    """
+
+    enabled: bool = False
+    stride: int = 1
+    heatmaps: bool = False
+    rays_in_box_only: bool = True
+    crop_to_subject: bool = True
+
+    def __post_init__(self) -> None:
+        _boolean(self, "enabled")
+        _integer(self, "stride", 1, 4)
+        _choice(self, "stride", (1, 2, 4))
+        _boolean(self, "heatmaps")
+        _boolean(self, "rays_in_box_only")
+        _boolean(self, "crop_to_subject")
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """The root: everything :class:`ghnerf_runtime.estimator.Estimator` needs besides the rig."""
+
+    session: SessionConfig = field(default_factory=SessionConfig)
+    roi: RoiConfig = field(default_factory=RoiConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    frame_check: FrameCheckConfig = field(default_factory=FrameCheckConfig)
+    rays: RaysConfig = field(default_factory=RaysConfig)
+    decoder: KeypointDecoderConfig = field(default_factory=KeypointDecoderConfig)
+    joints3d: Joints3DConfig = field(default_factory=Joints3DConfig)
+    novel_view: NovelViewConfig = field(default_factory=NovelViewConfig)
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            kind = typing.get_type_hints(type(self))[f.name]
+            if not isinstance(getattr(self, f.name), kind):
+                _fail(type(self), f.name, f"must be a {kind.__name__}", getattr(self, f.name))
+
+    def required_graphs(self) -> tuple[str, ...]:
+        """The graphs this configuration runs (the session loads only these)."""
+        graphs = ["encoder", "volume", "render_heat"]
+        if self.joints3d.method == "volumetric":
+            graphs.append("query")
+        if self.novel_view.enabled:
+            graphs.append("render" if self.novel_view.heatmaps else "render_rgb")
+        return tuple(graphs)
+
+
+# ------------------------------------------------------------------ dict I/O
+def _build(cls: type, data: Any, path: str) -> Any:
+    if isinstance(data, cls):
+        return data
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"must be a mapping (JSON object), got {type(data).__name__}", key=path or cls.__name__)
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    for key in data:
+        if key not in names:
+            where = f"{path}.{key}" if path else str(key)
+            raise ConfigError(f"unknown key; {cls.__name__} has {sorted(names)}", key=where)
+    kwargs = {}
+    for key, value in data.items():
+        where = f"{path}.{key}" if path else key
+        kind = hints[key]
+        if dataclasses.is_dataclass(kind):
+            kwargs[key] = _build(kind, value, where)
+        elif isinstance(value, list):
+            kwargs[key] = tuple(value)
+        else:
+            kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except ConfigError as e:
+        # Re-key "ClassName.field" as the dotted path the user wrote.
+        field_name = (e.key or "").split(".")[-1]
+        where = f"{path}.{field_name}" if path else field_name
+        raise ConfigError(str(e).split(": ", 1)[-1], key=where) from None
+    except KeypointConfigError as e:
+        raise ConfigError(str(e), key=path or cls.__name__) from None
+
+
+def config_from_dict(data: Mapping[str, Any]) -> EstimatorConfig:
+    """Build and validate the whole tree from plain data; unknown keys raise :class:`ConfigError`.
+
+    Example:
+        >>> config_from_dict({"joints3d": {"method": "volumetric"}}).joints3d.method
+        'volumetric'
+        >>> config_from_dict({"joints3d": {"metod": "x"}})
+        Traceback (most recent call last):
+        ...
+        ghnerf_runtime.errors.ConfigError: joints3d.metod: unknown key; Joints3DConfig has [...]
+    """
+    return _build(EstimatorConfig, data, "")
+
+
+def config_to_dict(config: Any) -> dict:
+    """The tree as plain data (JSON-ready); ``config_from_dict(config_to_dict(c)) == c``."""
+    out = {}
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if dataclasses.is_dataclass(value):
+            value = config_to_dict(value)
+        elif isinstance(value, tuple):
+            value = list(value)
+        elif isinstance(value, Mapping):
+            value = dict(value)
+        out[f.name] = value
+    return out
+
+
+def load_config(path: str | os.PathLike) -> EstimatorConfig:
+    """Read a JSON config file; errors name the file and the key."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except OSError as e:
+        raise ConfigError(f"cannot read config file ({e.strerror or e})", key=str(path)) from e
+    except json.JSONDecodeError as e:
+        raise ConfigError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", key=str(path)) from e
+    try:
+        return config_from_dict(data)
+    except ConfigError as e:
+        raise ConfigError(str(e), key=str(path)) from None

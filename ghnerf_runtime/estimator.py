@@ -1,0 +1,448 @@
+"""``Estimator``: a frame pair and the rig -> 25 BODY_25 joints in 3D and in both images.
+
+Per pair (stage names are the keys of ``PairResult.timing_ms``):
+
+1. ``preprocess`` -- the crop window of each camera comes from the tracked subject (previous
+   pair's joints plus a margin) or, cold, from the rig's working volume
+   (:mod:`ghnerf_runtime.tracking`); one ``cv2.remap`` per camera undistorts, crops and resizes
+   to the model resolution (remap tables cached per window); RGB float in [0, 1]. Each crop is
+   checked: a flat (black, saturated) or noise crop skips the model, and every joint comes back
+   missing.
+2. ``encoder`` -- image and human features of both views.
+3. ``volume`` -- plane-sweep cost volume and depth of each source view (the sources are the
+   targets), between near/far of the subject box (the working volume when cold).
+4. ``render_heat`` -- joint heatmaps of each source view on the heatmap grid, rendered only on
+   the rays covering the projected subject box (tracked) or the whole crop (cold); the colour
+   branch is never computed here.
+5. ``decode_2d`` -- OpenPose-style peaks with subpixel refinement and peak-value confidence
+   (:func:`ghnerf_runtime.keypoints.decode_keypoints`), mapped back to the original
+   (distorted) image pixels.
+6. ``joints_3d`` -- triangulation (default), volumetric query or depth centroid
+   (:mod:`ghnerf_runtime.joints3d`; comparison in docs/runtime.md); then the track is updated
+   (or dropped when too few joints were found).
+7. on request, ``novel_volume`` / ``novel_render`` / ``novel_compose`` -- the novel view.
+
+Every output is finite; a missing joint has coordinates 0, confidence 0 and ``missing`` set.
+Joints are only ever this pair's: the track only places the next crop.
+
+The :class:`~ghnerf_runtime.session.ModelSession` is injected (or built by
+:meth:`Estimator.from_config`); the estimator never touches onnxruntime itself.
+"""
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import cv2
+import numpy as np
+
+from ghnerf_runtime.body25 import JOINT_NAMES
+from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
+from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
+    target_inputs, target_projections
+from ghnerf_runtime.errors import FrameError, ModelError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_to_box, query_grid, triangulate_joints, \
+    volumetric_joints
+from ghnerf_runtime.keypoints import Keypoints2D, decode_keypoints, heatmap_to_model_pixels
+from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton, heatmap_overlay, \
+    interpolate_camera, novel_target, render_novel_view
+from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
+from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
+from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
+
+__all__ = ["Estimator", "PairResult", "check_crop", "KEYPOINT_STAGES", "NOVEL_STAGES"]
+
+#: Stage keys of the keypoint path, in order.
+KEYPOINT_STAGES = ("preprocess", "encoder", "volume", "render_heat", "decode_2d", "joints_3d")
+#: Stage keys of the novel view.
+NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
+
+
+@dataclass(frozen=True, eq=False)
+class PairResult:
+    """The joints of one frame pair.
+
+    Attributes:
+        sequence: the pair's number (as passed to :meth:`Estimator.estimate`).
+        joint_names: BODY_25 names, the order of every joint axis.
+        joints_3d: ``(25, 3)`` rig frame, metres; 0 where missing.
+        confidence: ``(25,)`` float32; 0 where missing.
+        missing: ``(25,)`` bool.
+        joints_2d: camera name -> ``(25, 2)`` pixels of the original (distorted) image; 0 where
+            missing in that camera.
+        confidence_2d: camera name -> ``(25,)`` peak values; 0 where missing.
+        missing_2d: camera name -> ``(25,)`` bool.
+        timing_ms: stage -> milliseconds (``total`` included).
+        tracked: the crops came from the track (False: from the working volume).
+        frame_ok: camera name -> False when the frame check rejected the crop (model not run).
+        rois: camera name -> the crop window used (undistorted pixels).
+        method: the 3D method used.
+        novel_view: the rendered novel view when requested, else ``None``.
+    """
+
+    sequence: int
+    joint_names: tuple[str, ...]
+    joints_3d: np.ndarray
+    confidence: np.ndarray
+    missing: np.ndarray
+    joints_2d: dict[str, np.ndarray]
+    confidence_2d: dict[str, np.ndarray]
+    missing_2d: dict[str, np.ndarray]
+    timing_ms: dict[str, float]
+    tracked: bool
+    frame_ok: dict[str, bool]
+    rois: dict[str, Roi]
+    method: str
+    novel_view: NovelView | None = None
+
+    @property
+    def num_found(self) -> int:
+        return int((~self.missing).sum())
+
+    def to_json(self) -> dict:
+        """The documented per-frame JSON object (docs/runtime.md): plain lists and numbers, no NaN."""
+        def r(x: float, nd: int) -> float:
+            return round(float(x), nd)
+
+        return {
+            "sequence": int(self.sequence),
+            "joint_names": list(self.joint_names),
+            "joints_3d": [[r(x, 5), r(y, 5), r(z, 5), r(c, 4)]
+                          for (x, y, z), c in zip(self.joints_3d, self.confidence)],
+            "joints_2d": {name: [[r(u, 2), r(v, 2), r(c, 4)] for (u, v), c in zip(uv, self.confidence_2d[name])]
+                          for name, uv in self.joints_2d.items()},
+            "missing": [bool(m) for m in self.missing],
+            "tracked": bool(self.tracked),
+            "frame_ok": {k: bool(v) for k, v in self.frame_ok.items()},
+            "method": self.method,
+            "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
+        }
+
+
+# ------------------------------------------------------------------ frame check
+def _levels_per_unit(norm: Normalisation) -> float:
+    lo, hi = (float(v) for v in norm.value_range)
+    scale = 255.0 / (hi - lo)
+    if not norm.mean_std_in_graph:
+        scale *= float(np.mean(norm.std))
+    return scale
+
+
+def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConfig) -> tuple[bool, str]:
+    """Is a model-input plane ``(S, S)`` (one channel, float) worth running the model on?
+
+    Returns ``(ok, reason)``: ``"flat"`` when its standard deviation is below ``min_std``
+    8-bit levels (black, saturated, covered lens), ``"noise"`` when more than
+    ``max_noise_ratio`` of its variance is pixel-to-pixel detail (``x - box3(x)``; white
+    noise 0.48-0.79 after the crop's resampling, simulator frames 0.008-0.08),
+    ``"non-finite"`` for NaN/inf, else ``""``.
+    """
+    if not config.enabled:
+        return True, ""
+    if not np.all(np.isfinite(plane)):
+        return False, "non-finite"
+    var = float(plane.var())
+    if np.sqrt(var) * levels_per_unit < config.min_std:
+        return False, "flat"
+    detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
+    if float(detail.var()) / var > config.max_noise_ratio:
+        return False, "noise"
+    return True, ""
+
+
+# ------------------------------------------------------------------ estimator
+@dataclass
+class _Pass:
+    """What one pass over a pair produced (``j3`` is ``None`` when the frame check stopped it)."""
+
+    regions: Regions
+    frame_ok: dict
+    env: dict | None = None
+    j3: Joints3D | None = None
+    joints_2d: dict | None = None
+    conf_2d: dict | None = None
+    missing_2d: dict | None = None
+
+
+@dataclass
+class _CameraState:
+    """Per source camera: remap tables and crop camera per crop window (LRU)."""
+
+    camera: Camera
+    cache: "OrderedDict[Roi, tuple[CropMaps, Camera]]" = field(default_factory=OrderedDict)
+
+
+class Estimator:
+    """Frame pair -> joints, with an injected :class:`~ghnerf_runtime.session.ModelSession`.
+
+    Args:
+        session: loaded model (must hold ``config.required_graphs()``); any object with the
+            same ``contract`` / ``run`` / ``has`` interface works.
+        rig: the calibrated rig; its first two cameras are the sources, in the pair's order.
+        config: the estimator configuration (its ``session`` part is not used here).
+
+    Raises:
+        ModelError: the session lacks a graph the configuration needs.
+    """
+
+    def __init__(self, session: Any, rig: Rig, config: EstimatorConfig | None = None) -> None:
+        self.config = config or EstimatorConfig()
+        self.session = session
+        self.rig = rig
+        self.contract = session.contract
+        missing = [g for g in self.config.required_graphs() if not session.has(g)]
+        if missing:
+            raise ModelError(f"the session lacks graph(s) {missing} that this configuration needs "
+                             f"(loaded: {list(getattr(session, 'graphs', []))})")
+        if self.contract.height != self.contract.width:
+            raise ModelError(f"the runtime crops square inputs; the model is {self.contract.width}x"
+                             f"{self.contract.height}")
+        self.size = self.contract.height
+        self.grid = self.size // self.contract.heatmap_stride
+        self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi)
+        self._cams = [_CameraState(c) for c in rig.pair]
+        self._levels = _levels_per_unit(self.contract.normalisation)
+        self._volume_box = np.stack([rig.volume.min_corner, rig.volume.max_corner])
+        self._sequence = 0
+        self._rays_cache: dict[tuple, np.ndarray] = {}
+        self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
+
+    @classmethod
+    def from_config(cls, rig: Rig, config: EstimatorConfig | None = None) -> "Estimator":
+        """Load the model named by ``config.session`` (only the graphs needed) and build the estimator."""
+        from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
+
+        config = config or EstimatorConfig()
+        return cls(ModelSession.load(config.session, config.required_graphs()), rig, config)
+
+    @property
+    def camera_names(self) -> tuple[str, str]:
+        return self._cams[0].camera.name, self._cams[1].camera.name
+
+    def reset(self) -> None:
+        """Forget the tracked subject (the next pair starts from the working volume)."""
+        self.tracker.reset()
+
+    # -------------------------------------------------------------- helpers
+    def _crop(self, state: _CameraState, roi: Roi) -> tuple[CropMaps, Camera]:
+        """Remap tables and the pinhole crop camera of one window (building both costs ~0.8 ms)."""
+        entry = state.cache.get(roi)
+        if entry is None:
+            entry = (build_undistort_crop_maps(state.camera, roi, self.size), crop_camera(state.camera, roi, self.size))
+            state.cache[roi] = entry
+            while len(state.cache) > self.config.roi.map_cache_size:
+                state.cache.popitem(last=False)
+        else:
+            state.cache.move_to_end(roi)
+        return entry
+
+    def _ray_uv(self, blocks: tuple, stride: int) -> np.ndarray:
+        """``(2, R, 2)`` rays of the two views' blocks (cached: blocks recur while tracking)."""
+        rays = self._rays_cache.get(blocks)
+        if rays is None:
+            rays = np.stack([block_ray_uv(b, stride) for b in blocks])
+            if len(self._rays_cache) > 256:
+                self._rays_cache.clear()
+            self._rays_cache[blocks] = rays
+        return rays
+
+    def _check_images(self, images: Sequence[np.ndarray]) -> None:
+        if len(images) != 2:
+            raise FrameError(f"expected 2 images (cameras {list(self.camera_names)}), got {len(images)}")
+        for img, st in zip(images, self._cams):
+            arr = np.asarray(img)
+            w, h = st.camera.size
+            if arr.dtype != np.uint8 or arr.shape != (h, w, 3):
+                raise FrameError(f"camera {st.camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image, got "
+                                 f"{arr.dtype} {arr.shape}")
+
+    def _empty_result(self, sequence: int, regions: Regions, frame_ok: dict, timing: dict) -> PairResult:
+        J = len(JOINT_NAMES)
+        names = self.camera_names
+        return PairResult(sequence, JOINT_NAMES, np.zeros((J, 3)), np.zeros(J, np.float32), np.ones(J, bool),
+                          {n: np.zeros((J, 2)) for n in names}, {n: np.zeros(J, np.float32) for n in names},
+                          {n: np.ones(J, bool) for n in names}, timing, regions.tracked, frame_ok,
+                          dict(zip(names, regions.rois)), self.config.joints3d.method)
+
+    # -------------------------------------------------------------- main
+    def estimate(self, images: Sequence[np.ndarray], *, sequence: int | None = None,
+                 novel_view: NovelViewRequest | None = None) -> PairResult:
+        """Joints of one synchronised pair.
+
+        Args:
+            images: the two BGR uint8 frames, in the rig's camera order, at the cameras' sizes.
+            sequence: the pair's number (default: a running count).
+            novel_view: render a novel view too (needs ``novel_view.enabled`` in the config). A
+                pair whose frames fail the frame check has none (``PairResult.novel_view`` is
+                ``None``).
+
+        Raises:
+            FrameError: an image has the wrong size or type for its camera.
+            ModelError: a novel view was requested but not enabled; a graph failed.
+        """
+        t_start = time.perf_counter()
+        if sequence is None:
+            sequence = self._sequence
+        self._sequence = sequence + 1
+        self._check_images(images)
+        if novel_view is not None and not self.config.novel_view.enabled:
+            raise ModelError("a novel view was requested but novel_view.enabled is false (the colour graph is "
+                             "not loaded)")
+        if novel_view is not None and novel_view.overlay == "heatmap" and not self.config.novel_view.heatmaps:
+            raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
+        timing: dict[str, float] = {}
+        p = self._pass(images, self.tracker.regions(), sequence, timing)
+        if (p.j3 is not None and not p.regions.tracked and self.config.tracking.refine_cold_start
+                and self.tracker.track is not None):
+            # Cold start that found the subject: run again on its crop and box, in this pair.
+            p = self._pass(images, self.tracker.regions(), sequence, timing)
+        if p.j3 is None:
+            timing["total"] = 1e3 * (time.perf_counter() - t_start)
+            return self._empty_result(sequence, p.regions, p.frame_ok, timing)
+        nv = None
+        if novel_view is not None:
+            nv = self._novel_view(novel_view, p.env, p.regions, p.j3, timing)
+        timing["total"] = 1e3 * (time.perf_counter() - t_start)
+        names = self.camera_names
+        return PairResult(sequence, JOINT_NAMES, p.j3.points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
+                          p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
+                          self.config.joints3d.method, nv)
+
+    def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict) -> "_Pass":
+        """Stages 1-6 on one set of regions; stage times are added to ``timing``; updates the track."""
+        cfg = self.config
+        S = self.size
+
+        def add(stage: str, t0: float) -> None:
+            timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
+
+        # 1. preprocess + frame check
+        t = time.perf_counter()
+        batch = np.empty((2, 3, S, S), np.float32)
+        frame_ok, crops = {}, []
+        for i, (img, st, roi) in enumerate(zip(images, self._cams, regions.rois)):
+            maps, crop = self._crop(st, roi)
+            crops.append(crop)
+            batch[i] = preprocess_image(img, maps, self.contract.normalisation)
+            ok, _ = check_crop(batch[i, 1], self._levels, cfg.frame_check)
+            frame_ok[st.camera.name] = ok
+        add("preprocess", t)
+        if not all(frame_ok.values()):
+            self.tracker.reset()  # nothing seen: the next pair starts cold
+            return _Pass(regions, frame_ok)
+
+        # 2-4. encoder, volume (sources as targets), heatmaps on the subject's rays
+        env: dict[str, np.ndarray] = {
+            "images": batch,
+            "src_P": source_projections(crops, S, S),
+            "src_centers": source_centers(crops),
+            **target_inputs(crops, S, S),
+            "near_far": np.stack([near_far_from_box(c, box_corners(regions.box), cfg.tracking.near_far_margin_m)
+                                  for c in crops]),
+        }
+        t = time.perf_counter()
+        env.update(self.session.run("encoder", env))
+        add("encoder", t)
+        t = time.perf_counter()
+        env.update(self.session.run("volume", env))
+        add("volume", t)
+        t = time.perf_counter()
+        stride, g = self.contract.heatmap_stride, self.grid
+        if cfg.rays.restrict_to_subject and regions.tracked:
+            blocks = common_blocks([box_block(c, regions.box, stride, cfg.rays.margin_cells) for c in crops], g, g,
+                                   cfg.rays.align_cells)
+        else:
+            blocks = [full_block(g, g)] * 2
+        env["ray_uv"] = self._ray_uv(tuple(blocks), stride)
+        out = self.session.run("render_heat", env)
+        add("render_heat", t)
+
+        # 5. decode 2D
+        t = time.perf_counter()
+        heat = np.stack([scatter_block(out["heatmaps"][i], blocks[i], g, g) for i in range(2)])  # (2, g, g, J)
+        heat = np.ascontiguousarray(heat.transpose(0, 3, 1, 2))  # (2, J, g, g)
+        kp = decode_keypoints(heat, cfg.decoder)
+        uv_model = heatmap_to_model_pixels(kp.uv, g, S)
+        joints_2d, conf_2d, missing_2d = {}, {}, {}
+        for i, (st, crop) in enumerate(zip(self._cams, crops)):
+            name = st.camera.name
+            # model_to_image_pixels without rebuilding the crop camera: crop pinhole -> lens.
+            safe = np.where(kp.valid[i][:, None], uv_model[i], S / 2)
+            uv_img = st.camera.normalized_to_pixels(crop.pixels_to_normalized(safe), distort=True)
+            ok = kp.valid[i] & np.all(np.isfinite(uv_img), axis=-1)
+            joints_2d[name] = np.where(ok[:, None], uv_img, 0.0)
+            conf_2d[name] = np.where(ok, kp.confidence[i], 0.0).astype(np.float32)
+            missing_2d[name] = ~ok
+        add("decode_2d", t)
+
+        # 6. 3D, then the track
+        t = time.perf_counter()
+        j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
+        # Nobody stands outside the working volume, nor far from where the sweep looked.
+        j3 = gate_to_box(j3, regions.box, cfg.joints3d.max_outside_box_m)
+        j3 = gate_to_box(j3, self._volume_box, cfg.joints3d.max_outside_box_m)
+        self.tracker.update(j3.points, j3.confidence, j3.valid, sequence)
+        add("joints_3d", t)
+        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d)
+
+    # -------------------------------------------------------------- 3D
+    def _joints_3d(self, env: dict, out: dict, blocks, heat: np.ndarray, kp: Keypoints2D, uv_model: np.ndarray,
+                   crops: list[Camera], regions: Regions) -> Joints3D:
+        cfg = self.config.joints3d
+
+        def centroid() -> Joints3D:
+            g = self.grid
+            depth = np.stack([scatter_block(out["depth"][i], blocks[i], g, g) for i in range(2)])
+            return depth_centroid_joints(heat, depth, kp.uv, kp.confidence, kp.valid, crops, self.size, cfg)
+
+        if cfg.method == "triangulate":
+            tri = triangulate_joints(uv_model, kp.confidence, kp.valid, crops, cfg)
+            if not cfg.single_view_fallback or tri.valid.all():
+                return tri
+            dc = centroid()
+            fill = ~tri.valid & dc.valid
+            return Joints3D(np.where(fill[:, None], dc.points, tri.points),
+                            np.where(fill, 0.5 * dc.confidence, tri.confidence).astype(np.float32),
+                            tri.valid | fill, tri.reprojection_px).sanitised()
+        if cfg.method == "depth_centroid":
+            return centroid()
+        # volumetric
+        key = (cfg.grid,) + tuple(np.round(regions.box, 4).ravel())
+        if key not in self._grid_points:
+            self._grid_points = {key: query_grid(regions.box, cfg.grid)}
+        points, shape = self._grid_points[key]
+        feeds = dict(env)
+        feeds["tgt_P"] = target_projections(crops, self.size, self.size)
+        feeds["points"] = np.ascontiguousarray(np.broadcast_to(points, (2,) + points.shape))
+        q = self.session.run("query", feeds)
+        return volumetric_joints(q["joint_heat"], points, shape, cfg)
+
+    # -------------------------------------------------------------- novel view
+    def _novel_view(self, request: NovelViewRequest, env: dict, regions: Regions, j3: Joints3D,
+                    timing: dict) -> NovelView:
+        cfg = self.config.novel_view
+        cam_a, cam_b = self.rig.pair
+        full = request.camera if request.camera is not None else interpolate_camera(cam_a, cam_b, request.alpha)
+        # The box: the subject seen in *this* pair when possible, else the sweep box.
+        box = regions.box
+        if int(j3.valid.sum()) >= self.config.tracking.min_joints:
+            pts = j3.points[j3.valid]
+            m = self.config.tracking.box_margin_m
+            box = np.stack([pts.min(axis=0) - m, pts.max(axis=0) + m])
+        target = novel_target(full, box, self.size, cfg.crop_to_subject)
+        nv = render_novel_view(self.session, env, target, box, cfg,
+                               near_far_margin=self.config.tracking.near_far_margin_m,
+                               want_heat=cfg.heatmaps, timing=timing)
+        t = time.perf_counter()
+        image = nv.image
+        if request.overlay == "skeleton":
+            uv, depth = target.project(j3.points, distort=False)
+            image = draw_skeleton(image, np.nan_to_num(uv), j3.valid & (depth > 0))
+        elif request.overlay == "heatmap" and nv.heat is not None:
+            image = heatmap_overlay(image, nv.heat)
+        timing["novel_compose"] = timing.get("novel_compose", 0.0) + 1e3 * (time.perf_counter() - t)
+        return NovelView(image, nv.camera, nv.depth, nv.heat, nv.rays)

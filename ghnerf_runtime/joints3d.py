@@ -1,0 +1,270 @@
+"""3D joints from the model's outputs: three methods, pure functions.
+
+* :func:`triangulate_joints` -- DLT of the two views' decoded 2D peaks (in the crop cameras,
+  so no lens model is involved), weighted by peak confidence, with a per-joint reprojection
+  check: a joint whose reprojection error exceeds ``max_reprojection_px`` in either view is
+  missing (with two views the culprit cannot be told, so neither is trusted).
+* :func:`volumetric_joints` -- the ``query`` graph's joint heatmap head evaluated on a regular
+  grid inside the subject box (:func:`query_grid`), averaged over the two source volumes; per
+  joint the weighted centroid of the grid points near its maximum (sub-cell estimate).
+* :func:`depth_centroid_joints` -- each view's rendered depth turns the heatmap rays around the
+  joint's 2D peak into 3D points (the depth-guided samples' expected surface); their
+  heatmap-weighted centroid, pushed ``surface_offset_m`` behind the surface, is that view's
+  estimate, and the views' estimates are averaged by confidence. One view suffices, so it
+  also answers for joints the other camera does not see.
+
+Every result is finite: missing joints are 0 with confidence 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ghnerf_runtime.config import Joints3DConfig
+from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.triangulation import triangulate_robust
+from ghnerf_runtime.keypoints import heatmap_to_model_pixels
+
+__all__ = ["Joints3D", "gate_to_box", "triangulate_joints", "grid_shape", "query_grid", "volumetric_joints",
+           "depth_centroid_joints"]
+
+
+@dataclass(frozen=True, eq=False)
+class Joints3D:
+    """3D joints of one pair.
+
+    Attributes:
+        points: ``(J, 3)`` rig frame, metres; 0 where not valid.
+        confidence: ``(J,)`` float32 in [0, 1]; 0 where not valid.
+        valid: ``(J,)`` bool.
+        reprojection_px: ``(J, C)`` reprojection error per view in model-input pixels (0 where
+            not computed).
+    """
+
+    points: np.ndarray
+    confidence: np.ndarray
+    valid: np.ndarray
+    reprojection_px: np.ndarray
+
+    @staticmethod
+    def missing(num_joints: int, num_views: int = 2) -> "Joints3D":
+        return Joints3D(np.zeros((num_joints, 3)), np.zeros(num_joints, np.float32), np.zeros(num_joints, bool),
+                        np.zeros((num_joints, num_views)))
+
+    def sanitised(self) -> "Joints3D":
+        """Joints with any non-finite value become missing; coordinates of missing joints are 0."""
+        ok = (self.valid & np.all(np.isfinite(self.points), axis=-1) & np.isfinite(self.confidence)
+              & (self.confidence > 0))
+        return Joints3D(np.where(ok[:, None], self.points, 0.0), np.where(ok, self.confidence, 0.0).astype(np.float32),
+                        ok, np.where(np.isfinite(self.reprojection_px), self.reprojection_px, 0.0))
+
+
+def gate_to_box(joints: Joints3D, box: np.ndarray, margin: float) -> Joints3D:
+    """Joints further than ``margin`` metres outside a ``(2, 3)`` box become missing.
+
+    Example:
+        >>> pts = np.array([[0.0, 0, 0], [2.0, 0, 0]])
+        >>> j = Joints3D(pts, np.ones(2, np.float32), np.ones(2, bool), np.zeros((2, 2)))
+        >>> gate_to_box(j, np.array([[-1.0, -1, -1], [1, 1, 1]]), 0.5).valid.tolist()
+        [True, False]
+    """
+    box = np.asarray(box, dtype=np.float64)
+    inside = np.all((joints.points >= box[0] - margin) & (joints.points <= box[1] + margin), axis=-1)
+    return Joints3D(joints.points, joints.confidence, joints.valid & inside, joints.reprojection_px).sanitised()
+
+
+def _check_views(uv: np.ndarray, conf: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    uv = np.asarray(uv, dtype=np.float64)
+    conf = np.asarray(conf, dtype=np.float64)
+    valid = np.asarray(valid, bool)
+    if uv.ndim != 3 or uv.shape[-1] != 2 or conf.shape != uv.shape[:2] or valid.shape != uv.shape[:2]:
+        raise ShapeError(f"uv (C, J, 2), confidence (C, J), valid (C, J) expected, got {uv.shape}, {conf.shape}, "
+                         f"{valid.shape}")
+    return uv, conf, valid
+
+
+# ----------------------------------------------------------------- triangulation
+def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig) -> Joints3D:
+    """Triangulate 2D peaks given in model-input pixels of the crop cameras.
+
+    Args:
+        uv_model: ``(C, J, 2)`` peaks in each view's model-input pixels.
+        confidence: ``(C, J)`` peak values.
+        valid: ``(C, J)`` decoded.
+        cameras: the C pinhole crop cameras (``preprocess.crop_camera``).
+        config: ``max_reprojection_px``, ``min_view_confidence``.
+
+    Returns:
+        :class:`Joints3D`; confidence is the geometric mean of the views' peak values.
+
+    Example:
+        >>> from ghnerf_runtime.geometry import Camera, look_at
+        >>> K = [[100.0, 0, 63.5], [0, 100.0, 63.5], [0, 0, 1]]
+        >>> eyes = (("a", -0.5), ("b", 0.5))
+        >>> cams = [Camera(n, 128, 128, K, [], *look_at((x, -1.0, 0), (0, -1.0, 3))) for n, x in eyes]
+        >>> X = np.array([[0.1, -1.2, 3.0]])
+        >>> uv = np.stack([c.project(X)[0] for c in cams])
+        >>> r = triangulate_joints(uv, np.full((2, 1), 0.8), np.ones((2, 1), bool), cams, Joints3DConfig())
+        >>> np.round(r.points, 6).tolist(), r.valid.tolist(), round(float(r.confidence[0]), 3)
+        ([[0.1, -1.2, 3.0]], [True], 0.8)
+    """
+    uv, conf, ok = _check_views(uv_model, confidence, valid)
+    use = ok & (conf >= config.min_view_confidence) & (conf > 0) & np.all(np.isfinite(uv), axis=-1)
+    weights = np.where(use, conf, 0.0)
+    mats = [np.asarray(c.P if isinstance(c, Camera) else c, dtype=np.float64) for c in cameras]  # pinhole: P suffices
+    res = triangulate_robust(np.where(use[..., None], uv, 0.0), mats, weights, undistorted=True,
+                             max_reprojection_error=config.max_reprojection_px)
+    both = use.all(axis=0)
+    good = res.valid & both
+    conf3 = np.sqrt(np.prod(np.where(use, conf, 0.0), axis=0))
+    return Joints3D(res.points, conf3.astype(np.float32), good, res.reprojection_error).sanitised()
+
+
+# ----------------------------------------------------------------- volumetric
+def grid_shape(box: np.ndarray, n: int) -> tuple[int, int, int]:
+    """``(nx, ny, nz)`` of a grid of about ``n**3`` points whose cells are near cubic in ``box``.
+
+    Example:
+        >>> grid_shape(np.array([[0.0, 0, 0], [1, 2, 1]]), 8)
+        (6, 13, 6)
+    """
+    box = np.asarray(box, dtype=np.float64)
+    if box.shape != (2, 3) or np.any(box[1] <= box[0]):
+        raise ShapeError(f"box must be (2, 3) (min, max) with max > min, got {box.tolist()}")
+    size = box[1] - box[0]
+    per_axis = n * size / np.prod(size) ** (1 / 3)
+    return tuple(int(max(3, round(v))) for v in per_axis)
+
+
+def query_grid(box: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int, int, int]]:
+    """Cell centres ``(N, 3)`` float32 of a :func:`grid_shape` grid over a ``(2, 3)`` box, x fastest,
+    and the grid's ``(nx, ny, nz)``.
+
+    Example:
+        >>> pts, shape = query_grid(np.array([[0.0, 0, 0], [0.4, 0.8, 0.4]]), 4)
+        >>> shape, np.round(pts[:3].astype(float), 3).tolist()
+        ((3, 6, 3), [[0.067, 0.067, 0.067], [0.2, 0.067, 0.067], [0.333, 0.067, 0.067]])
+    """
+    box = np.asarray(box, dtype=np.float64)
+    shape = grid_shape(box, n)
+    axes = [box[0, k] + (np.arange(shape[k]) + 0.5) * (box[1, k] - box[0, k]) / shape[k] for k in range(3)]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    return np.stack([x.ravel(), y.ravel(), z.ravel()], axis=-1).astype(np.float32), shape
+
+
+def volumetric_joints(joint_heat: np.ndarray, points: np.ndarray, shape: tuple[int, int, int],
+                      config: Joints3DConfig) -> Joints3D:
+    """Joints from the ``query`` graph's responses on a :func:`query_grid`.
+
+    Per joint: the grid point of the largest response (mean over the source volumes), refined
+    per axis by a parabola through the log responses of its two neighbours (exact for a
+    Gaussian response; the step is clipped to half a cell); confidence is that response.
+
+    Args:
+        joint_heat: ``(B, N, J)`` sigmoid responses, one row per source volume (averaged).
+        points: ``(N, 3)`` the grid (x fastest).
+        shape: ``(nx, ny, nz)`` with ``nx * ny * nz == N``.
+        config: ``min_volumetric_response``.
+    """
+    heat = np.asarray(joint_heat, dtype=np.float64)
+    pts = np.asarray(points, dtype=np.float64)
+    nx, ny, nz = (int(v) for v in shape)
+    if heat.ndim != 3 or pts.shape != (heat.shape[1], 3) or heat.shape[1] != nx * ny * nz:
+        raise ShapeError(f"joint_heat (B, N, J) and points (N, 3) with N = {nx}*{ny}*{nz} expected, got "
+                         f"{heat.shape}, {pts.shape}")
+    J = heat.shape[2]
+    resp = np.nan_to_num(heat.mean(axis=0), nan=0.0, posinf=0.0, neginf=0.0)  # (N, J)
+    cube = resp.T.reshape(J, nz, ny, nx)
+    best = resp.argmax(axis=0)
+    peak = resp[best, np.arange(J)]
+    idx = np.stack(np.unravel_index(best, (nz, ny, nx)), axis=-1)  # (J, 3) z, y, x
+    dims = np.array([nz, ny, nx])
+    floor = np.maximum(peak, 1e-12)[:, None] * 1e-6
+    offset = np.zeros((J, 3))
+    for axis in range(3):
+        lo_i, hi_i = idx.copy(), idx.copy()
+        lo_i[:, axis] -= 1
+        hi_i[:, axis] += 1
+        inner = (idx[:, axis] > 0) & (idx[:, axis] < dims[axis] - 1)
+        lo_i = np.clip(lo_i, 0, dims - 1)
+        hi_i = np.clip(hi_i, 0, dims - 1)
+        j = np.arange(J)
+        f0 = np.log(np.maximum(peak, floor[:, 0]))
+        fm = np.log(np.maximum(cube[j, lo_i[:, 0], lo_i[:, 1], lo_i[:, 2]], floor[:, 0]))
+        fp = np.log(np.maximum(cube[j, hi_i[:, 0], hi_i[:, 1], hi_i[:, 2]], floor[:, 0]))
+        curv = fm - 2 * f0 + fp
+        step = np.where(inner & (curv < 0), 0.5 * (fm - fp) / np.where(curv < 0, curv, -1.0), 0.0)
+        offset[:, axis] = np.clip(step, -0.5, 0.5)
+    cell = np.zeros(3)
+    if nx > 1:
+        cell[0] = pts[1, 0] - pts[0, 0]
+    if ny > 1:
+        cell[1] = pts[nx, 1] - pts[0, 1]
+    if nz > 1:
+        cell[2] = pts[nx * ny, 2] - pts[0, 2]
+    points_out = pts[best] + offset[:, ::-1] * cell  # offsets z, y, x -> x, y, z
+    valid = peak >= max(config.min_volumetric_response, 1e-6)
+    return Joints3D(points_out, peak.astype(np.float32), valid, np.zeros((J, heat.shape[0]))).sanitised()
+
+
+# ----------------------------------------------------------------- depth centroid
+def depth_centroid_joints(heatmaps: np.ndarray, depth: np.ndarray, peaks_uv: np.ndarray, confidence: np.ndarray,
+                          valid: np.ndarray, cameras: Sequence[Camera], model_size: int,
+                          config: Joints3DConfig) -> Joints3D:
+    """Joints from the rendered depth around each view's 2D peak.
+
+    Args:
+        heatmaps: ``(C, J, h, w)`` rendered heatmaps on the heatmap grid (0 where not rendered).
+        depth: ``(C, h, w)`` rendered expected depth (camera z, metres) on the same grid.
+        peaks_uv: ``(C, J, 2)`` decoded peaks in heatmap pixels.
+        confidence, valid: ``(C, J)`` decoded peak values and flags.
+        cameras: the C pinhole crop cameras.
+        model_size: model input side (heatmap -> model pixels).
+        config: ``centroid_radius_cells``, ``surface_offset_m``, ``min_view_confidence``.
+
+    Returns:
+        :class:`Joints3D`; confidence is the larger of the views' peak values.
+    """
+    hm = np.asarray(heatmaps, dtype=np.float64)
+    dep = np.asarray(depth, dtype=np.float64)
+    uv, conf, ok = _check_views(peaks_uv, confidence, valid)
+    C, J, h, w = hm.shape
+    if dep.shape != (C, h, w) or uv.shape[:2] != (C, J) or len(cameras) != C:
+        raise ShapeError(f"heatmaps (C, J, h, w), depth (C, h, w), peaks (C, J, 2) and C cameras expected, got "
+                         f"{hm.shape}, {dep.shape}, {uv.shape}, {len(cameras)}")
+    r = config.centroid_radius_cells
+    offs = np.arange(-r, r + 1)
+    cy = np.clip(np.rint(uv[..., 1]).astype(int), 0, h - 1)  # (C, J)
+    cx = np.clip(np.rint(uv[..., 0]).astype(int), 0, w - 1)
+    yy = cy[..., None, None] + offs[:, None]  # (C, J, k, 1)
+    xx = cx[..., None, None] + offs[None, :]  # (C, J, 1, k)
+    yy, xx = np.broadcast_arrays(yy, xx)
+    inside = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
+    yc, xc = np.clip(yy, 0, h - 1), np.clip(xx, 0, w - 1)
+    ci = np.arange(C)[:, None, None, None]
+    ji = np.arange(J)[None, :, None, None]
+    hv = hm[ci, ji, yc, xc]
+    dv = dep[ci, yc, xc]
+    good = inside & np.isfinite(hv) & np.isfinite(dv) & (dv > 1e-3)
+    wgt = np.where(good, np.nan_to_num(hv) ** 2, 0.0)
+    cells = np.stack([xc, yc], axis=-1).astype(np.float64)  # heatmap pixels
+    model_uv = heatmap_to_model_pixels(cells, (w, h), model_size)
+    points = np.zeros((C, J) + yy.shape[2:] + (3,))
+    for c, cam in enumerate(cameras):
+        xy = cam.pixels_to_normalized(model_uv[c])  # pinhole: exact
+        d_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+        unit = d_cam / np.linalg.norm(d_cam, axis=-1, keepdims=True)
+        z = np.where(good[c], dv[c], 0.0)
+        p_cam = d_cam * z[..., None] + unit * config.surface_offset_m
+        points[c] = p_cam @ cam.R + cam.center  # R^T p + centre, row vectors
+    wsum = wgt.sum(axis=(-2, -1))
+    per_view = (wgt[..., None] * points).sum(axis=(-3, -2)) / np.where(wsum > 0, wsum, 1.0)[..., None]  # (C, J, 3)
+    use = ok & (conf >= config.min_view_confidence) & (conf > 0) & (wsum > 0)
+    vw = np.where(use, conf, 0.0)
+    total = vw.sum(axis=0)
+    joint = (vw[..., None] * per_view).sum(axis=0) / np.where(total > 0, total, 1.0)[:, None]
+    conf3 = np.where(use, conf, 0.0).max(axis=0)
+    return Joints3D(joint, conf3.astype(np.float32), use.any(axis=0), np.zeros((J, C))).sanitised()

@@ -1,0 +1,244 @@
+"""Novel views: a virtual camera, the rays inside the subject, and the rendered image.
+
+The virtual camera is either one *between* the two rig cameras (rotation slerped, centre and
+intrinsics interpolated linearly: :func:`interpolate_camera`) or any given calibrated camera.
+Like the sources, it is cropped to the subject (:func:`novel_target`) and rendered at the model
+resolution (``S x S``, e.g. 128x128) -- the "reduced resolution" of the novel view -- every
+``stride`` pixels. Only the rays inside the projected subject box are rendered; the rest is the
+contract's background (black).
+
+Graph use (:func:`render_novel_view`): ``volume`` with the one novel camera as target (B = 1),
+then ``render_rgb`` (colour only) or ``render`` (colour and heatmaps). The encoder outputs of
+the pair are reused from the keypoint path, so a novel view costs two graph runs.
+
+numpy, OpenCV; the session is passed in (never created here).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from typing import Any, Mapping
+
+import cv2
+import numpy as np
+
+from ghnerf_runtime.body25 import LIMBS
+from ghnerf_runtime.config import NovelViewConfig
+from ghnerf_runtime.contract import near_far_from_box, target_inputs
+from ghnerf_runtime.errors import GeometryError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
+from ghnerf_runtime.rays import block_ray_uv, box_block, full_block, scatter_block
+from ghnerf_runtime.tracking import box_corners
+
+__all__ = ["NovelViewRequest", "NovelView", "slerp_rotation", "interpolate_camera", "novel_target",
+           "render_novel_view", "draw_skeleton", "heatmap_overlay"]
+
+
+@dataclass(frozen=True)
+class NovelViewRequest:
+    """What to render for one pair.
+
+    Attributes:
+        alpha: position between the rig's cameras (0 = first, 1 = second) when ``camera`` is
+            ``None``.
+        camera: a given virtual camera (rig frame, any size; distortion is ignored).
+        overlay: ``"none"``, ``"skeleton"`` (the pair's 3D joints projected and drawn) or
+            ``"heatmap"`` (rendered joint heatmaps blended in; needs ``novel_view.heatmaps``).
+    """
+
+    alpha: float = 0.5
+    camera: Camera | None = None
+    overlay: str = "none"
+
+    def __post_init__(self) -> None:
+        if self.camera is None and not (np.isfinite(self.alpha) and -1.0 <= self.alpha <= 2.0):
+            raise GeometryError(f"NovelViewRequest.alpha must be in [-1, 2], got {self.alpha!r}")
+        if self.overlay not in ("none", "skeleton", "heatmap"):
+            raise GeometryError(f"NovelViewRequest.overlay must be 'none', 'skeleton' or 'heatmap', "
+                                f"got {self.overlay!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class NovelView:
+    """A rendered novel view.
+
+    Attributes:
+        image: ``(S, S, 3)`` uint8 BGR (with the overlay, if requested).
+        camera: the pinhole camera of ``image`` (rig frame).
+        depth: ``(S / stride, S / stride)`` float32 rendered depth (0 outside the rendered rays).
+        heat: ``(S, S)`` float32 max over joints of the rendered heatmaps, or ``None``.
+        rays: number of rays rendered.
+    """
+
+    image: np.ndarray
+    camera: Camera
+    depth: np.ndarray
+    heat: np.ndarray | None
+    rays: int
+
+
+# ------------------------------------------------------------------ cameras
+def _quat(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method)."""
+    m = np.asarray(R, dtype=np.float64)
+    tr = np.trace(m)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k])
+        q = np.zeros(4)
+        q[0] = (m[k, j] - m[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (m[j, i] + m[i, j]) / s
+        q[1 + k] = (m[k, i] + m[i, k]) / s
+    q = np.asarray(q, dtype=np.float64)
+    return q / np.linalg.norm(q)
+
+
+def _matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray:
+    """Spherical linear interpolation of two rotation matrices (shortest arc).
+
+    Example:
+        >>> from ghnerf_runtime.geometry import look_at
+        >>> Ra, _ = look_at((-1, 0, 0), (0, 0, 3)); Rb, _ = look_at((1, 0, 0), (0, 0, 3))
+        >>> R = slerp_rotation(Ra, Rb, 0.5)
+        >>> np.round(R @ R.T, 9).tolist() == np.eye(3).tolist(), np.round(R[2], 6).tolist()
+        (True, [0.0, 0.0, 1.0])
+    """
+    qa, qb = _quat(R_a), _quat(R_b)
+    dot = float(np.dot(qa, qb))
+    if dot < 0:
+        qb, dot = -qb, -dot
+    if dot > 0.9995:  # nearly equal: linear interpolation is exact enough and stable
+        q = qa + alpha * (qb - qa)
+    else:
+        theta = np.arccos(np.clip(dot, -1.0, 1.0))
+        q = (np.sin((1 - alpha) * theta) * qa + np.sin(alpha * theta) * qb) / np.sin(theta)
+    return _matrix(q)
+
+
+def interpolate_camera(cam_a: Camera, cam_b: Camera, alpha: float, name: str = "novel") -> Camera:
+    """A pinhole camera between two cameras: slerped rotation, lerped centre and intrinsics.
+
+    The image size is ``cam_a``'s (``cam_b``'s intrinsics are rescaled to it first); lens
+    distortion is dropped (a virtual camera is ideal).
+    """
+    b = cam_b if cam_b.size == cam_a.size else cam_b.resized(cam_a.width, cam_a.height)
+    R = slerp_rotation(cam_a.R, b.R, alpha)
+    centre = (1 - alpha) * cam_a.center + alpha * b.center
+    K = (1 - alpha) * cam_a.K + alpha * b.K
+    K[2] = [0.0, 0.0, 1.0]
+    K[1, 0] = 0.0
+    return Camera(name, cam_a.width, cam_a.height, K, np.zeros(5), R, -R @ centre)
+
+
+def novel_target(camera: Camera, box: np.ndarray, size: int, crop_to_subject: bool = True) -> Camera:
+    """The ``size x size`` pinhole camera the novel view is rendered with.
+
+    ``crop_to_subject``: the square crop of ``camera``'s image showing the box (as the sources
+    are cropped); otherwise the whole image resized (non-square pixels if the image is not square).
+    """
+    cam = camera.without_distortion() if camera.has_distortion else camera
+    if crop_to_subject:
+        try:
+            return replace(crop_camera(cam, roi_from_volume(cam, box_corners(box)), size), name=camera.name)
+        except GeometryError:
+            pass  # the box is not in view: show the whole image (it will be background)
+    return cam.resized(size, size)
+
+
+# ------------------------------------------------------------------ rendering
+def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camera, box: np.ndarray,
+                      config: NovelViewConfig, *, near_far_margin: float = 0.1, want_heat: bool = False,
+                      timing: dict | None = None) -> NovelView:
+    """Render the novel view at ``camera`` (already the ``S x S`` target, :func:`novel_target`).
+
+    Args:
+        session: a :class:`~ghnerf_runtime.session.ModelSession` with ``volume`` and ``render_rgb``
+            (or ``render`` when heatmaps are wanted) loaded.
+        env: the pair's encoder outputs and source inputs (``images``, ``feat_*``, ``src_P``,
+            ``src_centers``).
+        camera: the target camera at the contract resolution.
+        box: ``(2, 3)`` subject box (near/far and the rendered rays).
+        config: stride, rays in the box only.
+        want_heat: render heatmaps too (``render`` graph).
+        timing: if given, ``novel_volume`` / ``novel_render`` / ``novel_compose`` ms are added.
+    """
+    contract = session.contract
+    S = contract.height
+    t0 = time.perf_counter()
+    feeds = dict(env)
+    feeds.update(target_inputs([camera], S, contract.width))
+    feeds["near_far"] = near_far_from_box(camera, box_corners(box), near_far_margin)[None]
+    feeds.update(session.run("volume", feeds))
+    t1 = time.perf_counter()
+    stride = config.stride
+    gh, gw = S // stride, contract.width // stride
+    block = box_block(camera, box, stride, margin_cells=1) if config.rays_in_box_only else full_block(gh, gw)
+    graph = "render" if want_heat else "render_rgb"
+    if block is None:  # the subject is not in view: nothing to render
+        rgb = np.zeros((gh, gw, 3), np.float32)
+        depth = np.zeros((gh, gw), np.float32)
+        heat = np.zeros((gh, gw), np.float32) if want_heat else None
+        rays = 0
+    else:
+        feeds["ray_uv"] = block_ray_uv(block, stride)[None]
+        out = session.run(graph, feeds)
+        rgb = scatter_block(out["rgb"][0], block, gh, gw, contract.background)
+        depth = scatter_block(out["depth"][0], block, gh, gw, 0.0)
+        heat = scatter_block(out["heatmaps"][0].max(axis=-1), block, gh, gw, 0.0) if want_heat else None
+        rays = block[2] * block[3]
+    t2 = time.perf_counter()
+    rgb = np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0)
+    if stride > 1:
+        rgb = cv2.resize(rgb, (contract.width, S), interpolation=cv2.INTER_LINEAR)
+        if heat is not None:
+            heat = cv2.resize(heat, (contract.width, S), interpolation=cv2.INTER_LINEAR)
+    image = np.ascontiguousarray((rgb[..., ::-1] * 255.0 + 0.5).astype(np.uint8))  # RGB -> BGR
+    if timing is not None:
+        timing["novel_volume"] = 1e3 * (t1 - t0)
+        timing["novel_render"] = 1e3 * (t2 - t1)
+        timing["novel_compose"] = 1e3 * (time.perf_counter() - t2)
+    return NovelView(image, camera, np.nan_to_num(depth).astype(np.float32),
+                     None if heat is None else np.nan_to_num(heat).astype(np.float32), rays)
+
+
+# ------------------------------------------------------------------ overlays
+def draw_skeleton(image: np.ndarray, uv: np.ndarray, valid: np.ndarray, *, color=(0, 255, 0),
+                  joint_color=(0, 0, 255), thickness: int = 1) -> np.ndarray:
+    """Draw BODY_25 limbs between valid joints ``(J, 2)`` (pixels) on a copy of a BGR image."""
+    out = np.array(image, copy=True)
+    pts = np.asarray(uv, dtype=np.float64)
+    ok = np.asarray(valid, bool) & np.all(np.isfinite(pts), axis=-1)
+    h, w = out.shape[:2]
+    ok &= (pts[:, 0] > -w) & (pts[:, 0] < 2 * w) & (pts[:, 1] > -h) & (pts[:, 1] < 2 * h)
+    p = np.rint(np.where(ok[:, None], pts, 0)).astype(int)
+    for a, b in LIMBS:
+        if ok[a] and ok[b]:
+            cv2.line(out, tuple(int(v) for v in p[a]), tuple(int(v) for v in p[b]), color, thickness, cv2.LINE_AA)
+    for j in np.flatnonzero(ok):
+        cv2.circle(out, tuple(int(v) for v in p[j]), max(1, thickness + 1), joint_color, -1, cv2.LINE_AA)
+    return out
+
+
+def heatmap_overlay(image: np.ndarray, heat: np.ndarray, weight: float = 0.5) -> np.ndarray:
+    """Blend a ``(H, W)`` heatmap in [0, 1] (JET colours) over a BGR image of the same size."""
+    heat = np.clip(np.nan_to_num(np.asarray(heat, np.float32)), 0.0, 1.0)
+    if heat.shape != image.shape[:2]:
+        heat = cv2.resize(heat, (image.shape[1], image.shape[0]), interpolation=cv2.INTER_LINEAR)
+    colour = cv2.applyColorMap((heat * 255).astype(np.uint8), cv2.COLORMAP_JET)
+    alpha = (weight * heat)[..., None]
+    return (image * (1 - alpha) + colour * alpha).astype(np.uint8)

@@ -1,0 +1,420 @@
+"""``ModelSession``: owns onnxruntime for one exported model; knows nothing of joints.
+
+Running the model is kept apart from interpreting its outputs (frigate's
+``BaseModelRunner`` vs its detectors): the session loads the graph files, checks
+them against the model contract, warms them up and runs them by name; the
+:class:`~ghnerf_runtime.estimator.Estimator` is handed a session and does the rest.
+
+Model folder layout (what ``python -m training.export`` writes)::
+
+    <model_dir>/<graph>.onnx          fp32, one file per graph (encoder, volume, render_heat, ...)
+    <model_dir>/<graph>.int8.onnx     static int8 QDQ, where the exporter made one
+    <model_dir>/model_card.json       optional: training figures; read and kept, never required
+
+The shipped layout (``python -m training.pipeline --out models/``) puts each variant in a
+subfolder, ``models/ghnerf/`` and ``models/baseline/``, with ``models/model_card.json`` beside
+them: a ``model_dir`` holding no graph files but a ``ghnerf/`` subfolder (or a single subfolder
+with graphs) resolves to it, and the card is looked up in the folder, then its parent
+(:func:`resolve_model_dir`). Files whose names do not follow the pattern are found by their
+metadata (``ghnerf.graph`` / ``ghnerf.precision``) when the conventional name is missing.
+
+What is checked at load (each failure names the file and what is wrong):
+
+* the file is a readable ONNX model (:class:`ModelLoadError` for a missing, truncated or
+  corrupt file);
+* its ``ghnerf.*`` metadata parses into a :class:`~ghnerf_runtime.contract.ModelContract`
+  of a compatible contract version (:class:`ModelContractError` naming the key);
+* it holds the graph it is loaded as, and its inputs/outputs match the contract's names and
+  fixed dimensions (``ModelContract.check_io``), all float32;
+* every graph file of the model carries the same contract (same model, same version);
+* the resolution and variant match :class:`SessionConfig` when it pins them.
+
+Threads: the graphs run one after another on a 2-core CPU. Measured here (docs/runtime.md),
+per-session pools whose workers do not spin are as fast as one global pool and far faster
+than spinning pools (a spinning pool steals the cores from the next graph), and they keep no
+process-wide onnxruntime state, so they are the default. ``thread_pool="global"`` installs
+one global pool for the whole process (``set_global_thread_pool_sizes``), for the daemon.
+
+onnxruntime, numpy only; never torch.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+import onnxruntime as ort
+
+from ghnerf_runtime.config import SessionConfig
+from ghnerf_runtime.contract import (
+    GRAPH_NAMES,
+    META_PREFIX,
+    ContractError,
+    ModelContract,
+    near_far_from_box,
+    ray_grid,
+    source_centers,
+    source_projections,
+    target_inputs,
+    target_projections,
+)
+from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
+from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
+
+log = logging.getLogger(__name__)
+
+__all__ = ["AUTO_PRECISION", "GraphFile", "ModelSession", "MODEL_CARD", "resolve_model_dir", "warmup_feeds"]
+
+#: Optional model card next to the graphs.
+MODEL_CARD = "model_card.json"
+#: ``precision="auto"``: the faster file per graph on the 2-core AVX2 target (docs/model.md,
+#: docs/runtime.md): int8 pays for the convolution-heavy encoder; the per-point heads of the
+#: render/query graphs gain nothing (no VNNI) and their QDQ boundaries cost more on large
+#: point counts; the volume graph is float in both files.
+AUTO_PRECISION: Mapping[str, str] = {
+    "encoder": "int8", "volume": "fp32", "render_heat": "fp32", "render_rgb": "fp32", "render": "fp32",
+    "query": "fp32",
+}
+_ONNX_FLOAT = "tensor(float)"
+_global_pool_lock = threading.Lock()
+_global_pool_threads: int | None = None
+
+
+@dataclass(frozen=True)
+class GraphFile:
+    """One loaded graph: where it came from and what it is."""
+
+    graph: str
+    path: Path
+    precision: str  # from the file's metadata
+    load_ms: float
+
+
+def resolve_model_dir(path: str | os.PathLike) -> Path:
+    """The folder holding the graph files: ``path`` itself, else its ``ghnerf/`` subfolder, else its
+    only subfolder holding ``*.onnx`` files (the shipped ``models/<variant>/`` layout)."""
+    folder = Path(path)
+    if not folder.is_dir() or any(folder.glob("*.onnx")):
+        return folder
+    if (folder / "ghnerf").is_dir() and any((folder / "ghnerf").glob("*.onnx")):
+        return folder / "ghnerf"
+    subs = [d for d in sorted(folder.iterdir()) if d.is_dir() and any(d.glob("*.onnx"))]
+    return subs[0] if len(subs) == 1 else folder
+
+
+def _file_name(graph: str, precision: str) -> str:
+    return f"{graph}.int8.onnx" if precision == "int8" else f"{graph}.onnx"
+
+
+def _session_options(config: SessionConfig) -> ort.SessionOptions:
+    so = ort.SessionOptions()
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    so.log_severity_level = 3
+    if config.thread_pool == "global":
+        _ensure_global_pool(config.threads)
+        so.use_per_session_threads = False
+    else:
+        so.intra_op_num_threads = config.threads
+        so.inter_op_num_threads = 1
+        so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        if not config.allow_spinning:
+            so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+            so.add_session_config_entry("session.inter_op.allow_spinning", "0")
+    return so
+
+
+def _ensure_global_pool(threads: int) -> None:
+    """Install onnxruntime's process-wide pool once (it cannot be resized afterwards)."""
+    global _global_pool_threads
+    with _global_pool_lock:
+        if _global_pool_threads is None:
+            try:
+                from onnxruntime.capi import _pybind_state
+                _pybind_state.set_global_thread_pool_sizes(int(threads), 1)
+            except (AttributeError, RuntimeError) as e:
+                raise ModelError(f"cannot install onnxruntime's global thread pool ({e}); use "
+                                 "thread_pool='per_session'") from e
+            _global_pool_threads = int(threads)
+        elif _global_pool_threads != threads:
+            log.warning("onnxruntime global pool already has %d threads; %d requested", _global_pool_threads, threads)
+
+
+def _open(path: Path, config: SessionConfig) -> ort.InferenceSession:
+    if not path.is_file():
+        raise ModelLoadError("no such model file", path=str(path))
+    try:
+        return ort.InferenceSession(str(path), _session_options(config), providers=["CPUExecutionProvider"])
+    except ModelError:
+        raise
+    except Exception as e:  # onnxruntime raises its own (pybind) exception types
+        size = path.stat().st_size
+        raise ModelLoadError(f"onnxruntime cannot load it ({size} bytes; truncated or corrupt?): "
+                             f"{type(e).__name__}: {str(e).strip()[:300]}", path=str(path)) from e
+
+
+def _contract_of(sess: ort.InferenceSession, path: Path) -> tuple[ModelContract, str, str]:
+    props = dict(sess.get_modelmeta().custom_metadata_map)
+    if not any(k.startswith(META_PREFIX) for k in props):
+        raise ModelContractError("the file has no ghnerf.* metadata: not a GHNeRF export (or exported before "
+                                 "the contract existed)", path=str(path), key=META_PREFIX + "contract_version")
+    try:
+        contract = ModelContract.from_metadata(props)
+        graph = ModelContract.graph_of(props)
+    except ContractError as e:
+        raise ModelContractError(str(e).split(": ", 1)[-1] if e.key else str(e), path=str(path), key=e.key) from e
+    precision = props.get(META_PREFIX + "precision", "fp32")
+    return contract, graph, precision
+
+
+def _check_io(sess: ort.InferenceSession, contract: ModelContract, graph: str, path: Path) -> None:
+    inputs = {i.name: i.shape for i in sess.get_inputs()}
+    outputs = {o.name: o.shape for o in sess.get_outputs()}
+    try:
+        contract.check_io(graph, inputs, outputs)
+    except ContractError as e:
+        raise ModelContractError(str(e).split(": ", 1)[-1], path=str(path), key=e.key) from e
+    for arg in list(sess.get_inputs()) + list(sess.get_outputs()):
+        if arg.type != _ONNX_FLOAT:
+            raise ModelContractError(f"tensor type {arg.type}, the contract says float32", path=str(path),
+                                     key=arg.name)
+
+
+class ModelSession:
+    """The onnxruntime sessions of one model's graphs, checked against the model contract.
+
+    Build with :meth:`load`; run a graph with :meth:`run`. Instances are not thread-safe for
+    concurrent :meth:`run` calls on one graph (onnxruntime is, but the run counters are
+    kept for instrumentation, not locked).
+
+    Attributes:
+        contract: the model contract (identical in every graph file).
+        files: graph -> :class:`GraphFile` actually loaded.
+        card: the parsed ``model_card.json`` (``{}`` when absent).
+        run_counts: graph -> number of :meth:`run` calls (instrumentation).
+        warmup_ms: graph -> duration of the warm-up run (empty when warm-up is off).
+    """
+
+    def __init__(self, sessions: Mapping[str, ort.InferenceSession], contract: ModelContract,
+                 files: Mapping[str, GraphFile], card: Mapping | None = None) -> None:
+        self._sessions = dict(sessions)
+        self.contract = contract
+        self.files = dict(files)
+        self.card = dict(card or {})
+        self.run_counts: dict[str, int] = {g: 0 for g in self._sessions}
+        self.warmup_ms: dict[str, float] = {}
+        self._output_names = {g: list(contract.graph(g).output_names) for g in self._sessions}
+        self._input_names = {g: list(contract.graph(g).input_names) for g in self._sessions}
+
+    # ------------------------------------------------------------------ load
+    @classmethod
+    def load(cls, config: SessionConfig | str | os.PathLike,
+             graphs: Sequence[str] = ("encoder", "volume", "render_heat")) -> "ModelSession":
+        """Load, check and warm up ``graphs`` of the model in ``config.model_dir``.
+
+        Args:
+            config: a :class:`SessionConfig`, or just the model folder (defaults otherwise).
+            graphs: which graphs to load (``EstimatorConfig.required_graphs()``).
+
+        Raises:
+            ModelLoadError: a folder or file is missing, unreadable or not valid ONNX.
+            ModelContractError: a file's contract is missing, malformed, of another version,
+                of another model than the other files, or does not match its graph's I/O or
+                the configured resolution/variant.
+        """
+        if not isinstance(config, SessionConfig):
+            config = SessionConfig(model_dir=str(config))
+        folder = resolve_model_dir(config.model_dir)
+        if not folder.is_dir():
+            raise ModelLoadError("model folder does not exist", path=str(folder))
+        unknown = [g for g in graphs if g not in GRAPH_NAMES]
+        if unknown:
+            raise ModelError(f"unknown graph(s) {unknown}; graphs are {list(GRAPH_NAMES)}", path=str(folder))
+
+        sessions: dict[str, ort.InferenceSession] = {}
+        files: dict[str, GraphFile] = {}
+        contract: ModelContract | None = None
+        first: Path | None = None
+        by_meta: dict[tuple[str, str], Path] | None = None
+        for graph in dict.fromkeys(graphs):
+            wanted = config.precision_overrides.get(
+                graph, AUTO_PRECISION.get(graph, "fp32") if config.precision == "auto" else config.precision)
+            path = cls._find(folder, graph, wanted)
+            if path is None:
+                by_meta = by_meta if by_meta is not None else cls._scan(folder, config)
+                path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or by_meta.get((graph, "int8"))
+            if path is None:
+                raise ModelLoadError(f"no file for graph {graph!r} (looked for {_file_name(graph, wanted)}, "
+                                     f"{_file_name(graph, 'fp32')} and ghnerf.graph metadata)", path=str(folder))
+            t0 = time.perf_counter()
+            sess = _open(path, config)
+            load_ms = 1e3 * (time.perf_counter() - t0)
+            file_contract, file_graph, precision = _contract_of(sess, path)
+            if file_graph != graph:
+                raise ModelContractError(f"holds graph {file_graph!r}, loaded as {graph!r}", path=str(path),
+                                         key=META_PREFIX + "graph")
+            _check_io(sess, file_contract, graph, path)
+            if contract is None:
+                contract, first = file_contract, path
+                cls._check_expected(contract, config, path)
+            elif not contract.same_model(file_contract):
+                diff = sorted(k for k, v in contract.to_metadata().items()
+                              if file_contract.to_metadata().get(k) != v)
+                raise ModelContractError(f"its contract differs from {first.name}'s in {diff}: the graph files "
+                                         "come from different models", path=str(path), key=diff[0] if diff else None)
+            sessions[graph] = sess
+            files[graph] = GraphFile(graph, path, precision, load_ms)
+            log.info("loaded %s (%s, %.0f ms)", path, precision, load_ms)
+        assert contract is not None
+        session = cls(sessions, contract, files, cls._read_card(folder))
+        if config.warmup:
+            session.warm_up()
+        return session
+
+    @staticmethod
+    def _find(folder: Path, graph: str, precision: str) -> Path | None:
+        for name in (_file_name(graph, precision), _file_name(graph, "fp32")):
+            if (folder / name).is_file():
+                return folder / name
+        return None
+
+    @staticmethod
+    def _scan(folder: Path, config: SessionConfig) -> dict[tuple[str, str], Path]:
+        """(graph, precision) -> file, for files named otherwise; unreadable files are skipped here."""
+        found: dict[tuple[str, str], Path] = {}
+        for path in sorted(folder.glob("*.onnx")):
+            try:
+                sess = _open(path, config)
+                _, graph, precision = _contract_of(sess, path)
+            except ModelError:
+                continue
+            found.setdefault((graph, precision), path)
+        return found
+
+    @staticmethod
+    def _check_expected(contract: ModelContract, config: SessionConfig, path: Path) -> None:
+        res = config.expected_resolution
+        if res is not None and (contract.height, contract.width) != (res, res):
+            raise ModelContractError(f"model resolution is {contract.width}x{contract.height}, the runtime is "
+                                     f"configured for {res}x{res} (session.expected_resolution)", path=str(path),
+                                     key=META_PREFIX + "resolution")
+        if config.expected_variant is not None and contract.variant != config.expected_variant:
+            raise ModelContractError(f"model variant is {contract.variant!r}, configured "
+                                     f"{config.expected_variant!r}", path=str(path), key=META_PREFIX + "variant")
+
+    @staticmethod
+    def _read_card(folder: Path) -> dict:
+        path = folder / MODEL_CARD
+        if not path.is_file():
+            path = folder.parent / MODEL_CARD
+        if not path.is_file():
+            return {}
+        try:
+            card = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+            log.warning("%s: unreadable model card ignored (%s)", path, e)
+            return {}
+        return card if isinstance(card, dict) else {"card": card}
+
+    # ------------------------------------------------------------------ run
+    @property
+    def graphs(self) -> tuple[str, ...]:
+        return tuple(self._sessions)
+
+    def has(self, graph: str) -> bool:
+        return graph in self._sessions
+
+    def precision(self, graph: str) -> str:
+        return self.files[graph].precision
+
+    def run(self, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Run one graph. ``feeds`` may hold more arrays than the graph takes; only its inputs are passed.
+
+        Returns:
+            output name -> array.
+
+        Raises:
+            ModelError: the graph was not loaded, or an input is missing.
+            ModelRunError: onnxruntime failed (message names the graph and file).
+        """
+        sess = self._sessions.get(graph)
+        if sess is None:
+            raise ModelError(f"graph {graph!r} is not loaded (loaded: {list(self._sessions)})")
+        try:
+            inputs = {n: feeds[n] for n in self._input_names[graph]}
+        except KeyError as e:
+            raise ModelError(f"graph {graph!r} needs input {e.args[0]!r}") from None
+        self.run_counts[graph] += 1
+        try:
+            out = sess.run(self._output_names[graph], inputs)
+        except Exception as e:  # onnxruntime's pybind exceptions
+            raise ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {str(e).strip()[:300]}",
+                                path=str(self.files[graph].path)) from e
+        return dict(zip(self._output_names[graph], out))
+
+    def warm_up(self) -> dict[str, float]:
+        """Run every loaded graph once at the estimator's shapes (so the first frame is not slow)."""
+        feeds = warmup_feeds(self.contract)
+        order = [g for g in ("encoder", "volume", "render_heat", "query") if g in self._sessions]
+        for graph in order:
+            t0 = time.perf_counter()
+            feeds.update(self.run(graph, feeds))
+            self.warmup_ms[graph] = 1e3 * (time.perf_counter() - t0)
+        novel = [g for g in ("render_rgb", "render") if g in self._sessions]
+        if novel:
+            one = warmup_feeds(self.contract, targets=1, ray_stride=1)
+            one.update({k: feeds[k] for k in ("feat_s1", "feat_s2", "feat_s4", "human_feat") if k in feeds})
+            one.update(self.run("volume", one))
+            for graph in novel:
+                t0 = time.perf_counter()
+                self.run(graph, one)
+                self.warmup_ms[graph] = 1e3 * (time.perf_counter() - t0)
+        for graph in self.run_counts:  # warm-up runs are not counted as work
+            self.run_counts[graph] = 0
+        return dict(self.warmup_ms)
+
+    def reset_counts(self) -> None:
+        for graph in self.run_counts:
+            self.run_counts[graph] = 0
+
+    def describe(self) -> dict:
+        """A JSON-ready summary: contract basics, files and their precision."""
+        c = self.contract
+        return {"resolution": f"{c.width}x{c.height}", "variant": c.variant, "model_version": c.model_version,
+                "contract_version": c.version,
+                "files": {g: {"path": str(f.path), "precision": f.precision} for g, f in self.files.items()},
+                "card": bool(self.card)}
+
+
+def warmup_feeds(contract: ModelContract, targets: int = 2, ray_stride: int | None = None,
+                 points: int = 512) -> dict[str, np.ndarray]:
+    """Plausible inputs for every graph: grey images, two cameras 1 m apart looking at a box 3 m away.
+
+    ``targets`` 2 uses the sources as targets (the keypoint path); 1 uses one camera between
+    them (the novel view). ``ray_stride`` defaults to the heatmap stride.
+    """
+    H, W = contract.height, contract.width
+    K = intrinsics_from_fov(W, H, 25.0)
+    box = np.array([[-0.4, -1.9, 2.7], [0.4, 0.0, 3.3]])
+    centre = box.mean(axis=0)
+    src = [Camera(n, W, H, K, np.zeros(5), *look_at((x, -1.2, 0.0), centre)) for n, x in (("a", -0.5), ("b", 0.5))]
+    tgts = src if targets == 2 else [Camera("n", W, H, K, np.zeros(5), *look_at((0.0, -1.2, 0.0), centre))]
+    stride = contract.heatmap_stride if ray_stride is None else ray_stride
+    rays = ray_grid(H, W, stride)
+    rng = np.random.default_rng(0)
+    feeds = {
+        "images": rng.uniform(0.3, 0.7, (contract.num_sources, 3, H, W)).astype(np.float32),
+        "src_P": source_projections(src, H, W),
+        "src_centers": source_centers(src),
+        **target_inputs(tgts, H, W),
+        "tgt_P": target_projections(tgts, H, W),
+        "near_far": np.stack([near_far_from_box(c, box) for c in tgts]),
+        "ray_uv": np.ascontiguousarray(np.broadcast_to(rays, (len(tgts),) + rays.shape)),
+        "points": rng.uniform(box[0], box[1], (len(tgts), points, 3)).astype(np.float32),
+    }
+    return feeds

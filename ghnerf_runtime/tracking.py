@@ -1,0 +1,183 @@
+"""Following one subject from pair to pair: where to crop, which box to sweep.
+
+The first pair (and every pair after the track is lost) uses the rig's working
+volume: the crop is the volume projected into each camera (``roi_from_volume``), and
+the plane sweep's near/far span the volume. Once a pair yields enough confident 3D
+joints, the next pair crops around those joints plus a margin (``roi_from_joints``) and
+sweeps only the subject box (the joints' box grown by ``box_margin_m``). Training
+built its crops the same two ways (``docs/dataset.md``).
+
+The track holds the previous pair's joints only to *place* the next crop: they are never
+reported again. When a pair yields fewer than ``min_joints`` confident joints, or an
+implausible box, the track is dropped and the next pair starts from the volume.
+
+Pure numpy; the :class:`SubjectTracker` is a small state holder around pure functions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ghnerf_runtime.config import RoiConfig, TrackingConfig
+from ghnerf_runtime.errors import GeometryError, ShapeError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.preprocess import Roi, roi_from_joints, roi_from_volume
+
+__all__ = ["Track", "Regions", "SubjectTracker", "plan_regions", "snap_roi", "track_from_joints"]
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """The subject as last seen.
+
+    Attributes:
+        joints: ``(J, 3)`` rig-frame joints (metres); only ``valid`` rows mean anything.
+        confidence: ``(J,)``.
+        valid: ``(J,)`` bool, joints that count for the track.
+        box: ``(2, 3)`` subject box ``(min, max)``, the valid joints' box grown by the margin.
+        sequence: the pair number the joints came from.
+    """
+
+    joints: np.ndarray
+    confidence: np.ndarray
+    valid: np.ndarray
+    box: np.ndarray
+    sequence: int
+
+
+@dataclass(frozen=True, eq=False)
+class Regions:
+    """What the model looks at for one pair.
+
+    Attributes:
+        rois: one :class:`Roi` per source camera (undistorted full-image pixels).
+        box: ``(2, 3)`` the box the plane sweep spans (subject box, or the working volume).
+        tracked: True when both came from a track, False for the working volume.
+    """
+
+    rois: tuple[Roi, ...]
+    box: np.ndarray
+    tracked: bool
+
+
+def box_corners(box: np.ndarray) -> np.ndarray:
+    """``(8, 3)`` corners of a ``(2, 3)`` ``(min, max)`` box."""
+    lo, hi = np.asarray(box, dtype=np.float64)
+    bits = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
+    return np.where(bits == 1, hi, lo)
+
+
+def track_from_joints(joints: np.ndarray, confidence: np.ndarray, valid: np.ndarray, config: TrackingConfig,
+                      sequence: int = 0) -> Track | None:
+    """A :class:`Track` from one pair's 3D joints, or ``None`` when they cannot carry one.
+
+    A track needs ``config.min_joints`` finite joints with confidence ``>= min_confidence``
+    and a box no larger than ``max_box_size_m``.
+    """
+    joints = np.asarray(joints, dtype=np.float64)
+    if joints.ndim != 2 or joints.shape[1] != 3:
+        raise ShapeError(f"joints must have shape (J, 3), got {joints.shape}")
+    conf = np.asarray(confidence, dtype=np.float64).reshape(-1)
+    ok = np.asarray(valid, bool).reshape(-1) & (conf >= config.min_confidence) & np.all(np.isfinite(joints), axis=1)
+    if conf.shape != ok.shape or ok.shape[0] != joints.shape[0]:
+        raise ShapeError(f"confidence and valid must have shape ({len(joints)},)")
+    if int(ok.sum()) < config.min_joints:
+        return None
+    lo, hi = joints[ok].min(axis=0), joints[ok].max(axis=0)
+    if np.any(hi - lo > config.max_box_size_m):
+        return None
+    box = np.stack([lo - config.box_margin_m, hi + config.box_margin_m])
+    return Track(joints.copy(), conf.astype(np.float32), ok, box, int(sequence))
+
+
+def snap_roi(roi: Roi, step: int) -> Roi:
+    """Round a ROI outwards to a grid of ``step`` pixels (it only grows), for remap-table reuse."""
+    if step <= 1:
+        return roi
+    x0, y0 = roi.x0 // step * step, roi.y0 // step * step
+    size = max(roi.x0 + roi.size - x0, roi.y0 + roi.size - y0)
+    return Roi(x0, y0, -(-size // step) * step)
+
+
+def plan_regions(rig: Rig, track: Track | None, roi_config: RoiConfig) -> Regions:
+    """Crop windows for both source cameras and the sweep box: from the track when it gives a
+    crop in both cameras, else from the working volume.
+
+    Raises:
+        GeometryError: the working volume is not visible in a camera (a rig file error).
+    """
+    cams = rig.pair
+    if track is not None:
+        rois = []
+        for cam in cams:
+            roi = roi_from_joints(cam, track.joints, np.where(track.valid, 1.0, 0.0), roi_config.joint_margin_frac,
+                                  roi_config.min_size_px, min_confidence=0.5, min_joints=3)
+            if roi is None:
+                break
+            rois.append(snap_roi(roi, roi_config.snap_px))
+        else:
+            return Regions(tuple(rois), track.box.copy(), True)
+    return volume_regions(rig, roi_config)
+
+
+def volume_regions(rig: Rig, roi_config: RoiConfig) -> Regions:
+    """The cold-start regions: the working volume (grown by ``volume_margin_m``) in each camera."""
+    volume = rig.volume.grown(roi_config.volume_margin_m) if roi_config.volume_margin_m > 0 else rig.volume
+    rois = []
+    for cam in rig.pair:
+        try:
+            rois.append(roi_from_volume(cam, volume))
+        except GeometryError as e:
+            raise GeometryError(f"rig {rig.rig_id!r}: the working volume is not visible in camera "
+                                f"{cam.name!r} ({e})") from e
+    return Regions(tuple(rois), np.stack([volume.min_corner, volume.max_corner]), False)
+
+
+class SubjectTracker:
+    """Holds the current :class:`Track` (or none) and turns it into :class:`Regions`.
+
+    Args:
+        rig: the calibrated rig (its first two cameras are the sources).
+        config: when to keep or drop the track.
+        roi_config: crop margins.
+    """
+
+    def __init__(self, rig: Rig, config: TrackingConfig, roi_config: RoiConfig) -> None:
+        self.rig = rig
+        self.config = config
+        self.roi_config = roi_config
+        self.track: Track | None = None
+        self._volume = volume_regions(rig, roi_config)
+        self.drops = 0
+
+    def regions(self) -> Regions:
+        if self.track is None or not self.config.enabled:
+            return self._volume
+        return plan_regions(self.rig, self.track, self.roi_config)
+
+    def update(self, joints: np.ndarray, confidence: np.ndarray, valid: np.ndarray, sequence: int = 0) -> bool:
+        """Replace the track by this pair's joints; returns whether a track is held afterwards."""
+        new = track_from_joints(joints, confidence, valid, self.config, sequence) if self.config.enabled else None
+        if new is None and self.track is not None:
+            self.drops += 1
+        self.track = new
+        return new is not None
+
+    def reset(self) -> None:
+        """Forget the subject (next pair starts from the working volume)."""
+        self.track = None
+
+
+def project_box(camera: Camera, box: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Pixel bounding box ``(lo, hi)`` of a rig box in a pinhole ``camera`` (``None`` if behind it).
+
+    Corners behind the camera make the projection unbounded: the whole image is returned then.
+    """
+    uv, depth = camera.project(box_corners(box), distort=False)
+    if np.all(depth <= 1e-6):
+        return None
+    if np.any(depth <= 1e-6):
+        return np.array([0.0, 0.0]), np.array([camera.width - 1.0, camera.height - 1.0])
+    return uv.min(axis=0), uv.max(axis=0)

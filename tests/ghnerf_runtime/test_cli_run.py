@@ -1,0 +1,105 @@
+"""``ghnerf-run`` end to end on a simulated pair (and a short clip), with the tiny exported model."""
+from __future__ import annotations
+
+import json
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from ghnerf_runtime.body25 import JOINT_NAMES
+from ghnerf_runtime.cli import run as cli_run
+from ghnerf_runtime.rig_file import load_rig
+from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
+
+simdata = pytest.importorskip("ghnerf_runtime.cli.simdata")
+pytest.importorskip("drivers.sim")
+
+
+@pytest.fixture(scope="module")
+def sim_pair(tmp_path_factory):
+    return simdata.write_sim_example(tmp_path_factory.mktemp("sim-pair"))
+
+
+def _check_frame(obj: dict, cameras: tuple[str, ...], width: int, height: int) -> None:
+    """The documented per-frame schema (docs/runtime.md)."""
+    assert obj["joint_names"] == list(JOINT_NAMES)
+    assert len(obj["joints_3d"]) == 25 and all(len(j) == 4 for j in obj["joints_3d"])
+    assert set(obj["joints_2d"]) == set(cameras)
+    for rows in obj["joints_2d"].values():
+        assert len(rows) == 25 and all(len(j) == 3 for j in rows)
+    assert len(obj["missing"]) == 25 and all(isinstance(m, bool) for m in obj["missing"])
+    stages = {"preprocess", "encoder", "volume", "render_heat", "decode_2d", "joints_3d", "total"}
+    assert stages <= set(obj["timing_ms"])
+    numbers = [v for j in obj["joints_3d"] for v in j] + [v for rows in obj["joints_2d"].values() for j in rows
+                                                         for v in j] + list(obj["timing_ms"].values())
+    assert all(isinstance(v, (int, float)) and math.isfinite(v) for v in numbers)
+    for (x, y, z, c), missing in zip(obj["joints_3d"], obj["missing"]):
+        assert 0.0 <= c <= 1.0
+        if missing:
+            assert (x, y, z, c) == (0.0, 0.0, 0.0, 0.0)
+    for name, rows in obj["joints_2d"].items():
+        for u, v, c in rows:
+            assert 0.0 <= c <= 1.0
+            if c > 0:
+                assert -width <= u <= 2 * width and -height <= v <= 2 * height
+
+
+def test_run_on_a_sim_pair_writes_the_documented_json(sim_pair, tiny_model_dir, tmp_path):  # noqa: F811
+    out = tmp_path / "joints.json"
+    novel = tmp_path / "novel.png"
+    overlay = tmp_path / "overlay.png"
+    rc = cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"],
+                       "--model-dir", str(tiny_model_dir), "--out", str(out), "--novel-view", str(novel),
+                       "--novel-overlay", "skeleton", "--overlay", str(overlay)])
+    assert rc == 0
+    frames = json.loads(out.read_text())
+    rig = load_rig(sim_pair["rig"])
+    assert isinstance(frames, list) and len(frames) == 1
+    _check_frame(frames[0], rig.names[:2], *rig.pair[0].size)
+    assert "novel_volume" in frames[0]["timing_ms"]
+    img = cv2.imread(str(novel))
+    assert img is not None and img.shape == (64, 64, 3)  # the tiny model renders 64x64
+    ov = cv2.imread(str(overlay))
+    assert ov is not None and ov.shape == (480, 1280, 3)
+
+
+def test_run_on_two_videos_writes_one_object_per_line(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    clip = simdata.write_sim_example(tmp_path / "clip", frames=3, width=320, height=240)
+    rc = cli_run.main(["--rig", clip["rig"], "--videos", clip["left"], clip["right"],
+                       "--model-dir", str(tiny_model_dir), "--method", "depth_centroid"])
+    assert rc == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.strip()]
+    assert len(lines) == 3
+    rig = load_rig(clip["rig"])
+    for i, line in enumerate(lines):
+        obj = json.loads(line)
+        assert obj["sequence"] == i and obj["method"] == "depth_centroid"
+        _check_frame(obj, rig.names[:2], 320, 240)
+
+
+def test_errors_exit_2_and_name_the_problem(sim_pair, tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    args = ["--rig", sim_pair["rig"], "--model-dir", str(tiny_model_dir)]
+    assert cli_run.main(args + ["--images", sim_pair["left"], str(tmp_path / "absent.png")]) == 2
+    assert "absent.png: cannot read the image" in capsys.readouterr().err
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.zeros((10, 10, 3), np.uint8))
+    assert cli_run.main(args + ["--images", sim_pair["left"], str(small)]) == 2
+    assert "expected a (480, 640, 3)" in capsys.readouterr().err
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text('{"joints3d": {"metod": "volumetric"}}')
+    assert cli_run.main(args + ["--images", sim_pair["left"], sim_pair["right"], "--config", str(cfg)]) == 2
+    assert "joints3d.metod: unknown key" in capsys.readouterr().err
+    assert cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"],
+                         "--model-dir", str(tmp_path / "nomodel")]) == 2
+    assert "model folder does not exist" in capsys.readouterr().err
+
+
+def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text('{"joints3d": {"method": "volumetric"}}')
+    assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--config", str(cfg), "--validate-config",
+                         "--model-dir", "/opt/m"]) == 0
+    tree = json.loads(capsys.readouterr().out)
+    assert tree["joints3d"]["method"] == "volumetric" and tree["session"]["model_dir"] == "/opt/m"

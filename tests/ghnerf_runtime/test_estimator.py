@@ -1,0 +1,185 @@
+"""Estimator with the real (tiny, random-weight) model on simulator frames: outputs, bad frames,
+novel views on/off (colour graph instrumented), errors.
+
+Random weights make the joints meaningless here; accuracy and tracking are tested against the
+oracle session (test_estimator_oracle.py) and the shipped model (test_estimator_accuracy.py).
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.body25 import JOINT_NAMES
+from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, NovelViewConfig, SessionConfig
+from ghnerf_runtime.contract import GRAPH_NAMES
+from ghnerf_runtime.errors import FrameError, ModelError
+from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
+from ghnerf_runtime.novel_view import NovelViewRequest
+from ghnerf_runtime.session import ModelSession
+from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
+
+sim = pytest.importorskip("drivers.sim")
+
+
+class Recorder:
+    """Wraps a session and records every graph run (the instrument of the colour-graph tests)."""
+
+    def __init__(self, session):
+        self.session = session
+        self.contract = session.contract
+        self.graphs = session.graphs
+        self.calls: list[tuple[str, dict]] = []
+
+    def has(self, graph):
+        return self.session.has(graph)
+
+    def run(self, graph, feeds):
+        self.calls.append((graph, {k: np.shape(v) for k, v in feeds.items()}))
+        return self.session.run(graph, feeds)
+
+    def ran(self, graph) -> int:
+        return sum(1 for g, _ in self.calls if g == graph)
+
+
+@pytest.fixture(scope="module")
+def scene_rig():
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = [tuple(scene.render(c, t, with_truth=False)[0] for c in rig.pair) for t in (0.0, 0.05, 0.1)]
+    return rig, frames
+
+
+@pytest.fixture(scope="module")
+def full_session(tiny_model_dir):  # noqa: F811
+    return ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir)), GRAPH_NAMES)
+
+
+def _all_finite(result) -> bool:
+    arrays = [result.joints_3d, result.confidence, *result.joints_2d.values(), *result.confidence_2d.values()]
+    return all(np.all(np.isfinite(a)) for a in arrays) and all(np.isfinite(v) for v in result.timing_ms.values())
+
+
+def _assert_all_missing(result):
+    assert result.missing.all() and not result.joints_3d.any() and not result.confidence.any()
+    for name in result.joints_2d:
+        assert result.missing_2d[name].all() and not result.joints_2d[name].any()
+        assert not result.confidence_2d[name].any()
+    assert _all_finite(result)
+
+
+def test_output_schema_and_finite(full_session, scene_rig):
+    rig, frames = scene_rig
+    est = Estimator(full_session, rig)
+    r = est.estimate(frames[0], sequence=7)
+    assert r.sequence == 7 and r.joint_names == JOINT_NAMES
+    assert r.joints_3d.shape == (25, 3) and r.confidence.shape == (25,) and r.missing.shape == (25,)
+    assert set(r.joints_2d) == set(rig.names[:2])
+    for name in rig.names[:2]:
+        assert r.joints_2d[name].shape == (25, 2) and r.confidence_2d[name].shape == (25,)
+    assert _all_finite(r)
+    assert set(KEYPOINT_STAGES) | {"total"} <= set(r.timing_ms) and not set(NOVEL_STAGES) & set(r.timing_ms)
+    assert r.frame_ok == {n: True for n in rig.names[:2]} and r.tracked is False
+    obj = json.loads(json.dumps(r.to_json(), allow_nan=False))
+    assert obj["joint_names"] == list(JOINT_NAMES) and len(obj["joints_3d"]) == 25
+    assert all(len(row) == 4 for row in obj["joints_3d"])
+    assert {k: len(v) for k, v in obj["joints_2d"].items()} == {n: 25 for n in rig.names[:2]}
+    assert all(len(row) == 3 for rows in obj["joints_2d"].values() for row in rows)
+
+
+@pytest.mark.parametrize("family", ["black", "saturated", "uniform_noise", "gaussian_noise", "nan_free_dark"])
+def test_bad_frames_give_finite_missing_joints_without_running_the_model(full_session, scene_rig, family):
+    rig, frames = scene_rig
+    rec = Recorder(full_session)
+    est = Estimator(rec, rig)
+    h, w = frames[0][0].shape[:2]
+    rng = np.random.default_rng(1)
+    bad = {
+        "black": np.zeros((h, w, 3), np.uint8),
+        "saturated": np.full((h, w, 3), 255, np.uint8),
+        "uniform_noise": rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
+        "gaussian_noise": np.clip(rng.normal(128, 40, (h, w, 3)), 0, 255).astype(np.uint8),
+        "nan_free_dark": np.full((h, w, 3), 3, np.uint8),
+    }[family]
+    for pair in ((bad, bad), (frames[0][0], bad), (bad, frames[0][1])):
+        r = est.estimate(pair)
+        _assert_all_missing(r)
+        assert not all(r.frame_ok.values())
+    assert rec.calls == [], "the model must not run on frames that cannot show anyone"
+
+
+def test_novel_view_off_never_runs_or_loads_a_colour_graph(tiny_model_dir, scene_rig):  # noqa: F811
+    rig, frames = scene_rig
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)))
+    est = Estimator.from_config(rig, cfg)
+    assert est.session.graphs == ("encoder", "volume", "render_heat")  # colour graphs not even loaded
+    rec = Recorder(est.session)
+    est.session = rec
+    for pair in frames:
+        est.estimate(pair)
+    assert rec.ran("render_rgb") == 0 and rec.ran("render") == 0
+    assert rec.ran("render_heat") == len(frames) and rec.ran("encoder") == len(frames)
+    with pytest.raises(ModelError, match="novel_view.enabled is false"):
+        est.estimate(frames[0], novel_view=NovelViewRequest())
+
+
+def test_novel_view_off_with_colour_graph_loaded_still_never_runs_it(full_session, scene_rig):
+    rig, frames = scene_rig
+    rec = Recorder(full_session)
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True)))
+    for pair in frames:
+        est.estimate(pair)  # no request: no novel view
+    assert rec.ran("render_rgb") == 0 and rec.ran("render") == 0 and rec.ran("volume") == len(frames)
+
+
+@pytest.mark.parametrize("stride, overlay", [(1, "skeleton"), (2, "none")])
+def test_novel_view_on_request(full_session, scene_rig, stride, overlay):
+    rig, frames = scene_rig
+    rec = Recorder(full_session)
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, stride=stride)))
+    r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.3, overlay=overlay))
+    S = full_session.contract.height
+    assert r.novel_view is not None and r.novel_view.image.shape == (S, S, 3) and r.novel_view.image.dtype == np.uint8
+    assert rec.ran("render_rgb") == 1 and rec.ran("render") == 0 and rec.ran("volume") == 2
+    rays = [shapes["ray_uv"] for g, shapes in rec.calls if g == "render_rgb"][0]
+    assert rays[0] == 1 and rays[1] <= (S // stride) ** 2
+    assert set(NOVEL_STAGES) <= set(r.timing_ms)
+
+
+def test_novel_view_with_heatmaps_uses_the_render_graph(full_session, scene_rig):
+    rig, frames = scene_rig
+    rec = Recorder(full_session)
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, heatmaps=True)))
+    from ghnerf_runtime.geometry import look_at
+    cam = rig.pair[0]
+    R, t = look_at((0.0, -1.5, 0.5), (0.0, -1.0, 3.0))
+    given = cam.with_pose(R, t)
+    r = est.estimate(frames[0], novel_view=NovelViewRequest(camera=given, overlay="heatmap"))
+    assert rec.ran("render") == 1 and rec.ran("render_rgb") == 0
+    assert r.novel_view.heat is not None and np.all(np.isfinite(r.novel_view.heat))
+
+
+@pytest.mark.parametrize("method", ["triangulate", "volumetric", "depth_centroid"])
+def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method):
+    rig, frames = scene_rig
+    est = Estimator(full_session, rig, EstimatorConfig(joints3d=Joints3DConfig(method=method)))
+    for pair in frames:
+        r = est.estimate(pair)
+        assert _all_finite(r) and r.method == method
+        assert np.all(r.confidence[r.missing] == 0) and not r.joints_3d[r.missing].any()
+
+
+def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir, scene_rig):  # noqa: F811
+    rig, frames = scene_rig
+    est = Estimator(full_session, rig)
+    with pytest.raises(FrameError, match=rig.names[1]):
+        est.estimate((frames[0][0], frames[0][1][:100]))
+    with pytest.raises(FrameError, match="uint8"):
+        est.estimate((frames[0][0].astype(np.float32), frames[0][1]))
+    with pytest.raises(FrameError, match="expected 2 images"):
+        est.estimate((frames[0][0],))
+    small = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False),
+                              ("encoder", "volume", "render_heat"))
+    with pytest.raises(ModelError, match="query"):
+        Estimator(small, rig, EstimatorConfig(joints3d=Joints3DConfig(method="volumetric")))

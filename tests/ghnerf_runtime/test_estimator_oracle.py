@@ -1,0 +1,170 @@
+"""Estimator geometry, tracking and missing-joint behaviour against the *oracle* session.
+
+The oracle (benchmarks/bench_runtime_common.py) answers each graph with what a perfectly
+trained model is trained to produce, from the simulator's truth, so these tests check
+everything around the model exactly -- crops, decoding, coordinate mapping, 3D methods,
+tracking -- without torch or a trained model.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, TrackingConfig
+from ghnerf_runtime.estimator import Estimator
+from ghnerf_runtime.metrics import mpjpe, pck
+
+sim = pytest.importorskip("drivers.sim")
+
+
+class RayCounter(OracleSession):
+    """The oracle, also recording the ray count of every render_heat call."""
+
+    def __init__(self):
+        super().__init__(edge128_contract())
+        self.rays: list[int] = []
+
+    def run(self, graph, feeds):
+        if graph == "render_heat":
+            self.rays.append(int(np.shape(feeds["ray_uv"])[1]))
+        return super().run(graph, feeds)
+
+
+@pytest.fixture(scope="module")
+def clip():
+    """A short clip of a person in view, then the same room without anyone (person moved away)."""
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 3.0)))
+    gone = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(40.0, 3.0)))  # far out of view
+    frames, truth, visible, twod = [], [], [], []
+    for i in range(5):
+        t = i / 30
+        rendered = [scene.render(c, t) for c in rig.pair]
+        frames.append(tuple(img for img, _ in rendered))
+        truth.append(scene.joints_3d(t))
+        visible.append(np.stack([tr.visible for _, tr in rendered]))
+        twod.append(np.stack([tr.joints_2d for _, tr in rendered]))
+    empty = tuple(gone.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
+    empty_truth = gone.joints_3d(0.2)
+    return rig, frames, truth, visible, empty, empty_truth, twod
+
+
+def _run(est, oracle, frames, truth, visible):
+    out = []
+    for pair, j3, vis in zip(frames, truth, visible):
+        oracle.set_truth(j3, vis)
+        out.append(est.estimate(pair))
+    return out
+
+
+def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip):
+    rig, frames, truth, visible, *_ = clip
+    oracle = RayCounter()
+    est = Estimator(oracle, rig)
+    results = _run(est, oracle, frames, truth, visible)
+    assert [r.tracked for r in results] == [False, True, True, True, True]
+    both = np.stack(visible).all(axis=1)  # joints the oracle shows in both views
+    pred = np.stack([r.joints_3d for r in results])
+    found = ~np.stack([r.missing for r in results])
+    assert np.array_equal(found, both), "exactly the joints visible in both views are triangulated"
+    err = mpjpe(pred, np.stack(truth), both, pred_valid=found)
+    assert err.value < 1.0, err.value  # mm: decoding + mapping + DLT are exact for Gaussian heatmaps
+    # Tracked pairs render only the rays covering the subject, fewer than the whole grid.
+    grid = (oracle.contract.height // oracle.contract.heatmap_stride) ** 2
+    assert oracle.rays[0] == grid and max(oracle.rays[1:]) < grid
+
+
+def test_2d_joints_land_on_the_truth_in_the_original_images(clip):
+    rig, frames, truth, visible, *_, twod = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig)
+    oracle.set_truth(truth[0], visible[0])
+    r = est.estimate(frames[0])
+    pred = np.stack([r.joints_2d[n] for n in rig.names[:2]])
+    res = pck(pred, twod[0], visible[0], pred_valid=~np.stack([r.missing_2d[n] for n in rig.names[:2]]))
+    assert res.value == 1.0 and res.num_pred_missing == 0
+    d = np.linalg.norm(pred - twod[0], axis=-1)[visible[0]]
+    assert d.max() < 0.5, d.max()  # pixels of the 640x480 image
+
+
+@pytest.mark.parametrize("method, tol_mm", [("volumetric", 5.0), ("depth_centroid", 150.0)])
+def test_other_3d_methods_on_the_oracle(clip, method, tol_mm):
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(joints3d=Joints3DConfig(method=method)))
+    results = _run(est, oracle, frames, truth, visible)
+    pred = np.stack([r.joints_3d for r in results])
+    found = ~np.stack([r.missing for r in results])
+    err = mpjpe(pred, np.stack(truth), np.ones_like(found), pred_valid=found)
+    assert err.num_evaluated > 50 and err.value < tol_mm, (err.value, err.num_evaluated)
+
+
+def test_person_leaving_the_view_gives_missing_joints_and_drops_the_track(clip):
+    rig, frames, truth, visible, empty, empty_truth, _ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig)
+    first = _run(est, oracle, frames[:2], truth[:2], visible[:2])
+    assert first[-1].num_found > 6 and est.tracker.track is not None
+    oracle.set_truth(empty_truth)  # the person is 40 m to the side: projections fall outside every crop
+    gone = est.estimate(empty)
+    assert gone.missing.all() and not gone.joints_3d.any() and not gone.confidence.any()
+    assert all(m.all() for m in gone.missing_2d.values())
+    assert gone.tracked is True and est.tracker.track is None  # cropped from the track, then dropped
+    oracle.set_truth(None)
+    cold = est.estimate(empty)
+    assert cold.tracked is False and cold.missing.all()  # fell back to the working volume
+    back = _run(est, oracle, frames[2:4], truth[2:4], visible[2:4])
+    assert back[0].tracked is False and back[1].tracked is True and back[1].num_found > 6
+
+
+def test_no_stale_joints_after_a_good_pair(clip):
+    rig, frames, truth, visible, empty, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig)
+    good = _run(est, oracle, frames[:1], truth[:1], visible[:1])[0]
+    assert good.num_found > 6
+    black = np.zeros_like(frames[0][0])
+    r = est.estimate((black, black))  # oracle still "sees" the truth: the frame check must stop it
+    assert r.missing.all() and not r.joints_3d.any() and est.tracker.track is None
+    oracle.set_truth(None)  # nobody: the model renders nothing
+    r2 = est.estimate(frames[1])
+    assert r2.missing.all() and not np.isin(r2.joints_3d, good.joints_3d[~good.missing]).any()
+    assert r2.tracked is False
+
+
+def test_too_few_confident_joints_drop_the_track(clip):
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(min_joints=6)))
+    _run(est, oracle, frames[:1], truth[:1], visible[:1])
+    assert est.tracker.track is not None
+    few = np.zeros_like(visible[1])
+    few[:, :4] = True  # only 4 joints shown in both views
+    oracle.set_truth(truth[1], few)
+    r = est.estimate(frames[1])
+    assert r.num_found == 4 and r.tracked is True and est.tracker.track is None
+    oracle.set_truth(truth[2], visible[2])
+    assert est.estimate(frames[2]).tracked is False
+
+
+def test_tracking_disabled_always_uses_the_working_volume(clip):
+    rig, frames, truth, visible, *_ = clip
+    oracle = RayCounter()
+    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(enabled=False)))
+    results = _run(est, oracle, frames[:3], truth[:3], visible[:3])
+    assert not any(r.tracked for r in results)
+    assert len({r.rois[rig.names[0]] for r in results}) == 1
+
+
+def test_refined_cold_start_reruns_the_first_pair_on_the_subject(clip):
+    rig, frames, truth, visible, *_ = clip
+    oracle = RayCounter()
+    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(refine_cold_start=True)))
+    results = _run(est, oracle, frames[:2], truth[:2], visible[:2])
+    assert [r.tracked for r in results] == [True, True]  # the first pair is reported from its second pass
+    assert oracle.run_counts["render_heat"] == 3 and oracle.run_counts["encoder"] == 3
+    grid = (oracle.contract.height // oracle.contract.heatmap_stride) ** 2
+    assert oracle.rays[0] == grid and oracle.rays[1] < grid
+    err = mpjpe(results[0].joints_3d, truth[0], visible[0].all(axis=0), pred_valid=~results[0].missing)
+    assert err.value < 1.0

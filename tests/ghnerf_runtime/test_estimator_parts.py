@@ -1,0 +1,166 @@
+"""The estimator's pure pieces: ray blocks, ROI snapping, tracks, 3D methods, novel cameras, frame check."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, TrackingConfig
+from ghnerf_runtime.estimator import check_crop
+from ghnerf_runtime.geometry import Camera, look_at
+from ghnerf_runtime.joints3d import depth_centroid_joints, query_grid, triangulate_joints, volumetric_joints
+from ghnerf_runtime.keypoints import model_to_heatmap_pixels
+from ghnerf_runtime.novel_view import interpolate_camera, slerp_rotation
+from ghnerf_runtime.preprocess import Roi
+from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, scatter_block
+from ghnerf_runtime.tracking import snap_roi, track_from_joints
+
+K128 = [[150.0, 0.0, 63.5], [0.0, 150.0, 63.5], [0.0, 0.0, 1.0]]
+
+
+def _cams():
+    return [Camera(n, 128, 128, K128, [], *look_at((x, -1.2, 0.0), (0.0, -1.0, 3.0))) for n, x in (("a", -0.5),
+                                                                                                    ("b", 0.5))]
+
+
+def _joints(n=25, seed=0):
+    rng = np.random.default_rng(seed)
+    return np.column_stack([rng.uniform(-0.3, 0.3, n), rng.uniform(-1.7, -0.2, n), rng.uniform(2.8, 3.2, n)])
+
+
+# ------------------------------------------------------------------ rays
+def test_blocks_share_one_size_stay_inside_and_cover_their_box():
+    raw = [(3, 5, 10, 7), (0, 20, 13, 12), (25, 0, 7, 3)]
+    out = common_blocks(raw, 32, 32, align=4)
+    assert len({(b[2], b[3]) for b in out}) == 1 and out[0][2:] == (16, 12)
+    for (r0, c0, rh, cw), orig in zip(out, raw):
+        assert 0 <= r0 and r0 + rh <= 32 and 0 <= c0 and c0 + cw <= 32
+        # the common block still covers the original
+        assert r0 <= orig[0] and orig[0] + orig[2] <= r0 + rh and c0 <= orig[1] and orig[1] + orig[3] <= c0 + cw
+    assert common_blocks([(3, 5, 10, 7), None], 32, 32) == [(0, 0, 32, 32)] * 2  # unknown: the whole grid
+
+
+def test_block_rays_scatter_back_to_their_cells():
+    block = (4, 6, 3, 5)
+    uv = block_ray_uv(block, 4)
+    assert uv.shape == (15, 2) and uv[0].tolist() == [25.5, 17.5]  # cell (4, 6) centre in model pixels
+    grid = scatter_block(np.arange(15.0), block, 32, 32, fill=-1.0)
+    assert grid[4, 6] == 0.0 and grid[6, 10] == 14.0 and (grid == -1.0).sum() == 32 * 32 - 15
+
+
+def test_box_block_covers_the_projected_box():
+    cam = _cams()[0]
+    box = np.array([[-0.3, -1.8, 2.8], [0.3, -0.1, 3.2]])
+    r0, c0, rh, cw = box_block(cam, box, 4, margin_cells=0)
+    uv, _ = cam.project(np.array([[x, y, z] for x in box[:, 0] for y in box[:, 1] for z in box[:, 2]]))
+    cells = model_to_heatmap_pixels(uv, 32, 128)
+    assert cells[:, 0].min() >= c0 - 0.5 and cells[:, 0].max() <= c0 + cw - 0.5
+    assert box_block(cam, box + [0, 0, -10.0], 4) is None  # behind the camera
+
+
+# ------------------------------------------------------------------ tracking
+@pytest.mark.parametrize("roi", [Roi(13, -7, 101), Roi(0, 0, 64), Roi(-3, 250, 333)])
+def test_snap_roi_only_grows_onto_the_grid(roi):
+    s = snap_roi(roi, 8)
+    assert s.x0 % 8 == 0 and s.y0 % 8 == 0 and s.size % 8 == 0
+    assert s.x0 <= roi.x0 and s.y0 <= roi.y0
+    assert s.x0 + s.size >= roi.x0 + roi.size and s.y0 + s.size >= roi.y0 + roi.size
+    assert s.size - roi.size < 16
+
+
+def test_track_needs_enough_confident_joints_and_a_plausible_box():
+    cfg = TrackingConfig(min_joints=6, box_margin_m=0.2)
+    j = _joints()
+    conf = np.full(25, 0.9)
+    valid = np.ones(25, bool)
+    t = track_from_joints(j, conf, valid, cfg)
+    assert t is not None and np.allclose(t.box, [j.min(0) - 0.2, j.max(0) + 0.2])
+    few = valid.copy()
+    few[5:] = False
+    assert track_from_joints(j, conf, few, cfg) is None
+    assert track_from_joints(j, np.full(25, 0.05), valid, cfg) is None  # below min_confidence
+    far = j.copy()
+    far[0] = [30.0, 0.0, 3.0]
+    assert track_from_joints(far, conf, valid, cfg) is None  # a 30 m box is nobody
+
+
+# ------------------------------------------------------------------ 3D methods
+def test_triangulation_gates_views_that_disagree():
+    cams = _cams()
+    X = _joints(5)
+    uv = np.stack([c.project(X)[0] for c in cams])
+    # Off the epipolar line (the baseline is horizontal): the DLT splits 20 px into ~10 px per view.
+    uv[1, 2] += [0.0, 20.0]
+    uv[1, 3] += [9.0, 0.0]  # along the epipolar line: only depth changes, no reprojection error
+    r = triangulate_joints(uv, np.full((2, 5), 0.7), np.ones((2, 5), bool), cams, Joints3DConfig())
+    assert r.valid.tolist() == [True, True, False, True, True]
+    ok = np.array([True, True, False, False, True])
+    assert np.allclose(r.points[ok], X[ok], atol=1e-6) and not r.points[2].any()
+    assert r.reprojection_px[3].max() < 1.0 and abs(r.points[3, 2] - X[3, 2]) > 0.05
+    low = np.full((2, 5), 0.7)
+    low[0, 0] = 0.05  # below min_view_confidence: one view only
+    assert not triangulate_joints(uv, low, np.ones((2, 5), bool), cams, Joints3DConfig()).valid[0]
+
+
+def test_volumetric_refinement_is_exact_for_gaussian_responses():
+    box = np.array([[-0.5, -1.9, 2.6], [0.5, 0.1, 3.4]])
+    pts, shape = query_grid(box, 12)
+    assert pts.shape == (np.prod(shape), 3)
+    X = _joints(25, seed=3)
+    d2 = ((pts[:, None, :] - X[None]) ** 2).sum(-1)
+    heat = np.exp(-d2 / (2 * 0.06 ** 2))[None].repeat(2, axis=0)
+    r = volumetric_joints(heat, pts, shape, Joints3DConfig())
+    assert r.valid.all() and np.abs(r.points - X).max() < 1e-3
+    flat = volumetric_joints(np.full_like(heat, 0.01), pts, shape, Joints3DConfig(min_volumetric_response=0.1))
+    assert not flat.valid.any() and not flat.points.any()
+
+
+def test_depth_centroid_recovers_points_from_rendered_depth():
+    cams = _cams()
+    X = _joints(4, seed=5)
+    hm = np.zeros((2, 4, 32, 32))
+    depth = np.zeros((2, 32, 32))
+    peaks = np.zeros((2, 4, 2))
+    for c, cam in enumerate(cams):
+        uv, z = cam.project(X)
+        cells = np.rint(model_to_heatmap_pixels(uv, 32, 128)).astype(int)
+        for j, (cx, cy) in enumerate(cells):
+            hm[c, j, cy, cx] = 1.0
+            depth[c, cy, cx] = z[j]
+            peaks[c, j] = (cx, cy)
+    r = depth_centroid_joints(hm, depth, peaks, np.full((2, 4), 0.9), np.ones((2, 4), bool), cams, 128,
+                              Joints3DConfig(surface_offset_m=0.0))
+    assert r.valid.all()
+    # Cell-centre quantisation: within one heatmap cell (4 model px ~ 8 cm at 3 m with f = 150).
+    assert np.abs(r.points - X).max() < 0.08
+
+
+# ------------------------------------------------------------------ novel camera
+def test_interpolated_camera_slerps_and_lerps():
+    a, b = _cams()
+    R0 = slerp_rotation(a.R, b.R, 0.0)
+    assert np.allclose(R0, a.R, atol=1e-9) and np.allclose(slerp_rotation(a.R, b.R, 1.0), b.R, atol=1e-9)
+    mid = interpolate_camera(a, b, 0.5)
+    assert np.allclose(mid.center, 0.5 * (a.center + b.center))
+    assert np.allclose(mid.R @ mid.R.T, np.eye(3), atol=1e-9)
+    # Slerp: the middle rotation is half the geodesic distance from both ends.
+
+    def angle(R1, R2):
+        return np.degrees(np.arccos(np.clip((np.trace(R1.T @ R2) - 1) / 2, -1, 1)))
+
+    assert angle(mid.R, a.R) == pytest.approx(angle(a.R, b.R) / 2, abs=1e-6)
+    assert angle(mid.R, b.R) == pytest.approx(angle(a.R, b.R) / 2, abs=1e-6)
+
+
+# ------------------------------------------------------------------ frame check
+def test_frame_check_flags_flat_and_noise_but_not_images():
+    cfg = FrameCheckConfig()
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[:128, :128]
+    image = (0.5 + 0.3 * np.sin(xx / 9.0) * np.cos(yy / 13.0)).astype(np.float32)
+    assert check_crop(image, 255.0, cfg) == (True, "")
+    assert check_crop(np.full((128, 128), 0.5, np.float32), 255.0, cfg) == (False, "flat")
+    assert check_crop(rng.random((128, 128)).astype(np.float32), 255.0, cfg) == (False, "noise")
+    bad = image.copy()
+    bad[3, 3] = np.nan
+    assert check_crop(bad, 255.0, cfg) == (False, "non-finite")
+    assert check_crop(np.zeros((128, 128), np.float32), 255.0, FrameCheckConfig(enabled=False)) == (True, "")

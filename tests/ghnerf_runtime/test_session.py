@@ -1,0 +1,222 @@
+"""ModelSession: loading, contract checks (refusing mismatched or corrupt models), warm-up, runs.
+
+The model is the ``tiny`` preset exported once per test session by the real export CLI
+(``python -m training.export``, random weights); the tests skip when torch is missing.
+``tiny_model_dir`` is imported by the estimator and CLI tests too.
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.config import SessionConfig
+from ghnerf_runtime.contract import GRAPH_NAMES, ModelContract
+from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, RuntimeErrorBase
+from ghnerf_runtime.session import ModelSession, warmup_feeds
+
+REPO = Path(__file__).resolve().parents[2]
+_EXPORTED: dict[str, Path] = {}
+
+
+def export_tiny(base: Path) -> Path:
+    """Export the ``tiny`` preset (fp32, every graph) once per test session."""
+    if "tiny" in _EXPORTED:
+        return _EXPORTED["tiny"]
+    if importlib.util.find_spec("torch") is None:
+        pytest.skip("torch is not installed: the tiny test model cannot be exported")
+    out = base / "tiny"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-m", "training.export", "--preset", "tiny", "--out", str(out)],
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, f"export failed:\n{proc.stderr[-3000:]}"
+    _EXPORTED["tiny"] = out
+    return out
+
+
+@pytest.fixture(scope="session")
+def tiny_model_dir(tmp_path_factory) -> Path:
+    return export_tiny(tmp_path_factory.mktemp("ghnerf-model"))
+
+
+@pytest.fixture(scope="module")
+def tiny_session(tiny_model_dir) -> ModelSession:
+    return ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir)), GRAPH_NAMES)
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    shutil.copytree(src, dst)
+    return dst
+
+
+def _edit_metadata(path: Path, edit) -> None:
+    """Rewrite a file's metadata_props through ``edit(dict) -> dict`` (onnx, a dev dependency)."""
+    onnx = pytest.importorskip("onnx")
+    model = onnx.load(str(path))
+    props = edit({p.key: p.value for p in model.metadata_props})
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, props)
+    onnx.save(model, str(path))
+
+
+def _load_encoder(folder: Path, **kw) -> ModelSession:
+    return ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False, **kw), ("encoder",))
+
+
+# --------------------------------------------------------------------------- loading
+def test_load_checks_contract_and_warms_up(tiny_session):
+    s = tiny_session
+    assert s.graphs == GRAPH_NAMES
+    assert (s.contract.height, s.contract.width) == (64, 64)
+    assert set(s.warmup_ms) == set(GRAPH_NAMES) and all(v > 0 for v in s.warmup_ms.values())
+    assert all(n == 0 for n in s.run_counts.values()), "warm-up runs must not count as work"
+    d = s.describe()
+    assert d["resolution"] == "64x64" and set(d["files"]) == set(GRAPH_NAMES)
+
+
+def test_run_returns_contract_shapes_and_counts(tiny_session):
+    feeds = warmup_feeds(tiny_session.contract)
+    out = tiny_session.run("encoder", feeds)
+    spec = tiny_session.contract.graph("encoder")
+    assert list(out) == list(spec.output_names)
+    for t in spec.outputs:
+        assert out[t.name].shape == tuple(t.shape) and out[t.name].dtype == np.float32
+    assert tiny_session.run_counts["encoder"] == 1
+    tiny_session.reset_counts()
+
+
+def test_run_unknown_graph_and_missing_input(tiny_model_dir):
+    s = _load_encoder(tiny_model_dir)
+    with pytest.raises(ModelError, match="not loaded"):
+        s.run("volume", {})
+    with pytest.raises(ModelError, match="needs input 'images'"):
+        s.run("encoder", {})
+
+
+def test_loads_only_requested_graphs_and_int8_falls_back_to_fp32(tiny_model_dir):
+    s = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), precision="int8", warmup=False),
+                          ("encoder", "volume"))
+    assert s.graphs == ("encoder", "volume")
+    assert s.files["encoder"].path.name == "encoder.onnx"  # the tiny export has no int8 files
+
+
+def test_int8_file_is_preferred_when_present(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    shutil.copy(folder / "encoder.onnx", folder / "encoder.int8.onnx")
+    assert _load_encoder(folder, precision="int8").files["encoder"].path.name == "encoder.int8.onnx"
+    assert _load_encoder(folder, precision="fp32").files["encoder"].path.name == "encoder.onnx"
+    assert _load_encoder(folder, precision="fp32", precision_overrides={"encoder": "int8"}).files[
+        "encoder"].path.name == "encoder.int8.onnx"
+
+
+def test_files_found_by_metadata_when_renamed(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    (folder / "encoder.onnx").rename(folder / "ghnerf-enc-v1.onnx")
+    assert _load_encoder(folder).files["encoder"].path.name == "ghnerf-enc-v1.onnx"
+
+
+# --------------------------------------------------------------------------- refusals
+def test_wrong_contract_version_refused(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, "ghnerf.contract_version": "2.0.0"})
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder)
+    msg = str(e.value)
+    assert str(folder / "encoder.onnx") in msg and "ghnerf.contract_version" in msg and "2.0.0" in msg
+    assert e.value.key == "ghnerf.contract_version" and e.value.path == str(folder / "encoder.onnx")
+    assert isinstance(e.value, (ModelError, RuntimeErrorBase, ValueError))
+
+
+def test_resolution_other_than_configured_refused(tiny_model_dir):
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(tiny_model_dir, expected_resolution=128)
+    assert "ghnerf.resolution" in str(e.value) and "64x64" in str(e.value) and "128x128" in str(e.value)
+    assert "encoder.onnx" in str(e.value)
+
+
+def test_metadata_resolution_disagreeing_with_the_graph_refused(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    tiny = _load_encoder(folder).contract
+    big = ModelContract.build(height=128, width=128, variant=tiny.variant, levels=tiny.levels,
+                              channels=tiny.channels, strides=tiny.strides, render_feature=tiny.render_feature,
+                              heatmap_stride=tiny.heatmap_stride)
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, **big.to_metadata(graph="encoder")})
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder)
+    assert e.value.key == "images" and "[2, 3, 64, 64]" in str(e.value) and "encoder.onnx" in str(e.value)
+
+
+def test_missing_metadata_key_refused(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "encoder.onnx", lambda p: {k: v for k, v in p.items() if k != "ghnerf.levels"})
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder)
+    assert e.value.key == "ghnerf.levels" and "missing" in str(e.value) and "encoder.onnx" in str(e.value)
+
+
+def test_file_without_any_contract_refused(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "encoder.onnx", lambda p: {})
+    with pytest.raises(ModelContractError, match="no ghnerf.* metadata"):
+        _load_encoder(folder)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "garbage", "empty"])
+def test_corrupt_file_refused(tiny_model_dir, tmp_path, damage):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    path = folder / "encoder.onnx"
+    data = path.read_bytes()
+    path.write_bytes({"truncated": data[: len(data) // 2], "garbage": os.urandom(4096), "empty": b""}[damage])
+    with pytest.raises(ModelLoadError) as e:
+        _load_encoder(folder)
+    assert str(path) in str(e.value) and "truncated or corrupt" in str(e.value)
+    assert isinstance(e.value, OSError)
+
+
+def test_missing_file_and_folder_refused(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    (folder / "volume.onnx").unlink()
+    with pytest.raises(ModelLoadError, match="no file for graph 'volume'"):
+        ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), ("encoder", "volume"))
+    with pytest.raises(ModelLoadError, match="model folder does not exist"):
+        _load_encoder(tmp_path / "nowhere")
+
+
+def test_graph_files_from_different_models_refused(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "volume.onnx", lambda p: {**p, "ghnerf.model_version": "9.9.9"})
+    with pytest.raises(ModelContractError) as e:
+        ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), ("encoder", "volume"))
+    assert "different models" in str(e.value) and e.value.key == "ghnerf.model_version"
+    assert "volume.onnx" in str(e.value)
+
+
+def test_file_holding_another_graph_refused(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    shutil.copy(folder / "encoder.onnx", folder / "volume.onnx")
+    with pytest.raises(ModelContractError, match="holds graph 'encoder', loaded as 'volume'"):
+        ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), ("encoder", "volume"))
+
+
+def test_shipped_layout_resolves_to_the_ghnerf_subfolder(tiny_model_dir, tmp_path):
+    models = tmp_path / "models"
+    _copy(tiny_model_dir, models / "ghnerf")
+    _copy(tiny_model_dir, models / "baseline")
+    (models / "model_card.json").write_text('{"name": "shipped"}')
+    s = _load_encoder(models)
+    assert s.files["encoder"].path == models / "ghnerf" / "encoder.onnx" and s.card == {"name": "shipped"}
+    assert _load_encoder(models / "baseline").files["encoder"].path.parent == models / "baseline"
+
+
+def test_model_card_is_read_when_present(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    (folder / "model_card.json").write_text('{"name": "tiny-test", "pck": 0.5}')
+    assert _load_encoder(folder).card == {"name": "tiny-test", "pck": 0.5}
+    (folder / "model_card.json").write_text("{not json")
+    assert _load_encoder(folder).card == {}  # an unreadable card is not fatal

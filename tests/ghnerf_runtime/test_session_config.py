@@ -1,0 +1,77 @@
+"""The runtime config tree: validated once, unknown keys rejected by their dotted path."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from ghnerf_runtime.config import (
+    EstimatorConfig,
+    Joints3DConfig,
+    NovelViewConfig,
+    SessionConfig,
+    config_from_dict,
+    config_to_dict,
+    load_config,
+)
+from ghnerf_runtime.errors import ConfigError
+
+
+def test_defaults_round_trip():
+    cfg = EstimatorConfig()
+    assert config_from_dict(config_to_dict(cfg)) == cfg
+    assert config_from_dict({}) == cfg
+    json.dumps(config_to_dict(cfg))  # JSON-ready
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"sesion": {}}, "sesion"),
+    ({"joints3d": {"metod": "volumetric"}}, "joints3d.metod"),
+    ({"novel_view": {"enabled": True, "strides": 2}}, "novel_view.strides"),
+])
+def test_unknown_keys_are_named(data, key):
+    with pytest.raises(ConfigError) as e:
+        config_from_dict(data)
+    assert e.value.key == key and str(e.value).startswith(key) and "unknown key" in str(e.value)
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"joints3d": {"method": "magic"}}, "joints3d.method"),
+    ({"session": {"threads": 0}}, "session.threads"),
+    ({"session": {"precision": "int4"}}, "session.precision"),
+    ({"session": {"precision_overrides": {"encoder": "int4"}}}, "session.precision_overrides"),
+    ({"novel_view": {"stride": 3}}, "novel_view.stride"),
+    ({"novel_view": {"enabled": "yes"}}, "novel_view.enabled"),
+    ({"tracking": {"min_joints": 1}}, "tracking.min_joints"),
+    ({"frame_check": {"min_std": float("nan")}}, "frame_check.min_std"),
+    ({"decoder": {"threshold": 2.0}}, "decoder"),
+    ({"roi": []}, "roi"),
+])
+def test_bad_values_are_named(data, key):
+    with pytest.raises(ConfigError) as e:
+        config_from_dict(data)
+    assert e.value.key == key, str(e.value)
+
+
+def test_required_graphs_follow_the_config():
+    assert EstimatorConfig().required_graphs() == ("encoder", "volume", "render_heat")
+    cfg = EstimatorConfig(joints3d=Joints3DConfig(method="volumetric"), novel_view=NovelViewConfig(enabled=True))
+    assert cfg.required_graphs() == ("encoder", "volume", "render_heat", "query", "render_rgb")
+    cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, heatmaps=True))
+    assert "render" in cfg.required_graphs() and "render_rgb" not in cfg.required_graphs()
+
+
+def test_load_config_names_the_file(tmp_path):
+    good = tmp_path / "good.json"
+    good.write_text(json.dumps({"session": {"model_dir": "/opt/models", "precision": "fp32"}}))
+    assert load_config(good).session == SessionConfig(model_dir="/opt/models", precision="fp32")
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"session": {"model_dir": }')
+    with pytest.raises(ConfigError, match="bad.json.*not valid JSON"):
+        load_config(bad)
+    typo = tmp_path / "typo.json"
+    typo.write_text('{"rays": {"restrict": false}}')
+    with pytest.raises(ConfigError, match="typo.json.*rays.restrict: unknown key"):
+        load_config(typo)
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "absent.json")

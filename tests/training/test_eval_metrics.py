@@ -1,0 +1,103 @@
+"""Evaluation metrics on fake model outputs with known answers (``training.evaluate``)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from ghnerf_runtime.contract import ray_grid  # noqa: E402
+from ghnerf_runtime.keypoints import model_to_heatmap_pixels  # noqa: E402
+from ghnerf_runtime.metrics import gaussian_heatmaps  # noqa: E402
+from tests.training.test_trainer import data64  # noqa: E402,F401  (fixture)
+from training.evaluate import Accumulator, evaluate, keypoints_from_heatmaps, scene_metrics  # noqa: E402
+
+
+def _scene(data64, i=0):
+    from training.data.torch_dataset import MultiViewDataset
+
+    return {k: v.numpy() for k, v in MultiViewDataset(data64, "val")[i].items()}
+
+
+def test_keypoints_are_decoded_in_crop_pixels():
+    joints = np.array([[[10.0, 20.0], [33.3, 41.7], [0.0, 0.0]]])  # model pixels of a 64 px crop
+    vis = np.array([[True, True, False]])
+    hm = gaussian_heatmaps(model_to_heatmap_pixels(joints, 16, 64), vis, 16, 1.5)
+    uv = keypoints_from_heatmaps(hm, 64)
+    assert np.allclose(uv[0, :2], joints[0, :2], atol=0.05)
+    assert np.isnan(uv[0, 2]).all()  # no peak: missing, never (0, 0)
+
+
+def test_perfect_outputs_score_perfectly(data64):
+    sc = _scene(data64)
+    nov = np.flatnonzero(~sc["tgt_is_source"])
+    m = sc["tgt_masks"][nov][:, None]
+    truth = sc["tgt_images"][nov] * m
+    offset = np.where(truth > 0.5, -0.1, 0.1) * m  # |error| 0.1 on every mask pixel and channel: PSNR 20 dB
+    r = scene_metrics(sc, sc["tgt_heatmaps"][:2], truth + offset, nov)
+    assert r["heatmap_mse"].value == 0.0
+    assert r["pck"].value == 1.0 and r["pck"].num_evaluated == sc["tgt_visible"][:2].sum()
+    both = sc["tgt_visible"][0] & sc["tgt_visible"][1]
+    assert r["mpjpe"].num_evaluated == both.sum()  # a joint needs both views to be triangulated
+    assert r["mpjpe"].value < 0.5  # mm: decoding + DLT of exact Gaussians
+    assert r["psnr"].value == pytest.approx(20.0, abs=1e-9)
+    assert r["ssim"].value < 1.0
+
+
+def test_shifted_joints_and_pooling(data64):
+    sc = _scene(data64)
+    S = 2
+    true2d = sc["tgt_joints_2d"][:S]
+    vis = sc["tgt_visible"][:S]
+    # move every joint of view 0 by 2 torso lengths: wrong; view 1 exact: right
+    neck, mid = true2d[0, 1], true2d[0, 8]
+    shift = 2.0 * np.linalg.norm(neck - mid)
+    moved = true2d.copy()
+    moved[0, :, 0] += shift
+    hm = gaussian_heatmaps(model_to_heatmap_pixels(moved.astype(np.float64), 16, 64), vis, 16, 1.5)
+    r = scene_metrics(sc, hm, None, np.array([], int))
+    expected = vis[1].sum() / (vis[0].sum() + vis[1].sum())
+    assert r["pck"].value == pytest.approx(expected)
+    assert not r["pck"].correct[0].any() and r["pck"].correct[1].sum() == vis[1].sum()
+    assert r["heatmap_mse"].value > 0
+    acc = Accumulator()
+    acc.add(r)
+    acc.add(r)
+    res = acc.result()
+    assert res["scenes"] == 2 and res["pck@0.2"] == pytest.approx(expected)
+    assert res["pck_evaluated_joints"] == 2 * r["pck"].num_evaluated
+
+
+class _Oracle:
+    """A renderer that returns the truth: the dataset's heatmaps and composited images."""
+
+    height = width = 64
+    heatmap_stride = 4
+    background = 0.0
+
+    def __init__(self, ds):
+        self.ds = ds
+
+    def _item(self, scene):
+        return {k: v.numpy() for k, v in self.ds[int(scene["index"])].items()}
+
+    def heatmaps(self, scene, targets, ray_uv):
+        hm = self._item(scene)["tgt_heatmaps"][targets]  # (T, J, h, w)
+        assert len(ray_uv) == hm.shape[-1] * hm.shape[-2]
+        return hm.reshape(len(targets), hm.shape[1], -1).transpose(0, 2, 1)
+
+    def colour(self, scene, targets, ray_uv):
+        it = self._item(scene)
+        img = it["tgt_images"][targets] * it["tgt_masks"][targets][:, None]
+        assert np.array_equal(ray_uv, ray_grid(64, 64, 1))
+        return img.transpose(0, 2, 3, 1).reshape(len(targets), -1, 3)
+
+
+def test_evaluate_loop_with_an_oracle(data64):
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(data64, "val")
+    res = evaluate(_Oracle(ds), ds, progress=False)
+    assert res["scenes"] == 2 and res["pck@0.2"] == 1.0 and res["heatmap_mse"] == 0.0
+    assert res["psnr_masked"] == float("inf") or res["psnr_masked"] > 100
+    assert res["novel_views"] == 4 and res["mpjpe_mm"] < 0.5

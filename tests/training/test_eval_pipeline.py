@@ -1,0 +1,56 @@
+"""``make model`` plumbing without training: restartable stages and the model card."""
+from __future__ import annotations
+
+import json
+
+from training.model_card import render_markdown, sha256, write_card
+from training.pipeline import STAGES, Stages
+
+
+def test_stages_skip_finished_work_and_redo_changed_work(tmp_path):
+    out = tmp_path / "thing.txt"
+    calls = []
+
+    def make(text):
+        def fn():
+            calls.append(text)
+            out.write_text(text)
+            return [out], {"text": text}
+        return fn
+
+    st = Stages(tmp_path, ())
+    st.run("export_ghnerf", {"a": 1}, make("one"))
+    st.run("export_ghnerf", {"a": 1}, make("two"))  # same inputs, intact output: skipped
+    assert calls == ["one"]
+    st.run("export_ghnerf", {"a": 2}, make("three"))  # inputs changed
+    out.write_text("tampered")
+    st.run("export_ghnerf", {"a": 2}, make("four"))  # output changed
+    assert calls == ["one", "three", "four"]
+    stamp = json.loads((tmp_path / ".stages" / "export_ghnerf.json").read_text())
+    assert stamp["outputs"] == {str(out): sha256(out)} and stamp["info"] == {"text": "four"}
+    Stages(tmp_path, ("export",)).run("export_ghnerf", {"a": 2}, make("five"))  # --force export
+    assert calls[-1] == "five"
+    assert {"data", "train_ghnerf", "eval_baseline", "card"} <= set(STAGES)
+
+
+def test_card_renders_metrics_and_missing_values(tmp_path):
+    card = {
+        "name": "test", "summary": "s", "quick": True, "command": "python -m training.pipeline --quick",
+        "hardware": {"cpu": "cpu", "cores": 2}, "wall_time_s": {"data": 60.0, "train_ghnerf": 120.0},
+        "data": {"path": "d", "splits": {"train": 3}, "eval_split": "val", "eval_scenes": 2},
+        "training": {"ghnerf": {"config": {"preset": "edge128", "targets_per_iter": 4, "heat_rays": 512,
+                                           "patch_size": 16, "lr": 5e-4, "lr_decay_gamma": 0.5,
+                                           "lr_decay_every": 2500}, "steps": 8000, "wall_s": 1800}},
+        "metrics": {"ghnerf_int8": {"kind": "onnx-int8", "pck@0.2": 0.5, "mpjpe_mm": None, "psnr_masked": 20.0,
+                                    "ssim_masked": 0.9, "heatmap_mse": 0.001, "pck_undecoded": 3,
+                                    "pck_evaluated_joints": 10}},
+        "parity": {"ghnerf": {"pipeline": {"heatmaps": {"max_abs": 0.01, "mean_abs": 1e-4}, "peak_shift_rays": 0.1,
+                                           "depth_mean_abs_m": 0.001}}},
+        "files": {"ghnerf/encoder.onnx": {"bytes": 10, "sha256": "ab"}},
+    }
+    j, m = write_card(tmp_path, card)
+    assert json.loads(j.read_text())["metrics"]["ghnerf_int8"]["pck@0.2"] == 0.5
+    md = m.read_text()
+    assert md == render_markdown(card)
+    assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 20.00 | 0.900 | 0.001 | 3/10 |" in md
+    assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md

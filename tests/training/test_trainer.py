@@ -1,0 +1,167 @@
+"""The trainer: config validation, the real loop on ``tiny`` (2 CPU iterations), checkpoint + resume."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from training.model.config import ConfigError  # noqa: E402
+from training.train import (  # noqa: E402
+    HEATMAP_SIGMA_HM_PX, apply_overrides, build_config, heatmaps_at, load_config_file, main, sample_rays, train,
+)
+
+
+@pytest.fixture(scope="session")
+def data64(tmp_path_factory):
+    """A 64 px synthetic dataset (3 train, 2 val scenes): the ``tiny`` preset's resolution."""
+    from training.data.generate import main as generate
+
+    out = tmp_path_factory.mktemp("data64")
+    generate(["--out", str(out), "--train", "3", "--val", "2", "--val-seen-motions", "0", "--res", "64",
+              "--workers", "1"])
+    return out
+
+
+def tiny_cfg(data, **kw):
+    base = {"preset": "tiny", "data": str(data), "iterations": 2, "targets_per_iter": 2, "heat_rays": 32,
+            "patch_size": 8, "checkpoint_every": 1, "log_every": 1, "pck_every": 1, "threads": 2,
+            "loss": {"coord_weight": 0.01}}
+    base.update(kw)
+    return build_config(base)
+
+
+# ----------------------------------------------------------------------------------------- config
+@pytest.mark.parametrize("data, key", [
+    ({"iterationz": 3}, "iterationz"),
+    ({"loss": {"heat_wieght": 0.5}}, "loss.heat_wieght"),
+    ({"iterations": "many"}, "iterations"),
+    ({"iterations": 0}, "iterations"),
+    ({"lr": -1.0}, "lr"),
+    ({"mask_fraction": 1.5}, "mask_fraction"),
+    ({"preset": "huge"}, "preset"),
+    ({"device": "tpu"}, "device"),
+    ({"loss": {"ssim_weight": -0.1}}, "loss.ssim_weight"),
+    ({"patch_size": 1}, "patch_size"),
+])
+def test_config_errors_name_the_key(data, key):
+    with pytest.raises(ConfigError) as e:
+        build_config(data)
+    assert str(e.value).startswith(key)
+
+
+def test_config_files_and_overrides(tmp_path):
+    (tmp_path / "a.toml").write_text('preset = "tiny"\niterations = 5\n[loss]\nheat_weight = 0.25\n')
+    d = apply_overrides(load_config_file(tmp_path / "a.toml"), ["loss.ssim_weight=0", "data=\"x\""])
+    cfg = build_config(d)
+    assert (cfg.preset, cfg.iterations, cfg.loss.heat_weight, cfg.loss.ssim_weight, cfg.data) == \
+        ("tiny", 5, 0.25, 0.0, "x")
+    for name in ("edge128", "edge128_baseline"):  # the shipped schedules validate
+        build_config(load_config_file(f"training/train_configs/{name}.json"))
+
+
+def test_cli_reports_config_error(tmp_path, capsys):
+    (tmp_path / "c.json").write_text(json.dumps({"bogus": 1}))
+    assert main(["--config", str(tmp_path / "c.json"), "--out", str(tmp_path / "o")]) == 2
+    assert "bogus" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------------------- sampling
+def test_rays_and_targets():
+    g = torch.Generator().manual_seed(0)
+    masks = torch.zeros(2, 64, 64, dtype=torch.bool)
+    masks[:, 20:40, 24:36] = True
+    uv = sample_rays(masks, 40, 6, 4, 0.75, g)
+    assert uv.shape == (2, 40 + 36, 2)
+    grid = uv[:, :40]
+    assert torch.all(((grid + 0.5) / 4 - 0.5) % 1 == 0)  # on the stride-4 grid (contract.ray_grid)
+    inside = masks[0][grid[0, :, 1].long(), grid[0, :, 0].long()] | \
+        masks[0][(grid[0, :, 1] + 0.5).long(), (grid[0, :, 0] + 0.5).long()]
+    assert inside.float().mean() >= 0.7
+    patch = uv[0, 40:].reshape(6, 6, 2)
+    assert torch.all(patch[:, 1:, 0] - patch[:, :-1, 0] == 1) and torch.all(patch[1:, :, 1] - patch[:-1, :, 1] == 1)
+
+
+def test_heatmaps_at_rays_match_the_dataset_heatmaps(data64):
+    from ghnerf_runtime.contract import ray_grid
+    from training.data.torch_dataset import MultiViewDataset
+
+    item = MultiViewDataset(data64, "train")[0]
+    V = item["tgt_heatmaps"].shape[0]
+    uv = torch.from_numpy(ray_grid(64, 64, 4))[None].expand(V, -1, -1)
+    h = heatmaps_at(item["tgt_joints_2d"], item["tgt_visible"], uv, HEATMAP_SIGMA_HM_PX * 4)
+    ref = item["tgt_heatmaps"].flatten(2).transpose(1, 2)
+    assert torch.allclose(h, ref, atol=1e-5)
+
+
+# ------------------------------------------------------------------------------------------- loop
+def test_two_iterations_and_resume_is_identical(data64, tmp_path):
+    straight, m_straight = train(tiny_cfg(data64), tmp_path / "a", quiet=True)
+    assert straight["steps"] == 2 and not straight["stopped_early"]
+    log = [json.loads(l) for l in (tmp_path / "a" / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in log] == [1, 2] and all(set(r) >= {"loss", "psnr", "pck"} for r in log)
+    assert (tmp_path / "a" / "ckpt_0000002.pt").exists()
+    ck = torch.load(tmp_path / "a" / "last.pt", weights_only=False)
+    assert {"model", "optimizer", "step", "config", "rng"} <= set(ck) and ck["step"] == 2
+
+    first, _ = train(tiny_cfg(data64, iterations=1), tmp_path / "b", quiet=True)
+    assert first["steps"] == 1
+    resumed, m_resumed = train(tiny_cfg(data64), tmp_path / "b", resume=True, quiet=True)
+    assert resumed["steps"] == 2
+    a, b = m_straight.state_dict(), m_resumed.state_dict()
+    assert a.keys() == b.keys()
+    for k in a:
+        assert torch.equal(a[k], b[k]), k
+    # and training moved the weights at all
+    init = torch.load(tmp_path / "b" / "ckpt_0000001.pt", weights_only=False)["model"]
+    assert any(not torch.equal(init[k], a[k]) for k in a if a[k].is_floating_point())
+
+
+def test_init_loads_torchvision_weights_into_the_human_encoder(data64, tmp_path):
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    torch.manual_seed(123)
+    donor = GHNeRF(preset("tiny")).human.trunk
+    state = {k: v.clone() for k, v in donor.state_dict().items()}
+    state["fc.weight"] = torch.zeros(1000, 512)  # torchvision extras are dropped
+    torch.save(state, tmp_path / "resnet18.pth")
+    cfg = tiny_cfg(data64, iterations=1, init=str(tmp_path / "resnet18.pth"), lr=1e-12, pck_every=0)
+    _, model = train(cfg, tmp_path / "run", quiet=True)
+    got = model.human.trunk.state_dict()
+    assert all(torch.allclose(got[k].float(), state[k].float(), atol=1e-6) for k in got if "num_batches" not in k
+               and "running" not in k)
+    with pytest.raises(ConfigError, match="^init"):  # the baseline has no human encoder
+        train(build_config({"preset": "edge128_baseline", "data": str(data64), "init": "x.pth"}), tmp_path / "r2")
+
+
+def test_step_losses_keep_every_loss_setting():
+    from dataclasses import replace
+
+    from training.losses import LossConfig, compute_losses
+    from training.train import step_losses
+
+    g = torch.Generator().manual_seed(0)
+    P, R = 4, 10
+    out = {"levels": [{"rgb": torch.rand(2, R + P * P, 3, generator=g),
+                       "heatmaps": torch.rand(2, R + P * P, 25, generator=g)}]}
+    batch = {"rgb": torch.rand(2, R + P * P, 3, generator=g), "heatmaps": torch.rand(2, R + P * P, 25, generator=g)}
+    for w in (0.0, 20.0):
+        cfg = build_config({"preset": "tiny", "patch_size": P, "loss": {"heat_positive_weight": w}})
+        terms = step_losses(out, batch, cfg)
+        ref = compute_losses(out, batch, replace(cfg.loss, ssim_weight=0.0))
+        assert torch.equal(terms["l0_heat"], ref["l0_heat"])
+        ssim = compute_losses({"levels": [{"rgb": out["levels"][0]["rgb"][:, -P * P:]}]},
+                              {"rgb": batch["rgb"][:, -P * P:]}, LossConfig(colour_weight=0, heat_weight=0),
+                              patch_shape=(P, P))["l0_ssim"]
+        assert torch.allclose(terms["loss"], ref["loss"] + cfg.loss.ssim_weight * ssim)
+
+
+def test_a_run_folder_in_use_is_refused(tmp_path):
+    import os
+
+    (tmp_path / "train.pid").write_text(str(os.getppid()))  # a live process that is not us
+    with pytest.raises(RuntimeError, match="another training process"):
+        train(build_config({"preset": "tiny", "data": "nowhere"}), tmp_path)
+    assert not (tmp_path / "config.json").exists()

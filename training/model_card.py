@@ -1,0 +1,160 @@
+"""The model card: ``model_card.json`` (machine-readable) and ``MODEL_CARD.md`` (for people).
+
+Written by :mod:`training.pipeline` from what it measured; nothing here runs a model.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import sys
+from pathlib import Path
+from typing import Any, Mapping
+
+
+def sha256(path: str | Path, chunk: int = 1 << 20) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def hardware() -> dict[str, Any]:
+    """CPU model, core count, memory, GPU (if torch sees one), library versions."""
+    cpu = platform.processor() or "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem_gb = None
+    try:
+        mem_gb = round(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 ** 30, 1)
+    except (ValueError, OSError, AttributeError):
+        pass
+    out: dict[str, Any] = {"cpu": cpu, "cores": os.cpu_count(), "memory_gb": mem_gb,
+                           "platform": platform.platform(), "python": sys.version.split()[0]}
+    try:
+        import torch
+
+        out["torch"] = torch.__version__
+        out["gpu"] = torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
+    except ImportError:
+        pass
+    try:
+        import onnxruntime
+
+        out["onnxruntime"] = onnxruntime.__version__
+    except ImportError:
+        pass
+    return out
+
+
+def _fmt(v: Any, digits: int = 3) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "n/a"
+    if isinstance(v, float):
+        return f"{v:.{digits}f}" if abs(v) >= 1e-3 or v == 0 else f"{v:.2e}"
+    return str(v)
+
+
+def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path]:
+    """Write ``model_card.json`` and ``MODEL_CARD.md`` into ``out_dir``; returns both paths."""
+    out_dir = Path(out_dir)
+    jpath = out_dir / "model_card.json"
+    jpath.write_text(json.dumps(card, indent=1, default=str))
+    mpath = out_dir / "MODEL_CARD.md"
+    mpath.write_text(render_markdown(card))
+    return jpath, mpath
+
+
+def render_markdown(card: Mapping[str, Any]) -> str:
+    L: list[str] = []
+    L.append(f"# Model card: {card.get('name', 'GHNeRF edge128')}")
+    L.append("")
+    L.append(card.get("summary", ""))
+    L.append("")
+    if card.get("quick"):
+        L.append("**Smoke-test build (`--quick`): tiny data and a few iterations; the numbers mean nothing.**")
+        L.append("")
+    L.append("## How it was made")
+    L.append("")
+    L.append(f"- Command: `{card.get('command', '')}`")
+    L.append(f"- Created: {card.get('created', '')}")
+    hw = card.get("hardware", {})
+    L.append(f"- Hardware: {hw.get('cpu')} ({hw.get('cores')} cores, {hw.get('memory_gb')} GB), "
+             f"GPU: {hw.get('gpu') or 'none'}; torch {hw.get('torch')}, onnxruntime {hw.get('onnxruntime')}")
+    wall = card.get("wall_time_s", {})
+    if wall:
+        total = sum(v for v in wall.values() if isinstance(v, (int, float)))
+        L.append(f"- Wall time: {total / 60:.1f} min summed over the stages (runs that shared the machine overlap) (" +
+                 ", ".join(f"{k} {v / 60:.1f} min" for k, v in wall.items() if isinstance(v, (int, float))) + ")")
+    L.append("")
+    data = card.get("data", {})
+    L.append("## Data")
+    L.append("")
+    L.append(f"- Dataset: `{data.get('path')}` ({data.get('source')}, {data.get('resolution')} px crops); "
+             f"splits: " + ", ".join(f"{k} {v}" for k, v in (data.get("splits") or {}).items()))
+    L.append(f"- Metrics on the held-out split `{data.get('eval_split')}` (unseen bodies, motions and rigs), "
+             f"{data.get('eval_scenes')} scenes.")
+    L.append("")
+    L.append("## Training")
+    L.append("")
+    L.append("| model | preset | iterations | rays/step | lr schedule | threads | wall time |")
+    L.append("|---|---|---|---|---|---|---|")
+    for name, t in (card.get("training") or {}).items():
+        c = t.get("config", {})
+        rays = c.get("targets_per_iter", 0) * (c.get("heat_rays", 0) + c.get("patch_size", 0) ** 2)
+        sched = f"Adam {c.get('lr')} x{c.get('lr_decay_gamma')} every {c.get('lr_decay_every')}"
+        L.append(f"| {name} | {c.get('preset')} | {t.get('steps')} | {rays} | {sched} | {c.get('threads') or 'all'} | "
+                 f"{_fmt((t.get('wall_s') or 0) / 60, 1)} min |")
+    L.append("")
+    L.append("## Metrics (held-out split)")
+    L.append("")
+    L.append("PCK@0.2 of the neck--mid-hip distance in each source view (2D joints decoded from the rendered "
+             "heatmaps), MPJPE of the triangulated joints (mm, rig frame), masked PSNR/SSIM of the novel views, "
+             "heatmap MSE in the source views. Definitions: `ghnerf_runtime/metrics.py`, `training/evaluate.py`.")
+    L.append("")
+    L.append("| model | runtime | PCK@0.2 | MPJPE mm | PSNR | SSIM | heatmap MSE | undecoded joints |")
+    L.append("|---|---|---|---|---|---|---|---|")
+    for label, m in (card.get("metrics") or {}).items():
+        L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('pck@0.2'))} | {_fmt(m.get('mpjpe_mm'), 1)} | "
+                 f"{_fmt(m.get('psnr_masked'), 2)} | {_fmt(m.get('ssim_masked'))} | {_fmt(m.get('heatmap_mse'))} | "
+                 f"{m.get('pck_undecoded')}/{m.get('pck_evaluated_joints')} |")
+    L.append("")
+    par = card.get("parity") or {}
+    if par:
+        L.append("## int8 vs fp32 parity")
+        L.append("")
+        for name, p in par.items():
+            pipe = p.get("pipeline", {})
+            hm = pipe.get("heatmaps", {})
+            L.append(f"- {name}: end to end (encoder -> volume -> render_heat, source views of a held-out scene): "
+                     f"heatmap max abs diff {_fmt(hm.get('max_abs'))}, mean {_fmt(hm.get('mean_abs'))}; "
+                     f"joint peak shift {_fmt(pipe.get('peak_shift_rays'))} heatmap px; "
+                     f"depth mean abs diff {_fmt(pipe.get('depth_mean_abs_m'), 4)} m.")
+        L.append("")
+    files = card.get("files") or {}
+    if files:
+        L.append("## Files")
+        L.append("")
+        L.append("| file | bytes | sha256 |")
+        L.append("|---|---|---|")
+        for name, f in files.items():
+            L.append(f"| `{name}` | {f.get('bytes')} | `{f.get('sha256')}` |")
+        L.append("")
+    notes = card.get("notes") or []
+    if notes:
+        L.append("## Limitations")
+        L.append("")
+        L.extend(f"- {n}" for n in notes)
+        L.append("")
+    return "\n".join(L)
+
+
+__all__ = ["sha256", "hardware", "write_card", "render_markdown"]

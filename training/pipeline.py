@@ -1,0 +1,488 @@
+"""``make model`` (``python -m training.pipeline --out models/``): everything from nothing, restartable.
+
+Stages (each skipped when its outputs exist and its stamp's inputs still match; ``--force STAGE`` redoes one):
+
+1. ``data``: the synthetic dataset (``training.data.generate``); reused when ``dataset.json`` matches.
+2. ``train_ghnerf`` / ``train_baseline``: ``training.train`` with ``training/train_configs/<preset>.json``
+   (``--resume``: an interrupted run continues from its last checkpoint).
+3. ``export_<variant>``: fp32 ONNX graphs (``training.export``) + a weights-only torch file.
+4. ``quantize_<variant>``: static int8 QDQ graphs, calibrated on training-split scenes (real frames and
+   cameras), and the int8-vs-fp32 parity on a held-out scene.
+5. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8) and the baseline (onnx fp32,
+   int8) into ``metrics_<variant>.json``.
+6. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
+   wall times), once every variant is evaluated.
+
+``--variants baseline`` takes one variant through its stages now (e.g. while the other still trains).
+
+``--quick``: a smoke test (a few scenes, a few iterations, a few eval scenes) into the same layout.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import hashlib
+import json
+import logging
+import os
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+log = logging.getLogger("training.pipeline")
+
+REPO = Path(__file__).resolve().parents[1]
+CONFIG_DIR = REPO / "training" / "train_configs"
+VARIANTS = {"ghnerf": "edge128", "baseline": "edge128_baseline"}
+#: Train-config keys that do not change the result (where and how fast it runs); ignored when matching runs.
+RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "pck_every", "checkpoint_every")
+STAGE_KINDS = ("data", "train", "export", "quantize", "eval", "card")
+"""Stage kinds; train/export/quantize/eval run per variant (``train_ghnerf``, ``eval_baseline``, ...)."""
+STAGES = ("data", *(f"{k}_{v}" for k in ("train", "export", "quantize", "eval") for v in VARIANTS), "card")
+EVAL_RUNTIMES = {"ghnerf": ("torch", "fp32", "int8"), "baseline": ("fp32", "int8")}
+
+
+@dataclass
+class PipelineConfig:
+    out: Path
+    data: Path = Path("data/edge128")
+    runs: Path = Path("runs")
+    train: int = 2500
+    val: int = 256
+    val_seen_motions: int = 128
+    res: int = 128
+    workers: int = 2
+    eval_split: str = "val"
+    eval_limit: int = 0
+    calib_scenes: int = 16
+    quick: bool = False
+    accept_stopped: bool = False
+    variants: tuple[str, ...] = tuple(VARIANTS)
+    threads: int = 2
+    parallel_train: bool = True
+    """Train the variants side by side, one thread each (CPU only): measured 44 min wall for both against
+    ~55 min one after the other with two threads (2-core EPYC)."""
+    force: tuple[str, ...] = ()
+    train_overrides: list[str] = field(default_factory=list)
+    command: str = ""
+
+    @classmethod
+    def quick_defaults(cls, out: Path) -> "PipelineConfig":
+        return cls(out=out, data=Path("data/quick128"), runs=out / "runs", train=12, val=4, val_seen_motions=0,
+                   eval_limit=2, calib_scenes=2, quick=True,
+                   train_overrides=["iterations=6", "log_every=3", "checkpoint_every=3", "pck_every=3",
+                                    "targets_per_iter=2", "heat_rays=64", "patch_size=8", "max_minutes=0"])
+
+
+# ----------------------------------------------------------------------------------------- stamps
+def _digest(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+class Stages:
+    """Stamp files ``<out>/.stages/<stage>.json``: the inputs' digest, outputs with sha256, wall time."""
+
+    def __init__(self, out: Path, force: tuple[str, ...]):
+        self.dir = out / ".stages"
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.force = {s for f in force for s in STAGES if s == f or s.startswith(f + "_")}
+
+    def stamp(self, name: str) -> dict | None:
+        p = self.dir / f"{name}.json"
+        return json.loads(p.read_text()) if p.exists() else None
+
+    def done(self, name: str, inputs: Any) -> dict | None:
+        """The stamp when the stage is finished for these inputs and its outputs are intact."""
+        from training.model_card import sha256
+
+        if name in self.force:
+            return None
+        s = self.stamp(name)
+        if not s or s.get("inputs") != _digest(inputs):
+            return None
+        for path, digest in s.get("outputs", {}).items():
+            if not Path(path).exists() or (digest and sha256(path) != digest):
+                return None
+        return s
+
+    def run(self, name: str, inputs: Any, fn: Callable[[], tuple[list[Path], dict]]) -> dict:
+        from training.model_card import sha256
+
+        s = self.done(name, inputs)
+        if s is not None:
+            log.info("stage %s: up to date (%.0f s when it ran)", name, s.get("wall_s", 0))
+            return s
+        log.info("stage %s: running", name)
+        t0 = time.monotonic()
+        outputs, info = fn()
+        s = {"inputs": _digest(inputs), "outputs": {str(p): sha256(p) for p in outputs},
+             "wall_s": round(time.monotonic() - t0, 1), "info": info,
+             "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+        (self.dir / f"{name}.json").write_text(json.dumps(s, indent=1, default=str))
+        log.info("stage %s: done in %.0f s", name, s["wall_s"])
+        return s
+
+
+def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = ()) -> list[str]:
+    cmd = [sys.executable, "-m", "training.train", "--config", str(CONFIG_DIR / f"{preset}.json"),
+           "--out", str(run), "--resume", "--data", str(cfg.data)]
+    for o in [*cfg.train_overrides, *extra]:
+        cmd += ["--set", o]
+    return cmd
+
+
+def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
+    """Run the trainings of ``variants`` at once, ``cores // n`` threads each (never oversubscribed)."""
+    threads = max(1, (os.cpu_count() or 1) // len(variants))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    for v in variants:
+        _check_run_folder(cfg, v)
+    procs = []
+    for v in variants:
+        run = cfg.runs / VARIANTS[v]
+        run.mkdir(parents=True, exist_ok=True)
+        cmd = _train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"])
+        log.info("$ %s &", shlex.join(cmd))
+        fh = open(run / "train.log", "a")
+        procs.append((v, subprocess.Popen(cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT), fh))
+    failed = []
+    for v, p, fh in procs:
+        if p.wait() != 0:
+            failed.append(v)
+        fh.close()
+    if failed:
+        raise RuntimeError(f"training failed for {failed}; see {cfg.runs}/<preset>/train.log")
+
+
+def _sh(cmd: list[str], log_path: Path | None = None) -> None:
+    log.info("$ %s", shlex.join(cmd))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+    if log_path is None:
+        subprocess.run(cmd, check=True, cwd=REPO, env=env)
+        return
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(log_path, "a") as fh:
+        subprocess.run(cmd, check=True, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT)
+
+
+# ------------------------------------------------------------------------------------------ stages
+def dataset_matches(cfg: PipelineConfig) -> bool:
+    """``dataset.json`` has the resolution and at least the requested, complete splits."""
+    from training.data.cache import ShardedSplit
+
+    meta = cfg.data / "dataset.json"
+    if not meta.exists():
+        return False
+    d = json.loads(meta.read_text())
+    if d.get("resolution") != cfg.res:
+        return False
+    want = {"train": cfg.train, "val": cfg.val, "val_seen_motions": cfg.val_seen_motions}
+    splits = d.get("splits", {})
+    for name, n in want.items():
+        if n and splits.get(name, {}).get("count", 0) < n:
+            return False
+        if n:
+            try:
+                if len(ShardedSplit(cfg.data, name)) < n:
+                    return False
+            except Exception:  # noqa: BLE001 - an unreadable split means regenerate (generate resumes)
+                return False
+    return True
+
+
+def stage_data(cfg: PipelineConfig) -> tuple[list[Path], dict]:
+    if not dataset_matches(cfg):
+        _sh([sys.executable, "-m", "training.data.generate", "--out", str(cfg.data), "--train", str(cfg.train),
+             "--val", str(cfg.val), "--val-seen-motions", str(cfg.val_seen_motions), "--res", str(cfg.res),
+             "--workers", str(cfg.workers)])
+        if not dataset_matches(cfg):
+            raise RuntimeError(f"{cfg.data}: the generated dataset does not match the request")
+    return [cfg.data / "dataset.json"], json.loads((cfg.data / "dataset.json").read_text()).get("splits", {})
+
+
+def train_inputs(cfg: PipelineConfig, preset: str) -> dict:
+    from training.train import apply_overrides, build_config, load_config_file
+
+    data = load_config_file(CONFIG_DIR / f"{preset}.json")
+    tc = build_config(apply_overrides(data, [f"data={json.dumps(str(cfg.data))}", *cfg.train_overrides]))
+    from dataclasses import asdict
+    return json.loads(json.dumps(asdict(tc)))  # as config.json holds it (lists, not tuples)
+
+
+def _result_keys(tc: dict) -> dict:
+    return {k: v for k, v in tc.items() if k not in RUNTIME_KEYS}
+
+
+def _run_finished(cfg: PipelineConfig, variant: str) -> bool:
+    """``runs/<preset>`` holds a finished run (all steps, or a capped one with ``accept_stopped``) of this config."""
+    run = cfg.runs / VARIANTS[variant]
+    cfg_p, summary_p = run / "config.json", run / "summary.json"
+    if not (cfg_p.exists() and summary_p.exists()):
+        return False
+    tc = train_inputs(cfg, VARIANTS[variant])
+    if _result_keys(json.loads(cfg_p.read_text())) != _result_keys(tc):
+        return False
+    sm = json.loads(summary_p.read_text())
+    return sm.get("steps", 0) >= tc["iterations"] or bool(cfg.accept_stopped and sm.get("stopped_early"))
+
+
+def _check_run_folder(cfg: PipelineConfig, variant: str) -> None:
+    """Refuse to (re)start a run over one in progress or one of another config."""
+    run = cfg.runs / VARIANTS[variant]
+    lg, cfg_p = run / "log.jsonl", run / "config.json"
+    if not (run / "summary.json").exists() and lg.exists() and time.time() - lg.stat().st_mtime < 180:
+        raise RuntimeError(f"{run}: a training run seems to be in progress (log.jsonl written "
+                           f"{time.time() - lg.stat().st_mtime:.0f} s ago); wait for it or stop it")
+    tc = train_inputs(cfg, VARIANTS[variant])
+    if (run / "last.pt").exists() and cfg_p.exists() and \
+            _result_keys(json.loads(cfg_p.read_text())) != _result_keys(tc):
+        raise RuntimeError(f"{run} holds a run with another config; move it away or pass --runs")
+
+
+def stage_train(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
+    preset = VARIANTS[variant]
+    run = cfg.runs / preset
+    summary_p = run / "summary.json"
+    cfg_p = run / "config.json"
+    # A finished run with the same config (e.g. started by hand) is reused as is.
+    if not _run_finished(cfg, variant):
+        _check_run_folder(cfg, variant)
+        _sh(_train_cmd(cfg, preset, run), run / "train.log")
+    summary = json.loads(summary_p.read_text())
+    if summary.get("stopped_early"):
+        log.warning("%s stopped early at step %s (max_minutes)", preset, summary.get("steps"))
+    return [run / "last.pt"], {"summary": summary, "config": json.loads(cfg_p.read_text())}
+
+
+def _scene_inputs(model, item: dict, ray_stride: int, targets=None, points_per_target: int = 256, seed: int = 0):
+    """``ExampleInputs`` of one dataset scene (real images and cameras) for every graph."""
+    import torch
+
+    from ghnerf_runtime.contract import ray_grid
+    from training.export.export import ExampleInputs
+
+    t = torch.arange(len(item["tgt_is_source"])) if targets is None else torch.as_tensor(targets)
+    cfg = model.config
+    uv = torch.from_numpy(ray_grid(cfg.height, cfg.width, ray_stride))
+    d = {"images": item["images"], "src_P": item["src_P"], "src_centers": item["src_centers"],
+         "tgt_K_inv": item["tgt_K_inv"][t], "tgt_c2w": item["tgt_c2w"][t], "tgt_P": item["tgt_P"][t],
+         "near_far": item["near_far"][t], "ray_uv": uv.unsqueeze(0).expand(len(t), -1, -1).contiguous()}
+    g = torch.Generator().manual_seed(seed)
+    lo, hi = item["bbox"][0] - 0.1, item["bbox"][1] + 0.1
+    d["points"] = lo + (hi - lo) * torch.rand(len(t), points_per_target, 3, generator=g)
+    with torch.no_grad():
+        enc = model.encode(d["images"])
+        d.update(enc)
+        last = model.volumes(enc, d["src_P"], d["tgt_K_inv"], d["tgt_c2w"], d["near_far"])[-1]
+        d["volume"], d["depth_stats"] = last["volume"], last["stats"]
+    return ExampleInputs(d)
+
+
+def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
+    import torch
+
+    from training.export.export import example_inputs, export_all
+    from training.export.parity import torch_vs_ort
+    from training.train import load_model
+
+    outputs, info = [], {}
+    for variant, ckpt in trained.items():
+        model, ck = load_model(ckpt)
+        folder = cfg.out / variant
+        folder.mkdir(parents=True, exist_ok=True)
+        weights = folder / f"{variant}.pt"
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": ck["step"]},
+                   weights)  # weights only: loads with torch.load(weights_only=True)
+        paths = export_all(model, folder, inputs=example_inputs(model))
+        info[variant] = {"fp32_parity_torch_vs_ort": torch_vs_ort(
+            model, paths, example_inputs(model, targets=3, ray_stride=4, seed=1))}
+        outputs += [weights, *paths.values()]
+    return outputs, info
+
+
+def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
+    from ghnerf_runtime.contract import GRAPH_NAMES
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+    from training.export.parity import int8_vs_fp32
+    from training.export.quantize import calibration_feeds, quantize_all
+    from training.train import load_model
+
+    outputs, info = [], {}
+    calib_ds = MultiViewDataset(cfg.data, "train", TargetConfig())
+    val_ds = MultiViewDataset(cfg.data, cfg.eval_split, TargetConfig())
+    step = max(1, len(calib_ds) // cfg.calib_scenes)
+    for variant, ckpt in trained.items():
+        model, _ = load_model(ckpt)
+        folder = cfg.out / variant
+        fp32 = {g: folder / f"{g}.onnx" for g in GRAPH_NAMES}
+        calib = [_scene_inputs(model, calib_ds[i], ray_stride=2, seed=i)
+                 for i in range(0, step * cfg.calib_scenes, step)[:cfg.calib_scenes]]
+        int8 = quantize_all(fp32, folder, calibration_feeds(model, calib, GRAPH_NAMES, rays_per_target=2048))
+        parity_in = _scene_inputs(model, val_ds[0], ray_stride=model.config.heatmap_stride, targets=[0, 1])
+        info[variant] = {"int8_vs_fp32": int8_vs_fp32(fp32, int8, model.contract(), parity_in),
+                         "calibration_scenes": len(calib)}
+        outputs += list(int8.values())
+    return outputs, info
+
+
+def stage_eval(cfg: PipelineConfig, variant: str, ckpt: Path) -> tuple[list[Path], dict]:
+    from training import evaluate as ev
+
+    folder = cfg.out / variant
+    specs = {"torch": str(ckpt), "fp32": str(folder), "int8": f"{folder}#int8"}
+    out = cfg.out / f"metrics_{variant}.json"
+    argv = ["--data", str(cfg.data), "--split", cfg.eval_split, "--out", str(out), "--threads", str(cfg.threads)]
+    if cfg.eval_limit:
+        argv += ["--limit", str(cfg.eval_limit)]
+    for runtime in EVAL_RUNTIMES[variant]:
+        argv += ["--model", f"{variant}_{runtime}={specs[runtime]}"]
+    ev.main(argv)
+    return [out], {}
+
+
+def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
+    from training.model_card import hardware, sha256, write_card
+
+    data_s = st.stamp("data")
+    metrics: dict = {"models": {}}
+    for v in VARIANTS:
+        m = json.loads((cfg.out / f"metrics_{v}.json").read_text())
+        metrics["models"].update(m["models"])
+        metrics.update({k: m[k] for k in ("data", "split", "pck_alpha", "pck_reference")})
+    (cfg.out / "metrics.json").write_text(json.dumps(metrics, indent=1))
+    files = {}
+    for variant in VARIANTS:
+        for p in sorted((cfg.out / variant).glob("*")):
+            if p.suffix in (".onnx", ".pt"):
+                files[str(p.relative_to(cfg.out))] = {"bytes": p.stat().st_size, "sha256": sha256(p)}
+    training = {}
+    for variant in VARIANTS:
+        s = st.stamp(f"train_{variant}") or {}
+        info = s.get("info", {})
+        training[variant] = {"config": info.get("config", {}), "steps": info.get("summary", {}).get("steps"),
+                             "stopped_early": info.get("summary", {}).get("stopped_early"),
+                             "wall_s": info.get("summary", {}).get("wall_s"),
+                             "checkpoint": info.get("summary", {}).get("checkpoint")}
+    q = {v: (st.stamp(f"quantize_{v}") or {}).get("info", {}).get(v, {}) for v in VARIANTS}
+    ds_meta = json.loads((cfg.data / "dataset.json").read_text())
+    card = {
+        "name": "GHNeRF edge128 (ResNet18 human encoder, BODY_25 heatmaps)",
+        "summary": ("Generalizable human NeRF (ENeRF backbone + GHNeRF joint-heatmap head) at 128x128 for a 2-core "
+                    "CPU through onnxruntime; `ghnerf/` is the model, `baseline/` the same network without the "
+                    "human encoder (ENeRF + heatmap). Trained from scratch on synthetic data."),
+        "quick": cfg.quick,
+        "command": cfg.command,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "hardware": hardware(),
+        "wall_time_s": {name: (st.stamp(name) or {}).get("wall_s") for name in STAGES if name != "card"},
+        "data": {"path": str(cfg.data), "source": ds_meta.get("source"), "resolution": ds_meta.get("resolution"),
+                 "splits": {k: v.get("count") for k, v in ds_meta.get("splits", {}).items()},
+                 "eval_split": cfg.eval_split, "eval_scenes": next(iter(metrics["models"].values()))["scenes"]},
+        "training": training,
+        "metrics": metrics["models"],
+        "parity": {v: q[v].get("int8_vs_fp32", {}) for v in VARIANTS},
+        "fp32_parity_torch_vs_ort": {v: (st.stamp(f"export_{v}") or {}).get("info", {}).get(v, {})
+                                     .get("fp32_parity_torch_vs_ort") for v in VARIANTS},
+        "files": files,
+        "notes": [
+            "Synthetic training and evaluation data only; no real-camera or ZJU-MoCap numbers.",
+            "The ResNet18 human encoder is trained from scratch (no ImageNet weights available here).",
+            "The perceptual loss is replaced by a 1 - SSIM patch loss (no VGG weights).",
+            "A 2-core CPU training budget (tens of minutes, not GHNeRF's 200k GPU iterations): expect far lower "
+            "accuracy than the paper.",
+        ],
+        "stage_inputs": {"data": (data_s or {}).get("inputs")},
+    }
+    for v in VARIANTS:
+        card["wall_time_s"][f"train_{v}"] = max(card["wall_time_s"].get(f"train_{v}") or 0,
+                                                training[v].get("wall_s") or 0)
+    j, m = write_card(cfg.out, card)
+    return [j, m], {}
+
+
+def run(cfg: PipelineConfig) -> dict | None:
+    """Run the stages of ``cfg.variants``; the card when every variant is evaluated (else None)."""
+    import torch
+
+    torch.set_num_threads(cfg.threads)
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    st = Stages(cfg.out, cfg.force)
+    data_in = {"data": str(cfg.data), "res": cfg.res, "train": cfg.train, "val": cfg.val,
+               "vsm": cfg.val_seen_motions}
+    d = st.run("data", data_in, lambda: stage_data(cfg))
+
+    def train_in(variant: str) -> dict:
+        return {"data": d["inputs"], "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
+                "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped}
+
+    todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v)) is None and not _run_finished(cfg, v)]
+    if cfg.parallel_train and len(todo) > 1 and not torch.cuda.is_available():
+        train_side_by_side(cfg, todo)
+    for variant in cfg.variants:
+        t = st.run(f"train_{variant}", train_in(variant), lambda v=variant: stage_train(cfg, v))
+        ckpt = {variant: Path(next(iter(t["outputs"])))}
+        e = st.run(f"export_{variant}", t["outputs"], lambda c=ckpt: stage_export(cfg, c))
+        q = st.run(f"quantize_{variant}", {"export": e["outputs"], "calib": cfg.calib_scenes},
+                   lambda c=ckpt: stage_quantize(cfg, c))
+        st.run(f"eval_{variant}", {"q": q["outputs"], "e": e["outputs"], "split": cfg.eval_split,
+                                   "limit": cfg.eval_limit, "runtimes": EVAL_RUNTIMES[variant]},
+               lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
+    if any(st.stamp(f"eval_{v}") is None for v in VARIANTS):
+        log.info("card: waiting for %s", [v for v in VARIANTS if st.stamp(f"eval_{v}") is None])
+        return None
+    st.force.add("card")  # always rewritten: cheap, and it records the command and the stamps
+    st.run("card", [st.stamp(f"eval_{v}")["outputs"] for v in VARIANTS], lambda: stage_card(cfg, st))
+    return json.loads((cfg.out / "model_card.json").read_text())
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.pipeline", description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--out", default="models", help="model folder (ONNX graphs, metrics, card)")
+    ap.add_argument("--data", help="dataset folder (default data/edge128; --quick: data/quick128)")
+    ap.add_argument("--runs", help="training runs folder (default runs/; --quick: OUT/runs)")
+    ap.add_argument("--quick", action="store_true", help="smoke test: tiny data, a few iterations")
+    ap.add_argument("--eval-limit", type=int, help="evaluate the first N held-out scenes only (0: all)")
+    ap.add_argument("--accept-stopped", action="store_true",
+                    help="use a training run that stopped at its max_minutes cap as it is (default: resume it)")
+    ap.add_argument("--force", action="append", default=[], choices=[*STAGES, *STAGE_KINDS],
+                    help="redo a stage (repeatable); a kind (export) means every variant's")
+    ap.add_argument("--variants", default=",".join(VARIANTS),
+                    help="variants to take through train/export/quantize/eval now (the card needs all)")
+    ap.add_argument("--threads", type=int, default=2, help="torch / onnxruntime threads for export and eval")
+    ap.add_argument("--sequential-train", action="store_true",
+                    help="train the variants one after the other with every core (default on CPU: side by side)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    out = Path(args.out)
+    cfg = PipelineConfig.quick_defaults(out) if args.quick else PipelineConfig(out=out)
+    if args.data:
+        cfg.data = Path(args.data)
+    if args.runs:
+        cfg.runs = Path(args.runs)
+    if args.eval_limit is not None:
+        cfg.eval_limit = args.eval_limit
+    cfg.force = tuple(args.force)
+    cfg.accept_stopped = args.accept_stopped
+    cfg.threads = args.threads
+    cfg.parallel_train = not args.sequential_train
+    cfg.variants = tuple(v for v in args.variants.split(",") if v)
+    bad = [v for v in cfg.variants if v not in VARIANTS]
+    if bad:
+        ap.error(f"--variants: unknown {bad}; variants: {list(VARIANTS)}")
+    cfg.train_overrides = [*cfg.train_overrides, *args.set]
+    cfg.command = shlex.join(["python", "-m", "training.pipeline", *(argv if argv is not None else sys.argv[1:])])
+    card = run(cfg)
+    if card is not None:
+        print(json.dumps(card["metrics"], indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
