@@ -143,18 +143,24 @@ class RoiConfig:
         volume_margin_m: metres added around the working volume for the cold-start ROI
             (training used 0).
         joint_margin_frac: tracked ROI: the joints' box grows by this fraction of its longer side
-            on every side (training drew 0.10-0.35).
+            on every side (training drew 0.10-0.35; with ``keep_frac`` the crop in use is often
+            larger; 0.15 measured best of 0.15 / 0.2 / 0.25 on the trained model, docs/runtime.md).
         min_size_px: smallest tracked ROI side, full-image pixels (training: 64).
         snap_px: tracked ROI corners and size are rounded to multiples of this (pixels), so a
             slowly moving subject reuses cached remap tables (measured on held-out sequences:
             23 % of crops reused at 1, 38 % at 4, 52 % at 8; a miss costs ~0.8 ms); 1 disables.
+        keep_frac: hysteresis: the previous pair's tracked ROI is kept while the new one lies
+            inside it and is at least ``1 - keep_frac`` of its size (the subject is still fully
+            in view, not much smaller), so crops are stable and remap tables are reused; 0
+            disables.
         map_cache_size: remap tables kept per camera (least recently used are dropped).
     """
 
     volume_margin_m: float = 0.0
-    joint_margin_frac: float = 0.25
+    joint_margin_frac: float = 0.15
     min_size_px: int = 64
     snap_px: int = 8
+    keep_frac: float = 0.2
     map_cache_size: int = 32
 
     def __post_init__(self) -> None:
@@ -162,6 +168,7 @@ class RoiConfig:
         _number(self, "joint_margin_frac", 0.0, 2.0)
         _integer(self, "min_size_px", 8, 4096)
         _integer(self, "snap_px", 1, 64)
+        _number(self, "keep_frac", 0.0, 0.9)
         _integer(self, "map_cache_size", 1, 4096)
 
 
@@ -258,10 +265,11 @@ class Joints3DConfig:
     """How 3D joints are made from the model outputs (:mod:`ghnerf_runtime.joints3d`).
 
     Attributes:
-        method: ``"triangulate"`` (DLT of both views' 2D peaks, per-joint reprojection check),
-            ``"volumetric"`` (the ``query`` graph on a grid in the subject box) or
-            ``"depth_centroid"`` (heatmap-weighted centroid of the rendered depth points around
-            each peak). Comparison: ``docs/runtime.md``.
+        method: ``"depth_centroid"`` (heatmap-weighted centroid of the rendered depth points
+            around each view's peak; the default: lowest MPJPE and cost on held-out sequences with
+            the trained model), ``"triangulate"`` (DLT of both views' 2D peaks, per-joint
+            reprojection check) or ``"volumetric"`` (the ``query`` graph on a grid in the subject
+            box). Comparison: ``docs/runtime.md``.
         single_view_fallback: triangulation: a joint that is not triangulated (seen in one view
             only, or the views disagree) takes the depth-centroid estimate instead, at half its
             confidence (off until measured on the trained model; docs/runtime.md).
@@ -280,7 +288,7 @@ class Joints3DConfig:
             (joints lie inside the body).
     """
 
-    method: str = "triangulate"
+    method: str = "depth_centroid"
     single_view_fallback: bool = False
     max_reprojection_px: float = 6.0
     min_view_confidence: float = 0.1

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import cv2
@@ -47,7 +47,7 @@ from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_to_box, query_grid, triangulate_joints, \
     volumetric_joints
-from ghnerf_runtime.keypoints import Keypoints2D, decode_keypoints, heatmap_to_model_pixels
+from ghnerf_runtime.keypoints import KeypointDecoderConfig, Keypoints2D, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton, heatmap_overlay, \
     interpolate_camera, novel_target, render_novel_view
 from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
@@ -209,6 +209,7 @@ class Estimator:
         self._volume_box = np.stack([rig.volume.min_corner, rig.volume.max_corner])
         self._sequence = 0
         self._rays_cache: dict[tuple, np.ndarray] = {}
+        self._decoders: dict[float, KeypointDecoderConfig] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
 
     @classmethod
@@ -239,6 +240,22 @@ class Estimator:
         else:
             state.cache.move_to_end(roi)
         return entry
+
+    def _decoder_for(self, block) -> KeypointDecoderConfig:
+        """The decoder config with ``max_region_frac`` taken of the *rendered* block, not the grid.
+
+        Outside the block the heatmaps are 0 (not rendered); a flooded map (a region covering a
+        large part of what was looked at) must stay "no peak" when fewer rays are rendered.
+        """
+        frac = block[2] * block[3] / float(self.grid * self.grid)
+        if frac >= 1.0:
+            return self.config.decoder
+        key = round(frac, 4)
+        cfg = self._decoders.get(key)
+        if cfg is None:
+            cfg = replace(self.config.decoder, max_region_frac=max(self.config.decoder.max_region_frac * frac, 1e-3))
+            self._decoders[key] = cfg
+        return cfg
 
     def _ray_uv(self, blocks: tuple, stride: int) -> np.ndarray:
         """``(2, R, 2)`` rays of the two views' blocks (cached: blocks recur while tracking)."""
@@ -365,7 +382,7 @@ class Estimator:
         t = time.perf_counter()
         heat = np.stack([scatter_block(out["heatmaps"][i], blocks[i], g, g) for i in range(2)])  # (2, g, g, J)
         heat = np.ascontiguousarray(heat.transpose(0, 3, 1, 2))  # (2, J, g, g)
-        kp = decode_keypoints(heat, cfg.decoder)
+        kp = decode_keypoints(heat, self._decoder_for(blocks[0]))
         uv_model = heatmap_to_model_pixels(kp.uv, g, S)
         joints_2d, conf_2d, missing_2d = {}, {}, {}
         for i, (st, crop) in enumerate(zip(self._cams, crops)):

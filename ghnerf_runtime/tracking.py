@@ -25,7 +25,8 @@ from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.preprocess import Roi, roi_from_joints, roi_from_volume
 
-__all__ = ["Track", "Regions", "SubjectTracker", "plan_regions", "snap_roi", "track_from_joints"]
+__all__ = ["Track", "Regions", "SubjectTracker", "keep_roi", "plan_regions", "snap_roi", "track_from_joints",
+           "volume_regions", "box_corners"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,9 +102,25 @@ def snap_roi(roi: Roi, step: int) -> Roi:
     return Roi(x0, y0, -(-size // step) * step)
 
 
-def plan_regions(rig: Rig, track: Track | None, roi_config: RoiConfig) -> Regions:
+def keep_roi(previous: Roi | None, new: Roi, keep_frac: float) -> Roi:
+    """``previous`` while ``new`` lies inside it and is at least ``1 - keep_frac`` of its size, else ``new``.
+
+    Example:
+        >>> keep_roi(Roi(0, 0, 100), Roi(10, 10, 85), 0.2), keep_roi(Roi(0, 0, 100), Roi(10, 10, 95), 0.2)
+        (Roi(x0=0, y0=0, size=100), Roi(x0=10, y0=10, size=95))
+    """
+    if previous is None or keep_frac <= 0:
+        return new
+    inside = (new.x0 >= previous.x0 and new.y0 >= previous.y0 and new.x0 + new.size <= previous.x0 + previous.size
+              and new.y0 + new.size <= previous.y0 + previous.size)
+    return previous if inside and new.size >= (1.0 - keep_frac) * previous.size else new
+
+
+def plan_regions(rig: Rig, track: Track | None, roi_config: RoiConfig,
+                 previous: tuple[Roi, ...] | None = None) -> Regions:
     """Crop windows for both source cameras and the sweep box: from the track when it gives a
-    crop in both cameras, else from the working volume.
+    crop in both cameras, else from the working volume. ``previous`` (the last tracked crops) are
+    kept while the new ones fit inside them (:func:`keep_roi`).
 
     Raises:
         GeometryError: the working volume is not visible in a camera (a rig file error).
@@ -111,12 +128,13 @@ def plan_regions(rig: Rig, track: Track | None, roi_config: RoiConfig) -> Region
     cams = rig.pair
     if track is not None:
         rois = []
-        for cam in cams:
+        for k, cam in enumerate(cams):
             roi = roi_from_joints(cam, track.joints, np.where(track.valid, 1.0, 0.0), roi_config.joint_margin_frac,
                                   roi_config.min_size_px, min_confidence=0.5, min_joints=3)
             if roi is None:
                 break
-            rois.append(snap_roi(roi, roi_config.snap_px))
+            roi = snap_roi(roi, roi_config.snap_px)
+            rois.append(keep_roi(previous[k] if previous else None, roi, roi_config.keep_frac))
         else:
             return Regions(tuple(rois), track.box.copy(), True)
     return volume_regions(rig, roi_config)
@@ -150,12 +168,16 @@ class SubjectTracker:
         self.roi_config = roi_config
         self.track: Track | None = None
         self._volume = volume_regions(rig, roi_config)
+        self._last_rois: tuple[Roi, ...] | None = None
         self.drops = 0
 
     def regions(self) -> Regions:
         if self.track is None or not self.config.enabled:
+            self._last_rois = None
             return self._volume
-        return plan_regions(self.rig, self.track, self.roi_config)
+        regions = plan_regions(self.rig, self.track, self.roi_config, self._last_rois)
+        self._last_rois = regions.rois if regions.tracked else None
+        return regions
 
     def update(self, joints: np.ndarray, confidence: np.ndarray, valid: np.ndarray, sequence: int = 0) -> bool:
         """Replace the track by this pair's joints; returns whether a track is held afterwards."""
@@ -168,6 +190,7 @@ class SubjectTracker:
     def reset(self) -> None:
         """Forget the subject (next pair starts from the working volume)."""
         self.track = None
+        self._last_rois = None
 
 
 def project_box(camera: Camera, box: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

@@ -66,7 +66,7 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     for seq in sequences:
         est = Estimator(estimator.session, seq.rig, estimator.config)
         for i in range(len(seq)):
-            images = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
+            images = (np.array(seq.images[i, 0]), np.array(seq.images[i, 1]))  # in RAM, as a driver delivers
             if oracle is not None:
                 oracle.set_truth(seq.joints_3d[i], seq.visible[i])
             if track_from_truth and i > 0:
@@ -103,13 +103,14 @@ def run_runtime_bench(args) -> dict:
     from ghnerf_runtime.cli.simdata import Accuracy, load_sequences
 
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
-    report = {"model_dir": args.model_dir, "pairs_per_run": sum(len(s) for s in sequences) - args.warmup,
+    report = {"model_dir": args.model_dir, "thread_pool": args.thread_pool, "allow_spinning": args.allow_spinning,
+              "pairs_per_run": sum(len(s) for s in sequences) - args.warmup,
               "sequences": [s.info for s in sequences], "method": args.method, "runs": [],
               "load_average_start": os.getloadavg(), "cpus": os.cpu_count()}
     for precision in args.precisions:
         cfg = EstimatorConfig(
             session=SessionConfig(model_dir=args.model_dir, precision=precision, threads=args.threads,
-                                  thread_pool=args.thread_pool),
+                                  thread_pool=args.thread_pool, allow_spinning=args.allow_spinning),
             joints3d=Joints3DConfig(method=args.method),
             novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
         session = ModelSession.load(cfg.session, cfg.required_graphs())
@@ -148,10 +149,11 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--frames", type=int, default=30, help="pairs per sequence (30 fps)")
     rt.add_argument("--precisions", default="fp32,int8,auto", type=lambda s: [p for p in s.split(",") if p])
     rt.add_argument("--modes", default="keypoints,novel", type=lambda s: [p for p in s.split(",") if p])
-    rt.add_argument("--method", default="triangulate", choices=THREE_D_METHODS)
+    rt.add_argument("--method", default=Joints3DConfig().method, choices=THREE_D_METHODS)
     rt.add_argument("--novel-stride", type=int, default=1, choices=(1, 2, 4))
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
+    rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")
     rt.add_argument("--warmup", type=int, default=10, help="pairs not counted at the start of each run")
     rt.add_argument("--track-from-truth", action="store_true",
                     help="place each crop from the previous pair's true joints (times the tracked path with an "

@@ -16,9 +16,12 @@ from ghnerf_runtime.config import EstimatorConfig, SessionConfig
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, models/model_card.json
 
-#: Measured on the held-out sequences below (see docs/runtime.md, "Accuracy"), with margins.
-#: None until the trained model's figures are recorded: then the test only checks sanity.
-THRESHOLDS = {"pck@0.2_min": None, "mpjpe_mm_max": None, "found_3d_min": None}
+#: Measured with exactly this test's sequences and defaults (depth_centroid) on the shipped model of
+#: 2026-11-21 (models/model_card.json "created" 2026-11-21T15:28:36, edge128, 8000 steps, ghnerf-eval
+#: PCK@0.2 0.318 on 256 val scenes): PCK@0.2 0.178, MPJPE 259 mm, 46 % of 3D joints found -- with
+#: margins (pairs are few: 40). Set a value to None to check sanity only. Re-measure when models/
+#: changes.
+THRESHOLDS = {"pck@0.2_min": 0.13, "mpjpe_mm_max": 350.0, "found_3d_min": 0.36}
 SEQUENCES, FRAMES = 4, 10
 
 pytestmark = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(),
