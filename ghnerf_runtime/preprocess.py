@@ -45,6 +45,7 @@ Pure functions; numpy and OpenCV only.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -145,9 +146,19 @@ def undistorted_image_bounds(camera: Camera, samples_per_side: int = 64) -> tupl
     return und.min(axis=0), und.max(axis=0)
 
 
+@functools.lru_cache(maxsize=32)
+def _cached_image_bounds(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    # Cameras are immutable (and hash by identity), so the footprint is computed once per camera
+    # instead of on every tracked pair: it undistorts 256 border points.
+    lo, hi = undistorted_image_bounds(camera)
+    lo.setflags(write=False)
+    hi.setflags(write=False)
+    return lo, hi
+
+
 def _square_roi(lo: np.ndarray, hi: np.ndarray, camera: Camera, min_size: int = 1) -> Roi:
     """Intersect the box ``[lo, hi]`` with the image footprint, then square it (see module doc)."""
-    img_lo, img_hi = undistorted_image_bounds(camera)
+    img_lo, img_hi = _cached_image_bounds(camera)
     lo, hi = np.maximum(lo, img_lo), np.minimum(hi, img_hi)
     if np.any(hi < lo):
         raise GeometryError(f"camera {camera.name!r}: the region {lo.tolist()}..{hi.tolist()} lies outside the image")

@@ -380,12 +380,23 @@ def save_checkpoint(path: Path, model, opt, step: int, cfg: TrainConfig, gen: to
     os.replace(tmp, path)
 
 
-def load_model(path: str | Path, map_location: str | torch.device = "cpu") -> tuple[GHNeRF, dict]:
-    """A trained model (eval mode) and its checkpoint dict from a ``.pt`` checkpoint."""
+def load_model(path: str | Path, map_location: str | torch.device = "cpu",
+               default_config: ModelConfig | None = None) -> tuple[GHNeRF, dict]:
+    """A trained model (eval mode) and its checkpoint dict from a ``.pt`` file.
+
+    Reads trainer checkpoints (which hold numpy RNG state, hence ``weights_only=False``: load only
+    files you made), the weights-only files ``make model`` ships, and bare state dicts; the model
+    config stored in the file wins, ``default_config`` serves files that carry none.
+    """
     ck = torch.load(str(path), map_location=map_location, weights_only=False)
-    mcfg = ModelConfig.from_dict(ck["model_config"])
+    if "model_config" in ck:
+        mcfg = ModelConfig.from_dict(ck["model_config"])
+    elif default_config is not None:
+        mcfg = default_config
+    else:
+        raise ValueError(f"{path}: no 'model_config' in the checkpoint; give default_config")
     model = GHNeRF(mcfg)
-    model.load_state_dict(ck["model"])
+    model.load_state_dict(ck.get("model", ck))
     return model.eval(), ck
 
 

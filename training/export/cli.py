@@ -71,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.export", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--preset", default="edge128", choices=sorted(PRESETS))
-    ap.add_argument("--checkpoint", help="state dict (.pt) of the model; default: random weights")
+    ap.add_argument("--checkpoint", help="trainer checkpoint or weights file (.pt); its stored model config "
+                    "overrides --preset; default: random weights")
     ap.add_argument("--out", required=True, help="output folder for <graph>.onnx / <graph>.int8.onnx")
     ap.add_argument("--graphs", default=",".join(GRAPH_NAMES))
     ap.add_argument("--opset", type=int, default=17)
@@ -86,10 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
 
-    model = GHNeRF(preset(args.preset)).eval()
     if args.checkpoint:
-        state = torch.load(args.checkpoint, map_location="cpu", weights_only=True)
-        model.load_state_dict(state.get("model", state))
+        from training.train import load_model  # lazy: the trainer is not needed for random weights
+
+        model, _ = load_model(args.checkpoint, default_config=preset(args.preset))
+    else:
+        model = GHNeRF(preset(args.preset)).eval()
     graphs = tuple(g for g in args.graphs.split(",") if g)
     out = Path(args.out)
     report: dict = {"preset": args.preset, "parameters": model.parameter_counts(),
