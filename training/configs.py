@@ -23,7 +23,7 @@ def tiny() -> ModelConfig:
     return ModelConfig(
         height=64, width=64,
         features=FeatureNetConfig(channels=(4, 8, 8)),
-        human=HumanEncoderConfig(num_layers=2, out_channels=8, out_stride=4),
+        human=HumanEncoderConfig(num_layers=2, out_channels=8, out_stride=4, aux_heatmaps=True),
         cost_volume=CostVolumeConfig(groups=4),
         levels=(
             LevelConfig(volume_stride=8, planes=8, samples=4, feature="feat_s4",
@@ -40,7 +40,7 @@ def edge128() -> ModelConfig:
     return ModelConfig(
         height=128, width=128,
         features=FeatureNetConfig(channels=(8, 16, 16), full_res_convs=1, full_res_smooth=False),
-        human=HumanEncoderConfig(num_layers=3, out_channels=16, out_stride=4, input_scale=0.5),
+        human=HumanEncoderConfig(num_layers=3, out_channels=32, out_stride=4, input_scale=0.5, aux_heatmaps=True),
         cost_volume=CostVolumeConfig(groups=8),
         levels=(
             LevelConfig(volume_stride=8, planes=16, samples=8, feature="feat_s4", range_scale=1.5,

@@ -32,6 +32,9 @@ class LossConfig(Config):
     """1 - SSIM over ray patches, the stand-in for GHNeRF's 0.01 l_perc (VGG). 0 disables."""
     coord_weight: float = 0.0
     """l_coord: MSE of g_co's regressed sample coordinates (metres); GHNeRF's optional 0.01."""
+    encoder_heat_weight: float = 0.0
+    """Auxiliary dense heatmap loss on the human encoder's training-only head (``aux_heatmaps``): the same
+    positive-weighted MSE against the source views' ground-truth heatmap grids. 0 disables."""
     level_weights: tuple[float, ...] = ()
     """Weight of each cascade level, coarse to fine (empty: 1.0 each)."""
     ssim_window: int = 7
@@ -57,7 +60,8 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
     Args:
         outputs: :meth:`GHNeRF.forward` output (``{"levels": [...]}``).
         batch: ``rgb`` ``(B, R, 3)`` target colour (subject over the model's background), ``heatmaps``
-            ``(B, R, J)`` Gaussian ground-truth heatmaps of the same rays.
+            ``(B, R, J)`` Gaussian ground-truth heatmaps of the same rays; optional ``source_heatmaps``
+            ``(S, J, h, w)`` ground-truth grids of the source views (for ``encoder_heat_weight``).
         patch_shape: ``(h, w)`` with ``h * w == R`` when the rays of each target form a row-major patch
             (enables the SSIM term).
 
@@ -93,6 +97,13 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
             terms[f"l{i}_coord"] = F.mse_loss(out["coord"], out["points"].detach())
             level_total = level_total + config.coord_weight * terms[f"l{i}_coord"]
         total = total + lw * level_total
+    if config.encoder_heat_weight and "encoder_heatmaps" in outputs and "source_heatmaps" in batch:
+        pred, target = outputs["encoder_heatmaps"], batch["source_heatmaps"]
+        if pred.shape != target.shape:
+            raise ValueError(f"encoder heatmaps {tuple(pred.shape)} do not match the targets {tuple(target.shape)}")
+        weight = 1.0 + config.heat_positive_weight * target
+        terms["enc_heat"] = (weight * (pred - target) ** 2).mean()
+        total = total + config.encoder_heat_weight * terms["enc_heat"]
     terms["loss"] = total
     return terms
 

@@ -80,6 +80,8 @@ class TrainConfig(Config):
     """Multiply the learning rate by ``lr_decay_gamma`` every this many steps (0: constant)."""
     lr_decay_gamma: float = 0.5
     """Step decay factor."""
+    lr_min: float = 0.0
+    """Floor of the decayed learning rate (a longer schedule then extends a shorter one unchanged)."""
     grad_clip: float = 0.0
     """Clip the global gradient norm (0: off)."""
     loss: LossConfig = field(default_factory=LossConfig)
@@ -123,6 +125,8 @@ class TrainConfig(Config):
             fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
         if self.grad_clip < 0 or self.max_minutes < 0:
             fail("grad_clip" if self.grad_clip < 0 else "max_minutes", "must be >= 0")
+        if not (self.lr_min >= 0 and math.isfinite(self.lr_min)):
+            fail("lr_min", f"must be a finite number >= 0, got {self.lr_min}")
         for f in fields(LossConfig):
             v = getattr(self.loss, f.name)
             if isinstance(v, float) and (v < 0 or not math.isfinite(v)):
@@ -320,13 +324,22 @@ def make_batch(item: dict, cfg: TrainConfig, mcfg: ModelConfig, gen: torch.Gener
     scale = H / mcfg.height  # dataset at model resolution; guard anyway
     if scale != 1:
         raise ValueError(f"dataset resolution {H} does not match the model's {mcfg.height}")
-    return {
+    batch = {
         "images": item["images"], "src_P": item["src_P"], "src_centers": item["src_centers"],
         "tgt_K_inv": item["tgt_K_inv"][t], "tgt_c2w": item["tgt_c2w"][t], "near_far": item["near_far"][t],
         "ray_uv": uv, "rgb": bilinear_at(comp, uv),
         "heatmaps": heatmaps_at(item["tgt_joints_2d"][t], item["tgt_visible"][t], uv, HEATMAP_SIGMA_HM_PX * stride),
         "targets": t,
     }
+    if "tgt_heatmaps" in item:  # dense grids of the source views (the images the encoder saw): auxiliary head
+        batch["source_heatmaps"] = item["tgt_heatmaps"][item["tgt_is_source"]]
+    return batch
+
+
+def learning_rate(cfg: TrainConfig, step: int) -> float:
+    """Step decay by ``lr_decay_gamma`` every ``lr_decay_every`` steps, floored at ``lr_min``."""
+    lr = cfg.lr * (cfg.lr_decay_gamma ** (step // cfg.lr_decay_every) if cfg.lr_decay_every else 1.0)
+    return max(lr, min(cfg.lr_min, cfg.lr))
 
 
 # -------------------------------------------------------------------------------------------- losses
@@ -515,7 +528,8 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     ddp_model: torch.nn.Module = model
     if info.world > 1:
         from torch.nn.parallel import DistributedDataParallel as DDP
-        find_unused = bool(mcfg.heads.coord_head and not cfg.loss.coord_weight)
+        find_unused = bool((mcfg.heads.coord_head and not cfg.loss.coord_weight)
+                           or (mcfg.use_human_encoder and mcfg.human.aux_heatmaps and not cfg.loss.encoder_heat_weight))
         ddp_model = DDP(model, device_ids=[device.index] if device.type == "cuda" else None,
                         find_unused_parameters=find_unused)
 
@@ -548,7 +562,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
             item = ds[idx]
             batch = make_batch(item, cfg, mcfg, gen)
             batch = {k: v.to(device) for k, v in batch.items()}
-            lr = cfg.lr * (cfg.lr_decay_gamma ** (step // cfg.lr_decay_every) if cfg.lr_decay_every else 1.0)
+            lr = learning_rate(cfg, step)
             for g in opt.param_groups:
                 g["lr"] = lr
             out = ddp_model(batch["images"], batch["src_P"], batch["src_centers"], batch["tgt_K_inv"],

@@ -351,7 +351,8 @@ class GHNeRF(nn.Module):
                 near_far: Tensor, ray_uv: Tensor, perturb: bool = True, colour: bool = True) -> dict:
         """Training forward: render ``ray_uv`` ``(B, R, 2)`` at every level.
 
-        Returns ``{"levels": [render outputs per level, coarse to fine], "volumes": [...]}``.
+        Returns ``{"levels": [render outputs per level, coarse to fine], "volumes": [...]}`` and, with
+        ``human.aux_heatmaps``, ``encoder_heatmaps`` ``(S, J, H / out_stride, W / out_stride)`` of the sources.
         """
         enc = self.encode(images)
         vols = self.volumes(enc, src_P, tgt_K_inv, tgt_c2w, near_far)
@@ -361,7 +362,10 @@ class GHNeRF(nn.Module):
                         src_centers=src_centers if colour else None, perturb=perturb, coord=coord)
             for i, v in enumerate(vols)
         ]
-        return {"levels": levels, "volumes": vols}
+        out = {"levels": levels, "volumes": vols}
+        if self.human is not None and self.human.heat_head is not None:
+            out["encoder_heatmaps"] = self.human.heatmaps(enc["human_feat"])  # (S, J, h, w), sources only
+        return out
 
     # -------------------------------------------------------------------- misc
     def parameter_counts(self) -> dict[str, int]:

@@ -46,6 +46,11 @@ class HumanEncoderConfig(Config):
     anyway). ``out_stride`` stays relative to the model input."""
     init: str | None = None
     """Path of a torchvision-format resnet18 state dict (ImageNet weights), or None for scratch."""
+    aux_heatmaps: bool = False
+    """Build a training-only 1x1 head ``human_feat -> 25`` joint heatmaps in the source image itself,
+    supervised densely (every cell of both source views, every step) by ``LossConfig.encoder_heat_weight``.
+    The rendered heatmaps reach the encoder through a few hundred rays per step; this dense signal teaches
+    it "where is joint j in this image" far sooner (deep supervision). Not exported: the runtime renders."""
 
 
 class BasicBlock(nn.Module):
@@ -153,6 +158,7 @@ class HumanEncoder(nn.Module):
         self.proj = nn.ModuleDict({
             name: nn.Conv2d(TRUNK_LEVELS[name][0], config.out_channels, 1) for name in self.trunk.level_names
         })
+        self.heat_head = nn.Conv2d(config.out_channels, 25, 1) if config.aux_heatmaps else None
         if config.init:
             load_torchvision_resnet18(self.trunk, config.init)
 
@@ -175,6 +181,13 @@ class HumanEncoder(nn.Module):
                 p = F.interpolate(p, size=size, mode="bilinear", align_corners=False)
             out = p if out is None else out + p
         return out
+
+
+    def heatmaps(self, human_feat: Tensor) -> Tensor:
+        """Training-only joint heatmaps ``(S, 25, H / out_stride, W / out_stride)`` in [0, 1] from ``human_feat``."""
+        if self.heat_head is None:
+            raise RuntimeError("the auxiliary heatmap head is off (HumanEncoderConfig.aux_heatmaps=False)")
+        return torch.sigmoid(self.heat_head(human_feat))
 
 
 HumanEncoderConfig._target = HumanEncoder
