@@ -310,6 +310,29 @@ class Joints3DConfig:
         _number(self, "surface_offset_m", -0.5, 0.5)
 
 
+HEATMAP_SOURCES = ("rendered", "encoder")
+
+
+@dataclass(frozen=True)
+class HeatmapsConfig:
+    """Where the source views' joint heatmaps come from.
+
+    Attributes:
+        source: ``"rendered"`` (GHNeRF: volume-rendered by ``render_heat`` from the cost volume,
+            the human features and the heads; the ``volume`` and ``render_heat`` graphs run every
+            pair) or ``"encoder"`` (the human encoder's own 2D heatmaps, an output of the
+            ``encoder`` graph of models exported with ``encoder_heatmaps``; ``volume`` and
+            ``render_heat`` then run only where the 3D method needs them: ``depth_centroid`` and
+            the single-view fallback read the rendered depth, ``volumetric`` the volume). The
+            speed/accuracy trade of the two is measured in docs/runtime.md.
+    """
+
+    source: str = "rendered"
+
+    def __post_init__(self) -> None:
+        _choice(self, "source", HEATMAP_SOURCES)
+
+
 @dataclass(frozen=True)
 class NovelViewConfig:
     """Novel-view rendering (:mod:`ghnerf_runtime.novel_view`).
@@ -352,6 +375,7 @@ class EstimatorConfig:
     frame_check: FrameCheckConfig = field(default_factory=FrameCheckConfig)
     rays: RaysConfig = field(default_factory=RaysConfig)
     decoder: KeypointDecoderConfig = field(default_factory=KeypointDecoderConfig)
+    heatmaps: HeatmapsConfig = field(default_factory=HeatmapsConfig)
     joints3d: Joints3DConfig = field(default_factory=Joints3DConfig)
     novel_view: NovelViewConfig = field(default_factory=NovelViewConfig)
 
@@ -363,12 +387,24 @@ class EstimatorConfig:
 
     def required_graphs(self) -> tuple[str, ...]:
         """The graphs this configuration runs (the session loads only these)."""
-        graphs = ["encoder", "volume", "render_heat"]
+        graphs = ["encoder"]
+        if self.renders_source_heatmaps:
+            graphs += ["volume", "render_heat"]
+        elif self.joints3d.method == "volumetric" or self.novel_view.enabled:
+            graphs.append("volume")
         if self.joints3d.method == "volumetric":
             graphs.append("query")
         if self.novel_view.enabled:
             graphs.append("render" if self.novel_view.heatmaps else "render_rgb")
         return tuple(graphs)
+
+    @property
+    def renders_source_heatmaps(self) -> bool:
+        """Whether each pair runs ``volume`` + ``render_heat`` in the source views: for the heatmaps
+        themselves, or for the rendered depth the 3D method reads."""
+        j = self.joints3d
+        return (self.heatmaps.source == "rendered" or j.method == "depth_centroid"
+                or (j.method == "triangulate" and j.single_view_fallback))
 
 
 # ------------------------------------------------------------------ dict I/O

@@ -52,7 +52,8 @@ from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.errors import RuntimeErrorBase
 
 #: Contract format version. A different *major* is refused by :meth:`ModelContract.from_metadata`.
-CONTRACT_VERSION = "1.0.0"
+CONTRACT_VERSION = "1.1.0"
+"""1.1.0: optional ``encoder_heatmaps`` output of the encoder graph (1.0.0 files read as without it)."""
 #: Prefix of every metadata key the contract writes.
 META_PREFIX = "ghnerf."
 #: Graph names in pipeline order.
@@ -204,6 +205,10 @@ class ModelContract:
     version: str = CONTRACT_VERSION
     model_version: str = "0.1.0"
     graphs: tuple[GraphSpec, ...] = ()
+    encoder_heatmaps: bool = False
+    """The encoder graph also outputs ``encoder_heatmaps`` ``(S, 25, H / s, W / s)`` (``s`` the
+    ``human_feat`` stride): the human encoder's own 2D joint heatmaps of each source image (the
+    training-time auxiliary head). A cheaper heatmap source than rendering (docs/runtime.md)."""
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -260,8 +265,11 @@ class ModelContract:
         heat = TensorSpec("heatmaps", ("B", "R", J), doc="volume-rendered joint heatmaps, BODY_25 order")
         depth = TensorSpec("depth", ("B", "R"), doc="expected camera depth of each ray (metres)")
         acc = TensorSpec("acc", ("B", "R"), doc="accumulated opacity of each ray")
+        enc_heat = ([TensorSpec("encoder_heatmaps", (S, J, *self._size("human_feat")),
+                                doc="the human encoder's 2D joint heatmaps of each source (sigmoid), BODY_25 order")]
+                    if self.encoder_heatmaps and self.has_human else [])
         return (
-            GraphSpec("encoder", (images,), (*feats, *human)),
+            GraphSpec("encoder", (images,), (*feats, *human, *enc_heat)),
             GraphSpec("volume", (*[f for f in feats if f.name in used_feats], src_P, tgt_K_inv, tgt_c2w, near_far),
                       (volume, stats)),
             GraphSpec("render", (*per_sample_in, src_centers, tgt_K_inv, tgt_c2w, ray_uv), (rgb, heat, depth, acc)),
@@ -313,6 +321,8 @@ class ModelContract:
             fail("render_feature", f"unknown render feature {self.render_feature!r}")
         if self.heatmap_stride < 1 or self.height % self.heatmap_stride or self.width % self.heatmap_stride:
             fail("heatmap_stride", f"heatmap stride {self.heatmap_stride} must divide {self.width}x{self.height}")
+        if self.encoder_heatmaps and not self.has_human:
+            fail("encoder_heatmaps", "encoder heatmaps need the human encoder (variant 'ghnerf')")
 
     # --------------------------------------------------------------- metadata
     def to_metadata(self, graph: str | None = None, precision: str = "fp32") -> dict[str, str]:
@@ -335,6 +345,7 @@ class ModelContract:
             p + "opset": str(self.opset),
             p + "graphs": json.dumps([g.to_json() for g in self.graphs]),
             p + "precision": precision,
+            p + "encoder_heatmaps": "true" if self.encoder_heatmaps else "false",
         }
         if graph is not None:
             if graph not in GRAPH_NAMES:
@@ -407,6 +418,8 @@ class ModelContract:
             version=version,
             model_version=get("model_version"),
             graphs=parse("graphs", graphs),
+            # optional since 1.1.0; absent in 1.0.0 files
+            encoder_heatmaps=parse("encoder_heatmaps", _boolean) if p + "encoder_heatmaps" in props else False,
         )
         contract.validate()
         expected = contract._derive_graphs()
@@ -443,11 +456,22 @@ class ModelContract:
                 if t.name not in actual:
                     raise ContractError(f"graph {graph!r} lacks {kind} {t.name!r}", key=t.name)
                 shape = tuple(actual[t.name])
+                # An input dimension the contract fixes must be that number in the file too (a symbolic one
+                # means the graph was exported for other shapes than the contract promises). Outputs may be
+                # symbolic: the exporter's shape inference leaves some names where the value is fixed.
+                strict = kind == "input"
                 if len(shape) != len(t.shape) or any(
-                    isinstance(e, int) and isinstance(a, int) and a != e for e, a in zip(t.shape, shape)
+                    isinstance(e, int) and (a != e if strict or isinstance(a, int) else False)
+                    for e, a in zip(t.shape, shape)
                 ):
                     raise ContractError(f"graph {graph!r} {kind} shape {list(shape)} != contract {list(t.shape)}",
                                         key=t.name)
+
+
+def _boolean(raw: str) -> bool:
+    if raw not in ("true", "false"):
+        raise ValueError("expected 'true' or 'false'")
+    return raw == "true"
 
 
 # ----------------------------------------------------------------- camera inputs

@@ -13,7 +13,9 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    targets), between near/far of the subject box (the working volume when cold).
 4. ``render_heat`` -- joint heatmaps of each source view on the heatmap grid, rendered only on
    the rays covering the projected subject box (tracked) or the whole crop (cold); the colour
-   branch is never computed here.
+   branch is never computed here. With ``heatmaps.source = "encoder"`` the heatmaps are the
+   encoder graph's own 2D output instead, and stages 3-4 run only when the 3D method needs the
+   rendered depth (``depth_centroid``) or the volume (``volumetric``).
 5. ``decode_2d`` -- OpenPose-style peaks with subpixel refinement and peak-value confidence
    (:func:`ghnerf_runtime.keypoints.decode_keypoints`), mapped back to the original
    (distorted) image pixels.
@@ -203,6 +205,14 @@ class Estimator:
                              f"{self.contract.height}")
         self.size = self.contract.height
         self.grid = self.size // self.contract.heatmap_stride
+        if self.config.heatmaps.source == "encoder":
+            if not getattr(self.contract, "encoder_heatmaps", False):
+                raise ModelError("heatmaps.source = 'encoder' needs a model exported with encoder heatmaps (the human "
+                                 "encoder's auxiliary head; contract key ghnerf.encoder_heatmaps); this one has none: "
+                                 "use heatmaps.source = 'rendered'")
+            if self.contract.strides.get("human_feat") != self.contract.heatmap_stride:
+                raise ModelError(f"encoder heatmaps at stride {self.contract.strides.get('human_feat')} do not match "
+                                 f"the heatmap grid's stride {self.contract.heatmap_stride}")
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi)
         self._cams = [_CameraState(c) for c in rig.pair]
         self._levels = _levels_per_unit(self.contract.normalisation)
@@ -364,25 +374,31 @@ class Estimator:
         t = time.perf_counter()
         env.update(self.session.run("encoder", env))
         add("encoder", t)
-        t = time.perf_counter()
-        env.update(self.session.run("volume", env))
-        add("volume", t)
-        t = time.perf_counter()
         stride, g = self.contract.heatmap_stride, self.grid
-        if cfg.rays.restrict_to_subject and regions.tracked:
-            blocks = common_blocks([box_block(c, regions.box, stride, cfg.rays.margin_cells) for c in crops], g, g,
-                                   cfg.rays.align_cells)
-        else:
-            blocks = [full_block(g, g)] * 2
-        env["ray_uv"] = self._ray_uv(tuple(blocks), stride)
-        out = self.session.run("render_heat", env)
-        add("render_heat", t)
+        blocks = [full_block(g, g)] * 2
+        out: dict[str, np.ndarray] = {}
+        if cfg.renders_source_heatmaps or cfg.joints3d.method == "volumetric":
+            t = time.perf_counter()
+            env.update(self.session.run("volume", env))
+            add("volume", t)
+        if cfg.renders_source_heatmaps:
+            t = time.perf_counter()
+            if cfg.rays.restrict_to_subject and regions.tracked:
+                blocks = common_blocks([box_block(c, regions.box, stride, cfg.rays.margin_cells) for c in crops],
+                                       g, g, cfg.rays.align_cells)
+            env["ray_uv"] = self._ray_uv(tuple(blocks), stride)
+            out = self.session.run("render_heat", env)
+            add("render_heat", t)
 
         # 5. decode 2D
         t = time.perf_counter()
-        heat = np.stack([scatter_block(out["heatmaps"][i], blocks[i], g, g) for i in range(2)])  # (2, g, g, J)
-        heat = np.ascontiguousarray(heat.transpose(0, 3, 1, 2))  # (2, J, g, g)
-        kp = decode_keypoints(heat, self._decoder_for(blocks[0]))
+        if cfg.heatmaps.source == "encoder":
+            heat = np.ascontiguousarray(env["encoder_heatmaps"], dtype=np.float32)  # (2, J, g, g), whole crop
+            kp = decode_keypoints(heat, cfg.decoder)
+        else:
+            heat = np.stack([scatter_block(out["heatmaps"][i], blocks[i], g, g) for i in range(2)])  # (2, g, g, J)
+            heat = np.ascontiguousarray(heat.transpose(0, 3, 1, 2))  # (2, J, g, g)
+            kp = decode_keypoints(heat, self._decoder_for(blocks[0]))
         uv_model = heatmap_to_model_pixels(kp.uv, g, S)
         joints_2d, conf_2d, missing_2d = {}, {}, {}
         for i, (st, crop) in enumerate(zip(self._cams, crops)):

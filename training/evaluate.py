@@ -22,6 +22,9 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
   - 3D joints: ``geometry.triangulate_dlt`` of the decoded joints of both sources with the crop
     projection matrices ``src_P``; ``mpjpe`` (mm, rig frame) against ``joints_3d``; joints that
     cannot be triangulated (not decoded in both views) are excluded and counted (``mpjpe_pred_missing``).
+* **Encoder heatmaps** (models with the human encoder's auxiliary head): its 2D heatmaps of the two
+  sources, decoded and triangulated exactly as above (``encoder_heatmaps_pck@0.2``,
+  ``encoder_heatmaps_mpjpe_mm``): the cheap heatmap source of the runtime.
 * **Novel views** (targets 2..V-1): the full-resolution image (graph ``render_rgb``), ``masked_psnr`` and
   ``masked_ssim`` inside the subject mask against the target composited over the model background.
 
@@ -66,6 +69,9 @@ class Renderer(Protocol):
     def colour(self, scene: Mapping[str, np.ndarray], targets: np.ndarray, ray_uv: np.ndarray) -> np.ndarray:
         """``(T, R, 3)`` colour."""
 
+    def encoder_heatmaps(self, scene: Mapping[str, np.ndarray]) -> np.ndarray | None:
+        """``(S, J, h, w)`` the human encoder's own 2D heatmaps of the sources, or None (no such head)."""
+
 
 def _cams(scene: Mapping[str, np.ndarray], targets: np.ndarray, ray_uv: np.ndarray) -> dict[str, np.ndarray]:
     T = len(targets)
@@ -107,6 +113,11 @@ class TorchRenderer:
     def colour(self, scene, targets, ray_uv):
         return self._render(scene, targets, ray_uv, heat=False).numpy()
 
+    @torch.no_grad()
+    def encoder_heatmaps(self, scene):
+        enc = self.model.encode(torch.from_numpy(np.asarray(scene["images"])).to(self.device))
+        return enc["encoder_heatmaps"].cpu().numpy() if "encoder_heatmaps" in enc else None
+
 
 class OnnxRenderer:
     """Exported graphs through onnxruntime (``training.export.parity.run_pipeline``)."""
@@ -137,6 +148,12 @@ class OnnxRenderer:
 
     def heatmaps(self, scene, targets, ray_uv):
         return self._run(scene, targets, ray_uv, "render_heat")["heatmaps"]
+
+    def encoder_heatmaps(self, scene):
+        if not self.contract.encoder_heatmaps:
+            return None
+        images = np.ascontiguousarray(scene["images"], dtype=np.float32)
+        return self.sessions["encoder"].run(["encoder_heatmaps"], {"images": images})[0]
 
     def colour(self, scene, targets, ray_uv):
         return self._run(scene, targets, ray_uv, "render_rgb")["rgb"]
@@ -178,6 +195,10 @@ class Accumulator:
     mpjpe_joints: int = 0
     mpjpe_missing: int = 0
     mpjpe_pred_missing: int = 0
+    enc_pck_correct: int = 0
+    enc_pck_evaluated: int = 0
+    enc_mpjpe_sum_mm: float = 0.0
+    enc_mpjpe_joints: int = 0
     heat_mse: list[float] = field(default_factory=list)
     psnr: list[float] = field(default_factory=list)
     ssim: list[float] = field(default_factory=list)
@@ -195,6 +216,12 @@ class Accumulator:
         self.mpjpe_missing += e.num_missing
         self.mpjpe_pred_missing += e.num_pred_missing
         self.heat_mse.append(hm.value)
+        if m.get("encoder_pck") is not None:
+            ep, ee = m["encoder_pck"], m["encoder_mpjpe"]
+            self.enc_pck_correct += ep.num_correct
+            self.enc_pck_evaluated += ep.num_evaluated
+            self.enc_mpjpe_sum_mm += float(ee.errors[ee.evaluated].sum())
+            self.enc_mpjpe_joints += ee.num_evaluated
         if m.get("psnr") is not None:
             # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
             self.psnr.extend(float(v) for v in np.ravel(m["psnr"].per_image) if not np.isnan(v))
@@ -215,18 +242,25 @@ class Accumulator:
             "mpjpe_pred_missing": self.mpjpe_pred_missing,
             "heatmap_mse": mean(self.heat_mse),
             "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
+            # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way
+            "encoder_heatmaps_pck@0.2": (self.enc_pck_correct / self.enc_pck_evaluated
+                                         if self.enc_pck_evaluated else None),
+            "encoder_heatmaps_mpjpe_mm": (self.enc_mpjpe_sum_mm / self.enc_mpjpe_joints
+                                          if self.enc_mpjpe_joints else None),
         }
 
 
 def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, novel_rgb: np.ndarray | None,
                   novel_targets: np.ndarray, background: float = 0.0,
-                  decoder: KeypointDecoderConfig | None = None) -> dict:
+                  decoder: KeypointDecoderConfig | None = None, encoder_heatmaps: np.ndarray | None = None) -> dict:
     """Metrics of one scene from rendered outputs (pure; the tests feed it known answers).
 
     Args:
         scene: numpy ``MultiViewDataset`` item.
         source_heatmaps: ``(2, J, h, w)`` heatmaps rendered in the two source views (targets 0, 1).
         novel_rgb: ``(T, 3, H, W)`` colour rendered in the views ``novel_targets`` (or None).
+        encoder_heatmaps: ``(2, J, h, w)`` the human encoder's 2D heatmaps of the sources (or None): scored
+            like the rendered ones (``encoder_pck``, ``encoder_mpjpe``).
     """
     S = source_heatmaps.shape[0]
     H = scene["tgt_images"].shape[-1]
@@ -239,6 +273,13 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
     tri = triangulate_dlt(uv, np.asarray(scene["src_P"], np.float64))
     out["mpjpe"] = mpjpe(tri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=tri.valid)
     out["keypoints_2d"], out["joints_3d"] = uv, np.where(tri.valid[:, None], tri.points, np.nan)
+    out["encoder_pck"] = out["encoder_mpjpe"] = None
+    if encoder_heatmaps is not None:
+        euv = keypoints_from_heatmaps(encoder_heatmaps, H, decoder)
+        out["encoder_pck"] = pck(np.nan_to_num(euv), scene["tgt_joints_2d"][:S], scene["tgt_visible"][:S],
+                                 alpha=PCK_ALPHA, pred_valid=np.isfinite(euv).all(-1))
+        etri = triangulate_dlt(euv, np.asarray(scene["src_P"], np.float64))
+        out["encoder_mpjpe"] = mpjpe(etri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=etri.valid)
     out["psnr"] = out["ssim"] = None
     if novel_rgb is not None and len(novel_targets):
         img = scene["tgt_images"][novel_targets]
@@ -267,7 +308,8 @@ def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, pr
         rgb = None
         if novel and len(nov):
             rgb = renderer.colour(scene, nov, grid_1).reshape(len(nov), H, W, 3).transpose(0, 3, 1, 2)
-        acc.add(scene_metrics(scene, hm, rgb, nov, renderer.background))
+        enc_hm = renderer.encoder_heatmaps(scene) if hasattr(renderer, "encoder_heatmaps") else None
+        acc.add(scene_metrics(scene, hm, rgb, nov, renderer.background, encoder_heatmaps=enc_hm))
         if progress and (i + 1) % 32 == 0:
             print(f"  eval {i + 1}/{n} {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
     res = acc.result()

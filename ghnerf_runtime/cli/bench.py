@@ -18,6 +18,7 @@ This module is a tool, not the runtime library: it imports ``drivers`` (through
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import logging
 import os
@@ -26,7 +27,8 @@ import time
 
 import numpy as np
 
-from ghnerf_runtime.config import THREE_D_METHODS, EstimatorConfig, Joints3DConfig, NovelViewConfig, SessionConfig
+from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, Joints3DConfig, \
+    NovelViewConfig, SessionConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
 from ghnerf_runtime.novel_view import NovelViewRequest
@@ -107,11 +109,12 @@ def run_runtime_bench(args) -> dict:
               "pairs_per_run": sum(len(s) for s in sequences) - args.warmup,
               "sequences": [s.info for s in sequences], "method": args.method, "runs": [],
               "load_average_start": os.getloadavg(), "cpus": os.cpu_count()}
-    for precision in args.precisions:
+    for precision, source in itertools.product(args.precisions, args.heatmap_sources):
         cfg = EstimatorConfig(
             session=SessionConfig(model_dir=args.model_dir, precision=precision, threads=args.threads,
                                   thread_pool=args.thread_pool, allow_spinning=args.allow_spinning),
-            joints3d=Joints3DConfig(method=args.method),
+            heatmaps=HeatmapsConfig(source=source),
+            joints3d=Joints3DConfig(method=args.method or _default_method(source)),
             novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
         session = ModelSession.load(cfg.session, cfg.required_graphs())
         report["model"] = session.describe()
@@ -121,6 +124,7 @@ def run_runtime_bench(args) -> dict:
             stages, wall = run_pairs(est, sequences, novel=(mode == "novel"), warmup=args.warmup, accuracy=acc,
                                      track_from_truth=args.track_from_truth)
             row = {"precision": precision, "mode": "keypoints" if mode == "keypoints" else "keypoints+novel",
+                   "heatmaps": source, "method": cfg.joints3d.method,
                    "track_from_truth": args.track_from_truth,
                    "files": {g: f.precision for g, f in session.files.items()}, **_row(stages, wall),
                    "accuracy": acc.summary(), "load_average": os.getloadavg()[0]}
@@ -129,12 +133,19 @@ def run_runtime_bench(args) -> dict:
     return report
 
 
+def _default_method(source: str) -> str:
+    """The 3D method of each heatmap source unless ``--method`` is given: the encoder source exists to
+    skip the volume and rendering, which ``triangulate`` allows; the rendered one keeps the default."""
+    return "triangulate" if source == "encoder" else Joints3DConfig().method
+
+
 def _print_row(row: dict) -> None:
     cols = " ".join(f"{name.split(' ')[0]} {row[name]['median']:.2f}/{row[name]['p99']:.2f}"
                     for name in STAGE_GROUPS)
     tracked = " (tracked from truth)" if row.get("track_from_truth") else ""
     acc = row["accuracy"]
-    print(f"{row['precision']:>4} {row['mode'] + tracked:<16} ms median/p99: {cols} | "
+    print(f"{row['precision']:>4} {row['heatmaps']:>8}/{row['method']:<14} {row['mode'] + tracked:<16} "
+          f"ms median/p99: {cols} | "
           f"{row['pairs_per_s']:.1f} pairs/s | "
           f"PCK@0.2 {acc.get('pck@0.2', float('nan')):.3f} MPJPE {acc.get('mpjpe_mm', float('nan')):.1f} mm "
           f"(3D found {acc.get('found_3d_frac', float('nan')):.2f}) | load {row['load_average']:.2f}", flush=True)
@@ -149,7 +160,10 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--frames", type=int, default=30, help="pairs per sequence (30 fps)")
     rt.add_argument("--precisions", default="fp32,int8,auto", type=lambda s: [p for p in s.split(",") if p])
     rt.add_argument("--modes", default="keypoints,novel", type=lambda s: [p for p in s.split(",") if p])
-    rt.add_argument("--method", default=Joints3DConfig().method, choices=THREE_D_METHODS)
+    rt.add_argument("--method", choices=THREE_D_METHODS,
+                    help="3D method (default: depth_centroid with rendered heatmaps, triangulate with encoder ones)")
+    rt.add_argument("--heatmap-sources", default="rendered",
+                    type=lambda s: [p for p in s.split(",") if p], help="comma list of rendered,encoder")
     rt.add_argument("--novel-stride", type=int, default=1, choices=(1, 2, 4))
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
@@ -182,6 +196,9 @@ def main(argv: list[str] | None = None) -> int:
             paths = write_sim_example(args.out, seed=args.seed, motion=args.motion, t=args.t, frames=args.frames)
             print(json.dumps(paths, indent=2))
             return 0
+        if any(h not in HEATMAP_SOURCES for h in args.heatmap_sources):
+            print(f"ghnerf-bench: error: heatmap sources are {','.join(HEATMAP_SOURCES)}", file=sys.stderr)
+            return 2
         bad = [p for p in args.precisions if p not in ("fp32", "int8", "auto")]
         if bad or any(m not in ("keypoints", "novel") for m in args.modes):
             print("ghnerf-bench: error: precisions are fp32,int8,auto and modes keypoints,novel", file=sys.stderr)

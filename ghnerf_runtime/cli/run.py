@@ -30,7 +30,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from ghnerf_runtime.config import THREE_D_METHODS, EstimatorConfig, config_to_dict, load_config
+from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, config_to_dict, load_config
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
@@ -58,6 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--model-dir", help="model folder (default: the config's, else ./models)")
     ap.add_argument("--precision", choices=("auto", "fp32", "int8"), help="graph file precision")
     ap.add_argument("--method", choices=THREE_D_METHODS, help="3D joint method")
+    ap.add_argument("--heatmap-source", choices=HEATMAP_SOURCES,
+                    help="rendered (GHNeRF render_heat) or encoder (the encoder's 2D heatmaps; faster)")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, default=0.5, help="novel camera between the rig cameras: 0 = first, "
@@ -83,6 +85,8 @@ def _config(args) -> EstimatorConfig:
     cfg = replace(cfg, session=session)
     if args.method:
         cfg = replace(cfg, joints3d=replace(cfg.joints3d, method=args.method))
+    if args.heatmap_source:
+        cfg = replace(cfg, heatmaps=replace(cfg.heatmaps, source=args.heatmap_source))
     if args.novel_view:
         nv = replace(cfg.novel_view, enabled=True, heatmaps=cfg.novel_view.heatmaps or args.novel_overlay == "heatmap")
         if args.novel_stride:

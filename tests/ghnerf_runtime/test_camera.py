@@ -196,3 +196,23 @@ def test_projection_matches_cv2_random(k, eye, seed):
     # identity (hypothesis found one), which would test OpenCV's rvec, not our projection.
     expected, _ = cv2.projectPoints(X @ cam.R.T + cam.t, np.zeros(3), np.zeros(3), cam.K, cam.dist)
     np.testing.assert_allclose(uv, expected.reshape(-1, 2), atol=1e-8)
+
+
+def test_derived_cameras_equal_validated_ones_and_stay_frozen():
+    cam = Camera("c", 640, 480, intrinsics_from_fov(640, 480, 70.0), dist=[0.1, -0.05, 0.001, 0.002, 0.01],
+                 R=look_at([0.3, -1.2, -2.0], [0, -1, 0])[0], t=[0.1, 0.2, 2.0])
+    for derived in (cam.cropped(100.5, 40, 256, 256), cam.resized(320, 240), cam.without_distortion(),
+                    cam.cropped(10, 20, 300, 200).resized(128, 128).without_distortion()):
+        rebuilt = Camera(derived.name, derived.width, derived.height, derived.K, derived.dist, derived.R, derived.t)
+        for key in ("K", "dist", "R", "t"):
+            np.testing.assert_array_equal(getattr(derived, key), getattr(rebuilt, key))
+            assert getattr(derived, key).dtype == np.float64
+            assert not getattr(derived, key).flags.writeable
+        assert (derived.width, derived.height) == (rebuilt.width, rebuilt.height)
+        assert isinstance(derived.width, int)
+    with pytest.raises(GeometryError, match="crop size"):
+        cam.cropped(0, 0, 0, 10)
+    with pytest.raises(GeometryError, match="crop origin"):
+        cam.cropped(float("nan"), 0, 10, 10)
+    with pytest.raises(GeometryError, match="image size"):
+        cam.resized(-1, 10)

@@ -183,3 +183,50 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
                               ("encoder", "volume", "render_heat"))
     with pytest.raises(ModelError, match="query"):
         Estimator(small, rig, EstimatorConfig(joints3d=Joints3DConfig(method="volumetric")))
+
+
+def test_encoder_heatmaps_skip_volume_and_rendering(tiny_model_dir, scene_rig):  # noqa: F811
+    from ghnerf_runtime.config import HeatmapsConfig
+
+    rig, frames = scene_rig
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)), heatmaps=HeatmapsConfig("encoder"),
+                          joints3d=Joints3DConfig(method="triangulate"))
+    assert cfg.required_graphs() == ("encoder",)
+    est = Estimator.from_config(rig, cfg)
+    assert est.session.graphs == ("encoder",)  # nothing else is even loaded
+    rec = Recorder(est.session)
+    est.session = rec
+    for pair in frames:
+        r = est.estimate(pair)
+        assert _all_finite(r)
+        assert "volume" not in r.timing_ms and "render_heat" not in r.timing_ms
+    assert [g for g, _ in rec.calls] == ["encoder"] * len(frames)
+
+
+@pytest.mark.parametrize("method, graphs", [("depth_centroid", ("encoder", "volume", "render_heat")),
+                                            ("volumetric", ("encoder", "volume", "query"))])
+def test_encoder_heatmaps_run_what_the_3d_method_reads(full_session, scene_rig, method, graphs):
+    from ghnerf_runtime.config import HeatmapsConfig
+
+    rig, frames = scene_rig
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method=method))
+    assert cfg.required_graphs() == graphs
+    rec = Recorder(full_session)
+    est = Estimator(rec, rig, cfg)
+    r = est.estimate(frames[0])
+    assert _all_finite(r)
+    assert {g for g, _ in rec.calls} == set(graphs)
+
+
+def test_encoder_heatmaps_need_a_model_that_has_them(full_session, scene_rig):
+    from dataclasses import replace
+
+    from ghnerf_runtime.config import ConfigError, HeatmapsConfig, config_from_dict
+
+    rig, _ = scene_rig
+    rec = Recorder(full_session)
+    rec.contract = replace(full_session.contract, encoder_heatmaps=False)  # as a 1.0.0 export reads
+    with pytest.raises(ModelError, match="encoder heatmaps"):
+        Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig("encoder")))
+    with pytest.raises(ConfigError, match="heatmaps.source"):
+        config_from_dict({"heatmaps": {"source": "volumetric"}})

@@ -101,3 +101,22 @@ def test_evaluate_loop_with_an_oracle(data64):
     assert res["scenes"] == 2 and res["pck@0.2"] == 1.0 and res["heatmap_mse"] == 0.0
     assert res["psnr_masked"] == float("inf") or res["psnr_masked"] > 100
     assert res["novel_views"] == 4 and res["mpjpe_mm"] < 0.5
+
+
+def test_encoder_heatmaps_are_scored_like_the_rendered_ones(data64):
+    sc = _scene(data64)
+    truth = sc["tgt_heatmaps"][:2]
+    r = scene_metrics(sc, truth, None, np.array([], int), encoder_heatmaps=np.zeros_like(truth))
+    assert r["pck"].value == 1.0
+    assert r["encoder_pck"].value == 0.0 and r["encoder_pck"].num_pred_missing == r["encoder_pck"].num_evaluated
+    r2 = scene_metrics(sc, np.zeros_like(truth), None, np.array([], int), encoder_heatmaps=truth)
+    assert r2["encoder_pck"].value == 1.0 and r2["encoder_mpjpe"].value < 0.5
+    acc = Accumulator()
+    acc.add(r)
+    acc.add(r2)
+    res = acc.result()
+    assert res["encoder_heatmaps_pck@0.2"] == pytest.approx(0.5)
+    assert res["encoder_heatmaps_mpjpe_mm"] < 0.5
+    none = Accumulator()
+    none.add(scene_metrics(sc, truth, None, np.array([], int)))
+    assert none.result()["encoder_heatmaps_pck@0.2"] is None

@@ -117,6 +117,14 @@ def test_check_io():
         c.check_io("render_heat", {k: v for k, v in inputs.items() if k != "ray_uv"}, outputs)
     with pytest.raises(ContractError, match="unexpected"):
         c.check_io("render_heat", dict(inputs, extra=[1]), outputs)
+    # an input the contract fixes but the file leaves symbolic: exported for other shapes -> refused
+    fixed = next(t for t in spec.inputs if any(isinstance(d, int) for d in t.shape))
+    loose = [None if isinstance(d, int) else d for d in inputs[fixed.name]]
+    with pytest.raises(ContractError) as err:
+        c.check_io("render_heat", dict(inputs, **{fixed.name: loose}), outputs)
+    assert err.value.key == fixed.name
+    # outputs may stay symbolic where the exporter's shape inference gave names
+    c.check_io("render_heat", inputs, {k: ["n"] * len(v) for k, v in outputs.items()})
 
 
 def _camera(x: float, size: int = 128) -> Camera:

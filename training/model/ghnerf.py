@@ -164,11 +164,13 @@ class GHNeRF(nn.Module):
 
     # ------------------------------------------------------------------ encode
     def encode(self, images: Tensor) -> dict[str, Tensor]:
-        """``images`` ``(S, 3, H, W)`` RGB in [0, 1] -> images, feat_s1/s2/s4 [, human_feat]."""
+        """``images`` ``(S, 3, H, W)`` RGB in [0, 1] -> images, feat_s1/s2/s4 [, human_feat [, encoder_heatmaps]]."""
         x = (images - self.mean) / self.std
         out = {"images": images, **self.feature_net(x)}
         if self.human is not None:
             out["human_feat"] = self.human(x)
+            if self.human.heat_head is not None:
+                out["encoder_heatmaps"] = self.human.heatmaps(out["human_feat"])
         return out
 
     # ----------------------------------------------------------------- volumes
@@ -363,8 +365,8 @@ class GHNeRF(nn.Module):
             for i, v in enumerate(vols)
         ]
         out = {"levels": levels, "volumes": vols}
-        if self.human is not None and self.human.heat_head is not None:
-            out["encoder_heatmaps"] = self.human.heatmaps(enc["human_feat"])  # (S, J, h, w), sources only
+        if "encoder_heatmaps" in enc:
+            out["encoder_heatmaps"] = enc["encoder_heatmaps"]  # (S, J, h, w), sources only
         return out
 
     # -------------------------------------------------------------------- misc
@@ -398,6 +400,7 @@ class GHNeRF(nn.Module):
             levels=levels, channels=self.channels(), strides=strides, render_feature=cfg.render_feature,
             heatmap_stride=cfg.heatmap_stride, background=cfg.background, opset=opset,
             model_version=cfg.model_version,
+            encoder_heatmaps=self.human is not None and self.human.heat_head is not None,
         )
 
 
