@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, contract_of, edge128_contract  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
 from ghnerf_runtime.metrics import mpjpe  # noqa: E402
 from ghnerf_runtime.session import ModelSession  # noqa: E402
@@ -48,8 +48,8 @@ METHODS = {
 }
 
 
-def run_method(session, sequences, joints3d: Joints3DConfig, oracle: OracleSession | None):
-    cfg = EstimatorConfig(joints3d=joints3d)
+def run_method(session, sequences, joints3d: Joints3DConfig, oracle: OracleSession | None, source: str = "rendered"):
+    cfg = EstimatorConfig(joints3d=joints3d, heatmaps=HeatmapsConfig(source=source))
     preds, found, stage, total, tracked = [], [], [], [], []
     for seq in sequences:
         est = Estimator(session, seq.rig, cfg)
@@ -73,6 +73,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=int, default=10)
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--methods", default=",".join(METHODS), help=f"comma list of {list(METHODS)}")
+    ap.add_argument("--heatmap-sources", default="rendered",
+                    help="comma list of rendered,encoder (the 2D heatmaps the methods start from)")
     ap.add_argument("--seen-motions", action="store_true")
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     ap.add_argument("--json", help="write the figures here")
@@ -82,6 +84,9 @@ def main(argv=None) -> int:
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
     truth = np.concatenate([np.asarray(s.joints_3d) for s in sequences])
     names = [m for m in args.methods.split(",") if m]
+    sources = [h for h in args.heatmap_sources.split(",") if h]
+    if args.oracle and sources != ["rendered"]:
+        ap.error("--oracle models rendered heatmaps only")
     oracle = None
     if args.oracle:
         try:
@@ -101,12 +106,14 @@ def main(argv=None) -> int:
           f"average {os.getloadavg()[0]:.2f}", flush=True)
 
     results = {}
-    for name in names:
-        t = time.perf_counter()
-        j3 = replace(Joints3DConfig(), **METHODS[name])
-        preds, found, stage, total, tracked = run_method(session, sequences, j3, oracle)
-        results[name] = {"preds": preds, "found": found, "stage": stage, "total": total, "tracked": tracked}
-        logging.info("%s done in %.1f s", name, time.perf_counter() - t)
+    for source in sources:
+        for name in names:
+            t = time.perf_counter()
+            j3 = replace(Joints3DConfig(), **METHODS[name])
+            preds, found, stage, total, tracked = run_method(session, sequences, j3, oracle, source)
+            label = name if sources == ["rendered"] else f"{source} heatmaps, {name}"
+            results[label] = {"preds": preds, "found": found, "stage": stage, "total": total, "tracked": tracked}
+            logging.info("%s done in %.1f s", label, time.perf_counter() - t)
 
     common = np.logical_and.reduce([r["found"] for r in results.values()])
     ones = np.ones(truth.shape[:2], bool)

@@ -1,15 +1,28 @@
-"""The main job on the simulated rig, as far as it exists today (``make demo``).
+"""The main job on the simulated rig (``make demo``): frame pairs -> estimated joints -> a joint stream.
 
-Opens a rig by URL (default: the simulated two-camera rig), reads frame pairs
-in real time for a few seconds, and shows the rig at work:
+Opens a rig by URL (default: the simulated two-camera rig), loads the model (the
+``models`` folder by default; ``--model-dir``, ``--config runtime.json``) and, for a few
+seconds of real time, runs :class:`ghnerf_runtime.estimator.Estimator` on the pairs the
+rig delivers:
 
-* delivered pairs per second, pair skew and the driver's counters;
-* the last pair with its ground-truth 2D joints drawn, written as a PNG;
-* the ground-truth 3D joints, printed and streamed through a joint-stream sink
-  (``file://`` JSON lines by default) exactly as the estimator's joints will be.
+* each estimated pair's 3D joints (rig frame, metres, with confidence) are streamed
+  through a joint-stream sink (``file://`` JSON lines, ``OUT/joints.jsonl``, by default);
+  a joint the estimator did not find is sent as missing (confidence 0);
+* the estimator is slower than 30 fps on a 2-core machine. Under the rig's ``latest``
+  pairing policy (the ``sim://`` default) the demo estimates the newest pair the rig has
+  delivered and counts the older ones it skipped, so it reports dropped pairs instead of
+  falling behind; under ``policy=all`` (e.g. ``replay://``) it estimates every pair;
+* at the end it prints pairs delivered / estimated / skipped, the estimator latency
+  (median and p99 of ``PairResult.timing_ms["total"]``), the fraction of joints found
+  and, when the frames carry the simulator's ground truth, the accuracy of the estimates
+  against it (MPJPE in mm over the joints found; 2D PCK@0.2 over both views);
+* the last estimated pair is written as a PNG (``OUT/sim_pair.png``) with the estimated
+  2D joints (magenta crosses and limbs) over the ground truth (dots, yellow limbs), and
+  its estimated 3D joints are printed next to the ground truth.
 
-The model stage (issue: runtime) replaces the ground truth with estimates; until
-then every joint printed or streamed here is labelled ground truth.
+Without a model in the model folder the demo stops with a one-line error naming the
+folder and the command that builds it. ``--truth-only`` skips the model: the simulator's
+ground-truth joints are streamed and printed instead, every one labelled ground truth.
 """
 from __future__ import annotations
 
@@ -18,6 +31,7 @@ import statistics
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -27,22 +41,86 @@ import drivers
 from drivers.sim.demo import draw_truth
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import open_sink
-from ghnerf_runtime.body25 import JOINT_NAMES
+from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
+from ghnerf_runtime.config import EstimatorConfig, load_config
+from ghnerf_runtime.errors import ConfigError, ModelError
+from ghnerf_runtime.estimator import Estimator, PairResult
+from ghnerf_runtime.metrics import mpjpe, pck
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
+#: How long a read waits for a pair that is already due when looking for a newer one (s).
+DRAIN_TIMEOUT_S = 0.001
+#: Colour of the estimated joints in the PNG (BGR magenta; the ground truth is red/blue/green + yellow).
+ESTIMATE_BGR = (255, 0, 255)
+PROG = "firmware_host.demo"
 
 
-def _annotated(pair: drivers.FramePair) -> np.ndarray:
-    panels = []
-    for frame in pair.frames:
-        panel = draw_truth(frame.image, frame.truth) if frame.truth is not None else frame.image.copy()
-        label = f"{frame.camera}  pair {pair.sequence}"
-        cv2.putText(panel, label, (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2, cv2.LINE_AA)
-        panels.append(panel)
-    return np.hstack(panels)
+class DemoError(Exception):
+    """A problem the user fixes (no model, bad config): printed as one line, exit status 2."""
 
 
-def _joint_frame(pair: drivers.FramePair) -> JointFrame | None:
+# ------------------------------------------------------------------ model
+def _estimator_config(args: argparse.Namespace) -> EstimatorConfig:
+    try:
+        cfg = load_config(args.config) if args.config else EstimatorConfig()
+    except ConfigError as e:
+        raise DemoError(f"config: {e}") from None
+    if args.model_dir is not None:
+        cfg = replace(cfg, session=replace(cfg.session, model_dir=str(args.model_dir)))
+    return cfg
+
+
+def _how_to_build(model_dir: str) -> str:
+    out = "models" if Path(model_dir).resolve() == Path("models").resolve() else model_dir
+    make = "`make model` or " if out == "models" else ""
+    return f"build it with {make}`python -m training.pipeline --out {out}` (or run with --truth-only)"
+
+
+def _check_model_dir(model_dir: str) -> None:
+    """Fail early (before the rig is opened) when the folder holds no model at all."""
+    from ghnerf_runtime.session import resolve_model_dir
+
+    folder = resolve_model_dir(model_dir)
+    if not folder.is_dir():
+        raise DemoError(f"no model in {model_dir}: the folder does not exist; {_how_to_build(model_dir)}")
+    if not any(folder.glob("*.onnx")):
+        raise DemoError(f"no model in {model_dir}: it holds no *.onnx graph files; {_how_to_build(model_dir)}")
+
+
+def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
+    t0 = time.monotonic()
+    try:
+        estimator = Estimator.from_config(rig, cfg)
+    except ModelError as e:
+        hint = f"; {_how_to_build(cfg.session.model_dir)}" if isinstance(e, OSError) else ""
+        raise DemoError(f"cannot load the model in {cfg.session.model_dir}: {e}{hint}") from None
+    d = estimator.session.describe()
+    folder = Path(next(iter(d["files"].values()))["path"]).parent
+    print(f"model {folder} ({d['variant']} {d['resolution']}, graphs {', '.join(d['files'])}; "
+          f"3D method {cfg.joints3d.method}) loaded in {time.monotonic() - t0:.2f} s")
+    return estimator
+
+
+# ------------------------------------------------------------------ reading
+def _newest_pair(source: drivers.RigSource, pair: drivers.FramePair) -> tuple[drivers.FramePair, int]:
+    """The newest pair the rig has already captured, starting from ``pair``, and how many were skipped.
+
+    ``read()`` hands out the oldest pair waiting in the driver's backlog; a reader slower
+    than the cameras would lag behind by that backlog. Reading on with a tiny timeout
+    returns the pairs already captured (no waiting on future frames, no busy loop: a
+    read with nothing due sleeps for the timeout and raises ``RigTimeoutError``).
+    """
+    skipped = 0
+    while True:
+        try:
+            newer = source.read(timeout_s=DRAIN_TIMEOUT_S)
+        except (drivers.RigTimeoutError, drivers.EndOfStream):
+            return pair, skipped
+        pair, skipped = newer, skipped + 1
+
+
+# ------------------------------------------------------------------ joint frames
+def _truth_frame(pair: drivers.FramePair) -> JointFrame | None:
     if pair.joints_3d is None:
         return None
     joints = np.concatenate([pair.joints_3d, np.ones((len(pair.joints_3d), 1))], axis=1)
@@ -54,48 +132,257 @@ def _joint_frame(pair: drivers.FramePair) -> JointFrame | None:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def _estimate_frame(pair: drivers.FramePair, result: PairResult) -> JointFrame:
+    """The estimate as a sink frame: missing joints are NaN with confidence 0 (missing on the wire)."""
+    missing = np.asarray(result.missing, bool)
+    xyz = np.where(missing[:, None], np.nan, result.joints_3d)
+    conf = np.where(missing, 0.0, result.confidence)
+    joints_2d = {}
+    for index, frame in enumerate(pair.frames):  # keyed by camera index: the sink needs no camera list
+        m2 = np.asarray(result.missing_2d[frame.camera], bool)
+        uv = np.where(m2[:, None], np.nan, result.joints_2d[frame.camera])
+        joints_2d[index] = np.column_stack([uv, np.where(m2, 0.0, result.confidence_2d[frame.camera])])
+    return JointFrame(
+        sequence=pair.sequence,
+        capture_time_us=pair.frames[0].timestamp_ns // 1000,
+        joint_set=0,
+        joints_3d=np.column_stack([xyz, conf]),
+        joints_2d=joints_2d,
+    )
+
+
+# ------------------------------------------------------------------ accuracy
+@dataclass
+class _Tally:
+    """What the estimated pairs produced, pooled for the summary."""
+
+    totals_ms: list[float] = field(default_factory=list)
+    capture_to_joints_ms: list[float] = field(default_factory=list)
+    found: list[np.ndarray] = field(default_factory=list)  # (25,) per estimated pair
+    pred_3d: list[np.ndarray] = field(default_factory=list)  # pairs with 3D truth only, from here on
+    true_3d: list[np.ndarray] = field(default_factory=list)
+    found_3d: list[np.ndarray] = field(default_factory=list)
+    pred_2d: list[np.ndarray] = field(default_factory=list)  # per camera image with 2D truth
+    true_2d: list[np.ndarray] = field(default_factory=list)
+    visible_2d: list[np.ndarray] = field(default_factory=list)
+    found_2d: list[np.ndarray] = field(default_factory=list)
+
+    def add(self, pair: drivers.FramePair, result: PairResult, done_ns: int) -> None:
+        self.totals_ms.append(float(result.timing_ms["total"]))
+        self.capture_to_joints_ms.append((done_ns - pair.frames[0].timestamp_ns) / 1e6)
+        found = ~np.asarray(result.missing, bool)
+        self.found.append(found)
+        if pair.joints_3d is not None:
+            self.pred_3d.append(result.joints_3d)
+            self.true_3d.append(pair.joints_3d)
+            self.found_3d.append(found)
+        for frame in pair.frames:
+            if frame.truth is not None:
+                self.pred_2d.append(result.joints_2d[frame.camera])
+                self.true_2d.append(frame.truth.joints_2d)
+                self.visible_2d.append(frame.truth.visible)
+                self.found_2d.append(~np.asarray(result.missing_2d[frame.camera], bool))
+
+    def report(self) -> list[str]:
+        lines = []
+        if not self.totals_ms:
+            return ["no pair was estimated"]
+        t = np.asarray(self.totals_ms)
+        c = np.asarray(self.capture_to_joints_ms)
+        lines.append(f"estimator latency (timing_ms total): median {np.median(t):.1f} ms, "
+                     f"p99 {np.percentile(t, 99):.1f} ms; capture to joints: median {np.median(c):.1f} ms, "
+                     f"p99 {np.percentile(c, 99):.1f} ms")
+        found = np.asarray(self.found)
+        lines.append(f"estimated joints found: {found.mean():.1%} ({int(found.sum())} of {found.size}; "
+                     f"the rest are streamed as missing)")
+        if not self.true_3d:
+            lines.append("accuracy: the frames carry no ground truth; not measured")
+            return lines
+        true_3d = np.asarray(self.true_3d)
+        m = mpjpe(np.asarray(self.pred_3d), true_3d, np.isfinite(true_3d).all(axis=-1),
+                  pred_valid=np.asarray(self.found_3d))
+        text = (f"accuracy of the estimate vs ground truth: MPJPE {m.value:.0f} mm over the {m.num_evaluated} "
+                f"joints found ({m.num_pred_missing} not found, not scored)")
+        if self.true_2d:
+            p = pck(np.asarray(self.pred_2d), np.asarray(self.true_2d), np.asarray(self.visible_2d),
+                    pred_valid=np.asarray(self.found_2d))
+            text += (f"; 2D PCK@0.2 {p.value:.3f} over {p.num_evaluated} visible joints in both views "
+                     f"(not found = wrong)")
+        lines.append(text)
+        return lines
+
+
+# ------------------------------------------------------------------ pictures and tables
+def _draw_estimate(image: np.ndarray, uv: np.ndarray, missing: np.ndarray) -> None:
+    """Draw estimated joints in place: magenta limbs between found joints, a tilted cross per joint."""
+    pts = np.clip(np.rint(np.nan_to_num(uv)), -10_000, 10_000).astype(int)
+    for a, b in LIMBS:
+        if not missing[a] and not missing[b]:
+            cv2.line(image, tuple(pts[a]), tuple(pts[b]), ESTIMATE_BGR, 2, cv2.LINE_AA)
+    for k, (u, v) in enumerate(pts):
+        if not missing[k]:
+            cv2.drawMarker(image, (int(u), int(v)), ESTIMATE_BGR, cv2.MARKER_TILTED_CROSS, 10, 2, cv2.LINE_AA)
+
+
+def _annotated(pair: drivers.FramePair, result: PairResult | None = None) -> np.ndarray:
+    panels = []
+    for frame in pair.frames:
+        panel = draw_truth(frame.image, frame.truth) if frame.truth is not None else frame.image.copy()
+        cv2.putText(panel, f"{frame.camera}  pair {pair.sequence}", (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7,
+                    (255, 255, 255), 2, cv2.LINE_AA)
+        y = 48
+        if result is not None:
+            missing = np.asarray(result.missing_2d[frame.camera], bool)
+            _draw_estimate(panel, result.joints_2d[frame.camera], missing)
+            cv2.putText(panel, f"estimate: magenta x ({int((~missing).sum())}/25 joints)", (10, y),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.55, ESTIMATE_BGR, 2, cv2.LINE_AA)
+            y += 22
+        if frame.truth is not None:
+            cv2.putText(panel, "ground truth: dots, yellow limbs", (10, y), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
+                        (0, 255, 255), 2, cv2.LINE_AA)
+        panels.append(panel)
+    return np.hstack(panels)
+
+
+def _print_joints(pair: drivers.FramePair, result: PairResult | None) -> None:
+    truth = pair.joints_3d
+    if result is None:
+        if truth is None:
+            return
+        print("ground-truth BODY_25 joints of that pair, rig frame (m; x right, y down, z forward):")
+        for name, (x, y, z) in zip(JOINT_NAMES, truth):
+            print(f"  {name:10s} {x:+.3f} {y:+.3f} {z:+.3f}")
+        return
+    print("BODY_25 joints of that pair, rig frame (m; x right, y down, z forward):")
+    print(f"  {'joint':10s} {'estimate':20s}   {'ground truth':20s}   error")
+    for k, name in enumerate(JOINT_NAMES):
+        est = "missing" if result.missing[k] else " ".join(f"{v:+.3f}" for v in result.joints_3d[k])
+        line = f"  {name:10s} {est:20s}"
+        if truth is not None:
+            line += "   " + " ".join(f"{v:+.3f}" for v in truth[k])
+            if not result.missing[k]:
+                line += f"   {1000 * np.linalg.norm(result.joints_3d[k] - truth[k]):4.0f} mm"
+        print(line)
+
+
+# ------------------------------------------------------------------ main
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("--url", default=DEFAULT_URL, help="rig URL (sim://, replay://DIR, depthai://)")
     parser.add_argument("--seconds", type=float, default=3.0, help="how long to read pairs")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
-    parser.add_argument("--sink", default=None, help="joint-stream sink URL (default: file://OUT/joints.jsonl)")
-    args = parser.parse_args(argv)
+    parser.add_argument("--sink", default=None,
+                        help="joint-stream sink URL (default: file://OUT/joints.jsonl, rewritten each run)")
+    parser.add_argument("--model-dir", default=None,
+                        help="model folder (default: the --config's session.model_dir, else ./models)")
+    parser.add_argument("--config", default=None, help="estimator config, JSON (docs/runtime.md)")
+    parser.add_argument("--truth-only", action="store_true",
+                        help="no model: stream the simulator's ground-truth joints instead of estimates")
+    return parser
+
+
+def _run(args: argparse.Namespace) -> int:
+    cfg = None
+    if not args.truth_only:
+        cfg = _estimator_config(args)
+        _check_model_dir(cfg.session.model_dir)
     args.out.mkdir(parents=True, exist_ok=True)
-    sink_url = args.sink or f"file://{(args.out / 'joints.jsonl').resolve()}"
+    if args.sink:
+        sink_url = args.sink
+    else:
+        sink_path = (args.out / "joints.jsonl").resolve()
+        sink_path.unlink(missing_ok=True)  # the file sink appends: keep this run only
+        sink_url = f"file://{sink_path}"
 
     print(f"opening {args.url} (the first open pre-renders the motion loop; later opens use the cache)")
-    t0 = time.monotonic()
-    with drivers.open_rig(args.url) as source, open_sink(sink_url) as sink:
+    source = drivers.create_rig_source(args.url)
+    try:
+        estimator = None
+        if cfg is not None:
+            try:
+                rig = source.rig  # known before open for sim:// and replay://: load first, so no backlog builds up
+            except drivers.RigOperationError:
+                rig = None
+            if rig is not None:
+                estimator = _load_estimator(rig, cfg)
+        t0 = time.monotonic()
+        source.open()
         print(f"open in {time.monotonic() - t0:.2f} s; cameras {list(source.rig.names)}, "
               f"baseline {source.rig.baseline:.2f} m")
-        arrivals, skews, last = [], [], None
-        deadline = time.monotonic() + args.seconds
-        while time.monotonic() < deadline:
-            pair = source.read(timeout_s=1.0)
-            arrivals.append(time.monotonic())
-            skews.append(pair.skew_ns / 1e6)
-            frame = _joint_frame(pair)
-            if frame is not None:
-                sink.send(frame)
-            last = pair
+        if cfg is not None and estimator is None:
+            estimator = _load_estimator(source.rig, cfg)
+        latest = source.pairing.policy is drivers.DropPolicy.LATEST
+        tally = _Tally()
+        delivered, skipped, skews = 0, 0, []
+        last_pair, last_result = None, None
+        with open_sink(sink_url) as sink:
+            start = time.monotonic()
+            deadline = start + args.seconds
+            while time.monotonic() < deadline:
+                try:
+                    pair = source.read(timeout_s=1.0)
+                except drivers.EndOfStream:
+                    print("the rig's stream ended")
+                    break
+                except (drivers.RigTimeoutError, drivers.RigDisconnectedError) as e:
+                    print(f"stopping: {e}")
+                    break
+                delivered += 1
+                if estimator is None:
+                    frame = _truth_frame(pair)
+                else:
+                    if latest:
+                        pair, n = _newest_pair(source, pair)
+                        delivered, skipped = delivered + n, skipped + n
+                    result = estimator.estimate(pair.images, sequence=pair.sequence)
+                    tally.add(pair, result, time.monotonic_ns())
+                    frame, last_result = _estimate_frame(pair, result), result
+                if frame is not None:
+                    sink.send(frame)
+                skews.append(pair.skew_ns / 1e6)
+                last_pair = pair
+            elapsed = max(time.monotonic() - start, 1e-9)
+        sink_stats = sink.stats()
         stats = source.stats
-    sink_stats = sink.stats()
+    finally:
+        source.close()
 
-    intervals = np.diff(arrivals)
-    fps = 1.0 / statistics.median(intervals) if len(intervals) else float("nan")
-    print(f"read {len(arrivals)} pairs in {args.seconds:.1f} s: median {fps:.2f} pairs/s, "
-          f"median skew {statistics.median(skews):.2f} ms")
+    rate = delivered / elapsed
+    skew = f"median skew {statistics.median(skews):.2f} ms" if skews else "no pairs"
+    print(f"read {delivered} pairs in {elapsed:.1f} s ({rate:.1f} pairs/s delivered by the rig), {skew}")
+    if estimator is None:
+        print("no model (--truth-only): every joint streamed and printed is GROUND TRUTH")
+    else:
+        estimated = len(tally.totals_ms)
+        policy = ("newest pair first: older pairs waiting are skipped" if latest
+                  else "pairing policy 'all': every pair estimated")
+        print(f"pairs: {delivered} delivered, {estimated} estimated ({estimated / elapsed:.1f}/s), "
+              f"{skipped} skipped ({policy}); latency, joints found and accuracy below are of the ESTIMATES")
+        lost_frames = sum(stats.camera_gaps.values())
+        if lost_frames or stats.pairs_dropped:
+            print(f"before delivery the rig lost {lost_frames} camera frames and dropped {stats.pairs_dropped} "
+                  f"pairs (see the driver counters)")
+        for line in tally.report():
+            print(line)
     print(f"driver counters: {stats}")
     print(f"sink {sink_url}: {sink_stats}")
     png = args.out / "sim_pair.png"
-    if last is not None and cv2.imwrite(str(png), _annotated(last)):
-        print(f"wrote {png} (pair {last.sequence} with its ground-truth 2D joints)")
-    if last is not None and last.joints_3d is not None:
-        print("ground-truth BODY_25 joints of that pair, rig frame (m; x right, y down, z forward):")
-        for name, (x, y, z) in zip(JOINT_NAMES, last.joints_3d):
-            print(f"  {name:10s} {x:+.3f} {y:+.3f} {z:+.3f}")
+    if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result)):
+        what = ("estimated 2D joints (magenta) over the ground truth (dots)" if last_result is not None
+                else "its ground-truth 2D joints")
+        print(f"wrote {png} (pair {last_pair.sequence} with {what})")
+    if last_pair is not None:
+        _print_joints(last_pair, last_result)
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return _run(args)
+    except DemoError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -127,6 +127,17 @@ def render_markdown(card: Mapping[str, Any]) -> str:
                  f"{_fmt(m.get('psnr_masked'), 2)} | {_fmt(m.get('ssim_masked'))} | {_fmt(m.get('heatmap_mse'))} | "
                  f"{m.get('pck_undecoded')}/{m.get('pck_evaluated_joints')} |")
     L.append("")
+    enc = {k: m for k, m in (card.get("metrics") or {}).items() if m.get("encoder_heatmaps_pck@0.2") is not None}
+    if enc:
+        L.append("The human encoder's own 2D heatmaps (the encoder graph's `encoder_heatmaps` output, no "
+                 "rendering; the runtime's `heatmaps.source = \"encoder\"`), decoded and triangulated the same way:")
+        L.append("")
+        L.append("| model | runtime | PCK@0.2 | MPJPE mm |")
+        L.append("|---|---|---|---|")
+        for label, m in enc.items():
+            L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('encoder_heatmaps_pck@0.2'))} | "
+                     f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} |")
+        L.append("")
     par = card.get("parity") or {}
     if par:
         L.append("## int8 vs fp32 parity")

@@ -393,6 +393,9 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
             "Synthetic training and evaluation data only; no real-camera or ZJU-MoCap numbers.",
             "The ResNet18 human encoder is trained from scratch (no ImageNet weights available here).",
             "The perceptual loss is replaced by a 1 - SSIM patch loss (no VGG weights).",
+            "The human encoder carries a training-time 2D heatmap head (dense auxiliary loss on both source "
+            "views); it is exported as the encoder's `encoder_heatmaps` output, scored above, and usable by the "
+            "runtime instead of the rendered heatmaps (faster: no volume or rendering for keypoints).",
             "A 2-core CPU training budget (tens of minutes, not GHNeRF's 200k GPU iterations): expect far lower "
             "accuracy than the paper.",
         ],

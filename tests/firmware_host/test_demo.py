@@ -1,0 +1,149 @@
+"""``python -m firmware_host.demo`` (``make demo``): the main job on the simulated rig, run briefly.
+
+The estimate tests use the shipped model (models/) and skip until it exists
+(models/model_card.json); the error and ``--truth-only`` tests need no model.
+"""
+from __future__ import annotations
+
+import json
+import re
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from firmware_host import demo
+from ghnerf_runtime.estimator import Estimator
+
+REPO = Path(__file__).resolve().parents[2]
+MODELS = REPO / "models"
+needs_model = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(),
+                                 reason="no trained model yet: models/model_card.json does not exist")
+
+
+@pytest.fixture(scope="module")
+def sim_url(tmp_path_factory) -> str:
+    """The demo's default rig, with the pre-rendered loop cached for this module only."""
+    cache = tmp_path_factory.mktemp("sim-cache")
+    return f"{demo.DEFAULT_URL}&cache={cache}"
+
+
+def _joints_rows(path: Path) -> list[dict]:
+    return [m for m in map(json.loads, path.read_text().splitlines()) if m["type"] == "JOINTS"]
+
+
+def _summary(out: str) -> tuple[int, int, int]:
+    m = re.search(r"^pairs: (\d+) delivered, (\d+) estimated .*?, (\d+) skipped", out, re.M)
+    assert m, out
+    return int(m[1]), int(m[2]), int(m[3])
+
+
+@pytest.fixture
+def recorded(monkeypatch):
+    """Every PairResult the demo's estimator returns, in order."""
+    results = []
+    original = Estimator.estimate
+
+    def estimate(self, *args, **kwargs):
+        result = original(self, *args, **kwargs)
+        results.append(result)
+        return result
+
+    monkeypatch.setattr(Estimator, "estimate", estimate)
+    return results
+
+
+@needs_model
+def test_streams_estimated_joints_and_prints_the_summary(tmp_path, capsys, sim_url, recorded):
+    rc = demo.main(["--url", sim_url, "--seconds", "1.5", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+
+    delivered, estimated, skipped = _summary(out)
+    assert estimated == len(recorded) >= 3
+    assert delivered == estimated + skipped
+    assert re.search(r"estimator latency \(timing_ms total\): median [\d.]+ ms, p99 [\d.]+ ms", out), out
+    assert re.search(r"estimated joints found: [\d.]+%", out), out
+    assert re.search(r"accuracy of the estimate vs ground truth: MPJPE \d+ mm over the \d+ joints found", out), out
+    assert "2D PCK@0.2" in out
+    assert (tmp_path / "sim_pair.png").stat().st_size > 0
+
+    # What was streamed is the estimate, joint for joint (mm on the wire), missing joints flagged.
+    rows = _joints_rows(tmp_path / "joints.jsonl")
+    assert [r["seq"] for r in rows] == [r.sequence for r in recorded]
+    for msg, result in zip(rows, recorded):
+        joints = np.array(msg["joints"], dtype=float)
+        assert joints.shape == (25, 5) and np.all(np.isfinite(joints))
+        missing = joints[:, 4] == 1
+        assert set(np.unique(joints[:, 4])) <= {0.0, 1.0}
+        np.testing.assert_array_equal(missing, result.missing)
+        assert np.all(joints[missing, :4] == 0)  # missing: zeros, confidence 0
+        assert np.all(joints[~missing, 3] >= 1)  # found: confidence 1..255
+        np.testing.assert_allclose(joints[~missing, :3], 1000 * result.joints_3d[~result.missing], atol=0.51)
+    assert sum(r.num_found for r in recorded) > 0  # the shipped model finds about half the joints
+
+
+@needs_model
+def test_a_slow_estimator_skips_to_the_newest_pair(tmp_path, capsys, sim_url, monkeypatch):
+    original = Estimator.estimate
+
+    def slow(self, *args, **kwargs):
+        time.sleep(0.1)  # three frame periods at 30 fps
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Estimator, "estimate", slow)
+    rc = demo.main(["--url", sim_url, "--seconds", "1.0", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    delivered, estimated, skipped = _summary(out)
+    assert estimated > 0 and skipped > 0 and delivered == estimated + skipped
+    seqs = [r["seq"] for r in _joints_rows(tmp_path / "joints.jsonl")]
+    # Gaps in the stream's sequence are the pairs skipped: >= 3 while 100 ms pass per estimate. (A
+    # stall longer than the driver's 8-frame backlog loses frames before pairing instead: no gap.)
+    assert len(seqs) == estimated and np.all(np.diff(seqs) > 0) and np.median(np.diff(seqs)) >= 3
+
+
+@pytest.mark.parametrize("make", [False, True], ids=["absent", "empty"])
+def test_no_model_is_a_one_line_error(tmp_path, capsys, make):
+    folder = tmp_path / "no-model"
+    if make:
+        folder.mkdir()
+    rc = demo.main(["--model-dir", str(folder), "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2
+    assert captured.out == ""  # stopped before opening the rig
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1, captured.err
+    assert str(folder) in lines[0] and f"python -m training.pipeline --out {folder}" in lines[0]
+    assert "--truth-only" in lines[0]
+
+
+def test_default_model_folder_error_names_make_model(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no ./models here
+    assert demo.main(["--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "no model in models" in err and "`make model`" in err
+    assert "python -m training.pipeline --out models" in err
+
+
+def test_bad_config_is_a_one_line_error(tmp_path, capsys):
+    config = tmp_path / "runtime.json"
+    config.write_text(json.dumps({"joints3d": {"metod": "triangulate"}}))
+    assert demo.main(["--config", str(config), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "joints3d.metod" in err and str(config) in err
+
+
+def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_url):
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path),
+                    "--model-dir", str(tmp_path / "no-model")])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "GROUND TRUTH" in out and "estimated" not in out
+    assert (tmp_path / "sim_pair.png").stat().st_size > 0
+    rows = _joints_rows(tmp_path / "joints.jsonl")
+    assert len(rows) >= 5
+    for msg in rows:
+        joints = np.array(msg["joints"])
+        assert joints.shape == (25, 5) and np.all(joints[:, 4] == 0) and np.all(joints[:, 3] == 255)
