@@ -1,8 +1,9 @@
 """The rig source base class: public behaviour written once, backends fill small hooks.
 
 A backend implements :meth:`RigSource._open`, :meth:`RigSource._read_frame` and
-:meth:`RigSource._close`. The base class owns pairing (:mod:`drivers.pairing`),
-timeouts, counters, iteration and the context manager.
+:meth:`RigSource._close` (and, for live sources, :meth:`RigSource._frame_available`).
+The base class owns pairing (:mod:`drivers.pairing`), timeouts, counters,
+iteration and the context manager.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from typing import ClassVar
 from drivers.clock import Clock, MonotonicClock
 from drivers.errors import EndOfStream, RigDisconnectedError, RigOperationError, RigTimeoutError
 from drivers.frames import Frame, FramePair
-from drivers.pairing import FramePairer, PairingConfig, PairingStats
+from drivers.pairing import DropPolicy, FramePairer, PairingConfig, PairingStats
 from drivers.url import RigUrl
 from ghnerf_runtime.geometry import Rig
 
@@ -39,6 +40,9 @@ class RigSource(abc.ABC):
 
     #: URL scheme this backend answers to.
     scheme: ClassVar[str] = ""
+    #: Most frames one ``read()`` takes in without waiting under ``DropPolicy.LATEST``, so a
+    #: source delivering faster than they can be drained cannot hold ``read()`` forever.
+    drain_limit: int = 32
 
     def __init__(
         self, rig: Rig | None, *, pairing: PairingConfig | None = None, clock: Clock | None = None
@@ -80,6 +84,18 @@ class RigSource(abc.ABC):
     def _close(self) -> None:
         """Release the cameras. Called once."""
 
+    def _frame_available(self) -> bool:
+        """Whether :meth:`_read_frame` can return a frame now, without waiting.
+
+        Under ``DropPolicy.LATEST`` :meth:`read` takes in every such frame before
+        returning, so it hands out the newest pair (older ones are dropped and
+        counted) instead of the oldest one still queued in the backend. Return
+        ``False`` for a pending error or the end of a recording: those are raised
+        by the next read, after the pairs already captured. Default: ``False``
+        (no draining; frames are read one at a time).
+        """
+        return False
+
     # ---------------------------------------------------------- public API
     @property
     def rig(self) -> Rig:
@@ -112,6 +128,11 @@ class RigSource(abc.ABC):
     def read(self, timeout_s: float = 1.0) -> FramePair:
         """Block until the next synchronised pair, at most ``timeout_s`` seconds.
 
+        With ``DropPolicy.LATEST`` that is the newest pair: frames the backend already
+        holds are taken in first (at most :attr:`drain_limit`), and older complete
+        pairs are dropped, counted in ``stats.pairs_dropped`` and seen as sequence
+        gaps. With ``DropPolicy.ALL`` it is the oldest pair not yet read.
+
         Raises:
             RigTimeoutError: no pair within the timeout (frames may still be flowing
                 but none pair within tolerance: see :attr:`stats`).
@@ -124,7 +145,9 @@ class RigSource(abc.ABC):
         pairer = self._pairer
         assert pairer is not None  # open() guarantees the rig, hence the pairer
         deadline = self.clock.now_ns() + int(timeout_s * 1e9)
+        drain = self.drain_limit if self.pairing.policy is DropPolicy.LATEST else 0
         while True:
+            drain -= self._drain(pairer, drain)
             ready = pairer.pop()
             if ready is not None:
                 sequence, first, second = ready
@@ -141,6 +164,21 @@ class RigSource(abc.ABC):
                 raise
             if frame is not None:
                 pairer.push(frame)
+
+    def _drain(self, pairer: FramePairer, limit: int) -> int:
+        """Push up to ``limit`` frames the backend holds already; returns how many were read."""
+        n = 0
+        while n < limit and self._frame_available():
+            try:
+                frame = self._read_frame(0.0)  # zero timeout: never wait, even if availability was wrong
+            except RigDisconnectedError:
+                pairer.reset()
+                raise
+            if frame is None:
+                break
+            pairer.push(frame)
+            n += 1
+        return n
 
     def __iter__(self) -> Iterator[FramePair]:
         """Pairs until the source ends (a recording's end stops iteration; other errors propagate)."""

@@ -48,8 +48,6 @@ from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.metrics import mpjpe, pck
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
-#: How long a read waits for a pair that is already due when looking for a newer one (s).
-DRAIN_TIMEOUT_S = 0.001
 #: Colour of the estimated joints in the PNG (BGR magenta; the ground truth is red/blue/green + yellow).
 ESTIMATE_BGR = (255, 0, 255)
 PROG = "firmware_host.demo"
@@ -102,23 +100,6 @@ def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
 
 
 # ------------------------------------------------------------------ reading
-def _newest_pair(source: drivers.RigSource, pair: drivers.FramePair) -> tuple[drivers.FramePair, int]:
-    """The newest pair the rig has already captured, starting from ``pair``, and how many were skipped.
-
-    ``read()`` hands out the oldest pair waiting in the driver's backlog; a reader slower
-    than the cameras would lag behind by that backlog. Reading on with a tiny timeout
-    returns the pairs already captured (no waiting on future frames, no busy loop: a
-    read with nothing due sleeps for the timeout and raises ``RigTimeoutError``).
-    """
-    skipped = 0
-    while True:
-        try:
-            newer = source.read(timeout_s=DRAIN_TIMEOUT_S)
-        except (drivers.RigTimeoutError, drivers.EndOfStream):
-            return pair, skipped
-        pair, skipped = newer, skipped + 1
-
-
 # ------------------------------------------------------------------ joint frames
 def _truth_frame(pair: drivers.FramePair) -> JointFrame | None:
     if pair.joints_3d is None:
@@ -331,9 +312,6 @@ def _run(args: argparse.Namespace) -> int:
                 if estimator is None:
                     frame = _truth_frame(pair)
                 else:
-                    if latest:
-                        pair, n = _newest_pair(source, pair)
-                        delivered, skipped = delivered + n, skipped + n
                     result = estimator.estimate(pair.images, sequence=pair.sequence)
                     tally.add(pair, result, time.monotonic_ns())
                     frame, last_result = _estimate_frame(pair, result), result
@@ -344,12 +322,15 @@ def _run(args: argparse.Namespace) -> int:
             elapsed = max(time.monotonic() - start, 1e-9)
         sink_stats = sink.stats()
         stats = source.stats
+        # under LATEST the rig hands out the newest pair and drops (counts) the older ones
+        skipped = stats.pairs_dropped
+        delivered += skipped
     finally:
         source.close()
 
     rate = delivered / elapsed
     skew = f"median skew {statistics.median(skews):.2f} ms" if skews else "no pairs"
-    print(f"read {delivered} pairs in {elapsed:.1f} s ({rate:.1f} pairs/s delivered by the rig), {skew}")
+    print(f"the rig delivered {delivered} pairs in {elapsed:.1f} s ({rate:.1f} pairs/s), {skew}")
     if estimator is None:
         print("no model (--truth-only): every joint streamed and printed is GROUND TRUTH")
     else:
@@ -359,9 +340,8 @@ def _run(args: argparse.Namespace) -> int:
         print(f"pairs: {delivered} delivered, {estimated} estimated ({estimated / elapsed:.1f}/s), "
               f"{skipped} skipped ({policy}); latency, joints found and accuracy below are of the ESTIMATES")
         lost_frames = sum(stats.camera_gaps.values())
-        if lost_frames or stats.pairs_dropped:
-            print(f"before delivery the rig lost {lost_frames} camera frames and dropped {stats.pairs_dropped} "
-                  f"pairs (see the driver counters)")
+        if lost_frames:
+            print(f"before pairing the rig lost {lost_frames} camera frames (see the driver counters)")
         for line in tally.report():
             print(line)
     print(f"driver counters: {stats}")

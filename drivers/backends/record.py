@@ -279,6 +279,9 @@ class RecordingRigSource(RigSource):
             writer.submit(frame)
         return frame
 
+    def _frame_available(self) -> bool:
+        return self.inner._frame_available()  # drained frames pass through _read_frame, so they are recorded
+
     def _close(self) -> None:
         try:
             self.inner.close()

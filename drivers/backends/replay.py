@@ -7,7 +7,9 @@ URL options:
   (``speed=2``) plays at that multiple of real time.
 * ``loop``: ``1`` starts over at the end instead of raising :class:`EndOfStream`.
 * ``tolerance_ms``, ``policy``: pairing (default policy ``all``: a recording is
-  usually processed offline, every pair counts).
+  usually processed offline, every pair counts). ``policy=latest`` with a paced
+  ``speed`` plays like a live rig: a slow reader gets the newest pair due and the
+  older ones are dropped (counted); free-running playback never skips ahead.
 
 Frames carry the recorded timestamps, indices and ground truth unchanged on the
 first pass. Each further ``loop`` pass shifts timestamps by the recording's span
@@ -144,8 +146,7 @@ class ReplayRigSource(RigSource):
         if self.speed is not None:
             if self._anchor_ns is None:
                 self._anchor_ns = self.clock.now_ns()
-            offset_ns = row.timestamp_ns + shift_ns - self._rows[0].timestamp_ns
-            due = self._anchor_ns + int(offset_ns / self.speed)
+            due = self._due_ns(row, shift_ns, self._anchor_ns, self.speed)
             deadline = self.clock.now_ns() + int(timeout_s * 1e9)
             if due > deadline:
                 self.clock.sleep_until(deadline)
@@ -153,6 +154,21 @@ class ReplayRigSource(RigSource):
             self.clock.sleep_until(due)
         self._cursor += 1
         return self._load(row, shift_ns)
+
+    def _due_ns(self, row: FrameRow, shift_ns: int, anchor_ns: int, speed: float) -> int:
+        """Clock time at which ``row`` (on the loop pass shifted by ``shift_ns``) plays."""
+        return anchor_ns + int((row.timestamp_ns + shift_ns - self._rows[0].timestamp_ns) / speed)
+
+    def _frame_available(self) -> bool:
+        # Unpaced playback has every frame at hand: draining would read the whole recording.
+        if self.speed is None or self._anchor_ns is None:
+            return False
+        cursor, shift_ns = self._cursor, self._pass * self._time_span_ns
+        if cursor >= len(self._rows):
+            if not (self.loop and self._rows):
+                return False  # the end: the next read raises EndOfStream, after the pairs already due
+            cursor, shift_ns = 0, shift_ns + self._time_span_ns
+        return self._due_ns(self._rows[cursor], shift_ns, self._anchor_ns, self.speed) <= self.clock.now_ns()
 
     def _load(self, row: FrameRow, shift_ns: int) -> Frame:
         path = self.directory / row.image

@@ -45,10 +45,13 @@ Timing model (:mod:`drivers.backends.sim_timing`): each camera captures frame
 ``k`` at ``open + k/fps + offset + jitter``; ``read`` sleeps on the clock until
 the next capture is due and returns frames in capture order, so with a
 :class:`~drivers.clock.ManualClock` tests run at full speed with exact
-timestamps. A reader that falls behind loses the oldest captures beyond a
-backlog of 8 frames per camera (as a driver queue would), counted as
-``stats.overruns``; ``stats.simulated_drops`` counts the ``drop`` losses (both
-also show as index gaps in ``stats.camera_gaps``).
+timestamps. With ``policy=latest`` each ``read`` first takes in every capture
+already due, so a slow reader gets the newest pair and the older ones count in
+``stats.pairs_dropped`` (sequence gaps). Captures older than a backlog of 8
+frames per camera (as a driver queue would hold) are lost before pairing: a
+``policy=all`` reader that falls behind, or any reader stalled that long,
+loses them, counted as ``stats.overruns``; ``stats.simulated_drops`` counts the
+``drop`` losses (both also show as index gaps in ``stats.camera_gaps``).
 
 Each frame says which scene instant it shows (``scene_time_s``, within the loop)
 and carries the ground truth of that instant (``truth``, ``joints_3d``).
@@ -288,6 +291,15 @@ class SimRigSource(RigSource):
                 self._overruns[name] += 1
             else:
                 return self._frame(capture)
+
+    def _frame_available(self) -> bool:
+        schedule = self._schedule
+        if schedule is None or self._unplugged:
+            return False
+        due = schedule.peek().time_ns
+        if self._unplug_ns is not None and due >= self._unplug_ns:
+            return False  # the next event is the unplug: the next read raises it, after the pairs captured before
+        return due <= self.clock.now_ns()
 
     def _frame(self, capture: Capture) -> Frame:
         assert self._loop is not None

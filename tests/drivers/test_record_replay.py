@@ -171,7 +171,10 @@ def test_a_slow_disk_never_stalls_the_reader(tmp_path, sim_cache, monkeypatch):
         return real_encode(*args)
 
     monkeypatch.setattr(record_module, "encode_image", slow_encode)
-    url = f"record+sim://?width=40&height=30&fps=100&cache={sim_cache}&out={tmp_path / 'slow'}&write_queue=2&writers=1"
+    # policy=all: every pair is read, so read_time alone says whether the reader kept pace (under
+    # latest, a pair captured while the recorder starts or during a scheduler hiccup would be skipped)
+    url = (f"record+sim://?width=40&height=30&fps=100&policy=all&cache={sim_cache}&out={tmp_path / 'slow'}"
+           "&write_queue=2&writers=1")
     with open_rig(url) as source:  # the real clock: 100 pairs per second
         t0 = time.monotonic()
         pairs = [source.read(timeout_s=1.0) for _ in range(40)]

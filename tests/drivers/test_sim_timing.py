@@ -170,8 +170,10 @@ def test_same_seed_same_timeline(sim_cache):
 
 
 def test_real_clock_delivers_at_the_nominal_rate(sim_cache):
-    with open_rig(f"sim://?width=32&height=24&fps=60&cache={sim_cache}") as source:
+    # policy=all: on a loaded machine a reader may fall a frame behind now and then; LATEST would then
+    # (correctly) skip to the newest pair, which is not what this test is about
+    with open_rig(f"sim://?width=32&height=24&fps=60&policy=all&cache={sim_cache}") as source:
         pairs = read_pairs(source, 40)
     stamps = np.array([p.frames[0].timestamp_ns for p in pairs])
     assert np.median(np.diff(stamps)) / 1e6 == pytest.approx(1000 / 60, abs=0.5)
-    assert [p.sequence for p in pairs] == list(range(40))  # a reader that keeps up loses nothing
+    assert [p.sequence for p in pairs] == list(range(40))  # every pair delivered, in order

@@ -128,6 +128,9 @@ class DepthaiRigSource(RigSource):
         self._pending.append(second)
         return first
 
+    def _frame_available(self) -> bool:
+        return bool(self._pending)  # the second frame of a group already taken; the link is not polled
+
     def _close(self) -> None:
         link, self._link = self._link, None
         self._pending.clear()
