@@ -16,6 +16,9 @@ two source views three ways:
   from the true joints (as a track would): the runtime's own crops, margins, ray restriction and
   decoding, 2D compared in the original images.
 
+With a model that exports encoder heatmaps (contract 1.1.0), each path is also scored with
+``heatmaps.source = "encoder"`` (the encoder graph's own 2D heatmaps; C then triangulates).
+
 A tool (imports ``training.data`` and ``drivers``); not a test.
 """
 from __future__ import annotations
@@ -28,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.contract import (  # noqa: E402
     near_far_from_box,
     ray_grid,
@@ -45,15 +48,18 @@ from ghnerf_runtime.session import ModelSession  # noqa: E402
 from ghnerf_runtime.tracking import box_corners, track_from_joints  # noqa: E402
 
 
-def _decode(session: ModelSession, images: np.ndarray, cams, near_far: np.ndarray):
+def _decode(session: ModelSession, images: np.ndarray, cams, near_far: np.ndarray, source: str = "rendered"):
     c = session.contract
     S, g = c.height, c.height // c.heatmap_stride
     env = {"images": images, "src_P": source_projections(cams, S, S), "src_centers": source_centers(cams),
            **target_inputs(cams, S, S), "near_far": near_far,
            "ray_uv": np.ascontiguousarray(np.broadcast_to(ray_grid(S, S, c.heatmap_stride), (2, g * g, 2)))}
     env.update(session.run("encoder", env))
-    env.update(session.run("volume", env))
-    hm = session.run("render_heat", env)["heatmaps"].reshape(2, g, g, -1).transpose(0, 3, 1, 2)
+    if source == "encoder":
+        hm = env["encoder_heatmaps"]
+    else:
+        env.update(session.run("volume", env))
+        hm = session.run("render_heat", env)["heatmaps"].reshape(2, g, g, -1).transpose(0, 3, 1, 2)
     kp = decode_keypoints(np.ascontiguousarray(hm))
     return heatmap_to_model_pixels(kp.uv, g, S), kp.valid
 
@@ -72,11 +78,12 @@ def main(argv=None) -> int:
     from training.data.splits import split_spec
 
     session = ModelSession.load(SessionConfig(model_dir=args.model_dir, precision=args.precision),
-                                ("encoder", "volume", "render_heat"))
+                                ("encoder", "volume", "render_heat"))  # the encoder heatmaps (when present) come with the encoder
     S = session.contract.height
     split = ShardedSplit(args.data, args.split)
     motions = split_spec(args.split).motions
-    rows = {k: ([], [], [], []) for k in "ABC"}
+    sources = ["rendered"] + (["encoder"] if session.contract.encoder_heatmaps else [])
+    rows = {(k, src): ([], [], [], []) for src in sources for k in "ABC"}
     diffs = []
     for idx in range(min(args.limit, len(split))):
         a, meta = split.arrays(idx), split.metadata(idx)
@@ -95,25 +102,29 @@ def main(argv=None) -> int:
         ours = np.stack([preprocess_image(full[i], build_undistort_crop_maps(rig.pair[i], Roi(*a["roi"][i]), S),
                                           session.contract.normalisation) for i in range(2)])
         diffs.append(float(np.abs(stored - ours).mean() * 255))
-        for key, images in (("A", stored), ("B", ours)):
-            uv, ok = _decode(session, images, cams, near_far)
-            for lst, v in zip(rows[key], (uv, a["joints_2d"][:2], a["visible"][:2], ok)):
+        for src in sources:
+            for key, images in (("A", stored), ("B", ours)):
+                uv, ok = _decode(session, images, cams, near_far, src)
+                for lst, v in zip(rows[key, src], (uv, a["joints_2d"][:2], a["visible"][:2], ok)):
+                    lst.append(v)
+            cfg = EstimatorConfig(heatmaps=HeatmapsConfig(source=src),
+                                  joints3d=Joints3DConfig(method="triangulate" if src == "encoder"
+                                                          else Joints3DConfig().method))
+            est = Estimator(session, rig, cfg)
+            est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
+            r = est.estimate(tuple(full))
+            truth = np.stack([cam.project(a["joints_3d"])[0] for cam in rig.pair])
+            pred = np.stack([r.joints_2d[n] for n in rig.names[:2]])
+            found = ~np.stack([r.missing_2d[n] for n in rig.names[:2]])
+            for lst, v in zip(rows["C", src], (pred, truth, a["visible"][:2], found)):
                 lst.append(v)
-        est = Estimator(session, rig, EstimatorConfig())
-        est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
-        r = est.estimate(tuple(full))
-        truth = np.stack([cam.project(a["joints_3d"])[0] for cam in rig.pair])
-        pred = np.stack([r.joints_2d[n] for n in rig.names[:2]])
-        found = ~np.stack([r.missing_2d[n] for n in rig.names[:2]])
-        for lst, v in zip(rows["C"], (pred, truth, a["visible"][:2], found)):
-            lst.append(v)
     print(f"model {args.model_dir} ({args.precision}), {args.data}/{args.split}, {len(diffs)} scenes")
     labels = {"A": "dataset crops (= ghnerf-eval)", "B": "runtime preprocessing, stored ROI",
               "C": "Estimator, crop placed from the true joints"}
-    for key, (p, tr, v, ok) in rows.items():
+    for (key, src), (p, tr, v, ok) in rows.items():
         res = pck(np.array(p), np.array(tr), np.array(v), pred_valid=np.array(ok))
-        print(f"  {key} {labels[key]:<46} PCK@0.2 {res.value:.3f}  ({res.num_evaluated} joints, "
-              f"{res.num_pred_missing} not decoded)")
+        print(f"  {key} {src + ' heatmaps':<17} {labels[key]:<46} PCK@0.2 {res.value:.3f}  "
+              f"({res.num_evaluated} joints, {res.num_pred_missing} not decoded)")
     print(f"  mean |stored crop - runtime crop|: {np.mean(diffs):.2f} levels of 255")
     return 0
 
