@@ -41,8 +41,9 @@ def edge128_contract() -> ModelContract:
         height=128, width=128, variant="ghnerf",
         levels=(LevelSpec(8, 16, 8, "inverse", "feat_s4", "interval"),
                 LevelSpec(4, 4, 4, "linear", "feat_s2", "planes")),
-        channels={"feat_s1": 8, "feat_s2": 16, "feat_s4": 16, "volume": 8, "human_feat": 16},
+        channels={"feat_s1": 8, "feat_s2": 16, "feat_s4": 16, "volume": 8, "human_feat": 32},
         strides={"feat_s1": 1, "feat_s2": 2, "feat_s4": 4, "human_feat": 4},
+        encoder_heatmaps=True,
     )
 
 
@@ -75,6 +76,23 @@ class OracleSession:
     def has(self, graph: str) -> bool:
         return graph in self.graphs
 
+    def _source_heatmaps(self, src_P: np.ndarray) -> np.ndarray:
+        """``(S, J, g, g)`` Gaussians at the true joints' projections on the heatmap grid of each source."""
+        c = self.contract
+        stride, g = c.heatmap_stride, c.height // c.heatmap_stride
+        centres = stride * np.arange(g) + 0.5 * (stride - 1)  # model pixels of the grid cells (contract.ray_grid)
+        homog = np.concatenate([self.truth, np.ones((len(self.truth), 1))], axis=1)
+        maps = np.zeros((len(src_P), c.num_joints, g, g), np.float32)
+        for s, P in enumerate(src_P):
+            p = homog @ P.T
+            z = p[:, 2]
+            uv = p[:, :2] / np.where(z > 1e-6, z, 1.0)[:, None]
+            gx = np.exp(-(centres[None, :] - uv[:, :1]) ** 2 / (2 * self.sigma_px ** 2))  # (J, g)
+            gy = np.exp(-(centres[None, :] - uv[:, 1:]) ** 2 / (2 * self.sigma_px ** 2))
+            seen = (z > 1e-6) & (self.visible[s] if self.visible is not None else True)
+            maps[s] = gy[:, :, None] * gx[:, None, :] * seen[:, None, None]
+        return maps
+
     def _zeros(self, spec, **dims) -> np.ndarray:
         return np.zeros([dims[d] if isinstance(d, str) else d for d in spec.shape], np.float32)
 
@@ -83,7 +101,10 @@ class OracleSession:
         spec = self.contract.graph(graph)
         J = self.contract.num_joints
         if graph == "encoder":
-            return {t.name: self._zeros(t) for t in spec.outputs}
+            out = {t.name: self._zeros(t) for t in spec.outputs}
+            if "encoder_heatmaps" in out and self.truth is not None:
+                out["encoder_heatmaps"] = self._source_heatmaps(np.asarray(feeds["src_P"], np.float64))
+            return out
         if graph == "volume":
             B = len(feeds["tgt_K_inv"])
             return {t.name: self._zeros(t, B=B) for t in spec.outputs}

@@ -31,7 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import BEST_METHOD, EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.contract import (  # noqa: E402
     near_far_from_box,
     ray_grid,
@@ -107,9 +107,7 @@ def main(argv=None) -> int:
                 uv, ok = _decode(session, images, cams, near_far, src)
                 for lst, v in zip(rows[key, src], (uv, a["joints_2d"][:2], a["visible"][:2], ok)):
                     lst.append(v)
-            cfg = EstimatorConfig(heatmaps=HeatmapsConfig(source=src),
-                                  joints3d=Joints3DConfig(method="triangulate" if src == "encoder"
-                                                          else Joints3DConfig().method))
+            cfg = EstimatorConfig(heatmaps=HeatmapsConfig(source=src), joints3d=Joints3DConfig(method=BEST_METHOD[src]))
             est = Estimator(session, rig, cfg)
             est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
             r = est.estimate(tuple(full))

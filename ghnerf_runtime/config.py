@@ -32,8 +32,8 @@ from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
-    "PRECISIONS", "THREE_D_METHODS", "SessionConfig", "RoiConfig", "TrackingConfig", "FrameCheckConfig",
-    "RaysConfig", "Joints3DConfig", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
+    "PRECISIONS", "THREE_D_METHODS", "HEATMAP_SOURCES", "BEST_METHOD", "SessionConfig", "RoiConfig", "TrackingConfig", "FrameCheckConfig",
+    "RaysConfig", "HeatmapsConfig", "Joints3DConfig", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
     "load_config",
 ]
 
@@ -265,10 +265,11 @@ class Joints3DConfig:
     """How 3D joints are made from the model outputs (:mod:`ghnerf_runtime.joints3d`).
 
     Attributes:
-        method: ``"depth_centroid"`` (heatmap-weighted centroid of the rendered depth points
-            around each view's peak; the default: lowest MPJPE and cost on held-out sequences with
-            the trained model), ``"triangulate"`` (DLT of both views' 2D peaks, per-joint
-            reprojection check) or ``"volumetric"`` (the ``query`` graph on a grid in the subject
+        method: ``"triangulate"`` (DLT of both views' 2D peaks, per-joint reprojection check;
+            the default, with the default encoder heatmaps: lowest MPJPE and cost on held-out
+            sequences), ``"depth_centroid"`` (heatmap-weighted centroid of the rendered depth
+            points around each view's peak; the best with ``heatmaps.source = "rendered"``, see
+            ``BEST_METHOD``) or ``"volumetric"`` (the ``query`` graph on a grid in the subject
             box). Comparison: ``docs/runtime.md``.
         single_view_fallback: triangulation: a joint that is not triangulated (seen in one view
             only, or the views disagree) takes the depth-centroid estimate instead, at half its
@@ -288,7 +289,7 @@ class Joints3DConfig:
             (joints lie inside the body).
     """
 
-    method: str = "depth_centroid"
+    method: str = "triangulate"
     single_view_fallback: bool = False
     max_reprojection_px: float = 6.0
     min_view_confidence: float = 0.1
@@ -318,19 +319,24 @@ class HeatmapsConfig:
     """Where the source views' joint heatmaps come from.
 
     Attributes:
-        source: ``"rendered"`` (GHNeRF: volume-rendered by ``render_heat`` from the cost volume,
+        source: ``"encoder"`` (the default: more accurate and ~2x faster on held-out sequences with
+            the shipped model, docs/runtime.md) or ``"rendered"`` (GHNeRF: volume-rendered by ``render_heat`` from the cost volume,
             the human features and the heads; the ``volume`` and ``render_heat`` graphs run every
-            pair) or ``"encoder"`` (the human encoder's own 2D heatmaps, an output of the
+            pair; models without encoder heatmaps, e.g. the baseline, need it) or ``"encoder"`` (the human encoder's own 2D heatmaps, an output of the
             ``encoder`` graph of models exported with ``encoder_heatmaps``; ``volume`` and
             ``render_heat`` then run only where the 3D method needs them: ``depth_centroid`` and
             the single-view fallback read the rendered depth, ``volumetric`` the volume). The
             speed/accuracy trade of the two is measured in docs/runtime.md.
     """
 
-    source: str = "rendered"
+    source: str = "encoder"
 
     def __post_init__(self) -> None:
         _choice(self, "source", HEATMAP_SOURCES)
+
+
+#: The best 3D method of each heatmap source on held-out sequences (docs/runtime.md, 3D methods).
+BEST_METHOD = {"encoder": "triangulate", "rendered": "depth_centroid"}
 
 
 @dataclass(frozen=True)

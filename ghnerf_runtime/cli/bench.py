@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, Joints3DConfig, \
+from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, Joints3DConfig, \
     NovelViewConfig, SessionConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
@@ -134,9 +134,8 @@ def run_runtime_bench(args) -> dict:
 
 
 def _default_method(source: str) -> str:
-    """The 3D method of each heatmap source unless ``--method`` is given: the encoder source exists to
-    skip the volume and rendering, which ``triangulate`` allows; the rendered one keeps the default."""
-    return "triangulate" if source == "encoder" else Joints3DConfig().method
+    """The 3D method of each heatmap source unless ``--method`` is given (``config.BEST_METHOD``)."""
+    return BEST_METHOD[source]
 
 
 def _print_row(row: dict) -> None:

@@ -30,7 +30,7 @@ def _check_frame(obj: dict, cameras: tuple[str, ...], width: int, height: int) -
     for rows in obj["joints_2d"].values():
         assert len(rows) == 25 and all(len(j) == 3 for j in rows)
     assert len(obj["missing"]) == 25 and all(isinstance(m, bool) for m in obj["missing"])
-    stages = {"preprocess", "encoder", "volume", "render_heat", "decode_2d", "joints_3d", "total"}
+    stages = {"preprocess", "encoder", "decode_2d", "joints_3d", "total"}  # default: encoder heatmaps
     assert stages <= set(obj["timing_ms"])
     numbers = [v for j in obj["joints_3d"] for v in j] + [v for rows in obj["joints_2d"].values() for j in rows
                                                          for v in j] + list(obj["timing_ms"].values())

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
-from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, TrackingConfig
+from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, TrackingConfig
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.metrics import mpjpe, pck
 
@@ -58,13 +58,15 @@ def _run(est, oracle, frames, truth, visible):
     return out
 
 
-TRIANGULATE = EstimatorConfig(joints3d=Joints3DConfig(method="triangulate"))
+RENDERED = HeatmapsConfig(source="rendered")
 
 
-def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip):
+@pytest.mark.parametrize("source", ["encoder", "rendered"])
+def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip, source):
     rig, frames, truth, visible, *_ = clip
     oracle = RayCounter()
-    est = Estimator(oracle, rig, TRIANGULATE)
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source=source),
+                                                 joints3d=Joints3DConfig(method="triangulate")))
     results = _run(est, oracle, frames, truth, visible)
     assert [r.tracked for r in results] == [False, True, True, True, True]
     both = np.stack(visible).all(axis=1)  # joints the oracle shows in both views
@@ -73,6 +75,9 @@ def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip):
     assert np.array_equal(found, both), "exactly the joints visible in both views are triangulated"
     err = mpjpe(pred, np.stack(truth), both, pred_valid=found)
     assert err.value < 1.0, err.value  # mm: decoding + mapping + DLT are exact for Gaussian heatmaps
+    if source == "encoder":  # the encoder's heatmaps cover the crop: nothing is rendered
+        assert oracle.rays == [] and oracle.run_counts["volume"] == 0
+        return
     # Tracked pairs render only the rays covering the subject, fewer than the whole grid.
     grid = (oracle.contract.height // oracle.contract.heatmap_stride) ** 2
     assert oracle.rays[0] == grid and max(oracle.rays[1:]) < grid
@@ -166,7 +171,7 @@ def test_tracking_disabled_always_uses_the_working_volume(clip):
 def test_refined_cold_start_reruns_the_first_pair_on_the_subject(clip):
     rig, frames, truth, visible, *_ = clip
     oracle = RayCounter()
-    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(refine_cold_start=True),
+    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(refine_cold_start=True), heatmaps=RENDERED,
                                                  joints3d=Joints3DConfig(method="triangulate")))
     results = _run(est, oracle, frames[:2], truth[:2], visible[:2])
     assert [r.tracked for r in results] == [True, True]  # the first pair is reported from its second pass

@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 
 from ghnerf_runtime.config import (
     EstimatorConfig,
+    HeatmapsConfig,
     Joints3DConfig,
     NovelViewConfig,
     SessionConfig,
@@ -54,9 +56,15 @@ def test_bad_values_are_named(data, key):
 
 
 def test_required_graphs_follow_the_config():
-    assert EstimatorConfig().required_graphs() == ("encoder", "volume", "render_heat")
+    assert EstimatorConfig().required_graphs() == ("encoder",)  # encoder heatmaps + triangulation
+    rendered = EstimatorConfig(heatmaps=HeatmapsConfig("rendered"))
+    assert rendered.required_graphs() == ("encoder", "volume", "render_heat")
     cfg = EstimatorConfig(joints3d=Joints3DConfig(method="volumetric"), novel_view=NovelViewConfig(enabled=True))
+    assert cfg.required_graphs() == ("encoder", "volume", "query", "render_rgb")
+    cfg = replace(cfg, heatmaps=HeatmapsConfig("rendered"))
     assert cfg.required_graphs() == ("encoder", "volume", "render_heat", "query", "render_rgb")
+    depth = EstimatorConfig(joints3d=Joints3DConfig(method="depth_centroid"))  # reads the rendered depth
+    assert depth.required_graphs() == ("encoder", "volume", "render_heat")
     cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, heatmaps=True))
     assert "render" in cfg.required_graphs() and "render_rgb" not in cfg.required_graphs()
 
