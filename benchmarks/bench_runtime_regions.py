@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig,
+    HeatmapsConfig,
     Joints3DConfig,
     NovelViewConfig,
     RaysConfig,
@@ -81,7 +82,10 @@ def graph_scaling(session: ModelSession, repeats: int) -> None:
 
 
 def end_to_end(session: ModelSession, sequences, warmup: int) -> None:
-    base = EstimatorConfig(novel_view=NovelViewConfig(enabled=True))
+    # the ray-region experiment is about rendered heatmaps; the default encoder path is the last rows
+    base = EstimatorConfig(heatmaps=HeatmapsConfig(source="rendered"), joints3d=Joints3DConfig(method="depth_centroid"),
+                           novel_view=NovelViewConfig(enabled=True))
+    encoder = replace(base, heatmaps=HeatmapsConfig(source="encoder"), joints3d=Joints3DConfig(method="triangulate"))
     cases = [
         ("keypoints, all rays (untracked crop)", base, None, False),
         ("keypoints, all rays", replace(base, rays=RaysConfig(restrict_to_subject=False)), None, True),
@@ -97,6 +101,10 @@ def end_to_end(session: ModelSession, sequences, warmup: int) -> None:
          NovelViewRequest(overlay="heatmap"), True),
         ("keypoints, volumetric 3D (query 16^3)", replace(base, joints3d=Joints3DConfig(method="volumetric")),
          None, True),
+        ("encoder heatmaps (default): keypoints", encoder, None, True),
+        ("encoder heatmaps: + novel view stride 1", encoder, NovelViewRequest(), True),
+        ("encoder heatmaps: + novel view stride 2", replace(encoder, novel_view=NovelViewConfig(enabled=True, stride=2)),
+         NovelViewRequest(), True),
     ]
     print(f"\nend to end over {sum(len(s) for s in sequences)} pairs ({warmup} warm-up), ms median / p99 "
           "[render_heat, novel, total], pairs/s:")
@@ -120,7 +128,7 @@ def end_to_end(session: ModelSession, sequences, warmup: int) -> None:
                 if n <= warmup:
                     continue
                 wall += dt
-                heat.append(r.timing_ms["render_heat"])
+                heat.append(r.timing_ms.get("render_heat", 0.0))
                 novel.append(sum(r.timing_ms.get(k, 0.0) for k in ("novel_volume", "novel_render", "novel_compose")))
                 total.append(r.timing_ms["total"])
         h, v, t_ = percentiles(heat), percentiles(novel), percentiles(total)
