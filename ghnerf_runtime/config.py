@@ -33,7 +33,7 @@ from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
     "PRECISIONS", "THREE_D_METHODS", "HEATMAP_SOURCES", "BEST_METHOD", "SessionConfig", "RoiConfig", "TrackingConfig", "FrameCheckConfig",
-    "RaysConfig", "HeatmapsConfig", "Joints3DConfig", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
+    "RaysConfig", "HeatmapsConfig", "Joints3DConfig", "PresenceConfig", "PRESENCE_MIN_CONFIDENCE", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
     "load_config",
 ]
 
@@ -311,6 +311,42 @@ class Joints3DConfig:
         _number(self, "surface_offset_m", -0.5, 0.5)
 
 
+#: Presence gate defaults per heatmap source (``PresenceConfig.min_confidence`` None): between the
+#: 6th-strongest 3D joint of empty-room pairs (encoder <= 0.15, rendered <= 0.42) and of pairs with a
+#: person (>= 0.485 / 0.493) on held-out sequences with the shipped model (docs/runtime.md).
+PRESENCE_MIN_CONFIDENCE = {"encoder": 0.3, "rendered": 0.46}
+
+
+@dataclass(frozen=True)
+class PresenceConfig:
+    """Whether a pair shows a person at all.
+
+    A model trained only on people answers "someone" for an empty room too (phantom joints with
+    weak peaks). A pair counts as showing a person only when at least ``min_joints`` of its 3D
+    joints have confidence ``>= min_confidence``; otherwise every joint (3D and 2D) is reported
+    missing and the track is dropped.
+
+    Attributes:
+        enabled: apply the gate.
+        min_joints: strong joints needed.
+        min_confidence: confidence of a strong joint; ``None`` takes the measured default of the
+            heatmap source (``PRESENCE_MIN_CONFIDENCE``).
+    """
+
+    enabled: bool = True
+    min_joints: int = 6
+    min_confidence: float | None = None
+
+    def __post_init__(self) -> None:
+        _boolean(self, "enabled")
+        _integer(self, "min_joints", 1, 25)
+        if self.min_confidence is not None:
+            _number(self, "min_confidence", 0.0, 1.0)
+
+    def threshold(self, source: str) -> float:
+        return PRESENCE_MIN_CONFIDENCE[source] if self.min_confidence is None else float(self.min_confidence)
+
+
 HEATMAP_SOURCES = ("rendered", "encoder")
 
 
@@ -383,6 +419,7 @@ class EstimatorConfig:
     decoder: KeypointDecoderConfig = field(default_factory=KeypointDecoderConfig)
     heatmaps: HeatmapsConfig = field(default_factory=HeatmapsConfig)
     joints3d: Joints3DConfig = field(default_factory=Joints3DConfig)
+    presence: PresenceConfig = field(default_factory=PresenceConfig)
     novel_view: NovelViewConfig = field(default_factory=NovelViewConfig)
 
     def __post_init__(self) -> None:

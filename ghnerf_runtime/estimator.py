@@ -47,8 +47,8 @@ from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_cen
 from ghnerf_runtime.errors import FrameError, ModelError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
-from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_to_box, query_grid, triangulate_joints, \
-    volumetric_joints
+from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presence, gate_to_box, query_grid, \
+    triangulate_joints, volumetric_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, Keypoints2D, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton, heatmap_overlay, \
     interpolate_camera, novel_target, render_novel_view
@@ -418,6 +418,13 @@ class Estimator:
         # Nobody stands outside the working volume, nor far from where the sweep looked.
         j3 = gate_to_box(j3, regions.box, cfg.joints3d.max_outside_box_m)
         j3 = gate_to_box(j3, self._volume_box, cfg.joints3d.max_outside_box_m)
+        if cfg.presence.enabled:
+            j3 = gate_presence(j3, cfg.presence.min_joints, cfg.presence.threshold(cfg.heatmaps.source))
+            if not j3.valid.any():  # nobody: no 2D joints either
+                for name in joints_2d:
+                    joints_2d[name] = np.zeros_like(joints_2d[name])
+                    conf_2d[name] = np.zeros_like(conf_2d[name])
+                    missing_2d[name] = np.ones_like(missing_2d[name])
         self.tracker.update(j3.points, j3.confidence, j3.valid, sequence)
         add("joints_3d", t)
         return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d)

@@ -28,8 +28,8 @@ from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.triangulation import triangulate_robust
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
-__all__ = ["Joints3D", "gate_to_box", "triangulate_joints", "grid_shape", "query_grid", "volumetric_joints",
-           "depth_centroid_joints"]
+__all__ = ["Joints3D", "gate_presence", "gate_to_box", "triangulate_joints", "grid_shape", "query_grid",
+           "volumetric_joints", "depth_centroid_joints"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +60,25 @@ class Joints3D:
               & (self.confidence > 0))
         return Joints3D(np.where(ok[:, None], self.points, 0.0), np.where(ok, self.confidence, 0.0).astype(np.float32),
                         ok, np.where(np.isfinite(self.reprojection_px), self.reprojection_px, 0.0))
+
+
+def gate_presence(joints: Joints3D, min_joints: int, min_confidence: float) -> Joints3D:
+    """Nobody unless at least ``min_joints`` joints have ``confidence >= min_confidence``.
+
+    A model trained only on views with a person in them answers "someone" for an empty room
+    too, with weaker peaks; this turns such a pair into all-missing joints.
+
+    Example:
+        >>> j = Joints3D(np.ones((3, 3)), np.array([0.9, 0.2, 0.2], np.float32), np.ones(3, bool), np.zeros((3, 2)))
+        >>> gate_presence(j, 2, 0.5).valid.tolist(), gate_presence(j, 1, 0.5).valid.tolist()
+        ([False, False, False], [True, True, True])
+    """
+    strong = int(np.count_nonzero(joints.valid & (joints.confidence >= min_confidence)))
+    if strong >= min_joints:
+        return joints
+    J = len(joints.valid)
+    return Joints3D(np.zeros_like(joints.points), np.zeros(J, np.float32), np.zeros(J, bool),
+                    np.zeros_like(joints.reprojection_px))
 
 
 def gate_to_box(joints: Joints3D, box: np.ndarray, margin: float) -> Joints3D:

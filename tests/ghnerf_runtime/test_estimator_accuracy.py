@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig
+from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, SessionConfig
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, models/model_card.json
@@ -58,3 +58,22 @@ def test_shipped_model_on_held_out_sequences(source):
         assert s["mpjpe_mm"] <= t["mpjpe_mm_max"], s
     if t["found_3d_min"] is not None:
         assert s["found_3d_frac"] >= t["found_3d_min"], s
+
+
+@pytest.mark.parametrize("source", sorted(THRESHOLDS))
+def test_shipped_model_finds_nobody_in_an_empty_room(source):
+    """No hallucinated person: the trained heatmaps of an empty room decode to no joints at all."""
+    sim = pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.estimator import Estimator
+
+    rig = sim.RigPlacement().build()
+    # the frame check off: the model itself must say "nobody" (the check may reject plain walls first)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS)), heatmaps=HeatmapsConfig(source=source),
+                          joints3d=Joints3DConfig(method=METHODS[source]), frame_check=FrameCheckConfig(enabled=False))
+    est = Estimator.from_config(rig, cfg)
+    for seed in (1, 2):
+        room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))  # person far away
+        pair = tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
+        for _ in range(2):  # cold, then whatever track the first pair left
+            r = est.estimate(pair)
+            assert r.num_found == 0 and not r.confidence.any() and not r.joints_3d.any()

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
-from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, TrackingConfig
+from ghnerf_runtime.config import ConfigError, EstimatorConfig, HeatmapsConfig, Joints3DConfig, PresenceConfig, \
+    TrackingConfig, config_from_dict
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime.metrics import mpjpe, pck
 
@@ -147,6 +148,7 @@ def test_too_few_confident_joints_drop_the_track(clip):
     rig, frames, truth, visible, *_ = clip
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(min_joints=6),
+                                                 presence=PresenceConfig(enabled=False),
                                                  joints3d=Joints3DConfig(method="triangulate")))
     _run(est, oracle, frames[:1], truth[:1], visible[:1])
     assert est.tracker.track is not None
@@ -157,6 +159,26 @@ def test_too_few_confident_joints_drop_the_track(clip):
     assert r.num_found == 4 and r.tracked is True and est.tracker.track is None
     oracle.set_truth(truth[2], visible[2])
     assert est.estimate(frames[2]).tracked is False
+
+
+def test_presence_gate_reports_nobody_for_too_few_strong_joints(clip):
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(presence=PresenceConfig(min_joints=6)))
+    _run(est, oracle, frames[:1], truth[:1], visible[:1])
+    assert est.tracker.track is not None
+    few = np.zeros_like(visible[1])
+    few[:, :4] = True  # 4 strong joints: below min_joints, so nobody (2D joints too)
+    oracle.set_truth(truth[1], few)
+    r = est.estimate(frames[1])
+    assert r.num_found == 0 and est.tracker.track is None
+    assert all(r.missing_2d[n].all() and not r.joints_2d[n].any() for n in rig.names[:2])
+    # every joint shown, but a threshold above the oracle's peaks: nobody either
+    strict = Estimator(oracle, rig, EstimatorConfig(presence=PresenceConfig(min_confidence=1.0)))
+    oracle.set_truth(truth[2], visible[2])
+    assert strict.estimate(frames[2]).num_found == 0
+    with pytest.raises(ConfigError, match="presence.min_joints"):
+        config_from_dict({"presence": {"min_joints": 0}})
 
 
 def test_tracking_disabled_always_uses_the_working_volume(clip):
