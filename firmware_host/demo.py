@@ -42,10 +42,10 @@ from drivers.sim.demo import draw_truth
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import open_sink
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
+from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ModelError
 from ghnerf_runtime.estimator import Estimator, PairResult
-from ghnerf_runtime.metrics import mpjpe, pck
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
 #: Colour of the estimated joints in the PNG (BGR magenta; the ground truth is red/blue/green + yellow).
@@ -99,7 +99,6 @@ def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
     return estimator
 
 
-# ------------------------------------------------------------------ reading
 # ------------------------------------------------------------------ joint frames
 def _truth_frame(pair: drivers.FramePair) -> JointFrame | None:
     if pair.joints_3d is None:
@@ -135,34 +134,23 @@ def _estimate_frame(pair: drivers.FramePair, result: PairResult) -> JointFrame:
 # ------------------------------------------------------------------ accuracy
 @dataclass
 class _Tally:
-    """What the estimated pairs produced, pooled for the summary."""
+    """What the estimated pairs produced, pooled for the summary (accuracy: ``cli.simdata.Accuracy``)."""
 
     totals_ms: list[float] = field(default_factory=list)
     capture_to_joints_ms: list[float] = field(default_factory=list)
     found: list[np.ndarray] = field(default_factory=list)  # (25,) per estimated pair
-    pred_3d: list[np.ndarray] = field(default_factory=list)  # pairs with 3D truth only, from here on
-    true_3d: list[np.ndarray] = field(default_factory=list)
-    found_3d: list[np.ndarray] = field(default_factory=list)
-    pred_2d: list[np.ndarray] = field(default_factory=list)  # per camera image with 2D truth
-    true_2d: list[np.ndarray] = field(default_factory=list)
-    visible_2d: list[np.ndarray] = field(default_factory=list)
-    found_2d: list[np.ndarray] = field(default_factory=list)
+    accuracy: Accuracy = field(default_factory=Accuracy)  # pairs with 3D truth only
 
     def add(self, pair: drivers.FramePair, result: PairResult, done_ns: int) -> None:
         self.totals_ms.append(float(result.timing_ms["total"]))
         self.capture_to_joints_ms.append((done_ns - pair.frames[0].timestamp_ns) / 1e6)
-        found = ~np.asarray(result.missing, bool)
-        self.found.append(found)
+        self.found.append(~np.asarray(result.missing, bool))
         if pair.joints_3d is not None:
-            self.pred_3d.append(result.joints_3d)
-            self.true_3d.append(pair.joints_3d)
-            self.found_3d.append(found)
-        for frame in pair.frames:
-            if frame.truth is not None:
-                self.pred_2d.append(result.joints_2d[frame.camera])
-                self.true_2d.append(frame.truth.joints_2d)
-                self.visible_2d.append(frame.truth.visible)
-                self.found_2d.append(~np.asarray(result.missing_2d[frame.camera], bool))
+            truths = [f.truth for f in pair.frames]
+            with_2d = all(t is not None for t in truths)
+            self.accuracy.add_truth(result, pair.joints_3d,
+                                    np.stack([t.joints_2d for t in truths]) if with_2d else None,
+                                    np.stack([t.visible for t in truths]) if with_2d else None)
 
     def report(self) -> list[str]:
         lines = []
@@ -176,18 +164,14 @@ class _Tally:
         found = np.asarray(self.found)
         lines.append(f"estimated joints found: {found.mean():.1%} ({int(found.sum())} of {found.size}; "
                      f"the rest are streamed as missing)")
-        if not self.true_3d:
+        acc = self.accuracy.summary()
+        if not acc:
             lines.append("accuracy: the frames carry no ground truth; not measured")
             return lines
-        true_3d = np.asarray(self.true_3d)
-        m = mpjpe(np.asarray(self.pred_3d), true_3d, np.isfinite(true_3d).all(axis=-1),
-                  pred_valid=np.asarray(self.found_3d))
-        text = (f"accuracy of the estimate vs ground truth: MPJPE {m.value:.0f} mm over the {m.num_evaluated} "
-                f"joints found ({m.num_pred_missing} not found, not scored)")
-        if self.true_2d:
-            p = pck(np.asarray(self.pred_2d), np.asarray(self.true_2d), np.asarray(self.visible_2d),
-                    pred_valid=np.asarray(self.found_2d))
-            text += (f"; 2D PCK@0.2 {p.value:.3f} over {p.num_evaluated} visible joints in both views "
+        text = (f"accuracy of the estimate vs ground truth: MPJPE {acc['mpjpe_mm']:.0f} mm over the "
+                f"{acc['mpjpe_evaluated']} joints found ({acc['mpjpe_pred_missing']} not found, not scored)")
+        if "pck@0.2" in acc:
+            text += (f"; 2D PCK@0.2 {acc['pck@0.2']:.3f} over {acc['pck_evaluated']} visible joints in both views "
                      f"(not found = wrong)")
         lines.append(text)
         return lines

@@ -32,9 +32,9 @@ from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
-    "PRECISIONS", "THREE_D_METHODS", "HEATMAP_SOURCES", "BEST_METHOD", "SessionConfig", "RoiConfig", "TrackingConfig", "FrameCheckConfig",
-    "RaysConfig", "HeatmapsConfig", "Joints3DConfig", "PresenceConfig", "PRESENCE_MIN_CONFIDENCE", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
-    "load_config",
+    "PRECISIONS", "THREE_D_METHODS", "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
+    "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
+    "PresenceConfig", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict", "load_config",
 ]
 
 #: Precision choices of :class:`SessionConfig`.
@@ -313,7 +313,7 @@ class Joints3DConfig:
 
 #: Presence gate defaults per heatmap source (``PresenceConfig.min_confidence`` None): between the
 #: 6th-strongest 3D joint of empty-room pairs (encoder <= 0.15, rendered <= 0.42) and of pairs with a
-#: person (>= 0.485 / 0.493) on held-out sequences with the shipped model (docs/runtime.md).
+#: person (>= 0.485 / 0.493) on held-out sequences with the shipped model (benchmarks/measure_presence.py).
 PRESENCE_MIN_CONFIDENCE = {"encoder": 0.3, "rendered": 0.46}
 
 
@@ -355,14 +355,14 @@ class HeatmapsConfig:
     """Where the source views' joint heatmaps come from.
 
     Attributes:
-        source: ``"encoder"`` (the default: more accurate and ~2x faster on held-out sequences with
-            the shipped model, docs/runtime.md) or ``"rendered"`` (GHNeRF: volume-rendered by ``render_heat`` from the cost volume,
-            the human features and the heads; the ``volume`` and ``render_heat`` graphs run every
-            pair; models without encoder heatmaps, e.g. the baseline, need it) or ``"encoder"`` (the human encoder's own 2D heatmaps, an output of the
+        source: ``"encoder"`` (the default: the human encoder's own 2D heatmaps, an output of the
             ``encoder`` graph of models exported with ``encoder_heatmaps``; ``volume`` and
             ``render_heat`` then run only where the 3D method needs them: ``depth_centroid`` and
-            the single-view fallback read the rendered depth, ``volumetric`` the volume). The
-            speed/accuracy trade of the two is measured in docs/runtime.md.
+            the single-view fallback read the rendered depth, ``volumetric`` the volume) or
+            ``"rendered"`` (GHNeRF: volume-rendered by ``render_heat`` from the cost volume, the
+            human features and the heads; ``volume`` and ``render_heat`` run every pair; models
+            without encoder heatmaps, e.g. the baseline, need it). With the shipped model the
+            encoder's are more accurate and ~2x faster (measured in docs/runtime.md).
     """
 
     source: str = "encoder"
@@ -431,10 +431,10 @@ class EstimatorConfig:
     def required_graphs(self) -> tuple[str, ...]:
         """The graphs this configuration runs (the session loads only these)."""
         graphs = ["encoder"]
-        if self.renders_source_heatmaps:
-            graphs += ["volume", "render_heat"]
-        elif self.joints3d.method == "volumetric" or self.novel_view.enabled:
+        if self.runs_source_volume or self.novel_view.enabled:
             graphs.append("volume")
+        if self.renders_source_heatmaps:
+            graphs.append("render_heat")
         if self.joints3d.method == "volumetric":
             graphs.append("query")
         if self.novel_view.enabled:
@@ -448,6 +448,11 @@ class EstimatorConfig:
         j = self.joints3d
         return (self.heatmaps.source == "rendered" or j.method == "depth_centroid"
                 or (j.method == "triangulate" and j.single_view_fallback))
+
+    @property
+    def runs_source_volume(self) -> bool:
+        """Whether each pair builds the cost volume of the source views (for rendering or ``query``)."""
+        return self.renders_source_heatmaps or self.joints3d.method == "volumetric"
 
 
 # ------------------------------------------------------------------ dict I/O

@@ -461,8 +461,7 @@ class ModelContract:
                 # symbolic: the exporter's shape inference leaves some names where the value is fixed.
                 strict = kind == "input"
                 if len(shape) != len(t.shape) or any(
-                    isinstance(e, int) and (a != e if strict or isinstance(a, int) else False)
-                    for e, a in zip(t.shape, shape)
+                    isinstance(e, int) and (strict or isinstance(a, int)) and a != e for e, a in zip(t.shape, shape)
                 ):
                     raise ContractError(f"graph {graph!r} {kind} shape {list(shape)} != contract {list(t.shape)}",
                                         key=t.name)

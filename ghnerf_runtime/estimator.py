@@ -377,7 +377,7 @@ class Estimator:
         stride, g = self.contract.heatmap_stride, self.grid
         blocks = [full_block(g, g)] * 2
         out: dict[str, np.ndarray] = {}
-        if cfg.renders_source_heatmaps or cfg.joints3d.method == "volumetric":
+        if cfg.runs_source_volume:
             t = time.perf_counter()
             env.update(self.session.run("volume", env))
             add("volume", t)

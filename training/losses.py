@@ -53,6 +53,11 @@ def ssim(x: Tensor, y: Tensor, window: int = 7, c1: float = 0.01 ** 2, c2: float
     return (num / den).mean()
 
 
+def positive_weighted_mse(pred: Tensor, target: Tensor, positive_weight: float) -> Tensor:
+    """``mean((1 + w * target) * (pred - target)^2)``: heatmap MSE that does not sit at all-zero maps."""
+    return ((1.0 + positive_weight * target) * (pred - target) ** 2).mean()
+
+
 def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
                    patch_shape: tuple[int, int] | None = None) -> dict[str, Tensor]:
     """Loss terms and their weighted total (``"loss"``).
@@ -80,9 +85,7 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
             terms[f"l{i}_col"] = F.mse_loss(out["rgb"], batch["rgb"])
             level_total = level_total + config.colour_weight * terms[f"l{i}_col"]
         if "heatmaps" in out and config.heat_weight:
-            target = batch["heatmaps"]
-            weight = 1.0 + config.heat_positive_weight * target
-            terms[f"l{i}_heat"] = (weight * (out["heatmaps"] - target) ** 2).mean()
+            terms[f"l{i}_heat"] = positive_weighted_mse(out["heatmaps"], batch["heatmaps"], config.heat_positive_weight)
             level_total = level_total + config.heat_weight * terms[f"l{i}_heat"]
         if "rgb" in out and config.ssim_weight and patch_shape is not None:
             h, w = patch_shape
@@ -101,11 +104,10 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
         pred, target = outputs["encoder_heatmaps"], batch["source_heatmaps"]
         if pred.shape != target.shape:
             raise ValueError(f"encoder heatmaps {tuple(pred.shape)} do not match the targets {tuple(target.shape)}")
-        weight = 1.0 + config.heat_positive_weight * target
-        terms["enc_heat"] = (weight * (pred - target) ** 2).mean()
+        terms["enc_heat"] = positive_weighted_mse(pred, target, config.heat_positive_weight)
         total = total + config.encoder_heat_weight * terms["enc_heat"]
     terms["loss"] = total
     return terms
 
 
-__all__ = ["LossConfig", "ssim", "compute_losses"]
+__all__ = ["LossConfig", "ssim", "positive_weighted_mse", "compute_losses"]

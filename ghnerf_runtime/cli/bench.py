@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, Joints3DConfig, \
-    NovelViewConfig, SessionConfig
+from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, \
+    Joints3DConfig, NovelViewConfig, SessionConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
 from ghnerf_runtime.novel_view import NovelViewRequest
@@ -114,7 +114,7 @@ def run_runtime_bench(args) -> dict:
             session=SessionConfig(model_dir=args.model_dir, precision=precision, threads=args.threads,
                                   thread_pool=args.thread_pool, allow_spinning=args.allow_spinning),
             heatmaps=HeatmapsConfig(source=source),
-            joints3d=Joints3DConfig(method=args.method or _default_method(source)),
+            joints3d=Joints3DConfig(method=args.method or BEST_METHOD[source]),
             novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
         session = ModelSession.load(cfg.session, cfg.required_graphs())
         report["model"] = session.describe()
@@ -131,11 +131,6 @@ def run_runtime_bench(args) -> dict:
             report["runs"].append(row)
             _print_row(row)
     return report
-
-
-def _default_method(source: str) -> str:
-    """The 3D method of each heatmap source unless ``--method`` is given (``config.BEST_METHOD``)."""
-    return BEST_METHOD[source]
 
 
 def _print_row(row: dict) -> None:
@@ -162,7 +157,8 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--method", choices=THREE_D_METHODS,
                     help="3D method (default: depth_centroid with rendered heatmaps, triangulate with encoder ones)")
     rt.add_argument("--heatmap-sources", default="rendered",
-                    type=lambda s: [p for p in s.split(",") if p], help="comma list of rendered,encoder")
+                    type=lambda s: [p for p in s.split(",") if p],
+                    help="comma list of rendered,encoder (default: rendered; the runtime's default is encoder)")
     rt.add_argument("--novel-stride", type=int, default=1, choices=(1, 2, 4))
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))

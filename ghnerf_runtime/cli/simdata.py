@@ -149,27 +149,34 @@ class Accuracy:
         self.p3, self.t3, self.pv3, self.tracked = [], [], [], []
 
     def add(self, result, seq: Sequence, i: int) -> None:
-        names = list(result.joints_2d)
-        for c, name in enumerate(names):
-            self.p2.append(result.joints_2d[name])
-            self.t2.append(seq.joints_2d[i, c])
-            self.v2.append(seq.visible[i, c])
-            self.pv2.append(~result.missing_2d[name])
+        self.add_truth(result, seq.joints_3d[i], seq.joints_2d[i], seq.visible[i])
+
+    def add_truth(self, result, joints_3d, joints_2d=None, visible=None) -> None:
+        """One pair against its truth: ``(25, 3)`` joints and, optionally, per camera (rig order)
+        ``(C, 25, 2)`` pixels with ``(C, 25)`` visibility for the 2D score."""
+        if joints_2d is not None:
+            for c, name in enumerate(result.joints_2d):
+                self.p2.append(result.joints_2d[name])
+                self.t2.append(joints_2d[c])
+                self.v2.append(visible[c])
+                self.pv2.append(~result.missing_2d[name])
         self.p3.append(result.joints_3d)
-        self.t3.append(seq.joints_3d[i])
+        self.t3.append(joints_3d)
         self.pv3.append(~result.missing)
         self.tracked.append(bool(result.tracked))
 
     def summary(self) -> dict:
         if not self.p3:
             return {}
-        pk = pck(np.array(self.p2), np.array(self.t2), np.array(self.v2), pred_valid=np.array(self.pv2))
         ones = np.ones((len(self.p3), 25), bool)
         p3, t3, pv3, tracked = np.array(self.p3), np.array(self.t3), np.array(self.pv3), np.array(self.tracked)
         mp = mpjpe(p3, t3, ones, pred_valid=pv3)
-        out = {"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated, "pck_pred_missing": pk.num_pred_missing,
-               "mpjpe_mm": mp.value, "mpjpe_evaluated": mp.num_evaluated, "mpjpe_pred_missing": mp.num_pred_missing,
+        out = {"mpjpe_mm": mp.value, "mpjpe_evaluated": mp.num_evaluated, "mpjpe_pred_missing": mp.num_pred_missing,
                "found_3d_frac": float(pv3.mean()), "tracked_frac": float(tracked.mean())}
+        if self.p2:
+            pk = pck(np.array(self.p2), np.array(self.t2), np.array(self.v2), pred_valid=np.array(self.pv2))
+            out.update({"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated,
+                        "pck_pred_missing": pk.num_pred_missing})
         for name, sel in (("tracked", tracked), ("cold", ~tracked)):
             if sel.any():
                 m = mpjpe(p3[sel], t3[sel], ones[sel], pred_valid=pv3[sel])

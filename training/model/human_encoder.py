@@ -50,7 +50,8 @@ class HumanEncoderConfig(Config):
     """Build a training-only 1x1 head ``human_feat -> 25`` joint heatmaps in the source image itself,
     supervised densely (every cell of both source views, every step) by ``LossConfig.encoder_heat_weight``.
     The rendered heatmaps reach the encoder through a few hundred rays per step; this dense signal teaches
-    it "where is joint j in this image" far sooner (deep supervision). Not exported: the runtime renders."""
+    it "where is joint j in this image" far sooner (deep supervision). Exported as the encoder graph's
+    ``encoder_heatmaps`` output (contract 1.1.0), a heatmap source the runtime can use instead of rendering."""
 
 
 class BasicBlock(nn.Module):
@@ -182,9 +183,8 @@ class HumanEncoder(nn.Module):
             out = p if out is None else out + p
         return out
 
-
     def heatmaps(self, human_feat: Tensor) -> Tensor:
-        """Training-only joint heatmaps ``(S, 25, H / out_stride, W / out_stride)`` in [0, 1] from ``human_feat``."""
+        """The auxiliary head's joint heatmaps ``(S, 25, H / out_stride, W / out_stride)`` in [0, 1]."""
         if self.heat_head is None:
             raise RuntimeError("the auxiliary heatmap head is off (HumanEncoderConfig.aux_heatmaps=False)")
         return torch.sigmoid(self.heat_head(human_feat))
