@@ -35,7 +35,7 @@ test: $(DEV_STAMP)
 	$(PY) -m pytest -q
 
 # Regenerate the shipped models from scratch (dataset, training of the model and the
-# baseline, ONNX export, int8 quantization, held-out evaluation, model card): ~1 h on 2 cores.
+# baseline, ONNX export, int8 quantization, held-out evaluation, model card): ~1.5-2 h on 2 cores.
 model: $(DEV_STAMP)
 	$(PY) -m training.pipeline --out models/
 

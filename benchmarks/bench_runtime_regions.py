@@ -148,7 +148,8 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-graphs", action="store_true")
     ap.add_argument("--skip-end-to-end", action="store_true")
     args = ap.parse_args(argv)
-    session = ModelSession.load(SessionConfig(model_dir=args.model_dir, precision=args.precision), GRAPH_NAMES)
+    graphs = [g for g in GRAPH_NAMES if ModelSession.has_graph_file(args.model_dir, g)]
+    session = ModelSession.load(SessionConfig(model_dir=args.model_dir, precision=args.precision), graphs)
     print(f"model {args.model_dir} ({args.precision}: {({g: f.precision for g, f in session.files.items()})}), "
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
     if not args.skip_graphs:

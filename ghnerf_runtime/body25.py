@@ -16,5 +16,12 @@ LIMBS: tuple[tuple[int, int], ...] = (
     (14, 19), (19, 20), (14, 21), (11, 22), (22, 23), (11, 24),
 )
 
+#: Joint index of each joint's mirror image (RShoulder <-> LShoulder, ...): a horizontally flipped
+#: image shows the person's right side where a left side would be.
+FLIP_INDEX: tuple[int, ...] = tuple(
+    JOINT_INDEX[("L" + n[1:]) if n.startswith("R") else ("R" + n[1:]) if n.startswith("L") else n]
+    for n in JOINT_NAMES
+)
+
 # Torso joints used for the PCK reference length (see docs/metrics.md).
 NECK, MID_HIP = JOINT_INDEX["Neck"], JOINT_INDEX["MidHip"]

@@ -41,7 +41,7 @@ __all__ = [
 PRECISIONS = ("fp32", "int8", "auto")
 #: 3D joint methods of :class:`Joints3DConfig`.
 THREE_D_METHODS = ("triangulate", "volumetric", "depth_centroid")
-_GRAPHS = ("encoder", "volume", "render", "render_heat", "render_rgb", "query")
+_GRAPHS = ("encoder", "human", "volume", "render", "render_heat", "render_rgb", "query")
 
 
 # ------------------------------------------------------------------ checks
@@ -312,9 +312,10 @@ class Joints3DConfig:
 
 
 #: Presence gate defaults per heatmap source (``PresenceConfig.min_confidence`` None): between the
-#: 6th-strongest 3D joint of empty-room pairs (encoder <= 0.15, rendered <= 0.42) and of pairs with a
-#: person (>= 0.485 / 0.493) on held-out sequences with the shipped model (benchmarks/measure_presence.py).
-PRESENCE_MIN_CONFIDENCE = {"encoder": 0.3, "rendered": 0.46}
+#: 6th-strongest 3D joint of empty-room pairs (encoder <= 0.23, rendered <= 0.46) and of pairs with a
+#: person (encoder >= 0.54; rendered 5th percentile 0.49) on held-out sequences with the shipped model
+#: of 2026-11-21 20:11 (benchmarks/measure_presence.py).
+PRESENCE_MIN_CONFIDENCE = {"encoder": 0.3, "rendered": 0.475}
 
 
 @dataclass(frozen=True)
@@ -390,6 +391,15 @@ class NovelViewConfig:
             background).
         crop_to_subject: a requested camera is cropped (in its own image) to the subject, as
             the model sees the sources; off: its whole image is resized to the model resolution.
+        silhouette_stride: coarse-to-fine in the image: a first pass renders every
+            ``silhouette_stride``-th pixel of the box, and only the cells where it finds the subject (plus
+            ``silhouette_dilate`` cells around them) are rendered at ``stride``; the rest is
+            background. The person fills a fraction of its box, so this renders fewer rays
+            (measured in docs/runtime.md). 0: off (every ray of the box); must be a multiple of
+            ``stride`` larger than it, else the coarse pass is skipped.
+        silhouette_min_acc: accumulated opacity from which a coarse cell counts as the subject.
+        silhouette_dilate: coarse cells added around the subject's (thin limbs between
+            coarse rays, the soft edge).
     """
 
     enabled: bool = False
@@ -397,6 +407,9 @@ class NovelViewConfig:
     heatmaps: bool = False
     rays_in_box_only: bool = True
     crop_to_subject: bool = True
+    silhouette_stride: int = 4
+    silhouette_min_diff: float = 0.05
+    silhouette_dilate: int = 0
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
@@ -405,6 +418,17 @@ class NovelViewConfig:
         _boolean(self, "heatmaps")
         _boolean(self, "rays_in_box_only")
         _boolean(self, "crop_to_subject")
+        _integer(self, "silhouette_stride", 0, 16)
+        if self.silhouette_stride and self.silhouette_stride % self.stride:
+            _fail(type(self), "silhouette_stride", f"must be 0 or a multiple of stride ({self.stride})",
+                  self.silhouette_stride)
+        _number(self, "silhouette_min_diff", 0.0, 1.0)
+        _integer(self, "silhouette_dilate", 0, 8)
+
+    @property
+    def coarse_pass(self) -> bool:
+        """Whether a coarse pass picks the rays (see ``silhouette_stride``)."""
+        return self.silhouette_stride > self.stride
 
 
 @dataclass(frozen=True)
@@ -428,9 +452,17 @@ class EstimatorConfig:
             if not isinstance(getattr(self, f.name), kind):
                 _fail(type(self), f.name, f"must be a {kind.__name__}", getattr(self, f.name))
 
-    def required_graphs(self) -> tuple[str, ...]:
-        """The graphs this configuration runs (the session loads only these)."""
-        graphs = ["encoder"]
+    def required_graphs(self, human_graph: bool = False) -> tuple[str, ...]:
+        """The graphs this configuration runs (the session loads only these).
+
+        ``human_graph``: the model has a ``human`` graph (contract 1.2.0). A configuration that reads
+        the encoder heatmaps and builds no source volume then runs it for the keypoints, and loads
+        ``encoder`` only when novel views need the image features.
+        """
+        human = self.uses_human_graph(human_graph)
+        graphs = ["human"] if human else []
+        if not human or self.novel_view.enabled:
+            graphs.insert(0, "encoder")
         if self.runs_source_volume or self.novel_view.enabled:
             graphs.append("volume")
         if self.renders_source_heatmaps:
@@ -448,6 +480,11 @@ class EstimatorConfig:
         j = self.joints3d
         return (self.heatmaps.source == "rendered" or j.method == "depth_centroid"
                 or (j.method == "triangulate" and j.single_view_fallback))
+
+    def uses_human_graph(self, human_graph: bool) -> bool:
+        """Whether the keypoint pass runs the ``human`` graph (when the model has one) instead of ``encoder``:
+        only the encoder heatmaps are read and no source volume needs the image features."""
+        return human_graph and self.heatmaps.source == "encoder" and not self.runs_source_volume
 
     @property
     def runs_source_volume(self) -> bool:

@@ -52,12 +52,13 @@ from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.errors import RuntimeErrorBase
 
 #: Contract format version. A different *major* is refused by :meth:`ModelContract.from_metadata`.
-CONTRACT_VERSION = "1.1.0"
-"""1.1.0: optional ``encoder_heatmaps`` output of the encoder graph (1.0.0 files read as without it)."""
+CONTRACT_VERSION = "1.2.0"
+"""1.1.0: optional ``encoder_heatmaps`` output of the encoder graph (1.0.0 files read as without it).
+1.2.0: optional ``human`` graph (images -> ``encoder_heatmaps`` only; older files read as without it)."""
 #: Prefix of every metadata key the contract writes.
 META_PREFIX = "ghnerf."
 #: Graph names in pipeline order.
-GRAPH_NAMES = ("encoder", "volume", "render", "render_heat", "render_rgb", "query")
+GRAPH_NAMES = ("encoder", "human", "volume", "render", "render_heat", "render_rgb", "query")
 #: ImageNet statistics, applied in the encoder graph after ``images`` (RGB, [0, 1]).
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -209,6 +210,11 @@ class ModelContract:
     """The encoder graph also outputs ``encoder_heatmaps`` ``(S, 25, H / s, W / s)`` (``s`` the
     ``human_feat`` stride): the human encoder's own 2D joint heatmaps of each source image (the
     training-time auxiliary head). A cheaper heatmap source than rendering (docs/runtime.md)."""
+    human_graph: bool = False
+    """The model has a ``human`` graph: ``images`` -> ``encoder_heatmaps`` alone, the human encoder
+    without the image feature network. onnxruntime runs every node of a graph whatever outputs are
+    asked for, so a keypoint-only pass that needs no cost volume runs this graph instead of
+    ``encoder`` and skips the feature network (docs/runtime.md)."""
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -228,6 +234,11 @@ class ModelContract:
     @property
     def num_joints(self) -> int:
         return len(self.joint_names)
+
+    @property
+    def graph_names(self) -> tuple[str, ...]:
+        """The graphs this model has (the exporter writes one file per graph and precision)."""
+        return tuple(g.name for g in self.graphs)
 
     def graph(self, name: str) -> GraphSpec:
         for g in self.graphs:
@@ -268,8 +279,10 @@ class ModelContract:
         enc_heat = ([TensorSpec("encoder_heatmaps", (S, J, *self._size("human_feat")),
                                 doc="the human encoder's 2D joint heatmaps of each source (sigmoid), BODY_25 order")]
                     if self.encoder_heatmaps and self.has_human else [])
+        human_only = [GraphSpec("human", (images,), tuple(enc_heat))] if self.human_graph and enc_heat else []
         return (
             GraphSpec("encoder", (images,), (*feats, *human, *enc_heat)),
+            *human_only,
             GraphSpec("volume", (*[f for f in feats if f.name in used_feats], src_P, tgt_K_inv, tgt_c2w, near_far),
                       (volume, stats)),
             GraphSpec("render", (*per_sample_in, src_centers, tgt_K_inv, tgt_c2w, ray_uv), (rgb, heat, depth, acc)),
@@ -323,6 +336,8 @@ class ModelContract:
             fail("heatmap_stride", f"heatmap stride {self.heatmap_stride} must divide {self.width}x{self.height}")
         if self.encoder_heatmaps and not self.has_human:
             fail("encoder_heatmaps", "encoder heatmaps need the human encoder (variant 'ghnerf')")
+        if self.human_graph and not self.encoder_heatmaps:
+            fail("human_graph", "the human graph outputs the encoder heatmaps; encoder_heatmaps must be true")
 
     # --------------------------------------------------------------- metadata
     def to_metadata(self, graph: str | None = None, precision: str = "fp32") -> dict[str, str]:
@@ -346,6 +361,7 @@ class ModelContract:
             p + "graphs": json.dumps([g.to_json() for g in self.graphs]),
             p + "precision": precision,
             p + "encoder_heatmaps": "true" if self.encoder_heatmaps else "false",
+            p + "human_graph": "true" if self.human_graph else "false",
         }
         if graph is not None:
             if graph not in GRAPH_NAMES:
@@ -420,6 +436,8 @@ class ModelContract:
             graphs=parse("graphs", graphs),
             # optional since 1.1.0; absent in 1.0.0 files
             encoder_heatmaps=parse("encoder_heatmaps", _boolean) if p + "encoder_heatmaps" in props else False,
+            # optional since 1.2.0
+            human_graph=parse("human_graph", _boolean) if p + "human_graph" in props else False,
         )
         contract.validate()
         expected = contract._derive_graphs()

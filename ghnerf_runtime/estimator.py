@@ -56,7 +56,7 @@ from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, 
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
-__all__ = ["Estimator", "PairResult", "check_crop", "KEYPOINT_STAGES", "NOVEL_STAGES"]
+__all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES"]
 
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "volume", "render_heat", "decode_2d", "joints_3d")
@@ -196,7 +196,9 @@ class Estimator:
         self.session = session
         self.rig = rig
         self.contract = session.contract
-        missing = [g for g in self.config.required_graphs() if not session.has(g)]
+        # The keypoint-only graph when the session has it (a model of contract >= 1.2.0).
+        self._human_graph = self.config.uses_human_graph(session.has("human"))
+        missing = [g for g in self.config.required_graphs(self._human_graph) if not session.has(g)]
         if missing:
             raise ModelError(f"the session lacks graph(s) {missing} that this configuration needs "
                              f"(loaded: {list(getattr(session, 'graphs', []))})")
@@ -225,10 +227,8 @@ class Estimator:
     @classmethod
     def from_config(cls, rig: Rig, config: EstimatorConfig | None = None) -> "Estimator":
         """Load the model named by ``config.session`` (only the graphs needed) and build the estimator."""
-        from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
-
         config = config or EstimatorConfig()
-        return cls(ModelSession.load(config.session, config.required_graphs()), rig, config)
+        return cls(load_session(config), rig, config)
 
     @property
     def camera_names(self) -> tuple[str, str]:
@@ -322,11 +322,12 @@ class Estimator:
         if novel_view is not None and novel_view.overlay == "heatmap" and not self.config.novel_view.heatmaps:
             raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
         timing: dict[str, float] = {}
-        p = self._pass(images, self.tracker.regions(), sequence, timing)
+        features = novel_view is not None  # the novel view reads the image features of the pair
+        p = self._pass(images, self.tracker.regions(), sequence, timing, features)
         if (p.j3 is not None and not p.regions.tracked and self.config.tracking.refine_cold_start
                 and self.tracker.track is not None):
             # Cold start that found the subject: run again on its crop and box, in this pair.
-            p = self._pass(images, self.tracker.regions(), sequence, timing)
+            p = self._pass(images, self.tracker.regions(), sequence, timing, features)
         if p.j3 is None:
             timing["total"] = 1e3 * (time.perf_counter() - t_start)
             return self._empty_result(sequence, p.regions, p.frame_ok, timing)
@@ -339,8 +340,12 @@ class Estimator:
                           p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
                           self.config.joints3d.method, nv)
 
-    def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict) -> "_Pass":
-        """Stages 1-6 on one set of regions; stage times are added to ``timing``; updates the track."""
+    def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict,
+              features: bool = False) -> "_Pass":
+        """Stages 1-6 on one set of regions; stage times are added to ``timing``; updates the track.
+
+        ``features``: compute the image features too (``encoder`` rather than ``human``) for a novel view.
+        """
         cfg = self.config
         S = self.size
 
@@ -372,7 +377,10 @@ class Estimator:
                                   for c in crops]),
         }
         t = time.perf_counter()
-        env.update(self.session.run("encoder", env))
+        # onnxruntime runs a whole graph whatever is asked of it: without a volume to build, the
+        # human-only graph skips the image feature network.
+        encoder = "human" if self._human_graph and not features else "encoder"
+        env.update(self.session.run(encoder, env))
         add("encoder", t)
         stride, g = self.contract.heatmap_stride, self.grid
         blocks = [full_block(g, g)] * 2
@@ -486,3 +494,12 @@ class Estimator:
             image = heatmap_overlay(image, nv.heat)
         timing["novel_compose"] = timing.get("novel_compose", 0.0) + 1e3 * (time.perf_counter() - t)
         return NovelView(image, nv.camera, nv.depth, nv.heat, nv.rays)
+
+
+def load_session(config: EstimatorConfig):
+    """The :class:`~ghnerf_runtime.session.ModelSession` of ``config.session`` with only the graphs the
+    configuration runs: the keypoint-only ``human`` graph when the model folder has one."""
+    from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
+
+    graphs = config.required_graphs(ModelSession.has_graph_file(config.session, "human"))
+    return ModelSession.load(config.session, graphs)

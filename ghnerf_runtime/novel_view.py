@@ -9,7 +9,9 @@ contract's background (black).
 
 Graph use (:func:`render_novel_view`): ``volume`` with the one novel camera as target (B = 1),
 then ``render_rgb`` (colour only) or ``render`` (colour and heatmaps). The encoder outputs of
-the pair are reused from the keypoint path, so a novel view costs two graph runs.
+the pair are reused from the keypoint path. With ``silhouette_stride`` the render graph runs
+twice: a coarse pass over the box (every 4th pixel) finds the cells the subject covers, and the
+fine pass renders only those, since the person fills a fraction of the box.
 
 numpy, OpenCV; the session is passed in (never created here).
 """
@@ -28,7 +30,15 @@ from ghnerf_runtime.contract import near_far_from_box, target_inputs
 from ghnerf_runtime.errors import GeometryError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
-from ghnerf_runtime.rays import block_ray_uv, box_block, full_block, scatter_block
+from ghnerf_runtime.rays import (
+    block_ray_uv,
+    box_block,
+    cells_ray_uv,
+    full_block,
+    refine_cells,
+    scatter_block,
+    scatter_cells,
+)
 from ghnerf_runtime.tracking import box_corners
 
 __all__ = ["NovelViewRequest", "NovelView", "slerp_rotation", "interpolate_camera", "novel_target",
@@ -189,18 +199,24 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
     gh, gw = S // stride, contract.width // stride
     block = box_block(camera, box, stride, margin_cells=1) if config.rays_in_box_only else full_block(gh, gw)
     graph = "render" if want_heat else "render_rgb"
-    if block is None:  # the subject is not in view: nothing to render
-        rgb = np.zeros((gh, gw, 3), np.float32)
+    cells, rays = None, 0
+    if block is not None:
+        cells = np.zeros((gh, gw), bool)
+        cells[block[0]:block[0] + block[2], block[1]:block[1] + block[3]] = True
+        if config.coarse_pass:
+            silhouette, rays = _silhouette_cells(session, graph, feeds, camera, box, config)
+            cells &= refine_cells(silhouette, config.silhouette_stride // stride)
+    if cells is None or not cells.any():  # the subject is not in view: nothing to render
+        rgb = np.full((gh, gw, 3), contract.background, np.float32)
         depth = np.zeros((gh, gw), np.float32)
         heat = np.zeros((gh, gw), np.float32) if want_heat else None
-        rays = 0
     else:
-        feeds["ray_uv"] = block_ray_uv(block, stride)[None]
+        feeds["ray_uv"] = cells_ray_uv(cells, stride)[None]
         out = session.run(graph, feeds)
-        rgb = scatter_block(out["rgb"][0], block, gh, gw, contract.background)
-        depth = scatter_block(out["depth"][0], block, gh, gw, 0.0)
-        heat = scatter_block(out["heatmaps"][0].max(axis=-1), block, gh, gw, 0.0) if want_heat else None
-        rays = block[2] * block[3]
+        rgb = scatter_cells(out["rgb"][0], cells, contract.background)
+        depth = scatter_cells(out["depth"][0], cells, 0.0)
+        heat = scatter_cells(out["heatmaps"][0].max(axis=-1), cells, 0.0) if want_heat else None
+        rays += int(cells.sum())
     t2 = time.perf_counter()
     rgb = np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0)
     if stride > 1:
@@ -214,6 +230,33 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         timing["novel_compose"] = 1e3 * (time.perf_counter() - t2)
     return NovelView(image, camera, np.nan_to_num(depth).astype(np.float32),
                      None if heat is None else np.nan_to_num(heat).astype(np.float32), rays)
+
+
+def _silhouette_cells(session: Any, graph: str, feeds: dict, camera: Camera, box: np.ndarray,
+                      config: NovelViewConfig) -> tuple[np.ndarray, int]:
+    """The coarse pass: cells of the ``silhouette_stride`` grid whose colour is not the background (dilated).
+
+    The test is on the composited colour, not the opacity: a ray whose colour is the background's
+    adds nothing to the picture however opaque the model made it (the shipped model fills its box
+    with opaque black, docs/runtime.md), and a cell left out is drawn as background, so what is
+    lost is bounded by ``silhouette_min_diff`` at the coarse rays.
+
+    Returns the ``(S / cs, S / cs)`` mask and the number of coarse rays rendered.
+    """
+    cs = config.silhouette_stride
+    S, W = session.contract.height, session.contract.width
+    mask = np.zeros((S // cs, W // cs), bool)
+    block = box_block(camera, box, cs, margin_cells=1) if config.rays_in_box_only else full_block(*mask.shape)
+    if block is None:
+        return mask, 0
+    coarse = dict(feeds, ray_uv=block_ray_uv(block, cs)[None])
+    rgb = np.nan_to_num(session.run(graph, coarse)["rgb"][0])
+    diff = np.abs(rgb - session.contract.background).max(axis=-1)
+    mask = scatter_block(diff, block, *mask.shape, 0.0) >= config.silhouette_min_diff
+    if config.silhouette_dilate and mask.any():
+        k = 2 * config.silhouette_dilate + 1
+        mask = cv2.dilate(mask.astype(np.uint8), np.ones((k, k), np.uint8)).astype(bool)
+    return mask, block[2] * block[3]
 
 
 # ------------------------------------------------------------------ overlays

@@ -16,7 +16,8 @@ import numpy as np
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 
-__all__ = ["Block", "full_block", "box_block", "common_blocks", "block_ray_uv", "scatter_block"]
+__all__ = ["Block", "full_block", "box_block", "common_blocks", "block_ray_uv", "scatter_block", "refine_cells",
+           "cells_ray_uv", "scatter_cells"]
 
 Block = tuple[int, int, int, int]
 
@@ -90,4 +91,27 @@ def scatter_block(values: np.ndarray, block: Block, grid_h: int, grid_w: int, fi
         raise ShapeError(f"values have {values.shape[0]} rays, the block {block} has {rows * cols}")
     out = np.full((grid_h, grid_w) + values.shape[1:], fill, dtype=values.dtype)
     out[r0:r0 + rows, c0:c0 + cols] = values.reshape((rows, cols) + values.shape[1:])
+    return out
+
+
+def refine_cells(coarse: np.ndarray, factor: int) -> np.ndarray:
+    """A ``(h, w)`` boolean cell mask -> the ``(h * factor, w * factor)`` mask of the cells inside them."""
+    m = np.asarray(coarse, dtype=bool)
+    return np.repeat(np.repeat(m, factor, axis=0), factor, axis=1)
+
+
+def cells_ray_uv(mask: np.ndarray, stride: int) -> np.ndarray:
+    """``(n, 2)`` float32 model-pixel ray positions of the ``True`` cells of a grid mask, row-major."""
+    rows, cols = np.nonzero(np.asarray(mask, dtype=bool))
+    return np.stack([(cols + 0.5) * stride - 0.5, (rows + 0.5) * stride - 0.5], axis=-1).astype(np.float32)
+
+
+def scatter_cells(values: np.ndarray, mask: np.ndarray, fill: float = 0.0) -> np.ndarray:
+    """Rendered ``(n, *C)`` values of the ``True`` cells of a ``(gh, gw)`` mask -> a ``(gh, gw, *C)`` grid."""
+    mask = np.asarray(mask, dtype=bool)
+    values = np.asarray(values)
+    if values.shape[0] != int(mask.sum()):
+        raise ShapeError(f"values have {values.shape[0]} rays, the mask has {int(mask.sum())} cells")
+    out = np.full(mask.shape + values.shape[1:], fill, dtype=values.dtype)
+    out[mask] = values
     return out

@@ -78,7 +78,7 @@ MODEL_CARD = "model_card.json"
 #: render/query graphs gain nothing (no VNNI) and their QDQ boundaries cost more on large
 #: point counts; the volume graph is float in both files.
 AUTO_PRECISION: Mapping[str, str] = {
-    "encoder": "int8", "volume": "fp32", "render_heat": "fp32", "render_rgb": "fp32", "render": "fp32",
+    "encoder": "int8", "human": "int8", "volume": "fp32", "render_heat": "fp32", "render_rgb": "fp32", "render": "fp32",
     "query": "fp32",
 }
 _ONNX_FLOAT = "tensor(float)"
@@ -276,6 +276,15 @@ class ModelSession:
             session.warm_up()
         return session
 
+    @classmethod
+    def has_graph_file(cls, config: SessionConfig | str | os.PathLike, graph: str) -> bool:
+        """Whether the model folder has a file for ``graph`` under its usual names (``<graph>.onnx``,
+        ``<graph>.int8.onnx``): how the caller learns, before loading, that an optional graph exists."""
+        if not isinstance(config, SessionConfig):
+            config = SessionConfig(model_dir=str(config))
+        folder = resolve_model_dir(config.model_dir)
+        return any(cls._find(folder, graph, p) is not None for p in ("fp32", "int8"))
+
     @staticmethod
     def _find(folder: Path, graph: str, precision: str) -> Path | None:
         for name in (_file_name(graph, precision), _file_name(graph, "fp32")):
@@ -360,7 +369,7 @@ class ModelSession:
     def warm_up(self) -> dict[str, float]:
         """Run every loaded graph once at the estimator's shapes (so the first frame is not slow)."""
         feeds = warmup_feeds(self.contract)
-        order = [g for g in ("encoder", "volume", "render_heat", "query") if g in self._sessions]
+        order = [g for g in ("human", "encoder", "volume", "render_heat", "query") if g in self._sessions]
         for graph in order:
             t0 = time.perf_counter()
             feeds.update(self.run(graph, feeds))

@@ -106,6 +106,13 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
             raise ValueError(f"encoder heatmaps {tuple(pred.shape)} do not match the targets {tuple(target.shape)}")
         terms["enc_heat"] = positive_weighted_mse(pred, target, config.heat_positive_weight)
         total = total + config.encoder_heat_weight * terms["enc_heat"]
+        if "aux_encoder_heatmaps" in outputs and "aux_heatmaps" in batch:  # more views / mirrored images
+            pred, target = outputs["aux_encoder_heatmaps"], batch["aux_heatmaps"]
+            if pred.shape != target.shape:
+                raise ValueError(f"auxiliary encoder heatmaps {tuple(pred.shape)} do not match the targets "
+                                 f"{tuple(target.shape)}")
+            terms["enc_heat_aux"] = positive_weighted_mse(pred, target, config.heat_positive_weight)
+            total = total + config.encoder_heat_weight * terms["enc_heat_aux"]
     terms["loss"] = total
     return terms
 

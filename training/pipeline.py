@@ -217,6 +217,44 @@ def _result_keys(tc: dict) -> dict:
     return {k: v for k, v in tc.items() if k not in RUNTIME_KEYS}
 
 
+def _run_config(path: Path) -> dict:
+    """A run's ``config.json`` through ``TrainConfig``: keys added since the run read as their defaults."""
+    from dataclasses import asdict
+
+    from training.train import build_config
+
+    return json.loads(json.dumps(asdict(build_config(json.loads(path.read_text())))))
+
+
+def _model_key(model_config: dict) -> dict:
+    """The parts of a model config that shape the trained weights (a baseline's unused human encoder aside)."""
+    out = json.loads(json.dumps(model_config))
+    if not out.get("use_human_encoder", True):
+        out.pop("human", None)
+    return out
+
+
+def expected_model(cfg: PipelineConfig, variant: str) -> dict:
+    """The model config a run of ``variant`` trains: the preset with the train config's overrides."""
+    from training.train import build_config
+
+    return _model_key(build_config(train_inputs(cfg, VARIANTS[variant])).model_config().to_dict())
+
+
+def _run_model(run: Path) -> dict | None:
+    """The model config a run folder's last checkpoint was trained with (None: no checkpoint)."""
+    import torch
+
+    last = run / "last.pt"
+    if not last.exists():
+        return None
+    from training.model import ModelConfig
+
+    ck = torch.load(str(last), map_location="cpu", weights_only=False)
+    # Through the dataclass: keys added since the run was saved read as their defaults.
+    return _model_key(ModelConfig.from_dict(ck.get("model_config", {})).to_dict())
+
+
 def _run_finished(cfg: PipelineConfig, variant: str) -> bool:
     """``runs/<preset>`` holds a finished run (all steps, or a capped one with ``accept_stopped``) of this config."""
     run = cfg.runs / VARIANTS[variant]
@@ -224,7 +262,9 @@ def _run_finished(cfg: PipelineConfig, variant: str) -> bool:
     if not (cfg_p.exists() and summary_p.exists()):
         return False
     tc = train_inputs(cfg, VARIANTS[variant])
-    if _result_keys(json.loads(cfg_p.read_text())) != _result_keys(tc):
+    if _result_keys(_run_config(cfg_p)) != _result_keys(tc):
+        return False
+    if _run_model(run) != expected_model(cfg, variant):  # the preset changed since (architecture)
         return False
     sm = json.loads(summary_p.read_text())
     return sm.get("steps", 0) >= tc["iterations"] or bool(cfg.accept_stopped and sm.get("stopped_early"))
@@ -239,8 +279,11 @@ def _check_run_folder(cfg: PipelineConfig, variant: str) -> None:
                            f"{time.time() - lg.stat().st_mtime:.0f} s ago); wait for it or stop it")
     tc = train_inputs(cfg, VARIANTS[variant])
     if (run / "last.pt").exists() and cfg_p.exists() and \
-            _result_keys(json.loads(cfg_p.read_text())) != _result_keys(tc):
+            _result_keys(_run_config(cfg_p)) != _result_keys(tc):
         raise RuntimeError(f"{run} holds a run with another config; move it away or pass --runs")
+    if (run / "last.pt").exists() and _run_model(run) != expected_model(cfg, variant):
+        raise RuntimeError(f"{run} holds a run of another model config (the preset changed since); "
+                           "move it away or pass --runs")
 
 
 def stage_train(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
@@ -305,7 +348,6 @@ def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Pa
 
 
 def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
-    from ghnerf_runtime.contract import GRAPH_NAMES
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
     from training.export.parity import int8_vs_fp32
@@ -319,10 +361,11 @@ def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[
     for variant, ckpt in trained.items():
         model, _ = load_model(ckpt)
         folder = cfg.out / variant
-        fp32 = {g: folder / f"{g}.onnx" for g in GRAPH_NAMES}
+        graphs = model.contract().graph_names
+        fp32 = {g: folder / f"{g}.onnx" for g in graphs}
         calib = [_scene_inputs(model, calib_ds[i], ray_stride=2, seed=i)
                  for i in range(0, step * cfg.calib_scenes, step)[:cfg.calib_scenes]]
-        int8 = quantize_all(fp32, folder, calibration_feeds(model, calib, GRAPH_NAMES, rays_per_target=2048))
+        int8 = quantize_all(fp32, folder, calibration_feeds(model, calib, graphs, rays_per_target=2048))
         parity_in = _scene_inputs(model, val_ds[0], ray_stride=model.config.heatmap_stride, targets=[0, 1])
         info[variant] = {"int8_vs_fp32": int8_vs_fp32(fp32, int8, model.contract(), parity_in),
                          "calibration_scenes": len(calib)}
@@ -421,7 +464,7 @@ def run(cfg: PipelineConfig) -> dict | None:
 
     def train_in(variant: str) -> dict:
         return {"data": d["inputs"], "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
-                "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped}
+                "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped}
 
     todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v)) is None and not _run_finished(cfg, v)]
     if cfg.parallel_train and len(todo) > 1 and not torch.cuda.is_available():

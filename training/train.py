@@ -60,6 +60,9 @@ class TrainConfig(Config):
 
     preset: str = "edge128"
     """Model preset of ``training.configs`` (``tiny``, ``edge128``, ``edge128_baseline``)."""
+    model: dict = field(default_factory=dict)
+    """Partial ``ModelConfig`` overriding the preset (``{"human": {"decoder": "fpn"}}``; ``--set model.x.y=v``):
+    an architecture experiment without a new preset. The checkpoint stores the resulting model config."""
     data: str = "data/edge128"
     """Dataset folder (``dataset.json``), made by ``python -m training.data.generate``."""
     split: str = "train"
@@ -84,6 +87,12 @@ class TrainConfig(Config):
     """Floor of the decayed learning rate (a longer schedule then extends a shorter one unchanged)."""
     grad_clip: float = 0.0
     """Clip the global gradient norm (0: off)."""
+    encoder_views: Literal["sources", "all"] = "sources"
+    """Images the human encoder's auxiliary heatmap head is supervised on each step: the two sources, or
+    every view of the scene (the novel target views too: the encoder sees them only for this loss)."""
+    encoder_flip: bool = False
+    """Also supervise the auxiliary head on the mirrored images (left/right joints swapped): twice the
+    images per step, and the left/right distinction taught by contrast."""
     loss: LossConfig = field(default_factory=LossConfig)
     """Loss weights (``l_col + 0.5 l_heat + ssim_weight * (1 - SSIM) [+ coord_weight * l_coord]``)."""
     seed: int = 0
@@ -135,9 +144,26 @@ class TrainConfig(Config):
             fail("loss.ssim_window", "must be >= 1")
         if not self.data:
             fail("data", "must name the dataset folder")
+        if not isinstance(self.model, Mapping):
+            fail("model", f"must be a mapping of ModelConfig overrides, got {self.model!r}")
+        self.model_config()  # unknown or mistyped model keys fail here, named by their path
 
     def model_config(self) -> ModelConfig:
-        return preset(self.preset)
+        """The preset with ``model`` merged on top, validated (unknown keys name their path)."""
+        base = preset(self.preset)
+        if not self.model:
+            return base
+        return ModelConfig.from_dict(_deep_merge(base.to_dict(), self.model), "model")
+
+
+def _deep_merge(base: dict, over: Mapping[str, Any]) -> dict:
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
+            out[key] = _deep_merge(out[key], value)
+        else:
+            out[key] = value
+    return out
 
 
 def load_config_file(path: str | Path) -> dict:
@@ -333,7 +359,31 @@ def make_batch(item: dict, cfg: TrainConfig, mcfg: ModelConfig, gen: torch.Gener
     }
     if "tgt_heatmaps" in item:  # dense grids of the source views (the images the encoder saw): auxiliary head
         batch["source_heatmaps"] = item["tgt_heatmaps"][item["tgt_is_source"]]
+        if cfg.encoder_views == "all" or cfg.encoder_flip:
+            batch.update(aux_encoder_batch(item, cfg))
     return batch
+
+
+def aux_encoder_batch(item: dict, cfg: TrainConfig) -> dict[str, Tensor]:
+    """Extra images for the encoder's auxiliary head (``encoder_views``, ``encoder_flip``) and their grids.
+
+    Mirroring is exact on the heatmap grid (cell centres map onto cell centres) once the joint channels
+    are swapped left for right (``FLIP_INDEX``).
+    """
+    from ghnerf_runtime.body25 import FLIP_INDEX
+
+    src = item["tgt_is_source"]
+    images, heat = [], []
+    if cfg.encoder_views == "all" and (~src).any():
+        images.append(item["tgt_images"][~src])
+        heat.append(item["tgt_heatmaps"][~src])
+    if cfg.encoder_flip:
+        views = slice(None) if cfg.encoder_views == "all" else src
+        images.append(torch.flip(item["tgt_images"][views], dims=(-1,)))
+        heat.append(torch.flip(item["tgt_heatmaps"][views], dims=(-1,))[:, list(FLIP_INDEX)])
+    if not images:
+        return {}
+    return {"aux_images": torch.cat(images), "aux_heatmaps": torch.cat(heat)}
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -566,7 +616,8 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
             for g in opt.param_groups:
                 g["lr"] = lr
             out = ddp_model(batch["images"], batch["src_P"], batch["src_centers"], batch["tgt_K_inv"],
-                            batch["tgt_c2w"], batch["near_far"], batch["ray_uv"], perturb=True)
+                            batch["tgt_c2w"], batch["near_far"], batch["ray_uv"], perturb=True,
+                            aux_images=batch.get("aux_images"))
             terms = step_losses(out, batch, cfg)
             opt.zero_grad(set_to_none=True)
             terms["loss"].backward()

@@ -30,9 +30,8 @@ import numpy as np
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, \
     Joints3DConfig, NovelViewConfig, SessionConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
-from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
+from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator, load_session
 from ghnerf_runtime.novel_view import NovelViewRequest
-from ghnerf_runtime.session import ModelSession
 from ghnerf_runtime.tracking import track_from_joints
 
 log = logging.getLogger("ghnerf-bench")
@@ -116,7 +115,7 @@ def run_runtime_bench(args) -> dict:
             heatmaps=HeatmapsConfig(source=source),
             joints3d=Joints3DConfig(method=args.method or BEST_METHOD[source]),
             novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
-        session = ModelSession.load(cfg.session, cfg.required_graphs())
+        session = load_session(cfg)
         report["model"] = session.describe()
         for mode in args.modes:
             acc = Accuracy()

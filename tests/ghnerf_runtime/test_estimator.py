@@ -141,13 +141,21 @@ def test_novel_view_off_with_colour_graph_loaded_still_never_runs_it(full_sessio
 def test_novel_view_on_request(full_session, scene_rig, stride, overlay):
     rig, frames = scene_rig
     rec = Recorder(full_session)
-    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, stride=stride)))
+    cfg = NovelViewConfig(enabled=True, stride=stride, silhouette_stride=0)  # every ray of the box
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=cfg))
     r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.3, overlay=overlay))
     S = full_session.contract.height
     assert r.novel_view is not None and r.novel_view.image.shape == (S, S, 3) and r.novel_view.image.dtype == np.uint8
     assert rec.ran("render_rgb") == 1 and rec.ran("render") == 0 and rec.ran("volume") == 1  # the novel camera's
     rays = [shapes["ray_uv"] for g, shapes in rec.calls if g == "render_rgb"][0]
     assert rays[0] == 1 and rays[1] <= (S // stride) ** 2
+    # With the coarse silhouette pass (the default): a coarse run, then a fine one over at most the box.
+    rec.calls.clear()
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, stride=stride)))
+    coarse = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.3, overlay=overlay))
+    calls = [shapes["ray_uv"][1] for g, shapes in rec.calls if g == "render_rgb"]
+    assert len(calls) in (1, 2) and calls[0] <= (S // 4) ** 2
+    assert coarse.novel_view.rays == sum(calls) and coarse.novel_view.image.shape == (S, S, 3)
     assert set(NOVEL_STAGES) <= set(r.timing_ms)
 
 
@@ -160,7 +168,7 @@ def test_novel_view_with_heatmaps_uses_the_render_graph(full_session, scene_rig)
     R, t = look_at((0.0, -1.5, 0.5), (0.0, -1.0, 3.0))
     given = cam.with_pose(R, t)
     r = est.estimate(frames[0], novel_view=NovelViewRequest(camera=given, overlay="heatmap"))
-    assert rec.ran("render") == 1 and rec.ran("render_rgb") == 0
+    assert rec.ran("render") in (1, 2) and rec.ran("render_rgb") == 0  # (coarse pass +) fine pass
     assert r.novel_view.heat is not None and np.all(np.isfinite(r.novel_view.heat))
 
 
@@ -193,16 +201,83 @@ def test_encoder_heatmaps_skip_volume_and_rendering(tiny_model_dir, scene_rig): 
     rig, frames = scene_rig
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)), heatmaps=HeatmapsConfig("encoder"),
                           joints3d=Joints3DConfig(method="triangulate"))
-    assert cfg.required_graphs() == ("encoder",)
+    assert cfg.required_graphs() == ("encoder",)  # a model without the human graph
+    assert cfg.required_graphs(human_graph=True) == ("human",)
+    assert ModelSession.has_graph_file(tiny_model_dir, "human")
     est = Estimator.from_config(rig, cfg)
-    assert est.session.graphs == ("encoder",)  # nothing else is even loaded
+    assert est.session.graphs == ("human",)  # nothing else is even loaded: no feature network, no volume
     rec = Recorder(est.session)
     est.session = rec
     for pair in frames:
         r = est.estimate(pair)
         assert _all_finite(r)
         assert "volume" not in r.timing_ms and "render_heat" not in r.timing_ms
-    assert [g for g, _ in rec.calls] == ["encoder"] * len(frames)
+    assert [g for g, _ in rec.calls] == ["human"] * len(frames)
+
+
+def test_human_graph_gives_the_encoder_graphs_keypoints(full_session, scene_rig):
+    """The human graph is the encoder graph's heatmap branch: same joints either way."""
+    rig, frames = scene_rig
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method="triangulate"))
+    calls = []
+    results = {}
+    for name, session in (("human", full_session), ("encoder", _Without(full_session, "human"))):
+        rec = Recorder(session)
+        est = Estimator(rec, rig, cfg)
+        results[name] = [est.estimate(pair) for pair in frames]
+        calls.append({g for g, _ in rec.calls})
+    assert calls == [{"human"}, {"encoder"}]
+    for a, b in zip(results["human"], results["encoder"]):
+        np.testing.assert_allclose(a.joints_3d, b.joints_3d, atol=1e-4)
+        np.testing.assert_array_equal(a.missing, b.missing)
+        for cam in a.joints_2d:
+            np.testing.assert_allclose(a.joints_2d[cam], b.joints_2d[cam], atol=1e-3)
+
+
+def test_older_model_without_human_graph_runs_the_encoder(tiny_model_dir, scene_rig, tmp_path):  # noqa: F811
+    import shutil
+
+    rig, frames = scene_rig
+    old = tmp_path / "old"
+    shutil.copytree(tiny_model_dir, old)
+    for f in old.glob("human*.onnx"):
+        f.unlink()
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(old), warmup=False), heatmaps=HeatmapsConfig("encoder"))
+    est = Estimator.from_config(rig, cfg)
+    assert est.session.graphs == ("encoder",)
+    assert _all_finite(est.estimate(frames[0]))
+
+
+def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_session, scene_rig):
+    rig, frames = scene_rig
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method="triangulate"),
+                          novel_view=NovelViewConfig(enabled=True))
+    assert cfg.required_graphs(human_graph=True) == ("encoder", "human", "volume", "render_rgb")
+    rec = Recorder(full_session)
+    est = Estimator(rec, rig, cfg)
+    est.estimate(frames[0])
+    plain = [g for g, _ in rec.calls]
+    rec.calls.clear()
+    est.estimate(frames[1], novel_view=NovelViewRequest(alpha=0.5))
+    novel = [g for g, _ in rec.calls]
+    assert "encoder" not in plain and "human" in plain
+    assert "human" not in novel and novel.count("encoder") >= 1 and "render_rgb" in novel
+
+
+class _Without:
+    """A session that hides one graph (as a model exported before it existed)."""
+
+    def __init__(self, session, graph):
+        self._s, self._hidden = session, graph
+        self.contract = session.contract
+        self.graphs = tuple(g for g in session.graphs if g != graph)
+
+    def has(self, graph):
+        return graph != self._hidden and self._s.has(graph)
+
+    def run(self, graph, feeds):
+        assert graph != self._hidden
+        return self._s.run(graph, feeds)
 
 
 @pytest.mark.parametrize("method, graphs", [("depth_centroid", ("encoder", "volume", "render_heat")),

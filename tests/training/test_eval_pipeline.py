@@ -54,3 +54,33 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert md == render_markdown(card)
     assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
+
+
+def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_path):
+    """``make model`` reuses runs/<preset> when its train config *and* model config match: a run saved
+    before a train-config key existed still matches (defaults), a changed preset does not."""
+    import pytest
+
+    torch = pytest.importorskip("torch")
+    from dataclasses import asdict
+
+    from training.configs import preset
+    from training.pipeline import PipelineConfig, _run_finished, train_inputs
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    run = cfg.runs / "edge128_baseline"
+    run.mkdir(parents=True)
+    tc = train_inputs(cfg, "edge128_baseline")
+    old_style = {k: v for k, v in tc.items() if k not in ("encoder_views", "encoder_flip", "model")}
+    (run / "config.json").write_text(json.dumps(old_style))
+    (run / "summary.json").write_text(json.dumps({"steps": tc["iterations"], "stopped_early": False}))
+    mc = preset("edge128_baseline").to_dict()
+    del mc["human"]["decoder"]  # a checkpoint from before the key existed
+    torch.save({"model_config": mc}, run / "last.pt")
+    assert _run_finished(cfg, "baseline")
+
+    other = preset("edge128_baseline")
+    other.levels[0].regularizer.channels = 4  # the preset's architecture changed since
+    torch.save({"model_config": other.to_dict()}, run / "last.pt")
+    assert not _run_finished(cfg, "baseline")
+    assert asdict(other) != asdict(preset("edge128_baseline"))

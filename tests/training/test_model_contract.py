@@ -31,7 +31,7 @@ def make(variant: str = "ghnerf", **kw) -> ModelContract:
 
 def test_graphs_and_shapes():
     c = make()
-    assert tuple(g.name for g in c.graphs) == GRAPH_NAMES
+    assert tuple(g.name for g in c.graphs) == tuple(g for g in GRAPH_NAMES if g != "human")
     enc = c.graph("encoder")
     assert enc.input_names == ("images",)
     assert enc.tensor("images").shape == (2, 3, 128, 128)
@@ -43,6 +43,21 @@ def test_graphs_and_shapes():
     assert c.graph("render_heat").tensor("heatmaps").shape == ("B", "R", 25)
     assert "human_feat" not in c.graph("render_rgb").input_names
     assert c.graph("query").tensor("joint_heat").shape == ("B", "N", 25)
+
+
+def test_human_graph_is_the_encoder_heatmaps_alone():
+    c = make(encoder_heatmaps=True, human_graph=True)
+    assert c.graph_names == GRAPH_NAMES
+    human = c.graph("human")
+    assert human.input_names == ("images",) and human.output_names == ("encoder_heatmaps",)
+    assert human.tensor("encoder_heatmaps").shape == c.graph("encoder").tensor("encoder_heatmaps").shape
+    back = ModelContract.from_metadata(c.to_metadata(graph="human"))
+    assert back.human_graph and back.same_model(c)
+    # 1.1.0 files carry no human_graph key: read as without the graph
+    old = {k: v for k, v in make(encoder_heatmaps=True).to_metadata().items() if k != "ghnerf.human_graph"}
+    assert not ModelContract.from_metadata(old).human_graph
+    with pytest.raises(ContractError, match="human_graph"):
+        make(human_graph=True)  # no encoder heatmaps to output
 
 
 def test_baseline_has_no_human_features():

@@ -118,6 +118,12 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
     assert any(not torch.equal(init[k], a[k]) for k in a if a[k].is_floating_point())
 
 
+def test_two_iterations_with_every_view_and_mirrored_encoder_images(data64, tmp_path):
+    summary, model = train(tiny_cfg(data64, encoder_views="all", encoder_flip=True), tmp_path / "r", quiet=True)
+    assert summary["steps"] == 2
+    assert all(torch.isfinite(p).all() for p in model.parameters())
+
+
 def test_init_loads_torchvision_weights_into_the_human_encoder(data64, tmp_path):
     from training.configs import preset
     from training.model import GHNeRF

@@ -74,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--checkpoint", help="trainer checkpoint or weights file (.pt); its stored model config "
                     "overrides --preset; default: random weights")
     ap.add_argument("--out", required=True, help="output folder for <graph>.onnx / <graph>.int8.onnx")
-    ap.add_argument("--graphs", default=",".join(GRAPH_NAMES))
+    ap.add_argument("--graphs", default="", help=f"comma-separated subset of {','.join(GRAPH_NAMES)} "
+                    "(default: every graph the model has)")
     ap.add_argument("--opset", type=int, default=17)
     ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
     ap.add_argument("--calib-frames", type=int, default=8, help="random calibration frames (no --calib-npz)")
@@ -93,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         model, _ = load_model(args.checkpoint, default_config=preset(args.preset))
     else:
         model = GHNeRF(preset(args.preset)).eval()
-    graphs = tuple(g for g in args.graphs.split(",") if g)
+    graphs = tuple(g for g in args.graphs.split(",") if g) or model.contract(opset=args.opset).graph_names
     out = Path(args.out)
     report: dict = {"preset": args.preset, "parameters": model.parameter_counts(),
                     "contract": {"resolution": f"{model.config.width}x{model.config.height}"}}

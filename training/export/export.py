@@ -3,6 +3,8 @@
 Graph split (``ghnerf_runtime.contract`` has the exact input/output specs):
 
 * ``encoder``: batch of source images -> multi-scale features + human features (2D convs: int8).
+* ``human``: the same images -> the human encoder's joint heatmaps alone (models with encoder heatmaps):
+  the keypoint path without a cost volume runs it and skips the image feature network.
 * ``volume``: features + host camera matrices -> regularised cost volume and depth statistics of each
   target frustum (3D convs, sampling, softmax: float).
 * ``render`` / ``render_heat`` / ``render_rgb``: per-sample heads + compositing along host-chosen rays
@@ -55,6 +57,11 @@ class EncoderGraph(_GraphModule):
         return tuple(enc[n] for n in self.spec.output_names)
 
 
+class HumanGraph(_GraphModule):
+    def forward(self, images: Tensor):
+        return (self.model.encode_human(images),)
+
+
 class VolumeGraph(_GraphModule):
     def forward(self, *args: Tensor):
         d = self.named(args)
@@ -79,7 +86,7 @@ class QueryGraph(_GraphModule):
         return out["joint_heat"], out["density"]
 
 
-GRAPH_MODULES = {"encoder": EncoderGraph, "volume": VolumeGraph, "render": RenderGraph,
+GRAPH_MODULES = {"encoder": EncoderGraph, "human": HumanGraph, "volume": VolumeGraph, "render": RenderGraph,
                  "render_heat": RenderGraph, "render_rgb": RenderGraph, "query": QueryGraph}
 
 
@@ -184,10 +191,12 @@ def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInp
     return path
 
 
-def export_all(model: GHNeRF, out_dir: str | Path, graphs: tuple[str, ...] = GRAPH_NAMES,
+def export_all(model: GHNeRF, out_dir: str | Path, graphs: tuple[str, ...] | None = None,
                opset: int = DEFAULT_OPSET, inputs: ExampleInputs | None = None) -> dict[str, Path]:
-    """Export every graph as ``<out_dir>/<graph>.onnx`` (fp32). Returns graph -> path."""
+    """Export ``graphs`` (default: every graph of the model's contract) as ``<out_dir>/<graph>.onnx`` (fp32).
+    Returns graph -> path."""
     out_dir = Path(out_dir)
+    graphs = model.contract(opset=opset).graph_names if graphs is None else graphs
     inputs = inputs or example_inputs(model)
     return {g: export_graph(model, g, out_dir / f"{g}.onnx", inputs, opset) for g in graphs}
 

@@ -83,6 +83,7 @@ ENCODER_FLOAT_LAYERS = ("/feature_net/stage0/stage0.0/",)
 #: Default policy per graph; ``None`` = stays float.
 POLICIES: dict[str, QuantPolicy | None] = {
     "encoder": QuantPolicy(exclude_name_contains=ENCODER_FLOAT_LAYERS),
+    "human": QuantPolicy(),
     "volume": None,
     "render": QuantPolicy(exclude_name_contains=HEAD_OUTPUT_LAYERS),
     "render_heat": QuantPolicy(exclude_name_contains=HEAD_OUTPUT_LAYERS),

@@ -173,6 +173,12 @@ class GHNeRF(nn.Module):
                 out["encoder_heatmaps"] = self.human.heatmaps(out["human_feat"])
         return out
 
+    def encode_human(self, images: Tensor) -> Tensor:
+        """``images`` ``(S, 3, H, W)`` RGB in [0, 1] -> the human encoder's heatmaps alone (the ``human`` graph)."""
+        if self.human is None or self.human.heat_head is None:
+            raise RuntimeError("the model has no encoder heatmaps (no human encoder or no auxiliary head)")
+        return self.human.heatmaps(self.human((images - self.mean) / self.std))
+
     # ----------------------------------------------------------------- volumes
     def volumes(self, enc: dict[str, Tensor], src_P: Tensor, tgt_K_inv: Tensor, tgt_c2w: Tensor,
                 near_far: Tensor, upto: int | None = None) -> list[dict[str, Tensor]]:
@@ -350,11 +356,14 @@ class GHNeRF(nn.Module):
 
     # ----------------------------------------------------------------- training
     def forward(self, images: Tensor, src_P: Tensor, src_centers: Tensor, tgt_K_inv: Tensor, tgt_c2w: Tensor,
-                near_far: Tensor, ray_uv: Tensor, perturb: bool = True, colour: bool = True) -> dict:
+                near_far: Tensor, ray_uv: Tensor, perturb: bool = True, colour: bool = True,
+                aux_images: Tensor | None = None) -> dict:
         """Training forward: render ``ray_uv`` ``(B, R, 2)`` at every level.
 
         Returns ``{"levels": [render outputs per level, coarse to fine], "volumes": [...]}`` and, with
-        ``human.aux_heatmaps``, ``encoder_heatmaps`` ``(S, J, H / out_stride, W / out_stride)`` of the sources.
+        ``human.aux_heatmaps``, ``encoder_heatmaps`` ``(S, J, H / out_stride, W / out_stride)`` of the sources
+        and, given ``aux_images`` ``(A, 3, H, W)`` (more views for that head only, in the same forward so
+        DDP sees one graph), their ``aux_encoder_heatmaps``.
         """
         enc = self.encode(images)
         vols = self.volumes(enc, src_P, tgt_K_inv, tgt_c2w, near_far)
@@ -367,6 +376,8 @@ class GHNeRF(nn.Module):
         out = {"levels": levels, "volumes": vols}
         if "encoder_heatmaps" in enc:
             out["encoder_heatmaps"] = enc["encoder_heatmaps"]  # (S, J, h, w), sources only
+            if aux_images is not None:
+                out["aux_encoder_heatmaps"] = self.encode_human(aux_images)
         return out
 
     # -------------------------------------------------------------------- misc
@@ -401,6 +412,7 @@ class GHNeRF(nn.Module):
             heatmap_stride=cfg.heatmap_stride, background=cfg.background, opset=opset,
             model_version=cfg.model_version,
             encoder_heatmaps=self.human is not None and self.human.heat_head is not None,
+            human_graph=self.human is not None and self.human.heat_head is not None,
         )
 
 

@@ -9,17 +9,25 @@ built; torchvision's ``fc`` (and ``layer4`` when ``num_layers == 3``) are
 dropped on load. From scratch by default (no ImageNet weights on these
 machines); ``init`` takes the path of a torchvision-format ``resnet18.pth``.
 
-Head: the stem (after max-pool, 64 ch @ 1/4) and every layer output go through
-their own 1x1 conv to ``out_channels``, are bilinearly resized to
-``out_stride`` and summed. Because the 1x1 conv and bilinear resize are both
-linear, this equals pixelNeRF's "upsample, concatenate, project" but runs the
-projection at each level's low resolution.
+Head (``decoder``): the stem (after max-pool, 64 ch @ 1/4) and every layer
+output go through their own 1x1 conv to ``out_channels``. Then either
+
+* ``"sum"``: bilinearly resized to ``out_stride`` and summed. Because the 1x1
+  conv and bilinear resize are both linear, this equals pixelNeRF's "upsample,
+  concatenate, project" but runs the projection at each level's low resolution.
+  The result is linear in the levels: the deep level that knows *which* joint
+  is where only reaches the output through a bilinear upsample of its coarse
+  grid (4x4 cells for a 64x64 trunk input at layer3).
+* ``"fpn"``: a top-down pathway (feature pyramid): from the deepest level down,
+  upsample, add the next level's projection, 3x3 conv + ReLU. The fine levels
+  now localise the deep ones non-linearly, which is what sharp joint heatmaps
+  need; it costs four small 3x3 convs.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
+from typing import Literal, Mapping
 
 import torch
 import torch.nn.functional as F
@@ -44,6 +52,9 @@ class HumanEncoderConfig(Config):
     input_scale: float = 1.0
     """The trunk sees the image resized by this factor (0.5: a quarter of the MACs; the features are coarse
     anyway). ``out_stride`` stays relative to the model input."""
+    decoder: Literal["sum", "fpn"] = "sum"
+    """How the trunk levels become ``human_feat``: linear resize-and-sum, or a top-down FPN (see the module doc).
+    "sum" is the default so that models trained before "fpn" existed load unchanged."""
     init: str | None = None
     """Path of a torchvision-format resnet18 state dict (ImageNet weights), or None for scratch."""
     aux_heatmaps: bool = False
@@ -159,6 +170,11 @@ class HumanEncoder(nn.Module):
         self.proj = nn.ModuleDict({
             name: nn.Conv2d(TRUNK_LEVELS[name][0], config.out_channels, 1) for name in self.trunk.level_names
         })
+        # Top-down smoothing convs, one per level below the deepest (FPN's "merge, then 3x3").
+        self.smooth = nn.ModuleDict({
+            name: nn.Conv2d(config.out_channels, config.out_channels, 3, padding=1)
+            for name in self.trunk.level_names[:-1]
+        }) if config.decoder == "fpn" else None
         self.heat_head = nn.Conv2d(config.out_channels, 25, 1) if config.aux_heatmaps else None
         if config.init:
             load_torchvision_resnet18(self.trunk, config.init)
@@ -175,6 +191,8 @@ class HumanEncoder(nn.Module):
             x = F.interpolate(x, scale_factor=self.config.input_scale, mode="bilinear", align_corners=False,
                               antialias=False)
         feats = self.trunk(x)
+        if self.smooth is not None:
+            return self._top_down(feats, size)
         out = None
         for name, f in feats.items():
             p = self.proj[name](f)
@@ -182,6 +200,19 @@ class HumanEncoder(nn.Module):
                 p = F.interpolate(p, size=size, mode="bilinear", align_corners=False)
             out = p if out is None else out + p
         return out
+
+    def _top_down(self, feats: dict[str, Tensor], size: tuple[int, int]) -> Tensor:
+        top = None
+        for name in reversed(self.trunk.level_names):
+            p = self.proj[name](feats[name])
+            if top is not None:
+                if top.shape[-2:] != p.shape[-2:]:
+                    top = F.interpolate(top, size=p.shape[-2:], mode="bilinear", align_corners=False)
+                p = F.relu(self.smooth[name](p + top))
+            top = p
+        if top.shape[-2:] != size:
+            top = F.interpolate(top, size=size, mode="bilinear", align_corners=False)
+        return top
 
     def heatmaps(self, human_feat: Tensor) -> Tensor:
         """The auxiliary head's joint heatmaps ``(S, 25, H / out_stride, W / out_stride)`` in [0, 1]."""

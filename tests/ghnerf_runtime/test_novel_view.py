@@ -1,0 +1,138 @@
+"""Novel-view ray selection: the coarse silhouette pass renders only the cells the subject covers."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_runtime_common import edge128_contract
+from ghnerf_runtime.config import ConfigError, NovelViewConfig
+from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
+from ghnerf_runtime.novel_view import render_novel_view
+from ghnerf_runtime.rays import cells_ray_uv, refine_cells, scatter_cells
+
+BOX = np.array([[-0.4, -1.8, 2.6], [0.4, 0.0, 3.4]])
+CENTRE = np.array([64.0, 64.0])
+RADIUS = 14.0
+
+
+class DiscSession:
+    """Render graphs answer a coloured disc (model pixels) over the background; counts the rays.
+
+    ``opaque_background``: every ray is opaque (acc 1), the background rays coloured as the background,
+    as the shipped model renders its box.
+    """
+
+    def __init__(self, radius: float = RADIUS, opaque_background: bool = False):
+        self.contract = edge128_contract()
+        self.radius = radius
+        self.opaque = opaque_background
+        self.rays: list[int] = []
+
+    def run(self, graph, feeds):
+        if graph == "volume":
+            return {"volume": np.zeros((1, 8, 4, 32, 32), np.float32),
+                    "depth_stats": np.zeros((1, 4, 32, 32), np.float32)}
+        uv = feeds["ray_uv"][0]
+        self.rays.append(len(uv))
+        inside = (np.linalg.norm(uv - CENTRE, axis=-1) <= self.radius).astype(np.float32)
+        shade = 0.25 + 0.5 * (uv[:, 0] / 128.0)  # a gradient, so misplaced rays would show
+        rgb = np.stack([shade * inside] * 3, axis=-1)
+        acc = np.ones_like(inside) if self.opaque else inside
+        out = {"rgb": rgb[None], "depth": (3.0 * acc)[None], "acc": acc[None]}
+        if graph == "render":
+            out["heatmaps"] = np.repeat(inside[None, :, None], 25, axis=-1)
+        return out
+
+
+def _camera() -> Camera:
+    R, t = look_at((0.0, -0.9, 0.0), BOX.mean(axis=0))
+    return Camera("novel", 128, 128, intrinsics_from_fov(128, 128, 40.0), np.zeros(5), R, t)
+
+
+def _render(config: NovelViewConfig, session=None, want_heat: bool = False):
+    session = session or DiscSession()
+    env = {"images": np.zeros((2, 3, 128, 128), np.float32)}
+    return render_novel_view(session, env, _camera(), BOX, config, want_heat=want_heat), session
+
+
+DILATED = NovelViewConfig(enabled=True, silhouette_dilate=1)
+
+
+def test_coarse_pass_renders_fewer_rays_and_the_same_subject():
+    full, s_full = _render(NovelViewConfig(enabled=True, silhouette_stride=0))
+    fast, s_fast = _render(DILATED)
+    assert len(s_full.rays) == 1 and len(s_fast.rays) == 2  # coarse + fine
+    assert fast.rays == sum(s_fast.rays) < full.rays / 2
+    # Every pixel the subject covers is rendered exactly as before; the rest is background either way.
+    np.testing.assert_array_equal(fast.image, full.image)
+    np.testing.assert_array_equal(fast.depth, full.depth)
+
+
+def test_default_coarse_pass_loses_at_most_the_rim():
+    """Without dilation (the default) only pixels within one coarse cell of the edge can be dropped."""
+    full, _ = _render(NovelViewConfig(enabled=True, silhouette_stride=0))
+    fast, s_fast = _render(NovelViewConfig(enabled=True))
+    assert fast.rays < _render(DILATED)[0].rays
+    differ = np.any(fast.image != full.image, axis=-1)
+    v, u = np.nonzero(differ)
+    dist = np.hypot(u - CENTRE[0], v - CENTRE[1])
+    assert differ.sum() < 0.25 * np.any(full.image > 0, axis=-1).sum()
+    assert np.all(dist > RADIUS - 4 * np.sqrt(2))  # only near the edge, never inside
+    assert not np.any(fast.image[~differ] != full.image[~differ])
+
+
+def test_opaque_background_is_not_mistaken_for_the_subject():
+    full, _ = _render(NovelViewConfig(enabled=True, silhouette_stride=0), DiscSession(opaque_background=True))
+    fast, s = _render(DILATED, DiscSession(opaque_background=True))
+    assert fast.rays < full.rays / 2
+    np.testing.assert_array_equal(fast.image, full.image)
+
+
+def test_thin_subject_between_coarse_rays_is_kept_by_dilation():
+    # A disc of radius 1.5 px can fall between the 4-px coarse rays entirely: nothing found, all background,
+    # never a stale or partial subject.
+    tiny, _ = _render(DILATED, DiscSession(radius=1.5))
+    tiny_full, _ = _render(NovelViewConfig(enabled=True, silhouette_stride=0), DiscSession(radius=1.5))
+    assert tiny_full.image.any()
+    assert not tiny.image.any() or np.array_equal(tiny.image, tiny_full.image)
+    # A subject 4 px across is always hit by a coarse ray, and dilation brings in its whole extent.
+    small_fast, _ = _render(DILATED, DiscSession(radius=4.0))
+    small_full, _ = _render(NovelViewConfig(enabled=True, silhouette_stride=0), DiscSession(radius=4.0))
+    np.testing.assert_array_equal(small_fast.image, small_full.image)
+
+
+def test_empty_scene_renders_only_the_coarse_pass():
+    nv, s = _render(NovelViewConfig(enabled=True), DiscSession(radius=0.0))
+    assert len(s.rays) == 1 and nv.rays == s.rays[0]
+    assert not nv.image.any() and not nv.depth.any()
+
+
+def test_coarse_pass_with_heatmaps_and_stride():
+    nv, s = _render(NovelViewConfig(enabled=True, stride=2, heatmaps=True), None, want_heat=True)
+    assert len(s.rays) == 2 and nv.heat is not None and nv.heat.max() == 1.0
+    off, s_off = _render(NovelViewConfig(enabled=True, stride=4, silhouette_stride=4))
+    assert len(s_off.rays) == 1  # the coarse pass would be no coarser than the render: skipped
+
+
+def test_silhouette_config_is_validated():
+    assert NovelViewConfig(silhouette_stride=8, stride=2).coarse_pass
+    assert not NovelViewConfig(silhouette_stride=0).coarse_pass
+    with pytest.raises(ConfigError, match="silhouette_stride"):
+        NovelViewConfig(stride=2, silhouette_stride=3)
+    with pytest.raises(ConfigError, match="silhouette_min_diff"):
+        NovelViewConfig(silhouette_min_diff=float("nan"))
+    with pytest.raises(ConfigError, match="silhouette_dilate"):
+        replace(NovelViewConfig(), silhouette_dilate=-1)
+
+
+def test_cell_helpers_round_trip():
+    mask = np.zeros((4, 5), bool)
+    mask[1, 2] = mask[3, 0] = True
+    uv = cells_ray_uv(mask, 4)
+    np.testing.assert_array_equal(uv, [[9.5, 5.5], [1.5, 13.5]])
+    grid = scatter_cells(np.array([[1.0], [2.0]]), mask, fill=-1.0)
+    assert grid.shape == (4, 5, 1) and grid[1, 2, 0] == 1.0 and grid[3, 0, 0] == 2.0 and grid[0, 0, 0] == -1.0
+    fine = refine_cells(mask, 2)
+    assert fine.shape == (8, 10) and fine[2:4, 4:6].all() and fine.sum() == 8
