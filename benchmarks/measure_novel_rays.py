@@ -8,7 +8,8 @@ with every ray of the subject box (``silhouette_stride`` 0) and with the coarse 
 (``silhouette_stride`` 4: every 4th pixel of the box first, then only the opaque cells,
 dilated). Prints the rays rendered, the ``novel_render`` time (median / p99 ms) of both, and
 the PSNR of the coarse-pass image against the all-rays image (how much of the picture the
-skipped rays carried). Not a test.
+skipped rays carried), and the median accumulated opacity of the all-rays renders (how much of the
+box the model fills, i.e. why the coarse pass tests colour rather than opacity). Not a test.
 """
 from __future__ import annotations
 
@@ -24,8 +25,25 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig  # noqa: E402
-from ghnerf_runtime.estimator import Estimator  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
+
+
+class _OpacityTap:
+    """The session, recording the accumulated opacity of every colour render it runs."""
+
+    def __init__(self, session):
+        self._session = session
+        self.acc: list[np.ndarray] = []
+
+    def __getattr__(self, name):
+        return getattr(self._session, name)
+
+    def run(self, graph, feeds):
+        out = self._session.run(graph, feeds)
+        if graph in ("render_rgb", "render"):
+            self.acc.append(out["acc"].ravel())
+        return out
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -52,8 +70,8 @@ def main(argv=None) -> int:
         cfg = replace(cfg, novel_view=replace(cfg.novel_view, silhouette_dilate=args.dilate))
     variants = {"all box rays": replace(cfg.novel_view, silhouette_stride=0), "coarse pass": cfg.novel_view}
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
-    est = Estimator.from_config(sequences[0].rig, cfg)
-    session = est.session
+    session = load_session(cfg)
+    tap = _OpacityTap(session)  # the all-rays variant renders exactly the box, once per pair
     print(f"model {args.model_dir} ({ {g: f.precision for g, f in session.files.items()} }), "
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
     rays = {k: [] for k in variants}
@@ -62,7 +80,8 @@ def main(argv=None) -> int:
     for seq in sequences:
         # One estimator per variant on the same session: the keypoints, hence the novel camera and box,
         # are the same in both (the estimator is deterministic); only the novel view's rays differ.
-        ests = {name: Estimator(session, seq.rig, replace(cfg, novel_view=nv)) for name, nv in variants.items()}
+        ests = {name: Estimator(tap if name == "all box rays" else session, seq.rig, replace(cfg, novel_view=nv))
+                for name, nv in variants.items()}
         for i in range(len(seq)):
             pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
             images = {}
@@ -85,6 +104,9 @@ def main(argv=None) -> int:
     print(f"  PSNR coarse pass vs all box rays: median {np.median(q):.1f} dB, min "
           f"{(finite.min() if finite.size else float('inf')):.1f} dB, identical in {int(np.sum(~np.isfinite(q)))} "
           f"of {q.size} pairs")
+    if tap.acc:
+        print(f"  accumulated opacity over the box's rays (all-rays renders): median "
+              f"{np.median(np.concatenate(tap.acc)):.2f}")
     ratio = np.median(ms["coarse pass"]) / np.median(ms["all box rays"])
     print(f"  novel_render time ratio (coarse pass / all box rays): {ratio:.2f}")
     return 0

@@ -28,6 +28,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
@@ -41,7 +42,6 @@ __all__ = [
 PRECISIONS = ("fp32", "int8", "auto")
 #: 3D joint methods of :class:`Joints3DConfig`.
 THREE_D_METHODS = ("triangulate", "volumetric", "depth_centroid")
-_GRAPHS = ("encoder", "human", "volume", "render", "render_heat", "render_rgb", "query")
 
 
 # ------------------------------------------------------------------ checks
@@ -121,8 +121,8 @@ class SessionConfig:
         if not isinstance(self.precision_overrides, Mapping):
             _fail(type(self), "precision_overrides", "must be a mapping graph -> precision", self.precision_overrides)
         for graph, prec in self.precision_overrides.items():
-            if graph not in _GRAPHS or prec not in ("fp32", "int8"):
-                _fail(type(self), "precision_overrides", f"keys must be graphs {list(_GRAPHS)} and values "
+            if graph not in GRAPH_NAMES or prec not in ("fp32", "int8"):
+                _fail(type(self), "precision_overrides", f"keys must be graphs {list(GRAPH_NAMES)} and values "
                                                          "'fp32' or 'int8'", dict(self.precision_overrides))
         object.__setattr__(self, "precision_overrides", dict(self.precision_overrides))
         _integer(self, "threads", 1, 64)
@@ -357,8 +357,9 @@ class HeatmapsConfig:
 
     Attributes:
         source: ``"encoder"`` (the default: the human encoder's own 2D heatmaps, an output of the
-            ``encoder`` graph of models exported with ``encoder_heatmaps``; ``volume`` and
-            ``render_heat`` then run only where the 3D method needs them: ``depth_centroid`` and
+            ``encoder`` graph, and of the ``human`` graph alone, of models exported with
+            ``encoder_heatmaps``; ``volume`` and ``render_heat`` then run only where the 3D
+            method needs them: ``depth_centroid`` and
             the single-view fallback read the rendered depth, ``volumetric`` the volume) or
             ``"rendered"`` (GHNeRF: volume-rendered by ``render_heat`` from the cost volume, the
             human features and the heads; ``volume`` and ``render_heat`` run every pair; models
@@ -397,7 +398,9 @@ class NovelViewConfig:
             background. The person fills a fraction of its box, so this renders fewer rays
             (measured in docs/runtime.md). 0: off (every ray of the box); must be a multiple of
             ``stride`` larger than it, else the coarse pass is skipped.
-        silhouette_min_acc: accumulated opacity from which a coarse cell counts as the subject.
+        silhouette_min_diff: a coarse cell counts as the subject when its colour differs from the
+            background by this much (max over RGB, [0, 1] units; 0.05 = 13 grey levels). Colour,
+            not opacity: the model may render empty space as opaque background.
         silhouette_dilate: coarse cells added around the subject's (thin limbs between
             coarse rays, the soft edge).
     """

@@ -78,8 +78,8 @@ MODEL_CARD = "model_card.json"
 #: render/query graphs gain nothing (no VNNI) and their QDQ boundaries cost more on large
 #: point counts; the volume graph is float in both files.
 AUTO_PRECISION: Mapping[str, str] = {
-    "encoder": "int8", "human": "int8", "volume": "fp32", "render_heat": "fp32", "render_rgb": "fp32", "render": "fp32",
-    "query": "fp32",
+    "encoder": "int8", "human": "int8", "volume": "fp32", "render_heat": "fp32", "render_rgb": "fp32",
+    "render": "fp32", "query": "fp32",
 }
 _ONNX_FLOAT = "tensor(float)"
 _global_pool_lock = threading.Lock()
