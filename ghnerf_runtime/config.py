@@ -403,6 +403,12 @@ class NovelViewConfig:
             not opacity: the model may render empty space as opaque background.
         silhouette_dilate: coarse cells added around the subject's (thin limbs between
             coarse rays, the soft edge).
+        overlap: on a tracked pair, render the novel view in a worker thread while this pair's
+            keypoints are decoded and triangulated (onnxruntime releases the GIL; its render
+            graphs gain little from the second core, measured in docs/runtime.md). The view is
+            then cropped to the tracked subject box (the previous pair's joints plus the
+            tracking margin) instead of this pair's joints, which are not known yet. Off, or on
+            a cold pair: the view follows the keypoints, cropped to this pair's joints.
     """
 
     enabled: bool = False
@@ -413,9 +419,11 @@ class NovelViewConfig:
     silhouette_stride: int = 4
     silhouette_min_diff: float = 0.05
     silhouette_dilate: int = 0
+    overlap: bool = True
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        _boolean(self, "overlap")
         _integer(self, "stride", 1, 4)
         _choice(self, "stride", (1, 2, 4))
         _boolean(self, "heatmaps")

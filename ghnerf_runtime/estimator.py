@@ -22,7 +22,9 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
 6. ``joints_3d`` -- triangulation (default), volumetric query or depth centroid
    (:mod:`ghnerf_runtime.joints3d`; comparison in docs/runtime.md); then the track is updated
    (or dropped when too few joints were found).
-7. on request, ``novel_volume`` / ``novel_render`` / ``novel_compose`` -- the novel view.
+7. on request, ``novel_volume`` / ``novel_render`` / ``novel_compose`` -- the novel view. On a
+   tracked pair it is rendered in a worker thread during stages 5-6 (``novel_view.overlap``),
+   so these stage times overlap the keypoint stages and ``total`` is less than their sum.
 
 Every output is finite; a missing joint has coordinates 0, confidence 0 and ``missing`` set.
 Joints are only ever this pair's: the track only places the next crop.
@@ -34,6 +36,7 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
@@ -168,6 +171,7 @@ class _Pass:
     joints_2d: dict | None = None
     conf_2d: dict | None = None
     missing_2d: dict | None = None
+    novel: Future | None = None  # the novel view rendering in the worker (overlap)
 
 
 @dataclass
@@ -223,6 +227,8 @@ class Estimator:
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._decoders: dict[float, KeypointDecoderConfig] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
+        self._between: dict[float, Camera] = {}  # alpha -> interpolated camera (the rig does not move)
+        self._worker: ThreadPoolExecutor | None = None  # novel views during the keypoint stages
 
     @classmethod
     def from_config(cls, rig: Rig, config: EstimatorConfig | None = None) -> "Estimator":
@@ -237,6 +243,19 @@ class Estimator:
     def reset(self) -> None:
         """Forget the tracked subject (the next pair starts from the working volume)."""
         self.tracker.reset()
+
+    def close(self) -> None:
+        """Stop the novel-view worker thread, if one was started (an estimator left to the garbage
+        collector stops it too)."""
+        if self._worker is not None:
+            self._worker.shutdown(wait=True)
+            self._worker = None
+
+    def __enter__(self) -> "Estimator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     # -------------------------------------------------------------- helpers
     def _crop(self, state: _CameraState, roi: Roi) -> tuple[CropMaps, Camera]:
@@ -322,18 +341,22 @@ class Estimator:
         if novel_view is not None and novel_view.overlay == "heatmap" and not self.config.novel_view.heatmaps:
             raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
         timing: dict[str, float] = {}
-        features = novel_view is not None  # the novel view reads the image features of the pair
-        p = self._pass(images, self.tracker.regions(), sequence, timing, features)
+        p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if (p.j3 is not None and not p.regions.tracked and self.config.tracking.refine_cold_start
                 and self.tracker.track is not None):
             # Cold start that found the subject: run again on its crop and box, in this pair.
-            p = self._pass(images, self.tracker.regions(), sequence, timing, features)
+            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if p.j3 is None:
             timing["total"] = 1e3 * (time.perf_counter() - t_start)
             return self._empty_result(sequence, p.regions, p.frame_ok, timing)
         nv = None
         if novel_view is not None:
-            nv = self._novel_view(novel_view, p.env, p.regions, p.j3, timing)
+            if p.novel is not None:  # rendered in the worker, on the tracked box
+                nv, novel_timing = p.novel.result()
+                timing.update(novel_timing)
+            else:
+                nv = self._render_novel(novel_view, p.env, self._novel_box(p.regions, p.j3), timing)
+            nv = self._compose_novel(novel_view, nv, p.j3, timing)
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
         return PairResult(sequence, JOINT_NAMES, p.j3.points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
@@ -341,13 +364,16 @@ class Estimator:
                           self.config.joints3d.method, nv)
 
     def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict,
-              features: bool = False) -> "_Pass":
+              novel_view: NovelViewRequest | None = None) -> "_Pass":
         """Stages 1-6 on one set of regions; stage times are added to ``timing``; updates the track.
 
-        ``features``: compute the image features too (``encoder`` rather than ``human``) for a novel view.
+        ``novel_view``: compute the image features too (``encoder`` rather than ``human``) for a novel
+        view; on a tracked pair with ``novel_view.overlap`` the view is started in the worker once the
+        graphs of the keypoint path have run (``_Pass.novel``).
         """
         cfg = self.config
         S = self.size
+        features = novel_view is not None  # the novel view reads the image features of the pair
 
         def add(stage: str, t0: float) -> None:
             timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
@@ -398,6 +424,25 @@ class Estimator:
             out = self.session.run("render_heat", env)
             add("render_heat", t)
 
+        job = None
+        if novel_view is not None and cfg.novel_view.overlap and regions.tracked:
+            job = self._start_novel(novel_view, env, regions.box)
+        try:
+            return self._finish_pass(env, out, blocks, crops, regions, frame_ok, sequence, timing, job)
+        except BaseException:
+            if job is not None:  # leave no render running behind an error
+                job.cancel() or job.exception()
+            raise
+
+    def _finish_pass(self, env: dict, out: dict, blocks, crops: list[Camera], regions: Regions, frame_ok: dict,
+                     sequence: int, timing: dict, job: Future | None) -> "_Pass":
+        """Stages 5-6 of :meth:`_pass`."""
+        cfg = self.config
+        S, g = self.size, self.grid
+
+        def add(stage: str, t0: float) -> None:
+            timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
+
         # 5. decode 2D
         t = time.perf_counter()
         if cfg.heatmaps.source == "encoder":
@@ -435,7 +480,7 @@ class Estimator:
                     missing_2d[name] = np.ones_like(missing_2d[name])
         self.tracker.update(j3.points, j3.confidence, j3.valid, sequence)
         add("joints_3d", t)
-        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d)
+        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job)
 
     # -------------------------------------------------------------- 3D
     def _joints_3d(self, env: dict, out: dict, blocks, heat: np.ndarray, kp: Keypoints2D, uv_model: np.ndarray,
@@ -470,25 +515,47 @@ class Estimator:
         return volumetric_joints(q["joint_heat"], points, shape, cfg)
 
     # -------------------------------------------------------------- novel view
-    def _novel_view(self, request: NovelViewRequest, env: dict, regions: Regions, j3: Joints3D,
-                    timing: dict) -> NovelView:
-        cfg = self.config.novel_view
-        cam_a, cam_b = self.rig.pair
-        full = request.camera if request.camera is not None else interpolate_camera(cam_a, cam_b, request.alpha)
-        # The box: the subject seen in *this* pair when possible, else the sweep box.
-        box = regions.box
+    def _novel_box(self, regions: Regions, j3: Joints3D) -> np.ndarray:
+        """The subject seen in *this* pair when it has enough joints, else the sweep box."""
         if int(j3.valid.sum()) >= self.config.tracking.min_joints:
             pts = j3.points[j3.valid]
             m = self.config.tracking.box_margin_m
-            box = np.stack([pts.min(axis=0) - m, pts.max(axis=0) + m])
+            return np.stack([pts.min(axis=0) - m, pts.max(axis=0) + m])
+        return regions.box
+
+    def _render_novel(self, request: NovelViewRequest, env: dict, box: np.ndarray, timing: dict) -> NovelView:
+        """The novel view (no overlay) of ``request`` cropped to ``box``."""
+        cfg = self.config.novel_view
+        full = request.camera
+        if full is None:
+            if request.alpha not in self._between:
+                if len(self._between) >= 16:
+                    self._between.clear()
+                cam_a, cam_b = self.rig.pair
+                self._between[request.alpha] = interpolate_camera(cam_a, cam_b, request.alpha)
+            full = self._between[request.alpha]
         target = novel_target(full, box, self.size, cfg.crop_to_subject)
-        nv = render_novel_view(self.session, env, target, box, cfg,
-                               near_far_margin=self.config.tracking.near_far_margin_m,
-                               want_heat=cfg.heatmaps, timing=timing)
+        return render_novel_view(self.session, env, target, box, cfg,
+                                 near_far_margin=self.config.tracking.near_far_margin_m,
+                                 want_heat=cfg.heatmaps, timing=timing)
+
+    def _start_novel(self, request: NovelViewRequest, env: dict, box: np.ndarray) -> Future:
+        """Render the novel view in the worker thread; the future gives ``(NovelView, timing)``."""
+        if self._worker is None:
+            self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ghnerf-novel-view")
+
+        def job(feeds: dict) -> tuple[NovelView, dict]:
+            timing: dict[str, float] = {}
+            return self._render_novel(request, feeds, box, timing), timing
+
+        return self._worker.submit(job, dict(env))
+
+    def _compose_novel(self, request: NovelViewRequest, nv: NovelView, j3: Joints3D, timing: dict) -> NovelView:
+        """The requested overlay on the rendered view (the pair's own joints)."""
         t = time.perf_counter()
         image = nv.image
         if request.overlay == "skeleton":
-            uv, depth = target.project(j3.points, distort=False)
+            uv, depth = nv.camera.project(j3.points, distort=False)
             image = draw_skeleton(image, np.nan_to_num(uv), j3.valid & (depth > 0))
         elif request.overlay == "heatmap" and nv.heat is not None:
             image = heatmap_overlay(image, nv.heat)

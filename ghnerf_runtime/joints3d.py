@@ -25,7 +25,7 @@ import numpy as np
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.geometry.triangulation import triangulate_robust
+from ghnerf_runtime.geometry.triangulation import triangulate_robust, triangulate_two_views
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
 __all__ = ["Joints3D", "gate_presence", "gate_to_box", "triangulate_joints", "grid_shape", "query_grid",
@@ -134,8 +134,12 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
     use = ok & (conf >= config.min_view_confidence) & (conf > 0) & np.all(np.isfinite(uv), axis=-1)
     weights = np.where(use, conf, 0.0)
     mats = [np.asarray(c.P if isinstance(c, Camera) else c, dtype=np.float64) for c in cameras]  # pinhole: P suffices
-    res = triangulate_robust(np.where(use[..., None], uv, 0.0), mats, weights, undistorted=True,
-                             max_reprojection_error=config.max_reprojection_px)
+    if len(mats) == 2:  # the rig: the lean two-view solver (same results, a third of the numpy calls)
+        res = triangulate_two_views(np.where(use[..., None], uv, 0.0), np.stack(mats), weights,
+                                    max_reprojection_error=config.max_reprojection_px)
+    else:
+        res = triangulate_robust(np.where(use[..., None], uv, 0.0), mats, weights, undistorted=True,
+                                 max_reprojection_error=config.max_reprojection_px)
     both = use.all(axis=0)
     good = res.valid & both
     conf3 = np.sqrt(np.prod(np.where(use, conf, 0.0), axis=0))

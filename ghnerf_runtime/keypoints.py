@@ -223,15 +223,13 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
     the edge pixel itself is not refined across the edge (its centre may lie outside the map).
     """
     n, h, w = maps.shape
-    zeros = np.zeros(n, bool)
-    offset = _newton_log(_patch3(padded, pad, iy, ix), zeros, zeros)
+    patch = _patch3(padded, pad, iy, ix)
     band = _radius(sigma) if sigma > 0 else h + w  # sigma 0: the raw map is all there is
     near = np.minimum(np.minimum(ix, w - 1 - ix), np.minimum(iy, h - 1 - iy)) < band
     if near.any():
-        raw = _newton_log(_patch3(maps[near], 0, iy[near], ix[near]),
-                          (ix[near] == 0) | (ix[near] == w - 1), (iy[near] == 0) | (iy[near] == h - 1))
-        offset[near] = raw
-    return offset
+        patch[near] = _patch3(maps[near], 0, iy[near], ix[near])
+    # One fit for all: an axis with no outer neighbour is only flagged on the raw (edge) patches.
+    return _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
 
 
 def _refine_centroid(padded: np.ndarray, pad: int, labels: np.ndarray, top: np.ndarray, iy: np.ndarray,

@@ -18,7 +18,7 @@ numpy, OpenCV; the session is passed in (never created here).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import cv2
@@ -164,7 +164,7 @@ def novel_target(camera: Camera, box: np.ndarray, size: int, crop_to_subject: bo
     cam = camera.without_distortion() if camera.has_distortion else camera
     if crop_to_subject:
         try:
-            return replace(crop_camera(cam, roi_from_volume(cam, box_corners(box)), size), name=camera.name)
+            return crop_camera(cam, roi_from_volume(cam, box_corners(box)), size)  # keeps the name
         except GeometryError:
             pass  # the box is not in view: show the whole image (it will be background)
     return cam.resized(size, size)

@@ -6,9 +6,10 @@ from ghnerf_runtime.geometry.triangulation import (
     triangulate_dlt,
     triangulate_midpoint,
     triangulate_robust,
+    triangulate_two_views,
 )
 
 __all__ = [
     "Camera", "Rig", "TriangulationResult", "WorkingVolume", "intrinsics_from_fov", "look_at",
-    "triangulate_dlt", "triangulate_midpoint", "triangulate_robust",
+    "triangulate_dlt", "triangulate_midpoint", "triangulate_robust", "triangulate_two_views",
 ]

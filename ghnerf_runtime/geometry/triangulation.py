@@ -48,6 +48,7 @@ __all__ = [
     "triangulate_dlt",
     "triangulate_midpoint",
     "triangulate_robust",
+    "triangulate_two_views",
     "MIN_DEPTH",
 ]
 
@@ -543,3 +544,84 @@ def triangulate_robust(
             used=result.used,
         )
     return result
+
+
+def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | None = None,
+                          min_ray_angle_deg: float = 0.1) -> TriangulationResult:
+    """:func:`triangulate_dlt` (and the final check of :func:`triangulate_robust`) for the common
+    case of two pinhole views and one frame, in about a third of the numpy calls.
+
+    The estimator triangulates 25 joints in two crop cameras every pair, where the general
+    functions' batch and camera-count handling costs more than the arithmetic. The system,
+    its conditioning, the validity rules and the fill values are the same, so the results
+    equal :func:`triangulate_dlt`'s (``tests/ghnerf_runtime/test_triangulation.py`` checks it).
+
+    Args:
+        uv: ``(2, J, 2)`` undistorted pixels of each view.
+        P: ``(2, 3, 4)`` projection matrices (pinhole: they act on undistorted pixels).
+        weights: ``(2, J)`` confidences; ``<= 0`` or non-finite ignores the observation.
+        max_reprojection_error: if given, a joint whose error exceeds it in a used view is
+            invalid (with two views the culprit cannot be told).
+        min_ray_angle_deg: as :func:`triangulate_dlt`.
+
+    Raises:
+        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix.
+    """
+    uv = np.asarray(uv, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    P = np.asarray(P, dtype=np.float64)
+    if uv.ndim != 3 or uv.shape[0] != 2 or uv.shape[2] != 2 or w.shape != uv.shape[:2] or P.shape != (2, 3, 4):
+        raise ShapeError(f"uv (2, J, 2), P (2, 3, 4) and weights (2, J) expected, got {uv.shape}, {P.shape}, "
+                         f"{w.shape}")
+    M = P[:, :, :3]
+    det = np.linalg.det(M)
+    if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
+        raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
+    J = uv.shape[1]
+    with np.errstate(all="ignore"):
+        used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
+        w = np.where(used, w, 0.0)
+        x = np.where(used[..., None], uv, 0.0)
+        # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
+        T = _conditioning_similarity(P)
+        xn = x * T[:, 0, 0, None, None] + T[:, None, :2, 2]
+        Pn = T @ P
+        Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
+        rows = xn[..., :, None] * Pn[:, None, None, 2, :] - Pn[:, None, :2, :]  # (2, J, 2, 4)
+        A = (rows * w[..., None, None]).transpose(1, 0, 2, 3).reshape(J, 4, 4)
+        X = np.linalg.svd(A)[2][:, -1, :]
+        finite = np.abs(X[:, 3]) > 1e-12 * np.sqrt(np.square(X[:, :3]).sum(axis=-1))
+        points = X[:, :3] / np.where(finite, X[:, 3], 1.0)[:, None]
+
+        # Ray angle (the conditioning figure) between the two viewing rays' lines: atan2(|a x b|, |a . b|)
+        # of unit directions (unit, so that absurd pixels overflow to 0 degrees as in _rays).
+        Minv = np.linalg.inv(M)
+        d = (x @ Minv[:, :, :2].transpose(0, 2, 1)) + Minv[:, None, :, 2]  # (2, J, 3)
+        d /= np.sqrt(np.square(d).sum(axis=-1, keepdims=True))
+        a, b = d[0], d[1]
+        cross = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                          a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=-1)
+        angle = np.degrees(np.arctan2(np.sqrt(np.square(cross).sum(axis=-1)), np.abs((a * b).sum(axis=-1))))
+        both = used[0] & used[1]
+        angle = np.where(both & np.isfinite(angle), angle, 0.0)
+
+        ok = finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
+        safe = np.where(ok[:, None], points, 0.0)
+        ph = safe @ M.transpose(0, 2, 1) + P[:, None, :, 3]  # (2, J, 3)
+        depth = ph[..., 2] * (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
+        ahead = depth > MIN_DEPTH
+        ok &= ~np.any(used & ~ahead, axis=0)
+        err = np.sqrt(np.square(ph[..., :2] / ph[..., 2:3] - uv).sum(axis=-1))
+        err = np.where(ahead, err, np.nan)
+        ok &= ~np.any(used & ~np.isfinite(err), axis=0)
+        if max_reprojection_error is not None:
+            ok &= ~np.any(used & (err > max_reprojection_error), axis=0)
+        err = np.where(np.isfinite(err) & ok[None], err, 0.0)
+    return TriangulationResult(
+        points=np.where(ok[:, None], points, 0.0),
+        reprojection_error=err.T,
+        ray_angle_deg=angle,
+        num_views=used.sum(axis=0).astype(np.int64),
+        valid=ok,
+        used=used.T,
+    )

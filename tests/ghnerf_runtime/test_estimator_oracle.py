@@ -7,13 +7,17 @@ tracking -- without torch or a trained model.
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
-from ghnerf_runtime.config import ConfigError, EstimatorConfig, HeatmapsConfig, Joints3DConfig, PresenceConfig, \
-    TrackingConfig, config_from_dict
-from ghnerf_runtime.estimator import Estimator
+from ghnerf_runtime.config import ConfigError, EstimatorConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, \
+    PresenceConfig, TrackingConfig, config_from_dict
+from ghnerf_runtime.errors import ModelRunError
+from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator
+from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.metrics import mpjpe, pck
 
 sim = pytest.importorskip("drivers.sim")
@@ -202,3 +206,70 @@ def test_refined_cold_start_reruns_the_first_pair_on_the_subject(clip):
     assert oracle.rays[0] == grid and oracle.rays[1] < grid
     err = mpjpe(results[0].joints_3d, truth[0], visible[0].all(axis=0), pred_valid=~results[0].missing)
     assert err.value < 1.0
+
+
+class ThreadRecorder(OracleSession):
+    """The oracle, recording which thread ran each graph; optionally failing one graph."""
+
+    def __init__(self, fail: str | None = None):
+        super().__init__(edge128_contract())
+        self.threads: list[tuple[str, str]] = []
+        self.fail = fail
+
+    def run(self, graph, feeds):
+        self.threads.append((graph, threading.current_thread().name))
+        if graph == self.fail:
+            raise ModelRunError(f"graph {graph!r} failed: injected")
+        return super().run(graph, feeds)
+
+
+def _novel_run(clip, overlap: bool, session=None):
+    rig, frames, truth, visible, *_ = clip
+    oracle = session or ThreadRecorder()
+    cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, overlap=overlap))
+    with Estimator(oracle, rig, cfg) as est:
+        out = []
+        for pair, j3, vis in zip(frames, truth, visible):
+            oracle.set_truth(j3, vis)
+            out.append(est.estimate(pair, novel_view=NovelViewRequest(alpha=0.5, overlay="skeleton")))
+    return out, oracle.threads
+
+
+def test_novel_view_overlap_renders_in_the_worker_and_changes_no_joint(clip):
+    on, on_threads = _novel_run(clip, overlap=True)
+    off, off_threads = _novel_run(clip, overlap=False)
+    for a, b in zip(on, off):
+        np.testing.assert_array_equal(a.joints_3d, b.joints_3d)
+        np.testing.assert_array_equal(a.confidence, b.confidence)
+        np.testing.assert_array_equal(a.missing, b.missing)
+    main = threading.main_thread().name
+    worker = {g for g, t in on_threads if t != main}
+    assert worker == {"volume", "render_rgb"}  # the novel camera's volume and the colour passes
+    assert all(t.startswith("ghnerf-novel-view") for g, t in on_threads if t != main)
+    assert all(t == main for _, t in off_threads)
+    # The cold first pair renders after its keypoints (on the main thread), every tracked pair in the worker.
+    assert [r.tracked for r in on] == [False] + [True] * (len(on) - 1)
+    worker_volumes = sum(1 for g, t in on_threads if g == "volume" and t != main)
+    assert worker_volumes == len(on) - 1
+    for r in on + off:  # the subject is in every view (the oracle paints it around the joints)
+        nv = r.novel_view
+        assert nv is not None and nv.rays > 0 and (nv.image > 0).any()
+        assert set(NOVEL_STAGES) <= set(r.timing_ms)
+    assert not [t for t in threading.enumerate() if t.name.startswith("ghnerf-novel-view")]  # closed
+
+
+def test_a_failing_novel_view_in_the_worker_is_raised_and_the_estimator_goes_on(clip):
+    rig, frames, truth, visible, *_ = clip
+    oracle = ThreadRecorder(fail="render_rgb")
+    est = Estimator(oracle, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True)))
+    oracle.set_truth(truth[0], visible[0])
+    est.estimate(frames[0])  # tracks the subject: the next novel view goes to the worker
+    oracle.set_truth(truth[1], visible[1])
+    with pytest.raises(ModelRunError, match="injected"):
+        est.estimate(frames[1], novel_view=NovelViewRequest())
+    assert any(t.startswith("ghnerf-novel-view") for g, t in oracle.threads if g == "render_rgb")
+    oracle.set_truth(truth[2], visible[2])
+    r = est.estimate(frames[2])
+    assert r.num_found > 20 and r.novel_view is None
+    est.close()
+    est.close()  # idempotent

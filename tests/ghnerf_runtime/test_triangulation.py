@@ -14,6 +14,7 @@ from ghnerf_runtime.geometry.triangulation import (
     triangulate_dlt,
     triangulate_midpoint,
     triangulate_robust,
+    triangulate_two_views,
 )
 
 K = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
@@ -402,6 +403,58 @@ def test_outputs_always_finite(p, weights, corruption):
         assert_finite(res)
         assert np.all(res.points[~res.valid] == 0)
         assert np.all(res.num_views[res.valid] >= 2)
+
+
+_FIELDS = ("points", "reprojection_error", "ray_angle_deg", "num_views", "valid", "used")
+
+
+def _two_view_case(p, weights, corruption):
+    """A random two-camera pinhole rig (pixels already undistorted), noisy and corrupted."""
+    cams, points, _ = random_rig(dict(p, C=2))
+    pin = [c.without_distortion() for c in cams]
+    rng = np.random.default_rng(p["seed"])
+    uv = np.stack([c.project(points)[0] for c in pin]) + rng.normal(0, 3.0, (2, 8, 2))
+    w = np.array(weights[:16]).reshape(2, 8)
+    for k, kind in enumerate(corruption[:16]):
+        if kind != "ok":
+            uv[divmod(k, 8)] = {"nan": np.nan, "inf": np.inf, "huge": 1e200}[kind]
+    return np.stack([c.P for c in pin]), uv, w
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    rig_strategy,
+    st.lists(st.sampled_from([1.0, 0.0, 0.5, 0.05, np.nan, np.inf, -1.0]), min_size=16, max_size=16),
+    st.lists(st.sampled_from(["ok", "ok", "ok", "nan", "inf", "huge"]), min_size=16, max_size=16),
+    st.sampled_from([None, 2.0, 6.0]),
+)
+def test_two_view_solver_equals_the_general_ones(p, weights, corruption, max_err):
+    """The estimator's lean two-view path gives exactly what triangulate_dlt / _robust give."""
+    P, uv, w = _two_view_case(p, weights, corruption)
+    fast = triangulate_two_views(uv, P, w, max_reprojection_error=max_err)
+    if max_err is None:
+        ref = triangulate_dlt(uv, list(P), w, undistorted=True)
+    else:
+        ref = triangulate_robust(uv, list(P), w, undistorted=True, max_reprojection_error=max_err)
+    assert_finite(fast)
+    for name in _FIELDS:
+        np.testing.assert_allclose(getattr(fast, name), getattr(ref, name), rtol=1e-7, atol=1e-9, err_msg=name)
+
+
+def test_two_view_solver_is_exact_and_checks_its_arguments():
+    cams, points, uv = generate_scene(2)
+    P = np.stack([c.P for c in cams])
+    res = triangulate_two_views(uv, P, np.ones((2, 25)))
+    assert res.valid.all() and res.reprojection_error.max() < 1e-6
+    np.testing.assert_allclose(res.points, points, atol=1e-9)
+    with pytest.raises(ShapeError, match="uv"):
+        triangulate_two_views(uv[:, :, :1], P, np.ones((2, 25)))
+    with pytest.raises(ShapeError):
+        triangulate_two_views(uv, P[:, :2], np.ones((2, 25)))
+    singular = P.copy()
+    singular[1, :, :3] = 0.0
+    with pytest.raises(GeometryError, match="regular"):
+        triangulate_two_views(uv, singular, np.ones((2, 25)))
 
 
 def test_docstring_examples():
