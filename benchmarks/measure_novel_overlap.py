@@ -8,7 +8,9 @@ and 3D stages (``overlap`` on, the default) and after them (off). The two varian
 sequence by sequence (and swap order each time), so drifting machine load hits both alike.
 Prints, per precision and variant, pairs/s over the counted pairs and the median / p99 wall
 time per pair, the ratio of the medians, and checks that the joints are the same bit for bit
-(the overlap must change nothing but the time). Not a test.
+(the overlap must change nothing but the time). With ``--repeats N`` the whole comparison runs
+N times and the pairs/s of each repeat are listed too (this machine's speed drifts by 10-20 %
+over minutes; the spread says how much one figure can be trusted). Not a test.
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=int, default=10)
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--warmup", type=int, default=2, help="pairs of each sequence not counted (cold start)")
+    ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
@@ -48,25 +51,33 @@ def main(argv=None) -> int:
         session = load_session(base)
         variants = {"overlap": base, "after": replace(base, novel_view=replace(base.novel_view, overlap=False))}
         wall = {k: [] for k in variants}
+        rates = {k: [] for k in variants}
         joints = {k: [] for k in variants}
-        for k, seq in enumerate(sequences):
-            order = list(variants) if k % 2 == 0 else list(variants)[::-1]
-            for name in order:
-                with Estimator(session, seq.rig, variants[name]) as est:
-                    for i in range(len(seq)):
-                        pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
-                        t = time.perf_counter()
-                        r = est.estimate(pair, sequence=i, novel_view=request)
-                        dt = 1e3 * (time.perf_counter() - t)
-                        if i >= args.warmup:
-                            wall[name].append(dt)
-                        joints[name].append(np.concatenate([r.joints_3d.ravel(), r.confidence]))
+        for rep in range(args.repeats):
+            rep_wall = {k: [] for k in variants}
+            for k, seq in enumerate(sequences):
+                order = list(variants) if (k + rep) % 2 == 0 else list(variants)[::-1]
+                for name in order:
+                    with Estimator(session, seq.rig, variants[name]) as est:
+                        for i in range(len(seq)):
+                            pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
+                            t = time.perf_counter()
+                            r = est.estimate(pair, sequence=i, novel_view=request)
+                            dt = 1e3 * (time.perf_counter() - t)
+                            if i >= args.warmup:
+                                rep_wall[name].append(dt)
+                            if rep == 0:
+                                joints[name].append(np.concatenate([r.joints_3d.ravel(), r.confidence]))
+            for name in variants:
+                wall[name] += rep_wall[name]
+                rates[name].append(1e3 * len(rep_wall[name]) / np.sum(rep_wall[name]))
         same = all(np.array_equal(a, b) for a, b in zip(joints["overlap"], joints["after"]))
         print(f"{precision}: {len(wall['overlap'])} pairs per variant; joints identical: {same}")
         for name in variants:
             t = percentiles(wall[name])
-            print(f"  {name:<8} {1e3 * len(wall[name]) / np.sum(wall[name]):5.1f} pairs/s   wall per pair median "
-                  f"{t['median']:5.2f} / p99 {t['p99']:5.2f} ms")
+            each = ", ".join(f"{v:.1f}" for v in rates[name])
+            print(f"  {name:<8} {1e3 * len(wall[name]) / np.sum(wall[name]):5.1f} pairs/s (per repeat: {each})   "
+                  f"wall per pair median {t['median']:5.2f} / p99 {t['p99']:5.2f} ms")
         print(f"  median ratio overlap / after: {np.median(wall['overlap']) / np.median(wall['after']):.3f}")
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
     return 0

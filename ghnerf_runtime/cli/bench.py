@@ -9,7 +9,8 @@ Subcommands::
 precision and for "keypoints" and "keypoints + novel view" runs the estimator over every pair
 and prints each stage's median and p99 (ms), the end-to-end median/p99 and throughput, and the
 accuracy against the simulator's truth (PCK@0.2 in both images, MPJPE in the rig frame, with
-the counts of missing joints). The first pairs of each run are warm-up and not counted. Not a
+the counts of missing joints). The rows take turns sequence by sequence, so drifts in the
+machine's speed hit them alike. The first pairs of each row are warm-up and not counted. Not a
 timed test: the figures depend on the machine and its load (the load average is printed).
 
 This module is a tool, not the runtime library: it imports ``drivers`` (through
@@ -65,25 +66,25 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     wall = 0.0
     n = 0
     for seq in sequences:
-        est = Estimator(estimator.session, seq.rig, estimator.config)
-        for i in range(len(seq)):
-            images = (np.array(seq.images[i, 0]), np.array(seq.images[i, 1]))  # in RAM, as a driver delivers
-            if oracle is not None:
-                oracle.set_truth(seq.joints_3d[i], seq.visible[i])
-            if track_from_truth and i > 0:
-                est.tracker.track = track_from_joints(seq.joints_3d[i - 1], np.ones(25), np.ones(25, bool),
-                                                      est.config.tracking, i - 1)
-            t = time.perf_counter()
-            result = est.estimate(images, sequence=i, novel_view=request)
-            dt = time.perf_counter() - t
-            n += 1
-            if n <= warmup:
-                continue
-            wall += dt
-            for k in stages:
-                stages[k].append(result.timing_ms.get(k, 0.0))
-            if accuracy is not None:
-                accuracy.add(result, seq, i)
+        with Estimator(estimator.session, seq.rig, estimator.config) as est:
+            for i in range(len(seq)):
+                images = (np.array(seq.images[i, 0]), np.array(seq.images[i, 1]))  # in RAM, as a driver delivers
+                if oracle is not None:
+                    oracle.set_truth(seq.joints_3d[i], seq.visible[i])
+                if track_from_truth and i > 0:
+                    est.tracker.track = track_from_joints(seq.joints_3d[i - 1], np.ones(25), np.ones(25, bool),
+                                                          est.config.tracking, i - 1)
+                t = time.perf_counter()
+                result = est.estimate(images, sequence=i, novel_view=request)
+                dt = time.perf_counter() - t
+                n += 1
+                if n <= warmup:
+                    continue
+                wall += dt
+                for k in stages:
+                    stages[k].append(result.timing_ms.get(k, 0.0))
+                if accuracy is not None:
+                    accuracy.add(result, seq, i)
     return stages, wall
 
 
@@ -101,13 +102,22 @@ def _row(stages: dict[str, list[float]], wall: float) -> dict:
 
 
 def run_runtime_bench(args) -> dict:
+    """Every (precision, heatmap source, mode) row, interleaved sequence by sequence.
+
+    This shared machine runs 10-20 % faster or slower for tens of seconds at a time; running
+    the rows one after another would hand each row a different machine. Instead each sequence
+    is run by every row in turn (the order rotating from one sequence to the next), so every
+    row sees the same mix of fast and slow spells and the rows compare. The first ``warmup``
+    pairs of each row are not counted.
+    """
     from ghnerf_runtime.cli.simdata import Accuracy, load_sequences
 
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
     report = {"model_dir": args.model_dir, "thread_pool": args.thread_pool, "allow_spinning": args.allow_spinning,
-              "pairs_per_run": sum(len(s) for s in sequences) - args.warmup,
+              "pairs_per_run": sum(len(s) for s in sequences) - args.warmup, "interleaved": True,
               "sequences": [s.info for s in sequences], "method": args.method, "runs": [],
               "load_average_start": os.getloadavg(), "cpus": os.cpu_count()}
+    rows = []
     for precision, source in itertools.product(args.precisions, args.heatmap_sources):
         cfg = EstimatorConfig(
             session=SessionConfig(model_dir=args.model_dir, precision=precision, threads=args.threads,
@@ -118,17 +128,28 @@ def run_runtime_bench(args) -> dict:
         session = load_session(cfg)
         report["model"] = session.describe()
         for mode in args.modes:
-            acc = Accuracy()
-            est = Estimator(session, sequences[0].rig, cfg)
-            stages, wall = run_pairs(est, sequences, novel=(mode == "novel"), warmup=args.warmup, accuracy=acc,
-                                     track_from_truth=args.track_from_truth)
-            row = {"precision": precision, "mode": "keypoints" if mode == "keypoints" else "keypoints+novel",
-                   "heatmaps": source, "method": cfg.joints3d.method,
-                   "track_from_truth": args.track_from_truth,
-                   "files": {g: f.precision for g, f in session.files.items()}, **_row(stages, wall),
-                   "accuracy": acc.summary(), "load_average": os.getloadavg()[0]}
-            report["runs"].append(row)
-            _print_row(row)
+            rows.append({"precision": precision, "source": source, "mode": mode, "cfg": cfg, "session": session,
+                         "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0})
+    loads = []
+    for k, seq in enumerate(sequences):
+        for row in rows[k % len(rows):] + rows[:k % len(rows)]:
+            est = Estimator(row["session"], seq.rig, row["cfg"])  # run_pairs makes one per sequence from it
+            warmup = max(0, args.warmup - row["seen"])
+            stages, wall = run_pairs(est, [seq], novel=(row["mode"] == "novel"), warmup=warmup,
+                                     accuracy=row["accuracy"], track_from_truth=args.track_from_truth)
+            row["seen"] += len(seq)
+            row["wall"] += wall
+            for key, values in stages.items():
+                row["stages"].setdefault(key, []).extend(values)
+        loads.append(os.getloadavg()[0])
+    for row in rows:
+        cfg, session = row["cfg"], row["session"]
+        out = {"precision": row["precision"], "mode": "keypoints" if row["mode"] == "keypoints" else "keypoints+novel",
+               "heatmaps": row["source"], "method": cfg.joints3d.method, "track_from_truth": args.track_from_truth,
+               "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
+               "accuracy": row["accuracy"].summary(), "load_average": float(np.mean(loads))}
+        report["runs"].append(out)
+        _print_row(out)
     return report
 
 

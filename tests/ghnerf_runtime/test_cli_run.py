@@ -103,3 +103,21 @@ def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
                          "--model-dir", "/opt/m"]) == 0
     tree = json.loads(capsys.readouterr().out)
     assert tree["joints3d"]["method"] == "volumetric" and tree["session"]["model_dir"] == "/opt/m"
+
+
+def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir, tmp_path):  # noqa: F811
+    """``ghnerf-bench runtime`` smoke run: every row counts the same pairs (warm-up excluded)."""
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    code = bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "3",
+                       "--precisions", "fp32,int8", "--heatmap-sources", "encoder", "--warmup", "2",
+                       "--cache", str(tmp_path / "cache"), "--json", str(report_path)])
+    assert code == 0
+    report = json.loads(report_path.read_text())
+    assert report["interleaved"] and len(report["runs"]) == 4  # 2 precisions x (keypoints, + novel view)
+    for row in report["runs"]:
+        assert row["pairs"] == 2 * 3 - 2
+        assert row["pairs_per_s"] > 0 and math.isfinite(row["total"]["median"])
+    novel = [r for r in report["runs"] if r["mode"] == "keypoints+novel"]
+    assert all(r["novel view"]["median"] > 0 for r in novel)
