@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 
 
@@ -47,8 +48,8 @@ class _OpacityTap:
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return float("inf") if mse == 0 else 10.0 * np.log10(255.0 ** 2 / mse)
+    """PSNR of two 8-bit images over every pixel (``inf`` when identical)."""
+    return masked_psnr(a.astype(np.float64), b.astype(np.float64), np.ones(a.shape[:2], bool), data_range=255.0).value
 
 
 def main(argv=None) -> int:

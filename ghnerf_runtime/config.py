@@ -423,12 +423,12 @@ class NovelViewConfig:
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
-        _boolean(self, "overlap")
         _integer(self, "stride", 1, 4)
         _choice(self, "stride", (1, 2, 4))
         _boolean(self, "heatmaps")
         _boolean(self, "rays_in_box_only")
         _boolean(self, "crop_to_subject")
+        _boolean(self, "overlap")
         _integer(self, "silhouette_stride", 0, 16)
         if self.silhouette_stride and self.silhouette_stride % self.stride:
             _fail(type(self), "silhouette_stride", f"must be 0 or a multiple of stride ({self.stride})",

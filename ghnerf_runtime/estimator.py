@@ -160,6 +160,11 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
 
 
 # ------------------------------------------------------------------ estimator
+def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
+    """Add the milliseconds since ``t0`` to ``timing[stage]`` (a cold start's second pass adds to the first)."""
+    timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
+
+
 @dataclass
 class _Pass:
     """What one pass over a pair produced (``j3`` is ``None`` when the frame check stopped it)."""
@@ -375,9 +380,6 @@ class Estimator:
         S = self.size
         features = novel_view is not None  # the novel view reads the image features of the pair
 
-        def add(stage: str, t0: float) -> None:
-            timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
-
         # 1. preprocess + frame check
         t = time.perf_counter()
         batch = np.empty((2, 3, S, S), np.float32)
@@ -388,7 +390,7 @@ class Estimator:
             batch[i] = preprocess_image(img, maps, self.contract.normalisation)
             ok, _ = check_crop(batch[i, 1], self._levels, cfg.frame_check)
             frame_ok[st.camera.name] = ok
-        add("preprocess", t)
+        _add_ms(timing, "preprocess", t)
         if not all(frame_ok.values()):
             self.tracker.reset()  # nothing seen: the next pair starts cold
             return _Pass(regions, frame_ok)
@@ -407,14 +409,14 @@ class Estimator:
         # human-only graph skips the image feature network.
         encoder = "human" if self._human_graph and not features else "encoder"
         env.update(self.session.run(encoder, env))
-        add("encoder", t)
+        _add_ms(timing, "encoder", t)
         stride, g = self.contract.heatmap_stride, self.grid
         blocks = [full_block(g, g)] * 2
         out: dict[str, np.ndarray] = {}
         if cfg.runs_source_volume:
             t = time.perf_counter()
             env.update(self.session.run("volume", env))
-            add("volume", t)
+            _add_ms(timing, "volume", t)
         if cfg.renders_source_heatmaps:
             t = time.perf_counter()
             if cfg.rays.restrict_to_subject and regions.tracked:
@@ -422,7 +424,7 @@ class Estimator:
                                        g, g, cfg.rays.align_cells)
             env["ray_uv"] = self._ray_uv(tuple(blocks), stride)
             out = self.session.run("render_heat", env)
-            add("render_heat", t)
+            _add_ms(timing, "render_heat", t)
 
         job = None
         if novel_view is not None and cfg.novel_view.overlap and regions.tracked:
@@ -439,9 +441,6 @@ class Estimator:
         """Stages 5-6 of :meth:`_pass`."""
         cfg = self.config
         S, g = self.size, self.grid
-
-        def add(stage: str, t0: float) -> None:
-            timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
 
         # 5. decode 2D
         t = time.perf_counter()
@@ -463,7 +462,7 @@ class Estimator:
             joints_2d[name] = np.where(ok[:, None], uv_img, 0.0)
             conf_2d[name] = np.where(ok, kp.confidence[i], 0.0).astype(np.float32)
             missing_2d[name] = ~ok
-        add("decode_2d", t)
+        _add_ms(timing, "decode_2d", t)
 
         # 6. 3D, then the track
         t = time.perf_counter()
@@ -479,7 +478,7 @@ class Estimator:
                     conf_2d[name] = np.zeros_like(conf_2d[name])
                     missing_2d[name] = np.ones_like(missing_2d[name])
         self.tracker.update(j3.points, j3.confidence, j3.valid, sequence)
-        add("joints_3d", t)
+        _add_ms(timing, "joints_3d", t)
         return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job)
 
     # -------------------------------------------------------------- 3D
