@@ -23,5 +23,15 @@ FLIP_INDEX: tuple[int, ...] = tuple(
     for n in JOINT_NAMES
 )
 
+#: Joint groups for per-part scores (``ghnerf-eval`` reports PCK per part: the arms, thin and fast,
+#: are where a small model fails first).
+BODY_PARTS: dict[str, tuple[int, ...]] = {
+    "head": tuple(JOINT_INDEX[n] for n in ("Nose", "REye", "LEye", "REar", "LEar")),
+    "torso": tuple(JOINT_INDEX[n] for n in ("Neck", "RShoulder", "LShoulder", "MidHip", "RHip", "LHip")),
+    "arms": tuple(JOINT_INDEX[n] for n in ("RElbow", "RWrist", "LElbow", "LWrist")),
+    "legs": tuple(JOINT_INDEX[n] for n in ("RKnee", "RAnkle", "LKnee", "LAnkle")),
+    "feet": tuple(JOINT_INDEX[n] for n in ("LBigToe", "LSmallToe", "LHeel", "RBigToe", "RSmallToe", "RHeel")),
+}
+
 # Torso joints used for the PCK reference length (see docs/metrics.md).
 NECK, MID_HIP = JOINT_INDEX["Neck"], JOINT_INDEX["MidHip"]

@@ -46,6 +46,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from ghnerf_runtime.body25 import BODY_PARTS
 from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
@@ -199,6 +200,9 @@ class Accumulator:
     enc_pck_evaluated: int = 0
     enc_mpjpe_sum_mm: float = 0.0
     enc_mpjpe_joints: int = 0
+    # per body part (body25.BODY_PARTS): [correct, evaluated]
+    pck_parts: dict[str, list[int]] = field(default_factory=dict)
+    enc_pck_parts: dict[str, list[int]] = field(default_factory=dict)
     heat_mse: list[float] = field(default_factory=list)
     psnr: list[float] = field(default_factory=list)
     ssim: list[float] = field(default_factory=list)
@@ -215,11 +219,13 @@ class Accumulator:
         self.mpjpe_joints += e.num_evaluated
         self.mpjpe_missing += e.num_missing
         self.mpjpe_pred_missing += e.num_pred_missing
+        _add_parts(self.pck_parts, p)
         self.heat_mse.append(hm.value)
         if m.get("encoder_pck") is not None:
             ep, ee = m["encoder_pck"], m["encoder_mpjpe"]
             self.enc_pck_correct += ep.num_correct
             self.enc_pck_evaluated += ep.num_evaluated
+            _add_parts(self.enc_pck_parts, ep)
             self.enc_mpjpe_sum_mm += float(ee.errors[ee.evaluated].sum())
             self.enc_mpjpe_joints += ee.num_evaluated
         if m.get("psnr") is not None:
@@ -247,7 +253,21 @@ class Accumulator:
                                          if self.enc_pck_evaluated else None),
             "encoder_heatmaps_mpjpe_mm": (self.enc_mpjpe_sum_mm / self.enc_mpjpe_joints
                                           if self.enc_mpjpe_joints else None),
+            "pck@0.2_by_part": _part_scores(self.pck_parts),
+            "encoder_heatmaps_pck@0.2_by_part": _part_scores(self.enc_pck_parts) if self.enc_pck_parts else None,
         }
+
+
+def _add_parts(totals: dict[str, list[int]], result) -> None:
+    """Add a :class:`~ghnerf_runtime.metrics.PckResult`'s correct / evaluated joints per body part."""
+    for part, joints in BODY_PARTS.items():
+        t = totals.setdefault(part, [0, 0])
+        t[0] += int(result.correct[..., joints].sum())
+        t[1] += int(result.evaluated[..., joints].sum())
+
+
+def _part_scores(totals: Mapping[str, list[int]]) -> dict[str, float | None]:
+    return {part: (c / n if n else None) for part, (c, n) in totals.items()}
 
 
 def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, novel_rgb: np.ndarray | None,

@@ -105,11 +105,13 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append("")
     L.append("## Training")
     L.append("")
-    L.append("| model | preset | iterations | rays/step | lr schedule | threads | wall time |")
+    L.append("| model | preset | iterations | rays (or images) per step | lr schedule | threads | wall time |")
     L.append("|---|---|---|---|---|---|---|")
     for name, t in (card.get("training") or {}).items():
         c = t.get("config", {})
         rays = c.get("targets_per_iter", 0) * (c.get("heat_rays", 0) + c.get("patch_size", 0) ** 2)
+        if t.get("images_per_step"):  # the human encoder's 2D pretraining: images, not rays
+            rays = f"{t['images_per_step']} images, 2D heatmaps only"
         sched = f"Adam {c.get('lr')} x{c.get('lr_decay_gamma')} every {c.get('lr_decay_every')}"
         L.append(f"| {name} | {c.get('preset')} | {t.get('steps')} | {rays} | {sched} | {c.get('threads') or 'all'} | "
                  f"{_fmt((t.get('wall_s') or 0) / 60, 1)} min |")
@@ -137,6 +139,18 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         for label, m in enc.items():
             L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('encoder_heatmaps_pck@0.2'))} | "
                      f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} |")
+        L.append("")
+    parts = [(label, src, m[key]) for label, m in (card.get("metrics") or {}).items()
+             for src, key in (("rendered", "pck@0.2_by_part"), ("encoder", "encoder_heatmaps_pck@0.2_by_part"))
+             if m.get(key)]
+    if parts:
+        names = list(parts[0][2])
+        L.append("PCK@0.2 per body part (`body25.BODY_PARTS`):")
+        L.append("")
+        L.append("| model | heatmaps | " + " | ".join(names) + " |")
+        L.append("|---|---|" + "---|" * len(names))
+        for label, src, by in parts:
+            L.append(f"| {label} | {src} | " + " | ".join(_fmt(by.get(n)) for n in names) + " |")
         L.append("")
     par = card.get("parity") or {}
     if par:

@@ -3,14 +3,17 @@
 Stages (each skipped when its outputs exist and its stamp's inputs still match; ``--force STAGE`` redoes one):
 
 1. ``data``: the synthetic dataset (``training.data.generate``); reused when ``dataset.json`` matches.
-2. ``train_ghnerf`` / ``train_baseline``: ``training.train`` with ``training/train_configs/<preset>.json``
+2. ``pretrain_ghnerf``: when the variant's train config has a ``pretrain_human`` block, the human encoder is
+   first pretrained on 2D heatmaps alone (``training.pretrain_human``, into ``runs/<preset>_human``) and the
+   joint training starts from it (``human_init``).
+3. ``train_ghnerf`` / ``train_baseline``: ``training.train`` with ``training/train_configs/<preset>.json``
    (``--resume``: an interrupted run continues from its last checkpoint).
-3. ``export_<variant>``: fp32 ONNX graphs (``training.export``) + a weights-only torch file.
-4. ``quantize_<variant>``: static int8 QDQ graphs, calibrated on training-split scenes (real frames and
+4. ``export_<variant>``: fp32 ONNX graphs (``training.export``) + a weights-only torch file.
+5. ``quantize_<variant>``: static int8 QDQ graphs, calibrated on training-split scenes (real frames and
    cameras), and the int8-vs-fp32 parity on a held-out scene.
-5. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8) and the baseline (onnx fp32,
+6. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8) and the baseline (onnx fp32,
    int8) into ``metrics_<variant>.json``.
-6. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
+7. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
    wall times), once every variant is evaluated.
 
 ``--variants baseline`` takes one variant through its stages now (e.g. while the other still trains).
@@ -40,9 +43,13 @@ CONFIG_DIR = REPO / "training" / "train_configs"
 VARIANTS = {"ghnerf": "edge128", "baseline": "edge128_baseline"}
 #: Train-config keys that do not change the result (where and how fast it runs); ignored when matching runs.
 RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "pck_every", "checkpoint_every")
-STAGE_KINDS = ("data", "train", "export", "quantize", "eval", "card")
-"""Stage kinds; train/export/quantize/eval run per variant (``train_ghnerf``, ``eval_baseline``, ...)."""
-STAGES = ("data", *(f"{k}_{v}" for k in ("train", "export", "quantize", "eval") for v in VARIANTS), "card")
+STAGE_KINDS = ("data", "pretrain", "train", "export", "quantize", "eval", "card")
+"""Stage kinds; pretrain/train/export/quantize/eval run per variant (``train_ghnerf``, ``eval_baseline``, ...)."""
+STAGES = ("data", "pretrain_ghnerf", *(f"{k}_{v}" for k in ("train", "export", "quantize", "eval") for v in VARIANTS),
+          "card")
+#: Pretraining keys that do not change the result; ignored when matching a finished pretraining run.
+PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "eval_every", "eval_scenes",
+                         "checkpoint_every")
 EVAL_RUNTIMES = {"ghnerf": ("torch", "fp32", "int8"), "baseline": ("fp32", "int8")}
 
 
@@ -68,6 +75,7 @@ class PipelineConfig:
     ~55 min one after the other with two threads (2-core EPYC)."""
     force: tuple[str, ...] = ()
     train_overrides: list[str] = field(default_factory=list)
+    pretrain_overrides: list[str] = field(default_factory=list)
     command: str = ""
 
     @classmethod
@@ -75,7 +83,9 @@ class PipelineConfig:
         return cls(out=out, data=Path("data/quick128"), runs=out / "runs", train=12, val=4, val_seen_motions=0,
                    eval_limit=2, calib_scenes=2, quick=True,
                    train_overrides=["iterations=6", "log_every=3", "checkpoint_every=3", "pck_every=3",
-                                    "targets_per_iter=2", "heat_rays=64", "patch_size=8", "max_minutes=0"])
+                                    "targets_per_iter=2", "heat_rays=64", "patch_size=8", "max_minutes=0"],
+                   pretrain_overrides=["iterations=2", "log_every=1", "checkpoint_every=1", "eval_every=0",
+                                       "scenes_per_step=1", "max_minutes=0"])
 
 
 # ----------------------------------------------------------------------------------------- stamps
@@ -135,27 +145,49 @@ def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = (
     return cmd
 
 
+def _pretrain_cmd(cfg: PipelineConfig, variant: str, extra: list[str] = ()) -> list[str]:
+    """The pretraining command; its config (the train config's block, every override applied) is written
+    to ``<run>/requested.json`` first."""
+    run = pretrain_dir(cfg, variant)
+    run.mkdir(parents=True, exist_ok=True)
+    (run / "requested.json").write_text(json.dumps(pretrain_inputs(cfg, variant), indent=1))
+    cmd = [sys.executable, "-m", "training.pretrain_human", "--config", str(run / "requested.json"),
+           "--out", str(run), "--resume", "--quiet"]
+    for o in extra:
+        cmd += ["--set", o]
+    return cmd
+
+
 def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
-    """Run the trainings of ``variants`` at once, ``cores // n`` threads each (never oversubscribed)."""
+    """Run the trainings of ``variants`` at once, ``cores // n`` threads each (never oversubscribed).
+
+    A variant with a pretraining stage runs it first, then its joint training, while the other trains.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
     threads = max(1, (os.cpu_count() or 1) // len(variants))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
     for v in variants:
         _check_run_folder(cfg, v)
-    procs = []
-    for v in variants:
+
+    def chain(v: str) -> bool:
         run = cfg.runs / VARIANTS[v]
-        run.mkdir(parents=True, exist_ok=True)
-        cmd = _train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"])
-        log.info("$ %s &", shlex.join(cmd))
-        fh = open(run / "train.log", "a")
-        procs.append((v, subprocess.Popen(cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT), fh))
-    failed = []
-    for v, p, fh in procs:
-        if p.wait() != 0:
-            failed.append(v)
-        fh.close()
-    if failed:
-        raise RuntimeError(f"training failed for {failed}; see {cfg.runs}/<preset>/train.log")
+        steps = []
+        if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v):
+            steps.append((_pretrain_cmd(cfg, v, [f"threads={threads}"]), pretrain_dir(cfg, v) / "train.log"))
+        steps.append((_train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"]), run / "train.log"))
+        for cmd, log_path in steps:
+            log_path.parent.mkdir(parents=True, exist_ok=True)
+            log.info("$ %s &", shlex.join(cmd))
+            with open(log_path, "a") as fh:
+                if subprocess.run(cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT).returncode != 0:
+                    return False
+        return True
+
+    with ThreadPoolExecutor(len(variants)) as pool:
+        ok = dict(zip(variants, pool.map(chain, variants)))
+    if failed := [v for v, good in ok.items() if not good]:
+        raise RuntimeError(f"training failed for {failed}; see {cfg.runs}/<preset>[_human]/train.log")
 
 
 def _sh(cmd: list[str], log_path: Path | None = None) -> None:
@@ -205,12 +237,60 @@ def stage_data(cfg: PipelineConfig) -> tuple[list[Path], dict]:
 
 
 def train_inputs(cfg: PipelineConfig, preset: str) -> dict:
+    """The train config a run of ``preset`` gets (as its ``config.json`` holds it); with a ``pretrain_human``
+    block, ``human_init`` names the pretraining run's ``human.pt``."""
     from training.train import apply_overrides, build_config, load_config_file
 
-    data = load_config_file(CONFIG_DIR / f"{preset}.json")
-    tc = build_config(apply_overrides(data, [f"data={json.dumps(str(cfg.data))}", *cfg.train_overrides]))
+    data = apply_overrides(load_config_file(CONFIG_DIR / f"{preset}.json"),
+                           [f"data={json.dumps(str(cfg.data))}", *cfg.train_overrides])
+    if data.get("pretrain_human") and not data.get("human_init"):
+        data["human_init"] = str(cfg.runs / f"{preset}_human" / "human.pt")
+    tc = build_config(data)
     from dataclasses import asdict
     return json.loads(json.dumps(asdict(tc)))  # as config.json holds it (lists, not tuples)
+
+
+def pretrain_block(cfg: PipelineConfig, variant: str) -> dict:
+    """The variant's ``pretrain_human`` block, overrides applied ({} when it has none)."""
+    return train_inputs(cfg, VARIANTS[variant]).get("pretrain_human") or {}
+
+
+def pretrain_dir(cfg: PipelineConfig, variant: str) -> Path:
+    return cfg.runs / f"{VARIANTS[variant]}_human"
+
+
+def pretrain_inputs(cfg: PipelineConfig, variant: str) -> dict:
+    """The ``PretrainConfig`` the pretraining run of ``variant`` gets (as its ``config.json`` holds it)."""
+    from dataclasses import asdict
+
+    from training.pretrain_human import config_from_train_config
+
+    pc = config_from_train_config(train_inputs(cfg, VARIANTS[variant]), cfg.pretrain_overrides)
+    return json.loads(json.dumps(asdict(pc)))
+
+
+def _pretrain_finished(cfg: PipelineConfig, variant: str) -> bool:
+    run = pretrain_dir(cfg, variant)
+    if not ((run / "summary.json").exists() and (run / "config.json").exists() and (run / "human.pt").exists()):
+        return False
+    want = {k: v for k, v in pretrain_inputs(cfg, variant).items() if k not in PRETRAIN_RUNTIME_KEYS}
+    have = {k: v for k, v in json.loads((run / "config.json").read_text()).items() if k not in PRETRAIN_RUNTIME_KEYS}
+    sm = json.loads((run / "summary.json").read_text())
+    return want == have and sm.get("steps", 0) >= want["iterations"]
+
+
+def stage_pretrain(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
+    run = pretrain_dir(cfg, variant)
+    if not _pretrain_finished(cfg, variant):
+        cfg_p = run / "config.json"
+        if (run / "last.pt").exists() and cfg_p.exists():
+            want = {k: v for k, v in pretrain_inputs(cfg, variant).items() if k not in PRETRAIN_RUNTIME_KEYS}
+            have = {k: v for k, v in json.loads(cfg_p.read_text()).items() if k not in PRETRAIN_RUNTIME_KEYS}
+            if want != have:
+                raise RuntimeError(f"{run} holds a pretraining run with another config; move it away or pass --runs")
+        _sh(_pretrain_cmd(cfg, variant), run / "train.log")
+    return [run / "human.pt"], {"summary": json.loads((run / "summary.json").read_text()),
+                                "config": json.loads((run / "config.json").read_text())}
 
 
 def _result_keys(tc: dict) -> dict:
@@ -405,6 +485,14 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
                 files[str(p.relative_to(cfg.out))] = {"bytes": p.stat().st_size, "sha256": sha256(p)}
     training = {}
     for variant in VARIANTS:
+        pre = (st.stamp(f"pretrain_{variant}") or {}).get("info")
+        if pre:
+            training[f"{variant}_human_pretraining"] = {
+                "config": pre.get("config", {}), "steps": pre.get("summary", {}).get("steps"),
+                "stopped_early": pre.get("summary", {}).get("stopped_early"),
+                "wall_s": pre.get("summary", {}).get("wall_s"), "checkpoint": pre.get("summary", {}).get("human"),
+                "images_per_step": pre.get("summary", {}).get("images_per_step"),
+                "eval_pck@0.2": pre.get("summary", {}).get("eval_pck@0.2")}
         s = st.stamp(f"train_{variant}") or {}
         info = s.get("info", {})
         training[variant] = {"config": info.get("config", {}), "steps": info.get("summary", {}).get("steps"),
@@ -464,12 +552,16 @@ def run(cfg: PipelineConfig) -> dict | None:
 
     def train_in(variant: str) -> dict:
         return {"data": d["inputs"], "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
-                "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped}
+                "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped,
+                "pretrain": pretrain_inputs(cfg, variant) if pretrain_block(cfg, variant) else None}
 
     todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v)) is None and not _run_finished(cfg, v)]
     if cfg.parallel_train and len(todo) > 1 and not torch.cuda.is_available():
         train_side_by_side(cfg, todo)
     for variant in cfg.variants:
+        if pretrain_block(cfg, variant):
+            st.run(f"pretrain_{variant}", {"data": d["inputs"], "config": pretrain_inputs(cfg, variant)},
+                   lambda v=variant: stage_pretrain(cfg, v))
         t = st.run(f"train_{variant}", train_in(variant), lambda v=variant: stage_train(cfg, v))
         ckpt = {variant: Path(next(iter(t["outputs"])))}
         e = st.run(f"export_{variant}", t["outputs"], lambda c=ckpt: stage_export(cfg, c))

@@ -109,6 +109,12 @@ class TrainConfig(Config):
     """``auto``: cuda when present, else CPU."""
     init: str = ""
     """torchvision-format resnet18 state dict for the human encoder ('' = from scratch)."""
+    human_init: str = ""
+    """A ``human.pt`` from ``python -m training.pretrain_human`` (trunk, projections and heatmap head of the
+    human encoder, pretrained on 2D heatmaps alone); loaded after ``init``. '' = none."""
+    pretrain_human: dict = field(default_factory=dict)
+    """The ``PretrainConfig`` (``training.pretrain_human``) of the stage that makes ``human_init``; read by
+    the pipeline (which runs it first and sets ``human_init``), ignored by the trainer itself."""
     max_minutes: float = 0.0
     """Stop (with a checkpoint) after this wall time (0: no limit). The run then counts as finished early."""
 
@@ -146,6 +152,11 @@ class TrainConfig(Config):
             fail("data", "must name the dataset folder")
         if not isinstance(self.model, Mapping):
             fail("model", f"must be a mapping of ModelConfig overrides, got {self.model!r}")
+        if not isinstance(self.pretrain_human, Mapping):
+            fail("pretrain_human", f"must be a mapping (a PretrainConfig), got {self.pretrain_human!r}")
+        if self.pretrain_human:
+            from training.pretrain_human import config_from_train_config  # lazy: it imports this module
+            config_from_train_config(asdict(self))  # a bad block fails here, named pretrain_human.<key>
         self.model_config()  # unknown or mistyped model keys fail here, named by their path
 
     def model_config(self) -> ModelConfig:
@@ -561,6 +572,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
             raise ConfigError("init: the preset has no human encoder")
         from training.model.human_encoder import load_torchvision_resnet18
         load_torchvision_resnet18(model.human.trunk, cfg.init)
+    if cfg.human_init:
+        from training.pretrain_human import load_human
+        load_human(model, cfg.human_init)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     gen = torch.Generator().manual_seed(cfg.seed * 1000 + info.rank + 1)
     seed_everything(cfg.seed + 7919 * info.rank + 1)  # per-rank stratified-sample noise

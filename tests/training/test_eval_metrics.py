@@ -68,6 +68,32 @@ def test_shifted_joints_and_pooling(data64):
     assert res["pck_evaluated_joints"] == 2 * r["pck"].num_evaluated
 
 
+def test_pck_by_body_part(data64):
+    from ghnerf_runtime.body25 import BODY_PARTS
+
+    sc = _scene(data64)
+    true2d = sc["tgt_joints_2d"][:2]
+    vis = sc["tgt_visible"][:2]
+    arms = list(BODY_PARTS["arms"])
+    moved = true2d.copy()
+    moved[:, arms, 0] += 2.0 * np.linalg.norm(true2d[0, 1] - true2d[0, 8])  # every arm joint wrong
+    hm = gaussian_heatmaps(model_to_heatmap_pixels(moved.astype(np.float64), 16, 64), vis, 16, 1.5)
+    acc = Accumulator()
+    acc.add(scene_metrics(sc, hm, None, np.array([], int), encoder_heatmaps=sc["tgt_heatmaps"][:2]))
+    res = acc.result()
+    parts = res["pck@0.2_by_part"]
+    assert set(parts) == set(BODY_PARTS)
+    evaluated = {p: int(vis[:, list(j)].sum()) for p, j in BODY_PARTS.items()}
+    assert evaluated["arms"] > 0 and parts["arms"] == 0.0
+    for part, score in parts.items():
+        if part != "arms":
+            assert score == (1.0 if evaluated[part] else None), part
+    # the parts pool to the overall score
+    correct = sum((parts[p] or 0.0) * evaluated[p] for p in parts)
+    assert correct / sum(evaluated.values()) == pytest.approx(res["pck@0.2"])
+    assert res["encoder_heatmaps_pck@0.2_by_part"]["arms"] == (1.0 if evaluated["arms"] else None)
+
+
 class _Oracle:
     """A renderer that returns the truth: the dataset's heatmaps and composited images."""
 

@@ -43,7 +43,8 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
                                            "lr_decay_every": 2500}, "steps": 8000, "wall_s": 1800}},
         "metrics": {"ghnerf_int8": {"kind": "onnx-int8", "pck@0.2": 0.5, "mpjpe_mm": None, "psnr_masked": 20.0,
                                     "ssim_masked": 0.9, "heatmap_mse": 0.001, "pck_undecoded": 3,
-                                    "pck_evaluated_joints": 10}},
+                                    "pck_evaluated_joints": 10,
+                                    "pck@0.2_by_part": {"head": 0.75, "arms": None}}},
         "parity": {"ghnerf": {"pipeline": {"heatmaps": {"max_abs": 0.01, "mean_abs": 1e-4}, "peak_shift_rays": 0.1,
                                            "depth_mean_abs_m": 0.001}}},
         "files": {"ghnerf/encoder.onnx": {"bytes": 10, "sha256": "ab"}},
@@ -54,6 +55,7 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert md == render_markdown(card)
     assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
+    assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
 
 
 def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_path):
@@ -84,3 +86,32 @@ def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_
     torch.save({"model_config": other.to_dict()}, run / "last.pt")
     assert not _run_finished(cfg, "baseline")
     assert asdict(other) != asdict(preset("edge128_baseline"))
+
+
+def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(tmp_path):
+    """A ``pretrain_human`` block (in the train config or a ``--set`` override): the pipeline pretrains into
+    ``runs/<preset>_human`` with the block's settings and the joint run loads that ``human.pt``."""
+    import pytest
+
+    pytest.importorskip("torch")
+    from training.pipeline import (PipelineConfig, _pretrain_cmd, _pretrain_finished, pretrain_block,
+                                   pretrain_inputs, train_inputs)
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    assert pretrain_block(cfg, "baseline") == {} and "pretrain_ghnerf" in STAGES
+    cfg.train_overrides = ['pretrain_human={"iterations": 5, "lr": 0.002}']
+    tc = train_inputs(cfg, "edge128")
+    assert tc["human_init"] == str(tmp_path / "runs" / "edge128_human" / "human.pt")
+    pc = pretrain_inputs(cfg, "ghnerf")
+    assert (pc["preset"], pc["iterations"], pc["lr"], pc["data"]) == ("edge128", 5, 0.002, str(cfg.data))
+    cmd = _pretrain_cmd(cfg, "ghnerf", ["threads=1"])
+    run = tmp_path / "runs" / "edge128_human"
+    assert json.loads((run / "requested.json").read_text()) == pc
+    assert cmd[cmd.index("--config") + 1] == str(run / "requested.json") and cmd[-2:] == ["--set", "threads=1"]
+    assert not _pretrain_finished(cfg, "ghnerf")
+    (run / "human.pt").write_bytes(b"x")
+    (run / "config.json").write_text(json.dumps({**pc, "threads": 1}))  # runtime keys do not matter
+    (run / "summary.json").write_text(json.dumps({"steps": 5}))
+    assert _pretrain_finished(cfg, "ghnerf")
+    (run / "config.json").write_text(json.dumps({**pc, "lr": 0.001}))  # another recipe: not this run
+    assert not _pretrain_finished(cfg, "ghnerf")

@@ -1,0 +1,102 @@
+"""Human-encoder pretraining (``training.pretrain_human``): the real loop on ``tiny``, resume, and loading the
+result into the joint trainer."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
+from tests.training.test_trainer import data64, tiny_cfg  # noqa: E402,F401  (fixture)
+from training.model.config import ConfigError  # noqa: E402
+from training.pretrain_human import PretrainConfig, load_human, main, pretrain, view_batch  # noqa: E402
+from training.train import train  # noqa: E402
+
+
+def tiny_pretrain(data, **kw) -> PretrainConfig:
+    base = {"preset": "tiny", "data": str(data), "iterations": 2, "scenes_per_step": 1, "checkpoint_every": 1,
+            "log_every": 1, "eval_every": 1, "eval_scenes": 2, "threads": 2}
+    base.update(kw)
+    return PretrainConfig.from_dict(base)
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"iterations": 0}, "iterations"),
+    ({"lr": 0.0}, "lr"),
+    ({"lr_decay_gamma": 2.0}, "lr_decay_gamma"),
+    ({"preset": "edge128_baseline"}, "preset"),  # no human encoder to pretrain
+    ({"scenes_per_step": 0}, "scenes_per_step"),
+    ({"itterations": 3}, "itterations"),
+])
+def test_config_errors_name_the_key(data, key):
+    with pytest.raises(ConfigError, match=key):
+        PretrainConfig.from_dict(data)
+
+
+def test_view_batch_mirrors_images_and_swaps_left_right(data64):
+    from training.data.torch_dataset import MultiViewDataset
+
+    it = MultiViewDataset(data64, "train")[0]
+    images, heat = view_batch([it], flip=True)
+    n = it["tgt_images"].shape[0]
+    assert images.shape[0] == heat.shape[0] == 2 * n
+    assert torch.equal(images[n], torch.flip(it["tgt_images"][0], dims=(-1,)))
+    r_wrist, l_wrist = 4, 7
+    assert FLIP_INDEX[r_wrist] == l_wrist
+    assert torch.equal(heat[n, l_wrist], torch.flip(it["tgt_heatmaps"][0, r_wrist], dims=(-1,)))
+    plain, _ = view_batch([it], flip=False)
+    assert plain.shape[0] == n
+
+
+def test_two_iterations_resume_and_joint_training_starts_from_it(data64, tmp_path):
+    straight = pretrain(tiny_pretrain(data64), tmp_path / "a", quiet=True)
+    assert straight["steps"] == 2 and not straight["stopped_early"]
+    assert 0.0 <= straight["eval_pck@0.2"] <= 1.0
+    log = [json.loads(line) for line in (tmp_path / "a" / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in log] == [1, 2] and all(r["loss"] > 0 for r in log)
+
+    pretrain(tiny_pretrain(data64, iterations=1), tmp_path / "b", quiet=True)
+    pretrain(tiny_pretrain(data64), tmp_path / "b", resume=True, quiet=True)
+    a = torch.load(tmp_path / "a" / "human.pt", weights_only=True)
+    b = torch.load(tmp_path / "b" / "human.pt", weights_only=True)
+    assert a["step"] == b["step"] == 2
+    for k in a["human"]:
+        assert torch.equal(a["human"][k], b["human"][k]), k
+
+    # the joint trainer starts from the pretrained encoder (lr ~0: the weights stay as loaded)
+    _, model = train(tiny_cfg(data64, iterations=1, lr=1e-12, pck_every=0, human_init=str(tmp_path / "a" / "human.pt")),
+                     tmp_path / "joint", quiet=True)
+    got = model.human.state_dict()
+    for k, v in a["human"].items():
+        if v.is_floating_point() and "running" not in k:
+            assert torch.allclose(got[k], v, atol=1e-6), k
+
+
+def test_a_mismatched_or_missing_encoder_is_refused(data64, tmp_path):
+    from dataclasses import replace
+
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), tmp_path / "a", quiet=True)
+    tiny = preset("tiny")
+    other = GHNeRF(replace(tiny, human=replace(tiny.human, out_channels=16)))
+    with pytest.raises(ConfigError, match="out_channels"):
+        load_human(other, tmp_path / "a" / "human.pt")
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_human(GHNeRF(tiny), tmp_path / "nope.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ConfigError, match="junk.pt"):
+        load_human(GHNeRF(tiny), tmp_path / "junk.pt")
+
+
+def test_cli_reads_the_block_of_a_train_config(data64, tmp_path, capsys):
+    cfg = {"preset": "tiny", "data": str(data64),
+           "pretrain_human": {"iterations": 1, "scenes_per_step": 1, "eval_every": 0, "log_every": 1}}
+    (tmp_path / "train.json").write_text(json.dumps(cfg))
+    assert main(["--config", str(tmp_path / "train.json"), "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    assert json.loads(capsys.readouterr().out)["steps"] == 1
+    assert main(["--config", str(tmp_path / "train.json"), "--out", str(tmp_path / "r2"), "--set", "lr=-1"]) == 2
+    assert "pretrain_human.lr" in capsys.readouterr().err

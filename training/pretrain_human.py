@@ -1,0 +1,330 @@
+"""``python -m training.pretrain_human``: pretrain the ResNet18 human encoder on 2D joint heatmaps alone.
+
+GHNeRF starts its human encoder from ImageNet weights; none can be had here. This stage gives the
+encoder a start of its own: the trunk, its level projections and the auxiliary heatmap head
+(``human.aux_heatmaps``) are trained on the synthetic dataset's dense 2D heatmaps of *every* view of
+each scene and their mirror images (left/right channels swapped), with the joint trainer's
+positive-weighted MSE. No cost volume, no rays: a step costs the encoder alone, so on a 2-core CPU
+the encoder sees several times more images per minute than inside the full model (docs/training.md
+has the measured figures).
+
+The run folder holds ``human.pt`` (the encoder's state dict and the model config it belongs to),
+``last.pt`` (resume), ``log.jsonl`` and ``summary.json``. ``ghnerf-train`` loads ``human.pt`` with
+``human_init: "<run>/human.pt"``; the pipeline does both when the train config names a
+``pretrain_human`` block.
+
+Example::
+
+    python -m training.pretrain_human --data data/edge128 --out runs/edge128_human --iterations 6000
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from ghnerf_runtime.body25 import FLIP_INDEX
+from training.configs import PRESETS
+from training.model.config import ConfigError
+from training.losses import positive_weighted_mse
+from training.model import GHNeRF, ModelConfig
+from training.train import DistInfo, Progress, _deep_merge, apply_overrides, load_config_file, scene_order, \
+    seed_everything
+
+HUMAN_CHECKPOINT_VERSION = 1
+
+
+@dataclass
+class PretrainConfig:
+    """One human-encoder pretraining run (JSON file and/or ``--set key=value``)."""
+
+    preset: str = "edge128"
+    """Model preset whose human encoder is trained (its ``human`` block must have ``aux_heatmaps``)."""
+    model: dict = field(default_factory=dict)
+    """Partial ``ModelConfig`` overrides, as in ``TrainConfig.model`` (must match the joint run's)."""
+    data: str = "data/edge128"
+    split: str = "train"
+    iterations: int = 1000
+    scenes_per_step: int = 2
+    """Scenes per step; each gives all its views (sources and targets) and, with ``flip``, their mirrors."""
+    flip: bool = True
+    """Also train on the mirror images (left/right joint channels swapped)."""
+    lr: float = 1e-3
+    lr_decay_every: int = 0
+    lr_decay_gamma: float = 0.5
+    lr_min: float = 0.0
+    heat_positive_weight: float = 20.0
+    """``mean((1 + w t) (h - t)^2)``: the joint trainer's heatmap loss (``loss.heat_positive_weight``)."""
+    seed: int = 0
+    checkpoint_every: int = 1000
+    log_every: int = 50
+    eval_every: int = 1000
+    """Every this many steps, PCK@0.2 of the head on ``eval_scenes`` scenes of ``eval_split`` (0: off).
+    A progress figure only: nothing is selected on it."""
+    eval_split: str = "val"
+    eval_scenes: int = 64
+    threads: int = 0
+    """torch CPU threads (0: all cores)."""
+    device: str = "auto"
+    max_minutes: float = 0.0
+    """Stop (with a checkpoint and ``human.pt``) after this wall time (0: no limit)."""
+
+    def validate(self) -> None:
+        def fail(key: str, why: str) -> None:
+            raise ConfigError(f"pretrain_human.{key}: {why}")
+
+        if self.preset not in PRESETS:
+            fail("preset", f"unknown preset {self.preset!r}; presets: {sorted(PRESETS)}")
+        for key in ("iterations", "scenes_per_step", "checkpoint_every", "log_every", "eval_scenes"):
+            if getattr(self, key) < 1:
+                fail(key, f"must be >= 1, got {getattr(self, key)}")
+        for key in ("lr_decay_every", "eval_every", "threads"):
+            if getattr(self, key) < 0:
+                fail(key, f"must be >= 0, got {getattr(self, key)}")
+        for key in ("lr", "lr_min", "heat_positive_weight", "max_minutes"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0) or (key == "lr" and v == 0):
+                fail(key, f"must be a finite number {'> 0' if key == 'lr' else '>= 0'}, got {v!r}")
+        if not 0 < self.lr_decay_gamma <= 1:
+            fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
+        if self.device not in ("auto", "cpu", "cuda"):
+            fail("device", f"must be auto, cpu or cuda, got {self.device!r}")
+        mcfg = self.model_config()
+        if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
+            fail("preset", f"{self.preset!r} has no human encoder with an auxiliary heatmap head")
+
+    def model_config(self) -> ModelConfig:
+        base = PRESETS[self.preset]()
+        return ModelConfig.from_dict(_deep_merge(base.to_dict(), self.model), "model") if self.model else base
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "PretrainConfig":
+        known = {f.name for f in fields(cls)}
+        if unknown := sorted(set(data) - known - {"$comment"}):
+            raise ConfigError(f"pretrain_human: unknown key {unknown[0]!r}; keys: {sorted(known)}")
+        cfg = cls(**{k: v for k, v in data.items() if k in known})
+        cfg.validate()
+        return cfg
+
+
+def learning_rate(cfg: PretrainConfig, step: int) -> float:
+    lr = cfg.lr * (cfg.lr_decay_gamma ** (step // cfg.lr_decay_every) if cfg.lr_decay_every else 1.0)
+    return max(lr, min(cfg.lr_min, cfg.lr))
+
+
+def view_batch(items: list[dict], flip: bool) -> tuple[Tensor, Tensor]:
+    """Every view of ``items`` (and their mirrors): images ``(N, 3, H, W)`` and heatmap grids ``(N, J, h, w)``.
+
+    Mirroring maps heatmap cell centres onto cell centres, so the flipped grid with the left and right
+    channels swapped is exactly the mirrored image's truth.
+    """
+    images = torch.cat([it["tgt_images"] for it in items])
+    heat = torch.cat([it["tgt_heatmaps"] for it in items])
+    if flip:
+        images = torch.cat([images, torch.flip(images, dims=(-1,))])
+        heat = torch.cat([heat, torch.flip(heat, dims=(-1,))[:, list(FLIP_INDEX)]])
+    return images, heat
+
+
+@torch.no_grad()
+def heatmap_pck(model: GHNeRF, dataset, scenes: int, device: torch.device) -> float:
+    """PCK@0.2 of the encoder's heatmaps in the two source views of the first ``scenes`` scenes of ``dataset``
+    (decoded and scored as ``ghnerf-eval`` scores ``encoder_heatmaps``)."""
+    from ghnerf_runtime.metrics import pck
+    from training.evaluate import PCK_ALPHA, keypoints_from_heatmaps
+
+    was = model.training
+    model.eval()
+    correct = evaluated = 0
+    for i in range(min(scenes, len(dataset))):
+        it = dataset[i]
+        src = torch.nonzero(it["tgt_is_source"]).flatten()
+        hm = model.encode_human(it["tgt_images"][src].to(device)).cpu().numpy()
+        uv = keypoints_from_heatmaps(hm, model.config.height)
+        r = pck(np.nan_to_num(uv), it["tgt_joints_2d"][src].numpy(), it["tgt_visible"][src].numpy(),
+                alpha=PCK_ALPHA, pred_valid=np.isfinite(uv).all(-1))
+        correct, evaluated = correct + r.num_correct, evaluated + r.num_evaluated
+    model.train(was)
+    return correct / evaluated if evaluated else float("nan")
+
+
+def save_human(path: Path, model: GHNeRF, step: int) -> None:
+    """``human.pt``: the encoder's weights (trunk, projections, heatmap head) and the model config."""
+    state = {"version": HUMAN_CHECKPOINT_VERSION, "human": model.human.state_dict(), "step": step,
+             "model_config": model.config.to_dict()}
+    tmp = path.with_suffix(".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_human(model: GHNeRF, path: str | Path) -> int:
+    """Load a ``human.pt`` into ``model.human``; returns the pretraining step.
+
+    Raises:
+        ConfigError: the file is missing or unreadable, or its encoder does not fit this model's
+            (another architecture: the message names the differing setting or weight).
+    """
+    p = Path(path)
+    try:
+        state = torch.load(str(p), map_location="cpu", weights_only=True)
+    except FileNotFoundError as e:
+        raise ConfigError(f"human_init: cannot read {p}: no such file") from e
+    except Exception as e:  # noqa: BLE001 - torch raises several types (pickle, zip, runtime) for a bad file
+        raise ConfigError(f"human_init: cannot read {p}: {type(e).__name__}: {str(e).splitlines()[0]}") from e
+    if not isinstance(state, dict) or "human" not in state:
+        raise ConfigError(f"human_init: {p} is not a human-encoder checkpoint (no 'human' weights)")
+    if model.human is None:
+        raise ConfigError("human_init: the model has no human encoder")
+    theirs = ModelConfig.from_dict(state.get("model_config", {})).human if state.get("model_config") else None
+    if theirs is not None:
+        ours = model.config.human
+        for f in fields(ours):
+            if f.name != "init" and getattr(theirs, f.name) != getattr(ours, f.name):
+                raise ConfigError(f"human_init: {p} was pretrained with human.{f.name}="
+                                  f"{getattr(theirs, f.name)!r}, this model has {getattr(ours, f.name)!r}")
+    try:
+        model.human.load_state_dict(state["human"], strict=True)
+    except RuntimeError as e:
+        raise ConfigError(f"human_init: {p} does not fit this model's human encoder: {e}") from e
+    return int(state.get("step", 0))
+
+
+def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, quiet: bool = False,
+             dataset=None, eval_dataset=None) -> dict:
+    """Run (or resume) the pretraining; returns the summary (also in ``out_dir/summary.json``)."""
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    cfg.validate()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
+    use_cuda = cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available())
+    device = torch.device("cuda" if use_cuda else "cpu")
+    if device.type == "cpu":
+        torch.set_num_threads(cfg.threads or os.cpu_count() or 1)
+        torch.set_flush_denormal(True)
+    mcfg = cfg.model_config()
+    targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride)
+    ds = dataset or MultiViewDataset(cfg.data, cfg.split, targets)
+    if len(ds) < cfg.scenes_per_step:
+        raise ValueError(f"split {cfg.split!r} has {len(ds)} scenes, fewer than scenes_per_step={cfg.scenes_per_step}")
+    val = eval_dataset
+    if val is None and cfg.eval_every:
+        val = MultiViewDataset(cfg.data, cfg.eval_split, targets)
+
+    seed_everything(cfg.seed)  # same initial weights as the joint run of the same seed
+    model = GHNeRF(mcfg).to(device).train()
+    params = list(model.human.parameters())
+    opt = torch.optim.Adam(params, lr=cfg.lr)
+    step = 0
+    last = out / "last.pt"
+    if resume and last.exists():
+        ck = torch.load(str(last), map_location=device, weights_only=False)
+        model.human.load_state_dict(ck["human"])
+        opt.load_state_dict(ck["optimizer"])
+        step = int(ck["step"])
+    seed_everything(cfg.seed + 1)
+
+    def checkpoint(s: int) -> None:
+        state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s}
+        torch.save(state, last.with_suffix(".tmp"))
+        os.replace(last.with_suffix(".tmp"), last)
+        save_human(out / "human.pt", model, s)
+
+    info = DistInfo(rank=0, world=1, local_rank=0)
+    per_epoch = len(ds) // cfg.scenes_per_step
+    prog = Progress(cfg.iterations, step, enabled=not quiet)
+    t0 = time.monotonic()
+    losses: list[float] = []
+    last_pck = float("nan")
+    stopped_early = False
+    while step < cfg.iterations and not stopped_early:
+        epoch, offset = divmod(step, per_epoch)
+        order = scene_order(len(ds), epoch, cfg.seed, info)  # a pure function of (seed, epoch): resumable
+        for b in range(offset, per_epoch):
+            if step >= cfg.iterations:
+                break
+            items = [ds[i] for i in order[b * cfg.scenes_per_step:(b + 1) * cfg.scenes_per_step]]
+            images, heat = view_batch(items, cfg.flip)
+            lr = learning_rate(cfg, step)
+            for g in opt.param_groups:
+                g["lr"] = lr
+            loss = positive_weighted_mse(model.encode_human(images.to(device)), heat.to(device),
+                                         cfg.heat_positive_weight)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            step += 1
+            lv = float(loss.detach())
+            if not math.isfinite(lv):
+                raise FloatingPointError(f"loss is {lv} at step {step}")
+            losses.append(lv)
+            if cfg.eval_every and step % cfg.eval_every == 0:
+                last_pck = heatmap_pck(model, val, cfg.eval_scenes, device)
+            if step % cfg.log_every == 0 or step == cfg.iterations:
+                rec = {"step": step, "lr": lr, "time_s": round(time.monotonic() - t0, 2),
+                       "loss": float(np.mean(losses)), "pck": last_pck}
+                losses = []
+                prog.update(step, {"loss": rec["loss"], "pck": last_pck})
+                with open(out / "log.jsonl", "a") as fh:
+                    fh.write(json.dumps(rec) + "\n")
+            if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
+                checkpoint(step)
+            if cfg.max_minutes and time.monotonic() - t0 > 60 * cfg.max_minutes and step < cfg.iterations:
+                stopped_early = True
+                checkpoint(step)
+                break
+    prog.close()
+    summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
+               "wall_s": round(time.monotonic() - t0, 1), "device": str(device), "threads": torch.get_num_threads(),
+               "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
+               "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,
+               "human": str(out / "human.pt")}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+def config_from_train_config(data: dict, overrides: list[str] = ()) -> PretrainConfig:
+    """The ``PretrainConfig`` of a train config's ``pretrain_human`` block (its preset, model and data come
+    from the train config), or of a bare ``PretrainConfig`` dict; ``overrides`` are ``key=value`` strings."""
+    if "pretrain_human" in data:
+        data = {"preset": data.get("preset", "edge128"), "model": data.get("model", {}),
+                "data": data.get("data", "data/edge128"), **(data["pretrain_human"] or {})}
+    return PretrainConfig.from_dict(apply_overrides(data, list(overrides)))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.pretrain_human", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--config", help="JSON file: a PretrainConfig, or a train config with a 'pretrain_human' block")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--data")
+    ap.add_argument("--iterations", type=int)
+    ap.add_argument("--threads", type=int)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        sets = list(args.set) + [f"{k}={json.dumps(getattr(args, k))}" for k in ("data", "iterations", "threads")
+                                 if getattr(args, k) is not None]
+        cfg = config_from_train_config(load_config_file(args.config) if args.config else {}, sets)
+    except ConfigError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    summary = pretrain(cfg, args.out, resume=args.resume, quiet=args.quiet)
+    print(json.dumps(summary, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
