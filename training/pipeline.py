@@ -140,7 +140,8 @@ class Stages:
 def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = ()) -> list[str]:
     cmd = [sys.executable, "-m", "training.train", "--config", str(CONFIG_DIR / f"{preset}.json"),
            "--out", str(run), "--resume", "--data", str(cfg.data)]
-    for o in [*cfg.train_overrides, *extra]:
+    human_init = train_inputs(cfg, preset).get("human_init")
+    for o in [*cfg.train_overrides, *([f"human_init={json.dumps(human_init)}"] if human_init else []), *extra]:
         cmd += ["--set", o]
     return cmd
 
@@ -532,9 +533,12 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         ],
         "stage_inputs": {"data": (data_s or {}).get("inputs")},
     }
-    for v in VARIANTS:
+    for v in VARIANTS:  # a reused run's stamp took ~0 s: its own summary has the real wall time
         card["wall_time_s"][f"train_{v}"] = max(card["wall_time_s"].get(f"train_{v}") or 0,
                                                 training[v].get("wall_s") or 0)
+        if f"{v}_human_pretraining" in training:
+            card["wall_time_s"][f"pretrain_{v}"] = max(card["wall_time_s"].get(f"pretrain_{v}") or 0,
+                                                       training[f"{v}_human_pretraining"].get("wall_s") or 0)
     j, m = write_card(cfg.out, card)
     return [j, m], {}
 

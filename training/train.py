@@ -112,6 +112,10 @@ class TrainConfig(Config):
     human_init: str = ""
     """A ``human.pt`` from ``python -m training.pretrain_human`` (trunk, projections and heatmap head of the
     human encoder, pretrained on 2D heatmaps alone); loaded after ``init``. '' = none."""
+    freeze_human: bool = False
+    """Keep the human encoder (trunk, projections, heatmap head, BatchNorm statistics) as ``human_init`` or
+    ``init`` left it: no gradients, no auxiliary-head images or loss. The joint run then only teaches the
+    NeRF to read its features, and its steps skip the encoder's backward pass (docs/training.md)."""
     pretrain_human: dict = field(default_factory=dict)
     """The ``PretrainConfig`` (``training.pretrain_human``) of the stage that makes ``human_init``; read by
     the pipeline (which runs it first and sets ``human_init``), ignored by the trainer itself."""
@@ -368,7 +372,7 @@ def make_batch(item: dict, cfg: TrainConfig, mcfg: ModelConfig, gen: torch.Gener
         "heatmaps": heatmaps_at(item["tgt_joints_2d"][t], item["tgt_visible"][t], uv, HEATMAP_SIGMA_HM_PX * stride),
         "targets": t,
     }
-    if "tgt_heatmaps" in item:  # dense grids of the source views (the images the encoder saw): auxiliary head
+    if "tgt_heatmaps" in item and not cfg.freeze_human:  # dense grids of the source views: auxiliary head
         batch["source_heatmaps"] = item["tgt_heatmaps"][item["tgt_is_source"]]
         if cfg.encoder_views == "all" or cfg.encoder_flip:
             batch.update(aux_encoder_batch(item, cfg))
@@ -575,7 +579,15 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     if cfg.human_init:
         from training.pretrain_human import load_human
         load_human(model, cfg.human_init)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    elif cfg.pretrain_human and info.main and not resume:
+        print("warning: the config has a pretrain_human block but no human_init: the human encoder starts from "
+              "scratch (run `python -m training.pretrain_human` first and pass its human.pt, or `make model`)",
+              file=sys.stderr)
+    if cfg.freeze_human:
+        if model.human is None:
+            raise ConfigError("freeze_human: the preset has no human encoder")
+        model.human.freeze()
+    opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
     gen = torch.Generator().manual_seed(cfg.seed * 1000 + info.rank + 1)
     seed_everything(cfg.seed + 7919 * info.rank + 1)  # per-rank stratified-sample noise
     step = 0
@@ -593,7 +605,8 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     if info.world > 1:
         from torch.nn.parallel import DistributedDataParallel as DDP
         find_unused = bool((mcfg.heads.coord_head and not cfg.loss.coord_weight)
-                           or (mcfg.use_human_encoder and mcfg.human.aux_heatmaps and not cfg.loss.encoder_heat_weight))
+                           or (mcfg.use_human_encoder and mcfg.human.aux_heatmaps and not cfg.loss.encoder_heat_weight
+                               and not cfg.freeze_human))
         ddp_model = DDP(model, device_ids=[device.index] if device.type == "cuda" else None,
                         find_unused_parameters=find_unused)
 

@@ -94,7 +94,7 @@ def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(t
     import pytest
 
     pytest.importorskip("torch")
-    from training.pipeline import (PipelineConfig, _pretrain_cmd, _pretrain_finished, pretrain_block,
+    from training.pipeline import (PipelineConfig, _pretrain_cmd, _pretrain_finished, _train_cmd, pretrain_block,
                                    pretrain_inputs, train_inputs)
 
     cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
@@ -102,6 +102,11 @@ def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(t
     cfg.train_overrides = ['pretrain_human={"iterations": 5, "lr": 0.002}']
     tc = train_inputs(cfg, "edge128")
     assert tc["human_init"] == str(tmp_path / "runs" / "edge128_human" / "human.pt")
+    # the joint run is told to start from it (the config file alone does not say where it is)
+    train_cmd = _train_cmd(cfg, "edge128", cfg.runs / "edge128")
+    assert f'human_init="{tc["human_init"]}"' in train_cmd
+    plain = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    assert not any("human_init" in c for c in _train_cmd(plain, "edge128_baseline", cfg.runs / "edge128_baseline"))
     pc = pretrain_inputs(cfg, "ghnerf")
     assert (pc["preset"], pc["iterations"], pc["lr"], pc["data"]) == ("edge128", 5, 0.002, str(cfg.data))
     cmd = _pretrain_cmd(cfg, "ghnerf", ["threads=1"])

@@ -100,3 +100,20 @@ def test_cli_reads_the_block_of_a_train_config(data64, tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["steps"] == 1
     assert main(["--config", str(tmp_path / "train.json"), "--out", str(tmp_path / "r2"), "--set", "lr=-1"]) == 2
     assert "pretrain_human.lr" in capsys.readouterr().err
+
+
+def test_a_frozen_encoder_stays_as_pretrained_while_the_rest_trains(data64, tmp_path):
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), tmp_path / "pre", quiet=True)
+    pre = torch.load(tmp_path / "pre" / "human.pt", weights_only=True)["human"]
+    cfg = tiny_cfg(data64, iterations=2, lr=1e-2, pck_every=1, human_init=str(tmp_path / "pre" / "human.pt"),
+                   freeze_human=True, encoder_views="all", encoder_flip=True)
+    _, model = train(cfg, tmp_path / "joint", quiet=True)
+    assert model.human.frozen and not model.human.training
+    got = model.human.state_dict()
+    for k, v in pre.items():  # weights and BatchNorm statistics alike
+        assert torch.equal(got[k], v), k
+    start = torch.load(tmp_path / "joint" / "ckpt_0000001.pt", weights_only=False)["model"]
+    end = model.state_dict()
+    assert any(not torch.equal(start[k], end[k]) for k in end if not k.startswith("human.") and end[k].is_floating_point())
+    model.train()  # a later train() keeps it frozen
+    assert not model.human.training and model.feature_net.training

@@ -176,8 +176,21 @@ class HumanEncoder(nn.Module):
             for name in self.trunk.level_names[:-1]
         }) if config.decoder == "fpn" else None
         self.heat_head = nn.Conv2d(config.out_channels, 25, 1) if config.aux_heatmaps else None
+        self.frozen = False
         if config.init:
             load_torchvision_resnet18(self.trunk, config.init)
+
+    def freeze(self) -> "HumanEncoder":
+        """Fix every weight and the BatchNorm statistics (a pretrained encoder kept as it is): no
+        gradients, and evaluation mode whatever ``train()`` asks (batch statistics of the two source
+        images of one scene would otherwise replace the pretraining's)."""
+        self.frozen = True
+        for p in self.parameters():
+            p.requires_grad_(False)
+        return super().train(False)
+
+    def train(self, mode: bool = True) -> "HumanEncoder":
+        return super().train(mode and not self.frozen)
 
     @property
     def out_channels(self) -> int:
