@@ -34,8 +34,9 @@ demo: $(RUNTIME_STAMP)
 test: $(DEV_STAMP)
 	$(PY) -m pytest -q
 
-# Regenerate the shipped models from scratch (dataset, training of the model and the
-# baseline, ONNX export, int8 quantization, held-out evaluation, model card): ~1.5-2 h on 2 cores.
+# Regenerate the shipped models from scratch (dataset, the human encoder's pretraining, training of
+# the model and the baseline, ONNX export, int8 quantization, held-out evaluation, model card):
+# ~1.4 h on 2 cores (docs/training.md).
 model: $(DEV_STAMP)
 	$(PY) -m training.pipeline --out models/
 

@@ -523,7 +523,9 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         "files": files,
         "notes": [
             "Synthetic training and evaluation data only; no real-camera or ZJU-MoCap numbers.",
-            "The ResNet18 human encoder is trained from scratch (no ImageNet weights available here).",
+            "The ResNet18 human encoder is trained from scratch (no ImageNet weights available here): when the "
+            "train config has a pretrain_human block it is first pretrained alone on the synthetic 2D heatmaps "
+            "(and, with freeze_human, kept fixed in the joint run).",
             "The perceptual loss is replaced by a 1 - SSIM patch loss (no VGG weights).",
             "The human encoder carries a training-time 2D heatmap head (dense auxiliary loss on both source "
             "views); it is exported as the encoder's `encoder_heatmaps` output, scored above, and usable by the "
