@@ -270,25 +270,29 @@ def pretrain_inputs(cfg: PipelineConfig, variant: str) -> dict:
     return json.loads(json.dumps(asdict(pc)))
 
 
+def _pretrain_config_matches(cfg: PipelineConfig, variant: str) -> bool:
+    """The pretraining folder's ``config.json`` has this pipeline's settings (runtime keys aside)."""
+    def result(c: dict) -> dict:
+        return {k: v for k, v in c.items() if k not in PRETRAIN_RUNTIME_KEYS}
+
+    cfg_p = pretrain_dir(cfg, variant) / "config.json"
+    return cfg_p.exists() and result(json.loads(cfg_p.read_text())) == result(pretrain_inputs(cfg, variant))
+
+
 def _pretrain_finished(cfg: PipelineConfig, variant: str) -> bool:
     run = pretrain_dir(cfg, variant)
-    if not ((run / "summary.json").exists() and (run / "config.json").exists() and (run / "human.pt").exists()):
+    if not ((run / "summary.json").exists() and (run / "human.pt").exists()
+            and _pretrain_config_matches(cfg, variant)):
         return False
-    want = {k: v for k, v in pretrain_inputs(cfg, variant).items() if k not in PRETRAIN_RUNTIME_KEYS}
-    have = {k: v for k, v in json.loads((run / "config.json").read_text()).items() if k not in PRETRAIN_RUNTIME_KEYS}
-    sm = json.loads((run / "summary.json").read_text())
-    return want == have and sm.get("steps", 0) >= want["iterations"]
+    steps = json.loads((run / "summary.json").read_text()).get("steps", 0)
+    return steps >= pretrain_inputs(cfg, variant)["iterations"]
 
 
 def stage_pretrain(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
     run = pretrain_dir(cfg, variant)
     if not _pretrain_finished(cfg, variant):
-        cfg_p = run / "config.json"
-        if (run / "last.pt").exists() and cfg_p.exists():
-            want = {k: v for k, v in pretrain_inputs(cfg, variant).items() if k not in PRETRAIN_RUNTIME_KEYS}
-            have = {k: v for k, v in json.loads(cfg_p.read_text()).items() if k not in PRETRAIN_RUNTIME_KEYS}
-            if want != have:
-                raise RuntimeError(f"{run} holds a pretraining run with another config; move it away or pass --runs")
+        if (run / "last.pt").exists() and (run / "config.json").exists() and not _pretrain_config_matches(cfg, variant):
+            raise RuntimeError(f"{run} holds a pretraining run with another config; move it away or pass --runs")
         _sh(_pretrain_cmd(cfg, variant), run / "train.log")
     return [run / "human.pt"], {"summary": json.loads((run / "summary.json").read_text()),
                                 "config": json.loads((run / "config.json").read_text())}

@@ -26,25 +26,25 @@ import os
 import sys
 import time
 from dataclasses import asdict, dataclass, field, fields
+from typing import Literal
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from ghnerf_runtime.body25 import FLIP_INDEX
 from training.configs import PRESETS
-from training.model.config import ConfigError
 from training.losses import positive_weighted_mse
 from training.model import GHNeRF, ModelConfig
-from training.train import DistInfo, Progress, _deep_merge, apply_overrides, load_config_file, scene_order, \
-    seed_everything
+from training.model.config import Config, ConfigError
+from training.train import DistInfo, Progress, apply_overrides, learning_rate, load_config_file, \
+    mirrored, model_config_of, scene_order, seed_everything
 
 HUMAN_CHECKPOINT_VERSION = 1
 
 
 @dataclass
-class PretrainConfig:
+class PretrainConfig(Config):
     """One human-encoder pretraining run (JSON file and/or ``--set key=value``)."""
 
     preset: str = "edge128"
@@ -74,7 +74,7 @@ class PretrainConfig:
     eval_scenes: int = 64
     threads: int = 0
     """torch CPU threads (0: all cores)."""
-    device: str = "auto"
+    device: Literal["auto", "cpu", "cuda"] = "auto"
     max_minutes: float = 0.0
     """Stop (with a checkpoint and ``human.pt``) after this wall time (0: no limit)."""
 
@@ -96,42 +96,29 @@ class PretrainConfig:
                 fail(key, f"must be a finite number {'> 0' if key == 'lr' else '>= 0'}, got {v!r}")
         if not 0 < self.lr_decay_gamma <= 1:
             fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
-        if self.device not in ("auto", "cpu", "cuda"):
-            fail("device", f"must be auto, cpu or cuda, got {self.device!r}")
         mcfg = self.model_config()
         if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
             fail("preset", f"{self.preset!r} has no human encoder with an auxiliary heatmap head")
 
     def model_config(self) -> ModelConfig:
-        base = PRESETS[self.preset]()
-        return ModelConfig.from_dict(_deep_merge(base.to_dict(), self.model), "model") if self.model else base
+        return model_config_of(self.preset, self.model)
 
     @classmethod
-    def from_dict(cls, data: dict) -> "PretrainConfig":
-        known = {f.name for f in fields(cls)}
-        if unknown := sorted(set(data) - known - {"$comment"}):
-            raise ConfigError(f"pretrain_human: unknown key {unknown[0]!r}; keys: {sorted(known)}")
-        cfg = cls(**{k: v for k, v in data.items() if k in known})
+    def from_dict(cls, data: dict, _path: str = "pretrain_human") -> "PretrainConfig":
+        """Typed and validated once; an unknown key or a bad value names ``pretrain_human.<key>``."""
+        cfg = super().from_dict({k: v for k, v in data.items() if k != "$comment"}, _path)
         cfg.validate()
         return cfg
 
 
-def learning_rate(cfg: PretrainConfig, step: int) -> float:
-    lr = cfg.lr * (cfg.lr_decay_gamma ** (step // cfg.lr_decay_every) if cfg.lr_decay_every else 1.0)
-    return max(lr, min(cfg.lr_min, cfg.lr))
-
-
 def view_batch(items: list[dict], flip: bool) -> tuple[Tensor, Tensor]:
-    """Every view of ``items`` (and their mirrors): images ``(N, 3, H, W)`` and heatmap grids ``(N, J, h, w)``.
-
-    Mirroring maps heatmap cell centres onto cell centres, so the flipped grid with the left and right
-    channels swapped is exactly the mirrored image's truth.
-    """
+    """Every view of ``items`` (and their mirrors, ``train.mirrored``): images ``(N, 3, H, W)`` and heatmap
+    grids ``(N, J, h, w)``."""
     images = torch.cat([it["tgt_images"] for it in items])
     heat = torch.cat([it["tgt_heatmaps"] for it in items])
     if flip:
-        images = torch.cat([images, torch.flip(images, dims=(-1,))])
-        heat = torch.cat([heat, torch.flip(heat, dims=(-1,))[:, list(FLIP_INDEX)]])
+        m_images, m_heat = mirrored(images, heat)
+        images, heat = torch.cat([images, m_images]), torch.cat([heat, m_heat])
     return images, heat
 
 

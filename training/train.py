@@ -165,10 +165,15 @@ class TrainConfig(Config):
 
     def model_config(self) -> ModelConfig:
         """The preset with ``model`` merged on top, validated (unknown keys name their path)."""
-        base = preset(self.preset)
-        if not self.model:
-            return base
-        return ModelConfig.from_dict(_deep_merge(base.to_dict(), self.model), "model")
+        return model_config_of(self.preset, self.model)
+
+
+def model_config_of(preset_name: str, overrides: Mapping[str, Any]) -> ModelConfig:
+    """A preset with partial ``ModelConfig`` overrides merged on top (``TrainConfig.model``)."""
+    base = preset(preset_name)
+    if not overrides:
+        return base
+    return ModelConfig.from_dict(_deep_merge(base.to_dict(), overrides), "model")
 
 
 def _deep_merge(base: dict, over: Mapping[str, Any]) -> dict:
@@ -385,8 +390,6 @@ def aux_encoder_batch(item: dict, cfg: TrainConfig) -> dict[str, Tensor]:
     Mirroring is exact on the heatmap grid (cell centres map onto cell centres) once the joint channels
     are swapped left for right (``FLIP_INDEX``).
     """
-    from ghnerf_runtime.body25 import FLIP_INDEX
-
     src = item["tgt_is_source"]
     images, heat = [], []
     if cfg.encoder_views == "all" and (~src).any():
@@ -394,15 +397,25 @@ def aux_encoder_batch(item: dict, cfg: TrainConfig) -> dict[str, Tensor]:
         heat.append(item["tgt_heatmaps"][~src])
     if cfg.encoder_flip:
         views = slice(None) if cfg.encoder_views == "all" else src
-        images.append(torch.flip(item["tgt_images"][views], dims=(-1,)))
-        heat.append(torch.flip(item["tgt_heatmaps"][views], dims=(-1,))[:, list(FLIP_INDEX)])
+        m_images, m_heat = mirrored(item["tgt_images"][views], item["tgt_heatmaps"][views])
+        images.append(m_images)
+        heat.append(m_heat)
     if not images:
         return {}
     return {"aux_images": torch.cat(images), "aux_heatmaps": torch.cat(heat)}
 
 
+def mirrored(images: Tensor, heatmaps: Tensor) -> tuple[Tensor, Tensor]:
+    """Mirror images ``(N, 3, H, W)`` and their heatmap grids ``(N, J, h, w)`` left to right: exact on the
+    grid (cell centres map onto cell centres) once the joint channels are swapped (``FLIP_INDEX``)."""
+    from ghnerf_runtime.body25 import FLIP_INDEX
+
+    return torch.flip(images, dims=(-1,)), torch.flip(heatmaps, dims=(-1,))[:, list(FLIP_INDEX)]
+
+
 def learning_rate(cfg: TrainConfig, step: int) -> float:
-    """Step decay by ``lr_decay_gamma`` every ``lr_decay_every`` steps, floored at ``lr_min``."""
+    """Step decay by ``lr_decay_gamma`` every ``lr_decay_every`` steps, floored at ``lr_min`` (reads only
+    ``lr``, ``lr_decay_every``, ``lr_decay_gamma``, ``lr_min``: the pretraining's config too)."""
     lr = cfg.lr * (cfg.lr_decay_gamma ** (step // cfg.lr_decay_every) if cfg.lr_decay_every else 1.0)
     return max(lr, min(cfg.lr_min, cfg.lr))
 

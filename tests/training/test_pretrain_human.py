@@ -29,6 +29,8 @@ def tiny_pretrain(data, **kw) -> PretrainConfig:
     ({"preset": "edge128_baseline"}, "preset"),  # no human encoder to pretrain
     ({"scenes_per_step": 0}, "scenes_per_step"),
     ({"itterations": 3}, "itterations"),
+    ({"iterations": "many"}, "iterations"),  # typed: a clear error, not a TypeError in validation
+    ({"device": "tpu"}, "device"),
 ])
 def test_config_errors_name_the_key(data, key):
     with pytest.raises(ConfigError, match=key):
