@@ -27,6 +27,10 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
   ``encoder_heatmaps_mpjpe_mm``): the cheap heatmap source of the runtime.
 * **Novel views** (targets 2..V-1): the full-resolution image (graph ``render_rgb``), ``masked_psnr`` and
   ``masked_ssim`` inside the subject mask against the target composited over the model background.
+  The dataset's novel cameras circle the subject (any azimuth), so many see sides that neither
+  source camera sees; ``psnr_masked_by_source_angle`` splits the PSNR by each view's angle from the
+  nearest source camera (seen from the subject's centre). The device's novel view lies between its
+  two cameras, in the first bin or two.
 
 Scores pool every joint / image of the split (PCK: correct / evaluated; MPJPE: mean over joints;
 PSNR/SSIM/heatmap MSE: mean over views).
@@ -53,6 +57,8 @@ from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, he
 from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, pck
 
 PCK_ALPHA = 0.2
+#: Bin edges (degrees) of a novel view's angle from the nearest source camera, for the PSNR split.
+SOURCE_ANGLE_BINS_DEG = (0.0, 15.0, 30.0, 60.0, 90.0, 180.0)
 
 
 # ------------------------------------------------------------------------------------------ renderers
@@ -205,6 +211,7 @@ class Accumulator:
     enc_pck_parts: dict[str, list[int]] = field(default_factory=dict)
     heat_mse: list[float] = field(default_factory=list)
     psnr: list[float] = field(default_factory=list)
+    psnr_angle_deg: list[float] = field(default_factory=list)  # per entry of psnr (NaN: unknown)
     ssim: list[float] = field(default_factory=list)
     scenes: int = 0
 
@@ -230,7 +237,10 @@ class Accumulator:
             self.enc_mpjpe_joints += ee.num_evaluated
         if m.get("psnr") is not None:
             # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
-            self.psnr.extend(float(v) for v in np.ravel(m["psnr"].per_image) if not np.isnan(v))
+            per_image = np.ravel(m["psnr"].per_image)
+            angles = np.ravel(m.get("novel_source_angle_deg", np.full(per_image.shape, np.nan)))
+            self.psnr.extend(float(v) for v in per_image if not np.isnan(v))
+            self.psnr_angle_deg.extend(float(a) for v, a in zip(per_image, angles) if not np.isnan(v))
             self.ssim.extend(float(v) for v in np.ravel(m["ssim"].per_image) if not np.isnan(v))
 
     def result(self) -> dict:
@@ -248,6 +258,7 @@ class Accumulator:
             "mpjpe_pred_missing": self.mpjpe_pred_missing,
             "heatmap_mse": mean(self.heat_mse),
             "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
+            "psnr_masked_by_source_angle": psnr_by_angle(self.psnr, self.psnr_angle_deg),
             # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way
             "encoder_heatmaps_pck@0.2": (self.enc_pck_correct / self.enc_pck_evaluated
                                          if self.enc_pck_evaluated else None),
@@ -256,6 +267,35 @@ class Accumulator:
             "pck@0.2_by_part": _part_scores(self.pck_parts),
             "encoder_heatmaps_pck@0.2_by_part": _part_scores(self.enc_pck_parts) if self.enc_pck_parts else None,
         }
+
+
+def psnr_by_angle(psnr: list[float], angles_deg: list[float],
+                  edges: tuple[float, ...] = SOURCE_ANGLE_BINS_DEG) -> list[dict]:
+    """Mean PSNR of the views in each ``[lo, hi)`` angle bin (the last bin includes ``hi``)."""
+    p, a = np.asarray(psnr, np.float64), np.asarray(angles_deg, np.float64)
+    out = []
+    for k, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        inside = (a >= lo) & ((a <= hi) if k == len(edges) - 2 else (a < hi))
+        out.append({"range_deg": [lo, hi], "views": int(inside.sum()),
+                    "psnr": float(np.mean(p[inside])) if inside.any() else None})
+    return out
+
+
+def source_angles_deg(scene: Mapping[str, np.ndarray], targets: np.ndarray) -> np.ndarray:
+    """Angle (degrees) at the subject's centre between each target camera and the nearest source camera.
+
+    The centre is the mean of the scene's valid 3D joints; camera centres are ``tgt_c2w[:, :, 3]``. 0 for
+    a source itself; NaN when the scene has no valid joint.
+    """
+    valid = np.asarray(scene["joints_3d_valid"], bool)
+    if not valid.any():
+        return np.full(len(targets), np.nan)
+    centre = np.asarray(scene["joints_3d"], np.float64)[valid].mean(axis=0)
+    eyes = np.asarray(scene["tgt_c2w"], np.float64)[:, :, 3] - centre
+    dirs = eyes / np.linalg.norm(eyes, axis=-1, keepdims=True)
+    src = dirs[np.asarray(scene["tgt_is_source"], bool)]
+    cos = np.clip(dirs[np.asarray(targets, int)] @ src.T, -1.0, 1.0)
+    return np.degrees(np.arccos(cos.max(axis=1)))
 
 
 def _add_parts(totals: dict[str, list[int]], result) -> None:
@@ -309,6 +349,7 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
         # metrics take channels-last images (..., H, W, C) or (..., H, W)
         out["psnr"] = masked_psnr(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
         out["ssim"] = masked_ssim(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
+        out["novel_source_angle_deg"] = source_angles_deg(scene, novel_targets)
     return out
 
 

@@ -1,5 +1,6 @@
 """Training losses: ``l_col + 0.5 l_heat`` (+ SSIM patch loss as the perceptual substitute,
-+ optional ``0.01 l_coord``), summed over the cascade levels (ENeRF supervises every level).
++ optional ``0.01 l_coord``, + optional ``l_mask``), summed over the cascade levels (ENeRF supervises
+every level).
 
 GHNeRF uses ``l_col + 0.01 l_perc + 0.5 l_heat`` with a VGG perceptual loss; no VGG
 weights are obtainable here, so ``l_perc`` is replaced by ``1 - SSIM`` over ray
@@ -35,6 +36,11 @@ class LossConfig(Config):
     encoder_heat_weight: float = 0.0
     """Auxiliary dense heatmap loss on the human encoder's training-only head (``aux_heatmaps``): the same
     positive-weighted MSE against the source views' ground-truth heatmap grids. 0 disables."""
+    mask_weight: float = 0.0
+    """l_mask: MSE of each ray's accumulated opacity against the subject mask at that ray (0 disables).
+    The colour target is the subject over a black background, so the colour loss alone does not
+    penalise opaque black fog around the subject, and fog in front of the subject dims it; this term
+    asks for an opaque subject and empty space around it."""
     level_weights: tuple[float, ...] = ()
     """Weight of each cascade level, coarse to fine (empty: 1.0 each)."""
     ssim_window: int = 7
@@ -65,13 +71,14 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
     Args:
         outputs: :meth:`GHNeRF.forward` output (``{"levels": [...]}``).
         batch: ``rgb`` ``(B, R, 3)`` target colour (subject over the model's background), ``heatmaps``
-            ``(B, R, J)`` Gaussian ground-truth heatmaps of the same rays; optional ``source_heatmaps``
+            ``(B, R, J)`` Gaussian ground-truth heatmaps of the same rays; optional ``mask`` ``(B, R)`` subject
+            mask at the rays in [0, 1] (for ``mask_weight``); optional ``source_heatmaps``
             ``(S, J, h, w)`` ground-truth grids of the source views (for ``encoder_heat_weight``).
         patch_shape: ``(h, w)`` with ``h * w == R`` when the rays of each target form a row-major patch
             (enables the SSIM term).
 
     Returns:
-        ``loss`` plus per level ``l{i}_col``, ``l{i}_heat`` [, ``l{i}_ssim``, ``l{i}_coord``].
+        ``loss`` plus per level ``l{i}_col``, ``l{i}_heat`` [, ``l{i}_ssim``, ``l{i}_coord``, ``l{i}_mask``].
     """
     levels = outputs["levels"]
     weights = config.level_weights or (1.0,) * len(levels)
@@ -96,6 +103,11 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
             gt = batch["rgb"].transpose(1, 2).reshape(B, 3, h, w)
             terms[f"l{i}_ssim"] = 1.0 - ssim(pred, gt, config.ssim_window)
             level_total = level_total + config.ssim_weight * terms[f"l{i}_ssim"]
+        if config.mask_weight and "acc" in out:
+            if "mask" not in batch:
+                raise ValueError("mask_weight is set but the batch has no 'mask' (subject mask at the rays)")
+            terms[f"l{i}_mask"] = F.mse_loss(out["acc"], batch["mask"])
+            level_total = level_total + config.mask_weight * terms[f"l{i}_mask"]
         if config.coord_weight and "coord" in out:
             terms[f"l{i}_coord"] = F.mse_loss(out["coord"], out["points"].detach())
             level_total = level_total + config.coord_weight * terms[f"l{i}_coord"]

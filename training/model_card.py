@@ -152,6 +152,19 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         for label, src, by in parts:
             L.append(f"| {label} | {src} | " + " | ".join(_fmt(by.get(n)) for n in names) + " |")
         L.append("")
+    by_angle = [(label, m["psnr_masked_by_source_angle"]) for label, m in (card.get("metrics") or {}).items()
+                if m.get("psnr_masked_by_source_angle") and m.get("novel_views")]
+    if by_angle:
+        bins = by_angle[0][1]
+        L.append("Novel-view PSNR by the view's angle from the nearest source camera (seen from the subject's "
+                 "centre; the dataset's novel cameras circle the subject, so the wide angles look at sides no "
+                 "source camera sees; the device's novel view lies between its two cameras). Mean dB (views):")
+        L.append("")
+        L.append("| model | " + " | ".join(f"{b['range_deg'][0]:g}-{b['range_deg'][1]:g} deg" for b in bins) + " |")
+        L.append("|---|" + "---|" * len(bins))
+        for label, bs in by_angle:
+            L.append(f"| {label} | " + " | ".join(f"{_fmt(b.get('psnr'), 2)} ({b.get('views')})" for b in bs) + " |")
+        L.append("")
     par = card.get("parity") or {}
     if par:
         L.append("## int8 vs fp32 parity")

@@ -94,7 +94,8 @@ class TrainConfig(Config):
     """Also supervise the auxiliary head on the mirrored images (left/right joints swapped): twice the
     images per step, and the left/right distinction taught by contrast."""
     loss: LossConfig = field(default_factory=LossConfig)
-    """Loss weights (``l_col + 0.5 l_heat + ssim_weight * (1 - SSIM) [+ coord_weight * l_coord]``)."""
+    """Loss weights (``l_col + 0.5 l_heat + ssim_weight * (1 - SSIM) [+ coord_weight * l_coord]
+    [+ mask_weight * l_mask]``)."""
     seed: int = 0
     """Seed of the weights, data order, ray sampling and stratified samples."""
     checkpoint_every: int = 500
@@ -373,7 +374,7 @@ def make_batch(item: dict, cfg: TrainConfig, mcfg: ModelConfig, gen: torch.Gener
     batch = {
         "images": item["images"], "src_P": item["src_P"], "src_centers": item["src_centers"],
         "tgt_K_inv": item["tgt_K_inv"][t], "tgt_c2w": item["tgt_c2w"][t], "near_far": item["near_far"][t],
-        "ray_uv": uv, "rgb": bilinear_at(comp, uv),
+        "ray_uv": uv, "rgb": bilinear_at(comp, uv), "mask": bilinear_at(m, uv)[..., 0],
         "heatmaps": heatmaps_at(item["tgt_joints_2d"][t], item["tgt_visible"][t], uv, HEATMAP_SIGMA_HM_PX * stride),
         "targets": t,
     }
@@ -422,12 +423,12 @@ def learning_rate(cfg: TrainConfig, step: int) -> float:
 
 # -------------------------------------------------------------------------------------------- losses
 def step_losses(out: dict, batch: dict, cfg: TrainConfig) -> dict[str, Tensor]:
-    """All rays: colour + heatmap (+ coord); the patch rays also SSIM (``training.losses``)."""
+    """All rays: colour + heatmap (+ coord, + mask); the patch rays also SSIM (``training.losses``)."""
     lc = cfg.loss
     terms = compute_losses(out, batch, replace(lc, ssim_weight=0.0))
     P = cfg.patch_size
     if P and lc.ssim_weight:
-        only_ssim = replace(lc, colour_weight=0.0, heat_weight=0.0, coord_weight=0.0)
+        only_ssim = replace(lc, colour_weight=0.0, heat_weight=0.0, coord_weight=0.0, mask_weight=0.0)
         sliced = {"levels": [{"rgb": lv["rgb"][:, -P * P:]} for lv in out["levels"]]}
         extra = compute_losses(sliced, {"rgb": batch["rgb"][:, -P * P:]}, only_ssim, patch_shape=(P, P))
         terms.update({k: v for k, v in extra.items() if k != "loss"})

@@ -10,7 +10,8 @@ from ghnerf_runtime.contract import ray_grid  # noqa: E402
 from ghnerf_runtime.keypoints import model_to_heatmap_pixels  # noqa: E402
 from ghnerf_runtime.metrics import gaussian_heatmaps  # noqa: E402
 from tests.training.test_trainer import data64  # noqa: E402,F401  (fixture)
-from training.evaluate import Accumulator, evaluate, keypoints_from_heatmaps, scene_metrics  # noqa: E402
+from training.evaluate import (Accumulator, evaluate, keypoints_from_heatmaps, psnr_by_angle,  # noqa: E402
+                               scene_metrics, source_angles_deg)
 
 
 def _scene(data64, i=0):
@@ -146,3 +147,43 @@ def test_encoder_heatmaps_are_scored_like_the_rendered_ones(data64):
     none = Accumulator()
     none.add(scene_metrics(sc, truth, None, np.array([], int)))
     assert none.result()["encoder_heatmaps_pck@0.2"] is None
+
+
+def _look_from(eye, centre=(0.0, 0.0, 0.0)):
+    """A ``tgt_c2w`` row whose camera centre is ``eye`` (only the centre column matters here)."""
+    c2w = np.zeros((3, 4))
+    c2w[:, :3] = np.eye(3)
+    c2w[:, 3] = eye
+    return c2w
+
+
+def test_source_angles_are_measured_at_the_subject_centre():
+    centre = np.array([0.5, -1.0, 3.0])
+    joints = np.tile(centre, (25, 1)) + np.linspace(-0.2, 0.2, 25)[:, None] * np.array([0.0, 1.0, 0.0])
+    r = 3.0
+    def at(deg):  # a camera on the horizontal circle of radius r around the centre
+        a = np.radians(deg)
+        return centre + r * np.array([np.sin(a), 0.0, -np.cos(a)])
+    scene = {"joints_3d": joints, "joints_3d_valid": np.ones(25, bool),
+             "tgt_c2w": np.stack([_look_from(at(d)) for d in (-10.0, 10.0, 0.0, 40.0, 180.0, -100.0)]),
+             "tgt_is_source": np.array([True, True, False, False, False, False])}
+    ang = source_angles_deg(scene, np.arange(6))
+    assert np.allclose(ang, [0.0, 0.0, 10.0, 30.0, 170.0, 90.0], atol=1e-9)
+    scene["joints_3d_valid"] = np.zeros(25, bool)
+    assert np.isnan(source_angles_deg(scene, np.array([2]))).all()
+
+
+def test_psnr_is_split_by_source_angle():
+    bins = psnr_by_angle([20.0, 22.0, 15.0, 12.0, 30.0], [5.0, 14.9, 15.0, 180.0, np.nan])
+    assert [b["views"] for b in bins] == [2, 1, 0, 0, 1]  # NaN angles fall in no bin; 180 in the last
+    assert bins[0]["psnr"] == pytest.approx(21.0) and bins[1]["psnr"] == 15.0 and bins[2]["psnr"] is None
+    assert bins[-1]["range_deg"] == [90.0, 180.0] and bins[-1]["psnr"] == 12.0
+
+
+def test_the_accumulator_keeps_each_psnr_with_its_angle(data64):
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(data64, "val")
+    res = evaluate(_Oracle(ds), ds, progress=False)
+    bins = res["psnr_masked_by_source_angle"]
+    assert sum(b["views"] for b in bins) == res["novel_views"] == 4

@@ -44,7 +44,10 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
         "metrics": {"ghnerf_int8": {"kind": "onnx-int8", "pck@0.2": 0.5, "mpjpe_mm": None, "psnr_masked": 20.0,
                                     "ssim_masked": 0.9, "heatmap_mse": 0.001, "pck_undecoded": 3,
                                     "pck_evaluated_joints": 10,
-                                    "pck@0.2_by_part": {"head": 0.75, "arms": None}}},
+                                    "pck@0.2_by_part": {"head": 0.75, "arms": None}, "novel_views": 3,
+                                    "psnr_masked_by_source_angle": [
+                                        {"range_deg": [0.0, 15.0], "views": 2, "psnr": 22.5},
+                                        {"range_deg": [15.0, 180.0], "views": 0, "psnr": None}]}},
         "parity": {"ghnerf": {"pipeline": {"heatmaps": {"max_abs": 0.01, "mean_abs": 1e-4}, "peak_shift_rays": 0.1,
                                            "depth_mean_abs_m": 0.001}}},
         "files": {"ghnerf/encoder.onnx": {"bytes": 10, "sha256": "ab"}},
@@ -56,6 +59,7 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
+    assert "| model | 0-15 deg | 15-180 deg |" in md and "| ghnerf_int8 | 22.50 (2) | n/a (0) |" in md
 
 
 def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_path):

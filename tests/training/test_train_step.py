@@ -33,9 +33,10 @@ def test_two_iterations(variant):
     uv = torch.stack([patch_rays(H, W, 20, 24, size), patch_rays(H, W, 8, 30, size)])  # (2, 256, 2)
     g = torch.Generator().manual_seed(1)
     batch = {"rgb": torch.rand(2, size * size, 3, generator=g),
-             "heatmaps": torch.rand(2, size * size, 25, generator=g) * 0.1}
+             "heatmaps": torch.rand(2, size * size, 25, generator=g) * 0.1,
+             "mask": (torch.rand(2, size * size, generator=g) > 0.5).float()}
     images = torch.rand(2, 3, H, W, generator=g)
-    loss_cfg = LossConfig(coord_weight=0.01)
+    loss_cfg = LossConfig(coord_weight=0.01, mask_weight=0.1)
     before = [p.detach().clone() for p in model.parameters()]
     losses = []
     for _ in range(2):
@@ -49,7 +50,7 @@ def test_two_iterations(variant):
         opt.step()
         losses.append(float(terms["loss"].detach()))
     assert all(math.isfinite(v) for v in losses)
-    assert {"l0_col", "l0_heat", "l0_ssim", "l1_col", "l1_heat", "l1_coord", "loss"} <= set(terms)
+    assert {"l0_col", "l0_heat", "l0_ssim", "l1_col", "l1_heat", "l1_coord", "l0_mask", "l1_mask", "loss"} <= set(terms)
     changed = sum(not torch.equal(a, b.detach()) for a, b in zip(before, model.parameters()))
     assert changed > 0.9 * len(before)
 
@@ -58,3 +59,16 @@ def test_ssim_identity_and_range():
     x = torch.rand(2, 3, 16, 16)
     assert float(ssim(x, x)) == pytest.approx(1.0, abs=1e-5)
     assert float(ssim(x, torch.rand(2, 3, 16, 16))) < 0.5
+
+
+def test_mask_loss_is_the_opacity_error_against_the_mask():
+    acc = torch.tensor([[1.0, 0.5, 0.0, 0.25]])
+    mask = torch.tensor([[1.0, 1.0, 0.0, 0.0]])
+    out = {"levels": [{"acc": acc}, {"acc": mask}]}
+    terms = compute_losses(out, {"rgb": torch.zeros(1, 4, 3), "mask": mask}, LossConfig(mask_weight=2.0))
+    assert float(terms["l0_mask"]) == pytest.approx((0.25 + 0.0625) / 4)
+    assert float(terms["l1_mask"]) == 0.0
+    assert float(terms["loss"]) == pytest.approx(2.0 * (0.25 + 0.0625) / 4)
+    assert "l0_mask" not in compute_losses(out, {"rgb": torch.zeros(1, 4, 3)}, LossConfig())  # off by default
+    with pytest.raises(ValueError, match="mask"):
+        compute_losses(out, {"rgb": torch.zeros(1, 4, 3)}, LossConfig(mask_weight=1.0))

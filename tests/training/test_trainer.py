@@ -95,6 +95,29 @@ def test_heatmaps_at_rays_match_the_dataset_heatmaps(data64):
     assert torch.allclose(h, ref, atol=1e-5)
 
 
+def test_batch_mask_is_the_subject_mask_at_the_rays(data64):
+    from training.configs import preset
+    from training.data.torch_dataset import MultiViewDataset
+    from training.train import TrainConfig, make_batch
+
+    item = MultiViewDataset(data64, "train")[0]
+    cfg = TrainConfig(data=str(data64), targets_per_iter=2, heat_rays=64, patch_size=4)
+    batch = make_batch(item, cfg, preset("tiny"), torch.Generator().manual_seed(0))
+    uv = batch["ray_uv"]
+    masks = item["tgt_masks"][batch["targets"]].float()
+    # heat rays sit at heatmap-cell centres (between 2x2 pixels: their mean), patch rays on pixel centres
+    lo = uv.floor().long()
+    frac = uv - lo
+    assert torch.all((frac == 0) | (frac == 0.5))
+    hi = torch.where(frac > 0, lo + 1, lo)
+    want = torch.stack([(masks[b, lo[b, :, 1], lo[b, :, 0]] + masks[b, lo[b, :, 1], hi[b, :, 0]]
+                         + masks[b, hi[b, :, 1], lo[b, :, 0]] + masks[b, hi[b, :, 1], hi[b, :, 0]]) / 4
+                        for b in range(len(uv))])
+    assert batch["mask"].shape == batch["rgb"].shape[:2]
+    assert torch.allclose(batch["mask"], want, atol=1e-6)
+    assert 0 < float(batch["mask"].mean()) < 1  # rays inside and outside the subject
+
+
 # ------------------------------------------------------------------------------------------- loop
 def test_two_iterations_and_resume_is_identical(data64, tmp_path):
     straight, m_straight = train(tiny_cfg(data64), tmp_path / "a", quiet=True)
@@ -119,7 +142,8 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
 
 
 def test_two_iterations_with_every_view_and_mirrored_encoder_images(data64, tmp_path):
-    summary, model = train(tiny_cfg(data64, encoder_views="all", encoder_flip=True), tmp_path / "r", quiet=True)
+    cfg = tiny_cfg(data64, encoder_views="all", encoder_flip=True, loss={"coord_weight": 0.01, "mask_weight": 0.1})
+    summary, model = train(cfg, tmp_path / "r", quiet=True)
     assert summary["steps"] == 2
     assert all(torch.isfinite(p).all() for p in model.parameters())
 

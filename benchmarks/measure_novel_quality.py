@@ -1,0 +1,118 @@
+"""How good the device's novel view is: the runtime's image against the simulator's picture of that camera.
+
+    .venv/bin/python benchmarks/measure_novel_quality.py --model-dir models [--sequences 4 --every 3]
+
+``ghnerf-eval`` scores novel views at cameras anywhere on a circle around the subject, many of
+them looking at sides neither rig camera sees. The device renders its novel view *between* its two
+cameras (``NovelViewRequest.alpha``). This script measures that view, through the runtime: on
+held-out-like simulator sequences (the bench's, ``ghnerf_runtime.cli.simdata``) the estimator
+tracks the subject with the model's own joints and renders the novel view at each ``--alphas``
+(0 and 1: the rig cameras' own viewpoints) and each ``--strides`` (1: every pixel of the 128x128
+view; 2: a quarter of the rays, upsampled). The simulator then renders the same camera (4x
+supersampled, area-averaged to 128x128) from the sequence's scene at the pair's time, and the
+script prints the masked PSNR and SSIM (``ghnerf_runtime.metrics``, inside the simulator's subject
+mask, the truth composited over the model background as ``ghnerf-eval`` does) and the
+``novel_render`` time of each variant, median over the pairs. Not a test.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from drivers.sim import random_scene  # noqa: E402
+from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEEN_MOTIONS, load_sequences, percentiles  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
+from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
+
+SUPERSAMPLE = 4
+
+
+def truth_view(scene, camera, t: float, background: float) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's picture of ``camera`` at time ``t``: ``(S, S, 3)`` RGB in [0, 1] composited over
+    ``background`` outside the subject, and the ``(S, S)`` subject mask (area share >= 0.5)."""
+    big = camera.resized(camera.width * SUPERSAMPLE, camera.height * SUPERSAMPLE)
+    image, truth = scene.render(big, t)
+    size = (camera.width, camera.height)
+    rgb = cv2.resize(image[..., ::-1].astype(np.float32) / 255.0, size, interpolation=cv2.INTER_AREA)
+    mask = cv2.resize(truth.mask.astype(np.float32), size, interpolation=cv2.INTER_AREA) >= 0.5
+    return np.where(mask[..., None], rgb, np.float32(background)), mask
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
+    ap.add_argument("--sequences", type=int, default=4)
+    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--every", type=int, default=3, help="score every N-th pair (all pairs are tracked)")
+    ap.add_argument("--alphas", default="0,0.5,1", help="comma list: 0 = the first rig camera, 1 = the second")
+    ap.add_argument("--strides", default="1,2", help="comma list of novel_view.stride values")
+    ap.add_argument("--seen-motions", action="store_true")
+    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    args = ap.parse_args(argv)
+    alphas = [float(a) for a in args.alphas.split(",")]
+    strides = [int(s) for s in args.strides.split(",")]
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
+                          novel_view=NovelViewConfig(enabled=True))
+    sequences = load_sequences(args.sequences, args.frames, seen_motions=args.seen_motions, cache_dir=args.cache)
+    session = load_session(cfg)
+    background = float(session.contract.background)
+    print(f"model {args.model_dir} ({ {g: f.precision for g, f in session.files.items()} }), "
+          f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
+    variants = [(a, s) for a in alphas for s in strides]
+    scores = {v: {"psnr": [], "ssim": [], "ms": []} for v in variants}
+    motions = SEEN_MOTIONS if args.seen_motions else HELD_OUT_MOTIONS
+    for seq in sequences:
+        scene = random_scene(int(seq.info["scene_seed"]), volume=seq.rig.volume, motions=motions)
+        first, _ = scene.render(seq.rig.pair[0], float(seq.info["t0"]), with_truth=False)
+        if not np.array_equal(first, np.asarray(seq.images[0, 0])):
+            raise SystemExit(f"sequence {seq.info['index']}: the rebuilt scene does not reproduce the cached frames "
+                             "(stale cache? pass --cache off)")
+        ests = {v: Estimator(session, seq.rig, replace(cfg, novel_view=replace(cfg.novel_view, stride=v[1])))
+                for v in variants}
+        truths: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        for i in range(len(seq)):
+            t = float(seq.info["t0"]) + i / float(seq.info["fps"])
+            pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
+            for (alpha, stride), est in ests.items():
+                r = est.estimate(pair, novel_view=NovelViewRequest(alpha=alpha))
+                if r.novel_view is None or i % args.every:
+                    continue
+                cam = r.novel_view.camera
+                key = np.round(cam.P, 9).tobytes()  # the strides of one alpha share the camera
+                if key not in truths:
+                    truths[key] = truth_view(scene, cam, t, background)
+                truth, mask = truths[key]
+                if not mask.any():
+                    continue
+                pred = r.novel_view.image[..., ::-1].astype(np.float64) / 255.0
+                s = scores[(alpha, stride)]
+                s["psnr"].append(masked_psnr(pred, truth, mask).value)
+                s["ssim"].append(masked_ssim(pred, truth, mask).value)
+                s["ms"].append(r.timing_ms["novel_render"])
+    print(f"{len(sequences)} sequences x {args.frames} pairs, every {args.every}th scored; novel view "
+          f"{session.contract.width}x{session.contract.height}; masked against the simulator's render")
+    print("| alpha | stride | pairs | PSNR dB median (mean) | SSIM median | novel_render ms median / p99 |")
+    print("|---|---|---|---|---|---|")
+    for (alpha, stride), s in scores.items():
+        if not s["psnr"]:
+            print(f"| {alpha:g} | {stride} | 0 | – | – | – |")
+            continue
+        tm = percentiles(s["ms"])
+        print(f"| {alpha:g} | {stride} | {len(s['psnr'])} | {np.median(s['psnr']):.2f} ({np.mean(s['psnr']):.2f}) | "
+              f"{np.median(s['ssim']):.3f} | {tm['median']:.1f} / {tm['p99']:.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
