@@ -100,7 +100,7 @@ def main(argv=None) -> int:
                 s["psnr"].append(masked_psnr(pred, truth, mask).value)
                 s["ssim"].append(masked_ssim(pred, truth, mask).value)
                 s["ms"].append(r.timing_ms["novel_render"])
-    print(f"{len(sequences)} sequences x {args.frames} pairs, every {args.every}th scored; novel view "
+    print(f"{len(sequences)} sequences x {args.frames} pairs, one pair in {args.every} scored; novel view "
           f"{session.contract.width}x{session.contract.height}; masked against the simulator's render")
     print("| alpha | stride | pairs | PSNR dB median (mean) | SSIM median | novel_render ms median / p99 |")
     print("|---|---|---|---|---|---|")

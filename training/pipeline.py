@@ -32,7 +32,7 @@ import shlex
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -247,7 +247,6 @@ def train_inputs(cfg: PipelineConfig, preset: str) -> dict:
     if data.get("pretrain_human") and not data.get("human_init"):
         data["human_init"] = str(cfg.runs / f"{preset}_human" / "human.pt")
     tc = build_config(data)
-    from dataclasses import asdict
     return json.loads(json.dumps(asdict(tc)))  # as config.json holds it (lists, not tuples)
 
 
@@ -262,8 +261,6 @@ def pretrain_dir(cfg: PipelineConfig, variant: str) -> Path:
 
 def pretrain_inputs(cfg: PipelineConfig, variant: str) -> dict:
     """The ``PretrainConfig`` the pretraining run of ``variant`` gets (as its ``config.json`` holds it)."""
-    from dataclasses import asdict
-
     from training.pretrain_human import config_from_train_config
 
     pc = config_from_train_config(train_inputs(cfg, VARIANTS[variant]), cfg.pretrain_overrides)
@@ -272,8 +269,12 @@ def pretrain_inputs(cfg: PipelineConfig, variant: str) -> dict:
 
 def _pretrain_config_matches(cfg: PipelineConfig, variant: str) -> bool:
     """The pretraining folder's ``config.json`` has this pipeline's settings (runtime keys aside)."""
+    from training.pretrain_human import PretrainConfig
+
     def result(c: dict) -> dict:
-        return {k: v for k, v in c.items() if k not in PRETRAIN_RUNTIME_KEYS}
+        # through PretrainConfig: a run made before a setting existed reads it as its default
+        full = json.loads(json.dumps(asdict(PretrainConfig.from_dict(c))))
+        return {k: v for k, v in full.items() if k not in PRETRAIN_RUNTIME_KEYS}
 
     cfg_p = pretrain_dir(cfg, variant) / "config.json"
     return cfg_p.exists() and result(json.loads(cfg_p.read_text())) == result(pretrain_inputs(cfg, variant))

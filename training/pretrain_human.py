@@ -16,6 +16,7 @@ The run folder holds ``human.pt`` (the encoder's state dict and the model config
 Example::
 
     python -m training.pretrain_human --data data/edge128 --out runs/edge128_human --iterations 6000
+    python -m training.pretrain_human --score runs/edge128_human/human.pt --split val    # PCK@0.2 only
 """
 from __future__ import annotations
 
@@ -37,8 +38,9 @@ from training.configs import PRESETS
 from training.losses import positive_weighted_mse
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
-from training.train import DistInfo, Progress, apply_overrides, learning_rate, load_config_file, \
-    mirrored, model_config_of, scene_order, seed_everything
+from training.augment import AugmentConfig, augment_views
+from training.train import HEATMAP_SIGMA_HM_PX, DistInfo, Progress, apply_overrides, learning_rate, \
+    load_config_file, mirrored, model_config_of, scene_order, seed_everything
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -58,6 +60,8 @@ class PretrainConfig(Config):
     """Scenes per step; each gives all its views (sources and targets) and, with ``flip``, their mirrors."""
     flip: bool = True
     """Also train on the mirror images (left/right joint channels swapped)."""
+    augment: AugmentConfig = field(default_factory=AugmentConfig)
+    """Random rotation / scale / shift of every image (``training.augment``), before the mirroring."""
     lr: float = 1e-3
     lr_decay_every: int = 0
     lr_decay_gamma: float = 0.5
@@ -96,6 +100,7 @@ class PretrainConfig(Config):
                 fail(key, f"must be a finite number {'> 0' if key == 'lr' else '>= 0'}, got {v!r}")
         if not 0 < self.lr_decay_gamma <= 1:
             fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
+        self.augment.validate("pretrain_human.augment")
         mcfg = self.model_config()
         if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
             fail("preset", f"{self.preset!r} has no human encoder with an auxiliary heatmap head")
@@ -111,11 +116,17 @@ class PretrainConfig(Config):
         return cfg
 
 
-def view_batch(items: list[dict], flip: bool) -> tuple[Tensor, Tensor]:
-    """Every view of ``items`` (and their mirrors, ``train.mirrored``): images ``(N, 3, H, W)`` and heatmap
-    grids ``(N, J, h, w)``."""
+def view_batch(items: list[dict], flip: bool, augment: AugmentConfig | None = None,
+               generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
+    """Every view of ``items`` (randomly transformed with ``augment``; and their mirrors, ``train.mirrored``):
+    images ``(N, 3, H, W)`` and heatmap grids ``(N, J, h, w)``."""
     images = torch.cat([it["tgt_images"] for it in items])
     heat = torch.cat([it["tgt_heatmaps"] for it in items])
+    if augment is not None and augment.enabled:
+        stride = images.shape[-1] // heat.shape[-1]
+        images, heat = augment_views(images, torch.cat([it["tgt_joints_2d"] for it in items]),
+                                     torch.cat([it["tgt_visible"] for it in items]), augment,
+                                     generator or torch.Generator(), stride, HEATMAP_SIGMA_HM_PX)
     if flip:
         m_images, m_heat = mirrored(images, heat)
         images, heat = torch.cat([images, m_images]), torch.cat([heat, m_heat])
@@ -242,7 +253,9 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
             if step >= cfg.iterations:
                 break
             items = [ds[i] for i in order[b * cfg.scenes_per_step:(b + 1) * cfg.scenes_per_step]]
-            images, heat = view_batch(items, cfg.flip)
+            # the transforms are a pure function of (seed, step): a resumed run draws the same ones
+            gen = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
+            images, heat = view_batch(items, cfg.flip, cfg.augment, gen)
             lr = learning_rate(cfg, step)
             for g in opt.param_groups:
                 g["lr"] = lr
@@ -290,10 +303,32 @@ def config_from_train_config(data: dict, overrides: list[str] = ()) -> PretrainC
     return PretrainConfig.from_dict(apply_overrides(data, list(overrides)))
 
 
+def score_human(path: str | Path, data: str | Path, split: str = "val", scenes: int = 0) -> dict:
+    """PCK@0.2 of a ``human.pt``'s heatmap head in the source views of ``scenes`` scenes of ``split`` (0: all),
+    scored as :func:`heatmap_pck` scores it during pretraining."""
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    try:
+        mc = torch.load(str(path), map_location="cpu", weights_only=True).get("model_config")
+    except Exception:  # noqa: BLE001 - load_human below reports the unreadable file by name
+        mc = None
+    model = GHNeRF(ModelConfig.from_dict(mc) if mc else model_config_of("edge128", {}))
+    step = load_human(model, path)
+    ds = MultiViewDataset(data, split, TargetConfig(heatmap_stride=model.config.heatmap_stride))
+    n = min(scenes, len(ds)) if scenes else len(ds)
+    return {"human": str(path), "step": step, "split": split, "scenes": n,
+            "pck@0.2": heatmap_pck(model, ds, n, torch.device("cpu"))}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.pretrain_human", description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", help="JSON file: a PretrainConfig, or a train config with a 'pretrain_human' block")
-    ap.add_argument("--out", required=True)
+    ap.add_argument("--out", help="run folder (required unless --score)")
+    ap.add_argument("--score", metavar="HUMAN_PT", help="only score this human.pt's heatmaps on --split "
+                                                         "(--data, default data/edge128; --scenes, default all)")
+    ap.add_argument("--split", default="val")
+    ap.add_argument("--scenes", type=int, default=0)
     ap.add_argument("--resume", action="store_true")
     ap.add_argument("--data")
     ap.add_argument("--iterations", type=int)
@@ -301,6 +336,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
+    if args.score:
+        if args.threads:
+            torch.set_num_threads(args.threads)
+        try:
+            print(json.dumps(score_human(args.score, args.data or "data/edge128", args.split, args.scenes), indent=1))
+        except ConfigError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        return 0
+    if not args.out:
+        ap.error("--out is required (or --score HUMAN_PT)")
     try:
         sets = list(args.set) + [f"{k}={json.dumps(getattr(args, k))}" for k in ("data", "iterations", "threads")
                                  if getattr(args, k) is not None]

@@ -122,5 +122,10 @@ def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(t
     (run / "config.json").write_text(json.dumps({**pc, "threads": 1}))  # runtime keys do not matter
     (run / "summary.json").write_text(json.dumps({"steps": 5}))
     assert _pretrain_finished(cfg, "ghnerf")
+    older = {k: v for k, v in pc.items() if k != "augment"}  # made before the setting existed: its default
+    (run / "config.json").write_text(json.dumps(older))
+    assert _pretrain_finished(cfg, "ghnerf")
     (run / "config.json").write_text(json.dumps({**pc, "lr": 0.001}))  # another recipe: not this run
+    assert not _pretrain_finished(cfg, "ghnerf")
+    (run / "config.json").write_text(json.dumps({**pc, "augment": {"rotation_deg": 30.0}}))
     assert not _pretrain_finished(cfg, "ghnerf")

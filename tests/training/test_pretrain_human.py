@@ -31,6 +31,8 @@ def tiny_pretrain(data, **kw) -> PretrainConfig:
     ({"itterations": 3}, "itterations"),
     ({"iterations": "many"}, "iterations"),  # typed: a clear error, not a TypeError in validation
     ({"device": "tpu"}, "device"),
+    ({"augment": {"rotation_deg": -5}}, "augment.rotation_deg"),
+    ({"augment": {"zoom": 0.1}}, "zoom"),
 ])
 def test_config_errors_name_the_key(data, key):
     with pytest.raises(ConfigError, match=key):
@@ -52,15 +54,30 @@ def test_view_batch_mirrors_images_and_swaps_left_right(data64):
     assert plain.shape[0] == n
 
 
+def test_view_batch_augments_before_mirroring(data64):
+    from training.augment import AugmentConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    it = MultiViewDataset(data64, "train")[0]
+    aug = AugmentConfig(rotation_deg=30.0, scale=0.2, shift=0.1)
+    images, heat = view_batch([it], flip=True, augment=aug, generator=torch.Generator().manual_seed(0))
+    again, _ = view_batch([it], flip=True, augment=aug, generator=torch.Generator().manual_seed(0))
+    n = it["tgt_images"].shape[0]
+    assert torch.equal(images, again) and not torch.equal(images[:n], it["tgt_images"])
+    assert torch.equal(images[n:], torch.flip(images[:n], dims=(-1,)))  # the mirror of the transformed view
+    assert heat.shape == (2 * n, *it["tgt_heatmaps"].shape[1:]) and float(heat.max()) <= 1.0
+
+
 def test_two_iterations_resume_and_joint_training_starts_from_it(data64, tmp_path):
-    straight = pretrain(tiny_pretrain(data64), tmp_path / "a", quiet=True)
+    aug = {"rotation_deg": 20.0, "scale": 0.2, "shift": 0.05}  # resumed runs draw the same transforms too
+    straight = pretrain(tiny_pretrain(data64, augment=aug), tmp_path / "a", quiet=True)
     assert straight["steps"] == 2 and not straight["stopped_early"]
     assert 0.0 <= straight["eval_pck@0.2"] <= 1.0
     log = [json.loads(line) for line in (tmp_path / "a" / "log.jsonl").read_text().splitlines()]
     assert [r["step"] for r in log] == [1, 2] and all(r["loss"] > 0 for r in log)
 
-    pretrain(tiny_pretrain(data64, iterations=1), tmp_path / "b", quiet=True)
-    pretrain(tiny_pretrain(data64), tmp_path / "b", resume=True, quiet=True)
+    pretrain(tiny_pretrain(data64, iterations=1, augment=aug), tmp_path / "b", quiet=True)
+    pretrain(tiny_pretrain(data64, augment=aug), tmp_path / "b", resume=True, quiet=True)
     a = torch.load(tmp_path / "a" / "human.pt", weights_only=True)
     b = torch.load(tmp_path / "b" / "human.pt", weights_only=True)
     assert a["step"] == b["step"] == 2
@@ -102,6 +119,16 @@ def test_cli_reads_the_block_of_a_train_config(data64, tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["steps"] == 1
     assert main(["--config", str(tmp_path / "train.json"), "--out", str(tmp_path / "r2"), "--set", "lr=-1"]) == 2
     assert "pretrain_human.lr" in capsys.readouterr().err
+
+
+def test_score_reports_the_heatmap_pck_of_a_human_pt(data64, tmp_path, capsys):
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), tmp_path / "a", quiet=True)
+    assert main(["--score", str(tmp_path / "a" / "human.pt"), "--data", str(data64), "--split", "val"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["step"] == 1 and got["scenes"] == 2 and 0.0 <= got["pck@0.2"] <= 1.0
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    assert main(["--score", str(tmp_path / "junk.pt"), "--data", str(data64)]) == 2
+    assert "junk.pt" in capsys.readouterr().err
 
 
 def test_a_frozen_encoder_stays_as_pretrained_while_the_rest_trains(data64, tmp_path):
