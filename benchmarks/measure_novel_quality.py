@@ -12,7 +12,11 @@ view; 2: a quarter of the rays, upsampled). The simulator then renders the same 
 supersampled, area-averaged to 128x128) from the sequence's scene at the pair's time, and the
 script prints the masked PSNR and SSIM (``ghnerf_runtime.metrics``, inside the simulator's subject
 mask, the truth composited over the model background as ``ghnerf-eval`` does) and the
-``novel_render`` time of each variant, median over the pairs. Not a test.
+``novel_render`` time of each variant, median over the pairs. It also prints the model's accumulated
+opacity on the rays of the coarse pass (every 4th pixel of the subject box, stride-1 variants) split by
+the simulator's mask: a clean model is opaque on the subject (1) and empty around it (0); black fog
+around the subject costs the colour loss nothing over a black background, and fog in front of it dims
+it. Not a test.
 """
 from __future__ import annotations
 
@@ -35,6 +39,23 @@ from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 
 SUPERSAMPLE = 4
+
+
+class _RenderTap:
+    """The session, recording the rays and accumulated opacity of every colour render it runs."""
+
+    def __init__(self, session):
+        self._session = session
+        self.runs: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def __getattr__(self, name):
+        return getattr(self._session, name)
+
+    def run(self, graph, feeds):
+        out = self._session.run(graph, feeds)
+        if graph in ("render_rgb", "render"):
+            self.runs.append((np.asarray(feeds["ray_uv"][0]), np.asarray(out["acc"][0])))
+        return out
 
 
 def truth_view(scene, camera, t: float, background: float) -> tuple[np.ndarray, np.ndarray]:
@@ -65,12 +86,13 @@ def main(argv=None) -> int:
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
                           novel_view=NovelViewConfig(enabled=True))
     sequences = load_sequences(args.sequences, args.frames, seen_motions=args.seen_motions, cache_dir=args.cache)
-    session = load_session(cfg)
+    session = _RenderTap(load_session(cfg))
     background = float(session.contract.background)
     print(f"model {args.model_dir} ({ {g: f.precision for g, f in session.files.items()} }), "
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
     variants = [(a, s) for a in alphas for s in strides]
     scores = {v: {"psnr": [], "ssim": [], "ms": []} for v in variants}
+    opacity = {"subject": [], "around": []}  # coarse-pass rays of the stride-1 views
     motions = SEEN_MOTIONS if args.seen_motions else HELD_OUT_MOTIONS
     for seq in sequences:
         scene = random_scene(int(seq.info["scene_seed"]), volume=seq.rig.volume, motions=motions)
@@ -85,6 +107,7 @@ def main(argv=None) -> int:
             t = float(seq.info["t0"]) + i / float(seq.info["fps"])
             pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
             for (alpha, stride), est in ests.items():
+                session.runs.clear()
                 r = est.estimate(pair, novel_view=NovelViewRequest(alpha=alpha))
                 if r.novel_view is None or i % args.every:
                     continue
@@ -100,6 +123,12 @@ def main(argv=None) -> int:
                 s["psnr"].append(masked_psnr(pred, truth, mask).value)
                 s["ssim"].append(masked_ssim(pred, truth, mask).value)
                 s["ms"].append(r.timing_ms["novel_render"])
+                if stride == 1 and len(session.runs) == 2:  # coarse pass + fine pass
+                    uv, acc = session.runs[0]
+                    px = np.clip(np.rint(uv).astype(int), 0, mask.shape[0] - 1)
+                    on = mask[px[:, 1], px[:, 0]]
+                    opacity["subject"].append(acc[on])
+                    opacity["around"].append(acc[~on])
     print(f"{len(sequences)} sequences x {args.frames} pairs, one pair in {args.every} scored; novel view "
           f"{session.contract.width}x{session.contract.height}; masked against the simulator's render")
     print("| alpha | stride | pairs | PSNR dB median (mean) | SSIM median | novel_render ms median / p99 |")
@@ -111,6 +140,11 @@ def main(argv=None) -> int:
         tm = percentiles(s["ms"])
         print(f"| {alpha:g} | {stride} | {len(s['psnr'])} | {np.median(s['psnr']):.2f} ({np.mean(s['psnr']):.2f}) | "
               f"{np.median(s['ssim']):.3f} | {tm['median']:.1f} / {tm['p99']:.1f} |")
+    if opacity["subject"]:
+        on, off = np.concatenate(opacity["subject"]), np.concatenate(opacity["around"])
+        print(f"accumulated opacity, coarse-pass rays of the stride-1 views: on the subject mean {on.mean():.2f} "
+              f"(median {np.median(on):.2f}, {on.size} rays), around it in the box mean {off.mean():.2f} "
+              f"(median {np.median(off):.2f}, {off.size} rays)")
     return 0
 
 
