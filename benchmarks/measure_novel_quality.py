@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from drivers.sim import random_scene  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEEN_MOTIONS, load_sequences, percentiles  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
@@ -78,13 +78,16 @@ def main(argv=None) -> int:
     ap.add_argument("--every", type=int, default=3, help="score every N-th pair (all pairs are tracked)")
     ap.add_argument("--alphas", default="0,0.5,1", help="comma list: 0 = the first rig camera, 1 = the second")
     ap.add_argument("--strides", default="1,2", help="comma list of novel_view.stride values")
+    ap.add_argument("--config", help="estimator config JSON (ghnerf_runtime.config; the novel view is enabled "
+                                     "whatever it says; --model-dir/--precision still apply)")
     ap.add_argument("--seen-motions", action="store_true")
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
     alphas = [float(a) for a in args.alphas.split(",")]
     strides = [int(s) for s in args.strides.split(",")]
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
-                          novel_view=NovelViewConfig(enabled=True))
+    base = load_config(args.config) if args.config else EstimatorConfig()
+    cfg = replace(base, session=replace(base.session, model_dir=args.model_dir, precision=args.precision),
+                  novel_view=replace(base.novel_view, enabled=True))
     sequences = load_sequences(args.sequences, args.frames, seen_motions=args.seen_motions, cache_dir=args.cache)
     session = _RenderTap(load_session(cfg))
     background = float(session.contract.background)
