@@ -1,6 +1,6 @@
 """How good the device's novel view is: the runtime's image against the simulator's picture of that camera.
 
-    .venv/bin/python benchmarks/measure_novel_quality.py --model-dir models [--sequences 4 --every 3]
+    .venv/bin/python benchmarks/measure_novel_quality.py --model-dir models [--sequences 10 --every 6]
 
 ``ghnerf-eval`` scores novel views at cameras anywhere on a circle around the subject, many of
 them looking at sides neither rig camera sees. The device renders its novel view *between* its two
@@ -73,9 +73,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
     ap.add_argument("--precision", default="auto", choices=("auto", "fp32", "int8"))
-    ap.add_argument("--sequences", type=int, default=4)
+    ap.add_argument("--sequences", type=int, default=10)
     ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--every", type=int, default=3, help="score every N-th pair (all pairs are tracked)")
+    ap.add_argument("--every", type=int, default=6, help="score every N-th pair (all pairs are tracked)")
     ap.add_argument("--alphas", default="0,0.5,1", help="comma list: 0 = the first rig camera, 1 = the second")
     ap.add_argument("--strides", default="1,2", help="comma list of novel_view.stride values")
     ap.add_argument("--config", help="estimator config JSON (ghnerf_runtime.config; the novel view is enabled "
