@@ -144,6 +144,24 @@ class OracleSession:
         return {t.name: out[t.name] for t in spec.outputs}
 
 
+class RenderTap:
+    """A session wrapper recording ``(ray_uv, acc)`` of every colour render (``render_rgb`` / ``render``) it runs,
+    for the novel-view scripts (opacity statistics); everything else passes through."""
+
+    def __init__(self, session):
+        self._session = session
+        self.runs: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def __getattr__(self, name):
+        return getattr(self._session, name)
+
+    def run(self, graph, feeds):
+        out = self._session.run(graph, feeds)
+        if graph in ("render_rgb", "render"):
+            self.runs.append((np.asarray(feeds["ray_uv"][0]), np.asarray(out["acc"][0])))
+        return out
+
+
 def contract_of(model_dir: str | os.PathLike) -> ModelContract:
     """The contract stamped in a model folder's encoder (used to build an :class:`OracleSession`)."""
     import onnxruntime as ort

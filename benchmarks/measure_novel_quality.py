@@ -31,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
 from drivers.sim import random_scene  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEEN_MOTIONS, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
@@ -39,23 +40,6 @@ from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 
 SUPERSAMPLE = 4
-
-
-class _RenderTap:
-    """The session, recording the rays and accumulated opacity of every colour render it runs."""
-
-    def __init__(self, session):
-        self._session = session
-        self.runs: list[tuple[np.ndarray, np.ndarray]] = []
-
-    def __getattr__(self, name):
-        return getattr(self._session, name)
-
-    def run(self, graph, feeds):
-        out = self._session.run(graph, feeds)
-        if graph in ("render_rgb", "render"):
-            self.runs.append((np.asarray(feeds["ray_uv"][0]), np.asarray(out["acc"][0])))
-        return out
 
 
 def truth_view(scene, camera, t: float, background: float) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +73,7 @@ def main(argv=None) -> int:
     cfg = replace(base, session=replace(base.session, model_dir=args.model_dir, precision=args.precision),
                   novel_view=replace(base.novel_view, enabled=True))
     sequences = load_sequences(args.sequences, args.frames, seen_motions=args.seen_motions, cache_dir=args.cache)
-    session = _RenderTap(load_session(cfg))
+    session = RenderTap(load_session(cfg))
     background = float(session.contract.background)
     print(f"model {args.model_dir} ({ {g: f.precision for g, f in session.files.items()} }), "
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)

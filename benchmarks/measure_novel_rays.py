@@ -23,28 +23,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
-
-
-class _OpacityTap:
-    """The session, recording the accumulated opacity of every colour render it runs."""
-
-    def __init__(self, session):
-        self._session = session
-        self.acc: list[np.ndarray] = []
-
-    def __getattr__(self, name):
-        return getattr(self._session, name)
-
-    def run(self, graph, feeds):
-        out = self._session.run(graph, feeds)
-        if graph in ("render_rgb", "render"):
-            self.acc.append(out["acc"].ravel())
-        return out
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -72,7 +56,7 @@ def main(argv=None) -> int:
     variants = {"all box rays": replace(cfg.novel_view, silhouette_stride=0), "coarse pass": cfg.novel_view}
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
     session = load_session(cfg)
-    tap = _OpacityTap(session)  # the all-rays variant renders exactly the box, once per pair
+    tap = RenderTap(session)  # the all-rays variant renders exactly the box, once per pair
     print(f"model {args.model_dir} ({ {g: f.precision for g, f in session.files.items()} }), "
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
     rays = {k: [] for k in variants}
@@ -105,9 +89,9 @@ def main(argv=None) -> int:
     print(f"  PSNR coarse pass vs all box rays: median {np.median(q):.1f} dB, min "
           f"{(finite.min() if finite.size else float('inf')):.1f} dB, identical in {int(np.sum(~np.isfinite(q)))} "
           f"of {q.size} pairs")
-    if tap.acc:
+    if tap.runs:
         print(f"  accumulated opacity over the box's rays (all-rays renders): median "
-              f"{np.median(np.concatenate(tap.acc)):.2f}")
+              f"{np.median(np.concatenate([acc.ravel() for _, acc in tap.runs])):.2f}")
     ratio = np.median(ms["coarse pass"]) / np.median(ms["all box rays"])
     print(f"  novel_render time ratio (coarse pass / all box rays): {ratio:.2f}")
     return 0

@@ -239,8 +239,10 @@ class Accumulator:
             # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
             per_image = np.ravel(m["psnr"].per_image)
             angles = np.ravel(m.get("novel_source_angle_deg", np.full(per_image.shape, np.nan)))
-            self.psnr.extend(float(v) for v in per_image if not np.isnan(v))
-            self.psnr_angle_deg.extend(float(a) for v, a in zip(per_image, angles) if not np.isnan(v))
+            for v, a in zip(per_image, angles):
+                if not np.isnan(v):
+                    self.psnr.append(float(v))
+                    self.psnr_angle_deg.append(float(a))
             self.ssim.extend(float(v) for v in np.ravel(m["ssim"].per_image) if not np.isnan(v))
 
     def result(self) -> dict:
