@@ -1,6 +1,6 @@
 """Does the runtime reproduce the training evaluation? Like-for-like on the dataset's held-out scenes.
 
-    .venv/bin/python benchmarks/bench_runtime_vs_eval.py --model-dir models [--data data/edge128] [--limit 32]
+    .venv/bin/python benchmarks/bench_runtime_vs_eval.py --model-dir models [--data data/edge128] [--limit 32] [--novel]
 
 For each of the first ``--limit`` scenes of the dataset split (default ``val``), PCK@0.2 of the
 two source views three ways:
@@ -19,6 +19,13 @@ two source views three ways:
 With a model that exports encoder heatmaps (contract 1.1.0), each path is also scored with
 ``heatmaps.source = "encoder"`` (the encoder graph's own 2D heatmaps; C then triangulates).
 
+With ``--novel`` (needs ``render_rgb``), the three paths also render the colour view *at the first
+source camera* (the device's ``alpha = 0``) and score its masked PSNR: A and B at the stored crop
+camera against the stored crop (as ``ghnerf-eval`` scores a view), C through ``Estimator.estimate``
+with ``NovelViewRequest(alpha=0)`` (its own crop, sweep box and coarse/fine rays) against the
+simulator's picture of the camera it rendered (``measure_novel_quality.truth_view``). This tells
+the runtime's novel-view error apart from the scenes' difficulty.
+
 A tool (imports ``training.data`` and ``drivers``); not a test.
 """
 from __future__ import annotations
@@ -31,7 +38,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.config import BEST_METHOD, EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
+from benchmarks.measure_novel_quality import truth_view  # noqa: E402
+from ghnerf_runtime.config import (  # noqa: E402
+    BEST_METHOD,
+    EstimatorConfig,
+    HeatmapsConfig,
+    Joints3DConfig,
+    NovelViewConfig,
+    SessionConfig,
+)
 from ghnerf_runtime.contract import (  # noqa: E402
     near_far_from_box,
     ray_grid,
@@ -42,7 +57,8 @@ from ghnerf_runtime.contract import (  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
 from ghnerf_runtime.geometry import Camera  # noqa: E402
 from ghnerf_runtime.keypoints import decode_keypoints, heatmap_to_model_pixels  # noqa: E402
-from ghnerf_runtime.metrics import pck  # noqa: E402
+from ghnerf_runtime.metrics import masked_psnr, pck  # noqa: E402
+from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 from ghnerf_runtime.preprocess import Roi, build_undistort_crop_maps, preprocess_image  # noqa: E402
 from ghnerf_runtime.session import ModelSession  # noqa: E402
 from ghnerf_runtime.tracking import box_corners, track_from_joints  # noqa: E402
@@ -64,6 +80,17 @@ def _decode(session: ModelSession, images: np.ndarray, cams, near_far: np.ndarra
     return heatmap_to_model_pixels(kp.uv, g, S), kp.valid
 
 
+def _render_first_source(session: ModelSession, images: np.ndarray, cams, near_far: np.ndarray) -> np.ndarray:
+    """``(S, S, 3)`` RGB: the colour branch at the first source's own crop camera, every pixel."""
+    S = session.contract.height
+    env = {"images": images, "src_P": source_projections(cams, S, S), "src_centers": source_centers(cams),
+           **target_inputs(cams[:1], S, S), "near_far": near_far[:1],
+           "ray_uv": np.ascontiguousarray(ray_grid(S, S, 1)[None], dtype=np.float32)}
+    env.update(session.run("encoder", env))
+    env.update(session.run("volume", env))
+    return session.run("render_rgb", env)["rgb"].reshape(S, S, 3)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
@@ -71,20 +98,23 @@ def main(argv=None) -> int:
     ap.add_argument("--data", default="data/edge128")
     ap.add_argument("--split", default="val")
     ap.add_argument("--limit", type=int, default=32)
+    ap.add_argument("--novel", action="store_true", help="also score the colour view at the first source camera")
     args = ap.parse_args(argv)
 
     from drivers.sim import RigPlacement, random_scene
     from training.data.cache import ShardedSplit
     from training.data.splits import split_spec
 
+    graphs = ("encoder", "volume", "render_heat") + (("render_rgb",) if args.novel else ())
     session = ModelSession.load(SessionConfig(model_dir=args.model_dir, precision=args.precision),
-                                ("encoder", "volume", "render_heat"))  # the encoder heatmaps (when present) come with the encoder
+                                graphs)  # the encoder heatmaps (when present) come with the encoder
     S = session.contract.height
     split = ShardedSplit(args.data, args.split)
     motions = split_spec(args.split).motions
     sources = ["rendered"] + (["encoder"] if session.contract.encoder_heatmaps else [])
     rows = {(k, src): ([], [], [], []) for src in sources for k in "ABC"}
     diffs = []
+    psnr: dict[str, list[float]] = {"A": [], "B": [], "C": []}
     for idx in range(min(args.limit, len(split))):
         a, meta = split.arrays(idx), split.metadata(idx)
         pl = dict(meta["placement"])
@@ -116,6 +146,19 @@ def main(argv=None) -> int:
             found = ~np.stack([r.missing_2d[n] for n in rig.names[:2]])
             for lst, v in zip(rows["C", src], (pred, truth, a["visible"][:2], found)):
                 lst.append(v)
+        if args.novel:
+            mask = np.unpackbits(np.asarray(a["masks"][0]), axis=-1).astype(bool)
+            truth = np.where(mask[..., None], stored[0].transpose(1, 2, 0), np.float32(session.contract.background))
+            for key, images in (("A", stored), ("B", ours)):
+                rgb = _render_first_source(session, images, cams, near_far)
+                psnr[key].append(masked_psnr(np.clip(rgb, 0.0, 1.0), truth, mask).value)
+            with Estimator(session, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True))) as est:
+                est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
+                view = est.estimate(tuple(full), novel_view=NovelViewRequest(alpha=0.0)).novel_view
+            if view is not None:
+                sim_truth, sim_mask = truth_view(scene, view.camera, t, float(session.contract.background))
+                pred = view.image[..., ::-1].astype(np.float64) / 255.0
+                psnr["C"].append(masked_psnr(pred, sim_truth, sim_mask).value)
     print(f"model {args.model_dir} ({args.precision}), {args.data}/{args.split}, {len(diffs)} scenes")
     labels = {"A": "dataset crops (= ghnerf-eval)", "B": "runtime preprocessing, stored ROI",
               "C": "Estimator, crop placed from the true joints"}
@@ -124,6 +167,10 @@ def main(argv=None) -> int:
         print(f"  {key} {src + ' heatmaps':<17} {labels[key]:<46} PCK@0.2 {res.value:.3f}  "
               f"({res.num_evaluated} joints, {res.num_pred_missing} not decoded)")
     print(f"  mean |stored crop - runtime crop|: {np.mean(diffs):.2f} levels of 255")
+    for key, values in psnr.items():
+        if values:
+            print(f"  {key} novel view at the first source camera {labels[key]:<46} masked PSNR mean {np.mean(values):.2f} "
+                  f"dB, median {np.median(values):.2f} ({len(values)} scenes)")
     return 0
 
 

@@ -38,6 +38,7 @@ from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
+from ghnerf_runtime.tracking import track_from_joints  # noqa: E402
 
 SUPERSAMPLE = 4
 
@@ -65,6 +66,9 @@ def main(argv=None) -> int:
     ap.add_argument("--config", help="estimator config JSON (ghnerf_runtime.config; the novel view is enabled "
                                      "whatever it says; --model-dir/--precision still apply)")
     ap.add_argument("--seen-motions", action="store_true")
+    ap.add_argument("--track-from-truth", action="store_true",
+                    help="place each pair's crop and sweep box from the previous pair's true joints (as "
+                         "ghnerf-bench runtime --track-from-truth): the view without the model's own tracking error")
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
     alphas = [float(a) for a in args.alphas.split(",")]
@@ -78,7 +82,7 @@ def main(argv=None) -> int:
     print(f"model {args.model_dir} ({ {g: f.precision for g, f in session.files.items()} }), "
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
     variants = [(a, s) for a in alphas for s in strides]
-    scores = {v: {"psnr": [], "ssim": [], "ms": []} for v in variants}
+    scores = {v: {"psnr": [], "ssim": [], "ms": [], "seq": []} for v in variants}
     opacity = {"subject": [], "around": []}  # coarse-pass rays of the stride-1 views
     motions = SEEN_MOTIONS if args.seen_motions else HELD_OUT_MOTIONS
     for seq in sequences:
@@ -94,6 +98,9 @@ def main(argv=None) -> int:
             t = float(seq.info["t0"]) + i / float(seq.info["fps"])
             pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
             for (alpha, stride), est in ests.items():
+                if args.track_from_truth and i > 0:
+                    est.tracker.track = track_from_joints(seq.joints_3d[i - 1], np.ones(25), np.ones(25, bool),
+                                                          est.config.tracking, i - 1)
                 session.runs.clear()
                 r = est.estimate(pair, novel_view=NovelViewRequest(alpha=alpha))
                 if r.novel_view is None or i % args.every:
@@ -110,6 +117,7 @@ def main(argv=None) -> int:
                 s["psnr"].append(masked_psnr(pred, truth, mask).value)
                 s["ssim"].append(masked_ssim(pred, truth, mask).value)
                 s["ms"].append(r.timing_ms["novel_render"])
+                s["seq"].append(int(seq.info["index"]))
                 if stride == 1 and len(session.runs) == 2:  # coarse pass + fine pass
                     uv, acc = session.runs[0]
                     px = np.clip(np.rint(uv).astype(int), 0, mask.shape[0] - 1)
@@ -127,6 +135,13 @@ def main(argv=None) -> int:
         tm = percentiles(s["ms"])
         print(f"| {alpha:g} | {stride} | {len(s['psnr'])} | {np.median(s['psnr']):.2f} ({np.mean(s['psnr']):.2f}) | "
               f"{np.median(s['ssim']):.3f} | {tm['median']:.1f} / {tm['p99']:.1f} |")
+    first = scores[variants[0]]
+    if first["psnr"]:  # how much the scenes differ: one mean per sequence
+        seq, p = np.array(first["seq"]), np.array(first["psnr"])
+        means = np.array([p[seq == k].mean() for k in np.unique(seq)])
+        print(f"per sequence (alpha {variants[0][0]:g}, stride {variants[0][1]}): mean PSNR min {means.min():.2f}, "
+              f"median {np.median(means):.2f}, max {means.max():.2f} dB over {means.size} sequences "
+              f"(standard error of the overall mean {means.std(ddof=1) / np.sqrt(means.size) if means.size > 1 else 0:.2f} dB)")
     if opacity["subject"]:
         on, off = np.concatenate(opacity["subject"]), np.concatenate(opacity["around"])
         print(f"accumulated opacity, coarse-pass rays of the stride-1 views: on the subject mean {on.mean():.2f} "

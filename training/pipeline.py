@@ -61,6 +61,9 @@ class PipelineConfig:
     train: int = 2500
     val: int = 256
     val_seen_motions: int = 128
+    freestyle_share: float = 0.0
+    """Share of ``train`` scenes moving ``freestyle`` (``SyntheticConfig.freestyle_share``); 0 is the
+    recipe of the shipped model."""
     res: int = 128
     workers: int = 2
     eval_split: str = "val"
@@ -137,6 +140,27 @@ class Stages:
         return s
 
 
+#: Written into each run folder the pipeline starts: the sha256 of the ``dataset.json`` it trains on.
+DATA_MARKER = "dataset.sha256"
+
+
+def _dataset_sha(cfg: PipelineConfig) -> str:
+    from training.model_card import sha256
+
+    return sha256(cfg.data / "dataset.json")
+
+
+def _data_marker_ok(cfg: PipelineConfig, run: Path) -> bool:
+    """The run trained on this dataset (runs made before the marker existed are taken on trust)."""
+    marker = run / DATA_MARKER
+    return not marker.exists() or marker.read_text().strip() == _dataset_sha(cfg)
+
+
+def _mark_data(cfg: PipelineConfig, run: Path) -> None:
+    run.mkdir(parents=True, exist_ok=True)
+    (run / DATA_MARKER).write_text(_dataset_sha(cfg) + "\n")
+
+
 def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = ()) -> list[str]:
     cmd = [sys.executable, "-m", "training.train", "--config", str(CONFIG_DIR / f"{preset}.json"),
            "--out", str(run), "--resume", "--data", str(cfg.data)]
@@ -178,6 +202,7 @@ def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
             steps.append((_pretrain_cmd(cfg, v, [f"threads={threads}"]), pretrain_dir(cfg, v) / "train.log"))
         steps.append((_train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"]), run / "train.log"))
         for cmd, log_path in steps:
+            _mark_data(cfg, log_path.parent)
             log_path.parent.mkdir(parents=True, exist_ok=True)
             log.info("$ %s &", shlex.join(cmd))
             with open(log_path, "a") as fh:
@@ -206,6 +231,7 @@ def _sh(cmd: list[str], log_path: Path | None = None) -> None:
 def dataset_matches(cfg: PipelineConfig) -> bool:
     """``dataset.json`` has the resolution and at least the requested, complete splits."""
     from training.data.cache import ShardedSplit
+    from training.data.splits import split_spec
 
     meta = cfg.data / "dataset.json"
     if not meta.exists():
@@ -218,6 +244,8 @@ def dataset_matches(cfg: PipelineConfig) -> bool:
     for name, n in want.items():
         if n and splits.get(name, {}).get("count", 0) < n:
             return False
+        if n and splits[name].get("spec") != split_spec(name, cfg.freestyle_share).to_json():
+            return False  # made by another recipe; generate names the difference
         if n:
             try:
                 if len(ShardedSplit(cfg.data, name)) < n:
@@ -231,7 +259,7 @@ def stage_data(cfg: PipelineConfig) -> tuple[list[Path], dict]:
     if not dataset_matches(cfg):
         _sh([sys.executable, "-m", "training.data.generate", "--out", str(cfg.data), "--train", str(cfg.train),
              "--val", str(cfg.val), "--val-seen-motions", str(cfg.val_seen_motions), "--res", str(cfg.res),
-             "--workers", str(cfg.workers)])
+             "--workers", str(cfg.workers), "--freestyle-share", str(cfg.freestyle_share)])
         if not dataset_matches(cfg):
             raise RuntimeError(f"{cfg.data}: the generated dataset does not match the request")
     return [cfg.data / "dataset.json"], json.loads((cfg.data / "dataset.json").read_text()).get("splits", {})
@@ -283,7 +311,7 @@ def _pretrain_config_matches(cfg: PipelineConfig, variant: str) -> bool:
 def _pretrain_finished(cfg: PipelineConfig, variant: str) -> bool:
     run = pretrain_dir(cfg, variant)
     if not ((run / "summary.json").exists() and (run / "human.pt").exists()
-            and _pretrain_config_matches(cfg, variant)):
+            and _pretrain_config_matches(cfg, variant) and _data_marker_ok(cfg, run)):
         return False
     steps = json.loads((run / "summary.json").read_text()).get("steps", 0)
     return steps >= pretrain_inputs(cfg, variant)["iterations"]
@@ -294,6 +322,10 @@ def stage_pretrain(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]
     if not _pretrain_finished(cfg, variant):
         if (run / "last.pt").exists() and (run / "config.json").exists() and not _pretrain_config_matches(cfg, variant):
             raise RuntimeError(f"{run} holds a pretraining run with another config; move it away or pass --runs")
+        if (run / "last.pt").exists() and not _data_marker_ok(cfg, run):
+            raise RuntimeError(f"{run} holds a pretraining run on another dataset ({DATA_MARKER} differs from "
+                               f"{cfg.data}/dataset.json); move it away or pass --runs")
+        _mark_data(cfg, run)
         _sh(_pretrain_cmd(cfg, variant), run / "train.log")
     return [run / "human.pt"], {"summary": json.loads((run / "summary.json").read_text()),
                                 "config": json.loads((run / "config.json").read_text())}
@@ -352,6 +384,8 @@ def _run_finished(cfg: PipelineConfig, variant: str) -> bool:
         return False
     if _run_model(run) != expected_model(cfg, variant):  # the preset changed since (architecture)
         return False
+    if not _data_marker_ok(cfg, run):
+        return False
     sm = json.loads(summary_p.read_text())
     return sm.get("steps", 0) >= tc["iterations"] or bool(cfg.accept_stopped and sm.get("stopped_early"))
 
@@ -370,6 +404,9 @@ def _check_run_folder(cfg: PipelineConfig, variant: str) -> None:
     if (run / "last.pt").exists() and _run_model(run) != expected_model(cfg, variant):
         raise RuntimeError(f"{run} holds a run of another model config (the preset changed since); "
                            "move it away or pass --runs")
+    if (run / "last.pt").exists() and not _data_marker_ok(cfg, run):
+        raise RuntimeError(f"{run} holds a run on another dataset ({DATA_MARKER} differs from "
+                           f"{cfg.data}/dataset.json); move it away or pass --runs")
 
 
 def stage_train(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
@@ -380,6 +417,7 @@ def stage_train(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
     # A finished run with the same config (e.g. started by hand) is reused as is.
     if not _run_finished(cfg, variant):
         _check_run_folder(cfg, variant)
+        _mark_data(cfg, run)
         _sh(_train_cmd(cfg, preset, run), run / "train.log")
     summary = json.loads(summary_p.read_text())
     if summary.get("stopped_early"):
@@ -558,11 +596,14 @@ def run(cfg: PipelineConfig) -> dict | None:
     cfg.out.mkdir(parents=True, exist_ok=True)
     st = Stages(cfg.out, cfg.force)
     data_in = {"data": str(cfg.data), "res": cfg.res, "train": cfg.train, "val": cfg.val,
-               "vsm": cfg.val_seen_motions}
+               "vsm": cfg.val_seen_motions, **({"freestyle": cfg.freestyle_share} if cfg.freestyle_share else {})}
     d = st.run("data", data_in, lambda: stage_data(cfg))
+    # What the training stages read: the request *and* the manifest's hash, so a dataset regenerated
+    # under another recipe (same folder and counts, say a new training motion) retrains the models.
+    data_key = {"request": d["inputs"], "manifest": d["outputs"]}
 
     def train_in(variant: str) -> dict:
-        return {"data": d["inputs"], "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
+        return {"data": data_key, "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
                 "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped,
                 "pretrain": pretrain_inputs(cfg, variant) if pretrain_block(cfg, variant) else None}
 
@@ -571,7 +612,7 @@ def run(cfg: PipelineConfig) -> dict | None:
         train_side_by_side(cfg, todo)
     for variant in cfg.variants:
         if pretrain_block(cfg, variant):
-            st.run(f"pretrain_{variant}", {"data": d["inputs"], "config": pretrain_inputs(cfg, variant)},
+            st.run(f"pretrain_{variant}", {"data": data_key, "config": pretrain_inputs(cfg, variant)},
                    lambda v=variant: stage_pretrain(cfg, v))
         t = st.run(f"train_{variant}", train_in(variant), lambda v=variant: stage_train(cfg, v))
         ckpt = {variant: Path(next(iter(t["outputs"])))}
@@ -607,6 +648,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sequential-train", action="store_true",
                     help="train the variants one after the other with every core (default on CPU: side by side)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
+    ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
+    ap.add_argument("--freestyle-share", type=float, default=0.0,
+                    help="share of train scenes moving 'freestyle' (a new dataset: pass a new --data folder)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     out = Path(args.out)
@@ -618,6 +663,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.eval_limit is not None:
         cfg.eval_limit = args.eval_limit
     cfg.force = tuple(args.force)
+    cfg.freestyle_share = args.freestyle_share
     cfg.accept_stopped = args.accept_stopped
     cfg.threads = args.threads
     cfg.parallel_train = not args.sequential_train
@@ -626,6 +672,7 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         ap.error(f"--variants: unknown {bad}; variants: {list(VARIANTS)}")
     cfg.train_overrides = [*cfg.train_overrides, *args.set]
+    cfg.pretrain_overrides = [*cfg.pretrain_overrides, *args.pretrain_set]
     cfg.command = shlex.join(["python", "-m", "training.pipeline", *(argv if argv is not None else sys.argv[1:])])
     card = run(cfg)
     if card is not None:

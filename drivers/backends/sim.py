@@ -11,7 +11,8 @@ URL options (every one validated; unknown ones are rejected by name)::
 
 * ``fps`` (30): capture rate of each camera.
 * ``seed`` (0): the person, clothes and room, and the timing noise (jitter, drops).
-* ``motion`` (``wave``): a procedural motion (``drivers.sim.MOTION_NAMES``); or
+* ``motion`` (``wave``): a procedural motion (``drivers.sim.MOTION_NAMES``; ``freestyle``
+  moves every joint along random curves drawn from ``seed``); or
   ``bvh=PATH``: a BVH clip (the two are exclusive).
 * ``width``, ``height`` (640x480): image size of both cameras.
 * ``baseline`` (1.2 m), ``convergence`` (degrees; default: both aimed at the
@@ -82,7 +83,7 @@ from drivers.clock import Clock
 from drivers.errors import RigConfigError, RigDisconnectedError, RigOperationError
 from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig, PairingStats
-from drivers.sim import MOTION_NAMES, RigPlacement, SceneConfig, SensorModel, SimScene
+from drivers.sim import MOTION_NAMES, MotionParams, RigPlacement, SceneConfig, SensorModel, SimScene
 from drivers.url import RigUrl
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import rig_to_dict
@@ -148,6 +149,8 @@ class SimOptions:
         max_loop_mb = url.take_float("max_loop_mb", 2048.0, lo=1.0)
         url.finish()
         kwargs = {"motion": bvh} if bvh is not None else ({"motion": motion} if motion else {})
+        if motion == "freestyle":  # its random trajectories follow the URL's seed too
+            kwargs["motion_params"] = MotionParams(seed=seed)
         return cls(
             timing=timing,
             scene=SceneConfig(seed=seed, sensor=SensorModel(read_noise=noise), **kwargs),

@@ -18,6 +18,7 @@ interaction with objects.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Callable, Protocol
 
 import numpy as np
@@ -98,11 +99,13 @@ class MotionParams:
             ``strides_per_lap`` strides).
         amplitude: scales the motion's angles (1.0 = nominal).
         strides_per_lap: walk only: strides per circle lap; 0 walks on the spot.
+        seed: freestyle only: picks its random joint trajectories (same seed, same motion).
     """
 
     period_s: float = 0.0  # 0 = the motion's default
     amplitude: float = 1.0
     strides_per_lap: int = 3
+    seed: int = 0
 
     def __post_init__(self) -> None:
         self.validate()
@@ -114,6 +117,8 @@ class MotionParams:
             raise SimConfigError("MotionParams.amplitude", f"must be in [0, 1.5], got {self.amplitude!r}")
         if not (isinstance(self.strides_per_lap, int) and 0 <= self.strides_per_lap <= 20):
             raise SimConfigError("MotionParams.strides_per_lap", f"must be an int in [0, 20], got {self.strides_per_lap!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or not 0 <= self.seed < 2**63:
+            raise SimConfigError("MotionParams.seed", f"must be an int in [0, 2**63), got {self.seed!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,6 +254,62 @@ def _jumping_jacks(m: ProceduralMotion, t: float) -> Pose:
     return Pose(b.R, m.rest_root)
 
 
+#: Freestyle's degrees of freedom and their ranges in degrees (after the sagittal/frontal
+#: ranges of motion of a healthy adult, trimmed where the capsule body would self-intersect).
+_FREESTYLE_RANGES: tuple[tuple[str, float, float], ...] = (
+    ("r_arm_abduct", 0.0, 170.0), ("r_arm_flex", -40.0, 170.0), ("r_elbow", 0.0, 140.0),
+    ("l_arm_abduct", 0.0, 170.0), ("l_arm_flex", -40.0, 170.0), ("l_elbow", 0.0, 140.0),
+    ("r_hip_flex", -20.0, 80.0), ("r_knee", 0.0, 110.0), ("r_hip_abduct", 0.0, 35.0), ("r_ankle", -20.0, 20.0),
+    ("l_hip_flex", -20.0, 80.0), ("l_knee", 0.0, 110.0), ("l_hip_abduct", 0.0, 35.0), ("l_ankle", -20.0, 20.0),
+    ("spine_flex", -10.0, 35.0), ("chest_twist", -30.0, 30.0), ("chest_side", -15.0, 15.0),
+    ("head_yaw", -40.0, 40.0), ("head_pitch", -25.0, 25.0),
+)
+_FREESTYLE_HARMONICS = 3
+
+
+@lru_cache(maxsize=256)
+def _freestyle_curves(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per degree of freedom: Fourier amplitudes ``(D, H)`` and phases ``(D, H)``, scaled so
+    each curve spans exactly [-1, 1] over one period (checked on a dense grid)."""
+    rng = np.random.default_rng([int(seed), 0xF5EE])
+    k = np.arange(1, _FREESTYLE_HARMONICS + 1)
+    amp = rng.normal(size=(len(_FREESTYLE_RANGES), _FREESTYLE_HARMONICS)) / k
+    phase = rng.uniform(0.0, TAU, amp.shape)
+    grid = np.linspace(0.0, TAU, 256, endpoint=False)
+    s = np.einsum("dh,dhg->dg", amp, np.sin(k[None, :, None] * grid[None, None, :] + phase[..., None]))
+    lo, hi = s.min(axis=1, keepdims=True), s.max(axis=1, keepdims=True)
+    # Affine map of each curve onto [-1, 1]: scale the harmonics, keep the offset separately.
+    scale = 2.0 / np.maximum(hi - lo, 1e-9)
+    offset = -1.0 - lo[:, 0] * scale[:, 0]
+    return np.concatenate([amp * scale, offset[:, None]], axis=1), phase
+
+
+def _freestyle(m: ProceduralMotion, t: float) -> Pose:
+    """Random, smooth whole-body movement: every joint angle of ``_FREESTYLE_RANGES`` follows its
+    own periodic curve (three harmonics of the period, random amplitudes and phases drawn from
+    ``params.seed``) that sweeps its whole range; ``amplitude`` scales the angles (0: rest pose).
+    Covers poses no choreographed motion reaches (arms overhead, wide stances, twists), so a
+    pose model trained on it sees the body's range of motion, not a handful of routines."""
+    coef, phase = _freestyle_curves(int(m.params.seed))
+    ph = TAU * t / m.period_s
+    k = np.arange(1, _FREESTYLE_HARMONICS + 1)
+    s = np.clip((coef[:, :-1] * np.sin(k * ph + phase)).sum(axis=1) + coef[:, -1], -1.0, 1.0)
+    a = m.params.amplitude
+    q = {}
+    for (name, lo, hi), v in zip(_FREESTYLE_RANGES, s):
+        mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        q[name] = float(np.clip(a * (mid + half * v), lo, hi))  # amplitude 0: the rest pose
+    b = _Builder()
+    for side in ("r", "l"):
+        _arm(b, side, abduct=q[f"{side}_arm_abduct"], flex=q[f"{side}_arm_flex"], elbow=q[f"{side}_elbow"])
+        _leg(b, side, flex=q[f"{side}_hip_flex"], knee=q[f"{side}_knee"], ankle=q[f"{side}_ankle"],
+             abduct=q[f"{side}_hip_abduct"])
+    b.set("spine", rot_x(_deg(q["spine_flex"])))
+    b.set("chest", rot_y(_deg(q["chest_twist"])), rot_z(_deg(q["chest_side"])))
+    b.set("head", rot_y(_deg(q["head_yaw"])), rot_x(_deg(q["head_pitch"])))
+    return Pose(b.R, m.rest_root)
+
+
 # name -> (function, default period, grounded, planted)
 _MOTIONS: dict[str, tuple[Callable[[ProceduralMotion, float], Pose], float, bool, bool]] = {
     "stand": (_stand, 4.0, True, True),
@@ -259,6 +320,7 @@ _MOTIONS: dict[str, tuple[Callable[[ProceduralMotion, float], Pose], float, bool
     "reach": (_reach, 3.2, True, True),
     "turn": (_turn, 4.0, True, True),
     "jumping_jacks": (_jumping_jacks, 1.4, True, True),
+    "freestyle": (_freestyle, 6.0, True, True),
 }
 MOTION_NAMES: tuple[str, ...] = tuple(_MOTIONS)
 

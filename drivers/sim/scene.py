@@ -209,7 +209,8 @@ class SimScene:
         return [self.render(cam, t, with_truth=with_truth) for cam in cameras]
 
 
-def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Sequence[str] = MOTION_NAMES) -> SimScene:
+def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Sequence[str] = MOTION_NAMES,
+                 motion_weights: Sequence[float] | None = None) -> SimScene:
     """A scene with everything drawn from ``seed``: body, clothes, room, motion, speed, place,
     heading, light, exposure and noise.
 
@@ -218,6 +219,9 @@ def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Seq
             whole motion loop (when the volume is large enough); default: the working volume of
             the default :class:`RigPlacement`.
         motions: procedural motion names to choose from.
+        motion_weights: relative probability of each of ``motions``; default: uniform (the draw
+            then consumes the stream exactly as it did before weights existed, so seeds keep
+            their scenes).
     """
     from drivers.sim.placement import RigPlacement  # local: placement is only needed for the default volume
 
@@ -226,18 +230,28 @@ def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Seq
     bad = [m for m in motions if m not in MOTION_NAMES]
     if not motions or bad:
         raise SimConfigError("motions", f"must be a non-empty subset of {MOTION_NAMES}, got {list(motions)}")
+    if motion_weights is not None:
+        w = np.asarray(motion_weights, dtype=float)
+        if w.shape != (len(motions),) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+            raise SimConfigError("motion_weights", f"must be {len(motions)} non-negative weights with a positive sum, "
+                                                   f"got {list(motion_weights)}")
     volume = volume or RigPlacement().build().volume
     rng = np.random.default_rng([int(seed), _RANDOM_SCENE])
     lo, hi = volume.min_corner, volume.max_corner
     inset = np.minimum(0.3, 0.45 * (hi - lo))
     x = float(rng.uniform(lo[0] + inset[0], hi[0] - inset[0]))
     z = float(rng.uniform(lo[2] + inset[2], hi[2] - inset[2]))
-    motion = str(motions[int(rng.integers(len(motions)))])
+    if motion_weights is None:
+        motion = str(motions[int(rng.integers(len(motions)))])
+    else:
+        motion = str(motions[int(rng.choice(len(motions), p=w / w.sum()))])
     light = (float(rng.uniform(-1, 1)), float(rng.uniform(-1.0, -0.3)), float(rng.uniform(-1, 0.5)))
     config = SceneConfig(
         seed=int(seed),
         motion=motion,
-        motion_params=MotionParams(amplitude=float(rng.uniform(0.7, 1.15))),
+        motion_params=MotionParams(amplitude=float(rng.uniform(0.7, 1.15)),
+                                   # own stream: the other motions' scenes stay what they were
+                                   seed=int(np.random.default_rng([int(seed), _RANDOM_SCENE, 1]).integers(2**62))),
         speed=float(rng.uniform(0.7, 1.3)),
         position_xz=(x, z),
         heading_deg=float(rng.uniform(-180.0, 180.0)),

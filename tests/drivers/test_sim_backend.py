@@ -21,6 +21,15 @@ def test_options_reach_the_rig_placement():
     source.close()
 
 
+def test_freestyle_follows_the_url_seed():
+    from drivers.backends.sim import SimOptions
+    from drivers.url import RigUrl
+
+    a, b = (SimOptions.from_url(RigUrl.parse(f"sim://?motion=freestyle&seed={s}&cache=off")).scene for s in (3, 4))
+    assert (a.motion, a.motion_params.seed, b.motion_params.seed) == ("freestyle", 3, 4)
+    assert not np.allclose(SimScene(a).joints_3d(1.0), SimScene(b).joints_3d(1.0))
+
+
 @pytest.mark.parametrize(
     ("url", "names"),
     [

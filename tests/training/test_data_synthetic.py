@@ -14,7 +14,10 @@ from training.data.cache import MANIFEST, ShardedSplit
 from training.data.errors import DataConfigError, DatasetError
 from training.data.generate import generate, main
 from training.data.sample import FIELDS
-from training.data.splits import HELD_OUT_BASELINE_M, HELD_OUT_MOTIONS, SPLITS, TRAIN_MOTIONS
+from drivers.sim import random_scene
+from training.data.cache import read_manifest, write_manifest
+from training.data.splits import (HELD_OUT_BASELINE_M, HELD_OUT_MOTIONS, ROUTINE_MOTIONS, SPLITS, TRAIN_MOTIONS,
+                                  SplitSpec, split_spec)
 from training.data.synthetic import SyntheticConfig, make_sample
 from training.data.targets import KEYS, TargetConfig
 
@@ -69,6 +72,46 @@ def test_resume_with_another_config_names_the_field(dataset):
         generate(dataset, {"train": 1}, SyntheticConfig(resolution=RES, novel_views=2, cold_start_fraction=0.5),
                  dataset_seed=3, workers=1, shard_size=4)
     assert err.value.path.endswith(MANIFEST)
+
+
+def test_resume_under_another_split_recipe_is_refused(dataset, tmp_path):
+    # A dataset of the routines only must not be extended with freestyle scenes (or the reverse).
+    root = tmp_path / "old_recipe"
+    generate(root, {"train": 1}, CONFIG, dataset_seed=3, workers=1, shard_size=4)
+    manifest = read_manifest(root)
+    manifest["splits"]["train"]["spec"] = split_spec("train", 0.25).to_json()
+    write_manifest(root, manifest)
+    with pytest.raises(DatasetError, match="'train' was generated with spec .*new folder"):
+        generate(root, {"train": 2}, CONFIG, dataset_seed=3, workers=1, shard_size=4)
+
+
+def test_freestyle_joins_train_only_on_request():
+    assert "freestyle" not in SPLITS["train"].motions and SPLITS["train"].motion_weights is None
+    assert SPLITS["val_seen_motions"].motions == ROUTINE_MOTIONS == TRAIN_MOTIONS
+    mixed = split_spec("train", 0.25)
+    weights = dict(zip(mixed.motions, mixed.motion_weights))
+    assert weights["freestyle"] == pytest.approx(0.25) and sum(weights.values()) == pytest.approx(1.0)
+    assert split_spec("val", 0.25) == SPLITS["val"]  # the held-out splits never change
+    # Uniform splits keep the manifest format older datasets were written with; so does share 0.
+    assert "motion_weights" not in SPLITS["train"].to_json() and "motion_weights" in mixed.to_json()
+    assert "freestyle_share" not in CONFIG.to_json()
+    assert SyntheticConfig.from_json(replace(CONFIG, freestyle_share=0.25).to_json()).freestyle_share == 0.25
+    with pytest.raises(DataConfigError, match="motion_weights"):
+        SplitSpec("x", 0, ("stand", "wave"), ((0.1, 0.5),), (1.0,))
+    with pytest.raises(DataConfigError, match="motion_weights"):
+        SplitSpec("x", 0, ("stand", "wave"), ((0.1, 0.5),), (0.0, 0.0))
+    with pytest.raises(DataConfigError, match="freestyle_share"):
+        SyntheticConfig(freestyle_share=1.0)
+
+
+def test_a_freestyle_dataset_draws_its_share_and_never_a_held_out_motion():
+    config = replace(CONFIG, freestyle_share=0.5)
+    spec = split_spec("train", config.freestyle_share)
+    motions = [random_scene(spec.scene_seed(0, i), motions=spec.motions, motion_weights=spec.motion_weights).config.motion
+               for i in range(60)]
+    assert 18 <= motions.count("freestyle") <= 42 and not set(motions) & set(HELD_OUT_MOTIONS)
+    sample = make_sample(spec, 0, next(i for i, m in enumerate(motions) if m == "freestyle"), config)
+    assert sample.metadata["motion"] == "freestyle"
 
 
 # ------------------------------------------------------------------ split disjointness

@@ -85,6 +85,19 @@ def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_
     torch.save({"model_config": mc}, run / "last.pt")
     assert _run_finished(cfg, "baseline")
 
+    # A run the pipeline started records the dataset it trained on: regenerated data is not that run's.
+    from training.pipeline import DATA_MARKER, _check_run_folder, _mark_data
+
+    cfg.data.mkdir(parents=True)
+    (cfg.data / "dataset.json").write_text('{"splits": {"train": {"spec": {"motions": ["stand"]}}}}')
+    _mark_data(cfg, run)
+    assert (run / DATA_MARKER).exists() and _run_finished(cfg, "baseline")
+    (cfg.data / "dataset.json").write_text('{"splits": {"train": {"spec": {"motions": ["stand", "freestyle"]}}}}')
+    assert not _run_finished(cfg, "baseline")
+    with pytest.raises(RuntimeError, match="another dataset"):
+        _check_run_folder(cfg, "baseline")
+    (run / DATA_MARKER).unlink()
+
     other = preset("edge128_baseline")
     other.levels[0].regularizer.channels = 4  # the preset's architecture changed since
     torch.save({"model_config": other.to_dict()}, run / "last.pt")

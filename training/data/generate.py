@@ -54,7 +54,7 @@ class GenerationReport:
 def _render_shard(task: tuple) -> tuple[str, int, int, float]:
     split, k, first, count, folder, dataset_seed, config_json = task
     config = SyntheticConfig.from_json(config_json)
-    spec = split_spec(split)
+    spec = split_spec(split, config.freestyle_share)
     start = time.perf_counter()
     samples = [make_sample(spec, dataset_seed, i, config) for i in range(first, first + count)]
     write_shard(folder, samples, first)
@@ -121,6 +121,11 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
         known = manifest["splits"].get(split)
         if known is not None and known["shard_size"] != shard_size:
             raise DatasetError(out / MANIFEST, f"split {split!r} uses shard_size {known['shard_size']}, not {shard_size}")
+        spec = split_spec(split, config.freestyle_share).to_json()
+        if known is not None and known.get("spec") != spec:
+            # e.g. a dataset made before a motion joined the split: resuming would mix two recipes
+            raise DatasetError(out / MANIFEST, f"split {split!r} was generated with spec {known.get('spec')}, this "
+                                               f"request's is {spec}: generate into a new folder")
         split_dir = out / split
         split_dir.mkdir(exist_ok=True)
         remove_stale_temporaries(split_dir)
@@ -156,7 +161,7 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
     for split, count in counts.items():
         if count:
             manifest["splits"][split] = {"count": int(count), "shard_size": int(shard_size),
-                                         "spec": split_spec(split).to_json(),
+                                         "spec": split_spec(split, config.freestyle_share).to_json(),
                                          "seed_range": list(split_spec(split).seed_range(dataset_seed))}
     write_manifest(out, manifest)
     on_disk = sum(int(info["count"]) for info in manifest["splits"].values())
@@ -174,6 +179,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--novel-views", type=int, default=2, help="novel target cameras per sample (0..4)")
     p.add_argument("--supersample", type=int, default=2, help="render factor before the INTER_AREA reduction")
     p.add_argument("--cold-start", type=float, default=0.2, help="share of samples with working-volume source ROIs")
+    p.add_argument("--freestyle-share", type=float, default=0.0,
+                   help="share of train scenes moving 'freestyle' (random poses over the range of motion); 0: routines only")
     p.add_argument("--seed", type=int, default=0, help="dataset seed")
     p.add_argument("--workers", type=int, default=2, help="processes")
     p.add_argument("--shard-size", type=int, default=64, help="samples per shard")
@@ -186,7 +193,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
     try:
         config = SyntheticConfig(resolution=args.res, novel_views=args.novel_views, supersample=args.supersample,
-                                 cold_start_fraction=args.cold_start)
+                                 cold_start_fraction=args.cold_start, freestyle_share=args.freestyle_share)
         counts = {"train": args.train, "val": args.val, "val_seen_motions": args.val_seen_motions}
         report = generate(args.out, counts, config, dataset_seed=args.seed, workers=args.workers,
                           shard_size=args.shard_size)

@@ -32,7 +32,11 @@ SEEDS_PER_DATASET = 10**9
 #: Largest dataset seed (keeps every split inside its own 2**50-wide seed range).
 MAX_DATASET_SEED = 10**5
 HELD_OUT_MOTIONS: tuple[str, ...] = ("jumping_jacks", "reach")
-TRAIN_MOTIONS: tuple[str, ...] = tuple(m for m in MOTION_NAMES if m not in HELD_OUT_MOTIONS)
+#: The choreographed training motions: ``train`` (by default) and ``val_seen_motions`` draw from
+#: them. ``freestyle`` (random trajectories over the body's range of motion) joins ``train`` only
+#: when a dataset asks for it (``SyntheticConfig.freestyle_share``).
+ROUTINE_MOTIONS: tuple[str, ...] = tuple(m for m in MOTION_NAMES if m not in HELD_OUT_MOTIONS + ("freestyle",))
+TRAIN_MOTIONS: tuple[str, ...] = ROUTINE_MOTIONS
 #: Source baselines only the held-out splits use, metres ``[lo, hi)``.
 HELD_OUT_BASELINE_M: tuple[float, float] = (0.85, 1.05)
 #: The full range ``RigPlacement.random`` draws baselines from.
@@ -49,12 +53,14 @@ class SplitSpec:
         motions: procedural motions the split draws from.
         baseline_bands: allowed source baselines, a union of ``[lo, hi)`` intervals in metres,
             sampled uniformly by length.
+        motion_weights: relative probability of each motion; ``None``: uniform.
     """
 
     name: str
     seed_base: int
     motions: tuple[str, ...]
     baseline_bands: tuple[tuple[float, float], ...]
+    motion_weights: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.replace("_", "").isalnum():
@@ -62,6 +68,10 @@ class SplitSpec:
         bad = [m for m in self.motions if m not in MOTION_NAMES]
         if not self.motions or bad:
             raise DataConfigError("SplitSpec.motions", f"must be a non-empty subset of {MOTION_NAMES}, got {self.motions}")
+        w = self.motion_weights
+        if w is not None and (len(w) != len(self.motions) or min(w) < 0 or sum(w) <= 0):
+            raise DataConfigError("SplitSpec.motion_weights",
+                                  f"must be one non-negative weight per motion with a positive sum, got {w}")
         for lo, hi in self.baseline_bands or ((0.0, -1.0),):
             if not BASELINE_RANGE_M[0] <= lo < hi <= BASELINE_RANGE_M[1]:
                 raise DataConfigError("SplitSpec.baseline_bands",
@@ -95,8 +105,11 @@ class SplitSpec:
         return replace(base, baseline_m=self.baseline(rng))
 
     def to_json(self) -> dict:
-        return {"name": self.name, "seed_base": self.seed_base, "motions": list(self.motions),
-                "baseline_bands": [list(b) for b in self.baseline_bands]}
+        out = {"name": self.name, "seed_base": self.seed_base, "motions": list(self.motions),
+               "baseline_bands": [list(b) for b in self.baseline_bands]}
+        if self.motion_weights is not None:  # absent when uniform: older manifests compare equal
+            out["motion_weights"] = [float(x) for x in self.motion_weights]
+        return out
 
 
 def check_dataset_seed(seed: int) -> int:
@@ -109,15 +122,24 @@ _LO, _HI = HELD_OUT_BASELINE_M
 SPLITS: dict[str, SplitSpec] = {
     "train": SplitSpec("train", 0, TRAIN_MOTIONS, ((BASELINE_RANGE_M[0], _LO), (_HI, BASELINE_RANGE_M[1]))),
     "val": SplitSpec("val", 1 << 50, HELD_OUT_MOTIONS, ((_LO, _HI),)),
-    "val_seen_motions": SplitSpec("val_seen_motions", 2 << 50, TRAIN_MOTIONS, ((_LO, _HI),)),
+    "val_seen_motions": SplitSpec("val_seen_motions", 2 << 50, ROUTINE_MOTIONS, ((_LO, _HI),)),
 }
 
 
-def split_spec(name: str) -> SplitSpec:
+def split_spec(name: str, freestyle_share: float = 0.0) -> SplitSpec:
+    """The split ``name``; for ``train`` with ``freestyle_share`` > 0, that share of its scenes move
+    ``freestyle`` and the routines share the rest equally (the held-out splits never change)."""
     if name not in SPLITS:
         raise DataConfigError("split", f"unknown split {name!r}; splits: {sorted(SPLITS)}")
-    return SPLITS[name]
+    if not 0.0 <= freestyle_share < 1.0:
+        raise DataConfigError("freestyle_share", f"must be in [0, 1), got {freestyle_share!r}")
+    spec = SPLITS[name]
+    if name != "train" or freestyle_share == 0.0:
+        return spec
+    routine = (1.0 - freestyle_share) / len(spec.motions)
+    return replace(spec, motions=spec.motions + ("freestyle",),
+                   motion_weights=(routine,) * len(spec.motions) + (float(freestyle_share),))
 
 
-__all__ = ["SEEDS_PER_DATASET", "MAX_DATASET_SEED", "HELD_OUT_MOTIONS", "TRAIN_MOTIONS", "HELD_OUT_BASELINE_M",
+__all__ = ["SEEDS_PER_DATASET", "MAX_DATASET_SEED", "HELD_OUT_MOTIONS", "TRAIN_MOTIONS", "ROUTINE_MOTIONS", "HELD_OUT_BASELINE_M",
            "BASELINE_RANGE_M", "SplitSpec", "SPLITS", "split_spec", "check_dataset_seed"]

@@ -58,6 +58,9 @@ class SyntheticConfig:
             novel cameras' distance to the subject, elevation above it and horizontal field of view.
         novel_image_size: side of the novel cameras' (square, virtual) full image.
         novel_aim_jitter_m: standard deviation of the novel cameras' aim point around the box centre.
+        freestyle_share: share of ``train`` scenes that move ``freestyle`` (random trajectories over
+            the body's range of motion) instead of a routine; 0: the routines only
+            (``training.data.splits.split_spec``).
     """
 
     resolution: int = 128
@@ -73,6 +76,7 @@ class SyntheticConfig:
     novel_hfov_deg: tuple[float, float] = (45.0, 70.0)
     novel_image_size: int = 512
     novel_aim_jitter_m: float = 0.1
+    freestyle_share: float = 0.0
 
     def __post_init__(self) -> None:
         def fail(name: str, message: str) -> None:
@@ -105,6 +109,7 @@ class SyntheticConfig:
         number("cold_start_fraction", 0.0, 1.0)
         number("track_noise_m", 0.0, 0.5)
         number("novel_aim_jitter_m", 0.0, 1.0)
+        number("freestyle_share", 0.0, 0.95)
         interval("margin_frac", 0.0, 2.0)
         interval("track_lag_s", 0.0, 1.0)
         interval("novel_radius_m", 1.0, 10.0)
@@ -116,7 +121,10 @@ class SyntheticConfig:
         return tuple(f"src{i}" for i in range(NUM_SOURCES)) + tuple(f"novel{i}" for i in range(self.novel_views))
 
     def to_json(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        out = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        if out["freestyle_share"] == 0.0:
+            del out["freestyle_share"]  # keeps the manifests of datasets made before it existed valid
+        return out
 
     @classmethod
     def from_json(cls, data: dict) -> "SyntheticConfig":
@@ -171,7 +179,8 @@ def make_sample(spec: SplitSpec, dataset_seed: int, index: int, config: Syntheti
     rng = np.random.default_rng([scene_seed, _SAMPLE_STREAM])
     placement = spec.placement(rng)
     rig = placement.build()
-    scene: SimScene = random_scene(scene_seed, volume=rig.volume, motions=spec.motions)
+    scene: SimScene = random_scene(scene_seed, volume=rig.volume, motions=spec.motions,
+                                   motion_weights=spec.motion_weights)
     t = float(rng.uniform(0.0, scene.period_s))
     cold = bool(rng.uniform() < config.cold_start_fraction)
     lag = float(rng.uniform(*config.track_lag_s))
