@@ -100,6 +100,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append("")
     L.append(f"- Dataset: `{data.get('path')}` ({data.get('source')}, {data.get('resolution')} px crops); "
              f"splits: " + ", ".join(f"{k} {v}" for k, v in (data.get("splits") or {}).items()))
+    if data.get("motions"):
+        L.append("- Motions: " + "; ".join(f"{k}: {v}" for k, v in data["motions"].items() if v))
     L.append(f"- Metrics on the held-out split `{data.get('eval_split')}` (unseen bodies, motions and rigs), "
              f"{data.get('eval_scenes')} scenes.")
     L.append("")

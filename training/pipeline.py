@@ -512,6 +512,15 @@ def stage_eval(cfg: PipelineConfig, variant: str, ckpt: Path) -> tuple[list[Path
     return [out], {}
 
 
+def motion_mix(spec: dict) -> str:
+    """A split spec's motions as the card prints them: ``"stand, walk"`` or, weighted, ``"stand 11 %, ..."``."""
+    motions, weights = spec.get("motions") or [], spec.get("motion_weights")
+    if not weights:
+        return ", ".join(motions)
+    total = sum(weights)
+    return ", ".join(f"{m} {100 * w / total:.0f} %" for m, w in zip(motions, weights))
+
+
 def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
     from training.model_card import hardware, sha256, write_card
 
@@ -557,6 +566,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         "wall_time_s": {name: (st.stamp(name) or {}).get("wall_s") for name in STAGES if name != "card"},
         "data": {"path": str(cfg.data), "source": ds_meta.get("source"), "resolution": ds_meta.get("resolution"),
                  "splits": {k: v.get("count") for k, v in ds_meta.get("splits", {}).items()},
+                 "motions": {k: motion_mix(v.get("spec") or {}) for k, v in ds_meta.get("splits", {}).items()},
                  "eval_split": cfg.eval_split, "eval_scenes": next(iter(metrics["models"].values()))["scenes"]},
         "training": training,
         "metrics": metrics["models"],

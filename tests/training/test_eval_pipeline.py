@@ -37,7 +37,8 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     card = {
         "name": "test", "summary": "s", "quick": True, "command": "python -m training.pipeline --quick",
         "hardware": {"cpu": "cpu", "cores": 2}, "wall_time_s": {"data": 60.0, "train_ghnerf": 120.0},
-        "data": {"path": "d", "splits": {"train": 3}, "eval_split": "val", "eval_scenes": 2},
+        "data": {"path": "d", "splits": {"train": 3}, "eval_split": "val", "eval_scenes": 2,
+                 "motions": {"train": "stand 50 %, freestyle 50 %", "val": "reach"}},
         "training": {"ghnerf": {"config": {"preset": "edge128", "targets_per_iter": 4, "heat_rays": 512,
                                            "patch_size": 16, "lr": 5e-4, "lr_decay_gamma": 0.5,
                                            "lr_decay_every": 2500}, "steps": 8000, "wall_s": 1800}},
@@ -60,6 +61,10 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
     assert "| model | 0-15 deg | 15-180 deg |" in md and "| ghnerf_int8 | 22.50 (2) | n/a (0) |" in md
+    assert "- Motions: train: stand 50 %, freestyle 50 %; val: reach" in md
+    from training.pipeline import motion_mix
+    assert motion_mix({"motions": ["a", "b"], "motion_weights": [1.0, 3.0]}) == "a 25 %, b 75 %"
+    assert motion_mix({"motions": ["a", "b"]}) == "a, b"
 
 
 def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_path):
