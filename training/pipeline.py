@@ -61,9 +61,9 @@ class PipelineConfig:
     train: int = 2500
     val: int = 256
     val_seen_motions: int = 128
-    freestyle_share: float = 0.0
-    """Share of ``train`` scenes moving ``freestyle`` (``SyntheticConfig.freestyle_share``); 0 is the
-    recipe of the shipped model."""
+    freestyle_share: float = 1.0 / 3.0
+    """Share of ``train`` scenes moving ``freestyle`` (``SyntheticConfig.freestyle_share``): a third is
+    the recipe of the shipped (fifth) model; 0 makes the routines-only set of the models before it."""
     res: int = 128
     workers: int = 2
     eval_split: str = "val"
@@ -660,8 +660,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
     ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
-    ap.add_argument("--freestyle-share", type=float, default=0.0,
-                    help="share of train scenes moving 'freestyle' (a new dataset: pass a new --data folder)")
+    ap.add_argument("--freestyle-share", type=float, default=None,
+                    help="share of train scenes moving 'freestyle' (default: PipelineConfig's, a third; another "
+                         "value makes another dataset: pass a new --data folder)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     out = Path(args.out)
@@ -673,7 +674,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.eval_limit is not None:
         cfg.eval_limit = args.eval_limit
     cfg.force = tuple(args.force)
-    cfg.freestyle_share = args.freestyle_share
+    if args.freestyle_share is not None:
+        cfg.freestyle_share = args.freestyle_share
     cfg.accept_stopped = args.accept_stopped
     cfg.threads = args.threads
     cfg.parallel_train = not args.sequential_train
