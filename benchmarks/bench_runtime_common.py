@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 from typing import Mapping
 
+import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -160,6 +161,21 @@ class RenderTap:
         if graph in ("render_rgb", "render"):
             self.runs.append((np.asarray(feeds["ray_uv"][0]), np.asarray(out["acc"][0])))
         return out
+
+
+#: Render factor of :func:`truth_view` before its area reduction (the novel-view scripts' reference picture).
+TRUTH_SUPERSAMPLE = 4
+
+
+def truth_view(scene, camera, t: float, background: float) -> tuple[np.ndarray, np.ndarray]:
+    """The simulator's picture of ``camera`` at time ``t`` (rendered at ``TRUTH_SUPERSAMPLE`` x, area-averaged): ``(S, S, 3)`` RGB in [0, 1] composited over
+    ``background`` outside the subject, and the ``(S, S)`` subject mask (area share >= 0.5)."""
+    big = camera.resized(camera.width * TRUTH_SUPERSAMPLE, camera.height * TRUTH_SUPERSAMPLE)
+    image, truth = scene.render(big, t)
+    size = (camera.width, camera.height)
+    rgb = cv2.resize(image[..., ::-1].astype(np.float32) / 255.0, size, interpolation=cv2.INTER_AREA)
+    mask = cv2.resize(truth.mask.astype(np.float32), size, interpolation=cv2.INTER_AREA) >= 0.5
+    return np.where(mask[..., None], rgb, np.float32(background)), mask
 
 
 def contract_of(model_dir: str | os.PathLike) -> ModelContract:

@@ -23,7 +23,7 @@ With ``--novel`` (needs ``render_rgb``), the three paths also render the colour 
 source camera* (the device's ``alpha = 0``) and score its masked PSNR: A and B at the stored crop
 camera against the stored crop (as ``ghnerf-eval`` scores a view), C through ``Estimator.estimate``
 with ``NovelViewRequest(alpha=0)`` (its own crop, sweep box and coarse/fine rays) against the
-simulator's picture of the camera it rendered (``measure_novel_quality.truth_view``). This tells
+simulator's picture of the camera it rendered (``bench_runtime_common.truth_view``). This tells
 the runtime's novel-view error apart from the scenes' difficulty.
 
 A tool (imports ``training.data`` and ``drivers``); not a test.
@@ -38,7 +38,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.measure_novel_quality import truth_view  # noqa: E402
+from benchmarks.bench_runtime_common import truth_view  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     BEST_METHOD,
     EstimatorConfig,

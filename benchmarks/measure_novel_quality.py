@@ -26,12 +26,11 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
+from benchmarks.bench_runtime_common import RenderTap, truth_view  # noqa: E402
 from drivers.sim import random_scene  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEEN_MOTIONS, load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
@@ -39,20 +38,6 @@ from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 from ghnerf_runtime.tracking import track_from_joints  # noqa: E402
-
-SUPERSAMPLE = 4
-
-
-def truth_view(scene, camera, t: float, background: float) -> tuple[np.ndarray, np.ndarray]:
-    """The simulator's picture of ``camera`` at time ``t``: ``(S, S, 3)`` RGB in [0, 1] composited over
-    ``background`` outside the subject, and the ``(S, S)`` subject mask (area share >= 0.5)."""
-    big = camera.resized(camera.width * SUPERSAMPLE, camera.height * SUPERSAMPLE)
-    image, truth = scene.render(big, t)
-    size = (camera.width, camera.height)
-    rgb = cv2.resize(image[..., ::-1].astype(np.float32) / 255.0, size, interpolation=cv2.INTER_AREA)
-    mask = cv2.resize(truth.mask.astype(np.float32), size, interpolation=cv2.INTER_AREA) >= 0.5
-    return np.where(mask[..., None], rgb, np.float32(background)), mask
-
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

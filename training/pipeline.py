@@ -193,6 +193,8 @@ def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
     threads = max(1, (os.cpu_count() or 1) // len(variants))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
     for v in variants:
+        if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v):
+            _check_pretrain_folder(cfg, v)
         _check_run_folder(cfg, v)
 
     def chain(v: str) -> bool:
@@ -202,8 +204,7 @@ def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
             steps.append((_pretrain_cmd(cfg, v, [f"threads={threads}"]), pretrain_dir(cfg, v) / "train.log"))
         steps.append((_train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"]), run / "train.log"))
         for cmd, log_path in steps:
-            _mark_data(cfg, log_path.parent)
-            log_path.parent.mkdir(parents=True, exist_ok=True)
+            _mark_data(cfg, log_path.parent)  # also creates the run folder
             log.info("$ %s &", shlex.join(cmd))
             with open(log_path, "a") as fh:
                 if subprocess.run(cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT).returncode != 0:
@@ -317,14 +318,21 @@ def _pretrain_finished(cfg: PipelineConfig, variant: str) -> bool:
     return steps >= pretrain_inputs(cfg, variant)["iterations"]
 
 
+def _check_pretrain_folder(cfg: PipelineConfig, variant: str) -> None:
+    """Refuse to resume a pretraining run of another config or on another dataset (``--resume`` would
+    carry on from its checkpoint)."""
+    run = pretrain_dir(cfg, variant)
+    if (run / "last.pt").exists() and (run / "config.json").exists() and not _pretrain_config_matches(cfg, variant):
+        raise RuntimeError(f"{run} holds a pretraining run with another config; move it away or pass --runs")
+    if (run / "last.pt").exists() and not _data_marker_ok(cfg, run):
+        raise RuntimeError(f"{run} holds a pretraining run on another dataset ({DATA_MARKER} differs from "
+                           f"{cfg.data}/dataset.json); move it away or pass --runs")
+
+
 def stage_pretrain(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
     run = pretrain_dir(cfg, variant)
     if not _pretrain_finished(cfg, variant):
-        if (run / "last.pt").exists() and (run / "config.json").exists() and not _pretrain_config_matches(cfg, variant):
-            raise RuntimeError(f"{run} holds a pretraining run with another config; move it away or pass --runs")
-        if (run / "last.pt").exists() and not _data_marker_ok(cfg, run):
-            raise RuntimeError(f"{run} holds a pretraining run on another dataset ({DATA_MARKER} differs from "
-                               f"{cfg.data}/dataset.json); move it away or pass --runs")
+        _check_pretrain_folder(cfg, variant)
         _mark_data(cfg, run)
         _sh(_pretrain_cmd(cfg, variant), run / "train.log")
     return [run / "human.pt"], {"summary": json.loads((run / "summary.json").read_text()),

@@ -147,3 +147,15 @@ def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(t
     assert not _pretrain_finished(cfg, "ghnerf")
     (run / "config.json").write_text(json.dumps({**pc, "augment": {"rotation_deg": 30.0}}))
     assert not _pretrain_finished(cfg, "ghnerf")
+    # Both ways of starting the pretraining (its own stage, or side by side) refuse to resume a
+    # checkpoint made on another dataset.
+    from training.pipeline import DATA_MARKER, _check_pretrain_folder
+
+    (run / "config.json").write_text(json.dumps(pc))
+    (run / "last.pt").write_bytes(b"x")
+    cfg.data.mkdir(parents=True, exist_ok=True)
+    (cfg.data / "dataset.json").write_text("{}")
+    (run / DATA_MARKER).write_text("another dataset\n")
+    assert not _pretrain_finished(cfg, "ghnerf")
+    with pytest.raises(RuntimeError, match="another dataset"):
+        _check_pretrain_folder(cfg, "ghnerf")
