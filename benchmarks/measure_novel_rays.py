@@ -1,13 +1,16 @@
-"""What the novel view's coarse silhouette pass saves, and what it changes in the image.
+"""What the novel view's coarse silhouette pass (and its sparse interior) saves, and what it changes in the image.
 
     .venv/bin/python benchmarks/measure_novel_rays.py --model-dir models [--sequences 4 --frames 30]
+                                                      [--interior-stride 2]
 
 On held-out-like simulator sequences, with the shipped model's own joints tracking the subject,
 each pair's novel view (alpha 0.5, 128x128, stride 1) is rendered twice at the same camera:
 with every ray of the subject box (``silhouette_stride`` 0) and with the coarse pass
 (``silhouette_stride`` 4: every 4th pixel of the box first, then only the opaque cells,
-dilated). Prints the rays rendered, the ``novel_render`` time (median / p99 ms) of both, and
-the PSNR of the coarse-pass image against the all-rays image (how much of the picture the
+dilated), and, with ``--interior-stride N``, a third time with the coarse pass and the subject's
+interior rendered every N-th pixel (``interior_stride``; its edge cells at stride 1). Prints the
+rays rendered, the ``novel_render`` time (median / p99 ms) of both, and
+the PSNR of each image against the all-rays image (how much of the picture the
 skipped rays carried), and the median accumulated opacity of the all-rays renders (how much of the
 box the model fills, i.e. why the coarse pass tests colour rather than opacity). Not a test.
 """
@@ -45,6 +48,8 @@ def main(argv=None) -> int:
     ap.add_argument("--silhouette-stride", type=int, default=4)
     ap.add_argument("--min-diff", type=float, help="silhouette_min_diff (default: the config's)")
     ap.add_argument("--dilate", type=int, help="silhouette_dilate (default: the config's)")
+    ap.add_argument("--interior-stride", type=int, default=0,
+                    help="also render with the interior at this stride (0: not; default)")
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
@@ -53,7 +58,10 @@ def main(argv=None) -> int:
         cfg = replace(cfg, novel_view=replace(cfg.novel_view, silhouette_min_diff=args.min_diff))
     if args.dilate is not None:
         cfg = replace(cfg, novel_view=replace(cfg.novel_view, silhouette_dilate=args.dilate))
-    variants = {"all box rays": replace(cfg.novel_view, silhouette_stride=0), "coarse pass": cfg.novel_view}
+    coarse = replace(cfg.novel_view, interior_stride=0)
+    variants = {"all box rays": replace(coarse, silhouette_stride=0), "coarse pass": coarse}
+    if args.interior_stride:
+        variants[f"+ interior /{args.interior_stride}"] = replace(coarse, interior_stride=args.interior_stride)
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache)
     session = load_session(cfg)
     tap = RenderTap(session)  # the all-rays variant renders exactly the box, once per pair
@@ -61,7 +69,7 @@ def main(argv=None) -> int:
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
     rays = {k: [] for k in variants}
     ms = {k: [] for k in variants}
-    quality = []
+    quality = {k: [] for k in list(variants)[1:]}
     for seq in sequences:
         # One estimator per variant on the same session: the keypoints, hence the novel camera and box,
         # are the same in both (the estimator is deterministic); only the novel view's rays differ.
@@ -78,22 +86,25 @@ def main(argv=None) -> int:
                 ms[name].append(r.timing_ms["novel_render"])
                 images[name] = r.novel_view.image
             if len(images) == len(variants):
-                quality.append(psnr(images["coarse pass"], images["all box rays"]))
-    print(f"{len(quality)} pairs; novel view 128x128, stride 1")
+                for name in quality:
+                    quality[name].append(psnr(images[name], images["all box rays"]))
+    print(f"{len(quality['coarse pass'])} pairs; novel view 128x128, stride 1")
     for name in variants:
         t = percentiles(ms[name])
-        print(f"  {name:<14} rays median {np.median(rays[name]):7.0f}   novel_render {t['median']:6.2f} / "
+        print(f"  {name:<18} rays median {np.median(rays[name]):7.0f}   novel_render {t['median']:6.2f} / "
               f"{t['p99']:6.2f} ms")
-    q = np.asarray(quality)
-    finite = q[np.isfinite(q)]
-    print(f"  PSNR coarse pass vs all box rays: median {np.median(q):.1f} dB, min "
-          f"{(finite.min() if finite.size else float('inf')):.1f} dB, identical in {int(np.sum(~np.isfinite(q)))} "
-          f"of {q.size} pairs")
+    for name, values in quality.items():
+        q = np.asarray(values)
+        finite = q[np.isfinite(q)]
+        print(f"  PSNR {name} vs all box rays: median {np.median(q):.1f} dB, min "
+              f"{(finite.min() if finite.size else float('inf')):.1f} dB, identical in {int(np.sum(~np.isfinite(q)))} "
+              f"of {q.size} pairs")
     if tap.runs:
         print(f"  accumulated opacity over the box's rays (all-rays renders): median "
               f"{np.median(np.concatenate([acc.ravel() for _, acc in tap.runs])):.2f}")
-    ratio = np.median(ms["coarse pass"]) / np.median(ms["all box rays"])
-    print(f"  novel_render time ratio (coarse pass / all box rays): {ratio:.2f}")
+    for name in quality:
+        ratio = np.median(ms[name]) / np.median(ms["all box rays"])
+        print(f"  novel_render time ratio ({name} / all box rays): {ratio:.2f}")
     return 0
 
 

@@ -403,6 +403,12 @@ class NovelViewConfig:
             not opacity: the model may render empty space as opaque background.
         silhouette_dilate: coarse cells added around the subject's (thin limbs between
             coarse rays, the soft edge).
+        interior_stride: with the coarse pass, the subject's *interior* (coarse cells whose eight
+            neighbours are the subject too) is rendered every ``interior_stride``-th pixel and
+            filled in bilinearly; its edge cells are rendered at ``stride``. The edges of the
+            silhouette, where the picture changes fastest, keep full resolution; what the interior
+            loses against every ray is measured in docs/runtime.md. Applies when larger than
+            ``stride``; must divide ``silhouette_stride``. 0: off (every subject cell at ``stride``).
         overlap: on a tracked pair, render the novel view in a worker thread while this pair's
             keypoints are decoded and triangulated (onnxruntime releases the GIL; its render
             graphs gain little from the second core, measured in docs/runtime.md). The view is
@@ -419,6 +425,7 @@ class NovelViewConfig:
     silhouette_stride: int = 4
     silhouette_min_diff: float = 0.05
     silhouette_dilate: int = 0
+    interior_stride: int = 0
     overlap: bool = True
 
     def __post_init__(self) -> None:
@@ -435,11 +442,21 @@ class NovelViewConfig:
                   self.silhouette_stride)
         _number(self, "silhouette_min_diff", 0.0, 1.0)
         _integer(self, "silhouette_dilate", 0, 8)
+        _integer(self, "interior_stride", 0, 8)
+        _choice(self, "interior_stride", (0, 1, 2, 4, 8))
+        if self.interior_stride and self.silhouette_stride and self.silhouette_stride % self.interior_stride:
+            _fail(type(self), "interior_stride", f"must divide silhouette_stride ({self.silhouette_stride})",
+                  self.interior_stride)
 
     @property
     def coarse_pass(self) -> bool:
         """Whether a coarse pass picks the rays (see ``silhouette_stride``)."""
         return self.silhouette_stride > self.stride
+
+    @property
+    def interior_pass(self) -> bool:
+        """Whether the subject's interior is rendered sparser than its edges (see ``interior_stride``)."""
+        return self.coarse_pass and self.interior_stride > self.stride
 
 
 @dataclass(frozen=True)

@@ -199,24 +199,45 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
     gh, gw = S // stride, contract.width // stride
     block = box_block(camera, box, stride, margin_cells=1) if config.rays_in_box_only else full_block(gh, gw)
     graph = "render" if want_heat else "render_rgb"
-    cells, rays = None, 0
+    cells, sparse, rays = None, None, 0
     if block is not None:
         cells = np.zeros((gh, gw), bool)
         cells[block[0]:block[0] + block[2], block[1]:block[1] + block[3]] = True
+        in_box = cells.copy()
         if config.coarse_pass:
             silhouette, rays = _silhouette_cells(session, graph, feeds, camera, box, config)
+            if config.interior_pass:
+                sparse = _split_interior(silhouette, config)
+                silhouette = silhouette & ~sparse.interior
             cells &= refine_cells(silhouette, config.silhouette_stride // stride)
-    if cells is None or not cells.any():  # the subject is not in view: nothing to render
+    edge = cells if cells is not None and cells.any() else None
+    if sparse is not None and not sparse.rays.any():
+        sparse = None
+    groups = ([] if edge is None else [(edge, stride)]) + ([] if sparse is None else [(sparse.rays, config.interior_stride)])
+    if not groups:  # the subject is not in view: nothing to render
         rgb = np.full((gh, gw, 3), contract.background, np.float32)
         depth = np.zeros((gh, gw), np.float32)
         heat = np.zeros((gh, gw), np.float32) if want_heat else None
     else:
-        feeds["ray_uv"] = cells_ray_uv(cells, stride)[None]
+        # One graph run for the edge rays and the interior's sparse rays together.
+        feeds["ray_uv"] = np.concatenate([cells_ray_uv(m, s) for m, s in groups])[None]
         out = session.run(graph, feeds)
-        rgb = scatter_cells(out["rgb"][0], cells, contract.background)
-        depth = scatter_cells(out["depth"][0], cells, 0.0)
-        heat = scatter_cells(out["heatmaps"][0].max(axis=-1), cells, 0.0) if want_heat else None
-        rays += int(cells.sum())
+        channels = {"rgb": (out["rgb"][0], contract.background), "depth": (out["depth"][0], 0.0)}
+        if want_heat:
+            channels["heat"] = (out["heatmaps"][0].max(axis=-1), 0.0)
+        n_edge = 0 if edge is None else int(edge.sum())
+        images = {}
+        for key, (values, fill) in channels.items():
+            image = scatter_cells(values[:n_edge], edge, fill) if edge is not None else \
+                np.full((gh, gw) + values.shape[1:], fill, np.float32)
+            if sparse is not None:
+                coarse = scatter_cells(values[n_edge:], sparse.rays, fill)
+                filled = cv2.resize(coarse, (gw, gh), interpolation=cv2.INTER_LINEAR)
+                inside = refine_cells(sparse.interior, config.silhouette_stride // stride) & in_box
+                image[inside] = filled[inside]
+            images[key] = image
+        rgb, depth, heat = images["rgb"], images["depth"], images.get("heat")
+        rays += sum(int(m.sum()) for m, _ in groups)
     t2 = time.perf_counter()
     rgb = np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0)
     if stride > 1:
@@ -230,6 +251,26 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         timing["novel_compose"] = 1e3 * (time.perf_counter() - t2)
     return NovelView(image, camera, np.nan_to_num(depth).astype(np.float32),
                      None if heat is None else np.nan_to_num(heat).astype(np.float32), rays)
+
+
+@dataclass(frozen=True)
+class _Interior:
+    """The silhouette's interior (coarse grid) and the sparse cells rendered to fill it in."""
+
+    interior: np.ndarray
+    rays: np.ndarray
+
+
+def _split_interior(silhouette: np.ndarray, config: NovelViewConfig) -> _Interior:
+    """Interior coarse cells (all eight neighbours are the subject; the image border counts as outside)
+    and the ``interior_stride`` cells that bilinear filling of them reads: those of the interior and
+    its one-cell ring, which lies inside the silhouette by construction.
+    """
+    m = silhouette.astype(np.uint8)
+    kernel = np.ones((3, 3), np.uint8)
+    interior = cv2.erode(m, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    ring = cv2.dilate(interior.astype(np.uint8), kernel).astype(bool)
+    return _Interior(interior, refine_cells(ring, config.silhouette_stride // config.interior_stride))
 
 
 def _silhouette_cells(session: Any, graph: str, feeds: dict, camera: Camera, box: np.ndarray,

@@ -668,6 +668,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
     ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
+    ap.add_argument("--train", type=int, default=None,
+                    help="scenes in the train split (default: PipelineConfig's, 2500; another count makes another "
+                         "dataset request: pass a new --data folder)")
     ap.add_argument("--freestyle-share", type=float, default=None,
                     help="share of train scenes moving 'freestyle' (default: PipelineConfig's, a third; another "
                          "value makes another dataset: pass a new --data folder)")
@@ -684,6 +687,10 @@ def main(argv: list[str] | None = None) -> int:
     cfg.force = tuple(args.force)
     if args.freestyle_share is not None:
         cfg.freestyle_share = args.freestyle_share
+    if args.train is not None:
+        if args.train < 1:
+            ap.error(f"--train: must be at least 1 scene, got {args.train}")
+        cfg.train = args.train
     cfg.accept_stopped = args.accept_stopped
     cfg.threads = args.threads
     cfg.parallel_train = not args.sequential_train

@@ -25,6 +25,7 @@ import logging
 import os
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -128,8 +129,11 @@ def run_runtime_bench(args) -> dict:
         session = load_session(cfg)
         report["model"] = session.describe()
         for mode in args.modes:
-            rows.append({"precision": precision, "source": source, "mode": mode, "cfg": cfg, "session": session,
-                         "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0})
+            for interior in ((args.novel_interior_strides or [None]) if mode == "novel" else [None]):
+                row_cfg = cfg if interior is None else \
+                    replace(cfg, novel_view=replace(cfg.novel_view, interior_stride=interior))
+                rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
+                             "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0})
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
@@ -146,6 +150,8 @@ def run_runtime_bench(args) -> dict:
         cfg, session = row["cfg"], row["session"]
         out = {"precision": row["precision"], "mode": "keypoints" if row["mode"] == "keypoints" else "keypoints+novel",
                "heatmaps": row["source"], "method": cfg.joints3d.method, "track_from_truth": args.track_from_truth,
+               **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride}
+                  if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
                "accuracy": row["accuracy"].summary(), "load_average": float(np.mean(loads))}
         report["runs"].append(out)
@@ -157,6 +163,8 @@ def _print_row(row: dict) -> None:
     cols = " ".join(f"{name.split(' ')[0]} {row[name]['median']:.2f}/{row[name]['p99']:.2f}"
                     for name in STAGE_GROUPS)
     tracked = " (tracked from truth)" if row.get("track_from_truth") else ""
+    if row.get("novel_interior_stride") and row["novel_interior_stride"] > row.get("novel_stride", 1):
+        tracked += f" interior/{row['novel_interior_stride']}"
     acc = row["accuracy"]
     print(f"{row['precision']:>4} {row['heatmaps']:>8}/{row['method']:<14} {row['mode'] + tracked:<16} "
           f"ms median/p99: {cols} | "
@@ -180,6 +188,10 @@ def build_parser() -> argparse.ArgumentParser:
                     type=lambda s: [p for p in s.split(",") if p],
                     help="comma list of rendered,encoder (default: rendered; the runtime's default is encoder)")
     rt.add_argument("--novel-stride", type=int, default=1, choices=(1, 2, 4))
+    rt.add_argument("--novel-interior-strides", default=None,
+                    type=lambda s: [int(p) for p in s.split(",") if p],
+                    help="comma list of novel_view.interior_stride values, one keypoints+novel row each "
+                         "(interleaved like the other rows; default: the config's)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

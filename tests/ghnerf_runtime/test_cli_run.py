@@ -121,3 +121,17 @@ def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir,
         assert row["pairs_per_s"] > 0 and math.isfinite(row["total"]["median"])
     novel = [r for r in report["runs"] if r["mode"] == "keypoints+novel"]
     assert all(r["novel view"]["median"] > 0 for r in novel)
+    assert all(r["novel_interior_stride"] == 0 for r in novel)  # the config's default
+
+
+def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_dir, tmp_path):  # noqa: F811
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    assert bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "2",
+                       "--precisions", "fp32", "--heatmap-sources", "encoder", "--modes", "novel", "--warmup", "0",
+                       "--novel-interior-strides", "0,2", "--cache", str(tmp_path / "cache"),
+                       "--json", str(report_path)]) == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    assert [r["novel_interior_stride"] for r in runs] == [0, 2]
+    assert all(r["pairs"] == 4 and r["mode"] == "keypoints+novel" for r in runs)

@@ -136,3 +136,71 @@ def test_cell_helpers_round_trip():
     assert grid.shape == (4, 5, 1) and grid[1, 2, 0] == 1.0 and grid[3, 0, 0] == 2.0 and grid[0, 0, 0] == -1.0
     fine = refine_cells(mask, 2)
     assert fine.shape == (8, 10) and fine[2:4, 4:6].all() and fine.sum() == 8
+
+
+class CheckerDiscSession(DiscSession):
+    """A disc filled with a 1-px checkerboard: detail that sparse interior rays cannot reproduce."""
+
+    def run(self, graph, feeds):
+        out = super().run(graph, feeds)
+        if graph != "volume":
+            uv = feeds["ray_uv"][0]
+            checker = ((np.floor(uv[:, 0] + 0.5) + np.floor(uv[:, 1] + 0.5)) % 2).astype(np.float32)
+            out["rgb"] = out["rgb"] * (0.5 + 0.5 * checker[None, :, None])
+        return out
+
+
+def test_sparse_interior_keeps_the_edges_and_fills_a_smooth_inside_exactly():
+    big = 30.0
+    full, s_full = _render(NovelViewConfig(enabled=True), DiscSession(radius=big))
+    fast, s_fast = _render(NovelViewConfig(enabled=True, interior_stride=2), DiscSession(radius=big))
+    assert len(s_fast.rays) == 2  # the coarse pass, then edge and interior rays in one run
+    assert s_fast.rays[1] < 0.7 * s_full.rays[1] and fast.rays == sum(s_fast.rays)
+    # The disc's shade is linear in u: bilinear filling of the interior reproduces it.
+    assert np.abs(fast.image.astype(int) - full.image.astype(int)).max() <= 1
+    np.testing.assert_allclose(fast.depth, full.depth, atol=1e-5)
+
+
+def test_sparse_interior_stays_inside_the_box():
+    # A subject that fills the whole box (as the shipped model paints the wall behind the person): the
+    # interior's coarse cells reach past the box's own pixels, which must stay background.
+    full, _ = _render(NovelViewConfig(enabled=True), DiscSession(radius=500.0))
+    fast, s = _render(NovelViewConfig(enabled=True, interior_stride=2), DiscSession(radius=500.0))
+    assert fast.rays < full.rays
+    assert np.abs(fast.image.astype(int) - full.image.astype(int)).max() <= 1
+    np.testing.assert_array_equal(fast.image.any(axis=-1), full.image.any(axis=-1))
+
+
+def test_sparse_interior_is_really_sparse_and_never_touches_the_rim():
+    big = 30.0
+    full, _ = _render(NovelViewConfig(enabled=True), CheckerDiscSession(radius=big))
+    fast, _ = _render(NovelViewConfig(enabled=True, interior_stride=2), CheckerDiscSession(radius=big))
+    differ = np.any(fast.image != full.image, axis=-1)
+    v, u = np.nonzero(differ)
+    dist = np.hypot(u - CENTRE[0], v - CENTRE[1])
+    assert differ.sum() > 0.3 * np.pi * big ** 2  # the 1-px checker is gone inside ...
+    assert dist.max() < big - 1.5  # ... and the silhouette's rim is rendered at full resolution
+    assert not fast.image[np.hypot(*np.meshgrid(np.arange(128) - CENTRE[0], np.arange(128) - CENTRE[1])) > big + 6].any()
+
+
+def test_sparse_interior_with_heatmaps_and_small_or_absent_subjects():
+    nv, s = _render(NovelViewConfig(enabled=True, heatmaps=True, interior_stride=2), DiscSession(radius=30.0),
+                    want_heat=True)
+    assert nv.heat is not None and nv.heat.max() == 1.0 and nv.heat[64, 64] == 1.0
+    # A subject too small to have an interior renders exactly as without the option.
+    for radius in (4.0, 0.0):
+        plain, _ = _render(NovelViewConfig(enabled=True), DiscSession(radius=radius))
+        sparse, _ = _render(NovelViewConfig(enabled=True, interior_stride=2), DiscSession(radius=radius))
+        np.testing.assert_array_equal(plain.image, sparse.image)
+        assert plain.rays == sparse.rays
+
+
+def test_interior_stride_config_is_validated():
+    assert NovelViewConfig(interior_stride=2).interior_pass
+    assert not NovelViewConfig(stride=2, interior_stride=2).interior_pass  # no sparser than the render
+    assert not NovelViewConfig(silhouette_stride=0, interior_stride=2).interior_pass  # needs the coarse pass
+    for bad in (3, 16, -1, 2.0, True):
+        with pytest.raises(ConfigError, match="interior_stride"):
+            NovelViewConfig(interior_stride=bad)
+    with pytest.raises(ConfigError, match="interior_stride"):
+        NovelViewConfig(interior_stride=8, silhouette_stride=4)  # must divide the coarse cells

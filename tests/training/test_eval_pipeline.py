@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from training.model_card import render_markdown, sha256, write_card
-from training.pipeline import STAGES, Stages
+from training.pipeline import STAGES, PipelineConfig, Stages
 
 
 def test_stages_skip_finished_work_and_redo_changed_work(tmp_path):
@@ -159,3 +161,21 @@ def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(t
     assert not _pretrain_finished(cfg, "ghnerf")
     with pytest.raises(RuntimeError, match="another dataset"):
         _check_pretrain_folder(cfg, "ghnerf")
+
+
+def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monkeypatch):
+    import training.pipeline as pipeline
+
+    seen = []
+    monkeypatch.setattr(pipeline, "run", lambda cfg: seen.append(cfg))
+    argv = ["--out", str(tmp_path / "m"), "--data", str(tmp_path / "d"), "--train", "5000", "--freestyle-share", "0.5",
+            "--pretrain-set", "iterations=12000"]
+    assert pipeline.main(argv) == 0
+    cfg = seen[0]
+    assert (cfg.train, cfg.freestyle_share, cfg.val) == (5000, 0.5, PipelineConfig(out=tmp_path).val)
+    assert cfg.pretrain_overrides == ["iterations=12000"]
+    assert "--train 5000" in cfg.command and "--freestyle-share 0.5" in cfg.command
+    pipeline.main(["--out", str(tmp_path / "m")])
+    assert seen[1].train == PipelineConfig(out=tmp_path).train  # the default request is unchanged
+    with pytest.raises(SystemExit):
+        pipeline.main(["--out", str(tmp_path / "m"), "--train", "0"])
