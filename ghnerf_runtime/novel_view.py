@@ -11,7 +11,9 @@ Graph use (:func:`render_novel_view`): ``volume`` with the one novel camera as t
 then ``render_rgb`` (colour only) or ``render`` (colour and heatmaps). The encoder outputs of
 the pair are reused from the keypoint path. With ``silhouette_stride`` the render graph runs
 twice: a coarse pass over the box (every 4th pixel) finds the cells the subject covers, and the
-fine pass renders only those, since the person fills a fraction of the box.
+fine pass renders only those, since the person fills a fraction of the box. With
+``interior_stride`` the fine pass renders the subject's interior sparser (every 2nd pixel, filled
+in bilinearly) and only its edge cells at full density, in the same graph run.
 
 numpy, OpenCV; the session is passed in (never created here).
 """
@@ -213,7 +215,9 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
     edge = cells if cells is not None and cells.any() else None
     if sparse is not None and not sparse.rays.any():
         sparse = None
-    groups = ([] if edge is None else [(edge, stride)]) + ([] if sparse is None else [(sparse.rays, config.interior_stride)])
+    groups = [(edge, stride)] if edge is not None else []
+    if sparse is not None:
+        groups.append((sparse.rays, config.interior_stride))
     if not groups:  # the subject is not in view: nothing to render
         rgb = np.full((gh, gw, 3), contract.background, np.float32)
         depth = np.zeros((gh, gw), np.float32)
@@ -226,6 +230,8 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         if want_heat:
             channels["heat"] = (out["heatmaps"][0].max(axis=-1), 0.0)
         n_edge = 0 if edge is None else int(edge.sum())
+        inside = None if sparse is None else \
+            refine_cells(sparse.interior, config.silhouette_stride // stride) & in_box
         images = {}
         for key, (values, fill) in channels.items():
             image = scatter_cells(values[:n_edge], edge, fill) if edge is not None else \
@@ -233,7 +239,6 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
             if sparse is not None:
                 coarse = scatter_cells(values[n_edge:], sparse.rays, fill)
                 filled = cv2.resize(coarse, (gw, gh), interpolation=cv2.INTER_LINEAR)
-                inside = refine_cells(sparse.interior, config.silhouette_stride // stride) & in_box
                 image[inside] = filled[inside]
             images[key] = image
         rgb, depth, heat = images["rgb"], images["depth"], images.get("heat")
