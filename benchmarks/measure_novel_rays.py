@@ -9,7 +9,7 @@ with every ray of the subject box (``silhouette_stride`` 0) and with the coarse 
 (``silhouette_stride`` 4: every 4th pixel of the box first, then only the opaque cells,
 dilated), and, with ``--interior-stride N``, a third time with the coarse pass and the subject's
 interior rendered every N-th pixel (``interior_stride``; its edge cells at stride 1). Prints the
-rays rendered, the ``novel_render`` time (median / p99 ms) of both, and
+rays rendered, the ``novel_render`` time (median / p99 ms) of each, and
 the PSNR of each image against the all-rays image (how much of the picture the
 skipped rays carried), and the median accumulated opacity of the all-rays renders (how much of the
 box the model fills, i.e. why the coarse pass tests colour rather than opacity). Not a test.

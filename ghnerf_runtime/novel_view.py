@@ -208,13 +208,11 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         in_box = cells.copy()
         if config.coarse_pass:
             silhouette, rays = _silhouette_cells(session, graph, feeds, camera, box, config)
-            if config.interior_pass:
-                sparse = _split_interior(silhouette, config)
+            sparse = _split_interior(silhouette, config) if config.interior_pass else None
+            if sparse is not None:
                 silhouette = silhouette & ~sparse.interior
             cells &= refine_cells(silhouette, config.silhouette_stride // stride)
     edge = cells if cells is not None and cells.any() else None
-    if sparse is not None and not sparse.rays.any():
-        sparse = None
     groups = [(edge, stride)] if edge is not None else []
     if sparse is not None:
         groups.append((sparse.rays, config.interior_stride))
@@ -266,14 +264,17 @@ class _Interior:
     rays: np.ndarray
 
 
-def _split_interior(silhouette: np.ndarray, config: NovelViewConfig) -> _Interior:
+def _split_interior(silhouette: np.ndarray, config: NovelViewConfig) -> _Interior | None:
     """Interior coarse cells (all eight neighbours are the subject; the image border counts as outside)
     and the ``interior_stride`` cells that bilinear filling of them reads: those of the interior and
-    its one-cell ring, which lies inside the silhouette by construction.
+    its one-cell ring, which lies inside the silhouette by construction. ``None`` when there is no
+    interior (a small or thin subject): every subject cell is then an edge cell.
     """
     m = silhouette.astype(np.uint8)
     kernel = np.ones((3, 3), np.uint8)
     interior = cv2.erode(m, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    if not interior.any():
+        return None
     ring = cv2.dilate(interior.astype(np.uint8), kernel).astype(bool)
     return _Interior(interior, refine_cells(ring, config.silhouette_stride // config.interior_stride))
 
