@@ -33,6 +33,7 @@ from ghnerf_runtime.cli.simdata import (  # noqa: E402,F401  (re-exported)
     load_sequences,
     percentiles,
 )
+from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
 from ghnerf_runtime.contract import LevelSpec, ModelContract  # noqa: E402
 
 
@@ -92,6 +93,8 @@ class OracleSession:
             gy = np.exp(-(centres[None, :] - uv[:, 1:]) ** 2 / (2 * self.sigma_px ** 2))
             seen = (z > 1e-6) & (self.visible[s] if self.visible is not None else True)
             maps[s] = gy[:, :, None] * gx[:, None, :] * seen[:, None, None]
+            if np.linalg.det(P[:, :3]) < 0:  # a mirrored camera (the flip test) sees the mirror person:
+                maps[s] = maps[s][list(FLIP_INDEX)]  # its right wrist is the person's left one
         return maps
 
     def _zeros(self, spec, **dims) -> np.ndarray:

@@ -48,6 +48,7 @@ from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
 from ghnerf_runtime.errors import FrameError, ModelError
+from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presence, gate_to_box, query_grid, \
@@ -62,7 +63,7 @@ from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES"]
 
 #: Stage keys of the keypoint path, in order.
-KEYPOINT_STAGES = ("preprocess", "encoder", "volume", "render_heat", "decode_2d", "joints_3d")
+KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_heat", "decode_2d", "joints_3d")
 #: Stage keys of the novel view.
 NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
 
@@ -410,6 +411,13 @@ class Estimator:
         encoder = "human" if self._human_graph and not features else "encoder"
         env.update(self.session.run(encoder, env))
         _add_ms(timing, "encoder", t)
+        if cfg.flips_encoder_heatmaps:
+            t = time.perf_counter()
+            second = "human" if self.session.has("human") else "encoder"
+            mirrored = self.session.run(second, {"images": mirror_images(batch),
+                                                 "src_P": mirror_projections(env["src_P"], S)})["encoder_heatmaps"]
+            env["encoder_heatmaps"] = flip_averaged(env["encoder_heatmaps"], mirrored)
+            _add_ms(timing, "encoder_flip", t)
         stride, g = self.contract.heatmap_stride, self.grid
         blocks = [full_block(g, g)] * 2
         out: dict[str, np.ndarray] = {}

@@ -52,6 +52,7 @@ from torch import Tensor
 
 from ghnerf_runtime.body25 import BODY_PARTS
 from ghnerf_runtime.contract import ModelContract, ray_grid
+from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, pck
@@ -191,6 +192,29 @@ def keypoints_from_heatmaps(heatmaps: np.ndarray, model_size: int,
 
 
 @dataclass
+class HeatmapScores:
+    """Pooled PCK@0.2 and MPJPE of one heatmap source (the encoder's, plain or flip-tested)."""
+
+    pck_correct: int = 0
+    pck_evaluated: int = 0
+    mpjpe_sum_mm: float = 0.0
+    mpjpe_joints: int = 0
+    parts: dict[str, list[int]] = field(default_factory=dict)
+
+    def add(self, p, e) -> None:
+        self.pck_correct += p.num_correct
+        self.pck_evaluated += p.num_evaluated
+        _add_parts(self.parts, p)
+        self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
+        self.mpjpe_joints += e.num_evaluated
+
+    def result(self, prefix: str) -> dict:
+        return {f"{prefix}_pck@0.2": self.pck_correct / self.pck_evaluated if self.pck_evaluated else None,
+                f"{prefix}_mpjpe_mm": self.mpjpe_sum_mm / self.mpjpe_joints if self.mpjpe_joints else None,
+                f"{prefix}_pck@0.2_by_part": _part_scores(self.parts) if self.parts else None}
+
+
+@dataclass
 class Accumulator:
     """Pools per-scene results into split scores."""
 
@@ -202,13 +226,10 @@ class Accumulator:
     mpjpe_joints: int = 0
     mpjpe_missing: int = 0
     mpjpe_pred_missing: int = 0
-    enc_pck_correct: int = 0
-    enc_pck_evaluated: int = 0
-    enc_mpjpe_sum_mm: float = 0.0
-    enc_mpjpe_joints: int = 0
     # per body part (body25.BODY_PARTS): [correct, evaluated]
     pck_parts: dict[str, list[int]] = field(default_factory=dict)
-    enc_pck_parts: dict[str, list[int]] = field(default_factory=dict)
+    encoder: HeatmapScores = field(default_factory=HeatmapScores)
+    encoder_flip: HeatmapScores = field(default_factory=HeatmapScores)
     heat_mse: list[float] = field(default_factory=list)
     psnr: list[float] = field(default_factory=list)
     psnr_angle_deg: list[float] = field(default_factory=list)  # per entry of psnr (NaN: unknown)
@@ -229,12 +250,9 @@ class Accumulator:
         _add_parts(self.pck_parts, p)
         self.heat_mse.append(hm.value)
         if m.get("encoder_pck") is not None:
-            ep, ee = m["encoder_pck"], m["encoder_mpjpe"]
-            self.enc_pck_correct += ep.num_correct
-            self.enc_pck_evaluated += ep.num_evaluated
-            _add_parts(self.enc_pck_parts, ep)
-            self.enc_mpjpe_sum_mm += float(ee.errors[ee.evaluated].sum())
-            self.enc_mpjpe_joints += ee.num_evaluated
+            self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"])
+        if m.get("encoder_flip_pck") is not None:
+            self.encoder_flip.add(m["encoder_flip_pck"], m["encoder_flip_mpjpe"])
         if m.get("psnr") is not None:
             # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
             per_image = np.ravel(m["psnr"].per_image)
@@ -261,13 +279,11 @@ class Accumulator:
             "heatmap_mse": mean(self.heat_mse),
             "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
             "psnr_masked_by_source_angle": psnr_by_angle(self.psnr, self.psnr_angle_deg),
-            # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way
-            "encoder_heatmaps_pck@0.2": (self.enc_pck_correct / self.enc_pck_evaluated
-                                         if self.enc_pck_evaluated else None),
-            "encoder_heatmaps_mpjpe_mm": (self.enc_mpjpe_sum_mm / self.enc_mpjpe_joints
-                                          if self.enc_mpjpe_joints else None),
             "pck@0.2_by_part": _part_scores(self.pck_parts),
-            "encoder_heatmaps_pck@0.2_by_part": _part_scores(self.enc_pck_parts) if self.enc_pck_parts else None,
+            # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way;
+            # "flip": averaged with those of the mirrored images (the runtime's heatmaps.flip_test)
+            **self.encoder.result("encoder_heatmaps"),
+            **self.encoder_flip.result("encoder_heatmaps_flip"),
         }
 
 
@@ -314,7 +330,8 @@ def _part_scores(totals: Mapping[str, list[int]]) -> dict[str, float | None]:
 
 def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, novel_rgb: np.ndarray | None,
                   novel_targets: np.ndarray, background: float = 0.0,
-                  decoder: KeypointDecoderConfig | None = None, encoder_heatmaps: np.ndarray | None = None) -> dict:
+                  decoder: KeypointDecoderConfig | None = None, encoder_heatmaps: np.ndarray | None = None,
+                  encoder_heatmaps_flip: np.ndarray | None = None) -> dict:
     """Metrics of one scene from rendered outputs (pure; the tests feed it known answers).
 
     Args:
@@ -323,6 +340,8 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
         novel_rgb: ``(T, 3, H, W)`` colour rendered in the views ``novel_targets`` (or None).
         encoder_heatmaps: ``(2, J, h, w)`` the human encoder's 2D heatmaps of the sources (or None): scored
             like the rendered ones (``encoder_pck``, ``encoder_mpjpe``).
+        encoder_heatmaps_flip: the same averaged with those of the mirrored images (or None):
+            ``encoder_flip_pck``, ``encoder_flip_mpjpe``.
     """
     S = source_heatmaps.shape[0]
     H = scene["tgt_images"].shape[-1]
@@ -335,13 +354,15 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
     tri = triangulate_dlt(uv, np.asarray(scene["src_P"], np.float64))
     out["mpjpe"] = mpjpe(tri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=tri.valid)
     out["keypoints_2d"], out["joints_3d"] = uv, np.where(tri.valid[:, None], tri.points, np.nan)
-    out["encoder_pck"] = out["encoder_mpjpe"] = None
-    if encoder_heatmaps is not None:
-        euv = keypoints_from_heatmaps(encoder_heatmaps, H, decoder)
-        out["encoder_pck"] = pck(np.nan_to_num(euv), scene["tgt_joints_2d"][:S], scene["tgt_visible"][:S],
-                                 alpha=PCK_ALPHA, pred_valid=np.isfinite(euv).all(-1))
-        etri = triangulate_dlt(euv, np.asarray(scene["src_P"], np.float64))
-        out["encoder_mpjpe"] = mpjpe(etri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=etri.valid)
+    for key, maps in (("encoder", encoder_heatmaps), ("encoder_flip", encoder_heatmaps_flip)):
+        out[f"{key}_pck"] = out[f"{key}_mpjpe"] = None
+        if maps is not None:
+            euv = keypoints_from_heatmaps(maps, H, decoder)
+            out[f"{key}_pck"] = pck(np.nan_to_num(euv), scene["tgt_joints_2d"][:S], scene["tgt_visible"][:S],
+                                    alpha=PCK_ALPHA, pred_valid=np.isfinite(euv).all(-1))
+            etri = triangulate_dlt(euv, np.asarray(scene["src_P"], np.float64))
+            out[f"{key}_mpjpe"] = mpjpe(etri.points, scene["joints_3d"], scene["joints_3d_valid"],
+                                        pred_valid=etri.valid)
     out["psnr"] = out["ssim"] = None
     if novel_rgb is not None and len(novel_targets):
         img = scene["tgt_images"][novel_targets]
@@ -372,7 +393,11 @@ def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, pr
         if novel and len(nov):
             rgb = renderer.colour(scene, nov, grid_1).reshape(len(nov), H, W, 3).transpose(0, 3, 1, 2)
         enc_hm = renderer.encoder_heatmaps(scene) if hasattr(renderer, "encoder_heatmaps") else None
-        acc.add(scene_metrics(scene, hm, rgb, nov, renderer.background, encoder_heatmaps=enc_hm))
+        enc_flip = None
+        if enc_hm is not None:  # the flip test: the encoder again on the mirrored sources, averaged
+            enc_flip = flip_averaged(enc_hm, renderer.encoder_heatmaps({"images": mirror_images(scene["images"])}))
+        acc.add(scene_metrics(scene, hm, rgb, nov, renderer.background, encoder_heatmaps=enc_hm,
+                              encoder_heatmaps_flip=enc_flip))
         if progress and (i + 1) % 32 == 0:
             print(f"  eval {i + 1}/{n} {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
     res = acc.result()

@@ -115,7 +115,10 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         if t.get("images_per_step"):  # the human encoder's 2D pretraining: images, not rays
             rays = f"{t['images_per_step']} images, 2D heatmaps only"
         sched = f"Adam {c.get('lr')} x{c.get('lr_decay_gamma')} every {c.get('lr_decay_every')}"
-        L.append(f"| {name} | {c.get('preset')} | {t.get('steps')} | {rays} | {sched} | {c.get('threads') or 'all'} | "
+        threads = t.get("threads") or c.get("threads") or "all"
+        if t.get("segments"):  # a resumed run: each invocation's threads and steps
+            threads = ", then ".join(f"{g['threads']} ({g['steps']} steps)" for g in t["segments"])
+        L.append(f"| {name} | {c.get('preset')} | {t.get('steps')} | {rays} | {sched} | {threads} | "
                  f"{_fmt((t.get('wall_s') or 0) / 60, 1)} min |")
     L.append("")
     L.append("## Metrics (held-out split)")
@@ -134,16 +137,20 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     enc = {k: m for k, m in (card.get("metrics") or {}).items() if m.get("encoder_heatmaps_pck@0.2") is not None}
     if enc:
         L.append("The human encoder's own 2D heatmaps (the encoder graph's `encoder_heatmaps` output, no "
-                 "rendering; the runtime's `heatmaps.source = \"encoder\"`), decoded and triangulated the same way:")
+                 "rendering; the runtime's `heatmaps.source = \"encoder\"`), decoded and triangulated the same way; "
+                 "flip test: averaged with the heatmaps of the mirrored source images (the runtime's "
+                 "`heatmaps.flip_test`, a second encoder run):")
         L.append("")
-        L.append("| model | runtime | PCK@0.2 | MPJPE mm |")
-        L.append("|---|---|---|---|")
+        L.append("| model | runtime | PCK@0.2 | MPJPE mm | PCK@0.2, flip test | MPJPE mm, flip test |")
+        L.append("|---|---|---|---|---|---|")
         for label, m in enc.items():
             L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('encoder_heatmaps_pck@0.2'))} | "
-                     f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} |")
+                     f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
+                     f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} |")
         L.append("")
     parts = [(label, src, m[key]) for label, m in (card.get("metrics") or {}).items()
-             for src, key in (("rendered", "pck@0.2_by_part"), ("encoder", "encoder_heatmaps_pck@0.2_by_part"))
+             for src, key in (("rendered", "pck@0.2_by_part"), ("encoder", "encoder_heatmaps_pck@0.2_by_part"),
+                              ("encoder, flip test", "encoder_heatmaps_flip_pck@0.2_by_part"))
              if m.get(key)]
     if parts:
         names = list(parts[0][2])

@@ -58,12 +58,13 @@ class PipelineConfig:
     out: Path
     data: Path = Path("data/edge128")
     runs: Path = Path("runs")
-    train: int = 2500
+    train: int = 5000
     val: int = 256
     val_seen_motions: int = 128
-    freestyle_share: float = 1.0 / 3.0
-    """Share of ``train`` scenes moving ``freestyle`` (``SyntheticConfig.freestyle_share``): a third is
-    the recipe of the shipped (fifth) model; 0 makes the routines-only set of the models before it."""
+    freestyle_share: float = 0.5
+    """Share of ``train`` scenes moving ``freestyle`` (``SyntheticConfig.freestyle_share``): a half (of 5000)
+    is the recipe of the shipped (sixth) model, a third (of 2500) the fifth's; 0 makes the routines-only
+    set of the models before it."""
     res: int = 128
     workers: int = 2
     eval_split: str = "val"
@@ -74,8 +75,9 @@ class PipelineConfig:
     variants: tuple[str, ...] = tuple(VARIANTS)
     threads: int = 2
     parallel_train: bool = True
-    """Train the variants side by side, one thread each (CPU only): measured 44 min wall for both against
-    ~55 min one after the other with two threads (2-core EPYC)."""
+    """On CPU, pretrain the encoder with every core, then train the variants side by side at one thread
+    each (:func:`side_by_side_plan`): the joint run and the baseline take 45-61 min each at one thread,
+    against ~45 min each one after the other at two (2-core EPYC)."""
     force: tuple[str, ...] = ()
     train_overrides: list[str] = field(default_factory=list)
     pretrain_overrides: list[str] = field(default_factory=list)
@@ -164,8 +166,9 @@ def _mark_data(cfg: PipelineConfig, run: Path) -> None:
 def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = ()) -> list[str]:
     cmd = [sys.executable, "-m", "training.train", "--config", str(CONFIG_DIR / f"{preset}.json"),
            "--out", str(run), "--resume", "--data", str(cfg.data)]
-    human_init = train_inputs(cfg, preset).get("human_init")
-    for o in [*cfg.train_overrides, *([f"human_init={json.dumps(human_init)}"] if human_init else []), *extra]:
+    tc = train_inputs(cfg, preset)
+    human_init, block = tc.get("human_init"), _joint_pretrain_overrides(cfg) if tc.get("pretrain_human") else []
+    for o in [*cfg.train_overrides, *block, *([f"human_init={json.dumps(human_init)}"] if human_init else []), *extra]:
         cmd += ["--set", o]
     return cmd
 
@@ -183,26 +186,32 @@ def _pretrain_cmd(cfg: PipelineConfig, variant: str, extra: list[str] = ()) -> l
     return cmd
 
 
-def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
-    """Run the trainings of ``variants`` at once, ``cores // n`` threads each (never oversubscribed).
+def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int) -> list[list[list[tuple[list[str], Path]]]]:
+    """Phases of lanes of ``(command, log)`` steps: the lanes of a phase run at once, the phases in order.
 
-    A variant with a pretraining stage runs it first, then its joint training, while the other trains.
+    The pretrainings come first, each with every core, since the encoder pretraining is the long pole
+    (24000 steps: ~87 min at two threads, ~126 min at one); then the joint trainings run side by side at
+    ``cores // n`` threads each, never oversubscribed. Measured lane times are in docs/training.md.
     """
+    threads = max(1, cores // len(variants))
+    pre = [[(_pretrain_cmd(cfg, v, [f"threads={cores}"]), pretrain_dir(cfg, v) / "train.log")]
+           for v in variants if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v)]
+    joint = [[(_train_cmd(cfg, VARIANTS[v], cfg.runs / VARIANTS[v], [f"threads={threads}"]),
+               cfg.runs / VARIANTS[v] / "train.log")] for v in variants]
+    return [[lane] for lane in pre] + [joint]
+
+
+def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
+    """Run the trainings of ``variants`` by :func:`side_by_side_plan` (CPU only)."""
     from concurrent.futures import ThreadPoolExecutor
 
-    threads = max(1, (os.cpu_count() or 1) // len(variants))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
     for v in variants:
         if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v):
             _check_pretrain_folder(cfg, v)
         _check_run_folder(cfg, v)
 
-    def chain(v: str) -> bool:
-        run = cfg.runs / VARIANTS[v]
-        steps = []
-        if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v):
-            steps.append((_pretrain_cmd(cfg, v, [f"threads={threads}"]), pretrain_dir(cfg, v) / "train.log"))
-        steps.append((_train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"]), run / "train.log"))
+    def lane(steps: list[tuple[list[str], Path]]) -> bool:
         for cmd, log_path in steps:
             _mark_data(cfg, log_path.parent)  # also creates the run folder
             log.info("$ %s &", shlex.join(cmd))
@@ -211,10 +220,10 @@ def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
                     return False
         return True
 
-    with ThreadPoolExecutor(len(variants)) as pool:
-        ok = dict(zip(variants, pool.map(chain, variants)))
-    if failed := [v for v, good in ok.items() if not good]:
-        raise RuntimeError(f"training failed for {failed}; see {cfg.runs}/<preset>[_human]/train.log")
+    for phase in side_by_side_plan(cfg, variants, os.cpu_count() or 1):
+        with ThreadPoolExecutor(len(phase)) as pool:
+            if not all(pool.map(lane, phase)):
+                raise RuntimeError(f"training failed; see {cfg.runs}/<preset>[_human]/train.log")
 
 
 def _sh(cmd: list[str], log_path: Path | None = None) -> None:
@@ -273,10 +282,19 @@ def train_inputs(cfg: PipelineConfig, preset: str) -> dict:
 
     data = apply_overrides(load_config_file(CONFIG_DIR / f"{preset}.json"),
                            [f"data={json.dumps(str(cfg.data))}", *cfg.train_overrides])
+    if data.get("pretrain_human"):  # the block as the pretraining ran it: a changed one is another joint run
+        data = apply_overrides(data, _joint_pretrain_overrides(cfg))
     if data.get("pretrain_human") and not data.get("human_init"):
         data["human_init"] = str(cfg.runs / f"{preset}_human" / "human.pt")
     tc = build_config(data)
     return json.loads(json.dumps(asdict(tc)))  # as config.json holds it (lists, not tuples)
+
+
+def _joint_pretrain_overrides(cfg: PipelineConfig) -> list[str]:
+    """``--pretrain-set`` overrides as train-config overrides of the ``pretrain_human`` block (runtime keys
+    such as threads aside), so the joint run's ``config.json`` records the pretraining it started from."""
+    return [f"pretrain_human.{o.strip()}" for o in cfg.pretrain_overrides
+            if o.split("=", 1)[0].strip().split(".")[0] not in PRETRAIN_RUNTIME_KEYS]
 
 
 def pretrain_block(cfg: PipelineConfig, variant: str) -> dict:
@@ -553,13 +571,15 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
                 "stopped_early": pre.get("summary", {}).get("stopped_early"),
                 "wall_s": pre.get("summary", {}).get("wall_s"), "checkpoint": pre.get("summary", {}).get("human"),
                 "images_per_step": pre.get("summary", {}).get("images_per_step"),
-                "eval_pck@0.2": pre.get("summary", {}).get("eval_pck@0.2")}
+                "eval_pck@0.2": pre.get("summary", {}).get("eval_pck@0.2"),
+                **{k: pre["summary"][k] for k in ("threads", "segments") if k in pre.get("summary", {})}}
         s = st.stamp(f"train_{variant}") or {}
         info = s.get("info", {})
         training[variant] = {"config": info.get("config", {}), "steps": info.get("summary", {}).get("steps"),
                              "stopped_early": info.get("summary", {}).get("stopped_early"),
                              "wall_s": info.get("summary", {}).get("wall_s"),
-                             "checkpoint": info.get("summary", {}).get("checkpoint")}
+                             "checkpoint": info.get("summary", {}).get("checkpoint"),
+                             **{k: info["summary"][k] for k in ("threads", "segments") if k in info.get("summary", {})}}
     q = {v: (st.stamp(f"quantize_{v}") or {}).get("info", {}).get(v, {}) for v in VARIANTS}
     ds_meta = json.loads((cfg.data / "dataset.json").read_text())
     card = {
@@ -669,10 +689,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
     ap.add_argument("--train", type=int, default=None,
-                    help="scenes in the train split (default: PipelineConfig's, 2500; another count makes another "
+                    help="scenes in the train split (default: PipelineConfig's, 5000; another count makes another "
                          "dataset request: pass a new --data folder)")
     ap.add_argument("--freestyle-share", type=float, default=None,
-                    help="share of train scenes moving 'freestyle' (default: PipelineConfig's, a third; another "
+                    help="share of train scenes moving 'freestyle' (default: PipelineConfig's, a half; another "
                          "value makes another dataset: pass a new --data folder)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")

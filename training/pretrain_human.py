@@ -25,7 +25,6 @@ import json
 import math
 import os
 import sys
-import time
 from dataclasses import asdict, dataclass, field, fields
 from typing import Literal
 from pathlib import Path
@@ -36,6 +35,7 @@ from torch import Tensor
 
 from training.configs import PRESETS
 from training.losses import positive_weighted_mse
+from training.run_clock import RunClock
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
@@ -226,15 +226,18 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     opt = torch.optim.Adam(params, lr=cfg.lr)
     step = 0
     last = out / "last.pt"
+    ck = None
     if resume and last.exists():
         ck = torch.load(str(last), map_location=device, weights_only=False)
         model.human.load_state_dict(ck["human"])
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])
+    clock = RunClock.resumed(ck, step, torch.get_num_threads())
     seed_everything(cfg.seed + 1)
 
     def checkpoint(s: int) -> None:
-        state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s}
+        state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s,
+                 "segments": clock.segments(s)}
         torch.save(state, last.with_suffix(".tmp"))
         os.replace(last.with_suffix(".tmp"), last)
         save_human(out / "human.pt", model, s)
@@ -242,7 +245,6 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     info = DistInfo(rank=0, world=1, local_rank=0)
     per_epoch = len(ds) // cfg.scenes_per_step
     prog = Progress(cfg.iterations, step, enabled=not quiet)
-    t0 = time.monotonic()
     losses: list[float] = []
     last_pck = float("nan")
     stopped_early = False
@@ -272,7 +274,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
             if cfg.eval_every and step % cfg.eval_every == 0:
                 last_pck = heatmap_pck(model, val, cfg.eval_scenes, device)
             if step % cfg.log_every == 0 or step == cfg.iterations:
-                rec = {"step": step, "lr": lr, "time_s": round(time.monotonic() - t0, 2),
+                rec = {"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
                        "loss": float(np.mean(losses)), "pck": last_pck}
                 losses = []
                 prog.update(step, {"loss": rec["loss"], "pck": last_pck})
@@ -280,13 +282,13 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
                     fh.write(json.dumps(rec) + "\n")
             if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
                 checkpoint(step)
-            if cfg.max_minutes and time.monotonic() - t0 > 60 * cfg.max_minutes and step < cfg.iterations:
+            if cfg.max_minutes and clock.elapsed() > 60 * cfg.max_minutes and step < cfg.iterations:
                 stopped_early = True
                 checkpoint(step)
                 break
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
-               "wall_s": round(time.monotonic() - t0, 1), "device": str(device), "threads": torch.get_num_threads(),
+               **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(),
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
                "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,
                "human": str(out / "human.pt")}

@@ -47,6 +47,7 @@ from training.configs import PRESETS, preset
 from training.losses import LossConfig, compute_losses
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
+from training.run_clock import RunClock
 
 CHECKPOINT_VERSION = 1
 HEATMAP_SIGMA_HM_PX = 1.5
@@ -606,6 +607,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     seed_everything(cfg.seed + 7919 * info.rank + 1)  # per-rank stratified-sample noise
     step = 0
     last = out_dir / "last.pt"
+    ck = None
     if resume and last.exists():
         ck = torch.load(str(last), map_location=device, weights_only=False)
         model.load_state_dict(ck["model"])
@@ -627,14 +629,14 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     log_path = out_dir / "log.jsonl"
     prog = Progress(cfg.iterations, step, enabled=info.main and not quiet)
     per_epoch = len(ds) // info.world
-    t_start = time.monotonic()
+    clock = RunClock.resumed(ck and ck.get("extra"), step, torch.get_num_threads())
     stopped_early = False
     window: dict[str, list[float]] = {}
     last_pck = float("nan")
     item = None
 
     def checkpoint(s: int) -> None:
-        extra = {}
+        extra = {"segments": clock.segments(s)}
         if info.world > 1:
             states = [None] * info.world
             dist.all_gather_object(states, rng_state(gen))
@@ -681,12 +683,12 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
                 if info.main:
                     prog.update(step, {"loss": rec["loss"], "psnr": rec["psnr"], "pck": rec["pck"]})
                     with open(log_path, "a") as fh:
-                        fh.write(json.dumps({"step": step, "lr": lr, "time_s": round(time.monotonic() - t_start, 2),
+                        fh.write(json.dumps({"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
                                              **rec}) + "\n")
             if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
                 checkpoint(step)
             if cfg.max_minutes and step % cfg.log_every == 0 and step < cfg.iterations:
-                over = torch.tensor([float(time.monotonic() - t_start > 60 * cfg.max_minutes)], device=device)
+                over = torch.tensor([float(clock.elapsed() > 60 * cfg.max_minutes)], device=device)
                 if info.world > 1:  # every rank must take the same decision (rank 0's clock)
                     dist.broadcast(over, 0)
                 if over.item():
@@ -697,7 +699,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
             break
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
-               "wall_s": round(time.monotonic() - t_start, 1), "world_size": info.world, "device": str(device),
+               **clock.summary(step), "world_size": info.world, "device": str(device),
                "threads": torch.get_num_threads(), "checkpoint": str(last)}
     if info.main:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))

@@ -43,7 +43,7 @@ __all__ = ["main", "run_runtime_bench", "STAGE_GROUPS"]
 #: Printed columns: the issue's stage names -> estimator stage keys.
 STAGE_GROUPS = {
     "preprocess": ("preprocess",),
-    "encoders": ("encoder",),
+    "encoders": ("encoder", "encoder_flip"),
     "depth (volume)": ("volume",),
     "rendering (heat)": ("render_heat",),
     "decoding (2D+3D)": ("decode_2d", "joints_3d"),
@@ -128,12 +128,15 @@ def run_runtime_bench(args) -> dict:
             novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
         session = load_session(cfg)
         report["model"] = session.describe()
-        for mode in args.modes:
+        flips = (args.flip_tests or [None]) if source == "encoder" else [None]
+        for mode, flip in itertools.product(args.modes, flips):
+            flip_cfg = cfg if flip is None else replace(cfg, heatmaps=replace(cfg.heatmaps, flip_test=flip))
             for interior in ((args.novel_interior_strides or [None]) if mode == "novel" else [None]):
-                row_cfg = cfg if interior is None else \
-                    replace(cfg, novel_view=replace(cfg.novel_view, interior_stride=interior))
+                row_cfg = flip_cfg if interior is None else \
+                    replace(flip_cfg, novel_view=replace(flip_cfg.novel_view, interior_stride=interior))
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
-                             "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0})
+                             "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
+                             "flip_label": flip is not None})
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
@@ -150,6 +153,7 @@ def run_runtime_bench(args) -> dict:
         cfg, session = row["cfg"], row["session"]
         out = {"precision": row["precision"], "mode": "keypoints" if row["mode"] == "keypoints" else "keypoints+novel",
                "heatmaps": row["source"], "method": cfg.joints3d.method, "track_from_truth": args.track_from_truth,
+               "flip_test": cfg.flips_encoder_heatmaps, "flip_label": row["flip_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
@@ -163,6 +167,8 @@ def _print_row(row: dict) -> None:
     cols = " ".join(f"{name.split(' ')[0]} {row[name]['median']:.2f}/{row[name]['p99']:.2f}"
                     for name in STAGE_GROUPS)
     tracked = " (tracked from truth)" if row.get("track_from_truth") else ""
+    if row.get("flip_label"):
+        tracked += " flip" if row["flip_test"] else " no-flip"
     if row.get("novel_interior_stride") and row["novel_interior_stride"] > row.get("novel_stride", 1):
         tracked += f" interior/{row['novel_interior_stride']}"
     acc = row["accuracy"]
@@ -171,6 +177,13 @@ def _print_row(row: dict) -> None:
           f"{row['pairs_per_s']:.1f} pairs/s | "
           f"PCK@0.2 {acc.get('pck@0.2', float('nan')):.3f} MPJPE {acc.get('mpjpe_mm', float('nan')):.1f} mm "
           f"(3D found {acc.get('found_3d_frac', float('nan')):.2f}) | load {row['load_average']:.2f}", flush=True)
+
+
+def _on_off_list(text: str) -> list[bool]:
+    words = {"1": True, "on": True, "0": False, "off": False}
+    if bad := [p for p in text.split(",") if p and p not in words]:
+        raise argparse.ArgumentTypeError(f"{bad}: expected on, off, 1 or 0")
+    return [words[p] for p in text.split(",") if p]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -192,6 +205,10 @@ def build_parser() -> argparse.ArgumentParser:
                     type=lambda s: [int(p) for p in s.split(",") if p],
                     help="comma list of novel_view.interior_stride values, one keypoints+novel row each "
                          "(interleaved like the other rows; default: the config's)")
+    rt.add_argument("--flip-tests", default=None,
+                    type=_on_off_list,
+                    help="comma list of heatmaps.flip_test values (on,off or 1,0), one row each for the encoder "
+                         "heatmaps (interleaved like the other rows; default: the config's, on)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

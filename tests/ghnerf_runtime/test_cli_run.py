@@ -135,3 +135,22 @@ def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_d
     runs = json.loads(report_path.read_text())["runs"]
     assert [r["novel_interior_stride"] for r in runs] == [0, 2]
     assert all(r["pairs"] == 4 and r["mode"] == "keypoints+novel" for r in runs)
+
+
+def test_bench_runtime_compares_the_flip_test_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    assert bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "2",
+                       "--precisions", "fp32", "--heatmap-sources", "encoder,rendered", "--modes", "keypoints",
+                       "--warmup", "0", "--flip-tests", "on,off", "--cache", str(tmp_path / "cache"),
+                       "--json", str(report_path)]) == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    # two encoder rows (the flip test on, off), one rendered row (the flip test does not apply)
+    assert [(r["heatmaps"], r["flip_test"]) for r in runs] == [("encoder", True), ("encoder", False),
+                                                               ("rendered", False)]
+    assert all(r["pairs"] == 4 for r in runs)
+    out = capsys.readouterr().out
+    assert "keypoints flip" in out and "keypoints no-flip" in out
+    with pytest.raises(SystemExit):
+        bench.main(["runtime", "--flip-tests", "maybe"])

@@ -7,6 +7,7 @@ oracle session (test_estimator_oracle.py) and the shipped model (test_estimator_
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,7 +15,8 @@ import pytest
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, SessionConfig
 from ghnerf_runtime.contract import GRAPH_NAMES
-from ghnerf_runtime.errors import FrameError, ModelError
+from ghnerf_runtime.errors import ConfigError, FrameError, ModelError
+from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_STAGES, Estimator
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.session import ModelSession
@@ -213,6 +215,50 @@ def test_encoder_heatmaps_skip_volume_and_rendering(tiny_model_dir, scene_rig): 
         assert _all_finite(r)
         assert "volume" not in r.timing_ms and "render_heat" not in r.timing_ms
     assert [g for g, _ in rec.calls] == ["human"] * len(frames)
+    # the flip test (heatmaps.flip_test, off by default) runs the human graph again, on the mirrored crops
+    est = Estimator(rec, rig, replace(cfg, heatmaps=HeatmapsConfig("encoder", flip_test=True)))
+    rec.calls.clear()
+    assert "encoder_flip" in est.estimate(frames[0]).timing_ms
+    assert [g for g, _ in rec.calls] == ["human", "human"]
+
+
+class _FlipAveragingSession:
+    """A session whose heatmaps are already the flip test's average (the reference for the wiring)."""
+
+    def __init__(self, session):
+        self.session, self.contract, self.graphs = session, session.contract, session.graphs
+        self.images: list[np.ndarray] = []
+
+    def has(self, graph):
+        return self.session.has(graph)
+
+    def run(self, graph, feeds):
+        self.images.append(np.array(feeds["images"]))
+        out = dict(self.session.run(graph, feeds))
+        mirrored = self.session.run(graph, {"images": mirror_images(feeds["images"])})["encoder_heatmaps"]
+        out["encoder_heatmaps"] = flip_averaged(out["encoder_heatmaps"], mirrored)
+        return out
+
+
+def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(full_session, scene_rig):
+    rig, frames = scene_rig
+    flip = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=True),
+                           joints3d=Joints3DConfig(method="triangulate"))
+    plain = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method="triangulate"))
+    assert flip.heatmaps.flip_test and flip.flips_encoder_heatmaps and not plain.flips_encoder_heatmaps
+    assert not EstimatorConfig(heatmaps=HeatmapsConfig("rendered")).flips_encoder_heatmaps  # rendered: no effect
+    seen = _FlipAveragingSession(full_session)
+    rec = Recorder(full_session)
+    with_flip, reference = Estimator(rec, rig, flip), Estimator(seen, rig, plain)
+    for pair in frames:
+        a, b = with_flip.estimate(pair), reference.estimate(pair)
+        np.testing.assert_allclose(a.joints_3d, b.joints_3d, atol=1e-5)
+        np.testing.assert_array_equal(a.missing, b.missing)
+        np.testing.assert_allclose(a.confidence, b.confidence, atol=1e-6)
+        assert "encoder_flip" in a.timing_ms and "encoder_flip" not in b.timing_ms
+    assert [g for g, _ in rec.calls] == ["human", "human"] * len(frames)
+    with pytest.raises(ConfigError, match="flip_test"):
+        HeatmapsConfig(flip_test="yes")
 
 
 def test_human_graph_gives_the_encoder_graphs_keypoints(full_session, scene_rig):
@@ -262,6 +308,11 @@ def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_sessi
     novel = [g for g, _ in rec.calls]
     assert "encoder" not in plain and "human" in plain
     assert "human" not in novel and novel.count("encoder") >= 1 and "render_rgb" in novel
+    # with the flip test the mirrored pass needs the heatmaps alone: the human graph, beside the encoder
+    est = Estimator(rec, rig, replace(cfg, heatmaps=HeatmapsConfig("encoder", flip_test=True)))
+    rec.calls.clear()
+    est.estimate(frames[1], novel_view=NovelViewRequest(alpha=0.5))
+    assert [g for g, _ in rec.calls if g in ("encoder", "human")] == ["encoder", "human"]
 
 
 class _Without:
@@ -285,12 +336,16 @@ class _Without:
 def test_encoder_heatmaps_run_what_the_3d_method_reads(full_session, scene_rig, method, graphs):
     rig, frames = scene_rig
     cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method=method))
-    assert cfg.required_graphs() == graphs
-    rec = Recorder(full_session)
-    est = Estimator(rec, rig, cfg)
-    r = est.estimate(frames[0])
-    assert _all_finite(r)
-    assert {g for g, _ in rec.calls} == set(graphs)
+    assert cfg.required_graphs() == cfg.required_graphs(human_graph=True) == graphs
+    # the flip test's mirrored pass runs the human graph when the model has one
+    flip = replace(cfg, heatmaps=HeatmapsConfig("encoder", flip_test=True))
+    assert flip.required_graphs() == graphs
+    assert flip.required_graphs(human_graph=True) == (graphs[0], "human", *graphs[1:])
+    for c, ran in ((cfg, set(graphs)), (flip, {*graphs, "human"})):
+        rec = Recorder(full_session)
+        r = Estimator(rec, rig, c).estimate(frames[0])
+        assert _all_finite(r)
+        assert {g for g, _ in rec.calls} == ran
 
 
 def test_encoder_heatmaps_need_a_model_that_has_them(full_session, scene_rig):

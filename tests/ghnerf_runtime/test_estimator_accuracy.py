@@ -20,16 +20,16 @@ MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, mode
 #: its default 3D method, by ``ghnerf-bench runtime --sequences 4 --frames 10 --warmup 0 --precisions auto
 #: --modes keypoints --heatmap-sources rendered,encoder``; the thresholds add margins (pairs are few: 40).
 #: Set a value to None to check sanity only. Re-measure when models/ changes.
-MEASURED_ON = ("models/ of 2026-11-22 (the fifth: a third of the train scenes in freestyle; human encoder "
-               "pretrained 12000 steps on 2D heatmaps, then frozen; 10000 joint steps; ghnerf-eval PCK@0.2 0.804 "
-               "rendered / 0.874 encoder heatmaps on 256 val scenes)")
-#: measured: rendered/depth_centroid PCK@0.2 0.648, MPJPE 250 mm, 92 % of 3D joints found (presence gate 0.4);
-#:           encoder/triangulate    PCK@0.2 0.882, MPJPE 109 mm, 63 % found (this model leaves a joint hidden in
-#:           one view undecoded there, as its training targets do: docs/runtime.md).
-#: (the fourth model: rendered 0.653 / 313 mm / 100 %, encoder 0.800 / 165 mm / 71 %.)
+MEASURED_ON = ("models/ of 2026-11-22 (the sixth: 5000 train scenes, half in freestyle; human encoder "
+               "pretrained 24000 steps on 2D heatmaps, then frozen; 10000 joint steps; ghnerf-eval PCK@0.2 0.804 "
+               "rendered / 0.898 encoder heatmaps on 256 val scenes)")
+#: measured: rendered/depth_centroid PCK@0.2 0.658, MPJPE 284 mm, 93 % of 3D joints found (presence gate 0.4);
+#:           encoder/triangulate    PCK@0.2 0.896, MPJPE 120 mm, 66 % found (presence gate 0.35; this model
+#:           leaves a joint hidden in one view undecoded there, as its training targets do: docs/runtime.md).
+#: (the fifth model: rendered 0.648 / 250 mm / 92 %, encoder 0.882 / 109 mm / 63 %.)
 THRESHOLDS = {
-    "rendered": {"pck@0.2_min": 0.55, "mpjpe_mm_max": 330.0, "found_3d_min": 0.80},
-    "encoder": {"pck@0.2_min": 0.78, "mpjpe_mm_max": 160.0, "found_3d_min": 0.50},
+    "rendered": {"pck@0.2_min": 0.55, "mpjpe_mm_max": 360.0, "found_3d_min": 0.80},
+    "encoder": {"pck@0.2_min": 0.82, "mpjpe_mm_max": 160.0, "found_3d_min": 0.55},
 }
 METHODS = {"rendered": "depth_centroid", "encoder": "triangulate"}
 SEQUENCES, FRAMES = 4, 10

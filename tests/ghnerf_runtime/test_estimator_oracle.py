@@ -66,11 +66,13 @@ def _run(est, oracle, frames, truth, visible):
 RENDERED = HeatmapsConfig(source="rendered")
 
 
-@pytest.mark.parametrize("source", ["encoder", "rendered"])
-def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip, source):
+@pytest.mark.parametrize("source, flip", [("encoder", False), ("encoder", True), ("rendered", False)])
+def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip, source, flip):
+    """Also with the flip test: the oracle's view of the mirrored crops (mirrored cameras see the mirror
+    person, left and right swapped) comes back exactly onto the joints."""
     rig, frames, truth, visible, *_ = clip
     oracle = RayCounter()
-    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source=source),
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source=source, flip_test=flip),
                                                  joints3d=Joints3DConfig(method="triangulate")))
     results = _run(est, oracle, frames, truth, visible)
     assert [r.tracked for r in results] == [False, True, True, True, True]
@@ -82,6 +84,7 @@ def test_triangulation_is_exact_on_oracle_heatmaps_and_tracking_engages(clip, so
     assert err.value < 1.0, err.value  # mm: decoding + mapping + DLT are exact for Gaussian heatmaps
     if source == "encoder":  # the encoder's heatmaps cover the crop: nothing is rendered
         assert oracle.rays == [] and oracle.run_counts["volume"] == 0
+        assert oracle.run_counts["encoder"] == len(frames) * (2 if flip else 1)
         return
     # Tracked pairs render only the rays covering the subject, fewer than the whole grid.
     grid = (oracle.contract.height // oracle.contract.heatmap_stride) ** 2

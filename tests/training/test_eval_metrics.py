@@ -7,6 +7,7 @@ import pytest
 pytest.importorskip("torch")
 
 from ghnerf_runtime.contract import ray_grid  # noqa: E402
+from ghnerf_runtime.flip_test import unmirror_heatmaps  # noqa: E402
 from ghnerf_runtime.keypoints import model_to_heatmap_pixels  # noqa: E402
 from ghnerf_runtime.metrics import gaussian_heatmaps  # noqa: E402
 from tests.training.test_trainer import data64  # noqa: E402,F401  (fixture)
@@ -147,6 +148,35 @@ def test_encoder_heatmaps_are_scored_like_the_rendered_ones(data64):
     none = Accumulator()
     none.add(scene_metrics(sc, truth, None, np.array([], int)))
     assert none.result()["encoder_heatmaps_pck@0.2"] is None
+    assert none.result()["encoder_heatmaps_flip_pck@0.2"] is None
+    # the flip test's heatmaps are scored on their own
+    r3 = scene_metrics(sc, truth, None, np.array([], int), encoder_heatmaps=np.zeros_like(truth),
+                       encoder_heatmaps_flip=truth)
+    assert r3["encoder_pck"].value == 0.0 and r3["encoder_flip_pck"].value == 1.0
+    acc3 = Accumulator()
+    acc3.add(r3)
+    assert acc3.result()["encoder_heatmaps_flip_pck@0.2"] == 1.0 and acc3.result()["encoder_heatmaps_pck@0.2"] == 0.0
+
+
+class _EncoderOracle(_Oracle):
+    """Also the encoder's heatmaps: the truth, and for mirrored sources the mirror person's (left and
+    right swapped, mirrored), as a perfect encoder would see them."""
+
+    def encoder_heatmaps(self, scene):
+        if "index" in scene:
+            self.last = scene
+            return self._item(scene)["tgt_heatmaps"][:2]
+        assert np.array_equal(scene["images"], self.last["images"][..., ::-1])  # evaluate's mirrored pass
+        return unmirror_heatmaps(self._item(self.last)["tgt_heatmaps"][:2])
+
+
+def test_evaluate_scores_the_flip_test_of_the_encoder_heatmaps(data64):
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(data64, "val")
+    res = evaluate(_EncoderOracle(ds), ds, novel=False, progress=False)
+    assert res["encoder_heatmaps_pck@0.2"] == 1.0 and res["encoder_heatmaps_flip_pck@0.2"] == 1.0
+    assert res["encoder_heatmaps_flip_mpjpe_mm"] < 0.5 and res["encoder_heatmaps_flip_pck@0.2_by_part"]["arms"] == 1.0
 
 
 def _look_from(eye, centre=(0.0, 0.0, 0.0)):

@@ -43,10 +43,18 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
                  "motions": {"train": "stand 50 %, freestyle 50 %", "val": "reach"}},
         "training": {"ghnerf": {"config": {"preset": "edge128", "targets_per_iter": 4, "heat_rays": 512,
                                            "patch_size": 16, "lr": 5e-4, "lr_decay_gamma": 0.5,
-                                           "lr_decay_every": 2500}, "steps": 8000, "wall_s": 1800}},
+                                           "lr_decay_every": 2500}, "steps": 8000, "wall_s": 1800},
+                     "ghnerf_human_pretraining": {
+                         "config": {"preset": "edge128", "lr": 1e-3, "lr_decay_gamma": 0.5, "lr_decay_every": 4000},
+                         "steps": 24000, "wall_s": 6391.6, "images_per_step": 16, "threads": 1,
+                         "segments": [{"steps": 12000, "wall_s": 2603.6, "threads": 2},
+                                      {"steps": 12000, "wall_s": 3788.0, "threads": 1}]}},
         "metrics": {"ghnerf_int8": {"kind": "onnx-int8", "pck@0.2": 0.5, "mpjpe_mm": None, "psnr_masked": 20.0,
                                     "ssim_masked": 0.9, "heatmap_mse": 0.001, "pck_undecoded": 3,
-                                    "pck_evaluated_joints": 10,
+                                    "pck_evaluated_joints": 10, "encoder_heatmaps_pck@0.2": 0.8,
+                                    "encoder_heatmaps_mpjpe_mm": 100.0, "encoder_heatmaps_flip_pck@0.2": 0.81,
+                                    "encoder_heatmaps_flip_mpjpe_mm": None,
+                                    "encoder_heatmaps_flip_pck@0.2_by_part": {"head": 0.5, "arms": 1.0},
                                     "pck@0.2_by_part": {"head": 0.75, "arms": None}, "novel_views": 3,
                                     "psnr_masked_by_source_angle": [
                                         {"range_deg": [0.0, 15.0], "views": 2, "psnr": 22.5},
@@ -61,7 +69,10 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert md == render_markdown(card)
     assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
+    assert "| 2 (12000 steps), then 1 (12000 steps) | 106.5 min |" in md  # a resumed run: both invocations
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
+    assert "| ghnerf_int8 | onnx-int8 | 0.800 | 100.0 | 0.810 | n/a |" in md  # plain and flip-tested encoder
+    assert "| ghnerf_int8 | encoder, flip test | 0.500 | 1.000 |" in md
     assert "| model | 0-15 deg | 15-180 deg |" in md and "| ghnerf_int8 | 22.50 (2) | n/a (0) |" in md
     assert "- Motions: train: stand 50 %, freestyle 50 %; val: reach" in md
     from training.pipeline import motion_mix
@@ -163,18 +174,75 @@ def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(t
         _check_pretrain_folder(cfg, "ghnerf")
 
 
+def test_a_pretrain_override_reaches_the_joint_runs_config(tmp_path):
+    """``--pretrain-set iterations=N`` pretrains longer; the joint run records that block, so a joint run
+    made on another pretraining is not reused (runtime keys such as threads do not count)."""
+    import pytest
+
+    pytest.importorskip("torch")
+    from training.pipeline import _train_cmd, train_inputs
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data",
+                         pretrain_overrides=["iterations=777", "threads=1"])
+    plain = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    block = train_inputs(cfg, "edge128")["pretrain_human"]
+    assert block["iterations"] == 777 and "threads" not in block
+    assert train_inputs(plain, "edge128")["pretrain_human"]["iterations"] != 777
+    cmd = _train_cmd(cfg, "edge128", cfg.runs / "edge128")
+    assert "pretrain_human.iterations=777" in cmd and not any("threads=1" in c for c in cmd)
+    assert not any("pretrain_human" in c for c in _train_cmd(cfg, "edge128_baseline", cfg.runs / "b"))
+    from training.train import apply_overrides, build_config, load_config_file
+    from training.pipeline import CONFIG_DIR
+    # what the trainer makes of that command is what the pipeline expects its config.json to hold
+    sets = [cmd[i + 1] for i, c in enumerate(cmd) if c == "--set"]
+    got = build_config(apply_overrides(load_config_file(CONFIG_DIR / "edge128.json"),
+                                       [f"data={json.dumps(str(cfg.data))}", *sets]))
+    assert got.pretrain_human == train_inputs(cfg, "edge128")["pretrain_human"]
+
+
+def test_side_by_side_pretrains_with_every_core_then_trains_the_variants_at_once(tmp_path):
+    """The encoder pretraining is the long pole: it gets every core first; then the joint run and the
+    baseline share the cores, one lane each; a finished pretraining is not planned again."""
+    import pytest
+
+    pytest.importorskip("torch")
+    from training.pipeline import side_by_side_plan
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+
+    def threads(cmd):
+        return [c for c in cmd if c.startswith("threads=")]
+
+    phases = side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2)
+    assert [len(phase) for phase in phases] == [1, 2]
+    (pre_cmd, pre_log), = phases[0][0]
+    assert "training.pretrain_human" in pre_cmd and threads(pre_cmd) == ["threads=2"]
+    assert pre_log == cfg.runs / "edge128_human" / "train.log"
+    joint = [lane[0] for lane in phases[1]]
+    assert [log for _, log in joint] == [cfg.runs / "edge128" / "train.log", cfg.runs / "edge128_baseline" / "train.log"]
+    assert all("training.train" in cmd and threads(cmd) == ["threads=1"] for cmd, _ in joint)
+    run = cfg.runs / "edge128_human"
+    (run / "human.pt").write_bytes(b"x")
+    (run / "config.json").write_text((run / "requested.json").read_text())
+    (run / "summary.json").write_text(json.dumps({"steps": 24000}))
+    assert [len(phase) for phase in side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2)] == [2]
+    assert side_by_side_plan(cfg, ["baseline"], cores=1)[0][0][0][0].count("threads=1") == 1
+
+
 def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monkeypatch):
     import training.pipeline as pipeline
 
     seen = []
     monkeypatch.setattr(pipeline, "run", lambda cfg: seen.append(cfg))
-    argv = ["--out", str(tmp_path / "m"), "--data", str(tmp_path / "d"), "--train", "5000", "--freestyle-share", "0.5",
+    argv = ["--out", str(tmp_path / "m"), "--data", str(tmp_path / "d"), "--train", "2500", "--freestyle-share", "0.25",
             "--pretrain-set", "iterations=12000"]
     assert pipeline.main(argv) == 0
     cfg = seen[0]
-    assert (cfg.train, cfg.freestyle_share, cfg.val) == (5000, 0.5, PipelineConfig(out=tmp_path).val)
+    default = PipelineConfig(out=tmp_path)
+    assert (default.train, default.freestyle_share) == (5000, 0.5)  # the shipped model's recipe
+    assert (cfg.train, cfg.freestyle_share, cfg.val) == (2500, 0.25, default.val)
     assert cfg.pretrain_overrides == ["iterations=12000"]
-    assert "--train 5000" in cfg.command and "--freestyle-share 0.5" in cfg.command
+    assert "--train 2500" in cfg.command and "--freestyle-share 0.25" in cfg.command
     pipeline.main(["--out", str(tmp_path / "m")])
     assert seen[1].train == PipelineConfig(out=tmp_path).train  # the default request is unchanged
     with pytest.raises(SystemExit):

@@ -76,8 +76,9 @@ def test_two_iterations_resume_and_joint_training_starts_from_it(data64, tmp_pat
     log = [json.loads(line) for line in (tmp_path / "a" / "log.jsonl").read_text().splitlines()]
     assert [r["step"] for r in log] == [1, 2] and all(r["loss"] > 0 for r in log)
 
-    pretrain(tiny_pretrain(data64, iterations=1, augment=aug), tmp_path / "b", quiet=True)
-    pretrain(tiny_pretrain(data64, augment=aug), tmp_path / "b", resume=True, quiet=True)
+    first = pretrain(tiny_pretrain(data64, iterations=1, augment=aug), tmp_path / "b", quiet=True)
+    resumed = pretrain(tiny_pretrain(data64, augment=aug), tmp_path / "b", resume=True, quiet=True)
+    assert [g["steps"] for g in resumed["segments"]] == [1, 1] and resumed["wall_s"] >= first["wall_s"]
     a = torch.load(tmp_path / "a" / "human.pt", weights_only=True)
     b = torch.load(tmp_path / "b" / "human.pt", weights_only=True)
     assert a["step"] == b["step"] == 2

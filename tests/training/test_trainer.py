@@ -132,6 +132,10 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
     assert first["steps"] == 1
     resumed, m_resumed = train(tiny_cfg(data64), tmp_path / "b", resume=True, quiet=True)
     assert resumed["steps"] == 2
+    # the summary's wall time covers both invocations, each listed with its steps and threads
+    assert "segments" not in straight and [g["steps"] for g in resumed["segments"]] == [1, 1]
+    assert resumed["wall_s"] == pytest.approx(sum(g["wall_s"] for g in resumed["segments"]), abs=0.11)
+    assert resumed["wall_s"] >= first["wall_s"]
     a, b = m_straight.state_dict(), m_resumed.state_dict()
     assert a.keys() == b.keys()
     for k in a:

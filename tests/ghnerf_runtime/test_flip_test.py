@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+
+from ghnerf_runtime.body25 import JOINT_INDEX, NUM_JOINTS
+from ghnerf_runtime.flip_test import flip_averaged, mirror_images, unmirror_heatmaps
+from ghnerf_runtime.keypoints import decode_keypoints, heatmap_to_model_pixels
+
+
+def _gaussian(g: int, x: float, y: float, sigma: float = 1.2) -> np.ndarray:
+    yy, xx = np.mgrid[0:g, 0:g]
+    return np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma ** 2)).astype(np.float32)
+
+
+def test_a_left_joint_of_the_mirror_image_comes_back_as_the_right_joint_at_the_mirrored_place():
+    g, S = 32, 128
+    mirrored = np.zeros((2, NUM_JOINTS, g, g), np.float32)
+    # in the mirror image the person's right wrist shows as a left wrist, at x = 10.3 cells
+    mirrored[0, JOINT_INDEX["LWrist"]] = _gaussian(g, 10.3, 7.6)
+    back = unmirror_heatmaps(mirrored)
+    kp = decode_keypoints(back)
+    r, l = JOINT_INDEX["RWrist"], JOINT_INDEX["LWrist"]
+    assert kp.valid[0, r] and not kp.valid[0, l]
+    np.testing.assert_allclose(kp.uv[0, r], [g - 1 - 10.3, 7.6], atol=0.05)  # cell x -> w - 1 - x
+    # and in model pixels: pixel column i of the mirror image is column S - 1 - i of the original
+    uv_m = heatmap_to_model_pixels(decode_keypoints(mirrored).uv, g, S)[0, l]
+    uv_b = heatmap_to_model_pixels(kp.uv, g, S)[0, r]
+    np.testing.assert_allclose([uv_b[0] + uv_m[0], uv_b[1]], [S - 1, uv_m[1]], atol=1e-3)
+    np.testing.assert_array_equal(unmirror_heatmaps(unmirror_heatmaps(mirrored)), mirrored)  # an involution
+
+
+def test_an_equivariant_encoder_is_left_unchanged_and_errors_partly_cancel():
+    g = 16
+    rng = np.random.default_rng(0)
+    h = rng.random((2, NUM_JOINTS, g, g), dtype=np.float32)
+    # a model that sees the mirror image exactly mirrored: the average is its own heatmaps
+    np.testing.assert_allclose(flip_averaged(h, unmirror_heatmaps(h)), h, atol=1e-7)
+    # two estimates off by +e and -e (in the original frame) average to the truth
+    truth = np.zeros((1, NUM_JOINTS, g, g), np.float32)
+    truth[0, 4] = _gaussian(g, 8.0, 8.0)
+    a = np.zeros_like(truth)
+    a[0, 4] = _gaussian(g, 8.6, 8.0)
+    b = np.zeros_like(truth)
+    b[0, 4] = _gaussian(g, 7.4, 8.0)
+    avg = flip_averaged(a, unmirror_heatmaps(b))
+    assert abs(decode_keypoints(avg).uv[0, 4, 0] - 8.0) < 0.1 < abs(decode_keypoints(a).uv[0, 4, 0] - 8.0)
+
+
+def test_images_mirror_along_their_width_and_shapes_are_checked():
+    images = np.arange(2 * 3 * 4 * 5, dtype=np.float32).reshape(2, 3, 4, 5)
+    m = mirror_images(images)
+    assert m.flags.c_contiguous and np.array_equal(m[..., 0], images[..., -1])
+    with pytest.raises(ValueError, match="expected"):
+        unmirror_heatmaps(np.zeros((2, 3, 4, 4), np.float32))
+    with pytest.raises(ValueError, match="differ"):
+        flip_averaged(np.zeros((2, NUM_JOINTS, 4, 4)), np.zeros((1, NUM_JOINTS, 4, 4)))
