@@ -370,9 +370,9 @@ class HeatmapsConfig:
         flip_test: with the encoder heatmaps, also run the human encoder on the mirrored crops and
             average the two estimates (:mod:`ghnerf_runtime.flip_test`). An accuracy knob, off by
             default: +0.013 PCK@0.2 on the held-out split (0.897 -> 0.910 int8), none on the
-            bench's sequences, for a second human-graph run (+5-6 ms per pair, which takes the
-            keypoints-only median past 16 ms; docs/runtime.md, "Flip test"). No effect on rendered
-            heatmaps.
+            bench's sequences, for a second human-graph run (+4-6 ms per pair: a 14 ms median on a
+            quiet machine, past the 16 ms target on a busy one; docs/runtime.md, "Flip test"). No
+            effect on rendered heatmaps.
     """
 
     source: str = "encoder"

@@ -103,6 +103,9 @@ def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
                          "--model-dir", "/opt/m"]) == 0
     tree = json.loads(capsys.readouterr().out)
     assert tree["joints3d"]["method"] == "volumetric" and tree["session"]["model_dir"] == "/opt/m"
+    assert tree["heatmaps"] == {"source": "encoder", "flip_test": False}  # the documented defaults
+    assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--validate-config", "--flip-test"]) == 0
+    assert json.loads(capsys.readouterr().out)["heatmaps"]["flip_test"] is True
 
 
 def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir, tmp_path):  # noqa: F811
