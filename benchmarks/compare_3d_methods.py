@@ -2,6 +2,8 @@
 
     .venv/bin/python benchmarks/compare_3d_methods.py --model-dir models            # the trained model
     .venv/bin/python benchmarks/compare_3d_methods.py --oracle                      # geometry floor, no model
+    .venv/bin/python benchmarks/compare_3d_methods.py --heatmap-sources encoder --methods triangulate \
+        --reprojection-gates 2,3,4,8,12                          # the reprojection gate's trade
 
 For every method (triangulation, triangulation with the single-view fallback, volumetric query
 at a few grid sizes, depth centroid) the estimator runs over the same pairs (a fresh track per
@@ -73,6 +75,9 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=int, default=10)
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--methods", default=",".join(METHODS), help=f"comma list of {list(METHODS)}")
+    ap.add_argument("--reprojection-gates", default="",
+                    help="comma list of joints3d.max_reprojection_px values: one more `triangulate` row each "
+                         "(the trade of joints found against their error; the default gate is 6)")
     ap.add_argument("--heatmap-sources", default="rendered",
                     help="comma list of rendered,encoder (the 2D heatmaps the methods start from)")
     ap.add_argument("--seen-motions", action="store_true")
@@ -80,10 +85,15 @@ def main(argv=None) -> int:
     ap.add_argument("--json", help="write the figures here")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    methods = dict(METHODS)
+    for gate in (float(g) for g in args.reprojection_gates.split(",") if g):
+        methods[f"triangulate, gate {gate:g} px"] = {"method": "triangulate", "max_reprojection_px": gate}
+    names = [m for m in args.methods.split(",") if m] + [m for m in methods if m not in METHODS]
+    if bad := [m for m in names if m not in methods]:
+        ap.error(f"--methods: unknown {bad}; methods: {list(METHODS)}")
 
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
     truth = np.concatenate([np.asarray(s.joints_3d) for s in sequences])
-    names = [m for m in args.methods.split(",") if m]
     sources = [h for h in args.heatmap_sources.split(",") if h]
     if args.oracle and sources != ["rendered"]:
         ap.error("--oracle models rendered heatmaps only")
@@ -109,7 +119,7 @@ def main(argv=None) -> int:
     for source in sources:
         for name in names:
             t = time.perf_counter()
-            j3 = replace(Joints3DConfig(), **METHODS[name])
+            j3 = replace(Joints3DConfig(), **methods[name])
             preds, found, stage, total, tracked = run_method(session, sequences, j3, oracle, source)
             label = name if sources == ["rendered"] else f"{source} heatmaps, {name}"
             results[label] = {"preds": preds, "found": found, "stage": stage, "total": total, "tracked": tracked}

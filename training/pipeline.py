@@ -85,7 +85,7 @@ class PipelineConfig:
 
     @classmethod
     def quick_defaults(cls, out: Path) -> "PipelineConfig":
-        return cls(out=out, data=Path("data/quick128"), runs=out / "runs", train=12, val=4, val_seen_motions=0,
+        return cls(out=out, data=out / "data", runs=out / "runs", train=12, val=4, val_seen_motions=0,
                    eval_limit=2, calib_scenes=2, quick=True,
                    train_overrides=["iterations=6", "log_every=3", "checkpoint_every=3", "pck_every=3",
                                     "targets_per_iter=2", "heat_rays=64", "patch_size=8", "max_minutes=0"],
@@ -672,7 +672,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.pipeline", description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
     ap.add_argument("--out", default="models", help="model folder (ONNX graphs, metrics, card)")
-    ap.add_argument("--data", help="dataset folder (default data/edge128; --quick: data/quick128)")
+    ap.add_argument("--data", help="dataset folder (default data/edge128; --quick: OUT/data)")
     ap.add_argument("--runs", help="training runs folder (default runs/; --quick: OUT/runs)")
     ap.add_argument("--quick", action="store_true", help="smoke test: tiny data, a few iterations")
     ap.add_argument("--eval-limit", type=int, help="evaluate the first N held-out scenes only (0: all)")
