@@ -1,6 +1,6 @@
 """Confidence of phantom joints in empty rooms vs joints of real people (sets the presence gate).
 
-    .venv/bin/python benchmarks/measure_presence.py [--model-dir models] [--rooms 8]
+    .venv/bin/python benchmarks/measure_presence.py [--model-dir models] [--rooms 8] [--flip-test]
 
 The trained model has only ever seen views with a person in them, so for an empty room it still
 answers "someone", with weaker peaks. For each heatmap source (with its best 3D method) this
@@ -42,13 +42,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
     ap.add_argument("--rooms", type=int, default=8, help="empty rooms (scene seeds 1..N)")
+    ap.add_argument("--flip-test", action="store_true", help="heatmaps.flip_test on (encoder heatmaps)")
     args = ap.parse_args(argv)
     import drivers.sim as sim
 
     rig = sim.RigPlacement().build()
     sequences = load_sequences(4, 10)
     for source in HEATMAP_SOURCES:
-        cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir), heatmaps=HeatmapsConfig(source=source),
+        heatmaps = HeatmapsConfig(source=source, flip_test=args.flip_test)
+        cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir), heatmaps=heatmaps,
                               joints3d=Joints3DConfig(method=BEST_METHOD[source]),
                               frame_check=FrameCheckConfig(enabled=False), presence=PresenceConfig(enabled=False))
         est = Estimator.from_config(rig, cfg)
@@ -66,7 +68,8 @@ def main(argv=None) -> int:
                 r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])))
                 real.append((r.num_found, sixth_strongest(r)))
         e, p = np.array(empty), np.array(real)
-        print(f"{source:>8} heatmaps ({BEST_METHOD[source]}): empty rooms: joints found {int(e[:, 0].min())}-"
+        flip = ", flip test" if cfg.flips_encoder_heatmaps else ""
+        print(f"{source:>8} heatmaps ({BEST_METHOD[source]}{flip}): empty rooms: joints found {int(e[:, 0].min())}-"
               f"{int(e[:, 0].max())}, 6th-strongest confidence max {e[:, 1].max():.3f} | {len(p)} pairs with a "
               f"person: 6th-strongest min {p[:, 1].min():.3f}, 5th percentile {np.percentile(p[:, 1], 5):.3f}")
     return 0
