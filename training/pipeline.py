@@ -668,6 +668,20 @@ def run(cfg: PipelineConfig) -> dict | None:
     return json.loads((cfg.out / "model_card.json").read_text())
 
 
+def _recipe_args(argv: list[str]) -> list[str]:
+    """``argv`` without ``--force STAGE``: redoing a stage changes no result, so the card's command (the
+    recipe) leaves it out."""
+    out, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+        elif a == "--force":
+            skip = True
+        elif not a.startswith("--force="):
+            out.append(a)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.pipeline", description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
@@ -720,7 +734,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--variants: unknown {bad}; variants: {list(VARIANTS)}")
     cfg.train_overrides = [*cfg.train_overrides, *args.set]
     cfg.pretrain_overrides = [*cfg.pretrain_overrides, *args.pretrain_set]
-    cfg.command = shlex.join(["python", "-m", "training.pipeline", *(argv if argv is not None else sys.argv[1:])])
+    cfg.command = shlex.join(["python", "-m", "training.pipeline", *_recipe_args(argv if argv is not None else sys.argv[1:])])
     card = run(cfg)
     if card is not None:
         print(json.dumps(card["metrics"], indent=1))
