@@ -200,18 +200,21 @@ class HeatmapScores:
     mpjpe_sum_mm: float = 0.0
     mpjpe_joints: int = 0
     parts: dict[str, list[int]] = field(default_factory=dict)
+    views: list[list[int]] = field(default_factory=list)
 
     def add(self, p, e) -> None:
         self.pck_correct += p.num_correct
         self.pck_evaluated += p.num_evaluated
         _add_parts(self.parts, p)
+        _add_views(self.views, p)
         self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
         self.mpjpe_joints += e.num_evaluated
 
     def result(self, prefix: str) -> dict:
         return {f"{prefix}_pck@0.2": self.pck_correct / self.pck_evaluated if self.pck_evaluated else None,
                 f"{prefix}_mpjpe_mm": self.mpjpe_sum_mm / self.mpjpe_joints if self.mpjpe_joints else None,
-                f"{prefix}_pck@0.2_by_part": _part_scores(self.parts) if self.parts else None}
+                f"{prefix}_pck@0.2_by_part": _part_scores(self.parts) if self.parts else None,
+                f"{prefix}_pck@0.2_by_view": _view_scores(self.views) if self.views else None}
 
 
 @dataclass
@@ -226,8 +229,9 @@ class Accumulator:
     mpjpe_joints: int = 0
     mpjpe_missing: int = 0
     mpjpe_pred_missing: int = 0
-    # per body part (body25.BODY_PARTS): [correct, evaluated]
+    # per body part (body25.BODY_PARTS) and per source view: [correct, evaluated]
     pck_parts: dict[str, list[int]] = field(default_factory=dict)
+    pck_views: list[list[int]] = field(default_factory=list)
     encoder: HeatmapScores = field(default_factory=HeatmapScores)
     encoder_flip: HeatmapScores = field(default_factory=HeatmapScores)
     heat_mse: list[float] = field(default_factory=list)
@@ -248,6 +252,7 @@ class Accumulator:
         self.mpjpe_missing += e.num_missing
         self.mpjpe_pred_missing += e.num_pred_missing
         _add_parts(self.pck_parts, p)
+        _add_views(self.pck_views, p)
         self.heat_mse.append(hm.value)
         if m.get("encoder_pck") is not None:
             self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"])
@@ -280,6 +285,8 @@ class Accumulator:
             "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
             "psnr_masked_by_source_angle": psnr_by_angle(self.psnr, self.psnr_angle_deg),
             "pck@0.2_by_part": _part_scores(self.pck_parts),
+            # the target holds in *each* source view
+            "pck@0.2_by_view": _view_scores(self.pck_views),
             # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way;
             # "flip": averaged with those of the mirrored images (the runtime's heatmaps.flip_test)
             **self.encoder.result("encoder_heatmaps"),
@@ -322,6 +329,21 @@ def _add_parts(totals: dict[str, list[int]], result) -> None:
         t = totals.setdefault(part, [0, 0])
         t[0] += int(result.correct[..., joints].sum())
         t[1] += int(result.evaluated[..., joints].sum())
+
+
+def _add_views(totals: list[list[int]], result) -> None:
+    """Add a :class:`~ghnerf_runtime.metrics.PckResult`'s correct / evaluated joints per source view."""
+    correct = np.asarray(result.correct).reshape(-1, np.shape(result.correct)[-1])
+    evaluated = np.asarray(result.evaluated).reshape(correct.shape)
+    while len(totals) < len(correct):
+        totals.append([0, 0])
+    for v in range(len(correct)):
+        totals[v][0] += int(correct[v].sum())
+        totals[v][1] += int(evaluated[v].sum())
+
+
+def _view_scores(totals: list[list[int]]) -> list[float | None]:
+    return [(c / n if n else None) for c, n in totals]
 
 
 def _part_scores(totals: Mapping[str, list[int]]) -> dict[str, float | None]:

@@ -148,6 +148,18 @@ def render_markdown(card: Mapping[str, Any]) -> str:
                      f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
                      f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} |")
         L.append("")
+    views = [(label, src, m[key]) for label, m in (card.get("metrics") or {}).items()
+             for src, key in (("rendered", "pck@0.2_by_view"), ("encoder", "encoder_heatmaps_pck@0.2_by_view"),
+                              ("encoder, flip test", "encoder_heatmaps_flip_pck@0.2_by_view"))
+             if m.get(key)]
+    if views:
+        L.append("PCK@0.2 in each source view (a PCK target applies to each):")
+        L.append("")
+        L.append("| model | heatmaps | " + " | ".join(f"view {v}" for v in range(len(views[0][2]))) + " |")
+        L.append("|---|---|" + "---|" * len(views[0][2]))
+        for label, src, by in views:
+            L.append(f"| {label} | {src} | " + " | ".join(_fmt(v) for v in by) + " |")
+        L.append("")
     parts = [(label, src, m[key]) for label, m in (card.get("metrics") or {}).items()
              for src, key in (("rendered", "pck@0.2_by_part"), ("encoder", "encoder_heatmaps_pck@0.2_by_part"),
                               ("encoder, flip test", "encoder_heatmaps_flip_pck@0.2_by_part"))

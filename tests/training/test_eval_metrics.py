@@ -156,6 +156,13 @@ def test_encoder_heatmaps_are_scored_like_the_rendered_ones(data64):
     acc3 = Accumulator()
     acc3.add(r3)
     assert acc3.result()["encoder_heatmaps_flip_pck@0.2"] == 1.0 and acc3.result()["encoder_heatmaps_pck@0.2"] == 0.0
+    # per source view: one view right, the other wrong
+    half = truth.copy()
+    half[1] = 0.0
+    acc4 = Accumulator()
+    acc4.add(scene_metrics(sc, half, None, np.array([], int), encoder_heatmaps=half))
+    assert acc4.result()["pck@0.2_by_view"] == [1.0, 0.0]
+    assert acc4.result()["encoder_heatmaps_pck@0.2_by_view"] == [1.0, 0.0]
 
 
 class _EncoderOracle(_Oracle):
@@ -177,6 +184,7 @@ def test_evaluate_scores_the_flip_test_of_the_encoder_heatmaps(data64):
     res = evaluate(_EncoderOracle(ds), ds, novel=False, progress=False)
     assert res["encoder_heatmaps_pck@0.2"] == 1.0 and res["encoder_heatmaps_flip_pck@0.2"] == 1.0
     assert res["encoder_heatmaps_flip_mpjpe_mm"] < 0.5 and res["encoder_heatmaps_flip_pck@0.2_by_part"]["arms"] == 1.0
+    assert res["pck@0.2_by_view"] == [1.0, 1.0] and res["encoder_heatmaps_flip_pck@0.2_by_view"] == [1.0, 1.0]
 
 
 def _look_from(eye, centre=(0.0, 0.0, 0.0)):
