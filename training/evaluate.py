@@ -24,7 +24,9 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
     cannot be triangulated (not decoded in both views) are excluded and counted (``mpjpe_pred_missing``).
 * **Encoder heatmaps** (models with the human encoder's auxiliary head): its 2D heatmaps of the two
   sources, decoded and triangulated exactly as above (``encoder_heatmaps_pck@0.2``,
-  ``encoder_heatmaps_mpjpe_mm``): the cheap heatmap source of the runtime.
+  ``encoder_heatmaps_mpjpe_mm``): the cheap heatmap source of the runtime; and flip-tested, averaged
+  with the heatmaps of the mirrored images mirrored back (``encoder_heatmaps_flip_*``, the runtime's
+  ``heatmaps.flip_test``). PCK is also reported per source view (``*_by_view``).
 * **Novel views** (targets 2..V-1): the full-resolution image (graph ``render_rgb``), ``masked_psnr`` and
   ``masked_ssim`` inside the subject mask against the target composited over the model background.
   The dataset's novel cameras circle the subject (any azimuth), so many see sides that neither
