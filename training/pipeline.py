@@ -190,7 +190,7 @@ def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int) -> l
     """Phases of lanes of ``(command, log)`` steps: the lanes of a phase run at once, the phases in order.
 
     The pretrainings come first, each with every core, since the encoder pretraining is the long pole
-    (24000 steps: ~87 min at two threads, ~126 min at one); then the joint trainings run side by side at
+    (24000 steps: ~66 min at two threads, ~126 min at one); then the joint trainings run side by side at
     ``cores // n`` threads each, never oversubscribed. Measured lane times are in docs/training.md.
     """
     threads = max(1, cores // len(variants))
