@@ -36,7 +36,7 @@ test: $(DEV_STAMP)
 
 # Regenerate the shipped models from scratch (dataset, the human encoder's pretraining, training of
 # the model and the baseline, ONNX export, int8 quantization, held-out evaluation, model card):
-# about 2.3 h on 2 cores (docs/training.md, "Lanes"; `--pretrain-set iterations=12000` for ~1.7 h).
+# about 2.05 h on 2 cores (docs/training.md, "Lanes"; `--pretrain-set iterations=12000` for ~1.5 h).
 model: $(DEV_STAMP)
 	$(PY) -m training.pipeline --out models/
 

@@ -669,15 +669,15 @@ def run(cfg: PipelineConfig) -> dict | None:
 
 
 def _recipe_args(argv: list[str]) -> list[str]:
-    """``argv`` without ``--force STAGE``: redoing a stage changes no result, so the card's command (the
-    recipe) leaves it out."""
+    """``argv`` without ``--force STAGE`` and ``--variants LIST``: redoing a stage, or taking only some
+    variants through now, changes no result, so the card's command (the recipe) leaves them out."""
     out, skip = [], False
     for a in argv:
         if skip:
             skip = False
-        elif a == "--force":
+        elif a in ("--force", "--variants"):
             skip = True
-        elif not a.startswith("--force="):
+        elif not a.startswith(("--force=", "--variants=")):
             out.append(a)
     return out
 

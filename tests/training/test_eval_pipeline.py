@@ -246,7 +246,7 @@ def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monk
     assert (cfg.train, cfg.freestyle_share, cfg.val) == (2500, 0.25, default.val)
     assert cfg.pretrain_overrides == ["iterations=12000"]
     assert "--train 2500" in cfg.command and "--freestyle-share 0.25" in cfg.command
-    pipeline.main([*argv, "--force", "eval_ghnerf", "--force=export"])  # redoing stages is not part of the recipe
+    pipeline.main([*argv, "--force", "eval_ghnerf", "--force=export", "--variants", "baseline"])  # not the recipe
     assert seen[-1].command == cfg.command and seen[-1].force == ("eval_ghnerf", "export")
     pipeline.main(["--out", str(tmp_path / "m")])
     assert seen[-1].train == PipelineConfig(out=tmp_path).train  # the default request is unchanged
