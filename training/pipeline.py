@@ -735,7 +735,12 @@ def main(argv: list[str] | None = None) -> int:
     cfg.train_overrides = [*cfg.train_overrides, *args.set]
     cfg.pretrain_overrides = [*cfg.pretrain_overrides, *args.pretrain_set]
     cfg.command = shlex.join(["python", "-m", "training.pipeline", *_recipe_args(argv if argv is not None else sys.argv[1:])])
-    card = run(cfg)
+    try:
+        card = run(cfg)
+    except (RuntimeError, subprocess.CalledProcessError) as e:
+        # the stage that failed has said why (a refused run folder, or the step's own log / stderr)
+        print(f"python -m training.pipeline: error: {e}", file=sys.stderr)
+        return 2
     if card is not None:
         print(json.dumps(card["metrics"], indent=1))
     return 0

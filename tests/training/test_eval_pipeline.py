@@ -252,3 +252,25 @@ def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monk
     assert seen[-1].train == PipelineConfig(out=tmp_path).train  # the default request is unchanged
     with pytest.raises(SystemExit):
         pipeline.main(["--out", str(tmp_path / "m"), "--train", "0"])
+
+
+def test_a_failed_stage_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
+    """A refused run folder or a failing step (say, data made by another recipe) ends the pipeline with
+    its reason on one line, not a traceback."""
+    import subprocess
+
+    import training.pipeline as pipeline
+
+    def refuse(cfg):
+        raise RuntimeError("runs/edge128 holds a run with another config; move it away or pass --runs")
+
+    monkeypatch.setattr(pipeline, "run", refuse)
+    assert pipeline.main(["--out", str(tmp_path / "m")]) == 2
+    assert "error: runs/edge128 holds a run with another config" in capsys.readouterr().err
+
+    def step_fails(cfg):
+        raise subprocess.CalledProcessError(2, ["python", "-m", "training.data.generate"])
+
+    monkeypatch.setattr(pipeline, "run", step_fails)
+    assert pipeline.main(["--out", str(tmp_path / "m")]) == 2
+    assert "training.data.generate" in capsys.readouterr().err
