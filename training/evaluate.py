@@ -195,12 +195,13 @@ def keypoints_from_heatmaps(heatmaps: np.ndarray, model_size: int,
 
 @dataclass
 class HeatmapScores:
-    """Pooled PCK@0.2 and MPJPE of one heatmap source (the encoder's, plain or flip-tested)."""
+    """Pooled PCK@0.2 and MPJPE of one heatmap source (rendered, or the encoder's plain or flip-tested)."""
 
     pck_correct: int = 0
     pck_evaluated: int = 0
     mpjpe_sum_mm: float = 0.0
     mpjpe_joints: int = 0
+    # per body part (body25.BODY_PARTS) and per source view: [correct, evaluated]
     parts: dict[str, list[int]] = field(default_factory=dict)
     views: list[list[int]] = field(default_factory=list)
 
@@ -212,9 +213,16 @@ class HeatmapScores:
         self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
         self.mpjpe_joints += e.num_evaluated
 
+    @property
+    def pck(self) -> float | None:
+        return self.pck_correct / self.pck_evaluated if self.pck_evaluated else None
+
+    @property
+    def mpjpe_mm(self) -> float | None:
+        return self.mpjpe_sum_mm / self.mpjpe_joints if self.mpjpe_joints else None
+
     def result(self, prefix: str) -> dict:
-        return {f"{prefix}_pck@0.2": self.pck_correct / self.pck_evaluated if self.pck_evaluated else None,
-                f"{prefix}_mpjpe_mm": self.mpjpe_sum_mm / self.mpjpe_joints if self.mpjpe_joints else None,
+        return {f"{prefix}_pck@0.2": self.pck, f"{prefix}_mpjpe_mm": self.mpjpe_mm,
                 f"{prefix}_pck@0.2_by_part": _part_scores(self.parts) if self.parts else None,
                 f"{prefix}_pck@0.2_by_view": _view_scores(self.views) if self.views else None}
 
@@ -223,17 +231,11 @@ class HeatmapScores:
 class Accumulator:
     """Pools per-scene results into split scores."""
 
-    pck_correct: int = 0
-    pck_evaluated: int = 0
+    rendered: HeatmapScores = field(default_factory=HeatmapScores)
     pck_missing: int = 0
     pck_pred_missing: int = 0
-    mpjpe_sum_mm: float = 0.0
-    mpjpe_joints: int = 0
     mpjpe_missing: int = 0
     mpjpe_pred_missing: int = 0
-    # per body part (body25.BODY_PARTS) and per source view: [correct, evaluated]
-    pck_parts: dict[str, list[int]] = field(default_factory=dict)
-    pck_views: list[list[int]] = field(default_factory=list)
     encoder: HeatmapScores = field(default_factory=HeatmapScores)
     encoder_flip: HeatmapScores = field(default_factory=HeatmapScores)
     heat_mse: list[float] = field(default_factory=list)
@@ -245,16 +247,11 @@ class Accumulator:
     def add(self, m: dict) -> None:
         self.scenes += 1
         p, e, hm = m["pck"], m["mpjpe"], m["heatmap_mse"]
-        self.pck_correct += p.num_correct
-        self.pck_evaluated += p.num_evaluated
+        self.rendered.add(p, e)
         self.pck_missing += p.num_missing
         self.pck_pred_missing += p.num_pred_missing
-        self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
-        self.mpjpe_joints += e.num_evaluated
         self.mpjpe_missing += e.num_missing
         self.mpjpe_pred_missing += e.num_pred_missing
-        _add_parts(self.pck_parts, p)
-        _add_views(self.pck_views, p)
         self.heat_mse.append(hm.value)
         if m.get("encoder_pck") is not None:
             self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"])
@@ -275,20 +272,21 @@ class Accumulator:
             v = [x for x in v if not np.isnan(x)]
             return float(np.mean(v)) if v else float("nan")
 
+        r = self.rendered
         return {
             "scenes": self.scenes,
-            "pck@0.2": self.pck_correct / self.pck_evaluated if self.pck_evaluated else float("nan"),
-            "pck_evaluated_joints": self.pck_evaluated, "pck_missing_truth": self.pck_missing,
+            "pck@0.2": r.pck if r.pck is not None else float("nan"),
+            "pck_evaluated_joints": r.pck_evaluated, "pck_missing_truth": self.pck_missing,
             "pck_undecoded": self.pck_pred_missing,
-            "mpjpe_mm": self.mpjpe_sum_mm / self.mpjpe_joints if self.mpjpe_joints else float("nan"),
-            "mpjpe_evaluated_joints": self.mpjpe_joints, "mpjpe_missing_truth": self.mpjpe_missing,
+            "mpjpe_mm": r.mpjpe_mm if r.mpjpe_mm is not None else float("nan"),
+            "mpjpe_evaluated_joints": r.mpjpe_joints, "mpjpe_missing_truth": self.mpjpe_missing,
             "mpjpe_pred_missing": self.mpjpe_pred_missing,
             "heatmap_mse": mean(self.heat_mse),
             "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
             "psnr_masked_by_source_angle": psnr_by_angle(self.psnr, self.psnr_angle_deg),
-            "pck@0.2_by_part": _part_scores(self.pck_parts),
-            # the target holds in *each* source view
-            "pck@0.2_by_view": _view_scores(self.pck_views),
+            "pck@0.2_by_part": _part_scores(r.parts),
+            # a PCK target applies to each source view
+            "pck@0.2_by_view": _view_scores(r.views),
             # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way;
             # "flip": averaged with those of the mirrored images (the runtime's heatmaps.flip_test)
             **self.encoder.result("encoder_heatmaps"),

@@ -73,6 +73,16 @@ def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path
     return jpath, mpath
 
 
+#: Heatmap sources of the metrics, as the card names them, and their metric-key prefixes.
+_HEATMAP_PREFIXES = (("rendered", ""), ("encoder", "encoder_heatmaps_"), ("encoder, flip test", "encoder_heatmaps_flip_"))
+
+
+def _pck_breakdown(card: dict, kind: str) -> list[tuple[str, str, object]]:
+    """``(model label, heatmap source, scores)`` of every ``<prefix>pck@0.2_<kind>`` the metrics hold."""
+    return [(label, src, m[f"{prefix}pck@0.2_{kind}"]) for label, m in (card.get("metrics") or {}).items()
+            for src, prefix in _HEATMAP_PREFIXES if m.get(f"{prefix}pck@0.2_{kind}")]
+
+
 def render_markdown(card: Mapping[str, Any]) -> str:
     L: list[str] = []
     L.append(f"# Model card: {card.get('name', 'GHNeRF edge128')}")
@@ -148,10 +158,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
                      f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
                      f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} |")
         L.append("")
-    views = [(label, src, m[key]) for label, m in (card.get("metrics") or {}).items()
-             for src, key in (("rendered", "pck@0.2_by_view"), ("encoder", "encoder_heatmaps_pck@0.2_by_view"),
-                              ("encoder, flip test", "encoder_heatmaps_flip_pck@0.2_by_view"))
-             if m.get(key)]
+    views = _pck_breakdown(card, "by_view")
     if views:
         L.append("PCK@0.2 in each source view (a PCK target applies to each):")
         L.append("")
@@ -160,10 +167,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         for label, src, by in views:
             L.append(f"| {label} | {src} | " + " | ".join(_fmt(v) for v in by) + " |")
         L.append("")
-    parts = [(label, src, m[key]) for label, m in (card.get("metrics") or {}).items()
-             for src, key in (("rendered", "pck@0.2_by_part"), ("encoder", "encoder_heatmaps_pck@0.2_by_part"),
-                              ("encoder, flip test", "encoder_heatmaps_flip_pck@0.2_by_part"))
-             if m.get(key)]
+    parts = _pck_breakdown(card, "by_part")
     if parts:
         names = list(parts[0][2])
         L.append("PCK@0.2 per body part (`body25.BODY_PARTS`):")
