@@ -222,8 +222,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
 
     seed_everything(cfg.seed)  # same initial weights as the joint run of the same seed
     model = GHNeRF(mcfg).to(device).train()
-    # Channels-last convolutions: 0.153-0.166 s per 16-image step against 0.180-0.182 (2-core EPYC, two
-    # threads, docs/training.md "Lanes"); the same weights and updates, another memory layout.
+    # Channels-last convolutions: 0.165 s per 16-image step against 0.189 (2-core EPYC, two threads, the
+    # 300-step run of docs/training.md "Lanes"); the same weights and updates, another memory layout.
     model.human.to(memory_format=torch.channels_last)
     params = list(model.human.parameters())
     opt = torch.optim.Adam(params, lr=cfg.lr)

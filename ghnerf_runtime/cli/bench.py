@@ -208,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--flip-tests", default=None,
                     type=_on_off_list,
                     help="comma list of heatmaps.flip_test values (on,off or 1,0), one row each for the encoder "
-                         "heatmaps (interleaved like the other rows; default: the config's, on)")
+                         "heatmaps (interleaved like the other rows; default: the config's, off)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

@@ -13,3 +13,15 @@ def _two_threads():
         return
     torch.set_num_threads(2)
     yield
+
+
+@pytest.fixture(autouse=True)
+def _no_flush_denormal_afterwards():
+    """The trainers set the process-wide flush-denormal mode (a CLI runs alone); a test that calls them in
+    process leaves subnormals off for every later test (hypothesis refuses float strategies then)."""
+    yield
+    try:
+        import torch
+    except ImportError:
+        return
+    torch.set_flush_denormal(False)
