@@ -135,7 +135,9 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
     # the summary's wall time covers both invocations, each listed with its steps and threads
     assert "segments" not in straight and [g["steps"] for g in resumed["segments"]] == [1, 1]
     assert resumed["wall_s"] == pytest.approx(sum(g["wall_s"] for g in resumed["segments"]), abs=0.11)
-    assert resumed["wall_s"] >= first["wall_s"]
+    # the first segment is what the first invocation's last checkpoint stored: its time up to that save
+    # (the save itself and the summary come after, so it can be shorter than that run's summary on a busy box)
+    assert 0 <= resumed["segments"][0]["wall_s"] <= first["wall_s"]
     a, b = m_straight.state_dict(), m_resumed.state_dict()
     assert a.keys() == b.keys()
     for k in a:
