@@ -36,7 +36,7 @@ from benchmarks.bench_runtime_common import OracleSession, contract_of, edge128_
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
-from ghnerf_runtime.metrics import mpjpe  # noqa: E402
+from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, mpjpe_by_visibility, visibility_class  # noqa: E402
 from ghnerf_runtime.session import ModelSession  # noqa: E402
 
 #: name -> Joints3DConfig overrides.
@@ -94,6 +94,8 @@ def main(argv=None) -> int:
 
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
     truth = np.concatenate([np.asarray(s.joints_3d) for s in sequences])
+    visible = np.concatenate([np.asarray(s.visible) for s in sequences])  # (pairs, 2, 25)
+    vis_class = visibility_class(visible)
     sources = [h for h in args.heatmap_sources.split(",") if h]
     if args.oracle and sources != ["rendered"]:
         ap.error("--oracle models rendered heatmaps only")
@@ -138,6 +140,9 @@ def main(argv=None) -> int:
                      "cold_mpjpe_mm": cold_err.value if cold_err else float("nan"),
                      "cold_found": float(r["found"][cold].mean()) if cold.any() else float("nan"),
                      "mpjpe_common_mm": fair.value, "common_joints": int(common.sum()),
+                     "by_visibility": {name: {"mpjpe_mm": t / n if n else float("nan"), "joints": n,
+                                              "found": float(r["found"][vis_class == k].mean())}
+                                       for k, (name, (t, n)) in enumerate(mpjpe_by_visibility(own, visible).items())},
                      "stage_ms": percentiles(r["stage"]), "total_ms": percentiles(r["total"])})
     print("\n| method | MPJPE (mm, own joints) | joints found | MPJPE on common joints (mm) "
           "| 3D stage ms median / p99 | pair ms median |")
@@ -151,6 +156,15 @@ def main(argv=None) -> int:
     for row in rows:
         print(f"| {row['method']} | {100 * row['tracked_frac']:.0f} % | {row['cold_mpjpe_mm']:.1f} / "
               f"{100 * row['cold_found']:.1f} % |")
+    shares = ", ".join(f"{name.replace('_', ' ')} {100 * float((vis_class == k).mean()):.0f} %"
+                       for k, name in enumerate(VISIBILITY_CLASSES))
+    print(f"\nBy the cameras that see the joint (simulator truth: in the image, not hidden by the body; {shares} "
+          "of the joints): MPJPE (mm) over the joints found / share found")
+    print("\n| method | " + " | ".join(n.replace("_", " ") for n in VISIBILITY_CLASSES) + " |")
+    print("|---|" + "---|" * len(VISIBILITY_CLASSES))
+    for row in rows:
+        print(f"| {row['method']} | " + " | ".join(
+            f"{c['mpjpe_mm']:.1f} / {100 * c['found']:.1f} %" for c in row["by_visibility"].values()) + " |")
     if args.json:
         Path(args.json).write_text(json.dumps({"model": model_line, "rows": rows,
                                                "sequences": [s.info for s in sequences]}, indent=2, default=float))

@@ -4,6 +4,7 @@ Every definition here is restated in ``docs/metrics.md``; change both together.
 
 * :func:`pck` -- PCK@alpha of 2D joints against a per-sample torso reference length.
 * :func:`mpjpe` -- mean per-joint 3D position error, millimetres (inputs in metres).
+* :func:`mpjpe_by_visibility` -- that error split by how many views see each joint.
 * :func:`masked_psnr`, :func:`masked_ssim` -- image quality inside a mask.
 * :func:`heatmap_mse` -- mean squared error between heatmaps.
 * :func:`gaussian_heatmaps` -- the ground-truth heatmap generator (training targets, tests).
@@ -40,6 +41,7 @@ SSIM_K2 = 0.03
 
 __all__ = [
     "TORSO_BOX_JOINTS", "PckResult", "MpjpeResult", "ImageMetricResult", "MseResult",
+    "VISIBILITY_CLASSES", "visibility_class", "mpjpe_by_visibility",
     "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse", "gaussian_heatmaps",
 ]
 
@@ -266,6 +268,56 @@ def mpjpe(pred_3d, true_3d, valid, *, pred_valid=None) -> MpjpeResult:
     return MpjpeResult(value=_mean_or_nan(float(errors_mm.sum()), n), errors=errors_mm, evaluated=evaluated,
                        num_evaluated=n, num_missing=int((~valid_b).sum()),
                        num_pred_missing=int((valid_b & ~pred_ok).sum()))
+
+
+#: A 3D joint's visibility class: seen (in the image, unoccluded) by every source view, by some, by none.
+VISIBILITY_CLASSES: tuple[str, ...] = ("all_views", "some_views", "no_view")
+
+
+def visibility_class(visible) -> np.ndarray:
+    """Index into :data:`VISIBILITY_CLASSES` of each joint from its per-view visibility.
+
+    Args:
+        visible: ``(..., C, J)`` bool, joint ``j`` visible in view ``c``.
+
+    Returns:
+        ``(..., J)`` int: 0 all views, 1 some, 2 none.
+
+    Example:
+        >>> visibility_class([[True, True, False], [True, False, False]]).tolist()
+        [0, 1, 2]
+    """
+    v = np.asarray(visible, bool)
+    if v.ndim < 2:
+        raise ShapeError(f"visible must have shape (..., C, J), got {v.shape}")
+    seen = v.sum(axis=-2)
+    return np.where(seen == v.shape[-2], 0, np.where(seen > 0, 1, 2))
+
+
+def mpjpe_by_visibility(result: MpjpeResult, visible) -> dict[str, tuple[float, int]]:
+    """``result``'s evaluated errors split by :func:`visibility_class`: ``{class: (sum_mm, joints)}``.
+
+    Sums, not means, so batches pool exactly; the mean is ``sum_mm / joints``. Why: the synthetic
+    truth knows every 3D joint, visible or not, and the MPJPE pools them all; this says how much of
+    the error comes from joints that some or every camera cannot see (docs/metrics.md).
+
+    Args:
+        result: :func:`mpjpe` of ``(..., J)`` joints.
+        visible: ``(..., C, J)`` bool per-view visibility of the same joints.
+
+    Example:
+        >>> r = mpjpe([[0, 0, 1.0], [0, 0, 1.0]], [[0, 0, 1.002], [0, 0, 1.01]], [True, True])
+        >>> {k: (round(s, 6), n) for k, (s, n) in mpjpe_by_visibility(r, [[True, True], [True, False]]).items()}
+        {'all_views': (2.0, 1), 'some_views': (10.0, 1), 'no_view': (0.0, 0)}
+    """
+    cls = visibility_class(visible)
+    if cls.shape != result.evaluated.shape:
+        raise ShapeError(f"visible {np.shape(visible)} does not match the MPJPE's joints {result.evaluated.shape}")
+    out = {}
+    for k, name in enumerate(VISIBILITY_CLASSES):
+        sel = result.evaluated & (cls == k)
+        out[name] = (float(result.errors[sel].sum()), int(sel.sum()))
+    return out
 
 
 # ------------------------------------------------------------- image metrics

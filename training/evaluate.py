@@ -26,7 +26,9 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
   sources, decoded and triangulated exactly as above (``encoder_heatmaps_pck@0.2``,
   ``encoder_heatmaps_mpjpe_mm``): the cheap heatmap source of the runtime; and flip-tested, averaged
   with the heatmaps of the mirrored images mirrored back (``encoder_heatmaps_flip_*``, the runtime's
-  ``heatmaps.flip_test``). PCK is also reported per source view (``*_by_view``).
+  ``heatmaps.flip_test``). PCK is also reported per source view (``*_by_view``), and MPJPE per
+  visibility class of the joint in the two sources (``*_mpjpe_by_visibility``: both see it, one, none;
+  every joint is in the MPJPE itself, since the synthetic truth knows the hidden ones too).
 * **Novel views** (targets 2..V-1): the full-resolution image (graph ``render_rgb``), ``masked_psnr`` and
   ``masked_ssim`` inside the subject mask against the target composited over the model background.
   The dataset's novel cameras circle the subject (any azimuth), so many see sides that neither
@@ -57,7 +59,7 @@ from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
-from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, pck
+from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility, pck
 
 PCK_ALPHA = 0.2
 #: Bin edges (degrees) of a novel view's angle from the nearest source camera, for the PSNR split.
@@ -204,14 +206,21 @@ class HeatmapScores:
     # per body part (body25.BODY_PARTS) and per source view: [correct, evaluated]
     parts: dict[str, list[int]] = field(default_factory=dict)
     views: list[list[int]] = field(default_factory=list)
+    # MPJPE per visibility class of the joint in the sources (metrics.VISIBILITY_CLASSES): [sum mm, joints]
+    visibility: dict[str, list[float]] = field(default_factory=dict)
 
-    def add(self, p, e) -> None:
+    def add(self, p, e, visible: np.ndarray | None = None) -> None:
         self.pck_correct += p.num_correct
         self.pck_evaluated += p.num_evaluated
         _add_parts(self.parts, p)
         _add_views(self.views, p)
         self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
         self.mpjpe_joints += e.num_evaluated
+        if visible is not None:
+            for name, (total, n) in mpjpe_by_visibility(e, visible).items():
+                t = self.visibility.setdefault(name, [0.0, 0])
+                t[0] += total
+                t[1] += n
 
     @property
     def pck(self) -> float | None:
@@ -224,7 +233,8 @@ class HeatmapScores:
     def result(self, prefix: str) -> dict:
         return {f"{prefix}_pck@0.2": self.pck, f"{prefix}_mpjpe_mm": self.mpjpe_mm,
                 f"{prefix}_pck@0.2_by_part": _part_scores(self.parts) if self.parts else None,
-                f"{prefix}_pck@0.2_by_view": _view_scores(self.views) if self.views else None}
+                f"{prefix}_pck@0.2_by_view": _view_scores(self.views) if self.views else None,
+                f"{prefix}_mpjpe_by_visibility": _visibility_scores(self.visibility) if self.visibility else None}
 
 
 @dataclass
@@ -247,16 +257,17 @@ class Accumulator:
     def add(self, m: dict) -> None:
         self.scenes += 1
         p, e, hm = m["pck"], m["mpjpe"], m["heatmap_mse"]
-        self.rendered.add(p, e)
+        vis = m.get("source_visible")
+        self.rendered.add(p, e, vis)
         self.pck_missing += p.num_missing
         self.pck_pred_missing += p.num_pred_missing
         self.mpjpe_missing += e.num_missing
         self.mpjpe_pred_missing += e.num_pred_missing
         self.heat_mse.append(hm.value)
         if m.get("encoder_pck") is not None:
-            self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"])
+            self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"], vis)
         if m.get("encoder_flip_pck") is not None:
-            self.encoder_flip.add(m["encoder_flip_pck"], m["encoder_flip_mpjpe"])
+            self.encoder_flip.add(m["encoder_flip_pck"], m["encoder_flip_mpjpe"], vis)
         if m.get("psnr") is not None:
             # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
             per_image = np.ravel(m["psnr"].per_image)
@@ -287,6 +298,8 @@ class Accumulator:
             "pck@0.2_by_part": _part_scores(r.parts),
             # a PCK target applies to each source view
             "pck@0.2_by_view": _view_scores(r.views),
+            # the MPJPE of joints both sources see, one sees, neither sees (all are scored above)
+            "mpjpe_by_visibility": _visibility_scores(r.visibility),
             # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way;
             # "flip": averaged with those of the mirrored images (the runtime's heatmaps.flip_test)
             **self.encoder.result("encoder_heatmaps"),
@@ -346,6 +359,11 @@ def _view_scores(totals: list[list[int]]) -> list[float | None]:
     return [(c / n if n else None) for c, n in totals]
 
 
+def _visibility_scores(totals: Mapping[str, list[float]]) -> dict[str, dict]:
+    """``{class: {"mpjpe_mm", "joints"}}`` (metrics.VISIBILITY_CLASSES; mpjpe None when no joint)."""
+    return {name: {"mpjpe_mm": (t / n if n else None), "joints": int(n)} for name, (t, n) in totals.items()}
+
+
 def _part_scores(totals: Mapping[str, list[int]]) -> dict[str, float | None]:
     return {part: (c / n if n else None) for part, (c, n) in totals.items()}
 
@@ -375,6 +393,7 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
                      pred_valid=decoded)
     tri = triangulate_dlt(uv, np.asarray(scene["src_P"], np.float64))
     out["mpjpe"] = mpjpe(tri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=tri.valid)
+    out["source_visible"] = np.asarray(scene["tgt_visible"][:S], bool)
     out["keypoints_2d"], out["joints_3d"] = uv, np.where(tri.valid[:, None], tri.points, np.nan)
     for key, maps in (("encoder", encoder_heatmaps), ("encoder_flip", encoder_heatmaps_flip)):
         out[f"{key}_pck"] = out[f"{key}_mpjpe"] = None

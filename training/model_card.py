@@ -77,10 +77,11 @@ def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path
 _HEATMAP_PREFIXES = (("rendered", ""), ("encoder", "encoder_heatmaps_"), ("encoder, flip test", "encoder_heatmaps_flip_"))
 
 
-def _pck_breakdown(card: dict, kind: str) -> list[tuple[str, str, object]]:
-    """``(model label, heatmap source, scores)`` of every ``<prefix>pck@0.2_<kind>`` the metrics hold."""
-    return [(label, src, m[f"{prefix}pck@0.2_{kind}"]) for label, m in (card.get("metrics") or {}).items()
-            for src, prefix in _HEATMAP_PREFIXES if m.get(f"{prefix}pck@0.2_{kind}")]
+def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
+    """``(model label, heatmap source, scores)`` of every ``<prefix><key>`` the metrics hold
+    (``key``: ``pck@0.2_by_view``, ``pck@0.2_by_part``, ``mpjpe_by_visibility``)."""
+    return [(label, src, m[f"{prefix}{key}"]) for label, m in (card.get("metrics") or {}).items()
+            for src, prefix in _HEATMAP_PREFIXES if m.get(f"{prefix}{key}")]
 
 
 def render_markdown(card: Mapping[str, Any]) -> str:
@@ -158,7 +159,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
                      f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
                      f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} |")
         L.append("")
-    views = _pck_breakdown(card, "by_view")
+    views = _breakdown(card, "pck@0.2_by_view")
     if views:
         L.append("PCK@0.2 in each source view (a PCK target applies to each):")
         L.append("")
@@ -167,7 +168,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         for label, src, by in views:
             L.append(f"| {label} | {src} | " + " | ".join(_fmt(v) for v in by) + " |")
         L.append("")
-    parts = _pck_breakdown(card, "by_part")
+    parts = _breakdown(card, "pck@0.2_by_part")
     if parts:
         names = list(parts[0][2])
         L.append("PCK@0.2 per body part (`body25.BODY_PARTS`):")
@@ -176,6 +177,20 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         L.append("|---|---|" + "---|" * len(names))
         for label, src, by in parts:
             L.append(f"| {label} | {src} | " + " | ".join(_fmt(by.get(n)) for n in names) + " |")
+        L.append("")
+    vis = _breakdown(card, "mpjpe_by_visibility")
+    if vis:
+        names = list(vis[0][2])
+        L.append("MPJPE (mm) by how many source views see the joint (in the crop and not hidden by the body; "
+                 "share of the triangulated joints in brackets). The MPJPE above pools all three: the synthetic "
+                 "truth knows where hidden joints are:")
+        L.append("")
+        L.append("| model | heatmaps | " + " | ".join(n.replace("_", " ") for n in names) + " |")
+        L.append("|---|---|" + "---|" * len(names))
+        for label, src, by in vis:
+            total = sum(by[n]["joints"] for n in names) or 1
+            L.append(f"| {label} | {src} | " + " | ".join(
+                f"{_fmt(by[n]['mpjpe_mm'], 1)} ({100 * by[n]['joints'] / total:.0f} %)" for n in names) + " |")
         L.append("")
     by_angle = [(label, m["psnr_masked_by_source_angle"]) for label, m in (card.get("metrics") or {}).items()
                 if m.get("psnr_masked_by_source_angle") and m.get("novel_views")]

@@ -177,6 +177,10 @@ def _print_row(row: dict) -> None:
           f"{row['pairs_per_s']:.1f} pairs/s | "
           f"PCK@0.2 {acc.get('pck@0.2', float('nan')):.3f} MPJPE {acc.get('mpjpe_mm', float('nan')):.1f} mm "
           f"(3D found {acc.get('found_3d_frac', float('nan')):.2f}) | load {row['load_average']:.2f}", flush=True)
+    if by := acc.get("mpjpe_by_visibility"):
+        print("      MPJPE by the cameras that see the joint: " + ", ".join(
+            f"{name.replace('_', ' ')} {c['mpjpe_mm']:.1f} mm ({100 * c['share']:.0f} % of joints, "
+            f"{100 * c['found_frac']:.0f} % found)" for name, c in by.items()), flush=True)
 
 
 def _on_off_list(text: str) -> list[bool]:

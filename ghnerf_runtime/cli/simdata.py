@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.metrics import mpjpe, pck
+from ghnerf_runtime.metrics import mpjpe, mpjpe_by_visibility, pck, visibility_class
 from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 
 log = logging.getLogger(__name__)
@@ -147,6 +147,7 @@ class Accuracy:
     def __init__(self) -> None:
         self.p2, self.t2, self.v2, self.pv2 = [], [], [], []
         self.p3, self.t3, self.pv3, self.tracked = [], [], [], []
+        self.vis3: list[np.ndarray | None] = []  # (C, 25) per pair, for the MPJPE by visibility
 
     def add(self, result, seq: Sequence, i: int) -> None:
         self.add_truth(result, seq.joints_3d[i], seq.joints_2d[i], seq.visible[i])
@@ -164,6 +165,7 @@ class Accuracy:
         self.t3.append(joints_3d)
         self.pv3.append(~result.missing)
         self.tracked.append(bool(result.tracked))
+        self.vis3.append(None if visible is None else np.asarray(visible, bool))
 
     def summary(self) -> dict:
         if not self.p3:
@@ -173,6 +175,16 @@ class Accuracy:
         mp = mpjpe(p3, t3, ones, pred_valid=pv3)
         out = {"mpjpe_mm": mp.value, "mpjpe_evaluated": mp.num_evaluated, "mpjpe_pred_missing": mp.num_pred_missing,
                "found_3d_frac": float(pv3.mean()), "tracked_frac": float(tracked.mean())}
+        if all(v is not None for v in self.vis3):
+            # how many cameras see each joint: the truth knows hidden joints, the MPJPE pools them all
+            vis = np.array(self.vis3)
+            cls = visibility_class(vis)
+            out["mpjpe_by_visibility"] = {}
+            for k, (name, (total, n)) in enumerate(mpjpe_by_visibility(mp, vis).items()):
+                of = cls == k
+                out["mpjpe_by_visibility"][name] = {
+                    "mpjpe_mm": total / n if n else float("nan"), "joints": n, "share": float(of.mean()),
+                    "found_frac": float(pv3[of].mean()) if of.any() else float("nan")}
         if self.p2:
             pk = pck(np.array(self.p2), np.array(self.t2), np.array(self.v2), pred_valid=np.array(self.pv2))
             out.update({"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated,

@@ -125,6 +125,11 @@ def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir,
     novel = [r for r in report["runs"] if r["mode"] == "keypoints+novel"]
     assert all(r["novel view"]["median"] > 0 for r in novel)
     assert all(r["novel_interior_stride"] == 0 for r in novel)  # the config's default
+    for row in report["runs"]:  # the MPJPE split by the cameras that see each joint covers every joint once
+        by = row["accuracy"]["mpjpe_by_visibility"]
+        assert set(by) == {"all_views", "some_views", "no_view"}
+        assert sum(c["share"] for c in by.values()) == pytest.approx(1.0)
+        assert sum(c["joints"] for c in by.values()) == row["accuracy"]["mpjpe_evaluated"]
 
 
 def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_dir, tmp_path):  # noqa: F811

@@ -64,6 +64,8 @@ def test_shipped_model_on_held_out_sequences(source, flip):
         assert s["mpjpe_mm"] <= t["mpjpe_mm_max"], s
     if t["found_3d_min"] is not None:
         assert s["found_3d_frac"] >= t["found_3d_min"], s
+    by = s["mpjpe_by_visibility"]
+    assert sum(c["joints"] for c in by.values()) == s["mpjpe_evaluated"]
 
 
 @pytest.mark.parametrize("source, flip", [*((s, False) for s in sorted(THRESHOLDS)), ("encoder", True)])

@@ -15,7 +15,8 @@ from ghnerf_runtime import metrics
 from ghnerf_runtime.body25 import JOINT_INDEX, MID_HIP, NECK, NUM_JOINTS
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.metrics import (
-    TORSO_BOX_JOINTS, gaussian_heatmaps, heatmap_mse, masked_psnr, masked_ssim, mpjpe, pck,
+    TORSO_BOX_JOINTS, gaussian_heatmaps, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility, pck,
+    visibility_class,
 )
 
 
@@ -123,6 +124,29 @@ def test_mpjpe_missing_predictions_and_empty():
     assert math.isnan(empty.value) and empty.num_evaluated == 0 and empty.num_missing == 6
     with pytest.raises(ShapeError):
         mpjpe(pred[..., :2], true[..., :2], np.ones((2, 3), bool))
+
+
+def test_mpjpe_split_by_visibility_hand_computed():
+    # two pairs x three joints; errors 5, 10, 20 / 30, missing, 40 mm
+    true = np.zeros((2, 3, 3))
+    pred = true + np.array([[[0.005, 0, 0], [0, 0.010, 0], [0, 0, 0.020]],
+                            [[0.030, 0, 0], [np.nan, 0, 0], [0, 0.040, 0]]])
+    r = mpjpe(pred, true, np.ones((2, 3), bool))
+    # visibility (pair, view, joint): pair 0 sees joint 0 in both views, 1 in one, 2 in none;
+    # pair 1 sees every joint in both views except joint 2 (none)
+    vis = np.array([[[1, 1, 0], [1, 0, 0]], [[1, 1, 0], [1, 1, 0]]], bool)
+    assert visibility_class(vis).tolist() == [[0, 1, 2], [0, 0, 2]]
+    split = mpjpe_by_visibility(r, vis)
+    assert split["all_views"] == pytest.approx((35.0, 2))  # 5 + 30; the missing joint is not evaluated
+    assert split["some_views"] == pytest.approx((10.0, 1))
+    assert split["no_view"] == pytest.approx((60.0, 2))
+    # the classes partition exactly what mpjpe evaluated
+    assert sum(n for _, n in split.values()) == r.num_evaluated
+    assert sum(t for t, _ in split.values()) == pytest.approx(r.value * r.num_evaluated)
+    with pytest.raises(ShapeError, match="does not match"):
+        mpjpe_by_visibility(r, vis[:1])
+    with pytest.raises(ShapeError):
+        visibility_class([True, False])
 
 
 # ------------------------------------------------------------------------- PSNR

@@ -163,6 +163,18 @@ def test_encoder_heatmaps_are_scored_like_the_rendered_ones(data64):
     acc4.add(scene_metrics(sc, half, None, np.array([], int), encoder_heatmaps=half))
     assert acc4.result()["pck@0.2_by_view"] == [1.0, 0.0]
     assert acc4.result()["encoder_heatmaps_pck@0.2_by_view"] == [1.0, 0.0]
+    # MPJPE by visibility: the classes hold every triangulated joint once, with the scene's own split
+    res = acc.result()
+    for key in ("mpjpe_by_visibility", "encoder_heatmaps_mpjpe_by_visibility"):
+        assert key in res
+    by = res["encoder_heatmaps_mpjpe_by_visibility"]
+    assert sum(c["joints"] for c in by.values()) == acc.encoder.mpjpe_joints
+    vis = sc["tgt_visible"][:2]
+    both = int(vis.all(0).sum())
+    assert by["all_views"]["joints"] == both  # r2 alone triangulated (r's encoder maps were empty)
+    # the truth's heatmaps are empty where a view cannot see the joint: such joints never triangulate
+    assert by["some_views"]["joints"] == by["no_view"]["joints"] == 0 and (~vis.all(0)).any()
+    assert all(c["mpjpe_mm"] is None or c["mpjpe_mm"] < 0.5 for c in by.values())
 
 
 class _EncoderOracle(_Oracle):

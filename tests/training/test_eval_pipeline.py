@@ -57,6 +57,10 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
                                     "encoder_heatmaps_flip_pck@0.2_by_part": {"head": 0.5, "arms": 1.0},
                                     "pck@0.2_by_view": [0.4, 0.6], "encoder_heatmaps_flip_pck@0.2_by_view": [0.9, None],
                                     "pck@0.2_by_part": {"head": 0.75, "arms": None}, "novel_views": 3,
+                                    "encoder_heatmaps_mpjpe_by_visibility": {
+                                        "all_views": {"mpjpe_mm": 80.0, "joints": 30},
+                                        "some_views": {"mpjpe_mm": 150.0, "joints": 10},
+                                        "no_view": {"mpjpe_mm": None, "joints": 0}},
                                     "psnr_masked_by_source_angle": [
                                         {"range_deg": [0.0, 15.0], "views": 2, "psnr": 22.5},
                                         {"range_deg": [15.0, 180.0], "views": 0, "psnr": None}]}},
@@ -76,6 +80,8 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "| ghnerf_int8 | encoder, flip test | 0.500 | 1.000 |" in md
     assert "| model | heatmaps | view 0 | view 1 |" in md and "| ghnerf_int8 | rendered | 0.400 | 0.600 |" in md
     assert "| ghnerf_int8 | encoder, flip test | 0.900 | n/a |" in md
+    assert "| model | heatmaps | all views | some views | no view |" in md
+    assert "| ghnerf_int8 | encoder | 80.0 (75 %) | 150.0 (25 %) | n/a (0 %) |" in md
     assert "| model | 0-15 deg | 15-180 deg |" in md and "| ghnerf_int8 | 22.50 (2) | n/a (0) |" in md
     assert "- Motions: train: stand 50 %, freestyle 50 %; val: reach" in md
     from training.pipeline import motion_mix
