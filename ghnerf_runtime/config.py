@@ -192,6 +192,12 @@ class TrackingConfig:
             yields a track, run that pair again on the subject's crop and box and report the
             second pass (costs one more keypoint pass on cold pairs only; the first pair's sweep
             spans the whole volume, coarser than the subject box the model was trained on).
+        follow_encoder: with ``heatmaps.source = "rendered"``, the next crop and sweep box follow the
+            joints triangulated from the encoder's own heatmaps (an output of the encoder graph the
+            pair runs anyway: ~1 ms to decode and triangulate) instead of the reported joints, whose
+            errors would otherwise steer the next crop off the subject. Only where to look changes;
+            the reported joints stay the rendered ones. No effect with the encoder heatmaps (the
+            same joints) or a model without them (docs/runtime.md, "Heatmap sources").
     """
 
     enabled: bool = True
@@ -201,10 +207,12 @@ class TrackingConfig:
     near_far_margin_m: float = 0.1
     max_box_size_m: float = 3.0
     refine_cold_start: bool = False
+    follow_encoder: bool = True
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _boolean(self, "refine_cold_start")
+        _boolean(self, "follow_encoder")
         _integer(self, "min_joints", 2, 25)
         _number(self, "min_confidence", 0.0, 1.0)
         _number(self, "box_margin_m", 0.0, 2.0)

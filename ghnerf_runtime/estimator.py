@@ -485,9 +485,24 @@ class Estimator:
                     joints_2d[name] = np.zeros_like(joints_2d[name])
                     conf_2d[name] = np.zeros_like(conf_2d[name])
                     missing_2d[name] = np.ones_like(missing_2d[name])
-        self.tracker.update(j3.points, j3.confidence, j3.valid, sequence)
+        follow = self._track_joints(env, crops, regions, j3)
+        self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         _add_ms(timing, "joints_3d", t)
         return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job)
+
+    def _track_joints(self, env: dict, crops: list[Camera], regions: Regions, reported: Joints3D) -> Joints3D:
+        """The joints the next pair's crop follows: the reported ones, or (``tracking.follow_encoder``,
+        rendered heatmaps) those of the encoder heatmaps this pair computed anyway, through the same
+        triangulation and gates. Nobody reported (the presence gate): nothing to follow either."""
+        cfg = self.config
+        if (cfg.heatmaps.source == "encoder" or not cfg.tracking.follow_encoder or not reported.valid.any()
+                or "encoder_heatmaps" not in env):
+            return reported
+        kp = decode_keypoints(np.ascontiguousarray(env["encoder_heatmaps"], dtype=np.float32), cfg.decoder)
+        uv = heatmap_to_model_pixels(kp.uv, self.grid, self.size)
+        j3 = triangulate_joints(uv, kp.confidence, kp.valid, crops, cfg.joints3d)
+        j3 = gate_to_box(j3, regions.box, cfg.joints3d.max_outside_box_m)
+        return gate_to_box(j3, self._volume_box, cfg.joints3d.max_outside_box_m)
 
     # -------------------------------------------------------------- 3D
     def _joints_3d(self, env: dict, out: dict, blocks, heat: np.ndarray, kp: Keypoints2D, uv_model: np.ndarray,

@@ -145,20 +145,22 @@ def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_d
     assert all(r["pairs"] == 4 and r["mode"] == "keypoints+novel" for r in runs)
 
 
-def test_bench_runtime_compares_the_flip_test_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+def test_bench_runtime_compares_the_flip_test_and_encoder_following_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
     from ghnerf_runtime.cli import bench
 
     report_path = tmp_path / "bench.json"
     assert bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "2",
                        "--precisions", "fp32", "--heatmap-sources", "encoder,rendered", "--modes", "keypoints",
-                       "--warmup", "0", "--flip-tests", "on,off", "--cache", str(tmp_path / "cache"),
-                       "--json", str(report_path)]) == 0
+                       "--warmup", "0", "--flip-tests", "on,off", "--follow-encoder", "on,off",
+                       "--cache", str(tmp_path / "cache"), "--json", str(report_path)]) == 0
     runs = json.loads(report_path.read_text())["runs"]
-    # two encoder rows (the flip test on, off), one rendered row (the flip test does not apply)
-    assert [(r["heatmaps"], r["flip_test"]) for r in runs] == [("encoder", True), ("encoder", False),
-                                                               ("rendered", False)]
+    # two encoder rows (the flip test on, off), two rendered rows (following the encoder or its own joints;
+    # the flip test does not apply to them, nor the following to the encoder rows)
+    assert [(r["heatmaps"], r["flip_test"], r["follow_encoder"]) for r in runs] == [
+        ("encoder", True, True), ("encoder", False, True), ("rendered", False, True), ("rendered", False, False)]
     assert all(r["pairs"] == 4 for r in runs)
     out = capsys.readouterr().out
     assert "keypoints flip" in out and "keypoints no-flip" in out
+    assert "keypoints follow-enc" in out and "keypoints follow-own" in out
     with pytest.raises(SystemExit):
         bench.main(["runtime", "--flip-tests", "maybe"])

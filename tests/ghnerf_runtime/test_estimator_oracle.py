@@ -276,3 +276,50 @@ def test_a_failing_novel_view_in_the_worker_is_raised_and_the_estimator_goes_on(
     assert r.num_found > 20 and r.novel_view is None
     est.close()
     est.close()  # idempotent
+
+
+class RenderedOffset(OracleSession):
+    """The oracle, but its rendered heatmaps show every joint ``offset`` metres away from the truth
+    (a rendered path that errs), while the encoder's heatmaps stay exact."""
+
+    def __init__(self, offset):
+        super().__init__(edge128_contract())
+        self.offset = np.asarray(offset, np.float64)
+
+    def run(self, graph, feeds):
+        if graph != "render_heat" or self.truth is None:
+            return super().run(graph, feeds)
+        truth = self.truth
+        self.truth = truth + self.offset
+        try:
+            return super().run(graph, feeds)
+        finally:
+            self.truth = truth
+
+
+@pytest.mark.parametrize("follow", [True, False])
+def test_rendered_heatmaps_place_the_next_crop_from_the_encoder_joints_when_following_it(clip, follow):
+    """``tracking.follow_encoder``: the reported joints are the rendered ones either way; only the track
+    (where the next pair looks) comes from the encoder's heatmaps."""
+    rig, frames, truth, *_ = clip
+    offset = np.array([0.2, 0.0, 0.0])
+    oracle = RenderedOffset(offset)
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig(source="rendered"), joints3d=Joints3DConfig(method="triangulate"),
+                          tracking=TrackingConfig(follow_encoder=follow))
+    est = Estimator(oracle, rig, cfg)
+    oracle.set_truth(truth[0])
+    r = est.estimate(frames[0])
+    assert r.num_found > 10
+    reported = np.linalg.norm(r.joints_3d[~r.missing] - (truth[0] + offset)[~r.missing], axis=-1)
+    assert reported.max() < 0.01  # the rendered (offset) joints are what the pair reports
+    track = est.tracker.track
+    assert track is not None and track.valid.sum() > 10
+    followed = track.joints[track.valid]
+    aim = truth[0] if follow else truth[0] + offset
+    assert np.linalg.norm(followed - aim[track.valid], axis=-1).max() < 0.01
+    # nobody reported (the presence gate): nothing to follow, whatever the encoder says
+    oracle.set_truth(truth[1])
+    quiet = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source="rendered"),
+                                                   tracking=TrackingConfig(follow_encoder=follow),
+                                                   presence=PresenceConfig(min_joints=25, min_confidence=1.0)))
+    assert quiet.estimate(frames[1]).missing.all() and quiet.tracker.track is None
