@@ -23,14 +23,15 @@ MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, mode
 MEASURED_ON = ("models/ of 2026-11-22 (the sixth: 5000 train scenes, half in freestyle; human encoder "
                "pretrained 24000 steps on 2D heatmaps, then frozen; 10000 joint steps; ghnerf-eval PCK@0.2 0.804 "
                "rendered / 0.898 encoder heatmaps on 256 val scenes)")
-#: measured: rendered/depth_centroid PCK@0.2 0.658, MPJPE 284 mm, 93 % of 3D joints found (presence gate 0.4);
+#: measured: rendered/depth_centroid PCK@0.2 0.735, MPJPE 234 mm, 99 % of 3D joints found (presence gate 0.4;
+#:           tracking.follow_encoder, the default since 2026-11-22; following its own joints: 0.658 / 284 / 93 %);
 #:           encoder/triangulate    PCK@0.2 0.896, MPJPE 120 mm, 66 % found (presence gate 0.35; this model
 #:           leaves a joint hidden in one view undecoded there, as its training targets do: docs/runtime.md).
 #:           encoder with the flip test (--flip-tests on,off): PCK@0.2 0.900, MPJPE 116 mm, 67 % found; it is
 #:           held to the encoder's thresholds.
 #: (the fifth model: rendered 0.648 / 250 mm / 92 %, encoder 0.882 / 109 mm / 63 %.)
 THRESHOLDS = {
-    "rendered": {"pck@0.2_min": 0.55, "mpjpe_mm_max": 360.0, "found_3d_min": 0.80},
+    "rendered": {"pck@0.2_min": 0.65, "mpjpe_mm_max": 300.0, "found_3d_min": 0.90},
     "encoder": {"pck@0.2_min": 0.82, "mpjpe_mm_max": 160.0, "found_3d_min": 0.55},
 }
 METHODS = {"rendered": "depth_centroid", "encoder": "triangulate"}
@@ -66,6 +67,9 @@ def test_shipped_model_on_held_out_sequences(source, flip):
         assert s["found_3d_frac"] >= t["found_3d_min"], s
     by = s["mpjpe_by_visibility"]
     assert sum(c["joints"] for c in by.values()) == s["mpjpe_evaluated"]
+    # joints both cameras see are placed better than joints neither sees (measured 88 / 197 mm encoder,
+    # 204 / 275 mm rendered): a split attached to the wrong joints or views would not keep this order
+    assert by["all_views"]["mpjpe_mm"] < by["no_view"]["mpjpe_mm"], by
 
 
 @pytest.mark.parametrize("source, flip", [*((s, False) for s in sorted(THRESHOLDS)), ("encoder", True)])
