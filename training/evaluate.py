@@ -28,7 +28,11 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
   with the heatmaps of the mirrored images mirrored back (``encoder_heatmaps_flip_*``, the runtime's
   ``heatmaps.flip_test``). PCK is also reported per source view (``*_by_view``), and MPJPE per
   visibility class of the joint in the two sources (``*_mpjpe_by_visibility``: both see it, one, none;
-  every joint is in the MPJPE itself, since the synthetic truth knows the hidden ones too).
+  every joint is in the MPJPE itself, since the synthetic truth knows the hidden ones too). Each
+  source's MPJPE is also given **gated** (``*_mpjpe_gated_mm``, with the share of joints kept,
+  ``*_mpjpe_gated_found``, and its split by visibility): the runtime's triangulation
+  (``joints3d.triangulate_joints``, default ``Joints3DConfig``: a joint whose views disagree beyond
+  the reprojection gate, or whose peak is weak, is missing), so the card states what a device reports.
 * **Novel views** (targets 2..V-1): the full-resolution image (graph ``render_rgb``), ``masked_psnr`` and
   ``masked_ssim`` inside the subject mask against the target composited over the model background.
   The dataset's novel cameras circle the subject (any azimuth), so many see sides that neither
@@ -56,8 +60,10 @@ from torch import Tensor
 
 from ghnerf_runtime.body25 import BODY_PARTS
 from ghnerf_runtime.contract import ModelContract, ray_grid
+from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.geometry import triangulate_dlt
+from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility, pck
 
@@ -188,11 +194,17 @@ def render_heatmap_grids(model, item: dict, targets: Tensor) -> Tensor:
 def keypoints_from_heatmaps(heatmaps: np.ndarray, model_size: int,
                             config: KeypointDecoderConfig | None = None) -> np.ndarray:
     """Decoded joints ``(..., J, 2)`` in model (crop) pixels from ``(..., J, h, w)`` heatmaps; NaN where none."""
+    return _decode(heatmaps, model_size, config)[0]
+
+
+def _decode(heatmaps: np.ndarray, model_size: int,
+            config: KeypointDecoderConfig | None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`keypoints_from_heatmaps` and the peaks' confidence ``(..., J)`` (0 where none)."""
     heatmaps = np.asarray(heatmaps, np.float32)
     kp = decode_keypoints(heatmaps, config)
     h, w = heatmaps.shape[-2:]
     uv = heatmap_to_model_pixels(kp.uv, (w, h), model_size)
-    return np.where(kp.valid[..., None], uv, np.nan)
+    return np.where(kp.valid[..., None], uv, np.nan), np.where(kp.valid, kp.confidence, 0.0)
 
 
 @dataclass
@@ -208,8 +220,11 @@ class HeatmapScores:
     views: list[list[int]] = field(default_factory=list)
     # MPJPE per visibility class of the joint in the sources (metrics.VISIBILITY_CLASSES): [sum mm, joints]
     visibility: dict[str, list[float]] = field(default_factory=dict)
+    # the runtime's gated triangulation: [sum mm, joints found, joints with truth], and per visibility class
+    gated: list[float] = field(default_factory=lambda: [0.0, 0, 0])
+    gated_visibility: dict[str, list[float]] = field(default_factory=dict)
 
-    def add(self, p, e, visible: np.ndarray | None = None) -> None:
+    def add(self, p, e, visible: np.ndarray | None = None, gated=None) -> None:
         self.pck_correct += p.num_correct
         self.pck_evaluated += p.num_evaluated
         _add_parts(self.parts, p)
@@ -217,10 +232,13 @@ class HeatmapScores:
         self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
         self.mpjpe_joints += e.num_evaluated
         if visible is not None:
-            for name, (total, n) in mpjpe_by_visibility(e, visible).items():
-                t = self.visibility.setdefault(name, [0.0, 0])
-                t[0] += total
-                t[1] += n
+            _add_visibility(self.visibility, e, visible)
+        if gated is not None:
+            self.gated[0] += float(gated.errors[gated.evaluated].sum())
+            self.gated[1] += gated.num_evaluated
+            self.gated[2] += gated.num_evaluated + gated.num_pred_missing
+            if visible is not None:
+                _add_visibility(self.gated_visibility, gated, visible)
 
     @property
     def pck(self) -> float | None:
@@ -234,7 +252,15 @@ class HeatmapScores:
         return {f"{prefix}_pck@0.2": self.pck, f"{prefix}_mpjpe_mm": self.mpjpe_mm,
                 f"{prefix}_pck@0.2_by_part": _part_scores(self.parts) if self.parts else None,
                 f"{prefix}_pck@0.2_by_view": _view_scores(self.views) if self.views else None,
-                f"{prefix}_mpjpe_by_visibility": _visibility_scores(self.visibility) if self.visibility else None}
+                f"{prefix}_mpjpe_by_visibility": _visibility_scores(self.visibility) if self.visibility else None,
+                **self.gated_result(f"{prefix}_")}
+
+    def gated_result(self, prefix: str) -> dict:
+        total, found, known = self.gated
+        return {f"{prefix}mpjpe_gated_mm": total / found if found else None,
+                f"{prefix}mpjpe_gated_found": found / known if known else None,
+                f"{prefix}mpjpe_gated_by_visibility":
+                    _visibility_scores(self.gated_visibility) if self.gated_visibility else None}
 
 
 @dataclass
@@ -258,16 +284,17 @@ class Accumulator:
         self.scenes += 1
         p, e, hm = m["pck"], m["mpjpe"], m["heatmap_mse"]
         vis = m.get("source_visible")
-        self.rendered.add(p, e, vis)
+        self.rendered.add(p, e, vis, m.get("mpjpe_gated"))
         self.pck_missing += p.num_missing
         self.pck_pred_missing += p.num_pred_missing
         self.mpjpe_missing += e.num_missing
         self.mpjpe_pred_missing += e.num_pred_missing
         self.heat_mse.append(hm.value)
         if m.get("encoder_pck") is not None:
-            self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"], vis)
+            self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"], vis, m.get("encoder_mpjpe_gated"))
         if m.get("encoder_flip_pck") is not None:
-            self.encoder_flip.add(m["encoder_flip_pck"], m["encoder_flip_mpjpe"], vis)
+            self.encoder_flip.add(m["encoder_flip_pck"], m["encoder_flip_mpjpe"], vis,
+                                  m.get("encoder_flip_mpjpe_gated"))
         if m.get("psnr") is not None:
             # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
             per_image = np.ravel(m["psnr"].per_image)
@@ -300,6 +327,8 @@ class Accumulator:
             "pck@0.2_by_view": _view_scores(r.views),
             # the MPJPE of joints both sources see, one sees, neither sees (all are scored above)
             "mpjpe_by_visibility": _visibility_scores(r.visibility),
+            # the runtime's triangulation (reprojection gate, minimum view confidence): what a device reports
+            **r.gated_result(""),
             # the human encoder's own 2D heatmaps (no rendering), decoded and triangulated the same way;
             # "flip": averaged with those of the mirrored images (the runtime's heatmaps.flip_test)
             **self.encoder.result("encoder_heatmaps"),
@@ -359,6 +388,14 @@ def _view_scores(totals: list[list[int]]) -> list[float | None]:
     return [(c / n if n else None) for c, n in totals]
 
 
+def _add_visibility(totals: dict[str, list[float]], e, visible: np.ndarray) -> None:
+    """Add an MPJPE result's error sums and joint counts per visibility class."""
+    for name, (total, n) in mpjpe_by_visibility(e, visible).items():
+        t = totals.setdefault(name, [0.0, 0])
+        t[0] += total
+        t[1] += n
+
+
 def _visibility_scores(totals: Mapping[str, list[float]]) -> dict[str, dict]:
     """``{class: {"mpjpe_mm", "joints"}}`` (metrics.VISIBILITY_CLASSES; mpjpe None when no joint)."""
     return {name: {"mpjpe_mm": (t / n if n else None), "joints": int(n)} for name, (t, n) in totals.items()}
@@ -366,6 +403,30 @@ def _visibility_scores(totals: Mapping[str, list[float]]) -> dict[str, dict]:
 
 def _part_scores(totals: Mapping[str, list[int]]) -> dict[str, float | None]:
     return {part: (c / n if n else None) for part, (c, n) in totals.items()}
+
+
+#: The runtime's triangulation (``joints3d.triangulate_joints`` with the default ``Joints3DConfig``:
+#: reprojection gate, minimum view confidence), applied to the eval's crops for the gated MPJPE.
+RUNTIME_TRIANGULATION = Joints3DConfig()
+
+
+def _joint_scores(prefix: str, uv: np.ndarray, conf: np.ndarray, scene: Mapping[str, np.ndarray]) -> dict:
+    """PCK of decoded joints ``uv`` ``(S, J, 2)`` (NaN = none) and the MPJPE of their triangulation, ungated
+    (``<prefix>mpjpe``: DLT of every joint decoded in both views) and gated as the runtime does
+    (``<prefix>mpjpe_gated``: a joint whose views disagree by more than the reprojection gate, or whose
+    peak is too weak, is missing)."""
+    S = len(uv)
+    decoded = np.isfinite(uv).all(-1)
+    P = np.asarray(scene["src_P"], np.float64)
+    out = {f"{prefix}pck": pck(np.nan_to_num(uv), scene["tgt_joints_2d"][:S], scene["tgt_visible"][:S],
+                               alpha=PCK_ALPHA, pred_valid=decoded)}
+    tri = triangulate_dlt(uv, P)
+    out[f"{prefix}mpjpe"] = mpjpe(tri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=tri.valid)
+    gated = triangulate_joints(np.nan_to_num(uv), conf, decoded, list(P), RUNTIME_TRIANGULATION)
+    out[f"{prefix}mpjpe_gated"] = mpjpe(gated.points, scene["joints_3d"], scene["joints_3d_valid"],
+                                        pred_valid=gated.valid)
+    out[f"{prefix}joints_3d"] = np.where(tri.valid[:, None], tri.points, np.nan)
+    return out
 
 
 def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, novel_rgb: np.ndarray | None,
@@ -387,23 +448,14 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
     H = scene["tgt_images"].shape[-1]
     hm_true = scene["tgt_heatmaps"][:S]
     out = {"heatmap_mse": heatmap_mse(source_heatmaps, hm_true)}
-    uv = keypoints_from_heatmaps(source_heatmaps, H, decoder)  # (S, J, 2) crop pixels, NaN = none
-    decoded = np.isfinite(uv).all(-1)
-    out["pck"] = pck(np.nan_to_num(uv), scene["tgt_joints_2d"][:S], scene["tgt_visible"][:S], alpha=PCK_ALPHA,
-                     pred_valid=decoded)
-    tri = triangulate_dlt(uv, np.asarray(scene["src_P"], np.float64))
-    out["mpjpe"] = mpjpe(tri.points, scene["joints_3d"], scene["joints_3d_valid"], pred_valid=tri.valid)
+    uv, conf = _decode(source_heatmaps, H, decoder)  # (S, J, 2) crop pixels, NaN = none
+    out.update(_joint_scores("", uv, conf, scene))
     out["source_visible"] = np.asarray(scene["tgt_visible"][:S], bool)
-    out["keypoints_2d"], out["joints_3d"] = uv, np.where(tri.valid[:, None], tri.points, np.nan)
+    out["keypoints_2d"] = uv
     for key, maps in (("encoder", encoder_heatmaps), ("encoder_flip", encoder_heatmaps_flip)):
-        out[f"{key}_pck"] = out[f"{key}_mpjpe"] = None
+        out[f"{key}_pck"] = out[f"{key}_mpjpe"] = out[f"{key}_mpjpe_gated"] = None
         if maps is not None:
-            euv = keypoints_from_heatmaps(maps, H, decoder)
-            out[f"{key}_pck"] = pck(np.nan_to_num(euv), scene["tgt_joints_2d"][:S], scene["tgt_visible"][:S],
-                                    alpha=PCK_ALPHA, pred_valid=np.isfinite(euv).all(-1))
-            etri = triangulate_dlt(euv, np.asarray(scene["src_P"], np.float64))
-            out[f"{key}_mpjpe"] = mpjpe(etri.points, scene["joints_3d"], scene["joints_3d_valid"],
-                                        pred_valid=etri.valid)
+            out.update(_joint_scores(f"{key}_", *_decode(maps, H, decoder), scene))
     out["psnr"] = out["ssim"] = None
     if novel_rgb is not None and len(novel_targets):
         img = scene["tgt_images"][novel_targets]

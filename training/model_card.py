@@ -77,6 +77,14 @@ def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path
 _HEATMAP_PREFIXES = (("rendered", ""), ("encoder", "encoder_heatmaps_"), ("encoder, flip test", "encoder_heatmaps_flip_"))
 
 
+def _gated(m: Mapping[str, Any], prefix: str) -> str:
+    """``"<mm> (<share kept> %)"`` of the gated MPJPE, ``n/a`` when the metrics predate it."""
+    mm, found = m.get(f"{prefix}mpjpe_gated_mm"), m.get(f"{prefix}mpjpe_gated_found")
+    if mm is None or found is None:
+        return "n/a"
+    return f"{_fmt(mm, 1)} ({100 * found:.0f} %)"
+
+
 def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
     """``(model label, heatmap source, scores)`` of every ``<prefix><key>`` the metrics hold
     (``key``: ``pck@0.2_by_view``, ``pck@0.2_by_part``, ``mpjpe_by_visibility``)."""
@@ -138,10 +146,14 @@ def render_markdown(card: Mapping[str, Any]) -> str:
              "heatmaps), MPJPE of the triangulated joints (mm, rig frame), masked PSNR/SSIM of the novel views, "
              "heatmap MSE in the source views. Definitions: `ghnerf_runtime/metrics.py`, `training/evaluate.py`.")
     L.append("")
-    L.append("| model | runtime | PCK@0.2 | MPJPE mm | PSNR | SSIM | heatmap MSE | undecoded joints |")
-    L.append("|---|---|---|---|---|---|---|---|")
+    L.append("MPJPE gated: the runtime's triangulation (`joints3d.triangulate_joints`: reprojection gate, "
+             "minimum view confidence) on the same crops, over the joints it keeps (share kept in brackets).")
+    L.append("")
+    L.append("| model | runtime | PCK@0.2 | MPJPE mm | MPJPE mm, gated | PSNR | SSIM | heatmap MSE | undecoded joints |")
+    L.append("|---|---|---|---|---|---|---|---|---|")
     for label, m in (card.get("metrics") or {}).items():
         L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('pck@0.2'))} | {_fmt(m.get('mpjpe_mm'), 1)} | "
+                 f"{_gated(m, '')} | "
                  f"{_fmt(m.get('psnr_masked'), 2)} | {_fmt(m.get('ssim_masked'))} | {_fmt(m.get('heatmap_mse'))} | "
                  f"{m.get('pck_undecoded')}/{m.get('pck_evaluated_joints')} |")
     L.append("")
@@ -152,12 +164,14 @@ def render_markdown(card: Mapping[str, Any]) -> str:
                  "flip test: averaged with the heatmaps of the mirrored source images (the runtime's "
                  "`heatmaps.flip_test`, a second encoder run):")
         L.append("")
-        L.append("| model | runtime | PCK@0.2 | MPJPE mm | PCK@0.2, flip test | MPJPE mm, flip test |")
-        L.append("|---|---|---|---|---|---|")
+        L.append("| model | runtime | PCK@0.2 | MPJPE mm | MPJPE mm, gated | PCK@0.2, flip test | MPJPE mm, flip test "
+                 "| MPJPE mm, flip test, gated |")
+        L.append("|---|---|---|---|---|---|---|---|")
         for label, m in enc.items():
             L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('encoder_heatmaps_pck@0.2'))} | "
-                     f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
-                     f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} |")
+                     f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_gated(m, 'encoder_heatmaps_')} | "
+                     f"{_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
+                     f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} | {_gated(m, 'encoder_heatmaps_flip_')} |")
         L.append("")
     views = _breakdown(card, "pck@0.2_by_view")
     if views:
@@ -178,12 +192,13 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         for label, src, by in parts:
             L.append(f"| {label} | {src} | " + " | ".join(_fmt(by.get(n)) for n in names) + " |")
         L.append("")
-    vis = _breakdown(card, "mpjpe_by_visibility")
+    gated = bool(_breakdown(card, "mpjpe_gated_by_visibility"))
+    vis = _breakdown(card, "mpjpe_gated_by_visibility" if gated else "mpjpe_by_visibility")
     if vis:
         names = list(vis[0][2])
-        L.append("MPJPE (mm) by how many source views see the joint (in the crop and not hidden by the body; "
-                 "share of the triangulated joints in brackets). The MPJPE above pools all three: the synthetic "
-                 "truth knows where hidden joints are:")
+        L.append(f"MPJPE (mm{', gated' if gated else ''}) by how many source views see the joint (in the crop "
+                 "and not hidden by the body; share of the triangulated joints in brackets). The MPJPE above pools "
+                 "all three: the synthetic truth knows where hidden joints are:")
         L.append("")
         L.append("| model | heatmaps | " + " | ".join(n.replace("_", " ") for n in names) + " |")
         L.append("|---|---|" + "---|" * len(names))

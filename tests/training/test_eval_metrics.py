@@ -237,3 +237,32 @@ def test_the_accumulator_keeps_each_psnr_with_its_angle(data64):
     res = evaluate(_Oracle(ds), ds, progress=False)
     bins = res["psnr_masked_by_source_angle"]
     assert sum(b["views"] for b in bins) == res["novel_views"] == 4
+
+
+def test_the_gated_mpjpe_drops_joints_whose_views_disagree_as_the_runtime_does(data64):
+    """``*_mpjpe_gated``: the runtime's triangulation (reprojection gate) on the eval's crops. One joint moved
+    off its epipolar line in one view is triangulated anyway by the ungated DLT (a large error) and dropped
+    by the gate; the other joints are the same in both."""
+    sc = _scene(data64)
+    true2d, vis = sc["tgt_joints_2d"][:2].astype(np.float64), sc["tgt_visible"][:2]
+    both = vis.all(0)
+    k = int(np.flatnonzero(both)[0])
+    moved = true2d.copy()
+    moved[1, k] += [12.0, -12.0]  # model pixels of the 64 px crop: far beyond the 6 px gate
+    hm = gaussian_heatmaps(model_to_heatmap_pixels(moved, 16, 64), vis, 16, 1.5)
+    r = scene_metrics(sc, hm, None, np.array([], int), encoder_heatmaps=hm)
+    plain, gated = r["mpjpe"], r["mpjpe_gated"]
+    assert plain.num_evaluated == both.sum() and plain.errors[k] > 20.0
+    assert gated.num_evaluated == both.sum() - 1 and not gated.evaluated[k] and gated.num_pred_missing >= 1
+    others = both.copy()
+    others[k] = False
+    assert np.allclose(gated.errors[others], plain.errors[others], atol=0.01)  # mm; the gated DLT weighs by confidence
+    assert gated.value < 0.5
+    acc = Accumulator()
+    acc.add(r)
+    res = acc.result()
+    assert res["mpjpe_gated_mm"] < 0.5 < res["mpjpe_mm"]
+    n = sc["joints_3d_valid"].sum()
+    assert res["mpjpe_gated_found"] == pytest.approx((both.sum() - 1) / n)
+    assert res["encoder_heatmaps_mpjpe_gated_mm"] == pytest.approx(res["mpjpe_gated_mm"])
+    assert sum(c["joints"] for c in res["mpjpe_gated_by_visibility"].values()) == both.sum() - 1

@@ -52,6 +52,7 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
         "metrics": {"ghnerf_int8": {"kind": "onnx-int8", "pck@0.2": 0.5, "mpjpe_mm": None, "psnr_masked": 20.0,
                                     "ssim_masked": 0.9, "heatmap_mse": 0.001, "pck_undecoded": 3,
                                     "pck_evaluated_joints": 10, "encoder_heatmaps_pck@0.2": 0.8,
+                                    "mpjpe_gated_mm": 61.25, "mpjpe_gated_found": 0.62,
                                     "encoder_heatmaps_mpjpe_mm": 100.0, "encoder_heatmaps_flip_pck@0.2": 0.81,
                                     "encoder_heatmaps_flip_mpjpe_mm": None,
                                     "encoder_heatmaps_flip_pck@0.2_by_part": {"head": 0.5, "arms": 1.0},
@@ -72,16 +73,24 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert json.loads(j.read_text())["metrics"]["ghnerf_int8"]["pck@0.2"] == 0.5
     md = m.read_text()
     assert md == render_markdown(card)
-    assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 20.00 | 0.900 | 0.001 | 3/10 |" in md
+    assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 61.2 (62 %) | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
     assert "| 2 (12000 steps), then 1 (12000 steps) | 106.5 min |" in md  # a resumed run: both invocations
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
-    assert "| ghnerf_int8 | onnx-int8 | 0.800 | 100.0 | 0.810 | n/a |" in md  # plain and flip-tested encoder
+    # plain and flip-tested encoder; the gated MPJPE only where the metrics have it (older cards: n/a)
+    assert "| ghnerf_int8 | onnx-int8 | 0.800 | 100.0 | n/a | 0.810 | n/a | n/a |" in md
     assert "| ghnerf_int8 | encoder, flip test | 0.500 | 1.000 |" in md
     assert "| model | heatmaps | view 0 | view 1 |" in md and "| ghnerf_int8 | rendered | 0.400 | 0.600 |" in md
     assert "| ghnerf_int8 | encoder, flip test | 0.900 | n/a |" in md
     assert "| model | heatmaps | all views | some views | no view |" in md
     assert "| ghnerf_int8 | encoder | 80.0 (75 %) | 150.0 (25 %) | n/a (0 %) |" in md
+    # where the metrics have the gated split (what the runtime reports), the table shows it instead
+    gated_card = json.loads(json.dumps(card))
+    gated_card["metrics"]["ghnerf_int8"]["mpjpe_gated_by_visibility"] = {
+        "all_views": {"mpjpe_mm": 70.0, "joints": 9}, "some_views": {"mpjpe_mm": 130.0, "joints": 1},
+        "no_view": {"mpjpe_mm": None, "joints": 0}}
+    gmd = render_markdown(gated_card)
+    assert "MPJPE (mm, gated) by how many" in gmd and "| ghnerf_int8 | rendered | 70.0 (90 %) | 130.0 (10 %) |" in gmd
     assert "| model | 0-15 deg | 15-180 deg |" in md and "| ghnerf_int8 | 22.50 (2) | n/a (0) |" in md
     assert "- Motions: train: stand 50 %, freestyle 50 %; val: reach" in md
     from training.pipeline import motion_mix
