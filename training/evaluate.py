@@ -223,6 +223,7 @@ class HeatmapScores:
     # the runtime's gated triangulation: [sum mm, joints found, joints with truth], and per visibility class
     gated: list[float] = field(default_factory=lambda: [0.0, 0, 0])
     gated_visibility: dict[str, list[float]] = field(default_factory=dict)
+    gated_errors: list[np.ndarray] = field(default_factory=list)  # mm, for the median (the mean has a long tail)
 
     def add(self, p, e, visible: np.ndarray | None = None, gated=None) -> None:
         self.pck_correct += p.num_correct
@@ -237,6 +238,7 @@ class HeatmapScores:
             self.gated[0] += float(gated.errors[gated.evaluated].sum())
             self.gated[1] += gated.num_evaluated
             self.gated[2] += gated.num_evaluated + gated.num_pred_missing
+            self.gated_errors.append(np.asarray(gated.errors[gated.evaluated], np.float64))
             if visible is not None:
                 _add_visibility(self.gated_visibility, gated, visible)
 
@@ -257,7 +259,9 @@ class HeatmapScores:
 
     def gated_result(self, prefix: str) -> dict:
         total, found, known = self.gated
+        errors = np.concatenate(self.gated_errors) if self.gated_errors else np.zeros(0)
         return {f"{prefix}mpjpe_gated_mm": total / found if found else None,
+                f"{prefix}mpjpe_gated_median_mm": float(np.median(errors)) if errors.size else None,
                 f"{prefix}mpjpe_gated_found": found / known if known else None,
                 f"{prefix}mpjpe_gated_by_visibility":
                     _visibility_scores(self.gated_visibility) if self.gated_visibility else None}

@@ -78,11 +78,12 @@ _HEATMAP_PREFIXES = (("rendered", ""), ("encoder", "encoder_heatmaps_"), ("encod
 
 
 def _gated(m: Mapping[str, Any], prefix: str) -> str:
-    """``"<mm> (<share kept> %)"`` of the gated MPJPE, ``n/a`` when the metrics predate it."""
+    """``"<mean> / <median> (<share kept> %)"`` of the gated MPJPE, ``n/a`` when the metrics predate it."""
     mm, found = m.get(f"{prefix}mpjpe_gated_mm"), m.get(f"{prefix}mpjpe_gated_found")
     if mm is None or found is None:
         return "n/a"
-    return f"{_fmt(mm, 1)} ({100 * found:.0f} %)"
+    median = m.get(f"{prefix}mpjpe_gated_median_mm")
+    return f"{_fmt(mm, 1)}{'' if median is None else ' / ' + _fmt(median, 1)} ({100 * found:.0f} %)"
 
 
 def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
@@ -147,7 +148,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
              "heatmap MSE in the source views. Definitions: `ghnerf_runtime/metrics.py`, `training/evaluate.py`.")
     L.append("")
     L.append("MPJPE gated: the runtime's triangulation (`joints3d.triangulate_joints`: reprojection gate, "
-             "minimum view confidence) on the same crops, over the joints it keeps (share kept in brackets).")
+             "minimum view confidence) on the same crops, mean / median over the joints it keeps (share kept in "
+             "brackets); the mean carries a tail of joints placed wrong in both views alike.")
     L.append("")
     L.append("| model | runtime | PCK@0.2 | MPJPE mm | MPJPE mm, gated | PSNR | SSIM | heatmap MSE | undecoded joints |")
     L.append("|---|---|---|---|---|---|---|---|---|")

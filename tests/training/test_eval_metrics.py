@@ -262,6 +262,7 @@ def test_the_gated_mpjpe_drops_joints_whose_views_disagree_as_the_runtime_does(d
     acc.add(r)
     res = acc.result()
     assert res["mpjpe_gated_mm"] < 0.5 < res["mpjpe_mm"]
+    assert res["mpjpe_gated_median_mm"] == pytest.approx(float(np.median(gated.errors[gated.evaluated])))
     n = sc["joints_3d_valid"].sum()
     assert res["mpjpe_gated_found"] == pytest.approx((both.sum() - 1) / n)
     assert res["encoder_heatmaps_mpjpe_gated_mm"] == pytest.approx(res["mpjpe_gated_mm"])

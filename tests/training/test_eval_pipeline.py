@@ -53,6 +53,7 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
                                     "ssim_masked": 0.9, "heatmap_mse": 0.001, "pck_undecoded": 3,
                                     "pck_evaluated_joints": 10, "encoder_heatmaps_pck@0.2": 0.8,
                                     "mpjpe_gated_mm": 61.25, "mpjpe_gated_found": 0.62,
+                                    "mpjpe_gated_median_mm": 40.04,
                                     "encoder_heatmaps_mpjpe_mm": 100.0, "encoder_heatmaps_flip_pck@0.2": 0.81,
                                     "encoder_heatmaps_flip_mpjpe_mm": None,
                                     "encoder_heatmaps_flip_pck@0.2_by_part": {"head": 0.5, "arms": 1.0},
@@ -73,7 +74,7 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert json.loads(j.read_text())["metrics"]["ghnerf_int8"]["pck@0.2"] == 0.5
     md = m.read_text()
     assert md == render_markdown(card)
-    assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 61.2 (62 %) | 20.00 | 0.900 | 0.001 | 3/10 |" in md
+    assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 61.2 / 40.0 (62 %) | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
     assert "| 2 (12000 steps), then 1 (12000 steps) | 106.5 min |" in md  # a resumed run: both invocations
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
