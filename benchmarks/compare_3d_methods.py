@@ -33,10 +33,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, contract_of, edge128_contract  # noqa: E402
-from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
+from ghnerf_runtime.cli.simdata import load_sequences, percentiles, visibility_summary  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
-from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, mpjpe_by_visibility, visibility_class  # noqa: E402
+from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, visibility_class  # noqa: E402
 from ghnerf_runtime.session import ModelSession  # noqa: E402
 
 #: name -> Joints3DConfig overrides.
@@ -140,9 +140,7 @@ def main(argv=None) -> int:
                      "cold_mpjpe_mm": cold_err.value if cold_err else float("nan"),
                      "cold_found": float(r["found"][cold].mean()) if cold.any() else float("nan"),
                      "mpjpe_common_mm": fair.value, "common_joints": int(common.sum()),
-                     "by_visibility": {name: {"mpjpe_mm": t / n if n else float("nan"), "joints": n,
-                                              "found": float(r["found"][vis_class == k].mean())}
-                                       for k, (name, (t, n)) in enumerate(mpjpe_by_visibility(own, visible).items())},
+                     "by_visibility": visibility_summary(own, visible, r["found"]),
                      "stage_ms": percentiles(r["stage"]), "total_ms": percentiles(r["total"])})
     print("\n| method | MPJPE (mm, own joints) | joints found | MPJPE on common joints (mm) "
           "| 3D stage ms median / p99 | pair ms median |")

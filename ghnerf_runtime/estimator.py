@@ -475,9 +475,7 @@ class Estimator:
         # 6. 3D, then the track
         t = time.perf_counter()
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
-        # Nobody stands outside the working volume, nor far from where the sweep looked.
-        j3 = gate_to_box(j3, regions.box, cfg.joints3d.max_outside_box_m)
-        j3 = gate_to_box(j3, self._volume_box, cfg.joints3d.max_outside_box_m)
+        j3 = self._gate_to_boxes(j3, regions)
         if cfg.presence.enabled:
             j3 = gate_presence(j3, cfg.presence.min_joints, cfg.presence.threshold(cfg.heatmaps.source))
             if not j3.valid.any():  # nobody: no 2D joints either
@@ -500,9 +498,12 @@ class Estimator:
             return reported
         kp = decode_keypoints(np.ascontiguousarray(env["encoder_heatmaps"], dtype=np.float32), cfg.decoder)
         uv = heatmap_to_model_pixels(kp.uv, self.grid, self.size)
-        j3 = triangulate_joints(uv, kp.confidence, kp.valid, crops, cfg.joints3d)
-        j3 = gate_to_box(j3, regions.box, cfg.joints3d.max_outside_box_m)
-        return gate_to_box(j3, self._volume_box, cfg.joints3d.max_outside_box_m)
+        return self._gate_to_boxes(triangulate_joints(uv, kp.confidence, kp.valid, crops, cfg.joints3d), regions)
+
+    def _gate_to_boxes(self, j3: Joints3D, regions: Regions) -> Joints3D:
+        """Nobody stands outside the working volume, nor far from where the sweep looked."""
+        margin = self.config.joints3d.max_outside_box_m
+        return gate_to_box(gate_to_box(j3, regions.box, margin), self._volume_box, margin)
 
     # -------------------------------------------------------------- 3D
     def _joints_3d(self, env: dict, out: dict, blocks, heat: np.ndarray, kp: Keypoints2D, uv_model: np.ndarray,

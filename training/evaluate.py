@@ -220,10 +220,11 @@ class HeatmapScores:
     views: list[list[int]] = field(default_factory=list)
     # MPJPE per visibility class of the joint in the sources (metrics.VISIBILITY_CLASSES): [sum mm, joints]
     visibility: dict[str, list[float]] = field(default_factory=dict)
-    # the runtime's gated triangulation: [sum mm, joints found, joints with truth], and per visibility class
-    gated: list[float] = field(default_factory=lambda: [0.0, 0, 0])
+    # the runtime's gated triangulation: errors (mm) of the joints it keeps (mean and median: the mean has a
+    # long tail), joints with truth, and the split per visibility class
+    gated_errors: list[np.ndarray] = field(default_factory=list)
+    gated_known: int = 0
     gated_visibility: dict[str, list[float]] = field(default_factory=dict)
-    gated_errors: list[np.ndarray] = field(default_factory=list)  # mm, for the median (the mean has a long tail)
 
     def add(self, p, e, visible: np.ndarray | None = None, gated=None) -> None:
         self.pck_correct += p.num_correct
@@ -235,10 +236,8 @@ class HeatmapScores:
         if visible is not None:
             _add_visibility(self.visibility, e, visible)
         if gated is not None:
-            self.gated[0] += float(gated.errors[gated.evaluated].sum())
-            self.gated[1] += gated.num_evaluated
-            self.gated[2] += gated.num_evaluated + gated.num_pred_missing
             self.gated_errors.append(np.asarray(gated.errors[gated.evaluated], np.float64))
+            self.gated_known += gated.num_evaluated + gated.num_pred_missing
             if visible is not None:
                 _add_visibility(self.gated_visibility, gated, visible)
 
@@ -258,11 +257,10 @@ class HeatmapScores:
                 **self.gated_result(f"{prefix}_")}
 
     def gated_result(self, prefix: str) -> dict:
-        total, found, known = self.gated
         errors = np.concatenate(self.gated_errors) if self.gated_errors else np.zeros(0)
-        return {f"{prefix}mpjpe_gated_mm": total / found if found else None,
+        return {f"{prefix}mpjpe_gated_mm": float(errors.mean()) if errors.size else None,
                 f"{prefix}mpjpe_gated_median_mm": float(np.median(errors)) if errors.size else None,
-                f"{prefix}mpjpe_gated_found": found / known if known else None,
+                f"{prefix}mpjpe_gated_found": errors.size / self.gated_known if self.gated_known else None,
                 f"{prefix}mpjpe_gated_by_visibility":
                     _visibility_scores(self.gated_visibility) if self.gated_visibility else None}
 

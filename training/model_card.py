@@ -194,8 +194,9 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         for label, src, by in parts:
             L.append(f"| {label} | {src} | " + " | ".join(_fmt(by.get(n)) for n in names) + " |")
         L.append("")
-    gated = bool(_breakdown(card, "mpjpe_gated_by_visibility"))
-    vis = _breakdown(card, "mpjpe_gated_by_visibility" if gated else "mpjpe_by_visibility")
+    vis = _breakdown(card, "mpjpe_gated_by_visibility")  # what a device reports; older metrics: ungated
+    gated = bool(vis)
+    vis = vis or _breakdown(card, "mpjpe_by_visibility")
     if vis:
         names = list(vis[0][2])
         L.append(f"MPJPE (mm{', gated' if gated else ''}) by how many source views see the joint (in the crop "

@@ -186,7 +186,7 @@ def _print_row(row: dict) -> None:
     if by := acc.get("mpjpe_by_visibility"):
         print("      MPJPE by the cameras that see the joint: " + ", ".join(
             f"{name.replace('_', ' ')} {c['mpjpe_mm']:.1f} mm ({100 * c['share']:.0f} % of joints, "
-            f"{100 * c['found_frac']:.0f} % found)" for name, c in by.items()), flush=True)
+            f"{100 * c['found']:.0f} % found)" for name, c in by.items()), flush=True)
 
 
 def _on_off_list(text: str) -> list[bool]:

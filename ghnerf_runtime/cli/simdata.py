@@ -177,14 +177,7 @@ class Accuracy:
                "found_3d_frac": float(pv3.mean()), "tracked_frac": float(tracked.mean())}
         if all(v is not None for v in self.vis3):
             # how many cameras see each joint: the truth knows hidden joints, the MPJPE pools them all
-            vis = np.array(self.vis3)
-            cls = visibility_class(vis)
-            out["mpjpe_by_visibility"] = {}
-            for k, (name, (total, n)) in enumerate(mpjpe_by_visibility(mp, vis).items()):
-                of = cls == k
-                out["mpjpe_by_visibility"][name] = {
-                    "mpjpe_mm": total / n if n else float("nan"), "joints": n, "share": float(of.mean()),
-                    "found_frac": float(pv3[of].mean()) if of.any() else float("nan")}
+            out["mpjpe_by_visibility"] = visibility_summary(mp, np.array(self.vis3), pv3)
         if self.p2:
             pk = pck(np.array(self.p2), np.array(self.t2), np.array(self.v2), pred_valid=np.array(self.pv2))
             out.update({"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated,
@@ -195,6 +188,25 @@ class Accuracy:
                 out[f"mpjpe_mm_{name}"] = m.value
                 out[f"found_3d_frac_{name}"] = float(pv3[sel].mean())
         return out
+
+
+def visibility_summary(result, visible: np.ndarray, found: np.ndarray) -> dict[str, dict]:
+    """An MPJPE split by the cameras that see each joint (``metrics.mpjpe_by_visibility``), per class:
+    ``mpjpe_mm`` over the joints found, ``joints`` found, ``share`` of all joints in the class and the
+    share of them ``found`` (nan for an empty class).
+
+    Args:
+        result: ``metrics.mpjpe`` of ``(N, J)`` joints.
+        visible: ``(N, C, J)`` per-camera visibility.
+        found: ``(N, J)`` bool, the estimator produced the joint.
+    """
+    cls = visibility_class(visible)
+    out = {}
+    for k, (name, (total, n)) in enumerate(mpjpe_by_visibility(result, visible).items()):
+        of = cls == k
+        out[name] = {"mpjpe_mm": total / n if n else float("nan"), "joints": n, "share": float(of.mean()),
+                     "found": float(found[of].mean()) if of.any() else float("nan")}
+    return out
 
 
 def percentiles(values, qs=(50, 99)) -> dict:
