@@ -5,6 +5,7 @@ Every definition here is restated in ``docs/metrics.md``; change both together.
 * :func:`pck` -- PCK@alpha of 2D joints against a per-sample torso reference length.
 * :func:`mpjpe` -- mean per-joint 3D position error, millimetres (inputs in metres).
 * :func:`mpjpe_by_visibility` -- that error split by how many views see each joint.
+* :func:`left_right_swaps` -- how often a left/right pair of 2D joints comes out exchanged.
 * :func:`masked_psnr`, :func:`masked_ssim` -- image quality inside a mask.
 * :func:`heatmap_mse` -- mean squared error between heatmaps.
 * :func:`gaussian_heatmaps` -- the ground-truth heatmap generator (training targets, tests).
@@ -22,7 +23,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from ghnerf_runtime.body25 import JOINT_INDEX, MID_HIP, NECK
+from ghnerf_runtime.body25 import FLIP_INDEX, JOINT_INDEX, MID_HIP, NECK
 from ghnerf_runtime.errors import ShapeError
 
 #: BODY_25 joints whose bounding box gives the fallback PCK reference length:
@@ -30,6 +31,9 @@ from ghnerf_runtime.errors import ShapeError
 TORSO_BOX_JOINTS: tuple[int, ...] = tuple(
     JOINT_INDEX[n] for n in ("Neck", "RShoulder", "LShoulder", "MidHip", "RHip", "LHip")
 )
+
+#: The BODY_25 left/right joint pairs ``(a, b)``, ``a < b`` (RShoulder/LShoulder, ..., LHeel/RHeel): 11.
+LEFT_RIGHT_PAIRS: tuple[tuple[int, int], ...] = tuple((j, m) for j, m in enumerate(FLIP_INDEX) if m > j)
 
 # SSIM constants of Wang et al. 2004 ("Image quality assessment: from error
 # visibility to structural similarity", IEEE TIP 13(4)): 11x11 Gaussian window,
@@ -40,8 +44,8 @@ SSIM_K1 = 0.01
 SSIM_K2 = 0.03
 
 __all__ = [
-    "TORSO_BOX_JOINTS", "PckResult", "MpjpeResult", "ImageMetricResult", "MseResult",
-    "VISIBILITY_CLASSES", "visibility_class", "mpjpe_by_visibility",
+    "TORSO_BOX_JOINTS", "LEFT_RIGHT_PAIRS", "PckResult", "SwapResult", "MpjpeResult", "ImageMetricResult",
+    "MseResult", "VISIBILITY_CLASSES", "visibility_class", "mpjpe_by_visibility", "left_right_swaps",
     "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse", "gaussian_heatmaps",
 ]
 
@@ -74,6 +78,25 @@ class PckResult:
     num_missing: int
     num_unreferenced: int
     num_pred_missing: int
+
+
+@dataclass(frozen=True, eq=False)
+class SwapResult:
+    """Left/right swaps over a batch (:func:`left_right_swaps`).
+
+    Attributes:
+        value: ``num_swapped / num_evaluated``; ``nan`` when ``num_evaluated == 0``.
+        swapped: ``(..., P)`` bool per sample and pair of ``pairs``.
+        evaluated: ``(..., P)`` bool: both joints' truth valid, both predicted, a reference length.
+        num_evaluated: pairs that entered the rate.
+        num_swapped: evaluated pairs found exchanged.
+    """
+
+    value: float
+    swapped: np.ndarray
+    evaluated: np.ndarray
+    num_evaluated: int
+    num_swapped: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -229,6 +252,67 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
         num_evaluated=n_eval, num_correct=n_ok, num_missing=int((~valid_b).sum()),
         num_unreferenced=int((valid_b & ~evaluated).sum()), num_pred_missing=int((evaluated & ~pred_ok).sum()),
     )
+
+
+def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
+                     pairs: Sequence[tuple[int, int]] = LEFT_RIGHT_PAIRS, alpha: float = 0.2,
+                     torso_joints: tuple[int, int] = (NECK, MID_HIP),
+                     box_joints: Sequence[int] = TORSO_BOX_JOINTS) -> SwapResult:
+    """How often a left/right pair of 2D joints is predicted the wrong way round.
+
+    A pair ``(a, b)`` of a sample is *swapped* when, as labelled, at least one of its two
+    predictions is wrong by PCK@alpha (:func:`pck`'s per-sample reference length) and,
+    exchanged (``a``'s prediction read as ``b``'s and the reverse), both are right. It is
+    *evaluated* when both truths are valid, both joints are predicted (finite) and the sample
+    has a reference length. A swapped pair costs PCK twice and, swapped in one view only,
+    breaks the triangulation of both joints; swapped in both views alike it places both on the
+    wrong side of the body in 3D.
+
+    Args:
+        pred_2d, true_2d: ``(..., J, 2)`` pixels of one image per sample.
+        valid: ``(..., J)`` bool, the truth is visible and labelled.
+        pred_valid: optional ``(..., J)`` bool, the predictor produced the joint.
+        pairs: the joint pairs to test (default: BODY_25's 11 left/right pairs).
+        alpha, torso_joints, box_joints: as for :func:`pck`.
+
+    Returns:
+        :class:`SwapResult`; ``value`` is ``nan`` when no pair was evaluated.
+
+    Example:
+        >>> true = np.array([[0.0, 0.0], [0.0, 10.0], [-3.0, 5.0], [3.0, 5.0]])
+        >>> pred = true[[0, 1, 3, 2]]  # joints 2 and 3 exchanged
+        >>> r = left_right_swaps(pred, true, np.ones(4, bool), pairs=[(2, 3)], torso_joints=(0, 1), box_joints=(0, 1))
+        >>> r.value, r.num_swapped
+        (1.0, 1)
+    """
+    pred = _points("pred_2d", pred_2d, 2)
+    true = _points("true_2d", true_2d, 2)
+    if pred.shape != true.shape:
+        raise ShapeError(f"pred_2d {pred.shape} and true_2d {true.shape} must match")
+    valid_b = _mask("valid", valid, true.shape[:-1]) & np.all(np.isfinite(true), axis=-1)
+    pred_ok = np.ones(valid_b.shape, bool) if pred_valid is None else _mask("pred_valid", pred_valid, valid_b.shape)
+    pred_ok = pred_ok & np.all(np.isfinite(pred), axis=-1)
+    num_joints = true.shape[-2]
+    pairs = [(int(a), int(b)) for a, b in pairs]
+    for j in (*(j for p in pairs for j in p), *torso_joints, *box_joints):
+        if not 0 <= int(j) < num_joints:
+            raise ShapeError(f"joint index {j} out of range for {num_joints} joints")
+    if not (np.isfinite(alpha) and alpha > 0):
+        raise ValueError(f"alpha must be a positive number, got {alpha}")
+    radius = alpha * _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
+    shape = true.shape[:-2] + (len(pairs),)
+    swapped, evaluated = np.zeros(shape, bool), np.zeros(shape, bool)
+    for k, (a, b) in enumerate(pairs):
+        ev = valid_b[..., a] & valid_b[..., b] & pred_ok[..., a] & pred_ok[..., b] & (radius > 0)
+        pa, pb = np.where(ev[..., None], pred[..., a, :], 0.0), np.where(ev[..., None], pred[..., b, :], 0.0)
+        ta, tb = true[..., a, :], true[..., b, :]
+        near = [[np.linalg.norm(p - t, axis=-1) <= radius for t in (ta, tb)] for p in (pa, pb)]
+        as_labelled = near[0][0] & near[1][1]
+        exchanged = near[0][1] & near[1][0]
+        evaluated[..., k] = ev
+        swapped[..., k] = ev & ~as_labelled & exchanged
+    n_eval, n_swap = int(evaluated.sum()), int(swapped.sum())
+    return SwapResult(_mean_or_nan(n_swap, n_eval), swapped, evaluated, n_eval, n_swap)
 
 
 # -------------------------------------------------------------------- MPJPE

@@ -187,6 +187,11 @@ def _print_row(row: dict) -> None:
         print("      MPJPE by the cameras that see the joint: " + ", ".join(
             f"{name.replace('_', ' ')} {c['mpjpe_mm']:.1f} mm ({100 * c['share']:.0f} % of joints, "
             f"{100 * c['found']:.0f} % found)" for name, c in by.items()), flush=True)
+    if sw := acc.get("left_right_swaps"):
+        print("      left/right pairs swapped in 2D: " + ", ".join(
+            f"view {c} {100 * f:.1f} %" for c, f in enumerate(sw["by_view"]))
+            + f" of the pairs decoded there; in every view alike {100 * sw['all_views_frac']:.2f} % "
+              f"({sw['all_views_evaluated']} pairs)", flush=True)
 
 
 def _on_off_list(text: str) -> list[bool]:

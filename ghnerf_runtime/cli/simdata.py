@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.metrics import mpjpe, mpjpe_by_visibility, pck, visibility_class
+from ghnerf_runtime.metrics import left_right_swaps, mpjpe, mpjpe_by_visibility, pck, visibility_class
 from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 
 log = logging.getLogger(__name__)
@@ -167,6 +167,20 @@ class Accuracy:
         self.tracked.append(bool(result.tracked))
         self.vis3.append(None if visible is None else np.asarray(visible, bool))
 
+    def _swaps(self) -> dict:
+        """Left/right swaps of the 2D joints (``metrics.left_right_swaps``): the share of evaluated pairs
+        swapped in each view, and of the pairs evaluated in every view, the share swapped in all of them
+        (a swap triangulation cannot see: both views agree)."""
+        views = len(self.p2) // len(self.p3)
+        shape = (len(self.p3), views)
+        r = left_right_swaps(np.array(self.p2).reshape(*shape, 25, 2), np.array(self.t2).reshape(*shape, 25, 2),
+                             np.array(self.v2).reshape(*shape, 25), pred_valid=np.array(self.pv2).reshape(*shape, 25))
+        every = r.evaluated.all(axis=1)
+        per_view = [float(r.swapped[:, c].sum() / max(r.evaluated[:, c].sum(), 1)) for c in range(views)]
+        return {"frac": r.value, "by_view": per_view, "evaluated": r.num_evaluated,
+                "all_views_frac": float((r.swapped.all(axis=1) & every).sum() / max(every.sum(), 1)),
+                "all_views_evaluated": int(every.sum())}
+
     def summary(self) -> dict:
         if not self.p3:
             return {}
@@ -182,6 +196,7 @@ class Accuracy:
             pk = pck(np.array(self.p2), np.array(self.t2), np.array(self.v2), pred_valid=np.array(self.pv2))
             out.update({"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated,
                         "pck_pred_missing": pk.num_pred_missing})
+            out["left_right_swaps"] = self._swaps()
         for name, sel in (("tracked", tracked), ("cold", ~tracked)):
             if sel.any():
                 m = mpjpe(p3[sel], t3[sel], ones[sel], pred_valid=pv3[sel])

@@ -130,6 +130,32 @@ def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir,
         assert set(by) == {"all_views", "some_views", "no_view"}
         assert sum(c["share"] for c in by.values()) == pytest.approx(1.0)
         assert sum(c["joints"] for c in by.values()) == row["accuracy"]["mpjpe_evaluated"]
+        swaps = row["accuracy"]["left_right_swaps"]
+        assert len(swaps["by_view"]) == 2 and all(0.0 <= f <= 1.0 for f in swaps["by_view"])
+
+
+def test_bench_accuracy_counts_left_right_swaps_per_view():
+    """A pair whose shoulders are exchanged in view 1 only: swapped there, not in view 0, not in both."""
+    from types import SimpleNamespace
+
+    from ghnerf_runtime.body25 import JOINT_INDEX, NUM_JOINTS
+    from ghnerf_runtime.cli.simdata import Accuracy
+
+    rng = np.random.default_rng(0)
+    truth_2d = rng.uniform(100, 400, (2, NUM_JOINTS, 2))
+    truth_2d[:, JOINT_INDEX["MidHip"]] = truth_2d[:, JOINT_INDEX["Neck"]] + [0.0, 150.0]  # PCK radius 30 px
+    r, l, neck = JOINT_INDEX["RShoulder"], JOINT_INDEX["LShoulder"], truth_2d[:, JOINT_INDEX["Neck"]]
+    truth_2d[:, r], truth_2d[:, l] = neck - [60.0, 0], neck + [60.0, 0]
+    pred = {"a": truth_2d[0].copy(), "b": truth_2d[1].copy()}
+    pred["b"][[r, l]] = pred["b"][[l, r]]
+    none = np.zeros(NUM_JOINTS, bool)
+    result = SimpleNamespace(joints_2d=pred, missing_2d={"a": none, "b": none}, joints_3d=np.zeros((NUM_JOINTS, 3)),
+                             missing=none, tracked=True)
+    acc = Accuracy()
+    acc.add_truth(result, np.zeros((NUM_JOINTS, 3)), truth_2d, np.ones((2, NUM_JOINTS), bool))
+    sw = acc.summary()["left_right_swaps"]
+    assert sw["by_view"] == [0.0, pytest.approx(1 / 11)]  # 11 pairs, all evaluated in each view
+    assert sw["all_views_frac"] == 0.0 and sw["all_views_evaluated"] == 11
 
 
 def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_dir, tmp_path):  # noqa: F811

@@ -20,19 +20,20 @@ MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, mode
 #: its default 3D method, by ``ghnerf-bench runtime --sequences 4 --frames 10 --warmup 0 --precisions auto
 #: --modes keypoints --heatmap-sources rendered,encoder``; the thresholds add margins (pairs are few: 40).
 #: Set a value to None to check sanity only. Re-measure when models/ changes.
-MEASURED_ON = ("models/ of 2026-11-22 (the sixth: 5000 train scenes, half in freestyle; human encoder "
-               "pretrained 24000 steps on 2D heatmaps, then frozen; 10000 joint steps; ghnerf-eval PCK@0.2 0.804 "
-               "rendered / 0.898 encoder heatmaps on 256 val scenes)")
-#: measured: rendered/depth_centroid PCK@0.2 0.735, MPJPE 234 mm, 99 % of 3D joints found (presence gate 0.4;
-#:           tracking.follow_encoder, the default since 2026-11-22; following its own joints: 0.658 / 284 / 93 %);
-#:           encoder/triangulate    PCK@0.2 0.896, MPJPE 120 mm, 66 % found (presence gate 0.35; this model
+MEASURED_ON = ("models/ of 2026-11-22 (the seventh, what `make model` makes: 5000 train scenes, half in freestyle; "
+               "human encoder pretrained 24000 steps on 2D heatmaps, then frozen; 10000 joint steps; ghnerf-eval "
+               "PCK@0.2 0.830 rendered / 0.904 encoder heatmaps on 256 val scenes, int8)")
+#: measured: rendered/depth_centroid PCK@0.2 0.791, MPJPE 223 mm, 99 % of 3D joints found (presence gate 0.4;
+#:           tracking.follow_encoder, the default);
+#:           encoder/triangulate    PCK@0.2 0.906, MPJPE 139 mm, 68 % found (presence gate 0.35; this model
 #:           leaves a joint hidden in one view undecoded there, as its training targets do: docs/runtime.md).
-#:           encoder with the flip test (--flip-tests on,off): PCK@0.2 0.900, MPJPE 116 mm, 67 % found; it is
+#:           encoder with the flip test (--flip-tests on,off): PCK@0.2 0.916, MPJPE 116 mm, 69 % found; it is
 #:           held to the encoder's thresholds.
-#: (the fifth model: rendered 0.648 / 250 mm / 92 %, encoder 0.882 / 109 mm / 63 %.)
+#: (the sixth model: rendered 0.735 / 234 mm / 99 %, encoder 0.896 / 120 mm / 66 %, flip test 0.900 / 116 mm;
+#:  the fifth: rendered 0.648 / 250 mm / 92 %, encoder 0.882 / 109 mm / 63 %.)
 THRESHOLDS = {
-    "rendered": {"pck@0.2_min": 0.65, "mpjpe_mm_max": 300.0, "found_3d_min": 0.90},
-    "encoder": {"pck@0.2_min": 0.82, "mpjpe_mm_max": 160.0, "found_3d_min": 0.55},
+    "rendered": {"pck@0.2_min": 0.72, "mpjpe_mm_max": 280.0, "found_3d_min": 0.90},
+    "encoder": {"pck@0.2_min": 0.84, "mpjpe_mm_max": 175.0, "found_3d_min": 0.58},
 }
 METHODS = {"rendered": "depth_centroid", "encoder": "triangulate"}
 SEQUENCES, FRAMES = 4, 10
@@ -67,8 +68,8 @@ def test_shipped_model_on_held_out_sequences(source, flip):
         assert s["found_3d_frac"] >= t["found_3d_min"], s
     by = s["mpjpe_by_visibility"]
     assert sum(c["joints"] for c in by.values()) == s["mpjpe_evaluated"]
-    # joints both cameras see are placed better than joints neither sees (measured 88 / 197 mm encoder,
-    # 204 / 275 mm rendered): a split attached to the wrong joints or views would not keep this order
+    # joints both cameras see are placed better than joints neither sees (measured 103 / 232 mm encoder,
+    # 183 / 267 mm rendered): a split attached to the wrong joints or views would not keep this order
     assert by["all_views"]["mpjpe_mm"] < by["no_view"]["mpjpe_mm"], by
 
 

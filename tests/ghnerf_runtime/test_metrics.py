@@ -15,8 +15,8 @@ from ghnerf_runtime import metrics
 from ghnerf_runtime.body25 import JOINT_INDEX, MID_HIP, NECK, NUM_JOINTS
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.metrics import (
-    TORSO_BOX_JOINTS, gaussian_heatmaps, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility, pck,
-    visibility_class,
+    TORSO_BOX_JOINTS, gaussian_heatmaps, heatmap_mse, left_right_swaps, masked_psnr, masked_ssim, mpjpe,
+    mpjpe_by_visibility, pck, visibility_class,
 )
 
 
@@ -147,6 +147,34 @@ def test_mpjpe_split_by_visibility_hand_computed():
         mpjpe_by_visibility(r, vis[:1])
     with pytest.raises(ShapeError):
         visibility_class([True, False])
+
+
+def test_left_right_swaps_hand_computed():
+    # torso 0-1 of length 10: PCK radius 2 px. Pairs (2, 3) and (4, 5), truth 6 px apart.
+    true = np.array([[0.0, 0.0], [0.0, 10.0], [-3.0, 5.0], [3.0, 5.0], [-3.0, 9.0], [3.0, 9.0]])
+    kw = {"pairs": [(2, 3), (4, 5)], "torso_joints": (0, 1), "box_joints": (0, 1)}
+    vis = np.ones(6, bool)
+    # sample 0: pair (2, 3) exchanged (1 px off each way round): swapped; pair (4, 5) right as labelled
+    p0 = true.copy()
+    p0[2], p0[3] = true[3] + [1.0, 0.0], true[2] - [1.0, 0.0]
+    # sample 1: pair (2, 3) both on joint 2 (one wrong, yet not exchanged): not swapped; joint 5 missing
+    p1 = true.copy()
+    p1[3] = true[2]
+    r = left_right_swaps(np.stack([p0, p1]), np.stack([true, true]), np.stack([vis, vis]),
+                         pred_valid=np.array([[True] * 6, [True] * 5 + [False]]), **kw)
+    assert r.swapped.tolist() == [[True, False], [False, False]]
+    assert r.evaluated.tolist() == [[True, True], [True, False]]  # the pair with a missing joint is left out
+    assert (r.num_swapped, r.num_evaluated) == (1, 3) and r.value == pytest.approx(1 / 3)
+    # a hidden joint leaves its pair out; nothing evaluated is undefined, not 0
+    hidden = vis.copy()
+    hidden[[2, 4]] = False
+    empty = left_right_swaps(p0, true, hidden, **kw)
+    assert empty.num_evaluated == 0 and math.isnan(empty.value)
+    # BODY_25 defaults: 11 pairs, each a joint and its mirror
+    assert len(metrics.LEFT_RIGHT_PAIRS) == 11
+    assert (JOINT_INDEX["RShoulder"], JOINT_INDEX["LShoulder"]) in metrics.LEFT_RIGHT_PAIRS
+    with pytest.raises(ShapeError, match="out of range"):
+        left_right_swaps(true, true, vis, pairs=[(2, 9)], torso_joints=(0, 1), box_joints=(0, 1))
 
 
 # ------------------------------------------------------------------------- PSNR
