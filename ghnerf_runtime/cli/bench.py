@@ -111,12 +111,19 @@ def run_runtime_bench(args) -> dict:
     row sees the same mix of fast and slow spells and the rows compare. The first ``warmup``
     pairs of each row are not counted.
     """
-    from ghnerf_runtime.cli.simdata import Accuracy, load_sequences
+    from ghnerf_runtime.cli.simdata import Accuracy, depth_per_disparity_px, load_sequences
 
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
+    depth_per_px = [1000 * depth_per_disparity_px(s.rig, s.info["distance_m"]) for s in sequences]
+    print(f"rigs: baseline {min(s.rig.baseline for s in sequences):.2f}-{max(s.rig.baseline for s in sequences):.2f} m, "
+          f"subject at {min(s.info['distance_m'] for s in sequences):.1f}-"
+          f"{max(s.info['distance_m'] for s in sequences):.1f} m: 1 px of disparity error there is "
+          f"{min(depth_per_px):.0f}-{max(depth_per_px):.0f} mm of depth (median {np.median(depth_per_px):.0f}; "
+          f"z^2 / (f b))", flush=True)
     report = {"model_dir": args.model_dir, "thread_pool": args.thread_pool, "allow_spinning": args.allow_spinning,
               "pairs_per_run": sum(len(s) for s in sequences) - args.warmup, "interleaved": True,
-              "sequences": [s.info for s in sequences], "method": args.method, "runs": [],
+              "sequences": [{**s.info, "depth_mm_per_disparity_px": d} for s, d in zip(sequences, depth_per_px)],
+              "method": args.method, "runs": [],
               "load_average_start": os.getloadavg(), "cpus": os.cpu_count()}
     rows = []
     for precision, source in itertools.product(args.precisions, args.heatmap_sources):
@@ -187,6 +194,9 @@ def _print_row(row: dict) -> None:
         print("      MPJPE by the cameras that see the joint: " + ", ".join(
             f"{name.replace('_', ' ')} {c['mpjpe_mm']:.1f} mm ({100 * c['share']:.0f} % of joints, "
             f"{100 * c['found']:.0f} % found)" for name, c in by.items()), flush=True)
+    if e2 := acc.get("error_2d_px"):
+        print(f"      2D error of the visible joints decoded: median {e2['median']:.1f} px, p90 {e2['p90']:.1f} px "
+              f"(original image pixels)", flush=True)
     if sw := acc.get("left_right_swaps"):
         print("      left/right pairs swapped in 2D: " + ", ".join(
             f"view {c} {100 * f:.1f} %" for c, f in enumerate(sw["by_view"]))

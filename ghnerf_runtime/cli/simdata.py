@@ -32,7 +32,7 @@ from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 log = logging.getLogger(__name__)
 
 __all__ = ["SEED_BASE", "HELD_OUT_MOTIONS", "SEEN_MOTIONS", "Sequence", "load_sequences", "Accuracy",
-           "default_cache_dir", "write_sim_example", "percentiles"]
+           "default_cache_dir", "write_sim_example", "percentiles", "depth_per_disparity_px"]
 
 #: Scene seeds of the bench sequences: 3 * 2**50 + k, outside every dataset split's range.
 SEED_BASE = 3 * 2 ** 50
@@ -197,6 +197,9 @@ class Accuracy:
             out.update({"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated,
                         "pck_pred_missing": pk.num_pred_missing})
             out["left_right_swaps"] = self._swaps()
+            # the 2D error in image pixels of the visible joints decoded: what triangulation amplifies
+            err = np.linalg.norm(np.array(self.p2) - np.array(self.t2), axis=-1)[pk.evaluated & np.array(self.pv2)]
+            out["error_2d_px"] = percentiles(err, (50, 90))
         for name, sel in (("tracked", tracked), ("cold", ~tracked)):
             if sel.any():
                 m = mpjpe(p3[sel], t3[sel], ones[sel], pred_valid=pv3[sel])
@@ -222,6 +225,25 @@ def visibility_summary(result, visible: np.ndarray, found: np.ndarray) -> dict[s
         out[name] = {"mpjpe_mm": total / n if n else float("nan"), "joints": n, "share": float(of.mean()),
                      "found": float(found[of].mean()) if of.any() else float("nan")}
     return out
+
+
+def depth_per_disparity_px(rig: Rig, depth_m: float) -> float:
+    """Metres of depth that one pixel of disparity error moves a point at ``depth_m`` for the rig's
+    pair: ``z**2 / (f * b)``, the rectified-stereo approximation (``f`` the pair's mean focal length
+    in pixels, ``b`` the baseline). Triangulation turns each view's 2D error into depth error at
+    about this rate; it is how a 2D error in pixels becomes an MPJPE.
+
+    Example:
+        >>> from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, look_at
+        >>> K = [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]]
+        >>> cams = tuple(Camera(n, 640, 480, K, [], *look_at((x, 0, 0), (x, 0, 3))) for n, x in (("l", 0.0), ("r", 1.0)))
+        >>> rig = Rig(cams, WorkingVolume(np.array([-1.0, -1, 2]), np.array([1.0, 1, 4])))
+        >>> round(depth_per_disparity_px(rig, 3.0), 4)
+        0.018
+    """
+    a, b = rig.pair
+    focal = float(np.mean([a.K[0, 0], a.K[1, 1], b.K[0, 0], b.K[1, 1]]))
+    return depth_m ** 2 / (focal * rig.baseline)
 
 
 def percentiles(values, qs=(50, 99)) -> dict:

@@ -156,6 +156,9 @@ def test_bench_accuracy_counts_left_right_swaps_per_view():
     sw = acc.summary()["left_right_swaps"]
     assert sw["by_view"] == [0.0, pytest.approx(1 / 11)]  # 11 pairs, all evaluated in each view
     assert sw["all_views_frac"] == 0.0 and sw["all_views_evaluated"] == 11
+    # the 2D error: 48 of the 50 visible joints exact, the two exchanged shoulders 120 px off
+    e2 = acc.summary()["error_2d_px"]
+    assert e2["median"] == 0.0 and e2["p90"] == 0.0
 
 
 def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_dir, tmp_path):  # noqa: F811
@@ -190,3 +193,12 @@ def test_bench_runtime_compares_the_flip_test_and_encoder_following_on_and_off(t
     assert "keypoints follow-enc" in out and "keypoints follow-own" in out
     with pytest.raises(SystemExit):
         bench.main(["runtime", "--flip-tests", "maybe"])
+
+
+def test_simdata_doctests():
+    """``depth_per_disparity_px``: a 1 m baseline, f = 500 px, 3 m away: 18 mm of depth per pixel."""
+    import doctest
+
+    from ghnerf_runtime.cli import simdata
+
+    assert doctest.testmod(simdata, raise_on_error=False).failed == 0
