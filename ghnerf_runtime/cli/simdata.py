@@ -173,8 +173,8 @@ class Accuracy:
         (a swap triangulation cannot see: both views agree)."""
         views = len(self.p2) // len(self.p3)
         shape = (len(self.p3), views)
-        r = left_right_swaps(np.array(self.p2).reshape(*shape, 25, 2), np.array(self.t2).reshape(*shape, 25, 2),
-                             np.array(self.v2).reshape(*shape, 25), pred_valid=np.array(self.pv2).reshape(*shape, 25))
+        r = left_right_swaps(np.array(self.p2).reshape(*shape, -1, 2), np.array(self.t2).reshape(*shape, -1, 2),
+                             np.array(self.v2).reshape(*shape, -1), pred_valid=np.array(self.pv2).reshape(*shape, -1))
         every = r.evaluated.all(axis=1)
         per_view = [float(r.swapped[:, c].sum() / max(r.evaluated[:, c].sum(), 1)) for c in range(views)]
         return {"frac": r.value, "by_view": per_view, "evaluated": r.num_evaluated,
