@@ -163,6 +163,26 @@ def _mask(name: str, array, shape: tuple[int, ...]) -> np.ndarray:
     return a.astype(bool)
 
 
+def _joints_pair(pred, true, valid, pred_valid, dim: int, kind: str):
+    """Checked ``(pred, true, valid, pred_ok)`` of a prediction against its truth (``..., J, dim``):
+    non-finite truth is not valid, a non-finite prediction is not predicted."""
+    pred = _points(f"pred_{kind}", pred, dim)
+    true = _points(f"true_{kind}", true, dim)
+    if pred.shape != true.shape:
+        raise ShapeError(f"pred_{kind} {pred.shape} and true_{kind} {true.shape} must match")
+    valid_b = _mask("valid", valid, true.shape[:-1]) & np.all(np.isfinite(true), axis=-1)
+    pred_ok = np.ones(valid_b.shape, bool) if pred_valid is None else _mask("pred_valid", pred_valid, valid_b.shape)
+    return pred, true, valid_b, pred_ok & np.all(np.isfinite(pred), axis=-1)
+
+
+def _check_pck_args(num_joints: int, joints, alpha: float) -> None:
+    for j in joints:
+        if not 0 <= int(j) < num_joints:
+            raise ShapeError(f"joint index {j} out of range for {num_joints} joints")
+    if not (np.isfinite(alpha) and alpha > 0):
+        raise ValueError(f"alpha must be a positive number, got {alpha}")
+
+
 def _mean_or_nan(total: float, count: int) -> float:
     return float(total / count) if count > 0 else float("nan")
 
@@ -225,23 +245,10 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
         >>> r.value, r.correct.tolist()
         (0.6666666666666666, [True, False, True])
     """
-    pred = _points("pred_2d", pred_2d, 2)
-    true = _points("true_2d", true_2d, 2)
-    if pred.shape != true.shape:
-        raise ShapeError(f"pred_2d {pred.shape} and true_2d {true.shape} must match")
-    valid_b = _mask("valid", valid, true.shape[:-1])
-    pred_ok = np.ones(valid_b.shape, bool) if pred_valid is None else _mask("pred_valid", pred_valid, valid_b.shape)
-    num_joints = true.shape[-2]
-    for j in (*torso_joints, *box_joints):
-        if not 0 <= int(j) < num_joints:
-            raise ShapeError(f"torso/box joint index {j} out of range for {num_joints} joints")
-    if not (np.isfinite(alpha) and alpha > 0):
-        raise ValueError(f"alpha must be a positive number, got {alpha}")
-
-    valid_b = valid_b & np.all(np.isfinite(true), axis=-1)  # non-finite truth cannot be valid
+    pred, true, valid_b, pred_ok = _joints_pair(pred_2d, true_2d, valid, pred_valid, 2, "2d")
+    _check_pck_args(true.shape[-2], (*torso_joints, *box_joints), alpha)
     ref = _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     evaluated = valid_b & (ref > 0)[..., None]
-    pred_ok = pred_ok & np.all(np.isfinite(pred), axis=-1)
     dist = np.linalg.norm(np.where(pred_ok[..., None], pred - true, 0.0), axis=-1)
     correct = evaluated & pred_ok & (dist <= alpha * ref[..., None])
 
@@ -285,20 +292,9 @@ def left_right_swaps(pred_2d, true_2d, valid, *, pred_valid=None,
         >>> r.value, r.num_swapped
         (1.0, 1)
     """
-    pred = _points("pred_2d", pred_2d, 2)
-    true = _points("true_2d", true_2d, 2)
-    if pred.shape != true.shape:
-        raise ShapeError(f"pred_2d {pred.shape} and true_2d {true.shape} must match")
-    valid_b = _mask("valid", valid, true.shape[:-1]) & np.all(np.isfinite(true), axis=-1)
-    pred_ok = np.ones(valid_b.shape, bool) if pred_valid is None else _mask("pred_valid", pred_valid, valid_b.shape)
-    pred_ok = pred_ok & np.all(np.isfinite(pred), axis=-1)
-    num_joints = true.shape[-2]
+    pred, true, valid_b, pred_ok = _joints_pair(pred_2d, true_2d, valid, pred_valid, 2, "2d")
     pairs = [(int(a), int(b)) for a, b in pairs]
-    for j in (*(j for p in pairs for j in p), *torso_joints, *box_joints):
-        if not 0 <= int(j) < num_joints:
-            raise ShapeError(f"joint index {j} out of range for {num_joints} joints")
-    if not (np.isfinite(alpha) and alpha > 0):
-        raise ValueError(f"alpha must be a positive number, got {alpha}")
+    _check_pck_args(true.shape[-2], (*(j for p in pairs for j in p), *torso_joints, *box_joints), alpha)
     radius = alpha * _reference_lengths(true, valid_b, tuple(torso_joints), box_joints)
     shape = true.shape[:-2] + (len(pairs),)
     swapped, evaluated = np.zeros(shape, bool), np.zeros(shape, bool)
@@ -338,13 +334,7 @@ def mpjpe(pred_3d, true_3d, valid, *, pred_valid=None) -> MpjpeResult:
         >>> round(r.value, 6), r.num_evaluated
         (2.5, 2)
     """
-    pred = _points("pred_3d", pred_3d, 3)
-    true = _points("true_3d", true_3d, 3)
-    if pred.shape != true.shape:
-        raise ShapeError(f"pred_3d {pred.shape} and true_3d {true.shape} must match")
-    valid_b = _mask("valid", valid, true.shape[:-1]) & np.all(np.isfinite(true), axis=-1)
-    pred_ok = np.ones(valid_b.shape, bool) if pred_valid is None else _mask("pred_valid", pred_valid, valid_b.shape)
-    pred_ok = pred_ok & np.all(np.isfinite(pred), axis=-1)
+    pred, true, valid_b, pred_ok = _joints_pair(pred_3d, true_3d, valid, pred_valid, 3, "3d")
     evaluated = valid_b & pred_ok
     errors = np.where(evaluated, np.linalg.norm(np.where(evaluated[..., None], pred - true, 0.0), axis=-1), 0.0)
     errors_mm = 1000.0 * errors

@@ -167,14 +167,15 @@ class Accuracy:
         self.tracked.append(bool(result.tracked))
         self.vis3.append(None if visible is None else np.asarray(visible, bool))
 
-    def _swaps(self) -> dict:
+    def _swaps(self, p2: np.ndarray, t2: np.ndarray, v2: np.ndarray, pv2: np.ndarray) -> dict:
         """Left/right swaps of the 2D joints (``metrics.left_right_swaps``): the share of evaluated pairs
         swapped in each view, and of the pairs evaluated in every view, the share swapped in all of them
-        (a swap triangulation cannot see: both views agree)."""
-        views = len(self.p2) // len(self.p3)
+        (a swap triangulation cannot see: both views agree). The arguments hold one row per view of
+        every pair, views fastest."""
+        views = len(p2) // len(self.p3)
         shape = (len(self.p3), views)
-        r = left_right_swaps(np.array(self.p2).reshape(*shape, -1, 2), np.array(self.t2).reshape(*shape, -1, 2),
-                             np.array(self.v2).reshape(*shape, -1), pred_valid=np.array(self.pv2).reshape(*shape, -1))
+        r = left_right_swaps(p2.reshape(*shape, -1, 2), t2.reshape(*shape, -1, 2), v2.reshape(*shape, -1),
+                             pred_valid=pv2.reshape(*shape, -1))
         every = r.evaluated.all(axis=1)
         per_view = [float(r.swapped[:, c].sum() / max(r.evaluated[:, c].sum(), 1)) for c in range(views)]
         return {"frac": r.value, "by_view": per_view, "evaluated": r.num_evaluated,
@@ -193,13 +194,13 @@ class Accuracy:
             # how many cameras see each joint: the truth knows hidden joints, the MPJPE pools them all
             out["mpjpe_by_visibility"] = visibility_summary(mp, np.array(self.vis3), pv3)
         if self.p2:
-            pk = pck(np.array(self.p2), np.array(self.t2), np.array(self.v2), pred_valid=np.array(self.pv2))
+            p2, t2, v2, pv2 = (np.array(a) for a in (self.p2, self.t2, self.v2, self.pv2))
+            pk = pck(p2, t2, v2, pred_valid=pv2)
             out.update({"pck@0.2": pk.value, "pck_evaluated": pk.num_evaluated,
                         "pck_pred_missing": pk.num_pred_missing})
-            out["left_right_swaps"] = self._swaps()
+            out["left_right_swaps"] = self._swaps(p2, t2, v2, pv2)
             # the 2D error in image pixels of the visible joints decoded: what triangulation amplifies
-            err = np.linalg.norm(np.array(self.p2) - np.array(self.t2), axis=-1)[pk.evaluated & np.array(self.pv2)]
-            out["error_2d_px"] = percentiles(err, (50, 90))
+            out["error_2d_px"] = percentiles(np.linalg.norm(p2 - t2, axis=-1)[pk.evaluated & pv2], (50, 90))
         for name, sel in (("tracked", tracked), ("cold", ~tracked)):
             if sel.any():
                 m = mpjpe(p3[sel], t3[sel], ones[sel], pred_valid=pv3[sel])
