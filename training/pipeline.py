@@ -49,7 +49,7 @@ STAGES = ("data", "pretrain_ghnerf", *(f"{k}_{v}" for k in ("train", "export", "
           "card")
 #: Pretraining keys that do not change the result; ignored when matching a finished pretraining run.
 PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "eval_every", "eval_scenes",
-                         "checkpoint_every")
+                         "checkpoint_every", "loader_workers")
 EVAL_RUNTIMES = {"ghnerf": ("torch", "fp32", "int8"), "baseline": ("fp32", "int8")}
 
 
@@ -72,6 +72,8 @@ class PipelineConfig:
     calib_scenes: int = 16
     quick: bool = False
     accept_stopped: bool = False
+    until: str | None = None
+    """Stop after this stage kind (``data``, ``pretrain``, ``train``): train where a GPU is, finish elsewhere."""
     variants: tuple[str, ...] = tuple(VARIANTS)
     threads: int = 2
     parallel_train: bool = True
@@ -636,6 +638,8 @@ def run(cfg: PipelineConfig) -> dict | None:
     data_in = {"data": str(cfg.data), "res": cfg.res, "train": cfg.train, "val": cfg.val,
                "vsm": cfg.val_seen_motions, **({"freestyle": cfg.freestyle_share} if cfg.freestyle_share else {})}
     d = st.run("data", data_in, lambda: stage_data(cfg))
+    if cfg.until == "data":
+        return None
     # What the training stages read: the request *and* the manifest's hash, so a dataset regenerated
     # under another recipe (same folder and counts, say a new training motion) retrains the models.
     data_key = {"request": d["inputs"], "manifest": d["outputs"]}
@@ -652,7 +656,11 @@ def run(cfg: PipelineConfig) -> dict | None:
         if pretrain_block(cfg, variant):
             st.run(f"pretrain_{variant}", {"data": data_key, "config": pretrain_inputs(cfg, variant)},
                    lambda v=variant: stage_pretrain(cfg, v))
+        if cfg.until == "pretrain":
+            continue
         t = st.run(f"train_{variant}", train_in(variant), lambda v=variant: stage_train(cfg, v))
+        if cfg.until == "train":
+            continue
         ckpt = {variant: Path(next(iter(t["outputs"])))}
         e = st.run(f"export_{variant}", t["outputs"], lambda c=ckpt: stage_export(cfg, c))
         q = st.run(f"quantize_{variant}", {"export": e["outputs"], "calib": cfg.calib_scenes},
@@ -660,6 +668,9 @@ def run(cfg: PipelineConfig) -> dict | None:
         st.run(f"eval_{variant}", {"q": q["outputs"], "e": e["outputs"], "split": cfg.eval_split,
                                    "limit": cfg.eval_limit, "runtimes": EVAL_RUNTIMES[variant]},
                lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
+    if cfg.until:
+        log.info("stopped after the %s stages (--until)", cfg.until)
+        return None
     if any(st.stamp(f"eval_{v}") is None for v in VARIANTS):
         log.info("card: waiting for %s", [v for v in VARIANTS if st.stamp(f"eval_{v}") is None])
         return None
@@ -675,9 +686,9 @@ def _recipe_args(argv: list[str]) -> list[str]:
     for a in argv:
         if skip:
             skip = False
-        elif a in ("--force", "--variants"):
+        elif a in ("--force", "--variants", "--until", "--workers"):
             skip = True
-        elif not a.startswith(("--force=", "--variants=")):
+        elif not a.startswith(("--force=", "--variants=", "--until=", "--workers=")):
             out.append(a)
     return out
 
@@ -702,6 +713,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
     ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
+    ap.add_argument("--workers", type=int, default=None,
+                    help="dataset generation processes (default 2; the files do not depend on it)")
+    ap.add_argument("--until", choices=("data", "pretrain", "train"),
+                    help="stop after this stage kind, e.g. train on a GPU machine and export, quantize and "
+                         "evaluate elsewhere: the same command there reuses the finished runs")
     ap.add_argument("--train", type=int, default=None,
                     help="scenes in the train split (default: PipelineConfig's, 5000; another count makes another "
                          "dataset request: pass a new --data folder)")
@@ -725,6 +741,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.train < 1:
             ap.error(f"--train: must be at least 1 scene, got {args.train}")
         cfg.train = args.train
+    if args.workers is not None:
+        if args.workers < 1:
+            ap.error(f"--workers: must be at least 1, got {args.workers}")
+        cfg.workers = args.workers
+    cfg.until = args.until
     cfg.accept_stopped = args.accept_stopped
     cfg.threads = args.threads
     cfg.parallel_train = not args.sequential_train

@@ -79,6 +79,10 @@ class PretrainConfig(Config):
     threads: int = 0
     """torch CPU threads (0: all cores)."""
     device: Literal["auto", "cpu", "cuda"] = "auto"
+    loader_workers: int = 0
+    """Processes that load and transform the step batches ahead of the trainer (0: in the training process).
+    On a GPU the in-process loading bounds the step rate; the batches are the same either way (each is a
+    pure function of the seed and the step), so this changes how fast, not what, the run learns."""
     max_minutes: float = 0.0
     """Stop (with a checkpoint and ``human.pt``) after this wall time (0: no limit)."""
 
@@ -91,7 +95,7 @@ class PretrainConfig(Config):
         for key in ("iterations", "scenes_per_step", "checkpoint_every", "log_every", "eval_scenes"):
             if getattr(self, key) < 1:
                 fail(key, f"must be >= 1, got {getattr(self, key)}")
-        for key in ("lr_decay_every", "eval_every", "threads"):
+        for key in ("lr_decay_every", "eval_every", "threads", "loader_workers"):
             if getattr(self, key) < 0:
                 fail(key, f"must be >= 0, got {getattr(self, key)}")
         for key in ("lr", "lr_min", "heat_positive_weight", "max_minutes"):
@@ -131,6 +135,49 @@ def view_batch(items: list[dict], flip: bool, augment: AugmentConfig | None = No
         m_images, m_heat = mirrored(images, heat)
         images, heat = torch.cat([images, m_images]), torch.cat([heat, m_heat])
     return images, heat
+
+
+class StepBatches(torch.utils.data.Dataset):
+    """The batch of every step, by step number: the scenes of the epoch's shuffle (``scene_order``, a pure
+    function of seed and epoch) and the transforms drawn from a generator seeded by the step, so a run that
+    loads them in worker processes (``loader_workers``) or resumes mid-epoch trains on the same batches."""
+
+    def __init__(self, ds, cfg: "PretrainConfig"):
+        self.ds, self.cfg = ds, cfg
+        self.per_epoch = len(ds) // cfg.scenes_per_step
+        self._orders: dict[int, list[int]] = {}
+
+    def __len__(self) -> int:
+        return self.cfg.iterations
+
+    def __getitem__(self, step: int) -> tuple[Tensor, Tensor]:
+        cfg = self.cfg
+        epoch, b = divmod(step, self.per_epoch)
+        if epoch not in self._orders:
+            self._orders = {epoch: scene_order(len(self.ds), epoch, cfg.seed, DistInfo(rank=0, world=1, local_rank=0))}
+        order = self._orders[epoch]
+        items = [self.ds[i] for i in order[b * cfg.scenes_per_step:(b + 1) * cfg.scenes_per_step]]
+        gen = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
+        return view_batch(items, cfg.flip, cfg.augment, gen)
+
+
+def step_batches(ds, cfg: "PretrainConfig", start: int):
+    """``(step, images, heat)`` from ``start`` to ``cfg.iterations``, loaded ahead by ``cfg.loader_workers``."""
+    batches = StepBatches(ds, cfg)
+    steps = range(start, cfg.iterations)
+    if not cfg.loader_workers:
+        for s in steps:
+            yield (s, *batches[s])
+        return
+    loader = torch.utils.data.DataLoader(batches, batch_size=None, sampler=steps, num_workers=cfg.loader_workers,
+                                         prefetch_factor=4, pin_memory=torch.cuda.is_available(),
+                                         worker_init_fn=_one_thread)
+    for s, (images, heat) in zip(steps, loader):
+        yield s, images, heat
+
+
+def _one_thread(_worker: int) -> None:
+    torch.set_num_threads(1)  # the loaders share the cores with each other and the trainer
 
 
 @torch.no_grad()
@@ -245,51 +292,40 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         os.replace(last.with_suffix(".tmp"), last)
         save_human(out / "human.pt", model, s)
 
-    info = DistInfo(rank=0, world=1, local_rank=0)
-    per_epoch = len(ds) // cfg.scenes_per_step
     prog = Progress(cfg.iterations, step, enabled=not quiet)
     losses: list[float] = []
     last_pck = float("nan")
     stopped_early = False
-    while step < cfg.iterations and not stopped_early:
-        epoch, offset = divmod(step, per_epoch)
-        order = scene_order(len(ds), epoch, cfg.seed, info)  # a pure function of (seed, epoch): resumable
-        for b in range(offset, per_epoch):
-            if step >= cfg.iterations:
-                break
-            items = [ds[i] for i in order[b * cfg.scenes_per_step:(b + 1) * cfg.scenes_per_step]]
-            # the transforms are a pure function of (seed, step): a resumed run draws the same ones
-            gen = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
-            images, heat = view_batch(items, cfg.flip, cfg.augment, gen)
-            lr = learning_rate(cfg, step)
-            for g in opt.param_groups:
-                g["lr"] = lr
-            images = images.to(device, memory_format=torch.channels_last)
-            loss = positive_weighted_mse(model.encode_human(images), heat.to(device),
-                                         cfg.heat_positive_weight)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            step += 1
-            lv = float(loss.detach())
-            if not math.isfinite(lv):
-                raise FloatingPointError(f"loss is {lv} at step {step}")
-            losses.append(lv)
-            if cfg.eval_every and step % cfg.eval_every == 0:
-                last_pck = heatmap_pck(model, val, cfg.eval_scenes, device)
-            if step % cfg.log_every == 0 or step == cfg.iterations:
-                rec = {"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
-                       "loss": float(np.mean(losses)), "pck": last_pck}
-                losses = []
-                prog.update(step, {"loss": rec["loss"], "pck": last_pck})
-                with open(out / "log.jsonl", "a") as fh:
-                    fh.write(json.dumps(rec) + "\n")
-            if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
-                checkpoint(step)
-            if cfg.max_minutes and clock.elapsed() > 60 * cfg.max_minutes and step < cfg.iterations:
-                stopped_early = True
-                checkpoint(step)
-                break
+    for _, images, heat in step_batches(ds, cfg, step):
+        lr = learning_rate(cfg, step)
+        for g in opt.param_groups:
+            g["lr"] = lr
+        images = images.to(device, memory_format=torch.channels_last)
+        loss = positive_weighted_mse(model.encode_human(images), heat.to(device),
+                                     cfg.heat_positive_weight)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        step += 1
+        lv = float(loss.detach())
+        if not math.isfinite(lv):
+            raise FloatingPointError(f"loss is {lv} at step {step}")
+        losses.append(lv)
+        if cfg.eval_every and step % cfg.eval_every == 0:
+            last_pck = heatmap_pck(model, val, cfg.eval_scenes, device)
+        if step % cfg.log_every == 0 or step == cfg.iterations:
+            rec = {"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
+                   "loss": float(np.mean(losses)), "pck": last_pck}
+            losses = []
+            prog.update(step, {"loss": rec["loss"], "pck": last_pck})
+            with open(out / "log.jsonl", "a") as fh:
+                fh.write(json.dumps(rec) + "\n")
+        if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
+            checkpoint(step)
+        if cfg.max_minutes and clock.elapsed() > 60 * cfg.max_minutes and step < cfg.iterations:
+            stopped_early = True
+            checkpoint(step)
+            break
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
                **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(),

@@ -264,10 +264,48 @@ def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monk
     assert "--train 2500" in cfg.command and "--freestyle-share 0.25" in cfg.command
     pipeline.main([*argv, "--force", "eval_ghnerf", "--force=export", "--variants", "baseline"])  # not the recipe
     assert seen[-1].command == cfg.command and seen[-1].force == ("eval_ghnerf", "export")
+    # where and how far it runs is not the recipe either: train on a GPU machine, finish elsewhere
+    pipeline.main([*argv, "--until", "train", "--workers", "16"])
+    assert seen[-1].command == cfg.command and (seen[-1].until, seen[-1].workers) == ("train", 16)
     pipeline.main(["--out", str(tmp_path / "m")])
     assert seen[-1].train == PipelineConfig(out=tmp_path).train  # the default request is unchanged
+    assert seen[-1].until is None
+    with pytest.raises(SystemExit):
+        pipeline.main(["--out", str(tmp_path / "m"), "--until", "export"])  # only data, pretrain, train
+    with pytest.raises(SystemExit):
+        pipeline.main(["--out", str(tmp_path / "m"), "--workers", "0"])
     with pytest.raises(SystemExit):
         pipeline.main(["--out", str(tmp_path / "m"), "--train", "0"])
+
+
+def test_until_stops_after_the_named_stages(tmp_path, monkeypatch):
+    """``--until train`` runs data, pretraining and training, and neither export nor the card."""
+    import training.pipeline as pipeline
+
+    ran = []
+
+    def stage(name):
+        def fn(cfg, *a):
+            ran.append(name)
+            out = cfg.out / f"{name}.out"
+            out.write_text(name)
+            return [out], {}
+        return fn
+
+    monkeypatch.setattr(pipeline, "stage_data", stage("data"))
+    monkeypatch.setattr(pipeline, "stage_pretrain", stage("pretrain"))
+    monkeypatch.setattr(pipeline, "stage_train", stage("train"))
+    monkeypatch.setattr(pipeline, "stage_export", stage("export"))
+    monkeypatch.setattr(pipeline, "_run_finished", lambda cfg, v: False)
+    monkeypatch.setattr(pipeline, "train_inputs", lambda cfg, preset: {"preset": preset})
+    monkeypatch.setattr(pipeline, "expected_model", lambda cfg, v: {})
+    monkeypatch.setattr(pipeline, "pretrain_block", lambda cfg, v: {"iterations": 1} if v == "ghnerf" else {})
+    monkeypatch.setattr(pipeline, "pretrain_inputs", lambda cfg, v: {"iterations": 1})
+    for until, stages in (("data", ["data"]), ("pretrain", ["pretrain"]), ("train", ["pretrain", "train", "train"])):
+        ran.clear()
+        cfg = PipelineConfig(out=tmp_path / until, parallel_train=False, until=until)
+        assert pipeline.run(cfg) is None
+        assert ran == (stages if until == "data" else ["data", *stages]), until
 
 
 def test_a_failed_stage_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):

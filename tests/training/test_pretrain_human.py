@@ -31,6 +31,7 @@ def tiny_pretrain(data, **kw) -> PretrainConfig:
     ({"itterations": 3}, "itterations"),
     ({"iterations": "many"}, "iterations"),  # typed: a clear error, not a TypeError in validation
     ({"device": "tpu"}, "device"),
+    ({"loader_workers": -1}, "loader_workers"),
     ({"augment": {"rotation_deg": -5}}, "augment.rotation_deg"),
     ({"augment": {"zoom": 0.1}}, "zoom"),
 ])
@@ -94,6 +95,27 @@ def test_two_iterations_resume_and_joint_training_starts_from_it(data64, tmp_pat
     for k, v in a["human"].items():
         if v.is_floating_point() and "running" not in k:
             assert torch.allclose(got[k], v, atol=1e-6), k
+
+
+def test_worker_processes_load_the_same_batches_as_the_trainer(data64, tmp_path):
+    """``loader_workers`` changes where the batches are made, not which: the same weights, step for step,
+    across an epoch boundary (data64's train split, one scene per step) and with the random transforms."""
+    from training.data.torch_dataset import MultiViewDataset
+    from training.pretrain_human import StepBatches
+
+    aug = {"rotation_deg": 20.0, "scale": 0.2, "shift": 0.05}
+    n = len(MultiViewDataset(data64, "train"))
+    kw = dict(iterations=n + 1, checkpoint_every=n + 1, eval_every=0, augment=aug)
+    pretrain(tiny_pretrain(data64, **kw), tmp_path / "here", quiet=True)
+    pretrain(tiny_pretrain(data64, loader_workers=2, **kw), tmp_path / "workers", quiet=True)
+    a = torch.load(tmp_path / "here" / "human.pt", weights_only=True)["human"]
+    b = torch.load(tmp_path / "workers" / "human.pt", weights_only=True)["human"]
+    for k in a:
+        assert torch.equal(a[k], b[k]), k
+    # the step's scenes follow the epoch's shuffle: epoch 1 starts over with another order of the same scenes
+    batches = StepBatches(MultiViewDataset(data64, "train"), tiny_pretrain(data64, **kw))
+    assert not torch.equal(batches[0][0], batches[n][0]) or n == 1
+    assert torch.equal(batches[3][0], batches[3][0])
 
 
 def test_a_mismatched_or_missing_encoder_is_refused(data64, tmp_path):
