@@ -107,7 +107,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append(f"- Command: `{card.get('command', '')}`")
     L.append(f"- Created: {card.get('created', '')}")
     hw = card.get("hardware", {})
-    L.append(f"- Hardware: {hw.get('cpu')} ({hw.get('cores')} cores, {hw.get('memory_gb')} GB), "
+    L.append(f"- Hardware (this run of the pipeline; the training table says where each model trained): {hw.get('cpu')} ({hw.get('cores')} cores, {hw.get('memory_gb')} GB), "
              f"GPU: {hw.get('gpu') or 'none'}; torch {hw.get('torch')}, onnxruntime {hw.get('onnxruntime')}")
     wall = card.get("wall_time_s", {})
     if wall:
@@ -127,7 +127,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append("")
     L.append("## Training")
     L.append("")
-    L.append("| model | preset | iterations | rays (or images) per step | lr schedule | threads | wall time |")
+    L.append("| model | preset | iterations | rays (or images) per step | lr schedule | where (threads) | wall time |")
     L.append("|---|---|---|---|---|---|---|")
     for name, t in (card.get("training") or {}).items():
         c = t.get("config", {})
@@ -138,6 +138,10 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         threads = t.get("threads") or c.get("threads") or "all"
         if t.get("segments"):  # a resumed run: each invocation's threads and steps
             threads = ", then ".join(f"{g['threads']} ({g['steps']} steps)" for g in t["segments"])
+        if str(t.get("device", "")).startswith("cuda"):  # trained elsewhere than the card's hardware line
+            threads = str(t.get("gpu") or t["device"])
+        elif t.get("device"):
+            threads = f"CPU ({threads})"
         L.append(f"| {name} | {c.get('preset')} | {t.get('steps')} | {rays} | {sched} | {threads} | "
                  f"{_fmt((t.get('wall_s') or 0) / 60, 1)} min |")
     L.append("")

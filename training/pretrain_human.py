@@ -329,6 +329,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
                **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(),
+               **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
                "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,
                "human": str(out / "human.pt")}

@@ -701,6 +701,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
                **clock.summary(step), "world_size": info.world, "device": str(device),
+               **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "threads": torch.get_num_threads(), "checkpoint": str(last)}
     if info.main:
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))

@@ -43,7 +43,8 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
                  "motions": {"train": "stand 50 %, freestyle 50 %", "val": "reach"}},
         "training": {"ghnerf": {"config": {"preset": "edge128", "targets_per_iter": 4, "heat_rays": 512,
                                            "patch_size": 16, "lr": 5e-4, "lr_decay_gamma": 0.5,
-                                           "lr_decay_every": 2500}, "steps": 8000, "wall_s": 1800},
+                                           "lr_decay_every": 2500}, "steps": 8000, "wall_s": 1800,
+                                "device": "cuda:0", "gpu": "NVIDIA H100 80GB HBM3", "threads": 16},
                      "ghnerf_human_pretraining": {
                          "config": {"preset": "edge128", "lr": 1e-3, "lr_decay_gamma": 0.5, "lr_decay_every": 4000},
                          "steps": 24000, "wall_s": 6391.6, "images_per_step": 16, "threads": 1,
@@ -77,6 +78,7 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 61.2 / 40.0 (62 %) | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
     assert "| 2 (12000 steps), then 1 (12000 steps) | 106.5 min |" in md  # a resumed run: both invocations
+    assert "| NVIDIA H100 80GB HBM3 | 30.0 min |" in md  # trained on a GPU machine, not the card's hardware
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
     # plain and flip-tested encoder; the gated MPJPE only where the metrics have it (older cards: n/a)
     assert "| ghnerf_int8 | onnx-int8 | 0.800 | 100.0 | n/a | 0.810 | n/a | n/a |" in md
