@@ -142,7 +142,7 @@ class StepBatches(torch.utils.data.Dataset):
     function of seed and epoch) and the transforms drawn from a generator seeded by the step, so a run that
     loads them in worker processes (``loader_workers``) or resumes mid-epoch trains on the same batches."""
 
-    def __init__(self, ds, cfg: "PretrainConfig"):
+    def __init__(self, ds, cfg: PretrainConfig):
         self.ds, self.cfg = ds, cfg
         self.per_epoch = len(ds) // cfg.scenes_per_step
         self._orders: dict[int, list[int]] = {}
@@ -161,19 +161,16 @@ class StepBatches(torch.utils.data.Dataset):
         return view_batch(items, cfg.flip, cfg.augment, gen)
 
 
-def step_batches(ds, cfg: "PretrainConfig", start: int):
-    """``(step, images, heat)`` from ``start`` to ``cfg.iterations``, loaded ahead by ``cfg.loader_workers``."""
+def step_batches(ds, cfg: PretrainConfig, start: int):
+    """``(images, heat)`` of the steps from ``start`` to ``cfg.iterations``, made ahead by ``cfg.loader_workers``
+    processes (or here, one at a time, with none)."""
     batches = StepBatches(ds, cfg)
     steps = range(start, cfg.iterations)
     if not cfg.loader_workers:
-        for s in steps:
-            yield (s, *batches[s])
-        return
-    loader = torch.utils.data.DataLoader(batches, batch_size=None, sampler=steps, num_workers=cfg.loader_workers,
-                                         prefetch_factor=4, pin_memory=torch.cuda.is_available(),
-                                         worker_init_fn=_one_thread)
-    for s, (images, heat) in zip(steps, loader):
-        yield s, images, heat
+        return (batches[s] for s in steps)
+    return iter(torch.utils.data.DataLoader(batches, batch_size=None, sampler=steps, num_workers=cfg.loader_workers,
+                                            prefetch_factor=4, pin_memory=torch.cuda.is_available(),
+                                            worker_init_fn=_one_thread))
 
 
 def _one_thread(_worker: int) -> None:
@@ -296,7 +293,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     losses: list[float] = []
     last_pck = float("nan")
     stopped_early = False
-    for _, images, heat in step_batches(ds, cfg, step):
+    for images, heat in step_batches(ds, cfg, step):
         lr = learning_rate(cfg, step)
         for g in opt.param_groups:
             g["lr"] = lr

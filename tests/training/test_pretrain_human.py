@@ -105,7 +105,7 @@ def test_worker_processes_load_the_same_batches_as_the_trainer(data64, tmp_path)
 
     aug = {"rotation_deg": 20.0, "scale": 0.2, "shift": 0.05}
     n = len(MultiViewDataset(data64, "train"))
-    kw = dict(iterations=n + 1, checkpoint_every=n + 1, eval_every=0, augment=aug)
+    kw = {"iterations": n + 1, "checkpoint_every": n + 1, "eval_every": 0, "augment": aug}
     pretrain(tiny_pretrain(data64, **kw), tmp_path / "here", quiet=True)
     pretrain(tiny_pretrain(data64, loader_workers=2, **kw), tmp_path / "workers", quiet=True)
     a = torch.load(tmp_path / "here" / "human.pt", weights_only=True)["human"]
