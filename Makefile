@@ -36,7 +36,8 @@ test: $(DEV_STAMP)
 
 # Regenerate the shipped models from scratch (dataset, the human encoder's pretraining, training of
 # the model and the baseline, ONNX export, int8 quantization, held-out evaluation, model card):
-# 2 h 13 min measured end to end on 2 cores, ~2.1 h on a quiet machine (docs/training.md, "Lanes";
+# 2 h 13 min measured end to end on 2 cores, ~2.1 h on a quiet machine, 56 min on a faster 2-core host
+# (docs/training.md, "Lanes"; a GPU recipe that trains in ~13 min: "On a GPU machine";
 # `--pretrain-set iterations=12000` for ~1.5 h).
 model: $(DEV_STAMP)
 	$(PY) -m training.pipeline --out models/
