@@ -145,7 +145,7 @@ class StepBatches(torch.utils.data.Dataset):
     def __init__(self, ds, cfg: PretrainConfig):
         self.ds, self.cfg = ds, cfg
         self.per_epoch = len(ds) // cfg.scenes_per_step
-        self._orders: dict[int, list[int]] = {}
+        self._epoch, self._order = -1, []  # the shuffle of the epoch last asked for (steps come in order)
 
     def __len__(self) -> int:
         return self.cfg.iterations
@@ -153,10 +153,10 @@ class StepBatches(torch.utils.data.Dataset):
     def __getitem__(self, step: int) -> tuple[Tensor, Tensor]:
         cfg = self.cfg
         epoch, b = divmod(step, self.per_epoch)
-        if epoch not in self._orders:
-            self._orders = {epoch: scene_order(len(self.ds), epoch, cfg.seed, DistInfo(rank=0, world=1, local_rank=0))}
-        order = self._orders[epoch]
-        items = [self.ds[i] for i in order[b * cfg.scenes_per_step:(b + 1) * cfg.scenes_per_step]]
+        if epoch != self._epoch:
+            self._epoch = epoch
+            self._order = scene_order(len(self.ds), epoch, cfg.seed, DistInfo(rank=0, world=1, local_rank=0))
+        items = [self.ds[i] for i in self._order[b * cfg.scenes_per_step:(b + 1) * cfg.scenes_per_step]]
         gen = torch.Generator().manual_seed(cfg.seed * 1_000_003 + step)
         return view_batch(items, cfg.flip, cfg.augment, gen)
 
