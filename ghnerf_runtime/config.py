@@ -234,14 +234,20 @@ class FrameCheckConfig:
             (``var(x - box3(x)) / var(x)``). Measured on model inputs: white noise 0.48-0.79
             (depending on how the crop resamples it), simulator frames 0.008-0.08. Above this
             the crop is treated as noise: no joints from that camera.
+        single_view_2d: when one camera's crop fails and the other's passes, still report the
+            passing camera's 2D joints, from the encoder heatmaps of models that have them (one
+            view gives no depth: every 3D joint is missing, and there is no novel view). False:
+            such a pair reports nothing, as a pair with both crops rejected does.
     """
 
     enabled: bool = True
     min_std: float = 2.0
     max_noise_ratio: float = 0.3
+    single_view_2d: bool = True
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        _boolean(self, "single_view_2d")
         _number(self, "min_std", 0.0, 128.0)
         _number(self, "max_noise_ratio", 0.0, 1.0, lo_open=True)
 

@@ -138,7 +138,8 @@ def _levels_per_unit(norm: Normalisation) -> float:
     return scale
 
 
-def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConfig) -> tuple[bool, str]:
+def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConfig,
+               inside: np.ndarray | None = None) -> tuple[bool, str]:
     """Is a model-input plane ``(S, S)`` (one channel, float) worth running the model on?
 
     Returns ``(ok, reason)``: ``"flat"`` when its standard deviation is below ``min_std``
@@ -146,15 +147,25 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
     ``max_noise_ratio`` of its variance is pixel-to-pixel detail (``x - box3(x)``; white
     noise 0.48-0.79 after the crop's resampling, simulator frames 0.008-0.08),
     ``"non-finite"`` for NaN/inf, else ``""``.
+
+    ``inside`` (``CropMaps.inside``) limits the statistics to the pixels that show the frame: the
+    zero padding of a crop reaching past the frame's edge would otherwise give a saturated frame
+    the contrast of a real one. A crop with no such pixel is ``"flat"``.
     """
     if not config.enabled:
         return True, ""
     if not np.all(np.isfinite(plane)):
         return False, "non-finite"
-    var = float(plane.var())
+    shown = plane if inside is None else plane[inside]
+    if shown.size == 0:
+        return False, "flat"
+    var = float(shown.var())
     if np.sqrt(var) * levels_per_unit < config.min_std:
         return False, "flat"
     detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
+    if inside is not None:  # pixels whose 3x3 box shows the frame: the padding's edge is no detail
+        core = cv2.erode(inside.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        detail = detail[core if core.any() else inside]
     if float(detail.var()) / var > config.max_noise_ratio:
         return False, "noise"
     return True, ""
@@ -235,6 +246,9 @@ class Estimator:
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
         self._between: dict[float, Camera] = {}  # alpha -> interpolated camera (the rig does not move)
         self._worker: ThreadPoolExecutor | None = None  # novel views during the keypoint stages
+        # 2D joints of the good camera when the other's frame fails the check (needs encoder heatmaps)
+        self._single_view_2d = self.config.frame_check.single_view_2d and bool(
+            getattr(self.contract, "encoder_heatmaps", False))
 
     @classmethod
     def from_config(cls, rig: Rig, config: EstimatorConfig | None = None) -> "Estimator":
@@ -356,7 +370,7 @@ class Estimator:
             timing["total"] = 1e3 * (time.perf_counter() - t_start)
             return self._empty_result(sequence, p.regions, p.frame_ok, timing)
         nv = None
-        if novel_view is not None:
+        if novel_view is not None and all(p.frame_ok.values()):  # a single-view pair has no novel view
             if p.novel is not None:  # rendered in the worker, on the tracked box
                 nv, novel_timing = p.novel.result()
                 timing.update(novel_timing)
@@ -389,10 +403,12 @@ class Estimator:
             maps, crop = self._crop(st, roi)
             crops.append(crop)
             batch[i] = preprocess_image(img, maps, self.contract.normalisation)
-            ok, _ = check_crop(batch[i, 1], self._levels, cfg.frame_check)
+            ok, _ = check_crop(batch[i, 1], self._levels, cfg.frame_check, maps.inside)
             frame_ok[st.camera.name] = ok
         _add_ms(timing, "preprocess", t)
         if not all(frame_ok.values()):
+            if any(frame_ok.values()) and self._single_view_2d:
+                return self._single_view_pass(batch, crops, regions, frame_ok, timing)
             self.tracker.reset()  # nothing seen: the next pair starts cold
             return _Pass(regions, frame_ok)
 
@@ -460,16 +476,7 @@ class Estimator:
             heat = np.ascontiguousarray(heat.transpose(0, 3, 1, 2))  # (2, J, g, g)
             kp = decode_keypoints(heat, self._decoder_for(blocks[0]))
         uv_model = heatmap_to_model_pixels(kp.uv, g, S)
-        joints_2d, conf_2d, missing_2d = {}, {}, {}
-        for i, (st, crop) in enumerate(zip(self._cams, crops)):
-            name = st.camera.name
-            # model_to_image_pixels without rebuilding the crop camera: crop pinhole -> lens.
-            safe = np.where(kp.valid[i][:, None], uv_model[i], S / 2)
-            uv_img = st.camera.normalized_to_pixels(crop.pixels_to_normalized(safe), distort=True)
-            ok = kp.valid[i] & np.all(np.isfinite(uv_img), axis=-1)
-            joints_2d[name] = np.where(ok[:, None], uv_img, 0.0)
-            conf_2d[name] = np.where(ok, kp.confidence[i], 0.0).astype(np.float32)
-            missing_2d[name] = ~ok
+        joints_2d, conf_2d, missing_2d = self._image_joints(kp, uv_model, crops)
         _add_ms(timing, "decode_2d", t)
 
         # 6. 3D, then the track
@@ -487,6 +494,56 @@ class Estimator:
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         _add_ms(timing, "joints_3d", t)
         return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job)
+
+    def _image_joints(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
+                      views: Sequence[int] = (0, 1)) -> tuple[dict, dict, dict]:
+        """Decoded peaks -> per camera name: pixels of the original image, confidence, missing.
+        Cameras not in ``views`` get every joint missing."""
+        S = self.size
+        joints_2d, conf_2d, missing_2d = {}, {}, {}
+        for i, (st, crop) in enumerate(zip(self._cams, crops)):
+            name = st.camera.name
+            # model_to_image_pixels without rebuilding the crop camera: crop pinhole -> lens.
+            safe = np.where(kp.valid[i][:, None], uv_model[i], S / 2)
+            uv_img = st.camera.normalized_to_pixels(crop.pixels_to_normalized(safe), distort=True)
+            ok = kp.valid[i] & np.all(np.isfinite(uv_img), axis=-1) & (i in views)
+            joints_2d[name] = np.where(ok[:, None], uv_img, 0.0)
+            conf_2d[name] = np.where(ok, kp.confidence[i], 0.0).astype(np.float32)
+            missing_2d[name] = ~ok
+        return joints_2d, conf_2d, missing_2d
+
+    def _single_view_pass(self, batch: np.ndarray, crops: list[Camera], regions: Regions, frame_ok: dict,
+                          timing: dict) -> "_Pass":
+        """One camera's crop failed the frame check (lens covered, blinded, a broken stream): the
+        other camera's 2D joints from the encoder heatmaps. One view gives no depth, so every 3D
+        joint is missing; the presence gate applies to the view's own peak values, and the view's
+        next crop follows its joints (``SubjectTracker.update_view``)."""
+        cfg = self.config
+        good = [i for i, st in enumerate(self._cams) if frame_ok[st.camera.name]]
+        t = time.perf_counter()
+        graph = "human" if self.session.has("human") else "encoder"
+        heat = self.session.run(graph, {"images": batch})["encoder_heatmaps"]
+        _add_ms(timing, "encoder", t)
+        if cfg.heatmaps.flip_test:
+            t = time.perf_counter()
+            mirrored = self.session.run(graph, {"images": mirror_images(batch)})["encoder_heatmaps"]
+            heat = flip_averaged(heat, mirrored)
+            _add_ms(timing, "encoder_flip", t)
+        t = time.perf_counter()
+        kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), cfg.decoder)
+        uv_model = heatmap_to_model_pixels(kp.uv, self.grid, self.size)
+        joints_2d, conf_2d, missing_2d = self._image_joints(kp, uv_model, crops, good)
+        if cfg.presence.enabled:
+            threshold = cfg.presence.threshold("encoder")
+            strong = sum(int(np.count_nonzero(conf_2d[n] >= threshold)) for n in joints_2d) / len(good)
+            if strong < cfg.presence.min_joints:  # nobody
+                joints_2d = {n: np.zeros_like(v) for n, v in joints_2d.items()}
+                conf_2d = {n: np.zeros_like(v) for n, v in conf_2d.items()}
+                missing_2d = {n: np.ones_like(v) for n, v in missing_2d.items()}
+        name = self.camera_names[good[0]]
+        self.tracker.update_view(good[0], joints_2d[name], conf_2d[name])  # its next crop follows the subject
+        _add_ms(timing, "decode_2d", t)
+        return _Pass(regions, frame_ok, None, Joints3D.missing(len(JOINT_NAMES)), joints_2d, conf_2d, missing_2d)
 
     def _track_joints(self, env: dict, crops: list[Camera], regions: Regions, reported: Joints3D) -> Joints3D:
         """The joints the next pair's crop follows: the reported ones, or (``tracking.follow_encoder``,

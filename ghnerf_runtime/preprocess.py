@@ -295,6 +295,8 @@ class CropMaps:
         image_size: ``(width, height)`` the frame must have.
         fixed: the same maps in OpenCV's fixed-point format (``cv2.convertMaps``), which
             :func:`apply_crop_maps` uses because it remaps ~2x faster.
+        inside: ``(S, S)`` bool, the model pixels that sample the frame (the others are the
+            zero padding of a crop reaching past the frame's edge); ``None``: all of them.
     """
 
     map_x: np.ndarray
@@ -303,6 +305,7 @@ class CropMaps:
     window: tuple[int, int, int, int]
     image_size: tuple[int, int]
     fixed: tuple[np.ndarray, np.ndarray]
+    inside: np.ndarray | None = None
 
     @property
     def out_size(self) -> int:
@@ -357,7 +360,7 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
     factor = 2 ** level
     if level == 0 or min(camera.width, camera.height) < factor:
         return CropMaps(map_x, map_y, 0, (0, 0, camera.width, camera.height), camera.size,
-                        cv2.convertMaps(map_x, map_y, cv2.CV_16SC2))
+                        cv2.convertMaps(map_x, map_y, cv2.CV_16SC2), _inside(map_x, map_y, camera.size))
 
     # Reduce only the touched window (+ one reduced pixel of context for the bilinear taps).
     pad = 2 * factor
@@ -367,7 +370,14 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
                            camera.height, factor)
     map_x = ((map_x - x0 + 0.5) / factor - 0.5).astype(np.float32)
     map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32)
-    return CropMaps(map_x, map_y, level, (x0, y0, x1, y1), camera.size, cv2.convertMaps(map_x, map_y, cv2.CV_16SC2))
+    return CropMaps(map_x, map_y, level, (x0, y0, x1, y1), camera.size, cv2.convertMaps(map_x, map_y, cv2.CV_16SC2),
+                    _inside(map_x, map_y, ((x1 - x0) // factor, (y1 - y0) // factor)))
+
+
+def _inside(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int]) -> np.ndarray | None:
+    """Model pixels whose bilinear taps all lie in the ``(width, height)`` source (``None``: every one)."""
+    inside = (map_x >= 0) & (map_x <= size[0] - 1) & (map_y >= 0) & (map_y <= size[1] - 1)
+    return None if inside.all() else inside
 
 
 def apply_crop_maps(image: np.ndarray, maps: CropMaps) -> np.ndarray:

@@ -11,6 +11,10 @@ The track holds the previous pair's joints only to *place* the next crop: they a
 reported again. When a pair yields fewer than ``min_joints`` confident joints, or an
 implausible box, the track is dropped and the next pair starts from the volume.
 
+A pair with one unusable camera (``frame_check.single_view_2d``) gives 2D joints in the other
+camera only: there is no 3D track then, but that camera's next crop follows its 2D joints (a
+*view track*), while the other camera and the sweep stay on the working volume.
+
 Pure numpy; the :class:`SubjectTracker` is a small state holder around pure functions.
 """
 from __future__ import annotations
@@ -167,6 +171,8 @@ class SubjectTracker:
         self.config = config
         self.roi_config = roi_config
         self.track: Track | None = None
+        #: ``(camera index, crop)`` of the one camera a single-view pair saw the subject in
+        self.view_track: tuple[int, Roi] | None = None
         self._volume = volume_regions(rig, roi_config)
         self._last_rois: tuple[Roi, ...] | None = None
         self.drops = 0
@@ -174,6 +180,11 @@ class SubjectTracker:
     def regions(self) -> Regions:
         if self.track is None or not self.config.enabled:
             self._last_rois = None
+            if self.view_track is not None:
+                k, roi = self.view_track
+                rois = list(self._volume.rois)
+                rois[k] = roi
+                return Regions(tuple(rois), self._volume.box, False)
             return self._volume
         regions = plan_regions(self.rig, self.track, self.roi_config, self._last_rois)
         self._last_rois = regions.rois if regions.tracked else None
@@ -185,11 +196,27 @@ class SubjectTracker:
         if new is None and self.track is not None:
             self.drops += 1
         self.track = new
+        self.view_track = None
         return new is not None
+
+    def update_view(self, camera: int, joints_2d: np.ndarray, confidence: np.ndarray) -> bool:
+        """A single-view pair: camera ``camera`` (rig order) saw ``(J, 2)`` joints (distorted image
+        pixels; confidence 0 where missing). Its next crop follows them (as many confident joints as
+        a 3D track needs); the 3D track is dropped. Returns whether a view track is held afterwards."""
+        cfg, rc = self.config, self.roi_config
+        self.track = None
+        self._last_rois = None
+        previous = self.view_track[1] if self.view_track is not None and self.view_track[0] == camera else None
+        roi = roi_from_joints(self.rig.pair[camera], joints_2d, confidence, rc.joint_margin_frac, rc.min_size_px,
+                              min_confidence=cfg.min_confidence, min_joints=cfg.min_joints) if cfg.enabled else None
+        self.view_track = None if roi is None else (camera, keep_roi(previous, snap_roi(roi, rc.snap_px),
+                                                                     rc.keep_frac))
+        return self.view_track is not None
 
     def reset(self) -> None:
         """Forget the subject (next pair starts from the working volume)."""
         self.track = None
+        self.view_track = None
         self._last_rois = None
 
 

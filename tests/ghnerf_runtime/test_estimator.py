@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.body25 import JOINT_NAMES
-from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, SessionConfig
+from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, \
+    PresenceConfig, SessionConfig
 from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError, FrameError, ModelError
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
@@ -106,11 +107,45 @@ def test_bad_frames_give_finite_missing_joints_without_running_the_model(full_se
         "gaussian_noise": np.clip(rng.normal(128, 40, (h, w, 3)), 0, 255).astype(np.uint8),
         "nan_free_dark": np.full((h, w, 3), 3, np.uint8),
     }[family]
-    for pair in ((bad, bad), (frames[0][0], bad), (bad, frames[0][1])):
-        r = est.estimate(pair)
+    r = est.estimate((bad, bad))
+    _assert_all_missing(r)
+    assert not any(r.frame_ok.values())
+    # one bad camera, single_view_2d off: nothing either
+    one_off = Estimator(rec, rig, EstimatorConfig(frame_check=FrameCheckConfig(single_view_2d=False)))
+    for pair in ((frames[0][0], bad), (bad, frames[0][1])):
+        r = one_off.estimate(pair)
         _assert_all_missing(r)
-        assert not all(r.frame_ok.values())
+        assert sum(r.frame_ok.values()) == 1
     assert rec.calls == [], "the model must not run on frames that cannot show anyone"
+
+
+@pytest.mark.parametrize("family", ["black", "saturated", "uniform_noise"])
+def test_one_bad_camera_gives_the_other_cameras_2d_joints_only(full_session, scene_rig, family):
+    """single_view_2d (the default): the good camera's encoder heatmaps are decoded; no 3D, no novel view,
+    nothing in the bad camera; the human graph alone runs (random weights: which 2D joints survive the
+    presence gate is the shipped model's test, test_estimator_accuracy.py)."""
+    rig, frames = scene_rig
+    h, w = frames[0][0].shape[:2]
+    bad = {"black": np.zeros((h, w, 3), np.uint8), "saturated": np.full((h, w, 3), 255, np.uint8),
+           "uniform_noise": np.random.default_rng(1).integers(0, 256, (h, w, 3), dtype=np.uint8)}[family]
+    rec = Recorder(full_session)
+    cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True), presence=PresenceConfig(enabled=False))
+    est = Estimator(rec, rig, cfg)
+    names = est.camera_names
+    both = Estimator(full_session, rig, cfg).estimate(frames[0])  # cold: the crops the single views get
+    for good in (0, 1):
+        pair = [frames[0][0], frames[0][1]]
+        pair[1 - good] = bad
+        est.reset()
+        r = est.estimate(pair, novel_view=NovelViewRequest(alpha=0.5))
+        assert r.frame_ok == {names[good]: True, names[1 - good]: False}
+        assert r.missing.all() and not r.joints_3d.any() and r.novel_view is None
+        assert r.missing_2d[names[1 - good]].all() and not r.joints_2d[names[1 - good]].any()
+        # each view's encoder heatmaps are its own: the good view decodes what it decodes in a full pair
+        np.testing.assert_array_equal(r.missing_2d[names[good]], both.missing_2d[names[good]])
+        np.testing.assert_allclose(r.joints_2d[names[good]], both.joints_2d[names[good]], atol=1e-9)
+        assert _all_finite(r) and {"encoder", "decode_2d"} <= set(r.timing_ms)
+    assert {g for g, _ in rec.calls} == {"human"}
 
 
 def test_novel_view_off_never_runs_or_loads_a_colour_graph(tiny_model_dir, scene_rig):  # noqa: F811

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, TrackingConfig
+from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, RoiConfig, TrackingConfig
 from ghnerf_runtime.estimator import check_crop
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.joints3d import depth_centroid_joints, query_grid, triangulate_joints, volumetric_joints
@@ -12,7 +12,7 @@ from ghnerf_runtime.keypoints import model_to_heatmap_pixels
 from ghnerf_runtime.novel_view import interpolate_camera, slerp_rotation
 from ghnerf_runtime.preprocess import Roi
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, scatter_block
-from ghnerf_runtime.tracking import snap_roi, track_from_joints
+from ghnerf_runtime.tracking import SubjectTracker, snap_roi, track_from_joints
 
 K128 = [[150.0, 0.0, 63.5], [0.0, 150.0, 63.5], [0.0, 0.0, 1.0]]
 
@@ -81,6 +81,28 @@ def test_track_needs_enough_confident_joints_and_a_plausible_box():
     far = j.copy()
     far[0] = [30.0, 0.0, 3.0]
     assert track_from_joints(far, conf, valid, cfg) is None  # a 30 m box is nobody
+
+
+def test_view_track_crops_one_camera_around_its_2d_joints():
+    """A single-view pair's 2D joints place that camera's next crop; the other camera and the sweep box stay on
+    the working volume; a 3D track, or too few confident joints, ends the view track."""
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    tracker = SubjectTracker(rig, TrackingConfig(min_joints=6), RoiConfig())
+    cold = tracker.regions()
+    uv, _ = rig.pair[1].project(_joints() + [0.0, 0.0, 0.0])
+    assert tracker.update_view(1, uv, np.full(25, 0.9))
+    r = tracker.regions()
+    assert not r.tracked and r.rois[0] == cold.rois[0] and np.array_equal(r.box, cold.box)
+    assert r.rois[1].size < cold.rois[1].size
+    lo, hi = rig.pair[1].undistort_pixels(uv).min(0), rig.pair[1].undistort_pixels(uv).max(0)
+    assert r.rois[1].x0 <= lo[0] and r.rois[1].y0 <= lo[1]
+    assert r.rois[1].x0 + r.rois[1].size >= hi[0] and r.rois[1].y0 + r.rois[1].size >= hi[1]
+    assert not tracker.update_view(1, uv, np.full(25, 0.1))  # nothing confident: cold again
+    assert tracker.regions() is tracker._volume
+    tracker.update_view(0, uv, np.full(25, 0.9))
+    tracker.update(_joints(), np.full(25, 0.9), np.ones(25, bool))
+    assert tracker.view_track is None and tracker.regions().tracked
 
 
 # ------------------------------------------------------------------ 3D methods
@@ -164,3 +186,20 @@ def test_frame_check_flags_flat_and_noise_but_not_images():
     bad[3, 3] = np.nan
     assert check_crop(bad, 255.0, cfg) == (False, "non-finite")
     assert check_crop(np.zeros((128, 128), np.float32), 255.0, FrameCheckConfig(enabled=False)) == (True, "")
+
+
+def test_frame_check_judges_only_the_pixels_that_show_the_frame():
+    """A saturated (or black) frame under a crop that reaches past the frame's edge: the zero padding gives the
+    plane contrast, so only ``inside`` tells it is flat; an image in the same crop still passes."""
+    cfg = FrameCheckConfig()
+    inside = np.zeros((128, 128), bool)
+    inside[:, 40:] = True  # the crop's left third is padding
+    saturated = np.where(inside, 1.0, 0.0).astype(np.float32)
+    assert check_crop(saturated, 255.0, cfg) == (True, "")  # what the padding fooled
+    assert check_crop(saturated, 255.0, cfg, inside) == (False, "flat")
+    yy, xx = np.mgrid[:128, :128]
+    image = np.where(inside, 0.5 + 0.3 * np.sin(xx / 9.0) * np.cos(yy / 13.0), 0.0).astype(np.float32)
+    assert check_crop(image, 255.0, cfg, inside) == (True, "")
+    noise = np.where(inside, np.random.default_rng(0).random((128, 128)), 0.0).astype(np.float32)
+    assert check_crop(noise, 255.0, cfg, inside) == (False, "noise")
+    assert check_crop(image, 255.0, cfg, np.zeros((128, 128), bool)) == (False, "flat")  # shows nothing

@@ -218,6 +218,22 @@ def test_padding_outside_the_frame_is_zero():
     assert np.all(out[:, :60] == 0) and np.all(out[100:] == 0) and np.all(out[:90, 70:] == 200)
 
 
+@pytest.mark.parametrize("roi, antialias", [(Roi(-320, 0, 640), True), (Roi(-320, 0, 640), False),
+                                            (Roi(500, 380, 300), True), (Roi(100, 50, 300), True)])
+def test_inside_marks_exactly_the_pixels_that_show_the_frame(roi, antialias):
+    """``CropMaps.inside``: a pixel it marks reads the frame alone (no blend with the zero padding), and the
+    pixels it leaves out read padding (all but those within the fixed-point maps' 1/32 pixel of the edge); a
+    crop inside the frame has ``inside`` None (every pixel)."""
+    cam = make_camera()
+    maps = build_undistort_crop_maps(cam, roi, 128, antialias=antialias)
+    out = apply_crop_maps(np.full((480, 640), 200, np.uint8), maps)
+    if maps.inside is None:
+        assert np.all(out == 200)
+        return
+    assert np.all(out[maps.inside] == 200)
+    assert (~maps.inside).sum() > 0 and np.mean(out[~maps.inside] < 200) > 0.97
+
+
 # ---------------------------------------------------------------- normalisation
 def test_preprocess_image_channel_order_and_normalisation():
     cam = make_camera()
