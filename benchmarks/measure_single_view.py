@@ -2,13 +2,16 @@
 
     .venv/bin/python benchmarks/measure_single_view.py [--model-dir models] [--sequences 10] [--rooms 16]
                                                        [--bad black|saturated|noise] [--flip-test]
+                                                       [--no-view-track]
 
 A pair whose one crop fails the frame check (a covered lens, a camera blinded by the sun, a broken
 stream) has no 3D joints, but the other camera's 2D joints still come from the encoder heatmaps.
 This scores them on the held-out-like bench sequences (``ghnerf-bench runtime``'s): every pair is
 run three times, as it is, and with each camera's frame replaced by a bad one in turn; it prints
 PCK@0.2 and the share of visible joints found for the good camera, beside the same camera's
-figures in the normal two-view run, with the pairs per second of each. Then the false alarms:
+figures in the normal two-view run, with the pairs per second of each. First it counts the cold
+(working-volume) crops of the sequences' rigs that reach past the frame's edge, and how many of them
+would pass an all-255 frame if the frame check also looked at the zero padding. Then the false alarms:
 empty simulated rooms with one camera bad, and how many of them report a person (the presence gate
 on the view's own peaks). Each run keeps its own estimator, so single-view pairs start cold, as on
 the device. A tool, not a test.
@@ -18,6 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, SessionConfig  # noqa: E402
-from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, check_crop, load_session  # noqa: E402
 from ghnerf_runtime.metrics import pck  # noqa: E402
+from ghnerf_runtime.preprocess import preprocess_image  # noqa: E402
 
 
 def bad_frame(kind: str, shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
@@ -47,6 +52,8 @@ def main(argv=None) -> int:
     ap.add_argument("--rooms", type=int, default=16, help="empty rooms (scene seeds 1..N), each camera bad in turn")
     ap.add_argument("--bad", default="black", choices=("black", "saturated", "noise"))
     ap.add_argument("--flip-test", action="store_true", help="heatmaps.flip_test on")
+    ap.add_argument("--no-view-track", action="store_true",
+                    help="single-view pairs cropped from the working volume every time (tracking off in those runs)")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
                           heatmaps=HeatmapsConfig(flip_test=args.flip_test))
@@ -56,8 +63,23 @@ def main(argv=None) -> int:
     scored = {name: {c: ([], [], [], []) for c in (0, 1)} for name in runs}  # pred, true, visible, found
     seconds = {name: 0.0 for name in runs}
     pairs = 0
-    for seq in load_sequences(args.sequences, args.frames):
-        ests = {name: Estimator(session, seq.rig, cfg) for name in runs}
+    sequences = load_sequences(args.sequences, args.frames)
+    crops = past_edge = fooled = 0
+    for seq in sequences:
+        est = Estimator(session, seq.rig, cfg)
+        cold = est.tracker.regions()
+        for c, roi in enumerate(cold.rois):
+            maps, _ = est._crop(est._cams[c], roi)
+            white = preprocess_image(np.full(seq.images.shape[2:], 255, np.uint8), maps, session.contract.normalisation)
+            crops += 1
+            past_edge += maps.inside is not None
+            fooled += check_crop(white[1], est._levels, cfg.frame_check)[0]  # without CropMaps.inside
+    print(f"cold crops: {past_edge} of {crops} reach past the frame's edge; {fooled} would pass an all-255 frame "
+          f"if the frame check looked at the padding too")
+    for seq in sequences:
+        ests = {name: Estimator(session, seq.rig, cfg if good is None or not args.no_view_track else
+                                replace(cfg, tracking=replace(cfg.tracking, enabled=False)))
+                for name, good in runs.items()}
         for i in range(len(seq)):
             pairs += 1
             for name, good in runs.items():
