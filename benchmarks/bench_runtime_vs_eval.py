@@ -137,7 +137,8 @@ def main(argv=None) -> int:
                 uv, ok = _decode(session, images, cams, near_far, src)
                 for lst, v in zip(rows[key, src], (uv, a["joints_2d"][:2], a["visible"][:2], ok)):
                     lst.append(v)
-            cfg = EstimatorConfig(heatmaps=HeatmapsConfig(source=src), joints3d=Joints3DConfig(method=BEST_METHOD[src]))
+            cfg = EstimatorConfig(heatmaps=HeatmapsConfig(source=src, flip_test=False),  # ghnerf-eval's main figure's
+                                  joints3d=Joints3DConfig(method=BEST_METHOD[src]))
             est = Estimator(session, rig, cfg)
             est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
             r = est.estimate(tuple(full))
@@ -152,7 +153,8 @@ def main(argv=None) -> int:
             for key, images in (("A", stored), ("B", ours)):
                 rgb = _render_first_source(session, images, cams, near_far)
                 psnr[key].append(masked_psnr(np.clip(rgb, 0.0, 1.0), truth, mask).value)
-            with Estimator(session, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True))) as est:
+            with Estimator(session, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False),
+                                                          novel_view=NovelViewConfig(enabled=True))) as est:
                 est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
                 view = est.estimate(tuple(full), novel_view=NovelViewRequest(alpha=0.0)).novel_view
             if view is not None:

@@ -26,7 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, NovelViewConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 
@@ -47,6 +47,7 @@ def main(argv=None) -> int:
     request = NovelViewRequest(alpha=0.5)
     for precision in args.precisions.split(","):
         base = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=precision),
+                               heatmaps=HeatmapsConfig(flip_test=False),  # flip test off: as docs/runtime.md measured this, before it became the default
                                novel_view=NovelViewConfig(enabled=True))
         session = load_session(base)
         variants = {"overlap": base, "after": replace(base, novel_view=replace(base.novel_view, overlap=False))}

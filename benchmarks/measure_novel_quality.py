@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.bench_runtime_common import RenderTap, truth_view  # noqa: E402
 from drivers.sim import random_scene  # noqa: E402
 from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, SEEN_MOTIONS, load_sequences, percentiles  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, load_config  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, load_config  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr, masked_ssim  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
@@ -58,7 +58,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     alphas = [float(a) for a in args.alphas.split(",")]
     strides = [int(s) for s in args.strides.split(",")]
-    base = load_config(args.config) if args.config else EstimatorConfig()
+    # without --config: the flip test off, as docs/runtime.md measured this, before it became the default
+    base = load_config(args.config) if args.config else EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False))
     cfg = replace(base, session=replace(base.session, model_dir=args.model_dir, precision=args.precision),
                   novel_view=replace(base.novel_view, enabled=True))
     sequences = load_sequences(args.sequences, args.frames, seen_motions=args.seen_motions, cache_dir=args.cache)

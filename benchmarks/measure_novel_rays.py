@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, NovelViewConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
@@ -53,6 +53,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
+                          heatmaps=HeatmapsConfig(flip_test=False),  # flip test off: as docs/runtime.md measured this, before it became the default
                           novel_view=NovelViewConfig(enabled=True, silhouette_stride=args.silhouette_stride))
     if args.min_diff is not None:
         cfg = replace(cfg, novel_view=replace(cfg.novel_view, silhouette_min_diff=args.min_diff))

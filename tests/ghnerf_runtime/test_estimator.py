@@ -236,7 +236,7 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
 
 def test_encoder_heatmaps_skip_volume_and_rendering(tiny_model_dir, scene_rig):  # noqa: F811
     rig, frames = scene_rig
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)), heatmaps=HeatmapsConfig("encoder"),
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)), heatmaps=HeatmapsConfig("encoder", flip_test=False),
                           joints3d=Joints3DConfig(method="triangulate"))
     assert cfg.required_graphs() == ("encoder",)  # a model without the human graph
     assert cfg.required_graphs(human_graph=True) == ("human",)
@@ -250,7 +250,7 @@ def test_encoder_heatmaps_skip_volume_and_rendering(tiny_model_dir, scene_rig): 
         assert _all_finite(r)
         assert "volume" not in r.timing_ms and "render_heat" not in r.timing_ms
     assert [g for g, _ in rec.calls] == ["human"] * len(frames)
-    # the flip test (heatmaps.flip_test, off by default) runs the human graph again, on the mirrored crops
+    # the flip test (heatmaps.flip_test, on by default) runs the human graph again, on the mirrored crops
     est = Estimator(rec, rig, replace(cfg, heatmaps=HeatmapsConfig("encoder", flip_test=True)))
     rec.calls.clear()
     assert "encoder_flip" in est.estimate(frames[0]).timing_ms
@@ -279,7 +279,7 @@ def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(full_sessi
     rig, frames = scene_rig
     flip = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=True),
                            joints3d=Joints3DConfig(method="triangulate"))
-    plain = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method="triangulate"))
+    plain = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"))
     assert flip.heatmaps.flip_test and flip.flips_encoder_heatmaps and not plain.flips_encoder_heatmaps
     assert not EstimatorConfig(heatmaps=HeatmapsConfig("rendered")).flips_encoder_heatmaps  # rendered: no effect
     seen = _FlipAveragingSession(full_session)
@@ -299,7 +299,7 @@ def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(full_sessi
 def test_human_graph_gives_the_encoder_graphs_keypoints(full_session, scene_rig):
     """The human graph is the encoder graph's heatmap branch: same joints either way."""
     rig, frames = scene_rig
-    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method="triangulate"))
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"))
     calls = []
     results = {}
     for name, session in (("human", full_session), ("encoder", _Without(full_session, "human"))):
@@ -323,7 +323,7 @@ def test_older_model_without_human_graph_runs_the_encoder(tiny_model_dir, scene_
     shutil.copytree(tiny_model_dir, old)
     for f in old.glob("human*.onnx"):
         f.unlink()
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(old), warmup=False), heatmaps=HeatmapsConfig("encoder"))
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(old), warmup=False), heatmaps=HeatmapsConfig("encoder", flip_test=False))
     est = Estimator.from_config(rig, cfg)
     assert est.session.graphs == ("encoder",)
     assert _all_finite(est.estimate(frames[0]))
@@ -331,7 +331,7 @@ def test_older_model_without_human_graph_runs_the_encoder(tiny_model_dir, scene_
 
 def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_session, scene_rig):
     rig, frames = scene_rig
-    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method="triangulate"),
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"),
                           novel_view=NovelViewConfig(enabled=True))
     assert cfg.required_graphs(human_graph=True) == ("encoder", "human", "volume", "render_rgb")
     rec = Recorder(full_session)
@@ -370,7 +370,7 @@ class _Without:
                                             ("volumetric", ("encoder", "volume", "query"))])
 def test_encoder_heatmaps_run_what_the_3d_method_reads(full_session, scene_rig, method, graphs):
     rig, frames = scene_rig
-    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder"), joints3d=Joints3DConfig(method=method))
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method=method))
     assert cfg.required_graphs() == cfg.required_graphs(human_graph=True) == graphs
     # the flip test's mirrored pass runs the human graph when the model has one
     flip = replace(cfg, heatmaps=HeatmapsConfig("encoder", flip_test=True))
@@ -392,6 +392,6 @@ def test_encoder_heatmaps_need_a_model_that_has_them(full_session, scene_rig):
     rec = Recorder(full_session)
     rec.contract = replace(full_session.contract, encoder_heatmaps=False)  # as a 1.0.0 export reads
     with pytest.raises(ModelError, match="encoder heatmaps"):
-        Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig("encoder")))
+        Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False)))
     with pytest.raises(ConfigError, match="heatmaps.source"):
         config_from_dict({"heatmaps": {"source": "volumetric"}})
