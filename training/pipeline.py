@@ -651,8 +651,8 @@ def run(cfg: PipelineConfig) -> dict | None:
                 "pretrain": pretrain_inputs(cfg, variant) if pretrain_block(cfg, variant) else None}
 
     todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v)) is None and not _run_finished(cfg, v)]
-    if cfg.parallel_train and len(todo) > 1 and not torch.cuda.is_available():
-        train_side_by_side(cfg, todo)
+    if cfg.until != "pretrain" and cfg.parallel_train and len(todo) > 1 and not torch.cuda.is_available():
+        train_side_by_side(cfg, todo)  # (it trains too: not when only the pretraining is asked for)
     for variant in cfg.variants:
         if pretrain_block(cfg, variant):
             st.run(f"pretrain_{variant}", {"data": data_key, "config": pretrain_inputs(cfg, variant)},

@@ -308,6 +308,13 @@ def test_until_stops_after_the_named_stages(tmp_path, monkeypatch):
         cfg = PipelineConfig(out=tmp_path / until, parallel_train=False, until=until)
         assert pipeline.run(cfg) is None
         assert ran == (stages if until == "data" else ["data", *stages]), until
+    # on a CPU the variants train side by side, pretraining included: not with --until pretrain
+    monkeypatch.setattr(pipeline, "train_side_by_side", lambda cfg, todo: ran.append("side by side"))
+    for until, stages in (("pretrain", ["pretrain"]), ("train", ["side by side", "pretrain", "train", "train"])):
+        ran.clear()
+        cfg = PipelineConfig(out=tmp_path / f"cpu_{until}", parallel_train=True, until=until)
+        assert pipeline.run(cfg) is None
+        assert ran == ["data", *stages], until
 
 
 def test_a_failed_stage_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
