@@ -1,7 +1,7 @@
 """2D joints of one camera when the other's frame is unusable (``frame_check.single_view_2d``).
 
     .venv/bin/python benchmarks/measure_single_view.py [--model-dir models] [--sequences 10] [--rooms 16]
-                                                       [--bad black|saturated|noise] [--flip-test]
+                                                       [--bad black|saturated|noise] [--no-flip-test]
                                                        [--no-view-track]
 
 A pair whose one crop fails the frame check (a covered lens, a camera blinded by the sun, a broken
@@ -51,12 +51,13 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--rooms", type=int, default=16, help="empty rooms (scene seeds 1..N), each camera bad in turn")
     ap.add_argument("--bad", default="black", choices=("black", "saturated", "noise"))
-    ap.add_argument("--flip-test", action="store_true", help="heatmaps.flip_test on")
+    ap.add_argument("--flip-test", action=argparse.BooleanOptionalAction, default=None,
+                    help="heatmaps.flip_test (default: the runtime's, on)")
     ap.add_argument("--no-view-track", action="store_true",
                     help="single-view pairs cropped from the working volume every time (tracking off in those runs)")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
-                          heatmaps=HeatmapsConfig(flip_test=args.flip_test))
+                          heatmaps=HeatmapsConfig() if args.flip_test is None else HeatmapsConfig(flip_test=args.flip_test))
     session = load_session(cfg)
     rng = np.random.default_rng(0)
     runs = {"both": None, "camera 0 bad": 1, "camera 1 bad": 0}  # run -> the good camera scored (None: both)
@@ -100,7 +101,7 @@ def main(argv=None) -> int:
         for est in ests.values():
             est.close()
     print(f"{pairs} pairs of {args.sequences} held-out-like sequences, {args.precision}, the other camera's frame "
-          f"{args.bad}{', flip test' if args.flip_test else ''}:")
+          f"{args.bad}{', flip test' if cfg.heatmaps.flip_test else ', no flip test'}:")
     for name, good in runs.items():
         for c in ((0, 1) if good is None else (good,)):
             p, t, v, f = (np.array(a) for a in scored[name][c])

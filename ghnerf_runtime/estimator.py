@@ -519,7 +519,8 @@ class Estimator:
         joint is missing; the presence gate applies to the view's own peak values, and the view's
         next crop follows its joints (``SubjectTracker.update_view``)."""
         cfg = self.config
-        good = [i for i, st in enumerate(self._cams) if frame_ok[st.camera.name]]
+        good = next(i for i, st in enumerate(self._cams) if frame_ok[st.camera.name])
+        name = self.camera_names[good]
         t = time.perf_counter()
         graph = "human" if self.session.has("human") else "encoder"
         heat = self.session.run(graph, {"images": batch})["encoder_heatmaps"]
@@ -532,16 +533,12 @@ class Estimator:
         t = time.perf_counter()
         kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), cfg.decoder)
         uv_model = heatmap_to_model_pixels(kp.uv, self.grid, self.size)
-        joints_2d, conf_2d, missing_2d = self._image_joints(kp, uv_model, crops, good)
-        if cfg.presence.enabled:
-            threshold = cfg.presence.threshold("encoder")
-            strong = sum(int(np.count_nonzero(conf_2d[n] >= threshold)) for n in joints_2d) / len(good)
-            if strong < cfg.presence.min_joints:  # nobody
-                joints_2d = {n: np.zeros_like(v) for n, v in joints_2d.items()}
-                conf_2d = {n: np.zeros_like(v) for n, v in conf_2d.items()}
-                missing_2d = {n: np.ones_like(v) for n, v in missing_2d.items()}
-        name = self.camera_names[good[0]]
-        self.tracker.update_view(good[0], joints_2d[name], conf_2d[name])  # its next crop follows the subject
+        joints_2d, conf_2d, missing_2d = self._image_joints(kp, uv_model, crops, (good,))
+        strong = int(np.count_nonzero(conf_2d[name] >= cfg.presence.threshold("encoder")))
+        if cfg.presence.enabled and strong < cfg.presence.min_joints:  # nobody
+            joints_2d[name], conf_2d[name] = np.zeros_like(joints_2d[name]), np.zeros_like(conf_2d[name])
+            missing_2d[name] = np.ones_like(missing_2d[name])
+        self.tracker.update_view(good, joints_2d[name], conf_2d[name])  # its next crop follows the subject
         _add_ms(timing, "decode_2d", t)
         return _Pass(regions, frame_ok, None, Joints3D.missing(len(JOINT_NAMES)), joints_2d, conf_2d, missing_2d)
 
