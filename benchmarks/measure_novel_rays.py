@@ -28,7 +28,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import RenderTap  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, NovelViewConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import (  # noqa: E402
+    EstimatorConfig,
+    HeatmapsConfig,
+    NovelViewConfig,
+    SessionConfig,
+)
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
