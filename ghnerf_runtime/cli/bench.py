@@ -193,7 +193,8 @@ def _print_row(row: dict) -> None:
     if by := acc.get("mpjpe_by_visibility"):
         print("      MPJPE by the cameras that see the joint: " + ", ".join(
             f"{name.replace('_', ' ')} {c['mpjpe_mm']:.1f} mm ({100 * c['share']:.0f} % of joints, "
-            f"{100 * c['found']:.0f} % found)" for name, c in by.items()), flush=True)
+            f"{100 * c['found']:.0f} % found, confidence median {c.get('confidence_median', float('nan')):.2f})"
+            for name, c in by.items()), flush=True)
     if e2 := acc.get("error_2d_px"):
         print(f"      2D error of the visible joints decoded: median {e2['median']:.1f} px, p90 {e2['p90']:.1f} px "
               f"(original image pixels)", flush=True)

@@ -146,7 +146,7 @@ class Accuracy:
 
     def __init__(self) -> None:
         self.p2, self.t2, self.v2, self.pv2 = [], [], [], []
-        self.p3, self.t3, self.pv3, self.tracked = [], [], [], []
+        self.p3, self.t3, self.pv3, self.c3, self.tracked = [], [], [], [], []
         self.vis3: list[np.ndarray | None] = []  # (C, 25) per pair, for the MPJPE by visibility
 
     def add(self, result, seq: Sequence, i: int) -> None:
@@ -164,6 +164,7 @@ class Accuracy:
         self.p3.append(result.joints_3d)
         self.t3.append(joints_3d)
         self.pv3.append(~result.missing)
+        self.c3.append(result.confidence)
         self.tracked.append(bool(result.tracked))
         self.vis3.append(None if visible is None else np.asarray(visible, bool))
 
@@ -192,7 +193,7 @@ class Accuracy:
                "found_3d_frac": float(pv3.mean()), "tracked_frac": float(tracked.mean())}
         if all(v is not None for v in self.vis3):
             # how many cameras see each joint: the truth knows hidden joints, the MPJPE pools them all
-            out["mpjpe_by_visibility"] = visibility_summary(mp, np.array(self.vis3), pv3)
+            out["mpjpe_by_visibility"] = visibility_summary(mp, np.array(self.vis3), pv3, np.array(self.c3))
         if self.p2:
             p2, t2, v2, pv2 = (np.array(a) for a in (self.p2, self.t2, self.v2, self.pv2))
             pk = pck(p2, t2, v2, pred_valid=pv2)
@@ -209,15 +210,19 @@ class Accuracy:
         return out
 
 
-def visibility_summary(result, visible: np.ndarray, found: np.ndarray) -> dict[str, dict]:
+def visibility_summary(result, visible: np.ndarray, found: np.ndarray,
+                       confidence: np.ndarray | None = None) -> dict[str, dict]:
     """An MPJPE split by the cameras that see each joint (``metrics.mpjpe_by_visibility``), per class:
     ``mpjpe_mm`` over the joints found, ``joints`` found, ``share`` of all joints in the class and the
-    share of them ``found`` (nan for an empty class).
+    share of them ``found`` (nan for an empty class), and with ``confidence`` the median confidence of
+    the class's joints found (``confidence_median``): how far a user's confidence threshold tells
+    hidden joints from seen ones.
 
     Args:
         result: ``metrics.mpjpe`` of ``(N, J)`` joints.
         visible: ``(N, C, J)`` per-camera visibility.
         found: ``(N, J)`` bool, the estimator produced the joint.
+        confidence: optional ``(N, J)`` reported 3D confidence.
     """
     cls = visibility_class(visible)
     out = {}
@@ -225,6 +230,9 @@ def visibility_summary(result, visible: np.ndarray, found: np.ndarray) -> dict[s
         of = cls == k
         out[name] = {"mpjpe_mm": total / n if n else float("nan"), "joints": n, "share": float(of.mean()),
                      "found": float(found[of].mean()) if of.any() else float("nan")}
+        if confidence is not None:
+            sel = of & found
+            out[name]["confidence_median"] = float(np.median(confidence[sel])) if sel.any() else float("nan")
     return out
 
 

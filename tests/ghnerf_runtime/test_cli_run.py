@@ -154,7 +154,7 @@ def test_bench_accuracy_counts_left_right_swaps_per_view():
     pred["b"][[r, l]] = pred["b"][[l, r]]
     none = np.zeros(NUM_JOINTS, bool)
     result = SimpleNamespace(joints_2d=pred, missing_2d={"a": none, "b": none}, joints_3d=np.zeros((NUM_JOINTS, 3)),
-                             missing=none, tracked=True)
+                             missing=none, confidence=np.ones(NUM_JOINTS, np.float32), tracked=True)
     acc = Accuracy()
     acc.add_truth(result, np.zeros((NUM_JOINTS, 3)), truth_2d, np.ones((2, NUM_JOINTS), bool))
     sw = acc.summary()["left_right_swaps"]

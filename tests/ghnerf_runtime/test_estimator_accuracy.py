@@ -71,6 +71,8 @@ def test_shipped_model_on_held_out_sequences(source, flip):
     # joints both cameras see are placed better than joints neither sees (measured 103 / 232 mm encoder,
     # 183 / 267 mm rendered): a split attached to the wrong joints or views would not keep this order
     assert by["all_views"]["mpjpe_mm"] < by["no_view"]["mpjpe_mm"], by
+    # and the reported confidence says so (30 bench sequences, flip test: medians 0.64 / 0.54 / 0.37)
+    assert by["all_views"]["confidence_median"] > by["no_view"]["confidence_median"], by
 
 
 @pytest.mark.parametrize("source, flip", [*((s, False) for s in sorted(THRESHOLDS)), ("encoder", True)])
