@@ -1,0 +1,102 @@
+"""Re-tune the runtime's accuracy knobs for the shipped model on sequences the bench never uses.
+
+    .venv/bin/python benchmarks/tune_runtime_knobs.py [--model-dir models] [--sequences 30] [--frames 30]
+                                                      [--only NAME,NAME]
+
+The decoder's Gaussian filter and subpixel refinement, its threshold and the triangulation's reprojection
+gate were tuned on the first model. This runs every variant below (one setting changed from the
+defaults each) on two sets of held-out-like sequences and prints, per set, PCK@0.2 (both images),
+MPJPE over the joints found, MPJPE over the joints both cameras see and the share found:
+
+* the *tuning* set: sequences drawn as ``ghnerf-bench runtime`` draws them but from other scene seeds
+  (``TUNE_SEED_BASE``: other rigs, bodies, clothes), where a choice is made;
+* the *bench* set: ``ghnerf-bench runtime``'s own sequences, where the choice is only checked.
+
+A tool, not a test; the figures and the choice are in docs/runtime.md ("Re-tuning the decoder").
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.cli.simdata import SEED_BASE, Accuracy, load_sequences  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, config_from_dict, config_to_dict  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+
+#: Scene seeds of the tuning set: far from the bench's (SEED_BASE + k) and from every dataset split.
+TUNE_SEED_BASE = SEED_BASE + 2 ** 40
+
+#: name -> overrides of the default configuration (one knob each; "default" is the reference).
+VARIANTS: dict[str, dict] = {
+    "default": {},
+    "decoder.sigma 0": {"decoder": {"sigma": 0.0}},
+    "decoder.sigma 0.5": {"decoder": {"sigma": 0.5}},
+    "decoder.sigma 0.75": {"decoder": {"sigma": 0.75}},
+    "decoder.sigma 1.25": {"decoder": {"sigma": 1.25}},
+    "decoder.sigma 1.5": {"decoder": {"sigma": 1.5}},
+    "decoder.refine centroid": {"decoder": {"refine": "centroid"}},
+    "decoder.threshold 0.05": {"decoder": {"threshold": 0.05}},
+    "decoder.threshold 0.2": {"decoder": {"threshold": 0.2}},
+    "joints3d.max_reprojection_px 2": {"joints3d": {"max_reprojection_px": 2.0}},
+    "joints3d.max_reprojection_px 3": {"joints3d": {"max_reprojection_px": 3.0}},
+    "joints3d.max_reprojection_px 4": {"joints3d": {"max_reprojection_px": 4.0}},
+    "joints3d.max_reprojection_px 5": {"joints3d": {"max_reprojection_px": 5.0}},
+    "joints3d.max_reprojection_px 9": {"joints3d": {"max_reprojection_px": 9.0}},
+    "roi.joint_margin_frac 0.1": {"roi": {"joint_margin_frac": 0.1}},
+    "roi.joint_margin_frac 0.25": {"roi": {"joint_margin_frac": 0.25}},
+}
+
+
+def _merged(base: dict, overrides: dict) -> dict:
+    out = {k: dict(v) if isinstance(v, dict) else v for k, v in base.items()}
+    for section, values in overrides.items():
+        out[section] = {**out[section], **values}
+    return out
+
+
+def score(session, cfg: EstimatorConfig, sequences) -> dict:
+    acc = Accuracy()
+    for seq in sequences:
+        with Estimator(session, seq.rig, cfg) as est:
+            for i in range(len(seq)):
+                r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=i)
+                acc.add(r, seq, i)
+    s = acc.summary()
+    return {"pck": s["pck@0.2"], "mpjpe": s["mpjpe_mm"], "seen": s["mpjpe_by_visibility"]["all_views"]["mpjpe_mm"],
+            "found": s["found_3d_frac"]}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--sequences", type=int, default=30)
+    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--only", help="comma list of variant names (default: all)")
+    args = ap.parse_args(argv)
+    base = config_to_dict(EstimatorConfig())
+    base["session"].update(model_dir=args.model_dir, precision=args.precision)
+    session = load_session(config_from_dict(base))
+    sets = {"tuning": load_sequences(args.sequences, args.frames, seed_base=TUNE_SEED_BASE),
+            "bench": load_sequences(args.sequences, args.frames)}
+    names = args.only.split(",") if args.only else list(VARIANTS)
+    print(f"{args.sequences} sequences x {args.frames} pairs per set, {args.precision}, the defaults otherwise "
+          f"(flip test {'on' if base['heatmaps']['flip_test'] else 'off'}); PCK@0.2 / MPJPE found / MPJPE both "
+          f"cameras see / found", flush=True)
+    for name in names:
+        cfg = config_from_dict(_merged(base, VARIANTS[name]))
+        cells = []
+        for label, sequences in sets.items():
+            r = score(session, cfg, sequences)
+            cells.append(f"{label} {r['pck']:.3f} / {r['mpjpe']:.1f} / {r['seen']:.1f} mm / {100 * r['found']:.1f} %")
+        print(f"{name:<34} " + " | ".join(cells), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
