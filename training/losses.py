@@ -64,6 +64,38 @@ def positive_weighted_mse(pred: Tensor, target: Tensor, positive_weight: float) 
     return ((1.0 + positive_weight * target) * (pred - target) ** 2).mean()
 
 
+def window_centroid_loss(pred: Tensor, target: Tensor, radius: int = 3, min_peak: float = 0.5) -> Tensor:
+    """Mean distance (heatmap cells) between the centroids of ``pred`` and of ``target``, both taken over
+    the same ``(2 radius + 1)^2`` cells around the true joint; a localisation term beside the heatmap MSE,
+    which scores values, not where the peak's mass sits.
+
+    The window is centred on the cell of the Gaussian ``target``'s centroid; joints whose target peaks
+    below ``min_peak`` (hidden, or off the map) are left out. ``pred`` and ``target`` are ``(N, J, h, w)``;
+    returns 0 when no joint qualifies, and 0 for ``pred == target``.
+    """
+    n, j, h, w = target.shape
+    t = target.reshape(n * j, h, w)
+    keep = t.amax(dim=(1, 2)) >= min_peak
+    if not bool(keep.any()):
+        return pred.sum() * 0.0
+    t, p = t[keep], pred.reshape(n * j, h, w)[keep].clamp(min=0.0)
+    ys = torch.arange(h, dtype=t.dtype, device=t.device)
+    xs = torch.arange(w, dtype=t.dtype, device=t.device)
+    mass = t.sum(dim=(1, 2))
+    cy = (t.sum(dim=2) * ys).sum(dim=1) / mass
+    cx = (t.sum(dim=1) * xs).sum(dim=1) / mass
+    inside = (((ys[None, :, None] - cy.round()[:, None, None]).abs() <= radius)
+              & ((xs[None, None, :] - cx.round()[:, None, None]).abs() <= radius))
+
+    def centroid(maps: Tensor) -> tuple[Tensor, Tensor]:
+        m = maps * inside
+        total = m.sum(dim=(1, 2)).clamp(min=1e-6)
+        return (m.sum(dim=2) * ys).sum(dim=1) / total, (m.sum(dim=1) * xs).sum(dim=1) / total
+
+    (ty, tx), (py, px) = centroid(t), centroid(p)
+    return torch.sqrt((py - ty) ** 2 + (px - tx) ** 2 + 1e-12).mean()
+
+
 def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
                    patch_shape: tuple[int, int] | None = None) -> dict[str, Tensor]:
     """Loss terms and their weighted total (``"loss"``).

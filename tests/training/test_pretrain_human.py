@@ -32,6 +32,7 @@ def tiny_pretrain(data, **kw) -> PretrainConfig:
     ({"iterations": "many"}, "iterations"),  # typed: a clear error, not a TypeError in validation
     ({"device": "tpu"}, "device"),
     ({"loader_workers": -1}, "loader_workers"),
+    ({"centroid_weight": -0.1}, "centroid_weight"),
     ({"augment": {"rotation_deg": -5}}, "augment.rotation_deg"),
     ({"augment": {"zoom": 0.1}}, "zoom"),
 ])
@@ -95,6 +96,36 @@ def test_two_iterations_resume_and_joint_training_starts_from_it(data64, tmp_pat
     for k, v in a["human"].items():
         if v.is_floating_point() and "running" not in k:
             assert torch.allclose(got[k], v, atol=1e-6), k
+
+
+def _gauss(cy, cx, size=32, sigma=1.5):
+    ys, xs = torch.meshgrid(torch.arange(size).float(), torch.arange(size).float(), indexing="ij")
+    return torch.exp(-((ys - cy) ** 2 + (xs - cx) ** 2) / (2 * sigma ** 2))
+
+
+def test_window_centroid_loss_measures_where_the_peak_sits():
+    from training.losses import window_centroid_loss
+
+    target = torch.stack([_gauss(10.3, 20.7), _gauss(5.0, 5.0), torch.zeros(32, 32)])[None]
+    assert float(window_centroid_loss(target, target)) < 1e-5
+    # a peak one cell off counts about a cell (the window's truncation pulls it in a little); the hidden
+    # joint (target all 0) is left out, whatever its prediction
+    shifted = torch.stack([_gauss(10.3, 21.7), _gauss(5.0, 5.0), _gauss(1.0, 1.0)])[None]
+    assert 0.35 < float(window_centroid_loss(shifted, target)) < 0.5  # (~0.86 + 0) / 2
+    assert float(window_centroid_loss(shifted, torch.zeros_like(target))) == 0.0
+    # an all-zero prediction (an untrained head) gives a finite loss and gradient
+    pred = torch.zeros_like(target, requires_grad=True)
+    loss = window_centroid_loss(pred, target)
+    loss.backward()
+    assert torch.isfinite(loss) and torch.isfinite(pred.grad).all()
+
+
+def test_centroid_weight_adds_the_localisation_term(data64, tmp_path):
+    plain = pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), tmp_path / "a", quiet=True)
+    with_term = pretrain(tiny_pretrain(data64, iterations=1, eval_every=0, centroid_weight=1.0), tmp_path / "b",
+                         quiet=True)
+    loss = [json.loads((tmp_path / d / "log.jsonl").read_text().splitlines()[0])["loss"] for d in ("a", "b")]
+    assert plain["steps"] == with_term["steps"] == 1 and loss[1] > loss[0] > 0  # same batch, one more term
 
 
 def test_worker_processes_load_the_same_batches_as_the_trainer(data64, tmp_path):
