@@ -143,3 +143,28 @@ def test_shipped_model_with_one_camera_covered():
             est.reset()
             r = est.estimate(pair)
             assert all(m.all() for m in r.missing_2d.values()) and r.missing.all()
+
+
+def test_shipped_model_through_a_camera_dropout():
+    """A camera blacked out for a few pairs mid-sequence: 2D joints from the other meanwhile, 3D joints again
+    once it is back, and the 3D track again one pair later (the first pair back starts from the view track's
+    crop in one camera and the working volume in the other)."""
+    pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.cli.simdata import load_sequences
+    from ghnerf_runtime.estimator import Estimator
+
+    seq = load_sequences(SEQUENCES, FRAMES)[0]
+    est = Estimator.from_config(seq.rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS))))
+    names = est.camera_names
+    dark = range(3, 6)
+    for i in range(len(seq)):
+        pair = [np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])]
+        if i in dark:
+            pair[1] = np.zeros_like(pair[1])
+        r = est.estimate(pair, sequence=i)
+        if i in dark:
+            assert r.missing.all() and r.missing_2d[names[1]].all() and (~r.missing_2d[names[0]]).sum() >= 15, i
+            assert est.tracker.view_track is not None and est.tracker.track is None
+        else:
+            assert r.num_found >= 10 and all(r.frame_ok.values()), i
+            assert r.tracked == (i not in (0, dark.stop)), i
