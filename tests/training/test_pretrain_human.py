@@ -182,9 +182,35 @@ def test_score_reports_the_heatmap_pck_of_a_human_pt(data64, tmp_path, capsys):
     assert main(["--score", str(tmp_path / "a" / "human.pt"), "--data", str(data64), "--split", "val"]) == 0
     got = json.loads(capsys.readouterr().out)
     assert got["step"] == 1 and got["scenes"] == 2 and 0.0 <= got["pck@0.2"] <= 1.0
+    assert {"error_px_median", "error_px_p90"} <= set(got)
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
     assert main(["--score", str(tmp_path / "junk.pt"), "--data", str(data64)]) == 2
     assert "junk.pt" in capsys.readouterr().err
+
+
+def test_heatmap_scores_of_the_true_heatmaps(data64):
+    """A head that answers the training targets themselves: PCK 1 and a 2D error of the decoder's own (well
+    under a model pixel), the p90 no smaller than the median."""
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+    from training.pretrain_human import heatmap_scores
+
+    ds = MultiViewDataset(data64, "val", TargetConfig(heatmap_stride=4))
+
+    class TruthHead(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.config = type("C", (), {"height": ds[0]["tgt_images"].shape[-1]})()
+            self.i = 0
+
+        def encode_human(self, images):
+            it = ds[self.i]
+            self.i += 1
+            return it["tgt_heatmaps"][torch.nonzero(it["tgt_is_source"]).flatten()]
+
+    got = heatmap_scores(TruthHead(), ds, len(ds), torch.device("cpu"))
+    assert got["pck@0.2"] == 1.0
+    assert 0.0 <= got["error_px_median"] <= got["error_px_p90"] < 1.0, got
 
 
 def test_a_frozen_encoder_stays_as_pretrained_while_the_rest_trains(data64, tmp_path):
