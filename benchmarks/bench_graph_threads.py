@@ -57,7 +57,8 @@ def capture(model_dir: str, sequences, pairs: int) -> dict[str, list[dict]]:
     feeds: dict[str, list[dict]] = {}
     for source, method in (("encoder", "triangulate"), ("rendered", "depth_centroid")):
         cfg = EstimatorConfig(session=SessionConfig(model_dir=model_dir, warmup=False),
-                              heatmaps=HeatmapsConfig(source=source, flip_test=False), joints3d=Joints3DConfig(method=method),
+                              heatmaps=HeatmapsConfig(source=source, flip_test=False),  # as docs measured it
+                              joints3d=Joints3DConfig(method=method),
                               novel_view=NovelViewConfig(enabled=True))
         tap = _FeedTap(load_session(cfg), feeds)
         for seq in sequences:

@@ -51,7 +51,8 @@ METHODS = {
 
 
 def run_method(session, sequences, joints3d: Joints3DConfig, oracle: OracleSession | None, source: str = "rendered"):
-    cfg = EstimatorConfig(joints3d=joints3d, heatmaps=HeatmapsConfig(source=source, flip_test=False))  # flip test off: as docs/runtime.md measured this, before it became the default
+    # the flip test off: as docs/runtime.md measured this, before it became the default
+    cfg = EstimatorConfig(joints3d=joints3d, heatmaps=HeatmapsConfig(source=source, flip_test=False))
     preds, found, stage, total, tracked = [], [], [], [], []
     for seq in sequences:
         est = Estimator(session, seq.rig, cfg)

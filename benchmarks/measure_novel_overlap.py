@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     request = NovelViewRequest(alpha=0.5)
     for precision in args.precisions.split(","):
         base = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=precision),
-                               heatmaps=HeatmapsConfig(flip_test=False),  # flip test off: as docs/runtime.md measured this, before it became the default
+                               heatmaps=HeatmapsConfig(flip_test=False),  # as docs/runtime.md measured it
                                novel_view=NovelViewConfig(enabled=True))
         session = load_session(base)
         variants = {"overlap": base, "after": replace(base, novel_view=replace(base.novel_view, overlap=False))}

@@ -58,7 +58,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
-                          heatmaps=HeatmapsConfig(flip_test=False),  # flip test off: as docs/runtime.md measured this, before it became the default
+                          heatmaps=HeatmapsConfig(flip_test=False),  # as docs/runtime.md measured it
                           novel_view=NovelViewConfig(enabled=True, silhouette_stride=args.silhouette_stride))
     if args.min_diff is not None:
         cfg = replace(cfg, novel_view=replace(cfg.novel_view, silhouette_min_diff=args.min_diff))

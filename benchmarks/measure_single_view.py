@@ -32,7 +32,7 @@ from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, check_crop, load_session  # noqa: E402
 from ghnerf_runtime.metrics import pck  # noqa: E402
-from ghnerf_runtime.preprocess import preprocess_image  # noqa: E402
+from ghnerf_runtime.preprocess import build_undistort_crop_maps, preprocess_image  # noqa: E402
 
 
 def bad_frame(kind: str, shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
@@ -56,8 +56,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-view-track", action="store_true",
                     help="single-view pairs cropped from the working volume every time (tracking off in those runs)")
     args = ap.parse_args(argv)
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
-                          heatmaps=HeatmapsConfig() if args.flip_test is None else HeatmapsConfig(flip_test=args.flip_test))
+    heatmaps = HeatmapsConfig() if args.flip_test is None else HeatmapsConfig(flip_test=args.flip_test)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision), heatmaps=heatmaps)
     session = load_session(cfg)
     rng = np.random.default_rng(0)
     runs = {"both": None, "camera 0 bad": 1, "camera 1 bad": 0}  # run -> the good camera scored (None: both)
@@ -70,7 +70,7 @@ def main(argv=None) -> int:
         est = Estimator(session, seq.rig, cfg)
         cold = est.tracker.regions()
         for c, roi in enumerate(cold.rois):
-            maps, _ = est._crop(est._cams[c], roi)
+            maps = build_undistort_crop_maps(seq.rig.pair[c], roi, session.contract.height)
             white = preprocess_image(np.full(seq.images.shape[2:], 255, np.uint8), maps, session.contract.normalisation)
             crops += 1
             past_edge += maps.inside is not None

@@ -428,12 +428,7 @@ class Estimator:
         env.update(self.session.run(encoder, env))
         _add_ms(timing, "encoder", t)
         if cfg.flips_encoder_heatmaps:
-            t = time.perf_counter()
-            second = "human" if self.session.has("human") else "encoder"
-            mirrored = self.session.run(second, {"images": mirror_images(batch),
-                                                 "src_P": mirror_projections(env["src_P"], S)})["encoder_heatmaps"]
-            env["encoder_heatmaps"] = flip_averaged(env["encoder_heatmaps"], mirrored)
-            _add_ms(timing, "encoder_flip", t)
+            env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"])
         stride, g = self.contract.heatmap_stride, self.grid
         blocks = [full_block(g, g)] * 2
         out: dict[str, np.ndarray] = {}
@@ -495,6 +490,19 @@ class Estimator:
         _add_ms(timing, "joints_3d", t)
         return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job)
 
+    def _flip_test(self, batch: np.ndarray, heat: np.ndarray, timing: dict,
+                   src_P: np.ndarray | None = None) -> np.ndarray:
+        """``heat`` averaged with the encoder heatmaps of the mirrored crops (``heatmaps.flip_test``): the
+        ``human`` graph when the model has one, else ``encoder``; the time goes to ``encoder_flip``."""
+        t = time.perf_counter()
+        feeds = {"images": mirror_images(batch)}
+        if src_P is not None:  # graphs read images only, but a graph that read cameras would see consistent ones
+            feeds["src_P"] = mirror_projections(src_P, self.size)
+        mirrored = self.session.run("human" if self.session.has("human") else "encoder", feeds)["encoder_heatmaps"]
+        out = flip_averaged(heat, mirrored)
+        _add_ms(timing, "encoder_flip", t)
+        return out
+
     def _image_joints(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                       views: Sequence[int] = (0, 1)) -> tuple[dict, dict, dict]:
         """Decoded peaks -> per camera name: pixels of the original image, confidence, missing.
@@ -522,14 +530,11 @@ class Estimator:
         good = next(i for i, st in enumerate(self._cams) if frame_ok[st.camera.name])
         name = self.camera_names[good]
         t = time.perf_counter()
-        graph = "human" if self.session.has("human") else "encoder"
-        heat = self.session.run(graph, {"images": batch})["encoder_heatmaps"]
+        heat = self.session.run("human" if self.session.has("human") else "encoder", {"images": batch})
         _add_ms(timing, "encoder", t)
+        heat = heat["encoder_heatmaps"]
         if cfg.heatmaps.flip_test:
-            t = time.perf_counter()
-            mirrored = self.session.run(graph, {"images": mirror_images(batch)})["encoder_heatmaps"]
-            heat = flip_averaged(heat, mirrored)
-            _add_ms(timing, "encoder_flip", t)
+            heat = self._flip_test(batch, heat, timing)
         t = time.perf_counter()
         kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), cfg.decoder)
         uv_model = heatmap_to_model_pixels(kp.uv, self.grid, self.size)

@@ -107,7 +107,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append(f"- Command: `{card.get('command', '')}`")
     L.append(f"- Created: {card.get('created', '')}")
     hw = card.get("hardware", {})
-    L.append(f"- Hardware (this run of the pipeline; the training table says where each model trained): {hw.get('cpu')} ({hw.get('cores')} cores, {hw.get('memory_gb')} GB), "
+    L.append("- Hardware (this run of the pipeline; the training table says where each model trained): "
+             f"{hw.get('cpu')} ({hw.get('cores')} cores, {hw.get('memory_gb')} GB), "
              f"GPU: {hw.get('gpu') or 'none'}; torch {hw.get('torch')}, onnxruntime {hw.get('onnxruntime')}")
     wall = card.get("wall_time_s", {})
     if wall:

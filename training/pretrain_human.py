@@ -180,7 +180,6 @@ def _one_thread(_worker: int) -> None:
     torch.set_num_threads(1)  # the loaders share the cores with each other and the trainer
 
 
-@torch.no_grad()
 def heatmap_pck(model: GHNeRF, dataset, scenes: int, device: torch.device) -> float:
     """PCK@0.2 of the encoder's heatmaps in the two source views of the first ``scenes`` scenes of ``dataset``
     (decoded and scored as ``ghnerf-eval`` scores ``encoder_heatmaps``)."""

@@ -61,9 +61,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--heatmap-source", choices=HEATMAP_SOURCES,
                     help="rendered (GHNeRF render_heat) or encoder (the encoder's 2D heatmaps; faster)")
     ap.add_argument("--flip-test", action=argparse.BooleanOptionalAction, default=None,
-                    help="encoder heatmaps: also run the encoder on the mirrored crops and average (heatmaps.flip_test, "
-                         "on by default: +0.016 PCK and -12 mm MPJPE on 30 held-out-like sequences, +1-2 ms per pair "
-                         "here, +4-6 ms on a slower host; docs/runtime.md); --no-flip-test turns it off")
+                    help="encoder heatmaps: also run the encoder on the mirrored crops and average "
+                         "(heatmaps.flip_test, on by default: +0.016 PCK and -12 mm MPJPE on 30 held-out-like "
+                         "sequences, +0.9 ms per pair on a fast 2-core host, +4-6 ms on a slower one; "
+                         "docs/runtime.md); --no-flip-test turns it off")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, default=0.5, help="novel camera between the rig cameras: 0 = first, "
