@@ -39,7 +39,7 @@ def tiny() -> ModelConfig:
 def edge128() -> ModelConfig:
     return ModelConfig(
         height=128, width=128,
-        features=FeatureNetConfig(channels=(8, 16, 16), full_res_convs=1, full_res_smooth=False),
+        features=FeatureNetConfig(channels=(8, 16, 16), full_res_convs=1, full_res_smooth=False, norm="scene"),
         human=HumanEncoderConfig(num_layers=3, out_channels=32, out_stride=4, input_scale=0.5, aux_heatmaps=True),
         cost_volume=CostVolumeConfig(groups=8),
         levels=(

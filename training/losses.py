@@ -41,6 +41,12 @@ class LossConfig(Config):
     The colour target is the subject over a black background, so the colour loss alone does not
     penalise opaque black fog around the subject, and fog in front of the subject dims it; this term
     asks for an opaque subject and empty space around it."""
+    depth_weight: float = 0.0
+    """l_depth: mean absolute error (metres) of each subject ray's rendered depth (``sum w z / acc``,
+    camera z) against the dataset's true depth, over the rays whose four bilinear taps all lie on the
+    subject, every level (0 disables). The synthetic dataset has true depth; views without it (ZJU-MoCap)
+    add nothing. The colour loss alone teaches the depth only through the source colours it blends,
+    which leaves the novel view's geometry centimetres off (docs/training.md, "Depth supervision")."""
     level_weights: tuple[float, ...] = ()
     """Weight of each cascade level, coarse to fine (empty: 1.0 each)."""
     ssim_window: int = 7
@@ -62,6 +68,12 @@ def ssim(x: Tensor, y: Tensor, window: int = 7, c1: float = 0.01 ** 2, c2: float
 def positive_weighted_mse(pred: Tensor, target: Tensor, positive_weight: float) -> Tensor:
     """``mean((1 + w * target) * (pred - target)^2)``: heatmap MSE that does not sit at all-zero maps."""
     return ((1.0 + positive_weight * target) * (pred - target) ** 2).mean()
+
+
+def masked_l1(pred: Tensor, target: Tensor, valid: Tensor) -> Tensor:
+    """Mean ``|pred - target|`` over ``valid``; zero (with a gradient path) when nothing is valid."""
+    v = valid.to(pred.dtype)
+    return ((pred - target).abs() * v).sum() / torch.clamp(v.sum(), min=1.0)
 
 
 def window_centroid_loss(pred: Tensor, target: Tensor, radius: int = 3, min_peak: float = 0.5) -> Tensor:
@@ -104,7 +116,8 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
         outputs: :meth:`GHNeRF.forward` output (``{"levels": [...]}``).
         batch: ``rgb`` ``(B, R, 3)`` target colour (subject over the model's background), ``heatmaps``
             ``(B, R, J)`` Gaussian ground-truth heatmaps of the same rays; optional ``mask`` ``(B, R)`` subject
-            mask at the rays in [0, 1] (for ``mask_weight``); optional ``source_heatmaps``
+            mask at the rays in [0, 1] (for ``mask_weight``); optional ``depth`` and ``depth_valid`` ``(B, R)``
+            true depth at the rays and where it counts (for ``depth_weight``); optional ``source_heatmaps``
             ``(S, J, h, w)`` ground-truth grids of the source views (for ``encoder_heat_weight``).
         patch_shape: ``(h, w)`` with ``h * w == R`` when the rays of each target form a row-major patch
             (enables the SSIM term).
@@ -140,6 +153,11 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
                 raise ValueError("mask_weight is set but the batch has no 'mask' (subject mask at the rays)")
             terms[f"l{i}_mask"] = F.mse_loss(out["acc"], batch["mask"])
             level_total = level_total + config.mask_weight * terms[f"l{i}_mask"]
+        if config.depth_weight and "depth" in out:
+            if "depth" not in batch or "depth_valid" not in batch:
+                raise ValueError("depth_weight is set but the batch has no 'depth' / 'depth_valid'")
+            terms[f"l{i}_depth"] = masked_l1(out["depth"], batch["depth"], batch["depth_valid"])
+            level_total = level_total + config.depth_weight * terms[f"l{i}_depth"]
         if config.coord_weight and "coord" in out:
             terms[f"l{i}_coord"] = F.mse_loss(out["coord"], out["points"].detach())
             level_total = level_total + config.coord_weight * terms[f"l{i}_coord"]
@@ -161,4 +179,4 @@ def compute_losses(outputs: dict, batch: dict[str, Tensor], config: LossConfig,
     return terms
 
 
-__all__ = ["LossConfig", "ssim", "positive_weighted_mse", "compute_losses"]
+__all__ = ["LossConfig", "ssim", "positive_weighted_mse", "masked_l1", "compute_losses"]

@@ -96,7 +96,7 @@ class TrainConfig(Config):
     images per step, and the left/right distinction taught by contrast."""
     loss: LossConfig = field(default_factory=LossConfig)
     """Loss weights (``l_col + 0.5 l_heat + ssim_weight * (1 - SSIM) [+ coord_weight * l_coord]
-    [+ mask_weight * l_mask]``)."""
+    [+ mask_weight * l_mask] [+ depth_weight * l_depth]``)."""
     seed: int = 0
     """Seed of the weights, data order, ray sampling and stratified samples."""
     checkpoint_every: int = 500
@@ -380,6 +380,11 @@ def make_batch(item: dict, cfg: TrainConfig, mcfg: ModelConfig, gen: torch.Gener
         "heatmaps": heatmaps_at(item["tgt_joints_2d"][t], item["tgt_visible"][t], uv, HEATMAP_SIGMA_HM_PX * stride),
         "targets": t,
     }
+    if cfg.loss.depth_weight and "tgt_depth" in item:
+        # every bilinear tap on the subject: the interpolated depth is the surface's, not a blend with 0
+        on_subject = bilinear_at(m, uv)[..., 0] > 0.999
+        batch["depth"] = bilinear_at(item["tgt_depth"][t][:, None], uv)[..., 0]
+        batch["depth_valid"] = on_subject & item["tgt_has_depth"][t][:, None] & (batch["depth"] > 0)
     if "tgt_heatmaps" in item and not cfg.freeze_human:  # dense grids of the source views: auxiliary head
         batch["source_heatmaps"] = item["tgt_heatmaps"][item["tgt_is_source"]]
         if cfg.encoder_views == "all" or cfg.encoder_flip:
@@ -430,7 +435,8 @@ def step_losses(out: dict, batch: dict, cfg: TrainConfig) -> dict[str, Tensor]:
     terms = compute_losses(out, batch, replace(lc, ssim_weight=0.0))
     P = cfg.patch_size
     if P and lc.ssim_weight:
-        only_ssim = replace(lc, colour_weight=0.0, heat_weight=0.0, coord_weight=0.0, mask_weight=0.0)
+        only_ssim = replace(lc, colour_weight=0.0, heat_weight=0.0, coord_weight=0.0, mask_weight=0.0,
+                            depth_weight=0.0)
         sliced = {"levels": [{"rgb": lv["rgb"][:, -P * P:]} for lv in out["levels"]]}
         extra = compute_losses(sliced, {"rgb": batch["rgb"][:, -P * P:]}, only_ssim, patch_shape=(P, P))
         terms.update({k: v for k, v in extra.items() if k != "loss"})
@@ -675,6 +681,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
             window.setdefault("loss", []).append(loss_v)
             window.setdefault("psnr", []).append(psnr_of(out["levels"][-1]["rgb"], batch["rgb"]))
             window.setdefault("heat", []).append(float(terms[f"l{len(out['levels']) - 1}_heat"].detach()))
+            last_depth = f"l{len(out['levels']) - 1}_depth"
+            if last_depth in terms:  # metres, mean absolute error on the subject
+                window.setdefault("depth_err_m", []).append(float(terms[last_depth].detach()))
             if cfg.pck_every and step % cfg.pck_every == 0 and info.main:
                 last_pck = source_pck(model, item, device)
             if step % cfg.log_every == 0 or step == cfg.iterations:

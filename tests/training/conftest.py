@@ -15,6 +15,17 @@ def _two_threads():
     yield
 
 
+@pytest.fixture(scope="session")
+def data64(tmp_path_factory):
+    """A 64 px synthetic dataset (3 train, 2 val scenes): the ``tiny`` preset's resolution."""
+    from training.data.generate import main as generate
+
+    out = tmp_path_factory.mktemp("data64")
+    generate(["--out", str(out), "--train", "3", "--val", "2", "--val-seen-motions", "0", "--res", "64",
+              "--workers", "1"])
+    return out
+
+
 @pytest.fixture(autouse=True)
 def _no_flush_denormal_afterwards():
     """The trainers set the process-wide flush-denormal mode (a CLI runs alone); a test that calls them in

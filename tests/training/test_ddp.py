@@ -10,7 +10,7 @@ torch = pytest.importorskip("torch")
 import torch.distributed as dist  # noqa: E402
 import torch.multiprocessing as mp  # noqa: E402
 
-from tests.training.test_trainer import data64, tiny_cfg  # noqa: E402,F401  (fixture)
+from tests.training.test_trainer import tiny_cfg  # noqa: E402  (data64: conftest)
 
 
 def _free_port() -> int:

@@ -10,7 +10,6 @@ from ghnerf_runtime.contract import ray_grid  # noqa: E402
 from ghnerf_runtime.flip_test import unmirror_heatmaps  # noqa: E402
 from ghnerf_runtime.keypoints import model_to_heatmap_pixels  # noqa: E402
 from ghnerf_runtime.metrics import gaussian_heatmaps  # noqa: E402
-from tests.training.test_trainer import data64  # noqa: E402,F401  (fixture)
 from training.evaluate import (Accumulator, evaluate, keypoints_from_heatmaps, psnr_by_angle,  # noqa: E402
                                scene_metrics, source_angles_deg)
 

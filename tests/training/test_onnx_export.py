@@ -17,10 +17,17 @@ from training.model import GHNeRF  # noqa: E402
 FORBIDDEN_OPS = {"Inverse", "Det", "NonZero", "Loop", "If", "Scan", "SequenceConstruct"}
 
 
-@pytest.fixture(scope="module")
-def exported(tmp_path_factory):
+def tiny_with(norm: str):
+    """The tiny preset with its image feature network normalised by ``norm`` (BatchNorm or scene statistics)."""
+    cfg = preset("tiny")
+    cfg.features.norm = norm
+    return cfg
+
+
+@pytest.fixture(scope="module", params=["batch", "scene"])
+def exported(tmp_path_factory, request):
     torch.manual_seed(0)
-    model = GHNeRF(preset("tiny")).eval()
+    model = GHNeRF(tiny_with(request.param)).eval()
     out = tmp_path_factory.mktemp("onnx")
     paths = export_all(model, out, inputs=example_inputs(model, targets=2))
     return model, paths

@@ -9,7 +9,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
-from tests.training.test_trainer import data64, tiny_cfg  # noqa: E402,F401  (fixture)
+from tests.training.test_trainer import tiny_cfg  # noqa: E402  (data64: conftest)
 from training.model.config import ConfigError  # noqa: E402
 from training.pretrain_human import PretrainConfig, load_human, main, pretrain, view_batch  # noqa: E402
 from training.train import train  # noqa: E402

@@ -19,10 +19,17 @@ from training.model import GHNeRF  # noqa: E402
 GRAPHS = ("encoder", "volume", "render_heat", "render_rgb")
 
 
-@pytest.fixture(scope="module")
-def quantized(tmp_path_factory):
+def tiny_with(norm: str):
+    """The tiny preset with its image feature network normalised by ``norm`` (BatchNorm or scene statistics)."""
+    cfg = preset("tiny")
+    cfg.features.norm = norm
+    return cfg
+
+
+@pytest.fixture(scope="module", params=["batch", "scene"])
+def quantized(tmp_path_factory, request):
     torch.manual_seed(0)
-    model = GHNeRF(preset("tiny")).eval()
+    model = GHNeRF(tiny_with(request.param)).eval()
     out = tmp_path_factory.mktemp("q")
     fp32 = export_all(model, out, graphs=GRAPHS, inputs=example_inputs(model))
     g = torch.Generator().manual_seed(5)
@@ -37,9 +44,19 @@ def ops(path):
 
 
 def test_quantized_ops(quantized):
-    _, fp32, int8 = quantized
+    model, fp32, int8 = quantized
     enc = ops(int8["encoder"])
     assert enc["QuantizeLinear"] > 0 and enc["DequantizeLinear"] >= enc["Conv"] > 0
+    # a conv whose output a scene normalisation reduces stays float (its input is not read from int8)
+    m = onnx.load(str(int8["encoder"]))
+    producers = {o: n for n in m.graph.node for o in n.output}
+    normalised = [n for n in m.graph.node if n.op_type == "Conv" and
+                  any(r.op_type == "ReduceMean" and set(n.output) & set(r.input) for r in m.graph.node)]
+    stage_convs = model.config.features.full_res_convs + 4  # stage 0, then two at each of strides 2 and 4
+    assert len(normalised) == (stage_convs if model.config.features.norm == "scene" else 0)
+    for n in normalised:
+        assert all(producers.get(i) is None or producers[i].op_type != "DequantizeLinear" for i in n.input[1:]), \
+            f"{n.name} has int8 weights"
     # the volume graph (3D convs, plane sweep) stays float
     vol = ops(int8["volume"])
     assert vol["QuantizeLinear"] == 0 and vol["Conv"] > 0
@@ -58,6 +75,7 @@ def test_quantized_ops(quantized):
 
 def test_int8_drift_is_bounded(quantized):
     model, fp32, int8 = quantized
+    norm = model.config.features.norm
     report = int8_vs_fp32(fp32, int8, model.contract(), example_inputs(model, seed=11))
     heat = report["pipeline"]["heatmaps"]
     assert heat["max_abs"] < 0.1, report
@@ -66,5 +84,12 @@ def test_int8_drift_is_bounded(quantized):
         for name, st in outputs.items():
             if graph == "volume":
                 assert st["max_abs"] == 0.0
-            else:
+            elif norm == "batch":
                 assert st["max_abs"] <= 0.15 * max(1.0, st["ref_max"]), (graph, name, st)
+            else:
+                # Scene-normalised features have unit variance and long tails; the uint8 range that
+                # MinMax calibration takes from 3 random frames clips a few of another frame's tail
+                # values (max 0.55 of 2.4 in feat_s4, 0.40 with 12 frames), while the typical error
+                # stays small and the pipeline's outputs above move as little as with BatchNorm.
+                assert st["mean_abs"] <= 0.01 * max(1.0, st["ref_max"]), (graph, name, st)
+                assert st["max_abs"] <= 0.3 * max(1.0, st["ref_max"]), (graph, name, st)

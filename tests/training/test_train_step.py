@@ -36,7 +36,9 @@ def test_two_iterations(variant):
              "heatmaps": torch.rand(2, size * size, 25, generator=g) * 0.1,
              "mask": (torch.rand(2, size * size, generator=g) > 0.5).float()}
     images = torch.rand(2, 3, H, W, generator=g)
-    loss_cfg = LossConfig(coord_weight=0.01, mask_weight=0.1)
+    batch["depth"] = 2.0 + torch.rand(2, size * size, generator=g)
+    batch["depth_valid"] = batch["mask"] > 0.5
+    loss_cfg = LossConfig(coord_weight=0.01, mask_weight=0.1, depth_weight=0.1)
     before = [p.detach().clone() for p in model.parameters()]
     losses = []
     for _ in range(2):
@@ -50,7 +52,8 @@ def test_two_iterations(variant):
         opt.step()
         losses.append(float(terms["loss"].detach()))
     assert all(math.isfinite(v) for v in losses)
-    assert {"l0_col", "l0_heat", "l0_ssim", "l1_col", "l1_heat", "l1_coord", "l0_mask", "l1_mask", "loss"} <= set(terms)
+    assert {"l0_col", "l0_heat", "l0_ssim", "l1_col", "l1_heat", "l1_coord", "l0_mask", "l1_mask", "l0_depth",
+            "l1_depth", "loss"} <= set(terms)
     changed = sum(not torch.equal(a, b.detach()) for a, b in zip(before, model.parameters()))
     assert changed > 0.9 * len(before)
 
@@ -72,3 +75,22 @@ def test_mask_loss_is_the_opacity_error_against_the_mask():
     assert "l0_mask" not in compute_losses(out, {"rgb": torch.zeros(1, 4, 3)}, LossConfig())  # off by default
     with pytest.raises(ValueError, match="mask"):
         compute_losses(out, {"rgb": torch.zeros(1, 4, 3)}, LossConfig(mask_weight=1.0))
+
+
+def test_depth_loss_is_the_mean_absolute_error_over_the_valid_rays():
+    depth = torch.tensor([[2.0, 2.5, 9.0, 3.0]], requires_grad=True)
+    truth = torch.tensor([[2.1, 2.0, 0.0, 3.0]])
+    valid = torch.tensor([[True, True, False, True]])  # the third ray is off the subject: not counted
+    out = {"levels": [{"depth": depth}]}
+    batch = {"rgb": torch.zeros(1, 4, 3), "depth": truth, "depth_valid": valid}
+    terms = compute_losses(out, batch, LossConfig(colour_weight=0.0, depth_weight=0.5))
+    assert float(terms["l0_depth"].detach()) == pytest.approx((0.1 + 0.5 + 0.0) / 3)
+    assert float(terms["loss"].detach()) == pytest.approx(0.5 * 0.6 / 3)
+    terms["loss"].backward()
+    assert depth.grad[0, 2] == 0 and depth.grad[0, 0] < 0 < depth.grad[0, 1]
+    # no valid ray (a view without depth, ZJU-MoCap): zero, not NaN
+    none = compute_losses(out, {**batch, "depth_valid": torch.zeros_like(valid)}, LossConfig(depth_weight=0.5))
+    assert float(none["l0_depth"].detach()) == 0.0
+    assert "l0_depth" not in compute_losses(out, batch, LossConfig())  # off by default
+    with pytest.raises(ValueError, match="depth"):
+        compute_losses(out, {"rgb": torch.zeros(1, 4, 3)}, LossConfig(depth_weight=1.0))

@@ -13,17 +13,6 @@ from training.train import (  # noqa: E402
 )
 
 
-@pytest.fixture(scope="session")
-def data64(tmp_path_factory):
-    """A 64 px synthetic dataset (3 train, 2 val scenes): the ``tiny`` preset's resolution."""
-    from training.data.generate import main as generate
-
-    out = tmp_path_factory.mktemp("data64")
-    generate(["--out", str(out), "--train", "3", "--val", "2", "--val-seen-motions", "0", "--res", "64",
-              "--workers", "1"])
-    return out
-
-
 def tiny_cfg(data, **kw):
     base = {"preset": "tiny", "data": str(data), "iterations": 2, "targets_per_iter": 2, "heat_rays": 32,
             "patch_size": 8, "checkpoint_every": 1, "log_every": 1, "pck_every": 1, "threads": 2,
@@ -118,6 +107,31 @@ def test_batch_mask_is_the_subject_mask_at_the_rays(data64):
     assert 0 < float(batch["mask"].mean()) < 1  # rays inside and outside the subject
 
 
+def test_batch_depth_is_the_true_depth_on_the_subject_only(data64):
+    from training.configs import preset
+    from training.data.torch_dataset import MultiViewDataset
+    from training.train import TrainConfig, make_batch
+
+    item = MultiViewDataset(data64, "train")[0]
+    cfg = TrainConfig(data=str(data64), targets_per_iter=2, heat_rays=64, patch_size=4)
+    assert "depth" not in make_batch(item, cfg, preset("tiny"), torch.Generator().manual_seed(0))  # off: not built
+    cfg.loss.depth_weight = 0.1
+    batch = make_batch(item, cfg, preset("tiny"), torch.Generator().manual_seed(0))
+    valid, t = batch["depth_valid"], batch["targets"]
+    assert valid.shape == batch["depth"].shape == batch["rgb"].shape[:2]
+    assert valid.any() and not valid.all()
+    assert torch.all(batch["mask"][valid] > 0.999)  # every bilinear tap on the subject
+    # on pixel-centre rays the depth is the dataset's pixel
+    uv = batch["ray_uv"]
+    on_pixel = valid & (uv.frac() == 0).all(-1)
+    b, r = torch.nonzero(on_pixel, as_tuple=True)
+    want = item["tgt_depth"][t[b], uv[b, r, 1].long(), uv[b, r, 0].long()]
+    assert len(b) and torch.allclose(batch["depth"][b, r], want)
+    # a view without depth (ZJU-MoCap) counts nowhere
+    item = dict(item, tgt_has_depth=torch.zeros_like(item["tgt_has_depth"]))
+    assert not make_batch(item, cfg, preset("tiny"), torch.Generator().manual_seed(0))["depth_valid"].any()
+
+
 # ------------------------------------------------------------------------------------------- loop
 def test_two_iterations_and_resume_is_identical(data64, tmp_path):
     straight, m_straight = train(tiny_cfg(data64), tmp_path / "a", quiet=True)
@@ -148,7 +162,8 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
 
 
 def test_two_iterations_with_every_view_and_mirrored_encoder_images(data64, tmp_path):
-    cfg = tiny_cfg(data64, encoder_views="all", encoder_flip=True, loss={"coord_weight": 0.01, "mask_weight": 0.1})
+    cfg = tiny_cfg(data64, encoder_views="all", encoder_flip=True, loss={"coord_weight": 0.01, "mask_weight": 0.1,
+                                                                                         "depth_weight": 0.1})
     summary, model = train(cfg, tmp_path / "r", quiet=True)
     assert summary["steps"] == 2
     assert all(torch.isfinite(p).all() for p in model.parameters())

@@ -93,7 +93,20 @@ POLICIES: dict[str, QuantPolicy | None] = {
 
 
 def _nodes_to_exclude(model: onnx.ModelProto, policy: QuantPolicy) -> list[str]:
-    return [n.name for n in model.graph.node if any(s in n.name for s in policy.exclude_name_contains)]
+    """Named by the policy, plus every conv whose output a normalisation reduces (``_feeds_a_reduction``)."""
+    named = {n.name for n in model.graph.node if any(s in n.name for s in policy.exclude_name_contains)}
+    return [n.name for n in model.graph.node if n.name in named or _feeds_a_reduction(model, n)]
+
+
+def _feeds_a_reduction(model: onnx.ModelProto, node: onnx.NodeProto) -> bool:
+    """A Conv whose output goes into a ReduceMean: the scene normalisation (``SceneNorm2d``) that follows
+    it divides by each channel's spread, which would magnify the per-tensor uint8 rounding of its
+    quieter channels (the tiny model's ``feat_s4`` drifted 0.55 on a 2.4 range that way); such convs stay float.
+    """
+    if node.op_type != "Conv":
+        return False
+    out = set(node.output)
+    return any(m.op_type == "ReduceMean" and out & set(m.input) for m in model.graph.node)
 
 
 def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],

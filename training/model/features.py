@@ -24,8 +24,10 @@ class FeatureNetConfig(Config):
 
     channels: tuple[int, int, int] = (8, 16, 32)
     """Channels at strides 1, 2, 4 (ENeRF: 8, 16, 32)."""
-    norm: Literal["batch", "none"] = "batch"
-    """BatchNorm after each conv (folded into the conv at export) or none."""
+    norm: Literal["batch", "scene", "none"] = "batch"
+    """After each conv of the encoder stages: BatchNorm (folded into the conv at export), ``scene``
+    (``layers.SceneNorm2d``: the statistics of the images of the call, one scene's sources, in training
+    and inference alike), or none."""
     full_res_convs: int = 2
     """3x3 convs at full resolution in the first stage (1 or 2). Full-resolution convs with few channels
     are the least efficient int8 convs on a CPU; the edge preset uses 1."""
@@ -42,7 +44,7 @@ class FeatureNet(nn.Module):
         super().__init__()
         self.config = config
         c0, c1, c2 = config.channels
-        bn = config.norm == "batch"
+        bn = config.norm
         if config.full_res_convs not in (1, 2):
             raise ValueError(f"full_res_convs must be 1 or 2, got {config.full_res_convs}")
         self.stage0 = nn.Sequential(*[conv_bn_relu(3 if i == 0 else c0, c0, 3, 1, bn)

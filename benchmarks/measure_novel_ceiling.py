@@ -1,0 +1,129 @@
+"""The novel view's PSNR against what blending the two source images can reach at all.
+
+    .venv/bin/python benchmarks/measure_novel_ceiling.py --data data/edge128 [--limit 256]
+        [--model NAME=runs/edge128/last.pt ...]
+
+For every view of each held-out scene (the two sources and the novel cameras ``ghnerf-eval``
+scores), by the view's angle from the nearest source camera (``ghnerf-eval``'s bins):
+
+* ``ceiling``: the masked PSNR of ``training.blend_ceiling.blend_sources`` fed the *true* depth: each
+  pixel's surface point coloured by the source cameras that see it (true visibility). A GHNeRF or
+  ENeRF colour is such a blend, so this is that family's ceiling; ``seen`` is the share of the
+  subject's pixels some source camera sees.
+* per ``--model`` (a torch checkpoint): its rendered colour's masked PSNR (the last cascade level,
+  as ``ghnerf-eval`` renders it), the same with the colour divided by the ray's accumulated opacity
+  (``psnr/acc``: what the dimming costs; ``acc`` is the mean opacity on the subject), the median
+  absolute error of its rendered depth on the subject (``depth_mm``), and ``blend@depth``: the same
+  visible blend fed the model's depth instead of the truth. The gap from ``blend@depth`` to the
+  model's PSNR is its blending and opacity; from ``ceiling`` to ``blend@depth`` its geometry.
+
+Masked PSNR inside the subject mask, the truth over the model's black background (``ghnerf-eval``'s).
+Not a test; CPU, about 20 s per 64 scenes and model.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.contract import ray_grid  # noqa: E402
+from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
+from training.blend_ceiling import blend_sources  # noqa: E402
+
+BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
+
+
+def psnr(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    return float(np.ravel(masked_psnr(np.clip(pred, 0, 1)[None], truth[None], mask[None]).per_image)[0])
+
+
+def render_views(model, scene: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A checkpoint's colour ``(V, H, W, 3)``, depth and accumulated opacity ``(V, H, W)`` at every view."""
+    import torch
+
+    from training.evaluate import _cams
+
+    V = len(scene["tgt_is_source"])
+    H, W = model.config.height, model.config.width
+    d = {k: torch.from_numpy(np.asarray(v)) for k, v in _cams(scene, np.arange(V), ray_grid(H, W, 1)).items()}
+    with torch.no_grad():
+        enc = model.encode(d["images"])
+        vols = model.volumes(enc, d["src_P"], d["tgt_K_inv"], d["tgt_c2w"], d["near_far"])
+        o = model.render(len(vols) - 1, enc, vols[-1]["volume"], vols[-1]["stats"], d["src_P"], d["tgt_K_inv"],
+                         d["tgt_c2w"], d["ray_uv"], src_centers=d["src_centers"], heat=False)
+    return (o["rgb"].numpy().reshape(V, H, W, 3), o["depth"].numpy().reshape(V, H, W),
+            o["acc"].numpy().reshape(V, H, W))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", default="data/edge128")
+    ap.add_argument("--split", default="val")
+    ap.add_argument("--limit", type=int, default=256, help="first N scenes (0: all)")
+    ap.add_argument("--model", action="append", default=[], metavar="NAME=CKPT",
+                    help="a torch checkpoint (last.pt) to score beside the ceiling; repeatable")
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args(argv)
+
+    import torch
+
+    from training.data.torch_dataset import MultiViewDataset
+    from training.evaluate import source_angles_deg
+    from training.train import load_model
+
+    torch.set_num_threads(args.threads)
+    models = []
+    for spec in args.model:
+        name, _, path = spec.rpartition("=")
+        model, _ = load_model(Path(path))
+        models.append((name or Path(path).parent.name, model.eval()))
+    ds = MultiViewDataset(args.data, split=args.split)
+    n = min(args.limit, len(ds)) if args.limit else len(ds)
+    rows: list[dict] = []
+    for i in range(n):
+        scene = {k: v.numpy() for k, v in ds[i].items()}
+        if not scene["tgt_has_depth"].all():
+            continue  # no true depth (ZJU-MoCap): no ceiling
+        V = len(scene["tgt_is_source"])
+        angles = source_angles_deg(scene, np.arange(V))
+        rendered = [render_views(m, scene) for _, m in models]
+        for t in range(V):
+            mask = np.asarray(scene["tgt_masks"][t], bool)
+            if not mask.any():
+                continue
+            truth = scene["tgt_images"][t].transpose(1, 2, 0) * mask[..., None]
+            rgb, seen = blend_sources(scene, t, scene["tgt_depth"][t])
+            row = {"source": bool(scene["tgt_is_source"][t]), "angle": float(angles[t]),
+                   "ceiling": psnr(rgb, truth, mask), "seen": float(seen[mask].mean())}
+            for (name, _), (m_rgb, m_depth, m_acc) in zip(models, rendered):
+                row[f"{name}:psnr"] = psnr(m_rgb[t], truth, mask)
+                row[f"{name}:psnr/acc"] = psnr(m_rgb[t] / np.maximum(m_acc[t], 1e-3)[..., None], truth, mask)
+                row[f"{name}:acc"] = float(m_acc[t][mask].mean())
+                row[f"{name}:blend@depth"] = psnr(blend_sources(scene, t, m_depth[t])[0], truth, mask)
+                row[f"{name}:depth_mm"] = 1000 * float(np.median(np.abs(m_depth[t] - scene["tgt_depth"][t])[mask]))
+            rows.append(row)
+        if (i + 1) % 32 == 0:
+            print(f"  {i + 1}/{n} scenes", file=sys.stderr, flush=True)
+
+    per_model = ("psnr", "psnr/acc", "acc", "blend@depth", "depth_mm")
+    cols = ["ceiling", "seen"] + [f"{name}:{k}" for name, _ in models for k in per_model]
+    groups = [("sources", lambda r: r["source"])]
+    groups += [(f"novel {lo}-{hi} deg", lambda r, lo=lo, hi=hi: not r["source"] and lo <= r["angle"] < hi)
+               for lo, hi in BINS]
+    groups += [("novel, all", lambda r: not r["source"])]
+    print(f"{n} scenes of {args.data} ({args.split}); PSNR in dB (mean over views), depth error median mm")
+    print("| views | n | " + " | ".join(cols) + " |")
+    print("|---" * (len(cols) + 2) + "|")
+    for label, keep in groups:
+        sel = [r for r in rows if keep(r)]
+        if sel:
+            print(f"| {label} | {len(sel)} | " + " | ".join(f"{np.mean([r[c] for r in sel]):.2f}" for c in cols) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,74 @@
+"""A checkpoint whose image feature network used BatchNorm -> the same weights with scene normalisation.
+
+    python -m training.convert_norm runs/old/edge128/last.pt runs/old/edge128/last_scene.pt
+
+The trainer runs one scene per step, so every BatchNorm of the image feature network normalised
+with the statistics of that scene's two source images: a network trained that way *is* a
+``norm = "scene"`` network (``training.model.layers.SceneNorm2d``), and BatchNorm's running
+averages, which inference used, are a different function that cost the seventh model 7 dB of PSNR
+at its source cameras (docs/training.md, "Scene normalisation"). This rewrites the stored model
+config and drops the running statistics; the learnt weights are untouched. The output is loadable
+wherever a checkpoint is (``ghnerf-eval``, ``python -m training.export``) and evaluates the model
+as it was trained. Other BatchNorms (the human encoder's, the 3D regulariser's) are left as they are:
+the human encoder is pretrained on batches that mix scenes, and the 3D ones measured no difference.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import torch
+
+from training.model import ModelConfig
+
+RUNNING_KEYS = ("running_mean", "running_var", "num_batches_tracked")
+
+
+def to_scene_norm(checkpoint: dict) -> dict:
+    """A copy of a trainer or weights-only checkpoint dict with ``features.norm = "scene"``.
+
+    Raises:
+        ValueError: the checkpoint carries no model config, or its feature network has no BatchNorm.
+    """
+    if "model_config" not in checkpoint:
+        raise ValueError("the checkpoint has no 'model_config' (not made by the trainer or the pipeline)")
+    mcfg = ModelConfig.from_dict(checkpoint["model_config"])
+    if mcfg.features.norm != "batch":
+        raise ValueError(f"the image feature network's norm is {mcfg.features.norm!r}, not 'batch'")
+    mcfg.features.norm = "scene"
+    out = dict(checkpoint)
+    out["model_config"] = mcfg.to_dict()
+    state = checkpoint.get("model", checkpoint)
+    kept = {k: v for k, v in state.items()
+            if not (k.startswith("feature_net.") and k.rsplit(".", 1)[-1] in RUNNING_KEYS)}
+    if "model" in checkpoint:
+        out["model"] = kept
+    else:
+        out = {**kept, "model_config": out["model_config"]}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("src", help="a .pt checkpoint trained with features.norm = 'batch'")
+    ap.add_argument("dst", help="where to write the converted checkpoint")
+    args = ap.parse_args(argv)
+    src, dst = Path(args.src), Path(args.dst)
+    if src.resolve() == dst.resolve():
+        print(f"convert_norm: {dst} is the input; write the converted checkpoint elsewhere", file=sys.stderr)
+        return 2
+    try:
+        ck = torch.load(str(src), map_location="cpu", weights_only=False)
+        converted = to_scene_norm(ck)
+    except (OSError, RuntimeError, ValueError) as e:
+        print(f"convert_norm: {src}: {e}", file=sys.stderr)
+        return 2
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(converted, str(dst))
+    print(f"{src} -> {dst}: image feature network normalised by scene statistics")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
