@@ -153,8 +153,10 @@ def main(argv=None) -> int:
             for key, images in (("A", stored), ("B", ours)):
                 rgb = _render_first_source(session, images, cams, near_far)
                 psnr[key].append(masked_psnr(np.clip(rgb, 0.0, 1.0), truth, mask).value)
+            # opaque_at 1: the raw composite, as paths A and B render it (the runtime's default un-dims it)
+            raw_view = NovelViewConfig(enabled=True, opaque_at=1.0)
             with Estimator(session, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False),
-                                                          novel_view=NovelViewConfig(enabled=True))) as est:
+                                                          novel_view=raw_view)) as est:
                 est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
                 view = est.estimate(tuple(full), novel_view=NovelViewRequest(alpha=0.0)).novel_view
             if view is not None:

@@ -12,7 +12,9 @@ scores), by the view's angle from the nearest source camera (``ghnerf-eval``'s b
   subject's pixels some source camera sees.
 * per ``--model`` (a torch checkpoint): its rendered colour's masked PSNR (the last cascade level,
   as ``ghnerf-eval`` renders it), the same with the colour divided by the ray's accumulated opacity
-  (``psnr/acc``: what the dimming costs; ``acc`` is the mean opacity on the subject), the median
+  (``psnr/acc``: what the dimming costs; ``acc`` is the mean opacity on the subject), the picture the
+  runtime shows (``psnr@opaque_at``: ``ghnerf_runtime.novel_view.opaque_colour`` with the runtime's
+  ``novel_view.opaque_at``, which counts a ray as opaque from that opacity on), the median
   absolute error of its rendered depth on the subject (``depth_mm``), and ``blend@depth``: the same
   visible blend fed the model's depth instead of the truth. The gap from ``blend@depth`` to the
   model's PSNR is its blending and opacity; from ``ceiling`` to ``blend@depth`` its geometry.
@@ -31,7 +33,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.contract import ray_grid  # noqa: E402
+from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
+from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from training.blend_ceiling import blend_sources  # noqa: E402
 
 BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
@@ -67,7 +71,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model", action="append", default=[], metavar="NAME=CKPT",
                     help="a torch checkpoint (last.pt) to score beside the ceiling; repeatable")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--opaque-at", type=float, default=NovelViewConfig().opaque_at,
+                    help="the runtime's novel_view.opaque_at for the psnr@opaque_at column (default: the runtime's)")
     args = ap.parse_args(argv)
+    opaque_at = args.opaque_at
 
     import torch
 
@@ -81,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         name, _, path = spec.rpartition("=")
         model, _ = load_model(Path(path))
         models.append((name or Path(path).parent.name, model.eval()))
+    background = models[0][1].config.background if models else 0.0
     ds = MultiViewDataset(args.data, split=args.split)
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     rows: list[dict] = []
@@ -102,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
             for (name, _), (m_rgb, m_depth, m_acc) in zip(models, rendered):
                 row[f"{name}:psnr"] = psnr(m_rgb[t], truth, mask)
                 row[f"{name}:psnr/acc"] = psnr(m_rgb[t] / np.maximum(m_acc[t], 1e-3)[..., None], truth, mask)
+                shown = opaque_colour(m_rgb[t].reshape(-1, 3), m_acc[t].ravel(), background, opaque_at)
+                row[f"{name}:psnr@opaque_at"] = psnr(shown.reshape(m_rgb[t].shape), truth, mask)
                 row[f"{name}:acc"] = float(m_acc[t][mask].mean())
                 row[f"{name}:blend@depth"] = psnr(blend_sources(scene, t, m_depth[t])[0], truth, mask)
                 row[f"{name}:depth_mm"] = 1000 * float(np.median(np.abs(m_depth[t] - scene["tgt_depth"][t])[mask]))
@@ -109,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         if (i + 1) % 32 == 0:
             print(f"  {i + 1}/{n} scenes", file=sys.stderr, flush=True)
 
-    per_model = ("psnr", "psnr/acc", "acc", "blend@depth", "depth_mm")
+    per_model = ("psnr", "psnr/acc", "psnr@opaque_at", "acc", "blend@depth", "depth_mm")
     cols = ["ceiling", "seen"] + [f"{name}:{k}" for name, _ in models for k in per_model]
     groups = [("sources", lambda r: r["source"])]
     groups += [(f"novel {lo}-{hi} deg", lambda r, lo=lo, hi=hi: not r["source"] and lo <= r["angle"] < hi)

@@ -441,6 +441,13 @@ class NovelViewConfig:
             then cropped to the tracked subject box (the previous pair's joints plus the
             tracking margin) instead of this pair's joints, which are not known yet. Off, or on
             a cold pair: the view follows the keypoints, cropped to this pair's joints.
+        opaque_at: a ray whose accumulated opacity reaches this counts as opaque in the picture:
+            its colour is the composite divided by the opacity (the subject's own colour), and a
+            fainter ray keeps ``opacity / opaque_at`` of it over the background. The model leaves
+            the subject slightly transparent (opacity about 0.9), which dims it over the black
+            background; the floor keeps faint fog faint (at most ``1 / opaque_at`` brighter).
+            Tuned on the ``val_seen_motions`` split, measured on the device's views in
+            docs/runtime.md ("Novel-view quality"). 1.0: the raw composite.
     """
 
     enabled: bool = False
@@ -453,9 +460,11 @@ class NovelViewConfig:
     silhouette_dilate: int = 0
     interior_stride: int = 0
     overlap: bool = True
+    opaque_at: float = 0.5
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        _number(self, "opaque_at", 0.05, 1.0)
         _integer(self, "stride", 1, 4)
         _choice(self, "stride", (1, 2, 4))
         _boolean(self, "heatmaps")

@@ -44,7 +44,7 @@ from ghnerf_runtime.rays import (
 from ghnerf_runtime.tracking import box_corners
 
 __all__ = ["NovelViewRequest", "NovelView", "slerp_rotation", "interpolate_camera", "novel_target",
-           "render_novel_view", "draw_skeleton", "heatmap_overlay"]
+           "render_novel_view", "opaque_colour", "draw_skeleton", "heatmap_overlay"]
 
 
 @dataclass(frozen=True)
@@ -224,7 +224,8 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         # One graph run for the edge rays and the interior's sparse rays together.
         feeds["ray_uv"] = np.concatenate([cells_ray_uv(m, s) for m, s in groups])[None]
         out = session.run(graph, feeds)
-        channels = {"rgb": (out["rgb"][0], contract.background), "depth": (out["depth"][0], 0.0)}
+        colour = opaque_colour(out["rgb"][0], out["acc"][0], contract.background, config.opaque_at)
+        channels = {"rgb": (colour, contract.background), "depth": (out["depth"][0], 0.0)}
         if want_heat:
             channels["heat"] = (out["heatmaps"][0].max(axis=-1), 0.0)
         n_edge = 0 if edge is None else int(edge.sum())
@@ -254,6 +255,21 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         timing["novel_compose"] = 1e3 * (time.perf_counter() - t2)
     return NovelView(image, camera, np.nan_to_num(depth).astype(np.float32),
                      None if heat is None else np.nan_to_num(heat).astype(np.float32), rays)
+
+
+def opaque_colour(rgb: np.ndarray, acc: np.ndarray, background: float, opaque_at: float) -> np.ndarray:
+    """Rays' colour with the opacity rescaled so that ``opaque_at`` counts as opaque.
+
+    ``rgb`` ``(R, 3)`` is the composite over ``background`` with accumulated opacity ``acc``
+    ``(R,)``. The foreground ``rgb - (1 - acc) * background`` divided by ``acc`` is the colour the
+    ray hit; it is shown with opacity ``min(acc / opaque_at, 1)``. ``opaque_at`` 1 returns ``rgb``.
+    """
+    if opaque_at >= 1.0:
+        return rgb
+    acc = np.clip(np.nan_to_num(acc, nan=0.0), 0.0, 1.0)[:, None]
+    fg = rgb - (1.0 - acc) * background
+    shown = np.minimum(acc / opaque_at, 1.0)
+    return fg / np.maximum(acc, opaque_at) + (1.0 - shown) * background
 
 
 @dataclass(frozen=True)

@@ -205,3 +205,55 @@ def test_interior_stride_config_is_validated():
             NovelViewConfig(interior_stride=bad)
     with pytest.raises(ConfigError, match="interior_stride"):
         NovelViewConfig(interior_stride=8, silhouette_stride=4)  # must divide the coarse cells
+
+
+class TranslucentSession(DiscSession):
+    """The disc at opacity 0.8 and faint fog (opacity 0.1, grey 0.3) around it: a model that dims its subject."""
+
+    def run(self, graph, feeds):
+        out = super().run(graph, feeds)
+        if graph == "volume":
+            return out
+        inside = out["acc"][0]
+        colour = np.where(inside[:, None] > 0, out["rgb"][0], 0.3)  # what each ray hit
+        acc = np.where(inside > 0, 0.8, 0.1).astype(np.float32)
+        out["rgb"] = (acc[:, None] * colour)[None].astype(np.float32)  # composited over black
+        out["acc"] = acc[None]
+        return out
+
+
+def test_opaque_at_shows_a_translucent_subject_in_its_own_colour_and_keeps_fog_faint():
+    cfg = NovelViewConfig(enabled=True, silhouette_stride=0)
+    want, _ = _render(cfg)  # the opaque disc
+    raw, _ = _render(replace(cfg, opaque_at=1.0), TranslucentSession())
+    shown, _ = _render(cfg, TranslucentSession())  # the default, 0.5
+    disc = want.image[..., 0] > 0
+    assert disc.sum() > 300
+    assert np.abs(raw.image[disc].astype(int) - (0.8 * want.image[disc]).astype(int)).max() <= 1  # dimmed
+    assert np.abs(shown.image[disc].astype(int) - want.image[disc].astype(int)).max() <= 1  # its own colour
+    fog = ~disc & (raw.image[..., 0] > 0)
+    assert fog.sum() > 300
+    assert np.all(raw.image[fog] == round(0.1 * 0.3 * 255))
+    assert np.all(shown.image[fog] == round(0.2 * 0.3 * 255))  # twice as bright at most, still faint
+
+
+def test_opaque_colour_over_a_grey_background():
+    from ghnerf_runtime.novel_view import opaque_colour
+
+    colour = np.array([[0.2, 0.8, 0.4], [0.2, 0.8, 0.4], [0.9, 0.9, 0.9]])
+    acc = np.array([0.9, 0.3, 0.0])
+    composite = acc[:, None] * colour + (1 - acc[:, None]) * 0.5
+    got = opaque_colour(composite, acc, 0.5, 0.5)
+    np.testing.assert_allclose(got[0], colour[0], atol=1e-9)  # opaque enough: the colour itself
+    np.testing.assert_allclose(got[1], 0.6 * colour[1] + 0.4 * 0.5, atol=1e-9)  # 0.3 / 0.5 of it
+    np.testing.assert_allclose(got[2], [0.5, 0.5, 0.5], atol=1e-9)  # an empty ray is the background
+    assert opaque_colour(composite, acc, 0.5, 1.0) is composite
+    nan_acc = opaque_colour(composite, np.array([np.nan, 0.3, 0.0]), 0.5, 0.5)
+    assert np.all(np.isfinite(nan_acc))
+
+
+def test_opaque_at_is_validated():
+    assert NovelViewConfig().opaque_at == 0.5
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ConfigError, match="opaque_at"):
+            NovelViewConfig(opaque_at=bad)
