@@ -20,19 +20,20 @@ MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, mode
 #: its default 3D method, by ``ghnerf-bench runtime --sequences 4 --frames 10 --warmup 0 --precisions auto
 #: --modes keypoints --heatmap-sources rendered,encoder``; the thresholds add margins (pairs are few: 40).
 #: Set a value to None to check sanity only. Re-measure when models/ changes.
-MEASURED_ON = ("models/ of 2026-11-22 (the seventh, what `make model` makes: 5000 train scenes, half in freestyle; "
-               "human encoder pretrained 24000 steps on 2D heatmaps, then frozen; 10000 joint steps; ghnerf-eval "
-               "PCK@0.2 0.830 rendered / 0.904 encoder heatmaps on 256 val scenes, int8)")
-#: measured: rendered/depth_centroid PCK@0.2 0.791, MPJPE 223 mm, 99 % of 3D joints found (presence gate 0.4;
+MEASURED_ON = ("models/ of 2026-11-22, session 14 (the ninth, what `make model` makes with the scene-normalised "
+               "image features: 5000 train scenes, half in freestyle; human encoder pretrained 24000 steps on 2D "
+               "heatmaps, then frozen; 10000 joint steps; ghnerf-eval PCK@0.2 0.892 rendered / 0.914 encoder "
+               "heatmaps on 256 val scenes, int8)")
+#: measured: rendered/depth_centroid PCK@0.2 0.898, MPJPE 166 mm, 99 % of 3D joints found (presence gate 0.4;
 #:           tracking.follow_encoder, the default);
-#:           encoder/triangulate    PCK@0.2 0.906, MPJPE 139 mm, 68 % found (presence gate 0.35; this model
+#:           encoder/triangulate    PCK@0.2 0.886, MPJPE 118 mm, 66 % found (presence gate 0.35; this model
 #:           leaves a joint hidden in one view undecoded there, as its training targets do: docs/runtime.md).
-#:           encoder with the flip test (--flip-tests on,off): PCK@0.2 0.916, MPJPE 116 mm, 69 % found; it is
+#:           encoder with the flip test (--flip-tests off,on): PCK@0.2 0.909, MPJPE 110 mm, 67 % found; it is
 #:           held to the encoder's thresholds.
-#: (the sixth model: rendered 0.735 / 234 mm / 99 %, encoder 0.896 / 120 mm / 66 %, flip test 0.900 / 116 mm;
-#:  the fifth: rendered 0.648 / 250 mm / 92 %, encoder 0.882 / 109 mm / 63 %.)
+#: (the seventh model: rendered 0.791 / 223 mm / 99 %, encoder 0.906 / 139 mm / 68 %, flip test 0.916 / 116 mm;
+#:  the sixth: rendered 0.735 / 234 mm / 99 %, encoder 0.896 / 120 mm / 66 %, flip test 0.900 / 116 mm.)
 THRESHOLDS = {
-    "rendered": {"pck@0.2_min": 0.72, "mpjpe_mm_max": 280.0, "found_3d_min": 0.90},
+    "rendered": {"pck@0.2_min": 0.83, "mpjpe_mm_max": 225.0, "found_3d_min": 0.90},
     "encoder": {"pck@0.2_min": 0.84, "mpjpe_mm_max": 175.0, "found_3d_min": 0.58},
 }
 METHODS = {"rendered": "depth_centroid", "encoder": "triangulate"}
@@ -168,3 +169,47 @@ def test_shipped_model_through_a_camera_dropout():
         else:
             assert r.num_found >= 10 and all(r.frame_ok.values()), i
             assert r.tracked == (i not in (0, dark.stop)), i
+
+
+#: The device's novel view at the first rig camera's viewpoint, pairs 4 and 9 of this file's sequences, masked
+#: PSNR against the simulator's picture (benchmarks/measure_novel_quality.py's measure): median 24.7 dB with the
+#: runtime's default ``novel_view.opaque_at`` (0.5), 22.5 dB raw (1.0), on MEASURED_ON's model; the seventh
+#: model, whose image features were normalised differently in training and at inference, scored about 16.
+NOVEL_PSNR_MEDIAN_MIN = 22.5
+
+
+def test_shipped_models_novel_view_against_the_simulators_picture():
+    pytest.importorskip("drivers.sim")
+    from dataclasses import replace
+
+    from benchmarks.bench_runtime_common import truth_view
+    from drivers.sim import random_scene
+    from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, load_sequences
+    from ghnerf_runtime.config import NovelViewConfig
+    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.metrics import masked_psnr
+    from ghnerf_runtime.novel_view import NovelViewRequest
+
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), expected_resolution=128),
+                          novel_view=NovelViewConfig(enabled=True))
+    session = load_session(cfg)
+    psnr = {}
+    for opaque_at in (cfg.novel_view.opaque_at, 1.0):
+        run = replace(cfg, novel_view=replace(cfg.novel_view, opaque_at=opaque_at))
+        psnr[opaque_at] = []
+        for seq in load_sequences(SEQUENCES, FRAMES):
+            scene = random_scene(int(seq.info["scene_seed"]), volume=seq.rig.volume, motions=HELD_OUT_MOTIONS)
+            est = Estimator(session, seq.rig, run)
+            for i in range(len(seq)):
+                pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
+                r = est.estimate(pair, novel_view=NovelViewRequest(alpha=0.0) if i in (4, 9) else None)
+                if r.novel_view is None:
+                    continue
+                t = float(seq.info["t0"]) + i / float(seq.info["fps"])
+                truth, mask = truth_view(scene, r.novel_view.camera, t, float(session.contract.background))
+                pred = r.novel_view.image[..., ::-1].astype(np.float64) / 255.0
+                psnr[opaque_at].append(masked_psnr(pred, truth, mask).value)
+    shown, raw = np.array(psnr[cfg.novel_view.opaque_at]), np.array(psnr[1.0])
+    assert len(shown) == len(raw) >= 6, psnr  # a view for nearly every scored pair
+    assert np.median(shown) >= NOVEL_PSNR_MEDIAN_MIN, psnr
+    assert np.all(shown > raw), psnr  # un-dimming the translucent subject helps every view
