@@ -45,22 +45,13 @@ def psnr(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
     return float(np.ravel(masked_psnr(np.clip(pred, 0, 1)[None], truth[None], mask[None]).per_image)[0])
 
 
-def render_views(model, scene: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A checkpoint's colour ``(V, H, W, 3)``, depth and accumulated opacity ``(V, H, W)`` at every view."""
-    import torch
-
-    from training.evaluate import _cams
-
+def render_views(renderer, scene: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A ``training.evaluate.TorchRenderer``'s colour ``(V, H, W, 3)``, depth and accumulated opacity
+    ``(V, H, W)`` at every view of ``scene``."""
     V = len(scene["tgt_is_source"])
-    H, W = model.config.height, model.config.width
-    d = {k: torch.from_numpy(np.asarray(v)) for k, v in _cams(scene, np.arange(V), ray_grid(H, W, 1)).items()}
-    with torch.no_grad():
-        enc = model.encode(d["images"])
-        vols = model.volumes(enc, d["src_P"], d["tgt_K_inv"], d["tgt_c2w"], d["near_far"])
-        o = model.render(len(vols) - 1, enc, vols[-1]["volume"], vols[-1]["stats"], d["src_P"], d["tgt_K_inv"],
-                         d["tgt_c2w"], d["ray_uv"], src_centers=d["src_centers"], heat=False)
-    return (o["rgb"].numpy().reshape(V, H, W, 3), o["depth"].numpy().reshape(V, H, W),
-            o["acc"].numpy().reshape(V, H, W))
+    H, W = renderer.height, renderer.width
+    o = renderer.render(scene, np.arange(V), ray_grid(H, W, 1), heat=False)
+    return o["rgb"].reshape(V, H, W, 3), o["depth"].reshape(V, H, W), o["acc"].reshape(V, H, W)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -79,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from training.data.torch_dataset import MultiViewDataset
-    from training.evaluate import source_angles_deg
+    from training.evaluate import TorchRenderer, source_angles_deg
     from training.train import load_model
 
     torch.set_num_threads(args.threads)
@@ -87,8 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     for spec in args.model:
         name, _, path = spec.rpartition("=")
         model, _ = load_model(Path(path))
-        models.append((name or Path(path).parent.name, model.eval()))
-    background = models[0][1].config.background if models else 0.0
+        models.append((name or Path(path).parent.name, TorchRenderer(model)))
+    background = models[0][1].background if models else 0.0
     ds = MultiViewDataset(args.data, split=args.split)
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     rows: list[dict] = []

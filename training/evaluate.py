@@ -111,25 +111,29 @@ class TorchRenderer:
         self.chunk = chunk
 
     @torch.no_grad()
-    def _render(self, scene, targets, ray_uv, heat: bool) -> Tensor:
+    def render(self, scene, targets, ray_uv, heat: bool) -> dict[str, np.ndarray]:
+        """Rays ``ray_uv`` of ``targets`` at the last level, in chunks: ``heatmaps`` (``heat``) or ``rgb``,
+        and ``depth``, ``acc`` (numpy, ``(T, R, ...)``)."""
         d = {k: torch.from_numpy(np.asarray(v)).to(self.device) for k, v in _cams(scene, targets, ray_uv).items()}
         m = self.model
         enc = m.encode(d["images"])
         vols = m.volumes(enc, d["src_P"], d["tgt_K_inv"], d["tgt_c2w"], d["near_far"])
         v, lvl = vols[-1], len(vols) - 1
-        outs = []
+        keys = ("heatmaps" if heat else "rgb", "depth", "acc")
+        outs: dict[str, list[Tensor]] = {k: [] for k in keys}
         for i in range(0, d["ray_uv"].shape[1], self.chunk):
             o = m.render(lvl, enc, v["volume"], v["stats"], d["src_P"], d["tgt_K_inv"], d["tgt_c2w"],
                          d["ray_uv"][:, i:i + self.chunk], src_centers=None if heat else d["src_centers"],
                          heat=heat)
-            outs.append(o["heatmaps"] if heat else o["rgb"])
-        return torch.cat(outs, 1).cpu()
+            for k in keys:
+                outs[k].append(o[k])
+        return {k: torch.cat(v, 1).cpu().numpy() for k, v in outs.items()}
 
     def heatmaps(self, scene, targets, ray_uv):
-        return self._render(scene, targets, ray_uv, heat=True).numpy()
+        return self.render(scene, targets, ray_uv, heat=True)["heatmaps"]
 
     def colour(self, scene, targets, ray_uv):
-        return self._render(scene, targets, ray_uv, heat=False).numpy()
+        return self.render(scene, targets, ray_uv, heat=False)["rgb"]
 
     @torch.no_grad()
     def encoder_heatmaps(self, scene):

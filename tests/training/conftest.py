@@ -15,6 +15,16 @@ def _two_threads():
     yield
 
 
+@pytest.fixture(scope="module", params=["batch", "scene"])
+def tiny_each_norm(request):
+    """The tiny preset with its image feature network normalised by BatchNorm, then by scene statistics."""
+    from training.configs import preset
+
+    cfg = preset("tiny")
+    cfg.features.norm = request.param
+    return cfg
+
+
 @pytest.fixture(scope="session")
 def data64(tmp_path_factory):
     """A 64 px synthetic dataset (3 train, 2 val scenes): the ``tiny`` preset's resolution."""

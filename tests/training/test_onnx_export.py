@@ -9,7 +9,6 @@ onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")
 
 from ghnerf_runtime.contract import GRAPH_NAMES, ModelContract  # noqa: E402
-from training.configs import preset  # noqa: E402
 from training.export.export import example_inputs, export_all  # noqa: E402
 from training.export.parity import make_session, torch_vs_ort  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
@@ -17,17 +16,10 @@ from training.model import GHNeRF  # noqa: E402
 FORBIDDEN_OPS = {"Inverse", "Det", "NonZero", "Loop", "If", "Scan", "SequenceConstruct"}
 
 
-def tiny_with(norm: str):
-    """The tiny preset with its image feature network normalised by ``norm`` (BatchNorm or scene statistics)."""
-    cfg = preset("tiny")
-    cfg.features.norm = norm
-    return cfg
-
-
-@pytest.fixture(scope="module", params=["batch", "scene"])
-def exported(tmp_path_factory, request):
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory, tiny_each_norm):
     torch.manual_seed(0)
-    model = GHNeRF(tiny_with(request.param)).eval()
+    model = GHNeRF(tiny_each_norm).eval()
     out = tmp_path_factory.mktemp("onnx")
     paths = export_all(model, out, inputs=example_inputs(model, targets=2))
     return model, paths

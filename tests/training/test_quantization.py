@@ -10,7 +10,6 @@ onnx = pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
 from ghnerf_runtime.contract import ModelContract  # noqa: E402
-from training.configs import preset  # noqa: E402
 from training.export.export import example_inputs, export_all  # noqa: E402
 from training.export.parity import int8_vs_fp32  # noqa: E402
 from training.export.quantize import calibration_feeds, quantize_all  # noqa: E402
@@ -19,17 +18,10 @@ from training.model import GHNeRF  # noqa: E402
 GRAPHS = ("encoder", "volume", "render_heat", "render_rgb")
 
 
-def tiny_with(norm: str):
-    """The tiny preset with its image feature network normalised by ``norm`` (BatchNorm or scene statistics)."""
-    cfg = preset("tiny")
-    cfg.features.norm = norm
-    return cfg
-
-
-@pytest.fixture(scope="module", params=["batch", "scene"])
-def quantized(tmp_path_factory, request):
+@pytest.fixture(scope="module")
+def quantized(tmp_path_factory, tiny_each_norm):
     torch.manual_seed(0)
-    model = GHNeRF(tiny_with(request.param)).eval()
+    model = GHNeRF(tiny_each_norm).eval()
     out = tmp_path_factory.mktemp("q")
     fp32 = export_all(model, out, graphs=GRAPHS, inputs=example_inputs(model))
     g = torch.Generator().manual_seed(5)
