@@ -18,6 +18,9 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
 
 ``--variants baseline`` takes one variant through its stages now (e.g. while the other still trains).
 
+``--recipe cpu|gpu`` (default ``auto``: ``gpu`` where torch sees one) picks the presets' overrides sized for
+the machine (``RECIPES``); ``--set`` / ``--pretrain-set`` come after them and win.
+
 ``--quick``: a smoke test (a few scenes, a few iterations, a few eval scenes) into the same layout.
 """
 from __future__ import annotations
@@ -53,6 +56,42 @@ PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "eval_
 EVAL_RUNTIMES = {"ghnerf": ("torch", "fp32", "int8"), "baseline": ("fp32", "int8")}
 
 
+@dataclass(frozen=True)
+class Recipe:
+    """A named training recipe: overrides of the presets sized for one kind of machine."""
+
+    about: str
+    train_overrides: tuple[str, ...] = ()
+    pretrain_overrides: tuple[str, ...] = ()
+    loader_workers: int = 0
+    """Pretraining batch-making processes (speed only), at most the machine's cores less four."""
+    workers: int = 0
+    """Dataset generation processes (speed only; 0: the pipeline's default), at most the machine's cores."""
+
+
+#: ``--recipe``. ``cpu`` is what two cores train in about two hours; ``gpu`` is the shipped (tenth) model's,
+#: about 17 minutes on one H100: the human encoder's trunk at 128x128 instead of 64x64 and 27000
+#: pretraining steps of 4 scenes instead of 24000 of 2 (docs/training.md, "The tenth model").
+RECIPES = {
+    "cpu": Recipe("two CPU cores, ~1.5-2 h: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes"),
+    "gpu": Recipe("one GPU, ~17 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes",
+                  train_overrides=("model.human.input_scale=1.0",),
+                  pretrain_overrides=("iterations=27000", "lr_decay_every=4500", "scenes_per_step=4"),
+                  loader_workers=12, workers=16),
+}
+
+
+def resolve_recipe(name: str) -> str:
+    """``auto``: ``gpu`` where torch sees a CUDA device, else ``cpu``."""
+    if name != "auto":
+        if name not in RECIPES:
+            raise ValueError(f"--recipe: unknown {name!r}; recipes: auto, {', '.join(RECIPES)}")
+        return name
+    import torch
+
+    return "gpu" if torch.cuda.is_available() else "cpu"
+
+
 @dataclass
 class PipelineConfig:
     out: Path
@@ -84,6 +123,21 @@ class PipelineConfig:
     train_overrides: list[str] = field(default_factory=list)
     pretrain_overrides: list[str] = field(default_factory=list)
     command: str = ""
+    recipe: str = "cpu"
+    """The ``RECIPES`` entry whose overrides ``apply_recipe`` put before the command line's."""
+
+    def apply_recipe(self, name: str, cores: int | None = None) -> None:
+        """Put recipe ``name``'s overrides before the ``--set`` / ``--pretrain-set`` ones (which win) and
+        take its worker counts, capped by ``cores`` (default: this machine's)."""
+        r = RECIPES[name]
+        cores = cores or os.cpu_count() or 1
+        self.recipe = name
+        loaders = min(r.loader_workers, max(0, cores - 4))
+        self.train_overrides = [*r.train_overrides, *self.train_overrides]
+        self.pretrain_overrides = [*r.pretrain_overrides, *([f"loader_workers={loaders}"] if loaders else []),
+                                   *self.pretrain_overrides]
+        if r.workers:
+            self.workers = max(1, min(r.workers, cores))
 
     @classmethod
     def quick_defaults(cls, out: Path) -> "PipelineConfig":
@@ -360,7 +414,18 @@ def stage_pretrain(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]
 
 
 def _result_keys(tc: dict) -> dict:
-    return {k: v for k, v in tc.items() if k not in RUNTIME_KEYS}
+    """The parts of a train config that shape the trained weights. A baseline has no human encoder, so its
+    ``model.human`` overrides are dropped: a recipe that changes only the encoder reuses the baseline run."""
+    out = {k: v for k, v in tc.items() if k not in RUNTIME_KEYS}
+    if "human" in (out.get("model") or {}) and not _uses_human_encoder(tc):
+        out["model"] = {k: v for k, v in out["model"].items() if k != "human"}
+    return out
+
+
+def _uses_human_encoder(tc: dict) -> bool:
+    from training.train import build_config
+
+    return bool(build_config(json.loads(json.dumps(tc))).model_config().use_human_encoder)
 
 
 def _run_config(path: Path) -> dict:
@@ -688,9 +753,9 @@ def _recipe_args(argv: list[str]) -> list[str]:
     for a in argv:
         if skip:
             skip = False
-        elif a in ("--force", "--variants", "--until", "--workers"):
+        elif a in ("--force", "--variants", "--until", "--workers", "--recipe"):
             skip = True
-        elif not a.startswith(("--force=", "--variants=", "--until=", "--workers=")):
+        elif not a.startswith(("--force=", "--variants=", "--until=", "--workers=", "--recipe=")):
             out.append(a)
     return out
 
@@ -726,6 +791,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--freestyle-share", type=float, default=None,
                     help="share of train scenes moving 'freestyle' (default: PipelineConfig's, a half; another "
                          "value makes another dataset: pass a new --data folder)")
+    ap.add_argument("--recipe", default="auto", choices=("auto", *RECIPES),
+                    help="training recipe: " + "; ".join(f"{k}: {r.about}" for k, r in RECIPES.items())
+                         + "; auto (default): gpu where torch sees one, else cpu. Ignored with --quick")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     out = Path(args.out)
@@ -757,7 +825,15 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--variants: unknown {bad}; variants: {list(VARIANTS)}")
     cfg.train_overrides = [*cfg.train_overrides, *args.set]
     cfg.pretrain_overrides = [*cfg.pretrain_overrides, *args.pretrain_set]
-    cfg.command = shlex.join(["python", "-m", "training.pipeline", *_recipe_args(argv if argv is not None else sys.argv[1:])])
+    recipe_flag: list[str] = []
+    if not args.quick:
+        cfg.apply_recipe(resolve_recipe(args.recipe))
+        if args.workers is not None:  # --workers wins over the recipe's
+            cfg.workers = args.workers
+        recipe_flag = ["--recipe", cfg.recipe]  # resolved: the card names what was trained, not "auto"
+        log.info("recipe %s: %s", cfg.recipe, RECIPES[cfg.recipe].about)
+    cfg.command = shlex.join(["python", "-m", "training.pipeline",
+                              *_recipe_args(argv if argv is not None else sys.argv[1:]), *recipe_flag])
     try:
         card = run(cfg)
     except (RuntimeError, subprocess.CalledProcessError) as e:

@@ -20,21 +20,20 @@ MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, mode
 #: its default 3D method, by ``ghnerf-bench runtime --sequences 4 --frames 10 --warmup 0 --precisions auto
 #: --modes keypoints --heatmap-sources rendered,encoder``; the thresholds add margins (pairs are few: 40).
 #: Set a value to None to check sanity only. Re-measure when models/ changes.
-MEASURED_ON = ("models/ of 2026-11-22, session 14 (the ninth, what `make model` makes with the scene-normalised "
-               "image features: 5000 train scenes, half in freestyle; human encoder pretrained 24000 steps on 2D "
-               "heatmaps, then frozen; 10000 joint steps; ghnerf-eval PCK@0.2 0.892 rendered / 0.914 encoder "
-               "heatmaps on 256 val scenes, int8)")
-#: measured: rendered/depth_centroid PCK@0.2 0.898, MPJPE 166 mm, 99 % of 3D joints found (presence gate 0.4;
+MEASURED_ON = ("models/ of 2026-11-22, session 15 (the tenth, `--recipe gpu`: the ninth's recipe with the human "
+               "encoder's trunk at 128x128, pretrained 27000 steps of 4 scenes on an H100; 10000 joint steps; "
+               "ghnerf-eval PCK@0.2 0.944 rendered / 0.968 encoder heatmaps on 256 val scenes, int8)")
+#: measured: rendered/depth_centroid PCK@0.2 0.906, MPJPE 158 mm, 97 % of 3D joints found (presence gate 0.4;
 #:           tracking.follow_encoder, the default);
-#:           encoder/triangulate    PCK@0.2 0.886, MPJPE 118 mm, 66 % found (presence gate 0.35; this model
+#:           encoder/triangulate    PCK@0.2 0.923, MPJPE 97 mm, 59 % found (presence gate 0.35; this model
 #:           leaves a joint hidden in one view undecoded there, as its training targets do: docs/runtime.md).
-#:           encoder with the flip test (--flip-tests off,on): PCK@0.2 0.909, MPJPE 110 mm, 67 % found; it is
+#:           encoder with the flip test (--flip-tests off,on): PCK@0.2 0.928, MPJPE 94 mm, 60 % found; it is
 #:           held to the encoder's thresholds.
-#: (the seventh model: rendered 0.791 / 223 mm / 99 %, encoder 0.906 / 139 mm / 68 %, flip test 0.916 / 116 mm;
-#:  the sixth: rendered 0.735 / 234 mm / 99 %, encoder 0.896 / 120 mm / 66 %, flip test 0.900 / 116 mm.)
+#: (the ninth model, `make model` on two cores: rendered 0.898 / 166 mm / 99 %, encoder 0.886 / 118 mm / 66 %,
+#:  flip test 0.909 / 110 mm; the seventh: rendered 0.791 / 223 mm / 99 %, encoder 0.906 / 139 mm / 68 %.)
 THRESHOLDS = {
-    "rendered": {"pck@0.2_min": 0.83, "mpjpe_mm_max": 225.0, "found_3d_min": 0.90},
-    "encoder": {"pck@0.2_min": 0.84, "mpjpe_mm_max": 175.0, "found_3d_min": 0.58},
+    "rendered": {"pck@0.2_min": 0.86, "mpjpe_mm_max": 195.0, "found_3d_min": 0.90},
+    "encoder": {"pck@0.2_min": 0.88, "mpjpe_mm_max": 125.0, "found_3d_min": 0.52},
 }
 METHODS = {"rendered": "depth_centroid", "encoder": "triangulate"}
 SEQUENCES, FRAMES = 4, 10
@@ -164,7 +163,9 @@ def test_shipped_model_through_a_camera_dropout():
             pair[1] = np.zeros_like(pair[1])
         r = est.estimate(pair, sequence=i)
         if i in dark:
-            assert r.missing.all() and r.missing_2d[names[1]].all() and (~r.missing_2d[names[0]]).sum() >= 15, i
+            # view 0 keeps its 2D joints: at least those the truth marks visible there (11 of 25 here)
+            seen = int(seq.visible[i, 0].sum())
+            assert r.missing.all() and r.missing_2d[names[1]].all() and (~r.missing_2d[names[0]]).sum() >= seen, i
             assert est.tracker.view_track is not None and est.tracker.track is None
         else:
             assert r.num_found >= 10 and all(r.frame_ok.values()), i
@@ -172,9 +173,9 @@ def test_shipped_model_through_a_camera_dropout():
 
 
 #: The device's novel view at the first rig camera's viewpoint, pairs 4 and 9 of this file's sequences, masked
-#: PSNR against the simulator's picture (benchmarks/measure_novel_quality.py's measure): median 24.7 dB with the
-#: runtime's default ``novel_view.opaque_at`` (0.5), 22.5 dB raw (1.0), on MEASURED_ON's model; the seventh
-#: model, whose image features were normalised differently in training and at inference, scored about 16.
+#: PSNR against the simulator's picture (benchmarks/measure_novel_quality.py's measure): median 24.2 dB with the
+#: runtime's default ``novel_view.opaque_at`` (0.5), 21.9 dB raw (1.0), on MEASURED_ON's model (the ninth: 24.7);
+#: the seventh model, whose image features were normalised differently in training and at inference, scored about 16.
 NOVEL_PSNR_MEDIAN_MIN = 22.5
 
 

@@ -144,6 +144,34 @@ def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_
     assert asdict(other) != asdict(preset("edge128_baseline"))
 
 
+def test_human_encoder_overrides_leave_the_baseline_run_reusable(tmp_path):
+    """``--set model.human.*`` changes the model's run but not the baseline's, which has no human encoder:
+    a recipe that changes only the encoder reuses a finished baseline; any other override does not."""
+    import pytest
+
+    torch = pytest.importorskip("torch")
+    from training.configs import preset
+    from training.pipeline import PipelineConfig, _result_keys, _run_finished, train_inputs
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    run = cfg.runs / "edge128_baseline"
+    run.mkdir(parents=True)
+    tc = train_inputs(cfg, "edge128_baseline")
+    (run / "config.json").write_text(json.dumps(tc))
+    (run / "summary.json").write_text(json.dumps({"steps": tc["iterations"], "stopped_early": False}))
+    torch.save({"model_config": preset("edge128_baseline").to_dict()}, run / "last.pt")
+    assert _run_finished(cfg, "baseline")
+
+    scaled = PipelineConfig(out=cfg.out, runs=cfg.runs, data=cfg.data, train_overrides=["model.human.input_scale=1.0"])
+    assert train_inputs(scaled, "edge128_baseline")["model"] == {"human": {"input_scale": 1.0}}
+    assert _run_finished(scaled, "baseline")
+    # The model's own run does change with it.
+    assert _result_keys(train_inputs(scaled, "edge128")) != _result_keys(train_inputs(cfg, "edge128"))
+    for other in ("iterations=20", "model.features.norm=\"batch\""):
+        changed = PipelineConfig(out=cfg.out, runs=cfg.runs, data=cfg.data, train_overrides=[other])
+        assert not _run_finished(changed, "baseline"), other
+
+
 def test_a_pretrain_block_adds_a_stage_and_points_the_joint_run_at_its_encoder(tmp_path):
     """A ``pretrain_human`` block (in the train config or a ``--set`` override): the pipeline pretrains into
     ``runs/<preset>_human`` with the block's settings and the joint run loads that ``human.pt``."""
@@ -278,6 +306,53 @@ def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monk
         pipeline.main(["--out", str(tmp_path / "m"), "--workers", "0"])
     with pytest.raises(SystemExit):
         pipeline.main(["--out", str(tmp_path / "m"), "--train", "0"])
+
+
+def test_a_recipe_puts_its_overrides_first_and_the_card_names_it(tmp_path, monkeypatch):
+    """``--recipe gpu`` trains the shipped model's settings (``--set`` / ``--pretrain-set`` still win);
+    ``auto`` picks it where torch sees a GPU; the card's command names the recipe that ran, never "auto"."""
+    import torch
+
+    import training.pipeline as pipeline
+
+    seen = []
+    monkeypatch.setattr(pipeline, "run", lambda cfg: seen.append(cfg))
+    out = ["--out", str(tmp_path / "m"), "--data", str(tmp_path / "d")]
+    pipeline.main([*out, "--recipe", "gpu", "--pretrain-set", "iterations=5"])
+    cfg = seen[-1]
+    assert cfg.recipe == "gpu" and cfg.command.endswith("--recipe gpu")
+    assert cfg.train_overrides[0] == "model.human.input_scale=1.0"
+    assert cfg.pretrain_overrides[0] == "iterations=27000" and cfg.pretrain_overrides[-1] == "iterations=5"
+    tc = pipeline.train_inputs(cfg, "edge128")
+    assert tc["model"]["human"]["input_scale"] == 1.0
+    assert (tc["pretrain_human"]["iterations"], tc["pretrain_human"]["scenes_per_step"]) == (5, 4)
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    pipeline.main(out)
+    assert seen[-1].recipe == "gpu" and "auto" not in seen[-1].command
+    pipeline.main([*out, "--recipe", "gpu", "--workers", "3"])  # --workers wins over the recipe's
+    assert seen[-1].workers == 3 and seen[-1].command == seen[-2].command
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    pipeline.main(out)
+    assert seen[-1].recipe == "cpu" and seen[-1].train_overrides == [] and seen[-1].command.endswith("--recipe cpu")
+    pipeline.main([*out, "--quick"])  # a smoke test keeps its own tiny settings
+    assert "model.human.input_scale=1.0" not in seen[-1].train_overrides and "--recipe" not in seen[-1].command
+
+    # Worker counts follow the machine: speed only, never the result.
+    small, big = PipelineConfig(out=tmp_path), PipelineConfig(out=tmp_path)
+    small.apply_recipe("gpu", cores=2)
+    big.apply_recipe("gpu", cores=16)
+    assert (small.workers, big.workers) == (2, 16)
+    assert not any(o.startswith("loader_workers") for o in small.pretrain_overrides)
+    assert "loader_workers=12" in big.pretrain_overrides
+
+    def result(c):
+        full = pipeline.pretrain_inputs(c, "ghnerf")
+        return {k: v for k, v in full.items() if k not in pipeline.PRETRAIN_RUNTIME_KEYS}
+
+    assert result(small) == result(big)
+    with pytest.raises(ValueError, match="unknown 'tpu'"):
+        pipeline.resolve_recipe("tpu")
 
 
 def test_until_stops_after_the_named_stages(tmp_path, monkeypatch):
