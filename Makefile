@@ -34,13 +34,14 @@ demo: $(RUNTIME_STAMP)
 test: $(DEV_STAMP)
 	$(PY) -m pytest -q
 
-# Regenerate the shipped models from scratch (dataset, the human encoder's pretraining, training of
-# the model and the baseline, ONNX export, int8 quantization, held-out evaluation, model card):
-# 2 h 13 min measured end to end on 2 cores, ~2.1 h on a quiet machine, 56 min on a faster 2-core host
-# (docs/training.md, "Lanes"; a GPU recipe that trains in ~13 min: "On a GPU machine";
-# `--pretrain-set iterations=12000` for ~1.5 h).
+# Regenerate the models from scratch (dataset, the human encoder's pretraining, training of the model
+# and the baseline, ONNX export, int8 quantization, held-out evaluation, model card). The recipe follows
+# the machine (`--recipe auto`): where torch sees a GPU, the shipped (tenth) model's, ~25 min of one H100;
+# on CPU the two-core recipe (the ninth model's), 1.4-2.2 h measured on 2-core hosts (docs/training.md,
+# "The tenth model" and "`make model`"). RECIPE=cpu or RECIPE=gpu picks one.
+RECIPE ?= auto
 model: $(DEV_STAMP)
-	$(PY) -m training.pipeline --out models/
+	$(PY) -m training.pipeline --out models/ --recipe $(RECIPE)
 
 bench: $(DEV_STAMP)
 	$(PY) benchmarks/bench_sim_render.py
