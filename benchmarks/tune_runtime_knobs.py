@@ -47,7 +47,10 @@ VARIANTS: dict[str, dict] = {
     "joints3d.max_reprojection_px 4": {"joints3d": {"max_reprojection_px": 4.0}},
     "joints3d.max_reprojection_px 5": {"joints3d": {"max_reprojection_px": 5.0}},
     "joints3d.max_reprojection_px 9": {"joints3d": {"max_reprojection_px": 9.0}},
+    "roi.joint_margin_frac 0.05": {"roi": {"joint_margin_frac": 0.05}},
+    "roi.joint_margin_frac 0.075": {"roi": {"joint_margin_frac": 0.075}},
     "roi.joint_margin_frac 0.1": {"roi": {"joint_margin_frac": 0.1}},
+    "roi.joint_margin_frac 0.125": {"roi": {"joint_margin_frac": 0.125}},
     "roi.joint_margin_frac 0.25": {"roi": {"joint_margin_frac": 0.25}},
 }
 

@@ -144,7 +144,9 @@ class RoiConfig:
             (training used 0).
         joint_margin_frac: tracked ROI: the joints' box grows by this fraction of its longer side
             on every side (training drew 0.10-0.35; with ``keep_frac`` the crop in use is often
-            larger; 0.15 measured best of 0.15 / 0.2 / 0.25 on the trained model, docs/runtime.md).
+            larger). 0.125 since the tenth model, whose finer trunk gains from the larger body in the
+            crop: best of 0.05-0.25 on the tuning sequences (0.15 for the seventh; docs/runtime.md,
+            "Re-tuning the decoder and the gates").
         min_size_px: smallest tracked ROI side, full-image pixels (training: 64).
         snap_px: tracked ROI corners and size are rounded to multiples of this (pixels), so a
             slowly moving subject reuses cached remap tables (measured on held-out sequences:
@@ -157,7 +159,7 @@ class RoiConfig:
     """
 
     volume_margin_m: float = 0.0
-    joint_margin_frac: float = 0.15
+    joint_margin_frac: float = 0.125
     min_size_px: int = 64
     snap_px: int = 8
     keep_frac: float = 0.2

@@ -105,6 +105,9 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append("## How it was made")
     L.append("")
     L.append(f"- Command: `{card.get('command', '')}`")
+    if card.get("recipe"):
+        L.append(f"- Recipe: `{card['recipe']}` (`training.pipeline.RECIPES`; `make model` on another machine may "
+                 "pick the other one: docs/training.md)")
     L.append(f"- Created: {card.get('created', '')}")
     hw = card.get("hardware", {})
     L.append("- Hardware (this run of the pipeline; the training table says where each model trained): "

@@ -658,6 +658,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
                     "human encoder (ENeRF + heatmap). Trained from scratch on synthetic data."),
         "quick": cfg.quick,
         "command": cfg.command,
+        "recipe": None if cfg.quick else cfg.recipe,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "hardware": hardware(),
         "wall_time_s": {name: (st.stamp(name) or {}).get("wall_s") for name in STAGES if name != "card"},
@@ -680,8 +681,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
             "The human encoder carries a training-time 2D heatmap head (dense auxiliary loss on both source "
             "views); it is exported as the encoder's `encoder_heatmaps` output, scored above, and usable by the "
             "runtime instead of the rendered heatmaps (faster: no volume or rendering for keypoints).",
-            "A 2-core CPU training budget (tens of minutes, not GHNeRF's 200k GPU iterations): expect far lower "
-            "accuracy than the paper.",
+            _budget_note(cfg),
         ],
         "stage_inputs": {"data": (data_s or {}).get("inputs")},
     }
@@ -693,6 +693,12 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
                                                        training[f"{v}_human_pretraining"].get("wall_s") or 0)
     j, m = write_card(cfg.out, card)
     return [j, m], {}
+
+
+def _budget_note(cfg: PipelineConfig) -> str:
+    where = "a smoke test's few steps" if cfg.quick else f"the `{cfg.recipe}` recipe: {RECIPES[cfg.recipe].about}"
+    return (f"A small training budget ({where}; not GHNeRF's 200k GPU iterations): expect lower accuracy than "
+            "the paper.")
 
 
 def run(cfg: PipelineConfig) -> dict | None:

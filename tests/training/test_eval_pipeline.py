@@ -78,6 +78,8 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 61.2 / 40.0 (62 %) | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
     assert "| 2 (12000 steps), then 1 (12000 steps) | 106.5 min |" in md  # a resumed run: both invocations
+    assert "Recipe:" not in md  # a smoke test has none
+    assert "- Recipe: `gpu`" in render_markdown({**card, "recipe": "gpu"})
     assert "| NVIDIA H100 80GB HBM3 | 30.0 min |" in md  # trained on a GPU machine, not the card's hardware
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
     # plain and flip-tested encoder; the gated MPJPE only where the metrics have it (older cards: n/a)
