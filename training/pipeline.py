@@ -701,11 +701,31 @@ def _budget_note(cfg: PipelineConfig) -> str:
             "the paper.")
 
 
+def _warn_if_replacing_another_recipe(cfg: PipelineConfig) -> str | None:
+    """A folder whose card names another recipe (``make model`` on two cores over the shipped ``gpu`` model)
+    is about to be replaced by a model of this one: say so before hours of training, not after."""
+    card = cfg.out / "model_card.json"
+    if cfg.quick or not card.exists():
+        return None
+    try:
+        old = json.loads(card.read_text()).get("recipe")
+    except (OSError, ValueError):
+        return None
+    if not old or old == cfg.recipe:
+        return None
+    msg = (f"{cfg.out} holds a model of the {old!r} recipe; this run makes the {cfg.recipe!r} recipe "
+           f"({RECIPES[cfg.recipe].about}) and replaces it at the export stage. Pass --recipe {old} to remake "
+           "that one, or another --out to keep it (docs/training.md, `make model`)")
+    log.warning("%s", msg)
+    return msg
+
+
 def run(cfg: PipelineConfig) -> dict | None:
     """Run the stages of ``cfg.variants``; the card when every variant is evaluated (else None)."""
     import torch
 
     torch.set_num_threads(cfg.threads)
+    _warn_if_replacing_another_recipe(cfg)
     cfg.out.mkdir(parents=True, exist_ok=True)
     st = Stages(cfg.out, cfg.force)
     data_in = {"data": str(cfg.data), "res": cfg.res, "train": cfg.train, "val": cfg.val,

@@ -357,6 +357,22 @@ def test_a_recipe_puts_its_overrides_first_and_the_card_names_it(tmp_path, monke
         pipeline.resolve_recipe("tpu")
 
 
+def test_a_run_of_another_recipe_over_a_model_folder_says_it_will_replace_it(tmp_path):
+    from training.pipeline import _warn_if_replacing_another_recipe
+
+    cfg = PipelineConfig(out=tmp_path / "models")
+    cfg.apply_recipe("cpu", cores=2)
+    assert _warn_if_replacing_another_recipe(cfg) is None  # nothing there yet
+    cfg.out.mkdir()
+    (cfg.out / "model_card.json").write_text(json.dumps({"recipe": "gpu"}))
+    msg = _warn_if_replacing_another_recipe(cfg)
+    assert msg and "'gpu' recipe" in msg and "--recipe gpu" in msg and str(cfg.out) in msg
+    cfg.recipe = "gpu"
+    assert _warn_if_replacing_another_recipe(cfg) is None
+    (cfg.out / "model_card.json").write_text("{not json")  # a broken card is the card stage's to redo
+    assert _warn_if_replacing_another_recipe(cfg) is None
+
+
 def test_until_stops_after_the_named_stages(tmp_path, monkeypatch):
     """``--until train`` runs data, pretraining and training, and neither export nor the card."""
     import training.pipeline as pipeline
