@@ -73,7 +73,7 @@ class Recipe:
 #: about 25 minutes on one H100: the human encoder's trunk at 128x128 instead of 64x64 and 27000
 #: pretraining steps of 4 scenes instead of 24000 of 2 (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, ~1.5-2 h: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes"),
+    "cpu": Recipe("two CPU cores, 1.4-2.2 h measured: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes"),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes",
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=27000", "lr_decay_every=4500", "scenes_per_step=4"),
