@@ -52,6 +52,14 @@ VARIANTS: dict[str, dict] = {
     "roi.joint_margin_frac 0.1": {"roi": {"joint_margin_frac": 0.1}},
     "roi.joint_margin_frac 0.125": {"roi": {"joint_margin_frac": 0.125}},
     "roi.joint_margin_frac 0.25": {"roi": {"joint_margin_frac": 0.25}},
+    # the skeleton prior (a model folder with skeleton_prior.onnx): off, and its expected-error gate
+    "joints3d.skeleton_prior off": {"joints3d": {"skeleton_prior": "off"}},
+    "joints3d.max_prior_error_m 0.05": {"joints3d": {"max_prior_error_m": 0.05}},
+    "joints3d.max_prior_error_m 0.075": {"joints3d": {"max_prior_error_m": 0.075}},
+    "joints3d.max_prior_error_m 0.1": {"joints3d": {"max_prior_error_m": 0.1}},
+    "joints3d.max_prior_error_m 0.15": {"joints3d": {"max_prior_error_m": 0.15}},
+    "joints3d.max_prior_error_m 0.2": {"joints3d": {"max_prior_error_m": 0.2}},
+    "joints3d.max_prior_error_m 10": {"joints3d": {"max_prior_error_m": 10.0}},
 }
 
 

@@ -33,7 +33,8 @@ from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
-    "PRECISIONS", "THREE_D_METHODS", "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
+    "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES",
+    "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
     "PresenceConfig", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict", "load_config",
 ]
@@ -42,6 +43,8 @@ __all__ = [
 PRECISIONS = ("fp32", "int8", "auto")
 #: 3D joint methods of :class:`Joints3DConfig`.
 THREE_D_METHODS = ("triangulate", "volumetric", "depth_centroid")
+#: :attr:`Joints3DConfig.skeleton_prior` choices.
+SKELETON_PRIOR_MODES = ("auto", "on", "off")
 
 
 # ------------------------------------------------------------------ checks
@@ -303,6 +306,13 @@ class Joints3DConfig:
         centroid_radius_cells: depth centroid: window half-width around the peak (heatmap cells).
         surface_offset_m: depth centroid: metres added along the ray behind the rendered surface
             (joints lie inside the body).
+        skeleton_prior: triangulation: refine the triangulated joints and place the hidden ones
+            with the learnt skeleton prior (``skeleton_prior.onnx`` in the model folder,
+            :mod:`ghnerf_runtime.skeleton_prior`): ``"auto"`` when the model folder has one,
+            ``"on"`` (a folder without one is an error) or ``"off"``. It replaces
+            ``single_view_fallback``.
+        max_prior_error_m: skeleton prior: a joint whose expected error (the prior's own
+            estimate) exceeds this is missing (docs/runtime.md, "The skeleton prior").
     """
 
     method: str = "triangulate"
@@ -314,9 +324,13 @@ class Joints3DConfig:
     min_volumetric_response: float = 0.1
     centroid_radius_cells: int = 2
     surface_offset_m: float = 0.03
+    skeleton_prior: str = "auto"
+    max_prior_error_m: float = 0.05
 
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)
+        _choice(self, "skeleton_prior", SKELETON_PRIOR_MODES)
+        _number(self, "max_prior_error_m", 0.0, 100.0, lo_open=True)
         _boolean(self, "single_view_fallback")
         _number(self, "max_reprojection_px", 0.0, 1000.0, lo_open=True)
         _number(self, "min_view_confidence", 0.0, 1.0)

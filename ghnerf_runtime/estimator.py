@@ -63,6 +63,10 @@ from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES"]
 
 #: Stage keys of the keypoint path, in order.
+#: Skeleton prior: confidence = exp(-expected error / this).
+_PRIOR_CONFIDENCE_SCALE_M = 0.1
+#: Skeleton prior: the crop follows the prior's joints expected within this (m), whatever is reported.
+_PRIOR_FOLLOW_MAX_ERROR_M = 0.25
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_heat", "decode_2d", "joints_3d")
 #: Stage keys of the novel view.
 NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
@@ -236,6 +240,8 @@ class Estimator:
             if self.contract.strides.get("human_feat") != self.contract.heatmap_stride:
                 raise ModelError(f"encoder heatmaps at stride {self.contract.strides.get('human_feat')} do not match "
                                  f"the heatmap grid's stride {self.contract.heatmap_stride}")
+        self.skeleton_prior = self._prior_of(session)
+        self._prior_follow: Joints3D | None = None
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi)
         self._cams = [_CameraState(c) for c in rig.pair]
         self._levels = _levels_per_unit(self.contract.normalisation)
@@ -249,6 +255,16 @@ class Estimator:
         # 2D joints of the good camera when the other's frame fails the check (needs encoder heatmaps)
         self._single_view_2d = self.config.frame_check.single_view_2d and bool(
             getattr(self.contract, "encoder_heatmaps", False))
+
+    def _prior_of(self, session: Any):
+        """The session's skeleton prior when the configuration uses it (``joints3d.skeleton_prior``)."""
+        cfg = self.config.joints3d
+        prior = getattr(session, "skeleton_prior", None)
+        if cfg.skeleton_prior == "on" and prior is None:
+            raise ModelError("joints3d.skeleton_prior = 'on' but the session has no skeleton prior (the model folder "
+                             "has no skeleton_prior.onnx; make one with python -m training.skeleton_prior, or set "
+                             "joints3d.skeleton_prior = 'auto' or 'off')")
+        return prior if cfg.skeleton_prior != "off" and cfg.method == "triangulate" else None
 
     @classmethod
     def from_config(cls, rig: Rig, config: EstimatorConfig | None = None) -> "Estimator":
@@ -479,8 +495,12 @@ class Estimator:
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
         j3 = self._gate_to_boxes(j3, regions)
         if cfg.presence.enabled:
-            j3 = gate_presence(j3, cfg.presence.min_joints, cfg.presence.threshold(cfg.heatmaps.source))
-            if not j3.valid.any():  # nobody: no 2D joints either
+            if self.skeleton_prior is None:
+                j3 = gate_presence(j3, cfg.presence.min_joints, cfg.presence.threshold(cfg.heatmaps.source))
+                nobody = not j3.valid.any()
+            else:  # decided on the triangulation (_joints_3d); the prior's error gate may still leave no joint
+                nobody = self._prior_follow is None
+            if nobody:  # nobody: no 2D joints either
                 for name in joints_2d:
                     joints_2d[name] = np.zeros_like(joints_2d[name])
                     conf_2d[name] = np.zeros_like(conf_2d[name])
@@ -550,8 +570,12 @@ class Estimator:
     def _track_joints(self, env: dict, crops: list[Camera], regions: Regions, reported: Joints3D) -> Joints3D:
         """The joints the next pair's crop follows: the reported ones, or (``tracking.follow_encoder``,
         rendered heatmaps) those of the encoder heatmaps this pair computed anyway, through the same
-        triangulation and gates. Nobody reported (the presence gate): nothing to follow either."""
+        triangulation and gates, or (the skeleton prior) the prior's whole skeleton, less strictly gated
+        than what is reported, so a strict report gate does not shrink the crop around fewer joints.
+        Nobody reported (the presence gate): nothing to follow either."""
         cfg = self.config
+        if self._prior_follow is not None:
+            return self._gate_to_boxes(self._prior_follow, regions)
         if (cfg.heatmaps.source == "encoder" or not cfg.tracking.follow_encoder or not reported.valid.any()
                 or "encoder_heatmaps" not in env):
             return reported
@@ -568,6 +592,7 @@ class Estimator:
     def _joints_3d(self, env: dict, out: dict, blocks, heat: np.ndarray, kp: Keypoints2D, uv_model: np.ndarray,
                    crops: list[Camera], regions: Regions) -> Joints3D:
         cfg = self.config.joints3d
+        self._prior_follow = None  # this pair's, set by _with_prior (someone is there) for _track_joints
 
         def centroid() -> Joints3D:
             g = self.grid
@@ -576,6 +601,14 @@ class Estimator:
 
         if cfg.method == "triangulate":
             tri = triangulate_joints(uv_model, kp.confidence, kp.valid, crops, cfg)
+            if self.skeleton_prior is not None:
+                # Someone there? Asked of the peaks (the presence gate's thresholds are the peaks'), never of
+                # the prior, which was trained on people only and places a skeleton in any noise.
+                pres = self.config.presence
+                if pres.enabled and not gate_presence(self._gate_to_boxes(tri, regions), pres.min_joints,
+                                                      pres.threshold(self.config.heatmaps.source)).valid.any():
+                    return Joints3D.missing(len(tri.valid), tri.reprojection_px.shape[-1])
+                return self._with_prior(tri, uv_model, kp, crops)
             if not cfg.single_view_fallback or tri.valid.all():
                 return tri
             dc = centroid()
@@ -595,6 +628,21 @@ class Estimator:
         feeds["points"] = np.ascontiguousarray(np.broadcast_to(points, (2,) + points.shape))
         q = self.session.run("query", feeds)
         return volumetric_joints(q["joint_heat"], points, shape, cfg)
+
+    def _with_prior(self, tri: Joints3D, uv_model: np.ndarray, kp: Keypoints2D, crops: list[Camera]) -> Joints3D:
+        """The skeleton prior's joints: refined where triangulated, placed where hidden; a joint whose
+        expected error exceeds ``max_prior_error_m`` is missing. Confidence: ``exp(-expected error /
+        0.1 m)`` (0.7 at 35 mm, 0.37 at 100 mm), so it says how far off the joint may be. The box gates
+        (``max_outside_box_m``) still apply after."""
+        est = self.skeleton_prior.estimate(uv_model, kp.confidence, kp.valid, [c.P for c in crops])
+        score = np.exp(-est.expected_error_m / _PRIOR_CONFIDENCE_SCALE_M).astype(np.float32)
+
+        def gated(max_error_m: float) -> Joints3D:
+            keep = est.expected_error_m <= max_error_m
+            return Joints3D(est.points, np.where(keep, score, 0.0), keep, tri.reprojection_px).sanitised()
+
+        self._prior_follow = gated(max(_PRIOR_FOLLOW_MAX_ERROR_M, self.config.joints3d.max_prior_error_m))
+        return gated(self.config.joints3d.max_prior_error_m)
 
     # -------------------------------------------------------------- novel view
     def _novel_box(self, regions: Regions, j3: Joints3D) -> np.ndarray:
@@ -651,4 +699,5 @@ def load_session(config: EstimatorConfig):
     from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
 
     graphs = config.required_graphs(ModelSession.has_graph_file(config.session, "human"))
-    return ModelSession.load(config.session, graphs)
+    j3 = config.joints3d
+    return ModelSession.load(config.session, graphs, skeleton_prior=j3.skeleton_prior != "off")

@@ -10,6 +10,8 @@ Model folder layout (what ``python -m training.export`` writes)::
     <model_dir>/<graph>.onnx          fp32, one file per graph (encoder, volume, render_heat, ...)
     <model_dir>/<graph>.int8.onnx     static int8 QDQ, where the exporter made one
     <model_dir>/model_card.json       optional: training figures; read and kept, never required
+    <model_dir>/skeleton_prior.onnx   optional: the learnt skeleton prior (its own metadata,
+                                      ghnerf_runtime.skeleton_prior), loaded on request
 
 The shipped layout (``python -m training.pipeline --out models/``) puts each variant in a
 subfolder, ``models/ghnerf/`` and ``models/baseline/``, with ``models/model_card.json`` beside
@@ -66,6 +68,8 @@ from ghnerf_runtime.contract import (
 )
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
+from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
+from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
 log = logging.getLogger(__name__)
 
@@ -196,6 +200,8 @@ class ModelSession:
         contract: the model contract (identical in every graph file).
         files: graph -> :class:`GraphFile` actually loaded.
         card: the parsed ``model_card.json`` (``{}`` when absent).
+        skeleton_prior: the folder's :class:`~ghnerf_runtime.skeleton_prior.SkeletonPrior` when
+            :meth:`load` was asked for it and the folder has one, else None.
         run_counts: graph -> number of :meth:`run` calls (instrumentation).
         warmup_ms: graph -> duration of the warm-up run (empty when warm-up is off).
     """
@@ -208,18 +214,21 @@ class ModelSession:
         self.card = dict(card or {})
         self.run_counts: dict[str, int] = {g: 0 for g in self._sessions}
         self.warmup_ms: dict[str, float] = {}
+        self.skeleton_prior = None
         self._output_names = {g: list(contract.graph(g).output_names) for g in self._sessions}
         self._input_names = {g: list(contract.graph(g).input_names) for g in self._sessions}
 
     # ------------------------------------------------------------------ load
     @classmethod
     def load(cls, config: SessionConfig | str | os.PathLike,
-             graphs: Sequence[str] = ("encoder", "volume", "render_heat")) -> "ModelSession":
+             graphs: Sequence[str] = ("encoder", "volume", "render_heat"),
+             skeleton_prior: bool = False) -> "ModelSession":
         """Load, check and warm up ``graphs`` of the model in ``config.model_dir``.
 
         Args:
             config: a :class:`SessionConfig`, or just the model folder (defaults otherwise).
             graphs: which graphs to load (``EstimatorConfig.required_graphs()``).
+            skeleton_prior: also load the folder's ``skeleton_prior.onnx`` when it has one.
 
         Raises:
             ModelLoadError: a folder or file is missing, unreadable or not valid ONNX.
@@ -272,6 +281,8 @@ class ModelSession:
             log.info("loaded %s (%s, %.0f ms)", path, precision, load_ms)
         assert contract is not None
         session = cls(sessions, contract, files, cls._read_card(folder))
+        if skeleton_prior and (folder / PRIOR_FILE).is_file():
+            session.skeleton_prior = SkeletonPrior.load(folder / PRIOR_FILE, threads=1)  # one small MLP row: no pool
         if config.warmup:
             session.warm_up()
         return session

@@ -93,6 +93,34 @@ def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
             for src, prefix in _HEATMAP_PREFIXES if m.get(f"{prefix}{key}")]
 
 
+def _prior_lines(card: Mapping[str, Any]) -> list[str]:
+    """The skeleton prior's held-out MPJPE (``training.skeleton_prior``), gated by its expected error."""
+    L: list[str] = []
+    for variant, p in (card.get("skeleton_prior") or {}).items():
+        if not p or not p.get("metrics"):
+            continue
+        m = p["metrics"]
+        tri = m.get("triangulation_gated") or {}
+        L.append(f"### Skeleton prior (`{variant}/skeleton_prior.onnx`)")
+        L.append("")
+        L.append(f"The encoder's flip-tested int8 2D joints of {p.get('scenes')} held-out scenes "
+                 f"({p.get('split')}), through the learnt skeleton prior (trained {p['config'].get('steps')} steps on "
+                 f"{p.get('train_scenes')} training scenes, {p.get('train_s')} s), against the runtime's gated "
+                 f"triangulation of the same joints: {_fmt(tri.get('mean_mm'), 1)} mean / "
+                 f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints. "
+                 "The prior answers for every joint; its expected error gates them (the runtime's "
+                 "`joints3d.max_prior_error_m`). MPJPE mm, mean / median (share of the true joints kept):")
+        L.append("")
+        L.append("| expected error at most | mean | median | p90 | joints kept |")
+        L.append("|---|---|---|---|---|")
+        for gate, g in (m.get("gated") or {}).items():
+            L.append(f"| {gate if gate == 'inf' else gate + ' m'} | {_fmt(g.get('mean_mm'), 1)} | "
+                     f"{_fmt(g.get('median_mm'), 1)} | {_fmt(g.get('p90_mm'), 1)} | "
+                     f"{100 * (g.get('found') or 0):.0f} % |")
+        L.append("")
+    return L
+
+
 def render_markdown(card: Mapping[str, Any]) -> str:
     L: list[str] = []
     L.append(f"# Model card: {card.get('name', 'GHNeRF edge128')}")
@@ -218,6 +246,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
             L.append(f"| {label} | {src} | " + " | ".join(
                 f"{_fmt(by[n]['mpjpe_mm'], 1)} ({100 * by[n]['joints'] / total:.0f} %)" for n in names) + " |")
         L.append("")
+    L.extend(_prior_lines(card))
     by_angle = [(label, m["psnr_masked_by_source_angle"]) for label, m in (card.get("metrics") or {}).items()
                 if m.get("psnr_masked_by_source_angle") and m.get("novel_views")]
     if by_angle:

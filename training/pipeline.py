@@ -13,7 +13,10 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
    cameras), and the int8-vs-fp32 parity on a held-out scene.
 6. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8) and the baseline (onnx fp32,
    int8) into ``metrics_<variant>.json``.
-7. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
+7. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
+   split (``training.skeleton_prior``, ~11 min on two cores) into ``ghnerf/skeleton_prior.onnx``, with its
+   held-out figures (``skeleton_prior.json``).
+8. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
    wall times), once every variant is evaluated.
 
 ``--variants baseline`` takes one variant through its stages now (e.g. while the other still trains).
@@ -46,10 +49,12 @@ CONFIG_DIR = REPO / "training" / "train_configs"
 VARIANTS = {"ghnerf": "edge128", "baseline": "edge128_baseline"}
 #: Train-config keys that do not change the result (where and how fast it runs); ignored when matching runs.
 RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "pck_every", "checkpoint_every")
-STAGE_KINDS = ("data", "pretrain", "train", "export", "quantize", "eval", "card")
+STAGE_KINDS = ("data", "pretrain", "train", "export", "quantize", "eval", "prior", "card")
 """Stage kinds; pretrain/train/export/quantize/eval run per variant (``train_ghnerf``, ``eval_baseline``, ...)."""
 STAGES = ("data", "pretrain_ghnerf", *(f"{k}_{v}" for k in ("train", "export", "quantize", "eval") for v in VARIANTS),
-          "card")
+          "prior_ghnerf", "card")
+#: Variants that get a skeleton prior (it learns from the human encoder's heatmaps).
+PRIOR_VARIANTS = ("ghnerf",)
 #: Pretraining keys that do not change the result; ignored when matching a finished pretraining run.
 PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "eval_every", "eval_scenes",
                          "checkpoint_every", "loader_workers")
@@ -109,6 +114,10 @@ class PipelineConfig:
     eval_split: str = "val"
     eval_limit: int = 0
     calib_scenes: int = 16
+    prior_steps: int = 15000
+    """Training steps of the skeleton prior (``training.skeleton_prior``; ~10 min on two cores)."""
+    prior_scenes: int = 0
+    """Scenes per split the prior collects (0: all)."""
     quick: bool = False
     accept_stopped: bool = False
     until: str | None = None
@@ -142,7 +151,7 @@ class PipelineConfig:
     @classmethod
     def quick_defaults(cls, out: Path) -> "PipelineConfig":
         return cls(out=out, data=out / "data", runs=out / "runs", train=12, val=4, val_seen_motions=0,
-                   eval_limit=2, calib_scenes=2, quick=True,
+                   eval_limit=2, calib_scenes=2, quick=True, prior_steps=4, prior_scenes=4,
                    train_overrides=["iterations=6", "log_every=3", "checkpoint_every=3", "pck_every=3",
                                     "targets_per_iter=2", "heat_rays=64", "patch_size=8", "max_minutes=0"],
                    pretrain_overrides=["iterations=2", "log_every=1", "checkpoint_every=1", "eval_every=0",
@@ -605,6 +614,19 @@ def stage_eval(cfg: PipelineConfig, variant: str, ckpt: Path) -> tuple[list[Path
     return [out], {}
 
 
+def stage_prior(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
+    """The skeleton prior of the exported model (``training.skeleton_prior``), beside its graphs."""
+    from training import skeleton_prior as sp
+
+    out = cfg.out / variant / sp.FILE_NAME
+    argv = ["--model-dir", str(cfg.out / variant), "--data", str(cfg.data), "--val-split", cfg.eval_split,
+            "--steps", str(cfg.prior_steps), "--threads", str(cfg.threads), "--out", str(out)]
+    if cfg.prior_scenes:
+        argv += ["--limit", str(cfg.prior_scenes)]
+    sp.main(argv)
+    return [out, out.with_suffix(".json")], {}
+
+
 def motion_mix(spec: dict) -> str:
     """A split spec's motions as the card prints them: ``"stand, walk"`` or, weighted, ``"stand 11 %, ..."``."""
     motions, weights = spec.get("motions") or [], spec.get("motion_weights")
@@ -616,6 +638,7 @@ def motion_mix(spec: dict) -> str:
 
 def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
     from training.model_card import hardware, sha256, write_card
+    from training.skeleton_prior import card_summary
 
     data_s = st.stamp("data")
     metrics: dict = {"models": {}}
@@ -672,6 +695,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         "fp32_parity_torch_vs_ort": {v: (st.stamp(f"export_{v}") or {}).get("info", {}).get(v, {})
                                      .get("fp32_parity_torch_vs_ort") for v in VARIANTS},
         "files": files,
+        "skeleton_prior": {v: card_summary(cfg.out / v) for v in PRIOR_VARIANTS},
         "notes": [
             "Synthetic training and evaluation data only; no real-camera or ZJU-MoCap numbers.",
             "The ResNet18 human encoder is trained from scratch (no ImageNet weights available here): when the "
@@ -767,8 +791,14 @@ def run(cfg: PipelineConfig) -> dict | None:
     if any(st.stamp(f"eval_{v}") is None for v in VARIANTS):
         log.info("card: waiting for %s", [v for v in VARIANTS if st.stamp(f"eval_{v}") is None])
         return None
+    for v in PRIOR_VARIANTS:
+        st.run(f"prior_{v}", {"q": st.stamp(f"quantize_{v}")["outputs"], "steps": cfg.prior_steps,
+                              "scenes": cfg.prior_scenes, "split": cfg.eval_split},
+               lambda v=v: stage_prior(cfg, v))
     st.force.add("card")  # always rewritten: cheap, and it records the command and the stamps
-    st.run("card", [st.stamp(f"eval_{v}")["outputs"] for v in VARIANTS], lambda: stage_card(cfg, st))
+    st.run("card", [st.stamp(f"eval_{v}")["outputs"] for v in VARIANTS] + [st.stamp(f"prior_{v}")["outputs"]
+                                                                           for v in PRIOR_VARIANTS],
+           lambda: stage_card(cfg, st))
     return json.loads((cfg.out / "model_card.json").read_text())
 
 

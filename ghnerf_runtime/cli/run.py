@@ -65,6 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
                          "(heatmaps.flip_test, on by default: +0.016 PCK and -12 mm MPJPE on 30 held-out-like "
                          "sequences, +0.9 ms per pair on a fast 2-core host, +4-6 ms on a slower one; "
                          "docs/runtime.md); --no-flip-test turns it off")
+    ap.add_argument("--skeleton-prior", choices=("auto", "on", "off"),
+                    help="triangulation: the learnt skeleton prior (joints3d.skeleton_prior; auto, the default, uses "
+                         "the model folder's skeleton_prior.onnx when it has one: docs/runtime.md)")
+    ap.add_argument("--max-prior-error", type=float, metavar="M",
+                    help="skeleton prior: report a joint only when its expected error is at most M metres "
+                         "(joints3d.max_prior_error_m, default 0.05)")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, default=0.5, help="novel camera between the rig cameras: 0 = first, "
@@ -94,6 +100,10 @@ def _config(args) -> EstimatorConfig:
         cfg = replace(cfg, heatmaps=replace(cfg.heatmaps, source=args.heatmap_source))
     if args.flip_test is not None:
         cfg = replace(cfg, heatmaps=replace(cfg.heatmaps, flip_test=args.flip_test))
+    if args.skeleton_prior:
+        cfg = replace(cfg, joints3d=replace(cfg.joints3d, skeleton_prior=args.skeleton_prior))
+    if args.max_prior_error is not None:
+        cfg = replace(cfg, joints3d=replace(cfg.joints3d, max_prior_error_m=args.max_prior_error))
     if args.novel_view:
         nv = replace(cfg.novel_view, enabled=True, heatmaps=cfg.novel_view.heatmaps or args.novel_overlay == "heatmap")
         if args.novel_stride:

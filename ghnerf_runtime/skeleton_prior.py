@@ -1,0 +1,260 @@
+"""The learnt skeleton prior: a small network that turns the two views' 2D joints into a whole 3D skeleton.
+
+Triangulation alone trusts each joint's two 2D peaks: a joint hidden in one view is missing, and a
+joint both views place wrongly alike (or along the epipolar line) lands wrongly in depth. The prior
+(``skeleton_prior.onnx`` beside the model's graphs, trained by ``python -m training.skeleton_prior``
+on the model's own 2D errors over the synthetic training split) sees all joints at once: it refines
+the triangulated ones, places the hidden ones where the rest of the body says they are, and
+predicts each joint's expected error, which gates what is reported (``joints3d.max_prior_error_m``).
+
+Its inputs are built here, in numpy, the same way for training and on the device
+(:func:`prior_inputs`): in a *canonical frame* (origin on the floor below the subject, y down as in
+the rig frame, z along the horizontal line of sight from the cameras' midpoint to the subject), so
+the network sees the same thing wherever the rig stands and whichever way it turns. Per joint:
+the triangulated point (and whether there is one), both views' peak values, reprojection errors,
+the rays' angle, each view's ray direction and whether it decoded the joint. Per pair: the camera
+centres, the baseline and the subject's distance.
+
+onnxruntime and numpy only; never torch.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
+from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
+from ghnerf_runtime.geometry.triangulation import triangulate_dlt
+
+log = logging.getLogger(__name__)
+
+__all__ = ["FEATURE_VERSION", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME", "META_PREFIX", "CanonicalFrame",
+           "PriorInputs", "SkeletonEstimate", "SkeletonPrior", "prior_inputs", "mirror_inputs"]
+
+#: Bump when the meaning of a feature changes: a file trained on other features is refused.
+FEATURE_VERSION = 1
+#: Per-joint features: X(3) triangulated, ok, conf0, conf1, reproj0/5, reproj1/5, ray angle/10,
+#: ray0 (3), ray1 (3), decoded0, decoded1.
+JOINT_FEATURES = 17
+#: Per-pair features: the two camera centres (6), baseline (m), subject distance (m).
+CONTEXT_FEATURES = 8
+FILE_NAME = "skeleton_prior.onnx"
+META_PREFIX = "ghnerf_skeleton."
+INPUTS = ("joint_features", "context")
+OUTPUTS = ("joints", "log_error")
+# A good triangulation has a small reprojection error; a root from a few such joints is robust.
+_ROOT_MAX_REPROJECTION_PX = 3.0
+_REPROJECTION_CLIP_PX = 20.0
+_DEFAULT_DISTANCE_M = 2.5  # no joint at all: a guess in front of the cameras
+
+
+@dataclass(frozen=True)
+class CanonicalFrame:
+    """Rig frame -> canonical frame, ``X_c = R (X - origin)`` (batched: ``(N, 3, 3)``, ``(N, 3)``)."""
+
+    rotation: np.ndarray
+    origin: np.ndarray
+
+    def to_canonical(self, points: np.ndarray) -> np.ndarray:
+        """``(N, K, 3)`` rig-frame points in the canonical frame."""
+        return np.einsum("nij,nkj->nki", self.rotation, points - self.origin[:, None])
+
+    def to_rig(self, points: np.ndarray) -> np.ndarray:
+        """``(N, K, 3)`` canonical points back in the rig frame."""
+        return np.einsum("nji,nkj->nki", self.rotation, points) + self.origin[:, None]
+
+
+@dataclass(frozen=True)
+class PriorInputs:
+    """What the network eats (float32) and the frame its answers come back in."""
+
+    joint_features: np.ndarray  # (N, J, JOINT_FEATURES)
+    context: np.ndarray  # (N, CONTEXT_FEATURES)
+    frame: CanonicalFrame
+    triangulated: np.ndarray  # (N, J) bool: a DLT point from both views
+
+
+def _centres(P: np.ndarray) -> np.ndarray:
+    """Camera centres ``(..., 3)`` of ``(..., 3, 4)`` projection matrices (their right null space)."""
+    _, _, vt = np.linalg.svd(P)
+    c = vt[..., -1, :]
+    return c[..., :3] / c[..., 3:]
+
+
+def _geometric_median(points: np.ndarray, iterations: int = 20) -> np.ndarray:
+    """Robust centre of ``(K, 3)`` points (Weiszfeld); unlike a per-axis median it turns with the points."""
+    c = points.mean(0)
+    for _ in range(iterations):
+        w = 1.0 / np.maximum(np.linalg.norm(points - c, axis=-1), 1e-6)
+        c = (points * w[:, None]).sum(0) / w.sum()
+    return c
+
+
+def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray) -> PriorInputs:
+    """The prior's inputs from decoded 2D peaks.
+
+    Args:
+        uv_model: ``(N, 2, J, 2)`` peaks in model-input (crop) pixels; anything where not ``valid``.
+        confidence: ``(N, 2, J)`` peak values.
+        valid: ``(N, 2, J)`` decoded.
+        P: ``(N, 2, 3, 4)`` the crop cameras' pinhole projections (rig frame -> model pixels).
+    """
+    uv = np.asarray(uv_model, np.float64)
+    conf = np.asarray(confidence, np.float64)
+    P = np.asarray(P, np.float64)
+    if uv.ndim != 4 or uv.shape[1] != 2 or uv.shape[-1] != 2:
+        raise ShapeError(f"uv_model must be (N, 2, J, 2), got {uv.shape}")
+    N, _, J, _ = uv.shape
+    if conf.shape != (N, 2, J) or np.shape(valid) != (N, 2, J) or P.shape != (N, 2, 3, 4):
+        raise ShapeError(f"confidence/valid must be {(N, 2, J)} and P {(N, 2, 3, 4)}, got {conf.shape}, "
+                         f"{np.shape(valid)}, {P.shape}")
+    dec = np.asarray(valid, bool) & np.isfinite(uv).all(-1) & np.isfinite(conf)
+    uv = np.where(dec[..., None], uv, 0.0)
+    conf = np.where(dec, np.clip(conf, 0.0, 1.0), 0.0)
+    # cameras differ per pair: one DLT per pair (weights: peak values; a decoded joint counts a little at least)
+    X, ok = np.zeros((N, J, 3)), np.zeros((N, J), bool)
+    rep, ang = np.zeros((N, J, 2)), np.zeros((N, J))
+    for i in range(N):
+        r = triangulate_dlt(uv[i], list(P[i]), np.where(dec[i], np.maximum(conf[i], 1e-3), 0.0))
+        X[i], ok[i], rep[i], ang[i] = r.points, r.valid, r.reprojection_error, r.ray_angle_deg
+    ok = ok & dec.all(1) & np.isfinite(X).all(-1)
+    X = np.where(ok[..., None], X, 0.0)
+    rep = np.where(ok[..., None], np.nan_to_num(rep), 0.0)
+    ang = np.where(ok, np.nan_to_num(ang), 0.0)
+
+    C = _centres(P)  # (N, 2, 3)
+    mid = C.mean(1)
+    root = mid + [0.0, 0.0, _DEFAULT_DISTANCE_M]
+    for i in range(N):
+        good = ok[i] & (rep[i].max(-1) < _ROOT_MAX_REPROJECTION_PX)
+        pick = good if good.sum() >= 3 else ok[i]
+        if pick.any():
+            root[i] = _geometric_median(X[i][pick])
+    fwd = root - mid
+    fwd[:, 1] = 0.0
+    n = np.linalg.norm(fwd, axis=-1, keepdims=True)
+    fwd = np.where(n > 1e-6, fwd / np.maximum(n, 1e-12), [0.0, 0.0, 1.0])
+    R = np.zeros((N, 3, 3))
+    R[:, 1] = [0.0, 1.0, 0.0]
+    R[:, 2] = fwd
+    R[:, 0] = np.cross(R[:, 1], R[:, 2])
+    origin = root * [1.0, 0.0, 1.0]  # keep the height above the floor
+    frame = CanonicalFrame(R, origin)
+
+    Xc = np.where(ok[..., None], frame.to_canonical(X), 0.0)
+    M = P[..., :3]
+    uvh = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], -1)
+    rays = np.einsum("nvij,nvkj->nvki", np.linalg.inv(M), uvh)
+    rays = rays * np.sign(np.linalg.det(M))[..., None, None]  # towards the scene whatever P's scale
+    rays /= np.maximum(np.linalg.norm(rays, axis=-1, keepdims=True), 1e-12)
+    rays = np.einsum("nij,nvkj->nvki", R, rays) * dec[..., None]
+    features = np.concatenate([Xc, ok[..., None], conf.transpose(0, 2, 1),
+                               np.clip(rep, 0.0, _REPROJECTION_CLIP_PX) / 5.0, ang[..., None] / 10.0,
+                               rays[:, 0], rays[:, 1], dec.transpose(0, 2, 1)], -1)
+    context = np.concatenate([frame.to_canonical(C).reshape(N, 6), np.linalg.norm(C[:, 0] - C[:, 1], axis=-1)[:, None],
+                              n], -1)
+    return PriorInputs(features.astype(np.float32), context.astype(np.float32), frame, ok)
+
+
+def mirror_inputs(joint_features: np.ndarray, context: np.ndarray, joints: np.ndarray | None = None):
+    """The same pair seen in a mirror (canonical x -> -x, left and right joints swapped): training's
+    augmentation, and a symmetry the tests check. Works on numpy or torch tensors ``(N, J, F)``, ``(N, C)``,
+    ``(N, J, 3)``."""
+    f = joint_features[:, list(FLIP_INDEX)] * 1.0
+    for col in (0, 9, 12):  # x of the point and of both rays
+        f[..., col] = -f[..., col]
+    c = context * 1.0
+    c[:, 0] = -c[:, 0]
+    c[:, 3] = -c[:, 3]
+    if joints is None:
+        return f, c
+    j = joints[:, list(FLIP_INDEX)] * 1.0
+    j[..., 0] = -j[..., 0]
+    return f, c, j
+
+
+@dataclass(frozen=True)
+class SkeletonEstimate:
+    """The prior's answer for ``N`` pairs: ``points`` ``(N, J, 3)`` rig frame (m), ``expected_error_m``
+    ``(N, J)`` (the network's own estimate of its error), ``triangulated`` ``(N, J)``."""
+
+    points: np.ndarray
+    expected_error_m: np.ndarray
+    triangulated: np.ndarray
+
+
+class SkeletonPrior:
+    """A loaded ``skeleton_prior.onnx``: :meth:`estimate` runs it on decoded 2D peaks.
+
+    Raises (at :meth:`load`): :class:`ModelLoadError` for a missing or unreadable file,
+    :class:`ModelContractError` for a file of another feature version, joint count or I/O.
+    """
+
+    def __init__(self, session, path: Path, metadata: dict[str, str]) -> None:
+        self._session = session
+        self.path = path
+        self.metadata = metadata
+
+    @classmethod
+    def load(cls, path: str | Path, threads: int = 1) -> "SkeletonPrior":
+        import onnxruntime as ort
+
+        path = Path(path)
+        if not path.is_file():
+            raise ModelLoadError("no such skeleton prior file", path=str(path))
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = threads
+        opts.inter_op_num_threads = 1
+        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        try:
+            sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+        except Exception as e:  # onnxruntime's own exception types
+            raise ModelLoadError(f"onnxruntime cannot load it ({path.stat().st_size} bytes; truncated or corrupt?): "
+                                 f"{type(e).__name__}: {str(e).strip()[:200]}", path=str(path)) from e
+        meta = dict(sess.get_modelmeta().custom_metadata_map)
+        version = meta.get(META_PREFIX + "feature_version")
+        if version != str(FEATURE_VERSION):
+            raise ModelContractError(f"feature version {version!r}; this runtime builds version {FEATURE_VERSION}",
+                                     path=str(path), key=META_PREFIX + "feature_version")
+        if meta.get(META_PREFIX + "num_joints") != str(NUM_JOINTS):
+            raise ModelContractError(f"{meta.get(META_PREFIX + 'num_joints')!r} joints, the runtime has {NUM_JOINTS}",
+                                     path=str(path), key=META_PREFIX + "num_joints")
+        ins = {i.name: i.shape for i in sess.get_inputs()}
+        outs = {o.name for o in sess.get_outputs()}
+        want = {"joint_features": JOINT_FEATURES, "context": CONTEXT_FEATURES}
+        for name, width in want.items():
+            if name not in ins or ins[name][-1] != width:
+                raise ModelContractError(f"input {name!r} of width {width} expected, the file has {ins}",
+                                         path=str(path), key=name)
+        if not set(OUTPUTS) <= outs:
+            raise ModelContractError(f"outputs {list(OUTPUTS)} expected, the file has {sorted(outs)}",
+                                     path=str(path), key=OUTPUTS[0])
+        return cls(sess, path, meta)
+
+    def estimate(self, uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray,
+                 P: Sequence | np.ndarray) -> SkeletonEstimate:
+        """The skeleton of ``N`` pairs (shapes as :func:`prior_inputs`; one pair may drop the ``N``)."""
+        single = np.ndim(uv_model) == 3
+        if single:
+            uv_model, confidence, valid = uv_model[None], confidence[None], valid[None]
+            P = np.asarray([np.asarray(getattr(c, "P", c), np.float64) for c in P])[None]
+        inputs = prior_inputs(uv_model, confidence, valid, np.asarray(P, np.float64))
+        try:
+            joints, log_error = self._session.run(list(OUTPUTS), {"joint_features": inputs.joint_features,
+                                                                  "context": inputs.context})
+        except Exception as e:
+            raise ModelRunError(f"skeleton prior failed: {type(e).__name__}: {str(e)[:200]}",
+                                path=str(self.path)) from e
+        points = inputs.frame.to_rig(joints.astype(np.float64))
+        err = np.exp(np.clip(log_error.astype(np.float64), -12.0, 5.0))
+        bad = ~np.isfinite(points).all(-1) | ~np.isfinite(err)
+        points = np.where(bad[..., None], 0.0, points)
+        err = np.where(bad, np.inf, err)
+        out = SkeletonEstimate(points, err, inputs.triangulated)
+        if single:
+            return SkeletonEstimate(out.points[0], out.expected_error_m[0], out.triangulated[0])
+        return out

@@ -1,0 +1,254 @@
+"""The skeleton prior: its inputs (canonical frame, invariance, the mirror used in training), the ONNX
+file (torch parity, refusal of bad files), extremes, and its place in the estimator."""
+from __future__ import annotations
+
+import shutil
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
+from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig
+from ghnerf_runtime.errors import ConfigError, ModelContractError, ModelError, ModelLoadError
+from ghnerf_runtime.geometry.camera import Camera, look_at
+from ghnerf_runtime.skeleton_prior import (
+    CONTEXT_FEATURES,
+    FILE_NAME,
+    JOINT_FEATURES,
+    SkeletonPrior,
+    mirror_inputs,
+    prior_inputs,
+)
+
+SIZE = 128
+K = np.array([[110.0, 0, 63.5], [0, 110.0, 63.5], [0, 0, 1]])
+
+
+def _rig(yaw_deg: float = 0.0, shift=(0.0, 0.0)) -> list[np.ndarray]:
+    """Two crop cameras 1.2 m apart, 1.4 m up, converging on a subject 3 m ahead (then the whole scene turned
+    by ``yaw_deg`` about the vertical and shifted on the floor)."""
+    cams = []
+    for x in (-0.6, 0.6):
+        cam = Camera("c", SIZE, SIZE, K, [], *look_at((x, -1.4, 0.0), (0.0, -1.0, 3.0)))
+        cams.append(cam.P @ _scene_motion(yaw_deg, shift, inverse=True))
+    return cams
+
+
+def _scene_motion(yaw_deg: float, shift, inverse: bool = False) -> np.ndarray:
+    a = np.radians(yaw_deg)
+    T = np.eye(4)
+    T[:3, :3] = [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]
+    T[0, 3], T[2, 3] = shift
+    return np.linalg.inv(T) if inverse else T
+
+
+def _skeleton(seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.array([0.0, -1.0, 3.0]) + rng.uniform(-0.4, 0.4, (NUM_JOINTS, 3)) * [1.0, 2.0, 0.5]
+
+
+def _observe(P: list[np.ndarray], X: np.ndarray):
+    Xh = np.c_[X, np.ones(len(X))]
+    uv = np.stack([(Xh @ p.T)[:, :2] / (Xh @ p.T)[:, 2:] for p in P])
+    return uv, np.full((2, NUM_JOINTS), 0.8), np.ones((2, NUM_JOINTS), bool)
+
+
+def test_canonical_frame_round_trip_and_exact_triangulation():
+    P, X = _rig(), _skeleton()
+    uv, conf, valid = _observe(P, X)
+    inp = prior_inputs(uv[None], conf[None], valid[None], np.stack(P)[None])
+    assert inp.joint_features.shape == (1, NUM_JOINTS, JOINT_FEATURES)
+    assert inp.context.shape == (1, CONTEXT_FEATURES)
+    assert inp.triangulated.all()
+    # the triangulated points are the true ones, in the canonical frame
+    np.testing.assert_allclose(inp.joint_features[0, :, :3], inp.frame.to_canonical(X[None])[0], atol=1e-5)
+    np.testing.assert_allclose(inp.frame.to_rig(inp.frame.to_canonical(X[None])), X[None], atol=1e-9)
+    # height above the floor is kept: y is the rig's y
+    np.testing.assert_allclose(inp.joint_features[0, :, 1], X[:, 1], atol=1e-5)
+    # baseline 1.2 m, subject about 3 m away
+    assert inp.context[0, 6] == pytest.approx(1.2, abs=1e-5) and 2.5 < inp.context[0, 7] < 3.5
+
+
+@pytest.mark.parametrize("yaw, shift", [(90.0, (0.0, 0.0)), (-37.0, (1.5, -2.0)), (180.0, (-0.3, 0.7))])
+def test_inputs_do_not_depend_on_where_the_rig_stands(yaw, shift):
+    """Turning the rig and the subject together about the vertical, or moving them on the floor, changes nothing."""
+    X = _skeleton(1)
+    base = prior_inputs(*(a[None] for a in _observe(_rig(), X)), np.stack(_rig())[None])
+    Xm = (np.c_[X, np.ones(len(X))] @ _scene_motion(yaw, shift).T)[:, :3]
+    Pm = _rig(yaw, shift)
+    moved = prior_inputs(*(a[None] for a in _observe(Pm, Xm)), np.stack(Pm)[None])
+    np.testing.assert_allclose(moved.joint_features, base.joint_features, atol=2e-5)
+    np.testing.assert_allclose(moved.context, base.context, atol=2e-5)
+
+
+def test_mirror_is_the_inputs_of_the_mirrored_scene():
+    """``mirror_inputs`` (training's augmentation) equals the features of the world seen in a mirror, with the
+    detector calling the mirrored left joints right."""
+    P, X = _rig(), _skeleton(2)
+    uv, conf, valid = _observe(P, X)
+    conf = conf * np.linspace(0.3, 1.0, NUM_JOINTS)
+    base = prior_inputs(uv[None], conf[None], valid[None], np.stack(P)[None])
+    S = np.diag([-1.0, 1.0, 1.0, 1.0])  # world x -> -x
+    F = np.array([[-1.0, 0, SIZE - 1], [0, 1, 0], [0, 0, 1]])  # image u -> W-1-u: a proper camera again
+    Pm = [F @ p @ S for p in P]
+    Xm = X * [-1.0, 1.0, 1.0]
+    uvm, _, _ = _observe(Pm, Xm)
+    flip = list(FLIP_INDEX)
+    mirrored = prior_inputs(uvm[:, flip][None], conf[:, flip][None], valid[None], np.stack(Pm)[None])
+    f, c, j = mirror_inputs(base.joint_features, base.context, base.frame.to_canonical(X[None]))
+    np.testing.assert_allclose(mirrored.joint_features, f, atol=2e-5)
+    np.testing.assert_allclose(mirrored.context, c, atol=2e-5)
+    np.testing.assert_allclose(mirrored.frame.to_canonical(Xm[flip][None]), j, atol=1e-6)
+    f2, c2 = mirror_inputs(f, c)
+    np.testing.assert_allclose(f2, base.joint_features) and np.testing.assert_allclose(c2, base.context)
+
+
+def test_inputs_finite_at_the_extremes():
+    P = np.stack(_rig())
+    N = 4
+    uv = np.zeros((N, 2, NUM_JOINTS, 2))
+    conf = np.zeros((N, 2, NUM_JOINTS))
+    valid = np.zeros((N, 2, NUM_JOINTS), bool)
+    uv[1] = 1e12  # absurd peaks, decoded
+    valid[1] = True
+    conf[1] = 1.0
+    uv[2] = np.nan  # NaN peaks said to be decoded
+    valid[2] = True
+    conf[2] = np.inf
+    valid[3, 0] = True  # one view only
+    conf[3, 0] = 0.9
+    inp = prior_inputs(uv, conf, valid, np.broadcast_to(P, (N, 2, 3, 4)))
+    assert np.isfinite(inp.joint_features).all() and np.isfinite(inp.context).all()
+    assert not inp.triangulated[0].any() and not inp.triangulated[2].any() and not inp.triangulated[3].any()
+    np.testing.assert_allclose(inp.joint_features[0], 0.0)  # nothing decoded: nothing said
+
+
+# ------------------------------------------------------------------------------------------- the ONNX file
+@pytest.fixture(scope="module")
+def tiny_prior(tmp_path_factory) -> SimpleNamespace:
+    """A prior trained a few steps on random scenes of the test rig and exported by the real code."""
+    pytest.importorskip("torch")
+    pytest.importorskip("onnx")
+    from training.skeleton_prior import PriorTrainConfig, export, train
+
+    rng = np.random.default_rng(0)
+    P = np.stack(_rig())
+    arrays = [_observe(P, _skeleton(s)) for s in range(32)]
+    uv = np.stack([a[0] for a in arrays]) + rng.normal(0, 1.0, (32, 2, NUM_JOINTS, 2))
+    truth = np.stack([_skeleton(s) for s in range(32)])
+    inp = prior_inputs(uv, np.stack([a[1] for a in arrays]), np.stack([a[2] for a in arrays]),
+                       np.broadcast_to(P, (32, 2, 3, 4)))
+    net = train(inp, inp.frame.to_canonical(truth), np.ones((32, NUM_JOINTS), bool),
+                PriorTrainConfig(steps=3, hidden=16, batch=8), progress=False)
+    path = export(net, tmp_path_factory.mktemp("prior") / FILE_NAME, {"trained_on": "test"})
+    return SimpleNamespace(path=path, net=net)  # the file and its torch twin
+
+
+def test_onnx_matches_torch_and_answers_in_the_rig_frame(tiny_prior):
+    import torch
+
+    prior = SkeletonPrior.load(tiny_prior.path)
+    assert {"ghnerf_skeleton.feature_version", "ghnerf_skeleton.num_joints"} <= set(prior.metadata)
+    P = _rig(30.0, (0.5, 0.5))
+    X = (np.c_[_skeleton(3), np.ones(NUM_JOINTS)] @ _scene_motion(30.0, (0.5, 0.5)).T)[:, :3]
+    uv, conf, valid = _observe(P, X)
+    est = prior.estimate(uv, conf, valid, P)
+    assert est.points.shape == (NUM_JOINTS, 3) and est.expected_error_m.shape == (NUM_JOINTS,)
+    assert np.isfinite(est.points).all() and (est.expected_error_m > 0).all()
+    # torch vs onnxruntime on the same inputs, back in the rig frame
+    inp = prior_inputs(uv[None], conf[None], valid[None], np.stack(P)[None])
+    with torch.no_grad():
+        joints, log_err = tiny_prior.net(torch.from_numpy(inp.joint_features), torch.from_numpy(inp.context))
+    np.testing.assert_allclose(est.points, inp.frame.to_rig(joints.double().numpy())[0], atol=1e-5)
+    np.testing.assert_allclose(est.expected_error_m, np.exp(log_err.double().numpy()[0]), rtol=1e-4)
+    # batched and single answers agree (N is dynamic)
+    batch = prior.estimate(np.stack([uv, uv]), np.stack([conf, conf]), np.stack([valid, valid]),
+                           np.stack([np.stack(P)] * 2))
+    np.testing.assert_allclose(batch.points[1], est.points, atol=1e-6)
+    # the network starts as the identity on the triangulated points and has had 3 steps: near the truth
+    assert np.median(np.linalg.norm(est.points - X, axis=-1)) < 0.1
+
+
+def test_bad_files_are_refused_with_the_file_named(tiny_prior, tmp_path):
+    with pytest.raises(ModelLoadError, match="no such skeleton prior file"):
+        SkeletonPrior.load(tmp_path / "nope.onnx")
+    broken = tmp_path / "broken.onnx"
+    broken.write_bytes(tiny_prior.path.read_bytes()[:500])
+    with pytest.raises(ModelLoadError, match=str(broken)):
+        SkeletonPrior.load(broken)
+    import onnx
+
+    m = onnx.load(str(tiny_prior.path))
+    for p in m.metadata_props:
+        if p.key == "ghnerf_skeleton.feature_version":
+            p.value = "999"
+    other = tmp_path / "other.onnx"
+    onnx.save(m, str(other))
+    with pytest.raises(ModelContractError, match="feature_version") as e:
+        SkeletonPrior.load(other)
+    assert str(other) in str(e.value)
+
+
+def test_config_rejects_unknown_modes():
+    with pytest.raises(ConfigError, match="skeleton_prior"):
+        Joints3DConfig(skeleton_prior="maybe")
+    with pytest.raises(ConfigError, match="max_prior_error_m"):
+        Joints3DConfig(max_prior_error_m=0.0)
+
+
+# ------------------------------------------------------------------------------------------- in the estimator
+sim = pytest.importorskip("drivers.sim")
+
+
+@pytest.fixture(scope="module")
+def model_with_prior(tmp_path_factory, tiny_prior):
+    from tests.ghnerf_runtime.test_session import export_tiny
+
+    folder = tmp_path_factory.mktemp("with-prior") / "tiny"
+    shutil.copytree(export_tiny(tmp_path_factory.mktemp("ghnerf-model")), folder)
+    shutil.copy(tiny_prior.path, folder / FILE_NAME)
+    return folder
+
+
+def _config(folder: Path, **joints3d) -> EstimatorConfig:
+    cfg = EstimatorConfig()
+    return replace(cfg, session=replace(cfg.session, model_dir=str(folder), warmup=False),
+                   joints3d=replace(cfg.joints3d, **joints3d), presence=replace(cfg.presence, enabled=False))
+
+
+def test_estimator_uses_the_prior_when_the_folder_has_one(model_with_prior, tmp_path):
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
+
+    calls = []
+    auto = _config(model_with_prior, max_prior_error_m=100.0)
+    session = load_session(auto)
+    assert isinstance(session.skeleton_prior, SkeletonPrior)
+    real = session.skeleton_prior.estimate
+    session.skeleton_prior.estimate = lambda *a: calls.append(1) or real(*a)
+    est = Estimator(session, rig, auto)
+    r = est.estimate(frames, sequence=0)
+    assert calls == [1]
+    # an expected-error gate that nothing passes leaves no joint; the prior is not asked when it is off
+    assert Estimator(session, rig, _config(model_with_prior, max_prior_error_m=1e-9)).estimate(frames).missing.all()
+    Estimator(session, rig, _config(model_with_prior, skeleton_prior="off")).estimate(frames)
+    assert len(calls) == 2
+    dc = _config(model_with_prior, method="depth_centroid")  # not a triangulation: nothing to refine
+    assert Estimator(load_session(dc), rig, dc).skeleton_prior is None
+    assert np.isfinite(r.joints_3d).all() and np.isfinite(r.confidence).all()
+    assert ((r.confidence > 0) == ~r.missing).all() and (r.confidence <= 1).all()
+
+    # "on" with a folder without the file: an error that says what to do
+    bare = tmp_path / "bare"
+    shutil.copytree(model_with_prior, bare)
+    (bare / FILE_NAME).unlink()
+    on = _config(bare, skeleton_prior="on")
+    with pytest.raises(ModelError, match="skeleton_prior.onnx"):
+        Estimator(load_session(on), rig, on)
+    assert load_session(_config(bare)).skeleton_prior is None

@@ -1,0 +1,355 @@
+"""Train the skeleton prior (``ghnerf_runtime.skeleton_prior``) on a model's own 2D errors, export it.
+
+    python -m training.skeleton_prior --model-dir models/ghnerf --data data/edge128_fs50
+
+1. **Collect**: the model's human encoder (its ``human`` graph, else ``encoder``; int8 when present,
+   as the runtime loads it) runs on every scene of the training split, with the flip test (the
+   runtime's default), and its decoded 2D peaks are kept with the scene's cameras and true joints.
+   The encoder was trained on those scenes, but its 3D error there is the held-out one's (78.7 vs
+   73.4 mm gated MPJPE, session 16), so its errors on them are a fair sample of the device's.
+2. **Train**: an MLP (``--hidden`` wide, three hidden layers) from :func:`prior_inputs`' features
+   to the canonical-frame skeleton (a residual on the triangulated points) and the log of each
+   joint's expected error. Loss: the mean joint distance (MPJPE itself) plus a Laplace likelihood
+   of the detached distance for the error head. Augmented by mirroring and by hiding joints in
+   one view (as the reprojection gate and occlusion do).
+3. **Export** ``skeleton_prior.onnx`` (fp32; about a million weights: int8 would save nothing that
+   matters) with ``ghnerf_skeleton.*`` metadata, and **evaluate** on the held-out split:
+   ``skeleton_prior.json`` beside it (MPJPE over all joints, and gated by the expected error).
+
+torch for training and export only; the device runs the ONNX file.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ghnerf_runtime.body25 import NUM_JOINTS
+from ghnerf_runtime.skeleton_prior import (
+    CONTEXT_FEATURES,
+    FEATURE_VERSION,
+    FILE_NAME,
+    JOINT_FEATURES,
+    META_PREFIX,
+    PriorInputs,
+    mirror_inputs,
+    prior_inputs,
+)
+
+#: Expected-error gates the evaluation reports (m); the runtime's default is one of them.
+GATES_M = (0.03, 0.05, 0.075, 0.1, 0.15, math.inf)
+
+
+@dataclass(frozen=True)
+class PriorTrainConfig:
+    """How the prior is trained (recorded in the file's metadata and the metrics)."""
+
+    steps: int = 15000
+    hidden: int = 768
+    batch: int = 256
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    hide_joint_prob: float = 0.1
+    seed: int = 0
+
+
+# ---------------------------------------------------------------------------------------------- collect
+def _encoder_session(model_dir: Path, threads: int):
+    import onnxruntime as ort
+
+    for name in ("human.int8.onnx", "human.onnx", "encoder.int8.onnx", "encoder.onnx"):
+        if (model_dir / name).is_file():
+            opts = ort.SessionOptions()
+            opts.intra_op_num_threads = threads
+            return ort.InferenceSession(str(model_dir / name), opts, providers=["CPUExecutionProvider"]), name
+    raise FileNotFoundError(f"{model_dir}: no human or encoder graph (human.onnx, encoder.onnx)")
+
+
+def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0, flip_test: bool = True,
+            threads: int = 2, progress: bool = True) -> dict[str, np.ndarray]:
+    """The model's decoded 2D peaks on ``split`` with the cameras and true joints (arrays over scenes)."""
+    from ghnerf_runtime.flip_test import flip_averaged, mirror_images
+    from training.data.torch_dataset import MultiViewDataset
+    from training.evaluate import _decode
+
+    sess, name = _encoder_session(Path(model_dir), threads)
+    ds = MultiViewDataset(data, split)
+    n = min(limit, len(ds)) if limit else len(ds)
+    keys = ("uv", "confidence", "valid", "P", "joints_3d", "joints_3d_valid")
+    out: dict[str, list] = {k: [] for k in keys}
+    t0 = time.monotonic()
+    for i in range(n):
+        scene = ds[i]
+        images = np.ascontiguousarray(scene["images"].numpy(), np.float32)
+        heat = sess.run(["encoder_heatmaps"], {"images": images})[0]
+        if flip_test:
+            heat = flip_averaged(heat, sess.run(["encoder_heatmaps"], {"images": mirror_images(images)})[0])
+        uv, conf = _decode(heat, images.shape[-1], None)
+        out["uv"].append(np.nan_to_num(uv))
+        out["confidence"].append(conf)
+        out["valid"].append(np.isfinite(uv).all(-1))
+        out["P"].append(scene["src_P"].numpy())
+        out["joints_3d"].append(scene["joints_3d"].numpy())
+        out["joints_3d_valid"].append(scene["joints_3d_valid"].numpy())
+        if progress and (i + 1) % 1000 == 0:
+            print(f"  collect {split} {i + 1}/{n} {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
+    arrays = {k: np.stack(v) for k, v in out.items()}
+    arrays["encoder_file"] = np.array(name)
+    return arrays
+
+
+def inputs_of(arrays: dict[str, np.ndarray]) -> tuple[PriorInputs, np.ndarray]:
+    """The prior's inputs and the canonical-frame truth of collected arrays."""
+    inp = prior_inputs(arrays["uv"], arrays["confidence"], arrays["valid"], arrays["P"])
+    return inp, inp.frame.to_canonical(np.asarray(arrays["joints_3d"], np.float64))
+
+
+# ---------------------------------------------------------------------------------------------- model
+def make_network(hidden: int):
+    import torch
+    from torch import nn
+
+    class SkeletonPriorNet(nn.Module):
+        """Features of all joints and the pair -> canonical joints (residual on the triangulated ones)
+        and the log of their expected error (m)."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.trunk = nn.Sequential(nn.Linear(NUM_JOINTS * JOINT_FEATURES + CONTEXT_FEATURES, hidden), nn.GELU(),
+                                       nn.Linear(hidden, hidden), nn.GELU(), nn.Linear(hidden, hidden), nn.GELU())
+            self.joints = nn.Linear(hidden, NUM_JOINTS * 3)
+            self.log_error = nn.Linear(hidden, NUM_JOINTS)
+            nn.init.zeros_(self.joints.weight)
+            nn.init.zeros_(self.joints.bias)
+            nn.init.zeros_(self.log_error.weight)
+            nn.init.constant_(self.log_error.bias, math.log(0.1))
+
+        def forward(self, joint_features, context):
+            h = self.trunk(torch.cat([joint_features.flatten(1), context], 1))
+            joints = joint_features[..., :3] + self.joints(h).view(-1, NUM_JOINTS, 3)
+            return joints, self.log_error(h)
+
+    return SkeletonPriorNet()
+
+
+def _hide_in_one_view(f, prob: float, gen):
+    """Some joints lose one view (as occlusion and the gates do): no triangulated point, no peak there."""
+    import torch
+
+    N, J, _ = f.shape
+    hide = torch.rand(N, J, generator=gen) < prob
+    view = torch.randint(0, 2, (N, J), generator=gen)
+    f = f.clone()
+    f[..., 0:4] = torch.where(hide[..., None], 0.0, f[..., 0:4])
+    f[..., 8] = torch.where(hide, 0.0, f[..., 8])
+    for v in (0, 1):
+        h = hide & (view == v)
+        for col in (4 + v, 6 + v, 15 + v):
+            f[..., col] = torch.where(h, 0.0, f[..., col])
+        f[..., 9 + 3 * v:12 + 3 * v] = torch.where(h[..., None], 0.0, f[..., 9 + 3 * v:12 + 3 * v])
+    return f
+
+
+def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, config: PriorTrainConfig,
+          progress: bool = True):
+    """The trained network (torch, eval mode)."""
+    import torch
+
+    torch.manual_seed(config.seed)
+    gen = torch.Generator().manual_seed(config.seed)
+    f_all = torch.from_numpy(inputs.joint_features)
+    c_all = torch.from_numpy(inputs.context)
+    y_all = torch.from_numpy(np.nan_to_num(truth).astype(np.float32))  # invalid joints weigh 0
+    w_all = torch.from_numpy(np.asarray(truth_valid, np.float32))
+    net = make_network(config.hidden)
+    opt = torch.optim.AdamW(net.parameters(), config.lr, weight_decay=config.weight_decay)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, config.lr, total_steps=max(config.steps, 2))
+    t0 = time.monotonic()
+    for step in range(config.steps):
+        idx = torch.randint(0, len(f_all), (config.batch,), generator=gen)
+        f, c, y, w = f_all[idx], c_all[idx], y_all[idx], w_all[idx]
+        mir = torch.rand(len(idx), generator=gen) < 0.5
+        if mir.any():
+            fm, cm, ym = mirror_inputs(f[mir], c[mir], y[mir])
+            f, c, y, w = f.clone(), c.clone(), y.clone(), w.clone()
+            f[mir], c[mir], y[mir] = fm, cm, ym
+            w[mir] = w[mir][:, list(_flip())]
+        f = _hide_in_one_view(f, config.hide_joint_prob, gen)
+        joints, log_err = net(f, c)
+        dist = torch.where(w > 0, (joints - y).norm(dim=-1), 0.0)
+        # the error head: a Laplace likelihood of the (detached) distance; log b kept to 1 mm..20 m so that
+        # a confident early guess cannot blow dist / b up
+        log_b = log_err.clamp(-7.0, 3.0)
+        loss_joints = dist.sum() / w.sum().clamp(min=1)
+        loss_error = torch.where(w > 0, dist.detach() / log_b.exp() + log_b, 0.0).sum() / w.sum().clamp(min=1)
+        opt.zero_grad()
+        (loss_joints + 0.01 * loss_error).backward()
+        opt.step()
+        sched.step()
+        if progress and (step % 1000 == 0 or step == config.steps - 1):
+            print(f"  prior step {step}/{config.steps} MPJPE {1e3 * loss_joints.item():.1f} mm "
+                  f"{time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
+    return net.eval()
+
+
+def _flip():
+    from ghnerf_runtime.body25 import FLIP_INDEX
+
+    return FLIP_INDEX
+
+
+# ---------------------------------------------------------------------------------------------- export
+def export(net, path: str | Path, metadata: dict[str, str]) -> Path:
+    """``net`` as an ONNX file with a dynamic batch and the ``ghnerf_skeleton.*`` metadata."""
+    import onnx
+    import torch
+
+    path = Path(path)
+    f = torch.zeros(1, NUM_JOINTS, JOINT_FEATURES)
+    c = torch.zeros(1, CONTEXT_FEATURES)
+    torch.onnx.export(net, (f, c), str(path), input_names=["joint_features", "context"],
+                      output_names=["joints", "log_error"], opset_version=17, dynamo=False,
+                      dynamic_axes={"joint_features": {0: "N"}, "context": {0: "N"}, "joints": {0: "N"},
+                                    "log_error": {0: "N"}})
+    model = onnx.load(str(path))
+    meta = {"feature_version": str(FEATURE_VERSION), "num_joints": str(NUM_JOINTS), **metadata}
+    for k, v in meta.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = META_PREFIX + k, str(v)
+    onnx.save(model, str(path))
+    return path
+
+
+# ---------------------------------------------------------------------------------------------- evaluate
+def score(points: np.ndarray, expected_error: np.ndarray, truth: np.ndarray, truth_valid: np.ndarray,
+          triangulated: np.ndarray) -> dict:
+    """MPJPE (mm) of the prior's joints over all true joints, over the triangulated / filled ones, and
+    gated by the expected error (:data:`GATES_M`: share of true joints kept, mean, median)."""
+    err = 1e3 * np.linalg.norm(points - truth, axis=-1)
+    valid = np.asarray(truth_valid, bool)
+
+    def stats(mask):
+        e = err[mask]
+        return {"mean_mm": float(e.mean()) if e.size else None, "median_mm": float(np.median(e)) if e.size else None,
+                "p90_mm": float(np.percentile(e, 90)) if e.size else None, "joints": int(e.size)}
+
+    out = {"all": stats(valid), "triangulated": stats(valid & triangulated), "filled": stats(valid & ~triangulated)}
+    out["gated"] = {("inf" if math.isinf(g) else f"{g:g}"): {**stats(valid & (expected_error <= g)),
+                                                              "found": float((valid & (expected_error <= g)).sum()
+                                                                             / max(valid.sum(), 1))}
+                    for g in GATES_M}
+    return out
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def card_summary(folder: str | Path) -> dict | None:
+    """The prior's held-out figures (``skeleton_prior.json`` in ``folder``) as the model card keeps them."""
+    path = (Path(folder) / FILE_NAME).with_suffix(".json")
+    if not path.is_file():
+        return None
+    r = json.loads(path.read_text())
+    return {k: r.get(k) for k in ("command", "split", "scenes", "train_scenes", "encoder_file", "flip_test", "config",
+                                  "collect_s", "train_s", "metrics")}
+
+
+def add_to_card(card_dir: str | Path, out: Path) -> Path:
+    """Record the prior ``out`` (figures, size, hash) in the model card of ``card_dir`` and re-render it."""
+    from training.model_card import write_card
+
+    card_dir = Path(card_dir)
+    card = json.loads((card_dir / "model_card.json").read_text())
+    variant = out.parent.name
+    card.setdefault("skeleton_prior", {})[variant] = card_summary(out.parent)
+    card.setdefault("files", {})[str(out.relative_to(card_dir))] = {"bytes": out.stat().st_size,
+                                                                     "sha256": _sha256(out)}
+    write_card(card_dir, card)
+    return card_dir / "model_card.json"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.skeleton_prior", description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--model-dir", required=True, help="the exported model folder (models/ghnerf)")
+    ap.add_argument("--data", required=True, help="the cached dataset (training split: train, held out: val)")
+    ap.add_argument("--out", default=None, help=f"the ONNX file (default: <model-dir>/{FILE_NAME})")
+    ap.add_argument("--train-split", default="train")
+    ap.add_argument("--val-split", default="val")
+    ap.add_argument("--limit", type=int, default=0, help="scenes per split (0: all)")
+    ap.add_argument("--steps", type=int, default=PriorTrainConfig.steps)
+    ap.add_argument("--hidden", type=int, default=PriorTrainConfig.hidden)
+    ap.add_argument("--lr", type=float, default=PriorTrainConfig.lr)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-flip-test", action="store_true", help="collect without the flip test")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--card", help="a model card folder (models) to record the prior in (model_card.json, "
+                                   "MODEL_CARD.md); the pipeline's card stage does it for new models")
+    args = ap.parse_args(argv)
+    command = " ".join(["python -m training.skeleton_prior", *(argv if argv is not None else sys.argv[1:])])
+
+    import torch
+
+    torch.set_num_threads(args.threads)
+    model_dir = Path(args.model_dir)
+    out = Path(args.out) if args.out else model_dir / FILE_NAME
+    config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed)
+    t0 = time.monotonic()
+    tr = collect(model_dir, args.data, args.train_split, args.limit, not args.no_flip_test, args.threads)
+    va = collect(model_dir, args.data, args.val_split, args.limit, not args.no_flip_test, args.threads)
+    collect_s = time.monotonic() - t0
+    tr_in, tr_truth = inputs_of(tr)
+    net = train(tr_in, tr_truth, tr["joints_3d_valid"], config)
+    train_s = time.monotonic() - t0 - collect_s
+    encoder_file = str(tr["encoder_file"])
+    export(net, out, {"trained_on": f"{args.data}:{args.train_split}", "scenes": str(len(tr["uv"])),
+                      "encoder_file": encoder_file,
+                      "encoder_sha256": _sha256(model_dir / encoder_file),
+                      "flip_test": str(not args.no_flip_test).lower(), "config": json.dumps(asdict(config))})
+
+    from ghnerf_runtime.config import Joints3DConfig
+    from ghnerf_runtime.joints3d import triangulate_joints
+    from ghnerf_runtime.skeleton_prior import SkeletonPrior
+
+    prior = SkeletonPrior.load(out, args.threads)
+    est = prior.estimate(va["uv"], va["confidence"], va["valid"], va["P"])
+    metrics = score(est.points, est.expected_error_m, va["joints_3d"], va["joints_3d_valid"], est.triangulated)
+    # the runtime without the prior, same peaks: the gated triangulation
+    tri_err, known = [], 0
+    for i in range(len(va["uv"])):
+        g = triangulate_joints(va["uv"][i], va["confidence"][i], va["valid"][i], list(va["P"][i]), Joints3DConfig())
+        keep = g.valid & va["joints_3d_valid"][i]
+        tri_err.append(1e3 * np.linalg.norm(g.points[keep] - va["joints_3d"][i][keep], axis=-1))
+        known += int(va["joints_3d_valid"][i].sum())
+    e = np.concatenate(tri_err)
+    metrics["triangulation_gated"] = {"mean_mm": float(e.mean()), "median_mm": float(np.median(e)),
+                                      "p90_mm": float(np.percentile(e, 90)), "joints": int(e.size),
+                                      "found": e.size / max(known, 1)}
+    result = {"command": command, "file": str(out), "sha256": _sha256(out), "split": args.val_split, "scenes": len(va["uv"]),
+              "train_scenes": len(tr["uv"]), "encoder_file": encoder_file, "flip_test": not args.no_flip_test,
+              "config": asdict(config), "collect_s": round(collect_s, 1), "train_s": round(train_s, 1),
+              "metrics": metrics}
+    out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
+    m = metrics
+    print(f"{out}: held out ({args.val_split}, {len(va['uv'])} scenes) all joints MPJPE {m['all']['mean_mm']:.1f} "
+          f"mean / {m['all']['median_mm']:.1f} median mm; gated triangulation {e.mean():.1f} / {np.median(e):.1f} mm "
+          f"over {metrics['triangulation_gated']['found']:.0%} of joints; {collect_s:.0f} s collect, "
+          f"{train_s:.0f} s train")
+    for g, s in m["gated"].items():
+        print(f"  expected error <= {g} m: {s['found']:.0%} of joints, MPJPE {s['mean_mm'] or float('nan'):.1f} mean"
+              f" / {s['median_mm'] or float('nan'):.1f} median mm")
+    if args.card:
+        print(f"recorded in {add_to_card(args.card, out)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
