@@ -20,7 +20,9 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    (:func:`ghnerf_runtime.keypoints.decode_keypoints`), mapped back to the original
    (distorted) image pixels.
 6. ``joints_3d`` -- triangulation (default), volumetric query or depth centroid
-   (:mod:`ghnerf_runtime.joints3d`; comparison in docs/runtime.md); then the track is updated
+   (:mod:`ghnerf_runtime.joints3d`; comparison in docs/runtime.md); with triangulation and a
+   model folder that has one, the learnt skeleton prior then gives the whole skeleton
+   (:mod:`ghnerf_runtime.skeleton_prior`, ``joints3d.skeleton_prior``); then the track is updated
    (or dropped when too few joints were found).
 7. on request, ``novel_volume`` / ``novel_render`` / ``novel_compose`` -- the novel view. On a
    tracked pair it is rendered in a worker thread during stages 5-6 (``novel_view.overlap``),
@@ -80,7 +82,8 @@ class PairResult:
         sequence: the pair's number (as passed to :meth:`Estimator.estimate`).
         joint_names: BODY_25 names, the order of every joint axis.
         joints_3d: ``(25, 3)`` rig frame, metres; 0 where missing.
-        confidence: ``(25,)`` float32; 0 where missing.
+        confidence: ``(25,)`` float32; 0 where missing. Triangulation: the geometric mean of the
+            views' peak values; with the skeleton prior, ``exp(-expected error / 0.1 m)``.
         missing: ``(25,)`` bool.
         joints_2d: camera name -> ``(25, 2)`` pixels of the original (distorted) image; 0 where
             missing in that camera.

@@ -109,7 +109,8 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
                  f"triangulation of the same joints: {_fmt(tri.get('mean_mm'), 1)} mean / "
                  f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints. "
                  "The prior answers for every joint; its expected error gates them (the runtime's "
-                 "`joints3d.max_prior_error_m`). MPJPE mm, mean / median (share of the true joints kept):")
+                 "`joints3d.max_prior_error_m`). MPJPE mm, mean / median (share of the true joints kept)"
+                 + (f"; made by `{p['command']}`:" if p.get("command") else ":"))
         L.append("")
         L.append("| expected error at most | mean | median | p90 | joints kept |")
         L.append("|---|---|---|---|---|")

@@ -32,7 +32,8 @@ def test_stages_skip_finished_work_and_redo_changed_work(tmp_path):
     assert stamp["outputs"] == {str(out): sha256(out)} and stamp["info"] == {"text": "four"}
     Stages(tmp_path, ("export",)).run("export_ghnerf", {"a": 2}, make("five"))  # --force export
     assert calls[-1] == "five"
-    assert {"data", "train_ghnerf", "eval_baseline", "card"} <= set(STAGES)
+    assert {"data", "train_ghnerf", "eval_baseline", "prior_ghnerf", "card"} <= set(STAGES)
+    assert STAGES.index("prior_ghnerf") > STAGES.index("eval_ghnerf")
 
 
 def test_card_renders_metrics_and_missing_values(tmp_path):
@@ -98,6 +99,14 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "MPJPE (mm, gated) by how many" in gmd and "| ghnerf_int8 | rendered | 70.0 (90 %) | 130.0 (10 %) |" in gmd
     assert "| model | 0-15 deg | 15-180 deg |" in md and "| ghnerf_int8 | 22.50 (2) | n/a (0) |" in md
     assert "- Motions: train: stand 50 %, freestyle 50 %; val: reach" in md
+    assert "Skeleton prior" not in md  # a card without one
+    prior = {"split": "val", "scenes": 2, "train_scenes": 12, "train_s": 3.5, "config": {"steps": 4},
+             "metrics": {"triangulation_gated": {"mean_mm": 73.4, "median_mm": 34.1, "found": 0.72},
+                         "gated": {"0.05": {"mean_mm": 37.3, "median_mm": 26.8, "p90_mm": 70.0, "found": 0.95},
+                                   "inf": {"mean_mm": 47.2, "median_mm": 28.1, "p90_mm": None, "found": 1.0}}}}
+    pmd = render_markdown({**card, "skeleton_prior": {"ghnerf": prior, "baseline": None}})
+    assert "### Skeleton prior (`ghnerf/skeleton_prior.onnx`)" in pmd and "73.4 mean / 34.1 median mm over 72 %" in pmd
+    assert "| 0.05 m | 37.3 | 26.8 | 70.0 | 95 % |" in pmd and "| inf | 47.2 | 28.1 | n/a | 100 % |" in pmd
     from training.pipeline import motion_mix
     assert motion_mix({"motions": ["a", "b"], "motion_weights": [1.0, 3.0]}) == "a 25 %, b 75 %"
     assert motion_mix({"motions": ["a", "b"]}) == "a, b"
