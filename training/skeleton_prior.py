@@ -228,6 +228,13 @@ def export(net, path: str | Path, metadata: dict[str, str]) -> Path:
 
 
 # ---------------------------------------------------------------------------------------------- evaluate
+def error_stats(errors_mm: np.ndarray) -> dict:
+    """Mean, median, p90 (mm; None when there is no joint) and count of joint errors."""
+    e = np.asarray(errors_mm, np.float64)
+    return {"mean_mm": float(e.mean()) if e.size else None, "median_mm": float(np.median(e)) if e.size else None,
+            "p90_mm": float(np.percentile(e, 90)) if e.size else None, "joints": int(e.size)}
+
+
 def score(points: np.ndarray, expected_error: np.ndarray, truth: np.ndarray, truth_valid: np.ndarray,
           triangulated: np.ndarray) -> dict:
     """MPJPE (mm) of the prior's joints over all true joints, over the triangulated / filled ones, and
@@ -236,9 +243,7 @@ def score(points: np.ndarray, expected_error: np.ndarray, truth: np.ndarray, tru
     valid = np.asarray(truth_valid, bool)
 
     def stats(mask):
-        e = err[mask]
-        return {"mean_mm": float(e.mean()) if e.size else None, "median_mm": float(np.median(e)) if e.size else None,
-                "p90_mm": float(np.percentile(e, 90)) if e.size else None, "joints": int(e.size)}
+        return error_stats(err[mask])
 
     out = {"all": stats(valid), "triangulated": stats(valid & triangulated), "filled": stats(valid & ~triangulated)}
     out["gated"] = {("inf" if math.isinf(g) else f"{g:g}"): {**stats(valid & (expected_error <= g)),
@@ -330,22 +335,25 @@ def main(argv: list[str] | None = None) -> int:
         tri_err.append(1e3 * np.linalg.norm(g.points[keep] - va["joints_3d"][i][keep], axis=-1))
         known += int(va["joints_3d_valid"][i].sum())
     e = np.concatenate(tri_err)
-    metrics["triangulation_gated"] = {"mean_mm": float(e.mean()), "median_mm": float(np.median(e)),
-                                      "p90_mm": float(np.percentile(e, 90)), "joints": int(e.size),
-                                      "found": e.size / max(known, 1)}
-    result = {"command": command, "file": str(out), "sha256": _sha256(out), "split": args.val_split, "scenes": len(va["uv"]),
+    metrics["triangulation_gated"] = {**error_stats(e), "found": e.size / max(known, 1)}
+    result = {"command": command, "file": str(out), "sha256": _sha256(out), "split": args.val_split,
+              "scenes": len(va["uv"]),
               "train_scenes": len(tr["uv"]), "encoder_file": encoder_file, "flip_test": not args.no_flip_test,
               "config": asdict(config), "collect_s": round(collect_s, 1), "train_s": round(train_s, 1),
               "metrics": metrics}
     out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
-    m = metrics
-    print(f"{out}: held out ({args.val_split}, {len(va['uv'])} scenes) all joints MPJPE {m['all']['mean_mm']:.1f} "
-          f"mean / {m['all']['median_mm']:.1f} median mm; gated triangulation {e.mean():.1f} / {np.median(e):.1f} mm "
-          f"over {metrics['triangulation_gated']['found']:.0%} of joints; {collect_s:.0f} s collect, "
+    m, tg = metrics, metrics["triangulation_gated"]
+
+    def mm(v):
+        return "n/a" if v is None else f"{v:.1f}"
+
+    print(f"{out}: held out ({args.val_split}, {len(va['uv'])} scenes) all joints MPJPE {mm(m['all']['mean_mm'])} "
+          f"mean / {mm(m['all']['median_mm'])} median mm; gated triangulation {mm(tg['mean_mm'])} / "
+          f"{mm(tg['median_mm'])} mm over {tg['found']:.0%} of joints; {collect_s:.0f} s collect, "
           f"{train_s:.0f} s train")
     for g, s in m["gated"].items():
-        print(f"  expected error <= {g} m: {s['found']:.0%} of joints, MPJPE {s['mean_mm'] or float('nan'):.1f} mean"
-              f" / {s['median_mm'] or float('nan'):.1f} median mm")
+        print(f"  expected error <= {g} m: {s['found']:.0%} of joints, MPJPE {mm(s['mean_mm'])} mean"
+              f" / {mm(s['median_mm'])} median mm")
     if args.card:
         print(f"recorded in {add_to_card(args.card, out)}")
     return 0
