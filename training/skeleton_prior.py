@@ -263,7 +263,8 @@ def card_summary(folder: str | Path) -> dict | None:
     if not path.is_file():
         return None
     r = json.loads(path.read_text())
-    return {k: r.get(k) for k in ("command", "split", "scenes", "train_scenes", "encoder_file", "flip_test", "config",
+    return {k: r.get(k) for k in ("command", "split", "scenes", "train_scenes", "trained_on", "encoder_file",
+                                  "flip_test", "config",
                                   "collect_s", "train_s", "metrics")}
 
 
@@ -288,6 +289,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", required=True, help="the cached dataset (training split: train, held out: val)")
     ap.add_argument("--out", default=None, help=f"the ONNX file (default: <model-dir>/{FILE_NAME})")
     ap.add_argument("--train-split", default="train")
+    ap.add_argument("--extra-data", action="append", default=[],
+                    help="another dataset folder whose training split the prior also learns from (repeatable; "
+                         "made by python -m training.data.generate with another --seed; --novel-views 0 suffices)")
     ap.add_argument("--val-split", default="val")
     ap.add_argument("--limit", type=int, default=0, help="scenes per split (0: all)")
     ap.add_argument("--steps", type=int, default=PriorTrainConfig.steps)
@@ -309,13 +313,17 @@ def main(argv: list[str] | None = None) -> int:
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed)
     t0 = time.monotonic()
     tr = collect(model_dir, args.data, args.train_split, args.limit, not args.no_flip_test, args.threads)
+    for extra in args.extra_data:
+        more = collect(model_dir, extra, args.train_split, args.limit, not args.no_flip_test, args.threads)
+        tr = {k: (v if k == "encoder_file" else np.concatenate([v, more[k]])) for k, v in tr.items()}
     va = collect(model_dir, args.data, args.val_split, args.limit, not args.no_flip_test, args.threads)
     collect_s = time.monotonic() - t0
     tr_in, tr_truth = inputs_of(tr)
     net = train(tr_in, tr_truth, tr["joints_3d_valid"], config)
     train_s = time.monotonic() - t0 - collect_s
     encoder_file = str(tr["encoder_file"])
-    export(net, out, {"trained_on": f"{args.data}:{args.train_split}", "scenes": str(len(tr["uv"])),
+    trained_on = ",".join(f"{d}:{args.train_split}" for d in [args.data, *args.extra_data])
+    export(net, out, {"trained_on": trained_on, "scenes": str(len(tr["uv"])),
                       "encoder_file": encoder_file,
                       "encoder_sha256": _sha256(model_dir / encoder_file),
                       "flip_test": str(not args.no_flip_test).lower(), "config": json.dumps(asdict(config))})
@@ -338,7 +346,8 @@ def main(argv: list[str] | None = None) -> int:
     metrics["triangulation_gated"] = {**error_stats(e), "found": e.size / max(known, 1)}
     result = {"command": command, "file": str(out), "sha256": _sha256(out), "split": args.val_split,
               "scenes": len(va["uv"]),
-              "train_scenes": len(tr["uv"]), "encoder_file": encoder_file, "flip_test": not args.no_flip_test,
+              "train_scenes": len(tr["uv"]), "trained_on": trained_on, "encoder_file": encoder_file,
+              "flip_test": not args.no_flip_test,
               "config": asdict(config), "collect_s": round(collect_s, 1), "train_s": round(train_s, 1),
               "metrics": metrics}
     out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
