@@ -325,7 +325,7 @@ class Joints3DConfig:
     centroid_radius_cells: int = 2
     surface_offset_m: float = 0.03
     skeleton_prior: str = "auto"
-    max_prior_error_m: float = 0.05
+    max_prior_error_m: float = 0.15
 
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)

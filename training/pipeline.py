@@ -72,17 +72,23 @@ class Recipe:
     """Pretraining batch-making processes (speed only), at most the machine's cores less four."""
     workers: int = 0
     """Dataset generation processes (speed only; 0: the pipeline's default), at most the machine's cores."""
+    prior_steps: int = 15000
+    """Skeleton prior training steps (``PipelineConfig.prior_steps``)."""
+    prior_extra_train: int = 0
+    """Scenes of the skeleton prior's second training set (``PipelineConfig.prior_extra_train``)."""
 
 
 #: ``--recipe``. ``cpu`` is what two cores train in about two hours; ``gpu`` is the shipped (tenth) model's,
 #: about 25 minutes on one H100: the human encoder's trunk at 128x128 instead of 64x64 and 27000
 #: pretraining steps of 4 scenes instead of 24000 of 2 (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, 1.4-2.2 h measured: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes"),
-    "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes",
+    "cpu": Recipe("two CPU cores, 1.4-2.2 h measured: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes; "
+                  "skeleton prior 15000 steps on the 5000 training scenes (~6 min)"),
+    "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
+                  "skeleton prior 30000 steps on 25000 scenes (~18 min on two cores, where the export runs)",
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=27000", "lr_decay_every=4500", "scenes_per_step=4"),
-                  loader_workers=12, workers=16),
+                  loader_workers=12, workers=16, prior_steps=30000, prior_extra_train=20000),
 }
 
 
@@ -150,6 +156,7 @@ class PipelineConfig:
                                    *self.pretrain_overrides]
         if r.workers:
             self.workers = max(1, min(r.workers, cores))
+        self.prior_steps, self.prior_extra_train = r.prior_steps, r.prior_extra_train
 
     @classmethod
     def quick_defaults(cls, out: Path) -> "PipelineConfig":

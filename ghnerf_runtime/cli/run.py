@@ -70,7 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "the model folder's skeleton_prior.onnx when it has one: docs/runtime.md)")
     ap.add_argument("--max-prior-error", type=float, metavar="M",
                     help="skeleton prior: report a joint only when its expected error is at most M metres "
-                         "(joints3d.max_prior_error_m, default 0.05)")
+                         "(joints3d.max_prior_error_m, default 0.15)")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, default=0.5, help="novel camera between the rig cameras: 0 = first, "
