@@ -340,6 +340,11 @@ class Joints3DConfig:
         _integer(self, "centroid_radius_cells", 0, 8)
         _number(self, "surface_offset_m", -0.5, 0.5)
 
+    def uses_skeleton_prior(self, available: bool) -> bool:
+        """Whether the skeleton prior runs, given whether the model folder has one (``on`` without one is the
+        estimator's error to raise)."""
+        return available and self.skeleton_prior != "off" and self.method == "triangulate"
+
 
 #: Presence gate defaults per heatmap source (``PresenceConfig.min_confidence`` None): between the
 #: 6th-strongest 3D joint of empty-room pairs (encoder <= 0.25, rendered <= 0.33 over 32 rooms) and of

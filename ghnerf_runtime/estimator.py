@@ -64,11 +64,11 @@ from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES"]
 
-#: Stage keys of the keypoint path, in order.
 #: Skeleton prior: confidence = exp(-expected error / this).
 _PRIOR_CONFIDENCE_SCALE_M = 0.1
 #: Skeleton prior: the crop follows the prior's joints expected within this (m), whatever is reported.
 _PRIOR_FOLLOW_MAX_ERROR_M = 0.25
+#: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_heat", "decode_2d", "joints_3d")
 #: Stage keys of the novel view.
 NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
@@ -267,7 +267,7 @@ class Estimator:
             raise ModelError("joints3d.skeleton_prior = 'on' but the session has no skeleton prior (the model folder "
                              "has no skeleton_prior.onnx; make one with python -m training.skeleton_prior, or set "
                              "joints3d.skeleton_prior = 'auto' or 'off')")
-        return prior if cfg.skeleton_prior != "off" and cfg.method == "triangulate" else None
+        return prior if cfg.uses_skeleton_prior(prior is not None) else None
 
     @classmethod
     def from_config(cls, rig: Rig, config: EstimatorConfig | None = None) -> "Estimator":
@@ -702,5 +702,4 @@ def load_session(config: EstimatorConfig):
     from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
 
     graphs = config.required_graphs(ModelSession.has_graph_file(config.session, "human"))
-    j3 = config.joints3d
-    return ModelSession.load(config.session, graphs, skeleton_prior=j3.skeleton_prior != "off")
+    return ModelSession.load(config.session, graphs, skeleton_prior=config.joints3d.uses_skeleton_prior(True))

@@ -19,7 +19,6 @@ onnxruntime and numpy only; never torch.
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -30,9 +29,8 @@ from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
 
-log = logging.getLogger(__name__)
-
-__all__ = ["FEATURE_VERSION", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME", "META_PREFIX", "CanonicalFrame",
+__all__ = ["FEATURE_VERSION", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME", "META_PREFIX", "INPUTS",
+           "OUTPUTS", "CanonicalFrame",
            "PriorInputs", "SkeletonEstimate", "SkeletonPrior", "prior_inputs", "mirror_inputs"]
 
 #: Bump when the meaning of a feature changes: a file trained on other features is refused.
@@ -225,8 +223,7 @@ class SkeletonPrior:
                                      path=str(path), key=META_PREFIX + "num_joints")
         ins = {i.name: i.shape for i in sess.get_inputs()}
         outs = {o.name for o in sess.get_outputs()}
-        want = {"joint_features": JOINT_FEATURES, "context": CONTEXT_FEATURES}
-        for name, width in want.items():
+        for name, width in zip(INPUTS, (JOINT_FEATURES, CONTEXT_FEATURES)):
             if name not in ins or ins[name][-1] != width:
                 raise ModelContractError(f"input {name!r} of width {width} expected, the file has {ins}",
                                          path=str(path), key=name)
@@ -244,8 +241,8 @@ class SkeletonPrior:
             P = np.asarray([np.asarray(getattr(c, "P", c), np.float64) for c in P])[None]
         inputs = prior_inputs(uv_model, confidence, valid, np.asarray(P, np.float64))
         try:
-            joints, log_error = self._session.run(list(OUTPUTS), {"joint_features": inputs.joint_features,
-                                                                  "context": inputs.context})
+            joints, log_error = self._session.run(list(OUTPUTS), dict(zip(INPUTS, (inputs.joint_features,
+                                                                                inputs.context))))
         except Exception as e:
             raise ModelRunError(f"skeleton prior failed: {type(e).__name__}: {str(e)[:200]}",
                                 path=str(self.path)) from e

@@ -14,8 +14,9 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
 6. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8) and the baseline (onnx fp32,
    int8) into ``metrics_<variant>.json``.
 7. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
-   split (``training.skeleton_prior``, ~11 min on two cores) into ``ghnerf/skeleton_prior.onnx``, with its
-   held-out figures (``skeleton_prior.json``).
+   split (``training.skeleton_prior``; the recipe sets its steps and extra scenes: ~6 min on two cores for
+   ``cpu``, ~18 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``, with its held-out figures
+   (``skeleton_prior.json``).
 8. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
    wall times), once every variant is evaluated.
 
@@ -121,7 +122,7 @@ class PipelineConfig:
     eval_limit: int = 0
     calib_scenes: int = 16
     prior_steps: int = 15000
-    """Training steps of the skeleton prior (``training.skeleton_prior``; ~10 min on two cores)."""
+    """Training steps of the skeleton prior (``training.skeleton_prior``; 15000: ~5 min on two cores)."""
     prior_scenes: int = 0
     """Scenes per split the prior collects (0: all)."""
     prior_extra_train: int = 0

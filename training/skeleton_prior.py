@@ -31,13 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ghnerf_runtime.body25 import NUM_JOINTS
+from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.skeleton_prior import (
     CONTEXT_FEATURES,
     FEATURE_VERSION,
     FILE_NAME,
+    INPUTS,
     JOINT_FEATURES,
     META_PREFIX,
+    OUTPUTS,
     PriorInputs,
     mirror_inputs,
     prior_inputs,
@@ -61,15 +63,15 @@ class PriorTrainConfig:
 
 
 # ---------------------------------------------------------------------------------------------- collect
-def _encoder_session(model_dir: Path, threads: int):
-    import onnxruntime as ort
+def _heatmap_session(model_dir: Path, threads: int):
+    """The model's keypoint graph as the runtime loads it (``human`` when the folder has one, else ``encoder``;
+    ``auto`` precision: int8), checked against the model contract."""
+    from ghnerf_runtime.config import SessionConfig
+    from ghnerf_runtime.session import ModelSession
 
-    for name in ("human.int8.onnx", "human.onnx", "encoder.int8.onnx", "encoder.onnx"):
-        if (model_dir / name).is_file():
-            opts = ort.SessionOptions()
-            opts.intra_op_num_threads = threads
-            return ort.InferenceSession(str(model_dir / name), opts, providers=["CPUExecutionProvider"]), name
-    raise FileNotFoundError(f"{model_dir}: no human or encoder graph (human.onnx, encoder.onnx)")
+    config = SessionConfig(model_dir=str(model_dir), threads=threads, warmup=False)
+    graph = "human" if ModelSession.has_graph_file(config, "human") else "encoder"
+    return ModelSession.load(config, (graph,)), graph
 
 
 def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0, flip_test: bool = True,
@@ -79,7 +81,7 @@ def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0,
     from training.data.torch_dataset import MultiViewDataset
     from training.evaluate import _decode
 
-    sess, name = _encoder_session(Path(model_dir), threads)
+    sess, graph = _heatmap_session(Path(model_dir), threads)
     ds = MultiViewDataset(data, split)
     n = min(limit, len(ds)) if limit else len(ds)
     keys = ("uv", "confidence", "valid", "P", "joints_3d", "joints_3d_valid")
@@ -88,9 +90,9 @@ def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0,
     for i in range(n):
         scene = ds[i]
         images = np.ascontiguousarray(scene["images"].numpy(), np.float32)
-        heat = sess.run(["encoder_heatmaps"], {"images": images})[0]
+        heat = sess.run(graph, {"images": images})["encoder_heatmaps"]
         if flip_test:
-            heat = flip_averaged(heat, sess.run(["encoder_heatmaps"], {"images": mirror_images(images)})[0])
+            heat = flip_averaged(heat, sess.run(graph, {"images": mirror_images(images)})["encoder_heatmaps"])
         uv, conf = _decode(heat, images.shape[-1], None)
         out["uv"].append(np.nan_to_num(uv))
         out["confidence"].append(conf)
@@ -101,7 +103,7 @@ def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0,
         if progress and (i + 1) % 1000 == 0:
             print(f"  collect {split} {i + 1}/{n} {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
     arrays = {k: np.stack(v) for k, v in out.items()}
-    arrays["encoder_file"] = np.array(name)
+    arrays["encoder_file"] = np.array(sess.files[graph].path.name)
     return arrays
 
 
@@ -180,7 +182,7 @@ def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, confi
             fm, cm, ym = mirror_inputs(f[mir], c[mir], y[mir])
             f, c, y, w = f.clone(), c.clone(), y.clone(), w.clone()
             f[mir], c[mir], y[mir] = fm, cm, ym
-            w[mir] = w[mir][:, list(_flip())]
+            w[mir] = w[mir][:, list(FLIP_INDEX)]
         f = _hide_in_one_view(f, config.hide_joint_prob, gen)
         joints, log_err = net(f, c)
         dist = torch.where(w > 0, (joints - y).norm(dim=-1), 0.0)
@@ -199,12 +201,6 @@ def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, confi
     return net.eval()
 
 
-def _flip():
-    from ghnerf_runtime.body25 import FLIP_INDEX
-
-    return FLIP_INDEX
-
-
 # ---------------------------------------------------------------------------------------------- export
 def export(net, path: str | Path, metadata: dict[str, str]) -> Path:
     """``net`` as an ONNX file with a dynamic batch and the ``ghnerf_skeleton.*`` metadata."""
@@ -214,10 +210,8 @@ def export(net, path: str | Path, metadata: dict[str, str]) -> Path:
     path = Path(path)
     f = torch.zeros(1, NUM_JOINTS, JOINT_FEATURES)
     c = torch.zeros(1, CONTEXT_FEATURES)
-    torch.onnx.export(net, (f, c), str(path), input_names=["joint_features", "context"],
-                      output_names=["joints", "log_error"], opset_version=17, dynamo=False,
-                      dynamic_axes={"joint_features": {0: "N"}, "context": {0: "N"}, "joints": {0: "N"},
-                                    "log_error": {0: "N"}})
+    torch.onnx.export(net, (f, c), str(path), input_names=list(INPUTS), output_names=list(OUTPUTS),
+                      opset_version=17, dynamo=False, dynamic_axes={n: {0: "N"} for n in (*INPUTS, *OUTPUTS)})
     model = onnx.load(str(path))
     meta = {"feature_version": str(FEATURE_VERSION), "num_joints": str(NUM_JOINTS), **metadata}
     for k, v in meta.items():
@@ -264,8 +258,7 @@ def card_summary(folder: str | Path) -> dict | None:
         return None
     r = json.loads(path.read_text())
     return {k: r.get(k) for k in ("command", "split", "scenes", "train_scenes", "trained_on", "encoder_file",
-                                  "flip_test", "config",
-                                  "collect_s", "train_s", "metrics")}
+                                  "flip_test", "config", "collect_s", "train_s", "metrics")}
 
 
 def add_to_card(card_dir: str | Path, out: Path) -> Path:
@@ -345,11 +338,9 @@ def main(argv: list[str] | None = None) -> int:
     e = np.concatenate(tri_err)
     metrics["triangulation_gated"] = {**error_stats(e), "found": e.size / max(known, 1)}
     result = {"command": command, "file": str(out), "sha256": _sha256(out), "split": args.val_split,
-              "scenes": len(va["uv"]),
-              "train_scenes": len(tr["uv"]), "trained_on": trained_on, "encoder_file": encoder_file,
-              "flip_test": not args.no_flip_test,
-              "config": asdict(config), "collect_s": round(collect_s, 1), "train_s": round(train_s, 1),
-              "metrics": metrics}
+              "scenes": len(va["uv"]), "train_scenes": len(tr["uv"]), "trained_on": trained_on,
+              "encoder_file": encoder_file, "flip_test": not args.no_flip_test, "config": asdict(config),
+              "collect_s": round(collect_s, 1), "train_s": round(train_s, 1), "metrics": metrics}
     out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
     m, tg = metrics, metrics["triangulation_gated"]
 

@@ -170,8 +170,7 @@ def run_runtime_bench(args) -> dict:
                "heatmaps": row["source"], "method": cfg.joints3d.method, "track_from_truth": args.track_from_truth,
                "flip_test": cfg.flips_encoder_heatmaps, "flip_label": row["flip_label"],
                "follow_encoder": cfg.tracking.follow_encoder, "follow_label": row["follow_label"],
-               "skeleton_prior": (cfg.joints3d.method == "triangulate" and cfg.joints3d.skeleton_prior != "off"
-                                  and getattr(session, "skeleton_prior", None) is not None),
+               "skeleton_prior": cfg.joints3d.uses_skeleton_prior(getattr(session, "skeleton_prior", None) is not None),
                "prior_label": row["prior_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride}
                   if row["mode"] == "novel" else {}),
