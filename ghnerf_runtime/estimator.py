@@ -637,7 +637,8 @@ class Estimator:
         expected error exceeds ``max_prior_error_m`` is missing. Confidence: ``exp(-expected error /
         0.1 m)`` (0.7 at 35 mm, 0.37 at 100 mm), so it says how far off the joint may be. The box gates
         (``max_outside_box_m``) still apply after."""
-        est = self.skeleton_prior.estimate(uv_model, kp.confidence, kp.valid, [c.P for c in crops])
+        est = self.skeleton_prior.estimate(uv_model, kp.confidence, kp.valid, [c.P for c in crops],
+                                          self.config.joints3d.prior_flip_test)
         score = np.exp(-est.expected_error_m / _PRIOR_CONFIDENCE_SCALE_M).astype(np.float32)
 
         def gated(max_error_m: float) -> Joints3D:

@@ -233,21 +233,35 @@ class SkeletonPrior:
         return cls(sess, path, meta)
 
     def estimate(self, uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray,
-                 P: Sequence | np.ndarray) -> SkeletonEstimate:
-        """The skeleton of ``N`` pairs (shapes as :func:`prior_inputs`; one pair may drop the ``N``)."""
+                 P: Sequence | np.ndarray, flip_test: bool = True) -> SkeletonEstimate:
+        """The skeleton of ``N`` pairs (shapes as :func:`prior_inputs`; one pair may drop the ``N``).
+
+        ``flip_test``: also run the mirrored pairs (:func:`mirror_inputs`, in the same batch) and average
+        both answers, mirrored back: the network is only nearly mirror-symmetric, and the average of the two
+        is better than either (held out: 41.1 -> 40.3 mm over every joint, docs/runtime.md)."""
         single = np.ndim(uv_model) == 3
         if single:
             uv_model, confidence, valid = uv_model[None], confidence[None], valid[None]
             P = np.asarray([np.asarray(getattr(c, "P", c), np.float64) for c in P])[None]
         inputs = prior_inputs(uv_model, confidence, valid, np.asarray(P, np.float64))
+        features, context = inputs.joint_features, inputs.context
+        if flip_test:
+            mirrored = mirror_inputs(features, context)
+            features, context = np.concatenate([features, mirrored[0]]), np.concatenate([context, mirrored[1]])
         try:
-            joints, log_error = self._session.run(list(OUTPUTS), dict(zip(INPUTS, (inputs.joint_features,
-                                                                                inputs.context))))
+            joints, log_error = self._session.run(list(OUTPUTS), dict(zip(INPUTS, (features, context))))
         except Exception as e:
             raise ModelRunError(f"skeleton prior failed: {type(e).__name__}: {str(e)[:200]}",
                                 path=str(self.path)) from e
-        points = inputs.frame.to_rig(joints.astype(np.float64))
+        joints = joints.astype(np.float64)
         err = np.exp(np.clip(log_error.astype(np.float64), -12.0, 5.0))
+        if flip_test:
+            n = len(inputs.context)
+            back = np.argsort(FLIP_INDEX)  # FLIP_INDEX is its own inverse; argsort says so without assuming it
+            mirrored_joints = joints[n:, back] * np.array([-1.0, 1.0, 1.0])
+            joints = 0.5 * (joints[:n] + mirrored_joints)
+            err = 0.5 * (err[:n] + err[n:, back])
+        points = inputs.frame.to_rig(joints)
         bad = ~np.isfinite(points).all(-1) | ~np.isfinite(err)
         points = np.where(bad[..., None], 0.0, points)
         err = np.where(bad, np.inf, err)

@@ -60,6 +60,9 @@ class PriorTrainConfig:
     weight_decay: float = 1e-4
     hide_joint_prob: float = 0.1
     seed: int = 0
+    members: int = 1
+    """Networks averaged in the exported file, trained alike but from seeds ``seed .. seed + members - 1``
+    (their errors are partly independent: the mean of two is better than either)."""
 
 
 # ---------------------------------------------------------------------------------------------- collect
@@ -141,6 +144,26 @@ def make_network(hidden: int):
     return SkeletonPriorNet()
 
 
+def make_ensemble(nets):
+    """One network answering the mean of ``nets``' joints and the log of the mean of their expected
+    errors (so one file, one run, the same I/O as a single network)."""
+    import torch
+    from torch import nn
+
+    class SkeletonPriorEnsemble(nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            self.members = nn.ModuleList(nets)
+
+        def forward(self, joint_features, context):
+            outs = [m(joint_features, context) for m in self.members]
+            joints = torch.stack([o[0] for o in outs]).mean(0)
+            log_error = torch.logsumexp(torch.stack([o[1] for o in outs]), 0) - math.log(len(outs))
+            return joints, log_error
+
+    return SkeletonPriorEnsemble().eval()
+
+
 def _hide_in_one_view(f, prob: float, gen):
     """Some joints lose one view (as occlusion and the gates do): no triangulated point, no peak there."""
     import torch
@@ -161,11 +184,19 @@ def _hide_in_one_view(f, prob: float, gen):
 
 def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, config: PriorTrainConfig,
           progress: bool = True):
-    """The trained network (torch, eval mode)."""
+    """The trained network (torch, eval mode): one, or the ensemble of ``config.members``."""
+    if config.members > 1:
+        return make_ensemble([_train_one(inputs, truth, truth_valid, config, config.seed + k, progress)
+                              for k in range(config.members)])
+    return _train_one(inputs, truth, truth_valid, config, config.seed, progress)
+
+
+def _train_one(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, config: PriorTrainConfig,
+               seed: int, progress: bool):
     import torch
 
-    torch.manual_seed(config.seed)
-    gen = torch.Generator().manual_seed(config.seed)
+    torch.manual_seed(seed)
+    gen = torch.Generator().manual_seed(seed)
     f_all = torch.from_numpy(inputs.joint_features)
     c_all = torch.from_numpy(inputs.context)
     y_all = torch.from_numpy(np.nan_to_num(truth).astype(np.float32))  # invalid joints weigh 0
@@ -196,7 +227,7 @@ def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, confi
         opt.step()
         sched.step()
         if progress and (step % 1000 == 0 or step == config.steps - 1):
-            print(f"  prior step {step}/{config.steps} MPJPE {1e3 * loss_joints.item():.1f} mm "
+            print(f"  prior (seed {seed}) step {step}/{config.steps} MPJPE {1e3 * loss_joints.item():.1f} mm "
                   f"{time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
     return net.eval()
 
@@ -291,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--hidden", type=int, default=PriorTrainConfig.hidden)
     ap.add_argument("--lr", type=float, default=PriorTrainConfig.lr)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--members", type=int, default=1,
+                    help="networks averaged in the file (seeds seed..seed+members-1; each takes the training time)")
     ap.add_argument("--no-flip-test", action="store_true", help="collect without the flip test")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--card", help="a model card folder (models) to record the prior in (model_card.json, "
@@ -303,7 +336,10 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     model_dir = Path(args.model_dir)
     out = Path(args.out) if args.out else model_dir / FILE_NAME
-    config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed)
+    if args.members < 1:
+        ap.error(f"--members must be at least 1, not {args.members}")
+    config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
+                              members=args.members)
     t0 = time.monotonic()
     tr = collect(model_dir, args.data, args.train_split, args.limit, not args.no_flip_test, args.threads)
     for extra in args.extra_data:

@@ -138,11 +138,15 @@ def run_runtime_bench(args) -> dict:
         flips = (args.flip_tests or [None]) if source == "encoder" else [None]
         follows = (args.follow_encoder or [None]) if source == "rendered" else [None]
         priors = (args.skeleton_priors or [None]) if cfg.joints3d.method == "triangulate" else [None]
-        for mode, flip, follow, prior in itertools.product(args.modes, flips, follows, priors):
+        prior_flips = (args.prior_flip_tests or [None]) if cfg.joints3d.method == "triangulate" else [None]
+        for mode, flip, follow, prior, prior_flip in itertools.product(args.modes, flips, follows, priors,
+                                                                       prior_flips):
             flip_cfg = cfg if flip is None else replace(cfg, heatmaps=replace(cfg.heatmaps, flip_test=flip))
             if prior is not None:
                 flip_cfg = replace(flip_cfg, joints3d=replace(flip_cfg.joints3d,
                                                               skeleton_prior="on" if prior else "off"))
+            if prior_flip is not None:
+                flip_cfg = replace(flip_cfg, joints3d=replace(flip_cfg.joints3d, prior_flip_test=prior_flip))
             if follow is not None:
                 flip_cfg = replace(flip_cfg, tracking=replace(flip_cfg.tracking, follow_encoder=follow))
             for interior in ((args.novel_interior_strides or [None]) if mode == "novel" else [None]):
@@ -151,7 +155,7 @@ def run_runtime_bench(args) -> dict:
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
                              "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
                              "flip_label": flip is not None, "follow_label": follow is not None,
-                             "prior_label": prior is not None})
+                             "prior_label": prior is not None, "prior_flip_label": prior_flip is not None})
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
@@ -171,7 +175,8 @@ def run_runtime_bench(args) -> dict:
                "flip_test": cfg.flips_encoder_heatmaps, "flip_label": row["flip_label"],
                "follow_encoder": cfg.tracking.follow_encoder, "follow_label": row["follow_label"],
                "skeleton_prior": cfg.joints3d.uses_skeleton_prior(getattr(session, "skeleton_prior", None) is not None),
-               "prior_label": row["prior_label"],
+               "prior_label": row["prior_label"], "prior_flip_test": cfg.joints3d.prior_flip_test,
+               "prior_flip_label": row["prior_flip_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
@@ -191,6 +196,8 @@ def _print_row(row: dict) -> None:
         tracked += " follow-enc" if row["follow_encoder"] else " follow-own"
     if row.get("prior_label"):
         tracked += " prior" if row["skeleton_prior"] else " no-prior"
+    if row.get("prior_flip_label") and row.get("skeleton_prior"):
+        tracked += " prior-flip" if row["prior_flip_test"] else " prior-no-flip"
     if row.get("novel_interior_stride") and row["novel_interior_stride"] > row.get("novel_stride", 1):
         tracked += f" interior/{row['novel_interior_stride']}"
     acc = row["accuracy"]
@@ -250,6 +257,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--skeleton-priors", default=None, type=_on_off_list,
                     help="comma list of joints3d.skeleton_prior values (on,off), one row each for triangulation "
                          "(interleaved; default: the config's, auto: on when the model folder has the prior)")
+    rt.add_argument("--prior-flip-tests", default=None, type=_on_off_list,
+                    help="comma list of joints3d.prior_flip_test values (on,off), one row each for triangulation "
+                         "with the skeleton prior (interleaved; default: the config's, on)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

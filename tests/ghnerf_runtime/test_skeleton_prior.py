@@ -144,7 +144,7 @@ def tiny_prior(tmp_path_factory) -> SimpleNamespace:
     net = train(inp, inp.frame.to_canonical(truth), np.ones((32, NUM_JOINTS), bool),
                 PriorTrainConfig(steps=3, hidden=16, batch=8), progress=False)
     path = export(net, tmp_path_factory.mktemp("prior") / FILE_NAME, {"trained_on": "test"})
-    return SimpleNamespace(path=path, net=net)  # the file and its torch twin
+    return SimpleNamespace(path=path, net=net, data=(inp, inp.frame.to_canonical(truth)))  # file, torch twin
 
 
 def test_onnx_matches_torch_and_answers_in_the_rig_frame(tiny_prior):
@@ -155,7 +155,7 @@ def test_onnx_matches_torch_and_answers_in_the_rig_frame(tiny_prior):
     P = _rig(30.0, (0.5, 0.5))
     X = (np.c_[_skeleton(3), np.ones(NUM_JOINTS)] @ _scene_motion(30.0, (0.5, 0.5)).T)[:, :3]
     uv, conf, valid = _observe(P, X)
-    est = prior.estimate(uv, conf, valid, P)
+    est = prior.estimate(uv, conf, valid, P, flip_test=False)
     assert est.points.shape == (NUM_JOINTS, 3) and est.expected_error_m.shape == (NUM_JOINTS,)
     assert np.isfinite(est.points).all() and (est.expected_error_m > 0).all()
     # torch vs onnxruntime on the same inputs, back in the rig frame
@@ -166,10 +166,60 @@ def test_onnx_matches_torch_and_answers_in_the_rig_frame(tiny_prior):
     np.testing.assert_allclose(est.expected_error_m, np.exp(log_err.double().numpy()[0]), rtol=1e-4)
     # batched and single answers agree (N is dynamic)
     batch = prior.estimate(np.stack([uv, uv]), np.stack([conf, conf]), np.stack([valid, valid]),
-                           np.stack([np.stack(P)] * 2))
+                           np.stack([np.stack(P)] * 2), flip_test=False)
     np.testing.assert_allclose(batch.points[1], est.points, atol=1e-6)
     # the network starts as the identity on the triangulated points and has had 3 steps: near the truth
     assert np.median(np.linalg.norm(est.points - X, axis=-1)) < 0.1
+
+
+def test_an_ensemble_file_answers_the_mean_of_its_members(tiny_prior, tmp_path):
+    """``members=2`` trains two networks (seeds 0 and 1) and exports one file answering their mean joints and
+    the mean of their expected errors; member 0 is the single network of seed 0."""
+    import torch
+    from training.skeleton_prior import PriorTrainConfig, export, train
+
+    inp, truth = tiny_prior.data
+    both = train(inp, truth, np.ones(truth.shape[:2], bool), PriorTrainConfig(steps=3, hidden=16, batch=8,
+                                                                              members=2), progress=False)
+    assert len(both.members) == 2
+    f, c = torch.from_numpy(inp.joint_features), torch.from_numpy(inp.context)
+    with torch.no_grad():
+        single, member0 = tiny_prior.net(f, c), both.members[0](f, c)
+        j1, e1 = both.members[1](f, c)
+    for a, b in zip(single, member0):  # training is deterministic, member 0 is the seed-0 network
+        torch.testing.assert_close(a, b)
+    assert (j1 - member0[0]).abs().max() > 1e-5  # seed 1 is another network
+    prior = SkeletonPrior.load(export(both, tmp_path / FILE_NAME, {"trained_on": "test"}))
+    joints, log_err = prior._session.run(None, {"joint_features": inp.joint_features, "context": inp.context})
+    np.testing.assert_allclose(joints, 0.5 * (member0[0] + j1).numpy(), atol=1e-5)
+    np.testing.assert_allclose(np.exp(log_err), 0.5 * (member0[1].exp() + e1.exp()).numpy(), rtol=1e-4)
+
+
+def test_flip_test_averages_the_mirrored_answer_and_makes_the_prior_mirror_symmetric(tiny_prior):
+    """With the flip test the prior's answer for a scene seen in a mirror is its answer mirrored, exactly;
+    the answer is the mean of the plain one and the mirrored pair's answer mirrored back."""
+    prior = SkeletonPrior.load(tiny_prior.path)
+    P, X = _rig(), _skeleton(4)
+    uv, conf, valid = _observe(P, X)
+    conf = conf * np.linspace(0.3, 1.0, NUM_JOINTS)
+    valid[1, 3] = False  # a joint one view misses: not symmetric by construction
+    S = np.diag([-1.0, 1.0, 1.0, 1.0])
+    F = np.array([[-1.0, 0, SIZE - 1], [0, 1, 0], [0, 0, 1]])
+    Pm = [F @ p @ S for p in P]
+    uvm, _, _ = _observe(Pm, X * [-1.0, 1.0, 1.0])
+    flip = list(FLIP_INDEX)
+    seen = prior.estimate(uv, conf, valid, P)
+    in_mirror = prior.estimate(uvm[:, flip], conf[:, flip], valid[:, flip], Pm)
+    np.testing.assert_allclose(in_mirror.points[flip] * [-1.0, 1.0, 1.0], seen.points, atol=1e-5)
+    np.testing.assert_allclose(in_mirror.expected_error_m[flip], seen.expected_error_m, rtol=1e-5)
+    plain = prior.estimate(uv, conf, valid, P, flip_test=False)
+    plain_mirror = prior.estimate(uvm[:, flip], conf[:, flip], valid[:, flip], Pm, flip_test=False)
+    np.testing.assert_allclose(seen.points, 0.5 * (plain.points + plain_mirror.points[flip] * [-1.0, 1.0, 1.0]),
+                               atol=1e-5)
+    np.testing.assert_allclose(seen.expected_error_m,
+                               0.5 * (plain.expected_error_m + plain_mirror.expected_error_m[flip]), rtol=1e-5)
+    # without it the (3-step) network is not symmetric: the test above is not vacuous
+    assert np.abs(plain_mirror.points[flip] * [-1.0, 1.0, 1.0] - plain.points).max() > 1e-4
 
 
 def test_bad_files_are_refused_with_the_file_named(tiny_prior, tmp_path):
@@ -197,6 +247,8 @@ def test_config_rejects_unknown_modes():
         Joints3DConfig(skeleton_prior="maybe")
     with pytest.raises(ConfigError, match="max_prior_error_m"):
         Joints3DConfig(max_prior_error_m=0.0)
+    with pytest.raises(ConfigError, match="prior_flip_test"):
+        Joints3DConfig(prior_flip_test="yes")
 
 
 # ------------------------------------------------------------------------------------------- in the estimator
