@@ -104,12 +104,16 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
         L.append(f"### Skeleton prior (`{variant}/skeleton_prior.onnx`)")
         L.append("")
         L.append(f"The encoder's flip-tested int8 2D joints of {p.get('scenes')} held-out scenes "
-                 f"({p.get('split')}), through the learnt skeleton prior (trained {p['config'].get('steps')} steps on "
+                 f"({p.get('split')}), through the learnt skeleton prior ({p['config'].get('members', 1)} "
+                 f"network(s) of {p['config'].get('steps')} steps on "
                  f"{p.get('train_scenes')} training scenes, {p.get('train_s')} s), against the runtime's gated "
                  f"triangulation of the same joints: {_fmt(tri.get('mean_mm'), 1)} mean / "
                  f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints. "
-                 "The prior answers for every joint; its expected error gates them (the runtime's "
-                 "`joints3d.max_prior_error_m`). MPJPE mm, mean / median (share of the true joints kept)"
+                 "The prior answers for every joint, with its flip test (the runtime's default); its expected "
+                 "error gates them (the runtime's `joints3d.max_prior_error_m`)"
+                 + (f"; without the flip test {_fmt(m['all_without_flip_test'].get('mean_mm'), 1)} mm over every "
+                    "joint" if m.get("all_without_flip_test") else "")
+                 + ". MPJPE mm, mean / median (share of the true joints kept)"
                  + (f"; made by `{p['command']}`:" if p.get("command") else ":"))
         L.append("")
         L.append("| expected error at most | mean | median | p90 | joints kept |")

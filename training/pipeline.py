@@ -77,6 +77,8 @@ class Recipe:
     """Skeleton prior training steps (``PipelineConfig.prior_steps``)."""
     prior_extra_train: int = 0
     """Scenes of the skeleton prior's second training set (``PipelineConfig.prior_extra_train``)."""
+    prior_members: int = 1
+    """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
 
 
 #: ``--recipe``. ``cpu`` is what two cores train in about two hours; ``gpu`` is the shipped (tenth) model's,
@@ -128,6 +130,9 @@ class PipelineConfig:
     prior_extra_train: int = 0
     """Scenes of a second training set the prior also learns from (``<data>_prior_extra``: dataset seed 1, no
     novel views; about 6 min per 20000 scenes on two cores); 0: the model's training split only."""
+    prior_members: int = 1
+    """Networks averaged in the skeleton prior (``training.skeleton_prior --members``; each one takes the
+    training time again)."""
     quick: bool = False
     accept_stopped: bool = False
     until: str | None = None
@@ -157,7 +162,8 @@ class PipelineConfig:
                                    *self.pretrain_overrides]
         if r.workers:
             self.workers = max(1, min(r.workers, cores))
-        self.prior_steps, self.prior_extra_train = r.prior_steps, r.prior_extra_train
+        self.prior_steps, self.prior_extra_train, self.prior_members = (r.prior_steps, r.prior_extra_train,
+                                                                        r.prior_members)
 
     @classmethod
     def quick_defaults(cls, out: Path) -> "PipelineConfig":
@@ -644,6 +650,8 @@ def stage_prior(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
     out = cfg.out / variant / sp.FILE_NAME
     argv = ["--model-dir", str(cfg.out / variant), "--data", str(cfg.data), "--val-split", cfg.eval_split,
             "--steps", str(cfg.prior_steps), "--threads", str(cfg.threads), "--out", str(out)]
+    if cfg.prior_members > 1:
+        argv += ["--members", str(cfg.prior_members)]
     if cfg.prior_scenes:
         argv += ["--limit", str(cfg.prior_scenes)]
     if cfg.prior_extra_train:
@@ -816,9 +824,12 @@ def run(cfg: PipelineConfig) -> dict | None:
     if any(st.stamp(f"eval_{v}") is None for v in VARIANTS):
         log.info("card: waiting for %s", [v for v in VARIANTS if st.stamp(f"eval_{v}") is None])
         return None
+    from ghnerf_runtime.skeleton_prior import FEATURE_VERSION  # a new feature set retrains the prior
+
     for v in PRIOR_VARIANTS:
         st.run(f"prior_{v}", {"q": st.stamp(f"quantize_{v}")["outputs"], "steps": cfg.prior_steps,
-                              "scenes": cfg.prior_scenes, "split": cfg.eval_split, "extra": cfg.prior_extra_train},
+                              "scenes": cfg.prior_scenes, "split": cfg.eval_split, "extra": cfg.prior_extra_train,
+                              "members": cfg.prior_members, "features": FEATURE_VERSION},
                lambda v=v: stage_prior(cfg, v))
     st.force.add("card")  # always rewritten: cheap, and it records the command and the stamps
     st.run("card", [st.stamp(f"eval_{v}")["outputs"] for v in VARIANTS] + [st.stamp(f"prior_{v}")["outputs"]

@@ -115,7 +115,8 @@ def run_runtime_bench(args) -> dict:
 
     sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
     depth_per_px = [1000 * depth_per_disparity_px(s.rig, s.info["distance_m"]) for s in sequences]
-    print(f"rigs: baseline {min(s.rig.baseline for s in sequences):.2f}-{max(s.rig.baseline for s in sequences):.2f} m, "
+    baselines = [s.rig.baseline for s in sequences]
+    print(f"rigs: baseline {min(baselines):.2f}-{max(baselines):.2f} m, "
           f"subject at {min(s.info['distance_m'] for s in sequences):.1f}-"
           f"{max(s.info['distance_m'] for s in sequences):.1f} m: 1 px of disparity error there is "
           f"{min(depth_per_px):.0f}-{max(depth_per_px):.0f} mm of depth (median {np.median(depth_per_px):.0f}; "

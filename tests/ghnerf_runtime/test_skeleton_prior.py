@@ -283,7 +283,7 @@ def test_estimator_uses_the_prior_when_the_folder_has_one(model_with_prior, tmp_
     session = load_session(auto)
     assert isinstance(session.skeleton_prior, SkeletonPrior)
     real = session.skeleton_prior.estimate
-    session.skeleton_prior.estimate = lambda *a: calls.append(1) or real(*a)
+    session.skeleton_prior.estimate = lambda *a, **k: calls.append(1) or real(*a, **k)
     est = Estimator(session, rig, auto)
     r = est.estimate(frames, sequence=0)
     assert calls == [1]
