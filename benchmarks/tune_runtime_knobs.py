@@ -60,6 +60,9 @@ VARIANTS: dict[str, dict] = {
     "joints3d.max_prior_error_m 0.15": {"joints3d": {"max_prior_error_m": 0.15}},
     "joints3d.max_prior_error_m 0.2": {"joints3d": {"max_prior_error_m": 0.2}},
     "joints3d.max_prior_error_m 10": {"joints3d": {"max_prior_error_m": 10.0}},
+    "joints3d.prior_flip_test off": {"joints3d": {"prior_flip_test": False}},
+    "joints3d.prior_flip_test off + max_prior_error_m 10": {"joints3d": {"prior_flip_test": False,
+                                                                         "max_prior_error_m": 10.0}},
 }
 
 
@@ -90,12 +93,14 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--only", help="comma list of variant names (default: all)")
     args = ap.parse_args(argv)
+    names = args.only.split(",") if args.only else list(VARIANTS)
+    if unknown := [n for n in names if n not in VARIANTS]:
+        ap.error(f"--only: no variant named {unknown}; the variants are {list(VARIANTS)}")
     base = config_to_dict(EstimatorConfig())
     base["session"].update(model_dir=args.model_dir, precision=args.precision)
     session = load_session(config_from_dict(base))
     sets = {"tuning": load_sequences(args.sequences, args.frames, seed_base=TUNE_SEED_BASE),
             "bench": load_sequences(args.sequences, args.frames)}
-    names = args.only.split(",") if args.only else list(VARIANTS)
     print(f"{args.sequences} sequences x {args.frames} pairs per set, {args.precision}, the defaults otherwise "
           f"(flip test {'on' if base['heatmaps']['flip_test'] else 'off'}); PCK@0.2 / MPJPE found / MPJPE both "
           f"cameras see / found", flush=True)

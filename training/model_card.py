@@ -74,7 +74,8 @@ def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path
 
 
 #: Heatmap sources of the metrics, as the card names them, and their metric-key prefixes.
-_HEATMAP_PREFIXES = (("rendered", ""), ("encoder", "encoder_heatmaps_"), ("encoder, flip test", "encoder_heatmaps_flip_"))
+_HEATMAP_PREFIXES = (("rendered", ""), ("encoder", "encoder_heatmaps_"),
+                     ("encoder, flip test", "encoder_heatmaps_flip_"))
 
 
 def _gated(m: Mapping[str, Any], prefix: str) -> str:
@@ -93,6 +94,10 @@ def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
             for src, prefix in _HEATMAP_PREFIXES if m.get(f"{prefix}{key}")]
 
 
+def _networks(n: int) -> str:
+    return "one network" if n == 1 else f"the mean of {n} networks"
+
+
 def _prior_lines(card: Mapping[str, Any]) -> list[str]:
     """The skeleton prior's held-out MPJPE (``training.skeleton_prior``), gated by its expected error."""
     L: list[str] = []
@@ -104,8 +109,8 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
         L.append(f"### Skeleton prior (`{variant}/skeleton_prior.onnx`)")
         L.append("")
         L.append(f"The encoder's flip-tested int8 2D joints of {p.get('scenes')} held-out scenes "
-                 f"({p.get('split')}), through the learnt skeleton prior ({p['config'].get('members', 1)} "
-                 f"network(s) of {p['config'].get('steps')} steps on "
+                 f"({p.get('split')}), through the learnt skeleton prior ({_networks(p['config'].get('members', 1))} "
+                 f"of {p['config'].get('steps')} steps on "
                  f"{p.get('train_scenes')} training scenes, {p.get('train_s')} s), against the runtime's gated "
                  f"triangulation of the same joints: {_fmt(tri.get('mean_mm'), 1)} mean / "
                  f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints. "
@@ -192,7 +197,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
              "minimum view confidence) on the same crops, mean / median over the joints it keeps (share kept in "
              "brackets); the mean carries a tail of joints placed wrong in both views alike.")
     L.append("")
-    L.append("| model | runtime | PCK@0.2 | MPJPE mm | MPJPE mm, gated | PSNR | SSIM | heatmap MSE | undecoded joints |")
+    L.append("| model | runtime | PCK@0.2 | MPJPE mm | MPJPE mm, gated | PSNR | SSIM | heatmap MSE "
+             "| undecoded joints |")
     L.append("|---|---|---|---|---|---|---|---|---|")
     for label, m in (card.get("metrics") or {}).items():
         L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('pck@0.2'))} | {_fmt(m.get('mpjpe_mm'), 1)} | "

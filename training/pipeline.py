@@ -14,8 +14,8 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
 6. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8) and the baseline (onnx fp32,
    int8) into ``metrics_<variant>.json``.
 7. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
-   split (``training.skeleton_prior``; the recipe sets its steps and extra scenes: ~6 min on two cores for
-   ``cpu``, ~18 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``, with its held-out figures
+   split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks: ~6 min on two
+   cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``, with its held-out figures
    (``skeleton_prior.json``).
 8. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
    wall times), once every variant is evaluated.
@@ -88,10 +88,11 @@ RECIPES = {
     "cpu": Recipe("two CPU cores, 1.4-2.2 h measured: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes; "
                   "skeleton prior 15000 steps on the 5000 training scenes (~6 min)"),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
-                  "skeleton prior 30000 steps on 25000 scenes (~18 min on two cores, where the export runs)",
+                  "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
+                  "the export runs)",
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=27000", "lr_decay_every=4500", "scenes_per_step=4"),
-                  loader_workers=12, workers=16, prior_steps=30000, prior_extra_train=20000),
+                  loader_workers=12, workers=16, prior_steps=30000, prior_extra_train=20000, prior_members=2),
 }
 
 

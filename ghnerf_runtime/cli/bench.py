@@ -142,6 +142,8 @@ def run_runtime_bench(args) -> dict:
         prior_flips = (args.prior_flip_tests or [None]) if cfg.joints3d.method == "triangulate" else [None]
         for mode, flip, follow, prior, prior_flip in itertools.product(args.modes, flips, follows, priors,
                                                                        prior_flips):
+            if prior is False and prior_flip is not None and prior_flip != prior_flips[0]:
+                continue  # without the prior its flip test changes nothing: one row
             flip_cfg = cfg if flip is None else replace(cfg, heatmaps=replace(cfg.heatmaps, flip_test=flip))
             if prior is not None:
                 flip_cfg = replace(flip_cfg, joints3d=replace(flip_cfg.joints3d,
