@@ -34,7 +34,7 @@ __all__ = ["FEATURE_VERSION", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
            "PriorInputs", "SkeletonEstimate", "SkeletonPrior", "prior_inputs", "mirror_inputs"]
 
 #: Bump when the meaning of a feature changes: a file trained on other features is refused.
-FEATURE_VERSION = 1
+FEATURE_VERSION = 2  # 2: DLT points farther than _MAX_JOINT_FROM_ROOT_M from the root are not triangulated
 #: Per-joint features: X(3) triangulated, ok, conf0, conf1, reproj0/5, reproj1/5, ray angle/10,
 #: ray0 (3), ray1 (3), decoded0, decoded1.
 JOINT_FEATURES = 17
@@ -48,6 +48,10 @@ OUTPUTS = ("joints", "log_error")
 _ROOT_MAX_REPROJECTION_PX = 3.0
 _REPROJECTION_CLIP_PX = 20.0
 _DEFAULT_DISTANCE_M = 2.5  # no joint at all: a guess in front of the cameras
+# No joint lies farther than this from the body's robust centre (the synthetic bodies' joints: within
+# 1.4 m of their geometric median, 1.3 m of the pelvis; 2 m leaves room for taller people and the root's
+# own error, and still drops the wild points, which lie 10 m to 1 km away).
+_MAX_JOINT_FROM_ROOT_M = 2.0
 
 
 @dataclass(frozen=True)
@@ -132,6 +136,13 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
         pick = good if good.sum() >= 3 else ok[i]
         if pick.any():
             root[i] = _geometric_median(X[i][pick])
+    # A DLT point far from the body is no measurement of a joint (nearly parallel rays through two wrong
+    # peaks: up to a kilometre away with a short baseline); as a feature it threw the prior's answer metres
+    # off. It counts as not triangulated: the rays still say where the joint may be.
+    ok = ok & (np.linalg.norm(X - root[:, None], axis=-1) <= _MAX_JOINT_FROM_ROOT_M)
+    X = np.where(ok[..., None], X, 0.0)
+    rep = np.where(ok[..., None], rep, 0.0)
+    ang = np.where(ok, ang, 0.0)
     fwd = root - mid
     fwd[:, 1] = 0.0
     n = np.linalg.norm(fwd, axis=-1, keepdims=True)

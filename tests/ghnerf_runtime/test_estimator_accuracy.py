@@ -31,11 +31,12 @@ MEASURED_ON = ("models/ of 2026-11-22, session 15 (the tenth, `--recipe gpu`: th
 #:           held to the encoder's thresholds.
 #: (the ninth model, `make model` on two cores: rendered 0.898 / 166 mm / 99 %, encoder 0.886 / 118 mm / 66 %,
 #:  flip test 0.909 / 110 mm; the seventh: rendered 0.791 / 223 mm / 99 %, encoder 0.906 / 139 mm / 68 %.)
-#: With the skeleton prior (session 17, models/ghnerf/skeleton_prior.onnx: two networks, run with their flip
-#: test; the default ``joints3d.max_prior_error_m`` 0.15; ``--flip-tests off,on --skeleton-priors off,on`` added
-#: to the command above): flip test PCK@0.2 0.956, MPJPE 37.2 mm, 96 % found (hidden joints 39.8 mm, 97 %
-#: found); without the (heatmaps') flip test 0.948 / 41.3 mm / 95 %. The rows without the prior measured as
-#: above in the same run. (Session 16's one-network prior without its own flip test: 0.952 / 41.9 mm / 96 %.)
+#: With the skeleton prior (session 17, models/ghnerf/skeleton_prior.onnx: feature version 2, two networks, run
+#: with their flip test; the default ``joints3d.max_prior_error_m`` 0.15; ``--flip-tests off,on
+#: --skeleton-priors off,on`` added to the command above): flip test PCK@0.2 0.947, MPJPE 38.0 mm, 97 % found
+#: (hidden joints 38.6 mm, 97 % found); without the (heatmaps') flip test 0.953 / 41.0 mm / 97 %. The rows
+#: without the prior measured as above in the same run. (Session 16's one-network prior without its own flip
+#: test: 0.952 / 41.9 mm / 96 %.)
 THRESHOLDS = {
     "rendered": {"pck@0.2_min": 0.86, "mpjpe_mm_max": 195.0, "found_3d_min": 0.90},
     "encoder": {"pck@0.2_min": 0.88, "mpjpe_mm_max": 125.0, "found_3d_min": 0.52},

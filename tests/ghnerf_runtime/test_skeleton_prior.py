@@ -106,6 +106,20 @@ def test_mirror_is_the_inputs_of_the_mirrored_scene():
     np.testing.assert_allclose(f2, base.joint_features) and np.testing.assert_allclose(c2, base.context)
 
 
+def test_a_dlt_point_far_from_the_body_is_not_a_triangulation():
+    """Two peaks whose rays meet 100 m away (nearly parallel rays through wrong peaks) give no DLT feature:
+    as one, such a point threw the prior's answer metres off. The joint keeps its rays."""
+    P = _rig()
+    X = _skeleton(6)
+    X[3] = [0.3, -1.2, 100.0]
+    inp = prior_inputs(*(a[None] for a in _observe(P, X)), np.stack(P)[None])
+    others = np.arange(NUM_JOINTS) != 3
+    assert not inp.triangulated[0, 3] and inp.triangulated[0, others].all()
+    assert not inp.joint_features[0, 3, :4].any() and not inp.joint_features[0, 3, 6:9].any()
+    assert np.abs(inp.joint_features[0, 3, 9:15]).sum() > 1.0  # both rays are still there
+    assert np.abs(inp.joint_features[0][inp.triangulated[0]][:, :3]).max() < 2.0
+
+
 def test_inputs_finite_at_the_extremes():
     P = np.stack(_rig())
     N = 4
