@@ -29,12 +29,12 @@ from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
 
-__all__ = ["FEATURE_VERSION", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME", "META_PREFIX", "INPUTS",
-           "OUTPUTS", "CanonicalFrame",
+__all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
+           "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame",
            "PriorInputs", "SkeletonEstimate", "SkeletonPrior", "prior_inputs", "mirror_inputs"]
 
 #: Bump when the meaning of a feature changes: a file trained on other features is refused.
-FEATURE_VERSION = 2  # 2: DLT points farther than _MAX_JOINT_FROM_ROOT_M from the root are not triangulated
+FEATURE_VERSION = 2  # 2: DLT points farther than MAX_JOINT_FROM_ROOT_M from the root are not triangulated
 #: Per-joint features: X(3) triangulated, ok, conf0, conf1, reproj0/5, reproj1/5, ray angle/10,
 #: ray0 (3), ray1 (3), decoded0, decoded1.
 JOINT_FEATURES = 17
@@ -51,7 +51,7 @@ _DEFAULT_DISTANCE_M = 2.5  # no joint at all: a guess in front of the cameras
 # No joint lies farther than this from the body's robust centre (the synthetic bodies' joints: within
 # 1.4 m of their geometric median, 1.3 m of the pelvis; 2 m leaves room for taller people and the root's
 # own error, and still drops the wild points, which lie 10 m to 1 km away).
-_MAX_JOINT_FROM_ROOT_M = 2.0
+MAX_JOINT_FROM_ROOT_M = 2.0
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,8 @@ def _geometric_median(points: np.ndarray, iterations: int = 20) -> np.ndarray:
     return c
 
 
-def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray) -> PriorInputs:
+def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray, *,
+                 max_joint_from_root_m: float = MAX_JOINT_FROM_ROOT_M) -> PriorInputs:
     """The prior's inputs from decoded 2D peaks.
 
     Args:
@@ -104,6 +105,8 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
         confidence: ``(N, 2, J)`` peak values.
         valid: ``(N, 2, J)`` decoded.
         P: ``(N, 2, 3, 4)`` the crop cameras' pinhole projections (rig frame -> model pixels).
+        max_joint_from_root_m: a DLT point farther than this from the body's robust centre is not a
+            triangulation (the features of version 1 are those of ``inf``: for measuring old files only).
     """
     uv = np.asarray(uv_model, np.float64)
     conf = np.asarray(confidence, np.float64)
@@ -139,7 +142,7 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     # A DLT point far from the body is no measurement of a joint (nearly parallel rays through two wrong
     # peaks: up to a kilometre away with a short baseline); as a feature it threw the prior's answer metres
     # off. It counts as not triangulated: the rays still say where the joint may be.
-    ok = ok & (np.linalg.norm(X - root[:, None], axis=-1) <= _MAX_JOINT_FROM_ROOT_M)
+    ok = ok & (np.linalg.norm(X - root[:, None], axis=-1) <= max_joint_from_root_m)
     X = np.where(ok[..., None], X, 0.0)
     rep = np.where(ok[..., None], rep, 0.0)
     ang = np.where(ok, ang, 0.0)

@@ -46,3 +46,25 @@ def test_collect_train_export_score_and_card(tmp_path, data64):
     assert "### Skeleton prior (`ghnerf/skeleton_prior.onnx`)" in (models / "MODEL_CARD.md").read_text()
     est = prior.estimate(arrays["uv"], arrays["confidence"], arrays["valid"], arrays["P"])
     assert np.isfinite(est.points).all() and est.points.shape == (3, 25, 3)
+
+
+def test_outlier_tool_compares_prior_files_on_the_same_joints(tmp_path, data64, capsys):
+    """``benchmarks/measure_prior_outliers.py`` runs a file of each feature version on one collection."""
+    import onnx
+
+    from benchmarks import measure_prior_outliers
+    from ghnerf_runtime.skeleton_prior import FILE_NAME, META_PREFIX
+    from tests.ghnerf_runtime.test_session import export_tiny
+    from training import skeleton_prior as sp
+
+    model = export_tiny(tmp_path / "export")
+    assert sp.main(["--model-dir", str(model), "--data", str(data64), "--steps", "2", "--hidden", "8"]) == 0
+    old = onnx.load(str(model / FILE_NAME))  # the same network stamped as version 1: run without the limit
+    next(p for p in old.metadata_props if p.key == META_PREFIX + "feature_version").value = "1"
+    onnx.save(old, str(tmp_path / "v1.onnx"))
+    capsys.readouterr()
+    assert measure_prior_outliers.main(["--model-dir", str(model), "--data", str(data64), "--split", "val",
+                                        "--prior", str(model / FILE_NAME), "--prior", str(tmp_path / "v1.onnx")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("val: 2 scenes; DLT points farther than 2 m from the body:")
+    assert len(out) == 3 and all("MPJPE" in line and "joints > 0.5 m off" in line for line in out[1:])
