@@ -33,6 +33,11 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
   ``*_mpjpe_gated_found``, and its split by visibility): the runtime's triangulation
   (``joints3d.triangulate_joints``, default ``Joints3DConfig``: a joint whose views disagree beyond
   the reprojection gate, or whose peak is weak, is missing), so the card states what a device reports.
+* **Skeleton prior** (an ONNX folder with ``skeleton_prior.onnx`` the runtime accepts): the prior run on
+  the flip-tested encoder joints, as the runtime runs it (with its own flip test):
+  ``skeleton_prior_mpjpe_mm`` over every true joint, and ``skeleton_prior_gated_mpjpe_mm`` /
+  ``skeleton_prior_gated_found`` over the joints whose expected error is within the runtime's default
+  gate (``skeleton_prior_gate_m``). A prior of another feature version is not scored (a warning).
 * **Novel views** (targets 2..V-1): the full-resolution image (graph ``render_rgb``), ``masked_psnr`` and
   ``masked_ssim`` inside the subject mask against the target composited over the model background.
   The dataset's novel cameras circle the subject (any azimuth), so many see sides that neither
@@ -141,6 +146,21 @@ class TorchRenderer:
         return enc["encoder_heatmaps"].cpu().numpy() if "encoder_heatmaps" in enc else None
 
 
+def _folder_prior(folder: Path, threads: int):
+    """The folder's skeleton prior (the runtime's), or None: none there, or one this runtime refuses (the
+    model's own metrics do not need it; a warning says why it is not scored)."""
+    from ghnerf_runtime.errors import ModelError
+    from ghnerf_runtime.skeleton_prior import FILE_NAME, SkeletonPrior
+
+    if not (folder / FILE_NAME).is_file():
+        return None
+    try:
+        return SkeletonPrior.load(folder / FILE_NAME, threads)
+    except ModelError as e:
+        print(f"warning: the skeleton prior is not scored: {e}", file=sys.stderr)
+        return None
+
+
 class OnnxRenderer:
     """Exported graphs through onnxruntime (``training.export.parity.run_pipeline``)."""
 
@@ -161,6 +181,7 @@ class OnnxRenderer:
         self.height, self.width = self.contract.height, self.contract.width
         self.heatmap_stride = self.contract.heatmap_stride
         self.background = self.contract.background
+        self.skeleton_prior = _folder_prior(folder, threads)
 
     def _run(self, scene, targets, ray_uv, graph: str) -> dict[str, np.ndarray]:
         from training.export.parity import run_pipeline
@@ -285,6 +306,9 @@ class Accumulator:
     psnr_angle_deg: list[float] = field(default_factory=list)  # per entry of psnr (NaN: unknown)
     ssim: list[float] = field(default_factory=list)
     scenes: int = 0
+    # the skeleton prior on the flip-tested encoder joints: every true joint's error (mm), its expected error (m)
+    prior_errors_mm: list[np.ndarray] = field(default_factory=list)
+    prior_expected_m: list[np.ndarray] = field(default_factory=list)
 
     def add(self, m: dict) -> None:
         self.scenes += 1
@@ -301,6 +325,10 @@ class Accumulator:
         if m.get("encoder_flip_pck") is not None:
             self.encoder_flip.add(m["encoder_flip_pck"], m["encoder_flip_mpjpe"], vis,
                                   m.get("encoder_flip_mpjpe_gated"))
+        if m.get("prior_mpjpe") is not None:
+            e = m["prior_mpjpe"]
+            self.prior_errors_mm.append(np.asarray(e.errors[e.evaluated], np.float64))
+            self.prior_expected_m.append(np.asarray(m["prior_expected_error_m"], np.float64)[e.evaluated])
         if m.get("psnr") is not None:
             # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
             per_image = np.ravel(m["psnr"].per_image)
@@ -339,7 +367,23 @@ class Accumulator:
             # "flip": averaged with those of the mirrored images (the runtime's heatmaps.flip_test)
             **self.encoder.result("encoder_heatmaps"),
             **self.encoder_flip.result("encoder_heatmaps_flip"),
+            **self.prior_result(),
         }
+
+    def prior_result(self) -> dict:
+        """The skeleton prior's MPJPE over every joint, and over those its expected error keeps under the
+        runtime's default gate (``joints3d.max_prior_error_m``); all None without a prior."""
+        from ghnerf_runtime.config import Joints3DConfig
+
+        keys = ("skeleton_prior_mpjpe_mm", "skeleton_prior_mpjpe_median_mm", "skeleton_prior_gated_mpjpe_mm",
+                "skeleton_prior_gated_found", "skeleton_prior_gate_m")
+        if not self.prior_errors_mm:
+            return dict.fromkeys(keys)
+        e, x = np.concatenate(self.prior_errors_mm), np.concatenate(self.prior_expected_m)
+        gate = Joints3DConfig().max_prior_error_m
+        kept = e[x <= gate]
+        return dict(zip(keys, (float(e.mean()), float(np.median(e)), float(kept.mean()) if kept.size else None,
+                               kept.size / e.size, gate)))
 
 
 def psnr_by_angle(psnr: list[float], angles_deg: list[float],
@@ -438,7 +482,7 @@ def _joint_scores(prefix: str, uv: np.ndarray, conf: np.ndarray, scene: Mapping[
 def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, novel_rgb: np.ndarray | None,
                   novel_targets: np.ndarray, background: float = 0.0,
                   decoder: KeypointDecoderConfig | None = None, encoder_heatmaps: np.ndarray | None = None,
-                  encoder_heatmaps_flip: np.ndarray | None = None) -> dict:
+                  encoder_heatmaps_flip: np.ndarray | None = None, skeleton_prior=None) -> dict:
     """Metrics of one scene from rendered outputs (pure; the tests feed it known answers).
 
     Args:
@@ -449,6 +493,9 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
             like the rendered ones (``encoder_pck``, ``encoder_mpjpe``).
         encoder_heatmaps_flip: the same averaged with those of the mirrored images (or None):
             ``encoder_flip_pck``, ``encoder_flip_mpjpe``.
+        skeleton_prior: a :class:`~ghnerf_runtime.skeleton_prior.SkeletonPrior` (or None): its joints from
+            the flip-tested encoder joints, as the runtime makes them (``prior_mpjpe``: every joint;
+            ``prior_expected_error_m``: its own estimate, which the runtime's gate reads).
     """
     S = source_heatmaps.shape[0]
     H = scene["tgt_images"].shape[-1]
@@ -462,6 +509,13 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
         out[f"{key}_pck"] = out[f"{key}_mpjpe"] = out[f"{key}_mpjpe_gated"] = None
         if maps is not None:
             out.update(_joint_scores(f"{key}_", *_decode(maps, H, decoder), scene))
+    out["prior_mpjpe"] = out["prior_expected_error_m"] = None
+    if skeleton_prior is not None and encoder_heatmaps_flip is not None:
+        uv, conf = _decode(encoder_heatmaps_flip, H, decoder)
+        est = skeleton_prior.estimate(np.nan_to_num(uv), conf, np.isfinite(uv).all(-1),
+                                      np.asarray(scene["src_P"], np.float64))
+        out["prior_mpjpe"] = mpjpe(est.points, scene["joints_3d"], scene["joints_3d_valid"])
+        out["prior_expected_error_m"] = est.expected_error_m
     out["psnr"] = out["ssim"] = None
     if novel_rgb is not None and len(novel_targets):
         img = scene["tgt_images"][novel_targets]
@@ -496,7 +550,7 @@ def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, pr
         if enc_hm is not None:  # the flip test: the encoder again on the mirrored sources, averaged
             enc_flip = flip_averaged(enc_hm, renderer.encoder_heatmaps({"images": mirror_images(scene["images"])}))
         acc.add(scene_metrics(scene, hm, rgb, nov, renderer.background, encoder_heatmaps=enc_hm,
-                              encoder_heatmaps_flip=enc_flip))
+                              encoder_heatmaps_flip=enc_flip, skeleton_prior=getattr(renderer, "skeleton_prior", None)))
         if progress and (i + 1) % 32 == 0:
             print(f"  eval {i + 1}/{n} {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
     res = acc.result()

@@ -266,3 +266,42 @@ def test_the_gated_mpjpe_drops_joints_whose_views_disagree_as_the_runtime_does(d
     assert res["mpjpe_gated_found"] == pytest.approx((both.sum() - 1) / n)
     assert res["encoder_heatmaps_mpjpe_gated_mm"] == pytest.approx(res["mpjpe_gated_mm"])
     assert sum(c["joints"] for c in res["mpjpe_gated_by_visibility"].values()) == both.sum() - 1
+
+
+class _ShiftedPrior:
+    """A stand-in skeleton prior: the truth moved 10 mm along x, sure of the even joints only. It checks it is
+    fed the flip-tested encoder joints in crop pixels with the crop cameras."""
+
+    def __init__(self, dataset):
+        self.dataset, self.calls = dataset, 0
+
+    def estimate(self, uv_model, confidence, valid, P):
+        scene = {k: v.numpy() for k, v in self.dataset[self.calls].items()}
+        self.calls += 1
+        vis = scene["tgt_visible"][:2]
+        assert valid[vis].all() and np.allclose(uv_model[vis], scene["tgt_joints_2d"][:2][vis], atol=0.3)
+        assert np.array_equal(P, scene["src_P"]) and (confidence[vis] > 0.5).all()
+        from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+
+        J = len(scene["joints_3d"])
+        return SkeletonEstimate(scene["joints_3d"] + [0.01, 0.0, 0.0], np.where(np.arange(J) % 2 == 0, 0.01, 1.0),
+                                valid.all(0))
+
+
+def test_evaluate_scores_the_skeleton_prior_on_the_flip_tested_joints(data64):
+    """The folder's skeleton prior, fed as the runtime feeds it: MPJPE over every true joint and over those its
+    expected error keeps under the runtime's default gate."""
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(data64, "val")
+    oracle = _EncoderOracle(ds)
+    assert evaluate(oracle, ds, novel=False, progress=False)["skeleton_prior_mpjpe_mm"] is None  # none: None
+    oracle.skeleton_prior = _ShiftedPrior(ds)
+    res = evaluate(oracle, ds, novel=False, progress=False)
+    assert oracle.skeleton_prior.calls == len(ds)
+    assert res["skeleton_prior_mpjpe_mm"] == pytest.approx(10.0)
+    assert res["skeleton_prior_gated_mpjpe_mm"] == pytest.approx(10.0)
+    valid = np.stack([ds[i]["joints_3d_valid"].numpy() for i in range(len(ds))])
+    even = valid & (np.arange(valid.shape[1]) % 2 == 0)
+    assert res["skeleton_prior_gated_found"] == pytest.approx(even.sum() / valid.sum())
+    assert res["skeleton_prior_gate_m"] == 0.15

@@ -57,7 +57,8 @@ def test_outlier_tool_compares_prior_files_on_the_same_joints(tmp_path, data64, 
     from tests.ghnerf_runtime.test_session import export_tiny
     from training import skeleton_prior as sp
 
-    model = export_tiny(tmp_path / "export")
+    model = tmp_path / "ghnerf"  # a copy: the exported tiny model is shared by the session's tests
+    shutil.copytree(export_tiny(tmp_path / "export"), model)
     assert sp.main(["--model-dir", str(model), "--data", str(data64), "--steps", "2", "--hidden", "8"]) == 0
     old = onnx.load(str(model / FILE_NAME))  # the same network stamped as version 1: run without the limit
     next(p for p in old.metadata_props if p.key == META_PREFIX + "feature_version").value = "1"
@@ -68,3 +69,28 @@ def test_outlier_tool_compares_prior_files_on_the_same_joints(tmp_path, data64, 
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("val: 2 scenes; DLT points farther than 2 m from the body:")
     assert len(out) == 3 and all("MPJPE" in line and "joints > 0.5 m off" in line for line in out[1:])
+
+
+def test_ghnerf_eval_scores_the_folder_prior_and_skips_a_stale_one(tmp_path, data64, capsys):
+    import onnx
+
+    from ghnerf_runtime.skeleton_prior import FILE_NAME, META_PREFIX
+    from tests.ghnerf_runtime.test_session import export_tiny
+    from training import skeleton_prior as sp
+    from training.data.torch_dataset import MultiViewDataset
+    from training.evaluate import evaluate, make_renderer
+
+    model = tmp_path / "ghnerf"  # a copy: the exported tiny model is shared by the session's tests
+    shutil.copytree(export_tiny(tmp_path / "export"), model)
+    assert make_renderer(str(model))[0].skeleton_prior is None  # no file: nothing to score
+    assert sp.main(["--model-dir", str(model), "--data", str(data64), "--steps", "2", "--hidden", "8"]) == 0
+    renderer, _ = make_renderer(str(model))
+    assert renderer.skeleton_prior is not None
+    res = evaluate(renderer, MultiViewDataset(data64, "val"), novel=False, progress=False)
+    assert res["skeleton_prior_mpjpe_mm"] > 0 and 0.0 <= res["skeleton_prior_gated_found"] <= 1.0
+    stale = onnx.load(str(model / FILE_NAME))
+    next(p for p in stale.metadata_props if p.key == META_PREFIX + "feature_version").value = "1"
+    onnx.save(stale, str(model / FILE_NAME))
+    capsys.readouterr()
+    assert make_renderer(str(model))[0].skeleton_prior is None
+    assert "the skeleton prior is not scored" in capsys.readouterr().err
