@@ -21,27 +21,21 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
 from ghnerf_runtime.skeleton_prior import (  # noqa: E402
-    FILE_NAME, INPUTS, MAX_JOINT_FROM_ROOT_M, META_PREFIX, OUTPUTS, mirror_inputs, prior_inputs,
+    FILE_NAME, MAX_JOINT_FROM_ROOT_M, META_PREFIX, SkeletonPrior, prior_inputs,
 )
 
 
 def _answers(path: Path, arrays: dict) -> np.ndarray:
-    """The file's joints (rig frame) with the runtime's flip test, on the features of its version."""
+    """The file's joints (rig frame) with the runtime's flip test, on the features of its version
+    (``SkeletonPrior.load`` refuses version 1: the session is made here)."""
     import onnxruntime as ort
 
     sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    version = sess.get_modelmeta().custom_metadata_map.get(META_PREFIX + "feature_version")
-    bound = np.inf if version == "1" else MAX_JOINT_FROM_ROOT_M
+    meta = dict(sess.get_modelmeta().custom_metadata_map)
+    bound = np.inf if meta.get(META_PREFIX + "feature_version") == "1" else MAX_JOINT_FROM_ROOT_M
     inp = prior_inputs(arrays["uv"], arrays["confidence"], arrays["valid"], arrays["P"], max_joint_from_root_m=bound)
-    f, c = inp.joint_features, inp.context
-    fm, cm = mirror_inputs(f, c)
-    joints = sess.run([OUTPUTS[0]], dict(zip(INPUTS, (np.concatenate([f, fm]), np.concatenate([c, cm])))))[0]
-    n = len(f)
-    back = np.argsort(FLIP_INDEX)
-    joints = 0.5 * (joints[:n] + joints[n:, back] * np.array([-1.0, 1.0, 1.0]))
-    return inp.frame.to_rig(joints.astype(np.float64))
+    return SkeletonPrior(sess, path, meta).answer(inp).points
 
 
 def main(argv: list[str] | None = None) -> int:

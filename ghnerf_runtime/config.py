@@ -314,7 +314,7 @@ class Joints3DConfig:
         max_prior_error_m: skeleton prior: a joint whose expected error (the prior's own
             estimate) exceeds this is missing (docs/runtime.md, "The skeleton prior").
         prior_flip_test: skeleton prior: also run it on the mirrored pair and average the two
-            answers (in the same batch: about 0.1 ms more; docs/runtime.md, "The skeleton prior").
+            answers (in the same batch: about 0.15 ms more; docs/runtime.md, "The skeleton prior").
     """
 
     method: str = "triangulate"

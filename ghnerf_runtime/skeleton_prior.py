@@ -127,9 +127,7 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
         r = triangulate_dlt(uv[i], list(P[i]), np.where(dec[i], np.maximum(conf[i], 1e-3), 0.0))
         X[i], ok[i], rep[i], ang[i] = r.points, r.valid, r.reprojection_error, r.ray_angle_deg
     ok = ok & dec.all(1) & np.isfinite(X).all(-1)
-    X = np.where(ok[..., None], X, 0.0)
-    rep = np.where(ok[..., None], np.nan_to_num(rep), 0.0)
-    ang = np.where(ok, np.nan_to_num(ang), 0.0)
+    rep, ang = np.nan_to_num(rep), np.nan_to_num(ang)
 
     C = _centres(P)  # (N, 2, 3)
     mid = C.mean(1)
@@ -142,7 +140,7 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     # A DLT point far from the body is no measurement of a joint (nearly parallel rays through two wrong
     # peaks: up to a kilometre away with a short baseline); as a feature it threw the prior's answer metres
     # off. It counts as not triangulated: the rays still say where the joint may be.
-    ok = ok & (np.linalg.norm(X - root[:, None], axis=-1) <= max_joint_from_root_m)
+    ok = ok & (np.linalg.norm(np.where(ok[..., None], X, 0.0) - root[:, None], axis=-1) <= max_joint_from_root_m)
     X = np.where(ok[..., None], X, 0.0)
     rep = np.where(ok[..., None], rep, 0.0)
     ang = np.where(ok, ang, 0.0)
@@ -257,7 +255,13 @@ class SkeletonPrior:
         if single:
             uv_model, confidence, valid = uv_model[None], confidence[None], valid[None]
             P = np.asarray([np.asarray(getattr(c, "P", c), np.float64) for c in P])[None]
-        inputs = prior_inputs(uv_model, confidence, valid, np.asarray(P, np.float64))
+        out = self.answer(prior_inputs(uv_model, confidence, valid, np.asarray(P, np.float64)), flip_test)
+        if single:
+            return SkeletonEstimate(out.points[0], out.expected_error_m[0], out.triangulated[0])
+        return out
+
+    def answer(self, inputs: PriorInputs, flip_test: bool = True) -> SkeletonEstimate:
+        """The network's answer to built inputs (:meth:`estimate` without the building)."""
         features, context = inputs.joint_features, inputs.context
         if flip_test:
             mirrored = mirror_inputs(features, context)
@@ -279,7 +283,4 @@ class SkeletonPrior:
         bad = ~np.isfinite(points).all(-1) | ~np.isfinite(err)
         points = np.where(bad[..., None], 0.0, points)
         err = np.where(bad, np.inf, err)
-        out = SkeletonEstimate(points, err, inputs.triangulated)
-        if single:
-            return SkeletonEstimate(out.points[0], out.expected_error_m[0], out.triangulated[0])
-        return out
+        return SkeletonEstimate(points, err, inputs.triangulated)

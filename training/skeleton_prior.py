@@ -13,7 +13,7 @@
    of the detached distance for the error head. Augmented by mirroring and by hiding joints in
    one view (as the reprojection gate and occlusion do). ``--members K`` trains K such networks
    (seeds ``seed..seed+K-1``) and exports their mean as one file.
-3. **Export** ``skeleton_prior.onnx`` (fp32; about a million weights: int8 would save nothing that
+3. **Export** ``skeleton_prior.onnx`` (fp32; 1.6 M weights per network: int8 would save nothing that
    matters) with ``ghnerf_skeleton.*`` metadata, and **evaluate** on the held-out split:
    ``skeleton_prior.json`` beside it (MPJPE over all joints, and gated by the expected error).
 
