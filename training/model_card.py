@@ -87,6 +87,17 @@ def _gated(m: Mapping[str, Any], prefix: str) -> str:
     return f"{_fmt(mm, 1)}{'' if median is None else ' / ' + _fmt(median, 1)} ({100 * found:.0f} %)"
 
 
+def _prior_cells(m: Mapping[str, Any]) -> str:
+    """`` <mean> / <median> | <gated mean> (<share> % within <gate> m) |`` of the skeleton prior, else n/a."""
+    mm = m.get("skeleton_prior_mpjpe_mm")
+    if mm is None:
+        return " n/a | n/a |"
+    found, gate = m.get("skeleton_prior_gated_found"), m.get("skeleton_prior_gate_m")
+    share = "" if found is None else f" ({100 * found:.0f} %{'' if gate is None else f' within {gate:g} m'})"
+    return (f" {_fmt(mm, 1)} / {_fmt(m.get('skeleton_prior_mpjpe_median_mm'), 1)} | "
+            f"{_fmt(m.get('skeleton_prior_gated_mpjpe_mm'), 1)}{share} |")
+
+
 def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
     """``(model label, heatmap source, scores)`` of every ``<prefix><key>`` the metrics hold
     (``key``: ``pck@0.2_by_view``, ``pck@0.2_by_part``, ``mpjpe_by_visibility``)."""
@@ -213,15 +224,25 @@ def render_markdown(card: Mapping[str, Any]) -> str:
                  "flip test: averaged with the heatmaps of the mirrored source images (the runtime's "
                  "`heatmaps.flip_test`, a second encoder run):")
         L.append("")
+        with_prior = any(m.get("skeleton_prior_mpjpe_mm") is not None for m in enc.values())
         L.append("| model | runtime | PCK@0.2 | MPJPE mm | MPJPE mm, gated | PCK@0.2, flip test | MPJPE mm, flip test "
-                 "| MPJPE mm, flip test, gated |")
-        L.append("|---|---|---|---|---|---|---|---|")
+                 "| MPJPE mm, flip test, gated |" + (" MPJPE mm, skeleton prior | MPJPE mm, skeleton prior, gated |"
+                                                    if with_prior else ""))
+        L.append("|---|---|---|---|---|---|---|---|" + ("---|---|" if with_prior else ""))
         for label, m in enc.items():
             L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('encoder_heatmaps_pck@0.2'))} | "
                      f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_gated(m, 'encoder_heatmaps_')} | "
                      f"{_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
-                     f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} | {_gated(m, 'encoder_heatmaps_flip_')} |")
+                     f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} | {_gated(m, 'encoder_heatmaps_flip_')} |"
+                     + (_prior_cells(m) if with_prior else ""))
         L.append("")
+        if with_prior:
+            L.append("MPJPE, skeleton prior: the model folder's skeleton prior (the runtime's 3D path) on the "
+                     "flip-tested encoder joints, with its own flip test: mean / median over every true joint; "
+                     "gated: the mean over the joints whose expected error is within the runtime's default "
+                     "`joints3d.max_prior_error_m` (share kept in brackets). n/a: no prior scored (the torch row "
+                     "runs none).")
+            L.append("")
     views = _breakdown(card, "pck@0.2_by_view")
     if views:
         L.append("PCK@0.2 in each source view (a PCK target applies to each):")

@@ -11,12 +11,13 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
 4. ``export_<variant>``: fp32 ONNX graphs (``training.export``) + a weights-only torch file.
 5. ``quantize_<variant>``: static int8 QDQ graphs, calibrated on training-split scenes (real frames and
    cameras), and the int8-vs-fp32 parity on a held-out scene.
-6. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8) and the baseline (onnx fp32,
-   int8) into ``metrics_<variant>.json``.
-7. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
-   split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks: ~6 min on two
-   cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``, with its held-out figures
+6. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
+   split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks, ``--prior-set``
+   overrides them: ~18 min on two cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``, with its held-out figures
    (``skeleton_prior.json``).
+7. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8; the ONNX rows with the
+   folder's skeleton prior) and the baseline (onnx fp32, int8) into ``metrics_<variant>.json``; a new prior
+   re-evaluates.
 8. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
    wall times), once every variant is evaluated.
 
@@ -52,10 +53,13 @@ VARIANTS = {"ghnerf": "edge128", "baseline": "edge128_baseline"}
 RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "pck_every", "checkpoint_every")
 STAGE_KINDS = ("data", "pretrain", "train", "export", "quantize", "eval", "prior", "card")
 """Stage kinds; pretrain/train/export/quantize/eval run per variant (``train_ghnerf``, ``eval_baseline``, ...)."""
-STAGES = ("data", "pretrain_ghnerf", *(f"{k}_{v}" for k in ("train", "export", "quantize", "eval") for v in VARIANTS),
-          "prior_ghnerf", "card")
+STAGES = ("data", "pretrain_ghnerf", *(f"{k}_{v}" for k in ("train", "export", "quantize") for v in VARIANTS),
+          "prior_ghnerf", *(f"eval_{v}" for v in VARIANTS), "card")
 #: Variants that get a skeleton prior (it learns from the human encoder's heatmaps).
 PRIOR_VARIANTS = ("ghnerf",)
+#: ``--prior-set`` keys: the ``PipelineConfig`` field each sets, and its smallest value.
+PRIOR_SET_KEYS = {"steps": ("prior_steps", 1), "extra_train": ("prior_extra_train", 0),
+                  "members": ("prior_members", 1)}
 #: Pretraining keys that do not change the result; ignored when matching a finished pretraining run.
 PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "eval_every", "eval_scenes",
                          "checkpoint_every", "loader_workers")
@@ -81,12 +85,15 @@ class Recipe:
     """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
 
 
-#: ``--recipe``. ``cpu`` is what two cores train in about two hours; ``gpu`` is the shipped (tenth) model's,
+#: ``--recipe``. ``cpu`` is what two cores train in about two hours (its prior: the larger of the two measured
+#: in docs/training.md, 58.9 against 70.4 mm held out for ~12 min more); ``gpu`` is the shipped (tenth) model's,
 #: about 25 minutes on one H100: the human encoder's trunk at 128x128 instead of 64x64 and 27000
 #: pretraining steps of 4 scenes instead of 24000 of 2 (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, 1.4-2.2 h measured: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes; "
-                  "skeleton prior 15000 steps on the 5000 training scenes (~6 min)"),
+    "cpu": Recipe("two CPU cores, 1.6-2.4 h: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes "
+                  "(1.4-2.2 h measured up to the card); skeleton prior: one network of 30000 steps on 25000 scenes "
+                  "(~18 min, 5 of them making its 20000 extra scenes)",
+                  prior_steps=30000, prior_extra_train=20000),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
                   "the export runs)",
@@ -165,6 +172,25 @@ class PipelineConfig:
             self.workers = max(1, min(r.workers, cores))
         self.prior_steps, self.prior_extra_train, self.prior_members = (r.prior_steps, r.prior_extra_train,
                                                                         r.prior_members)
+
+    def apply_prior_overrides(self, items: list[str]) -> None:
+        """``KEY=VALUE`` overrides of the skeleton prior's recipe (``PRIOR_SET_KEYS``), after the recipe's.
+
+        Raises:
+            ValueError: an unknown key, a value that is not a whole number, or one below the key's minimum.
+        """
+        for item in items:
+            key, sep, value = item.partition("=")
+            if not sep or key not in PRIOR_SET_KEYS:
+                raise ValueError(f"--prior-set {item!r}: expected KEY=VALUE with KEY one of {sorted(PRIOR_SET_KEYS)}")
+            field_name, minimum = PRIOR_SET_KEYS[key]
+            try:
+                number = int(value)
+            except ValueError:
+                raise ValueError(f"--prior-set {item!r}: {key} must be a whole number, got {value!r}") from None
+            if number < minimum:
+                raise ValueError(f"--prior-set {item!r}: {key} must be at least {minimum}, got {number}")
+            setattr(self, field_name, number)
 
     @classmethod
     def quick_defaults(cls, out: Path) -> "PipelineConfig":
@@ -661,6 +687,14 @@ def stage_prior(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
     return [out, out.with_suffix(".json")], {}
 
 
+def prior_stage_inputs(cfg: PipelineConfig, quantized: dict) -> dict:
+    """What the prior stage reads: the quantized graphs (the encoder it learns the errors of) and its recipe."""
+    from ghnerf_runtime.skeleton_prior import FEATURE_VERSION  # a new feature set retrains the prior
+
+    return {"q": quantized, "steps": cfg.prior_steps, "scenes": cfg.prior_scenes, "split": cfg.eval_split,
+            "extra": cfg.prior_extra_train, "members": cfg.prior_members, "features": FEATURE_VERSION}
+
+
 def motion_mix(spec: dict) -> str:
     """A split spec's motions as the card prints them: ``"stand, walk"`` or, weighted, ``"stand 11 %, ..."``."""
     motions, weights = spec.get("motions") or [], spec.get("motion_weights")
@@ -816,22 +850,18 @@ def run(cfg: PipelineConfig) -> dict | None:
         e = st.run(f"export_{variant}", t["outputs"], lambda c=ckpt: stage_export(cfg, c))
         q = st.run(f"quantize_{variant}", {"export": e["outputs"], "calib": cfg.calib_scenes},
                    lambda c=ckpt: stage_quantize(cfg, c))
-        st.run(f"eval_{variant}", {"q": q["outputs"], "e": e["outputs"], "split": cfg.eval_split,
-                                   "limit": cfg.eval_limit, "runtimes": EVAL_RUNTIMES[variant]},
-               lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
+        eval_in = {"q": q["outputs"], "e": e["outputs"], "split": cfg.eval_split, "limit": cfg.eval_limit,
+                   "runtimes": EVAL_RUNTIMES[variant]}
+        if variant in PRIOR_VARIANTS:  # before the eval, which scores it: a new prior re-evaluates
+            p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, q["outputs"]), lambda v=variant: stage_prior(cfg, v))
+            eval_in["prior"] = p["outputs"]
+        st.run(f"eval_{variant}", eval_in, lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
     if cfg.until:
         log.info("stopped after the %s stages (--until)", cfg.until)
         return None
     if any(st.stamp(f"eval_{v}") is None for v in VARIANTS):
         log.info("card: waiting for %s", [v for v in VARIANTS if st.stamp(f"eval_{v}") is None])
         return None
-    from ghnerf_runtime.skeleton_prior import FEATURE_VERSION  # a new feature set retrains the prior
-
-    for v in PRIOR_VARIANTS:
-        st.run(f"prior_{v}", {"q": st.stamp(f"quantize_{v}")["outputs"], "steps": cfg.prior_steps,
-                              "scenes": cfg.prior_scenes, "split": cfg.eval_split, "extra": cfg.prior_extra_train,
-                              "members": cfg.prior_members, "features": FEATURE_VERSION},
-               lambda v=v: stage_prior(cfg, v))
     st.force.add("card")  # always rewritten: cheap, and it records the command and the stamps
     st.run("card", [st.stamp(f"eval_{v}")["outputs"] for v in VARIANTS] + [st.stamp(f"prior_{v}")["outputs"]
                                                                            for v in PRIOR_VARIANTS],
@@ -873,6 +903,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
     ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
+    ap.add_argument("--prior-set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override of the skeleton prior's recipe: steps, extra_train (scenes of the second "
+                         "training set), members (networks averaged), e.g. --recipe cpu --prior-set "
+                         "extra_train=0 --prior-set steps=15000: the smaller prior, 12 min sooner (docs/training.md)")
     ap.add_argument("--workers", type=int, default=None,
                     help="dataset generation processes (default 2; the files do not depend on it)")
     ap.add_argument("--until", choices=("data", "pretrain", "train"),
@@ -925,6 +959,10 @@ def main(argv: list[str] | None = None) -> int:
             cfg.workers = args.workers
         recipe_flag = ["--recipe", cfg.recipe]  # resolved: the card names what was trained, not "auto"
         log.info("recipe %s: %s", cfg.recipe, RECIPES[cfg.recipe].about)
+    try:
+        cfg.apply_prior_overrides(args.prior_set)
+    except ValueError as e:
+        ap.error(str(e))
     cfg.command = shlex.join(["python", "-m", "training.pipeline",
                               *_recipe_args(argv if argv is not None else sys.argv[1:]), *recipe_flag])
     try:

@@ -33,7 +33,8 @@ def test_stages_skip_finished_work_and_redo_changed_work(tmp_path):
     Stages(tmp_path, ("export",)).run("export_ghnerf", {"a": 2}, make("five"))  # --force export
     assert calls[-1] == "five"
     assert {"data", "train_ghnerf", "eval_baseline", "prior_ghnerf", "card"} <= set(STAGES)
-    assert STAGES.index("prior_ghnerf") > STAGES.index("eval_ghnerf")
+    # the prior learns the quantized encoder's errors, and the eval scores it
+    assert STAGES.index("quantize_ghnerf") < STAGES.index("prior_ghnerf") < STAGES.index("eval_ghnerf")
 
 
 def test_card_renders_metrics_and_missing_values(tmp_path):
@@ -99,7 +100,17 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "MPJPE (mm, gated) by how many" in gmd and "| ghnerf_int8 | rendered | 70.0 (90 %) | 130.0 (10 %) |" in gmd
     assert "| model | 0-15 deg | 15-180 deg |" in md and "| ghnerf_int8 | 22.50 (2) | n/a (0) |" in md
     assert "- Motions: train: stand 50 %, freestyle 50 %; val: reach" in md
-    assert "Skeleton prior" not in md  # a card without one
+    assert "Skeleton prior" not in md and "skeleton prior" not in md  # a card without one
+    # the eval scored the folder's prior: two more columns in the encoder table, n/a where none ran
+    scored = json.loads(json.dumps(card))
+    scored["metrics"]["ghnerf_int8"].update({"skeleton_prior_mpjpe_mm": 38.64, "skeleton_prior_mpjpe_median_mm": 24.3,
+                                             "skeleton_prior_gated_mpjpe_mm": 35.91,
+                                             "skeleton_prior_gated_found": 0.987, "skeleton_prior_gate_m": 0.15})
+    scored["metrics"]["ghnerf_torch"] = {"kind": "torch", "encoder_heatmaps_pck@0.2": 0.8}
+    smd = render_markdown(scored)
+    assert "| MPJPE mm, skeleton prior | MPJPE mm, skeleton prior, gated |" in smd
+    assert "| 0.810 | n/a | n/a | 38.6 / 24.3 | 35.9 (99 % within 0.15 m) |" in smd
+    assert "| ghnerf_torch | torch | 0.800 | n/a | n/a | n/a | n/a | n/a | n/a | n/a |" in smd
     prior = {"split": "val", "scenes": 2, "train_scenes": 12, "train_s": 3.5, "config": {"steps": 4},
              "metrics": {"triangulation_gated": {"mean_mm": 73.4, "median_mm": 34.1, "found": 0.72},
                          "gated": {"0.05": {"mean_mm": 37.3, "median_mm": 26.8, "p90_mm": 70.0, "found": 0.95},
@@ -366,6 +377,30 @@ def test_a_recipe_puts_its_overrides_first_and_the_card_names_it(tmp_path, monke
         pipeline.resolve_recipe("tpu")
 
 
+def test_prior_set_overrides_the_recipes_prior_and_the_card_records_it(tmp_path, monkeypatch, capsys):
+    """``--prior-set`` (the measured trade of docs/training.md: the two-core recipe's prior, larger or smaller)
+    wins over the recipe's prior, reaches the prior stage's inputs, and bad values are refused by name."""
+    import training.pipeline as pipeline
+
+    seen = []
+    monkeypatch.setattr(pipeline, "run", lambda cfg: seen.append(cfg))
+    out = ["--out", str(tmp_path / "m"), "--data", str(tmp_path / "d"), "--recipe", "cpu"]
+    pipeline.main(out)
+    plain = seen[-1]
+    assert (plain.prior_steps, plain.prior_extra_train, plain.prior_members) == (30000, 20000, 1)
+    pipeline.main([*out, "--prior-set", "extra_train=0", "--prior-set", "steps=15000"])  # session 17's cpu prior
+    cfg = seen[-1]
+    assert (cfg.prior_steps, cfg.prior_extra_train, cfg.prior_members) == (15000, 0, 1)
+    assert "--prior-set extra_train=0 --prior-set steps=15000" in cfg.command
+    q = {"ghnerf/human.int8.onnx": "ab"}
+    assert pipeline.prior_stage_inputs(cfg, q) != pipeline.prior_stage_inputs(plain, q)  # a new prior is trained
+    for bad, says in (("epochs=3", "KEY one of"), ("steps=many", "whole number"), ("members=0", "at least 1"),
+                      ("extra_train", "KEY=VALUE")):
+        with pytest.raises(SystemExit):
+            pipeline.main([*out, "--prior-set", bad])
+        assert says in capsys.readouterr().err
+
+
 def test_a_run_of_another_recipe_over_a_model_folder_says_it_will_replace_it(tmp_path):
     from training.pipeline import _warn_if_replacing_another_recipe
 
@@ -439,3 +474,33 @@ def test_a_failed_stage_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(pipeline, "run", step_fails)
     assert pipeline.main(["--out", str(tmp_path / "m")]) == 2
     assert "training.data.generate" in capsys.readouterr().err
+
+
+def test_quick_pipeline_end_to_end_scores_its_prior_and_a_new_prior_re_evaluates(tmp_path, caplog):
+    """``--quick`` from nothing (~25 s on two cores): every stage, the prior before the eval that scores it;
+    a second run redoes nothing but the card; a changed prior file retrains the prior and re-evaluates."""
+    import logging
+
+    from training.pipeline import main
+
+    out = tmp_path / "quick"
+    assert main(["--quick", "--out", str(out)]) == 0
+    metrics = json.loads((out / "metrics_ghnerf.json").read_text())["models"]
+    assert metrics["ghnerf_int8"]["skeleton_prior_mpjpe_mm"] > 0  # the eval found the prior beside the graphs
+    assert metrics["ghnerf_torch"]["skeleton_prior_mpjpe_mm"] is None
+    prior_file = out / "ghnerf" / "skeleton_prior.onnx"
+    assert str(prior_file) in json.loads((out / ".stages" / "prior_ghnerf.json").read_text())["outputs"]
+    assert "MPJPE mm, skeleton prior" in (out / "MODEL_CARD.md").read_text()
+
+    def ran() -> list[str]:
+        return [r.getMessage().split()[1].rstrip(":") for r in caplog.records
+                if r.getMessage().startswith("stage ") and r.getMessage().endswith("running")]
+
+    caplog.set_level(logging.INFO, logger="training.pipeline")
+    caplog.clear()
+    assert main(["--quick", "--out", str(out)]) == 0
+    assert ran() == ["card"]
+    prior_file.write_bytes(prior_file.read_bytes() + b"\0")  # not the file the stage wrote
+    caplog.clear()
+    assert main(["--quick", "--out", str(out)]) == 0
+    assert ran() == ["prior_ghnerf", "eval_ghnerf", "card"]
