@@ -854,7 +854,7 @@ def run(cfg: PipelineConfig) -> dict | None:
                    "runtimes": EVAL_RUNTIMES[variant]}
         if variant in PRIOR_VARIANTS:  # before the eval, which scores it: a new prior re-evaluates
             p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, q["outputs"]), lambda v=variant: stage_prior(cfg, v))
-            eval_in["prior"] = p["outputs"]
+            eval_in["prior"] = {k: v for k, v in p["outputs"].items() if k.endswith(".onnx")}  # not its report
         st.run(f"eval_{variant}", eval_in, lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
     if cfg.until:
         log.info("stopped after the %s stages (--until)", cfg.until)

@@ -478,7 +478,7 @@ def test_a_failed_stage_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
 
 def test_quick_pipeline_end_to_end_scores_its_prior_and_a_new_prior_re_evaluates(tmp_path, caplog):
     """``--quick`` from nothing (~25 s on two cores): every stage, the prior before the eval that scores it;
-    a second run redoes nothing but the card; a changed prior file retrains the prior and re-evaluates."""
+    a second run redoes nothing but the card; a damaged prior file is remade; another prior is re-evaluated."""
     import logging
 
     from training.pipeline import main
@@ -500,7 +500,10 @@ def test_quick_pipeline_end_to_end_scores_its_prior_and_a_new_prior_re_evaluates
     caplog.clear()
     assert main(["--quick", "--out", str(out)]) == 0
     assert ran() == ["card"]
-    prior_file.write_bytes(prior_file.read_bytes() + b"\0")  # not the file the stage wrote
+    prior_file.write_bytes(prior_file.read_bytes() + b"\0")  # not the file the stage wrote: remade
     caplog.clear()
     assert main(["--quick", "--out", str(out)]) == 0
+    assert ran()[0] == "prior_ghnerf" and ran()[-1] == "card"  # (the same file again needs no new eval)
+    caplog.clear()
+    assert main(["--quick", "--out", str(out), "--prior-set", "steps=5"]) == 0  # another prior: re-evaluated
     assert ran() == ["prior_ghnerf", "eval_ghnerf", "card"]
