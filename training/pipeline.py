@@ -13,8 +13,8 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
    cameras), and the int8-vs-fp32 parity on a held-out scene.
 6. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
    split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks, ``--prior-set``
-   overrides them: ~18 min on two cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``, with its held-out figures
-   (``skeleton_prior.json``).
+   overrides them: ~18 min on two cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``,
+   with its held-out figures (``skeleton_prior.json``).
 7. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8; the ONNX rows with the
    folder's skeleton prior) and the baseline (onnx fp32, int8) into ``metrics_<variant>.json``; a new prior
    re-evaluates.
@@ -91,8 +91,8 @@ class Recipe:
 #: pretraining steps of 4 scenes instead of 24000 of 2 (docs/training.md, "The tenth model").
 RECIPES = {
     "cpu": Recipe("two CPU cores, 1.6-2.4 h: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes "
-                  "(1.4-2.2 h measured up to the card); skeleton prior: one network of 30000 steps on 25000 scenes "
-                  "(~18 min, 5 of them making its 20000 extra scenes)",
+                  "(1.4-2.2 h measured before the prior existed); skeleton prior: one network of 30000 steps "
+                  "on 25000 scenes (~18 min, 5 of them making its 20000 extra scenes)",
                   prior_steps=30000, prior_extra_train=20000),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
