@@ -63,6 +63,14 @@ VARIANTS: dict[str, dict] = {
     "joints3d.prior_flip_test off": {"joints3d": {"prior_flip_test": False}},
     "joints3d.prior_flip_test off + max_prior_error_m 10": {"joints3d": {"prior_flip_test": False,
                                                                          "max_prior_error_m": 10.0}},
+    # temporal smoothing of the reported joints (One Euro on the pairs' capture times; beta in Hz per m/s)
+    "smoothing on": {"smoothing": {"enabled": True}},
+    "smoothing on + beta 3": {"smoothing": {"enabled": True, "beta": 3.0}},
+    "smoothing on + beta 3 + min_cutoff_hz 0.5": {"smoothing": {"enabled": True, "beta": 3.0, "min_cutoff_hz": 0.5}},
+    "smoothing on + beta 1": {"smoothing": {"enabled": True, "beta": 1.0}},
+    "smoothing on + beta 1 + min_cutoff_hz 2": {"smoothing": {"enabled": True, "beta": 1.0, "min_cutoff_hz": 2.0}},
+    "smoothing on + beta 1 + min_cutoff_hz 0.5": {"smoothing": {"enabled": True, "beta": 1.0, "min_cutoff_hz": 0.5}},
+    "smoothing on + beta 0.3": {"smoothing": {"enabled": True, "beta": 0.3}},
 }
 
 
@@ -73,16 +81,32 @@ def _merged(base: dict, overrides: dict) -> dict:
     return out
 
 
+def acceleration_error_mm(points: np.ndarray, found: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Jitter: ``|second difference of (reported - true)|`` per joint and inner frame, in mm per frame^2,
+    over the joints reported in three consecutive pairs (``points``, ``truth`` ``(F, J, 3)``, ``found``
+    ``(F, J)``). A still error scores 0; noise from pair to pair scores its size."""
+    e = np.asarray(points, np.float64) - np.asarray(truth, np.float64)
+    ok = found[:-2] & found[1:-1] & found[2:]
+    acc = np.linalg.norm(e[2:] - 2 * e[1:-1] + e[:-2], axis=-1)
+    return 1e3 * acc[ok]
+
+
 def score(session, cfg: EstimatorConfig, sequences) -> dict:
     acc = Accuracy()
+    jitter = []
     for seq in sequences:
+        fps = float(seq.info.get("fps", 30.0))
+        points, found = np.zeros(seq.joints_3d.shape), np.zeros(seq.joints_3d.shape[:2], bool)
         with Estimator(session, seq.rig, cfg) as est:
             for i in range(len(seq)):
-                r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=i)
+                r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=i,
+                                 timestamp_s=i / fps)
                 acc.add(r, seq, i)
+                points[i], found[i] = r.joints_3d, ~r.missing
+        jitter.append(acceleration_error_mm(points, found, seq.joints_3d))
     s = acc.summary()
     return {"pck": s["pck@0.2"], "mpjpe": s["mpjpe_mm"], "seen": s["mpjpe_by_visibility"]["all_views"]["mpjpe_mm"],
-            "found": s["found_3d_frac"]}
+            "found": s["found_3d_frac"], "jitter": float(np.mean(np.concatenate(jitter)))}
 
 
 def main(argv=None) -> int:
@@ -103,13 +127,14 @@ def main(argv=None) -> int:
             "bench": load_sequences(args.sequences, args.frames)}
     print(f"{args.sequences} sequences x {args.frames} pairs per set, {args.precision}, the defaults otherwise "
           f"(flip test {'on' if base['heatmaps']['flip_test'] else 'off'}); PCK@0.2 / MPJPE found / MPJPE both "
-          f"cameras see / found", flush=True)
+          f"cameras see / found / jitter (mean |second difference of the error|, mm per pair^2)", flush=True)
     for name in names:
         cfg = config_from_dict(_merged(base, VARIANTS[name]))
         cells = []
         for label, sequences in sets.items():
             r = score(session, cfg, sequences)
-            cells.append(f"{label} {r['pck']:.3f} / {r['mpjpe']:.1f} / {r['seen']:.1f} mm / {100 * r['found']:.1f} %")
+            cells.append(f"{label} {r['pck']:.3f} / {r['mpjpe']:.1f} / {r['seen']:.1f} mm / {100 * r['found']:.1f} % "
+                         f"/ jitter {r['jitter']:.1f}")
         print(f"{name:<34} " + " | ".join(cells), flush=True)
     return 0
 

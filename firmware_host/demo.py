@@ -296,7 +296,8 @@ def _run(args: argparse.Namespace) -> int:
                 if estimator is None:
                     frame = _truth_frame(pair)
                 else:
-                    result = estimator.estimate(pair.images, sequence=pair.sequence)
+                    result = estimator.estimate(pair.images, sequence=pair.sequence,
+                                                timestamp_s=pair.timestamps_ns[0] * 1e-9)
                     tally.add(pair, result, time.monotonic_ns())
                     frame, last_result = _estimate_frame(pair, result), result
                 if frame is not None:

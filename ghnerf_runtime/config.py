@@ -17,6 +17,7 @@ Tree (defaults in the classes)::
       decoder      KeypointDecoderConfig  (ghnerf_runtime.keypoints) 2D peak decoding
       joints3d     Joints3DConfig       3D method and its parameters
       novel_view   NovelViewConfig      novel-view rendering (off by default)
+      smoothing    SmoothingConfig      One Euro filtering of the reported 3D joints (off by default)
 """
 from __future__ import annotations
 
@@ -36,7 +37,8 @@ __all__ = [
     "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES",
     "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
-    "PresenceConfig", "NovelViewConfig", "EstimatorConfig", "config_from_dict", "config_to_dict", "load_config",
+    "PresenceConfig", "NovelViewConfig", "SmoothingConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
+    "load_config",
 ]
 
 #: Precision choices of :class:`SessionConfig`.
@@ -389,6 +391,34 @@ class PresenceConfig:
         return PRESENCE_MIN_CONFIDENCE[source] if self.min_confidence is None else float(self.min_confidence)
 
 
+@dataclass(frozen=True)
+class SmoothingConfig:
+    """Temporal smoothing of the reported 3D joints (:mod:`ghnerf_runtime.smoothing`: a One Euro filter
+    per joint on the pairs' capture times). Off by default; its trade (less jitter, some lag, the
+    MPJPE either way) is measured in docs/runtime.md, "Smoothing".
+
+    Attributes:
+        enabled: smooth the reported joints (the tracker always follows the raw ones).
+        min_cutoff_hz: the cutoff of a still joint (lower: steadier, more lag).
+        beta: how fast the cutoff rises with the joint's speed, Hz per m/s (higher: less lag when moving).
+        d_cutoff_hz: the cutoff of the speed estimate.
+        max_gap_s: a longer gap between pairs restarts every joint.
+    """
+
+    enabled: bool = False
+    min_cutoff_hz: float = 1.0
+    beta: float = 10.0  # tuned: the only setting tried that lowers both jitter and MPJPE (docs/runtime.md)
+    d_cutoff_hz: float = 1.0
+    max_gap_s: float = 0.25
+
+    def __post_init__(self) -> None:
+        _boolean(self, "enabled")
+        _number(self, "min_cutoff_hz", 0.0, 1000.0, lo_open=True)
+        _number(self, "beta", 0.0, 1e4)
+        _number(self, "d_cutoff_hz", 0.0, 1000.0, lo_open=True)
+        _number(self, "max_gap_s", 0.0, 60.0, lo_open=True)
+
+
 HEATMAP_SOURCES = ("rendered", "encoder")
 
 
@@ -533,6 +563,7 @@ class EstimatorConfig:
     joints3d: Joints3DConfig = field(default_factory=Joints3DConfig)
     presence: PresenceConfig = field(default_factory=PresenceConfig)
     novel_view: NovelViewConfig = field(default_factory=NovelViewConfig)
+    smoothing: SmoothingConfig = field(default_factory=SmoothingConfig)
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

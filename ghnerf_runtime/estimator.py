@@ -60,6 +60,7 @@ from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton
     interpolate_camera, novel_target, render_novel_view
 from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
+from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES"]
@@ -246,6 +247,8 @@ class Estimator:
         self.skeleton_prior = self._prior_of(session)
         self._prior_follow: Joints3D | None = None
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi)
+        # smooths what is reported; the tracker follows the raw joints
+        self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
         self._cams = [_CameraState(c) for c in rig.pair]
         self._levels = _levels_per_unit(self.contract.normalisation)
         self._volume_box = np.stack([rig.volume.min_corner, rig.volume.max_corner])
@@ -280,8 +283,10 @@ class Estimator:
         return self._cams[0].camera.name, self._cams[1].camera.name
 
     def reset(self) -> None:
-        """Forget the tracked subject (the next pair starts from the working volume)."""
+        """Forget the tracked subject (the next pair starts from the working volume) and the smoothing."""
         self.tracker.reset()
+        if self._smoother is not None:
+            self._smoother.reset()
 
     def close(self) -> None:
         """Stop the novel-view worker thread, if one was started (an estimator left to the garbage
@@ -355,12 +360,14 @@ class Estimator:
 
     # -------------------------------------------------------------- main
     def estimate(self, images: Sequence[np.ndarray], *, sequence: int | None = None,
-                 novel_view: NovelViewRequest | None = None) -> PairResult:
+                 novel_view: NovelViewRequest | None = None, timestamp_s: float | None = None) -> PairResult:
         """Joints of one synchronised pair.
 
         Args:
             images: the two BGR uint8 frames, in the rig's camera order, at the cameras' sizes.
             sequence: the pair's number (default: a running count).
+            timestamp_s: the pair's capture time, seconds (any origin), for ``smoothing`` (default: the
+                host's monotonic clock now, which counts processing jitter as motion).
             novel_view: render a novel view too (needs ``novel_view.enabled`` in the config). A
                 pair whose frames fail the frame check has none (``PairResult.novel_view`` is
                 ``None``).
@@ -386,6 +393,8 @@ class Estimator:
             # Cold start that found the subject: run again on its crop and box, in this pair.
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if p.j3 is None:
+            if self._smoother is not None:
+                self._smoother.reset()
             timing["total"] = 1e3 * (time.perf_counter() - t_start)
             return self._empty_result(sequence, p.regions, p.frame_ok, timing)
         nv = None
@@ -396,9 +405,13 @@ class Estimator:
             else:
                 nv = self._render_novel(novel_view, p.env, self._novel_box(p.regions, p.j3), timing)
             nv = self._compose_novel(novel_view, nv, p.j3, timing)
+        points = p.j3.points
+        if self._smoother is not None:
+            t = time.monotonic() if timestamp_s is None else float(timestamp_s)
+            points = np.where(p.j3.valid[:, None], self._smoother(t, p.j3.points, p.j3.valid), 0.0)
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
-        return PairResult(sequence, JOINT_NAMES, p.j3.points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
+        return PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
                           p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
                           self.config.joints3d.method, nv)
 

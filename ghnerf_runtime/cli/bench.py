@@ -76,7 +76,8 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
                     est.tracker.track = track_from_joints(seq.joints_3d[i - 1], np.ones(25), np.ones(25, bool),
                                                           est.config.tracking, i - 1)
                 t = time.perf_counter()
-                result = est.estimate(images, sequence=i, novel_view=request)
+                result = est.estimate(images, sequence=i, novel_view=request,
+                                      timestamp_s=i / float(seq.info.get("fps", 30.0)))
                 dt = time.perf_counter() - t
                 n += 1
                 if n <= warmup:

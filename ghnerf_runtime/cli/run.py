@@ -208,7 +208,7 @@ def _run(args) -> int:
     try:
         for seq, images in enumerate(_pairs(args)):
             try:
-                result = estimator.estimate(images, sequence=seq, novel_view=request)
+                result = estimator.estimate(images, sequence=seq, novel_view=request, timestamp_s=seq / fps)
             except FrameError as e:
                 names = args.images or args.videos
                 raise UsageError(f"{names[0]}, {names[1]}: {e}") from e

@@ -1,0 +1,80 @@
+"""Temporal smoothing of the reported 3D joints: a One Euro filter per joint (Casiez et al., CHI 2012).
+
+Jitter is what users of peer systems complain about most (MediaPipe, OpenPose, EasyMocap: PEERS.md),
+and a robot arm or an avatar driven by the stream shows every millimetre of it. The One Euro filter
+is an exponential low-pass whose cutoff rises with the joint's speed: a still joint is smoothed hard
+(cutoff ``min_cutoff_hz``), a fast one hardly lags (cutoff ``min_cutoff_hz + beta * speed``). Speed
+is the filtered derivative of the position (its own low-pass at ``d_cutoff_hz``), in metres per
+second, measured on the whole 3D point so the three axes move together.
+
+Time comes from the pairs' capture timestamps, so a dropped pair is a longer step, not a jump. A
+joint that goes missing restarts from its next reported position; a gap longer than ``max_gap_s``
+(the subject left, the stream stalled) restarts every joint. Only what is reported is smoothed: the
+tracker still follows the raw joints, so the crop never lags the subject.
+
+Pure numpy; the state is the filter object's own (one per estimator).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ghnerf_runtime.config import SmoothingConfig
+
+__all__ = ["OneEuroJoints", "smoothing_alpha"]
+
+
+def smoothing_alpha(cutoff_hz: np.ndarray | float, dt_s: float) -> np.ndarray:
+    """The exponential smoothing factor of a first-order low-pass at ``cutoff_hz`` over a step ``dt_s``."""
+    tau = 1.0 / (2.0 * math.pi * np.asarray(cutoff_hz, np.float64))
+    return 1.0 / (1.0 + tau / dt_s)
+
+
+class OneEuroJoints:
+    """One Euro filters over ``(J, 3)`` joints with a validity mask, driven by timestamps (seconds)."""
+
+    def __init__(self, config: SmoothingConfig) -> None:
+        self.config = config
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every joint (the next call reports its input unchanged)."""
+        self._x: np.ndarray | None = None  # (J, 3) filtered positions
+        self._dx: np.ndarray | None = None  # (J, 3) filtered velocities, m/s
+        self._alive: np.ndarray | None = None  # (J,) joints with a state
+        self._t: float | None = None
+
+    def __call__(self, t_s: float, points: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """The smoothed joints at time ``t_s``: ``points`` where a joint restarts, filtered elsewhere.
+
+        Args:
+            t_s: capture time of the pair, seconds (any origin; increasing).
+            points: ``(J, 3)`` joints, metres.
+            valid: ``(J,)`` the joints reported in this pair; the others keep no state.
+
+        Returns:
+            ``(J, 3)`` float64; invalid joints are returned as given.
+        """
+        cfg = self.config
+        x = np.asarray(points, np.float64)
+        valid = np.asarray(valid, bool)
+        dt = None if self._t is None else float(t_s) - self._t
+        if dt is None or not (0.0 < dt <= cfg.max_gap_s) or self._x is None or self._x.shape != x.shape:
+            # First pair, a gap, or time running backwards (a restarted source): start over.
+            self._x, self._dx = x.copy(), np.zeros_like(x)
+            self._alive = valid.copy()
+            self._t = float(t_s)
+            return x.copy()
+        keep = valid & self._alive
+        dx = (x - self._x) / dt
+        dx_hat = self._dx + smoothing_alpha(cfg.d_cutoff_hz, dt) * (dx - self._dx)
+        speed = np.linalg.norm(dx_hat, axis=-1, keepdims=True)
+        a = smoothing_alpha(cfg.min_cutoff_hz + cfg.beta * speed, dt)
+        x_hat = self._x + a * (x - self._x)
+        out = np.where(keep[:, None], x_hat, x)
+        self._dx = np.where(keep[:, None], dx_hat, 0.0)
+        self._x = out
+        self._alive = valid.copy()
+        self._t = float(t_s)
+        return out.copy()

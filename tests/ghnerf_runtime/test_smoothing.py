@@ -1,0 +1,109 @@
+"""The One Euro smoothing of the reported 3D joints: still joints steadied, fast ones barely delayed,
+restarts on gaps, missing joints and time running backwards; its config validated; in the estimator it
+smooths what is reported and leaves the tracker on the raw joints."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, config_from_dict
+from ghnerf_runtime.smoothing import OneEuroJoints, smoothing_alpha
+
+FPS = 30.0
+
+
+def _run(filt, points, valid=None, fps=FPS):
+    valid = np.ones(points.shape[:2], bool) if valid is None else valid
+    return np.stack([filt(i / fps, p, v) for i, (p, v) in enumerate(zip(points, valid))])
+
+
+def test_alpha_is_the_first_order_low_pass_factor():
+    # tau = 1 / (2 pi fc); alpha = dt / (dt + tau): at fc = 1 / (2 pi dt), tau = dt, so a half
+    dt = 1 / 30
+    assert smoothing_alpha(1 / (2 * math.pi * dt), dt) == pytest.approx(0.5)
+    assert smoothing_alpha(1e9, dt) == pytest.approx(1.0) and smoothing_alpha(1e-9, dt) < 1e-8
+
+
+def test_a_still_joint_passes_exactly_and_noise_on_it_is_cut():
+    still = np.tile(np.array([[0.1, -0.2, 3.0]]), (60, 25, 1))
+    out = _run(OneEuroJoints(SmoothingConfig(enabled=True)), still)
+    assert np.array_equal(out, still)
+    noisy = still + np.random.default_rng(0).normal(0, 0.005, still.shape)  # 5 mm of noise per pair
+    out = _run(OneEuroJoints(SmoothingConfig(enabled=True)), noisy)
+    raw_err = np.linalg.norm(noisy[10:] - still[10:], axis=-1).mean()
+    smooth_err = np.linalg.norm(out[10:] - still[10:], axis=-1).mean()
+    assert smooth_err < 0.5 * raw_err, (smooth_err, raw_err)
+
+
+def test_a_fast_joint_lags_little_with_beta_and_much_without():
+    """A ramp at 2 m/s: the cutoff rises with the speed (beta), so the steady lag shrinks."""
+    t = np.arange(60) / FPS
+    ramp = np.zeros((60, 1, 3))
+    ramp[:, 0, 0] = 2.0 * t
+    lag = {}
+    for beta in (0.0, 10.0):
+        out = _run(OneEuroJoints(SmoothingConfig(enabled=True, beta=beta)), ramp)
+        lag[beta] = float(np.abs(out[-1, 0, 0] - ramp[-1, 0, 0]))
+    # beta 0: a 1 Hz low-pass, tau 0.16 s, so about 0.3 m behind; beta 10: about 21 Hz, a few centimetres
+    assert lag[0.0] > 0.2 and lag[10.0] < 0.05 and lag[10.0] < 0.2 * lag[0.0], lag
+
+
+def test_restarts_on_a_missing_joint_a_gap_and_time_going_back():
+    cfg = SmoothingConfig(enabled=True, max_gap_s=0.25)
+    f = OneEuroJoints(cfg)
+    a, b = np.zeros((2, 3)), np.ones((2, 3))
+    assert np.array_equal(f(0.0, a, np.ones(2, bool)), a)  # the first pair is reported as it is
+    moved = f(1 / FPS, b, np.array([True, False]))
+    assert 0 < moved[0, 0] < 1 and np.array_equal(moved[1], b[1])  # filtered / not reported: as given
+    back = f(2 / FPS, b, np.ones(2, bool))
+    assert back[0, 0] < 1 and np.array_equal(back[1], b[1])  # joint 1 returns: it restarts where it is
+    assert np.array_equal(f(2 / FPS + 0.3, a, np.ones(2, bool)), a)  # a gap longer than max_gap_s
+    assert np.array_equal(f(0.1, b, np.ones(2, bool)), b)  # time ran backwards (a restarted source)
+    f.reset()
+    assert np.array_equal(f(5.0, a, np.ones(2, bool)), a)
+
+
+def test_the_config_is_validated_by_its_dotted_path():
+    assert not EstimatorConfig().smoothing.enabled  # off unless asked for
+    assert config_from_dict({"smoothing": {"enabled": True, "beta": 3}}).smoothing.beta == 3
+    for bad, key in (({"min_cutoff_hz": 0}, "smoothing.min_cutoff_hz"), ({"beta": -1}, "smoothing.beta"),
+                     ({"max_gap_s": float("nan")}, "smoothing.max_gap_s"), ({"enabled": "yes"}, "smoothing.enabled"),
+                     ({"bta": 3}, "smoothing.bta")):
+        with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+            config_from_dict({"smoothing": bad})
+
+
+def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
+    sim = pytest.importorskip("drivers.sim")
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.estimator import Estimator
+
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 3.0)))
+    frames = []
+    for i in range(4):
+        rendered = [scene.render(c, i / FPS) for c in rig.pair]
+        frames.append((tuple(img for img, _ in rendered), scene.joints_3d(i / FPS),
+                       np.stack([tr.visible for _, tr in rendered])))
+    runs = {}
+    for enabled in (False, True):
+        oracle = OracleSession(edge128_contract())
+        cfg = EstimatorConfig(joints3d=Joints3DConfig(method="triangulate"),
+                              smoothing=SmoothingConfig(enabled=enabled, beta=0.0))
+        est = Estimator(oracle, rig, cfg)
+        out = []
+        for i, (pair, truth, vis) in enumerate(frames):
+            oracle.set_truth(truth, vis)
+            r = est.estimate(pair, timestamp_s=i / FPS)
+            out.append((r, est.tracker.track))
+        runs[enabled] = out
+    raw, smooth = runs[False], runs[True]
+    assert np.array_equal(raw[0][0].joints_3d, smooth[0][0].joints_3d)  # nothing to smooth against yet
+    for (r0, t0), (r1, t1) in zip(raw[1:], smooth[1:]):
+        assert np.array_equal(r0.missing, r1.missing)
+        found = ~r0.missing
+        assert not np.allclose(r0.joints_3d[found], r1.joints_3d[found])  # smoothed (beta 0: a 1 Hz low-pass)
+        assert not r1.joints_3d[~found].any()  # missing joints stay 0
+        assert np.array_equal(t0.box, t1.box)  # the crop follows the raw joints either way
