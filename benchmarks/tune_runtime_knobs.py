@@ -6,7 +6,8 @@
 The decoder's Gaussian filter and subpixel refinement, its threshold and the triangulation's reprojection
 gate were tuned on the first model. This runs every variant below (one setting changed from the
 defaults each) on two sets of held-out-like sequences and prints, per set, PCK@0.2 (both images),
-MPJPE over the joints found, MPJPE over the joints both cameras see and the share found:
+MPJPE over the joints found, MPJPE over the joints both cameras see, the share found and the jitter
+(:func:`acceleration_error_mm`; the pairs carry their capture times, as ``smoothing`` needs):
 
 * the *tuning* set: sequences drawn as ``ghnerf-bench runtime`` draws them but from other scene seeds
   (``TUNE_SEED_BASE``: other rigs, bodies, clothes), where a choice is made;

@@ -408,7 +408,7 @@ class Estimator:
         points = p.j3.points
         if self._smoother is not None:
             t = time.monotonic() if timestamp_s is None else float(timestamp_s)
-            points = np.where(p.j3.valid[:, None], self._smoother(t, p.j3.points, p.j3.valid), 0.0)
+            points = self._smoother(t, p.j3.points, p.j3.valid)  # missing joints come back as given (0)
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
         return PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
