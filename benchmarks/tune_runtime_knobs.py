@@ -1,13 +1,14 @@
 """Re-tune the runtime's accuracy knobs for the shipped model on sequences the bench never uses.
 
     .venv/bin/python benchmarks/tune_runtime_knobs.py [--model-dir models] [--sequences 30] [--frames 30]
-                                                      [--only NAME,NAME]
+                                                      [--only NAME,NAME] [--every N]
 
 The decoder's Gaussian filter and subpixel refinement, its threshold and the triangulation's reprojection
 gate were tuned on the first model. This runs every variant below (one setting changed from the
 defaults each) on two sets of held-out-like sequences and prints, per set, PCK@0.2 (both images),
 MPJPE over the joints found, MPJPE over the joints both cameras see, the share found and the jitter
-(:func:`acceleration_error_mm`; the pairs carry their capture times, as ``smoothing`` needs):
+(``metrics.acceleration_error``, mm per pair squared; the pairs carry their capture times, as
+``smoothing`` needs):
 
 * the *tuning* set: sequences drawn as ``ghnerf-bench runtime`` draws them but from other scene seeds
   (``TUNE_SEED_BASE``: other rigs, bodies, clothes), where a choice is made;
@@ -64,14 +65,18 @@ VARIANTS: dict[str, dict] = {
     "joints3d.prior_flip_test off": {"joints3d": {"prior_flip_test": False}},
     "joints3d.prior_flip_test off + max_prior_error_m 10": {"joints3d": {"prior_flip_test": False,
                                                                          "max_prior_error_m": 10.0}},
-    # temporal smoothing of the reported joints (One Euro on the pairs' capture times; beta in Hz per m/s)
-    "smoothing on": {"smoothing": {"enabled": True}},
-    "smoothing on + beta 3": {"smoothing": {"enabled": True, "beta": 3.0}},
-    "smoothing on + beta 3 + min_cutoff_hz 0.5": {"smoothing": {"enabled": True, "beta": 3.0, "min_cutoff_hz": 0.5}},
-    "smoothing on + beta 1": {"smoothing": {"enabled": True, "beta": 1.0}},
-    "smoothing on + beta 1 + min_cutoff_hz 2": {"smoothing": {"enabled": True, "beta": 1.0, "min_cutoff_hz": 2.0}},
-    "smoothing on + beta 1 + min_cutoff_hz 0.5": {"smoothing": {"enabled": True, "beta": 1.0, "min_cutoff_hz": 0.5}},
-    "smoothing on + beta 0.3": {"smoothing": {"enabled": True, "beta": 0.3}},
+    # temporal smoothing of the reported joints (One Euro on the pairs' capture times; beta in Hz per m/s;
+    # on by default since session 19, min_cutoff_hz 1, beta 10)
+    "smoothing off": {"smoothing": {"enabled": False}},
+    "smoothing.beta 30": {"smoothing": {"beta": 30.0}},
+    "smoothing.beta 3": {"smoothing": {"beta": 3.0}},
+    "smoothing.beta 3 + min_cutoff_hz 0.5": {"smoothing": {"beta": 3.0, "min_cutoff_hz": 0.5}},
+    "smoothing.beta 1": {"smoothing": {"beta": 1.0}},
+    "smoothing.beta 1 + min_cutoff_hz 2": {"smoothing": {"beta": 1.0, "min_cutoff_hz": 2.0}},
+    "smoothing.beta 1 + min_cutoff_hz 0.5": {"smoothing": {"beta": 1.0, "min_cutoff_hz": 0.5}},
+    "smoothing.beta 0.3": {"smoothing": {"beta": 0.3}},
+    "smoothing.min_cutoff_hz 0.5": {"smoothing": {"min_cutoff_hz": 0.5}},
+    "smoothing.min_cutoff_hz 2": {"smoothing": {"min_cutoff_hz": 2.0}},
 }
 
 
@@ -82,32 +87,20 @@ def _merged(base: dict, overrides: dict) -> dict:
     return out
 
 
-def acceleration_error_mm(points: np.ndarray, found: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Jitter: ``|second difference of (reported - true)|`` per joint and inner frame, in mm per frame^2,
-    over the joints reported in three consecutive pairs (``points``, ``truth`` ``(F, J, 3)``, ``found``
-    ``(F, J)``). A still error scores 0; noise from pair to pair scores its size."""
-    e = np.asarray(points, np.float64) - np.asarray(truth, np.float64)
-    ok = found[:-2] & found[1:-1] & found[2:]
-    acc = np.linalg.norm(e[2:] - 2 * e[1:-1] + e[:-2], axis=-1)
-    return 1e3 * acc[ok]
-
-
-def score(session, cfg: EstimatorConfig, sequences) -> dict:
+def score(session, cfg: EstimatorConfig, sequences, every: int = 1) -> dict:
+    """Every ``every``-th pair of each sequence (a slower camera: ``30 / every`` fps), on its capture time."""
     acc = Accuracy()
-    jitter = []
     for seq in sequences:
         fps = float(seq.info.get("fps", 30.0))
-        points, found = np.zeros(seq.joints_3d.shape), np.zeros(seq.joints_3d.shape[:2], bool)
         with Estimator(session, seq.rig, cfg) as est:
-            for i in range(len(seq)):
-                r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=i,
+            for k, i in enumerate(range(0, len(seq), every)):
+                r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=k,
                                  timestamp_s=i / fps)
-                acc.add(r, seq, i)
-                points[i], found[i] = r.joints_3d, ~r.missing
-        jitter.append(acceleration_error_mm(points, found, seq.joints_3d))
+                # the jitter is per delivered pair: pair k follows pair k - 1
+                acc.add_truth(r, seq.joints_3d[i], seq.joints_2d[i], seq.visible[i], frame=(id(seq), k))
     s = acc.summary()
     return {"pck": s["pck@0.2"], "mpjpe": s["mpjpe_mm"], "seen": s["mpjpe_by_visibility"]["all_views"]["mpjpe_mm"],
-            "found": s["found_3d_frac"], "jitter": float(np.mean(np.concatenate(jitter)))}
+            "found": s["found_3d_frac"], "jitter": s["jitter_mm"]}
 
 
 def main(argv=None) -> int:
@@ -117,7 +110,12 @@ def main(argv=None) -> int:
     ap.add_argument("--sequences", type=int, default=30)
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--only", help="comma list of variant names (default: all)")
+    ap.add_argument("--every", type=int, default=1,
+                    help="use every n-th pair of each sequence: a camera at 30/n fps (the jitter is then per such "
+                         "pair, so compare it only between runs of the same n)")
     args = ap.parse_args(argv)
+    if args.every < 1:
+        ap.error(f"--every: a pair count of at least 1, got {args.every}")
     names = args.only.split(",") if args.only else list(VARIANTS)
     if unknown := [n for n in names if n not in VARIANTS]:
         ap.error(f"--only: no variant named {unknown}; the variants are {list(VARIANTS)}")
@@ -126,14 +124,15 @@ def main(argv=None) -> int:
     session = load_session(config_from_dict(base))
     sets = {"tuning": load_sequences(args.sequences, args.frames, seed_base=TUNE_SEED_BASE),
             "bench": load_sequences(args.sequences, args.frames)}
-    print(f"{args.sequences} sequences x {args.frames} pairs per set, {args.precision}, the defaults otherwise "
+    print(f"{args.sequences} sequences x {args.frames} pairs per set at {30 / args.every:g} fps (every "
+          f"{args.every}), {args.precision}, the defaults otherwise "
           f"(flip test {'on' if base['heatmaps']['flip_test'] else 'off'}); PCK@0.2 / MPJPE found / MPJPE both "
           f"cameras see / found / jitter (mean |second difference of the error|, mm per pair^2)", flush=True)
     for name in names:
         cfg = config_from_dict(_merged(base, VARIANTS[name]))
         cells = []
         for label, sequences in sets.items():
-            r = score(session, cfg, sequences)
+            r = score(session, cfg, sequences, args.every)
             cells.append(f"{label} {r['pck']:.3f} / {r['mpjpe']:.1f} / {r['seen']:.1f} mm / {100 * r['found']:.1f} % "
                          f"/ jitter {r['jitter']:.1f}")
         print(f"{name:<34} " + " | ".join(cells), flush=True)

@@ -150,7 +150,8 @@ class _Tally:
             with_2d = all(t is not None for t in truths)
             self.accuracy.add_truth(result, pair.joints_3d,
                                     np.stack([t.joints_2d for t in truths]) if with_2d else None,
-                                    np.stack([t.visible for t in truths]) if with_2d else None)
+                                    np.stack([t.visible for t in truths]) if with_2d else None,
+                                    frame=(0, pair.sequence))  # a skipped pair breaks the jitter's chain
 
     def report(self) -> list[str]:
         lines = []
@@ -173,6 +174,8 @@ class _Tally:
         if "pck@0.2" in acc:
             text += (f"; 2D PCK@0.2 {acc['pck@0.2']:.3f} over {acc['pck_evaluated']} visible joints in both views "
                      f"(not found = wrong)")
+        if np.isfinite(acc.get("jitter_mm", float("nan"))):
+            text += f"; jitter {acc['jitter_mm']:.1f} mm per pair^2"
         lines.append(text)
         return lines
 

@@ -366,8 +366,9 @@ class Estimator:
         Args:
             images: the two BGR uint8 frames, in the rig's camera order, at the cameras' sizes.
             sequence: the pair's number (default: a running count).
-            timestamp_s: the pair's capture time, seconds (any origin), for ``smoothing`` (default: the
-                host's monotonic clock now, which counts processing jitter as motion).
+            timestamp_s: the pair's capture time, seconds (any origin), for ``smoothing``. Without one
+                the pair's joints are reported unsmoothed and the filter restarts: the host's clock would
+                count processing jitter as motion, so a caller that wants smoothing passes the time.
             novel_view: render a novel view too (needs ``novel_view.enabled`` in the config). A
                 pair whose frames fail the frame check has none (``PairResult.novel_view`` is
                 ``None``).
@@ -407,8 +408,10 @@ class Estimator:
             nv = self._compose_novel(novel_view, nv, p.j3, timing)
         points = p.j3.points
         if self._smoother is not None:
-            t = time.monotonic() if timestamp_s is None else float(timestamp_s)
-            points = self._smoother(t, p.j3.points, p.j3.valid)  # missing joints come back as given (0)
+            if timestamp_s is None:
+                self._smoother.reset()  # no time to filter on: a still image, as far as smoothing goes
+            else:
+                points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
         return PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,

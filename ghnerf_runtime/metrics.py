@@ -5,6 +5,7 @@ Every definition here is restated in ``docs/metrics.md``; change both together.
 * :func:`pck` -- PCK@alpha of 2D joints against a per-sample torso reference length.
 * :func:`mpjpe` -- mean per-joint 3D position error, millimetres (inputs in metres).
 * :func:`mpjpe_by_visibility` -- that error split by how many views see each joint.
+* :func:`acceleration_error` -- jitter: the second difference of the 3D error from frame to frame.
 * :func:`left_right_swaps` -- how often a left/right pair of 2D joints comes out exchanged.
 * :func:`masked_psnr`, :func:`masked_ssim` -- image quality inside a mask.
 * :func:`heatmap_mse` -- mean squared error between heatmaps.
@@ -46,7 +47,8 @@ SSIM_K2 = 0.03
 __all__ = [
     "TORSO_BOX_JOINTS", "LEFT_RIGHT_PAIRS", "PckResult", "SwapResult", "MpjpeResult", "ImageMetricResult",
     "MseResult", "VISIBILITY_CLASSES", "visibility_class", "mpjpe_by_visibility", "left_right_swaps",
-    "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse", "gaussian_heatmaps",
+    "AccelerationResult", "acceleration_error", "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse",
+    "gaussian_heatmaps",
 ]
 
 
@@ -120,6 +122,22 @@ class MpjpeResult:
     num_evaluated: int
     num_missing: int
     num_pred_missing: int
+
+
+@dataclass(frozen=True, eq=False)
+class AccelerationResult:
+    """The acceleration error of a joint sequence (:func:`acceleration_error`).
+
+    Attributes:
+        value: mean error in millimetres per frame squared; ``nan`` when ``num_evaluated == 0``.
+        errors: ``(F - 2, J)`` per inner frame and joint, mm per frame squared; ``0.0`` where not evaluated.
+        evaluated: ``(F - 2, J)`` bool: the joint is evaluated in the frame and both its neighbours.
+        num_evaluated: (inner frame, joint) entries that entered the mean.
+    """
+    value: float
+    errors: np.ndarray
+    evaluated: np.ndarray
+    num_evaluated: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -342,6 +360,49 @@ def mpjpe(pred_3d, true_3d, valid, *, pred_valid=None) -> MpjpeResult:
     return MpjpeResult(value=_mean_or_nan(float(errors_mm.sum()), n), errors=errors_mm, evaluated=evaluated,
                        num_evaluated=n, num_missing=int((~valid_b).sum()),
                        num_pred_missing=int((valid_b & ~pred_ok).sum()))
+
+
+def acceleration_error(pred_3d, true_3d, valid, *, pred_valid=None, consecutive=None) -> AccelerationResult:
+    """Jitter: the mean size of the second difference, frame to frame, of the 3D error, mm per frame².
+
+    ``|a_pred - a_true|`` with ``a = x[f+1] - 2 x[f] + x[f-1]`` per joint, the "acceleration error" of
+    the video pose literature (Kanazawa et al., CVPR 2019), pooled over every inner frame whose joint is
+    evaluated (valid truth and a prediction) in that frame and both its neighbours. An error that stays
+    put scores 0, however large (that is MPJPE's business); noise from frame to frame scores its size.
+    Per frame, not per second: it compares runs at the same frame rate.
+
+    Args:
+        pred_3d: ``(F, J, 3)`` metres, frames in order.
+        true_3d: ``(F, J, 3)`` metres.
+        valid: ``(F, J)`` bool, truth is available.
+        pred_valid: optional ``(F, J)`` bool, the predictor produced the joint.
+        consecutive: optional ``(F,)`` bool, frame ``f`` directly follows frame ``f - 1`` (False where a
+            sequence starts or frames were dropped; ``consecutive[0]`` is ignored). Default: all do.
+
+    Returns:
+        :class:`AccelerationResult`; ``value`` is ``nan`` when fewer than three frames chain.
+
+    Example:
+        >>> pred = [[[0, 0, 1.0]], [[0, 0, 1.003]], [[0, 0, 1.0]]]  # 3 mm out in the middle frame
+        >>> r = acceleration_error(pred, [[[0, 0, 1.0]]] * 3, [[True]] * 3)
+        >>> round(r.value, 6), r.num_evaluated
+        (6.0, 1)
+    """
+    pred, true, valid_b, pred_ok = _joints_pair(pred_3d, true_3d, valid, pred_valid, 3, "3d")
+    if pred.ndim != 3:
+        raise ShapeError(f"pred_3d must have shape (F, J, 3), got {pred.shape}")
+    frames = pred.shape[0]
+    chained = np.ones(frames, bool) if consecutive is None else _mask("consecutive", consecutive, (frames,)).copy()
+    if frames < 3:
+        empty = np.zeros((0, pred.shape[1]), bool)
+        return AccelerationResult(float("nan"), empty.astype(np.float64), empty, 0)
+    ok = valid_b & pred_ok
+    evaluated = ok[:-2] & ok[1:-1] & ok[2:] & (chained[1:-1] & chained[2:])[:, None]
+    e = np.where(ok[..., None], pred - true, 0.0)
+    accel = np.linalg.norm(e[2:] - 2.0 * e[1:-1] + e[:-2], axis=-1)
+    errors = np.where(evaluated, 1000.0 * accel, 0.0)
+    n = int(evaluated.sum())
+    return AccelerationResult(_mean_or_nan(float(errors.sum()), n), errors, evaluated, n)
 
 
 #: A 3D joint's visibility class: seen (in the image, unoccluded) by every source view, by some, by none.

@@ -9,9 +9,11 @@ Subcommands::
 precision and for "keypoints" and "keypoints + novel view" runs the estimator over every pair
 and prints each stage's median and p99 (ms), the end-to-end median/p99 and throughput, and the
 accuracy against the simulator's truth (PCK@0.2 in both images, MPJPE in the rig frame, with
-the counts of missing joints). The rows take turns sequence by sequence, so drifts in the
-machine's speed hit them alike. The first pairs of each row are warm-up and not counted. Not a
-timed test: the figures depend on the machine and its load (the load average is printed).
+the counts of missing joints, and the jitter of the 3D joints: ``metrics.acceleration_error``).
+The pairs carry their capture times (frame number / fps), as ``smoothing`` needs. The rows take
+turns sequence by sequence, so drifts in the machine's speed hit them alike. The first pairs of
+each row are warm-up and not counted. Not a timed test: the figures depend on the machine and its
+load (the load average is printed).
 
 This module is a tool, not the runtime library: it imports ``drivers`` (through
 :mod:`ghnerf_runtime.cli.simdata`) only inside the commands.
@@ -141,8 +143,9 @@ def run_runtime_bench(args) -> dict:
         follows = (args.follow_encoder or [None]) if source == "rendered" else [None]
         priors = (args.skeleton_priors or [None]) if cfg.joints3d.method == "triangulate" else [None]
         prior_flips = (args.prior_flip_tests or [None]) if cfg.joints3d.method == "triangulate" else [None]
-        for mode, flip, follow, prior, prior_flip in itertools.product(args.modes, flips, follows, priors,
-                                                                       prior_flips):
+        smooths = args.smoothing or [None]
+        for mode, flip, follow, prior, prior_flip, smooth in itertools.product(args.modes, flips, follows, priors,
+                                                                               prior_flips, smooths):
             if prior is False and prior_flip is not None and prior_flip != prior_flips[0]:
                 continue  # without the prior its flip test changes nothing: one row
             flip_cfg = cfg if flip is None else replace(cfg, heatmaps=replace(cfg.heatmaps, flip_test=flip))
@@ -153,13 +156,16 @@ def run_runtime_bench(args) -> dict:
                 flip_cfg = replace(flip_cfg, joints3d=replace(flip_cfg.joints3d, prior_flip_test=prior_flip))
             if follow is not None:
                 flip_cfg = replace(flip_cfg, tracking=replace(flip_cfg.tracking, follow_encoder=follow))
+            if smooth is not None:
+                flip_cfg = replace(flip_cfg, smoothing=replace(flip_cfg.smoothing, enabled=smooth))
             for interior in ((args.novel_interior_strides or [None]) if mode == "novel" else [None]):
                 row_cfg = flip_cfg if interior is None else \
                     replace(flip_cfg, novel_view=replace(flip_cfg.novel_view, interior_stride=interior))
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
                              "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
                              "flip_label": flip is not None, "follow_label": follow is not None,
-                             "prior_label": prior is not None, "prior_flip_label": prior_flip is not None})
+                             "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
+                             "smoothing_label": smooth is not None})
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
@@ -181,6 +187,7 @@ def run_runtime_bench(args) -> dict:
                "skeleton_prior": cfg.joints3d.uses_skeleton_prior(getattr(session, "skeleton_prior", None) is not None),
                "prior_label": row["prior_label"], "prior_flip_test": cfg.joints3d.prior_flip_test,
                "prior_flip_label": row["prior_flip_label"],
+               "smoothing": cfg.smoothing.enabled, "smoothing_label": row["smoothing_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
@@ -202,6 +209,8 @@ def _print_row(row: dict) -> None:
         tracked += " prior" if row["skeleton_prior"] else " no-prior"
     if row.get("prior_flip_label") and row.get("skeleton_prior"):
         tracked += " prior-flip" if row["prior_flip_test"] else " prior-no-flip"
+    if row.get("smoothing_label"):
+        tracked += " smooth" if row["smoothing"] else " no-smooth"
     if row.get("novel_interior_stride") and row["novel_interior_stride"] > row.get("novel_stride", 1):
         tracked += f" interior/{row['novel_interior_stride']}"
     acc = row["accuracy"]
@@ -209,7 +218,8 @@ def _print_row(row: dict) -> None:
           f"ms median/p99: {cols} | "
           f"{row['pairs_per_s']:.1f} pairs/s | "
           f"PCK@0.2 {acc.get('pck@0.2', float('nan')):.3f} MPJPE {acc.get('mpjpe_mm', float('nan')):.1f} mm "
-          f"(3D found {acc.get('found_3d_frac', float('nan')):.2f}) | load {row['load_average']:.2f}", flush=True)
+          f"(3D found {acc.get('found_3d_frac', float('nan')):.2f}) jitter {acc.get('jitter_mm', float('nan')):.1f} "
+          f"mm/pair^2 | load {row['load_average']:.2f}", flush=True)
     if by := acc.get("mpjpe_by_visibility"):
         print("      MPJPE by the cameras that see the joint: " + ", ".join(
             f"{name.replace('_', ' ')} {c['mpjpe_mm']:.1f} mm ({100 * c['share']:.0f} % of joints, "
@@ -264,6 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--prior-flip-tests", default=None, type=_on_off_list,
                     help="comma list of joints3d.prior_flip_test values (on,off), one row each for triangulation "
                          "with the skeleton prior (interleaved; default: the config's, on)")
+    rt.add_argument("--smoothing", default=None, type=_on_off_list,
+                    help="comma list of smoothing.enabled values (on,off), one row each (interleaved; default: "
+                         "the config's, on)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

@@ -71,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--max-prior-error", type=float, metavar="M",
                     help="skeleton prior: report a joint only when its expected error is at most M metres "
                          "(joints3d.max_prior_error_m, default 0.15)")
+    ap.add_argument("--smoothing", action=argparse.BooleanOptionalAction, default=None,
+                    help="videos: One Euro smoothing of the 3D joints on the frames' times (smoothing.enabled, on "
+                         "by default: less jitter and a lower MPJPE on the bench, docs/runtime.md); --no-smoothing "
+                         "reports each pair's raw joints")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, default=0.5, help="novel camera between the rig cameras: 0 = first, "
@@ -100,6 +104,8 @@ def _config(args) -> EstimatorConfig:
         cfg = replace(cfg, heatmaps=replace(cfg.heatmaps, source=args.heatmap_source))
     if args.flip_test is not None:
         cfg = replace(cfg, heatmaps=replace(cfg.heatmaps, flip_test=args.flip_test))
+    if args.smoothing is not None:
+        cfg = replace(cfg, smoothing=replace(cfg.smoothing, enabled=args.smoothing))
     if args.skeleton_prior:
         cfg = replace(cfg, joints3d=replace(cfg.joints3d, skeleton_prior=args.skeleton_prior))
     if args.max_prior_error is not None:

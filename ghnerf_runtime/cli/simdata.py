@@ -26,7 +26,8 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.metrics import left_right_swaps, mpjpe, mpjpe_by_visibility, pck, visibility_class
+from ghnerf_runtime.metrics import acceleration_error, left_right_swaps, mpjpe, mpjpe_by_visibility, pck, \
+    visibility_class
 from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 
 log = logging.getLogger(__name__)
@@ -141,20 +142,25 @@ class Accuracy:
     """Pools predictions over pairs; PCK@0.2 per camera image and MPJPE (docs/metrics.md).
 
     ``summary()`` also splits the 3D figures between tracked pairs and cold starts (crop and
-    sweep from the working volume), which behave differently.
+    sweep from the working volume), which behave differently, and where every pair says which frame
+    of which stream it is, gives the jitter of the 3D joints (``metrics.acceleration_error``, over
+    runs of consecutive frames).
     """
 
     def __init__(self) -> None:
         self.p2, self.t2, self.v2, self.pv2 = [], [], [], []
         self.p3, self.t3, self.pv3, self.c3, self.tracked = [], [], [], [], []
         self.vis3: list[np.ndarray | None] = []  # (C, 25) per pair, for the MPJPE by visibility
+        self.frames: list[tuple[object, int] | None] = []  # (stream, frame number) per pair, for the jitter
 
     def add(self, result, seq: Sequence, i: int) -> None:
-        self.add_truth(result, seq.joints_3d[i], seq.joints_2d[i], seq.visible[i])
+        self.add_truth(result, seq.joints_3d[i], seq.joints_2d[i], seq.visible[i], frame=(id(seq), i))
 
-    def add_truth(self, result, joints_3d, joints_2d=None, visible=None) -> None:
+    def add_truth(self, result, joints_3d, joints_2d=None, visible=None, frame: tuple[object, int] | None = None
+                  ) -> None:
         """One pair against its truth: ``(25, 3)`` joints and, optionally, per camera (rig order)
-        ``(C, 25, 2)`` pixels with ``(C, 25)`` visibility for the 2D score."""
+        ``(C, 25, 2)`` pixels with ``(C, 25)`` visibility for the 2D score; ``frame``: which stream
+        (any key) and frame number the pair is, for the jitter (pairs of one stream in order)."""
         if joints_2d is not None:
             for c, name in enumerate(result.joints_2d):
                 self.p2.append(result.joints_2d[name])
@@ -167,6 +173,7 @@ class Accuracy:
         self.c3.append(result.confidence)
         self.tracked.append(bool(result.tracked))
         self.vis3.append(None if visible is None else np.asarray(visible, bool))
+        self.frames.append(frame)
 
     def _swaps(self, p2: np.ndarray, t2: np.ndarray, v2: np.ndarray, pv2: np.ndarray) -> dict:
         """Left/right swaps of the 2D joints (``metrics.left_right_swaps``): the share of evaluated pairs
@@ -191,6 +198,10 @@ class Accuracy:
         mp = mpjpe(p3, t3, ones, pred_valid=pv3)
         out = {"mpjpe_mm": mp.value, "mpjpe_evaluated": mp.num_evaluated, "mpjpe_pred_missing": mp.num_pred_missing,
                "found_3d_frac": float(pv3.mean()), "tracked_frac": float(tracked.mean())}
+        if len(self.frames) >= 3 and all(f is not None for f in self.frames):
+            follows = [False] + [b[0] == a[0] and b[1] == a[1] + 1 for a, b in zip(self.frames, self.frames[1:])]
+            jit = acceleration_error(p3, t3, ones, pred_valid=pv3, consecutive=follows)
+            out["jitter_mm"], out["jitter_evaluated"] = jit.value, jit.num_evaluated
         if all(v is not None for v in self.vis3):
             # how many cameras see each joint: the truth knows hidden joints, the MPJPE pools them all
             out["mpjpe_by_visibility"] = visibility_summary(mp, np.array(self.vis3), pv3, np.array(self.c3))

@@ -110,6 +110,9 @@ def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
     assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--config", str(cfg), "--validate-config",
                          "--flip-test"]) == 0
     assert json.loads(capsys.readouterr().out)["heatmaps"]["flip_test"] is True
+    assert tree["smoothing"]["enabled"] is True  # on by default
+    assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--validate-config", "--no-smoothing"]) == 0
+    assert json.loads(capsys.readouterr().out)["smoothing"]["enabled"] is False
 
 
 def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir, tmp_path):  # noqa: F811
@@ -136,6 +139,7 @@ def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir,
         assert sum(c["joints"] for c in by.values()) == row["accuracy"]["mpjpe_evaluated"]
         swaps = row["accuracy"]["left_right_swaps"]
         assert len(swaps["by_view"]) == 2 and all(0.0 <= f <= 1.0 for f in swaps["by_view"])
+        assert "jitter_mm" in row["accuracy"] and row["smoothing"] is True  # the config's default
 
 
 def test_bench_accuracy_counts_left_right_swaps_per_view():
@@ -163,6 +167,30 @@ def test_bench_accuracy_counts_left_right_swaps_per_view():
     # the 2D error: 48 of the 50 visible joints exact, the two exchanged shoulders 120 px off
     e2 = acc.summary()["error_2d_px"]
     assert e2["median"] == 0.0 and e2["p90"] == 0.0
+
+
+def test_bench_accuracy_jitter_chains_consecutive_frames_of_one_stream():
+    """The jitter pools inner frames of runs of consecutive frames of one stream: a new stream or a
+    skipped frame breaks the chain."""
+    from types import SimpleNamespace
+
+    from ghnerf_runtime.body25 import NUM_JOINTS
+    from ghnerf_runtime.cli.simdata import Accuracy
+
+    none = np.zeros(NUM_JOINTS, bool)
+    acc = Accuracy()
+    # stream "a": frames 0-3 with errors 0, 1, 0, 0 mm on every joint along x (jitter 2 then 1 mm);
+    # stream "b": frames 0, 1, then 3 (2 skipped) with a 5 mm jump: no three consecutive frames
+    for stream, i, err_mm in (("a", 0, 0), ("a", 1, 1), ("a", 2, 0), ("a", 3, 0), ("b", 0, 0), ("b", 1, 0),
+                              ("b", 3, 5)):
+        result = SimpleNamespace(joints_2d={}, missing_2d={}, joints_3d=np.full((NUM_JOINTS, 3), [err_mm / 1e3, 0, 0]),
+                                 missing=none, confidence=np.ones(NUM_JOINTS, np.float32), tracked=True)
+        acc.add_truth(result, np.zeros((NUM_JOINTS, 3)), frame=(stream, i))
+    s = acc.summary()
+    assert s["jitter_evaluated"] == 2 * NUM_JOINTS and s["jitter_mm"] == pytest.approx(1.5)
+    plain = Accuracy()  # pairs that do not say which frame they are: no jitter
+    plain.add_truth(result, np.zeros((NUM_JOINTS, 3)))
+    assert "jitter_mm" not in plain.summary()
 
 
 def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_dir, tmp_path):  # noqa: F811
@@ -197,6 +225,20 @@ def test_bench_runtime_compares_the_flip_test_and_encoder_following_on_and_off(t
     assert "keypoints follow-enc" in out and "keypoints follow-own" in out
     with pytest.raises(SystemExit):
         bench.main(["runtime", "--flip-tests", "maybe"])
+
+
+def test_bench_runtime_compares_smoothing_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    assert bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "3",
+                       "--precisions", "fp32", "--heatmap-sources", "encoder", "--modes", "keypoints",
+                       "--warmup", "0", "--smoothing", "on,off", "--cache", str(tmp_path / "cache"),
+                       "--json", str(report_path)]) == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    assert [r["smoothing"] for r in runs] == [True, False] and all(r["pairs"] == 3 for r in runs)
+    out = capsys.readouterr().out
+    assert "keypoints smooth" in out and "keypoints no-smooth" in out and "mm/pair^2" in out
 
 
 def test_simdata_doctests():

@@ -15,8 +15,8 @@ from ghnerf_runtime import metrics
 from ghnerf_runtime.body25 import JOINT_INDEX, MID_HIP, NECK, NUM_JOINTS
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.metrics import (
-    TORSO_BOX_JOINTS, gaussian_heatmaps, heatmap_mse, left_right_swaps, masked_psnr, masked_ssim, mpjpe,
-    mpjpe_by_visibility, pck, visibility_class,
+    TORSO_BOX_JOINTS, acceleration_error, gaussian_heatmaps, heatmap_mse, left_right_swaps, masked_psnr, masked_ssim,
+    mpjpe, mpjpe_by_visibility, pck, visibility_class,
 )
 
 
@@ -147,6 +147,40 @@ def test_mpjpe_split_by_visibility_hand_computed():
         mpjpe_by_visibility(r, vis[:1])
     with pytest.raises(ShapeError):
         visibility_class([True, False])
+
+
+def test_acceleration_error_hand_computed():
+    # one joint over five frames, errors along x of 0, 2, 0, 0, 0 mm; the truth itself moves (a still
+    # error over a moving joint scores 0), the second joint's error is a constant 50 mm
+    t = np.arange(5)[:, None] * np.array([0.1, 0.0, 0.0])  # 0.1 m per frame
+    true = np.stack([t, t + [0, 1.0, 0]], axis=1)  # (5, 2, 3)
+    pred = true.copy()
+    pred[1, 0, 0] += 0.002
+    pred[:, 1, 2] += 0.050
+    r = acceleration_error(pred, true, np.ones((5, 2), bool))
+    # second differences of joint 0: frames 1..3 -> |0 - 4 + 0| = 4, |2 - 0 + 0| = 2, 0 mm
+    np.testing.assert_allclose(r.errors, [[4.0, 0.0], [2.0, 0.0], [0.0, 0.0]], atol=1e-9)
+    assert r.num_evaluated == 6 and r.value == pytest.approx(1.0)
+    # a missing prediction takes out every inner frame it neighbours
+    found = np.ones((5, 2), bool)
+    found[2, 0] = False
+    m = acceleration_error(pred, true, np.ones((5, 2), bool), pred_valid=found)
+    assert m.evaluated[:, 0].tolist() == [False, False, False] and m.num_evaluated == 3
+    # a break in the chain (dropped frames, a new sequence) likewise
+    c = acceleration_error(pred, true, np.ones((5, 2), bool), consecutive=[True, True, True, False, True])
+    assert c.evaluated[:, 0].tolist() == [True, False, False]
+    assert c.value == pytest.approx(4.0 / 2)  # frame 1: joint 0 (4 mm) and joint 1 (0)
+
+
+def test_acceleration_error_short_and_bad_input():
+    short = acceleration_error(np.zeros((2, 3, 3)), np.zeros((2, 3, 3)), np.ones((2, 3), bool))
+    assert math.isnan(short.value) and short.num_evaluated == 0
+    nothing = acceleration_error(np.zeros((4, 3, 3)), np.zeros((4, 3, 3)), np.zeros((4, 3), bool))
+    assert math.isnan(nothing.value) and np.all(np.isfinite(nothing.errors))
+    with pytest.raises(ShapeError, match=r"\(F, J, 3\)"):
+        acceleration_error(np.zeros((3, 3)), np.zeros((3, 3)), np.ones(3, bool))
+    with pytest.raises(ShapeError, match="consecutive"):
+        acceleration_error(np.zeros((4, 3, 3)), np.zeros((4, 3, 3)), np.ones((4, 3), bool), consecutive=[True])
 
 
 def test_left_right_swaps_hand_computed():

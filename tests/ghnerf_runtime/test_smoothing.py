@@ -66,7 +66,7 @@ def test_restarts_on_a_missing_joint_a_gap_and_time_going_back():
 
 
 def test_the_config_is_validated_by_its_dotted_path():
-    assert not EstimatorConfig().smoothing.enabled  # off unless asked for
+    assert EstimatorConfig().smoothing.enabled  # on by default (it needs the pairs' capture times)
     assert config_from_dict({"smoothing": {"enabled": True, "beta": 3}}).smoothing.beta == 3
     for bad, key in (({"min_cutoff_hz": 0}, "smoothing.min_cutoff_hz"), ({"beta": -1}, "smoothing.beta"),
                      ({"max_gap_s": float("nan")}, "smoothing.max_gap_s"), ({"enabled": "yes"}, "smoothing.enabled"),
@@ -107,3 +107,14 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
         assert not np.allclose(r0.joints_3d[found], r1.joints_3d[found])  # smoothed (beta 0: a 1 Hz low-pass)
         assert not r1.joints_3d[~found].any()  # missing joints stay 0
         assert np.array_equal(t0.box, t1.box)  # the crop follows the raw joints either way
+    # a pair without a capture time is reported raw and restarts the filter (no time to filter on)
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(joints3d=Joints3DConfig(method="triangulate"),
+                                                 smoothing=SmoothingConfig(beta=0.0)))
+    for i, (pair, truth, vis) in enumerate(frames):
+        oracle.set_truth(truth, vis)
+        r = est.estimate(pair, timestamp_s=i / FPS if i != 1 else None)
+        if i in (1, 2):  # the timeless pair, and the first after it (a fresh start)
+            assert np.array_equal(r.joints_3d, raw[i][0].joints_3d)
+        else:
+            assert np.array_equal(r.joints_3d, smooth[i][0].joints_3d) == (i == 0)
