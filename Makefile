@@ -38,8 +38,8 @@ test: $(DEV_STAMP)
 # and the baseline, ONNX export, int8 quantization, skeleton prior, held-out evaluation, model card).
 # The recipe follows the machine (`--recipe auto`): where torch sees a GPU, the shipped (tenth) model's,
 # ~25 min of one H100 (and ~30 min on two cores for its two-network skeleton prior);
-# on CPU the two-core recipe (the ninth model's), 1.4-2.2 h measured on 2-core hosts before the skeleton
-# prior existed, plus ~18 min for it (docs/training.md, "The tenth model" and "`make model`").
+# on CPU the two-core recipe (the ninth model's): 1 h 19 min measured end to end from nothing, prior included,
+# on a fast 2-core host; about 3 h on the slowest seen (docs/training.md, "The tenth model" and "`make model`").
 # RECIPE=cpu or RECIPE=gpu picks one.
 RECIPE ?= auto
 model: $(DEV_STAMP)

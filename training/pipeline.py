@@ -85,14 +85,15 @@ class Recipe:
     """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
 
 
-#: ``--recipe``. ``cpu`` is what two cores train in about two hours (its prior: the larger of the two measured
+#: ``--recipe``. ``cpu`` is what two cores train in one to three hours (its prior: the larger of the two measured
 #: in docs/training.md, 58.9 against 70.4 mm held out for ~12 min more); ``gpu`` is the shipped (tenth) model's,
 #: about 25 minutes on one H100: the human encoder's trunk at 128x128 instead of 64x64 and 27000
 #: pretraining steps of 4 scenes instead of 24000 of 2 (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, 1.6-2.4 h: encoder trunk at 64x64, 24000 pretraining steps of 2 scenes "
-                  "(1.4-2.2 h measured before the prior existed); skeleton prior: one network of 30000 steps "
-                  "on 25000 scenes (~18 min, 5 of them making its 20000 extra scenes)",
+    "cpu": Recipe("two CPU cores, 1.3-3 h by the host (1 h 19 min measured end to end from nothing on a fast "
+                  "one; 2 h 13 min before the prior existed on one 1.8-2.7x slower per step): encoder trunk at "
+                  "64x64, 24000 pretraining steps of 2 scenes; skeleton prior: one network of 30000 steps on "
+                  "25000 scenes (19 min on the fast host, 5.5 of them making its 20000 extra scenes)",
                   prior_steps=30000, prior_extra_train=20000),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
