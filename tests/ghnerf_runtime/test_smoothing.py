@@ -63,6 +63,12 @@ def test_restarts_on_a_missing_joint_a_gap_and_time_going_back():
     assert np.array_equal(f(0.1, b, np.ones(2, bool)), b)  # time ran backwards (a restarted source)
     f.reset()
     assert np.array_equal(f(5.0, a, np.ones(2, bool)), a)
+    # a broken timestamp (a driver's NaN) is no time to filter on: reported as given, never a NaN joint
+    for t in (float("nan"), 5.0 + 1 / FPS, float("inf")):
+        out = f(t, b, np.ones(2, bool))
+        assert np.isfinite(out).all()
+    assert np.array_equal(f(float("nan"), a, np.ones(2, bool)), a)
+    assert np.array_equal(f(float("nan"), b, np.ones(2, bool)), b)
 
 
 def test_the_config_is_validated_by_its_dotted_path():
