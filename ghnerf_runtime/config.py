@@ -17,7 +17,7 @@ Tree (defaults in the classes)::
       decoder      KeypointDecoderConfig  (ghnerf_runtime.keypoints) 2D peak decoding
       joints3d     Joints3DConfig       3D method and its parameters
       novel_view   NovelViewConfig      novel-view rendering (off by default)
-      smoothing    SmoothingConfig      One Euro filtering of the reported 3D joints (off by default)
+      smoothing    SmoothingConfig      One Euro filtering of the reported 3D joints (on; needs capture times)
 """
 from __future__ import annotations
 

@@ -198,7 +198,7 @@ class Accuracy:
         mp = mpjpe(p3, t3, ones, pred_valid=pv3)
         out = {"mpjpe_mm": mp.value, "mpjpe_evaluated": mp.num_evaluated, "mpjpe_pred_missing": mp.num_pred_missing,
                "found_3d_frac": float(pv3.mean()), "tracked_frac": float(tracked.mean())}
-        if len(self.frames) >= 3 and all(f is not None for f in self.frames):
+        if all(f is not None for f in self.frames):  # nan when no three frames chain
             follows = [False] + [b[0] == a[0] and b[1] == a[1] + 1 for a, b in zip(self.frames, self.frames[1:])]
             jit = acceleration_error(p3, t3, ones, pred_valid=pv3, consecutive=follows)
             out["jitter_mm"], out["jitter_evaluated"] = jit.value, jit.num_evaluated
