@@ -38,8 +38,9 @@ test: $(DEV_STAMP)
 # and the baseline, ONNX export, int8 quantization, skeleton prior, held-out evaluation, model card).
 # The recipe follows the machine (`--recipe auto`): where torch sees a GPU, the shipped (tenth) model's,
 # ~25 min of one H100 (and ~30 min on two cores for its two-network skeleton prior);
-# on CPU the two-core recipe (the ninth model's): 1 h 19 min measured end to end from nothing, prior included,
-# on a fast 2-core host; about 3 h on the slowest seen (docs/training.md, "The tenth model" and "`make model`").
+# on CPU the two-core recipe (the trunk at 128x128, pretrained in bfloat16 where the CPU has it): about
+# 1 h 28 min on a fast AVX-512 2-core host by its stages' measured times, about 3-4.5 h on the slowest seen
+# (docs/training.md, "The tenth model" and "The two-core recipe's trunk at 128x128").
 # RECIPE=cpu or RECIPE=gpu picks one.
 RECIPE ?= auto
 model: $(DEV_STAMP)

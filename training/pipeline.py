@@ -85,15 +85,19 @@ class Recipe:
     """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
 
 
-#: ``--recipe``. ``cpu`` is what two cores train in one to three hours (its prior: the larger of the two measured
-#: in docs/training.md, 58.9 against 70.4 mm held out for ~12 min more); ``gpu`` is the shipped (tenth) model's,
-#: about 25 minutes on one H100: the human encoder's trunk at 128x128 instead of 64x64 and 27000
-#: pretraining steps of 4 scenes instead of 24000 of 2 (docs/training.md, "The tenth model").
+#: ``--recipe``. ``cpu`` is what two cores train in about an hour and a half: since session 20 the human encoder's
+#: trunk at 128x128, pretrained in bfloat16 where the CPU has it (43.9 mm held out with its prior, against 58.9 for
+#: the 64x64 trunk's 24000 float32 steps before it; docs/training.md, "The two-core recipe's trunk at 128x128");
+#: ``gpu`` is the shipped (tenth) model's, about 25 minutes on one H100: the same trunk with 27000 float32
+#: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, 1.3-3 h by the host (1 h 19 min measured end to end from nothing on a fast "
-                  "one; 2 h 13 min before the prior existed on one 1.8-2.7x slower per step): encoder trunk at "
-                  "64x64, 24000 pretraining steps of 2 scenes; skeleton prior: one network of 30000 steps on "
-                  "25000 scenes (19 min on the fast host, 5.5 of them making its 20000 extra scenes)",
+    "cpu": Recipe("two CPU cores, about 1.5 h on a fast AVX-512 host (1 h 19 min for the 64x64 trunk before it, "
+                  "measured end to end from nothing; docs/training.md): encoder trunk at 128x128, 20000 "
+                  "pretraining steps of 2 scenes with the forward pass in bfloat16 where the CPU computes it "
+                  "(precision auto: 0.09 against 0.16 s per step in float32); skeleton prior: one network of "
+                  "30000 steps on 25000 scenes (19 min on the fast host, 5.5 of them making its 20000 extra scenes)",
+                  train_overrides=("model.human.input_scale=1.0",),
+                  pretrain_overrides=("iterations=20000", 'precision="auto"'),
                   prior_steps=30000, prior_extra_train=20000),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
@@ -731,7 +735,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
                 "wall_s": pre.get("summary", {}).get("wall_s"), "checkpoint": pre.get("summary", {}).get("human"),
                 "images_per_step": pre.get("summary", {}).get("images_per_step"),
                 "eval_pck@0.2": pre.get("summary", {}).get("eval_pck@0.2"),
-                **{k: pre["summary"][k] for k in ("threads", "segments", "device", "gpu")
+                **{k: pre["summary"][k] for k in ("threads", "segments", "device", "gpu", "precision")
                    if k in pre.get("summary", {})}}
         s = st.stamp(f"train_{variant}") or {}
         info = s.get("info", {})

@@ -88,6 +88,11 @@ class PretrainConfig(Config):
     pure function of the seed and the step), so this changes how fast, not what, the run learns."""
     max_minutes: float = 0.0
     """Stop (with a checkpoint and ``human.pt``) after this wall time (0: no limit)."""
+    precision: Literal["fp32", "bf16", "auto"] = "fp32"
+    """Arithmetic of the encoder's forward pass: ``fp32``; ``bf16`` (``torch.autocast``: convolutions in bfloat16,
+    the weights, optimiser and loss in float32); ``auto``: ``bf16`` where the device computes it natively (a CUDA
+    GPU with bfloat16, a CPU whose oneDNN has bfloat16 kernels), else ``fp32``. On the 2-core AVX-512 EPYC a
+    16-image step at the 128x128 trunk takes 0.088 s in bf16 against 0.162 s in fp32 (docs/training.md)."""
 
     def validate(self) -> None:
         def fail(key: str, why: str) -> None:
@@ -107,6 +112,8 @@ class PretrainConfig(Config):
                 fail(key, f"must be a finite number {'> 0' if key == 'lr' else '>= 0'}, got {v!r}")
         if not 0 < self.lr_decay_gamma <= 1:
             fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
+        if self.precision not in ("fp32", "bf16", "auto"):
+            fail("precision", f"must be 'fp32', 'bf16' or 'auto', got {self.precision!r}")
         self.augment.validate("pretrain_human.augment")
         mcfg = self.model_config()
         if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
@@ -215,6 +222,15 @@ def heatmap_scores(model: GHNeRF, dataset, scenes: int, device: torch.device) ->
             "error_px_p90": float(np.percentile(err, 90)) if err.size else float("nan")}
 
 
+def resolve_precision(precision: str, device: torch.device) -> str:
+    """``fp32`` or ``bf16``: what ``PretrainConfig.precision`` means on ``device`` (``auto`` asks the hardware)."""
+    if precision != "auto":
+        return precision
+    if device.type == "cuda":
+        return "bf16" if torch.cuda.is_bf16_supported() else "fp32"
+    return "bf16" if torch.ops.mkldnn._is_mkldnn_bf16_supported() else "fp32"
+
+
 def save_human(path: Path, model: GHNeRF, step: int) -> None:
     """``human.pt``: the encoder's weights (trunk, projections, heatmap head) and the model config."""
     state = {"version": HUMAN_CHECKPOINT_VERSION, "human": model.human.state_dict(), "step": step,
@@ -296,6 +312,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])
     clock = RunClock.resumed(ck, step, torch.get_num_threads())
+    precision = resolve_precision(cfg.precision, device)
     seed_everything(cfg.seed + 1)
 
     def checkpoint(s: int) -> None:
@@ -314,7 +331,9 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         for g in opt.param_groups:
             g["lr"] = lr
         images = images.to(device, memory_format=torch.channels_last)
-        pred, heat = model.encode_human(images), heat.to(device)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
+            pred = model.encode_human(images)
+        pred, heat = pred.float(), heat.to(device)  # the loss in float32 whatever the forward pass
         loss = positive_weighted_mse(pred, heat, cfg.heat_positive_weight)
         if cfg.centroid_weight:
             loss = loss + cfg.centroid_weight * window_centroid_loss(pred, heat)
@@ -343,7 +362,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
             break
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
-               **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(),
+               **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(), "precision": precision,
                **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
                "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,

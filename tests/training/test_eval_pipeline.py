@@ -80,6 +80,9 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "| ghnerf_int8 | onnx-int8 | 0.500 | n/a | 61.2 / 40.0 (62 %) | 20.00 | 0.900 | 0.001 | 3/10 |" in md
     assert "3.0 min summed" in md and "Smoke-test build" in md and "| 8000 | 3072 |" in md
     assert "| 2 (12000 steps), then 1 (12000 steps) | 106.5 min |" in md  # a resumed run: both invocations
+    bf16_card = json.loads(json.dumps(card))
+    bf16_card["training"]["ghnerf_human_pretraining"]["precision"] = "bf16"
+    assert "| 2 (12000 steps), then 1 (12000 steps), bf16 | 106.5 min |" in render_markdown(bf16_card)
     assert "Recipe:" not in md  # a smoke test has none
     assert "- Recipe: `gpu`" in render_markdown({**card, "recipe": "gpu"})
     assert "| NVIDIA H100 80GB HBM3 | 30.0 min |" in md  # trained on a GPU machine, not the card's hardware
@@ -290,7 +293,8 @@ def test_side_by_side_pretrains_with_every_core_then_trains_the_variants_at_once
     assert "training.pretrain_human" in pre_cmd and threads(pre_cmd) == ["threads=2"]
     assert pre_log == cfg.runs / "edge128_human" / "train.log"
     joint = [lane[0] for lane in phases[1]]
-    assert [log for _, log in joint] == [cfg.runs / "edge128" / "train.log", cfg.runs / "edge128_baseline" / "train.log"]
+    assert [log for _, log in joint] == [cfg.runs / "edge128" / "train.log",
+                                         cfg.runs / "edge128_baseline" / "train.log"]
     assert all("training.train" in cmd and threads(cmd) == ["threads=1"] for cmd, _ in joint)
     run = cfg.runs / "edge128_human"
     (run / "human.pt").write_bytes(b"x")
@@ -312,7 +316,7 @@ def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monk
     default = PipelineConfig(out=tmp_path)
     assert (default.train, default.freestyle_share) == (5000, 0.5)  # the shipped model's recipe
     assert (cfg.train, cfg.freestyle_share, cfg.val) == (2500, 0.25, default.val)
-    assert cfg.pretrain_overrides == ["iterations=12000"]
+    assert cfg.pretrain_overrides[-1] == "iterations=12000"  # after the recipe's own, so it wins
     assert "--train 2500" in cfg.command and "--freestyle-share 0.25" in cfg.command
     pipeline.main([*argv, "--force", "eval_ghnerf", "--force=export", "--variants", "baseline"])  # not the recipe
     assert seen[-1].command == cfg.command and seen[-1].force == ("eval_ghnerf", "export")
@@ -356,7 +360,10 @@ def test_a_recipe_puts_its_overrides_first_and_the_card_names_it(tmp_path, monke
     assert seen[-1].workers == 3 and seen[-1].command == seen[-2].command
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     pipeline.main(out)
-    assert seen[-1].recipe == "cpu" and seen[-1].train_overrides == [] and seen[-1].command.endswith("--recipe cpu")
+    assert seen[-1].recipe == "cpu" and seen[-1].command.endswith("--recipe cpu")
+    assert seen[-1].train_overrides == ["model.human.input_scale=1.0"]  # both recipes: the trunk at 128x128
+    tc = pipeline.train_inputs(seen[-1], "edge128")
+    assert (tc["pretrain_human"]["iterations"], tc["pretrain_human"]["precision"]) == (20000, "auto")
     pipeline.main([*out, "--quick"])  # a smoke test keeps its own tiny settings
     assert "model.human.input_scale=1.0" not in seen[-1].train_overrides and "--recipe" not in seen[-1].command
 

@@ -35,6 +35,7 @@ def tiny_pretrain(data, **kw) -> PretrainConfig:
     ({"centroid_weight": -0.1}, "centroid_weight"),
     ({"augment": {"rotation_deg": -5}}, "augment.rotation_deg"),
     ({"augment": {"zoom": 0.1}}, "zoom"),
+    ({"precision": "fp16"}, "precision"),
 ])
 def test_config_errors_name_the_key(data, key):
     with pytest.raises(ConfigError, match=key):
@@ -126,6 +127,32 @@ def test_centroid_weight_adds_the_localisation_term(data64, tmp_path):
                          quiet=True)
     loss = [json.loads((tmp_path / d / "log.jsonl").read_text().splitlines()[0])["loss"] for d in ("a", "b")]
     assert plain["steps"] == with_term["steps"] == 1 and loss[1] > loss[0] > 0  # same batch, one more term
+
+
+def test_bf16_forward_pass_trains_float32_weights_close_to_the_fp32_run(data64, tmp_path):
+    """``precision: bf16`` changes the arithmetic of the forward pass only: the loss is finite and close to the
+    fp32 run's on the same batches, the weights stay float32, and the summary names what ran."""
+    kw = {"iterations": 2, "eval_every": 0}
+    fp32 = pretrain(tiny_pretrain(data64, **kw), tmp_path / "fp32", quiet=True)
+    bf16 = pretrain(tiny_pretrain(data64, precision="bf16", **kw), tmp_path / "bf16", quiet=True)
+    assert (fp32["precision"], bf16["precision"]) == ("fp32", "bf16")
+    loss = [[json.loads(line)["loss"] for line in (tmp_path / d / "log.jsonl").read_text().splitlines()]
+            for d in ("fp32", "bf16")]
+    assert all(v > 0 for v in loss[1]) and loss[0] != loss[1]  # computed in another arithmetic
+    assert loss[1][0] == pytest.approx(loss[0][0], rel=0.05)  # the same first batch and weights
+    weights = torch.load(tmp_path / "bf16" / "human.pt", weights_only=True)["human"]
+    assert all(w.dtype in (torch.float32, torch.int64) for w in weights.values())
+
+
+def test_auto_precision_asks_the_hardware(monkeypatch):
+    from training.pretrain_human import resolve_precision
+
+    cpu = torch.device("cpu")
+    assert resolve_precision("fp32", cpu) == "fp32" and resolve_precision("bf16", cpu) == "bf16"
+    monkeypatch.setattr(torch.ops.mkldnn, "_is_mkldnn_bf16_supported", lambda: False)
+    assert resolve_precision("auto", cpu) == "fp32"
+    monkeypatch.setattr(torch.ops.mkldnn, "_is_mkldnn_bf16_supported", lambda: True)
+    assert resolve_precision("auto", cpu) == "bf16"
 
 
 def test_worker_processes_load_the_same_batches_as_the_trainer(data64, tmp_path):
@@ -225,6 +252,7 @@ def test_a_frozen_encoder_stays_as_pretrained_while_the_rest_trains(data64, tmp_
         assert torch.equal(got[k], v), k
     start = torch.load(tmp_path / "joint" / "ckpt_0000001.pt", weights_only=False)["model"]
     end = model.state_dict()
-    assert any(not torch.equal(start[k], end[k]) for k in end if not k.startswith("human.") and end[k].is_floating_point())
+    assert any(not torch.equal(start[k], end[k])
+               for k in end if not k.startswith("human.") and end[k].is_floating_point())
     model.train()  # a later train() keeps it frozen
     assert not model.human.training and model.feature_net.training

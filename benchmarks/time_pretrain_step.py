@@ -1,0 +1,90 @@
+"""Seconds per step of the human encoder's pretraining, by trunk resolution and arithmetic.
+
+    .venv/bin/python benchmarks/time_pretrain_step.py --data data/edge128_fs50 \
+        [--input-scales 0.5,1.0] [--precisions fp32,bf16] [--steps 25] [--threads 2]
+
+One step is ``training.pretrain_human``'s: the batch of that step (``StepBatches``: 2 scenes, every view
+and its mirror image, 16 images at 128x128), the encoder's forward pass (under ``torch.autocast`` for
+``bf16``, as ``PretrainConfig.precision`` runs it), the positive-weighted MSE in float32, backward and an
+Adam update. The batch is made before the clock starts, so this times the arithmetic, not the loading.
+Prints the median and p90 over the steps after the first five (warm-up), and bf16's speed-up over fp32
+at each scale. Not a test: the figures depend on the host (AVX-512 with bfloat16 kernels or not).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import torch  # noqa: E402
+
+from training.data.targets import TargetConfig  # noqa: E402
+from training.data.torch_dataset import MultiViewDataset  # noqa: E402
+from training.losses import positive_weighted_mse  # noqa: E402
+from training.model import GHNeRF  # noqa: E402
+from training.pretrain_human import PretrainConfig, StepBatches, resolve_precision  # noqa: E402
+from training.train import seed_everything  # noqa: E402
+
+WARMUP = 5
+
+
+def time_steps(data: str, scale: float, precision: str, steps: int) -> list[float]:
+    """Wall seconds of each of ``steps`` pretraining steps (``WARMUP`` more first, not returned)."""
+    cfg = PretrainConfig.from_dict({"data": data, "iterations": steps + WARMUP, "precision": precision,
+                                    "model": {"human": {"input_scale": scale}}})
+    seed_everything(cfg.seed)
+    model = GHNeRF(cfg.model_config()).train()
+    model.human.to(memory_format=torch.channels_last)
+    ds = MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=model.config.heatmap_stride))
+    batches = StepBatches(ds, cfg)
+    opt = torch.optim.Adam(model.human.parameters(), lr=cfg.lr)
+    bf16 = resolve_precision(precision, torch.device("cpu")) == "bf16"
+    times = []
+    for step in range(steps + WARMUP):
+        images, heat = batches[step]
+        images = images.contiguous(memory_format=torch.channels_last)
+        t0 = time.perf_counter()
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+            pred = model.encode_human(images)
+        loss = positive_weighted_mse(pred.float(), heat, cfg.heat_positive_weight)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        times.append(time.perf_counter() - t0)
+    return times[WARMUP:]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", default="data/edge128_fs50")
+    ap.add_argument("--input-scales", default="0.5,1.0", help="human.input_scale values (1.0: a 128x128 trunk)")
+    ap.add_argument("--precisions", default="fp32,bf16", help="PretrainConfig.precision values")
+    ap.add_argument("--steps", type=int, default=25)
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    torch.set_flush_denormal(True)
+    print(f"torch {torch.__version__}, {args.threads} threads, oneDNN bfloat16: "
+          f"{torch.ops.mkldnn._is_mkldnn_bf16_supported()}")
+    print("| trunk input | precision | median s/step | p90 s/step | bf16 speed-up |")
+    print("|---|---|---|---|---|")
+    for scale in (float(s) for s in args.input_scales.split(",")):
+        medians = {}
+        for precision in args.precisions.split(","):
+            t = np.array(time_steps(args.data, scale, precision, args.steps))
+            medians[precision] = float(np.median(t))
+            ratio = (f"{medians['fp32'] / medians['bf16']:.2f}x" if precision == "bf16" and "fp32" in medians
+                     else "")
+            side = int(round(128 * scale))
+            print(f"| {side}x{side} | {precision} | {medians[precision]:.3f} | {np.percentile(t, 90):.3f} | "
+                  f"{ratio} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
