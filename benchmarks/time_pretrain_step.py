@@ -27,7 +27,8 @@ from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
 from training.losses import positive_weighted_mse  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
-from training.pretrain_human import PretrainConfig, StepBatches, resolve_precision  # noqa: E402
+from training.pretrain_human import (PretrainConfig, StepBatches, cpu_has_native_bf16,  # noqa: E402
+                                     resolve_precision)
 from training.train import seed_everything  # noqa: E402
 
 WARMUP = 5
@@ -69,8 +70,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     torch.set_flush_denormal(True)
-    print(f"torch {torch.__version__}, {args.threads} threads, oneDNN bfloat16: "
-          f"{torch.ops.mkldnn._is_mkldnn_bf16_supported()}")
+    print(f"torch {torch.__version__}, {args.threads} threads, bfloat16 in hardware: {cpu_has_native_bf16()} "
+          f"(precision auto: {resolve_precision('auto', torch.device('cpu'))})")
     print("| trunk input | precision | median s/step | p90 s/step | bf16 speed-up |")
     print("|---|---|---|---|---|")
     for scale in (float(s) for s in args.input_scales.split(",")):

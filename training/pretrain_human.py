@@ -91,8 +91,9 @@ class PretrainConfig(Config):
     precision: Literal["fp32", "bf16", "auto"] = "fp32"
     """Arithmetic of the encoder's forward pass: ``fp32``; ``bf16`` (``torch.autocast``: convolutions in bfloat16,
     the weights, optimiser and loss in float32); ``auto``: ``bf16`` where the device computes it natively (a CUDA
-    GPU with bfloat16, a CPU whose oneDNN has bfloat16 kernels), else ``fp32``. On the 2-core AVX-512 EPYC a
-    16-image step at the 128x128 trunk takes 0.088 s in bf16 against 0.162 s in fp32 (docs/training.md)."""
+    GPU with bfloat16, a CPU with bfloat16 instructions: :func:`cpu_has_native_bf16`), else ``fp32``. On the
+    2-core EPYC (AVX512_BF16) a 16-image step at the 128x128 trunk takes 0.11 s in bf16 against 0.19 s in fp32
+    (``benchmarks/time_pretrain_step.py``, docs/training.md)."""
 
     def validate(self) -> None:
         def fail(key: str, why: str) -> None:
@@ -228,7 +229,17 @@ def resolve_precision(precision: str, device: torch.device) -> str:
         return precision
     if device.type == "cuda":
         return "bf16" if torch.cuda.is_bf16_supported() else "fp32"
-    return "bf16" if torch.ops.mkldnn._is_mkldnn_bf16_supported() else "fp32"
+    return "bf16" if cpu_has_native_bf16() else "fp32"
+
+
+def cpu_has_native_bf16() -> bool:
+    """The CPU computes bfloat16 in hardware. On x86 that takes AVX512_BF16 or AMX: oneDNN also runs bfloat16 on
+    plain AVX-512 (``torch.ops.mkldnn._is_mkldnn_bf16_supported()`` is true there), but by conversion, which need
+    not beat float32. Elsewhere (aarch64) oneDNN's own answer."""
+    probe = lambda name: bool(getattr(torch.cpu, name, lambda: False)())  # noqa: E731 - private torch probes
+    if probe("_is_avx2_supported"):  # x86
+        return probe("_is_avx512_bf16_supported") or probe("_is_amx_tile_supported")
+    return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
 
 
 def save_human(path: Path, model: GHNeRF, step: int) -> None:

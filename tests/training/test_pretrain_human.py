@@ -149,10 +149,19 @@ def test_auto_precision_asks_the_hardware(monkeypatch):
 
     cpu = torch.device("cpu")
     assert resolve_precision("fp32", cpu) == "fp32" and resolve_precision("bf16", cpu) == "bf16"
-    monkeypatch.setattr(torch.ops.mkldnn, "_is_mkldnn_bf16_supported", lambda: False)
-    assert resolve_precision("auto", cpu) == "fp32"
-    monkeypatch.setattr(torch.ops.mkldnn, "_is_mkldnn_bf16_supported", lambda: True)
-    assert resolve_precision("auto", cpu) == "bf16"
+
+    def host(avx2: bool, avx512_bf16: bool, amx: bool, onednn_bf16: bool) -> str:
+        for name, value in (("_is_avx2_supported", avx2), ("_is_avx512_bf16_supported", avx512_bf16),
+                            ("_is_amx_tile_supported", amx)):
+            monkeypatch.setattr(torch.cpu, name, lambda v=value: v)
+        monkeypatch.setattr(torch.ops.mkldnn, "_is_mkldnn_bf16_supported", lambda: onednn_bf16)
+        return resolve_precision("auto", cpu)
+
+    assert host(avx2=True, avx512_bf16=True, amx=False, onednn_bf16=True) == "bf16"  # this EPYC
+    assert host(avx2=True, avx512_bf16=False, amx=True, onednn_bf16=True) == "bf16"  # AMX
+    assert host(avx2=True, avx512_bf16=False, amx=False, onednn_bf16=True) == "fp32"  # plain AVX-512: emulated
+    assert host(avx2=True, avx512_bf16=False, amx=False, onednn_bf16=False) == "fp32"  # AVX2 only
+    assert host(avx2=False, avx512_bf16=False, amx=False, onednn_bf16=True) == "bf16"  # aarch64 with bf16
 
 
 def test_worker_processes_load_the_same_batches_as_the_trainer(data64, tmp_path):
