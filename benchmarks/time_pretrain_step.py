@@ -3,10 +3,11 @@
     .venv/bin/python benchmarks/time_pretrain_step.py --data data/edge128_fs50 \
         [--input-scales 0.5,1.0] [--precisions fp32,bf16] [--steps 25] [--threads 2]
 
-One step is ``training.pretrain_human``'s: the batch of that step (``StepBatches``: 2 scenes, every view
-and its mirror image, 16 images at 128x128), the encoder's forward pass (under ``torch.autocast`` for
-``bf16``, as ``PretrainConfig.precision`` runs it), the positive-weighted MSE in float32, backward and an
-Adam update. The batch is made before the clock starts, so this times the arithmetic, not the loading.
+One step is ``training.pretrain_human.pretrain_step``, the function the pretraining itself calls: the
+encoder's forward pass (under ``torch.autocast`` for ``bf16``, as ``PretrainConfig.precision`` runs it),
+the loss in float32, backward and an Adam update, on that step's batch (``StepBatches``: 2 scenes, every
+view and its mirror image, 16 images at 128x128). The batch is made before the clock starts, so this
+times the arithmetic, not the loading.
 Prints the median and p90 over the steps after the first five (warm-up), and bf16's speed-up over fp32
 at each scale. Not a test: the figures depend on the host (AVX-512 with bfloat16 kernels or not).
 """
@@ -25,10 +26,9 @@ import torch  # noqa: E402
 
 from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
-from training.losses import positive_weighted_mse  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
 from training.pretrain_human import (PretrainConfig, StepBatches, cpu_has_native_bf16,  # noqa: E402
-                                     resolve_precision)
+                                     pretrain_step, resolve_precision)
 from training.train import seed_everything  # noqa: E402
 
 WARMUP = 5
@@ -44,18 +44,12 @@ def time_steps(data: str, scale: float, precision: str, steps: int) -> list[floa
     ds = MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=model.config.heatmap_stride))
     batches = StepBatches(ds, cfg)
     opt = torch.optim.Adam(model.human.parameters(), lr=cfg.lr)
-    bf16 = resolve_precision(precision, torch.device("cpu")) == "bf16"
+    resolved = resolve_precision(precision, torch.device("cpu"))
     times = []
     for step in range(steps + WARMUP):
         images, heat = batches[step]
-        images = images.contiguous(memory_format=torch.channels_last)
         t0 = time.perf_counter()
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-            pred = model.encode_human(images)
-        loss = positive_weighted_mse(pred.float(), heat, cfg.heat_positive_weight)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
+        pretrain_step(model, opt, images, heat, cfg, resolved)
         times.append(time.perf_counter() - t0)
     return times[WARMUP:]
 

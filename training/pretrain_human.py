@@ -113,8 +113,6 @@ class PretrainConfig(Config):
                 fail(key, f"must be a finite number {'> 0' if key == 'lr' else '>= 0'}, got {v!r}")
         if not 0 < self.lr_decay_gamma <= 1:
             fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
-        if self.precision not in ("fp32", "bf16", "auto"):
-            fail("precision", f"must be 'fp32', 'bf16' or 'auto', got {self.precision!r}")
         self.augment.validate("pretrain_human.augment")
         mcfg = self.model_config()
         if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
@@ -283,6 +281,28 @@ def load_human(model: GHNeRF, path: str | Path) -> int:
     return int(state.get("step", 0))
 
 
+def pretrain_step(model: GHNeRF, opt: torch.optim.Optimizer, images: Tensor, heat: Tensor,
+                  cfg: PretrainConfig, precision: str) -> float:
+    """One update of the human encoder on one step's batch; returns the loss.
+
+    The forward pass runs under ``torch.autocast`` when ``precision`` is ``bf16`` (the resolved value, see
+    ``resolve_precision``); the loss, the gradients' accumulation and Adam stay float32. Shared by
+    ``pretrain`` and ``benchmarks/time_pretrain_step.py`` so the benchmark times exactly this.
+    """
+    device = next(model.human.parameters()).device
+    images = images.to(device, memory_format=torch.channels_last)
+    with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
+        pred = model.encode_human(images)
+    pred, heat = pred.float(), heat.to(device)  # the loss in float32 whatever the forward pass
+    loss = positive_weighted_mse(pred, heat, cfg.heat_positive_weight)
+    if cfg.centroid_weight:
+        loss = loss + cfg.centroid_weight * window_centroid_loss(pred, heat)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    return float(loss.detach())
+
+
 def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, quiet: bool = False,
              dataset=None, eval_dataset=None) -> dict:
     """Run (or resume) the pretraining; returns the summary (also in ``out_dir/summary.json``)."""
@@ -341,18 +361,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         lr = learning_rate(cfg, step)
         for g in opt.param_groups:
             g["lr"] = lr
-        images = images.to(device, memory_format=torch.channels_last)
-        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
-            pred = model.encode_human(images)
-        pred, heat = pred.float(), heat.to(device)  # the loss in float32 whatever the forward pass
-        loss = positive_weighted_mse(pred, heat, cfg.heat_positive_weight)
-        if cfg.centroid_weight:
-            loss = loss + cfg.centroid_weight * window_centroid_loss(pred, heat)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
+        lv = pretrain_step(model, opt, images, heat, cfg, precision)
         step += 1
-        lv = float(loss.detach())
         if not math.isfinite(lv):
             raise FloatingPointError(f"loss is {lv} at step {step}")
         losses.append(lv)
