@@ -39,8 +39,8 @@ test: $(DEV_STAMP)
 # The recipe follows the machine (`--recipe auto`): where torch sees a GPU, the shipped (tenth) model's,
 # ~25 min of one H100 (and ~30 min on two cores for its two-network skeleton prior);
 # on CPU the two-core recipe (the trunk at 128x128, pretrained in bfloat16 where the CPU has it): about
-# 1 h 28 min on a fast AVX-512 2-core host by its stages' measured times, about 3-4.5 h on the slowest seen
-# (docs/training.md, "The tenth model" and "The two-core recipe's trunk at 128x128").
+# 1 h 16 min from nothing on a fast AVX-512 2-core host (timed end to end), about 3-4.5 h on the slowest seen
+# (docs/training.md, "The tenth model" and "`make model` on two cores from nothing, end to end (session 21)").
 # RECIPE=cpu or RECIPE=gpu picks one.
 RECIPE ?= auto
 model: $(DEV_STAMP)

@@ -91,11 +91,12 @@ class Recipe:
 #: ``gpu`` is the shipped (tenth) model's, about 25 minutes on one H100: the same trunk with 27000 float32
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, about 1.5 h on a fast AVX-512 host (1 h 19 min for the 64x64 trunk before it, "
-                  "measured end to end from nothing; docs/training.md): encoder trunk at 128x128, 20000 "
+    "cpu": Recipe("two CPU cores, 1 h 16 min from nothing on a fast AVX-512 host (measured end to end; "
+                  "docs/training.md): encoder trunk at 128x128, 20000 "
                   "pretraining steps of 2 scenes with the forward pass in bfloat16 where the CPU computes it "
                   "(precision auto: 0.11 against 0.19 s per step in float32); skeleton prior: one network of "
-                  "30000 steps on 25000 scenes (19 min on the fast host, 5.5 of them making its 20000 extra scenes)",
+                  "30000 steps on 25000 scenes (17 min on the fast host, about 4.5 of them making its 20000 "
+                  "extra scenes)",
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=20000", 'precision="auto"'),
                   prior_steps=30000, prior_extra_train=20000),
