@@ -85,20 +85,21 @@ class Recipe:
     """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
 
 
-#: ``--recipe``. ``cpu`` is what two cores train in about an hour and a half: since session 20 the human encoder's
-#: trunk at 128x128, pretrained in bfloat16 where the CPU has it (43.9 mm held out with its prior, against 58.9 for
-#: the 64x64 trunk's 24000 float32 steps before it; docs/training.md, "The two-core recipe's trunk at 128x128");
+#: ``--recipe``. ``cpu`` is what two cores train in under two hours: since session 20 the human encoder's
+#: trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 22 for 36000 steps (41.4 mm held
+#: out with its prior, against 43.9 for 20000 steps and 58.9 for the 64x64 trunk's 24000 float32 steps before it;
+#: docs/training.md, "The two-core recipe's pretraining at 36000 steps");
 #: ``gpu`` is the shipped (tenth) model's, about 25 minutes on one H100: the same trunk with 27000 float32
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, 1 h 16 min from nothing on a fast AVX-512 host (measured end to end; "
-                  "docs/training.md): encoder trunk at 128x128, 20000 "
-                  "pretraining steps of 2 scenes with the forward pass in bfloat16 where the CPU computes it "
+    "cpu": Recipe("two CPU cores, about 1 h 45 min from nothing on a fast AVX-512 host (by its stages' measured "
+                  "times; docs/training.md): encoder trunk at 128x128, 36000 pretraining steps of 2 scenes, "
+                  "the rate halved every 7200, with the forward pass in bfloat16 where the CPU computes it "
                   "(precision auto: 0.11 against 0.19 s per step in float32); skeleton prior: one network of "
                   "30000 steps on 25000 scenes (17 min on the fast host, about 4.5 of them making its 20000 "
                   "extra scenes)",
                   train_overrides=("model.human.input_scale=1.0",),
-                  pretrain_overrides=("iterations=20000", 'precision="auto"'),
+                  pretrain_overrides=("iterations=36000", "lr_decay_every=7200", 'precision="auto"'),
                   prior_steps=30000, prior_extra_train=20000),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
