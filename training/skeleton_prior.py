@@ -29,6 +29,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -79,8 +80,13 @@ def _heatmap_session(model_dir: Path, threads: int):
 
 
 def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0, flip_test: bool = True,
-            threads: int = 2, progress: bool = True) -> dict[str, np.ndarray]:
-    """The model's decoded 2D peaks on ``split`` with the cameras and true joints (arrays over scenes)."""
+            threads: int = 2, progress: bool = True,
+            per_scene: Callable[[np.ndarray, dict], dict] | None = None) -> dict[str, np.ndarray]:
+    """The model's decoded 2D peaks on ``split`` with the cameras and true joints (arrays over scenes).
+
+    ``per_scene(heatmaps, record)``, if given, is called with each scene's heatmaps ``(2, J, h, w)`` (those the
+    peaks were decoded from) and its record (``uv``, ``confidence``, ``valid``, ``P``, ...); the arrays it
+    returns are kept too, by their names (what a measurement wants of the heatmaps besides the peaks)."""
     from ghnerf_runtime.flip_test import flip_averaged, mirror_images
     from training.data.torch_dataset import MultiViewDataset
     from training.evaluate import _decode
@@ -104,6 +110,9 @@ def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0,
         out["P"].append(scene["src_P"].numpy())
         out["joints_3d"].append(scene["joints_3d"].numpy())
         out["joints_3d_valid"].append(scene["joints_3d_valid"].numpy())
+        if per_scene is not None:
+            for k, v in per_scene(heat, {k: out[k][-1] for k in keys}).items():
+                out.setdefault(k, []).append(v)
         if progress and (i + 1) % 1000 == 0:
             print(f"  collect {split} {i + 1}/{n} {time.monotonic() - t0:.0f} s", file=sys.stderr, flush=True)
     arrays = {k: np.stack(v) for k, v in out.items()}
@@ -118,7 +127,9 @@ def inputs_of(arrays: dict[str, np.ndarray]) -> tuple[PriorInputs, np.ndarray]:
 
 
 # ---------------------------------------------------------------------------------------------- model
-def make_network(hidden: int):
+def make_network(hidden: int, joint_features: int = JOINT_FEATURES):
+    """``joint_features``: the width of each joint's features (:data:`JOINT_FEATURES`; a measurement of other
+    features passes its own)."""
     import torch
     from torch import nn
 
@@ -128,7 +139,7 @@ def make_network(hidden: int):
 
         def __init__(self) -> None:
             super().__init__()
-            self.trunk = nn.Sequential(nn.Linear(NUM_JOINTS * JOINT_FEATURES + CONTEXT_FEATURES, hidden), nn.GELU(),
+            self.trunk = nn.Sequential(nn.Linear(NUM_JOINTS * joint_features + CONTEXT_FEATURES, hidden), nn.GELU(),
                                        nn.Linear(hidden, hidden), nn.GELU(), nn.Linear(hidden, hidden), nn.GELU())
             self.joints = nn.Linear(hidden, NUM_JOINTS * 3)
             self.log_error = nn.Linear(hidden, NUM_JOINTS)
@@ -166,10 +177,11 @@ def make_ensemble(nets):
 
 
 def _hide_in_one_view(f, prob: float, gen):
-    """Some joints lose one view (as occlusion and the gates do): no triangulated point, no peak there."""
+    """Some joints lose one view (as occlusion and the gates do): no triangulated point, no peak there.
+    Columns past :data:`JOINT_FEATURES` (a measurement's extra features) are per view, view 0's half first."""
     import torch
 
-    N, J, _ = f.shape
+    N, J, width = f.shape
     hide = torch.rand(N, J, generator=gen) < prob
     view = torch.randint(0, 2, (N, J), generator=gen)
     f = f.clone()
@@ -180,6 +192,10 @@ def _hide_in_one_view(f, prob: float, gen):
         for col in (4 + v, 6 + v, 15 + v):
             f[..., col] = torch.where(h, 0.0, f[..., col])
         f[..., 9 + 3 * v:12 + 3 * v] = torch.where(h[..., None], 0.0, f[..., 9 + 3 * v:12 + 3 * v])
+        k = (width - JOINT_FEATURES) // 2
+        if k:
+            cols = slice(JOINT_FEATURES + k * v, JOINT_FEATURES + k * (v + 1))
+            f[..., cols] = torch.where(h[..., None], 0.0, f[..., cols])
     return f
 
 
@@ -202,7 +218,7 @@ def _train_one(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, 
     c_all = torch.from_numpy(inputs.context)
     y_all = torch.from_numpy(np.nan_to_num(truth).astype(np.float32))  # invalid joints weigh 0
     w_all = torch.from_numpy(np.asarray(truth_valid, np.float32))
-    net = make_network(config.hidden)
+    net = make_network(config.hidden, f_all.shape[-1])
     opt = torch.optim.AdamW(net.parameters(), config.lr, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, config.lr, total_steps=max(config.steps, 2))
     t0 = time.monotonic()

@@ -94,3 +94,86 @@ def test_ghnerf_eval_scores_the_folder_prior_and_skips_a_stale_one(tmp_path, dat
     capsys.readouterr()
     assert make_renderer(str(model))[0].skeleton_prior is None
     assert "the skeleton prior is not scored" in capsys.readouterr().err
+
+
+def test_hiding_a_view_also_hides_that_views_extra_columns():
+    """A measurement's extra per-view columns (past ``JOINT_FEATURES``, view 0's half first) go with the view
+    the augmentation hides; without extra columns the hiding is the same as before."""
+    import torch
+
+    from ghnerf_runtime.skeleton_prior import JOINT_FEATURES
+    from training.skeleton_prior import _hide_in_one_view
+
+    base = torch.rand(64, 25, JOINT_FEATURES) + 0.5  # nothing is 0 before hiding
+    extra = torch.rand(64, 25, 6) + 0.5  # three columns per view
+    plain = _hide_in_one_view(base, 0.3, torch.Generator().manual_seed(4))
+    wide = _hide_in_one_view(torch.cat([base, extra], -1), 0.3, torch.Generator().manual_seed(4))
+    torch.testing.assert_close(wide[..., :JOINT_FEATURES], plain)  # same draws, same hiding
+    hidden0 = plain[..., 4] == 0  # view 0's peak value gone: that joint lost view 0
+    hidden1 = plain[..., 5] == 0
+    assert hidden0.any() and hidden1.any() and not (hidden0 & hidden1).any()
+    ext = wide[..., JOINT_FEATURES:]
+    assert (ext[hidden0][:, :3] == 0).all() and (ext[hidden0][:, 3:] > 0).all()
+    assert (ext[hidden1][:, 3:] == 0).all() and (ext[hidden1][:, :3] > 0).all()
+    kept = ~(hidden0 | hidden1)
+    torch.testing.assert_close(ext[kept], extra[kept])
+
+
+def test_peak_shape_reads_spread_along_the_epipolar_line_and_a_second_blob():
+    """``benchmarks/measure_prior_peak_shape.peak_shape``: a heatmap stretched along the epipolar line spreads
+    more along it than across; stretched across, the other way; a second blob takes mass from the peak."""
+    from benchmarks.measure_prior_peak_shape import peak_shape
+    from ghnerf_runtime.geometry.camera import Camera, look_at
+
+    K = np.array([[60.0, 0, 31.5], [0, 60.0, 31.5], [0, 0, 1]])
+    P = np.stack([Camera("c", 64, 64, K, [], *look_at((x, 0.0, 0.0), (0.0, 0.0, 3.0))).P for x in (-0.6, 0.6)])
+    X = np.array([0.1, 0.2, 3.0, 1.0])
+    uv = np.stack([(p @ X)[:2] / (p @ X)[2] for p in P])  # (2, 2) model px
+    # the cameras stand side by side looking the same way: the epipolar lines run along the image x axis
+    yy, xx = np.mgrid[:16, :16].astype(float)
+    cell = (uv + 0.5) / 4 - 0.5
+
+    def blob(c, sx, sy):
+        return np.exp(-0.5 * (((xx - c[0]) / sx) ** 2 + ((yy - c[1]) / sy) ** 2))
+
+    heat = np.zeros((2, 25, 16, 16))
+    heat[:, 0] = [blob(cell[v], 2.0, 0.7) for v in range(2)]  # stretched along x: along the epipolar line
+    heat[:, 1] = [blob(cell[v], 0.7, 2.0) for v in range(2)]  # stretched across it
+    heat[:, 2] = [blob(cell[v], 1.0, 1.0) for v in range(2)]
+    heat[:, 3] = [blob(cell[v], 1.0, 1.0) + blob(cell[v] - [0.0, 6.0], 1.0, 1.0) for v in range(2)]
+    uvs = np.repeat(uv[:, None], 25, 1)
+    valid = np.zeros((2, 25), bool)
+    valid[:, :4] = True
+    s = peak_shape(heat, uvs, valid, P, 64)
+    assert s.shape == (2, 25, 3) and np.isfinite(s).all()
+    assert (s[:, 0, 0] > s[:, 0, 1] + 0.5).all() and (s[:, 1, 1] > s[:, 1, 0] + 0.5).all()
+    assert (s[:, 2, 2] > 0.95).all() and (np.abs(s[:, 3, 2] - 0.5) < 0.05).all()  # half the mass elsewhere
+    assert (s[:, 4:] == 0).all()  # not decoded: nothing said
+    wild = peak_shape(np.full((2, 25, 16, 16), np.nan), np.full((2, 25, 2), 1e12), np.ones((2, 25), bool), P, 64)
+    assert np.isfinite(wild).all()
+
+
+def test_peak_shape_measurement_trains_each_variant(tmp_path, data64, capsys):
+    """``benchmarks/measure_prior_peak_shape.py`` collects through ``collect(per_scene=)``, caches, and scores
+    a prior per variant on the same joints."""
+    from benchmarks import measure_prior_peak_shape as m
+    from tests.ghnerf_runtime.test_session import export_tiny
+
+    model = tmp_path / "ghnerf"
+    shutil.copytree(export_tiny(tmp_path / "export"), model)
+    argv = ["--model-dir", str(model), "--data", str(data64), "--extra-data", str(data64), "--steps", "2",
+            "--hidden", "8", "--threads", "1", "--cache", str(tmp_path / "c.npz")]
+    capsys.readouterr()
+    assert m.main(argv) == 0
+    first = capsys.readouterr().out.splitlines()
+    assert first[0].startswith("collected 6 training and 2 held-out scenes")
+    assert [line.split(" ")[0] for line in first[1:4]] == ["base", "shape", "mass"]
+    res = json.loads(first[-1])
+    assert set(res) == {"base", "shape", "mass"} and all(r["mean_mm"] > 0 for r in res.values())
+    z = np.load(tmp_path / "c.npz")
+    assert z["tr_shape"].shape == (6, 2, 25, 4) and z["va_shape"].shape == (2, 2, 25, 4)
+    assert m.main(argv + ["--variants", "base"]) == 0  # from the cache: the same answer
+    again = capsys.readouterr().out.splitlines()
+    assert not again[0].startswith("collected") and json.loads(again[-1])["base"] == res["base"]
+    with pytest.raises(SystemExit):
+        m.main(argv + ["--variants", "base,nope"])
