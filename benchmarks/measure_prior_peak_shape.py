@@ -33,7 +33,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
-from ghnerf_runtime.keypoints import decode_keypoints  # noqa: E402
+from ghnerf_runtime.config import Joints3DConfig  # noqa: E402
+from ghnerf_runtime.keypoints import decode_keypoints, model_to_heatmap_pixels  # noqa: E402
 from ghnerf_runtime.skeleton_prior import PriorInputs, _centres, mirror_inputs  # noqa: E402
 
 WINDOW = 3
@@ -57,7 +58,7 @@ def peak_shape(heatmaps: np.ndarray, uv_model: np.ndarray, valid: np.ndarray, P:
     h = np.clip(np.nan_to_num(np.asarray(heatmaps, np.float64)), 0.0, None)
     pad = np.pad(h, ((0, 0), (0, 0), (WINDOW, WINDOW), (WINDOW, WINDOW)))
     uv = np.where(valid[..., None], uv_model, 0.0)
-    cell = (uv + 0.5) / stride - 0.5  # model pixels -> heatmap cells (keypoints.model_to_heatmap_pixels)
+    cell = model_to_heatmap_pixels(uv, (W, H), model_size)
     ix = np.clip(np.rint(cell[..., 0]).astype(int), 0, W - 1)
     iy = np.clip(np.rint(cell[..., 1]).astype(int), 0, H - 1)
     oy, ox = np.mgrid[-WINDOW:WINDOW + 1, -WINDOW:WINDOW + 1]
@@ -164,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from training.skeleton_prior import GATES_M, PriorTrainConfig, _train_one, inputs_of, score
+    from training.skeleton_prior import PriorTrainConfig, _train_one, inputs_of, score
 
     torch.set_num_threads(args.threads)
     if args.cache and Path(args.cache).is_file():
@@ -176,8 +177,7 @@ def main(argv: list[str] | None = None) -> int:
             np.savez(args.cache, **{f"tr_{k}": v for k, v in tr.items()}, **{f"va_{k}": v for k, v in va.items()})
     tr_in, tr_truth = inputs_of(tr)
     va_in, _ = inputs_of(va)
-    gate = f"{0.15:g}"
-    assert any(f"{g:g}" == gate for g in GATES_M)
+    gate = f"{Joints3DConfig().max_prior_error_m:g}"  # the runtime's default gate, one of GATES_M
     results = {}
     for name in variants:
         cols = VARIANTS[name]
