@@ -1,19 +1,21 @@
 """Seconds per step of the human encoder's pretraining, by trunk resolution and arithmetic.
 
     .venv/bin/python benchmarks/time_pretrain_step.py --data data/edge128_fs50 \
-        [--input-scales 0.5,1.0] [--precisions fp32,bf16] [--steps 25] [--threads 2]
+        [--input-scales 0.5,1.0] [--precisions fp32,bf16] [--scenes-per-step 2,4] [--steps 25] [--threads 2] \
+        [--profile 20]
 
 One step is ``training.pretrain_human.pretrain_step``, the function the pretraining itself calls: the
 encoder's forward pass (under ``torch.autocast`` for ``bf16``, as ``PretrainConfig.precision`` runs it),
 the loss in float32, backward and an Adam update, on that step's batch (``StepBatches``: 2 scenes, every
 view and its mirror image, 16 images at 128x128). The batch is made before the clock starts, so this
 times the arithmetic, not the loading.
-Prints the median and p90 over the steps after the first five (warm-up), and bf16's speed-up over fp32
-at each scale. Not a test: the figures depend on the host (AVX-512 with bfloat16 kernels or not).
+Prints the median and p90 over the steps after the first five (warm-up), the median per scene (what
+compares batch sizes), and bf16's speed-up over fp32 at each scale. Not a test: the figures depend on the host (AVX-512 with bfloat16 kernels or not).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -34,10 +36,12 @@ from training.train import seed_everything  # noqa: E402
 WARMUP = 5
 
 
-def time_steps(data: str, scale: float, precision: str, steps: int) -> list[float]:
-    """Wall seconds of each of ``steps`` pretraining steps (``WARMUP`` more first, not returned)."""
+def time_steps(data: str, scale: float, precision: str, steps: int, scenes_per_step: int = 2,
+               profile_rows: int = 0) -> list[float]:
+    """Wall seconds of each of ``steps`` pretraining steps (``WARMUP`` more first, not returned). With
+    ``profile_rows``, also prints torch.profiler's costliest operators over those steps, by input shape."""
     cfg = PretrainConfig.from_dict({"data": data, "iterations": steps + WARMUP, "precision": precision,
-                                    "model": {"human": {"input_scale": scale}}})
+                                    "scenes_per_step": scenes_per_step, "model": {"human": {"input_scale": scale}}})
     seed_everything(cfg.seed)
     model = GHNeRF(cfg.model_config()).train()
     model.human.to(memory_format=torch.channels_last)
@@ -46,12 +50,20 @@ def time_steps(data: str, scale: float, precision: str, steps: int) -> list[floa
     opt = torch.optim.Adam(model.human.parameters(), lr=cfg.lr)
     resolved = resolve_precision(precision, torch.device("cpu"))
     times = []
-    for step in range(steps + WARMUP):
-        images, heat = batches[step]
-        t0 = time.perf_counter()
-        pretrain_step(model, opt, images, heat, cfg, resolved)
-        times.append(time.perf_counter() - t0)
-    return times[WARMUP:]
+    for step in range(WARMUP):
+        pretrain_step(model, opt, *batches[step], cfg, resolved)
+    with contextlib.ExitStack() as stack:
+        prof = stack.enter_context(torch.profiler.profile(record_shapes=True)) if profile_rows else None
+        for step in range(WARMUP, steps + WARMUP):
+            images, heat = batches[step]
+            t0 = time.perf_counter()
+            pretrain_step(model, opt, images, heat, cfg, resolved)
+            times.append(time.perf_counter() - t0)
+    if prof is not None:
+        print(prof.key_averages(group_by_input_shape=True).table(
+            sort_by="self_cpu_time_total", row_limit=profile_rows, max_name_column_width=32,
+            max_shapes_column_width=70))
+    return times
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -61,23 +73,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--precisions", default="fp32,bf16", help="PretrainConfig.precision values")
     ap.add_argument("--steps", type=int, default=25)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--profile", type=int, default=0, metavar="ROWS",
+                    help="also print the ROWS costliest operators of each setting (torch.profiler; slows the steps)")
+    ap.add_argument("--scenes-per-step", default="2",
+                    help="PretrainConfig.scenes_per_step values (the cpu recipe 2, the gpu recipe 4)")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     torch.set_flush_denormal(True)
     print(f"torch {torch.__version__}, {args.threads} threads, bfloat16 in hardware: {cpu_has_native_bf16()} "
           f"(precision auto: {resolve_precision('auto', torch.device('cpu'))})")
-    print("| trunk input | precision | median s/step | p90 s/step | bf16 speed-up |")
-    print("|---|---|---|---|---|")
+    print("| trunk input | scenes per step | precision | median s/step | p90 s/step | median ms/scene | "
+          "bf16 speed-up |")
+    print("|---|---|---|---|---|---|---|")
     for scale in (float(s) for s in args.input_scales.split(",")):
-        medians = {}
-        for precision in args.precisions.split(","):
-            t = np.array(time_steps(args.data, scale, precision, args.steps))
-            medians[precision] = float(np.median(t))
-            ratio = (f"{medians['fp32'] / medians['bf16']:.2f}x" if precision == "bf16" and "fp32" in medians
-                     else "")
-            side = int(round(128 * scale))
-            print(f"| {side}x{side} | {precision} | {medians[precision]:.3f} | {np.percentile(t, 90):.3f} | "
-                  f"{ratio} |", flush=True)
+        for per_step in (int(n) for n in args.scenes_per_step.split(",")):
+            medians = {}
+            for precision in args.precisions.split(","):
+                t = np.array(time_steps(args.data, scale, precision, args.steps, per_step, args.profile))
+                medians[precision] = float(np.median(t))
+                ratio = (f"{medians['fp32'] / medians['bf16']:.2f}x" if precision == "bf16" and "fp32" in medians
+                         else "")
+                side = int(round(128 * scale))
+                print(f"| {side}x{side} | {per_step} | {precision} | {medians[precision]:.3f} | "
+                      f"{np.percentile(t, 90):.3f} | {1000 * medians[precision] / per_step:.1f} | {ratio} |",
+                      flush=True)
     return 0
 
 

@@ -25,6 +25,7 @@ import json
 import math
 import os
 import sys
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields
 from typing import Literal
 from pathlib import Path
@@ -95,6 +96,13 @@ class PretrainConfig(Config):
     2-core EPYC (AVX512_BF16) a 16-image step at the 128x128 trunk takes 0.11 s in bf16 against 0.19 s in fp32
     (``benchmarks/time_pretrain_step.py``, docs/training.md)."""
 
+    coarse_steps: int = 0
+    """The first this many steps feed the trunk the image resized by ``coarse_input_scale`` instead of the model's
+    ``human.input_scale`` (progressive resizing: early steps learn coarse shapes at a fraction of the cost; the
+    weights do not depend on the input size, and the heatmaps keep their size). 0: off (the shipped recipes)."""
+    coarse_input_scale: float = 0.5
+    """The trunk's input scale during ``coarse_steps`` (must give a trunk input divisible by 16)."""
+
     def validate(self) -> None:
         def fail(key: str, why: str) -> None:
             raise ConfigError(f"pretrain_human.{key}: {why}")
@@ -104,7 +112,7 @@ class PretrainConfig(Config):
         for key in ("iterations", "scenes_per_step", "checkpoint_every", "log_every", "eval_scenes"):
             if getattr(self, key) < 1:
                 fail(key, f"must be >= 1, got {getattr(self, key)}")
-        for key in ("lr_decay_every", "eval_every", "threads", "loader_workers"):
+        for key in ("lr_decay_every", "eval_every", "threads", "loader_workers", "coarse_steps"):
             if getattr(self, key) < 0:
                 fail(key, f"must be >= 0, got {getattr(self, key)}")
         for key in ("lr", "lr_min", "heat_positive_weight", "centroid_weight", "max_minutes"):
@@ -117,6 +125,15 @@ class PretrainConfig(Config):
         mcfg = self.model_config()
         if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
             fail("preset", f"{self.preset!r} has no human encoder with an auxiliary heatmap head")
+        c = self.coarse_input_scale
+        if self.coarse_steps and not (isinstance(c, (int, float)) and 0 < c <= 1
+                                      and (mcfg.height * c) % 16 == 0 and (mcfg.width * c) % 16 == 0):
+            fail("coarse_input_scale", f"must be in (0, 1] and give a trunk input divisible by 16 (the model is "
+                                       f"{mcfg.width}x{mcfg.height}), got {c!r}")
+
+    def input_scale_at(self, step: int) -> float | None:
+        """The trunk's input scale for ``step`` (0-based) when it differs from the model's, else None."""
+        return self.coarse_input_scale if step < self.coarse_steps else None
 
     def model_config(self) -> ModelConfig:
         return model_config_of(self.preset, self.model)
@@ -281,9 +298,26 @@ def load_human(model: GHNeRF, path: str | Path) -> int:
     return int(state.get("step", 0))
 
 
+@contextmanager
+def trunk_input_scale(model: GHNeRF, scale: float | None):
+    """The human encoder's trunk sees its input resized by ``scale`` inside the block (None: as configured).
+    Only the forward pass's resize changes: no weight depends on it."""
+    if scale is None:
+        yield
+        return
+    hcfg = model.human.config
+    kept = hcfg.input_scale
+    hcfg.input_scale = scale
+    try:
+        yield
+    finally:
+        hcfg.input_scale = kept
+
+
 def pretrain_step(model: GHNeRF, opt: torch.optim.Optimizer, images: Tensor, heat: Tensor,
-                  cfg: PretrainConfig, precision: str) -> float:
-    """One update of the human encoder on one step's batch; returns the loss.
+                  cfg: PretrainConfig, precision: str, input_scale: float | None = None) -> float:
+    """One update of the human encoder on one step's batch; returns the loss. ``input_scale``: the trunk's
+    input scale for this step (``PretrainConfig.input_scale_at``; None: the model's).
 
     The forward pass runs under ``torch.autocast`` when ``precision`` is ``bf16`` (the resolved value, see
     ``resolve_precision``); the loss, the gradients' accumulation and Adam stay float32. Shared by
@@ -291,7 +325,8 @@ def pretrain_step(model: GHNeRF, opt: torch.optim.Optimizer, images: Tensor, hea
     """
     device = next(model.human.parameters()).device
     images = images.to(device, memory_format=torch.channels_last)
-    with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
+    with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"), \
+            trunk_input_scale(model, input_scale):
         pred = model.encode_human(images)
     pred, heat = pred.float(), heat.to(device)  # the loss in float32 whatever the forward pass
     loss = positive_weighted_mse(pred, heat, cfg.heat_positive_weight)
@@ -361,16 +396,19 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         lr = learning_rate(cfg, step)
         for g in opt.param_groups:
             g["lr"] = lr
-        lv = pretrain_step(model, opt, images, heat, cfg, precision)
+        scale = cfg.input_scale_at(step)
+        lv = pretrain_step(model, opt, images, heat, cfg, precision, scale)
         step += 1
         if not math.isfinite(lv):
             raise FloatingPointError(f"loss is {lv} at step {step}")
         losses.append(lv)
         if cfg.eval_every and step % cfg.eval_every == 0:
-            last_pck = heatmap_pck(model, val, cfg.eval_scenes, device)
+            with trunk_input_scale(model, cfg.input_scale_at(step - 1)):  # scored as it is being trained
+                last_pck = heatmap_pck(model, val, cfg.eval_scenes, device)
         if step % cfg.log_every == 0 or step == cfg.iterations:
             rec = {"step": step, "lr": lr, "time_s": round(clock.elapsed(), 2),
-                   "loss": float(np.mean(losses)), "pck": last_pck}
+                   "loss": float(np.mean(losses)), "pck": last_pck,
+                   **({"input_scale": scale} if scale is not None else {})}
             losses = []
             prog.update(step, {"loss": rec["loss"], "pck": last_pck})
             with open(out / "log.jsonl", "a") as fh:

@@ -11,7 +11,8 @@ torch = pytest.importorskip("torch")
 from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
 from tests.training.test_trainer import tiny_cfg  # noqa: E402  (data64: conftest)
 from training.model.config import ConfigError  # noqa: E402
-from training.pretrain_human import PretrainConfig, load_human, main, pretrain, view_batch  # noqa: E402
+from training.pretrain_human import (PretrainConfig, load_human, main, pretrain, pretrain_step,  # noqa: E402
+                                     trunk_input_scale, view_batch)
 from training.train import train  # noqa: E402
 
 
@@ -36,6 +37,9 @@ def tiny_pretrain(data, **kw) -> PretrainConfig:
     ({"augment": {"rotation_deg": -5}}, "augment.rotation_deg"),
     ({"augment": {"zoom": 0.1}}, "zoom"),
     ({"precision": "fp16"}, "precision"),
+    ({"coarse_steps": -1}, "coarse_steps"),
+    ({"coarse_steps": 100, "coarse_input_scale": 0.3}, "coarse_input_scale"),  # 38.4 px: not a multiple of 16
+    ({"coarse_steps": 100, "coarse_input_scale": 1.5}, "coarse_input_scale"),
 ])
 def test_config_errors_name_the_key(data, key):
     with pytest.raises(ConfigError, match=key):
@@ -265,3 +269,39 @@ def test_a_frozen_encoder_stays_as_pretrained_while_the_rest_trains(data64, tmp_
                for k in end if not k.startswith("human.") and end[k].is_floating_point())
     model.train()  # a later train() keeps it frozen
     assert not model.human.training and model.feature_net.training
+
+
+def test_coarse_steps_feed_the_trunk_a_smaller_image_then_the_models(data64, tmp_path):
+    """Progressive resizing (``coarse_steps``): the first steps' trunk input is ``coarse_input_scale`` of the
+    image, the rest the model's; the heatmaps keep their size, and ``human.pt`` records the model's scale."""
+    from training.data.torch_dataset import MultiViewDataset
+    from training.model import GHNeRF
+
+    cfg = tiny_pretrain(data64, iterations=3, eval_every=0, coarse_steps=2, coarse_input_scale=0.5)
+    assert [cfg.input_scale_at(s) for s in range(3)] == [0.5, 0.5, None]
+    model = GHNeRF(cfg.model_config()).train()
+    sizes = []
+    model.human.trunk.conv1.register_forward_hook(lambda m, i, o: sizes.append(i[0].shape[-1]))
+    images, heat = view_batch([MultiViewDataset(data64, "train")[0]], flip=False)
+    opt = torch.optim.Adam(model.human.parameters(), lr=1e-3)
+    for scale in (0.5, None):
+        assert pretrain_step(model, opt, images, heat, cfg, "fp32", scale) > 0  # heatmaps fit the targets
+    assert sizes == [32, 64] and model.config.human.input_scale == 1.0
+
+    summary = pretrain(cfg, tmp_path / "run", quiet=True)
+    log = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
+    assert summary["steps"] == 3 and [r.get("input_scale") for r in log] == [0.5, 0.5, None]
+    saved = torch.load(tmp_path / "run" / "human.pt", weights_only=True)["model_config"]["human"]
+    assert saved["input_scale"] == 1.0
+
+
+def test_trunk_input_scale_is_restored_when_the_step_fails():
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    with pytest.raises(RuntimeError, match="boom"):
+        with trunk_input_scale(model, 0.5):
+            assert model.human.config.input_scale == 0.5
+            raise RuntimeError("boom")
+    assert model.human.config.input_scale == 1.0
