@@ -38,9 +38,10 @@ test: $(DEV_STAMP)
 # and the baseline, ONNX export, int8 quantization, skeleton prior, held-out evaluation, model card).
 # The recipe follows the machine (`--recipe auto`): where torch sees a GPU, the shipped (tenth) model's,
 # ~25 min of one H100 (and ~30 min on two cores for its two-network skeleton prior);
-# on CPU the two-core recipe (the trunk at 128x128, 36000 pretraining steps in bfloat16 where the CPU has it):
-# about 1 h 45 min from nothing on a fast AVX-512 2-core host by its stages' measured times, about 4 h on the
-# slowest seen (docs/training.md, "The tenth model" and "The two-core recipe's pretraining at 36000 steps").
+# on CPU the two-core recipe (the trunk at 128x128, 44000 pretraining steps in bfloat16 where the CPU has it, the
+# first 17600 at 64x64): about 1 h 45 min from nothing on a fast AVX-512 2-core host by its stages' measured
+# times, well over two hours on an Intel Xeon host, about 4 h on the slowest seen (docs/training.md, "The tenth
+# model" and "Progressive resizing in the two-core pretraining").
 # RECIPE=cpu or RECIPE=gpu picks one.
 RECIPE ?= auto
 model: $(DEV_STAMP)

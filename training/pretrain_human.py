@@ -99,7 +99,8 @@ class PretrainConfig(Config):
     coarse_steps: int = 0
     """The first this many steps feed the trunk the image resized by ``coarse_input_scale`` instead of the model's
     ``human.input_scale`` (progressive resizing: early steps learn coarse shapes at a fraction of the cost; the
-    weights do not depend on the input size, and the heatmaps keep their size). 0: off (the shipped recipes)."""
+    weights do not depend on the input size, and the heatmaps keep their size). 0: off (the ``gpu`` recipe); the
+    ``cpu`` recipe runs 17600 of its 44000 steps so (docs/training.md, "Progressive resizing")."""
     coarse_input_scale: float = 0.5
     """The trunk's input scale during ``coarse_steps`` (must give a trunk input divisible by 16)."""
 

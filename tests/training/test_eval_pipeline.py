@@ -364,7 +364,8 @@ def test_a_recipe_puts_its_overrides_first_and_the_card_names_it(tmp_path, monke
     assert seen[-1].train_overrides == ["model.human.input_scale=1.0"]  # both recipes: the trunk at 128x128
     tc = pipeline.train_inputs(seen[-1], "edge128")
     assert (tc["pretrain_human"]["iterations"], tc["pretrain_human"]["lr_decay_every"],
-            tc["pretrain_human"]["precision"]) == (36000, 7200, "auto")
+            tc["pretrain_human"]["coarse_steps"], tc["pretrain_human"]["precision"]) == (44000, 8800, 17600, "auto")
+    assert pipeline.pretrain_inputs(seen[-1], "ghnerf")["coarse_steps"] == 17600  # what the pretraining runs
     pipeline.main([*out, "--quick"])  # a smoke test keeps its own tiny settings
     assert "model.human.input_scale=1.0" not in seen[-1].train_overrides and "--recipe" not in seen[-1].command
 
