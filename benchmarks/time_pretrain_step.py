@@ -10,7 +10,8 @@ the loss in float32, backward and an Adam update, on that step's batch (``StepBa
 view and its mirror image, 16 images at 128x128). The batch is made before the clock starts, so this
 times the arithmetic, not the loading.
 Prints the median and p90 over the steps after the first five (warm-up), the median per scene (what
-compares batch sizes), and bf16's speed-up over fp32 at each scale. Not a test: the figures depend on the host (AVX-512 with bfloat16 kernels or not).
+compares batch sizes), and bf16's speed-up over fp32 at each scale. Not a test: the figures depend on the
+host (AVX-512 with bfloat16 kernels or not).
 """
 from __future__ import annotations
 

@@ -26,7 +26,7 @@ import math
 import os
 import sys
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Literal
 from pathlib import Path
 
@@ -126,11 +126,12 @@ class PretrainConfig(Config):
         mcfg = self.model_config()
         if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
             fail("preset", f"{self.preset!r} has no human encoder with an auxiliary heatmap head")
-        c = self.coarse_input_scale
-        if self.coarse_steps and not (isinstance(c, (int, float)) and 0 < c <= 1
-                                      and (mcfg.height * c) % 16 == 0 and (mcfg.width * c) % 16 == 0):
-            fail("coarse_input_scale", f"must be in (0, 1] and give a trunk input divisible by 16 (the model is "
-                                       f"{mcfg.width}x{mcfg.height}), got {c!r}")
+        if self.coarse_steps:  # the model's own rule for a trunk input scale
+            try:
+                replace(mcfg, human=replace(mcfg.human, input_scale=self.coarse_input_scale)).validate()
+            except ConfigError as e:
+                fail("coarse_input_scale", f"{self.coarse_input_scale!r} is not a usable trunk input scale "
+                                           f"for this {mcfg.width}x{mcfg.height} model ({e})")
 
     def input_scale_at(self, step: int) -> float | None:
         """The trunk's input scale for ``step`` (0-based) when it differs from the model's, else None."""
