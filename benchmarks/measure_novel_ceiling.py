@@ -18,6 +18,13 @@ scores), by the view's angle from the nearest source camera (``ghnerf-eval``'s b
   absolute error of its rendered depth on the subject (``depth_mm``), and ``blend@depth``: the same
   visible blend fed the model's depth instead of the truth. The gap from ``blend@depth`` to the
   model's PSNR is its blending and opacity; from ``ceiling`` to ``blend@depth`` its geometry.
+* ``--oracles``: what a renderer that also *invents* the surfaces no source sees could gain, bounded
+  with the truth (oracles, not renderers): ``ceil:seen`` / ``ceil:unseen`` split the ceiling's PSNR
+  into the subject's pixels some source sees and the rest; ``fill:affine`` is the ceiling with its
+  unseen pixels (the plain average of the sources there) passed through the per-view, per-channel
+  gain and offset that fit the truth best (least squares on those pixels): the most that any global
+  colour or shading correction of the borrowed colours can give; ``fill:exact`` is the ceiling with
+  the unseen pixels replaced by the truth (a perfect inventor; what is left is the seen pixels' error).
 
 Masked PSNR inside the subject mask, the truth over the model's black background (``ghnerf-eval``'s).
 Not a test; CPU, about 20 s per 64 scenes and model.
@@ -36,7 +43,7 @@ from ghnerf_runtime.contract import ray_grid  # noqa: E402
 from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
-from training.blend_ceiling import blend_sources  # noqa: E402
+from training.blend_ceiling import affine_fill, blend_sources  # noqa: E402
 
 BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
 
@@ -62,6 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--model", action="append", default=[], metavar="NAME=CKPT",
                     help="a torch checkpoint (last.pt) to score beside the ceiling; repeatable")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--oracles", action="store_true",
+                    help="add the oracle columns (ceil:seen, ceil:unseen, fill:affine, fill:exact)")
     ap.add_argument("--opaque-at", type=float, default=NovelViewConfig().opaque_at,
                     help="the runtime's novel_view.opaque_at for the psnr@opaque_at column (default: the runtime's)")
     args = ap.parse_args(argv)
@@ -98,6 +107,12 @@ def main(argv: list[str] | None = None) -> int:
             rgb, seen = blend_sources(scene, t, scene["tgt_depth"][t])
             row = {"source": bool(scene["tgt_is_source"][t]), "angle": float(angles[t]),
                    "ceiling": psnr(rgb, truth, mask), "seen": float(seen[mask].mean())}
+            if args.oracles:
+                unseen = mask & ~seen
+                row["ceil:seen"] = psnr(rgb, truth, mask & seen) if (mask & seen).any() else np.nan
+                row["ceil:unseen"] = psnr(rgb, truth, unseen) if unseen.any() else np.nan
+                row["fill:affine"] = psnr(affine_fill(rgb, truth, unseen), truth, mask)
+                row["fill:exact"] = psnr(np.where(unseen[..., None], truth, rgb), truth, mask) if (mask & seen).any() else np.nan
             for (name, _), (m_rgb, m_depth, m_acc) in zip(models, rendered):
                 row[f"{name}:psnr"] = psnr(m_rgb[t], truth, mask)
                 row[f"{name}:psnr/acc"] = psnr(m_rgb[t] / np.maximum(m_acc[t], 1e-3)[..., None], truth, mask)
@@ -111,7 +126,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {i + 1}/{n} scenes", file=sys.stderr, flush=True)
 
     per_model = ("psnr", "psnr/acc", "psnr@opaque_at", "acc", "blend@depth", "depth_mm")
-    cols = ["ceiling", "seen"] + [f"{name}:{k}" for name, _ in models for k in per_model]
+    oracle_cols = ["ceil:seen", "ceil:unseen", "fill:affine", "fill:exact"] if args.oracles else []
+    cols = ["ceiling", "seen"] + oracle_cols + [f"{name}:{k}" for name, _ in models for k in per_model]
     groups = [("sources", lambda r: r["source"])]
     groups += [(f"novel {lo}-{hi} deg", lambda r, lo=lo, hi=hi: not r["source"] and lo <= r["angle"] < hi)
                for lo, hi in BINS]
@@ -122,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     for label, keep in groups:
         sel = [r for r in rows if keep(r)]
         if sel:
-            print(f"| {label} | {len(sel)} | " + " | ".join(f"{np.mean([r[c] for r in sel]):.2f}" for c in cols) + " |")
+            print(f"| {label} | {len(sel)} | " + " | ".join(f"{np.nanmean([r[c] for r in sel]):.2f}" for c in cols) + " |")
     return 0
 
 

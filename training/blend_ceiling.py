@@ -72,4 +72,22 @@ def blend_sources(scene: Mapping[str, np.ndarray], view: int, depth: np.ndarray,
     return rgb, n[..., 0] > 0
 
 
-__all__ = ["VISIBILITY_TOLERANCE_M", "unproject", "project", "blend_sources"]
+def affine_fill(rgb: np.ndarray, truth: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """``rgb`` ``(H, W, 3)`` with the pixels of ``region`` replaced by their best per-channel affine fit
+    (least squares) to ``truth``.
+
+    An oracle, since it reads the truth: on the pixels no source sees it bounds what any global colour
+    or shading correction of the borrowed colours can reach (``benchmarks/measure_novel_ceiling.py
+    --oracles``)."""
+    out = rgb.copy()
+    if region.sum() < 2:
+        return out
+    for c in range(rgb.shape[-1]):
+        x, y = rgb[..., c][region].astype(np.float64), truth[..., c][region].astype(np.float64)
+        A = np.stack([x, np.ones_like(x)], axis=1)
+        (gain, offset), *_ = np.linalg.lstsq(A, y, rcond=None)
+        out[..., c][region] = gain * x + offset
+    return out
+
+
+__all__ = ["VISIBILITY_TOLERANCE_M", "unproject", "project", "blend_sources", "affine_fill"]
