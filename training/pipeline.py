@@ -88,8 +88,9 @@ class Recipe:
 #: ``--recipe``. ``cpu`` is what two cores train in under two hours: since session 20 the human encoder's
 #: trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 24 for 44000 steps, the first
 #: 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128 on the
-#: EPYC by estimate, 14 % more on the Intel Xeon, measured): 39.5 mm held out with its prior, against 41.8 for
-#: those 36000 steps on the same host, 43.9 for 20000 steps and 58.9 for the 64x64 trunk's 24000 float32 steps
+#: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with its prior (39.7 with a
+#: second pretraining seed), against 41.8 for those 36000 steps on the same host, 43.9 for 20000 steps and 58.9
+#: for the 64x64 trunk's 24000 float32 steps
 #: (docs/training.md, "Progressive resizing in the two-core pretraining" and "The same-host baseline");
 #: ``gpu`` is the shipped (tenth) model's, about 25 minutes on one H100: the same trunk with 27000 float32
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
