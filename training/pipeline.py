@@ -90,8 +90,8 @@ class Recipe:
 #: 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128 on the
 #: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with its prior (39.7 with a
 #: second pretraining seed), against 41.8 for those 36000 steps on the same host, 43.9 for 20000 steps and 58.9
-#: for the 64x64 trunk's 24000 float32 steps
-#: (docs/training.md, "Progressive resizing in the two-core pretraining" and "The same-host baseline");
+#: for the 64x64 trunk's 24000 float32 steps (docs/training.md, "Progressive resizing in the two-core
+#: pretraining", "The same-host baseline" and "A second pretraining seed");
 #: ``gpu`` is the shipped (tenth) model's, about 25 minutes on one H100: the same trunk with 27000 float32
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
