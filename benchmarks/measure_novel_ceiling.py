@@ -25,6 +25,15 @@ scores), by the view's angle from the nearest source camera (``ghnerf-eval``'s b
   gain and offset that fit the truth best (least squares on those pixels): the most that any global
   colour or shading correction of the borrowed colours can give; ``fill:exact`` is the ceiling with
   the unseen pixels replaced by the truth (a perfect inventor; what is left is the seen pixels' error).
+  Beside them two renderers that are not oracles (``training.unseen_fill``: they read the sources,
+  the true geometry and the 3D joints, not the view): ``fill:part`` paints each unseen pixel the mean
+  colour the sources see on its bone, in the same bin along it; ``fill:relit`` takes those colours as
+  albedos under a light fitted to the seen pixels and shades the unseen surface with it;
+  ``part:unseen`` and ``relit:unseen`` are their PSNR on the unseen pixels alone (against
+  ``ceil:unseen``). With ``--model`` it adds ``relit@depth``: the picture the runtime shows with the
+  pixels the model's *own* geometry calls unseen repainted by ``fill:relit``'s method, everything
+  from the model (its depth at every view, its opacity above 0.5 as the subject, visibility within
+  ``--fill-tolerance``) but the 3D joints: what the fill would give on a device.
 
 Masked PSNR inside the subject mask, the truth over the model's black background (``ghnerf-eval``'s).
 Not a test; CPU, about 20 s per 64 scenes and model.
@@ -43,7 +52,8 @@ from ghnerf_runtime.contract import ray_grid  # noqa: E402
 from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
-from training.blend_ceiling import affine_fill, blend_sources  # noqa: E402
+from training.blend_ceiling import VISIBILITY_TOLERANCE_M, affine_fill, blend_sources  # noqa: E402
+from training.unseen_fill import fit_lighting, part_fill, relit_fill, seen_surface  # noqa: E402
 
 BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
 
@@ -61,6 +71,13 @@ def render_views(renderer, scene: dict) -> tuple[np.ndarray, np.ndarray, np.ndar
     return o["rgb"].reshape(V, H, W, 3), o["depth"].reshape(V, H, W), o["acc"].reshape(V, H, W)
 
 
+def modelled_scene(scene: dict, depth: np.ndarray, acc: np.ndarray) -> dict:
+    """``scene`` with a model's geometry in place of the truth: its depth at every view, and its opacity
+    above 0.5 as the subject's masks (what a device knows)."""
+    masks = acc > 0.5
+    return {**scene, "tgt_depth": np.where(masks, depth, 0.0).astype(np.float32), "tgt_masks": masks}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128")
@@ -70,7 +87,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="a torch checkpoint (last.pt) to score beside the ceiling; repeatable")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--oracles", action="store_true",
-                    help="add the oracle columns (ceil:seen, ceil:unseen, fill:affine, fill:exact)")
+                    help="add the oracle columns (ceil:seen, ceil:unseen, fill:affine, fill:exact) and the "
+                         "fills (fill:part, fill:relit; with --model, relit@depth)")
+    ap.add_argument("--fill-tolerance", type=float, default=VISIBILITY_TOLERANCE_M, metavar="M",
+                    help="visibility tolerance (metres) of the relit@depth column (default: %(default)s)")
     ap.add_argument("--opaque-at", type=float, default=NovelViewConfig().opaque_at,
                     help="the runtime's novel_view.opaque_at for the psnr@opaque_at column (default: the runtime's)")
     args = ap.parse_args(argv)
@@ -99,6 +119,9 @@ def main(argv: list[str] | None = None) -> int:
         V = len(scene["tgt_is_source"])
         angles = source_angles_deg(scene, np.arange(V))
         rendered = [render_views(m, scene) for _, m in models]
+        lighting = fit_lighting(seen_surface(scene)) if args.oracles else None  # one light per scene
+        as_modelled = [modelled_scene(scene, depth, acc) for _, depth, acc in rendered] if args.oracles else []
+        model_lighting = [fit_lighting(seen_surface(m)) for m in as_modelled]
         for t in range(V):
             mask = np.asarray(scene["tgt_masks"][t], bool)
             if not mask.any():
@@ -113,11 +136,23 @@ def main(argv: list[str] | None = None) -> int:
                 row["ceil:unseen"] = psnr(rgb, truth, unseen) if unseen.any() else np.nan
                 row["fill:affine"] = psnr(affine_fill(rgb, truth, unseen), truth, mask)
                 row["fill:exact"] = psnr(np.where(unseen[..., None], truth, rgb), truth, mask) if (mask & seen).any() else np.nan
+                painted = part_fill(rgb, scene, t, scene["tgt_depth"][t], unseen)
+                relit = relit_fill(rgb, scene, t, scene["tgt_depth"][t], unseen, mask=mask, lighting=lighting)
+                row["fill:part"], row["fill:relit"] = psnr(painted, truth, mask), psnr(relit, truth, mask)
+                row["part:unseen"] = psnr(painted, truth, unseen) if unseen.any() else np.nan
+                row["relit:unseen"] = psnr(relit, truth, unseen) if unseen.any() else np.nan
             for (name, _), (m_rgb, m_depth, m_acc) in zip(models, rendered):
                 row[f"{name}:psnr"] = psnr(m_rgb[t], truth, mask)
                 row[f"{name}:psnr/acc"] = psnr(m_rgb[t] / np.maximum(m_acc[t], 1e-3)[..., None], truth, mask)
                 shown = opaque_colour(m_rgb[t].reshape(-1, 3), m_acc[t].ravel(), background, opaque_at)
                 row[f"{name}:psnr@opaque_at"] = psnr(shown.reshape(m_rgb[t].shape), truth, mask)
+                if args.oracles:
+                    k = [n for n, _ in models].index(name)
+                    own, own_mask = as_modelled[k], as_modelled[k]["tgt_masks"][t]
+                    _, own_seen = blend_sources(own, t, own["tgt_depth"][t], tolerance_m=args.fill_tolerance)
+                    repainted = relit_fill(shown.reshape(m_rgb[t].shape), own, t, own["tgt_depth"][t],
+                                           own_mask & ~own_seen, mask=own_mask, lighting=model_lighting[k])
+                    row[f"{name}:relit@depth"] = psnr(repainted, truth, mask)
                 row[f"{name}:acc"] = float(m_acc[t][mask].mean())
                 row[f"{name}:blend@depth"] = psnr(blend_sources(scene, t, m_depth[t])[0], truth, mask)
                 row[f"{name}:depth_mm"] = 1000 * float(np.median(np.abs(m_depth[t] - scene["tgt_depth"][t])[mask]))
@@ -126,7 +161,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {i + 1}/{n} scenes", file=sys.stderr, flush=True)
 
     per_model = ("psnr", "psnr/acc", "psnr@opaque_at", "acc", "blend@depth", "depth_mm")
-    oracle_cols = ["ceil:seen", "ceil:unseen", "fill:affine", "fill:exact"] if args.oracles else []
+    oracle_cols = (["ceil:seen", "ceil:unseen", "fill:affine", "fill:exact", "fill:part", "fill:relit",
+                    "part:unseen", "relit:unseen"] if args.oracles else [])
+    if args.oracles:
+        per_model += ("relit@depth",)
     cols = ["ceiling", "seen"] + oracle_cols + [f"{name}:{k}" for name, _ in models for k in per_model]
     groups = [("sources", lambda r: r["source"])]
     groups += [(f"novel {lo}-{hi} deg", lambda r, lo=lo, hi=hi: not r["source"] and lo <= r["angle"] < hi)
