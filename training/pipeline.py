@@ -699,12 +699,25 @@ def stage_prior(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
     return [out, out.with_suffix(".json")], {}
 
 
-def prior_stage_inputs(cfg: PipelineConfig, quantized: dict) -> dict:
-    """What the prior stage reads: the quantized graphs (the encoder it learns the errors of) and its recipe."""
+def keypoint_graphs(graphs: dict) -> dict:
+    """Of a variant's graph files (path: hash), those the runtime decodes 2D joints from: ``human.*``, else
+    ``encoder.*`` (``training.skeleton_prior`` loads the same one)."""
+    for stem in ("human", "encoder"):
+        picked = {k: v for k, v in graphs.items() if Path(k).name.split(".")[0] == stem and k.endswith(".onnx")}
+        if picked:
+            return picked
+    return {}
+
+
+def prior_stage_inputs(cfg: PipelineConfig, graphs: dict, data: Any = None) -> dict:
+    """What the prior stage reads: the keypoint graph (the encoder it learns the errors of; fp32 and int8),
+    the dataset and its recipe. Not the rendering graphs: the joint run keeps the pretrained encoder frozen,
+    so training the NeRF branch again (longer, on another machine) leaves the prior as it is."""
     from ghnerf_runtime.skeleton_prior import FEATURE_VERSION  # a new feature set retrains the prior
 
-    return {"q": quantized, "steps": cfg.prior_steps, "scenes": cfg.prior_scenes, "split": cfg.eval_split,
-            "extra": cfg.prior_extra_train, "members": cfg.prior_members, "features": FEATURE_VERSION}
+    return {"keypoints": keypoint_graphs(graphs), "data": data, "steps": cfg.prior_steps,
+            "scenes": cfg.prior_scenes, "split": cfg.eval_split, "extra": cfg.prior_extra_train,
+            "members": cfg.prior_members, "features": FEATURE_VERSION}
 
 
 def motion_mix(spec: dict) -> str:
@@ -865,7 +878,8 @@ def run(cfg: PipelineConfig) -> dict | None:
         eval_in = {"q": q["outputs"], "e": e["outputs"], "split": cfg.eval_split, "limit": cfg.eval_limit,
                    "runtimes": EVAL_RUNTIMES[variant]}
         if variant in PRIOR_VARIANTS:  # before the eval, which scores it: a new prior re-evaluates
-            p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, q["outputs"]), lambda v=variant: stage_prior(cfg, v))
+            p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key),
+                       lambda v=variant: stage_prior(cfg, v))
             eval_in["prior"] = {k: v for k, v in p["outputs"].items() if k.endswith(".onnx")}  # not its report
         st.run(f"eval_{variant}", eval_in, lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
     if cfg.until:

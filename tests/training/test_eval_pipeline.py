@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -408,6 +409,25 @@ def test_prior_set_overrides_the_recipes_prior_and_the_card_records_it(tmp_path,
         with pytest.raises(SystemExit):
             pipeline.main([*out, "--prior-set", bad])
         assert says in capsys.readouterr().err
+
+
+def test_the_prior_stage_follows_the_keypoint_graph_and_the_data_not_the_rendering_graphs():
+    """A longer joint run (the encoder frozen) re-exports every graph but ``human``: the prior is kept."""
+    from training.pipeline import PipelineConfig, keypoint_graphs, prior_stage_inputs
+
+    cfg = PipelineConfig(out=Path("m"))
+    graphs = {"m/ghnerf/ghnerf.pt": "c0", "m/ghnerf/human.onnx": "h1", "m/ghnerf/human.int8.onnx": "h2",
+              "m/ghnerf/encoder.int8.onnx": "e1", "m/ghnerf/render.int8.onnx": "r1"}
+    assert keypoint_graphs(graphs) == {"m/ghnerf/human.onnx": "h1", "m/ghnerf/human.int8.onnx": "h2"}
+    before = prior_stage_inputs(cfg, graphs, {"manifest": 1})
+    retrained = {**graphs, "m/ghnerf/ghnerf.pt": "c9", "m/ghnerf/encoder.int8.onnx": "e9",
+                 "m/ghnerf/render.int8.onnx": "r9"}
+    assert prior_stage_inputs(cfg, retrained, {"manifest": 1}) == before
+    assert prior_stage_inputs(cfg, {**graphs, "m/ghnerf/human.int8.onnx": "h9"}, {"manifest": 1}) != before
+    assert prior_stage_inputs(cfg, graphs, {"manifest": 2}) != before  # another dataset: other scenes to learn from
+    # a model without a human graph decodes its joints from the encoder's heatmaps: that one counts then
+    no_human = {k: v for k, v in graphs.items() if "human" not in k}
+    assert keypoint_graphs(no_human) == {"m/ghnerf/encoder.int8.onnx": "e1"}
 
 
 def test_a_run_of_another_recipe_over_a_model_folder_says_it_will_replace_it(tmp_path):
