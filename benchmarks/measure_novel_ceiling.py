@@ -141,13 +141,12 @@ def main(argv: list[str] | None = None) -> int:
                 row["fill:part"], row["fill:relit"] = psnr(painted, truth, mask), psnr(relit, truth, mask)
                 row["part:unseen"] = psnr(painted, truth, unseen) if unseen.any() else np.nan
                 row["relit:unseen"] = psnr(relit, truth, unseen) if unseen.any() else np.nan
-            for (name, _), (m_rgb, m_depth, m_acc) in zip(models, rendered):
+            for k, ((name, _), (m_rgb, m_depth, m_acc)) in enumerate(zip(models, rendered)):
                 row[f"{name}:psnr"] = psnr(m_rgb[t], truth, mask)
                 row[f"{name}:psnr/acc"] = psnr(m_rgb[t] / np.maximum(m_acc[t], 1e-3)[..., None], truth, mask)
                 shown = opaque_colour(m_rgb[t].reshape(-1, 3), m_acc[t].ravel(), background, opaque_at)
                 row[f"{name}:psnr@opaque_at"] = psnr(shown.reshape(m_rgb[t].shape), truth, mask)
                 if args.oracles:
-                    k = [n for n, _ in models].index(name)
                     own, own_mask = as_modelled[k], as_modelled[k]["tgt_masks"][t]
                     _, own_seen = blend_sources(own, t, own["tgt_depth"][t], tolerance_m=args.fill_tolerance)
                     repainted = relit_fill(shown.reshape(m_rgb[t].shape), own, t, own["tgt_depth"][t],
