@@ -39,9 +39,10 @@ test: $(DEV_STAMP)
 # The recipe follows the machine (`--recipe auto`): where torch sees a GPU, the shipped (tenth) model's,
 # ~25 min of one H100 (and ~30 min on two cores for its two-network skeleton prior);
 # on CPU the two-core recipe (the trunk at 128x128, 44000 pretraining steps in bfloat16 where the CPU has it, the
-# first 17600 at 64x64): about 1 h 45 min from nothing on a fast AVX-512 2-core host by its stages' measured
-# times, well over two hours on an Intel Xeon host, about 4 h on the slowest seen (docs/training.md, "The tenth
-# model" and "Progressive resizing in the two-core pretraining").
+# first 17600 at 64x64; a skeleton prior of two networks): about 1 h 56 min from nothing on a fast AVX-512 2-core
+# host by its stages' measured times, well over two hours on an Intel Xeon host, about 4 h on the slowest seen
+# (docs/training.md, "The tenth model", "Progressive resizing in the two-core pretraining" and "Two prior
+# networks in the cpu recipe").
 # RECIPE=cpu or RECIPE=gpu picks one.
 RECIPE ?= auto
 model: $(DEV_STAMP)

@@ -88,24 +88,26 @@ class Recipe:
 #: ``--recipe``. ``cpu`` is what two cores train in under two hours: since session 20 the human encoder's
 #: trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 24 for 44000 steps, the first
 #: 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128 on the
-#: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with its prior (39.7 with a
-#: second pretraining seed), against 41.8 for those 36000 steps on the same host, 43.9 for 20000 steps and 58.9
-#: for the 64x64 trunk's 24000 float32 steps (docs/training.md, "Progressive resizing in the two-core
-#: pretraining", "The same-host baseline" and "A second pretraining seed");
+#: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with a one-network prior
+#: (39.7 with a second pretraining seed), against 41.8 for those 36000 steps on the same host, 43.9 for 20000
+#: steps and 58.9 for the 64x64 trunk's 24000 float32 steps (docs/training.md, "Progressive resizing in the
+#: two-core pretraining", "The same-host baseline" and "A second pretraining seed"); since session 27 a prior of
+#: two networks: 38.8 and 39.2 mm over the two seeds, for about 10.5 more minutes on the EPYC, 14.6 on the Intel
+#: host (docs/training.md, "Two prior networks in the cpu recipe");
 #: ``gpu`` is the shipped (tenth) model's, about 25 minutes on one H100: the same trunk with 27000 float32
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
-    "cpu": Recipe("two CPU cores, about 1 h 45 min from nothing on a fast AVX-512 host (by its stages' measured "
+    "cpu": Recipe("two CPU cores, about 1 h 56 min from nothing on a fast AVX-512 host (by its stages' measured "
                   "times; docs/training.md): encoder trunk at 128x128, 44000 pretraining steps of 2 scenes, "
                   "the first 17600 with the trunk's input at 64x64 (progressive resizing), the rate halved "
                   "every 8800, with the forward pass in bfloat16 where the CPU computes it (precision auto: "
-                  "0.11 against 0.19 s per step in float32); skeleton prior: one network of "
-                  "30000 steps on 25000 scenes (17 min on the fast host, about 4.5 of them making its 20000 "
-                  "extra scenes)",
+                  "0.11 against 0.19 s per step in float32); skeleton prior: two networks of "
+                  "30000 steps on 25000 scenes (about 27 min on the fast host, about 4.5 of them making its "
+                  "20000 extra scenes)",
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=44000", "lr_decay_every=8800", "coarse_steps=17600",
                                       'precision="auto"'),
-                  prior_steps=30000, prior_extra_train=20000),
+                  prior_steps=30000, prior_extra_train=20000, prior_members=2),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
                   "the export runs)",

@@ -397,11 +397,12 @@ def test_prior_set_overrides_the_recipes_prior_and_the_card_records_it(tmp_path,
     out = ["--out", str(tmp_path / "m"), "--data", str(tmp_path / "d"), "--recipe", "cpu"]
     pipeline.main(out)
     plain = seen[-1]
-    assert (plain.prior_steps, plain.prior_extra_train, plain.prior_members) == (30000, 20000, 1)
-    pipeline.main([*out, "--prior-set", "extra_train=0", "--prior-set", "steps=15000"])  # session 17's cpu prior
+    assert (plain.prior_steps, plain.prior_extra_train, plain.prior_members) == (30000, 20000, 2)
+    pipeline.main([*out, "--prior-set", "extra_train=0", "--prior-set", "steps=15000",
+                   "--prior-set", "members=1"])  # session 17's cpu prior
     cfg = seen[-1]
     assert (cfg.prior_steps, cfg.prior_extra_train, cfg.prior_members) == (15000, 0, 1)
-    assert "--prior-set extra_train=0 --prior-set steps=15000" in cfg.command
+    assert "--prior-set extra_train=0 --prior-set steps=15000 --prior-set members=1" in cfg.command
     q = {"ghnerf/human.int8.onnx": "ab"}
     assert pipeline.prior_stage_inputs(cfg, q) != pipeline.prior_stage_inputs(plain, q)  # a new prior is trained
     for bad, says in (("epochs=3", "KEY one of"), ("steps=many", "whole number"), ("members=0", "at least 1"),
