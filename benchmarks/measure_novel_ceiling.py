@@ -119,7 +119,8 @@ def main(argv: list[str] | None = None) -> int:
         V = len(scene["tgt_is_source"])
         angles = source_angles_deg(scene, np.arange(V))
         rendered = [render_views(m, scene) for _, m in models]
-        lighting = fit_lighting(seen_surface(scene)) if args.oracles else None  # one light per scene
+        surface = seen_surface(scene) if args.oracles else None  # gathered once per scene
+        lighting = fit_lighting(surface) if args.oracles else None
         as_modelled = [modelled_scene(scene, depth, acc) for _, depth, acc in rendered] if args.oracles else []
         model_lighting = [fit_lighting(seen_surface(m)) for m in as_modelled]
         for t in range(V):
@@ -136,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
                 row["ceil:unseen"] = psnr(rgb, truth, unseen) if unseen.any() else np.nan
                 row["fill:affine"] = psnr(affine_fill(rgb, truth, unseen), truth, mask)
                 row["fill:exact"] = psnr(np.where(unseen[..., None], truth, rgb), truth, mask) if (mask & seen).any() else np.nan
-                painted = part_fill(rgb, scene, t, scene["tgt_depth"][t], unseen)
+                painted = part_fill(rgb, scene, t, scene["tgt_depth"][t], unseen, surface=surface)
                 relit = relit_fill(rgb, scene, t, scene["tgt_depth"][t], unseen, mask=mask, lighting=lighting)
                 row["fill:part"], row["fill:relit"] = psnr(painted, truth, mask), psnr(relit, truth, mask)
                 row["part:unseen"] = psnr(painted, truth, unseen) if unseen.any() else np.nan

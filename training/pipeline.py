@@ -704,7 +704,9 @@ def stage_prior(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
 def keypoint_graphs(graphs: dict) -> dict:
     """Of a variant's graph files (path: hash), those the runtime decodes 2D joints from: ``human.*``, else
     ``encoder.*`` (``training.skeleton_prior`` loads the same one)."""
-    for stem in ("human", "encoder"):
+    from training.skeleton_prior import KEYPOINT_GRAPHS
+
+    for stem in KEYPOINT_GRAPHS:
         picked = {k: v for k, v in graphs.items() if Path(k).name.split(".")[0] == stem and k.endswith(".onnx")}
         if picked:
             return picked

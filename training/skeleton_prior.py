@@ -68,6 +68,10 @@ class PriorTrainConfig:
 
 
 # ---------------------------------------------------------------------------------------------- collect
+#: The graphs a model decodes its 2D joints from, in order of preference (the first the folder has).
+KEYPOINT_GRAPHS = ("human", "encoder")
+
+
 def _heatmap_session(model_dir: Path, threads: int):
     """The model's keypoint graph as the runtime loads it (``human`` when the folder has one, else ``encoder``;
     ``auto`` precision: int8), checked against the model contract."""
@@ -75,7 +79,7 @@ def _heatmap_session(model_dir: Path, threads: int):
     from ghnerf_runtime.session import ModelSession
 
     config = SessionConfig(model_dir=str(model_dir), threads=threads, warmup=False)
-    graph = "human" if ModelSession.has_graph_file(config, "human") else "encoder"
+    graph = next((g for g in KEYPOINT_GRAPHS if ModelSession.has_graph_file(config, g)), KEYPOINT_GRAPHS[-1])
     return ModelSession.load(config, (graph,)), graph
 
 

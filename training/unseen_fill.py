@@ -22,14 +22,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from drivers.sim.sensor import GAMMA  # display values are gamma-encoded; shading multiplies linear radiance
 from ghnerf_runtime.body25 import FLIP_INDEX, LIMBS
 from training.blend_ceiling import unproject
 
 #: Bins along each bone: clothing changes along a limb (a short sleeve, shorts).
 PART_BINS = 4
-#: Display values are gamma-encoded (the simulator's sensor, ``drivers.sim.sensor.GAMMA``); shading
-#: multiplies linear radiance.
-GAMMA = 2.2
 #: The world's up direction (the rig frame's y points down).
 UP = np.array([0.0, -1.0, 0.0])
 #: Each bone's mirror bone (the left forearm's is the right forearm), for a bone no source sees.
@@ -92,9 +90,14 @@ def surface_normals(depth: np.ndarray, mask: np.ndarray, K_inv: np.ndarray, c2w:
     return np.where(((n * towards_camera).sum(-1) < 0)[..., None], -n, n)
 
 
+def _hemisphere(normals: np.ndarray) -> np.ndarray:
+    """The ambient term's share at unit normals: a little brighter from above."""
+    return 0.85 + 0.15 * (normals @ UP)
+
+
 def shading(normals: np.ndarray, light: np.ndarray, ambient: float) -> np.ndarray:
-    """Lambertian key light plus hemispherical ambient (a little brighter from above) at unit normals."""
-    return ambient * (0.85 + 0.15 * (normals @ UP)) + (1.0 - ambient) * np.clip(normals @ light, 0.0, None)
+    """Lambertian key light plus hemispherical ambient at unit normals."""
+    return ambient * _hemisphere(normals) + (1.0 - ambient) * np.clip(normals @ light, 0.0, None)
 
 
 @dataclass(frozen=True)
@@ -160,7 +163,7 @@ def _best_light(surface: SeenSurface, directions: np.ndarray, ambients: np.ndarr
     n, lin, cell = surface.normals[keep][order], surface.linear[keep][order], surface.cell[keep][order]
     starts = np.flatnonzero(np.r_[True, cell[1:] != cell[:-1]])  # each cell's first row
     key = np.clip(directions @ n.T, 0.0, None)  # (D, N)
-    hemi = 0.85 + 0.15 * (n @ UP)  # (N,)
+    hemi = _hemisphere(n)  # (N,)
     best_energy, best = -np.inf, None
     for a in ambients:
         s = a * hemi + (1.0 - a) * key  # (D, N)
@@ -212,13 +215,16 @@ def _cell_values(values: np.ndarray, weight: np.ndarray, bins: int, bone: np.nda
 
 
 def part_fill(rgb: np.ndarray, scene: Mapping[str, np.ndarray], view: int, depth: np.ndarray,
-              region: np.ndarray, bins: int = PART_BINS) -> np.ndarray:
+              region: np.ndarray, surface: SeenSurface | None = None) -> np.ndarray:
     """``rgb`` ``(H, W, 3)`` with each ``region`` pixel's surface point (at ``depth``) painted the mean
-    display colour the sources see on its bone's bin (else its bone, else the mirror bone; else left)."""
+    display colour the sources see on its bone's bin (else its bone, else the mirror bone; else left).
+
+    ``surface``: a :func:`seen_surface` to reuse across a scene's views (default: gathered here)."""
     out = rgb.copy()
     if not region.any():
         return out
-    surface = seen_surface(scene, bins)
+    surface = surface or seen_surface(scene)
+    bins = surface.bins
     L = len(LIMBS) * bins
     keep = surface.cell >= 0
     count = np.bincount(surface.cell[keep], minlength=L).astype(np.float64)
@@ -234,7 +240,7 @@ def part_fill(rgb: np.ndarray, scene: Mapping[str, np.ndarray], view: int, depth
 
 
 def relit_fill(rgb: np.ndarray, scene: Mapping[str, np.ndarray], view: int, depth: np.ndarray,
-               region: np.ndarray, mask: np.ndarray | None = None, bins: int = PART_BINS,
+               region: np.ndarray, mask: np.ndarray | None = None,
                lighting: Lighting | None = None) -> np.ndarray:
     """``rgb`` ``(H, W, 3)`` with each ``region`` pixel re-rendered: its bin's fitted albedo (else its
     bone's, else the mirror bone's) shaded by the fitted light at the surface normal of ``depth``.
@@ -245,9 +251,10 @@ def relit_fill(rgb: np.ndarray, scene: Mapping[str, np.ndarray], view: int, dept
     out = rgb.copy()
     if not region.any():
         return out
-    lighting = lighting or fit_lighting(seen_surface(scene, bins))
+    lighting = lighting or fit_lighting(seen_surface(scene))
     if lighting is None:
         return out
+    bins = lighting.bins
     K_inv, c2w = scene["tgt_K_inv"][view], scene["tgt_c2w"][view]
     normals = surface_normals(depth, region if mask is None else mask, K_inv, c2w)[region]
     points = unproject(depth, K_inv, c2w)[region]
