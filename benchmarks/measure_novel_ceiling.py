@@ -48,11 +48,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.contract import ray_grid  # noqa: E402
 from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from training.blend_ceiling import VISIBILITY_TOLERANCE_M, affine_fill, blend_sources  # noqa: E402
+from training.fill_features import modelled_scene, render_views  # noqa: E402
 from training.unseen_fill import fit_lighting, part_fill, relit_fill, seen_surface  # noqa: E402
 
 BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
@@ -60,22 +60,6 @@ BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
 
 def psnr(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
     return float(np.ravel(masked_psnr(np.clip(pred, 0, 1)[None], truth[None], mask[None]).per_image)[0])
-
-
-def render_views(renderer, scene: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A ``training.evaluate.TorchRenderer``'s colour ``(V, H, W, 3)``, depth and accumulated opacity
-    ``(V, H, W)`` at every view of ``scene``."""
-    V = len(scene["tgt_is_source"])
-    H, W = renderer.height, renderer.width
-    o = renderer.render(scene, np.arange(V), ray_grid(H, W, 1), heat=False)
-    return o["rgb"].reshape(V, H, W, 3), o["depth"].reshape(V, H, W), o["acc"].reshape(V, H, W)
-
-
-def modelled_scene(scene: dict, depth: np.ndarray, acc: np.ndarray) -> dict:
-    """``scene`` with a model's geometry in place of the truth: its depth at every view, and its opacity
-    above 0.5 as the subject's masks (what a device knows)."""
-    masks = acc > 0.5
-    return {**scene, "tgt_depth": np.where(masks, depth, 0.0).astype(np.float32), "tgt_masks": masks}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,180 @@
+"""The learnt painter of the unseen surfaces: its feature caches (``training.fill_features``) and its
+network, trainer and score (``training.learnt_fill``)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
+from training.blend_ceiling import blend_sources  # noqa: E402
+from training.fill_features import FIELDS, MASK_BIT, SEEN_BIT, TRUTH_BIT, cache_split, load_cache  # noqa: E402
+from training.learnt_fill import (FillNet, FillNetConfig, FillTrainConfig, _parse_sets, flip_views,  # noqa: E402
+                                  joint_maps, load_net, main, masked_mse, net_inputs, paint, score_rows,
+                                  to_device, train_fill)
+
+
+@pytest.fixture(scope="module")
+def truth_cache(data64, tmp_path_factory):
+    return cache_split(data64, "val", tmp_path_factory.mktemp("fill") / "val.npz", workers=1, log=lambda *_: None)
+
+
+@pytest.fixture(scope="module")
+def model_cache(data64, tmp_path_factory):
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    folder = tmp_path_factory.mktemp("fill_model")
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, folder / "tiny.pt")
+    return cache_split(data64, "val", folder / "val.npz", workers=1, model=folder / "tiny.pt", log=lambda *_: None)
+
+
+def test_a_true_geometry_cache_holds_every_novel_view_with_the_blend_and_the_target(truth_cache, data64):
+    from training.data.torch_dataset import MultiViewDataset
+
+    a = load_cache(truth_cache)
+    assert set(FIELDS) <= set(a)
+    n = len(a["angle"])
+    assert n >= 2 and all(len(a[k]) == n for k in FIELDS)
+    assert (a["geometry"] == "truth").all() and (a["angle"] > 0).all()
+    flags = a["flags"]
+    mask = (flags & MASK_BIT) > 0
+    assert np.array_equal(mask, (flags & TRUTH_BIT) > 0)  # the geometry's mask is the truth's
+    assert not ((flags & SEEN_BIT) > 0)[~mask].any()
+    assert np.array_equal(a["shown"], a["relit"])
+    # the first view: its target is the dataset's image over black, its blend the two-camera blend
+    scene = {k: v.numpy() for k, v in MultiViewDataset(data64, "val")[int(a["scene"][0])].items()}
+    t = int(a["view"][0])
+    assert not scene["tgt_is_source"][t]
+    truth = scene["tgt_images"][t].transpose(1, 2, 0) * scene["tgt_masks"][t][..., None]
+    assert np.abs(a["truth"][0] / 255.0 - truth).max() <= 0.5 / 255 + 1e-6
+    blend, seen = blend_sources(scene, t, scene["tgt_depth"][t])
+    assert np.array_equal((flags[0] & SEEN_BIT) > 0, seen & mask[0])
+    assert np.abs(a["blend"][0] / 255.0 - np.clip(blend, 0, 1)).max() <= 0.5 / 255 + 1e-6
+    # the relit fill repaints only what no source sees
+    assert np.array_equal(a["relit"][0][seen & mask[0]], a["blend"][0][seen & mask[0]])
+    normals = a["normals"][0].astype(float) / 127
+    assert np.allclose(np.linalg.norm(normals[mask[0]], axis=-1), 1.0, atol=0.02)
+    assert not normals[~mask[0]].any()
+    j = a["joints"][0]
+    assert set(np.unique(j[:, 2])) <= {0.0, 1.0}
+    assert np.allclose(j[j[:, 2] > 0, :2], scene["tgt_joints_2d"][t][j[:, 2] > 0], atol=1e-3)
+
+
+def test_a_model_geometry_cache_takes_the_mask_and_picture_from_the_model_and_the_target_from_the_truth(
+        model_cache, truth_cache):
+    m, t = load_cache(model_cache), load_cache(truth_cache)
+    assert (m["geometry"] == "model").all()
+    assert np.array_equal(m["truth"], t["truth"])
+    assert np.array_equal(m["flags"] & TRUTH_BIT, t["flags"] & TRUTH_BIT)
+    assert not np.array_equal(m["flags"] & MASK_BIT, t["flags"] & MASK_BIT)  # an untrained model's opacity
+    rows = score_rows(m, m["shown"] / 255.0)
+    assert {"blend", "shown", "fill:relit"} <= set(rows["novel, all"]) and "ceiling" not in rows["novel, all"]
+    assert rows["novel, all"]["shown"] == pytest.approx(rows["novel, all"]["fill:learnt"])
+
+
+def test_a_broken_cache_is_named_with_what_is_wrong(truth_cache, tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="bad.npz: not a fill-feature cache"):
+        load_cache(bad)
+    a = load_cache(truth_cache)
+    np.savez(tmp_path / "short.npz", **{k: v for k, v in a.items() if k != "normals"})
+    with pytest.raises(ValueError, match="lacks normals"):
+        load_cache(tmp_path / "short.npz")
+    np.savez(tmp_path / "ragged.npz", **{**a, "angle": a["angle"][:1]})
+    with pytest.raises(ValueError, match="disagree"):
+        load_cache(tmp_path / "ragged.npz")
+
+
+def test_the_net_starts_as_its_base_and_paints_only_the_subject(truth_cache):
+    a = load_cache(truth_cache)
+    net = FillNet(FillNetConfig(width=8))
+    painted = paint(net, a)
+    mask = (a["flags"] & TRUTH_BIT) > 0
+    assert np.allclose(painted[mask], a["relit"][mask] / 255.0, atol=1e-6)
+    assert not painted[~mask].any()
+    shown_net = FillNet(FillNetConfig(width=8, shown_input=True))
+    assert shown_net.stem[0].in_channels == net.stem[0].in_channels + 3
+    assert np.allclose(paint(shown_net, a)[mask], a["shown"][mask] / 255.0, atol=1e-6)
+
+
+def test_joint_maps_peak_at_valid_joints_and_vanish_for_invalid_ones():
+    joints = torch.zeros(1, 25, 3)
+    joints[0, 0] = torch.tensor([5.0, 7.0, 1.0])
+    joints[0, 1] = torch.tensor([3.0, 3.0, 0.0])
+    maps = joint_maps(joints, 16, 12, sigma=2.0)
+    assert maps.shape == (1, 25, 16, 12)
+    assert maps[0, 0, 7, 5] == pytest.approx(1.0) and maps[0, 0].argmax().item() == 7 * 12 + 5
+    assert maps[0, 0, 7, 7] == pytest.approx(np.exp(-4 / 8))
+    assert not maps[0, 1:].any()
+
+
+def test_a_mirrored_batch_swaps_left_and_right_and_mirroring_twice_gives_it_back(truth_cache):
+    b = to_device({k: v[:2] for k, v in load_cache(truth_cache).items()}, torch.device("cpu"))
+    f = flip_views(b)
+    W = b["flags"].shape[-1]
+    assert torch.equal(f["blend"][:, :, 0], b["blend"][:, :, W - 1])
+    r, l_ = JOINT_INDEX["RWrist"], JOINT_INDEX["LWrist"]
+    if b["joints"][0, r, 2] > 0:
+        assert f["joints"][0, l_, 0] == pytest.approx(W - 1 - b["joints"][0, r, 0].item())
+        assert f["joints"][0, l_, 1] == b["joints"][0, r, 1]
+    assert torch.equal(f["normals"][..., 0], -b["normals"].flip(2)[..., 0])
+    assert f["light"][0, 0] == -b["light"][0, 0] and f["light"][0, 3] == b["light"][0, 3]
+    back = flip_views(f)
+    for k in b:
+        assert torch.allclose(back[k].float(), b[k].float(), atol=1e-5), k
+
+
+def test_masked_mse_averages_each_image_over_its_mask_then_over_the_batch():
+    pred, truth = torch.zeros(2, 3, 2, 2), torch.zeros(2, 3, 2, 2)
+    pred[0, :, 0, 0] = 0.3  # image 0: one masked pixel off by 0.3 in every channel
+    pred[1, 0, 1, 1] = 0.6  # image 1: one channel of one masked pixel off by 0.6
+    pred[1, :, 0, 0] = 9.0  # outside image 1's mask: ignored
+    mask = torch.ones(2, 1, 2, 2)
+    mask[1, :, 0, 0] = 0
+    expected = (3 * 0.09 / 12 + 0.36 / 9) / 2
+    assert masked_mse(pred, truth, mask).item() == pytest.approx(expected)
+
+
+def test_training_fits_the_training_views_better_than_the_relit_fill(truth_cache):
+    a = load_cache(truth_cache)
+    cfg = FillTrainConfig(steps=60, batch=4, lr=3e-3, log_every=1000, device="cpu", net=FillNetConfig(width=8))
+    net = train_fill(a, cfg, log=lambda *_: None)
+    assert net.steps_trained == 60
+    rows = score_rows(a, paint(net, a))["novel, all"]
+    assert rows["fill:learnt"] > rows["fill:relit"] + 0.3
+    x, base, truth, mask = net_inputs(to_device(a, torch.device("cpu")), net.cfg)
+    assert x.shape[1] == net.stem[0].in_channels and base.shape == truth.shape
+
+
+def test_a_time_budget_ends_training_early(truth_cache):
+    a = load_cache(truth_cache)
+    cfg = FillTrainConfig(steps=10 ** 6, batch=2, max_seconds=0.5, log_every=10 ** 6, device="cpu",
+                          net=FillNetConfig(width=8))
+    assert 1 <= train_fill(a, cfg, log=lambda *_: None).steps_trained < 10 ** 6
+
+
+def test_the_cli_trains_saves_and_scores_the_same_table(truth_cache, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["train", "--train-cache", str(truth_cache), "--val-cache", str(truth_cache), "--out", str(out),
+                 "--device", "cpu", "--set", "steps=3", "--set", "batch=2", "--set", "net.width=8"]) == 0
+    report = (out / "score.md").read_text()
+    assert "3 steps of 2" in report and "| novel, all |" in report
+    capsys.readouterr()
+    assert main(["score", "--val-cache", str(truth_cache), "--net", str(out / "fill_net.pt"), "--device", "cpu"]) == 0
+    assert capsys.readouterr().out.strip() in report
+    (tmp_path / "broken.pt").write_bytes(b"x")
+    with pytest.raises(ValueError, match="broken.pt: not a fill-net checkpoint"):
+        load_net(tmp_path / "broken.pt")
+
+
+def test_overrides_reach_the_net_and_unknown_keys_are_refused():
+    cfg = _parse_sets(FillTrainConfig(), ["steps=7", "net.width=16", "flip=false", "net.shown_input=true"])
+    assert (cfg.steps, cfg.net.width, cfg.flip, cfg.net.shown_input) == (7, 16, False, True)
+    with pytest.raises(ValueError, match="stepz"):
+        _parse_sets(FillTrainConfig(), ["stepz=1"])
+    with pytest.raises(ValueError, match="net.depth"):
+        _parse_sets(FillTrainConfig(), ["net.depth=3"])

@@ -1,0 +1,214 @@
+"""What a learnt painter of the unseen surfaces reads at one novel view, cached per split.
+
+``training.unseen_fill`` measures analytic fills of the surfaces no source camera sees;
+``training.learnt_fill`` trains a network to do better from the same information. Both read what a
+device could know (the source images, the geometry, the 3D joints), never the view's own image,
+which is kept only as the training target. Here the geometry is the dataset's truth, so the
+network's score bounds what a learnt appearance model adds once the geometry is right (the first
+lever, which the model does not yet pull: docs/training.md, "Painting the unseen side from the
+skeleton").
+
+Per novel view with a non-empty subject mask (numpy, one array per field, views stacked):
+
+* ``blend`` / ``relit`` / ``shown`` / ``truth`` ``(H, W, 3)`` uint8 display colours: the two-camera
+  blend at the geometry's depth (``training.blend_ceiling``); ``shown``, the model's picture as the
+  runtime shows it (``novel_view.opaque_colour``; with the true geometry, ``relit``); ``relit``, the
+  blend (with a model: ``shown``) with its unseen pixels repainted by ``unseen_fill.relit_fill``;
+  and the view over black (the target, ``ghnerf-eval``'s);
+* ``flags`` ``(H, W)`` uint8: bit 0 the geometry's subject mask, bit 1 some source sees the pixel,
+  bit 2 the true subject mask (the score's; the same as bit 0 with the true geometry);
+* ``normals`` ``(H, W, 3)`` int8: camera-frame unit normals times 127 (zero off the subject);
+* ``depth`` ``(H, W)`` float16: camera z minus its median on the subject, metres (zero off it);
+* ``joints`` ``(25, 3)`` float32: the 3D joints projected into the view (pixel u, v; valid 0/1);
+* ``light`` ``(4,)`` float32: the fitted key light's direction in the camera frame and its ambient
+  share (zeros when nothing was seen to fit it);
+* ``angle`` float32: the view's angle from the nearest source camera (``ghnerf-eval``'s bins);
+* ``scene``, ``view`` int32: where it came from; ``geometry``: ``truth`` or ``model``.
+
+Cached as one uncompressed ``.npz`` per split (about 250 KB per view at 128x128).
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from training.blend_ceiling import blend_sources, project
+from training.unseen_fill import PART_BINS, Lighting, fit_lighting, relit_fill, seen_surface, surface_normals
+
+FIELDS = ("blend", "relit", "shown", "truth", "flags", "normals", "depth", "joints", "light", "angle", "scene",
+          "view", "geometry")
+MASK_BIT, SEEN_BIT, TRUTH_BIT = 1, 2, 4
+
+
+def _to_u8(rgb: np.ndarray) -> np.ndarray:
+    return np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def render_views(renderer, scene: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A ``training.evaluate.TorchRenderer``'s colour ``(V, H, W, 3)``, depth and accumulated opacity
+    ``(V, H, W)`` at every view of ``scene``."""
+    from ghnerf_runtime.contract import ray_grid  # noqa: PLC0415
+
+    V = len(scene["tgt_is_source"])
+    H, W = renderer.height, renderer.width
+    o = renderer.render(scene, np.arange(V), ray_grid(H, W, 1), heat=False)
+    return o["rgb"].reshape(V, H, W, 3), o["depth"].reshape(V, H, W), o["acc"].reshape(V, H, W)
+
+
+def modelled_scene(scene: Mapping[str, np.ndarray], depth: np.ndarray, acc: np.ndarray) -> dict:
+    """``scene`` with a model's geometry in place of the truth: its depth at every view, and its opacity
+    above 0.5 as the subject's masks (what a device knows)."""
+    masks = acc > 0.5
+    return {**scene, "tgt_depth": np.where(masks, depth, 0.0).astype(np.float32), "tgt_masks": masks}
+
+
+def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting | None,
+                  angle: float, index: int = -1, truth: Mapping[str, np.ndarray] | None = None,
+                  shown: np.ndarray | None = None) -> dict[str, np.ndarray] | None:
+    """One novel view's features (module docstring); ``None`` when the subject is not in it.
+
+    ``scene`` carries the geometry (the truth, or :func:`modelled_scene`); ``truth`` the dataset item
+    whose image and mask are the target (default ``scene``); ``shown`` the model's picture ``(H, W, 3)``
+    (default: none, ``relit`` stands in)."""
+    truth = scene if truth is None else truth
+    subject = np.asarray(truth["tgt_masks"][view], bool)
+    if not subject.any():
+        return None
+    mask = np.asarray(scene["tgt_masks"][view], bool)
+    depth = np.asarray(scene["tgt_depth"][view], np.float64)
+    K_inv, c2w = scene["tgt_K_inv"][view], np.asarray(scene["tgt_c2w"][view], np.float64)
+    blend, seen = blend_sources(scene, view, depth)
+    relit = relit_fill(blend if shown is None else shown, scene, view, depth, mask & ~seen, mask=mask,
+                       lighting=lighting)
+    target = truth["tgt_images"][view].transpose(1, 2, 0) * subject[..., None]
+    R = c2w[:, :3]  # camera to world: a world vector v is v @ R in the camera frame
+    normals = surface_normals(depth, mask, K_inv, c2w) @ R
+    z = np.where(mask, depth - np.median(depth[mask]), 0.0)
+    u, v, jz = project(np.asarray(scene["joints_3d"], np.float64), scene["tgt_P"][view])
+    valid = np.asarray(scene["joints_3d_valid"], bool) & (jz > 0)
+    light = np.zeros(4, np.float32)
+    if lighting is not None:
+        light[:3], light[3] = lighting.direction @ R, lighting.ambient
+    return {
+        "blend": _to_u8(blend), "relit": _to_u8(relit), "shown": _to_u8(relit if shown is None else shown),
+        "truth": _to_u8(target),
+        "flags": (mask * MASK_BIT + (mask & seen) * SEEN_BIT + subject * TRUTH_BIT).astype(np.uint8),
+        "normals": np.round(np.where(mask[..., None], normals, 0.0) * 127.0).astype(np.int8),
+        "depth": z.astype(np.float16),
+        "joints": np.stack([np.where(valid, u, 0.0), np.where(valid, v, 0.0), valid], -1).astype(np.float32),
+        "light": light, "angle": np.float32(angle), "scene": np.int32(index), "view": np.int32(view),
+        "geometry": np.str_("truth" if shown is None else "model"),
+    }
+
+
+def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int = PART_BINS,
+                   renderer=None, opaque_at: float | None = None) -> list[dict[str, np.ndarray]]:
+    """Features of every novel view of one dataset item (numpy arrays) that shows the subject.
+
+    ``renderer``: a ``training.evaluate.TorchRenderer`` whose geometry and picture (at the runtime's
+    ``novel_view.opaque_at``, or ``opaque_at``) replace the truth's; default the true geometry."""
+    from training.evaluate import source_angles_deg  # noqa: PLC0415 - torch-side module, loaded late
+
+    if not np.asarray(scene["tgt_has_depth"], bool).all():
+        return []  # no true depth (ZJU-MoCap): nothing to paint against
+    V = len(scene["tgt_is_source"])
+    angles = source_angles_deg(scene, np.arange(V))
+    geometry, shown = scene, [None] * V
+    if renderer is not None:
+        from ghnerf_runtime.config import NovelViewConfig  # noqa: PLC0415
+        from ghnerf_runtime.novel_view import opaque_colour  # noqa: PLC0415
+
+        rgb, depth, acc = render_views(renderer, scene)
+        geometry = modelled_scene(scene, depth, acc)
+        at = NovelViewConfig().opaque_at if opaque_at is None else opaque_at
+        shown = [opaque_colour(rgb[t].reshape(-1, 3), acc[t].ravel(), renderer.background, at).reshape(rgb[t].shape)
+                 for t in range(V)]
+    lighting = fit_lighting(seen_surface(geometry, bins=bins))
+    out = []
+    for t in range(V):
+        if scene["tgt_is_source"][t]:
+            continue
+        f = view_features(geometry, t, lighting, float(angles[t]), index, truth=scene, shown=shown[t])
+        if f is not None:
+            out.append(f)
+    return out
+
+
+_WORKER: dict = {}
+
+
+def _open(data: str, split: str, bins: int, model: str | None) -> None:
+    import torch  # noqa: PLC0415
+
+    from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
+
+    renderer = None
+    if model:
+        from training.evaluate import TorchRenderer  # noqa: PLC0415
+        from training.train import load_model  # noqa: PLC0415
+
+        torch.set_num_threads(1)  # one scene per process
+        renderer = TorchRenderer(load_model(Path(model))[0])
+    _WORKER.update(ds=MultiViewDataset(data, split=split), bins=bins, renderer=renderer)
+
+
+def _one(index: int) -> list[dict[str, np.ndarray]]:
+    scene = {k: v.numpy() for k, v in _WORKER["ds"][index].items()}
+    return scene_features(scene, index, _WORKER["bins"], _WORKER["renderer"])
+
+
+def stack(views: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    if not views:
+        raise ValueError("no novel view with the subject in it: nothing to cache")
+    return {k: np.stack([f[k] for f in views]) for k in FIELDS}
+
+
+def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, workers: int = 2,
+                bins: int = PART_BINS, model: str | Path | None = None, log=print) -> Path:
+    """Compute the features of a split's first ``limit`` scenes (0: all) and write them to ``out`` (.npz).
+
+    ``model``: a GHNeRF checkpoint whose geometry and picture replace the truth's (module docstring)."""
+    from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
+
+    n = len(MultiViewDataset(data, split=split))
+    n = min(limit, n) if limit else n
+    t0, views = time.monotonic(), []
+    if workers > 1:
+        with mp.get_context("spawn").Pool(workers, initializer=_open, initargs=(str(data), split, bins, model and str(model))) as pool:
+            for i, fs in enumerate(pool.imap(_one, range(n), chunksize=4)):
+                views.extend(fs)
+                if (i + 1) % 256 == 0:
+                    log(f"  {split}: {i + 1}/{n} scenes, {time.monotonic() - t0:.0f} s")
+    else:
+        _open(str(data), split, bins, model and str(model))
+        for i in range(n):
+            views.extend(_one(i))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(out, **stack(views))
+    log(f"{out}: {len(views)} views of {n} {split} scenes in {time.monotonic() - t0:.0f} s")
+    return out
+
+
+def load_cache(path: str | Path) -> dict[str, np.ndarray]:
+    """A cache written by :func:`cache_split`, checked for every field."""
+    path = Path(path)
+    try:
+        with np.load(path) as z:
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: not a fill-feature cache ({e})") from e
+    missing = [k for k in FIELDS if k not in arrays]
+    if missing:
+        raise ValueError(f"{path}: fill-feature cache lacks {', '.join(missing)}")
+    n = {k: len(arrays[k]) for k in FIELDS}
+    if len(set(n.values())) != 1:
+        raise ValueError(f"{path}: fill-feature fields disagree on the number of views: {n}")
+    return arrays
+
+
+__all__ = ["FIELDS", "MASK_BIT", "SEEN_BIT", "TRUTH_BIT", "render_views", "modelled_scene", "view_features", "scene_features", "stack", "cache_split", "load_cache"]

@@ -1,0 +1,386 @@
+"""A learnt painter of the surfaces no source camera sees, and what it reaches held out.
+
+The analytic fills (``training.unseen_fill``) give the novel views 22.65 dB with the true geometry
+(``fill:relit``), 2.4 dB short of issue #3's 25 dB. This trains a small U-Net on
+``training.fill_features`` caches to repaint a view from the same information (the two-camera blend,
+the relit fill, visibility, normals, depth, the fitted light and the projected 3D joints), never the
+view's own image, and scores it on the held-out split beside the fills. It starts as the relit fill
+(its last layer is zero: the output is the relit fill plus a learnt residual) and is trained on the
+masked MSE, which is what the masked PSNR scores. With the true geometry it bounds what a learnt
+appearance model of this size and data adds once the geometry is right; it is a measurement, not a
+runtime stage (the runtime has no true geometry).
+
+    python -m training.learnt_fill cache --data out/s26/data --split val --limit 256 --out fill_val.npz
+    python -m training.learnt_fill cache --data out/s26/data --split train --limit 2048 --out fill_train.npz
+    python -m training.learnt_fill train --train-cache fill_train.npz --val-cache fill_val.npz --out runs/fill
+    python -m training.learnt_fill score --val-cache fill_val.npz --net runs/fill/fill_net.pt
+
+``train`` takes the GPU when torch sees one (``--device``) and prints the held-out table at the end
+(also written to ``<out>/score.md``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pickle
+import sys
+import time
+import warnings
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from ghnerf_runtime.body25 import FLIP_INDEX
+from ghnerf_runtime.metrics import masked_psnr
+from training.fill_features import MASK_BIT, SEEN_BIT, TRUTH_BIT, load_cache
+
+#: Angle bins of the table (``ghnerf-eval``'s, from the nearest source camera).
+BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
+#: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
+#: with ``FillNetConfig.shown_input``, the model's picture 3 more.
+IN_CHANNELS = 41
+
+
+@dataclass(frozen=True)
+class FillNetConfig:
+    width: int = 32
+    """Channels at full resolution; doubled per level, at most 8x."""
+    levels: int = 4
+    """Resolutions (128, 64, 32, 16 at 128x128): the coarsest sees the whole body."""
+    joint_sigma_px: float = 2.0
+    """Std of the Gaussian drawn at each projected joint (pixels)."""
+    shown_input: bool = False
+    """Read the model's picture (the cache's ``shown``) too, and start from it instead of the relit fill:
+    for caches made with a model's geometry, whose picture is better than its repainting."""
+
+
+@dataclass(frozen=True)
+class FillTrainConfig:
+    steps: int = 6000
+    batch: int = 32
+    lr: float = 2e-3
+    """Peak AdamW rate; cosine decay after a 200-step warm-up."""
+    weight_decay: float = 1e-4
+    flip: bool = True
+    """Mirror half the batches left-right (joints swapped, normals and light mirrored)."""
+    seed: int = 0
+    device: str = "auto"
+    log_every: int = 500
+    max_seconds: float = 0.0
+    """Wall-time budget (0: none): the cosine decay follows whichever of steps and time runs out first,
+    so a run cut by a lent machine's lease still ends at a low rate."""
+    net: FillNetConfig = field(default_factory=FillNetConfig)
+
+
+def _block(cin: int, cout: int) -> nn.Sequential:
+    return nn.Sequential(nn.Conv2d(cin, cout, 3, padding=1), nn.GroupNorm(8, cout), nn.SiLU(),
+                         nn.Conv2d(cout, cout, 3, padding=1), nn.GroupNorm(8, cout), nn.SiLU())
+
+
+class FillNet(nn.Module):
+    """A U-Net that returns ``base`` (the relit fill, or the model's picture) plus a residual colour,
+    zero at initialisation."""
+
+    def __init__(self, cfg: FillNetConfig = FillNetConfig()) -> None:
+        super().__init__()
+        self.cfg = cfg
+        widths = [cfg.width * min(2 ** i, 8) for i in range(cfg.levels)]
+        self.stem = _block(IN_CHANNELS + 3 * cfg.shown_input, widths[0])
+        self.down = nn.ModuleList(nn.Sequential(nn.Conv2d(a, b, 3, stride=2, padding=1), _block(b, b))
+                                  for a, b in zip(widths[:-1], widths[1:]))
+        self.up = nn.ModuleList(_block(b + a, a) for a, b in zip(widths[:-1], widths[1:]))
+        self.head = nn.Conv2d(widths[0], 3, 1)
+        nn.init.zeros_(self.head.weight)
+        nn.init.zeros_(self.head.bias)
+
+    def forward(self, x: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
+        skips = [self.stem(x)]
+        for down in self.down:
+            skips.append(down(skips[-1]))
+        h = skips.pop()
+        for up in reversed(self.up):
+            skip = skips.pop()
+            h = up(torch.cat([F.interpolate(h, size=skip.shape[-2:], mode="bilinear", align_corners=False), skip], 1))
+        return base + self.head(h).float()
+
+
+def to_device(arrays: dict[str, np.ndarray], device: torch.device) -> dict[str, torch.Tensor]:
+    """The cache's image fields as tensors on ``device`` (still uint8 / int8 / float16: converted per batch)."""
+    keep = ("blend", "relit", "shown", "truth", "flags", "normals", "depth", "joints", "light")
+    return {k: torch.from_numpy(np.ascontiguousarray(arrays[k])).to(device) for k in keep}
+
+
+def joint_maps(joints: torch.Tensor, H: int, W: int, sigma: float) -> torch.Tensor:
+    """``(N, 25, H, W)`` Gaussians at the projected joints ``(N, 25, 3)`` (u, v, valid)."""
+    ys = torch.arange(H, device=joints.device, dtype=torch.float32).view(1, 1, H, 1)
+    xs = torch.arange(W, device=joints.device, dtype=torch.float32).view(1, 1, 1, W)
+    u, v, valid = (joints[..., i, None, None] for i in range(3))
+    return torch.exp(-((xs - u) ** 2 + (ys - v) ** 2) / (2.0 * sigma * sigma)) * valid
+
+
+def flip_views(b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """The views mirrored left-right: images along W, normals' and light's x negated, joints mirrored and
+    their left and right swapped (a mirrored person is a person)."""
+    W = b["flags"].shape[-1]
+    out = {k: b[k].flip(2) for k in ("blend", "relit", "shown", "truth", "normals")}  # (N, H, W, C)
+    out["flags"], out["depth"] = b["flags"].flip(-1), b["depth"].flip(-1)
+    out["normals"] = out["normals"] * torch.tensor([-1, 1, 1], dtype=out["normals"].dtype, device=out["normals"].device)
+    j = b["joints"][:, list(FLIP_INDEX)].clone()
+    j[..., 0] = torch.where(j[..., 2] > 0, (W - 1) - j[..., 0], j[..., 0])
+    out["joints"] = j
+    out["light"] = b["light"] * torch.tensor([-1.0, 1.0, 1.0, 1.0], device=b["light"].device)
+    return out
+
+
+def net_inputs(b: dict[str, torch.Tensor], cfg: FillNetConfig) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Network input ``(N, C, H, W)``, base and truth ``(N, 3, H, W)`` in [0, 1], and the true subject's
+    mask ``(N, 1, H, W)`` (the loss's and the score's)."""
+    def img(k: str) -> torch.Tensor:
+        return b[k].permute(0, 3, 1, 2).float() / 255.0
+
+    flags = b["flags"].long()
+    mask = ((flags & MASK_BIT) > 0).float()[:, None]
+    seen = ((flags & SEEN_BIT) > 0).float()[:, None]
+    subject = ((flags & TRUTH_BIT) > 0).float()[:, None]
+    N, H, W = b["flags"].shape
+    normals = b["normals"].permute(0, 3, 1, 2).float() / 127.0
+    depth = b["depth"].float()[:, None]
+    light = b["light"][:, :, None, None].expand(N, 4, H, W)
+    relit = img("relit")
+    planes = [img("blend"), relit, mask, seen, normals, depth, light, joint_maps(b["joints"], H, W, cfg.joint_sigma_px)]
+    if cfg.shown_input:
+        shown = img("shown")
+        return torch.cat([*planes, shown], 1), shown, img("truth"), subject
+    return torch.cat(planes, 1), relit, img("truth"), subject
+
+
+def masked_mse(pred: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Per image, the mean squared error over the mask's pixels and the channels; the batch's mean."""
+    sq = ((pred - truth) ** 2 * mask).sum((1, 2, 3))
+    return (sq / (mask.sum((1, 2, 3)) * pred.shape[1]).clamp_min(1.0)).mean()
+
+
+def pick_device(kind: str) -> torch.device:
+    if kind == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if kind == "cuda" and not torch.cuda.is_available():
+        raise RuntimeError("--device cuda: torch sees no GPU")
+    return torch.device(kind)
+
+
+def _subset(b: dict[str, torch.Tensor], idx: torch.Tensor) -> dict[str, torch.Tensor]:
+    return {k: v[idx] for k, v in b.items()}
+
+
+@torch.no_grad()
+def paint(net: FillNet, arrays: dict[str, np.ndarray], device: torch.device | None = None,
+          batch: int = 64) -> np.ndarray:
+    """The network's picture of every cached view ``(N, H, W, 3)`` in [0, 1], black off the subject."""
+    device = device or next(net.parameters()).device
+    net.eval()
+    data = to_device(arrays, device)
+    n, out = len(arrays["flags"]), []
+    for s in range(0, n, batch):
+        x, base, _, mask = net_inputs(_subset(data, torch.arange(s, min(s + batch, n), device=device)), net.cfg)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
+            pred = net(x, base)
+        out.append((pred.clamp(0, 1) * mask).permute(0, 2, 3, 1).cpu().numpy())
+    return np.concatenate(out)
+
+
+def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str, np.ndarray] | None = None,
+               log=print) -> FillNet:
+    """Train a :class:`FillNet` on a feature cache; logs the loss (and, with ``val``, its held-out PSNR)."""
+    torch.manual_seed(cfg.seed)
+    device = pick_device(cfg.device)
+    net = FillNet(cfg.net).to(device)
+    torch.backends.cudnn.benchmark = device.type == "cuda"  # fixed shapes: let cuDNN pick its kernels once
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    warm = min(200, max(cfg.steps // 10, 1))
+    data = to_device(train, device)
+    n = len(train["flags"])
+    gen = torch.Generator(device="cpu").manual_seed(cfg.seed)
+    t0, running = time.monotonic(), []
+    log(f"fill net: {sum(p.numel() for p in net.parameters()) / 1e6:.2f} M parameters, {n} training views, "
+        f"{cfg.steps} steps of {cfg.batch} on {device}")
+    step = 0
+    while True:
+        progress = step / max(cfg.steps, 1)
+        if cfg.max_seconds > 0:
+            progress = max(progress, (time.monotonic() - t0) / cfg.max_seconds)
+        if progress >= 1.0:
+            break
+        for g in opt.param_groups:
+            g["lr"] = cfg.lr * min((step + 1) / warm, 0.5 * (1 + math.cos(math.pi * progress)))
+        net.train()
+        idx = torch.randint(0, n, (cfg.batch,), generator=gen).to(device)
+        b = _subset(data, idx)
+        if cfg.flip and step % 2 == 1:
+            b = flip_views(b)
+        x, base, truth, mask = net_inputs(b, cfg.net)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
+            pred = net(x, base)
+        loss = masked_mse(pred, truth, mask)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        running.append(loss.item())
+        step += 1
+        if step % cfg.log_every == 0:
+            msg = f"  step {step}: loss {np.mean(running):.5f}"
+            if val is not None:
+                few = {k: v[:128] for k, v in val.items()}
+                msg += f", held-out PSNR (128 views) {score_rows(few, paint(net, few))['novel, all']['fill:learnt']:.2f} dB"
+            log(msg + f", {(time.monotonic() - t0) / step * 1000:.0f} ms/step")
+            running = []
+    net.steps_trained = step
+    log(f"  {step} steps in {time.monotonic() - t0:.0f} s")
+    return net
+
+
+def _psnr(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Per-view masked PSNR (NaN where the mask is empty)."""
+    return np.ravel(masked_psnr(np.clip(pred, 0, 1), truth, mask).per_image)
+
+
+def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray) -> dict[str, dict[str, float]]:
+    """Mean PSNR per angle bin (and over all novel views) of the blend (with the true geometry: the
+    ceiling), the relit fill, the model's picture (caches made with a model) and the learnt fill, over
+    the true subject's mask and over the pixels the geometry calls unseen or seen; ``n`` views."""
+    truth = arrays["truth"].astype(np.float64) / 255.0
+    flags = arrays["flags"]
+    mask, seen = (flags & TRUTH_BIT) > 0, (flags & SEEN_BIT) > 0
+    unseen = mask & ~seen
+    pics = {"ceiling": arrays["blend"] / 255.0, "fill:relit": arrays["relit"] / 255.0, "fill:learnt": learnt}
+    if (arrays["geometry"] != "truth").any():
+        pics = {"blend": pics["ceiling"], "fill:relit": pics["fill:relit"], "shown": arrays["shown"] / 255.0,
+                "fill:learnt": learnt}
+    cols: dict[str, np.ndarray] = {}
+    for name, pic in pics.items():
+        cols[name] = _psnr(pic, truth, mask)
+    cols["relit:unseen"] = _psnr(pics["fill:relit"], truth, unseen)
+    cols["learnt:unseen"] = _psnr(learnt, truth, unseen)
+    cols["learnt:seen"] = _psnr(learnt, truth, mask & seen)
+    if "ceiling" in pics:
+        cols["ceil:seen"] = _psnr(pics["ceiling"], truth, mask & seen)
+    angle = arrays["angle"]
+    groups = [(f"novel {lo}-{hi} deg", (angle >= lo) & (angle < hi)) for lo, hi in BINS]
+    groups.append(("novel, all", np.ones(len(angle), bool)))
+    rows = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a bin whose views have no unseen pixel: NaN
+        for label, keep in groups:
+            if keep.any():
+                rows[label] = {"n": int(keep.sum()), **{k: float(np.nanmean(v[keep])) for k, v in cols.items()}}
+    return rows
+
+
+def table(rows: dict[str, dict[str, float]]) -> str:
+    first = next(iter(rows.values()))
+    cols = [c for c in ("ceiling", "blend", "fill:relit", "shown", "fill:learnt", "relit:unseen", "learnt:unseen",
+                        "ceil:seen", "learnt:seen") if c in first]
+    lines = ["| views | n | " + " | ".join(cols) + " |", "|---" * (len(cols) + 2) + "|"]
+    for label, r in rows.items():
+        lines.append(f"| {label} | {r['n']} | " + " | ".join(f"{r[c]:.2f}" for c in cols) + " |")
+    return "\n".join(lines)
+
+
+def save_net(net: FillNet, cfg: FillTrainConfig, path: Path, **info) -> None:
+    torch.save({"config": asdict(cfg), "state_dict": net.state_dict(), "info": info}, path)
+
+
+def load_net(path: str | Path, device: torch.device | str = "cpu") -> FillNet:
+    path = Path(path)
+    try:
+        ckpt = torch.load(path, map_location=device, weights_only=True)
+        net = FillNet(FillNetConfig(**ckpt["config"]["net"]))
+        net.load_state_dict(ckpt["state_dict"])
+    except (OSError, RuntimeError, KeyError, TypeError, EOFError, pickle.UnpicklingError) as e:
+        raise ValueError(f"{path}: not a fill-net checkpoint ({e})") from e
+    return net.to(device)
+
+
+def _parse_sets(cfg: FillTrainConfig, sets: list[str]) -> FillTrainConfig:
+    """``key=value`` overrides; ``net.width=16`` reaches the network's config."""
+    net = asdict(cfg.net)
+    top = {k: v for k, v in asdict(cfg).items() if k != "net"}
+    for s in sets:
+        key, sep, value = s.partition("=")
+        target, name = (net, key[4:]) if key.startswith("net.") else (top, key)
+        if not sep or name not in target:
+            raise ValueError(f"--set {s}: expected key=value with key one of {sorted(top)} or net.{sorted(net)}")
+        kind = type(target[name])
+        target[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+    return replace(FillTrainConfig(**top), net=FillNetConfig(**net))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    c = sub.add_parser("cache", help="compute a split's fill features (training.fill_features)")
+    c.add_argument("--data", required=True)
+    c.add_argument("--split", default="val")
+    c.add_argument("--limit", type=int, default=0, help="first N scenes (0: all)")
+    c.add_argument("--workers", type=int, default=2)
+    c.add_argument("--model", default=None, metavar="CKPT",
+                   help="a GHNeRF checkpoint whose geometry and picture replace the truth's (default: the truth)")
+    c.add_argument("--out", required=True, type=Path)
+    t = sub.add_parser("train", help="train the fill net and score it on the held-out cache")
+    t.add_argument("--train-cache", required=True, type=Path)
+    t.add_argument("--val-cache", required=True, type=Path)
+    t.add_argument("--out", required=True, type=Path, help="folder for fill_net.pt and score.md")
+    t.add_argument("--train-views", type=int, default=0, help="train on the cache's first N views (0: all)")
+    t.add_argument("--device", default=None, help="auto (default), cpu or cuda")
+    t.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="FillTrainConfig override (steps, batch, lr, ..., net.width, net.levels)")
+    s = sub.add_parser("score", help="score a trained fill net on a held-out cache")
+    s.add_argument("--val-cache", required=True, type=Path)
+    s.add_argument("--net", required=True, type=Path)
+    s.add_argument("--device", default="auto")
+    args = ap.parse_args(argv)
+
+    if args.cmd == "cache":
+        from training.fill_features import cache_split  # noqa: PLC0415
+
+        cache_split(args.data, args.split, args.out, args.limit, args.workers, model=args.model)
+        return 0
+    if args.cmd == "score":
+        net = load_net(args.net, pick_device(args.device))
+        val = load_cache(args.val_cache)
+        print(table(score_rows(val, paint(net, val))))
+        return 0
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    cfg = _parse_sets(FillTrainConfig(), args.set)
+    if args.device:
+        cfg = replace(cfg, device=args.device)
+    train, val = load_cache(args.train_cache), load_cache(args.val_cache)
+    if args.train_views:
+        train = {k: v[:args.train_views] for k, v in train.items()}
+    t0 = time.monotonic()
+    net = train_fill(train, cfg, val=val)
+    seconds = time.monotonic() - t0
+    rows = score_rows(val, paint(net, val))
+    args.out.mkdir(parents=True, exist_ok=True)
+    device = pick_device(cfg.device)
+    hardware = torch.cuda.get_device_name(0) if device.type == "cuda" else f"cpu, {torch.get_num_threads()} threads"
+    info = {"train_views": len(train["flags"]), "steps": net.steps_trained, "seconds": round(seconds, 1),
+            "hardware": hardware}
+    save_net(net, cfg, args.out / "fill_net.pt", **info)
+    report = (f"{len(val['flags'])} held-out views ({args.val_cache}), fill net trained on {len(train['flags'])} "
+              f"views ({args.train_cache}), {net.steps_trained} steps of {cfg.batch} in {seconds:.0f} s on "
+              f"{hardware}; masked PSNR, dB\n\n{table(rows)}\n")
+    (args.out / "score.md").write_text(report)
+    (args.out / "score.json").write_text(json.dumps({"config": asdict(cfg), "rows": rows, **info}, indent=1))
+    print(report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
