@@ -8,12 +8,16 @@ view's own image, and scores it on the held-out split beside the fills. It start
 (its last layer is zero: the output is the relit fill plus a learnt residual) and is trained on the
 masked MSE, which is what the masked PSNR scores. With the true geometry it bounds what a learnt
 appearance model of this size and data adds once the geometry is right; it is a measurement, not a
-runtime stage (the runtime has no true geometry).
+runtime stage (the runtime has no true geometry); docs/training.md, "A learnt painter of the unseen
+side", has the figures.
 
     python -m training.learnt_fill cache --data out/s26/data --split val --limit 256 --out fill_val.npz
     python -m training.learnt_fill cache --data out/s26/data --split train --limit 2048 --out fill_train.npz
     python -m training.learnt_fill train --train-cache fill_train.npz --val-cache fill_val.npz --out runs/fill
     python -m training.learnt_fill score --val-cache fill_val.npz --net runs/fill/fill_net.pt
+
+The same on a model's geometry and picture (``cache --model models/ghnerf/ghnerf.pt`` for both
+caches, ``train --set net.shown_input=true``): what the painter would give on a device today.
 
 ``train`` takes the GPU when torch sees one (``--device``) and prints the held-out table at the end
 (also written to ``<out>/score.md``).
@@ -89,6 +93,7 @@ class FillNet(nn.Module):
     def __init__(self, cfg: FillNetConfig = FillNetConfig()) -> None:
         super().__init__()
         self.cfg = cfg
+        self.steps_trained = 0  # set by train_fill
         widths = [cfg.width * min(2 ** i, 8) for i in range(cfg.levels)]
         self.stem = _block(IN_CHANNELS + 3 * cfg.shown_input, widths[0])
         self.down = nn.ModuleList(nn.Sequential(nn.Conv2d(a, b, 3, stride=2, padding=1), _block(b, b))
