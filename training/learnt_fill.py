@@ -58,6 +58,10 @@ class FillNetConfig:
     """Resolutions (128, 64, 32, 16 at 128x128): the coarsest sees the whole body."""
     joint_sigma_px: float = 2.0
     """Std of the Gaussian drawn at each projected joint (pixels)."""
+    relit_input: bool = True
+    """Read the relit fill and its fitted light. Without them (7 planes fewer) the net starts from the
+    blend, or from the model's picture with ``shown_input``: the light fit costs about 0.4 s a scene
+    on one core, more than a runtime stage could spend."""
     shown_input: bool = False
     """Read the model's picture (the cache's ``shown``) too, and start from it instead of the relit fill:
     for caches made with a model's geometry, whose picture is better than its repainting."""
@@ -95,7 +99,7 @@ class FillNet(nn.Module):
         self.cfg = cfg
         self.steps_trained = 0  # set by train_fill
         widths = [cfg.width * min(2 ** i, 8) for i in range(cfg.levels)]
-        self.stem = _block(IN_CHANNELS + 3 * cfg.shown_input, widths[0])
+        self.stem = _block(IN_CHANNELS - 7 * (not cfg.relit_input) + 3 * cfg.shown_input, widths[0])
         self.down = nn.ModuleList(nn.Sequential(nn.Conv2d(a, b, 3, stride=2, padding=1), _block(b, b))
                                   for a, b in zip(widths[:-1], widths[1:]))
         self.up = nn.ModuleList(_block(b + a, a) for a, b in zip(widths[:-1], widths[1:]))
@@ -156,12 +160,16 @@ def net_inputs(b: dict[str, torch.Tensor], cfg: FillNetConfig) -> tuple[torch.Te
     normals = b["normals"].permute(0, 3, 1, 2).float() / 127.0
     depth = b["depth"].float()[:, None]
     light = b["light"][:, :, None, None].expand(N, 4, H, W)
-    relit = img("relit")
-    planes = [img("blend"), relit, mask, seen, normals, depth, light, joint_maps(b["joints"], H, W, cfg.joint_sigma_px)]
+    blend, maps = img("blend"), joint_maps(b["joints"], H, W, cfg.joint_sigma_px)
+    if cfg.relit_input:
+        base = relit = img("relit")
+        planes = [blend, relit, mask, seen, normals, depth, light, maps]
+    else:
+        base, planes = blend, [blend, mask, seen, normals, depth, maps]
     if cfg.shown_input:
-        shown = img("shown")
-        return torch.cat([*planes, shown], 1), shown, img("truth"), subject
-    return torch.cat(planes, 1), relit, img("truth"), subject
+        base = img("shown")
+        planes.append(base)
+    return torch.cat(planes, 1), base, img("truth"), subject
 
 
 def masked_mse(pred: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

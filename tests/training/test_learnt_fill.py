@@ -99,6 +99,11 @@ def test_the_net_starts_as_its_base_and_paints_only_the_subject(truth_cache):
     shown_net = FillNet(FillNetConfig(width=8, shown_input=True))
     assert shown_net.stem[0].in_channels == net.stem[0].in_channels + 3
     assert np.allclose(paint(shown_net, a)[mask], a["shown"][mask] / 255.0, atol=1e-6)
+    lightless = FillNet(FillNetConfig(width=8, relit_input=False))  # no relit fill, no light: from the blend
+    assert lightless.stem[0].in_channels == net.stem[0].in_channels - 7
+    assert np.allclose(paint(lightless, a)[mask], a["blend"][mask] / 255.0, atol=1e-6)
+    x, base, _, _ = net_inputs(to_device(a, torch.device("cpu")), FillNetConfig(relit_input=False, shown_input=True))
+    assert x.shape[1] == net.stem[0].in_channels - 4 and torch.equal(base, x[:, -3:])
 
 
 def test_joint_maps_peak_at_valid_joints_and_vanish_for_invalid_ones():
