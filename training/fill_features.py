@@ -3,10 +3,13 @@
 ``training.unseen_fill`` measures analytic fills of the surfaces no source camera sees;
 ``training.learnt_fill`` trains a network to do better from the same information. Both read what a
 device could know (the source images, the geometry, the 3D joints), never the view's own image,
-which is kept only as the training target. Here the geometry is the dataset's truth, so the
+which is kept only as the training target. By default the geometry is the dataset's truth, so the
 network's score bounds what a learnt appearance model adds once the geometry is right (the first
 lever, which the model does not yet pull: docs/training.md, "Painting the unseen side from the
-skeleton").
+skeleton"). Given a GHNeRF checkpoint (``cache_split(model=...)``), everything a device would read
+comes from that model instead (its depth at every view, its opacity above 0.5 as the subject, its
+picture as the runtime shows it at ``novel_view.opaque_at``) but the 3D joints; the view's image and
+mask stay the target.
 
 Per novel view with a non-empty subject mask (numpy, one array per field, views stacked):
 
@@ -106,11 +109,11 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
 
 
 def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int = PART_BINS,
-                   renderer=None, opaque_at: float | None = None) -> list[dict[str, np.ndarray]]:
+                   renderer=None) -> list[dict[str, np.ndarray]]:
     """Features of every novel view of one dataset item (numpy arrays) that shows the subject.
 
     ``renderer``: a ``training.evaluate.TorchRenderer`` whose geometry and picture (at the runtime's
-    ``novel_view.opaque_at``, or ``opaque_at``) replace the truth's; default the true geometry."""
+    ``novel_view.opaque_at``) replace the truth's; default the true geometry."""
     from training.evaluate import source_angles_deg  # noqa: PLC0415 - torch-side module, loaded late
 
     if not np.asarray(scene["tgt_has_depth"], bool).all():
@@ -124,7 +127,7 @@ def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int =
 
         rgb, depth, acc = render_views(renderer, scene)
         geometry = modelled_scene(scene, depth, acc)
-        at = NovelViewConfig().opaque_at if opaque_at is None else opaque_at
+        at = NovelViewConfig().opaque_at
         shown = [opaque_colour(rgb[t].reshape(-1, 3), acc[t].ravel(), renderer.background, at).reshape(rgb[t].shape)
                  for t in range(V)]
     lighting = fit_lighting(seen_surface(geometry, bins=bins))
@@ -178,13 +181,14 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
     n = min(limit, n) if limit else n
     t0, views = time.monotonic(), []
     if workers > 1:
-        with mp.get_context("spawn").Pool(workers, initializer=_open, initargs=(str(data), split, bins, model and str(model))) as pool:
+        init = (str(data), split, bins, model and str(model))
+        with mp.get_context("spawn").Pool(workers, initializer=_open, initargs=init) as pool:
             for i, fs in enumerate(pool.imap(_one, range(n), chunksize=4)):
                 views.extend(fs)
                 if (i + 1) % 256 == 0:
                     log(f"  {split}: {i + 1}/{n} scenes, {time.monotonic() - t0:.0f} s")
     else:
-        _open(str(data), split, bins, model and str(model))
+        _open(str(data), split, bins, model and str(model))  # in this process
         for i in range(n):
             views.extend(_one(i))
     out = Path(out)
@@ -211,4 +215,5 @@ def load_cache(path: str | Path) -> dict[str, np.ndarray]:
     return arrays
 
 
-__all__ = ["FIELDS", "MASK_BIT", "SEEN_BIT", "TRUTH_BIT", "render_views", "modelled_scene", "view_features", "scene_features", "stack", "cache_split", "load_cache"]
+__all__ = ["FIELDS", "MASK_BIT", "SEEN_BIT", "TRUTH_BIT", "render_views", "modelled_scene", "view_features",
+           "scene_features", "stack", "cache_split", "load_cache"]

@@ -41,10 +41,9 @@ from torch.nn import functional as F
 
 from ghnerf_runtime.body25 import FLIP_INDEX
 from ghnerf_runtime.metrics import masked_psnr
+from training.evaluate import SOURCE_ANGLE_BINS_DEG
 from training.fill_features import MASK_BIT, SEEN_BIT, TRUTH_BIT, load_cache
 
-#: Angle bins of the table (``ghnerf-eval``'s, from the nearest source camera).
-BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
 #: with ``FillNetConfig.shown_input``, the model's picture 3 more.
 IN_CHANNELS = 41
@@ -114,7 +113,8 @@ class FillNet(nn.Module):
         h = skips.pop()
         for up in reversed(self.up):
             skip = skips.pop()
-            h = up(torch.cat([F.interpolate(h, size=skip.shape[-2:], mode="bilinear", align_corners=False), skip], 1))
+            h = F.interpolate(h, size=skip.shape[-2:], mode="bilinear", align_corners=False)
+            h = up(torch.cat([h, skip], 1))
         return base + self.head(h).float()
 
 
@@ -138,7 +138,7 @@ def flip_views(b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     W = b["flags"].shape[-1]
     out = {k: b[k].flip(2) for k in ("blend", "relit", "shown", "truth", "normals")}  # (N, H, W, C)
     out["flags"], out["depth"] = b["flags"].flip(-1), b["depth"].flip(-1)
-    out["normals"] = out["normals"] * torch.tensor([-1, 1, 1], dtype=out["normals"].dtype, device=out["normals"].device)
+    out["normals"] = out["normals"] * torch.tensor([-1, 1, 1], dtype=torch.int8, device=b["normals"].device)
     j = b["joints"][:, list(FLIP_INDEX)].clone()
     j[..., 0] = torch.where(j[..., 2] > 0, (W - 1) - j[..., 0], j[..., 0])
     out["joints"] = j
@@ -146,7 +146,8 @@ def flip_views(b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     return out
 
 
-def net_inputs(b: dict[str, torch.Tensor], cfg: FillNetConfig) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+def net_inputs(b: dict[str, torch.Tensor],
+               cfg: FillNetConfig) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Network input ``(N, C, H, W)``, base and truth ``(N, 3, H, W)`` in [0, 1], and the true subject's
     mask ``(N, 1, H, W)`` (the loss's and the score's)."""
     def img(k: str) -> torch.Tensor:
@@ -248,7 +249,8 @@ def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str
             msg = f"  step {step}: loss {np.mean(running):.5f}"
             if val is not None:
                 few = {k: v[:128] for k, v in val.items()}
-                msg += f", held-out PSNR (128 views) {score_rows(few, paint(net, few))['novel, all']['fill:learnt']:.2f} dB"
+                held_out = score_rows(few, paint(net, few))["novel, all"]["fill:learnt"]
+                msg += f", held-out PSNR (128 views) {held_out:.2f} dB"
             log(msg + f", {(time.monotonic() - t0) / step * 1000:.0f} ms/step")
             running = []
     net.steps_trained = step
@@ -269,20 +271,19 @@ def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray) -> dict[str, d
     flags = arrays["flags"]
     mask, seen = (flags & TRUTH_BIT) > 0, (flags & SEEN_BIT) > 0
     unseen = mask & ~seen
-    pics = {"ceiling": arrays["blend"] / 255.0, "fill:relit": arrays["relit"] / 255.0, "fill:learnt": learnt}
-    if (arrays["geometry"] != "truth").any():
-        pics = {"blend": pics["ceiling"], "fill:relit": pics["fill:relit"], "shown": arrays["shown"] / 255.0,
-                "fill:learnt": learnt}
-    cols: dict[str, np.ndarray] = {}
-    for name, pic in pics.items():
-        cols[name] = _psnr(pic, truth, mask)
-    cols["relit:unseen"] = _psnr(pics["fill:relit"], truth, unseen)
+    true_geometry = bool((arrays["geometry"] == "truth").all())
+    blend, relit = arrays["blend"] / 255.0, arrays["relit"] / 255.0
+    cols = {"ceiling" if true_geometry else "blend": _psnr(blend, truth, mask), "fill:relit": _psnr(relit, truth, mask)}
+    if not true_geometry:
+        cols["shown"] = _psnr(arrays["shown"] / 255.0, truth, mask)
+    cols["fill:learnt"] = _psnr(learnt, truth, mask)
+    cols["relit:unseen"] = _psnr(relit, truth, unseen)
     cols["learnt:unseen"] = _psnr(learnt, truth, unseen)
     cols["learnt:seen"] = _psnr(learnt, truth, mask & seen)
-    if "ceiling" in pics:
-        cols["ceil:seen"] = _psnr(pics["ceiling"], truth, mask & seen)
-    angle = arrays["angle"]
-    groups = [(f"novel {lo}-{hi} deg", (angle >= lo) & (angle < hi)) for lo, hi in BINS]
+    if true_geometry:
+        cols["ceil:seen"] = _psnr(blend, truth, mask & seen)
+    angle, edges = arrays["angle"], SOURCE_ANGLE_BINS_DEG
+    groups = [(f"novel {lo:g}-{hi:g} deg", (angle >= lo) & (angle < hi)) for lo, hi in zip(edges[:-1], edges[1:])]
     groups.append(("novel, all", np.ones(len(angle), bool)))
     rows = {}
     with warnings.catch_warnings():
@@ -381,8 +382,9 @@ def main(argv: list[str] | None = None) -> int:
     seconds = time.monotonic() - t0
     rows = score_rows(val, paint(net, val))
     args.out.mkdir(parents=True, exist_ok=True)
-    device = pick_device(cfg.device)
-    hardware = torch.cuda.get_device_name(0) if device.type == "cuda" else f"cpu, {torch.get_num_threads()} threads"
+    device = next(net.parameters()).device
+    hardware = (torch.cuda.get_device_name(device) if device.type == "cuda"
+                else f"cpu, {torch.get_num_threads()} threads")
     info = {"train_views": len(train["flags"]), "steps": net.steps_trained, "seconds": round(seconds, 1),
             "hardware": hardware}
     save_net(net, cfg, args.out / "fill_net.pt", **info)
