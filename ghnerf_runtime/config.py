@@ -504,6 +504,13 @@ class NovelViewConfig:
             background; the floor keeps faint fog faint (at most ``1 / opaque_at`` brighter).
             Tuned on the ``val_seen_motions`` split, measured on the device's views in
             docs/runtime.md ("Novel-view quality"). 1.0: the raw composite.
+        proxy_blend: recolour the subject from the source crops at the depth of a body proxy built from
+            the pair's 3D joints (``ghnerf_runtime.proxy_blend``): the pixels the proxy covers and some
+            source sees get the average of those sources' pixels, the rest keep the rendered picture.
+            The proxy's depth is nearer the truth than the model's; measured in docs/runtime.md
+            ("Recolouring from the body proxy"). Off: the rendered picture alone.
+        proxy_tolerance_m: with ``proxy_blend``, a source sees a surface point when the proxy's own
+            depth in that source is this close to the point's (metres).
     """
 
     enabled: bool = False
@@ -517,9 +524,13 @@ class NovelViewConfig:
     interior_stride: int = 0
     overlap: bool = True
     opaque_at: float = 0.5
+    proxy_blend: bool = False
+    proxy_tolerance_m: float = 0.03
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        _boolean(self, "proxy_blend")
+        _number(self, "proxy_tolerance_m", 0.001, 0.5)
         _number(self, "opaque_at", 0.05, 1.0)
         _integer(self, "stride", 1, 4)
         _choice(self, "stride", (1, 2, 4))

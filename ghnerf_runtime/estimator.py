@@ -26,7 +26,9 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    (or dropped when too few joints were found).
 7. on request, ``novel_volume`` / ``novel_render`` / ``novel_compose`` -- the novel view. On a
    tracked pair it is rendered in a worker thread during stages 5-6 (``novel_view.overlap``),
-   so these stage times overlap the keypoint stages and ``total`` is less than their sum.
+   so these stage times overlap the keypoint stages and ``total`` is less than their sum. With
+   ``novel_view.proxy_blend``, ``novel_proxy`` then recolours it at the depth of the body proxy of
+   this pair's joints (:mod:`ghnerf_runtime.proxy_blend`), in this thread, once the joints are known.
 
 Every output is finite; a missing joint has coordinates 0, confidence 0 and ``missing`` set.
 Joints are only ever this pair's: the track only places the next crop.
@@ -47,6 +49,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
+from ghnerf_runtime.body_proxy import proxy_body
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
 from ghnerf_runtime.errors import FrameError, ModelError
@@ -58,12 +61,14 @@ from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presen
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, Keypoints2D, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton, heatmap_overlay, \
     interpolate_camera, novel_target, render_novel_view
+from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend
 from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
-__all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES"]
+__all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
+           "NOVEL_PROXY_STAGE"]
 
 #: Skeleton prior: confidence = exp(-expected error / this).
 _PRIOR_CONFIDENCE_SCALE_M = 0.1
@@ -73,6 +78,8 @@ _PRIOR_FOLLOW_MAX_ERROR_M = 0.25
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_heat", "decode_2d", "joints_3d")
 #: Stage keys of the novel view.
 NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
+#: With ``novel_view.proxy_blend`` only.
+NOVEL_PROXY_STAGE = "novel_proxy"
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,6 +204,7 @@ class _Pass:
     conf_2d: dict | None = None
     missing_2d: dict | None = None
     novel: Future | None = None  # the novel view rendering in the worker (overlap)
+    crops: list | None = None  # the source crop cameras (the novel view's proxy blend reads them)
 
 
 @dataclass
@@ -405,6 +413,8 @@ class Estimator:
                 timing.update(novel_timing)
             else:
                 nv = self._render_novel(novel_view, p.env, self._novel_box(p.regions, p.j3), timing)
+            if self.config.novel_view.proxy_blend:
+                nv = self._proxy_blend(nv, p, timing)
             nv = self._compose_novel(novel_view, nv, p.j3, timing)
         points = p.j3.points
         if self._smoother is not None:
@@ -527,7 +537,7 @@ class Estimator:
         follow = self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         _add_ms(timing, "joints_3d", t)
-        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job)
+        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job, crops)
 
     def _flip_test(self, batch: np.ndarray, heat: np.ndarray, timing: dict,
                    src_P: np.ndarray | None = None) -> np.ndarray:
@@ -699,6 +709,22 @@ class Estimator:
             return self._render_novel(request, feeds, box, timing), timing
 
         return self._worker.submit(job, dict(env))
+
+    def _proxy_blend(self, nv: NovelView, p: "_Pass", timing: dict) -> NovelView:
+        """``novel_view.proxy_blend``: the view's subject recoloured from the source crops at the depth of
+        the body proxy of this pair's joints (``ghnerf_runtime.proxy_blend``); unchanged without joints."""
+        t = time.perf_counter()
+        body = proxy_body(p.j3.points, p.j3.valid)
+        if not body.empty:
+            cfg = self.config.novel_view
+            rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation)
+            # the subject as rendered: the colour test of the coarse pass (silhouette_min_diff)
+            shown = np.abs(nv.image.astype(np.float32) / 255.0 - self.contract.background).max(axis=-1)
+            blended = proxy_blend(nv.image, nv.camera, body, p.crops, rgb, cfg.proxy_tolerance_m,
+                                  region=shown >= cfg.silhouette_min_diff)
+            nv = NovelView(blended.image, nv.camera, nv.depth, nv.heat, nv.rays)
+        timing[NOVEL_PROXY_STAGE] = 1e3 * (time.perf_counter() - t)
+        return nv
 
     def _compose_novel(self, request: NovelViewRequest, nv: NovelView, j3: Joints3D, timing: dict) -> NovelView:
         """The requested overlay on the rendered view (the pair's own joints)."""

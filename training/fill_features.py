@@ -9,7 +9,10 @@ lever, which the model does not yet pull: docs/training.md, "Painting the unseen
 skeleton"). Given a GHNeRF checkpoint (``cache_split(model=...)``), everything a device would read
 comes from that model instead (its depth at every view, its opacity above 0.5 as the subject, its
 picture as the runtime shows it at ``novel_view.opaque_at``) but the 3D joints; the view's image and
-mask stay the target.
+mask stay the target. Given also the device's 3D joints (``cache_split(joints=...)``,
+``training.device_joints``), the geometry is instead the body proxy built from them
+(``training.body_proxy``, the template's mean girth) and the joints are those too: then nothing but the
+target comes from the truth.
 
 Per novel view with a non-empty subject mask (numpy, one array per field, views stacked):
 
@@ -26,7 +29,7 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
 * ``light`` ``(4,)`` float32: the fitted key light's direction in the camera frame and its ambient
   share (zeros when nothing was seen to fit it);
 * ``angle`` float32: the view's angle from the nearest source camera (``ghnerf-eval``'s bins);
-* ``scene``, ``view`` int32: where it came from; ``geometry``: ``truth`` or ``model``.
+* ``scene``, ``view`` int32: where it came from; ``geometry``: ``truth``, ``model`` or ``proxy``.
 
 Cached as one uncompressed ``.npz`` per split (about 250 KB per view at 128x128).
 """
@@ -71,12 +74,13 @@ def modelled_scene(scene: Mapping[str, np.ndarray], depth: np.ndarray, acc: np.n
 
 def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting | None,
                   angle: float, index: int = -1, truth: Mapping[str, np.ndarray] | None = None,
-                  shown: np.ndarray | None = None) -> dict[str, np.ndarray] | None:
+                  shown: np.ndarray | None = None, geometry: str | None = None) -> dict[str, np.ndarray] | None:
     """One novel view's features (module docstring); ``None`` when the subject is not in it.
 
     ``scene`` carries the geometry (the truth, or :func:`modelled_scene`); ``truth`` the dataset item
     whose image and mask are the target (default ``scene``); ``shown`` the model's picture ``(H, W, 3)``
-    (default: none, ``relit`` stands in)."""
+    (default: none, ``relit`` stands in); ``geometry`` the label (default: ``truth`` without ``shown``,
+    else ``model``)."""
     truth = scene if truth is None else truth
     subject = np.asarray(truth["tgt_masks"][view], bool)
     if not subject.any():
@@ -104,29 +108,36 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
         "depth": z.astype(np.float16),
         "joints": np.stack([np.where(valid, u, 0.0), np.where(valid, v, 0.0), valid], -1).astype(np.float32),
         "light": light, "angle": np.float32(angle), "scene": np.int32(index), "view": np.int32(view),
-        "geometry": np.str_("truth" if shown is None else "model"),
+        "geometry": np.str_(geometry or ("truth" if shown is None else "model")),
     }
 
 
 def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int = PART_BINS,
-                   renderer=None) -> list[dict[str, np.ndarray]]:
+                   renderer=None, joints: np.ndarray | None = None) -> list[dict[str, np.ndarray]]:
     """Features of every novel view of one dataset item (numpy arrays) that shows the subject.
 
     ``renderer``: a ``training.evaluate.TorchRenderer`` whose geometry and picture (at the runtime's
-    ``novel_view.opaque_at``) replace the truth's; default the true geometry."""
+    ``novel_view.opaque_at``) replace the truth's; default the true geometry. ``joints``: with a
+    renderer, the device's ``(25, 3)`` joints, whose body proxy is the geometry (module docstring)."""
     from training.evaluate import source_angles_deg  # noqa: PLC0415 - torch-side module, loaded late
 
     if not np.asarray(scene["tgt_has_depth"], bool).all():
         return []  # no true depth (ZJU-MoCap): nothing to paint against
     V = len(scene["tgt_is_source"])
     angles = source_angles_deg(scene, np.arange(V))
-    geometry, shown = scene, [None] * V
+    geometry, shown, label = scene, [None] * V, None
     if renderer is not None:
         from ghnerf_runtime.config import NovelViewConfig  # noqa: PLC0415
         from ghnerf_runtime.novel_view import opaque_colour  # noqa: PLC0415
 
         rgb, depth, acc = render_views(renderer, scene)
         geometry = modelled_scene(scene, depth, acc)
+        if joints is not None:
+            from training.body_proxy import proxy_scene  # noqa: PLC0415
+
+            valid = np.ones(len(joints), bool)
+            geometry, _ = proxy_scene({**scene, "joints_3d": joints, "joints_3d_valid": valid}, joints, valid)
+            label = "proxy"
         at = NovelViewConfig().opaque_at
         shown = [opaque_colour(rgb[t].reshape(-1, 3), acc[t].ravel(), renderer.background, at).reshape(rgb[t].shape)
                  for t in range(V)]
@@ -135,7 +146,7 @@ def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int =
     for t in range(V):
         if scene["tgt_is_source"][t]:
             continue
-        f = view_features(geometry, t, lighting, float(angles[t]), index, truth=scene, shown=shown[t])
+        f = view_features(geometry, t, lighting, float(angles[t]), index, truth=scene, shown=shown[t], geometry=label)
         if f is not None:
             out.append(f)
     return out
@@ -144,7 +155,7 @@ def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int =
 _WORKER: dict = {}
 
 
-def _open(data: str, split: str, bins: int, model: str | None) -> None:
+def _open(data: str, split: str, bins: int, model: str | None, joints: str | None = None) -> None:
     import torch  # noqa: PLC0415
 
     from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
@@ -156,12 +167,22 @@ def _open(data: str, split: str, bins: int, model: str | None) -> None:
 
         torch.set_num_threads(1)  # one scene per process
         renderer = TorchRenderer(load_model(Path(model))[0])
-    _WORKER.update(ds=MultiViewDataset(data, split=split), bins=bins, renderer=renderer)
+    if joints:
+        from training.device_joints import load_joints  # noqa: PLC0415
+
+        joints = load_joints(joints)
+    _WORKER.update(ds=MultiViewDataset(data, split=split), bins=bins, renderer=renderer, joints=joints)
 
 
 def _one(index: int) -> list[dict[str, np.ndarray]]:
     scene = {k: v.numpy() for k, v in _WORKER["ds"][index].items()}
-    return scene_features(scene, index, _WORKER["bins"], _WORKER["renderer"])
+    joints = _WORKER["joints"]
+    if joints is not None and index >= len(joints):
+        from training.device_joints import JointsCacheError  # noqa: PLC0415
+
+        raise JointsCacheError(f"the joints cache holds {len(joints)} scenes; scene {index} asked for")
+    return scene_features(scene, index, _WORKER["bins"], _WORKER["renderer"],
+                          None if joints is None else joints[index])
 
 
 def stack(views: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -171,24 +192,29 @@ def stack(views: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
 
 
 def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, workers: int = 2,
-                bins: int = PART_BINS, model: str | Path | None = None, log=print) -> Path:
+                bins: int = PART_BINS, model: str | Path | None = None, joints: str | Path | None = None,
+                log=print) -> Path:
     """Compute the features of a split's first ``limit`` scenes (0: all) and write them to ``out`` (.npz).
 
-    ``model``: a GHNeRF checkpoint whose geometry and picture replace the truth's (module docstring)."""
+    ``model``: a GHNeRF checkpoint whose geometry and picture replace the truth's; ``joints``: with it,
+    a ``training.device_joints`` cache of the same split whose body proxy is the geometry (module
+    docstring)."""
     from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
 
+    if joints is not None and model is None:
+        raise ValueError("a joints cache takes a model too (its picture is the one repainted)")
     n = len(MultiViewDataset(data, split=split))
     n = min(limit, n) if limit else n
     t0, views = time.monotonic(), []
     if workers > 1:
-        init = (str(data), split, bins, model and str(model))
+        init = (str(data), split, bins, model and str(model), joints and str(joints))
         with mp.get_context("spawn").Pool(workers, initializer=_open, initargs=init) as pool:
             for i, fs in enumerate(pool.imap(_one, range(n), chunksize=4)):
                 views.extend(fs)
                 if (i + 1) % 256 == 0:
                     log(f"  {split}: {i + 1}/{n} scenes, {time.monotonic() - t0:.0f} s")
     else:
-        _open(str(data), split, bins, model and str(model))  # in this process
+        _open(str(data), split, bins, model and str(model), joints and str(joints))  # in this process
         for i in range(n):
             views.extend(_one(i))
     out = Path(out)

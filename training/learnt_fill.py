@@ -17,7 +17,9 @@ side", has the figures.
     python -m training.learnt_fill score --val-cache fill_val.npz --net runs/fill/fill_net.pt
 
 The same on a model's geometry and picture (``cache --model models/ghnerf/ghnerf.pt`` for both
-caches, ``train --set net.shown_input=true``): what the painter would give on a device today.
+caches, ``train --set net.shown_input=true``): what the painter would give on a device today. With
+``cache --model ... --joints <training.device_joints cache>`` the geometry is the body proxy built from
+the device's joints instead (``training.body_proxy``; the model's picture is still the one repainted).
 
 ``train`` takes the GPU when torch sees one (``--device``) and prints the held-out table at the end
 (also written to ``<out>/score.md``).
@@ -343,6 +345,9 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--workers", type=int, default=2)
     c.add_argument("--model", default=None, metavar="CKPT",
                    help="a GHNeRF checkpoint whose geometry and picture replace the truth's (default: the truth)")
+    c.add_argument("--joints", default=None, metavar="NPZ",
+                   help="with --model: the device's joints of the split (python -m training.device_joints), whose "
+                        "body proxy (training.body_proxy) is the geometry")
     c.add_argument("--out", required=True, type=Path)
     t = sub.add_parser("train", help="train the fill net and score it on the held-out cache")
     t.add_argument("--train-cache", required=True, type=Path)
@@ -362,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd == "cache":
         from training.fill_features import cache_split  # noqa: PLC0415
 
-        cache_split(args.data, args.split, args.out, args.limit, args.workers, model=args.model)
+        cache_split(args.data, args.split, args.out, args.limit, args.workers, model=args.model, joints=args.joints)
         return 0
     if args.cmd == "score":
         net = load_net(args.net, pick_device(args.device))

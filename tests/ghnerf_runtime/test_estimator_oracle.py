@@ -323,3 +323,36 @@ def test_rendered_heatmaps_place_the_next_crop_from_the_encoder_joints_when_foll
                                                    tracking=TrackingConfig(follow_encoder=follow),
                                                    presence=PresenceConfig(min_joints=25, min_confidence=1.0)))
     assert quiet.estimate(frames[1]).missing.all() and quiet.tracker.track is None
+
+
+@pytest.mark.parametrize("overlap", [True, False])
+def test_the_proxy_blend_recolours_the_novel_view_with_the_subjects_colours(clip, overlap):
+    """``novel_view.proxy_blend``: with the oracle's exact joints, the view's subject gets the source crops'
+    colours at the body proxy's depth, much nearer the simulator's picture than the oracle's flat paint;
+    it runs on the main thread after the joints (``novel_proxy``), and changes no joint."""
+    from benchmarks.bench_runtime_common import truth_view
+    from ghnerf_runtime.metrics import masked_psnr
+
+    rig, frames, truth, visible, *_ = clip
+    scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 3.0)))
+    runs = {}
+    for blend in (False, True):
+        oracle = OracleSession(edge128_contract())
+        cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, overlap=overlap, proxy_blend=blend))
+        with Estimator(oracle, rig, cfg) as est:
+            runs[blend] = []
+            for pair, j3, vis in zip(frames, truth, visible):
+                oracle.set_truth(j3, vis)
+                runs[blend].append(est.estimate(pair, novel_view=NovelViewRequest(alpha=0.5)))
+    gains = []
+    for i, (off, on) in enumerate(zip(runs[False], runs[True])):
+        np.testing.assert_array_equal(off.joints_3d, on.joints_3d)
+        assert "novel_proxy" in on.timing_ms and "novel_proxy" not in off.timing_ms
+        assert on.novel_view.camera is off.novel_view.camera or np.allclose(on.novel_view.camera.P,
+                                                                            off.novel_view.camera.P)
+        want, mask = truth_view(scene, on.novel_view.camera, i / 30, 0.0)
+        psnr = [masked_psnr(r.novel_view.image[..., ::-1] / 255.0, want, mask).value for r in (off, on)]
+        gains.append(psnr[1] - psnr[0])
+        changed = np.any(on.novel_view.image != off.novel_view.image, axis=-1)
+        assert changed.sum() > 0.5 * mask.sum()
+    assert min(gains) > 3.0, gains

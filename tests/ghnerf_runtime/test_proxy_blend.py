@@ -1,0 +1,150 @@
+"""The body proxy built from 3D joints (``ghnerf_runtime.body_proxy``) and the novel view recoloured at its
+depth (``ghnerf_runtime.proxy_blend``), against the simulator's truth."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.body25 import JOINT_INDEX
+from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
+from ghnerf_runtime.config import ConfigError, NovelViewConfig
+from ghnerf_runtime.contract import Normalisation
+from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.metrics import masked_psnr
+from ghnerf_runtime.novel_view import interpolate_camera, novel_target
+from ghnerf_runtime.preprocess import Roi, build_undistort_crop_maps, preprocess_image
+from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend
+
+sim = pytest.importorskip("drivers.sim")
+T = 0.1
+
+
+@pytest.fixture(scope="module", params=[5, 11])
+def shot(request):
+    """A simulated person, two source crops around it and a target between the rig's cameras."""
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=request.param, motion="wave"))
+    joints = scene.joints_3d(T)
+    box = np.stack([joints.min(0) - 0.15, joints.max(0) + 0.15])
+    sources = [novel_target(c, box, 128) for c in rig.pair]
+    rgb = np.stack([scene.render(c, T, with_truth=False)[0][..., ::-1].astype(np.float32) / 255 for c in sources])
+    target = novel_target(interpolate_camera(*rig.pair, 0.5), box, 128)
+    image, truth = scene.render(target, T)
+    return joints, sources, rgb, target, image, truth
+
+
+def test_the_proxy_of_the_true_joints_lies_on_the_simulated_body(shot):
+    joints, _, _, target, _, truth = shot
+    depth = proxy_depth(proxy_body(joints, np.ones(25, bool)), target)
+    hit = depth > 0
+    assert (hit & truth.mask).sum() / (hit | truth.mask).sum() > 0.8
+    assert np.median(np.abs(depth - truth.depth)[hit & truth.mask]) < 0.02
+
+
+def test_the_blend_at_the_proxy_depth_gives_the_subject_its_own_colours(shot):
+    joints, sources, rgb, target, image, truth = shot
+    grey = np.full((128, 128, 3), 77, np.uint8)
+    out = proxy_blend(grey, target, proxy_body(joints, np.ones(25, bool)), sources, rgb)
+    r = out.replaced
+    assert r.sum() > 1000 and (r & truth.mask).sum() / r.sum() > 0.85  # it recolours the subject
+    assert np.array_equal(out.image[~r], grey[~r])  # and nothing else
+    pred, want = out.image[..., ::-1] / 255.0, image[..., ::-1] / 255.0
+    assert masked_psnr(pred, want, r & truth.mask).value > 23.0
+    assert np.array_equal(r, r & (out.depth > 0))
+
+
+def test_at_a_source_cameras_own_viewpoint_its_pixels_are_copied(shot):
+    """The angular weights: on the first source's own rays its colour dominates, whatever the proxy's depth
+    error, so the blend there is that source's image."""
+    joints, sources, rgb, _, _, _ = shot
+    out = proxy_blend(np.zeros((128, 128, 3), np.uint8), sources[0], proxy_body(joints, np.ones(25, bool)),
+                      sources, rgb)
+    r = out.replaced
+    assert r.sum() > 1000
+    assert masked_psnr(out.image[..., ::-1] / 255.0, rgb[0].astype(np.float64), r).value > 35.0
+
+
+def test_only_the_region_given_is_recoloured(shot):
+    joints, sources, rgb, target, _, truth = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    out = proxy_blend(np.zeros((128, 128, 3), np.uint8), target, body, sources, rgb, region=truth.mask)
+    assert out.replaced.any() and not out.replaced[~truth.mask].any()
+    with pytest.raises(ShapeError, match="region must be"):
+        proxy_blend(np.zeros((128, 128, 3), np.uint8), target, body, sources, rgb, region=truth.mask[:64])
+
+
+def test_a_source_behind_the_body_lends_no_colour(shot):
+    """Visibility: a surface point is coloured only by sources whose own proxy depth there is its depth."""
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    # the same target seen from behind the subject: the rig's cameras see only its other side
+    behind = novel_target(interpolate_camera(*[_mirror(c, joints) for c in sources], 0.5), _box(joints), 128)
+    out = proxy_blend(np.zeros((128, 128, 3), np.uint8), behind, body, sources, rgb)
+    front = proxy_blend(np.zeros((128, 128, 3), np.uint8), target, body, sources, rgb)
+    assert out.replaced.sum() < 0.5 * front.replaced.sum()
+    assert (out.depth > 0).sum() > 0.5 * (front.depth > 0).sum()  # the proxy is there, unseen
+
+
+def _box(joints):
+    return np.stack([joints.min(0) - 0.15, joints.max(0) + 0.15])
+
+
+def _mirror(camera, joints):
+    """``camera`` moved to the other side of the subject (its centre mirrored through the body's), looking at it."""
+    from ghnerf_runtime.geometry.camera import Camera, look_at
+
+    centre = joints.mean(0)
+    R, t = look_at(2 * centre - camera.center, centre)
+    return Camera("behind", camera.width, camera.height, camera.K, np.zeros(5), R, t)
+
+
+def test_missing_joints_drop_their_parts_and_no_joints_leave_the_view_alone(shot):
+    joints, sources, rgb, target, _, _ = shot
+    valid = np.ones(25, bool)
+    valid[[JOINT_INDEX["LKnee"], JOINT_INDEX["RKnee"]]] = False
+    fewer = proxy_body(joints, valid)
+    assert len(fewer.cone_a) == len(proxy_body(joints, np.ones(25, bool)).cone_a) - 4
+    nan = joints.copy()
+    nan[JOINT_INDEX["LWrist"]] = np.nan  # a NaN joint counts as missing, never a NaN depth
+    assert np.isfinite(proxy_depth(proxy_body(nan, np.ones(25, bool)), target)).all()
+    empty = proxy_body(joints, np.zeros(25, bool))
+    assert isinstance(empty, BodyProxy) and empty.empty
+    image = np.full((128, 128, 3), 9, np.uint8)
+    out = proxy_blend(image, target, empty, sources, rgb)
+    assert np.array_equal(out.image, image) and not out.replaced.any()
+
+
+def test_bad_inputs_are_named(shot):
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    with pytest.raises(ShapeError, match="image must be uint8"):
+        proxy_blend(np.zeros((64, 64, 3), np.uint8), target, body, sources, rgb)
+    with pytest.raises(ShapeError, match="2 source cameras for 1 source images"):
+        proxy_blend(np.zeros((128, 128, 3), np.uint8), target, body, sources, rgb[:1])
+    with pytest.raises(ShapeError, match="does not match its camera"):
+        proxy_blend(np.zeros((128, 128, 3), np.uint8), target, body, sources, rgb[:, :64])
+    with pytest.raises(ShapeError, match=r"\(N, 3, S, S\)"):
+        model_input_to_rgb(np.zeros((3, 8, 8)), Normalisation())
+
+
+@pytest.mark.parametrize("norm", [Normalisation(), Normalisation(channel_order="BGR", mean_std_in_graph=False),
+                                  Normalisation(value_range=(-1.0, 1.0), mean_std_in_graph=False)])
+def test_model_input_to_rgb_undoes_the_preprocessing(norm):
+    from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov
+
+    rng = np.random.default_rng(3)
+    frame = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    cam = Camera("c", 64, 48, intrinsics_from_fov(64, 48, 60.0))
+    maps = build_undistort_crop_maps(cam, Roi(8, 4, 32), 16)
+    x = preprocess_image(frame, maps, norm)
+    rgb = model_input_to_rgb(x[None], norm)[0]
+    crop = preprocess_image(frame, maps, Normalisation(mean_std_in_graph=True))  # RGB in [0, 1]
+    assert np.allclose(rgb, crop.transpose(1, 2, 0), atol=1e-5)
+
+
+def test_proxy_blend_config_is_validated():
+    assert NovelViewConfig().proxy_blend is False
+    with pytest.raises(ConfigError, match="proxy_blend"):
+        NovelViewConfig(proxy_blend="yes")
+    with pytest.raises(ConfigError, match="proxy_tolerance_m"):
+        NovelViewConfig(proxy_tolerance_m=0.0)

@@ -1,0 +1,145 @@
+"""The body proxy built from 3D joints (``training.body_proxy``), the device's joints it is built from
+(``training.device_joints``) and the painter's caches on it (``training.fill_features``)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
+from training.body_proxy import (ProxyTemplate, fit_scale, iou, proxy_body, proxy_depth, proxy_scene,  # noqa: E402
+                                 view_camera)
+from training.device_joints import JointsCacheError, cache_joints, cache_true_joints, load_joints  # noqa: E402
+from training.fill_features import MASK_BIT, TRUTH_BIT, cache_split, load_cache  # noqa: E402
+
+SHIPPED = Path(__file__).resolve().parents[2] / "models" / "ghnerf"
+
+
+def _scenes(data, split="val"):
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(data, split=split)
+    return [{k: v.numpy() for k, v in ds[i].items()} for i in range(len(ds))]
+
+
+def test_the_proxy_from_the_true_joints_lies_on_the_true_surface(data64):
+    for scene in _scenes(data64):
+        body = proxy_body(scene["joints_3d"], scene["joints_3d_valid"])
+        for v in range(len(scene["tgt_is_source"])):
+            depth, mask = proxy_depth(body, view_camera(scene, v)), scene["tgt_masks"][v]
+            both = mask & (depth > 0)
+            assert iou(depth > 0, mask) > 0.6  # 64 px: the thin limbs are a pixel or two
+            assert np.median(np.abs(depth - scene["tgt_depth"][v])[both]) < 0.03
+
+
+def test_the_view_camera_projects_the_joints_where_the_dataset_does(data64):
+    scene = _scenes(data64)[0]
+    for v in range(len(scene["tgt_is_source"])):
+        uv, _ = view_camera(scene, v).project(scene["joints_3d"].astype(np.float64))
+        ok = scene["tgt_visible"][v]
+        assert np.allclose(uv[ok], scene["tgt_joints_2d"][v][ok], atol=1e-3)
+
+
+def test_the_girth_scale_is_recovered_from_silhouettes_and_widens_the_proxy(data64):
+    scene = _scenes(data64)[0]
+    j, ok = scene["joints_3d"], scene["joints_3d_valid"]
+    cams = [view_camera(scene, v) for v in (0, 1)]
+    wide = proxy_body(j, ok, scale=1.2)
+    masks = [proxy_depth(wide, c) > 0 for c in cams]
+    assert fit_scale(j, ok, cams, masks) == pytest.approx(1.2)
+    assert sum(m.sum() for m in masks) > sum((proxy_depth(proxy_body(j, ok), c) > 0).sum() for c in cams)
+
+
+def test_joints_that_are_not_valid_leave_their_primitives_out():
+    rng = np.random.default_rng(0)
+    joints = rng.normal(0.0, 0.3, (25, 3)) + np.array([0.0, 1.0, 3.0])
+    every = proxy_body(joints, np.ones(25, bool))
+    valid = np.ones(25, bool)
+    valid[JOINT_INDEX["RKnee"]] = False
+    fewer = proxy_body(joints, valid)
+    assert len(fewer.cone_a) == len(every.cone_a) - 2  # thigh and shin
+    assert len(proxy_body(joints, np.zeros(25, bool)).cone_a) == 0
+
+
+def test_a_proxy_scene_carries_the_proxy_depth_and_its_masks(data64):
+    scene = _scenes(data64)[0]
+    out, s = proxy_scene(scene, scene["joints_3d"], scene["joints_3d_valid"], scale=None)
+    assert 0.7 <= s <= 1.5
+    assert out["tgt_depth"].shape == scene["tgt_depth"].shape
+    assert np.array_equal(out["tgt_masks"], out["tgt_depth"] > 0)
+    assert out["images"] is scene["images"]
+    fixed, s1 = proxy_scene(scene, scene["joints_3d"], scene["joints_3d_valid"], template=ProxyTemplate())
+    assert s1 == 1.0 and fixed["tgt_masks"].any()
+
+
+@pytest.fixture(scope="module")
+def data128(tmp_path_factory):
+    """One 128 px val scene: the shipped model's resolution."""
+    from training.data.generate import main as generate
+
+    out = tmp_path_factory.mktemp("data128")
+    generate(["--out", str(out), "--train", "0", "--val", "1", "--val-seen-motions", "0", "--res", "128",
+              "--workers", "1"])
+    return out
+
+
+@pytest.mark.skipif(not (SHIPPED / "skeleton_prior.onnx").exists(), reason="no shipped model folder")
+def test_the_device_joints_come_from_the_shipped_model_near_the_truth(data128, tmp_path):
+    path = cache_joints(data128, "val", SHIPPED, tmp_path / "j.npz", log=lambda *_: None)
+    joints = load_joints(path, 1)
+    scene = _scenes(data128)[0]
+    err = np.linalg.norm(joints[0] - scene["joints_3d"], axis=-1)[scene["joints_3d_valid"]]
+    assert np.isfinite(joints).all() and np.median(err) < 0.08
+
+
+def test_the_true_joints_cache_holds_the_dataset_joints(data64, tmp_path):
+    path = cache_true_joints(data64, "val", tmp_path / "t.npz", log=lambda *_: None)
+    scenes = _scenes(data64)
+    joints = load_joints(path, len(scenes))
+    assert np.allclose(joints, np.stack([s["joints_3d"] for s in scenes]))
+
+
+def test_a_broken_joints_cache_is_named(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(JointsCacheError, match="bad.npz"):
+        load_joints(bad)
+    np.savez(tmp_path / "shape.npz", joints=np.zeros((2, 24, 3)))
+    with pytest.raises(JointsCacheError, match=r"\(2, 24, 3\)"):
+        load_joints(tmp_path / "shape.npz")
+    np.savez(tmp_path / "short.npz", joints=np.zeros((2, 25, 3)))
+    with pytest.raises(JointsCacheError, match="holds 2 scenes, 5 asked for"):
+        load_joints(tmp_path / "short.npz", 5)
+
+
+def test_a_proxy_cache_takes_its_geometry_and_joints_from_the_device_joints(data64, tmp_path):
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    scenes = _scenes(data64)
+    joints = np.stack([s["joints_3d"] + 0.01 for s in scenes]).astype(np.float32)  # 1 cm off the truth
+    np.savez(tmp_path / "joints.npz", joints=joints)
+    model = GHNeRF(preset("tiny"))
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, tmp_path / "tiny.pt")
+    path = cache_split(data64, "val", tmp_path / "val.npz", workers=1, model=tmp_path / "tiny.pt",
+                       joints=tmp_path / "joints.npz", log=lambda *_: None)
+    a = load_cache(path)
+    assert (a["geometry"] == "proxy").all()
+    for k in range(len(a["angle"])):
+        scene = scenes[int(a["scene"][k])]
+        t = int(a["view"][k])
+        body = proxy_body(joints[int(a["scene"][k])], np.ones(25, bool))
+        proxy_mask = proxy_depth(body, view_camera(scene, t)) > 0
+        assert np.array_equal((a["flags"][k] & MASK_BIT) > 0, proxy_mask)
+        assert np.array_equal((a["flags"][k] & TRUTH_BIT) > 0, scene["tgt_masks"][t])
+        uv, _ = view_camera(scene, t).project(joints[int(a["scene"][k])].astype(np.float64))
+        assert np.allclose(a["joints"][k][:, :2], uv, atol=1e-2)
+    with pytest.raises(ValueError, match="takes a model"):
+        cache_split(data64, "val", tmp_path / "x.npz", workers=1, joints=tmp_path / "joints.npz")
+    np.savez(tmp_path / "one.npz", joints=joints[:1])
+    with pytest.raises(JointsCacheError, match="holds 1 scenes"):
+        cache_split(data64, "val", tmp_path / "y.npz", workers=1, model=tmp_path / "tiny.pt",
+                    joints=tmp_path / "one.npz", log=lambda *_: None)

@@ -1,0 +1,132 @@
+"""The 3D joints a device estimates for dataset scenes, cached per split.
+
+What the runtime's 3D path gives for a pair of source images: the model folder's human encoder
+heatmaps, flip-tested (averaged with those of the mirrored images), decoded, and lifted to 3D by the
+folder's skeleton prior (``ghnerf_runtime.skeleton_prior``), exactly as ``ghnerf-eval`` scores it
+(``training.evaluate.scene_metrics``: the model card's "MPJPE mm, skeleton prior" column). The
+geometry built from joints (``training.body_proxy``) reads these, never the dataset's true joints,
+when it stands for what a device could do.
+
+    python -m training.device_joints --data out/s26/data --split val --limit 256 \
+        --model models/ghnerf --out out/s34/joints_val.npz
+
+``--truth`` writes the dataset's true joints in the same format instead (an oracle, for measuring
+what better joints would give).
+
+Cached fields: ``joints`` ``(N, 25, 3)`` float32 (rig frame, metres), ``expected_error_m`` ``(N, 25)``
+(the prior's own estimate), ``index`` ``(N,)`` the dataset items.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from ghnerf_runtime.flip_test import flip_averaged, mirror_images
+
+
+class JointsCacheError(ValueError):
+    """A joints cache that is missing, broken or does not cover the scenes asked for."""
+
+
+def estimate_joints(renderer, scene: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """``(25, 3)`` joints and ``(25,)`` expected errors (m) of one scene from a
+    ``training.evaluate.OnnxRenderer`` whose folder has a skeleton prior."""
+    from training.evaluate import _decode  # noqa: PLC0415 - torch-side module, loaded late
+
+    if renderer.skeleton_prior is None:
+        raise JointsCacheError("the model folder has no skeleton prior the runtime accepts")
+    enc = renderer.encoder_heatmaps(scene)
+    if enc is None:
+        raise JointsCacheError("the model's encoder graph has no encoder_heatmaps output")
+    maps = flip_averaged(enc, renderer.encoder_heatmaps({"images": mirror_images(scene["images"])}))
+    uv, conf = _decode(maps, renderer.height, None)
+    est = renderer.skeleton_prior.estimate(np.nan_to_num(uv), conf, np.isfinite(uv).all(-1),
+                                           np.asarray(scene["src_P"], np.float64))
+    return np.asarray(est.points, np.float32), np.asarray(est.expected_error_m, np.float32)
+
+
+def cache_joints(data: str | Path, split: str, model: str | Path, out: str | Path, limit: int = 0,
+                 precision: str = "int8", threads: int = 1, log=print) -> Path:
+    """Estimate the joints of a split's first ``limit`` scenes (0: all) and write them to ``out`` (.npz)."""
+    from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
+    from training.evaluate import OnnxRenderer  # noqa: PLC0415
+
+    renderer = OnnxRenderer(model, precision, threads)
+    ds = MultiViewDataset(data, split=split)
+    n = min(limit, len(ds)) if limit else len(ds)
+    t0 = time.monotonic()
+    joints, errors = [], []
+    for i in range(n):
+        scene = {k: v.numpy() for k, v in ds[i].items()}
+        p, e = estimate_joints(renderer, scene)
+        joints.append(p)
+        errors.append(e)
+        if (i + 1) % 256 == 0:
+            log(f"  {split}: {i + 1}/{n} scenes, {time.monotonic() - t0:.0f} s")
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(out, joints=np.stack(joints), expected_error_m=np.stack(errors), index=np.arange(n, dtype=np.int32))
+    log(f"{out}: joints of {n} {split} scenes in {time.monotonic() - t0:.0f} s")
+    return out
+
+
+def cache_true_joints(data: str | Path, split: str, out: str | Path, limit: int = 0, log=print) -> Path:
+    """The dataset's own 3D joints of a split's first ``limit`` scenes, cached as :func:`cache_joints`
+    caches a device's (invalid joints, which the dataset marks, are written as they are)."""
+    from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
+
+    ds = MultiViewDataset(data, split=split)
+    n = min(limit, len(ds)) if limit else len(ds)
+    joints = np.stack([ds[i]["joints_3d"].numpy() for i in range(n)]).astype(np.float32)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(out, joints=joints, expected_error_m=np.zeros(joints.shape[:2], np.float32),
+             index=np.arange(n, dtype=np.int32))
+    log(f"{out}: true joints of {n} {split} scenes")
+    return out
+
+
+def load_joints(path: str | Path, n: int = 0) -> np.ndarray:
+    """The cached ``(N, 25, 3)`` joints; ``n``: how many scenes they must cover at least."""
+    path = Path(path)
+    try:
+        with np.load(path) as z:
+            joints = np.asarray(z["joints"], np.float64)
+    except (OSError, ValueError, KeyError) as e:
+        raise JointsCacheError(f"{path}: not a joints cache ({e})") from e
+    if joints.ndim != 3 or joints.shape[1:] != (25, 3):
+        raise JointsCacheError(f"{path}: joints have shape {joints.shape}, expected (N, 25, 3)")
+    if len(joints) < n:
+        raise JointsCacheError(f"{path}: holds {len(joints)} scenes, {n} asked for")
+    return joints
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--split", default="val")
+    ap.add_argument("--limit", type=int, default=0, help="first N scenes (0: all)")
+    ap.add_argument("--model", default="models/ghnerf", help="a model folder with a skeleton prior")
+    ap.add_argument("--precision", choices=["fp32", "int8"], default="int8")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--truth", action="store_true", help="cache the dataset's true joints instead (an oracle)")
+    ap.add_argument("--out", required=True)
+    args = ap.parse_args(argv)
+    if args.truth:
+        cache_true_joints(args.data, args.split, args.out, args.limit)
+        return 0
+    try:
+        cache_joints(args.data, args.split, args.model, args.out, args.limit, args.precision, args.threads)
+    except (JointsCacheError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
