@@ -158,14 +158,18 @@ def run_runtime_bench(args) -> dict:
                 flip_cfg = replace(flip_cfg, tracking=replace(flip_cfg.tracking, follow_encoder=follow))
             if smooth is not None:
                 flip_cfg = replace(flip_cfg, smoothing=replace(flip_cfg.smoothing, enabled=smooth))
-            for interior in ((args.novel_interior_strides or [None]) if mode == "novel" else [None]):
+            novel_rows = itertools.product(args.novel_interior_strides or [None], args.proxy_blends or [None]) \
+                if mode == "novel" else [(None, None)]
+            for interior, blend in novel_rows:
                 row_cfg = flip_cfg if interior is None else \
                     replace(flip_cfg, novel_view=replace(flip_cfg.novel_view, interior_stride=interior))
+                if blend is not None:
+                    row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, proxy_blend=blend))
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
                              "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
                              "flip_label": flip is not None, "follow_label": follow is not None,
                              "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
-                             "smoothing_label": smooth is not None})
+                             "smoothing_label": smooth is not None, "proxy_label": blend is not None})
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
@@ -188,7 +192,8 @@ def run_runtime_bench(args) -> dict:
                "prior_label": row["prior_label"], "prior_flip_test": cfg.joints3d.prior_flip_test,
                "prior_flip_label": row["prior_flip_label"],
                "smoothing": cfg.smoothing.enabled, "smoothing_label": row["smoothing_label"],
-               **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride}
+               **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
+                   "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"]}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
                "accuracy": row["accuracy"].summary(), "load_average": float(np.mean(loads))}
@@ -211,6 +216,8 @@ def _print_row(row: dict) -> None:
         tracked += " prior-flip" if row["prior_flip_test"] else " prior-no-flip"
     if row.get("smoothing_label"):
         tracked += " smooth" if row["smoothing"] else " no-smooth"
+    if row.get("proxy_label"):
+        tracked += " proxy-blend" if row["proxy_blend"] else " no-proxy-blend"
     if row.get("novel_interior_stride") and row["novel_interior_stride"] > row.get("novel_stride", 1):
         tracked += f" interior/{row['novel_interior_stride']}"
     acc = row["accuracy"]
@@ -277,6 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--smoothing", default=None, type=_on_off_list,
                     help="comma list of smoothing.enabled values (on,off), one row each (interleaved; default: "
                          "the config's, on)")
+    rt.add_argument("--proxy-blends", default=None, type=_on_off_list,
+                    help="comma list of novel_view.proxy_blend values (on,off), one novel row each (default: the "
+                         "config's)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

@@ -206,6 +206,20 @@ def test_bench_runtime_compares_novel_interior_strides_side_by_side(tiny_model_d
     assert all(r["pairs"] == 4 and r["mode"] == "keypoints+novel" for r in runs)
 
 
+def test_bench_runtime_compares_the_proxy_blend_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    assert bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "2",
+                       "--precisions", "fp32", "--heatmap-sources", "encoder", "--modes", "keypoints,novel",
+                       "--warmup", "0", "--proxy-blends", "off,on", "--cache", str(tmp_path / "cache"),
+                       "--json", str(report_path)]) == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    assert [(r["mode"], r.get("proxy_blend")) for r in runs] == [
+        ("keypoints", None), ("keypoints+novel", False), ("keypoints+novel", True)]
+    assert "no-proxy-blend" in capsys.readouterr().out
+
+
 def test_bench_runtime_compares_the_flip_test_and_encoder_following_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
     from ghnerf_runtime.cli import bench
 

@@ -143,7 +143,7 @@ def test_model_input_to_rgb_undoes_the_preprocessing(norm):
 
 
 def test_proxy_blend_config_is_validated():
-    assert NovelViewConfig().proxy_blend is False
+    assert NovelViewConfig().proxy_blend is True
     with pytest.raises(ConfigError, match="proxy_blend"):
         NovelViewConfig(proxy_blend="yes")
     with pytest.raises(ConfigError, match="proxy_tolerance_m"):
