@@ -20,6 +20,10 @@ Per novel view of each held-out scene, by its angle from the nearest source (``g
   pixels of the proxy some source sees and the model's picture on every other. Subject pixels the
   proxy misses keep the model's picture in every column but ``proxy only``: the blend on the proxy's
   pixels and the background elsewhere, no network rendering at all.
+* ``runtime``: what the runtime shows by default, the model's picture recoloured by
+  ``ghnerf_runtime.proxy_blend`` with the device proxy and the runtime's defaults (angular weights,
+  only where the picture shows the subject and a source sees the point within
+  ``novel_view.proxy_max_angle_deg`` of the view's ray).
 * ``ceiling`` and ``fill:relit``: the same blend and fill on the true geometry (session 27's columns).
 * ``--guided``: the network itself given the better depth, without retraining: its fine level's
   planes placed around a guide depth (``guide_std`` wide) instead of around its coarse level's
@@ -42,7 +46,9 @@ from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from training.blend_ceiling import blend_sources  # noqa: E402
-from training.body_proxy import proxy_scene  # noqa: E402
+from ghnerf_runtime.body_proxy import proxy_body  # noqa: E402
+from ghnerf_runtime.proxy_blend import proxy_blend  # noqa: E402
+from training.body_proxy import proxy_scene, view_camera  # noqa: E402
 from training.evaluate import SOURCE_ANGLE_BINS_DEG  # noqa: E402
 from training.unseen_fill import fit_lighting, relit_fill, seen_surface  # noqa: E402
 
@@ -141,6 +147,9 @@ def main(argv: list[str] | None = None) -> int:
         valid = np.ones(25, bool)
         dev, scale = proxy_scene({**scene, "joints_3d": device_joints[i], "joints_3d_valid": valid},
                                  device_joints[i], valid, args.scale, [acc[v] > 0.5 for v in src])
+        body = proxy_body(device_joints[i], valid)
+        src_cams = [view_camera(scene, v) for v in src]
+        src_rgb = np.ascontiguousarray(np.asarray(scene["images"]).transpose(0, 2, 3, 1))
         true_light = fit_lighting(seen_surface(scene))
         dev_light = fit_lighting(seen_surface(dev))
         guided = {}
@@ -165,6 +174,12 @@ def main(argv: list[str] | None = None) -> int:
             repainted = relit_fill(shown, dev, t, pd, unseen, mask=pm, lighting=dev_light)
             keep = pm[..., None]
             extra = {}
+            shown_u8 = np.round(np.clip(shown, 0, 1)[..., ::-1] * 255).astype(np.uint8)  # BGR, as the runtime's
+            region = np.abs(shown_u8 / 255.0 - renderer.background).max(-1) >= NovelViewConfig().silhouette_min_diff
+            nvc = NovelViewConfig()
+            runtime = proxy_blend(shown_u8, view_camera(scene, t), body, src_cams, src_rgb, nvc.proxy_tolerance_m,
+                                  region=region, max_angle_deg=nvc.proxy_max_angle_deg)
+            extra["runtime"] = psnr(runtime.image[..., ::-1] / 255.0, truth, mask)
             for name in ("proxy", "truth") if args.guided else ():
                 g_rgb, g_acc = guided[(name, t)]
                 g = opaque_colour(g_rgb, g_acc, renderer.background, at).reshape(rgb[t].shape)
@@ -188,7 +203,7 @@ def main(argv: list[str] | None = None) -> int:
 
     cols = ["model:depth_mm", "proxy:truth:depth_mm", "proxy:depth_mm", "cover", "ceiling", "fill:relit", "shown",
             "blend@proxy", "relit@proxy", "shown+relit",
-            "seen:blend", "proxy only"] + (["guided:proxy", "guided:truth"] if args.guided else [])
+            "seen:blend", "proxy only", "runtime"] + (["guided:proxy", "guided:truth"] if args.guided else [])
     edges = SOURCE_ANGLE_BINS_DEG
     groups = [(f"novel {lo:.0f}-{hi:.0f} deg", lambda r, lo=lo, hi=hi: lo <= r["angle"] < hi)
               for lo, hi in zip(edges[:-1], edges[1:])]

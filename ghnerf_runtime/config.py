@@ -512,6 +512,9 @@ class NovelViewConfig:
             the body proxy"). Off: the rendered picture alone.
         proxy_tolerance_m: with ``proxy_blend``, a source sees a surface point when the proxy's own
             depth in that source is this close to the point's (metres).
+        proxy_max_angle_deg: with ``proxy_blend``, a pixel is recoloured only when a source that sees its
+            point looks at it within this angle of the view's ray: views from far round the subject
+            are better left to the network (docs/runtime.md, "Recolouring from the body proxy").
     """
 
     enabled: bool = False
@@ -527,11 +530,13 @@ class NovelViewConfig:
     opaque_at: float = 0.5
     proxy_blend: bool = True
     proxy_tolerance_m: float = 0.03
+    proxy_max_angle_deg: float = 60.0
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _boolean(self, "proxy_blend")
         _number(self, "proxy_tolerance_m", 0.001, 0.5)
+        _number(self, "proxy_max_angle_deg", 0.0, 180.0)
         _number(self, "opaque_at", 0.05, 1.0)
         _integer(self, "stride", 1, 4)
         _choice(self, "stride", (1, 2, 4))

@@ -721,7 +721,7 @@ class Estimator:
             # the subject as rendered: the colour test of the coarse pass (silhouette_min_diff)
             shown = np.abs(nv.image.astype(np.float32) / 255.0 - self.contract.background).max(axis=-1)
             blended = proxy_blend(nv.image, nv.camera, body, p.crops, rgb, cfg.proxy_tolerance_m,
-                                  region=shown >= cfg.silhouette_min_diff)
+                                  region=shown >= cfg.silhouette_min_diff, max_angle_deg=cfg.proxy_max_angle_deg)
             nv = NovelView(blended.image, nv.camera, nv.depth, nv.heat, nv.rays)
         timing[NOVEL_PROXY_STAGE] = 1e3 * (time.perf_counter() - t)
         return nv

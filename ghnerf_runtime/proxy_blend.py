@@ -10,7 +10,10 @@ pixels the proxy covers *and* some source sees at that depth (the proxy's own de
 within ``tolerance_m``) by those sources' pixels, averaged with weights that favour the source whose
 ray to the point is nearest the view's own (``1 / (angle + 1 degree)``, as unstructured lumigraph
 rendering weighs its cameras): at a rig camera's own viewpoint its pixels are copied whatever the
-proxy's depth error, halfway between the cameras both count alike. Every other pixel keeps the
+proxy's depth error, halfway between the cameras both count alike. A pixel whose nearest seeing
+source looks at its point from more than ``max_angle_deg`` away from the view's own ray keeps the
+rendered picture too: a view from the far side is better left to the network (measured on
+``ghnerf-eval``'s views around the subject, docs/runtime.md). Every other pixel keeps the
 rendered picture (the network's, and its background). The estimator recolours only where the rendered
 picture shows the subject (``region``): where the proxy is wider than the person, the sources show the
 room behind, which would draw a halo around the subject.
@@ -69,7 +72,8 @@ def model_input_to_rgb(batch: np.ndarray, normalisation: Normalisation) -> np.nd
 
 
 def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
-                source_rgb: np.ndarray, tolerance_m: float = 0.03, region: np.ndarray | None = None) -> ProxyBlend:
+                source_rgb: np.ndarray, tolerance_m: float = 0.03, region: np.ndarray | None = None,
+                max_angle_deg: float = 180.0) -> ProxyBlend:
     """Recolour ``image_bgr`` (the rendered view at pinhole ``camera``) from the sources at the proxy's
     depth (module docstring).
 
@@ -80,6 +84,8 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         source_rgb: ``(N, h, w, 3)`` float RGB in [0, 1], the crops the cameras describe.
         tolerance_m: a source sees a surface point when its own proxy depth there is this close.
         region: ``(H, W)`` bool, the only pixels that may be recoloured (default: all).
+        max_angle_deg: recolour a pixel only when a source that sees its point looks at it within this
+            angle of the view's ray (default: any).
     """
     image = np.asarray(image_bgr)
     if image.shape != (camera.height, camera.width, 3) or image.dtype != np.uint8:
@@ -101,6 +107,7 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
     points = (in_cam - camera.t) @ camera.R  # camera frame -> rig frame
     total = np.zeros((len(z), 3), np.float64)
     weight = np.zeros(len(z), np.float64)
+    nearest = np.full(len(z), np.inf)  # the smallest angle of a source that sees the point
     to_view = camera.center - points
     to_view /= np.linalg.norm(to_view, axis=-1, keepdims=True)
     for cam, rgb in zip(sources, source_rgb):
@@ -117,10 +124,12 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         sees = inside & (zs > 0) & (np.abs(own - zs) < tolerance_m)
         to_source = cam.center - points
         cos = np.sum(to_view * to_source, axis=-1) / np.linalg.norm(to_source, axis=-1)
-        w = np.where(sees, 1.0 / (np.arccos(np.clip(cos, -1.0, 1.0)) + ANGLE_FLOOR_RAD), 0.0)
+        angle = np.arccos(np.clip(cos, -1.0, 1.0))
+        w = np.where(sees, 1.0 / (angle + ANGLE_FLOOR_RAD), 0.0)
+        nearest = np.where(sees, np.minimum(nearest, angle), nearest)
         total += w[:, None] * colour
         weight += w
-    seen = weight > 0
+    seen = (weight > 0) & (nearest <= np.deg2rad(max_angle_deg))
     out = image.copy()
     blended = total[seen] / weight[seen, None]  # RGB
     out[rows[seen], cols[seen]] = np.round(np.clip(blended[:, ::-1], 0.0, 1.0) * 255.0).astype(np.uint8)

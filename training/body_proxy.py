@@ -93,6 +93,7 @@ def _depth_error(scene: Mapping[str, np.ndarray], template: ProxyTemplate, scale
         d = proxy_depth(body, view_camera(scene, v))
         m = np.asarray(scene["tgt_masks"][v], bool)
         both = m & (d > 0)
+        # a view where the proxy misses the subject altogether counts as half a metre off
         errs.append(float(np.median(np.abs(d - scene["tgt_depth"][v])[both])) if both.any() else 0.5)
         ious.append(iou(d > 0, m))
     return float(np.mean(errs)), float(np.mean(ious))
@@ -110,7 +111,7 @@ def tune(scenes: list[Mapping[str, np.ndarray]], rounds: int = 2, start: ProxyTe
         return float(np.mean([e + 0.1 * (1 - i) for e, i in r]))
 
     best = cost(t)
-    log(f"start {best * 1000:.1f}")
+    log(f"start {best * 1000:.1f}")  # mm
     for _ in range(rounds):
         for name, value in asdict(t).items():
             for f in (0.8, 0.9, 1.1, 1.25):

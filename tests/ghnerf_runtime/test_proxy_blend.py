@@ -64,6 +64,18 @@ def test_at_a_source_cameras_own_viewpoint_its_pixels_are_copied(shot):
     assert masked_psnr(out.image[..., ::-1] / 255.0, rgb[0].astype(np.float64), r).value > 35.0
 
 
+def test_pixels_no_source_sees_within_the_angle_keep_the_picture(shot):
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    image = np.full((128, 128, 3), 5, np.uint8)
+    wide = proxy_blend(image, target, body, sources, rgb, max_angle_deg=60.0)
+    narrow = proxy_blend(image, target, body, sources, rgb, max_angle_deg=1.0)  # halfway: both sources ~10 deg off
+    assert wide.replaced.sum() > 1000 and not narrow.replaced.any()
+    assert np.array_equal(narrow.image, image)
+    with pytest.raises(ConfigError, match="proxy_max_angle_deg"):
+        NovelViewConfig(proxy_max_angle_deg=200.0)
+
+
 def test_only_the_region_given_is_recoloured(shot):
     joints, sources, rgb, target, _, truth = shot
     body = proxy_body(joints, np.ones(25, bool))

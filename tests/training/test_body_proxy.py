@@ -10,8 +10,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
-from training.body_proxy import (ProxyTemplate, fit_scale, iou, proxy_body, proxy_depth, proxy_scene,  # noqa: E402
-                                 view_camera)
+from training.body_proxy import (ProxyTemplate, _depth_error, fit_scale, iou, proxy_body, proxy_depth,  # noqa: E402
+                                 proxy_scene, tune, view_camera)
 from training.device_joints import JointsCacheError, cache_joints, cache_true_joints, load_joints  # noqa: E402
 from training.fill_features import MASK_BIT, TRUTH_BIT, cache_split, load_cache  # noqa: E402
 
@@ -73,6 +73,18 @@ def test_a_proxy_scene_carries_the_proxy_depth_and_its_masks(data64):
     assert out["images"] is scene["images"]
     fixed, s1 = proxy_scene(scene, scene["joints_3d"], scene["joints_3d_valid"], template=ProxyTemplate())
     assert s1 == 1.0 and fixed["tgt_masks"].any()
+
+
+def test_tuning_the_template_never_makes_it_worse(data64):
+    scene = _scenes(data64)[0]
+    start = ProxyTemplate(thigh=(0.06, 0.04))  # thighs too thin
+
+    def cost(t):
+        e, i = _depth_error(scene, t, 1.0, list(range(len(scene["tgt_is_source"]))))
+        return e + 0.1 * (1 - i)
+
+    tuned = tune([scene], rounds=1, start=start, log=lambda *_: None)
+    assert cost(tuned) < cost(start) and tuned.thigh[0] > 0.06
 
 
 @pytest.fixture(scope="module")
