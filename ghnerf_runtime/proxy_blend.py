@@ -2,21 +2,21 @@
 
 GHNeRF's colour is a learnt blend of the two source images where each sample projects, placed by
 its own depth, which is about 5 cm off (median) on views off the rig's cameras. The body proxy built
-from the pair's 3D joints (``ghnerf_runtime.body_proxy``) is about 2 cm off. Near the rig's
-viewpoints, where the device renders its view, a plain blend of the sources at the proxy's depth is
-the better picture (docs/training.md, "A body proxy from the joints": +0.8 dB within 15 degrees of a
-source, +0.5 dB at 15-30, nothing at 30-60, worse beyond). This replaces the rendered colour of the
-pixels the proxy covers *and* some source sees at that depth (the proxy's own depth in that source,
-within ``tolerance_m``) by those sources' pixels, averaged with weights that favour the source whose
-ray to the point is nearest the view's own (``1 / (angle + 1 degree)``, as unstructured lumigraph
-rendering weighs its cameras): at a rig camera's own viewpoint its pixels are copied whatever the
-proxy's depth error, halfway between the cameras both count alike. A pixel whose nearest seeing
-source looks at its point from more than ``max_angle_deg`` away from the view's own ray keeps the
-rendered picture too: a view from the far side is better left to the network (measured on
-``ghnerf-eval``'s views around the subject, docs/runtime.md). Every other pixel keeps the
-rendered picture (the network's, and its background). The estimator recolours only where the rendered
-picture shows the subject (``region``): where the proxy is wider than the person, the sources show the
-room behind, which would draw a halo around the subject.
+from the pair's 3D joints (``ghnerf_runtime.body_proxy``) is about 2 cm off. This replaces the
+rendered colour of the pixels that
+
+* the rendered picture shows as the subject (``region``; where the proxy is wider than the person,
+  the sources show the room behind, which would draw a halo),
+* the proxy covers, and
+* some source sees at the proxy's depth (the proxy's own depth in that source within
+  ``tolerance_m``), within ``max_angle_deg`` of the view's own ray (a view from far round the
+  subject is better left to the network),
+
+by those sources' pixels, averaged with weights that favour the source whose ray to the point is
+nearest the view's own (``1 / (angle + 1 degree)``, as unstructured lumigraph rendering weighs its
+cameras). At a rig camera's own viewpoint its pixels are copied whatever the proxy's depth error;
+halfway between the cameras both count alike. Every other pixel keeps the rendered picture.
+Measured in docs/runtime.md, "Recolouring from the body proxy".
 
 numpy, OpenCV.
 """
@@ -46,7 +46,8 @@ class ProxyBlend:
     Attributes:
         image: ``(H, W, 3)`` uint8 BGR.
         replaced: ``(H, W)`` bool, the pixels recoloured from the sources.
-        depth: ``(H, W)`` the proxy's camera-z depth (0 where it covers nothing).
+        depth: ``(H, W)`` the proxy's camera-z depth (0 where it covers nothing, and outside the box
+            of ``region`` when one was given).
     """
 
     image: np.ndarray
@@ -92,12 +93,19 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         raise ShapeError(f"image must be uint8 {(camera.height, camera.width, 3)}, got {image.dtype} {image.shape}")
     if len(sources) != len(source_rgb):
         raise ShapeError(f"{len(sources)} source cameras for {len(source_rgb)} source images")
-    depth = proxy_depth(body, camera)
-    covered = depth > 0
-    if region is not None:
-        if np.shape(region) != covered.shape:
-            raise ShapeError(f"region must be {covered.shape}, got {np.shape(region)}")
-        covered = covered & np.asarray(region, bool)
+    if region is None:
+        depth = proxy_depth(body, camera)
+        covered = depth > 0
+    else:  # ray-cast only the region's box
+        region = np.asarray(region, bool)
+        if region.shape != image.shape[:2]:
+            raise ShapeError(f"region must be {image.shape[:2]}, got {region.shape}")
+        depth = np.zeros(region.shape)
+        if region.any():
+            rs, cs = np.nonzero(region.any(axis=1))[0], np.nonzero(region.any(axis=0))[0]
+            r0, r1, c0, c1 = rs[0], rs[-1] + 1, cs[0], cs[-1] + 1
+            depth[r0:r1, c0:c1] = proxy_depth(body, camera.cropped(c0, r0, c1 - c0, r1 - r0))
+        covered = (depth > 0) & region
     if not covered.any():
         return ProxyBlend(image, covered, depth)
     rows, cols = np.nonzero(covered)
@@ -118,6 +126,7 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         u = np.nan_to_num(uv[:, 0], nan=-1.0).astype(np.float32).reshape(-1, 1)
         v = np.nan_to_num(uv[:, 1], nan=-1.0).astype(np.float32).reshape(-1, 1)
         colour = cv2.remap(rgb, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT).reshape(-1, 3)
+        # (ray-cast at half resolution this costs the views 1-1.5 dB on their recoloured pixels)
         own = cv2.remap(proxy_depth(body, cam).astype(np.float32), u, v, cv2.INTER_NEAREST,
                         borderMode=cv2.BORDER_CONSTANT, borderValue=0.0).ravel()
         inside = (u[:, 0] >= 0) & (u[:, 0] <= cam.width - 1) & (v[:, 0] >= 0) & (v[:, 0] <= cam.height - 1)
