@@ -10,7 +10,8 @@ Per novel view of each held-out scene, by its angle from the nearest source (``g
 * ``depth_mm`` columns: the median absolute depth error on the subject pixels each geometry covers:
   the model's (its opacity above 0.5), the proxy from the true joints (``proxy:truth``, scale fitted to
   the sources' true masks; what the template can do) and from the device's joints (``proxy``: the
-  ``--joints`` cache, scale fitted to the model's own masks in the sources: nothing from the truth);
+  ``--joints`` cache at the template's girth, or ``--scale fit``: fitted to the model's own masks in the
+  sources; nothing from the truth);
   ``cover`` is the share of the subject the device proxy covers.
 * PSNR columns (masked, ``ghnerf-eval``'s): ``shown``, the model's picture as the runtime shows it
   (``psnr@opaque_at``); ``blend@proxy``, the two-camera blend at the device proxy's depth with its own
@@ -47,7 +48,7 @@ from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from training.blend_ceiling import blend_sources  # noqa: E402
 from ghnerf_runtime.body_proxy import proxy_body  # noqa: E402
-from ghnerf_runtime.proxy_blend import proxy_blend  # noqa: E402
+from ghnerf_runtime.proxy_blend import proxy_blend, subject_region  # noqa: E402
 from training.body_proxy import proxy_scene, view_camera  # noqa: E402
 from training.evaluate import SOURCE_ANGLE_BINS_DEG  # noqa: E402
 from training.unseen_fill import fit_lighting, relit_fill, seen_surface  # noqa: E402
@@ -89,7 +90,7 @@ def guided_render(model, scene, targets: np.ndarray, guide: np.ndarray | None, g
             stats = stats.clone()
             stats[:, 0:1] = torch.where(use, mean, stats[:, 0:1])
             stats[:, 1:2] = torch.where(use, torch.full_like(mean, guide_std), stats[:, 1:2])
-        lv, last = cfg.levels[-1], len(cfg.levels) - 1
+        last = len(cfg.levels) - 1
         B = stats.shape[0]
         near, far = d["near_far"][:, 0].reshape(B, 1, 1, 1), d["near_far"][:, 1].reshape(B, 1, 1, 1)
         for i in range(1, len(cfg.levels)):  # the levels after the coarse one, as GHNeRF.volumes builds them
@@ -135,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     ds = MultiViewDataset(args.data, split=args.split)
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     device_joints = load_joints(args.joints, n)
-    at = NovelViewConfig().opaque_at
+    nvc = NovelViewConfig()  # the runtime's defaults
+    at = nvc.opaque_at
     rows: list[dict] = []
     for i in range(n):
         scene = {k: v.numpy() for k, v in ds[i].items()}
@@ -147,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         valid = np.ones(25, bool)
         dev, scale = proxy_scene({**scene, "joints_3d": device_joints[i], "joints_3d_valid": valid},
                                  device_joints[i], valid, args.scale, [acc[v] > 0.5 for v in src])
-        body = proxy_body(device_joints[i], valid)
+        body = proxy_body(device_joints[i], valid, scale=scale)
         src_cams = [view_camera(scene, v) for v in src]
         src_rgb = np.ascontiguousarray(np.asarray(scene["images"]).transpose(0, 2, 3, 1))
         true_light = fit_lighting(seen_surface(scene))
@@ -175,8 +177,7 @@ def main(argv: list[str] | None = None) -> int:
             keep = pm[..., None]
             extra = {}
             shown_u8 = np.round(np.clip(shown, 0, 1)[..., ::-1] * 255).astype(np.uint8)  # BGR, as the runtime's
-            region = np.abs(shown_u8 / 255.0 - renderer.background).max(-1) >= NovelViewConfig().silhouette_min_diff
-            nvc = NovelViewConfig()
+            region = subject_region(shown_u8, renderer.background, nvc.silhouette_min_diff)
             runtime = proxy_blend(shown_u8, view_camera(scene, t), body, src_cams, src_rgb, nvc.proxy_tolerance_m,
                                   region=region, max_angle_deg=nvc.proxy_max_angle_deg)
             extra["runtime"] = psnr(runtime.image[..., ::-1] / 255.0, truth, mask)

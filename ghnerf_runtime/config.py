@@ -505,11 +505,12 @@ class NovelViewConfig:
             Tuned on the ``val_seen_motions`` split, measured on the device's views in
             docs/runtime.md ("Novel-view quality"). 1.0: the raw composite.
         proxy_blend: recolour the subject from the source crops at the depth of a body proxy built from
-            the pair's 3D joints (``ghnerf_runtime.proxy_blend``): the pixels the proxy covers and some
-            source sees get the average of those sources' pixels, the rest keep the rendered picture.
-            The proxy's depth is nearer the truth than the model's: on by default since session 29,
-            +0.5 to +1.6 dB median against the simulator's picture (docs/runtime.md, "Recolouring from
-            the body proxy"). Off: the rendered picture alone.
+            the pair's 3D joints (``ghnerf_runtime.proxy_blend``): the pixels the rendered picture shows
+            as the subject, the proxy covers and some source sees get those sources' pixels, weighted
+            by how near each source's ray is to the view's; the rest keep the rendered picture. The
+            proxy's depth is nearer the truth than the model's: on by default since session 29, +0.5
+            to +2.1 dB median against the simulator's picture, at about 12 ms per view on a 2-core
+            host (docs/runtime.md, "Recolouring from the body proxy"). Off: the rendered picture alone.
         proxy_tolerance_m: with ``proxy_blend``, a source sees a surface point when the proxy's own
             depth in that source is this close to the point's (metres).
         proxy_max_angle_deg: with ``proxy_blend``, a pixel is recoloured only when a source that sees its

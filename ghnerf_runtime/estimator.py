@@ -61,7 +61,7 @@ from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presen
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, Keypoints2D, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton, heatmap_overlay, \
     interpolate_camera, novel_target, render_novel_view
-from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend
+from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
@@ -718,10 +718,9 @@ class Estimator:
         if not body.empty:
             cfg = self.config.novel_view
             rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation)
-            # the subject as rendered: the colour test of the coarse pass (silhouette_min_diff)
-            shown = np.abs(nv.image.astype(np.float32) / 255.0 - self.contract.background).max(axis=-1)
+            region = subject_region(nv.image, self.contract.background, cfg.silhouette_min_diff)
             blended = proxy_blend(nv.image, nv.camera, body, p.crops, rgb, cfg.proxy_tolerance_m,
-                                  region=shown >= cfg.silhouette_min_diff, max_angle_deg=cfg.proxy_max_angle_deg)
+                                  region=region, max_angle_deg=cfg.proxy_max_angle_deg)
             nv = NovelView(blended.image, nv.camera, nv.depth, nv.heat, nv.rays)
         timing[NOVEL_PROXY_STAGE] = 1e3 * (time.perf_counter() - t)
         return nv

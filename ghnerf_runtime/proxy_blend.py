@@ -33,7 +33,7 @@ from ghnerf_runtime.contract import Normalisation
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 
-__all__ = ["ProxyBlend", "model_input_to_rgb", "proxy_blend"]
+__all__ = ["ProxyBlend", "model_input_to_rgb", "proxy_blend", "subject_region"]
 
 #: Angular weights ``1 / (angle + this)``: keeps the weight of a source on the view's own ray finite.
 ANGLE_FLOOR_RAD = np.deg2rad(1.0)
@@ -70,6 +70,13 @@ def model_input_to_rgb(batch: np.ndarray, normalisation: Normalisation) -> np.nd
     if normalisation.channel_order == "BGR":
         rgb = rgb[..., ::-1]
     return np.ascontiguousarray(np.clip(rgb, 0.0, 1.0), dtype=np.float32)
+
+
+def subject_region(image_bgr: np.ndarray, background: float, min_diff: float) -> np.ndarray:
+    """``(H, W)`` bool: where a rendered uint8 view shows the subject, the colour test of the novel view's
+    coarse pass (``novel_view.silhouette_min_diff``): some channel differs from ``background`` ([0, 1])
+    by at least ``min_diff``."""
+    return np.abs(np.asarray(image_bgr, np.float32) / 255.0 - background).max(axis=-1) >= min_diff
 
 
 def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
@@ -126,7 +133,7 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         u = np.nan_to_num(uv[:, 0], nan=-1.0).astype(np.float32).reshape(-1, 1)
         v = np.nan_to_num(uv[:, 1], nan=-1.0).astype(np.float32).reshape(-1, 1)
         colour = cv2.remap(rgb, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT).reshape(-1, 3)
-        # (ray-cast at half resolution this costs the views 1-1.5 dB on their recoloured pixels)
+        # full resolution: at half, visibility along the silhouettes' edges goes wrong
         own = cv2.remap(proxy_depth(body, cam).astype(np.float32), u, v, cv2.INTER_NEAREST,
                         borderMode=cv2.BORDER_CONSTANT, borderValue=0.0).ravel()
         inside = (u[:, 0] >= 0) & (u[:, 0] <= cam.width - 1) & (v[:, 0] >= 0) & (v[:, 0] <= cam.height - 1)

@@ -64,9 +64,9 @@ def proxy_scene(scene: Mapping[str, np.ndarray], joints: np.ndarray, valid: np.n
     ``training.fill_features.modelled_scene``. ``scale``: the girth scale, or None to fit it to
     ``source_masks`` (default: the true masks of the source views). Returns the scene and the scale.
 
-    GHNeRF's own masks (opacity above 0.5) are too fat to fit the scale to (IoU 0.70 with the truth
-    at the sources; fitted to them the scale runs to the top of its range): the template's mean body
-    (1.0) does better on the device's joints (docs/training.md, "A body proxy from the joints")."""
+    GHNeRF's own masks (opacity above 0.5) are too fat to fit the scale to (fitted to them the scale
+    runs to the top of its range): the template's mean body (1.0) does better on the device's joints
+    (docs/training.md, "A body proxy from the joints")."""
     V = len(scene["tgt_is_source"])
     cams = [view_camera(scene, v) for v in range(V)]
     if scale is None:
@@ -81,16 +81,13 @@ def proxy_scene(scene: Mapping[str, np.ndarray], joints: np.ndarray, valid: np.n
 # ------------------------------------------------------------------ tuning the template on the truth
 def _depth_error(scene: Mapping[str, np.ndarray], template: ProxyTemplate, scale: float | None,
                  views: list[int]) -> tuple[float, float]:
-    """Mean over ``views`` of (median |depth error| on the true mask where both hit, IoU)."""
+    """Mean over ``views`` of (median |depth error| on the true mask where both hit, IoU); ``scale`` as
+    :func:`proxy_scene` takes it."""
     joints, valid = np.asarray(scene["joints_3d"], np.float64), np.asarray(scene["joints_3d_valid"], bool)
-    if scale is None:
-        src = [v for v in range(len(scene["tgt_is_source"])) if scene["tgt_is_source"][v]]
-        scale = fit_scale(joints, valid, [view_camera(scene, v) for v in src],
-                          [np.asarray(scene["tgt_masks"][v], bool) for v in src], template)
-    body = proxy_body(joints, valid, template, scale)
+    proxy, _ = proxy_scene(scene, joints, valid, scale, template=template)
     errs, ious = [], []
     for v in views:
-        d = proxy_depth(body, view_camera(scene, v))
+        d = proxy["tgt_depth"][v]
         m = np.asarray(scene["tgt_masks"][v], bool)
         both = m & (d > 0)
         # a view where the proxy misses the subject altogether counts as half a metre off

@@ -26,8 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ghnerf_runtime.flip_test import flip_averaged, mirror_images
-
 
 class JointsCacheError(ValueError):
     """A joints cache that is missing, broken or does not cover the scenes asked for."""
@@ -36,17 +34,14 @@ class JointsCacheError(ValueError):
 def estimate_joints(renderer, scene: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """``(25, 3)`` joints and ``(25,)`` expected errors (m) of one scene from a
     ``training.evaluate.OnnxRenderer`` whose folder has a skeleton prior."""
-    from training.evaluate import _decode  # noqa: PLC0415 - torch-side module, loaded late
+    from training.evaluate import flip_tested, prior_estimate  # noqa: PLC0415 - torch-side module, loaded late
 
     if renderer.skeleton_prior is None:
         raise JointsCacheError("the model folder has no skeleton prior the runtime accepts")
     enc = renderer.encoder_heatmaps(scene)
     if enc is None:
         raise JointsCacheError("the model's encoder graph has no encoder_heatmaps output")
-    maps = flip_averaged(enc, renderer.encoder_heatmaps({"images": mirror_images(scene["images"])}))
-    uv, conf = _decode(maps, renderer.height, None)
-    est = renderer.skeleton_prior.estimate(np.nan_to_num(uv), conf, np.isfinite(uv).all(-1),
-                                           np.asarray(scene["src_P"], np.float64))
+    est = prior_estimate(renderer.skeleton_prior, flip_tested(renderer, scene, enc), scene["src_P"], renderer.height)
     return np.asarray(est.points, np.float32), np.asarray(est.expected_error_m, np.float32)
 
 

@@ -511,9 +511,7 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
             out.update(_joint_scores(f"{key}_", *_decode(maps, H, decoder), scene))
     out["prior_mpjpe"] = out["prior_expected_error_m"] = None
     if skeleton_prior is not None and encoder_heatmaps_flip is not None:
-        uv, conf = _decode(encoder_heatmaps_flip, H, decoder)
-        est = skeleton_prior.estimate(np.nan_to_num(uv), conf, np.isfinite(uv).all(-1),
-                                      np.asarray(scene["src_P"], np.float64))
+        est = prior_estimate(skeleton_prior, encoder_heatmaps_flip, scene["src_P"], H, decoder)
         out["prior_mpjpe"] = mpjpe(est.points, scene["joints_3d"], scene["joints_3d_valid"])
         out["prior_expected_error_m"] = est.expected_error_m
     out["psnr"] = out["ssim"] = None
@@ -527,6 +525,20 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
         out["ssim"] = masked_ssim(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
         out["novel_source_angle_deg"] = source_angles_deg(scene, novel_targets)
     return out
+
+
+def flip_tested(renderer: Renderer, scene: Mapping[str, np.ndarray], heatmaps: np.ndarray) -> np.ndarray:
+    """The flip test: the encoder's ``heatmaps`` of the sources averaged with those of the mirrored sources."""
+    return flip_averaged(heatmaps, renderer.encoder_heatmaps({"images": mirror_images(scene["images"])}))
+
+
+def prior_estimate(skeleton_prior, heatmaps: np.ndarray, src_P: np.ndarray, model_size: int,
+                   decoder: KeypointDecoderConfig | None = None):
+    """The skeleton prior's estimate from the sources' (flip-tested) encoder heatmaps, decoded as the runtime
+    decodes them: a :class:`~ghnerf_runtime.skeleton_prior.SkeletonPrior` estimate (``points``,
+    ``expected_error_m``)."""
+    uv, conf = _decode(heatmaps, model_size, decoder)
+    return skeleton_prior.estimate(np.nan_to_num(uv), conf, np.isfinite(uv).all(-1), np.asarray(src_P, np.float64))
 
 
 def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, progress: bool = True) -> dict:
@@ -546,9 +558,7 @@ def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, pr
         if novel and len(nov):
             rgb = renderer.colour(scene, nov, grid_1).reshape(len(nov), H, W, 3).transpose(0, 3, 1, 2)
         enc_hm = renderer.encoder_heatmaps(scene) if hasattr(renderer, "encoder_heatmaps") else None
-        enc_flip = None
-        if enc_hm is not None:  # the flip test: the encoder again on the mirrored sources, averaged
-            enc_flip = flip_averaged(enc_hm, renderer.encoder_heatmaps({"images": mirror_images(scene["images"])}))
+        enc_flip = None if enc_hm is None else flip_tested(renderer, scene, enc_hm)
         acc.add(scene_metrics(scene, hm, rgb, nov, renderer.background, encoder_heatmaps=enc_hm,
                               encoder_heatmaps_flip=enc_flip, skeleton_prior=getattr(renderer, "skeleton_prior", None)))
         if progress and (i + 1) % 32 == 0:

@@ -131,8 +131,9 @@ def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int =
         from ghnerf_runtime.novel_view import opaque_colour  # noqa: PLC0415
 
         rgb, depth, acc = render_views(renderer, scene)
-        geometry = modelled_scene(scene, depth, acc)
-        if joints is not None:
+        if joints is None:
+            geometry = modelled_scene(scene, depth, acc)
+        else:
             from training.body_proxy import proxy_scene  # noqa: PLC0415
 
             valid = np.ones(len(joints), bool)
