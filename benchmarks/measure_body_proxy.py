@@ -25,6 +25,9 @@ Per novel view of each held-out scene, by its angle from the nearest source (``g
   ``ghnerf_runtime.proxy_blend`` with the device proxy and the runtime's defaults (angular weights,
   only where the picture shows the subject and a source sees the point within
   ``novel_view.proxy_max_angle_deg`` of the view's ray).
+* ``--painter novel_painter.onnx``: ``painter``, the model's picture repainted by the runtime's learnt
+  painter (``ghnerf_runtime.novel_painter``, on the device proxy and joints, where the proxy or the
+  picture shows the subject); ``painter+blend``, that picture then recoloured as ``runtime`` does.
 * ``ceiling`` and ``fill:relit``: the same blend and fill on the true geometry (session 27's columns).
 * ``--guided``: the network itself given the better depth, without retraining: its fine level's
   planes placed around a guide depth (``guide_std`` wide) instead of around its coarse level's
@@ -120,6 +123,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scale", type=lambda s: None if s == "fit" else float(s), default=1.0,
                     help="the device proxy's girth scale, or 'fit' to fit it to the model's masks (default: 1)")
     ap.add_argument("--guided", action="store_true", help="add the guided:proxy and guided:truth columns")
+    ap.add_argument("--painter", default=None, metavar="ONNX",
+                    help="add the runtime painter's columns (ghnerf_runtime.novel_painter): painter, painter+blend")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
 
@@ -137,6 +142,11 @@ def main(argv: list[str] | None = None) -> int:
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     device_joints = load_joints(args.joints, n)
     nvc = NovelViewConfig()  # the runtime's defaults
+    painter = None
+    if args.painter:
+        from ghnerf_runtime.novel_painter import NovelPainter
+
+        painter = NovelPainter.load(args.painter, threads=args.threads)
     at = nvc.opaque_at
     rows: list[dict] = []
     for i in range(n):
@@ -181,6 +191,13 @@ def main(argv: list[str] | None = None) -> int:
             runtime = proxy_blend(shown_u8, view_camera(scene, t), body, src_cams, src_rgb, nvc.proxy_tolerance_m,
                                   region=region, max_angle_deg=nvc.proxy_max_angle_deg)
             extra["runtime"] = psnr(runtime.image[..., ::-1] / 255.0, truth, mask)
+            if painter is not None:
+                painted, _ = painter.repaint(shown_u8, view_camera(scene, t), body, src_cams, src_rgb, device_joints[i],
+                                             valid, nvc.proxy_tolerance_m, region=region)
+                extra["painter"] = psnr(painted[..., ::-1] / 255.0, truth, mask)
+                both = proxy_blend(painted, view_camera(scene, t), body, src_cams, src_rgb, nvc.proxy_tolerance_m,
+                                   region=region, max_angle_deg=nvc.proxy_max_angle_deg)
+                extra["painter+blend"] = psnr(both.image[..., ::-1] / 255.0, truth, mask)
             for name in ("proxy", "truth") if args.guided else ():
                 g_rgb, g_acc = guided[(name, t)]
                 g = opaque_colour(g_rgb, g_acc, renderer.background, at).reshape(rgb[t].shape)
@@ -205,6 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     cols = ["model:depth_mm", "proxy:truth:depth_mm", "proxy:depth_mm", "cover", "ceiling", "fill:relit", "shown",
             "blend@proxy", "relit@proxy", "shown+relit",
             "seen:blend", "proxy only", "runtime"] + (["guided:proxy", "guided:truth"] if args.guided else [])
+    cols += ["painter", "painter+blend"] if painter is not None else []
     edges = SOURCE_ANGLE_BINS_DEG
     groups = [(f"novel {lo:.0f}-{hi:.0f} deg", lambda r, lo=lo, hi=hi: lo <= r["angle"] < hi)
               for lo, hi in zip(edges[:-1], edges[1:])]

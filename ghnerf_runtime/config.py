@@ -93,7 +93,9 @@ class SessionConfig:
             Switching to another model is only this path.
         precision: ``"fp32"``: the fp32 file of every graph; ``"int8"``: the int8 file of every
             graph that has one; ``"auto"``: the faster file per graph as measured on the
-            2-core target (:data:`ghnerf_runtime.session.AUTO_PRECISION`).
+            2-core target (:data:`ghnerf_runtime.session.AUTO_PRECISION`). The novel view's painter
+            (``novel_painter.onnx``) is int8 under ``"auto"`` and ``"int8"`` where the folder has its
+            int8 file.
         precision_overrides: graph -> ``"fp32"`` / ``"int8"``, applied after ``precision``.
         threads: intra-op threads (the device has 2 cores).
         thread_pool: ``"per_session"``: each graph session owns a pool of ``threads`` whose
@@ -516,6 +518,10 @@ class NovelViewConfig:
         proxy_max_angle_deg: with ``proxy_blend``, a pixel is recoloured only when a source that sees its
             point looks at it within this angle of the view's ray: views from far round the subject
             are better left to the network (docs/runtime.md, "Recolouring from the body proxy").
+        painter: repaint the subject with the learnt painter (``novel_painter.onnx`` in the model
+            folder, :mod:`ghnerf_runtime.novel_painter`) over the body proxy of the pair's joints,
+            before ``proxy_blend``: ``"auto"`` when the model folder has one, ``"on"`` (a folder
+            without one is an error) or ``"off"`` (docs/runtime.md, "The learnt painter").
     """
 
     enabled: bool = False
@@ -532,9 +538,11 @@ class NovelViewConfig:
     proxy_blend: bool = True
     proxy_tolerance_m: float = 0.03
     proxy_max_angle_deg: float = 60.0
+    painter: str = "auto"
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        _choice(self, "painter", ("auto", "on", "off"))
         _boolean(self, "proxy_blend")
         _number(self, "proxy_tolerance_m", 0.001, 0.5)
         _number(self, "proxy_max_angle_deg", 0.0, 180.0)
@@ -556,6 +564,11 @@ class NovelViewConfig:
         if self.interior_stride and self.silhouette_stride and self.silhouette_stride % self.interior_stride:
             _fail(type(self), "interior_stride", f"must divide silhouette_stride ({self.silhouette_stride})",
                   self.interior_stride)
+
+    def uses_painter(self, available: bool) -> bool:
+        """Whether the learnt painter runs, given whether the model folder has one (``on`` without one is the
+        estimator's error to raise)."""
+        return available and self.enabled and self.painter != "off"
 
     @property
     def coarse_pass(self) -> bool:

@@ -26,9 +26,11 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    (or dropped when too few joints were found).
 7. on request, ``novel_volume`` / ``novel_render`` / ``novel_compose`` -- the novel view. On a
    tracked pair it is rendered in a worker thread during stages 5-6 (``novel_view.overlap``),
-   so these stage times overlap the keypoint stages and ``total`` is less than their sum. With
-   ``novel_view.proxy_blend``, ``novel_proxy`` then recolours it at the depth of the body proxy of
-   this pair's joints (:mod:`ghnerf_runtime.proxy_blend`), in this thread, once the joints are known.
+   so these stage times overlap the keypoint stages and ``total`` is less than their sum. Then, in
+   this thread once the joints are known, over the body proxy of this pair's joints: with a model
+   folder that has one, ``novel_paint`` repaints it with the learnt painter
+   (:mod:`ghnerf_runtime.novel_painter`, ``novel_view.painter``); with ``novel_view.proxy_blend``,
+   ``novel_proxy`` recolours it from the source crops (:mod:`ghnerf_runtime.proxy_blend`).
 
 Every output is finite; a missing joint has coordinates 0, confidence 0 and ``missing`` set.
 Joints are only ever this pair's: the track only places the next crop.
@@ -49,7 +51,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
-from ghnerf_runtime.body_proxy import proxy_body
+from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
 from ghnerf_runtime.errors import FrameError, ModelError
@@ -68,7 +70,7 @@ from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
-           "NOVEL_PROXY_STAGE"]
+           "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE"]
 
 #: Skeleton prior: confidence = exp(-expected error / this).
 _PRIOR_CONFIDENCE_SCALE_M = 0.1
@@ -80,6 +82,8 @@ KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_he
 NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
 #: With ``novel_view.proxy_blend`` only.
 NOVEL_PROXY_STAGE = "novel_proxy"
+#: With the learnt painter (``novel_view.painter``) only.
+NOVEL_PAINT_STAGE = "novel_paint"
 
 
 @dataclass(frozen=True, eq=False)
@@ -253,6 +257,7 @@ class Estimator:
                 raise ModelError(f"encoder heatmaps at stride {self.contract.strides.get('human_feat')} do not match "
                                  f"the heatmap grid's stride {self.contract.heatmap_stride}")
         self.skeleton_prior = self._prior_of(session)
+        self.novel_painter = self._painter_of(session)
         self._prior_follow: Joints3D | None = None
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi)
         # smooths what is reported; the tracker follows the raw joints
@@ -279,6 +284,16 @@ class Estimator:
                              "has no skeleton_prior.onnx; make one with python -m training.skeleton_prior, or set "
                              "joints3d.skeleton_prior = 'auto' or 'off')")
         return prior if cfg.uses_skeleton_prior(prior is not None) else None
+
+    def _painter_of(self, session: Any):
+        """The session's novel-view painter when the configuration uses it (``novel_view.painter``)."""
+        cfg = self.config.novel_view
+        painter = getattr(session, "novel_painter", None)
+        if cfg.enabled and cfg.painter == "on" and painter is None:
+            raise ModelError("novel_view.painter = 'on' but the session has no painter (the model folder has no "
+                             "novel_painter.onnx; make one with python -m training.learnt_fill export, or set "
+                             "novel_view.painter = 'auto' or 'off')")
+        return painter if cfg.uses_painter(painter is not None) else None
 
     @classmethod
     def from_config(cls, rig: Rig, config: EstimatorConfig | None = None) -> "Estimator":
@@ -413,8 +428,8 @@ class Estimator:
                 timing.update(novel_timing)
             else:
                 nv = self._render_novel(novel_view, p.env, self._novel_box(p.regions, p.j3), timing)
-            if self.config.novel_view.proxy_blend:
-                nv = self._proxy_blend(nv, p, timing)
+            if self.novel_painter is not None or self.config.novel_view.proxy_blend:
+                nv = self._over_proxy(nv, p, timing)
             nv = self._compose_novel(novel_view, nv, p.j3, timing)
         points = p.j3.points
         if self._smoother is not None:
@@ -710,20 +725,30 @@ class Estimator:
 
         return self._worker.submit(job, dict(env))
 
-    def _proxy_blend(self, nv: NovelView, p: "_Pass", timing: dict) -> NovelView:
-        """``novel_view.proxy_blend``: the view's subject recoloured from the source crops at the depth of
-        the body proxy of this pair's joints (``ghnerf_runtime.proxy_blend``); unchanged without joints."""
+    def _over_proxy(self, nv: NovelView, p: "_Pass", timing: dict) -> NovelView:
+        """The view's subject repainted by the learnt painter (``novel_view.painter``), then recoloured from the
+        source crops (``novel_view.proxy_blend``), both over the body proxy of this pair's joints and only
+        where the rendered picture shows the subject (or the proxy, for the painter); unchanged without
+        joints. The proxy's construction counts in the first stage that runs."""
         t = time.perf_counter()
         body = proxy_body(p.j3.points, p.j3.valid)
-        if not body.empty:
-            cfg = self.config.novel_view
-            rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation)
-            region = subject_region(nv.image, self.contract.background, cfg.silhouette_min_diff)
-            blended = proxy_blend(nv.image, nv.camera, body, p.crops, rgb, cfg.proxy_tolerance_m,
-                                  region=region, max_angle_deg=cfg.proxy_max_angle_deg)
-            nv = NovelView(blended.image, nv.camera, nv.depth, nv.heat, nv.rays)
-        timing[NOVEL_PROXY_STAGE] = 1e3 * (time.perf_counter() - t)
-        return nv
+        if body.empty:
+            return nv
+        cfg = self.config.novel_view
+        rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation)
+        region = subject_region(nv.image, self.contract.background, cfg.silhouette_min_diff)  # the picture's own
+        src_depth = [proxy_depth(body, c) for c in p.crops]  # both stages read the proxy's depth in the sources
+        image = nv.image
+        if self.novel_painter is not None:
+            image, _ = self.novel_painter.repaint(image, nv.camera, body, p.crops, rgb, p.j3.points, p.j3.valid,
+                                                  cfg.proxy_tolerance_m, region=region, source_depth=src_depth)
+            timing[NOVEL_PAINT_STAGE] = 1e3 * (time.perf_counter() - t)
+            t = time.perf_counter()
+        if cfg.proxy_blend:
+            image = proxy_blend(image, nv.camera, body, p.crops, rgb, cfg.proxy_tolerance_m, region=region,
+                                max_angle_deg=cfg.proxy_max_angle_deg, source_depth=src_depth).image
+            timing[NOVEL_PROXY_STAGE] = 1e3 * (time.perf_counter() - t)
+        return NovelView(image, nv.camera, nv.depth, nv.heat, nv.rays)
 
     def _compose_novel(self, request: NovelViewRequest, nv: NovelView, j3: Joints3D, timing: dict) -> NovelView:
         """The requested overlay on the rendered view (the pair's own joints)."""
@@ -744,4 +769,5 @@ def load_session(config: EstimatorConfig):
     from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
 
     graphs = config.required_graphs(ModelSession.has_graph_file(config.session, "human"))
-    return ModelSession.load(config.session, graphs, skeleton_prior=config.joints3d.uses_skeleton_prior(True))
+    return ModelSession.load(config.session, graphs, skeleton_prior=config.joints3d.uses_skeleton_prior(True),
+                             novel_painter=config.novel_view.uses_painter(True))

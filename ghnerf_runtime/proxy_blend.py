@@ -81,7 +81,7 @@ def subject_region(image_bgr: np.ndarray, background: float, min_diff: float) ->
 
 def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
                 source_rgb: np.ndarray, tolerance_m: float = 0.03, region: np.ndarray | None = None,
-                max_angle_deg: float = 180.0) -> ProxyBlend:
+                max_angle_deg: float = 180.0, source_depth: Sequence[np.ndarray] | None = None) -> ProxyBlend:
     """Recolour ``image_bgr`` (the rendered view at pinhole ``camera``) from the sources at the proxy's
     depth (module docstring).
 
@@ -94,12 +94,16 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         region: ``(H, W)`` bool, the only pixels that may be recoloured (default: all).
         max_angle_deg: recolour a pixel only when a source that sees its point looks at it within this
             angle of the view's ray (default: any).
+        source_depth: the proxy's depth in each source camera, when the caller has it already
+            (``proxy_depth(body, camera)``); default: ray-cast here.
     """
     image = np.asarray(image_bgr)
     if image.shape != (camera.height, camera.width, 3) or image.dtype != np.uint8:
         raise ShapeError(f"image must be uint8 {(camera.height, camera.width, 3)}, got {image.dtype} {image.shape}")
     if len(sources) != len(source_rgb):
         raise ShapeError(f"{len(sources)} source cameras for {len(source_rgb)} source images")
+    if source_depth is not None and len(source_depth) != len(sources):
+        raise ShapeError(f"{len(sources)} source cameras for {len(source_depth)} source depth maps")
     if region is None:
         depth = proxy_depth(body, camera)
         covered = depth > 0
@@ -125,7 +129,7 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
     nearest = np.full(len(z), np.inf)  # the smallest angle of a source that sees the point
     to_view = camera.center - points
     to_view /= np.linalg.norm(to_view, axis=-1, keepdims=True)
-    for cam, rgb in zip(sources, source_rgb):
+    for k, (cam, rgb) in enumerate(zip(sources, source_rgb)):
         rgb = np.ascontiguousarray(rgb, np.float32)
         if rgb.shape[:2] != (cam.height, cam.width):
             raise ShapeError(f"source image {rgb.shape[:2]} does not match its camera {(cam.height, cam.width)}")
@@ -134,7 +138,10 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         v = np.nan_to_num(uv[:, 1], nan=-1.0).astype(np.float32).reshape(-1, 1)
         colour = cv2.remap(rgb, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT).reshape(-1, 3)
         # full resolution: at half, visibility along the silhouettes' edges goes wrong
-        own = cv2.remap(proxy_depth(body, cam).astype(np.float32), u, v, cv2.INTER_NEAREST,
+        own_depth = proxy_depth(body, cam) if source_depth is None else np.asarray(source_depth[k])
+        if own_depth.shape != rgb.shape[:2]:
+            raise ShapeError(f"source depth {own_depth.shape} does not match its camera {(cam.height, cam.width)}")
+        own = cv2.remap(own_depth.astype(np.float32), u, v, cv2.INTER_NEAREST,
                         borderMode=cv2.BORDER_CONSTANT, borderValue=0.0).ravel()
         inside = (u[:, 0] >= 0) & (u[:, 0] <= cam.width - 1) & (v[:, 0] >= 0) & (v[:, 0] <= cam.height - 1)
         sees = inside & (zs > 0) & (np.abs(own - zs) < tolerance_m)

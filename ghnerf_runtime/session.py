@@ -12,6 +12,9 @@ Model folder layout (what ``python -m training.export`` writes)::
     <model_dir>/model_card.json       optional: training figures; read and kept, never required
     <model_dir>/skeleton_prior.onnx   optional: the learnt skeleton prior (its own metadata,
                                       ghnerf_runtime.skeleton_prior), loaded on request
+    <model_dir>/novel_painter.onnx    optional: the novel view's learnt painter (its own metadata,
+                                      ghnerf_runtime.novel_painter), loaded on request; its int8 twin
+                                      novel_painter.int8.onnx where the precision allows
 
 The shipped layout (``python -m training.pipeline --out models/``) puts each variant in a
 subfolder, ``models/ghnerf/`` and ``models/baseline/``, with ``models/model_card.json`` beside
@@ -68,6 +71,7 @@ from ghnerf_runtime.contract import (
 )
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
+from ghnerf_runtime.novel_painter import NovelPainter
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
@@ -215,6 +219,7 @@ class ModelSession:
         self.run_counts: dict[str, int] = {g: 0 for g in self._sessions}
         self.warmup_ms: dict[str, float] = {}
         self.skeleton_prior = None
+        self.novel_painter = None
         self._output_names = {g: list(contract.graph(g).output_names) for g in self._sessions}
         self._input_names = {g: list(contract.graph(g).input_names) for g in self._sessions}
 
@@ -222,13 +227,14 @@ class ModelSession:
     @classmethod
     def load(cls, config: SessionConfig | str | os.PathLike,
              graphs: Sequence[str] = ("encoder", "volume", "render_heat"),
-             skeleton_prior: bool = False) -> "ModelSession":
+             skeleton_prior: bool = False, novel_painter: bool = False) -> "ModelSession":
         """Load, check and warm up ``graphs`` of the model in ``config.model_dir``.
 
         Args:
             config: a :class:`SessionConfig`, or just the model folder (defaults otherwise).
             graphs: which graphs to load (``EstimatorConfig.required_graphs()``).
             skeleton_prior: also load the folder's ``skeleton_prior.onnx`` when it has one.
+            novel_painter: also load the folder's ``novel_painter.onnx`` when it has one.
 
         Raises:
             ModelLoadError: a folder or file is missing, unreadable or not valid ONNX.
@@ -283,6 +289,9 @@ class ModelSession:
         session = cls(sessions, contract, files, cls._read_card(folder))
         if skeleton_prior and (folder / PRIOR_FILE).is_file():
             session.skeleton_prior = SkeletonPrior.load(folder / PRIOR_FILE, threads=1)  # one small MLP row: no pool
+        painter_file = NovelPainter.find(folder, config.precision)
+        if novel_painter and painter_file is not None:
+            session.novel_painter = NovelPainter.load(painter_file, threads=config.threads)
         if config.warmup:
             session.warm_up()
         return session

@@ -31,6 +31,7 @@ import json
 import math
 import pickle
 import sys
+import tempfile
 import time
 import warnings
 from dataclasses import asdict, dataclass, field, replace
@@ -41,7 +42,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from ghnerf_runtime.body25 import FLIP_INDEX
+from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.metrics import masked_psnr
 from training.evaluate import SOURCE_ANGLE_BINS_DEG
 from training.fill_features import MASK_BIT, SEEN_BIT, TRUTH_BIT, load_cache
@@ -316,9 +317,116 @@ def load_net(path: str | Path, device: torch.device | str = "cpu") -> FillNet:
         ckpt = torch.load(path, map_location=device, weights_only=True)
         net = FillNet(FillNetConfig(**ckpt["config"]["net"]))
         net.load_state_dict(ckpt["state_dict"])
+        net.steps_trained = int(ckpt.get("info", {}).get("steps", 0))
     except (OSError, RuntimeError, KeyError, TypeError, EOFError, pickle.UnpicklingError) as e:
         raise ValueError(f"{path}: not a fill-net checkpoint ({e})") from e
     return net.to(device)
+
+
+# ---------------------------------------------------------------------------------------------- the runtime's painter
+class PainterGraph(nn.Module):
+    """A :class:`FillNet` that reads the runtime's inputs (``ghnerf_runtime.novel_painter``): the image
+    planes ``(N, 12, H, W)`` and the projected joints ``(N, 25, 3)``, whose Gaussians it draws itself;
+    returns the repainted picture in [0, 1]. Only a net without the relit fill and with the model's
+    picture (``net.relit_input=false``, ``net.shown_input=true``) runs on the device: the light fit is
+    too slow there."""
+
+    def __init__(self, net: FillNet) -> None:
+        super().__init__()
+        if net.cfg.relit_input or not net.cfg.shown_input:
+            raise ValueError("the runtime's painter is trained with net.relit_input=false and net.shown_input=true; "
+                             f"this net has {net.cfg}")
+        self.net = net
+
+    def forward(self, planes: torch.Tensor, joints: torch.Tensor) -> torch.Tensor:
+        H, W = planes.shape[-2:]
+        maps = joint_maps(joints, H, W, self.net.cfg.joint_sigma_px)
+        x = torch.cat([planes[:, :9], maps, planes[:, 9:]], 1)  # net_inputs' order: ..., depth, maps, shown
+        return self.net(x, planes[:, 9:]).clamp(0.0, 1.0)
+
+
+def painter_planes_of(b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """A cache batch's runtime inputs (``ghnerf_runtime.novel_painter.PLANES`` and the joints)."""
+    def img(k: str) -> torch.Tensor:
+        return b[k].permute(0, 3, 1, 2).float() / 255.0
+
+    flags = b["flags"].long()
+    planes = [img("blend"), ((flags & MASK_BIT) > 0).float()[:, None], ((flags & SEEN_BIT) > 0).float()[:, None],
+              b["normals"].permute(0, 3, 1, 2).float() / 127.0, b["depth"].float()[:, None], img("shown")]
+    return torch.cat(planes, 1), b["joints"].float()
+
+
+def export_painter(net: FillNet, path: str | Path, metadata: dict[str, str], size: int = 128) -> Path:
+    """``net`` as the runtime's ``novel_painter.onnx`` (dynamic batch and image size), with the
+    ``ghnerf_painter.*`` metadata."""
+    import onnx  # noqa: PLC0415
+
+    from ghnerf_runtime import novel_painter as rt  # noqa: PLC0415
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    graph = PainterGraph(net.cpu().eval())
+    planes, joints = torch.zeros(1, len(rt.PLANES), size, size), torch.zeros(1, NUM_JOINTS, 3)
+    axes = {"planes": {0: "N", 2: "H", 3: "W"}, "joints": {0: "N"}, rt.OUTPUT: {0: "N", 2: "H", 3: "W"}}
+    torch.onnx.export(graph, (planes, joints), str(path), input_names=list(rt.INPUTS), output_names=[rt.OUTPUT],
+                      opset_version=17, dynamo=False, dynamic_axes=axes)
+    model = onnx.load(str(path))
+    meta = {"feature_version": str(rt.FEATURE_VERSION), "joint_sigma_px": str(net.cfg.joint_sigma_px),
+            "width": str(net.cfg.width), "levels": str(net.cfg.levels), "steps": str(net.steps_trained), **metadata}
+    for k, v in meta.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = rt.META_PREFIX + k, str(v)
+    onnx.save(model, str(path))
+    return path
+
+
+def quantize_painter(fp32_path: str | Path, out_path: str | Path, arrays: dict[str, np.ndarray],
+                     views: int = 64) -> Path:
+    """Static int8 QDQ of the painter's convolutions (the encoder's policy), calibrated on a cache's first
+    ``views`` (a training cache: the held-out one scores it); its metadata is the fp32 file's, with the
+    precision."""
+    import onnx  # noqa: PLC0415
+    from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static  # noqa: PLC0415
+    from onnxruntime.quantization.shape_inference import quant_pre_process  # noqa: PLC0415
+
+    from ghnerf_runtime import novel_painter as rt  # noqa: PLC0415
+    from training.export.quantize import FeedsReader  # noqa: PLC0415
+
+    fp32_path, out_path = Path(fp32_path), Path(out_path)
+    few = {k: v[:views] for k, v in arrays.items()}
+    planes, joints = painter_planes_of(to_device(few, torch.device("cpu")))
+    feeds = [{"planes": planes[i:i + 1].numpy(), "joints": joints[i:i + 1].numpy()} for i in range(len(planes))]
+    with tempfile.TemporaryDirectory() as tmp:
+        pre = Path(tmp) / "pre.onnx"
+        quant_pre_process(str(fp32_path), str(pre))
+        quantize_static(str(pre), str(out_path), FeedsReader(feeds), quant_format=QuantFormat.QDQ,
+                        op_types_to_quantize=["Conv"], per_channel=True, reduce_range=True,
+                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+                        calibrate_method=CalibrationMethod.MinMax)
+    meta = {p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props}
+    meta[rt.META_PREFIX + "precision"] = "int8"
+    meta[rt.META_PREFIX + "calibration_views"] = str(len(feeds))
+    model = onnx.load(str(out_path))
+    del model.metadata_props[:]
+    for k, v in meta.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = k, v
+    onnx.save(model, str(out_path))
+    return out_path
+
+
+def onnx_rows(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
+    """:func:`score_rows` of an exported painter run through onnxruntime over a whole cache."""
+    from ghnerf_runtime.novel_painter import NovelPainter, PainterPlanes  # noqa: PLC0415
+
+    painter, out = NovelPainter.load(path), []
+    for s in range(0, len(arrays["flags"]), 64):
+        b = to_device({k: v[s:s + 64] for k, v in arrays.items()}, torch.device("cpu"))
+        planes, joints = painter_planes_of(b)
+        subject = ((b["flags"].long() & TRUTH_BIT) > 0).numpy()[..., None]
+        out.extend(painter.paint(PainterPlanes(p, j, p[3] > 0)) * m
+                   for p, j, m in zip(planes.numpy(), joints.numpy(), subject))
+    return score_rows(arrays, np.stack(out))
 
 
 def _parse_sets(cfg: FillTrainConfig, sets: list[str]) -> FillTrainConfig:
@@ -333,6 +441,59 @@ def _parse_sets(cfg: FillTrainConfig, sets: list[str]) -> FillTrainConfig:
         kind = type(target[name])
         target[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
     return replace(FillTrainConfig(**top), net=FillNetConfig(**net))
+
+
+def _export_cli(args) -> int:
+    import hashlib  # noqa: PLC0415
+
+    net = load_net(args.net)
+    score_json = args.net.parent / "score.json"
+    trained = json.loads(score_json.read_text()) if score_json.is_file() else {}
+    meta = {"trained_on": str(args.net), "hardware": str(trained.get("hardware", "")),
+            "seconds": str(trained.get("seconds", ""))}
+    out = export_painter(net, args.out, meta)
+    report = {"command": "python -m training.learnt_fill export " + " ".join(
+                  f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items() if k != "cmd" and v is not None),
+              "net": str(args.net), "steps": net.steps_trained, "config": trained.get("config"),
+              "train_views": trained.get("train_views"), "train_s": trained.get("seconds"),
+              "hardware": trained.get("hardware"), "held_out": trained.get("rows")}
+    outs = [out]
+    if args.calib_cache is not None:
+        outs.append(quantize_painter(out, out.with_suffix(".int8.onnx"), load_cache(args.calib_cache)))
+    if args.val_cache is not None:
+        val = load_cache(args.val_cache)
+        report["parity"] = painter_parity(net, out, val)
+        print(f"onnxruntime vs torch on {report['parity']['views']} views: max |diff| "
+              f"{report['parity']['max_abs']:.2e}, PSNR {report['parity']['psnr_db']:.1f} dB")
+        report["onnx_held_out"] = {}
+        for path in outs:
+            precision = "int8" if path.name.endswith(".int8.onnx") else "fp32"
+            report["onnx_held_out"][precision] = rows = onnx_rows(path, val)
+            print(f"{path.name} (onnxruntime, {precision}) held out:\n{table(rows)}")
+    out.with_suffix(".json").write_text(json.dumps(report, indent=1))
+    for path in outs:
+        print(f"{path}: {path.stat().st_size / 1e6:.2f} MB, sha256 {hashlib.sha256(path.read_bytes()).hexdigest()[:16]}")
+    if args.card_dir is not None:
+        from training.model_card import add_painter_to_card  # noqa: PLC0415
+
+        print(add_painter_to_card(args.card_dir, out, outs[1:]))
+    return 0
+
+
+def painter_parity(net: FillNet, path: Path, arrays: dict[str, np.ndarray], views: int = 8) -> dict:
+    """The exported painter through onnxruntime against the torch net on a cache's first ``views``."""
+    from ghnerf_runtime.novel_painter import NovelPainter, PainterPlanes  # noqa: PLC0415
+
+    few = {k: v[:views] for k, v in arrays.items()}
+    b = to_device(few, torch.device("cpu"))
+    planes, joints = painter_planes_of(b)
+    with torch.no_grad():
+        want = PainterGraph(net.cpu().eval())(planes, joints).permute(0, 2, 3, 1).numpy()
+    painter = NovelPainter.load(path)
+    got = np.stack([painter.paint(PainterPlanes(p, j, p[3] > 0)) for p, j in zip(planes.numpy(), joints.numpy())])
+    mse = float(np.mean((got - want) ** 2))
+    return {"views": len(got), "max_abs": float(np.abs(got - want).max()),
+            "psnr_db": float(10 * np.log10(1.0 / max(mse, 1e-20)))}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -362,8 +523,19 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--val-cache", required=True, type=Path)
     s.add_argument("--net", required=True, type=Path)
     s.add_argument("--device", default="auto")
+    e = sub.add_parser("export", help="the runtime's painter: novel_painter.onnx (and its figures) from a fill net")
+    e.add_argument("--net", required=True, type=Path, help="a fill_net.pt trained with net.relit_input=false, "
+                                                           "net.shown_input=true")
+    e.add_argument("--out", required=True, type=Path, help="the .onnx to write (models/ghnerf/novel_painter.onnx)")
+    e.add_argument("--val-cache", type=Path, default=None, help="check onnxruntime against torch on its first views")
+    e.add_argument("--calib-cache", type=Path, default=None,
+                   help="also write the int8 file (<out stem>.int8.onnx), calibrated on this cache's first views "
+                        "(the training cache)")
+    e.add_argument("--card-dir", type=Path, default=None, help="record the painter in this model card (models/)")
     args = ap.parse_args(argv)
 
+    if args.cmd == "export":
+        return _export_cli(args)
     if args.cmd == "cache":
         from training.fill_features import cache_split  # noqa: PLC0415
 

@@ -142,6 +142,47 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
     return L
 
 
+def _painter_lines(card: Mapping[str, Any]) -> list[str]:
+    """The novel-view painter's held-out masked PSNR (``training.learnt_fill export``)."""
+    L: list[str] = []
+    for variant, p in (card.get("novel_painter") or {}).items():
+        if not p or not p.get("held_out"):
+            continue
+        rows = p["held_out"]
+        L.append(f"### Novel-view painter (`{variant}/novel_painter.onnx`)")
+        L.append("")
+        L.append(f"A U-Net of {p.get('steps')} steps ({p.get('train_views')} training views, {p.get('train_s')} s on "
+                 f"{p.get('hardware')}) that repaints the rendered picture over the body proxy of the device's joints "
+                 "(`ghnerf_runtime.novel_painter`); masked PSNR dB of `ghnerf-eval`'s held-out novel views, the model's "
+                 "picture (`shown`) and the painter's"
+                 + (f"; made by `{p['command']}`:" if p.get("command") else ":"))
+        L.append("")
+        onnx_rows = p.get("onnx_held_out") or {}
+        precisions = [k for k in ("fp32", "int8") if k in onnx_rows]
+        L.append("| views | n | shown | painter (torch) | " + " | ".join(f"onnxruntime {k}" for k in precisions) + " |")
+        L.append("|---|---|---|---|" + "---|" * len(precisions))
+        for label, r in rows.items():
+            L.append(f"| {label} | {r.get('n')} | {_fmt(r.get('shown'))} | {_fmt(r.get('fill:learnt'))} | "
+                     + " | ".join(_fmt((onnx_rows[k].get(label) or {}).get("fill:learnt")) for k in precisions) + " |")
+        L.append("")
+    return L
+
+
+def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = ()) -> Path:
+    """Record the painter ``out`` (its ``.json`` figures; size and hash of it and of ``more``, its int8 file)
+    in the model card of ``card_dir``."""
+    import hashlib
+
+    card_dir = Path(card_dir)
+    card = json.loads((card_dir / "model_card.json").read_text())
+    card.setdefault("novel_painter", {})[out.parent.name] = json.loads(out.with_suffix(".json").read_text())
+    for path in (out, *more):
+        card.setdefault("files", {})[str(path.relative_to(card_dir))] = {
+            "bytes": path.stat().st_size, "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+    write_card(card_dir, card)
+    return card_dir / "model_card.json"
+
+
 def render_markdown(card: Mapping[str, Any]) -> str:
     L: list[str] = []
     L.append(f"# Model card: {card.get('name', 'GHNeRF edge128')}")
@@ -281,6 +322,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
                 f"{_fmt(by[n]['mpjpe_mm'], 1)} ({100 * by[n]['joints'] / total:.0f} %)" for n in names) + " |")
         L.append("")
     L.extend(_prior_lines(card))
+    L.extend(_painter_lines(card))
     by_angle = [(label, m["psnr_masked_by_source_angle"]) for label, m in (card.get("metrics") or {}).items()
                 if m.get("psnr_masked_by_source_angle") and m.get("novel_views")]
     if by_angle:

@@ -24,6 +24,7 @@ import numpy as np
 
 from drivers.sim.sensor import GAMMA  # display values are gamma-encoded; shading multiplies linear radiance
 from ghnerf_runtime.body25 import FLIP_INDEX, LIMBS
+from ghnerf_runtime.geometry.surface import surface_normals as surface_from_points
 from training.blend_ceiling import unproject
 
 #: Bins along each bone: clothing changes along a limb (a short sleeve, shorts).
@@ -56,38 +57,11 @@ def bone_coordinates(points: np.ndarray, joints: np.ndarray, valid: np.ndarray,
     return bone, np.minimum((along * bins).astype(int), bins - 1)
 
 
-def _masked_difference(points: np.ndarray, mask: np.ndarray, axis: int) -> np.ndarray:
-    """Central difference of ``points`` along an image axis, one-sided where a neighbour is outside
-    ``mask`` (zero where both are)."""
-    fwd = np.zeros_like(points)
-    ok = np.zeros(mask.shape, bool)
-    lo, hi = [slice(None)] * 2, [slice(None)] * 2
-    lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-    lo, hi = tuple(lo), tuple(hi)
-    fwd[lo] = points[hi] - points[lo]
-    ok[lo] = mask[hi] & mask[lo]
-    bwd, ok_b = np.zeros_like(points), np.zeros(mask.shape, bool)
-    bwd[hi], ok_b[hi] = fwd[lo], ok[lo]
-    n = ok.astype(np.float64) + ok_b
-    return (fwd * ok[..., None] + bwd * ok_b[..., None]) / np.maximum(n, 1.0)[..., None]
-
-
 def surface_normals(depth: np.ndarray, mask: np.ndarray, K_inv: np.ndarray, c2w: np.ndarray) -> np.ndarray:
-    """World-frame unit normals ``(H, W, 3)`` of a depth map's surface inside ``mask`` (zero outside),
-    facing the camera.
-
-    From the unprojected points' image-space differences, one-sided at the silhouette so that an edge
-    pixel's normal comes from its own side rather than from the background; a pixel with no neighbour
-    in the mask along an axis (a one-pixel sliver) faces the camera.
-    """
-    mask = np.asarray(mask, bool)
-    points = unproject(np.where(mask, depth, 0.0), K_inv, c2w)
-    n = np.cross(_masked_difference(points, mask, 1), _masked_difference(points, mask, 0))
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
-    towards_camera = np.asarray(c2w, np.float64)[:, 3] - points
-    view = towards_camera / np.maximum(np.linalg.norm(towards_camera, axis=-1, keepdims=True), 1e-12)
-    n = np.where(length > 1e-12, n / np.maximum(length, 1e-12), view)
-    return np.where(((n * towards_camera).sum(-1) < 0)[..., None], -n, n)
+    """World-frame unit normals ``(H, W, 3)`` of a depth map's surface inside ``mask``, facing the camera
+    (``ghnerf_runtime.geometry.surface.surface_normals`` on the unprojected pixels)."""
+    points = unproject(np.where(np.asarray(mask, bool), depth, 0.0), K_inv, c2w)
+    return surface_from_points(points, mask, np.asarray(c2w, np.float64)[:, 3])
 
 
 def _hemisphere(normals: np.ndarray) -> np.ndarray:

@@ -34,7 +34,8 @@ import numpy as np
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, \
     Joints3DConfig, NovelViewConfig, SessionConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
-from ghnerf_runtime.estimator import KEYPOINT_STAGES, NOVEL_PROXY_STAGE, NOVEL_STAGES, Estimator, load_session
+from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE, NOVEL_STAGES, Estimator,
+                                      load_session)
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.tracking import track_from_joints
 
@@ -49,7 +50,7 @@ STAGE_GROUPS = {
     "depth (volume)": ("volume",),
     "rendering (heat)": ("render_heat",),
     "decoding (2D+3D)": ("decode_2d", "joints_3d"),
-    "novel view": (*NOVEL_STAGES, NOVEL_PROXY_STAGE),
+    "novel view": (*NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE),
     "total": ("total",),
 }
 
@@ -64,7 +65,8 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
 
     Returns per-stage lists of ms (warm-up pairs excluded) and the wall time of the counted pairs.
     """
-    stages: dict[str, list[float]] = {k: [] for k in (*KEYPOINT_STAGES, *NOVEL_STAGES, NOVEL_PROXY_STAGE, "total")}
+    stages: dict[str, list[float]] = {k: [] for k in (*KEYPOINT_STAGES, *NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
+                                                      "total")}
     request = NovelViewRequest(alpha=0.5) if novel else None
     wall = 0.0
     n = 0
@@ -158,18 +160,21 @@ def run_runtime_bench(args) -> dict:
                 flip_cfg = replace(flip_cfg, tracking=replace(flip_cfg.tracking, follow_encoder=follow))
             if smooth is not None:
                 flip_cfg = replace(flip_cfg, smoothing=replace(flip_cfg.smoothing, enabled=smooth))
-            novel_rows = itertools.product(args.novel_interior_strides or [None], args.proxy_blends or [None]) \
-                if mode == "novel" else [(None, None)]
-            for interior, blend in novel_rows:
+            novel_rows = itertools.product(args.novel_interior_strides or [None], args.proxy_blends or [None],
+                                           args.painters or [None]) if mode == "novel" else [(None, None, None)]
+            for interior, blend, paint in novel_rows:
                 row_cfg = flip_cfg if interior is None else \
                     replace(flip_cfg, novel_view=replace(flip_cfg.novel_view, interior_stride=interior))
                 if blend is not None:
                     row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, proxy_blend=blend))
+                if paint is not None:
+                    row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, painter="on" if paint else "off"))
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
                              "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
                              "flip_label": flip is not None, "follow_label": follow is not None,
                              "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
-                             "smoothing_label": smooth is not None, "proxy_label": blend is not None})
+                             "smoothing_label": smooth is not None, "proxy_label": blend is not None,
+                             "painter_label": paint is not None})
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
@@ -193,7 +198,9 @@ def run_runtime_bench(args) -> dict:
                "prior_flip_label": row["prior_flip_label"],
                "smoothing": cfg.smoothing.enabled, "smoothing_label": row["smoothing_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
-                   "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"]}
+                   "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"],
+                   "painter": cfg.novel_view.uses_painter(getattr(session, "novel_painter", None) is not None),
+                   "painter_label": row["painter_label"]}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
                "accuracy": row["accuracy"].summary(), "load_average": float(np.mean(loads))}
@@ -218,6 +225,8 @@ def _print_row(row: dict) -> None:
         tracked += " smooth" if row["smoothing"] else " no-smooth"
     if row.get("proxy_label"):
         tracked += " proxy-blend" if row["proxy_blend"] else " no-proxy-blend"
+    if row.get("painter_label"):
+        tracked += " painter" if row["painter"] else " no-painter"
     if row.get("novel_interior_stride") and row["novel_interior_stride"] > row.get("novel_stride", 1):
         tracked += f" interior/{row['novel_interior_stride']}"
     acc = row["accuracy"]
@@ -287,6 +296,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--proxy-blends", default=None, type=_on_off_list,
                     help="comma list of novel_view.proxy_blend values (on,off), one novel row each (default: the "
                          "config's)")
+    rt.add_argument("--painters", default=None, type=_on_off_list,
+                    help="comma list of novel_view.painter values (on,off), one novel row each; on needs the model "
+                         "folder's novel_painter.onnx (default: the config's, auto)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

@@ -220,6 +220,27 @@ def test_bench_runtime_compares_the_proxy_blend_on_and_off(tiny_model_dir, tmp_p
     assert "no-proxy-blend" in capsys.readouterr().out
 
 
+def test_bench_runtime_compares_the_painter_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    import shutil
+
+    from ghnerf_runtime.cli import bench
+    from tests.ghnerf_runtime.test_novel_painter import blend_painter
+
+    models = tmp_path / "models"
+    shutil.copytree(tiny_model_dir, models)
+    report_path = tmp_path / "bench.json"
+    args = ["runtime", "--sequences", "1", "--frames", "2", "--precisions", "fp32", "--heatmap-sources", "encoder",
+            "--modes", "novel", "--warmup", "0", "--painters", "off,on", "--cache", str(tmp_path / "cache"),
+            "--json", str(report_path)]
+    assert bench.main(["runtime", "--model-dir", str(models), *args[1:]]) != 0  # on, and the folder has none
+    assert "no novel_painter.onnx" in capsys.readouterr().err
+    blend_painter(models / "novel_painter.onnx")
+    assert bench.main(["runtime", "--model-dir", str(models), *args[1:]]) == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    assert [r.get("painter") for r in runs] == [False, True]
+    assert "no-painter" in capsys.readouterr().out
+
+
 def test_bench_runtime_compares_the_flip_test_and_encoder_following_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
     from ghnerf_runtime.cli import bench
 

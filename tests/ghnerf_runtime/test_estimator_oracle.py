@@ -356,3 +356,30 @@ def test_the_proxy_blend_recolours_the_novel_view_with_the_subjects_colours(clip
         changed = np.any(on.novel_view.image != off.novel_view.image, axis=-1)
         assert changed.sum() > 0.5 * mask.sum()
     assert min(gains) > 3.0, gains
+
+
+def test_the_painter_runs_over_the_proxy_before_the_blend_and_only_when_asked(clip, tmp_path):
+    """``novel_view.painter``: a session's painter repaints the view after the joints (``novel_paint``), before
+    the proxy blend, and changes no joint; ``off`` skips it, ``on`` without one is an error."""
+    from ghnerf_runtime.errors import ModelError
+    from ghnerf_runtime.novel_painter import NovelPainter
+    from tests.ghnerf_runtime.test_novel_painter import blend_painter
+
+    rig, frames, truth, visible, *_ = clip
+    painter = NovelPainter.load(blend_painter(tmp_path / "novel_painter.onnx"))
+    runs = {}
+    for mode in ("off", "auto"):
+        oracle = OracleSession(edge128_contract())
+        oracle.novel_painter = painter
+        cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, painter=mode, proxy_blend=False))
+        with Estimator(oracle, rig, cfg) as est:
+            assert (est.novel_painter is painter) == (mode == "auto")
+            oracle.set_truth(truth[0], visible[0])
+            runs[mode] = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
+    off, on = runs["off"], runs["auto"]
+    np.testing.assert_array_equal(off.joints_3d, on.joints_3d)
+    assert "novel_paint" in on.timing_ms and "novel_paint" not in off.timing_ms
+    assert np.any(on.novel_view.image != off.novel_view.image, axis=-1).sum() > 500
+    with pytest.raises(ModelError, match="novel_painter.onnx"):
+        Estimator(OracleSession(edge128_contract()), rig,
+                  EstimatorConfig(novel_view=NovelViewConfig(enabled=True, painter="on")))

@@ -160,3 +160,16 @@ def test_proxy_blend_config_is_validated():
         NovelViewConfig(proxy_blend="yes")
     with pytest.raises(ConfigError, match="proxy_tolerance_m"):
         NovelViewConfig(proxy_tolerance_m=0.0)
+
+
+def test_source_depth_given_by_the_caller_gives_the_same_blend(shot):
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    image = np.full((128, 128, 3), 5, np.uint8)
+    own = proxy_blend(image, target, body, sources, rgb)
+    given = proxy_blend(image, target, body, sources, rgb, source_depth=[proxy_depth(body, c) for c in sources])
+    assert np.array_equal(own.image, given.image) and own.replaced.sum() > 1000
+    with pytest.raises(ShapeError, match="source depth"):
+        proxy_blend(image, target, body, sources, rgb, source_depth=[np.zeros((4, 4))] * 2)
+    with pytest.raises(ShapeError, match="2 source cameras for 1 source depth"):
+        proxy_blend(image, target, body, sources, rgb, source_depth=[np.zeros((128, 128))])

@@ -1,0 +1,162 @@
+"""The novel view's learnt painter on the device (``ghnerf_runtime.novel_painter``): its inputs against the
+simulator's truth, its file contract, and where it may change the picture.
+
+The painter here is a graph written with ``onnx.helper`` (no torch): it returns its two-source blend plane,
+which is enough to check what the runtime feeds it and what it keeps of the answer; that a trained
+painter is fed what it was trained on is ``tests/training/test_novel_painter_export.py``."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
+from ghnerf_runtime.config import ConfigError, NovelViewConfig
+from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ShapeError
+from ghnerf_runtime.metrics import masked_psnr
+from ghnerf_runtime.novel_painter import (FEATURE_VERSION, META_PREFIX, PLANES, NovelPainter, PainterPlanes,
+                                          painter_planes)
+from ghnerf_runtime.novel_view import interpolate_camera, novel_target
+
+sim = pytest.importorskip("drivers.sim")
+onnx = pytest.importorskip("onnx")
+T = 0.1
+
+
+def blend_painter(path: Path, version: int = FEATURE_VERSION, planes: int = len(PLANES)) -> Path:
+    """A painter graph that answers its blend planes (0-2) and ignores the rest."""
+    from onnx import TensorProto, helper
+
+    consts = [helper.make_tensor(n, TensorProto.INT64, [1], [v]) for n, v in (("s", 0), ("e", 3), ("a", 1))]
+    node = helper.make_node("Slice", ["planes", "s", "e", "a"], ["rgb"])
+    graph = helper.make_graph(
+        [node], "blend_painter",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, ["N", planes, "H", "W"]),
+         helper.make_tensor_value_info("joints", TensorProto.FLOAT, ["N", 25, 3])],
+        [helper.make_tensor_value_info("rgb", TensorProto.FLOAT, ["N", 3, "H", "W"])], initializer=consts)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    entry = model.metadata_props.add()
+    entry.key, entry.value = META_PREFIX + "feature_version", str(version)
+    onnx.save(model, str(path))
+    return path
+
+
+@pytest.fixture(scope="module", params=[5, 11])
+def shot(request):
+    """A simulated person, two source crops around it and a target between the rig's cameras."""
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=request.param, motion="wave"))
+    joints = scene.joints_3d(T)
+    box = np.stack([joints.min(0) - 0.15, joints.max(0) + 0.15])
+    sources = [novel_target(c, box, 128) for c in rig.pair]
+    rgb = np.stack([scene.render(c, T, with_truth=False)[0][..., ::-1].astype(np.float32) / 255 for c in sources])
+    target = novel_target(interpolate_camera(*rig.pair, 0.5), box, 128)
+    image, truth = scene.render(target, T)
+    return joints, sources, rgb, target, image, truth
+
+
+def _planes(shot, shown=None):
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    shown = np.zeros((128, 128, 3)) if shown is None else shown
+    return painter_planes(shown, target, proxy_depth(body, target), sources, rgb,
+                          [proxy_depth(body, c) for c in sources], joints, np.ones(25, bool))
+
+
+def test_the_inputs_describe_the_subject_the_simulator_drew(shot):
+    joints, sources, rgb, target, image, truth = shot
+    p = _planes(shot)
+    assert p.planes.shape == (len(PLANES), 128, 128) and p.planes.dtype == np.float32
+    mask, seen = p.planes[3] > 0, p.planes[4] > 0
+    assert np.array_equal(mask, p.mask)
+    assert (mask & truth.mask).sum() / (mask | truth.mask).sum() > 0.8  # the proxy's silhouette
+    assert seen.sum() > 0.7 * mask.sum() and not (seen & ~mask).any()  # halfway: the sources see most of it
+    blend = p.planes[:3].transpose(1, 2, 0).astype(np.float64)
+    assert masked_psnr(blend, image[..., ::-1] / 255.0, seen & truth.mask).value > 23.0  # its own colours
+    normals = p.planes[5:8]
+    assert np.allclose(np.linalg.norm(normals[:, mask], axis=0), 1.0, atol=0.02)
+    assert np.median(normals[2, mask]) < -0.5  # camera frame: the surface faces the camera (-z)
+    assert abs(np.median(p.planes[8][mask])) < 1e-3 and not p.planes[8][~mask].any()
+    uv, _ = target.project(joints, distort=False)
+    np.testing.assert_allclose(p.joints[:, :2], uv, atol=1e-3)
+    assert p.joints[:, 2].all()
+
+
+def test_unknown_joints_are_marked_and_bad_inputs_named(shot):
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    depth, src = proxy_depth(body, target), [proxy_depth(body, c) for c in sources]
+    valid = np.ones(25, bool)
+    valid[4] = False
+    p = painter_planes(np.zeros((128, 128, 3)), target, depth, sources, rgb, src, joints, valid)
+    assert p.joints[4].tolist() == [0.0, 0.0, 0.0] and p.joints[3, 2] == 1.0
+    with pytest.raises(ShapeError, match="picture"):
+        painter_planes(np.zeros((64, 64, 3)), target, depth, sources, rgb, src, joints, valid)
+    with pytest.raises(ShapeError, match="2 source cameras, 1 images"):
+        painter_planes(np.zeros((128, 128, 3)), target, depth, sources, rgb[:1], src, joints, valid)
+    with pytest.raises(ShapeError, match="joints"):
+        painter_planes(np.zeros((128, 128, 3)), target, depth, sources, rgb, src, joints[:24], valid)
+    empty = painter_planes(np.zeros((128, 128, 3)), target, np.zeros((128, 128)), sources, rgb, src, joints, valid)
+    assert not empty.mask.any() and np.isfinite(empty.planes).all()
+
+
+def test_the_painter_changes_only_the_proxy_and_the_region(shot, tmp_path):
+    joints, sources, rgb, target, image, truth = shot
+    painter = NovelPainter.load(blend_painter(tmp_path / "p.onnx"))
+    body = proxy_body(joints, np.ones(25, bool))
+    grey = np.full((128, 128, 3), 77, np.uint8)
+    out, changed = painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool))
+    proxy = proxy_depth(body, target) > 0
+    assert np.array_equal(changed, proxy)
+    assert np.array_equal(out[~changed], grey[~changed])
+    assert masked_psnr(out[..., ::-1] / 255.0, image[..., ::-1] / 255.0, proxy & truth.mask).value > 20.0
+    region = np.zeros((128, 128), bool)
+    region[:10, :10] = True  # a corner the proxy does not reach: painted too (the picture says subject)
+    _, changed = painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool), region=region)
+    assert np.array_equal(changed, proxy | region)
+    # the painted box is the proxy's and the region's, padded: the same colours as painting the whole view
+    whole, _ = painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool), margin_px=128)
+    boxed, _ = painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool))
+    assert np.array_equal(whole, boxed)
+    nobody = proxy_body(joints, np.zeros(25, bool))
+    same, none = painter.repaint(grey, target, nobody, sources, rgb, joints, np.zeros(25, bool))
+    assert not none.any() and np.array_equal(same, grey)
+
+
+def test_a_painter_file_of_another_contract_is_refused(tmp_path):
+    with pytest.raises(ModelLoadError, match="no such novel-view painter"):
+        NovelPainter.load(tmp_path / "none.onnx")
+    (tmp_path / "bad.onnx").write_bytes(b"\x00" * 10)
+    with pytest.raises(ModelLoadError, match="bad.onnx.*corrupt"):
+        NovelPainter.load(tmp_path / "bad.onnx")
+    with pytest.raises(ModelContractError, match="feature version '99'"):
+        NovelPainter.load(blend_painter(tmp_path / "v99.onnx", version=99))
+    with pytest.raises(ModelContractError, match="planes"):
+        NovelPainter.load(blend_painter(tmp_path / "p11.onnx", planes=11))
+    painter = NovelPainter.load(blend_painter(tmp_path / "ok.onnx"))
+    p = PainterPlanes(np.full((12, 16, 16), np.nan, np.float32), np.zeros((25, 3), np.float32), np.ones((16, 16), bool))
+    from ghnerf_runtime.errors import ModelRunError
+
+    with pytest.raises(ModelRunError, match="non-finite"):
+        painter.paint(p)
+
+
+def test_the_painter_setting_is_checked():
+    assert NovelViewConfig().painter == "auto"
+    assert NovelViewConfig(enabled=True).uses_painter(True) and not NovelViewConfig(enabled=True).uses_painter(False)
+    assert not NovelViewConfig(enabled=True, painter="off").uses_painter(True)
+    assert not NovelViewConfig(enabled=False).uses_painter(True)
+    with pytest.raises(ConfigError, match="painter"):
+        NovelViewConfig(painter="maybe")
+
+
+def test_the_folder_gives_the_int8_painter_where_the_precision_allows(tmp_path):
+    assert NovelPainter.find(tmp_path) is None
+    blend_painter(tmp_path / "novel_painter.onnx")
+    assert NovelPainter.find(tmp_path, "auto").name == "novel_painter.onnx"
+    blend_painter(tmp_path / "novel_painter.int8.onnx")
+    assert NovelPainter.find(tmp_path, "auto").name == "novel_painter.int8.onnx"
+    assert NovelPainter.find(tmp_path, "int8").name == "novel_painter.int8.onnx"
+    assert NovelPainter.find(tmp_path, "fp32").name == "novel_painter.onnx"

@@ -1,0 +1,147 @@
+"""The runtime's learnt painter (``ghnerf_runtime.novel_painter``) against what it was trained on: the
+runtime builds the same inputs as the training caches (``training.fill_features``), and the exported
+graph (``training.learnt_fill export``) paints what the torch net paints."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from ghnerf_runtime.errors import ModelContractError, ModelLoadError  # noqa: E402
+from ghnerf_runtime.novel_painter import NovelPainter, PainterPlanes, painter_planes  # noqa: E402
+from training.body_proxy import proxy_body, proxy_scene, view_camera  # noqa: E402
+from training.fill_features import stack, view_features  # noqa: E402
+from training.learnt_fill import (FillNet, FillNetConfig, FillTrainConfig, PainterGraph, export_painter,  # noqa: E402
+                                  main, painter_planes_of, save_net, to_device)
+
+
+def _scenes(data, split="val"):
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(data, split=split)
+    return [{k: v.numpy() for k, v in ds[i].items()} for i in range(len(ds))]
+
+
+def _net(seed: int = 0) -> FillNet:
+    """A painter whose residual is not zero (a trained one's is not)."""
+    torch.manual_seed(seed)
+    net = FillNet(FillNetConfig(width=8, relit_input=False, shown_input=True))
+    torch.nn.init.normal_(net.head.weight, std=0.05)
+    return net.eval()
+
+
+def _both(scene, joints, t):
+    """One view's cache features (as training reads them) and the runtime's planes, from the same proxy."""
+    valid = np.ones(25, bool)
+    geometry, _ = proxy_scene({**scene, "joints_3d": joints, "joints_3d_valid": valid}, joints, valid)
+    rng = np.random.default_rng(t)
+    H, W = scene["tgt_masks"].shape[-2:]
+    shown = np.round(rng.uniform(0, 1, (H, W, 3)) * 255) / 255
+    f = view_features(geometry, t, None, 0.0, truth=scene, shown=shown, geometry="proxy")
+    src = [v for v in range(len(scene["tgt_is_source"])) if scene["tgt_is_source"][v]]
+    rt = painter_planes(shown, view_camera(scene, t), geometry["tgt_depth"][t], [view_camera(scene, s) for s in src],
+                        np.asarray(scene["images"]).transpose(0, 2, 3, 1), [geometry["tgt_depth"][s] for s in src],
+                        joints, valid)
+    planes, j = painter_planes_of(to_device(stack([f]), torch.device("cpu")))
+    return planes[0].numpy(), j[0].numpy(), rt
+
+
+def test_the_runtime_builds_the_inputs_the_painter_was_trained_on(data64):
+    scene = _scenes(data64)[0]
+    joints = scene["joints_3d"] + 0.01
+    novel = [t for t in range(len(scene["tgt_is_source"])) if not scene["tgt_is_source"][t]]
+    for t in novel:
+        want, want_j, rt = _both(scene, joints, t)
+        got = rt.planes
+        assert got.shape == want.shape == (12, 64, 64)
+        assert np.array_equal(got[3:5], want[3:5])  # the proxy's mask and what the sources see of it
+        assert np.array_equal(rt.mask, want[3] > 0)
+        assert rt.mask.sum() > 100
+        np.testing.assert_allclose(got[9:], want[9:], atol=1e-6)  # the picture
+        # colours and normals: the same up to a rounding step where float64 and float32 maths round apart
+        assert np.mean(np.abs(got[:3] - want[:3]) <= 1.01 / 255) > 0.999
+        assert np.mean(np.abs(got[5:8] - want[5:8]) <= 1.01 / 127) > 0.995
+        np.testing.assert_allclose(got[8], want[8], atol=2e-3)  # depth about its median (float16)
+        np.testing.assert_allclose(rt.joints, want_j, atol=1e-3)
+
+
+def test_the_exported_painter_paints_what_the_torch_net_paints(data64, tmp_path):
+    scene = _scenes(data64)[0]
+    t = next(t for t in range(len(scene["tgt_is_source"])) if not scene["tgt_is_source"][t])
+    net = _net()
+    path = export_painter(net, tmp_path / "novel_painter.onnx", {"trained_on": "test"})
+    painter = NovelPainter.load(path)
+    assert painter.meta["ghnerf_painter.width"] == "8"
+    want_planes, want_j, rt = _both(scene, scene["joints_3d"], t)
+    with torch.no_grad():
+        want = PainterGraph(net)(torch.from_numpy(want_planes)[None], torch.from_numpy(want_j)[None])[0]
+    got = painter.paint(rt)
+    assert got.shape == (64, 64, 3)
+    assert np.abs(got - want.permute(1, 2, 0).numpy()).max() < 3e-3
+    assert np.abs(got - rt.planes[9:].transpose(1, 2, 0)).max() > 0.01  # it does repaint
+    # any image size the network's levels divide
+    wide = PainterPlanes(np.zeros((12, 48, 80), np.float32), np.zeros((25, 3), np.float32), np.zeros((48, 80), bool))
+    assert painter.paint(wide).shape == (48, 80, 3)
+
+
+def test_only_a_net_that_reads_what_a_device_has_is_exported(tmp_path):
+    with pytest.raises(ValueError, match="relit_input=false"):
+        PainterGraph(FillNet(FillNetConfig(width=8)))
+
+
+def test_a_broken_painter_file_is_named(tmp_path):
+    with pytest.raises(ModelLoadError, match="no such novel-view painter"):
+        NovelPainter.load(tmp_path / "missing.onnx")
+    bad = tmp_path / "novel_painter.onnx"
+    bad.write_bytes(b"\x08\x07not onnx")
+    with pytest.raises(ModelLoadError, match="novel_painter.onnx.*corrupt"):
+        NovelPainter.load(bad)
+    import onnx
+
+    path = export_painter(_net(), tmp_path / "old.onnx", {})
+    model = onnx.load(str(path))
+    for p in model.metadata_props:
+        if p.key == "ghnerf_painter.feature_version":
+            p.value = "0"
+    onnx.save(model, str(path))
+    with pytest.raises(ModelContractError, match="feature version '0'"):
+        NovelPainter.load(path)
+
+
+def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_path, data64):
+    from training.model_card import write_card
+
+    net = _net()
+    save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "fill_net.pt", steps=7, seconds=1.0, hardware="cpu",
+             train_views=3)
+    rows = {"novel, all": {"n": 3, "shown": 19.0, "fill:learnt": 20.0}}
+    (tmp_path / "score.json").write_text(json.dumps({"rows": rows, "seconds": 1.0, "hardware": "cpu",
+                                                     "train_views": 3}))
+    card_dir = tmp_path / "models"
+    (card_dir / "ghnerf").mkdir(parents=True)
+    write_card(card_dir, {"files": {}})
+    scene = _scenes(data64)[0]
+    valid = np.ones(25, bool)
+    geometry, _ = proxy_scene(scene, scene["joints_3d"], valid)
+    views = [view_features(geometry, t, None, 45.0, truth=scene, shown=scene["tgt_images"][t].transpose(1, 2, 0),
+                           geometry="proxy") for t in range(len(scene["tgt_is_source"])) if not scene["tgt_is_source"][t]]
+    np.savez(tmp_path / "cache.npz", **stack([v for v in views if v is not None]))
+    out = card_dir / "ghnerf" / "novel_painter.onnx"
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--val-cache", str(tmp_path / "cache.npz"), "--calib-cache", str(tmp_path / "cache.npz")]) == 0
+    report = json.loads(out.with_suffix(".json").read_text())
+    assert report["steps"] == 7 and report["held_out"] == rows
+    assert report["parity"]["max_abs"] < 1e-3
+    fp32, int8 = (report["onnx_held_out"][k]["novel, all"]["fill:learnt"] for k in ("fp32", "int8"))
+    assert abs(fp32 - int8) < 1.0 and fp32 > 10.0
+    card = json.loads((card_dir / "model_card.json").read_text())
+    assert card["novel_painter"]["ghnerf"]["steps"] == 7
+    assert {"ghnerf/novel_painter.onnx", "ghnerf/novel_painter.int8.onnx"} <= set(card["files"])
+    assert "Novel-view painter" in (card_dir / "MODEL_CARD.md").read_text()
+    assert NovelPainter.load(out).meta["ghnerf_painter.steps"] == "7"
+    int8_painter = NovelPainter.load(out.with_suffix(".int8.onnx"))
+    assert int8_painter.precision == "int8" and NovelPainter.load(out).precision == "fp32"
+    assert NovelPainter.find(out.parent).name == "novel_painter.int8.onnx"
