@@ -50,8 +50,9 @@ model: $(DEV_STAMP)
 
 # The novel view's learnt painter (models/ghnerf/novel_painter.onnx) for the model in models/, on the dataset
 # make model made: the device's joints of 2048 training and 256 held-out scenes, the painter's inputs over their
-# body proxies, 45 minutes of training at two threads, export with a parity check, the model card. About 70 min on
-# two cores (docs/runtime.md, "The learnt painter").
+# body proxies (about 22 min), 90 minutes of training at one thread (the shipped painter's run), export to fp32 and
+# int8 with parity checks, the model card. About two hours on two cores by its stages' times; not timed end to end
+# (docs/training.md, "The painter in the runtime").
 PAINTER_DATA ?= data/edge128
 PAINTER_RUNS ?= runs/painter
 painter: $(DEV_STAMP)
@@ -62,7 +63,7 @@ painter: $(DEV_STAMP)
 	$(PY) -m training.learnt_fill cache --data $(PAINTER_DATA) --split val --limit 256 --model models/ghnerf/ghnerf.pt \
 	    --joints $(PAINTER_RUNS)/joints_val.npz --out $(PAINTER_RUNS)/fill_val.npz
 	$(PY) -m training.learnt_fill train --train-cache $(PAINTER_RUNS)/fill_train.npz --val-cache $(PAINTER_RUNS)/fill_val.npz \
-	    --out $(PAINTER_RUNS)/net --threads 2 --set net.width=16 --set batch=8 --set steps=1000000 --set max_seconds=2700 \
+	    --out $(PAINTER_RUNS)/net --threads 1 --set net.width=16 --set batch=8 --set steps=1000000 --set max_seconds=5400 \
 	    --set net.shown_input=true --set net.relit_input=false
 	$(PY) -m training.learnt_fill export --net $(PAINTER_RUNS)/net/fill_net.pt --out models/ghnerf/novel_painter.onnx \
 	    --val-cache $(PAINTER_RUNS)/fill_val.npz --calib-cache $(PAINTER_RUNS)/fill_train.npz --card-dir models

@@ -27,7 +27,9 @@ Per novel view of each held-out scene, by its angle from the nearest source (``g
   ``novel_view.proxy_max_angle_deg`` of the view's ray).
 * ``--painter novel_painter.onnx``: ``painter``, the model's picture repainted by the runtime's learnt
   painter (``ghnerf_runtime.novel_painter``, on the device proxy and joints, where the proxy or the
-  picture shows the subject); ``painter+blend``, that picture then recoloured as ``runtime`` does.
+  picture shows the subject); ``painter+blend``, that picture then recoloured as ``runtime`` does;
+  ``device``, what the runtime shows by default with the painter: ``painter+blend`` on views at least
+  ``novel_view.painter_min_angle_deg`` from a source camera (by the device's joints), ``runtime`` nearer.
 * ``ceiling`` and ``fill:relit``: the same blend and fill on the true geometry (session 27's columns).
 * ``--guided``: the network itself given the better depth, without retraining: its fine level's
   planes placed around a guide depth (``guide_std`` wide) instead of around its coarse level's
@@ -144,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     nvc = NovelViewConfig()  # the runtime's defaults
     painter = None
     if args.painter:
-        from ghnerf_runtime.novel_painter import NovelPainter
+        from ghnerf_runtime.novel_painter import NovelPainter, angle_from_sources_deg
 
         painter = NovelPainter.load(args.painter, threads=args.threads)
     at = nvc.opaque_at
@@ -198,6 +200,9 @@ def main(argv: list[str] | None = None) -> int:
                 both = proxy_blend(painted, view_camera(scene, t), body, src_cams, src_rgb, nvc.proxy_tolerance_m,
                                    region=region, max_angle_deg=nvc.proxy_max_angle_deg)
                 extra["painter+blend"] = psnr(both.image[..., ::-1] / 255.0, truth, mask)
+                near = angle_from_sources_deg(view_camera(scene, t), src_cams, device_joints[i], valid) \
+                    < nvc.painter_min_angle_deg  # the runtime's gate, on the device's joints
+                extra["device"] = extra["runtime"] if near else extra["painter+blend"]
             for name in ("proxy", "truth") if args.guided else ():
                 g_rgb, g_acc = guided[(name, t)]
                 g = opaque_colour(g_rgb, g_acc, renderer.background, at).reshape(rgb[t].shape)
@@ -222,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     cols = ["model:depth_mm", "proxy:truth:depth_mm", "proxy:depth_mm", "cover", "ceiling", "fill:relit", "shown",
             "blend@proxy", "relit@proxy", "shown+relit",
             "seen:blend", "proxy only", "runtime"] + (["guided:proxy", "guided:truth"] if args.guided else [])
-    cols += ["painter", "painter+blend"] if painter is not None else []
+    cols += ["painter", "painter+blend", "device"] if painter is not None else []
     edges = SOURCE_ANGLE_BINS_DEG
     groups = [(f"novel {lo:.0f}-{hi:.0f} deg", lambda r, lo=lo, hi=hi: lo <= r["angle"] < hi)
               for lo, hi in zip(edges[:-1], edges[1:])]

@@ -517,11 +517,16 @@ class NovelViewConfig:
             depth in that source is this close to the point's (metres).
         proxy_max_angle_deg: with ``proxy_blend``, a pixel is recoloured only when a source that sees its
             point looks at it within this angle of the view's ray: views from far round the subject
-            are better left to the network (docs/runtime.md, "Recolouring from the body proxy").
+            are better left to the network, and to the painter (30 since session 30, 60 before:
+            docs/runtime.md, "The learnt painter").
         painter: repaint the subject with the learnt painter (``novel_painter.onnx`` in the model
             folder, :mod:`ghnerf_runtime.novel_painter`) over the body proxy of the pair's joints,
             before ``proxy_blend``: ``"auto"`` when the model folder has one, ``"on"`` (a folder
             without one is an error) or ``"off"`` (docs/runtime.md, "The learnt painter").
+        painter_min_angle_deg: the painter runs only on views at least this far (degrees, at the
+            subject's centre) from the nearest source camera: nearer, the sources see nearly all the
+            view sees and the proxy blend does as well at a fraction of its cost (docs/runtime.md, "The
+            learnt painter"). 0: every view.
     """
 
     enabled: bool = False
@@ -537,12 +542,14 @@ class NovelViewConfig:
     opaque_at: float = 0.5
     proxy_blend: bool = True
     proxy_tolerance_m: float = 0.03
-    proxy_max_angle_deg: float = 60.0
+    proxy_max_angle_deg: float = 30.0
     painter: str = "auto"
+    painter_min_angle_deg: float = 15.0
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
         _choice(self, "painter", ("auto", "on", "off"))
+        _number(self, "painter_min_angle_deg", 0.0, 180.0)
         _boolean(self, "proxy_blend")
         _number(self, "proxy_tolerance_m", 0.001, 0.5)
         _number(self, "proxy_max_angle_deg", 0.0, 180.0)

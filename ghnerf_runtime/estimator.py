@@ -63,6 +63,7 @@ from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presen
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, Keypoints2D, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton, heatmap_overlay, \
     interpolate_camera, novel_target, render_novel_view
+from ghnerf_runtime.novel_painter import angle_from_sources_deg
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
@@ -726,7 +727,8 @@ class Estimator:
         return self._worker.submit(job, dict(env))
 
     def _over_proxy(self, nv: NovelView, p: "_Pass", timing: dict) -> NovelView:
-        """The view's subject repainted by the learnt painter (``novel_view.painter``), then recoloured from the
+        """The view's subject repainted by the learnt painter (``novel_view.painter``, on views at least
+        ``painter_min_angle_deg`` from the nearest source camera), then recoloured from the
         source crops (``novel_view.proxy_blend``), both over the body proxy of this pair's joints and only
         where the rendered picture shows the subject (or the proxy, for the painter); unchanged without
         joints. The proxy's construction counts in the first stage that runs."""
@@ -735,11 +737,15 @@ class Estimator:
         if body.empty:
             return nv
         cfg = self.config.novel_view
+        paint = self.novel_painter is not None and not (
+            angle_from_sources_deg(nv.camera, p.crops, p.j3.points, p.j3.valid) < cfg.painter_min_angle_deg)
+        if not (paint or cfg.proxy_blend):
+            return nv
         rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation)
         region = subject_region(nv.image, self.contract.background, cfg.silhouette_min_diff)  # the picture's own
         src_depth = [proxy_depth(body, c) for c in p.crops]  # both stages read the proxy's depth in the sources
         image = nv.image
-        if self.novel_painter is not None:
+        if paint:
             image, _ = self.novel_painter.repaint(image, nv.camera, body, p.crops, rgb, p.j3.points, p.j3.valid,
                                                   cfg.proxy_tolerance_m, region=region, source_depth=src_depth)
             timing[NOVEL_PAINT_STAGE] = 1e3 * (time.perf_counter() - t)

@@ -36,7 +36,7 @@ from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_normals
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
-           "painter_planes", "NovelPainter"]
+           "painter_planes", "angle_from_sources_deg", "NovelPainter"]
 
 #: Bump when a plane's meaning changes: a file trained on other planes is refused.
 FEATURE_VERSION = 1
@@ -64,6 +64,18 @@ class PainterPlanes:
     planes: np.ndarray
     joints: np.ndarray
     mask: np.ndarray
+
+
+def angle_from_sources_deg(view: Camera, sources: Sequence[Camera], joints: np.ndarray, valid: np.ndarray) -> float:
+    """The angle (degrees) at the subject's centre (the mean of its known joints) between ``view``'s centre and
+    the nearest source camera's: ``ghnerf-eval``'s angle bins. NaN without a known joint."""
+    valid = np.asarray(valid, bool)
+    if not valid.any():
+        return float("nan")
+    centre = np.asarray(joints, np.float64)[valid].mean(axis=0)
+    dirs = np.array([c.center - centre for c in (view, *sources)])
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    return float(np.degrees(np.arccos(np.clip(dirs[1:] @ dirs[0], -1.0, 1.0).max())))
 
 
 def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sources: Sequence[Camera],
@@ -185,7 +197,7 @@ class NovelPainter:
 
     def repaint(self, image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
                 source_rgb: np.ndarray, joints: np.ndarray, valid: np.ndarray, tolerance_m: float = 0.03,
-                region: np.ndarray | None = None, margin_px: int = 8,
+                region: np.ndarray | None = None, margin_px: int = 24,
                 source_depth: Sequence[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The rendered view ``image_bgr`` (uint8, at pinhole ``camera``) repainted over the pair's body proxy
         ``body``; returns the image and the ``(H, W)`` pixels it changed.

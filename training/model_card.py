@@ -171,14 +171,12 @@ def _painter_lines(card: Mapping[str, Any]) -> list[str]:
 def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = ()) -> Path:
     """Record the painter ``out`` (its ``.json`` figures; size and hash of it and of ``more``, its int8 file)
     in the model card of ``card_dir``."""
-    import hashlib
-
     card_dir = Path(card_dir)
     card = json.loads((card_dir / "model_card.json").read_text())
     card.setdefault("novel_painter", {})[out.parent.name] = json.loads(out.with_suffix(".json").read_text())
     for path in (out, *more):
         card.setdefault("files", {})[str(path.relative_to(card_dir))] = {
-            "bytes": path.stat().st_size, "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+            "bytes": path.stat().st_size, "sha256": sha256(path)}
     write_card(card_dir, card)
     return card_dir / "model_card.json"
 

@@ -231,10 +231,16 @@ def test_shipped_models_novel_view_against_the_simulators_picture():
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), expected_resolution=128),
                           novel_view=NovelViewConfig(enabled=True))
     session = load_session(cfg)
-    psnr = {}
-    for opaque_at in (cfg.novel_view.opaque_at, 1.0, "proxy"):
-        run = replace(cfg, novel_view=replace(cfg.novel_view, opaque_at=cfg.novel_view.opaque_at, proxy_blend=True)
-                      if opaque_at == "proxy" else replace(cfg.novel_view, opaque_at=opaque_at, proxy_blend=False))
+    psnr, painted = {}, []
+    for opaque_at in (cfg.novel_view.opaque_at, 1.0, "proxy", "painter"):
+        nv = replace(cfg.novel_view, painter="off", proxy_blend=False)
+        if opaque_at == "proxy":
+            nv = replace(nv, proxy_blend=True)
+        elif opaque_at == "painter":  # at a rig camera's own viewpoint only when told to: the default skips it
+            nv = replace(nv, proxy_blend=True, painter="on", painter_min_angle_deg=0.0)
+        else:
+            nv = replace(nv, opaque_at=opaque_at)
+        run = replace(cfg, novel_view=nv)
         psnr[opaque_at] = []
         for seq in load_sequences(SEQUENCES, FRAMES):
             scene = random_scene(int(seq.info["scene_seed"]), volume=seq.rig.volume, motions=HELD_OUT_MOTIONS)
@@ -248,8 +254,13 @@ def test_shipped_models_novel_view_against_the_simulators_picture():
                 truth, mask = truth_view(scene, r.novel_view.camera, t, float(session.contract.background))
                 pred = r.novel_view.image[..., ::-1].astype(np.float64) / 255.0
                 psnr[opaque_at].append(masked_psnr(pred, truth, mask).value)
+                painted.append(("novel_paint" in r.timing_ms) == (opaque_at == "painter"))
     shown, raw = np.array(psnr[cfg.novel_view.opaque_at]), np.array(psnr[1.0])
     assert len(shown) == len(raw) >= 6, psnr  # a view for nearly every scored pair
     assert np.median(shown) >= NOVEL_PSNR_MEDIAN_MIN, psnr
     assert np.all(shown > raw), psnr  # un-dimming the translucent subject helps every view
     assert np.median(psnr["proxy"]) > np.median(shown) + 0.5, psnr  # the proxy's colours help (docs/runtime.md)
+    # the learnt painter (novel_painter.onnx), forced on at the rig's viewpoint where it is not needed: it runs,
+    # and costs at most a little there (held out, 30 sequences: 28.55 -> 28.24 dB median; docs/runtime.md)
+    assert all(painted) and len(psnr["painter"]) == len(shown)  # it ran on those views, and only there
+    assert np.median(psnr["painter"]) > np.median(psnr["proxy"]) - 1.0, psnr

@@ -360,7 +360,8 @@ def test_the_proxy_blend_recolours_the_novel_view_with_the_subjects_colours(clip
 
 def test_the_painter_runs_over_the_proxy_before_the_blend_and_only_when_asked(clip, tmp_path):
     """``novel_view.painter``: a session's painter repaints the view after the joints (``novel_paint``), before
-    the proxy blend, and changes no joint; ``off`` skips it, ``on`` without one is an error."""
+    the proxy blend, and changes no joint; ``off`` skips it, as does a view nearer a source camera than
+    ``painter_min_angle_deg``; ``on`` without one is an error."""
     from ghnerf_runtime.errors import ModelError
     from ghnerf_runtime.novel_painter import NovelPainter
     from tests.ghnerf_runtime.test_novel_painter import blend_painter
@@ -368,15 +369,18 @@ def test_the_painter_runs_over_the_proxy_before_the_blend_and_only_when_asked(cl
     rig, frames, truth, visible, *_ = clip
     painter = NovelPainter.load(blend_painter(tmp_path / "novel_painter.onnx"))
     runs = {}
-    for mode in ("off", "auto"):
+    for mode, min_angle in (("off", 0.0), ("auto", 0.0), ("near", 30.0)):
         oracle = OracleSession(edge128_contract())
         oracle.novel_painter = painter
-        cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, painter=mode, proxy_blend=False))
+        cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, painter="off" if mode == "off" else "auto",
+                                                         proxy_blend=False, painter_min_angle_deg=min_angle))
         with Estimator(oracle, rig, cfg) as est:
-            assert (est.novel_painter is painter) == (mode == "auto")
+            assert (est.novel_painter is painter) == (mode != "off")
             oracle.set_truth(truth[0], visible[0])
             runs[mode] = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
-    off, on = runs["off"], runs["auto"]
+    off, on, near = runs["off"], runs["auto"], runs["near"]
+    # halfway between cameras about a metre apart, 3 m away: about 10 degrees from each
+    assert "novel_paint" not in near.timing_ms and np.array_equal(near.novel_view.image, off.novel_view.image)
     np.testing.assert_array_equal(off.joints_3d, on.joints_3d)
     assert "novel_paint" in on.timing_ms and "novel_paint" not in off.timing_ms
     assert np.any(on.novel_view.image != off.novel_view.image, axis=-1).sum() > 500

@@ -16,7 +16,7 @@ from ghnerf_runtime.config import ConfigError, NovelViewConfig
 from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ShapeError
 from ghnerf_runtime.metrics import masked_psnr
 from ghnerf_runtime.novel_painter import (FEATURE_VERSION, META_PREFIX, PLANES, NovelPainter, PainterPlanes,
-                                          painter_planes)
+                                          angle_from_sources_deg, painter_planes)
 from ghnerf_runtime.novel_view import interpolate_camera, novel_target
 
 sim = pytest.importorskip("drivers.sim")
@@ -160,3 +160,16 @@ def test_the_folder_gives_the_int8_painter_where_the_precision_allows(tmp_path):
     assert NovelPainter.find(tmp_path, "auto").name == "novel_painter.int8.onnx"
     assert NovelPainter.find(tmp_path, "int8").name == "novel_painter.int8.onnx"
     assert NovelPainter.find(tmp_path, "fp32").name == "novel_painter.onnx"
+
+
+def test_the_views_angle_from_the_sources_is_ghnerf_evals(shot):
+    joints, sources, _, target, _, _ = shot
+    valid = np.ones(25, bool)
+    assert angle_from_sources_deg(sources[0], sources, joints, valid) == pytest.approx(0.0, abs=1e-6)
+    centre = joints.mean(0)
+    a, b = (c.center - centre for c in sources)
+    between = np.degrees(np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b)))
+    assert 0.3 * between < angle_from_sources_deg(target, sources, joints, valid) <= 0.5 * between + 1e-6
+    assert np.isnan(angle_from_sources_deg(target, sources, joints, np.zeros(25, bool)))
+    with pytest.raises(ConfigError, match="painter_min_angle_deg"):
+        NovelViewConfig(painter_min_angle_deg=-1.0)
