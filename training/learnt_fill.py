@@ -21,6 +21,11 @@ caches, ``train --set net.shown_input=true``): what the painter would give on a 
 ``cache --model ... --joints <training.device_joints cache>`` the geometry is the body proxy built from
 the device's joints instead (``training.body_proxy``; the model's picture is still the one repainted).
 
+Such a net trained without the relit fill (``--set net.relit_input=false --set net.shown_input=true``:
+the light fit is too slow for a device) is the runtime's painter: ``export`` writes it as
+``novel_painter.onnx`` (and, with ``--calib-cache``, its int8 twin) for ``ghnerf_runtime.novel_painter``;
+``make painter`` runs the whole recipe (docs/training.md, "The painter in the runtime").
+
 ``train`` takes the GPU when torch sees one (``--device``) and prints the held-out table at the end
 (also written to ``<out>/score.md``).
 """
