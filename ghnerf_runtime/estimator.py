@@ -744,15 +744,18 @@ class Estimator:
         rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation)
         region = subject_region(nv.image, self.contract.background, cfg.silhouette_min_diff)  # the picture's own
         src_depth = [proxy_depth(body, c) for c in p.crops]  # both stages read the proxy's depth in the sources
+        # and the painter's in the whole view; the blend alone casts only the region's box
+        depth = proxy_depth(body, nv.camera) if paint else None
         image = nv.image
         if paint:
             image, _ = self.novel_painter.repaint(image, nv.camera, body, p.crops, rgb, p.j3.points, p.j3.valid,
-                                                  cfg.proxy_tolerance_m, region=region, source_depth=src_depth)
+                                                  cfg.proxy_tolerance_m, region=region, source_depth=src_depth,
+                                                  depth=depth)
             timing[NOVEL_PAINT_STAGE] = 1e3 * (time.perf_counter() - t)
             t = time.perf_counter()
         if cfg.proxy_blend:
             image = proxy_blend(image, nv.camera, body, p.crops, rgb, cfg.proxy_tolerance_m, region=region,
-                                max_angle_deg=cfg.proxy_max_angle_deg, source_depth=src_depth).image
+                                max_angle_deg=cfg.proxy_max_angle_deg, source_depth=src_depth, depth=depth).image
             timing[NOVEL_PROXY_STAGE] = 1e3 * (time.perf_counter() - t)
         return NovelView(image, nv.camera, nv.depth, nv.heat, nv.rays)
 

@@ -31,9 +31,10 @@ import numpy as np
 
 from ghnerf_runtime.body25 import NUM_JOINTS
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_depth
-from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
+from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_normals
+from ghnerf_runtime.onnx_file import open_onnx_file
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
            "painter_planes", "angle_from_sources_deg", "NovelPainter"]
@@ -158,21 +159,8 @@ class NovelPainter:
 
     @classmethod
     def load(cls, path: str | Path, threads: int = 1) -> "NovelPainter":
-        import onnxruntime as ort
-
         path = Path(path)
-        if not path.is_file():
-            raise ModelLoadError("no such novel-view painter file", path=str(path))
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = threads
-        opts.inter_op_num_threads = 1
-        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-        try:
-            sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
-        except Exception as e:  # onnxruntime's own exception types
-            raise ModelLoadError(f"onnxruntime cannot load it ({path.stat().st_size} bytes; truncated or corrupt?): "
-                                 f"{type(e).__name__}: {str(e).strip()[:200]}", path=str(path)) from e
-        meta = dict(sess.get_modelmeta().custom_metadata_map)
+        sess, meta = open_onnx_file(path, threads, "novel-view painter")
         key = META_PREFIX + "feature_version"
         if meta.get(key) != str(FEATURE_VERSION):
             raise ModelContractError(f"feature version {meta.get(key)!r}; this runtime builds version "
@@ -198,20 +186,23 @@ class NovelPainter:
     def repaint(self, image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
                 source_rgb: np.ndarray, joints: np.ndarray, valid: np.ndarray, tolerance_m: float = 0.03,
                 region: np.ndarray | None = None, margin_px: int = 24,
-                source_depth: Sequence[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                source_depth: Sequence[np.ndarray] | None = None,
+                depth: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The rendered view ``image_bgr`` (uint8, at pinhole ``camera``) repainted over the pair's body proxy
         ``body``; returns the image and the ``(H, W)`` pixels it changed.
 
         Only the box around the proxy's silhouette and ``region`` (the pixels the picture shows as the
         subject), ``margin_px`` wider and rounded up to a multiple of 8 (the network's coarsest level),
         is painted, and only the proxy's and the region's pixels inside it change: elsewhere the
-        network was never asked for a colour. ``source_depth``: the proxy's depth in each source, when the
-        caller has it already (default: ray-cast here)."""
+        network was never asked for a colour. ``source_depth`` and ``depth``: the proxy's depth in each
+        source and in ``camera``, when the caller has them already (default: ray-cast here)."""
         image = np.asarray(image_bgr)
         H, W = camera.height, camera.width
         if image.shape != (H, W, 3) or image.dtype != np.uint8:
             raise ShapeError(f"image must be uint8 {(H, W, 3)}, got {image.dtype} {image.shape}")
-        depth = proxy_depth(body, camera)
+        depth = proxy_depth(body, camera) if depth is None else np.asarray(depth)
+        if depth.shape != (H, W):
+            raise ShapeError(f"depth must be {(H, W)}, got {depth.shape}")
         keep = depth > 0 if region is None else (depth > 0) | np.asarray(region, bool)
         if not (depth > 0).any():
             return image, np.zeros((H, W), bool)

@@ -81,7 +81,8 @@ def subject_region(image_bgr: np.ndarray, background: float, min_diff: float) ->
 
 def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
                 source_rgb: np.ndarray, tolerance_m: float = 0.03, region: np.ndarray | None = None,
-                max_angle_deg: float = 180.0, source_depth: Sequence[np.ndarray] | None = None) -> ProxyBlend:
+                max_angle_deg: float = 180.0, source_depth: Sequence[np.ndarray] | None = None,
+                depth: np.ndarray | None = None) -> ProxyBlend:
     """Recolour ``image_bgr`` (the rendered view at pinhole ``camera``) from the sources at the proxy's
     depth (module docstring).
 
@@ -96,6 +97,8 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
             angle of the view's ray (default: any).
         source_depth: the proxy's depth in each source camera, when the caller has it already
             (``proxy_depth(body, camera)``); default: ray-cast here.
+        depth: the proxy's depth in ``camera``, when the caller has it already; default: ray-cast here
+            (only the box of ``region`` when one is given).
     """
     image = np.asarray(image_bgr)
     if image.shape != (camera.height, camera.width, 3) or image.dtype != np.uint8:
@@ -104,13 +107,19 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         raise ShapeError(f"{len(sources)} source cameras for {len(source_rgb)} source images")
     if source_depth is not None and len(source_depth) != len(sources):
         raise ShapeError(f"{len(sources)} source cameras for {len(source_depth)} source depth maps")
-    if region is None:
-        depth = proxy_depth(body, camera)
-        covered = depth > 0
-    else:  # ray-cast only the region's box
+    if region is not None:
         region = np.asarray(region, bool)
         if region.shape != image.shape[:2]:
             raise ShapeError(f"region must be {image.shape[:2]}, got {region.shape}")
+    if depth is not None:
+        depth = np.asarray(depth)
+        if depth.shape != image.shape[:2]:
+            raise ShapeError(f"depth must be {image.shape[:2]}, got {depth.shape}")
+        covered = (depth > 0) if region is None else (depth > 0) & region
+    elif region is None:
+        depth = proxy_depth(body, camera)
+        covered = depth > 0
+    else:  # ray-cast only the region's box
         depth = np.zeros(region.shape)
         if region.any():
             rs, cs = np.nonzero(region.any(axis=1))[0], np.nonzero(region.any(axis=0))[0]

@@ -26,8 +26,9 @@ from typing import Sequence
 import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
-from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
+from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
+from ghnerf_runtime.onnx_file import open_onnx_file
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
            "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame",
@@ -211,21 +212,8 @@ class SkeletonPrior:
 
     @classmethod
     def load(cls, path: str | Path, threads: int = 1) -> "SkeletonPrior":
-        import onnxruntime as ort
-
         path = Path(path)
-        if not path.is_file():
-            raise ModelLoadError("no such skeleton prior file", path=str(path))
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = threads
-        opts.inter_op_num_threads = 1
-        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-        try:
-            sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
-        except Exception as e:  # onnxruntime's own exception types
-            raise ModelLoadError(f"onnxruntime cannot load it ({path.stat().st_size} bytes; truncated or corrupt?): "
-                                 f"{type(e).__name__}: {str(e).strip()[:200]}", path=str(path)) from e
-        meta = dict(sess.get_modelmeta().custom_metadata_map)
+        sess, meta = open_onnx_file(path, threads, "skeleton prior")
         version = meta.get(META_PREFIX + "feature_version")
         if version != str(FEATURE_VERSION):
             raise ModelContractError(f"feature version {version!r}; this runtime builds version {FEATURE_VERSION}",

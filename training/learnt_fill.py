@@ -36,7 +36,6 @@ import json
 import math
 import pickle
 import sys
-import tempfile
 import time
 import warnings
 from dataclasses import asdict, dataclass, field, replace
@@ -154,31 +153,36 @@ def flip_views(b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     return out
 
 
+def decoded(b: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """A cache batch's planes as the network reads them, ``(N, C, H, W)`` float: the colours in [0, 1]
+    (``blend``, ``relit``, ``shown``, ``truth``), the flags' ``mask``, ``seen`` and ``subject`` (the true
+    subject: the loss's and the score's), unit ``normals`` and ``depth``."""
+    flags = b["flags"].long()
+    out = {k: b[k].permute(0, 3, 1, 2).float() / 255.0 for k in ("blend", "relit", "shown", "truth")}
+    for name, bit in (("mask", MASK_BIT), ("seen", SEEN_BIT), ("subject", TRUTH_BIT)):
+        out[name] = ((flags & bit) > 0).float()[:, None]
+    out["normals"] = b["normals"].permute(0, 3, 1, 2).float() / 127.0
+    out["depth"] = b["depth"].float()[:, None]
+    return out
+
+
 def net_inputs(b: dict[str, torch.Tensor],
                cfg: FillNetConfig) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Network input ``(N, C, H, W)``, base and truth ``(N, 3, H, W)`` in [0, 1], and the true subject's
     mask ``(N, 1, H, W)`` (the loss's and the score's)."""
-    def img(k: str) -> torch.Tensor:
-        return b[k].permute(0, 3, 1, 2).float() / 255.0
-
-    flags = b["flags"].long()
-    mask = ((flags & MASK_BIT) > 0).float()[:, None]
-    seen = ((flags & SEEN_BIT) > 0).float()[:, None]
-    subject = ((flags & TRUTH_BIT) > 0).float()[:, None]
+    d = decoded(b)
     N, H, W = b["flags"].shape
-    normals = b["normals"].permute(0, 3, 1, 2).float() / 127.0
-    depth = b["depth"].float()[:, None]
     light = b["light"][:, :, None, None].expand(N, 4, H, W)
-    blend, maps = img("blend"), joint_maps(b["joints"], H, W, cfg.joint_sigma_px)
+    maps = joint_maps(b["joints"], H, W, cfg.joint_sigma_px)
+    geometry = [d["mask"], d["seen"], d["normals"], d["depth"]]
     if cfg.relit_input:
-        base = relit = img("relit")
-        planes = [blend, relit, mask, seen, normals, depth, light, maps]
+        base, planes = d["relit"], [d["blend"], d["relit"], *geometry, light, maps]
     else:
-        base, planes = blend, [blend, mask, seen, normals, depth, maps]
+        base, planes = d["blend"], [d["blend"], *geometry, maps]
     if cfg.shown_input:
-        base = img("shown")
+        base = d["shown"]
         planes.append(base)
-    return torch.cat(planes, 1), base, img("truth"), subject
+    return torch.cat(planes, 1), base, d["truth"], d["subject"]
 
 
 def masked_mse(pred: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -352,13 +356,8 @@ class PainterGraph(nn.Module):
 
 def painter_planes_of(b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
     """A cache batch's runtime inputs (``ghnerf_runtime.novel_painter.PLANES`` and the joints)."""
-    def img(k: str) -> torch.Tensor:
-        return b[k].permute(0, 3, 1, 2).float() / 255.0
-
-    flags = b["flags"].long()
-    planes = [img("blend"), ((flags & MASK_BIT) > 0).float()[:, None], ((flags & SEEN_BIT) > 0).float()[:, None],
-              b["normals"].permute(0, 3, 1, 2).float() / 127.0, b["depth"].float()[:, None], img("shown")]
-    return torch.cat(planes, 1), b["joints"].float()
+    d = decoded(b)
+    return torch.cat([d[k] for k in ("blend", "mask", "seen", "normals", "depth", "shown")], 1), b["joints"].float()
 
 
 def export_painter(net: FillNet, path: str | Path, metadata: dict[str, str], size: int = 128) -> Path:
@@ -387,27 +386,19 @@ def export_painter(net: FillNet, path: str | Path, metadata: dict[str, str], siz
 
 def quantize_painter(fp32_path: str | Path, out_path: str | Path, arrays: dict[str, np.ndarray],
                      views: int = 64) -> Path:
-    """Static int8 QDQ of the painter's convolutions (the encoder's policy), calibrated on a cache's first
-    ``views`` (a training cache: the held-out one scores it); its metadata is the fp32 file's, with the
-    precision."""
+    """Static int8 QDQ of the painter's convolutions (``training.export.quantize``'s default policy, as the
+    encoder's), calibrated on a cache's first ``views`` (a training cache: the held-out one scores it); its
+    metadata is the fp32 file's, with the precision."""
     import onnx  # noqa: PLC0415
-    from onnxruntime.quantization import CalibrationMethod, QuantFormat, QuantType, quantize_static  # noqa: PLC0415
-    from onnxruntime.quantization.shape_inference import quant_pre_process  # noqa: PLC0415
 
     from ghnerf_runtime import novel_painter as rt  # noqa: PLC0415
-    from training.export.quantize import FeedsReader  # noqa: PLC0415
+    from training.export.quantize import QuantPolicy, quantize_qdq  # noqa: PLC0415
 
     fp32_path, out_path = Path(fp32_path), Path(out_path)
     few = {k: v[:views] for k, v in arrays.items()}
     planes, joints = painter_planes_of(to_device(few, torch.device("cpu")))
     feeds = [{"planes": planes[i:i + 1].numpy(), "joints": joints[i:i + 1].numpy()} for i in range(len(planes))]
-    with tempfile.TemporaryDirectory() as tmp:
-        pre = Path(tmp) / "pre.onnx"
-        quant_pre_process(str(fp32_path), str(pre))
-        quantize_static(str(pre), str(out_path), FeedsReader(feeds), quant_format=QuantFormat.QDQ,
-                        op_types_to_quantize=["Conv"], per_channel=True, reduce_range=True,
-                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                        calibrate_method=CalibrationMethod.MinMax)
+    quantize_qdq(fp32_path, out_path, feeds, QuantPolicy(), "novel_painter")
     meta = {p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props}
     meta[rt.META_PREFIX + "precision"] = "int8"
     meta[rt.META_PREFIX + "calibration_views"] = str(len(feeds))

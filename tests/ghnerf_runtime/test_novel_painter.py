@@ -17,11 +17,9 @@ from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ShapeError
 from ghnerf_runtime.metrics import masked_psnr
 from ghnerf_runtime.novel_painter import (FEATURE_VERSION, META_PREFIX, PLANES, NovelPainter, PainterPlanes,
                                           angle_from_sources_deg, painter_planes)
-from ghnerf_runtime.novel_view import interpolate_camera, novel_target
 
-sim = pytest.importorskip("drivers.sim")
+pytest.importorskip("drivers.sim")  # the shot fixture renders with the simulator
 onnx = pytest.importorskip("onnx")
-T = 0.1
 
 
 def blend_painter(path: Path, version: int = FEATURE_VERSION, planes: int = len(PLANES)) -> Path:
@@ -41,20 +39,6 @@ def blend_painter(path: Path, version: int = FEATURE_VERSION, planes: int = len(
     entry.key, entry.value = META_PREFIX + "feature_version", str(version)
     onnx.save(model, str(path))
     return path
-
-
-@pytest.fixture(scope="module", params=[5, 11])
-def shot(request):
-    """A simulated person, two source crops around it and a target between the rig's cameras."""
-    rig = sim.RigPlacement().build()
-    scene = sim.SimScene(sim.SceneConfig(seed=request.param, motion="wave"))
-    joints = scene.joints_3d(T)
-    box = np.stack([joints.min(0) - 0.15, joints.max(0) + 0.15])
-    sources = [novel_target(c, box, 128) for c in rig.pair]
-    rgb = np.stack([scene.render(c, T, with_truth=False)[0][..., ::-1].astype(np.float32) / 255 for c in sources])
-    target = novel_target(interpolate_camera(*rig.pair, 0.5), box, 128)
-    image, truth = scene.render(target, T)
-    return joints, sources, rgb, target, image, truth
 
 
 def _planes(shot, shown=None):
@@ -120,6 +104,9 @@ def test_the_painter_changes_only_the_proxy_and_the_region(shot, tmp_path):
     whole, _ = painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool), margin_px=128)
     boxed, _ = painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool))
     assert np.array_equal(whole, boxed)
+    given, _ = painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool),
+                               depth=proxy_depth(body, target), source_depth=[proxy_depth(body, c) for c in sources])
+    assert np.array_equal(given, boxed)
     nobody = proxy_body(joints, np.zeros(25, bool))
     same, none = painter.repaint(grey, target, nobody, sources, rgb, joints, np.zeros(25, bool))
     assert not none.any() and np.array_equal(same, grey)

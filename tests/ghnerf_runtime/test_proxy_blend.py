@@ -15,22 +15,7 @@ from ghnerf_runtime.novel_view import interpolate_camera, novel_target
 from ghnerf_runtime.preprocess import Roi, build_undistort_crop_maps, preprocess_image
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend
 
-sim = pytest.importorskip("drivers.sim")
-T = 0.1
-
-
-@pytest.fixture(scope="module", params=[5, 11])
-def shot(request):
-    """A simulated person, two source crops around it and a target between the rig's cameras."""
-    rig = sim.RigPlacement().build()
-    scene = sim.SimScene(sim.SceneConfig(seed=request.param, motion="wave"))
-    joints = scene.joints_3d(T)
-    box = np.stack([joints.min(0) - 0.15, joints.max(0) + 0.15])
-    sources = [novel_target(c, box, 128) for c in rig.pair]
-    rgb = np.stack([scene.render(c, T, with_truth=False)[0][..., ::-1].astype(np.float32) / 255 for c in sources])
-    target = novel_target(interpolate_camera(*rig.pair, 0.5), box, 128)
-    image, truth = scene.render(target, T)
-    return joints, sources, rgb, target, image, truth
+pytest.importorskip("drivers.sim")  # the shot fixture renders with the simulator
 
 
 def test_the_proxy_of_the_true_joints_lies_on_the_simulated_body(shot):
@@ -162,13 +147,21 @@ def test_proxy_blend_config_is_validated():
         NovelViewConfig(proxy_tolerance_m=0.0)
 
 
-def test_source_depth_given_by_the_caller_gives_the_same_blend(shot):
+def test_depth_given_by_the_caller_gives_the_same_blend(shot):
     joints, sources, rgb, target, _, _ = shot
     body = proxy_body(joints, np.ones(25, bool))
     image = np.full((128, 128, 3), 5, np.uint8)
     own = proxy_blend(image, target, body, sources, rgb)
-    given = proxy_blend(image, target, body, sources, rgb, source_depth=[proxy_depth(body, c) for c in sources])
+    given = proxy_blend(image, target, body, sources, rgb, source_depth=[proxy_depth(body, c) for c in sources],
+                        depth=proxy_depth(body, target))
     assert np.array_equal(own.image, given.image) and own.replaced.sum() > 1000
+    region = np.zeros((128, 128), bool)
+    region[30:90, 40:100] = True
+    boxed = proxy_blend(image, target, body, sources, rgb, region=region)
+    whole = proxy_blend(image, target, body, sources, rgb, region=region, depth=proxy_depth(body, target))
+    assert np.array_equal(boxed.image, whole.image) and np.array_equal(boxed.replaced, whole.replaced)
+    with pytest.raises(ShapeError, match="depth must be"):
+        proxy_blend(image, target, body, sources, rgb, depth=np.zeros((4, 4)))
     with pytest.raises(ShapeError, match="source depth"):
         proxy_blend(image, target, body, sources, rgb, source_depth=[np.zeros((4, 4))] * 2)
     with pytest.raises(ShapeError, match="2 source cameras for 1 source depth"):

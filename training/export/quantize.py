@@ -109,24 +109,17 @@ def _feeds_a_reduction(model: onnx.ModelProto, node: onnx.NodeProto) -> bool:
     return any(m.op_type == "ReduceMean" and out & set(m.input) for m in model.graph.node)
 
 
-def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],
-                   policy: QuantPolicy | None, graph: str) -> Path:
-    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract."""
-    from training.export.export import stamp_metadata
-
+def quantize_qdq(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],
+                 policy: QuantPolicy, name: str) -> Path:
+    """Static QDQ int8 of one fp32 ONNX file by ``policy``, calibrated on ``feeds``; ``name`` is for the log.
+    The metadata is onnxruntime's: the caller stamps its own."""
     fp32_path, out_path = Path(fp32_path), Path(out_path)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    contract = ModelContract.from_metadata({p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props})
-    if policy is None:
-        shutil.copyfile(fp32_path, out_path)
-        stamp_metadata(out_path, contract, graph, "fp32")
-        return out_path
     with tempfile.TemporaryDirectory() as tmp:
         pre = Path(tmp) / "pre.onnx"
         try:
             quant_pre_process(str(fp32_path), str(pre), skip_symbolic_shape=False)
         except Exception as e:  # symbolic shape inference can fail on exotic graphs; quantize unprepared
-            log.warning("quant_pre_process failed for %s (%s); quantizing the raw graph", graph, e)
+            log.warning("quant_pre_process failed for %s (%s); quantizing the raw graph", name, e)
             shutil.copyfile(fp32_path, pre)
         model = onnx.load(str(pre))
         quantize_static(
@@ -141,6 +134,22 @@ def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[
             calibrate_method=getattr(CalibrationMethod, policy.calibrate_method),
             extra_options=dict(policy.extra_options),
         )
+    return out_path
+
+
+def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],
+                   policy: QuantPolicy | None, graph: str) -> Path:
+    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract."""
+    from training.export.export import stamp_metadata
+
+    fp32_path, out_path = Path(fp32_path), Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    contract = ModelContract.from_metadata({p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props})
+    if policy is None:
+        shutil.copyfile(fp32_path, out_path)
+        stamp_metadata(out_path, contract, graph, "fp32")
+        return out_path
+    quantize_qdq(fp32_path, out_path, feeds, policy, graph)
     stamp_metadata(out_path, contract, graph, "int8")
     log.info("quantized %s -> %s", graph, out_path)
     return out_path
