@@ -30,6 +30,10 @@ Per novel view of each held-out scene, by its angle from the nearest source (``g
   picture shows the subject); ``painter+blend``, that picture then recoloured as ``runtime`` does;
   ``device``, what the runtime shows by default with the painter: ``painter+blend`` on views at least
   ``novel_view.painter_min_angle_deg`` from a source camera (by the device's joints), ``runtime`` nearer.
+* ``--matte``: the runtime's fog matte (``ghnerf_runtime.proxy_matte``, the runtime's defaults) after
+  ``runtime`` (``runtime+matte``) and, with ``--painter``, after ``device`` (``device+matte``); and the
+  PSNR over the whole view (the truth over the background) of ``shown``, ``runtime`` and those
+  (``whole:...`` columns), which sees the fog around the subject that the masked PSNR does not.
 * ``ceiling`` and ``fill:relit``: the same blend and fill on the true geometry (session 27's columns).
 * ``--guided``: the network itself given the better depth, without retraining: its fine level's
   planes placed around a guide depth (``guide_std`` wide) instead of around its coarse level's
@@ -52,8 +56,9 @@ from ghnerf_runtime.config import NovelViewConfig  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
 from ghnerf_runtime.novel_view import opaque_colour  # noqa: E402
 from training.blend_ceiling import blend_sources  # noqa: E402
-from ghnerf_runtime.body_proxy import proxy_body  # noqa: E402
+from ghnerf_runtime.body_proxy import proxy_body, proxy_depth  # noqa: E402
 from ghnerf_runtime.proxy_blend import proxy_blend, subject_region  # noqa: E402
+from ghnerf_runtime.proxy_matte import proxy_matte  # noqa: E402
 from training.body_proxy import proxy_scene, view_camera  # noqa: E402
 from training.evaluate import SOURCE_ANGLE_BINS_DEG  # noqa: E402
 from training.unseen_fill import fit_lighting, relit_fill, seen_surface  # noqa: E402
@@ -127,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--guided", action="store_true", help="add the guided:proxy and guided:truth columns")
     ap.add_argument("--painter", default=None, metavar="ONNX",
                     help="add the runtime painter's columns (ghnerf_runtime.novel_painter): painter, painter+blend")
+    ap.add_argument("--matte", action="store_true", help="add the fog matte's columns and the whole-view PSNRs")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
 
@@ -203,6 +209,20 @@ def main(argv: list[str] | None = None) -> int:
                 near = angle_from_sources_deg(view_camera(scene, t), src_cams, device_joints[i], valid) \
                     < nvc.painter_min_angle_deg  # the runtime's gate, on the device's joints
                 extra["device"] = extra["runtime"] if near else extra["painter+blend"]
+            if args.matte:
+                cam = view_camera(scene, t)
+                whole = np.ones_like(mask)
+                view_depth = proxy_depth(body, cam)
+                pictures = {"shown": shown_u8, "runtime": runtime.image}
+                if painter is not None:
+                    pictures["device"] = runtime.image if near else both.image
+                for name, picture in list(pictures.items())[1:]:
+                    pictures[f"{name}+matte"] = proxy_matte(picture, cam, view_depth, region, renderer.background,
+                                                            nvc.matte_margin_m, nvc.matte_feather_m,
+                                                            joints=device_joints[i], valid=valid).image
+                    extra[f"{name}+matte"] = psnr(pictures[f"{name}+matte"][..., ::-1] / 255.0, truth, mask)
+                for name, picture in pictures.items():
+                    extra[f"whole:{name}"] = psnr(picture[..., ::-1] / 255.0, truth, whole)
             for name in ("proxy", "truth") if args.guided else ():
                 g_rgb, g_acc = guided[(name, t)]
                 g = opaque_colour(g_rgb, g_acc, renderer.background, at).reshape(rgb[t].shape)
@@ -228,6 +248,10 @@ def main(argv: list[str] | None = None) -> int:
             "blend@proxy", "relit@proxy", "shown+relit",
             "seen:blend", "proxy only", "runtime"] + (["guided:proxy", "guided:truth"] if args.guided else [])
     cols += ["painter", "painter+blend", "device"] if painter is not None else []
+    if args.matte:
+        cols += ["runtime+matte"] + (["device+matte"] if painter is not None else [])
+        cols += ["whole:shown", "whole:runtime", "whole:runtime+matte"]
+        cols += ["whole:device", "whole:device+matte"] if painter is not None else []
     edges = SOURCE_ANGLE_BINS_DEG
     groups = [(f"novel {lo:.0f}-{hi:.0f} deg", lambda r, lo=lo, hi=hi: lo <= r["angle"] < hi)
               for lo, hi in zip(edges[:-1], edges[1:])]

@@ -16,8 +16,10 @@ mask, the truth composited over the model background as ``ghnerf-eval`` does) an
 opacity on the rays of the coarse pass (every 4th pixel of the subject box, stride-1 variants) split by
 the simulator's mask: a clean model is opaque on the subject (1) and empty around it (0); black fog
 around the subject costs the colour loss nothing over a black background, and fog in front of it dims
-it. ``--proxy-blend off,on`` and ``--painter off,auto`` compare the recolouring over the body proxy and
-the learnt painter (docs/runtime.md). Not a test.
+it. ``--proxy-blend off,on``, ``--painter off,auto`` and ``--matte off,on`` compare the recolouring over
+the body proxy, the learnt painter and the fog matte (docs/runtime.md); the ``whole view`` column is the
+PSNR over every pixel of the view (the truth over the background), which sees the fog around the subject
+that the masked PSNR does not. Not a test.
 """
 from __future__ import annotations
 
@@ -54,6 +56,8 @@ def main(argv=None) -> int:
     ap.add_argument("--painter", default="off",
                     help="comma list of novel_view.painter values, off and/or auto (default: off; auto uses the model "
                          "folder's novel_painter.onnx)")
+    ap.add_argument("--matte", default="off",
+                    help="comma list of novel_view.matte values, off and/or on (default: off)")
     ap.add_argument("--config", help="estimator config JSON (ghnerf_runtime.config; the novel view is enabled "
                                      "whatever it says; --model-dir/--precision still apply)")
     ap.add_argument("--seen-motions", action="store_true")
@@ -66,6 +70,7 @@ def main(argv=None) -> int:
     strides = [int(s) for s in args.strides.split(",")]
     blends = [{"off": False, "on": True}[b.strip()] for b in args.proxy_blend.split(",")]
     painters = [p.strip() for p in args.painter.split(",")]
+    mattes = [{"off": False, "on": True}[m.strip()] for m in args.matte.split(",")]
     # without --config: the flip test off, as docs/runtime.md measured this, before it became the default
     base = load_config(args.config) if args.config else EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False))
     cfg = replace(base, session=replace(base.session, model_dir=args.model_dir, precision=args.precision),
@@ -78,8 +83,9 @@ def main(argv=None) -> int:
     background = float(session.contract.background)
     print(f"model {args.model_dir} ({ {g: f.precision for g, f in session.files.items()} }), "
           f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs", flush=True)
-    variants = [(a, s, b, p) for a in alphas for s in strides for b in blends for p in painters]
-    scores = {v: {"psnr": [], "ssim": [], "ms": [], "proxy_ms": [], "paint_ms": [], "seq": []} for v in variants}
+    variants = [(a, s, b, p, m) for a in alphas for s in strides for b in blends for p in painters for m in mattes]
+    scores = {v: {"psnr": [], "ssim": [], "whole": [], "ms": [], "proxy_ms": [], "paint_ms": [], "matte_ms": [],
+                  "seq": []} for v in variants}
     opacity = {"subject": [], "around": []}  # coarse-pass rays of the stride-1 views
     motions = SEEN_MOTIONS if args.seen_motions else HELD_OUT_MOTIONS
     for seq in sequences:
@@ -89,13 +95,14 @@ def main(argv=None) -> int:
             raise SystemExit(f"sequence {seq.info['index']}: the rebuilt scene does not reproduce the cached frames "
                              "(stale cache? pass --cache off)")
         ests = {v: Estimator(session, seq.rig, replace(cfg, novel_view=replace(cfg.novel_view, stride=v[1],
-                                                                                proxy_blend=v[2], painter=v[3])))
+                                                                                proxy_blend=v[2], painter=v[3],
+                                                                                matte=v[4])))
                 for v in variants}
         truths: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
         for i in range(len(seq)):
             t = float(seq.info["t0"]) + i / float(seq.info["fps"])
             pair = (np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1]))
-            for (alpha, stride, blend, painter), est in ests.items():
+            for (alpha, stride, blend, painter, matte), est in ests.items():
                 if args.track_from_truth and i > 0:
                     est.tracker.track = track_from_joints(seq.joints_3d[i - 1], np.ones(25), np.ones(25, bool),
                                                           est.config.tracking, i - 1)
@@ -111,14 +118,17 @@ def main(argv=None) -> int:
                 if not mask.any():
                     continue
                 pred = r.novel_view.image[..., ::-1].astype(np.float64) / 255.0
-                s = scores[(alpha, stride, blend, painter)]
+                s = scores[(alpha, stride, blend, painter, matte)]
                 s["psnr"].append(masked_psnr(pred, truth, mask).value)
+                s["whole"].append(masked_psnr(pred, truth, np.ones_like(mask)).value)
                 s["ssim"].append(masked_ssim(pred, truth, mask).value)
                 s["ms"].append(r.timing_ms["novel_render"])
                 s["proxy_ms"].append(r.timing_ms.get("novel_proxy", 0.0))
                 s["paint_ms"].append(r.timing_ms.get("novel_paint", 0.0))
+                s["matte_ms"].append(r.timing_ms.get("novel_matte", 0.0))
                 s["seq"].append(int(seq.info["index"]))
-                if stride == 1 and not blend and painter == "off" and len(session.runs) == 2:  # coarse pass + fine pass
+                plain = stride == 1 and not blend and painter == "off" and matte == mattes[0]
+                if plain and len(session.runs) == 2:  # coarse pass + fine pass
                     uv, acc = session.runs[0]
                     px = np.clip(np.rint(uv).astype(int), 0, mask.shape[0] - 1)
                     on = mask[px[:, 1], px[:, 0]]
@@ -126,24 +136,26 @@ def main(argv=None) -> int:
                     opacity["around"].append(acc[~on])
     print(f"{len(sequences)} sequences x {args.frames} pairs, one pair in {args.every} scored; novel view "
           f"{session.contract.width}x{session.contract.height}; masked against the simulator's render")
-    print("| alpha | stride | proxy_blend | painter | pairs | PSNR dB median (mean) | SSIM median "
-          "| novel_render ms median / p99 | novel_paint ms median | novel_proxy ms median |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for (alpha, stride, blend, painter), s in scores.items():
-        on = "on" if blend else "off"
+    print("| alpha | stride | proxy_blend | painter | matte | pairs | PSNR dB median (mean) | SSIM median "
+          "| whole view PSNR median (mean) | novel_render ms median / p99 | novel_paint ms median "
+          "| novel_proxy ms median | novel_matte ms median |")
+    print("|---" * 13 + "|")
+    for (alpha, stride, blend, painter, matte), s in scores.items():
+        on, mat = ("on" if blend else "off"), ("on" if matte else "off")
         if not s["psnr"]:
-            print(f"| {alpha:g} | {stride} | {on} | {painter} | 0 | – | – | – | – | – |")
+            print(f"| {alpha:g} | {stride} | {on} | {painter} | {mat} | 0 |" + " – |" * 7)
             continue
         tm = percentiles(s["ms"])
-        print(f"| {alpha:g} | {stride} | {on} | {painter} | {len(s['psnr'])} | {np.median(s['psnr']):.2f} "
-              f"({np.mean(s['psnr']):.2f}) | {np.median(s['ssim']):.3f} | {tm['median']:.1f} / {tm['p99']:.1f} | "
-              f"{np.median(s['paint_ms']):.1f} | {np.median(s['proxy_ms']):.1f} |")
+        print(f"| {alpha:g} | {stride} | {on} | {painter} | {mat} | {len(s['psnr'])} | {np.median(s['psnr']):.2f} "
+              f"({np.mean(s['psnr']):.2f}) | {np.median(s['ssim']):.3f} | {np.median(s['whole']):.2f} "
+              f"({np.mean(s['whole']):.2f}) | {tm['median']:.1f} / {tm['p99']:.1f} | "
+              f"{np.median(s['paint_ms']):.1f} | {np.median(s['proxy_ms']):.1f} | {np.median(s['matte_ms']):.1f} |")
     first = scores[variants[0]]
     if first["psnr"]:  # how much the scenes differ: one mean per sequence
         seq, p = np.array(first["seq"]), np.array(first["psnr"])
         means = np.array([p[seq == k].mean() for k in np.unique(seq)])
         print(f"per sequence (alpha {variants[0][0]:g}, stride {variants[0][1]}, proxy_blend {variants[0][2]}, "
-              f"painter {variants[0][3]}): mean PSNR min {means.min():.2f}, "
+              f"painter {variants[0][3]}, matte {variants[0][4]}): mean PSNR min {means.min():.2f}, "
               f"median {np.median(means):.2f}, max {means.max():.2f} dB over {means.size} sequences "
               f"(standard error of the overall mean {means.std(ddof=1) / np.sqrt(means.size) if means.size > 1 else 0:.2f} dB)")
     if opacity["subject"]:

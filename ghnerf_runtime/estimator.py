@@ -30,7 +30,9 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    this thread once the joints are known, over the body proxy of this pair's joints: with a model
    folder that has one, ``novel_paint`` repaints it with the learnt painter
    (:mod:`ghnerf_runtime.novel_painter`, ``novel_view.painter``); with ``novel_view.proxy_blend``,
-   ``novel_proxy`` recolours it from the source crops (:mod:`ghnerf_runtime.proxy_blend`).
+   ``novel_proxy`` recolours it from the source crops (:mod:`ghnerf_runtime.proxy_blend`); with
+   ``novel_view.matte``, ``novel_matte`` fades it to the background away from the proxy
+   (:mod:`ghnerf_runtime.proxy_matte`).
 
 Every output is finite; a missing joint has coordinates 0, confidence 0 and ``missing`` set.
 Joints are only ever this pair's: the track only places the next crop.
@@ -65,13 +67,15 @@ from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton
     interpolate_camera, novel_target, render_novel_view
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
+from ghnerf_runtime.proxy_matte import proxy_matte
 from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
-           "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE"]
+           "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
+           "NOVEL_MATTE_STAGE"]
 
 #: Skeleton prior: confidence = exp(-expected error / this).
 _PRIOR_CONFIDENCE_SCALE_M = 0.1
@@ -85,6 +89,8 @@ NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
 NOVEL_PROXY_STAGE = "novel_proxy"
 #: With the learnt painter (``novel_view.painter``) only.
 NOVEL_PAINT_STAGE = "novel_paint"
+#: With ``novel_view.matte`` only.
+NOVEL_MATTE_STAGE = "novel_matte"
 
 
 @dataclass(frozen=True, eq=False)
@@ -429,7 +435,8 @@ class Estimator:
                 timing.update(novel_timing)
             else:
                 nv = self._render_novel(novel_view, p.env, self._novel_box(p.regions, p.j3), timing)
-            if self.novel_painter is not None or self.config.novel_view.proxy_blend:
+            cfg = self.config.novel_view
+            if self.novel_painter is not None or cfg.proxy_blend or cfg.matte:
                 nv = self._over_proxy(nv, p, timing)
             nv = self._compose_novel(novel_view, nv, p.j3, timing)
         points = p.j3.points
@@ -730,8 +737,9 @@ class Estimator:
         """The view's subject repainted by the learnt painter (``novel_view.painter``, on views at least
         ``painter_min_angle_deg`` from the nearest source camera), then recoloured from the
         source crops (``novel_view.proxy_blend``), both over the body proxy of this pair's joints and only
-        where the rendered picture shows the subject (or the proxy, for the painter); unchanged without
-        joints. The proxy's construction counts in the first stage that runs."""
+        where the rendered picture shows the subject (or the proxy, for the painter), then faded to the
+        background away from the proxy (``novel_view.matte``); unchanged without joints. The proxy's
+        construction counts in the first stage that runs."""
         t = time.perf_counter()
         body = proxy_body(p.j3.points, p.j3.valid)
         if body.empty:
@@ -739,13 +747,14 @@ class Estimator:
         cfg = self.config.novel_view
         paint = self.novel_painter is not None and not (
             angle_from_sources_deg(nv.camera, p.crops, p.j3.points, p.j3.valid) < cfg.painter_min_angle_deg)
-        if not (paint or cfg.proxy_blend):
+        if not (paint or cfg.proxy_blend or cfg.matte):
             return nv
-        rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation)
+        rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation) if paint or cfg.proxy_blend else None
         region = subject_region(nv.image, self.contract.background, cfg.silhouette_min_diff)  # the picture's own
-        src_depth = [proxy_depth(body, c) for c in p.crops]  # both stages read the proxy's depth in the sources
-        # and the painter's in the whole view; the blend alone casts only the region's box
-        depth = proxy_depth(body, nv.camera) if paint else None
+        # the painter and the blend read the proxy's depth in the sources; the painter and the matte read it
+        # in the whole view (the blend alone casts only the region's box)
+        src_depth = [proxy_depth(body, c) for c in p.crops] if paint or cfg.proxy_blend else None
+        depth = proxy_depth(body, nv.camera) if paint or cfg.matte else None
         image = nv.image
         if paint:
             image, _ = self.novel_painter.repaint(image, nv.camera, body, p.crops, rgb, p.j3.points, p.j3.valid,
@@ -757,6 +766,11 @@ class Estimator:
             image = proxy_blend(image, nv.camera, body, p.crops, rgb, cfg.proxy_tolerance_m, region=region,
                                 max_angle_deg=cfg.proxy_max_angle_deg, source_depth=src_depth, depth=depth).image
             timing[NOVEL_PROXY_STAGE] = 1e3 * (time.perf_counter() - t)
+            t = time.perf_counter()
+        if cfg.matte:
+            image = proxy_matte(image, nv.camera, depth, region, self.contract.background, cfg.matte_margin_m,
+                                cfg.matte_feather_m, joints=p.j3.points, valid=p.j3.valid).image
+            timing[NOVEL_MATTE_STAGE] = 1e3 * (time.perf_counter() - t)
         return NovelView(image, nv.camera, nv.depth, nv.heat, nv.rays)
 
     def _compose_novel(self, request: NovelViewRequest, nv: NovelView, j3: Joints3D, timing: dict) -> NovelView:

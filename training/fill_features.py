@@ -27,7 +27,9 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
 * ``depth`` ``(H, W)`` float16: camera z minus its median on the subject, metres (zero off it);
 * ``joints`` ``(25, 3)`` float32: the 3D joints projected into the view (pixel u, v; valid 0/1);
 * ``light`` ``(4,)`` float32: the fitted key light's direction in the camera frame and its ambient
-  share (zeros when nothing was seen to fit it);
+  share (zeros when nothing was seen to fit it, or when the cache was made without the light fit:
+  ``cache_split(relight=False)``, whose ``relit`` is then ``shown``; the runtime's painter reads
+  neither, and the fit is about 40% of a model cache's time);
 * ``angle`` float32: the view's angle from the nearest source camera (``ghnerf-eval``'s bins);
 * ``scene``, ``view`` int32: where it came from; ``geometry``: ``truth``, ``model`` or ``proxy``.
 
@@ -74,13 +76,14 @@ def modelled_scene(scene: Mapping[str, np.ndarray], depth: np.ndarray, acc: np.n
 
 def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting | None,
                   angle: float, index: int = -1, truth: Mapping[str, np.ndarray] | None = None,
-                  shown: np.ndarray | None = None, geometry: str | None = None) -> dict[str, np.ndarray] | None:
+                  shown: np.ndarray | None = None, geometry: str | None = None,
+                  relight: bool = True) -> dict[str, np.ndarray] | None:
     """One novel view's features (module docstring); ``None`` when the subject is not in it.
 
     ``scene`` carries the geometry (the truth, or :func:`modelled_scene`); ``truth`` the dataset item
     whose image and mask are the target (default ``scene``); ``shown`` the model's picture ``(H, W, 3)``
     (default: none, ``relit`` stands in); ``geometry`` the label (default: ``truth`` without ``shown``,
-    else ``model``)."""
+    else ``model``); ``relight`` false: no relit fill (``relit`` is the picture, ``light`` zeros)."""
     truth = scene if truth is None else truth
     subject = np.asarray(truth["tgt_masks"][view], bool)
     if not subject.any():
@@ -89,8 +92,9 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
     depth = np.asarray(scene["tgt_depth"][view], np.float64)
     K_inv, c2w = scene["tgt_K_inv"][view], np.asarray(scene["tgt_c2w"][view], np.float64)
     blend, seen = blend_sources(scene, view, depth)
-    relit = relit_fill(blend if shown is None else shown, scene, view, depth, mask & ~seen, mask=mask,
-                       lighting=lighting)
+    picture = blend if shown is None else shown
+    relit = (relit_fill(picture, scene, view, depth, mask & ~seen, mask=mask, lighting=lighting)
+             if relight else picture)
     target = truth["tgt_images"][view].transpose(1, 2, 0) * subject[..., None]
     R = c2w[:, :3]  # camera to world: a world vector v is v @ R in the camera frame
     normals = surface_normals(depth, mask, K_inv, c2w) @ R
@@ -98,7 +102,7 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
     u, v, jz = project(np.asarray(scene["joints_3d"], np.float64), scene["tgt_P"][view])
     valid = np.asarray(scene["joints_3d_valid"], bool) & (jz > 0)
     light = np.zeros(4, np.float32)
-    if lighting is not None:
+    if relight and lighting is not None:
         light[:3], light[3] = lighting.direction @ R, lighting.ambient
     return {
         "blend": _to_u8(blend), "relit": _to_u8(relit), "shown": _to_u8(relit if shown is None else shown),
@@ -113,12 +117,14 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
 
 
 def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int = PART_BINS,
-                   renderer=None, joints: np.ndarray | None = None) -> list[dict[str, np.ndarray]]:
+                   renderer=None, joints: np.ndarray | None = None,
+                   relight: bool = True) -> list[dict[str, np.ndarray]]:
     """Features of every novel view of one dataset item (numpy arrays) that shows the subject.
 
     ``renderer``: a ``training.evaluate.TorchRenderer`` whose geometry and picture (at the runtime's
     ``novel_view.opaque_at``) replace the truth's; default the true geometry. ``joints``: with a
-    renderer, the device's ``(25, 3)`` joints, whose body proxy is the geometry (module docstring)."""
+    renderer, the device's ``(25, 3)`` joints, whose body proxy is the geometry (module docstring).
+    ``relight`` false skips the light fit and the relit fill (:func:`view_features`)."""
     from training.evaluate import source_angles_deg  # noqa: PLC0415 - torch-side module, loaded late
 
     if not np.asarray(scene["tgt_has_depth"], bool).all():
@@ -142,12 +148,13 @@ def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int =
         at = NovelViewConfig().opaque_at
         shown = [opaque_colour(rgb[t].reshape(-1, 3), acc[t].ravel(), renderer.background, at).reshape(rgb[t].shape)
                  for t in range(V)]
-    lighting = fit_lighting(seen_surface(geometry, bins=bins))
+    lighting = fit_lighting(seen_surface(geometry, bins=bins)) if relight else None
     out = []
     for t in range(V):
         if scene["tgt_is_source"][t]:
             continue
-        f = view_features(geometry, t, lighting, float(angles[t]), index, truth=scene, shown=shown[t], geometry=label)
+        f = view_features(geometry, t, lighting, float(angles[t]), index, truth=scene, shown=shown[t], geometry=label,
+                          relight=relight)
         if f is not None:
             out.append(f)
     return out
@@ -156,7 +163,8 @@ def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int =
 _WORKER: dict = {}
 
 
-def _open(data: str, split: str, bins: int, model: str | None, joints: str | None = None) -> None:
+def _open(data: str, split: str, bins: int, model: str | None, joints: str | None = None,
+          relight: bool = True) -> None:
     import torch  # noqa: PLC0415
 
     from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
@@ -172,7 +180,8 @@ def _open(data: str, split: str, bins: int, model: str | None, joints: str | Non
         from training.device_joints import load_joints  # noqa: PLC0415
 
         joints = load_joints(joints)
-    _WORKER.update(ds=MultiViewDataset(data, split=split), bins=bins, renderer=renderer, joints=joints)
+    _WORKER.update(ds=MultiViewDataset(data, split=split), bins=bins, renderer=renderer, joints=joints,
+                   relight=relight)
 
 
 def _one(index: int) -> list[dict[str, np.ndarray]]:
@@ -183,7 +192,7 @@ def _one(index: int) -> list[dict[str, np.ndarray]]:
 
         raise JointsCacheError(f"the joints cache holds {len(joints)} scenes; scene {index} asked for")
     return scene_features(scene, index, _WORKER["bins"], _WORKER["renderer"],
-                          None if joints is None else joints[index])
+                          None if joints is None else joints[index], relight=_WORKER["relight"])
 
 
 def stack(views: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
@@ -194,12 +203,13 @@ def stack(views: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
 
 def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, workers: int = 2,
                 bins: int = PART_BINS, model: str | Path | None = None, joints: str | Path | None = None,
-                log=print) -> Path:
+                relight: bool = True, log=print) -> Path:
     """Compute the features of a split's first ``limit`` scenes (0: all) and write them to ``out`` (.npz).
 
     ``model``: a GHNeRF checkpoint whose geometry and picture replace the truth's; ``joints``: with it,
     a ``training.device_joints`` cache of the same split whose body proxy is the geometry (module
-    docstring)."""
+    docstring); ``relight`` false: no light fit nor relit fill (for the runtime's painter, which reads
+    neither)."""
     from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
 
     if joints is not None and model is None:
@@ -208,14 +218,14 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
     n = min(limit, n) if limit else n
     t0, views = time.monotonic(), []
     if workers > 1:
-        init = (str(data), split, bins, model and str(model), joints and str(joints))
+        init = (str(data), split, bins, model and str(model), joints and str(joints), relight)
         with mp.get_context("spawn").Pool(workers, initializer=_open, initargs=init) as pool:
             for i, fs in enumerate(pool.imap(_one, range(n), chunksize=4)):
                 views.extend(fs)
                 if (i + 1) % 256 == 0:
                     log(f"  {split}: {i + 1}/{n} scenes, {time.monotonic() - t0:.0f} s")
     else:
-        _open(str(data), split, bins, model and str(model), joints and str(joints))  # in this process
+        _open(str(data), split, bins, model and str(model), joints and str(joints), relight)  # in this process
         for i in range(n):
             views.extend(_one(i))
     out = Path(out)
@@ -223,6 +233,11 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
     np.savez(out, **stack(views))
     log(f"{out}: {len(views)} views of {n} {split} scenes in {time.monotonic() - t0:.0f} s")
     return out
+
+
+def relit_in(arrays: Mapping[str, np.ndarray]) -> bool:
+    """Whether a cache holds a relit fill (made with the light fit): some view has a fitted light."""
+    return bool(np.asarray(arrays["light"]).any())
 
 
 def load_cache(path: str | Path) -> dict[str, np.ndarray]:
@@ -243,4 +258,4 @@ def load_cache(path: str | Path) -> dict[str, np.ndarray]:
 
 
 __all__ = ["FIELDS", "MASK_BIT", "SEEN_BIT", "TRUTH_BIT", "render_views", "modelled_scene", "view_features",
-           "scene_features", "stack", "cache_split", "load_cache"]
+           "scene_features", "stack", "cache_split", "load_cache", "relit_in"]

@@ -24,7 +24,13 @@ the device's joints instead (``training.body_proxy``; the model's picture is sti
 Such a net trained without the relit fill (``--set net.relit_input=false --set net.shown_input=true``:
 the light fit is too slow for a device) is the runtime's painter: ``export`` writes it as
 ``novel_painter.onnx`` (and, with ``--calib-cache``, its int8 twin) for ``ghnerf_runtime.novel_painter``;
-``make painter`` runs the whole recipe (docs/training.md, "The painter in the runtime").
+``make painter`` runs the whole recipe (docs/training.md, "The painter in the runtime"). The runtime
+repaints the proxy's pixels and every pixel its picture shows, the model's fog around the subject
+included; the masked MSE never asks for a colour there, so since session 31 the recipe adds
+``--set around_weight=0.5``, a second term whose target there is the background (``repainted``), and
+the caches skip the light fit such a net does not read (``cache --no-relit``). ``train`` and ``score``
+print the whole view as the runtime shows it beside the masked columns (``shown:whole``,
+``learnt:whole``).
 
 ``train`` takes the GPU when torch sees one (``--device``) and prints the held-out table at the end
 (also written to ``<out>/score.md``).
@@ -47,13 +53,16 @@ from torch import nn
 from torch.nn import functional as F
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
+from ghnerf_runtime.config import NovelViewConfig
 from ghnerf_runtime.metrics import masked_psnr
 from training.evaluate import SOURCE_ANGLE_BINS_DEG
-from training.fill_features import MASK_BIT, SEEN_BIT, TRUTH_BIT, load_cache
+from training.fill_features import MASK_BIT, SEEN_BIT, TRUTH_BIT, load_cache, relit_in
 
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
 #: with ``FillNetConfig.shown_input``, the model's picture 3 more.
 IN_CHANNELS = 41
+#: The models' background (the contract's, black): the caches' target is the view over it.
+BACKGROUND = 0.0
 
 
 @dataclass(frozen=True)
@@ -88,6 +97,11 @@ class FillTrainConfig:
     max_seconds: float = 0.0
     """Wall-time budget (0: none): the cosine decay follows whichever of steps and time runs out first,
     so a run cut by a lent machine's lease still ends at a low rate."""
+    around_weight: float = 0.0
+    """Weight of a second masked MSE, over the pixels the runtime's painter changes that are not the
+    subject (:func:`repainted`: the proxy's and those the model's picture shows, less the true
+    subject; mostly the model's fog), whose target is the background. 0: the subject's pixels alone
+    (sessions 28-30: such a painter paints that fog brighter, which the masked PSNR does not see)."""
     net: FillNetConfig = field(default_factory=FillNetConfig)
 
 
@@ -185,6 +199,19 @@ def net_inputs(b: dict[str, torch.Tensor],
     return torch.cat(planes, 1), base, d["truth"], d["subject"]
 
 
+def repainted(b: dict[str, torch.Tensor]) -> torch.Tensor:
+    """``(N, 1, H, W)``: the pixels the runtime's painter changes (``NovelPainter.repaint``): the proxy's
+    (the geometry's mask) and those the model's picture shows as the subject (its colour test,
+    ``novel_view.silhouette_min_diff`` from the background)."""
+    from ghnerf_runtime.proxy_blend import subject_region  # noqa: PLC0415 - the runtime's own test
+
+    cfg = NovelViewConfig()
+    shown = b["shown"].cpu().numpy()[..., ::-1]  # RGB -> BGR, as the runtime's picture
+    region = np.stack([subject_region(v, BACKGROUND, cfg.silhouette_min_diff) for v in shown])
+    mask = (b["flags"] & MASK_BIT) > 0
+    return (mask | torch.from_numpy(region).to(mask.device)).float()[:, None]
+
+
 def masked_mse(pred: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """Per image, the mean squared error over the mask's pixels and the channels; the batch's mean."""
     sq = ((pred - truth) ** 2 * mask).sum((1, 2, 3))
@@ -205,23 +232,33 @@ def _subset(b: dict[str, torch.Tensor], idx: torch.Tensor) -> dict[str, torch.Te
 
 @torch.no_grad()
 def paint(net: FillNet, arrays: dict[str, np.ndarray], device: torch.device | None = None,
-          batch: int = 64) -> np.ndarray:
-    """The network's picture of every cached view ``(N, H, W, 3)`` in [0, 1], black off the subject."""
+          batch: int = 64, as_runtime: bool = False) -> np.ndarray:
+    """The network's picture of every cached view ``(N, H, W, 3)`` in [0, 1], black off the subject;
+    ``as_runtime``: instead the whole view as the runtime shows it, the network's colours on the
+    pixels it repaints (:func:`repainted`) and the model's picture on the others."""
     device = device or next(net.parameters()).device
     net.eval()
     data = to_device(arrays, device)
     n, out = len(arrays["flags"]), []
     for s in range(0, n, batch):
-        x, base, _, mask = net_inputs(_subset(data, torch.arange(s, min(s + batch, n), device=device)), net.cfg)
+        b = _subset(data, torch.arange(s, min(s + batch, n), device=device))
+        x, base, _, mask = net_inputs(b, net.cfg)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
-            pred = net(x, base)
-        out.append((pred.clamp(0, 1) * mask).permute(0, 2, 3, 1).cpu().numpy())
+            pred = net(x, base).clamp(0, 1)
+        if as_runtime:
+            pred = torch.where(repainted(b) > 0, pred, decoded(b)["shown"])
+        else:
+            pred = pred * mask
+        out.append(pred.permute(0, 2, 3, 1).float().cpu().numpy())
     return np.concatenate(out)
 
 
 def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str, np.ndarray] | None = None,
                log=print) -> FillNet:
     """Train a :class:`FillNet` on a feature cache; logs the loss (and, with ``val``, its held-out PSNR)."""
+    if cfg.net.relit_input and not relit_in(train):
+        raise ValueError("the training cache was made without the light fit (cache --no-relit): it holds no relit "
+                         "fill; train with --set net.relit_input=false")
     torch.manual_seed(cfg.seed)
     device = pick_device(cfg.device)
     net = FillNet(cfg.net).to(device)
@@ -252,6 +289,8 @@ def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
             pred = net(x, base)
         loss = masked_mse(pred, truth, mask)
+        if cfg.around_weight > 0:  # the truth is the background off the subject
+            loss = loss + cfg.around_weight * masked_mse(pred, truth, repainted(b) * (1.0 - mask))
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -261,8 +300,9 @@ def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str
             msg = f"  step {step}: loss {np.mean(running):.5f}"
             if val is not None:
                 few = {k: v[:128] for k, v in val.items()}
-                held_out = score_rows(few, paint(net, few))["novel, all"]["fill:learnt"]
-                msg += f", held-out PSNR (128 views) {held_out:.2f} dB"
+                held_out = score_rows(few, paint(net, few), paint(net, few, as_runtime=True))["novel, all"]
+                msg += (f", held-out PSNR (128 views) {held_out['fill:learnt']:.2f} dB "
+                        f"(whole view {held_out['learnt:whole']:.2f})")
             log(msg + f", {(time.monotonic() - t0) / step * 1000:.0f} ms/step")
             running = []
     net.steps_trained = step
@@ -275,23 +315,34 @@ def _psnr(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.ravel(masked_psnr(np.clip(pred, 0, 1), truth, mask).per_image)
 
 
-def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray) -> dict[str, dict[str, float]]:
+def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray,
+               whole: np.ndarray | None = None) -> dict[str, dict[str, float]]:
     """Mean PSNR per angle bin (and over all novel views) of the blend (with the true geometry: the
     ceiling), the relit fill, the model's picture (caches made with a model) and the learnt fill, over
-    the true subject's mask and over the pixels the geometry calls unseen or seen; ``n`` views."""
+    the true subject's mask and over the pixels the geometry calls unseen or seen; ``n`` views.
+    ``whole``: the learnt fill as the runtime shows it (``paint(as_runtime=True)``), scored with the
+    model's picture over every pixel of the view (``shown:whole``, ``learnt:whole``: the fog counts)."""
     truth = arrays["truth"].astype(np.float64) / 255.0
     flags = arrays["flags"]
     mask, seen = (flags & TRUTH_BIT) > 0, (flags & SEEN_BIT) > 0
     unseen = mask & ~seen
     true_geometry = bool((arrays["geometry"] == "truth").all())
     blend, relit = arrays["blend"] / 255.0, arrays["relit"] / 255.0
-    cols = {"ceiling" if true_geometry else "blend": _psnr(blend, truth, mask), "fill:relit": _psnr(relit, truth, mask)}
+    cols = {"ceiling" if true_geometry else "blend": _psnr(blend, truth, mask)}
+    relit_fill = relit_in(arrays)  # a cache made without the light fit has no relit fill to score
+    if relit_fill:
+        cols["fill:relit"] = _psnr(relit, truth, mask)
     if not true_geometry:
         cols["shown"] = _psnr(arrays["shown"] / 255.0, truth, mask)
     cols["fill:learnt"] = _psnr(learnt, truth, mask)
-    cols["relit:unseen"] = _psnr(relit, truth, unseen)
+    if relit_fill:
+        cols["relit:unseen"] = _psnr(relit, truth, unseen)
     cols["learnt:unseen"] = _psnr(learnt, truth, unseen)
     cols["learnt:seen"] = _psnr(learnt, truth, mask & seen)
+    if whole is not None:
+        everywhere = np.ones_like(mask)
+        cols["shown:whole"] = _psnr(arrays["shown"] / 255.0, truth, everywhere)
+        cols["learnt:whole"] = _psnr(whole, truth, everywhere)
     if true_geometry:
         cols["ceil:seen"] = _psnr(blend, truth, mask & seen)
     angle, edges = arrays["angle"], SOURCE_ANGLE_BINS_DEG
@@ -309,7 +360,7 @@ def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray) -> dict[str, d
 def table(rows: dict[str, dict[str, float]]) -> str:
     first = next(iter(rows.values()))
     cols = [c for c in ("ceiling", "blend", "fill:relit", "shown", "fill:learnt", "relit:unseen", "learnt:unseen",
-                        "ceil:seen", "learnt:seen") if c in first]
+                        "ceil:seen", "learnt:seen", "shown:whole", "learnt:whole") if c in first]
     lines = ["| views | n | " + " | ".join(cols) + " |", "|---" * (len(cols) + 2) + "|"]
     for label, r in rows.items():
         lines.append(f"| {label} | {r['n']} | " + " | ".join(f"{r[c]:.2f}" for c in cols) + " |")
@@ -415,14 +466,18 @@ def onnx_rows(path: Path, arrays: dict[str, np.ndarray]) -> dict[str, dict[str, 
     """:func:`score_rows` of an exported painter run through onnxruntime over a whole cache."""
     from ghnerf_runtime.novel_painter import NovelPainter, PainterPlanes  # noqa: PLC0415
 
-    painter, out = NovelPainter.load(path), []
+    painter, out, whole = NovelPainter.load(path), [], []
     for s in range(0, len(arrays["flags"]), 64):
         b = to_device({k: v[s:s + 64] for k, v in arrays.items()}, torch.device("cpu"))
         planes, joints = painter_planes_of(b)
         subject = ((b["flags"].long() & TRUTH_BIT) > 0).numpy()[..., None]
-        out.extend(painter.paint(PainterPlanes(p, j, p[3] > 0)) * m
-                   for p, j, m in zip(planes.numpy(), joints.numpy(), subject))
-    return score_rows(arrays, np.stack(out))
+        changed = repainted(b).numpy().transpose(0, 2, 3, 1) > 0
+        shown = decoded(b)["shown"].numpy().transpose(0, 2, 3, 1)
+        for p, j, m, c, v in zip(planes.numpy(), joints.numpy(), subject, changed, shown):
+            painted = painter.paint(PainterPlanes(p, j, p[3] > 0))
+            out.append(painted * m)
+            whole.append(np.where(c, painted, v))
+    return score_rows(arrays, np.stack(out), np.stack(whole))
 
 
 def _parse_sets(cfg: FillTrainConfig, sets: list[str]) -> FillTrainConfig:
@@ -505,6 +560,9 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--joints", default=None, metavar="NPZ",
                    help="with --model: the device's joints of the split (python -m training.device_joints), whose "
                         "body proxy (training.body_proxy) is the geometry")
+    c.add_argument("--no-relit", action="store_true",
+                   help="skip the light fit and the relit fill (about 40%% of a model cache's time): what the "
+                        "runtime's painter (net.relit_input=false) reads is unchanged")
     c.add_argument("--out", required=True, type=Path)
     t = sub.add_parser("train", help="train the fill net and score it on the held-out cache")
     t.add_argument("--train-cache", required=True, type=Path)
@@ -535,12 +593,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd == "cache":
         from training.fill_features import cache_split  # noqa: PLC0415
 
-        cache_split(args.data, args.split, args.out, args.limit, args.workers, model=args.model, joints=args.joints)
+        cache_split(args.data, args.split, args.out, args.limit, args.workers, model=args.model, joints=args.joints,
+                    relight=not args.no_relit)
         return 0
     if args.cmd == "score":
         net = load_net(args.net, pick_device(args.device))
         val = load_cache(args.val_cache)
-        print(table(score_rows(val, paint(net, val))))
+        print(table(score_rows(val, paint(net, val), paint(net, val, as_runtime=True))))
         return 0
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -553,7 +612,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     net = train_fill(train, cfg, val=val)
     seconds = time.monotonic() - t0
-    rows = score_rows(val, paint(net, val))
+    rows = score_rows(val, paint(net, val), paint(net, val, as_runtime=True))
     args.out.mkdir(parents=True, exist_ok=True)
     device = next(net.parameters()).device
     hardware = (torch.cuda.get_device_name(device) if device.type == "cuda"

@@ -358,6 +358,32 @@ def test_the_proxy_blend_recolours_the_novel_view_with_the_subjects_colours(clip
     assert min(gains) > 3.0, gains
 
 
+def test_the_matte_fades_the_view_away_from_the_proxy_and_only_when_asked(clip):
+    """``novel_view.matte``: after the joints (``novel_matte``), the oracle's paint that lies far from the body
+    proxy of this pair's joints goes to the background; the simulated person's own pixels stay; no joint
+    changes."""
+    from benchmarks.bench_runtime_common import truth_view
+
+    rig, frames, truth, visible, *_ = clip
+    scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 3.0)))
+    runs = {}
+    for matte in (False, True):
+        oracle = OracleSession(edge128_contract())
+        cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, proxy_blend=False, matte=matte,
+                                                         matte_feather_m=0.0))
+        with Estimator(oracle, rig, cfg) as est:
+            oracle.set_truth(truth[0], visible[0])
+            runs[matte] = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
+    off, on = runs[False], runs[True]
+    np.testing.assert_array_equal(off.joints_3d, on.joints_3d)
+    assert "novel_matte" in on.timing_ms and "novel_matte" not in off.timing_ms
+    changed = np.any(on.novel_view.image != off.novel_view.image, axis=-1)
+    assert changed.sum() > 50, changed.sum()
+    assert not on.novel_view.image[changed].any()  # to the background (black), nothing else
+    _, mask = truth_view(scene, on.novel_view.camera, 0.0, 0.0)
+    assert (changed & mask).sum() <= 0.01 * mask.sum(), ((changed & mask).sum(), mask.sum())  # the person stays
+
+
 def test_the_painter_runs_over_the_proxy_before_the_blend_and_only_when_asked(clip, tmp_path):
     """``novel_view.painter``: a session's painter repaints the view after the joints (``novel_paint``), before
     the proxy blend, and changes no joint; ``off`` skips it, as does a view nearer a source camera than

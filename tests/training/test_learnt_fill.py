@@ -2,6 +2,8 @@
 network, trainer and score (``training.learnt_fill``)."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -9,9 +11,10 @@ torch = pytest.importorskip("torch")
 
 from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
 from training.blend_ceiling import blend_sources  # noqa: E402
-from training.fill_features import FIELDS, MASK_BIT, SEEN_BIT, TRUTH_BIT, cache_split, load_cache  # noqa: E402
+from training.fill_features import (FIELDS, MASK_BIT, SEEN_BIT, TRUTH_BIT, cache_split, load_cache,  # noqa: E402
+                                    relit_in)
 from training.learnt_fill import (FillNet, FillNetConfig, FillTrainConfig, _parse_sets, flip_views,  # noqa: E402
-                                  joint_maps, load_net, main, masked_mse, net_inputs, paint, score_rows,
+                                  joint_maps, load_net, main, masked_mse, net_inputs, paint, repainted, score_rows,
                                   to_device, train_fill)
 
 
@@ -73,6 +76,51 @@ def test_a_model_geometry_cache_takes_the_mask_and_picture_from_the_model_and_th
     rows = score_rows(m, m["shown"] / 255.0)
     assert {"blend", "shown", "fill:relit"} <= set(rows["novel, all"]) and "ceiling" not in rows["novel, all"]
     assert rows["novel, all"]["shown"] == pytest.approx(rows["novel, all"]["fill:learnt"])
+
+
+def test_a_cache_without_the_light_fit_holds_the_same_painter_inputs_and_no_relit_fill(model_cache, data64,
+                                                                                       tmp_path):
+    """``cache --no-relit`` (make painter's caches) skips the light fit: every plane the runtime's painter
+    reads is the same, ``relit`` is the picture, and a net that reads the relit fill refuses to train on it."""
+    m = load_cache(model_cache)
+    assert relit_in(m)  # the fixture's cache was made with the light fit
+    lightless = load_cache(cache_split(data64, "val", tmp_path / "val.npz", workers=1,
+                                       model=Path(model_cache).parent / "tiny.pt", relight=False,
+                                       log=lambda *_: None))
+    for k in FIELDS:
+        if k not in ("relit", "light"):
+            assert np.array_equal(lightless[k], m[k]), k
+    assert np.array_equal(lightless["relit"], lightless["shown"]) and not lightless["light"].any()
+    assert not relit_in(lightless)
+    rows = score_rows(lightless, lightless["shown"] / 255.0)["novel, all"]
+    assert "fill:relit" not in rows and "relit:unseen" not in rows and "shown" in rows
+    with pytest.raises(ValueError, match="without the light fit.*relit_input=false"):
+        train_fill(lightless, FillTrainConfig(steps=1, batch=2, device="cpu", net=FillNetConfig(width=8)))
+    net = train_fill(lightless, FillTrainConfig(steps=1, batch=2, device="cpu", log_every=10 ** 6,
+                                                net=FillNetConfig(width=8, relit_input=False, shown_input=True)),
+                     log=lambda *_: None)
+    assert net.steps_trained == 1
+
+
+def test_the_around_term_teaches_the_painter_to_paint_the_fog_as_background(model_cache):
+    """``around_weight``: the runtime's painter changes the proxy's pixels and those the model's picture
+    shows (:func:`repainted`), the fog included; with the term the net learns the background there and
+    the whole view as the runtime shows it (``paint(as_runtime=True)``) gets nearer the truth."""
+    a = load_cache(model_cache)
+    b = to_device(a, torch.device("cpu"))
+    domain = repainted(b)[:, 0].numpy() > 0
+    subject = (a["flags"] & TRUTH_BIT) > 0
+    assert (domain & ~subject).sum() > 0.2 * subject.sum()  # an untrained model's picture: fog to learn
+    rows = {}
+    for weight in (0.0, 1.0):
+        cfg = FillTrainConfig(steps=40, batch=4, lr=3e-3, device="cpu", log_every=10 ** 6, around_weight=weight,
+                              net=FillNetConfig(width=8, relit_input=False, shown_input=True))
+        net = train_fill(a, cfg, log=lambda *_: None)
+        whole = paint(net, a, as_runtime=True)
+        assert np.array_equal(whole[~domain], a["shown"][~domain] / 255.0)  # the picture where it does not paint
+        rows[weight] = score_rows(a, paint(net, a), whole)["novel, all"]
+    assert rows[1.0]["learnt:whole"] > rows[0.0]["learnt:whole"] + 1.0, rows
+    assert rows[0.0]["shown:whole"] == rows[1.0]["shown:whole"]
 
 
 def test_a_broken_cache_is_named_with_what_is_wrong(truth_cache, tmp_path):
