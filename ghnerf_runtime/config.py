@@ -530,9 +530,11 @@ class NovelViewConfig:
         matte: fade the view to the background away from the body proxy of the pair's joints
             (``ghnerf_runtime.proxy_matte``): the coloured fog the model leaves around the subject goes,
             at the cost of subject pixels the proxy misses by more than the margin. On by default since
-            session 31: on ``ghnerf-eval``'s views PSNR over the whole view +1.5 to +2 dB, masked PSNR
-            about -0.1 dB (docs/runtime.md, "Matting out the fog"). Where the picture disagrees with the
-            proxy (wrong joints), nothing is matted.
+            session 31: held out, PSNR over the whole view +1.4 dB at the rig's cameras and +2.0 dB on
+            ``ghnerf-eval``'s views round the subject, masked PSNR -0.3 and -0.17 dB; on the device's
+            views through the runtime +0.7 to +0.8 dB whole, -0.07 to -0.19 dB masked (medians;
+            docs/runtime.md, "Matting out the fog"). The parts of joints not found are kept within their
+            reach; where the picture disagrees with the proxy (wrong joints), nothing is matted.
         matte_margin_m: with ``matte``, pixels within this distance (metres, at the proxy's depth) of
             the proxy's silhouette keep the picture.
         matte_feather_m: with ``matte``, beyond the margin the picture fades to the background over
