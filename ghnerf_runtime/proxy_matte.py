@@ -1,8 +1,7 @@
 """The novel view's fog matted out: background wherever the body proxy says no person can be.
 
 The model leaves coloured haze around the subject: floor and wall colours the sources show behind
-the person, rendered at depths where nothing is (on ``ghnerf-eval``'s views, pixels that differ from
-the background over two to three times the subject's own area). Masked PSNR does not see it; anyone
+the person, rendered at depths where nothing is. Masked PSNR does not see it; anyone
 looking at the picture does. The body proxy of the pair's 3D joints (``ghnerf_runtime.body_proxy``)
 says where the person is to a few centimetres, so every pixel further than ``margin_m`` from the
 proxy's silhouette fades to the background over ``feather_m`` (metres at the proxy's median depth,

@@ -29,7 +29,7 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
 * ``light`` ``(4,)`` float32: the fitted key light's direction in the camera frame and its ambient
   share (zeros when nothing was seen to fit it, or when the cache was made without the light fit:
   ``cache_split(relight=False)``, whose ``relit`` is then ``shown``; the runtime's painter reads
-  neither, and the fit is about 40% of a model cache's time);
+  neither, and the fit is a large share of a model cache's time);
 * ``angle`` float32: the view's angle from the nearest source camera (``ghnerf-eval``'s bins);
 * ``scene``, ``view`` int32: where it came from; ``geometry``: ``truth``, ``model`` or ``proxy``.
 

@@ -27,7 +27,7 @@ the light fit is too slow for a device) is the runtime's painter: ``export`` wri
 ``make painter`` runs the whole recipe (docs/training.md, "The painter in the runtime"). The runtime
 repaints the proxy's pixels and every pixel its picture shows, the model's fog around the subject
 included; the masked MSE never asks for a colour there, so since session 31 the recipe adds
-``--set around_weight=0.5``, a second term whose target there is the background (``repainted``), and
+``--set around_weight=0.03``, a second term whose target there is the background (``repainted``), and
 the caches skip the light fit such a net does not read (``cache --no-relit``). ``train`` and ``score``
 print the whole view as the runtime shows it beside the masked columns (``shown:whole``,
 ``learnt:whole``).
@@ -231,26 +231,29 @@ def _subset(b: dict[str, torch.Tensor], idx: torch.Tensor) -> dict[str, torch.Te
 
 
 @torch.no_grad()
-def paint(net: FillNet, arrays: dict[str, np.ndarray], device: torch.device | None = None,
-          batch: int = 64, as_runtime: bool = False) -> np.ndarray:
-    """The network's picture of every cached view ``(N, H, W, 3)`` in [0, 1], black off the subject;
-    ``as_runtime``: instead the whole view as the runtime shows it, the network's colours on the
-    pixels it repaints (:func:`repainted`) and the model's picture on the others."""
+def paintings(net: FillNet, arrays: dict[str, np.ndarray], device: torch.device | None = None,
+              batch: int = 64) -> tuple[np.ndarray, np.ndarray]:
+    """One pass of the network over every cached view: its picture ``(N, H, W, 3)`` in [0, 1] black off
+    the subject (the masked scores'), and the whole view as the runtime shows it, the network's colours
+    on the pixels it repaints (:func:`repainted`) and the model's picture on the others."""
     device = device or next(net.parameters()).device
     net.eval()
     data = to_device(arrays, device)
-    n, out = len(arrays["flags"]), []
+    n, subject, whole = len(arrays["flags"]), [], []
     for s in range(0, n, batch):
         b = _subset(data, torch.arange(s, min(s + batch, n), device=device))
         x, base, _, mask = net_inputs(b, net.cfg)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
-            pred = net(x, base).clamp(0, 1)
-        if as_runtime:
-            pred = torch.where(repainted(b) > 0, pred, decoded(b)["shown"])
-        else:
-            pred = pred * mask
-        out.append(pred.permute(0, 2, 3, 1).float().cpu().numpy())
-    return np.concatenate(out)
+            pred = net(x, base).clamp(0, 1).float()
+        for out, img in ((subject, pred * mask), (whole, torch.where(repainted(b) > 0, pred, decoded(b)["shown"]))):
+            out.append(img.permute(0, 2, 3, 1).cpu().numpy())
+    return np.concatenate(subject), np.concatenate(whole)
+
+
+def paint(net: FillNet, arrays: dict[str, np.ndarray], device: torch.device | None = None,
+          batch: int = 64, as_runtime: bool = False) -> np.ndarray:
+    """One of :func:`paintings`: the picture black off the subject, or (``as_runtime``) the whole view."""
+    return paintings(net, arrays, device, batch)[int(as_runtime)]
 
 
 def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str, np.ndarray] | None = None,
@@ -300,7 +303,7 @@ def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str
             msg = f"  step {step}: loss {np.mean(running):.5f}"
             if val is not None:
                 few = {k: v[:128] for k, v in val.items()}
-                held_out = score_rows(few, paint(net, few), paint(net, few, as_runtime=True))["novel, all"]
+                held_out = score_rows(few, *paintings(net, few))["novel, all"]
                 msg += (f", held-out PSNR (128 views) {held_out['fill:learnt']:.2f} dB "
                         f"(whole view {held_out['learnt:whole']:.2f})")
             log(msg + f", {(time.monotonic() - t0) / step * 1000:.0f} ms/step")
@@ -320,7 +323,7 @@ def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray,
     """Mean PSNR per angle bin (and over all novel views) of the blend (with the true geometry: the
     ceiling), the relit fill, the model's picture (caches made with a model) and the learnt fill, over
     the true subject's mask and over the pixels the geometry calls unseen or seen; ``n`` views.
-    ``whole``: the learnt fill as the runtime shows it (``paint(as_runtime=True)``), scored with the
+    ``whole``: the learnt fill as the runtime shows it (:func:`paintings`), scored with the
     model's picture over every pixel of the view (``shown:whole``, ``learnt:whole``: the fog counts)."""
     truth = arrays["truth"].astype(np.float64) / 255.0
     flags = arrays["flags"]
@@ -561,7 +564,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="with --model: the device's joints of the split (python -m training.device_joints), whose "
                         "body proxy (training.body_proxy) is the geometry")
     c.add_argument("--no-relit", action="store_true",
-                   help="skip the light fit and the relit fill (about 40%% of a model cache's time): what the "
+                   help="skip the light fit and the relit fill (docs/training.md, \"The painter and the fog\"): what the "
                         "runtime's painter (net.relit_input=false) reads is unchanged")
     c.add_argument("--out", required=True, type=Path)
     t = sub.add_parser("train", help="train the fill net and score it on the held-out cache")
@@ -599,7 +602,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd == "score":
         net = load_net(args.net, pick_device(args.device))
         val = load_cache(args.val_cache)
-        print(table(score_rows(val, paint(net, val), paint(net, val, as_runtime=True))))
+        print(table(score_rows(val, *paintings(net, val))))
         return 0
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -612,7 +615,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     net = train_fill(train, cfg, val=val)
     seconds = time.monotonic() - t0
-    rows = score_rows(val, paint(net, val), paint(net, val, as_runtime=True))
+    rows = score_rows(val, *paintings(net, val))
     args.out.mkdir(parents=True, exist_ok=True)
     device = next(net.parameters()).device
     hardware = (torch.cuda.get_device_name(device) if device.type == "cuda"
