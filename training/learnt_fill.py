@@ -44,6 +44,7 @@ import pickle
 import sys
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -230,21 +231,36 @@ def _subset(b: dict[str, torch.Tensor], idx: torch.Tensor) -> dict[str, torch.Te
     return {k: v[idx] for k, v in b.items()}
 
 
+def _predict(net: FillNet, b: dict[str, torch.Tensor], flip_test: bool) -> torch.Tensor:
+    """The net's picture of a batch ``(N, 3, H, W)`` in [0, 1]; ``flip_test``: averaged with its picture
+    of the mirrored views, mirrored back."""
+    device = b["flags"].device
+    pred = []
+    for views in (b, flip_views(b)) if flip_test else (b,):
+        x, base, _, _ = net_inputs(views, net.cfg)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
+            pred.append(net(x, base).clamp(0, 1).float())
+    return pred[0] if len(pred) == 1 else 0.5 * (pred[0] + pred[1].flip(-1))
+
+
 @torch.no_grad()
-def paintings(net: FillNet, arrays: dict[str, np.ndarray], device: torch.device | None = None,
-              batch: int = 64) -> tuple[np.ndarray, np.ndarray]:
+def paintings(net: FillNet | Sequence[FillNet], arrays: dict[str, np.ndarray], device: torch.device | None = None,
+              batch: int = 64, flip_test: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """One pass of the network over every cached view: its picture ``(N, H, W, 3)`` in [0, 1] black off
     the subject (the masked scores'), and the whole view as the runtime shows it, the network's colours
-    on the pixels it repaints (:func:`repainted`) and the model's picture on the others."""
-    device = device or next(net.parameters()).device
-    net.eval()
+    on the pixels it repaints (:func:`repainted`) and the model's picture on the others. Several nets:
+    the mean of their pictures (an ensemble); ``flip_test``: each net's picture averaged with that of the
+    mirrored views (docs/training.md, "The painter and the fog", has what both buy)."""
+    nets = [net] if isinstance(net, FillNet) else list(net)
+    device = device or next(nets[0].parameters()).device
+    for n in nets:
+        n.eval()
     data = to_device(arrays, device)
     n, subject, whole = len(arrays["flags"]), [], []
     for s in range(0, n, batch):
         b = _subset(data, torch.arange(s, min(s + batch, n), device=device))
-        x, base, _, mask = net_inputs(b, net.cfg)
-        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
-            pred = net(x, base).clamp(0, 1).float()
+        pred = torch.stack([_predict(m, b, flip_test) for m in nets]).mean(0)
+        mask = decoded(b)["subject"]
         for out, img in ((subject, pred * mask), (whole, torch.where(repainted(b) > 0, pred, decoded(b)["shown"]))):
             out.append(img.permute(0, 2, 3, 1).cpu().numpy())
     return np.concatenate(subject), np.concatenate(whole)
@@ -578,7 +594,10 @@ def main(argv: list[str] | None = None) -> int:
                    help="FillTrainConfig override (steps, batch, lr, ..., net.width, net.levels)")
     s = sub.add_parser("score", help="score a trained fill net on a held-out cache")
     s.add_argument("--val-cache", required=True, type=Path)
-    s.add_argument("--net", required=True, type=Path)
+    s.add_argument("--net", required=True, type=Path, action="append",
+                   help="a fill_net.pt; given more than once, the nets' mean picture is scored (an ensemble)")
+    s.add_argument("--flip-test", action="store_true",
+                   help="average each net's picture with its picture of the mirrored views")
     s.add_argument("--device", default="auto")
     e = sub.add_parser("export", help="the runtime's painter: novel_painter.onnx (and its figures) from a fill net")
     e.add_argument("--net", required=True, type=Path, help="a fill_net.pt trained with net.relit_input=false, "
@@ -600,9 +619,9 @@ def main(argv: list[str] | None = None) -> int:
                     relight=not args.no_relit)
         return 0
     if args.cmd == "score":
-        net = load_net(args.net, pick_device(args.device))
+        nets = [load_net(path, pick_device(args.device)) for path in args.net]
         val = load_cache(args.val_cache)
-        print(table(score_rows(val, *paintings(net, val))))
+        print(table(score_rows(val, *paintings(nets, val, flip_test=args.flip_test))))
         return 0
     if args.threads:
         torch.set_num_threads(args.threads)

@@ -14,7 +14,8 @@ from training.blend_ceiling import blend_sources  # noqa: E402
 from training.fill_features import (FIELDS, MASK_BIT, SEEN_BIT, TRUTH_BIT, cache_split, load_cache,  # noqa: E402
                                     relit_in)
 from training.learnt_fill import (FillNet, FillNetConfig, FillTrainConfig, _parse_sets, flip_views,  # noqa: E402
-                                  joint_maps, load_net, main, masked_mse, net_inputs, paint, repainted, score_rows,
+                                  joint_maps, load_net, main, masked_mse, net_inputs, paint, paintings, repainted,
+                                  score_rows,
                                   to_device, train_fill)
 
 
@@ -181,6 +182,29 @@ def test_a_mirrored_batch_swaps_left_and_right_and_mirroring_twice_gives_it_back
         assert torch.allclose(back[k].float(), b[k].float(), atol=1e-5), k
 
 
+def _painting_net(seed: int) -> FillNet:
+    torch.manual_seed(seed)
+    net = FillNet(FillNetConfig(width=8, relit_input=False, shown_input=True))
+    with torch.no_grad():
+        for p in net.parameters():  # a net that paints something other than its base
+            p.add_(0.05 * torch.randn_like(p))
+    return net
+
+
+def test_the_flip_test_paints_a_mirrored_view_as_the_mirror_of_the_view_and_an_ensemble_averages(truth_cache):
+    a = {k: v[:3] for k, v in load_cache(truth_cache).items()}
+    mirrored = {**a, **{k: v.numpy() for k, v in flip_views(to_device(a, torch.device("cpu"))).items()}}
+    one, two = _painting_net(0), _painting_net(1)
+    plain, plain_of_mirror = paint(one, a), paint(one, mirrored)
+    assert not np.allclose(plain_of_mirror, plain[:, :, ::-1], atol=1e-3)  # the net alone is not symmetric
+    tested = paintings(one, a, flip_test=True)[0]
+    assert np.allclose(paintings(one, mirrored, flip_test=True)[0], tested[:, :, ::-1], atol=1e-5)
+    assert np.allclose(tested, 0.5 * (plain + plain_of_mirror[:, :, ::-1]), atol=1e-5)
+    both = paintings([one, two], a)
+    assert np.allclose(both[0], 0.5 * (plain + paint(two, a)), atol=1e-6)
+    assert both[1].shape == plain.shape
+
+
 def test_masked_mse_averages_each_image_over_its_mask_then_over_the_batch():
     pred, truth = torch.zeros(2, 3, 2, 2), torch.zeros(2, 3, 2, 2)
     pred[0, :, 0, 0] = 0.3  # image 0: one masked pixel off by 0.3 in every channel
@@ -219,6 +243,11 @@ def test_the_cli_trains_saves_and_scores_the_same_table(truth_cache, tmp_path, c
     capsys.readouterr()
     assert main(["score", "--val-cache", str(truth_cache), "--net", str(out / "fill_net.pt"), "--device", "cpu"]) == 0
     assert capsys.readouterr().out.strip() in report
+    net = str(out / "fill_net.pt")  # an ensemble of one net twice is that net; the flip test scores too
+    assert main(["score", "--val-cache", str(truth_cache), "--net", net, "--net", net, "--device", "cpu"]) == 0
+    assert capsys.readouterr().out.strip() in report
+    assert main(["score", "--val-cache", str(truth_cache), "--net", net, "--flip-test", "--device", "cpu"]) == 0
+    assert "| novel, all |" in capsys.readouterr().out
     (tmp_path / "broken.pt").write_bytes(b"x")
     with pytest.raises(ValueError, match="broken.pt: not a fill-net checkpoint"):
         load_net(tmp_path / "broken.pt")
