@@ -10,7 +10,9 @@ model's picture as the runtime shows it (``novel_view.opaque_at``) is matted wit
 device's joints (``--joints``, ``training.device_joints``) at each ``--margins`` x ``--feathers`` (metres),
 and scored against the dataset's view over the background: the masked PSNR (inside the true subject,
 ``ghnerf-eval``'s), the PSNR over the whole view (the fog counts) and the share of the subject's pixels
-the matte dims (``cut``). Tune on ``val_seen_motions`` (the defaults were), report on ``val``.
+the matte dims or the clearing turns to background (``cut``). ``--clear-below`` adds an axis: the picture with each opacity floor
+(:func:`cleared`: rays at most that opaque show the background), with and without the matte.
+Tune on ``val_seen_motions`` (the defaults were), report on ``val``.
 
 Not a test; CPU, about 0.3 s per scene.
 """
@@ -37,6 +39,17 @@ def _floats(text: str) -> list[float]:
     return [float(v) for v in text.split(",")]
 
 
+def cleared(rgb: np.ndarray, acc: np.ndarray, background: float, opaque_at: float, clear_below: float) -> np.ndarray:
+    """The runtime's picture (``opaque_colour``) with an opacity floor the runtime does not have: a ray at
+    most ``clear_below`` opaque shows the background, and its colour fades in linearly up to ``opaque_at``
+    (0: the runtime's picture exactly). docs/runtime.md, "Matting out the fog", has why it is not there."""
+    if clear_below <= 0.0:
+        return opaque_colour(rgb, acc, background, opaque_at)
+    acc = np.clip(np.nan_to_num(acc, nan=0.0), 0.0, 1.0)[:, None]
+    shown = np.clip((acc - clear_below) / (opaque_at - clear_below), 0.0, 1.0)
+    return (rgb - (1.0 - acc) * background) * (shown / np.maximum(acc, clear_below)) + (1.0 - shown) * background
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", required=True)
@@ -46,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--joints", required=True, help="the device's joints of the split (python -m training.device_joints)")
     ap.add_argument("--margins", type=_floats, default=[0.04, 0.06, 0.08, 0.10, 0.12])
     ap.add_argument("--feathers", type=_floats, default=[0.0, 0.10, 0.15, 0.20])
+    ap.add_argument("--clear-below", type=_floats, default=[0.0],
+                    help="comma list of opacity floors (cleared); 0: the runtime's picture")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args(argv)
 
@@ -63,8 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     n = min(args.limit, len(ds)) if args.limit else len(ds)
     joints = load_joints(args.joints, n)
     nvc = NovelViewConfig()
-    settings = [(m, f) for m in args.margins for f in args.feathers]
-    scores: dict[str, dict] = {kind: {s: [] for s in [None, *settings]} for kind in ("source", "novel")}
+    mattes = [None, *[(m, f) for m in args.margins for f in args.feathers]]
+    settings = [(c, m) for c in args.clear_below for m in mattes]
+    scores: dict[str, dict] = {kind: {s: [] for s in settings} for kind in ("source", "novel")}
     valid = np.ones(len(joints[0]), bool)
     for i in range(n):
         scene = {k: v.numpy() for k, v in ds[i].items()}
@@ -75,36 +91,40 @@ def main(argv: list[str] | None = None) -> int:
             if not mask.any():
                 continue
             truth = scene["tgt_images"][t].transpose(1, 2, 0) * mask[..., None]
-            shown = opaque_colour(rgb[t].reshape(-1, 3), acc[t].ravel(), renderer.background, nvc.opaque_at)
-            picture = np.round(np.clip(shown.reshape(rgb[t].shape), 0, 1)[..., ::-1] * 255).astype(np.uint8)
             camera = view_camera(scene, t)
             depth = proxy_depth(body, camera)
-            region = subject_region(picture, renderer.background, nvc.silhouette_min_diff)
             kind = "source" if scene["tgt_is_source"][t] else "novel"
             everywhere = np.ones_like(mask)
-            for s in [None, *settings]:
-                if s is None:
-                    out, weight = picture, np.ones(mask.shape)
-                else:
-                    m = proxy_matte(picture, camera, depth, region, renderer.background, s[0], s[1],
-                                    joints=joints[i], valid=valid)
-                    out, weight = m.image, m.weight
-                x = out[..., ::-1] / 255.0
-                scores[kind][s].append((masked_psnr(x, truth, mask).value, masked_psnr(x, truth, everywhere).value,
-                                        float((weight[mask] < 1).mean())))
+            for clear in args.clear_below:
+                shown = cleared(rgb[t].reshape(-1, 3), acc[t].ravel(), renderer.background, nvc.opaque_at, clear)
+                picture = np.round(np.clip(shown.reshape(rgb[t].shape), 0, 1)[..., ::-1] * 255).astype(np.uint8)
+                region = subject_region(picture, renderer.background, nvc.silhouette_min_diff)
+                for s in mattes:
+                    if s is None:
+                        out, weight = picture, np.ones(mask.shape)
+                    else:
+                        m = proxy_matte(picture, camera, depth, region, renderer.background, s[0], s[1],
+                                        joints=joints[i], valid=valid)
+                        out, weight = m.image, m.weight
+                    x = out[..., ::-1] / 255.0
+                    # cut: the subject's pixels the matte dims or the clearing turns to background
+                    dimmed = (weight < 1) | (acc[t] <= clear) if clear > 0 else weight < 1
+                    scores[kind][(clear, s)].append((masked_psnr(x, truth, mask).value,
+                                                     masked_psnr(x, truth, everywhere).value,
+                                                     float(dimmed[mask].mean())))
         if (i + 1) % 32 == 0:
             print(f"  {i + 1}/{n} scenes", file=sys.stderr, flush=True)
 
     print(f"{n} scenes of {args.data} ({args.split}); mean over views; PSNR dB; the runtime's picture "
           f"(opaque_at {nvc.opaque_at}) matted with the proxy of the device's joints")
-    print("| margin m | feather m | source: masked | whole | cut | novel: masked | whole | cut |")
-    print("|---|---|---|---|---|---|---|---|")
-    for s in [None, *settings]:
+    print("| clear_below | margin m | feather m | source: masked | whole | cut | novel: masked | whole | cut |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for s in settings:
         cells = []
         for kind in ("source", "novel"):
             v = np.array(scores[kind][s])
             cells += [f"{v[:, 0].mean():.2f}", f"{v[:, 1].mean():.2f}", f"{v[:, 2].mean():.4f}"]
-        label = "no matte | –" if s is None else f"{s[0]:g} | {s[1]:g}"
+        label = f"{s[0]:g} | " + ("no matte | –" if s[1] is None else f"{s[1][0]:g} | {s[1][1]:g}")
         print(f"| {label} | " + " | ".join(cells) + " |")
     return 0
 
