@@ -252,6 +252,21 @@ def test_opaque_colour_over_a_grey_background():
     assert np.all(np.isfinite(nan_acc))
 
 
+def test_the_tuning_scripts_opacity_floor_clears_faint_rays_and_keeps_opaque_ones():
+    from benchmarks.tune_proxy_matte import cleared
+    from ghnerf_runtime.novel_view import opaque_colour
+
+    colour = np.tile([[0.2, 0.8, 0.4]], (5, 1))
+    acc = np.array([0.9, 0.35, 0.2, 0.0, 1.0])
+    composite = acc[:, None] * colour + (1 - acc[:, None]) * 0.5
+    assert np.array_equal(cleared(composite, acc, 0.5, 0.5, 0.0), opaque_colour(composite, acc, 0.5, 0.5))
+    got = cleared(composite, acc, 0.5, 0.5, 0.2)
+    np.testing.assert_allclose(got[[0, 4]], colour[[0, 4]], atol=1e-9)  # opaque: the colour itself
+    np.testing.assert_allclose(got[1], 0.5 * colour[1] + 0.5 * 0.5, atol=1e-9)  # halfway up the ramp
+    np.testing.assert_allclose(got[2:4], 0.5, atol=1e-9)  # at or under the floor: the background
+    assert np.all(np.isfinite(cleared(composite, np.array([np.nan, 0.3, 0.0, 1e-12, 1.0]), 0.5, 0.5, 0.2)))
+
+
 def test_opaque_at_is_validated():
     assert NovelViewConfig().opaque_at == 0.5
     for bad in (0.0, 1.5, float("nan")):
