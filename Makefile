@@ -52,7 +52,7 @@ model: $(DEV_STAMP)
 # make model made: the device's joints of 2048 training and 256 held-out scenes, the painter's inputs over their
 # body proxies (without the light fit, which the runtime's painter does not read), 70 minutes of training at one
 # thread with the fog around the subject taught as background (the shipped painter's run), export to fp32 and int8
-# with parity checks, the model card: about 1 h 23 min on two cores by its stages' times (docs/training.md, "The
+# with parity checks, the model card: 1 h 24 min on two cores, timed end to end (docs/training.md, "The
 # painter and the fog").
 # PAINTER_MODELS=<folder> reads that folder's model and writes the painter and its card entry there instead.
 PAINTER_DATA ?= data/edge128
