@@ -15,7 +15,7 @@ DEV_STAMP := $(VENV)/.stamp-dev
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
-	$(PIP) install --quiet --upgrade "pip>=24" wheel "setuptools>=69"
+	$(PIP) install --quiet --upgrade "pip>=24" wheel "setuptools>=77"
 
 $(RUNTIME_STAMP): $(PY) pyproject.toml constraints.txt
 	$(PIP) install --quiet -c constraints.txt -e .
