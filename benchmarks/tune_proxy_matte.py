@@ -10,9 +10,9 @@ model's picture as the runtime shows it (``novel_view.opaque_at``) is matted wit
 device's joints (``--joints``, ``training.device_joints``) at each ``--margins`` x ``--feathers`` (metres),
 and scored against the dataset's view over the background: the masked PSNR (inside the true subject,
 ``ghnerf-eval``'s), the PSNR over the whole view (the fog counts) and the share of the subject's pixels
-the matte dims or the clearing turns to background (``cut``). ``--clear-below`` adds an axis: the picture with each opacity floor
-(:func:`cleared`: rays at most that opaque show the background), with and without the matte.
-Tune on ``val_seen_motions`` (the defaults were), report on ``val``.
+the matte dims or the clearing turns to background (``cut``). ``--clear-below`` adds an axis: the
+picture with each opacity floor (:func:`cleared`: rays at most that opaque show the background), with
+and without the matte. Tune on ``val_seen_motions`` (the defaults were), report on ``val``.
 
 Not a test; CPU, about 0.3 s per scene.
 """

@@ -253,15 +253,16 @@ def paintings(net: FillNet | Sequence[FillNet], arrays: dict[str, np.ndarray], d
     mirrored views (docs/training.md, "The painter and the fog", has what both buy)."""
     nets = [net] if isinstance(net, FillNet) else list(net)
     device = device or next(nets[0].parameters()).device
-    for n in nets:
-        n.eval()
+    for member in nets:
+        member.eval()
     data = to_device(arrays, device)
     n, subject, whole = len(arrays["flags"]), [], []
     for s in range(0, n, batch):
         b = _subset(data, torch.arange(s, min(s + batch, n), device=device))
-        pred = torch.stack([_predict(m, b, flip_test) for m in nets]).mean(0)
-        mask = decoded(b)["subject"]
-        for out, img in ((subject, pred * mask), (whole, torch.where(repainted(b) > 0, pred, decoded(b)["shown"]))):
+        pred = torch.stack([_predict(member, b, flip_test) for member in nets]).mean(0)
+        planes = decoded(b)
+        for out, img in ((subject, pred * planes["subject"]),
+                         (whole, torch.where(repainted(b) > 0, pred, planes["shown"]))):
             out.append(img.permute(0, 2, 3, 1).cpu().numpy())
     return np.concatenate(subject), np.concatenate(whole)
 

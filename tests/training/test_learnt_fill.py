@@ -15,8 +15,7 @@ from training.fill_features import (FIELDS, MASK_BIT, SEEN_BIT, TRUTH_BIT, cache
                                     relit_in)
 from training.learnt_fill import (FillNet, FillNetConfig, FillTrainConfig, _parse_sets, flip_views,  # noqa: E402
                                   joint_maps, load_net, main, masked_mse, net_inputs, paint, paintings, repainted,
-                                  score_rows,
-                                  to_device, train_fill)
+                                  score_rows, to_device, train_fill)
 
 
 @pytest.fixture(scope="module")
