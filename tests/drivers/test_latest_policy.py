@@ -1,4 +1,6 @@
 """``DropPolicy.LATEST``: a reader slower than the cameras gets the newest pair, older ones dropped and counted."""
+import time
+
 import numpy as np
 import pytest
 
@@ -178,7 +180,30 @@ def test_the_drain_is_bounded_so_a_flood_cannot_trap_read():
 
 
 # ----------------------------------------------------------------- depthai://
-def test_depthai_drains_only_its_pending_frame_never_the_link():
+def _read_after_a_stall(policy: str):
+    """One pair read 0.4 s (12 groups at 30 fps) after the previous one; the newest index sent before it."""
+    link = HostPipelineLink()
+    with open_rig(f"{DEPTHAI_URL}&queue=4&policy={policy}", link_factory=lambda: link) as source:
+        source.read(timeout_s=3.0)
+        time.sleep(0.4)  # the host queue now holds its 4 newest groups
+        newest_sent = max(k for k, _ in list(link.cameras[0].sent))
+        pair = source.read(timeout_s=3.0)
+        return pair, newest_sent, source.stats
+
+
+def test_depthai_slow_reader_gets_the_newest_group_not_the_oldest_queued():
+    pair, newest_sent, stats = _read_after_a_stall("latest")
+    assert pair.frames[0].index >= newest_sent - 1  # the host queue was drained (one may be in Sync)
+    assert stats.pairs_dropped >= 2  # the older queued groups: counted as dropped, not as camera gaps
+
+
+def test_depthai_policy_all_reads_the_queued_groups_in_order():
+    pair, newest_sent, stats = _read_after_a_stall("all")
+    assert pair.frames[0].index <= newest_sent - 2  # the oldest of the queued groups comes first
+    assert stats.pairs_dropped == 0
+
+
+def test_depthai_serves_its_pending_frame_before_the_link():
     source = create_rig_source(DEPTHAI_URL, link_factory=HostPipelineLink)  # not opened: no link at all
     try:
         assert not source._frame_available()

@@ -12,7 +12,9 @@
   :mod:`.calibration`). ``height`` is the image height, hence the name.
 * ``rig``: path to a rig file to use instead of the device's calibration.
 * ``tolerance_ms``, ``policy``: pairing; the Sync node's threshold is ``tolerance_ms``.
-* ``queue``: depth of the host output queue (default 4; older groups are dropped).
+* ``queue``: depth of the host output queue (default 4; older groups are dropped). Under
+  ``policy=latest`` each read drains it and returns the newest group (the rest count as
+  ``pairs_dropped``); under ``policy=all`` it is how far a slow reader may fall behind.
 """
 from __future__ import annotations
 

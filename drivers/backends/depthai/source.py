@@ -129,7 +129,18 @@ class DepthaiRigSource(RigSource):
         return first
 
     def _frame_available(self) -> bool:
-        return bool(self._pending)  # the second frame of a group already taken; the link is not polled
+        # The second frame of a group already taken, or a group waiting in the host queue: under the
+        # LATEST policy read() drains them, so a consumer slower than the cameras gets the newest pair
+        # (older ones counted in pairs_dropped) rather than one up to queue= groups old.
+        if self._pending:
+            return True
+        link = self._link
+        if link is None:
+            return False
+        try:
+            return link.has_group()
+        except RuntimeError:  # depthai's errors are RuntimeErrors: let the next read raise it, typed
+            return False
 
     def _close(self) -> None:
         link, self._link = self._link, None
