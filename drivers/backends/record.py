@@ -36,7 +36,7 @@ import logging
 import queue
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from urllib.parse import quote, urlencode
 
@@ -162,6 +162,9 @@ class RecordingWriter:
             truth=f"truth/{cam_dir}/{n:08d}.npz" if frame_has_truth(frame) else None,
             scene_time_s=frame.scene_time_s,
         )
+        # The writers encode later, and a reader may draw on the image it was handed meanwhile:
+        # record what the camera captured, not the annotated picture.
+        frame = replace(frame, image=frame.image.copy())
         try:
             self._queue.put((frame, row), block=self.options.lossless)
         except queue.Full:

@@ -143,6 +143,20 @@ def test_jpeg_recording(tmp_path, sim_cache):
 
 
 # ----------------------------------------------------------------- recorder behaviour
+def test_drawing_on_a_delivered_image_does_not_reach_the_recording(tmp_path, sim_cache):
+    captured = []
+    with open_rig(f"record+{SIM}&cache={sim_cache}&out={tmp_path / 'drawn'}&lossless=1", clock=ManualClock()) as source:
+        for _ in range(8):
+            pair = source.read(timeout_s=5.0)
+            captured.append([f.image.copy() for f in pair.frames])
+            for frame in pair.frames:
+                frame.image[:] = 0  # a consumer annotating the picture in place, before the writers ran
+    replayed = replay_all(tmp_path / "drawn")
+    for images, pair in zip(captured, replayed):
+        for image, frame in zip(images, pair.frames):
+            assert np.array_equal(image, frame.image)
+
+
 def test_recorder_options_never_reach_the_inner_backend(tmp_path):
     url = RigUrl.parse("sim://?fps=30&out=/tmp/x&image_format=jpg&width=64")
     options = record_module.RecordOptions.take_from(url)
