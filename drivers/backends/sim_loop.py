@@ -204,10 +204,23 @@ class FrameLoop:
                     raise ValueError(f"{name}.npy has shape {array.shape}")
         except (OSError, ValueError) as e:
             log.warning("sim cache entry %s unusable (%s); rendering again", self.cache_dir, e)
+            self._discard_entry()
             return False
         self._arrays = arrays
         log.info("sim loop loaded from cache %s", self.cache_dir)
         return True
+
+    def _discard_entry(self) -> None:
+        """Move an unusable entry aside and delete it, so that the new render can take its place
+        (else every later open would render again: a rename cannot replace a non-empty folder)."""
+        assert self.cache_dir is not None
+        stale = self.cache_dir.with_name(f".{self.cache_dir.name}.{uuid.uuid4().hex[:8]}.stale")
+        try:
+            os.replace(self.cache_dir, stale)  # atomic: a concurrent reader's mmaps stay valid
+        except OSError as e:
+            log.warning("sim cache entry %s could not be moved aside: %s", self.cache_dir, e)
+            return
+        shutil.rmtree(stale, ignore_errors=True)
 
     def _store(self) -> None:
         assert self.cache_dir is not None

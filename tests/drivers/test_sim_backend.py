@@ -90,6 +90,10 @@ def test_corrupt_cache_entry_is_rendered_again(tmp_path, caplog):
             assert source.fill_report.source == "rendered"
             source.read(timeout_s=1.0)
     assert "unusable" in caplog.text
+    assert "not stored" not in caplog.text  # the bad entry made way for the new render
+    assert [p.name for p in tmp_path.iterdir()] == [entry.name]  # nothing left aside
+    with open_rig(url, clock=ManualClock()) as third:
+        assert third.fill_report.source == "disk"  # repaired once, not rendered at every open
 
 
 def test_cache_off_writes_nothing_and_the_default_honours_xdg(tmp_path, monkeypatch):
