@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import abc
 import logging
+import math
 from collections.abc import Iterator
 from typing import ClassVar
 
@@ -142,9 +143,16 @@ class RigSource(abc.ABC):
         """
         if not self._is_open:
             raise RigOperationError(f"{type(self).__name__} is not open; call open() or use open_rig()")
+        try:
+            seconds = float(timeout_s)
+        except (TypeError, ValueError):
+            seconds = math.nan
+        if not 0 <= seconds < math.inf:
+            raise ValueError(f"read(timeout_s={timeout_s!r}): give a finite number of seconds >= 0 "
+                             "(to wait without limit, read again after each RigTimeoutError)")
         pairer = self._pairer
         assert pairer is not None  # open() guarantees the rig, hence the pairer
-        deadline = self.clock.now_ns() + int(timeout_s * 1e9)
+        deadline = self.clock.now_ns() + int(seconds * 1e9)
         drain = self.drain_limit if self.pairing.policy is DropPolicy.LATEST else 0
         while True:
             drain -= self._drain(pairer, drain)
@@ -155,7 +163,7 @@ class RigSource(abc.ABC):
             remaining = (deadline - self.clock.now_ns()) / 1e9
             if remaining <= 0:
                 raise RigTimeoutError(
-                    f"no frame pair within {timeout_s:.3f} s from {type(self).__name__} (stats: {self.stats})"
+                    f"no frame pair within {seconds:.3f} s from {type(self).__name__} (stats: {self.stats})"
                 )
             try:
                 frame = self._read_frame(remaining)

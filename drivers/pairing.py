@@ -6,6 +6,7 @@ frame.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 from enum import Enum
@@ -44,8 +45,8 @@ class PairingConfig:
     max_ready: int = 64
 
     def __post_init__(self) -> None:
-        if not self.tolerance_ms > 0:
-            raise RigConfigError(f"pairing tolerance_ms must be > 0, got {self.tolerance_ms}")
+        if not 0 < self.tolerance_ms < math.inf:
+            raise RigConfigError(f"pairing tolerance_ms must be a finite number > 0, got {self.tolerance_ms}")
         try:
             object.__setattr__(self, "policy", DropPolicy(self.policy))
         except ValueError:

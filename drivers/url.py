@@ -6,6 +6,7 @@ so a typo such as ``sim://?fsp=60`` fails loudly instead of being ignored.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, unquote, urlsplit
 
@@ -35,7 +36,10 @@ class RigUrl:
     def parse(cls, url: str) -> "RigUrl":
         if not isinstance(url, str) or "://" not in url:
             raise RigConfigError(f"rig URL must look like 'scheme://target?options', got {url!r}")
-        parts = urlsplit(url)
+        try:
+            parts = urlsplit(url)
+        except ValueError as e:  # e.g. an unclosed '[' reads as a broken IPv6 host
+            raise RigConfigError(f"rig URL {url!r} cannot be parsed: {e}") from None
         target = unquote(parts.netloc + parts.path)
         options: dict[str, str] = {}
         for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):
@@ -63,7 +67,7 @@ class RigUrl:
             value = float(raw)
         except ValueError:
             raise self._error(name, raw, "a number") from None
-        if value != value or (lo is not None and value < lo) or (hi is not None and value > hi):
+        if not math.isfinite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
             raise self._error(name, raw, f"in [{lo}, {hi}]")
         return value
 

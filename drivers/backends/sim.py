@@ -119,6 +119,9 @@ class SimOptions:
 
     @classmethod
     def from_url(cls, url: RigUrl) -> "SimOptions":
+        if url.target:  # "sim://fps=60" would otherwise run at the defaults without a word
+            raise RigConfigError(f"rig URL {url.url!r}: sim:// takes no target ({url.target!r}); "
+                                 "options go after '?', as in sim://?fps=60")
         fps = url.take_float("fps", 30.0, lo=0.1, hi=1000.0)
         seed = url.take_int("seed", 0, lo=0, hi=2**32 - 1)
         motion = url.take_str("motion", None, choices=MOTION_NAMES)
@@ -141,7 +144,7 @@ class SimOptions:
             drop=url.take_float("drop", 0.0, lo=0.0, hi=1.0),
             seed=seed,
         )
-        unplug = url.take_float("unplug_after_s", -1.0, lo=0.0) if "unplug_after_s" in url.options else None
+        unplug = url.take_float("unplug_after_s", -1.0, lo=0.0, hi=1e6) if "unplug_after_s" in url.options else None
         tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=1000.0)
         policy = url.take_str("policy", DropPolicy.LATEST.value, choices=tuple(p.value for p in DropPolicy))
         cache = url.take_str("cache")

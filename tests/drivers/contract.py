@@ -117,6 +117,13 @@ class RigSourceContract:
             assert waited == pytest.approx(self.stall_timeout_s, abs=1e-6)
             assert wall < 1.0  # the manual clock never really sleeps
 
+    def test_a_timeout_that_is_not_a_finite_number_of_seconds_is_refused(self):
+        with self.make_source() as source:
+            for bad in (float("inf"), float("nan"), -1.0, None):
+                with pytest.raises(ValueError, match="timeout_s"):
+                    source.read(timeout_s=bad)
+            source.read(timeout_s=self.first_timeout_s)  # still usable
+
     def test_timeout_is_also_a_builtin_timeout_error(self):
         assert issubclass(RigTimeoutError, TimeoutError)
 

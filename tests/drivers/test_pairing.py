@@ -123,8 +123,9 @@ def test_unknown_camera_and_bad_config_are_rejected():
     pairer = FramePairer(("a", "b"))
     with pytest.raises(RigConfigError, match="'c'"):
         pairer.push(frame("c", 0, 0))
-    with pytest.raises(RigConfigError, match="tolerance_ms"):
-        PairingConfig(tolerance_ms=0)
+    for tolerance in (0, float("inf"), float("nan")):
+        with pytest.raises(RigConfigError, match="tolerance_ms"):
+            PairingConfig(tolerance_ms=tolerance)
     with pytest.raises(RigConfigError, match="policy"):
         PairingConfig(policy="newest")
 

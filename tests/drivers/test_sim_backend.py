@@ -42,6 +42,8 @@ def test_freestyle_follows_the_url_seed():
         ("sim://?baseline=9", ["baseline"]),
         ("sim://?policy=newest", ["policy"]),
         ("sim://?unplug_after_s=-1", ["unplug_after_s"]),
+        ("sim://?unplug_after_s=1e300", ["unplug_after_s"]),
+        ("sim://fps=60&width=320", ["no target", "'fps=60&width=320'", "after '?'"]),
         ("sim://?motion=walk&max_loop_mb=100", ["max_loop_mb", "99 frames"]),
     ],
 )

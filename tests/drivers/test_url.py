@@ -31,6 +31,7 @@ def test_typed_getters_convert_and_consume():
         ("fps=fast", lambda u: u.take_float("fps", 30.0), ["fps='fast'", "a number"]),
         ("fps=-1", lambda u: u.take_float("fps", 30.0, lo=0.0), ["fps='-1'", "[0.0, None]"]),
         ("fps=nan", lambda u: u.take_float("fps", 30.0), ["fps='nan'"]),
+        ("fps=inf", lambda u: u.take_float("fps", 30.0, lo=0.0), ["fps='inf'"]),
         ("seed=1.5", lambda u: u.take_int("seed", 0), ["seed='1.5'", "an integer"]),
         ("loop=maybe", lambda u: u.take_bool("loop", False), ["loop='maybe'", "boolean"]),
         ("policy=best", lambda u: u.take_str("policy", "latest", choices=("latest", "all")), ["policy='best'", "latest"]),
@@ -56,7 +57,7 @@ def test_duplicate_option_is_rejected():
         RigUrl.parse("sim://?fps=30&fps=60")
 
 
-@pytest.mark.parametrize("text", ["sim", "", "/data/take1"])
+@pytest.mark.parametrize("text", ["sim", "", "/data/take1", "sim://[::1?x"])
 def test_not_a_url(text):
     with pytest.raises(RigConfigError):
         RigUrl.parse(text)
