@@ -107,6 +107,14 @@ class Sink(ABC):
     def _on_connected(self) -> None:
         """Called after each successful connect (e.g. to announce HELLO); may raise like _deliver."""
 
+    def _idle_timeout_s(self) -> Optional[float]:
+        """How long the connected worker may wait for a frame before :meth:`_on_idle` (None: forever)."""
+        return None
+
+    def _on_idle(self) -> None:
+        """Called when no frame came within :meth:`_idle_timeout_s` (e.g. a periodic STATUS while the
+        estimator stalls); may raise like _deliver."""
+
     def link_capacity_fps(self) -> Optional[float]:
         """Highest frame rate the link carries, or None when it is not the bottleneck."""
         return None
@@ -255,8 +263,9 @@ class Sink(ABC):
         backoff.reset()
 
     def _next_frame(self) -> Optional[tuple[JointFrame, int]]:
+        """The next queued frame; None when closed with nothing queued, or when the idle timeout passed."""
         with self._cond:
-            self._cond.wait_for(lambda: self._queue or self._closed)
+            self._cond.wait_for(lambda: self._queue or self._closed, self._idle_timeout_s())
             if not self._queue:
                 return None
             frame, flags = self._queue.popleft()
@@ -264,6 +273,23 @@ class Sink(ABC):
             flags |= self._error_flags
             self._error_flags = 0
             return frame, flags
+
+    def _idle(self) -> None:
+        try:
+            self._on_idle()
+        except SinkWriteError as e:
+            with self._cond:
+                self._last_error = str(e)
+        except SinkUnavailableError as e:
+            _log.warning("%s: link lost (%s); reconnecting", self.url, e)
+            self._release()
+            with self._cond:
+                self._disconnects += 1
+                self._last_error = str(e)
+        except Exception as e:  # a bug in a backend must not kill the worker silently
+            _log.exception("%s: idle hook failed", self.url)
+            with self._cond:
+                self._last_error = f"{type(e).__name__}: {e}"
 
     def _run(self) -> None:
         backoff = Backoff(self.options.backoff)
@@ -275,7 +301,9 @@ class Sink(ABC):
                 continue
             item = self._next_frame()
             if item is None:
-                break
+                if not self._closed:
+                    self._idle()
+                continue  # the loop's condition ends the worker once closed and drained
             frame, flags = item
             error: Optional[str] = None
             try:

@@ -78,6 +78,19 @@ class ProtocolSink(Sink):
         self._status_due_us = now + int(self.options.status_s * 1e6)
         self._write_messages([self._hello(now), self._status(now)])
 
+    def _idle_timeout_s(self) -> Optional[float]:
+        # Wake up for the next STATUS even when no frame comes: a stalled estimator is exactly when
+        # the receiver needs STATUS (its fault code) and HELLO (a receiver joining late).
+        if self._status_due_us is None:
+            return None
+        return max(0.001, (self._status_due_us - self.options.clock_us()) / 1e6)  # never a hot loop
+
+    def _on_idle(self) -> None:
+        now = self.options.clock_us()
+        if self._status_due_us is not None and now >= self._status_due_us:
+            self._status_due_us = now + int(self.options.status_s * 1e6)
+            self._write_messages([self._hello(now), self._status(now)])
+
     def _deliver(self, frame: JointFrame, flags: int) -> None:
         now = self.options.clock_us()
         self._joint_set = frame.joint_set

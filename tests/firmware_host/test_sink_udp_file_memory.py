@@ -108,3 +108,26 @@ def test_status_reports_drops_to_the_receiver() -> None:
     # The first STATUS after the drops names the cause; later ones are back to OK.
     first = next(st for st in statuses if st.dropped > 0)
     assert first.fault == Fault.QUEUE_OVERFLOW and statuses[-1].fault == Fault.OK
+
+
+def test_status_and_hello_keep_coming_while_no_frame_does() -> None:
+    """A stalled estimator is when the receiver most needs STATUS (its fault) and HELLO (a late joiner)."""
+    sink = open_sink("memory://?status_s=0.05", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        sink.read()  # the connect's HELLO + STATUS and frame 0's JOINTS
+        sink.set_fault(Fault.ESTIMATOR_STALLED)  # then no frame at all
+        got: list = []
+
+        def stalled_status_seen() -> bool:
+            got.extend(messages_of(sink.read()))
+            return any(isinstance(m, Status) and m.fault == Fault.ESTIMATOR_STALLED for m in got)
+
+        wait_until(stalled_status_seen, what="a STATUS with the fault while no frame comes")
+        hellos = [m for m in got if isinstance(m, Hello)]
+        assert hellos and not any(isinstance(m, Joints) for m in got)
+    finally:
+        stats = sink.close()
+    assert stats.sent == 1 and stats.accounted == stats.submitted
