@@ -118,7 +118,7 @@ def _estimate_frame(pair: drivers.FramePair, result: PairResult) -> JointFrame:
     xyz = np.where(missing[:, None], np.nan, result.joints_3d)
     conf = np.where(missing, 0.0, result.confidence)
     joints_2d = {}
-    for index, frame in enumerate(pair.frames):  # keyed by camera index: the sink needs no camera list
+    for index, frame in enumerate(pair.frames):  # keyed by camera index: the sink announces rig.pair's names
         m2 = np.asarray(result.missing_2d[frame.camera], bool)
         uv = np.where(m2[:, None], np.nan, result.joints_2d[frame.camera])
         joints_2d[index] = np.column_stack([uv, np.where(m2, 0.0, result.confidence_2d[frame.camera])])
@@ -283,7 +283,8 @@ def _run(args: argparse.Namespace) -> int:
         tally = _Tally()
         delivered, skipped, skews = 0, 0, []
         last_pair, last_result = None, None
-        with open_sink(sink_url) as sink:
+        # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO.
+        with open_sink(sink_url, cameras=tuple(camera.name for camera in source.rig.pair)) as sink:
             start = time.monotonic()
             deadline = start + args.seconds
             while time.monotonic() < deadline:

@@ -20,14 +20,21 @@ def joints_message(frame: JointFrame, send_us: int, flags: int = 0) -> Joints:
 
 
 def camera_index(key: str | int, cameras: Sequence[str]) -> int:
-    """Index of a ``joints_2d`` key: ints are used as-is, names are looked up in
-    ``cameras`` (the order announced in HELLO)."""
+    """Index of a ``joints_2d`` key: ints index ``cameras`` (the order announced in HELLO),
+    names are looked up in it. :raises KeyError: a camera HELLO does not announce."""
     if isinstance(key, int):
+        if not 0 <= key < len(cameras):
+            raise KeyError(f"camera index {key} is not among the {len(cameras)} announced cameras {list(cameras)!r}")
         return key
     try:
         return list(cameras).index(key)
     except ValueError:
         raise KeyError(f"camera {key!r} is not in the announced cameras {list(cameras)!r}") from None
+
+
+def is_announced(key: str | int, cameras: Sequence[str]) -> bool:
+    """Whether :func:`camera_index` knows ``key``."""
+    return 0 <= key < len(cameras) if isinstance(key, int) else key in cameras
 
 
 def joints2d_messages(

@@ -6,7 +6,9 @@ so receivers that start late learn the stream's parameters.
 """
 from __future__ import annotations
 
+import logging
 from abc import abstractmethod
+from dataclasses import replace
 from typing import Optional
 
 from firmware_host.errors import EncodeError, SinkConfigError
@@ -20,10 +22,12 @@ from firmware_host.protocol.constants import (
     Units,
 )
 from firmware_host.protocol.encoder import encode, joints2d_packet_len, joints_packet_len, wire_len
-from firmware_host.protocol.from_frame import joints2d_messages, joints_message, wire_seq
+from firmware_host.protocol.from_frame import is_announced, joints2d_messages, joints_message, wire_seq
 from firmware_host.protocol.messages import Hello, JointFrame, Message, Status, make_header
 from firmware_host.sinks.base import Sink, SinkStats
 from firmware_host.sinks.options import SinkOptions
+
+_log = logging.getLogger(__name__)
 
 
 class ProtocolSink(Sink):
@@ -37,6 +41,11 @@ class ProtocolSink(Sink):
         self._status_due_us: Optional[int] = None
         self._window = (0, 0)  # (time of last STATUS, frames sent by then)
         self._prev_stats: Optional[SinkStats] = None
+        self._unannounced_warned: set = set()
+        if options.send_2d and not options.cameras:
+            # JOINTS_2D numbers its camera by HELLO's list, and the link budget counts one packet per camera.
+            raise SinkConfigError(url, "cameras", "", "required with send_2d=1: the camera names, in index order "
+                                                      "(e.g. cameras=left,right)")
         try:  # validate HELLO fields now, so a bad rig_id fails at open_sink()
             encode(self._hello(0))
         except EncodeError as e:
@@ -98,11 +107,25 @@ class ProtocolSink(Sink):
         self._last_capture_us = frame.capture_time_us
         messages: list[Message] = [joints_message(frame, now, flags)]
         if self.options.send_2d and frame.joints_2d:
-            messages += joints2d_messages(frame, now, self.options.cameras, flags)
+            messages += joints2d_messages(self._announced_2d(frame), now, self.options.cameras, flags)
         if self._status_due_us is None or now >= self._status_due_us:
             self._status_due_us = now + int(self.options.status_s * 1e6)
             messages += [self._hello(now), self._status(now)]
         self._write_messages(messages)
+
+    def _announced_2d(self, frame: JointFrame) -> JointFrame:
+        """``frame`` without the 2D joints of cameras HELLO does not name (warned once per camera): they
+        cannot be numbered, and they must not cost the frame its 3D joints."""
+        cameras = self.options.cameras
+        unknown = [k for k in frame.joints_2d if not is_announced(k, cameras)]
+        if not unknown:
+            return frame
+        for key in unknown:
+            if key not in self._unannounced_warned:
+                self._unannounced_warned.add(key)
+                _log.warning("%s: 2D joints of camera %r not sent: not among the announced cameras %s",
+                             self.url, key, list(cameras))
+        return replace(frame, joints_2d={k: v for k, v in frame.joints_2d.items() if k not in unknown})
 
     # ---- messages ------------------------------------------------------------------
 

@@ -6,7 +6,9 @@ import socket
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from firmware_host.errors import SinkConfigError
 from firmware_host.protocol import Fault, Hello, Joints, Joints2D, StreamDecoder
 from firmware_host.protocol.messages import Status
 from firmware_host.sinks import open_sink
@@ -131,3 +133,26 @@ def test_status_and_hello_keep_coming_while_no_frame_does() -> None:
     finally:
         stats = sink.close()
     assert stats.sent == 1 and stats.accounted == stats.submitted
+
+
+def test_send_2d_needs_the_camera_names_it_numbers_and_budgets() -> None:
+    with pytest.raises(SinkConfigError) as info:
+        open_sink("memory://?send_2d=1")
+    assert info.value.field == "cameras" and "send_2d=1" in str(info.value)
+
+
+def test_2d_joints_of_an_unannounced_camera_are_left_out_not_the_frame(caplog: pytest.LogCaptureFixture) -> None:
+    sink = open_sink("memory://?send_2d=1&cameras=left,right", backoff=FAST_BACKOFF)
+    uv = np.full((25, 3), 10.0)
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(3):
+            sink.send(make_frame(seq, joints_2d={"left": uv, "CAM_C": uv, 2: uv}))
+        assert sink.wait_drained(5)
+    finally:
+        stats = sink.close()
+    messages = messages_of(sink.read())
+    assert joints_seqs(messages) == [0, 1, 2] and stats.sent == 3 and stats.dropped == 0
+    assert [m.camera for m in messages if isinstance(m, Joints2D)] == [0, 0, 0]
+    warnings = [r.getMessage() for r in caplog.records if "not among the announced cameras" in r.getMessage()]
+    assert len(warnings) == 2  # once per unknown camera, not once per frame
