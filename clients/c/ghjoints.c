@@ -102,7 +102,8 @@ static ghj_result parse_status(const uint8_t *p, size_t n, ghj_status *out)
     return GHJ_PACKET;
 }
 
-/* Copies a length-prefixed printable-ASCII string at p[*off]; advances *off. */
+/* Checks a length-prefixed printable-ASCII string at p[*off] and copies it to dst
+ * (dst NULL: check only); advances *off. */
 static int take_ascii(const uint8_t *p, size_t n, size_t *off, size_t max_len, char *dst)
 {
     size_t i, len;
@@ -112,31 +113,41 @@ static int take_ascii(const uint8_t *p, size_t n, size_t *off, size_t max_len, c
     for (i = 0; i < len; i++) {
         uint8_t c = p[*off + 1u + i];
         if (c < 0x20u || c > 0x7Eu) return 0;
-        dst[i] = (char)c;
+        if (dst) dst[i] = (char)c;
     }
-    dst[len] = '\0';
+    if (dst) dst[len] = '\0';
     *off += 1u + len;
+    return 1;
+}
+
+/* Walks a HELLO payload: checks it (out NULL), or copies it (out set, payload already checked). */
+static int walk_hello(const uint8_t *p, size_t n, ghj_hello *out)
+{
+    size_t off = 5u, c, cameras;
+    if (n < 5u || p[2] > 64u) return 0;
+    if (!take_ascii(p, n, &off, GHJ_MAX_RIG_ID_LEN, out ? out->rig_id : NULL)) return 0;
+    if (off + 1u > n || p[off] > GHJ_MAX_CAMERAS) return 0;
+    cameras = p[off];
+    off += 1u;
+    for (c = 0; c < cameras; c++) {
+        if (!take_ascii(p, n, &off, GHJ_MAX_CAMERA_NAME_LEN, out ? out->cameras[c] : NULL)) return 0;
+    }
+    if (out) {
+        out->protocol_version = p[0];
+        out->joint_set = p[1];
+        out->joint_count = p[2];
+        out->units = p[3];
+        out->frame = p[4];
+        out->n_cameras = (uint8_t)cameras;
+    }
     return 1;
 }
 
 static ghj_result parse_hello(const uint8_t *p, size_t n, ghj_hello *out)
 {
-    size_t off = 5u, c;
-    if (n < 5u) return GHJ_ERR_MALFORMED;
-    out->protocol_version = p[0];
-    out->joint_set = p[1];
-    out->joint_count = p[2];
-    out->units = p[3];
-    out->frame = p[4];
-    if (out->joint_count > 64u) return GHJ_ERR_MALFORMED;
-    if (!take_ascii(p, n, &off, GHJ_MAX_RIG_ID_LEN, out->rig_id)) return GHJ_ERR_MALFORMED;
-    if (off + 1u > n) return GHJ_ERR_MALFORMED;
-    if (p[off] > GHJ_MAX_CAMERAS) return GHJ_ERR_MALFORMED;
-    out->n_cameras = p[off];
-    off += 1u;
-    for (c = 0; c < out->n_cameras; c++) {
-        if (!take_ascii(p, n, &off, GHJ_MAX_CAMERA_NAME_LEN, out->cameras[c])) return GHJ_ERR_MALFORMED;
-    }
+    /* Check the whole payload before writing: a malformed HELLO leaves *out as it was. */
+    if (!walk_hello(p, n, NULL)) return GHJ_ERR_MALFORMED;
+    walk_hello(p, n, out);
     return GHJ_PACKET;
 }
 
@@ -144,25 +155,30 @@ ghj_result ghj_parse_packet(const uint8_t *packet, size_t len, ghj_packet *out)
 {
     const uint8_t *payload;
     size_t plen;
+    ghj_result r;
     if (len > GHJ_MAX_PACKET_LEN) return GHJ_ERR_OVERSIZE;
     if (len < GHJ_HEADER_LEN + GHJ_CRC_LEN) return GHJ_ERR_SHORT;
     if (ghj_crc16(0xFFFFu, packet, len - GHJ_CRC_LEN) != rd_u16(packet + len - GHJ_CRC_LEN)) return GHJ_ERR_CRC;
     if (packet[0] != GHJ_PROTOCOL_VERSION) return GHJ_ERR_VERSION;
-    out->header.version = packet[0];
-    out->header.msg_type = packet[1];
-    out->header.flags = packet[2];
-    out->header.seq = rd_u32(packet + 3);
-    out->header.capture_us = rd_u64(packet + 7);
-    out->header.send_us = rd_u64(packet + 15);
     payload = packet + GHJ_HEADER_LEN;
     plen = len - GHJ_HEADER_LEN - GHJ_CRC_LEN;
+    /* Each parser checks its payload before writing it, so an error leaves *out untouched. */
     switch (packet[1]) {
-    case GHJ_MSG_JOINTS: return parse_joints(payload, plen, &out->u.joints);
-    case GHJ_MSG_JOINTS_2D: return parse_joints2d(payload, plen, &out->u.joints2d);
-    case GHJ_MSG_STATUS: return parse_status(payload, plen, &out->u.status);
-    case GHJ_MSG_HELLO: return parse_hello(payload, plen, &out->u.hello);
-    default: return GHJ_SKIPPED; /* the protocol may grow: skip, do not fail */
+    case GHJ_MSG_JOINTS: r = parse_joints(payload, plen, &out->u.joints); break;
+    case GHJ_MSG_JOINTS_2D: r = parse_joints2d(payload, plen, &out->u.joints2d); break;
+    case GHJ_MSG_STATUS: r = parse_status(payload, plen, &out->u.status); break;
+    case GHJ_MSG_HELLO: r = parse_hello(payload, plen, &out->u.hello); break;
+    default: r = GHJ_SKIPPED; break; /* the protocol may grow: skip, do not fail */
     }
+    if (r == GHJ_PACKET || r == GHJ_SKIPPED) {
+        out->header.version = packet[0];
+        out->header.msg_type = packet[1];
+        out->header.flags = packet[2];
+        out->header.seq = rd_u32(packet + 3);
+        out->header.capture_us = rd_u64(packet + 7);
+        out->header.send_us = rd_u64(packet + 15);
+    }
+    return r;
 }
 
 void ghj_init(ghj_decoder *d)

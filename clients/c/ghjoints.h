@@ -167,8 +167,9 @@ typedef struct {
 /* Reset the decoder (also use after a link reconnects). */
 void ghj_init(ghj_decoder *d);
 
-/* Feed one received byte. Returns GHJ_NONE until a frame ends; *out is written
- * only when GHJ_PACKET is returned. */
+/* Feed one received byte. Returns GHJ_NONE until a frame ends. *out is written
+ * only when GHJ_PACKET is returned, and its header (only) on GHJ_SKIPPED: an
+ * error leaves it as it was, so it can hold the last good pose. */
 ghj_result ghj_feed_byte(ghj_decoder *d, uint8_t byte, ghj_packet *out);
 
 /* Feed up to len bytes, stopping after the first byte that ends a frame.

@@ -7,7 +7,9 @@
  *     (byte-at-a-time vs. chunks of a size taken from the input);
  *   - every decoded packet is within bounds (count <= GHJ_MAX_JOINTS, missing
  *     is 0/1, strings are NUL-terminated printable ASCII of legal length);
- *   - the counters add up: frames == messages + skipped + all errors.
+ *   - the counters add up: frames == messages + skipped + all errors;
+ *   - an error leaves the caller's ghj_packet untouched, and GHJ_SKIPPED
+ *     writes only its header (firmware may keep the packet as its last pose).
  * A violated check calls abort(), which libFuzzer records as a crash.
  */
 #include <stdint.h>
@@ -104,6 +106,18 @@ static void check_stats(const ghj_stats *s)
           "counters add up");
 }
 
+/* After a result: check what it may have written, against the packet as it was before. */
+static void check_written(ghj_result r, const ghj_packet *now, ghj_packet *before)
+{
+    if (r == GHJ_NONE) return;
+    if (r == GHJ_SKIPPED) {
+        check(memcmp(&now->u, &before->u, sizeof now->u) == 0, "GHJ_SKIPPED writes only the header");
+    } else if (r != GHJ_PACKET) {
+        check(memcmp(now, before, sizeof *now) == 0, "an error leaves *out untouched");
+    }
+    memcpy(before, now, sizeof *now);
+}
+
 static uint32_t events_a[MAX_EVENTS];
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
@@ -111,13 +125,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     static ghj_decoder a, b;
-    static ghj_packet pa, pb;
+    static ghj_packet pa, pb, before;
     size_t i, n_a = 0, n_b = 0, chunk, off = 0;
 
     /* Pass 1: byte at a time. */
     ghj_init(&a);
+    memcpy(&before, &pa, sizeof pa);
     for (i = 0; i < size; i++) {
         ghj_result r = ghj_feed_byte(&a, data[i], &pa);
+        check_written(r, &pa, &before);
         if (r != GHJ_NONE) {
             uint32_t h = digest(r, &pa);
             if (n_a < MAX_EVENTS) events_a[n_a] = h;
@@ -156,12 +172,16 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (size >= GHJ_CRC_LEN && size <= GHJ_MAX_PACKET_LEN) {
         uint8_t *pkt = (uint8_t *)malloc(size);
         uint16_t crc;
+        ghj_result r;
         check(pkt != NULL, "malloc");
         memcpy(pkt, data, size);
         crc = ghj_crc16(0xFFFFu, pkt, size - GHJ_CRC_LEN);
         pkt[size - 2u] = (uint8_t)(crc & 0xFFu);
         pkt[size - 1u] = (uint8_t)(crc >> 8);
-        (void)digest(ghj_parse_packet(pkt, size, &pa), &pa);
+        memcpy(&before, &pa, sizeof pa);
+        r = ghj_parse_packet(pkt, size, &pa);
+        check_written(r, &pa, &before);
+        (void)digest(r, &pa);
         free(pkt);
     }
     return 0;
