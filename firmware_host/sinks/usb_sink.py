@@ -11,6 +11,7 @@ else) is released and searched for again with backoff.
 from __future__ import annotations
 
 import errno
+import logging
 from typing import Any, Optional
 
 import usb.core
@@ -20,6 +21,8 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, non_negative_int, parse_url, positive_int
+
+_log = logging.getLogger(__name__)
 
 
 def _vid_pid(url: str, netloc: str) -> tuple[int, int]:
@@ -51,6 +54,7 @@ class UsbSink(ProtocolSink):
         self.vid, self.pid, self.ep, self.interface, self.timeout_ms = vid, pid, ep, interface, timeout_ms
         self._backend = backend
         self._dev: Optional[usb.core.Device] = None
+        self._warned_claim: Optional[str] = None
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "UsbSink":
@@ -88,7 +92,14 @@ class UsbSink(ProtocolSink):
             self._configure(dev)
         except (usb.core.USBError, ValueError) as e:
             usb.util.dispose_resources(dev)
-            raise SinkUnavailableError(self.url, f"cannot claim {self.vid:04x}:{self.pid:04x}: {e}") from e
+            error = SinkUnavailableError(self.url, f"cannot claim {self.vid:04x}:{self.pid:04x}: {e}")
+            if str(error) != self._warned_claim:
+                # The device is there but not as the URL describes it (interface, ep) or is held by
+                # another program: retrying will not help until someone acts, so say it loudly, once.
+                self._warned_claim = str(error)
+                _log.warning("%s; retrying", error)
+            raise error from e
+        self._warned_claim = None
         self._dev = dev
 
     def _configure(self, dev: usb.core.Device) -> None:
@@ -102,7 +113,10 @@ class UsbSink(ProtocolSink):
                 dev.detach_kernel_driver(self.interface)
         except NotImplementedError:
             pass  # backends without kernel drivers (macOS, Windows, fakes)
-        intf = cfg[(self.interface, 0)]
+        try:
+            intf = cfg[(self.interface, 0)]
+        except (IndexError, KeyError):
+            raise ValueError(f"configuration {cfg.bConfigurationValue} has no interface {self.interface}") from None
         ep = usb.util.find_descriptor(intf, bEndpointAddress=self.ep)
         if ep is None or usb.util.endpoint_type(ep.bmAttributes) != usb.util.ENDPOINT_TYPE_BULK:
             raise ValueError(f"interface {self.interface} has no bulk OUT endpoint 0x{self.ep:02x}")

@@ -1,6 +1,9 @@
 """usb:// through pyusb's real code on a fake IBackend (see fake_usb_backend for what it models)."""
 from __future__ import annotations
 
+import logging
+
+import pytest
 import usb.core
 
 from firmware_host.protocol import Flags, Hello, Joints
@@ -88,8 +91,15 @@ def test_absent_device_at_start_is_waited_for() -> None:
     assert joints_seqs(messages_of(device.take())) == [7]
 
 
-def test_missing_endpoint_is_reported_by_address() -> None:
-    sink = open_sink("usb://1209:0001?ep=0x02", backend=FakeBackend(FakeDevice()), backoff=FAST_BACKOFF)
-    wait_until(lambda: sink.stats().connect_failures >= 1, what="connect attempt")
-    stats = sink.close()
-    assert "0x02" in (stats.last_error or "")
+@pytest.mark.parametrize(("query", "words"), [("ep=0x02", ["0x02"]), ("ep=0x01&interface=1", ["no interface 1"])])
+def test_a_device_unlike_its_url_is_warned_about_once_and_retried(
+    query: str, words: list[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING):
+        sink = open_sink(f"usb://1209:0001?{query}", backend=FakeBackend(FakeDevice()), backoff=FAST_BACKOFF)
+        wait_until(lambda: sink.stats().connect_failures >= 3, what="three connect attempts")
+        stats = sink.close()
+    for word in words:
+        assert word in (stats.last_error or "")
+    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) == 1 and "cannot claim" in warnings[0].getMessage()  # no traceback per attempt
