@@ -143,6 +143,14 @@ def undistorted_image_bounds(camera: Camera, samples_per_side: int = 64) -> tupl
         np.stack([np.full_like(ys, -0.5), ys], -1), np.stack([np.full_like(ys, w - 0.5), ys], -1),
     ])
     und = camera.undistort_pixels(border) if camera.has_distortion else border
+    # A lens model that folds over before the image's edge cannot undistort the border there (NaN):
+    # the footprint is then what it can undistort.
+    und = und[np.all(np.isfinite(und), axis=-1)]
+    if len(und) == 0:
+        raise GeometryError(
+            f"camera {camera.name!r}: its lens model (distortion {np.asarray(camera.dist).tolist()}) cannot "
+            "undistort any point of the image border; check the calibration"
+        )
     return und.min(axis=0), und.max(axis=0)
 
 
@@ -251,6 +259,7 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
         ok &= depth > NEAR_PLANE
     else:
         uv = camera.undistort_pixels(np.where(ok[:, None], joints, 0.0)) if camera.has_distortion else joints
+        ok &= np.all(np.isfinite(uv), axis=1)  # beyond the lens model's reach
     if int(ok.sum()) < max(int(min_joints), 1):
         return None
     lo, hi = uv[ok].min(axis=0), uv[ok].max(axis=0)
@@ -312,14 +321,25 @@ class CropMaps:
         return int(self.map_x.shape[0])
 
 
+_OUTSIDE = -1e6  # a map coordinate far off any frame: cv2.remap's constant border (0)
+
+
 def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Distorted frame pixels ``(S, S)`` x2 sampled by each pixel of the pinhole ``crop`` camera."""
     if camera.K[0, 1] == 0.0:
         # OpenCV's own implementation of the same lens model; no skew support, hence the test.
         dist = camera.dist if camera.dist.size else None
-        return cv2.initUndistortRectifyMap(camera.K, dist, None, crop.K, crop.size, cv2.CV_32FC1)
-    src = camera.normalized_to_pixels(crop.pixels_to_normalized(crop.pixel_grid()), distort=True)
-    return src[..., 0].astype(np.float32), src[..., 1].astype(np.float32)
+        map_x, map_y = cv2.initUndistortRectifyMap(camera.K, dist, None, crop.K, crop.size, cv2.CV_32FC1)
+    else:
+        src = camera.normalized_to_pixels(crop.pixels_to_normalized(crop.pixel_grid()), distort=True)
+        map_x, map_y = src[..., 0].astype(np.float32), src[..., 1].astype(np.float32)
+    if math.isfinite(camera.fold_radius):
+        # Past the lens model's fold, the forward model maps back onto the image (a mirrored ring of
+        # the picture): show nothing there instead, as outside the frame.
+        xy = crop.pixels_to_normalized(crop.pixel_grid())  # a pinhole: exact
+        outside = np.sum(xy * xy, axis=-1) >= camera.fold_radius**2
+        map_x[outside] = map_y[outside] = _OUTSIDE
+    return map_x, map_y
 
 
 def _aligned_span(lo: int, hi: int, limit: int, factor: int) -> tuple[int, int]:
@@ -364,10 +384,12 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
 
     # Reduce only the touched window (+ one reduced pixel of context for the bilinear taps).
     pad = 2 * factor
-    x0, x1 = _aligned_span(int(np.floor(map_x.min())) - pad, int(np.ceil(map_x.max())) + pad + 1,
-                           camera.width, factor)
-    y0, y1 = _aligned_span(int(np.floor(map_y.min())) - pad, int(np.ceil(map_y.max())) + pad + 1,
-                           camera.height, factor)
+    touched = map_x > _OUTSIDE / 2
+    if not touched.any():
+        touched[...] = True
+    tx, ty = map_x[touched], map_y[touched]
+    x0, x1 = _aligned_span(int(np.floor(tx.min())) - pad, int(np.ceil(tx.max())) + pad + 1, camera.width, factor)
+    y0, y1 = _aligned_span(int(np.floor(ty.min())) - pad, int(np.ceil(ty.max())) + pad + 1, camera.height, factor)
     map_x = ((map_x - x0 + 0.5) / factor - 0.5).astype(np.float32)
     map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32)
     return CropMaps(map_x, map_y, level, (x0, y0, x1, y1), camera.size, cv2.convertMaps(map_x, map_y, cv2.CV_16SC2),

@@ -27,6 +27,7 @@ This is the only module of ``ghnerf_runtime`` that touches the file system.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import os
 import uuid
@@ -38,6 +39,8 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+
+log = logging.getLogger(__name__)
 
 FORMAT = "ghnerf-rig"
 VERSION = 1
@@ -138,7 +141,10 @@ class _Checker:
             self._raise(field, f"must be a {expect}, got {_show(value)}")
         if shape is not None and (len(found) != len(shape) or any(s is not None and s != f for s, f in zip(shape, found))):
             self._raise(field, f"must be a {expect}, got shape {'x'.join(map(str, found)) or 'scalar'}: {_show(value)}")
-        arr = np.asarray(value, dtype=np.float64)
+        try:
+            arr = np.asarray(value, dtype=np.float64)
+        except OverflowError:  # an integer beyond any float, e.g. 10**400
+            arr = np.array(np.inf)
         if not np.all(np.isfinite(arr)):
             self._raise(field, f"must contain only finite numbers, got {_show(value)}")
         return arr
@@ -224,6 +230,14 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
     metadata = data.get("metadata", {})
     if not isinstance(metadata, dict):
         chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
+    for cam in cameras:
+        if cam.fold_inside_image():
+            log.warning(
+                "%scamera %r: its lens model folds over %.2f (normalised radius) from the centre, before the "
+                "image corners: pixels beyond it count as outside the image. A calibration with the rational "
+                "model (8 coefficients) usually covers the whole frame", f"{path}: " if path else "", cam.name,
+                cam.fold_radius,
+            )
     try:
         return Rig(tuple(cameras), WorkingVolume(lo, hi), rig_id=rig_id, metadata=_plain(metadata))
     except GeometryError as e:  # pragma: no cover - every case is checked above

@@ -46,7 +46,7 @@ def as_array(path, field: str, value: Any, shapes: Sequence[tuple[int, ...]], wh
     """``value`` as a finite float array reshaped to the first of ``shapes`` it fits (by size)."""
     try:
         arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise fail(path, field, f"must be {what}, got {show(value)}") from None
     for shape in shapes:
         if arr.size == int(np.prod(shape)) and (arr.ndim <= 1 or arr.shape == shape or 1 in arr.shape):
@@ -63,7 +63,10 @@ def rotation(path, field: str, value: Any) -> np.ndarray:
     """A 3x3 rotation matrix, or a Rodrigues 3-vector (converted with ``cv2.Rodrigues``)."""
     import cv2
 
-    arr = np.asarray(value, dtype=np.float64)
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise fail(path, field, f"must be a 3x3 rotation matrix or a Rodrigues 3-vector, got {show(value)}") from None
     if arr.size == 3:
         arr = as_array(path, field, arr, [(3,)], "a 3x3 rotation matrix or a Rodrigues 3-vector")
         R, _ = cv2.Rodrigues(arr.reshape(3, 1))
@@ -85,7 +88,8 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
                 size_keys: tuple[str, str] = ("width", "height")) -> Camera:
     """Validate each parameter (errors name ``field.<key>``) and build the camera."""
     for what, key, v in (("width", size_keys[0], width), ("height", size_keys[1], height)):
-        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or v <= 0 or v != int(v):
+        if (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v)
+                or v <= 0 or v != int(v)):
             raise fail(path, join(field, key), f"image {what} must be a positive integer, got {show(v)}")
     K = as_array(path, join(field, K_key), K, [(3, 3)], "a 3x3 camera matrix")
     if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
@@ -93,7 +97,7 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
                    f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {show(K)}")
     try:
         d = np.asarray(dist if dist is not None else [], dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise fail(path, join(field, dist_key), f"must be a list of numbers, got {show(dist)}") from None
     if d.size not in DISTORTION_LENGTHS or not np.all(np.isfinite(d)):
         raise fail(path, join(field, dist_key),

@@ -16,6 +16,8 @@ on entry.
 """
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -42,6 +44,23 @@ def _as_dist(coefficients) -> np.ndarray:
     full = np.zeros(12)
     full[: min(dist.size, 12)] = dist[:12]
     return full
+
+
+@functools.lru_cache(maxsize=64)
+def fold_radius(coefficients: tuple[float, ...], r_max: float = 10.0) -> float:
+    """Normalised radius where the radial lens model stops growing (``inf``: not within ``r_max``).
+
+    Past it, ``r * radial(r)`` falls again, so those points land on pixels nearer the centre
+    that other points already map to: the model is only valid inside this radius. Wide lenses
+    fitted with a few polynomial terms often fold inside the image corners.
+    """
+    k1, k2, _, _, k3, k4, k5, k6 = _as_dist(coefficients)[:8]
+    r = np.linspace(0.0, r_max, 20001)
+    r2 = r * r
+    with np.errstate(all="ignore"):
+        rd = r * (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
+    falling = ~(np.diff(rd) > 0)
+    return float(r[int(np.argmax(falling))]) if falling.any() else math.inf
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,20 +158,58 @@ class Camera:
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
         return np.stack([xd, yd], axis=-1)
 
-    def undistort_normalized(self, xy_distorted: np.ndarray, iterations: int = 20) -> np.ndarray:
-        """Invert :meth:`distort` by fixed-point iteration (as ``cv2.undistortPoints`` does)."""
+    def undistort_normalized(
+        self, xy_distorted: np.ndarray, iterations: int = 100, tolerance: float = 1e-6
+    ) -> np.ndarray:
+        """Invert :meth:`distort` by residual iteration (as ``cv2.undistortPoints`` does, checked).
+
+        Points the lens model cannot reach come back NaN: a wide lens fitted with a few
+        polynomial terms folds over (its distorted radius stops growing, :attr:`fold_radius`)
+        before the image corners, so no undistorted point maps to them; so do points where
+        the iteration did not reach ``tolerance`` (normalised units: about a thousandth of a
+        pixel) or reached a root past the fold. ``cv2.undistortPoints`` returns finite,
+        wrong coordinates there instead.
+        """
         xy_d = check_last_dim("xy_distorted", xy_distorted, 2)
         if not self.has_distortion:
             return xy_d.copy()
         xy = xy_d.copy()
-        for _ in range(iterations):
-            # Residual form converges for the moderate distortion of real lenses
-            # and, unlike a pure fixed point, corrects the tangential terms too.
-            step = self.distort(xy) - xy_d
-            xy = xy - step
-            if np.all(np.abs(step) < 1e-13):  # converged: stop early, most calls need few steps
-                break
+        limit2 = 4 * self.fold_radius**2  # a point this far out has run away: stop waiting for it
+        with np.errstate(all="ignore"):  # runaway points overflow; they are flagged below
+            for _ in range(iterations):
+                # Residual form converges for the moderate distortion of real lenses
+                # and, unlike a pure fixed point, corrects the tangential terms too.
+                step = self.distort(xy) - xy_d
+                xy = xy - step
+                settled = np.all(np.abs(step) < 1e-10, axis=-1) | ~(np.sum(xy * xy, axis=-1) < limit2)
+                if np.all(settled):  # most calls need few steps
+                    break
+            residual = np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
+            bad = ~(residual <= tolerance) | ~(np.sum(xy * xy, axis=-1) < self.fold_radius**2)
+        if np.any(bad):
+            xy[bad] = np.nan
         return xy
+
+    def fold_inside_image(self) -> bool:
+        """Whether the lens model folds before the image's farthest corner (:attr:`fold_radius`):
+        pixels beyond its reach then undistort to NaN and count as outside the image."""
+        r = self.fold_radius
+        if not math.isfinite(r):
+            return False
+        k1, k2, _, _, k3, k4, k5, k6 = _as_dist(self.dist)[:8]
+        r2 = r * r
+        reach = r * (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
+        corners = np.array([[-0.5, -0.5], [self.width - 0.5, -0.5], [-0.5, self.height - 0.5],
+                            [self.width - 0.5, self.height - 0.5]])
+        fx, fy, cx, cy, skew = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.K[0, 1]
+        y = (corners[:, 1] - cy) / fy
+        x = (corners[:, 0] - cx - skew * y) / fx
+        return bool(np.max(np.hypot(x, y)) > reach)
+
+    @property
+    def fold_radius(self) -> float:
+        """Normalised radius the lens model is valid within (:func:`fold_radius`; ``inf`` without distortion)."""
+        return fold_radius(tuple(self.dist.tolist())) if self.has_distortion else math.inf
 
     def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
         """Distorted pixel coordinates ``(..., 2)`` -> undistorted normalised coordinates."""

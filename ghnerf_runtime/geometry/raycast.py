@@ -74,7 +74,9 @@ class RayGrid:
             return cls(camera, xs, ys, None, None, (xs[0], xs[-1], ys[0], ys[-1]))
         xy = camera.pixels_to_normalized(camera.pixel_grid())
         gx, gy = np.ascontiguousarray(xy[..., 0]), np.ascontiguousarray(xy[..., 1])
-        return cls(camera, None, None, gx, gy, (float(gx.min()), float(gx.max()), float(gy.min()), float(gy.max())))
+        # NaN: pixels past the lens model's fold (Camera.undistort_normalized), which no ray reaches.
+        return cls(camera, None, None, gx, gy,
+                   (float(np.nanmin(gx)), float(np.nanmax(gx)), float(np.nanmin(gy)), float(np.nanmax(gy))))
 
     def with_camera(self, camera: Camera) -> "RayGrid":
         """The same rays for another camera with identical intrinsics (pose does not matter)."""

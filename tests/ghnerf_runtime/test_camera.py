@@ -216,3 +216,32 @@ def test_derived_cameras_equal_validated_ones_and_stay_frozen():
         cam.cropped(float("nan"), 0, 10, 10)
     with pytest.raises(GeometryError, match="image size"):
         cam.resized(-1, 10)
+
+
+# A wide lens (90 degrees across 1280 px) fitted with five terms: r * radial(r) peaks at r = 1.76,
+# distorted radius 1.07, below the image corners' 1.18, so no point of the model reaches them.
+WIDE_K = np.array([[640.0, 0.0, 640.0], [0.0, 640.0, 400.0], [0.0, 0.0, 1.0]])
+WIDE_DIST = np.array([-0.28, 0.09, 0.0, 0.0, -0.013])
+
+
+def test_a_lens_model_that_folds_before_the_corners_flags_them_instead_of_inventing_a_point():
+    cam = Camera("wide", 1280, 800, WIDE_K, WIDE_DIST)
+    assert cam.fold_radius == pytest.approx(1.765, abs=2e-3)
+    corners = np.array([[0.0, 0.0], [1279.0, 799.0], [0.0, 799.0]])
+    assert np.all(np.isnan(cam.undistort_pixels(corners)))  # cv2.undistortPoints: finite and wrong
+    inner = np.array([[640.0, 400.0], [300.0, 250.0], [1200.0, 400.0], [640.0, 20.0]])
+    xy = cam.pixels_to_normalized(inner)
+    assert np.all(np.isfinite(xy)) and np.all(np.hypot(*xy.T) < cam.fold_radius)
+    np.testing.assert_allclose(cam.normalized_to_pixels(xy), inner, atol=1e-3)
+    assert make_camera(DISTORTIONS["5"]).fold_radius > 1.5 and make_camera(DISTORTIONS["none"]).fold_radius == np.inf
+
+
+def test_undistortion_converges_for_a_strong_rational_lens():
+    # 20 fixed iterations left 13 % of these pixels off by more than 0.1 px (up to 2 px).
+    K8 = np.array([[500.0, 0.0, 640.0], [0.0, 500.0, 400.0], [0.0, 0.0, 1.0]])
+    cam = Camera("rational", 1280, 800, K8, [2.0, 0.5, 0.0, 0.0, 0.01, 2.3, 1.0, 0.05])
+    u, v = np.meshgrid(np.arange(0.0, 1280.0, 8.0), np.arange(0.0, 800.0, 8.0))
+    uv = np.stack([u, v], -1).reshape(-1, 2)
+    xy = cam.pixels_to_normalized(uv)
+    assert np.all(np.isfinite(xy))
+    np.testing.assert_allclose(cam.normalized_to_pixels(xy), uv, atol=1e-3)

@@ -260,3 +260,24 @@ def test_preprocess_image_rejects_wrong_frames(frame):
     maps = build_undistort_crop_maps(make_camera(), Roi(200, 100, 128), 64)
     with pytest.raises(ShapeError):
         preprocess_image(frame, maps, Normalisation())
+
+
+def test_a_wide_lens_that_folds_inside_the_image_still_gets_a_footprint_and_blank_folds():
+    K_wide = np.array([[640.0, 0.0, 640.0], [0.0, 640.0, 400.0], [0.0, 0.0, 1.0]])
+    R, t = look_at((0.3, -1.2, -0.4), (0.0, -0.9, 3.0))
+    cam = Camera("wide", 1280, 800, K_wide, [-0.28, 0.09, 0.0, 0.0, -0.013], R, t)
+    lo, hi = undistorted_image_bounds(cam)  # the corners cannot be undistorted: NaN there crashed this
+    assert np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < 0) and hi[0] > 1280
+    assert roi_from_volume(cam, VOLUME).size > 0
+    # A window reaching past the fold radius: the forward model would fold back onto the picture there
+    # (a mirrored ring); those model pixels must be blank, as outside the frame.
+    roi = Roi(-700, -400, 2700)
+    crop = crop_camera(cam, roi, 64)
+    xy = crop.pixels_to_normalized(crop.pixel_grid())
+    past = np.hypot(xy[..., 0], xy[..., 1]) >= cam.fold_radius
+    assert past.any() and (~past).any()
+    frame = np.full((800, 1280), 200, np.uint8)
+    out = apply_crop_maps(frame, build_undistort_crop_maps(cam, roi, 64))
+    assert np.all(out[past] == 0)
+    centre = np.hypot(xy[..., 0], xy[..., 1]) < 0.5
+    assert centre.any() and np.all(out[centre] == 200)

@@ -133,6 +133,7 @@ ERROR_CASES = {
     "R shape": (_set(["cameras", 1, "R"], [1, 0, 0]), "cameras[1].R", "[1, 0, 0]"),
     "t shape": (_set(["cameras", 1, "t"], [0, 0]), "cameras[1].t", "[0, 0]"),
     "t inf": (_set(["cameras", 1, "t", 2], float("inf")), "cameras[1].t", "Infinity"),
+    "K beyond float": (_set(["cameras", 0, "K", 0, 0], 10**400), "cameras[0].K", "finite"),
     "distortion not object": (_set(["cameras", 0, "distortion"], [0.1]), "cameras[0].distortion", "[0.1]"),
     "distortion model": (_set(["cameras", 0, "distortion", "model"], "fisheye"), "cameras[0].distortion.model", '"fisheye"'),
     "distortion count": (_set(["cameras", 0, "distortion", "coefficients"], [0.1, 0.2, 0.3]),
@@ -252,3 +253,20 @@ def test_dumps_is_stable():
     text = dumps_rig(rig)
     assert dumps_rig(loads_rig(text)) == text
     assert copy.deepcopy(rig_to_dict(rig)) == json.loads(text)
+
+
+def test_a_lens_model_that_folds_inside_the_image_loads_with_a_warning_naming_the_camera(example_dict, caplog):
+    for cam in example_dict["cameras"]:
+        cam["K"] = [[640.0, 0.0, 640.0], [0.0, 640.0, 400.0], [0.0, 0.0, 1.0]]
+        cam["width"], cam["height"] = 1280, 800
+        cam["distortion"]["coefficients"] = [-0.28, 0.09, 0.0, 0.0, -0.013]  # a wide lens, five terms
+    example_dict["cameras"][1]["distortion"]["coefficients"] = [-0.05, 0.01, 0.0, 0.0, 0.0]  # a mild one
+    with caplog.at_level("WARNING"):
+        rig = rig_from_dict(example_dict, path="wide.json")
+    assert rig.cameras[0].fold_inside_image() and not rig.cameras[1].fold_inside_image()
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 1 and "wide.json" in messages[0] and repr(rig.cameras[0].name) in messages[0]
+    with caplog.at_level("WARNING"):
+        caplog.clear()
+        load_rig(EXAMPLE)
+    assert not caplog.records  # the shipped example's lens covers its frame
