@@ -163,6 +163,9 @@ class RoiConfig:
             in view, not much smaller), so crops are stable and remap tables are reused; 0
             disables.
         map_cache_size: remap tables kept per camera (least recently used are dropped).
+        upright: turn each camera's crop by quarter turns so that the rig's down (gravity) is the
+            picture's down, as in training: a camera mounted upside down (a ceiling mount) or on its
+            side. Free at run time (the remap tables turn). False: crops keep the sensor's orientation.
     """
 
     volume_margin_m: float = 0.0
@@ -171,8 +174,10 @@ class RoiConfig:
     snap_px: int = 8
     keep_frac: float = 0.2
     map_cache_size: int = 32
+    upright: bool = True
 
     def __post_init__(self) -> None:
+        _boolean(self, "upright")
         _number(self, "volume_margin_m", 0.0, 2.0)
         _number(self, "joint_margin_frac", 0.0, 2.0)
         _integer(self, "min_size_px", 8, 4096)

@@ -42,6 +42,8 @@ The :class:`~ghnerf_runtime.session.ModelSession` is injected (or built by
 """
 from __future__ import annotations
 
+import logging
+import math
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -68,7 +70,15 @@ from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
-from ghnerf_runtime.preprocess import CropMaps, Roi, build_undistort_crop_maps, crop_camera, preprocess_image
+from ghnerf_runtime.preprocess import (
+    CropMaps,
+    Roi,
+    build_undistort_crop_maps,
+    crop_camera,
+    preprocess_image,
+    unturned_normalized,
+    upright_quarter_turns,
+)
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
@@ -77,8 +87,12 @@ __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_ST
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
            "NOVEL_MATTE_STAGE"]
 
+log = logging.getLogger(__name__)
+
 #: Skeleton prior: confidence = exp(-expected error / this).
 _PRIOR_CONFIDENCE_SCALE_M = 0.1
+#: A source camera's picture rolled more than this from upright (after the quarter turns) is warned about.
+_MAX_ROLL_DEG = 20.0
 #: Skeleton prior: the crop follows the prior's joints expected within this (m), whatever is reported.
 _PRIOR_FOLLOW_MAX_ERROR_M = 0.25
 #: Stage keys of the keypoint path, in order.
@@ -223,7 +237,13 @@ class _CameraState:
     """Per source camera: remap tables and crop camera per crop window (LRU)."""
 
     camera: Camera
+    turns: int = 0  # quarter turns (np.rot90) that show the camera's crops upright (RoiConfig.upright)
     cache: "OrderedDict[Roi, tuple[CropMaps, Camera]]" = field(default_factory=OrderedDict)
+
+    @property
+    def upright_pinhole(self) -> Camera:
+        """The camera without its lens, turned upright (what a virtual camera between the sources follows)."""
+        return self.camera.without_distortion().quarter_turned(self.turns) if self.turns else self.camera
 
 
 class Estimator:
@@ -269,7 +289,7 @@ class Estimator:
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi)
         # smooths what is reported; the tracker follows the raw joints
         self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
-        self._cams = [_CameraState(c) for c in rig.pair]
+        self._cams = [_CameraState(c, self._upright_turns(c)) for c in rig.pair]
         self._levels = _levels_per_unit(self.contract.normalisation)
         self._volume_box = np.stack([rig.volume.min_corner, rig.volume.max_corner])
         self._sequence = 0
@@ -281,6 +301,21 @@ class Estimator:
         # 2D joints of the good camera when the other's frame fails the check (needs encoder heatmaps)
         self._single_view_2d = self.config.frame_check.single_view_2d and bool(
             getattr(self.contract, "encoder_heatmaps", False))
+
+    def _upright_turns(self, camera: Camera) -> int:
+        """Quarter turns that show ``camera``'s crops upright (``roi.upright``); warns when a roll is left."""
+        turns, left = upright_quarter_turns(camera)
+        if not self.config.roi.upright:  # the roll as mounted: where the rig's down points in the picture
+            turns, left = 0, math.degrees(math.atan2(camera.R[0, 1], camera.R[1, 1]))
+        if turns:
+            log.info("camera %r is mounted %s: its crops are turned upright (%d quarter turn%s)", camera.name,
+                     "upside down" if turns == 2 else "on its side", turns, "s" if turns > 1 else "")
+        if abs(left) > _MAX_ROLL_DEG:
+            log.warning("camera %r: its picture is rolled %.0f degrees from upright%s; the model was trained on "
+                        "upright views, so expect fewer and worse joints (mount it level, or turn it to the "
+                        "nearest quarter turn)", camera.name, left,
+                        "" if self.config.roi.upright else " (roi.upright is off)")
+        return turns
 
     def _prior_of(self, session: Any):
         """The session's skeleton prior when the configuration uses it (``joints3d.skeleton_prior``)."""
@@ -336,7 +371,8 @@ class Estimator:
         """Remap tables and the pinhole crop camera of one window (building both costs ~0.8 ms)."""
         entry = state.cache.get(roi)
         if entry is None:
-            entry = (build_undistort_crop_maps(state.camera, roi, self.size), crop_camera(state.camera, roi, self.size))
+            entry = (build_undistort_crop_maps(state.camera, roi, self.size, quarter_turns=state.turns),
+                     crop_camera(state.camera, roi, self.size, quarter_turns=state.turns))
             state.cache[roi] = entry
             while len(state.cache) > self.config.roi.map_cache_size:
                 state.cache.popitem(last=False)
@@ -585,7 +621,8 @@ class Estimator:
             name = st.camera.name
             # model_to_image_pixels without rebuilding the crop camera: crop pinhole -> lens.
             safe = np.where(kp.valid[i][:, None], uv_model[i], S / 2)
-            uv_img = st.camera.normalized_to_pixels(crop.pixels_to_normalized(safe), distort=True)
+            xy = unturned_normalized(crop.pixels_to_normalized(safe), st.turns)
+            uv_img = st.camera.normalized_to_pixels(xy, distort=True)
             ok = kp.valid[i] & np.all(np.isfinite(uv_img), axis=-1) & (i in views)
             joints_2d[name] = np.where(ok[:, None], uv_img, 0.0)
             conf_2d[name] = np.where(ok, kp.confidence[i], 0.0).astype(np.float32)
@@ -714,7 +751,7 @@ class Estimator:
             if request.alpha not in self._between:
                 if len(self._between) >= 16:
                     self._between.clear()
-                cam_a, cam_b = self.rig.pair
+                cam_a, cam_b = (st.upright_pinhole for st in self._cams)  # no view spinning between them
                 self._between[request.alpha] = interpolate_camera(cam_a, cam_b, request.alpha)
             full = self._between[request.alpha]
         target = novel_target(full, box, self.size, cfg.crop_to_subject)

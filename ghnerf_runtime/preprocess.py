@@ -59,7 +59,8 @@ from ghnerf_runtime.geometry.rig import WorkingVolume
 
 __all__ = [
     "Roi", "CropMaps", "roi_from_volume", "roi_from_joints", "crop_camera", "build_undistort_crop_maps",
-    "apply_crop_maps", "preprocess_image", "undistorted_image_bounds",
+    "apply_crop_maps", "preprocess_image", "undistorted_image_bounds", "upright_quarter_turns",
+    "unturned_normalized",
 ]
 
 #: Nearest camera depth (metres) used when clipping a box that reaches behind the camera.
@@ -270,9 +271,40 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
         return None
 
 
+# ------------------------------------------------------------------ upright crops
+def upright_quarter_turns(camera: Camera) -> tuple[int, float]:
+    """Quarter turns (counterclockwise, as ``np.rot90``) that bring ``camera``'s picture nearest
+    upright, and the roll left after them, in degrees.
+
+    Upright: the rig's down (+y, gravity) points down the image. A camera mounted upside down
+    (a ceiling mount) needs 2, one on its side 1 or 3. A camera looking straight up or down has no
+    upright (0, 0.0).
+    """
+    dx, dy = camera.R[0, 1], camera.R[1, 1]  # the rig's +y in the camera frame, seen in the image
+    if math.hypot(dx, dy) < 1e-6:
+        return 0, 0.0
+    # After k turns the image's down direction is: k=0 (dx, dy), 1 (dy, -dx), 2 (-dx, -dy), 3 (-dy, dx).
+    downs = [dy, -dx, -dy, dx]
+    turns = int(np.argmax(downs))
+    turned = [(dx, dy), (dy, -dx), (-dx, -dy), (-dy, dx)][turns]
+    return turns, math.degrees(math.atan2(turned[0], turned[1]))
+
+
+def unturned_normalized(xy: np.ndarray, quarter_turns: int) -> np.ndarray:
+    """Normalised coordinates ``(..., 2)`` of a camera turned ``quarter_turns`` (``Camera.quarter_turned``)
+    -> those of the camera before the turn (same ray; exact)."""
+    x, y = xy[..., 0], xy[..., 1]
+    k = int(quarter_turns) % 4
+    if k == 0:
+        return xy
+    return np.stack([-y, x] if k == 1 else [-x, -y] if k == 2 else [y, -x], axis=-1)
+
+
 # ------------------------------------------------------------------ crop camera
-def crop_camera(camera: Camera, roi: Roi, out_size: int) -> Camera:
-    """The pinhole camera of the model input: undistorted, cropped to ``roi``, resized.
+def crop_camera(camera: Camera, roi: Roi, out_size: int, quarter_turns: int = 0) -> Camera:
+    """The pinhole camera of the model input: undistorted, cropped to ``roi``, resized, and turned
+    ``quarter_turns`` counterclockwise (:func:`upright_quarter_turns`: a camera mounted on its side
+    or upside down still gives the model an upright person).
 
     Its ``project`` gives model-input pixels; its ``K`` is what the model graphs take.
 
@@ -283,7 +315,8 @@ def crop_camera(camera: Camera, roi: Roi, out_size: int) -> Camera:
         ((128, 128), False, [200.0, 0.0, 63.5, 0.0, 200.0, 63.5])
     """
     out_size = _check_out_size(out_size)
-    return camera.without_distortion().cropped(roi.x0, roi.y0, roi.size, roi.size).resized(out_size, out_size)
+    crop = camera.without_distortion().cropped(roi.x0, roi.y0, roi.size, roi.size).resized(out_size, out_size)
+    return crop.quarter_turned(quarter_turns)
 
 
 # ------------------------------------------------------------------------- maps
@@ -355,7 +388,8 @@ def _aligned_span(lo: int, hi: int, limit: int, factor: int) -> tuple[int, int]:
     return lo, lo + (hi - lo) // factor * factor
 
 
-def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antialias: bool = True) -> CropMaps:
+def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antialias: bool = True,
+                              quarter_turns: int = 0) -> CropMaps:
     """Maps for one ``cv2.remap`` that undistorts, crops and resizes a frame in one pass.
 
     Each model-input pixel centre goes through :func:`crop_camera` to normalised
@@ -369,12 +403,17 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
         roi: crop window in undistorted pixels.
         out_size: model input side ``S``.
         antialias: allow the box pre-reduction.
+        quarter_turns: turn the crop counterclockwise (as ``np.rot90``), as
+            ``crop_camera(..., quarter_turns)`` does its camera.
 
     Returns:
         :class:`CropMaps` for :func:`apply_crop_maps` / :func:`preprocess_image`.
     """
     out_size = _check_out_size(out_size)
     map_x, map_y = _lens_maps(camera, crop_camera(camera, roi, out_size))
+    if quarter_turns % 4:  # turning the tables turns the picture they make: free at remap time
+        map_x = np.ascontiguousarray(np.rot90(map_x, quarter_turns))
+        map_y = np.ascontiguousarray(np.rot90(map_y, quarter_turns))
 
     level = max(0, int(round(math.log2(roi.size / out_size)))) if antialias else 0
     factor = 2 ** level

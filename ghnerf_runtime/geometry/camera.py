@@ -286,7 +286,7 @@ class Camera:
         """A copy with ``changes`` that are valid by construction (crop, resize, no distortion).
 
         Skips ``__post_init__``'s checks (a third of the runtime's per-pair geometry cost): the
-        derived cameras below keep K upper-triangular with fx, fy > 0, R and t untouched.
+        derived cameras below keep K upper-triangular with fx, fy > 0 and R a rotation.
         """
         cam = object.__new__(Camera)
         for name in ("name", "width", "height", "K", "dist", "R", "t"):
@@ -320,6 +320,33 @@ class Camera:
 
     def without_distortion(self) -> "Camera":
         return self._derived(dist=np.zeros(5))
+
+    def quarter_turned(self, turns: int) -> "Camera":
+        """The camera whose image is this one's turned ``turns`` quarter turns counterclockwise, as
+        ``np.rot90(image, turns)``: the same centre and optical axis, rolled about the axis.
+
+        Pinhole cameras only (a lens model's tangential terms would turn too); a skewed ``K`` only
+        by half turns (a quarter turn would move the skew below the diagonal).
+        """
+        turns = int(turns) % 4
+        if turns == 0:
+            return self
+        if self.has_distortion:
+            raise GeometryError(f"camera {self.name!r}: only a pinhole camera can be quarter-turned")
+        if turns % 2 and self.K[0, 1] != 0.0:
+            raise GeometryError(f"camera {self.name!r}: a skewed camera turns by half turns only")
+        W, H = self.width, self.height
+        # A: pixel (u, v) -> its place in the turned image; Rz: the camera frame rolled to match.
+        if turns == 1:  # u' = v, v' = W-1-u
+            A, Rz, size = [[0, 1, 0], [-1, 0, W - 1], [0, 0, 1]], [[0, 1, 0], [-1, 0, 0], [0, 0, 1]], (H, W)
+        elif turns == 2:  # u' = W-1-u, v' = H-1-v
+            A, Rz, size = [[-1, 0, W - 1], [0, -1, H - 1], [0, 0, 1]], [[-1, 0, 0], [0, -1, 0], [0, 0, 1]], (W, H)
+        else:  # u' = H-1-v, v' = u
+            A, Rz, size = [[0, -1, H - 1], [1, 0, 0], [0, 0, 1]], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], (H, W)
+        A, Rz = np.asarray(A, np.float64), np.asarray(Rz, np.float64)
+        K = A @ self.K @ Rz.T
+        K[1, 0] = 0.0  # exactly 0 by the checks above; drop the -0.0
+        return self._derived(K=K, R=Rz @ self.R, t=Rz @ self.t, width=size[0], height=size[1])
 
 
 def look_at(eye, target, up=(0.0, -1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:

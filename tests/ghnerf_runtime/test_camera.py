@@ -245,3 +245,35 @@ def test_undistortion_converges_for_a_strong_rational_lens():
     xy = cam.pixels_to_normalized(uv)
     assert np.all(np.isfinite(xy))
     np.testing.assert_allclose(cam.normalized_to_pixels(xy), uv, atol=1e-3)
+
+
+@pytest.mark.parametrize("turns", [0, 1, 2, 3, -1, 6])
+def test_a_quarter_turned_camera_sees_the_turned_image(turns):
+    cam = make_camera().without_distortion().resized(96, 72)  # not square: the turn swaps the sides
+    turned = cam.quarter_turned(turns)
+    k = turns % 4
+    assert turned.size == ((cam.height, cam.width) if k % 2 else cam.size)
+    assert np.allclose(turned.center, cam.center) and np.allclose(turned.R @ turned.R.T, np.eye(3))
+    # Mark each visible point's pixel in an image, turn the image with np.rot90: the turned camera
+    # must project the point onto the same (turned) pixel.
+    X = scene_points(400, seed=3)
+    uv, _ = cam.project(X)
+    uv_t, _ = turned.project(X)
+    ui, vi = np.round(uv).astype(int).T
+    inside = (ui >= 0) & (ui < cam.width) & (vi >= 0) & (vi < cam.height) & np.all(np.abs(uv - np.round(uv)) < 0.3, -1)
+    assert inside.sum() > 20
+    for (u, v), (ut, vt) in zip(uv[inside], uv_t[inside]):
+        image = np.zeros((cam.height, cam.width), np.uint8)
+        image[int(round(v)), int(round(u))] = 1
+        rows, cols = np.nonzero(np.rot90(image, turns))
+        assert (cols[0], rows[0]) == (int(round(ut)), int(round(vt)))
+        assert abs(ut - round(ut)) < 0.3 + 1e-9 and abs(vt - round(vt)) < 0.3 + 1e-9
+
+
+def test_quarter_turns_need_a_pinhole_and_no_skew():
+    with pytest.raises(GeometryError, match="pinhole"):
+        make_camera(DISTORTIONS["5"]).quarter_turned(2)
+    skewed = Camera("s", 64, 64, [[50.0, 2.0, 32.0], [0.0, 50.0, 32.0], [0.0, 0.0, 1.0]])
+    assert skewed.quarter_turned(2).K[0, 1] == 2.0
+    with pytest.raises(GeometryError, match="half turns"):
+        skewed.quarter_turned(1)

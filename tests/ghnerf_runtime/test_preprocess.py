@@ -15,7 +15,7 @@ from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints
 from ghnerf_runtime.preprocess import (
     Roi, apply_crop_maps, build_undistort_crop_maps, crop_camera, preprocess_image, roi_from_joints,
-    roi_from_volume, undistorted_image_bounds,
+    roi_from_volume, undistorted_image_bounds, upright_quarter_turns,
 )
 
 K = np.array([[560.0, 0.0, 331.0], [0.0, 556.0, 236.5], [0.0, 0.0, 1.0]])
@@ -190,17 +190,17 @@ def _render_dots(cam: Camera, points: np.ndarray, sigma_px: float) -> np.ndarray
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
-@pytest.mark.parametrize("antialias", [True, False])
-def test_dot_lands_where_crop_camera_projects_it(antialias):
+@pytest.mark.parametrize(("antialias", "turns"), [(True, 0), (False, 0), (True, 1), (False, 2), (True, 3)])
+def test_dot_lands_where_crop_camera_projects_it(antialias, turns):
     cam = make_camera()
     roi = Roi(60, -30, 512)  # scale 4: two box levels when antialiased; partly off the frame
     points = np.array([[0.0, -1.0, 3.0], [-0.7, -1.5, 2.6], [0.6, -0.3, 2.4], [0.5, -1.8, 3.4]])
     sigma_model = 2.0
     frame = _render_dots(cam, points, sigma_px=sigma_model * roi.size / 128)
-    maps = build_undistort_crop_maps(cam, roi, 128, antialias=antialias)
+    maps = build_undistort_crop_maps(cam, roi, 128, antialias=antialias, quarter_turns=turns)
     assert maps.level == (2 if antialias else 0)
     crop = apply_crop_maps(frame, maps).astype(np.float32) / 255.0
-    expected, _ = crop_camera(cam, roi, 128).project(points)
+    expected, _ = crop_camera(cam, roi, 128, quarter_turns=turns).project(points)
     for uv in expected:  # decode each dot in its own window so the others do not compete
         heat = np.zeros_like(crop)
         u, v = np.round(uv).astype(int)
@@ -281,3 +281,20 @@ def test_a_wide_lens_that_folds_inside_the_image_still_gets_a_footprint_and_blan
     assert np.all(out[past] == 0)
     centre = np.hypot(xy[..., 0], xy[..., 1]) < 0.5
     assert centre.any() and np.all(out[centre] == 200)
+
+
+@pytest.mark.parametrize(("roll_deg", "turns"), [(0, 0), (10, 0), (180, 2), (170, 2), (90, 1), (-90, 3), (-80, 3)])
+def test_upright_quarter_turns_undo_the_mounting_roll(roll_deg, turns):
+    """A camera rolled about its optical axis: the turns that show the rig's down as the picture's down."""
+    R, t = look_at((0.3, -1.2, -0.4), (0.0, -0.9, 3.0))
+    a = np.radians(roll_deg)  # the camera frame rolled by roll_deg about its z axis
+    Rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    cam = Camera("rolled", 640, 480, K, DIST, Rz @ R, Rz @ t)
+    got, left = upright_quarter_turns(cam)
+    assert got == turns
+    upright = crop_camera(cam, Roi(0, 0, 480), 128, quarter_turns=got)
+    head, feet = upright.project(np.array([[0.0, -1.7, 3.0], [0.0, 0.0, 3.0]]))[0]
+    assert feet[1] - head[1] > 3 * abs(feet[0] - head[0])  # a standing person stands in the crop
+    assert abs(left) <= 45 and abs(abs(left) - abs(roll_deg - 90 * round(roll_deg / 90))) < 3
+    looking_down = Camera("down", 640, 480, K, DIST, np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]), np.zeros(3))
+    assert upright_quarter_turns(looking_down) == (0, 0.0)
