@@ -3,9 +3,9 @@
     .venv/bin/python benchmarks/measure_mounting.py [--model-dir models] [--sequences 6] [--frames 15]
                                                     [--rolls 0,30,90,180]
 
-The model was trained on upright views. ``roi.upright`` (on by default) turns each camera's crop by
-the quarter turns that bring the rig's down nearest the picture's down, so a camera on its side or
-upside down gives the model an upright person; a roll between quarter turns stays. This renders the
+The model was trained on upright views. ``roi.upright`` (on by default) rotates each camera's crop so
+that the rig's down is the picture's down, so a camera on its side, upside down or crooked gives the
+model an upright person. This renders the
 bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe: held-out motions, random rig
 placements) through the same rig with both cameras rolled by each angle, runs the runtime with
 ``roi.upright`` on and off, and prints per roll: 3D joints found per pair, MPJPE of those, PCK@0.2 of
@@ -58,7 +58,7 @@ def main(argv=None) -> int:
     rolls = [float(r) for r in args.rolls.split(",")]
     runs = [(r, up) for r in rolls for up in ((True,) if r == 0 else (True, False))]
     tally = {run: {"found": [], "err": [], "p": [], "t": [], "v": [], "f": []} for run in runs}
-    turns_of = {}
+    roll_of = {}
     for k in range(args.sequences):
         seed = SEED_BASE + k  # the bench's recipe (ghnerf_runtime.cli.simdata)
         rng = np.random.default_rng([seed, 7])
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
             shots = [[scene.render(c, t) for c in mounted.pair] for t in times]
             for up in (True,) if roll == 0 else (True, False):
                 est = Estimator(session, mounted, replace(cfg, roi=RoiConfig(upright=up)))
-                turns_of[(roll, up)] = [st.turns for st in est._cams]
+                roll_of[(roll, up)] = [round(st.roll_deg, 1) + 0.0 for st in est._cams]
                 acc = tally[(roll, up)]
                 for t, pair in zip(times, shots):
                     r = est.estimate([image for image, _ in pair], timestamp_s=t)
@@ -89,7 +89,7 @@ def main(argv=None) -> int:
     for (roll, up), acc in tally.items():
         score = pck(*(np.array(acc[n]) for n in "ptv"), pred_valid=np.array(acc["f"]))
         mpjpe = float(np.mean(acc["err"])) if acc["err"] else float("nan")
-        print(f"  roll {roll:5.0f} deg, roi.upright {'on ' if up else 'off'} (quarter turns {turns_of[(roll, up)]}): "
+        print(f"  roll {roll:5.0f} deg, roi.upright {'on ' if up else 'off'} (crops rotated {roll_of[(roll, up)]}): "
               f"3D joints found {np.mean(acc['found']):4.1f} / 25 a pair, MPJPE {mpjpe:6.1f} mm, "
               f"2D PCK@0.2 {score.value:.3f}")
     return 0

@@ -163,9 +163,10 @@ class RoiConfig:
             in view, not much smaller), so crops are stable and remap tables are reused; 0
             disables.
         map_cache_size: remap tables kept per camera (least recently used are dropped).
-        upright: turn each camera's crop by quarter turns so that the rig's down (gravity) is the
-            picture's down, as in training: a camera mounted upside down (a ceiling mount) or on its
-            side. Free at run time (the remap tables turn). False: crops keep the sensor's orientation.
+        upright: rotate each camera's crop so that the rig's down (gravity) is the picture's down, as
+            in training: a camera mounted upside down (a ceiling mount), on its side or crooked. The
+            angle comes from the rig file's R; free at run time (it is in the remap tables). False:
+            crops keep the sensor's orientation.
     """
 
     volume_margin_m: float = 0.0

@@ -43,7 +43,6 @@ The :class:`~ghnerf_runtime.session.ModelSession` is injected (or built by
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -76,8 +75,8 @@ from ghnerf_runtime.preprocess import (
     build_undistort_crop_maps,
     crop_camera,
     preprocess_image,
-    unturned_normalized,
-    upright_quarter_turns,
+    camera_normalized,
+    upright_roll_deg,
 )
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
@@ -91,8 +90,8 @@ log = logging.getLogger(__name__)
 
 #: Skeleton prior: confidence = exp(-expected error / this).
 _PRIOR_CONFIDENCE_SCALE_M = 0.1
-#: A source camera's picture rolled more than this from upright (after the quarter turns) is warned about.
-_MAX_ROLL_DEG = 20.0
+#: A source camera's picture rolled more than this from upright is said in the log (rotated or not).
+_NOTED_ROLL_DEG = 1.0
 #: Skeleton prior: the crop follows the prior's joints expected within this (m), whatever is reported.
 _PRIOR_FOLLOW_MAX_ERROR_M = 0.25
 #: Stage keys of the keypoint path, in order.
@@ -237,13 +236,15 @@ class _CameraState:
     """Per source camera: remap tables and crop camera per crop window (LRU)."""
 
     camera: Camera
-    turns: int = 0  # quarter turns (np.rot90) that show the camera's crops upright (RoiConfig.upright)
+    roll_deg: float = 0.0  # the crops' rotation that shows them upright (RoiConfig.upright)
     cache: "OrderedDict[Roi, tuple[CropMaps, Camera]]" = field(default_factory=OrderedDict)
 
     @property
     def upright_pinhole(self) -> Camera:
-        """The camera without its lens, turned upright (what a virtual camera between the sources follows)."""
-        return self.camera.without_distortion().quarter_turned(self.turns) if self.turns else self.camera
+        """The camera without its lens, turned by the quarter turns nearest upright (what a virtual camera
+        between the sources follows, so that it does not spin from one to the other)."""
+        turns = round(self.roll_deg / 90.0) % 4
+        return self.camera.without_distortion().quarter_turned(turns) if turns else self.camera
 
 
 class Estimator:
@@ -286,10 +287,11 @@ class Estimator:
         self.skeleton_prior = self._prior_of(session)
         self.novel_painter = self._painter_of(session)
         self._prior_follow: Joints3D | None = None
-        self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi)
+        self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
+        self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
+                                      (self._cams[0].roll_deg, self._cams[1].roll_deg))
         # smooths what is reported; the tracker follows the raw joints
         self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
-        self._cams = [_CameraState(c, self._upright_turns(c)) for c in rig.pair]
         self._levels = _levels_per_unit(self.contract.normalisation)
         self._volume_box = np.stack([rig.volume.min_corner, rig.volume.max_corner])
         self._sequence = 0
@@ -302,20 +304,17 @@ class Estimator:
         self._single_view_2d = self.config.frame_check.single_view_2d and bool(
             getattr(self.contract, "encoder_heatmaps", False))
 
-    def _upright_turns(self, camera: Camera) -> int:
-        """Quarter turns that show ``camera``'s crops upright (``roi.upright``); warns when a roll is left."""
-        turns, left = upright_quarter_turns(camera)
-        if not self.config.roi.upright:  # the roll as mounted: where the rig's down points in the picture
-            turns, left = 0, math.degrees(math.atan2(camera.R[0, 1], camera.R[1, 1]))
-        if turns:
-            log.info("camera %r is mounted %s: its crops are turned upright (%d quarter turn%s)", camera.name,
-                     "upside down" if turns == 2 else "on its side", turns, "s" if turns > 1 else "")
-        if abs(left) > _MAX_ROLL_DEG:
-            log.warning("camera %r: its picture is rolled %.0f degrees from upright%s; the model was trained on "
-                        "upright views, so expect fewer and worse joints (mount it level, or turn it to the "
-                        "nearest quarter turn)", camera.name, left,
-                        "" if self.config.roi.upright else " (roi.upright is off)")
-        return turns
+    def _upright_roll(self, camera: Camera) -> float:
+        """The rotation that shows ``camera``'s crops upright (``roi.upright``; 0 when off), said in the log."""
+        roll = upright_roll_deg(camera)
+        if abs(roll) > _NOTED_ROLL_DEG:
+            if self.config.roi.upright:
+                log.info("camera %r is mounted rolled %.1f degrees from upright: its crops are rotated upright",
+                         camera.name, -roll)
+            else:
+                log.warning("camera %r is mounted rolled %.1f degrees from upright and roi.upright is off: the model "
+                            "was trained on upright views, so expect fewer and worse joints", camera.name, -roll)
+        return roll if self.config.roi.upright else 0.0
 
     def _prior_of(self, session: Any):
         """The session's skeleton prior when the configuration uses it (``joints3d.skeleton_prior``)."""
@@ -371,8 +370,8 @@ class Estimator:
         """Remap tables and the pinhole crop camera of one window (building both costs ~0.8 ms)."""
         entry = state.cache.get(roi)
         if entry is None:
-            entry = (build_undistort_crop_maps(state.camera, roi, self.size, quarter_turns=state.turns),
-                     crop_camera(state.camera, roi, self.size, quarter_turns=state.turns))
+            entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.roll_deg),
+                     crop_camera(state.camera, roi, self.size, state.roll_deg))
             state.cache[roi] = entry
             while len(state.cache) > self.config.roi.map_cache_size:
                 state.cache.popitem(last=False)
@@ -621,7 +620,7 @@ class Estimator:
             name = st.camera.name
             # model_to_image_pixels without rebuilding the crop camera: crop pinhole -> lens.
             safe = np.where(kp.valid[i][:, None], uv_model[i], S / 2)
-            xy = unturned_normalized(crop.pixels_to_normalized(safe), st.turns)
+            xy = camera_normalized(crop.pixels_to_normalized(safe), crop, st.camera)
             uv_img = st.camera.normalized_to_pixels(xy, distort=True)
             ok = kp.valid[i] & np.all(np.isfinite(uv_img), axis=-1) & (i in views)
             joints_2d[name] = np.where(ok[:, None], uv_img, 0.0)

@@ -61,7 +61,7 @@ import numpy as np
 
 from ghnerf_runtime.errors import RuntimeErrorBase, ShapeError
 from ghnerf_runtime.geometry.camera import Camera, check_last_dim
-from ghnerf_runtime.preprocess import Roi, crop_camera, unturned_normalized
+from ghnerf_runtime.preprocess import Roi, camera_normalized, crop_camera
 
 __all__ = [
     "MISSING_FILL", "KeypointConfigError", "KeypointDecoderConfig", "Keypoints2D", "decode_keypoints",
@@ -368,7 +368,7 @@ def _keep_fill(mapped: np.ndarray, valid) -> np.ndarray:
 
 
 def model_to_image_pixels(uv: np.ndarray, camera: Camera, roi: Roi, model_size: int, *, distort: bool = True,
-                          valid=None, quarter_turns: int = 0) -> np.ndarray:
+                          valid=None, roll_deg: float = 0.0) -> np.ndarray:
     """Model-input pixels ``(..., 2)`` -> pixels of the full camera frame.
 
     Goes through the model input's pinhole camera (:func:`crop_camera`) to normalised
@@ -384,23 +384,23 @@ def model_to_image_pixels(uv: np.ndarray, camera: Camera, roi: Roi, model_size: 
         model_size: model input side ``S``.
         distort: return distorted (raw frame) pixels.
         valid: optional ``(...)`` bool; entries not valid come back as :data:`MISSING_FILL`.
-        quarter_turns: the model input was turned so (``crop_camera``'s argument).
+        roll_deg: the model input was rotated so (``crop_camera``'s argument).
 
     Returns:
         ``(..., 2)`` float64.
     """
     uv = check_last_dim("uv", uv, 2)
-    crop = crop_camera(camera, roi, model_size, quarter_turns)
+    crop = crop_camera(camera, roi, model_size, roll_deg)
     safe = uv if valid is None else np.where(np.asarray(valid, bool)[..., None], uv, 0.0)
-    xy = unturned_normalized(crop.pixels_to_normalized(safe), quarter_turns)
+    xy = camera_normalized(crop.pixels_to_normalized(safe), crop, camera)
     mapped = camera.normalized_to_pixels(xy, distort=distort)
     return _keep_fill(mapped, valid)
 
 
 def heatmap_to_image_pixels(uv: np.ndarray, camera: Camera, roi: Roi, model_size: int, heatmap_size, *,
-                            distort: bool = True, valid=None, quarter_turns: int = 0) -> np.ndarray:
+                            distort: bool = True, valid=None, roll_deg: float = 0.0) -> np.ndarray:
     """Heatmap pixels ``(..., 2)`` -> full-frame pixels (:func:`heatmap_to_model_pixels`, then
     :func:`model_to_image_pixels`); see the latter for the arguments."""
     model_uv = heatmap_to_model_pixels(uv, heatmap_size, model_size)
     return model_to_image_pixels(model_uv, camera, roi, model_size, distort=distort, valid=valid,
-                                 quarter_turns=quarter_turns)
+                                 roll_deg=roll_deg)

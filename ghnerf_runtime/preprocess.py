@@ -59,8 +59,8 @@ from ghnerf_runtime.geometry.rig import WorkingVolume
 
 __all__ = [
     "Roi", "CropMaps", "roi_from_volume", "roi_from_joints", "crop_camera", "build_undistort_crop_maps",
-    "apply_crop_maps", "preprocess_image", "undistorted_image_bounds", "upright_quarter_turns",
-    "unturned_normalized",
+    "apply_crop_maps", "preprocess_image", "undistorted_image_bounds", "upright_roll_deg",
+    "camera_normalized",
 ]
 
 #: Nearest camera depth (metres) used when clipping a box that reaches behind the camera.
@@ -178,7 +178,32 @@ def _square_roi(lo: np.ndarray, hi: np.ndarray, camera: Camera, min_size: int = 
     return Roi(x0, y0, size)
 
 
-def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: float = 0.0) -> Roi:
+def _roi_of_points(uv: np.ndarray, camera: Camera, *, margin_frac: float = 0.0, min_size: int = 1,
+                   roll_deg: float = 0.0) -> Roi:
+    """The square ROI showing the undistorted pixels ``uv`` ``(N, 2)``, its box grown by ``margin_frac``
+    of its longer side. With ``roll_deg`` the crop is rotated so about its centre (``crop_camera``), so
+    the square is sized and centred on the points' extent seen that way: a body standing upright in the
+    rotated crop fits it, where the sensor's own box would cut its head and feet."""
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    if roll_deg % 360.0 == 0.0:
+        grow = margin_frac * float(np.max(hi - lo))
+        return _square_roi(lo - grow, hi + grow, camera, min_size=min_size)
+    img_lo, img_hi = _cached_image_bounds(camera)
+    if np.any(np.minimum(hi, img_hi) < np.maximum(lo, img_lo)):
+        raise GeometryError(f"camera {camera.name!r}: the region {lo.tolist()}..{hi.tolist()} lies outside the image")
+    a = math.radians(roll_deg)
+    turn = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])  # as Camera.rotated
+    seen = np.clip(uv, img_lo, img_hi) @ turn.T  # nothing outside the image can be seen
+    lo, hi = seen.min(axis=0), seen.max(axis=0)
+    grow = margin_frac * float(np.max(hi - lo))
+    size = max(int(math.ceil(float(np.max(hi - lo)) + 2 * grow)) + 1, int(min_size), 1)
+    centre = turn.T @ (0.5 * (lo + hi))
+    x0, y0 = (int(math.floor(c - (size - 1) / 2 + 0.5)) for c in centre)
+    return Roi(x0, y0, size)
+
+
+def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: float = 0.0, *,
+                    roll_deg: float = 0.0) -> Roi:
     """The square ROI that shows a box (the working volume) in one camera.
 
     The box (grown by ``margin`` metres on every side) is clipped against the camera's near
@@ -191,6 +216,7 @@ def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: 
         volume: a :class:`WorkingVolume`, or box corners ``(N, 3)`` in the rig frame (the box
             used is their axis-aligned bounding box).
         margin: metres added to every side of the box.
+        roll_deg: the crop will be rotated so (``crop_camera``): size the square for it.
 
     Returns:
         :class:`Roi` in undistorted pixels.
@@ -222,11 +248,12 @@ def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: 
     if len(pts) == 0:
         raise GeometryError(f"camera {camera.name!r}: the volume is entirely behind the camera")
     uv = camera.normalized_to_pixels(pts[:, :2] / pts[:, 2:], distort=False)
-    return _square_roi(uv.min(axis=0), uv.max(axis=0), camera)
+    return _roi_of_points(uv, camera, roll_deg=roll_deg)
 
 
 def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray, margin_frac: float = 0.2,
-                    min_size: int = 64, *, min_confidence: float = 0.0, min_joints: int = 3) -> Roi | None:
+                    min_size: int = 64, *, min_confidence: float = 0.0, min_joints: int = 3,
+                    roll_deg: float = 0.0) -> Roi | None:
     """A square ROI around joints of the previous frame (tracking).
 
     Args:
@@ -240,6 +267,7 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
         min_size: smallest ROI side, pixels.
         min_confidence: see ``confidences``.
         min_joints: fewer usable joints than this gives ``None``.
+        roll_deg: the crop will be rotated so (``crop_camera``): size the square for it.
 
     Returns:
         A :class:`Roi`, or ``None`` when too few joints are usable or they lie outside the
@@ -263,48 +291,42 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
         ok &= np.all(np.isfinite(uv), axis=1)  # beyond the lens model's reach
     if int(ok.sum()) < max(int(min_joints), 1):
         return None
-    lo, hi = uv[ok].min(axis=0), uv[ok].max(axis=0)
-    grow = margin_frac * float(np.max(hi - lo))
     try:
-        return _square_roi(lo - grow, hi + grow, camera, min_size=min_size)
+        return _roi_of_points(uv[ok], camera, margin_frac=margin_frac, min_size=min_size, roll_deg=roll_deg)
     except GeometryError:
         return None
 
 
 # ------------------------------------------------------------------ upright crops
-def upright_quarter_turns(camera: Camera) -> tuple[int, float]:
-    """Quarter turns (counterclockwise, as ``np.rot90``) that bring ``camera``'s picture nearest
-    upright, and the roll left after them, in degrees.
+def upright_roll_deg(camera: Camera) -> float:
+    """Degrees to rotate ``camera``'s picture (counterclockwise, about its centre) to make it upright:
+    the rig's down (+y, gravity) pointing down the picture, as in the model's training views.
 
-    Upright: the rig's down (+y, gravity) points down the image. A camera mounted upside down
-    (a ceiling mount) needs 2, one on its side 1 or 3. A camera looking straight up or down has no
-    upright (0, 0.0).
+    A camera mounted level gives 0, upside down (a ceiling mount) 180, on its side +-90; a crooked
+    mount anything between. A camera looking straight up or down has no upright: 0.
     """
     dx, dy = camera.R[0, 1], camera.R[1, 1]  # the rig's +y in the camera frame, seen in the image
     if math.hypot(dx, dy) < 1e-6:
-        return 0, 0.0
-    # After k turns the image's down direction is: k=0 (dx, dy), 1 (dy, -dx), 2 (-dx, -dy), 3 (-dy, dx).
-    downs = [dy, -dx, -dy, dx]
-    turns = int(np.argmax(downs))
-    turned = [(dx, dy), (dy, -dx), (-dx, -dy), (-dy, dx)][turns]
-    return turns, math.degrees(math.atan2(turned[0], turned[1]))
+        return 0.0
+    # Rotating the picture by a turns (dx, dy) into (cos a dx + sin a dy, -sin a dx + cos a dy).
+    return math.degrees(math.atan2(-dx, dy))
 
 
-def unturned_normalized(xy: np.ndarray, quarter_turns: int) -> np.ndarray:
-    """Normalised coordinates ``(..., 2)`` of a camera turned ``quarter_turns`` (``Camera.quarter_turned``)
-    -> those of the camera before the turn (same ray; exact)."""
-    x, y = xy[..., 0], xy[..., 1]
-    k = int(quarter_turns) % 4
-    if k == 0:
+def camera_normalized(xy: np.ndarray, crop: Camera, camera: Camera) -> np.ndarray:
+    """Normalised coordinates ``(..., 2)`` of ``crop`` (a crop of ``camera``, maybe rotated: the same
+    centre) -> those of ``camera``: the same rays."""
+    if crop.R is camera.R:  # not rotated (the crop shares the camera's R): the same coordinates
         return xy
-    return np.stack([-y, x] if k == 1 else [-x, -y] if k == 2 else [y, -x], axis=-1)
+    rel = camera.R @ crop.R.T
+    d = xy @ rel[:, :2].T + rel[:, 2]
+    return d[..., :2] / d[..., 2:3]
 
 
 # ------------------------------------------------------------------ crop camera
-def crop_camera(camera: Camera, roi: Roi, out_size: int, quarter_turns: int = 0) -> Camera:
-    """The pinhole camera of the model input: undistorted, cropped to ``roi``, resized, and turned
-    ``quarter_turns`` counterclockwise (:func:`upright_quarter_turns`: a camera mounted on its side
-    or upside down still gives the model an upright person).
+def crop_camera(camera: Camera, roi: Roi, out_size: int, roll_deg: float = 0.0) -> Camera:
+    """The pinhole camera of the model input: undistorted, cropped to ``roi``, resized, and rotated
+    ``roll_deg`` counterclockwise about the crop's centre (:func:`upright_roll_deg`: a camera mounted
+    upside down, on its side or crooked still shows the model an upright person).
 
     Its ``project`` gives model-input pixels; its ``K`` is what the model graphs take.
 
@@ -316,7 +338,7 @@ def crop_camera(camera: Camera, roi: Roi, out_size: int, quarter_turns: int = 0)
     """
     out_size = _check_out_size(out_size)
     crop = camera.without_distortion().cropped(roi.x0, roi.y0, roi.size, roi.size).resized(out_size, out_size)
-    return crop.quarter_turned(quarter_turns)
+    return crop.rotated(roll_deg)
 
 
 # ------------------------------------------------------------------------- maps
@@ -360,16 +382,19 @@ _OUTSIDE = -1e6  # a map coordinate far off any frame: cv2.remap's constant bord
 def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Distorted frame pixels ``(S, S)`` x2 sampled by each pixel of the pinhole ``crop`` camera."""
     if camera.K[0, 1] == 0.0:
-        # OpenCV's own implementation of the same lens model; no skew support, hence the test.
+        # OpenCV's own implementation of the same lens model; no skew support, hence the test. A rotated
+        # crop is a rectification: R takes the camera's frame to the crop's.
         dist = camera.dist if camera.dist.size else None
-        map_x, map_y = cv2.initUndistortRectifyMap(camera.K, dist, None, crop.K, crop.size, cv2.CV_32FC1)
+        rectify = None if crop.R is camera.R else crop.R @ camera.R.T
+        map_x, map_y = cv2.initUndistortRectifyMap(camera.K, dist, rectify, crop.K, crop.size, cv2.CV_32FC1)
     else:
-        src = camera.normalized_to_pixels(crop.pixels_to_normalized(crop.pixel_grid()), distort=True)
+        xy = camera_normalized(crop.pixels_to_normalized(crop.pixel_grid()), crop, camera)
+        src = camera.normalized_to_pixels(xy, distort=True)
         map_x, map_y = src[..., 0].astype(np.float32), src[..., 1].astype(np.float32)
     if math.isfinite(camera.fold_radius):
         # Past the lens model's fold, the forward model maps back onto the image (a mirrored ring of
         # the picture): show nothing there instead, as outside the frame.
-        xy = crop.pixels_to_normalized(crop.pixel_grid())  # a pinhole: exact
+        xy = camera_normalized(crop.pixels_to_normalized(crop.pixel_grid()), crop, camera)  # a pinhole: exact
         outside = np.sum(xy * xy, axis=-1) >= camera.fold_radius**2
         map_x[outside] = map_y[outside] = _OUTSIDE
     return map_x, map_y
@@ -389,7 +414,7 @@ def _aligned_span(lo: int, hi: int, limit: int, factor: int) -> tuple[int, int]:
 
 
 def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antialias: bool = True,
-                              quarter_turns: int = 0) -> CropMaps:
+                              roll_deg: float = 0.0) -> CropMaps:
     """Maps for one ``cv2.remap`` that undistorts, crops and resizes a frame in one pass.
 
     Each model-input pixel centre goes through :func:`crop_camera` to normalised
@@ -403,17 +428,14 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
         roi: crop window in undistorted pixels.
         out_size: model input side ``S``.
         antialias: allow the box pre-reduction.
-        quarter_turns: turn the crop counterclockwise (as ``np.rot90``), as
-            ``crop_camera(..., quarter_turns)`` does its camera.
+        roll_deg: rotate the crop counterclockwise about its centre, as
+            ``crop_camera(..., roll_deg)`` does its camera.
 
     Returns:
         :class:`CropMaps` for :func:`apply_crop_maps` / :func:`preprocess_image`.
     """
     out_size = _check_out_size(out_size)
-    map_x, map_y = _lens_maps(camera, crop_camera(camera, roi, out_size))
-    if quarter_turns % 4:  # turning the tables turns the picture they make: free at remap time
-        map_x = np.ascontiguousarray(np.rot90(map_x, quarter_turns))
-        map_y = np.ascontiguousarray(np.rot90(map_y, quarter_turns))
+    map_x, map_y = _lens_maps(camera, crop_camera(camera, roi, out_size, roll_deg))
 
     level = max(0, int(round(math.log2(roi.size / out_size)))) if antialias else 0
     factor = 2 ** level

@@ -121,10 +121,11 @@ def keep_roi(previous: Roi | None, new: Roi, keep_frac: float) -> Roi:
 
 
 def plan_regions(rig: Rig, track: Track | None, roi_config: RoiConfig,
-                 previous: tuple[Roi, ...] | None = None) -> Regions:
+                 previous: tuple[Roi, ...] | None = None, rolls: tuple[float, float] = (0.0, 0.0)) -> Regions:
     """Crop windows for both source cameras and the sweep box: from the track when it gives a
     crop in both cameras, else from the working volume. ``previous`` (the last tracked crops) are
-    kept while the new ones fit inside them (:func:`keep_roi`).
+    kept while the new ones fit inside them (:func:`keep_roi`). ``rolls``: each camera's crop
+    rotation (``RoiConfig.upright``), which the windows are sized for.
 
     Raises:
         GeometryError: the working volume is not visible in a camera (a rig file error).
@@ -134,23 +135,23 @@ def plan_regions(rig: Rig, track: Track | None, roi_config: RoiConfig,
         rois = []
         for k, cam in enumerate(cams):
             roi = roi_from_joints(cam, track.joints, np.where(track.valid, 1.0, 0.0), roi_config.joint_margin_frac,
-                                  roi_config.min_size_px, min_confidence=0.5, min_joints=3)
+                                  roi_config.min_size_px, min_confidence=0.5, min_joints=3, roll_deg=rolls[k])
             if roi is None:
                 break
             roi = snap_roi(roi, roi_config.snap_px)
             rois.append(keep_roi(previous[k] if previous else None, roi, roi_config.keep_frac))
         else:
             return Regions(tuple(rois), track.box.copy(), True)
-    return volume_regions(rig, roi_config)
+    return volume_regions(rig, roi_config, rolls)
 
 
-def volume_regions(rig: Rig, roi_config: RoiConfig) -> Regions:
+def volume_regions(rig: Rig, roi_config: RoiConfig, rolls: tuple[float, float] = (0.0, 0.0)) -> Regions:
     """The cold-start regions: the working volume (grown by ``volume_margin_m``) in each camera."""
     volume = rig.volume.grown(roi_config.volume_margin_m) if roi_config.volume_margin_m > 0 else rig.volume
     rois = []
-    for cam in rig.pair:
+    for cam, roll in zip(rig.pair, rolls):
         try:
-            rois.append(roi_from_volume(cam, volume))
+            rois.append(roi_from_volume(cam, volume, roll_deg=roll))
         except GeometryError as e:
             raise GeometryError(f"rig {rig.rig_id!r}: the working volume is not visible in camera "
                                 f"{cam.name!r} ({e})") from e
@@ -164,16 +165,19 @@ class SubjectTracker:
         rig: the calibrated rig (its first two cameras are the sources).
         config: when to keep or drop the track.
         roi_config: crop margins.
+        rolls: each source camera's crop rotation (``RoiConfig.upright``), degrees.
     """
 
-    def __init__(self, rig: Rig, config: TrackingConfig, roi_config: RoiConfig) -> None:
+    def __init__(self, rig: Rig, config: TrackingConfig, roi_config: RoiConfig,
+                 rolls: tuple[float, float] = (0.0, 0.0)) -> None:
         self.rig = rig
         self.config = config
         self.roi_config = roi_config
+        self.rolls = (float(rolls[0]), float(rolls[1]))
         self.track: Track | None = None
         #: ``(camera index, crop)`` of the one camera a single-view pair saw the subject in
         self.view_track: tuple[int, Roi] | None = None
-        self._volume = volume_regions(rig, roi_config)
+        self._volume = volume_regions(rig, roi_config, self.rolls)
         self._last_rois: tuple[Roi, ...] | None = None
         self.drops = 0
 
@@ -186,7 +190,7 @@ class SubjectTracker:
                 rois[k] = roi
                 return Regions(tuple(rois), self._volume.box, False)
             return self._volume
-        regions = plan_regions(self.rig, self.track, self.roi_config, self._last_rois)
+        regions = plan_regions(self.rig, self.track, self.roi_config, self._last_rois, self.rolls)
         self._last_rois = regions.rois if regions.tracked else None
         return regions
 
@@ -208,7 +212,8 @@ class SubjectTracker:
         self._last_rois = None
         previous = self.view_track[1] if self.view_track is not None and self.view_track[0] == camera else None
         roi = roi_from_joints(self.rig.pair[camera], joints_2d, confidence, rc.joint_margin_frac, rc.min_size_px,
-                              min_confidence=cfg.min_confidence, min_joints=cfg.min_joints) if cfg.enabled else None
+                              min_confidence=cfg.min_confidence, min_joints=cfg.min_joints,
+                              roll_deg=self.rolls[camera]) if cfg.enabled else None
         self.view_track = None if roi is None else (camera, keep_roi(previous, snap_roi(roi, rc.snap_px),
                                                                      rc.keep_frac))
         return self.view_track is not None

@@ -321,6 +321,31 @@ class Camera:
     def without_distortion(self) -> "Camera":
         return self._derived(dist=np.zeros(5))
 
+    def rotated(self, degrees: float) -> "Camera":
+        """The camera whose image is this one's rotated ``degrees`` counterclockwise about the image
+        centre, size kept (the corners turn out of the frame, others come in): the same centre,
+        rolled about the optical axis, with the principal point moved to match. For a square image
+        and a multiple of 90 degrees it is :meth:`quarter_turned`. Pinhole cameras only.
+        """
+        if degrees % 360.0 == 0.0:
+            return self
+        if self.has_distortion:
+            raise GeometryError(f"camera {self.name!r}: only a pinhole camera can be rotated")
+        a = math.radians(degrees)
+        rot = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])  # pixels, y down
+        centre = np.array([(self.width - 1) / 2, (self.height - 1) / 2])
+        M = rot @ self.K[:2, :2]
+        # RQ of M = K2 @ Q: K2 upper triangular with a positive diagonal, Q a rotation (det M > 0).
+        r = math.hypot(M[1, 0], M[1, 1])
+        q_row = M[1] / r  # (-sin phi, cos phi)
+        q = np.array([[q_row[1], -q_row[0]], [q_row[0], q_row[1]]])
+        K = np.eye(3)
+        K[0, 0], K[0, 1], K[1, 1] = M[0] @ q[0], M[0] @ q[1], r
+        K[:2, 2] = rot @ (self.K[:2, 2] - centre) + centre
+        Rz = np.eye(3)
+        Rz[:2, :2] = q
+        return self._derived(K=K, R=Rz @ self.R, t=Rz @ self.t)
+
     def quarter_turned(self, turns: int) -> "Camera":
         """The camera whose image is this one's turned ``turns`` quarter turns counterclockwise, as
         ``np.rot90(image, turns)``: the same centre and optical axis, rolled about the axis.

@@ -107,3 +107,22 @@ def test_unsupported_calibrations_are_initialization_errors(calib):
     tilted.setDistortionCoefficients(S.CAM_B, [0.0] * 12 + [0.01, 0.0])
     with pytest.raises(RigInitializationError, match="tilted"):
         rig_from_calibration(tilted, S.CAM_B, S.CAM_C, (640, 400), 1.0)
+
+
+@pytest.mark.parametrize("roll", [180.0, 90.0, -30.0])
+def test_a_rolled_mount_keeps_the_rig_level_and_the_cameras_carry_the_roll(calib, rig, roll):
+    from ghnerf_runtime.preprocess import upright_roll_deg
+
+    rolled = rig_from_calibration(calib, S.CAM_B, S.CAM_C, (640, 400), mount_height_m=1.25, mount_roll_deg=roll)
+    left, right = rolled.pair
+    assert 0.5 * (left.center + right.center) == pytest.approx(np.array([0.0, -1.25, 0.0]), abs=1e-9)
+    a = np.radians(roll)  # turned counterclockwise seen from behind: the image's right turns towards up
+    assert left.R[0] == pytest.approx([np.cos(a), -np.sin(a), 0.0], abs=1e-12)
+    if roll == 180.0:
+        assert right.center[0] < left.center[0]  # upside down, the right-hand camera hangs on the rig's left
+    # the relative pose is still the EEPROM's, and the crops are rotated back upright
+    points = np.random.default_rng(0).uniform([-1, -2, 1], [1, 0, 4], (50, 3))
+    T = np.array(calib.getCameraExtrinsics(S.CAM_B, S.CAM_C, unit=dai.LengthUnit.METER))
+    assert np.allclose(right.to_camera(points), left.to_camera(points) @ T[:3, :3].T + T[:3, 3], atol=1e-6)
+    assert (upright_roll_deg(left) - roll + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-9)
+    assert rolled.metadata["mount_roll_deg"] == roll

@@ -200,8 +200,16 @@ def test_rig_file_overrides_the_device_calibration(tmp_path, rig):
         create_rig_source(f"depthai://?width=320&height=200&rig={tmp_path / 'rig.json'}")
     with pytest.raises(RigConfigError, match="rig="):
         create_rig_source(f"depthai://?rig={tmp_path / 'rig.json'}&mount_height=1")
+    with pytest.raises(RigConfigError, match="mount_roll"):
+        create_rig_source(f"depthai://?rig={tmp_path / 'rig.json'}&mount_roll=180")
     with pytest.raises(RigConfigError, match="nope.json"):
         create_rig_source(f"depthai://?rig={tmp_path / 'nope.json'}")
+
+
+def test_mount_roll_reaches_the_rig_from_the_device_calibration():
+    with open_rig(f"{URL}&mount_roll=180", link_factory=HostPipelineLink) as source:
+        left = source.rig.pair[0]
+        assert np.allclose(left.R, np.diag([-1.0, -1.0, 1.0])) and source.rig.metadata["mount_roll_deg"] == 180.0
 
 
 def test_rig_is_unknown_until_open():
@@ -231,6 +239,7 @@ def test_record_a_depthai_source_and_replay_it(tmp_path):
         ("depthai://?left=CAM_Z", "left"),
         ("depthai://?fps=0", "fps"),
         ("depthai://?queue=0", "queue"),
+        ("depthai://?mount_roll=400", "mount_roll"),
     ],
 )
 def test_option_errors(url, word):
@@ -242,6 +251,8 @@ def test_options_defaults():
     options = DepthaiOptions.from_url(RigUrl.parse("depthai://14442C10D13EABCE00"))
     assert (options.device_id, options.left, options.right, options.fps) == ("14442C10D13EABCE00", "CAM_B", "CAM_C", 30.0)
     assert (options.width, options.height, options.mount_height_m, options.pairing.policy.value) == (640, 400, None, "latest")
+    assert options.mount_roll_deg == 0.0
+    assert DepthaiOptions.from_url(RigUrl.parse("depthai://?mount_roll=180")).mount_roll_deg == 180.0
 
 
 def test_real_link_without_a_device_is_an_initialization_error():

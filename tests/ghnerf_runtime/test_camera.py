@@ -277,3 +277,20 @@ def test_quarter_turns_need_a_pinhole_and_no_skew():
     assert skewed.quarter_turned(2).K[0, 1] == 2.0
     with pytest.raises(GeometryError, match="half turns"):
         skewed.quarter_turned(1)
+
+
+@pytest.mark.parametrize("degrees", [0.0, 10.0, -33.0, 90.0, 180.0, 270.0])
+def test_a_rotated_camera_sees_its_image_rotated_about_the_centre(degrees):
+    cam = Camera("c", 64, 64, [[55.0, 0.7, 30.0], [0.0, 52.0, 35.5], [0.0, 0.0, 1.0]], np.zeros(5),
+                 *look_at((0.3, -1.4, -0.2), (0.0, -1.0, 3.0)))
+    rot = cam.rotated(degrees)
+    assert rot.size == cam.size and np.allclose(rot.center, cam.center) and rot.K[1, 0] == 0.0
+    a = np.radians(degrees)
+    turn = np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
+    uv, _ = cam.project(scene_points(50))
+    expected = (uv - 31.5) @ turn.T + 31.5  # the same pixel, rotated about the image centre
+    np.testing.assert_allclose(rot.project(scene_points(50))[0], expected, atol=1e-9)
+    if degrees % 90 == 0 and cam.K[0, 1] == 0.0:
+        np.testing.assert_allclose(rot.P, cam.quarter_turned(int(degrees // 90)).P, atol=1e-9)
+    square = make_camera().without_distortion().resized(48, 48)
+    np.testing.assert_allclose(square.rotated(90.0).P, square.quarter_turned(1).P, atol=1e-9)

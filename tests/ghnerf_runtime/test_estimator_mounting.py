@@ -1,6 +1,6 @@
-"""Cameras mounted on their side or upside down: the crops are turned upright (``roi.upright``).
+"""Cameras mounted on their side, upside down or crooked: the crops are rotated upright (``roi.upright``).
 
-The model was trained on upright views only. Before the crops were turned, the shipped model found no
+The model was trained on upright views only. Before the crops were rotated, the shipped model found no
 joint through a camera on its side and placed half of them about a metre off through one upside down.
 Runs the shipped model on a simulated sequence seen by the same rig rolled about each optical axis.
 """
@@ -18,22 +18,16 @@ from ghnerf_runtime.rig_file import dumps_rig, loads_rig
 MODELS = Path(__file__).resolve().parents[2] / "models"
 pytestmark = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model in models/")
 
-#: Rig-frame rotation of each camera about its own optical axis, and the sensor's new size.
-ROLLS = {
-    0: None,
-    90: np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),  # on its side: a portrait sensor
-    180: np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]),  # upside down: a ceiling mount
-}
-
-
-def rolled(rig: Rig, degrees: int) -> Rig:
-    """The rig with every camera rolled, through a rig file as a user would load it."""
-    Rz = ROLLS[degrees]
-    if Rz is None:
+def rolled(rig: Rig, degrees: float) -> Rig:
+    """The rig with every camera rolled about its optical axis (a quarter turn swaps the sensor's sides),
+    through a rig file as a user would load it."""
+    if degrees == 0:
         return rig
+    a = np.radians(degrees)
+    Rz = np.array([[np.cos(a), np.sin(a), 0.0], [-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
     cams = []
     for c in rig.cameras:
-        W, H = (c.height, c.width) if degrees == 90 else (c.width, c.height)
+        W, H = (c.height, c.width) if round(degrees) % 180 == 90 else (c.width, c.height)
         K = np.array([[c.K[0, 0], 0.0, (W - 1) / 2], [0.0, c.K[1, 1], (H - 1) / 2], [0.0, 0.0, 1.0]])
         cams.append(Camera(c.name, W, H, K, c.dist, Rz @ c.R, Rz @ c.t))
     return loads_rig(dumps_rig(Rig(tuple(cams), rig.volume, rig.rig_id)))
@@ -62,17 +56,18 @@ def run():
             for cam, (_, truth) in zip(rig.pair, shots):
                 seen = ~r.missing_2d[cam.name] & truth.visible
                 errors_2d += list(np.linalg.norm(r.joints_2d[cam.name][seen] - truth.joints_2d[seen], axis=1))
-        return {"turns": [st.turns for st in est._cams], "found": float(np.mean(found)),
+        return {"roll": [round(st.roll_deg, 6) for st in est._cams], "found": float(np.mean(found)),
                 "mpjpe_mm": float(np.mean(errors_3d)) if errors_3d else np.inf,
                 "median_2d_px": float(np.median(errors_2d)) if errors_2d else np.inf}
 
     return estimate
 
 
-@pytest.mark.parametrize("degrees, turns", [(90, 3), (180, 2)])
-def test_a_rolled_rig_sees_what_the_upright_one_does(run, degrees, turns):
+@pytest.mark.parametrize("degrees", [90, 180, 30])
+def test_a_rolled_rig_sees_what_the_upright_one_does(run, degrees):
     upright, mounted = run(0), run(degrees)
-    assert upright["turns"] == [0, 0] and mounted["turns"] == [turns, turns]
+    assert upright["roll"] == [0.0, 0.0]
+    np.testing.assert_allclose((np.array(mounted["roll"]) + degrees + 180) % 360 - 180, 0.0, atol=1e-6)
     assert mounted["found"] >= upright["found"] - 1.0, (mounted, upright)
     assert mounted["mpjpe_mm"] <= upright["mpjpe_mm"] + 10.0, (mounted, upright)
     # 2D joints come back in the sensor's own pixels, as mounted
@@ -82,5 +77,5 @@ def test_a_rolled_rig_sees_what_the_upright_one_does(run, degrees, turns):
 def test_without_upright_crops_an_upside_down_rig_is_wrong(run):
     """What ``roi.upright`` is for: the same sequence, crops left in the sensor's orientation."""
     upright, as_mounted = run(0), run(180, upright=False)
-    assert as_mounted["turns"] == [0, 0]
+    assert as_mounted["roll"] == [0.0, 0.0]
     assert as_mounted["mpjpe_mm"] > 3 * upright["mpjpe_mm"] or as_mounted["found"] < upright["found"] / 2

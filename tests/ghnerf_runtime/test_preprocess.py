@@ -15,7 +15,7 @@ from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints
 from ghnerf_runtime.preprocess import (
     Roi, apply_crop_maps, build_undistort_crop_maps, crop_camera, preprocess_image, roi_from_joints,
-    roi_from_volume, undistorted_image_bounds, upright_quarter_turns,
+    roi_from_volume, undistorted_image_bounds, upright_roll_deg,
 )
 
 K = np.array([[560.0, 0.0, 331.0], [0.0, 556.0, 236.5], [0.0, 0.0, 1.0]])
@@ -190,24 +190,27 @@ def _render_dots(cam: Camera, points: np.ndarray, sigma_px: float) -> np.ndarray
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
-@pytest.mark.parametrize(("antialias", "turns"), [(True, 0), (False, 0), (True, 1), (False, 2), (True, 3)])
-def test_dot_lands_where_crop_camera_projects_it(antialias, turns):
+@pytest.mark.parametrize(("antialias", "roll"), [(True, 0.0), (False, 0.0), (True, 90.0), (False, 180.0), (True, -33.0)])
+def test_dot_lands_where_crop_camera_projects_it(antialias, roll):
     cam = make_camera()
     roi = Roi(60, -30, 512)  # scale 4: two box levels when antialiased; partly off the frame
     points = np.array([[0.0, -1.0, 3.0], [-0.7, -1.5, 2.6], [0.6, -0.3, 2.4], [0.5, -1.8, 3.4]])
     sigma_model = 2.0
     frame = _render_dots(cam, points, sigma_px=sigma_model * roi.size / 128)
-    maps = build_undistort_crop_maps(cam, roi, 128, antialias=antialias, quarter_turns=turns)
+    maps = build_undistort_crop_maps(cam, roi, 128, antialias=antialias, roll_deg=roll)
     assert maps.level == (2 if antialias else 0)
     crop = apply_crop_maps(frame, maps).astype(np.float32) / 255.0
-    expected, _ = crop_camera(cam, roi, 128, quarter_turns=turns).project(points)
+    expected, _ = crop_camera(cam, roi, 128, roll).project(points)
     for uv in expected:  # decode each dot in its own window so the others do not compete
         heat = np.zeros_like(crop)
         u, v = np.round(uv).astype(int)
         heat[v - 8:v + 9, u - 8:u + 9] = crop[v - 8:v + 9, u - 8:u + 9]
         kp = decode_keypoints(heat[None], KeypointDecoderConfig(sigma=0.0))
         assert kp.valid[0]
-        assert np.linalg.norm(kp.uv[0] - uv) < 0.1, (kp.uv[0], uv)
+        # A box pre-reduction seen at a slant blurs the dot a little unevenly: the peak refinement
+        # then errs up to 0.13 px (0.01 px without the pre-reduction); the geometry itself is exact.
+        tolerance = 0.15 if antialias and roll % 90 else 0.1
+        assert np.linalg.norm(kp.uv[0] - uv) < tolerance, (kp.uv[0], uv)
 
 
 def test_padding_outside_the_frame_is_zero():
@@ -283,18 +286,42 @@ def test_a_wide_lens_that_folds_inside_the_image_still_gets_a_footprint_and_blan
     assert centre.any() and np.all(out[centre] == 200)
 
 
-@pytest.mark.parametrize(("roll_deg", "turns"), [(0, 0), (10, 0), (180, 2), (170, 2), (90, 1), (-90, 3), (-80, 3)])
-def test_upright_quarter_turns_undo_the_mounting_roll(roll_deg, turns):
-    """A camera rolled about its optical axis: the turns that show the rig's down as the picture's down."""
+@pytest.mark.parametrize("mounted_deg", [0, 10, 180, -170, 90, -90, -80])
+def test_upright_roll_undoes_the_mounting_roll(mounted_deg):
+    """A camera rolled about its optical axis: the crop rotation that shows the rig's down as the picture's down."""
     R, t = look_at((0.3, -1.2, -0.4), (0.0, -0.9, 3.0))
-    a = np.radians(roll_deg)  # the camera frame rolled by roll_deg about its z axis
+    a = np.radians(mounted_deg)  # the camera frame rolled about its z axis
     Rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
     cam = Camera("rolled", 640, 480, K, DIST, Rz @ R, Rz @ t)
-    got, left = upright_quarter_turns(cam)
-    assert got == turns
-    upright = crop_camera(cam, Roi(0, 0, 480), 128, quarter_turns=got)
+    roll = upright_roll_deg(cam)
+    assert (roll - mounted_deg + 180) % 360 - 180 == pytest.approx(0.0, abs=1e-6)
+    upright = crop_camera(cam, Roi(0, 0, 480), 128, roll)
     head, feet = upright.project(np.array([[0.0, -1.7, 3.0], [0.0, 0.0, 3.0]]))[0]
-    assert feet[1] - head[1] > 3 * abs(feet[0] - head[0])  # a standing person stands in the crop
-    assert abs(left) <= 45 and abs(abs(left) - abs(roll_deg - 90 * round(roll_deg / 90))) < 3
+    assert feet[1] - head[1] > 20 * abs(feet[0] - head[0])  # a standing person stands straight in the crop
     looking_down = Camera("down", 640, 480, K, DIST, np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]), np.zeros(3))
-    assert upright_quarter_turns(looking_down) == (0, 0.0)
+    assert upright_roll_deg(looking_down) == 0.0
+
+
+@pytest.mark.parametrize("roll", [0.0, 30.0, -45.0, 90.0])
+def test_a_rotated_crop_is_sized_for_what_it_shows(roll):
+    """A standing body seen through a camera rolled by roll: the crop rotated upright holds all of it,
+    with the margin asked for, and not much more."""
+    R, t = look_at((0.3, -1.2, -0.4), (0.0, -0.9, 3.0))
+    a = np.radians(roll)
+    Rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    cam = Camera("rolled", 640, 480, K, DIST, Rz @ R, Rz @ t)
+    assert upright_roll_deg(cam) == pytest.approx(roll, abs=1e-9)
+    body = np.array([[0.0, y, 3.0] for y in np.linspace(-1.7, 0.0, 18)] + [[-0.3, -1.4, 3.0], [0.3, -1.4, 3.0]])
+    roi = roi_from_joints(cam, body, np.ones(len(body)), margin_frac=0.1, min_size=8, roll_deg=roll)
+    crop = crop_camera(cam, roi, 128, roll)
+    uv, _ = crop.project(body)
+    assert np.all(uv >= 0) and np.all(uv <= 127)  # all of the body in the crop
+    height = uv[:, 1].max() - uv[:, 1].min()
+    assert 0.75 * 128 <= height <= 0.9 * 128  # the body fills the crop's height less the margins
+    assert uv[:18, 1].argmin() == 0  # upright: the head on top
+    vol = roi_from_volume(cam, VOLUME, roll_deg=roll)
+    corners = np.array([[x, y, z] for x in (-1.0, 1.0) for y in (-2.0, 0.0) for z in (2.0, 4.0)])
+    inside = crop_camera(cam, vol, 128, roll).project(corners)[0]
+    lo, hi = undistorted_image_bounds(cam)
+    assert vol.size <= 1.5 * max(hi - lo)  # a rotated crop of the volume stays about the image's size
+    assert np.all(np.isfinite(inside))

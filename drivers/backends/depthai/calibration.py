@@ -3,9 +3,10 @@
 Rig frame (the project convention, docs/rig-file.md): metres, x right, y down,
 z forward, origin on the floor below the midpoint of the two camera centres.
 The EEPROM knows the cameras relative to each other but not where the floor is,
-so we assume the device is mounted level (the left camera's axes are the rig
-axes: no pitch or roll) at ``mount_height_m`` above the floor. A tilted mount
-needs a calibrated rig file (``rig=``).
+so we assume the device is mounted without pitch (the left camera's optical axis
+is horizontal), rolled ``mount_roll_deg`` about it (0: level, 180: upside down),
+at ``mount_height_m`` above the floor. A tilted mount needs a calibrated rig file
+(``rig=``).
 
 Intrinsics are converted to the output size the way the Camera node produces it
 (``ImgResizeMode.CROP``: centre crop to the output aspect ratio, then scale),
@@ -76,11 +77,15 @@ def rig_from_calibration(
     size: tuple[int, int],
     mount_height_m: float,
     *,
+    mount_roll_deg: float = 0.0,
     names: tuple[str, str] = ("left", "right"),
     rig_id: str = "oak",
     volume: WorkingVolume = DEFAULT_VOLUME,
 ) -> Rig:
     """The stereo pair ``left``/``right`` of ``calib`` as a two-camera rig at output ``size``.
+
+    ``mount_roll_deg``: the device turned about its viewing direction, counterclockwise as seen
+    from behind it; the rig frame stays level (y down), so the cameras carry the roll.
 
     Raises:
         RigInitializationError: a socket is not calibrated, uses an unsupported lens
@@ -96,11 +101,15 @@ def rig_from_calibration(
     u, _, vt = np.linalg.svd(R_lr)  # the EEPROM stores float32: snap back onto a rotation
     R_lr = u @ vt
     centre_r = -R_lr.T @ t_lr  # right camera centre in the left camera's frame
-    # Rig origin in left-camera coordinates: below the midpoint of the centres, on the floor (y is down).
-    origin = 0.5 * centre_r + np.array([0.0, mount_height_m, 0.0])
+    # The left camera's frame is the level rig frame rolled: X_cam = roll @ X_rig + origin. Turned
+    # counterclockwise (seen from behind), the camera's x axis turns from the rig's right towards up.
+    a = np.radians(mount_roll_deg)
+    roll = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    # Rig origin in left-camera coordinates: below the midpoint of the centres, on the floor (the rig's down).
+    origin = 0.5 * centre_r + mount_height_m * roll[:, 1]
     try:
-        cam_l = cam_l.with_pose(np.eye(3), origin)
-        cam_r = cam_r.with_pose(R_lr, R_lr @ origin + t_lr)
+        cam_l = cam_l.with_pose(roll, origin)
+        cam_r = cam_r.with_pose(R_lr @ roll, R_lr @ origin + t_lr)
         return Rig(
             (cam_l, cam_r),
             volume,
@@ -109,7 +118,8 @@ def rig_from_calibration(
                 "source": "depthai-eeprom",
                 "sockets": [left.name, right.name],
                 "mount_height_m": mount_height_m,
-                "assumes": "level mount (no pitch/roll)",
+                "mount_roll_deg": mount_roll_deg,
+                "assumes": "no pitch; the roll is mount_roll_deg",
             },
         )
     except GeometryError as e:

@@ -10,6 +10,10 @@
 * ``mount_height``: height of the cameras above the floor, metres (default 1.0,
   logged as an assumption): places the rig frame's origin on the floor (see
   :mod:`.calibration`). ``height`` is the image height, hence the name.
+* ``mount_roll``: degrees the device is turned about its viewing direction, counterclockwise
+  as seen from behind it (default 0: level; 180: upside down, as hung from a ceiling; 90 or
+  -90: on its side). The device calibration cannot know it; the rig frame keeps gravity down
+  and the runtime shows the model upright crops (``roi.upright``).
 * ``rig``: path to a rig file to use instead of the device's calibration.
 * ``tolerance_ms``, ``policy``: pairing; the Sync node's threshold is ``tolerance_ms``.
 * ``queue``: depth of the host output queue (default 4; older groups are dropped). Under
@@ -47,6 +51,7 @@ class DepthaiOptions:
     width: int = 640
     height: int = 400
     mount_height_m: float | None = None  # None: not given (DEFAULT_MOUNT_HEIGHT_M is assumed)
+    mount_roll_deg: float = 0.0
     rig_path: Path | None = None
     queue_size: int = 4
     pairing: PairingConfig = PairingConfig()
@@ -68,11 +73,14 @@ class DepthaiOptions:
         height = url.take_int("height", 400, lo=16, hi=8192)
         mount = url.options.get("mount_height")
         mount_height = url.take_float("mount_height", DEFAULT_MOUNT_HEIGHT_M, lo=0.0, hi=10.0)
+        roll = url.options.get("mount_roll")
+        mount_roll = url.take_float("mount_roll", 0.0, lo=-360.0, hi=360.0)
         rig = url.take_str("rig")
-        if rig is not None and mount is not None:
-            raise RigConfigError(
-                f"rig URL {url.url!r}: give rig= (a rig file) or mount_height= (with the device calibration), not both"
-            )
+        for given, name in ((mount, "mount_height"), (roll, "mount_roll")):
+            if rig is not None and given is not None:
+                raise RigConfigError(
+                    f"rig URL {url.url!r}: give rig= (a rig file) or {name}= (with the device calibration), not both"
+                )
         tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=1000.0)
         policy = url.take_str("policy", DropPolicy.LATEST.value, choices=tuple(p.value for p in DropPolicy))
         queue_size = url.take_int("queue", 4, lo=1, hi=64)
@@ -85,6 +93,7 @@ class DepthaiOptions:
             width=width,
             height=height,
             mount_height_m=mount_height if mount is not None else None,
+            mount_roll_deg=mount_roll,
             rig_path=Path(rig) if rig else None,
             queue_size=queue_size,
             pairing=PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)),

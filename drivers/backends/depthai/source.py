@@ -109,6 +109,7 @@ class DepthaiRigSource(RigSource):
             board_socket(o.right),
             (o.width, o.height),
             DEFAULT_MOUNT_HEIGHT_M if o.mount_height_m is None else o.mount_height_m,
+            mount_roll_deg=o.mount_roll_deg,
             rig_id=f"oak-{link.device_id() or 'device'}",
         )
 
