@@ -1,16 +1,47 @@
-"""Opening a small auxiliary ONNX file (the skeleton prior, the novel-view painter) on the CPU.
+"""Opening a small auxiliary ONNX file (the skeleton prior, the novel-view painter) on the CPU, and
+onnxruntime's process-wide thread pool.
 
 The model's own graphs go through :class:`ghnerf_runtime.session.ModelSession`, which shares one
 thread pool between them; these files are one small network each, loaded beside them with a pool of
-their own whose workers do not spin.
+their own whose workers do not spin, or on the global pool once one is installed
+(``SessionConfig.thread_pool = "global"``): onnxruntime then refuses any session with its own.
 """
 from __future__ import annotations
 
+import logging
+import threading
 from pathlib import Path
 
-from ghnerf_runtime.errors import ModelLoadError
+from ghnerf_runtime.errors import ModelError, ModelLoadError
 
-__all__ = ["open_onnx_file"]
+__all__ = ["open_onnx_file", "ensure_global_pool", "global_pool_threads"]
+
+log = logging.getLogger(__name__)
+
+# onnxruntime's global pool is process-wide by nature and cannot be resized once installed.
+_global_pool_lock = threading.Lock()
+_global_pool_threads: int | None = None
+
+
+def ensure_global_pool(threads: int) -> None:
+    """Install onnxruntime's process-wide pool once (it cannot be resized afterwards)."""
+    global _global_pool_threads
+    with _global_pool_lock:
+        if _global_pool_threads is None:
+            try:
+                from onnxruntime.capi import _pybind_state
+                _pybind_state.set_global_thread_pool_sizes(int(threads), 1)
+            except (AttributeError, RuntimeError) as e:
+                raise ModelError(f"cannot install onnxruntime's global thread pool ({e}); use "
+                                 "thread_pool='per_session'") from e
+            _global_pool_threads = int(threads)
+        elif _global_pool_threads != threads:
+            log.warning("onnxruntime global pool already has %d threads; %d requested", _global_pool_threads, threads)
+
+
+def global_pool_threads() -> int | None:
+    """The global pool's size once installed, else ``None``."""
+    return _global_pool_threads
 
 
 def open_onnx_file(path: str | Path, threads: int, what: str):
@@ -22,12 +53,15 @@ def open_onnx_file(path: str | Path, threads: int, what: str):
     if not path.is_file():
         raise ModelLoadError(f"no such {what} file", path=str(path))
     opts = ort.SessionOptions()
-    opts.intra_op_num_threads = threads
-    opts.inter_op_num_threads = 1
-    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    if global_pool_threads() is not None:  # every session of the process must then run on it
+        opts.use_per_session_threads = False
+    else:
+        opts.intra_op_num_threads = threads
+        opts.inter_op_num_threads = 1
+        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
     try:
         sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
     except Exception as e:  # onnxruntime's own exception types
-        raise ModelLoadError(f"onnxruntime cannot load it ({path.stat().st_size} bytes; truncated or corrupt?): "
-                             f"{type(e).__name__}: {str(e).strip()[:200]}", path=str(path)) from e
+        raise ModelLoadError(f"onnxruntime cannot load the {what} ({path.stat().st_size} bytes): "
+                             f"{type(e).__name__}: {' '.join(str(e).split())[:500]}", path=str(path)) from e
     return sess, dict(sess.get_modelmeta().custom_metadata_map)

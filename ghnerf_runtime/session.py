@@ -47,7 +47,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,6 +71,7 @@ from ghnerf_runtime.contract import (
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.novel_painter import NovelPainter
+from ghnerf_runtime.onnx_file import ensure_global_pool
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
@@ -90,8 +90,6 @@ AUTO_PRECISION: Mapping[str, str] = {
     "render": "fp32", "query": "fp32",
 }
 _ONNX_FLOAT = "tensor(float)"
-_global_pool_lock = threading.Lock()
-_global_pool_threads: int | None = None
 
 
 @dataclass(frozen=True)
@@ -125,7 +123,7 @@ def _session_options(config: SessionConfig) -> ort.SessionOptions:
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     so.log_severity_level = 3
     if config.thread_pool == "global":
-        _ensure_global_pool(config.threads)
+        ensure_global_pool(config.threads)
         so.use_per_session_threads = False
     else:
         so.intra_op_num_threads = config.threads
@@ -135,22 +133,6 @@ def _session_options(config: SessionConfig) -> ort.SessionOptions:
             so.add_session_config_entry("session.intra_op.allow_spinning", "0")
             so.add_session_config_entry("session.inter_op.allow_spinning", "0")
     return so
-
-
-def _ensure_global_pool(threads: int) -> None:
-    """Install onnxruntime's process-wide pool once (it cannot be resized afterwards)."""
-    global _global_pool_threads
-    with _global_pool_lock:
-        if _global_pool_threads is None:
-            try:
-                from onnxruntime.capi import _pybind_state
-                _pybind_state.set_global_thread_pool_sizes(int(threads), 1)
-            except (AttributeError, RuntimeError) as e:
-                raise ModelError(f"cannot install onnxruntime's global thread pool ({e}); use "
-                                 "thread_pool='per_session'") from e
-            _global_pool_threads = int(threads)
-        elif _global_pool_threads != threads:
-            log.warning("onnxruntime global pool already has %d threads; %d requested", _global_pool_threads, threads)
 
 
 def _open(path: Path, config: SessionConfig) -> ort.InferenceSession:

@@ -220,3 +220,22 @@ def test_model_card_is_read_when_present(tiny_model_dir, tmp_path):
     assert _load_encoder(folder).card == {"name": "tiny-test", "pck": 0.5}
     (folder / "model_card.json").write_text("{not json")
     assert _load_encoder(folder).card == {}  # an unreadable card is not fatal
+
+
+@pytest.mark.skipif(not (REPO / "models" / "model_card.json").is_file(), reason="no trained model in models/")
+def test_the_global_thread_pool_loads_the_shipped_model_with_its_prior_and_painter():
+    """onnxruntime's global pool is process-wide: once installed, every session must use it, the skeleton
+    prior's and the painter's too (they failed to load, blamed on a corrupt file). In a child process, so
+    this test's pool does not reach the others'."""
+    script = (
+        "from ghnerf_runtime.config import EstimatorConfig, SessionConfig, NovelViewConfig\n"
+        "from ghnerf_runtime.estimator import load_session\n"
+        "cfg = EstimatorConfig(session=SessionConfig(model_dir='models', thread_pool='global', warmup=False),\n"
+        "                      novel_view=NovelViewConfig(enabled=True, painter='on'))\n"
+        "s = load_session(cfg)\n"
+        "assert s.skeleton_prior is not None and s.novel_painter is not None\n"
+        "print('loaded')\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert proc.returncode == 0 and "loaded" in proc.stdout, proc.stderr[-2000:]
