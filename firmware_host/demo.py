@@ -39,6 +39,7 @@ import numpy as np
 
 import drivers
 from drivers.sim.demo import draw_truth
+from firmware_host.errors import FirmwareHostError
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import open_sink
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
@@ -349,7 +350,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return _run(args)
-    except DemoError as e:
+    except (DemoError, drivers.DriverError, FirmwareHostError, OSError) as e:
+        # a wrong --url / --sink / --out, a camera that is not there: one line, not a traceback
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
 

@@ -751,6 +751,8 @@ def load_config(path: str | os.PathLike) -> EstimatorConfig:
         raise ConfigError(f"cannot read config file ({e.strerror or e})", key=str(path)) from e
     except json.JSONDecodeError as e:
         raise ConfigError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", key=str(path)) from e
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"not UTF-8 text (byte {e.start}): {e.reason}", key=str(path)) from e
     try:
         return config_from_dict(data)
     except ConfigError as e:

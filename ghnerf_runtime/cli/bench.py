@@ -24,6 +24,7 @@ import argparse
 import itertools
 import json
 import logging
+import math
 import os
 import sys
 import time
@@ -319,6 +320,17 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _no_nan(value):
+    """``value`` with every float NaN or infinity replaced by ``None`` (strict JSON parsers refuse them)."""
+    if isinstance(value, dict):
+        return {k: _no_nan(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_no_nan(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
@@ -334,14 +346,22 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ghnerf-bench: error: heatmap sources are {','.join(HEATMAP_SOURCES)}", file=sys.stderr)
             return 2
         bad = [p for p in args.precisions if p not in ("fp32", "int8", "auto")]
-        if bad or any(m not in ("keypoints", "novel") for m in args.modes):
+        if bad or not args.precisions or any(m not in ("keypoints", "novel") for m in args.modes):
             print("ghnerf-bench: error: precisions are fp32,int8,auto and modes keypoints,novel", file=sys.stderr)
+            return 2
+        if args.sequences < 1 or args.frames < 1 or args.warmup < 0:
+            print("ghnerf-bench: error: --sequences and --frames must be at least 1, --warmup at least 0",
+                  file=sys.stderr)
+            return 2
+        if args.sequences * args.frames <= args.warmup:
+            print(f"ghnerf-bench: error: {args.sequences} x {args.frames} pairs leave none after --warmup "
+                  f"{args.warmup}: nothing would be timed", file=sys.stderr)
             return 2
         print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs; model {args.model_dir}", flush=True)
         report = run_runtime_bench(args)
         if args.json:
             with open(args.json, "w", encoding="utf-8") as fh:
-                json.dump(report, fh, indent=2, default=float)
+                json.dump(_no_nan(report), fh, indent=2, default=float)  # strict JSON: NaN becomes null
         return 0
     except (RuntimeErrorBase, OSError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)

@@ -48,8 +48,8 @@ class UsageError(RuntimeErrorBase):
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="ghnerf-run", description=__doc__.split("\n\n")[0],
                                  epilog="Schema and examples: docs/runtime.md")
-    ap.add_argument("--rig", required=True, help="rig file (docs/rig-file.md)")
-    src = ap.add_mutually_exclusive_group(required=True)
+    ap.add_argument("--rig", help="rig file (docs/rig-file.md); required unless --validate-config")
+    src = ap.add_mutually_exclusive_group()
     src.add_argument("--images", nargs=2, metavar=("FIRST", "SECOND"), help="one image per camera, rig order")
     src.add_argument("--videos", nargs=2, metavar=("FIRST", "SECOND"), help="one video per camera, rig order")
     ap.add_argument("--out", default="-", help="joints output: .json (a list), .jsonl or - (stdout, one object "
@@ -77,15 +77,39 @@ def build_parser() -> argparse.ArgumentParser:
                          "reports each pair's raw joints")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
-    ap.add_argument("--novel-alpha", type=float, default=0.5, help="novel camera between the rig cameras: 0 = first, "
-                                                                   "1 = second (default 0.5)")
-    ap.add_argument("--novel-overlay", choices=("none", "skeleton", "heatmap"), default="none")
+    ap.add_argument("--novel-alpha", type=float, help="novel camera between the rig cameras: 0 = first, "
+                                                      "1 = second (default 0.5)")
+    ap.add_argument("--novel-overlay", choices=("none", "skeleton", "heatmap"), help="drawn on the novel view "
+                                                                                     "(default none)")
     ap.add_argument("--novel-stride", type=int, choices=(1, 2, 4), help="render every n-th novel-view pixel")
     ap.add_argument("--overlay", metavar="PATH", help="both input frames with the 2D joints drawn: .png or .mp4")
-    ap.add_argument("--max-frames", type=int, help="stop after this many pairs (videos)")
+    ap.add_argument("--max-frames", type=int, help="stop after this many pairs (videos; at least 1)")
     ap.add_argument("--validate-config", action="store_true", help="check the config, print it, exit")
     ap.add_argument("-v", "--verbose", action="store_true")
     return ap
+
+
+def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """What argparse cannot say: no flag is accepted and then ignored."""
+    if not args.validate_config:
+        if not args.rig:
+            ap.error("the following arguments are required: --rig")
+        if not (args.images or args.videos):
+            ap.error("one of the arguments --images --videos is required")
+    if not args.novel_view:
+        given = [f for f, v in (("--novel-alpha", args.novel_alpha), ("--novel-overlay", args.novel_overlay),
+                                ("--novel-stride", args.novel_stride)) if v is not None]
+        if given:
+            ap.error(f"{', '.join(given)} without --novel-view: there is no novel view to apply it to")
+    if args.max_frames is not None:
+        if args.images:
+            ap.error("--max-frames applies to --videos (--images is one pair)")
+        if args.max_frames < 1:
+            ap.error(f"--max-frames must be at least 1, got {args.max_frames}")
+    if args.novel_alpha is None:
+        args.novel_alpha = 0.5
+    if args.novel_overlay is None:
+        args.novel_overlay = "none"
 
 
 def _config(args) -> EstimatorConfig:
@@ -95,7 +119,7 @@ def _config(args) -> EstimatorConfig:
         session = replace(session, model_dir=args.model_dir)
     if args.precision:
         session = replace(session, precision=args.precision)
-    if args.threads:
+    if args.threads is not None:  # 0 too: the config's check names it
         session = replace(session, threads=args.threads)
     cfg = replace(cfg, session=session)
     if args.method:
@@ -169,6 +193,8 @@ class _Sink:
     def __init__(self, path: str, fps: float = 30.0) -> None:
         self.path = path
         self.video = Path(path).suffix.lower() in (".mp4", ".avi", ".mkv")
+        if not self.video and not cv2.haveImageWriter(path):  # said now, not after the whole run
+            raise UsageError(f"{path}: cannot write an image of this kind; give .png, .jpg or .mp4")
         self.writer = None
         self.fps = fps
         self.last = None
@@ -187,8 +213,13 @@ class _Sink:
     def close(self) -> None:
         if self.writer is not None:
             self.writer.release()
-        if self.last is not None and not cv2.imwrite(self.path, self.last):
-            raise UsageError(f"{self.path}: cannot write the image (unknown extension or no permission)")
+        if self.last is not None:
+            try:
+                written = cv2.imwrite(self.path, self.last)
+            except cv2.error as e:
+                raise UsageError(f"{self.path}: cannot write the image: {e}") from None
+            if not written:
+                raise UsageError(f"{self.path}: cannot write the image (no permission, or no such folder)")
 
 
 def _run(args) -> int:
@@ -244,7 +275,9 @@ def _run(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    _check_args(ap, args)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     try:

@@ -140,6 +140,20 @@ def test_bad_config_is_a_one_line_error(tmp_path, capsys):
     assert len(err.splitlines()) == 1 and "joints3d.metod" in err and str(config) in err
 
 
+@pytest.mark.parametrize(("args", "words"), [
+    (["--url", "bogus://x"], ["bogus"]),
+    (["--url", "replay:///nonexistent/take"], ["/nonexistent/take"]),
+    (["--sink", "bogus://x"], ["bogus"]),
+])
+def test_a_wrong_url_or_sink_is_a_one_line_error(tmp_path, capsys, sim_url, args, words):
+    argv = ["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out")]
+    if "--url" not in args:
+        argv += ["--url", sim_url]
+    assert demo.main(argv + args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and all(w in err for w in words), err
+
+
 def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_url):
     rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path),
                     "--model-dir", str(tmp_path / "no-model")])

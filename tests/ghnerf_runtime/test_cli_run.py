@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.cli import run as cli_run
+from ghnerf_runtime.config import EstimatorConfig, config_to_dict
 from ghnerf_runtime.rig_file import load_rig
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
@@ -113,6 +115,52 @@ def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
     assert tree["smoothing"]["enabled"] is True  # on by default
     assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--validate-config", "--no-smoothing"]) == 0
     assert json.loads(capsys.readouterr().out)["smoothing"]["enabled"] is False
+
+
+def test_the_defaults_in_the_docs_are_the_configs():
+    text = (Path(__file__).resolve().parents[2] / "docs" / "runtime.md").read_text()
+    block = text.split("prints the resolved tree. Defaults:\n\n```json\n", 1)[1].split("```", 1)[0]
+    assert json.loads(block) == config_to_dict(EstimatorConfig())
+
+
+def test_validate_config_needs_no_rig_or_images(tmp_path, capsys):
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text('{"joints3d": {"method": "volumetric"}}')
+    assert cli_run.main(["--config", str(cfg), "--validate-config"]) == 0  # as docs/runtime.md writes it
+    assert json.loads(capsys.readouterr().out)["joints3d"]["method"] == "volumetric"
+    cfg.write_bytes('{"session": {"model_dir": "mod\xe9ls"}}'.encode("latin-1"))
+    assert cli_run.main(["--config", str(cfg), "--validate-config"]) == 2
+    assert "not UTF-8" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("extra", "words"), [
+    ([], ["--rig"]),
+    (["--rig", "r.json"], ["--images", "--videos"]),
+    (["--rig", "r.json", "--images", "a", "b", "--novel-stride", "2"], ["--novel-stride", "without --novel-view"]),
+    (["--rig", "r.json", "--images", "a", "b", "--novel-alpha", "0.3", "--novel-overlay", "skeleton"],
+     ["--novel-alpha, --novel-overlay"]),
+    (["--rig", "r.json", "--images", "a", "b", "--max-frames", "3"], ["--max-frames applies to --videos"]),
+    (["--rig", "r.json", "--videos", "a", "b", "--max-frames", "0"], ["at least 1"]),
+])
+def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli_run.main(extra)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert all(w in err for w in words), err
+
+
+def test_threads_zero_is_refused_by_the_config_check(capsys):
+    assert cli_run.main(["--validate-config", "--threads", "0"]) == 2
+    assert "threads" in capsys.readouterr().err
+
+
+def test_an_output_image_of_unknown_kind_is_refused_before_the_run(sim_pair, tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    args = ["--rig", sim_pair["rig"], "--model-dir", str(tiny_model_dir), "--images", sim_pair["left"],
+            sim_pair["right"], "--out", str(tmp_path / "j.json")]
+    assert cli_run.main(args + ["--overlay", str(tmp_path / "overlay.txt")]) == 2
+    assert "overlay.txt: cannot write an image of this kind" in capsys.readouterr().err
+    assert not (tmp_path / "j.json").exists() or (tmp_path / "j.json").read_text() == ""
 
 
 def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir, tmp_path):  # noqa: F811
@@ -283,3 +331,15 @@ def test_simdata_doctests():
     from ghnerf_runtime.cli import simdata
 
     assert doctest.testmod(simdata, raise_on_error=False).failed == 0
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--sequences", "0"], "at least 1"),
+    (["--precisions", ","], "precisions are"),
+    (["--sequences", "1", "--frames", "5", "--warmup", "10"], "nothing would be timed"),
+])
+def test_bench_refuses_a_run_that_would_time_nothing(args, words, capsys):
+    from ghnerf_runtime.cli import bench
+
+    assert bench.main(["runtime", "--model-dir", "unused", *args]) == 2
+    assert words in capsys.readouterr().err
