@@ -389,6 +389,19 @@ def dataset_matches(cfg: PipelineConfig) -> bool:
     return True
 
 
+def _set_aside_forced(cfg: PipelineConfig, forced: set[str]) -> None:
+    """``--force`` of a stage that reuses what it finds (the dataset, a finished run): move that aside
+    (``<name>.replaced-<time>``, nothing deleted), so the stage makes it again."""
+    folders = {"data": cfg.data, **{f"pretrain_{v}": pretrain_dir(cfg, v) for v in VARIANTS if pretrain_block(cfg, v)},
+               **{f"train_{v}": cfg.runs / VARIANTS[v] for v in VARIANTS}}
+    stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    for stage, folder in folders.items():
+        if stage in forced and folder.exists():
+            aside = folder.with_name(f"{folder.name}.replaced-{stamp}")
+            folder.rename(aside)
+            log.info("--force %s: moved %s aside to %s", stage, folder, aside)
+
+
 def stage_data(cfg: PipelineConfig) -> tuple[list[Path], dict]:
     if not dataset_matches(cfg):
         _sh([sys.executable, "-m", "training.data.generate", "--out", str(cfg.data), "--train", str(cfg.train),
@@ -582,7 +595,12 @@ def stage_train(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
         _sh(_train_cmd(cfg, preset, run), run / "train.log")
     summary = json.loads(summary_p.read_text())
     if summary.get("stopped_early"):
-        log.warning("%s stopped early at step %s (max_minutes)", preset, summary.get("steps"))
+        if not cfg.accept_stopped:  # no stamp: the next run of the pipeline resumes it
+            raise RuntimeError(f"{run} stopped at its max_minutes cap after {summary.get('steps')} of "
+                               f"{summary.get('iterations', '?')} steps: run the same command again to resume it, "
+                               "or pass --accept-stopped to use it as it is")
+        log.warning("%s stopped early at step %s (max_minutes); used as it is (--accept-stopped)", preset,
+                    summary.get("steps"))
     return [run / "last.pt"], {"summary": summary, "config": json.loads(cfg_p.read_text())}
 
 
@@ -849,6 +867,7 @@ def run(cfg: PipelineConfig) -> dict | None:
     _warn_if_replacing_another_recipe(cfg)
     cfg.out.mkdir(parents=True, exist_ok=True)
     st = Stages(cfg.out, cfg.force)
+    _set_aside_forced(cfg, st.force)
     data_in = {"data": str(cfg.data), "res": cfg.res, "train": cfg.train, "val": cfg.val,
                "vsm": cfg.val_seen_motions, **({"freestyle": cfg.freestyle_share} if cfg.freestyle_share else {})}
     d = st.run("data", data_in, lambda: stage_data(cfg))
@@ -863,6 +882,9 @@ def run(cfg: PipelineConfig) -> dict | None:
                 "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped,
                 "pretrain": pretrain_inputs(cfg, variant) if pretrain_block(cfg, variant) else None}
 
+    for v in cfg.variants:  # a run stopped at its max_minutes cap is resumed, whatever its stamp says
+        if cfg.until != "pretrain" and not _run_finished(cfg, v):
+            st.force.add(f"train_{v}")
     todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v)) is None and not _run_finished(cfg, v)]
     if cfg.until != "pretrain" and cfg.parallel_train and len(todo) > 1 and not torch.cuda.is_available():
         train_side_by_side(cfg, todo)  # (it trains too: not when only the pretraining is asked for)

@@ -537,3 +537,26 @@ def test_quick_pipeline_end_to_end_scores_its_prior_and_a_new_prior_re_evaluates
     caplog.clear()
     assert main(["--quick", "--out", str(out), "--prior-set", "steps=5"]) == 0  # another prior: re-evaluated
     assert ran() == ["prior_ghnerf", "eval_ghnerf", "card"]
+
+
+def test_a_run_stopped_at_its_cap_is_resumed_and_force_trains_anew(tmp_path, capsys):
+    """A run that hit ``max_minutes`` is no finished stage: the pipeline says so, and running it again
+    resumes the run (its stamp used to keep the partial model for good). ``--force train`` trains anew,
+    the old run moved aside, not deleted."""
+    from training.pipeline import main
+
+    out, runs = tmp_path / "q", tmp_path / "q" / "runs"
+    capped = ["--quick", "--out", str(out), "--until", "train", "--set", "max_minutes=0.00001", "--set", "log_every=1"]
+    assert main(capped) == 2
+    assert "stopped at its max_minutes cap" in capsys.readouterr().err
+    summary = json.loads((runs / "edge128" / "summary.json").read_text())
+    assert summary["stopped_early"] and summary["steps"] < summary["iterations"]
+    assert main(["--quick", "--out", str(out), "--until", "train"]) == 0  # the cap lifted: resumed
+    for run in ("edge128", "edge128_baseline"):
+        summary = json.loads((runs / run / "summary.json").read_text())
+        assert summary["steps"] == summary["iterations"] and not summary["stopped_early"]
+    first = sha256(runs / "edge128" / "last.pt")
+    assert main(["--quick", "--out", str(out), "--until", "train", "--force", "train_ghnerf"]) == 0
+    aside = [p for p in runs.iterdir() if p.name.startswith("edge128.replaced-")]
+    assert len(aside) == 1 and sha256(aside[0] / "last.pt") == first
+    assert (runs / "edge128" / "summary.json").exists() and (runs / "edge128_baseline").exists()
