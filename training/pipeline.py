@@ -157,6 +157,9 @@ class PipelineConfig:
     training time again)."""
     quick: bool = False
     accept_stopped: bool = False
+    parity_check: bool = True
+    """Stop when an exported graph differs from torch, or int8 from fp32, beyond ``training.export.parity``'s
+    bounds (the figures go to the card either way)."""
     until: str | None = None
     """Stop after this stage kind (``data``, ``pretrain``, ``train``): train where a GPU is, finish elsewhere."""
     variants: tuple[str, ...] = tuple(VARIANTS)
@@ -535,14 +538,13 @@ def expected_model(cfg: PipelineConfig, variant: str) -> dict:
 
 def _run_model(run: Path) -> dict | None:
     """The model config a run folder's last checkpoint was trained with (None: no checkpoint)."""
-    import torch
-
     last = run / "last.pt"
     if not last.exists():
         return None
     from training.model import ModelConfig
+    from training.train import load_checkpoint
 
-    ck = torch.load(str(last), map_location="cpu", weights_only=False)
+    ck = load_checkpoint(last)  # a damaged file: an error naming it
     # Through the dataclass: keys added since the run was saved read as their defaults.
     return _model_key(ModelConfig.from_dict(ck.get("model_config", {})).to_dict())
 
@@ -632,7 +634,7 @@ def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Pa
     import torch
 
     from training.export.export import example_inputs, export_all
-    from training.export.parity import torch_vs_ort
+    from training.export.parity import check_fp32_parity, torch_vs_ort
     from training.train import load_model
 
     outputs, info = [], {}
@@ -646,6 +648,8 @@ def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Pa
         paths = export_all(model, folder, inputs=example_inputs(model))
         info[variant] = {"fp32_parity_torch_vs_ort": torch_vs_ort(
             model, paths, example_inputs(model, targets=3, ray_stride=4, seed=1))}
+        if cfg.parity_check:
+            check_fp32_parity(info[variant]["fp32_parity_torch_vs_ort"], f"{folder}/")
         outputs += [weights, *paths.values()]
     return outputs, info
 
@@ -653,7 +657,7 @@ def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Pa
 def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
-    from training.export.parity import int8_vs_fp32
+    from training.export.parity import check_int8_parity, int8_vs_fp32
     from training.export.quantize import calibration_feeds, quantize_all
     from training.train import load_model
 
@@ -672,6 +676,8 @@ def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[
         parity_in = _scene_inputs(model, val_ds[0], ray_stride=model.config.heatmap_stride, targets=[0, 1])
         info[variant] = {"int8_vs_fp32": int8_vs_fp32(fp32, int8, model.contract(), parity_in),
                          "calibration_scenes": len(calib)}
+        if cfg.parity_check:
+            check_int8_parity(info[variant]["int8_vs_fp32"], f"{folder}: ")
         outputs += list(int8.values())
     return outputs, info
 
@@ -950,6 +956,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--variants", default=",".join(VARIANTS),
                     help="variants to take through train/export/quantize/eval now (the card needs all)")
     ap.add_argument("--threads", type=int, default=2, help="torch / onnxruntime threads for export and eval")
+    ap.add_argument("--no-parity-check", action="store_true",
+                    help="export and quantize even when onnxruntime strays from torch (fp32) or int8 from fp32 "
+                         "beyond training.export.parity's bounds (default: stop there)")
     ap.add_argument("--sequential-train", action="store_true",
                     help="train the variants one after the other with every core (default on CPU: side by side)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
@@ -996,6 +1005,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg.workers = args.workers
     cfg.until = args.until
     cfg.accept_stopped = args.accept_stopped
+    cfg.parity_check = not args.no_parity_check
     cfg.threads = args.threads
     cfg.parallel_train = not args.sequential_train
     cfg.variants = tuple(v for v in args.variants.split(",") if v)

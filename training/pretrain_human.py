@@ -41,7 +41,7 @@ from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
 from training.train import HEATMAP_SIGMA_HM_PX, DistInfo, Progress, apply_overrides, learning_rate, \
-    load_config_file, mirrored, model_config_of, scene_order, seed_everything
+    load_checkpoint, load_config_file, mirrored, model_config_of, scene_order, seed_everything
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -340,6 +340,25 @@ def pretrain_step(model: GHNeRF, opt: torch.optim.Optimizer, images: Tensor, hea
     return float(loss.detach())
 
 
+#: Pretraining keys a resumed run may change: its length, where the data lives and how it runs.
+RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "log_every", "eval_every",
+                     "eval_scenes", "checkpoint_every", "loader_workers")
+
+
+def _check_resumable(cfg: PretrainConfig, last: Path) -> None:
+    """Refuse to resume ``last`` under another config (checkpoints from before the config was stored pass)."""
+    old = load_checkpoint(last).get("config")
+    if not old:
+        return
+    now = json.loads(json.dumps(asdict(cfg)))
+    was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
+    differ = sorted(k for k in now if k not in RESUME_MAY_CHANGE and was.get(k) != now.get(k))
+    if differ:
+        raise ConfigError(f"{last}: resuming under another config ({', '.join(differ)} differ from the run's); "
+                          "resume changes only " + ", ".join(RESUME_MAY_CHANGE) + ": start a new run (--out) "
+                          "for another config")
+
+
 def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, quiet: bool = False,
              dataset=None, eval_dataset=None) -> dict:
     """Run (or resume) the pretraining; returns the summary (also in ``out_dir/summary.json``)."""
@@ -348,6 +367,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
 
     cfg.validate()
     out = Path(out_dir)
+    if resume and (out / "last.pt").exists():
+        _check_resumable(cfg, out / "last.pt")  # before config.json is overwritten with the new one
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
     use_cuda = cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available())
@@ -375,7 +396,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     last = out / "last.pt"
     ck = None
     if resume and last.exists():
-        ck = torch.load(str(last), map_location=device, weights_only=False)
+        ck = load_checkpoint(last, map_location=device)
         model.human.load_state_dict(ck["human"])
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])
@@ -385,7 +406,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
 
     def checkpoint(s: int) -> None:
         state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s,
-                 "segments": clock.segments(s)}
+                 "segments": clock.segments(s), "config": asdict(cfg)}
         torch.save(state, last.with_suffix(".tmp"))
         os.replace(last.with_suffix(".tmp"), last)
         save_human(out / "human.pt", model, s)

@@ -488,7 +488,7 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
     files you made), the weights-only files ``make model`` ships, and bare state dicts; the model
     config stored in the file wins, ``default_config`` serves files that carry none.
     """
-    ck = torch.load(str(path), map_location=map_location, weights_only=False)
+    ck = load_checkpoint(path, map_location)
     if "model_config" in ck:
         mcfg = ModelConfig.from_dict(ck["model_config"])
     elif default_config is not None:
@@ -557,6 +557,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         local_world = int(os.environ.get("LOCAL_WORLD_SIZE", info.world))
         torch.set_num_threads(cfg.threads or max(1, (os.cpu_count() or 1) // local_world))
         torch.set_flush_denormal(True)
+    if resume and (out_dir / "last.pt").exists():
+        check_resumable(cfg, out_dir / "last.pt")  # before config.json is overwritten with the new one
     if info.main:
         out_dir.mkdir(parents=True, exist_ok=True)
         _take_lock(out_dir / "train.pid")
@@ -566,6 +568,35 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     finally:
         if info.main:
             (out_dir / "train.pid").unlink(missing_ok=True)
+
+
+#: Train-config keys a resumed run may change: its length, where the data lives and how it runs.
+RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "log_every", "pck_every",
+                     "checkpoint_every")
+
+
+def load_checkpoint(path: str | Path, map_location="cpu") -> dict:
+    """``torch.load`` of a checkpoint; a damaged file is a ``ConfigError`` naming it."""
+    try:
+        return torch.load(str(path), map_location=map_location, weights_only=False)
+    except Exception as e:  # torch's zip reader, pickle, EOF...
+        raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {' '.join(str(e).split())[:200]}); "
+                          "delete it, or restore one of the run's ckpt_*.pt as last.pt") from e
+
+
+def check_resumable(cfg: TrainConfig, last: Path) -> None:
+    """Refuse to resume ``last`` under another config: the rest of the run would silently mix two (only
+    :data:`RESUME_MAY_CHANGE` may differ)."""
+    old = load_checkpoint(last).get("config")
+    if not old:
+        return
+    was = json.loads(json.dumps(asdict(build_config(old))))  # keys added since read as their defaults
+    now = json.loads(json.dumps(asdict(cfg)))
+    differ = sorted(k for k in set(was) | set(now) if k not in RESUME_MAY_CHANGE and was.get(k) != now.get(k))
+    if differ:
+        raise ConfigError(f"{last}: resuming under another config ({', '.join(differ)} differ from the run's); "
+                          "resume changes only " + ", ".join(RESUME_MAY_CHANGE) + ": start a new run (--out) "
+                          "for another config")
 
 
 def _take_lock(path: Path) -> None:
@@ -616,7 +647,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     last = out_dir / "last.pt"
     ck = None
     if resume and last.exists():
-        ck = torch.load(str(last), map_location=device, weights_only=False)
+        ck = load_checkpoint(last, map_location=device)
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])

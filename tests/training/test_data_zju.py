@@ -161,6 +161,15 @@ def test_malformed_annots_names_the_file(tmp_path):
     assert err.value.path == str(tmp_path / ANNOTS)
 
 
+@pytest.mark.parametrize("keep", [130, 200, 371])
+def test_truncated_annots_names_the_file(tmp_path, subject, keep):
+    data = (subject[0] / ANNOTS).read_bytes()
+    (tmp_path / ANNOTS).write_bytes(data[:keep])
+    with pytest.raises(DatasetError, match="unreadable annots") as err:
+        ZjuSequence(tmp_path)
+    assert err.value.path == str(tmp_path / ANNOTS)
+
+
 def test_missing_image_and_mask_name_the_file(tmp_path, subject):
     _, cams, frames = subject
     root = write_zju_format(tmp_path / "s", cams[:2], [ZjuFrame(frames[0].images[:2], frames[0].masks[:2])],

@@ -55,6 +55,22 @@ def test_torch_vs_ort_fp32_parity(exported):
                 assert st["max_abs"] <= 1e-4 * max(1.0, st["ref_max"]), (graph, name, st)
 
 
+def test_the_parity_check_passes_a_good_export_and_stops_a_wrong_one(exported):
+    import copy
+
+    from training.export.parity import ParityError, check_fp32_parity
+
+    model, paths = exported
+    ex = example_inputs(model, targets=2)
+    check_fp32_parity(torch_vs_ort(model, paths, ex))  # the export as made
+    wrong = copy.deepcopy(model)
+    with torch.no_grad():
+        for p in wrong.parameters():
+            p.mul_(3.0)  # torch no longer computes what the files hold
+    with pytest.raises(ParityError, match=r"\.onnx output '.*': onnxruntime differs from torch"):
+        check_fp32_parity(torch_vs_ort(wrong, paths, ex), "m/")
+
+
 def test_no_inverse_and_static_channel_dims(exported):
     _, paths = exported
     sess = make_session(paths["volume"])

@@ -103,6 +103,15 @@ def test_two_iterations_resume_and_joint_training_starts_from_it(data64, tmp_pat
             assert torch.allclose(got[k], v, atol=1e-6), k
 
 
+def test_pretraining_resume_refuses_another_config(data64, tmp_path):
+    from training.model.config import ConfigError
+
+    pretrain(tiny_pretrain(data64, iterations=1), tmp_path / "p", quiet=True)
+    with pytest.raises(ConfigError, match="lr, seed differ"):
+        pretrain(tiny_pretrain(data64, lr=0.5, seed=9), tmp_path / "p", resume=True, quiet=True)
+    assert pretrain(tiny_pretrain(data64, max_minutes=5.0), tmp_path / "p", resume=True, quiet=True)["steps"] == 2
+
+
 def _gauss(cy, cx, size=32, sigma=1.5):
     ys, xs = torch.meshgrid(torch.arange(size).float(), torch.arange(size).float(), indexing="ij")
     return torch.exp(-((ys - cy) ** 2 + (xs - cx) ** 2) / (2 * sigma ** 2))

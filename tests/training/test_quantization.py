@@ -71,6 +71,12 @@ def test_int8_drift_is_bounded(quantized):
     report = int8_vs_fp32(fp32, int8, model.contract(), example_inputs(model, seed=11))
     heat = report["pipeline"]["heatmaps"]
     assert heat["max_abs"] < 0.1, report
+    from training.export.parity import ParityError, check_int8_parity
+
+    check_int8_parity(report)  # what the pipeline checks
+    broken = {**report, "pipeline": {**report["pipeline"], "heatmaps": {**heat, "max_abs": 0.9}}}
+    with pytest.raises(ParityError, match="int8 heatmaps differ"):
+        check_int8_parity(broken)
     assert report["pipeline"]["depth_mean_abs_m"] < 0.05, report
     for graph, outputs in report["graphs"].items():
         for name, st in outputs.items():

@@ -161,6 +161,20 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
     assert any(not torch.equal(init[k], a[k]) for k in a if a[k].is_floating_point())
 
 
+def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tmp_path):
+    from training.model.config import ConfigError
+
+    train(tiny_cfg(data64, iterations=1), tmp_path / "r", quiet=True)
+    before = (tmp_path / "r" / "config.json").read_text()
+    with pytest.raises(ConfigError, match=r"lr, seed differ"):
+        train(tiny_cfg(data64, lr=0.1, seed=5), tmp_path / "r", resume=True, quiet=True)
+    assert (tmp_path / "r" / "config.json").read_text() == before  # the run's record untouched
+    last = tmp_path / "r" / "last.pt"
+    last.write_bytes(last.read_bytes()[:1000])
+    with pytest.raises(ConfigError, match="last.pt: unreadable checkpoint"):
+        train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)
+
+
 def test_two_iterations_with_every_view_and_mirrored_encoder_images(data64, tmp_path):
     cfg = tiny_cfg(data64, encoder_views="all", encoder_flip=True, loss={"coord_weight": 0.01, "mask_weight": 0.1,
                                                                                          "depth_weight": 0.1})

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import logging
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -132,7 +133,7 @@ class ZjuSequence:
             raise DatasetError(path, "missing: not a ZJU-MoCap subject folder")
         try:
             annots = np.load(path, allow_pickle=True).item()
-        except (OSError, ValueError, AttributeError, EOFError) as e:
+        except (OSError, ValueError, AttributeError, EOFError, pickle.UnpicklingError) as e:
             raise DatasetError(path, f"unreadable annots (expected np.save of a dict): {e}") from e
         if not isinstance(annots, dict):
             raise DatasetError(path, f"must hold a dict, got {type(annots).__name__}")

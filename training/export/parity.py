@@ -128,3 +128,37 @@ def benchmark(session: ort.InferenceSession, feeds: Mapping[str, np.ndarray], re
 
 
 __all__ = ["make_session", "torch_vs_ort", "run_pipeline", "int8_vs_fp32", "benchmark"]
+
+
+#: An fp32 export agrees with torch to float rounding (the shipped model: 1.9e-4 of an output's range at
+#: worst); int8 heatmaps within a fifth of their range, depth within 10 cm on average (the shipped models:
+#: 0.07-0.10 and 1.3-2.3 cm). A broken export or calibration is far outside both.
+FP32_MAX_REL = 1e-2
+INT8_HEATMAP_MAX_ABS = 0.5
+INT8_DEPTH_MEAN_ABS_M = 0.1
+
+
+class ParityError(RuntimeError):
+    """An exported or quantized graph does not compute what it should."""
+
+
+def check_fp32_parity(report: Mapping[str, Mapping[str, Mapping[str, float]]], what: str = "") -> None:
+    """Raise :class:`ParityError` naming the graph and output whose onnxruntime result is off torch's by
+    more than :data:`FP32_MAX_REL` of ``max(|ref|, 1)`` (``report``: :func:`torch_vs_ort`)."""
+    for graph, outputs in report.items():
+        for name, st in outputs.items():
+            if not st["max_abs"] <= FP32_MAX_REL * max(st["ref_max"], 1.0):
+                raise ParityError(f"{what}{graph}.onnx output {name!r}: onnxruntime differs from torch by "
+                                  f"{st['max_abs']:.3g} (outputs reach {st['ref_max']:.3g}): the export is wrong")
+
+
+def check_int8_parity(report: Mapping, what: str = "") -> None:
+    """Raise :class:`ParityError` when the int8 keypoint pipeline strays from fp32 beyond the bounds above
+    (``report``: :func:`int8_vs_fp32`)."""
+    pipe = report.get("pipeline") or {}
+    if pipe and not pipe["heatmaps"]["max_abs"] <= INT8_HEATMAP_MAX_ABS:
+        raise ParityError(f"{what}int8 heatmaps differ from fp32 by {pipe['heatmaps']['max_abs']:.3g} (bound "
+                          f"{INT8_HEATMAP_MAX_ABS}): the calibration or the quantization is wrong")
+    if pipe and not pipe["depth_mean_abs_m"] <= INT8_DEPTH_MEAN_ABS_M:
+        raise ParityError(f"{what}int8 depth differs from fp32 by {pipe['depth_mean_abs_m']:.3g} m on average "
+                          f"(bound {INT8_DEPTH_MEAN_ABS_M} m): the calibration or the quantization is wrong")
