@@ -62,6 +62,8 @@ def open_onnx_file(path: str | Path, threads: int, what: str):
     try:
         sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
     except Exception as e:  # onnxruntime's own exception types
-        raise ModelLoadError(f"onnxruntime cannot load the {what} ({path.stat().st_size} bytes): "
-                             f"{type(e).__name__}: {' '.join(str(e).split())[:500]}", path=str(path)) from e
+        text = " ".join(str(e).split())
+        damaged = "; truncated or corrupt?" if "protobuf" in text.lower() else ""  # else: it parsed, and said why
+        raise ModelLoadError(f"onnxruntime cannot load the {what} ({path.stat().st_size} bytes{damaged}): "
+                             f"{type(e).__name__}: {text[:500]}", path=str(path)) from e
     return sess, dict(sess.get_modelmeta().custom_metadata_map)
