@@ -213,6 +213,12 @@ class TrackingConfig:
             errors would otherwise steer the next crop off the subject. Only where to look changes;
             the reported joints stay the rendered ones. No effect with the encoder heatmaps (the
             same joints) or a model without them (docs/runtime.md, "Heatmap sources").
+        retry_cold: a tracked pair that finds nobody is run again from the working volume, in the
+            same pair: a subject who left the crop (a jump, a turn, a body larger than the frame) is
+            found at once instead of a pair later (costs one more pass on such pairs only).
+        max_gap_s: a track older than this, by the pairs' capture times (``estimate(timestamp_s=)``),
+            is dropped, as is one when time runs backwards (a looped recording): the subject may be
+            anywhere by now.
     """
 
     enabled: bool = True
@@ -223,9 +229,13 @@ class TrackingConfig:
     max_box_size_m: float = 3.0
     refine_cold_start: bool = False
     follow_encoder: bool = True
+    retry_cold: bool = True
+    max_gap_s: float = 0.5
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
+        _boolean(self, "retry_cold")
+        _number(self, "max_gap_s", 0.0, 3600.0, lo_open=True)
         _boolean(self, "refine_cold_start")
         _boolean(self, "follow_encoder")
         _integer(self, "min_joints", 2, 25)

@@ -199,7 +199,7 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
     if shown.size == 0:
         return False, "flat"
     var = float(shown.var())
-    if np.sqrt(var) * levels_per_unit < config.min_std:
+    if var <= 0.0 or np.sqrt(var) * levels_per_unit < config.min_std:  # (min_std 0 lets a flat crop this far)
         return False, "flat"
     detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
     if inside is not None:  # pixels whose 3x3 box shows the frame: the padding's edge is no detail
@@ -295,6 +295,7 @@ class Estimator:
         self._levels = _levels_per_unit(self.contract.normalisation)
         self._volume_box = np.stack([rig.volume.min_corner, rig.volume.max_corner])
         self._sequence = 0
+        self._last_timestamp_s: float | None = None
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._decoders: dict[float, KeypointDecoderConfig] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
@@ -453,8 +454,16 @@ class Estimator:
         if novel_view is not None and novel_view.overlay == "heatmap" and not self.config.novel_view.heatmaps:
             raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
         timing: dict[str, float] = {}
+        self._forget_a_stale_track(timestamp_s)
+        tcfg = self.config.tracking
         p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
-        if (p.j3 is not None and not p.regions.tracked and self.config.tracking.refine_cold_start
+        if (tcfg.retry_cold and p.regions.tracked and all(p.frame_ok.values())
+                and (p.j3 is None or not p.j3.valid.any()) and self.tracker.track is None):
+            # The tracked crop found nobody: the subject may have left it. Look at the working volume now.
+            if p.novel is not None and not p.novel.cancel():
+                p.novel.exception()  # leave no render running behind
+            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
+        if (p.j3 is not None and not p.regions.tracked and tcfg.refine_cold_start
                 and self.tracker.track is not None):
             # Cold start that found the subject: run again on its crop and box, in this pair.
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
@@ -480,11 +489,24 @@ class Estimator:
                 self._smoother.reset()  # no time to filter on: a still image, as far as smoothing goes
             else:
                 points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
+                if not p.regions.tracked:
+                    # A cold pair (cropped from the whole working volume) is crude: reported as it is, but the
+                    # filter starts again on the tracked pair that follows rather than pulling it back here.
+                    self._smoother.reset()
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
         return PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
                           p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
                           self.config.joints3d.method, nv)
+
+    def _forget_a_stale_track(self, timestamp_s: float | None) -> None:
+        """Drop the track when the pair comes more than ``tracking.max_gap_s`` after the last one, or before it."""
+        if timestamp_s is None:
+            return
+        t, last = float(timestamp_s), self._last_timestamp_s
+        self._last_timestamp_s = t
+        if last is not None and not (last < t <= last + self.config.tracking.max_gap_s):
+            self.tracker.reset()
 
     def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict,
               novel_view: NovelViewRequest | None = None) -> "_Pass":

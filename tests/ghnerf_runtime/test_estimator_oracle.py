@@ -413,3 +413,49 @@ def test_the_painter_runs_over_the_proxy_before_the_blend_and_only_when_asked(cl
     with pytest.raises(ModelError, match="novel_painter.onnx"):
         Estimator(OracleSession(edge128_contract()), rig,
                   EstimatorConfig(novel_view=NovelViewConfig(enabled=True, painter="on")))
+
+
+def _jump(rig, position_xz):
+    """One pair of the same person suddenly elsewhere in the room."""
+    there = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=position_xz))
+    rendered = [there.render(c, 0.2) for c in rig.pair]
+    return tuple(img for img, _ in rendered), there.joints_3d(0.2), np.stack([tr.visible for _, tr in rendered])
+
+
+@pytest.mark.parametrize("retry", [True, False])
+def test_a_subject_who_left_the_tracked_crop_is_found_in_the_same_pair(clip, retry):
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(retry_cold=retry)))
+    assert _run(est, oracle, frames[:2], truth[:2], visible[:2])[-1].tracked
+    pair, j3, vis = _jump(rig, (1.1, 2.4))
+    oracle.set_truth(j3, vis)
+    r = est.estimate(pair)
+    if retry:  # the tracked crop saw nobody: looked again at the whole working volume
+        assert r.tracked is False and r.num_found > 6
+        err = np.linalg.norm(r.joints_3d[~r.missing] - j3[~r.missing], axis=-1)
+        assert np.median(err) < 1e-3 and err.max() < 0.1  # (a cold crop's coarser heatmaps: a few cm at worst)
+    else:  # a pair lost, found again on the next one
+        assert r.tracked is True and r.num_found == 0
+
+
+def test_a_track_older_than_max_gap_or_from_the_future_is_dropped(clip):
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(max_gap_s=0.5)))
+    tracked = []
+    for t, k in ((0.0, 0), (1 / 30, 1), (2 / 30, 2), (10.0, 3), (10 + 1 / 30, 4), (5.0, 0)):
+        oracle.set_truth(truth[k], visible[k])
+        tracked.append(est.estimate(frames[k], timestamp_s=t).tracked)
+    # 10 s later the subject may be anywhere; a time before the last (a looped recording) starts over too
+    assert tracked == [False, True, True, False, True, False]
+
+
+def test_a_flat_frame_with_min_std_zero_is_rejected_not_a_crash(clip):
+    from ghnerf_runtime.config import FrameCheckConfig
+
+    rig, frames, *_ = clip
+    est = Estimator(OracleSession(edge128_contract()), rig, EstimatorConfig(frame_check=FrameCheckConfig(min_std=0.0)))
+    black = tuple(np.zeros_like(f) for f in frames[0])
+    r = est.estimate(black)
+    assert r.missing.all() and not any(r.frame_ok.values())
