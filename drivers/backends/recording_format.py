@@ -90,11 +90,20 @@ class Manifest:
         }
 
 
+def _safe(name: str) -> bool:
+    return bool(_SAFE_NAME.match(name)) and name not in (".", "..")
+
+
 def camera_dir_name(rig: Rig, camera: str) -> str:
-    """A file-system-safe directory name for a camera (its name, or ``cam<i>`` when the name is unsafe)."""
-    if _SAFE_NAME.match(camera) and camera not in (".", ".."):
+    """A file-system-safe directory name for a camera: its name, or ``cam<i>`` when the name is unsafe
+    (``_cam<i>`` and so on when another camera is called that)."""
+    if _safe(camera):
         return camera
-    return f"cam{rig.names.index(camera)}"
+    taken = {n for n in rig.names if _safe(n)}
+    name = f"cam{rig.names.index(camera)}"
+    while name in taken:
+        name = "_" + name
+    return name
 
 
 def write_manifest(directory: Path, manifest: Manifest) -> None:

@@ -62,7 +62,13 @@ class _CameraTimeline:
         self._rng = np.random.default_rng([model.seed, camera])
         self._limit_ns = 0.45 * model.period_ns
         self.index = 0
-        self.head = self._make(0)
+        # A negative offset puts the camera's first captures before the source opened: it starts with the
+        # first due after (the others never happened), not with old frames counted as the reader's overruns.
+        # Their random draws are still made, so each index keeps its jitter and drop.
+        while self._start_ns + int(round(self.index * model.period_ns)) < start_ns:
+            self._make(self.index)
+            self.index += 1
+        self.head = self._make(self.index)
 
     def _make(self, index: int) -> Capture:
         m = self._model

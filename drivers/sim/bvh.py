@@ -267,6 +267,9 @@ def _parse_motion(lines: list[str], start: int, num_channels: int, source: str) 
         raise BvhError(source, n + 2, f"Frame Time must be a number, got {raw!r}") from None
     if not (np.isfinite(frame_time) and frame_time > 0):
         raise BvhError(source, n + 2, f"Frame Time must be positive, got {raw!r}")
+    if count > len(lines) - (n + 2):  # before allocating: a garbled count must not ask for terabytes
+        given = sum(1 for line in lines[n + 2:] if line.strip())
+        raise BvhError(source, n + 1, f"Frames: {count} but only {given} frame lines")
     frames = np.empty((count, num_channels))
     k = 0
     for m in range(n + 2, len(lines)):
@@ -303,7 +306,7 @@ def load_bvh(path: str | Path) -> BvhClip:
     """Read and parse a ``.bvh`` file (errors name the file and the line)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8", errors="strict")
+        text = path.read_text(encoding="utf-8-sig", errors="strict")  # -sig: a byte-order mark is no text
     except OSError as e:
         raise BvhError(str(path), None, f"cannot read: {e.strerror or e}") from e
     except UnicodeDecodeError as e:

@@ -57,6 +57,10 @@ _PRIMARY_CHILD = {
     "r_hip": "r_knee", "r_knee": "r_ankle", "r_ankle": None,
     "l_hip": "l_knee", "l_knee": "l_ankle", "l_ankle": None,
 }
+# Where the chain's bone points when its primary child is not in the file (a one-joint spine, no neck):
+# the next of our joints up the chain that is, never the clip joint's first child (often a thigh).
+_CHAIN_TARGETS = {"pelvis": ("spine", "chest", "neck", "head"), "spine": ("chest", "neck", "head"),
+                  "chest": ("neck", "head"), "neck": ("head",)}
 FOOT_DIR = np.array([0.0, -0.45, 1.0]) / np.linalg.norm([0.0, -0.45, 1.0])
 _LEAF_DIRS = {"head": np.array([0.0, 1.0, 0.0]), "r_wrist": np.array([0.0, -1.0, 0.0]), "l_wrist": np.array([0.0, -1.0, 0.0]),
               "r_ankle": FOOT_DIR, "l_ankle": FOOT_DIR}
@@ -136,10 +140,16 @@ def _ancestors(clip: BvhClip, k: int) -> list[int]:
 
 
 def _leaf_direction(clip: BvhClip, rest: np.ndarray, k: int) -> np.ndarray | None:
-    """Rest direction of clip joint ``k``'s own bone: to its first child, else to its End Site."""
+    """Rest direction of clip joint ``k``'s own bone: towards its children (a hand's fingers: the middle
+    finger, else the mean of all but the thumb, which rigs often list first), else to its End Site."""
     children = clip.children(k)
-    if children:
-        return rest[children[0]] - rest[k]
+    names = [clip.joints[c].name.lower() for c in children]
+    children = ([c for c, n in zip(children, names) if "middle" in n]
+                or [c for c, n in zip(children, names) if "thumb" not in n] or children)
+    dirs = [rest[c] - rest[k] for c in children]
+    dirs = [d / np.linalg.norm(d) for d in dirs if np.linalg.norm(d) > 1e-9]
+    if dirs and np.linalg.norm(np.mean(dirs, axis=0)) > 1e-6:
+        return np.mean(dirs, axis=0)
     if clip.joints[k].end_site is not None:
         return clip.joints[k].end_site.copy()
     return None
@@ -181,8 +191,9 @@ def retarget(clip: BvhClip, skeleton: Skeleton, *, in_place: bool = True) -> Ret
             continue
         child = _PRIMARY_CHILD[name]
         if child is not None:
-            ours = rest[JOINT_ID[child]] - rest[j]
-            child_b = found.get(child)
+            target = next((c for c in _CHAIN_TARGETS.get(name, (child,)) if c in found), child)
+            ours = rest[JOINT_ID[target]] - rest[j]
+            child_b = found.get(target)
         else:
             ours = _LEAF_DIRS[name]
             child_b = found.get(name.replace("ankle", "toe")) if name.endswith("ankle") else None

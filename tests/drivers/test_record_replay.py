@@ -345,3 +345,21 @@ def test_replay_option_errors():
         create_rig_source("replay:///x?speed=-1")
     with pytest.raises(RigConfigError, match="directory"):
         create_rig_source("replay://")
+
+
+def test_camera_folder_names_are_safe_and_distinct():
+    from drivers.backends.recording_format import camera_dir_name
+    from drivers.sim import RigPlacement
+    from ghnerf_runtime.geometry import Rig
+
+    base = RigPlacement().build()
+    a, b = base.pair
+    rig = Rig((_renamed(a, "cam1"), _renamed(b, "cam 2")), base.volume)
+    names = [camera_dir_name(rig, n) for n in rig.names]
+    assert names == ["cam1", "_cam1"]  # "cam 2" is unsafe; its fallback cam1 is taken
+
+
+def _renamed(camera, name):
+    from dataclasses import replace
+
+    return replace(camera, name=name)

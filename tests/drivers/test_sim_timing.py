@@ -81,6 +81,17 @@ def test_delivered_timestamps_follow_fps_and_offset_exactly(sim_cache):
     assert pairs[-1].sequence == 89
 
 
+def test_a_negative_offset_starts_the_late_camera_at_open_without_phantom_overruns(sim_cache):
+    source, _ = sim(sim_cache, "offset_ms=-300")
+    with source:
+        pairs = read_pairs(source, 20)
+        stats = source.stats
+    assert stats.overruns == {"left": 0, "right": 0}  # nothing the reader missed
+    first = pairs[0].frames[1]
+    assert first.timestamp_ns >= START and first.index == 9  # captures due before open never happened
+    assert all(b.frames[1].index - a.frames[1].index == 1 for a, b in zip(pairs, pairs[1:]))
+
+
 def test_delivered_jitter_statistics(sim_cache):
     source, _ = sim(sim_cache, "jitter_ms=1.5&seed=11")
     with source:

@@ -327,3 +327,81 @@ def test_unusable_bvh_is_reported(tmp_path):
     legless = TINY_TEXT.replace("LeftUpLeg", "LeftTail").replace("RightUpLeg", "RightTail")
     with pytest.raises(BvhError, match=r"legless\.bvh: cannot map joints \['r_hip', 'l_hip'\]"):
         BvhMotion(load_bvh(_write(tmp_path, legless, "legless.bvh")), Skeleton.from_params(BodyParams()))
+
+
+def test_a_huge_frame_count_and_a_byte_order_mark(tmp_path):
+    lines = TINY_TEXT.splitlines()
+    frames_line = next(k for k, line in enumerate(lines) if line.startswith("Frames:"))
+    huge = "\n".join(lines[:frames_line] + ["Frames: 99999999999"] + lines[frames_line + 1:]) + "\n"
+    with pytest.raises(BvhError, match=rf"bad.bvh:{frames_line + 1}: Frames: 99999999999 but only"):
+        load_bvh(_write(tmp_path, huge))  # not a MemoryError for 44 TiB
+    path = tmp_path / "bom.bvh"
+    path.write_bytes(b"\xef\xbb\xbf" + TINY_TEXT.encode())  # saved by a Windows editor
+    assert load_bvh(path).num_frames == load_bvh(_write(tmp_path, TINY_TEXT, "plain.bvh")).num_frames
+
+
+def _t_pose_clip(children: str, channels: int) -> str:
+    """A T-pose clip (every rotation zero) whose Hips have ``children``; ``channels`` below the root."""
+    text = ("HIERARCHY\nROOT Hips {\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
+            "Yrotation\n" + children + "}\nMOTION\nFrames: 2\nFrame Time: 0.0333\n")
+    row = " ".join(["0", "95", "0"] + ["0"] * (3 + channels))
+    return text + row + "\n" + row + "\n"
+
+
+def _limb(name: str, offsets, end, extra: str = "") -> str:
+    out, close = "", ""
+    for k, (n, off) in enumerate(zip(name.split(","), offsets)):
+        out += f"JOINT {n} {{ OFFSET {off} CHANNELS 3 Zrotation Xrotation Yrotation\n"
+        close += "}"
+    return out + (extra or f"End Site {{ OFFSET {end} }}\n") + close + "\n"
+
+
+def _legs() -> str:
+    return "".join(_limb(f"{s}UpLeg,{s}Leg,{s}Foot", [f"{x} 0 0", "0 -42 0", "0 -40 0"], "0 -5 12")
+                   for s, x in (("Left", 9), ("Right", -9)))
+
+
+def _arms(fingers: bool = False) -> str:
+    def hand(x):
+        if not fingers:
+            return ""
+        side = "Left" if x > 0 else "Right"
+        return "".join(f"JOINT {side}Hand{f}1 {{ OFFSET {x * a} 0 {z} CHANNELS 3 Zrotation Xrotation Yrotation "
+                       f"End Site {{ OFFSET {x * 3} 0 0 }} }}\n" for f, a, z in (("Thumb", 2, 3), ("Index", 8, 1),
+                                                                                   ("Middle", 8, 0)))
+    return "".join(_limb(f"{s}Arm,{s}ForeArm,{s}Hand", [f"{x * 17} 10 0", f"{x * 28} 0 0", f"{x * 25} 0 0"],
+                         f"{x * 10} 0 0", hand(x)) for s, x in (("Left", 1), ("Right", -1)))
+
+
+@pytest.mark.parametrize("legs_first", [False, True])
+@pytest.mark.parametrize("neck", [True, False])
+def test_a_short_spine_listed_after_the_legs_keeps_the_torso_upright(legs_first, neck):
+    """One spine joint between the hips and the arms (or no neck): the torso's bones point up the
+    chain, not at the clip joint's first child (a thigh, a collarbone)."""
+    head = "JOINT Head { OFFSET 0 10 0 CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 20 0 } }\n"
+    top = ("JOINT Neck { OFFSET 0 12 0 CHANNELS 3 Zrotation Xrotation Yrotation\n" + head + "}\n") if neck else \
+        head.replace("OFFSET 0 10 0", "OFFSET 0 22 0")
+    spine = ("JOINT Spine { OFFSET 0 45 0 CHANNELS 3 Zrotation Xrotation Yrotation\n"
+             + (_arms() + top if neck else top + _arms()) + "}\n")
+    channels = 3 * (1 + (2 if neck else 1) + 6 + 6)
+    clip = parse_bvh(_t_pose_clip(_legs() + spine if legs_first else spine + _legs(), channels), "t.bvh")
+    sk = Skeleton.from_params(BodyParams())
+    pose = BvhMotion(clip, sk).pose(0.0)
+    P = sk.forward(pose.rotations[None], pose.root[None])[1][0]
+    up = P[JOINT_ID["head"]] - P[JOINT_ID["pelvis"]]
+    assert up[1] > 0.99 * np.linalg.norm(up)  # the head straight above the pelvis
+    across = P[JOINT_ID["l_shoulder"]] - P[JOINT_ID["r_shoulder"]]
+    assert abs(across[1]) < 0.02 * np.linalg.norm(across)  # the shoulders level
+
+
+def test_a_hand_with_fingers_points_along_the_hand_not_at_the_thumb():
+    sk = Skeleton.from_params(BodyParams())
+    poses = []
+    for fingers in (False, True):
+        spine = ("JOINT Spine { OFFSET 0 45 0 CHANNELS 3 Zrotation Xrotation Yrotation\n" + _arms(fingers)
+                 + "JOINT Neck { OFFSET 0 12 0 CHANNELS 3 Zrotation Xrotation Yrotation\nJOINT Head { OFFSET 0 10 0 "
+                 "CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 20 0 } }\n}\n}\n")
+        channels = 3 * (1 + 2 + 6 + 6 + (6 if fingers else 0))
+        clip = parse_bvh(_t_pose_clip(spine + _legs(), channels), "h.bvh")
+        poses.append(BvhMotion(clip, sk).pose(0.0).rotations[JOINT_ID["l_wrist"]])
+    assert np.allclose(poses[0], poses[1], atol=1e-6)
