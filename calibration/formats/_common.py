@@ -95,6 +95,9 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
     if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
         raise fail(path, join(field, K_key),
                    f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {show(K)}")
+    if K[0, 1] != 0:  # the tools that write these files project without it: ours would disagree with theirs
+        raise fail(path, join(field, K_key), f"has a skew K[0][1] = {K[0, 1]!r}, which OpenCV's camera model (and "
+                                             "so this file's writer) ignores; set it to 0")
     try:
         d = np.asarray(dist if dist is not None else [], dtype=np.float64).reshape(-1)
     except (TypeError, ValueError, OverflowError):
@@ -175,3 +178,11 @@ def default_working_volume(
         centre = centres.mean(axis=0) + (distance_m * mean_axis / norm if norm > 0.5 else 0.0)
     half = 0.5 * side_m
     return WorkingVolume(centre - half, centre + half)
+
+
+def refuse_skew(cameras: Sequence[Camera], what: str) -> None:
+    """Foreign formats follow OpenCV's camera model, which has no skew: writing one would lose it silently."""
+    for cam in cameras:
+        if cam.K[0, 1] != 0.0:
+            raise GeometryError(f"camera {cam.name!r} has a skew K[0][1] = {cam.K[0, 1]!r}; {what} cannot hold it "
+                                "(OpenCV's camera model has none): keep this rig in our rig file")

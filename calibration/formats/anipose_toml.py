@@ -37,7 +37,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from calibration.formats._common import as_array, check_units, fail, make_camera, make_rig, show
+from calibration.formats._common import as_array, check_units, fail, make_camera, make_rig, refuse_skew, show
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import write_text_atomic
 
@@ -84,8 +84,9 @@ def read_anipose_toml(
         raise fail(path, None, f"invalid TOML: {e}") from e
 
     cameras, fields = [], []
-    file_rig_id = None
-    for section, table in doc.items():
+    file_rig_id, file_volume = None, None
+    # aniposelib's CameraGroup.load takes the cameras in sorted key order, whatever the file's order
+    for section, table in sorted(doc.items(), key=lambda item: item[0]):
         if not isinstance(table, dict):
             raise fail(path, section, f"top-level key must be a camera table, got {show(table)}")
         if section == "metadata":
@@ -93,12 +94,18 @@ def read_anipose_toml(
                 file_rig_id = table["rig_id"]
                 if not isinstance(file_rig_id, str) or not file_rig_id:
                     raise fail(path, "metadata.rig_id", f"must be a non-empty string, got {show(file_rig_id)}")
+            if "working_volume_min" in table or "working_volume_max" in table:  # ours: metres, rig frame
+                lo, hi = (as_array(path, f"metadata.{k}", _numbers(path, f"metadata.{k}", table.get(k)), [(3,)],
+                                   "a 3-vector (metres)") for k in ("working_volume_min", "working_volume_max"))
+                if np.any(hi <= lo):
+                    raise fail(path, "metadata.working_volume_max", f"must exceed working_volume_min, got {lo} .. {hi}")
+                file_volume = WorkingVolume(lo, hi)
             continue
         cameras.append(_camera(path, section, table, units))
         fields.append(section)
     metadata = {"source": {"format": "anipose-toml", "path": str(path), "units_to_metres": units}}
-    return make_rig(path, cameras, fields, volume=volume, rig_id=rig_id or file_rig_id or p.stem,
-                    metadata=metadata, list_field="cam_0")
+    return make_rig(path, cameras, fields, volume=volume if volume is not None else file_volume,
+                    rig_id=rig_id or file_rig_id or p.stem, metadata=metadata, list_field="cam_0")
 
 
 def _camera(path, section: str, table: dict, units: float):
@@ -178,6 +185,7 @@ def dumps_anipose_toml(rig: Rig, *, units_to_metres: float) -> str:
         units_to_metres: metres per unit of the written ``translation`` (0.001 writes mm).
     """
     units = check_units(units_to_metres)
+    refuse_skew(rig.cameras, "an anipose calibration.toml")
     lines = [f"# anipose calibration written by ghnerf; translation unit = {units!r} m, rotation = Rodrigues (world -> camera)"]
     for i, cam in enumerate(rig.cameras):
         rvec, _ = cv2.Rodrigues(np.ascontiguousarray(cam.R))
@@ -192,7 +200,9 @@ def dumps_anipose_toml(rig: Rig, *, units_to_metres: float) -> str:
             f"rotation = {_toml_array(rvec.reshape(-1))}",
             f"translation = {_toml_array(cam.t / units)}",
         ]
-    lines += ["", "[metadata]", "adjusted = false", f"rig_id = {_toml_string(rig.rig_id)}", ""]
+    lines += ["", "[metadata]", "adjusted = false", f"rig_id = {_toml_string(rig.rig_id)}",
+              f"working_volume_min = {_toml_array(rig.volume.min_corner)}",  # metres, whatever the translations'
+              f"working_volume_max = {_toml_array(rig.volume.max_corner)}", ""]
     return "\n".join(lines)
 
 

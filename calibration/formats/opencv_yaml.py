@@ -28,9 +28,14 @@ Stereo pair (OpenCV's ``stereo_calib`` sample: ``intrinsics.yml`` + ``extrinsics
 
 Matrices may be ``!!opencv-matrix`` nodes or plain (nested) sequences. Translations are
 multiplied by ``units_to_metres`` on reading and divided by it on writing; OpenCV
-calibrations come out in the units of the board's square size. Writers produce the
-multi-camera / single-camera layouts with 17 significant digits (lossless) and replace
-the file atomically.
+calibrations come out in the units of the board's square size (often millimetres), so a
+stereo_calib or single-camera file whose ``T`` is not zero needs ``units_to_metres``: from
+the argument, else from the file's own ``units_to_metres`` key (our writers store it), else
+it is an error; the multi-camera layout (ours) is in metres unless its key says otherwise. Writers
+produce the multi-camera / single-camera layouts with 17 significant digits (lossless),
+store ``units_to_metres`` and (multi-camera) the working volume in metres
+(``working_volume_min`` / ``working_volume_max``, which OpenCV ignores), and replace the
+file atomically.
 """
 from __future__ import annotations
 
@@ -41,7 +46,17 @@ from typing import Any, Sequence
 import cv2
 import numpy as np
 
-from calibration.formats._common import as_array, check_units, fail, join, make_camera, make_rig, rotation, show
+from calibration.formats._common import (
+    as_array,
+    check_units,
+    fail,
+    join,
+    make_camera,
+    make_rig,
+    refuse_skew,
+    rotation,
+    show,
+)
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import write_text_atomic
@@ -167,16 +182,58 @@ def _camera(node, path, field: str, *, default_name: str, image_size, units: flo
                        size_keys=size_keys)
 
 
+def _units(root, path, given: float | None, needed: bool) -> float:
+    """``units_to_metres``: the argument, else the file's key, else 1.0 when no translation needs it."""
+    if given is not None:
+        return check_units(given)
+    if "units_to_metres" in _keys(root):
+        value = _numeric(root.getNode("units_to_metres"), path, "units_to_metres")
+        if value is None or value.size != 1:
+            raise fail(path, "units_to_metres", f"must be a number, got {show(value)}")
+        try:
+            return check_units(float(value.reshape(-1)[0]))
+        except Exception as e:
+            raise fail(path, "units_to_metres", str(e)) from None
+    if needed:
+        raise fail(path, "T", "OpenCV calibrations give T in the units of the board's square size (often "
+                              "millimetres) and this file does not say which: pass units_to_metres (0.001 for mm, "
+                              "1.0 for m)")
+    return 1.0
+
+
+def _has_translation(node) -> bool:
+    keys = _keys(node)
+    if "T" not in keys:
+        return False
+    try:
+        T = node.getNode("T").mat()
+    except cv2.error:
+        return True  # malformed: the camera reader names it
+    return T is None or bool(np.any(np.asarray(T) != 0))
+
+
+def _volume(root, path) -> WorkingVolume | None:
+    keys = _keys(root)
+    if "working_volume_min" not in keys and "working_volume_max" not in keys:
+        return None
+    lo = as_array(path, "working_volume_min", _pick(root, ("working_volume_min",), path, "")[1], [(3,)], "a 3-vector")
+    hi = as_array(path, "working_volume_max", _pick(root, ("working_volume_max",), path, "")[1], [(3,)], "a 3-vector")
+    if np.any(hi <= lo):
+        raise fail(path, "working_volume_max", f"must exceed working_volume_min on every axis, got {lo} .. {hi}")
+    return WorkingVolume(lo, hi)
+
+
 # --------------------------------------------------------------------------- public readers
 def read_opencv_camera(path: str | os.PathLike, *, name: str | None = None, image_size: tuple[int, int] | None = None,
-                       units_to_metres: float = 1.0) -> Camera:
+                       units_to_metres: float | None = None) -> Camera:
     """Read the single-camera layout (see the module docstring for the keys).
 
     Args:
         path: the YAML file.
         name: camera name; default the file's ``name`` key, else the file's stem.
         image_size: ``(width, height)`` when the file has no image size.
-        units_to_metres: metres per unit of ``T`` in the file.
+        units_to_metres: metres per unit of ``T`` in the file; default the file's own
+            ``units_to_metres``; needed when the file has a non-zero ``T`` and no such key.
 
     Returns:
         The :class:`Camera` (identity pose unless the file has ``R``/``T``).
@@ -184,12 +241,12 @@ def read_opencv_camera(path: str | os.PathLike, *, name: str | None = None, imag
     Raises:
         RigFileError: naming the file and the key, e.g. ``camera_matrix``.
     """
-    units = check_units(units_to_metres)
     fs = _open(path)
     try:
         root = fs.root()
         if "cameras" in _keys(root) or "M1" in _keys(root):
             raise fail(path, None, "this is a multi-camera file; use read_opencv_rig")
+        units = _units(root, path, units_to_metres, needed=_has_translation(root))
         cam = _camera(root, path, "", default_name=Path(path).stem, image_size=image_size, units=units, need_pose=False)
     finally:
         fs.release()
@@ -203,7 +260,7 @@ def read_opencv_rig(
     image_size: tuple[int, int] | None = None,
     volume: WorkingVolume | None = None,
     rig_id: str | None = None,
-    units_to_metres: float = 1.0,
+    units_to_metres: float | None = None,
 ) -> Rig:
     """Read the multi-camera or the stereo_calib layout (see the module docstring).
 
@@ -211,9 +268,12 @@ def read_opencv_rig(
         path: the YAML file (``intrinsics.yml`` for the stereo_calib layout).
         extrinsics_path: stereo_calib's ``extrinsics.yml`` when ``R``/``T`` are not in ``path``.
         image_size: ``(width, height)`` for cameras whose entry has no image size.
-        volume: the working volume; default :func:`default_working_volume`.
+        volume: the working volume; default the file's (``working_volume_min`` / ``_max``, our
+            writer stores it), else :func:`default_working_volume`.
         rig_id: default the file's ``rig_id``, else the file's stem.
-        units_to_metres: metres per unit of ``T`` in the file.
+        units_to_metres: metres per unit of ``T`` in the file; default the file's own
+            ``units_to_metres``, else metres for the multi-camera layout (ours). Required for
+            the stereo_calib layout, whose ``T`` is in the board's units.
 
     Returns:
         The :class:`Rig`, metadata ``{"source": {"format", "path", "units_to_metres"}}``.
@@ -221,13 +281,15 @@ def read_opencv_rig(
     Raises:
         RigFileError: naming the file and the field, e.g. ``cameras[1].camera_matrix``.
     """
-    units = check_units(units_to_metres)
     fs = _open(path)
     try:
         root = fs.root()
         keys = _keys(root)
         if "cameras" in keys:
             layout = "opencv-yaml"
+            units = _units(root, path, units_to_metres, needed=False)  # our layout: metres unless it says
+            if volume is None:
+                volume = _volume(root, path)
             seq = root.getNode("cameras")
             if not seq.isSeq():
                 raise fail(path, "cameras", "must be a sequence of camera maps")
@@ -244,6 +306,7 @@ def read_opencv_rig(
             list_field = "cameras"
         elif "M1" in keys:
             layout = "opencv-stereo-calib"
+            units = _units(root, path, units_to_metres, needed=True)
             cameras, fields = _stereo_calib(fs, path, extrinsics_path, image_size, units)
             file_rig_id, list_field = None, "M1"
         else:
@@ -296,7 +359,7 @@ def _memory_writer() -> cv2.FileStorage:
 
 
 def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
-    """Write the multi-camera layout (``rig_id`` + ``cameras``); the working volume is not stored.
+    """Write the multi-camera layout (``rig_id``, ``units_to_metres``, the working volume, ``cameras``).
 
     Args:
         rig: the rig.
@@ -304,9 +367,13 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
         units_to_metres: metres per unit of the written ``T`` (1.0: metres).
     """
     units = check_units(units_to_metres)
+    refuse_skew(rig.cameras, "an OpenCV YAML file")
     fs = _memory_writer()
     fs.writeComment(" ghnerf rig exported as OpenCV YAML; R, T map rig -> camera (X_cam = R X + T)")
     fs.write("rig_id", rig.rig_id)
+    fs.write("units_to_metres", float(units))
+    fs.write("working_volume_min", np.ascontiguousarray(rig.volume.min_corner.reshape(3, 1)))  # metres
+    fs.write("working_volume_max", np.ascontiguousarray(rig.volume.max_corner.reshape(3, 1)))
     fs.startWriteStruct("cameras", cv2.FileNode_SEQ)
     for cam in rig.cameras:
         fs.startWriteStruct("", cv2.FileNode_MAP)
@@ -319,6 +386,8 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
 def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
     """Write the single-camera layout, plus ``name``, ``R`` and ``T`` (readers that do not know them ignore them)."""
     units = check_units(units_to_metres)
+    refuse_skew([camera], "an OpenCV YAML file")
     fs = _memory_writer()
     _write_camera(fs, camera, units, with_name=True)
+    fs.write("units_to_metres", float(units))
     write_text_atomic(path, fs.releaseAndGetString())

@@ -60,6 +60,57 @@ def test_yaml_round_trip(rig, tmp_path, units):
 
 
 @pytest.mark.parametrize("units", [1.0, 0.001])
+def test_our_yaml_carries_its_units_and_working_volume(rig, tmp_path, units):
+    """Read back without arguments: the file says its units and keeps the volume (it was replaced by the
+    default one, which cut off people the original volume held)."""
+    path = tmp_path / "rig.yaml"
+    write_opencv_rig(rig, path, units_to_metres=units)
+    back = read_opencv_rig(path)
+    assert_cameras_close(rig, back)
+    np.testing.assert_allclose(back.volume.min_corner, rig.volume.min_corner, atol=1e-12)
+    np.testing.assert_allclose(back.volume.max_corner, rig.volume.max_corner, atol=1e-12)
+    write_opencv_camera(rig.cameras[1], tmp_path / "one.yml", units_to_metres=units)
+    np.testing.assert_allclose(read_opencv_camera(tmp_path / "one.yml").t, rig.cameras[1].t, atol=1e-12)
+
+
+def test_a_single_camera_file_with_a_translation_needs_its_units(tmp_path):
+    (tmp_path / "cam.yml").write_text("%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n"
+                                      "camera_matrix: [[600, 0, 320], [0, 600, 240], [0, 0, 1]]\n"
+                                      "distortion_coefficients: [0, 0, 0, 0]\nR: [0, 0, 0]\nT: [60, 0, 0]\n")
+    with pytest.raises(RigFileError, match="pass units_to_metres") as info:
+        read_opencv_camera(tmp_path / "cam.yml")
+    assert info.value.field == "T"
+    np.testing.assert_allclose(read_opencv_camera(tmp_path / "cam.yml", units_to_metres=0.001).t, [0.06, 0, 0])
+
+
+def test_toml_volume_round_trips_and_cameras_come_in_anipose_order(rig, tmp_path):
+    path = tmp_path / "calibration.toml"
+    write_anipose_toml(rig, path, units_to_metres=0.001)
+    back = read_anipose_toml(path, units_to_metres=0.001)
+    np.testing.assert_allclose(back.volume.min_corner, rig.volume.min_corner, atol=1e-12)
+    text = path.read_text()
+    head, cam0, rest = text.partition("[cam_0]")
+    cam0_body, cam1, tail = rest.partition("[cam_1]")
+    swapped = head + cam1 + tail.split("[metadata]")[0] + cam0 + cam0_body + "[metadata]" + tail.split("[metadata]")[1]
+    path.write_text(swapped)  # a hand-merged file with [cam_1] first: aniposelib still sorts the keys
+    assert read_anipose_toml(path, units_to_metres=0.001).names == back.names
+
+
+def test_skew_is_refused_by_the_foreign_formats(rig, tmp_path):
+    skewed = Camera("s", 640, 480, [[600.0, 5.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+    for write in (lambda: write_opencv_camera(skewed, tmp_path / "s.yml"),
+                  lambda: write_anipose_toml(Rig((skewed, rig.cameras[1]), rig.volume), tmp_path / "s.toml",
+                                             units_to_metres=1.0)):
+        with pytest.raises(GeometryError, match="skew"):
+            write()
+    (tmp_path / "k.yml").write_text("%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n"
+                                    "camera_matrix: [[600, 5, 320], [0, 600, 240], [0, 0, 1]]\n"
+                                    "distortion_coefficients: [0, 0, 0, 0]\n")
+    with pytest.raises(RigFileError, match="skew"):
+        read_opencv_camera(tmp_path / "k.yml")
+
+
+@pytest.mark.parametrize("units", [1.0, 0.001])
 def test_toml_round_trip(rig, tmp_path, units):
     path = tmp_path / "calibration.toml"
     write_anipose_toml(rig, path, units_to_metres=units)
@@ -234,15 +285,20 @@ def test_opencv_stereo_calib_layout(tmp_path):
 
 def test_stereo_calib_errors_name_the_right_file(tmp_path):
     _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    mm = {"units_to_metres": 0.001}
+    with pytest.raises(RigFileError, match="pass units_to_metres") as info:  # stereo_calib's T is in board units
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml", image_size=(640, 480))
+    assert info.value.field == "T"
     with pytest.raises(RigFileError, match="missing image size") as info:
-        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml")
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml", **mm)
     assert info.value.field == "image_width"
     with pytest.raises(RigFileError) as info:
-        read_opencv_rig(tmp_path / "intrinsics.yml", image_size=(640, 480))  # R, T live in the other file
+        read_opencv_rig(tmp_path / "intrinsics.yml", image_size=(640, 480), **mm)  # R, T live in the other file
     assert info.value.path == str(tmp_path / "intrinsics.yml") and info.value.field == "R"
     (tmp_path / "bad_ext.yml").write_text("%YAML:1.0\n---\nR: [1, 2, 3, 4]\nT: [0, 0, 0]\n")
     with pytest.raises(RigFileError) as info:
-        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "bad_ext.yml", image_size=(640, 480))
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "bad_ext.yml", image_size=(640, 480),
+                        **mm)
     assert info.value.path == str(tmp_path / "bad_ext.yml") and info.value.field == "R"
 
 
