@@ -63,7 +63,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from ghnerf_runtime.body25 import BODY_PARTS
+from ghnerf_runtime.body25 import BODY_PARTS, MID_HIP, NECK
 from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
@@ -290,6 +290,10 @@ class HeatmapScores:
                     _visibility_scores(self.gated_visibility) if self.gated_visibility else None}
 
 
+#: Per-image PSNR of identical images (+inf) counts as this, so one cannot make the split's mean infinite.
+PSNR_CAP_DB = 100.0
+
+
 @dataclass
 class Accumulator:
     """Pools per-scene results into split scores."""
@@ -306,6 +310,11 @@ class Accumulator:
     psnr_angle_deg: list[float] = field(default_factory=list)  # per entry of psnr (NaN: unknown)
     ssim: list[float] = field(default_factory=list)
     scenes: int = 0
+    pck_unreferenced: int = 0  # visible joints of views with no reference length (excluded, counted)
+    pck_views: int = 0  # source views with a reference length
+    pck_fallback_views: int = 0  # ... of which took the torso box's diagonal (neck or mid-hip hidden)
+    nonfinite_scenes: int = 0  # a non-finite heatmap prediction: excluded from heatmap_mse, counted
+    nonfinite_views: int = 0  # a non-finite novel view (not an empty mask): excluded from PSNR/SSIM, counted
     # the skeleton prior on the flip-tested encoder joints: every true joint's error (mm), its expected error (m)
     prior_errors_mm: list[np.ndarray] = field(default_factory=list)
     prior_expected_m: list[np.ndarray] = field(default_factory=list)
@@ -319,7 +328,15 @@ class Accumulator:
         self.pck_pred_missing += p.num_pred_missing
         self.mpjpe_missing += e.num_missing
         self.mpjpe_pred_missing += e.num_pred_missing
-        self.heat_mse.append(hm.value)
+        self.pck_unreferenced += p.num_unreferenced
+        ref = np.asarray(p.reference) > 0
+        torso = np.asarray(p.evaluated)[..., NECK] & np.asarray(p.evaluated)[..., MID_HIP]
+        self.pck_views += int(ref.sum())
+        self.pck_fallback_views += int((ref & ~torso).sum())
+        if np.isfinite(hm.value):
+            self.heat_mse.append(hm.value)
+        else:  # a broken prediction must not vanish from the score silently
+            self.nonfinite_scenes += 1
         if m.get("encoder_pck") is not None:
             self.encoder.add(m["encoder_pck"], m["encoder_mpjpe"], vis, m.get("encoder_mpjpe_gated"))
         if m.get("encoder_flip_pck") is not None:
@@ -330,14 +347,21 @@ class Accumulator:
             self.prior_errors_mm.append(np.asarray(e.errors[e.evaluated], np.float64))
             self.prior_expected_m.append(np.asarray(m["prior_expected_error_m"], np.float64)[e.evaluated])
         if m.get("psnr") is not None:
-            # NaN = empty mask (not scored); +inf PSNR (identical images) is kept
+            # An empty mask is not scored; a non-finite render is excluded too, but counted; identical
+            # images (+inf) are capped at PSNR_CAP_DB so one such view cannot make the mean infinite.
             per_image = np.ravel(m["psnr"].per_image)
+            scored = np.ravel(m["psnr"].num_pixels) > 0
+            ssim = np.ravel(m["ssim"].per_image)
             angles = np.ravel(m.get("novel_source_angle_deg", np.full(per_image.shape, np.nan)))
-            for v, a in zip(per_image, angles):
-                if not np.isnan(v):
-                    self.psnr.append(float(v))
-                    self.psnr_angle_deg.append(float(a))
-            self.ssim.extend(float(v) for v in np.ravel(m["ssim"].per_image) if not np.isnan(v))
+            for v, q, a, ok in zip(per_image, ssim, angles, scored):
+                if not ok:
+                    continue
+                if np.isnan(v) or not np.isfinite(q):
+                    self.nonfinite_views += 1
+                    continue
+                self.psnr.append(float(min(v, PSNR_CAP_DB)))
+                self.psnr_angle_deg.append(float(a))
+                self.ssim.append(float(q))
 
     def result(self) -> dict:
         def mean(v):
@@ -349,12 +373,14 @@ class Accumulator:
             "scenes": self.scenes,
             "pck@0.2": r.pck if r.pck is not None else float("nan"),
             "pck_evaluated_joints": r.pck_evaluated, "pck_missing_truth": self.pck_missing,
-            "pck_undecoded": self.pck_pred_missing,
+            "pck_undecoded": self.pck_pred_missing, "pck_unreferenced": self.pck_unreferenced,
+            "pck_fallback_views": self.pck_fallback_views, "pck_views": self.pck_views,
             "mpjpe_mm": r.mpjpe_mm if r.mpjpe_mm is not None else float("nan"),
             "mpjpe_evaluated_joints": r.mpjpe_joints, "mpjpe_missing_truth": self.mpjpe_missing,
             "mpjpe_pred_missing": self.mpjpe_pred_missing,
             "heatmap_mse": mean(self.heat_mse),
             "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
+            "nonfinite_scenes": self.nonfinite_scenes, "nonfinite_views": self.nonfinite_views,
             "psnr_masked_by_source_angle": psnr_by_angle(self.psnr, self.psnr_angle_deg),
             "pck@0.2_by_part": _part_scores(r.parts),
             # a PCK target applies to each source view
