@@ -244,7 +244,11 @@ class _CameraState:
         """The camera without its lens, turned by the quarter turns nearest upright (what a virtual camera
         between the sources follows, so that it does not spin from one to the other)."""
         turns = round(self.roll_deg / 90.0) % 4
-        return self.camera.without_distortion().quarter_turned(turns) if turns else self.camera
+        if not turns:
+            return self.camera
+        pinhole = self.camera.without_distortion()
+        # a skewed camera cannot be quarter-turned exactly: rotated about its centre, its size kept
+        return pinhole.rotated(90.0 * turns) if turns % 2 and pinhole.K[0, 1] != 0.0 else pinhole.quarter_turned(turns)
 
 
 class Estimator:
@@ -296,6 +300,7 @@ class Estimator:
         self._volume_box = np.stack([rig.volume.min_corner, rig.volume.max_corner])
         self._sequence = 0
         self._last_timestamp_s: float | None = None
+        self._last_pair_cold = False
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._decoders: dict[float, KeypointDecoderConfig] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
@@ -488,11 +493,13 @@ class Estimator:
             if timestamp_s is None:
                 self._smoother.reset()  # no time to filter on: a still image, as far as smoothing goes
             else:
-                points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
-                if not p.regions.tracked:
-                    # A cold pair (cropped from the whole working volume) is crude: reported as it is, but the
-                    # filter starts again on the tracked pair that follows rather than pulling it back here.
+                if p.regions.tracked and self._last_pair_cold:
+                    # The pair before was cold (cropped from the whole working volume): crude. The filter starts
+                    # again on this first tracked pair rather than pulling it back there. (Without tracking
+                    # every pair is cold, and smoothing runs on them all.)
                     self._smoother.reset()
+                points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
+        self._last_pair_cold = not p.regions.tracked
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
         return PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,

@@ -392,17 +392,38 @@ def dataset_matches(cfg: PipelineConfig) -> bool:
     return True
 
 
+def _pid_alive(path: Path) -> bool:
+    """Whether ``path`` (a run's ``train.pid``) names a live process (a crashed run leaves a stale one)."""
+    try:
+        os.kill(int(path.read_text().strip()), 0)
+    except (OSError, ValueError):
+        return False
+    return True
+
+
 def _set_aside_forced(cfg: PipelineConfig, forced: set[str]) -> None:
-    """``--force`` of a stage that reuses what it finds (the dataset, a finished run): move that aside
-    (``<name>.replaced-<time>``, nothing deleted), so the stage makes it again."""
-    folders = {"data": cfg.data, **{f"pretrain_{v}": pretrain_dir(cfg, v) for v in VARIANTS if pretrain_block(cfg, v)},
-               **{f"train_{v}": cfg.runs / VARIANTS[v] for v in VARIANTS}}
+    """``--force`` of a stage that reuses what it finds (the dataset, a finished run) and that this invocation
+    will run: move that aside (``<name>.replaced-<time>``, nothing deleted), so the stage makes it again."""
+    folders = {"data": cfg.data}
+    if cfg.until != "data":
+        folders.update({f"pretrain_{v}": pretrain_dir(cfg, v) for v in cfg.variants if pretrain_block(cfg, v)})
+    if cfg.until not in ("data", "pretrain"):
+        folders.update({f"train_{v}": cfg.runs / VARIANTS[v] for v in cfg.variants})
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     for stage, folder in folders.items():
-        if stage in forced and folder.exists():
-            aside = folder.with_name(f"{folder.name}.replaced-{stamp}")
-            folder.rename(aside)
-            log.info("--force %s: moved %s aside to %s", stage, folder, aside)
+        if stage not in forced or not folder.exists():
+            continue
+        log_p = folder / "log.jsonl"
+        if _pid_alive(folder / "train.pid") or (log_p.exists() and not (folder / "summary.json").exists()
+                                                and time.time() - log_p.stat().st_mtime < 180):
+            raise RuntimeError(f"--force {stage}: {folder} seems to be in use by a training run (train.pid or a "
+                               "fresh log.jsonl); wait for it or stop it first")
+        aside = folder.with_name(f"{folder.name}.replaced-{stamp}")
+        n = 1
+        while aside.exists():
+            aside, n = folder.with_name(f"{folder.name}.replaced-{stamp}-{n}"), n + 1
+        folder.rename(aside)
+        log.info("--force %s: moved %s aside to %s", stage, folder, aside)
 
 
 def stage_data(cfg: PipelineConfig) -> tuple[list[Path], dict]:

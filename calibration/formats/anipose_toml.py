@@ -63,7 +63,7 @@ def read_anipose_toml(
         rig_id: default ``metadata.rig_id`` from the file, else the file's stem.
 
     Returns:
-        The :class:`Rig`, cameras in file order, metadata
+        The :class:`Rig`, cameras in sorted section order (as aniposelib loads them), metadata
         ``{"source": {"format": "anipose-toml", "path", "units_to_metres"}}``.
 
     Raises:
@@ -187,12 +187,13 @@ def dumps_anipose_toml(rig: Rig, *, units_to_metres: float) -> str:
     units = check_units(units_to_metres)
     refuse_skew(rig.cameras, "an anipose calibration.toml")
     lines = [f"# anipose calibration written by ghnerf; translation unit = {units!r} m, rotation = Rodrigues (world -> camera)"]
+    digits = len(str(len(rig.cameras) - 1))  # cam_00..cam_11: readers sort the sections (aniposelib does)
     for i, cam in enumerate(rig.cameras):
         rvec, _ = cv2.Rodrigues(np.ascontiguousarray(cam.R))
         dist = cam.dist if cam.dist.size else np.zeros(5)
         lines += [
             "",
-            f"[cam_{i}]",
+            f"[cam_{i:0{digits}d}]",
             f"name = {_toml_string(cam.name)}",
             f"size = [{int(cam.width)}, {int(cam.height)}]",
             "matrix = [" + ", ".join(_toml_array(row) for row in cam.K) + "]",

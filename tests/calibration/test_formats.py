@@ -96,6 +96,15 @@ def test_toml_volume_round_trips_and_cameras_come_in_anipose_order(rig, tmp_path
     assert read_anipose_toml(path, units_to_metres=0.001).names == back.names
 
 
+def test_a_dozen_cameras_keep_their_order_through_toml(rig, tmp_path):
+    cams = tuple(Camera(f"c{i}", 640, 480, rig.cameras[0].K, rig.cameras[0].dist, rig.cameras[0].R,
+                        rig.cameras[0].t + [0.1 * i, 0.0, 0.0]) for i in range(12))
+    path = tmp_path / "many.toml"
+    write_anipose_toml(Rig(cams, rig.volume), path, units_to_metres=1.0)
+    assert "[cam_00]" in path.read_text() and "[cam_11]" in path.read_text()
+    assert read_anipose_toml(path, units_to_metres=1.0).names == tuple(f"c{i}" for i in range(12))
+
+
 def test_skew_is_refused_by_the_foreign_formats(rig, tmp_path):
     skewed = Camera("s", 640, 480, [[600.0, 5.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
     for write in (lambda: write_opencv_camera(skewed, tmp_path / "s.yml"),

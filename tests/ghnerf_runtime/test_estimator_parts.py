@@ -203,3 +203,14 @@ def test_frame_check_judges_only_the_pixels_that_show_the_frame():
     noise = np.where(inside, np.random.default_rng(0).random((128, 128)), 0.0).astype(np.float32)
     assert check_crop(noise, 255.0, cfg, inside) == (False, "noise")
     assert check_crop(image, 255.0, cfg, np.zeros((128, 128), bool)) == (False, "flat")  # shows nothing
+
+
+def test_a_skewed_camera_on_its_side_still_gives_an_upright_pinhole():
+    """The novel view interpolates the sources' upright pinholes; a skewed K cannot be quarter-turned exactly."""
+    from ghnerf_runtime.estimator import _CameraState
+    from ghnerf_runtime.geometry.camera import Camera
+
+    cam = Camera("side", 480, 640, [[600.0, 3.0, 240.0], [0.0, 600.0, 320.0], [0.0, 0.0, 1.0]], [-0.1, 0.01, 0.0, 0.0])
+    for roll in (90.0, -90.0, 180.0):
+        upright = _CameraState(cam, roll).upright_pinhole
+        assert not upright.has_distortion and np.allclose(upright.center, cam.center)

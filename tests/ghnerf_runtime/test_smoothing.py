@@ -127,3 +127,22 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
             assert np.array_equal(r.joints_3d, raw[i][0].joints_3d)
         else:
             assert np.array_equal(r.joints_3d, smooth[i][0].joints_3d) == (i == 0)
+    # without tracking every pair is cold: smoothing still runs (it restarts only on the step to a tracked pair)
+    from ghnerf_runtime.config import TrackingConfig
+
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(joints3d=Joints3DConfig(method="triangulate"),
+                                                 smoothing=SmoothingConfig(beta=0.0),
+                                                 tracking=TrackingConfig(enabled=False)))
+    untracked = []
+    for i, (pair, truth, vis) in enumerate(frames):
+        oracle.set_truth(truth, vis)
+        untracked.append(est.estimate(pair, timestamp_s=i / FPS))
+    assert not any(r.tracked for r in untracked)
+    raw_cold = Estimator(OracleSession(edge128_contract()), rig, EstimatorConfig(
+        joints3d=Joints3DConfig(method="triangulate"), smoothing=SmoothingConfig(enabled=False),
+        tracking=TrackingConfig(enabled=False)))
+    for i, (pair, truth, vis) in enumerate(frames):
+        raw_cold.session.set_truth(truth, vis)
+        r = raw_cold.estimate(pair, timestamp_s=i / FPS)
+        assert np.array_equal(r.joints_3d, untracked[i].joints_3d) == (i == 0)

@@ -560,3 +560,25 @@ def test_a_run_stopped_at_its_cap_is_resumed_and_force_trains_anew(tmp_path, cap
     aside = [p for p in runs.iterdir() if p.name.startswith("edge128.replaced-")]
     assert len(aside) == 1 and sha256(aside[0] / "last.pt") == first
     assert (runs / "edge128" / "summary.json").exists() and (runs / "edge128_baseline").exists()
+
+
+def test_force_sets_aside_only_what_this_run_redoes_and_never_a_live_run(tmp_path):
+    import os
+
+    from training.pipeline import PipelineConfig, _set_aside_forced
+
+    cfg = PipelineConfig(out=tmp_path / "m", runs=tmp_path / "runs", data=tmp_path / "data")
+    cfg.variants = ("ghnerf",)
+    for run in ("edge128", "edge128_baseline"):
+        (cfg.runs / run).mkdir(parents=True)
+    _set_aside_forced(cfg, {"train_ghnerf", "train_baseline"})
+    names = sorted(p.name for p in cfg.runs.iterdir())
+    assert names[0].startswith("edge128.replaced-") and names[1:] == ["edge128_baseline"]  # only the variant asked for
+    cfg.until = "pretrain"
+    (cfg.runs / "edge128").mkdir()
+    _set_aside_forced(cfg, {"train_ghnerf"})
+    assert (cfg.runs / "edge128").exists()  # this invocation trains nothing
+    cfg.until = None
+    (cfg.runs / "edge128" / "train.pid").write_text(str(os.getpid()))  # a live trainer
+    with pytest.raises(RuntimeError, match="in use by a training run"):
+        _set_aside_forced(cfg, {"train_ghnerf"})
