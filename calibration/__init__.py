@@ -1,5 +1,6 @@
 """Camera calibration: boards, detection, intrinsic + stereo solve, reports, the ``ghcal`` CLI.
 
 ``calibration.formats`` imports and exports foreign calibration files (OpenCV YAML,
-anipose TOML). The rig file itself lives in :mod:`ghnerf_runtime.rig_file`.
+anipose TOML); ``calibration.level`` puts an imported rig in the project's frame (gravity
+down, floor at y = 0). The rig file itself lives in :mod:`ghnerf_runtime.rig_file`.
 """

@@ -211,6 +211,19 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
 
 
 # ------------------------------------------------------------------ estimator
+#: Imported calibrations whose frame is the tool's own (its first camera's, the board's), not gravity-down.
+_TOOL_FRAMES = ("opencv-stereo-calib", "anipose-toml")
+
+
+def _warn_if_not_levelled(rig: Rig) -> None:
+    source = rig.metadata.get("source") if isinstance(rig.metadata, dict) else None
+    fmt = source.get("format") if isinstance(source, dict) else None
+    if fmt in _TOOL_FRAMES and "levelled" not in rig.metadata:
+        log.warning("rig %r comes from %s and keeps that tool's frame; the runtime reads the rig frame as y down "
+                    "(gravity) with the floor at y = 0 (the skeleton prior, upright crops, the working volume): level "
+                    "it first with calibration.level.level_rig (docs/rig-file.md)", rig.rig_id, fmt)
+
+
 def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
     """Add the milliseconds since ``t0`` to ``timing[stage]`` (a cold start's second pass adds to the first)."""
     timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
@@ -291,6 +304,7 @@ class Estimator:
         self.skeleton_prior = self._prior_of(session)
         self.novel_painter = self._painter_of(session)
         self._prior_follow: Joints3D | None = None
+        _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
                                       (self._cams[0].roll_deg, self._cams[1].roll_deg))
