@@ -1,4 +1,4 @@
-"""Camera calibration: boards, detection, intrinsic + stereo solve, reports, the ``ghcal`` CLI.
+"""Camera calibration files: import, export and levelling (a calibration CLI is not built yet).
 
 ``calibration.formats`` imports and exports foreign calibration files (OpenCV YAML,
 anipose TOML); ``calibration.level`` puts an imported rig in the project's frame (gravity
