@@ -75,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="videos: One Euro smoothing of the 3D joints on the frames' times (smoothing.enabled, on "
                          "by default: less jitter and a lower MPJPE on the bench, docs/runtime.md); --no-smoothing "
                          "reports each pair's raw joints")
+    ap.add_argument("--refine-cold-start", action=argparse.BooleanOptionalAction, default=None,
+                    help="run a cold pair (no track yet) again on the subject it found (tracking.refine_cold_start): "
+                         "on by default for --images, a still pair that has no next pair to track with "
+                         "(docs/runtime.md); off by default for --videos, whose later pairs are tracked")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, help="novel camera between the rig cameras: 0 = first, "
@@ -132,6 +136,9 @@ def _config(args) -> EstimatorConfig:
         cfg = replace(cfg, smoothing=replace(cfg.smoothing, enabled=args.smoothing))
     if args.skeleton_prior:
         cfg = replace(cfg, joints3d=replace(cfg.joints3d, skeleton_prior=args.skeleton_prior))
+    refine = args.refine_cold_start if args.refine_cold_start is not None else (True if args.images else None)
+    if refine is not None:
+        cfg = replace(cfg, tracking=replace(cfg.tracking, refine_cold_start=refine))
     if args.max_prior_error is not None:
         cfg = replace(cfg, joints3d=replace(cfg.joints3d, max_prior_error_m=args.max_prior_error))
     if args.novel_view:

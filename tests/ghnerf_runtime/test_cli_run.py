@@ -343,3 +343,15 @@ def test_bench_refuses_a_run_that_would_time_nothing(args, words, capsys):
 
     assert bench.main(["runtime", "--model-dir", "unused", *args]) == 2
     assert words in capsys.readouterr().err
+
+
+def test_a_still_pair_refines_its_cold_start_by_default(capsys):
+    """One pair has no next pair to track with: its crude working-volume crop is run again on the subject."""
+    def resolved(*args):
+        assert cli_run.main(["--validate-config", *args]) == 0
+        return json.loads(capsys.readouterr().out)["tracking"]["refine_cold_start"]
+
+    assert resolved("--rig", "r.json", "--images", "a", "b") is True
+    assert resolved("--rig", "r.json", "--images", "a", "b", "--no-refine-cold-start") is False
+    assert resolved("--rig", "r.json", "--videos", "a", "b") is False  # later pairs are tracked
+    assert resolved("--rig", "r.json", "--videos", "a", "b", "--refine-cold-start") is True
