@@ -106,9 +106,6 @@ class HostPipelineLink:
         assert self.queue is not None
         return self.queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
 
-    def has_group(self) -> bool:
-        return self.queue is not None and not self.queue.isClosed() and self.queue.has()
-
     def unplug(self) -> None:
         """Stop the pipeline under the reader, as a lost device does: its queue closes."""
         if self.pipeline is not None:

@@ -52,9 +52,6 @@ class DeviceLink(Protocol):
     def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
         """The next synced group with ``left`` and ``right`` ImgFrames, or ``None`` after ``timeout_s``."""
 
-    def has_group(self) -> bool:
-        """Whether a group waits in the host queue now (so ``next_group(0)`` returns it without waiting)."""
-
     def close(self) -> None:
         """Stop the pipeline and release the device. Safe to call more than once."""
 
@@ -93,10 +90,6 @@ class DaiDeviceLink:
     def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
         assert self._queue is not None, "start() first"
         return self._queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
-
-    def has_group(self) -> bool:
-        # A closed queue (the device went away) says False; the next read raises it.
-        return self._queue is not None and not self._queue.isClosed() and self._queue.has()
 
     def close(self) -> None:
         pipeline, device = self._pipeline, self._device

@@ -13,7 +13,7 @@ from drivers.base import RigSource
 from drivers.clock import Clock
 from drivers.errors import RigConfigError, RigDisconnectedError, RigInitializationError, RigOperationError
 from drivers.frames import Frame
-from drivers.pairing import PairingConfig
+from drivers.pairing import DropPolicy, PairingConfig
 from drivers.url import RigUrl
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
@@ -127,21 +127,28 @@ class DepthaiRigSource(RigSource):
                 return None
             first, second = frames_from_group(group, self.rig)
         self._pending.append(second)
+        if self.pairing.policy is DropPolicy.LATEST:
+            self._take_queued_groups(link)
         return first
 
+    def _take_queued_groups(self, link: DeviceLink) -> None:
+        """Move the groups already waiting in the host queue into ``_pending``: read() drains them under
+        the LATEST policy, so a reader slower than the cameras gets the newest pair (older ones counted in
+        pairs_dropped) rather than one up to ``queue=`` groups old. Through ``next_group(0)``, which
+        releases the GIL: depthai's ``has()``/``isClosed()`` wait on the queue's lock holding it, and a
+        host node that needs the GIL to hand over a message then deadlocks with them."""
+        for _ in range(max(self.options.queue_size, 1)):
+            try:
+                group = link.next_group(0.0)
+                if group is None:
+                    return
+                self._pending.extend(frames_from_group(group, self.rig))
+            except Exception as e:  # noqa: BLE001 - a closed queue: the next read raises it, typed
+                log.debug("depthai: no more queued groups (%s)", e)
+                return
+
     def _frame_available(self) -> bool:
-        # The second frame of a group already taken, or a group waiting in the host queue: under the
-        # LATEST policy read() drains them, so a consumer slower than the cameras gets the newest pair
-        # (older ones counted in pairs_dropped) rather than one up to queue= groups old.
-        if self._pending:
-            return True
-        link = self._link
-        if link is None:
-            return False
-        try:
-            return link.has_group()
-        except RuntimeError:  # depthai's errors are RuntimeErrors: let the next read raise it, typed
-            return False
+        return bool(self._pending)  # frames already taken from the link; the link itself is not polled
 
     def _close(self) -> None:
         link, self._link = self._link, None
