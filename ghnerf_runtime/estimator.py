@@ -73,9 +73,9 @@ from ghnerf_runtime.preprocess import (
     CropMaps,
     Roi,
     build_undistort_crop_maps,
+    camera_normalized,
     crop_camera,
     preprocess_image,
-    camera_normalized,
     upright_roll_deg,
 )
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block

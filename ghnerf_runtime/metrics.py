@@ -48,8 +48,20 @@ __all__ = [
     "TORSO_BOX_JOINTS", "LEFT_RIGHT_PAIRS", "PckResult", "SwapResult", "MpjpeResult", "ImageMetricResult",
     "MseResult", "VISIBILITY_CLASSES", "visibility_class", "mpjpe_by_visibility", "left_right_swaps",
     "AccelerationResult", "acceleration_error", "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse",
-    "gaussian_heatmaps",
+    "gaussian_heatmaps", "finite_or_none",
 ]
+
+
+def finite_or_none(value):
+    """A metrics report with every non-finite float (a metric with nothing to score, a broken model's
+    NaN) as ``None``: strict JSON, which refuses NaN and infinity."""
+    if isinstance(value, dict):
+        return {k: finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_or_none(v) for v in value]
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
 
 
 # ------------------------------------------------------------------ results

@@ -54,7 +54,7 @@ import numpy as np
 
 from ghnerf_runtime.contract import Normalisation
 from ghnerf_runtime.errors import GeometryError, ShapeError
-from ghnerf_runtime.geometry.camera import Camera, check_last_dim
+from ghnerf_runtime.geometry.camera import Camera, check_last_dim, image_rotation
 from ghnerf_runtime.geometry.rig import WorkingVolume
 
 __all__ = [
@@ -171,9 +171,13 @@ def _square_roi(lo: np.ndarray, hi: np.ndarray, camera: Camera, min_size: int = 
     lo, hi = np.maximum(lo, img_lo), np.minimum(hi, img_hi)
     if np.any(hi < lo):
         raise GeometryError(f"camera {camera.name!r}: the region {lo.tolist()}..{hi.tolist()} lies outside the image")
+    return _square(0.5 * (lo + hi), float(np.max(hi - lo)), min_size)
+
+
+def _square(centre: np.ndarray, side: float, min_size: int = 1) -> Roi:
+    """The integer square of at least ``side`` (and ``min_size``) pixels around ``centre``."""
     # +1: integer rounding of the corner may shift the window by up to half a pixel each way.
-    size = max(int(math.ceil(float(np.max(hi - lo)))) + 1, int(min_size), 1)
-    centre = 0.5 * (lo + hi)
+    size = max(int(math.ceil(side)) + 1, int(min_size), 1)
     x0, y0 = (int(math.floor(c - (size - 1) / 2 + 0.5)) for c in centre)
     return Roi(x0, y0, size)
 
@@ -191,15 +195,11 @@ def _roi_of_points(uv: np.ndarray, camera: Camera, *, margin_frac: float = 0.0, 
     img_lo, img_hi = _cached_image_bounds(camera)
     if np.any(np.minimum(hi, img_hi) < np.maximum(lo, img_lo)):
         raise GeometryError(f"camera {camera.name!r}: the region {lo.tolist()}..{hi.tolist()} lies outside the image")
-    a = math.radians(roll_deg)
-    turn = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])  # as Camera.rotated
+    turn = image_rotation(roll_deg)  # as Camera.rotated turns the crop
     seen = np.clip(uv, img_lo, img_hi) @ turn.T  # nothing outside the image can be seen
     lo, hi = seen.min(axis=0), seen.max(axis=0)
-    grow = margin_frac * float(np.max(hi - lo))
-    size = max(int(math.ceil(float(np.max(hi - lo)) + 2 * grow)) + 1, int(min_size), 1)
-    centre = turn.T @ (0.5 * (lo + hi))
-    x0, y0 = (int(math.floor(c - (size - 1) / 2 + 0.5)) for c in centre)
-    return Roi(x0, y0, size)
+    extent = float(np.max(hi - lo))
+    return _square(turn.T @ (0.5 * (lo + hi)), extent * (1 + 2 * margin_frac), min_size)
 
 
 def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: float = 0.0, *,
@@ -381,20 +381,21 @@ _OUTSIDE = -1e6  # a map coordinate far off any frame: cv2.remap's constant bord
 
 def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Distorted frame pixels ``(S, S)`` x2 sampled by each pixel of the pinhole ``crop`` camera."""
-    if camera.K[0, 1] == 0.0:
+    skewed, folds = camera.K[0, 1] != 0.0, math.isfinite(camera.fold_radius)
+    # each crop pixel's ray in the camera's normalised coordinates (the crop is a pinhole: exact)
+    xy = camera_normalized(crop.pixels_to_normalized(crop.pixel_grid()), crop, camera) if skewed or folds else None
+    if not skewed:
         # OpenCV's own implementation of the same lens model; no skew support, hence the test. A rotated
         # crop is a rectification: R takes the camera's frame to the crop's.
         dist = camera.dist if camera.dist.size else None
         rectify = None if crop.R is camera.R else crop.R @ camera.R.T
         map_x, map_y = cv2.initUndistortRectifyMap(camera.K, dist, rectify, crop.K, crop.size, cv2.CV_32FC1)
     else:
-        xy = camera_normalized(crop.pixels_to_normalized(crop.pixel_grid()), crop, camera)
         src = camera.normalized_to_pixels(xy, distort=True)
         map_x, map_y = src[..., 0].astype(np.float32), src[..., 1].astype(np.float32)
-    if math.isfinite(camera.fold_radius):
+    if folds:
         # Past the lens model's fold, the forward model maps back onto the image (a mirrored ring of
         # the picture): show nothing there instead, as outside the frame.
-        xy = camera_normalized(crop.pixels_to_normalized(crop.pixel_grid()), crop, camera)  # a pinhole: exact
         outside = np.sum(xy * xy, axis=-1) >= camera.fold_radius**2
         map_x[outside] = map_y[outside] = _OUTSIDE
     return map_x, map_y

@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass, field
@@ -70,7 +69,8 @@ from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
-from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility, pck
+from ghnerf_runtime.metrics import (finite_or_none, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility,
+                                    pck)
 
 PCK_ALPHA = 0.2
 #: Bin edges (degrees) of a novel view's angle from the nearest source camera, for the PSNR split.
@@ -611,16 +611,6 @@ def make_renderer(spec: str, threads: int = 2) -> tuple[Renderer, dict]:
     return r, {"kind": f"onnx-{precision}", "path": str(p), "variant": r.contract.variant}
 
 
-def _clean(obj):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_clean(v) for v in obj]
-    return obj
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="ghnerf-eval", description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
@@ -647,7 +637,7 @@ def main(argv: list[str] | None = None) -> int:
         ds = MultiViewDataset(args.data, args.split, TargetConfig(heatmap_stride=renderer.heatmap_stride))
         print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
         results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
-    text = json.dumps(_clean(results), indent=1)
+    text = json.dumps(finite_or_none(results), indent=1)
     if args.out:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(text)

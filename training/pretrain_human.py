@@ -41,7 +41,7 @@ from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
 from training.train import HEATMAP_SIGMA_HM_PX, DistInfo, Progress, apply_overrides, learning_rate, \
-    load_checkpoint, load_config_file, mirrored, model_config_of, scene_order, seed_everything
+    load_checkpoint, load_config_file, mirrored, model_config_of, refuse_another_config, scene_order, seed_everything
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -348,15 +348,10 @@ RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "
 def _check_resumable(cfg: PretrainConfig, last: Path) -> None:
     """Refuse to resume ``last`` under another config (checkpoints from before the config was stored pass)."""
     old = load_checkpoint(last).get("config")
-    if not old:
-        return
-    now = json.loads(json.dumps(asdict(cfg)))
-    was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
-    differ = sorted(k for k in now if k not in RESUME_MAY_CHANGE and was.get(k) != now.get(k))
-    if differ:
-        raise ConfigError(f"{last}: resuming under another config ({', '.join(differ)} differ from the run's); "
-                          "resume changes only " + ", ".join(RESUME_MAY_CHANGE) + ": start a new run (--out) "
-                          "for another config")
+    if old:
+        now = json.loads(json.dumps(asdict(cfg)))
+        was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
+        refuse_another_config(last, was, now, RESUME_MAY_CHANGE)
 
 
 def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, quiet: bool = False,

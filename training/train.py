@@ -584,19 +584,22 @@ def load_checkpoint(path: str | Path, map_location="cpu") -> dict:
                           "delete it, or restore one of the run's ckpt_*.pt as last.pt") from e
 
 
-def check_resumable(cfg: TrainConfig, last: Path) -> None:
-    """Refuse to resume ``last`` under another config: the rest of the run would silently mix two (only
-    :data:`RESUME_MAY_CHANGE` may differ)."""
-    old = load_checkpoint(last).get("config")
-    if not old:
-        return
-    was = json.loads(json.dumps(asdict(build_config(old))))  # keys added since read as their defaults
-    now = json.loads(json.dumps(asdict(cfg)))
-    differ = sorted(k for k in set(was) | set(now) if k not in RESUME_MAY_CHANGE and was.get(k) != now.get(k))
+def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...]) -> None:
+    """Refuse to resume ``last`` (whose run had config ``was``) under ``now``: the rest of the run would
+    silently mix two. Only the keys in ``may_change`` may differ."""
+    differ = sorted(k for k in set(was) | set(now) if k not in may_change and was.get(k) != now.get(k))
     if differ:
         raise ConfigError(f"{last}: resuming under another config ({', '.join(differ)} differ from the run's); "
-                          "resume changes only " + ", ".join(RESUME_MAY_CHANGE) + ": start a new run (--out) "
+                          "resume changes only " + ", ".join(may_change) + ": start a new run (--out) "
                           "for another config")
+
+
+def check_resumable(cfg: TrainConfig, last: Path) -> None:
+    """:func:`refuse_another_config` for a training run (only :data:`RESUME_MAY_CHANGE` may differ)."""
+    old = load_checkpoint(last).get("config")
+    if old:
+        was = json.loads(json.dumps(asdict(build_config(old))))  # keys added since read as their defaults
+        refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE)
 
 
 def _take_lock(path: Path) -> None:

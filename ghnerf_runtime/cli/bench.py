@@ -24,7 +24,6 @@ import argparse
 import itertools
 import json
 import logging
-import math
 import os
 import sys
 import time
@@ -37,6 +36,7 @@ from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS,
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE, NOVEL_STAGES, Estimator,
                                       load_session)
+from ghnerf_runtime.metrics import finite_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.tracking import track_from_joints
 
@@ -320,17 +320,6 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _no_nan(value):
-    """``value`` with every float NaN or infinity replaced by ``None`` (strict JSON parsers refuse them)."""
-    if isinstance(value, dict):
-        return {k: _no_nan(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_no_nan(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
@@ -361,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
         report = run_runtime_bench(args)
         if args.json:
             with open(args.json, "w", encoding="utf-8") as fh:
-                json.dump(_no_nan(report), fh, indent=2, default=float)  # strict JSON: NaN becomes null
+                json.dump(finite_or_none(report), fh, indent=2, default=float)  # strict JSON: NaN becomes null
         return 0
     except (RuntimeErrorBase, OSError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)

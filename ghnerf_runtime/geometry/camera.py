@@ -46,6 +46,19 @@ def _as_dist(coefficients) -> np.ndarray:
     return full
 
 
+def image_rotation(degrees: float) -> np.ndarray:
+    """``(2, 2)``: pixel offsets (x right, y down) turned ``degrees`` counterclockwise on the screen."""
+    a = math.radians(degrees)
+    return np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+
+
+def _distorted_radius(dist: np.ndarray, r):
+    """``r * radial(r)``: where the radial lens model puts a point ``r`` from the axis (normalised)."""
+    k1, k2, _, _, k3, k4, k5, k6 = _as_dist(dist)[:8]
+    r2 = r * r
+    return r * (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
+
+
 @functools.lru_cache(maxsize=64)
 def fold_radius(coefficients: tuple[float, ...], r_max: float = 10.0) -> float:
     """Normalised radius where the radial lens model stops growing (``inf``: not within ``r_max``).
@@ -54,11 +67,9 @@ def fold_radius(coefficients: tuple[float, ...], r_max: float = 10.0) -> float:
     that other points already map to: the model is only valid inside this radius. Wide lenses
     fitted with a few polynomial terms often fold inside the image corners.
     """
-    k1, k2, _, _, k3, k4, k5, k6 = _as_dist(coefficients)[:8]
     r = np.linspace(0.0, r_max, 20001)
-    r2 = r * r
     with np.errstate(all="ignore"):
-        rd = r * (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
+        rd = _distorted_radius(np.asarray(coefficients), r)
     falling = ~(np.diff(rd) > 0)
     return float(r[int(np.argmax(falling))]) if falling.any() else math.inf
 
@@ -196,9 +207,7 @@ class Camera:
         r = self.fold_radius
         if not math.isfinite(r):
             return False
-        k1, k2, _, _, k3, k4, k5, k6 = _as_dist(self.dist)[:8]
-        r2 = r * r
-        reach = r * (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
+        reach = _distorted_radius(self.dist, r)
         corners = np.array([[-0.5, -0.5], [self.width - 0.5, -0.5], [-0.5, self.height - 0.5],
                             [self.width - 0.5, self.height - 0.5]])
         fx, fy, cx, cy, skew = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.K[0, 1]
@@ -331,8 +340,7 @@ class Camera:
             return self
         if self.has_distortion:
             raise GeometryError(f"camera {self.name!r}: only a pinhole camera can be rotated")
-        a = math.radians(degrees)
-        rot = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])  # pixels, y down
+        rot = image_rotation(degrees)
         centre = np.array([(self.width - 1) / 2, (self.height - 1) / 2])
         M = rot @ self.K[:2, :2]
         # RQ of M = K2 @ Q: K2 upper triangular with a positive diagonal, Q a rotation (det M > 0).

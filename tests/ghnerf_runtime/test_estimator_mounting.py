@@ -12,25 +12,17 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.config import EstimatorConfig, RoiConfig, SessionConfig
-from ghnerf_runtime.geometry import Camera, Rig
+from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import dumps_rig, loads_rig
 
 MODELS = Path(__file__).resolve().parents[2] / "models"
 pytestmark = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model in models/")
 
 def rolled(rig: Rig, degrees: float) -> Rig:
-    """The rig with every camera rolled about its optical axis (a quarter turn swaps the sensor's sides),
-    through a rig file as a user would load it."""
-    if degrees == 0:
-        return rig
-    a = np.radians(degrees)
-    Rz = np.array([[np.cos(a), np.sin(a), 0.0], [-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    cams = []
-    for c in rig.cameras:
-        W, H = (c.height, c.width) if round(degrees) % 180 == 90 else (c.width, c.height)
-        K = np.array([[c.K[0, 0], 0.0, (W - 1) / 2], [0.0, c.K[1, 1], (H - 1) / 2], [0.0, 0.0, 1.0]])
-        cams.append(Camera(c.name, W, H, K, c.dist, Rz @ c.R, Rz @ c.t))
-    return loads_rig(dumps_rig(Rig(tuple(cams), rig.volume, rig.rig_id)))
+    """The rig with every camera rolled (the benchmark's), through a rig file as a user would load it."""
+    from benchmarks.measure_mounting import rolled as roll_cameras
+
+    return rig if degrees == 0 else loads_rig(dumps_rig(roll_cameras(rig, degrees)))
 
 
 @pytest.fixture(scope="module")
