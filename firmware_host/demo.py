@@ -40,7 +40,7 @@ import numpy as np
 import drivers
 from drivers.sim.demo import draw_truth
 from firmware_host.errors import FirmwareHostError
-from firmware_host.protocol.messages import JointFrame
+from firmware_host.joint_frames import estimate_frame, truth_frame
 from firmware_host.sinks import open_sink
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.simdata import Accuracy
@@ -98,38 +98,6 @@ def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
     print(f"model {folder} ({d['variant']} {d['resolution']}, graphs {', '.join(d['files'])}; "
           f"3D method {cfg.joints3d.method}) loaded in {time.monotonic() - t0:.2f} s")
     return estimator
-
-
-# ------------------------------------------------------------------ joint frames
-def _truth_frame(pair: drivers.FramePair) -> JointFrame | None:
-    if pair.joints_3d is None:
-        return None
-    joints = np.concatenate([pair.joints_3d, np.ones((len(pair.joints_3d), 1))], axis=1)
-    return JointFrame(
-        sequence=pair.sequence,
-        capture_time_us=pair.frames[0].timestamp_ns // 1000,
-        joint_set=0,
-        joints_3d=joints,
-    )
-
-
-def _estimate_frame(pair: drivers.FramePair, result: PairResult) -> JointFrame:
-    """The estimate as a sink frame: missing joints are NaN with confidence 0 (missing on the wire)."""
-    missing = np.asarray(result.missing, bool)
-    xyz = np.where(missing[:, None], np.nan, result.joints_3d)
-    conf = np.where(missing, 0.0, result.confidence)
-    joints_2d = {}
-    for index, frame in enumerate(pair.frames):  # keyed by camera index: the sink announces rig.pair's names
-        m2 = np.asarray(result.missing_2d[frame.camera], bool)
-        uv = np.where(m2[:, None], np.nan, result.joints_2d[frame.camera])
-        joints_2d[index] = np.column_stack([uv, np.where(m2, 0.0, result.confidence_2d[frame.camera])])
-    return JointFrame(
-        sequence=pair.sequence,
-        capture_time_us=pair.frames[0].timestamp_ns // 1000,
-        joint_set=0,
-        joints_3d=np.column_stack([xyz, conf]),
-        joints_2d=joints_2d,
-    )
 
 
 # ------------------------------------------------------------------ accuracy
@@ -299,12 +267,12 @@ def _run(args: argparse.Namespace) -> int:
                     break
                 delivered += 1
                 if estimator is None:
-                    frame = _truth_frame(pair)
+                    frame = truth_frame(pair)
                 else:
                     result = estimator.estimate(pair.images, sequence=pair.sequence,
                                                 timestamp_s=pair.timestamps_ns[0] * 1e-9)
                     tally.add(pair, result, time.monotonic_ns())
-                    frame, last_result = _estimate_frame(pair, result), result
+                    frame, last_result = estimate_frame(pair, result), result
                 if frame is not None:
                     sink.send(frame)
                 skews.append(pair.skew_ns / 1e6)

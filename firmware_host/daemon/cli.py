@@ -1,0 +1,143 @@
+"""``ghnerf-daemon``: the device's headless service (rig -> joints -> sinks), as systemd runs it.
+
+Examples::
+
+    ghnerf-daemon --config /etc/ghnerf/daemon.json
+    ghnerf-daemon --config daemon.json --validate-config      # check, print the full config, exit
+    ghnerf-daemon --print-example-config > daemon.json        # a starting point (sim:// rig, UDP sink)
+
+Under systemd (``systemd/ghnerf.service``, ``Type=notify``) it reports ``READY=1`` once the model
+is loaded, keeps a one-line ``STATUS=`` (``systemctl status ghnerf``), pings the watchdog while its
+main loop progresses and logs without timestamps (the journal adds its own).
+
+Exit status: 0 after SIGTERM / SIGINT or the end of a recording; 2 for what a restart cannot fix
+(a bad config, a sink URL, a model that does not load: the message names the file and the key),
+which the unit file keeps systemd from restarting; 1 for an unexpected error, which it restarts.
+"""
+from __future__ import annotations
+
+import argparse
+import faulthandler
+import json
+import logging
+import os
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+
+import drivers
+from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_config_to_dict, load_daemon_config
+from firmware_host.daemon.service import Daemon, DaemonStartError
+from firmware_host.errors import FirmwareHostError
+from firmware_host.sinks.registry import sink_class
+from firmware_host.sinks.url import parse_url
+from ghnerf_runtime.session import resolve_model_dir
+
+__all__ = ["main", "build_parser", "check_config", "EXAMPLE_CONFIG"]
+
+PROG = "ghnerf-daemon"
+
+#: ``--print-example-config``: runs as it is on a development machine (the simulated rig).
+EXAMPLE_CONFIG = {
+    "rig": {"url": "sim://?fps=30&seed=0&motion=wave"},
+    "sinks": ["udp://127.0.0.1:9870?send_2d=1"],
+    "estimator": {"session": {"model_dir": "models"}},
+    "health": {"status_file": "ghnerf-status.json"},
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
+                                 epilog="Config reference: docs/daemon.md")
+    ap.add_argument("--config", help="daemon config, JSON (docs/daemon.md)")
+    ap.add_argument("--validate-config", action="store_true",
+                    help="check the config (keys, values, rig and sink URLs, model folder), print it in full, exit")
+    ap.add_argument("--print-example-config", action="store_true", help="print a config to start from, exit")
+    ap.add_argument("--max-seconds", type=float, default=None,
+                    help="stop after this long (a bounded run for trials; default: until SIGTERM)")
+    return ap
+
+
+def check_config(config: DaemonConfig) -> None:
+    """What can be checked without hardware: the URLs parse for their backends, the model folder holds graphs.
+
+    :raises DaemonConfigError: naming the key.
+    """
+    try:
+        drivers.create_rig_source(config.rig.url)  # parses and checks the options; opens nothing
+    except drivers.DriverError as e:
+        raise DaemonConfigError(str(e), key="rig.url") from None
+    for k, url in enumerate(config.sinks):
+        try:
+            if "cameras" in parse_url(url).query:
+                raise DaemonConfigError("the daemon announces the rig's camera names itself; remove cameras=",
+                                        key=f"sinks[{k}]")
+            # Built, not started: nothing is opened. The rig's camera names stand in as placeholders.
+            sink_class(url).from_url(url, cameras=("first", "second"))  # type: ignore[attr-defined]
+        except FirmwareHostError as e:
+            if isinstance(e, DaemonConfigError):
+                raise
+            raise DaemonConfigError(str(e), key=f"sinks[{k}]") from None
+    model_dir = resolve_model_dir(config.estimator.session.model_dir)
+    if not model_dir.is_dir() or not any(model_dir.glob("*.onnx")):
+        raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
+                                key="estimator.session.model_dir")
+
+
+def _setup_logging(level: str) -> None:
+    # Under systemd the journal stamps every line itself; elsewhere the time helps.
+    fmt = "%(levelname)s %(name)s: %(message)s" if os.environ.get("JOURNAL_STREAM") else \
+        "%(asctime)s %(levelname)s %(name)s: %(message)s"
+    logging.basicConfig(level=getattr(logging, level.upper()), format=fmt, stream=sys.stderr, force=True)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.print_example_config:
+        print(json.dumps(EXAMPLE_CONFIG, indent=2))
+        return 0
+    if not args.config:
+        print(f"{PROG}: error: --config is required (--print-example-config prints one to start from)",
+              file=sys.stderr)
+        return 2
+    if args.max_seconds is not None and not args.max_seconds > 0:
+        print(f"{PROG}: error: --max-seconds must be > 0, got {args.max_seconds}", file=sys.stderr)
+        return 2
+    try:
+        config = load_daemon_config(args.config)
+        if args.validate_config:
+            try:
+                check_config(config)
+            except DaemonConfigError as e:
+                raise DaemonConfigError(str(e), key=args.config) from None
+            print(json.dumps(daemon_config_to_dict(config), indent=2))
+            return 0
+    except DaemonConfigError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+    _setup_logging(config.log_level)
+    faulthandler.enable()  # a crash inside onnxruntime or depthai leaves its stack in the journal
+
+    stop = threading.Event()
+
+    def _on_signal(signum: int, _frame: object) -> None:
+        logging.getLogger("ghnerf.daemon").info("%s received: stopping", signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGTERM, _on_signal)
+    signal.signal(signal.SIGINT, _on_signal)
+    if args.max_seconds is not None:
+        timer = threading.Timer(args.max_seconds, stop.set)
+        timer.daemon = True
+        timer.start()
+    try:
+        return Daemon(config).run(stop)
+    except DaemonStartError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

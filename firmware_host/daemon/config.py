@@ -1,0 +1,226 @@
+"""The daemon's configuration: one JSON file, one frozen dataclass per component, validated once at load.
+
+Tree (defaults in the classes; ``docs/daemon.md`` has a full example)::
+
+    DaemonConfig
+      rig        RigConfig          camera URL, read timeout, when to reopen, reopen backoff
+      sinks      tuple[str, ...]    joint-stream sink URLs (serial://, usb://, udp://, vmc://, file://)
+      estimator  EstimatorConfig    the runtime's config tree, exactly as docs/runtime.md has it
+      health     HealthConfig       status file, systemd watchdog allowance, estimator stall
+      log_level  str
+
+Unknown keys are an error naming their dotted path (``rig.urll: unknown key ...``), like the
+runtime's config, so a typo on a device fails at start rather than being ignored. Every error
+is a :class:`DaemonConfigError` whose message starts with the file and the key.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from firmware_host.errors import FirmwareHostError
+from ghnerf_runtime.config import EstimatorConfig, config_from_dict, config_to_dict
+from ghnerf_runtime.errors import ConfigError
+
+__all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "daemon_config_from_dict",
+           "daemon_config_to_dict", "load_daemon_config", "LOG_LEVELS"]
+
+LOG_LEVELS = ("debug", "info", "warning", "error")
+
+
+class DaemonConfigError(FirmwareHostError, ValueError):
+    """The daemon's config is invalid; ``key`` is the dotted path (``"rig.read_timeout_s"``)."""
+
+    def __init__(self, message: str, *, key: str | None = None) -> None:
+        super().__init__(f"{key}: {message}" if key else message)
+        self.key = key
+
+
+def _fail(field_name: str, why: str, value: Any) -> None:
+    raise DaemonConfigError(f"{why}, got {value!r}", key=field_name)
+
+
+def _seconds(obj: Any, name: str, lo: float, hi: float) -> None:
+    value = getattr(obj, name)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or not lo <= value <= hi:
+        _fail(name, f"must be a number of seconds in [{lo:g}, {hi:g}]", value)
+    object.__setattr__(obj, name, float(value))
+
+
+def _boolean(obj: Any, name: str) -> None:
+    if not isinstance(getattr(obj, name), bool):
+        _fail(name, "must be true or false", getattr(obj, name))
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Which rig the daemon reads, and how it rides out a camera that stalls or vanishes.
+
+    Attributes:
+        url: rig URL (``drivers.open_rig``): ``depthai://`` (the first OAK), ``depthai://<mxid>``,
+            ``sim://?fps=30``, ``replay:///var/lib/ghnerf/take1``...
+        read_timeout_s: how long one read waits for a pair before the health report calls the
+            camera late (``CAMERA_FAULT`` on the sinks' STATUS).
+        stall_s: no pair for this long (the camera is open but silent): close it and open it again.
+        reopen_min_s, reopen_max_s: backoff between attempts to open the rig after a failure or an
+            unplug, doubling from the first to the second (a missing camera is retried forever).
+        exit_at_end: when a finite source (``replay://``) ends, stop the daemon (exit status 0);
+            false: open it again from the start.
+    """
+
+    url: str = "depthai://"
+    read_timeout_s: float = 1.0
+    stall_s: float = 10.0
+    reopen_min_s: float = 0.5
+    reopen_max_s: float = 30.0
+    exit_at_end: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.url, str) or "://" not in self.url:
+            _fail("url", "must be a rig URL such as 'depthai://' or 'sim://?fps=30'", self.url)
+        _seconds(self, "read_timeout_s", 0.01, 60.0)
+        _seconds(self, "stall_s", 0.1, 3600.0)
+        if self.stall_s < self.read_timeout_s:
+            _fail("stall_s", f"must be at least read_timeout_s ({self.read_timeout_s:g})", self.stall_s)
+        _seconds(self, "reopen_min_s", 0.01, 600.0)
+        _seconds(self, "reopen_max_s", 0.01, 3600.0)
+        if self.reopen_max_s < self.reopen_min_s:
+            _fail("reopen_max_s", f"must be at least reopen_min_s ({self.reopen_min_s:g})", self.reopen_max_s)
+        _boolean(self, "exit_at_end")
+
+
+@dataclass(frozen=True)
+class HealthConfig:
+    """What the daemon reports about itself, and when systemd may consider it hung.
+
+    Attributes:
+        status_file: JSON health report rewritten (atomically) every ``status_every_s``
+            (``docs/daemon.md`` lists its fields); ``null``: none. The unit file uses
+            ``/run/ghnerf/status.json``.
+        status_every_s: how often the report (and systemd's ``STATUS=`` line) is refreshed.
+        open_allowance_s: how long opening the rig may block the main loop before the watchdog
+            treats the daemon as hung (an OAK boots its firmware in a few seconds).
+        loop_allowance_s: how long one pass of the main loop (a read plus an estimate) may take
+            before the watchdog treats the daemon as hung: systemd's ``WATCHDOG=1`` pings stop, the
+            thread stacks go to the journal and systemd restarts the service.
+        slow_estimate_s: an estimate slower than this flags ``ESTIMATOR_STALLED`` on the sinks' STATUS.
+    """
+
+    status_file: str | None = None
+    status_every_s: float = 1.0
+    open_allowance_s: float = 60.0
+    loop_allowance_s: float = 15.0
+    slow_estimate_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
+            _fail("status_file", "must be a file path or null", self.status_file)
+        _seconds(self, "status_every_s", 0.05, 3600.0)
+        _seconds(self, "open_allowance_s", 1.0, 3600.0)
+        _seconds(self, "loop_allowance_s", 1.0, 3600.0)
+        _seconds(self, "slow_estimate_s", 0.001, 3600.0)
+
+
+@dataclass(frozen=True)
+class DaemonConfig:
+    """The root. ``sinks`` is required (a daemon that streams nowhere is a mistake, not a default)."""
+
+    rig: RigConfig = field(default_factory=RigConfig)
+    sinks: tuple[str, ...] = ()
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    health: HealthConfig = field(default_factory=HealthConfig)
+    log_level: str = "info"
+
+    def __post_init__(self) -> None:
+        sinks = self.sinks
+        if isinstance(sinks, str) or not isinstance(sinks, (tuple, list)) or not sinks:
+            _fail("sinks", "must be a non-empty list of sink URLs such as ['udp://192.168.1.20:9870']", sinks)
+        for k, url in enumerate(sinks):
+            if not isinstance(url, str) or "://" not in url:
+                _fail(f"sinks[{k}]", "must be a sink URL such as 'serial:///dev/ttyACM0'", url)
+        if len(set(sinks)) != len(sinks):
+            _fail("sinks", "lists a URL twice", list(sinks))
+        object.__setattr__(self, "sinks", tuple(sinks))
+        if self.log_level not in LOG_LEVELS:
+            _fail("log_level", f"must be one of {list(LOG_LEVELS)}", self.log_level)
+
+
+def _build(cls: type, data: Any, path: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise DaemonConfigError(f"must be a mapping (JSON object), got {type(data).__name__}", key=path or None)
+    names = {f.name for f in dataclasses.fields(cls)}
+    for key in data:
+        if key not in names:
+            raise DaemonConfigError(f"unknown key; {cls.__name__} has {sorted(names)}",
+                                    key=f"{path}.{key}" if path else str(key))
+    hints = typing.get_type_hints(cls)
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        where = f"{path}.{key}" if path else key
+        if hints[key] is EstimatorConfig:
+            try:
+                kwargs[key] = config_from_dict(value)
+            except ConfigError as e:  # the runtime's error, keyed within the estimator tree
+                raise DaemonConfigError(str(e).split(": ", 1)[-1],
+                                        key=f"{where}.{e.key}" if e.key else where) from None
+        elif dataclasses.is_dataclass(hints[key]):
+            kwargs[key] = _build(hints[key], value, where)
+        else:
+            kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except DaemonConfigError as e:  # a field's own check: put the section in front of its key
+        raise DaemonConfigError(str(e).split(": ", 1)[-1],
+                                key=f"{path}.{e.key}" if path and e.key else (e.key or path)) from None
+
+
+def daemon_config_from_dict(data: Mapping[str, Any]) -> DaemonConfig:
+    """Build and validate the tree from plain data.
+
+    >>> daemon_config_from_dict({"sinks": ["udp://127.0.0.1:9870"], "rig": {"url": "sim://"}}).rig.url
+    'sim://'
+    >>> daemon_config_from_dict({"sinks": ["udp://127.0.0.1:9870"], "rig": {"ulr": "sim://"}})
+    Traceback (most recent call last):
+    ...
+    firmware_host.daemon.config.DaemonConfigError: rig.ulr: unknown key; RigConfig has [...]
+    """
+    return _build(DaemonConfig, data, "")
+
+
+def daemon_config_to_dict(config: DaemonConfig) -> dict:
+    """The tree as plain data; ``daemon_config_from_dict(daemon_config_to_dict(c)) == c``."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if isinstance(value, EstimatorConfig):
+            value = config_to_dict(value)
+        elif dataclasses.is_dataclass(value):
+            value = dataclasses.asdict(value)
+        elif isinstance(value, tuple):
+            value = list(value)
+        out[f.name] = value
+    return out
+
+
+def load_daemon_config(path: str | os.PathLike) -> DaemonConfig:
+    """Read the daemon's JSON config file; every error names the file and the key."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except OSError as e:
+        raise DaemonConfigError(f"cannot read the config file ({e.strerror or e})", key=str(path)) from e
+    except json.JSONDecodeError as e:
+        raise DaemonConfigError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})",
+                                key=str(path)) from e
+    except UnicodeDecodeError as e:
+        raise DaemonConfigError(f"not UTF-8 text (byte {e.start}): {e.reason}", key=str(path)) from e
+    try:
+        return daemon_config_from_dict(data)
+    except DaemonConfigError as e:
+        raise DaemonConfigError(str(e), key=str(path)) from None

@@ -1,0 +1,127 @@
+"""The daemon's health: counters kept by the main loop, a JSON report, and its atomic status file.
+
+The report (``docs/daemon.md`` lists the fields) is what an operator reads to tell a pulled camera
+from a slow estimator from a dead link: the state, what the rig delivered and what was estimated,
+latency and joints found over the last window, camera reopen counts with the last error, and each
+sink's counters.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+
+__all__ = ["State", "Health", "write_status_file"]
+
+#: Window of recent estimates the latency and joints-found figures are taken over.
+WINDOW = 100
+
+
+class State:
+    """The daemon's states, as written in the report and systemd's STATUS line."""
+
+    STARTING = "starting"
+    OPENING = "opening"  # opening the rig
+    WAITING = "waiting"  # the rig could not be opened, or vanished: retrying after a backoff
+    RUNNING = "running"  # reading and estimating pairs
+    STOPPING = "stopping"
+
+
+@dataclass
+class Health:
+    """Counters of one daemon run; the main loop is the only writer, :meth:`report` the reader."""
+
+    clock: Any = time.monotonic
+    state: str = State.STARTING
+    started: float = 0.0
+    state_since: float = 0.0
+    rig_url: str = ""
+    cameras: tuple[str, ...] = ()
+    pairs_read: int = 0
+    pairs_estimated: int = 0
+    pairs_dropped: int = 0  # skipped by the driver under the latest-pair policy
+    estimate_errors: int = 0
+    rig_opens: int = 0
+    rig_open_failures: int = 0
+    rig_lost: int = 0  # an open rig that vanished, ended or fell silent
+    last_pair_at: Optional[float] = None
+    last_error: Optional[str] = None
+    camera_fault: bool = False
+    estimator_stalled: bool = False
+    latencies_ms: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
+    found_fraction: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
+    estimate_times: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
+
+    def __post_init__(self) -> None:
+        self.started = self.state_since = self.clock()
+
+    def enter(self, state: str) -> None:
+        if state != self.state:
+            self.state, self.state_since = state, self.clock()
+
+    def estimated(self, total_ms: float, found: float) -> None:
+        now = self.clock()
+        self.pairs_estimated += 1
+        self.last_pair_at = now
+        self.latencies_ms.append(float(total_ms))
+        self.found_fraction.append(float(found))
+        self.estimate_times.append(now)
+
+    def report(self, sinks: Optional[dict[str, Any]] = None) -> dict[str, Any]:
+        now = self.clock()
+        lat = np.asarray(self.latencies_ms, float)
+        times = self.estimate_times
+        rate = (len(times) - 1) / (times[-1] - times[0]) if len(times) > 1 and times[-1] > times[0] else 0.0
+        return {
+            "state": self.state,
+            "state_for_s": round(now - self.state_since, 3),
+            "uptime_s": round(now - self.started, 3),
+            "updated_unix": round(time.time(), 3),
+            "pid": os.getpid(),
+            "rig": {"url": self.rig_url, "cameras": list(self.cameras), "opens": self.rig_opens,
+                    "open_failures": self.rig_open_failures, "lost": self.rig_lost,
+                    "camera_fault": self.camera_fault,
+                    "last_pair_age_s": None if self.last_pair_at is None else round(now - self.last_pair_at, 3)},
+            "pairs": {"read": self.pairs_read, "estimated": self.pairs_estimated, "dropped": self.pairs_dropped,
+                      "estimate_errors": self.estimate_errors},
+            "estimator": {"stalled": self.estimator_stalled,
+                          "pairs_per_s": round(rate, 2),
+                          "latency_ms_median": round(float(np.median(lat)), 2) if lat.size else None,
+                          "latency_ms_p99": round(float(np.percentile(lat, 99)), 2) if lat.size else None,
+                          "joints_found": round(float(np.mean(self.found_fraction)), 3)
+                          if self.found_fraction else None,
+                          "window": len(lat)},
+            "last_error": self.last_error,
+            "sinks": sinks or {},
+        }
+
+    def status_line(self) -> str:
+        """One line for systemd's ``STATUS=`` (``systemctl status ghnerf``)."""
+        if self.state == State.RUNNING:
+            r = self.report()["estimator"]
+            lat = f", {r['latency_ms_median']:.0f} ms" if r["latency_ms_median"] is not None else ""
+            return f"running: {r['pairs_per_s']:.1f} pairs/s{lat}, {self.pairs_estimated} estimated"
+        if self.state == State.WAITING and self.last_error:
+            return f"waiting for the rig: {self.last_error}"[:200]
+        return self.state
+
+
+def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:
+    """Replace ``path`` with the report in one step (a reader never sees half a file)."""
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(report, fh, indent=1, allow_nan=False)
+            fh.write("\n")
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

@@ -1,0 +1,171 @@
+"""systemd's notification protocol (``Type=notify``, ``WatchdogSec=``) and the daemon's hang watchdog.
+
+The protocol is one datagram of ``KEY=VALUE`` lines to the unix socket named by ``$NOTIFY_SOCKET``
+(sd_notify(3)); it is written here in a few lines rather than taken from a library, because the
+maintained binding (python-systemd) needs libsystemd's headers to build, which a small ARM board's
+image often lacks. Outside systemd (no ``$NOTIFY_SOCKET``) every call is a no-op.
+
+:class:`HangWatchdog` turns systemd's watchdog into a hang detector for the main loop: the loop
+calls :meth:`HangWatchdog.beat` on each pass (or :meth:`HangWatchdog.allow` around a call known to
+block longer, such as opening an OAK); a thread pings ``WATCHDOG=1`` only while the last beat is
+within its allowance. When the loop hangs (a deadlocked driver, a stuck estimate) the pings stop,
+the thread writes every thread's stack to the log once, and systemd kills and restarts the service.
+"""
+from __future__ import annotations
+
+import faulthandler
+import logging
+import os
+import socket
+import sys
+import threading
+import time
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from typing import Callable, Optional, TextIO
+
+__all__ = ["SystemdNotifier", "HangWatchdog"]
+
+_log = logging.getLogger(__name__)
+
+
+class SystemdNotifier:
+    """Send sd_notify(3) messages to ``$NOTIFY_SOCKET`` (pass ``environ`` to read another mapping).
+
+    ``watchdog_s`` is systemd's ``WatchdogSec`` as the service sees it (``$WATCHDOG_USEC``, honoured
+    only when ``$WATCHDOG_PID`` is absent or this process), or None when the watchdog is off.
+    """
+
+    def __init__(self, environ: Optional[Mapping[str, str]] = None) -> None:
+        env = os.environ if environ is None else environ
+        address = env.get("NOTIFY_SOCKET", "")
+        # A leading "@" names a socket in the abstract namespace (a NUL byte on the wire).
+        self._address = "\0" + address[1:] if address.startswith("@") else address
+        self._sock: Optional[socket.socket] = None
+        self._lock = threading.Lock()
+        self._warned = False
+        self.dropped = 0  # messages not sent because the socket's queue was full
+        usec, pid = env.get("WATCHDOG_USEC", ""), env.get("WATCHDOG_PID", "")
+        mine = not pid or pid == str(os.getpid())
+        self.watchdog_s: Optional[float] = int(usec) / 1e6 if usec.isdigit() and int(usec) > 0 and mine else None
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self._address)
+
+    def notify(self, **fields: object) -> bool:
+        """Send ``KEY=value`` lines (``ready=1`` becomes ``READY=1``); False when not sent."""
+        if not self._address:
+            return False
+        text = "\n".join(f"{key.upper()}={value}" for key, value in fields.items())
+        with self._lock:
+            try:
+                if self._sock is None:
+                    # Non-blocking: a manager that is not reading (its queue full) must never stall the
+                    # main loop; a message that does not fit is dropped and counted.
+                    self._sock = socket.socket(socket.AF_UNIX,
+                                               socket.SOCK_DGRAM | socket.SOCK_CLOEXEC | socket.SOCK_NONBLOCK)
+                self._sock.sendto(text.encode("utf-8"), self._address)
+                return True
+            except BlockingIOError:
+                self.dropped += 1
+                return False
+            except OSError as e:
+                # systemd gone (a restart of the manager) or a wrong path: the service goes on.
+                if not self._warned:
+                    _log.warning("cannot notify systemd at %r: %s", self._address, e)
+                    self._warned = True
+                return False
+
+    def close(self) -> None:
+        with self._lock:
+            if self._sock is not None:
+                self._sock.close()
+                self._sock = None
+
+
+class HangWatchdog:
+    """Ping systemd's watchdog while the main loop makes progress (see the module docstring).
+
+    ``allowance_s`` is how long after a beat the loop still counts as alive; ``interval_s`` how
+    often the pinging thread wakes (half of systemd's WatchdogSec when it is set). ``stacks_to``
+    receives the thread stacks when a hang is first seen (stderr, i.e. the journal, by default).
+    """
+
+    def __init__(self, notifier: SystemdNotifier, allowance_s: float, *, interval_s: Optional[float] = None,
+                 clock: Callable[[], float] = time.monotonic, stacks_to: Optional[TextIO] = None) -> None:
+        self._notifier = notifier
+        self._default_allowance = float(allowance_s)
+        self._allowance = float(allowance_s)
+        wd = notifier.watchdog_s
+        self._interval = interval_s if interval_s is not None else (wd / 2 if wd else 1.0)
+        self._clock = clock
+        self._stacks_to = stacks_to
+        self._last_beat = clock()
+        self._where = "start"
+        self._hung_reported = False
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.pings = 0
+
+    def beat(self, where: str = "main loop") -> None:
+        with self._lock:
+            self._last_beat = self._clock()
+            self._allowance = self._default_allowance
+            self._where = where
+            self._hung_reported = False
+
+    @contextmanager
+    def allow(self, seconds: float, where: str) -> Iterator[None]:
+        """Around one call that may block up to ``seconds`` (e.g. opening a camera)."""
+        with self._lock:
+            self._last_beat = self._clock()
+            self._allowance = max(float(seconds), self._default_allowance)
+            self._where = where
+            self._hung_reported = False
+        try:
+            yield
+        finally:
+            self.beat(where)
+
+    def alive(self) -> bool:
+        """Whether the loop beat within its allowance (what a ping vouches for)."""
+        with self._lock:
+            return self._clock() - self._last_beat <= self._allowance
+
+    def check(self) -> bool:
+        """One tick of the thread: ping when alive; report a hang once. Returns whether it pinged."""
+        if self.alive():
+            if self._notifier.watchdog_s is not None and self._notifier.notify(watchdog=1):
+                self.pings += 1
+            return True
+        with self._lock:
+            report = not self._hung_reported
+            self._hung_reported = True
+            where, silent_s = self._where, self._clock() - self._last_beat
+        if report:
+            _log.error("the main loop has not progressed for %.1f s (last in %s); watchdog pings stopped, "
+                       "thread stacks follow", silent_s, where)
+            out = self._stacks_to if self._stacks_to is not None else sys.stderr
+            try:
+                faulthandler.dump_traceback(file=out, all_threads=True)
+            except (OSError, ValueError, AttributeError):  # a stream without a file descriptor
+                _log.error("cannot dump the thread stacks to %r", out)
+        return False
+
+    def start(self) -> "HangWatchdog":
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="watchdog", daemon=True)
+            self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._interval):
+            self.check()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None

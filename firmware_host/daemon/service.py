@@ -1,0 +1,342 @@
+"""The daemon's main loop: rig -> estimator -> sinks, for as long as it runs, through unplugs and stalls.
+
+One thread does the work in order (read the newest pair, estimate it, hand the frame to every sink);
+the rig's driver and each sink have their own threads, and a sink's ``send`` never blocks, so a
+pulled serial cable or a slow link never holds up the estimate or the other outputs.
+
+What it rides out, and how (each is counted in the health report, ``docs/daemon.md``):
+
+* **a rig that cannot be opened** (OAK not plugged in yet, USB reset): retried forever with a
+  backoff from ``rig.reopen_min_s`` doubling to ``rig.reopen_max_s``; state ``waiting``;
+* **a camera that vanishes** (``RigDisconnectedError``) or **falls silent** for ``rig.stall_s``:
+  the rig is closed and opened again, and the tracker restarts from the working volume; the sinks
+  flag ``CAMERA_FAULT`` in their STATUS until pairs flow again;
+* **a rig that comes back with another calibration** (another OAK): the estimator is rebuilt for
+  it from the loaded model (no reload), and the sinks are reopened when the camera names change;
+* **a pair the estimator rejects** (``FrameError``): counted and skipped; an estimate slower than
+  ``health.slow_estimate_s`` flags ``ESTIMATOR_STALLED``;
+* **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
+  watchdog pings and systemd restarts the service.
+
+What stops it: ``stop`` being set (SIGTERM / SIGINT in the CLI), a finite source ending when
+``rig.exit_at_end`` is on, or an error no retry can fix (a model that will not load: raised as
+:class:`DaemonStartError` before the loop starts).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import threading
+import time
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+import drivers
+from firmware_host.daemon.config import DaemonConfig
+from firmware_host.daemon.health import Health, State, write_status_file
+from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
+from firmware_host.errors import FirmwareHostError
+from firmware_host.joint_frames import estimate_frame
+from firmware_host.protocol.constants import Fault
+from firmware_host.sinks import open_sink
+from firmware_host.sinks.base import Sink
+from firmware_host.sinks.url import parse_url
+from ghnerf_runtime.errors import FrameError, ModelError
+from ghnerf_runtime.estimator import Estimator, load_session
+from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.rig_file import dumps_rig
+
+__all__ = ["Daemon", "DaemonStartError"]
+
+_log = logging.getLogger("ghnerf.daemon")
+
+
+class DaemonStartError(FirmwareHostError):
+    """The daemon cannot start and retrying will not help (a model that does not load, a bad sink URL)."""
+
+
+class Daemon:
+    """Run :class:`DaemonConfig` until ``stop`` is set; see the module docstring.
+
+    ``rig_kwargs`` go to :func:`drivers.create_rig_source` (tests pass a clock), ``sink_kwargs`` to
+    every :func:`firmware_host.sinks.open_sink` (tests pass a fast backoff); ``notifier`` defaults
+    to systemd's socket from the environment.
+    """
+
+    def __init__(self, config: DaemonConfig, *, notifier: Optional[SystemdNotifier] = None,
+                 rig_kwargs: Optional[dict[str, Any]] = None, sink_kwargs: Optional[dict[str, Any]] = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.config = config
+        self.notifier = notifier if notifier is not None else SystemdNotifier()
+        self.health = Health(clock=clock, rig_url=config.rig.url)
+        self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock)
+        self._clock = clock
+        self._rig_kwargs = dict(rig_kwargs or {})
+        self._sink_kwargs = dict(sink_kwargs or {})
+        self._session: Any = None
+        self._estimator: Optional[Estimator] = None
+        self._rig_text: Optional[str] = None
+        self._sinks: dict[str, Sink] = {}
+        self._sinks_for: Optional[tuple[str, tuple[str, ...]]] = None  # (rig_id, camera names)
+        self._backoff_s = config.rig.reopen_min_s
+        self._next_status = 0.0
+        self._fault = int(Fault.OK)
+        self._closed_sink_stats: dict[str, Any] = {}  # the last counters of sinks already closed
+
+    # ------------------------------------------------------------------ run
+    def run(self, stop: threading.Event) -> int:
+        """The main loop; returns the exit status (0). :raises DaemonStartError: cannot start."""
+        self._load_model()
+        self.watchdog.start()
+        self.notifier.notify(ready=1, status="started: opening the rig", mainpid=os.getpid())
+        _log.info("started: rig %s, sinks %s", self.config.rig.url, ", ".join(self.config.sinks))
+        try:
+            while not stop.is_set():
+                source = self._open_rig(stop)
+                if source is None:
+                    break
+                read_before = self.health.pairs_read
+                try:
+                    ended = self._stream(source, stop)
+                finally:
+                    self._close_rig(source)
+                if ended and self.config.rig.exit_at_end:
+                    _log.info("the rig's stream ended (rig.exit_at_end): stopping")
+                    break
+                if self.health.pairs_read == read_before:
+                    # Opened but lost before a single pair (a flapping device): back off as after a failed open.
+                    self._wait(stop, self._backoff_s)
+                    self._backoff_s = min(self._backoff_s * 2, self.config.rig.reopen_max_s)
+        finally:
+            self._shutdown()
+        return 0
+
+    # ------------------------------------------------------------------ model
+    def _load_model(self) -> None:
+        t0 = time.monotonic()
+        try:
+            self._session = load_session(self.config.estimator)
+        except ModelError as e:
+            raise DaemonStartError(f"cannot load the model in {self.config.estimator.session.model_dir}: {e}") \
+                from None
+        _log.info("model %s loaded in %.2f s", self.config.estimator.session.model_dir, time.monotonic() - t0)
+
+    def _estimator_for(self, rig: Rig) -> Estimator:
+        """The estimator of ``rig``: kept across reopens of the same rig, rebuilt for another one."""
+        text = dumps_rig(rig)
+        if self._estimator is None or text != self._rig_text:
+            if self._estimator is not None:
+                _log.warning("the rig came back with another calibration (%s): estimator rebuilt", rig.rig_id)
+                self._estimator.close()
+            try:
+                self._estimator = Estimator(self._session, rig, self.config.estimator)
+            except ModelError as e:
+                raise DaemonStartError(f"the model does not fit rig {rig.rig_id!r}: {e}") from None
+            self._rig_text = text
+        else:
+            self._estimator.reset()  # the subject may have moved while the camera was away
+        return self._estimator
+
+    # ------------------------------------------------------------------ rig
+    def _open_rig(self, stop: threading.Event) -> Optional[drivers.RigSource]:
+        """Open the rig, retrying with backoff until it opens or ``stop`` is set (then None)."""
+        rig_cfg = self.config.rig
+        while not stop.is_set():
+            self.health.enter(State.OPENING)
+            self._set_fault(Fault.CAMERA_FAULT)
+            self._tick(force=True)
+            source = None
+            try:
+                with self.watchdog.allow(self.config.health.open_allowance_s, "opening the rig"):
+                    source = drivers.create_rig_source(rig_cfg.url, **self._rig_kwargs)
+                    source.open()
+                    self._estimator_for(source.rig)
+                    self._open_sinks(source.rig)
+            except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
+                self._close_rig(source)
+                raise DaemonStartError(f"rig.url {rig_cfg.url!r}: {e}") from None
+            except drivers.DriverError as e:
+                self._close_rig(source)
+                self.health.rig_open_failures += 1
+                self.health.last_error = f"cannot open {rig_cfg.url}: {e}"
+                self.health.enter(State.WAITING)
+                _log.warning("%s; retrying in %.1f s", self.health.last_error, self._backoff_s)
+                self._wait(stop, self._backoff_s)
+                self._backoff_s = min(self._backoff_s * 2, rig_cfg.reopen_max_s)
+                continue
+            except BaseException:
+                self._close_rig(source)
+                raise
+            self.health.rig_opens += 1
+            self.health.cameras = tuple(c.name for c in source.rig.pair)
+            _log.info("rig open: cameras %s, baseline %.3f m", list(self.health.cameras), source.rig.baseline)
+            return source
+        return None
+
+    def _close_rig(self, source: Optional[drivers.RigSource]) -> None:
+        if source is None:
+            return
+        try:
+            stats = source.stats
+            self.health.pairs_dropped += stats.pairs_dropped
+        except drivers.DriverError:
+            pass
+        try:
+            source.close()
+        except drivers.DriverError as e:  # a vanished device may fail its close too: it is gone either way
+            _log.warning("closing the rig: %s", e)
+
+    def _stream(self, source: drivers.RigSource, stop: threading.Event) -> bool:
+        """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
+        rig_cfg = self.config.rig
+        estimator = self._estimator
+        assert estimator is not None
+        self.health.enter(State.RUNNING)
+        last_pair = self._clock()
+        while not stop.is_set():
+            self.watchdog.beat("reading a pair")
+            self._tick()
+            try:
+                pair = source.read(timeout_s=rig_cfg.read_timeout_s)
+            except drivers.EndOfStream as e:
+                self.health.last_error = f"{rig_cfg.url}: {e}"
+                return True
+            except drivers.RigTimeoutError:
+                self._set_fault(Fault.CAMERA_FAULT)
+                silent = self._clock() - last_pair
+                if silent >= rig_cfg.stall_s:
+                    self._lost(f"no pair for {silent:.1f} s (rig.stall_s {rig_cfg.stall_s:g}): reopening the rig")
+                    return False
+                continue
+            except drivers.DriverError as e:  # unplugged, device reset, a failed driver thread
+                self._lost(f"the rig failed: {e}")
+                return False
+            last_pair = self._clock()
+            self.health.pairs_read += 1
+            self._backoff_s = rig_cfg.reopen_min_s  # pairs flow again: the next loss retries quickly
+            self.watchdog.beat("estimating a pair")
+            t0 = self._clock()
+            try:
+                result = estimator.estimate(pair.images, sequence=pair.sequence,
+                                            timestamp_s=pair.timestamps_ns[0] * 1e-9)
+            except FrameError as e:
+                self.health.estimate_errors += 1
+                self.health.last_error = f"pair {pair.sequence} rejected: {e}"
+                if self.health.estimate_errors == 1 or self.health.estimate_errors % 100 == 0:
+                    _log.warning("%s (%d so far)", self.health.last_error, self.health.estimate_errors)
+                continue
+            took = self._clock() - t0
+            self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))
+            self.health.estimator_stalled = took > self.config.health.slow_estimate_s
+            self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)
+            self.health.camera_fault = False
+            frame = estimate_frame(pair, result)
+            for sink in self._sinks.values():
+                sink.send(frame)
+        return False
+
+    def _lost(self, why: str) -> None:
+        self.health.rig_lost += 1
+        self.health.last_error = why
+        self.health.enter(State.WAITING)
+        self._set_fault(Fault.CAMERA_FAULT)
+        _log.warning(why)
+
+    # ------------------------------------------------------------------ sinks
+    @property
+    def sinks(self) -> dict[str, Sink]:
+        """The open sinks by URL (opened once the rig's camera names are known)."""
+        return dict(self._sinks)
+
+    def _open_sinks(self, rig: Rig) -> None:
+        """Open every sink for this rig's camera names (reopened only when they change)."""
+        key = (rig.rig_id, tuple(c.name for c in rig.pair))
+        if key == self._sinks_for:
+            return
+        self._close_sinks()
+        for url in self.config.sinks:
+            kw = dict(self._sink_kwargs)
+            kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
+            if "rig_id" not in parse_url(url).query:
+                kw["rig_id"] = rig.rig_id
+            try:
+                self._sinks[url] = open_sink(url, **kw)
+            except FirmwareHostError as e:
+                self._close_sinks()
+                raise DaemonStartError(f"sinks: {e}") from None
+        self._sinks_for = key
+        for sink in self._sinks.values():
+            self._apply_fault(sink)
+
+    def _close_sinks(self) -> None:
+        for url, sink in self._sinks.items():
+            try:
+                sink.close()
+                self._closed_sink_stats[url] = self._stats_of(sink)
+            except FirmwareHostError as e:
+                _log.warning("closing sink %s: %s", url, e)
+        self._sinks.clear()
+        self._sinks_for = None
+
+    def _set_fault(self, fault: Fault) -> None:
+        if fault == Fault.CAMERA_FAULT:
+            self.health.camera_fault = True
+        if int(fault) != self._fault:
+            self._fault = int(fault)
+            for sink in self._sinks.values():
+                self._apply_fault(sink)
+
+    def _apply_fault(self, sink: Sink) -> None:
+        set_fault = getattr(sink, "set_fault", None)  # the binary-protocol sinks carry STATUS
+        if set_fault is not None:
+            set_fault(self._fault)
+
+    # ------------------------------------------------------------------ health
+    @staticmethod
+    def _stats_of(sink: Sink) -> dict[str, Any]:
+        stats = sink.stats()
+        return {**dataclasses.asdict(stats), "dropped": stats.dropped}
+
+    def sink_stats(self) -> dict[str, Any]:
+        """Each sink's counters (those closed by a reopen or the shutdown: as they were last)."""
+        return {**self._closed_sink_stats, **{url: self._stats_of(sink) for url, sink in self._sinks.items()}}
+
+    def _tick(self, force: bool = False, tell_systemd: bool = True) -> None:
+        """Refresh the status file and systemd's STATUS line every ``health.status_every_s``."""
+        now = self._clock()
+        if not force and now < self._next_status:
+            return
+        self._next_status = now + self.config.health.status_every_s
+        if tell_systemd:
+            self.notifier.notify(status=self.health.status_line())
+        path = self.config.health.status_file
+        if path:
+            try:
+                write_status_file(path, self.health.report(self.sink_stats()))
+            except (OSError, ValueError) as e:
+                _log.warning("cannot write the status file %s: %s", path, e)
+
+    def _wait(self, stop: threading.Event, seconds: float) -> None:
+        """Sleep ``seconds`` or until stopped, beating the watchdog and refreshing the status."""
+        deadline = self._clock() + seconds
+        while not stop.is_set():
+            left = deadline - self._clock()
+            if left <= 0:
+                return
+            self.watchdog.beat("waiting to reopen the rig")
+            self._tick()
+            stop.wait(min(left, 0.2))
+
+    def _shutdown(self) -> None:
+        self.health.enter(State.STOPPING)
+        self.watchdog.stop()  # stopping is bounded by systemd's TimeoutStopSec, not the watchdog
+        self.notifier.notify(stopping=1, status="stopping")
+        self._close_sinks()
+        if self._estimator is not None:
+            self._estimator.close()
+        self._tick(force=True, tell_systemd=False)  # the final counters; STOPPING stays systemd's last word
+        self.notifier.close()
+        _log.info("stopped: %d pairs read, %d estimated, rig opened %d times (%d lost)",
+                  self.health.pairs_read, self.health.pairs_estimated, self.health.rig_opens, self.health.rig_lost)

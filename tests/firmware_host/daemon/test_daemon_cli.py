@@ -1,0 +1,124 @@
+"""``ghnerf-daemon`` as systemd runs it: a separate process, a notify socket, SIGTERM, exit statuses."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from firmware_host.daemon import cli
+
+REPO = Path(__file__).resolve().parents[3]
+MODELS = REPO / "models"
+needs_model = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(),
+                                 reason="no trained model yet: models/model_card.json does not exist")
+
+
+def _write(tmp_path: Path, data: dict) -> Path:
+    path = tmp_path / "daemon.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_validate_config_prints_the_full_tree(tmp_path, capsys):
+    path = _write(tmp_path, {"rig": {"url": "sim://?fps=15"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    assert cli.main(["--config", str(path), "--validate-config"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["rig"]["url"] == "sim://?fps=15" and printed["rig"]["stall_s"] == 10.0
+    assert printed["estimator"]["joints3d"]["method"]  # the runtime's defaults spelled out
+
+
+@pytest.mark.parametrize("data, message", [
+    ({"sinks": ["udp://127.0.0.1:9870"], "rig": {"url": "sim://", "stall": 3}}, "rig.stall: unknown key"),
+    ({"sinks": ["udp://127.0.0.1:9870?fps=fast"], "rig": {"url": "sim://"}}, "sinks[0]: "),
+])
+def test_bad_config_is_one_line_and_exit_2(tmp_path, capsys, data, message):
+    path = _write(tmp_path, data)
+    assert cli.main(["--config", str(path), "--validate-config"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err
+    assert err.startswith(f"ghnerf-daemon: error: {path}: {message}")
+
+
+def test_usage_errors(capsys):
+    assert cli.main([]) == 2
+    assert "--config is required" in capsys.readouterr().err
+    assert cli.main(["--config", "x.json", "--max-seconds", "0"]) == 2
+    assert cli.main(["--print-example-config"]) == 0
+    assert json.loads(capsys.readouterr().out) == cli.EXAMPLE_CONFIG
+
+
+def test_a_corrupt_model_exits_2_naming_it(tmp_path):
+    broken = tmp_path / "models"
+    broken.mkdir()
+    (broken / "encoder.onnx").write_bytes(b"\x08\x07garbage")
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(broken)}}})
+    proc = subprocess.run([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
+                          capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert proc.returncode == 2, proc.stderr
+    assert f"cannot load the model in {broken}" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+@needs_model
+def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
+    sock_path = tmp_path / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(sock_path))
+    sock.settimeout(1.0)
+    status = tmp_path / "status.json"
+    cache = tmp_path / "sim-cache"
+    path = _write(tmp_path, {
+        "rig": {"url": f"sim://?fps=30&width=320&height=240&cache={cache}"},
+        "sinks": [f"file://{tmp_path / 'joints.jsonl'}"],
+        "estimator": {"session": {"model_dir": str(MODELS)}},
+        "health": {"status_file": str(status), "status_every_s": 0.2},
+    })
+    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "WATCHDOG_USEC": "2000000", "JOURNAL_STREAM": "8:1"}
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    notes: list[dict[str, str]] = []
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            try:
+                data = sock.recv(4096).decode()
+            except socket.timeout:
+                assert proc.poll() is None, proc.communicate()[1]
+                continue
+            notes.append(dict(line.split("=", 1) for line in data.splitlines()))
+            if any(n.get("STATUS", "").startswith("running:") for n in notes) \
+                    and any("WATCHDOG" in n for n in notes):
+                break
+        else:
+            pytest.fail(f"no running status and watchdog ping: {notes}")
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        while True:
+            try:
+                data = sock.recv(4096).decode()
+            except (socket.timeout, OSError):
+                break
+            notes.append(dict(line.split("=", 1) for line in data.splitlines()))
+        sock.close()
+    assert proc.returncode == 0, err
+    assert notes[0]["READY"] == "1" and notes[0]["MAINPID"] == str(proc.pid)
+    assert "STOPPING" in notes[-1]
+    assert "SIGTERM received: stopping" in err
+    assert "Traceback" not in err
+    assert not any(line[:4].isdigit() for line in err.splitlines())  # the journal stamps lines itself
+    report = json.loads(status.read_text())
+    assert report["state"] == "stopping" and report["pairs"]["estimated"] > 0
+    rows = [json.loads(line) for line in (tmp_path / "joints.jsonl").read_text().splitlines()]
+    assert sum(r["type"] == "JOINTS" for r in rows) == report["pairs"]["estimated"]

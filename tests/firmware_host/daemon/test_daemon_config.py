@@ -1,0 +1,102 @@
+"""The daemon's config: defaults, every error names its key (and the file), round trip."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from firmware_host.daemon.cli import EXAMPLE_CONFIG, check_config
+from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_config_from_dict, \
+    daemon_config_to_dict, load_daemon_config
+
+SINK = "udp://127.0.0.1:9870"
+
+
+def _error(data: dict) -> str:
+    with pytest.raises(DaemonConfigError) as e:
+        daemon_config_from_dict(data)
+    return str(e.value)
+
+
+def test_minimal_config_takes_the_defaults():
+    cfg = daemon_config_from_dict({"sinks": [SINK]})
+    assert cfg.rig.url == "depthai://"
+    assert cfg.sinks == (SINK,)
+    assert cfg.health.status_file is None
+    assert cfg.estimator.joints3d.method  # the runtime's defaults, untouched
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"sinks": [SINK], "rig": {"ulr": "sim://"}}, "rig.ulr: unknown key"),
+    ({"sinks": [SINK], "helth": {}}, "helth: unknown key"),
+    ({"sinks": [SINK], "estimator": {"joints3d": {"metod": "x"}}}, "estimator.joints3d.metod: unknown key"),
+    ({"sinks": [SINK], "estimator": {"session": {"threads": 0}}}, "estimator.session.threads"),
+    ({"sinks": [SINK], "rig": {"read_timeout_s": -1}}, "rig.read_timeout_s: must be a number of seconds"),
+    ({"sinks": [SINK], "rig": {"read_timeout_s": float("nan")}}, "rig.read_timeout_s"),
+    ({"sinks": [SINK], "rig": {"read_timeout_s": True}}, "rig.read_timeout_s"),
+    ({"sinks": [SINK], "rig": {"read_timeout_s": 5, "stall_s": 2}}, "rig.stall_s: must be at least read_timeout_s"),
+    ({"sinks": [SINK], "rig": {"reopen_min_s": 5, "reopen_max_s": 1}}, "rig.reopen_max_s"),
+    ({"sinks": [SINK], "rig": {"url": "depthai"}}, "rig.url: must be a rig URL"),
+    ({"sinks": [SINK], "rig": {"exit_at_end": "yes"}}, "rig.exit_at_end: must be true or false"),
+    ({"sinks": [SINK], "rig": []}, "rig: must be a mapping"),
+    ({"sinks": [SINK], "health": {"status_file": ""}}, "health.status_file"),
+    ({"sinks": [SINK], "log_level": "loud"}, "log_level: must be one of"),
+    ({}, "sinks: must be a non-empty list"),
+    ({"sinks": []}, "sinks: must be a non-empty list"),
+    ({"sinks": SINK}, "sinks: must be a non-empty list"),
+    ({"sinks": [SINK, 3]}, "sinks[1]: must be a sink URL"),
+    ({"sinks": [SINK, SINK]}, "sinks: lists a URL twice"),
+])
+def test_errors_name_the_key(data, key):
+    assert _error(data).startswith(key)
+
+
+def test_round_trip_and_example_is_valid():
+    cfg = daemon_config_from_dict(EXAMPLE_CONFIG)
+    assert daemon_config_from_dict(json.loads(json.dumps(daemon_config_to_dict(cfg)))) == cfg
+    assert isinstance(cfg, DaemonConfig)
+
+
+def test_file_errors_name_the_file(tmp_path):
+    missing = tmp_path / "nope.json"
+    with pytest.raises(DaemonConfigError, match=f"^{missing}: cannot read"):
+        load_daemon_config(missing)
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"sinks": [\n  "udp://h:1",\n}')
+    with pytest.raises(DaemonConfigError, match=rf"^{bad}: not valid JSON \(line 3"):
+        load_daemon_config(bad)
+    latin = tmp_path / "latin.json"
+    latin.write_bytes(b'{"sinks": ["udp://caf\xe9:1"]}')
+    with pytest.raises(DaemonConfigError, match=f"^{latin}: not UTF-8"):
+        load_daemon_config(latin)
+    typo = tmp_path / "typo.json"
+    typo.write_text(json.dumps({"sinks": [SINK], "rig": {"urll": "sim://"}}))
+    with pytest.raises(DaemonConfigError, match=f"^{typo}: rig.urll: unknown key"):
+        load_daemon_config(typo)
+
+
+def test_check_config_names_bad_urls_and_models(tmp_path):
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "x.onnx").write_bytes(b"not checked here")
+
+    def cfg(**over):
+        data = {"rig": {"url": "sim://?fps=30"}, "sinks": [SINK],
+                "estimator": {"session": {"model_dir": str(models)}}}
+        data.update(over)
+        return daemon_config_from_dict(data)
+
+    check_config(cfg())  # passes: URLs parse, the folder holds a graph
+    with pytest.raises(DaemonConfigError, match=r"^rig\.url: .*fps"):
+        check_config(cfg(rig={"url": "sim://?fps=-3"}))
+    with pytest.raises(DaemonConfigError, match=r"^rig\.url: .*nosuch"):
+        check_config(cfg(rig={"url": "nosuch://"}))
+    with pytest.raises(DaemonConfigError, match=r"^sinks\[1\]: .*baud"):
+        check_config(cfg(sinks=[SINK, "serial:///dev/ttyUSB9?baud=fast"]))
+    with pytest.raises(DaemonConfigError, match=r"^sinks\[0\]: .*cameras="):
+        check_config(cfg(sinks=[SINK + "?send_2d=1&cameras=a,b"]))
+    check_config(cfg(sinks=[SINK + "?send_2d=1"]))  # the daemon fills in the camera names
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(DaemonConfigError, match=r"^estimator\.session\.model_dir: .*no \*\.onnx"):
+        check_config(cfg(estimator={"session": {"model_dir": str(empty)}}))

@@ -1,0 +1,153 @@
+"""sd_notify over a real unix datagram socket, and the hang watchdog on a manual clock."""
+from __future__ import annotations
+
+import os
+import socket
+import uuid
+
+import pytest
+
+from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
+
+
+@pytest.fixture
+def notify_socket(tmp_path):
+    path = tmp_path / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))
+    sock.settimeout(2.0)
+    yield str(path), sock
+    sock.close()
+
+
+def _fields(sock: socket.socket) -> dict[str, str]:
+    data = sock.recv(4096).decode()
+    return dict(line.split("=", 1) for line in data.splitlines())
+
+
+def test_messages_reach_the_socket(notify_socket):
+    path, sock = notify_socket
+    n = SystemdNotifier({"NOTIFY_SOCKET": path})
+    assert n.enabled and n.watchdog_s is None
+    assert n.notify(ready=1, status="warming up")
+    assert _fields(sock) == {"READY": "1", "STATUS": "warming up"}
+    n.close()
+
+
+def test_abstract_namespace_socket():
+    name = f"ghnerf-test-{uuid.uuid4().hex}"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind("\0" + name)
+    sock.settimeout(2.0)
+    try:
+        n = SystemdNotifier({"NOTIFY_SOCKET": "@" + name})
+        assert n.notify(stopping=1)
+        assert _fields(sock) == {"STOPPING": "1"}
+    finally:
+        sock.close()
+
+
+def test_without_systemd_nothing_is_sent():
+    n = SystemdNotifier({})
+    assert not n.enabled
+    assert n.notify(ready=1) is False
+
+
+def test_a_vanished_socket_is_not_fatal(tmp_path, caplog):
+    n = SystemdNotifier({"NOTIFY_SOCKET": str(tmp_path / "gone.sock")})
+    assert n.notify(ready=1) is False
+    assert n.notify(ready=1) is False
+    assert sum("cannot notify systemd" in r.message for r in caplog.records) == 1  # warned once
+
+
+@pytest.mark.parametrize("env, expected", [
+    ({"WATCHDOG_USEC": "4000000"}, 4.0),
+    ({"WATCHDOG_USEC": "4000000", "WATCHDOG_PID": str(os.getpid())}, 4.0),
+    ({"WATCHDOG_USEC": "4000000", "WATCHDOG_PID": "1"}, None),  # meant for another process
+    ({"WATCHDOG_USEC": "0"}, None),
+    ({"WATCHDOG_USEC": "soon"}, None),
+])
+def test_watchdog_interval_from_the_environment(env, expected):
+    assert SystemdNotifier({"NOTIFY_SOCKET": "/nonexistent", **env}).watchdog_s == expected
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_pings_only_while_the_loop_beats(notify_socket):
+    path, sock = notify_socket
+    clock = _Clock()
+    n = SystemdNotifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "2000000"})
+    wd = HangWatchdog(n, allowance_s=5.0, clock=clock)
+    assert wd._interval == 1.0  # half of WatchdogSec
+    wd.beat()
+    clock.t += 4.0
+    assert wd.check()
+    assert _fields(sock) == {"WATCHDOG": "1"}
+    assert wd.pings == 1
+
+
+def test_hang_stops_pings_and_dumps_stacks_once(notify_socket, tmp_path):
+    path, sock = notify_socket
+    clock = _Clock()
+    n = SystemdNotifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "2000000"})
+    with open(tmp_path / "stacks.txt", "w+") as stacks:
+        wd = HangWatchdog(n, allowance_s=5.0, clock=clock, stacks_to=stacks)
+        wd.beat("estimating a pair")
+        clock.t += 6.0
+        assert not wd.check()
+        assert not wd.check()
+        stacks.seek(0)
+        text = stacks.read()
+    assert text.count("Current thread") + text.count("Thread 0x") >= 1
+    assert text.count("test_hang_stops_pings_and_dumps_stacks_once") == 1  # dumped once, not per tick
+    sock.settimeout(0.2)
+    with pytest.raises(socket.timeout):
+        sock.recv(4096)  # no WATCHDOG=1 while hung
+    wd.beat()
+    assert wd.check() and _fields(sock) == {"WATCHDOG": "1"}  # progress again: pings resume
+
+
+def test_allow_covers_one_long_call(notify_socket):
+    path, sock = notify_socket
+    clock = _Clock()
+    n = SystemdNotifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "2000000"})
+    wd = HangWatchdog(n, allowance_s=5.0, clock=clock)
+    with wd.allow(60.0, "opening the rig"):
+        clock.t += 30.0
+        assert wd.alive()
+        clock.t += 31.0
+        assert not wd.alive()
+    assert wd.alive()  # the call returned: a beat
+    clock.t += 6.0
+    assert not wd.alive()  # back to the normal allowance
+
+
+def test_thread_pings_on_its_own(notify_socket):
+    path, sock = notify_socket
+    n = SystemdNotifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "2000000"})
+    wd = HangWatchdog(n, allowance_s=30.0, interval_s=0.01).start()
+    try:
+        assert _fields(sock) == {"WATCHDOG": "1"}
+    finally:
+        wd.stop()
+
+
+def test_a_full_socket_never_blocks_the_sender(tmp_path):
+    path = tmp_path / "full.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))  # never read: its queue fills
+    try:
+        n = SystemdNotifier({"NOTIFY_SOCKET": str(path)})
+        results = [n.notify(status="x" * 200) for _ in range(2000)]  # returns: it did not block
+        assert results[0] is True
+        assert results.count(False) == n.dropped > 0
+        sock.recv(4096)
+        assert n.notify(watchdog=1)  # room again
+    finally:
+        sock.close()

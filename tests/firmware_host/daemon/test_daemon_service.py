@@ -1,0 +1,187 @@
+"""The daemon's main loop on the simulated rig with the shipped model, end to end in process.
+
+What each test shows: pairs flow from ``sim://`` through the estimator to a ``memory://`` sink
+(the real protocol bytes, decoded back); a camera that vanishes is reopened and the sinks flag
+CAMERA_FAULT meanwhile; a rig that is absent at start is waited for with backoff; a recording
+that ends stops the daemon; systemd hears READY, STATUS and STOPPING; the status file is
+complete, valid JSON. They run in real time (the daemon reads the rig at its frame rate) and wait
+for events, never asserting how long something took.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import drivers
+from firmware_host.daemon import Daemon, DaemonStartError, daemon_config_from_dict
+from firmware_host.daemon.health import State
+from firmware_host.daemon.notify import SystemdNotifier
+from firmware_host.protocol.constants import Fault
+from firmware_host.protocol.messages import Hello, Joints, Status
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, messages_of, wait_until
+
+REPO = Path(__file__).resolve().parents[3]
+MODELS = REPO / "models"
+pytestmark = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(),
+                                reason="no trained model yet: models/model_card.json does not exist")
+
+
+@pytest.fixture(scope="module")
+def sim_url(tmp_path_factory) -> str:
+    cache = tmp_path_factory.mktemp("sim-cache")
+    return f"sim://?fps=30&seed=0&motion=wave&width=320&height=240&cache={cache}"
+
+
+def _config(rig: dict, tmp_path: Path, sinks=("memory://?status_s=0.05",), **health) -> object:
+    return daemon_config_from_dict({
+        "rig": rig,
+        "sinks": list(sinks),
+        "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
+        "health": {"status_file": str(tmp_path / "status.json"), "status_every_s": 0.05, **health},
+    })
+
+
+class _Running:
+    """A daemon on a thread, with a notify socket systemd would own."""
+
+    def __init__(self, config, tmp_path: Path, **kw) -> None:
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind(str(tmp_path / "notify.sock"))
+        self.sock.settimeout(0.05)
+        self.listening = True
+        self.listener = threading.Thread(target=self._listen, daemon=True)  # systemd reads all the time
+        self.daemon = Daemon(config, notifier=SystemdNotifier({"NOTIFY_SOCKET": str(tmp_path / "notify.sock")}),
+                             sink_kwargs={"backoff": FAST_BACKOFF}, **kw)
+        self.stop = threading.Event()
+        self.rc: list[object] = []
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.notes: list[dict[str, str]] = []
+
+    def _run(self) -> None:
+        try:
+            self.rc.append(self.daemon.run(self.stop))
+        except BaseException as e:  # surfaced by finish()
+            self.rc.append(e)
+
+    def __enter__(self) -> "_Running":
+        self.listener.start()
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop.set()
+        self.thread.join(timeout=30)
+        self.listening = False
+        self.listener.join(timeout=5)
+        self.sock.close()
+
+    def finish(self) -> object:
+        self.stop.set()
+        self.thread.join(timeout=30)
+        assert not self.thread.is_alive(), "the daemon did not stop"
+        self.listening = False
+        self.listener.join(timeout=5)
+        return self.rc[0]
+
+    def _listen(self) -> None:
+        while self.listening:
+            try:
+                data = self.sock.recv(4096).decode()
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            self.notes.append(dict(line.split("=", 1) for line in data.splitlines()))
+
+
+def test_pairs_stream_to_the_sink_and_systemd_hears_it(sim_url, tmp_path):
+    cfg = _config({"url": sim_url}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 15, timeout=60, what="15 estimated pairs")
+        sink = run.daemon.sinks["memory://?status_s=0.05"]
+        assert run.finish() == 0
+    messages = messages_of(sink.read())
+    hello = [m for m in messages if isinstance(m, Hello)]
+    joints = [m for m in messages if isinstance(m, Joints)]
+    assert hello and hello[0].cameras == ("left", "right") and hello[0].rig_id
+    assert len(joints) == run.daemon.health.pairs_estimated
+    # The shipped model finds the simulated person: most joints present, within the room.
+    found = ~np.stack([j.missing for j in joints])
+    xyz_m = np.stack([j.xyz_mm for j in joints]) / 1000.0
+    assert found.mean() > 0.8
+    depth = xyz_m[found][:, 2]
+    assert np.all((depth > 1.5) & (depth < 4.5))  # the simulated person stands 3 m in front of the rig
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["state"] == State.STOPPING
+    assert report["pairs"]["estimated"] == len(joints)
+    assert report["sinks"]["memory://?status_s=0.05"]["sent"] == len(joints)
+    assert report["rig"]["opens"] == 1 and report["rig"]["lost"] == 0
+    assert report["estimator"]["latency_ms_median"] > 0
+    keys = [set(n) for n in run.notes]
+    assert "READY" in keys[0] and run.notes[0]["MAINPID"].isdigit()
+    assert any(n.get("STATUS", "").startswith("running:") for n in run.notes)
+    assert "STOPPING" in keys[-1]
+
+
+def test_a_vanished_camera_is_reopened_and_flagged(sim_url, tmp_path):
+    cfg = _config({"url": f"{sim_url}&unplug_after_s=0.6", "reopen_min_s": 0.01}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.rig_lost >= 2 and run.daemon.health.rig_opens >= 3,
+                   timeout=60, what="two unplugs and reopens")
+        seen = run.daemon.health.pairs_estimated
+        wait_until(lambda: run.daemon.health.pairs_estimated > seen + 3, timeout=60, what="pairs after a reopen")
+        sink = run.daemon.sinks["memory://?status_s=0.05"]
+        assert run.finish() == 0
+    assert "unplugged" in run.daemon.health.last_error
+    faults = [m.fault for m in messages_of(sink.read()) if isinstance(m, Status)]
+    assert Fault.CAMERA_FAULT in faults  # flagged while the camera was away
+    assert faults.index(Fault.CAMERA_FAULT) < len(faults) - 1 - faults[::-1].index(Fault.OK)  # and cleared
+
+
+def test_an_absent_rig_is_waited_for_then_a_recording_plays_to_its_end(sim_url, tmp_path):
+    take = tmp_path / "take"
+    with drivers.open_rig(f"record+{sim_url}&policy=all&out={tmp_path / 'made'}") as rig:
+        for _ in range(12):
+            rig.read(timeout_s=5)
+    cfg = _config({"url": f"replay://{take}", "reopen_min_s": 0.02, "reopen_max_s": 0.1}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.rig_open_failures >= 3, timeout=30, what="failed opens")
+        report = json.loads((tmp_path / "status.json").read_text())
+        assert report["state"] in (State.WAITING, State.OPENING)
+        assert str(take) in report["last_error"]
+        assert run.daemon.sinks == {}  # nothing to announce until the rig (its camera names) is known
+        shutil.copytree(tmp_path / "made", take)  # the recording appears
+        run.thread.join(timeout=60)  # rig.exit_at_end: the daemon stops by itself
+        assert not run.thread.is_alive()
+        assert run.rc == [0]
+    assert run.daemon.health.pairs_estimated >= 10
+    assert run.daemon.health.rig_opens == 1
+
+
+def test_stop_while_waiting_is_prompt(tmp_path):
+    cfg = _config({"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 30, "reopen_max_s": 30}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.rig_open_failures >= 1, timeout=30, what="a failed open")
+        assert run.finish() == 0  # not 30 s later: the backoff wait watches the stop event
+
+
+def test_a_model_that_does_not_load_stops_the_start(tmp_path):
+    broken = tmp_path / "models"
+    broken.mkdir()
+    (broken / "encoder.onnx").write_bytes(b"\x08\x07garbage")
+    cfg = daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": ["memory://"],
+                                   "estimator": {"session": {"model_dir": str(broken)}}})
+    with pytest.raises(DaemonStartError, match=str(broken)):
+        Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
+
+
+def test_a_bad_rig_url_stops_the_start(tmp_path):
+    cfg = _config({"url": "sim://?fps=-1"}, tmp_path)
+    with pytest.raises(DaemonStartError, match=r"rig\.url .*fps"):
+        Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())

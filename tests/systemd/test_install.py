@@ -1,0 +1,126 @@
+"""systemd/: the install script (staged into a folder, no root), the unit file, the udev rules, the config.
+
+``systemd-analyze verify`` checks the installed unit where systemd's tools exist (skipped elsewhere);
+the rest checks that the unit, the default config and the daemon agree with each other.
+"""
+from __future__ import annotations
+
+import configparser
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from firmware_host.daemon.config import load_daemon_config
+
+REPO = Path(__file__).resolve().parents[2]
+INSTALL = REPO / "systemd" / "install.sh"
+UNIT = REPO / "systemd" / "ghnerf.service"
+
+
+def _install(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["bash", str(INSTALL), *args], capture_output=True, text=True, timeout=300)
+
+
+def _unit(path: Path) -> configparser.ConfigParser:
+    parser = configparser.ConfigParser(strict=False, interpolation=None, delimiters=("=",))
+    parser.optionxform = str  # systemd keys are case-sensitive
+    parser.read_string(path.read_text())
+    return parser
+
+
+@pytest.fixture(scope="module")
+def staged(tmp_path_factory) -> tuple[Path, Path]:
+    root = tmp_path_factory.mktemp("stage")
+    prefix = tmp_path_factory.mktemp("prefix")  # absolute, and where verify finds the executable
+    proc = _install("--destdir", str(root), "--prefix", str(prefix))
+    assert proc.returncode == 0, proc.stderr
+    return root, prefix
+
+
+def test_stages_every_file(staged):
+    root, prefix = staged
+    unit = root / "etc/systemd/system/ghnerf.service"
+    assert unit.is_file() and (root / "etc/udev/rules.d/60-ghnerf.rules").is_file()
+    staged_prefix = root / str(prefix).lstrip("/")
+    assert (staged_prefix / "models/model_card.json").read_bytes() == (REPO / "models/model_card.json").read_bytes()
+    assert (staged_prefix / "docs/daemon.md").is_file()
+    service = _unit(unit)["Service"]
+    assert service["ExecStart"] == f"{prefix}/venv/bin/ghnerf-daemon --config /etc/ghnerf/daemon.json"
+    assert "/opt/ghnerf" not in unit.read_text()
+    config = load_daemon_config(root / "etc/ghnerf/daemon.json")
+    assert config.estimator.session.model_dir == f"{prefix}/models"
+    assert config.rig.url == "depthai://"
+
+
+def test_an_existing_config_is_kept(staged):
+    root, prefix = staged
+    config = root / "etc/ghnerf/daemon.json"
+    edited = json.loads(config.read_text())
+    edited["sinks"] = ["serial:///dev/ttyACM0?baud=921600"]
+    config.write_text(json.dumps(edited))
+    proc = _install("--destdir", str(root), "--prefix", str(prefix))
+    assert proc.returncode == 0, proc.stderr
+    assert "kept the existing" in proc.stdout
+    assert json.loads(config.read_text())["sinks"] == ["serial:///dev/ttyACM0?baud=921600"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--prefix", "relative/path", "--destdir", "/tmp/x"], "--prefix must be an absolute path"),
+    (["--prefix", "/opt/a b", "--destdir", "/tmp/x"], "--prefix may hold only"),
+    (["--frobnicate"], "unknown option --frobnicate"),
+    (["--prefix"], "--prefix needs a folder"),
+])
+def test_bad_options_exit_2(args, message):
+    proc = _install(*args)
+    assert proc.returncode == 2 and message in proc.stderr
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is not installed")
+def test_systemd_accepts_the_installed_unit(staged):
+    root, prefix = staged
+    exe = prefix / "venv/bin/ghnerf-daemon"
+    exe.parent.mkdir(parents=True, exist_ok=True)
+    if not exe.exists():
+        exe.symlink_to(Path(sys.executable).parent / "ghnerf-daemon")
+    proc = subprocess.run(["systemd-analyze", "verify", str(root / "etc/systemd/system/ghnerf.service")],
+                          capture_output=True, text=True, timeout=120)
+    complaints = [line for line in (proc.stdout + proc.stderr).splitlines() if "ghnerf" in line]
+    assert proc.returncode == 0 and not complaints, proc.stdout + proc.stderr
+
+
+def test_unit_and_daemon_agree():
+    unit = _unit(UNIT)
+    service = unit["Service"]
+    assert service["Type"] == "notify"  # the daemon sends READY=1 (firmware_host.daemon.service)
+    assert service["RestartPreventExitStatus"] == "2"  # the CLI's exit status for what a restart cannot fix
+    assert service["Restart"] == "on-failure"
+    default = load_daemon_config(REPO / "systemd/daemon.json")
+    # The status file lives in the folder systemd creates for the service.
+    assert Path(default.health.status_file).parent == Path("/run") / service["RuntimeDirectory"]
+    # systemd must not kill a loop the daemon still counts as alive.
+    watchdog_s = float(service["WatchdogSec"])
+    assert watchdog_s >= 2 * 1.0  # pinged every WatchdogSec / 2
+    assert float(service["TimeoutStartSec"]) > 10
+    groups = service["SupplementaryGroups"].split()
+    rules = (REPO / "systemd/60-ghnerf.rules").read_text()
+    assert 'GROUP="plugdev"' in rules and "plugdev" in groups and "dialout" in groups
+
+
+_RULE_KEY = re.compile(r'^(SUBSYSTEM|ATTRS\{\w+\}|ATTR\{\w+\}|KERNEL|ENV\{\w+\}|MODE|GROUP|SYMLINK|TAG)'
+                       r'(==|!=|\+=|=)"[^"]*"$')
+
+
+def test_udev_rules_parse():
+    lines = [line.strip() for line in (REPO / "systemd/60-ghnerf.rules").read_text().splitlines()]
+    rules = [line for line in lines if line and not line.startswith("#")]
+    assert rules, "no active rule"
+    commented = [line.lstrip("# ") for line in lines if line.startswith("# SUBSYSTEM")]
+    for rule in rules + commented:  # the templates must be valid once uncommented too
+        for pair in (p.strip() for p in rule.split(",")):
+            assert _RULE_KEY.match(pair), f"bad udev pair {pair!r} in {rule!r}"
+    assert any('ATTRS{idVendor}=="03e7"' in rule for rule in rules)  # Luxonis / Movidius
