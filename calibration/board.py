@@ -1,0 +1,132 @@
+"""The calibration board: a ChArUco board (a chessboard with ArUco markers in its white squares).
+
+ChArUco rather than a plain chessboard because each corner is identified by the markers around
+it: a board seen partly, at the image edge or half hidden, still gives labelled corners, which is
+what fills the corners of the image where the lens distorts most. The board is one small JSON file
+(:meth:`BoardSpec.to_dict`), the same one ``ghcal board`` prints from and ``ghcal solve`` reads,
+so the printed board and the solver never disagree about the square size.
+
+Measure the printed squares with a ruler and put the measured size in ``square_m``: a printer that
+scales by 2 % scales the whole rig by 2 %.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import cv2
+import numpy as np
+
+from calibration.errors import BoardError
+
+__all__ = ["BoardSpec", "load_board", "DICTIONARIES"]
+
+#: ArUco dictionaries a board may use (OpenCV's predefined ones, by name).
+DICTIONARIES = tuple(sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and "APRILTAG" not in n
+                            and "ARUCO_ORIGINAL" not in n and "MIP" not in n))
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A ChArUco board.
+
+    Attributes:
+        squares_x, squares_y: squares along the board's width and height.
+        square_m: side of one chessboard square, metres (measured on the print).
+        marker_m: side of one ArUco marker, metres (smaller than ``square_m``).
+        dictionary: the ArUco dictionary (``DICT_5X5_100``...); it must hold a marker per white square.
+        legacy_pattern: boards made by OpenCV before 4.6 with an even number of rows start with a
+            marker in the other colour; set true to read such a print.
+    """
+
+    squares_x: int = 9
+    squares_y: int = 6
+    square_m: float = 0.08
+    marker_m: float = 0.06
+    dictionary: str = "DICT_5X5_100"
+    legacy_pattern: bool = False
+
+    def __post_init__(self) -> None:
+        for key in ("squares_x", "squares_y"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or not 3 <= value <= 64:
+                raise BoardError(f"must be a whole number of squares in [3, 64], got {value!r}", key=key)
+        for key in ("square_m", "marker_m"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not 0.001 <= value <= 2.0:
+                raise BoardError(f"must be a length in metres in [0.001, 2], got {value!r}", key=key)
+            object.__setattr__(self, key, float(value))
+        if not self.marker_m < self.square_m:
+            raise BoardError(f"must be smaller than square_m ({self.square_m:g}), got {self.marker_m:g}",
+                             key="marker_m")
+        if self.dictionary not in DICTIONARIES:
+            raise BoardError(f"must be one of OpenCV's ArUco dictionaries ({', '.join(DICTIONARIES[:4])}, ...), "
+                             f"got {self.dictionary!r}", key="dictionary")
+        if not isinstance(self.legacy_pattern, bool):
+            raise BoardError(f"must be true or false, got {self.legacy_pattern!r}", key="legacy_pattern")
+        markers = (self.squares_x * self.squares_y) // 2
+        available = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary)).bytesList.shape[0]
+        if markers > available:
+            raise BoardError(f"{self.dictionary} holds {available} markers; a {self.squares_x}x{self.squares_y} "
+                             f"board needs {markers}", key="dictionary")
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def corner_count(self) -> int:
+        """Inner chessboard corners, the points the calibration uses."""
+        return (self.squares_x - 1) * (self.squares_y - 1)
+
+    @property
+    def size_m(self) -> tuple[float, float]:
+        return self.squares_x * self.square_m, self.squares_y * self.square_m
+
+    def corners_m(self) -> np.ndarray:
+        """``(corner_count, 3)`` inner corners in the board frame (metres, z = 0), in corner-id order."""
+        return np.asarray(self.cv_board().getChessboardCorners(), np.float64).reshape(-1, 3)
+
+    def cv_board(self) -> "cv2.aruco.CharucoBoard":
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        board = cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_m, self.marker_m, dictionary)
+        board.setLegacyPattern(self.legacy_pattern)
+        return board
+
+    def image(self, px_per_square: int = 120, margin_px: int = 0) -> np.ndarray:
+        """The board as a greyscale image (white margin of ``margin_px``), ``px_per_square`` per square."""
+        if px_per_square < 20:
+            raise BoardError(f"px_per_square must be at least 20 for the markers to be drawn, got {px_per_square}")
+        size = (self.squares_x * px_per_square + 2 * margin_px, self.squares_y * px_per_square + 2 * margin_px)
+        return self.cv_board().generateImage(size, marginSize=margin_px, borderBits=1)
+
+    # ------------------------------------------------------------------ I/O
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Any, *, path: str | None = None) -> "BoardSpec":
+        if not isinstance(data, Mapping):
+            raise BoardError(f"must be a JSON object, got {type(data).__name__}", path=path)
+        names = {f.name for f in dataclasses.fields(cls)}
+        for key in data:
+            if key not in names:
+                raise BoardError(f"unknown key; a board has {sorted(names)}", key=str(key), path=path)
+        try:
+            return cls(**data)
+        except BoardError as e:
+            raise BoardError(str(e).split(": ", 1)[-1], key=e.key, path=path) from None
+
+
+def load_board(path: str | os.PathLike) -> BoardSpec:
+    """Read a board JSON file; errors name the file and the key."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+    except OSError as e:
+        raise BoardError(f"cannot read the board file ({e.strerror or e})", path=str(path)) from e
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise BoardError(f"not a JSON file: {e}", path=str(path)) from e
+    return BoardSpec.from_dict(data, path=str(path))

@@ -1,0 +1,304 @@
+"""``ghcal``: calibrate the two-camera rig with a printed ChArUco board and write the rig file.
+
+Workflow (docs/calibration.md)::
+
+    ghcal board --out board/                        # board/board.png to print, board/board.json its definition
+    ghcal capture --url depthai:// --board board/board.json --out capture/          # 20 views, moving the board
+    ghcal capture --url depthai:// --board board/board.json --out capture/ --floor  # one view, board on the floor
+    ghcal solve --board board/board.json --images capture/ --floor-view floor --out rig.json
+    ghcal check --rig rig.json --board board/board.json --images capture/        # later: does it still fit?
+
+``ghcal synth --out capture/`` renders the views a careful user would take, of a known rig, so the
+tool can be tried (and is tested) without cameras.
+
+Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the user fixes (the
+message names the file, folder, camera or key).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from calibration.board import BoardSpec, load_board
+from calibration.capture import detect_folder
+from calibration.check import FLOOR_VIEW, check_rig
+from calibration.detect import BoardDetector
+from calibration.errors import CalibrationError, CaptureError
+from calibration.render import calibration_views, example_rig
+from calibration.solve import LENS_MODELS, solve_rig
+from ghnerf_runtime.errors import RuntimeErrorBase
+from ghnerf_runtime.geometry.rig import WorkingVolume
+from ghnerf_runtime.rig_file import load_rig, save_rig
+
+__all__ = ["main", "build_parser"]
+
+PROG = "ghcal"
+
+
+class UsageError(CalibrationError):
+    """A command-line value the user fixes."""
+
+
+def _board(path: str | None) -> BoardSpec:
+    return load_board(path) if path else BoardSpec()
+
+
+def _volume(text: str | None) -> WorkingVolume | None:
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+        if len(values) != 6:
+            raise ValueError
+        return WorkingVolume(np.array(values[:3]), np.array(values[3:]))
+    except (ValueError, RuntimeErrorBase) as e:
+        raise UsageError(f"--volume must be six numbers xmin,ymin,zmin,xmax,ymax,zmax (metres, rig frame), "
+                         f"min < max, got {text!r}") from e
+
+
+def _cameras(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    names = [n for n in text.split(",") if n]
+    if len(names) != 2 or len(set(names)) != 2:
+        raise UsageError(f"--cameras must name two cameras, FIRST,SECOND, got {text!r}")
+    return names
+
+
+# ------------------------------------------------------------------ board
+def cmd_board(args: argparse.Namespace) -> int:
+    board = _board(args.board)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    px = int(round(board.square_m / 0.0254 * args.dpi))
+    image = board.image(px_per_square=px, margin_px=px // 2)
+    png, spec = out / "board.png", out / "board.json"
+    if not cv2.imwrite(str(png), image):
+        raise UsageError(f"{png}: cannot write the image")
+    spec.write_text(json.dumps(board.to_dict(), indent=2) + "\n", encoding="utf-8")
+    w_cm, h_cm = (100 * image.shape[1] / args.dpi * 0.0254, 100 * image.shape[0] / args.dpi * 0.0254)
+    print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px) and {spec}")
+    print(f"print it at {args.dpi} dpi, 100 % scale (no 'fit to page'): {w_cm:.1f} x {h_cm:.1f} cm with its margin; "
+          f"{board.squares_x}x{board.squares_y} squares of {1000 * board.square_m:g} mm")
+    print(f"then measure a square with a ruler and put the measured size in {spec} (square_m, and marker_m "
+          "scaled alike); glue the print to something flat and rigid")
+    return 0
+
+
+# ------------------------------------------------------------------ synth
+def cmd_synth(args: argparse.Namespace) -> int:
+    board = _board(args.board)
+    rig = load_rig(args.rig) if args.rig else example_rig()
+    out = Path(args.out)
+    t0 = time.monotonic()
+    views = calibration_views(rig, board, count=args.count, seed=args.seed)
+    for camera, images in views.items():
+        (out / camera).mkdir(parents=True, exist_ok=True)
+        for name, image in images.items():
+            cv2.imwrite(str(out / camera / f"{name}.png"), image)
+    save_rig(rig, out / "truth_rig.json")
+    (out / "board.json").write_text(json.dumps(board.to_dict(), indent=2) + "\n", encoding="utf-8")
+    total = len(next(iter(views.values())))
+    print(f"rendered {total} image pairs (a floor view among them) of rig {rig.rig_id!r} into {out} in "
+          f"{time.monotonic() - t0:.1f} s; its rig: {out / 'truth_rig.json'}, board: {out / 'board.json'}")
+    return 0
+
+
+# ------------------------------------------------------------------ capture
+def cmd_capture(args: argparse.Namespace) -> int:
+    import drivers
+
+    board = _board(args.board)
+    detector = BoardDetector(board)
+    out = Path(args.out)
+    count = 1 if args.floor else args.count
+    kept, last_centres, last_kept = 0, None, -1e9
+    source = drivers.create_rig_source(args.url)
+    try:
+        source.open()
+        cams = [c.name for c in source.rig.pair]
+        for cam in cams:
+            (out / cam).mkdir(parents=True, exist_ok=True)
+        start = len(list((out / cams[0]).glob("[0-9][0-9][0-9].png")))
+        print(f"capturing from {args.url} (cameras {cams}) into {out}: "
+              + ("lay the board flat on the floor, face up, where both cameras see it" if args.floor else
+                 f"{count} views; move the board between them: near and far, tilted, into the image corners"))
+        deadline = time.monotonic() + args.max_seconds
+        while kept < count and time.monotonic() < deadline:
+            try:
+                pair = source.read(timeout_s=2.0)
+            except drivers.RigTimeoutError:
+                continue
+            except drivers.EndOfStream:
+                break
+            now = time.monotonic()
+            if now - last_kept < args.interval_s:
+                continue
+            found = [detector.detect(image) for image in pair.images]
+            if any(v is None for v in found):
+                continue  # both cameras must see it: the pair's relative pose needs shared views
+            centres = np.array([v.corners.mean(axis=0) for v in found])
+            if not args.floor and last_centres is not None and np.max(np.linalg.norm(centres - last_centres, axis=1)) \
+                    < args.min_move_px:
+                continue  # the board has not moved: the same view again adds nothing
+            name = FLOOR_VIEW if args.floor else f"{start + kept:03d}"
+            for cam, image in zip(cams, pair.images):
+                if not cv2.imwrite(str(out / cam / f"{name}.png"), image):
+                    raise CaptureError(f"{out / cam / name}.png: cannot write the image")
+            kept += 1
+            last_centres, last_kept = centres, now
+            print(f"  {name}: {len(found[0])} + {len(found[1])} corners")
+    finally:
+        source.close()
+    if kept < count:
+        print(f"{PROG}: kept {kept} of {count} views before {'the stream ended' if kept else 'giving up'}",
+              file=sys.stderr)
+        return 2 if kept == 0 else 0
+    print(f"kept {kept} view(s) in {out}")
+    return 0
+
+
+# ------------------------------------------------------------------ solve
+def cmd_solve(args: argparse.Namespace) -> int:
+    board = _board(args.board)
+    if (args.floor_view is None) == (args.camera_height is None):
+        raise UsageError("give --floor-view NAME (a view of the board lying on the floor) or --camera-height M "
+                         "(the first camera's height above the floor, with --pitch and --roll)")
+    views, missed = detect_folder(board, args.images, _cameras(args.cameras))
+    names = tuple(views)
+    for cam in names:
+        extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
+        print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
+    if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
+        raise UsageError(f"--floor-view {args.floor_view!r}: neither camera's folder has an image of that name "
+                         "with the board found in it")
+    solution = solve_rig(board, views, names, lens=args.lens, floor_view=args.floor_view,
+                         board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
+                         pitch_deg=args.pitch, roll_deg=args.roll, volume=_volume(args.volume),
+                         rig_id=args.rig_id)
+    out = Path(args.out)
+    save_rig(solution.rig, out)
+    report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
+    report_path.write_text(json.dumps(solution.report, indent=1) + "\n", encoding="utf-8")
+    r = solution.report
+    for cam in names:
+        c = r["cameras"][cam]
+        print(f"{cam}: reprojection {c['rms_px']:.3f} px over {c['views']} views, coverage {c['coverage']:.0%}, "
+              f"f {c['K'][0][0]:.1f} px")
+    p, lv = r["pair"], r["levelling"]
+    print(f"pair: reprojection {p['rms_px']:.3f} px over {p['views']} views, baseline {1000 * p['baseline_m']:.1f} mm, "
+          f"convergence {p['convergence_deg']:.2f} deg")
+    print(f"levelled by {lv['method']}: {lv['camera']} {lv['camera_height_m']:.3f} m above the floor, "
+          f"pitch {lv['pitch_deg']:.2f} deg, roll {lv['roll_deg']:.2f} deg")
+    for warning in r["warnings"]:
+        print(f"warning: {warning}")
+    print(f"wrote {out} and {report_path}")
+    return 0
+
+
+# ------------------------------------------------------------------ check
+def cmd_check(args: argparse.Namespace) -> int:
+    rig = load_rig(args.rig)
+    board = _board(args.board)
+    views, _ = detect_folder(board, args.images, [c.name for c in rig.pair])
+    report = check_rig(rig, board, views, board_thickness_m=args.board_thickness)
+    if not report["pairs"]:
+        raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
+    print(json.dumps(report, indent=1) if args.json else
+          f"{report['pairs']} pairs: reprojection {report['reprojection_px_rms']:.3f} px rms "
+          f"(p95 {report['reprojection_px_p95']:.3f}), scale {report['scale']:.4f} of the board's"
+          + (f", floor view {report['floor']['height_mm_median']:+.1f} mm off the floor" if "floor" in report else ""))
+    bad = report["reprojection_px_rms"] > args.max_px or abs((report["scale"] or 1.0) - 1.0) > args.max_scale_error
+    if bad:
+        print(f"{PROG}: the rig does not fit these views (limits: {args.max_px} px, scale within "
+              f"{args.max_scale_error:.1%}): a camera moved, or the views are of another rig; calibrate again",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+# ------------------------------------------------------------------ main
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
+                                 epilog="Guide: docs/calibration.md")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("board", help="write the board to print and its definition")
+    p.add_argument("--out", required=True, help="folder for board.png and board.json")
+    p.add_argument("--board", help="a board definition to start from (default: 9x6 squares of 80 mm)")
+    p.add_argument("--dpi", type=int, default=300, help="print resolution (default 300)")
+    p.set_defaults(run=cmd_board)
+
+    p = sub.add_parser("synth", help="render the calibration views of a known rig (no cameras needed)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--rig", help="the rig to film (default: a 0.6 m pair at 1.4 m, ghcal.render.example_rig)")
+    p.add_argument("--board")
+    p.add_argument("--count", type=int, default=15)
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(run=cmd_synth)
+
+    p = sub.add_parser("capture", help="save image pairs in which both cameras see the board")
+    p.add_argument("--url", required=True, help="rig URL (depthai://, replay://DIR, ...)")
+    p.add_argument("--board")
+    p.add_argument("--out", required=True)
+    p.add_argument("--count", type=int, default=20, help="views to keep (default 20)")
+    p.add_argument("--floor", action="store_true", help="keep one view named 'floor': the board lying on the floor")
+    p.add_argument("--interval-s", type=float, default=1.0, help="at least this long between kept views")
+    p.add_argument("--min-move-px", type=float, default=40.0, help="the board must move this far between views")
+    p.add_argument("--max-seconds", type=float, default=600.0)
+    p.set_defaults(run=cmd_capture)
+
+    p = sub.add_parser("solve", help="solve the rig from a folder of views and write the rig file")
+    p.add_argument("--images", required=True, help="folder with one subfolder per camera")
+    p.add_argument("--board")
+    p.add_argument("--out", required=True, help="rig file to write (docs/rig-file.md)")
+    p.add_argument("--report", help="report JSON (default: OUT with .report.json)")
+    p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the two subfolders, sorted)")
+    p.add_argument("--lens", choices=sorted(LENS_MODELS), default="standard")
+    p.add_argument("--floor-view", help="the view (file name without suffix) of the board lying on the floor")
+    p.add_argument("--board-thickness", type=float, default=0.0, help="metres, for the floor view")
+    p.add_argument("--camera-height", type=float, help="instead of a floor view: the first camera above the floor, m")
+    p.add_argument("--pitch", type=float, default=0.0, help="with --camera-height: degrees below the horizon")
+    p.add_argument("--roll", type=float, default=0.0, help="with --camera-height: degrees about the optical axis")
+    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame)")
+    p.add_argument("--rig-id", default="rig")
+    p.set_defaults(run=cmd_solve)
+
+    p = sub.add_parser("check", help="check a rig file against new views of the board")
+    p.add_argument("--rig", required=True)
+    p.add_argument("--board")
+    p.add_argument("--images", required=True)
+    p.add_argument("--board-thickness", type=float, default=0.0)
+    p.add_argument("--max-px", type=float, default=1.0, help="largest acceptable reprojection rms (default 1 px)")
+    p.add_argument("--max-scale-error", type=float, default=0.01, help="default 0.01 (1 %%)")
+    p.add_argument("--json", action="store_true", help="print the full report")
+    p.set_defaults(run=cmd_check)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.run(args))
+    except (CalibrationError, RuntimeErrorBase, OSError) as e:
+        # RuntimeErrorBase: a bad rig file (RigFileError) or geometry; OSError: a folder we cannot write
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+    except Exception as e:  # noqa: BLE001 - a driver error in capture: one line, not a traceback
+        import drivers
+
+        if isinstance(e, drivers.DriverError):
+            print(f"{PROG}: error: {e}", file=sys.stderr)
+            return 2
+        raise
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,327 @@
+"""From board views to a rig: each camera's intrinsics, the pair's relative pose, the floor.
+
+Pure computation on detected views (:class:`~calibration.detect.BoardView`); no file or camera I/O.
+
+1. **Intrinsics** per camera (``cv2.calibrateCameraExtended``) from every view where that camera
+   saw the board; a view whose reprojection error is far above the others' (a blurred or moving
+   frame) is dropped once and the solve repeated.
+2. **Relative pose** of the second camera (``cv2.stereoCalibrateExtended`` with the intrinsics
+   fixed) from the views both cameras saw at the same instant, on the corners both found.
+3. **Levelling** into the rig frame (docs/rig-file.md: y down along gravity, floor at y = 0):
+   either from one view of the board lying flat on the floor (its plane is the floor, its normal
+   gravity; the most accurate, and nothing to measure), or from the reference camera's height and
+   tilt measured by hand (:func:`calibration.level.level_rig`).
+
+The report (:attr:`RigSolution.report`) carries every figure a user needs to judge the result and
+``warnings`` in words where one is out of the usual range.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import cv2
+import numpy as np
+
+from calibration.board import BoardSpec
+from calibration.detect import MIN_CORNERS, BoardView
+from calibration.errors import SolveError
+from calibration.level import LEVEL_VOLUME, level_rig
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+
+__all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
+           "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "MIN_VIEWS"]
+
+#: Lens models: OpenCV flags and what they suit.
+LENS_MODELS = {
+    "standard": 0,  # k1, k2, p1, p2, k3: most lenses up to ~100 degrees
+    "narrow": cv2.CALIB_FIX_K3,  # k1, k2, p1, p2: long lenses, where k3 only fits noise
+    "rational": cv2.CALIB_RATIONAL_MODEL,  # 8 terms: wide lenses; needs views reaching the image corners
+}
+#: Fewest views a camera's intrinsics are solved from (OpenCV needs 3; fewer than ~10 is weak).
+MIN_VIEWS = 4
+#: A view whose error exceeds this multiple of the median (and 1 px) is dropped once as an outlier.
+OUTLIER_FACTOR = 3.0
+#: The image is divided into this grid to measure how much of it the board's corners covered.
+COVERAGE_GRID = (8, 6)
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    K: np.ndarray
+    dist: np.ndarray
+    rms_px: float
+    per_view_px: dict[str, float]
+    dropped: tuple[str, ...]
+    coverage: float
+    image_size: tuple[int, int]
+
+
+@dataclass(frozen=True)
+class PairPose:
+    """``X_second = R @ X_first + T`` (metres), from the views both cameras saw."""
+
+    R: np.ndarray
+    T: np.ndarray
+    rms_px: float
+    per_view_px: dict[str, float]
+
+
+@dataclass(frozen=True)
+class Floor:
+    """Gravity and the floor in one camera's frame, from a board lying on the floor."""
+
+    down: np.ndarray  # unit vector along gravity, camera frame
+    height_m: float  # the camera centre above the floor
+    pitch_deg: float  # the optical axis below the horizon
+    roll_deg: float  # turned about the optical axis (counterclockwise from behind; 180: upside down)
+    rms_px: float  # of the board pose fit
+
+
+@dataclass
+class RigSolution:
+    rig: Rig
+    report: dict[str, Any] = field(default_factory=dict)
+
+
+def _object_points(board: BoardSpec, view: BoardView) -> np.ndarray:
+    return board.corners_m()[view.ids].astype(np.float32).reshape(-1, 1, 3)
+
+
+def _image_points(view: BoardView, ids: np.ndarray | None = None) -> np.ndarray:
+    corners = view.corners if ids is None else view.corners[np.searchsorted(view.ids, ids)]
+    return corners.astype(np.float32).reshape(-1, 1, 2)
+
+
+def _coverage(views: Mapping[str, BoardView], image_size: tuple[int, int]) -> float:
+    gx, gy = COVERAGE_GRID
+    hit = np.zeros((gy, gx), bool)
+    w, h = image_size
+    for view in views.values():
+        cx = np.clip((view.corners[:, 0] / w * gx).astype(int), 0, gx - 1)
+        cy = np.clip((view.corners[:, 1] / h * gy).astype(int), 0, gy - 1)
+        hit[cy, cx] = True
+    return float(hit.mean())
+
+
+def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, lens: str = "standard",
+                         camera: str = "camera") -> Intrinsics:
+    """One camera's K and distortion from its views (name -> view).
+
+    :raises SolveError: fewer than :data:`MIN_VIEWS` views, mixed image sizes, an unknown lens model.
+    """
+    if lens not in LENS_MODELS:
+        raise SolveError(f"lens model {lens!r} is not one of {sorted(LENS_MODELS)}")
+    views = dict(views)
+    sizes = {v.image_size for v in views.values()}
+    if len(sizes) > 1:
+        raise SolveError(f"camera {camera!r}: its images differ in size: {sorted(sizes)}")
+    if len(views) < MIN_VIEWS:
+        raise SolveError(f"camera {camera!r}: the board was found in {len(views)} image(s); at least {MIN_VIEWS} "
+                         "are needed (15-30 is usual: near and far, tilted, reaching the image corners)")
+    size = sizes.pop()
+    dropped: list[str] = []
+    for attempt in range(2):
+        names = sorted(views)
+        rms, K, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
+            [_object_points(board, views[n]) for n in names], [_image_points(views[n]) for n in names],
+            size, None, None, flags=LENS_MODELS[lens])
+        errors = dict(zip(names, np.asarray(per_view, float).reshape(-1)))
+        median = float(np.median(list(errors.values())))
+        outliers = [n for n, e in errors.items() if e > max(OUTLIER_FACTOR * median, 1.0)]
+        if attempt or not outliers or len(views) - len(outliers) < MIN_VIEWS:
+            break
+        dropped = outliers
+        views = {n: v for n, v in views.items() if n not in outliers}
+    if not np.all(np.isfinite(K)) or not np.all(np.isfinite(dist)):
+        raise SolveError(f"camera {camera!r}: the solve diverged (the views may all show the board at one angle)")
+    return Intrinsics(K=np.asarray(K, float), dist=np.asarray(dist, float).reshape(-1), rms_px=float(rms),
+                      per_view_px={n: round(float(e), 4) for n, e in errors.items()}, dropped=tuple(dropped),
+                      coverage=_coverage(views, size), image_size=size)
+
+
+def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Mapping[str, BoardView],
+                   intr_first: Intrinsics, intr_second: Intrinsics, *, names: tuple[str, str] = ("first", "second"),
+                   min_common: int = MIN_CORNERS) -> PairPose:
+    """The second camera's pose relative to the first, from views both saw (same view name).
+
+    :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners.
+    """
+    shared = []
+    for name in sorted(set(first) & set(second)):
+        ids = np.intersect1d(first[name].ids, second[name].ids)
+        if ids.size >= min_common:
+            shared.append((name, ids))
+    if len(shared) < MIN_VIEWS:
+        raise SolveError(f"cameras {names[0]!r} and {names[1]!r} both saw the board in {len(shared)} image pair(s); "
+                         f"at least {MIN_VIEWS} are needed: hold it where both cameras see it")
+    obj = [board.corners_m()[ids].astype(np.float32).reshape(-1, 1, 3) for _, ids in shared]
+    img_a = [_image_points(first[n], ids) for n, ids in shared]
+    img_b = [_image_points(second[n], ids) for n, ids in shared]
+    R0, T0 = np.eye(3), np.zeros((3, 1))
+    # -> rms, K1, D1, K2, D2, R, T, E, F, rvecs, tvecs, per-view errors
+    result = cv2.stereoCalibrateExtended(
+        obj, img_a, img_b, intr_first.K, intr_first.dist, intr_second.K, intr_second.dist,
+        intr_first.image_size, R0, T0, flags=cv2.CALIB_FIX_INTRINSIC)
+    rms, R, T, per_view = result[0], result[5], result[6], result[-1]
+    per = np.asarray(per_view, float).reshape(len(shared), 2).mean(axis=1)
+    return PairPose(R=np.asarray(R, float), T=np.asarray(T, float).reshape(3), rms_px=float(rms),
+                    per_view_px={n: round(float(e), 4) for (n, _), e in zip(shared, per)})
+
+
+def floor_from_view(board: BoardSpec, view: BoardView, intr: Intrinsics, *, board_thickness_m: float = 0.0) \
+        -> Floor:
+    """Gravity and the camera's height from a view of the board lying flat on the floor, printed face up."""
+    ok, rvec, tvec = cv2.solvePnP(_object_points(board, view), _image_points(view), intr.K, intr.dist,
+                                  flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        raise SolveError("the floor view's board pose could not be solved")
+    projected, _ = cv2.projectPoints(_object_points(board, view), rvec, tvec, intr.K, intr.dist)
+    rms = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - view.corners) ** 2, axis=1))))
+    R_bc = cv2.Rodrigues(rvec)[0]
+    down = R_bc[:, 2]  # the board's z points into the board: down, for a board face up on the floor
+    height = float(down @ tvec.reshape(3)) + board_thickness_m
+    if height <= 0:
+        raise SolveError("the floor view puts the camera below the floor: is the board face down, or is the "
+                         "view of a board held up rather than lying on the floor?")
+    pitch = math.degrees(math.asin(float(np.clip(down[2], -1.0, 1.0))))
+    roll = math.degrees(math.atan2(-float(down[0]), float(down[1])))
+    return Floor(down=down, height_m=height, pitch_deg=pitch, roll_deg=roll, rms_px=rms)
+
+
+def floor_from_pair(board: BoardSpec, first: BoardView, second: BoardView, tool_rig: Rig, *,
+                    board_thickness_m: float = 0.0) -> Floor:
+    """Like :func:`floor_from_view`, from a floor view both cameras saw: the corners both found are
+    triangulated with the solved pair and a plane fitted to them.
+
+    Much steadier than one camera's pose of a flat, foreshortened board: the stereo baseline fixes
+    the plane's tilt where a single view leaves it to perspective cues a few pixels deep. The result
+    is in the first camera's frame (``tool_rig``'s frame); ``rms_px`` is the triangulation's
+    reprojection error.
+    """
+    ids = np.intersect1d(first.ids, second.ids)
+    if ids.size < MIN_CORNERS:
+        raise SolveError(f"the floor view has {ids.size} corners both cameras found; {MIN_CORNERS} are needed")
+    from ghnerf_runtime.geometry.triangulation import triangulate_dlt
+
+    uv = np.stack([first.corners[np.searchsorted(first.ids, ids)], second.corners[np.searchsorted(second.ids, ids)]])
+    points = np.asarray(triangulate_dlt(uv, tool_rig.pair).points, float)  # (N, 3), the first camera's frame
+    reproj = [np.linalg.norm(cam.project(points)[0] - uv[k], axis=1) for k, cam in enumerate(tool_rig.pair)]
+    rms = float(np.sqrt(np.mean(np.concatenate(reproj) ** 2)))
+    centroid = points.mean(axis=0)
+    normal = np.linalg.svd(points - centroid)[2][2]
+    reference = tool_rig.pair[0]
+    if normal @ (reference.center - centroid) > 0:
+        normal = -normal  # gravity points from the cameras toward the floor
+    down = reference.R @ normal
+    height = float(normal @ (centroid - reference.center)) + board_thickness_m
+    if height <= 0:
+        raise SolveError("the floor view puts the camera below the floor")
+    pitch = math.degrees(math.asin(float(np.clip(down[2], -1.0, 1.0))))
+    roll = math.degrees(math.atan2(-float(down[0]), float(down[1])))
+    return Floor(down=down, height_m=height, pitch_deg=pitch, roll_deg=roll, rms_px=rms)
+
+
+def _round(a: np.ndarray, digits: int = 6) -> list:
+    return np.round(np.asarray(a, float), digits).tolist()
+
+
+def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], names: tuple[str, str], *,
+              lens: str = "standard", floor_view: str | None = None, board_thickness_m: float = 0.0,
+              camera_height_m: float | None = None, pitch_deg: float = 0.0, roll_deg: float = 0.0,
+              volume: WorkingVolume | None = None, rig_id: str = "rig") -> RigSolution:
+    """The levelled rig of the two cameras ``names`` from their views (camera -> view name -> view).
+
+    Levelling: ``floor_view`` (a view name whose board lies on the floor, seen by the first camera,
+    else the second) or ``camera_height_m`` with ``pitch_deg`` / ``roll_deg`` of the first camera.
+    Views named ``floor_view`` are used for levelling only, not for the intrinsics.
+
+    :raises SolveError: too few views, no levelling given, a floor view neither camera saw.
+    """
+    if (floor_view is None) == (camera_height_m is None):
+        raise SolveError("say where the floor is: a floor view (the board lying on the floor) or the first "
+                         "camera's height above the floor (with its pitch and roll)")
+    a, b = names
+    for name in names:
+        if name not in views:
+            raise SolveError(f"no views of camera {name!r}; cameras with views: {sorted(views)}")
+    calib = {cam: {n: v for n, v in views[cam].items() if n != floor_view} for cam in names}
+    intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam) for cam in names}
+    pose = calibrate_pair(board, calib[a], calib[b], intr[a], intr[b], names=names)
+    cams = (Camera(a, *intr[a].image_size, intr[a].K, intr[a].dist),
+            Camera(b, *intr[b].image_size, intr[b].K, intr[b].dist, pose.R, pose.T))
+    tool_rig = Rig(cams, LEVEL_VOLUME, rig_id=rig_id)
+    floor = None
+    if floor_view is not None:
+        seen_by = [cam for cam in names if floor_view in views[cam]]
+        if not seen_by:
+            raise SolveError(f"neither camera found the board in the floor view {floor_view!r}")
+        reference = names.index(seen_by[0])
+        shared = np.intersect1d(views[a][floor_view].ids, views[b][floor_view].ids).size \
+            if len(seen_by) == 2 else 0
+        if shared >= MIN_CORNERS:
+            floor = floor_from_pair(board, views[a][floor_view], views[b][floor_view], tool_rig,
+                                    board_thickness_m=board_thickness_m)
+            method = "floor view, both cameras"
+        else:
+            floor = floor_from_view(board, views[seen_by[0]][floor_view], intr[seen_by[0]],
+                                    board_thickness_m=board_thickness_m)
+            method = "floor view, one camera"
+        rig = level_rig(tool_rig, camera_height_m=floor.height_m, pitch_deg=floor.pitch_deg,
+                        roll_deg=floor.roll_deg, reference=reference, volume=volume)
+        levelling = {"method": method, "view": floor_view, "camera": seen_by[0],
+                     "camera_height_m": round(floor.height_m, 4), "pitch_deg": round(floor.pitch_deg, 3),
+                     "roll_deg": round(floor.roll_deg, 3), "fit_rms_px": round(floor.rms_px, 4)}
+    else:
+        assert camera_height_m is not None
+        rig = level_rig(tool_rig, camera_height_m=camera_height_m, pitch_deg=pitch_deg, roll_deg=roll_deg,
+                        volume=volume)
+        levelling = {"method": "measured", "camera": a, "camera_height_m": camera_height_m,
+                     "pitch_deg": pitch_deg, "roll_deg": roll_deg}
+    axes = [rig.camera(n).R[2] for n in names]
+    convergence = math.degrees(math.acos(float(np.clip(axes[0] @ axes[1], -1.0, 1.0))))
+    report: dict[str, Any] = {
+        "board": board.to_dict(),
+        "lens_model": lens,
+        "cameras": {
+            cam: {"image_size": list(intr[cam].image_size), "views": len(intr[cam].per_view_px),
+                  "dropped_views": list(intr[cam].dropped), "rms_px": round(intr[cam].rms_px, 4),
+                  "coverage": round(intr[cam].coverage, 3), "K": _round(intr[cam].K, 4),
+                  "dist": _round(intr[cam].dist), "per_view_px": intr[cam].per_view_px}
+            for cam in names},
+        "pair": {"views": len(pose.per_view_px), "rms_px": round(pose.rms_px, 4),
+                 "baseline_m": round(float(np.linalg.norm(pose.T)), 5),
+                 "convergence_deg": round(convergence, 3), "per_view_px": pose.per_view_px},
+        "levelling": levelling,
+    }
+    report["warnings"] = _warnings(report)
+    for cam in rig.pair:
+        if cam.fold_inside_image():
+            report["warnings"].append(
+                f"{cam.name}: the solved lens model folds over inside the image (radius {cam.fold_radius:.2f}): "
+                "views did not reach the image corners; capture some there, or use --lens narrow")
+    return RigSolution(rig=rig, report=report)
+
+
+def _warnings(report: dict[str, Any]) -> list[str]:
+    out = []
+    for cam, r in report["cameras"].items():
+        if r["rms_px"] > 0.5:
+            out.append(f"{cam}: reprojection error {r['rms_px']:.2f} px (usually < 0.5): blurred or moving images, "
+                       "a board that is not flat, or a wrong board definition")
+        if r["coverage"] < 0.5:
+            out.append(f"{cam}: the board's corners covered {r['coverage']:.0%} of the image: move it into the "
+                       "image's corners and edges, where the lens distorts most")
+        if r["views"] < 10:
+            out.append(f"{cam}: {r['views']} views (15-30 is usual): the lens model is weakly determined")
+        if r["dropped_views"]:
+            out.append(f"{cam}: views {r['dropped_views']} were dropped as outliers (blurred or moving?)")
+    if report["pair"]["rms_px"] > 1.0:
+        out.append(f"pair: reprojection error {report['pair']['rms_px']:.2f} px (usually < 1): were the two "
+                   "cameras' images taken at the same instant?")
+    if report["pair"]["views"] < 8:
+        out.append(f"pair: {report['pair']['views']} views seen by both cameras: the relative pose is weakly "
+                   "determined")
+    return out
