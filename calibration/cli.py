@@ -119,7 +119,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     detector = BoardDetector(board)
     out = Path(args.out)
     count = 1 if args.floor else args.count
-    kept, last_centres, last_kept = 0, None, -1e9
+    kept, last_centres, last_kept, ended = 0, None, -1e9, False
     source = drivers.create_rig_source(args.url)
     try:
         source.open()
@@ -129,7 +129,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
         start = len(list((out / cams[0]).glob("[0-9][0-9][0-9].png")))
         print(f"capturing from {args.url} (cameras {cams}) into {out}: "
               + ("lay the board flat on the floor, face up, where both cameras see it" if args.floor else
-                 f"{count} views; move the board between them: near and far, tilted, into the image corners"))
+                 f"{count} views; move the board between them: near and far, tilted, into each image's corners, "
+                 "mostly where both cameras see it"))
         deadline = time.monotonic() + args.max_seconds
         while kept < count and time.monotonic() < deadline:
             try:
@@ -137,28 +138,31 @@ def cmd_capture(args: argparse.Namespace) -> int:
             except drivers.RigTimeoutError:
                 continue
             except drivers.EndOfStream:
+                ended = True
                 break
-            now = time.monotonic()
+            now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
             if now - last_kept < args.interval_s:
                 continue
             found = [detector.detect(image) for image in pair.images]
-            if any(v is None for v in found):
-                continue  # both cameras must see it: the pair's relative pose needs shared views
-            centres = np.array([v.corners.mean(axis=0) for v in found])
-            if not args.floor and last_centres is not None and np.max(np.linalg.norm(centres - last_centres, axis=1)) \
-                    < args.min_move_px:
-                continue  # the board has not moved: the same view again adds nothing
+            if all(v is None for v in found):
+                continue
+            centres = [None if v is None else v.corners.mean(axis=0) for v in found]
+            if not args.floor and last_centres is not None:
+                moved = [np.linalg.norm(c - last) for c, last in zip(centres, last_centres)
+                         if c is not None and last is not None]
+                if moved and max(moved) < args.min_move_px:
+                    continue  # the board has not moved: the same view again adds nothing
             name = FLOOR_VIEW if args.floor else f"{start + kept:03d}"
-            for cam, image in zip(cams, pair.images):
+            for cam, image in zip(cams, pair.images):  # both images, so a view one camera missed stays a pair
                 if not cv2.imwrite(str(out / cam / f"{name}.png"), image):
                     raise CaptureError(f"{out / cam / name}.png: cannot write the image")
             kept += 1
             last_centres, last_kept = centres, now
-            print(f"  {name}: {len(found[0])} + {len(found[1])} corners")
+            print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
     finally:
         source.close()
     if kept < count:
-        print(f"{PROG}: kept {kept} of {count} views before {'the stream ended' if kept else 'giving up'}",
+        print(f"{PROG}: kept {kept} of {count} views: {'the stream ended' if ended else '--max-seconds ran out'}",
               file=sys.stderr)
         return 2 if kept == 0 else 0
     print(f"kept {kept} view(s) in {out}")
@@ -244,7 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(run=cmd_synth)
 
-    p = sub.add_parser("capture", help="save image pairs in which both cameras see the board")
+    p = sub.add_parser("capture", help="save image pairs in which a camera sees the board (both images)")
     p.add_argument("--url", required=True, help="rig URL (depthai://, replay://DIR, ...)")
     p.add_argument("--board")
     p.add_argument("--out", required=True)

@@ -1,0 +1,234 @@
+"""``ghcal`` end to end on rendered views of a known rig: solve, level, check, capture from a recording.
+
+The views come from :func:`calibration.render.calibration_views` (exact geometry through the rig's
+lens model), so the solved rig is compared with the truth it was rendered from.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration import cli
+from calibration.board import BoardSpec
+from calibration.capture import detect_folder
+from calibration.check import check_rig
+from calibration.errors import CaptureError, SolveError
+from calibration.render import calibration_views, example_rig
+from calibration.solve import solve_rig
+from drivers.backends.recording_format import FRAMES, FrameRow, Manifest, write_manifest
+from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.rig_file import load_rig, save_rig
+
+BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
+
+
+def _rotation_deg(R: np.ndarray) -> float:
+    return math.degrees(math.acos(float(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+
+
+@pytest.fixture(scope="module")
+def truth() -> Rig:
+    rig = example_rig()
+    return Rig(tuple(c.resized(640, 400) for c in rig.cameras), rig.volume, rig_id="truth")
+
+
+@pytest.fixture(scope="module")
+def capture(truth, tmp_path_factory) -> Path:
+    """A folder as ``ghcal capture`` writes it: 8 shared views, 3 per camera in its corners, a floor view."""
+    root = tmp_path_factory.mktemp("capture")
+    for camera, images in calibration_views(truth, BOARD, count=8, edge_count=3, seed=3).items():
+        (root / camera).mkdir()
+        for name, image in images.items():
+            assert cv2.imwrite(str(root / camera / f"{name}.png"), image)
+    (root / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    return root
+
+
+@pytest.fixture(scope="module")
+def views(capture):
+    found, missed = detect_folder(BOARD, capture)
+    return found
+
+
+def _compare(solved: Rig, truth: Rig) -> dict[str, float]:
+    out = {}
+    for cam in truth.pair:
+        est = solved.camera(cam.name)
+        out[f"{cam.name}_centre_mm"] = 1000 * float(np.linalg.norm(est.center - cam.center))
+        out[f"{cam.name}_rotation_deg"] = _rotation_deg(est.R @ cam.R.T)
+        out[f"{cam.name}_focal"] = abs(est.K[0, 0] / cam.K[0, 0] - 1)
+        out[f"{cam.name}_principal_px"] = float(np.max(np.abs(est.K[:2, 2] - cam.K[:2, 2])))
+    return out
+
+
+def test_the_solved_rig_is_the_rig_that_was_filmed(truth, views):
+    assert set(views) == {"left", "right"} and "floor" in views["left"]
+    solution = solve_rig(BOARD, views, ("left", "right"), floor_view="floor")
+    err = _compare(solution.rig, truth)
+    for cam in ("left", "right"):
+        assert err[f"{cam}_focal"] < 0.01, err
+        assert err[f"{cam}_principal_px"] < 4.0, err
+        assert err[f"{cam}_centre_mm"] < 15.0, err  # levelled from the floor view: nothing measured by hand
+        assert err[f"{cam}_rotation_deg"] < 0.6, err
+    report = solution.report
+    assert report["levelling"]["method"] == "floor view, both cameras"
+    assert abs(report["pair"]["baseline_m"] - truth.baseline) < 0.005
+    assert report["cameras"]["left"]["rms_px"] < 0.5 and report["pair"]["rms_px"] < 0.6
+    assert not [w for w in report["warnings"] if "folds" in w or "reprojection" in w], report["warnings"]
+    # the working volume is in front of the levelled rig, the floor at y = 0
+    assert solution.rig.volume.min_corner[1] < -1.5 and solution.rig.volume.max_corner[1] > 0
+
+
+def test_levelling_by_measured_height_and_tilt(truth, views):
+    left = truth.camera("left")
+    pitch = math.degrees(math.asin(float(left.R[2] @ np.array([0.0, 1.0, 0.0]))))  # the optical axis below level
+    solution = solve_rig(BOARD, views, ("left", "right"), camera_height_m=float(-left.center[1]), pitch_deg=pitch)
+    err = _compare(solution.rig, truth)
+    assert err["left_centre_mm"] < 10 and err["right_centre_mm"] < 15, err
+    assert solution.report["levelling"]["method"] == "measured"
+
+
+def test_too_little_to_solve_is_said_plainly(views):
+    few = {cam: dict(list(v.items())[:3]) for cam, v in views.items()}
+    with pytest.raises(SolveError, match="found in 3 image"):
+        solve_rig(BOARD, few, ("left", "right"), camera_height_m=1.4)
+    with pytest.raises(SolveError, match="say where the floor is"):
+        solve_rig(BOARD, views, ("left", "right"))
+    with pytest.raises(SolveError, match="no views of camera 'middle'"):
+        solve_rig(BOARD, views, ("left", "middle"), camera_height_m=1.4)
+    lone = {"left": views["left"], "right": {n: v for n, v in views["right"].items() if n in ("000", "001")}}
+    lone["right"].update({f"x{k}": v for k, v in enumerate(views["right"].values())})  # names the left never had
+    with pytest.raises(SolveError, match="both saw the board in 2 image pair"):
+        solve_rig(BOARD, lone, ("left", "right"), camera_height_m=1.4)
+
+
+def test_check_accepts_the_truth_and_flags_a_bumped_camera(truth, views):
+    report = check_rig(truth, BOARD, views)
+    assert report["pairs"] >= 8
+    assert report["reprojection_px_rms"] < 0.5
+    assert abs(report["scale"] - 1.0) < 0.003
+    assert abs(report["floor"]["height_mm_median"]) < 5.0
+    right = truth.camera("right")
+
+    def bumped(axis: list[float]) -> Rig:  # the right camera turned by 1 degree on its mount
+        nudge = cv2.Rodrigues(np.radians(1.0) * np.array(axis))[0]
+        return Rig((truth.camera("left"), right.with_pose(nudge @ right.R, nudge @ right.t)), truth.volume)
+
+    # tilted: the views no longer meet (reprojection); turned toward the other camera: they meet at
+    # the wrong depth, which shows as the board's squares measured the wrong size (scale)
+    assert check_rig(bumped([1.0, 0.0, 0.0]), BOARD, views)["reprojection_px_rms"] > 2.0
+    assert abs(check_rig(bumped([0.0, 1.0, 0.0]), BOARD, views)["scale"] - 1.0) > 0.02
+
+
+def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
+    rig_path = tmp_path / "rig.json"
+    board = str(capture / "board.json")
+    rc = cli.main(["solve", "--board", board, "--images", str(capture), "--floor-view", "floor",
+                   "--out", str(rig_path), "--rig-id", "bench-rig"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "levelled by floor view, both cameras" in out and "baseline" in out
+    rig = load_rig(rig_path)
+    assert rig.rig_id == "bench-rig" and rig.names == ("left", "right")
+    report = json.loads((tmp_path / "rig.report.json").read_text())
+    assert report["cameras"]["right"]["views"] >= 10
+    assert cli.main(["check", "--rig", str(rig_path), "--board", board, "--images", str(capture)]) == 0
+    assert "pairs: reprojection" in capsys.readouterr().out
+    right = truth.camera("right")
+    nudge = cv2.Rodrigues(np.array([math.radians(1.0), 0.0, 0.0]))[0]
+    save_rig(Rig((truth.camera("left"), right.with_pose(nudge @ right.R, nudge @ right.t)), truth.volume),
+             tmp_path / "bumped.json")
+    assert cli.main(["check", "--rig", str(tmp_path / "bumped.json"), "--board", board,
+                     "--images", str(capture)]) == 1
+    assert "calibrate again" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json"], "give --floor-view NAME"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "ceiling"], "--floor-view 'ceiling'"),
+    (["solve", "--images", "{tmp}/none", "--out", "{tmp}/r.json", "--camera-height", "1.4"], "no such folder"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--camera-height", "1.4", "--cameras", "left"],
+     "--cameras must name two"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--camera-height", "1.4", "--volume", "1,2,3"],
+     "--volume must be six numbers"),
+    (["check", "--rig", "{tmp}/missing.json", "--images", "{cap}"], "missing.json"),
+])
+def test_cli_errors_are_one_line_exit_2(capture, tmp_path, capsys, args, message):
+    argv = [a.format(cap=capture, tmp=tmp_path) for a in args]
+    if argv[0] == "solve":
+        argv += ["--board", str(capture / "board.json")]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("ghcal: error: ") and "\n" not in err and message in err, err
+
+
+def test_unreadable_and_unpaired_folders(tmp_path):
+    (tmp_path / "a").mkdir()
+    with pytest.raises(CaptureError, match="found \\['a'\\]"):
+        detect_folder(BOARD, tmp_path)
+    (tmp_path / "b").mkdir()
+    with pytest.raises(CaptureError, match="no images"):
+        detect_folder(BOARD, tmp_path)
+    (tmp_path / "a" / "000.png").write_bytes(b"not a png")
+    (tmp_path / "b" / "000.png").write_bytes(b"not a png")
+    with pytest.raises(CaptureError, match="000.png: not a readable image"):
+        detect_folder(BOARD, tmp_path)
+
+
+def test_board_command_writes_a_print_at_scale(tmp_path, capsys):
+    assert cli.main(["board", "--out", str(tmp_path), "--dpi", "150"]) == 0
+    image = cv2.imread(str(tmp_path / "board.png"), cv2.IMREAD_GRAYSCALE)
+    px = round(0.08 / 0.0254 * 150)  # one 80 mm square at 150 dpi
+    assert image.shape == (6 * px + 2 * (px // 2), 9 * px + 2 * (px // 2))
+    assert BoardSpec(**json.loads((tmp_path / "board.json").read_text())) == BoardSpec()
+    assert "100 % scale" in capsys.readouterr().out
+
+
+def _write_recording(root: Path, rig: Rig, images: dict[str, dict[str, np.ndarray]], period_s: float) -> None:
+    """A recording in docs/recording-format.md's layout, one pair every ``period_s``."""
+    rows = []
+    for k, name in enumerate(sorted(images[rig.pair[0].name])):
+        for cam in rig.pair:
+            rel = f"images/{cam.name}/{k:08d}.png"
+            (root / rel).parent.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(root / rel), cv2.cvtColor(images[cam.name][name], cv2.COLOR_GRAY2BGR))
+            rows.append(FrameRow(cam.name, k, int(1e9 + k * period_s * 1e9), rel).to_json())
+    (root / FRAMES).write_text("\n".join(rows) + "\n")
+    write_manifest(root, Manifest(rig, "png", source="test", created_utc="2026-11-28T00:00:00Z", complete=True))
+
+
+def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys):
+    images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=5, floor_view=False)
+    # every view twice in a row: the second copy has not moved and is skipped
+    doubled = {cam: {f"{name}{tag}": im for name, im in views.items() for tag in ("a", "b")}
+               for cam, views in images.items()}
+    recording = tmp_path / "take"
+    recording.mkdir()
+    _write_recording(recording, truth, doubled, period_s=2.0)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    out = tmp_path / "capture"
+    rc = cli.main(["capture", "--url", f"replay://{recording}?speed=free", "--board", str(board), "--out", str(out),
+                   "--count", "5", "--interval-s", "1"])
+    assert rc == 0  # some kept: what there is is usable
+    assert "kept 3 of 5 views: the stream ended" in capsys.readouterr().err
+    for cam in ("left", "right"):
+        kept = sorted(p.name for p in (out / cam).iterdir())
+        assert kept == ["000.png", "001.png", "002.png"]
+        for k, name in enumerate(sorted(images[cam])):
+            saved = cv2.imread(str(out / cam / kept[k]), cv2.IMREAD_GRAYSCALE)
+            assert np.array_equal(saved, images[cam][name])  # the pair as the cameras gave it
+    # a second session adds to the folder instead of overwriting it
+    assert cli.main(["capture", "--url", f"replay://{recording}?speed=free", "--board", str(board), "--out", str(out),
+                     "--count", "1"]) == 0
+    assert (out / "left" / "003.png").is_file()
+    assert cli.main(["capture", "--url", f"replay://{recording}?speed=free", "--board", str(board), "--out", str(out),
+                     "--floor"]) == 0
+    assert (out / "right" / "floor.png").is_file()
+    assert cli.main(["capture", "--url", f"replay://{tmp_path / 'nothing'}", "--out", str(out)]) == 2
+    assert "does not exist" in capsys.readouterr().err
