@@ -50,12 +50,16 @@ fi
 echo "installing the ghnerf daemon from $REPO into ${ROOT}${PREFIX}"
 install -d "$ROOT$PREFIX" "$ROOT$PREFIX/docs" "$ROOT/etc/ghnerf" "$ROOT/etc/systemd/system" "$ROOT/etc/udev/rules.d"
 
-# Models: replaced as a whole, so no graph of an older model is left beside the new ones.
-rm -rf "$ROOT$PREFIX/models.new"
-cp -R "$REPO/models" "$ROOT$PREFIX/models.new"
-rm -rf "$ROOT$PREFIX/models"
-mv "$ROOT$PREFIX/models.new" "$ROOT$PREFIX/models"
-cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/"
+if [ "$(cd "$ROOT$PREFIX" && pwd -P)" = "$(cd "$REPO" && pwd -P)" ]; then
+    echo "the checkout is the prefix: its models and docs are used in place"
+else
+    # Models: replaced as a whole, so no graph of an older model is left beside the new ones.
+    rm -rf "$ROOT$PREFIX/models.new"
+    cp -R "$REPO/models" "$ROOT$PREFIX/models.new"
+    rm -rf "$ROOT$PREFIX/models"
+    mv "$ROOT$PREFIX/models.new" "$ROOT$PREFIX/models"
+    cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/"
+fi
 
 if [ -z "$DESTDIR" ]; then
     getent group plugdev >/dev/null || groupadd --system plugdev
@@ -67,14 +71,29 @@ if [ -z "$DESTDIR" ]; then
 fi
 
 if [ "$VENV" = 1 ]; then
-    "$PYTHON" -m venv --clear "$PREFIX/venv"  # rebuilt: an upgrade may change the interpreter
-    "$PREFIX/venv/bin/python" -m pip install --quiet --upgrade "pip>=24"
+    # The environment links to the interpreter it is made from. The service cannot start one under a
+    # home folder (ProtectHome=yes hides /home, /root and /run/user), nor one its user cannot read.
+    INTERPRETER=$(readlink -f "$(command -v "$PYTHON" || echo "$PYTHON")")
+    [ -x "$INTERPRETER" ] || die "no Python interpreter $PYTHON (pass --python /usr/bin/python3.11)"
+    case "$("$PYTHON" -c 'import sys, os; print(os.path.realpath(sys.base_prefix))')/" in
+        /home/*|/root/*|/run/user/*)
+            die "$PYTHON lives under a home folder, which the service's sandbox hides; pass --python with a system interpreter, e.g. --python /usr/bin/python3.11" ;;
+    esac
+    # A new environment beside the old one, switched to by renaming a link: a failed build (no network)
+    # leaves the running service its working environment.
+    NEW="venv-$(date -u +%Y%m%dT%H%M%S)"
+    "$PYTHON" -m venv "$PREFIX/$NEW"
+    "$PREFIX/$NEW/bin/python" -m pip install --quiet --upgrade "pip>=24"
     # The runtime only: onnxruntime, OpenCV, depthai, pyserial, pyusb, numpy (no [training] extra).
-    "$PREFIX/venv/bin/python" -m pip install --quiet -c "$REPO/constraints.txt" "$REPO"
-    # The venv links to the interpreter it was made from: one under a private home (pyenv in
-    # /root) installs fine but the service user cannot start it.
-    runuser -u ghnerf -- "$PREFIX/venv/bin/python" -c "import firmware_host.daemon" \
-        || die "the service user ghnerf cannot run $PREFIX/venv/bin/python (it is $(readlink -f "$PREFIX/venv/bin/python")); pass --python with an interpreter every user can run, e.g. --python /usr/bin/python3.11"
+    "$PREFIX/$NEW/bin/python" -m pip install --quiet -c "$REPO/constraints.txt" "$REPO" \
+        || { rm -rf "${PREFIX:?}/$NEW"; die "pip could not install the runtime; the previous environment is kept"; }
+    runuser -u ghnerf -- "$PREFIX/$NEW/bin/python" -c "import firmware_host.daemon" \
+        || { rm -rf "${PREFIX:?}/$NEW"; die "the service user ghnerf cannot run $INTERPRETER; pass --python with an interpreter every user can run, e.g. --python /usr/bin/python3.11"; }
+    [ -d "$PREFIX/venv" ] && [ ! -L "$PREFIX/venv" ] && mv "$PREFIX/venv" "$PREFIX/venv-before-links"
+    ln -sfn "$NEW" "$PREFIX/venv.link" && mv -T "$PREFIX/venv.link" "$PREFIX/venv"
+    # keep the environment just replaced (to roll back by relinking) and remove older ones
+    for old in $(ls -1d "$PREFIX"/venv-2* 2>/dev/null | sort | head -n -2); do rm -rf "$old"; done
+    rm -rf "$PREFIX/venv-before-links"
 fi
 
 sed "s|/opt/ghnerf|$PREFIX|g" "$REPO/systemd/ghnerf.service" > "$ROOT/etc/systemd/system/ghnerf.service"

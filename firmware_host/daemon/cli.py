@@ -66,8 +66,10 @@ def check_config(config: DaemonConfig) -> None:
     """
     try:
         drivers.create_rig_source(config.rig.url)  # parses and checks the options; opens nothing
-    except drivers.DriverError as e:
+    except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
         raise DaemonConfigError(str(e), key="rig.url") from None
+    except drivers.DriverError:
+        pass  # a recording or device not there yet: the daemon waits for it, so the config is fine
     for k, url in enumerate(config.sinks):
         try:
             if "cameras" in parse_url(url).query:

@@ -31,6 +31,8 @@ __all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "da
            "daemon_config_to_dict", "load_daemon_config", "LOG_LEVELS"]
 
 LOG_LEVELS = ("debug", "info", "warning", "error")
+#: Time one estimate may take on top of a read before the watchdog's allowance runs out (see DaemonConfig).
+LOOP_MARGIN_S = 5.0
 
 
 class DaemonConfigError(FirmwareHostError, ValueError):
@@ -47,10 +49,13 @@ def _fail(field_name: str, why: str, value: Any) -> None:
 
 def _seconds(obj: Any, name: str, lo: float, hi: float) -> None:
     value = getattr(obj, name)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-            or not lo <= value <= hi:
+    try:
+        seconds = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
+    except OverflowError:  # an integer too large for a float
+        seconds = math.nan
+    if not math.isfinite(seconds) or not lo <= seconds <= hi:
         _fail(name, f"must be a number of seconds in [{lo:g}, {hi:g}]", value)
-    object.__setattr__(obj, name, float(value))
+    object.__setattr__(obj, name, seconds)
 
 
 def _boolean(obj: Any, name: str) -> None:
@@ -84,6 +89,10 @@ class RigConfig:
     def __post_init__(self) -> None:
         if not isinstance(self.url, str) or "://" not in self.url:
             _fail("url", "must be a rig URL such as 'depthai://' or 'sim://?fps=30'", self.url)
+        if self.url.startswith("record+"):
+            # A recorder needs an empty out= folder, and the daemon reopens the rig after every unplug.
+            _fail("url", "record+ is not supported by the daemon (each reopen would need a new out= folder); "
+                         "record with ghnerf-demo --url record+... instead", self.url)
         _seconds(self, "read_timeout_s", 0.01, 60.0)
         _seconds(self, "stall_s", 0.1, 3600.0)
         if self.stall_s < self.read_timeout_s:
@@ -149,6 +158,13 @@ class DaemonConfig:
         object.__setattr__(self, "sinks", tuple(sinks))
         if self.log_level not in LOG_LEVELS:
             _fail("log_level", f"must be one of {list(LOG_LEVELS)}", self.log_level)
+        # One pass of the loop is a read (up to read_timeout_s) and an estimate: the watchdog must not
+        # take a silent camera, which the loop handles by reopening it, for a hung loop.
+        if isinstance(self.rig, RigConfig) and isinstance(self.health, HealthConfig) \
+                and self.health.loop_allowance_s < self.rig.read_timeout_s + LOOP_MARGIN_S:
+            _fail("health.loop_allowance_s", f"must be at least rig.read_timeout_s + {LOOP_MARGIN_S:g} s "
+                                             f"({self.rig.read_timeout_s + LOOP_MARGIN_S:g})",
+                  self.health.loop_allowance_s)
 
 
 def _build(cls: type, data: Any, path: str) -> Any:

@@ -118,6 +118,7 @@ def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:
     target = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
     try:
+        os.fchmod(fd, 0o644)  # mkstemp makes it private; operators read it without being the service user
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=1, allow_nan=False)
             fh.write("\n")

@@ -93,7 +93,8 @@ class HangWatchdog:
     """
 
     def __init__(self, notifier: SystemdNotifier, allowance_s: float, *, interval_s: Optional[float] = None,
-                 clock: Callable[[], float] = time.monotonic, stacks_to: Optional[TextIO] = None) -> None:
+                 clock: Callable[[], float] = time.monotonic, stacks_to: Optional[TextIO] = None,
+                 on_tick: Optional[Callable[[str, float], None]] = None) -> None:
         self._notifier = notifier
         self._default_allowance = float(allowance_s)
         self._allowance = float(allowance_s)
@@ -101,6 +102,7 @@ class HangWatchdog:
         self._interval = interval_s if interval_s is not None else (wd / 2 if wd else 1.0)
         self._clock = clock
         self._stacks_to = stacks_to
+        self._on_tick = on_tick  # (where, seconds since the last beat), from the watchdog's thread
         self._last_beat = clock()
         self._where = "start"
         self._hung_reported = False
@@ -134,8 +136,18 @@ class HangWatchdog:
         with self._lock:
             return self._clock() - self._last_beat <= self._allowance
 
+    def since_beat(self) -> tuple[str, float]:
+        """Where the loop last beat, and how long ago."""
+        with self._lock:
+            return self._where, self._clock() - self._last_beat
+
     def check(self) -> bool:
         """One tick of the thread: ping when alive; report a hang once. Returns whether it pinged."""
+        if self._on_tick is not None:
+            try:
+                self._on_tick(*self.since_beat())
+            except Exception:  # noqa: BLE001 - the watchdog must keep ticking whatever a hook does
+                _log.exception("watchdog hook failed")
         if self.alive():
             if self._notifier.watchdog_s is not None and self._notifier.notify(watchdog=1):
                 self.pings += 1

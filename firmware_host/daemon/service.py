@@ -40,10 +40,10 @@ from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import estimate_frame
 from firmware_host.protocol.constants import Fault
-from firmware_host.sinks import open_sink
 from firmware_host.sinks.base import Sink
+from firmware_host.sinks.registry import sink_class
 from firmware_host.sinks.url import parse_url
-from ghnerf_runtime.errors import FrameError, ModelError
+from ghnerf_runtime.errors import FrameError, ModelError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, load_session
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import dumps_rig
@@ -71,7 +71,8 @@ class Daemon:
         self.config = config
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.health = Health(clock=clock, rig_url=config.rig.url)
-        self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock)
+        self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock,
+                                     on_tick=self._on_watchdog_tick)
         self._clock = clock
         self._rig_kwargs = dict(rig_kwargs or {})
         self._sink_kwargs = dict(sink_kwargs or {})
@@ -83,12 +84,19 @@ class Daemon:
         self._backoff_s = config.rig.reopen_min_s
         self._next_status = 0.0
         self._fault = int(Fault.OK)
+        self._fault_lock = threading.RLock()  # the watchdog's thread flags a stuck estimate too
+        self._dropped_closed = 0  # pairs the driver skipped, summed over rigs already closed
+        self._status_file_failing = False
         self._closed_sink_stats: dict[str, Any] = {}  # the last counters of sinks already closed
 
     # ------------------------------------------------------------------ run
     def run(self, stop: threading.Event) -> int:
         """The main loop; returns the exit status (0). :raises DaemonStartError: cannot start."""
         self._load_model()
+        self._check_sinks()
+        if stop.is_set():  # SIGTERM while the model loaded: never report ready
+            self.notifier.notify(stopping=1)
+            return 0
         self.watchdog.start()
         self.notifier.notify(ready=1, status="started: opening the rig", mainpid=os.getpid())
         _log.info("started: rig %s, sinks %s", self.config.rig.url, ", ".join(self.config.sinks))
@@ -132,7 +140,7 @@ class Daemon:
                 self._estimator.close()
             try:
                 self._estimator = Estimator(self._session, rig, self.config.estimator)
-            except ModelError as e:
+            except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the runtime cannot use
                 raise DaemonStartError(f"the model does not fit rig {rig.rig_id!r}: {e}") from None
             self._rig_text = text
         else:
@@ -179,14 +187,14 @@ class Daemon:
         if source is None:
             return
         try:
-            stats = source.stats
-            self.health.pairs_dropped += stats.pairs_dropped
-        except drivers.DriverError:
+            self._dropped_closed += source.stats.pairs_dropped
+            self.health.pairs_dropped = self._dropped_closed
+        except Exception:  # noqa: BLE001 - counters of a dead device: not worth failing over
             pass
         try:
             source.close()
-        except drivers.DriverError as e:  # a vanished device may fail its close too: it is gone either way
-            _log.warning("closing the rig: %s", e)
+        except Exception as e:  # noqa: BLE001 - a vanished device may fail its close too; it is gone either
+            _log.warning("closing the rig: %s", e)  # way, and raising here would hide why it was closed
 
     def _stream(self, source: drivers.RigSource, stop: threading.Event) -> bool:
         """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
@@ -215,6 +223,7 @@ class Daemon:
                 return False
             last_pair = self._clock()
             self.health.pairs_read += 1
+            self.health.pairs_dropped = self._dropped_closed + source.stats.pairs_dropped
             self._backoff_s = rig_cfg.reopen_min_s  # pairs flow again: the next loss retries quickly
             self.watchdog.beat("estimating a pair")
             t0 = self._clock()
@@ -228,10 +237,11 @@ class Daemon:
                     _log.warning("%s (%d so far)", self.health.last_error, self.health.estimate_errors)
                 continue
             took = self._clock() - t0
+            self.watchdog.beat("handing the joints to the sinks")
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
-            self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)
             self.health.camera_fault = False
+            self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)
             frame = estimate_frame(pair, result)
             for sink in self._sinks.values():
                 sink.send(frame)
@@ -250,43 +260,62 @@ class Daemon:
         """The open sinks by URL (opened once the rig's camera names are known)."""
         return dict(self._sinks)
 
+    def _check_sinks(self) -> None:
+        """Build (not start) every sink once, so a bad URL stops the start instead of waiting for a rig."""
+        for k, url in enumerate(self.config.sinks):
+            try:
+                sink_class(url).from_url(url, **{**self._sink_kwargs, "cameras": ("first", "second")})
+            except FirmwareHostError as e:
+                raise DaemonStartError(f"sinks[{k}]: {e}") from None
+
     def _open_sinks(self, rig: Rig) -> None:
-        """Open every sink for this rig's camera names (reopened only when they change)."""
+        """Open every sink for this rig's id and camera names (reopened only when either changes)."""
         key = (rig.rig_id, tuple(c.name for c in rig.pair))
         if key == self._sinks_for:
             return
-        self._close_sinks()
-        for url in self.config.sinks:
-            kw = dict(self._sink_kwargs)
-            kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
-            if "rig_id" not in parse_url(url).query:
-                kw["rig_id"] = rig.rig_id
-            try:
-                self._sinks[url] = open_sink(url, **kw)
-            except FirmwareHostError as e:
-                self._close_sinks()
-                raise DaemonStartError(f"sinks: {e}") from None
-        self._sinks_for = key
-        for sink in self._sinks.values():
-            self._apply_fault(sink)
+        with self._fault_lock:
+            self._close_sinks()
+            for url in self.config.sinks:
+                kw = dict(self._sink_kwargs)
+                kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
+                if "rig_id" not in parse_url(url).query:
+                    kw["rig_id"] = rig.rig_id
+                try:
+                    sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
+                except FirmwareHostError as e:
+                    self._close_sinks()
+                    raise DaemonStartError(f"sinks: {e}") from None
+                self._apply_fault(sink)  # before start: its first STATUS already carries the fault
+                self._sinks[url] = sink.start()
+            self._sinks_for = key
 
     def _close_sinks(self) -> None:
-        for url, sink in self._sinks.items():
-            try:
-                sink.close()
-                self._closed_sink_stats[url] = self._stats_of(sink)
-            except FirmwareHostError as e:
-                _log.warning("closing sink %s: %s", url, e)
-        self._sinks.clear()
-        self._sinks_for = None
+        with self._fault_lock:
+            for url, sink in self._sinks.items():
+                try:
+                    sink.close()
+                    self._closed_sink_stats[url] = self._stats_of(sink)
+                except FirmwareHostError as e:
+                    _log.warning("closing sink %s: %s", url, e)
+            self._sinks.clear()
+            self._sinks_for = None
 
     def _set_fault(self, fault: Fault) -> None:
-        if fault == Fault.CAMERA_FAULT:
-            self.health.camera_fault = True
-        if int(fault) != self._fault:
-            self._fault = int(fault)
-            for sink in self._sinks.values():
-                self._apply_fault(sink)
+        with self._fault_lock:
+            if fault == Fault.CAMERA_FAULT:
+                self.health.camera_fault = True
+            if int(fault) != self._fault:
+                self._fault = int(fault)
+                for sink in self._sinks.values():
+                    self._apply_fault(sink)
+
+    def _on_watchdog_tick(self, where: str, silent_s: float) -> None:
+        """From the watchdog's thread: an estimate still running past ``slow_estimate_s`` is flagged now,
+        not only once it returns."""
+        if where == "estimating a pair" and silent_s > self.config.health.slow_estimate_s \
+                and self._fault != int(Fault.ESTIMATOR_STALLED):
+            self.health.estimator_stalled = True
+            self._set_fault(Fault.ESTIMATOR_STALLED)
 
     def _apply_fault(self, sink: Sink) -> None:
         set_fault = getattr(sink, "set_fault", None)  # the binary-protocol sinks carry STATUS
@@ -315,8 +344,11 @@ class Daemon:
         if path:
             try:
                 write_status_file(path, self.health.report(self.sink_stats()))
+                self._status_file_failing = False
             except (OSError, ValueError) as e:
-                _log.warning("cannot write the status file %s: %s", path, e)
+                if not self._status_file_failing:  # once until it works again, not every tick
+                    _log.warning("cannot write the status file %s: %s", path, e)
+                self._status_file_failing = True
 
     def _wait(self, stop: threading.Event, seconds: float) -> None:
         """Sleep ``seconds`` or until stopped, beating the watchdog and refreshing the status."""

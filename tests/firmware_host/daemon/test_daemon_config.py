@@ -46,6 +46,11 @@ def test_minimal_config_takes_the_defaults():
     ({"sinks": SINK}, "sinks: must be a non-empty list"),
     ({"sinks": [SINK, 3]}, "sinks[1]: must be a sink URL"),
     ({"sinks": [SINK, SINK]}, "sinks: lists a URL twice"),
+    ({"sinks": [SINK], "rig": {"url": "record+sim://?out=/tmp/x"}}, "rig.url: record+ is not supported"),
+    ({"sinks": [SINK], "rig": {"read_timeout_s": 12, "stall_s": 20}},
+     "health.loop_allowance_s: must be at least rig.read_timeout_s"),
+    ({"sinks": [SINK], "health": {"loop_allowance_s": 5}}, "health.loop_allowance_s: must be at least"),
+    ({"sinks": [SINK], "rig": {"stall_s": 10 ** 400}}, "rig.stall_s: must be a number of seconds"),
 ])
 def test_errors_name_the_key(data, key):
     assert _error(data).startswith(key)
@@ -96,6 +101,7 @@ def test_check_config_names_bad_urls_and_models(tmp_path):
     with pytest.raises(DaemonConfigError, match=r"^sinks\[0\]: .*cameras="):
         check_config(cfg(sinks=[SINK + "?send_2d=1&cameras=a,b"]))
     check_config(cfg(sinks=[SINK + "?send_2d=1"]))  # the daemon fills in the camera names
+    check_config(cfg(rig={"url": f"replay://{tmp_path / 'later'}"}))  # a recording the daemon will wait for
     empty = tmp_path / "empty"
     empty.mkdir()
     with pytest.raises(DaemonConfigError, match=r"^estimator\.session\.model_dir: .*no \*\.onnx"):

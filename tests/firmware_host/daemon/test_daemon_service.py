@@ -10,9 +10,12 @@ for events, never asserting how long something took.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import socket
+import stat
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +120,7 @@ def test_pairs_stream_to_the_sink_and_systemd_hears_it(sim_url, tmp_path):
     assert found.mean() > 0.8
     depth = xyz_m[found][:, 2]
     assert np.all((depth > 1.5) & (depth < 4.5))  # the simulated person stands 3 m in front of the rig
+    assert stat.S_IMODE(os.stat(tmp_path / "status.json").st_mode) == 0o644  # operators may read it
     report = json.loads((tmp_path / "status.json").read_text())
     assert report["state"] == State.STOPPING
     assert report["pairs"]["estimated"] == len(joints)
@@ -139,7 +143,10 @@ def test_a_vanished_camera_is_reopened_and_flagged(sim_url, tmp_path):
         sink = run.daemon.sinks["memory://?status_s=0.05"]
         assert run.finish() == 0
     assert "unplugged" in run.daemon.health.last_error
-    faults = [m.fault for m in messages_of(sink.read()) if isinstance(m, Status)]
+    messages = messages_of(sink.read())
+    first_joints = next(k for k, m in enumerate(messages) if isinstance(m, Joints))
+    # After pairs first flowed (before them the rig was still opening, a camera fault too):
+    faults = [m.fault for m in messages[first_joints:] if isinstance(m, Status)]
     assert Fault.CAMERA_FAULT in faults  # flagged while the camera was away
     assert faults.index(Fault.CAMERA_FAULT) < len(faults) - 1 - faults[::-1].index(Fault.OK)  # and cleared
 
@@ -168,7 +175,9 @@ def test_stop_while_waiting_is_prompt(tmp_path):
     cfg = _config({"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 30, "reopen_max_s": 30}, tmp_path)
     with _Running(cfg, tmp_path) as run:
         wait_until(lambda: run.daemon.health.rig_open_failures >= 1, timeout=30, what="a failed open")
-        assert run.finish() == 0  # not 30 s later: the backoff wait watches the stop event
+        t0 = time.monotonic()
+        assert run.finish() == 0
+        assert time.monotonic() - t0 < 5.0  # not after the 30 s backoff: the wait watches the stop event
 
 
 def test_a_model_that_does_not_load_stops_the_start(tmp_path):
@@ -185,3 +194,43 @@ def test_a_bad_rig_url_stops_the_start(tmp_path):
     cfg = _config({"url": "sim://?fps=-1"}, tmp_path)
     with pytest.raises(DaemonStartError, match=r"rig\.url .*fps"):
         Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
+
+
+def test_a_bad_sink_url_stops_the_start_without_a_rig(tmp_path):
+    cfg = _config({"url": f"replay://{tmp_path / 'not-yet'}"}, tmp_path, sinks=["udp://127.0.0.1:9870?fps=fast"])
+    with pytest.raises(DaemonStartError, match=r"sinks\[0\]: .*fps"):
+        Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
+
+
+def test_stopped_while_loading_never_reports_ready(tmp_path):
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(tmp_path / "n.sock"))
+    sock.settimeout(0.5)
+    stop = threading.Event()
+    stop.set()  # SIGTERM arrived while the model loaded
+    cfg = _config({"url": "sim://"}, tmp_path)
+    try:
+        assert Daemon(cfg, notifier=SystemdNotifier({"NOTIFY_SOCKET": str(tmp_path / "n.sock")})).run(stop) == 0
+        assert sock.recv(4096) == b"STOPPING=1"
+    finally:
+        sock.close()
+
+
+def test_a_stuck_estimate_is_flagged_while_it_runs(tmp_path):
+    from firmware_host.sinks import open_sink
+
+    cfg = _config({"url": "sim://"}, tmp_path, slow_estimate_s=0.5)
+    daemon = Daemon(cfg, notifier=SystemdNotifier({}))
+    sink = open_sink("memory://?status_s=0.01")
+    daemon._sinks["memory://"] = sink  # as _open_sinks leaves it (what a rig being open would do)
+    try:
+        daemon._on_watchdog_tick("estimating a pair", 0.2)
+        assert not daemon.health.estimator_stalled
+        daemon._on_watchdog_tick("reading a pair", 3.0)  # a slow read is the camera's, not the estimator's
+        assert not daemon.health.estimator_stalled
+        daemon._on_watchdog_tick("estimating a pair", 0.8)  # the watchdog's thread, mid-estimate
+        assert daemon.health.estimator_stalled
+        wait_until(lambda: any(isinstance(m, Status) and m.fault == Fault.ESTIMATOR_STALLED
+                               for m in messages_of(sink.read())), timeout=10, what="a STATUS with the fault")
+    finally:
+        sink.close()
