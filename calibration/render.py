@@ -36,6 +36,16 @@ def render_board(camera: Camera, board: BoardSpec, R_board: np.ndarray, t_board:
     """
     pps = TEXTURE_PX_PER_SQUARE
     texture = board.image(px_per_square=pps, margin_px=pps).astype(np.float32)
+    # Sampled at a pixel per texel or fewer texels (a mip level), so a board seen small or edge-on is
+    # prefiltered instead of aliased; aliasing would shift the detected corners by tenths of a pixel.
+    # Per board axis (a board on the floor is foreshortened along one of them only).
+    step_x, step_y = _smallest_square_px(camera, board, R_board, t_board, per_axis=True)
+    h, w = texture.shape
+    size = (w if step_x >= pps / 1.5 else max(int(round(w * max(step_x, 4.0) / pps)), 1),
+            h if step_y >= pps / 1.5 else max(int(round(h * max(step_y, 4.0) / pps)), 1))
+    if size != (w, h):
+        texture = cv2.resize(texture, size, interpolation=cv2.INTER_AREA)
+    sx, sy = size[0] / w, size[1] / h  # texels of this level per full-size texel, exact after rounding
     origins, dirs = camera.rays(camera.pixel_grid())
     normal = np.asarray(R_board, float)[:, 2]
     denom = dirs @ normal
@@ -45,8 +55,9 @@ def render_board(camera: Camera, board: BoardSpec, R_board: np.ndarray, t_board:
     local = (hit - np.asarray(t_board, float)) @ np.asarray(R_board, float)  # rig -> board frame
     ok = np.isfinite(s) & (s > 0) & (np.abs(denom) > 1e-9)
     # board metres -> texture pixels (pixel centres at integers), the margin one square wide
-    map_x = np.where(ok, local[..., 0] / board.square_m * pps + pps - 0.5, -1e6).astype(np.float32)
-    map_y = np.where(ok, local[..., 1] / board.square_m * pps + pps - 0.5, -1e6).astype(np.float32)
+    # board metres -> full-size texel coordinates (the margin one square wide) -> this level's pixel centres
+    map_x = np.where(ok, (local[..., 0] / board.square_m * pps + pps) * sx - 0.5, -1e6).astype(np.float32)
+    map_y = np.where(ok, (local[..., 1] / board.square_m * pps + pps) * sy - 0.5, -1e6).astype(np.float32)
     image = cv2.remap(texture, map_x, map_y, cv2.INTER_LINEAR,
                       borderMode=cv2.BORDER_CONSTANT, borderValue=BACKGROUND)
     if blur_sigma > 0:
@@ -54,6 +65,18 @@ def render_board(camera: Camera, board: BoardSpec, R_board: np.ndarray, t_board:
     if noise > 0:
         image = image + np.random.default_rng(seed).normal(0.0, noise, image.shape).astype(np.float32)
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def _smallest_square_px(camera: Camera, board: BoardSpec, R_board: np.ndarray, t_board: np.ndarray, *,
+                        per_axis: bool = False):
+    """The shortest side, in image pixels, of any square of the board as ``camera`` sees it (0 if not
+    in front); ``per_axis``: the shortest along the board's x and along its y."""
+    uv, _ = camera.project(board.corners_m() @ np.asarray(R_board, float).T + np.asarray(t_board, float))
+    grid = uv.reshape(board.squares_y - 1, board.squares_x - 1, 2)
+    along_x = np.linalg.norm(np.diff(grid, axis=1), axis=-1).ravel()
+    along_y = np.linalg.norm(np.diff(grid, axis=0), axis=-1).ravel()
+    sides = [float(np.min(a)) if a.size and np.all(np.isfinite(a)) else 0.0 for a in (along_x, along_y)]
+    return tuple(sides) if per_axis else min(sides)
 
 
 def board_pose_facing(board: BoardSpec, centre: np.ndarray, toward: np.ndarray, *, yaw_deg: float = 0.0,
@@ -150,10 +173,9 @@ def calibration_views(rig: Rig, board: BoardSpec, *, count: int = 20, edge_count
                 out[other.name][name] = render_board(other, board, R, t, seed=int(rng.integers(1 << 30)) + k)
             placed += 1
     if floor_view:
-        # Of the floor poses both cameras see, the one each sees largest (a flat board is foreshortened).
+        # Of the floor poses both cameras see, the one whose squares both see largest (a flat board is
+        # foreshortened; its markers must stay readable).
         best, best_area = None, 0.0
-        outline = np.array([[0, 0, 0], [board.size_m[0], 0, 0], [board.size_m[0], board.size_m[1], 0],
-                            [0, board.size_m[1], 0]], float)
         ahead = np.array([forward[0], 0.0, forward[2]]) / max(float(np.linalg.norm([forward[0], forward[2]])), 1e-9)
         for _ in range(60):
             centre = np.array([mid[0], 0.0, mid[2]]) + rng.uniform(0.5, 4.0) * ahead \
@@ -165,7 +187,8 @@ def calibration_views(rig: Rig, board: BoardSpec, *, count: int = 20, edge_count
             t = centre - R @ np.array([board.size_m[0] / 2, board.size_m[1] / 2, 0.0])
             if not visible(R, t):
                 continue
-            area = min(float(cv2.contourArea(cam.project(outline @ R.T + t)[0].astype(np.float32))) for cam in cams)
+            # the smallest projected square side decides whether the markers can be read
+            area = min(_smallest_square_px(cam, board, R, t) for cam in cams)
             if area > best_area:
                 best, best_area = (R, t), area
         if best is None:
@@ -177,7 +200,7 @@ def calibration_views(rig: Rig, board: BoardSpec, *, count: int = 20, edge_count
 
 def example_rig() -> Rig:
     """The rig ``ghcal synth`` films by default: two 960x600 cameras (75 degrees, a mild barrel lens,
-    principal points off centre) 0.6 m apart at 1.4 m, converging on a point 2.5 m ahead and 0.6 m up (the floor in view from about 1.5 m)."""
+    principal points off centre) 0.6 m apart at 1.4 m, converging on a point 2.5 m ahead and 0.3 m up (pitched 24 degrees down: the floor in view from about 1.2 m)."""
     from ghnerf_runtime.geometry.camera import intrinsics_from_fov, look_at
     from calibration.level import LEVEL_VOLUME
 
@@ -187,6 +210,6 @@ def example_rig() -> Rig:
         K = intrinsics_from_fov(width, height, 75.0)
         K[0, 2] += shift[0]
         K[1, 2] += shift[1]
-        R, t = look_at([x, -1.4, 0.0], [0.0, -0.6, 2.5])
+        R, t = look_at([x, -1.4, 0.0], [0.0, -0.3, 2.5])
         cams.append(Camera(name, width, height, K, [-0.12, 0.03, 0.001, -0.0005, 0.0], R, t))
     return Rig(tuple(cams), LEVEL_VOLUME, rig_id="ghcal-example")

@@ -191,34 +191,76 @@ def floor_from_view(board: BoardSpec, view: BoardView, intr: Intrinsics, *, boar
     return Floor(down=down, height_m=height, pitch_deg=pitch, roll_deg=roll, rms_px=rms)
 
 
+def _board_pose_two_views(board: BoardSpec, first: BoardView, second: BoardView, tool_rig: Rig,
+                          iterations: int = 30) -> tuple[np.ndarray, np.ndarray, float]:
+    """The board's pose in the first camera's frame that best explains both cameras' corners.
+
+    Starts from one camera's pose of the board (the camera that found more corners) and refines the
+    six pose parameters by Levenberg-Marquardt on the reprojection errors in both cameras, the
+    board's geometry known. Returns (R, t, rms px); board -> first camera.
+    """
+    cam_a, cam_b = tool_rig.pair
+    R_ab, t_ab = cam_b.R @ cam_a.R.T, cam_b.t - cam_b.R @ cam_a.R.T @ cam_a.t  # first -> second camera
+    obs = [(cam_a, first), (cam_b, second)]
+    seed_cam, seed_view = max(obs, key=lambda o: len(o[1]))
+    ok, rvec, tvec = cv2.solvePnP(board.corners_m()[seed_view.ids], seed_view.corners, seed_cam.K, seed_cam.dist)
+    if not ok:
+        raise SolveError("the floor view's board pose could not be solved")
+    R0, t0 = cv2.Rodrigues(rvec)[0], tvec.reshape(3)
+    if seed_cam is cam_b:  # board -> second camera  ==>  board -> first camera
+        R0, t0 = R_ab.T @ R0, R_ab.T @ (t0 - t_ab)
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        R = cv2.Rodrigues(x[:3])[0]
+        t = x[3:]
+        out = []
+        for cam, view, (Rc, tc) in ((cam_a, first, (np.eye(3), np.zeros(3))), (cam_b, second, (R_ab, t_ab))):
+            rv = cv2.Rodrigues(Rc @ R)[0]
+            proj, _ = cv2.projectPoints(board.corners_m()[view.ids], rv, Rc @ t + tc, cam.K, cam.dist)
+            out.append((proj.reshape(-1, 2) - view.corners).ravel())
+        return np.concatenate(out)
+
+    x = np.concatenate([cv2.Rodrigues(R0)[0].ravel(), t0])
+    r = residuals(x)
+    damping = 1e-3
+    for _ in range(iterations):
+        J = np.empty((r.size, 6))
+        for k in range(6):
+            step = 1e-6 if k < 3 else 1e-6 * max(1.0, float(np.linalg.norm(x[3:])))
+            dx = np.zeros(6)
+            dx[k] = step
+            J[:, k] = (residuals(x + dx) - r) / step
+        A, g = J.T @ J, J.T @ r
+        while True:
+            delta = -np.linalg.solve(A + damping * np.diag(np.diag(A) + 1e-12), g)
+            r_new = residuals(x + delta)
+            if r_new @ r_new < r @ r:
+                x, r, damping = x + delta, r_new, max(damping / 10, 1e-9)
+                break
+            damping *= 10
+            if damping > 1e9:
+                break
+        if np.max(np.abs(delta)) < 1e-10 or damping > 1e9:
+            break
+    rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2 @ np.ones(2))))
+    return cv2.Rodrigues(x[:3])[0], x[3:].copy(), rms
+
+
 def floor_from_pair(board: BoardSpec, first: BoardView, second: BoardView, tool_rig: Rig, *,
                     board_thickness_m: float = 0.0) -> Floor:
-    """Like :func:`floor_from_view`, from a floor view both cameras saw: the corners both found are
-    triangulated with the solved pair and a plane fitted to them.
+    """Like :func:`floor_from_view`, from a floor view both cameras saw: the board's pose fitted to both
+    cameras' corners at once (:func:`_board_pose_two_views`).
 
-    Much steadier than one camera's pose of a flat, foreshortened board: the stereo baseline fixes
-    the plane's tilt where a single view leaves it to perspective cues a few pixels deep. The result
-    is in the first camera's frame (``tool_rig``'s frame); ``rms_px`` is the triangulation's
-    reprojection error.
+    Steadier than one camera's pose of a flat, foreshortened board, whose tilt one view leaves to
+    perspective cues a few pixels deep: the second camera, a baseline away, sees the same corners
+    from elsewhere. The result is in the first camera's frame (``tool_rig``'s frame).
     """
-    ids = np.intersect1d(first.ids, second.ids)
-    if ids.size < MIN_CORNERS:
-        raise SolveError(f"the floor view has {ids.size} corners both cameras found; {MIN_CORNERS} are needed")
-    from ghnerf_runtime.geometry.triangulation import triangulate_dlt
-
-    uv = np.stack([first.corners[np.searchsorted(first.ids, ids)], second.corners[np.searchsorted(second.ids, ids)]])
-    points = np.asarray(triangulate_dlt(uv, tool_rig.pair).points, float)  # (N, 3), the first camera's frame
-    reproj = [np.linalg.norm(cam.project(points)[0] - uv[k], axis=1) for k, cam in enumerate(tool_rig.pair)]
-    rms = float(np.sqrt(np.mean(np.concatenate(reproj) ** 2)))
-    centroid = points.mean(axis=0)
-    normal = np.linalg.svd(points - centroid)[2][2]
-    reference = tool_rig.pair[0]
-    if normal @ (reference.center - centroid) > 0:
-        normal = -normal  # gravity points from the cameras toward the floor
-    down = reference.R @ normal
-    height = float(normal @ (centroid - reference.center)) + board_thickness_m
+    R, t, rms = _board_pose_two_views(board, first, second, tool_rig)
+    reference = tool_rig.pair[0]  # the tool rig's frame is this camera's own
+    down = reference.R @ R[:, 2]  # the board's z points into the board: down, for a board face up
+    height = float(down @ (reference.R @ t + reference.t)) + board_thickness_m
     if height <= 0:
-        raise SolveError("the floor view puts the camera below the floor")
+        raise SolveError("the floor view puts the camera below the floor: is the board face down?")
     pitch = math.degrees(math.asin(float(np.clip(down[2], -1.0, 1.0))))
     roll = math.degrees(math.atan2(-float(down[0]), float(down[1])))
     return Floor(down=down, height_m=height, pitch_deg=pitch, roll_deg=roll, rms_px=rms)
@@ -259,9 +301,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
         if not seen_by:
             raise SolveError(f"neither camera found the board in the floor view {floor_view!r}")
         reference = names.index(seen_by[0])
-        shared = np.intersect1d(views[a][floor_view].ids, views[b][floor_view].ids).size \
-            if len(seen_by) == 2 else 0
-        if shared >= MIN_CORNERS:
+        if len(seen_by) == 2:
             floor = floor_from_pair(board, views[a][floor_view], views[b][floor_view], tool_rig,
                                     board_thickness_m=board_thickness_m)
             method = "floor view, both cameras"

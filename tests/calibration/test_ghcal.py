@@ -34,7 +34,7 @@ def _rotation_deg(R: np.ndarray) -> float:
 @pytest.fixture(scope="module")
 def truth() -> Rig:
     rig = example_rig()
-    return Rig(tuple(c.resized(640, 400) for c in rig.cameras), rig.volume, rig_id="truth")
+    return Rig(tuple(c.resized(800, 500) for c in rig.cameras), rig.volume, rig_id="truth")
 
 
 @pytest.fixture(scope="module")
