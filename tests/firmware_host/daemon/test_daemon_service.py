@@ -234,3 +234,34 @@ def test_a_stuck_estimate_is_flagged_while_it_runs(tmp_path):
                                for m in messages_of(sink.read())), timeout=10, what="a STATUS with the fault")
     finally:
         sink.close()
+
+
+def test_on_the_depthai_backend(tmp_path):
+    """The daemon on ``depthai://``'s real backend (calibration, Sync stage, queues), on a host-only depthai
+    pipeline standing in for the device (tests/drivers/depthai_host.py): the frames show no person, so
+    this is about the plumbing: pairs read and estimated, sinks fed, a prompt stop."""
+    from tests.drivers.depthai_host import HostPipelineLink
+
+    cfg = _config({"url": "depthai://?width=160&height=100&mount_height=1.2&fps=30"}, tmp_path)
+    with _Running(cfg, tmp_path, rig_kwargs={"link_factory": HostPipelineLink}) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 10, timeout=60, what="10 estimated pairs")
+        sink = run.daemon.sinks["memory://?status_s=0.05"]
+        t0 = time.monotonic()
+        assert run.finish() == 0
+        assert time.monotonic() - t0 < 10.0
+    joints = [m for m in messages_of(sink.read()) if isinstance(m, Joints)]
+    assert len(joints) == run.daemon.health.pairs_estimated >= 10
+    assert run.daemon.health.rig_lost == 0
+
+
+@pytest.mark.hardware
+@pytest.mark.skipif(os.environ.get("GHNERF_TEST_DEPTHAI") != "1",
+                    reason="needs an OAK device; set GHNERF_TEST_DEPTHAI=1 (and GHNERF_DEPTHAI_ID) to run")
+def test_on_an_oak(tmp_path):
+    url = f"depthai://{os.environ.get('GHNERF_DEPTHAI_ID', '')}?fps=30&width=640&height=400&mount_height=1.2"
+    cfg = _config({"url": url}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 30, timeout=90, what="30 estimated pairs")
+        assert run.finish() == 0
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["rig"]["opens"] == 1 and report["pairs"]["estimated"] >= 30
