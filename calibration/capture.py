@@ -12,6 +12,7 @@ camera's intrinsics.
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Iterable
 
@@ -21,9 +22,30 @@ from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CaptureError
 
-__all__ = ["IMAGE_SUFFIXES", "camera_folders", "list_images", "detect_folder"]
+__all__ = ["IMAGE_SUFFIXES", "camera_folders", "list_images", "detect_folder", "check_camera_name",
+           "next_view_number"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
+_NUMBERED = re.compile(r"^(\d+)$")
+
+
+def check_camera_name(name: str) -> str:
+    """A camera name used as a folder name: letters, digits, ``_ - .``, not starting with a dot.
+
+    :raises CaptureError: another name (``..`` or one with ``/`` would write outside the folder).
+    """
+    if not _SAFE_NAME.match(name):
+        raise CaptureError(f"camera name {name!r} cannot be a folder name (letters, digits, '_', '-', '.'; "
+                           "not starting with '.'): rename the camera in the rig file")
+    return name
+
+
+def next_view_number(folders: Iterable[Path]) -> int:
+    """One past the highest numbered view in any of ``folders`` (so a new session never overwrites)."""
+    numbers = [int(m[1]) for folder in folders if folder.is_dir() for p in folder.iterdir()
+               if p.suffix.lower() in IMAGE_SUFFIXES and (m := _NUMBERED.match(p.stem))]
+    return max(numbers, default=-1) + 1
 
 
 def camera_folders(root: str | os.PathLike, cameras: Iterable[str] | None = None) -> dict[str, Path]:
@@ -42,7 +64,7 @@ def camera_folders(root: str | os.PathLike, cameras: Iterable[str] | None = None
         cameras = found
     out = {}
     for name in cameras:
-        folder = root / name
+        folder = root / check_camera_name(name)
         if not folder.is_dir():
             raise CaptureError(f"{folder}: no such folder (camera {name!r})")
         out[name] = folder

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -27,9 +28,9 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec, load_board
-from calibration.capture import detect_folder
+from calibration.capture import check_camera_name, detect_folder, next_view_number
 from calibration.check import FLOOR_VIEW, check_rig
-from calibration.detect import BoardDetector
+from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, solve_rig
@@ -96,9 +97,11 @@ def cmd_board(args: argparse.Namespace) -> int:
 def cmd_synth(args: argparse.Namespace) -> int:
     board = _board(args.board)
     rig = load_rig(args.rig) if args.rig else example_rig()
+    for cam in rig.pair:
+        check_camera_name(cam.name)
     out = Path(args.out)
     t0 = time.monotonic()
-    views = calibration_views(rig, board, count=args.count, seed=args.seed)
+    views = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=args.seed)
     for camera, images in views.items():
         (out / camera).mkdir(parents=True, exist_ok=True)
         for name, image in images.items():
@@ -112,6 +115,18 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ capture
+def _largest_move_px(view: BoardView | None, last: BoardView | None) -> float | None:
+    """The largest displacement of a corner both views found (None: nothing to compare)."""
+    if view is None or last is None:
+        return None
+    ids = np.intersect1d(view.ids, last.ids)
+    if ids.size == 0:
+        return None
+    here = view.corners[np.searchsorted(view.ids, ids)]
+    there = last.corners[np.searchsorted(last.ids, ids)]
+    return float(np.max(np.linalg.norm(here - there, axis=1)))
+
+
 def cmd_capture(args: argparse.Namespace) -> int:
     import drivers
 
@@ -119,16 +134,22 @@ def cmd_capture(args: argparse.Namespace) -> int:
     detector = BoardDetector(board)
     out = Path(args.out)
     count = 1 if args.floor else args.count
-    kept, last_centres, last_kept, ended = 0, None, -1e9, False
+    kept, ended, last_kept_at = 0, False, -1e9
+    last_views: list[BoardView | None] = [None, None]
+    steady_since: float | None = None
     source = drivers.create_rig_source(args.url)
     try:
         source.open()
-        cams = [c.name for c in source.rig.pair]
-        for cam in cams:
-            (out / cam).mkdir(parents=True, exist_ok=True)
-        start = len(list((out / cams[0]).glob("[0-9][0-9][0-9].png")))
+        cams = [check_camera_name(c.name) for c in source.rig.pair]
+        folders = [out / cam for cam in cams]
+        if args.floor and any((f / f"{FLOOR_VIEW}.png").exists() for f in folders) and not args.force:
+            raise UsageError(f"{out} already has a floor view: pass --force to replace it")
+        for folder in folders:
+            folder.mkdir(parents=True, exist_ok=True)
+        number = next_view_number(folders)
         print(f"capturing from {args.url} (cameras {cams}) into {out}: "
-              + ("lay the board flat on the floor, face up, where both cameras see it" if args.floor else
+              + (f"lay the board flat on the floor, face up, where both cameras see it, and leave it "
+                 f"({args.steady_s:g} s still)" if args.floor else
                  f"{count} views; move the board between them: near and far, tilted, into each image's corners, "
                  "mostly where both cameras see it"))
         deadline = time.monotonic() + args.max_seconds
@@ -141,29 +162,41 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 ended = True
                 break
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
-            if now - last_kept < args.interval_s:
-                continue
             found = [detector.detect(image) for image in pair.images]
-            if all(v is None for v in found):
-                continue
-            centres = [None if v is None else v.corners.mean(axis=0) for v in found]
-            if not args.floor and last_centres is not None:
-                moved = [np.linalg.norm(c - last) for c, last in zip(centres, last_centres)
-                         if c is not None and last is not None]
-                if moved and max(moved) < args.min_move_px:
-                    continue  # the board has not moved: the same view again adds nothing
-            name = FLOOR_VIEW if args.floor else f"{start + kept:03d}"
-            for cam, image in zip(cams, pair.images):  # both images, so a view one camera missed stays a pair
-                if not cv2.imwrite(str(out / cam / f"{name}.png"), image):
-                    raise CaptureError(f"{out / cam / name}.png: cannot write the image")
+            moves = [_largest_move_px(v, last) for v, last in zip(found, last_views)]
+            if args.floor:
+                # Both cameras, and the board lying still: not the board carried into place.
+                still = all(v is not None for v in found) and all(m is not None and m < 1.0 for m in moves)
+                last_views = found
+                if not still:
+                    steady_since = None
+                    continue
+                steady_since = now if steady_since is None else steady_since
+                if now - steady_since < args.steady_s:
+                    continue
+            else:
+                if now - last_kept_at < args.interval_s or all(v is None for v in found):
+                    continue
+                known = [m for m in moves if m is not None]
+                if known and max(known) < args.min_move_px:
+                    continue  # the board has not moved or turned: the same view again adds nothing
+                last_views = found
+            name = FLOOR_VIEW if args.floor else f"{number:03d}"
+            number += 1
+            for folder, image in zip(folders, pair.images):  # both, so a view one camera missed stays a pair
+                if not cv2.imwrite(str(folder / f"{name}.png"), image):
+                    raise CaptureError(f"{folder / name}.png: cannot write the image")
             kept += 1
-            last_centres, last_kept = centres, now
+            last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
+    except KeyboardInterrupt:
+        print(f"stopped: kept {kept} view(s) in {out}")
+        return 0
     finally:
         source.close()
     if kept < count:
-        print(f"{PROG}: kept {kept} of {count} views: {'the stream ended' if ended else '--max-seconds ran out'}",
-              file=sys.stderr)
+        why = "the stream ended" if ended else "--max-seconds ran out"
+        print(f"{PROG}: kept {kept} of {count} views: {why}", file=sys.stderr)
         return 2 if kept == 0 else 0
     print(f"kept {kept} view(s) in {out}")
     return 0
@@ -175,6 +208,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
     if (args.floor_view is None) == (args.camera_height is None):
         raise UsageError("give --floor-view NAME (a view of the board lying on the floor) or --camera-height M "
                          "(the first camera's height above the floor, with --pitch and --roll)")
+    if args.floor_view is not None and (args.pitch is not None or args.roll is not None):
+        raise UsageError("--pitch and --roll go with --camera-height; a floor view measures them")
+    if args.camera_height is not None and args.board_thickness:
+        raise UsageError("--board-thickness goes with --floor-view")
+    out = Path(args.out)
+    if not out.parent.is_dir():
+        raise UsageError(f"{out.parent}: no such folder for the rig file")
     views, missed = detect_folder(board, args.images, _cameras(args.cameras))
     names = tuple(views)
     for cam in names:
@@ -185,9 +225,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          "with the board found in it")
     solution = solve_rig(board, views, names, lens=args.lens, floor_view=args.floor_view,
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
-                         pitch_deg=args.pitch, roll_deg=args.roll, volume=_volume(args.volume),
+                         pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
                          rig_id=args.rig_id)
-    out = Path(args.out)
     save_rig(solution.rig, out)
     report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
     report_path.write_text(json.dumps(solution.report, indent=1) + "\n", encoding="utf-8")
@@ -212,12 +251,18 @@ def cmd_check(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
     board = _board(args.board)
     views, _ = detect_folder(board, args.images, [c.name for c in rig.pair])
+    for cam in rig.pair:
+        for name, view in views[cam.name].items():
+            if view.image_size != cam.size:
+                raise UsageError(f"{args.images}/{cam.name}/{name}: the image is {view.image_size[0]}x"
+                                 f"{view.image_size[1]}, camera {cam.name!r} of {args.rig} {cam.width}x{cam.height}")
     report = check_rig(rig, board, views, board_thickness_m=args.board_thickness)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
     print(json.dumps(report, indent=1) if args.json else
           f"{report['pairs']} pairs: reprojection {report['reprojection_px_rms']:.3f} px rms "
-          f"(p95 {report['reprojection_px_p95']:.3f}), scale {report['scale']:.4f} of the board's"
+          f"(p95 {report['reprojection_px_p95']:.3f}), scale "
+          + ("not measured (no neighbouring corners)" if report["scale"] is None else f"{report['scale']:.4f} of the board's")
           + (f", floor view {report['floor']['height_mm_median']:+.1f} mm off the floor" if "floor" in report else ""))
     bad = report["reprojection_px_rms"] > args.max_px or abs((report["scale"] or 1.0) - 1.0) > args.max_scale_error
     if bad:
@@ -229,6 +274,27 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ main
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _count(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def _seconds(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Guide: docs/calibration.md")
@@ -244,7 +310,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--rig", help="the rig to film (default: a 0.6 m pair at 1.4 m, ghcal.render.example_rig)")
     p.add_argument("--board")
-    p.add_argument("--count", type=int, default=15)
+    p.add_argument("--count", type=_positive_int, default=15, help="views both cameras see (default 15)")
+    p.add_argument("--edge-count", type=_count, default=6, help="views per camera in its image corners (default 6)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(run=cmd_synth)
 
@@ -252,11 +319,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--url", required=True, help="rig URL (depthai://, replay://DIR, ...)")
     p.add_argument("--board")
     p.add_argument("--out", required=True)
-    p.add_argument("--count", type=int, default=20, help="views to keep (default 20)")
-    p.add_argument("--floor", action="store_true", help="keep one view named 'floor': the board lying on the floor")
-    p.add_argument("--interval-s", type=float, default=1.0, help="at least this long between kept views")
-    p.add_argument("--min-move-px", type=float, default=40.0, help="the board must move this far between views")
-    p.add_argument("--max-seconds", type=float, default=600.0)
+    p.add_argument("--count", type=_positive_int, default=20, help="views to keep (default 20)")
+    p.add_argument("--floor", action="store_true",
+                   help="keep one view named 'floor': the board lying still on the floor, seen by both cameras")
+    p.add_argument("--steady-s", type=_seconds, default=1.0, help="--floor: how long the board must lie still")
+    p.add_argument("--force", action="store_true", help="--floor: replace an existing floor view")
+    p.add_argument("--interval-s", type=_seconds, default=1.0, help="at least this long between kept views")
+    p.add_argument("--min-move-px", type=_seconds, default=40.0,
+                   help="a corner must move (or the board turn) this far between kept views (default 40 px)")
+    p.add_argument("--max-seconds", type=_seconds, default=600.0)
     p.set_defaults(run=cmd_capture)
 
     p = sub.add_parser("solve", help="solve the rig from a folder of views and write the rig file")
@@ -269,8 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--floor-view", help="the view (file name without suffix) of the board lying on the floor")
     p.add_argument("--board-thickness", type=float, default=0.0, help="metres, for the floor view")
     p.add_argument("--camera-height", type=float, help="instead of a floor view: the first camera above the floor, m")
-    p.add_argument("--pitch", type=float, default=0.0, help="with --camera-height: degrees below the horizon")
-    p.add_argument("--roll", type=float, default=0.0, help="with --camera-height: degrees about the optical axis")
+    p.add_argument("--pitch", type=float, help="with --camera-height: degrees below the horizon (default 0)")
+    p.add_argument("--roll", type=float, help="with --camera-height: degrees about the optical axis (default 0)")
     p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame)")
     p.add_argument("--rig-id", default="rig")
     p.set_defaults(run=cmd_solve)

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec
+from calibration.errors import CalibrationError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 
@@ -140,7 +141,7 @@ def calibration_views(rig: Rig, board: BoardSpec, *, count: int = 20, edge_count
     while len(out[cams[0].name]) < count:
         tries += 1
         if tries > 200 * count:
-            raise ValueError(f"could not place {count} board views both cameras see; is the rig's pair facing "
+            raise CalibrationError(f"could not place {count} board views both cameras see; is the rig's pair facing "
                              "the same way?")
         d = rng.uniform(*distance_m)
         lateral = rng.uniform(-0.35, 0.35) * d
@@ -192,7 +193,7 @@ def calibration_views(rig: Rig, board: BoardSpec, *, count: int = 20, edge_count
             if area > best_area:
                 best, best_area = (R, t), area
         if best is None:
-            raise ValueError("no floor view both cameras see: are the cameras looking over the floor?")
+            raise CalibrationError("no floor view both cameras see: are the cameras looking over the floor?")
         for k, cam in enumerate(cams):
             out[cam.name]["floor"] = render_board(cam, board, *best, seed=int(rng.integers(1 << 30)) + k)
     return out

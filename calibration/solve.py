@@ -67,6 +67,7 @@ class PairPose:
     T: np.ndarray
     rms_px: float
     per_view_px: dict[str, float]
+    dropped: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -157,18 +158,27 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
     if len(shared) < MIN_VIEWS:
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r} both saw the board in {len(shared)} image pair(s); "
                          f"at least {MIN_VIEWS} are needed: hold it where both cameras see it")
-    obj = [board.corners_m()[ids].astype(np.float32).reshape(-1, 1, 3) for _, ids in shared]
-    img_a = [_image_points(first[n], ids) for n, ids in shared]
-    img_b = [_image_points(second[n], ids) for n, ids in shared]
-    R0, T0 = np.eye(3), np.zeros((3, 1))
-    # -> rms, K1, D1, K2, D2, R, T, E, F, rvecs, tvecs, per-view errors
-    result = cv2.stereoCalibrateExtended(
-        obj, img_a, img_b, intr_first.K, intr_first.dist, intr_second.K, intr_second.dist,
-        intr_first.image_size, R0, T0, flags=cv2.CALIB_FIX_INTRINSIC)
-    rms, R, T, per_view = result[0], result[5], result[6], result[-1]
-    per = np.asarray(per_view, float).reshape(len(shared), 2).mean(axis=1)
+    dropped: list[str] = []
+    for attempt in range(2):
+        obj = [board.corners_m()[ids].astype(np.float32).reshape(-1, 1, 3) for _, ids in shared]
+        img_a = [_image_points(first[n], ids) for n, ids in shared]
+        img_b = [_image_points(second[n], ids) for n, ids in shared]
+        R0, T0 = np.eye(3), np.zeros((3, 1))
+        # -> rms, K1, D1, K2, D2, R, T, E, F, rvecs, tvecs, per-view errors
+        result = cv2.stereoCalibrateExtended(
+            obj, img_a, img_b, intr_first.K, intr_first.dist, intr_second.K, intr_second.dist,
+            intr_first.image_size, R0, T0, flags=cv2.CALIB_FIX_INTRINSIC)
+        rms, R, T, per_view = result[0], result[5], result[6], result[-1]
+        per = np.asarray(per_view, float).reshape(len(shared), 2).mean(axis=1)
+        # A pair far worse than the others: the two images were not taken at the same instant, or one blurred.
+        median = float(np.median(per))
+        outliers = [n for (n, _), e in zip(shared, per) if e > max(OUTLIER_FACTOR * median, 1.0)]
+        if attempt or not outliers or len(shared) - len(outliers) < MIN_VIEWS:
+            break
+        dropped = outliers
+        shared = [(n, ids) for n, ids in shared if n not in outliers]
     return PairPose(R=np.asarray(R, float), T=np.asarray(T, float).reshape(3), rms_px=float(rms),
-                    per_view_px={n: round(float(e), 4) for (n, _), e in zip(shared, per)})
+                    per_view_px={n: round(float(e), 4) for (n, _), e in zip(shared, per)}, dropped=tuple(dropped))
 
 
 def floor_from_view(board: BoardSpec, view: BoardView, intr: Intrinsics, *, board_thickness_m: float = 0.0) \
@@ -289,9 +299,13 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     for name in names:
         if name not in views:
             raise SolveError(f"no views of camera {name!r}; cameras with views: {sorted(views)}")
+    if not (math.isfinite(board_thickness_m) and 0.0 <= board_thickness_m < 0.1):
+        raise SolveError(f"the board's thickness must be between 0 and 0.1 m, got {board_thickness_m!r}")
     calib = {cam: {n: v for n, v in views[cam].items() if n != floor_view} for cam in names}
     intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam) for cam in names}
-    pose = calibrate_pair(board, calib[a], calib[b], intr[a], intr[b], names=names)
+    # a view dropped from a camera's intrinsics as an outlier is no better for the pair's pose
+    kept = {cam: {n: v for n, v in calib[cam].items() if n not in intr[cam].dropped} for cam in names}
+    pose = calibrate_pair(board, kept[a], kept[b], intr[a], intr[b], names=names)
     cams = (Camera(a, *intr[a].image_size, intr[a].K, intr[a].dist),
             Camera(b, *intr[b].image_size, intr[b].K, intr[b].dist, pose.R, pose.T))
     tool_rig = Rig(cams, LEVEL_VOLUME, rig_id=rig_id)
@@ -300,6 +314,10 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
         seen_by = [cam for cam in names if floor_view in views[cam]]
         if not seen_by:
             raise SolveError(f"neither camera found the board in the floor view {floor_view!r}")
+        for cam in seen_by:
+            if views[cam][floor_view].image_size != intr[cam].image_size:
+                raise SolveError(f"camera {cam!r}: the floor view is {views[cam][floor_view].image_size}, its other "
+                                 f"views {intr[cam].image_size}: take every view at one image size")
         reference = names.index(seen_by[0])
         if len(seen_by) == 2:
             floor = floor_from_pair(board, views[a][floor_view], views[b][floor_view], tool_rig,
@@ -309,6 +327,9 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
             floor = floor_from_view(board, views[seen_by[0]][floor_view], intr[seen_by[0]],
                                     board_thickness_m=board_thickness_m)
             method = "floor view, one camera"
+        if not 0.05 < floor.height_m < 10.0:
+            raise SolveError(f"the floor view puts camera {seen_by[0]!r} {floor.height_m:.2f} m above the floor: "
+                             "is the board lying flat on the floor, and is the board definition right?")
         rig = level_rig(tool_rig, camera_height_m=floor.height_m, pitch_deg=floor.pitch_deg,
                         roll_deg=floor.roll_deg, reference=reference, volume=volume)
         levelling = {"method": method, "view": floor_view, "camera": seen_by[0],
@@ -331,7 +352,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
                   "coverage": round(intr[cam].coverage, 3), "K": _round(intr[cam].K, 4),
                   "dist": _round(intr[cam].dist), "per_view_px": intr[cam].per_view_px}
             for cam in names},
-        "pair": {"views": len(pose.per_view_px), "rms_px": round(pose.rms_px, 4),
+        "pair": {"views": len(pose.per_view_px), "dropped_views": list(pose.dropped), "rms_px": round(pose.rms_px, 4),
                  "baseline_m": round(float(np.linalg.norm(pose.T)), 5),
                  "convergence_deg": round(convergence, 3), "per_view_px": pose.per_view_px},
         "levelling": levelling,
@@ -361,6 +382,13 @@ def _warnings(report: dict[str, Any]) -> list[str]:
     if report["pair"]["rms_px"] > 1.0:
         out.append(f"pair: reprojection error {report['pair']['rms_px']:.2f} px (usually < 1): were the two "
                    "cameras' images taken at the same instant?")
+    if report["pair"]["dropped_views"]:
+        out.append(f"pair: views {report['pair']['dropped_views']} were dropped as outliers (the two images not "
+                   "taken at the same instant?)")
+    lv = report["levelling"]
+    if lv["method"].startswith("floor view") and not -15.0 <= lv["pitch_deg"] <= 60.0:
+        out.append(f"levelling: the floor view gives camera {lv['camera']!r} a pitch of {lv['pitch_deg']:.1f} "
+                   "degrees, unusual for a rig filming people: was the board lying flat on the floor?")
     if report["pair"]["views"] < 8:
         out.append(f"pair: {report['pair']['views']} views seen by both cameras: the relative pose is weakly "
                    "determined")

@@ -16,6 +16,7 @@ import pytest
 from calibration import cli
 from calibration.board import BoardSpec
 from calibration.capture import detect_folder
+from calibration.detect import BoardView
 from calibration.check import check_rig
 from calibration.errors import CaptureError, SolveError
 from calibration.render import calibration_views, example_rig
@@ -157,6 +158,11 @@ def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
     (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--camera-height", "1.4", "--volume", "1,2,3"],
      "--volume must be six numbers"),
     (["check", "--rig", "{tmp}/missing.json", "--images", "{cap}"], "missing.json"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--pitch", "20"],
+     "--pitch and --roll go with --camera-height"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/no/r.json", "--floor-view", "floor"], "no such folder"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--board-thickness", "-1"],
+     "thickness must be between 0 and 0.1"),
 ])
 def test_cli_errors_are_one_line_exit_2(capture, tmp_path, capsys, args, message):
     argv = [a.format(cap=capture, tmp=tmp_path) for a in args]
@@ -223,12 +229,74 @@ def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys
         for k, name in enumerate(sorted(images[cam])):
             saved = cv2.imread(str(out / cam / kept[k]), cv2.IMREAD_GRAYSCALE)
             assert np.array_equal(saved, images[cam][name])  # the pair as the cameras gave it
-    # a second session adds to the folder instead of overwriting it
+    # a second session adds to the folder, after the highest number there, even with a gap below it
+    for cam in ("left", "right"):
+        (out / cam / "001.png").unlink()
     assert cli.main(["capture", "--url", f"replay://{recording}?speed=free", "--board", str(board), "--out", str(out),
                      "--count", "1"]) == 0
-    assert (out / "left" / "003.png").is_file()
-    assert cli.main(["capture", "--url", f"replay://{recording}?speed=free", "--board", str(board), "--out", str(out),
-                     "--floor"]) == 0
-    assert (out / "right" / "floor.png").is_file()
+    assert sorted(p.name for p in (out / "left").iterdir()) == ["000.png", "002.png", "003.png"]
+    # --floor keeps the board lying still on the floor, not the views of it carried into place
+    floor_images = calibration_views(truth, BOARD, count=2, edge_count=0, seed=6, floor_view=True)
+    sequence = {cam: {"0": v["000"], "1": v["001"], "2": v["floor"], "3": v["floor"], "4": v["floor"]}
+                for cam, v in floor_images.items()}
+    floor_take = tmp_path / "floor_take"
+    floor_take.mkdir()
+    _write_recording(floor_take, truth, sequence, period_s=1.0)
+    assert cli.main(["capture", "--url", f"replay://{floor_take}?speed=free", "--board", str(board),
+                     "--out", str(out), "--floor"]) == 0
+    for cam in ("left", "right"):
+        saved = cv2.imread(str(out / cam / "floor.png"), cv2.IMREAD_GRAYSCALE)
+        assert np.array_equal(saved, floor_images[cam]["floor"])
+    assert cli.main(["capture", "--url", f"replay://{floor_take}?speed=free", "--board", str(board),
+                     "--out", str(out), "--floor"]) == 2
+    assert "already has a floor view" in capsys.readouterr().err
     assert cli.main(["capture", "--url", f"replay://{tmp_path / 'nothing'}", "--out", str(out)]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_a_view_dropped_from_the_intrinsics_is_not_used_for_the_pair(views):
+    smeared = {cam: dict(v) for cam, v in views.items()}
+    view = smeared["left"]["004"]
+    noise = np.random.default_rng(0).normal(0.0, 3.0, view.corners.shape)  # a blurred, moving frame
+    smeared["left"]["004"] = BoardView(view.ids, view.corners + noise, view.image_size)
+    report = solve_rig(BOARD, smeared, ("left", "right"), floor_view="floor").report
+    assert report["cameras"]["left"]["dropped_views"] == ["004"]
+    assert "004" not in report["pair"]["per_view_px"]
+    assert any("dropped as outliers" in w for w in report["warnings"])
+
+
+def test_a_board_held_up_as_the_floor_view_is_questioned(views):
+    held_up = {cam: {**v, "floor": v["000"]} for cam, v in views.items()}  # not lying on the floor
+    try:
+        report = solve_rig(BOARD, held_up, ("left", "right"), floor_view="floor").report
+    except SolveError as e:
+        assert "above the floor" in str(e)
+    else:
+        assert any("was the board lying flat on the floor" in w for w in report["warnings"]), report["warnings"]
+
+
+def test_movement_is_measured_per_corner():
+    ids = np.arange(6)
+    base = BoardView(ids, np.array([[0, 0], [10, 0], [20, 0], [0, 10], [10, 10], [20, 10]], float), (100, 100))
+    # turned about its centre: the centroid stays, the corners move
+    turned = BoardView(ids, np.array([[20, 10], [10, 10], [0, 10], [20, 0], [10, 0], [0, 0]], float), (100, 100))
+    assert cli._largest_move_px(turned, base) > 20
+    assert cli._largest_move_px(base, base) == 0.0
+    assert cli._largest_move_px(None, base) is None
+    assert cli._largest_move_px(BoardView(ids + 10, base.corners, (100, 100)), base) is None
+
+
+@pytest.mark.parametrize("name", ["..", ".hidden", "a/b", "", "left camera"])
+def test_unsafe_camera_names_are_refused(name):
+    from calibration.capture import check_camera_name
+
+    with pytest.raises(CaptureError, match="cannot be a folder name"):
+        check_camera_name(name)
+
+
+def test_check_refuses_views_of_another_size(capture, truth, tmp_path, capsys):
+    small = Rig(tuple(c.resized(400, 250) for c in truth.cameras), truth.volume)
+    save_rig(small, tmp_path / "small.json")
+    assert cli.main(["check", "--rig", str(tmp_path / "small.json"), "--board", str(capture / "board.json"),
+                     "--images", str(capture)]) == 2
+    assert "the image is 800x500, camera 'left'" in capsys.readouterr().err
