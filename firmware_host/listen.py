@@ -1,0 +1,211 @@
+"""``ghnerf-listen``: receive the joint stream where the robot would, and say what arrives.
+
+The receiving end's check after installing the daemon (is the robot getting joints, how many, how
+late, with what faults?), and a reference receiver in Python beside the C one in ``clients/c/``.
+
+    ghnerf-listen udp://:9870                             # a summary line every second
+    ghnerf-listen serial:///dev/ttyUSB0?baud=921600 --json  # every message as a JSON line
+    ghnerf-listen udp://0.0.0.0:9870 --seconds 10           # stop after 10 s (default: Ctrl-C)
+
+The summary: JOINTS messages per second, joints present per message, the sender's latency
+(``send_us - capture_us`` of the JOINTS headers: capture to the wire), sequence gaps (frames the
+sender skipped or the link lost), the latest STATUS (its fault code, docs/protocol.md) and HELLO,
+and the decoder's error counts (a noisy serial line shows as ``crc``/``cobs`` errors). Exit status:
+0; 2 for a bad URL or a port that cannot be opened (named).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import select
+import socket
+import statistics
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Optional, TextIO
+from urllib.parse import parse_qs, urlsplit
+
+from firmware_host.protocol.constants import Fault
+from firmware_host.protocol.decoder import StreamDecoder
+from firmware_host.protocol.messages import Hello, Joints, Message, Status
+
+__all__ = ["main", "open_port", "Tally", "ListenError"]
+
+PROG = "ghnerf-listen"
+
+
+class ListenError(Exception):
+    """A URL or port the user fixes; printed as one line, exit status 2."""
+
+
+class _UdpPort:
+    def __init__(self, host: str, port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind((host, port))
+        except OSError as e:
+            self.sock.close()
+            raise ListenError(f"udp://{host}:{port}: cannot listen: {e.strerror or e}") from e
+        self.address = self.sock.getsockname()
+
+    def read(self, timeout_s: float) -> bytes:
+        ready, _, _ = select.select([self.sock], [], [], timeout_s)
+        return self.sock.recv(65536) if ready else b""
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class _SerialPort:
+    def __init__(self, device: str, baud: int) -> None:
+        import serial
+
+        try:
+            self.port = serial.Serial(device, baud, timeout=0)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise ListenError(f"serial://{device}: cannot open: {e}") from e
+
+    def read(self, timeout_s: float) -> bytes:
+        import serial
+
+        ready, _, _ = select.select([self.port.fileno()], [], [], timeout_s)
+        if not ready:
+            return b""
+        try:
+            return bytes(self.port.read(65536))
+        except (serial.SerialException, OSError) as e:  # unplugged: say so rather than spin
+            raise ListenError(f"serial://{self.port.port}: read failed: {e}") from e
+
+    def close(self) -> None:
+        self.port.close()
+
+
+def open_port(url: str) -> "_UdpPort | _SerialPort":
+    """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces) or ``serial://DEVICE?baud=N``."""
+    parts = urlsplit(url)
+    query = parse_qs(parts.query)
+    if parts.scheme == "udp":
+        try:
+            port = parts.port
+        except ValueError as e:
+            raise ListenError(f"{url}: bad port: {e}") from None
+        if port is None:
+            raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870")
+        return _UdpPort(parts.hostname or "0.0.0.0", port)
+    if parts.scheme == "serial":
+        device = parts.netloc + parts.path
+        if not device:
+            raise ListenError(f"{url}: give the device, e.g. serial:///dev/ttyUSB0?baud=921600")
+        try:
+            baud = int(query.get("baud", ["115200"])[0])
+        except ValueError:
+            raise ListenError(f"{url}: baud must be a whole number") from None
+        return _SerialPort(device, baud)
+    raise ListenError(f"{url}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")
+
+
+def _fault_name(code: int) -> str:
+    try:
+        return Fault(code).name
+    except ValueError:  # a newer sender's code
+        return str(code)
+
+
+@dataclass
+class Tally:
+    """What arrived since the last summary (and in total)."""
+
+    joints: int = 0
+    present: list[int] = field(default_factory=list)
+    latency_ms: list[float] = field(default_factory=list)
+    gaps: int = 0
+    last_seq: Optional[int] = None
+    status: Optional[Status] = None
+    hello: Optional[Hello] = None
+    total_joints: int = 0
+    total_gaps: int = 0
+
+    def add(self, message: Message) -> None:
+        if isinstance(message, Joints):
+            self.joints += 1
+            self.total_joints += 1
+            self.present.append(int((~message.missing).sum()))
+            h = message.header
+            self.latency_ms.append((h.send_us - h.capture_us) / 1000.0)
+            if self.last_seq is not None and h.seq > self.last_seq + 1:
+                self.gaps += h.seq - self.last_seq - 1
+                self.total_gaps += h.seq - self.last_seq - 1
+            self.last_seq = h.seq
+        elif isinstance(message, Status):
+            self.status = message
+        elif isinstance(message, Hello):
+            self.hello = message
+
+    def line(self, seconds: float, errors: dict[str, int]) -> str:
+        parts = [f"{self.joints / max(seconds, 1e-9):.1f} JOINTS/s"]
+        if self.present:
+            parts.append(f"{statistics.mean(self.present):.1f} joints present")
+            parts.append(f"latency {statistics.median(self.latency_ms):.1f} ms")
+        parts.append(f"{self.gaps} seq gaps")
+        if self.status is not None:
+            parts.append(f"sender fault {_fault_name(self.status.fault)}, dropped {self.status.dropped}")
+        if self.hello is not None:
+            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}")
+        bad = {k: v for k, v in errors.items() if v}
+        if bad:
+            parts.append(f"decode errors {bad}")
+        self.joints, self.present, self.latency_ms, self.gaps = 0, [], [], 0
+        return "; ".join(parts)
+
+
+def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, every_s: float = 1.0) -> Tally:
+    """Read until ``seconds`` pass (None: until interrupted), writing summaries or JSON lines to ``out``."""
+    decoder = StreamDecoder()
+    tally = Tally()
+    start = last = time.monotonic()
+    while seconds is None or time.monotonic() - start < seconds:
+        data = port.read(0.1)
+        for event in decoder.feed(data) if data else ():
+            if event.message is not None:
+                tally.add(event.message)
+            if as_json:
+                out.write(json.dumps(event.to_json()) + "\n")
+        now = time.monotonic()
+        if not as_json and now - last >= every_s:
+            out.write(tally.line(now - last, decoder.stats.errors) + "\n")
+            out.flush()
+            last = now
+    if as_json:
+        out.flush()
+    return tally
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
+                                 epilog="Protocol: docs/protocol.md")
+    ap.add_argument("url", help="udp://[HOST]:PORT or serial://DEVICE?baud=N")
+    ap.add_argument("--json", action="store_true", help="every message (and decode error) as a JSON line")
+    ap.add_argument("--seconds", type=float, default=None, help="stop after this long (default: Ctrl-C)")
+    args = ap.parse_args(argv)
+    try:
+        port = open_port(args.url)
+    except ListenError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+    try:
+        tally = listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout)
+    except KeyboardInterrupt:
+        return 0
+    except ListenError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+    finally:
+        port.close()
+    print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

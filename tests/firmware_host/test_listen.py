@@ -1,0 +1,69 @@
+"""``ghnerf-listen``: the receiving end, over a real UDP socket and a real pty, fed by the real sinks."""
+from __future__ import annotations
+
+import io
+import os
+import threading
+
+import pytest
+
+from firmware_host import listen
+from firmware_host.sinks import open_sink
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame
+
+
+def test_udp_summary_counts_what_the_sink_sent():
+    port = listen.open_port("udp://127.0.0.1:0")
+    host, number = port.address
+    out = io.StringIO()
+    result: list = []
+    thread = threading.Thread(target=lambda: result.append(listen.listen(port, seconds=1.5, as_json=False, out=out,
+                                                                         every_s=0.5)))
+    thread.start()
+    try:
+        with open_sink(f"udp://{host}:{number}?status_s=0.2&queue=16", backoff=FAST_BACKOFF, rig_id="bench",
+                       cameras=("left", "right")) as sink:
+            for seq in (0, 1, 2, 5, 6):  # 3 and 4 skipped by the sender
+                sink.send(make_frame(seq))
+        thread.join(timeout=10)
+    finally:
+        port.close()
+    tally = result[0]
+    assert tally.total_joints == 5 and tally.total_gaps == 2
+    assert tally.hello is not None and tally.hello.rig_id == "bench" and tally.hello.cameras == ("left", "right")
+    text = out.getvalue()
+    assert "JOINTS/s" in text and "25.0 joints present" in text and "rig 'bench'" in text
+
+
+def test_serial_json_lines_over_a_pty():
+    master, slave = os.openpty()
+    name = os.ttyname(slave)
+    port = listen.open_port(f"serial://{name}?baud=115200")
+    sink = open_sink("memory://", rig_id="pty")
+    try:
+        sink.send(make_frame(7))
+        sink.close()
+        os.write(master, b"\x00garbage\x00" + sink.read())  # line noise first: it is counted, then skipped
+        out = io.StringIO()
+        tally = listen.listen(port, seconds=0.5, as_json=True, out=out)
+    finally:
+        port.close()
+        os.close(master)
+        os.close(slave)
+    lines = out.getvalue().splitlines()
+    assert any('"type": "JOINTS"' in line and '"seq": 7' in line for line in lines)
+    assert any('"error"' in line for line in lines)
+    assert tally.total_joints == 1
+
+
+@pytest.mark.parametrize("url, message", [
+    ("udp://127.0.0.1", "give the port"),
+    ("tcp://x:1", "reads udp:// or serial://"),
+    ("serial://", "give the device"),
+    ("serial:///dev/nonexistent-ghnerf?baud=9600", "cannot open"),
+    ("serial:///dev/null?baud=fast", "baud must be"),
+])
+def test_bad_urls_are_one_line_exit_2(url, message, capsys):
+    assert listen.main([url, "--seconds", "0.1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("ghnerf-listen: error: ") and message in err and "\n" not in err
