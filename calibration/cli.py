@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec, load_board
-from calibration.capture import check_camera_name, detect_folder, next_view_number
+from calibration.capture import IMAGE_SUFFIXES, check_camera_name, detect_folder, next_view_number
 from calibration.check import FLOOR_VIEW, check_rig
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
@@ -45,6 +45,22 @@ PROG = "ghcal"
 
 class UsageError(CalibrationError):
     """A command-line value the user fixes."""
+
+
+#: ``capture --floor``: the board counts as lying still while its corners stay this close to where they
+#: were when it came to rest (median and 90th percentile over the corners, pixels).
+STILL_MEDIAN_PX = 0.3
+STILL_P90_PX = 1.5
+#: What the joint stream's HELLO carries (firmware_host.protocol.constants; this package may not import it).
+MAX_RIG_ID_LEN = 32
+MAX_CAMERA_NAME_LEN = 16
+
+
+def _stream_name(text: str, limit: int, what: str) -> str:
+    if not (0 < len(text) <= limit and text.isascii() and text.isprintable()):
+        raise UsageError(f"{what} {text!r} must be printable ASCII of 1-{limit} characters (the joint stream "
+                         "announces it)")
+    return text
 
 
 def _board(path: str | None) -> BoardSpec:
@@ -115,6 +131,19 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ capture
+def _still_since(view: BoardView | None, reference: BoardView | None) -> bool:
+    """Whether ``view`` shows the board where ``reference`` did: robust to detection jitter (a corner or
+    two rebuilt from flickering markers), strict about drift (compared with the start, not the last frame)."""
+    if view is None or reference is None:
+        return False
+    ids = np.intersect1d(view.ids, reference.ids)
+    if ids.size < 0.8 * len(reference):
+        return False
+    moves = np.linalg.norm(view.corners[np.searchsorted(view.ids, ids)]
+                           - reference.corners[np.searchsorted(reference.ids, ids)], axis=1)
+    return float(np.median(moves)) < STILL_MEDIAN_PX and float(np.percentile(moves, 90)) < STILL_P90_PX
+
+
 def _largest_move_px(view: BoardView | None, last: BoardView | None) -> float | None:
     """The largest displacement of a corner both views found (None: nothing to compare)."""
     if view is None or last is None:
@@ -137,12 +166,14 @@ def cmd_capture(args: argparse.Namespace) -> int:
     kept, ended, last_kept_at = 0, False, -1e9
     last_views: list[BoardView | None] = [None, None]
     steady_since: float | None = None
+    resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
     source = drivers.create_rig_source(args.url)
     try:
         source.open()
         cams = [check_camera_name(c.name) for c in source.rig.pair]
         folders = [out / cam for cam in cams]
-        if args.floor and any((f / f"{FLOOR_VIEW}.png").exists() for f in folders) and not args.force:
+        if args.floor and not args.force and any((f / f"{FLOOR_VIEW}{suffix}").exists()
+                                                 for f in folders for suffix in IMAGE_SUFFIXES):
             raise UsageError(f"{out} already has a floor view: pass --force to replace it")
         for folder in folders:
             folder.mkdir(parents=True, exist_ok=True)
@@ -166,13 +197,12 @@ def cmd_capture(args: argparse.Namespace) -> int:
             moves = [_largest_move_px(v, last) for v, last in zip(found, last_views)]
             if args.floor:
                 # Both cameras, and the board lying still: not the board carried into place.
-                still = all(v is not None for v in found) and all(m is not None and m < 1.0 for m in moves)
-                last_views = found
-                if not still:
-                    steady_since = None
-                    continue
-                steady_since = now if steady_since is None else steady_since
-                if now - steady_since < args.steady_s:
+                if all(_still_since(v, r) for v, r in zip(found, resting)):
+                    if now - steady_since < args.steady_s:  # type: ignore[operator]
+                        continue
+                else:
+                    resting = found if all(v is not None for v in found) else [None, None]
+                    steady_since = now
                     continue
             else:
                 if now - last_kept_at < args.interval_s or all(v is None for v in found):
@@ -215,8 +245,14 @@ def cmd_solve(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise UsageError(f"{out.parent}: no such folder for the rig file")
+    report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
+    if not report_path.parent.is_dir():
+        raise UsageError(f"{report_path.parent}: no such folder for the report")
+    _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
     views, missed = detect_folder(board, args.images, _cameras(args.cameras))
     names = tuple(views)
+    for name in names:
+        _stream_name(name, MAX_CAMERA_NAME_LEN, "camera name (its folder)")
     for cam in names:
         extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
@@ -228,7 +264,6 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
                          rig_id=args.rig_id)
     save_rig(solution.rig, out)
-    report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
     report_path.write_text(json.dumps(solution.report, indent=1) + "\n", encoding="utf-8")
     r = solution.report
     for cam in names:
@@ -288,6 +323,15 @@ def _count(text: str) -> int:
     return value
 
 
+def _finite(lo: float, hi: float):
+    def parse(text: str) -> float:
+        value = float(text)
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise argparse.ArgumentTypeError(f"must be a number in [{lo:g}, {hi:g}], got {text}")
+        return value
+    return parse
+
+
 def _seconds(text: str) -> float:
     value = float(text)
     if not (math.isfinite(value) and value >= 0):
@@ -303,7 +347,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("board", help="write the board to print and its definition")
     p.add_argument("--out", required=True, help="folder for board.png and board.json")
     p.add_argument("--board", help="a board definition to start from (default: 9x6 squares of 80 mm)")
-    p.add_argument("--dpi", type=int, default=300, help="print resolution (default 300)")
+    p.add_argument("--dpi", type=_positive_int, default=300, help="print resolution (default 300)")
     p.set_defaults(run=cmd_board)
 
     p = sub.add_parser("synth", help="render the calibration views of a known rig (no cameras needed)")
@@ -338,10 +382,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the two subfolders, sorted)")
     p.add_argument("--lens", choices=sorted(LENS_MODELS), default="standard")
     p.add_argument("--floor-view", help="the view (file name without suffix) of the board lying on the floor")
-    p.add_argument("--board-thickness", type=float, default=0.0, help="metres, for the floor view")
-    p.add_argument("--camera-height", type=float, help="instead of a floor view: the first camera above the floor, m")
-    p.add_argument("--pitch", type=float, help="with --camera-height: degrees below the horizon (default 0)")
-    p.add_argument("--roll", type=float, help="with --camera-height: degrees about the optical axis (default 0)")
+    p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0, help="metres, for the floor view")
+    p.add_argument("--camera-height", type=_finite(0.05, 10.0),
+                   help="instead of a floor view: the first camera above the floor, m")
+    p.add_argument("--pitch", type=_finite(-90.0, 90.0),
+                   help="with --camera-height: degrees below the horizon (default 0)")
+    p.add_argument("--roll", type=_finite(-180.0, 180.0),
+                   help="with --camera-height: degrees about the optical axis (default 0)")
     p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame)")
     p.add_argument("--rig-id", default="rig")
     p.set_defaults(run=cmd_solve)
@@ -350,9 +397,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rig", required=True)
     p.add_argument("--board")
     p.add_argument("--images", required=True)
-    p.add_argument("--board-thickness", type=float, default=0.0)
-    p.add_argument("--max-px", type=float, default=1.0, help="largest acceptable reprojection rms (default 1 px)")
-    p.add_argument("--max-scale-error", type=float, default=0.01, help="default 0.01 (1 %%)")
+    p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0)
+    p.add_argument("--max-px", type=_finite(0.01, 100.0), default=1.0,
+                   help="largest acceptable reprojection rms (default 1 px)")
+    p.add_argument("--max-scale-error", type=_finite(0.0001, 1.0), default=0.01, help="default 0.01 (1 %%)")
     p.add_argument("--json", action="store_true", help="print the full report")
     p.set_defaults(run=cmd_check)
     return ap

@@ -159,7 +159,8 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r} both saw the board in {len(shared)} image pair(s); "
                          f"at least {MIN_VIEWS} are needed: hold it where both cameras see it")
     dropped: list[str] = []
-    for attempt in range(2):
+    max_dropped = max(1, len(shared) // 4)
+    while True:
         obj = [board.corners_m()[ids].astype(np.float32).reshape(-1, 1, 3) for _, ids in shared]
         img_a = [_image_points(first[n], ids) for n, ids in shared]
         img_b = [_image_points(second[n], ids) for n, ids in shared]
@@ -170,13 +171,16 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
             intr_first.image_size, R0, T0, flags=cv2.CALIB_FIX_INTRINSIC)
         rms, R, T, per_view = result[0], result[5], result[6], result[-1]
         per = np.asarray(per_view, float).reshape(len(shared), 2).mean(axis=1)
-        # A pair far worse than the others: the two images were not taken at the same instant, or one blurred.
-        median = float(np.median(per))
-        outliers = [n for (n, _), e in zip(shared, per) if e > max(OUTLIER_FACTOR * median, 1.0)]
-        if attempt or not outliers or len(shared) - len(outliers) < MIN_VIEWS:
+        # A pair far worse than the others: its two images not taken at the same instant, or one blurred.
+        # One bad pair drags the fit and raises the good ones' errors too, so drop only the worst, solve
+        # again, and repeat while the worst is still an outlier (at most a quarter of the pairs).
+        worst = int(np.argmax(per))
+        others = np.delete(per, worst)
+        if (per[worst] <= max(OUTLIER_FACTOR * float(np.median(others)), 1.0)
+                or len(shared) - 1 < MIN_VIEWS or len(dropped) >= max_dropped):
             break
-        dropped = outliers
-        shared = [(n, ids) for n, ids in shared if n not in outliers]
+        dropped.append(shared[worst][0])
+        shared = shared[:worst] + shared[worst + 1:]
     return PairPose(R=np.asarray(R, float), T=np.asarray(T, float).reshape(3), rms_px=float(rms),
                     per_view_px={n: round(float(e), 4) for (n, _), e in zip(shared, per)}, dropped=tuple(dropped))
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import select
 import socket
 import statistics
@@ -126,6 +127,9 @@ class Tally:
     hello: Optional[Hello] = None
     total_joints: int = 0
     total_gaps: int = 0
+    status_at: float = 0.0
+    hello_at: float = 0.0
+    errors_before: dict[str, int] = field(default_factory=dict)
 
     def add(self, message: Message) -> None:
         if isinstance(message, Joints):
@@ -134,14 +138,16 @@ class Tally:
             self.present.append(int((~message.missing).sum()))
             h = message.header
             self.latency_ms.append((h.send_us - h.capture_us) / 1000.0)
-            if self.last_seq is not None and h.seq > self.last_seq + 1:
-                self.gaps += h.seq - self.last_seq - 1
-                self.total_gaps += h.seq - self.last_seq - 1
+            if self.last_seq is not None:
+                step = (h.seq - self.last_seq) % (1 << 32)  # sequence numbers wrap (docs/protocol.md)
+                if 1 < step < (1 << 31):  # a larger step is a sender restart or a reordering, not a gap
+                    self.gaps += step - 1
+                    self.total_gaps += step - 1
             self.last_seq = h.seq
         elif isinstance(message, Status):
-            self.status = message
+            self.status, self.status_at = message, time.monotonic()
         elif isinstance(message, Hello):
-            self.hello = message
+            self.hello, self.hello_at = message, time.monotonic()
 
     def line(self, seconds: float, errors: dict[str, int]) -> str:
         parts = [f"{self.joints / max(seconds, 1e-9):.1f} JOINTS/s"]
@@ -149,11 +155,15 @@ class Tally:
             parts.append(f"{statistics.mean(self.present):.1f} joints present")
             parts.append(f"latency {statistics.median(self.latency_ms):.1f} ms")
         parts.append(f"{self.gaps} seq gaps")
+        now = time.monotonic()
         if self.status is not None:
-            parts.append(f"sender fault {_fault_name(self.status.fault)}, dropped {self.status.dropped}")
+            age = f" ({now - self.status_at:.0f} s ago)" if now - self.status_at > 2 * seconds + 1 else ""
+            parts.append(f"sender fault {_fault_name(self.status.fault)}, dropped {self.status.dropped}{age}")
         if self.hello is not None:
-            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}")
-        bad = {k: v for k, v in errors.items() if v}
+            age = f" ({now - self.hello_at:.0f} s ago)" if now - self.hello_at > 2 * seconds + 1 else ""
+            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}{age}")
+        bad = {k: v - self.errors_before.get(k, 0) for k, v in errors.items() if v - self.errors_before.get(k, 0)}
+        self.errors_before = dict(errors)
         if bad:
             parts.append(f"decode errors {bad}")
         self.joints, self.present, self.latency_ms, self.gaps = 0, [], [], 0
@@ -165,20 +175,22 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     decoder = StreamDecoder()
     tally = Tally()
     start = last = time.monotonic()
-    while seconds is None or time.monotonic() - start < seconds:
-        data = port.read(0.1)
-        for event in decoder.feed(data) if data else ():
-            if event.message is not None:
-                tally.add(event.message)
-            if as_json:
-                out.write(json.dumps(event.to_json()) + "\n")
-        now = time.monotonic()
-        if not as_json and now - last >= every_s:
-            out.write(tally.line(now - last, decoder.stats.errors) + "\n")
-            out.flush()
-            last = now
-    if as_json:
-        out.flush()
+    try:
+        while seconds is None or time.monotonic() - start < seconds:
+            data = port.read(0.1)
+            for event in decoder.feed(data) if data else ():
+                if event.message is not None:
+                    tally.add(event.message)
+                if as_json:
+                    out.write(json.dumps(event.to_json()) + "\n")
+                    out.flush()  # a reader at the end of a pipe sees each message as it comes
+            now = time.monotonic()
+            if not as_json and now - last >= every_s:
+                out.write(tally.line(now - last, decoder.stats.errors) + "\n")
+                out.flush()
+                last = now
+    except KeyboardInterrupt:  # Ctrl-C is how a listening session usually ends: keep the totals
+        pass
     return tally
 
 
@@ -196,7 +208,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         tally = listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout)
-    except KeyboardInterrupt:
+    except BrokenPipeError:  # `ghnerf-listen ... | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except ListenError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)

@@ -25,6 +25,7 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from urllib.parse import parse_qs, urlsplit
 
 import drivers
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_config_to_dict, load_daemon_config
@@ -32,6 +33,9 @@ from firmware_host.daemon.service import Daemon, DaemonStartError
 from firmware_host.errors import FirmwareHostError
 from firmware_host.sinks.registry import sink_class
 from firmware_host.sinks.url import parse_url
+from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
+from ghnerf_runtime.errors import RuntimeErrorBase
+from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
 
 __all__ = ["main", "build_parser", "check_config", "EXAMPLE_CONFIG"]
@@ -70,6 +74,18 @@ def check_config(config: DaemonConfig) -> None:
         raise DaemonConfigError(str(e), key="rig.url") from None
     except drivers.DriverError:
         pass  # a recording or device not there yet: the daemon waits for it, so the config is fine
+    rig_file = parse_qs(urlsplit(config.rig.url).query).get("rig")
+    if rig_file:  # a calibration of our own (ghcal): the stream announces its id and camera names
+        try:
+            rig = load_rig(rig_file[0])
+        except RuntimeErrorBase as e:
+            raise DaemonConfigError(str(e), key="rig.url") from None
+        names = [("rig id", rig.rig_id, MAX_RIG_ID_LEN)] + [("camera name", c.name, MAX_CAMERA_NAME_LEN)
+                                                            for c in rig.pair]
+        for what, text, limit in names:
+            if not (0 < len(text) <= limit and text.isascii() and text.isprintable()):
+                raise DaemonConfigError(f"{rig_file[0]}: its {what} {text!r} cannot go in the joint stream's HELLO "
+                                        f"(printable ASCII, at most {limit} characters)", key="rig.url")
     for k, url in enumerate(config.sinks):
         try:
             if "cameras" in parse_url(url).query:

@@ -88,7 +88,8 @@ class HangWatchdog:
     """Ping systemd's watchdog while the main loop makes progress (see the module docstring).
 
     ``allowance_s`` is how long after a beat the loop still counts as alive; ``interval_s`` how
-    often the pinging thread wakes (half of systemd's WatchdogSec when it is set). ``stacks_to``
+    often the thread wakes (to run ``on_tick``; default: as often as it pings), and it pings at most
+    every half of systemd's WatchdogSec. ``stacks_to``
     receives the thread stacks when a hang is first seen (stderr, i.e. the journal, by default).
     """
 
@@ -99,7 +100,9 @@ class HangWatchdog:
         self._default_allowance = float(allowance_s)
         self._allowance = float(allowance_s)
         wd = notifier.watchdog_s
-        self._interval = interval_s if interval_s is not None else (wd / 2 if wd else 1.0)
+        self._ping_every = wd / 2 if wd else 1.0
+        self._interval = min(interval_s, self._ping_every) if interval_s is not None else self._ping_every
+        self._last_ping = -float("inf")
         self._clock = clock
         self._stacks_to = stacks_to
         self._on_tick = on_tick  # (where, seconds since the last beat), from the watchdog's thread
@@ -149,8 +152,11 @@ class HangWatchdog:
             except Exception:  # noqa: BLE001 - the watchdog must keep ticking whatever a hook does
                 _log.exception("watchdog hook failed")
         if self.alive():
-            if self._notifier.watchdog_s is not None and self._notifier.notify(watchdog=1):
+            now = self._clock()
+            if self._notifier.watchdog_s is not None and now - self._last_ping >= self._ping_every * 0.99 \
+                    and self._notifier.notify(watchdog=1):
                 self.pings += 1
+                self._last_ping = now
             return True
         with self._lock:
             report = not self._hung_reported

@@ -71,7 +71,9 @@ class Daemon:
         self.config = config
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.health = Health(clock=clock, rig_url=config.rig.url)
+        # Woken often enough to flag a stuck estimate within about half of slow_estimate_s.
         self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock,
+                                     interval_s=min(config.health.slow_estimate_s / 2, 1.0),
                                      on_tick=self._on_watchdog_tick)
         self._clock = clock
         self._rig_kwargs = dict(rig_kwargs or {})
@@ -263,6 +265,9 @@ class Daemon:
     def _check_sinks(self) -> None:
         """Build (not start) every sink once, so a bad URL stops the start instead of waiting for a rig."""
         for k, url in enumerate(self.config.sinks):
+            if "cameras" in parse_url(url).query:
+                raise DaemonStartError(f"sinks[{k}]: the daemon announces the rig's camera names itself; "
+                                       "remove cameras= from the URL")
             try:
                 sink_class(url).from_url(url, **{**self._sink_kwargs, "cameras": ("first", "second")})
             except FirmwareHostError as e:

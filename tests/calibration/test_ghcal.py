@@ -16,7 +16,7 @@ import pytest
 from calibration import cli
 from calibration.board import BoardSpec
 from calibration.capture import detect_folder
-from calibration.detect import BoardView
+from calibration.detect import BoardDetector, BoardView
 from calibration.check import check_rig
 from calibration.errors import CaptureError, SolveError
 from calibration.render import calibration_views, example_rig
@@ -161,8 +161,10 @@ def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
     (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--pitch", "20"],
      "--pitch and --roll go with --camera-height"),
     (["solve", "--images", "{cap}", "--out", "{tmp}/no/r.json", "--floor-view", "floor"], "no such folder"),
-    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--board-thickness", "-1"],
-     "thickness must be between 0 and 0.1"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--rig-id", "Süd-Rig"],
+     "--rig-id 'Süd-Rig' must be printable ASCII"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--report", "{tmp}/no/r.json"],
+     "no such folder for the report"),
 ])
 def test_cli_errors_are_one_line_exit_2(capture, tmp_path, capsys, args, message):
     argv = [a.format(cap=capture, tmp=tmp_path) for a in args]
@@ -237,16 +239,33 @@ def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys
     assert sorted(p.name for p in (out / "left").iterdir()) == ["000.png", "002.png", "003.png"]
     # --floor keeps the board lying still on the floor, not the views of it carried into place
     floor_images = calibration_views(truth, BOARD, count=2, edge_count=0, seed=6, floor_view=True)
-    sequence = {cam: {"0": v["000"], "1": v["001"], "2": v["floor"], "3": v["floor"], "4": v["floor"]}
+    rng = np.random.default_rng(0)
+
+    def noisy(image: np.ndarray) -> np.ndarray:  # each frame its own sensor noise: the detections jitter
+        return np.clip(image + rng.normal(0.0, 1.5, image.shape), 0, 255).astype(np.uint8)
+
+    sequence = {cam: {"0": v["000"], "1": v["001"], **{str(k): noisy(v["floor"]) for k in range(2, 7)}}
                 for cam, v in floor_images.items()}
     floor_take = tmp_path / "floor_take"
     floor_take.mkdir()
-    _write_recording(floor_take, truth, sequence, period_s=1.0)
+    _write_recording(floor_take, truth, sequence, period_s=0.4)
     assert cli.main(["capture", "--url", f"replay://{floor_take}?speed=free", "--board", str(board),
                      "--out", str(out), "--floor"]) == 0
     for cam in ("left", "right"):
         saved = cv2.imread(str(out / cam / "floor.png"), cv2.IMREAD_GRAYSCALE)
-        assert np.array_equal(saved, floor_images[cam]["floor"])
+        assert any(np.array_equal(saved, sequence[cam][str(k)]) for k in range(4, 7))  # after 1 s at rest
+    # a board still creeping (0.3 px a frame, too slow for frame-to-frame jitter to show) is not at rest
+    creeping = {cam: {str(k): cv2.warpAffine(v["floor"], np.float32([[1, 0, 0.3 * k], [0, 1, 0]]),
+                                             (v["floor"].shape[1], v["floor"].shape[0]),
+                                             borderMode=cv2.BORDER_REPLICATE) for k in range(8)}
+                for cam, v in floor_images.items()}
+    assert BoardDetector(BOARD).detect(creeping["left"]["7"]) is not None  # found in every frame, yet moving
+    creep_take = tmp_path / "creep_take"
+    creep_take.mkdir()
+    _write_recording(creep_take, truth, creeping, period_s=0.4)
+    assert cli.main(["capture", "--url", f"replay://{creep_take}?speed=free", "--board", str(board),
+                     "--out", str(tmp_path / "creep"), "--floor"]) == 2
+    assert "kept 0 of 1 views" in capsys.readouterr().err
     assert cli.main(["capture", "--url", f"replay://{floor_take}?speed=free", "--board", str(board),
                      "--out", str(out), "--floor"]) == 2
     assert "already has a floor view" in capsys.readouterr().err
@@ -300,3 +319,26 @@ def test_check_refuses_views_of_another_size(capture, truth, tmp_path, capsys):
     assert cli.main(["check", "--rig", str(tmp_path / "small.json"), "--board", str(capture / "board.json"),
                      "--images", str(capture)]) == 2
     assert "the image is 800x500, camera 'left'" in capsys.readouterr().err
+
+
+def test_one_unsynchronised_pair_is_dropped_alone(views):
+    swapped = {cam: dict(v) for cam, v in views.items()}
+    swapped["right"]["002"] = views["right"]["005"]  # the right image of another instant
+    report = solve_rig(BOARD, swapped, ("left", "right"), floor_view="floor").report
+    assert report["pair"]["dropped_views"] == ["002"]
+    assert report["pair"]["rms_px"] < 0.6
+
+
+def test_numeric_options_are_checked(capture, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["solve", "--images", str(capture), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
+                  "--pitch", "inf"])
+    assert e.value.code == 2 and "--pitch: must be a number in [-90, 90]" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["check", "--rig", "r.json", "--images", str(capture), "--max-px", "nan"])
+
+
+def test_the_stream_limits_match_the_protocol():
+    from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
+
+    assert (cli.MAX_RIG_ID_LEN, cli.MAX_CAMERA_NAME_LEN) == (MAX_RIG_ID_LEN, MAX_CAMERA_NAME_LEN)

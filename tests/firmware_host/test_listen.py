@@ -67,3 +67,25 @@ def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("ghnerf-listen: error: ") and message in err and "\n" not in err
+
+
+def test_sequence_numbers_wrap_and_errors_are_per_line():
+    from firmware_host.protocol.messages import Joints, make_header
+    from firmware_host.protocol.constants import MsgType
+    import numpy as np
+
+    tally = listen.Tally()
+
+    def joints(seq: int) -> Joints:
+        return Joints(make_header(MsgType.JOINTS, seq, 0, 1000), 0, np.zeros((25, 3), np.int16),
+                      np.zeros(25, np.uint8), np.zeros(25, bool))
+
+    for seq in (2**32 - 2, 2**32 - 1, 1):  # 0 skipped across the wrap
+        tally.add(joints(seq))
+    assert tally.total_gaps == 1
+    tally.add(joints(5))
+    tally.add(joints(3))  # a step back (reordering, a sender restart) is not 4 billion gaps
+    assert tally.total_gaps == 4
+    first = tally.line(1.0, {"crc": 2, "cobs": 0})
+    second = tally.line(1.0, {"crc": 2, "cobs": 0})
+    assert "decode errors {'crc': 2}" in first and "decode errors" not in second

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -10,6 +11,7 @@ from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_
     daemon_config_to_dict, load_daemon_config
 
 SINK = "udp://127.0.0.1:9870"
+REPO_RIG = Path(__file__).resolve().parents[3] / "docs" / "examples" / "rig.json"
 
 
 def _error(data: dict) -> str:
@@ -106,3 +108,26 @@ def test_check_config_names_bad_urls_and_models(tmp_path):
     empty.mkdir()
     with pytest.raises(DaemonConfigError, match=r"^estimator\.session\.model_dir: .*no \*\.onnx"):
         check_config(cfg(estimator={"session": {"model_dir": str(empty)}}))
+
+
+def test_check_config_reads_a_rig_file_named_in_the_url(tmp_path):
+    from ghnerf_runtime.geometry.rig import Rig
+    from ghnerf_runtime.rig_file import load_rig, save_rig
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "x.onnx").write_bytes(b"")
+    rig = load_rig(REPO_RIG)
+    long_id = tmp_path / "rig.json"
+    save_rig(Rig(rig.cameras, rig.volume, rig_id="a rig id far longer than the streams 32 characters"), long_id)
+
+    def cfg(url):
+        return daemon_config_from_dict({"rig": {"url": url}, "sinks": [SINK],
+                                        "estimator": {"session": {"model_dir": str(models)}}})
+
+    size = f"width={rig.pair[0].width}&height={rig.pair[0].height}"
+    check_config(cfg(f"depthai://?rig={REPO_RIG}&{size}"))
+    with pytest.raises(DaemonConfigError, match=r"^rig\.url: .*rig id 'a rig id far longer"):
+        check_config(cfg(f"depthai://?rig={long_id}&{size}"))
+    with pytest.raises(DaemonConfigError, match=r"^rig\.url: .*missing\.json"):
+        check_config(cfg(f"depthai://?rig={tmp_path / 'missing.json'}&{size}"))

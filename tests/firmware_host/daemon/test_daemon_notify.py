@@ -151,3 +151,18 @@ def test_a_full_socket_never_blocks_the_sender(tmp_path):
         assert n.notify(watchdog=1)  # room again
     finally:
         sock.close()
+
+
+def test_wakes_often_pings_at_half_the_watchdog(notify_socket):
+    """The thread may wake often (to flag a stuck estimate in time) yet pings systemd only every WatchdogSec/2."""
+    path, sock = notify_socket
+    clock = _Clock()
+    n = SystemdNotifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "30000000"})
+    ticks = []
+    wd = HangWatchdog(n, allowance_s=60.0, interval_s=0.5, clock=clock, on_tick=lambda where, s: ticks.append(s))
+    assert wd._interval == 0.5
+    for _ in range(40):  # 20 s of wakes
+        wd.beat()
+        wd.check()
+        clock.t += 0.5
+    assert len(ticks) == 40 and wd.pings == 2  # at 0 s and at 15 s

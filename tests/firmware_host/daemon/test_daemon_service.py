@@ -265,3 +265,15 @@ def test_on_an_oak(tmp_path):
         assert run.finish() == 0
     report = json.loads((tmp_path / "status.json").read_text())
     assert report["rig"]["opens"] == 1 and report["pairs"]["estimated"] >= 30
+
+
+def test_the_watchdog_wakes_within_the_slow_estimate_threshold(tmp_path):
+    cfg = _config({"url": "sim://"}, tmp_path, slow_estimate_s=1.0)
+    daemon = Daemon(cfg, notifier=SystemdNotifier({"NOTIFY_SOCKET": "/nonexistent", "WATCHDOG_USEC": "30000000"}))
+    assert daemon.watchdog._interval <= 0.5  # not systemd's 15 s
+
+
+def test_a_sink_url_with_camera_names_is_refused_at_start(tmp_path):
+    cfg = _config({"url": "sim://"}, tmp_path, sinks=["memory://?cameras=a,b"])
+    with pytest.raises(DaemonStartError, match=r"sinks\[0\]: .*cameras="):
+        Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
