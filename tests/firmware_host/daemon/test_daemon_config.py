@@ -131,3 +131,16 @@ def test_check_config_reads_a_rig_file_named_in_the_url(tmp_path):
         check_config(cfg(f"depthai://?rig={long_id}&{size}"))
     with pytest.raises(DaemonConfigError, match=r"^rig\.url: .*missing\.json"):
         check_config(cfg(f"depthai://?rig={tmp_path / 'missing.json'}&{size}"))
+
+
+@pytest.mark.parametrize("doc", ["docs/daemon.md", "README.md", "systemd/daemon.json"])
+def test_the_configs_in_the_docs_are_valid(doc):
+    """Every daemon config a reader may copy (the JSON blocks with a "sinks" key) loads as it is."""
+    import re
+
+    text = (REPO_RIG.parents[2] / doc).read_text()
+    blocks = [text] if doc.endswith(".json") else re.findall(r"```json\n(.*?)```", text, re.S)
+    configs = [json.loads(b) for b in blocks if '"sinks"' in b]
+    assert configs, f"no daemon config in {doc}"
+    for data in configs:
+        daemon_config_from_dict(data)
