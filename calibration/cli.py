@@ -165,7 +165,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     count = 1 if args.floor else args.count
     kept, ended, last_kept_at = 0, False, -1e9
     last_views: list[BoardView | None] = [None, None]
-    steady_since: float | None = None
+    steady_since = 0.0  # when the board came to rest (read only once ``resting`` is set)
     resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
     source = drivers.create_rig_source(args.url)
     try:
@@ -194,11 +194,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 break
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
             found = [detector.detect(image) for image in pair.images]
-            moves = [_largest_move_px(v, last) for v, last in zip(found, last_views)]
             if args.floor:
                 # Both cameras, and the board lying still: not the board carried into place.
                 if all(_still_since(v, r) for v, r in zip(found, resting)):
-                    if now - steady_since < args.steady_s:  # type: ignore[operator]
+                    if now - steady_since < args.steady_s:
                         continue
                 else:
                     resting = found if all(v is not None for v in found) else [None, None]
@@ -207,6 +206,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
             else:
                 if now - last_kept_at < args.interval_s or all(v is None for v in found):
                     continue
+                moves = [_largest_move_px(v, last) for v, last in zip(found, last_views)]
                 known = [m for m in moves if m is not None]
                 if known and max(known) < args.min_move_px:
                     continue  # the board has not moved or turned: the same view again adds nothing

@@ -27,7 +27,7 @@ import numbers
 import os
 import typing
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError
@@ -38,7 +38,7 @@ __all__ = [
     "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
     "PresenceConfig", "NovelViewConfig", "SmoothingConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
-    "load_config",
+    "load_config", "read_json_file",
 ]
 
 #: Precision choices of :class:`SessionConfig`.
@@ -752,17 +752,23 @@ def config_to_dict(config: Any) -> dict:
     return out
 
 
-def load_config(path: str | os.PathLike) -> EstimatorConfig:
-    """Read a JSON config file; errors name the file and the key."""
+def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], what: str = "config file") -> Any:
+    """The JSON value in ``path``; an unreadable file, invalid JSON or non-UTF-8 text raises ``fail(message)``
+    (the caller's error type, naming the file), the message saying which and where."""
     try:
         with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
+            return json.load(fh)
     except OSError as e:
-        raise ConfigError(f"cannot read config file ({e.strerror or e})", key=str(path)) from e
+        raise fail(f"cannot read {what} ({e.strerror or e})") from e
     except json.JSONDecodeError as e:
-        raise ConfigError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})", key=str(path)) from e
+        raise fail(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
     except UnicodeDecodeError as e:
-        raise ConfigError(f"not UTF-8 text (byte {e.start}): {e.reason}", key=str(path)) from e
+        raise fail(f"not UTF-8 text (byte {e.start}): {e.reason}") from e
+
+
+def load_config(path: str | os.PathLike) -> EstimatorConfig:
+    """Read a JSON config file; errors name the file and the key."""
+    data = read_json_file(path, lambda message: ConfigError(message, key=str(path)))
     try:
         return config_from_dict(data)
     except ConfigError as e:

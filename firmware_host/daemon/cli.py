@@ -28,12 +28,10 @@ from collections.abc import Sequence
 from urllib.parse import parse_qs, urlsplit
 
 import drivers
-from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_config_to_dict, load_daemon_config
-from firmware_host.daemon.service import Daemon, DaemonStartError
-from firmware_host.errors import FirmwareHostError
-from firmware_host.sinks.registry import sink_class
-from firmware_host.sinks.url import parse_url
+from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
+from firmware_host.daemon.service import Daemon, DaemonStartError, check_sink_urls
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
+from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
@@ -86,17 +84,7 @@ def check_config(config: DaemonConfig) -> None:
             if not (0 < len(text) <= limit and text.isascii() and text.isprintable()):
                 raise DaemonConfigError(f"{rig_file[0]}: its {what} {text!r} cannot go in the joint stream's HELLO "
                                         f"(printable ASCII, at most {limit} characters)", key="rig.url")
-    for k, url in enumerate(config.sinks):
-        try:
-            if "cameras" in parse_url(url).query:
-                raise DaemonConfigError("the daemon announces the rig's camera names itself; remove cameras=",
-                                        key=f"sinks[{k}]")
-            # Built, not started: nothing is opened. The rig's camera names stand in as placeholders.
-            sink_class(url).from_url(url, cameras=("first", "second"))  # type: ignore[attr-defined]
-        except FirmwareHostError as e:
-            if isinstance(e, DaemonConfigError):
-                raise
-            raise DaemonConfigError(str(e), key=f"sinks[{k}]") from None
+    check_sink_urls(config.sinks)
     model_dir = resolve_model_dir(config.estimator.session.model_dir)
     if not model_dir.is_dir() or not any(model_dir.glob("*.onnx")):
         raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
@@ -129,7 +117,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 check_config(config)
             except DaemonConfigError as e:
                 raise DaemonConfigError(str(e), key=args.config) from None
-            print(json.dumps(daemon_config_to_dict(config), indent=2))
+            print(json.dumps(config_to_dict(config), indent=2))
             return 0
     except DaemonConfigError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)

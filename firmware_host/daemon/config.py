@@ -16,7 +16,6 @@ is a :class:`DaemonConfigError` whose message starts with the file and the key.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 import typing
@@ -24,11 +23,11 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from firmware_host.errors import FirmwareHostError
-from ghnerf_runtime.config import EstimatorConfig, config_from_dict, config_to_dict
+from ghnerf_runtime.config import EstimatorConfig, config_from_dict, read_json_file
 from ghnerf_runtime.errors import ConfigError
 
 __all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "daemon_config_from_dict",
-           "daemon_config_to_dict", "load_daemon_config", "LOG_LEVELS"]
+           "load_daemon_config", "LOG_LEVELS"]
 
 LOG_LEVELS = ("debug", "info", "warning", "error")
 #: Time one estimate may take on top of a read before the watchdog's allowance runs out (see DaemonConfig).
@@ -209,33 +208,10 @@ def daemon_config_from_dict(data: Mapping[str, Any]) -> DaemonConfig:
     return _build(DaemonConfig, data, "")
 
 
-def daemon_config_to_dict(config: DaemonConfig) -> dict:
-    """The tree as plain data; ``daemon_config_from_dict(daemon_config_to_dict(c)) == c``."""
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(config):
-        value = getattr(config, f.name)
-        if isinstance(value, EstimatorConfig):
-            value = config_to_dict(value)
-        elif dataclasses.is_dataclass(value):
-            value = dataclasses.asdict(value)
-        elif isinstance(value, tuple):
-            value = list(value)
-        out[f.name] = value
-    return out
-
-
 def load_daemon_config(path: str | os.PathLike) -> DaemonConfig:
-    """Read the daemon's JSON config file; every error names the file and the key."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
-    except OSError as e:
-        raise DaemonConfigError(f"cannot read the config file ({e.strerror or e})", key=str(path)) from e
-    except json.JSONDecodeError as e:
-        raise DaemonConfigError(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})",
-                                key=str(path)) from e
-    except UnicodeDecodeError as e:
-        raise DaemonConfigError(f"not UTF-8 text (byte {e.start}): {e.reason}", key=str(path)) from e
+    """Read the daemon's JSON config file; every error names the file and the key. (The tree back to plain
+    data, for ``--validate-config``, is the runtime's ``config_to_dict``: it walks any dataclass tree.)"""
+    data = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
     try:
         return daemon_config_from_dict(data)
     except DaemonConfigError as e:

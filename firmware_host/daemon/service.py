@@ -29,12 +29,13 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Sequence
 from typing import Any, Callable, Optional
 
 import numpy as np
 
 import drivers
-from firmware_host.daemon.config import DaemonConfig
+from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.errors import FirmwareHostError
@@ -48,13 +49,29 @@ from ghnerf_runtime.estimator import Estimator, load_session
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import dumps_rig
 
-__all__ = ["Daemon", "DaemonStartError"]
+__all__ = ["Daemon", "DaemonStartError", "check_sink_urls"]
 
 _log = logging.getLogger("ghnerf.daemon")
 
 
 class DaemonStartError(FirmwareHostError):
     """The daemon cannot start and retrying will not help (a model that does not load, a bad sink URL)."""
+
+
+def check_sink_urls(urls: Sequence[str], **sink_kwargs: Any) -> None:
+    """Build (not start: nothing is opened) the sink of every URL, the rig's camera names stood in for.
+
+    :raises DaemonConfigError: keyed ``sinks[k]``: a bad URL, or one naming ``cameras=`` (the daemon
+        announces the rig's own).
+    """
+    for k, url in enumerate(urls):
+        if "cameras" in parse_url(url).query:
+            raise DaemonConfigError("the daemon announces the rig's camera names itself; remove cameras= from "
+                                    "the URL", key=f"sinks[{k}]")
+        try:
+            sink_class(url).from_url(url, **{**sink_kwargs, "cameras": ("first", "second")})  # type: ignore[attr-defined]
+        except FirmwareHostError as e:
+            raise DaemonConfigError(str(e), key=f"sinks[{k}]") from None
 
 
 class Daemon:
@@ -263,15 +280,11 @@ class Daemon:
         return dict(self._sinks)
 
     def _check_sinks(self) -> None:
-        """Build (not start) every sink once, so a bad URL stops the start instead of waiting for a rig."""
-        for k, url in enumerate(self.config.sinks):
-            if "cameras" in parse_url(url).query:
-                raise DaemonStartError(f"sinks[{k}]: the daemon announces the rig's camera names itself; "
-                                       "remove cameras= from the URL")
-            try:
-                sink_class(url).from_url(url, **{**self._sink_kwargs, "cameras": ("first", "second")})
-            except FirmwareHostError as e:
-                raise DaemonStartError(f"sinks[{k}]: {e}") from None
+        """A bad sink URL stops the start instead of waiting for a rig (:func:`check_sink_urls`)."""
+        try:
+            check_sink_urls(self.config.sinks, **self._sink_kwargs)
+        except DaemonConfigError as e:
+            raise DaemonStartError(str(e)) from None
 
     def _open_sinks(self, rig: Rig) -> None:
         """Open every sink for this rig's id and camera names (reopened only when either changes)."""

@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 
 from firmware_host.daemon.cli import EXAMPLE_CONFIG, check_config
+from ghnerf_runtime.config import config_to_dict
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, daemon_config_from_dict, \
-    daemon_config_to_dict, load_daemon_config
+    load_daemon_config
 
 SINK = "udp://127.0.0.1:9870"
 REPO_RIG = Path(__file__).resolve().parents[3] / "docs" / "examples" / "rig.json"
@@ -60,7 +61,7 @@ def test_errors_name_the_key(data, key):
 
 def test_round_trip_and_example_is_valid():
     cfg = daemon_config_from_dict(EXAMPLE_CONFIG)
-    assert daemon_config_from_dict(json.loads(json.dumps(daemon_config_to_dict(cfg)))) == cfg
+    assert daemon_config_from_dict(json.loads(json.dumps(config_to_dict(cfg)))) == cfg
     assert isinstance(cfg, DaemonConfig)
 
 
