@@ -10,6 +10,10 @@ Under systemd (``systemd/ghnerf.service``, ``Type=notify``) it reports ``READY=1
 is loaded, keeps a one-line ``STATUS=`` (``systemctl status ghnerf``), pings the watchdog while its
 main loop progresses and logs without timestamps (the journal adds its own).
 
+SIGHUP (``systemctl reload ghnerf``) reads the config file again: a file that passes every check of
+``--validate-config`` (and whose model loads) is applied without a restart, touching only what
+changed; one that does not is refused with its error in the journal, and the daemon runs on as it was.
+
 Exit status: 0 after SIGTERM / SIGINT or the end of a recording; 2 for what a restart cannot fix
 (a bad config, a sink URL, a model that does not load: the message names the file and the key),
 which the unit file keeps systemd from restarting; 1 for an unexpected error, which it restarts.
@@ -36,7 +40,7 @@ from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
 
-__all__ = ["main", "build_parser", "check_config", "EXAMPLE_CONFIG"]
+__all__ = ["main", "build_parser", "check_config", "read_checked_config", "EXAMPLE_CONFIG"]
 
 PROG = "ghnerf-daemon"
 
@@ -91,6 +95,20 @@ def check_config(config: DaemonConfig) -> None:
                                 key="estimator.session.model_dir")
 
 
+def read_checked_config(path: str) -> DaemonConfig:
+    """Load the config file and run :func:`check_config` on it; every error names the file and the key."""
+    config = load_daemon_config(path)
+    try:
+        check_config(config)
+    except DaemonConfigError as e:
+        raise DaemonConfigError(str(e), key=str(path)) from None
+    return config
+
+
+def _set_log_level(config: DaemonConfig) -> None:
+    logging.getLogger().setLevel(getattr(logging, config.log_level.upper()))
+
+
 def _setup_logging(level: str) -> None:
     # Under systemd the journal stamps every line itself; elsewhere the time helps.
     fmt = "%(levelname)s %(name)s: %(message)s" if os.environ.get("JOURNAL_STREAM") else \
@@ -111,14 +129,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: --max-seconds must be > 0, got {args.max_seconds}", file=sys.stderr)
         return 2
     try:
-        config = load_daemon_config(args.config)
         if args.validate_config:
-            try:
-                check_config(config)
-            except DaemonConfigError as e:
-                raise DaemonConfigError(str(e), key=args.config) from None
-            print(json.dumps(config_to_dict(config), indent=2))
+            print(json.dumps(config_to_dict(read_checked_config(args.config)), indent=2))
             return 0
+        config = load_daemon_config(args.config)
     except DaemonConfigError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
@@ -126,6 +140,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     faulthandler.enable()  # a crash inside onnxruntime or depthai leaves its stack in the journal
 
     stop = threading.Event()
+    daemon = Daemon(config, reload_config=lambda: read_checked_config(args.config), on_reload=_set_log_level)
 
     def _on_signal(signum: int, _frame: object) -> None:
         logging.getLogger("ghnerf.daemon").info("%s received: stopping", signal.Signals(signum).name)
@@ -133,12 +148,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
+    signal.signal(signal.SIGHUP, lambda _signum, _frame: daemon.request_reload())  # logged by the reload itself
     if args.max_seconds is not None:
         timer = threading.Timer(args.max_seconds, stop.set)
         timer.daemon = True
         timer.start()
     try:
-        return Daemon(config).run(stop)
+        return daemon.run(stop)
     except DaemonStartError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2

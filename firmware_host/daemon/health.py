@@ -55,6 +55,9 @@ class Health:
     last_error: Optional[str] = None
     camera_fault: bool = False
     estimator_stalled: bool = False
+    reloads: int = 0  # config reloads accepted (SIGHUP)
+    reload_failures: int = 0  # refused: the daemon ran on with the config it had
+    reload_error: Optional[str] = None  # why the last reload was refused (None once one is accepted)
     latencies_ms: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     found_fraction: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     estimate_times: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
@@ -99,6 +102,8 @@ class Health:
                           if self.found_fraction else None,
                           "window": len(lat)},
             "last_error": self.last_error,
+            "config": {"reloads": self.reloads, "reload_failures": self.reload_failures,
+                       "reload_error": self.reload_error},
             "sinks": sinks or {},
         }
 

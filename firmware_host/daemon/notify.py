@@ -114,6 +114,12 @@ class HangWatchdog:
         self._thread: Optional[threading.Thread] = None
         self.pings = 0
 
+    def configure(self, allowance_s: float, *, interval_s: Optional[float] = None) -> None:
+        """New allowance and wake interval (a reloaded config), from the next beat and the next wake."""
+        with self._lock:
+            self._default_allowance = float(allowance_s)
+            self._interval = min(interval_s, self._ping_every) if interval_s is not None else self._ping_every
+
     def beat(self, where: str = "main loop") -> None:
         with self._lock:
             self._last_beat = self._clock()

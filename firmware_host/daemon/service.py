@@ -18,6 +18,15 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
   watchdog pings and systemd restarts the service.
 
+**Reloading the config** (SIGHUP, ``systemctl reload ghnerf``; :meth:`Daemon.request_reload`): the
+new file is read and checked in full, and a changed model is loaded (and built for the open rig),
+before anything is swapped; a file that fails any of it is refused with its error in the log, the
+status file and systemd's STATUS, and the daemon runs on with the config it had (nothing is lost,
+nothing restarts). Once accepted, only what changed is touched: a new ``rig.url`` closes the rig and
+opens the new one; added or removed sinks are opened or closed while the others keep streaming
+without a gap; a new estimator tree replaces the estimator between two pairs; the rest (timeouts,
+health, log level) applies from the next pass.
+
 What stops it: ``stop`` being set (SIGTERM / SIGINT in the CLI), a finite source ending when
 ``rig.exit_at_end`` is on, or an error no retry can fix (a model that will not load: raised as
 :class:`DaemonStartError` before the loop starts).
@@ -25,6 +34,7 @@ What stops it: ``stop`` being set (SIGTERM / SIGINT in the CLI), a finite source
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import os
 import threading
@@ -44,12 +54,20 @@ from firmware_host.protocol.constants import Fault
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.registry import sink_class
 from firmware_host.sinks.url import parse_url
+from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.errors import FrameError, ModelError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, load_session
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import dumps_rig
 
 __all__ = ["Daemon", "DaemonStartError", "check_sink_urls"]
+
+
+def _part(config: DaemonConfig, name: str) -> Any:
+    """One part of the config by its name, for telling what a reload changed ("rig": all but its url)."""
+    if name == "rig.url":
+        return config.rig.url
+    return dataclasses.replace(config.rig, url="sim://") if name == "rig" else getattr(config, name)
 
 _log = logging.getLogger("ghnerf.daemon")
 
@@ -79,12 +97,16 @@ class Daemon:
 
     ``rig_kwargs`` go to :func:`drivers.create_rig_source` (tests pass a clock), ``sink_kwargs`` to
     every :func:`firmware_host.sinks.open_sink` (tests pass a fast backoff); ``notifier`` defaults
-    to systemd's socket from the environment.
+    to systemd's socket from the environment. ``reload_config`` reads and checks the config file again
+    for :meth:`request_reload` (raising :class:`DaemonConfigError`), and ``on_reload`` receives each
+    config it accepted (the CLI sets the log level from it).
     """
 
     def __init__(self, config: DaemonConfig, *, notifier: Optional[SystemdNotifier] = None,
                  rig_kwargs: Optional[dict[str, Any]] = None, sink_kwargs: Optional[dict[str, Any]] = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 reload_config: Optional[Callable[[], DaemonConfig]] = None,
+                 on_reload: Optional[Callable[[DaemonConfig], None]] = None) -> None:
         self.config = config
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.health = Health(clock=clock, rig_url=config.rig.url)
@@ -107,6 +129,16 @@ class Daemon:
         self._dropped_closed = 0  # pairs the driver skipped, summed over rigs already closed
         self._status_file_failing = False
         self._closed_sink_stats: dict[str, Any] = {}  # the last counters of sinks already closed
+        self._reload_config = reload_config
+        self._on_reload = on_reload
+        # A plain flag, not an Event: set from a signal handler, which must never wait on a lock the
+        # interrupted main thread may hold.
+        self._reload_requested = False
+        self._reopen_rig = False  # a reload changed rig.url: close the open rig and open the new one
+
+    def request_reload(self) -> None:
+        """Ask the main loop to reload the config at its next pass (safe from a signal handler)."""
+        self._reload_requested = True
 
     # ------------------------------------------------------------------ run
     def run(self, stop: threading.Event) -> int:
@@ -129,6 +161,10 @@ class Daemon:
                     ended = self._stream(source, stop)
                 finally:
                     self._close_rig(source)
+                if self._reopen_rig:  # the reloaded config names another rig: open it now
+                    self._reopen_rig = False
+                    self._backoff_s = self.config.rig.reopen_min_s
+                    continue
                 if ended and self.config.rig.exit_at_end:
                     _log.info("the rig's stream ended (rig.exit_at_end): stopping")
                     break
@@ -169,8 +205,10 @@ class Daemon:
     # ------------------------------------------------------------------ rig
     def _open_rig(self, stop: threading.Event) -> Optional[drivers.RigSource]:
         """Open the rig, retrying with backoff until it opens or ``stop`` is set (then None)."""
-        rig_cfg = self.config.rig
         while not stop.is_set():
+            self._maybe_reload(None)  # nothing is open: this attempt opens the reloaded rig.url
+            rig_cfg = self.config.rig
+            self.health.rig_url = rig_cfg.url
             self.health.enter(State.OPENING)
             self._set_fault(Fault.CAMERA_FAULT)
             self._tick(force=True)
@@ -217,12 +255,15 @@ class Daemon:
 
     def _stream(self, source: drivers.RigSource, stop: threading.Event) -> bool:
         """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
-        rig_cfg = self.config.rig
-        estimator = self._estimator
-        assert estimator is not None
         self.health.enter(State.RUNNING)
         last_pair = self._clock()
         while not stop.is_set():
+            if self._maybe_reload(source.rig):
+                self._reopen_rig = True  # run() closes this rig and opens the new rig.url
+                return False
+            rig_cfg = self.config.rig  # a reload may have changed its timeouts
+            estimator = self._estimator  # or replaced the estimator
+            assert estimator is not None
             self.watchdog.beat("reading a pair")
             self._tick()
             try:
@@ -287,36 +328,117 @@ class Daemon:
             raise DaemonStartError(str(e)) from None
 
     def _open_sinks(self, rig: Rig) -> None:
-        """Open every sink for this rig's id and camera names (reopened only when either changes)."""
+        """Open every sink for this rig's id and camera names (reopened only when either changes; after a
+        reload with the same rig, only the sinks added are opened and those removed closed)."""
         key = (rig.rig_id, tuple(c.name for c in rig.pair))
-        if key == self._sinks_for:
-            return
         with self._fault_lock:
-            self._close_sinks()
+            if key != self._sinks_for:
+                self._close_sinks()
+            for url in [u for u in self._sinks if u not in self.config.sinks]:
+                self._close_sink(url)
             for url in self.config.sinks:
-                kw = dict(self._sink_kwargs)
-                kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
-                if "rig_id" not in parse_url(url).query:
-                    kw["rig_id"] = rig.rig_id
-                try:
-                    sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
-                except FirmwareHostError as e:
-                    self._close_sinks()
-                    raise DaemonStartError(f"sinks: {e}") from None
-                self._apply_fault(sink)  # before start: its first STATUS already carries the fault
-                self._sinks[url] = sink.start()
+                if url not in self._sinks:
+                    try:
+                        self._sinks[url] = self._open_sink(url, key)
+                    except FirmwareHostError as e:
+                        self._close_sinks()
+                        raise DaemonStartError(f"sinks: {e}") from None
             self._sinks_for = key
+
+    def _open_sink(self, url: str, key: tuple[str, tuple[str, ...]]) -> Sink:
+        kw = dict(self._sink_kwargs)
+        kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
+        if "rig_id" not in parse_url(url).query:
+            kw["rig_id"] = key[0]
+        sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
+        self._apply_fault(sink)  # before start: its first STATUS already carries the fault
+        return sink.start()
+
+    def _close_sink(self, url: str) -> None:
+        sink = self._sinks.pop(url)
+        try:
+            sink.close()
+            self._closed_sink_stats[url] = self._stats_of(sink)
+        except FirmwareHostError as e:
+            _log.warning("closing sink %s: %s", url, e)
 
     def _close_sinks(self) -> None:
         with self._fault_lock:
-            for url, sink in self._sinks.items():
-                try:
-                    sink.close()
-                    self._closed_sink_stats[url] = self._stats_of(sink)
-                except FirmwareHostError as e:
-                    _log.warning("closing sink %s: %s", url, e)
-            self._sinks.clear()
+            for url in list(self._sinks):
+                self._close_sink(url)
             self._sinks_for = None
+
+    # ------------------------------------------------------------------ reload
+    def _maybe_reload(self, rig: Optional[Rig]) -> bool:
+        """Apply a requested reload; ``rig`` is the open rig (None: none). True: close the rig, open the new one."""
+        if not self._reload_requested:
+            return False
+        self._reload_requested = False
+        _log.info("reloading the config")
+        self.notifier.notify(reloading=1, monotonic_usec=time.monotonic_ns() // 1000, status="reloading the config")
+        try:
+            with self.watchdog.allow(self.config.health.open_allowance_s, "reloading the config"):
+                changed = self._reload(rig)
+        except Exception as e:  # noqa: BLE001 - whatever a reload hits, the running service must not die of it
+            self.health.reload_failures += 1
+            self.health.reload_error = self.health.last_error = f"reload refused: {e}"
+            _log.error("%s; running on with the config loaded before", self.health.last_error,
+                       exc_info=not isinstance(e, DaemonConfigError))  # a bug's traceback, not a bad file's
+            self.notifier.notify(ready=1, status=self.health.last_error[:200])
+            return False
+        self.health.reloads += 1
+        self.health.reload_error = None
+        _log.info("config reloaded: %s", ", ".join(changed) or "nothing changed")
+        _log.debug("the config now: %s", json.dumps(config_to_dict(self.config), sort_keys=True))
+        self.notifier.notify(ready=1, status=self.health.status_line())
+        return "rig.url" in changed and rig is not None
+
+    def _reload(self, rig: Optional[Rig]) -> list[str]:
+        """Read, check and apply the config file again; returns what changed.
+
+        Everything that can fail (the file, its URLs, the model and, for the open rig, the estimator) is
+        done before anything is swapped, so a refusal leaves the daemon exactly as it was.
+
+        :raises DaemonConfigError: the reload is refused.
+        """
+        if self._reload_config is None:
+            raise DaemonConfigError("this daemon was started without a config file to read again")
+        old, new = self.config, self._reload_config()
+        check_sink_urls(new.sinks, **self._sink_kwargs)
+        changed = [name for name in ("rig.url", "rig", "sinks", "estimator", "health", "log_level")
+                   if _part(old, name) != _part(new, name)]
+        if "rig.url" in changed:
+            try:
+                drivers.create_rig_source(new.rig.url, **self._rig_kwargs)  # parses the URL; opens nothing
+            except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
+                raise DaemonConfigError(str(e), key="rig.url") from None
+            except drivers.DriverError:
+                pass  # a device or recording not there yet: waited for, as at start
+        session, built = self._session, None
+        if "estimator" in changed:
+            try:
+                session = load_session(new.estimator)
+                if rig is not None and "rig.url" not in changed:  # built now, so a misfit is refused too
+                    built = Estimator(session, rig, new.estimator)
+            except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the new settings cannot use
+                raise DaemonConfigError(f"does not load: {e}", key="estimator") from None
+        # Accepted: swap, then touch only what changed.
+        self.config = new
+        if "estimator" in changed:
+            if self._estimator is not None:
+                self._estimator.close()
+            self._session, self._estimator = session, built  # None: built when the rig opens
+            self._rig_text = dumps_rig(rig) if built is not None and rig is not None else None
+        if "health" in changed:
+            self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
+            self._next_status = 0.0
+        if "sinks" in changed and rig is not None and "rig.url" not in changed:
+            self._open_sinks(rig)  # added ones opened, removed ones closed; the others stream on
+        if "rig" in changed:
+            self._backoff_s = min(self._backoff_s, new.rig.reopen_max_s)
+        if self._on_reload is not None:
+            self._on_reload(new)
+        return changed
 
     def _set_fault(self, fault: Fault) -> None:
         with self._fault_lock:
@@ -373,7 +495,7 @@ class Daemon:
         deadline = self._clock() + seconds
         while not stop.is_set():
             left = deadline - self._clock()
-            if left <= 0:
+            if left <= 0 or self._reload_requested:  # the reloaded config may name another rig or backoff
                 return
             self.watchdog.beat("waiting to reopen the rig")
             self._tick()

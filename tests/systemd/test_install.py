@@ -99,6 +99,8 @@ def test_unit_and_daemon_agree():
     assert service["Type"] == "notify"  # the daemon sends READY=1 (firmware_host.daemon.service)
     assert service["RestartPreventExitStatus"] == "2"  # the CLI's exit status for what a restart cannot fix
     assert service["Restart"] == "on-failure"
+    # systemctl reload: the signal the CLI reloads the config on, sent to the daemon itself.
+    assert service["ExecReload"].split()[1:] == ["-HUP", "$MAINPID"]
     default = load_daemon_config(REPO / "systemd/daemon.json")
     # The status file lives in the folder systemd creates for the service.
     assert Path(default.health.status_file).parent == Path("/run") / service["RuntimeDirectory"]

@@ -122,3 +122,71 @@ def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
     assert report["state"] == "stopping" and report["pairs"]["estimated"] > 0
     rows = [json.loads(line) for line in (tmp_path / "joints.jsonl").read_text().splitlines()]
     assert sum(r["type"] == "JOINTS" for r in rows) == report["pairs"]["estimated"]
+
+
+def _notes_until(sock: socket.socket, proc: subprocess.Popen, notes: list[dict[str, str]], done, what: str,
+                 timeout: float = 120) -> None:
+    """Read systemd notifications into ``notes`` until ``done(notes)``; fail naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            data = sock.recv(4096).decode()
+        except socket.timeout:
+            assert proc.poll() is None, proc.communicate()[1]
+            continue
+        notes.append(dict(line.split("=", 1) for line in data.splitlines()))
+        if done(notes):
+            return
+    pytest.fail(f"{what}: not seen in {notes}")
+
+
+@needs_model
+def test_sighup_reloads_the_config_file_and_refuses_a_broken_one(tmp_path):
+    sock_path = tmp_path / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(sock_path))
+    sock.settimeout(1.0)
+    status = tmp_path / "status.json"
+    config = {
+        "rig": {"url": f"sim://?fps=30&width=320&height=240&cache={tmp_path / 'sim-cache'}"},
+        "sinks": [f"file://{tmp_path / 'first.jsonl'}"],
+        "estimator": {"session": {"model_dir": str(MODELS)}},
+        "health": {"status_file": str(status), "status_every_s": 0.2},
+    }
+    path = _write(tmp_path, config)
+    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "JOURNAL_STREAM": "8:1"}
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    notes: list[dict[str, str]] = []
+    try:
+        _notes_until(sock, proc, notes, lambda ns: ns[-1].get("STATUS", "").startswith("running:"), "running")
+        # systemctl reload: a second sink and debug logging, applied without a restart.
+        _write(tmp_path, {**config, "sinks": config["sinks"] + [f"file://{tmp_path / 'second.jsonl'}"],
+                          "log_level": "debug"})
+        proc.send_signal(signal.SIGHUP)
+        _notes_until(sock, proc, notes, lambda ns: "RELOADING" in ns[-1], "RELOADING=1")
+        _notes_until(sock, proc, notes, lambda ns: ns[-1].get("READY") == "1", "READY=1 after the reload")
+        # A file broken mid-edit: refused, the daemon runs on with the config it had.
+        path.write_text('{"rig": {"url": ')
+        proc.send_signal(signal.SIGHUP)
+        _notes_until(sock, proc, notes, lambda ns: ns[-1].get("STATUS", "").startswith("reload refused"),
+                     "the refusal")
+        assert notes[-1]["READY"] == "1"
+        _notes_until(sock, proc, notes, lambda ns: ns[-1].get("STATUS", "").startswith("running:"),
+                     "running after the refusal")
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        sock.close()
+    assert proc.returncode == 0, err
+    assert "config reloaded: sinks, log_level" in err
+    assert f"reload refused: {path}: " in err and "running on with the config loaded before" in err
+    assert "DEBUG ghnerf.daemon: the config now: " in err  # the reloaded log level took effect
+    assert "Traceback" not in err
+    report = json.loads(status.read_text())
+    assert report["config"]["reloads"] == 1 and report["config"]["reload_failures"] == 1
+    assert report["rig"]["opens"] == 1
+    second = [json.loads(line) for line in (tmp_path / "second.jsonl").read_text().splitlines()]
+    assert sum(r["type"] == "JOINTS" for r in second) > 0

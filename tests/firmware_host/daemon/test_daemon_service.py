@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import drivers
-from firmware_host.daemon import Daemon, DaemonStartError, daemon_config_from_dict
+from firmware_host.daemon import Daemon, DaemonConfigError, DaemonStartError, daemon_config_from_dict
 from firmware_host.daemon.health import State
 from firmware_host.daemon.notify import SystemdNotifier
 from firmware_host.protocol.constants import Fault
@@ -277,3 +277,136 @@ def test_a_sink_url_with_camera_names_is_refused_at_start(tmp_path):
     cfg = _config({"url": "sim://"}, tmp_path, sinks=["memory://?cameras=a,b"])
     with pytest.raises(DaemonStartError, match=r"sinks\[0\]: .*cameras="):
         Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
+
+
+# ---------------------------------------------------------------- reloading the config (SIGHUP)
+class _Configs:
+    """What ``reload_config`` returns next: a config, or the error a bad file raises."""
+
+    def __init__(self) -> None:
+        self.next: object = None
+
+    def __call__(self):
+        if isinstance(self.next, Exception):
+            raise self.next
+        return self.next
+
+
+def _notes_after(notes: list[dict[str, str]], key: str) -> list[dict[str, str]]:
+    k = next(i for i, n in enumerate(notes) if key in n)
+    return notes[k:]
+
+
+def test_a_reload_adds_and_removes_sinks_while_the_others_stream_on(sim_url, tmp_path):
+    first, second = "memory://?status_s=0.05", "memory://?status_s=0.06"
+    configs = _Configs()
+    with _Running(_config({"url": sim_url}, tmp_path, sinks=[first]), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 5, timeout=60, what="5 estimated pairs")
+        kept = run.daemon.sinks[first]
+        configs.next = _config({"url": sim_url}, tmp_path, sinks=[first, second])
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 1, timeout=30, what="the reload")
+        added = run.daemon.sinks[second]
+        assert run.daemon.sinks[first] is kept  # not reopened: its client sees no gap and no new HELLO
+        sent = kept.stats().sent
+        wait_until(lambda: added.stats().sent >= 5 and kept.stats().sent >= sent + 5, timeout=60,
+                   what="joints on the added sink and on the kept one")
+        configs.next = _config({"url": sim_url}, tmp_path, sinks=[second])
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 2, timeout=30, what="the second reload")
+        assert list(run.daemon.sinks) == [second]
+        assert run.finish() == 0
+    # One stream on the kept sink from start to stop (its messages decode as one, every estimate in it).
+    assert sum(isinstance(m, Joints) for m in messages_of(kept.read())) == kept.stats().sent >= 10
+    assert any(isinstance(m, Hello) for m in messages_of(added.read()))
+    assert run.daemon.health.rig_opens == 1 and run.daemon.health.reload_failures == 0
+    reloading = _notes_after(run.notes, "RELOADING")
+    assert reloading[0]["MONOTONIC_USEC"].isdigit()
+    assert any("READY" in n for n in reloading[1:])  # systemd's reload job completes
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["config"] == {"reloads": 2, "reload_failures": 0, "reload_error": None}
+    assert report["sinks"][first]["sent"] == kept.stats().sent  # a removed sink's counters stay in the report
+
+
+def test_a_bad_reload_is_refused_and_the_daemon_runs_on_unchanged(sim_url, tmp_path):
+    broken = tmp_path / "broken-models"
+    broken.mkdir()
+    (broken / "encoder.onnx").write_bytes(b"\x08\x07garbage")
+    configs = _Configs()
+    cfg = _config({"url": sim_url}, tmp_path)
+    with _Running(cfg, tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 5, timeout=60, what="5 estimated pairs")
+        estimator, sinks = run.daemon._estimator, run.daemon.sinks
+        configs.next = DaemonConfigError("unknown key", key="daemon.json: rig.ulr")  # what a typo'd file raises
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reload_failures == 1, timeout=30, what="the first refusal")
+        assert "rig.ulr" in run.daemon.health.reload_error
+        bad_model = daemon_config_from_dict({**_config_dict(sim_url, tmp_path),
+                                             "estimator": {"session": {"model_dir": str(broken)}}})
+        configs.next = bad_model
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reload_failures == 2, timeout=60, what="the second refusal")
+        assert run.daemon.health.reload_error.startswith("reload refused: estimator: does not load")
+        assert str(broken) in run.daemon.health.reload_error
+        seen = run.daemon.health.pairs_estimated
+        wait_until(lambda: run.daemon.health.pairs_estimated > seen + 5, timeout=60, what="pairs after the refusals")
+        assert run.daemon.config is cfg and run.daemon._estimator is estimator and run.daemon.sinks == sinks
+        report = json.loads((tmp_path / "status.json").read_text())
+        assert report["config"]["reload_failures"] == 2 and str(broken) in report["config"]["reload_error"]
+        assert run.finish() == 0
+    refused = [n for n in run.notes if n.get("STATUS", "").startswith("reload refused")]
+    assert len(refused) == 2 and all(n.get("READY") == "1" for n in refused)
+    assert run.daemon.health.reloads == 0 and run.daemon.health.rig_opens == 1
+
+
+def _config_dict(url: str, tmp_path: Path) -> dict:
+    return {"rig": {"url": url}, "sinks": ["memory://?status_s=0.05"],
+            "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
+            "health": {"status_file": str(tmp_path / "status.json"), "status_every_s": 0.05}}
+
+
+def test_a_reload_of_the_estimator_and_health_keeps_the_rig_open(sim_url, tmp_path):
+    configs = _Configs()
+    with _Running(_config({"url": sim_url}, tmp_path), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 5, timeout=60, what="5 estimated pairs")
+        before = run.daemon._estimator
+        data = _config_dict(sim_url, tmp_path)
+        data["estimator"]["smoothing"] = {"beta": 3.0}
+        data["health"]["slow_estimate_s"] = 0.4
+        configs.next = daemon_config_from_dict(data)
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 1, timeout=60, what="the reload")
+        seen = run.daemon.health.pairs_estimated
+        wait_until(lambda: run.daemon.health.pairs_estimated > seen + 5, timeout=60, what="pairs after the reload")
+        after = run.daemon._estimator
+        assert after is not before and after.config.smoothing.beta == 3.0
+        assert run.daemon.watchdog._interval <= 0.2  # woken often enough for the new slow_estimate_s
+        assert run.finish() == 0
+    assert run.daemon.health.rig_opens == 1 and run.daemon.health.rig_lost == 0
+
+
+def test_a_reload_with_another_rig_url_opens_it(sim_url, tmp_path):
+    configs = _Configs()
+    with _Running(_config({"url": sim_url}, tmp_path), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 5, timeout=60, what="5 estimated pairs")
+        other = sim_url.replace("width=320&height=240", "width=256&height=192")
+        configs.next = _config({"url": other}, tmp_path)
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.rig_opens == 2, timeout=60, what="the new rig opened")
+        seen = run.daemon.health.pairs_estimated
+        wait_until(lambda: run.daemon.health.pairs_estimated > seen + 5, timeout=60, what="pairs from the new rig")
+        assert run.daemon._estimator.rig.pair[0].width == 256  # rebuilt for the new calibration
+        assert run.finish() == 0
+    assert run.daemon.health.rig_lost == 0 and run.daemon.health.rig_url == other
+
+
+def test_a_reload_while_waiting_for_an_absent_rig_opens_the_new_one(sim_url, tmp_path):
+    configs = _Configs()
+    absent = {"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 30, "reopen_max_s": 30}
+    with _Running(_config(absent, tmp_path), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.rig_open_failures >= 1, timeout=30, what="a failed open")
+        configs.next = _config({"url": sim_url}, tmp_path)
+        run.daemon.request_reload()  # not after the 30 s backoff: the wait watches for a reload too
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 3, timeout=20, what="pairs from the reloaded rig")
+        assert run.finish() == 0
+    assert run.daemon.health.rig_opens == 1
