@@ -132,7 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.validate_config:
             print(json.dumps(config_to_dict(read_checked_config(args.config)), indent=2))
             return 0
-        config = load_daemon_config(args.config)
+        config = read_checked_config(args.config)  # as a reload checks it: what starts also reloads
     except DaemonConfigError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2

@@ -108,14 +108,17 @@ class Health:
         }
 
     def status_line(self) -> str:
-        """One line for systemd's ``STATUS=`` (``systemctl status ghnerf``)."""
+        """One line for systemd's ``STATUS=`` (``systemctl status ghnerf``); a refused reload stays on it
+        until one is accepted (``systemctl reload`` returns before the daemon has read the file)."""
         if self.state == State.RUNNING:
             r = self.report()["estimator"]
             lat = f", {r['latency_ms_median']:.0f} ms" if r["latency_ms_median"] is not None else ""
-            return f"running: {r['pairs_per_s']:.1f} pairs/s{lat}, {self.pairs_estimated} estimated"
-        if self.state == State.WAITING and self.last_error:
-            return f"waiting for the rig: {self.last_error}"[:200]
-        return self.state
+            line = f"running: {r['pairs_per_s']:.1f} pairs/s{lat}, {self.pairs_estimated} estimated"
+        elif self.state == State.WAITING and self.last_error and self.last_error != self.reload_error:
+            line = f"waiting for the rig: {self.last_error}"
+        else:
+            line = self.state
+        return (f"{line}; {self.reload_error}" if self.reload_error else line)[:200]
 
 
 def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:

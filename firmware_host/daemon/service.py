@@ -63,11 +63,24 @@ from ghnerf_runtime.rig_file import dumps_rig
 __all__ = ["Daemon", "DaemonStartError", "check_sink_urls"]
 
 
+#: The parts of the config a reload tells apart ("rig": its fields but the url).
+_PARTS = ("rig.url", "rig", "sinks", "estimator", "health", "log_level")
+
+
 def _part(config: DaemonConfig, name: str) -> Any:
     """One part of the config by its name, for telling what a reload changed ("rig": all but its url)."""
     if name == "rig.url":
         return config.rig.url
     return dataclasses.replace(config.rig, url="sim://") if name == "rig" else getattr(config, name)
+
+
+def _session_key(config: DaemonConfig) -> tuple:
+    """What :func:`load_session` loads for this config: the same key, the same session (kept across a reload)."""
+    from ghnerf_runtime.session import ModelSession  # as load_session does: importable without a model
+
+    est = config.estimator
+    return (est.session, tuple(est.required_graphs(ModelSession.has_graph_file(est.session, "human"))),
+            est.joints3d.uses_skeleton_prior(True), est.novel_view.uses_painter(True))
 
 _log = logging.getLogger("ghnerf.daemon")
 
@@ -258,7 +271,7 @@ class Daemon:
         self.health.enter(State.RUNNING)
         last_pair = self._clock()
         while not stop.is_set():
-            if self._maybe_reload(source.rig):
+            if "rig.url" in self._maybe_reload(source.rig):
                 self._reopen_rig = True  # run() closes this rig and opens the new rig.url
                 return False
             rig_cfg = self.config.rig  # a reload may have changed its timeouts
@@ -339,20 +352,21 @@ class Daemon:
             for url in self.config.sinks:
                 if url not in self._sinks:
                     try:
-                        self._sinks[url] = self._open_sink(url, key)
+                        self._sinks[url] = self._build_sink(url, key).start()
                     except FirmwareHostError as e:
                         self._close_sinks()
                         raise DaemonStartError(f"sinks: {e}") from None
             self._sinks_for = key
 
-    def _open_sink(self, url: str, key: tuple[str, tuple[str, ...]]) -> Sink:
+    def _build_sink(self, url: str, key: tuple[str, tuple[str, ...]]) -> Sink:
+        """The sink of ``url`` for a rig's (id, camera names), built but not started (it holds nothing yet)."""
         kw = dict(self._sink_kwargs)
         kw["cameras"] = key[1]  # 2D joints are keyed by index in rig.pair order
         if "rig_id" not in parse_url(url).query:
             kw["rig_id"] = key[0]
         sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
         self._apply_fault(sink)  # before start: its first STATUS already carries the fault
-        return sink.start()
+        return sink
 
     def _close_sink(self, url: str) -> None:
         sink = self._sinks.pop(url)
@@ -369,10 +383,11 @@ class Daemon:
             self._sinks_for = None
 
     # ------------------------------------------------------------------ reload
-    def _maybe_reload(self, rig: Optional[Rig]) -> bool:
-        """Apply a requested reload; ``rig`` is the open rig (None: none). True: close the rig, open the new one."""
+    def _maybe_reload(self, rig: Optional[Rig]) -> list[str]:
+        """Apply a requested reload; ``rig`` is the open rig (None: none). Returns what changed (``_reload``);
+        empty when nothing was requested, nothing changed or the reload was refused."""
         if not self._reload_requested:
-            return False
+            return []
         self._reload_requested = False
         _log.info("reloading the config")
         self.notifier.notify(reloading=1, monotonic_usec=time.monotonic_ns() // 1000, status="reloading the config")
@@ -384,20 +399,23 @@ class Daemon:
             self.health.reload_error = self.health.last_error = f"reload refused: {e}"
             _log.error("%s; running on with the config loaded before", self.health.last_error,
                        exc_info=not isinstance(e, DaemonConfigError))  # a bug's traceback, not a bad file's
-            self.notifier.notify(ready=1, status=self.health.last_error[:200])
-            return False
+            self.notifier.notify(ready=1, status=self.health.status_line())
+            return []
         self.health.reloads += 1
         self.health.reload_error = None
         _log.info("config reloaded: %s", ", ".join(changed) or "nothing changed")
         _log.debug("the config now: %s", json.dumps(config_to_dict(self.config), sort_keys=True))
         self.notifier.notify(ready=1, status=self.health.status_line())
-        return "rig.url" in changed and rig is not None
+        return changed
 
     def _reload(self, rig: Optional[Rig]) -> list[str]:
-        """Read, check and apply the config file again; returns what changed.
+        """Read, check and apply the config file again; returns the parts that changed (``_PARTS``).
 
-        Everything that can fail (the file, its URLs, the model and, for the open rig, the estimator) is
-        done before anything is swapped, so a refusal leaves the daemon exactly as it was.
+        Everything that can fail is done first, while nothing of the running daemon has changed: the
+        file and its checks, the rig URL, the model (loaded again only when the session's settings or
+        graphs change) and the new estimator, built for the open rig or, while none is open, the rig
+        the estimator was last built for; the added sinks, built for the open rig's id and camera names.
+        The swap after that cannot fail, so a refusal leaves the daemon exactly as it was.
 
         :raises DaemonConfigError: the reload is refused.
         """
@@ -405,8 +423,7 @@ class Daemon:
             raise DaemonConfigError("this daemon was started without a config file to read again")
         old, new = self.config, self._reload_config()
         check_sink_urls(new.sinks, **self._sink_kwargs)
-        changed = [name for name in ("rig.url", "rig", "sinks", "estimator", "health", "log_level")
-                   if _part(old, name) != _part(new, name)]
+        changed = [name for name in _PARTS if _part(old, name) != _part(new, name)]
         if "rig.url" in changed:
             try:
                 drivers.create_rig_source(new.rig.url, **self._rig_kwargs)  # parses the URL; opens nothing
@@ -414,30 +431,47 @@ class Daemon:
                 raise DaemonConfigError(str(e), key="rig.url") from None
             except drivers.DriverError:
                 pass  # a device or recording not there yet: waited for, as at start
-        session, built = self._session, None
+        session, estimator = self._session, self._estimator
         if "estimator" in changed:
+            fit = rig if rig is not None else (self._estimator.rig if self._estimator is not None else None)
             try:
-                session = load_session(new.estimator)
-                if rig is not None and "rig.url" not in changed:  # built now, so a misfit is refused too
-                    built = Estimator(session, rig, new.estimator)
+                if _session_key(new) != _session_key(old):
+                    session = load_session(new.estimator)
+                # Built now, so a model or settings that do not fit the rig are refused too.
+                estimator = Estimator(session, fit, new.estimator) \
+                    if fit is not None and "rig.url" not in changed else None
             except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the new settings cannot use
                 raise DaemonConfigError(f"does not load: {e}", key="estimator") from None
-        # Accepted: swap, then touch only what changed.
+        added: dict[str, Sink] = {}
+        if self._sinks_for is not None and "rig.url" not in changed:  # else: opened with the next rig
+            for url in new.sinks:
+                if url not in self._sinks:
+                    try:
+                        added[url] = self._build_sink(url, self._sinks_for)
+                    except FirmwareHostError as e:  # the real rig id or camera names do not fit this sink
+                        raise DaemonConfigError(str(e), key=f"sinks[{new.sinks.index(url)}]") from None
+        # Accepted: swap, touching only what changed (nothing below raises).
         self.config = new
-        if "estimator" in changed:
+        if "estimator" in changed:  # (then ``estimator`` is a new one, or None)
             if self._estimator is not None:
                 self._estimator.close()
-            self._session, self._estimator = session, built  # None: built when the rig opens
-            self._rig_text = dumps_rig(rig) if built is not None and rig is not None else None
+            self._session, self._estimator = session, estimator  # None: built when the next rig opens
+            self._rig_text = dumps_rig(estimator.rig) if estimator is not None else None
+        with self._fault_lock:
+            for url in [u for u in self._sinks if u not in new.sinks]:
+                self._close_sink(url)  # at once, rig or not: a removed serial sink frees its port now
+            for url, sink in added.items():
+                self._sinks[url] = sink.start()
         if "health" in changed:
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0
-        if "sinks" in changed and rig is not None and "rig.url" not in changed:
-            self._open_sinks(rig)  # added ones opened, removed ones closed; the others stream on
         if "rig" in changed:
             self._backoff_s = min(self._backoff_s, new.rig.reopen_max_s)
         if self._on_reload is not None:
-            self._on_reload(new)
+            try:
+                self._on_reload(new)
+            except Exception:  # noqa: BLE001 - the reload is applied; a failing hook must not undo or hide it
+                _log.exception("after the reload")
         return changed
 
     def _set_fault(self, fault: Fault) -> None:
@@ -491,12 +525,15 @@ class Daemon:
                 self._status_file_failing = True
 
     def _wait(self, stop: threading.Event, seconds: float) -> None:
-        """Sleep ``seconds`` or until stopped, beating the watchdog and refreshing the status."""
+        """Sleep ``seconds`` or until stopped, beating the watchdog, refreshing the status and taking a reload
+        (a new ``rig`` section ends the wait: the next attempt uses it)."""
         deadline = self._clock() + seconds
         while not stop.is_set():
             left = deadline - self._clock()
-            if left <= 0 or self._reload_requested:  # the reloaded config may name another rig or backoff
+            if left <= 0:
                 return
+            if {"rig.url", "rig"} & set(self._maybe_reload(None)):  # (no rig is open while it waits)
+                return  # another rig or backoff: try it now
             self.watchdog.beat("waiting to reopen the rig")
             self._tick()
             stop.wait(min(left, 0.2))

@@ -354,7 +354,7 @@ def test_a_bad_reload_is_refused_and_the_daemon_runs_on_unchanged(sim_url, tmp_p
         report = json.loads((tmp_path / "status.json").read_text())
         assert report["config"]["reload_failures"] == 2 and str(broken) in report["config"]["reload_error"]
         assert run.finish() == 0
-    refused = [n for n in run.notes if n.get("STATUS", "").startswith("reload refused")]
+    refused = [n for n in run.notes if "READY" in n and "reload refused: " in n.get("STATUS", "")]
     assert len(refused) == 2 and all(n.get("READY") == "1" for n in refused)
     assert run.daemon.health.reloads == 0 and run.daemon.health.rig_opens == 1
 
@@ -410,3 +410,95 @@ def test_a_reload_while_waiting_for_an_absent_rig_opens_the_new_one(sim_url, tmp
         wait_until(lambda: run.daemon.health.pairs_estimated >= 3, timeout=20, what="pairs from the reloaded rig")
         assert run.finish() == 0
     assert run.daemon.health.rig_opens == 1
+
+
+# The reload's own logic, on a daemon that is not running (no model: the estimator and session are stand-ins).
+class _StubEstimator:
+    def __init__(self, rig) -> None:
+        self.rig, self.closed = rig, False
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def _idle_daemon(tmp_path: Path, sinks: list[str], configs: _Configs, rig) -> Daemon:
+    from firmware_host.sinks import open_sink
+
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path, sinks=sinks), notifier=SystemdNotifier({}),
+                    reload_config=configs)
+    daemon._session, daemon._estimator = object(), _StubEstimator(rig)
+    key = (rig.rig_id, tuple(c.name for c in rig.pair))
+    for url in sinks:  # as _open_sinks leaves them for this rig
+        daemon._sinks[url] = open_sink(url, cameras=key[1], **({} if "rig_id" in url else {"rig_id": key[0]}))
+    daemon._sinks_for = key
+    return daemon
+
+
+def test_a_sink_that_does_not_fit_the_rig_is_refused_before_anything_changes(tmp_path):
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build(rig_id="a-rig-id-too-long-for-the-hello-message")  # kept sinks name their own
+    first = "memory://?rig_id=short"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [first], configs, rig)
+    kept, cfg = daemon.sinks[first], daemon.config
+    try:
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[first, "memory://?status_s=0.06"])
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == []
+        assert daemon.health.reload_failures == 1 and "sinks[1]" in daemon.health.reload_error
+        assert daemon.config is cfg and daemon.sinks == {first: kept}  # nothing swapped, nothing closed
+        assert not kept._closed
+    finally:
+        daemon._close_sinks()
+
+
+def test_a_sink_removed_while_the_rig_is_away_is_closed_at_once(tmp_path):
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build()
+    first, second = "memory://?status_s=0.05", "memory://?status_s=0.06"
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, [first, second], configs, rig)
+    removed = daemon.sinks[second]
+    try:
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[first])
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == ["sinks"]  # no rig open: the serial port it held is freed now
+        assert list(daemon.sinks) == [first] and removed._closed
+    finally:
+        daemon._close_sinks()
+
+
+def test_an_estimator_reload_while_the_rig_is_away_is_built_for_the_last_rig(tmp_path, monkeypatch):
+    import firmware_host.daemon.service as service
+    from drivers.sim.placement import RigPlacement
+
+    rig = RigPlacement().build()
+    configs = _Configs()
+    daemon = _idle_daemon(tmp_path, ["memory://"], configs, rig)
+    old, session = daemon._estimator, daemon._session
+    built_for = []
+
+    def misfit(session_, rig_, config_):
+        built_for.append(rig_)
+        raise ValueError("this rig cannot be used with these settings")
+
+    monkeypatch.setattr(service, "Estimator", misfit)
+    data = _config_dict("sim://", tmp_path)
+    data["sinks"] = ["memory://"]
+    data["estimator"]["smoothing"] = {"beta": 3.0}  # the same graphs and session settings: no model load
+    configs.next = daemon_config_from_dict(data)
+    try:
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == []
+        assert built_for == [rig]  # the rig it ran on last, not deferred to the next open
+        assert "estimator: does not load: this rig cannot be used" in daemon.health.reload_error
+        assert daemon._estimator is old and not old.closed and daemon._session is session
+        monkeypatch.setattr(service, "Estimator", lambda s, r, c: _StubEstimator(r))
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == ["estimator"]
+        assert old.closed and daemon._estimator.rig is rig and daemon._session is session  # the model not reloaded
+        assert daemon.health.status_line() == "starting"  # an accepted reload clears the refusal from STATUS
+    finally:
+        daemon._close_sinks()
