@@ -112,7 +112,7 @@ class HealthConfig:
             (``docs/daemon.md`` lists its fields); ``null``: none. The unit file uses
             ``/run/ghnerf/status.json``.
         status_every_s: how often the report (and systemd's ``STATUS=`` line) is refreshed.
-        open_allowance_s: how long opening the rig may block the main loop before the watchdog
+        open_allowance_s: how long opening the rig (or a reload) may block the main loop before the watchdog
             treats the daemon as hung (an OAK boots its firmware in a few seconds).
         loop_allowance_s: how long one pass of the main loop (a read plus an estimate) may take
             before the watchdog treats the daemon as hung: systemd's ``WATCHDOG=1`` pings stop, the

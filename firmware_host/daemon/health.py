@@ -114,11 +114,14 @@ class Health:
             r = self.report()["estimator"]
             lat = f", {r['latency_ms_median']:.0f} ms" if r["latency_ms_median"] is not None else ""
             line = f"running: {r['pairs_per_s']:.1f} pairs/s{lat}, {self.pairs_estimated} estimated"
-        elif self.state == State.WAITING and self.last_error and self.last_error != self.reload_error:
+        elif self.state == State.WAITING and self.last_error:
             line = f"waiting for the rig: {self.last_error}"
         else:
             line = self.state
-        return (f"{line}; {self.reload_error}" if self.reload_error else line)[:200]
+        if not self.reload_error:
+            return line[:200]
+        refused = f"; {self.reload_error}"[:120]  # kept whole however long the rig's error is
+        return line[:200 - len(refused)] + refused
 
 
 def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:

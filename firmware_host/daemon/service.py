@@ -74,6 +74,13 @@ def _part(config: DaemonConfig, name: str) -> Any:
     return dataclasses.replace(config.rig, url="sim://") if name == "rig" else getattr(config, name)
 
 
+def _stand_in_rig() -> Rig:
+    """A plausible rig (the simulator's default placement) to check estimator settings against while no rig is known."""
+    from drivers.sim.placement import RigPlacement  # local: the simulator's scene is not needed otherwise
+
+    return RigPlacement().build(rig_id="stand-in")
+
+
 def _session_key(config: DaemonConfig) -> tuple:
     """What :func:`load_session` loads for this config: the same key, the same session (kept across a reload)."""
     from ghnerf_runtime.session import ModelSession  # as load_session does: importable without a model
@@ -183,8 +190,8 @@ class Daemon:
                     break
                 if self.health.pairs_read == read_before:
                     # Opened but lost before a single pair (a flapping device): back off as after a failed open.
-                    self._wait(stop, self._backoff_s)
-                    self._backoff_s = min(self._backoff_s * 2, self.config.rig.reopen_max_s)
+                    if self._wait(stop, self._backoff_s):
+                        self._backoff_s = min(self._backoff_s * 2, self.config.rig.reopen_max_s)
         finally:
             self._shutdown()
         return 0
@@ -204,7 +211,7 @@ class Daemon:
         text = dumps_rig(rig)
         if self._estimator is None or text != self._rig_text:
             if self._estimator is not None:
-                _log.warning("the rig came back with another calibration (%s): estimator rebuilt", rig.rig_id)
+                _log.warning("rig %s has another calibration than the estimator's: estimator rebuilt", rig.rig_id)
                 self._estimator.close()
             try:
                 self._estimator = Estimator(self._session, rig, self.config.estimator)
@@ -241,8 +248,8 @@ class Daemon:
                 self.health.last_error = f"cannot open {rig_cfg.url}: {e}"
                 self.health.enter(State.WAITING)
                 _log.warning("%s; retrying in %.1f s", self.health.last_error, self._backoff_s)
-                self._wait(stop, self._backoff_s)
-                self._backoff_s = min(self._backoff_s * 2, rig_cfg.reopen_max_s)
+                if self._wait(stop, self._backoff_s):  # not cut short by a new rig section
+                    self._backoff_s = min(self._backoff_s * 2, self.config.rig.reopen_max_s)
                 continue
             except BaseException:
                 self._close_rig(source)
@@ -373,7 +380,7 @@ class Daemon:
         try:
             sink.close()
             self._closed_sink_stats[url] = self._stats_of(sink)
-        except FirmwareHostError as e:
+        except Exception as e:  # noqa: BLE001 - a link that fails even to close (a USB error): it is gone
             _log.warning("closing sink %s: %s", url, e)
 
     def _close_sinks(self) -> None:
@@ -396,15 +403,16 @@ class Daemon:
                 changed = self._reload(rig)
         except Exception as e:  # noqa: BLE001 - whatever a reload hits, the running service must not die of it
             self.health.reload_failures += 1
-            self.health.reload_error = self.health.last_error = f"reload refused: {e}"
-            _log.error("%s; running on with the config loaded before", self.health.last_error,
+            self.health.reload_error = f"reload refused: {e}"  # (last_error keeps the rig's or estimator's)
+            _log.error("%s; running on with the config loaded before", self.health.reload_error,
                        exc_info=not isinstance(e, DaemonConfigError))  # a bug's traceback, not a bad file's
             self.notifier.notify(ready=1, status=self.health.status_line())
             return []
         self.health.reloads += 1
         self.health.reload_error = None
         _log.info("config reloaded: %s", ", ".join(changed) or "nothing changed")
-        _log.debug("the config now: %s", json.dumps(config_to_dict(self.config), sort_keys=True))
+        if _log.isEnabledFor(logging.DEBUG):
+            _log.debug("the config now: %s", json.dumps(config_to_dict(self.config), sort_keys=True))
         self.notifier.notify(ready=1, status=self.health.status_line())
         return changed
 
@@ -433,15 +441,22 @@ class Daemon:
                 pass  # a device or recording not there yet: waited for, as at start
         session, estimator = self._session, self._estimator
         if "estimator" in changed:
+            # Built now, so a model or settings that do not fit are refused, not found when a rig opens: for
+            # the open rig, or the one it last ran on; with none (or another rig.url) for a stand-in rig, as
+            # what the settings need of the model does not depend on the rig.
             fit = rig if rig is not None else (self._estimator.rig if self._estimator is not None else None)
+            keep = fit is not None and "rig.url" not in changed
+            allowance = max(old.health.open_allowance_s, new.health.open_allowance_s)
             try:
-                if _session_key(new) != _session_key(old):
-                    session = load_session(new.estimator)
-                # Built now, so a model or settings that do not fit the rig are refused too.
-                estimator = Estimator(session, fit, new.estimator) \
-                    if fit is not None and "rig.url" not in changed else None
+                with self.watchdog.allow(allowance, "loading the model for a reload"):
+                    if _session_key(new) != _session_key(old):
+                        session = load_session(new.estimator)
+                    estimator = Estimator(session, fit if keep else _stand_in_rig(), new.estimator)
             except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the new settings cannot use
                 raise DaemonConfigError(f"does not load: {e}", key="estimator") from None
+            if not keep:
+                estimator.close()
+                estimator = None  # built for the rig when it opens
         added: dict[str, Sink] = {}
         if self._sinks_for is not None and "rig.url" not in changed:  # else: opened with the next rig
             for url in new.sinks:
@@ -465,8 +480,10 @@ class Daemon:
         if "health" in changed:
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0
-        if "rig" in changed:
-            self._backoff_s = min(self._backoff_s, new.rig.reopen_max_s)
+        if "rig.url" in changed:
+            self._backoff_s = new.rig.reopen_min_s  # a new rig is tried at once, then from the start of its backoff
+        elif "rig" in changed:
+            self._backoff_s = min(max(self._backoff_s, new.rig.reopen_min_s), new.rig.reopen_max_s)
         if self._on_reload is not None:
             try:
                 self._on_reload(new)
@@ -524,19 +541,20 @@ class Daemon:
                     _log.warning("cannot write the status file %s: %s", path, e)
                 self._status_file_failing = True
 
-    def _wait(self, stop: threading.Event, seconds: float) -> None:
-        """Sleep ``seconds`` or until stopped, beating the watchdog, refreshing the status and taking a reload
-        (a new ``rig`` section ends the wait: the next attempt uses it)."""
+    def _wait(self, stop: threading.Event, seconds: float) -> bool:
+        """Sleep ``seconds`` or until stopped, beating the watchdog, refreshing the status and taking a reload;
+        a new ``rig`` section ends the wait (the next attempt uses it: False). True: waited it out (or stopped)."""
         deadline = self._clock() + seconds
         while not stop.is_set():
             left = deadline - self._clock()
             if left <= 0:
-                return
+                return True
             if {"rig.url", "rig"} & set(self._maybe_reload(None)):  # (no rig is open while it waits)
-                return  # another rig or backoff: try it now
+                return False  # another rig or backoff: try it now
             self.watchdog.beat("waiting to reopen the rig")
             self._tick()
             stop.wait(min(left, 0.2))
+        return True
 
     def _shutdown(self) -> None:
         self.health.enter(State.STOPPING)

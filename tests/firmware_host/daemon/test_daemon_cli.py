@@ -192,3 +192,19 @@ def test_sighup_reloads_the_config_file_and_refuses_a_broken_one(tmp_path):
     assert report["rig"]["opens"] == 1
     second = [json.loads(line) for line in (tmp_path / "second.jsonl").read_text().splitlines()]
     assert sum(r["type"] == "JOINTS" for r in second) > 0
+
+
+def test_the_start_runs_the_checks_a_reload_runs(tmp_path, capsys):
+    """A rig file whose id the stream cannot announce: refused at start (exit 2), as a reload refuses it, rather
+    than waiting for an OAK and failing once it is plugged in."""
+    from ghnerf_runtime.geometry.rig import Rig
+    from ghnerf_runtime.rig_file import load_rig, save_rig
+
+    rig = load_rig(REPO / "docs/examples/rig.json")
+    long_id = tmp_path / "rig.json"
+    save_rig(Rig(rig.cameras, rig.volume, rig_id="a rig id far longer than the streams 32 characters"), long_id)
+    size = f"width={rig.pair[0].width}&height={rig.pair[0].height}"
+    path = _write(tmp_path, {"rig": {"url": f"depthai://?rig={long_id}&{size}"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    assert cli.main(["--config", str(path)]) == 2
+    assert f"ghnerf-daemon: error: {path}: rig.url: " in capsys.readouterr().err

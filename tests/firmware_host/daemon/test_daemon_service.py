@@ -502,3 +502,59 @@ def test_an_estimator_reload_while_the_rig_is_away_is_built_for_the_last_rig(tmp
         assert daemon.health.status_line() == "starting"  # an accepted reload clears the refusal from STATUS
     finally:
         daemon._close_sinks()
+
+
+def test_an_estimator_reload_before_any_rig_is_checked_on_a_stand_in(tmp_path, monkeypatch):
+    import firmware_host.daemon.service as service
+    from ghnerf_runtime.errors import ModelError
+
+    configs = _Configs()
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path), notifier=SystemdNotifier({}), reload_config=configs)
+    daemon._session = session = object()  # loaded; no rig opened yet (the OAK not plugged in)
+    built_for = []
+
+    def lacks_the_prior(session_, rig_, config_):
+        built_for.append(rig_.rig_id)
+        raise ModelError("joints3d.skeleton_prior = 'on' but the session has no skeleton prior")
+
+    monkeypatch.setattr(service, "Estimator", lacks_the_prior)
+    data = _config_dict("sim://", tmp_path)
+    data["estimator"]["smoothing"] = {"beta": 3.0}
+    configs.next = daemon_config_from_dict(data)
+    daemon.request_reload()
+    assert daemon._maybe_reload(None) == []  # refused now, not an exit 2 once the camera is plugged in
+    assert built_for == ["stand-in"] and "no skeleton prior" in daemon.health.reload_error
+    probes = []
+    monkeypatch.setattr(service, "Estimator", lambda s, r, c: probes.append(_StubEstimator(r)) or probes[-1])
+    daemon.request_reload()
+    assert daemon._maybe_reload(None) == ["estimator"]
+    assert probes[0].closed and daemon._estimator is None and daemon._session is session  # built at the open
+
+
+def test_a_refused_reload_keeps_the_backoff_and_a_new_rig_is_tried_at_once(tmp_path):
+    configs = _Configs()
+    cfg = _config({"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 0.3, "reopen_max_s": 30}, tmp_path)
+    daemon = Daemon(cfg, notifier=SystemdNotifier({}), reload_config=configs)
+    stop = threading.Event()
+    configs.next = DaemonConfigError("not valid JSON", key="daemon.json")
+    daemon.request_reload()
+    t0 = time.monotonic()
+    assert daemon._wait(stop, 0.6) is True  # waited it out: the refusal changed nothing
+    assert time.monotonic() - t0 >= 0.6 and daemon.health.reload_failures == 1
+    daemon._backoff_s = 8.0  # after a few failed opens
+    configs.next = _config({"url": "sim://?fps=15", "reopen_min_s": 0.05, "reopen_max_s": 2}, tmp_path)
+    daemon.request_reload()
+    assert daemon._wait(stop, 30.0) is False  # ended at once: the next attempt opens the new rig
+    assert daemon._backoff_s == 0.05  # and backs off from the new rig's start, not the old rig's 8 s
+
+
+def test_the_status_line_keeps_a_refusal_whatever_the_rig_error(tmp_path):
+    from firmware_host.daemon.health import Health
+
+    health = Health(rig_url="depthai://")
+    health.enter(State.WAITING)
+    health.last_error = "cannot open depthai://: " + "X_LINK_DEVICE_NOT_FOUND " * 20
+    health.reload_error = "reload refused: /etc/ghnerf/daemon.json: rig.ulr: unknown key"
+    line = health.status_line()
+    assert len(line) <= 200 and line.startswith("waiting for the rig: cannot open depthai://")
+    assert line.endswith("; reload refused: /etc/ghnerf/daemon.json: rig.ulr: unknown key")
