@@ -421,9 +421,9 @@ class Daemon:
 
         Everything that can fail is done first, while nothing of the running daemon has changed: the
         file and its checks, the rig URL, the model (loaded again only when the session's settings or
-        graphs change) and the new estimator, built for the open rig or, while none is open, the rig
-        the estimator was last built for; the added sinks, built for the open rig's id and camera names.
-        The swap after that cannot fail, so a refusal leaves the daemon exactly as it was.
+        graphs change) and the new estimator, built for the open rig, else the rig the estimator was
+        last built for, else a stand-in; the added sinks, built for the rig's id and camera names when
+        one has been open. The swap after that cannot fail, so a refusal leaves the daemon as it was.
 
         :raises DaemonConfigError: the reload is refused.
         """
