@@ -2,7 +2,8 @@
 
 Backends (imported only when chosen): ``sim://`` (simulated rig filming a synthetic person),
 ``replay://DIR`` (a recording), ``record+<url>`` (record while passing through),
-``depthai://[device-id]`` (Luxonis OAK through depthai 3.x).
+``depthai://[device-id]`` (Luxonis OAK through depthai 3.x), ``opencv://?first=..&second=..``
+(two cameras OpenCV opens: USB webcams, video files, streams).
 """
 from drivers.base import RigSource
 from drivers.clock import ManualClock, MonotonicClock

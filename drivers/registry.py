@@ -15,6 +15,7 @@ BACKENDS: dict[str, tuple[str, str]] = {
     "sim": ("drivers.backends.sim", "SimRigSource"),
     "replay": ("drivers.backends.replay", "ReplayRigSource"),
     "depthai": ("drivers.backends.depthai", "DepthaiRigSource"),
+    "opencv": ("drivers.backends.opencv", "OpenCVRigSource"),
 }
 
 RECORD_PREFIX = "record+"
@@ -37,7 +38,8 @@ def open_rig(url: str, **kwargs) -> RigSource:
     """Open a rig source by URL and return it (already opened; use it as a context manager).
 
     Examples: ``sim://``, ``sim://?fps=30&seed=3&motion=wave``, ``replay:///data/take1``,
-    ``record+sim://?out=/tmp/take1``, ``depthai://`` (first device) or ``depthai://<device-id>``.
+    ``record+sim://?out=/tmp/take1``, ``depthai://`` (first device) or ``depthai://<device-id>``,
+    ``opencv://?first=0&second=1&rig=rig.json`` (two webcams).
     Keyword arguments (``clock=``, ``pairing=``, ``rig=`` ...) go to the backend.
     """
     return create_rig_source(url, **kwargs).open()

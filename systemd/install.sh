@@ -8,7 +8,7 @@
 # What it does: a virtual environment with the runtime only (no PyTorch) at PREFIX/venv, pinned by
 # constraints.txt; the models and docs under PREFIX; the unit file, the udev rules and, when none is
 # there yet, /etc/ghnerf/daemon.json (an existing config is never overwritten); a system user
-# `ghnerf` in plugdev and dialout; the config checked with --validate-config; then systemd and
+# `ghnerf` in plugdev, dialout and video; the config checked with --validate-config; then systemd and
 # udev reloaded and the service enabled and started. docs/daemon.md has the details.
 set -euo pipefail
 
@@ -64,9 +64,10 @@ fi
 if [ -z "$DESTDIR" ]; then
     getent group plugdev >/dev/null || groupadd --system plugdev
     getent group dialout >/dev/null || groupadd --system dialout
+    getent group video >/dev/null || groupadd --system video
     if ! id ghnerf >/dev/null 2>&1; then
         useradd --system --home-dir /var/lib/ghnerf --no-create-home --shell /usr/sbin/nologin \
-            --user-group --groups plugdev,dialout ghnerf
+            --user-group --groups plugdev,dialout,video ghnerf
     fi
 fi
 

@@ -77,6 +77,10 @@ def check_config(config: DaemonConfig) -> None:
     except drivers.DriverError:
         pass  # a recording or device not there yet: the daemon waits for it, so the config is fine
     rig_file = parse_qs(urlsplit(config.rig.url).query).get("rig")
+    if urlsplit(config.rig.url).scheme == "opencv" and not rig_file:
+        # Its rig without a file is a nominal one, for ghcal capture: 3D joints from it would be wrong.
+        raise DaemonConfigError("opencv:// cameras need their calibration: add rig=/path/to/rig.json (ghcal solve)",
+                                key="rig.url")
     if rig_file:  # a calibration of our own (ghcal): the stream announces its id and camera names
         try:
             rig = load_rig(rig_file[0])

@@ -7,7 +7,7 @@ import time
 import pytest
 
 # Threads our backends start (render pool, recorder); none may outlive a test.
-_OUR_THREADS = ("sim-render", "rig-recorder")
+_OUR_THREADS = ("sim-render", "rig-recorder", "opencv ")
 
 
 @pytest.fixture(scope="session")

@@ -132,6 +132,10 @@ def test_check_config_reads_a_rig_file_named_in_the_url(tmp_path):
         check_config(cfg(f"depthai://?rig={long_id}&{size}"))
     with pytest.raises(DaemonConfigError, match=r"^rig\.url: .*missing\.json"):
         check_config(cfg(f"depthai://?rig={tmp_path / 'missing.json'}&{size}"))
+    # Webcams: only with their calibration (without one their rig is a nominal stand-in, for ghcal capture).
+    check_config(cfg(f"opencv://?first=0&second=1&rig={REPO_RIG}"))
+    with pytest.raises(DaemonConfigError, match=r"^rig\.url: opencv:// cameras need their calibration: add rig="):
+        check_config(cfg("opencv://?first=0&second=1"))
 
 
 @pytest.mark.parametrize("doc", ["docs/daemon.md", "README.md", "systemd/daemon.json"])
