@@ -558,3 +558,29 @@ def test_the_status_line_keeps_a_refusal_whatever_the_rig_error(tmp_path):
     line = health.status_line()
     assert len(line) <= 200 and line.startswith("waiting for the rig: cannot open depthai://")
     assert line.endswith("; reload refused: /etc/ghnerf/daemon.json: rig.ulr: unknown key")
+
+
+def test_on_two_videos_through_opencv(sim_url, tmp_path):
+    """The daemon on ``opencv://``: two videos of a simulated take (what two webcams would give, OpenCV
+    decoding them at their pace) with the take's rig file; the shipped model finds the person in them."""
+    import cv2
+
+    from ghnerf_runtime.rig_file import save_rig
+
+    with drivers.open_rig(sim_url.replace("fps=30", "fps=30&policy=all"), clock=drivers.ManualClock()) as source:
+        pairs = [source.read(timeout_s=5) for _ in range(30)]
+        save_rig(source.rig, tmp_path / "rig.json")
+        names = [c.name for c in source.rig.pair]
+    for k, name in enumerate(names):
+        writer = cv2.VideoWriter(str(tmp_path / f"{name}.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (320, 240))
+        for pair in pairs:
+            writer.write(pair.images[k])
+        writer.release()
+    url = f"opencv://?first={tmp_path / 'left.avi'}&second={tmp_path / 'right.avi'}&rig={tmp_path / 'rig.json'}"
+    with _Running(_config({"url": url}, tmp_path), tmp_path) as run:
+        run.thread.join(timeout=60)  # rig.exit_at_end: the videos' end stops it
+        assert not run.thread.is_alive() and run.rc == [0]
+    assert run.daemon.health.pairs_estimated >= 20 and run.daemon.health.rig_lost == 0
+    assert "ended after 30 frames" in run.daemon.health.last_error
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["estimator"]["joints_found"] > 0.8  # the person, seen through two lossy videos
