@@ -39,7 +39,7 @@ def open_rig(url: str, **kwargs) -> RigSource:
 
     Examples: ``sim://``, ``sim://?fps=30&seed=3&motion=wave``, ``replay:///data/take1``,
     ``record+sim://?out=/tmp/take1``, ``depthai://`` (first device) or ``depthai://<device-id>``,
-    ``opencv://?first=0&second=1&rig=rig.json`` (two webcams).
+    ``opencv://?first=/dev/video0&second=/dev/video2&rig=rig.json`` (two webcams).
     Keyword arguments (``clock=``, ``pairing=``, ``rig=`` ...) go to the backend.
     """
     return create_rig_source(url, **kwargs).open()

@@ -3,44 +3,59 @@
 For a rig without an OAK: two webcams calibrated with ``ghcal``, or two videos of one take played
 as if live. Examples::
 
-    opencv://?first=0&second=1                                   # two webcams, a nominal rig: for ghcal capture
-    opencv://?first=0&second=1&rig=/etc/ghnerf/rig.json          # the same, calibrated (ghcal solve)
-    opencv://?first=/dev/video2&second=/dev/video4&rig=rig.json&fourcc=MJPG&fps=30
-    opencv://?first=take/left.mp4&second=take/right.mp4&rig=rig.json   # two synchronised videos
+    opencv://?first=/dev/v4l/by-id/usb-A-video-index0&second=/dev/v4l/by-id/usb-B-video-index0
+    opencv://?first=/dev/video0&second=/dev/video2&rig=/etc/ghnerf/rig.json&fourcc=MJPG&fps=30
+    opencv://?first=take/left.mp4&second=take/right.mp4&rig=rig.json   # two videos of one take
 
 Options:
 
 * ``first``, ``second`` (required): what ``cv2.VideoCapture`` opens for the rig's first and second
-  camera: a device index (``0``), a device path (``/dev/video2``), a video file, or a stream URL
-  (percent-encoded inside the query: ``rtsp%3A%2F%2Fcam1%2Fstream``).
+  camera: a device path, a device index (``0``), a video file, or a stream URL (percent-encoded
+  inside the query: ``rtsp%3A%2F%2Fcam1%2Fstream``). Prefer the stable paths under
+  ``/dev/v4l/by-id/`` (or ``by-path/``, for two webcams of one model): indices can swap between
+  boots, which would swap left and right under a rig file of the same size, and on Linux each
+  webcam usually takes two nodes (``/dev/video0`` and its metadata node ``/dev/video1``), so the
+  second webcam is ``/dev/video2``, not ``1``.
 * ``rig``: the rig file (``ghcal solve``); its first two cameras are ``first`` and ``second``, in
-  that order, and their image size is what the cameras must deliver. Without it the source has a
-  nominal, uncalibrated rig (``hfov``, ``names``): enough for ``ghcal capture``, not for 3D joints.
-* ``width``, ``height``, ``fps``, ``fourcc``: asked of live cameras (default: the rig's size, the
-  camera's own rate and format); what a camera really delivers is checked against the rig at
-  :meth:`open`. Two webcams on one USB bus usually need ``fourcc=MJPG``.
+  that order, and their image sizes are asked of the cameras and checked on every frame. Without
+  it the source has a nominal, uncalibrated rig (``hfov``, ``names``, the size the cameras deliver):
+  enough for ``ghcal capture``, not for 3D joints (the daemon refuses it).
+* ``width``, ``height`` (without ``rig``): the size asked of live cameras; ``fps``, ``fourcc``: the
+  rate and format asked of live cameras (two webcams on one USB bus usually need ``fourcc=MJPG``).
+  A size a camera does not deliver is an error at :meth:`open`; a rate or format it does not take
+  is a warning. ``fps`` is also the pace of a video whose file does not state its rate.
 * ``api``: OpenCV's capture backend: ``any`` (default), ``v4l2``, ``ffmpeg``, ``gstreamer``,
   ``dshow``, ``msmf``, ``avfoundation``.
-* ``names``: the two camera names of the nominal rig (default ``left,right``); ``hfov``: its
-  horizontal field of view in degrees (default 70).
-* ``loop`` (videos): start over at the end instead of ending the stream.
-* ``tolerance_ms``: pairing tolerance (default: half a frame period at ``fps``, or at 30 fps);
-  ``policy``: ``latest`` (default) or ``all``; ``queue``: frames held per camera (default 4).
+* ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
+  horizontal field of view in degrees (20 to 150, default 70).
+* ``loop`` (two videos of the same length): start over at the end instead of ending the stream.
+* ``tolerance_ms``: pairing tolerance (default: half a frame period of the slower camera's rate as
+  it reports it, else ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
+  ``queue``: frames held per camera for the reader (default 4; under ``all`` a video waits for
+  room instead of dropping); ``open_timeout_s``: how long :meth:`open` waits for each camera's
+  first frame (default 10).
 
-Timing. Each camera has its own grabbing thread. A live camera's frame is stamped with the host's
-monotonic clock as it is grabbed: webcams are not synchronised in hardware, so a pair is two
-frames within ``tolerance_ms`` (the default pairs each frame with the other camera's nearest one;
-a person moving fast is seen up to half a frame apart by the two cameras, which an OAK's shared
-trigger avoids). A video file is paced at its own frame rate from a start shared by both files and
-stamped by its frame number, so two videos of one take pair exactly as recorded. Not modelled:
+Timing. Each camera has its own thread that grabs, decodes and queues its frames, and owns its
+capture (opened, read and released on that thread's watch: a capture is never released while it
+is being read). A live camera's frame is stamped with the host's monotonic clock when its grab
+returns. Webcams are not synchronised in hardware, so a pair is two frames within ``tolerance_ms``:
+the default pairs each frame with the other camera's nearest, so a fast movement is seen up to
+half a frame apart by the two cameras (an OAK's shared trigger avoids that). A network stream's
+frames are stamped on arrival, after its own buffering, which may differ between the two streams.
+A video file is a file on disk (anything else is live): it is paced at its rate from a start
+shared by both files and stamped by its frame number, so two constant-rate videos that start at
+the same instant pair frame by frame (a phone's variable-rate video drifts). Not modelled:
 exposure, white balance or rolling-shutter differences between the two cameras.
 
-A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the next
-read, after the frames it delivered before; a video's end raises :class:`EndOfStream` the same way.
+Ends. A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the
+next read, after the frames it delivered before. When a video ends, the stream ends
+(:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
+can follow, so a longer video is not played out to its end.
 """
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections import deque
@@ -72,14 +87,15 @@ log = logging.getLogger(__name__)
 #: ``api=`` -> OpenCV's capture backend constant.
 APIS = {"any": cv2.CAP_ANY, "v4l2": cv2.CAP_V4L2, "ffmpeg": cv2.CAP_FFMPEG, "gstreamer": cv2.CAP_GSTREAMER,
         "dshow": cv2.CAP_DSHOW, "msmf": cv2.CAP_MSMF, "avfoundation": cv2.CAP_AVFOUNDATION}
-VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".webm", ".m4v", ".mpg", ".mpeg")
-#: Frame rate assumed for pacing a video whose container does not say.
+#: Frame rate assumed where neither the camera nor ``fps=`` says.
 FALLBACK_FPS = 30.0
+#: The nominal rig's field of view bounds (those of :class:`drivers.sim.placement.RigPlacement`).
+HFOV_RANGE = (20.0, 150.0)
 
 
 @dataclass(frozen=True)
 class OpenCVOptions:
-    """The URL's options, validated (see the module docstring)."""
+    """The URL's options, validated (see the module docstring). ``tolerance_ms`` None: from the cameras' rate."""
 
     first: str
     second: str
@@ -93,47 +109,56 @@ class OpenCVOptions:
     hfov_deg: float = 70.0
     loop: bool = False
     queue: int = 4
-    pairing: PairingConfig = field(default_factory=PairingConfig)
+    open_timeout_s: float = 10.0
+    tolerance_ms: float | None = None
+    policy: DropPolicy = DropPolicy.LATEST
 
     @classmethod
     def from_url(cls, url: RigUrl) -> "OpenCVOptions":
+        def fail(message: str) -> RigConfigError:
+            return RigConfigError(f"rig URL {url.url!r}: {message}")
+
         if url.target:
-            raise RigConfigError(f"rig URL {url.url!r}: name the cameras with first= and second=, "
-                                 f"e.g. opencv://?first=0&second=1")
+            raise fail("name the cameras with first= and second=, e.g. opencv://?first=/dev/video0&second=/dev/video2")
         first, second = url.take_str("first"), url.take_str("second")
         for name, value in (("first", first), ("second", second)):
             if not value:
-                raise RigConfigError(f"rig URL {url.url!r}: option {name}= (a device index, a device path, a video "
-                                     f"file or a stream URL) is required")
+                raise fail(f"option {name}= (a device path or index, a video file or a stream URL) is required")
+        if first == second:
+            raise fail(f"first= and second= are the same camera ({first!r})")
+        rig_path = url.take_str("rig")
+        given = set(url.options)
         fourcc = url.take_str("fourcc")
         if fourcc is not None and (len(fourcc) != 4 or not fourcc.isascii() or not fourcc.isprintable()):
-            raise RigConfigError(f"rig URL {url.url!r}: option fourcc={fourcc!r} must be four characters, e.g. MJPG")
+            raise fail(f"option fourcc={fourcc!r} must be four characters, e.g. MJPG")
         names = tuple(n.strip() for n in (url.take_str("names", "left,right") or "").split(","))
         if len(names) != 2 or not all(names) or names[0] == names[1]:
-            raise RigConfigError(f"rig URL {url.url!r}: option names= must be two different names, e.g. left,right")
-        fps = url.take_float("fps", 0.0, lo=0.0, hi=1000.0) or None
-        tolerance_default = 500.0 / (fps or FALLBACK_FPS)  # half a frame period: every frame finds its nearest
+            raise fail("option names= must be two different names, e.g. left,right")
         options = cls(
             first=first, second=second,  # type: ignore[arg-type]
-            rig_path=url.take_str("rig"),
-            width=url.take_int("width", 0, lo=0, hi=16384) or None,
-            height=url.take_int("height", 0, lo=0, hi=16384) or None,
-            fps=fps,
+            rig_path=rig_path,
+            width=url.take_int("width", 0, lo=16, hi=16384) or None,
+            height=url.take_int("height", 0, lo=16, hi=16384) or None,
+            fps=url.take_float("fps", 0.0, lo=0.1, hi=1000.0) or None,
             fourcc=fourcc,
             api=url.take_str("api", "any", choices=tuple(APIS)) or "any",
             names=(names[0], names[1]),
-            hfov_deg=url.take_float("hfov", 70.0, lo=10.0, hi=170.0),
+            hfov_deg=url.take_float("hfov", 70.0, lo=HFOV_RANGE[0], hi=HFOV_RANGE[1]),
             loop=url.take_bool("loop", False),
             queue=url.take_int("queue", 4, lo=1, hi=256),
-            pairing=PairingConfig(
-                tolerance_ms=url.take_float("tolerance_ms", tolerance_default, lo=0.001, hi=10_000.0),
-                policy=DropPolicy(url.take_str("policy", DropPolicy.LATEST.value,
-                                               choices=tuple(p.value for p in DropPolicy))),
-            ),
+            open_timeout_s=url.take_float("open_timeout_s", 10.0, lo=0.1, hi=600.0),
+            tolerance_ms=url.take_float("tolerance_ms", 0.0, lo=0.001, hi=10_000.0) or None,
+            policy=DropPolicy(url.take_str("policy", DropPolicy.LATEST.value,
+                                           choices=tuple(p.value for p in DropPolicy))),
         )
         url.finish()
         if (options.width is None) != (options.height is None):
-            raise RigConfigError(f"rig URL {url.url!r}: give width= and height= together")
+            raise fail("give width= and height= together")
+        if rig_path is not None:
+            pointless = sorted(given & {"width", "height", "names", "hfov"})
+            if pointless:
+                raise fail(f"option(s) {pointless} do not apply with rig= (the rig file sets the cameras' names "
+                           f"and sizes)")
         return options
 
 
@@ -143,66 +168,140 @@ def capture_target(spec: str) -> int | str:
 
 
 def is_video_file(spec: str) -> bool:
-    """A file played at its own pace (not a live camera or stream)."""
-    return not spec.isdigit() and "://" not in spec and spec.lower().endswith(VIDEO_SUFFIXES)
+    """A file on disk, played at its own pace; anything else (a device, a stream) is live."""
+    return not spec.isdigit() and "://" not in spec and not spec.startswith("/dev/") and os.path.isfile(spec)
 
 
 class _Camera:
-    """One ``cv2.VideoCapture`` and the thread that grabs from it into the shared queue."""
+    """One ``cv2.VideoCapture`` and the thread that owns it: grabs, decodes, checks and queues its frames."""
 
-    def __init__(self, name: str, spec: str, capture: Any, source: "OpenCVRigSource") -> None:
-        self.name, self.spec, self.capture, self.source = name, spec, capture, source
+    def __init__(self, name: str, spec: str, size: tuple[int, int] | None, source: "OpenCVRigSource") -> None:
+        self.name, self.spec, self.source = name, spec, source
+        self.size = size  # (width, height) every frame must have; None: the first frame's (a nominal rig)
         self.video = is_video_file(spec)
-        fps = float(capture.get(cv2.CAP_PROP_FPS) or 0.0)
-        self.fps = fps if 0.0 < fps < 1000.0 else (source.options.fps or FALLBACK_FPS)
+        self.capture: Any = None
+        self.fps = 0.0  # as the camera or file reports it (0: unknown)
+        self.frame_count = 0  # a video's, as its container says (0: unknown)
         self.index = 0
+        self.last_stamp_ns = -1
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
 
-    def size(self) -> tuple[int, int]:
-        return int(self.capture.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self.capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    # The capture is opened on the caller's thread (errors are raised from open()), then only the
+    # camera's own thread touches it, and releases it when it stops.
+    def open(self) -> None:
+        o = self.source.options
+        capture = self.source._capture_factory(capture_target(self.spec), APIS[o.api])
+        if not capture.isOpened():
+            capture.release()
+            raise RigInitializationError(
+                f"camera {self.name!r}: OpenCV cannot open {self.spec!r} (api={o.api}): "
+                + ("not a video OpenCV decodes" if self.video else
+                   "not plugged in, busy in another program, no permission (the video group), or not this index "
+                   "(a webcam's second node is its metadata: use /dev/v4l/by-id/ paths)"))
+        self.capture = capture
+        if not self.video:
+            # FOURCC first: a webcam offers its larger sizes only compressed.
+            if o.fourcc:
+                capture.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*o.fourcc))
+            if self.size is not None:
+                capture.set(cv2.CAP_PROP_FRAME_WIDTH, self.size[0])
+                capture.set(cv2.CAP_PROP_FRAME_HEIGHT, self.size[1])
+            if o.fps:
+                capture.set(cv2.CAP_PROP_FPS, o.fps)
+            got_fourcc = int(capture.get(cv2.CAP_PROP_FOURCC))
+            if o.fourcc and got_fourcc and got_fourcc != cv2.VideoWriter_fourcc(*o.fourcc):
+                log.warning("camera %r (%s) did not take fourcc=%s", self.name, self.spec, o.fourcc)
+        fps = float(capture.get(cv2.CAP_PROP_FPS) or 0.0)
+        self.fps = fps if 0.0 < fps < 1000.0 else 0.0
+        if not self.video and o.fps and self.fps and abs(self.fps - o.fps) > 0.5:
+            log.warning("camera %r (%s) runs at %.1f fps, not the fps=%g asked", self.name, self.spec, self.fps, o.fps)
+        self.frame_count = max(int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0), 0) if self.video else 0
+
+    def release(self) -> None:
+        if self.capture is not None:
+            try:
+                self.capture.release()
+            except Exception as e:  # noqa: BLE001 - releasing a vanished device: it is gone either way
+                log.debug("opencv: releasing %s: %s", self.spec, e)
+            self.capture = None
+
+    @property
+    def pace_fps(self) -> float:
+        return self.fps or self.source.options.fps or FALLBACK_FPS
 
     def _run(self) -> None:
         src = self.source
-        since_rewind = 0  # frames since the start (or the last rewind): a video that yields none never loops
         try:
-            while not src._stop.is_set():
-                if not self.capture.grab():
-                    if self.video and src.options.loop and since_rewind > 0:
-                        self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)  # indices and stamps run on across passes
-                        since_rewind = 0
-                        continue
-                    if self.video:
-                        src._end(self.name, EndOfStream(f"video {self.spec} (camera {self.name!r}) ended after "
-                                                        f"{self.index} frames"))
-                    else:
-                        src._put(RigDisconnectedError(f"camera {self.name!r} ({self.spec}) stopped delivering frames "
-                                                      f"(unplugged?)"))
-                    return
-                grabbed_ns = src.clock.now_ns()
-                since_rewind += 1
-                ok, image = self.capture.retrieve()
-                if not ok or image is None:
-                    src._put(RigDisconnectedError(f"camera {self.name!r} ({self.spec}): a grabbed frame could not be "
-                                                  f"decoded"))
-                    return
-                if self.video:  # paced: due at its frame number's time from the shared start
-                    stamp = src._anchor_ns + round(self.index * 1e9 / self.fps)
-                    src.clock.sleep_until(stamp)
-                else:
-                    stamp = grabbed_ns
-                src._put(Frame(camera=self.name, image=_bgr(image), timestamp_ns=stamp, index=self.index))
-                self.index += 1
+            self._grab_loop()
         except Exception as e:  # noqa: BLE001 - a capture backend failing: the reader gets it, typed
-            src._put(RigOperationError(f"camera {self.name!r} ({self.spec}): {type(e).__name__}: {e}"))
+            src._fail(RigOperationError(f"camera {self.name!r} ({self.spec}): {type(e).__name__}: {e}"))
+        finally:
+            self.release()
+
+    def _grab_loop(self) -> None:
+        src = self.source
+        since_rewind = 0
+        while not src._stop.is_set():
+            if not self.capture.grab():
+                if self.video and src.options.loop and since_rewind > 0:
+                    # Each video starts over at its own end: two of one length stay paired frame by frame, as
+                    # indices and stamps run on across passes; two of different lengths would not.
+                    if not src._passed(self, since_rewind):
+                        return
+                    self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                    since_rewind = 0
+                    continue
+                if self.video:
+                    src._end(self, EndOfStream(f"video {self.spec} (camera {self.name!r}) ended after {self.index} "
+                                               f"frames"))
+                elif self.index == 0:
+                    src._fail(RigInitializationError(
+                        f"camera {self.name!r} ({self.spec}) opened but delivered no frame (two webcams on one USB "
+                        f"bus: try fourcc=MJPG, a smaller size or a lower fps)"))
+                else:
+                    src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}) stopped delivering frames "
+                                                   f"(unplugged?)"))
+                return
+            grabbed_ns = src.clock.now_ns()
+            since_rewind += 1
+            ok, image = self.capture.retrieve()
+            if not ok or image is None:
+                src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}): a grabbed frame could not be "
+                                               f"decoded"))
+                return
+            image = _bgr(image)
+            if image is None or (self.size is not None and (image.shape[1], image.shape[0]) != self.size):
+                got = "an image that is not 8-bit colour or grey" if image is None else \
+                    f"{image.shape[1]}x{image.shape[0]}"
+                want = "" if self.size is None else (
+                    f", but its rig camera is {self.size[0]}x{self.size[1]}" if src._fixed_rig is not None else
+                    f", not the width={self.size[0]}&height={self.size[1]} asked")
+                src._fail(RigOperationError(f"camera {self.name!r} ({self.spec}) delivered {got}{want}"))
+                return
+            if self.size is None:
+                self.size = (image.shape[1], image.shape[0])
+            if self.video:  # paced: due at its frame number's time from the shared start
+                stamp = src._anchor_ns + round(self.index * 1e9 / self.pace_fps)
+                if src._stop.wait(max(0.0, (stamp - src.clock.now_ns()) / 1e9)):
+                    return
+            else:
+                stamp = max(grabbed_ns, self.last_stamp_ns + 1)
+            if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
+                            wait=self.video and src.options.policy is DropPolicy.ALL):
+                return
+            self.last_stamp_ns = stamp
+            self.index += 1
 
 
-def _bgr(image: np.ndarray) -> np.ndarray:
-    """``(H, W, 3)`` uint8 BGR, as every frame is (a grey camera's frames are expanded)."""
-    if image.ndim == 2:
-        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-    if image.shape[2] == 4:
+def _bgr(image: np.ndarray) -> np.ndarray | None:
+    """``(H, W, 3)`` uint8 BGR, as every frame is (grey and BGRA converted); None for anything else."""
+    if image.dtype != np.uint8:
+        return None
+    if image.ndim == 2 or (image.ndim == 3 and image.shape[2] == 1):
+        return cv2.cvtColor(image.reshape(image.shape[:2]), cv2.COLOR_GRAY2BGR)
+    if image.ndim == 3 and image.shape[2] == 4:
         return cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
-    return image
+    return image if image.ndim == 3 and image.shape[2] == 3 else None
 
 
 class OpenCVRigSource(RigSource):
@@ -219,20 +318,27 @@ class OpenCVRigSource(RigSource):
     def __init__(self, options: OpenCVOptions, *, rig: Rig | None = None,
                  capture_factory: Callable[[int | str, int], Any] = cv2.VideoCapture,
                  pairing: PairingConfig | None = None, clock: Clock | None = None) -> None:
-        super().__init__(None, pairing=pairing or options.pairing, clock=clock)
         if clock is not None and not isinstance(clock, MonotonicClock):
             raise RigConfigError("opencv:// runs on the real clock (its cameras do)")
+        self._pairing_given = pairing is not None or options.tolerance_ms is not None
+        super().__init__(None, pairing=pairing or PairingConfig(
+            tolerance_ms=options.tolerance_ms or 500.0 / (options.fps or FALLBACK_FPS), policy=options.policy),
+            clock=clock)
         self.options = options
         self._fixed_rig = rig
         self._capture_factory = capture_factory
         self._cameras: list[_Camera] = []
         self._queue: deque[Frame | Exception] = deque()
         self._per_camera: dict[str, int] = {}
-        self._ended: set[str] = set()  # cameras whose video has ended
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._anchor_ns = 0
-        self.frames_overflowed = 0  # taken from a full per-camera queue before the reader got to them
+        self._ending: tuple[int, EndOfStream] | None = None  # a video ended: (its last stamp, the end to raise)
+        self._failed = False  # an end or a failure is queued: later frames are not
+        self._delivered: set[str] = set()  # cameras that queued a frame (open() waits for both)
+        self._ended: set[str] = set()  # videos that ended
+        self._pass_frames: dict[str, int] = {}  # loop: frames in a pass, per video
+        self.frames_overflowed = 0  # live frames dropped from a full queue before the reader took them
 
     @classmethod
     def from_url(cls, url: RigUrl, *, rig: Rig | None = None,
@@ -244,109 +350,154 @@ class OpenCVRigSource(RigSource):
                 rig = load_rig(options.rig_path)
             except RigFileError as e:
                 raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
-        if rig is not None and options.width is not None and (options.width, options.height) != \
-                (rig.pair[0].width, rig.pair[0].height):
-            raise RigConfigError(f"rig URL {url.url!r}: width={options.width}&height={options.height} but the rig "
-                                 f"file's cameras are {rig.pair[0].width}x{rig.pair[0].height}")
         return cls(options, rig=rig, capture_factory=capture_factory, pairing=pairing, clock=clock)
 
     # ------------------------------------------------------------------ hooks
     def _open(self) -> None:
         o = self.options
-        names = (self._fixed_rig.pair[0].name, self._fixed_rig.pair[1].name) if self._fixed_rig else o.names
+        if self._fixed_rig is not None:
+            specs = [(c.name, spec, (c.width, c.height)) for c, spec in zip(self._fixed_rig.pair, (o.first, o.second))]
+        else:
+            size = (o.width, o.height) if o.width else None
+            specs = [(name, spec, size) for name, spec in zip(o.names, (o.first, o.second))]
+        self._cameras = [_Camera(name, spec, size, self) for name, spec, size in specs]
+        self._per_camera = {cam.name: 0 for cam in self._cameras}
         try:
-            for name, spec in zip(names, (o.first, o.second)):
-                self._cameras.append(_Camera(name, spec, self._start_capture(name, spec), self))
-            sizes = [cam.size() for cam in self._cameras]
+            for cam in self._cameras:
+                cam.open()
+            videos = [cam for cam in self._cameras if cam.video]
+            if o.loop and len(videos) == 2 and videos[0].frame_count != videos[1].frame_count:
+                raise RigInitializationError(
+                    f"loop=1: the videos have {videos[0].frame_count} and {videos[1].frame_count} frames; looping "
+                    f"them would pair different instants from the second pass on (trim them to one length)")
+            if not self._pairing_given:  # half a frame period of the slower camera, as it reports its rate
+                rate = min(cam.fps or o.fps or FALLBACK_FPS for cam in self._cameras)
+                self.pairing = PairingConfig(tolerance_ms=500.0 / rate, policy=o.policy)
+            self._anchor_ns = self.clock.now_ns()
+            for cam in self._cameras:
+                cam.thread.start()
+            sizes = self._first_frames()
             rig = self._fixed_rig or self._nominal_rig(sizes)
-            for cam, size, rig_cam in zip(self._cameras, sizes, rig.pair):
-                if size != (rig_cam.width, rig_cam.height):
-                    raise RigInitializationError(
-                        f"camera {cam.name!r} ({cam.spec}) delivers {size[0]}x{size[1]} but the rig's camera is "
-                        f"{rig_cam.width}x{rig_cam.height}" + ("" if cam.video else "; it may not offer that size "
-                                                               "(v4l2-ctl --list-formats-ext lists what it does)"))
         except BaseException:
-            self._release()
+            self._close()
             raise
         if self._fixed_rig is None:
             log.warning("opencv://: no rig= given: a nominal, uncalibrated rig (%g deg field of view) names the "
                         "cameras; calibrate with ghcal before trusting 3D joints", o.hfov_deg)
         self._set_rig(rig)
-        self._per_camera = {cam.name: 0 for cam in self._cameras}
-        self._anchor_ns = self.clock.now_ns()
-        for cam in self._cameras:
-            cam.thread.start()
 
-    def _start_capture(self, name: str, spec: str) -> Any:
-        o = self.options
-        capture = self._capture_factory(capture_target(spec), APIS[o.api])
-        if not capture.isOpened():
-            capture.release()
-            raise RigInitializationError(f"camera {name!r}: OpenCV cannot open {spec!r} (api={o.api}): "
-                                         + ("no such file or not a video OpenCV decodes" if is_video_file(spec) else
-                                            "not plugged in, busy in another program, or no permission "
-                                            "(the video group)"))
-        if not is_video_file(spec):
-            # FOURCC first: a webcam offers its larger sizes only compressed.
-            if o.fourcc:
-                capture.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*o.fourcc))
-            width, height = (o.width, o.height) if o.width else \
-                ((self._fixed_rig.pair[0].width, self._fixed_rig.pair[0].height) if self._fixed_rig else (None, None))
-            if width:
-                capture.set(cv2.CAP_PROP_FRAME_WIDTH, width)
-                capture.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
-            if o.fps:
-                capture.set(cv2.CAP_PROP_FPS, o.fps)
-            capture.set(cv2.CAP_PROP_BUFFERSIZE, 1)  # the newest frame, not one queued in the driver
-        return capture
+    def _first_frames(self) -> list[tuple[int, int]]:
+        """Wait for each camera's first frame (kept for the reader); their sizes. A camera that fails or
+        delivers nothing within ``open_timeout_s`` fails the open, naming it."""
+        deadline = time.monotonic() + self.options.open_timeout_s
+        with self._cond:
+            while True:
+                for item in self._queue:
+                    if isinstance(item, Exception):
+                        raise RigInitializationError(str(item)) from None
+                if self._delivered >= set(self._per_camera):
+                    break
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    silent = [f"{cam.name!r} ({cam.spec})" for cam in self._cameras if cam.name not in self._delivered]
+                    raise RigInitializationError(
+                        f"camera(s) {', '.join(silent)} delivered no frame within {self.options.open_timeout_s:g} s "
+                        f"(open_timeout_s)")
+                self._cond.wait(left)
+        return [cam.size for cam in self._cameras]  # type: ignore[misc]
 
     def _nominal_rig(self, sizes: list[tuple[int, int]]) -> Rig:
         from drivers.sim.placement import RigPlacement  # a plausible two-camera placement, metres
 
-        if sizes[0] != sizes[1]:
+        o = self.options
+        if o.width is None and sizes[0] != sizes[1]:
             raise RigInitializationError(f"the cameras deliver {sizes[0][0]}x{sizes[0][1]} and "
                                          f"{sizes[1][0]}x{sizes[1][1]}; give width= and height= so both match")
         width, height = sizes[0]
-        return RigPlacement(width=width, height=height, hfov_deg=self.options.hfov_deg,
-                            names=self.options.names).build(rig_id="opencv-uncalibrated")
+        return RigPlacement(width=width, height=height, hfov_deg=o.hfov_deg,
+                            names=o.names).build(rig_id="opencv-uncalibrated")
 
-    def _put(self, item: Frame | Exception) -> None:
-        """From a grabbing thread: queue a frame (the oldest of its camera goes when it holds ``queue``)."""
+    # ------------------------------------------------------ from the camera threads
+    def _put(self, frame: Frame, *, wait: bool) -> bool:
+        """Queue a frame; False: stop grabbing (closed, or the stream has ended or failed).
+
+        A full queue (``queue`` frames of this camera) waits for room when ``wait`` (a video under
+        ``policy=all``: every pair counts); otherwise its oldest frame goes (a live camera runs on).
+        """
         with self._cond:
-            if isinstance(item, Frame):
-                if self._per_camera[item.camera] >= self.options.queue:
-                    for k, queued in enumerate(self._queue):
-                        if isinstance(queued, Frame) and queued.camera == item.camera:
-                            del self._queue[k]
-                            break
-                    self.frames_overflowed += 1
-                else:
-                    self._per_camera[item.camera] += 1
-            self._queue.append(item)
+            while wait and self._per_camera[frame.camera] >= self.options.queue and not self._stop.is_set() \
+                    and not self._failed:
+                self._cond.wait(0.1)
+            if self._stop.is_set() or self._failed:
+                return False
+            if self._ending is not None and frame.timestamp_ns > self._ending[0] + self.pairing.tolerance_ms * 1e6:
+                self._queue.append(self._ending[1])  # past the ended video's last frame: no pair can follow
+                self._failed = True
+                self._cond.notify_all()
+                return False
+            if self._per_camera[frame.camera] >= self.options.queue:
+                for k, queued in enumerate(self._queue):
+                    if isinstance(queued, Frame) and queued.camera == frame.camera:
+                        del self._queue[k]
+                        break
+                self.frames_overflowed += 1
+            else:
+                self._per_camera[frame.camera] += 1
+            self._queue.append(frame)
+            self._delivered.add(frame.camera)
+            self._cond.notify_all()
+            return True
+
+    def _end(self, camera: _Camera, end: EndOfStream) -> None:
+        """A video ended: the stream ends once every camera has, or another has delivered past its last
+        frame (then checked again by :meth:`_put` as the other camera's frames come)."""
+        with self._cond:
+            if self._failed:
+                return
+            self._ended.add(camera.name)
+            if self._ending is None or camera.last_stamp_ns < self._ending[0]:
+                self._ending = (camera.last_stamp_ns, end)
+            past_ns = self._ending[0] + self.pairing.tolerance_ms * 1e6
+            if all(c.name in self._ended or c.last_stamp_ns > past_ns for c in self._cameras):
+                self._queue.append(self._ending[1])
+                self._failed = True
             self._cond.notify_all()
 
-    def _end(self, camera: str, end: EndOfStream) -> None:
-        """From a video's thread at its end: the stream ends once every camera has (the other's last
-        frames, decoded a little later, still make their pairs)."""
+    def _passed(self, camera: _Camera, frames: int) -> bool:
+        """loop=1: a video finished a pass of ``frames``; False (and the stream fails) if the other's differs."""
         with self._cond:
-            self._ended.add(camera)
-            if self._ended >= set(self._per_camera):
-                self._queue.append(end)
-                self._cond.notify_all()
+            self._pass_frames.setdefault(camera.name, frames)
+            lengths = set(self._pass_frames.values())
+        if len(lengths) > 1:
+            self._fail(RigOperationError(f"loop=1: the videos have {sorted(lengths)} frames; looping them would "
+                                         f"pair different instants (trim them to one length)"))
+            return False
+        return True
 
+    def _fail(self, error: Exception) -> None:
+        with self._cond:
+            if not self._failed:
+                self._queue.append(error)
+                self._failed = True
+            self._cond.notify_all()
+
+    # ------------------------------------------------------------ reader side
     def _read_frame(self, timeout_s: float) -> Frame | None:
         deadline = time.monotonic() + timeout_s
         with self._cond:
             while not self._queue:
+                if self._stop.is_set():
+                    raise RigOperationError("opencv:// source closed")
                 left = deadline - time.monotonic()
-                if left <= 0 or self._stop.is_set():
+                if left <= 0:
                     return None
                 self._cond.wait(left)
-            item = self._queue.popleft()
+            item = self._queue[0]
             if isinstance(item, Exception):
-                self._queue.appendleft(item)  # stays: every later read raises it too, until close
-                raise item
+                raise type(item)(*item.args)  # a fresh one each read: it stays queued until close
+            self._queue.popleft()
             self._per_camera[item.camera] -= 1
+            self._cond.notify_all()  # a video waiting for room
             return item
 
     def _frame_available(self) -> bool:
@@ -357,15 +508,14 @@ class OpenCVRigSource(RigSource):
         self._stop.set()
         with self._cond:
             self._cond.notify_all()
+        deadline = time.monotonic() + 2.0
         for cam in self._cameras:
             if cam.thread.is_alive():
-                cam.thread.join(timeout=2.0)  # a grab blocked on a dead camera returns with its timeout
-        self._release()
-
-    def _release(self) -> None:
-        for cam in self._cameras:
-            try:
-                cam.capture.release()
-            except Exception as e:  # noqa: BLE001 - releasing a vanished device: it is gone either way
-                log.debug("opencv: releasing %s: %s", cam.spec, e)
-        self._cameras = []
+                cam.thread.join(timeout=max(0.0, deadline - time.monotonic()))
+            elif cam.thread.ident is None:
+                cam.release()  # never started (a failed open): released here
+            # A thread still in a grab on a dead camera releases its capture when that grab returns;
+            # releasing it from here, under the grab, is what OpenCV's captures do not survive.
+            if cam.thread.is_alive():
+                log.warning("opencv: camera %r (%s) is still in a read; it is released when that returns",
+                            cam.name, cam.spec)

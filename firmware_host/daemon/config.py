@@ -68,7 +68,7 @@ class RigConfig:
 
     Attributes:
         url: rig URL (``drivers.open_rig``): ``depthai://`` (the first OAK), ``depthai://<mxid>``,
-            ``opencv://?first=0&second=1&rig=/etc/ghnerf/rig.json`` (two webcams), ``sim://?fps=30``,
+            ``opencv://?first=/dev/video0&second=/dev/video2&rig=/etc/ghnerf/rig.json`` (two webcams), ``sim://?fps=30``,
             ``replay:///var/lib/ghnerf/take1``...
         read_timeout_s: how long one read waits for a pair before the health report calls the
             camera late (``CAMERA_FAULT`` on the sinks' STATUS).

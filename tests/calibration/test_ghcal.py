@@ -345,8 +345,10 @@ def test_the_stream_limits_match_the_protocol():
 
 
 def test_two_webcams_from_no_rig_file_to_a_calibrated_rig(truth, tmp_path, capsys):
-    """The webcam workflow through ``opencv://`` for real (OpenCV decoding two videos standing in for the
-    cameras, at their pace): capture with no rig file yet, solve, then open the cameras on the solved rig."""
+    """The webcam workflow through ``opencv://`` with two videos standing in for the webcams (OpenCV
+    decoding them at their pace; the live-camera path itself, settings and grab stamps, is
+    tests/drivers/test_contract_opencv.py's): capture with no rig file yet, solve, then open the
+    cameras on the solved rig."""
     images = calibration_views(truth, BOARD, count=8, edge_count=1, seed=7, floor_view=False)
     names = sorted(images[truth.pair[0].name])
     videos = {}
@@ -363,8 +365,10 @@ def test_two_webcams_from_no_rig_file_to_a_calibrated_rig(truth, tmp_path, capsy
     board.write_text(json.dumps(BOARD.to_dict()))
     out = tmp_path / "capture"
     assert cli.main(["capture", "--url", url, "--board", str(board), "--out", str(out),
-                     "--count", str(len(names)), "--interval-s", "0.3"]) == 0
-    assert len(list((out / "left").iterdir())) == len(names)  # every pose once: the held copies add nothing
+                     "--count", str(len(names) + 2), "--interval-s", "0.3"]) == 0
+    # Every pose once (the held copies add nothing), then the videos' end stops it.
+    assert f"kept {len(names)} of {len(names) + 2} views: the stream ended" in capsys.readouterr().err
+    assert len(list((out / "left").iterdir())) == len(list((out / "right").iterdir())) == len(names)
     rig_path = tmp_path / "rig.json"
     assert cli.main(["solve", "--images", str(out), "--board", str(board), "--out", str(rig_path),
                      "--camera-height", "1.3"]) == 0
