@@ -2,7 +2,7 @@
 and config reloads.
 
     .venv/bin/python benchmarks/soak_daemon.py [--minutes 20] [--unplug-every-s 30] [--sample-s 60]
-                                               [--reload-every-s 0]
+                                               [--reload-every-s 0] [--fps 30]
 
 Runs :class:`firmware_host.daemon.Daemon` in this process on ``sim://`` (320x240, the shipped model,
 a ``memory://`` sink drained as a receiver would) with the second camera unplugged every
@@ -42,10 +42,11 @@ def main() -> None:
     ap.add_argument("--unplug-every-s", type=float, default=30.0)
     ap.add_argument("--sample-s", type=float, default=60.0)
     ap.add_argument("--reload-every-s", type=float, default=0.0, help="0: never")
+    ap.add_argument("--fps", type=float, default=30.0, help="the simulated rig's rate (lower: a light soak)")
     ap.add_argument("--model-dir", default=str(Path(__file__).resolve().parents[1] / "models"))
     args = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)  # the unplugs' warnings would bury the table
-    url = f"sim://?fps=30&seed=0&motion=wave&width=320&height=240&unplug_after_s={args.unplug_every_s}"
+    url = f"sim://?fps={args.fps:g}&seed=0&motion=wave&width=320&height=240&unplug_after_s={args.unplug_every_s}"
     base = {"rig": {"url": url, "reopen_min_s": 0.05}, "sinks": ["memory://?max_bytes=8388608"],
             "estimator": {"session": {"model_dir": args.model_dir}}}
     cycle = [daemon_config_from_dict(base),
