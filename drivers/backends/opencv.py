@@ -20,10 +20,11 @@ Options:
   that order, and their image sizes are asked of the cameras and checked on every frame. Without
   it the source has a nominal, uncalibrated rig (``hfov``, ``names``, the size the cameras deliver):
   enough for ``ghcal capture``, not for 3D joints (the daemon refuses it).
-* ``width``, ``height`` (without ``rig``): the size asked of live cameras; ``fps``, ``fourcc``: the
-  rate and format asked of live cameras (two webcams on one USB bus usually need ``fourcc=MJPG``).
-  A size a camera does not deliver is an error at :meth:`open`; a rate or format it does not take
-  is a warning. ``fps`` is also the pace of a video whose file does not state its rate.
+* ``width``, ``height`` (without ``rig``): the size asked of live cameras and required of every
+  frame, videos' too; ``fps``, ``fourcc``: the rate and format asked of live cameras (two webcams on
+  one USB bus usually need ``fourcc=MJPG``). A size a camera does not deliver is an error at
+  :meth:`open`; a rate or format it does not take is a warning. ``fps`` is also the pace of a video
+  whose file does not state its rate.
 * ``api``: OpenCV's capture backend: ``any`` (default), ``v4l2``, ``ffmpeg``, ``gstreamer``,
   ``dshow``, ``msmf``, ``avfoundation``.
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
@@ -31,18 +32,22 @@ Options:
 * ``loop`` (two videos of the same length): start over at the end instead of ending the stream.
 * ``tolerance_ms``: pairing tolerance (default: half a frame period of the slower camera's rate as
   it reports it, else ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
-  ``queue``: frames held per camera for the reader (default 4; under ``all`` a video waits for
-  room instead of dropping); ``open_timeout_s``: how long :meth:`open` waits for each camera's
-  first frame (default 10).
+  ``queue``: frames held per camera for the reader (default 4; under ``all`` two videos are read in
+  step, neither more than a frame ahead, and wait for room instead of dropping: every pair of the
+  take is delivered, however slowly one decodes); ``open_timeout_s``: how long :meth:`open` waits
+  for each camera's first frame (default 10). A failed :meth:`open` is final: open a new source.
 
-Timing. Each camera has its own thread that grabs, decodes and queues its frames, and owns its
-capture (opened, read and released on that thread's watch: a capture is never released while it
-is being read). A live camera's frame is stamped with the host's monotonic clock when its grab
+Timing. Each camera's capture is opened by :meth:`open`, then owned by that camera's thread, which
+grabs, decodes and queues its frames and releases the capture when it stops (never while it is
+being read). A live camera's frame is stamped with the host's monotonic clock when its grab
 returns. Webcams are not synchronised in hardware, so a pair is two frames within ``tolerance_ms``:
 the default pairs each frame with the other camera's nearest, so a fast movement is seen up to
-half a frame apart by the two cameras (an OAK's shared trigger avoids that). A network stream's
+half a frame apart by the two cameras (an OAK's shared trigger avoids that). That default leaves
+no margin for a camera slower than it reports (auto-exposure in dim light can halve a webcam's
+rate): give ``fps=`` the rate it really keeps, or a ``tolerance_ms``. A network stream's
 frames are stamped on arrival, after its own buffering, which may differ between the two streams.
-A video file is a file on disk (anything else is live): it is paced at its rate from a start
+A video is a file (a path that is not a device index, not under ``/dev/`` and not a URL; an OpenCV
+image sequence such as ``seq/%04d.png`` counts): it is paced at its rate from a start
 shared by both files and stamped by its frame number, so two constant-rate videos that start at
 the same instant pair frame by frame (a phone's variable-rate video drifts). Not modelled:
 exposure, white balance or rolling-shutter differences between the two cameras.
@@ -124,8 +129,8 @@ class OpenCVOptions:
         for name, value in (("first", first), ("second", second)):
             if not value:
                 raise fail(f"option {name}= (a device path or index, a video file or a stream URL) is required")
-        if first == second:
-            raise fail(f"first= and second= are the same camera ({first!r})")
+        if _same_camera(first, second):  # type: ignore[arg-type]
+            raise fail(f"first= and second= are the same camera ({first!r}, {second!r})")
         rig_path = url.take_str("rig")
         given = set(url.options)
         fourcc = url.take_str("fourcc")
@@ -162,14 +167,23 @@ class OpenCVOptions:
         return options
 
 
+def _same_camera(first: str, second: str) -> bool:
+    """Two specs naming one device (an index and its /dev/videoN, a by-id link and its target) or one file."""
+    def resolved(spec: str) -> str:
+        if "://" in spec:
+            return spec
+        return os.path.realpath(f"/dev/video{spec}" if spec.isdigit() else spec)
+    return resolved(first) == resolved(second)
+
+
 def capture_target(spec: str) -> int | str:
     """What ``cv2.VideoCapture`` is given for ``first=`` / ``second=``: a device index as an int."""
     return int(spec) if spec.isdigit() else spec
 
 
 def is_video_file(spec: str) -> bool:
-    """A file on disk, played at its own pace; anything else (a device, a stream) is live."""
-    return not spec.isdigit() and "://" not in spec and not spec.startswith("/dev/") and os.path.isfile(spec)
+    """A video file or image sequence, played at its own pace; a device or a stream is live."""
+    return not spec.isdigit() and "://" not in spec and not spec.startswith("/dev/")
 
 
 class _Camera:
@@ -178,18 +192,23 @@ class _Camera:
     def __init__(self, name: str, spec: str, size: tuple[int, int] | None, source: "OpenCVRigSource") -> None:
         self.name, self.spec, self.source = name, spec, source
         self.size = size  # (width, height) every frame must have; None: the first frame's (a nominal rig)
+        self.size_from = "rig" if source._fixed_rig is not None else ("asked" if size is not None else "first")
         self.video = is_video_file(spec)
         self.capture: Any = None
         self.fps = 0.0  # as the camera or file reports it (0: unknown)
         self.frame_count = 0  # a video's, as its container says (0: unknown)
         self.index = 0
-        self.last_stamp_ns = -1
+        self.index_queued = -1  # the last queued frame's index (written under the source's lock)
+        self.at_pass_end = False  # loop: waiting for the other video to end its pass (under the lock)
+        self.last_stamp_ns = -1  # the last queued frame's (written under the source's lock)
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
 
     # The capture is opened on the caller's thread (errors are raised from open()), then only the
     # camera's own thread touches it, and releases it when it stops.
     def open(self) -> None:
         o = self.source.options
+        if self.video and "%" not in self.spec and not os.path.exists(self.spec):
+            raise RigInitializationError(f"camera {self.name!r}: no such video file {self.spec!r}")
         capture = self.source._capture_factory(capture_target(self.spec), APIS[o.api])
         if not capture.isOpened():
             capture.release()
@@ -273,9 +292,10 @@ class _Camera:
             if image is None or (self.size is not None and (image.shape[1], image.shape[0]) != self.size):
                 got = "an image that is not 8-bit colour or grey" if image is None else \
                     f"{image.shape[1]}x{image.shape[0]}"
-                want = "" if self.size is None else (
-                    f", but its rig camera is {self.size[0]}x{self.size[1]}" if src._fixed_rig is not None else
-                    f", not the width={self.size[0]}&height={self.size[1]} asked")
+                want = "" if self.size is None else {
+                    "rig": f", but its rig camera is {self.size[0]}x{self.size[1]}",
+                    "asked": f", not the width={self.size[0]}&height={self.size[1]} asked",
+                    "first": f", not the {self.size[0]}x{self.size[1]} of its first frame"}[self.size_from]
                 src._fail(RigOperationError(f"camera {self.name!r} ({self.spec}) delivered {got}{want}"))
                 return
             if self.size is None:
@@ -287,9 +307,8 @@ class _Camera:
             else:
                 stamp = max(grabbed_ns, self.last_stamp_ns + 1)
             if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
-                            wait=self.video and src.options.policy is DropPolicy.ALL):
+                            wait=self.video and src.pairing.policy is DropPolicy.ALL):
                 return
-            self.last_stamp_ns = stamp
             self.index += 1
 
 
@@ -337,7 +356,7 @@ class OpenCVRigSource(RigSource):
         self._failed = False  # an end or a failure is queued: later frames are not
         self._delivered: set[str] = set()  # cameras that queued a frame (open() waits for both)
         self._ended: set[str] = set()  # videos that ended
-        self._pass_frames: dict[str, int] = {}  # loop: frames in a pass, per video
+        self._pass_frames: dict[str, list[int]] = {}  # loop: frames in each pass, per video
         self.frames_overflowed = 0  # live frames dropped from a full queue before the reader took them
 
     @classmethod
@@ -355,6 +374,9 @@ class OpenCVRigSource(RigSource):
     # ------------------------------------------------------------------ hooks
     def _open(self) -> None:
         o = self.options
+        if self._stop.is_set():
+            # A thread of the failed attempt may still be in a grab; it must not feed a new one.
+            raise RigOperationError("opencv://: an open() that failed is final: make a new source (drivers.open_rig)")
         if self._fixed_rig is not None:
             specs = [(c.name, spec, (c.width, c.height)) for c, spec in zip(self._fixed_rig.pair, (o.first, o.second))]
         else:
@@ -366,7 +388,8 @@ class OpenCVRigSource(RigSource):
             for cam in self._cameras:
                 cam.open()
             videos = [cam for cam in self._cameras if cam.video]
-            if o.loop and len(videos) == 2 and videos[0].frame_count != videos[1].frame_count:
+            if o.loop and len(videos) == 2 and videos[0].frame_count and videos[1].frame_count \
+                    and videos[0].frame_count != videos[1].frame_count:
                 raise RigInitializationError(
                     f"loop=1: the videos have {videos[0].frame_count} and {videos[1].frame_count} frames; looping "
                     f"them would pair different instants from the second pass on (trim them to one length)")
@@ -425,8 +448,7 @@ class OpenCVRigSource(RigSource):
         ``policy=all``: every pair counts); otherwise its oldest frame goes (a live camera runs on).
         """
         with self._cond:
-            while wait and self._per_camera[frame.camera] >= self.options.queue and not self._stop.is_set() \
-                    and not self._failed:
+            while wait and self._must_wait(frame) and not self._stop.is_set() and not self._failed:
                 self._cond.wait(0.1)
             if self._stop.is_set() or self._failed:
                 return False
@@ -444,9 +466,23 @@ class OpenCVRigSource(RigSource):
             else:
                 self._per_camera[frame.camera] += 1
             self._queue.append(frame)
+            self._camera(frame.camera).index_queued = frame.index
             self._delivered.add(frame.camera)
+            self._camera(frame.camera).last_stamp_ns = frame.timestamp_ns
             self._cond.notify_all()
             return True
+
+    def _camera(self, name: str) -> _Camera:
+        return next(cam for cam in self._cameras if cam.name == name)
+
+    def _must_wait(self, frame: Frame) -> bool:
+        """(Under the lock.) A video under ``policy=all`` waits for room, and for the other video to be no
+        more than one frame behind: paced alone, a video that decodes slower would leave the other's
+        frames to go unpaired."""
+        if self._per_camera[frame.camera] >= self.options.queue:
+            return True
+        return any(other.video and other.name not in self._ended and not other.at_pass_end
+                   and other.name != frame.camera and frame.index > other.index_queued + 1 for other in self._cameras)
 
     def _end(self, camera: _Camera, end: EndOfStream) -> None:
         """A video ended: the stream ends once every camera has, or another has delivered past its last
@@ -464,10 +500,22 @@ class OpenCVRigSource(RigSource):
             self._cond.notify_all()
 
     def _passed(self, camera: _Camera, frames: int) -> bool:
-        """loop=1: a video finished a pass of ``frames``; False (and the stream fails) if the other's differs."""
+        """loop=1: a video finished a pass of ``frames``. It waits for the other video to finish the same
+        pass (so none starts over early), then both compare: False (and the stream fails) on a different
+        length, which would pair different instants from then on."""
         with self._cond:
-            self._pass_frames.setdefault(camera.name, frames)
-            lengths = set(self._pass_frames.values())
+            passes = self._pass_frames.setdefault(camera.name, [])
+            passes.append(frames)
+            others = [c for c in self._cameras if c is not camera and c.video]
+            camera.at_pass_end = True  # the other, longer or behind, reads on to its own end meanwhile
+            self._cond.notify_all()
+            while not self._stop.is_set() and not self._failed and \
+                    any(len(self._pass_frames.get(o.name, [])) < len(passes) for o in others):
+                self._cond.wait(0.1)
+            camera.at_pass_end = False
+            if self._stop.is_set() or self._failed:
+                return False
+            lengths = {frames, *(self._pass_frames[o.name][len(passes) - 1] for o in others)}
         if len(lengths) > 1:
             self._fail(RigOperationError(f"loop=1: the videos have {sorted(lengths)} frames; looping them would "
                                          f"pair different instants (trim them to one length)"))

@@ -258,6 +258,7 @@ class RecordingRigSource(RigSource):
     def _open(self) -> None:
         self.inner.open()
         try:
+            self.pairing = self.inner.pairing  # an inner source may settle its pairing at open (opencv://)
             self._set_rig(self.inner.rig)
             manifest = Manifest(
                 rig=self.inner.rig,

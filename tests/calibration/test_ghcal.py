@@ -346,9 +346,8 @@ def test_the_stream_limits_match_the_protocol():
 
 def test_two_webcams_from_no_rig_file_to_a_calibrated_rig(truth, tmp_path, capsys):
     """The webcam workflow through ``opencv://`` with two videos standing in for the webcams (OpenCV
-    decoding them at their pace; the live-camera path itself, settings and grab stamps, is
-    tests/drivers/test_contract_opencv.py's): capture with no rig file yet, solve, then open the
-    cameras on the solved rig."""
+    decoding them at their pace; the live-camera path itself is tests/drivers/test_contract_opencv.py's):
+    capture with no rig file yet, solve, then open the cameras on the solved rig."""
     images = calibration_views(truth, BOARD, count=8, edge_count=1, seed=7, floor_view=False)
     names = sorted(images[truth.pair[0].name])
     videos = {}

@@ -18,6 +18,7 @@ import pytest
 
 from drivers import (
     EndOfStream,
+    RigOperationError,
     ManualClock,
     RigConfigError,
     RigDisconnectedError,
@@ -83,8 +84,8 @@ class TestOpenCVVideoContract(RigSourceContract):
 
 def test_the_videos_play_as_recorded_at_their_pace_then_end(takes):
     take, _ = takes
+    t0 = time.monotonic()  # before the open: the first frames are due as it returns
     with open_rig(_url(take, "&policy=all")) as source:
-        t0 = time.monotonic()
         pairs = [source.read(timeout_s=5.0) for _ in range(40)]
         took = time.monotonic() - t0
         with pytest.raises(EndOfStream, match="ended after 40 frames"):
@@ -154,12 +155,13 @@ def test_bad_urls_name_the_option(query, message):
 
 def test_a_missing_video_or_a_size_the_rig_does_not_have_is_refused_at_open(takes, tmp_path):
     first, second, rig, _ = takes[0]
-    with pytest.raises(RigInitializationError, match=r"camera 'right': OpenCV cannot open .*nope\.avi"):
+    with pytest.raises(RigInitializationError, match=r"camera 'right': no such video file .*nope\.avi"):
         open_rig(f"opencv://?first={first}&second={tmp_path / 'nope.avi'}&rig={rig}")
     other = tmp_path / "rig.json"
     loaded = load_rig(rig)
     save_rig(Rig(tuple(c.resized(320, 240) for c in loaded.cameras), loaded.volume, rig_id="big"), other)
-    with pytest.raises(RigInitializationError, match=r"camera 'left' .* delivered 160x120, but its rig camera is 320x240"):
+    with pytest.raises(RigInitializationError,
+                       match=r"camera '(left|right)' .* delivered 160x120, but its rig camera is 320x240"):
         open_rig(f"opencv://?first={first}&second={second}&rig={other}")
 
 
@@ -231,17 +233,17 @@ def test_each_camera_is_asked_its_own_rig_size(takes, webcam, tmp_path):
     loaded = load_rig(takes[0][2])
     mixed = tmp_path / "mixed.json"
     save_rig(Rig((loaded.pair[0], loaded.pair[1].resized(320, 240)), loaded.volume, rig_id="mixed"), mixed)
-    with open_rig(f"opencv://?first=0&second=1&rig={mixed}", capture_factory=webcam) as source:
+    with open_rig(f"opencv://?first=0&second=1&rig={mixed}&tolerance_ms=40", capture_factory=webcam) as source:
         pair = source.read(timeout_s=5.0)
     assert pair.images[0].shape == (120, 160, 3) and pair.images[1].shape == (240, 320, 3)
 
 
 def test_grey_and_bgra_frames_become_bgr_and_others_are_refused(webcam):
     webcam.make = staticmethod(lambda w, h: np.full((h, w), 7, np.uint8))
-    with open_rig("opencv://?first=0&second=1", capture_factory=webcam) as source:
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam) as source:
         assert source.read(timeout_s=5.0).images[0].shape == (SIZE[1], SIZE[0], 3)
     webcam.make = staticmethod(lambda w, h: np.full((h, w, 4), 7, np.uint8))
-    with open_rig("opencv://?first=0&second=1", capture_factory=webcam) as source:
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam) as source:
         assert source.read(timeout_s=5.0).images[1].shape == (SIZE[1], SIZE[0], 3)
     webcam.make = staticmethod(lambda w, h: np.full((h, w, 3), 7, np.uint16))
     with pytest.raises(RigInitializationError, match="delivered an image that is not 8-bit colour or grey"):
@@ -261,12 +263,15 @@ def test_a_camera_that_delivers_nothing_fails_the_open_naming_it(webcam):
 
 
 def test_a_hung_camera_fails_the_open_and_is_never_released_under_a_grab(webcam):
-    webcam.frames, webcam.block_s = 0, 1.0  # its first grab hangs for a second
+    webcam.frames, webcam.block_s = 0, 3.0  # its first grab hangs longer than close() waits for it (2 s)
     t0 = time.monotonic()
+    source = create_rig_source("opencv://?first=0&second=1&open_timeout_s=0.3", capture_factory=webcam)
     with pytest.raises(RigInitializationError, match=r"delivered no frame within 0\.3 s \(open_timeout_s\)"):
-        open_rig("opencv://?first=0&second=1&open_timeout_s=0.3", capture_factory=webcam)
+        source.open()
     assert time.monotonic() - t0 < 5.0
-    time.sleep(1.2)  # the grabs return; their threads release the captures
+    with pytest.raises(RigOperationError, match="an open\\(\\) that failed is final"):
+        source.open()  # its hung threads must not feed a second attempt: a new source does
+    time.sleep(max(0.0, t0 + 3.3 - time.monotonic()))  # the grabs return; their threads release the captures
     assert not any(cam.released_while_grabbing for cam in webcam.made)
 
 
@@ -286,3 +291,100 @@ class TestWebcamContract(RigSourceContract):
     @classmethod
     def make_stalling_source(cls):  # pragma: no cover - a webcam cannot be told to stall
         pytest.skip("a webcam cannot be made to stall")
+
+
+def test_the_default_tolerance_is_half_a_period_of_the_slower_camera(webcam):
+    class TenFps(_Webcam):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.props[cv2.CAP_PROP_FPS] = 10.0 if target == 1 else 30.0
+
+    with open_rig("opencv://?first=0&second=1", capture_factory=TenFps) as source:
+        assert source.pairing.tolerance_ms == pytest.approx(50.0)
+        assert source._pairer.config.tolerance_ms == pytest.approx(50.0)  # what pairs, not only what is said
+
+
+def _videos(tmp_path, lengths, delays):
+    """Stand-in videos (files that exist, captures that play ``lengths`` frames at ``delays`` s per decode)."""
+    paths = []
+    for k in range(2):
+        paths.append(tmp_path / f"v{k}.avi")
+        paths[-1].write_bytes(b"")
+    by_path = {str(p): (n, d) for p, n, d in zip(paths, lengths, delays)}
+
+    class Video(_Webcam):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.total, self.delay = by_path[target]
+            self.left, self.props[cv2.CAP_PROP_FPS] = self.total, 30.0
+
+        def set(self, prop, value) -> bool:
+            if prop == cv2.CAP_PROP_POS_FRAMES:
+                self.left = self.total
+            return super().set(prop, value)
+
+        def grab(self) -> bool:
+            time.sleep(self.delay)
+            self.left -= 1
+            return self.left >= 0
+
+    return paths, Video
+
+
+def test_under_policy_all_two_videos_keep_step_however_slowly_one_decodes(tmp_path, webcam):
+    (first, second), video = _videos(tmp_path, (40, 40), (0.0, 2 / 30))  # the second at half its rate
+    with open_rig(f"opencv://?first={first}&second={second}&policy=all", capture_factory=video) as source:
+        pairs = [source.read(timeout_s=5.0) for _ in range(40)]
+        with pytest.raises(EndOfStream):
+            source.read(timeout_s=5.0)
+        assert sum(source.stats.unpaired.values()) == 0
+    assert [p.frames[0].index for p in pairs] == [p.frames[1].index for p in pairs] == list(range(40))
+
+
+def test_under_policy_all_a_slow_reader_gets_every_pair(takes):
+    with open_rig(_url(takes[0], "&policy=all&queue=1")) as source:
+        time.sleep(0.5)  # 15 frames' time: the videos wait for room rather than drop
+        pairs = [source.read(timeout_s=5.0) for _ in range(20)]
+    assert [p.frames[0].index for p in pairs] == list(range(20))
+
+
+def test_loop_refuses_videos_that_turn_out_to_differ_in_length(tmp_path, webcam):
+    (first, second), video = _videos(tmp_path, (5, 6), (1 / 30, 1 / 30))  # containers that do not say
+    with open_rig(f"opencv://?first={first}&second={second}&loop=1&policy=all", capture_factory=video) as source:
+        pairs = []
+        with pytest.raises(RigOperationError, match=r"loop=1: the videos have \[5, 6\] frames"):
+            while True:
+                pairs.append(source.read(timeout_s=5.0))
+        second_error = None
+        try:
+            source.read(timeout_s=1.0)
+        except RigOperationError as e:
+            second_error = e
+    assert [p.frames[0].index for p in pairs] == [p.frames[1].index for p in pairs] == list(range(5))
+    assert second_error is not None and second_error.__traceback__ is not None  # raised again: a fresh one
+
+
+def test_close_wakes_a_blocked_read(takes, webcam):
+    import threading
+
+    webcam.frames, webcam.block_s = 1, 3.0  # one frame each, then a grab that hangs
+    source = open_rig("opencv://?first=0&second=1&tolerance_ms=40", capture_factory=webcam)
+    source.read(timeout_s=5.0)
+    errors = []
+    reader = threading.Thread(target=lambda: errors.append(_raises(lambda: source.read(timeout_s=10.0))))
+    reader.start()
+    time.sleep(0.2)
+    t0 = time.monotonic()
+    source.close()
+    reader.join(timeout=5.0)
+    assert not reader.is_alive() and time.monotonic() - t0 < 5.0
+    assert isinstance(errors[0], RigOperationError)
+    time.sleep(3.2)  # the hung grabs return and their threads end
+
+
+def _raises(call):
+    try:
+        call()
+    except Exception as e:  # noqa: BLE001 - returned for the test to look at
+        return e
+    return None
