@@ -40,7 +40,8 @@ test: $(DEV_STAMP)
 # ~25 min of one H100 (and ~30 min on two cores for its two-network skeleton prior);
 # on CPU the two-core recipe (the trunk at 128x128, 44000 pretraining steps in bfloat16 where the CPU has it, the
 # first 17600 at 64x64; a skeleton prior of two networks): about 1 h 56 min from nothing on a fast AVX-512 2-core
-# host by its stages' measured times, well over two hours on an Intel Xeon host, about 4 h on the slowest seen
+# host by its stages' measured times, about 2 h 45 min on session 35's EPYC (its first three stages timed),
+# well over two hours on an Intel Xeon host, about 4 h on the slowest seen
 # (docs/training.md, "The tenth model", "Progressive resizing in the two-core pretraining" and "Two prior
 # networks in the cpu recipe").
 # RECIPE=cpu or RECIPE=gpu picks one.
