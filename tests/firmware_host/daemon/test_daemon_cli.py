@@ -68,6 +68,22 @@ def test_a_corrupt_model_exits_2_naming_it(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+def _notes_until(sock: socket.socket, proc: subprocess.Popen, notes: list[dict[str, str]], done, what: str,
+                 timeout: float = 120) -> None:
+    """Read systemd notifications into ``notes`` until ``done(notes)``; fail naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            data = sock.recv(4096).decode()
+        except socket.timeout:
+            assert proc.poll() is None, proc.communicate()[1]
+            continue
+        notes.append(dict(line.split("=", 1) for line in data.splitlines()))
+        if done(notes):
+            return
+    pytest.fail(f"{what}: not seen in {notes}")
+
+
 @needs_model
 def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
     sock_path = tmp_path / "notify.sock"
@@ -87,19 +103,8 @@ def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
     notes: list[dict[str, str]] = []
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            try:
-                data = sock.recv(4096).decode()
-            except socket.timeout:
-                assert proc.poll() is None, proc.communicate()[1]
-                continue
-            notes.append(dict(line.split("=", 1) for line in data.splitlines()))
-            if any(n.get("STATUS", "").startswith("running:") for n in notes) \
-                    and any("WATCHDOG" in n for n in notes):
-                break
-        else:
-            pytest.fail(f"no running status and watchdog ping: {notes}")
+        _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("running:") for n in ns)
+                     and any("WATCHDOG" in n for n in ns), "a running status and a watchdog ping")
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=60)
     finally:
@@ -122,22 +127,6 @@ def test_runs_under_a_notify_socket_and_stops_on_sigterm(tmp_path):
     assert report["state"] == "stopping" and report["pairs"]["estimated"] > 0
     rows = [json.loads(line) for line in (tmp_path / "joints.jsonl").read_text().splitlines()]
     assert sum(r["type"] == "JOINTS" for r in rows) == report["pairs"]["estimated"]
-
-
-def _notes_until(sock: socket.socket, proc: subprocess.Popen, notes: list[dict[str, str]], done, what: str,
-                 timeout: float = 120) -> None:
-    """Read systemd notifications into ``notes`` until ``done(notes)``; fail naming ``what``."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            data = sock.recv(4096).decode()
-        except socket.timeout:
-            assert proc.poll() is None, proc.communicate()[1]
-            continue
-        notes.append(dict(line.split("=", 1) for line in data.splitlines()))
-        if done(notes):
-            return
-    pytest.fail(f"{what}: not seen in {notes}")
 
 
 @needs_model
