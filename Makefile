@@ -11,7 +11,7 @@ PIP := $(PY) -m pip
 RUNTIME_STAMP := $(VENV)/.stamp-runtime
 DEV_STAMP := $(VENV)/.stamp-dev
 
-.PHONY: demo test model painter venv dev bench clean-venv
+.PHONY: demo test model painter painter-gpu venv dev bench clean-venv
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -52,7 +52,7 @@ model: $(DEV_STAMP)
 # The novel view's learnt painter (models/ghnerf/novel_painter.onnx) for the model in models/, on the dataset
 # make model made: the device's joints of 2048 training and 256 held-out scenes, the painter's inputs over their
 # body proxies (without the light fit, which the runtime's painter does not read), 70 minutes of training at one
-# thread with the fog around the subject taught as background (the shipped painter's run), export to fp32 and int8
+# thread with the fog around the subject taught as background (session 31's painter), export to fp32 and int8
 # with parity checks, the model card: 1 h 24 min on two cores, timed end to end (docs/training.md, "The
 # painter and the fog").
 # PAINTER_MODELS=<folder> reads that folder's model and writes the painter and its card entry there instead.
@@ -74,6 +74,18 @@ painter: $(DEV_STAMP)
 	$(PY) -m training.learnt_fill export --net $(PAINTER_RUNS)/net/fill_net.pt \
 	    --out $(PAINTER_MODELS)/ghnerf/novel_painter.onnx --val-cache $(PAINTER_RUNS)/fill_val.npz \
 	    --calib-cache $(PAINTER_RUNS)/fill_train.npz --card-dir $(PAINTER_MODELS)
+
+# The same painter trained on a GPU machine (training/painter_gpu.sh: the data, the device's joints and the caches
+# at all cores, then 270 s of one GPU at batches of 32), exported here: how the shipped painter was made since
+# session 38 (about 7 minutes of a 16-core H200 machine, export 1 min; docs/training.md, "The painter on a GPU").
+# PAINTER_WIDTH=32 makes the wider painter measured there: +0.2 dB masked for +8 ms per painted view, 14 MB.
+PAINTER_WIDTH ?= 16
+painter-gpu: $(DEV_STAMP)
+	WIDTHS=$(PAINTER_WIDTH) PYTHON=$(PY) MODELS=$(PAINTER_MODELS) \
+	    bash training/painter_gpu.sh $(PAINTER_RUNS)/gpu $(PAINTER_RUNS)/gpu 2048 270
+	$(PY) -m training.learnt_fill export --net $(PAINTER_RUNS)/gpu/w$(PAINTER_WIDTH)/fill_net.pt \
+	    --out $(PAINTER_MODELS)/ghnerf/novel_painter.onnx --val-cache $(PAINTER_RUNS)/gpu/fill_val.npz \
+	    --calib-cache $(PAINTER_RUNS)/gpu/fill_train.npz --card-dir $(PAINTER_MODELS)
 
 bench: $(DEV_STAMP)
 	$(PY) benchmarks/bench_sim_render.py

@@ -119,6 +119,7 @@ class FillNet(nn.Module):
         super().__init__()
         self.cfg = cfg
         self.steps_trained = 0  # set by train_fill
+        self.trained: dict = {}  # the checkpoint's config and training record (load_net)
         widths = [cfg.width * min(2 ** i, 8) for i in range(cfg.levels)]
         self.stem = _block(IN_CHANNELS - 7 * (not cfg.relit_input) + 3 * cfg.shown_input, widths[0])
         self.down = nn.ModuleList(nn.Sequential(nn.Conv2d(a, b, 3, stride=2, padding=1), _block(b, b))
@@ -398,6 +399,9 @@ def load_net(path: str | Path, device: torch.device | str = "cpu") -> FillNet:
         net = FillNet(FillNetConfig(**ckpt["config"]["net"]))
         net.load_state_dict(ckpt["state_dict"])
         net.steps_trained = int(ckpt.get("info", {}).get("steps", 0))
+        # What the checkpoint says of its own training, for an export made without its score.json beside
+        # it (a net brought back alone from a GPU machine).
+        net.trained = {"config": ckpt["config"], **ckpt.get("info", {})}
     except (OSError, RuntimeError, KeyError, TypeError, EOFError, pickle.UnpicklingError) as e:
         raise ValueError(f"{path}: not a fill-net checkpoint ({e})") from e
     return net.to(device)
@@ -519,7 +523,7 @@ def _export_cli(args) -> int:
 
     net = load_net(args.net)
     score_json = args.net.parent / "score.json"
-    trained = json.loads(score_json.read_text()) if score_json.is_file() else {}
+    trained = {**net.trained, **(json.loads(score_json.read_text()) if score_json.is_file() else {})}
     meta = {"trained_on": str(args.net), "hardware": str(trained.get("hardware", "")),
             "seconds": str(trained.get("seconds", ""))}
     out = export_painter(net, args.out, meta)
@@ -533,6 +537,9 @@ def _export_cli(args) -> int:
         outs.append(quantize_painter(out, out.with_suffix(".int8.onnx"), load_cache(args.calib_cache)))
     if args.val_cache is not None:
         val = load_cache(args.val_cache)
+        if not report["held_out"]:  # no score.json: the torch net's own figures on this cache instead
+            report["held_out"] = score_rows(val, *paintings(net, val))
+            report["held_out_cache"] = str(args.val_cache)
         report["parity"] = painter_parity(net, out, val)
         print(f"onnxruntime vs torch on {report['parity']['views']} views: max |diff| "
               f"{report['parity']['max_abs']:.2e}, PSNR {report['parity']['psnr_db']:.1f} dB")

@@ -111,15 +111,13 @@ def test_a_broken_painter_file_is_named(tmp_path):
         NovelPainter.load(path)
 
 
-def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_path, data64):
+def _export_setup(tmp_path, data64):
+    """A saved net, an empty model card and a one-scene cache: what ``export`` reads."""
     from training.model_card import write_card
 
     net = _net()
     save_net(net, FillTrainConfig(net=net.cfg), tmp_path / "fill_net.pt", steps=7, seconds=1.0, hardware="cpu",
              train_views=3)
-    rows = {"novel, all": {"n": 3, "shown": 19.0, "fill:learnt": 20.0}}
-    (tmp_path / "score.json").write_text(json.dumps({"rows": rows, "seconds": 1.0, "hardware": "cpu",
-                                                     "train_views": 3}))
     card_dir = tmp_path / "models"
     (card_dir / "ghnerf").mkdir(parents=True)
     write_card(card_dir, {"files": {}})
@@ -129,7 +127,14 @@ def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_pa
     views = [view_features(geometry, t, None, 45.0, truth=scene, shown=scene["tgt_images"][t].transpose(1, 2, 0),
                            geometry="proxy") for t in range(len(scene["tgt_is_source"])) if not scene["tgt_is_source"][t]]
     np.savez(tmp_path / "cache.npz", **stack([v for v in views if v is not None]))
-    out = card_dir / "ghnerf" / "novel_painter.onnx"
+    return card_dir, card_dir / "ghnerf" / "novel_painter.onnx"
+
+
+def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_path, data64):
+    card_dir, out = _export_setup(tmp_path, data64)
+    rows = {"novel, all": {"n": 3, "shown": 19.0, "fill:learnt": 20.0}}
+    (tmp_path / "score.json").write_text(json.dumps({"rows": rows, "seconds": 1.0, "hardware": "cpu",
+                                                     "train_views": 3}))
     assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
                  "--val-cache", str(tmp_path / "cache.npz"), "--calib-cache", str(tmp_path / "cache.npz")]) == 0
     report = json.loads(out.with_suffix(".json").read_text())
@@ -145,3 +150,18 @@ def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_pa
     int8_painter = NovelPainter.load(out.with_suffix(".int8.onnx"))
     assert int8_painter.precision == "int8" and NovelPainter.load(out).precision == "fp32"
     assert NovelPainter.find(out.parent).name == "novel_painter.int8.onnx"
+
+
+def test_a_net_exported_without_its_score_file_keeps_its_record_and_is_scored_on_the_cache(tmp_path, data64):
+    # A net brought back alone from a GPU machine: the checkpoint's own record fills the card, and the
+    # torch net's held-out figures come from the given cache.
+    card_dir, out = _export_setup(tmp_path, data64)
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
+                 "--val-cache", str(tmp_path / "cache.npz")]) == 0
+    report = json.loads(out.with_suffix(".json").read_text())
+    assert report["hardware"] == "cpu" and report["train_views"] == 3 and report["train_s"] == 1.0
+    assert report["config"]["net"]["width"] == 8 and report["config"]["net"]["shown_input"] is True
+    assert report["held_out_cache"] == str(tmp_path / "cache.npz")
+    torch_all = report["held_out"]["novel, all"]["fill:learnt"]
+    assert abs(torch_all - report["onnx_held_out"]["fp32"]["novel, all"]["fill:learnt"]) < 0.01
+    assert "Novel-view painter" in (card_dir / "MODEL_CARD.md").read_text()

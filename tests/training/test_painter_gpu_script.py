@@ -1,0 +1,48 @@
+"""training/painter_gpu.sh, the painter's GPU recipe, end to end at a tiny size on the CPU.
+
+A lent GPU machine is held for minutes, so the script must not fail there for a reason a CPU run finds:
+this runs every stage (data, the device's joints, the caches, a net per width) on a few scenes."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+REPO = Path(__file__).resolve().parents[2]
+SCRIPT = REPO / "training" / "painter_gpu.sh"
+
+
+def _run(tmp_path: Path, **env: str) -> subprocess.CompletedProcess:
+    full = {**os.environ, "PYTHON": sys.executable, "VAL": "4", "WORKERS": "2", "WIDTHS": "8", **env}
+    return subprocess.run(["bash", str(SCRIPT), str(tmp_path / "work"), str(tmp_path / "report"), "6", "2"],
+                          cwd=REPO, env=full, capture_output=True, text=True, timeout=600)
+
+
+def test_the_gpu_recipe_makes_a_scored_net_per_width_and_the_val_joints(tmp_path):
+    from training.learnt_fill import load_net
+
+    done = _run(tmp_path)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    report = tmp_path / "report"
+    net = load_net(report / "fill_net_w8.pt")
+    assert net.cfg.width == 8 and net.cfg.shown_input and not net.cfg.relit_input
+    assert net.steps_trained >= 1 and net.trained["config"]["batch"] == 32
+    assert net.trained["config"]["around_weight"] == pytest.approx(0.03)
+    assert "| novel, all |" in (report / "score_w8.md").read_text()
+    with np.load(report / "joints_val.npz") as z:
+        assert z["joints"].shape == (4, 25, 3)
+    assert "total:" in done.stdout
+
+
+def test_a_stage_that_fails_in_the_background_stops_the_script(tmp_path):
+    # the joints of both splits run side by side: a missing model folder must end the run there, named
+    done = _run(tmp_path, MODELS=str(tmp_path / "no_models"))
+    assert done.returncode != 0
+    assert "no_models" in done.stderr
+    assert "joints:" not in done.stdout and not (tmp_path / "report" / "joints_val.npz").exists()
