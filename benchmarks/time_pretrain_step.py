@@ -81,8 +81,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
     torch.set_flush_denormal(True)
+    auto = ("the faster of fp32 and bf16, timed at the start of each pretraining scale" if cpu_has_native_bf16()
+            else resolve_precision("auto", torch.device("cpu")))
     print(f"torch {torch.__version__}, {args.threads} threads, bfloat16 in hardware: {cpu_has_native_bf16()} "
-          f"(precision auto: {resolve_precision('auto', torch.device('cpu'))})")
+          f"(precision auto: {auto})")
     print("| trunk input | scenes per step | precision | median s/step | p90 s/step | median ms/scene | "
           "bf16 speed-up |")
     print("|---|---|---|---|---|---|---|")

@@ -98,10 +98,12 @@ class Recipe:
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
     "cpu": Recipe("two CPU cores, about 1 h 56 min from nothing on a fast AVX-512 host (by its stages' measured "
-                  "times; docs/training.md): encoder trunk at 128x128, 44000 pretraining steps of 2 scenes, "
+                  "times), about 2 h 45 min on session 35's EPYC (its first three stages timed; docs/training.md): encoder trunk at 128x128, 44000 pretraining steps of 2 scenes, "
                   "the first 17600 with the trunk's input at 64x64 (progressive resizing), the rate halved "
-                  "every 8800, with the forward pass in bfloat16 where the CPU computes it (precision auto: "
-                  "0.11 against 0.19 s per step in float32); skeleton prior: two networks of "
+                  "every 8800, with the forward pass in bfloat16 where the CPU computes it faster (precision "
+                  "auto times both at the start of each scale: 0.11 s per step in bfloat16 against 0.19 in "
+                  "float32 on that host, 0.30 against 0.21 on session 38's Intel Xeon, which then runs "
+                  "float32); skeleton prior: two networks of "
                   "30000 steps on 25000 scenes (about 27 min on the fast host, about 4.5 of them making its "
                   "20000 extra scenes)",
                   train_overrides=("model.human.input_scale=1.0",),

@@ -21,10 +21,13 @@ Example::
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
 import os
+import random
 import sys
+import time
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Literal
@@ -91,9 +94,11 @@ class PretrainConfig(Config):
     """Stop (with a checkpoint and ``human.pt``) after this wall time (0: no limit)."""
     precision: Literal["fp32", "bf16", "auto"] = "fp32"
     """Arithmetic of the encoder's forward pass: ``fp32``; ``bf16`` (``torch.autocast``: convolutions in bfloat16,
-    the weights, optimiser and loss in float32); ``auto``: ``bf16`` where the device computes it natively (a CUDA
-    GPU with bfloat16, a CPU with bfloat16 instructions: :func:`cpu_has_native_bf16`), else ``fp32``. On the
-    2-core EPYC (AVX512_BF16) a 16-image step at the 128x128 trunk takes 0.11 s in bf16 against 0.19 s in fp32
+    the weights, optimiser and loss in float32); ``auto``: on a CUDA GPU ``bf16`` where it has bfloat16; on a
+    CPU with bfloat16 instructions (:func:`cpu_has_native_bf16`) whichever of the two is faster, timed on the
+    run's first batch at each trunk input scale (:func:`fastest_precision`); else ``fp32``. The instructions
+    alone do not say: on the 2-core EPYC (AVX512_BF16) a 16-image step at the 128x128 trunk takes 0.11 s in
+    bf16 against 0.19 s in fp32, on session 38's Intel Xeon (AVX512_BF16, no AMX) 0.30 s against 0.21
     (``benchmarks/time_pretrain_step.py``, docs/training.md)."""
 
     coarse_steps: int = 0
@@ -259,6 +264,30 @@ def cpu_has_native_bf16() -> bool:
     return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
 
 
+def fastest_precision(model: GHNeRF, images: Tensor, heat: Tensor, cfg: PretrainConfig,
+                      input_scale: float | None, steps: int = 4, warmup: int = 2) -> tuple[str, dict[str, float]]:
+    """``fp32`` or ``bf16``, whichever runs :func:`pretrain_step` faster here on this batch, and the median
+    seconds per step of each. It times copies of the encoder with an optimiser of their own and restores the
+    random state after, so the run itself is exactly what it would be without the probe."""
+    seconds: dict[str, float] = {}
+    py_state, np_state = random.getstate(), np.random.get_state()
+    with torch.random.fork_rng(devices=[]):
+        for precision in ("fp32", "bf16"):
+            probe = copy.deepcopy(model)
+            opt = torch.optim.Adam(probe.human.parameters(), lr=cfg.lr)
+            times = []
+            for i in range(warmup + steps):
+                t0 = time.perf_counter()
+                pretrain_step(probe, opt, images, heat, cfg, precision, input_scale)
+                if i >= warmup:
+                    times.append(time.perf_counter() - t0)
+            seconds[precision] = float(np.median(times))
+            del probe, opt
+    random.setstate(py_state)
+    np.random.set_state(np_state)
+    return min(seconds, key=seconds.get), seconds
+
+
 def save_human(path: Path, model: GHNeRF, step: int) -> None:
     """``human.pt``: the encoder's weights (trunk, projections, heatmap head) and the model config."""
     state = {"version": HUMAN_CHECKPOINT_VERSION, "human": model.human.state_dict(), "step": step,
@@ -397,6 +426,9 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         step = int(ck["step"])
     clock = RunClock.resumed(ck, step, torch.get_num_threads())
     precision = resolve_precision(cfg.precision, device)
+    # A CPU's bfloat16 instructions need not make bf16 the faster (docs/training.md): time both per scale.
+    probe = cfg.precision == "auto" and device.type == "cpu" and precision == "bf16"
+    probed: dict[float | None, tuple[str, dict[str, float]]] = {}
     seed_everything(cfg.seed + 1)
 
     def checkpoint(s: int) -> None:
@@ -415,6 +447,14 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         for g in opt.param_groups:
             g["lr"] = lr
         scale = cfg.input_scale_at(step)
+        if probe and scale not in probed:
+            probed[scale] = fastest_precision(model, images, heat, cfg, scale)
+            if not quiet:
+                times = ", ".join(f"{k} {v:.3f}" for k, v in probed[scale][1].items())
+                print(f"precision auto at trunk input scale {'full' if scale is None else scale}: {probed[scale][0]} "
+                      f"(s/step {times})", file=sys.stderr)
+        if probe:
+            precision = probed[scale][0]
         lv = pretrain_step(model, opt, images, heat, cfg, precision, scale)
         step += 1
         if not math.isfinite(lv):
@@ -440,6 +480,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
                **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(), "precision": precision,
+               **({"precision_probe": {("full" if k is None else str(k)): {"picked": v[0], "s_per_step": v[1]} for k, v in probed.items()}}
+                  if probed else {}),
                **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
                "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,

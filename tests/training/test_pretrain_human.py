@@ -177,6 +177,45 @@ def test_auto_precision_asks_the_hardware(monkeypatch):
     assert host(avx2=False, avx512_bf16=False, amx=False, onednn_bf16=True) == "bf16"  # aarch64 with bf16
 
 
+def test_auto_precision_on_a_bf16_cpu_times_both_per_scale_and_leaves_the_run_as_it_was(data64, tmp_path,
+                                                                                          monkeypatch):
+    """Bfloat16 instructions do not make bf16 the faster (session 38's Intel Xeon: 0.30 s against 0.21 s a
+    step), so ``auto`` on such a CPU times both on copies at each trunk scale and runs the faster. The probe
+    touches neither the weights nor the random state: a run whose probe picks fp32 is the fp32 run."""
+    import training.pretrain_human as ph
+
+    monkeypatch.setattr(ph, "cpu_has_native_bf16", lambda: True)
+    picks = []
+
+    def probe_then_fp32(*args, **kw):
+        picked, seconds = real(*args, **kw)
+        picks.append((picked, seconds))
+        return "fp32", seconds
+
+    real = ph.fastest_precision
+    monkeypatch.setattr(ph, "fastest_precision", probe_then_fp32)
+    kw = {"iterations": 3, "eval_every": 0, "coarse_steps": 2, "coarse_input_scale": 0.5}
+    auto = pretrain(tiny_pretrain(data64, precision="auto", **kw), tmp_path / "auto", quiet=True)
+    fp32 = pretrain(tiny_pretrain(data64, **kw), tmp_path / "fp32", quiet=True)
+    assert len(picks) == 2  # once per trunk input scale, not per step
+    assert all(p in ("fp32", "bf16") and set(s) == {"fp32", "bf16"} and min(s.values()) > 0 for p, s in picks)
+    assert all(p == min(s, key=s.get) for p, s in picks)  # the faster one
+    assert auto["precision"] == "fp32" and set(auto["precision_probe"]) == {"0.5", "full"}
+    assert "precision_probe" not in fp32
+    a, b = (torch.load(tmp_path / d / "human.pt", weights_only=True)["human"] for d in ("auto", "fp32"))
+    assert all(torch.equal(a[k], b[k]) for k in a)  # bit for bit: the probe changed nothing in the run
+
+
+def test_auto_precision_probes_only_where_the_cpu_has_bf16(data64, tmp_path, monkeypatch):
+    import training.pretrain_human as ph
+
+    monkeypatch.setattr(ph, "cpu_has_native_bf16", lambda: False)
+    monkeypatch.setattr(ph, "fastest_precision", lambda *a, **k: pytest.fail("probed a CPU without bf16"))
+    summary = pretrain(tiny_pretrain(data64, precision="auto", iterations=1, eval_every=0), tmp_path / "r",
+                       quiet=True)
+    assert summary["precision"] == "fp32" and "precision_probe" not in summary
+
+
 def test_worker_processes_load_the_same_batches_as_the_trainer(data64, tmp_path):
     """``loader_workers`` changes where the batches are made, not which: the same weights, step for step,
     across an epoch boundary (data64's train split, one scene per step) and with the random transforms."""
