@@ -31,7 +31,7 @@ from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
 from training.pretrain_human import (PretrainConfig, StepBatches, cpu_has_native_bf16,  # noqa: E402
-                                     pretrain_step, resolve_precision)
+                                     fastest_precision, pretrain_step, resolve_precision)
 from training.train import seed_everything  # noqa: E402
 
 WARMUP = 5
@@ -50,6 +50,8 @@ def time_steps(data: str, scale: float, precision: str, steps: int, scenes_per_s
     batches = StepBatches(ds, cfg)
     opt = torch.optim.Adam(model.human.parameters(), lr=cfg.lr)
     resolved = resolve_precision(precision, torch.device("cpu"))
+    if precision == "auto" and resolved == "bf16":  # what the pretraining does: time both, keep the faster
+        resolved = fastest_precision(model, *batches[0], cfg, None)[0]
     times = []
     for step in range(WARMUP):
         pretrain_step(model, opt, *batches[step], cfg, resolved)

@@ -522,8 +522,17 @@ def _export_cli(args) -> int:
     import hashlib  # noqa: PLC0415
 
     net = load_net(args.net)
+    # The checkpoint's own record; the score.json beside it lends its held-out rows only if it is this
+    # net's (another run's may sit in the folder a net was copied into).
+    trained = dict(net.trained)
     score_json = args.net.parent / "score.json"
-    trained = {**net.trained, **(json.loads(score_json.read_text()) if score_json.is_file() else {})}
+    if score_json.is_file():
+        scored = json.loads(score_json.read_text())
+        if scored.get("steps") == net.steps_trained and scored.get("config") == net.trained.get("config"):
+            trained["rows"] = scored.get("rows")
+        else:
+            print(f"{score_json}: another run's (steps or config differ from {args.net}): its figures are not "
+                  "used", file=sys.stderr)
     meta = {"trained_on": str(args.net), "hardware": str(trained.get("hardware", "")),
             "seconds": str(trained.get("seconds", ""))}
     out = export_painter(net, args.out, meta)
@@ -537,9 +546,10 @@ def _export_cli(args) -> int:
         outs.append(quantize_painter(out, out.with_suffix(".int8.onnx"), load_cache(args.calib_cache)))
     if args.val_cache is not None:
         val = load_cache(args.val_cache)
-        if not report["held_out"]:  # no score.json: the torch net's own figures on this cache instead
+        if not report["held_out"]:  # no score.json of this net: the torch net's own figures on this cache
             report["held_out"] = score_rows(val, *paintings(net, val))
             report["held_out_cache"] = str(args.val_cache)
+            report["held_out_scored_on"] = "cpu, float32"  # train scores on its own device (bf16 on a GPU)
         report["parity"] = painter_parity(net, out, val)
         print(f"onnxruntime vs torch on {report['parity']['views']} views: max |diff| "
               f"{report['parity']['max_abs']:.2e}, PSNR {report['parity']['psnr_db']:.1f} dB")

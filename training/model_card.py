@@ -234,8 +234,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
             threads = str(t.get("gpu") or t["device"])
         elif t.get("device"):
             threads = f"CPU ({threads})"
-        if t.get("precision") == "bf16":  # the pretraining's forward pass in bfloat16 (PretrainConfig.precision)
-            threads = f"{threads}, bf16"
+        if t.get("precision") not in (None, "fp32"):  # the pretraining's forward pass (PretrainConfig.precision):
+            threads = f"{threads}, {t['precision']}"  # bf16, or each trunk scale's when the probe picked both
         L.append(f"| {name} | {c.get('preset')} | {t.get('steps')} | {rays} | {sched} | {threads} | "
                  f"{_fmt((t.get('wall_s') or 0) / 60, 1)} min |")
     L.append("")

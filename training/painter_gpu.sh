@@ -11,8 +11,8 @@
 #
 #   bash training/painter_gpu.sh WORK REPORT [TRAIN_SCENES=2048] [SECONDS=240]
 #
-# WORK holds the data and caches (a few GB); REPORT gets each width's fill_net_w<W>.pt, score and log,
-# and the val split's joints. Export the nets on any machine with `python -m training.learnt_fill
+# WORK holds the data and caches (a few GB); REPORT (WORK itself will do) gets each width's fill_net_w<W>.pt,
+# score and log, and the val split's joints. Export the nets on any machine with `python -m training.learnt_fill
 # export` (docs/training.md, "The painter on a GPU"). MODELS=<folder> reads that folder's model instead
 # of models/; WIDTHS="32 16" by default. Runs on a CPU as well, slowly.
 set -euo pipefail
@@ -22,8 +22,10 @@ WIDTHS=${WIDTHS:-32 16}
 mkdir -p "$WORK" "$REPORT"
 t0=$(date +%s)
 stamp() { echo "$1: $(( $(date +%s) - t0 )) s"; }
-# A background job's failure stops the script too (plain `wait` would not).
+# A background job's failure stops the script too (plain `wait` would not), and whatever still runs beside
+# it is stopped with it (a leftover trainer would hold the lent GPU).
 wait_all() { local p; for p in "$@"; do wait "$p"; done; }
+trap 'kill $(jobs -p) 2>/dev/null || true' EXIT
 
 $PY -m training.data.generate --out "$WORK/data" --train "$N" --val "$VAL" --res 128 --workers "$W" --freestyle-share 0.5
 stamp data
@@ -33,7 +35,7 @@ $PY -m training.device_joints --data "$WORK/data" --split train --limit "$N" --m
 $PY -m training.device_joints --data "$WORK/data" --split val --limit "$VAL" --model "$MODELS/ghnerf" \
     --threads 2 --out "$WORK/joints_val.npz" & b=$!
 wait_all $a $b
-cp "$WORK/joints_val.npz" "$REPORT/joints_val.npz"
+[ "$WORK/joints_val.npz" -ef "$REPORT/joints_val.npz" ] || cp "$WORK/joints_val.npz" "$REPORT/joints_val.npz"
 stamp joints
 
 VW=$(( W / 4 > 1 ? W / 4 : 1 )); TW=$(( W - VW > 1 ? W - VW : 1 ))

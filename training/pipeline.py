@@ -806,7 +806,8 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
                 "wall_s": pre.get("summary", {}).get("wall_s"), "checkpoint": pre.get("summary", {}).get("human"),
                 "images_per_step": pre.get("summary", {}).get("images_per_step"),
                 "eval_pck@0.2": pre.get("summary", {}).get("eval_pck@0.2"),
-                **{k: pre["summary"][k] for k in ("threads", "segments", "device", "gpu", "precision")
+                **{k: pre["summary"][k] for k in ("threads", "segments", "device", "gpu", "precision",
+                                                             "precision_probe")
                    if k in pre.get("summary", {})}}
         s = st.stamp(f"train_{variant}") or {}
         info = s.get("info", {})

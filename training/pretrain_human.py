@@ -96,7 +96,8 @@ class PretrainConfig(Config):
     """Arithmetic of the encoder's forward pass: ``fp32``; ``bf16`` (``torch.autocast``: convolutions in bfloat16,
     the weights, optimiser and loss in float32); ``auto``: on a CUDA GPU ``bf16`` where it has bfloat16; on a
     CPU with bfloat16 instructions (:func:`cpu_has_native_bf16`) whichever of the two is faster, timed on the
-    run's first batch at each trunk input scale (:func:`fastest_precision`); else ``fp32``. The instructions
+    run's first batch at each trunk input scale (:func:`fastest_precision`; bf16 only if 10 % faster); else
+    ``fp32``. The instructions
     alone do not say: on the 2-core EPYC (AVX512_BF16) a 16-image step at the 128x128 trunk takes 0.11 s in
     bf16 against 0.19 s in fp32, on session 38's Intel Xeon (AVX512_BF16, no AMX) 0.30 s against 0.21
     (``benchmarks/time_pretrain_step.py``, docs/training.md)."""
@@ -264,28 +265,45 @@ def cpu_has_native_bf16() -> bool:
     return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
 
 
+#: bf16 must be this much faster than fp32 (seconds per step, ratio) to be picked: near a tie the timing noise
+#: would pick either from run to run, and the arithmetic changes the weights.
+BF16_MIN_SPEEDUP = 1.10
+
+
 def fastest_precision(model: GHNeRF, images: Tensor, heat: Tensor, cfg: PretrainConfig,
-                      input_scale: float | None, steps: int = 4, warmup: int = 2) -> tuple[str, dict[str, float]]:
-    """``fp32`` or ``bf16``, whichever runs :func:`pretrain_step` faster here on this batch, and the median
-    seconds per step of each. It times copies of the encoder with an optimiser of their own and restores the
-    random state after, so the run itself is exactly what it would be without the probe."""
-    seconds: dict[str, float] = {}
+                      input_scale: float | None, steps: int = 4, warmup: int = 2,
+                      clock=time.perf_counter) -> tuple[str, dict[str, float]]:
+    """``bf16`` where it runs :func:`pretrain_step` at least :data:`BF16_MIN_SPEEDUP` times as fast as ``fp32`` here
+    on this batch, else ``fp32``; and the median seconds per step of each. The two are timed step by step in
+    turn (a load that comes and goes falls on both), on copies of the encoder with optimisers of their own,
+    and the random states are restored after, so the run itself is exactly what it would be without the probe."""
+    times: dict[str, list[float]] = {"fp32": [], "bf16": []}
     py_state, np_state = random.getstate(), np.random.get_state()
     with torch.random.fork_rng(devices=[]):
-        for precision in ("fp32", "bf16"):
+        copies = {}
+        for precision in times:
             probe = copy.deepcopy(model)
-            opt = torch.optim.Adam(probe.human.parameters(), lr=cfg.lr)
-            times = []
-            for i in range(warmup + steps):
-                t0 = time.perf_counter()
+            copies[precision] = (probe, torch.optim.Adam(probe.human.parameters(), lr=cfg.lr))
+        for i in range(warmup + steps):
+            for precision in (("fp32", "bf16") if i % 2 else ("bf16", "fp32")):
+                probe, opt = copies[precision]
+                t0 = clock()
                 pretrain_step(probe, opt, images, heat, cfg, precision, input_scale)
                 if i >= warmup:
-                    times.append(time.perf_counter() - t0)
-            seconds[precision] = float(np.median(times))
-            del probe, opt
+                    times[precision].append(clock() - t0)
+        del copies
     random.setstate(py_state)
     np.random.set_state(np_state)
-    return min(seconds, key=seconds.get), seconds
+    seconds = {k: float(np.median(v)) for k, v in times.items()}
+    return ("bf16" if seconds["fp32"] >= BF16_MIN_SPEEDUP * seconds["bf16"] else "fp32"), seconds
+
+
+def precision_label(probed: dict) -> str:
+    """The summary's ``precision`` of a probed run: the one pick, or each scale's when they differ."""
+    picks = {("full" if k is None else str(k)): v[0] for k, v in probed.items()}
+    if len(set(picks.values())) == 1:
+        return next(iter(picks.values()))
+    return ", ".join(f"{v} at {k}" for k, v in picks.items())
 
 
 def save_human(path: Path, model: GHNeRF, step: int) -> None:
@@ -426,14 +444,17 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         step = int(ck["step"])
     clock = RunClock.resumed(ck, step, torch.get_num_threads())
     precision = resolve_precision(cfg.precision, device)
-    # A CPU's bfloat16 instructions need not make bf16 the faster (docs/training.md): time both per scale.
+    # A CPU's bfloat16 instructions need not make bf16 the faster (docs/training.md): time both per scale. A
+    # resumed run keeps the picks its checkpoint holds, so one scale never changes arithmetic midway.
     probe = cfg.precision == "auto" and device.type == "cpu" and precision == "bf16"
     probed: dict[float | None, tuple[str, dict[str, float]]] = {}
+    if probe and ck is not None:
+        probed = {k: tuple(v) for k, v in (ck.get("precision_probe") or {}).items()}
     seed_everything(cfg.seed + 1)
 
     def checkpoint(s: int) -> None:
         state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s,
-                 "segments": clock.segments(s), "config": asdict(cfg)}
+                 "segments": clock.segments(s), "config": asdict(cfg), "precision_probe": probed}
         torch.save(state, last.with_suffix(".tmp"))
         os.replace(last.with_suffix(".tmp"), last)
         save_human(out / "human.pt", model, s)
@@ -479,9 +500,10 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
             break
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
-               **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(), "precision": precision,
-               **({"precision_probe": {("full" if k is None else str(k)): {"picked": v[0], "s_per_step": v[1]} for k, v in probed.items()}}
-                  if probed else {}),
+               **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(),
+               "precision": precision_label(probed) if probed else precision,
+               **({"precision_probe": {("full" if k is None else str(k)): {"picked": v[0], "s_per_step": v[1]}
+                                       for k, v in probed.items()}} if probed else {}),
                **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
                "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,

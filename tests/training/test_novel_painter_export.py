@@ -133,8 +133,9 @@ def _export_setup(tmp_path, data64):
 def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_path, data64):
     card_dir, out = _export_setup(tmp_path, data64)
     rows = {"novel, all": {"n": 3, "shown": 19.0, "fill:learnt": 20.0}}
+    config = torch.load(tmp_path / "fill_net.pt", weights_only=True)["config"]
     (tmp_path / "score.json").write_text(json.dumps({"rows": rows, "seconds": 1.0, "hardware": "cpu",
-                                                     "train_views": 3}))
+                                                     "train_views": 3, "steps": 7, "config": config}))
     assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
                  "--val-cache", str(tmp_path / "cache.npz"), "--calib-cache", str(tmp_path / "cache.npz")]) == 0
     report = json.loads(out.with_suffix(".json").read_text())
@@ -152,16 +153,22 @@ def test_the_export_command_writes_both_graphs_their_figures_and_the_card(tmp_pa
     assert NovelPainter.find(out.parent).name == "novel_painter.int8.onnx"
 
 
-def test_a_net_exported_without_its_score_file_keeps_its_record_and_is_scored_on_the_cache(tmp_path, data64):
+@pytest.mark.parametrize("score_file", ["none", "another run's"])
+def test_a_net_exported_without_its_score_file_keeps_its_record_and_is_scored_on_the_cache(tmp_path, data64,
+                                                                                         score_file):
     # A net brought back alone from a GPU machine: the checkpoint's own record fills the card, and the
-    # torch net's held-out figures come from the given cache.
+    # torch net's held-out figures come from the given cache. Another run's score.json beside it lends nothing.
     card_dir, out = _export_setup(tmp_path, data64)
+    if score_file != "none":
+        (tmp_path / "score.json").write_text(json.dumps({
+            "rows": {"novel, all": {"n": 9, "fill:learnt": 99.0}}, "steps": 123, "hardware": "elsewhere",
+            "seconds": 5.0, "train_views": 99, "config": {"batch": 1}}))
     assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out), "--card-dir", str(card_dir),
                  "--val-cache", str(tmp_path / "cache.npz")]) == 0
     report = json.loads(out.with_suffix(".json").read_text())
     assert report["hardware"] == "cpu" and report["train_views"] == 3 and report["train_s"] == 1.0
     assert report["config"]["net"]["width"] == 8 and report["config"]["net"]["shown_input"] is True
-    assert report["held_out_cache"] == str(tmp_path / "cache.npz")
+    assert report["held_out_cache"] == str(tmp_path / "cache.npz") and report["steps"] == 7
     torch_all = report["held_out"]["novel, all"]["fill:learnt"]
     assert abs(torch_all - report["onnx_held_out"]["fp32"]["novel, all"]["fill:learnt"]) < 0.01
     assert "Novel-view painter" in (card_dir / "MODEL_CARD.md").read_text()

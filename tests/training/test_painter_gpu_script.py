@@ -18,18 +18,19 @@ REPO = Path(__file__).resolve().parents[2]
 SCRIPT = REPO / "training" / "painter_gpu.sh"
 
 
-def _run(tmp_path: Path, **env: str) -> subprocess.CompletedProcess:
+def _run(tmp_path: Path, report: str = "report", **env: str) -> subprocess.CompletedProcess:
     full = {**os.environ, "PYTHON": sys.executable, "VAL": "4", "WORKERS": "2", "WIDTHS": "8", **env}
-    return subprocess.run(["bash", str(SCRIPT), str(tmp_path / "work"), str(tmp_path / "report"), "6", "2"],
+    return subprocess.run(["bash", str(SCRIPT), str(tmp_path / "work"), str(tmp_path / report), "6", "2"],
                           cwd=REPO, env=full, capture_output=True, text=True, timeout=600)
 
 
-def test_the_gpu_recipe_makes_a_scored_net_per_width_and_the_val_joints(tmp_path):
+@pytest.mark.parametrize("report", ["report", "work"])  # `make painter-gpu` reports into the work folder
+def test_the_gpu_recipe_makes_a_scored_net_per_width_and_the_val_joints(tmp_path, report):
     from training.learnt_fill import load_net
 
-    done = _run(tmp_path)
+    done = _run(tmp_path, report)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
-    report = tmp_path / "report"
+    report = tmp_path / report
     net = load_net(report / "fill_net_w8.pt")
     assert net.cfg.width == 8 and net.cfg.shown_input and not net.cfg.relit_input
     assert net.steps_trained >= 1 and net.trained["config"]["batch"] == 32
@@ -41,8 +42,15 @@ def test_the_gpu_recipe_makes_a_scored_net_per_width_and_the_val_joints(tmp_path
 
 
 def test_a_stage_that_fails_in_the_background_stops_the_script(tmp_path):
-    # the joints of both splits run side by side: a missing model folder must end the run there, named
-    done = _run(tmp_path, MODELS=str(tmp_path / "no_models"))
-    assert done.returncode != 0
-    assert "no_models" in done.stderr
-    assert "joints:" not in done.stdout and not (tmp_path / "report" / "joints_val.npz").exists()
+    # the joints of both splits run side by side; only the train split's fails here, and the script must
+    # stop there (a plain `wait` would let it go on with the val split's joints alone)
+    python = tmp_path / "python"
+    python.write_text(f"""#!/usr/bin/env bash
+case "$*" in *training.device_joints*--split\\ train*) echo "train joints failed" >&2; exit 7;; esac
+exec {sys.executable} "$@"
+""")
+    python.chmod(0o755)
+    done = _run(tmp_path, PYTHON=str(python))
+    assert done.returncode == 7, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "train joints failed" in done.stderr
+    assert "joints:" not in done.stdout and not (tmp_path / "work" / "fill_val.npz").exists()

@@ -206,6 +206,76 @@ def test_auto_precision_on_a_bf16_cpu_times_both_per_scale_and_leaves_the_run_as
     assert all(torch.equal(a[k], b[k]) for k in a)  # bit for bit: the probe changed nothing in the run
 
 
+def test_the_precision_probe_restores_every_random_state_and_leaves_the_weights(data64):
+    import random
+
+    import numpy as np
+
+    from training.data.torch_dataset import MultiViewDataset
+    from training.model import GHNeRF
+    from training.pretrain_human import fastest_precision
+
+    cfg = tiny_pretrain(data64, eval_every=0)
+    model = GHNeRF(cfg.model_config()).train()
+    images, heat = view_batch([MultiViewDataset(data64, "train")[0]], flip=False)
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    torch.manual_seed(5), np.random.seed(5), random.seed(5)
+    states = torch.random.get_rng_state(), np.random.get_state()[1].copy(), random.getstate()
+    picked, seconds = fastest_precision(model, images, heat, cfg, None, steps=2, warmup=1)
+    assert picked in ("fp32", "bf16") and set(seconds) == {"fp32", "bf16"}
+    assert torch.equal(torch.random.get_rng_state(), states[0])
+    assert np.array_equal(np.random.get_state()[1], states[1]) and random.getstate() == states[2]
+    assert all(torch.equal(before[k], v) for k, v in model.state_dict().items())  # BN statistics too
+
+
+def test_bf16_is_picked_only_when_clearly_faster(data64, monkeypatch):
+    import training.pretrain_human as ph
+    from training.data.torch_dataset import MultiViewDataset
+    from training.model import GHNeRF
+
+    cfg = tiny_pretrain(data64, eval_every=0)
+    model = GHNeRF(cfg.model_config()).train()
+    images, heat = view_batch([MultiViewDataset(data64, "train")[0]], flip=False)
+    for bf16_s, picked in ((0.95, "fp32"), (0.85, "bf16"), (1.5, "fp32")):
+        order: list[str] = []
+        monkeypatch.setattr(ph, "pretrain_step", lambda *a, _o=order: _o.append(a[5]) or 1.0)
+        now, counted = [0.0], [0]
+
+        def clock(_o=order, _bf16=bf16_s):  # a step takes 1 s in fp32, bf16_s in bf16
+            for precision in _o[counted[0]:]:
+                now[0] += _bf16 if precision == "bf16" else 1.0
+            counted[0] = len(_o)
+            return now[0]
+
+        got, seconds = ph.fastest_precision(model, images, heat, cfg, None, clock=clock)
+        assert got == picked and seconds == pytest.approx({"fp32": 1.0, "bf16": bf16_s}), bf16_s
+        assert order[:4] == ["bf16", "fp32", "fp32", "bf16"]  # in turn, each first every other step
+
+
+def test_a_resumed_run_keeps_the_precision_its_checkpoint_picked(data64, tmp_path, monkeypatch):
+    import training.pretrain_human as ph
+
+    monkeypatch.setattr(ph, "cpu_has_native_bf16", lambda: True)
+    calls = []
+
+    def pick_bf16(*args, **kw):
+        calls.append(args[4])  # the trunk input scale
+        return "bf16", {"fp32": 2.0, "bf16": 1.0}
+
+    monkeypatch.setattr(ph, "fastest_precision", pick_bf16)
+    kw = {"eval_every": 0, "coarse_steps": 2, "coarse_input_scale": 0.5, "precision": "auto"}
+    pretrain(tiny_pretrain(data64, iterations=1, **kw), tmp_path / "r", quiet=True)
+    assert calls == [0.5]
+    monkeypatch.setattr(ph, "fastest_precision", lambda *a, **k: ("fp32", {"fp32": 1.0, "bf16": 2.0}))
+    summary = pretrain(tiny_pretrain(data64, iterations=3, **kw), tmp_path / "r", resume=True, quiet=True)
+    # the 0.5 scale kept its bf16; the full scale, new at the resume, was probed then
+    assert summary["precision_probe"]["0.5"]["picked"] == "bf16"
+    assert summary["precision_probe"]["full"]["picked"] == "fp32"
+    assert summary["precision"] == "bf16 at 0.5, fp32 at full"
+    log = [json.loads(line) for line in (tmp_path / "r" / "log.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in log] == [1, 2, 3]
+
+
 def test_auto_precision_probes_only_where_the_cpu_has_bf16(data64, tmp_path, monkeypatch):
     import training.pretrain_human as ph
 
