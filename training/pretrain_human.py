@@ -470,10 +470,9 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         scale = cfg.input_scale_at(step)
         if probe and scale not in probed:
             probed[scale] = fastest_precision(model, images, heat, cfg, scale)
-            if not quiet:
-                times = ", ".join(f"{k} {v:.3f}" for k, v in probed[scale][1].items())
-                print(f"precision auto at trunk input scale {'full' if scale is None else scale}: {probed[scale][0]} "
-                      f"(s/step {times})", file=sys.stderr)
+            times = ", ".join(f"{k} {v:.3f}" for k, v in probed[scale][1].items())
+            print(f"precision auto at trunk input scale {'full' if scale is None else scale}: {probed[scale][0]} "
+                  f"(s/step {times})", file=sys.stderr)  # a decision, not progress: printed under --quiet too
         if probe:
             precision = probed[scale][0]
         lv = pretrain_step(model, opt, images, heat, cfg, precision, scale)

@@ -252,7 +252,7 @@ def test_bf16_is_picked_only_when_clearly_faster(data64, monkeypatch):
         assert order[:4] == ["bf16", "fp32", "fp32", "bf16"]  # in turn, each first every other step
 
 
-def test_a_resumed_run_keeps_the_precision_its_checkpoint_picked(data64, tmp_path, monkeypatch):
+def test_a_resumed_run_keeps_the_precision_its_checkpoint_picked(data64, tmp_path, monkeypatch, capsys):
     import training.pretrain_human as ph
 
     monkeypatch.setattr(ph, "cpu_has_native_bf16", lambda: True)
@@ -266,6 +266,8 @@ def test_a_resumed_run_keeps_the_precision_its_checkpoint_picked(data64, tmp_pat
     kw = {"eval_every": 0, "coarse_steps": 2, "coarse_input_scale": 0.5, "precision": "auto"}
     pretrain(tiny_pretrain(data64, iterations=1, **kw), tmp_path / "r", quiet=True)
     assert calls == [0.5]
+    # the pick is logged under --quiet too (the pipeline's train.log)
+    assert "precision auto at trunk input scale 0.5: bf16 (s/step fp32 2.000, bf16 1.000)" in capsys.readouterr().err
     monkeypatch.setattr(ph, "fastest_precision", lambda *a, **k: ("fp32", {"fp32": 1.0, "bf16": 2.0}))
     summary = pretrain(tiny_pretrain(data64, iterations=3, **kw), tmp_path / "r", resume=True, quiet=True)
     # the 0.5 scale kept its bf16; the full scale, new at the resume, was probed then
