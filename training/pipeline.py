@@ -98,7 +98,9 @@ class Recipe:
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
     "cpu": Recipe("two CPU cores, about 1 h 56 min from nothing on a fast AVX-512 host (by its stages' measured "
-                  "times), about 2 h 45 min on session 35's EPYC (its first three stages timed; docs/training.md): encoder trunk at 128x128, 44000 pretraining steps of 2 scenes, "
+                  "times), about 2 h 45 min on session 35's EPYC and about 3 h on session 38's Intel Xeon (each "
+                  "timed into its first stages; docs/training.md): encoder trunk at 128x128, 44000 pretraining "
+                  "steps of 2 scenes, "
                   "the first 17600 with the trunk's input at 64x64 (progressive resizing), the rate halved "
                   "every 8800, with the forward pass in bfloat16 where the CPU computes it faster (precision "
                   "auto times both at the start of each scale: 0.11 s per step in bfloat16 against 0.19 in "
@@ -806,8 +808,8 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
                 "wall_s": pre.get("summary", {}).get("wall_s"), "checkpoint": pre.get("summary", {}).get("human"),
                 "images_per_step": pre.get("summary", {}).get("images_per_step"),
                 "eval_pck@0.2": pre.get("summary", {}).get("eval_pck@0.2"),
-                **{k: pre["summary"][k] for k in ("threads", "segments", "device", "gpu", "precision",
-                                                             "precision_probe")
+                **{k: pre["summary"][k]
+                   for k in ("threads", "segments", "device", "gpu", "precision", "precision_probe")
                    if k in pre.get("summary", {})}}
         s = st.stamp(f"train_{variant}") or {}
         info = s.get("info", {})

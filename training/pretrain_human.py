@@ -97,9 +97,9 @@ class PretrainConfig(Config):
     the weights, optimiser and loss in float32); ``auto``: on a CUDA GPU ``bf16`` where it has bfloat16; on a
     CPU with bfloat16 instructions (:func:`cpu_has_native_bf16`) whichever of the two is faster, timed on the
     run's first batch at each trunk input scale (:func:`fastest_precision`; bf16 only if 10 % faster); else
-    ``fp32``. The instructions
-    alone do not say: on the 2-core EPYC (AVX512_BF16) a 16-image step at the 128x128 trunk takes 0.11 s in
-    bf16 against 0.19 s in fp32, on session 38's Intel Xeon (AVX512_BF16, no AMX) 0.30 s against 0.21
+    ``fp32``. The instructions alone do not say: on the 2-core EPYC (AVX512_BF16) a 16-image step at the
+    128x128 trunk takes 0.11 s in bf16 against 0.19 s in fp32, on session 38's Intel Xeon (AVX512_BF16, no
+    AMX) 0.30 s against 0.21
     (``benchmarks/time_pretrain_step.py``, docs/training.md)."""
 
     coarse_steps: int = 0
@@ -298,9 +298,14 @@ def fastest_precision(model: GHNeRF, images: Tensor, heat: Tensor, cfg: Pretrain
     return ("bf16" if seconds["fp32"] >= BF16_MIN_SPEEDUP * seconds["bf16"] else "fp32"), seconds
 
 
+def scale_name(input_scale: float | None) -> str:
+    """A trunk input scale as the probe's log and summary name it (None: the model's own, ``full``)."""
+    return "full" if input_scale is None else str(input_scale)
+
+
 def precision_label(probed: dict) -> str:
     """The summary's ``precision`` of a probed run: the one pick, or each scale's when they differ."""
-    picks = {("full" if k is None else str(k)): v[0] for k, v in probed.items()}
+    picks = {scale_name(k): v[0] for k, v in probed.items()}
     if len(set(picks.values())) == 1:
         return next(iter(picks.values()))
     return ", ".join(f"{v} at {k}" for k, v in picks.items())
@@ -471,7 +476,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         if probe and scale not in probed:
             probed[scale] = fastest_precision(model, images, heat, cfg, scale)
             times = ", ".join(f"{k} {v:.3f}" for k, v in probed[scale][1].items())
-            print(f"precision auto at trunk input scale {'full' if scale is None else scale}: {probed[scale][0]} "
+            print(f"precision auto at trunk input scale {scale_name(scale)}: {probed[scale][0]} "
                   f"(s/step {times})", file=sys.stderr)  # a decision, not progress: printed under --quiet too
         if probe:
             precision = probed[scale][0]
@@ -501,7 +506,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,
                **clock.summary(step), "device": str(device), "threads": torch.get_num_threads(),
                "precision": precision_label(probed) if probed else precision,
-               **({"precision_probe": {("full" if k is None else str(k)): {"picked": v[0], "s_per_step": v[1]}
+               **({"precision_probe": {scale_name(k): {"picked": v[0], "s_per_step": v[1]}
                                        for k, v in probed.items()}} if probed else {}),
                **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
