@@ -993,7 +993,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--prior-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the skeleton prior's recipe: steps, extra_train (scenes of the second "
                          "training set), members (networks averaged), e.g. --recipe cpu --prior-set "
-                         "extra_train=0 --prior-set steps=15000: the smaller prior, 12 min sooner (docs/training.md)")
+                         "extra_train=0 --prior-set steps=15000 --prior-set members=1: session 17's smaller prior, "
+                         "about 23 min sooner (docs/training.md, `make model`)")
     ap.add_argument("--workers", type=int, default=None,
                     help="dataset generation processes (default 2; the files do not depend on it)")
     ap.add_argument("--until", choices=("data", "pretrain", "train"),

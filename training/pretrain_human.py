@@ -413,6 +413,10 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     from training.data.torch_dataset import MultiViewDataset
 
     cfg.validate()
+    if cfg.coarse_steps >= cfg.iterations:  # allowed (a run stopped early to be extended), but rarely meant
+        print(f"warning: pretrain_human.coarse_steps={cfg.coarse_steps} >= iterations={cfg.iterations}: every "
+              f"step feeds the trunk at input scale {cfg.coarse_input_scale}, none at the model's "
+              f"({cfg.model_config().human.input_scale})", file=sys.stderr)
     out = Path(out_dir)
     if resume and (out / "last.pt").exists():
         _check_resumable(cfg, out / "last.pt")  # before config.json is overwritten with the new one

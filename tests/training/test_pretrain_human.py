@@ -267,7 +267,10 @@ def test_a_resumed_run_keeps_the_precision_its_checkpoint_picked(data64, tmp_pat
     pretrain(tiny_pretrain(data64, iterations=1, **kw), tmp_path / "r", quiet=True)
     assert calls == [0.5]
     # the pick is logged under --quiet too (the pipeline's train.log)
-    assert "precision auto at trunk input scale 0.5: bf16 (s/step fp32 2.000, bf16 1.000)" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "precision auto at trunk input scale 0.5: bf16 (s/step fp32 2.000, bf16 1.000)" in err
+    # a run that ends inside its coarse steps is allowed (to be extended, as here), with a warning
+    assert "coarse_steps=2 >= iterations=1: every step feeds the trunk at input scale 0.5" in err
     monkeypatch.setattr(ph, "fastest_precision", lambda *a, **k: ("fp32", {"fp32": 1.0, "bf16": 2.0}))
     summary = pretrain(tiny_pretrain(data64, iterations=3, **kw), tmp_path / "r", resume=True, quiet=True)
     # the 0.5 scale kept its bf16; the full scale, new at the resume, was probed then
@@ -391,7 +394,7 @@ def test_a_frozen_encoder_stays_as_pretrained_while_the_rest_trains(data64, tmp_
     assert not model.human.training and model.feature_net.training
 
 
-def test_coarse_steps_feed_the_trunk_a_smaller_image_then_the_models(data64, tmp_path):
+def test_coarse_steps_feed_the_trunk_a_smaller_image_then_the_models(data64, tmp_path, capsys):
     """Progressive resizing (``coarse_steps``): the first steps' trunk input is ``coarse_input_scale`` of the
     image, the rest the model's; the heatmaps keep their size, and ``human.pt`` records the model's scale."""
     from training.data.torch_dataset import MultiViewDataset
@@ -409,6 +412,7 @@ def test_coarse_steps_feed_the_trunk_a_smaller_image_then_the_models(data64, tmp
     assert sizes == [32, 64] and model.config.human.input_scale == 1.0
 
     summary = pretrain(cfg, tmp_path / "run", quiet=True)
+    assert "warning" not in capsys.readouterr().err  # coarse steps < iterations: no warning
     log = [json.loads(line) for line in (tmp_path / "run" / "log.jsonl").read_text().splitlines()]
     assert summary["steps"] == 3 and [r.get("input_scale") for r in log] == [0.5, 0.5, None]
     saved = torch.load(tmp_path / "run" / "human.pt", weights_only=True)["model_config"]["human"]
