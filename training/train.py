@@ -444,6 +444,23 @@ def step_losses(out: dict, batch: dict, cfg: TrainConfig) -> dict[str, Tensor]:
     return terms
 
 
+def train_step(ddp_model: torch.nn.Module, model: GHNeRF, opt: torch.optim.Optimizer, batch: dict[str, Tensor],
+               cfg: TrainConfig) -> tuple[dict, dict[str, Tensor]]:
+    """One update of the joint run (``ddp_model`` is ``model`` or its DDP wrapper): forward over the batch's
+    rays, the losses, backward, gradient clipping, Adam. Returns the outputs and the loss terms.
+    ``benchmarks/time_train_step.py`` times this very function."""
+    out = ddp_model(batch["images"], batch["src_P"], batch["src_centers"], batch["tgt_K_inv"],
+                    batch["tgt_c2w"], batch["near_far"], batch["ray_uv"], perturb=True,
+                    aux_images=batch.get("aux_images"))
+    terms = step_losses(out, batch, cfg)
+    opt.zero_grad(set_to_none=True)
+    terms["loss"].backward()
+    if cfg.grad_clip:
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+    opt.step()
+    return out, terms
+
+
 def psnr_of(pred: Tensor, target: Tensor) -> float:
     mse = float(F.mse_loss(pred.detach(), target))
     return 10 * math.log10(1.0 / max(mse, 1e-10))
@@ -699,15 +716,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
             lr = learning_rate(cfg, step)
             for g in opt.param_groups:
                 g["lr"] = lr
-            out = ddp_model(batch["images"], batch["src_P"], batch["src_centers"], batch["tgt_K_inv"],
-                            batch["tgt_c2w"], batch["near_far"], batch["ray_uv"], perturb=True,
-                            aux_images=batch.get("aux_images"))
-            terms = step_losses(out, batch, cfg)
-            opt.zero_grad(set_to_none=True)
-            terms["loss"].backward()
-            if cfg.grad_clip:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-            opt.step()
+            out, terms = train_step(ddp_model, model, opt, batch, cfg)
             step += 1
             loss_v = float(terms["loss"].detach())
             if not math.isfinite(loss_v):

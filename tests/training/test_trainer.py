@@ -230,3 +230,23 @@ def test_a_run_folder_in_use_is_refused(tmp_path):
     with pytest.raises(RuntimeError, match="another training process"):
         train(build_config({"preset": "tiny", "data": "nowhere"}), tmp_path)
     assert not (tmp_path / "config.json").exists()
+
+
+def test_the_step_timing_benchmark_runs_the_trainers_step(data64, capsys):
+    """``benchmarks/time_train_step.py`` times ``training.train.train_step`` for both variants and both
+    arithmetics and prints one row each (here on the tiny preset; the figures are the host's)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "time_train_step.py"
+    spec = importlib.util.spec_from_file_location("time_train_step", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert bench.main(["--data", str(data64), "--threads", "1", "--steps", "1", "--set", 'preset="tiny"']) == 0
+    rows = [line.split("|")[1:-1] for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
+    rows = [[c.strip() for c in r] for r in rows if r[0].strip() in ("ghnerf", "baseline")]
+    assert [(r[0], r[2]) for r in rows] == [("ghnerf", "fp32"), ("ghnerf", "bf16"),
+                                            ("baseline", "fp32"), ("baseline", "bf16")]
+    assert all(float(r[3]) > 0 for r in rows) and rows[1][5].endswith("x")
+    with pytest.raises(SystemExit):
+        bench.main(["--data", str(data64), "--precisions", "fp16"])
