@@ -85,7 +85,8 @@ class Recipe:
     """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
 
 
-#: ``--recipe``. ``cpu`` is what two cores train in under two hours: since session 20 the human encoder's
+#: ``--recipe``. ``cpu`` is sized for two cores (under two hours only on the fastest 2-core host measured, about
+#: 2 h 39 min to 3 h on the others: docs/training.md, "`make model` on an AMX Xeon"): since session 20 the encoder's
 #: trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 24 for 44000 steps, the first
 #: 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128 on the
 #: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with a one-network prior
@@ -98,14 +99,15 @@ class Recipe:
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
     "cpu": Recipe("two CPU cores, about 1 h 56 min from nothing on a fast AVX-512 host (by its stages' measured "
-                  "times), about 2 h 45 min on session 35's EPYC and about 3 h on session 38's Intel Xeon (each "
-                  "timed into its first stages; docs/training.md): encoder trunk at 128x128, 44000 pretraining "
+                  "times), about 2 h 39 min on session 39's AMX Xeon, about 2 h 45 min on session 35's EPYC and about "
+                  "3 h on session 38's Intel Xeon (each timed into its first stages; docs/training.md): encoder "
+                  "trunk at 128x128, 44000 pretraining "
                   "steps of 2 scenes, "
                   "the first 17600 with the trunk's input at 64x64 (progressive resizing), the rate halved "
                   "every 8800, with the forward pass in bfloat16 where the CPU computes it faster (precision "
                   "auto times both at the start of each scale: 0.11 s per step in bfloat16 against 0.19 in "
                   "float32 on that host, 0.30 against 0.21 on session 38's Intel Xeon, which then runs "
-                  "float32); skeleton prior: two networks of "
+                  "float32, 0.11 against 0.25 on session 39's AMX Xeon); skeleton prior: two networks of "
                   "30000 steps on 25000 scenes (about 27 min on the fast host, about 4.5 of them making its "
                   "20000 extra scenes)",
                   train_overrides=("model.human.input_scale=1.0",),

@@ -48,6 +48,24 @@ def test_collect_train_export_score_and_card(tmp_path, data64):
     assert np.isfinite(est.points).all() and est.points.shape == (3, 25, 3)
 
 
+def test_out_goes_to_a_new_folder_and_a_folder_or_unmakeable_path_is_refused_before_training(tmp_path, data64,
+                                                                                                capsys):
+    from ghnerf_runtime.skeleton_prior import FILE_NAME
+    from tests.ghnerf_runtime.test_session import export_tiny
+    from training import skeleton_prior as sp
+
+    model = export_tiny(tmp_path / "export")
+    base = ["--model-dir", str(model), "--data", str(data64), "--steps", "2", "--hidden", "8"]
+    out = tmp_path / "new" / "deeper" / FILE_NAME  # its folder does not exist yet: made
+    assert sp.main([*base, "--out", str(out)]) == 0 and out.exists() and out.with_suffix(".json").exists()
+
+    (tmp_path / "a_file").write_text("")
+    for bad, says in ((tmp_path / "new", "is a folder"), (tmp_path / "a_file" / FILE_NAME, "cannot make its folder")):
+        with pytest.raises(SystemExit) as e:
+            sp.main([*base, "--out", str(bad)])
+        assert e.value.code == 2 and says in capsys.readouterr().err
+
+
 def test_outlier_tool_compares_prior_files_on_the_same_joints(tmp_path, data64, capsys):
     """``benchmarks/measure_prior_outliers.py`` runs a file of each feature version on one collection."""
     import onnx
