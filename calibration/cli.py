@@ -245,9 +245,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise UsageError(f"{out.parent}: no such folder for the rig file")
+    if out.is_dir():  # found now, not after the detection and the solve
+        raise UsageError(f"--out {out}: is a folder; give the rig file's path")
     report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
     if not report_path.parent.is_dir():
         raise UsageError(f"{report_path.parent}: no such folder for the report")
+    if report_path.is_dir():
+        raise UsageError(f"report {report_path}: is a folder; give the report file's path")
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
     views, missed = detect_folder(board, args.images, _cameras(args.cameras))
     names = tuple(views)

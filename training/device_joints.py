@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+
 
 class JointsCacheError(ValueError):
     """A joints cache that is missing, broken or does not cover the scenes asked for."""
@@ -112,6 +114,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--truth", action="store_true", help="cache the dataset's true joints instead (an oracle)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
+    try:  # a pass over every scene comes first: where its file goes (with the name savez writes) is settled now
+        args.out = ready_output(args.out, "--out", suffix=".npz")
+    except OutputPathError as e:
+        ap.error(str(e))
     if args.truth:
         cache_true_joints(args.data, args.split, args.out, args.limit)
         return 0

@@ -66,6 +66,7 @@ from ghnerf_runtime.body25 import BODY_PARTS, MID_HIP, NECK
 from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
@@ -623,6 +624,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", help="write the JSON here (also printed)")
     args = ap.parse_args(argv)
+    if args.out:  # written after minutes of evaluation: its place is settled first
+        try:
+            args.out = ready_output(args.out, "--out")
+        except OutputPathError as e:
+            ap.error(str(e))
     torch.set_num_threads(args.threads)
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
@@ -638,10 +644,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
         results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
     text = json.dumps(finite_or_none(results), indent=1)
-    if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(text)
     print(text)
+    if args.out:
+        args.out.write_text(text)
     return 0
 
 

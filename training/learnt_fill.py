@@ -54,6 +54,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import NovelViewConfig
 from ghnerf_runtime.metrics import masked_psnr
 from training.evaluate import SOURCE_ANGLE_BINS_DEG
@@ -627,6 +628,13 @@ def main(argv: list[str] | None = None) -> int:
                         "(the training cache)")
     e.add_argument("--card-dir", type=Path, default=None, help="record the painter in this model card (models/)")
     args = ap.parse_args(argv)
+    try:  # the cache and the training take minutes to hours: where they go is settled first
+        if args.cmd == "train":
+            args.out = ready_output(args.out, "--out", kind="folder")
+        elif args.cmd == "cache":
+            args.out = ready_output(args.out, "--out", suffix=".npz")
+    except OutputPathError as e:
+        ap.error(str(e))
 
     if args.cmd == "export":
         return _export_cli(args)

@@ -34,6 +34,7 @@ from typing import Callable
 import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.skeleton_prior import (
     CONTEXT_FEATURES,
     FEATURE_VERSION,
@@ -359,13 +360,10 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out) if args.out else model_dir / FILE_NAME
     if args.members < 1:
         ap.error(f"--members must be at least 1, not {args.members}")
-    # the file is written after minutes of collecting and training: settle where it goes first
-    if out.is_dir():
-        ap.error(f"--out {out} is a folder; give the ONNX file's path (e.g. {out / FILE_NAME})")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        ap.error(f"--out {out}: cannot make its folder ({e})")
+    try:  # the file is written after minutes of collecting and training: where it goes is settled first
+        out = ready_output(out, "--out")
+    except OutputPathError as e:
+        ap.error(str(e))
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
                               members=args.members)
     t0 = time.monotonic()

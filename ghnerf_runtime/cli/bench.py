@@ -31,6 +31,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, \
     Joints3DConfig, NovelViewConfig, SessionConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
@@ -346,13 +347,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ghnerf-bench: error: {args.sequences} x {args.frames} pairs leave none after --warmup "
                   f"{args.warmup}: nothing would be timed", file=sys.stderr)
             return 2
+        if args.json:  # written after the whole bench: its place is settled first
+            args.json = ready_output(args.json, "--json")
         print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs; model {args.model_dir}", flush=True)
         report = run_runtime_bench(args)
         if args.json:
             with open(args.json, "w", encoding="utf-8") as fh:
                 json.dump(finite_or_none(report), fh, indent=2, default=float)  # strict JSON: NaN becomes null
         return 0
-    except (RuntimeErrorBase, OSError) as e:
+    except (RuntimeErrorBase, OSError, OutputPathError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)
         return 2
 

@@ -165,6 +165,9 @@ def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
      "--rig-id 'Süd-Rig' must be printable ASCII"),
     (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--report", "{tmp}/no/r.json"],
      "no such folder for the report"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}", "--floor-view", "floor"], "is a folder; give the rig file's"),
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--report", "{tmp}"],
+     "is a folder; give the report file's"),
 ])
 def test_cli_errors_are_one_line_exit_2(capture, tmp_path, capsys, args, message):
     argv = [a.format(cap=capture, tmp=tmp_path) for a in args]

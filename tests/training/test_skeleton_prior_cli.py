@@ -60,7 +60,7 @@ def test_out_goes_to_a_new_folder_and_a_folder_or_unmakeable_path_is_refused_bef
     assert sp.main([*base, "--out", str(out)]) == 0 and out.exists() and out.with_suffix(".json").exists()
 
     (tmp_path / "a_file").write_text("")
-    for bad, says in ((tmp_path / "new", "is a folder"), (tmp_path / "a_file" / FILE_NAME, "cannot make its folder")):
+    for bad, says in ((tmp_path / "new", "is a folder"), (tmp_path / "a_file" / FILE_NAME, "cannot make the folder")):
         with pytest.raises(SystemExit) as e:
             sp.main([*base, "--out", str(bad)])
         assert e.value.code == 2 and says in capsys.readouterr().err

@@ -22,6 +22,7 @@ import torch
 
 from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from training.export.export import ExampleInputs, example_inputs, export_all
 from training.export.parity import benchmark, int8_vs_fp32, make_session, torch_vs_ort
 from training.export.quantize import calibration_feeds, quantize_all
@@ -84,6 +85,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--report", help="write the figures as JSON here")
     args = ap.parse_args(argv)
+    if args.report:  # written after the export, parity, int8 and timings: its place is settled first
+        try:
+            args.report = ready_output(args.report, "--report")
+        except OutputPathError as e:
+            ap.error(str(e))
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
@@ -118,9 +124,9 @@ def main(argv: list[str] | None = None) -> int:
             report["latency_int8"] = time_graphs(model, int8, args.threads)
         report["load_average"] = os.getloadavg()
     text = json.dumps(report, indent=2, default=float)
+    print(text)  # first: the figures reach the terminal whatever happens to the file
     if args.report:
-        Path(args.report).write_text(text)
-    print(text)
+        args.report.write_text(text)
     return 0
 
 

@@ -1,0 +1,46 @@
+"""Settle where a tool's output goes before the long work that produces it.
+
+A benchmark, an evaluation or a training run that learns only at its last line that its ``--out`` folder
+is missing, is a folder where a file was meant, or cannot be written, loses minutes to hours of work. The
+tools call :func:`ready_output` right after parsing their arguments: the parent folder is made, and a
+path of the wrong kind is refused with the flag and the path named.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Literal
+
+
+class OutputPathError(ValueError):
+    """An output path that cannot take what the tool will write (the message names the flag and path)."""
+
+
+def ready_output(path: str | os.PathLike, flag: str, kind: Literal["file", "folder"] = "file",
+                 suffix: str | None = None) -> Path:
+    """``path`` ready to be written: its folder made (for ``kind="folder"``, the folder itself).
+
+    ``suffix`` (e.g. ``".npz"``) is appended when the name lacks it, as ``numpy.savez`` would do, so that the
+    checks and a later read see the file that will be written. Returns the path to write.
+
+    Raises:
+        OutputPathError: a folder given for a file, a file given for a folder, or a folder that cannot be
+            made or written into.
+    """
+    p = Path(path)
+    if suffix and p.suffix != suffix:
+        p = p.with_name(p.name + suffix)
+    folder = p if kind == "folder" else p.parent
+    if kind == "file" and p.is_dir():
+        raise OutputPathError(f"{flag} {p}: is a folder; give the file's path")
+    if kind == "folder" and p.exists() and not p.is_dir():
+        raise OutputPathError(f"{flag} {p}: is a file; give a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputPathError(f"{flag} {p}: cannot make the folder {folder} ({e.strerror or e})") from e
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{flag} {p}: the folder {folder} is not writable")
+    if kind == "file" and p.exists() and not os.access(p, os.W_OK):
+        raise OutputPathError(f"{flag} {p}: the file exists and is not writable")
+    return p

@@ -1,0 +1,47 @@
+"""``ready_output``: an output path is settled before the work that fills it."""
+from __future__ import annotations
+
+import pytest
+
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+
+
+def test_a_missing_folder_is_made_and_the_path_returned(tmp_path):
+    p = ready_output(tmp_path / "a" / "b" / "r.json", "--out")
+    assert p == tmp_path / "a" / "b" / "r.json" and p.parent.is_dir() and not p.exists()
+    f = ready_output(tmp_path / "runs" / "net", "--out", kind="folder")
+    assert f.is_dir()
+    assert ready_output(tmp_path / "runs" / "net", "--out", kind="folder") == f  # an existing folder is fine
+
+
+def test_the_suffix_numpy_would_add_is_added_first(tmp_path):
+    assert ready_output(tmp_path / "cache", "--cache", suffix=".npz") == tmp_path / "cache.npz"
+    assert ready_output(tmp_path / "cache.npz", "--cache", suffix=".npz") == tmp_path / "cache.npz"
+
+
+@pytest.mark.parametrize("make, kind, says", [
+    (lambda t: (t / "d").mkdir(), "file", "is a folder"),
+    (lambda t: (t / "d").write_text(""), "folder", "is a file"),
+])
+def test_a_path_of_the_wrong_kind_is_refused_with_flag_and_path(tmp_path, make, kind, says):
+    make(tmp_path)
+    with pytest.raises(OutputPathError, match=f"--out {tmp_path / 'd'}: {says}"):
+        ready_output(tmp_path / "d", "--out", kind=kind)
+
+
+def test_a_folder_that_cannot_be_made_is_refused(tmp_path):
+    (tmp_path / "plain").write_text("")
+    with pytest.raises(OutputPathError, match="--json .*cannot make the folder"):
+        ready_output(tmp_path / "plain" / "sub" / "r.json", "--json")
+
+
+def test_a_folder_or_file_without_write_permission_is_refused(tmp_path, monkeypatch):
+    import ghnerf_runtime.cli.output_path as op
+
+    (tmp_path / "r.json").write_text("{}")
+    monkeypatch.setattr(op.os, "access", lambda path, mode: False)  # what a read-only mount says (root ignores chmod)
+    with pytest.raises(OutputPathError, match=f"--out {tmp_path / 'r.json'}: the folder {tmp_path} is not writable"):
+        ready_output(tmp_path / "r.json", "--out")
+    monkeypatch.setattr(op.os, "access", lambda path, mode: str(path) == str(tmp_path))
+    with pytest.raises(OutputPathError, match="the file exists and is not writable"):
+        ready_output(tmp_path / "r.json", "--out")

@@ -1,0 +1,80 @@
+"""Tools that work for minutes before writing refuse an output path they could not write, before the work.
+
+Each is given a folder where its file goes (or a file where its folder goes) and must stop at once with
+exit status 2 and the flag named, not after the work with a traceback (``ready_output``)."""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _bench_script(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+#: (how to load the tool's main, its arguments with OUT where the bad path goes, the flag named)
+TOOLS = [
+    (lambda: importlib.import_module("training.evaluate").main, ["--data", "nowhere", "--model", "m.pt", "--out", "OUT"],
+     "--out"),
+    (lambda: importlib.import_module("training.export.cli").main, ["--preset", "tiny", "--out", "x", "--report", "OUT"],
+     "--report"),
+    (lambda: importlib.import_module("training.device_joints").main, ["--data", "nowhere", "--out", "OUT"], "--out"),
+    (lambda: importlib.import_module("training.learnt_fill").main,
+     ["cache", "--data", "nowhere", "--split", "val", "--out", "OUT"], "--out"),
+    (lambda: importlib.import_module("training.skeleton_prior").main,
+     ["--model-dir", "nowhere", "--data", "nowhere", "--out", "OUT"], "--out"),
+    (lambda: _bench_script("compare_3d_methods").main, ["--json", "OUT"], "--json"),
+    (lambda: _bench_script("measure_prior_peak_shape").main, ["--data", "nowhere", "--cache", "OUT"], "--cache"),
+]
+
+
+@pytest.mark.parametrize("load, argv, flag", TOOLS, ids=lambda v: v[0] if isinstance(v, list) else None)
+def test_a_folder_given_for_the_output_file_is_refused_before_the_work(tmp_path, capsys, load, argv, flag):
+    pytest.importorskip("torch")
+    bad = tmp_path / "a_folder.npz"  # a folder, named as the file would be (so a .npz suffix changes nothing)
+    bad.mkdir()
+    with pytest.raises(SystemExit) as e:
+        load()([str(bad) if a == "OUT" else a for a in argv])
+    assert e.value.code == 2
+    assert f"{flag} {bad}: is a folder" in capsys.readouterr().err
+
+
+def test_learnt_fill_train_refuses_a_file_for_its_folder_before_training(tmp_path, capsys):
+    pytest.importorskip("torch")
+    from training.learnt_fill import main
+
+    (tmp_path / "f").write_text("")
+    with pytest.raises(SystemExit) as e:
+        main(["train", "--train-cache", "a.npz", "--val-cache", "b.npz", "--out", str(tmp_path / "f")])
+    assert e.value.code == 2 and f"--out {tmp_path / 'f'}: is a file" in capsys.readouterr().err
+
+
+def test_ghnerf_bench_refuses_its_json_path_before_the_bench(tmp_path, capsys):
+    from ghnerf_runtime.cli.bench import main
+
+    (tmp_path / "plain").write_text("")
+    bad = tmp_path / "plain" / "r.json"  # its folder would be inside a file
+    assert main(["runtime", "--model-dir", str(tmp_path / "no_model"), "--json", str(bad)]) == 2
+    err = capsys.readouterr()
+    assert f"--json {bad}: cannot make the folder" in err.err and "load average" not in err.out  # nothing ran
+
+
+def test_a_cache_named_without_npz_is_written_and_found_under_the_name_savez_gives(tmp_path):
+    """``--out joints`` used to write ``joints.npz`` and then look for ``joints``."""
+    pytest.importorskip("torch")
+    from training.data.generate import main as generate
+    from training.device_joints import load_joints, main
+
+    data = tmp_path / "d"
+    generate(["--out", str(data), "--train", "0", "--val", "2", "--val-seen-motions", "0", "--res", "64",
+              "--novel-views", "0", "--workers", "1"])
+    assert main(["--data", str(data), "--split", "val", "--truth", "--out", str(tmp_path / "joints")]) == 0
+    assert load_joints(tmp_path / "joints.npz").shape == (2, 25, 3)
