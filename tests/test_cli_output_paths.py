@@ -78,3 +78,25 @@ def test_a_cache_named_without_npz_is_written_and_found_under_the_name_savez_giv
               "--novel-views", "0", "--workers", "1"])
     assert main(["--data", str(data), "--split", "val", "--truth", "--out", str(tmp_path / "joints")]) == 0
     assert load_joints(tmp_path / "joints.npz").shape == (2, 25, 3)
+
+
+@pytest.mark.parametrize("tool", ["skeleton_prior", "learnt_fill export"])
+def test_a_card_folder_without_a_card_or_not_holding_the_output_is_refused_before_the_work(tmp_path, capsys, tool):
+    pytest.importorskip("torch")
+    from training import learnt_fill, skeleton_prior
+
+    card = tmp_path / "models"
+    card.mkdir()
+    if tool == "skeleton_prior":
+        run, flag = skeleton_prior.main, "--card"
+        argv = ["--model-dir", "nowhere", "--data", "nowhere", "--card", str(card), "--out"]
+    else:
+        run, flag = learnt_fill.main, "--card-dir"
+        argv = ["export", "--net", "nowhere.pt", "--card-dir", str(card), "--out"]
+    with pytest.raises(SystemExit):
+        run([*argv, str(card / "ghnerf" / "x.onnx")])
+    assert f"{flag} {card}: no model_card.json there" in capsys.readouterr().err
+    (card / "model_card.json").write_text("{}")
+    with pytest.raises(SystemExit):
+        run([*argv, str(tmp_path / "elsewhere" / "x.onnx")])
+    assert f"{flag} {card}: the output {tmp_path / 'elsewhere' / 'x.onnx'} is not inside" in capsys.readouterr().err

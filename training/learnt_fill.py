@@ -628,12 +628,18 @@ def main(argv: list[str] | None = None) -> int:
                         "(the training cache)")
     e.add_argument("--card-dir", type=Path, default=None, help="record the painter in this model card (models/)")
     args = ap.parse_args(argv)
-    try:  # the cache and the training take minutes to hours: where they go is settled first
+    try:  # the cache, the training and the export take minutes to hours: where they go is settled first
         if args.cmd == "train":
             args.out = ready_output(args.out, "--out", kind="folder")
         elif args.cmd == "cache":
             args.out = ready_output(args.out, "--out", suffix=".npz")
-    except OutputPathError as e:
+        elif args.cmd == "export":
+            args.out = ready_output(args.out, "--out")
+            if args.card_dir is not None:
+                from training.model_card import check_card_dir  # noqa: PLC0415
+
+                check_card_dir(args.card_dir, args.out, "--card-dir")
+    except ValueError as e:  # OutputPathError, CardError
         ap.error(str(e))
 
     if args.cmd == "export":

@@ -168,6 +168,27 @@ def _painter_lines(card: Mapping[str, Any]) -> list[str]:
     return L
 
 
+class CardError(ValueError):
+    """A model card folder that cannot record a file (no card there, or the file outside its folder)."""
+
+
+def check_card_dir(card_dir: str | Path, out: str | Path, flag: str) -> None:
+    """Before the work whose file the card in ``card_dir`` will record: the card is there and ``out`` lies in
+    its folder (the card lists files by their path inside it).
+
+    Raises:
+        CardError: naming ``flag``, the folder and the file.
+    """
+    card_dir = Path(card_dir)
+    if not (card_dir / "model_card.json").is_file():
+        raise CardError(f"{flag} {card_dir}: no model_card.json there (`make model` writes one)")
+    try:
+        Path(out).resolve().relative_to(card_dir.resolve())
+    except ValueError:
+        raise CardError(f"{flag} {card_dir}: the output {out} is not inside that folder, so its card could not "
+                        "list it") from None
+
+
 def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = ()) -> Path:
     """Record the painter ``out`` (its ``.json`` figures; size and hash of it and of ``more``, its int8 file)
     in the model card of ``card_dir``."""
@@ -175,7 +196,7 @@ def add_painter_to_card(card_dir: str | Path, out: Path, more: list[Path] = ()) 
     card = json.loads((card_dir / "model_card.json").read_text())
     card.setdefault("novel_painter", {})[out.parent.name] = json.loads(out.with_suffix(".json").read_text())
     for path in (out, *more):
-        card.setdefault("files", {})[str(path.relative_to(card_dir))] = {
+        card.setdefault("files", {})[str(path.resolve().relative_to(card_dir.resolve()))] = {
             "bytes": path.stat().st_size, "sha256": sha256(path)}
     write_card(card_dir, card)
     return card_dir / "model_card.json"

@@ -322,7 +322,7 @@ def add_to_card(card_dir: str | Path, out: Path) -> Path:
     card = json.loads((card_dir / "model_card.json").read_text())
     variant = out.parent.name
     card.setdefault("skeleton_prior", {})[variant] = card_summary(out.parent)
-    card.setdefault("files", {})[str(out.relative_to(card_dir))] = {"bytes": out.stat().st_size,
+    card.setdefault("files", {})[str(out.resolve().relative_to(card_dir.resolve()))] = {"bytes": out.stat().st_size,
                                                                      "sha256": _sha256(out)}
     write_card(card_dir, card)
     return card_dir / "model_card.json"
@@ -362,7 +362,11 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--members must be at least 1, not {args.members}")
     try:  # the file is written after minutes of collecting and training: where it goes is settled first
         out = ready_output(out, "--out")
-    except OutputPathError as e:
+        if args.card:
+            from training.model_card import check_card_dir
+
+            check_card_dir(args.card, out, "--card")
+    except ValueError as e:  # OutputPathError, CardError
         ap.error(str(e))
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
                               members=args.members)
