@@ -30,6 +30,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, config_to_dict, load_config
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
@@ -197,8 +198,11 @@ def overlay_image(images, result: PairResult) -> np.ndarray:
 class _Sink:
     """A PNG (the last frame wins) or an MP4 that grows frame by frame."""
 
-    def __init__(self, path: str, fps: float = 30.0) -> None:
-        self.path = path
+    def __init__(self, path: str, fps: float = 30.0, flag: str = "output") -> None:
+        try:  # its folder made, or a bad place named, now: not after the whole run
+            self.path = path = str(ready_output(path, flag))
+        except OutputPathError as e:
+            raise UsageError(str(e)) from None
         self.video = Path(path).suffix.lower() in (".mp4", ".avi", ".mkv")
         if not self.video and not cv2.haveImageWriter(path):  # said now, not after the whole run
             raise UsageError(f"{path}: cannot write an image of this kind; give .png, .jpg or .mp4")
@@ -243,8 +247,8 @@ def _run(args) -> int:
         cap = cv2.VideoCapture(args.videos[0])
         fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
         cap.release()
-    novel = _Sink(args.novel_view, fps) if args.novel_view else None
-    overlay = _Sink(args.overlay, fps) if args.overlay else None
+    novel = _Sink(args.novel_view, fps, "--novel-view") if args.novel_view else None
+    overlay = _Sink(args.overlay, fps, "--overlay") if args.overlay else None
     to_stdout = args.out == "-"
     as_list = not to_stdout and Path(args.out).suffix.lower() == ".json"
     out = sys.stdout if to_stdout else open(args.out, "w", encoding="utf-8")

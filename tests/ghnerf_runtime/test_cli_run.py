@@ -161,6 +161,12 @@ def test_an_output_image_of_unknown_kind_is_refused_before_the_run(sim_pair, tin
     assert cli_run.main(args + ["--overlay", str(tmp_path / "overlay.txt")]) == 2
     assert "overlay.txt: cannot write an image of this kind" in capsys.readouterr().err
     assert not (tmp_path / "j.json").exists() or (tmp_path / "j.json").read_text() == ""
+    (tmp_path / "pics").mkdir()  # a folder where the image goes: said before the run, not when the file is closed
+    assert cli_run.main(args + ["--novel-view", str(tmp_path / "pics")]) == 2
+    assert f"--novel-view {tmp_path / 'pics'}: is a folder" in capsys.readouterr().err
+    # a missing folder is made, and the image is written at the end of the run
+    assert cli_run.main(args + ["--overlay", str(tmp_path / "new" / "overlay.png")]) == 0
+    assert (tmp_path / "new" / "overlay.png").is_file()
 
 
 def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir, tmp_path):  # noqa: F811
