@@ -86,7 +86,7 @@ class Recipe:
 
 
 #: ``--recipe``. ``cpu`` is sized for two cores (under two hours only on the fastest 2-core host measured, about
-#: 2 h 39 min to 3 h on the others: docs/training.md, "`make model` on an AMX Xeon"): since session 20 the encoder's
+#: 2 h 44 min to 3 h on the others: docs/training.md, "`make model` on an AMX Xeon"): since session 20 the encoder's
 #: trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 24 for 44000 steps, the first
 #: 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128 on the
 #: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with a one-network prior
@@ -99,7 +99,7 @@ class Recipe:
 #: pretraining steps of 4 scenes and a prior of two networks (docs/training.md, "The tenth model").
 RECIPES = {
     "cpu": Recipe("two CPU cores, about 1 h 56 min from nothing on a fast AVX-512 host (by its stages' measured "
-                  "times), about 2 h 39 min on session 39's AMX Xeon, about 2 h 45 min on session 35's EPYC and about "
+                  "times), about 2 h 44 min on session 39's AMX Xeon, about 2 h 45 min on session 35's EPYC and about "
                   "3 h on session 38's Intel Xeon (each timed into its first stages; docs/training.md): encoder "
                   "trunk at 128x128, 44000 pretraining "
                   "steps of 2 scenes, "
