@@ -33,8 +33,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, contract_of, edge128_contract  # noqa: E402
+from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences, percentiles, visibility_summary  # noqa: E402
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, HeatmapsConfig, Joints3DConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
 from ghnerf_runtime.metrics import VISIBILITY_CLASSES, mpjpe, visibility_class  # noqa: E402
@@ -87,10 +87,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", help="write the figures here")
     args = ap.parse_args(argv)
     if args.json:  # written after every method has run over every sequence: its place is settled first
-        try:
-            args.json = ready_output(args.json, "--json")
-        except OutputPathError as e:
-            ap.error(str(e))
+        args.json = ready_output_arg(ap, args.json, "--json")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     methods = dict(METHODS)
     for gate in (float(g) for g in args.reprojection_gates.split(",") if g):
@@ -172,7 +169,7 @@ def main(argv=None) -> int:
             f"{c['mpjpe_mm']:.1f} / {100 * c['found']:.1f} %" for c in row["by_visibility"].values()) + " |")
     if args.json:
         args.json.write_text(json.dumps({"model": model_line, "rows": rows,
-                                               "sequences": [s.info for s in sequences]}, indent=2, default=float))
+                                         "sequences": [s.info for s in sequences]}, indent=2, default=float))
     return 0
 
 

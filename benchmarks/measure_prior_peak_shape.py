@@ -33,7 +33,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output  # noqa: E402
+from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 from ghnerf_runtime.config import Joints3DConfig  # noqa: E402
 from ghnerf_runtime.keypoints import decode_keypoints, model_to_heatmap_pixels  # noqa: E402
 from ghnerf_runtime.skeleton_prior import PriorInputs, _centres, mirror_inputs  # noqa: E402
@@ -164,10 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown := [v for v in variants if v not in VARIANTS]:
         ap.error(f"unknown variants {unknown}; known: {', '.join(VARIANTS)}")
     if args.cache:  # the collection takes minutes: its file's place is settled first, with the name savez writes
-        try:
-            args.cache = ready_output(args.cache, "--cache", suffix=".npz")
-        except OutputPathError as e:
-            ap.error(str(e))
+        args.cache = ready_output_arg(ap, args.cache, "--cache", suffix=".npz")
 
     import torch
 

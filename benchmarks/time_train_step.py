@@ -32,20 +32,19 @@ import torch  # noqa: E402
 from training.data.targets import TargetConfig  # noqa: E402
 from training.data.torch_dataset import MultiViewDataset  # noqa: E402
 from training.model import GHNeRF  # noqa: E402
+from training.pipeline import RECIPES  # noqa: E402
 from training.train import (apply_overrides, build_config, load_config_file, make_batch,  # noqa: E402
                             seed_everything, train_step)
 
 WARMUP = 3
 CONFIGS = {"ghnerf": "training/train_configs/edge128.json", "baseline": "training/train_configs/edge128_baseline.json"}
-#: The ``cpu`` recipe's train override (``training.pipeline.RECIPES``), for both variants as the pipeline passes it.
-RECIPE_SETS = ["model.human.input_scale=1.0"]
 
 
 def time_steps(data: str, variant: str, precision: str, steps: int, sets: list[str] = ()) -> list[float]:
     """Wall seconds of each of ``steps`` joint-run steps (``WARMUP`` more first, not returned); ``sets`` are
     ``KEY=VALUE`` train config overrides after the recipe's."""
     root = Path(__file__).resolve().parents[1]
-    raw = apply_overrides(load_config_file(root / CONFIGS[variant]), [*RECIPE_SETS, f'data="{data}"', *sets])
+    raw = apply_overrides(load_config_file(root / CONFIGS[variant]), [*RECIPES["cpu"].train_overrides, f'data="{data}"', *sets])
     raw.pop("pretrain_human", None)  # the joint run's encoder comes pretrained; here its weights do not matter
     cfg = build_config(raw)
     mcfg = cfg.model_config()

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import ready_output_arg
 
 
 class JointsCacheError(ValueError):
@@ -114,10 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--truth", action="store_true", help="cache the dataset's true joints instead (an oracle)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
-    try:  # a pass over every scene comes first: where its file goes (with the name savez writes) is settled now
-        args.out = ready_output(args.out, "--out", suffix=".npz")
-    except OutputPathError as e:
-        ap.error(str(e))
+    # a pass over every scene comes first: where its file goes (with the name savez writes) is settled now
+    args.out = ready_output_arg(ap, args.out, "--out", suffix=".npz")
     if args.truth:
         cache_true_joints(args.data, args.split, args.out, args.limit)
         return 0

@@ -63,10 +63,10 @@ import torch
 from torch import Tensor
 
 from ghnerf_runtime.body25 import BODY_PARTS, MID_HIP, NECK
+from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
@@ -625,10 +625,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="write the JSON here (also printed)")
     args = ap.parse_args(argv)
     if args.out:  # written after minutes of evaluation: its place is settled first
-        try:
-            args.out = ready_output(args.out, "--out")
-        except OutputPathError as e:
-            ap.error(str(e))
+        args.out = ready_output_arg(ap, args.out, "--out")
     torch.set_num_threads(args.threads)
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset

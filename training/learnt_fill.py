@@ -54,7 +54,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.config import NovelViewConfig
 from ghnerf_runtime.metrics import masked_psnr
 from training.evaluate import SOURCE_ANGLE_BINS_DEG
@@ -628,19 +628,20 @@ def main(argv: list[str] | None = None) -> int:
                         "(the training cache)")
     e.add_argument("--card-dir", type=Path, default=None, help="record the painter in this model card (models/)")
     args = ap.parse_args(argv)
-    try:  # the cache, the training and the export take minutes to hours: where they go is settled first
-        if args.cmd == "train":
-            args.out = ready_output(args.out, "--out", kind="folder")
-        elif args.cmd == "cache":
-            args.out = ready_output(args.out, "--out", suffix=".npz")
-        elif args.cmd == "export":
-            args.out = ready_output(args.out, "--out")
-            if args.card_dir is not None:
-                from training.model_card import check_card_dir  # noqa: PLC0415
+    # the cache, the training and the export take minutes to hours: where they go is settled first
+    if args.cmd == "train":
+        args.out = ready_output_arg(ap, args.out, "--out", kind="folder")
+    elif args.cmd == "cache":
+        args.out = ready_output_arg(ap, args.out, "--out", suffix=".npz")
+    elif args.cmd == "export":
+        args.out = ready_output_arg(ap, args.out, "--out")
+    if args.cmd == "export" and args.card_dir is not None:
+        from training.model_card import CardError, check_card_dir  # noqa: PLC0415
 
-                check_card_dir(args.card_dir, args.out, "--card-dir")
-    except ValueError as e:  # OutputPathError, CardError
-        ap.error(str(e))
+        try:
+            check_card_dir(args.card_dir, args.out, "--card-dir")
+        except CardError as e:
+            ap.error(str(e))
 
     if args.cmd == "export":
         return _export_cli(args)

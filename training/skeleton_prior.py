@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.skeleton_prior import (
     CONTEXT_FEATURES,
     FEATURE_VERSION,
@@ -360,14 +360,14 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out) if args.out else model_dir / FILE_NAME
     if args.members < 1:
         ap.error(f"--members must be at least 1, not {args.members}")
-    try:  # the file is written after minutes of collecting and training: where it goes is settled first
-        out = ready_output(out, "--out")
-        if args.card:
-            from training.model_card import check_card_dir
+    out = ready_output_arg(ap, out, "--out")  # written after minutes of collecting and training: settled first
+    if args.card:
+        from training.model_card import CardError, check_card_dir
 
+        try:
             check_card_dir(args.card, out, "--card")
-    except ValueError as e:  # OutputPathError, CardError
-        ap.error(str(e))
+        except CardError as e:
+            ap.error(str(e))
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
                               members=args.members)
     t0 = time.monotonic()

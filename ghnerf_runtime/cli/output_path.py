@@ -7,6 +7,7 @@ path of the wrong kind is refused with the flag and the path named.
 """
 from __future__ import annotations
 
+import argparse
 import os
 from pathlib import Path
 from typing import Literal
@@ -44,3 +45,13 @@ def ready_output(path: str | os.PathLike, flag: str, kind: Literal["file", "fold
     if kind == "file" and p.exists() and not os.access(p, os.W_OK):
         raise OutputPathError(f"{flag} {p}: the file exists and is not writable")
     return p
+
+
+def ready_output_arg(ap: argparse.ArgumentParser, path: str | os.PathLike, flag: str,
+                     kind: Literal["file", "folder"] = "file", suffix: str | None = None) -> Path:
+    """:func:`ready_output` for a parsed argument: a bad path ends the tool as argparse ends it (the usage
+    line, the message, exit status 2)."""
+    try:
+        return ready_output(path, flag, kind, suffix)
+    except OutputPathError as e:
+        ap.error(str(e))

@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from training.export.export import ExampleInputs, example_inputs, export_all
 from training.export.parity import benchmark, int8_vs_fp32, make_session, torch_vs_ort
 from training.export.quantize import calibration_feeds, quantize_all
@@ -86,10 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report", help="write the figures as JSON here")
     args = ap.parse_args(argv)
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first
-        try:
-            args.report = ready_output(args.report, "--report")
-        except OutputPathError as e:
-            ap.error(str(e))
+        args.report = ready_output_arg(ap, args.report, "--report")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
