@@ -171,6 +171,10 @@ def test_peak_shape_reads_spread_along_the_epipolar_line_and_a_second_blob():
     assert np.isfinite(wild).all()
 
 
+def _without_time(result: dict) -> dict:
+    return {k: v for k, v in result.items() if k != "train_s"}
+
+
 def test_peak_shape_measurement_trains_each_variant(tmp_path, data64, capsys):
     """``benchmarks/measure_prior_peak_shape.py`` collects through ``collect(per_scene=)``, caches, and scores
     a prior per variant on the same joints."""
@@ -192,6 +196,8 @@ def test_peak_shape_measurement_trains_each_variant(tmp_path, data64, capsys):
     assert z["tr_shape"].shape == (6, 2, 25, 4) and z["va_shape"].shape == (2, 2, 25, 4)
     assert m.main(argv + ["--variants", "base"]) == 0  # from the cache: the same answer
     again = capsys.readouterr().out.splitlines()
-    assert not again[0].startswith("collected") and json.loads(again[-1])["base"] == res["base"]
+    assert not again[0].startswith("collected")
+    # the same figures; its training time (whole seconds) may round differently on a second run
+    assert _without_time(json.loads(again[-1])["base"]) == _without_time(res["base"])
     with pytest.raises(SystemExit):
         m.main(argv + ["--variants", "base,nope"])
