@@ -185,7 +185,8 @@ def main(argv: list[str] | None = None) -> int:
     for name in variants:
         cols = VARIANTS[name]
         t0 = time.monotonic()
-        net = _train_one(with_columns(tr_in, tr["shape"], cols), tr_truth, tr["joints_3d_valid"],
+        features = with_columns(tr_in, tr["shape"], cols)
+        net = _train_one(features.joint_features, features.context, tr_truth, tr["joints_3d_valid"],
                          PriorTrainConfig(steps=args.steps, hidden=args.hidden), args.seed, progress=False)
         train_s = time.monotonic() - t0
         vin = with_columns(va_in, va["shape"], cols)

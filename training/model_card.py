@@ -130,6 +130,7 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
                  + (f"; without the flip test {_fmt(m['all_without_flip_test'].get('mean_mm'), 1)} mm over every "
                     "joint" if m.get("all_without_flip_test") else "")
                  + ". MPJPE mm, mean / median (share of the true joints kept)"
+                 + (f"; trained beside {p['trained_beside']}" if p.get("trained_beside") else "")
                  + (f"; made by `{p['command']}`:" if p.get("command") else ":"))
         L.append("")
         L.append("| expected error at most | mean | median | p90 | joints kept |")

@@ -14,7 +14,9 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
 6. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
    split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks, ``--prior-set``
    overrides them: ~18 min on two cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``,
-   with its held-out figures (``skeleton_prior.json``).
+   with its held-out figures (``skeleton_prior.json``). On CPU with the ``cpu`` recipe's lanes it was trained
+   already, beside the joint run, from the pretrained encoder (``training.early_prior``): the stage takes
+   that prior when it learnt from the same keypoint graphs (sha256) for the same request.
 7. ``eval_<variant>``: held-out metrics of ghnerf (torch, onnx fp32, onnx int8; the ONNX rows with the
    folder's skeleton prior) and the baseline (onnx fp32, int8) into ``metrics_<variant>.json``; a new prior
    re-evaluates.
@@ -42,7 +44,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 log = logging.getLogger("training.pipeline")
 
@@ -61,7 +63,7 @@ PRIOR_VARIANTS = ("ghnerf",)
 PRIOR_SET_KEYS = {"steps": ("prior_steps", 1), "extra_train": ("prior_extra_train", 0),
                   "members": ("prior_members", 1)}
 #: Pretraining keys that do not change the result; ignored when matching a finished pretraining run.
-PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "log_every", "eval_every", "eval_scenes",
+PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "stop_at", "log_every", "eval_every", "eval_scenes",
                          "checkpoint_every", "loader_workers")
 EVAL_RUNTIMES = {"ghnerf": ("torch", "fp32", "int8"), "baseline": ("fp32", "int8")}
 
@@ -83,10 +85,13 @@ class Recipe:
     """Scenes of the skeleton prior's second training set (``PipelineConfig.prior_extra_train``)."""
     prior_members: int = 1
     """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
+    shared_pretrain_steps: int = 0
+    """Pretraining steps at half the cores beside the baseline (``PipelineConfig.shared_pretrain_steps``)."""
 
 
 #: ``--recipe``. ``cpu`` is sized for two cores (under two hours only on the fastest 2-core host measured, about
-#: 2 h 44 min to 3 h on the others: docs/training.md, "`make model` on an AMX Xeon"): since session 20 the encoder's
+#: 2 h 44 min to 3 h on the others: docs/training.md, "`make model` on an AMX Xeon"; since session 40 its lanes
+#: share the cores, about 15 % sooner by estimate: "Lanes that share the cores"): since session 20 the encoder's
 #: trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 24 for 44000 steps, the first
 #: 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128 on the
 #: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with a one-network prior
@@ -100,7 +105,9 @@ class Recipe:
 RECIPES = {
     "cpu": Recipe("two CPU cores, about 1 h 56 min from nothing on a fast AVX-512 host (by its stages' measured "
                   "times), about 2 h 44 min on session 39's AMX Xeon, about 2 h 45 min on session 35's EPYC and about "
-                  "3 h on session 38's Intel Xeon (each timed into its first stages; docs/training.md): encoder "
+                  "3 h on session 38's Intel Xeon (each timed into its first stages; docs/training.md), before "
+                  "session 40's lanes (the baseline beside the pretraining's first 25000 steps, the prior beside "
+                  "the joint run: about 2 h 20 min on the AMX Xeon by estimate, benchmarks/time_lanes.py): encoder "
                   "trunk at 128x128, 44000 pretraining "
                   "steps of 2 scenes, "
                   "the first 17600 with the trunk's input at 64x64 (progressive resizing), the rate halved "
@@ -113,7 +120,7 @@ RECIPES = {
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=44000", "lr_decay_every=8800", "coarse_steps=17600",
                                       'precision="auto"'),
-                  prior_steps=30000, prior_extra_train=20000, prior_members=2),
+                  prior_steps=30000, prior_extra_train=20000, prior_members=2, shared_pretrain_steps=25000),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
                   "the export runs)",
@@ -171,9 +178,15 @@ class PipelineConfig:
     variants: tuple[str, ...] = tuple(VARIANTS)
     threads: int = 2
     parallel_train: bool = True
-    """On CPU, pretrain the encoder with every core, then train the variants side by side at one thread
-    each (:func:`side_by_side_plan`): the joint run and the baseline take 45-61 min each at one thread,
-    against ~45 min each one after the other at two (2-core EPYC)."""
+    """On CPU, train in lanes that share the cores (:func:`side_by_side_plan`): by default the encoder's
+    pretraining with every core, then the variants side by side at one thread each (the joint run and the
+    baseline take 45-61 min each at one thread, against ~45 min each one after the other at two, 2-core EPYC);
+    with ``shared_pretrain_steps`` the baseline beside the pretraining's start and the prior beside the joint
+    run."""
+    shared_pretrain_steps: int = 0
+    """On CPU, when the baseline trains too: the pretraining's first this many steps run at half the cores beside
+    the baseline's joint run and the prior's extra scenes, the rest with every core (:func:`side_by_side_plan`;
+    0: the pretraining alone first). Where the run is split changes its wall time, not its batches."""
     force: tuple[str, ...] = ()
     train_overrides: list[str] = field(default_factory=list)
     pretrain_overrides: list[str] = field(default_factory=list)
@@ -195,6 +208,7 @@ class PipelineConfig:
             self.workers = max(1, min(r.workers, cores))
         self.prior_steps, self.prior_extra_train, self.prior_members = (r.prior_steps, r.prior_extra_train,
                                                                         r.prior_members)
+        self.shared_pretrain_steps = r.shared_pretrain_steps
 
     def apply_prior_overrides(self, items: list[str]) -> None:
         """``KEY=VALUE`` overrides of the skeleton prior's recipe (``PRIOR_SET_KEYS``), after the recipe's.
@@ -223,7 +237,8 @@ class PipelineConfig:
                    train_overrides=["iterations=6", "log_every=3", "checkpoint_every=3", "pck_every=3",
                                     "targets_per_iter=2", "heat_rays=64", "patch_size=8", "max_minutes=0"],
                    pretrain_overrides=["iterations=2", "log_every=1", "checkpoint_every=1", "eval_every=0",
-                                       "scenes_per_step=1", "max_minutes=0"])
+                                       "scenes_per_step=1", "max_minutes=0"],
+                   shared_pretrain_steps=1)  # the cpu recipe's lanes, in miniature
 
 
 # ----------------------------------------------------------------------------------------- stamps
@@ -319,22 +334,101 @@ def _pretrain_cmd(cfg: PipelineConfig, variant: str, extra: list[str] = ()) -> l
     return cmd
 
 
-def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int) -> list[list[list[tuple[list[str], Path]]]]:
-    """Phases of lanes of ``(command, log)`` steps: the lanes of a phase run at once, the phases in order.
+class LaneStep(NamedTuple):
+    """One command of a lane and its log; ``run_folder``: it trains in the log's folder, which is marked with the
+    dataset's hash first (:func:`_mark_data`); ``optional``: a failure is reported and the lane goes on (what the
+    step saves time on is done by a later stage anyway)."""
 
-    The pretrainings come first, each with every core, since the encoder pretraining is the long pole
-    (24000 steps: ~66 min at two threads, ~126 min at one); then the joint trainings run side by side at
-    ``cores // n`` threads each, never oversubscribed. Measured lane times are in docs/training.md.
+    cmd: list[str]
+    log: Path
+    run_folder: bool = True
+    optional: bool = False
+
+
+def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
+                      data: Any = None) -> list[list[list[LaneStep]]]:
+    """Phases of lanes of steps: the lanes of a phase run at once, the phases in order, never with more threads
+    in all than ``cores``.
+
+    By default the pretraining comes first with every core (the long pole), then the joint runs side by side
+    at ``cores // n`` threads each. Two things in ``make model`` need no pretrained encoder (the baseline's joint
+    run, the prior's extra scenes) and one needs only that encoder (the skeleton prior: the joint run keeps it
+    frozen), and a second thread buys little on most of them (docs/training.md, "Lanes"). So with
+    ``cfg.shared_pretrain_steps`` (the ``cpu`` recipe), on two cores or more, when the baseline trains too:
+
+    1. the pretraining's first ``shared_pretrain_steps`` (``stop_at``) at half the cores, beside a lane of the
+       baseline's joint run, then the prior's extra scenes;
+    2. the rest of the pretraining with every core (``--resume``: the same batches);
+    3. the joint run at half the cores beside the skeleton prior learnt from the pretrained encoder
+       (:mod:`training.early_prior`, which the prior stage then takes), when ``data`` (the dataset's stamp) is
+       given, the pipeline goes on to the prior (no ``--until``) and the run keeps its encoder frozen; else
+       the joint run alone with every core. (Also when only the joint run is left to train, as after a stop.)
     """
-    threads = max(1, cores // len(variants))
-    pre = [[(_pretrain_cmd(cfg, v, [f"threads={cores}"]), pretrain_dir(cfg, v) / "train.log")]
-           for v in variants if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v)]
-    joint = [[(_train_cmd(cfg, VARIANTS[v], cfg.runs / VARIANTS[v], [f"threads={threads}"]),
-               cfg.runs / VARIANTS[v] / "train.log")] for v in variants]
-    return [[lane] for lane in pre] + [joint]
+    half = max(1, cores // 2)
+    pre = [v for v in variants if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v)]
+    free = [v for v in variants if not pretrain_block(cfg, v)]
+    wants_prior = cfg.until is None and any(v in PRIOR_VARIANTS for v in variants)
+    extras = [LaneStep([sys.executable, "-m", "training.data.generate", *prior_extra_args(cfg, half)],
+                       cfg.runs / "prior_extra.log", run_folder=False)] if wants_prior and cfg.prior_extra_train else []
+
+    def joint(v: str, threads: int) -> LaneStep:
+        run = cfg.runs / VARIANTS[v]
+        return LaneStep(_train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"]), run / "train.log")
+
+    def pretrain(v: str, extra: list[str]) -> LaneStep:
+        return LaneStep(_pretrain_cmd(cfg, v, extra), pretrain_dir(cfg, v) / "train.log")
+
+    phases: list[list[list[LaneStep]]] = []
+    shared = cfg.shared_pretrain_steps and all(_pretrain_progress(cfg, v) < cfg.shared_pretrain_steps for v in pre)
+    if pre and free and cores >= 2 and shared:  # (a run resumed past the shared steps: the default plan)
+        threads = max(1, cores // (len(pre) + 1))
+        phases.append([[pretrain(v, [f"threads={threads}", f"stop_at={cfg.shared_pretrain_steps}"])] for v in pre]
+                      + [[*(joint(v, threads) for v in free), *extras]])
+        variants, extras = [v for v in variants if v not in free], []
+    phases += [[[pretrain(v, [f"threads={cores}"])]] for v in pre]
+    early = _early_prior_step(cfg, variants, half, data) if wants_prior and cores >= 2 else None
+    if early is not None:
+        phases.append([[joint(variants[0], half)], [*extras, early]])
+    elif variants:
+        phases.append([[joint(v, max(1, cores // len(variants)))] for v in variants])
+    return phases
 
 
-def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
+def _pretrain_progress(cfg: PipelineConfig, variant: str) -> int:
+    """The last step the pretraining run logged (0 when none): where a resumed run starts, or a little past it."""
+    lines = (pretrain_dir(cfg, variant) / "log.jsonl").read_text().splitlines() \
+        if (pretrain_dir(cfg, variant) / "log.jsonl").is_file() else []
+    for line in reversed(lines):
+        try:
+            return int(json.loads(line)["step"])
+        except (ValueError, KeyError, TypeError):
+            continue  # a line cut short by a stop
+    return 0
+
+
+def _early_prior_step(cfg: PipelineConfig, variants: list[str], threads: int, data: Any) -> LaneStep | None:
+    """The :mod:`training.early_prior` step for the one variant left to train, with its job file written; None
+    when it does not apply (no dataset stamp, other variants, no pretraining, an encoder that trains on)."""
+    from training.early_prior import JOB_FILE
+    from training.skeleton_prior import FILE_NAME
+
+    if data is None or not cfg.shared_pretrain_steps or len(variants) != 1 or variants[0] not in PRIOR_VARIANTS:
+        return None
+    v = variants[0]
+    tc = train_inputs(cfg, VARIANTS[v])
+    if not (pretrain_block(cfg, v) and tc.get("freeze_human") and tc.get("human_init")):
+        return None
+    folder = early_prior_dir(cfg, v)
+    folder.mkdir(parents=True, exist_ok=True)
+    job = {"train_config": tc, "data": str(cfg.data), "calib_scenes": cfg.calib_scenes,
+           "prior_argv": prior_argv(cfg, folder, folder / FILE_NAME, threads),
+           "request": early_prior_request(cfg, {}, data)}
+    (folder / JOB_FILE).write_text(json.dumps(job, indent=1, default=str) + "\n")
+    return LaneStep([sys.executable, "-m", "training.early_prior", str(folder / JOB_FILE)],
+                    folder / "early_prior.log", run_folder=False, optional=True)
+
+
+def train_side_by_side(cfg: PipelineConfig, variants: list[str], data: Any = None) -> None:
     """Run the trainings of ``variants`` by :func:`side_by_side_plan` (CPU only)."""
     from concurrent.futures import ThreadPoolExecutor
 
@@ -344,19 +438,25 @@ def train_side_by_side(cfg: PipelineConfig, variants: list[str]) -> None:
             _check_pretrain_folder(cfg, v)
         _check_run_folder(cfg, v)
 
-    def lane(steps: list[tuple[list[str], Path]]) -> bool:
-        for cmd, log_path in steps:
-            _mark_data(cfg, log_path.parent)  # also creates the run folder
-            log.info("$ %s &", shlex.join(cmd))
-            with open(log_path, "a") as fh:
-                if subprocess.run(cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT).returncode != 0:
-                    return False
-        return True
+    def lane(steps: list[LaneStep]) -> Path | None:
+        """None when every step succeeded, else the failed step's log."""
+        for step in steps:
+            step.log.parent.mkdir(parents=True, exist_ok=True)
+            if step.run_folder:
+                _mark_data(cfg, step.log.parent)
+            log.info("$ %s &", shlex.join(step.cmd))
+            with open(step.log, "a") as fh:
+                if subprocess.run(step.cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT).returncode != 0:
+                    if not step.optional:
+                        return step.log
+                    log.warning("%s failed (see %s); its stage will do that work later", step.cmd[2], step.log)
+        return None
 
-    for phase in side_by_side_plan(cfg, variants, os.cpu_count() or 1):
+    for phase in side_by_side_plan(cfg, variants, os.cpu_count() or 1, data):
         with ThreadPoolExecutor(len(phase)) as pool:
-            if not all(pool.map(lane, phase)):
-                raise RuntimeError(f"training failed; see {cfg.runs}/<preset>[_human]/train.log")
+            failed = [str(p) for p in pool.map(lane, phase) if p is not None]
+        if failed:
+            raise RuntimeError(f"training failed; see {', '.join(failed)}")
 
 
 def _sh(cmd: list[str], log_path: Path | None = None) -> None:
@@ -657,6 +757,13 @@ def _scene_inputs(model, item: dict, ray_stride: int, targets=None, points_per_t
     return ExampleInputs(d)
 
 
+def calibration_items(dataset, scenes: int) -> list[tuple[int, dict]]:
+    """``(index, scene)`` of the int8 calibration: ``scenes`` evenly spaced over the training split (the quantize
+    stage's, and ``training.early_prior``'s for the same keypoint graph)."""
+    step = max(1, len(dataset) // scenes)
+    return [(i, dataset[i]) for i in range(0, step * scenes, step)[:scenes]]
+
+
 def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
     import torch
 
@@ -691,14 +798,13 @@ def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[
     outputs, info = [], {}
     calib_ds = MultiViewDataset(cfg.data, "train", TargetConfig())
     val_ds = MultiViewDataset(cfg.data, cfg.eval_split, TargetConfig())
-    step = max(1, len(calib_ds) // cfg.calib_scenes)
     for variant, ckpt in trained.items():
         model, _ = load_model(ckpt)
         folder = cfg.out / variant
         graphs = model.contract().graph_names
         fp32 = {g: folder / f"{g}.onnx" for g in graphs}
-        calib = [_scene_inputs(model, calib_ds[i], ray_stride=2, seed=i)
-                 for i in range(0, step * cfg.calib_scenes, step)[:cfg.calib_scenes]]
+        calib = [_scene_inputs(model, item, ray_stride=2, seed=i) for i, item in calibration_items(calib_ds,
+                                                                                                 cfg.calib_scenes)]
         int8 = quantize_all(fp32, folder, calibration_feeds(model, calib, graphs, rays_per_target=2048))
         parity_in = _scene_inputs(model, val_ds[0], ray_stride=model.config.heatmap_stride, targets=[0, 1])
         info[variant] = {"int8_vs_fp32": int8_vs_fp32(fp32, int8, model.contract(), parity_in),
@@ -724,31 +830,93 @@ def stage_eval(cfg: PipelineConfig, variant: str, ckpt: Path) -> tuple[list[Path
     return [out], {}
 
 
+def prior_extra_dir(cfg: PipelineConfig) -> Path:
+    """The prior's second training set: other scenes of the same recipe (dataset seed 1, no novel views)."""
+    return cfg.data.parent / f"{cfg.data.name}_prior_extra"
+
+
+def prior_extra_args(cfg: PipelineConfig, workers: int) -> list[str]:
+    """``training.data.generate``'s arguments for :func:`prior_extra_dir` (the files do not depend on ``workers``)."""
+    return ["--out", str(prior_extra_dir(cfg)), "--train", str(cfg.prior_extra_train), "--val", "0",
+            "--val-seen-motions", "0", "--novel-views", "0", "--seed", "1", "--res", str(cfg.res),
+            "--freestyle-share", str(cfg.freestyle_share), "--workers", str(workers)]
+
+
 def prior_extra_data(cfg: PipelineConfig) -> Path:
-    """The prior's second training set (made, resumed or extended here): other scenes of the same recipe."""
+    """The prior's second training set (made, resumed or extended here; nothing to do once complete)."""
     from training.data.generate import main as generate
 
-    folder = cfg.data.parent / f"{cfg.data.name}_prior_extra"
-    generate(["--out", str(folder), "--train", str(cfg.prior_extra_train), "--val", "0", "--val-seen-motions", "0",
-              "--novel-views", "0", "--seed", "1", "--res", str(cfg.res), "--freestyle-share", str(cfg.freestyle_share),
-              "--workers", str(cfg.workers)])
-    return folder
+    generate(prior_extra_args(cfg, cfg.workers))
+    return prior_extra_dir(cfg)
 
 
-def stage_prior(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
-    """The skeleton prior of the exported model (``training.skeleton_prior``), beside its graphs."""
-    from training import skeleton_prior as sp
-
-    out = cfg.out / variant / sp.FILE_NAME
-    argv = ["--model-dir", str(cfg.out / variant), "--data", str(cfg.data), "--val-split", cfg.eval_split,
-            "--steps", str(cfg.prior_steps), "--threads", str(cfg.threads), "--out", str(out)]
+def prior_argv(cfg: PipelineConfig, model_dir: Path, out: Path, threads: int) -> list[str]:
+    """``training.skeleton_prior``'s arguments for the recipe's prior of ``model_dir``'s keypoint graph."""
+    argv = ["--model-dir", str(model_dir), "--data", str(cfg.data), "--val-split", cfg.eval_split,
+            "--steps", str(cfg.prior_steps), "--threads", str(threads), "--out", str(out)]
     if cfg.prior_members > 1:
         argv += ["--members", str(cfg.prior_members)]
     if cfg.prior_scenes:
         argv += ["--limit", str(cfg.prior_scenes)]
     if cfg.prior_extra_train:
-        argv += ["--extra-data", str(prior_extra_data(cfg))]
-    sp.main(argv)
+        argv += ["--extra-data", str(prior_extra_dir(cfg))]
+    return argv
+
+
+def early_prior_dir(cfg: PipelineConfig, variant: str) -> Path:
+    """Where :mod:`training.early_prior` exports the pretrained encoder and trains its prior."""
+    return cfg.runs / f"{VARIANTS[variant]}_prior"
+
+
+def early_prior_request(cfg: PipelineConfig, keypoints: dict[str, str], data: Any) -> dict:
+    """What an early prior must have been trained for to stand for the prior stage's: the keypoint graphs' hashes
+    by file name, the dataset (its stamp and folder) and the prior's recipe."""
+    return {**prior_stage_inputs(cfg, {}, data), "keypoints": keypoints, "data_folder": str(cfg.data)}
+
+
+def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
+    """Copy the early prior into the model folder when it was trained on this folder's keypoint graphs (same
+    sha256) for the same request, and intact; False (nothing copied) otherwise."""
+    import shutil
+
+    from training.early_prior import REQUEST_FILE
+    from training.model_card import sha256
+    from training.skeleton_prior import FILE_NAME
+
+    folder, staged = cfg.out / variant, early_prior_dir(cfg, variant)
+    try:
+        record = json.loads((staged / REQUEST_FILE).read_text())
+        prior = Path(record["prior"])
+        graphs = keypoint_graphs({str(p): None for p in folder.glob("*.onnx")})
+        wanted = early_prior_request(cfg, {Path(p).name: sha256(p) for p in graphs}, data)
+        if not graphs or _digest(record["request"]) != _digest(wanted) or sha256(prior) != record["prior_sha256"]:
+            log.info("prior: the early prior in %s does not match %s; training it here", staged, folder)
+            return False
+        report = json.loads(prior.with_suffix(".json").read_text())
+    except (OSError, ValueError, KeyError) as e:
+        if (staged / REQUEST_FILE).exists():
+            log.info("prior: the early prior in %s is unreadable (%s); training it here", staged, e)
+        return False
+    out = folder / FILE_NAME
+    shutil.copyfile(prior, out)
+    report.update({"file": str(out), "trained_in": str(prior),
+                   "trained_beside": "the joint run (training.early_prior, from the pretrained encoder)"})
+    out.with_suffix(".json").write_text(json.dumps(report, indent=1) + "\n")
+    log.info("prior: taken from %s (trained beside the joint run on the same keypoint graphs)", staged)
+    return True
+
+
+def stage_prior(cfg: PipelineConfig, variant: str, data: Any = None) -> tuple[list[Path], dict]:
+    """The skeleton prior of the exported model (``training.skeleton_prior``), beside its graphs: the early
+    prior's when it learnt from the same graphs (:func:`adopt_early_prior`), else trained here."""
+    from training import skeleton_prior as sp
+
+    out = cfg.out / variant / sp.FILE_NAME
+    if adopt_early_prior(cfg, variant, data):
+        return [out, out.with_suffix(".json")], {"early": True}
+    if cfg.prior_extra_train:
+        prior_extra_data(cfg)
+    sp.main(prior_argv(cfg, cfg.out / variant, out, cfg.threads))
     return [out, out.with_suffix(".json")], {}
 
 
@@ -920,8 +1088,10 @@ def run(cfg: PipelineConfig) -> dict | None:
         if cfg.until != "pretrain" and not _run_finished(cfg, v):
             st.force.add(f"train_{v}")
     todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v)) is None and not _run_finished(cfg, v)]
-    if cfg.until != "pretrain" and cfg.parallel_train and len(todo) > 1 and not torch.cuda.is_available():
-        train_side_by_side(cfg, todo)  # (it trains too: not when only the pretraining is asked for)
+    # lanes: two trainings to share the cores, or (the shared plan) one beside the early prior
+    lanes = len(todo) > 1 or (todo and cfg.shared_pretrain_steps and (os.cpu_count() or 1) >= 2)
+    if cfg.until != "pretrain" and cfg.parallel_train and lanes and not torch.cuda.is_available():
+        train_side_by_side(cfg, todo, data_key)  # (it trains too: not when only the pretraining is asked for)
     for variant in cfg.variants:
         if pretrain_block(cfg, variant):
             st.run(f"pretrain_{variant}", {"data": data_key, "config": pretrain_inputs(cfg, variant)},
@@ -939,7 +1109,7 @@ def run(cfg: PipelineConfig) -> dict | None:
                    "runtimes": EVAL_RUNTIMES[variant]}
         if variant in PRIOR_VARIANTS:  # before the eval, which scores it: a new prior re-evaluates
             p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key),
-                       lambda v=variant: stage_prior(cfg, v))
+                       lambda v=variant: stage_prior(cfg, v, data_key))
             eval_in["prior"] = {k: v for k, v in p["outputs"].items() if k.endswith(".onnx")}  # not its report
         st.run(f"eval_{variant}", eval_in, lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
     if cfg.until:
@@ -989,6 +1159,12 @@ def main(argv: list[str] | None = None) -> int:
                          "beyond training.export.parity's bounds (default: stop there)")
     ap.add_argument("--sequential-train", action="store_true",
                     help="train the variants one after the other with every core (default on CPU: side by side)")
+    ap.add_argument("--shared-pretrain-steps", type=int, default=None, metavar="N",
+                    help="on CPU, the pretraining's first N steps run at half the cores beside the baseline's joint "
+                         "run and the prior's extra scenes, and the skeleton prior then trains beside the joint run "
+                         "(default: the recipe's, 25000 for cpu; 0: the pretraining alone first, with every core, "
+                         "and the prior after the joint run). The same batches; the thread counts, hence the rounding, "
+                         "change with it")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
     ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
@@ -1050,6 +1226,10 @@ def main(argv: list[str] | None = None) -> int:
             cfg.workers = args.workers
         recipe_flag = ["--recipe", cfg.recipe]  # resolved: the card names what was trained, not "auto"
         log.info("recipe %s: %s", cfg.recipe, RECIPES[cfg.recipe].about)
+    if args.shared_pretrain_steps is not None:
+        if args.shared_pretrain_steps < 0:
+            ap.error(f"--shared-pretrain-steps: must be at least 0, got {args.shared_pretrain_steps}")
+        cfg.shared_pretrain_steps = args.shared_pretrain_steps
     try:
         cfg.apply_prior_overrides(args.prior_set)
     except ValueError as e:

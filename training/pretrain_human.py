@@ -92,6 +92,11 @@ class PretrainConfig(Config):
     pure function of the seed and the step), so this changes how fast, not what, the run learns."""
     max_minutes: float = 0.0
     """Stop (with a checkpoint and ``human.pt``) after this wall time (0: no limit)."""
+    stop_at: int = 0
+    """Stop (with a checkpoint and ``human.pt``) once this step is reached (0: run to ``iterations``); a run
+    resumed at or past it stops at once. How the run is split, not what it learns: the pipeline trains the
+    first steps at one thread beside the baseline's joint run, then resumes at every core (``--resume`` trains
+    on the same batches, so a split run learns what a straight one does at the same thread counts)."""
     precision: Literal["fp32", "bf16", "auto"] = "fp32"
     """Arithmetic of the encoder's forward pass: ``fp32``; ``bf16`` (``torch.autocast``: convolutions in bfloat16,
     the weights, optimiser and loss in float32); ``auto``: on a CUDA GPU ``bf16`` where it has bfloat16; on a
@@ -119,7 +124,7 @@ class PretrainConfig(Config):
         for key in ("iterations", "scenes_per_step", "checkpoint_every", "log_every", "eval_scenes"):
             if getattr(self, key) < 1:
                 fail(key, f"must be >= 1, got {getattr(self, key)}")
-        for key in ("lr_decay_every", "eval_every", "threads", "loader_workers", "coarse_steps"):
+        for key in ("lr_decay_every", "eval_every", "threads", "loader_workers", "coarse_steps", "stop_at"):
             if getattr(self, key) < 0:
                 fail(key, f"must be >= 0, got {getattr(self, key)}")
         for key in ("lr", "lr_min", "heat_positive_weight", "centroid_weight", "max_minutes"):
@@ -393,7 +398,7 @@ def pretrain_step(model: GHNeRF, opt: torch.optim.Optimizer, images: Tensor, hea
 
 
 #: Pretraining keys a resumed run may change: its length, where the data lives and how it runs.
-RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "log_every", "eval_every",
+RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "stop_at", "log_every", "eval_every",
                      "eval_scenes", "checkpoint_every", "loader_workers")
 
 
@@ -471,8 +476,9 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     prog = Progress(cfg.iterations, step, enabled=not quiet)
     losses: list[float] = []
     last_pck = float("nan")
-    stopped_early = False
-    for images, heat in step_batches(ds, cfg, step):
+    # stop_at: a run resumed at or past it has nothing to do in this invocation
+    stopped_early = bool(cfg.stop_at) and cfg.stop_at <= step < cfg.iterations
+    for images, heat in ([] if stopped_early else step_batches(ds, cfg, step)):
         lr = learning_rate(cfg, step)
         for g in opt.param_groups:
             g["lr"] = lr
@@ -502,9 +508,11 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
                 fh.write(json.dumps(rec) + "\n")
         if step % cfg.checkpoint_every == 0 or step == cfg.iterations:
             checkpoint(step)
-        if cfg.max_minutes and clock.elapsed() > 60 * cfg.max_minutes and step < cfg.iterations:
+        if step < cfg.iterations and ((cfg.max_minutes and clock.elapsed() > 60 * cfg.max_minutes)
+                                      or (cfg.stop_at and step >= cfg.stop_at)):
             stopped_early = True
-            checkpoint(step)
+            if step % cfg.checkpoint_every:  # (else saved just above)
+                checkpoint(step)
             break
     prog.close()
     summary = {"steps": step, "iterations": cfg.iterations, "stopped_early": stopped_early,

@@ -12,7 +12,8 @@
    joint's expected error. Loss: the mean joint distance (MPJPE itself) plus a Laplace likelihood
    of the detached distance for the error head. Augmented by mirroring and by hiding joints in
    one view (as the reprojection gate and occlusion do). ``--members K`` trains K such networks
-   (seeds ``seed..seed+K-1``) and exports their mean as one file.
+   (seeds ``seed..seed+K-1``; side by side, one process each, as far as ``--threads`` goes) and exports
+   their mean as one file.
 3. **Export** ``skeleton_prior.onnx`` (fp32; 1.6 M weights per network: int8 would save nothing that
    matters) with ``ghnerf_skeleton.*`` metadata, and **evaluate** on the held-out split:
    ``skeleton_prior.json`` beside it (MPJPE over all joints, and gated by the expected error).
@@ -205,22 +206,63 @@ def _hide_in_one_view(f, prob: float, gen):
 
 
 def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, config: PriorTrainConfig,
-          progress: bool = True):
-    """The trained network (torch, eval mode): one, or the ensemble of ``config.members``."""
-    if config.members > 1:
-        return make_ensemble([_train_one(inputs, truth, truth_valid, config, config.seed + k, progress)
-                              for k in range(config.members)])
-    return _train_one(inputs, truth, truth_valid, config, config.seed, progress)
+          progress: bool = True, threads: int = 1):
+    """The trained network (torch, eval mode): one, or the ensemble of ``config.members``.
+
+    With several members and ``threads`` >= 2, the members train side by side in processes of
+    ``threads // processes`` threads each (:func:`member_lanes`): this small network gains little from a
+    second thread (18.8 against 29.3 ms a step on two cores, docs/training.md), so two members at one thread
+    each take about half the time of one after the other at two. The thread counts follow from ``members``
+    and ``threads`` alone, so a rerun on the same machine trains the same weights.
+    """
+    if config.members == 1:
+        return _train_one(inputs.joint_features, inputs.context, truth, truth_valid, config, config.seed, progress)
+    seeds = [config.seed + k for k in range(config.members)]
+    processes, each = member_lanes(config.members, threads)
+    if processes == 1:
+        return make_ensemble([_train_one(inputs.joint_features, inputs.context, truth, truth_valid, config, s,
+                                         progress) for s in seeds])
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    arrays = (inputs.joint_features, inputs.context, np.asarray(truth), np.asarray(truth_valid))
+    # spawn, not fork: a forked child of a process whose OpenMP pool has run can hang in its first parallel region
+    with ProcessPoolExecutor(processes, mp.get_context("spawn")) as pool:
+        states = list(pool.map(_train_member, [(arrays, config, s, progress, each) for s in seeds]))
+    import torch
+
+    nets = []
+    for state in states:
+        net = make_network(config.hidden, inputs.joint_features.shape[-1])
+        net.load_state_dict({k: torch.from_numpy(v) for k, v in state.items()})
+        nets.append(net.eval())
+    return make_ensemble(nets)
 
 
-def _train_one(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, config: PriorTrainConfig,
-               seed: int, progress: bool):
+def member_lanes(members: int, threads: int) -> tuple[int, int]:
+    """``(processes, threads each)`` for training ``members`` networks with ``threads`` threads in all."""
+    processes = max(1, min(members, threads))
+    return processes, max(1, threads // processes)
+
+
+def _train_member(job) -> dict[str, np.ndarray]:
+    """One member in a worker process: its weights as arrays (plain pickles, no shared-memory handles)."""
+    import torch
+
+    (features, context, truth, truth_valid), config, seed, progress, threads = job
+    torch.set_num_threads(threads)
+    net = _train_one(features, context, truth, truth_valid, config, seed, progress)
+    return {k: v.detach().numpy().copy() for k, v in net.state_dict().items()}
+
+
+def _train_one(joint_features: np.ndarray, context: np.ndarray, truth: np.ndarray, truth_valid: np.ndarray,
+               config: PriorTrainConfig, seed: int, progress: bool):
     import torch
 
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
-    f_all = torch.from_numpy(inputs.joint_features)
-    c_all = torch.from_numpy(inputs.context)
+    f_all = torch.from_numpy(joint_features)
+    c_all = torch.from_numpy(context)
     y_all = torch.from_numpy(np.nan_to_num(truth).astype(np.float32))  # invalid joints weigh 0
     w_all = torch.from_numpy(np.asarray(truth_valid, np.float32))
     net = make_network(config.hidden, f_all.shape[-1])
@@ -311,7 +353,8 @@ def card_summary(folder: str | Path) -> dict | None:
         return None
     r = json.loads(path.read_text())
     return {k: r.get(k) for k in ("command", "split", "scenes", "train_scenes", "trained_on", "encoder_file",
-                                  "flip_test", "config", "collect_s", "train_s", "metrics")}
+                                  "flip_test", "config", "collect_s", "train_s", "metrics", "trained_beside")
+            if k in r or k != "trained_beside"}
 
 
 def add_to_card(card_dir: str | Path, out: Path) -> Path:
@@ -345,7 +388,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--lr", type=float, default=PriorTrainConfig.lr)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--members", type=int, default=1,
-                    help="networks averaged in the file (seeds seed..seed+members-1; each takes the training time)")
+                    help="networks averaged in the file (seeds seed..seed+members-1), trained side by side "
+                         "when --threads allows (one thread each at two members and two threads)")
     ap.add_argument("--no-flip-test", action="store_true", help="collect without the flip test")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--card", help="a model card folder (models) to record the prior in (model_card.json, "
@@ -378,7 +422,7 @@ def main(argv: list[str] | None = None) -> int:
     va = collect(model_dir, args.data, args.val_split, args.limit, not args.no_flip_test, args.threads)
     collect_s = time.monotonic() - t0
     tr_in, tr_truth = inputs_of(tr)
-    net = train(tr_in, tr_truth, tr["joints_3d_valid"], config)
+    net = train(tr_in, tr_truth, tr["joints_3d_valid"], config, threads=args.threads)
     train_s = time.monotonic() - t0 - collect_s
     encoder_file = str(tr["encoder_file"])
     trained_on = ",".join(f"{d}:{args.train_split}" for d in [args.data, *args.extra_data])

@@ -209,6 +209,32 @@ def test_an_ensemble_file_answers_the_mean_of_its_members(tiny_prior, tmp_path):
     np.testing.assert_allclose(np.exp(log_err), 0.5 * (member0[1].exp() + e1.exp()).numpy(), rtol=1e-4)
 
 
+def test_members_train_side_by_side_and_match_members_trained_alone(tiny_prior):
+    """At two threads the two members train at once, one process of one thread each; each is the network
+    its seed gives at one thread in this process (the lanes change the wall time, not the weights)."""
+    import torch
+    from training.skeleton_prior import PriorTrainConfig, member_lanes, train
+
+    assert member_lanes(2, 2) == (2, 1) and member_lanes(2, 1) == (1, 1) and member_lanes(3, 2) == (2, 1)
+    assert member_lanes(2, 16) == (2, 8) and member_lanes(1, 4) == (1, 4)
+    inp, truth = tiny_prior.data
+    valid = np.ones(truth.shape[:2], bool)
+    config = PriorTrainConfig(steps=3, hidden=16, batch=8, members=2)
+    side_by_side = train(inp, truth, valid, config, progress=False, threads=2)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        alone = train(inp, truth, valid, config, progress=False, threads=1)
+    finally:
+        torch.set_num_threads(threads)
+    f, c = torch.from_numpy(inp.joint_features), torch.from_numpy(inp.context)
+    with torch.no_grad():
+        for a, b in zip(side_by_side.members, alone.members):
+            for x, y in zip(a(f, c), b(f, c)):
+                torch.testing.assert_close(x, y, rtol=0, atol=0)
+        assert (side_by_side.members[0](f, c)[0] - side_by_side.members[1](f, c)[0]).abs().max() > 1e-5
+
+
 def test_flip_test_averages_the_mirrored_answer_and_makes_the_prior_mirror_symmetric(tiny_prior):
     """With the flip test the prior's answer for a scene seen in a mirror is its answer mirrored, exactly;
     the answer is the mean of the plain one and the mirrored pair's answer mirrored back."""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -290,19 +291,103 @@ def test_side_by_side_pretrains_with_every_core_then_trains_the_variants_at_once
 
     phases = side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2)
     assert [len(phase) for phase in phases] == [1, 2]
-    (pre_cmd, pre_log), = phases[0][0]
-    assert "training.pretrain_human" in pre_cmd and threads(pre_cmd) == ["threads=2"]
-    assert pre_log == cfg.runs / "edge128_human" / "train.log"
+    pre, = phases[0][0]
+    assert "training.pretrain_human" in pre.cmd and threads(pre.cmd) == ["threads=2"]
+    assert pre.log == cfg.runs / "edge128_human" / "train.log" and pre.run_folder
     joint = [lane[0] for lane in phases[1]]
-    assert [log for _, log in joint] == [cfg.runs / "edge128" / "train.log",
-                                         cfg.runs / "edge128_baseline" / "train.log"]
-    assert all("training.train" in cmd and threads(cmd) == ["threads=1"] for cmd, _ in joint)
+    assert [step.log for step in joint] == [cfg.runs / "edge128" / "train.log",
+                                            cfg.runs / "edge128_baseline" / "train.log"]
+    assert all("training.train" in step.cmd and threads(step.cmd) == ["threads=1"] for step in joint)
     run = cfg.runs / "edge128_human"
     (run / "human.pt").write_bytes(b"x")
     (run / "config.json").write_text((run / "requested.json").read_text())
     (run / "summary.json").write_text(json.dumps({"steps": 24000}))
     assert [len(phase) for phase in side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2)] == [2]
-    assert side_by_side_plan(cfg, ["baseline"], cores=1)[0][0][0][0].count("threads=1") == 1
+    assert side_by_side_plan(cfg, ["baseline"], cores=1)[0][0][0].cmd.count("threads=1") == 1
+
+
+def test_shared_lanes_put_the_baseline_beside_the_pretraining_and_the_prior_beside_the_joint_run(tmp_path):
+    """The cpu recipe's lanes on two cores: the pretraining's first steps at one thread beside the baseline and
+    the prior's extra scenes; the rest of it at two; then the joint run beside the early prior, whose job file
+    says what the prior stage will compare. Never more threads than cores in a phase."""
+    import pytest
+
+    pytest.importorskip("torch")
+    from training.early_prior import JOB_FILE
+    from training.pipeline import early_prior_dir, side_by_side_plan
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    cfg.apply_recipe("cpu", cores=2)
+    assert cfg.shared_pretrain_steps > 0
+
+    def threads(step):
+        found = [int(c.split("=")[1]) for c in step.cmd if c.startswith("threads=")]
+        if "--threads" in step.cmd:
+            found.append(int(step.cmd[step.cmd.index("--threads") + 1]))
+        if "--workers" in step.cmd:
+            found.append(int(step.cmd[step.cmd.index("--workers") + 1]))
+        return found
+
+    data_key = {"request": {"train": 5000}, "manifest": {"dataset.json": "abc"}}
+    phases = side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2, data=data_key)
+    assert [[[s.log.name for s in lane] for lane in phase] for phase in phases] == [
+        [["train.log"], ["train.log", "prior_extra.log"]], [["train.log"]], [["train.log"], ["early_prior.log"]]]
+    (pre,), (base, extra) = phases[0]
+    assert "training.pretrain_human" in pre.cmd and f"stop_at={cfg.shared_pretrain_steps}" in pre.cmd
+    assert base.log.parent == cfg.runs / "edge128_baseline" and "training.train" in base.cmd
+    assert "training.data.generate" in extra.cmd and not extra.run_folder
+    (rest,), = phases[1]
+    assert "training.pretrain_human" in rest.cmd and not any(c.startswith("stop_at") for c in rest.cmd)
+    (joint,), (early,) = phases[2]
+    assert joint.log.parent == cfg.runs / "edge128" and "training.early_prior" in early.cmd and not early.run_folder
+    for phase in phases:  # (the early prior's threads are in its job file: checked below)
+        assert sum(max(threads(s), default=1) for s in (lane[0] for lane in phase)) <= 2, phase
+    assert [threads(s) for s in (pre, base, extra, rest, joint)] == [[1], [1], [1], [2], [1]]
+
+    job = json.loads((early_prior_dir(cfg, "ghnerf") / JOB_FILE).read_text())
+    assert job["train_config"]["human_init"] == str(cfg.runs / "edge128_human" / "human.pt")
+    argv = job["prior_argv"]
+    assert argv[argv.index("--model-dir") + 1] == str(early_prior_dir(cfg, "ghnerf"))
+    assert argv[argv.index("--threads") + 1] == "1" and argv[argv.index("--members") + 1] == "2"
+    assert job["request"]["data"] == data_key and job["request"]["members"] == 2
+
+    # a pretraining resumed past the shared steps: nothing to share it with, the default plan
+    log_file = cfg.runs / "edge128_human" / "log.jsonl"
+    log_file.write_text(json.dumps({"step": cfg.shared_pretrain_steps + 50}) + "\n{\"step\": 9")  # cut short
+    assert [len(p) for p in side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2, data=data_key)] == [1, 2]
+    log_file.unlink()
+    # without the dataset's stamp (or with --until) there is no early prior: the joint run gets both cores
+    assert [len(p) for p in side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2)] == [2, 1, 1]
+    cfg.until = "train"
+    last = side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=2, data=data_key)
+    assert [[s.log.name for s in lane] for lane in last[0]] == [["train.log"], ["train.log"]]  # no extra scenes
+    assert threads(last[-1][0][0]) == [2]
+    # one core: nothing shared
+    cfg.until = None
+    assert [len(p) for p in side_by_side_plan(cfg, ["ghnerf", "baseline"], cores=1, data=data_key)] == [1, 2]
+
+
+def test_a_failed_optional_lane_step_warns_and_a_failed_training_stops(tmp_path, monkeypatch, caplog):
+    """The early prior is optional (the prior stage trains one anyway): its failure is logged and the lane goes
+    on; a training that fails stops the pipeline, naming its log."""
+    import logging
+    import sys
+
+    import training.pipeline as pipeline
+    from training.pipeline import LaneStep
+
+    cfg = PipelineConfig(out=tmp_path / "m", runs=tmp_path / "runs", data=tmp_path / "data")
+    fail, ok = [sys.executable, "-c", "raise SystemExit(3)"], [sys.executable, "-c", "print('fine')"]
+    plan = [[[LaneStep(fail, tmp_path / "a.log", run_folder=False, optional=True),
+              LaneStep(ok, tmp_path / "b.log", run_folder=False)]]]
+    monkeypatch.setattr(pipeline, "side_by_side_plan", lambda *a: plan)
+    caplog.set_level(logging.WARNING, logger="training.pipeline")
+    pipeline.train_side_by_side(cfg, [])
+    assert "fine" in (tmp_path / "b.log").read_text() and "a.log" in caplog.text
+    plan[0][0] = [LaneStep(fail, tmp_path / "c.log", run_folder=False), LaneStep(ok, tmp_path / "d.log")]
+    with pytest.raises(RuntimeError, match="c.log"):
+        pipeline.train_side_by_side(cfg, [])
+    assert not (tmp_path / "d.log").exists()
 
 
 def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monkeypatch):
@@ -333,6 +418,13 @@ def test_the_cli_sets_the_dataset_request_and_records_the_command(tmp_path, monk
         pipeline.main(["--out", str(tmp_path / "m"), "--workers", "0"])
     with pytest.raises(SystemExit):
         pipeline.main(["--out", str(tmp_path / "m"), "--train", "0"])
+    # the lanes: the recipe's shared start unless the flag says otherwise (0: the pretraining alone first)
+    pipeline.main(["--out", str(tmp_path / "m"), "--recipe", "cpu"])
+    assert seen[-1].shared_pretrain_steps == pipeline.RECIPES["cpu"].shared_pretrain_steps > 0
+    pipeline.main(["--out", str(tmp_path / "m"), "--recipe", "cpu", "--shared-pretrain-steps", "0"])
+    assert seen[-1].shared_pretrain_steps == 0 and "--shared-pretrain-steps 0" in seen[-1].command
+    with pytest.raises(SystemExit):
+        pipeline.main(["--out", str(tmp_path / "m"), "--shared-pretrain-steps", "-5"])
 
 
 def test_a_recipe_puts_its_overrides_first_and_the_card_names_it(tmp_path, monkeypatch):
@@ -476,7 +568,7 @@ def test_until_stops_after_the_named_stages(tmp_path, monkeypatch):
         assert pipeline.run(cfg) is None
         assert ran == (stages if until == "data" else ["data", *stages]), until
     # on a CPU the variants train side by side, pretraining included: not with --until pretrain
-    monkeypatch.setattr(pipeline, "train_side_by_side", lambda cfg, todo: ran.append("side by side"))
+    monkeypatch.setattr(pipeline, "train_side_by_side", lambda cfg, todo, data=None: ran.append("side by side"))
     for until, stages in (("pretrain", ["pretrain"]), ("train", ["side by side", "pretrain", "train", "train"])):
         ran.clear()
         cfg = PipelineConfig(out=tmp_path / f"cpu_{until}", parallel_train=True, until=until)
@@ -521,6 +613,11 @@ def test_quick_pipeline_end_to_end_scores_its_prior_and_a_new_prior_re_evaluates
     prior_file = out / "ghnerf" / "skeleton_prior.onnx"
     assert str(prior_file) in json.loads((out / ".stages" / "prior_ghnerf.json").read_text())["outputs"]
     assert "MPJPE mm, skeleton prior" in (out / "MODEL_CARD.md").read_text()
+    if (os.cpu_count() or 1) >= 2:  # the lanes ran: the prior learnt beside the joint run is the one taken
+        assert json.loads((out / ".stages" / "prior_ghnerf.json").read_text())["info"] == {"early": True}
+        report = json.loads(prior_file.with_suffix(".json").read_text())
+        assert report["file"] == str(prior_file) and "edge128_prior" in report["trained_in"]
+        assert "trained beside the joint run" in (out / "MODEL_CARD.md").read_text()
 
     def ran() -> list[str]:
         return [r.getMessage().split()[1].rstrip(":") for r in caplog.records

@@ -38,6 +38,7 @@ def tiny_pretrain(data, **kw) -> PretrainConfig:
     ({"augment": {"zoom": 0.1}}, "zoom"),
     ({"precision": "fp16"}, "precision"),
     ({"coarse_steps": -1}, "coarse_steps"),
+    ({"stop_at": -1}, "stop_at"),
     ({"coarse_steps": 100, "coarse_input_scale": 0.3}, "coarse_input_scale"),  # 38.4 px: not a multiple of 16
     ({"coarse_steps": 100, "coarse_input_scale": 1.5}, "coarse_input_scale"),
 ])
@@ -101,6 +102,30 @@ def test_two_iterations_resume_and_joint_training_starts_from_it(data64, tmp_pat
     for k, v in a["human"].items():
         if v.is_floating_point() and "running" not in k:
             assert torch.allclose(got[k], v, atol=1e-6), k
+
+
+def test_a_run_split_by_stop_at_and_thread_count_learns_what_a_straight_one_does(data64, tmp_path):
+    """The pipeline's split: the first steps at one thread (``stop_at``), the rest resumed at two. The
+    second part trains on the same batches from the same state, so the split run is the straight run of the
+    same thread counts; a resume at or past ``stop_at`` does nothing."""
+    straight = tmp_path / "straight"
+    pretrain(tiny_pretrain(data64, iterations=3, threads=1, eval_every=0), straight, quiet=True)
+    pretrain(tiny_pretrain(data64, iterations=4, threads=2, eval_every=0), straight, resume=True, quiet=True)
+
+    split = tmp_path / "split"
+    first = pretrain(tiny_pretrain(data64, iterations=4, threads=1, eval_every=0, stop_at=3, checkpoint_every=2),
+                     split, quiet=True)
+    assert first["steps"] == 3 and first["stopped_early"]  # saved at the stop, not only at its checkpoints
+    again = pretrain(tiny_pretrain(data64, iterations=4, threads=1, eval_every=0, stop_at=3), split, resume=True,
+                     quiet=True)
+    assert again["steps"] == 3 and again["stopped_early"]
+    done = pretrain(tiny_pretrain(data64, iterations=4, threads=2, eval_every=0), split, resume=True, quiet=True)
+    assert done["steps"] == 4 and not done["stopped_early"]
+    assert [(g["steps"], g["threads"]) for g in done["segments"]] == [(3, 1), (1, 2)]
+    a = torch.load(straight / "human.pt", weights_only=True)
+    b = torch.load(split / "human.pt", weights_only=True)
+    for k in a["human"]:
+        assert torch.equal(a["human"][k], b["human"][k]), k
 
 
 def test_pretraining_resume_refuses_another_config(data64, tmp_path):

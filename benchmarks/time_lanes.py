@@ -1,0 +1,286 @@
+"""Step rates of ``make model``'s jobs alone and side by side, and what each lane plan costs on this host.
+
+    .venv/bin/python benchmarks/time_lanes.py --data data/edge128 [--seconds 60] [--json out.json]
+
+The jobs are the real commands the pipeline runs (``training.pretrain_human`` at the trunk's 64x64 and
+128x128 inputs, ``training.train`` for each variant, ``training.data.generate`` for the prior's extra scenes)
+with the ``cpu`` recipe's settings, each stopped after ``--seconds``, plus the skeleton prior's two parts in
+this script's own worker processes: collecting the shipped model's flip-tested peaks (``--model-dir``, default
+``models/ghnerf``) and training one prior network on inputs of the recipe's size (random values: the
+arithmetic is the same). Each measurement runs its jobs at once, as a lane plan would, and reads their rates
+from their own logs after the first records (warm-up). The pairs are those of the two plans
+(``training.pipeline.side_by_side_plan``):
+
+- **alone first** (``--shared-pretrain-steps 0``): the pretraining at every core; the joint run beside the
+  baseline at one thread each; then the prior's extra scenes, collection and networks at every core;
+- **shared** (the ``cpu`` recipe): the pretraining's first ``shared_pretrain_steps`` at one thread beside the
+  baseline and then the extra scenes; the rest at every core; the joint run beside the early prior
+  (collection, then the networks one after the other) at one thread each.
+
+The estimate multiplies each lane's steps (the recipe's counts) by its measured rate; where a lane ends before
+the other, the phase lasts as long as the longer. Data, export, quantization, evaluation and card are the same
+in both plans and left out. Needs two cores or more; the figures depend on the host and on what else runs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
+
+SKIP_RECORDS = 2
+"""Log records left out of a rate (the warm-up and, for the pretraining, its precision probe)."""
+
+
+# ------------------------------------------------------------------------------------------------ workers
+def worker_prior(threads: int, steps: int, scenes: int) -> dict:
+    """Seconds per step of one prior network (``training.skeleton_prior._train_one``) on ``scenes`` inputs."""
+    import torch
+
+    from ghnerf_runtime.body25 import NUM_JOINTS
+    from ghnerf_runtime.skeleton_prior import CONTEXT_FEATURES, JOINT_FEATURES
+    from training.skeleton_prior import PriorTrainConfig, _train_one
+
+    torch.set_num_threads(threads)
+    rng = np.random.default_rng(0)
+    features = rng.normal(size=(scenes, NUM_JOINTS, JOINT_FEATURES)).astype(np.float32)
+    context = rng.normal(size=(scenes, CONTEXT_FEATURES)).astype(np.float32)
+    truth = rng.normal(size=(scenes, NUM_JOINTS, 3)).astype(np.float32)
+    config = PriorTrainConfig(steps=WARMUP_STEPS)
+    _train_one(features, context, truth, np.ones((scenes, NUM_JOINTS), bool), config, 0, False)
+    t0 = time.monotonic()
+    _train_one(features, context, truth, np.ones((scenes, NUM_JOINTS), bool), PriorTrainConfig(steps=steps), 0, False)
+    return {"s_per_step": (time.monotonic() - t0) / steps}
+
+
+WARMUP_STEPS = 50
+
+
+def worker_collect(threads: int, scenes: int, model_dir: str, data: str) -> dict:
+    """Seconds per scene of the prior's collection (``training.skeleton_prior.collect``, flip test on)."""
+    from training.skeleton_prior import collect
+
+    collect(model_dir, data, "train", 8, True, threads, progress=False)  # warm-up
+    t0 = time.monotonic()
+    collect(model_dir, data, "train", scenes, True, threads, progress=False)
+    return {"s_per_scene": (time.monotonic() - t0) / scenes}
+
+
+# --------------------------------------------------------------------------------------------------- jobs
+class Job:
+    """One process of a measurement and how its rate is read."""
+
+    def __init__(self, name: str, cmd: list[str], rate, folder: Path):
+        self.name, self.cmd, self.rate, self.folder = name, cmd, rate, folder
+
+
+def log_rate(folder: Path) -> float:
+    """Seconds per step from a run's ``log.jsonl`` (``step``, ``time_s``), the first records left out."""
+    records = [json.loads(line) for line in (folder / "log.jsonl").read_text().splitlines() if line.strip()]
+    records = [r for r in records if "time_s" in r][SKIP_RECORDS:]
+    if len(records) < 2:
+        raise RuntimeError(f"{folder}: too few log records for a rate ({len(records)}); give more --seconds")
+    return (records[-1]["time_s"] - records[0]["time_s"]) / (records[-1]["step"] - records[0]["step"])
+
+
+class Jobs:
+    """The jobs of one host's measurement, in a scratch folder."""
+
+    def __init__(self, data: Path, model_dir: Path, scratch: Path, seconds: float):
+        from training.pipeline import PipelineConfig, pretrain_inputs
+
+        self.data, self.model_dir, self.scratch, self.seconds = data, model_dir, scratch, seconds
+        self.cfg = PipelineConfig(out=scratch / "models", data=data, runs=scratch / "runs")
+        self.cfg.apply_recipe("cpu", cores=2)
+        self.pretrain_config = scratch / "pretrain.json"
+        self.pretrain_config.write_text(json.dumps({**pretrain_inputs(self.cfg, "ghnerf"), "data": str(data)}))
+        self.count = 0
+
+    def _folder(self, name: str) -> Path:
+        self.count += 1
+        return self.scratch / f"{self.count:02d}_{name}"
+
+    def pretrain(self, scale: str, threads: int) -> Job:
+        folder = self._folder(f"pretrain{scale}_{threads}t")
+        coarse = "1000000" if scale == "64" else "0"
+        cmd = [sys.executable, "-m", "training.pretrain_human", "--config", str(self.pretrain_config), "--out",
+               str(folder), "--quiet", "--threads", str(threads), "--iterations", "1000000",
+               "--set", f"coarse_steps={coarse}", "--set", "eval_every=0", "--set", "log_every=10",
+               "--set", "checkpoint_every=1000000", "--set", f"max_minutes={self.seconds / 60}"]
+        return Job(f"pretrain {scale}x{scale}, {threads} thread(s)", cmd, lambda: log_rate(folder), folder)
+
+    def joint(self, variant: str, threads: int) -> Job:
+        from training.pipeline import CONFIG_DIR, VARIANTS
+
+        folder = self._folder(f"{variant}_{threads}t")
+        cmd = [sys.executable, "-m", "training.train", "--config", str(CONFIG_DIR / f"{VARIANTS[variant]}.json"),
+               "--out", str(folder), "--data", str(self.data), "--quiet"]
+        for o in [*self.cfg.train_overrides, f"threads={threads}", "log_every=10", "pck_every=0",
+                  "checkpoint_every=1000000", "iterations=1000000", f"max_minutes={self.seconds / 60}"]:
+            cmd += ["--set", o]
+        return Job(f"joint run {variant}, {threads} thread(s)", cmd, lambda: log_rate(folder), folder)
+
+    def extras(self, workers: int, scenes: int) -> Job:
+        from training.pipeline import prior_extra_args
+
+        folder = self._folder(f"extras_{workers}w")
+        args = prior_extra_args(self.cfg, workers)
+        args[args.index("--out") + 1], args[args.index("--train") + 1] = str(folder / "data"), str(scenes)
+        cmd = [sys.executable, "-m", "training.data.generate", *args]
+        return Job(f"prior's extra scenes, {workers} worker(s)", cmd, lambda: self._timed(folder) / scenes, folder)
+
+    def prior(self, threads: int, steps: int) -> Job:
+        folder = self._folder(f"prior_{threads}t")
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "prior", "--threads", str(threads),
+               "--steps", str(steps), "--scenes", str(self.cfg.train + self.cfg.prior_extra_train)]
+        return Job(f"prior network, {threads} thread(s)", cmd, lambda: self._reported(folder, "s_per_step"), folder)
+
+    def collect(self, threads: int, scenes: int) -> Job:
+        folder = self._folder(f"collect_{threads}t")
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "collect", "--threads", str(threads),
+               "--scenes", str(scenes), "--model-dir", str(self.model_dir), "--data", str(self.data)]
+        return Job(f"prior's collection, {threads} thread(s)", cmd, lambda: self._reported(folder, "s_per_scene"),
+                   folder)
+
+    @staticmethod
+    def _timed(folder: Path) -> float:
+        return json.loads((folder / "wall.json").read_text())["wall_s"]
+
+    @staticmethod
+    def _reported(folder: Path, key: str) -> float:
+        return json.loads((folder / "stdout.log").read_text().strip().splitlines()[-1])[key]
+
+
+def measure(jobs: list[Job]) -> dict[str, float]:
+    """Run ``jobs`` at once; each one's rate."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    procs = []
+    for job in jobs:
+        job.folder.mkdir(parents=True, exist_ok=True)
+        out = open(job.folder / "stdout.log", "w")
+        procs.append((job, out, time.monotonic(), subprocess.Popen(job.cmd, cwd=ROOT, env=env, stdout=out,
+                                                                  stderr=subprocess.STDOUT)))
+    rates = {}
+    for job, out, t0, p in procs:
+        code = p.wait()
+        out.close()
+        (job.folder / "wall.json").write_text(json.dumps({"wall_s": time.monotonic() - t0}))
+        if code != 0:
+            tail = (job.folder / "stdout.log").read_text()[-2000:]
+            raise RuntimeError(f"{job.name}: exit {code}\n{tail}")
+        rates[job.name] = job.rate()
+    return rates
+
+
+# ------------------------------------------------------------------------------------------------ estimate
+def plans(cfg, r: dict[str, float]) -> dict[str, dict[str, float]]:
+    """Seconds of each phase of the two plans from the measured rates ``r`` (keys as :func:`main` names them)."""
+    pre = cfg.pretrain_overrides  # the recipe's counts
+    iters = int(next(o for o in pre if o.startswith("iterations=")).split("=")[1])
+    coarse = int(next(o for o in pre if o.startswith("coarse_steps=")).split("=")[1])
+    fine, shared = iters - coarse, cfg.shared_pretrain_steps
+    joint = 10000
+    collect_scenes = cfg.train + cfg.prior_extra_train + cfg.val
+    members, steps = cfg.prior_members, cfg.prior_steps
+    alone = {
+        "pretraining, every core": coarse * r["pre64_2"] + fine * r["pre128_2"],
+        "joint run beside the baseline": joint * max(r["ghnerf_1_b"], r["baseline_1_g"]),
+        "prior's extra scenes, every core": cfg.prior_extra_train * r["extras_2"],
+        "prior's collection, every core": collect_scenes * r["collect_2"],
+        "prior's networks side by side": steps * r["prior_1_1"] * -(-members // 2),
+    }
+    lane_a = coarse * r["pre64_1_b"] + max(0, shared - coarse) * r["pre128_1_e"]
+    lane_b = joint * r["baseline_1_p"] + cfg.prior_extra_train * r["extras_1_p"]
+    early = collect_scenes * r["collect_1_g"] + members * steps * r["prior_1_g"]
+    shared_plan = {
+        "phase 1: pretraining beside the baseline and extra scenes": max(lane_a, lane_b),
+        "phase 2: the rest of the pretraining, every core": (iters - max(shared, coarse)) * r["pre128_2"]
+        + max(0, coarse - shared) * r["pre64_2"],
+        "phase 3: joint run beside the early prior": max(joint * r["ghnerf_1_q"], early),
+    }
+    return {"alone first": alone, "shared": shared_plan,
+            "lanes": {"phase 1 pretraining lane": lane_a, "phase 1 baseline lane": lane_b,
+                      "phase 3 joint run lane": joint * r["ghnerf_1_q"], "phase 3 early prior lane": early}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", default="data/edge128", help="the make model dataset (its train split)")
+    ap.add_argument("--model-dir", default=str(ROOT / "models" / "ghnerf"), help="a model folder for the collection")
+    ap.add_argument("--seconds", type=float, default=60.0, help="length of each measurement")
+    ap.add_argument("--json", help="also write the rates and estimates here")
+    ap.add_argument("--worker", choices=("prior", "collect"), help=argparse.SUPPRESS)
+    ap.add_argument("--threads", type=int, default=1, help=argparse.SUPPRESS)
+    ap.add_argument("--steps", type=int, default=0, help=argparse.SUPPRESS)
+    ap.add_argument("--scenes", type=int, default=0, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.worker == "prior":
+        print(json.dumps(worker_prior(args.threads, args.steps, args.scenes)))
+        return 0
+    if args.worker == "collect":
+        print(json.dumps(worker_collect(args.threads, args.scenes, args.model_dir, args.data)))
+        return 0
+    out = ready_output_arg(ap, args.json, "--json") if args.json else None
+    data = Path(args.data)
+    if not (data / "dataset.json").is_file():
+        ap.error(f"--data {data}: no dataset.json (make it with `python -m training.pipeline --until data`)")
+    if (os.cpu_count() or 1) < 2:
+        ap.error("the lanes need two cores or more")
+    # rough counts that run about --seconds at the rates of a 2-core host (the rates do not depend on them)
+    s = args.seconds
+    prior_steps, collect_scenes, extra_scenes = int(s / 0.03), int(s / 0.02), int(s / 0.05)
+    with tempfile.TemporaryDirectory(prefix="time_lanes_") as tmp:
+        j = Jobs(data, Path(args.model_dir), Path(tmp), s)
+        steps = [
+            ({"pre64_2": j.pretrain("64", 2)}),
+            ({"pre128_2": j.pretrain("128", 2)}),
+            ({"ghnerf_1_b": j.joint("ghnerf", 1), "baseline_1_g": j.joint("baseline", 1)}),
+            ({"extras_2": j.extras(2, 2 * extra_scenes)}),
+            ({"collect_2": j.collect(2, 2 * collect_scenes)}),
+            ({"prior_1_1": j.prior(1, prior_steps), "prior_1_1b": j.prior(1, prior_steps)}),
+            ({"pre64_1_b": j.pretrain("64", 1), "baseline_1_p": j.joint("baseline", 1)}),
+            ({"pre128_1_e": j.pretrain("128", 1), "extras_1_p": j.extras(1, extra_scenes)}),
+            ({"ghnerf_1_q": j.joint("ghnerf", 1), "prior_1_g": j.prior(1, int(1.5 * prior_steps))}),
+            ({"ghnerf_1_c": j.joint("ghnerf", 1), "collect_1_g": j.collect(1, collect_scenes)}),
+        ]
+        rates: dict[str, float] = {}
+        names: dict[str, str] = {}
+        for measurement in steps:
+            got = measure(list(measurement.values()))
+            for key, job in measurement.items():
+                rates[key], names[key] = got[job.name], job.name + (
+                    f" beside {', '.join(o.name for o in measurement.values() if o is not job)}"
+                    if len(measurement) > 1 else ", alone")
+            print("; ".join(f"{names[k]}: {rates[k]:.4f}" for k in measurement), flush=True)
+        cfg = j.cfg
+    est = plans(cfg, rates)
+    print("\n| job | s per step, scene or network step |\n|---|---|")
+    for k, v in rates.items():
+        print(f"| {names[k]} | {v:.4f} |")
+    for plan in ("alone first", "shared"):
+        total = sum(est[plan].values())
+        print(f"\n**{plan}**: {total / 60:.1f} min in the stages that differ")
+        for phase, sec in est[plan].items():
+            print(f"- {phase}: {sec / 60:.1f} min")
+    print("\nlanes of the shared plan: " + "; ".join(f"{k} {v / 60:.1f} min" for k, v in est["lanes"].items()))
+    a, b = sum(est["alone first"].values()), sum(est["shared"].values())
+    print(f"\nshared saves {(a - b) / 60:.1f} min ({1 - b / a:.0%} of those stages)")
+    if out:
+        out.write_text(json.dumps({"rates": rates, "jobs": names, "estimates_s": est,
+                                   "seconds": args.seconds}, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,90 @@
+"""``python -m training.early_prior JOB``: the skeleton prior from the pretrained encoder, beside the joint run.
+
+The joint run keeps the pretrained encoder frozen (``freeze_human``), so the keypoint graph that ``make model``
+exports after it is the pretraining's encoder, byte for byte (the ``human`` graph of a model built from the run's
+config with ``human_init`` loaded has the same sha256 as the one exported from the finished run). The prior
+learns from that graph alone, so it need not wait for the joint run: on two cores the pipeline trains it at one
+thread while the joint run takes the other (``training.pipeline.side_by_side_plan``).
+
+``JOB`` is the JSON file the pipeline writes (``<runs>/<preset>_prior/job.json``):
+
+- ``train_config``: the joint run's train config (as its ``config.json`` will hold it: ``human_init`` set);
+- ``data``, ``calib_scenes``: the quantize stage's calibration scenes (the same scenes, so the same int8 graph);
+- ``prior_argv``: ``training.skeleton_prior``'s arguments (its ``--model-dir`` is this folder);
+- ``request``: what the pipeline's prior stage will compare, less the keypoint graphs' hashes.
+
+This exports and quantizes the keypoint graph into the job's folder, trains the prior there, and last writes
+``request.json`` (the request with those hashes). The pipeline's prior stage takes the prior when the exported
+model's keypoint graphs have the same hashes and the request is unchanged (``training.pipeline.adopt_early_prior``);
+otherwise it trains its own, so a mismatch costs time, never a wrong prior.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+REQUEST_FILE = "request.json"
+JOB_FILE = "job.json"
+
+
+def export_keypoint_graph(train_config: dict, data: str | Path, calib_scenes: int, out_dir: str | Path,
+                          graph: str = "human") -> dict[str, Path]:
+    """``<graph>.onnx`` and ``<graph>.int8.onnx`` of the model ``train_config`` describes, its encoder loaded from
+    ``human_init``, calibrated as the pipeline's quantize stage calibrates (the same scenes and inputs)."""
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+    from training.export.export import example_inputs, export_graph
+    from training.export.quantize import calibration_feeds, quantize_all
+    from training.model import GHNeRF
+    from training.pipeline import calibration_items, _scene_inputs
+    from training.pretrain_human import load_human
+    from training.train import build_config
+
+    tc = build_config(train_config)
+    if not tc.human_init:
+        raise ValueError("the train config has no human_init: there is no pretrained encoder to export")
+    model = GHNeRF(tc.model_config()).eval()
+    load_human(model, tc.human_init)
+    out = Path(out_dir)
+    fp32 = {graph: export_graph(model, graph, out / f"{graph}.onnx", example_inputs(model))}
+    calib_ds = MultiViewDataset(data, "train", TargetConfig())
+    calib = [_scene_inputs(model, item, ray_stride=2, seed=i) for i, item in calibration_items(calib_ds, calib_scenes)]
+    int8 = quantize_all(fp32, out, calibration_feeds(model, calib, (graph,), rays_per_target=2048))
+    return {f"{graph}.onnx": fp32[graph], f"{graph}.int8.onnx": int8[graph]}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.early_prior", description=__doc__.split("\n\n")[0])
+    ap.add_argument("job", help=f"the pipeline's {JOB_FILE}")
+    args = ap.parse_args(argv)
+    from training import skeleton_prior as sp
+    from training.model_card import sha256
+
+    from training.pipeline import _digest
+
+    job_path = Path(args.job)
+    job = json.loads(job_path.read_text())
+    folder = job_path.parent
+    prior = Path(job["prior_argv"][job["prior_argv"].index("--out") + 1])
+    graphs = export_keypoint_graph(job["train_config"], job["data"], job["calib_scenes"], folder)
+    request = {**job["request"], "keypoints": {name: sha256(p) for name, p in graphs.items()}}
+    try:  # a pipeline run again after a stop: the prior may be done already
+        record = json.loads((folder / REQUEST_FILE).read_text())
+        if _digest(record["request"]) == _digest(request) and sha256(prior) == record["prior_sha256"]:
+            print(f"early prior: {prior} is up to date", file=sys.stderr)
+            return 0
+    except (OSError, ValueError, KeyError):
+        pass
+    (folder / REQUEST_FILE).unlink(missing_ok=True)  # written last: a stopped job leaves none
+    if sp.main(job["prior_argv"]) != 0:
+        return 1
+    (folder / REQUEST_FILE).write_text(json.dumps({"request": request, "prior": str(prior),
+                                                   "prior_sha256": sha256(prior)}, indent=1) + "\n")
+    print(f"early prior: {prior} (keypoint graphs {', '.join(graphs)})", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
