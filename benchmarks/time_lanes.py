@@ -200,7 +200,7 @@ def plans(cfg, r: dict[str, float]) -> dict[str, dict[str, float]]:
         "prior's collection, every core": collect_scenes * r["collect_2"],
         "prior's networks side by side": steps * r["prior_1_1"] * -(-members // 2),
     }
-    lane_a = coarse * r["pre64_1_b"] + max(0, shared - coarse) * r["pre128_1_e"]
+    lane_a = min(shared, coarse) * r["pre64_1_b"] + max(0, shared - coarse) * r["pre128_1_e"]
     lane_b = joint * r["baseline_1_p"] + cfg.prior_extra_train * r["extras_1_p"]
     early = collect_scenes * r["collect_1_g"] + members * steps * r["prior_1_g"]
     shared_plan = {

@@ -679,3 +679,37 @@ def test_force_sets_aside_only_what_this_run_redoes_and_never_a_live_run(tmp_pat
     (cfg.runs / "edge128" / "train.pid").write_text(str(os.getpid()))  # a live trainer
     with pytest.raises(RuntimeError, match="in use by a training run"):
         _set_aside_forced(cfg, {"train_ghnerf"})
+
+
+def test_the_lanes_benchmark_estimates_each_plan_from_its_rates(tmp_path):
+    """``benchmarks/time_lanes.py``: rates from a run's log after its warm-up records, and each plan's phases
+    from the rates and the recipe's counts (hand-computed here; the benchmark itself runs real jobs)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "time_lanes.py"
+    spec = importlib.util.spec_from_file_location("time_lanes", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+
+    (tmp_path / "log.jsonl").write_text("\n".join(json.dumps({"step": s, "time_s": t})
+                                                  for s, t in [(10, 30.0), (20, 31.0), (30, 32.0), (40, 34.0)]))
+    assert bench.log_rate(tmp_path) == pytest.approx(0.2)  # the first two records (warm-up, probe) left out
+    (tmp_path / "log.jsonl").write_text(json.dumps({"step": 10, "time_s": 30.0}))
+    with pytest.raises(RuntimeError, match="too few"):
+        bench.log_rate(tmp_path)
+
+    cfg = PipelineConfig(out=tmp_path)
+    cfg.apply_recipe("cpu", cores=2)  # 17600 + 26400 pretraining steps, 25000 shared, 25256 scenes collected
+    r = {"pre64_2": 0.1, "pre128_2": 0.2, "ghnerf_1_b": 0.3, "baseline_1_g": 0.25, "extras_2": 0.02,
+         "collect_2": 0.01, "prior_1_1": 0.03, "pre64_1_b": 0.15, "pre128_1_e": 0.3, "baseline_1_p": 0.28,
+         "extras_1_p": 0.05, "collect_1_g": 0.015, "prior_1_g": 0.035, "ghnerf_1_q": 0.31}
+    est = bench.plans(cfg, r)
+    alone, shared = est["alone first"], est["shared"]
+    assert alone["pretraining, every core"] == pytest.approx(17600 * 0.1 + 26400 * 0.2)
+    assert alone["joint run beside the baseline"] == pytest.approx(10000 * 0.3)
+    assert alone["prior's networks side by side"] == pytest.approx(30000 * 0.03)  # two members at once
+    assert alone["prior's collection, every core"] == pytest.approx(25256 * 0.01)
+    phase1, phase2, phase3 = shared.values()
+    assert phase1 == pytest.approx(max(17600 * 0.15 + 7400 * 0.3, 10000 * 0.28 + 20000 * 0.05))
+    assert phase2 == pytest.approx(19000 * 0.2)
+    assert phase3 == pytest.approx(max(10000 * 0.31, 25256 * 0.015 + 2 * 30000 * 0.035))
