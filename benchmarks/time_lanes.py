@@ -1,6 +1,6 @@
 """Step rates of ``make model``'s jobs alone and side by side, and what each lane plan costs on this host.
 
-    .venv/bin/python benchmarks/time_lanes.py --data data/edge128 [--seconds 60] [--json out.json]
+    .venv/bin/python benchmarks/time_lanes.py --data data/edge128 [--seconds 60] [--rounds 3] [--json out.json]
 
 The jobs are the real commands the pipeline runs (``training.pretrain_human`` at the trunk's 64x64 and
 128x128 inputs, ``training.train`` for each variant, ``training.data.generate`` for the prior's extra scenes)
@@ -14,12 +14,14 @@ from their own logs after the first records (warm-up). The pairs are those of th
 - **alone first** (``--shared-pretrain-steps 0``): the pretraining at every core; the joint run beside the
   baseline at one thread each; then the prior's extra scenes, collection and networks at every core;
 - **shared** (the ``cpu`` recipe): the pretraining's first ``shared_pretrain_steps`` at one thread beside the
-  baseline and then the extra scenes; the rest at every core; the joint run beside the early prior
-  (collection, then the networks one after the other) at one thread each.
+  baseline; the extra scenes at every core; the rest of the pretraining at every core; the joint run beside
+  the early prior (collection, then the networks one after the other) at one thread each.
 
 The estimate multiplies each lane's steps (the recipe's counts) by its measured rate; where a lane ends before
-the other, the phase lasts as long as the longer. Data, export, quantization, evaluation and card are the same
-in both plans and left out. Needs two cores or more; the figures depend on the host and on what else runs.
+the other, the phase lasts as long as the longer. The extra scenes' rate is the generator's wall time over its
+scenes, start-up included, so it errs high; the others are read after the warm-up. Data, export, quantization,
+evaluation and card are the same in both plans and left out. Needs two cores or more; the figures depend on the
+host and on what else runs.
 """
 from __future__ import annotations
 
@@ -162,25 +164,33 @@ class Jobs:
         return json.loads((folder / "stdout.log").read_text().strip().splitlines()[-1])[key]
 
 
-def measure(jobs: list[Job]) -> dict[str, float]:
-    """Run ``jobs`` at once; each one's rate."""
+def measure(jobs: dict[str, Job], limit_s: float) -> dict[str, float]:
+    """Run ``jobs`` at once; each one's rate, by its key. A job that fails or runs past ``limit_s`` stops the
+    others and raises with its output's tail."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
-    procs = []
-    for job in jobs:
+    procs = {}
+    for key, job in jobs.items():
         job.folder.mkdir(parents=True, exist_ok=True)
         out = open(job.folder / "stdout.log", "w")
-        procs.append((job, out, time.monotonic(), subprocess.Popen(job.cmd, cwd=ROOT, env=env, stdout=out,
-                                                                  stderr=subprocess.STDOUT)))
-    rates = {}
-    for job, out, t0, p in procs:
-        code = p.wait()
-        out.close()
-        (job.folder / "wall.json").write_text(json.dumps({"wall_s": time.monotonic() - t0}))
-        if code != 0:
-            tail = (job.folder / "stdout.log").read_text()[-2000:]
-            raise RuntimeError(f"{job.name}: exit {code}\n{tail}")
-        rates[job.name] = job.rate()
-    return rates
+        procs[key] = (out, time.monotonic(), subprocess.Popen(job.cmd, cwd=ROOT, env=env, stdout=out,
+                                                              stderr=subprocess.STDOUT))
+    try:
+        for key, (out, t0, p) in procs.items():
+            try:
+                code = p.wait(timeout=max(1.0, limit_s - (time.monotonic() - t0)))
+            except subprocess.TimeoutExpired:
+                code = f"still running after {limit_s:.0f} s"
+            out.close()
+            (jobs[key].folder / "wall.json").write_text(json.dumps({"wall_s": time.monotonic() - t0}))
+            if code != 0:
+                tail = (jobs[key].folder / "stdout.log").read_text()[-2000:]
+                raise RuntimeError(f"{jobs[key].name}: exit {code}\n{tail}")
+    finally:
+        for _, _, p in procs.values():
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    return {key: job.rate() for key, job in jobs.items()}
 
 
 # ------------------------------------------------------------------------------------------------ estimate
@@ -190,35 +200,47 @@ def plans(cfg, r: dict[str, float]) -> dict[str, dict[str, float]]:
     iters = int(next(o for o in pre if o.startswith("iterations=")).split("=")[1])
     coarse = int(next(o for o in pre if o.startswith("coarse_steps=")).split("=")[1])
     fine, shared = iters - coarse, cfg.shared_pretrain_steps
-    joint = 10000
+    from training.pipeline import VARIANTS, train_inputs
+
+    joint, base = (train_inputs(cfg, VARIANTS[v])["iterations"] for v in ("ghnerf", "baseline"))
     collect_scenes = cfg.train + cfg.prior_extra_train + cfg.val
     members, steps = cfg.prior_members, cfg.prior_steps
     alone = {
         "pretraining, every core": coarse * r["pre64_2"] + fine * r["pre128_2"],
-        "joint run beside the baseline": joint * max(r["ghnerf_1_b"], r["baseline_1_g"]),
+        "joint run beside the baseline": max(joint * r["ghnerf_1_b"], base * r["baseline_1_g"]),
         "prior's extra scenes, every core": cfg.prior_extra_train * r["extras_2"],
         "prior's collection, every core": collect_scenes * r["collect_2"],
         "prior's networks side by side": steps * r["prior_1_1"] * -(-members // 2),
     }
-    lane_a = min(shared, coarse) * r["pre64_1_b"] + max(0, shared - coarse) * r["pre128_1_e"]
-    lane_b = joint * r["baseline_1_p"] + cfg.prior_extra_train * r["extras_1_p"]
-    early = collect_scenes * r["collect_1_g"] + members * steps * r["prior_1_g"]
+    lane_a = min(shared, coarse) * r["pre64_1_b"] + max(0, shared - coarse) * r["pre128_1_b"]
+    # the baseline's steps beside the 64x64 ones at that pair's rate, the rest beside the 128x128 ones
+    beside64 = min(base, min(shared, coarse) * r["pre64_1_b"] / r["baseline_1_p"])
+    lane_b = beside64 * r["baseline_1_p"] + (base - beside64) * r["baseline_1_p2"]
+    collecting = collect_scenes * r["collect_1_g"]
+    early = collecting + members * steps * r["prior_1_g"]
+    # the joint run goes at its rate beside the collection while that lasts, then beside the networks
+    joint_lane = collecting + max(0.0, joint - collecting / r["ghnerf_1_c"]) * r["ghnerf_1_q"]
     shared_plan = {
-        "phase 1: pretraining beside the baseline and extra scenes": max(lane_a, lane_b),
+        "phase 1: pretraining beside the baseline": max(lane_a, lane_b),
+        "prior's extra scenes, every core": cfg.prior_extra_train * r["extras_2"],
         "phase 2: the rest of the pretraining, every core": (iters - max(shared, coarse)) * r["pre128_2"]
         + max(0, coarse - shared) * r["pre64_2"],
-        "phase 3: joint run beside the early prior": max(joint * r["ghnerf_1_q"], early),
+        "phase 3: joint run beside the early prior": max(joint_lane, early),
     }
     return {"alone first": alone, "shared": shared_plan,
             "lanes": {"phase 1 pretraining lane": lane_a, "phase 1 baseline lane": lane_b,
-                      "phase 3 joint run lane": joint * r["ghnerf_1_q"], "phase 3 early prior lane": early}}
+                      "phase 3 joint run lane": joint_lane, "phase 3 early prior lane": early}}
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", default="data/edge128", help="the make model dataset (its train split)")
-    ap.add_argument("--model-dir", default=str(ROOT / "models" / "ghnerf"), help="a model folder for the collection")
+    ap.add_argument("--model-dir", default=str(ROOT / "models" / "ghnerf"), type=lambda p: str(Path(p).resolve()),
+                    help="a model folder for the collection")
     ap.add_argument("--seconds", type=float, default=60.0, help="length of each measurement")
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="times every measurement runs (every other round in reverse order); the rates are the "
+                         "medians (a shared host's speed drifts by a fifth over minutes)")
     ap.add_argument("--json", help="also write the rates and estimates here")
     ap.add_argument("--worker", choices=("prior", "collect"), help=argparse.SUPPRESS)
     ap.add_argument("--threads", type=int, default=1, help=argparse.SUPPRESS)
@@ -232,7 +254,9 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(worker_collect(args.threads, args.scenes, args.model_dir, args.data)))
         return 0
     out = ready_output_arg(ap, args.json, "--json") if args.json else None
-    data = Path(args.data)
+    if args.rounds < 1:
+        ap.error(f"--rounds: must be at least 1, got {args.rounds}")
+    data = Path(args.data).resolve()  # (the jobs run in the repository)
     if not (data / "dataset.json").is_file():
         ap.error(f"--data {data}: no dataset.json (make it with `python -m training.pipeline --until data`)")
     if (os.cpu_count() or 1) < 2:
@@ -242,30 +266,44 @@ def main(argv: list[str] | None = None) -> int:
     prior_steps, collect_scenes, extra_scenes = int(s / 0.03), int(s / 0.02), int(s / 0.05)
     with tempfile.TemporaryDirectory(prefix="time_lanes_") as tmp:
         j = Jobs(data, Path(args.model_dir), Path(tmp), s)
-        steps = [
-            ({"pre64_2": j.pretrain("64", 2)}),
-            ({"pre128_2": j.pretrain("128", 2)}),
-            ({"ghnerf_1_b": j.joint("ghnerf", 1), "baseline_1_g": j.joint("baseline", 1)}),
-            ({"extras_2": j.extras(2, 2 * extra_scenes)}),
-            ({"collect_2": j.collect(2, 2 * collect_scenes)}),
-            ({"prior_1_1": j.prior(1, prior_steps), "prior_1_1b": j.prior(1, prior_steps)}),
-            ({"pre64_1_b": j.pretrain("64", 1), "baseline_1_p": j.joint("baseline", 1)}),
-            ({"pre128_1_e": j.pretrain("128", 1), "extras_1_p": j.extras(1, extra_scenes)}),
-            ({"ghnerf_1_q": j.joint("ghnerf", 1), "prior_1_g": j.prior(1, int(1.5 * prior_steps))}),
-            ({"ghnerf_1_c": j.joint("ghnerf", 1), "collect_1_g": j.collect(1, collect_scenes)}),
-        ]
-        rates: dict[str, float] = {}
+        def measurements() -> list[dict[str, Job]]:  # new folders each round
+            return [
+                {"pre64_2": j.pretrain("64", 2)},
+                {"pre128_2": j.pretrain("128", 2)},
+                {"ghnerf_1_b": j.joint("ghnerf", 1), "baseline_1_g": j.joint("baseline", 1)},
+                {"extras_2": j.extras(2, 2 * extra_scenes)},
+                {"collect_2": j.collect(2, 2 * collect_scenes)},
+                {"prior_1_1": j.prior(1, prior_steps), "prior_1_1b": j.prior(1, prior_steps)},
+                {"pre64_1_b": j.pretrain("64", 1), "baseline_1_p": j.joint("baseline", 1)},
+                {"pre128_1_b": j.pretrain("128", 1), "baseline_1_p2": j.joint("baseline", 1)},
+                {"ghnerf_1_q": j.joint("ghnerf", 1), "prior_1_g": j.prior(1, int(1.5 * prior_steps))},
+                {"ghnerf_1_c": j.joint("ghnerf", 1), "collect_1_g": j.collect(1, collect_scenes)},
+            ]
+
+        samples: dict[str, list[float]] = {}
         names: dict[str, str] = {}
-        for measurement in steps:
-            got = measure(list(measurement.values()))
-            for key, job in measurement.items():
-                rates[key], names[key] = got[job.name], job.name + (
-                    f" beside {', '.join(o.name for o in measurement.values() if o is not job)}"
-                    if len(measurement) > 1 else ", alone")
-            print("; ".join(f"{names[k]}: {rates[k]:.4f}" for k in measurement), flush=True)
+        savings = []
+        for round_ in range(args.rounds):
+            # every other round in reverse order, so a host that speeds up or slows down over the run weighs
+            # on both plans' jobs alike
+            order = measurements() if round_ % 2 == 0 else measurements()[::-1]
+            this: dict[str, float] = {}
+            for measurement in order:
+                got = measure(measurement, limit_s=5 * s + 300)
+                for key, job in measurement.items():
+                    this[key], names[key] = got[key], job.name + (
+                        f" beside {', '.join(o.name for o in measurement.values() if o is not job)}"
+                        if len(measurement) > 1 else ", alone")
+                    samples.setdefault(key, []).append(got[key])
+                print(f"round {round_ + 1}: " + "; ".join(f"{names[k]}: {this[k]:.4f}" for k in measurement),
+                      flush=True)
+            e = plans(j.cfg, this)
+            savings.append((sum(e["alone first"].values()) - sum(e["shared"].values())) / 60)
+            print(f"round {round_ + 1}: shared saves {savings[-1]:.1f} min", flush=True)
+        rates = {k: float(np.median(v)) for k, v in samples.items()}
         cfg = j.cfg
     est = plans(cfg, rates)
-    print("\n| job | s per step, scene or network step |\n|---|---|")
+    print(f"\n| job | s per step, scene or network step (median of {args.rounds} rounds) |\n|---|---|")
     for k, v in rates.items():
         print(f"| {names[k]} | {v:.4f} |")
     for plan in ("alone first", "shared"):
@@ -275,10 +313,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"- {phase}: {sec / 60:.1f} min")
     print("\nlanes of the shared plan: " + "; ".join(f"{k} {v / 60:.1f} min" for k, v in est["lanes"].items()))
     a, b = sum(est["alone first"].values()), sum(est["shared"].values())
-    print(f"\nshared saves {(a - b) / 60:.1f} min ({1 - b / a:.0%} of those stages)")
+    print(f"\nshared saves {(a - b) / 60:.1f} min ({1 - b / a:.0%} of those stages) at the median rates; by round "
+          + ", ".join(f"{x:.1f}" for x in savings) + " min")
     if out:
-        out.write_text(json.dumps({"rates": rates, "jobs": names, "estimates_s": est,
-                                   "seconds": args.seconds}, indent=1) + "\n")
+        out.write_text(json.dumps({"rates": rates, "samples": samples, "jobs": names, "estimates_s": est,
+                                   "savings_by_round_min": savings, "seconds": args.seconds}, indent=1) + "\n")
     return 0
 
 

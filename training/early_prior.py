@@ -11,12 +11,14 @@ thread while the joint run takes the other (``training.pipeline.side_by_side_pla
 - ``train_config``: the joint run's train config (as its ``config.json`` will hold it: ``human_init`` set);
 - ``data``, ``calib_scenes``: the quantize stage's calibration scenes (the same scenes, so the same int8 graph);
 - ``prior_argv``: ``training.skeleton_prior``'s arguments (its ``--model-dir`` is this folder);
-- ``request``: what the pipeline's prior stage will compare, less the keypoint graphs' hashes.
+- ``request``: what the pipeline's prior stage will compare, less the keypoint graphs' hashes;
+- ``threads``: the lane's threads (the export's, and ``prior_argv``'s ``--threads``).
 
 This exports and quantizes the keypoint graph into the job's folder, trains the prior there, and last writes
-``request.json`` (the request with those hashes). The pipeline's prior stage takes the prior when the exported
-model's keypoint graphs have the same hashes and the request is unchanged (``training.pipeline.adopt_early_prior``);
-otherwise it trains its own, so a mismatch costs time, never a wrong prior.
+``request.json`` (the request with those hashes, and the ``human.pt`` it came from). The pipeline's prior stage
+takes the prior when the exported model's keypoint graphs have the same hashes and the request is unchanged
+(``training.pipeline.adopt_early_prior``); otherwise it trains its own, so a mismatch costs time, never a wrong
+prior.
 """
 from __future__ import annotations
 
@@ -64,10 +66,14 @@ def main(argv: list[str] | None = None) -> int:
 
     from training.pipeline import _digest
 
+    import torch
+
     job_path = Path(args.job)
     job = json.loads(job_path.read_text())
     folder = job_path.parent
     prior = Path(job["prior_argv"][job["prior_argv"].index("--out") + 1])
+    # the lane's share of the cores (onnxruntime's calibration sessions take their own for a few seconds)
+    torch.set_num_threads(job["threads"])
     graphs = export_keypoint_graph(job["train_config"], job["data"], job["calib_scenes"], folder)
     request = {**job["request"], "keypoints": {name: sha256(p) for name, p in graphs.items()}}
     try:  # a pipeline run again after a stop: the prior may be done already
@@ -81,7 +87,9 @@ def main(argv: list[str] | None = None) -> int:
     if sp.main(job["prior_argv"]) != 0:
         return 1
     (folder / REQUEST_FILE).write_text(json.dumps({"request": request, "prior": str(prior),
-                                                   "prior_sha256": sha256(prior)}, indent=1) + "\n")
+                                                   "prior_sha256": sha256(prior),
+                                                   "human_sha256": sha256(job["train_config"]["human_init"])},
+                                                  indent=1) + "\n")
     print(f"early prior: {prior} (keypoint graphs {', '.join(graphs)})", file=sys.stderr)
     return 0
 

@@ -91,10 +91,10 @@ class Recipe:
 
 #: ``--recipe``. ``cpu`` is sized for two cores (under two hours only on the fastest 2-core host measured, about
 #: 2 h 44 min to 3 h on the others: docs/training.md, "`make model` on an AMX Xeon"; since session 40 its lanes
-#: share the cores, about 15 % sooner by estimate: "Lanes that share the cores"): since session 20 the encoder's
-#: trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 24 for 44000 steps, the first
-#: 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128 on the
-#: EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with a one-network prior
+#: share the cores, about 2 h 23 min on the AMX Xeon by estimate: "Lanes that share the cores"): since session 20
+#: the encoder's trunk at 128x128, pretrained in bfloat16 where the CPU has it; since session 24 for 44000 steps,
+#: the first 17600 with the trunk's input at 64x64 (progressive resizing: about the time of 36000 steps at 128x128
+#: on the EPYC by estimate, 3-14 % more on the Intel Xeon over two runs): 39.5 mm held out with a one-network prior
 #: (39.7 with a second pretraining seed), against 41.8 for those 36000 steps on the same host, 43.9 for 20000
 #: steps and 58.9 for the 64x64 trunk's 24000 float32 steps (docs/training.md, "Progressive resizing in the
 #: two-core pretraining", "The same-host baseline" and "A second pretraining seed"); since session 27 a prior of
@@ -106,8 +106,8 @@ RECIPES = {
     "cpu": Recipe("two CPU cores, about 1 h 56 min from nothing on a fast AVX-512 host (by its stages' measured "
                   "times), about 2 h 44 min on session 39's AMX Xeon, about 2 h 45 min on session 35's EPYC and about "
                   "3 h on session 38's Intel Xeon (each timed into its first stages; docs/training.md), before "
-                  "session 40's lanes (the baseline beside the pretraining's first 25000 steps, the prior beside "
-                  "the joint run: about 2 h 20 min on the AMX Xeon by estimate, benchmarks/time_lanes.py): encoder "
+                  "session 40's lanes (the baseline beside the pretraining's 64x64 steps, the prior beside the "
+                  "joint run and its two networks side by side; benchmarks/time_lanes.py): encoder "
                   "trunk at 128x128, 44000 pretraining "
                   "steps of 2 scenes, "
                   "the first 17600 with the trunk's input at 64x64 (progressive resizing), the rate halved "
@@ -120,7 +120,7 @@ RECIPES = {
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=44000", "lr_decay_every=8800", "coarse_steps=17600",
                                       'precision="auto"'),
-                  prior_steps=30000, prior_extra_train=20000, prior_members=2, shared_pretrain_steps=25000),
+                  prior_steps=30000, prior_extra_train=20000, prior_members=2, shared_pretrain_steps=17600),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
                   "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
                   "the export runs)",
@@ -166,8 +166,8 @@ class PipelineConfig:
     """Scenes of a second training set the prior also learns from (``<data>_prior_extra``: dataset seed 1, no
     novel views; about 6 min per 20000 scenes on two cores); 0: the model's training split only."""
     prior_members: int = 1
-    """Networks averaged in the skeleton prior (``training.skeleton_prior --members``; each one takes the
-    training time again)."""
+    """Networks averaged in the skeleton prior (``training.skeleton_prior --members``; side by side as far as
+    ``threads`` goes, each one after that takes the training time again)."""
     quick: bool = False
     accept_stopped: bool = False
     parity_check: bool = True
@@ -185,8 +185,10 @@ class PipelineConfig:
     run."""
     shared_pretrain_steps: int = 0
     """On CPU, when the baseline trains too: the pretraining's first this many steps run at half the cores beside
-    the baseline's joint run and the prior's extra scenes, the rest with every core (:func:`side_by_side_plan`;
-    0: the pretraining alone first). Where the run is split changes its wall time, not its batches."""
+    the baseline's joint run, the rest with every core, and the prior then trains beside the joint run
+    (:func:`side_by_side_plan`; 0: the pretraining alone first, the prior after the joint run). The ``cpu`` recipe
+    shares its 17600 steps at 64x64, so ``precision`` ``auto`` times the 128x128 trunk after the resume, at every
+    core. The same batches; the thread counts differ, so the rounding does."""
     force: tuple[str, ...] = ()
     train_overrides: list[str] = field(default_factory=list)
     pretrain_overrides: list[str] = field(default_factory=list)
@@ -233,7 +235,7 @@ class PipelineConfig:
     def quick_defaults(cls, out: Path) -> "PipelineConfig":
         return cls(out=out, data=out / "data", runs=out / "runs", train=12, val=4, val_seen_motions=0,
                    eval_limit=2, calib_scenes=2, quick=True, prior_steps=4, prior_scenes=4,
-                   prior_extra_train=4,
+                   prior_extra_train=4, prior_members=2,
                    train_overrides=["iterations=6", "log_every=3", "checkpoint_every=3", "pck_every=3",
                                     "targets_per_iter=2", "heat_rays=64", "patch_size=8", "max_minutes=0"],
                    pretrain_overrides=["iterations=2", "log_every=1", "checkpoint_every=1", "eval_every=0",
@@ -353,11 +355,12 @@ def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
     By default the pretraining comes first with every core (the long pole), then the joint runs side by side
     at ``cores // n`` threads each. Two things in ``make model`` need no pretrained encoder (the baseline's joint
     run, the prior's extra scenes) and one needs only that encoder (the skeleton prior: the joint run keeps it
-    frozen), and a second thread buys little on most of them (docs/training.md, "Lanes"). So with
+    frozen), and a second thread buys little on several of them (docs/training.md, "Lanes"). So with
     ``cfg.shared_pretrain_steps`` (the ``cpu`` recipe), on two cores or more, when the baseline trains too:
 
-    1. the pretraining's first ``shared_pretrain_steps`` (``stop_at``) at half the cores, beside a lane of the
-       baseline's joint run, then the prior's extra scenes;
+    1. the pretraining's first ``shared_pretrain_steps`` (``stop_at``) at half the cores, beside the baseline's
+       joint run (the ``cpu`` recipe shares the 64x64 steps, whose second thread buys the least); then the
+       prior's extra scenes with every core;
     2. the rest of the pretraining with every core (``--resume``: the same batches);
     3. the joint run at half the cores beside the skeleton prior learnt from the pretrained encoder
        (:mod:`training.early_prior`, which the prior stage then takes), when ``data`` (the dataset's stamp) is
@@ -368,8 +371,12 @@ def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
     pre = [v for v in variants if pretrain_block(cfg, v) and not _pretrain_finished(cfg, v)]
     free = [v for v in variants if not pretrain_block(cfg, v)]
     wants_prior = cfg.until is None and any(v in PRIOR_VARIANTS for v in variants)
-    extras = [LaneStep([sys.executable, "-m", "training.data.generate", *prior_extra_args(cfg, half)],
-                       cfg.runs / "prior_extra.log", run_folder=False)] if wants_prior and cfg.prior_extra_train else []
+
+    def extras(workers: int) -> list[LaneStep]:
+        if not (wants_prior and cfg.prior_extra_train):
+            return []
+        return [LaneStep([sys.executable, "-m", "training.data.generate", *prior_extra_args(cfg, workers)],
+                         cfg.runs / "prior_extra.log", run_folder=False)]
 
     def joint(v: str, threads: int) -> LaneStep:
         run = cfg.runs / VARIANTS[v]
@@ -379,16 +386,26 @@ def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
         return LaneStep(_pretrain_cmd(cfg, v, extra), pretrain_dir(cfg, v) / "train.log")
 
     phases: list[list[list[LaneStep]]] = []
-    shared = cfg.shared_pretrain_steps and all(_pretrain_progress(cfg, v) < cfg.shared_pretrain_steps for v in pre)
-    if pre and free and cores >= 2 and shared:  # (a run resumed past the shared steps: the default plan)
-        threads = max(1, cores // (len(pre) + 1))
-        phases.append([[pretrain(v, [f"threads={threads}", f"stop_at={cfg.shared_pretrain_steps}"])] for v in pre]
-                      + [[*(joint(v, threads) for v in free), *extras]])
-        variants, extras = [v for v in variants if v not in free], []
+    steps = cfg.shared_pretrain_steps
+    if pre and free and cores >= 2 and steps and all(steps < pretrain_inputs(cfg, v)["iterations"] for v in pre):
+        if all(_pretrain_progress(cfg, v) < steps for v in pre):
+            threads = max(1, cores // (len(pre) + 1))
+            phases.append([[pretrain(v, [f"threads={threads}", f"stop_at={steps}"])] for v in pre]
+                          + [[joint(v, threads) for v in free]])
+        else:  # resumed with the pretraining's shared part done: what was beside it finishes with every core
+            phases.append([[joint(v, cores) for v in free]])
+        # the extra scenes with every core: the generator at one worker beside the pretraining makes a scene in
+        # 0.055 s, against 0.018 s at two alone (benchmarks/time_lanes.py), too dear a lane
+        if extras(cores):
+            phases.append([extras(cores)])
+        variants, later_extras = [v for v in variants if v not in free], []
+    else:
+        later_extras = extras(half)
     phases += [[[pretrain(v, [f"threads={cores}"])]] for v in pre]
-    early = _early_prior_step(cfg, variants, half, data) if wants_prior and cores >= 2 else None
+    # the early prior at the threads the prior stage would give each network (the same weights): see _early_prior_step
+    early = _early_prior_step(cfg, variants, min(half, cfg.threads), data) if wants_prior and cores >= 2 else None
     if early is not None:
-        phases.append([[joint(variants[0], half)], [*extras, early]])
+        phases.append([[joint(variants[0], half)], [*later_extras, early]])
     elif variants:
         phases.append([[joint(v, max(1, cores // len(variants)))] for v in variants])
     return phases
@@ -406,9 +423,27 @@ def _pretrain_progress(cfg: PipelineConfig, variant: str) -> int:
     return 0
 
 
+def _early_prior_current(folder: Path, request: dict, human: Path) -> bool:
+    """The early prior in ``folder`` learnt from this ``human.pt`` for this request (keypoint graphs aside, which
+    follow from the encoder) and is intact."""
+    from training.early_prior import REQUEST_FILE
+    from training.model_card import sha256
+
+    try:
+        record = json.loads((folder / REQUEST_FILE).read_text())
+        return (record["human_sha256"] == sha256(human) and sha256(record["prior"]) == record["prior_sha256"]
+                and _digest({**record["request"], "keypoints": {}}) == _digest(request))
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
 def _early_prior_step(cfg: PipelineConfig, variants: list[str], threads: int, data: Any) -> LaneStep | None:
     """The :mod:`training.early_prior` step for the one variant left to train, with its job file written; None
-    when it does not apply (no dataset stamp, other variants, no pretraining, an encoder that trains on)."""
+    when it does not apply (no dataset stamp, other variants, no pretraining, an encoder that trains on) or its
+    prior is already done for the finished pretraining.
+
+    ``threads``: the plan gives it ``min(half the cores, cfg.threads)``, so each of its networks trains at the
+    thread count the prior stage would give it (``skeleton_prior.member_lanes``), as the adoption assumes."""
     from training.early_prior import JOB_FILE
     from training.skeleton_prior import FILE_NAME
 
@@ -418,11 +453,18 @@ def _early_prior_step(cfg: PipelineConfig, variants: list[str], threads: int, da
     tc = train_inputs(cfg, VARIANTS[v])
     if not (pretrain_block(cfg, v) and tc.get("freeze_human") and tc.get("human_init")):
         return None
+    from training.skeleton_prior import member_lanes
+
+    if member_lanes(cfg.prior_members, threads)[1] != member_lanes(cfg.prior_members, cfg.threads)[1]:
+        return None  # (one network at two threads, say: the lane cannot train what the stage would)
     folder = early_prior_dir(cfg, v)
+    request = early_prior_request(cfg, {}, data, threads)
+    if _pretrain_finished(cfg, v) and _early_prior_current(folder, request, Path(tc["human_init"])):
+        log.info("early prior: %s is up to date for this encoder; the joint run gets every core", folder)
+        return None
     folder.mkdir(parents=True, exist_ok=True)
-    job = {"train_config": tc, "data": str(cfg.data), "calib_scenes": cfg.calib_scenes,
-           "prior_argv": prior_argv(cfg, folder, folder / FILE_NAME, threads),
-           "request": early_prior_request(cfg, {}, data)}
+    job = {"train_config": tc, "data": str(cfg.data), "calib_scenes": cfg.calib_scenes, "threads": threads,
+           "prior_argv": prior_argv(cfg, folder, folder / FILE_NAME, threads), "request": request}
     (folder / JOB_FILE).write_text(json.dumps(job, indent=1, default=str) + "\n")
     return LaneStep([sys.executable, "-m", "training.early_prior", str(folder / JOB_FILE)],
                     folder / "early_prior.log", run_folder=False, optional=True)
@@ -448,6 +490,8 @@ def train_side_by_side(cfg: PipelineConfig, variants: list[str], data: Any = Non
             with open(step.log, "a") as fh:
                 if subprocess.run(step.cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT).returncode != 0:
                     if not step.optional:
+                        log.error("%s failed (see %s); the other lanes of this phase finish first, their work kept "
+                                  "for the next run", step.cmd[2], step.log)
                         return step.log
                     log.warning("%s failed (see %s); its stage will do that work later", step.cmd[2], step.log)
         return None
@@ -868,10 +912,14 @@ def early_prior_dir(cfg: PipelineConfig, variant: str) -> Path:
     return cfg.runs / f"{VARIANTS[variant]}_prior"
 
 
-def early_prior_request(cfg: PipelineConfig, keypoints: dict[str, str], data: Any) -> dict:
+def early_prior_request(cfg: PipelineConfig, keypoints: dict[str, str], data: Any, threads: int) -> dict:
     """What an early prior must have been trained for to stand for the prior stage's: the keypoint graphs' hashes
-    by file name, the dataset (its stamp and folder) and the prior's recipe."""
-    return {**prior_stage_inputs(cfg, {}, data), "keypoints": keypoints, "data_folder": str(cfg.data)}
+    by file name, the dataset (its stamp and folder), the prior's recipe and the threads each network trains at
+    when trained with ``threads`` in all (the stage's ``cfg.threads``; arithmetic may round by thread count)."""
+    from training.skeleton_prior import member_lanes
+
+    return {**prior_stage_inputs(cfg, {}, data), "keypoints": keypoints, "data_folder": str(cfg.data),
+            "threads_per_network": member_lanes(cfg.prior_members, threads)[1]}
 
 
 def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
@@ -888,12 +936,12 @@ def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
         record = json.loads((staged / REQUEST_FILE).read_text())
         prior = Path(record["prior"])
         graphs = keypoint_graphs({str(p): None for p in folder.glob("*.onnx")})
-        wanted = early_prior_request(cfg, {Path(p).name: sha256(p) for p in graphs}, data)
+        wanted = early_prior_request(cfg, {Path(p).name: sha256(p) for p in graphs}, data, cfg.threads)
         if not graphs or _digest(record["request"]) != _digest(wanted) or sha256(prior) != record["prior_sha256"]:
             log.info("prior: the early prior in %s does not match %s; training it here", staged, folder)
             return False
         report = json.loads(prior.with_suffix(".json").read_text())
-    except (OSError, ValueError, KeyError) as e:
+    except (OSError, ValueError, KeyError, TypeError) as e:
         if (staged / REQUEST_FILE).exists():
             log.info("prior: the early prior in %s is unreadable (%s); training it here", staged, e)
         return False
@@ -906,13 +954,14 @@ def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
     return True
 
 
-def stage_prior(cfg: PipelineConfig, variant: str, data: Any = None) -> tuple[list[Path], dict]:
+def stage_prior(cfg: PipelineConfig, variant: str, data: Any = None, adopt: bool = True) -> tuple[list[Path], dict]:
     """The skeleton prior of the exported model (``training.skeleton_prior``), beside its graphs: the early
-    prior's when it learnt from the same graphs (:func:`adopt_early_prior`), else trained here."""
+    prior's when it learnt from the same graphs (:func:`adopt_early_prior`; not when ``adopt`` is False, as
+    under ``--force prior``), else trained here."""
     from training import skeleton_prior as sp
 
     out = cfg.out / variant / sp.FILE_NAME
-    if adopt_early_prior(cfg, variant, data):
+    if adopt and adopt_early_prior(cfg, variant, data):
         return [out, out.with_suffix(".json")], {"early": True}
     if cfg.prior_extra_train:
         prior_extra_data(cfg)
@@ -1109,7 +1158,7 @@ def run(cfg: PipelineConfig) -> dict | None:
                    "runtimes": EVAL_RUNTIMES[variant]}
         if variant in PRIOR_VARIANTS:  # before the eval, which scores it: a new prior re-evaluates
             p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key),
-                       lambda v=variant: stage_prior(cfg, v, data_key))
+                       lambda v=variant: stage_prior(cfg, v, data_key, adopt=f"prior_{v}" not in st.force))
             eval_in["prior"] = {k: v for k, v in p["outputs"].items() if k.endswith(".onnx")}  # not its report
         st.run(f"eval_{variant}", eval_in, lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
     if cfg.until:
@@ -1161,10 +1210,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="train the variants one after the other with every core (default on CPU: side by side)")
     ap.add_argument("--shared-pretrain-steps", type=int, default=None, metavar="N",
                     help="on CPU, the pretraining's first N steps run at half the cores beside the baseline's joint "
-                         "run and the prior's extra scenes, and the skeleton prior then trains beside the joint run "
-                         "(default: the recipe's, 25000 for cpu; 0: the pretraining alone first, with every core, "
-                         "and the prior after the joint run). The same batches; the thread counts, hence the rounding, "
-                         "change with it")
+                         "run, and the skeleton prior then trains beside the joint run (default: the recipe's, "
+                         "17600 for cpu; 0: the pretraining alone first, with every core, and the prior after the "
+                         "joint run). The same batches; the thread counts, hence the rounding, change with it")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="train config override")
     ap.add_argument("--pretrain-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")

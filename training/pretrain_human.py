@@ -94,9 +94,10 @@ class PretrainConfig(Config):
     """Stop (with a checkpoint and ``human.pt``) after this wall time (0: no limit)."""
     stop_at: int = 0
     """Stop (with a checkpoint and ``human.pt``) once this step is reached (0: run to ``iterations``); a run
-    resumed at or past it stops at once. How the run is split, not what it learns: the pipeline trains the
-    first steps at one thread beside the baseline's joint run, then resumes at every core (``--resume`` trains
-    on the same batches, so a split run learns what a straight one does at the same thread counts)."""
+    resumed at or past it stops at once. The pipeline trains the first steps at one thread beside the baseline's
+    joint run, then resumes at every core (``--resume`` trains on the same batches, so a split run learns what a
+    straight one does at the same thread counts). With ``precision`` ``auto``, a scale that starts before the
+    stop is timed there, at that part's thread count, and its pick holds after the resume."""
     precision: Literal["fp32", "bf16", "auto"] = "fp32"
     """Arithmetic of the encoder's forward pass: ``fp32``; ``bf16`` (``torch.autocast``: convolutions in bfloat16,
     the weights, optimiser and loss in float32); ``auto``: on a CUDA GPU ``bf16`` where it has bfloat16; on a

@@ -206,22 +206,29 @@ def _hide_in_one_view(f, prob: float, gen):
 
 
 def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, config: PriorTrainConfig,
-          progress: bool = True, threads: int = 1):
+          progress: bool = True, threads: int | None = None):
     """The trained network (torch, eval mode): one, or the ensemble of ``config.members``.
 
-    With several members and ``threads`` >= 2, the members train side by side in processes of
-    ``threads // processes`` threads each (:func:`member_lanes`): this small network gains little from a
-    second thread (18.8 against 29.3 ms a step on two cores, docs/training.md), so two members at one thread
-    each take about half the time of one after the other at two. The thread counts follow from ``members``
-    and ``threads`` alone, so a rerun on the same machine trains the same weights.
+    ``threads`` (None: torch's current setting, one member after the other): with several members and
+    ``threads`` >= 2 the members train side by side, in processes of ``threads // processes`` threads each
+    (:func:`member_lanes`). This small network gains little from a second thread (18.8 against 29.3 ms a step
+    on two cores), so the recipe's two networks at one thread each took 900 s against 1422 s one after the other
+    at two (docs/training.md, "Lanes that share the cores"). The thread counts follow from ``members`` and
+    ``threads`` alone, so a rerun on the same machine trains the same weights.
     """
-    if config.members == 1:
-        return _train_one(inputs.joint_features, inputs.context, truth, truth_valid, config, config.seed, progress)
+    import torch
+
     seeds = [config.seed + k for k in range(config.members)]
-    processes, each = member_lanes(config.members, threads)
+    processes, each = member_lanes(config.members, threads) if threads else (1, torch.get_num_threads())
     if processes == 1:
-        return make_ensemble([_train_one(inputs.joint_features, inputs.context, truth, truth_valid, config, s,
-                                         progress) for s in seeds])
+        before = torch.get_num_threads()
+        torch.set_num_threads(each)
+        try:
+            nets = [_train_one(inputs.joint_features, inputs.context, truth, truth_valid, config, s, progress)
+                    for s in seeds]
+        finally:
+            torch.set_num_threads(before)
+        return nets[0] if config.members == 1 else make_ensemble(nets)
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -229,8 +236,6 @@ def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, confi
     # spawn, not fork: a forked child of a process whose OpenMP pool has run can hang in its first parallel region
     with ProcessPoolExecutor(processes, mp.get_context("spawn")) as pool:
         states = list(pool.map(_train_member, [(arrays, config, s, progress, each) for s in seeds]))
-    import torch
-
     nets = []
     for state in states:
         net = make_network(config.hidden, inputs.joint_features.shape[-1])

@@ -222,11 +222,8 @@ def test_members_train_side_by_side_and_match_members_trained_alone(tiny_prior):
     config = PriorTrainConfig(steps=3, hidden=16, batch=8, members=2)
     side_by_side = train(inp, truth, valid, config, progress=False, threads=2)
     threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        alone = train(inp, truth, valid, config, progress=False, threads=1)
-    finally:
-        torch.set_num_threads(threads)
+    alone = train(inp, truth, valid, config, progress=False, threads=1)  # one after the other, at one thread
+    assert torch.get_num_threads() == threads  # (restored)
     f, c = torch.from_numpy(inp.joint_features), torch.from_numpy(inp.context)
     with torch.no_grad():
         for a, b in zip(side_by_side.members, alone.members):
