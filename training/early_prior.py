@@ -40,7 +40,7 @@ def export_keypoint_graph(train_config: dict, data: str | Path, calib_scenes: in
     from training.export.export import example_inputs, export_graph
     from training.export.quantize import calibration_feeds, quantize_all
     from training.model import GHNeRF
-    from training.pipeline import calibration_items, _scene_inputs
+    from training.pipeline import _scene_inputs, calibration_items
     from training.pretrain_human import load_human
     from training.train import build_config
 
@@ -61,12 +61,11 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.early_prior", description=__doc__.split("\n\n")[0])
     ap.add_argument("job", help=f"the pipeline's {JOB_FILE}")
     args = ap.parse_args(argv)
+    import torch
+
     from training import skeleton_prior as sp
     from training.model_card import sha256
-
     from training.pipeline import _digest
-
-    import torch
 
     job_path = Path(args.job)
     job = json.loads(job_path.read_text())
@@ -81,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         if _digest(record["request"]) == _digest(request) and sha256(prior) == record["prior_sha256"]:
             print(f"early prior: {prior} is up to date", file=sys.stderr)
             return 0
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError, KeyError, TypeError):
         pass
     (folder / REQUEST_FILE).unlink(missing_ok=True)  # written last: a stopped job leaves none
     if sp.main(job["prior_argv"]) != 0:
