@@ -43,6 +43,8 @@ from ghnerf_runtime.cli.output_path import ready_output_arg  # noqa: E402
 
 SKIP_RECORDS = 2
 """Log records left out of a rate (the warm-up and, for the pretraining, its precision probe)."""
+WARMUP_STEPS = 50
+"""Prior-network steps before the clock starts."""
 
 
 # ------------------------------------------------------------------------------------------------ workers
@@ -59,14 +61,11 @@ def worker_prior(threads: int, steps: int, scenes: int) -> dict:
     features = rng.normal(size=(scenes, NUM_JOINTS, JOINT_FEATURES)).astype(np.float32)
     context = rng.normal(size=(scenes, CONTEXT_FEATURES)).astype(np.float32)
     truth = rng.normal(size=(scenes, NUM_JOINTS, 3)).astype(np.float32)
-    config = PriorTrainConfig(steps=WARMUP_STEPS)
-    _train_one(features, context, truth, np.ones((scenes, NUM_JOINTS), bool), config, 0, False)
+    valid = np.ones((scenes, NUM_JOINTS), bool)
+    _train_one(features, context, truth, valid, PriorTrainConfig(steps=WARMUP_STEPS), 0, False)
     t0 = time.monotonic()
-    _train_one(features, context, truth, np.ones((scenes, NUM_JOINTS), bool), PriorTrainConfig(steps=steps), 0, False)
+    _train_one(features, context, truth, valid, PriorTrainConfig(steps=steps), 0, False)
     return {"s_per_step": (time.monotonic() - t0) / steps}
-
-
-WARMUP_STEPS = 50
 
 
 def worker_collect(threads: int, scenes: int, model_dir: str, data: str) -> dict:
@@ -196,12 +195,11 @@ def measure(jobs: dict[str, Job], limit_s: float) -> dict[str, float]:
 # ------------------------------------------------------------------------------------------------ estimate
 def plans(cfg, r: dict[str, float]) -> dict[str, dict[str, float]]:
     """Seconds of each phase of the two plans from the measured rates ``r`` (keys as :func:`main` names them)."""
-    pre = cfg.pretrain_overrides  # the recipe's counts
-    iters = int(next(o for o in pre if o.startswith("iterations=")).split("=")[1])
-    coarse = int(next(o for o in pre if o.startswith("coarse_steps=")).split("=")[1])
-    fine, shared = iters - coarse, cfg.shared_pretrain_steps
-    from training.pipeline import VARIANTS, train_inputs
+    from training.pipeline import VARIANTS, pretrain_inputs, train_inputs
 
+    pc = pretrain_inputs(cfg, "ghnerf")  # the recipe's counts
+    iters, coarse = pc["iterations"], pc["coarse_steps"]
+    fine, shared = iters - coarse, cfg.shared_pretrain_steps
     joint, base = (train_inputs(cfg, VARIANTS[v])["iterations"] for v in ("ghnerf", "baseline"))
     collect_scenes = cfg.train + cfg.prior_extra_train + cfg.val
     members, steps = cfg.prior_members, cfg.prior_steps

@@ -44,7 +44,8 @@ def time_steps(data: str, variant: str, precision: str, steps: int, sets: list[s
     """Wall seconds of each of ``steps`` joint-run steps (``WARMUP`` more first, not returned); ``sets`` are
     ``KEY=VALUE`` train config overrides after the recipe's."""
     root = Path(__file__).resolve().parents[1]
-    raw = apply_overrides(load_config_file(root / CONFIGS[variant]), [*RECIPES["cpu"].train_overrides, f'data="{data}"', *sets])
+    raw = apply_overrides(load_config_file(root / CONFIGS[variant]),
+                          [*RECIPES["cpu"].train_overrides, f'data="{data}"', *sets])
     raw.pop("pretrain_human", None)  # the joint run's encoder comes pretrained; here its weights do not matter
     cfg = build_config(raw)
     mcfg = cfg.model_config()

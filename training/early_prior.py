@@ -65,29 +65,26 @@ def main(argv: list[str] | None = None) -> int:
 
     from training import skeleton_prior as sp
     from training.model_card import sha256
-    from training.pipeline import _digest
+    from training.pipeline import early_prior_current
 
     job_path = Path(args.job)
     job = json.loads(job_path.read_text())
     folder = job_path.parent
     prior = Path(job["prior_argv"][job["prior_argv"].index("--out") + 1])
+    human = Path(job["train_config"]["human_init"])
+    if early_prior_current(folder, job["request"], human):  # a pipeline run again after a stop
+        print(f"early prior: {prior} is up to date", file=sys.stderr)
+        return 0
+    (folder / REQUEST_FILE).unlink(missing_ok=True)  # written last: a stopped job leaves none
     # the lane's share of the cores (onnxruntime's calibration sessions take their own for a few seconds)
     torch.set_num_threads(job["threads"])
     graphs = export_keypoint_graph(job["train_config"], job["data"], job["calib_scenes"], folder)
     request = {**job["request"], "keypoints": {name: sha256(p) for name, p in graphs.items()}}
-    try:  # a pipeline run again after a stop: the prior may be done already
-        record = json.loads((folder / REQUEST_FILE).read_text())
-        if _digest(record["request"]) == _digest(request) and sha256(prior) == record["prior_sha256"]:
-            print(f"early prior: {prior} is up to date", file=sys.stderr)
-            return 0
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
-    (folder / REQUEST_FILE).unlink(missing_ok=True)  # written last: a stopped job leaves none
     if sp.main(job["prior_argv"]) != 0:
         return 1
     (folder / REQUEST_FILE).write_text(json.dumps({"request": request, "prior": str(prior),
                                                    "prior_sha256": sha256(prior),
-                                                   "human_sha256": sha256(job["train_config"]["human_init"])},
+                                                   "human_sha256": sha256(human)},
                                                   indent=1) + "\n")
     print(f"early prior: {prior} (keypoint graphs {', '.join(graphs)})", file=sys.stderr)
     return 0

@@ -395,9 +395,9 @@ def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
         else:  # resumed with the pretraining's shared part done: what was beside it finishes with every core
             phases.append([[joint(v, cores) for v in free]])
         # the extra scenes with every core: the generator at one worker beside the pretraining makes a scene in
-        # 0.055 s, against 0.018 s at two alone (benchmarks/time_lanes.py), too dear a lane
-        if extras(cores):
-            phases.append([extras(cores)])
+        # 0.053 s, against 0.016-0.019 s at two alone (benchmarks/time_lanes.py at 66cf209), too dear a lane
+        if made := extras(cores):
+            phases.append([made])
         variants, later_extras = [v for v in variants if v not in free], []
     else:
         later_extras = extras(half)
@@ -413,8 +413,8 @@ def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
 
 def _pretrain_progress(cfg: PipelineConfig, variant: str) -> int:
     """The last step the pretraining run logged (0 when none): where a resumed run starts, or a little past it."""
-    lines = (pretrain_dir(cfg, variant) / "log.jsonl").read_text().splitlines() \
-        if (pretrain_dir(cfg, variant) / "log.jsonl").is_file() else []
+    log_file = pretrain_dir(cfg, variant) / "log.jsonl"
+    lines = log_file.read_text().splitlines() if log_file.is_file() else []
     for line in reversed(lines):
         try:
             return int(json.loads(line)["step"])
@@ -423,9 +423,10 @@ def _pretrain_progress(cfg: PipelineConfig, variant: str) -> int:
     return 0
 
 
-def _early_prior_current(folder: Path, request: dict, human: Path) -> bool:
+def early_prior_current(folder: Path, request: dict, human: Path) -> bool:
     """The early prior in ``folder`` learnt from this ``human.pt`` for this request (keypoint graphs aside, which
-    follow from the encoder) and is intact."""
+    follow from the encoder: its export is byte for byte the same) and is intact. The pipeline asks before it
+    plans the lane, :mod:`training.early_prior` before it exports."""
     from training.early_prior import REQUEST_FILE
     from training.model_card import sha256
 
@@ -445,7 +446,7 @@ def _early_prior_step(cfg: PipelineConfig, variants: list[str], threads: int, da
     ``threads``: the plan gives it ``min(half the cores, cfg.threads)``, so each of its networks trains at the
     thread count the prior stage would give it (``skeleton_prior.member_lanes``), as the adoption assumes."""
     from training.early_prior import JOB_FILE
-    from training.skeleton_prior import FILE_NAME
+    from training.skeleton_prior import FILE_NAME, member_lanes
 
     if data is None or not cfg.shared_pretrain_steps or len(variants) != 1 or variants[0] not in PRIOR_VARIANTS:
         return None
@@ -453,13 +454,11 @@ def _early_prior_step(cfg: PipelineConfig, variants: list[str], threads: int, da
     tc = train_inputs(cfg, VARIANTS[v])
     if not (pretrain_block(cfg, v) and tc.get("freeze_human") and tc.get("human_init")):
         return None
-    from training.skeleton_prior import member_lanes
-
     if member_lanes(cfg.prior_members, threads)[1] != member_lanes(cfg.prior_members, cfg.threads)[1]:
         return None  # (one network at two threads, say: the lane cannot train what the stage would)
     folder = early_prior_dir(cfg, v)
     request = early_prior_request(cfg, {}, data, threads)
-    if _pretrain_finished(cfg, v) and _early_prior_current(folder, request, Path(tc["human_init"])):
+    if _pretrain_finished(cfg, v) and early_prior_current(folder, request, Path(tc["human_init"])):
         log.info("early prior: %s is up to date for this encoder; the joint run gets every core", folder)
         return None
     folder.mkdir(parents=True, exist_ok=True)

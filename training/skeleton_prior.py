@@ -211,9 +211,9 @@ def train(inputs: PriorInputs, truth: np.ndarray, truth_valid: np.ndarray, confi
 
     ``threads`` (None: torch's current setting, one member after the other): with several members and
     ``threads`` >= 2 the members train side by side, in processes of ``threads // processes`` threads each
-    (:func:`member_lanes`). This small network gains little from a second thread (18.8 against 29.3 ms a step
-    on two cores), so the recipe's two networks at one thread each took 900 s against 1422 s one after the other
-    at two (docs/training.md, "Lanes that share the cores"). The thread counts follow from ``members`` and
+    (:func:`member_lanes`). This small network gains little from a second thread, so the recipe's two networks
+    at one thread each took 900 s against 1422 s one after the other at two (docs/training.md, "Lanes that
+    share the cores"). The thread counts follow from ``members`` and
     ``threads`` alone, so a rerun on the same machine trains the same weights.
     """
     import torch
