@@ -4,10 +4,14 @@ For each image pair where both cameras found the board, the corners both found a
 with the rig and compared with what the board is known to be: the reprojection error (pixels: a
 camera bumped since calibration shows here first), the spacing of neighbouring corners against
 ``square_m`` (the rig's scale: a baseline read in the wrong unit or a misprinted board), and, for
-a view named ``floor``, the corners' height above the floor (the levelling).
+a view named ``floor``, the corners' height above the floor (the levelling). A corner whose two rays
+do not meet in front of both cameras cannot be measured at all: it is counted (``untriangulated``), left
+out of the figures, and fails the check, since a rig that fits triangulates every corner both cameras
+found. :func:`check_failures` turns the report into the reasons a rig does not fit.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -17,7 +21,7 @@ from calibration.detect import MIN_CORNERS, BoardView
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
 
-__all__ = ["check_rig", "FLOOR_VIEW"]
+__all__ = ["check_rig", "check_failures", "CheckLimits", "FLOOR_VIEW"]
 
 FLOOR_VIEW = "floor"
 
@@ -40,9 +44,10 @@ def check_rig(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, Board
               board_thickness_m: float = 0.0) -> dict[str, Any]:
     """The figures above over every pair both of ``rig``'s pair cameras saw (camera -> name -> view)."""
     a, b = (cam.name for cam in rig.pair)
-    per_view: dict[str, dict[str, float]] = {}
+    per_view: dict[str, dict[str, Any]] = {}
     reproj_all, spacing_all = [], []
     floor = None
+    corners_total = untriangulated_total = 0
     for name in sorted(set(views.get(a, {})) & set(views.get(b, {}))):
         va, vb = views[a][name], views[b][name]
         ids = np.intersect1d(va.ids, vb.ids)
@@ -50,19 +55,31 @@ def check_rig(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, Board
             continue
         uv = np.stack([va.corners[np.searchsorted(va.ids, ids)], vb.corners[np.searchsorted(vb.ids, ids)]])
         result = triangulate_dlt(uv, rig.pair)
+        # an invalid corner's point is a fill value (the origin), not a measurement: measuring from it
+        # gave NaN pixels and a zero scale, which no limit caught
+        ok = np.asarray(result.valid, bool)
         points = np.asarray(result.points, float)
-        reproj = np.concatenate([np.linalg.norm(cam.project(points)[0] - uv[k], axis=1)
-                                 for k, cam in enumerate(rig.pair)])
+        reproj = np.full((2, ids.size), np.nan)
+        if ok.any():
+            reproj[:, ok] = [np.linalg.norm(cam.project(points[ok])[0] - uv[k][ok], axis=1)
+                             for k, cam in enumerate(rig.pair)]
+        ok &= np.all(np.isfinite(reproj), axis=0)
+        reproj = reproj[:, ok].reshape(-1)
         pairs = _neighbour_pairs(board, ids)
+        pairs = pairs[ok[pairs].all(axis=1)] if pairs.size else pairs
         spacing = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) / board.square_m \
             if pairs.size else np.zeros(0)
         reproj_all.append(reproj)
         spacing_all.append(spacing)
-        entry = {"corners": int(ids.size), "reprojection_px_rms": round(float(np.sqrt(np.mean(reproj ** 2))), 4),
-                 "scale": round(float(np.median(spacing)), 5) if spacing.size else None}
-        if name == FLOOR_VIEW:
+        corners_total += int(ids.size)
+        untriangulated_total += int(ids.size - ok.sum())
+        entry: dict[str, Any] = {
+            "corners": int(ids.size), "untriangulated": int(ids.size - ok.sum()),
+            "reprojection_px_rms": round(float(np.sqrt(np.mean(reproj ** 2))), 4) if reproj.size else None,
+            "scale": round(float(np.median(spacing)), 5) if spacing.size else None}
+        if name == FLOOR_VIEW and ok.any():
             # rig frame: y down, floor at 0; the board's face sits its thickness above the floor
-            heights = -(points[:, 1]) - board_thickness_m
+            heights = -(points[ok, 1]) - board_thickness_m
             floor = {"height_mm_median": round(1000 * float(np.median(heights)), 2),
                      "height_mm_spread": round(1000 * float(np.ptp(heights)), 2)}
             entry["floor"] = floor
@@ -73,11 +90,47 @@ def check_rig(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, Board
     spacing = np.concatenate(spacing_all)
     report: dict[str, Any] = {
         "pairs": len(per_view),
-        "reprojection_px_rms": round(float(np.sqrt(np.mean(reproj ** 2))), 4),
-        "reprojection_px_p95": round(float(np.percentile(reproj, 95)), 4),
+        "corners": corners_total,
+        "untriangulated": untriangulated_total,
+        "reprojection_px_rms": round(float(np.sqrt(np.mean(reproj ** 2))), 4) if reproj.size else None,
+        "reprojection_px_p95": round(float(np.percentile(reproj, 95)), 4) if reproj.size else None,
         "scale": round(float(np.median(spacing)), 5) if spacing.size else None,
         "per_view": per_view,
     }
     if floor is not None:
         report["floor"] = floor
     return report
+
+
+@dataclass(frozen=True)
+class CheckLimits:
+    """How far a rig may be off and still fit (``ghcal check``'s ``--max-*`` options)."""
+
+    max_px: float = 1.0
+    """reprojection error, pixels rms over every corner"""
+    max_scale_error: float = 0.01
+    """the board's squares measured against ``square_m``: 0.01 is 1 %"""
+    max_floor_mm: float = 25.0
+    """the floor view's median height off the floor: a rig tilted on its mount keeps its pair's pose,
+    so only the floor shows it (1 degree is about 35 mm at 2 m)"""
+
+
+def check_failures(report: Mapping[str, Any], limits: CheckLimits = CheckLimits()) -> list[str]:
+    """Why ``report`` (from :func:`check_rig`, with at least one pair) says the rig does not fit; empty if it fits."""
+    reasons = []
+    if report.get("untriangulated"):
+        views = [n for n, e in report["per_view"].items() if e.get("untriangulated")]
+        reasons.append(f"{report['untriangulated']} of {report['corners']} corners do not triangulate in front of "
+                       f"both cameras (view(s) {', '.join(views)})")
+    rms = report.get("reprojection_px_rms")
+    if rms is None or not rms <= limits.max_px:
+        reasons.append(f"reprojection {rms} px rms, over {limits.max_px} px" if rms is not None
+                       else "no corner could be reprojected")
+    scale = report.get("scale")
+    if scale is not None and not abs(scale - 1.0) <= limits.max_scale_error:
+        reasons.append(f"the board measures {scale:.4f} of its size, off by more than {limits.max_scale_error:.1%}")
+    floor = report.get("floor")
+    if floor is not None and not abs(floor["height_mm_median"]) <= limits.max_floor_mm:
+        reasons.append(f"the floor view lies {floor['height_mm_median']:+.1f} mm off the floor, over "
+                       f"{limits.max_floor_mm:g} mm (the rig tilted or moved on its mount)")
+    return reasons

@@ -29,14 +29,14 @@ import numpy as np
 
 from calibration.board import BoardSpec, load_board
 from calibration.capture import IMAGE_SUFFIXES, check_camera_name, detect_folder, next_view_number
-from calibration.check import FLOOR_VIEW, check_rig
+from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, solve_rig
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
-from ghnerf_runtime.rig_file import load_rig, save_rig
+from ghnerf_runtime.rig_file import load_rig, save_rig, write_text_atomic
 
 __all__ = ["main", "build_parser"]
 
@@ -97,9 +97,19 @@ def cmd_board(args: argparse.Namespace) -> int:
     px = int(round(board.square_m / 0.0254 * args.dpi))
     image = board.image(px_per_square=px, margin_px=px // 2)
     png, spec = out / "board.png", out / "board.json"
+    if spec.exists() and not args.force:
+        # it may hold the square size measured on the print: overwritten with the defaults, every
+        # later solve would be scaled wrong
+        try:
+            same = load_board(spec) == board
+        except CalibrationError:
+            same = False
+        if not same:
+            raise UsageError(f"{spec} exists and defines another board (measured on the print?): give it as "
+                             f"--board {spec} to print it again, or --force to replace it")
     if not cv2.imwrite(str(png), image):
         raise UsageError(f"{png}: cannot write the image")
-    spec.write_text(json.dumps(board.to_dict(), indent=2) + "\n", encoding="utf-8")
+    write_text_atomic(spec, json.dumps(board.to_dict(), indent=2) + "\n")
     w_cm, h_cm = (100 * image.shape[1] / args.dpi * 0.0254, 100 * image.shape[0] / args.dpi * 0.0254)
     print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px) and {spec}")
     print(f"print it at {args.dpi} dpi, 100 % scale (no 'fit to page'): {w_cm:.1f} x {h_cm:.1f} cm with its margin; "
@@ -298,16 +308,20 @@ def cmd_check(args: argparse.Namespace) -> int:
     report = check_rig(rig, board, views, board_thickness_m=args.board_thickness)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
-    print(json.dumps(report, indent=1) if args.json else
-          f"{report['pairs']} pairs: reprojection {report['reprojection_px_rms']:.3f} px rms "
-          f"(p95 {report['reprojection_px_p95']:.3f}), scale "
+    rms = report["reprojection_px_rms"]
+    print(json.dumps(report, indent=1, allow_nan=False) if args.json else
+          f"{report['pairs']} pairs: reprojection "
+          + ("not measured" if rms is None else f"{rms:.3f} px rms (p95 {report['reprojection_px_p95']:.3f})")
+          + ", scale "
           + ("not measured (no neighbouring corners)" if report["scale"] is None else f"{report['scale']:.4f} of the board's")
-          + (f", floor view {report['floor']['height_mm_median']:+.1f} mm off the floor" if "floor" in report else ""))
-    bad = report["reprojection_px_rms"] > args.max_px or abs((report["scale"] or 1.0) - 1.0) > args.max_scale_error
-    if bad:
-        print(f"{PROG}: the rig does not fit these views (limits: {args.max_px} px, scale within "
-              f"{args.max_scale_error:.1%}): a camera moved, or the views are of another rig; calibrate again",
-              file=sys.stderr)
+          + (f", floor view {report['floor']['height_mm_median']:+.1f} mm off the floor" if "floor" in report else "")
+          + (f", {report['untriangulated']} of {report['corners']} corners not triangulated"
+             if report["untriangulated"] else ""))
+    limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
+    reasons = check_failures(report, limits)
+    if reasons:
+        print(f"{PROG}: the rig does not fit these views: {'; '.join(reasons)}. A camera moved, or the views are "
+              "of another rig: calibrate again", file=sys.stderr)
         return 1
     return 0
 
@@ -352,6 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="folder for board.png and board.json")
     p.add_argument("--board", help="a board definition to start from (default: 9x6 squares of 80 mm)")
     p.add_argument("--dpi", type=_positive_int, default=300, help="print resolution (default 300)")
+    p.add_argument("--force", action="store_true", help="replace a board.json in --out that defines another board")
     p.set_defaults(run=cmd_board)
 
     p = sub.add_parser("synth", help="render the calibration views of a known rig (no cameras needed)")
@@ -404,7 +419,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0)
     p.add_argument("--max-px", type=_finite(0.01, 100.0), default=1.0,
                    help="largest acceptable reprojection rms (default 1 px)")
-    p.add_argument("--max-scale-error", type=_finite(0.0001, 1.0), default=0.01, help="default 0.01 (1 %%)")
+    p.add_argument("--max-scale-error", type=_finite(0.0001, 1.0), default=CheckLimits.max_scale_error, help="default 0.01 (1 %%)")
+    p.add_argument("--max-floor-mm", type=_finite(0.1, 10000.0), default=CheckLimits.max_floor_mm,
+                   help=f"the floor view's height off the floor (default {CheckLimits.max_floor_mm:g})")
     p.add_argument("--json", action="store_true", help="print the full report")
     p.set_defaults(run=cmd_check)
     return ap

@@ -143,6 +143,21 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
                       coverage=_coverage(views, size), image_size=size)
 
 
+def _lens_terms_flags(*dists: np.ndarray) -> int:
+    """The flags that make OpenCV use every distortion term given. With the intrinsics fixed it still
+    projects through only the first five unless told otherwise, so a rational lens's k4-k6 were ignored
+    and the pair's pose came out wrong by tens of pixels."""
+    n = max(int(np.asarray(d).size) for d in dists)
+    flags = 0
+    if n > 5:
+        flags |= cv2.CALIB_RATIONAL_MODEL
+    if n > 8:
+        flags |= cv2.CALIB_THIN_PRISM_MODEL
+    if n > 12:
+        flags |= cv2.CALIB_TILTED_MODEL
+    return flags
+
+
 def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Mapping[str, BoardView],
                    intr_first: Intrinsics, intr_second: Intrinsics, *, names: tuple[str, str] = ("first", "second"),
                    min_common: int = MIN_CORNERS) -> PairPose:
@@ -167,8 +182,10 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
         R0, T0 = np.eye(3), np.zeros((3, 1))
         # -> rms, K1, D1, K2, D2, R, T, E, F, rvecs, tvecs, per-view errors
         result = cv2.stereoCalibrateExtended(
-            obj, img_a, img_b, intr_first.K, intr_first.dist, intr_second.K, intr_second.dist,
-            intr_first.image_size, R0, T0, flags=cv2.CALIB_FIX_INTRINSIC)
+            # copies: OpenCV writes into these (unchanged with the intrinsics fixed) and refuses read-only arrays
+            obj, img_a, img_b, intr_first.K.copy(), intr_first.dist.copy(), intr_second.K.copy(),
+            intr_second.dist.copy(), intr_first.image_size, R0, T0,
+            flags=cv2.CALIB_FIX_INTRINSIC | _lens_terms_flags(intr_first.dist, intr_second.dist))
         rms, R, T, per_view = result[0], result[5], result[6], result[-1]
         per = np.asarray(per_view, float).reshape(len(shared), 2).mean(axis=1)
         # A pair far worse than the others: its two images not taken at the same instant, or one blurred.

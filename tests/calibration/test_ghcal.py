@@ -337,8 +337,10 @@ def test_numeric_options_are_checked(capture, tmp_path, capsys):
         cli.main(["solve", "--images", str(capture), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
                   "--pitch", "inf"])
     assert e.value.code == 2 and "--pitch: must be a number in [-90, 90]" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        cli.main(["check", "--rig", "r.json", "--images", str(capture), "--max-px", "nan"])
+    for option in ("--max-px", "--max-floor-mm"):
+        with pytest.raises(SystemExit) as e:
+            cli.main(["check", "--rig", "r.json", "--images", str(capture), option, "nan"])
+        assert e.value.code == 2 and f"{option}: must be a number in" in capsys.readouterr().err
 
 
 def test_the_stream_limits_match_the_protocol():

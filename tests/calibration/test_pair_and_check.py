@@ -1,0 +1,162 @@
+"""The pair solve through every lens term, and ``ghcal check`` failing a rig that does not fit.
+
+Board corners are projected exactly through known cameras (no rendering, no detection), so each
+case runs in well under a second and the truth is known to the digit.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration import cli
+from calibration.board import BoardSpec, load_board
+from calibration.check import CheckLimits, check_failures, check_rig
+from calibration.detect import BoardView
+from calibration.render import board_pose_facing, example_rig
+from calibration.solve import Intrinsics, _lens_terms_flags, calibrate_pair
+from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
+from ghnerf_runtime.geometry.rig import Rig
+
+BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
+
+
+def _views(rig: Rig, poses: dict, noise_px: float = 0.0, seed: int = 0) -> dict:
+    rng = np.random.default_rng(seed)
+    out = {cam.name: {} for cam in rig.pair}
+    for name, (R, t) in poses.items():
+        corners = BOARD.corners_m() @ R.T + t
+        for cam in rig.pair:
+            uv, _ = cam.project(corners)
+            out[cam.name][name] = BoardView(np.arange(len(uv)), uv + rng.normal(0.0, noise_px, uv.shape), cam.size)
+    return out
+
+
+def _facing_poses(rig: Rig, count: int, seed: int) -> dict:
+    """Board poses both cameras see whole, spread over depth and angle."""
+    rng = np.random.default_rng(seed)
+    mid = 0.5 * (rig.pair[0].center + rig.pair[1].center)
+    forward = rig.pair[0].R[2] + rig.pair[1].R[2]
+    forward /= np.linalg.norm(forward)
+    poses = {}
+    while len(poses) < count:
+        depth = rng.uniform(1.0, 2.2)
+        centre = mid + depth * forward + np.array([rng.uniform(-0.4, 0.4) * depth, rng.uniform(-0.25, 0.25) * depth, 0])
+        R, t = board_pose_facing(BOARD, centre, mid, yaw_deg=rng.uniform(-35, 35), pitch_deg=rng.uniform(-35, 35),
+                                 spin_deg=rng.uniform(-25, 25))
+        corners = BOARD.corners_m() @ R.T + t
+        inside = True
+        for cam in rig.pair:
+            uv, _ = cam.project(corners)
+            inside &= bool(np.all(np.isfinite(uv)) and np.all((uv > 2) & (uv < [cam.width - 3, cam.height - 3])))
+        if inside:
+            poses[f"{len(poses):03d}"] = (R, t)
+    return poses
+
+
+def _relative_t(first: Camera, second: Camera) -> np.ndarray:
+    return second.t - second.R @ first.R.T @ first.t
+
+
+def test_the_pair_is_solved_through_a_rational_lens():
+    # a wide lens whose k4-k6 matter: the pair solve once projected through the first five terms only,
+    # and put the second camera tens of centimetres off with a pair error of tens of pixels
+    dist = np.array([-0.3, 0.1, 0.0, 0.0, 0.0, 0.2, 0.05, 0.01])
+    cams = []
+    for name, x in (("left", -0.3), ("right", 0.3)):
+        R, t = look_at([x, -1.4, 0.0], [0.0, -0.6, 2.5])
+        cams.append(Camera(name, 960, 600, intrinsics_from_fov(960, 600, 90.0), dist, R, t))
+    rig = Rig(tuple(cams), example_rig().volume)
+    views = _views(rig, _facing_poses(rig, 12, seed=1), noise_px=0.1, seed=2)
+    intr = {cam.name: Intrinsics(K=cam.K, dist=dist, rms_px=0.1, per_view_px={}, dropped=(), coverage=1.0,
+                                 image_size=cam.size) for cam in cams}
+    pose = calibrate_pair(BOARD, views["left"], views["right"], intr["left"], intr["right"])
+    assert pose.rms_px < 0.3, pose.rms_px
+    assert np.linalg.norm(pose.T - _relative_t(*cams)) < 0.005, (pose.T, _relative_t(*cams))
+    assert pose.dropped == ()
+
+
+@pytest.mark.parametrize("size,flags", [(4, 0), (5, 0), (8, cv2.CALIB_RATIONAL_MODEL),
+                                         (12, cv2.CALIB_RATIONAL_MODEL | cv2.CALIB_THIN_PRISM_MODEL),
+                                         (14, cv2.CALIB_RATIONAL_MODEL | cv2.CALIB_THIN_PRISM_MODEL
+                                          | cv2.CALIB_TILTED_MODEL)])
+def test_every_lens_term_given_is_used(size, flags):
+    assert _lens_terms_flags(np.zeros(5), np.zeros(size)) == flags
+
+
+@pytest.fixture(scope="module")
+def level_rig() -> Rig:
+    """A pair looking level, its floor view on the floor 2.2 m ahead."""
+    cams = []
+    for name, x in (("left", -0.3), ("right", 0.3)):
+        R, t = look_at([x, -1.4, 0.0], [0.0, -1.0, 2.5])
+        cams.append(Camera(name, 960, 600, intrinsics_from_fov(960, 600, 75.0), [-0.12, 0.03, 0.001, -0.0005, 0.0],
+                           R, t))
+    return Rig(tuple(cams), example_rig().volume)
+
+
+@pytest.fixture(scope="module")
+def level_views(level_rig) -> dict:
+    poses = _facing_poses(level_rig, 6, seed=5)
+    x, z = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])  # face up: the board's z points down
+    R = np.stack([x, np.cross(z, x), z], axis=1)
+    poses["floor"] = (R, np.array([0, 0, 2.2]) - R @ np.array([BOARD.size_m[0] / 2, BOARD.size_m[1] / 2, 0]))
+    return _views(level_rig, poses)
+
+
+def test_the_rig_that_was_filmed_fits(level_rig, level_views):
+    report = check_rig(level_rig, BOARD, level_views)
+    assert report["untriangulated"] == 0 and report["corners"] == 7 * 24
+    assert abs(report["floor"]["height_mm_median"]) < 1.0
+    assert check_failures(report) == []
+
+
+def test_a_camera_turned_far_fails_and_the_report_stays_json(level_rig, level_views):
+    # turned 20 degrees outward, the two rays of a corner no longer meet in front of both cameras: the
+    # check measured from the fill value, got NaN pixels and a zero scale, and passed the rig
+    right = level_rig.camera("right")
+    turn = cv2.Rodrigues(np.array([0.0, math.radians(-20.0), 0.0]))[0]
+    turned = Rig((level_rig.camera("left"), right.with_pose(turn @ right.R, turn @ right.t)), level_rig.volume)
+    report = check_rig(turned, BOARD, level_views)
+    assert report["corners"] == 7 * 24 and report["corners"] // 2 < report["untriangulated"] < report["corners"]
+    assert math.isfinite(report["reprojection_px_rms"])
+    reasons = check_failures(report)
+    assert any(f"{report['untriangulated']} of 168 corners do not triangulate" in r for r in reasons), reasons
+    json.dumps(report, allow_nan=False)
+
+
+def test_a_report_with_nothing_measured_fails():
+    report = {"pairs": 1, "corners": 24, "untriangulated": 24, "reprojection_px_rms": None, "scale": None,
+              "per_view": {"000": {"corners": 24, "untriangulated": 24}}}
+    assert check_failures(report) == ["24 of 24 corners do not triangulate in front of both cameras (view(s) 000)",
+                                      "no corner could be reprojected"]
+
+
+def test_a_tilted_rig_fails_on_the_floor(level_rig, level_views):
+    # the whole rig tilted 3 degrees on its mount: the pair's pose, hence pixels and scale, are intact
+    tilt = cv2.Rodrigues(np.array([math.radians(3.0), 0.0, 0.0]))[0]
+    tilted = Rig(tuple(c.with_pose(c.R @ tilt.T, c.t) for c in level_rig.cameras), level_rig.volume)
+    report = check_rig(tilted, BOARD, level_views)
+    assert report["reprojection_px_rms"] < 0.01 and abs(report["scale"] - 1.0) < 1e-4
+    assert abs(report["floor"]["height_mm_median"]) > 50
+    reasons = check_failures(report)
+    assert len(reasons) == 1 and "off the floor" in reasons[0], reasons
+    assert check_failures(report, CheckLimits(max_floor_mm=1000.0)) == []
+
+
+def test_the_board_file_measured_on_the_print_is_not_overwritten(tmp_path, capsys):
+    assert cli.main(["board", "--out", str(tmp_path)]) == 0
+    spec = tmp_path / "board.json"
+    measured = {**json.loads(spec.read_text()), "square_m": 0.0787, "marker_m": 0.059}
+    spec.write_text(json.dumps(measured))
+    capsys.readouterr()
+    assert cli.main(["board", "--out", str(tmp_path)]) == 2  # the defaults again
+    assert "defines another board" in capsys.readouterr().err
+    assert load_board(spec).square_m == 0.0787
+    assert cli.main(["board", "--out", str(tmp_path), "--board", str(spec)]) == 0  # printed again, as measured
+    assert load_board(spec).square_m == 0.0787
+    assert cli.main(["board", "--out", str(tmp_path), "--force"]) == 0
+    assert load_board(spec) == BoardSpec()
