@@ -30,8 +30,8 @@ Options:
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
   horizontal field of view in degrees (20 to 150, default 70).
 * ``loop`` (two videos of the same length): start over at the end instead of ending the stream.
-* ``tolerance_ms``: pairing tolerance (default: half a frame period of the slower camera's rate as
-  it reports it, else ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
+* ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
+  the cameras report and ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
   ``queue``: frames held per camera for the reader (default 4; under ``all`` two videos are read in
   step, neither more than a frame ahead, and wait for room instead of dropping: every pair of the
   take is delivered, however slowly one decodes); ``open_timeout_s``: how long :meth:`open` waits
@@ -46,7 +46,8 @@ half a frame apart by the two cameras (an OAK's shared trigger avoids that). Tha
 no margin for a camera slower than it reports (auto-exposure in dim light can halve a webcam's
 rate): give ``fps=`` the rate it really keeps, or a ``tolerance_ms``. A network stream's
 frames are stamped on arrival, after its own buffering, which may differ between the two streams.
-A video is a file (a path that is not a device index, not under ``/dev/`` and not a URL; an OpenCV
+A video is a file (a path that is not a device index, not under ``/dev/``, not a URL and not a
+GStreamer pipeline, which has ``!`` between its elements and is live; an OpenCV
 image sequence such as ``seq/%04d.png`` counts): it is paced at its rate from a start
 shared by both files and stamped by its frame number, so two constant-rate videos that start at
 the same instant pair frame by frame (a phone's variable-rate video drifts). Not modelled:
@@ -182,8 +183,10 @@ def capture_target(spec: str) -> int | str:
 
 
 def is_video_file(spec: str) -> bool:
-    """A video file or image sequence, played at its own pace; a device or a stream is live."""
-    return not spec.isdigit() and "://" not in spec and not spec.startswith("/dev/")
+    """A video file or image sequence, played at its own pace; a device, a stream or a GStreamer
+    pipeline (its elements linked by ``!``, e.g. a Jetson's CSI camera: ``nvarguscamerasrc ! ... !
+    appsink``) is live."""
+    return not spec.isdigit() and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
 
 
 class _Camera:
@@ -393,8 +396,10 @@ class OpenCVRigSource(RigSource):
                 raise RigInitializationError(
                     f"loop=1: the videos have {videos[0].frame_count} and {videos[1].frame_count} frames; looping "
                     f"them would pair different instants from the second pass on (trim them to one length)")
-            if not self._pairing_given:  # half a frame period of the slower camera, as it reports its rate
-                rate = min(cam.fps or o.fps or FALLBACK_FPS for cam in self._cameras)
+            if not self._pairing_given:
+                # half a frame period at the slowest rate known: a camera's report, or fps= where that
+                # is lower (a webcam may report 30 fps and keep 15 in dim light: fps= says so)
+                rate = min(min((r for r in (cam.fps, o.fps) if r), default=FALLBACK_FPS) for cam in self._cameras)
                 self.pairing = PairingConfig(tolerance_ms=500.0 / rate, policy=o.policy)
             self._anchor_ns = self.clock.now_ns()
             for cam in self._cameras:

@@ -14,6 +14,10 @@ def monotonic_us() -> int:
     return time.monotonic_ns() // 1000
 
 
+#: Longest STATUS (and HELLO) period: an hour.
+MAX_STATUS_S = 3600.0
+
+
 @dataclass(frozen=True)
 class SinkOptions:
     queue: int = 4
@@ -54,6 +58,9 @@ class SinkOptions:
         )
         if opts.queue < 1:
             raise SinkConfigError(u.url, "queue", opts.queue, "must be >= 1")
+        if not 0 < opts.status_s <= MAX_STATUS_S:
+            # a receiver that joins late waits this long for HELLO; far larger also overflows the waits
+            raise SinkConfigError(u.url, "status_s", opts.status_s, f"must be in (0, {MAX_STATUS_S:g}] seconds")
         return opts
 
 

@@ -3,7 +3,8 @@
 Each datagram carries one COBS frame with its 0x00 delimiter, so a receiver can
 use the same stream decoder as on serial. UDP has no delivery feedback: losses
 on the network show up only as sequence gaps at the receiver; the sender
-counts what it could not send (full socket buffer, unreachable network).
+counts what it could not send (full socket buffer, unreachable network). An IPv4
+broadcast address (``udp://192.168.1.255:9000``) sends to every receiver on the subnet.
 """
 from __future__ import annotations
 
@@ -33,6 +34,10 @@ class DatagramLink:
         except OSError as e:
             raise SinkUnavailableError(self.url, f"cannot resolve or open {self.host}:{self.port}: {e}") from e
         sock.setblocking(False)  # a full send buffer must drop, not stall the worker
+        if family == socket.AF_INET:
+            # a broadcast address (192.168.1.255) reaches every console on the subnet; without this
+            # flag the kernel refuses each datagram (EACCES) and the sink would reconnect forever
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
         self._sock, self._addr = sock, addr
 
     def close(self) -> None:

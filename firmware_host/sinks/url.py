@@ -4,6 +4,7 @@ Every error names the URL, the parameter and the value (SinkConfigError).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 from urllib.parse import parse_qs, urlsplit
@@ -74,8 +75,8 @@ def non_negative_int(raw: str) -> int:
 
 def positive_float(raw: str) -> float:
     v = float(raw)
-    if not v > 0:
-        raise ValueError("must be > 0")
+    if not (v > 0 and math.isfinite(v)):
+        raise ValueError("must be a finite number > 0")
     return v
 
 

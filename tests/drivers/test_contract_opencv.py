@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
+from urllib.parse import quote
 
 import cv2
 import numpy as np
@@ -229,6 +230,15 @@ def test_a_live_camera_that_stops_delivering_is_a_disconnect_after_its_frames(ta
     assert cv2.CAP_PROP_BUFFERSIZE not in props  # a thread per camera grabs all the time: the driver's queue stays empty
 
 
+def test_a_gstreamer_pipeline_is_a_live_camera(webcam):
+    # a Jetson's CSI camera is opened through a pipeline; it was taken for a missing video file
+    pipeline = "nvarguscamerasrc sensor-id=0 ! video/x-raw(memory:NVMM) ! nvvidconv ! appsink"
+    with open_rig(f"opencv://?first={quote(pipeline)}&second=1&api=gstreamer&tolerance_ms=40",
+                  capture_factory=webcam) as source:
+        source.read(timeout_s=5.0)
+    assert webcam.made[0].target == pipeline and webcam.made[0].api == cv2.CAP_GSTREAMER
+
+
 def test_each_camera_is_asked_its_own_rig_size(takes, webcam, tmp_path):
     loaded = load_rig(takes[0][2])
     mixed = tmp_path / "mixed.json"
@@ -302,6 +312,23 @@ def test_the_default_tolerance_is_half_a_period_of_the_slower_camera(webcam):
     with open_rig("opencv://?first=0&second=1", capture_factory=TenFps) as source:
         assert source.pairing.tolerance_ms == pytest.approx(50.0)
         assert source._pairer.config.tolerance_ms == pytest.approx(50.0)  # what pairs, not only what is said
+
+
+def test_fps_given_below_the_reported_rate_sets_the_tolerance(webcam):
+    # a webcam that reports 30 fps whatever it is asked and keeps 15 in dim light: fps=15 is the rate
+    # the user knows it keeps, and the tolerance must cover it, else half the phases never pair
+    class Stubborn(_Webcam):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.props[cv2.CAP_PROP_FPS] = 30.0
+
+        def set(self, prop, value) -> bool:
+            return prop != cv2.CAP_PROP_FPS and super().set(prop, value)
+
+    with open_rig("opencv://?first=0&second=1&fps=15", capture_factory=Stubborn) as source:
+        assert source._pairer.config.tolerance_ms == pytest.approx(500.0 / 15)
+    with open_rig("opencv://?first=0&second=1&fps=60", capture_factory=Stubborn) as source:
+        assert source._pairer.config.tolerance_ms == pytest.approx(500.0 / 30)  # the slower, reported rate
 
 
 def _videos(tmp_path, lengths, delays):

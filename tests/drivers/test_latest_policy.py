@@ -12,6 +12,7 @@ from drivers import (
     PairingConfig,
     RigDisconnectedError,
     RigSource,
+    RigTimeoutError,
     create_rig_source,
     open_rig,
 )
@@ -214,3 +215,24 @@ def test_depthai_serves_its_pending_frame_before_the_link():
         assert not source._frame_available()
     finally:
         source.close()
+
+
+@pytest.mark.parametrize("policy", ["latest", "all"])
+def test_a_poll_takes_the_pair_already_there_and_only_then_times_out(sim_cache, policy):
+    # read(timeout_s=0) once timed out before asking the backend for a frame under policy=all
+    source, clock = sim(sim_cache, f"policy={policy}")
+    with source:
+        clock.advance(WORK_NS)  # three periods: pairs are waiting
+        polled = []
+        while True:
+            try:
+                polled.append(source.read(timeout_s=0))
+            except RigTimeoutError:
+                break
+            assert len(polled) <= 8, "a poll kept finding pairs that had not been captured"
+        assert clock.now_ns() == START + WORK_NS  # a poll never waits
+    assert polled, "a poll found no pair with three captured"
+    if policy == "all":
+        assert [p.sequence for p in polled] == list(range(len(polled))) and len(polled) >= 3
+    else:
+        assert len(polled) == 1 and 0 <= clock.now_ns() - max(polled[0].timestamps_ns) < PERIOD_NS

@@ -47,6 +47,11 @@ def test_importing_sinks_loads_no_backend_library() -> None:
         ("memory://?send_2d=maybe", {}, "send_2d", "maybe"),
         ("serial:///dev/ttyACM0", {"baud": 0}, "baud", 0),
         ("memory://", {"max_fps": -1.0}, "max_fps", -1.0),
+        # inf overflowed the STATUS deadline in the worker, and 1e12 passed threading's longest wait:
+        # the sink never connected, or its worker died with frames queued
+        ("memory://?status_s=inf", {}, "status_s", "inf"),
+        ("memory://?status_s=1e12", {}, "status_s", 1e12),
+        ("memory://?fps=nan", {}, "fps", "nan"),
     ],
 )
 def test_config_errors_name_url_field_and_value(url: str, kw: dict, field: str, value: object) -> None:

@@ -43,6 +43,27 @@ def test_udp_one_packet_per_datagram() -> None:
     assert stats.sent == 5
 
 
+def test_udp_to_a_broadcast_address() -> None:
+    # the loopback net's broadcast address: without SO_BROADCAST the kernel refused every datagram
+    # (EACCES) and the sink reconnected forever, sending nothing
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("0.0.0.0", 0))
+    rx.settimeout(5)
+    port = rx.getsockname()[1]
+    sink = open_sink(f"udp://127.255.255.255:{port}?queue=16", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        received = []
+        while not any(isinstance(m, Joints) for m in received):
+            received += [e.message for e in StreamDecoder().feed(rx.recv(2048))]
+    finally:
+        stats = sink.close()
+        rx.close()
+    assert isinstance(received[0], Hello) and joints_seqs(received) == [0]
+    assert stats.sent == 1 and stats.connect_failures == 0 and stats.disconnects == 0
+
+
 def test_file_sink_writes_canonical_json_lines(tmp_path: Path) -> None:
     path = tmp_path / "joints.jsonl"
     sink = open_sink(f"file://{path}", backoff=FAST_BACKOFF, rig_id="rec")
