@@ -43,6 +43,7 @@ Symbolic dimensions: ``S`` sources (fixed, 2), ``B`` targets, ``R`` rays,
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -313,8 +314,12 @@ class ModelContract:
         if self.num_sources != 2:
             fail("num_sources", f"the runtime feeds exactly 2 source views, got {self.num_sources}")
         n = self.normalisation
-        if n.channel_order not in ("RGB", "BGR") or len(n.mean) != 3 or len(n.std) != 3 or min(n.std) <= 0:
+        if (n.channel_order not in ("RGB", "BGR") or len(n.mean) != 3 or len(n.std) != 3 or min(n.std) <= 0
+                or len(n.value_range) != 2 or not n.value_range[0] < n.value_range[1]
+                or not all(math.isfinite(v) for v in (*n.value_range, *n.mean, *n.std))):
             fail("normalisation", f"bad normalisation {n.to_json()}")
+        if not math.isfinite(self.background):
+            fail("background", f"background must be a finite number, got {self.background}")
         if not self.levels:
             fail("levels", "at least one level is required")
         needed = {"feat_s1", "feat_s2", "feat_s4", "volume"} | ({"human_feat"} if self.has_human else set())
@@ -322,6 +327,10 @@ class ModelContract:
             fail("channels", f"missing channel counts {sorted(missing)}")
         if missing := (needed - {"volume"}) - set(self.strides):
             fail("strides", f"missing strides {sorted(missing)}")
+        if bad := {k: v for k, v in self.strides.items() if v < 1 or self.height % v or self.width % v}:
+            fail("strides", f"strides must be at least 1 and divide {self.width}x{self.height}, got {bad}")
+        if bad := {k: v for k, v in self.channels.items() if v < 1}:
+            fail("channels", f"channel counts must be at least 1, got {bad}")
         for i, lv in enumerate(self.levels):
             if (lv.spacing not in ("inverse", "linear") or lv.sampling not in ("interval", "planes")
                     or lv.planes < 2 or lv.samples < 1 or lv.volume_stride < 1):

@@ -665,7 +665,8 @@ class Estimator:
             safe = np.where(kp.valid[i][:, None], uv_model[i], S / 2)
             xy = camera_normalized(crop.pixels_to_normalized(safe), crop, st.camera)
             uv_img = st.camera.normalized_to_pixels(xy, distort=True)
-            ok = kp.valid[i] & np.all(np.isfinite(uv_img), axis=-1) & (i in views)
+            # past the lens model's fold the model mirrors the point onto another part of the frame
+            ok = kp.valid[i] & np.all(np.isfinite(uv_img), axis=-1) & st.camera.within_lens(xy) & (i in views)
             joints_2d[name] = np.where(ok[:, None], uv_img, 0.0)
             conf_2d[name] = np.where(ok, kp.confidence[i], 0.0).astype(np.float32)
             missing_2d[name] = ~ok

@@ -52,6 +52,7 @@ Pure functions; numpy and OpenCV only.
 """
 from __future__ import annotations
 
+import math
 import numbers
 from dataclasses import dataclass
 from typing import Literal
@@ -358,13 +359,17 @@ def model_to_heatmap_pixels(uv: np.ndarray, heatmap_size, model_size) -> np.ndar
     return (uv + 0.5) * (hs / ms) - 0.5
 
 
-def _keep_fill(mapped: np.ndarray, valid) -> np.ndarray:
-    if valid is None:
-        return mapped
+def _valid_like(valid, mapped: np.ndarray) -> np.ndarray:
     valid = np.asarray(valid, dtype=bool)
     if valid.shape != mapped.shape[:-1]:
         raise ShapeError(f"valid must have shape {mapped.shape[:-1]}, got {valid.shape}")
-    return np.where(valid[..., None], mapped, MISSING_FILL)
+    return valid
+
+
+def _keep_fill(mapped: np.ndarray, valid) -> np.ndarray:
+    if valid is None:
+        return mapped
+    return np.where(_valid_like(valid, mapped)[..., None], mapped, MISSING_FILL)
 
 
 def model_to_image_pixels(uv: np.ndarray, camera: Camera, roi: Roi, model_size: int, *, distort: bool = True,
@@ -387,13 +392,19 @@ def model_to_image_pixels(uv: np.ndarray, camera: Camera, roi: Roi, model_size: 
         roll_deg: the model input was rotated so (``crop_camera``'s argument).
 
     Returns:
-        ``(..., 2)`` float64.
+        ``(..., 2)`` float64. With ``distort``, a point past the lens model's fold (a square crop
+        can reach past it; :meth:`Camera.within_lens`) comes back as :data:`MISSING_FILL` too: no
+        pixel of the frame shows it.
     """
     uv = check_last_dim("uv", uv, 2)
     crop = crop_camera(camera, roi, model_size, roll_deg)
     safe = uv if valid is None else np.where(np.asarray(valid, bool)[..., None], uv, 0.0)
     xy = camera_normalized(crop.pixels_to_normalized(safe), crop, camera)
     mapped = camera.normalized_to_pixels(xy, distort=distort)
+    if distort and math.isfinite(camera.fold_radius):
+        inside = camera.within_lens(xy)
+        if not inside.all():
+            valid = inside if valid is None else _valid_like(valid, mapped) & inside
     return _keep_fill(mapped, valid)
 
 

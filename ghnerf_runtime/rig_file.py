@@ -47,8 +47,9 @@ VERSION = 1
 UNITS = "m"
 DISTORTION_MODELS = ("opencv",)
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
-#: Tolerance on ``|R R^T - I|`` and ``det R - 1`` for a rotation to be accepted.
-ROTATION_TOLERANCE = 1e-6
+#: Tolerance on ``|R R^T - I|`` and ``det R - 1`` for a rotation to be accepted; it is then snapped to
+#: the nearest rotation. A file that prints six decimals is off by up to about 1e-6 (0.0001 degree).
+ROTATION_TOLERANCE = 1e-4
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -286,6 +287,9 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
             f"must be a rotation matrix (orthonormal, det +1): max |R R^T - I| = {dev:.3g}, det = {det:.6g}, "
             f"got {R.tolist()}",
         )
+    if dev > 1e-12:
+        u, _, vt = np.linalg.svd(R)
+        R = u @ vt
     t = chk.array(raw["t"], f"{field}.t", (3,), "3-vector of numbers")
     try:
         return Camera(name, width, height, K, dist=dist, R=R, t=t)

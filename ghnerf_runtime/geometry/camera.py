@@ -197,8 +197,51 @@ class Camera:
                     break
             residual = np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
             bad = ~(residual <= tolerance) | ~(np.sum(xy * xy, axis=-1) < self.fold_radius**2)
+            # The residual step overshoots where the lens model's slope passes 2 (strong pincushion,
+            # mixed signs) and diverges on points it can reach: solve those again. Points well past
+            # what the fold reaches stay out (a folding wide lens has many, every frame).
+            retry = bad
+            if math.isfinite(self.fold_radius):
+                reach = _distorted_radius(self.dist, self.fold_radius)
+                retry = bad & (np.hypot(xy_d[..., 0], xy_d[..., 1]) < 1.05 * reach)
+            if np.any(retry):
+                xy[retry] = self._undistort_newton(xy_d[retry])
+                residual = np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
+                bad = ~(residual <= tolerance) | ~(np.sum(xy * xy, axis=-1) < self.fold_radius**2)
         if np.any(bad):
             xy[bad] = np.nan
+        return xy
+
+    def _undistort_newton(self, xy_d: np.ndarray, iterations: int = 30) -> np.ndarray:
+        """Points ``(N, 2)`` the residual iteration missed: the radial model inverted by bisection
+        inside the fold, then Newton steps on the whole model (tangential and prism terms too)."""
+        dist = self.dist
+        rd = np.hypot(xy_d[:, 0], xy_d[:, 1])
+        hi = np.full(rd.shape, min(self.fold_radius, 10.0))
+        for _ in range(8):  # a model that never folds: widen the bracket until it holds the point
+            short = _distorted_radius(dist, hi) < rd
+            if not short.any() or math.isfinite(self.fold_radius):
+                break
+            hi[short] *= 4
+        lo = np.zeros_like(rd)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            below = _distorted_radius(dist, mid) < rd
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        scale = np.divide(0.5 * (lo + hi), rd, out=np.ones_like(rd), where=rd > 0)
+        xy = xy_d * scale[:, None]
+        h = 1e-7
+        for _ in range(iterations):
+            f = self.distort(xy) - xy_d
+            jx = (self.distort(xy + [h, 0.0]) - self.distort(xy - [h, 0.0])) / (2 * h)
+            jy = (self.distort(xy + [0.0, h]) - self.distort(xy - [0.0, h])) / (2 * h)
+            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+            safe = np.where(np.abs(det) > 1e-12, det, np.nan)
+            step = np.stack([jy[:, 1] * f[:, 0] - jy[:, 0] * f[:, 1],
+                             -jx[:, 1] * f[:, 0] + jx[:, 0] * f[:, 1]], axis=-1) / safe[:, None]
+            xy = xy - step
+            if np.all(~(np.abs(step) >= 1e-12)):
+                break
         return xy
 
     def fold_inside_image(self) -> bool:
@@ -214,6 +257,13 @@ class Camera:
         y = (corners[:, 1] - cy) / fy
         x = (corners[:, 0] - cx - skew * y) / fx
         return bool(np.max(np.hypot(x, y)) > reach)
+
+    def within_lens(self, xy: np.ndarray) -> np.ndarray:
+        """``(...)`` bool: normalised coordinates ``(..., 2)`` inside :attr:`fold_radius`, where
+        :meth:`distort` is one to one. Past it the model mirrors a point to a pixel that shows
+        another direction (its radial factor turns negative), so no pixel of the frame shows it."""
+        xy = check_last_dim("xy", xy, 2)
+        return np.sum(xy * xy, axis=-1) < self.fold_radius**2
 
     @property
     def fold_radius(self) -> float:

@@ -247,6 +247,20 @@ def test_undistortion_converges_for_a_strong_rational_lens():
     np.testing.assert_allclose(cam.normalized_to_pixels(xy), uv, atol=1e-3)
 
 
+@pytest.mark.parametrize("f,dist", [(300.0, [0.3, 0.1, 0.0, 0.0, 0.0]), (350.0, [-0.05, 0.3, 0.0, 0.0, 0.2]),
+                                     (400.0, [0.5, 0.0, 0.001, -0.002, 0.0])])
+def test_undistortion_reaches_every_pixel_of_a_strong_pincushion(f, dist):
+    # the residual step diverges where the model's slope passes 2: 13-15 % of these pixels came back
+    # NaN though the model never folds, and the undistorted image bounds shrank with them
+    cam = Camera("pincushion", 640, 480, [[f, 0.0, 319.5], [0.0, f, 239.5], [0.0, 0.0, 1.0]], dist)
+    assert cam.fold_radius == np.inf
+    u, v = np.meshgrid(np.linspace(-0.5, 639.5, 41), np.linspace(-0.5, 479.5, 31))
+    uv = np.stack([u, v], -1).reshape(-1, 2)
+    xy = cam.pixels_to_normalized(uv)
+    assert np.all(np.isfinite(xy))
+    np.testing.assert_allclose(cam.normalized_to_pixels(xy), uv, atol=1e-3)
+
+
 @pytest.mark.parametrize("turns", [0, 1, 2, 3, -1, 6])
 def test_a_quarter_turned_camera_sees_the_turned_image(turns):
     cam = make_camera().without_distortion().resized(96, 72)  # not square: the turn swaps the sides

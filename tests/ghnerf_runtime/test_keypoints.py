@@ -239,3 +239,17 @@ def test_outputs_always_finite_and_consistent(hm, sigma, refine):
     assert np.all(kp.uv[~kp.valid] == MISSING_FILL)
     assert np.all(kp.uv[kp.valid] >= -1.0) and np.all(kp.uv[kp.valid] <= [w, h])
     assert not np.any(kp.valid & ~np.isfinite(hm).all(axis=(-2, -1)))
+
+
+def test_a_peak_past_the_lens_fold_is_missing_not_mirrored():
+    # a square crop can reach past where the lens model folds; a peak there went through the folded
+    # model and came back as a confident joint on the opposite side of the frame
+    cam = Camera("c", 640, 480, [[300, 0, 319.5], [0, 300, 239.5], [0, 0, 1]], [-0.4, 0, 0, 0, 0])
+    roi, size = Roi(-200, -200, 1040), 128
+    uv = np.array([[8.0, 8.0], [64.0, 64.0]])  # past the fold, top left; the centre
+    assert np.hypot(*crop_camera(cam, roi, size).pixels_to_normalized(uv[:1])[0]) > cam.fold_radius
+    mapped = model_to_image_pixels(uv, cam, roi, size)
+    np.testing.assert_array_equal(mapped[0], MISSING_FILL)
+    assert 0 < mapped[1][0] < 640 and 0 < mapped[1][1] < 480
+    np.testing.assert_array_equal(model_to_image_pixels(uv, cam, roi, size, valid=[True, False]), MISSING_FILL)
+    assert np.all(np.isfinite(model_to_image_pixels(uv, cam, roi, size, distort=False)))  # a ray still

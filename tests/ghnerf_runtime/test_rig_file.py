@@ -270,3 +270,19 @@ def test_a_lens_model_that_folds_inside_the_image_loads_with_a_warning_naming_th
         caplog.clear()
         load_rig(EXAMPLE)
     assert not caplog.records  # the shipped example's lens covers its frame
+
+
+def test_a_rotation_printed_with_six_decimals_loads_snapped_and_a_wrong_one_does_not(example_dict):
+    # about a quarter of rotations rounded to six decimals missed the old 1e-6 tolerance
+    from calibration.render import example_rig
+
+    exact = example_rig().camera("right").R
+    rounded = np.round(exact, 6)
+    assert np.abs(rounded @ rounded.T - np.eye(3)).max() > 1e-7  # not a rotation to the digit
+    example_dict["cameras"][1]["R"] = rounded.tolist()
+    R = rig_from_dict(example_dict, path="six.json").cameras[1].R
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(R, exact, atol=2e-6)
+    example_dict["cameras"][1]["R"] = (exact + [[0, 1e-3, 0], [0, 0, 0], [0, 0, 0]]).tolist()
+    with pytest.raises(RigFileError, match=r"cameras\[1\]\.R.*must be a rotation matrix"):
+        rig_from_dict(example_dict, path="bent.json")

@@ -90,6 +90,14 @@ def test_metadata_round_trip():
     ("ghnerf.variant", "dino"),
     ("ghnerf.contract_version", "9.0.0"),
     ("ghnerf.graphs", json.dumps([{"name": "encoder", "inputs": [], "outputs": []}])),
+    # once a ZeroDivisionError out of the session load, or accepted and failing in the estimator
+    ("ghnerf.strides", json.dumps({**STRIDES, "human_feat": 0})),
+    ("ghnerf.strides", json.dumps({**STRIDES, "feat_s4": 3})),
+    ("ghnerf.channels", json.dumps({**CHANNELS, "volume": -3})),
+    ("ghnerf.normalisation", json.dumps({**make().normalisation.to_json(), "value_range": [0.5]})),
+    ("ghnerf.normalisation", json.dumps({**make().normalisation.to_json(), "value_range": [1.0, 1.0]})),
+    ("ghnerf.normalisation", json.dumps({**make().normalisation.to_json(), "mean": [0.5, "nan", 0.5]})),
+    ("ghnerf.background", "nan"),
 ])
 def test_bad_metadata_names_the_key(key, value):
     meta = make().to_metadata()
