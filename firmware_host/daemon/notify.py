@@ -84,6 +84,10 @@ class SystemdNotifier:
                 self._sock = None
 
 
+#: The watchdog thread's shortest wake interval.
+MIN_WAKE_S = 0.01
+
+
 class HangWatchdog:
     """Ping systemd's watchdog while the main loop makes progress (see the module docstring).
 
@@ -101,7 +105,7 @@ class HangWatchdog:
         self._allowance = float(allowance_s)
         wd = notifier.watchdog_s
         self._ping_every = wd / 2 if wd else 1.0
-        self._interval = min(interval_s, self._ping_every) if interval_s is not None else self._ping_every
+        self._interval = self._wake_interval(interval_s)
         self._last_ping = -float("inf")
         self._clock = clock
         self._stacks_to = stacks_to
@@ -118,7 +122,11 @@ class HangWatchdog:
         """New allowance and wake interval (a reloaded config), from the next beat and the next wake."""
         with self._lock:
             self._default_allowance = float(allowance_s)
-            self._interval = min(interval_s, self._ping_every) if interval_s is not None else self._ping_every
+            self._interval = self._wake_interval(interval_s)
+
+    def _wake_interval(self, interval_s: Optional[float]) -> float:
+        # at least 10 ms: a tiny slow_estimate_s woke the thread every half millisecond (8 % of a core)
+        return max(MIN_WAKE_S, min(interval_s, self._ping_every)) if interval_s is not None else self._ping_every
 
     def beat(self, where: str = "main loop") -> None:
         with self._lock:
@@ -180,6 +188,8 @@ class HangWatchdog:
 
     def start(self) -> "HangWatchdog":
         if self._thread is None:
+            # the time since construction (the model loading, tens of seconds) is not a hang
+            self.beat("start")
             self._thread = threading.Thread(target=self._run, name="watchdog", daemon=True)
             self._thread.start()
         return self

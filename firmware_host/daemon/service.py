@@ -34,6 +34,7 @@ What stops it: ``stop`` being set (SIGTERM / SIGINT in the CLI), a finite source
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import logging
 import os
@@ -103,12 +104,14 @@ def check_sink_urls(urls: Sequence[str], **sink_kwargs: Any) -> None:
         announces the rig's own).
     """
     for k, url in enumerate(urls):
-        if "cameras" in parse_url(url).query:
-            raise DaemonConfigError("the daemon announces the rig's camera names itself; remove cameras= from "
-                                    "the URL", key=f"sinks[{k}]")
-        try:
+        try:  # parse_url first: a URL it refuses (a key given twice) must not leave as a traceback
+            if "cameras" in parse_url(url).query:
+                raise DaemonConfigError("the daemon announces the rig's camera names itself; remove cameras= from "
+                                        "the URL", key=f"sinks[{k}]")
             sink_class(url).from_url(url, **{**sink_kwargs, "cameras": ("first", "second")})  # type: ignore[attr-defined]
-        except FirmwareHostError as e:
+        except DaemonConfigError:
+            raise
+        except (FirmwareHostError, ValueError) as e:
             raise DaemonConfigError(str(e), key=f"sinks[{k}]") from None
 
 
@@ -466,6 +469,7 @@ class Daemon:
                     except FirmwareHostError as e:  # the real rig id or camera names do not fit this sink
                         raise DaemonConfigError(str(e), key=f"sinks[{new.sinks.index(url)}]") from None
         # Accepted: swap, touching only what changed (nothing below raises).
+        old_status_file = self.config.health.status_file
         self.config = new
         if "estimator" in changed:  # (then ``estimator`` is a new one, or None)
             if self._estimator is not None:
@@ -480,6 +484,13 @@ class Daemon:
         if "health" in changed:
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0
+            if old_status_file and old_status_file != new.health.status_file:
+                # left in place it would read "running" for ever, frozen, to a monitor still watching it
+                try:
+                    os.unlink(old_status_file)
+                except OSError as e:
+                    if e.errno != errno.ENOENT:
+                        _log.warning("cannot remove the old status file %s: %s", old_status_file, e)
         if "rig.url" in changed:
             self._backoff_s = new.rig.reopen_min_s  # a new rig is tried at once, then from the start of its backoff
         elif "rig" in changed:
@@ -538,7 +549,10 @@ class Daemon:
                 self._status_file_failing = False
             except (OSError, ValueError) as e:
                 if not self._status_file_failing:  # once until it works again, not every tick
-                    _log.warning("cannot write the status file %s: %s", path, e)
+                    hint = (" (the ghnerf unit writes only under /run/ghnerf and /var/lib/ghnerf: add the folder "
+                            "with ReadWritePaths= in systemctl edit ghnerf)"
+                            if isinstance(e, OSError) and e.errno in (errno.EROFS, errno.EACCES) else "")
+                    _log.warning("cannot write the status file %s: %s%s", path, e, hint)
                 self._status_file_failing = True
 
     def _wait(self, stop: threading.Event, seconds: float) -> bool:

@@ -48,7 +48,10 @@ class SinkUrl:
 
 
 def parse_url(url: str) -> SinkUrl:
-    parts = urlsplit(url)
+    try:
+        parts = urlsplit(url)
+    except (ValueError, TypeError) as e:  # e.g. "Invalid IPv6 URL": an unclosed [
+        raise SinkConfigError(url, "url", url, f"cannot be parsed: {e}") from e
     if not parts.scheme:
         raise SinkConfigError(url, "scheme", "", "expected e.g. serial://, usb://, udp://, vmc://, file://, memory://")
     query: dict[str, str] = {}

@@ -52,6 +52,7 @@ def test_importing_sinks_loads_no_backend_library() -> None:
         ("memory://?status_s=inf", {}, "status_s", "inf"),
         ("memory://?status_s=1e12", {}, "status_s", 1e12),
         ("memory://?fps=nan", {}, "fps", "nan"),
+        ("udp://[::1:9870", {}, "url", "udp://[::1:9870"),
     ],
 )
 def test_config_errors_name_url_field_and_value(url: str, kw: dict, field: str, value: object) -> None:

@@ -38,6 +38,9 @@ def test_validate_config_prints_the_full_tree(tmp_path, capsys):
 @pytest.mark.parametrize("data, message", [
     ({"sinks": ["udp://127.0.0.1:9870"], "rig": {"url": "sim://", "stall": 3}}, "rig.stall: unknown key"),
     ({"sinks": ["udp://127.0.0.1:9870?fps=fast"], "rig": {"url": "sim://"}}, "sinks[0]: "),
+    # these two left as tracebacks, exit 1, which systemd restarts
+    ({"sinks": ["memory://", "udp://127.0.0.1:9870?send_2d=1&send_2d=0"], "rig": {"url": "sim://"}}, "sinks[1]: "),
+    ({"sinks": ["udp://[::1:9870"], "rig": {"url": "sim://"}}, "sinks[0]: "),
 ])
 def test_bad_config_is_one_line_and_exit_2(tmp_path, capsys, data, message):
     path = _write(tmp_path, data)

@@ -166,3 +166,19 @@ def test_wakes_often_pings_at_half_the_watchdog(notify_socket):
         wd.check()
         clock.t += 0.5
     assert len(ticks) == 40 and wd.pings == 2  # at 0 s and at 15 s
+
+
+def test_the_time_before_start_is_not_a_hang():
+    # the model loads between the watchdog's construction and its start: that took tens of seconds
+    # and the first tick reported a hang with every thread's stack
+    now = [100.0]
+    wd = HangWatchdog(SystemdNotifier({}), allowance_s=1.0, interval_s=0.001, clock=lambda: now[0])
+    assert wd._interval == 0.01  # not woken every millisecond
+    now[0] += 40.0
+    wd.start()
+    try:
+        assert wd.check()
+        now[0] += 2.0
+        assert not wd.check()  # a real hang still shows
+    finally:
+        wd.stop()

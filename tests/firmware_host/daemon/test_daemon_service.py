@@ -373,9 +373,14 @@ def test_a_reload_of_the_estimator_and_health_keeps_the_rig_open(sim_url, tmp_pa
         data = _config_dict(sim_url, tmp_path)
         data["estimator"]["smoothing"] = {"beta": 3.0}
         data["health"]["slow_estimate_s"] = 0.4
+        data["health"]["status_file"] = str(tmp_path / "moved.json")
+        assert (tmp_path / "status.json").exists()
         configs.next = daemon_config_from_dict(data)
         run.daemon.request_reload()
         wait_until(lambda: run.daemon.health.reloads == 1, timeout=60, what="the reload")
+        # the old report is removed, not left saying "running" for ever
+        wait_until(lambda: (tmp_path / "moved.json").exists(), timeout=60, what="the moved status file")
+        assert not (tmp_path / "status.json").exists()
         seen = run.daemon.health.pairs_estimated
         wait_until(lambda: run.daemon.health.pairs_estimated > seen + 5, timeout=60, what="pairs after the reload")
         after = run.daemon._estimator
