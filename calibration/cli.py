@@ -226,6 +226,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
             for folder, image in zip(folders, pair.images):  # both, so a view one camera missed stays a pair
                 if not cv2.imwrite(str(folder / f"{name}.png"), image):
                     raise CaptureError(f"{folder / name}.png: cannot write the image")
+                if args.floor:  # --force: the view replaced may have been a .jpg; two floors stop the solve
+                    for stale in (folder / f"{name}{suffix}" for suffix in IMAGE_SUFFIXES if suffix != ".png"):
+                        stale.unlink(missing_ok=True)
             kept += 1
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
@@ -371,7 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("synth", help="render the calibration views of a known rig (no cameras needed)")
     p.add_argument("--out", required=True)
-    p.add_argument("--rig", help="the rig to film (default: a 0.6 m pair at 1.4 m, ghcal.render.example_rig)")
+    p.add_argument("--rig", help="the rig to film (default: a 0.6 m pair at 1.4 m, calibration.render.example_rig)")
     p.add_argument("--board")
     p.add_argument("--count", type=_positive_int, default=15, help="views both cameras see (default 15)")
     p.add_argument("--edge-count", type=_count, default=6, help="views per camera in its image corners (default 6)")

@@ -1,7 +1,7 @@
 """anipose / aniposelib ``calibration.toml``: read with ``tomllib``, written by a small emitter.
 
-Layout (as aniposelib's ``CameraGroup.dump`` writes it): one table per camera, in file
-order, plus an optional ``[metadata]`` table::
+Layout (as aniposelib's ``CameraGroup.dump`` writes it): one table per camera, taken in
+sorted section order (as aniposelib's ``CameraGroup.load``), plus an optional ``[metadata]`` table::
 
     [cam_0]
     name = "left"
@@ -19,8 +19,8 @@ Keys read per camera table: ``name`` (string or integer; default the table name)
 ``size``, ``matrix``, ``distortions``, ``rotation``, ``translation`` (all required) and
 ``fisheye`` (if true the file is rejected: the fisheye model is not supported). Other
 keys are ignored. Every top-level table except ``metadata`` is a camera; from
-``metadata`` only an optional ``rig_id`` string is read (our exporter writes it;
-aniposelib ignores it).
+``metadata`` an optional ``rig_id`` string and our ``working_volume_min``/``max`` are read
+(our exporter writes them; aniposelib ignores them).
 
 Units: anipose's translations are in whatever unit the calibration board was measured
 in (often millimetres), so ``units_to_metres`` is a required argument. The world frame

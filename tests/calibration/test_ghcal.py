@@ -272,6 +272,12 @@ def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys
     assert cli.main(["capture", "--url", f"replay://{floor_take}?speed=free", "--board", str(board),
                      "--out", str(out), "--floor"]) == 2
     assert "already has a floor view" in capsys.readouterr().err
+    # --force replaces a floor view of another image type too: left beside it, it stopped the solve
+    for cam in ("left", "right"):
+        (out / cam / "floor.png").rename(out / cam / "floor.jpg")
+    assert cli.main(["capture", "--url", f"replay://{floor_take}?speed=free", "--board", str(board),
+                     "--out", str(out), "--floor", "--force"]) == 0
+    assert sorted(p.name for p in (out / "left").glob("floor.*")) == ["floor.png"]
     assert cli.main(["capture", "--url", f"replay://{tmp_path / 'nothing'}", "--out", str(out)]) == 2
     assert "does not exist" in capsys.readouterr().err
 
