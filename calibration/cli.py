@@ -51,6 +51,11 @@ class UsageError(CalibrationError):
 #: were when it came to rest (median and 90th percentile over the corners, pixels).
 STILL_MEDIAN_PX = 0.3
 STILL_P90_PX = 1.5
+#: ``capture`` (hand-held views): the board counts as held still within these; looser than the floor's,
+#: for a hand's tremor, tight enough that a board swept through the view (blurred, and seen at two
+#: places by cameras that are not triggered together) never passes.
+HELD_MEDIAN_PX = 1.0
+HELD_P90_PX = 2.5
 #: What the joint stream's HELLO carries (firmware_host.protocol.constants; this package may not import it).
 MAX_RIG_ID_LEN = 32
 MAX_CAMERA_NAME_LEN = 16
@@ -141,7 +146,8 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ capture
-def _still_since(view: BoardView | None, reference: BoardView | None) -> bool:
+def _still_since(view: BoardView | None, reference: BoardView | None, *, median_px: float = STILL_MEDIAN_PX,
+                 p90_px: float = STILL_P90_PX) -> bool:
     """Whether ``view`` shows the board where ``reference`` did: robust to detection jitter (a corner or
     two rebuilt from flickering markers), strict about drift (compared with the start, not the last frame)."""
     if view is None or reference is None:
@@ -151,7 +157,13 @@ def _still_since(view: BoardView | None, reference: BoardView | None) -> bool:
         return False
     moves = np.linalg.norm(view.corners[np.searchsorted(view.ids, ids)]
                            - reference.corners[np.searchsorted(reference.ids, ids)], axis=1)
-    return float(np.median(moves)) < STILL_MEDIAN_PX and float(np.percentile(moves, 90)) < STILL_P90_PX
+    return float(np.median(moves)) < median_px and float(np.percentile(moves, 90)) < p90_px
+
+
+def _held_since(found: list[BoardView | None], reference: list[BoardView | None]) -> bool:
+    """Every camera sees the board as it did in ``reference`` (held still), or missed it both times."""
+    return all((v is None and r is None) or _still_since(v, r, median_px=HELD_MEDIAN_PX, p90_px=HELD_P90_PX)
+               for v, r in zip(found, reference))
 
 
 def _largest_move_px(view: BoardView | None, last: BoardView | None) -> float | None:
@@ -177,6 +189,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
     last_views: list[BoardView | None] = [None, None]
     steady_since = 0.0  # when the board came to rest (read only once ``resting`` is set)
     resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
+    holding: list[BoardView | None] = [None, None]  # the views where the hand-held board stopped
+    holding_since = 0.0
     source = drivers.create_rig_source(args.url)
     try:
         source.open()
@@ -214,7 +228,15 @@ def cmd_capture(args: argparse.Namespace) -> int:
                     steady_since = now
                     continue
             else:
-                if now - last_kept_at < args.interval_s or all(v is None for v in found):
+                if all(v is None for v in found):
+                    holding = [None, None]
+                    continue
+                # Held still for --still-s in both cameras: a view taken mid-sweep is blurred, and
+                # cameras not triggered together see the board at two places
+                if not _held_since(found, holding):
+                    holding, holding_since = found, now
+                    continue
+                if now - holding_since < args.still_s or now - last_kept_at < args.interval_s:
                     continue
                 moves = [_largest_move_px(v, last) for v, last in zip(found, last_views)]
                 known = [m for m in moves if m is not None]
@@ -391,6 +413,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steady-s", type=_seconds, default=1.0, help="--floor: how long the board must lie still")
     p.add_argument("--force", action="store_true", help="--floor: replace an existing floor view")
     p.add_argument("--interval-s", type=_seconds, default=1.0, help="at least this long between kept views")
+    p.add_argument("--still-s", type=_seconds, default=0.3,
+                   help="how long the hand-held board must be held still before its view is kept (default 0.3)")
     p.add_argument("--min-move-px", type=_seconds, default=40.0,
                    help="a corner must move (or the board turn) this far between kept views (default 40 px)")
     p.add_argument("--max-seconds", type=_seconds, default=600.0)

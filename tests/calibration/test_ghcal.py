@@ -282,6 +282,35 @@ def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys
     assert "does not exist" in capsys.readouterr().err
 
 
+def test_capture_keeps_a_hand_held_view_only_once_it_is_held_still(truth, tmp_path, capsys):
+    # a board swept through the view was kept mid-sweep (blurred; two untriggered cameras see it at two places)
+    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=7, floor_view=False)
+
+    def shifted(image: np.ndarray, dx: float) -> np.ndarray:
+        return cv2.warpAffine(image, np.float32([[1, 0, dx], [0, 1, 0]]), (image.shape[1], image.shape[0]),
+                              borderMode=cv2.BORDER_REPLICATE)
+
+    sweep = {cam: {f"{k:02d}": shifted(v["000"], 8.0 * k - 40.0) for k in range(10)} for cam, v in images.items()}
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    take = tmp_path / "sweep"
+    take.mkdir()
+    _write_recording(take, truth, sweep, period_s=0.1)  # 80 px a second, never still
+    assert BoardDetector(BOARD).detect(sweep["left"]["09"]) is not None
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board),
+                     "--out", str(tmp_path / "swept"), "--count", "1", "--interval-s", "0"]) == 2
+    assert "kept 0 of 1 views" in capsys.readouterr().err
+    held = {cam: {**frames, **{f"{k:02d}": frames["09"] for k in range(10, 15)}} for cam, frames in sweep.items()}
+    take2 = tmp_path / "held"
+    take2.mkdir()
+    _write_recording(take2, truth, held, period_s=0.1)  # then held for 0.5 s
+    out = tmp_path / "kept"
+    assert cli.main(["capture", "--url", f"replay://{take2}?speed=free", "--board", str(board),
+                     "--out", str(out), "--count", "1", "--interval-s", "0"]) == 0
+    saved = cv2.imread(str(out / "left" / "000.png"), cv2.IMREAD_GRAYSCALE)
+    assert np.array_equal(saved, held["left"]["09"])
+
+
 def test_a_view_dropped_from_the_intrinsics_is_not_used_for_the_pair(views):
     smeared = {cam: dict(v) for cam, v in views.items()}
     view = smeared["left"]["004"]
