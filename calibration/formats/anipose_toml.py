@@ -19,8 +19,9 @@ Keys read per camera table: ``name`` (string or integer; default the table name)
 ``size``, ``matrix``, ``distortions``, ``rotation``, ``translation`` (all required) and
 ``fisheye`` (if true the file is rejected: the fisheye model is not supported). Other
 keys are ignored. Every top-level table except ``metadata`` is a camera; from
-``metadata`` an optional ``rig_id`` string and our ``working_volume_min``/``max`` are read
-(our exporter writes them; aniposelib ignores them).
+``metadata`` an optional ``rig_id`` string, our ``working_volume_min``/``max`` and our
+``units_to_metres`` (checked against the argument) are read (our exporter writes them;
+aniposelib ignores them).
 
 Units: anipose's translations are in whatever unit the calibration board was measured
 in (often millimetres), so ``units_to_metres`` is a required argument. The world frame
@@ -83,6 +84,13 @@ def read_anipose_toml(
     except tomllib.TOMLDecodeError as e:
         raise fail(path, None, f"invalid TOML: {e}") from e
 
+    declared = doc.get("metadata", {}).get("units_to_metres") if isinstance(doc.get("metadata"), dict) else None
+    if declared is not None:  # ours: the unit the writer was given; aniposelib files say nothing
+        if isinstance(declared, bool) or not isinstance(declared, (int, float)) or not declared > 0:
+            raise fail(path, "metadata.units_to_metres", f"must be a positive number, got {show(declared)}")
+        if not math.isclose(float(declared), units, rel_tol=1e-9):
+            raise fail(path, "metadata.units_to_metres", f"the file says {declared!r} m per unit, the argument "
+                                                         f"{units!r}: the rig would be scaled by their ratio")
     cameras, fields = [], []
     file_rig_id, file_volume = None, None
     # aniposelib's CameraGroup.load takes the cameras in sorted key order, whatever the file's order
@@ -202,11 +210,12 @@ def dumps_anipose_toml(rig: Rig, *, units_to_metres: float) -> str:
             f"translation = {_toml_array(cam.t / units)}",
         ]
     lines += ["", "[metadata]", "adjusted = false", f"rig_id = {_toml_string(rig.rig_id)}",
+              f"units_to_metres = {units!r}",  # read back and checked against the reader's argument
               f"working_volume_min = {_toml_array(rig.volume.min_corner)}",  # metres, whatever the translations'
               f"working_volume_max = {_toml_array(rig.volume.max_corner)}", ""]
     return "\n".join(lines)
 
 
 def write_anipose_toml(rig: Rig, path: str | os.PathLike, *, units_to_metres: float) -> None:
-    """Write ``rig`` as an anipose ``calibration.toml`` (atomically); the working volume is not stored."""
+    """Write ``rig`` as an anipose ``calibration.toml`` (atomically)."""
     write_text_atomic(path, dumps_anipose_toml(rig, units_to_metres=units_to_metres))

@@ -39,6 +39,7 @@ file atomically.
 """
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any, Sequence
@@ -183,17 +184,25 @@ def _camera(node, path, field: str, *, default_name: str, image_size, units: flo
 
 
 def _units(root, path, given: float | None, needed: bool) -> float:
-    """``units_to_metres``: the argument, else the file's key, else 1.0 when no translation needs it."""
+    """``units_to_metres``: the argument, else the file's key, else 1.0 when no translation needs it.
+    An argument that contradicts the file's key is an error: one of them is wrong, and the rig would be
+    scaled by their ratio (a baseline of 75 m)."""
     if given is not None:
-        return check_units(given)
+        given = check_units(given)
     if "units_to_metres" in _keys(root):
         value = _numeric(root.getNode("units_to_metres"), path, "units_to_metres")
         if value is None or value.size != 1:
             raise fail(path, "units_to_metres", f"must be a number, got {show(value)}")
         try:
-            return check_units(float(value.reshape(-1)[0]))
+            declared = check_units(float(value.reshape(-1)[0]))
         except Exception as e:
             raise fail(path, "units_to_metres", str(e)) from None
+        if given is not None and not math.isclose(given, declared, rel_tol=1e-9):
+            raise fail(path, "units_to_metres", f"the file says {declared!r} m per unit, the argument {given!r}: "
+                                                "leave the argument out to use the file's")
+        return declared
+    if given is not None:
+        return given
     if needed:
         raise fail(path, "T", "OpenCV calibrations give T in the units of the board's square size (often "
                               "millimetres) and this file does not say which: pass units_to_metres (0.001 for mm, "

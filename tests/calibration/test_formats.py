@@ -73,6 +73,30 @@ def test_our_yaml_carries_its_units_and_working_volume(rig, tmp_path, units):
     np.testing.assert_allclose(read_opencv_camera(tmp_path / "one.yml").t, rig.cameras[1].t, atol=1e-12)
 
 
+def test_a_principal_point_outside_the_image_is_refused(rig, tmp_path):
+    # a stereo_calib file has no image size: the caller's, if of another size, went through
+    write_opencv_rig(rig, tmp_path / "rig.yaml")
+    text = (tmp_path / "rig.yaml").read_text()
+    cam = rig.cameras[0]
+    half = text.replace(f"image_width: {cam.width}\n      image_height: {cam.height}",
+                        f"image_width: {cam.width // 2}\n      image_height: {cam.height // 2}", 1)
+    assert half != text
+    (tmp_path / "half.yaml").write_text(half)
+    with pytest.raises(RigFileError, match=r"cameras\[0\]\.camera_matrix.*principal point .* lies outside the 640x400"):
+        read_opencv_rig(tmp_path / "half.yaml")
+
+
+def test_an_argument_that_contradicts_the_files_units_is_refused(rig, tmp_path):
+    # the argument won silently: a rig written in millimetres and read "in metres" had a 75 m baseline
+    write_opencv_rig(rig, tmp_path / "rig.yaml", units_to_metres=0.001)
+    with pytest.raises(RigFileError, match=r"units_to_metres.*the file says 0.001 m per unit, the argument 1.0"):
+        read_opencv_rig(tmp_path / "rig.yaml", units_to_metres=1.0)
+    assert_cameras_close(rig, read_opencv_rig(tmp_path / "rig.yaml", units_to_metres=0.001))
+    write_anipose_toml(rig, tmp_path / "calibration.toml", units_to_metres=0.001)
+    with pytest.raises(RigFileError, match=r"metadata\.units_to_metres.*the file says 0.001"):
+        read_anipose_toml(tmp_path / "calibration.toml", units_to_metres=1.0)
+
+
 def test_a_single_camera_file_with_a_translation_needs_its_units(tmp_path):
     (tmp_path / "cam.yml").write_text("%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\n"
                                       "camera_matrix: [[600, 0, 320], [0, 600, 240], [0, 0, 1]]\n"
@@ -97,7 +121,7 @@ def test_toml_volume_round_trips_and_cameras_come_in_anipose_order(rig, tmp_path
 
 
 def test_a_dozen_cameras_keep_their_order_through_toml(rig, tmp_path):
-    cams = tuple(Camera(f"c{i}", 640, 480, rig.cameras[0].K, rig.cameras[0].dist, rig.cameras[0].R,
+    cams = tuple(Camera(f"c{i}", rig.cameras[0].width, rig.cameras[0].height, rig.cameras[0].K, rig.cameras[0].dist, rig.cameras[0].R,
                         rig.cameras[0].t + [0.1 * i, 0.0, 0.0]) for i in range(12))
     path = tmp_path / "many.toml"
     write_anipose_toml(Rig(cams, rig.volume), path, units_to_metres=1.0)
