@@ -38,6 +38,7 @@ class ProtocolSink(Sink):
         self._last_capture_us = 0
         self._resync = True
         self._fault = int(Fault.OK)
+        self._fault_since_status = int(Fault.OK)  # the last non-OK fault set since the previous STATUS
         self._status_due_us: Optional[int] = None
         self._window = (0, 0)  # (time of last STATUS, frames sent by then)
         self._prev_stats: Optional[SinkStats] = None
@@ -76,8 +77,14 @@ class ProtocolSink(Sink):
         return total
 
     def set_fault(self, fault: int) -> None:
-        """Report a daemon-level fault (e.g. Fault.ESTIMATOR_STALLED) in STATUS; Fault.OK clears it."""
-        self._fault = int(fault)
+        """Report a daemon-level fault (e.g. Fault.ESTIMATOR_STALLED) in STATUS; Fault.OK clears it.
+
+        A fault cleared again before the next STATUS is still reported in it, once: a camera that
+        vanished and came back between two STATUS packets was never seen by the receiver."""
+        with self._cond:  # the worker takes the latch when it writes STATUS
+            self._fault = int(fault)
+            if self._fault != Fault.OK:
+                self._fault_since_status = self._fault
 
     # ---- Sink hooks --------------------------------------------------------------
 
@@ -142,8 +149,10 @@ class ProtocolSink(Sink):
         t0, sent0 = self._window
         fps_centi = round(100 * (s.sent - sent0) * 1e6 / (now - t0)) if t0 and now > t0 else 0
         self._window, self._prev_stats = (now, s.sent), s
-        if self._fault != Fault.OK:
-            fault = self._fault
+        with self._cond:
+            current, latched, self._fault_since_status = self._fault, self._fault_since_status, int(Fault.OK)
+        if current != Fault.OK or latched != Fault.OK:
+            fault = current if current != Fault.OK else latched
         elif s.decimated > prev.decimated:
             fault = int(Fault.RATE_LIMITED)
         elif s.dropped_queue > prev.dropped_queue:

@@ -156,6 +156,26 @@ def test_status_and_hello_keep_coming_while_no_frame_does() -> None:
     assert stats.sent == 1 and stats.accounted == stats.submitted
 
 
+def test_a_fault_that_clears_before_the_next_status_is_still_reported_once() -> None:
+    # a camera that vanished and came back between two STATUS packets was never seen by the receiver
+    sink = open_sink("memory://?status_s=0.05", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.read()  # the connect's HELLO + STATUS
+        sink.set_fault(Fault.CAMERA_FAULT)
+        sink.set_fault(Fault.OK)  # cleared at once: no STATUS went out in between
+        faults: list = []
+
+        def two_statuses() -> bool:
+            faults.extend(m.fault for m in messages_of(sink.read()) if isinstance(m, Status))
+            return len(faults) >= 2
+
+        wait_until(two_statuses, what="two STATUS packets")
+    finally:
+        sink.close()
+    assert faults[:2] == [Fault.CAMERA_FAULT, Fault.OK]
+
+
 def test_send_2d_needs_the_camera_names_it_numbers_and_budgets() -> None:
     with pytest.raises(SinkConfigError) as info:
         open_sink("memory://?send_2d=1")
