@@ -367,6 +367,20 @@ def _memory_writer() -> cv2.FileStorage:
     return cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | cv2.FILE_STORAGE_FORMAT_YAML)
 
 
+def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str]]) -> None:
+    """OpenCV writes strings unquoted: ``true``, ``null`` or a trailing space come back as a number, nothing or
+    another name. Refuse to write a file whose strings (field -> (node, value)) would not read back as given."""
+    fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    try:
+        for field, (where, value) in expected.items():
+            node = where(fs.root())
+            if not (node.isString() and node.string() == value):
+                raise fail(path, field, f"{value!r} would not read back from OpenCV YAML as written (OpenCV "
+                                        "does not quote it): choose another")
+    finally:
+        fs.release()
+
+
 def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
     """Write the multi-camera layout (``rig_id``, ``units_to_metres``, the working volume, ``cameras``).
 
@@ -389,7 +403,12 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
         _write_camera(fs, cam, units, with_name=True)
         fs.endWriteStruct()
     fs.endWriteStruct()
-    write_text_atomic(path, fs.releaseAndGetString())
+    text = fs.releaseAndGetString()
+    strings = {"rig_id": (lambda root: root.getNode("rig_id"), rig.rig_id)}
+    for i, cam in enumerate(rig.cameras):
+        strings[f"cameras[{i}].name"] = (lambda root, i=i: root.getNode("cameras").at(i).getNode("name"), cam.name)
+    _check_strings_read_back(text, path, strings)
+    write_text_atomic(path, text)
 
 
 def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_metres: float = 1.0) -> None:
@@ -399,4 +418,6 @@ def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_met
     fs = _memory_writer()
     _write_camera(fs, camera, units, with_name=True)
     fs.write("units_to_metres", float(units))
-    write_text_atomic(path, fs.releaseAndGetString())
+    text = fs.releaseAndGetString()
+    _check_strings_read_back(text, path, {"name": (lambda root: root.getNode("name"), camera.name)})
+    write_text_atomic(path, text)

@@ -1,6 +1,7 @@
 """Foreign calibration formats: round trips, real-world layouts checked with OpenCV, errors name file + field."""
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import cv2
@@ -84,6 +85,19 @@ def test_a_principal_point_outside_the_image_is_refused(rig, tmp_path):
     (tmp_path / "half.yaml").write_text(half)
     with pytest.raises(RigFileError, match=r"cameras\[0\]\.camera_matrix.*principal point .* lies outside the 640x400"):
         read_opencv_rig(tmp_path / "half.yaml")
+
+
+@pytest.mark.parametrize("name", ["true", "null", "a b "])
+def test_a_name_opencv_would_not_read_back_is_refused_before_writing(rig, tmp_path, name):
+    # OpenCV writes strings unquoted: a camera called "true" came back as 1.0, a rig id "null" as nothing
+    renamed = Rig((dataclasses.replace(rig.cameras[0], name=name),) + rig.cameras[1:], rig.volume, rig_id=rig.rig_id)
+    with pytest.raises(RigFileError, match=r"cameras\[0\]\.name.*would not read back"):
+        write_opencv_rig(renamed, tmp_path / "rig.yaml")
+    assert not (tmp_path / "rig.yaml").exists()
+    with pytest.raises(RigFileError, match=r"rig_id.*would not read back"):
+        write_opencv_rig(Rig(rig.cameras, rig.volume, rig_id=name), tmp_path / "rig.yaml")
+    with pytest.raises(RigFileError, match=r"'name'.*would not read back"):
+        write_opencv_camera(renamed.cameras[0], tmp_path / "one.yml")
 
 
 def test_an_argument_that_contradicts_the_files_units_is_refused(rig, tmp_path):
