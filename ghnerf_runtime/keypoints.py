@@ -52,7 +52,6 @@ Pure functions; numpy and OpenCV only.
 """
 from __future__ import annotations
 
-import math
 import numbers
 from dataclasses import dataclass
 from typing import Literal
@@ -401,7 +400,7 @@ def model_to_image_pixels(uv: np.ndarray, camera: Camera, roi: Roi, model_size: 
     safe = uv if valid is None else np.where(np.asarray(valid, bool)[..., None], uv, 0.0)
     xy = camera_normalized(crop.pixels_to_normalized(safe), crop, camera)
     mapped = camera.normalized_to_pixels(xy, distort=distort)
-    if distort and math.isfinite(camera.fold_radius):
+    if distort:
         inside = camera.within_lens(xy)
         if not inside.all():
             valid = inside if valid is None else _valid_like(valid, mapped) & inside

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from ghnerf_runtime.errors import GeometryError, RigFileError
-from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 
 log = logging.getLogger(__name__)
@@ -288,8 +288,7 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
             f"got {R.tolist()}",
         )
     if dev > 1e-12:
-        u, _, vt = np.linalg.svd(R)
-        R = u @ vt
+        R = nearest_rotation(R)
     t = chk.array(raw["t"], f"{field}.t", (3,), "3-vector of numbers")
     try:
         return Camera(name, width, height, K, dist=dist, R=R, t=t)

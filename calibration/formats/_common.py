@@ -7,13 +7,14 @@ from typing import Any, Sequence
 import numpy as np
 
 from ghnerf_runtime.errors import GeometryError, RigFileError
-from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import ROTATION_TOLERANCE
 
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: Foreign files often print rotations with few digits: rotations whose ``|R R^T - I|``
-#: is within this are accepted and snapped to the nearest rotation (SVD).
-FOREIGN_ROTATION_TOLERANCE = 1e-4
+#: is within this are accepted and snapped to the nearest rotation, as in our own rig file.
+FOREIGN_ROTATION_TOLERANCE = ROTATION_TOLERANCE
 
 #: Default working volume: distance in front of the cameras and cube side, metres.
 DEFAULT_VOLUME_DISTANCE_M = 2.5
@@ -78,8 +79,7 @@ def rotation(path, field: str, value: Any) -> np.ndarray:
         raise fail(path, field, f"must be a rotation (orthonormal, det +1): max |R R^T - I| = {dev:.3g}, "
                                 f"det = {det:.6g}, got {show(R)}")
     if dev > 1e-12:
-        u, _, vt = np.linalg.svd(R)
-        R = u @ vt
+        R = nearest_rotation(R)
     return R
 
 

@@ -195,8 +195,12 @@ class Camera:
                 settled = np.all(np.abs(step) < 1e-10, axis=-1) | ~(np.sum(xy * xy, axis=-1) < limit2)
                 if np.all(settled):  # most calls need few steps
                     break
-            residual = np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
-            bad = ~(residual <= tolerance) | ~(np.sum(xy * xy, axis=-1) < self.fold_radius**2)
+
+            def unsolved(xy: np.ndarray) -> np.ndarray:
+                residual = np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
+                return ~(residual <= tolerance) | ~self.within_lens(xy)
+
+            bad = unsolved(xy)
             # The residual step overshoots where the lens model's slope passes 2 (strong pincushion,
             # mixed signs) and diverges on points it can reach: solve those again. Points well past
             # what the fold reaches stay out (a folding wide lens has many, every frame).
@@ -206,8 +210,7 @@ class Camera:
                 retry = bad & (np.hypot(xy_d[..., 0], xy_d[..., 1]) < 1.05 * reach)
             if np.any(retry):
                 xy[retry] = self._undistort_newton(xy_d[retry])
-                residual = np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
-                bad = ~(residual <= tolerance) | ~(np.sum(xy * xy, axis=-1) < self.fold_radius**2)
+                bad = unsolved(xy)
         if np.any(bad):
             xy[bad] = np.nan
         return xy
@@ -430,6 +433,13 @@ class Camera:
         K = A @ self.K @ Rz.T
         K[1, 0] = 0.0  # exactly 0 by the checks above; drop the -0.0
         return self._derived(K=K, R=Rz @ self.R, t=Rz @ self.t, width=size[0], height=size[1])
+
+
+def nearest_rotation(R) -> np.ndarray:
+    """The rotation closest to a nearly orthonormal ``(3, 3)`` matrix (SVD): what a file printed with a few
+    digits, or a device stored in float32, meant."""
+    u, _, vt = np.linalg.svd(np.asarray(R, dtype=np.float64))
+    return u @ vt
 
 
 def look_at(eye, target, up=(0.0, -1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:

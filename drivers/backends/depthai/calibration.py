@@ -24,7 +24,7 @@ import depthai as dai
 
 from drivers.errors import RigInitializationError
 from ghnerf_runtime.errors import GeometryError
-from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume
+from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, nearest_rotation
 
 #: Where a person can stand in front of a level-mounted OAK (rig frame, metres): used
 #: when the calibration comes from the device; a rig file carries its own.
@@ -98,8 +98,7 @@ def rig_from_calibration(
     except RuntimeError as e:
         raise RigInitializationError(f"device calibration has no extrinsics {left.name} -> {right.name}: {e}") from e
     R_lr, t_lr = T[:3, :3], T[:3, 3]
-    u, _, vt = np.linalg.svd(R_lr)  # the EEPROM stores float32: snap back onto a rotation
-    R_lr = u @ vt
+    R_lr = nearest_rotation(R_lr)  # the EEPROM stores float32: snap back onto a rotation
     centre_r = -R_lr.T @ t_lr  # right camera centre in the left camera's frame
     # The left camera's frame is the level rig frame rolled: X_cam = roll @ X_rig + origin. Turned
     # counterclockwise (seen from behind), the camera's x axis turns from the rig's right towards up.
