@@ -31,7 +31,9 @@ Anti-aliasing
     low-pass than a Gaussian pyramid (``cv2.pyrDown``), but measured ~3x cheaper
     (0.12 ms against 0.34 ms for 640x480 -> 160x120 on the 2-core test box),
     and the bilinear remap adds its own smoothing. Window sides are kept
-    multiples of ``2^L`` because OpenCV's INTER_AREA is ~10x slower on odd sizes.
+    multiples of ``2^L`` because OpenCV's INTER_AREA is ~10x slower on odd sizes;
+    where the frame's side is not one, the window passes the frame's edge and is
+    padded by repeating it (what lies past the edge still shows zeros).
 
 Speed
     Maps are built by ``cv2.initUndistortRectifyMap`` (same lens model as
@@ -355,7 +357,8 @@ class CropMaps:
     Attributes:
         map_x, map_y: ``(S, S)`` float32.
         level: 2x reductions applied to the window before the remap (0 = none).
-        window: ``(x0, y0, x1, y1)`` of the frame region that is read, pixels.
+        window: ``(x0, y0, x1, y1)`` of the frame region that is read, pixels; ``x1``/``y1`` pass the
+            frame's edge (its edge repeated) where the frame's side is not a multiple of ``2^level``.
         image_size: ``(width, height)`` the frame must have.
         fixed: the same maps in OpenCV's fixed-point format (``cv2.convertMaps``), which
             :func:`apply_crop_maps` uses because it remaps ~2x faster.
@@ -402,7 +405,13 @@ def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _aligned_span(lo: int, hi: int, limit: int, factor: int) -> tuple[int, int]:
-    """``[lo, hi)`` clipped to ``[0, limit)`` and grown (or, at the frame edge, shrunk) to a multiple of ``factor``."""
+    """``[lo, hi)`` clipped to ``[0, limit)`` and grown to a multiple of ``factor``.
+
+    The span stays inside the frame where it fits; where it does not (a window as wide as a frame
+    whose side is not a multiple of ``factor``), it starts at 0 and ends past ``limit``: the reader
+    pads the frame there by repeating its edge, so the box steps' last pixel is frame alone, rather than
+    dropping the frame pixels that do not fill a box.
+    """
     lo, hi = max(lo, 0), min(hi, limit)
     if hi - lo < factor:
         lo, hi = 0, limit
@@ -411,7 +420,7 @@ def _aligned_span(lo: int, hi: int, limit: int, factor: int) -> tuple[int, int]:
         return lo, lo + span
     if hi - span >= 0:
         return hi - span, hi
-    return lo, lo + (hi - lo) // factor * factor
+    return 0, span
 
 
 def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antialias: bool = True,
@@ -452,6 +461,11 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
     tx, ty = map_x[touched], map_y[touched]
     x0, x1 = _aligned_span(int(np.floor(tx.min())) - pad, int(np.ceil(tx.max())) + pad + 1, camera.width, factor)
     y0, y1 = _aligned_span(int(np.floor(ty.min())) - pad, int(np.ceil(ty.max())) + pad + 1, camera.height, factor)
+    if x1 > camera.width or y1 > camera.height:
+        # The window's edge-repeating padding is not frame: what lies past the frame's edge shows zeros, as
+        # everywhere else outside it.
+        past = (map_x > camera.width - 0.5) | (map_y > camera.height - 0.5)
+        map_x[past] = map_y[past] = _OUTSIDE
     map_x = ((map_x - x0 + 0.5) / factor - 0.5).astype(np.float32)
     map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32)
     return CropMaps(map_x, map_y, level, (x0, y0, x1, y1), camera.size, cv2.convertMaps(map_x, map_y, cv2.CV_16SC2),
@@ -475,6 +489,8 @@ def apply_crop_maps(image: np.ndarray, maps: CropMaps) -> np.ndarray:
                          f"for these maps, got {image.shape}")
     x0, y0, x1, y1 = maps.window
     src = image[y0:y1, x0:x1]
+    if x1 > image.shape[1] or y1 > image.shape[0]:  # the box steps' window reaches past the frame (_aligned_span)
+        src = cv2.copyMakeBorder(src, 0, y1 - y0 - src.shape[0], 0, x1 - x0 - src.shape[1], cv2.BORDER_REPLICATE)
     for _ in range(maps.level):
         src = cv2.resize(src, (src.shape[1] // 2, src.shape[0] // 2), interpolation=cv2.INTER_AREA)
     return cv2.remap(src, maps.fixed[0], maps.fixed[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,

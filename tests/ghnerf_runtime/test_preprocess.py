@@ -237,6 +237,26 @@ def test_inside_marks_exactly_the_pixels_that_show_the_frame(roi, antialias):
     assert (~maps.inside).sum() > 0 and np.mean(out[~maps.inside] < 200) > 0.97
 
 
+def test_box_steps_keep_the_frame_edge_when_its_side_is_not_a_multiple_of_the_factor():
+    """A crop wider than a 1000x600 frame at 16x (four box steps): neither side is a multiple of 16. The window
+    once dropped the frame's last 8 columns and rows (shown as padding); now it reads them, its box steps padded
+    by the frame's edge, and past the edge the model input is zeros as without the box steps."""
+    K1 = np.array([[700.0, 0.0, 499.5], [0.0, 700.0, 299.5], [0.0, 0.0, 1.0]])
+    cam = Camera("wide", 1000, 600, K1, np.zeros(5), np.eye(3), np.zeros(3))
+    roi = Roi(0, -200, 1000)
+    maps = build_undistort_crop_maps(cam, roi, 64)
+    assert maps.level == 4 and maps.window == (0, 0, 1008, 608)
+    frame = np.full((600, 1000), 200, np.uint8)
+    out = apply_crop_maps(frame, maps)
+    plain = apply_crop_maps(frame, build_undistort_crop_maps(cam, roi, 64, antialias=False))
+    # The last column samples frame x = 991.7 and row 50 frame y = 592.2: frame (they read zeros before).
+    assert np.all(out[13:51, -1] == 200) and np.all(out[50, :] == 200)
+    # Below the frame (y >= 600) zeros; from row 13 down, pixel for pixel what the plain remap shows (row 12
+    # blends the top edge with the padding in both, a little differently).
+    assert np.all(out[51:] == 0) and np.array_equal(out[13:], plain[13:])
+    assert np.all(out[maps.inside] == 200) and maps.inside[13:51, 1:].all()  # column 0 blends the left edge
+
+
 # ---------------------------------------------------------------- normalisation
 def test_preprocess_image_channel_order_and_normalisation():
     cam = make_camera()
