@@ -40,7 +40,11 @@ Options:
 Timing. Each camera's capture is opened by :meth:`open`, then owned by that camera's thread, which
 grabs, decodes and queues its frames and releases the capture when it stops (never while it is
 being read). A live camera's frame is stamped with the host's monotonic clock when its grab
-returns. Webcams are not synchronised in hardware, so a pair is two frames within ``tolerance_ms``:
+returns, except where both cameras are V4L2 devices (Linux webcams): there each frame carries the
+kernel's own stamp of its capture (``CAP_PROP_POS_MSEC``, on the same monotonic clock), which a busy
+host's late wake-ups do not delay. A driver stamp that is not on that clock (in the future, or more than
+``DRIVER_STAMP_MAX_AGE_S`` before the grab) turns driver stamps off for both cameras, with a warning,
+so the two are never stamped differently for long. Webcams are not synchronised in hardware, so a pair is two frames within ``tolerance_ms``:
 the default pairs each frame with the other camera's nearest, so a fast movement is seen up to
 half a frame apart by the two cameras (an OAK's shared trigger avoids that). That default leaves
 no margin for a camera slower than it reports (auto-exposure in dim light can halve a webcam's
@@ -61,6 +65,7 @@ can follow, so a longer video is not played out to its end.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import threading
 import time
@@ -97,6 +102,8 @@ APIS = {"any": cv2.CAP_ANY, "v4l2": cv2.CAP_V4L2, "ffmpeg": cv2.CAP_FFMPEG, "gst
 FALLBACK_FPS = 30.0
 #: The nominal rig's field of view bounds (those of :class:`drivers.sim.placement.RigPlacement`).
 HFOV_RANGE = (20.0, 150.0)
+#: A V4L2 driver's frame stamp older than this at the grab is not on the host's monotonic clock.
+DRIVER_STAMP_MAX_AGE_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -204,6 +211,7 @@ class _Camera:
         self.index_queued = -1  # the last queued frame's index (written under the source's lock)
         self.at_pass_end = False  # loop: waiting for the other video to end its pass (under the lock)
         self.last_stamp_ns = -1  # the last queued frame's (written under the source's lock)
+        self.v4l2 = False  # a live V4L2 device: its driver stamps frames on the host's monotonic clock
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
 
     # The capture is opened on the caller's thread (errors are raised from open()), then only the
@@ -222,6 +230,7 @@ class _Camera:
                    "(a webcam's second node is its metadata: use /dev/v4l/by-id/ paths)"))
         self.capture = capture
         if not self.video:
+            self.v4l2 = _backend_name(capture) == "V4L2"
             # FOURCC first: a webcam offers its larger sizes only compressed.
             if o.fourcc:
                 capture.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*o.fourcc))
@@ -308,11 +317,35 @@ class _Camera:
                 if src._stop.wait(max(0.0, (stamp - src.clock.now_ns()) / 1e9)):
                     return
             else:
-                stamp = max(grabbed_ns, self.last_stamp_ns + 1)
+                stamp = max(self._live_stamp(grabbed_ns), self.last_stamp_ns + 1)
             if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
                             wait=self.video and src.pairing.policy is DropPolicy.ALL):
                 return
             self.index += 1
+
+
+    def _live_stamp(self, grabbed_ns: int) -> int:
+        """The frame's driver stamp where the source uses them (module docstring, Timing), else the grab's."""
+        src = self.source
+        if not src.driver_stamps:
+            return grabbed_ns
+        ms = float(self.capture.get(cv2.CAP_PROP_POS_MSEC))
+        driver_ns = round(ms * 1e6) if math.isfinite(ms) else -1
+        if grabbed_ns - DRIVER_STAMP_MAX_AGE_S * 1e9 <= driver_ns <= grabbed_ns:
+            return driver_ns
+        src.driver_stamps = False
+        log.warning("camera %r (%s): its driver's frame stamp (%.3f ms) is not on the host's monotonic clock (%.3f "
+                    "ms at the grab): both cameras' frames are stamped at their grab from now on", self.name,
+                    self.spec, ms, grabbed_ns / 1e6)
+        return grabbed_ns
+
+
+def _backend_name(capture: Any) -> str:
+    """The capture's OpenCV backend (``"V4L2"``, ``"FFMPEG"``, ...); ``""`` where it does not say."""
+    try:
+        return str(capture.getBackendName())
+    except Exception:  # noqa: BLE001 - a backend without a name, or a stand-in: no driver stamps
+        return ""
 
 
 def _bgr(image: np.ndarray) -> np.ndarray | None:
@@ -361,6 +394,7 @@ class OpenCVRigSource(RigSource):
         self._ended: set[str] = set()  # videos that ended
         self._pass_frames: dict[str, list[int]] = {}  # loop: frames in each pass, per video
         self.frames_overflowed = 0  # live frames dropped from a full queue before the reader took them
+        self.driver_stamps = False  # both cameras are V4L2 devices whose driver stamps are used (Timing)
 
     @classmethod
     def from_url(cls, url: RigUrl, *, rig: Rig | None = None,
@@ -402,6 +436,7 @@ class OpenCVRigSource(RigSource):
                 rate = min(min((r for r in (cam.fps, o.fps) if r), default=FALLBACK_FPS) for cam in self._cameras)
                 self.pairing = PairingConfig(tolerance_ms=500.0 / rate, policy=o.policy)
             self._anchor_ns = self.clock.now_ns()
+            self.driver_stamps = all(cam.v4l2 for cam in self._cameras)
             for cam in self._cameras:
                 cam.thread.start()
             sizes = self._first_frames()

@@ -239,6 +239,62 @@ def test_a_gstreamer_pipeline_is_a_live_camera(webcam):
     assert webcam.made[0].target == pipeline and webcam.made[0].api == cv2.CAP_GSTREAMER
 
 
+class _V4l2Webcam(_Webcam):
+    """A Linux webcam: its driver stamps each frame (``CAP_PROP_POS_MSEC``) ``lag_ms`` before the grab returns, on
+    the host's monotonic clock plus ``offset_ms`` (a driver on another clock)."""
+
+    lag_ms = {0: 3.0, 1: 11.0}
+    offset_ms = 0.0
+
+    def __init__(self, target, api) -> None:
+        super().__init__(target, api)
+        self.stamp_ms, self.stamped = 0.0, set()
+
+    def getBackendName(self) -> str:  # noqa: N802 - OpenCV's name
+        return "V4L2"
+
+    def grab(self) -> bool:
+        ok = super().grab()
+        self.stamp_ms = time.monotonic_ns() / 1e6 - self.lag_ms[self.target] + self.offset_ms
+        self.stamped.add(round(self.stamp_ms * 1e6))
+        return ok
+
+    def get(self, prop) -> float:
+        return self.stamp_ms if prop == cv2.CAP_PROP_POS_MSEC else super().get(prop)
+
+
+def _read_pairs(url, factory, n):
+    with open_rig(url, capture_factory=factory) as source:
+        return [source.read(timeout_s=5.0) for _ in range(n)], source.driver_stamps
+
+
+def test_two_v4l2_webcams_are_stamped_by_their_drivers(webcam):
+    _Webcam.made.clear()
+    pairs, used = _read_pairs("opencv://?first=0&second=1&policy=all&tolerance_ms=30", _V4l2Webcam, 4)
+    left, right = _Webcam.made
+    assert used
+    for pair in pairs:  # the driver's stamp of each frame, not the host's clock at the grab
+        assert pair.frames[0].timestamp_ns in left.stamped and pair.frames[1].timestamp_ns in right.stamped
+
+
+def test_driver_stamps_off_the_monotonic_clock_or_one_camera_without_them_mean_grab_stamps(webcam, caplog):
+    _Webcam.made.clear()
+    _V4l2Webcam.offset_ms = 1.7e12  # a driver stamping on the wall clock
+    try:
+        pairs, used = _read_pairs("opencv://?first=0&second=1&policy=all&tolerance_ms=30", _V4l2Webcam, 3)
+    finally:
+        _V4l2Webcam.offset_ms = 0.0
+    assert not used and "is not on the host's monotonic clock" in caplog.text
+    stamped = set().union(*(cam.stamped for cam in _Webcam.made))
+    assert all(f.timestamp_ns not in stamped and abs(f.timestamp_ns - time.monotonic_ns()) < 60e9
+               for pair in pairs for f in pair.frames)
+
+    _Webcam.made.clear()  # a V4L2 webcam beside a network stream: neither uses driver stamps
+    pairs, used = _read_pairs("opencv://?first=0&second=1&policy=all&tolerance_ms=30",
+                              lambda target, api: (_V4l2Webcam if target == 0 else _Webcam)(target, api), 3)
+    assert not used and all(pair.frames[0].timestamp_ns not in _Webcam.made[0].stamped for pair in pairs)
+
+
 def test_each_camera_is_asked_its_own_rig_size(takes, webcam, tmp_path):
     loaded = load_rig(takes[0][2])
     mixed = tmp_path / "mixed.json"
