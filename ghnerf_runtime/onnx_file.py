@@ -9,12 +9,13 @@ their own whose workers do not spin, or on the global pool once one is installed
 from __future__ import annotations
 
 import logging
+import re
 import threading
 from pathlib import Path
 
 from ghnerf_runtime.errors import ModelError, ModelLoadError
 
-__all__ = ["open_onnx_file", "ensure_global_pool", "global_pool_threads"]
+__all__ = ["open_onnx_file", "ensure_global_pool", "global_pool_threads", "load_failure"]
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,25 @@ def global_pool_threads() -> int | None:
     return _global_pool_threads
 
 
+# "Load model from <path> failed:" and the C++ source line and signature onnxruntime puts before its reason
+_ORT_LOAD_PREFIX = re.compile(r"Load model from .*? failed:\s*")
+_ORT_SOURCE = re.compile(r"\S+\.(?:cc|cpp|h|hpp):\d+ [^()]*\([^()]*\)\s*")
+_REASON_CHARS = 500
+
+
+def load_failure(error: Exception, path: Path, what: str) -> ModelLoadError:
+    """The error for an onnxruntime that cannot load ``path``: its reason, without the C++ source location
+    and function signature that would take up the message (an IR version or opset too new, an unknown
+    operator), and "truncated or corrupt?" only where the file did not parse."""
+    text = _ORT_SOURCE.sub("", _ORT_LOAD_PREFIX.sub("", " ".join(str(error).split())))
+    if len(text) > _REASON_CHARS:  # onnxruntime says why at the end
+        text = "..." + text[-_REASON_CHARS:]
+    damaged = "; truncated or corrupt?" if "protobuf" in text.lower() else ""  # else: it parsed, and said why
+    size = path.stat().st_size if path.is_file() else 0
+    return ModelLoadError(f"onnxruntime cannot load the {what} ({size} bytes{damaged}): {type(error).__name__}: "
+                          f"{text}", path=str(path))
+
+
 def open_onnx_file(path: str | Path, threads: int, what: str):
     """``(onnxruntime.InferenceSession, custom metadata dict)`` of ``path``; ``what`` names the file in the
     error when it is missing (``ModelLoadError``, also when onnxruntime cannot load it)."""
@@ -62,8 +82,5 @@ def open_onnx_file(path: str | Path, threads: int, what: str):
     try:
         sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
     except Exception as e:  # onnxruntime's own exception types
-        text = " ".join(str(e).split())
-        damaged = "; truncated or corrupt?" if "protobuf" in text.lower() else ""  # else: it parsed, and said why
-        raise ModelLoadError(f"onnxruntime cannot load the {what} ({path.stat().st_size} bytes{damaged}): "
-                             f"{type(e).__name__}: {text[:500]}", path=str(path)) from e
+        raise load_failure(e, path, what) from e
     return sess, dict(sess.get_modelmeta().custom_metadata_map)

@@ -71,7 +71,7 @@ from ghnerf_runtime.contract import (
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.novel_painter import NovelPainter
-from ghnerf_runtime.onnx_file import ensure_global_pool
+from ghnerf_runtime.onnx_file import ensure_global_pool, load_failure
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
@@ -143,9 +143,7 @@ def _open(path: Path, config: SessionConfig) -> ort.InferenceSession:
     except ModelError:
         raise
     except Exception as e:  # onnxruntime raises its own (pybind) exception types
-        size = path.stat().st_size
-        raise ModelLoadError(f"onnxruntime cannot load it ({size} bytes; truncated or corrupt?): "
-                             f"{type(e).__name__}: {str(e).strip()[:300]}", path=str(path)) from e
+        raise load_failure(e, path, "graph file") from e
 
 
 def _contract_of(sess: ort.InferenceSession, path: Path) -> tuple[ModelContract, str, str]:
@@ -241,10 +239,13 @@ class ModelSession:
         for graph in dict.fromkeys(graphs):
             wanted = config.precision_overrides.get(
                 graph, AUTO_PRECISION.get(graph, "fp32") if config.precision == "auto" else config.precision)
+            # fp32 asked for by name is fp32 or an error; int8 falls back to fp32 where a graph has no int8 file
+            only_fp32 = wanted == "fp32" and (graph in config.precision_overrides or config.precision == "fp32")
             path = cls._find(folder, graph, wanted)
             if path is None:
                 by_meta = by_meta if by_meta is not None else cls._scan(folder, config)
-                path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or by_meta.get((graph, "int8"))
+                path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or (
+                    None if only_fp32 else by_meta.get((graph, "int8")))
             if path is None:
                 raise ModelLoadError(f"no file for graph {graph!r} (looked for {_file_name(graph, wanted)}, "
                                      f"{_file_name(graph, 'fp32')} and ghnerf.graph metadata)", path=str(folder))
@@ -255,6 +256,10 @@ class ModelSession:
             if file_graph != graph:
                 raise ModelContractError(f"holds graph {file_graph!r}, loaded as {graph!r}", path=str(path),
                                          key=META_PREFIX + "graph")
+            if only_fp32 and precision != "fp32":
+                raise ModelContractError(f"holds {precision} weights, and fp32 was asked for graph {graph!r} "
+                                         f"(session.precision / precision_overrides)", path=str(path),
+                                         key=META_PREFIX + "precision")
             _check_io(sess, file_contract, graph, path)
             if contract is None:
                 contract, first = file_contract, path
@@ -271,6 +276,7 @@ class ModelSession:
         session = cls(sessions, contract, files, cls._read_card(folder))
         if skeleton_prior and (folder / PRIOR_FILE).is_file():
             session.skeleton_prior = SkeletonPrior.load(folder / PRIOR_FILE, threads=1)  # one small MLP row: no pool
+            session.skeleton_prior.check_encoder(folder)
         painter_file = NovelPainter.find(folder, config.precision)
         if novel_painter and painter_file is not None:
             session.novel_painter = NovelPainter.load(painter_file, threads=config.threads)

@@ -19,6 +19,7 @@ onnxruntime and numpy only; never torch.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -231,6 +232,31 @@ class SkeletonPrior:
             raise ModelContractError(f"outputs {list(OUTPUTS)} expected, the file has {sorted(outs)}",
                                      path=str(path), key=OUTPUTS[0])
         return cls(sess, path, meta)
+
+    def check_encoder(self, folder: Path) -> None:
+        """Refuse a prior whose encoder file in ``folder`` is not the one it was trained on.
+
+        The prior learns one encoder's 2D errors (docs/training.md, "The skeleton prior"): beside another
+        encoder it would correct mistakes that encoder does not make. Files that do not record their
+        encoder (``encoder_file``, ``encoder_sha256``) are taken as they are.
+
+        Raises:
+            ModelContractError: the recorded encoder file is missing or has other bytes.
+        """
+        name, digest = self.metadata.get(META_PREFIX + "encoder_file"), self.metadata.get(META_PREFIX + "encoder_sha256")
+        if not name or not digest:
+            return
+        encoder = Path(folder) / name
+        fix = (f"retrain it on this encoder (python -m training.skeleton_prior --model-dir {folder} ...) or run "
+               f"without it (joints3d.skeleton_prior: off)")
+        if not encoder.is_file():
+            raise ModelContractError(f"was trained on the 2D joints of {name}, which {folder} does not have: {fix}",
+                                     path=str(self.path), key=META_PREFIX + "encoder_file")
+        actual = hashlib.sha256(encoder.read_bytes()).hexdigest()
+        if actual != digest:
+            raise ModelContractError(f"was trained on the 2D joints of {name} with sha256 {digest[:12]}..., and "
+                                     f"{encoder} is another file (sha256 {actual[:12]}...): {fix}",
+                                     path=str(self.path), key=META_PREFIX + "encoder_sha256")
 
     def estimate(self, uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray,
                  P: Sequence | np.ndarray, flip_test: bool = True) -> SkeletonEstimate:

@@ -179,6 +179,33 @@ def test_corrupt_file_refused(tiny_model_dir, tmp_path, damage):
     assert isinstance(e.value, OSError)
 
 
+def test_a_file_onnxruntime_parses_but_refuses_says_why(tiny_model_dir, tmp_path):
+    """An IR version too new: onnxruntime's reason, not its C++ signature, and no "corrupt?" for a file that parsed."""
+    onnx = pytest.importorskip("onnx")
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    model = onnx.load(str(folder / "encoder.onnx"))
+    model.ir_version = 99
+    onnx.save(model, str(folder / "encoder.onnx"))
+    with pytest.raises(ModelLoadError) as e:
+        _load_encoder(folder)
+    assert "IR version: 99" in str(e.value) and "corrupt" not in str(e.value) and "::" not in str(e.value)
+
+
+def test_fp32_asked_for_never_loads_int8_weights(tiny_model_dir, tmp_path):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, "ghnerf.precision": "int8"})  # int8 under the fp32 name
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder, precision="fp32")
+    assert e.value.key == "ghnerf.precision" and "int8" in str(e.value) and "encoder.onnx" in str(e.value)
+    with pytest.raises(ModelContractError, match="ghnerf.precision"):
+        _load_encoder(folder, precision="int8", precision_overrides={"encoder": "fp32"})
+    assert _load_encoder(folder).files["encoder"].precision == "int8"  # auto takes what the folder has
+    (folder / "encoder.onnx").rename(folder / "enc-q.onnx")  # found by metadata: int8 is no fp32 either
+    with pytest.raises(ModelLoadError, match="no file for graph 'encoder'"):
+        _load_encoder(folder, precision="fp32")
+    assert _load_encoder(folder, precision="int8").files["encoder"].path.name == "enc-q.onnx"
+
+
 def test_missing_file_and_folder_refused(tiny_model_dir, tmp_path):
     folder = _copy(tiny_model_dir, tmp_path / "m")
     (folder / "volume.onnx").unlink()

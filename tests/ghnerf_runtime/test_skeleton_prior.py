@@ -308,6 +308,32 @@ def _config(folder: Path, **joints3d) -> EstimatorConfig:
                    joints3d=replace(cfg.joints3d, **joints3d), presence=replace(cfg.presence, enabled=False))
 
 
+def test_a_prior_beside_another_encoder_than_its_own_is_refused(model_with_prior, tiny_prior, tmp_path):
+    """The prior learnt one encoder's 2D errors: the file it names must be the one it was trained on."""
+    import hashlib
+
+    from ghnerf_runtime.estimator import load_session
+    from training.skeleton_prior import export
+
+    folder = tmp_path / "m"
+    shutil.copytree(model_with_prior, folder)
+    digest = hashlib.sha256((folder / "encoder.onnx").read_bytes()).hexdigest()
+    export(tiny_prior.net, folder / FILE_NAME, {"trained_on": "test", "encoder_file": "encoder.onnx",
+                                                "encoder_sha256": digest})
+    cfg = _config(folder)
+    assert load_session(cfg).skeleton_prior is not None  # its own encoder: taken
+    (folder / "encoder.onnx").write_bytes((folder / "encoder.onnx").read_bytes() + b"\0")  # another file
+    with pytest.raises(ModelContractError) as e:
+        load_session(cfg)
+    assert e.value.key == "ghnerf_skeleton.encoder_sha256" and "encoder.onnx" in str(e.value)
+    assert "retrain it" in str(e.value) and str(folder / FILE_NAME) in str(e.value)
+    export(tiny_prior.net, folder / FILE_NAME, {"trained_on": "test", "encoder_file": "human.int8.onnx",
+                                                "encoder_sha256": digest})
+    with pytest.raises(ModelContractError, match="human.int8.onnx, which .* does not have") as e:
+        load_session(cfg)
+    assert e.value.key == "ghnerf_skeleton.encoder_file"
+
+
 def test_estimator_uses_the_prior_when_the_folder_has_one(model_with_prior, tmp_path):
     from ghnerf_runtime.estimator import Estimator, load_session
 
