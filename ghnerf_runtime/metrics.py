@@ -249,8 +249,10 @@ def pck(pred_2d, true_2d, valid, torso_joints: tuple[int, int] = (NECK, MID_HIP)
     3. otherwise none: the sample's joints are excluded and counted in
        ``num_unreferenced``. A zero-length reference counts as none.
 
-    The fallback diagonal is about 1.2x the neck--mid-hip distance of an upright adult, so
-    it is slightly more lenient; it only applies when a torso joint is missing.
+    The fallback diagonal only applies when a torso joint is missing. With the shoulders and
+    hips visible it is about 1.2x the neck--mid-hip distance of an upright adult seen from the
+    front, so slightly more lenient; with only two close torso joints it can be much shorter,
+    so stricter (docs/metrics.md).
 
     Joints whose truth is not valid are excluded and counted (``num_missing``). Joints with
     valid truth but no prediction (``pred_valid`` False, or a non-finite prediction) are
