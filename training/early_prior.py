@@ -40,7 +40,7 @@ def export_keypoint_graph(train_config: dict, data: str | Path, calib_scenes: in
     from training.export.export import example_inputs, export_graph
     from training.export.quantize import calibration_feeds, quantize_all
     from training.model import GHNeRF
-    from training.pipeline import _scene_inputs, calibration_items
+    from training.pipeline import CALIB_RAY_STRIDE, CALIB_RAYS_PER_TARGET, _scene_inputs, calibration_items
     from training.pretrain_human import load_human
     from training.train import build_config
 
@@ -52,8 +52,10 @@ def export_keypoint_graph(train_config: dict, data: str | Path, calib_scenes: in
     out = Path(out_dir)
     fp32 = {graph: export_graph(model, graph, out / f"{graph}.onnx", example_inputs(model))}
     calib_ds = MultiViewDataset(data, "train", TargetConfig())
-    calib = [_scene_inputs(model, item, ray_stride=2, seed=i) for i, item in calibration_items(calib_ds, calib_scenes)]
-    int8 = quantize_all(fp32, out, calibration_feeds(model, calib, (graph,), rays_per_target=2048))
+    # calibrated as the quantize stage calibrates (its constants), so the int8 file comes out the same
+    calib = [_scene_inputs(model, item, ray_stride=CALIB_RAY_STRIDE, seed=i)
+             for i, item in calibration_items(calib_ds, calib_scenes)]
+    int8 = quantize_all(fp32, out, calibration_feeds(model, calib, (graph,), rays_per_target=CALIB_RAYS_PER_TARGET))
     return {f"{graph}.onnx": fp32[graph], f"{graph}.int8.onnx": int8[graph]}
 
 

@@ -10,6 +10,7 @@ import math
 import os
 import platform
 import sys
+import threading
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -20,6 +21,24 @@ def sha256(path: str | Path, chunk: int = 1 << 20) -> str:
         while block := fh.read(chunk):
             h.update(block)
     return h.hexdigest()
+
+
+def write_atomic(path: str | Path, data: str | bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and ``os.replace``: a crash leaves
+    the old file or the new one, never half of one (the pipeline's stamps and cards are read back as JSON)."""
+    path = Path(path)
+    # not tempfile.mkstemp: its 0600 mode would follow the file into place; pid and thread: lanes write at once
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{threading.get_ident()}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data.encode() if isinstance(data, str) else data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
 
 
 def hardware() -> dict[str, Any]:
@@ -66,10 +85,8 @@ def _fmt(v: Any, digits: int = 3) -> str:
 def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path]:
     """Write ``model_card.json`` and ``MODEL_CARD.md`` into ``out_dir``; returns both paths."""
     out_dir = Path(out_dir)
-    jpath = out_dir / "model_card.json"
-    jpath.write_text(json.dumps(card, indent=1, default=str))
-    mpath = out_dir / "MODEL_CARD.md"
-    mpath.write_text(render_markdown(card))
+    jpath = write_atomic(out_dir / "model_card.json", json.dumps(card, indent=1, default=str))
+    mpath = write_atomic(out_dir / "MODEL_CARD.md", render_markdown(card))
     return jpath, mpath
 
 

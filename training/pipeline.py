@@ -11,6 +11,8 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
 4. ``export_<variant>``: fp32 ONNX graphs (``training.export``) + a weights-only torch file.
 5. ``quantize_<variant>``: static int8 QDQ graphs, calibrated on training-split scenes (real frames and
    cameras), and the int8-vs-fp32 parity on a held-out scene.
+   Both write into ``<variant>.staging`` beside the model folder and move their files in only once the parity
+   checks pass: a failure leaves the folder as it was and the rejected files in the staging folder.
 6. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
    split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks, ``--prior-set``
    overrides them: ~18 min on two cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``,
@@ -21,7 +23,11 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
    folder's skeleton prior) and the baseline (onnx fp32, int8) into ``metrics_<variant>.json``; a new prior
    re-evaluates.
 8. ``card``: ``metrics.json``, ``model_card.json`` + ``MODEL_CARD.md`` (metrics, parity, hashes, hardware,
-   wall times), once every variant is evaluated.
+   wall times), once every variant is evaluated; the painter's section (``training.learnt_fill export
+   --card-dir``) is kept while its files are unchanged.
+
+Stamps, cards and the JSON files the pipeline writes are replaced whole (a temporary file and ``os.replace``);
+a stamp that cannot be read counts as not done.
 
 ``--variants baseline`` takes one variant through its stages now (e.g. while the other still trains).
 
@@ -248,6 +254,14 @@ def _digest(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def _write_atomic(path: Path, data: str | bytes) -> None:
+    """``data`` into ``path`` whole or not at all (:func:`training.model_card.write_atomic`): a stamp or a
+    request cut in half by a crash would stop every later run."""
+    from training.model_card import write_atomic
+
+    write_atomic(path, data)
+
+
 class Stages:
     """Stamp files ``<out>/.stages/<stage>.json``: the inputs' digest, outputs with sha256, wall time."""
 
@@ -255,10 +269,23 @@ class Stages:
         self.dir = out / ".stages"
         self.dir.mkdir(parents=True, exist_ok=True)
         self.force = {s for f in force for s in STAGES if s == f or s.startswith(f + "_")}
+        self._warned: set[Path] = set()
 
     def stamp(self, name: str) -> dict | None:
+        """The stage's stamp; None when it has none, or an unreadable one (the stage runs again)."""
         p = self.dir / f"{name}.json"
-        return json.loads(p.read_text()) if p.exists() else None
+        if not p.exists():
+            return None
+        try:
+            s = json.loads(p.read_text())
+            if not isinstance(s, dict):
+                raise ValueError(f"a JSON {type(s).__name__}, not an object")
+        except (OSError, ValueError) as e:  # (stamps made before they were written atomically, or damaged since)
+            if p not in self._warned:
+                self._warned.add(p)
+                log.warning("stage %s: its stamp %s is unreadable (%s); the stage counts as not done", name, p, e)
+            return None
+        return s
 
     def done(self, name: str, inputs: Any) -> dict | None:
         """The stamp when the stage is finished for these inputs and its outputs are intact."""
@@ -287,7 +314,8 @@ class Stages:
         s = {"inputs": _digest(inputs), "outputs": {str(p): sha256(p) for p in outputs},
              "wall_s": round(time.monotonic() - t0, 1), "info": info,
              "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
-        (self.dir / f"{name}.json").write_text(json.dumps(s, indent=1, default=str))
+        _write_atomic(self.dir / f"{name}.json", json.dumps(s, indent=1, default=str))
+        self._warned.discard(self.dir / f"{name}.json")
         log.info("stage %s: done in %.0f s", name, s["wall_s"])
         return s
 
@@ -310,7 +338,7 @@ def _data_marker_ok(cfg: PipelineConfig, run: Path) -> bool:
 
 def _mark_data(cfg: PipelineConfig, run: Path) -> None:
     run.mkdir(parents=True, exist_ok=True)
-    (run / DATA_MARKER).write_text(_dataset_sha(cfg) + "\n")
+    _write_atomic(run / DATA_MARKER, _dataset_sha(cfg) + "\n")
 
 
 def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = ()) -> list[str]:
@@ -328,7 +356,7 @@ def _pretrain_cmd(cfg: PipelineConfig, variant: str, extra: list[str] = ()) -> l
     to ``<run>/requested.json`` first."""
     run = pretrain_dir(cfg, variant)
     run.mkdir(parents=True, exist_ok=True)
-    (run / "requested.json").write_text(json.dumps(pretrain_inputs(cfg, variant), indent=1))
+    _write_atomic(run / "requested.json", json.dumps(pretrain_inputs(cfg, variant), indent=1))
     cmd = [sys.executable, "-m", "training.pretrain_human", "--config", str(run / "requested.json"),
            "--out", str(run), "--resume", "--quiet"]
     for o in extra:
@@ -464,7 +492,7 @@ def _early_prior_step(cfg: PipelineConfig, variants: list[str], threads: int, da
     folder.mkdir(parents=True, exist_ok=True)
     job = {"train_config": tc, "data": str(cfg.data), "calib_scenes": cfg.calib_scenes, "threads": threads,
            "prior_argv": prior_argv(cfg, folder, folder / FILE_NAME, threads), "request": request}
-    (folder / JOB_FILE).write_text(json.dumps(job, indent=1, default=str) + "\n")
+    _write_atomic(folder / JOB_FILE, json.dumps(job, indent=1, default=str) + "\n")
     return LaneStep([sys.executable, "-m", "training.early_prior", str(folder / JOB_FILE)],
                     folder / "early_prior.log", run_folder=False, optional=True)
 
@@ -807,7 +835,87 @@ def calibration_items(dataset, scenes: int) -> list[tuple[int, dict]]:
     return [(i, dataset[i]) for i in range(0, step * scenes, step)[:scenes]]
 
 
+#: ``<variant>`` + this: where the export and quantize stages write and check their files before they replace
+#: the model folder's (beside it, so on the same file system for ``os.replace``).
+STAGING_SUFFIX = ".staging"
+#: The quantize stage's calibration inputs (``training.early_prior`` calibrates its keypoint graph alike).
+CALIB_RAY_STRIDE = 2
+CALIB_RAYS_PER_TARGET = 2048
+
+
+def export_settings() -> dict:
+    """What the export stage's files follow besides the checkpoint (a stamp input): another opset or contract
+    (its version, its graphs) exports again."""
+    from ghnerf_runtime.contract import CONTRACT_VERSION, GRAPH_NAMES
+    from training.export.export import DEFAULT_OPSET
+
+    return {"opset": DEFAULT_OPSET, "contract": CONTRACT_VERSION, "graphs": list(GRAPH_NAMES)}
+
+
+def quantize_settings() -> dict:
+    """What the quantize stage's files follow besides the fp32 graphs and the calibration scenes (a stamp input):
+    the per-graph policies (``HEAD_OUTPUT_LAYERS``, ``ENCODER_FLOAT_LAYERS`` and the rest, as ``POLICIES``
+    holds them) and the calibration rays."""
+    from training.export.quantize import POLICIES
+
+    return {"policies": {g: None if p is None else asdict(p) for g, p in sorted(POLICIES.items())},
+            "ray_stride": CALIB_RAY_STRIDE, "rays_per_target": CALIB_RAYS_PER_TARGET}
+
+
+def _staging(folder: Path) -> Path:
+    """An empty ``<folder>.staging`` (a failed attempt's files, kept for inspection, go now)."""
+    import shutil
+
+    staging = folder.with_name(folder.name + STAGING_SUFFIX)
+    if staging.exists():
+        log.info("removing %s (the rejected files of an earlier attempt)", staging)
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True)
+    return staging
+
+
+def _rejected(folder: Path, staging: Path, e: BaseException) -> None:
+    """Say that a stage's failure left ``folder`` as it was, and where its files are; a failed parity check is
+    raised again with that said (the pipeline prints it as the error)."""
+    from training.export.parity import ParityError
+
+    where = f"{folder} is left as it was; the rejected files are kept in {staging}"
+    if isinstance(e, ParityError):
+        raise ParityError(f"{e} ({where})") from e
+    log.error("%s", where)
+
+
+def _move_into(staging: Path, folder: Path, files: list[Path]) -> list[Path]:
+    """Move ``files`` (in ``staging``, checked) over the model folder's, one ``os.replace`` each, then remove
+    ``staging``; returns their paths in ``folder``."""
+    import shutil
+
+    folder.mkdir(parents=True, exist_ok=True)
+    moved = []
+    for f in files:
+        os.replace(f, folder / f.name)
+        moved.append(folder / f.name)
+    shutil.rmtree(staging)
+    return moved
+
+
+def _drop_stale_int8(folder: Path, fresh: dict[str, Path]) -> None:
+    """Before fp32 graphs that differ from the folder's replace them: remove the ``<graph>.int8.onnx`` quantized
+    from the old ones, which the runtime would load beside the new graphs as one model (``auto`` precision mixes
+    int8 and fp32 files) until the quantize stage remakes them; a missing one falls back to the fp32 file."""
+    from training.model_card import sha256
+
+    for graph, new in fresh.items():
+        old, int8 = folder / new.name, folder / f"{graph}.int8.onnx"
+        if int8.exists() and not (old.exists() and sha256(old) == sha256(new)):
+            log.info("removing %s: quantized from the %s being replaced (the quantize stage makes it anew)",
+                     int8, old.name)
+            int8.unlink()
+
+
 def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
+    """fp32 graphs and weights, written and checked in ``<variant>.staging``, then moved over the folder's: a
+    failed check or a crash leaves the model folder's files as they were."""
     import torch
 
     from training.export.export import example_inputs, export_all
@@ -818,20 +926,27 @@ def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Pa
     for variant, ckpt in trained.items():
         model, ck = load_model(ckpt)
         folder = cfg.out / variant
-        folder.mkdir(parents=True, exist_ok=True)
-        weights = folder / f"{variant}.pt"
-        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": ck["step"]},
-                   weights)  # weights only: loads with torch.load(weights_only=True)
-        paths = export_all(model, folder, inputs=example_inputs(model))
-        info[variant] = {"fp32_parity_torch_vs_ort": torch_vs_ort(
-            model, paths, example_inputs(model, targets=3, ray_stride=4, seed=1))}
-        if cfg.parity_check:
-            check_fp32_parity(info[variant]["fp32_parity_torch_vs_ort"], f"{folder}/")
-        outputs += [weights, *paths.values()]
+        staging = _staging(folder)
+        try:
+            weights = staging / f"{variant}.pt"
+            torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": ck["step"]},
+                       weights)  # weights only: loads with torch.load(weights_only=True)
+            paths = export_all(model, staging, inputs=example_inputs(model))
+            info[variant] = {"fp32_parity_torch_vs_ort": torch_vs_ort(
+                model, paths, example_inputs(model, targets=3, ray_stride=4, seed=1))}
+            if cfg.parity_check:
+                check_fp32_parity(info[variant]["fp32_parity_torch_vs_ort"], f"{staging}/")
+        except BaseException as e:
+            _rejected(folder, staging, e)
+            raise
+        _drop_stale_int8(folder, paths)
+        outputs += _move_into(staging, folder, [weights, *paths.values()])
     return outputs, info
 
 
 def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
+    """int8 graphs of the folder's fp32 ones, written and checked in ``<variant>.staging``, then moved over the
+    folder's (as :func:`stage_export`)."""
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
     from training.export.parity import check_int8_parity, int8_vs_fp32
@@ -846,15 +961,21 @@ def stage_quantize(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[
         folder = cfg.out / variant
         graphs = model.contract().graph_names
         fp32 = {g: folder / f"{g}.onnx" for g in graphs}
-        calib = [_scene_inputs(model, item, ray_stride=2, seed=i) for i, item in calibration_items(calib_ds,
-                                                                                                 cfg.calib_scenes)]
-        int8 = quantize_all(fp32, folder, calibration_feeds(model, calib, graphs, rays_per_target=2048))
-        parity_in = _scene_inputs(model, val_ds[0], ray_stride=model.config.heatmap_stride, targets=[0, 1])
-        info[variant] = {"int8_vs_fp32": int8_vs_fp32(fp32, int8, model.contract(), parity_in),
-                         "calibration_scenes": len(calib)}
-        if cfg.parity_check:
-            check_int8_parity(info[variant]["int8_vs_fp32"], f"{folder}: ")
-        outputs += list(int8.values())
+        calib = [_scene_inputs(model, item, ray_stride=CALIB_RAY_STRIDE, seed=i)
+                 for i, item in calibration_items(calib_ds, cfg.calib_scenes)]
+        staging = _staging(folder)
+        try:
+            int8 = quantize_all(fp32, staging, calibration_feeds(model, calib, graphs,
+                                                                 rays_per_target=CALIB_RAYS_PER_TARGET))
+            parity_in = _scene_inputs(model, val_ds[0], ray_stride=model.config.heatmap_stride, targets=[0, 1])
+            info[variant] = {"int8_vs_fp32": int8_vs_fp32(fp32, int8, model.contract(), parity_in),
+                             "calibration_scenes": len(calib)}
+            if cfg.parity_check:
+                check_int8_parity(info[variant]["int8_vs_fp32"], f"{staging}: ")
+        except BaseException as e:
+            _rejected(folder, staging, e)
+            raise
+        outputs += _move_into(staging, folder, list(int8.values()))
     return outputs, info
 
 
@@ -924,8 +1045,6 @@ def early_prior_request(cfg: PipelineConfig, keypoints: dict[str, str], data: An
 def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
     """Copy the early prior into the model folder when it was trained on this folder's keypoint graphs (same
     sha256) for the same request, and intact; False (nothing copied) otherwise."""
-    import shutil
-
     from training.early_prior import REQUEST_FILE
     from training.model_card import sha256
     from training.skeleton_prior import FILE_NAME
@@ -945,10 +1064,10 @@ def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
             log.info("prior: the early prior in %s is unreadable (%s); training it here", staged, e)
         return False
     out = folder / FILE_NAME
-    shutil.copyfile(prior, out)
+    _write_atomic(out, prior.read_bytes())  # (a small MLP) never half a prior beside the graphs
     report.update({"file": str(out), "trained_in": str(prior),
                    "trained_beside": "the joint run (training.early_prior, from the pretrained encoder)"})
-    out.with_suffix(".json").write_text(json.dumps(report, indent=1) + "\n")
+    _write_atomic(out.with_suffix(".json"), json.dumps(report, indent=1) + "\n")
     log.info("prior: taken from %s (trained beside the joint run on the same keypoint graphs)", staged)
     return True
 
@@ -1000,6 +1119,33 @@ def motion_mix(spec: dict) -> str:
     return ", ".join(f"{m} {100 * w / total:.0f} %" for m, w in zip(motions, weights))
 
 
+def kept_painter_sections(cfg: PipelineConfig) -> dict:
+    """The ``novel_painter`` sections of the folder's card (``training.model_card.add_painter_to_card``, not made
+    by the pipeline) whose files are still the ones the card recorded (same sha256), to carry into the new card;
+    a section whose files changed or went is dropped with a warning naming them."""
+    from training.model_card import sha256
+
+    try:
+        old = json.loads((cfg.out / "model_card.json").read_text())
+        sections, files = old.get("novel_painter") or {}, old.get("files") or {}
+    except (OSError, ValueError, AttributeError):
+        return {}  # no card yet (or an unreadable one: nothing of it to keep)
+    kept = {}
+    for variant, section in sections.items():
+        recorded = {k: v for k, v in files.items()
+                    if Path(k).parent.name == variant and Path(k).name.startswith("novel_painter")
+                    and k.endswith(".onnx")}
+        changed = sorted(str(cfg.out / k) for k, v in recorded.items() if not (cfg.out / k).is_file()
+                         or sha256(cfg.out / k) != (v.get("sha256") if isinstance(v, dict) else None))
+        if recorded and not changed:
+            kept[variant] = section
+        else:
+            log.warning("card: the novel_painter section of %s is dropped: %s", variant,
+                        f"{', '.join(changed)} changed or went since the card recorded them" if changed else
+                        f"the card records none of its files ({variant}/novel_painter*.onnx)")
+    return kept
+
+
 def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
     from training.model_card import hardware, sha256, write_card
     from training.skeleton_prior import card_summary
@@ -1010,7 +1156,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         m = json.loads((cfg.out / f"metrics_{v}.json").read_text())
         metrics["models"].update(m["models"])
         metrics.update({k: m[k] for k in ("data", "split", "pck_alpha", "pck_reference")})
-    (cfg.out / "metrics.json").write_text(json.dumps(metrics, indent=1))
+    _write_atomic(cfg.out / "metrics.json", json.dumps(metrics, indent=1))
     files = {}
     for variant in VARIANTS:
         for p in sorted((cfg.out / variant).glob("*")):
@@ -1080,6 +1226,8 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         if f"{v}_human_pretraining" in training:
             card["wall_time_s"][f"pretrain_{v}"] = max(card["wall_time_s"].get(f"pretrain_{v}") or 0,
                                                        training[f"{v}_human_pretraining"].get("wall_s") or 0)
+    if painter := kept_painter_sections(cfg):  # the painter's figures, while its files are the ones they describe
+        card["novel_painter"] = painter
     j, m = write_card(cfg.out, card)
     return [j, m], {}
 
@@ -1150,8 +1298,11 @@ def run(cfg: PipelineConfig) -> dict | None:
         if cfg.until == "train":
             continue
         ckpt = {variant: Path(next(iter(t["outputs"])))}
-        e = st.run(f"export_{variant}", t["outputs"], lambda c=ckpt: stage_export(cfg, c))
-        q = st.run(f"quantize_{variant}", {"export": e["outputs"], "calib": cfg.calib_scenes},
+        # the exporter's and quantizer's own settings too: another policy or opset remakes the files
+        e = st.run(f"export_{variant}", {"checkpoint": t["outputs"], "settings": export_settings()},
+                   lambda c=ckpt: stage_export(cfg, c))
+        q = st.run(f"quantize_{variant}", {"export": e["outputs"], "calib": cfg.calib_scenes,
+                                           "settings": quantize_settings()},
                    lambda c=ckpt: stage_quantize(cfg, c))
         eval_in = {"q": q["outputs"], "e": e["outputs"], "split": cfg.eval_split, "limit": cfg.eval_limit,
                    "runtimes": EVAL_RUNTIMES[variant]}

@@ -688,6 +688,7 @@ def test_quick_pipeline_end_to_end_scores_its_prior_and_a_new_prior_re_evaluates
 
     out = tmp_path / "quick"
     assert main(["--quick", "--out", str(out)]) == 0
+    assert not list(out.glob("*.staging"))  # the export and quantize stages moved their checked files in
     metrics = json.loads((out / "metrics_ghnerf.json").read_text())["models"]
     assert metrics["ghnerf_int8"]["skeleton_prior_mpjpe_mm"] > 0  # the eval found the prior beside the graphs
     assert metrics["ghnerf_torch"]["skeleton_prior_mpjpe_mm"] is None

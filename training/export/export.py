@@ -18,6 +18,7 @@ TorchScript exporter is used (``dynamo=False``): it needs no onnxscript and hand
 from __future__ import annotations
 
 import logging
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -154,7 +155,15 @@ def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precis
     onnx.helper.set_model_props(m, {**{p.key: p.value for p in keep}, **props})
     m.producer_name = "ghnerf-training"
     m.doc_string = f"GHNeRF graph {graph!r} ({contract.variant}, {contract.width}x{contract.height}, {precision})"
-    onnx.save(m, str(path))
+    # into a temporary file beside it, then over it: a crash here leaves the whole old file, not half a graph
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        onnx.save(m, str(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInputs | None = None,

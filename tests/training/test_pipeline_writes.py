@@ -1,0 +1,273 @@
+"""``make model``'s writes: whole stamps and cards, staged exports, stamps that follow the exporter's settings, and
+a card stage that keeps the painter's section (no training, no real export: the stages' tools are stand-ins)."""
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+import training.pipeline as pipeline
+from training.model_card import add_painter_to_card, sha256, write_atomic, write_card
+from training.pipeline import PipelineConfig, Stages
+
+
+# ------------------------------------------------------------------------------------ atomic writes, stamps
+def test_a_truncated_stamp_counts_as_not_done_and_is_named_in_the_log(tmp_path, caplog):
+    out, calls = tmp_path / "thing.txt", []
+
+    def make():
+        calls.append(1)
+        out.write_text("made")
+        return [out], {}
+
+    Stages(tmp_path, ()).run("export_ghnerf", {"a": 1}, make)
+    stamp = tmp_path / ".stages" / "export_ghnerf.json"
+    stamp.write_text(stamp.read_text()[:20])  # cut in half by a crash
+    caplog.set_level(logging.WARNING, logger="training.pipeline")
+    st = Stages(tmp_path, ())
+    assert st.stamp("export_ghnerf") is None and st.done("export_ghnerf", {"a": 1}) is None
+    assert sum(str(stamp) in r.getMessage() for r in caplog.records) == 1  # named, once for both reads
+    assert "export_ghnerf" in caplog.text and "not done" in caplog.text
+    st.run("export_ghnerf", {"a": 1}, make)  # runs again, and its new stamp reads
+    assert len(calls) == 2 and json.loads(stamp.read_text())["outputs"] == {str(out): sha256(out)}
+    stamp.write_text("[1, 2]")  # JSON, but no stamp
+    assert Stages(tmp_path, ()).stamp("export_ghnerf") is None
+    assert list((tmp_path / ".stages").glob(".*")) == []  # no temporary file left behind
+
+
+def test_an_atomic_write_that_fails_leaves_the_old_file_whole(tmp_path, monkeypatch):
+    import os
+
+    path = tmp_path / "model_card.json"
+    write_atomic(path, '{"old": 1}')
+    assert oct(path.stat().st_mode & 0o777) == oct(0o666 & ~_umask())  # not mkstemp's 0600
+
+    def no_replace(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", no_replace)
+    with pytest.raises(OSError, match="disk full"):
+        write_card(tmp_path, {"name": "new"})
+    assert path.read_text() == '{"old": 1}' and sorted(p.name for p in tmp_path.iterdir()) == ["model_card.json"]
+
+
+def _umask() -> int:
+    import os
+
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+# ----------------------------------------------------------------------------------------- staged export
+GRAPHS = ("encoder", "volume")
+
+
+class _Model:
+    config = SimpleNamespace(to_dict=lambda: {"preset": "tiny"}, heatmap_stride=4)
+
+    def state_dict(self):
+        return {}
+
+    def contract(self):
+        return SimpleNamespace(graph_names=GRAPHS)
+
+
+def _old_folder(cfg: PipelineConfig) -> tuple[Path, dict[str, bytes]]:
+    """The model folder of an earlier export: fp32 and int8 graphs, weights, a prior."""
+    folder = cfg.out / "ghnerf"
+    folder.mkdir(parents=True)
+    old = {"ghnerf.pt": b"old weights", "encoder.onnx": b"old encoder", "encoder.int8.onnx": b"old encoder int8",
+           "volume.onnx": b"volume", "volume.int8.onnx": b"volume int8", "skeleton_prior.onnx": b"prior"}
+    for name, body in old.items():
+        (folder / name).write_bytes(body)
+    return folder, old
+
+
+def _fake_export(monkeypatch, max_abs: float, fail_after: str | None = None):
+    import training.export.export as export
+    import training.export.parity as parity
+    import training.train as train
+
+    def export_all(model, out_dir, inputs=None):
+        paths = {}
+        for g in GRAPHS:
+            if g == fail_after:
+                raise RuntimeError("the exporter crashed")
+            paths[g] = Path(out_dir) / f"{g}.onnx"
+            paths[g].write_bytes(b"volume" if g == "volume" else b"new encoder")  # the volume graph as it was
+        return paths
+
+    monkeypatch.setattr(train, "load_model", lambda ckpt: (_Model(), {"step": 6}))
+    monkeypatch.setattr(export, "example_inputs", lambda model, **kw: None)
+    monkeypatch.setattr(export, "export_all", export_all)
+    monkeypatch.setattr(parity, "torch_vs_ort", lambda model, paths, inputs: {
+        g: {"out": {"max_abs": max_abs, "ref_max": 1.0}} for g in paths})
+
+
+def test_a_failed_export_parity_leaves_the_model_folder_as_it_was_and_keeps_the_rejected_files(tmp_path,
+                                                                                              monkeypatch, caplog):
+    pytest.importorskip("torch")
+    from training.export.parity import ParityError
+
+    cfg = PipelineConfig(out=tmp_path / "models")
+    folder, old = _old_folder(cfg)
+    staging = cfg.out / "ghnerf.staging"
+    _fake_export(monkeypatch, max_abs=1.0)
+    with pytest.raises(ParityError) as err:
+        pipeline.stage_export(cfg, {"ghnerf": tmp_path / "last.pt"})
+    assert f"{staging}/encoder.onnx" in str(err.value)
+    assert f"{folder} is left as it was; the rejected files are kept in {staging}" in str(err.value)
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == old  # byte for byte
+    assert (staging / "encoder.onnx").read_bytes() == b"new encoder" and (staging / "ghnerf.pt").is_file()
+
+    # a crash mid-export: the same, said in the log
+    _fake_export(monkeypatch, max_abs=0.0, fail_after="volume")
+    with pytest.raises(RuntimeError, match="the exporter crashed"):
+        pipeline.stage_export(cfg, {"ghnerf": tmp_path / "last.pt"})
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == old
+    assert f"the rejected files are kept in {staging}" in caplog.text
+    assert sorted(p.name for p in staging.iterdir()) == ["encoder.onnx", "ghnerf.pt"]  # this attempt's, not the last
+
+    # passed: moved in, the staging folder gone, the stamp lists the model folder's files
+    _fake_export(monkeypatch, max_abs=0.0)
+    outputs, info = pipeline.stage_export(cfg, {"ghnerf": tmp_path / "last.pt"})
+    assert outputs == [folder / "ghnerf.pt", folder / "encoder.onnx", folder / "volume.onnx"]
+    assert not staging.exists() and (folder / "encoder.onnx").read_bytes() == b"new encoder"
+    assert info["ghnerf"]["fp32_parity_torch_vs_ort"]["encoder"]["out"]["max_abs"] == 0.0
+    # the int8 encoder quantized from the replaced graph went; the unchanged volume graph's stays, as the prior
+    assert not (folder / "encoder.int8.onnx").exists()
+    assert (folder / "volume.int8.onnx").read_bytes() == b"volume int8"
+    assert (folder / "skeleton_prior.onnx").read_bytes() == b"prior"
+
+
+def test_a_failed_int8_parity_leaves_the_int8_graphs_as_they_were(tmp_path, monkeypatch):
+    pytest.importorskip("torch")
+    import training.data.torch_dataset as torch_dataset
+    import training.export.parity as parity
+    import training.export.quantize as quantize
+    import training.train as train
+    from training.export.parity import ParityError
+
+    cfg = PipelineConfig(out=tmp_path / "models", calib_scenes=1)
+    folder, old = _old_folder(cfg)
+    staging = cfg.out / "ghnerf.staging"
+    got = {}
+
+    def quantize_all(fp32, out_dir, feeds):
+        got["fp32"], got["feeds"] = fp32, feeds
+        paths = {g: Path(out_dir) / f"{g}.int8.onnx" for g in fp32}
+        for g, p in paths.items():
+            p.write_bytes(b"new " + g.encode())
+        return paths
+
+    def int8_vs_fp32(fp32, int8, contract, inputs):
+        return {"pipeline": {"heatmaps": {"max_abs": got["heat"]}, "depth_mean_abs_m": 0.0}}
+
+    monkeypatch.setattr(train, "load_model", lambda ckpt: (_Model(), {"step": 6}))
+    monkeypatch.setattr(torch_dataset, "MultiViewDataset", lambda *a: [{"scene": 0}])
+    monkeypatch.setattr(pipeline, "_scene_inputs", lambda model, item, ray_stride, **kw: ray_stride)
+    monkeypatch.setattr(quantize, "calibration_feeds", lambda model, calib, graphs, rays_per_target: rays_per_target)
+    monkeypatch.setattr(quantize, "quantize_all", quantize_all)
+    monkeypatch.setattr(parity, "int8_vs_fp32", int8_vs_fp32)
+    got["heat"] = 1e9
+    with pytest.raises(ParityError, match=f"kept in {staging}"):
+        pipeline.stage_quantize(cfg, {"ghnerf": tmp_path / "last.pt"})
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == old
+    assert (staging / "encoder.int8.onnx").read_bytes() == b"new encoder"
+    assert got["fp32"] == {g: folder / f"{g}.onnx" for g in GRAPHS}  # from the model folder's fp32 graphs
+    assert got["feeds"] == pipeline.CALIB_RAYS_PER_TARGET
+    got["heat"] = 0.0
+    outputs, _ = pipeline.stage_quantize(cfg, {"ghnerf": tmp_path / "last.pt"})
+    assert outputs == [folder / "encoder.int8.onnx", folder / "volume.int8.onnx"] and not staging.exists()
+    assert (folder / "volume.int8.onnx").read_bytes() == b"new volume"
+
+
+# --------------------------------------------------------------------------- stamps follow the tools' settings
+def test_the_export_and_quantize_stamps_follow_the_exporters_and_quantizers_settings(tmp_path, monkeypatch):
+    pytest.importorskip("torch")
+    import training.export.export as export
+    import training.export.quantize as quantize
+
+    ran = []
+
+    def stage(name):
+        def fn(cfg, *a):
+            ran.append(name)
+            out = cfg.out / f"{name}.out"
+            out.write_text(name)  # the same bytes each time: only the stage's own inputs make it run
+            return [out], {}
+        return fn
+
+    for name in ("data", "train", "export", "quantize", "eval"):
+        monkeypatch.setattr(pipeline, f"stage_{name}", stage(name))
+    monkeypatch.setattr(pipeline, "_run_finished", lambda cfg, v: True)
+    monkeypatch.setattr(pipeline, "train_inputs", lambda cfg, preset: {"preset": preset})
+    monkeypatch.setattr(pipeline, "expected_model", lambda cfg, v: {})
+    monkeypatch.setattr(pipeline, "pretrain_block", lambda cfg, v: {})
+    cfg = PipelineConfig(out=tmp_path / "m", variants=("baseline",))
+
+    def run() -> list[str]:
+        ran.clear()
+        assert pipeline.run(cfg) is None  # (the card waits for ghnerf)
+        return list(ran)
+
+    assert run() == ["data", "train", "export", "quantize", "eval"]
+    assert run() == []
+    before = pipeline.quantize_settings()
+    monkeypatch.setitem(quantize.POLICIES, "render",
+                        quantize.QuantPolicy(exclude_name_contains=quantize.HEAD_OUTPUT_LAYERS[:-1]))
+    assert pipeline.quantize_settings() != before
+    assert run() == ["quantize"]  # (the same int8 bytes: nothing after it)
+    monkeypatch.setattr(pipeline, "CALIB_RAYS_PER_TARGET", 1024)
+    assert run() == ["quantize"]
+    monkeypatch.setattr(export, "DEFAULT_OPSET", export.DEFAULT_OPSET + 1)
+    assert run() == ["export"]
+    monkeypatch.setattr("ghnerf_runtime.contract.CONTRACT_VERSION", "99.0.0")
+    assert run() == ["export"]
+    assert run() == []
+
+
+# ----------------------------------------------------------------------------------- the painter's section
+def _card_inputs(cfg: PipelineConfig) -> None:
+    """What the card stage reads besides the stamps: each variant's metrics and the dataset's manifest."""
+    cfg.data.mkdir(parents=True)
+    (cfg.data / "dataset.json").write_text(json.dumps({"resolution": 128, "splits": {"val": {"count": 2}}}))
+    for v in pipeline.VARIANTS:
+        (cfg.out / v).mkdir(parents=True, exist_ok=True)
+        (cfg.out / v / "encoder.onnx").write_bytes(v.encode())
+        (cfg.out / f"metrics_{v}.json").write_text(json.dumps({
+            "models": {f"{v}_int8": {"kind": "onnx-int8", "scenes": 2, "pck@0.2": 0.5}}, "data": str(cfg.data),
+            "split": "val", "pck_alpha": 0.2, "pck_reference": "bbox"}))
+
+
+def test_the_card_stage_keeps_the_painters_section_while_its_files_are_unchanged(tmp_path, caplog):
+    pytest.importorskip("torch")
+    cfg = PipelineConfig(out=tmp_path / "models", data=tmp_path / "data", quick=True)
+    _card_inputs(cfg)
+    st = Stages(cfg.out, ())
+    pipeline.stage_card(cfg, st)  # the pipeline's card
+    painter = cfg.out / "ghnerf" / "novel_painter.onnx"
+    painter.write_bytes(b"painter")
+    painter.with_suffix(".int8.onnx").write_bytes(b"painter int8")
+    section = {"steps": 100, "held_out": {"all": {"n": 3, "shown": 20.0, "fill:learnt": 21.5}}}
+    painter.with_suffix(".json").write_text(json.dumps(section))
+    add_painter_to_card(cfg.out, painter, [painter.with_suffix(".int8.onnx")])  # learnt_fill export --card-dir
+
+    pipeline.stage_card(cfg, st)  # the card stage again (it always runs)
+    card = json.loads((cfg.out / "model_card.json").read_text())
+    assert card["novel_painter"] == {"ghnerf": section}
+    assert card["files"]["ghnerf/novel_painter.int8.onnx"]["sha256"] == sha256(painter.with_suffix(".int8.onnx"))
+    assert "Novel-view painter (`ghnerf/novel_painter.onnx`)" in (cfg.out / "MODEL_CARD.md").read_text()
+    pipeline.stage_card(cfg, st)  # and again: still there
+    assert json.loads((cfg.out / "model_card.json").read_text())["novel_painter"] == {"ghnerf": section}
+
+    painter.with_suffix(".int8.onnx").write_bytes(b"another painter int8")  # not the file the figures describe
+    caplog.set_level(logging.WARNING, logger="training.pipeline")
+    pipeline.stage_card(cfg, st)
+    assert "novel_painter" not in json.loads((cfg.out / "model_card.json").read_text())
+    assert "Novel-view painter" not in (cfg.out / "MODEL_CARD.md").read_text()
+    assert f"{painter.with_suffix('.int8.onnx')} changed or went" in caplog.text
