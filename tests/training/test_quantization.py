@@ -59,6 +59,15 @@ def test_quantized_ops(quantized):
             for i in n.input[:2]:
                 p = producers.get(i)
                 assert p is None or p.op_type != "DequantizeLinear", f"{n.op_type} {n.name} reads int8 data"
+    # each head's output layer stays float, the colour head's second call (/g_c_out_1/, the exporter's name) too
+    m = onnx.load(str(int8["render_rgb"]))
+    producers = {o: n for n in m.graph.node for o in n.output}
+    heads = [n for n in m.graph.node if n.op_type == "Conv" and n.name.split("/")[1] in ("g_sigma", "g_c_out",
+                                                                                          "g_c_out_1")]
+    assert {n.name.split("/")[1] for n in heads} == {"g_sigma", "g_c_out", "g_c_out_1"}
+    for n in heads:
+        assert all(producers.get(i) is None or producers[i].op_type != "DequantizeLinear" for i in n.input[1:]), \
+            f"{n.name} has int8 weights"
     for path in int8.values():
         props = {p.key: p.value for p in onnx.load(str(path)).metadata_props}
         ModelContract.from_metadata(props)

@@ -22,6 +22,7 @@ calibration frames (:func:`calibration_feeds`).
 from __future__ import annotations
 
 import logging
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -92,9 +93,18 @@ POLICIES: dict[str, QuantPolicy | None] = {
 }
 
 
+def _name_matcher(parts: Sequence[str]) -> re.Pattern:
+    """Node names containing any of ``parts``; a module path ``/m/`` also matches ``/m_1/``, ``/m_2/``..., the
+    names the exporter gives the module's later calls (the colour head runs twice in ``render``)."""
+    alternatives = [re.escape(p[:-1]) + r"(?:_\d+)?/" if p.startswith("/") and p.endswith("/") else re.escape(p)
+                    for p in parts]
+    return re.compile("|".join(alternatives) if alternatives else r"(?!)")
+
+
 def _nodes_to_exclude(model: onnx.ModelProto, policy: QuantPolicy) -> list[str]:
     """Named by the policy, plus every conv whose output a normalisation reduces (``_feeds_a_reduction``)."""
-    named = {n.name for n in model.graph.node if any(s in n.name for s in policy.exclude_name_contains)}
+    matcher = _name_matcher(policy.exclude_name_contains)
+    named = {n.name for n in model.graph.node if matcher.search(n.name)}
     return [n.name for n in model.graph.node if n.name in named or _feeds_a_reduction(model, n)]
 
 
