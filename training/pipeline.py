@@ -856,9 +856,10 @@ def quantize_settings() -> dict:
     """What the quantize stage's files follow besides the fp32 graphs and the calibration scenes (a stamp input):
     the per-graph policies (``HEAD_OUTPUT_LAYERS``, ``ENCODER_FLOAT_LAYERS`` and the rest, as ``POLICIES``
     holds them) and the calibration rays."""
-    from training.export.quantize import POLICIES
+    from training.export.quantize import POLICIES, QUANTIZER_VERSION
 
-    return {"policies": {g: None if p is None else asdict(p) for g, p in sorted(POLICIES.items())},
+    return {"version": QUANTIZER_VERSION,
+            "policies": {g: None if p is None else asdict(p) for g, p in sorted(POLICIES.items())},
             "ray_stride": CALIB_RAY_STRIDE, "rays_per_target": CALIB_RAYS_PER_TARGET}
 
 

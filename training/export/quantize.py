@@ -81,6 +81,10 @@ HEAD_OUTPUT_LAYERS = ("/g_sigma/", "/g_h_out/", "/g_c_out/", "/g_co/g_co.2/")
 #: measured ~2.5x slower than fp32 on this CPU (0.75 vs 0.29 ms at 128^2 x 2).
 ENCODER_FLOAT_LAYERS = ("/feature_net/stage0/stage0.0/",)
 
+#: Raised whenever what the quantizer makes changes in a way :data:`POLICIES` does not show (a pipeline stamp
+#: input: 2 since the filter takes a module's later calls, :func:`_name_matcher`).
+QUANTIZER_VERSION = 2
+
 #: Default policy per graph; ``None`` = stays float.
 POLICIES: dict[str, QuantPolicy | None] = {
     "encoder": QuantPolicy(exclude_name_contains=ENCODER_FLOAT_LAYERS),
