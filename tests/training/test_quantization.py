@@ -86,6 +86,13 @@ def test_int8_drift_is_bounded(quantized):
     broken = {**report, "pipeline": {**report["pipeline"], "heatmaps": {**heat, "max_abs": 0.9}}}
     with pytest.raises(ParityError, match="int8 heatmaps differ"):
         check_int8_parity(broken)
+    # the encoder's own heatmaps (the runtime's default 2D joints) are bounded too
+    enc = report["graphs"]["encoder"]
+    assert "encoder_heatmaps" in enc
+    broken = {**report, "graphs": {**report["graphs"], "encoder": {
+        **enc, "encoder_heatmaps": {**enc["encoder_heatmaps"], "max_abs": 0.9}}}}
+    with pytest.raises(ParityError, match=r"encoder\.int8\.onnx: its heatmaps differ from fp32 by 0\.9"):
+        check_int8_parity(broken, "m/")
     assert report["pipeline"]["depth_mean_abs_m"] < 0.05, report
     for graph, outputs in report["graphs"].items():
         for name, st in outputs.items():

@@ -24,7 +24,9 @@ from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
 from training.export.export import ExampleInputs, example_inputs, export_all
-from training.export.parity import benchmark, int8_vs_fp32, make_session, torch_vs_ort
+from training.export.parity import (
+    ParityError, benchmark, check_fp32_parity, check_int8_parity, int8_vs_fp32, make_session, torch_vs_ort,
+)
 from training.export.quantize import calibration_feeds, quantize_all
 from training.model import GHNeRF
 
@@ -84,6 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bench", action="store_true", help="time every graph (fp32 and int8)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--report", help="write the figures as JSON here")
+    ap.add_argument("--no-parity-check", action="store_true",
+                    help="exit 0 even when onnxruntime strays from torch, or int8 from fp32, beyond "
+                         "training.export.parity's bounds")
     args = ap.parse_args(argv)
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first
         args.report = ready_output_arg(ap, args.report, "--report")
@@ -96,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
 
         model, _ = load_model(args.checkpoint, default_config=preset(args.preset))
     else:
+        log.warning("no --checkpoint: exporting random weights (to test the export, not to run)")
         model = GHNeRF(preset(args.preset)).eval()
     graphs = tuple(g for g in args.graphs.split(",") if g) or model.contract(opset=args.opset).graph_names
     out = Path(args.out)
@@ -109,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.calib_npz:
             frames = [torch.from_numpy(f) for f in np.load(args.calib_npz)["images"].astype(np.float32)]
         else:
+            log.warning("no --calib-npz: calibrating int8 on random images; a trained model wants real frames "
+                        "(make model calibrates on training scenes)")
             g = torch.Generator().manual_seed(1)
             frames = [torch.rand(2, 3, H, W, generator=g) for _ in range(args.calib_frames)]
         calib = [example_inputs(model, images=f, targets=3, ray_stride=2, seed=i) for i, f in enumerate(frames)]
@@ -124,6 +132,14 @@ def main(argv: list[str] | None = None) -> int:
     print(text)  # first: the figures reach the terminal whatever happens to the file
     if args.report:
         args.report.write_text(text)
+    if not args.no_parity_check:
+        try:
+            check_fp32_parity(report["fp32_parity"], f"{out}/")
+            if int8:
+                check_int8_parity(report["int8_vs_fp32"], f"{out}/")
+        except ParityError as e:
+            print(f"python -m training.export: {e}", file=sys.stderr)
+            return 1
     return 0
 
 

@@ -165,8 +165,14 @@ def check_fp32_parity(report: Mapping[str, Mapping[str, Mapping[str, float]]], w
 
 
 def check_int8_parity(report: Mapping, what: str = "") -> None:
-    """Raise :class:`ParityError` when the int8 keypoint pipeline strays from fp32 beyond the bounds above
-    (``report``: :func:`int8_vs_fp32`)."""
+    """Raise :class:`ParityError` when the int8 keypoint pipeline (the rendered one, and the encoder's own
+    heatmaps) strays from fp32 beyond the bounds above (``report``: :func:`int8_vs_fp32`)."""
+    for graph, outputs in (report.get("graphs") or {}).items():
+        # the encoder's own heatmaps (``encoder``, ``human``): the runtime's default 2D joints read them
+        st = outputs.get("encoder_heatmaps")
+        if st is not None and not st["max_abs"] <= INT8_HEATMAP_MAX_ABS:
+            raise ParityError(f"{what}{graph}.int8.onnx: its heatmaps differ from fp32 by {st['max_abs']:.3g} (bound "
+                              f"{INT8_HEATMAP_MAX_ABS}): the calibration or the quantization is wrong")
     pipe = report.get("pipeline") or {}
     if pipe and not pipe["heatmaps"]["max_abs"] <= INT8_HEATMAP_MAX_ABS:
         raise ParityError(f"{what}int8 heatmaps differ from fp32 by {pipe['heatmaps']['max_abs']:.3g} (bound "
