@@ -3,14 +3,26 @@
  *
  * COBS is decoded one byte at a time into d->buf, so no byte is stored twice
  * and the frame never needs to be held encoded. Every index into a buffer is
- * checked against a length first; nothing here allocates.
+ * checked against a length first; nothing here allocates. Shifts and
+ * arithmetic are done in unsigned types that are wide enough where int has
+ * 16 bits (AVR), so nothing relies on int being 32 bits.
  */
 #include "ghjoints.h"
 
 #include <string.h>
 
-/* CRC-16/IBM-3740 by nibbles: a 32-byte table instead of 512, 2 lookups per byte. */
-static const uint16_t crc_nibble[16] = {
+/* CRC-16/IBM-3740 by nibbles: a 32-byte table instead of 512, 2 lookups per byte.
+ * On AVR, const data is copied to SRAM unless it is placed in flash explicitly. */
+#if defined(__AVR__)
+#include <avr/pgmspace.h>
+#define GHJ_FLASH PROGMEM
+#define GHJ_TABLE16(t, i) ((uint16_t)pgm_read_word(&(t)[i]))
+#else
+#define GHJ_FLASH
+#define GHJ_TABLE16(t, i) ((t)[i])
+#endif
+
+static const uint16_t crc_nibble[16] GHJ_FLASH = {
     0x0000, 0x1021, 0x2042, 0x3063, 0x4084, 0x50A5, 0x60C6, 0x70E7,
     0x8108, 0x9129, 0xA14A, 0xB16B, 0xC18C, 0xD1AD, 0xE1CE, 0xF1EF,
 };
@@ -19,19 +31,23 @@ uint16_t ghj_crc16(uint16_t crc, const uint8_t *data, size_t len)
 {
     size_t i;
     for (i = 0; i < len; i++) {
-        crc = (uint16_t)((crc << 4) ^ crc_nibble[(crc >> 12) ^ (data[i] >> 4)]);
-        crc = (uint16_t)((crc << 4) ^ crc_nibble[(crc >> 12) ^ (data[i] & 0x0Fu)]);
+        unsigned b = data[i];
+        /* (unsigned)crc << 4: a uint16_t promotes to int, which overflows on 16-bit int. */
+        crc = (uint16_t)(((unsigned)crc << 4) ^ GHJ_TABLE16(crc_nibble, ((unsigned)crc >> 12) ^ (b >> 4)));
+        crc = (uint16_t)(((unsigned)crc << 4) ^ GHJ_TABLE16(crc_nibble, ((unsigned)crc >> 12) ^ (b & 0x0Fu)));
     }
     return crc;
 }
 
-static uint16_t rd_u16(const uint8_t *p) { return (uint16_t)(p[0] | (p[1] << 8)); }
+/* Bytes are widened to unsigned (>= 16 bits) or uint32_t before shifting: shifting
+ * a uint8_t promotes it to int, and 0xFF << 8 overflows a 16-bit int. */
+static uint16_t rd_u16(const uint8_t *p) { return (uint16_t)((unsigned)p[0] | ((unsigned)p[1] << 8)); }
 
 static int16_t rd_i16(const uint8_t *p)
 {
     uint16_t u = rd_u16(p);
     /* Portable two's-complement conversion without implementation-defined casts. */
-    return (u & 0x8000u) ? (int16_t)(-(int32_t)(0x10000u - u)) : (int16_t)u;
+    return (u & 0x8000u) ? (int16_t)(-(int32_t)(0x10000UL - u)) : (int16_t)u;
 }
 
 static uint32_t rd_u32(const uint8_t *p)
@@ -49,6 +65,9 @@ static uint8_t bit(const uint8_t *mask, size_t i)
     return (uint8_t)((byte >> (unsigned)(i % 8u)) & 1u);
 }
 
+/* Each parser checks the whole payload first and writes *out only when it is
+ * valid (out NULL: check only), so an error leaves the caller's packet as it was. */
+
 static ghj_result parse_joints(const uint8_t *p, size_t n, ghj_joints *out)
 {
     size_t i, off, count;
@@ -57,6 +76,7 @@ static ghj_result parse_joints(const uint8_t *p, size_t n, ghj_joints *out)
     if (count > 64u || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
     off = 2u + mask_len(count);
     if (n < off + 7u * count) return GHJ_ERR_MALFORMED;
+    if (!out) return GHJ_PACKET;
     out->joint_set = p[0];
     out->count = (uint8_t)count;
     for (i = 0; i < count; i++) {
@@ -66,6 +86,13 @@ static ghj_result parse_joints(const uint8_t *p, size_t n, ghj_joints *out)
         out->joints[i].z = rd_i16(j + 4);
         out->joints[i].conf = j[6];
         out->joints[i].missing = bit(p + 2, i);
+    }
+    for (; i < GHJ_MAX_JOINTS; i++) { /* not sent: missing, never a previous packet's joint */
+        out->joints[i].x = 0;
+        out->joints[i].y = 0;
+        out->joints[i].z = 0;
+        out->joints[i].conf = 0u;
+        out->joints[i].missing = 1u;
     }
     return GHJ_PACKET;
 }
@@ -78,6 +105,7 @@ static ghj_result parse_joints2d(const uint8_t *p, size_t n, ghj_joints2d *out)
     if (count > 64u || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
     off = 3u + mask_len(count);
     if (n < off + 5u * count) return GHJ_ERR_MALFORMED;
+    if (!out) return GHJ_PACKET;
     out->camera = p[0];
     out->joint_set = p[1];
     out->count = (uint8_t)count;
@@ -88,12 +116,19 @@ static ghj_result parse_joints2d(const uint8_t *p, size_t n, ghj_joints2d *out)
         out->joints[i].conf = j[4];
         out->joints[i].missing = bit(p + 3, i);
     }
+    for (; i < GHJ_MAX_JOINTS; i++) {
+        out->joints[i].u = 0;
+        out->joints[i].v = 0;
+        out->joints[i].conf = 0u;
+        out->joints[i].missing = 1u;
+    }
     return GHJ_PACKET;
 }
 
 static ghj_result parse_status(const uint8_t *p, size_t n, ghj_status *out)
 {
     if (n < 16u) return GHJ_ERR_MALFORMED;
+    if (!out) return GHJ_PACKET;
     out->fps_centi = rd_u16(p);
     out->latency_us = rd_u32(p + 2);
     out->dropped = rd_u32(p + 6);
@@ -145,32 +180,31 @@ static int walk_hello(const uint8_t *p, size_t n, ghj_hello *out)
 
 static ghj_result parse_hello(const uint8_t *p, size_t n, ghj_hello *out)
 {
-    /* Check the whole payload before writing: a malformed HELLO leaves *out as it was. */
     if (!walk_hello(p, n, NULL)) return GHJ_ERR_MALFORMED;
-    walk_hello(p, n, out);
+    if (out) walk_hello(p, n, out);
     return GHJ_PACKET;
 }
 
-ghj_result ghj_parse_packet(const uint8_t *packet, size_t len, ghj_packet *out)
+ghj_result ghj_parse_packet_checked(const uint8_t *packet, size_t len, ghj_packet *out, uint32_t layout)
 {
     const uint8_t *payload;
     size_t plen;
     ghj_result r;
+    if (out && layout != GHJ_PACKET_LAYOUT) return GHJ_ERR_CONFIG; /* GHJ_MAX_JOINTS mismatch */
     if (len > GHJ_MAX_PACKET_LEN) return GHJ_ERR_OVERSIZE;
     if (len < GHJ_HEADER_LEN + GHJ_CRC_LEN) return GHJ_ERR_SHORT;
     if (ghj_crc16(0xFFFFu, packet, len - GHJ_CRC_LEN) != rd_u16(packet + len - GHJ_CRC_LEN)) return GHJ_ERR_CRC;
     if (packet[0] != GHJ_PROTOCOL_VERSION) return GHJ_ERR_VERSION;
     payload = packet + GHJ_HEADER_LEN;
     plen = len - GHJ_HEADER_LEN - GHJ_CRC_LEN;
-    /* Each parser checks its payload before writing it, so an error leaves *out untouched. */
     switch (packet[1]) {
-    case GHJ_MSG_JOINTS: r = parse_joints(payload, plen, &out->u.joints); break;
-    case GHJ_MSG_JOINTS_2D: r = parse_joints2d(payload, plen, &out->u.joints2d); break;
-    case GHJ_MSG_STATUS: r = parse_status(payload, plen, &out->u.status); break;
-    case GHJ_MSG_HELLO: r = parse_hello(payload, plen, &out->u.hello); break;
-    default: r = GHJ_SKIPPED; break; /* the protocol may grow: skip, do not fail */
+    case GHJ_MSG_JOINTS: r = parse_joints(payload, plen, out ? &out->u.joints : NULL); break;
+    case GHJ_MSG_JOINTS_2D: r = parse_joints2d(payload, plen, out ? &out->u.joints2d : NULL); break;
+    case GHJ_MSG_STATUS: r = parse_status(payload, plen, out ? &out->u.status : NULL); break;
+    case GHJ_MSG_HELLO: r = parse_hello(payload, plen, out ? &out->u.hello : NULL); break;
+    default: return GHJ_SKIPPED; /* the protocol may grow: skip, do not fail; *out untouched */
     }
-    if (r == GHJ_PACKET || r == GHJ_SKIPPED) {
+    if (r == GHJ_PACKET && out) {
         out->header.version = packet[0];
         out->header.msg_type = packet[1];
         out->header.flags = packet[2];
@@ -198,22 +232,26 @@ static void count_result(ghj_stats *s, ghj_result r)
     case GHJ_ERR_CRC: s->err_crc++; break;
     case GHJ_ERR_VERSION: s->err_version++; break;
     case GHJ_ERR_MALFORMED: s->err_malformed++; break;
+    case GHJ_ERR_CONFIG: s->err_config++; break;
     case GHJ_NONE: break;
     }
 }
 
-static ghj_result end_frame(ghj_decoder *d, ghj_packet *out)
+static ghj_result end_frame(ghj_decoder *d, ghj_packet *out, uint32_t layout)
 {
     ghj_result r;
     if (d->enc_len == 0u) return GHJ_NONE; /* consecutive delimiters: idle or resync */
-    if (d->enc_len > GHJ_MAX_FRAME_LEN) {
+    if (out && layout != GHJ_PACKET_LAYOUT) {
+        r = GHJ_ERR_CONFIG; /* decoding would write past the caller's packet */
+    } else if (d->enc_len > GHJ_MAX_FRAME_LEN) {
         r = GHJ_ERR_OVERSIZE;
     } else if (d->block_left != 0u) {
         r = GHJ_ERR_COBS;
     } else if (d->dec_len > GHJ_MAX_PACKET_LEN) {
         r = GHJ_ERR_OVERSIZE;
     } else {
-        r = ghj_parse_packet(d->buf, d->dec_len, out);
+        r = ghj_parse_packet_checked(d->buf, d->dec_len, out, layout);
+        if (r == GHJ_SKIPPED) d->skipped_type = d->buf[1];
     }
     count_result(&d->stats, r);
     d->enc_len = 0u;
@@ -223,9 +261,9 @@ static ghj_result end_frame(ghj_decoder *d, ghj_packet *out)
     return r;
 }
 
-ghj_result ghj_feed_byte(ghj_decoder *d, uint8_t byte, ghj_packet *out)
+ghj_result ghj_feed_byte_checked(ghj_decoder *d, uint8_t byte, ghj_packet *out, uint32_t layout)
 {
-    if (byte == 0u) return end_frame(d, out);
+    if (byte == 0u) return end_frame(d, out, layout);
     if (d->enc_len > GHJ_MAX_FRAME_LEN) return GHJ_NONE; /* already too long: wait for 0x00 */
     d->enc_len++;
     if (d->enc_len > GHJ_MAX_FRAME_LEN) return GHJ_NONE;
@@ -242,17 +280,18 @@ ghj_result ghj_feed_byte(ghj_decoder *d, uint8_t byte, ghj_packet *out)
     return GHJ_NONE;
 }
 
-size_t ghj_feed(ghj_decoder *d, const uint8_t *data, size_t len, ghj_result *result, ghj_packet *out)
+size_t ghj_feed_checked(ghj_decoder *d, const uint8_t *data, size_t len, ghj_result *result, ghj_packet *out,
+                        uint32_t layout)
 {
     size_t i;
     for (i = 0; i < len; i++) {
-        ghj_result r = ghj_feed_byte(d, data[i], out);
+        ghj_result r = ghj_feed_byte_checked(d, data[i], out, layout);
         if (r != GHJ_NONE) {
-            *result = r;
+            if (result) *result = r;
             return i + 1u;
         }
     }
-    *result = GHJ_NONE;
+    if (result) *result = GHJ_NONE;
     return len;
 }
 
@@ -268,6 +307,7 @@ const char *ghj_result_name(ghj_result r)
     case GHJ_ERR_CRC: return "crc";
     case GHJ_ERR_VERSION: return "version";
     case GHJ_ERR_MALFORMED: return "malformed";
+    case GHJ_ERR_CONFIG: return "config";
     }
     return "unknown";
 }

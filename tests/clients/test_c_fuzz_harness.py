@@ -37,9 +37,13 @@ def _libfuzzer_clang() -> str | None:
 def test_run_fuzz_script_for_a_few_seconds(tmp_path: Path) -> None:
     if _libfuzzer_clang() is None:
         pytest.skip("no clang: libFuzzer needs clang (apt-get install clang)")
+    # A reproducer left by an earlier run must not count as a crash of this one.
+    (tmp_path / "crashes").mkdir()
+    (tmp_path / "crashes" / "crash-earlier-run").write_bytes(b"\x00")
     proc = subprocess.run([str(C_DIR / "fuzz" / "run_fuzz.sh"), "3"], capture_output=True, text=True,
                           env={"PATH": "/usr/bin:/bin:/usr/local/bin", "OUT": str(tmp_path)}, timeout=120)
     if proc.returncode == 77:
         pytest.skip(proc.stderr.strip())
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "crashes=0" in proc.stdout and "run_fuzz: OK" in proc.stdout
+    assert (tmp_path / "crashes.prev" / "crash-earlier-run").exists()

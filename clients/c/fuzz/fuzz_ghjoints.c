@@ -6,10 +6,13 @@
  *   - the result sequence does not depend on how the bytes are chunked
  *     (byte-at-a-time vs. chunks of a size taken from the input);
  *   - every decoded packet is within bounds (count <= GHJ_MAX_JOINTS, missing
- *     is 0/1, strings are NUL-terminated printable ASCII of legal length);
+ *     is 0/1, strings are NUL-terminated printable ASCII of legal length) and
+ *     joints beyond count are marked missing with zero fields; the comparison
+ *     covers every decoded field (header, payload, the skipped type);
  *   - the counters add up: frames == messages + skipped + all errors;
- *   - an error leaves the caller's ghj_packet untouched, and GHJ_SKIPPED
- *     writes only its header (firmware may keep the packet as its last pose).
+ *   - only GHJ_PACKET writes the caller's ghj_packet: an error or GHJ_SKIPPED
+ *     leaves it untouched;
+ *   - out == NULL (counters only) classifies every frame the same.
  * A violated check calls abort(), which libFuzzer records as a crash.
  */
 #include <stdint.h>
@@ -47,50 +50,84 @@ static void check_string(const char *s, size_t max_len)
     check(n <= max_len, "string length within bounds");
 }
 
-/* Digest of the fields a decoder promises (never of padding or unused slots). */
-static uint32_t digest(ghj_result r, const ghj_packet *p)
+#define HASH(h, field) fnv((h), &(field), sizeof(field))
+
+/* Digest of every field a decoder promises (never of padding): all header
+ * fields, every payload field, and joints beyond count, which must be missing.
+ * skipped_type is the decoder's record of a GHJ_SKIPPED packet's type. */
+static uint32_t digest(ghj_result r, const ghj_packet *p, uint8_t skipped_type)
 {
     uint32_t h = fnv(2166136261u, &r, sizeof r);
     unsigned i;
-    if (r != GHJ_PACKET && r != GHJ_SKIPPED) return h;
-    h = fnv(h, &p->header.msg_type, 1);
-    if (r == GHJ_SKIPPED) return h;
-    h = fnv(h, &p->header.seq, sizeof p->header.seq);
-    h = fnv(h, &p->header.capture_us, sizeof p->header.capture_us);
+    if (r == GHJ_SKIPPED) return HASH(h, skipped_type);
+    if (r != GHJ_PACKET) return h;
+    h = HASH(h, p->header.version);
+    h = HASH(h, p->header.msg_type);
+    h = HASH(h, p->header.flags);
+    h = HASH(h, p->header.seq);
+    h = HASH(h, p->header.capture_us);
+    h = HASH(h, p->header.send_us);
+    check(p->header.version == GHJ_PROTOCOL_VERSION, "only version 1 decodes");
     switch (p->header.msg_type) {
     case GHJ_MSG_JOINTS:
         check(p->u.joints.count <= GHJ_MAX_JOINTS, "joints count bound");
-        for (i = 0; i < p->u.joints.count; i++) {
+        h = HASH(h, p->u.joints.joint_set);
+        h = HASH(h, p->u.joints.count);
+        for (i = 0; i < GHJ_MAX_JOINTS; i++) {
             const ghj_joint3d *j = &p->u.joints.joints[i];
             check(j->missing <= 1u, "missing is 0/1");
-            h = fnv(h, &j->x, 2);
-            h = fnv(h, &j->y, 2);
-            h = fnv(h, &j->z, 2);
-            h = fnv(h, &j->conf, 1);
-            h = fnv(h, &j->missing, 1);
+            if (i >= p->u.joints.count) {
+                check(j->missing == 1u && j->conf == 0u && j->x == 0 && j->y == 0 && j->z == 0,
+                      "joints beyond count are missing and zero");
+                continue;
+            }
+            h = HASH(h, j->x);
+            h = HASH(h, j->y);
+            h = HASH(h, j->z);
+            h = HASH(h, j->conf);
+            h = HASH(h, j->missing);
         }
         break;
     case GHJ_MSG_JOINTS_2D:
         check(p->u.joints2d.count <= GHJ_MAX_JOINTS, "joints2d count bound");
-        for (i = 0; i < p->u.joints2d.count; i++) {
+        h = HASH(h, p->u.joints2d.camera);
+        h = HASH(h, p->u.joints2d.joint_set);
+        h = HASH(h, p->u.joints2d.count);
+        for (i = 0; i < GHJ_MAX_JOINTS; i++) {
             const ghj_joint2d *j = &p->u.joints2d.joints[i];
             check(j->missing <= 1u, "missing is 0/1");
-            h = fnv(h, &j->u, 2);
-            h = fnv(h, &j->v, 2);
-            h = fnv(h, &j->conf, 1);
+            if (i >= p->u.joints2d.count) {
+                check(j->missing == 1u && j->conf == 0u && j->u == 0 && j->v == 0,
+                      "2D joints beyond count are missing and zero");
+                continue;
+            }
+            h = HASH(h, j->u);
+            h = HASH(h, j->v);
+            h = HASH(h, j->conf);
+            h = HASH(h, j->missing);
         }
         break;
     case GHJ_MSG_STATUS:
-        h = fnv(h, &p->u.status.dropped, 4);
-        h = fnv(h, &p->u.status.fault, 2);
+        h = HASH(h, p->u.status.fps_centi);
+        h = HASH(h, p->u.status.latency_us);
+        h = HASH(h, p->u.status.dropped);
+        h = HASH(h, p->u.status.decimated);
+        h = HASH(h, p->u.status.fault);
         break;
     case GHJ_MSG_HELLO:
         check(p->u.hello.n_cameras <= GHJ_MAX_CAMERAS, "camera count bound");
+        check(p->u.hello.joint_count <= 64u, "HELLO joint_count bound");
+        h = HASH(h, p->u.hello.protocol_version);
+        h = HASH(h, p->u.hello.joint_set);
+        h = HASH(h, p->u.hello.joint_count);
+        h = HASH(h, p->u.hello.units);
+        h = HASH(h, p->u.hello.frame);
+        h = HASH(h, p->u.hello.n_cameras);
         check_string(p->u.hello.rig_id, GHJ_MAX_RIG_ID_LEN);
-        h = fnv(h, p->u.hello.rig_id, strlen(p->u.hello.rig_id));
+        h = fnv(h, p->u.hello.rig_id, strlen(p->u.hello.rig_id) + 1u); /* + NUL: "a","b" != "ab","" */
         for (i = 0; i < p->u.hello.n_cameras; i++) {
             check_string(p->u.hello.cameras[i], GHJ_MAX_CAMERA_NAME_LEN);
-            h = fnv(h, p->u.hello.cameras[i], strlen(p->u.hello.cameras[i]));
+            h = fnv(h, p->u.hello.cameras[i], strlen(p->u.hello.cameras[i]) + 1u);
         }
         break;
     default:
@@ -102,19 +139,16 @@ static uint32_t digest(ghj_result r, const ghj_packet *p)
 static void check_stats(const ghj_stats *s)
 {
     check(s->frames == s->messages + s->skipped + s->err_oversize + s->err_cobs + s->err_short + s->err_crc +
-                           s->err_version + s->err_malformed,
+                           s->err_version + s->err_malformed + s->err_config,
           "counters add up");
+    check(s->err_config == 0u, "no GHJ_ERR_CONFIG when built with one GHJ_MAX_JOINTS");
 }
 
 /* After a result: check what it may have written, against the packet as it was before. */
 static void check_written(ghj_result r, const ghj_packet *now, ghj_packet *before)
 {
     if (r == GHJ_NONE) return;
-    if (r == GHJ_SKIPPED) {
-        check(memcmp(&now->u, &before->u, sizeof now->u) == 0, "GHJ_SKIPPED writes only the header");
-    } else if (r != GHJ_PACKET) {
-        check(memcmp(now, before, sizeof *now) == 0, "an error leaves *out untouched");
-    }
+    if (r != GHJ_PACKET) check(memcmp(now, before, sizeof *now) == 0, "only GHJ_PACKET writes *out");
     memcpy(before, now, sizeof *now);
 }
 
@@ -124,7 +158,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    static ghj_decoder a, b;
+    static ghj_decoder a, b, c;
     static ghj_packet pa, pb, before;
     size_t i, n_a = 0, n_b = 0, chunk, off = 0;
 
@@ -135,7 +169,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         ghj_result r = ghj_feed_byte(&a, data[i], &pa);
         check_written(r, &pa, &before);
         if (r != GHJ_NONE) {
-            uint32_t h = digest(r, &pa);
+            uint32_t h = digest(r, &pa, a.skipped_type);
             if (n_a < MAX_EVENTS) events_a[n_a] = h;
             n_a++;
         }
@@ -155,7 +189,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             check(used >= 1u && used <= len - used_total, "ghj_feed consumes 1..len bytes");
             used_total += used;
             if (r != GHJ_NONE) {
-                uint32_t h = digest(r, &pb);
+                uint32_t h = digest(r, &pb, b.skipped_type);
                 if (n_b < MAX_EVENTS) check(events_a[n_b] == h, "chunking does not change results");
                 n_b++;
             }
@@ -164,6 +198,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     }
     check(n_a == n_b, "same number of results");
     check(memcmp(&a.stats, &b.stats, sizeof a.stats) == 0, "same counters");
+
+    /* Pass 2b: counters only (out and result NULL) classify every frame the same. */
+    ghj_init(&c);
+    for (off = 0; off < size;) off += ghj_feed(&c, data + off, size - off, NULL, NULL);
+    check(memcmp(&a.stats, &c.stats, sizeof a.stats) == 0, "out == NULL gives the same counters");
+    check(c.skipped_type == a.skipped_type, "out == NULL records the skipped type");
 
     /* Pass 3: the input as one packet whose CRC is made valid, in a heap buffer of
      * exactly its size: the fuzzer reaches the payload parsers without having to
@@ -181,7 +221,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         memcpy(&before, &pa, sizeof pa);
         r = ghj_parse_packet(pkt, size, &pa);
         check_written(r, &pa, &before);
-        (void)digest(r, &pa);
+        check(r != GHJ_NONE && r != GHJ_ERR_COBS && r != GHJ_ERR_CONFIG, "ghj_parse_packet's results");
+        check(ghj_parse_packet(pkt, size, NULL) == r, "out == NULL gives the same result");
+        (void)digest(r, &pa, pkt[1]);
         free(pkt);
     }
     return 0;

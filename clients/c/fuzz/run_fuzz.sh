@@ -7,7 +7,8 @@
 #
 # Seeds the corpus with the shared vectors, runs with ASan + UBSan, prints the
 # libFuzzer summary and exits 0 if no crash was found, 1 if one was (the
-# reproducer is under $OUT/crashes/), 77 if no libFuzzer-capable clang exists.
+# reproducer is under $OUT/crashes/; those of the run before move to
+# $OUT/crashes.prev/), 77 if no libFuzzer-capable clang exists.
 set -eu
 
 secs=${1:-60}
@@ -25,6 +26,14 @@ if [ -z "${CC:-}" ]; then
     exit 77
 fi
 
+# The corpus grows from run to run, but crashes/ holds only this run's
+# reproducers: the previous run's move to crashes.prev/ (replacing older ones),
+# so a fixed crash is not counted again.
+if [ -d "$out/crashes" ] && [ -n "$(ls -A "$out/crashes")" ]; then
+    rm -rf "$out/crashes.prev"
+    mv "$out/crashes" "$out/crashes.prev"
+    echo "run_fuzz: the previous run's reproducers are now in $out/crashes.prev/"
+fi
 mkdir -p "$out/corpus" "$out/crashes"
 if ! "$CC" -g -O1 -std=c99 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
         -I"$root/clients/c" "$root/clients/c/ghjoints.c" "$here/fuzz_ghjoints.c" \

@@ -1,11 +1,16 @@
 /*
  * ghj_dump - decode a joint-stream capture and print one JSON object per frame,
- * then {"stats": {...}}. Used by the test suite to compare the C decoder with
- * the shared vectors (tests/vectors/joint_stream) and with the Python decoder.
+ * then {"stats": {...}} (with a "config" counter only if that error occurred).
+ * Used by the test suite and `make check` to compare the C decoder with the
+ * shared vectors (tests/vectors/joint_stream) and with the Python decoder.
  *
- * usage: ghj_dump [-c CHUNK] FILE|-
+ * usage: ghj_dump [-c CHUNK] [-n] FILE|-
  *   -c CHUNK  feed the decoder CHUNK bytes per ghj_feed() call (default 4096;
  *             1 exercises byte-at-a-time streaming)
+ *   -n        counters only: pass out = NULL and result = NULL to ghj_feed()
+ *             and print only the stats line
+ *
+ * Exit status: 0 when the file was read, 2 on a usage or I/O error.
  */
 #include <inttypes.h>
 #include <stdio.h>
@@ -84,12 +89,13 @@ static void print_packet(const ghj_packet *p)
     }
 }
 
-static void print_result(ghj_result r, const ghj_packet *p)
+static void print_result(ghj_result r, const ghj_packet *p, const ghj_decoder *d)
 {
     if (r == GHJ_PACKET) {
         print_packet(p);
     } else if (r == GHJ_SKIPPED) {
-        printf("{\"skipped\":\"unknown\",\"msg_type\":%u}\n", (unsigned)p->header.msg_type);
+        /* *p is untouched on GHJ_SKIPPED; the decoder keeps the skipped type. */
+        printf("{\"skipped\":\"unknown\",\"msg_type\":%u}\n", (unsigned)d->skipped_type);
     } else {
         printf("{\"error\":\"%s\"}\n", ghj_result_name(r));
     }
@@ -103,18 +109,20 @@ int main(int argc, char **argv)
     size_t chunk = sizeof buf, n;
     const char *path = NULL;
     FILE *f;
-    int i;
+    int i, counters_only = 0;
 
     for (i = 1; i < argc; i++) {
         if (strcmp(argv[i], "-c") == 0 && i + 1 < argc) {
             chunk = (size_t)strtoul(argv[++i], NULL, 10);
             if (chunk == 0 || chunk > sizeof buf) chunk = sizeof buf;
+        } else if (strcmp(argv[i], "-n") == 0) {
+            counters_only = 1;
         } else {
             path = argv[i];
         }
     }
     if (!path) {
-        fprintf(stderr, "usage: ghj_dump [-c CHUNK] FILE|-\n");
+        fprintf(stderr, "usage: ghj_dump [-c CHUNK] [-n] FILE|-\n");
         return 2;
     }
     f = strcmp(path, "-") == 0 ? stdin : fopen(path, "rb");
@@ -127,15 +135,26 @@ int main(int argc, char **argv)
         size_t off = 0;
         while (off < n) {
             ghj_result r;
+            if (counters_only) {
+                off += ghj_feed(&dec, buf + off, n - off, NULL, NULL);
+                continue;
+            }
             off += ghj_feed(&dec, buf + off, n - off, &r, &pkt);
-            if (r != GHJ_NONE) print_result(r, &pkt);
+            if (r != GHJ_NONE) print_result(r, &pkt, &dec);
         }
+    }
+    if (ferror(f)) {
+        perror(path);
+        return 2;
     }
     if (f != stdin) fclose(f);
     printf("{\"stats\":{\"frames\":%" PRIu32 ",\"messages\":%" PRIu32 ",\"skipped\":%" PRIu32
            ",\"oversize\":%" PRIu32 ",\"cobs\":%" PRIu32 ",\"short\":%" PRIu32 ",\"crc\":%" PRIu32
-           ",\"version\":%" PRIu32 ",\"malformed\":%" PRIu32 "}}\n",
+           ",\"version\":%" PRIu32 ",\"malformed\":%" PRIu32,
            dec.stats.frames, dec.stats.messages, dec.stats.skipped, dec.stats.err_oversize, dec.stats.err_cobs,
            dec.stats.err_short, dec.stats.err_crc, dec.stats.err_version, dec.stats.err_malformed);
+    /* Not a protocol result (the Python decoder has no such counter): shown only when it happened. */
+    if (dec.stats.err_config) printf(",\"config\":%" PRIu32, dec.stats.err_config);
+    printf("}}\n");
     return 0;
 }
