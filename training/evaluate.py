@@ -573,6 +573,8 @@ def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, pr
     H, W, s = renderer.height, renderer.width, renderer.heatmap_stride
     grid_h, grid_1 = ray_grid(H, W, s), ray_grid(H, W, 1)
     acc = Accumulator()
+    if limit < 0:  # min(-1, len) would evaluate nothing and report empty metrics
+        raise ValueError(f"limit must be >= 0 (0: every scene), got {limit}")
     n = min(limit, len(dataset)) if limit else len(dataset)
     t0 = time.monotonic()
     for i in range(n):
@@ -624,6 +626,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--out", help="write the JSON here (also printed)")
     args = ap.parse_args(argv)
+    if args.limit < 0:
+        ap.error(f"--limit: must be >= 0 (0: every scene), got {args.limit}")
     if args.out:  # written after minutes of evaluation: its place is settled first
         args.out = ready_output_arg(ap, args.out, "--out")
     torch.set_num_threads(args.threads)

@@ -19,8 +19,11 @@ Targets: colour is the subject over the model's background (black), bilinearly s
 heatmaps are the dataset's Gaussians (``metrics.gaussian_heatmaps``, sigma 1.5 heatmap pixels)
 evaluated at the ray in model pixels (sigma ``1.5 * stride``), identical to ``tgt_heatmaps`` on the grid.
 
-Checkpoints (``ckpt_XXXXXXX.pt`` and ``last.pt``) hold the model, the optimiser, the step, the config
-and every RNG state, so ``--resume`` continues bit-identically to an uninterrupted run (on CPU).
+Checkpoints (``ckpt_XXXXXXX.pt`` and ``last.pt``) hold the model, the optimiser, the step, the config,
+the process count and every RNG state, so ``--resume`` continues bit-identically to an uninterrupted run
+(on CPU): from ``last.pt``, else from the newest readable ``ckpt_*.pt``; in an empty folder it starts fresh.
+It refuses another config or process count. Without ``--resume`` a folder that holds checkpoints is refused
+(exit 2), so a new run never overwrites another.
 """
 from __future__ import annotations
 
@@ -144,8 +147,10 @@ class TrainConfig(Config):
             fail("lr", f"must be a positive number, got {self.lr}")
         if not 0 < self.lr_decay_gamma <= 1:
             fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
-        if self.grad_clip < 0 or self.max_minutes < 0:
-            fail("grad_clip" if self.grad_clip < 0 else "max_minutes", "must be >= 0")
+        for key in ("grad_clip", "max_minutes"):  # NaN compares False with everything: test for it
+            v = getattr(self, key)
+            if not (math.isfinite(v) and v >= 0):
+                fail(key, f"must be a finite number >= 0 (0: off), got {v}")
         if not (self.lr_min >= 0 and math.isfinite(self.lr_min)):
             fail("lr_min", f"must be a finite number >= 0, got {self.lr_min}")
         for f in fields(LossConfig):
@@ -163,7 +168,14 @@ class TrainConfig(Config):
         if self.pretrain_human:
             from training.pretrain_human import config_from_train_config  # lazy: it imports this module
             config_from_train_config(asdict(self))  # a bad block fails here, named pretrain_human.<key>
-        self.model_config()  # unknown or mistyped model keys fail here, named by their path
+        mcfg = self.model_config()  # unknown or mistyped model keys fail here, named by their path
+        if self.patch_size > min(mcfg.height, mcfg.width):  # sample_rays would place the patch off the image
+            fail("patch_size", f"must be at most the model's {mcfg.width}x{mcfg.height} input, got {self.patch_size}")
+        lw = self.loss.level_weights
+        if any(not (math.isfinite(w) and w >= 0) for w in lw):
+            fail("loss.level_weights", f"must be finite numbers >= 0, got {list(lw)}")
+        if lw and len(lw) != len(mcfg.levels):
+            fail("loss.level_weights", f"has {len(lw)} entries for the model's {len(mcfg.levels)} cascade levels")
 
     def model_config(self) -> ModelConfig:
         """The preset with ``model`` merged on top, validated (unknown keys name their path)."""
@@ -195,9 +207,12 @@ def load_config_file(path: str | Path) -> dict:
         if path.suffix == ".toml":
             with open(path, "rb") as fh:
                 return tomllib.load(fh)
-        return json.loads(path.read_text())
+        data = json.loads(path.read_text())
     except (OSError, ValueError) as e:
         raise ConfigError(f"config file {path}: {e}") from e
+    if not isinstance(data, dict):
+        raise ConfigError(f"config file {path}: must hold a JSON object of settings, got a {type(data).__name__}")
+    return data
 
 
 def _parse_value(text: str) -> Any:
@@ -566,6 +581,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     (this rank's copy). ``dataset`` replaces the ``MultiViewDataset`` of ``cfg.data`` (tests).
     """
     out_dir = Path(out_dir)
+    if not resume:
+        refuse_existing_run(out_dir)  # before config.json is overwritten with the new one
     device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
     info = setup_distributed(device_kind)
     device = pick_device(cfg.device, info)
@@ -574,14 +591,15 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         local_world = int(os.environ.get("LOCAL_WORLD_SIZE", info.world))
         torch.set_num_threads(cfg.threads or max(1, (os.cpu_count() or 1) // local_world))
         torch.set_flush_denormal(True)
-    if resume and (out_dir / "last.pt").exists():
-        check_resumable(cfg, out_dir / "last.pt")  # before config.json is overwritten with the new one
+    start = resume_checkpoint(out_dir, verbose=info.main) if resume else None
+    if start is not None:
+        check_resumable(cfg, start, world=info.world)  # before config.json is overwritten with the new one
     if info.main:
         out_dir.mkdir(parents=True, exist_ok=True)
         _take_lock(out_dir / "train.pid")
         (out_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
     try:
-        return _train(cfg, out_dir, info, device, resume=resume, quiet=quiet, dataset=dataset)
+        return _train(cfg, out_dir, info, device, start=start, resume=resume, quiet=quiet, dataset=dataset)
     finally:
         if info.main:
             (out_dir / "train.pid").unlink(missing_ok=True)
@@ -598,7 +616,55 @@ def load_checkpoint(path: str | Path, map_location="cpu") -> dict:
         return torch.load(str(path), map_location=map_location, weights_only=False)
     except Exception as e:  # torch's zip reader, pickle, EOF...
         raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {' '.join(str(e).split())[:200]}); "
-                          "delete it, or restore one of the run's ckpt_*.pt as last.pt") from e
+                          "delete it (--resume then continues from the newest ckpt_*.pt), or restore one of the "
+                          "run's ckpt_*.pt as last.pt") from e
+
+
+def _step_checkpoints(out_dir: Path) -> list[Path]:
+    """The run's ``ckpt_<step>.pt``, newest first (by step: the zero padding runs out past 9999999)."""
+    found = [(int(p.stem[5:]), p) for p in out_dir.glob("ckpt_*.pt") if p.stem[5:].isdigit()]
+    return [p for _, p in sorted(found, reverse=True)]
+
+
+def refuse_existing_run(out_dir: Path) -> None:
+    """A new run must not overwrite another run's ``config.json`` and checkpoints: refuse a folder holding them."""
+    ckpts = [p.name for p in _step_checkpoints(out_dir)]
+    held = ["last.pt"] * (out_dir / "last.pt").exists() + ckpts[:2] + ["..."] * (len(ckpts) > 2)
+    if held:
+        raise ConfigError(f"{out_dir}: holds a training run ({', '.join(held)}); pass --resume to continue it, "
+                          "or another --out for a new run")
+
+
+def resume_checkpoint(out_dir: Path, verbose: bool = True) -> Path | None:
+    """The checkpoint ``--resume`` continues from: ``last.pt``, else (deleted or lost) the newest readable
+    ``ckpt_*.pt``; None for a folder with neither, where the run starts fresh (``--resume`` is then a no-op,
+    which the pipeline relies on)."""
+    last = out_dir / "last.pt"
+    if last.exists():
+        return last  # a damaged one is refused by name (load_checkpoint), never skipped silently
+    ckpts = _step_checkpoints(out_dir)
+    for ck in ckpts:
+        try:
+            load_checkpoint(ck)
+        except ConfigError as e:
+            if verbose:
+                print(f"ghnerf-train: skipping {e}", file=sys.stderr)
+            continue
+        if verbose:
+            print(f"ghnerf-train: {last} is missing: resuming from {ck.name}", file=sys.stderr)
+        return ck
+    if ckpts:
+        raise ConfigError(f"{out_dir}: no last.pt and none of its {len(ckpts)} ckpt_*.pt loads; "
+                          "start a new run (another --out)")
+    return None
+
+
+def checkpoint_world_size(ck: dict) -> int:
+    """Processes of the run that saved ``ck`` (checkpoints made before it was stored: its per-rank RNG states)."""
+    extra = ck.get("extra") or {}
+    if "world_size" in extra:
+        return int(extra["world_size"])
+    return len(extra["rng_ranks"]) if "rng_ranks" in extra else 1
 
 
 def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...]) -> None:
@@ -611,9 +677,16 @@ def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[st
                           "for another config")
 
 
-def check_resumable(cfg: TrainConfig, last: Path) -> None:
-    """:func:`refuse_another_config` for a training run (only :data:`RESUME_MAY_CHANGE` may differ)."""
-    old = load_checkpoint(last).get("config")
+def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> None:
+    """:func:`refuse_another_config` for a training run (only :data:`RESUME_MAY_CHANGE` may differ); with
+    ``world``, also refuse another process count (each rank's scenes and RNG state depend on it)."""
+    ck = load_checkpoint(last)
+    if world is not None and checkpoint_world_size(ck) != world:
+        n = checkpoint_world_size(ck)
+        raise ConfigError(f"{last}: saved by a run of {n} process(es), resumed with {world}: the scene split and "
+                          f"the per-process random states depend on the count; resume with {n} "
+                          f"(torchrun --nproc_per_node {n}) or start a new run (another --out)")
+    old = ck.get("config")
     if old:
         was = json.loads(json.dumps(asdict(build_config(old))))  # keys added since read as their defaults
         refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE)
@@ -632,8 +705,8 @@ def _take_lock(path: Path) -> None:
     path.write_text(str(os.getpid()))
 
 
-def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device, *, resume: bool, quiet: bool,
-           dataset) -> tuple[dict, GHNeRF]:
+def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device, *, start: Path | None,
+           resume: bool, quiet: bool, dataset) -> tuple[dict, GHNeRF]:
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
 
@@ -666,8 +739,8 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     step = 0
     last = out_dir / "last.pt"
     ck = None
-    if resume and last.exists():
-        ck = load_checkpoint(last, map_location=device)
+    if start is not None:
+        ck = load_checkpoint(start, map_location=device)
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])
@@ -694,7 +767,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     item = None
 
     def checkpoint(s: int) -> None:
-        extra = {"segments": clock.segments(s)}
+        extra = {"segments": clock.segments(s), "world_size": info.world}
         if info.world > 1:
             states = [None] * info.world
             dist.all_gather_object(states, rng_state(gen))
@@ -766,7 +839,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", help="JSON or TOML train config (training/train_configs/*.json)")
     p.add_argument("--out", required=True, help="run folder: checkpoints, log.jsonl, config.json")
-    p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt when it exists")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from OUT/last.pt (without it, the newest OUT/ckpt_*.pt) when it exists; "
+                        "without --resume an OUT holding checkpoints is refused")
     p.add_argument("--init", help="torchvision resnet18 state dict for the human encoder")
     p.add_argument("--preset", choices=sorted(PRESETS))
     p.add_argument("--data")
@@ -801,7 +876,13 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(asdict(cfg), indent=1))
         return 0
     out = Path(args.out)
-    summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
+    try:
+        summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
+    except ConfigError as e:  # raised by the run itself: an existing run folder, a damaged or foreign checkpoint
+        print(f"ghnerf-train: config error: {e}", file=sys.stderr)
+        if dist.is_initialized():
+            dist.destroy_process_group()
+        return 2
     if int(os.environ.get("RANK", "0")) == 0:
         print(json.dumps(summary))
     if dist.is_initialized():

@@ -133,3 +133,38 @@ def test_schema_version_mismatch_names_the_manifest(tmp_path):
     with pytest.raises(DatasetError, match="schema_version") as err:
         ShardedSplit(root, "train")
     assert err.value.path.endswith(MANIFEST)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda m: m["splits"]["train"].pop("count"), "splits.train.count must be an int"),
+    (lambda m: m["splits"]["train"].update(shard_size=0), "splits.train.shard_size must be an int >= 1"),
+    (lambda m: m["splits"]["train"].update(count="5"), "splits.train.count must be an int"),
+    (lambda m: m["splits"].update(train=[5, 2]), "splits.train must be a mapping"),
+    (lambda m: m.update(splits=[]), "splits must be a mapping"),
+    (lambda m: m.update(resolution="16"), "resolution must be a positive int"),
+    (lambda m: m.update(view_names="src0"), "view_names must be a list"),
+])
+def test_malformed_manifest_fields_name_the_manifest(tmp_path, edit, match):
+    root = _dataset(tmp_path / "ds")
+    manifest = json.loads((root / MANIFEST).read_text())
+    edit(manifest)
+    (root / MANIFEST).write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match=match) as err:
+        ShardedSplit(root, "train")
+    assert err.value.path == str(root / MANIFEST)
+
+
+def test_shard_metadata_that_is_not_an_object_names_the_file(tmp_path):
+    from training.data.cache import shard_is_complete
+
+    root = _dataset(tmp_path / "ds")
+    meta = root / "train" / "shard_000001" / "meta.json"
+    meta.write_text("[1, 2]")
+    assert not shard_is_complete(meta.parent, 2, 2)  # generate renders it again
+    with pytest.raises(DatasetError, match="JSON object") as err:
+        ShardedSplit(root, "train")
+    assert err.value.path == str(meta)
+    meta.write_text(json.dumps({"first_index": 2, "count": 2, "samples": 7}))
+    with pytest.raises(DatasetError, match="JSON object") as err:
+        ShardedSplit(root, "train")
+    assert err.value.path == str(meta)

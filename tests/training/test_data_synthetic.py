@@ -262,3 +262,58 @@ def test_cli_main(tmp_path, caplog):
     assert ShardedSplit(out, "train")[0].views[2].image.shape == (32, 32, 3)
     assert main(["--out", str(out), "--train", "1", "--res", "30"]) == 2
     assert "SyntheticConfig.resolution" in caplog.text
+
+
+def test_ctrl_c_stops_a_parallel_generation_and_its_workers(tmp_path):
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) must end the run and its workers; the
+    pool used to restart the killed workers and wait forever for their lost shards."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    log = tmp_path / "gen.log"
+    cmd = [sys.executable, "-m", "training.data.generate", "--out", str(tmp_path / "ds"), "--train", "100000",
+           "--res", "32", "--novel-views", "0", "--supersample", "1", "--shard-size", "2", "--workers", "2"]
+    with open(log, "wb") as fh:
+        proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True,
+                                cwd=Path(__file__).resolve().parents[2])
+    try:
+        deadline = time.monotonic() + 240  # the workers are rendering once a shard is logged (slow on a busy box)
+        while " shard " not in log.read_text() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert proc.poll() is None, log.read_text()[-2000:]
+        os.killpg(proc.pid, signal.SIGINT)
+        rc = proc.wait(timeout=120)  # it hung forever before
+        assert rc == 130, log.read_text()[-2000:]
+        assert "run the same command again to resume" in log.read_text()
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # no worker survives its parent
+            try:
+                os.killpg(proc.pid, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("generation workers still run after Ctrl-C")
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+
+
+def test_a_manifest_split_without_shard_size_is_named(tmp_path):
+    import json
+
+    out = tmp_path / "ds"
+    config = SyntheticConfig(resolution=32, novel_views=0, supersample=1)
+    generate(out, {"train": 1}, config, workers=1)
+    manifest = json.loads((out / MANIFEST).read_text())
+    del manifest["splits"]["train"]["shard_size"]
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="splits.train.shard_size") as err:
+        generate(out, {"train": 2}, config, workers=1)
+    assert err.value.path == str(out / MANIFEST)

@@ -192,3 +192,88 @@ def test_config_errors_name_the_field():
         ZjuConfig(joints_2d_from="smpl")
     with pytest.raises(DataConfigError, match="ZjuConfig.resolution"):
         ZjuConfig(resolution=100)
+
+
+@pytest.mark.parametrize("mutate, where", [
+    (lambda a: a["cams"].update(K=5), "cams.K must be a list"),
+    (lambda a: a["cams"]["K"].__setitem__(0, [["a"] * 3] * 3), r"cams.K\[0\]: not a numeric array"),
+    (lambda a: a["cams"]["R"].__setitem__(1, {"r": 1}), r"cams.R\[1\]: not a numeric array"),
+    (lambda a: a["ims"][0].update(ims="abcd"), r"ims\[0\] must be a dict whose 'ims' lists 4 image paths"),
+    (lambda a: a["ims"][1].update(ims=[1, 2, 3, 4]), r"ims\[1\] must be a dict"),
+    (lambda a: a["ims"].__setitem__(0, "Camera_B1"), r"ims\[0\] must be a dict"),
+])
+def test_malformed_annots_fields_name_the_file_and_field(tmp_path, subject, mutate, where):
+    annots = np.load(subject[0] / ANNOTS, allow_pickle=True).item()
+    annots["cams"] = {k: list(v) for k, v in annots["cams"].items()}
+    mutate(annots)
+    np.save(tmp_path / ANNOTS, annots, allow_pickle=True)
+    with pytest.raises(DatasetError, match=where) as err:
+        ZjuSequence(tmp_path)
+    assert err.value.path == str(tmp_path / ANNOTS)
+
+
+def test_malformed_keypoint_entries_name_the_file(tmp_path, subject):
+    import shutil
+
+    root = tmp_path / "s"
+    shutil.copytree(subject[0], root)
+    annots = np.load(root / ANNOTS, allow_pickle=True).item()
+    annots["ims"][0]["kpts2d"] = [["x"] * 3] * 25
+    np.save(root / ANNOTS, annots, allow_pickle=True)
+    with pytest.raises(DatasetError, match=r"ims\[0\]\['kpts2d'\]: not a numeric array"):
+        ZjuSequence(root).keypoints2d(0)
+    (root / "keypoints3d" / "000001.json").write_text(json.dumps([[1, 2, 3]]))
+    with pytest.raises(DatasetError, match="person 0 must be") as err:
+        ZjuSequence(root).joints_3d(1)
+    assert err.value.path == str(root / "keypoints3d" / "000001.json")
+    (root / "keypoints3d" / "000001.json").write_text(json.dumps([{"keypoints3d": [["x"] * 4] * 25}]))
+    with pytest.raises(DatasetError, match="keypoints3d: not a numeric array"):
+        ZjuSequence(root).joints_3d(1)
+    bad_2d = root / "kp.json"
+    for data, match in (({"people": [7]}, "'people' must be a list"), ([7], "person 0 must be"),
+                        ({"annots": [{"keypoints": "abc"}]}, "not a numeric array")):
+        from training.data.zju import parse_keypoints2d_json
+
+        with pytest.raises(DatasetError, match=match):
+            parse_keypoints2d_json(data, bad_2d)
+
+
+def test_a_failed_reconversion_leaves_the_previous_split_whole(tmp_path, subject):
+    import shutil
+
+    root = tmp_path / "s"
+    shutil.copytree(subject[0], root)
+    out = tmp_path / "ds"
+    first = ZjuConfig(resolution=RES, view_sets=((0, 1),), margin_frac=0.25)
+    assert convert_zju(root, out, first, split="s", shard_size=1) == 2
+    before = [ShardedSplit(out, "s").arrays(i)["roi"].tolist() for i in range(2)]
+    manifest = json.loads((out / "dataset.json").read_text())
+    assert manifest["splits"]["s"]["source_config"]["zju"]["margin_frac"] == 0.25
+
+    # frame 1 lacks a mask: the new settings fail after frame 0's shard was written
+    (root / "mask" / "Camera_B2" / "000001.png").unlink()
+    second = ZjuConfig(resolution=RES, view_sets=((0, 1),), margin_frac=1.0)
+    with pytest.raises(DatasetError, match="mask"):
+        convert_zju(root, out, second, split="s", shard_size=1)
+    split = ShardedSplit(out, "s")
+    assert [split.arrays(i)["roi"].tolist() for i in range(2)] == before  # not one shard of each
+    assert json.loads((out / "dataset.json").read_text()) == manifest
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "s"]  # no temporary left
+
+    # a conversion that succeeds replaces the split and records its settings
+    shutil.copy(subject[0] / "mask" / "Camera_B2" / "000001.png", root / "mask" / "Camera_B2" / "000001.png")
+    assert convert_zju(root, out, second, split="s", shard_size=2) == 2
+    split = ShardedSplit(out, "s")
+    assert [split.arrays(i)["roi"].tolist() for i in range(2)] != before
+    manifest = json.loads((out / "dataset.json").read_text())
+    assert manifest["splits"]["s"]["source_config"]["zju"]["margin_frac"] == 1.0
+    assert manifest["source_config"]["zju"]["margin_frac"] == 1.0
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "s"]
+    assert sorted(p.name for p in (out / "s").iterdir()) == ["shard_000000"]  # the old 1-sample shards are gone
+
+
+@pytest.mark.parametrize("shard_size", [0, -1, 100_001, 2.0, True])
+def test_convert_refuses_a_bad_shard_size(tmp_path, subject, shard_size):
+    with pytest.raises(DataConfigError, match="shard_size"):
+        convert_zju(subject[0], tmp_path / "ds", ZjuConfig(resolution=RES, view_sets=((0, 1),)), shard_size=shard_size)
+    assert not (tmp_path / "ds" / "dataset.json").exists()

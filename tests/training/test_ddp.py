@@ -53,4 +53,4 @@ def test_two_gloo_ranks_end_identical(data64, tmp_path):
         assert torch.equal(a[k], b[k]), k
     assert any(not torch.equal(init[k], a[k]) for k in a)
     ck = torch.load(tmp_path / "last.pt", weights_only=False)
-    assert ck["step"] == 2 and len(ck["extra"]["rng_ranks"]) == 2
+    assert ck["step"] == 2 and len(ck["extra"]["rng_ranks"]) == 2 and ck["extra"]["world_size"] == 2

@@ -128,6 +128,16 @@ def test_evaluate_loop_with_an_oracle(data64):
     assert res["scenes"] == 2 and res["pck@0.2"] == 1.0 and res["heatmap_mse"] == 0.0
     assert res["psnr_masked"] >= 100.0  # identical renders: capped (PSNR_CAP_DB), not an infinite mean
     assert res["novel_views"] == 4 and res["mpjpe_mm"] < 0.5
+    with pytest.raises(ValueError, match="limit must be >= 0"):  # min(-1, len) used to evaluate nothing
+        evaluate(_Oracle(ds), ds, limit=-1, progress=False)
+
+
+def test_the_cli_refuses_a_negative_limit(tmp_path, capsys):
+    from training.evaluate import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--model", str(tmp_path / "never_loaded.pt"), "--limit", "-1"])
+    assert e.value.code == 2 and "--limit: must be >= 0" in capsys.readouterr().err
 
 
 def test_encoder_heatmaps_are_scored_like_the_rendered_ones(data64):

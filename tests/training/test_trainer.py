@@ -33,6 +33,12 @@ def tiny_cfg(data, **kw):
     ({"device": "tpu"}, "device"),
     ({"loss": {"ssim_weight": -0.1}}, "loss.ssim_weight"),
     ({"patch_size": 1}, "patch_size"),
+    ({"patch_size": 129}, "patch_size"),  # larger than the 128x128 model input: rays off the image
+    ({"grad_clip": float("nan")}, "grad_clip"),
+    ({"max_minutes": float("nan")}, "max_minutes"),
+    ({"max_minutes": -1.0}, "max_minutes"),
+    ({"loss": {"level_weights": [-1.0, 2.0]}}, "loss.level_weights"),
+    ({"loss": {"level_weights": [1.0, 1.0, 1.0]}}, "loss.level_weights"),  # edge128 has 2 levels
 ])
 def test_config_errors_name_the_key(data, key):
     with pytest.raises(ConfigError) as e:
@@ -54,6 +60,23 @@ def test_cli_reports_config_error(tmp_path, capsys):
     (tmp_path / "c.json").write_text(json.dumps({"bogus": 1}))
     assert main(["--config", str(tmp_path / "c.json"), "--out", str(tmp_path / "o")]) == 2
     assert "bogus" in capsys.readouterr().err
+    (tmp_path / "list.json").write_text("[1, 2]")  # JSON, but not a table of settings
+    assert main(["--config", str(tmp_path / "list.json"), "--out", str(tmp_path / "o")]) == 2
+    assert f"config file {tmp_path / 'list.json'}: must hold a JSON object" in capsys.readouterr().err
+
+
+def test_cli_reports_the_run_folders_config_errors(tmp_path, capsys):
+    """ConfigErrors of the run itself (not of the config file) exit 2 too, before anything is written."""
+    (tmp_path / "c.json").write_text(json.dumps({"preset": "tiny", "data": str(tmp_path / "nowhere")}))
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "last.pt").write_bytes(b"not a checkpoint")
+    assert main(["--config", str(tmp_path / "c.json"), "--out", str(run)]) == 2  # a run, and no --resume
+    err = capsys.readouterr().err
+    assert f"{run}: holds a training run (last.pt)" in err and "--resume" in err
+    assert main(["--config", str(tmp_path / "c.json"), "--out", str(run), "--resume"]) == 2
+    assert f"{run / 'last.pt'}: unreadable checkpoint" in capsys.readouterr().err
+    assert sorted(p.name for p in run.iterdir()) == ["last.pt"]
 
 
 # --------------------------------------------------------------------------------------- sampling
@@ -144,6 +167,14 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
 
     first, _ = train(tiny_cfg(data64, iterations=1), tmp_path / "b", quiet=True)
     assert first["steps"] == 1
+    # last.pt lost: --resume continues from the newest ckpt_*.pt (it used to start again from step 0)
+    import shutil
+
+    shutil.copytree(tmp_path / "b", tmp_path / "c")
+    (tmp_path / "c" / "last.pt").unlink()
+    (tmp_path / "c" / "ckpt_0000000.pt").write_bytes(b"older and damaged: never reached")
+    from_ckpt, m_from_ckpt = train(tiny_cfg(data64), tmp_path / "c", resume=True, quiet=True)
+    assert from_ckpt["steps"] == 2 and [g["steps"] for g in from_ckpt["segments"]] == [1, 1]
     resumed, m_resumed = train(tiny_cfg(data64), tmp_path / "b", resume=True, quiet=True)
     assert resumed["steps"] == 2
     # the summary's wall time covers both invocations, each listed with its steps and threads
@@ -156,6 +187,7 @@ def test_two_iterations_and_resume_is_identical(data64, tmp_path):
     assert a.keys() == b.keys()
     for k in a:
         assert torch.equal(a[k], b[k]), k
+        assert torch.equal(a[k], m_from_ckpt.state_dict()[k]), k
     # and training moved the weights at all
     init = torch.load(tmp_path / "b" / "ckpt_0000001.pt", weights_only=False)["model"]
     assert any(not torch.equal(init[k], a[k]) for k in a if a[k].is_floating_point())
@@ -170,6 +202,23 @@ def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tm
         train(tiny_cfg(data64, lr=0.1, seed=5), tmp_path / "r", resume=True, quiet=True)
     assert (tmp_path / "r" / "config.json").read_text() == before  # the run's record untouched
     last = tmp_path / "r" / "last.pt"
+    saved = {p.name: p.read_bytes() for p in (tmp_path / "r").iterdir()}
+
+    # a new run in the folder (no resume) would overwrite the run's config.json, last.pt and ckpt_*.pt
+    with pytest.raises(ConfigError, match=r"holds a training run \(last.pt, ckpt_0000001.pt\); pass --resume"):
+        train(tiny_cfg(data64, lr=0.1), tmp_path / "r", quiet=True)
+    assert {p.name: p.read_bytes() for p in (tmp_path / "r").iterdir()} == saved
+
+    # another process count: each rank's scenes and random state depend on it
+    ck = torch.load(last, weights_only=False)
+    assert ck["extra"]["world_size"] == 1
+    for extra in ({"world_size": 2}, {"rng_ranks": [ck["rng"], ck["rng"]]}):  # the latter: saved before world_size
+        torch.save({**ck, "extra": {k: v for k, v in {**ck["extra"], **extra}.items()
+                                    if k != "world_size" or "world_size" in extra}}, last)
+        with pytest.raises(ConfigError, match=r"last.pt: saved by a run of 2 process\(es\), resumed with 1"):
+            train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)
+    assert (tmp_path / "r" / "config.json").read_text() == before
+
     last.write_bytes(last.read_bytes()[:1000])
     with pytest.raises(ConfigError, match="last.pt: unreadable checkpoint"):
         train(tiny_cfg(data64), tmp_path / "r", resume=True, quiet=True)

@@ -65,7 +65,26 @@ def read_manifest(root: str | Path) -> dict:
     for key in ("resolution", "view_names", "splits"):
         if key not in manifest:
             raise DatasetError(path, f"manifest lacks {key!r}")
+    _check_manifest_fields(manifest, path)
     return manifest
+
+
+def _check_manifest_fields(manifest: dict, path: Path) -> None:
+    # readers index these fields directly: a hand-edited or damaged manifest must fail here, named
+    res, names, splits = manifest["resolution"], manifest["view_names"], manifest["splits"]
+    if isinstance(res, bool) or not isinstance(res, int) or res < 1:
+        raise DatasetError(path, f"resolution must be a positive int, got {res!r}")
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise DatasetError(path, f"view_names must be a list of names, got {names!r}")
+    if not isinstance(splits, dict):
+        raise DatasetError(path, f"splits must be a mapping of split name to entry, got {splits!r}")
+    for name, info in splits.items():
+        if not isinstance(info, dict):
+            raise DatasetError(path, f"splits.{name} must be a mapping, got {info!r}")
+        for key, lo in (("count", 0), ("shard_size", 1)):
+            v = info.get(key)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise DatasetError(path, f"splits.{name}.{key} must be an int >= {lo}, got {v!r}")
 
 
 def write_manifest(root: str | Path, manifest: dict) -> None:
@@ -122,6 +141,8 @@ def shard_is_complete(folder: Path, first_index: int, count: int) -> bool:
     try:
         data = json.loads(meta.read_text())
     except (OSError, json.JSONDecodeError):
+        return False
+    if not isinstance(data, dict):  # damaged: render the shard again
         return False
     return data.get("first_index") == first_index and data.get("count") == count and all(
         (folder / f"{name}.npy").is_file() for name in FIELDS)
@@ -184,6 +205,9 @@ class ShardedSplit:
                 meta = json.loads(meta_path.read_text())
             except (OSError, json.JSONDecodeError) as e:
                 raise DatasetError(meta_path, f"unreadable shard metadata: {e}") from e
+            if not isinstance(meta, dict) or not isinstance(meta.get("samples", []), list):
+                raise DatasetError(meta_path, "shard metadata must be a JSON object with first_index, count and a "
+                                              f"samples list, got {type(meta).__name__}")
             if meta.get("first_index") != i0 or meta.get("count") != n or len(meta.get("samples", [])) != n:
                 raise DatasetError(meta_path, f"shard holds samples from {meta.get('first_index')} x {meta.get('count')}, "
                                               f"expected {i0} x {n}")

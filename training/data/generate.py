@@ -62,8 +62,13 @@ def _render_shard(task: tuple) -> tuple[str, int, int, float]:
 
 
 def _worker_init() -> None:
+    import signal
+
     import cv2
 
+    # Ctrl-C reaches the whole process group: only the parent acts on it (it terminates the pool); a worker
+    # killed by it would be replaced by the pool and its lost shard would keep join() waiting forever
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     cv2.setNumThreads(1)  # one process per core already
 
 
@@ -152,10 +157,16 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
             elapsed = time.perf_counter() - start
             log.info("%s shard %d: %d samples in %.1f s; %d/%d done, %.2f samples/s", split, k, n, seconds, done, total,
                      done / elapsed)
-    finally:
+    except BaseException:
         if pool is not None:
-            pool.close()
+            # Ctrl-C or a failed shard: stop the workers now (close() would wait for every queued shard); a
+            # shard cut short is only a *.tmp-* folder, which the next run removes
+            pool.terminate()
             pool.join()
+        raise
+    if pool is not None:
+        pool.close()
+        pool.join()
     seconds = time.perf_counter() - start
 
     for split, count in counts.items():
@@ -200,6 +211,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (DataConfigError, DatasetError) as e:
         log.error("%s", e)
         return 2
+    except KeyboardInterrupt:
+        log.error("interrupted: the finished shards are kept; run the same command again to resume")
+        return 130
     log.info("rendered %d samples in %.1f s (%.2f samples/s); %d shards written, %d skipped; %.0f bytes/sample on disk",
              report.samples_rendered, report.seconds, report.samples_per_s, report.shards_written, report.shards_skipped,
              report.bytes_per_sample)

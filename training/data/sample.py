@@ -91,7 +91,8 @@ class Sample:
         joints_3d: ``(25, 3)`` float64 BODY_25 joints in the rig frame (metres).
         joints_3d_valid: ``(25,)`` bool (all True for synthetic data).
         bbox: ``(2, 3)`` float64 axis-aligned box ``(min, max)`` of the subject in the rig frame,
-            no margin (synthetic: the exact body surface; ZJU-MoCap: see ``docs/dataset.md``).
+            synthetic: the exact body surface, no margin; ZJU-MoCap: the joints' box grown by
+            ``bbox_margin_m`` (``docs/dataset.md``).
         metadata: JSON-serialisable facts about where the sample came from.
     """
 

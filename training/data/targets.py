@@ -41,7 +41,8 @@ KEYS: dict[str, tuple[str, str, str]] = {
     "tgt_is_source": ("(V,)", "bool", "the target is a source camera"),
     "joints_3d": ("(25, 3)", "float32", "BODY_25 joints, rig frame, metres"),
     "joints_3d_valid": ("(25,)", "bool", "3D joint known"),
-    "bbox": ("(2, 3)", "float32", "subject box (min, max), rig frame, metres, no margin"),
+    "bbox": ("(2, 3)", "float32", "subject box (min, max), rig frame, metres (synthetic: exact, no margin; "
+                                  "ZJU-MoCap: the joints' box grown by bbox_margin_m)"),
 }
 
 

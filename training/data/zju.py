@@ -55,8 +55,20 @@ MASK_DIRS = ("mask", "mask_cihp")
 
 
 # ------------------------------------------------------------------ reading
+def _numeric(value, path: Path, where: str) -> np.ndarray:
+    """``value`` as a float64 array; anything else (strings, ragged lists, dicts) names ``where`` in ``path``."""
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise DatasetError(path, f"{where}: not a numeric array ({e})") from e
+
+
+def _is_list(value) -> bool:
+    return isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim >= 1)
+
+
 def _as_rotation(value, path: Path, c: int) -> np.ndarray:
-    R = np.asarray(value, dtype=np.float64)
+    R = _numeric(value, path, f"cams.R[{c}]")
     if R.size == 3:  # Rodrigues vector
         R = cv2.Rodrigues(R.reshape(3, 1))[0]
     if R.shape != (3, 3):
@@ -69,16 +81,20 @@ def parse_cameras(annots: dict, path: Path) -> list[tuple[np.ndarray, np.ndarray
     cams = annots.get("cams")
     if not isinstance(cams, dict) or not all(k in cams for k in ("K", "R", "T", "D")):
         raise DatasetError(path, "annots['cams'] must be a dict with K, R, T and D lists")
+    for k in ("K", "R", "T", "D"):
+        if not _is_list(cams[k]):
+            raise DatasetError(path, f"cams.{k} must be a list with one entry per camera, got {cams[k]!r:.80}")
     counts = {k: len(cams[k]) for k in ("K", "R", "T", "D")}
     if len(set(counts.values())) != 1 or counts["K"] == 0:
         raise DatasetError(path, f"cams lists must be non-empty and of equal length, got {counts}")
     out = []
     for c in range(counts["K"]):
-        K = np.asarray(cams["K"][c], dtype=np.float64)
-        T = np.asarray(cams["T"][c], dtype=np.float64).reshape(-1)
-        D = np.asarray(cams["D"][c], dtype=np.float64).reshape(-1)
+        K = _numeric(cams["K"][c], path, f"cams.K[{c}]")
+        T = _numeric(cams["T"][c], path, f"cams.T[{c}]").reshape(-1)
+        D = _numeric(cams["D"][c], path, f"cams.D[{c}]").reshape(-1)
         if K.shape != (3, 3) or T.shape != (3,):
-            raise DatasetError(path, f"camera {c}: K must be 3x3 and T a 3-vector, got {K.shape}, {T.shape}")
+            raise DatasetError(path, f"camera {c}: cams.K[{c}] must be 3x3 and cams.T[{c}] a 3-vector, "
+                                     f"got {K.shape}, {T.shape}")
         out.append((K, _as_rotation(cams["R"][c], path, c), T / MM_PER_M, D))
     return out
 
@@ -94,9 +110,11 @@ def parse_keypoints2d_json(data, path: Path) -> np.ndarray | None:
     """``(25, 3)`` x, y, confidence of the first person in an OpenPose or EasyMocap 2D file."""
     if isinstance(data, dict) and "people" in data:
         people = data["people"]
+        if not isinstance(people, list) or not all(isinstance(p, dict) for p in people):
+            raise DatasetError(path, f"'people' must be a list of OpenPose person objects, got {people!r:.80}")
         if not people:
             return None
-        flat = np.asarray(people[0].get("pose_keypoints_2d", []), dtype=np.float64)
+        flat = _numeric(people[0].get("pose_keypoints_2d", []), path, "people[0].pose_keypoints_2d")
         if flat.size < 3 * NUM_JOINTS:
             raise DatasetError(path, f"pose_keypoints_2d has {flat.size} values, expected {3 * NUM_JOINTS} (BODY_25)")
         return flat[: 3 * NUM_JOINTS].reshape(NUM_JOINTS, 3)
@@ -105,7 +123,9 @@ def parse_keypoints2d_json(data, path: Path) -> np.ndarray | None:
         raise DatasetError(path, "neither OpenPose ('people') nor EasyMocap ('annots' list) keypoints")
     if not persons:
         return None
-    kp = np.asarray(persons[0].get("keypoints", persons[0].get("keypoints2d", [])), dtype=np.float64)
+    if not isinstance(persons[0], dict):
+        raise DatasetError(path, f"person 0 must be an object with 'keypoints', got {persons[0]!r:.80}")
+    kp = _numeric(persons[0].get("keypoints", persons[0].get("keypoints2d", [])), path, "annots[0].keypoints")
     if kp.ndim != 2 or kp.shape[0] < NUM_JOINTS or kp.shape[1] < 3:
         raise DatasetError(path, f"keypoints must be (25, 3) BODY_25 x, y, confidence, got {kp.shape}")
     return kp[:NUM_JOINTS, :3]
@@ -142,8 +162,11 @@ class ZjuSequence:
         if not isinstance(ims, (list, tuple, np.ndarray)) or len(ims) == 0:
             raise DatasetError(path, "annots['ims'] must be a non-empty list of frames")
         for f, frame in enumerate(ims):
-            if not isinstance(frame, dict) or len(frame.get("ims", ())) != len(self._calib):
-                raise DatasetError(path, f"ims[{f}] must be a dict whose 'ims' lists {len(self._calib)} image paths")
+            paths = frame.get("ims") if isinstance(frame, dict) else None
+            # a string has a length too: check the entries are paths
+            if not _is_list(paths) or len(paths) != len(self._calib) or not all(isinstance(p, str) for p in paths):
+                raise DatasetError(path, f"ims[{f}] must be a dict whose 'ims' lists {len(self._calib)} image paths, "
+                                         f"got {paths if isinstance(frame, dict) else frame!r:.80}")
         self._ims = list(ims)
         self._annots_path = path
         self._cameras: dict[int, Camera] = {}
@@ -211,7 +234,7 @@ class ZjuSequence:
         self._check(frame)
         kp = self._ims[frame].get("kpts2d")
         if kp is not None:
-            kp = np.asarray(kp, dtype=np.float64)
+            kp = _numeric(kp, self._annots_path, f"ims[{frame}]['kpts2d']")
             if kp.ndim != 3 or kp.shape[0] != self.num_cameras or kp.shape[1] < NUM_JOINTS or kp.shape[2] < 3:
                 raise DatasetError(self._annots_path, f"ims[{frame}]['kpts2d'] must be (C, 25, 3), got {kp.shape}")
             return kp[:, :NUM_JOINTS, :3]
@@ -239,7 +262,9 @@ class ZjuSequence:
             raise DatasetError(path, "must be an EasyMocap list of {'id', 'keypoints3d'} persons")
         if not data:
             return None
-        kp = np.asarray(data[0].get("keypoints3d", []), dtype=np.float64)
+        if not isinstance(data[0], dict):
+            raise DatasetError(path, f"person 0 must be an {{'id', 'keypoints3d'}} object, got {data[0]!r:.80}")
+        kp = _numeric(data[0].get("keypoints3d", []), path, "[0].keypoints3d")
         if kp.ndim != 2 or kp.shape[0] < NUM_JOINTS or kp.shape[1] not in (3, 4):
             raise DatasetError(path, f"keypoints3d must be (25, 4) x, y, z, confidence, got {kp.shape}")
         if kp.shape[1] == 3:

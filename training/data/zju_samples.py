@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import logging
 import math
+import os
+import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterator, Sequence
@@ -218,10 +220,20 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
     """Convert one ZJU-MoCap subject into split ``split`` of the cached dataset ``out``; returns the count.
 
     Several subjects go into one dataset as several splits (``train_313``, ``train_315``...;
-    combine them with ``torch.utils.data.ConcatDataset``). The split is rewritten whole.
+    combine them with ``torch.utils.data.ConcatDataset``). The split is rewritten whole and
+    atomically: the shards are written into ``<split>.tmp-<pid>`` and swapped in once every
+    sample converted, so a conversion that fails midway (a missing mask, say) leaves the
+    previous split as it was. The split's manifest entry records the settings that made it
+    (``source_config``); the top-level ``source_config`` of a ZJU dataset is the latest conversion's.
+
+    Raises:
+        DataConfigError: a bad ``split``, ``shard_size`` or camera index (the message names it).
+        DatasetError: the subject folder or ``out``'s manifest is unusable (the message names the file).
     """
-    if not split or not split.replace("_", "").isalnum():
+    if not isinstance(split, str) or not split or not split.replace("_", "").isalnum():
         raise DataConfigError("split", f"must be an identifier, got {split!r}")
+    if isinstance(shard_size, bool) or not isinstance(shard_size, int) or not 1 <= shard_size <= 100_000:
+        raise DataConfigError("shard_size", f"must be an int in [1, 100000], got {shard_size!r}")
     seq = ZjuSequence(subject, mask_dir=config.mask_dir)
     for view_set in config.view_sets:
         if max(view_set) >= seq.num_cameras:
@@ -229,22 +241,47 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
                                                          f"({seq.num_cameras} cameras in {seq.root})")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    fresh = new_manifest(resolution=config.resolution, view_names=config.view_names, source="zju",
-                         source_config={"zju": config.to_json()})
+    source_config = {"zju": config.to_json()}
     if (out / MANIFEST).exists():
         manifest = read_manifest(out)
         if manifest["resolution"] != config.resolution or manifest["view_names"] != list(config.view_names):
             raise DatasetError(out / MANIFEST, "holds a dataset of another resolution or view count")
     else:
-        manifest = fresh
+        manifest = new_manifest(resolution=config.resolution, view_names=config.view_names, source="zju",
+                                source_config=source_config)
+    # leftovers of an interrupted conversion of this split (split names have no dot: no other split matches)
+    for stale in [*out.glob(f"{split}.tmp-*"), *out.glob(f"{split}.old-*")]:
+        log.info("removing %s, left by an interrupted conversion", stale)
+        shutil.rmtree(stale, ignore_errors=True)
+
     count = len(config.frame_indices(seq.num_frames)) * len(config.view_sets)
-    samples = iter_zju_samples(seq, config)
-    for k, first, n in shard_plan(count, shard_size):
-        write_shard(out / split / shard_name(k), [next(samples) for _ in range(n)], first)
-        log.info("%s: shard %d written (%d samples)", split, k, n)
-    manifest["splits"][split] = {"count": count, "shard_size": shard_size, "spec": {"name": split, "source": "zju",
-                                                                                   "subject": str(subject)}}
+    tmp = out / f"{split}.tmp-{os.getpid()}"
+    try:
+        tmp.mkdir()
+        samples = iter_zju_samples(seq, config)
+        for k, first, n in shard_plan(count, shard_size):
+            write_shard(tmp / shard_name(k), [next(samples) for _ in range(n)], first)
+            log.info("%s: shard %d written (%d samples)", split, k, n)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)  # the old split (if any) was never touched
+        raise
+
+    split_dir = out / split
+    if split in manifest["splits"]:
+        # a crash during the swap then leaves the split absent from the manifest, never old entry + new shards
+        del manifest["splits"][split]
+        write_manifest(out, manifest)
+    old = out / f"{split}.old-{os.getpid()}"
+    if split_dir.exists():
+        os.replace(split_dir, old)
+    os.replace(tmp, split_dir)
+    manifest["splits"][split] = {"count": count, "shard_size": shard_size,
+                                 "spec": {"name": split, "source": "zju", "subject": str(subject)},
+                                 "source_config": source_config}
+    if manifest.get("source") == "zju":  # (another source's top-level settings are its own: generate checks them)
+        manifest["source_config"] = source_config
     write_manifest(out, manifest)
+    shutil.rmtree(old, ignore_errors=True)
     return count
 
 
