@@ -44,7 +44,8 @@ from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
 from training.train import HEATMAP_SIGMA_HM_PX, DistInfo, Progress, apply_overrides, learning_rate, \
-    load_checkpoint, load_config_file, mirrored, model_config_of, refuse_another_config, scene_order, seed_everything
+    load_checkpoint, load_config_file, mirrored, model_config_of, refuse_another_config, refuse_existing_run, \
+    scene_order, seed_everything
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -426,6 +427,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     out = Path(out_dir)
     if resume and (out / "last.pt").exists():
         _check_resumable(cfg, out / "last.pt")  # before config.json is overwritten with the new one
+    elif not resume:
+        refuse_existing_run(out)  # a new run never overwrites another's config.json and last.pt
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
     use_cuda = cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available())
@@ -589,7 +592,11 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    summary = pretrain(cfg, args.out, resume=args.resume, quiet=args.quiet)
+    try:
+        summary = pretrain(cfg, args.out, resume=args.resume, quiet=args.quiet)
+    except ConfigError as e:  # raised while starting: a run folder in use, a resume under another config
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     print(json.dumps(summary, indent=1))
     return 0
 

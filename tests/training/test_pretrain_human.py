@@ -135,6 +135,11 @@ def test_pretraining_resume_refuses_another_config(data64, tmp_path):
     with pytest.raises(ConfigError, match="lr, seed differ"):
         pretrain(tiny_pretrain(data64, lr=0.5, seed=9), tmp_path / "p", resume=True, quiet=True)
     assert pretrain(tiny_pretrain(data64, max_minutes=5.0), tmp_path / "p", resume=True, quiet=True)["steps"] == 2
+    # without --resume a folder holding a run is refused before anything in it is overwritten
+    before = {f.name: f.read_bytes() for f in (tmp_path / "p").iterdir() if f.is_file()}
+    with pytest.raises(ConfigError, match=r"holds a training run \(last\.pt\); pass --resume"):
+        pretrain(tiny_pretrain(data64, iterations=1), tmp_path / "p", quiet=True)
+    assert {f.name: f.read_bytes() for f in (tmp_path / "p").iterdir() if f.is_file()} == before
 
 
 def _gauss(cy, cx, size=32, sigma=1.5):
