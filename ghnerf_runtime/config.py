@@ -312,7 +312,8 @@ class Joints3DConfig:
             box). Comparison: ``docs/runtime.md``.
         single_view_fallback: triangulation: a joint that is not triangulated (seen in one view
             only, or the views disagree) takes the depth-centroid estimate instead, at half its
-            confidence (off until measured on the trained model; docs/runtime.md).
+            confidence (off until measured on the trained model; docs/runtime.md). Ignored where
+            the skeleton prior runs, which places those joints itself (:meth:`EstimatorConfig.beside_prior`).
         max_reprojection_px: triangulation: a joint whose reprojection error exceeds this in
             either view (model-input pixels) is missing (the views disagree).
         min_view_confidence: a 2D peak below this does not enter the 3D estimate.
@@ -643,6 +644,15 @@ class EstimatorConfig:
             kind = typing.get_type_hints(type(self))[f.name]
             if not isinstance(getattr(self, f.name), kind):
                 _fail(type(self), f.name, f"must be a {kind.__name__}", getattr(self, f.name))
+
+    def beside_prior(self, prior_available: bool) -> "EstimatorConfig":
+        """This configuration as it runs, given whether the model folder has a skeleton prior: the prior places
+        the joints ``single_view_fallback`` would (it replaces it), so where the prior runs the fallback is off,
+        and its two graphs (``volume``, ``render_heat``) are neither loaded nor run for nothing."""
+        j = self.joints3d
+        if j.single_view_fallback and j.uses_skeleton_prior(prior_available):
+            return dataclasses.replace(self, joints3d=dataclasses.replace(j, single_view_fallback=False))
+        return self
 
     def required_graphs(self, human_graph: bool = False) -> tuple[str, ...]:
         """The graphs this configuration runs (the session loads only these).

@@ -278,7 +278,10 @@ class Estimator:
     """
 
     def __init__(self, session: Any, rig: Rig, config: EstimatorConfig | None = None) -> None:
-        self.config = config or EstimatorConfig()
+        config = config or EstimatorConfig()
+        self.config = config.beside_prior(getattr(session, "skeleton_prior", None) is not None)
+        if self.config is not config:
+            log.info("joints3d.single_view_fallback is off: the skeleton prior places the joints it would")
         self.session = session
         self.rig = rig
         self.contract = session.contract
@@ -871,6 +874,7 @@ def load_session(config: EstimatorConfig):
     configuration runs: the keypoint-only ``human`` graph when the model folder has one."""
     from ghnerf_runtime.session import ModelSession  # local: keeps this module importable without a model
 
+    config = config.beside_prior(ModelSession.has_skeleton_prior(config.session))
     graphs = config.required_graphs(ModelSession.has_graph_file(config.session, "human"))
     return ModelSession.load(config.session, graphs, skeleton_prior=config.joints3d.uses_skeleton_prior(True),
                              novel_painter=config.novel_view.uses_painter(True))

@@ -178,13 +178,20 @@ def query_grid(box: np.ndarray, n: int) -> tuple[np.ndarray, tuple[int, int, int
     return np.stack([x.ravel(), y.ravel(), z.ravel()], axis=-1).astype(np.float32), shape
 
 
+#: The share of the query grid a volumetric joint's response may hold at half its peak or more (the 2D
+#: decoder's ``max_region_frac`` default); more is a flat or flooded response, and the joint is missing.
+VOLUMETRIC_MAX_REGION_FRAC = 0.25
+
+
 def volumetric_joints(joint_heat: np.ndarray, points: np.ndarray, shape: tuple[int, int, int],
                       config: Joints3DConfig) -> Joints3D:
     """Joints from the ``query`` graph's responses on a :func:`query_grid`.
 
     Per joint: the grid point of the largest response (mean over the source volumes), refined
     per axis by a parabola through the log responses of its two neighbours (exact for a
-    Gaussian response; the step is clipped to half a cell); confidence is that response.
+    Gaussian response; the step is clipped to half a cell); confidence is that response. A joint
+    whose response is flat or flooded (more than :data:`VOLUMETRIC_MAX_REGION_FRAC` of the grid at
+    half its peak or more) is missing.
 
     Args:
         joint_heat: ``(B, N, J)`` sigmoid responses, one row per source volume (averaged).
@@ -229,7 +236,10 @@ def volumetric_joints(joint_heat: np.ndarray, points: np.ndarray, shape: tuple[i
     if nz > 1:
         cell[2] = pts[nx * ny, 2] - pts[0, 2]
     points_out = pts[best] + offset[:, ::-1] * cell  # offsets z, y, x -> x, y, z
-    valid = peak >= max(config.min_volumetric_response, 1e-6)
+    # A peak, not a flat or flooded response (a constant one's argmax is the grid's first cell): as the 2D
+    # decoder's max_region_frac, at most that share of the grid may reach half the peak.
+    region = (resp >= 0.5 * peak[None, :]).mean(axis=0)
+    valid = (peak >= max(config.min_volumetric_response, 1e-6)) & (region <= VOLUMETRIC_MAX_REGION_FRAC)
     return Joints3D(points_out, peak.astype(np.float32), valid, np.zeros((J, heat.shape[0]))).sanitised()
 
 

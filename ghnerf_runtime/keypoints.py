@@ -286,6 +286,9 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     finite = np.isfinite(maps).all(axis=(1, 2))
     if not finite.all():  # keep NaN/Inf out of the filter; those joints are dropped below
         maps = np.where(finite[:, None, None], maps, 0.0).astype(np.float32)
+    # heatmaps are probabilities: a model that strays outside [0, 1] (huge values overflow the filter to
+    # inf) must not report a confidence outside it
+    maps = np.clip(maps, 0.0, 1.0)
 
     padded, pad = _filter(maps, cfg.sigma)
     filtered = padded[:, pad:pad + h, pad:pad + w]

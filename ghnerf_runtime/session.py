@@ -285,6 +285,13 @@ class ModelSession:
         return session
 
     @classmethod
+    def has_skeleton_prior(cls, config: SessionConfig | str | os.PathLike) -> bool:
+        """Whether the model folder has a skeleton prior file (:meth:`load` with ``skeleton_prior`` loads it)."""
+        if not isinstance(config, SessionConfig):
+            config = SessionConfig(model_dir=str(config))
+        return (resolve_model_dir(config.model_dir) / PRIOR_FILE).is_file()
+
+    @classmethod
     def has_graph_file(cls, config: SessionConfig | str | os.PathLike, graph: str) -> bool:
         """Whether the model folder has a file for ``graph`` under its usual names (``<graph>.onnx``,
         ``<graph>.int8.onnx``): how the caller learns, before loading, that an optional graph exists."""

@@ -58,7 +58,8 @@ class OneEuroJoints:
         """
         cfg = self.config
         x = np.asarray(points, np.float64)
-        valid = np.asarray(valid, bool)
+        # a non-finite joint is not reported: it must not enter (and poison) the state
+        valid = np.asarray(valid, bool) & np.isfinite(x).all(axis=-1)
         dt = None if self._t is None else float(t_s) - self._t
         if dt is None or not (0.0 < dt <= cfg.max_gap_s) or self._x is None or self._x.shape != x.shape:
             # First pair, a gap, or time running backwards (a restarted source): start over.
@@ -73,6 +74,9 @@ class OneEuroJoints:
         a = smoothing_alpha(cfg.min_cutoff_hz + cfg.beta * speed, dt)
         x_hat = self._x + a * (x - self._x)
         out = np.where(keep[:, None], x_hat, x)
+        keep &= np.isfinite(out).all(axis=-1)  # an overflowing step (a jump of 1e308 m) restarts the joint
+        out = np.where(keep[:, None], out, x)
+        dx_hat = np.where(np.isfinite(dx_hat), dx_hat, 0.0)
         self._dx = np.where(keep[:, None], dx_hat, 0.0)
         self._x = out
         self._alive = valid.copy()

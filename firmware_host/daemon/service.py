@@ -86,7 +86,7 @@ def _session_key(config: DaemonConfig) -> tuple:
     """What :func:`load_session` loads for this config: the same key, the same session (kept across a reload)."""
     from ghnerf_runtime.session import ModelSession  # as load_session does: importable without a model
 
-    est = config.estimator
+    est = config.estimator.beside_prior(ModelSession.has_skeleton_prior(config.estimator.session))
     return (est.session, tuple(est.required_graphs(ModelSession.has_graph_file(est.session, "human"))),
             est.joints3d.uses_skeleton_prior(True), est.novel_view.uses_painter(True))
 

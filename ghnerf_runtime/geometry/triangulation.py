@@ -314,15 +314,22 @@ def _dlt_solve(views: _Views) -> tuple[np.ndarray, np.ndarray]:
     # Two rows per observation (H&Z 12.2): u * p3 - p1 and v * p3 - p2, scaled by the weight.
     rows_u = xn[..., 0:1] * Pn[None, :, None, 2, :] - Pn[None, :, None, 0, :]  # (N, C, J, 4)
     rows_v = xn[..., 1:2] * Pn[None, :, None, 2, :] - Pn[None, :, None, 1, :]
-    A = np.stack([rows_u, rows_v], axis=2) * views.w[:, :, None, :, None]  # (N, C, 2, J, 4)
+    # Each joint's weights over their largest (the solution does not change): huge weights cannot overflow A.
+    top = views.w.max(axis=1, keepdims=True)
+    with np.errstate(all="ignore"):
+        weights = np.where(top > 0, views.w / np.where(top > 0, top, 1.0), 0.0)
+    A = np.stack([rows_u, rows_v], axis=2) * weights[:, :, None, :, None]  # (N, C, 2, J, 4)
     N, C, _, J, _ = A.shape
     A = np.moveaxis(A, 3, 1).reshape(N, J, 2 * C, 4)
+    # A row that overflowed (absurd pixels) has no answer; LAPACK's SVD can loop forever on an inf.
+    solvable = np.isfinite(A).all(axis=(-2, -1))
+    A = np.where(solvable[..., None, None], A, 0.0)
     # The solution is the right singular vector of the smallest singular value.
     _, _, vh = np.linalg.svd(A, full_matrices=False if 2 * C >= 4 else True)
     X = vh[..., -1, :]
     w = X[..., 3]
     # A (near-)zero homogeneous coordinate is a point at infinity: (near-)parallel rays.
-    finite = np.abs(w) > 1e-12 * np.linalg.norm(X[..., :3], axis=-1)
+    finite = solvable & (np.abs(w) > 1e-12 * np.linalg.norm(X[..., :3], axis=-1))
     with np.errstate(all="ignore"):
         points = X[..., :3] / np.where(finite, w, 1.0)[..., None]
     return points, finite
@@ -588,9 +595,13 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
         Pn = T @ P
         Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
         rows = xn[..., :, None] * Pn[:, None, None, 2, :] - Pn[:, None, :2, :]  # (2, J, 2, 4)
-        A = (rows * w[..., None, None]).transpose(1, 0, 2, 3).reshape(J, 4, 4)
+        top = w.max(axis=0)  # each joint's weights over their largest, as _dlt_solve
+        A = (rows * np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)[..., None, None]).transpose(
+            1, 0, 2, 3).reshape(J, 4, 4)
+        solvable = np.isfinite(A).all(axis=(-2, -1))  # (LAPACK's SVD can loop forever on an inf)
+        A = np.where(solvable[:, None, None], A, 0.0)
         X = np.linalg.svd(A)[2][:, -1, :]
-        finite = np.abs(X[:, 3]) > 1e-12 * np.sqrt(np.square(X[:, :3]).sum(axis=-1))
+        finite = solvable & (np.abs(X[:, 3]) > 1e-12 * np.sqrt(np.square(X[:, :3]).sum(axis=-1)))
         points = X[:, :3] / np.where(finite, X[:, 3], 1.0)[:, None]
 
         # Ray angle (the conditioning figure) between the two viewing rays' lines: atan2(|a x b|, |a . b|)

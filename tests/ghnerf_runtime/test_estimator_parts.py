@@ -134,6 +134,10 @@ def test_volumetric_refinement_is_exact_for_gaussian_responses():
     assert r.valid.all() and np.abs(r.points - X).max() < 1e-3
     flat = volumetric_joints(np.full_like(heat, 0.01), pts, shape, Joints3DConfig(min_volumetric_response=0.1))
     assert not flat.valid.any() and not flat.points.any()
+    # a strong but flat or flooded response is no peak either (its argmax would be the grid's first cell)
+    for flooded in (np.full_like(heat, 0.6), np.maximum(heat, 0.5)):
+        r = volumetric_joints(flooded, pts, shape, Joints3DConfig())
+        assert not r.valid.any() and not r.confidence.any()
 
 
 def test_depth_centroid_recovers_points_from_rendered_depth():

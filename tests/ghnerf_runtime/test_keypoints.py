@@ -253,3 +253,15 @@ def test_a_peak_past_the_lens_fold_is_missing_not_mirrored():
     assert 0 < mapped[1][0] < 640 and 0 < mapped[1][1] < 480
     np.testing.assert_array_equal(model_to_image_pixels(uv, cam, roi, size, valid=[True, False]), MISSING_FILL)
     assert np.all(np.isfinite(model_to_image_pixels(uv, cam, roi, size, distort=False)))  # a ray still
+
+
+def test_values_outside_zero_one_never_give_a_confidence_outside_it():
+    """A model straying outside [0, 1]: a block of 3.4e38 once overflowed the filter to an infinite confidence."""
+    yy, xx = np.mgrid[:32, :32]
+    blob = np.exp(-((xx - 10.3) ** 2 + (yy - 20.6) ** 2) / (2 * 2.0 ** 2)).astype(np.float32)
+    huge = np.zeros((32, 32), np.float32)
+    huge[14:17, 14:17] = 3.4e38
+    kp = decode_keypoints(np.stack([huge, 1.5 * blob, blob]))
+    assert np.isfinite(kp.confidence).all() and (kp.confidence <= 1.0).all() and (kp.confidence >= 0.0).all()
+    assert kp.valid[0] and np.abs(kp.uv[0] - 15.0).max() < 0.5  # the block's centre
+    assert np.abs(kp.uv[2] - [10.3, 20.6]).max() < 0.05

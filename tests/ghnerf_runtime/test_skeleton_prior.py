@@ -334,6 +334,28 @@ def test_a_prior_beside_another_encoder_than_its_own_is_refused(model_with_prior
     assert e.value.key == "ghnerf_skeleton.encoder_file"
 
 
+def test_the_prior_replaces_the_single_view_fallback_and_its_graphs(model_with_prior):
+    """single_view_fallback beside the prior: the prior places those joints, so the fallback's volume and
+    render_heat graphs are neither loaded nor run (they once ran every pair and were never read)."""
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
+    both = _config(model_with_prior, single_view_fallback=True, max_prior_error_m=100.0)
+    session = load_session(both)
+    assert session.skeleton_prior is not None and not session.has("volume") and not session.has("render_heat")
+    est = Estimator(session, rig, both)
+    assert not est.config.joints3d.single_view_fallback
+    est.estimate(frames, sequence=0)
+    assert set(session.run_counts) & {"volume", "render_heat"} == set()
+    off = _config(model_with_prior, single_view_fallback=True, skeleton_prior="off")  # the fallback alone
+    plain = load_session(off)
+    assert plain.has("volume") and plain.has("render_heat")
+    Estimator(plain, rig, off).estimate(frames, sequence=0)
+    assert plain.run_counts["volume"] == plain.run_counts["render_heat"] == 1
+
+
 def test_estimator_uses_the_prior_when_the_folder_has_one(model_with_prior, tmp_path):
     from ghnerf_runtime.estimator import Estimator, load_session
 

@@ -146,3 +146,22 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
         raw_cold.session.set_truth(truth, vis)
         r = raw_cold.estimate(pair, timestamp_s=i / FPS)
         assert np.array_equal(r.joints_3d, untracked[i].joints_3d) == (i == 0)
+
+
+def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
+    from ghnerf_runtime.config import SmoothingConfig
+
+    f = OneEuroJoints(SmoothingConfig())
+    x = np.zeros((2, 3))
+    ok = np.ones(2, bool)
+    f(0.0, x, ok)
+    bad = x.copy()
+    bad[0] = np.nan
+    f(0.033, bad, ok)  # reported as valid, but NaN: not taken into the state
+    out = f(0.066, x + 0.01, ok)
+    assert np.isfinite(out).all()
+    jump = x.copy()
+    jump[1] = 1e308
+    f(0.1, jump, ok)
+    out = f(0.133, x, ok)
+    assert np.isfinite(out).all() and np.abs(out).max() < 1.0

@@ -464,3 +464,33 @@ def test_docstring_examples():
 
     result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted >= 10 and result.failed == 0
+
+
+def test_overflowing_weights_or_pixels_return_invalid_joints_instead_of_hanging():
+    """Finite inputs whose DLT rows overflow (weights near the float maximum, pixels of 1e10 or 1e308): an inf
+    in LAPACK's SVD can loop forever, so those joints must come back invalid, at once. Run in a subprocess
+    so that a regression fails the test instead of hanging the suite."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent("""
+        import numpy as np
+        from ghnerf_runtime.geometry import Camera, look_at
+        from ghnerf_runtime.geometry.triangulation import triangulate_dlt, triangulate_two_views
+        K = [[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]]
+        cams = [Camera(n, 640, 480, K, [], *look_at((x, -1.0, 0), (0, -1.0, 3))) for n, x in (("a", -0.5), ("b", 0.5))]
+        P = np.stack([c.P for c in cams])
+        good = np.stack([c.project(np.array([[0.1, -1.2, 3.0]]))[0] for c in cams])
+        uv = np.concatenate([good, [[[1e10, 0.0]], [[320.0, 240.0]]], [[[1e308, 0.0]], [[320.0, 240.0]]]], axis=1)
+        for w in (1.0, 1e300, np.finfo(float).max):
+            W = np.full((2, 3), w)
+            for f in (triangulate_dlt, triangulate_two_views):
+                r = f(uv, P, W)
+                assert np.isfinite(r.points).all(), (f.__name__, w, r.points)
+                assert r.valid[0] and np.abs(r.points[0] - [0.1, -1.2, 3.0]).max() < 1e-6, (f.__name__, w, r)
+                assert not r.valid[1:].any(), (f.__name__, w, r.valid)
+        print("ok")
+    """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stdout + done.stderr
