@@ -15,7 +15,8 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    the rays covering the projected subject box (tracked) or the whole crop (cold); the colour
    branch is never computed here. With ``heatmaps.source = "encoder"`` the heatmaps are the
    encoder graph's own 2D output instead, and stages 3-4 run only when the 3D method needs the
-   rendered depth (``depth_centroid``) or the volume (``volumetric``).
+   rendered depth (``depth_centroid``, or triangulation's ``single_view_fallback`` where no skeleton
+   prior runs); ``volumetric`` runs stage 3 alone, then its ``query`` graph.
 5. ``decode_2d`` -- OpenPose-style peaks with subpixel refinement and peak-value confidence
    (:func:`ghnerf_runtime.keypoints.decode_keypoints`), mapped back to the original
    (distorted) image pixels.

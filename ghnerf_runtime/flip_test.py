@@ -3,8 +3,8 @@
 The human encoder was trained on mirrored images too (``encoder_flip`` / pretraining ``flip``), so
 its heatmaps of a mirrored crop are a second, partly independent estimate: mirrored back (width
 reversed, left and right joints swapped) and averaged with the first, they cancel part of each
-other's error. Measured on the shipped model: +0.013 PCK@0.2 on the held-out split, for a second
-run of the human encoder (docs/runtime.md, "Flip test"). Pure numpy.
+other's error, for a second run of the human encoder (the held-out gain, measured per model, is in
+docs/runtime.md, "Flip test", and its settings table). Pure numpy.
 """
 from __future__ import annotations
 
