@@ -525,12 +525,13 @@ class Estimator:
                           self.config.joints3d.method, nv)
 
     def _forget_a_stale_track(self, timestamp_s: float | None) -> None:
-        """Drop the track when the pair comes more than ``tracking.max_gap_s`` after the last one, or before it."""
+        """Drop the track when the pair comes more than ``tracking.max_gap_s`` after the last one, or before it
+        (a pair of the same instant, the same frames estimated again, keeps it)."""
         if timestamp_s is None:
             return
         t, last = float(timestamp_s), self._last_timestamp_s
         self._last_timestamp_s = t
-        if last is not None and not (last < t <= last + self.config.tracking.max_gap_s):
+        if last is not None and not (last <= t <= last + self.config.tracking.max_gap_s):
             self.tracker.reset()
 
     def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict,
