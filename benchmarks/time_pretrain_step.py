@@ -1,6 +1,6 @@
 """Seconds per step of the human encoder's pretraining, by trunk resolution and arithmetic.
 
-    .venv/bin/python benchmarks/time_pretrain_step.py --data data/edge128_fs50 \
+    .venv/bin/python benchmarks/time_pretrain_step.py --data data/edge128 \
         [--input-scales 0.5,1.0] [--precisions fp32,bf16] [--scenes-per-step 2,4] [--steps 25] [--threads 2] \
         [--profile 20]
 
@@ -71,7 +71,7 @@ def time_steps(data: str, scale: float, precision: str, steps: int, scenes_per_s
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", default="data/edge128_fs50")
+    ap.add_argument("--data", default="data/edge128", help="a dataset folder (default: the one make model makes)")
     ap.add_argument("--input-scales", default="0.5,1.0", help="human.input_scale values (1.0: a 128x128 trunk)")
     ap.add_argument("--precisions", default="fp32,bf16", help="PretrainConfig.precision values")
     ap.add_argument("--steps", type=int, default=25)

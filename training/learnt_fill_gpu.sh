@@ -14,7 +14,7 @@
 # Runs on a CPU as well (slowly: give it hours, or fewer scenes and seconds).
 set -euo pipefail
 WORK=${1:?work folder}; REPORT=${2:?report folder}; N=${3:-2560}; SECS=${4:-180}
-PY=${PYTHON:-python3}; W=${WORKERS:-$(nproc)}; VAL=${VAL:-256}; HALF=${HALF:-1}
+PY=${PYTHON:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3 )}; W=${WORKERS:-$(nproc)}; VAL=${VAL:-256}; HALF=${HALF:-1}
 GEOMETRY=(); NET=()
 if [ -n "${MODEL:-}" ]; then GEOMETRY=(--model "$MODEL"); NET=(--set net.shown_input=true); fi
 mkdir -p "$WORK" "$REPORT"

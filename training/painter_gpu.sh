@@ -17,7 +17,7 @@
 # of models/; WIDTHS="32 16" by default. Runs on a CPU as well, slowly.
 set -euo pipefail
 WORK=${1:?work folder}; REPORT=${2:?report folder}; N=${3:-2048}; SECS=${4:-240}
-PY=${PYTHON:-python3}; W=${WORKERS:-$(nproc)}; VAL=${VAL:-256}; MODELS=${MODELS:-models}
+PY=${PYTHON:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3 )}; W=${WORKERS:-$(nproc)}; VAL=${VAL:-256}; MODELS=${MODELS:-models}
 WIDTHS=${WIDTHS:-32 16}
 mkdir -p "$WORK" "$REPORT"
 t0=$(date +%s)

@@ -15,7 +15,8 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
    checks pass: a failure leaves the folder as it was and the rejected files in the staging folder.
 6. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
    split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks, ``--prior-set``
-   overrides them: ~18 min on two cores for ``cpu``, ~30 for ``gpu``) into ``ghnerf/skeleton_prior.onnx``,
+   overrides them: the ``cpu`` recipe's, about 27 min on the fast two-core host with its 20000 extra scenes, as
+   ``--recipe``'s help says) into ``ghnerf/skeleton_prior.onnx``,
    with its held-out figures (``skeleton_prior.json``). On CPU with the ``cpu`` recipe's lanes it was trained
    already, beside the joint run, from the pretrained encoder (``training.early_prior``): the stage takes
    that prior when it learnt from the same keypoint graphs (sha256) for the same request.

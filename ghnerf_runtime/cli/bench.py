@@ -282,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--flip-tests", default=None,
                     type=_on_off_list,
                     help="comma list of heatmaps.flip_test values (on,off or 1,0), one row each for the encoder "
-                         "heatmaps (interleaved like the other rows; default: the config's, off)")
+                         "heatmaps (interleaved like the other rows; default: the config's, on)")
     rt.add_argument("--follow-encoder", default=None, type=_on_off_list,
                     help="comma list of tracking.follow_encoder values (on,off), one row each for the rendered "
                          "heatmaps (interleaved; default: the config's, on)")
