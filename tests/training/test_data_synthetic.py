@@ -278,8 +278,11 @@ def test_ctrl_c_stops_a_parallel_generation_and_its_workers(tmp_path):
     cmd = [sys.executable, "-m", "training.data.generate", "--out", str(tmp_path / "ds"), "--train", "4000",
            "--res", "32", "--novel-views", "0", "--supersample", "1", "--shard-size", "2", "--workers", "2"]
     with open(log, "wb") as fh:
+        # SIGINT as a terminal leaves it: a suite started in the background (nohup ... &) ignores it, and the
+        # child would inherit that and never see the Ctrl-C this test sends
         proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True,
-                                cwd=Path(__file__).resolve().parents[2])
+                                cwd=Path(__file__).resolve().parents[2],
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 240  # the workers are rendering once a shard is logged (slow on a busy box)
         while " shard " not in log.read_text() and proc.poll() is None and time.monotonic() < deadline:
