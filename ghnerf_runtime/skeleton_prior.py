@@ -243,7 +243,8 @@ class SkeletonPrior:
         Raises:
             ModelContractError: the recorded encoder file is missing or has other bytes.
         """
-        name, digest = self.metadata.get(META_PREFIX + "encoder_file"), self.metadata.get(META_PREFIX + "encoder_sha256")
+        name = self.metadata.get(META_PREFIX + "encoder_file")
+        digest = self.metadata.get(META_PREFIX + "encoder_sha256")
         if not name or not digest:
             return
         encoder = Path(folder) / name

@@ -44,7 +44,8 @@ returns, except where both cameras are V4L2 devices (Linux webcams): there each 
 kernel's own stamp of its capture (``CAP_PROP_POS_MSEC``, on the same monotonic clock), which a busy
 host's late wake-ups do not delay. A driver stamp that is not on that clock (in the future, or more than
 ``DRIVER_STAMP_MAX_AGE_S`` before the grab) turns driver stamps off for both cameras, with a warning,
-so the two are never stamped differently for long. Webcams are not synchronised in hardware, so a pair is two frames within ``tolerance_ms``:
+so the two are never stamped differently for long. Webcams are not synchronised in hardware, so a pair
+is two frames within ``tolerance_ms``:
 the default pairs each frame with the other camera's nearest, so a fast movement is seen up to
 half a frame apart by the two cameras (an OAK's shared trigger avoids that). That default leaves
 no margin for a camera slower than it reports (auto-exposure in dim light can halve a webcam's
