@@ -53,6 +53,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
+from training.model_card import write_atomic  # stamps and requests whole: half a one would stop every later run
+
 log = logging.getLogger("training.pipeline")
 
 REPO = Path(__file__).resolve().parents[1]
@@ -255,14 +257,6 @@ def _digest(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def _write_atomic(path: Path, data: str | bytes) -> None:
-    """``data`` into ``path`` whole or not at all (:func:`training.model_card.write_atomic`): a stamp or a
-    request cut in half by a crash would stop every later run."""
-    from training.model_card import write_atomic
-
-    write_atomic(path, data)
-
-
 class Stages:
     """Stamp files ``<out>/.stages/<stage>.json``: the inputs' digest, outputs with sha256, wall time."""
 
@@ -315,7 +309,7 @@ class Stages:
         s = {"inputs": _digest(inputs), "outputs": {str(p): sha256(p) for p in outputs},
              "wall_s": round(time.monotonic() - t0, 1), "info": info,
              "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
-        _write_atomic(self.dir / f"{name}.json", json.dumps(s, indent=1, default=str))
+        write_atomic(self.dir / f"{name}.json", json.dumps(s, indent=1, default=str))
         self._warned.discard(self.dir / f"{name}.json")
         log.info("stage %s: done in %.0f s", name, s["wall_s"])
         return s
@@ -339,7 +333,7 @@ def _data_marker_ok(cfg: PipelineConfig, run: Path) -> bool:
 
 def _mark_data(cfg: PipelineConfig, run: Path) -> None:
     run.mkdir(parents=True, exist_ok=True)
-    _write_atomic(run / DATA_MARKER, _dataset_sha(cfg) + "\n")
+    write_atomic(run / DATA_MARKER, _dataset_sha(cfg) + "\n")
 
 
 def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = ()) -> list[str]:
@@ -357,7 +351,7 @@ def _pretrain_cmd(cfg: PipelineConfig, variant: str, extra: list[str] = ()) -> l
     to ``<run>/requested.json`` first."""
     run = pretrain_dir(cfg, variant)
     run.mkdir(parents=True, exist_ok=True)
-    _write_atomic(run / "requested.json", json.dumps(pretrain_inputs(cfg, variant), indent=1))
+    write_atomic(run / "requested.json", json.dumps(pretrain_inputs(cfg, variant), indent=1))
     cmd = [sys.executable, "-m", "training.pretrain_human", "--config", str(run / "requested.json"),
            "--out", str(run), "--resume", "--quiet"]
     for o in extra:
@@ -493,7 +487,7 @@ def _early_prior_step(cfg: PipelineConfig, variants: list[str], threads: int, da
     folder.mkdir(parents=True, exist_ok=True)
     job = {"train_config": tc, "data": str(cfg.data), "calib_scenes": cfg.calib_scenes, "threads": threads,
            "prior_argv": prior_argv(cfg, folder, folder / FILE_NAME, threads), "request": request}
-    _write_atomic(folder / JOB_FILE, json.dumps(job, indent=1, default=str) + "\n")
+    write_atomic(folder / JOB_FILE, json.dumps(job, indent=1, default=str) + "\n")
     return LaneStep([sys.executable, "-m", "training.early_prior", str(folder / JOB_FILE)],
                     folder / "early_prior.log", run_folder=False, optional=True)
 
@@ -1066,10 +1060,10 @@ def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
             log.info("prior: the early prior in %s is unreadable (%s); training it here", staged, e)
         return False
     out = folder / FILE_NAME
-    _write_atomic(out, prior.read_bytes())  # (a small MLP) never half a prior beside the graphs
+    write_atomic(out, prior.read_bytes())  # (a small MLP) never half a prior beside the graphs
     report.update({"file": str(out), "trained_in": str(prior),
                    "trained_beside": "the joint run (training.early_prior, from the pretrained encoder)"})
-    _write_atomic(out.with_suffix(".json"), json.dumps(report, indent=1) + "\n")
+    write_atomic(out.with_suffix(".json"), json.dumps(report, indent=1) + "\n")
     log.info("prior: taken from %s (trained beside the joint run on the same keypoint graphs)", staged)
     return True
 
@@ -1158,7 +1152,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         m = json.loads((cfg.out / f"metrics_{v}.json").read_text())
         metrics["models"].update(m["models"])
         metrics.update({k: m[k] for k in ("data", "split", "pck_alpha", "pck_reference")})
-    _write_atomic(cfg.out / "metrics.json", json.dumps(metrics, indent=1))
+    write_atomic(cfg.out / "metrics.json", json.dumps(metrics, indent=1))
     files = {}
     for variant in VARIANTS:
         for p in sorted((cfg.out / variant).glob("*")):

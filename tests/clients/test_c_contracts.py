@@ -120,14 +120,6 @@ def test_only_a_packet_writes_out(driver: Path) -> None:
     assert all(e["untouched"] == 1 for e in ev[2:])
 
 
-@pytest.fixture(scope="module")
-def ghj_dump(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cc = require_compiler()
-    tmp = tmp_path_factory.mktemp("dump")
-    return compile_c(cc, tmp / "ghj_dump", [C_DIR / "ghjoints.c", C_DIR / "tools" / "ghj_dump.c"],
-                     sanitizer_flags(cc, tmp))
-
-
 def test_ghj_dump_reports_the_skipped_type_from_the_decoder(ghj_dump: Path) -> None:
     lines = _run(ghj_dump, _status(1) + _frame(0x42, b"", 2) + _frame(0x7F, b"abc", 3), "-")
     assert lines[1:3] == [{"skipped": "unknown", "msg_type": 0x42}, {"skipped": "unknown", "msg_type": 0x7F}]
@@ -141,7 +133,6 @@ def test_null_out_counts_like_a_full_decode(ghj_dump: Path, name: str) -> None:
 
 
 # --- make check --------------------------------------------------------------------------------
-
 
 
 @pytest.mark.parametrize("make", ["make", "bmake"])

@@ -10,16 +10,7 @@ import pytest
 
 from firmware_host.protocol import decode_stream
 from firmware_host.protocol.vectors import VECTORS
-from tests.clients.c_build import C_DIR, VECTOR_DIR, compile_c, require_compiler, sanitizer_flags
-
-
-@pytest.fixture(scope="module")
-def ghj_dump(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cc = require_compiler()
-    tmp = tmp_path_factory.mktemp("c")
-    # Sanitizers catch out-of-bounds reads the comparisons alone would miss.
-    return compile_c(cc, tmp / "ghj_dump", [C_DIR / "ghjoints.c", C_DIR / "tools" / "ghj_dump.c"],
-                     sanitizer_flags(cc, tmp))
+from tests.clients.c_build import C_DIR, VECTOR_DIR, compile_c, require_compiler
 
 
 def run_dump(exe: Path, path: Path, chunk: int = 4096) -> tuple[list[dict], dict]:

@@ -18,7 +18,6 @@ TorchScript exporter is used (``dynamo=False``): it needs no onnxscript and hand
 from __future__ import annotations
 
 import logging
-import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +30,7 @@ from torch import Tensor, nn
 from ghnerf_runtime.contract import GRAPH_NAMES, GraphSpec, ModelContract, ray_grid
 from training.model.camera_inputs import box_corners, orbit_camera, scene_inputs, synthetic_rig
 from training.model.ghnerf import GHNeRF
+from training.model_card import write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -155,15 +155,7 @@ def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precis
     onnx.helper.set_model_props(m, {**{p.key: p.value for p in keep}, **props})
     m.producer_name = "ghnerf-training"
     m.doc_string = f"GHNeRF graph {graph!r} ({contract.variant}, {contract.width}x{contract.height}, {precision})"
-    # into a temporary file beside it, then over it: a crash here leaves the whole old file, not half a graph
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        onnx.save(m, str(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_atomic(path, m.SerializeToString())  # a crash here leaves the whole old file, not half a graph
 
 
 def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInputs | None = None,
