@@ -5,12 +5,16 @@ Layout (what ``ghcal capture`` writes and ``ghcal solve`` reads)::
     DIR/left/000.png  DIR/right/000.png     # one pair: both cameras at the same instant
     DIR/left/001.png  DIR/right/001.png
     DIR/left/floor.png DIR/right/floor.png  # optional: the board lying on the floor
+    DIR/cameras.json                        # {"cameras": ["left", "right"]}: the stream's order
 
 Images may be PNG, JPEG, BMP or TIFF; a name present in one folder only is still used for that
-camera's intrinsics.
+camera's intrinsics. ``cameras.json`` keeps the order the rig source gave the cameras in: the first
+is the one a driver opens as its first device (``opencv://?first=``), so the solved rig must list it
+first too, whatever the names sort as (``names=right,left``).
 """
 from __future__ import annotations
 
+import json
 import os
 import re
 from pathlib import Path
@@ -21,10 +25,12 @@ import cv2
 from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CaptureError
+from ghnerf_runtime.rig_file import write_text_atomic
 
-__all__ = ["IMAGE_SUFFIXES", "camera_folders", "list_images", "detect_folder", "check_camera_name",
-           "next_view_number"]
+__all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
+           "next_view_number", "read_camera_order", "write_camera_order"]
 
+CAMERAS_FILE = "cameras.json"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
 _NUMBERED = re.compile(r"^(\d+)$")
@@ -48,14 +54,59 @@ def next_view_number(folders: Iterable[Path]) -> int:
     return max(numbers, default=-1) + 1
 
 
-def camera_folders(root: str | os.PathLike, cameras: Iterable[str] | None = None) -> dict[str, Path]:
-    """Camera name -> its folder under ``root`` (``cameras`` in rig order; default: the two subfolders, sorted).
+def write_camera_order(root: str | os.PathLike, names: Iterable[str], *, replace: bool = False) -> None:
+    """Record the pair's order (the rig source's) in ``root/cameras.json``, atomically.
 
-    :raises CaptureError: a missing folder, or not exactly two subfolders when ``cameras`` is not given.
+    :raises CaptureError: ``root`` already records another order and not ``replace`` (a second session
+        from a source that orders the cameras otherwise: which one is first?).
+    """
+    names = [check_camera_name(n) for n in names]
+    path = Path(root) / CAMERAS_FILE
+    if path.exists() and not replace:
+        recorded = read_camera_order(root, check_folders=False)
+        if recorded != names:
+            raise CaptureError(f"{path} records the cameras {recorded}, this source gives {names}: capture into "
+                               "another folder (or remove the folder's views and cameras.json)")
+        return
+    write_text_atomic(path, json.dumps({"cameras": names}) + "\n")
+
+
+def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) -> list[str] | None:
+    """The pair's order recorded in ``root/cameras.json``; None without the file.
+
+    :raises CaptureError: an unreadable file, or (``check_folders``) a camera it names without a folder.
+    """
+    path = Path(root) / CAMERAS_FILE
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise CaptureError(f"{path}: cannot read the camera order ({e})") from e
+    names = data.get("cameras") if isinstance(data, dict) else None
+    if (not isinstance(names, list) or len(names) != 2 or len(set(names)) != 2
+            or not all(isinstance(n, str) for n in names)):
+        raise CaptureError(f"{path}: must be {{\"cameras\": [FIRST, SECOND]}}, two different names, got {data!r}")
+    for name in names:
+        check_camera_name(name)
+    missing = [n for n in names if not (Path(root) / n).is_dir()] if check_folders else []
+    if missing:
+        raise CaptureError(f"{path} names the cameras {names}, but {root} has no folder {missing[0]!r}: restore it, "
+                           "or pass --cameras FIRST,SECOND")
+    return names
+
+
+def camera_folders(root: str | os.PathLike, cameras: Iterable[str] | None = None) -> dict[str, Path]:
+    """Camera name -> its folder under ``root``, in rig order: ``cameras``, else the order ``root/cameras.json``
+    records, else the two subfolders sorted.
+
+    :raises CaptureError: a missing folder, or not exactly two subfolders when the order is not known.
     """
     root = Path(root)
     if not root.is_dir():
         raise CaptureError(f"{root}: no such folder of calibration images")
+    if cameras is None:
+        cameras = read_camera_order(root)
     if cameras is None:
         found = sorted(p.name for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
         if len(found) != 2:

@@ -4,7 +4,8 @@ For each image pair where both cameras found the board, the corners both found a
 with the rig and compared with what the board is known to be: the reprojection error (pixels: a
 camera bumped since calibration shows here first), the spacing of neighbouring corners against
 ``square_m`` (the rig's scale: a baseline read in the wrong unit or a misprinted board), and, for
-a view named ``floor``, the corners' height above the floor (the levelling). A corner whose two rays
+the floor view (``floor_view``, by default ``floor``), the corners' height above the floor (the
+levelling). A corner whose two rays
 do not meet in front of both cameras cannot be measured at all: it is counted (``untriangulated``), left
 out of the figures, and fails the check, since a rig that fits triangulates every corner both cameras
 found. :func:`check_failures` turns the report into the reasons a rig does not fit.
@@ -41,8 +42,9 @@ def _neighbour_pairs(board: BoardSpec, ids: np.ndarray) -> np.ndarray:
 
 
 def check_rig(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], *,
-              board_thickness_m: float = 0.0) -> dict[str, Any]:
-    """The figures above over every pair both of ``rig``'s pair cameras saw (camera -> name -> view)."""
+              board_thickness_m: float = 0.0, floor_view: str = FLOOR_VIEW) -> dict[str, Any]:
+    """The figures above over every pair both of ``rig``'s pair cameras saw (camera -> name -> view);
+    the view named ``floor_view`` is the board lying on the floor."""
     a, b = (cam.name for cam in rig.pair)
     per_view: dict[str, dict[str, Any]] = {}
     reproj_all, spacing_all = [], []
@@ -77,10 +79,10 @@ def check_rig(rig: Rig, board: BoardSpec, views: Mapping[str, Mapping[str, Board
             "corners": int(ids.size), "untriangulated": int(ids.size - ok.sum()),
             "reprojection_px_rms": round(float(np.sqrt(np.mean(reproj ** 2))), 4) if reproj.size else None,
             "scale": round(float(np.median(spacing)), 5) if spacing.size else None}
-        if name == FLOOR_VIEW and ok.any():
+        if name == floor_view and ok.any():
             # rig frame: y down, floor at 0; the board's face sits its thickness above the floor
             heights = -(points[ok, 1]) - board_thickness_m
-            floor = {"height_mm_median": round(1000 * float(np.median(heights)), 2),
+            floor = {"view": name, "height_mm_median": round(1000 * float(np.median(heights)), 2),
                      "height_mm_spread": round(1000 * float(np.ptp(heights)), 2)}
             entry["floor"] = floor
         per_view[name] = entry

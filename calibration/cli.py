@@ -8,7 +8,7 @@ Workflow (docs/calibration.md)::
     ghcal solve --board board/board.json --images capture/ --floor-view floor --out rig.json
     ghcal check --rig rig.json --board board/board.json --images capture/        # later: does it still fit?
 
-``ghcal synth --out capture/`` renders the views a careful user would take, of a known rig, so the
+``ghcal synth --out synth/`` renders the views a careful user would take, of a known rig, so the
 tool can be tried (and is tested) without cameras.
 
 Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the user fixes (the
@@ -28,7 +28,8 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec, load_board
-from calibration.capture import IMAGE_SUFFIXES, check_camera_name, detect_folder, next_view_number
+from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, check_camera_name, detect_folder, next_view_number,
+                                 read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
@@ -59,6 +60,8 @@ HELD_P90_PX = 2.5
 #: What the joint stream's HELLO carries (firmware_host.protocol.constants; this package may not import it).
 MAX_RIG_ID_LEN = 32
 MAX_CAMERA_NAME_LEN = 16
+#: The board definition ``ghcal synth`` writes beside its views, and ``solve`` / ``check`` look for there.
+BOARD_FILE = "board.json"
 
 
 def _stream_name(text: str, limit: int, what: str) -> str:
@@ -69,7 +72,55 @@ def _stream_name(text: str, limit: int, what: str) -> str:
 
 
 def _board(path: str | None) -> BoardSpec:
+    """``board``, ``synth``, ``capture``: the given board, else the default (they print, render or detect it)."""
     return load_board(path) if path else BoardSpec()
+
+
+def _describe(board: BoardSpec) -> str:
+    return (f"{board.squares_x}x{board.squares_y} squares of {1000 * board.square_m:g} mm, markers of "
+            f"{1000 * board.marker_m:g} mm, {board.dictionary}")
+
+
+def _measuring_board(given: str | None, images: str, recorded: BoardSpec | None = None) -> tuple[BoardSpec, str]:
+    """``solve`` / ``check``: the board and where it came from: ``--board``, else ``board.json`` beside the
+    images, else (``check``) the board the rig records. Never the default board: its 80 mm squares
+    scaled the whole rig silently when ``--board`` was forgotten."""
+    if given:
+        return load_board(given), given
+    beside = Path(images) / BOARD_FILE
+    if beside.is_file():
+        return load_board(beside), f"{beside} (beside the images)"
+    if recorded is not None:
+        return recorded, "the one the rig file records"
+    raise UsageError(f"no board: pass --board FILE, the board.json that 'ghcal board' wrote with the square size "
+                     f"measured on the print ({beside} does not exist)")
+
+
+def _calibration_record(rig) -> dict:
+    """What ``solve`` recorded in the rig's metadata (empty for rigs from elsewhere or older ones)."""
+    record = rig.metadata.get("calibration")
+    return record if isinstance(record, dict) else {}
+
+
+def _recorded_board(rig, rig_path: str) -> BoardSpec | None:
+    data = _calibration_record(rig).get("board")
+    return None if data is None else BoardSpec.from_dict(data, path=f"{rig_path}: metadata.calibration.board")
+
+
+def _existing_capture(out: Path) -> Path | None:
+    """Something in ``out`` that ``synth`` would overwrite or mix its views with: a board or camera-order
+    file, or an image at the top or in a camera folder."""
+    if not out.is_dir():
+        return None
+    for name in (BOARD_FILE, CAMERAS_FILE):
+        if (out / name).exists():
+            return out / name
+    for path in sorted(out.iterdir()):
+        inside = sorted(path.iterdir()) if path.is_dir() else [path]
+        for item in inside:
+            if item.suffix.lower() in IMAGE_SUFFIXES:
+                return item
+    return None
 
 
 def _volume(text: str | None) -> WorkingVolume | None:
@@ -131,14 +182,20 @@ def cmd_synth(args: argparse.Namespace) -> int:
     for cam in rig.pair:
         check_camera_name(cam.name)
     out = Path(args.out)
+    found = _existing_capture(out)
+    if found is not None and not args.force:  # real captures, or their measured board.json, overwritten
+        raise UsageError(f"{out} already holds views or a board ({found}): render into a new folder "
+                         "(--out synth/), or pass --force to write over it")
     t0 = time.monotonic()
     views = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=args.seed)
     for camera, images in views.items():
         (out / camera).mkdir(parents=True, exist_ok=True)
         for name, image in images.items():
-            cv2.imwrite(str(out / camera / f"{name}.png"), image)
+            if not cv2.imwrite(str(out / camera / f"{name}.png"), image):
+                raise UsageError(f"{out / camera / name}.png: cannot write the image")
     save_rig(rig, out / "truth_rig.json")
-    (out / "board.json").write_text(json.dumps(board.to_dict(), indent=2) + "\n", encoding="utf-8")
+    write_text_atomic(out / BOARD_FILE, json.dumps(board.to_dict(), indent=2) + "\n")
+    write_camera_order(out, [cam.name for cam in rig.pair], replace=True)
     total = len(next(iter(views.values())))
     print(f"rendered {total} image pairs (a floor view among them) of rig {rig.rig_id!r} into {out} in "
           f"{time.monotonic() - t0:.1f} s; its rig: {out / 'truth_rig.json'}, board: {out / 'board.json'}")
@@ -199,6 +256,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
         if args.floor and not args.force and any((f / f"{FLOOR_VIEW}{suffix}").exists()
                                                  for f in folders for suffix in IMAGE_SUFFIXES):
             raise UsageError(f"{out} already has a floor view: pass --force to replace it")
+        out.mkdir(parents=True, exist_ok=True)
+        write_camera_order(out, cams)  # the stream's order: solve keeps it (folder names may sort the other way)
         for folder in folders:
             folder.mkdir(parents=True, exist_ok=True)
         number = next_view_number(folders)
@@ -269,7 +328,6 @@ def cmd_capture(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------ solve
 def cmd_solve(args: argparse.Namespace) -> int:
-    board = _board(args.board)
     if (args.floor_view is None) == (args.camera_height is None):
         raise UsageError("give --floor-view NAME (a view of the board lying on the floor) or --camera-height M "
                          "(the first camera's height above the floor, with --pitch and --roll)")
@@ -287,9 +345,19 @@ def cmd_solve(args: argparse.Namespace) -> int:
         raise UsageError(f"{report_path.parent}: no such folder for the report")
     if report_path.is_dir():
         raise UsageError(f"report {report_path}: is a folder; give the report file's path")
+    if report_path.resolve() == out.resolve():  # the report written over the rig it describes
+        raise UsageError(f"--report {report_path} is the rig file (--out {out}): give the report another path")
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
-    views, missed = detect_folder(board, args.images, _cameras(args.cameras))
+    cameras = _cameras(args.cameras)
+    ordered = cameras is not None or read_camera_order(args.images) is not None
+    board, where = _measuring_board(args.board, args.images)
+    print(f"board: {where}: {_describe(board)}")
+    views, missed = detect_folder(board, args.images, cameras)
     names = tuple(views)
+    if not ordered:
+        print(f"note: no {Path(args.images) / CAMERAS_FILE} (written by 'ghcal capture'): the pair's order is the "
+              f"folder names sorted, {names[0]!r} first; the first must be the camera the rig source opens first "
+              "(opencv://?first=): if it is not, pass --cameras FIRST,SECOND")
     for name in names:
         _stream_name(name, MAX_CAMERA_NAME_LEN, "camera name (its folder)")
     for cam in names:
@@ -302,8 +370,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
                          rig_id=args.rig_id)
+    # the report first: a rig file is never left beside a report of another solve
+    write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
     save_rig(solution.rig, out)
-    report_path.write_text(json.dumps(solution.report, indent=1) + "\n", encoding="utf-8")
     r = solution.report
     for cam in names:
         c = r["cameras"][cam]
@@ -323,14 +392,23 @@ def cmd_solve(args: argparse.Namespace) -> int:
 # ------------------------------------------------------------------ check
 def cmd_check(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
-    board = _board(args.board)
+    recorded = _recorded_board(rig, args.rig)
+    board, where = _measuring_board(args.board, args.images, recorded)
+    if recorded is not None and not math.isclose(board.square_m, recorded.square_m, rel_tol=1e-9):
+        # the scale check would blame the rig for the board file's square size
+        raise UsageError(f"the board from {where} has squares of {1000 * board.square_m:g} mm, but {args.rig} was "
+                         f"solved with squares of {1000 * recorded.square_m:g} mm (metadata.calibration.board): check "
+                         "with the board it was solved with, or calibrate again")
+    record_floor = _calibration_record(rig).get("floor_view")
+    floor_view = args.floor_view or (record_floor if isinstance(record_floor, str) else FLOOR_VIEW)
+    print(f"board: {where}: {_describe(board)}", file=sys.stderr if args.json else sys.stdout)
     views, _ = detect_folder(board, args.images, [c.name for c in rig.pair])
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
                 raise UsageError(f"{args.images}/{cam.name}/{name}: the image is {view.image_size[0]}x"
                                  f"{view.image_size[1]}, camera {cam.name!r} of {args.rig} {cam.width}x{cam.height}")
-    report = check_rig(rig, board, views, board_thickness_m=args.board_thickness)
+    report = check_rig(rig, board, views, board_thickness_m=args.board_thickness, floor_view=floor_view)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
     rms = report["reprojection_px_rms"]
@@ -339,7 +417,8 @@ def cmd_check(args: argparse.Namespace) -> int:
           + ("not measured" if rms is None else f"{rms:.3f} px rms (p95 {report['reprojection_px_p95']:.3f})")
           + ", scale "
           + ("not measured (no neighbouring corners)" if report["scale"] is None else f"{report['scale']:.4f} of the board's")
-          + (f", floor view {report['floor']['height_mm_median']:+.1f} mm off the floor" if "floor" in report else "")
+          + (f", floor view {floor_view!r} {report['floor']['height_mm_median']:+.1f} mm off the floor"
+             if "floor" in report else "")
           + (f", {report['untriangulated']} of {report['corners']} corners not triangulated"
              if report["untriangulated"] else ""))
     limits = CheckLimits(max_px=args.max_px, max_scale_error=args.max_scale_error, max_floor_mm=args.max_floor_mm)
@@ -397,7 +476,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("synth", help="render the calibration views of a known rig (no cameras needed)")
     p.add_argument("--out", required=True)
     p.add_argument("--rig", help="the rig to film (default: a 0.6 m pair at 1.4 m, calibration.render.example_rig)")
-    p.add_argument("--board")
+    p.add_argument("--board", help="the board to render (default: 9x6 squares of 80 mm); written to OUT/board.json")
+    p.add_argument("--force", action="store_true",
+                   help="write into a folder that already holds views, board.json or cameras.json")
     p.add_argument("--count", type=_positive_int, default=15, help="views both cameras see (default 15)")
     p.add_argument("--edge-count", type=_count, default=6, help="views per camera in its image corners (default 6)")
     p.add_argument("--seed", type=int, default=0)
@@ -422,10 +503,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("solve", help="solve the rig from a folder of views and write the rig file")
     p.add_argument("--images", required=True, help="folder with one subfolder per camera")
-    p.add_argument("--board")
+    p.add_argument("--board", help="the board's definition, measured on the print (default: IMAGES/board.json; "
+                                   "without either, an error)")
     p.add_argument("--out", required=True, help="rig file to write (docs/rig-file.md)")
     p.add_argument("--report", help="report JSON (default: OUT with .report.json)")
-    p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the two subfolders, sorted)")
+    p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the order IMAGES/cameras.json "
+                                     "records, else the two subfolders, sorted)")
     p.add_argument("--lens", choices=sorted(LENS_MODELS), default="standard")
     p.add_argument("--floor-view", help="the view (file name without suffix) of the board lying on the floor")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0, help="metres, for the floor view")
@@ -441,8 +524,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("check", help="check a rig file against new views of the board")
     p.add_argument("--rig", required=True)
-    p.add_argument("--board")
+    p.add_argument("--board", help="the board's definition (default: IMAGES/board.json, else the board the rig "
+                                   "records); its square size must be the one the rig was solved with")
     p.add_argument("--images", required=True)
+    p.add_argument("--floor-view", help="the view of the board lying on the floor (default: the rig's, as given "
+                                        "to solve, else 'floor')")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0)
     p.add_argument("--max-px", type=_finite(0.01, 100.0), default=1.0,
                    help="largest acceptable reprojection rms (default 1 px)")

@@ -30,6 +30,7 @@ from calibration.errors import SolveError
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "MIN_VIEWS"]
@@ -311,7 +312,10 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     else the second) or ``camera_height_m`` with ``pitch_deg`` / ``roll_deg`` of the first camera.
     Views named ``floor_view`` are used for levelling only, not for the intrinsics.
 
-    :raises SolveError: too few views, no levelling given, a floor view neither camera saw.
+    The rig's ``metadata["calibration"]`` records the board, the floor view and the lens model.
+
+    :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved
+        principal point far from the image centre.
     """
     if (floor_view is None) == (camera_height_m is None):
         raise SolveError("say where the floor is: a floor view (the board lying on the floor) or the first "
@@ -324,6 +328,11 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
         raise SolveError(f"the board's thickness must be between 0 and 0.1 m, got {board_thickness_m!r}")
     calib = {cam: {n: v for n, v in views[cam].items() if n != floor_view} for cam in names}
     intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam) for cam in names}
+    for cam in names:  # the rig file refuses such a camera: say why here, not when it is read
+        problem = principal_point_problem(intr[cam].K, *intr[cam].image_size, advice=(
+            "the views do not pin the lens down: add views near and far, tilted, reaching the image's corners"))
+        if problem:
+            raise SolveError(f"camera {cam!r}: the solved lens model: {problem}")
     # a view dropped from a camera's intrinsics as an outlier is no better for the pair's pose
     kept = {cam: {n: v for n, v in calib[cam].items() if n not in intr[cam].dropped} for cam in names}
     pose = calibrate_pair(board, kept[a], kept[b], intr[a], intr[b], names=names)
@@ -362,6 +371,10 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
                         volume=volume)
         levelling = {"method": "measured", "camera": a, "camera_height_m": camera_height_m,
                      "pitch_deg": pitch_deg, "roll_deg": roll_deg}
+    # what ``ghcal check`` needs to measure with the same board and floor view (docs/calibration.md)
+    rig = Rig(rig.cameras, rig.volume, rig_id=rig.rig_id, metadata={
+        **rig.metadata, "calibration": {"tool": "ghcal", "board": board.to_dict(), "floor_view": floor_view,
+                                        "lens_model": lens}})
     axes = [rig.camera(n).R[2] for n in names]
     convergence = math.degrees(math.acos(float(np.clip(axes[0] @ axes[1], -1.0, 1.0))))
     report: dict[str, Any] = {

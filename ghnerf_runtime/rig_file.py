@@ -50,6 +50,12 @@ DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: Tolerance on ``|R R^T - I|`` and ``det R - 1`` for a rotation to be accepted; it is then snapped to
 #: the nearest rotation. A file that prints six decimals is off by up to about 1e-6 (0.0001 degree).
 ROTATION_TOLERANCE = 1e-4
+#: How far the principal point may lie from the image centre, as a fraction of the image's width (x)
+#: and height (y). Real lenses sit within a few per cent of it (lens-to-sensor mounting tolerance: an
+#: OAK's factory calibrations are within 1 %); a calibration made at another image size and read with
+#: this one is off by a sixth of the image (1280x720 read as 1920x1080) or a quarter (the other way),
+#: which the old "inside the image" test let through. 10 % leaves margin on both sides.
+PRINCIPAL_POINT_TOLERANCE = 0.1
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -67,6 +73,8 @@ __all__ = [
     "dumps_rig",
     "loads_rig",
     "write_text_atomic",
+    "principal_point_problem",
+    "PRINCIPAL_POINT_TOLERANCE",
 ]
 
 
@@ -149,6 +157,24 @@ class _Checker:
         if not np.all(np.isfinite(arr)):
             self._raise(field, f"must contain only finite numbers, got {_show(value)}")
         return arr
+
+
+_RESIZE_ADVICE = ("a calibration of another image size? Give the size it was calibrated at, then resize the camera "
+                  "to the images' size with Camera.resized(width, height)")
+
+
+def principal_point_problem(K: Any, width: int, height: int, *, advice: str = _RESIZE_ADVICE) -> str | None:
+    """Why ``K``'s principal point does not belong to a ``width`` x ``height`` image (ending in ``advice``);
+    None when it does. The centre is ``((w - 1) / 2, (h - 1) / 2)`` (pixel centres, as :meth:`Camera.resized`).
+    """
+    K = np.asarray(K, dtype=np.float64)
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    off_x, off_y = abs(cx - (width - 1) / 2) / width, abs(cy - (height - 1) / 2) / height
+    if off_x <= PRINCIPAL_POINT_TOLERANCE and off_y <= PRINCIPAL_POINT_TOLERANCE:
+        return None
+    return (f"its principal point ({cx:g}, {cy:g}) lies {off_x:.0%} of the width and {off_y:.0%} of the height "
+            f"from the centre of the {width}x{height} image (a real lens: within {PRINCIPAL_POINT_TOLERANCE:.0%}): "
+            + advice)
 
 
 def _join(parent: str, key: str) -> str:
@@ -266,6 +292,9 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
             f"{field}.K",
             f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {K.tolist()}",
         )
+    problem = principal_point_problem(K, width, height)
+    if problem:
+        chk._raise(f"{field}.K", f"camera {name!r}: {problem}")
 
     dist_raw = chk.mapping(raw["distortion"], f"{field}.distortion", _DISTORTION_KEYS)
     model = dist_raw["model"]
@@ -393,11 +422,16 @@ def save_rig(rig: Rig, path: str | os.PathLike) -> None:
     """Write ``rig`` to ``path`` atomically (see :func:`write_text_atomic`).
 
     The text is produced and checked in memory before the file system is touched, so a
-    rig that cannot be written (e.g. non-JSON metadata) leaves the old file as it was.
+    rig that cannot be written (e.g. non-JSON metadata, or a principal point :func:`load_rig`
+    would refuse) leaves the old file as it was.
 
     Raises:
         RigFileError: the rig cannot be serialised, or the file cannot be written.
     """
+    for i, cam in enumerate(rig.cameras):  # a file the reader refuses is worse than none
+        problem = principal_point_problem(cam.K, cam.width, cam.height)
+        if problem:
+            raise RigFileError(f"camera {cam.name!r}: {problem}", path=str(path), field=f"cameras[{i}].K")
     write_text_atomic(path, dumps_rig(rig, path=path))
 
 

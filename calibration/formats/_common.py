@@ -9,7 +9,7 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import ROTATION_TOLERANCE
+from ghnerf_runtime.rig_file import ROTATION_TOLERANCE, principal_point_problem
 
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: Foreign files often print rotations with few digits: rotations whose ``|R R^T - I|``
@@ -95,12 +95,12 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
     if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
         raise fail(path, join(field, K_key),
                    f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {show(K)}")
-    w, h = int(width), int(height)
-    if not (0 <= K[0, 2] <= w and 0 <= K[1, 2] <= h):
-        # a calibration of another image size: the rig would be wrong silently
-        raise fail(path, join(field, K_key), f"its principal point ({K[0, 2]:g}, {K[1, 2]:g}) lies outside the "
-                                             f"{w}x{h} image ({' x '.join(dict.fromkeys(size_keys))}): a calibration of "
-                                             "another image size?")
+    # a calibration of another image size (often not in the file: the caller's image_size) would make
+    # the rig wrong silently; "inside the image" let through 1280x720 read as 1920x1080
+    problem = principal_point_problem(K, int(width), int(height))
+    if problem:
+        sizes = " x ".join(dict.fromkeys(size_keys))
+        raise fail(path, join(field, K_key), f"camera {str(name)!r}, image size from {sizes}: {problem}")
     if K[0, 1] != 0:  # the tools that write these files project without it: ours would disagree with theirs
         raise fail(path, join(field, K_key), f"has a skew K[0][1] = {K[0, 1]!r}, which OpenCV's camera model (and "
                                              "so this file's writer) ignores; set it to 0")

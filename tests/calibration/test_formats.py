@@ -83,8 +83,22 @@ def test_a_principal_point_outside_the_image_is_refused(rig, tmp_path):
                         f"image_width: {cam.width // 2}\n      image_height: {cam.height // 2}", 1)
     assert half != text
     (tmp_path / "half.yaml").write_text(half)
-    with pytest.raises(RigFileError, match=r"cameras\[0\]\.camera_matrix.*principal point .* lies outside the 640x400"):
+    with pytest.raises(RigFileError, match=r"cameras\[0\]\.camera_matrix.*camera 'left'.*principal point "
+                                           r"\(641.3, 402.85\) lies 50% of the width .* 640x400 image"):
         read_opencv_rig(tmp_path / "half.yaml")
+
+
+def test_a_calibration_of_a_smaller_image_size_is_refused(tmp_path):
+    # 640x480 calibrated, read as 960x720: its principal point is inside the larger image, a sixth of it
+    # off centre, and the old "inside the image" test let it through
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    files = {"extrinsics_path": tmp_path / "extrinsics.yml", "units_to_metres": 0.001}
+    with pytest.raises(RigFileError) as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", image_size=(960, 720), **files)
+    assert info.value.field == "M1" and str(tmp_path / "intrinsics.yml") in str(info.value)
+    assert "camera 'left'" in str(info.value) and "(322, 241)" in str(info.value)
+    assert "Camera.resized" in str(info.value)
+    assert read_opencv_rig(tmp_path / "intrinsics.yml", image_size=(640, 480), **files).pair[0].size == (640, 480)
 
 
 @pytest.mark.parametrize("name", ["true", "null", "a b "])

@@ -168,6 +168,9 @@ def test_cli_solve_then_check(capture, truth, tmp_path, capsys):
     (["solve", "--images", "{cap}", "--out", "{tmp}", "--floor-view", "floor"], "is a folder; give the rig file's"),
     (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--report", "{tmp}"],
      "is a folder; give the report file's"),
+    # the report written over the rig it describes
+    (["solve", "--images", "{cap}", "--out", "{tmp}/r.json", "--floor-view", "floor", "--report", "{tmp}/./r.json"],
+     "is the rig file (--out"),
 ])
 def test_cli_errors_are_one_line_exit_2(capture, tmp_path, capsys, args, message):
     argv = [a.format(cap=capture, tmp=tmp_path) for a in args]
@@ -420,3 +423,161 @@ def test_two_webcams_from_no_rig_file_to_a_calibrated_rig(truth, tmp_path, capsy
     with drivers.open_rig(f"{url}&rig={rig_path}") as source:
         pair = source.read(timeout_s=5.0)
     assert source.rig.rig_id == solved.rig_id and pair.images[0].shape == (truth.pair[0].height, truth.pair[0].width, 3)
+
+
+# ------------------------------------------------------------------ review fixes: board, order, report, floor view
+def _copy_capture(capture: Path, dest: Path, *, board: bool = True, rename: dict[str, str] | None = None) -> Path:
+    """A copy of the capture fixture: without its board.json, or with views renamed (``old -> new``)."""
+    import shutil
+
+    shutil.copytree(capture, dest)
+    if not board:
+        (dest / "board.json").unlink()
+    for old, new in (rename or {}).items():
+        for cam in ("left", "right"):
+            (dest / cam / f"{old}.png").rename(dest / cam / f"{new}.png")
+    return dest
+
+
+def test_solve_without_board_uses_the_one_beside_the_images_and_records_it(capture, tmp_path, capsys):
+    # the default 80 mm board was used silently: the whole rig scaled by 0.08 / 0.12
+    rig_path = tmp_path / "rig.json"
+    assert cli.main(["solve", "--images", str(capture), "--floor-view", "floor", "--out", str(rig_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"board: {capture / 'board.json'} (beside the images): 7x5 squares of 120 mm" in out
+    assert "note: no " in out and "cameras.json" in out and "'left' first" in out  # the order is a guess: said
+    record = load_rig(rig_path).metadata["calibration"]
+    assert record["board"] == BOARD.to_dict() and record["floor_view"] == "floor"
+
+
+def test_solve_and_check_without_any_board_are_refused(tmp_path, capsys):
+    for cam in ("left", "right"):
+        (tmp_path / "views" / cam).mkdir(parents=True)
+    assert cli.main(["solve", "--images", str(tmp_path / "views"), "--camera-height", "1.4",
+                     "--out", str(tmp_path / "r.json")]) == 2
+    err = capsys.readouterr().err
+    assert "no board: pass --board FILE" in err and "board.json does not exist" in err
+    save_rig(example_rig(), tmp_path / "old.json")  # a rig that records no board
+    assert cli.main(["check", "--rig", str(tmp_path / "old.json"), "--images", str(tmp_path / "views")]) == 2
+    assert "no board: pass --board FILE" in capsys.readouterr().err
+
+
+def test_check_refuses_a_board_of_another_square_size_than_the_rigs(truth, capture, tmp_path, capsys):
+    rig_path = tmp_path / "rig.json"
+    save_rig(Rig(truth.cameras, truth.volume, metadata={"calibration": {"board": BOARD.to_dict()}}), rig_path)
+    default_board = tmp_path / "default.json"
+    default_board.write_text(json.dumps(BoardSpec(squares_x=7, squares_y=5).to_dict()))  # 80 mm squares
+    assert cli.main(["check", "--rig", str(rig_path), "--board", str(default_board), "--images", str(capture)]) == 2
+    err = capsys.readouterr().err
+    assert "squares of 80 mm" in err and "solved with squares of 120 mm" in err
+    # no --board, none beside the images: the board the rig records
+    images = _copy_capture(capture, tmp_path / "capture", board=False)
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(images)]) == 0
+    assert "board: the one the rig file records: 7x5 squares of 120 mm" in capsys.readouterr().out
+
+
+def test_synth_does_not_write_over_captures(tmp_path, capsys):
+    real = tmp_path / "capture"
+    (real / "left").mkdir(parents=True)
+    (real / "left" / "000.png").write_bytes(b"a real view")
+    args = ["--count", "1", "--edge-count", "0"]
+    assert cli.main(["synth", "--out", str(real), *args]) == 2
+    assert "already holds views or a board" in capsys.readouterr().err
+    assert (real / "left" / "000.png").read_bytes() == b"a real view"
+    measured = tmp_path / "measured"
+    measured.mkdir()
+    (measured / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    assert cli.main(["synth", "--out", str(measured), *args]) == 2  # its board.json, measured on the print, kept
+    assert load_board_json(measured) == BOARD
+    assert cli.main(["synth", "--out", str(measured), "--force", *args]) == 0
+    assert load_board_json(measured) == BoardSpec()
+    assert json.loads((measured / "cameras.json").read_text()) == {"cameras": ["left", "right"]}
+    assert sorted(p.name for p in (measured / "left").iterdir()) == ["000.png", "floor.png"]
+
+
+def load_board_json(folder: Path) -> BoardSpec:
+    return BoardSpec(**json.loads((folder / "board.json").read_text()))
+
+
+def test_capture_records_the_streams_camera_order(truth, tmp_path, capsys):
+    # names=right,left: folders sorted put 'left' first, and the driver's first device got its calibration
+    swapped = Rig((truth.camera("right"), truth.camera("left")), truth.volume)
+    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_recording(take, swapped, {cam: {"0": v["000"], "1": v["000"]} for cam, v in images.items()},
+                     period_s=1.0)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    out = tmp_path / "capture"
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+                     "--count", "1", "--interval-s", "0", "--still-s", "0"]) == 0
+    assert json.loads((out / "cameras.json").read_text()) == {"cameras": ["right", "left"]}
+    assert (out / "left" / "000.png").exists()
+    # a second session from a source that orders them the other way: which camera is first?
+    take2 = tmp_path / "take2"
+    take2.mkdir()
+    _write_recording(take2, truth, {cam: {"0": v["000"]} for cam, v in images.items()}, period_s=1.0)
+    capsys.readouterr()
+    assert cli.main(["capture", "--url", f"replay://{take2}?speed=free", "--board", str(board), "--out", str(out),
+                     "--count", "1"]) == 2
+    assert "records the cameras ['right', 'left'], this source gives ['left', 'right']" in capsys.readouterr().err
+
+
+def test_solve_keeps_the_recorded_camera_order(capture, tmp_path, capsys):
+    images = _copy_capture(capture, tmp_path / "capture")
+    (images / "cameras.json").write_text(json.dumps({"cameras": ["right", "left"]}))
+    rig_path = tmp_path / "rig.json"
+    board = ["--board", str(capture / "board.json")]
+    assert cli.main(["solve", "--images", str(images), "--camera-height", "1.4", "--out", str(rig_path), *board]) == 0
+    assert "note:" not in capsys.readouterr().out
+    assert load_rig(rig_path).names == ("right", "left")
+    (images / "cameras.json").write_text(json.dumps({"cameras": ["right", "middle"]}))
+    assert cli.main(["solve", "--images", str(images), "--camera-height", "1.4", "--out", str(rig_path), *board]) == 2
+    err = capsys.readouterr().err
+    assert "cameras.json names the cameras ['right', 'middle']" in err and "no folder 'middle'" in err
+
+
+def test_a_solved_principal_point_far_off_centre_is_refused(views, monkeypatch):
+    # the rig file refuses such a camera: the solve says so, not the next program to read the rig
+    import dataclasses
+
+    from calibration import solve
+
+    real = solve.calibrate_intrinsics
+
+    def off_centre(*args, **kwargs):
+        intr = real(*args, **kwargs)
+        return dataclasses.replace(intr, K=intr.K + [[0, 0, 200.0], [0, 0, 0], [0, 0, 0]])
+
+    monkeypatch.setattr(solve, "calibrate_intrinsics", off_centre)
+    with pytest.raises(SolveError, match="camera 'left': the solved lens model: its principal point .* of the "
+                                         "width .* do not pin the lens down"):
+        solve_rig(BOARD, views, ("left", "right"), camera_height_m=1.4)
+
+
+def test_the_report_is_written_first_and_atomically(capture, tmp_path, monkeypatch):
+    written = []
+    real_atomic, real_save = cli.write_text_atomic, cli.save_rig
+    monkeypatch.setattr(cli, "write_text_atomic", lambda path, text: (written.append(Path(path).name),
+                                                                        real_atomic(path, text)))
+    monkeypatch.setattr(cli, "save_rig", lambda rig, path: (written.append(Path(path).name), real_save(rig, path)))
+    assert cli.main(["solve", "--images", str(capture), "--board", str(capture / "board.json"), "--camera-height",
+                     "1.4", "--out", str(tmp_path / "rig.json")]) == 0
+    assert written == ["rig.report.json", "rig.json"]
+    assert json.loads((tmp_path / "rig.report.json").read_text())["pair"]["views"] >= 8
+
+
+def test_check_measures_the_floor_view_solve_was_given(truth, capture, tmp_path, capsys):
+    images = _copy_capture(capture, tmp_path / "capture", rename={"floor": "ground"})
+    rig_path = tmp_path / "rig.json"
+    record = {"board": BOARD.to_dict(), "floor_view": "ground"}
+    save_rig(Rig(truth.cameras, truth.volume, metadata={"calibration": record}), rig_path)
+    board = ["--board", str(images / "board.json")]
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(images), *board]) == 0
+    assert "floor view 'ground'" in capsys.readouterr().out  # the rig's floor view, by default
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(images), *board, "--floor-view", "000",
+                     "--json"]) == 1
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # --json: the board line goes to stderr, stdout stays JSON
+    assert report["floor"]["view"] == "000" and "board:" in captured.err

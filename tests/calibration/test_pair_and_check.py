@@ -160,3 +160,12 @@ def test_the_board_file_measured_on_the_print_is_not_overwritten(tmp_path, capsy
     assert load_board(spec).square_m == 0.0787
     assert cli.main(["board", "--out", str(tmp_path), "--force"]) == 0
     assert load_board(spec) == BoardSpec()
+
+
+def test_the_floor_view_is_the_one_named(level_rig, level_views):
+    # only a view literally named 'floor' was measured, while solve takes --floor-view NAME
+    renamed = {cam: {("ground" if n == "floor" else n): v for n, v in views.items()}
+               for cam, views in level_views.items()}
+    assert "floor" not in check_rig(level_rig, BOARD, renamed)
+    report = check_rig(level_rig, BOARD, renamed, floor_view="ground")
+    assert report["floor"]["view"] == "ground" and abs(report["floor"]["height_mm_median"]) < 1.0

@@ -66,7 +66,7 @@ def test_round_trip_awkward_values(tmp_path):
     K = np.array([[612.123456789012345, 0.25, 319.9999999999], [0.0, 611.0000000001, 240.1], [0.0, 0.0, 1.0]])
     cams = (
         Camera("café ☕", 641, 479, K, [1e-17, -0.3, 1 / 3, 2 / 3, 0.1, 0.2, 0.3, 0.4, 0, 0, 0, 0, 0, 0], R, [1e-9, -2.5, 3.0]),
-        Camera("b", 10, 10, K, [], np.eye(3), [0.0, 0.0, 0.0]),
+        Camera("b", 640, 480, K, [], np.eye(3), [0.0, 0.0, 0.0]),
     )
     rig = Rig(cams, WorkingVolume([-1, -2, 0.5], [1, 0, 4]), rig_id="x", metadata={"n": [1, 2.5, None, True], "s": "q\"\\"})
     save_rig(rig, tmp_path / "r.json")
@@ -286,3 +286,29 @@ def test_a_rotation_printed_with_six_decimals_loads_snapped_and_a_wrong_one_does
     example_dict["cameras"][1]["R"] = (exact + [[0, 1e-3, 0], [0, 0, 0], [0, 0, 0]]).tolist()
     with pytest.raises(RigFileError, match=r"cameras\[1\]\.R.*must be a rotation matrix"):
         rig_from_dict(example_dict, path="bent.json")
+
+
+def test_a_calibration_of_another_image_size_is_refused_naming_the_camera(example_dict, tmp_path):
+    # 1280x800 intrinsics in a 1920x1080 camera: the principal point is inside the image, a sixth of it off
+    # centre; the rig would project everything wrong, silently
+    example_dict["cameras"][0]["width"], example_dict["cameras"][0]["height"] = 1920, 1080
+    with pytest.raises(RigFileError) as info:
+        rig_from_dict(example_dict, path="big.json")
+    message = str(info.value)
+    assert info.value.field == "cameras[0].K" and "big.json" in message and "camera 'left'" in message
+    assert "(641.3, 402.85)" in message and "1920x1080" in message and "Camera.resized" in message
+    # resized to that size, it is the same camera and loads
+    cam = load_rig(EXAMPLE).cameras[0].resized(1920, 1200)
+    example_dict["cameras"][0].update(width=1920, height=1200, K=cam.K.tolist())
+    assert rig_from_dict(example_dict).cameras[0].size == (1920, 1200)
+
+
+def test_save_refuses_a_rig_the_reader_would_refuse(tmp_path):
+    rig = load_rig(EXAMPLE)
+    cams = list(rig.cameras)
+    cams[1] = Camera(cams[1].name, 640, 400, cams[1].K, cams[1].dist, cams[1].R, cams[1].t)  # K of 1280x800
+    (tmp_path / "rig.json").write_text("old")
+    with pytest.raises(RigFileError, match=r"cameras\[1\]\.K.*camera 'right'.*principal point") as info:
+        save_rig(Rig(tuple(cams), rig.volume), tmp_path / "rig.json")
+    assert info.value.path == str(tmp_path / "rig.json")
+    assert (tmp_path / "rig.json").read_text() == "old"
