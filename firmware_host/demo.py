@@ -11,7 +11,8 @@ rig delivers:
 * the estimator is slower than 30 fps on a 2-core machine. Under the rig's ``latest``
   pairing policy (the ``sim://`` default) the demo estimates the newest pair the rig has
   delivered and counts the older ones it skipped, so it reports dropped pairs instead of
-  falling behind; under ``policy=all`` (e.g. ``replay://``) it estimates every pair;
+  falling behind; under ``policy=all`` (e.g. ``replay://``) it estimates every pair. The
+  stream numbers the frames it sends (seq 0, 1, 2...), so a skipped pair leaves no gap in it;
 * at the end it prints pairs delivered / estimated / skipped, the estimator latency
   (median and p99 of ``PairResult.timing_ms["total"]``), the fraction of joints found
   and, when the frames carry the simulator's ground truth, the accuracy of the estimates
@@ -40,7 +41,7 @@ import numpy as np
 import drivers
 from drivers.sim.demo import draw_truth
 from firmware_host.errors import FirmwareHostError
-from firmware_host.joint_frames import estimate_frame, truth_frame
+from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
 from firmware_host.sinks import open_sink
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.simdata import Accuracy
@@ -252,6 +253,7 @@ def _run(args: argparse.Namespace) -> int:
         tally = _Tally()
         delivered, skipped, skews = 0, 0, []
         last_pair, last_result = None, None
+        numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
         # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO.
         with open_sink(sink_url, cameras=tuple(camera.name for camera in source.rig.pair)) as sink:
             start = time.monotonic()
@@ -267,12 +269,12 @@ def _run(args: argparse.Namespace) -> int:
                     break
                 delivered += 1
                 if estimator is None:
-                    frame = truth_frame(pair)
+                    frame = truth_frame(pair, sequence=numbers.take()) if pair.joints_3d is not None else None
                 else:
                     result = estimator.estimate(pair.images, sequence=pair.sequence,
                                                 timestamp_s=pair.timestamps_ns[0] * 1e-9)
                     tally.add(pair, result, time.monotonic_ns())
-                    frame, last_result = estimate_frame(pair, result), result
+                    frame, last_result = estimate_frame(pair, result, sequence=numbers.take()), result
                 if frame is not None:
                     sink.send(frame)
                 skews.append(pair.skew_ns / 1e6)

@@ -1,30 +1,53 @@
-"""Estimator results (and simulator ground truth) as joint-stream frames, for the demo and the daemon."""
+"""Estimator results (and simulator ground truth) as joint-stream frames, for the demo and the daemon.
+
+A frame's ``sequence`` (the wire's seq) is the producer's own frame number, from :class:`FrameNumbers`,
+not the driver's ``pair.sequence``: that one restarts at 0 with every (re)opened rig and counts the
+pairs skipped or rejected before any frame was made, which a receiver would take for frames lost on
+the link (``docs/protocol.md`` section 3).
+"""
 from __future__ import annotations
 
 import numpy as np
 
 import drivers
+from firmware_host.protocol.constants import U32_MAX
 from firmware_host.protocol.messages import JointFrame
 from ghnerf_runtime.estimator import PairResult
 
-__all__ = ["estimate_frame", "truth_frame"]
+__all__ = ["FrameNumbers", "estimate_frame", "truth_frame"]
 
 
-def truth_frame(pair: drivers.FramePair) -> JointFrame | None:
-    """The simulator's ground-truth 3D joints of ``pair`` (confidence 1), or None when it carries none."""
+class FrameNumbers:
+    """The seq of each frame a producer sends: 0, 1, 2... without gaps, wrapping at 2**32.
+
+    Take a number only for a frame that is handed to the sinks: a number taken and not sent is a gap.
+    """
+
+    def __init__(self) -> None:
+        self._next = 0
+
+    def take(self) -> int:
+        number = self._next
+        self._next = (number + 1) & U32_MAX
+        return number
+
+
+def truth_frame(pair: drivers.FramePair, *, sequence: int) -> JointFrame | None:
+    """The simulator's ground-truth 3D joints of ``pair`` (confidence 1) as frame ``sequence``, or None when
+    it carries none."""
     if pair.joints_3d is None:
         return None
     joints = np.concatenate([pair.joints_3d, np.ones((len(pair.joints_3d), 1))], axis=1)
     return JointFrame(
-        sequence=pair.sequence,
+        sequence=sequence,
         capture_time_us=pair.frames[0].timestamp_ns // 1000,
         joint_set=0,
         joints_3d=joints,
     )
 
 
-def estimate_frame(pair: drivers.FramePair, result: PairResult) -> JointFrame:
-    """The estimate as a sink frame: missing joints are NaN with confidence 0 (missing on the wire).
+def estimate_frame(pair: drivers.FramePair, result: PairResult, *, sequence: int) -> JointFrame:
+    """The estimate as sink frame ``sequence``: missing joints are NaN with confidence 0 (missing on the wire).
 
     The 2D joints are keyed by camera index in ``pair.frames`` order (the rig's pair order), which is
     the order of the names a sink announces in HELLO (``open_sink(url, cameras=...)``).
@@ -38,7 +61,7 @@ def estimate_frame(pair: drivers.FramePair, result: PairResult) -> JointFrame:
         uv = np.where(m2[:, None], np.nan, result.joints_2d[frame.camera])
         joints_2d[index] = np.column_stack([uv, np.where(m2, 0.0, result.confidence_2d[frame.camera])])
     return JointFrame(
-        sequence=pair.sequence,
+        sequence=sequence,
         capture_time_us=pair.frames[0].timestamp_ns // 1000,
         joint_set=0,
         joints_3d=np.column_stack([xyz, conf]),

@@ -3,7 +3,7 @@
 The receiving end's check after installing the daemon (is the robot getting joints, how many, how
 late, with what faults?), and a reference receiver in Python beside the C one in ``clients/c/``.
 
-    ghnerf-listen udp://:9870                             # a summary line every second
+    ghnerf-listen udp://:9870                             # a summary line every second (IPv4 and IPv6)
     ghnerf-listen serial:///dev/ttyUSB0?baud=921600 --json  # every message as a JSON line
     ghnerf-listen udp://0.0.0.0:9870 --seconds 10           # stop after 10 s (default: Ctrl-C)
 
@@ -42,13 +42,12 @@ class ListenError(Exception):
 
 
 class _UdpPort:
+    """A UDP socket bound to ``host`` (its address family), or to every interface when ``host`` is empty:
+    IPv6 and IPv4 on one socket where the machine has IPv6 (a sender whose name resolved to ::1 is
+    heard too), IPv4 alone where it has not."""
+
     def __init__(self, host: str, port: int) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        try:
-            self.sock.bind((host, port))
-        except OSError as e:
-            self.sock.close()
-            raise ListenError(f"udp://{host}:{port}: cannot listen: {e.strerror or e}") from e
+        self.sock = _bind_any(port) if not host else _bind(host, port)
         self.address = self.sock.getsockname()
 
     def read(self, timeout_s: float) -> bytes:
@@ -57,6 +56,42 @@ class _UdpPort:
 
     def close(self) -> None:
         self.sock.close()
+
+
+def _cannot_listen(host: str, port: int, e: OSError) -> ListenError:
+    where = f"[{host}]" if ":" in host else host
+    return ListenError(f"udp://{where}:{port}: cannot listen: {e.strerror or e}")
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """``host``'s IPv4 address if it has one (as the udp:// sink picks), else its first."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM, flags=socket.AI_PASSIVE)
+        family, _, _, _, addr = min(infos, key=lambda info: info[0] != socket.AF_INET)
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+    except OSError as e:
+        raise _cannot_listen(host, port, e) from e
+    try:
+        sock.bind(addr)
+    except OSError as e:
+        sock.close()
+        raise _cannot_listen(host, port, e) from e
+    return sock
+
+
+def _bind_any(port: int) -> socket.socket:
+    """Every interface: dual-stack ``::`` (IPV6_V6ONLY off), or ``0.0.0.0`` where IPv6 is unavailable."""
+    try:
+        sock = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+    except OSError:  # no IPv6 in this kernel (EAFNOSUPPORT)
+        return _bind("0.0.0.0", port)
+    try:
+        sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 0)
+        sock.bind(("::", port))
+    except OSError:  # IPv6 disabled on the interfaces (EADDRNOTAVAIL), or no dual stack: IPv4 still works
+        sock.close()
+        return _bind("0.0.0.0", port)
+    return sock
 
 
 class _SerialPort:
@@ -84,7 +119,7 @@ class _SerialPort:
 
 
 def open_port(url: str) -> "_UdpPort | _SerialPort":
-    """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces) or ``serial://DEVICE?baud=N``."""
+    """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces, IPv4 and IPv6) or ``serial://DEVICE?baud=N``."""
     parts = urlsplit(url)
     query = parse_qs(parts.query)
     if parts.scheme == "udp":
@@ -94,7 +129,7 @@ def open_port(url: str) -> "_UdpPort | _SerialPort":
             raise ListenError(f"{url}: bad port: {e}") from None
         if port is None:
             raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870")
-        return _UdpPort(parts.hostname or "0.0.0.0", port)
+        return _UdpPort(parts.hostname or "", port)
     if parts.scheme == "serial":
         device = parts.netloc + parts.path
         if not device:

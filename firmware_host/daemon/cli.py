@@ -120,6 +120,51 @@ def _setup_logging(level: str) -> None:
     logging.basicConfig(level=getattr(logging, level.upper()), format=fmt, stream=sys.stderr, force=True)
 
 
+class _StopOnSignal:
+    """SIGTERM / SIGINT set ``stop`` from a thread of this class, never from the signal handler.
+
+    Python runs a handler on the main thread between two bytecodes, possibly inside ``stop.wait()`` while
+    that thread holds the Event's lock (a plain Lock, not reentrant): ``stop.set()`` there would wait for
+    ever, and systemd would SIGKILL the daemon with its sinks unflushed. (Handing ``set`` to a new thread
+    is no better: starting one takes threading's own locks.) So the handler only writes the signal's
+    number to a pipe, which takes no lock; the thread reads it, logs it and sets ``stop``, which wakes
+    the loop's waits at once. A context manager: the handlers are put back and the pipe closed on exit.
+    """
+
+    def __init__(self, stop: threading.Event, signums: Sequence[int] = (signal.SIGTERM, signal.SIGINT)) -> None:
+        self._stop = stop
+        self._signums = tuple(signums)
+        self._previous: dict[int, object] = {}
+        self._read_fd, self._write_fd = os.pipe()
+        os.set_blocking(self._write_fd, False)  # a full pipe (a burst of signals) must not block the handler
+        self._thread = threading.Thread(target=self._watch, name="ghnerf-signals", daemon=True)
+
+    def __enter__(self) -> "_StopOnSignal":
+        self._thread.start()
+        for signum in self._signums:
+            self._previous[signum] = signal.signal(signum, self.handler)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for signum, previous in self._previous.items():
+            signal.signal(signum, previous)  # type: ignore[arg-type]
+        os.close(self._write_fd)  # the thread reads the end of the pipe and returns
+        self._thread.join(timeout=5)
+        os.close(self._read_fd)
+
+    def handler(self, signum: int, _frame: object) -> None:
+        try:
+            os.write(self._write_fd, bytes([signum]))
+        except OSError:  # full: the numbers already in it stop the daemon
+            pass
+
+    def _watch(self) -> None:
+        while data := os.read(self._read_fd, 64):
+            for signum in data:
+                logging.getLogger("ghnerf.daemon").info("%s received: stopping", signal.Signals(signum).name)
+            self._stop.set()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.print_example_config:
@@ -146,22 +191,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     daemon = Daemon(config, reload_config=lambda: read_checked_config(args.config), on_reload=_set_log_level)
 
-    def _on_signal(signum: int, _frame: object) -> None:
-        logging.getLogger("ghnerf.daemon").info("%s received: stopping", signal.Signals(signum).name)
-        stop.set()
-
-    signal.signal(signal.SIGTERM, _on_signal)
-    signal.signal(signal.SIGINT, _on_signal)
-    signal.signal(signal.SIGHUP, lambda _signum, _frame: daemon.request_reload())  # logged by the reload itself
+    # SIGHUP only sets a plain flag, taking no lock either (the reload logs itself).
+    previous_hup = signal.signal(signal.SIGHUP, lambda _signum, _frame: daemon.request_reload())
     if args.max_seconds is not None:
         timer = threading.Timer(args.max_seconds, stop.set)
         timer.daemon = True
         timer.start()
     try:
-        return daemon.run(stop)
+        with _StopOnSignal(stop):
+            return daemon.run(stop)
     except DaemonStartError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        signal.signal(signal.SIGHUP, previous_hup)
 
 
 if __name__ == "__main__":

@@ -107,9 +107,10 @@ class Health:
             "sinks": sinks or {},
         }
 
-    def status_line(self) -> str:
+    def status_line(self, sinks: Optional[dict[str, Any]] = None) -> str:
         """One line for systemd's ``STATUS=`` (``systemctl status ghnerf``); a refused reload stays on it
-        until one is accepted (``systemctl reload`` returns before the daemon has read the file)."""
+        until one is accepted (``systemctl reload`` returns before the daemon has read the file). ``sinks``:
+        each sink's counters by URL (as in :meth:`report`); those down are named with their error."""
         if self.state == State.RUNNING:
             r = self.report()["estimator"]
             lat = f", {r['latency_ms_median']:.0f} ms" if r["latency_ms_median"] is not None else ""
@@ -118,10 +119,32 @@ class Health:
             line = f"waiting for the rig: {self.last_error}"
         else:
             line = self.state
-        if not self.reload_error:
-            return line[:200]
-        refused = f"; {self.reload_error}"[:120]  # kept whole however long the rig's error is
-        return line[:200 - len(refused)] + refused
+        refused = f"; {self.reload_error}"[:120] if self.reload_error else ""  # kept whole however long the rest
+        down = _sinks_down(sinks or {}, STATUS_MAX - len(refused) - min(len(line), STATUS_KEEP))
+        return line[:STATUS_MAX - len(refused) - len(down)] + down + refused
+
+
+#: systemd shows this much of the status line; the daemon's state keeps at least STATUS_KEEP of it.
+STATUS_MAX, STATUS_KEEP = 200, 60
+
+
+def _sinks_down(sinks: dict[str, Any], room: int) -> str:
+    """``; sink URL down: why`` for each sink that is down, or ``; N sinks down`` when that does not fit."""
+    down = {url: s for url, s in sinks.items() if s.get("state") == "down"}
+    if not down:
+        return ""
+    text = "".join(f"; sink {url} down: {_why(url, s.get('last_error'))}" for url, s in down.items())
+    if len(text) <= room:
+        return text
+    if room >= 40:  # the first sink's URL and the start of its error say more than a count
+        return text[:room]
+    return f"; {len(down)} sink{'s' if len(down) > 1 else ''} down"[:max(room, 0)]
+
+
+def _why(url: str, error: Optional[str]) -> str:
+    """A sink's error without the URL and the ``unavailable:`` its exception message starts with."""
+    why = (error or "not connected").removeprefix(f"{url}: ")
+    return why.removeprefix("unavailable: ")
 
 
 def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:

@@ -18,6 +18,12 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
   watchdog pings and systemd restarts the service.
 
+**Sequence numbers**: the daemon numbers the frames it sends itself (0 at start, one more a frame, on
+through rig reopens, reloads and reopened sinks), not by the driver's pair numbers (which restart at 0
+with each open). A pair the driver skipped or the estimator rejected takes no number (they are the
+health report's ``pairs.dropped`` and ``pairs.estimate_errors``), so a gap a receiver sees was lost
+after the daemon: in a sink (flagged) or on the link.
+
 **Reloading the config** (SIGHUP, ``systemctl reload ghnerf``; :meth:`Daemon.request_reload`): the
 new file is read and checked in full, and a changed model is loaded (and built for the open rig),
 before anything is swapped; a file that fails any of it is refused with its error in the log, the
@@ -50,7 +56,7 @@ from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.errors import FirmwareHostError
-from firmware_host.joint_frames import estimate_frame
+from firmware_host.joint_frames import FrameNumbers, estimate_frame
 from firmware_host.protocol.constants import Fault
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.registry import sink_class
@@ -150,6 +156,9 @@ class Daemon:
         self._fault = int(Fault.OK)
         self._fault_lock = threading.RLock()  # the watchdog's thread flags a stuck estimate too
         self._dropped_closed = 0  # pairs the driver skipped, summed over rigs already closed
+        # The wire's seq: one numbering for the daemon's life, through rig reopens (whose pair numbers start
+        # at 0 again), reloads and reopened sinks, so a receiver's gap means lost after the daemon.
+        self._frame_numbers = FrameNumbers()
         self._status_file_failing = False
         self._closed_sink_stats: dict[str, Any] = {}  # the last counters of sinks already closed
         self._reload_config = reload_config
@@ -325,7 +334,7 @@ class Daemon:
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
             self.health.camera_fault = False
             self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)
-            frame = estimate_frame(pair, result)
+            frame = estimate_frame(pair, result, sequence=self._frame_numbers.take())
             for sink in self._sinks.values():
                 sink.send(frame)
         return False
@@ -409,14 +418,14 @@ class Daemon:
             self.health.reload_error = f"reload refused: {e}"  # (last_error keeps the rig's or estimator's)
             _log.error("%s; running on with the config loaded before", self.health.reload_error,
                        exc_info=not isinstance(e, DaemonConfigError))  # a bug's traceback, not a bad file's
-            self.notifier.notify(ready=1, status=self.health.status_line())
+            self.notifier.notify(ready=1, status=self.health.status_line(self.sink_stats()))
             return []
         self.health.reloads += 1
         self.health.reload_error = None
         _log.info("config reloaded: %s", ", ".join(changed) or "nothing changed")
         if _log.isEnabledFor(logging.DEBUG):
             _log.debug("the config now: %s", json.dumps(config_to_dict(self.config), sort_keys=True))
-        self.notifier.notify(ready=1, status=self.health.status_line())
+        self.notifier.notify(ready=1, status=self.health.status_line(self.sink_stats()))
         return changed
 
     def _reload(self, rig: Optional[Rig]) -> list[str]:
@@ -541,7 +550,7 @@ class Daemon:
             return
         self._next_status = now + self.config.health.status_every_s
         if tell_systemd:
-            self.notifier.notify(status=self.health.status_line())
+            self.notifier.notify(status=self.health.status_line(self.sink_stats()))
         path = self.config.health.status_file
         if path:
             try:

@@ -10,6 +10,10 @@ Behaviour written once here:
   ``decimated``, ``dropped_queue``, ``dropped_error``, ``dropped_close``, or
   is still ``queued`` / ``in_flight``.
 
+A link that cannot be (re)opened is retried forever; the journal hears of it
+once per outage (a WARNING, again only when the error changes, repeats at
+DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``.
+
 Backend hooks: ``_connect``, ``_disconnect``, ``_deliver`` and optionally
 ``_on_connected`` and ``link_capacity_fps``.
 """
@@ -47,6 +51,9 @@ class SinkStats:
     connect_failures: int
     disconnects: int
     last_error: Optional[str]
+    state: str = "connecting"
+    """``connecting`` (not tried yet), ``up``, ``down`` (the link was lost or the last connect failed;
+    ``last_error`` says why) or ``closed``."""
 
     @property
     def dropped(self) -> int:
@@ -81,6 +88,9 @@ class Sink(ABC):
         self._connected = False
         self._connects = self._connect_failures = self._disconnects = 0
         self._last_error: Optional[str] = None
+        # The error of the current outage (None while up): a repeat of it is not logged again.
+        self._down = False
+        self._down_error: Optional[str] = None
         # Gap reasons not yet attached to a frame (see protocol Flags): decimation
         # since the last admitted frame, and failed deliveries since the last pop.
         self._gap_flags = 0
@@ -188,7 +198,15 @@ class Sink(ABC):
                 connect_failures=self._connect_failures,
                 disconnects=self._disconnects,
                 last_error=self._last_error,
+                state=self._state(),
             )
+
+    def _state(self) -> str:
+        if self._closed and not self._connected:
+            return "closed"
+        if self._connected:
+            return "up"
+        return "down" if self._down else "connecting"
 
     def wait_drained(self, timeout: float) -> bool:
         """Block until nothing is queued or in flight (for shutdown and tests)."""
@@ -243,24 +261,40 @@ class Sink(ABC):
             with self._cond:
                 self._connected = True
                 self._connects += 1
+                was_down, self._down, self._down_error = self._down, False, None
                 self._cond.notify_all()
+            if was_down:
+                _log.info("%s: connected again", self.url)
             self._on_connected()
         except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: the link itself is up
             with self._cond:
                 self._last_error = str(e)
         except Exception as e:  # SinkUnavailableError, or a backend bug: retry later either way
-            if isinstance(e, SinkUnavailableError):
-                _log.info("%s: %s; retrying", self.url, e)
-            else:
-                _log.exception("%s: connect failed unexpectedly; retrying", self.url)
             self._release()
-            with self._cond:
-                self._connect_failures += 1
-                self._last_error = str(e) if isinstance(e, SinkUnavailableError) else f"{type(e).__name__}: {e}"
-                self._cond.notify_all()
+            self._connect_failed(e, backoff.policy.max_s)
             self._stop.wait(backoff.next_delay())
             return
         backoff.reset()
+
+    def _connect_failed(self, e: Exception, retry_s: float) -> None:
+        """Count a failed connect; log it once per outage and per new error, not on every retry
+        (a sink that is never plugged in would otherwise write a line every ``retry_s``, forever)."""
+        expected = isinstance(e, SinkUnavailableError)
+        error = str(e) if expected else f"{type(e).__name__}: {e}"
+        with self._cond:
+            repeat = error == self._down_error
+            self._down, self._down_error = True, error
+            self._connect_failures += 1
+            self._last_error = error
+            self._cond.notify_all()
+        if repeat:
+            _log.debug("%s: %s; retrying", self.url, error)
+        elif expected:
+            _log.warning("%s; retrying at least every %g s (repeats of this error logged at DEBUG)",
+                         error, retry_s)
+        else:  # a backend bug: its traceback once, not on every retry
+            _log.error("%s: connect failed unexpectedly; retrying at least every %g s (repeats of this error "
+                       "logged at DEBUG)", self.url, retry_s, exc_info=e)
 
     def _next_frame(self) -> Optional[tuple[JointFrame, int]]:
         """The next queued frame; None when closed with nothing queued, or when the idle timeout passed."""
@@ -286,6 +320,7 @@ class Sink(ABC):
             with self._cond:
                 self._disconnects += 1
                 self._last_error = str(e)
+                self._down = True
         except Exception as e:  # a bug in a backend must not kill the worker silently
             _log.exception("%s: idle hook failed", self.url)
             with self._cond:
@@ -316,6 +351,7 @@ class Sink(ABC):
                 self._release()
                 with self._cond:
                     self._disconnects += 1
+                    self._down = True
             except Exception as e:  # a bug in a backend must not kill the worker silently
                 error = f"{type(e).__name__}: {e}"
                 _log.exception("%s: frame %d could not be delivered", self.url, frame.sequence)

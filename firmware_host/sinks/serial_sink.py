@@ -5,14 +5,28 @@ common options. The rate is capped at what the baud rate carries (8N1, with
 headroom); a faster producer is decimated with a warning, never backed up.
 Unplug shows up as a failed write (EIO on Linux); the port is then reopened by
 path with backoff, so use a stable path such as /dev/serial/by-id/....
+
+A peer that stops reading fills the tty's buffer: each write then waits for
+room (select, no CPU) at most ``write_timeout_ms`` and the rest of the frame is
+dropped and counted. The next write starts with a 0x00 delimiter, so the
+receiver discards the cut frame (one decode error) and decodes the next one.
+pyserial's own ``write()`` is not used: on a full buffer it retries without
+waiting (a busy loop), and it reports a timeout for a write that did go out.
 """
 from __future__ import annotations
 
+import itertools
+import os
+import select
+import time
 from typing import Any, Optional
 
 import serial
 
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
+from firmware_host.protocol.constants import MsgType
+from firmware_host.protocol.encoder import encode
+from firmware_host.protocol.messages import Message
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.rate import serial_capacity_fps
@@ -48,8 +62,11 @@ class SerialSink(ProtocolSink):
     def _connect(self) -> None:
         try:
             # exclusive: a second process writing the same port would interleave frames.
-            self._ser = serial.Serial(self.port, self.baud, write_timeout=self.write_timeout_s, exclusive=True)
+            # write_timeout=0: the sink writes the fd itself (_write_within), never through pyserial.
+            self._ser = serial.Serial(self.port, self.baud, write_timeout=0, exclusive=True)
+            os.set_blocking(self._ser.fileno(), False)  # a full buffer must return EAGAIN, not block
         except (serial.SerialException, OSError, ValueError) as e:
+            self._disconnect()
             raise SinkUnavailableError(self.url, f"cannot open {self.port}: {e}") from e
 
     def _disconnect(self) -> None:
@@ -60,14 +77,58 @@ class SerialSink(ProtocolSink):
             except (serial.SerialException, OSError):
                 pass  # already gone; nothing left to release
 
+    def _write_messages(self, messages: list[Message]) -> None:
+        packets = [encode(m) for m in messages]
+        lead = b"\x00" if self._resync else b""  # ends a frame a timeout cut short
+        data = lead + b"".join(packets)
+        written = self._write_within(data, self.write_timeout_s)
+        if written == len(data):
+            self._resync = False
+            return
+        if written:
+            self._resync = True  # the receiver holds part of a frame: the next write's 0x00 ends it
+        if written < len(lead) + _frame_bytes(messages, packets):
+            raise SinkWriteError(self.url, f"write timed out after {self.write_timeout_s * 1000:.0f} ms "
+                                           f"({written} of {len(data)} bytes out; the peer is not reading)")
+        # Only a trailing HELLO + STATUS was cut: the frame itself is out, the next period repeats them.
+
     def _write_bytes(self, data: bytes) -> None:
+        # ProtocolSink's hook; this sink writes through _write_messages, which knows the packet bounds.
+        if self._write_within(data, self.write_timeout_s) < len(data):
+            raise SinkWriteError(self.url, f"write timed out after {self.write_timeout_s * 1000:.0f} ms")
+
+    def _write_within(self, data: bytes, timeout_s: float) -> int:
+        """Write ``data`` as far as the port takes it within ``timeout_s``; returns the bytes written.
+
+        Waits for room with select(), so a peer that stops reading costs no CPU.
+        :raises SinkUnavailableError: the port is gone (EIO after an unplug).
+        """
         if self._ser is None:
             raise SinkUnavailableError(self.url, "port not open")
+        fd = self._ser.fileno()
+        view = memoryview(data)
+        done = 0
+        deadline = time.monotonic() + timeout_s
         try:
-            self._ser.write(data)
-        except serial.SerialTimeoutException as e:
-            # Part of a frame may be out: the next write starts with a delimiter.
-            self._resync = True
-            raise SinkWriteError(self.url, f"write timed out after {self.write_timeout_s * 1000:.0f} ms") from e
-        except (serial.SerialException, OSError) as e:
+            while True:
+                try:
+                    done += os.write(fd, view[done:])
+                except BlockingIOError:
+                    pass  # full: wait for room below
+                remaining = deadline - time.monotonic()
+                if done == len(data) or remaining <= 0:
+                    return done
+                _, ready, _ = select.select([], [fd], [], remaining)
+                if not ready:
+                    return done
+        except OSError as e:
             raise SinkUnavailableError(self.url, f"write to {self.port} failed: {e}") from e
+
+
+def _frame_bytes(messages: list[Message], packets: list[bytes]) -> int:
+    """Bytes that must be out for a write to count as delivered: the frame's own packets (JOINTS,
+    JOINTS_2D; all of them for a HELLO + STATUS write), less the last 0x00, which the next write's
+    leading delimiter supplies."""
+    frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)
+    n = sum(1 for _ in itertools.takewhile(lambda m: m.header.msg_type in frame_types, messages)) or len(messages)
+    return sum(len(p) for p in packets[:n]) - 1

@@ -5,10 +5,20 @@ use the same stream decoder as on serial. UDP has no delivery feedback: losses
 on the network show up only as sequence gaps at the receiver; the sender
 counts what it could not send (full socket buffer, unreachable network). An IPv4
 broadcast address (``udp://192.168.1.255:9000``) sends to every receiver on the subnet.
+
+A host name is resolved to its IPv4 address when it has one (a receiver bound to
+0.0.0.0 never hears ::1, which glibc may list first for ``localhost``), to IPv6
+when that is all it has or the host is an IPv6 literal. The name is looked up
+again every ``resolve_s`` (30) seconds in a thread of its own, so a robot whose
+DHCP or mDNS address changes is found again while the frames keep going out.
 """
 from __future__ import annotations
 
+import ipaddress
+import logging
 import socket
+import threading
+import time
 from typing import Any, Optional
 
 from firmware_host.errors import SinkUnavailableError, SinkWriteError
@@ -16,38 +26,111 @@ from firmware_host.protocol.encoder import encode
 from firmware_host.protocol.messages import Message
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
-from firmware_host.sinks.url import SinkUrl, host_port, parse_url
+from firmware_host.sinks.url import SinkUrl, host_port, parse_url, positive_float
+
+_log = logging.getLogger(__name__)
+
+#: Seconds between lookups of a host name (``resolve_s``); IP literals are never looked up again.
+RESOLVE_S = 30.0
+
+
+def resolve(url: str, host: str, port: int) -> tuple[int, Any]:
+    """``(family, sockaddr)`` for ``host``: its first IPv4 address, else its first address.
+
+    :raises SinkUnavailableError: the name does not resolve (now).
+    """
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+    except OSError as e:
+        raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: {e}") from e
+    if not infos:
+        raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: no address")
+    family, _, _, _, addr = min(infos, key=lambda info: info[0] != socket.AF_INET)  # stable: keeps the order
+    return family, addr
+
+
+def _is_ip_literal(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return True
 
 
 class DatagramLink:
-    """An unconnected UDP socket to one address; shared by the udp and vmc sinks."""
+    """An unconnected UDP socket to one address; shared by the udp and vmc sinks.
 
-    def __init__(self, url: str, host: str, port: int) -> None:
+    Only the sink's worker calls open/send/close; the lookup thread hands its answer over through
+    ``_fresh`` and the worker applies it on its next send."""
+
+    def __init__(self, url: str, host: str, port: int, resolve_s: float = RESOLVE_S) -> None:
         self.url, self.host, self.port = url, host, port
+        self.resolve_s = resolve_s
         self._sock: Optional[socket.socket] = None
+        self._family = 0
         self._addr: Any = None
+        self._is_name = not _is_ip_literal(host)
+        self._lock = threading.Lock()  # guards _fresh, _looking_up and _resolved_at
+        self._fresh: Optional[tuple[int, Any]] = None
+        self._looking_up = False
+        self._resolved_at = 0.0
 
     def open(self) -> None:
-        try:
-            family, _, _, _, addr = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM)[0]
-            sock = socket.socket(family, socket.SOCK_DGRAM)
-        except OSError as e:
-            raise SinkUnavailableError(self.url, f"cannot resolve or open {self.host}:{self.port}: {e}") from e
-        sock.setblocking(False)  # a full send buffer must drop, not stall the worker
-        if family == socket.AF_INET:
-            # a broadcast address (192.168.1.255) reaches every console on the subnet; without this
-            # flag the kernel refuses each datagram (EACCES) and the sink would reconnect forever
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
-        self._sock, self._addr = sock, addr
+        family, addr = resolve(self.url, self.host, self.port)
+        with self._lock:
+            self._fresh, self._resolved_at = None, time.monotonic()
+        self._use(family, addr)
+
+    def _use(self, family: int, addr: Any) -> None:
+        """Send to ``addr`` from now on, with a new socket if its family differs."""
+        if self._sock is None or family != self._family:
+            try:
+                sock = socket.socket(family, socket.SOCK_DGRAM)
+            except OSError as e:
+                raise SinkUnavailableError(self.url, f"cannot open a socket to {self.host}:{self.port}: {e}") from e
+            sock.setblocking(False)  # a full send buffer must drop, not stall the worker
+            if family == socket.AF_INET:
+                # a broadcast address (192.168.1.255) reaches every console on the subnet; without this
+                # flag the kernel refuses each datagram (EACCES) and the sink would reconnect forever
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_BROADCAST, 1)
+            self.close()
+            self._sock, self._family = sock, family
+        self._addr = addr
 
     def close(self) -> None:
         sock, self._sock = self._sock, None
         if sock is not None:
             sock.close()
 
+    def _refresh(self) -> None:
+        """Apply a finished lookup; start the next one when due, in its own thread: a slow DNS or mDNS
+        answer (seconds, for a name that went away) must not hold up the frames."""
+        now = time.monotonic()
+        with self._lock:
+            fresh, self._fresh = self._fresh, None
+            due = self._is_name and not self._looking_up and now - self._resolved_at >= self.resolve_s
+            if due:
+                self._looking_up, self._resolved_at = True, now
+        if fresh is not None and fresh[1] != self._addr:
+            _log.info("%s: %s now resolves to %s (was %s)", self.url, self.host, fresh[1][0], self._addr[0])
+            self._use(*fresh)
+        if due:
+            threading.Thread(target=self._look_up, name=f"resolve {self.host}", daemon=True).start()
+
+    def _look_up(self) -> None:
+        try:
+            fresh: Optional[tuple[int, Any]] = resolve(self.url, self.host, self.port)
+        except SinkUnavailableError as e:  # keep sending to the address it had; the next lookup may work
+            _log.debug("%s; still sending to %s", e, self._addr)
+            fresh = None
+        with self._lock:
+            self._fresh = fresh or self._fresh
+            self._looking_up = False
+
     def send(self, datagram: bytes) -> None:
         if self._sock is None:
             raise SinkUnavailableError(self.url, "socket not open")
+        self._refresh()
         try:
             self._sock.sendto(datagram, self._addr)
         except BlockingIOError as e:
@@ -59,18 +142,19 @@ class DatagramLink:
 class UdpSink(ProtocolSink):
     scheme = "udp"
 
-    def __init__(self, url: str, host: str, port: int, options: SinkOptions) -> None:
+    def __init__(self, url: str, host: str, port: int, options: SinkOptions, resolve_s: float = RESOLVE_S) -> None:
         super().__init__(url, options)
-        self._link = DatagramLink(url, host, port)
+        self._link = DatagramLink(url, host, port, resolve_s)
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "UdpSink":
         u: SinkUrl = parse_url(url)
         host, port = host_port(u)
+        resolve_s = u.take("resolve_s", positive_float, RESOLVE_S, kw)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
-        return cls(url, host, port, options)
+        return cls(url, host, port, options, resolve_s)
 
     def _connect(self) -> None:
         self._link.open()

@@ -11,7 +11,6 @@ else) is released and searched for again with backoff.
 from __future__ import annotations
 
 import errno
-import logging
 from typing import Any, Optional
 
 import usb.core
@@ -21,8 +20,6 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, non_negative_int, parse_url, positive_int
-
-_log = logging.getLogger(__name__)
 
 
 def _vid_pid(url: str, netloc: str) -> tuple[int, int]:
@@ -54,7 +51,6 @@ class UsbSink(ProtocolSink):
         self.vid, self.pid, self.ep, self.interface, self.timeout_ms = vid, pid, ep, interface, timeout_ms
         self._backend = backend
         self._dev: Optional[usb.core.Device] = None
-        self._warned_claim: Optional[str] = None
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "UsbSink":
@@ -92,14 +88,9 @@ class UsbSink(ProtocolSink):
             self._configure(dev)
         except (usb.core.USBError, ValueError) as e:
             usb.util.dispose_resources(dev)
-            error = SinkUnavailableError(self.url, f"cannot claim {self.vid:04x}:{self.pid:04x}: {e}")
-            if str(error) != self._warned_claim:
-                # The device is there but not as the URL describes it (interface, ep) or is held by
-                # another program: retrying will not help until someone acts, so say it loudly, once.
-                self._warned_claim = str(error)
-                _log.warning("%s; retrying", error)
-            raise error from e
-        self._warned_claim = None
+            # The device is there but not as the URL describes it (interface, ep) or is held by another
+            # program; the base class warns once per outage and per new error, as for any failed connect.
+            raise SinkUnavailableError(self.url, f"cannot claim {self.vid:04x}:{self.pid:04x}: {e}") from e
         self._dev = dev
 
     def _configure(self, dev: usb.core.Device) -> None:

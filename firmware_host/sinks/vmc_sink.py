@@ -4,7 +4,8 @@ One OSC bundle per frame: /VMC/Ext/OK, /VMC/Ext/T, Root/Pos (hip position) and
 Bone/Pos (local rotations) solved by ``vmc_pose``. VMC has no sequence
 numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
 report what it decimated or dropped. ``max_fps`` caps the rate (receivers
-render at display rate; 60 is plenty).
+render at display rate; 60 is plenty). Host names are resolved like udp://
+(IPv4 first, looked up again every ``resolve_s``, default 30).
 """
 from __future__ import annotations
 
@@ -13,8 +14,8 @@ from typing import Any, Optional
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
-from firmware_host.sinks.udp_sink import DatagramLink
-from firmware_host.sinks.url import SinkUrl, host_port, parse_url
+from firmware_host.sinks.udp_sink import RESOLVE_S, DatagramLink
+from firmware_host.sinks.url import SinkUrl, host_port, parse_url, positive_float
 from firmware_host.sinks.vmc_osc import build_bundle
 from firmware_host.sinks.vmc_pose import solve_pose
 
@@ -24,19 +25,20 @@ VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
 class VmcSink(Sink):
     scheme = "vmc"
 
-    def __init__(self, url: str, host: str, port: int, options: SinkOptions) -> None:
+    def __init__(self, url: str, host: str, port: int, options: SinkOptions, resolve_s: float = RESOLVE_S) -> None:
         super().__init__(url, options)
-        self._link = DatagramLink(url, host, port)
+        self._link = DatagramLink(url, host, port, resolve_s)
         self._t0_us: Optional[int] = None
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "VmcSink":
         u: SinkUrl = parse_url(url)
         host, port = host_port(u, VMC_DEFAULT_PORT)
+        resolve_s = u.take("resolve_s", positive_float, RESOLVE_S, kw)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
-        return cls(url, host, port, options)
+        return cls(url, host, port, options, resolve_s)
 
     def _connect(self) -> None:
         self._link.open()

@@ -76,7 +76,7 @@ def test_streams_estimated_joints_and_prints_the_summary(tmp_path, capsys, sim_u
 
     # What was streamed is the estimate, joint for joint (mm on the wire), missing joints flagged.
     rows = _joints_rows(tmp_path / "joints.jsonl")
-    assert [r["seq"] for r in rows] == [r.sequence for r in recorded]
+    assert [r["seq"] for r in rows] == list(range(len(recorded)))  # the frames sent, not the rig's pair numbers
     for msg, result in zip(rows, recorded):
         joints = np.array(msg["joints"], dtype=float)
         assert joints.shape == (25, 5) and np.all(np.isfinite(joints))
@@ -104,9 +104,9 @@ def test_a_slow_estimator_skips_to_the_newest_pair(tmp_path, capsys, sim_url, mo
     delivered, estimated, skipped = _summary(out)
     assert estimated > 0 and skipped > 0 and delivered == estimated + skipped
     seqs = [r["seq"] for r in _joints_rows(tmp_path / "joints.jsonl")]
-    # Gaps in the stream's sequence are the pairs skipped: >= 3 while 100 ms pass per estimate. (A
-    # stall longer than the driver's 8-frame backlog loses frames before pairing instead: no gap.)
-    assert len(seqs) == estimated and np.all(np.diff(seqs) > 0) and np.median(np.diff(seqs)) >= 3
+    # The pairs skipped were never frames: no gap in the stream's seq, where a gap means lost on the link
+    # (docs/protocol.md section 3); the summary counts them instead.
+    assert seqs == list(range(estimated))
 
 
 @pytest.mark.parametrize("make", [False, True], ids=["absent", "empty"])
@@ -162,7 +162,7 @@ def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_u
     assert "GROUND TRUTH" in out and "estimated" not in out
     assert (tmp_path / "sim_pair.png").stat().st_size > 0
     rows = _joints_rows(tmp_path / "joints.jsonl")
-    assert len(rows) >= 5
+    assert len(rows) >= 5 and [r["seq"] for r in rows] == list(range(len(rows)))
     for msg in rows:
         joints = np.array(msg["joints"])
         assert joints.shape == (25, 5) and np.all(joints[:, 4] == 0) and np.all(joints[:, 3] == 255)

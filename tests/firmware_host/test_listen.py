@@ -1,8 +1,10 @@
 """``ghnerf-listen``: the receiving end, over a real UDP socket and a real pty, fed by the real sinks."""
 from __future__ import annotations
 
+import errno
 import io
 import os
+import socket
 import threading
 
 import pytest
@@ -89,3 +91,52 @@ def test_sequence_numbers_wrap_and_errors_are_per_line():
     first = tally.line(1.0, {"crc": 2, "cobs": 0})
     second = tally.line(1.0, {"crc": 2, "cobs": 0})
     assert "decode errors {'crc': 2}" in first and "decode errors" not in second
+
+
+def _datagram_reaches(port, family: int, address: str) -> bool:
+    """Send one datagram from a ``family`` socket to ``address`` and the port's number; True if it is read."""
+    with socket.socket(family, socket.SOCK_DGRAM) as tx:
+        tx.sendto(b"\x00ping\x00", (address, port.address[1]))
+    return port.read(2.0) == b"\x00ping\x00"
+
+
+def test_udp_on_every_interface_hears_ipv4_and_ipv6_senders():
+    # udp://localhost sinks used to send to ::1 (glibc's first answer on many hosts) and nobody heard them
+    port = listen.open_port("udp://:0")
+    try:
+        if port.sock.family == socket.AF_INET6:
+            assert port.sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY) == 0
+            assert _datagram_reaches(port, socket.AF_INET6, "::1")
+        assert _datagram_reaches(port, socket.AF_INET, "127.0.0.1")
+    finally:
+        port.close()
+    if not socket.has_ipv6:
+        pytest.skip("no IPv6 here: only the IPv4 fallback was checked")
+    assert port.sock.family == socket.AF_INET6
+
+
+def test_udp_on_every_interface_falls_back_to_ipv4_without_ipv6(monkeypatch):
+    real_socket = socket.socket
+
+    def no_ipv6(family=socket.AF_INET, *args, **kwargs):
+        if family == socket.AF_INET6:
+            raise OSError(errno.EAFNOSUPPORT, "Address family not supported by protocol")
+        return real_socket(family, *args, **kwargs)
+
+    monkeypatch.setattr(listen.socket, "socket", no_ipv6)
+    port = listen.open_port("udp://:0")
+    try:
+        assert port.sock.family == socket.AF_INET and port.address[0] == "0.0.0.0"
+        assert _datagram_reaches(port, socket.AF_INET, "127.0.0.1")
+    finally:
+        port.close()
+
+
+def test_udp_on_an_ipv6_literal():
+    if not socket.has_ipv6:
+        pytest.skip("no IPv6 here")
+    port = listen.open_port("udp://[::1]:0")
+    try:
+        assert port.sock.family == socket.AF_INET6 and _datagram_reaches(port, socket.AF_INET6, "::1")
+    finally:
+        port.close()

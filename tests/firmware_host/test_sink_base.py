@@ -5,6 +5,7 @@ each failure can be triggered exactly when wanted.
 """
 from __future__ import annotations
 
+import logging
 import threading
 
 import pytest
@@ -30,12 +31,13 @@ class ScriptedSink(Sink):
         self.gate.set()
         self.delivered: list[tuple[int, int]] = []
         self.connect_calls = 0
+        self.connect_reason = "not plugged in"
 
     def _connect(self) -> None:
         self.connect_calls += 1
         if self.connect_failures_left:
             self.connect_failures_left -= 1
-            raise SinkUnavailableError(self.url, "not plugged in")
+            raise SinkUnavailableError(self.url, self.connect_reason)
 
     def _disconnect(self) -> None:
         pass
@@ -197,3 +199,68 @@ def test_rate_limiter_never_exceeds_its_cap(max_fps: float, gaps: list[int]) -> 
 def test_rate_limiter_without_cap_admits_everything() -> None:
     lim = RateLimiter(None)
     assert all(lim.admit(t) for t in range(0, 1000, 1))
+
+
+def sink_records(caplog: pytest.LogCaptureFixture, level: int) -> list[logging.LogRecord]:
+    return [r for r in caplog.records if r.name == "firmware_host.sinks.base" and r.levelno >= level]
+
+
+def test_a_sink_that_never_connects_warns_once_per_error_and_says_it_is_down(
+        caplog: pytest.LogCaptureFixture) -> None:
+    sink = ScriptedSink()
+    sink.connect_failures_left = 10**6
+    assert sink.stats().state == "connecting"
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        wait_until(lambda: sink.stats().connect_failures >= 5, what="five failed connects")
+        assert len(sink_records(caplog, logging.INFO)) == 1  # not one line per retry
+        assert sink_records(caplog, logging.INFO)[0].levelno == logging.WARNING
+        assert len(sink_records(caplog, logging.DEBUG)) >= 5  # the repeats, at DEBUG
+        s = sink.stats()
+        assert s.state == "down" and not s.connected and "not plugged in" in (s.last_error or "")
+
+        sink.connect_reason = "permission denied"  # a new error is worth a line again
+        seen = s.connect_failures
+        wait_until(lambda: sink.stats().connect_failures >= seen + 3, what="failures with the new error")
+        warnings = sink_records(caplog, logging.INFO)
+        assert [r.levelno for r in warnings] == [logging.WARNING, logging.WARNING]
+        assert "permission denied" in warnings[1].getMessage()
+        assert "permission denied" in (sink.stats().last_error or "")
+
+        sink.connect_failures_left = 0  # plugged in: up again, and said so
+        wait_until(lambda: sink.stats().connected, what="connect")
+        assert sink.stats().state == "up"
+        assert "connected again" in sink_records(caplog, logging.INFO)[-1].getMessage()
+    assert sink.close().state == "closed"
+
+
+def test_an_unexpected_connect_error_logs_its_traceback_once(caplog: pytest.LogCaptureFixture) -> None:
+    class Broken(ScriptedSink):
+        def _connect(self) -> None:
+            self.connect_calls += 1
+            raise RuntimeError("driver bug")
+
+    sink = Broken()
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        wait_until(lambda: sink.stats().connect_failures >= 4, what="four failed connects")
+        sink.close()
+    loud = sink_records(caplog, logging.INFO)
+    assert len(loud) == 1 and loud[0].exc_info is not None
+    repeats = [r for r in sink_records(caplog, logging.DEBUG) if r.levelno == logging.DEBUG]
+    assert len(repeats) >= 3 and all(r.exc_info is None for r in repeats)
+    assert sink.stats().state == "closed" and "RuntimeError: driver bug" in (sink.stats().last_error or "")
+
+
+def test_a_lost_link_reads_down_until_it_reconnects() -> None:
+    sink = ScriptedSink().start()
+    wait_until(lambda: sink.stats().connected, what="connected")
+    sink.fail_next.append(SinkUnavailableError("scripted://", "unplugged"))
+    sink.connect_failures_left = 10**6
+    sink.send(make_frame(0))
+    wait_until(lambda: sink.stats().connect_failures >= 1, what="a failed reconnect")
+    s = sink.stats()
+    assert s.state == "down" and "not plugged in" in (s.last_error or "")
+    sink.connect_failures_left = 0
+    wait_until(lambda: sink.stats().state == "up", what="reconnect")
+    sink.close()

@@ -11,11 +11,12 @@ import logging
 import os
 import select
 import threading
+import time
 from pathlib import Path
 
 import pytest
 
-from firmware_host.protocol import Flags, Hello, Joints
+from firmware_host.protocol import Flags, Hello, Joints, decode_stream
 from firmware_host.sinks import open_sink
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
 
@@ -34,11 +35,15 @@ class PtyPort:
         self._lock = threading.Lock()
         self._data = bytearray()
         self._stop = threading.Event()
+        self._draining = threading.Event()
+        self._draining.set()
         self._thread = threading.Thread(target=self._drain, daemon=True)
         self._thread.start()
 
     def _drain(self) -> None:
         while not self._stop.is_set():
+            if not self._draining.wait(0.01):
+                continue  # paused: the reader stalls, the pty's buffer fills
             ready, _, _ = select.select([self.master], [], [], 0.01)
             if ready:
                 try:
@@ -52,6 +57,12 @@ class PtyPort:
     def data(self) -> bytes:
         with self._lock:
             return bytes(self._data)
+
+    def pause(self) -> None:
+        self._draining.clear()
+
+    def resume(self) -> None:
+        self._draining.set()
 
     def unplug(self) -> None:
         self._stop.set()
@@ -163,3 +174,97 @@ def test_missing_port_keeps_retrying_without_blocking(tmp_path: Path) -> None:
     s = sink.close()
     assert s.sent == 0 and s.dropped == 50
     assert "nothing-here" in (s.last_error or "")
+
+
+def count_writes_to(monkeypatch: pytest.MonkeyPatch, device: str) -> list[int]:
+    """Count ``os.write`` calls on file descriptors open on ``device`` (pyserial's and the sink's)."""
+    calls = [0]
+    real_write = os.write
+    targets: dict[int, bool] = {}
+
+    def counting_write(fd: int, data: bytes) -> int:
+        if fd not in targets:
+            try:
+                targets[fd] = os.readlink(f"/proc/self/fd/{fd}") == device
+            except OSError:
+                targets[fd] = False
+        if targets[fd]:
+            calls[0] += 1
+        return real_write(fd, data)
+
+    monkeypatch.setattr(os, "write", counting_write)
+    return calls
+
+
+def test_a_stalled_reader_costs_no_busy_loop_and_sent_is_what_arrives(
+        link: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    port = PtyPort(link)
+    writes = count_writes_to(monkeypatch, port.slave_name)
+    # status_s: only JOINTS per frame, so every frame is one packet on the wire
+    sink = open_sink(f"serial://{link}?baud=921600&queue=4&write_timeout_ms=40&status_s=3600",
+                     backoff=FAST_BACKOFF)
+    seq = 0
+
+    def send_for(seconds: float) -> None:
+        nonlocal seq
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            sink.send(make_frame(seq))
+            seq += 1
+            time.sleep(0.005)
+
+    try:
+        assert sink.wait_connected(5)
+        port.pause()  # the receiver stops reading: the pty's buffer (some kB) fills, then every write waits
+        deadline = time.monotonic() + 10
+        while sink.stats().dropped_error < 3 and time.monotonic() < deadline:
+            send_for(0.05)
+        assert sink.stats().dropped_error >= 3, "the stall never showed"
+        before, tried_before = writes[0], sink.stats().sent + sink.stats().dropped_error
+        send_for(0.5)  # stalled throughout
+        tried = sink.stats().sent + sink.stats().dropped_error - tried_before
+        # Each frame waits for room (select), it does not retry the write in a loop until the timeout.
+        assert writes[0] - before <= 3 * tried + 5, (writes[0] - before, tried)
+        port.resume()
+        send_for(0.2)
+        assert sink.wait_drained(5)
+        wait_until(lambda: len(received_joints(port.data)) >= sink.stats().sent, what="the sent frames")
+    finally:
+        stats = sink.close()
+        port.unplug()
+    joints = received_joints(port.data)
+    assert stats.dropped_error >= 3 and stats.accounted == stats.submitted
+    # A frame counted as sent arrived, and a frame counted as dropped did not.
+    assert len(joints) == stats.sent
+    assert [m.header.seq for m in joints] == sorted(m.header.seq for m in joints)
+
+
+def received_joints(data: bytes) -> list[Joints]:
+    """The JOINTS packets decoded; frames cut by a write timeout are skipped as decode errors."""
+    events, _ = decode_stream(data)
+    return [e.message for e in events if isinstance(e.message, Joints)]
+
+
+@pytest.mark.parametrize("short_by, delivered", [
+    ("joints", False),  # the JOINTS packet cut: the frame is lost, the receiver drops the fragment
+    ("joints_delimiter", True),  # all but its 0x00, which the next write's leading delimiter supplies
+    ("status", True),  # only the trailing HELLO + STATUS cut: the frame is out
+])
+def test_what_a_cut_write_counts_as_delivered(monkeypatch: pytest.MonkeyPatch, short_by: str, delivered: bool) -> None:
+    from firmware_host.errors import SinkWriteError
+    from firmware_host.protocol.encoder import encode
+    from firmware_host.protocol.from_frame import joints_message
+    from firmware_host.sinks.serial_sink import SerialSink
+
+    sink = SerialSink.from_url("serial:///dev/ttyGHNERF-unused?baud=921600")  # never started: no port
+    sink._resync = False
+    messages = [joints_message(make_frame(0), 1, 0), sink._hello(1), sink._status(1)]
+    joints_len = len(encode(messages[0]))
+    out = {"joints": joints_len - 2, "joints_delimiter": joints_len - 1, "status": joints_len + 5}[short_by]
+    monkeypatch.setattr(sink, "_write_within", lambda data, timeout_s: out)
+    if delivered:
+        sink._write_messages(messages)
+    else:
+        with pytest.raises(SinkWriteError, match="timed out"):
+            sink._write_messages(messages)
+    assert sink._resync  # either way the next write starts with 0x00

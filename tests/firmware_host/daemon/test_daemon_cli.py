@@ -7,6 +7,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -200,3 +201,78 @@ def test_the_start_runs_the_checks_a_reload_runs(tmp_path, capsys):
                              "estimator": {"session": {"model_dir": str(MODELS)}}})
     assert cli.main(["--config", str(path)]) == 2
     assert f"ghnerf-daemon: error: {path}: rig.url: " in capsys.readouterr().err
+
+
+def test_the_stop_signal_handler_never_waits_on_the_stop_events_lock(tmp_path, monkeypatch):
+    """SIGTERM's handler runs on the main thread between two bytecodes, maybe inside ``stop.wait()`` while
+    that thread holds the Event's lock (a plain Lock): a handler taking it would wait for ever. Here the
+    daemon holds the lock while the handler runs on another thread, so such a handler fails, not hangs."""
+    from firmware_host.daemon import daemon_config_from_dict
+
+    seen: dict[str, bool] = {}
+
+    class HoldsTheStopLock:
+        def __init__(self, config, **_kw) -> None:
+            pass
+
+        def request_reload(self) -> None:
+            pass
+
+        def run(self, stop: threading.Event) -> int:
+            handler = signal.getsignal(signal.SIGTERM)
+            with stop._cond:  # as Event.wait holds it around its inner wait
+                caller = threading.Thread(target=handler, args=(signal.SIGTERM, None), daemon=True)
+                caller.start()
+                caller.join(timeout=5)
+                seen["handler returned"] = not caller.is_alive()
+            seen["stopped"] = stop.wait(timeout=5)  # the stop still arrives, without the lock held
+            return 0
+
+    config = daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": ["memory://"],
+                                      "estimator": {"session": {"model_dir": str(tmp_path)}}})
+    monkeypatch.setattr(cli, "read_checked_config", lambda path: config)
+    monkeypatch.setattr(cli, "Daemon", HoldsTheStopLock)
+    monkeypatch.setattr(cli, "_setup_logging", lambda level: None)  # leave pytest's logging alone
+    monkeypatch.setattr(cli.faulthandler, "enable", lambda: None)
+    before = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)}
+    try:
+        assert cli.main(["--config", str(tmp_path / "daemon.json")]) == 0
+        assert seen == {"handler returned": True, "stopped": True}
+        assert {s: signal.getsignal(s) for s in before} == before  # put back once the daemon returns
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
+
+
+@needs_model
+def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
+    """The loop waits for an absent rig in short ``stop.wait`` calls (where a signal may land): SIGTERM
+    still stops it long before its backoff ends, with the final status written."""
+    sock_path = tmp_path / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(sock_path))
+    sock.settimeout(1.0)
+    status = tmp_path / "status.json"
+    path = _write(tmp_path, {
+        "rig": {"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 300, "reopen_max_s": 300},
+        "sinks": [f"file://{tmp_path / 'joints.jsonl'}"],
+        "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
+        "health": {"status_file": str(status), "status_every_s": 0.2},
+    })
+    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "JOURNAL_STREAM": "8:1"}
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    notes: list[dict[str, str]] = []
+    try:
+        _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
+                     "waiting for the rig")
+        time.sleep(0.5)  # a few of its stop.wait calls
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)  # not after the 300 s backoff, nor never
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        sock.close()
+    assert proc.returncode == 0, err
+    assert "SIGTERM received: stopping" in err and "Traceback" not in err
+    assert json.loads(status.read_text())["state"] == "stopping"

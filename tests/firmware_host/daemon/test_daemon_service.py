@@ -25,7 +25,7 @@ import drivers
 from firmware_host.daemon import Daemon, DaemonConfigError, DaemonStartError, daemon_config_from_dict
 from firmware_host.daemon.health import State
 from firmware_host.daemon.notify import SystemdNotifier
-from firmware_host.protocol.constants import Fault
+from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.protocol.messages import Hello, Joints, Status
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, messages_of, wait_until
 
@@ -149,6 +149,75 @@ def test_a_vanished_camera_is_reopened_and_flagged(sim_url, tmp_path):
     faults = [m.fault for m in messages[first_joints:] if isinstance(m, Status)]
     assert Fault.CAMERA_FAULT in faults  # flagged while the camera was away
     assert faults.index(Fault.CAMERA_FAULT) < len(faults) - 1 - faults[::-1].index(Fault.OK)  # and cleared
+    _assert_seqs_number_the_frames_sent(messages, sink)
+
+
+def _assert_seqs_number_the_frames_sent(messages: list, sink) -> None:
+    """The JOINTS seqs are 0, 1, 2... (docs/protocol.md section 3): every gap is flagged as the sink's own
+    drop, and the gaps add up to what the sink dropped; nothing the daemon did not send takes a number."""
+    joints = [m for m in messages if isinstance(m, Joints)]
+    seqs = [m.header.seq for m in joints]
+    assert seqs and seqs[0] == 0, seqs[:5]
+    steps = np.diff(seqs)
+    assert np.all(steps >= 1), f"the seq went back: {seqs}"
+    unflagged = [(seqs[k], seqs[k + 1]) for k in np.flatnonzero(steps > 1)
+                 if not joints[k + 1].header.flags & (Flags.DROPPED | Flags.DECIMATED)]
+    assert unflagged == [], f"gaps a receiver would count as lost on the link: {unflagged}"
+    stats = sink.stats()
+    assert len(seqs) == stats.sent and seqs[-1] < stats.submitted  # numbers of frames handed to the sink
+    assert int(np.sum(steps - 1)) <= stats.submitted - stats.sent
+
+
+class _CountingEstimator:
+    """Stands in for the model: every third pair rejected (FrameError), the others all joints found."""
+
+    def __init__(self, session, rig, config) -> None:
+        self.rig, self.calls, self.sequences = rig, 0, []
+
+    def estimate(self, images, *, sequence: int, timestamp_s: float):
+        from ghnerf_runtime.body25 import JOINT_NAMES
+        from ghnerf_runtime.errors import FrameError
+        from ghnerf_runtime.estimator import PairResult
+
+        self.calls += 1
+        self.sequences.append(sequence)  # the driver's pair number: still the estimator's
+        if self.calls % 3 == 0:
+            raise FrameError("a frame of the wrong shape")
+        names = [c.name for c in self.rig.pair]
+        n = len(JOINT_NAMES)
+        return PairResult(sequence, tuple(JOINT_NAMES), np.full((n, 3), 1.0), np.full(n, 0.9), np.zeros(n, bool),
+                          {c: np.full((n, 2), 10.0) for c in names}, {c: np.full(n, 0.9) for c in names},
+                          {c: np.zeros(n, bool) for c in names}, {"total": 1.0}, False, {c: True for c in names},
+                          {}, "stub")
+
+    def reset(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_seqs_stay_contiguous_through_reopens_and_rejected_pairs(sim_url, tmp_path, monkeypatch):
+    """Each reopen starts the driver's pair numbers at 0 again and a rejected pair sends nothing: neither
+    shows on the wire, where seq counts the frames the daemon sent (a gap: lost after the daemon)."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    cfg = _config({"url": f"{sim_url}&unplug_after_s=0.4", "reopen_min_s": 0.01}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.rig_opens >= 3 and run.daemon.health.pairs_estimated >= 20,
+                   timeout=60, what="pairs from three opens of the rig")
+        sink = run.daemon.sinks["memory://?status_s=0.05"]
+        assert run.finish() == 0
+    health = run.daemon.health
+    assert health.estimate_errors > 0 and health.rig_lost >= 2
+    messages = messages_of(sink.read())
+    _assert_seqs_number_the_frames_sent(messages, sink)
+    assert sink.stats().submitted == health.pairs_estimated  # one frame, one number, per estimated pair
+    report = json.loads((tmp_path / "status.json").read_text())  # what the daemon did not send, counted
+    assert report["pairs"]["estimate_errors"] == health.estimate_errors
+    assert report["pairs"]["read"] == health.pairs_estimated + health.estimate_errors
 
 
 def test_an_absent_rig_is_waited_for_then_a_recording_plays_to_its_end(sim_url, tmp_path):

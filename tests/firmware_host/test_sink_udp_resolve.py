@@ -1,0 +1,125 @@
+"""udp:// (and vmc://) host names: IPv4 preferred, looked up again while streaming, never holding up the frames.
+
+``socket.getaddrinfo`` is replaced by a scripted resolver for the name ``robot.test``; the datagrams go
+to real sockets on the loopback.
+"""
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from typing import Any
+
+import pytest
+
+from firmware_host.protocol import Joints, StreamDecoder
+from firmware_host.sinks import open_sink
+from firmware_host.sinks import udp_sink
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, wait_until
+
+NAME = "robot.test"
+
+
+class Resolver:
+    """Answers ``robot.test`` with ``answers`` (sockaddrs, in glibc's order); other names as usual."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch, *answers: tuple) -> None:
+        self.answers = list(answers)
+        self.calls = 0
+        self.release = threading.Event()  # cleared: lookups of the name hang until it is set
+        self.release.set()
+        self._real = socket.getaddrinfo
+        monkeypatch.setattr(udp_sink.socket, "getaddrinfo", self)
+
+    def __call__(self, host: Any, port: Any, *args: Any, **kwargs: Any) -> list:
+        if host != NAME:
+            return self._real(host, port, *args, **kwargs)
+        self.calls += 1
+        self.release.wait(10)
+        return [(socket.AF_INET6 if ":" in addr[0] else socket.AF_INET, socket.SOCK_DGRAM, 17, "", addr)
+                for addr in self.answers]
+
+
+def receiver() -> socket.socket:
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.setblocking(False)
+    return rx
+
+
+def joints_read(rx: socket.socket) -> list[int]:
+    seqs = []
+    while True:
+        try:
+            data = rx.recv(4096)
+        except BlockingIOError:
+            return seqs
+        seqs += [e.message.header.seq for e in StreamDecoder().feed(data) if isinstance(e.message, Joints)]
+
+
+def test_a_name_listed_with_ipv6_first_is_sent_to_its_ipv4_address(monkeypatch: pytest.MonkeyPatch) -> None:
+    # glibc lists ::1 first for localhost on many hosts; a receiver bound to 0.0.0.0 never hears it
+    rx = receiver()
+    port = rx.getsockname()[1]
+    Resolver(monkeypatch, ("::1", port, 0, 0), ("127.0.0.1", port))
+    received: list[int] = []
+
+    def three_read() -> bool:
+        received.extend(joints_read(rx))
+        return len(received) >= 3
+
+    sink = open_sink(f"udp://{NAME}:{port}?queue=16", backoff=FAST_BACKOFF)
+    try:
+        for seq in range(3):
+            sink.send(make_frame(seq))
+        assert sink.wait_drained(5)
+        wait_until(three_read, what="3 frames")
+    finally:
+        sink.close()
+        rx.close()
+    assert received == [0, 1, 2]
+
+
+def test_an_ipv6_only_name_or_literal_still_uses_ipv6() -> None:
+    assert udp_sink.resolve("udp://[::1]:9", "::1", 9)[0] == socket.AF_INET6
+
+
+@pytest.mark.parametrize("scheme", ["udp", "vmc"])
+def test_a_name_is_looked_up_again_without_holding_up_the_frames(
+        monkeypatch: pytest.MonkeyPatch, scheme: str) -> None:
+    old, new = receiver(), receiver()
+    resolver = Resolver(monkeypatch, old.getsockname())
+    sink = open_sink(f"{scheme}://{NAME}:{old.getsockname()[1]}?queue=64&resolve_s=0.05", backoff=FAST_BACKOFF)
+    seq = 0
+
+    def send_until(predicate: Any, what: str) -> None:
+        def step() -> bool:
+            nonlocal seq
+            sink.send(make_frame(seq))
+            seq += 1
+            time.sleep(0.005)
+            return predicate()
+        wait_until(step, what=what)
+
+    try:
+        assert sink.wait_connected(5)
+        resolver.release.clear()  # the next lookup hangs (a name that went away: mDNS waits seconds)
+        send_until(lambda: resolver.calls >= 2, "a second lookup")
+        sent_before = sink.stats().sent
+        send_until(lambda: sink.stats().sent >= sent_before + 10, "frames while the lookup hangs")
+        assert old.recv(4096)  # still to the address it had
+        resolver.answers = [new.getsockname()]  # the robot got a new address (DHCP lease, mDNS)
+        resolver.release.set()
+        send_until(lambda: new_got_one(new), "datagrams at the new address")
+    finally:
+        stats = sink.close()
+        old.close()
+        new.close()
+    assert stats.connects == 1 and stats.dropped == 0  # no reconnect: the socket just sends elsewhere
+
+
+def new_got_one(rx: socket.socket) -> bool:
+    try:
+        return bool(rx.recv(4096))
+    except BlockingIOError:
+        return False
