@@ -41,8 +41,11 @@ class RigSource(abc.ABC):
 
     #: URL scheme this backend answers to.
     scheme: ClassVar[str] = ""
-    #: Most frames one ``read()`` takes in without waiting under ``DropPolicy.LATEST``, so a
-    #: source delivering faster than they can be drained cannot hold ``read()`` forever.
+    #: Most frames one ``read()`` takes in without waiting under ``DropPolicy.LATEST``: at least
+    #: what the backend can hold for the reader (both cameras together), so every frame already
+    #: waiting is taken and the pair handed out is the newest, and bounded, so a source delivering
+    #: faster than frames can be drained cannot hold ``read()`` forever. Backends that hold more
+    #: (a deeper queue) raise it.
     drain_limit: int = 32
 
     def __init__(
@@ -97,6 +100,24 @@ class RigSource(abc.ABC):
         """
         return False
 
+    def _catch_up(self, pairer: FramePairer) -> None:
+        """Under ``DropPolicy.LATEST``, before :meth:`read` drains: push what is waiting more cheaply.
+
+        A backend that can tell what is due without producing it (a recording's journal) pushes
+        the waiting frames into ``pairer`` here, each image left unloaded, then loads the images
+        of the frames the pairer still holds (:meth:`FramePairer.replace_held`): the others went
+        into dropped pairs or were unpaired, and nobody sees them. Default: nothing.
+        """
+
+    def _pairs_lost(self) -> int:
+        """Whole pairs the backend lost just before the frame :meth:`_read_frame` returned last.
+
+        A backend that sees both cameras skip together (depthai's Sync groups discarded from the
+        host queue) reports them here: :meth:`read` counts them in ``stats.pairs_dropped`` and as
+        sequence gaps, not as camera gaps. Called once after each frame. Default: 0.
+        """
+        return 0
+
     # ---------------------------------------------------------- public API
     @property
     def rig(self) -> Rig:
@@ -129,10 +150,10 @@ class RigSource(abc.ABC):
     def read(self, timeout_s: float = 1.0) -> FramePair:
         """Block until the next synchronised pair, at most ``timeout_s`` seconds.
 
-        With ``DropPolicy.LATEST`` that is the newest pair: frames the backend already
-        holds are taken in first (at most :attr:`drain_limit`), and older complete
-        pairs are dropped, counted in ``stats.pairs_dropped`` and seen as sequence
-        gaps. With ``DropPolicy.ALL`` it is the oldest pair not yet read.
+        With ``DropPolicy.LATEST`` that is the newest pair: every frame the backend already
+        holds is taken in first (up to :attr:`drain_limit`, what the backend can hold), and
+        older complete pairs are dropped, counted in ``stats.pairs_dropped`` and seen as
+        sequence gaps. With ``DropPolicy.ALL`` it is the oldest pair not yet read.
 
         Raises:
             RigTimeoutError: no pair within the timeout (frames may still be flowing
@@ -153,11 +174,14 @@ class RigSource(abc.ABC):
         pairer = self._pairer
         assert pairer is not None  # open() guarantees the rig, hence the pairer
         deadline = self.clock.now_ns() + int(seconds * 1e9)
-        drain = self.drain_limit if self.pairing.policy is DropPolicy.LATEST else 0
+        drain = 0
+        if self.pairing.policy is DropPolicy.LATEST:
+            self._catch_up(pairer)
+            drain = self.drain_limit  # read once, here: a backend may size it by what is waiting now
         # Past the deadline (at once for a poll, timeout 0), frames the backend holds are still taken,
         # without waiting: a poll must see the pair that is already there. Bounded, for a source that
         # always has a frame but never a pair.
-        late_reads = max(2, self.drain_limit)
+        late_reads = max(2, drain or RigSource.drain_limit)
         while True:
             drain -= self._drain(pairer, drain)
             ready = pairer.pop()
@@ -177,7 +201,7 @@ class RigSource(abc.ABC):
                 pairer.reset()
                 raise
             if frame is not None:
-                pairer.push(frame)
+                self._push(pairer, frame)
             elif remaining <= 0:
                 late_reads = -1  # nothing held: time out now
 
@@ -192,9 +216,15 @@ class RigSource(abc.ABC):
                 raise
             if frame is None:
                 break
-            pairer.push(frame)
+            self._push(pairer, frame)
             n += 1
         return n
+
+    def _push(self, pairer: FramePairer, frame: Frame) -> None:
+        lost = self._pairs_lost()
+        if lost > 0:
+            pairer.skip_pairs(lost)
+        pairer.push(frame)
 
     def __iter__(self) -> Iterator[FramePair]:
         """Pairs until the source ends (a recording's end stops iteration; other errors propagate)."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -66,8 +67,12 @@ class PairingStats:
     frames_in: dict[str, int] = field(default_factory=dict)
     pairs_out: int = 0
     unpaired: dict[str, int] = field(default_factory=dict)  # frames that never found a partner
-    pairs_dropped: int = 0  # complete pairs discarded by the LATEST policy or a full queue
-    camera_gaps: dict[str, int] = field(default_factory=dict)  # frames the camera itself skipped (index gaps)
+    # complete pairs discarded by the LATEST policy or a full queue, or lost whole before pairing
+    # (both cameras' frames at once: depthai's host queue); sequence gaps count them all
+    pairs_dropped: int = 0
+    # index gaps: frames the camera skipped, or the backend lost one camera at a time before pairing
+    # (a backend counter says so: sim's and opencv's ``overruns``)
+    camera_gaps: dict[str, int] = field(default_factory=dict)
 
     def snapshot(self) -> "PairingStats":
         return PairingStats(
@@ -137,6 +142,23 @@ class FramePairer:
         while len(self._ready) > limit:
             self._ready.popleft()
             self.stats.pairs_dropped += 1
+
+    def skip_pairs(self, n: int) -> None:
+        """``n`` pairs lost whole before the next frames (both cameras skipped together): dropped,
+        with their sequence numbers, and not counted again as the cameras' index gaps."""
+        self._formed += n
+        self.stats.pairs_dropped += n
+        for cam in self._last_index:
+            self._last_index[cam] += n
+
+    def replace_held(self, replace: Callable[[Frame], Frame]) -> None:
+        """Put ``replace(frame)`` in place of every frame still held (waiting for a partner, or in a
+        pair not yet read): a backend loads here the images of frames it pushed without them."""
+        for queue in self._pending.values():
+            for i, frame in enumerate(queue):
+                queue[i] = replace(frame)
+        for i, (sequence, first, second) in enumerate(self._ready):
+            self._ready[i] = (sequence, replace(first), replace(second))
 
     def pop(self) -> tuple[int, Frame, Frame] | None:
         """The next complete pair as ``(sequence, frame_a, frame_b)``, or ``None``.

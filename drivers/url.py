@@ -3,6 +3,7 @@
 Every option a backend reads is taken through a typed getter; whatever is left
 afterwards is an unknown option and :meth:`RigUrl.finish` rejects it by name,
 so a typo such as ``sim://?fsp=60`` fails loudly instead of being ignored.
+A ``#`` would start a fragment, which URL parsing drops: it is refused (write ``%23``).
 """
 from __future__ import annotations
 
@@ -40,6 +41,11 @@ class RigUrl:
             parts = urlsplit(url)
         except ValueError as e:  # e.g. an unclosed '[' reads as a broken IPv6 host
             raise RigConfigError(f"rig URL {url!r} cannot be parsed: {e}") from None
+        if "#" in url:  # urlsplit would drop the fragment: record into, or play, another directory
+            raise RigConfigError(
+                f"rig URL {url!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "
+                "use; write a '#' in a path or option value as %23"
+            )
         target = unquote(parts.netloc + parts.path)
         options: dict[str, str] = {}
         for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):

@@ -32,10 +32,13 @@ Options:
 * ``loop`` (two videos of the same length): start over at the end instead of ending the stream.
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
   the cameras report and ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
-  ``queue``: frames held per camera for the reader (default 4; under ``all`` two videos are read in
-  step, neither more than a frame ahead, and wait for room instead of dropping: every pair of the
-  take is delivered, however slowly one decodes); ``open_timeout_s``: how long :meth:`open` waits
-  for each camera's first frame (default 10). A failed :meth:`open` is final: open a new source.
+  ``queue``: frames held per camera for the reader (default 4, at most 256; under ``latest`` each read
+  takes in all of them and returns the newest pair; a camera whose queue is full loses its oldest
+  frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
+  under ``all`` two videos are read in step, neither more than a frame ahead, and wait for room
+  instead of dropping: every pair of the take is delivered, however slowly one decodes);
+  ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10). A
+  failed :meth:`open` is final: open a new source.
 
 Timing. Each camera's capture is opened by :meth:`open`, then owned by that camera's thread, which
 grabs, decodes and queues its frames and releases the capture when it stops (never while it is
@@ -88,7 +91,7 @@ from drivers.errors import (
     RigOperationError,
 )
 from drivers.frames import Frame
-from drivers.pairing import DropPolicy, PairingConfig
+from drivers.pairing import DropPolicy, PairingConfig, PairingStats
 from drivers.url import RigUrl
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
@@ -105,6 +108,13 @@ FALLBACK_FPS = 30.0
 HFOV_RANGE = (20.0, 150.0)
 #: A V4L2 driver's frame stamp older than this at the grab is not on the host's monotonic clock.
 DRIVER_STAMP_MAX_AGE_S = 2.0
+
+
+@dataclass
+class OpenCVRigStats(PairingStats):
+    """Pairing counters plus the frames each camera lost from its full queue before pairing (a slow reader)."""
+
+    overruns: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -394,7 +404,8 @@ class OpenCVRigSource(RigSource):
         self._delivered: set[str] = set()  # cameras that queued a frame (open() waits for both)
         self._ended: set[str] = set()  # videos that ended
         self._pass_frames: dict[str, list[int]] = {}  # loop: frames in each pass, per video
-        self.frames_overflowed = 0  # live frames dropped from a full queue before the reader took them
+        self._overruns: dict[str, int] = {}  # per camera: frames dropped from a full queue before the reader took them
+        self.drain_limit = 2 * options.queue  # what the queues hold: under latest a read takes all of it
         self.driver_stamps = False  # both cameras are V4L2 devices whose driver stamps are used (Timing)
 
     @classmethod
@@ -409,6 +420,12 @@ class OpenCVRigSource(RigSource):
                 raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
         return cls(options, rig=rig, capture_factory=capture_factory, pairing=pairing, clock=clock)
 
+    @property
+    def stats(self) -> OpenCVRigStats:
+        with self._cond:
+            overruns = dict(self._overruns)
+        return OpenCVRigStats(**vars(super().stats), overruns=overruns)
+
     # ------------------------------------------------------------------ hooks
     def _open(self) -> None:
         o = self.options
@@ -422,6 +439,7 @@ class OpenCVRigSource(RigSource):
             specs = [(name, spec, size) for name, spec in zip(o.names, (o.first, o.second))]
         self._cameras = [_Camera(name, spec, size, self) for name, spec, size in specs]
         self._per_camera = {cam.name: 0 for cam in self._cameras}
+        self._overruns = {cam.name: 0 for cam in self._cameras}
         try:
             for cam in self._cameras:
                 cam.open()
@@ -503,7 +521,7 @@ class OpenCVRigSource(RigSource):
                     if isinstance(queued, Frame) and queued.camera == frame.camera:
                         del self._queue[k]
                         break
-                self.frames_overflowed += 1
+                self._overruns[frame.camera] += 1
             else:
                 self._per_camera[frame.camera] += 1
             self._queue.append(frame)

@@ -28,11 +28,18 @@ recorded and counted in ``stats.writes_dropped``. Every frame the inner camera d
 paired or not, so a replay meets the same pairing situations. A write failure
 (disk full...) is raised once from the next ``read()`` as
 :class:`RigOperationError`; after that frames pass through unrecorded.
+
+Durability: files are not fsynced per frame (too slow for small disks); at close
+every image and truth file written, their folders and the journal are fsynced,
+and only then is the manifest rewritten with ``complete: true`` (itself fsynced),
+so the mark never reaches the disk before the data it vouches for. A take cut
+short before that stays ``complete: false``; replay drops its torn tail.
 """
 from __future__ import annotations
 
 import datetime
 import logging
+import os
 import queue
 import threading
 from collections.abc import Callable
@@ -120,6 +127,7 @@ class RecordingWriter:
         self._journal_lock = threading.Lock()
         self._journal = None
         self._threads: list[threading.Thread] = []
+        self._unsynced: list[str] = []  # payload files written, not fsynced yet (relative paths, under the lock)
 
     def start(self) -> None:
         try:
@@ -190,24 +198,58 @@ class RecordingWriter:
                     self._journal.write(row.to_json() + "\n")
                     self._journal.flush()
                     self.frames_written += 1
+                    self._unsynced.extend(rel for rel in (row.image, row.truth) if rel is not None)
             except BaseException as e:  # noqa: BLE001 - reported to the reader thread, see module doc
                 log.error("recording to %s failed at %s: %s", self.directory, row.image, e)
                 self.error = e
 
     def close(self, counters: dict) -> None:
-        """Write what is queued, then finalise the manifest (``complete: true``)."""
+        """Write what is queued, fsync it (:meth:`_sync`), then finalise the manifest (``complete: true``)."""
         for _ in self._threads:
             self._queue.put(None)
         for thread in self._threads:
             thread.join()
         if self._journal is not None:
-            self._journal.close()
+            try:
+                if self.error is None:
+                    self._sync()
+            except OSError as e:
+                log.error("recording to %s: cannot make the take durable: %s", self.directory, e)
+                self.error = e
+            finally:
+                self._journal.close()
         self.manifest.complete = self.error is None
         self.manifest.counters = dict(counters, frames_written=self.frames_written, writes_dropped=self.writes_dropped)
         write_manifest(self.directory, self.manifest)
         log.info(
             "recording %s closed: %d frames written, %d dropped", self.directory, self.frames_written, self.writes_dropped
         )
+
+    def _sync(self) -> None:
+        """fsync the payload files written, their folders and the journal, before ``complete: true`` is written:
+        a power cut after the manifest reached the disk must not find the rows' files missing or empty."""
+        folders = set()
+        for rel in self._unsynced:
+            path = self.directory / rel
+            _fsync(path)
+            folders.add(path.parent)
+        for folder in sorted(folders):
+            try:  # makes the files' names durable; not possible on every platform
+                _fsync(folder)
+            except OSError as e:
+                log.debug("recording: fsync of folder %s: %s", folder, e)
+        assert self._journal is not None
+        self._journal.flush()
+        os.fsync(self._journal.fileno())
+        self._unsynced.clear()
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 class RecordingRigSource(RigSource):
@@ -285,6 +327,13 @@ class RecordingRigSource(RigSource):
 
     def _frame_available(self) -> bool:
         return self.inner._frame_available()  # drained frames pass through _read_frame, so they are recorded
+
+    @property
+    def drain_limit(self) -> int:  # type: ignore[override]
+        return self.inner.drain_limit  # what the inner source can hold; its _catch_up is not used: all is recorded
+
+    def _pairs_lost(self) -> int:
+        return self.inner._pairs_lost()
 
     def _close(self) -> None:
         try:

@@ -51,6 +51,7 @@ class FrameRow:
     image: str  # path relative to the recording directory
     truth: str | None = None  # npz path relative to the recording directory
     scene_time_s: float | None = None
+    line: int = field(default=0, compare=False)  # where it was read in frames.jsonl (0: not read from one)
 
     def to_json(self) -> str:
         return json.dumps(
@@ -187,38 +188,72 @@ def _check_row(path: Path, line_no: int, obj: Any, rig: Rig) -> FrameRow:
         raise _fail(path, "scene_time_s", f"{where}: must be a finite number or null, got {st!r}")
     return FrameRow(
         obj["camera"], obj["index"], obj["timestamp_ns"], obj["image"], obj["truth"],
-        None if st is None else float(st),
+        None if st is None else float(st), line=line_no,
     )
 
 
 def read_rows(directory: Path, manifest: Manifest) -> list[FrameRow]:
-    """Load ``frames.jsonl``.
+    """Load ``frames.jsonl``, rows in journal order.
 
     A recording that was not closed cleanly (``complete: false``) may end in a
-    half-written line; that line is ignored. Anywhere else a bad line is an error.
+    half-written line, or one of NUL bytes (a file extended but not written before
+    a power cut); that last line is ignored. Anywhere else a bad line is an error.
 
     Raises:
         RigInitializationError: naming the file, line and field.
     """
     path = directory / FRAMES
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = path.read_bytes().split(b"\n")
     except FileNotFoundError:
         raise _fail(path, None, "missing (every recording has a frame journal, even an empty one)") from None
-    except (OSError, UnicodeDecodeError) as e:
+    except OSError as e:
         raise _fail(path, None, f"cannot read: {e}") from e
+    last = max((n for n, line in enumerate(lines, start=1) if line.strip()), default=0)
     rows = []
     for n, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         try:
-            obj = json.loads(line)
-        except json.JSONDecodeError as e:
-            if n == len(lines) and not manifest.complete:
+            obj = _parse_line(line)
+        except ValueError as e:
+            if n == last and not manifest.complete:
                 break  # torn final write of an interrupted recording
-            raise _fail(path, None, f"line {n}: invalid JSON: {e.msg}") from e
+            raise _fail(path, None, f"line {n}: {e}") from e
         rows.append(_check_row(path, n, obj, manifest.rig))
     return rows
+
+
+def _parse_line(line: bytes) -> Any:
+    if b"\0" in line:
+        raise ValueError("NUL bytes (a write the disk never completed)")
+    try:
+        return json.loads(line.decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise ValueError(f"not UTF-8: {e.reason}") from e
+    except json.JSONDecodeError as e:
+        raise ValueError(f"invalid JSON: {e.msg}") from e
+
+
+def drop_torn_tail(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], int]:
+    """A take cut short (``complete: false``): ``rows`` without the trailing ones whose image or truth file is
+    missing or empty (journal rows can reach the disk before their files), and how many were dropped.
+
+    Only the tail: a broken row followed by whole ones is damage, reported when the take is opened.
+    """
+    keep = len(rows)
+    while keep and not all(file_is_whole(directory / rel) for rel in (rows[keep - 1].image, rows[keep - 1].truth)
+                           if rel is not None):
+        keep -= 1
+    return rows[:keep], len(rows) - keep
+
+
+def file_is_whole(path: Path) -> bool:
+    """A file that exists and is not empty."""
+    try:
+        return path.stat().st_size > 0
+    except OSError:
+        return False
 
 
 # ------------------------------------------------------------------ payloads

@@ -8,13 +8,16 @@ URL options:
 * ``loop``: ``1`` starts over at the end instead of raising :class:`EndOfStream`.
 * ``tolerance_ms``, ``policy``: pairing (default policy ``all``: a recording is
   usually processed offline, every pair counts). ``policy=latest`` with a paced
-  ``speed`` plays like a live rig: a slow reader gets the newest pair due and the
-  older ones are dropped (counted); free-running playback never skips ahead.
+  ``speed`` plays like a live rig: each read jumps to the newest pair due, however
+  far behind the reader is, and the older ones are dropped (counted, their images
+  never decoded); free-running playback never skips ahead.
 
 Frames carry the recorded timestamps, indices and ground truth unchanged on the
 first pass. Each further ``loop`` pass shifts timestamps by the recording's span
 (plus one frame period) and indices by the per-camera count, so both keep
-increasing per camera. Layout and validation: docs/recording-format.md.
+increasing per camera. A take that was not closed cleanly plays without its torn
+tail (:func:`~drivers.backends.recording_format.drop_torn_tail`). Layout and
+validation: docs/recording-format.md.
 """
 from __future__ import annotations
 
@@ -23,15 +26,28 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.backends.recording_format import FrameRow, Manifest, load_image, load_truth, read_manifest, read_rows
+from drivers.backends.recording_format import (
+    FRAMES,
+    FrameRow,
+    Manifest,
+    drop_torn_tail,
+    file_is_whole,
+    load_image,
+    load_truth,
+    read_manifest,
+    read_rows,
+)
 from drivers.base import RigSource
 from drivers.clock import Clock
 from drivers.errors import EndOfStream, RigConfigError, RigInitializationError, RigOperationError
-from drivers.frames import Frame
-from drivers.pairing import DropPolicy, PairingConfig
+from drivers.frames import CameraTruth, Frame
+from drivers.pairing import DropPolicy, FramePairer, PairingConfig
 from drivers.url import RigUrl
 
 log = logging.getLogger(__name__)
+
+#: The image of a frame pushed by :meth:`ReplayRigSource._catch_up` before its file is decoded.
+_NOT_LOADED = np.empty((0, 0, 3), np.uint8)
 
 
 def _parse_speed(url: RigUrl) -> float | None:
@@ -84,6 +100,7 @@ class ReplayRigSource(RigSource):
         self._pass = 0
         self._anchor_ns: int | None = None  # clock time at which the first frame is due (set by the first read)
         self._time_span_ns, self._index_span = self._loop_spans()
+        self._unloaded: dict[Frame, tuple[FrameRow, int]] = {}  # frames pushed by _catch_up, image not read yet
 
     @classmethod
     def from_url(cls, url: RigUrl, *, clock: Clock | None = None, pairing: PairingConfig | None = None) -> "ReplayRigSource":
@@ -98,6 +115,10 @@ class ReplayRigSource(RigSource):
         manifest = read_manifest(directory)
         rows = read_rows(directory, manifest)
         if not manifest.complete:
+            rows, torn = drop_torn_tail(directory, rows)
+            if torn:
+                log.warning("recording %s: dropped its last %d journal row(s), whose files are missing or empty "
+                            "(a torn tail)", directory, torn)
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
         return cls(
             directory, manifest, rows, speed=speed, loop=loop,
@@ -123,26 +144,35 @@ class ReplayRigSource(RigSource):
         return self._rows[-1].timestamp_ns - self._rows[0].timestamp_ns + max(period, 1), index_span
 
     def _open(self) -> None:
-        missing = []
-        for row in self._rows:
-            for rel in (row.image, row.truth):
-                if rel is not None and not (self.directory / rel).is_file():
-                    missing.append(rel)
-        if missing:
+        broken = [(row, rel) for row in self._rows for rel in (row.image, row.truth)
+                  if rel is not None and not file_is_whole(self.directory / rel)]
+        if broken:
+            row, rel = min(broken, key=lambda b: b[0].line)
             raise RigInitializationError(
-                f"recording {self.directory}: {len(missing)} file(s) listed in frames.jsonl are missing, "
-                f"first: {self.directory / missing[0]}"
+                f"recording {self.directory}: {len(broken)} file(s) listed in {FRAMES} are missing or empty, "
+                f"first: {self.directory / rel} ({self.directory / FRAMES} line {row.line})"
             )
         log.info("replaying %s: %d frames, speed %s", self.directory, len(self._rows), self.speed or "free")
 
-    def _read_frame(self, timeout_s: float) -> Frame | None:
-        if self._cursor >= len(self._rows):
+    def _next(self) -> tuple[FrameRow, int] | None:
+        """The row played next and its loop pass's timestamp shift; ``None`` at the end (no loop)."""
+        cursor, passes = self._cursor, self._pass
+        if cursor >= len(self._rows):
             if not (self.loop and self._rows):
-                raise EndOfStream(f"recording {self.directory} ended after {len(self._rows)} frames")
-            self._cursor = 0
-            self._pass += 1
-        row = self._rows[self._cursor]
-        shift_ns = self._pass * self._time_span_ns
+                return None
+            cursor, passes = 0, passes + 1
+        return self._rows[cursor], passes * self._time_span_ns
+
+    def _advance(self) -> None:
+        if self._cursor >= len(self._rows):
+            self._cursor, self._pass = 0, self._pass + 1
+        self._cursor += 1
+
+    def _read_frame(self, timeout_s: float) -> Frame | None:
+        upcoming = self._next()
+        if upcoming is None:
+            raise EndOfStream(f"recording {self.directory} ended after {len(self._rows)} frames")
+        row, shift_ns = upcoming
         if self.speed is not None:
             if self._anchor_ns is None:
                 self._anchor_ns = self.clock.now_ns()
@@ -152,23 +182,60 @@ class ReplayRigSource(RigSource):
                 self.clock.sleep_until(deadline)
                 return None
             self.clock.sleep_until(due)
-        self._cursor += 1
+        self._advance()
         return self._load(row, shift_ns)
 
     def _due_ns(self, row: FrameRow, shift_ns: int, anchor_ns: int, speed: float) -> int:
         """Clock time at which ``row`` (on the loop pass shifted by ``shift_ns``) plays."""
         return anchor_ns + int((row.timestamp_ns + shift_ns - self._rows[0].timestamp_ns) / speed)
 
-    def _frame_available(self) -> bool:
+    def _due_now(self) -> tuple[FrameRow, int] | None:
+        """The next row and its shift if it is due by now (paced playback, once started), else ``None``."""
         # Unpaced playback has every frame at hand: draining would read the whole recording.
         if self.speed is None or self._anchor_ns is None:
-            return False
-        cursor, shift_ns = self._cursor, self._pass * self._time_span_ns
-        if cursor >= len(self._rows):
-            if not (self.loop and self._rows):
-                return False  # the end: the next read raises EndOfStream, after the pairs already due
-            cursor, shift_ns = 0, shift_ns + self._time_span_ns
-        return self._due_ns(self._rows[cursor], shift_ns, self._anchor_ns, self.speed) <= self.clock.now_ns()
+            return None
+        upcoming = self._next()  # None at the end: the next read raises EndOfStream, after the pairs due
+        if upcoming is None or self._due_ns(*upcoming, self._anchor_ns, self.speed) > self.clock.now_ns():
+            return None
+        return upcoming
+
+    def _frame_available(self) -> bool:
+        return self._due_now() is not None
+
+    @property
+    def drain_limit(self) -> int:  # type: ignore[override]
+        """Every row due by now (paced playback holds no queue: all of them wait); at least the default.
+        A read alone skips them in :meth:`_catch_up`; a recorder around this source drains them all."""
+        if self.speed is None or self._anchor_ns is None or not self._rows:
+            return RigSource.drain_limit
+        now, n, cursor, passes = self.clock.now_ns(), 0, self._cursor, self._pass
+        while True:
+            if cursor >= len(self._rows):
+                if not self.loop:
+                    break
+                cursor, passes = 0, passes + 1
+            if self._due_ns(self._rows[cursor], passes * self._time_span_ns, self._anchor_ns, self.speed) > now:
+                break
+            n, cursor = n + 1, cursor + 1
+        return max(n, RigSource.drain_limit)
+
+    def _catch_up(self, pairer: FramePairer) -> None:
+        """Push every row due by now without reading its files, then load those the pairer still holds
+        (the newest pair, partners awaited): however far behind the reader, a read decodes a pair or
+        two, and the skipped rows count as they would live (dropped pairs, unpaired frames)."""
+        while (due := self._due_now()) is not None:
+            row, shift_ns = due
+            self._advance()
+            frame = self._frame(row, shift_ns, _NOT_LOADED, None, None)
+            self._unloaded[frame] = due
+            pairer.push(frame)
+        if self._unloaded:
+            pairer.replace_held(self._loaded)
+            self._unloaded.clear()  # the rest went into dropped pairs or were unpaired
+
+    def _loaded(self, frame: Frame) -> Frame:
+        due = self._unloaded.get(frame)
+        return frame if due is None else self._load(*due)
 
     def _load(self, row: FrameRow, shift_ns: int) -> Frame:
         path = self.directory / row.image
@@ -180,11 +247,16 @@ class ReplayRigSource(RigSource):
                 f"{row.camera!r} is {cam.width}x{cam.height}"
             )
         truth, joints_3d = load_truth(self.directory / row.truth) if row.truth is not None else (None, None)
+        return self._frame(row, shift_ns, image, truth, joints_3d)
+
+    def _frame(self, row: FrameRow, shift_ns: int, image: np.ndarray, truth: CameraTruth | None,
+               joints_3d: np.ndarray | None) -> Frame:
+        passes = shift_ns // self._time_span_ns if self._time_span_ns else 0
         return Frame(
             camera=row.camera,
             image=image,
             timestamp_ns=row.timestamp_ns + shift_ns,
-            index=row.index + self._pass * self._index_span.get(row.camera, 0),
+            index=row.index + passes * self._index_span.get(row.camera, 0),
             truth=truth,
             scene_time_s=row.scene_time_s,
             joints_3d=joints_3d,

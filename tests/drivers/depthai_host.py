@@ -106,6 +106,9 @@ class HostPipelineLink:
         assert self.queue is not None
         return self.queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
 
+    def is_running(self) -> bool:
+        return self.pipeline is not None and self.pipeline.isRunning()
+
     def unplug(self) -> None:
         """Stop the pipeline under the reader, as a lost device does: its queue closes."""
         if self.pipeline is not None:
@@ -119,3 +122,44 @@ class HostPipelineLink:
         # the GIL, and these Python nodes need the GIL to finish: wait for them here.
         for camera in self.cameras:
             camera.finished.wait(2.0)
+
+
+def image_group(indices: tuple[int, int], size: tuple[int, int], fps: float = 30.0) -> dai.MessageGroup:
+    """A Sync group as the host queue hands it out: ``left``/``right`` GRAY8 frames with these sequence
+    numbers, both stamped at the first one's frame time."""
+    group = dai.MessageGroup()
+    for name, index in zip(("left", "right"), indices):
+        frame = dai.ImgFrame()
+        frame.setCvFrame(np.full((size[1], size[0]), indices[0] % 256, np.uint8), dai.ImgFrame.Type.GRAY8)
+        stamp(frame, 1_000_000_000 + int(indices[0] * 1e9 / fps))
+        frame.setSequenceNum(index)
+        group[name] = frame
+    return group
+
+
+class ScriptedLink:
+    """A :class:`~drivers.backends.depthai.link.DeviceLink` whose host queue holds the groups a test chose
+    (their frame indices), all at once; then nothing, with the pipeline running or (``stops``) not."""
+
+    def __init__(self, groups: list[tuple[int, int]], *, stops: bool = False, device: str = "14442C10D1") -> None:
+        self.indices, self.stops, self.device = list(groups), stops, device
+        self.groups: list[dai.MessageGroup] = []
+        self.closed = 0
+
+    def start(self, request: StereoRequest) -> None:
+        self.groups = [image_group(ix, (request.width, request.height)) for ix in self.indices]
+
+    def device_id(self) -> str:
+        return "" if self.closed else self.device  # as DaiDeviceLink: no device once closed
+
+    def calibration(self) -> dai.CalibrationHandler:
+        return dai.CalibrationHandler(CALIBRATION)
+
+    def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
+        return self.groups.pop(0) if self.groups else None
+
+    def is_running(self) -> bool:
+        return bool(self.groups) or not self.stops
+
+    def close(self) -> None:
+        self.closed += 1

@@ -414,6 +414,40 @@ def _videos(tmp_path, lengths, delays):
     return paths, Video
 
 
+def _played_out(source, timeout_s=10.0):
+    """Wait until both videos have ended (every frame queued, or lost from a full queue)."""
+    deadline = time.monotonic() + timeout_s
+    while len(source._ended) < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert len(source._ended) == 2, "the videos did not play out in time"
+
+
+def _fast_videos(tmp_path, frames):
+    (first, second), video = _videos(tmp_path, (frames, frames), (0.0, 0.0))
+
+    class Fast(video):  # 300 fps: the take plays out in a fraction of a second
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.props[cv2.CAP_PROP_FPS] = 300.0
+
+    return first, second, Fast
+
+
+@pytest.mark.parametrize(("queue", "overruns"), [(64, 0), (4, 36)])
+def test_under_policy_latest_a_read_takes_every_queued_frame_and_counts_the_overruns(tmp_path, webcam, queue,
+                                                                                     overruns):
+    first, second, video = _fast_videos(tmp_path, 40)
+    with open_rig(f"opencv://?first={first}&second={second}&queue={queue}", capture_factory=video) as source:
+        _played_out(source)
+        pair = source.read(timeout_s=5.0)
+        stats = source.stats
+        with pytest.raises(EndOfStream):
+            source.read(timeout_s=5.0)
+    assert pair.frames[0].index == pair.frames[1].index == 39  # the newest, however deep the queue
+    assert stats.overruns == {"left": overruns, "right": overruns}  # lost from the full queues before pairing
+    assert stats.pairs_out + stats.pairs_dropped == pair.sequence + 1
+
+
 def test_under_policy_all_two_videos_keep_step_however_slowly_one_decodes(tmp_path, webcam):
     (first, second), video = _videos(tmp_path, (40, 40), (0.0, 2 / 30))  # the second at half its rate
     with open_rig(f"opencv://?first={first}&second={second}&policy=all", capture_factory=video) as source:

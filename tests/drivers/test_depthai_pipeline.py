@@ -30,7 +30,7 @@ from drivers.backends.depthai.convert import (
 from drivers.backends.depthai.link import StereoRequest
 from drivers.backends.depthai.options import DepthaiOptions
 from drivers.url import RigUrl
-from tests.drivers.depthai_host import HostPipelineLink, stamp
+from tests.drivers.depthai_host import HostPipelineLink, ScriptedLink, stamp
 
 URL = "depthai://?width=160&height=100&mount_height=1.2"
 
@@ -164,12 +164,16 @@ def test_backend_delivers_pairs_from_real_groups():
     assert link.closed == 1
 
 
-def test_dropped_frames_show_as_gaps():
+def test_frames_a_camera_loses_are_lost_pairs():
+    """Sync discards the partner of a frame one camera lost: both indices jump together, as for a group the
+    host queue dropped, and the reader lost a pair either way (sequence gaps, ``pairs_dropped``)."""
     link = HostPipelineLink(drop=0.3)
-    with open_rig(URL, link_factory=lambda: link) as source:
-        for _ in range(15):
-            source.read(timeout_s=3.0)
-        assert sum(source.stats.camera_gaps.values()) > 0
+    with open_rig(f"{URL}&policy=all", link_factory=lambda: link) as source:
+        pairs = [source.read(timeout_s=3.0) for _ in range(15)]
+        stats = source.stats
+    assert stats.pairs_dropped > 0
+    assert stats.pairs_out + stats.pairs_dropped == pairs[-1].sequence + 1
+    assert [p.sequence - p.frames[0].index for p in pairs] == [pairs[0].sequence - pairs[0].frames[0].index] * 15
 
 
 def test_unplug_while_reading_raises_rig_disconnected():
@@ -180,6 +184,45 @@ def test_unplug_while_reading_raises_rig_disconnected():
         with pytest.raises(RigDisconnectedError):
             for _ in range(10):  # the queue may still hold a group or two
                 source.read(timeout_s=1.0)
+
+
+def test_a_lost_device_is_named_with_its_id_and_the_url():
+    link = HostPipelineLink()
+    with open_rig(URL, link_factory=lambda: link) as source:
+        source.read(timeout_s=3.0)
+        link.unplug()
+        with pytest.raises(RigDisconnectedError) as info:
+            for _ in range(10):  # the queue may still hold a group or two
+                source.read(timeout_s=1.0)
+    assert "host-pipeline" in str(info.value) and URL in str(info.value)
+
+
+def test_a_device_that_stops_without_closing_its_queue_is_a_disconnect_not_a_timeout():
+    link = ScriptedLink([(0, 0), (1, 1)], stops=True)
+    with open_rig(f"{URL}&policy=all", link_factory=lambda: link) as source:
+        assert [source.read(timeout_s=0.1).sequence for _ in range(2)] == [0, 1]
+        with pytest.raises(RigDisconnectedError, match=r"depthai device 14442C10D1 \(depthai://\?width=160"):
+            source.read(timeout_s=0.1)
+
+
+def test_groups_lost_whole_are_dropped_pairs_not_camera_gaps():
+    # (3, 3) and (4, 4) never reached the reader (the full host queue dropped them); then the left
+    # camera alone skips one frame: that one is a camera gap
+    link = ScriptedLink([(0, 0), (1, 1), (2, 2), (5, 5), (6, 6), (8, 7)])
+    with open_rig(f"{URL}&policy=all", link_factory=lambda: link) as source:
+        pairs = [source.read(timeout_s=0.1) for _ in range(6)]
+        stats = source.stats
+    assert [p.sequence for p in pairs] == [0, 1, 2, 5, 6, 7]
+    assert stats.pairs_dropped == 2 and stats.pairs_out == 6
+    assert stats.pairs_out + stats.pairs_dropped == pairs[-1].sequence + 1
+    assert stats.camera_gaps == {"left": 1, "right": 0}
+
+
+def test_recording_a_depthai_source_keeps_its_lost_groups_as_dropped_pairs(tmp_path):
+    link = ScriptedLink([(0, 0), (3, 3)])
+    with open_rig(f"record+{URL}&policy=all&out={tmp_path / 'take'}", link_factory=lambda: link) as source:
+        assert [source.read(timeout_s=0.1).sequence for _ in range(2)] == [0, 3]
+        assert source.stats.pairs_dropped == 2 and source.stats.camera_gaps == {"left": 0, "right": 0}
 
 
 def test_no_group_in_time_is_a_timeout():

@@ -18,7 +18,7 @@ from drivers import (
 )
 from drivers.sim import RigPlacement
 from tests.drivers.test_depthai_pipeline import URL as DEPTHAI_URL
-from tests.drivers.depthai_host import HostPipelineLink
+from tests.drivers.depthai_host import HostPipelineLink, ScriptedLink
 
 START = 5_000_000_000
 PERIOD_NS = 1e9 / 30
@@ -137,6 +137,41 @@ def test_paced_replay_under_latest_skips_to_the_newest_pair_due(take):
             source.read(timeout_s=1.0)
 
 
+@pytest.fixture(scope="module")
+def long_take(tmp_path_factory, sim_cache):
+    """40 pairs (80 frames, more than the old drain bound of 32), pair k at START + k/30 s."""
+    out = tmp_path_factory.mktemp("latest-long") / "take"
+    with open_rig(f"record+sim://?{SMALL}&cache={sim_cache}&out={out}&policy=all&lossless=1",
+                  clock=ManualClock(START)) as source:
+        for _ in range(40):
+            source.read(timeout_s=1.0)
+    return out
+
+
+def test_paced_replay_under_latest_keeps_a_slow_readers_lag_bounded(long_take, monkeypatch):
+    from drivers.backends import replay as replay_module
+
+    decoded = []
+    real_load = replay_module.load_image
+    monkeypatch.setattr(replay_module, "load_image", lambda path: decoded.append(path) or real_load(path))
+    clock = ManualClock(123_000_000_000)
+    with open_rig(f"replay://{long_take}?speed=recorded&policy=latest&loop=1", clock=clock) as source:
+        first = source.read(timeout_s=1.0)
+        anchor = clock.now_ns()
+        lags, per_read = [], []
+        for _ in range(5):  # one pair a second: 30 pairs (60 frames) due at each read
+            clock.advance(1_000_000_000)
+            decoded.clear()
+            pair = source.read(timeout_s=1.0)
+            per_read.append(len(decoded))
+            lags.append((clock.now_ns() - anchor) - (pair.frames[0].timestamp_ns - first.frames[0].timestamp_ns))
+        stats = source.stats
+    assert all(0 <= lag < PERIOD_NS for lag in lags), lags  # the newest pair due, every time: no growing lag
+    assert max(per_read) <= 4, per_read  # the pair handed out (and a partner awaited), not the 60 skipped
+    assert stats.pairs_out + stats.pairs_dropped == pair.sequence + 1
+    assert stats.pairs_dropped >= 5 * 28
+
+
 # ----------------------------------------------------------------- the drain bound
 class FloodSource(RigSource):
     """Both cameras always have a frame ready: a source faster than any reader."""
@@ -201,7 +236,20 @@ def test_depthai_slow_reader_gets_the_newest_group_not_the_oldest_queued():
 def test_depthai_policy_all_reads_the_queued_groups_in_order():
     pair, newest_sent, stats = _read_after_a_stall("all")
     assert pair.frames[0].index <= newest_sent - 2  # the oldest of the queued groups comes first
-    assert stats.pairs_dropped == 0
+    # the groups the full queue (4) dropped during the 12-group stall: whole pairs lost, not camera gaps
+    assert stats.pairs_dropped >= 4
+    assert stats.pairs_out + stats.pairs_dropped == pair.sequence + 1
+    assert stats.camera_gaps == {"left": 0, "right": 0}
+
+
+def test_depthai_latest_drains_a_deep_queue_whole():
+    # queue=64 holds up to 129 frames for the reader: a bound of 32 returned a pair 24 groups old
+    link = ScriptedLink([(k, k) for k in range(40)])
+    with open_rig(f"{DEPTHAI_URL}&queue=64&policy=latest", link_factory=lambda: link) as source:
+        pair = source.read(timeout_s=0.1)
+        stats = source.stats
+    assert (pair.sequence, pair.frames[0].index) == (39, 39)
+    assert stats.pairs_dropped == 39 and stats.camera_gaps == {"left": 0, "right": 0}
 
 
 def test_depthai_serves_its_pending_frame_before_the_link():

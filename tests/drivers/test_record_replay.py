@@ -1,6 +1,9 @@
 """``record+<url>`` and ``replay://``: exact round trips, the file format, and every way a take can be broken."""
 import json
+import logging
+import os
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -301,6 +304,78 @@ def test_torn_last_line_is_tolerated_only_in_an_interrupted_take(copy_of_take):
     edit_manifest(copy_of_take, lambda d: d.update(complete=False))
     source = create_rig_source(f"replay://{copy_of_take}")  # plays what it holds
     source.close()
+
+
+def journal(take):
+    return [json.loads(line) for line in (take / FRAMES).read_text().splitlines()]
+
+
+def tear_the_tail(take):
+    """What a power cut can leave: the last rows' files empty or missing, the journal ending in NULs."""
+    rows = journal(take)
+    (take / rows[-1]["image"]).write_bytes(b"")
+    (take / rows[-2]["truth"]).unlink()
+    with open(take / FRAMES, "ab") as f:
+        f.write(b"\0" * 300)
+    return rows
+
+
+def test_an_interrupted_take_plays_without_its_torn_tail(copy_of_take, caplog):
+    rows = tear_the_tail(copy_of_take)
+    edit_manifest(copy_of_take, lambda d: d.update(complete=False))
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        with open_rig(f"replay://{copy_of_take}?speed=free&policy=all") as source:
+            list(source)
+            assert sum(source.stats.frames_in.values()) == len(rows) - 2
+    assert "dropped its last 2 journal row(s)" in caplog.text
+
+
+def test_a_complete_take_with_a_torn_tail_is_an_error_naming_file_and_line(copy_of_take):
+    rows = tear_the_tail(copy_of_take)
+    with pytest.raises(RigInitializationError) as info:  # the NUL line
+        create_rig_source(f"replay://{copy_of_take}")
+    assert str(copy_of_take / FRAMES) in str(info.value) and f"line {len(rows) + 1}" in str(info.value)
+    (copy_of_take / FRAMES).write_text("".join(json.dumps(row) + "\n" for row in rows))  # without the NULs
+    source = create_rig_source(f"replay://{copy_of_take}")
+    with pytest.raises(RigInitializationError) as info:  # the files: missing or empty
+        source.open()
+    message = str(info.value)
+    assert "2 file(s)" in message and str(copy_of_take / rows[-2]["truth"]) in message
+    assert f"{copy_of_take / FRAMES} line {len(rows) - 1}" in message
+
+
+def test_a_broken_row_before_whole_ones_is_not_a_torn_tail(copy_of_take):
+    rows = journal(copy_of_take)
+    (copy_of_take / rows[-3]["image"]).write_bytes(b"")
+    edit_manifest(copy_of_take, lambda d: d.update(complete=False))
+    source = create_rig_source(f"replay://{copy_of_take}")
+    with pytest.raises(RigInitializationError, match=f"line {len(rows) - 2}"):
+        source.open()
+
+
+def test_complete_is_marked_only_once_the_take_is_on_disk(tmp_path, sim_cache, monkeypatch):
+    if not os.path.isdir("/proc/self/fd"):
+        pytest.skip("needs /proc to name fsynced files")
+    synced, at_complete = set(), []
+    real_fsync, real_write = os.fsync, record_module.write_manifest
+
+    def fsync(fd):
+        synced.add(os.readlink(f"/proc/self/fd/{fd}"))
+        real_fsync(fd)
+
+    def write_manifest(directory, manifest):
+        if manifest.complete:
+            at_complete.append(set(synced))
+        real_write(directory, manifest)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(record_module, "write_manifest", write_manifest)
+    out = tmp_path / "take"
+    record(out, sim_cache, pairs=4, lossless=1)
+    root = Path(os.path.realpath(out))
+    needed = {str(root / FRAMES)} | {str(root / r[key]) for r in journal(out) for key in ("image", "truth") if r[key]}
+    assert len(at_complete) == 1 and not needed - at_complete[0]
+    assert read_manifest(out).complete is True
 
 
 def test_missing_image_file_is_named_at_open(copy_of_take):

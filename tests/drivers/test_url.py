@@ -64,6 +64,18 @@ def test_not_a_url(text):
 
 
 @pytest.mark.parametrize(
+    ("url", "fragment"),
+    [("record+sim://?out=/data/take#3", "'#3'"), ("replay:///data/run#2", "'#2'"), ("sim://?fps=30#", "'#'")],
+)
+def test_a_fragment_is_refused_not_dropped(url, fragment):
+    """``#`` starts a fragment, which parsing would drop: another take played or recorded into."""
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(url)
+    assert fragment in str(info.value) and "%23" in str(info.value)
+    assert RigUrl.parse("replay:///data/run%232").target == "/data/run#2"  # the way to write one
+
+
+@pytest.mark.parametrize(
     "url",
     ["sim://?fsp=60", "replay:///nonexistent?sped=free", "record+sim://?out=/tmp/x&bogus=1", "depthai://?widht=640"],
 )

@@ -52,6 +52,10 @@ class DeviceLink(Protocol):
     def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
         """The next synced group with ``left`` and ``right`` ImgFrames, or ``None`` after ``timeout_s``."""
 
+    def is_running(self) -> bool:
+        """Whether the device is still connected and its pipeline running (asked after a timeout: a device
+        lost without closing the queue would otherwise read as a silent camera)."""
+
     def close(self) -> None:
         """Stop the pipeline and release the device. Safe to call more than once."""
 
@@ -90,6 +94,10 @@ class DaiDeviceLink:
     def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
         assert self._queue is not None, "start() first"
         return self._queue.get(datetime.timedelta(seconds=max(timeout_s, 0.0)))
+
+    def is_running(self) -> bool:
+        pipeline, device = self._pipeline, self._device
+        return pipeline is not None and device is not None and pipeline.isRunning() and not device.isClosed()
 
     def close(self) -> None:
         pipeline, device = self._pipeline, self._device

@@ -16,9 +16,12 @@
   and the runtime shows the model upright crops (``roi.upright``).
 * ``rig``: path to a rig file to use instead of the device's calibration.
 * ``tolerance_ms``, ``policy``: pairing; the Sync node's threshold is ``tolerance_ms``.
-* ``queue``: depth of the host output queue (default 4; older groups are dropped). Under
-  ``policy=latest`` each read drains it and returns the newest group (the rest count as
-  ``pairs_dropped``); under ``policy=all`` it is how far a slow reader may fall behind.
+* ``queue``: depth of the host output queue (default 4, at most 64; older groups are dropped).
+  Under ``policy=latest`` each read drains all of it and returns the newest group (the rest
+  count as ``pairs_dropped``); under ``policy=all`` it is how far a slow reader may fall behind.
+  A group the full queue dropped, or a frame one camera lost (Sync then discards its partner),
+  shows as both cameras' indices jumping together: a pair the reader never got, counted in
+  ``pairs_dropped`` (sequence gaps), not in ``camera_gaps`` (which keeps gaps of one camera only).
 """
 from __future__ import annotations
 
@@ -55,6 +58,7 @@ class DepthaiOptions:
     rig_path: Path | None = None
     queue_size: int = 4
     pairing: PairingConfig = PairingConfig()
+    url: str = ""  # the URL these came from, for error messages
 
     @classmethod
     def from_url(cls, url: RigUrl) -> "DepthaiOptions":
@@ -97,4 +101,5 @@ class DepthaiOptions:
             rig_path=Path(rig) if rig else None,
             queue_size=queue_size,
             pairing=PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)),
+            url=url.url,
         )

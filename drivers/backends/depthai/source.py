@@ -4,6 +4,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from drivers.backends.depthai.calibration import rig_from_calibration
 from drivers.backends.depthai.convert import depthai_errors, frames_from_group
@@ -18,6 +19,9 @@ from drivers.url import RigUrl
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import load_rig
+
+if TYPE_CHECKING:
+    import depthai as dai
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +63,12 @@ class DepthaiRigSource(RigSource):
         self._link_factory = link_factory
         self._link: DeviceLink | None = None
         self._pending: deque[Frame] = deque()
+        # Frames the reader holds: the first group's second frame and up to ``queue`` groups taken after it.
+        self.drain_limit = 2 * options.queue_size + 2
+        self._device_id = ""  # kept from start(): a lost device no longer says
+        self._last_indices: tuple[int, int] | None = None  # the last group's (first, second) frame indices
+        self._lost_before: dict[Frame, int] = {}  # a group's first frame -> whole groups lost just before it
+        self._lost = 0  # for _pairs_lost: before the frame _read_frame returned last
 
     @classmethod
     def from_url(
@@ -96,6 +106,7 @@ class DepthaiRigSource(RigSource):
             raise
         self._set_rig(rig)
         self._link = link
+        self._device_id = link.device_id()
 
     def _rig_from_device(self, link: DeviceLink) -> Rig:
         o = self.options
@@ -113,23 +124,46 @@ class DepthaiRigSource(RigSource):
             rig_id=f"oak-{link.device_id() or 'device'}",
         )
 
+    def _where(self) -> str:
+        device = f"depthai device {self._device_id or self.options.device_id or '(first found)'}"
+        return f"{device} ({self.options.url})" if self.options.url else device
+
     def _read_frame(self, timeout_s: float) -> Frame | None:
         if self._pending:
-            return self._pending.popleft()
+            return self._served(self._pending.popleft())
         link = self._link
         if link is None:
             raise RigOperationError("depthai link is not open")
         deadline = self.clock.now_ns() + int(timeout_s * 1e9)
-        with depthai_errors("reading from the depthai device", RigDisconnectedError):
+        with depthai_errors(f"reading from {self._where()}", RigDisconnectedError):
             group = link.next_group(timeout_s)
             if group is None:
+                if not link.is_running():
+                    raise RigDisconnectedError(f"{self._where()} stopped: the device was lost or its pipeline ended")
                 self.clock.sleep_until(deadline)  # the timeout has passed on our clock too (a ManualClock jumps)
                 return None
-            first, second = frames_from_group(group, self.rig)
+            first, second = self._frames(group)
         self._pending.append(second)
         if self.pairing.policy is DropPolicy.LATEST:
             self._take_queued_groups(link)
-        return first
+        return self._served(first)
+
+    def _frames(self, group: dai.MessageGroup) -> tuple[Frame, Frame]:
+        """A group's frames; whole groups lost before it (both indices jumped by as many) are noted on the first."""
+        first, second = frames_from_group(group, self.rig)
+        if self._last_indices is not None:
+            lost = min(first.index - self._last_indices[0], second.index - self._last_indices[1]) - 1
+            if lost > 0:  # the non-blocking host queue dropped them (or Sync found no partner for either)
+                self._lost_before[first] = lost
+        self._last_indices = (first.index, second.index)
+        return first, second
+
+    def _served(self, frame: Frame) -> Frame:
+        self._lost = self._lost_before.pop(frame, 0)
+        return frame
+
+    def _pairs_lost(self) -> int:
+        return self._lost
 
     def _take_queued_groups(self, link: DeviceLink) -> None:
         """Move the groups already waiting in the host queue into ``_pending``: read() drains them under
@@ -142,7 +176,7 @@ class DepthaiRigSource(RigSource):
                 group = link.next_group(0.0)
                 if group is None:
                     return
-                self._pending.extend(frames_from_group(group, self.rig))
+                self._pending.extend(self._frames(group))
             except Exception as e:  # noqa: BLE001 - a closed queue: the next read raises it, typed
                 log.debug("depthai: no more queued groups (%s)", e)
                 return
@@ -153,6 +187,7 @@ class DepthaiRigSource(RigSource):
     def _close(self) -> None:
         link, self._link = self._link, None
         self._pending.clear()
+        self._lost_before.clear()
         if link is not None:
-            with depthai_errors("closing the depthai device", RigOperationError):
+            with depthai_errors(f"closing {self._where()}", RigOperationError):
                 link.close()
