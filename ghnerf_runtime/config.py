@@ -34,7 +34,7 @@ from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
-    "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES",
+    "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES", "NOVEL_SILHOUETTE_STRIDES",
     "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
     "PresenceConfig", "NovelViewConfig", "SmoothingConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
@@ -47,6 +47,9 @@ PRECISIONS = ("fp32", "int8", "auto")
 THREE_D_METHODS = ("triangulate", "volumetric", "depth_centroid")
 #: :attr:`Joints3DConfig.skeleton_prior` choices.
 SKELETON_PRIOR_MODES = ("auto", "on", "off")
+#: :attr:`NovelViewConfig.silhouette_stride` choices: the powers of two up to 16, which divide the model
+#: resolutions in use (64, 128); :class:`~ghnerf_runtime.estimator.Estimator` checks them against its model's.
+NOVEL_SILHOUETTE_STRIDES = (0, 1, 2, 4, 8, 16)
 
 
 # ------------------------------------------------------------------ checks
@@ -215,7 +218,9 @@ class TrackingConfig:
             same joints) or a model without them (docs/runtime.md, "Heatmap sources").
         retry_cold: a tracked pair that finds nobody is run again from the working volume, in the
             same pair: a subject who left the crop (a jump, a turn, a body larger than the frame) is
-            found at once instead of a pair later (costs one more pass on such pairs only).
+            found at once instead of a pair later (costs one more pass on such pairs only). A crop the
+            frame check rejects counts as finding nobody (a subject who left may leave the crop a flat
+            wall), unless the other camera's 2D joints were reported.
         max_gap_s: a track older than this, by the pairs' capture times (``estimate(timestamp_s=)``),
             is dropped, as is one when time runs backwards (a looped recording): the subject may be
             anywhere by now.
@@ -497,7 +502,8 @@ class NovelViewConfig:
             ``silhouette_stride``-th pixel of the box, and only the cells where it finds the subject (plus
             ``silhouette_dilate`` cells around them) are rendered at ``stride``; the rest is
             background. The person fills a fraction of its box, so this renders fewer rays
-            (measured in docs/runtime.md). 0: off (every ray of the box); must be a multiple of
+            (measured in docs/runtime.md). 0: off (every ray of the box); one of 0, 1, 2, 4, 8, 16 (it must
+            divide the model resolution: the estimator checks it against the model's); a multiple of
             ``stride`` larger than it, else the coarse pass is skipped.
         silhouette_min_diff: a coarse cell counts as the subject when its colour differs from the
             background by this much (max over RGB, [0, 1] units; 0.05 = 13 grey levels). Colour,
@@ -596,6 +602,9 @@ class NovelViewConfig:
         _boolean(self, "crop_to_subject")
         _boolean(self, "overlap")
         _integer(self, "silhouette_stride", 0, 16)
+        # the coarse grid must tile the model resolution, else its cells refined to `stride` miss the image's
+        # last rows (6 at 128: 21 cells -> 126 pixels) and the render fails on the mismatch
+        _choice(self, "silhouette_stride", NOVEL_SILHOUETTE_STRIDES)
         if self.silhouette_stride and self.silhouette_stride % self.stride:
             _fail(type(self), "silhouette_stride", f"must be 0 or a multiple of stride ({self.stride})",
                   self.silhouette_stride)

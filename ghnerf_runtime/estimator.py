@@ -65,7 +65,7 @@ from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presence, gate_to_box, query_grid, \
     triangulate_joints, volumetric_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, Keypoints2D, decode_keypoints, heatmap_to_model_pixels
-from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, draw_skeleton, heatmap_overlay, \
+from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, draw_skeleton, heatmap_overlay, \
     interpolate_camera, novel_target, render_novel_view
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
@@ -276,6 +276,7 @@ class Estimator:
 
     Raises:
         ModelError: the session lacks a graph the configuration needs.
+        ConfigError: a novel-view stride does not divide the model's resolution.
     """
 
     def __init__(self, session: Any, rig: Rig, config: EstimatorConfig | None = None) -> None:
@@ -296,6 +297,8 @@ class Estimator:
             raise ModelError(f"the runtime crops square inputs; the model is {self.contract.width}x"
                              f"{self.contract.height}")
         self.size = self.contract.height
+        if self.config.novel_view.enabled:  # said at load, not by the first novel view
+            check_strides(self.config.novel_view, self.size)
         self.grid = self.size // self.contract.heatmap_stride
         if self.config.heatmaps.source == "encoder":
             if not getattr(self.contract, "encoder_heatmaps", False):
@@ -480,8 +483,7 @@ class Estimator:
         self._forget_a_stale_track(timestamp_s)
         tcfg = self.config.tracking
         p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
-        if (tcfg.retry_cold and p.regions.tracked and all(p.frame_ok.values())
-                and (p.j3 is None or not p.j3.valid.any()) and self.tracker.track is None):
+        if self._lost_on_a_tracked_pass(p):
             # The tracked crop found nobody: the subject may have left it. Look at the working volume now.
             if p.novel is not None and not p.novel.cancel():
                 p.novel.exception()  # leave no render running behind
@@ -523,6 +525,17 @@ class Estimator:
         return PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
                           p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
                           self.config.joints3d.method, nv)
+
+    def _lost_on_a_tracked_pass(self, p: "_Pass") -> bool:
+        """Whether ``tracking.retry_cold`` runs the pair again from the working volume: a tracked pass that
+        dropped the track and reported nobody. That includes a crop the frame check rejected: a subject who
+        left shows the crop a flat wall, and the working volume's crop may show them (a view whose 2D joints
+        were reported, the single-view pass, is no loss: its next crop follows them)."""
+        if not (self.config.tracking.retry_cold and p.regions.tracked and self.tracker.track is None):
+            return False
+        if all(p.frame_ok.values()):
+            return p.j3 is None or not p.j3.valid.any()
+        return p.missing_2d is None or all(m.all() for m in p.missing_2d.values())
 
     def _forget_a_stale_track(self, timestamp_s: float | None) -> None:
         """Drop the track when the pair comes more than ``tracking.max_gap_s`` after the last one, or before it

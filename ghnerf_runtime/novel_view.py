@@ -1,7 +1,8 @@
 """Novel views: a virtual camera, the rays inside the subject, and the rendered image.
 
 The virtual camera is either one *between* the two rig cameras (rotation slerped, centre and
-intrinsics interpolated linearly: :func:`interpolate_camera`) or any given calibrated camera.
+intrinsics interpolated linearly, the second camera's fitted to the first's image size with square
+pixels kept: :func:`interpolate_camera`) or any given calibrated camera.
 Like the sources, it is cropped to the subject (:func:`novel_target`) and rendered at the model
 resolution (``S x S``, e.g. 128x128) -- the "reduced resolution" of the novel view -- every
 ``stride`` pixels. Only the rays inside the projected subject box are rendered; the rest is the
@@ -29,7 +30,7 @@ import numpy as np
 from ghnerf_runtime.body25 import LIMBS
 from ghnerf_runtime.config import NovelViewConfig
 from ghnerf_runtime.contract import near_far_from_box, target_inputs
-from ghnerf_runtime.errors import GeometryError
+from ghnerf_runtime.errors import ConfigError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
 from ghnerf_runtime.rays import (
@@ -43,8 +44,8 @@ from ghnerf_runtime.rays import (
 )
 from ghnerf_runtime.tracking import box_corners
 
-__all__ = ["NovelViewRequest", "NovelView", "slerp_rotation", "interpolate_camera", "novel_target",
-           "render_novel_view", "opaque_colour", "draw_skeleton", "heatmap_overlay"]
+__all__ = ["NovelViewRequest", "NovelView", "slerp_rotation", "interpolate_camera", "fit_intrinsics",
+           "novel_target", "check_strides", "render_novel_view", "opaque_colour", "draw_skeleton", "heatmap_overlay"]
 
 
 @dataclass(frozen=True)
@@ -145,16 +146,43 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
 def interpolate_camera(cam_a: Camera, cam_b: Camera, alpha: float, name: str = "novel") -> Camera:
     """A pinhole camera between two cameras: slerped rotation, lerped centre and intrinsics.
 
-    The image size is ``cam_a``'s (``cam_b``'s intrinsics are rescaled to it first); lens
-    distortion is dropped (a virtual camera is ideal).
+    The image size is ``cam_a``'s; ``cam_b``'s intrinsics are first fitted into it by one uniform scale
+    (:func:`fit_intrinsics`: its pixels stay square when the two images' shapes differ, e.g. one camera
+    mounted on its side). Lens distortion is dropped (a virtual camera is ideal). ``alpha`` outside [0, 1]
+    extrapolates.
+
+    Raises:
+        GeometryError: the extrapolated focal length is not positive (``alpha`` too far out for two
+            cameras whose focal lengths differ more than twofold).
     """
-    b = cam_b if cam_b.size == cam_a.size else cam_b.resized(cam_a.width, cam_a.height)
-    R = slerp_rotation(cam_a.R, b.R, alpha)
-    centre = (1 - alpha) * cam_a.center + alpha * b.center
-    K = (1 - alpha) * cam_a.K + alpha * b.K
+    K_b = cam_b.K if cam_b.size == cam_a.size else fit_intrinsics(cam_b, cam_a.width, cam_a.height)
+    R = slerp_rotation(cam_a.R, cam_b.R, alpha)
+    centre = (1 - alpha) * cam_a.center + alpha * cam_b.center
+    K = (1 - alpha) * cam_a.K + alpha * K_b
     K[2] = [0.0, 0.0, 1.0]
     K[1, 0] = 0.0
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        raise GeometryError(f"novel-view alpha {alpha} (--novel-alpha, NovelViewRequest.alpha) extrapolates the "
+                            f"focal lengths of cameras {cam_a.name!r} and {cam_b.name!r} to fx {K[0, 0]:.1f}, "
+                            f"fy {K[1, 1]:.1f} px; keep it nearer [0, 1]")
     return Camera(name, cam_a.width, cam_a.height, K, np.zeros(5), R, -R @ centre)
+
+
+def fit_intrinsics(camera: Camera, width: int, height: int) -> np.ndarray:
+    """``camera``'s K for a ``width x height`` image: scaled by one factor so the whole image fits, centred.
+
+    Unlike :meth:`Camera.resized` (a factor per axis), pixels keep their aspect: a 480x640 camera fitted to
+    640x480 is scaled by 0.75 and shows its view in the middle 360 columns, not squeezed. Centres follow the
+    pixel-centre convention of :meth:`Camera.resized`: ``u' = s (u - (W_b - 1) / 2) + (W - 1) / 2``; for
+    images of one shape this is :meth:`Camera.resized`'s K.
+    """
+    s = min(width / camera.width, height / camera.height)
+    centre_b = np.array([(camera.width - 1) / 2, (camera.height - 1) / 2])
+    centre = np.array([(width - 1) / 2, (height - 1) / 2])
+    A = np.eye(3)
+    A[:2, :2] *= s
+    A[:2, 2] = centre - s * centre_b
+    return A @ camera.K
 
 
 def novel_target(camera: Camera, box: np.ndarray, size: int, crop_to_subject: bool = True) -> Camera:
@@ -173,6 +201,18 @@ def novel_target(camera: Camera, box: np.ndarray, size: int, crop_to_subject: bo
 
 
 # ------------------------------------------------------------------ rendering
+def check_strides(config: NovelViewConfig, size: int) -> None:
+    """Raise :class:`ConfigError` naming the field unless every stride in use divides the model's ``size``.
+
+    The grids of the passes are scattered into one another and resized back to ``size``; a grid that does not
+    tile the image (``silhouette_stride`` 6 at 128: 21 cells refined to 126 pixels) fails mid-render.
+    """
+    for name in ("stride", "silhouette_stride", "interior_stride"):
+        value = getattr(config, name)
+        if value and size % value:
+            raise ConfigError(f"must divide the model resolution {size}, got {value}", key=f"novel_view.{name}")
+
+
 def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camera, box: np.ndarray,
                       config: NovelViewConfig, *, near_far_margin: float = 0.1, want_heat: bool = False,
                       timing: dict | None = None) -> NovelView:
@@ -191,6 +231,7 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
     """
     contract = session.contract
     S = contract.height
+    check_strides(config, S)
     t0 = time.perf_counter()
     feeds = dict(env)
     feeds.update(target_inputs([camera], S, contract.width))

@@ -313,12 +313,29 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--json", help="write the full report here")
     sp = sub.add_parser("sim-pair", help="write a simulated pair (or short clip) and its rig file")
     sp.add_argument("--out", required=True)
-    sp.add_argument("--frames", type=int, default=1, help=">1 writes <camera>.mp4 clips instead of PNGs")
+    sp.add_argument("--frames", type=int, default=1, help="at least 1; >1 writes <camera>.mp4 clips instead of PNGs")
     sp.add_argument("--seed", type=int, default=3)
     sp.add_argument("--motion", default="wave")
     sp.add_argument("--t", type=float, default=0.4, help="scene time of the first frame (s)")
     ap.add_argument("-v", "--verbose", action="store_true")
     return ap
+
+
+def _sim_pair(args) -> int:
+    """``sim-pair``: the simulator's errors (an unknown ``--motion``...) are bad input: exit 2 with the message."""
+    from drivers.errors import DriverError  # tool only: the runtime library never imports drivers
+    from ghnerf_runtime.cli.simdata import write_sim_example
+
+    if args.frames < 1:
+        print(f"ghnerf-bench: error: --frames must be at least 1, got {args.frames}", file=sys.stderr)
+        return 2
+    try:
+        paths = write_sim_example(args.out, seed=args.seed, motion=args.motion, t=args.t, frames=args.frames)
+    except DriverError as e:
+        print(f"ghnerf-bench: error: {e}", file=sys.stderr)
+        return 2
+    print(json.dumps(paths, indent=2))
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -327,16 +344,14 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     try:
         if args.command == "sim-pair":
-            from ghnerf_runtime.cli.simdata import write_sim_example
-
-            paths = write_sim_example(args.out, seed=args.seed, motion=args.motion, t=args.t, frames=args.frames)
-            print(json.dumps(paths, indent=2))
-            return 0
-        if any(h not in HEATMAP_SOURCES for h in args.heatmap_sources):
+            return _sim_pair(args)
+        # an empty list would leave no row to run, found only after the sequences are rendered
+        if not args.heatmap_sources or any(h not in HEATMAP_SOURCES for h in args.heatmap_sources):
             print(f"ghnerf-bench: error: heatmap sources are {','.join(HEATMAP_SOURCES)}", file=sys.stderr)
             return 2
         bad = [p for p in args.precisions if p not in ("fp32", "int8", "auto")]
-        if bad or not args.precisions or any(m not in ("keypoints", "novel") for m in args.modes):
+        if (bad or not args.precisions or not args.modes
+                or any(m not in ("keypoints", "novel") for m in args.modes)):
             print("ghnerf-bench: error: precisions are fp32,int8,auto and modes keypoints,novel", file=sys.stderr)
             return 2
         if args.sequences < 1 or args.frames < 1 or args.warmup < 0:

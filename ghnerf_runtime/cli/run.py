@@ -11,8 +11,10 @@ Images are given in the rig file's camera order (its first two cameras). Output:
 object per frame pair (``docs/runtime.md``: ``joint_names``, ``joints_3d`` as
 ``[x, y, z, confidence]`` metres in the rig frame, ``joints_2d`` per camera name as
 ``[u, v, confidence]`` pixels of the original image, ``missing``, ``timing_ms``...). A ``.json``
-output holds a list of those objects; ``.jsonl`` (and stdout) one object per line. Missing
-joints have confidence 0 and coordinates 0; no NaN is ever written.
+output holds a list of those objects, written whole when the run ends (atomically; a run stopped by an
+error or Ctrl-C writes the pairs it finished, and one that finished none leaves an earlier file as it
+was); ``.jsonl`` (and stdout) one object per line as each pair is done. Missing joints have confidence
+0 and coordinates 0; no NaN is ever written.
 
 Exit status: 0 on success, 2 for a usage, config, rig, model or input error (the message names
 the file and what is wrong).
@@ -30,7 +32,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output, write_atomically
 from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, config_to_dict, load_config
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
@@ -233,11 +235,21 @@ class _Sink:
                 raise UsageError(f"{self.path}: cannot write the image (no permission, or no such folder)")
 
 
+def _ready(path: str, flag: str) -> str:
+    """``path`` checked and its folder made before the model loads (:func:`ready_output`)."""
+    try:
+        return str(ready_output(path, flag))
+    except OutputPathError as e:
+        raise UsageError(str(e)) from None
+
+
 def _run(args) -> int:
     cfg = _config(args)
     if args.validate_config:
         print(json.dumps(config_to_dict(cfg), indent=2))
         return 0
+    to_stdout = args.out == "-"
+    out_path = None if to_stdout else _ready(args.out, "--out")
     rig = load_rig(args.rig)
     estimator = Estimator.from_config(rig, cfg)
     log.info("model %s", json.dumps(estimator.session.describe()))
@@ -249,10 +261,11 @@ def _run(args) -> int:
         cap.release()
     novel = _Sink(args.novel_view, fps, "--novel-view") if args.novel_view else None
     overlay = _Sink(args.overlay, fps, "--overlay") if args.overlay else None
-    to_stdout = args.out == "-"
-    as_list = not to_stdout and Path(args.out).suffix.lower() == ".json"
-    out = sys.stdout if to_stdout else open(args.out, "w", encoding="utf-8")
-    frames = []
+    as_list = not to_stdout and Path(out_path).suffix.lower() == ".json"
+    # .jsonl / stdout: a line per pair as it is done; .json: one list, written whole at the end (below)
+    out = sys.stdout if to_stdout else None if as_list else open(out_path, "w", encoding="utf-8")
+    frames: list[dict] = []
+    done = False
     try:
         for seq, images in enumerate(_pairs(args)):
             try:
@@ -273,16 +286,29 @@ def _run(args) -> int:
             if overlay is not None:
                 overlay.add(overlay_image(images, result))
             log.info("pair %d: %d/25 joints, %.1f ms", seq, result.num_found, result.timing_ms["total"])
-        if as_list:
-            json.dump(frames, out, allow_nan=False)
-            out.write("\n")
+        done = True
     finally:
-        if not to_stdout:
-            out.close()
-        for sink in (novel, overlay):
-            if sink is not None:
-                sink.close()
+        try:
+            if as_list:
+                _write_list(out_path, frames, done)
+            elif out is not None and not to_stdout:
+                out.close()
+        finally:
+            for sink in (novel, overlay):
+                if sink is not None:
+                    sink.close()
     return 0
+
+
+def _write_list(path: str, frames: list[dict], done: bool) -> None:
+    """The ``.json`` list, replacing the file atomically (an earlier file stays whole until the new one is): a
+    run stopped by an error or Ctrl-C keeps the pairs it finished (a shorter list; the exit status is not 0),
+    and one that finished none leaves an earlier file as it was."""
+    if not (done or frames):
+        return
+    write_atomically(path, json.dumps(frames, allow_nan=False) + "\n")
+    if not done:
+        print(f"ghnerf-run: stopped early; the {len(frames)} pair(s) finished are in {path}", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -339,16 +339,36 @@ def test_simdata_doctests():
     assert doctest.testmod(simdata, raise_on_error=False).failed == 0
 
 
+_ONE_PAIR = ["--sequences", "1", "--frames", "1", "--warmup", "0", "--cache", "off"]  # quick, should a check miss
+
+
 @pytest.mark.parametrize(("args", "words"), [
     (["--sequences", "0"], "at least 1"),
     (["--precisions", ","], "precisions are"),
     (["--sequences", "1", "--frames", "5", "--warmup", "10"], "nothing would be timed"),
+    # empty lists: no row to run (a ZeroDivisionError once the sequences were rendered, minutes in)
+    (["--modes", ",", *_ONE_PAIR], "modes keypoints,novel"),
+    (["--heatmap-sources", "", *_ONE_PAIR], "heatmap sources are"),
 ])
 def test_bench_refuses_a_run_that_would_time_nothing(args, words, capsys):
     from ghnerf_runtime.cli import bench
 
     assert bench.main(["runtime", "--model-dir", "unused", *args]) == 2
     assert words in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--motion", "jump"], "unknown motion 'jump'"),  # the simulator's SimConfigError, a DriverError
+    (["--frames", "0"], "--frames must be at least 1"),
+    (["--frames", "-2"], "--frames must be at least 1"),
+])
+def test_bench_sim_pair_refuses_bad_input_with_a_message(args, words, tmp_path, capsys):
+    from ghnerf_runtime.cli import bench
+
+    assert bench.main(["sim-pair", "--out", str(tmp_path / "ex"), *args]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err
+    assert not (tmp_path / "ex" / "truth.json").exists()  # no empty set written
 
 
 def test_a_still_pair_refines_its_cold_start_by_default(capsys):
@@ -361,3 +381,73 @@ def test_a_still_pair_refines_its_cold_start_by_default(capsys):
     assert resolved("--rig", "r.json", "--images", "a", "b", "--no-refine-cold-start") is False
     assert resolved("--rig", "r.json", "--videos", "a", "b") is False  # later pairs are tracked
     assert resolved("--rig", "r.json", "--videos", "a", "b", "--refine-cold-start") is True
+
+
+class _StubEstimator:
+    """Answers ``estimate`` with a minimal result, raising ``fail`` at pair ``fail_at`` (a mid-run error)."""
+
+    size = 64
+
+    def __init__(self, fail_at: int | None = None, fail: BaseException | None = None):
+        self.fail_at, self.fail = fail_at, fail
+        self.session = type("S", (), {"describe": staticmethod(lambda: {})})()
+
+    def estimate(self, images, *, sequence, novel_view=None, timestamp_s=None):
+        if sequence == self.fail_at:
+            raise self.fail
+        return type("R", (), {"to_json": lambda r: {"sequence": sequence}, "num_found": 0, "novel_view": None,
+                              "timing_ms": {"total": 1.0}})()
+
+
+def _stub_run(monkeypatch, out: Path, pairs: int = 3, **stub) -> tuple[int, list]:
+    """``ghnerf-run --videos`` over ``pairs`` blank pairs with the stub estimator: (exit status, estimators built)."""
+    built = []
+
+    def from_config(rig, cfg):
+        built.append(_StubEstimator(**stub))
+        return built[-1]
+
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", from_config)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * pairs))
+    return cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out)]), built
+
+
+def test_a_json_output_keeps_the_pairs_finished_before_an_error(monkeypatch, tmp_path, capsys):
+    from ghnerf_runtime.errors import ModelRunError
+
+    out = tmp_path / "joints.json"
+    out.write_text("an earlier run's list\n")
+    rc, _ = _stub_run(monkeypatch, out, fail_at=2, fail=ModelRunError("render_heat failed"))
+    assert rc == 2  # before: the file was truncated at the start and the two finished pairs lost
+    assert json.loads(out.read_text()) == [{"sequence": 0}, {"sequence": 1}]
+    err = capsys.readouterr().err
+    assert "render_heat failed" in err and "2 pair(s) finished" in err
+    assert [p.name for p in tmp_path.iterdir()] == ["joints.json"]  # no temporary file left behind
+
+
+def test_a_json_output_is_left_as_it_was_when_no_pair_finished(monkeypatch, tmp_path):
+    from ghnerf_runtime.errors import ModelRunError
+
+    out = tmp_path / "joints.json"
+    out.write_text("[{\"sequence\": 7}]\n")
+    rc, _ = _stub_run(monkeypatch, out, fail_at=0, fail=ModelRunError("encoder failed"))
+    assert rc == 2 and out.read_text() == "[{\"sequence\": 7}]\n"
+
+
+def test_a_json_output_keeps_the_pairs_finished_before_ctrl_c(monkeypatch, tmp_path):
+    out = tmp_path / "joints.json"
+    with pytest.raises(KeyboardInterrupt):
+        _stub_run(monkeypatch, out, fail_at=1, fail=KeyboardInterrupt())
+    assert json.loads(out.read_text()) == [{"sequence": 0}]
+    rc, _ = _stub_run(monkeypatch, out)  # a whole run replaces it
+    assert rc == 0 and len(json.loads(out.read_text())) == 3
+
+
+def test_out_is_checked_before_the_model_loads(monkeypatch, tmp_path, capsys):
+    (tmp_path / "dir.json").mkdir()
+    rc, built = _stub_run(monkeypatch, tmp_path / "dir.json")
+    assert rc == 2 and not built
+    assert f"--out {tmp_path / 'dir.json'}: is a folder" in capsys.readouterr().err
+    rc, _ = _stub_run(monkeypatch, tmp_path / "new" / "joints.jsonl")  # its folder is made, lines as they come
+    assert rc == 0 and len((tmp_path / "new" / "joints.jsonl").read_text().splitlines()) == 3

@@ -128,7 +128,9 @@ def test_person_leaving_the_view_gives_missing_joints_and_drops_the_track(clip):
     gone = est.estimate(empty)
     assert gone.missing.all() and not gone.joints_3d.any() and not gone.confidence.any()
     assert all(m.all() for m in gone.missing_2d.values())
-    assert gone.tracked is True and est.tracker.track is None  # cropped from the track, then dropped
+    # the tracked crops showed the empty room's plain wall (frame check): the working volume was looked at in
+    # the same pair (tracking.retry_cold), nobody there either, and the track is dropped
+    assert gone.tracked is False and not any(gone.frame_ok.values()) and est.tracker.track is None
     oracle.set_truth(None)
     cold = est.estimate(empty)
     assert cold.tracked is False and cold.missing.all()  # fell back to the working volume
@@ -437,6 +439,33 @@ def test_a_subject_who_left_the_tracked_crop_is_found_in_the_same_pair(clip, ret
         assert np.median(err) < 1e-3 and err.max() < 0.1  # (a cold crop's coarser heatmaps: a few cm at worst)
     else:  # a pair lost, found again on the next one
         assert r.tracked is True and r.num_found == 0
+
+
+@pytest.mark.parametrize("retry", [True, False])
+def test_a_tracked_crop_left_a_flat_wall_is_retried_from_the_working_volume(clip, retry):
+    """The subject left; where the tracked crops look is now a plain wall, which the frame check rejects.
+    That is finding nobody too: the pair looks at the whole working volume at once."""
+    import copy
+
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(tracking=TrackingConfig(retry_cold=retry)))
+    assert _run(est, oracle, frames[:2], truth[:2], visible[:2])[-1].tracked
+    tracked = copy.deepcopy(est.tracker).regions()  # where this pair's tracked crops will look
+    assert tracked.tracked and not any(c.has_distortion for c in rig.pair)
+    pair, j3, vis = _jump(rig, (1.1, 2.4))
+    walled = []
+    for img, roi in zip(pair, tracked.rois):
+        img = img.copy()
+        m = 4  # the window is in undistorted pixels: the sim's lenses have none (asserted below)
+        img[max(roi.y0 - m, 0):max(roi.y0 + roi.size + m, 0), max(roi.x0 - m, 0):max(roi.x0 + roi.size + m, 0)] = 128
+        walled.append(img)
+    oracle.set_truth(j3, vis)
+    r = est.estimate(tuple(walled))
+    if retry:
+        assert r.tracked is False and all(r.frame_ok.values()) and r.num_found > 6
+    else:  # a pair lost: re-detection waits for the next one
+        assert r.tracked is True and not any(r.frame_ok.values()) and r.num_found == 0
 
 
 def test_a_track_older_than_max_gap_or_from_the_future_is_dropped(clip):

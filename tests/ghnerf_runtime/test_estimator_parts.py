@@ -177,6 +177,48 @@ def test_interpolated_camera_slerps_and_lerps():
     assert angle(mid.R, b.R) == pytest.approx(angle(a.R, b.R) / 2, abs=1e-6)
 
 
+def _landscape_and_side_mounted():
+    """A 640x480 camera and one whose 640x480 sensor is mounted on its side (upright: 480x640)."""
+    K = [[500.0, 0.0, 331.5], [0.0, 500.0, 232.5], [0.0, 0.0, 1.0]]  # principal point off centre
+    a = Camera("a", 640, 480, K, [], *look_at((-0.5, -1.2, 0.0), (0.0, -1.0, 3.0)))
+    side = Camera("b", 640, 480, [[420.0, 0.0, 311.5], [0.0, 420.0, 247.5], [0.0, 0.0, 1.0]], [],
+                  *look_at((0.5, -1.2, 0.0), (0.0, -1.0, 3.0), up=(1.0, 0.0, 0.0)))
+    return a, side.quarter_turned(1)
+
+
+def test_interpolated_camera_keeps_square_pixels_between_images_of_different_shapes():
+    a, b = _landscape_and_side_mounted()
+    assert (a.size, b.size) == ((640, 480), (480, 640))
+    for alpha in (0.0, 0.5, 1.0):
+        K = interpolate_camera(a, b, alpha).K
+        assert K[0, 0] == pytest.approx(K[1, 1], rel=1e-12), alpha  # per-axis resizing gave aspect 1.78 at 1
+    # at alpha 1: b's view, scaled by one factor (0.75, to fit 640 rows in 480) about the images' centres
+    end = interpolate_camera(a, b, 1.0)
+    assert end.size == a.size and np.allclose(end.R, b.R) and np.allclose(end.center, b.center)
+    X = _joints()
+    uv_b, _ = b.project(X)
+    uv, _ = end.project(X)
+    expected = 0.75 * (uv_b - [(480 - 1) / 2, (640 - 1) / 2]) + [(640 - 1) / 2, (480 - 1) / 2]
+    np.testing.assert_allclose(uv, expected, atol=1e-9)
+
+
+def test_interpolated_camera_of_one_shape_is_unchanged_and_extrapolation_keeps_a_positive_focal_length():
+    from dataclasses import replace
+
+    from ghnerf_runtime.errors import GeometryError
+    from ghnerf_runtime.novel_view import fit_intrinsics
+
+    a, b = _cams()
+    small = b.resized(64, 64)  # one shape: the uniform fit is Camera.resized
+    np.testing.assert_allclose(fit_intrinsics(small, 128, 128), b.K, atol=1e-12)
+    wide = replace(a, K=np.array([[400.0, 0.0, 63.5], [0.0, 400.0, 63.5], [0.0, 0.0, 1.0]]))  # f 400 vs 150
+    assert interpolate_camera(wide, b, 1.5).K[0, 0] == pytest.approx(25.0)  # -0.5 * 400 + 1.5 * 150
+    with pytest.raises(GeometryError, match="novel-alpha"):
+        interpolate_camera(wide, b, 2.0)  # -400 + 2 * 150 = -100: a mirrored camera
+    with pytest.raises(GeometryError, match="alpha -1"):
+        interpolate_camera(b, wide, -1.0)
+
+
 # ------------------------------------------------------------------ frame check
 def test_frame_check_flags_flat_and_noise_but_not_images():
     cfg = FrameCheckConfig()

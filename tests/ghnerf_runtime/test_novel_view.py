@@ -127,6 +127,56 @@ def test_silhouette_config_is_validated():
         replace(NovelViewConfig(), silhouette_dilate=-1)
 
 
+@pytest.mark.parametrize("value", [3, 5, 6, 10, 12, 14])
+def test_a_silhouette_stride_that_does_not_tile_the_model_is_refused(value):
+    """6 passed the old check (an int 0..16, a multiple of stride) and crashed the render at 128 (21 cells -> 126)."""
+    with pytest.raises(ConfigError, match="silhouette_stride"):
+        NovelViewConfig(silhouette_stride=value)
+    for ok in (0, 1, 2, 4, 8, 16):
+        assert NovelViewConfig(silhouette_stride=ok).silhouette_stride == ok
+
+
+def _contract(size: int):
+    from ghnerf_runtime.contract import ModelContract
+
+    c = edge128_contract()
+    return ModelContract.build(height=size, width=size, variant=c.variant, levels=c.levels, channels=c.channels,
+                               strides=c.strides, encoder_heatmaps=True)
+
+
+class OddSizeSession(DiscSession):
+    """The disc session with a model of another square resolution."""
+
+    def __init__(self, size: int):
+        super().__init__()
+        self.contract = _contract(size)
+
+
+def test_strides_that_do_not_divide_the_model_resolution_are_a_config_error_not_a_crash():
+    """A 120x120 model (the contract allows it): 16 does not divide 120; the render names the field."""
+    env = {"images": np.zeros((2, 3, 120, 120), np.float32)}
+    camera = _camera().resized(120, 120)
+    with pytest.raises(ConfigError, match=r"novel_view\.silhouette_stride.*120"):
+        render_novel_view(OddSizeSession(120), env, camera, BOX, NovelViewConfig(enabled=True, silhouette_stride=16))
+    nv = render_novel_view(OddSizeSession(120), env, camera, BOX, NovelViewConfig(enabled=True, silhouette_stride=8))
+    assert nv.image.shape == (120, 120, 3)
+
+
+def test_the_estimator_checks_the_novel_strides_against_its_model_at_load():
+    from benchmarks.bench_runtime_common import OracleSession
+    from ghnerf_runtime.config import EstimatorConfig
+    from ghnerf_runtime.estimator import Estimator
+    from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+
+    rig = Rig((_camera().resized(640, 640), replace(_camera(), name="other").resized(640, 640)),
+              WorkingVolume(BOX[0], BOX[1]))
+    bad = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, silhouette_stride=16))
+    with pytest.raises(ConfigError, match=r"novel_view\.silhouette_stride"):
+        Estimator(OracleSession(_contract(120)), rig, bad)
+    Estimator(OracleSession(_contract(128)), rig, bad).close()  # 16 divides 128
+    Estimator(OracleSession(_contract(120)), rig, replace(bad, novel_view=NovelViewConfig())).close()  # no novel view
+
+
 def test_cell_helpers_round_trip():
     mask = np.zeros((4, 5), bool)
     mask[1, 2] = mask[3, 0] = True
