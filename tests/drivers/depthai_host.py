@@ -119,9 +119,12 @@ class HostPipelineLink:
         if self.pipeline is not None and self.pipeline.isRunning():
             self.pipeline.stop()
         # stop() only signals. The pipeline's destructor joins the node threads while holding
-        # the GIL, and these Python nodes need the GIL to finish: wait for them here.
+        # the GIL, and these Python nodes need the GIL to finish: wait for them here. Generously: on a
+        # starved machine (a niced CI beside a training run) a node took over 2 s to notice the stop, and
+        # the destructor then deadlocked the test run.
         for camera in self.cameras:
-            camera.finished.wait(2.0)
+            if not camera.finished.wait(60.0):
+                raise RuntimeError("a host camera node did not stop within 60 s of pipeline.stop()")
 
 
 def image_group(indices: tuple[int, int], size: tuple[int, int], fps: float = 30.0) -> dai.MessageGroup:
