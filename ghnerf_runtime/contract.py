@@ -50,7 +50,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_NAMES
-from ghnerf_runtime.errors import RuntimeErrorBase
+from ghnerf_runtime.errors import GeometryError, RuntimeErrorBase
 
 #: Contract format version. A different *major* is refused by :meth:`ModelContract.from_metadata`.
 CONTRACT_VERSION = "1.2.0"
@@ -559,15 +559,25 @@ def near_far_from_box(camera, corners: np.ndarray, margin: float = 0.1, min_near
     ``corners`` ``(8, 3)`` are the box corners (``WorkingVolume.corners()`` or a box
     around the subject); the box is grown by ``margin`` metres before the camera
     depths of its corners are taken. ``near`` is clamped to ``min_near``.
+
+    Raises:
+        GeometryError: the corners (or margin) are not finite, or the (grown) box lies wholly at or behind
+            the near plane (``min_near`` in front of the camera): nothing of it can be rendered,
+            and a range clamped to the near plane would look like a real one.
     """
     corners = np.asarray(corners, dtype=np.float64)
     if corners.ndim != 2 or corners.shape[1] != 3:
         raise ContractError(f"corners must have shape (8, 3), got {corners.shape}", key="corners")
+    if not (np.all(np.isfinite(corners)) and math.isfinite(margin)):
+        raise GeometryError(f"box corners and margin must be finite, got {corners.tolist()}, {margin!r}")
     lo, hi = corners.min(0) - margin, corners.max(0) + margin
     idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
     box = np.where(idx == 1, hi, lo)
     _, R, t = _cam_arrays(camera)
     z = (box @ R.T + t)[:, 2]
+    if not float(z.max()) > min_near:
+        raise GeometryError(f"the box is behind the camera's near plane ({min_near} m): camera depths "
+                            f"{float(z.min()):.3f} to {float(z.max()):.3f} m")
     near = max(float(z.min()), min_near)
     far = max(float(z.max()), near + 1e-3)
     return np.array([near, far], dtype=np.float32)

@@ -213,6 +213,17 @@ def check_strides(config: NovelViewConfig, size: int) -> None:
             raise ConfigError(f"must divide the model resolution {size}, got {value}", key=f"novel_view.{name}")
 
 
+def _near_far_in_view(camera: Camera, box: np.ndarray, margin: float) -> np.ndarray | None:
+    """The near/far of the subject box for ``camera``, or None when the box is wholly behind it (a requested
+    camera facing away). A non-finite box is an error, not an empty view."""
+    if not np.isfinite(box).all():
+        raise GeometryError(f"novel view: the subject box is not finite: {np.asarray(box).tolist()}")
+    try:
+        return near_far_from_box(camera, box_corners(box), margin)
+    except GeometryError:  # finite, so: behind the near plane
+        return None
+
+
 def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camera, box: np.ndarray,
                       config: NovelViewConfig, *, near_far_margin: float = 0.1, want_heat: bool = False,
                       timing: dict | None = None) -> NovelView:
@@ -235,12 +246,17 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
     t0 = time.perf_counter()
     feeds = dict(env)
     feeds.update(target_inputs([camera], S, contract.width))
-    feeds["near_far"] = near_far_from_box(camera, box_corners(box), near_far_margin)[None]
-    feeds.update(session.run("volume", feeds))
+    near_far = _near_far_in_view(camera, box, near_far_margin)
+    if near_far is not None:
+        feeds["near_far"] = near_far[None]
+        feeds.update(session.run("volume", feeds))
     t1 = time.perf_counter()
     stride = config.stride
     gh, gw = S // stride, contract.width // stride
-    block = box_block(camera, box, stride, margin_cells=1) if config.rays_in_box_only else full_block(gh, gw)
+    if near_far is None:  # the subject is behind this camera: no ray of it, whatever rays_in_box_only says
+        block = None
+    else:
+        block = box_block(camera, box, stride, margin_cells=1) if config.rays_in_box_only else full_block(gh, gw)
     graph = "render" if want_heat else "render_rgb"
     cells, sparse, rays = None, None, 0
     if block is not None:

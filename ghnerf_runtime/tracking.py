@@ -25,7 +25,6 @@ import numpy as np
 
 from ghnerf_runtime.config import RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import GeometryError, ShapeError
-from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.preprocess import Roi, roi_from_joints, roi_from_volume
 
@@ -223,16 +222,3 @@ class SubjectTracker:
         self.track = None
         self.view_track = None
         self._last_rois = None
-
-
-def project_box(camera: Camera, box: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Pixel bounding box ``(lo, hi)`` of a rig box in a pinhole ``camera`` (``None`` if behind it).
-
-    Corners behind the camera make the projection unbounded: the whole image is returned then.
-    """
-    uv, depth = camera.project(box_corners(box), distort=False)
-    if np.all(depth <= 1e-6):
-        return None
-    if np.any(depth <= 1e-6):
-        return np.array([0.0, 0.0]), np.array([camera.width - 1.0, camera.height - 1.0])
-    return uv.min(axis=0), uv.max(axis=0)

@@ -308,3 +308,21 @@ def test_a_rotated_camera_sees_its_image_rotated_about_the_centre(degrees):
         np.testing.assert_allclose(rot.P, cam.quarter_turned(int(degrees // 90)).P, atol=1e-9)
     square = make_camera().without_distortion().resized(48, 48)
     np.testing.assert_allclose(square.rotated(90.0).P, square.quarter_turned(1).P, atol=1e-9)
+
+
+def test_a_lens_folding_far_out_is_flagged_and_inverted_up_to_its_fold():
+    # k1 = -0.002 folds at r = 1 / sqrt(0.006) = 12.91 (83 degrees off the axis): a scan stopping at r = 10 missed
+    # it, so r = 14 counted as in the lens though it lands where r = 11.7 does (distorted radius 8.51).
+    cam = Camera("far", 640, 480, K, [-0.002, 0.0, 0.0, 0.0, 0.0])
+    assert cam.fold_radius == pytest.approx(1.0 / np.sqrt(0.006), rel=1e-3)
+    assert cam.within_lens([[11.7, 0.0], [0.0, 12.8]]).all() and not cam.within_lens([14.0, 0.0])
+    np.testing.assert_allclose(cam.distort([14.0, 0.0]), cam.distort([11.7, 0.0]), atol=0.02)  # the mirror
+    # points between r = 10 and the fold invert (the bracket reaches the fold), none to a root past it
+    xy = np.array([[11.7, 0.0], [0.0, 12.8], [-9.0, 9.0], [3.0, -4.0]])
+    np.testing.assert_allclose(cam.undistort_normalized(cam.distort(xy)), xy, atol=1e-6)
+    assert np.all(np.isnan(cam.undistort_normalized(cam.distort([[14.0, 0.0]]) * 1.05)))
+    # a lens that never folds is checked as far as it is inverted: beyond, outside too
+    from ghnerf_runtime.geometry.camera import LENS_REACH
+    mild = make_camera([0.3, 0.1, 0.0, 0.0, 0.0])  # pincushion
+    assert mild.fold_radius == np.inf and mild.within_lens([LENS_REACH * 0.99, 0.0])
+    assert not mild.within_lens([LENS_REACH * 1.01, 0.0]) and make_camera(DISTORTIONS["none"]).within_lens([1e9, 0.0])

@@ -57,6 +57,20 @@ def test_box_block_covers_the_projected_box():
     assert box_block(cam, box + [0, 0, -10.0], 4) is None  # behind the camera
 
 
+def test_box_block_of_a_box_reaching_behind_or_off_the_image():
+    cam = _cams()[0]
+    centre, forward = cam.center, cam.R[2]  # the camera's position and optical axis (rig frame)
+    across = np.stack([centre - 0.3 * forward - 0.2, centre + 2.0 * forward + 0.2])
+    across = np.stack([across.min(axis=0), across.max(axis=0)])  # corners on both sides of the camera plane
+    z = cam.to_camera(np.array([[x, y, w] for x in across[:, 0] for y in across[:, 1] for w in across[:, 2]]))[:, 2]
+    assert (z <= 0).any() and (z > 0).any()
+    assert box_block(cam, across, 4) == (0, 0, 32, 32)  # unbounded projection: the whole grid
+    aside = centre + 3.0 * forward + 5.0 * cam.R[0]  # 3 m ahead, 5 m to the right: in front, out of view
+    off = np.stack([aside - 0.2, aside + 0.2])
+    assert (cam.to_camera(off)[:, 2] > 0).all()
+    assert box_block(cam, off, 4) is None and box_block(cam, off, 4, margin_cells=2) is None
+
+
 # ------------------------------------------------------------------ tracking
 @pytest.mark.parametrize("roi", [Roi(13, -7, 101), Roi(0, 0, 64), Roi(-3, 250, 333)])
 def test_snap_roi_only_grows_onto_the_grid(roi):

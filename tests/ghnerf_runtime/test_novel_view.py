@@ -322,3 +322,32 @@ def test_opaque_at_is_validated():
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(ConfigError, match="opaque_at"):
             NovelViewConfig(opaque_at=bad)
+
+
+@pytest.mark.parametrize("rays_in_box_only", [True, False])
+def test_a_camera_facing_away_from_the_subject_renders_the_background_without_running_the_graphs(rays_in_box_only):
+    """The box wholly behind the requested camera: no near/far of it exists (near_far_from_box refuses it), so
+    nothing is rendered, not a 1 mm sweep at the near plane over the full grid."""
+    centre = BOX.mean(axis=0)
+    R, t = look_at((0.0, -0.9, 0.0), (0.0, -0.9, -1.0))  # at the box's height, looking away from it
+    away = Camera("novel", 128, 128, intrinsics_from_fov(128, 128, 40.0), np.zeros(5), R, t)
+    assert (away.R @ centre + away.t)[2] < 0  # the subject is behind it
+    session = DiscSession()
+    env = {"images": np.zeros((2, 3, 128, 128), np.float32)}
+    config = NovelViewConfig(enabled=True, rays_in_box_only=rays_in_box_only)
+    nv = render_novel_view(session, env, away, BOX, config)
+    assert session.rays == [] and nv.rays == 0
+    assert not nv.image.any() and not nv.depth.any()
+
+
+def test_a_non_finite_subject_box_is_an_error_not_an_empty_view():
+    from ghnerf_runtime.errors import GeometryError
+    box = BOX.copy()
+    box[0, 0] = np.nan
+    with pytest.raises(GeometryError, match="not finite"):
+        _render_box(box)
+
+
+def _render_box(box):
+    env = {"images": np.zeros((2, 3, 128, 128), np.float32)}
+    return render_novel_view(DiscSession(), env, _camera(), box, NovelViewConfig(enabled=True))

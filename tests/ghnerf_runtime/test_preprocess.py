@@ -129,6 +129,21 @@ def test_roi_from_joints_3d_and_2d_agree_and_track():
         roi_from_joints(cam, joints, np.ones(24))
 
 
+def test_roi_from_joints_leaves_out_confident_joints_behind_the_camera():
+    # a 3D joint behind the camera (or nearer than the near plane) has no pixel: it is left out, not
+    # turned into NaN (a ValueError) or a huge ROI
+    cam = make_camera()
+    rng = np.random.default_rng(5)
+    joints = rng.uniform([-0.3, -1.7, 2.8], [0.3, -0.1, 3.2], size=(25, 3))
+    conf = np.ones(25)
+    want = roi_from_joints(cam, joints[2:], conf[2:], margin_frac=0.1)
+    joints[0] = cam.center - 1.5 * cam.R[2]  # 1.5 m behind
+    joints[1] = cam.center + 0.01 * cam.R[2] + 0.02 * cam.R[0]  # 1 cm in front: inside the near plane
+    assert cam.to_camera(joints[:2])[:, 2].max() < preprocess.NEAR_PLANE
+    assert roi_from_joints(cam, joints, conf, margin_frac=0.1) == want
+    assert roi_from_joints(cam, joints[:4], conf[:4], min_joints=3) is None  # two usable joints only
+
+
 # -------------------------------------------------------------------------- maps
 def _reference_crop(image, cam, roi, out_size, interpolation):
     """cv2.undistort to the ideal camera, crop the ROI, resize: three passes."""

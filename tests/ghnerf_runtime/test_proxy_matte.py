@@ -135,3 +135,41 @@ def test_bad_inputs_are_named(shot):
         NovelViewConfig(matte_feather_m=-1.0)
     with pytest.raises(ConfigError, match="matte"):
         NovelViewConfig(matte="yes")
+
+
+def _meets_brute_force(camera, centre_rig: np.ndarray, r: float) -> np.ndarray:
+    """``(H, W)`` whether each pixel's ray passes within ``r`` of the point, and how far from the edge."""
+    vs, us = np.mgrid[:camera.height, :camera.width].astype(np.float64)
+    d = np.stack([us, vs, np.ones_like(us)], -1) @ np.linalg.inv(camera.K).T
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    c = camera.R @ centre_rig + camera.t
+    along = np.maximum(d @ c, 0.0)  # the ray's closest point to the centre (rays start at the camera)
+    miss = np.linalg.norm(c - along[..., None] * d, axis=-1)
+    return miss <= r, np.abs(miss - r)
+
+
+@pytest.mark.parametrize("centre_cam,r,share", [
+    ((0.0, 0.0, 0.8), 0.63, 1.0),  # near, on the axis: covers the frame (a disc f r / z = 157 px did not)
+    ((0.5, -0.2, 0.6), 0.3, None),  # near, off the axis: an ellipse
+    ((0.3, 0.05, 0.1), 0.25, None),  # across the camera plane (the disc kept the whole view)
+    ((-0.2, 0.3, 3.0), 0.25, None),  # far: close to the disc
+    ((0.0, 0.0, -0.5), 0.3, 0.0),  # wholly behind
+    ((0.1, 0.0, 0.1), 0.3, 1.0),  # round the camera
+])
+def test_reach_spheres_are_drawn_with_their_exact_outline(centre_cam, r, share):
+    from ghnerf_runtime.geometry.camera import Camera, look_at
+    from ghnerf_runtime.proxy_matte import _discs
+
+    R, t = look_at((0.4, -1.3, -0.5), (0.1, -0.9, 3.0))
+    camera = Camera("view", 256, 256, [[200.0, 0.0, 127.5], [0.0, 200.0, 127.5], [0.0, 0.0, 1.0]], [], R, t)
+    centre = R.T @ (np.asarray(centre_cam) - t)  # rig frame
+    got = _discs((256, 256), camera, centre[None], np.array([r]))
+    want, edge = _meets_brute_force(camera, centre, r)
+    clear = edge > 1e-9  # pixels on the outline itself may round either way
+    assert got.shape == (256, 256) and np.array_equal(got[clear], want[clear])
+    if share is not None:
+        assert got.mean() == share
+    else:
+        assert 0.0 < got.mean() < 1.0
+    none = _discs((256, 256), camera, np.zeros((0, 3)), np.zeros(0))
+    assert none.shape == (256, 256) and not none.any()

@@ -190,3 +190,28 @@ def test_near_far_and_ray_grid():
     assert ray_grid(128, 128, 1).shape == (128 * 128, 2)
     with pytest.raises(ContractError, match="stride"):
         ray_grid(128, 128, 3)
+
+
+def test_near_far_of_a_box_across_behind_or_not_finite():
+    """A box reaching behind the camera clamps near to the near plane; one wholly behind it, or NaN, has no
+    range (it was [0.05, 0.051] and [nan, nan], which look like real ones to the graphs)."""
+    from ghnerf_runtime.errors import GeometryError
+
+    cam = Camera("c", 128, 128, intrinsics_from_fov(128, 128, 45.0))  # at the origin, looking along +z
+    idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
+
+    def corners(lo, hi):
+        return np.where(idx == 1, np.asarray(hi, float), np.asarray(lo, float))
+
+    near, far = near_far_from_box(cam, corners([-0.5, -0.5, -1.0], [0.5, 0.5, 2.0]), margin=0.0)
+    assert near == pytest.approx(0.05) and far == pytest.approx(2.0)
+    with pytest.raises(GeometryError, match="behind"):
+        near_far_from_box(cam, corners([-0.5, -0.5, -3.0], [0.5, 0.5, -1.0]), margin=0.1)
+    with pytest.raises(GeometryError, match="behind"):  # in front of the camera, not of the near plane
+        near_far_from_box(cam, corners([-0.5, -0.5, -0.5], [0.5, 0.5, 0.04]), margin=0.0)
+    bad = corners([-0.5, -0.5, 1.0], [0.5, 0.5, 2.0])
+    bad[3, 1] = np.nan
+    with pytest.raises(GeometryError, match="finite"):
+        near_far_from_box(cam, bad)
+    with pytest.raises(GeometryError, match="finite"):
+        near_far_from_box(cam, corners([-0.5, -0.5, 1.0], [0.5, 0.5, 2.0]), margin=float("inf"))
