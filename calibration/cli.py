@@ -486,8 +486,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("capture", help="save image pairs in which a camera sees the board (both images)")
     p.add_argument("--url", required=True, help="rig URL (depthai://, replay://DIR, ...)")
-    p.add_argument("--board")
-    p.add_argument("--out", required=True)
+    p.add_argument("--board", help="the board to look for (default: 9x6 squares of 80 mm); solve and check "
+                                   "still need its measured board.json")
+    p.add_argument("--out", required=True, help="folder: one subfolder per camera, and cameras.json, the order "
+                                                "the rig source gives the cameras in (solve keeps it)")
     p.add_argument("--count", type=_positive_int, default=20, help="views to keep (default 20)")
     p.add_argument("--floor", action="store_true",
                    help="keep one view named 'floor': the board lying still on the floor, seen by both cameras")
@@ -506,7 +508,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--board", help="the board's definition, measured on the print (default: IMAGES/board.json; "
                                    "without either, an error)")
     p.add_argument("--out", required=True, help="rig file to write (docs/rig-file.md)")
-    p.add_argument("--report", help="report JSON (default: OUT with .report.json)")
+    p.add_argument("--report", help="report JSON (default: OUT with .report.json; not OUT itself)")
     p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the order IMAGES/cameras.json "
                                      "records, else the two subfolders, sorted)")
     p.add_argument("--lens", choices=sorted(LENS_MODELS), default="standard")

@@ -282,7 +282,8 @@ def _run(args: argparse.Namespace) -> int:
             elapsed = max(time.monotonic() - start, 1e-9)
         sink_stats = sink.stats()
         stats = source.stats
-        # under LATEST the rig hands out the newest pair and drops (counts) the older ones
+        # under LATEST the rig hands out the newest pair and drops (counts) the older ones; an OAK's count
+        # also holds the pairs lost whole from its host queue (drivers' pairs_dropped)
         skipped = stats.pairs_dropped
         delivered += skipped
     finally:

@@ -5,13 +5,15 @@ late, with what faults?), and a reference receiver in Python beside the C one in
 
     ghnerf-listen udp://:9870                             # a summary line every second (IPv4 and IPv6)
     ghnerf-listen serial:///dev/ttyUSB0?baud=921600 --json  # every message as a JSON line
-    ghnerf-listen udp://0.0.0.0:9870 --seconds 10           # stop after 10 s (default: Ctrl-C)
+    ghnerf-listen udp://0.0.0.0:9870 --seconds 10           # IPv4 only; stop after 10 s (default: Ctrl-C)
 
 The summary: JOINTS messages per second, joints present per message, the sender's latency
 (``send_us - capture_us`` of the JOINTS headers: capture to the wire), sequence gaps (frames the
-sender skipped or the link lost), the latest STATUS (its fault code, docs/protocol.md) and HELLO,
-and the decoder's error counts (a noisy serial line shows as ``crc``/``cobs`` errors). Exit status:
-0; 2 for a bad URL or a port that cannot be opened (named).
+sender numbered but dropped or decimated, or the link lost; camera pairs the sender never made a
+frame of take no number, and a seq that steps back, a restarted sender, is not a gap), the latest
+STATUS (its fault code, docs/protocol.md) and HELLO, and the decoder's error counts (a noisy serial
+line shows as ``crc``/``cobs`` errors). Exit status: 0; 2 for a bad URL or a port that cannot be
+opened (named).
 """
 from __future__ import annotations
 
@@ -232,7 +234,8 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Protocol: docs/protocol.md")
-    ap.add_argument("url", help="udp://[HOST]:PORT or serial://DEVICE?baud=N")
+    ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6) or "
+                                "serial://DEVICE?baud=N")
     ap.add_argument("--json", action="store_true", help="every message (and decode error) as a JSON line")
     ap.add_argument("--seconds", type=float, default=None, help="stop after this long (default: Ctrl-C)")
     args = ap.parse_args(argv)

@@ -491,7 +491,7 @@ class NovelViewConfig:
         enabled: load the colour graph(s) so novel views can be requested. When off, no colour
             graph is loaded or run.
         stride: render every ``stride``-th pixel (1: the full contract resolution; 2: a quarter
-            of the rays, upsampled).
+            of the rays, upsampled); must divide the model resolution (the estimator checks it at load).
         heatmaps: also render joint heatmaps at the novel camera (``render`` graph: colour and
             heatmaps in one pass; costs more).
         rays_in_box_only: render only the rays inside the projected subject box (the rest is
@@ -515,7 +515,8 @@ class NovelViewConfig:
             filled in bilinearly; its edge cells are rendered at ``stride``. The edges of the
             silhouette, where the picture changes fastest, keep full resolution; what the interior
             loses against every ray is measured in docs/runtime.md. Applies when larger than
-            ``stride``; must divide ``silhouette_stride``. 0: off (every subject cell at ``stride``).
+            ``stride``; must divide ``silhouette_stride`` and the model resolution (checked at load).
+            0: off (every subject cell at ``stride``).
         overlap: on a tracked pair, render the novel view in a worker thread while this pair's
             keypoints are decoded and triangulated (onnxruntime releases the GIL; its render
             graphs gain little from the second core, measured in docs/runtime.md). The view is

@@ -51,10 +51,10 @@ DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: the nearest rotation. A file that prints six decimals is off by up to about 1e-6 (0.0001 degree).
 ROTATION_TOLERANCE = 1e-4
 #: How far the principal point may lie from the image centre, as a fraction of the image's width (x)
-#: and height (y). Real lenses sit within a few per cent of it (lens-to-sensor mounting tolerance: an
-#: OAK's factory calibrations are within 1 %); a calibration made at another image size and read with
-#: this one is off by a sixth of the image (1280x720 read as 1920x1080) or a quarter (the other way),
-#: which the old "inside the image" test let through. 10 % leaves margin on both sides.
+#: and height (y). Real lenses sit within a few per cent of it (lens-to-sensor mounting tolerance); a
+#: calibration made at another image size and read with this one is off by a sixth of the image
+#: (1280x720 read as 1920x1080) or a quarter (the other way), which the old "inside the image" test
+#: let through. 10 % leaves margin on both sides.
 PRINCIPAL_POINT_TOLERANCE = 0.1
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")

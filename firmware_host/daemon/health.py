@@ -46,7 +46,7 @@ class Health:
     cameras: tuple[str, ...] = ()
     pairs_read: int = 0
     pairs_estimated: int = 0
-    pairs_dropped: int = 0  # skipped by the driver under the latest-pair policy
+    pairs_dropped: int = 0  # skipped by the driver under the latest-pair policy, or lost whole (an OAK's host queue)
     estimate_errors: int = 0
     rig_opens: int = 0
     rig_open_failures: int = 0

@@ -55,8 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     src = ap.add_mutually_exclusive_group()
     src.add_argument("--images", nargs=2, metavar=("FIRST", "SECOND"), help="one image per camera, rig order")
     src.add_argument("--videos", nargs=2, metavar=("FIRST", "SECOND"), help="one video per camera, rig order")
-    ap.add_argument("--out", default="-", help="joints output: .json (a list), .jsonl or - (stdout, one object "
-                                               "per line); default -")
+    ap.add_argument("--out", default="-", help="joints output: .json (a list, written atomically at the end; a run "
+                                               "stopped early keeps the pairs it finished), .jsonl or - (stdout, "
+                                               "one object per line as each pair is done); default -")
     ap.add_argument("--config", help="estimator config (JSON, docs/runtime.md); flags below override it")
     ap.add_argument("--model-dir", help="model folder (default: the config's, else ./models)")
     ap.add_argument("--precision", choices=("auto", "fp32", "int8"), help="graph file precision")
@@ -85,7 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, help="novel camera between the rig cameras: 0 = first, "
-                                                      "1 = second (default 0.5)")
+                                                      "1 = second (default 0.5); -1..2 extrapolates, "
+                                                      "refused where the focal length would reach 0")
     ap.add_argument("--novel-overlay", choices=("none", "skeleton", "heatmap"), help="drawn on the novel view "
                                                                                      "(default none)")
     ap.add_argument("--novel-stride", type=int, choices=(1, 2, 4), help="render every n-th novel-view pixel")

@@ -311,7 +311,7 @@ def test_a_rotated_camera_sees_its_image_rotated_about_the_centre(degrees):
 
 
 def test_a_lens_folding_far_out_is_flagged_and_inverted_up_to_its_fold():
-    # k1 = -0.002 folds at r = 1 / sqrt(0.006) = 12.91 (83 degrees off the axis): a scan stopping at r = 10 missed
+    # k1 = -0.002 folds at r = 1 / sqrt(0.006) = 12.91 (86 degrees off the axis): a scan stopping at r = 10 missed
     # it, so r = 14 counted as in the lens though it lands where r = 11.7 does (distorted radius 8.51).
     cam = Camera("far", 640, 480, K, [-0.002, 0.0, 0.0, 0.0, 0.0])
     assert cam.fold_radius == pytest.approx(1.0 / np.sqrt(0.006), rel=1e-3)
