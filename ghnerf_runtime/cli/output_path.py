@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import tempfile
 from pathlib import Path
 from typing import Literal
 
@@ -56,25 +55,3 @@ def ready_output_arg(ap: argparse.ArgumentParser, path: str | os.PathLike, flag:
         return ready_output(path, flag, kind, suffix)
     except OutputPathError as e:
         ap.error(str(e))
-
-
-def write_atomically(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and ``os.replace``: a reader (or
-    a crash) sees the earlier file or the new one whole, never a truncated one. The file gets the mode an
-    ``open(path, "w")`` would give it (an existing file's, else the umask's)."""
-    p = Path(path)
-    try:
-        mode = p.stat().st_mode & 0o777
-    except FileNotFoundError:
-        umask = os.umask(0)
-        os.umask(umask)
-        mode = 0o666 & ~umask
-    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.chmod(tmp, mode)
-        os.replace(tmp, p)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise

@@ -32,12 +32,12 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output, write_atomically
+from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, config_to_dict, load_config
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
-from ghnerf_runtime.rig_file import load_rig
+from ghnerf_runtime.rig_file import load_rig, write_text_atomic
 
 log = logging.getLogger("ghnerf-run")
 
@@ -308,7 +308,7 @@ def _write_list(path: str, frames: list[dict], done: bool) -> None:
     and one that finished none leaves an earlier file as it was."""
     if not (done or frames):
         return
-    write_atomically(path, json.dumps(frames, allow_nan=False) + "\n")
+    write_text_atomic(path, json.dumps(frames, allow_nan=False) + "\n")  # the rig file's writer: fsynced
     if not done:
         print(f"ghnerf-run: stopped early; the {len(frames)} pair(s) finished are in {path}", file=sys.stderr)
 
