@@ -370,7 +370,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
                          rig_id=args.rig_id)
-    # the report first: a rig file is never left beside a report of another solve
+    # the report first, so the rig file is never newer than its report; if save_rig then fails, the new
+    # report is left beside the old rig
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
     save_rig(solution.rig, out)
     r = solution.report

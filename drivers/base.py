@@ -114,7 +114,8 @@ class RigSource(abc.ABC):
 
         A backend that sees both cameras skip together (depthai's Sync groups discarded from the
         host queue) reports them here: :meth:`read` counts them in ``stats.pairs_dropped`` and as
-        sequence gaps, not as camera gaps. Called once after each frame. Default: 0.
+        sequence gaps, not as camera gaps. Called once for each frame :meth:`_read_frame` returned, just
+        before it is pushed into the pairer. Default: 0.
         """
         return 0
 

@@ -160,6 +160,19 @@ class FramePairer:
         for i, (sequence, first, second) in enumerate(self._ready):
             self._ready[i] = (sequence, replace(first), replace(second))
 
+    def discard_held(self, drop: Callable[[Frame], bool]) -> None:
+        """Forget every held frame for which ``drop(frame)`` is true (one whose image could not be loaded):
+        a waiting one counts as unpaired, a pair not yet read that holds one as dropped (a sequence gap)."""
+        for cam, queue in self._pending.items():
+            kept = [frame for frame in queue if not drop(frame)]
+            self.stats.unpaired[cam] += len(queue) - len(kept)
+            queue.clear()
+            queue.extend(kept)
+        ready = [item for item in self._ready if not (drop(item[1]) or drop(item[2]))]
+        self.stats.pairs_dropped += len(self._ready) - len(ready)
+        self._ready.clear()
+        self._ready.extend(ready)
+
     def pop(self) -> tuple[int, Frame, Frame] | None:
         """The next complete pair as ``(sequence, frame_a, frame_b)``, or ``None``.
 

@@ -29,11 +29,13 @@ paired or not, so a replay meets the same pairing situations. A write failure
 (disk full...) is raised once from the next ``read()`` as
 :class:`RigOperationError`; after that frames pass through unrecorded.
 
-Durability: files are not fsynced per frame (too slow for small disks); at close
-every image and truth file written, their folders and the journal are fsynced,
+Durability: files are not fsynced per frame on the read path (too slow for small
+disks): the writer threads fsync them in batches of :data:`SYNC_BATCH` files as
+they go (so the backlog stays bounded and close stays quick); at close the
+writers fsync what is outstanding, then the folders and the journal are fsynced,
 and only then is the manifest rewritten with ``complete: true`` (itself fsynced),
 so the mark never reaches the disk before the data it vouches for. A take cut
-short before that stays ``complete: false``; replay drops its torn tail.
+short before that stays ``complete: false``; replay drops the rows whose files are missing or empty.
 """
 from __future__ import annotations
 
@@ -63,11 +65,15 @@ from drivers.errors import RigConfigError, RigInitializationError, RigOperationE
 from drivers.frames import Frame
 from drivers.pairing import PairingStats
 from drivers.url import RigUrl
+from ghnerf_runtime.rig_file import principal_point_problem
 
 log = logging.getLogger(__name__)
 
 #: Options the recorder consumes from the URL.
 RECORD_OPTIONS = ("out", "image_format", "jpeg_quality", "write_queue", "writers", "lossless")
+
+#: Written files a writer thread lets pile up before it fsyncs them (bounds the backlog close must fsync).
+SYNC_BATCH = 64
 
 
 @dataclass(frozen=True)
@@ -127,9 +133,19 @@ class RecordingWriter:
         self._journal_lock = threading.Lock()
         self._journal = None
         self._threads: list[threading.Thread] = []
-        self._unsynced: list[str] = []  # payload files written, not fsynced yet (relative paths, under the lock)
+        # Payload files written, not fsynced yet (relative paths, under the journal lock): a writer that
+        # brings it to SYNC_BATCH takes the batch and fsyncs it, off the reader's path.
+        self._unsynced: list[str] = []
+        self._folders: set[Path] = set()  # folders of the files fsynced, for close (a few: one per camera and kind)
 
     def start(self) -> None:
+        # replay reads the manifest's rig with rig_from_dict: refuse a rig it would refuse, before any file is made
+        for cam in self.manifest.rig.cameras:
+            problem = principal_point_problem(cam.K, cam.width, cam.height)
+            if problem:
+                raise RigInitializationError(
+                    f"cannot record to {self.directory}: the take could not be replayed: camera {cam.name!r}: {problem}"
+                )
         try:
             self.directory.mkdir(parents=True, exist_ok=True)
             if any(self.directory.iterdir()):
@@ -199,9 +215,25 @@ class RecordingWriter:
                     self._journal.flush()
                     self.frames_written += 1
                     self._unsynced.extend(rel for rel in (row.image, row.truth) if rel is not None)
+                    batch = self._take_unsynced(SYNC_BATCH)
+                self._sync_files(batch)
             except BaseException as e:  # noqa: BLE001 - reported to the reader thread, see module doc
                 log.error("recording to %s failed at %s: %s", self.directory, row.image, e)
                 self.error = e
+
+    def _take_unsynced(self, at_least: int) -> list[str]:
+        """The pending files to fsync, taken off the list, when there are ``at_least`` of them (under the lock)."""
+        if len(self._unsynced) < max(at_least, 1):
+            return []
+        batch, self._unsynced = self._unsynced, []
+        return batch
+
+    def _sync_files(self, batch: list[str]) -> None:
+        for rel in batch:
+            path = self.directory / rel
+            _fsync(path)
+            with self._journal_lock:
+                self._folders.add(path.parent)
 
     def close(self, counters: dict) -> None:
         """Write what is queued, fsync it (:meth:`_sync`), then finalise the manifest (``complete: true``)."""
@@ -228,12 +260,8 @@ class RecordingWriter:
     def _sync(self) -> None:
         """fsync the payload files written, their folders and the journal, before ``complete: true`` is written:
         a power cut after the manifest reached the disk must not find the rows' files missing or empty."""
-        folders = set()
-        for rel in self._unsynced:
-            path = self.directory / rel
-            _fsync(path)
-            folders.add(path.parent)
-        for folder in sorted(folders):
+        self._sync_files(self._take_unsynced(1))  # the writers have stopped: what their last batches left
+        for folder in sorted(self._folders):
             try:  # makes the files' names durable; not possible on every platform
                 _fsync(folder)
             except OSError as e:
@@ -241,7 +269,6 @@ class RecordingWriter:
         assert self._journal is not None
         self._journal.flush()
         os.fsync(self._journal.fileno())
-        self._unsynced.clear()
 
 
 def _fsync(path: Path) -> None:

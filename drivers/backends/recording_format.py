@@ -235,17 +235,17 @@ def _parse_line(line: bytes) -> Any:
         raise ValueError(f"invalid JSON: {e.msg}") from e
 
 
-def drop_torn_tail(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], int]:
-    """A take cut short (``complete: false``): ``rows`` without the trailing ones whose image or truth file is
-    missing or empty (journal rows can reach the disk before their files), and how many were dropped.
+def drop_broken_rows(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], int]:
+    """A take cut short (``complete: false``): ``rows`` without those whose image or truth file is missing or
+    empty, and how many were dropped.
 
-    Only the tail: a broken row followed by whole ones is damage, reported when the take is opened.
+    Journal rows can reach the disk before their files, and with several writer threads and no per-frame
+    fsync the rows a power cut tore need not be the last ones: every broken row is dropped, wherever it is.
+    A ``complete: true`` take promises whole files, so there any broken row is reported when it is opened.
     """
-    keep = len(rows)
-    while keep and not all(file_is_whole(directory / rel) for rel in (rows[keep - 1].image, rows[keep - 1].truth)
-                           if rel is not None):
-        keep -= 1
-    return rows[:keep], len(rows) - keep
+    kept = [row for row in rows
+            if all(file_is_whole(directory / rel) for rel in (row.image, row.truth) if rel is not None)]
+    return kept, len(rows) - len(kept)
 
 
 def file_is_whole(path: Path) -> bool:

@@ -15,8 +15,9 @@ URL options:
 Frames carry the recorded timestamps, indices and ground truth unchanged on the
 first pass. Each further ``loop`` pass shifts timestamps by the recording's span
 (plus one frame period) and indices by the per-camera count, so both keep
-increasing per camera. A take that was not closed cleanly plays without its torn
-tail (:func:`~drivers.backends.recording_format.drop_torn_tail`). Layout and
+increasing per camera. A take that was not closed cleanly plays without the rows
+whose files are missing or empty
+(:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
 validation: docs/recording-format.md.
 """
 from __future__ import annotations
@@ -30,7 +31,7 @@ from drivers.backends.recording_format import (
     FRAMES,
     FrameRow,
     Manifest,
-    drop_torn_tail,
+    drop_broken_rows,
     file_is_whole,
     load_image,
     load_truth,
@@ -115,10 +116,10 @@ class ReplayRigSource(RigSource):
         manifest = read_manifest(directory)
         rows = read_rows(directory, manifest)
         if not manifest.complete:
-            rows, torn = drop_torn_tail(directory, rows)
-            if torn:
-                log.warning("recording %s: dropped its last %d journal row(s), whose files are missing or empty "
-                            "(a torn tail)", directory, torn)
+            rows, broken = drop_broken_rows(directory, rows)
+            if broken:
+                log.warning("recording %s: dropped %d journal row(s) whose files are missing or empty "
+                            "(written after the last flush before the take was cut short)", directory, broken)
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
         return cls(
             directory, manifest, rows, speed=speed, loop=loop,
@@ -229,13 +230,28 @@ class ReplayRigSource(RigSource):
             frame = self._frame(row, shift_ns, _NOT_LOADED, None, None)
             self._unloaded[frame] = due
             pairer.push(frame)
-        if self._unloaded:
-            pairer.replace_held(self._loaded)
+        if not self._unloaded:
+            return
+        errors: list[RigOperationError] = []
+        try:
+            pairer.replace_held(lambda frame: self._loaded(frame, errors))
+        finally:
             self._unloaded.clear()  # the rest went into dropped pairs or were unpaired
+        if errors:
+            # A row that cannot be loaded (corrupt, wrong size) leaves the pairer with its frame, and the
+            # error is raised once, as a paced read without catching up would: the next read goes on.
+            pairer.discard_held(lambda frame: frame.image is _NOT_LOADED)
+            raise errors[0]
 
-    def _loaded(self, frame: Frame) -> Frame:
+    def _loaded(self, frame: Frame, errors: list[RigOperationError]) -> Frame:
         due = self._unloaded.get(frame)
-        return frame if due is None else self._load(*due)
+        if due is None:
+            return frame
+        try:
+            return self._load(*due)
+        except RigOperationError as e:
+            errors.append(e)
+            return frame  # still the placeholder: discarded after
 
     def _load(self, row: FrameRow, shift_ns: int) -> Frame:
         path = self.directory / row.image

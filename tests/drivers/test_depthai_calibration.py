@@ -126,3 +126,17 @@ def test_a_rolled_mount_keeps_the_rig_level_and_the_cameras_carry_the_roll(calib
     assert np.allclose(right.to_camera(points), left.to_camera(points) @ T[:3, :3].T + T[:3, 3], atol=1e-6)
     assert (upright_roll_deg(left) - roll + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-9)
     assert rolled.metadata["mount_roll_deg"] == roll
+
+
+def test_a_principal_point_far_off_centre_is_refused_naming_device_socket_and_values(calib):
+    """A rig the recorder could write but replay (rig_from_dict) would refuse is refused where it is made."""
+    off = dai.CalibrationHandler.fromJson(calib.eepromToJson())
+    K0, w0, h0 = off.getDefaultIntrinsics(S.CAM_C)
+    K0 = np.array(K0)
+    K0[0, 2] = 0.9 * w0  # 40% of the width off centre
+    off.setCameraIntrinsics(S.CAM_C, K0.tolist(), w0, h0)
+    with pytest.raises(RigInitializationError) as info:
+        rig_from_calibration(off, S.CAM_B, S.CAM_C, (640, 400), 1.0, rig_id="oak-1844301")
+    message = str(info.value)
+    assert "oak-1844301" in message and "CAM_C" in message and "principal point" in message
+    assert f"({0.9 * w0 / 2:g}," in message and "640x400" in message

@@ -284,3 +284,27 @@ def test_a_poll_takes_the_pair_already_there_and_only_then_times_out(sim_cache, 
         assert [p.sequence for p in polled] == list(range(len(polled))) and len(polled) >= 3
     else:
         assert len(polled) == 1 and 0 <= clock.now_ns() - max(polled[0].timestamps_ns) < PERIOD_NS
+
+
+def test_paced_replay_under_latest_raises_a_corrupt_row_once_then_goes_on(take, tmp_path):
+    """A row that cannot be loaded while catching up is raised once, not by every read until it ages out."""
+    import json
+    import shutil
+
+    from drivers import RigOperationError
+
+    copy = tmp_path / "take"
+    shutil.copytree(take, copy)
+    rows = [json.loads(line) for line in (copy / "frames.jsonl").read_text().splitlines()]
+    bad = next(r for r in rows if r["camera"] == "left" and r["index"] == 3)
+    (copy / bad["image"]).write_bytes(b"\x89PNG garbage")
+    clock = ManualClock(123_000_000_000)
+    with open_rig(f"replay://{copy}?speed=recorded&policy=latest", clock=clock) as source:
+        assert source.read(timeout_s=1.0).sequence == 0
+        clock.advance(WORK_NS)  # pair 3 is the newest due
+        with pytest.raises(RigOperationError, match="corrupt") as info:
+            source.read(timeout_s=1.0)
+        assert bad["image"] in str(info.value)
+        pair = source.read(timeout_s=1.0)  # the bad row is behind us
+        assert pair.frames[0].index == 4 and all(f.image.size for f in pair.frames)
+        assert source.stats.pairs_dropped == 3  # pairs 1 and 2 skipped, pair 3 lost to the corrupt image

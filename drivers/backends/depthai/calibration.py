@@ -25,6 +25,7 @@ import depthai as dai
 from drivers.errors import RigInitializationError
 from ghnerf_runtime.errors import GeometryError
 from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, nearest_rotation
+from ghnerf_runtime.rig_file import principal_point_problem
 
 #: Where a person can stand in front of a level-mounted OAK (rig frame, metres): used
 #: when the calibration comes from the device; a rig file carries its own.
@@ -50,8 +51,10 @@ def crop_resize_intrinsics(K: np.ndarray, source_size: tuple[int, int], size: tu
     return out
 
 
-def _camera(calib: dai.CalibrationHandler, socket: dai.CameraBoardSocket, name: str, size: tuple[int, int]) -> Camera:
-    where = f"device calibration of {socket.name} ({name})"
+def _camera(
+    calib: dai.CalibrationHandler, socket: dai.CameraBoardSocket, name: str, size: tuple[int, int], device: str
+) -> Camera:
+    where = f"device calibration of {device} {socket.name} ({name})"
     if not calib.hasCameraCalibration(socket):
         raise RigInitializationError(f"{where}: the EEPROM has no calibration for this socket")
     model = calib.getDistortionModel(socket)
@@ -64,6 +67,12 @@ def _camera(calib: dai.CalibrationHandler, socket: dai.CameraBoardSocket, name: 
     if dist.size == 14 and np.any(dist[12:] != 0):
         raise RigInitializationError(f"{where}: tilted-sensor terms tx, ty = {dist[12:].tolist()} are not supported")
     K = crop_resize_intrinsics(np.asarray(K0), (w0, h0), size)
+    # The rule a rig file enforces (a take recorded from this rig must replay): checked where the rig is made.
+    problem = principal_point_problem(K, size[0], size[1], advice=(
+        f"the EEPROM's intrinsics (calibrated at {w0}x{h0}) do not fit this socket at {size[0]}x{size[1]}; "
+        "recalibrate the device or supply rig=FILE"))
+    if problem is not None:
+        raise RigInitializationError(f"{where}: {problem}")
     try:
         return Camera(name, size[0], size[1], K, dist=dist)
     except GeometryError as e:
@@ -89,10 +98,12 @@ def rig_from_calibration(
 
     Raises:
         RigInitializationError: a socket is not calibrated, uses an unsupported lens
-            model, or the extrinsics are not a rigid transform.
+            model or a principal point far from its image's centre
+            (:func:`ghnerf_runtime.rig_file.principal_point_problem`), or the extrinsics
+            are not a rigid transform.
     """
-    cam_l = _camera(calib, left, names[0], size)
-    cam_r = _camera(calib, right, names[1], size)
+    cam_l = _camera(calib, left, names[0], size, rig_id)
+    cam_r = _camera(calib, right, names[1], size, rig_id)
     try:
         T = np.asarray(calib.getCameraExtrinsics(left, right, unit=dai.LengthUnit.METER), dtype=np.float64)
     except RuntimeError as e:
