@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
 from urllib.parse import parse_qs, urlsplit
 
+from firmware_host.addresses import ipv4_first
 from firmware_host.protocol.constants import Fault
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
@@ -60,18 +61,18 @@ class _UdpPort:
         self.sock.close()
 
 
-def _cannot_listen(host: str, port: int, e: OSError) -> ListenError:
+def _cannot_listen(host: str, port: int, e: Exception) -> ListenError:
     where = f"[{host}]" if ":" in host else host
-    return ListenError(f"udp://{where}:{port}: cannot listen: {e.strerror or e}")
+    return ListenError(f"udp://{where}:{port}: cannot listen: {getattr(e, 'strerror', None) or e}")
 
 
 def _bind(host: str, port: int) -> socket.socket:
     """``host``'s IPv4 address if it has one (as the udp:// sink picks), else its first."""
     try:
         infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM, flags=socket.AI_PASSIVE)
-        family, _, _, _, addr = min(infos, key=lambda info: info[0] != socket.AF_INET)
+        family, addr = ipv4_first(infos)
         sock = socket.socket(family, socket.SOCK_DGRAM)
-    except OSError as e:
+    except (OSError, ValueError) as e:  # ValueError: an empty answer
         raise _cannot_listen(host, port, e) from e
     try:
         sock.bind(addr)

@@ -57,7 +57,7 @@ from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame
-from firmware_host.protocol.constants import Fault
+from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.registry import sink_class
 from firmware_host.sinks.url import parse_url
@@ -161,6 +161,7 @@ class Daemon:
         self._frame_numbers = FrameNumbers()
         self._status_file_failing = False
         self._closed_sink_stats: dict[str, Any] = {}  # the last counters of sinks already closed
+        self._carried_gaps: dict[str, int] = {}  # gap flags a closed sink could not report, by URL
         self._reload_config = reload_config
         self._on_reload = on_reload
         # A plain flag, not an Event: set from a signal handler, which must never wait on a lock the
@@ -384,6 +385,9 @@ class Daemon:
         if "rig_id" not in parse_url(url).query:
             kw["rig_id"] = key[0]
         sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
+        carried = self._carried_gaps.pop(url, 0)
+        if carried:  # frames the sink it replaces lost at close: its first frame says so, not a silent gap
+            sink.carry_gap(carried)
         self._apply_fault(sink)  # before start: its first STATUS already carries the fault
         return sink
 
@@ -392,8 +396,12 @@ class Daemon:
         try:
             sink.close()
             self._closed_sink_stats[url] = self._stats_of(sink)
+            gap = sink.pending_gap_flags()
         except Exception as e:  # noqa: BLE001 - a link that fails even to close (a USB error): it is gone
             _log.warning("closing sink %s: %s", url, e)
+            gap = int(Flags.DROPPED)  # what it still held is unknown: assume lost
+        if gap:  # passed on to the next sink of this URL (_build_sink)
+            self._carried_gaps[url] = self._carried_gaps.get(url, 0) | gap
 
     def _close_sinks(self) -> None:
         with self._fault_lock:

@@ -208,6 +208,22 @@ class Sink(ABC):
             return "up"
         return "down" if self._down else "connecting"
 
+    def pending_gap_flags(self) -> int:
+        """The gap flags (DROPPED, DECIMATED) the next frame would have carried: after ``close()``, what
+        this sink lost that no frame of it reported (frames still queued or in flight, failed writes,
+        decimation). A sink replacing this one on the same link passes them on with :meth:`carry_gap`."""
+        with self._cond:
+            flags = self._gap_flags | self._error_flags
+            if self._queue or self._in_flight:
+                flags |= Flags.DROPPED
+            return flags
+
+    def carry_gap(self, flags: int) -> None:
+        """Mark the next frame with ``flags`` (DROPPED, DECIMATED): a gap made before this sink existed,
+        e.g. frames a sink it replaces dropped when closed (docs/protocol.md section 3)."""
+        with self._cond:
+            self._gap_flags |= int(flags) & (Flags.DROPPED | Flags.DECIMATED)
+
     def wait_drained(self, timeout: float) -> bool:
         """Block until nothing is queued or in flight (for shutdown and tests)."""
         with self._cond:
@@ -232,6 +248,8 @@ class Sink(ABC):
             self._thread.join(timeout)
         with self._cond:
             self._dropped_close += len(self._queue)
+            for _, flags in self._queue:  # a gap no frame of this sink will report now
+                self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
             self._queue.clear()
         if self._thread is None or not self._thread.is_alive():
             self._release()
@@ -256,24 +274,32 @@ class Sink(ABC):
             self._disconnect()
 
     def _try_connect(self, backoff: Backoff) -> None:
+        """Connect and announce; the link counts as up (state, ``connects``, "connected again") only once
+        ``_on_connected`` went through: a port that opens but fails its first write (EIO, a udp:// route
+        that is gone) is still the same outage, logged once, not an up/down flicker on every retry."""
+        opened = False
+        write_error: Optional[str] = None
         try:
             self._connect()
-            with self._cond:
-                self._connected = True
-                self._connects += 1
-                was_down, self._down, self._down_error = self._down, False, None
-                self._cond.notify_all()
-            if was_down:
-                _log.info("%s: connected again", self.url)
+            opened = True
             self._on_connected()
         except SinkWriteError as e:  # e.g. HELLO hit a stalled endpoint: the link itself is up
-            with self._cond:
-                self._last_error = str(e)
+            write_error = str(e)
         except Exception as e:  # SinkUnavailableError, or a backend bug: retry later either way
-            self._release()
+            if opened:
+                self._disconnect()  # never marked connected, so _release() would not
             self._connect_failed(e, backoff.policy.max_s)
             self._stop.wait(backoff.next_delay())
             return
+        with self._cond:
+            self._connected = True
+            self._connects += 1
+            was_down, self._down, self._down_error = self._down, False, None
+            if write_error is not None:
+                self._last_error = write_error
+            self._cond.notify_all()
+        if was_down:
+            _log.info("%s: connected again", self.url)
         backoff.reset()
 
     def _connect_failed(self, e: Exception, retry_s: float) -> None:

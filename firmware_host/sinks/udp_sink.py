@@ -21,6 +21,7 @@ import threading
 import time
 from typing import Any, Optional
 
+from firmware_host.addresses import ipv4_first
 from firmware_host.errors import SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.encoder import encode
 from firmware_host.protocol.messages import Message
@@ -43,10 +44,10 @@ def resolve(url: str, host: str, port: int) -> tuple[int, Any]:
         infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
     except OSError as e:
         raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: {e}") from e
-    if not infos:
-        raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: no address")
-    family, _, _, _, addr = min(infos, key=lambda info: info[0] != socket.AF_INET)  # stable: keeps the order
-    return family, addr
+    try:
+        return ipv4_first(infos)
+    except ValueError as e:
+        raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: {e}") from e
 
 
 def _is_ip_literal(host: str) -> bool:
@@ -70,14 +71,17 @@ class DatagramLink:
         self._family = 0
         self._addr: Any = None
         self._is_name = not _is_ip_literal(host)
-        self._lock = threading.Lock()  # guards _fresh, _looking_up and _resolved_at
+        self._lock = threading.Lock()  # guards _fresh, _looking_up, _resolved_at and _generation
         self._fresh: Optional[tuple[int, Any]] = None
+        # Bumped by each open(): a lookup started for an earlier connection answers too late to be used.
+        self._generation = 0
         self._looking_up = False
         self._resolved_at = 0.0
 
     def open(self) -> None:
         family, addr = resolve(self.url, self.host, self.port)
         with self._lock:
+            self._generation += 1
             self._fresh, self._resolved_at = None, time.monotonic()
         self._use(family, addr)
 
@@ -111,21 +115,27 @@ class DatagramLink:
             due = self._is_name and not self._looking_up and now - self._resolved_at >= self.resolve_s
             if due:
                 self._looking_up, self._resolved_at = True, now
+            generation = self._generation
         if fresh is not None and fresh[1] != self._addr:
             _log.info("%s: %s now resolves to %s (was %s)", self.url, self.host, fresh[1][0], self._addr[0])
             self._use(*fresh)
         if due:
-            threading.Thread(target=self._look_up, name=f"resolve {self.host}", daemon=True).start()
+            # the thread gets what it needs as arguments: it never reads the worker's _addr
+            threading.Thread(target=self._look_up, args=(generation, self._addr), name=f"resolve {self.host}",
+                             daemon=True).start()
 
-    def _look_up(self) -> None:
+    def _look_up(self, generation: int, addr: Any) -> None:
+        """One lookup for the connection ``generation`` (sending to ``addr`` when it started); its answer is
+        dropped when the link was reopened meanwhile: that open() looked the name up afresh."""
         try:
             fresh: Optional[tuple[int, Any]] = resolve(self.url, self.host, self.port)
         except SinkUnavailableError as e:  # keep sending to the address it had; the next lookup may work
-            _log.debug("%s; still sending to %s", e, self._addr)
+            _log.debug("%s; still sending to %s", e, addr[0] if addr else addr)
             fresh = None
         with self._lock:
-            self._fresh = fresh or self._fresh
             self._looking_up = False
+            if fresh is not None and generation == self._generation:
+                self._fresh = fresh
 
     def send(self, datagram: bytes) -> None:
         if self._sock is None:

@@ -103,10 +103,19 @@ def test_a_slow_estimator_skips_to_the_newest_pair(tmp_path, capsys, sim_url, mo
     assert rc == 0, out
     delivered, estimated, skipped = _summary(out)
     assert estimated > 0 and skipped > 0 and delivered == estimated + skipped
-    seqs = [r["seq"] for r in _joints_rows(tmp_path / "joints.jsonl")]
+    rows = _joints_rows(tmp_path / "joints.jsonl")
+    seqs = [r["seq"] for r in rows]
     # The pairs skipped were never frames: no gap in the stream's seq, where a gap means lost on the link
     # (docs/protocol.md section 3); the summary counts them instead.
     assert seqs == list(range(estimated))
+    # Each estimate takes the newest pair: while one runs (>= 0.1 s, three periods at 30 fps) at least
+    # three pairs arrive, so consecutive frames are >= ~3 periods apart in capture time. An estimator that
+    # took the pairs in turn (skipping only what overflowed) would step one period at a time. A loaded
+    # machine only makes the estimates, and so the steps, longer; 2.5 periods leaves room for capture jitter.
+    period_us = 1e6 / 30
+    steps = np.diff([r["capture_us"] for r in rows])
+    assert len(steps) >= 2, rows
+    assert np.median(steps) >= 2.5 * period_us, steps.tolist()
 
 
 @pytest.mark.parametrize("make", [False, True], ids=["absent", "empty"])

@@ -140,3 +140,24 @@ def test_udp_on_an_ipv6_literal():
         assert port.sock.family == socket.AF_INET6 and _datagram_reaches(port, socket.AF_INET6, "::1")
     finally:
         port.close()
+
+
+def test_the_listener_and_the_udp_sink_pick_a_name_s_address_by_one_rule(monkeypatch: pytest.MonkeyPatch) -> None:
+    from firmware_host import addresses
+    from firmware_host.sinks import udp_sink
+
+    v6, v4 = ("::1", 9870, 0, 0), ("127.0.0.1", 9870)
+    infos = [(socket.AF_INET6, socket.SOCK_DGRAM, 17, "", v6), (socket.AF_INET, socket.SOCK_DGRAM, 17, "", v4)]
+    assert addresses.ipv4_first(infos) == (socket.AF_INET, v4)
+    assert addresses.ipv4_first(infos[:1]) == (socket.AF_INET6, v6)
+    used: list[object] = []
+
+    def spy(answer):
+        used.append(answer)
+        return addresses.ipv4_first(answer)
+
+    monkeypatch.setattr(listen, "ipv4_first", spy)
+    monkeypatch.setattr(udp_sink, "ipv4_first", spy)
+    udp_sink.resolve("udp://localhost:0", "localhost", 0)
+    listen._bind("127.0.0.1", 0).close()
+    assert len(used) == 2  # both went through the shared rule

@@ -264,3 +264,37 @@ def test_a_lost_link_reads_down_until_it_reconnects() -> None:
     sink.connect_failures_left = 0
     wait_until(lambda: sink.stats().state == "up", what="reconnect")
     sink.close()
+
+
+def test_a_link_that_opens_but_fails_its_first_write_warns_once_and_stays_down(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A port that opens but EIOs on HELLO (or a udp:// whose route is gone) is one outage: one WARNING,
+    no "connected again" per retry, and the state never reads up in between."""
+    class HelloFails(ScriptedSink):
+        hello_fails = True
+        disconnects_seen = 0
+
+        def _on_connected(self) -> None:
+            if self.hello_fails:
+                raise SinkUnavailableError(self.url, "network unreachable")
+
+        def _disconnect(self) -> None:
+            self.disconnects_seen += 1
+
+    sink = HelloFails()
+    states: list[str] = []
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink.start()
+        while sink.stats().connect_failures < 6:
+            states.append(sink.stats().state)
+        loud = sink_records(caplog, logging.INFO)
+        assert len(loud) == 1 and loud[0].levelno == logging.WARNING, [r.getMessage() for r in loud]
+        assert "up" not in states
+        s = sink.stats()
+        assert s.state == "down" and s.connects == 0 and "network unreachable" in (s.last_error or "")
+        assert sink.disconnects_seen >= 5  # each half-open link is released
+        sink.hello_fails = False
+        wait_until(lambda: sink.stats().state == "up", what="up once HELLO goes out")
+        assert sink.stats().connects == 1
+        assert "connected again" in sink_records(caplog, logging.INFO)[-1].getMessage()
+    assert sink.close().state == "closed"

@@ -268,3 +268,30 @@ def test_what_a_cut_write_counts_as_delivered(monkeypatch: pytest.MonkeyPatch, s
         with pytest.raises(SinkWriteError, match="timed out"):
             sink._write_messages(messages)
     assert sink._resync  # either way the next write starts with 0x00
+
+
+def test_write_bytes_cut_short_makes_the_next_write_start_a_new_frame(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``_write_bytes`` keeps the framing like ``_write_messages``: after a partial write the next write
+    begins with a 0x00 (the receiver drops the cut frame), and a write that did go out does not."""
+    from firmware_host.errors import SinkWriteError
+    from firmware_host.protocol import encode
+    from firmware_host.protocol.from_frame import joints_message
+    from firmware_host.sinks.serial_sink import SerialSink
+
+    sink = SerialSink.from_url("serial:///dev/null-never-opened")
+    writes: list[bytes] = []
+    limit = [5]  # bytes the port takes per write
+
+    def write_within(data: bytes, timeout_s: float) -> int:
+        writes.append(bytes(data))
+        return min(limit[0], len(data))
+
+    monkeypatch.setattr(sink, "_write_within", write_within)
+    packet = encode(joints_message(make_frame(0), 0, 0))
+    sink._resync = False
+    with pytest.raises(SinkWriteError):
+        sink._write_bytes(packet)  # cut after 5 bytes
+    limit[0] = 10**6
+    sink._write_bytes(packet)
+    sink._write_bytes(packet)
+    assert writes == [packet, b"\x00" + packet, packet]

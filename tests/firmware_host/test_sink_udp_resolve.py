@@ -123,3 +123,45 @@ def new_got_one(rx: socket.socket) -> bool:
         return bool(rx.recv(4096))
     except BlockingIOError:
         return False
+
+
+def test_a_lookup_started_before_a_reconnect_does_not_undo_its_answer(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A slow lookup of the old connection that answers after close() + open() is stale: the datagrams go
+    on to the address the new open() found."""
+    old_rx, new_rx = receiver(), receiver()
+    answer = [old_rx.getsockname()]
+    gate = threading.Event()
+    real = socket.getaddrinfo
+
+    def getaddrinfo(host: Any, port: Any, *args: Any, **kwargs: Any) -> list:
+        if host != NAME:
+            return real(host, port, *args, **kwargs)
+        addr = answer[0]  # the answer as of the moment the lookup starts
+        if threading.current_thread().name.startswith("resolve"):
+            gate.wait(10)
+        return [(socket.AF_INET, socket.SOCK_DGRAM, 17, "", addr)]
+
+    monkeypatch.setattr(udp_sink.socket, "getaddrinfo", getaddrinfo)
+    link = udp_sink.DatagramLink("udp://robot.test:1", NAME, 1, resolve_s=0.001)
+    try:
+        link.open()
+        time.sleep(0.01)
+        link.send(b"a")  # starts a lookup in the background; it hangs, holding the old answer
+        wait_until(lambda: link._looking_up, what="a lookup in flight")
+        link.close()
+        answer[0] = new_rx.getsockname()  # the robot moved while the link was down
+        link.open()
+        gate.set()
+        wait_until(lambda: not link._looking_up, what="the stale lookup to finish")
+        link.send(b"b")
+        time.sleep(0.05)
+        got_new = new_rx.recv(100)
+        assert got_new == b"b"
+        assert old_rx.recv(100) == b"a"
+        with pytest.raises(BlockingIOError):
+            old_rx.recv(100)  # nothing after the reconnect went to the old address
+    finally:
+        gate.set()
+        link.close()
+        old_rx.close()
+        new_rx.close()

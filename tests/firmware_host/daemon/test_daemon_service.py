@@ -661,3 +661,35 @@ def test_on_two_videos_through_opencv(sim_url, tmp_path):
     assert "ended after 30 frames" in run.daemon.health.last_error
     report = json.loads((tmp_path / "status.json").read_text())
     assert report["estimator"]["joints_found"] > 0.8  # the person, seen through two lossy videos
+
+
+def test_frames_lost_when_a_new_rig_reopens_the_sinks_are_flagged_dropped(tmp_path):
+    """Frames still queued when another rig closes a sink are a gap the sender made: the rebuilt sink's
+    first frame says DROPPED (docs/protocol.md section 3), not a silent gap the receiver blames on the link."""
+    import json
+
+    from drivers.sim.placement import RigPlacement
+    from tests.firmware_host.joint_stream_helpers import make_frame
+
+    folder = tmp_path / "stick"
+    url = f"file://{folder}/joints.jsonl"  # the folder is missing: the old sink never connects
+    daemon = _idle_daemon(tmp_path, [url], _Configs(), RigPlacement().build(rig_id="first"))
+    old = daemon.sinks[url]
+    try:
+        for seq in range(3):
+            old.send(make_frame(seq))
+        daemon._open_sinks(RigPlacement().build(rig_id="second"))  # another OAK: every sink is rebuilt
+        assert old._closed and old.stats().dropped_close == 3
+        new = daemon.sinks[url]
+        assert new is not old
+        folder.mkdir()
+        assert new.wait_connected(10)
+        new.send(make_frame(3))
+        new.send(make_frame(4))
+        assert new.wait_drained(5)
+    finally:
+        daemon._close_sinks()
+    joints = [m for m in map(json.loads, (folder / "joints.jsonl").read_text().splitlines()) if m["type"] == "JOINTS"]
+    assert [m["seq"] for m in joints] == [3, 4]
+    assert joints[0]["flags"] & Flags.DROPPED
+    assert not joints[1]["flags"] & Flags.DROPPED
