@@ -9,6 +9,10 @@ start with ``Test``, so pytest collects only the subclasses) and provides:
 
 ``realtime`` says whether the source runs on the real clock (then timing checks
 get ``slack_s`` of scheduling slack) or on a ``ManualClock`` (exact).
+``expected_stats`` gives the exact counters after the shared session where what is
+lost does not depend on timing (a seeded simulation on a ``ManualClock``, a recorded
+take under ``policy=all``); a hardware backend leaves it ``None`` and is held to the
+bounds every backend meets.
 """
 from __future__ import annotations
 
@@ -32,6 +36,9 @@ class RigSourceContract:
     #: real clock (True) or ManualClock (False)
     realtime = False
     slack_s = 0.25
+    #: exact ``frames_in``, ``unpaired``, ``camera_gaps``, ``pairs_dropped`` after reading ``n_pairs``
+    #: (deterministic backends only; None: the generic bounds alone)
+    expected_stats: dict | None = None
 
     # --------------------------------------------------------------- hooks
     @classmethod
@@ -98,9 +105,13 @@ class RigSourceContract:
         names = source.rig.pair[0].name, source.rig.pair[1].name
         assert stats.pairs_out == len(pairs)
         for name in names:
-            assert stats.frames_in[name] >= len(pairs)
+            # each frame taken in went into a pair that was read, was given up as unpaired, or is still held
+            # (waiting for a partner, or in a pair dropped or not yet read)
+            assert stats.frames_in[name] >= len(pairs) + stats.unpaired[name], stats
             assert stats.unpaired[name] >= 0 and stats.camera_gaps[name] >= 0
         assert stats.pairs_out + stats.pairs_dropped == pairs[-1].sequence + 1
+        if self.expected_stats is not None:
+            assert {k: getattr(stats, k) for k in self.expected_stats} == self.expected_stats, stats
 
     def test_read_times_out_when_frames_stop(self):
         with self.make_stalling_source() as source:

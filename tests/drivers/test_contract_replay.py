@@ -24,6 +24,10 @@ class TestReplayContract(RigSourceContract):
     """Recorded-speed playback on a ManualClock: the recorded timing, exactly."""
 
     n_pairs = 30
+    # the take's first 34 instants (indices 0-33) make 30 pairs: its seed dropped 2 frames of each camera
+    # there, each leaving the other camera's frame unpaired. The same free-running: policy=all drops nothing
+    expected_stats = {"frames_in": {"left": 32, "right": 32}, "unpaired": {"left": 2, "right": 2},
+                      "camera_gaps": {"left": 2, "right": 2}, "pairs_dropped": 0}
 
     @pytest.fixture(autouse=True, scope="class")
     @classmethod

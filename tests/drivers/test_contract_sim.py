@@ -9,6 +9,10 @@ URL = "sim://?width=160&height=120&jitter_ms=1&offset_ms=2&drop=0.05&seed=1"
 
 class TestSimContract(RigSourceContract):
     n_pairs = 40
+    # 49 captures a camera (indices 0-48) for 40 pairs; seed 1 drops 4 left and 5 right (index gaps), and
+    # each dropped frame leaves the other camera's frame of that instant unpaired
+    expected_stats = {"frames_in": {"left": 45, "right": 44}, "unpaired": {"left": 5, "right": 4},
+                      "camera_gaps": {"left": 4, "right": 5}, "pairs_dropped": 0}
 
     @pytest.fixture(autouse=True, scope="class")
     @classmethod

@@ -209,14 +209,46 @@ def test_novel_view_with_heatmaps_uses_the_render_graph(full_session, scene_rig)
     assert r.novel_view.heat is not None and np.all(np.isfinite(r.novel_view.heat))
 
 
+#: the graphs each 3D method runs beyond the encoder's heatmaps, once a pair (triangulation: none)
+METHOD_GRAPHS = {"triangulate": (), "volumetric": ("volume", "query"), "depth_centroid": ("volume", "render_heat")}
+
+
 @pytest.mark.parametrize("method", ["triangulate", "volumetric", "depth_centroid"])
-def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method):
+def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method, monkeypatch):
+    # The random weights give flat heatmaps and query responses (peaks ~0.6 over most of the map): the
+    # default decoder and the volumetric flood check call every joint missing, and all-zero outputs are
+    # finite trivially. Here the flood checks are off, and the presence gate too, so each method's own
+    # estimate is what comes out.
+    import ghnerf_runtime.joints3d as joints3d
+    from ghnerf_runtime.keypoints import KeypointDecoderConfig
+
+    monkeypatch.setattr(joints3d, "VOLUMETRIC_MAX_REGION_FRAC", 1.0)
     rig, frames = scene_rig
-    est = Estimator(full_session, rig, EstimatorConfig(joints3d=Joints3DConfig(method=method)))
-    for pair in frames:
+
+    def estimator(m):
+        cfg = EstimatorConfig(joints3d=Joints3DConfig(method=m), presence=PresenceConfig(enabled=False),
+                              decoder=KeypointDecoderConfig(max_region_frac=1.0))
+        est = Estimator(full_session, rig, cfg)
+        est.session = Recorder(est.session)
+        return est
+
+    est, tri = estimator(method), estimator("triangulate")
+    for i, pair in enumerate(frames):
         r = est.estimate(pair)
         assert _all_finite(r) and r.method == method
         assert np.all(r.confidence[r.missing] == 0) and not r.joints_3d[r.missing].any()
+        found = ~r.missing
+        assert found.sum() >= 10, (method, i, int(found.sum()))
+        assert np.all(r.confidence[found] > 0) and np.all(np.abs(r.joints_3d[found]).sum(-1) > 0)
+        for name in rig.names:
+            assert not r.missing_2d[name].all()
+        if method != "triangulate":  # the method's own estimate, not triangulation's under its name
+            t = tri.estimate(pair)
+            both = found & ~t.missing
+            assert both.any() and not np.allclose(r.joints_3d[both], t.joints_3d[both], atol=1e-3)
+    for graph in {g for gs in METHOD_GRAPHS.values() for g in gs}:
+        expected = len(frames) if graph in METHOD_GRAPHS[method] else 0
+        assert est.session.ran(graph) == expected, (method, graph, [g for g, _ in est.session.calls])
 
 
 def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir, scene_rig):  # noqa: F811

@@ -42,7 +42,34 @@ def test_perfect_outputs_score_perfectly(data64):
     assert r["mpjpe"].num_evaluated == both.sum()  # a joint needs both views to be triangulated
     assert r["mpjpe"].value < 0.5  # mm: decoding + DLT of exact Gaussians
     assert r["psnr"].value == pytest.approx(20.0, abs=1e-9)
-    assert r["ssim"].value < 1.0
+    # SSIM of that offset: a plain per-pixel evaluation of the documented definition (11x11 Gaussian window,
+    # sigma 1.5, restricted to the mask; K1 0.01, K2 0.03), mean over mask pixels, channels, then views
+    expected = np.mean([np.mean([_reference_ssim((truth + offset)[i, c], truth[i, c], m[i, 0] > 0.5)
+                                 for c in range(3)]) for i in range(len(nov))])
+    assert 0.55 < expected < 0.75  # 0.64 for this scene: far from the 1.0 of identical images
+    assert r["ssim"].value == pytest.approx(expected, abs=1e-6)
+    assert r["ssim"].per_image.shape == (len(nov),)
+    exact = scene_metrics(sc, sc["tgt_heatmaps"][:2], truth, nov)  # no offset at all
+    assert exact["ssim"].value == pytest.approx(1.0, abs=1e-9) and exact["psnr"].value == np.inf
+
+
+def _reference_ssim(x, y, mask):
+    """Masked Gaussian-window SSIM of one channel, pixel by pixel (no blur)."""
+    k = np.exp(-(np.arange(11) - 5.0) ** 2 / (2 * 1.5 ** 2))
+    kernel = np.outer(k, k)
+    H, W = mask.shape
+    c1, c2 = 0.01 ** 2, 0.03 ** 2
+    values = []
+    for r, c in np.argwhere(mask):
+        r0, r1, c0, c1_ = max(r - 5, 0), min(r + 6, H), max(c - 5, 0), min(c + 6, W)
+        w = kernel[r0 - r + 5:r1 - r + 5, c0 - c + 5:c1_ - c + 5] * mask[r0:r1, c0:c1_]
+        w = w / w.sum()
+        a, b = x[r0:r1, c0:c1_].astype(np.float64), y[r0:r1, c0:c1_].astype(np.float64)
+        ma, mb = (w * a).sum(), (w * b).sum()
+        va, vb = (w * a * a).sum() - ma * ma, (w * b * b).sum() - mb * mb
+        cov = (w * a * b).sum() - ma * mb
+        values.append((2 * ma * mb + c1) * (2 * cov + c2) / ((ma * ma + mb * mb + c1) * (va + vb + c2)))
+    return np.mean(values)
 
 
 def test_shifted_joints_and_pooling(data64):

@@ -227,10 +227,34 @@ def test_training_fits_the_training_views_better_than_the_relit_fill(truth_cache
 
 
 def test_a_time_budget_ends_training_early(truth_cache):
+    """A million steps (hours here) under a 0.5 s budget: training stops once the budget is spent, not
+    before (after a step or two, say) and not long after: within 10 s of the clock's start (the "fill net:
+    ..." line; building the net before it takes a second on a first call). The limit is loose on purpose:
+    a loaded CI machine must not fail it, and an ignored budget runs for hours. That case fails fast: the
+    log, called every step, gives up at the limit instead of running on."""
+    import time
+
     a = load_cache(truth_cache)
-    cfg = FillTrainConfig(steps=10 ** 6, batch=2, max_seconds=0.5, log_every=10 ** 6, device="cpu",
+    budget = 0.5
+    limit = 10.0
+    cfg = FillTrainConfig(steps=10 ** 6, batch=2, max_seconds=budget, log_every=1, device="cpu",
                           net=FillNetConfig(width=8))
-    assert 1 <= train_fill(a, cfg, log=lambda *_: None).steps_trained < 10 ** 6
+    lines, start = [], []
+
+    def log(line):
+        now = time.perf_counter()
+        start[:] = start or [now]  # the first line is logged as the budget's clock starts
+        lines.append(line)
+        if now - start[0] > limit:
+            raise AssertionError(f"still training {limit} s into a {budget} s budget: {line}")
+
+    called = time.perf_counter()
+    steps = train_fill(a, cfg, log=log).steps_trained
+    ended = time.perf_counter()
+    assert lines[0].startswith("fill net: ") and lines[-1].startswith(f"  {steps} steps in "), (lines[0], lines[-1])
+    assert budget <= ended - start[0] <= limit, (ended - start[0], steps)
+    assert ended - called <= limit + 5.0  # the net's construction included
+    assert 1 <= steps < 10 ** 6 and sum(" step " in ln for ln in lines) == steps
 
 
 def test_the_cli_trains_saves_and_scores_the_same_table(truth_cache, tmp_path, capsys):

@@ -54,9 +54,15 @@ def test_torch_vs_ort_fp32_parity(exported):
             for name, st in outputs.items():
                 assert st["max_abs"] <= 1e-4 * max(1.0, st["ref_max"]), (graph, name, st)
         # depth is compared on the rays that hit something only (a full make model failed on a ray of
-        # opacity ~0, whose depth is a ratio of two roundings)
-        for graph in ("render", "render_heat", "render_rgb"):
-            assert report[graph]["depth"]["min_acc"] == 0.1 and report[graph]["depth"]["rays"] >= 0
+        # opacity ~0, whose depth is a ratio of two roundings). The tiny random model's rays all reach
+        # opacity 0.1 on these inputs: a mask that kept none (or few) would compare nothing and pass.
+        rays = ex.tensors["ray_uv"].shape[0] * ex.tensors["ray_uv"].shape[1]
+        with_depth = [g for g, outputs in report.items() if "depth" in outputs]
+        assert {"render", "render_heat", "render_rgb"} <= set(with_depth), report.keys()
+        for graph in with_depth:
+            st = report[graph]["depth"]
+            assert st["min_acc"] == 0.1 and rays // 2 <= st["rays"] <= rays, (graph, st, rays)
+            assert st["ref_max"] > 0, (graph, st)  # the compared depths are real ones, not the empty stand-in
 
 
 def test_the_parity_check_passes_a_good_export_and_stops_a_wrong_one(exported):

@@ -58,6 +58,51 @@ def test_two_iterations(variant):
     assert changed > 0.9 * len(before)
 
 
+@pytest.mark.parametrize("variant", ["ghnerf", "baseline"])
+def test_the_loss_falls_on_one_fixed_batch(variant):
+    """40 Adam steps on one fixed batch of the tiny model: the loss falls well below where it started, its
+    heatmap term too. The targets are learnable (the two targets are the source cameras, so their true colours
+    are the source images' at the rays; no joint in the patches), the seeds fixed: the last five losses average
+    0.04-0.38 of the first five over seeds 0-2 (the heatmap terms 0.0-0.39; the colour terms alone do not fall
+    reliably in 40 steps)."""
+    torch.manual_seed(0)
+    cfg = preset("tiny")
+    cfg.use_human_encoder = variant == "ghnerf"
+    model = GHNeRF(cfg).train()
+    opt = torch.optim.Adam(model.parameters(), lr=2e-3)
+    H, W = cfg.height, cfg.width
+    src = synthetic_rig(H, W)
+    cam = to_torch(scene_inputs(src, src, box_corners(), H, W))  # targets = the two sources
+    size, corners = 16, ((20, 24), (8, 30))
+    uv = torch.stack([patch_rays(H, W, top, left, size) for top, left in corners])  # (2, 256, 2)
+    images = torch.rand(2, 3, H, W, generator=torch.Generator().manual_seed(1))
+    rgb = torch.stack([images[i, :, top:top + size, left:left + size].reshape(3, -1).T
+                       for i, (top, left) in enumerate(corners)])
+    mask = torch.ones(2, size * size)
+    batch = {"rgb": rgb, "heatmaps": torch.zeros(2, size * size, 25), "mask": mask,
+             "depth": torch.full((2, size * size), 2.5), "depth_valid": mask > 0.5}
+    loss_cfg = LossConfig(coord_weight=0.01, mask_weight=0.1, depth_weight=0.1)
+    history = []
+    for _ in range(40):
+        out = model(images, cam["src_P"], cam["src_centers"], cam["tgt_K_inv"], cam["tgt_c2w"], cam["near_far"], uv)
+        terms = compute_losses(out, batch, loss_cfg, patch_shape=(size, size))
+        opt.zero_grad()
+        terms["loss"].backward()
+        opt.step()
+        history.append({k: float(v.detach()) for k, v in terms.items()})
+
+    def mean(key, steps):
+        return sum(h[key] for h in steps) / len(steps)
+
+    first, last = history[:5], history[-5:]
+    assert all(math.isfinite(h["loss"]) for h in history)
+    loss_first, loss_last = mean("loss", first), mean("loss", last)
+    assert loss_last < 0.7 * loss_first, [round(h["loss"], 4) for h in history]
+    heat_first = mean("l0_heat", first) + mean("l1_heat", first)
+    heat_last = mean("l0_heat", last) + mean("l1_heat", last)
+    assert heat_last < 0.7 * heat_first, (heat_first, heat_last)  # the heatmap head learns too
+
+
 def test_ssim_identity_and_range():
     x = torch.rand(2, 3, 16, 16)
     assert float(ssim(x, x)) == pytest.approx(1.0, abs=1e-5)
