@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 
 import pytest
 from hypothesis import given, settings
@@ -230,7 +231,9 @@ def test_a_sink_that_never_connects_warns_once_per_error_and_says_it_is_down(
         sink.connect_failures_left = 0  # plugged in: up again, and said so
         wait_until(lambda: sink.stats().connected, what="connect")
         assert sink.stats().state == "up"
-        assert "connected again" in sink_records(caplog, logging.INFO)[-1].getMessage()
+        # the line is logged just after the state changes (outside the lock): wait for it, not race it
+        wait_until(lambda: "connected again" in sink_records(caplog, logging.INFO)[-1].getMessage(),
+                   what="'connected again' logged")
     assert sink.close().state == "closed"
 
 
@@ -285,8 +288,10 @@ def test_a_link_that_opens_but_fails_its_first_write_warns_once_and_stays_down(
     states: list[str] = []
     with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
         sink.start()
+        deadline = time.monotonic() + 10.0  # a regression fails here instead of hanging CI
         while sink.stats().connect_failures < 6:
             states.append(sink.stats().state)
+            assert time.monotonic() < deadline, "timed out waiting for 6 failed connects"
         loud = sink_records(caplog, logging.INFO)
         assert len(loud) == 1 and loud[0].levelno == logging.WARNING, [r.getMessage() for r in loud]
         assert "up" not in states
@@ -296,5 +301,6 @@ def test_a_link_that_opens_but_fails_its_first_write_warns_once_and_stays_down(
         sink.hello_fails = False
         wait_until(lambda: sink.stats().state == "up", what="up once HELLO goes out")
         assert sink.stats().connects == 1
-        assert "connected again" in sink_records(caplog, logging.INFO)[-1].getMessage()
+        wait_until(lambda: "connected again" in sink_records(caplog, logging.INFO)[-1].getMessage(),
+                   what="'connected again' logged")
     assert sink.close().state == "closed"
