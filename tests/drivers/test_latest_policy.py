@@ -102,15 +102,20 @@ def test_drained_frames_are_recorded(tmp_path, sim_cache):
 
 
 # ----------------------------------------------------------------- replay://
-@pytest.fixture(scope="module")
-def take(tmp_path_factory, sim_cache):
-    """10 pairs, no jitter or drops: 20 frames, pair k at START + k/30 s."""
-    out = tmp_path_factory.mktemp("latest") / "take"
+def _record_take(tmp_path_factory, sim_cache, folder: str, pairs: int):
+    """``pairs`` pairs of the small sim rig, no jitter or drops: pair k at START + k/30 s."""
+    out = tmp_path_factory.mktemp(folder) / "take"
     with open_rig(f"record+sim://?{SMALL}&cache={sim_cache}&out={out}&policy=all&lossless=1",
                   clock=ManualClock(START)) as source:
-        for _ in range(10):
+        for _ in range(pairs):
             source.read(timeout_s=1.0)
     return out
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory, sim_cache):
+    """10 pairs: 20 frames."""
+    return _record_take(tmp_path_factory, sim_cache, "latest", 10)
 
 
 def test_unpaced_replay_under_latest_never_reads_ahead(take):
@@ -139,13 +144,8 @@ def test_paced_replay_under_latest_skips_to_the_newest_pair_due(take):
 
 @pytest.fixture(scope="module")
 def long_take(tmp_path_factory, sim_cache):
-    """40 pairs (80 frames, more than the old drain bound of 32), pair k at START + k/30 s."""
-    out = tmp_path_factory.mktemp("latest-long") / "take"
-    with open_rig(f"record+sim://?{SMALL}&cache={sim_cache}&out={out}&policy=all&lossless=1",
-                  clock=ManualClock(START)) as source:
-        for _ in range(40):
-            source.read(timeout_s=1.0)
-    return out
+    """40 pairs (80 frames, more than the old drain bound of 32)."""
+    return _record_take(tmp_path_factory, sim_cache, "latest-long", 40)
 
 
 def test_paced_replay_under_latest_keeps_a_slow_readers_lag_bounded(long_take, monkeypatch):

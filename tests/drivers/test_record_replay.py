@@ -320,13 +320,18 @@ def tear_the_tail(take):
     return rows
 
 
+def _frames_played_when_interrupted(take, caplog) -> int:
+    """Mark ``take`` interrupted (``complete: false``), play it whole; the frames it delivered."""
+    edit_manifest(take, lambda d: d.update(complete=False))
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
+        with open_rig(f"replay://{take}?speed=free&policy=all") as source:
+            list(source)
+            return sum(source.stats.frames_in.values())
+
+
 def test_an_interrupted_take_plays_without_its_torn_tail(copy_of_take, caplog):
     rows = tear_the_tail(copy_of_take)
-    edit_manifest(copy_of_take, lambda d: d.update(complete=False))
-    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
-        with open_rig(f"replay://{copy_of_take}?speed=free&policy=all") as source:
-            list(source)
-            assert sum(source.stats.frames_in.values()) == len(rows) - 2
+    assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 2
     assert "dropped 2 journal row(s)" in caplog.text
 
 
@@ -352,11 +357,7 @@ def test_broken_rows_anywhere_in_an_interrupted_take_are_dropped(copy_of_take, c
     source = create_rig_source(f"replay://{copy_of_take}")  # complete: true: still an error
     with pytest.raises(RigInitializationError, match="line 3"):
         source.open()
-    edit_manifest(copy_of_take, lambda d: d.update(complete=False))
-    with caplog.at_level(logging.WARNING, logger="drivers.backends.replay"):
-        with open_rig(f"replay://{copy_of_take}?speed=free&policy=all") as source:
-            list(source)
-            assert sum(source.stats.frames_in.values()) == len(rows) - 2
+    assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 2
     assert "dropped 2 journal row(s)" in caplog.text
 
 

@@ -19,16 +19,31 @@ def patch_rays(H, W, top, left, size):
     return uv[top:top + size, left:left + size].reshape(-1, 2)
 
 
-@pytest.mark.parametrize("variant", ["ghnerf", "baseline"])
-def test_two_iterations(variant):
+def _tiny_model(variant: str, lr: float):
+    """The tiny preset (seed 0), its Adam, and the two sources' cameras as the targets."""
     torch.manual_seed(0)
     cfg = preset("tiny")
     cfg.use_human_encoder = variant == "ghnerf"
     model = GHNeRF(cfg).train()
-    opt = torch.optim.Adam(model.parameters(), lr=5e-4)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
     H, W = cfg.height, cfg.width
     src = synthetic_rig(H, W)
     cam = to_torch(scene_inputs(src, src, box_corners(), H, W))  # targets = the two sources
+    return model, opt, cam, (H, W)
+
+
+def _losses(model, opt, images, cam, uv, batch, loss_cfg, size: int) -> dict:
+    """One forward pass and its gradients (zeroed first); the caller steps ``opt``."""
+    out = model(images, cam["src_P"], cam["src_centers"], cam["tgt_K_inv"], cam["tgt_c2w"], cam["near_far"], uv)
+    terms = compute_losses(out, batch, loss_cfg, patch_shape=(size, size))
+    opt.zero_grad()
+    terms["loss"].backward()
+    return terms
+
+
+@pytest.mark.parametrize("variant", ["ghnerf", "baseline"])
+def test_two_iterations(variant):
+    model, opt, cam, (H, W) = _tiny_model(variant, lr=5e-4)
     size = 16
     uv = torch.stack([patch_rays(H, W, 20, 24, size), patch_rays(H, W, 8, 30, size)])  # (2, 256, 2)
     g = torch.Generator().manual_seed(1)
@@ -42,10 +57,7 @@ def test_two_iterations(variant):
     before = [p.detach().clone() for p in model.parameters()]
     losses = []
     for _ in range(2):
-        out = model(images, cam["src_P"], cam["src_centers"], cam["tgt_K_inv"], cam["tgt_c2w"], cam["near_far"], uv)
-        terms = compute_losses(out, batch, loss_cfg, patch_shape=(size, size))
-        opt.zero_grad()
-        terms["loss"].backward()
+        terms = _losses(model, opt, images, cam, uv, batch, loss_cfg, size)
         for p in model.parameters():
             if p.grad is not None:
                 assert torch.all(torch.isfinite(p.grad))
@@ -65,14 +77,7 @@ def test_the_loss_falls_on_one_fixed_batch(variant):
     are the source images' at the rays; no joint in the patches), the seeds fixed: the last five losses average
     0.04-0.38 of the first five over seeds 0-2 (the heatmap terms 0.0-0.39; the colour terms alone do not fall
     reliably in 40 steps)."""
-    torch.manual_seed(0)
-    cfg = preset("tiny")
-    cfg.use_human_encoder = variant == "ghnerf"
-    model = GHNeRF(cfg).train()
-    opt = torch.optim.Adam(model.parameters(), lr=2e-3)
-    H, W = cfg.height, cfg.width
-    src = synthetic_rig(H, W)
-    cam = to_torch(scene_inputs(src, src, box_corners(), H, W))  # targets = the two sources
+    model, opt, cam, (H, W) = _tiny_model(variant, lr=2e-3)
     size, corners = 16, ((20, 24), (8, 30))
     uv = torch.stack([patch_rays(H, W, top, left, size) for top, left in corners])  # (2, 256, 2)
     images = torch.rand(2, 3, H, W, generator=torch.Generator().manual_seed(1))
@@ -84,10 +89,7 @@ def test_the_loss_falls_on_one_fixed_batch(variant):
     loss_cfg = LossConfig(coord_weight=0.01, mask_weight=0.1, depth_weight=0.1)
     history = []
     for _ in range(40):
-        out = model(images, cam["src_P"], cam["src_centers"], cam["tgt_K_inv"], cam["tgt_c2w"], cam["near_far"], uv)
-        terms = compute_losses(out, batch, loss_cfg, patch_shape=(size, size))
-        opt.zero_grad()
-        terms["loss"].backward()
+        terms = _losses(model, opt, images, cam, uv, batch, loss_cfg, size)
         opt.step()
         history.append({k: float(v.detach()) for k, v in terms.items()})
 
