@@ -162,6 +162,7 @@ class Daemon:
         self._status_file_failing = False
         self._closed_sink_stats: dict[str, Any] = {}  # the last counters of sinks already closed
         self._carried_gaps: dict[str, int] = {}  # gap flags a closed sink could not report, by URL
+        self._carried_totals: dict[str, tuple[int, int]] = {}  # (dropped, decimated) of closed sinks, by URL
         self._reload_config = reload_config
         self._on_reload = on_reload
         # A plain flag, not an Event: set from a signal handler, which must never wait on a lock the
@@ -372,7 +373,7 @@ class Daemon:
             for url in self.config.sinks:
                 if url not in self._sinks:
                     try:
-                        self._sinks[url] = self._build_sink(url, key).start()
+                        self._start_sink(url, self._build_sink(url, key))
                     except FirmwareHostError as e:
                         self._close_sinks()
                         raise DaemonStartError(f"sinks: {e}") from None
@@ -385,17 +386,27 @@ class Daemon:
         if "rig_id" not in parse_url(url).query:
             kw["rig_id"] = key[0]
         sink = sink_class(url).from_url(url, **kw)  # type: ignore[attr-defined]
-        carried = self._carried_gaps.pop(url, 0)
+        carried = self._carried_gaps.get(url, 0)  # dropped from the dict once the sink starts (_start_sink)
         if carried:  # frames the sink it replaces lost at close: its first frame says so, not a silent gap
             sink.carry_gap(carried)
+        if url in self._carried_totals and hasattr(sink, "carry_totals"):  # STATUS totals go on, not from zero
+            sink.carry_totals(*self._carried_totals[url])
         self._apply_fault(sink)  # before start: its first STATUS already carries the fault
         return sink
+
+    def _start_sink(self, url: str, sink: Sink) -> None:
+        """Start a sink built by :meth:`_build_sink`: only now has the gap it carries been handed on (a build
+        thrown away, by a refused reload, leaves the gap for the next one)."""
+        self._sinks[url] = sink.start()
+        self._carried_gaps.pop(url, None)
 
     def _close_sink(self, url: str) -> None:
         sink = self._sinks.pop(url)
         try:
             sink.close()
-            self._closed_sink_stats[url] = self._stats_of(sink)
+            self._closed_sink_stats[url] = stats = self._stats_of(sink)
+            d, k = self._carried_totals.get(url, (0, 0))
+            self._carried_totals[url] = (d + stats["dropped"], k + stats["decimated"])
             gap = sink.pending_gap_flags()
         except Exception as e:  # noqa: BLE001 - a link that fails even to close (a USB error): it is gone
             _log.warning("closing sink %s: %s", url, e)
@@ -497,7 +508,7 @@ class Daemon:
             for url in [u for u in self._sinks if u not in new.sinks]:
                 self._close_sink(url)  # at once, rig or not: a removed serial sink frees its port now
             for url, sink in added.items():
-                self._sinks[url] = sink.start()
+                self._start_sink(url, sink)
         if "health" in changed:
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0

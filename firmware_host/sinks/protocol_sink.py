@@ -42,6 +42,7 @@ class ProtocolSink(Sink):
         self._status_due_us: Optional[int] = None
         self._window = (0, 0)  # (time of last STATUS, frames sent by then)
         self._prev_stats: Optional[SinkStats] = None
+        self._earlier_totals = (0, 0)  # (dropped, decimated) of the sinks this one replaces: STATUS totals go on
         self._unannounced_warned: set = set()
         if options.send_2d and not options.cameras:
             # JOINTS_2D numbers its camera by HELLO's list, and the link budget counts one packet per camera.
@@ -143,6 +144,13 @@ class ProtocolSink(Sink):
             int(CoordFrame.RIG), self.options.rig_id, tuple(self.options.cameras),
         )
 
+    def carry_totals(self, dropped: int, decimated: int) -> None:
+        """Count ``dropped`` and ``decimated`` frames of sinks this one replaces (a rebuilt link) in STATUS, whose
+        fields are the sender's totals (docs/protocol.md): a receiver must not see them fall back to zero."""
+        with self._cond:
+            d, k = self._earlier_totals
+            self._earlier_totals = (d + int(dropped), k + int(decimated))
+
     def _status(self, now: int) -> Status:
         s = self.stats()
         prev = self._prev_stats or s
@@ -151,6 +159,7 @@ class ProtocolSink(Sink):
         self._window, self._prev_stats = (now, s.sent), s
         with self._cond:
             current, latched, self._fault_since_status = self._fault, self._fault_since_status, int(Fault.OK)
+            earlier_dropped, earlier_decimated = self._earlier_totals
         if current != Fault.OK or latched != Fault.OK:
             fault = current if current != Fault.OK else latched
         elif s.decimated > prev.decimated:
@@ -167,7 +176,7 @@ class ProtocolSink(Sink):
             h,
             fps_centi=min(fps_centi, 0xFFFF),
             latency_us=min(latency, U32_MAX),
-            dropped=min(s.dropped, U32_MAX),
-            decimated=min(s.decimated, U32_MAX),
+            dropped=min(earlier_dropped + s.dropped, U32_MAX),
+            decimated=min(earlier_decimated + s.decimated, U32_MAX),
             fault=fault,
         )

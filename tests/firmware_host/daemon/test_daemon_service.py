@@ -689,7 +689,49 @@ def test_frames_lost_when_a_new_rig_reopens_the_sinks_are_flagged_dropped(tmp_pa
         assert new.wait_drained(5)
     finally:
         daemon._close_sinks()
-    joints = [m for m in map(json.loads, (folder / "joints.jsonl").read_text().splitlines()) if m["type"] == "JOINTS"]
+    messages = [json.loads(line) for line in (folder / "joints.jsonl").read_text().splitlines()]
+    joints = [m for m in messages if m["type"] == "JOINTS"]
     assert [m["seq"] for m in joints] == [3, 4]
     assert joints[0]["flags"] & Flags.DROPPED
     assert not joints[1]["flags"] & Flags.DROPPED
+    # STATUS counts the sender's totals: the three the old link dropped stay counted on the new one
+    assert [m["dropped"] for m in messages if m["type"] == "STATUS"][0] == 3
+
+
+def test_a_gap_carried_to_a_readded_sink_survives_a_refused_reload(tmp_path):
+    """A reload that builds the re-added sink and is then refused (another sink does not fit) must leave the
+    gap its predecessor made for the build that is accepted: the receiver still learns of it."""
+    import json
+
+    from drivers.sim.placement import RigPlacement
+    from tests.firmware_host.joint_stream_helpers import make_frame
+
+    folder = tmp_path / "stick"
+    url, other = f"file://{folder}/joints.jsonl?rig_id=short", "memory://?rig_id=short"
+    misfit = "memory://"  # takes the rig's own id, too long for HELLO: refused only when built for the rig
+    configs = _Configs()
+    rig = RigPlacement().build(rig_id="a-rig-id-too-long-for-the-hello-message")
+    daemon = _idle_daemon(tmp_path, [url, other], configs, rig)
+    try:
+        for seq in range(2):
+            daemon.sinks[url].send(make_frame(seq))  # the folder is missing: both still queued at close
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[other])
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == ["sinks"] and list(daemon.sinks) == [other]
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[other, url, misfit])
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == [] and daemon.health.reload_failures == 1
+        configs.next = _config({"url": "sim://"}, tmp_path, sinks=[other, url])
+        daemon.request_reload()
+        assert daemon._maybe_reload(None) == ["sinks"]
+        folder.mkdir()
+        sink = daemon.sinks[url]
+        assert sink.wait_connected(10)
+        sink.send(make_frame(2))
+        assert sink.wait_drained(5)
+    finally:
+        daemon._close_sinks()
+    messages = [json.loads(line) for line in (folder / "joints.jsonl").read_text().splitlines()]
+    joints = [m for m in messages if m["type"] == "JOINTS"]
+    assert [m["seq"] for m in joints] == [2] and joints[0]["flags"] & Flags.DROPPED
+    assert [m["dropped"] for m in messages if m["type"] == "STATUS"][0] == 2
