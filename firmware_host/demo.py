@@ -230,7 +230,7 @@ def _run(args: argparse.Namespace) -> int:
     else:
         sink_path = (args.out / "joints.jsonl").resolve()
         sink_path.unlink(missing_ok=True)  # the file sink appends: keep this run only
-        sink_url = f"file://{sink_path}"
+        sink_url = sink_path.as_uri()  # percent-encoded: a space or "#" in --out stays part of the path
 
     print(f"opening {args.url} (the first open pre-renders the motion loop; later opens use the cache)")
     source = drivers.create_rig_source(args.url)

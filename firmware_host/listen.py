@@ -121,11 +121,25 @@ class _SerialPort:
         self.port.close()
 
 
+#: The query keys each scheme takes; any other is refused (``baudrate=921600`` once opened at 115200).
+_ACCEPTED: dict[str, tuple[str, ...]] = {"udp": (), "serial": ("baud",)}
+
+
+def _reject_unknown_keys(url: str, query: dict[str, list[str]], accepted: Sequence[str]) -> None:
+    unknown = sorted(k for k in query if k not in accepted)
+    if unknown:
+        takes = f"it takes {', '.join(accepted)}" if accepted else "it takes none"
+        raise ListenError(f"{url}: unknown parameter {', '.join(unknown)}; {takes}")
+
+
 def open_port(url: str) -> "_UdpPort | _SerialPort":
     """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces, IPv4 and IPv6) or ``serial://DEVICE?baud=N``."""
     parts = urlsplit(url)
-    query = parse_qs(parts.query)
-    if parts.scheme == "udp":
+    scheme = parts.scheme.lower()  # UDP:// is udp:// (as for the sinks)
+    query = parse_qs(parts.query, keep_blank_values=True)
+    if scheme in _ACCEPTED:  # another scheme is refused as such below
+        _reject_unknown_keys(url, query, _ACCEPTED[scheme])
+    if scheme == "udp":
         try:
             port = parts.port
         except ValueError as e:
@@ -133,7 +147,7 @@ def open_port(url: str) -> "_UdpPort | _SerialPort":
         if port is None:
             raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870")
         return _UdpPort(parts.hostname or "", port)
-    if parts.scheme == "serial":
+    if scheme == "serial":
         device = parts.netloc + parts.path
         if not device:
             raise ListenError(f"{url}: give the device, e.g. serial:///dev/ttyUSB0?baud=921600")

@@ -1,14 +1,21 @@
-"""file://path.jsonl - one JSON object per packet, in the canonical form of the test vectors.
+"""file:///path/joints.jsonl - one JSON object per packet, in the canonical form of the test vectors.
 
-The values are the quantised wire values (mm, confidence 0..255), so the file
-is a faithful record of what robots received. Lines are flushed one by one; a
-failed write (disk full, removed medium) closes the file and reopens it in
-append mode with backoff.
+The path is absolute and percent-decoded (``file:///data/my%20run/joints.jsonl``; ``Path.as_uri()``
+writes such URLs); the host is empty or ``localhost``. The values are the quantised wire values (mm,
+confidence 0..255), so the file is a faithful record of what robots received. Lines are flushed one
+by one; a failed write (disk full, removed medium) closes the file and reopens it in append mode with
+backoff, first ending a line the failed write cut short, so the one broken line stays on its own.
+
+The file grows for as long as the sink runs (about 650 bytes per JOINTS line); rotate it with
+logrotate's ``copytruncate``: every write is O_APPEND, so it lands at the end of the truncated file.
 """
 from __future__ import annotations
 
 import json
+import os
+import stat
 from typing import IO, Any, Optional
+from urllib.parse import unquote
 
 from firmware_host.errors import SinkConfigError, SinkUnavailableError
 from firmware_host.protocol.messages import Message
@@ -28,9 +35,7 @@ class FileSink(ProtocolSink):
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "FileSink":
         u: SinkUrl = parse_url(url)
-        path = u.netloc + u.path  # file://rel/path.jsonl and file:///abs/path.jsonl
-        if not path:
-            raise SinkConfigError(url, "path", path, "expected file:///path/to/joints.jsonl")
+        path = _local_path(url, u)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
@@ -39,8 +44,25 @@ class FileSink(ProtocolSink):
     def _connect(self) -> None:
         try:
             self._fh = open(self.path, "a", encoding="utf-8")
+            self._end_cut_line()
         except OSError as e:
+            self._disconnect()
             raise SinkUnavailableError(self.url, f"cannot open {self.path}: {e}") from e
+
+    def _end_cut_line(self) -> None:
+        """End the last line if a write cut it short (disk full, EFBIG): the HELLO written next must start
+        a line of its own, not make one unparsable line of both."""
+        assert self._fh is not None
+        if not stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode):
+            return  # a FIFO or /dev/stdout: nothing to read back, and a reader there sees whole lines anyway
+        with open(self.path, "rb") as f:
+            if f.seek(0, os.SEEK_END) == 0:
+                return
+            f.seek(-1, os.SEEK_END)
+            if f.read(1) == b"\n":
+                return
+        self._fh.write("\n")
+        self._fh.flush()
 
     def _disconnect(self) -> None:
         fh, self._fh = self._fh, None
@@ -50,9 +72,10 @@ class FileSink(ProtocolSink):
             except OSError:
                 pass  # the write that failed already reported why
 
-    def _write_messages(self, messages: list[Message]) -> None:
+    def _write_messages(self, messages: list[Message]) -> bool:
         text = "".join(json.dumps(m.to_json(), separators=(",", ":")) + "\n" for m in messages)
         self._write_text(text)
+        return True
 
     def _write_bytes(self, data: bytes) -> None:
         raise NotImplementedError("the file sink writes JSON lines, not frames")
@@ -65,3 +88,15 @@ class FileSink(ProtocolSink):
             self._fh.flush()
         except OSError as e:
             raise SinkUnavailableError(self.url, f"write to {self.path} failed: {e}") from e
+
+
+def _local_path(url: str, u: SinkUrl) -> str:
+    """The file's path: percent-decoded, absolute, on this machine (host empty or ``localhost``)."""
+    if u.netloc not in ("", "localhost"):
+        # file://rel/path once meant a relative path; now a host, and another machine's file is not ours to write
+        raise SinkConfigError(url, "host", u.netloc, "file:// takes a local, absolute path: file:///path/to/"
+                                                     "joints.jsonl (or file://localhost/path/to/joints.jsonl)")
+    path = unquote(u.path)
+    if not path.startswith("/") or path == "/":
+        raise SinkConfigError(url, "path", path, "expected file:///path/to/joints.jsonl")
+    return path

@@ -1,4 +1,8 @@
-"""memory://[name] - the protocol into an in-process byte buffer, for tests and tools.
+"""memory://[label] - the protocol into an in-process byte buffer, for tests and tools.
+
+The label is not used: it only makes URLs differ where sinks are keyed by URL (two memory sinks in
+one daemon config). Every memory sink has its own buffer, whatever its label; ``read()`` it from the
+object ``open_sink`` returned.
 
 A first-class backend, not a mock: frames go through the same queue, rate
 limiter, encoder and framing as on a real link, and ``read()`` returns the

@@ -29,6 +29,9 @@ from firmware_host.sinks.options import SinkOptions
 
 _log = logging.getLogger(__name__)
 
+#: After a STATUS that could not be written, how soon (at most) another is tried while no frame comes.
+STATUS_RETRY_S = 0.1
+
 
 class ProtocolSink(Sink):
     def __init__(self, url: str, options: SinkOptions) -> None:
@@ -39,7 +42,9 @@ class ProtocolSink(Sink):
         self._resync = True
         self._fault = int(Fault.OK)
         self._fault_since_status = int(Fault.OK)  # the last non-OK fault set since the previous STATUS
+        self._faults_set = 0  # non-OK faults set so far: a STATUS clears the latch only if none came since it read it
         self._status_due_us: Optional[int] = None
+        self._status_owed = False  # the last STATUS was not written: the next frame carries one
         self._window = (0, 0)  # (time of last STATUS, frames sent by then)
         self._prev_stats: Optional[SinkStats] = None
         self._earlier_totals = (0, 0)  # (dropped, decimated) of the sinks this one replaces: STATUS totals go on
@@ -59,13 +64,16 @@ class ProtocolSink(Sink):
     def _write_bytes(self, data: bytes) -> None:
         """Write framed packets. Raise SinkWriteError / SinkUnavailableError like ``_deliver``."""
 
-    def _write_messages(self, messages: list[Message]) -> None:
+    def _write_messages(self, messages: list[Message]) -> bool:
+        """Write ``messages``; raise like ``_deliver``. False: the write counts as delivered, but a trailing
+        HELLO + STATUS was cut (serial), so that STATUS is owed like one whose write failed."""
         data = b"".join(encode(m) for m in messages)
         if self._resync:
             # A leading delimiter ends whatever partial frame the receiver holds.
             data = b"\x00" + data
         self._write_bytes(data)
         self._resync = False
+        return True
 
     # ---- link budget ------------------------------------------------------------
 
@@ -86,14 +94,16 @@ class ProtocolSink(Sink):
             self._fault = int(fault)
             if self._fault != Fault.OK:
                 self._fault_since_status = self._fault
+                self._faults_set += 1
 
     # ---- Sink hooks --------------------------------------------------------------
 
     def _on_connected(self) -> None:
         self._resync = True
         now = self.options.clock_us()
-        self._status_due_us = now + int(self.options.status_s * 1e6)
-        self._write_messages([self._hello(now), self._status(now)])
+        # fps counts this connection only: the frames before an outage, over its length, are no rate.
+        self._window = (now, self.stats().sent)
+        self._write_with_status([], now)
 
     def _idle_timeout_s(self) -> Optional[float]:
         # Wake up for the next STATUS even when no frame comes: a stalled estimator is exactly when
@@ -105,8 +115,7 @@ class ProtocolSink(Sink):
     def _on_idle(self) -> None:
         now = self.options.clock_us()
         if self._status_due_us is not None and now >= self._status_due_us:
-            self._status_due_us = now + int(self.options.status_s * 1e6)
-            self._write_messages([self._hello(now), self._status(now)])
+            self._write_with_status([], now)
 
     def _deliver(self, frame: JointFrame, flags: int) -> None:
         now = self.options.clock_us()
@@ -116,10 +125,30 @@ class ProtocolSink(Sink):
         messages: list[Message] = [joints_message(frame, now, flags)]
         if self.options.send_2d and frame.joints_2d:
             messages += joints2d_messages(self._announced_2d(frame), now, self.options.cameras, flags)
-        if self._status_due_us is None or now >= self._status_due_us:
-            self._status_due_us = now + int(self.options.status_s * 1e6)
-            messages += [self._hello(now), self._status(now)]
-        self._write_messages(messages)
+        if self._status_owed or self._status_due_us is None or now >= self._status_due_us:
+            self._write_with_status(messages, now)
+        else:
+            self._write_messages(messages)
+
+    def _write_with_status(self, messages: list[Message], now: int) -> None:
+        """Write ``messages`` + HELLO + STATUS. The STATUS counts as reported only once written: a failed write
+        keeps the latched fault and the interval's counters for the next one, which is then due soon."""
+        status, taken = self._status(now)
+        try:
+            complete = self._write_messages(messages + [self._hello(now), status])
+        except Exception:
+            self._status_not_written(now)
+            raise
+        if complete is False:  # the frame went out, the STATUS behind it did not
+            self._status_not_written(now)
+            return
+        self._status_owed = False
+        self._status_due_us = now + int(self.options.status_s * 1e6)
+        self._status_written(*taken)
+
+    def _status_not_written(self, now: int) -> None:
+        self._status_owed = True  # the next frame carries it; while none comes, retry shortly
+        self._status_due_us = now + int(min(self.options.status_s, STATUS_RETRY_S) * 1e6)
 
     def _announced_2d(self, frame: JointFrame) -> JointFrame:
         """``frame`` without the 2D joints of cameras HELLO does not name (warned once per camera): they
@@ -151,28 +180,21 @@ class ProtocolSink(Sink):
             d, k = self._earlier_totals
             self._earlier_totals = (d + int(dropped), k + int(decimated))
 
-    def _status(self, now: int) -> Status:
+    def _status(self, now: int) -> tuple[Status, tuple[int, SinkStats, int]]:
+        """STATUS for the interval since the last one written, and what :meth:`_status_written` takes to
+        commit it; builds only, so a STATUS that is never written is reported again."""
         s = self.stats()
-        prev = self._prev_stats or s
         t0, sent0 = self._window
         fps_centi = round(100 * (s.sent - sent0) * 1e6 / (now - t0)) if t0 and now > t0 else 0
-        self._window, self._prev_stats = (now, s.sent), s
         with self._cond:
-            current, latched, self._fault_since_status = self._fault, self._fault_since_status, int(Fault.OK)
+            current, latched, faults_set = self._fault, self._fault_since_status, self._faults_set
             earlier_dropped, earlier_decimated = self._earlier_totals
-        if current != Fault.OK or latched != Fault.OK:
-            fault = current if current != Fault.OK else latched
-        elif s.decimated > prev.decimated:
-            fault = int(Fault.RATE_LIMITED)
-        elif s.dropped_queue > prev.dropped_queue:
-            fault = int(Fault.QUEUE_OVERFLOW)
-        elif s.dropped_error > prev.dropped_error or s.disconnects > prev.disconnects:
-            fault = int(Fault.LINK_ERRORS)
-        else:
-            fault = int(Fault.OK)
+        fault = current if current != Fault.OK else latched
+        if fault == Fault.OK:
+            fault = self._link_fault(self._prev_stats or s, s)
         h = make_header(MsgType.STATUS, self._last_seq, self._last_capture_us or now, now)
         latency = max(0, now - self._last_capture_us) if self._last_capture_us else 0
-        return Status(
+        status = Status(
             h,
             fps_centi=min(fps_centi, 0xFFFF),
             latency_us=min(latency, U32_MAX),
@@ -180,3 +202,24 @@ class ProtocolSink(Sink):
             decimated=min(earlier_decimated + s.decimated, U32_MAX),
             fault=fault,
         )
+        return status, (now, s, faults_set)
+
+    @staticmethod
+    def _link_fault(prev: SinkStats, s: SinkStats) -> int:
+        """The sink's own fault for the interval, the most severe first: frames lost to the link, then to a full
+        queue, then skipped on purpose (a deliberate ``max_fps`` must not hide the other two)."""
+        if s.dropped_error > prev.dropped_error or s.disconnects > prev.disconnects:
+            return int(Fault.LINK_ERRORS)
+        if s.dropped_queue > prev.dropped_queue:
+            return int(Fault.QUEUE_OVERFLOW)
+        if s.decimated > prev.decimated:
+            return int(Fault.RATE_LIMITED)
+        return int(Fault.OK)
+
+    def _status_written(self, now: int, s: SinkStats, faults_set: int) -> None:
+        """A STATUS built from ``s`` reached the link: start the next interval, and clear the latched fault
+        unless a newer one was set after the STATUS read it."""
+        self._window, self._prev_stats = (now, s.sent), s
+        with self._cond:
+            if self._faults_set == faults_set:
+                self._fault_since_status = int(Fault.OK)

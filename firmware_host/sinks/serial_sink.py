@@ -77,29 +77,31 @@ class SerialSink(ProtocolSink):
             except (serial.SerialException, OSError):
                 pass  # already gone; nothing left to release
 
-    def _write_messages(self, messages: list[Message]) -> None:
+    def _write_messages(self, messages: list[Message]) -> bool:
         packets = [encode(m) for m in messages]
-        self._write_framed(b"".join(packets), _frame_bytes(messages, packets))
+        return self._write_framed(b"".join(packets), _frame_bytes(messages, packets))
 
     def _write_bytes(self, data: bytes) -> None:
         # ProtocolSink's hook (framed packets, bounds unknown): the whole of ``data`` is the frame.
         self._write_framed(data, len(data) - 1)
 
-    def _write_framed(self, data: bytes, needed: int) -> None:
+    def _write_framed(self, data: bytes, needed: int) -> bool:
         """Write framed packets; ``needed``: how many bytes of ``data`` must go out for the write to count
-        as delivered. A write cut short sets ``_resync``: the next write's leading 0x00 ends the cut frame."""
+        as delivered. A write cut short sets ``_resync``: the next write's leading 0x00 ends the cut frame.
+        Returns whether all of ``data`` went out."""
         lead = b"\x00" if self._resync else b""  # ends a frame a timeout cut short
         data = lead + data
         written = self._write_within(data, self.write_timeout_s)
         if written == len(data):
             self._resync = False
-            return
+            return True
         if written:
             self._resync = True  # the receiver holds part of a frame: the next write's 0x00 ends it
         if written < len(lead) + needed:
             raise SinkWriteError(self.url, f"write timed out after {self.write_timeout_s * 1000:.0f} ms "
                                            f"({written} of {len(data)} bytes out; the peer is not reading)")
-        # Only a trailing HELLO + STATUS was cut: the frame itself is out, the next period repeats them.
+        # Only a trailing HELLO + STATUS was cut: the frame itself is out; the STATUS is owed (ProtocolSink).
+        return False
 
     def _write_within(self, data: bytes, timeout_s: float) -> int:
         """Write ``data`` as far as the port takes it within ``timeout_s``; returns the bytes written.

@@ -172,9 +172,10 @@ class UdpSink(ProtocolSink):
     def _disconnect(self) -> None:
         self._link.close()
 
-    def _write_messages(self, messages: list[Message]) -> None:
+    def _write_messages(self, messages: list[Message]) -> bool:
         for m in messages:  # one packet per datagram: a lost datagram loses one packet
             self._link.send(encode(m))
+        return True
 
     def _write_bytes(self, data: bytes) -> None:
         self._link.send(data)

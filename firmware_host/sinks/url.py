@@ -54,6 +54,9 @@ def parse_url(url: str) -> SinkUrl:
         raise SinkConfigError(url, "url", url, f"cannot be parsed: {e}") from e
     if not parts.scheme:
         raise SinkConfigError(url, "scheme", "", "expected e.g. serial://, usb://, udp://, vmc://, file://, memory://")
+    if "#" in url:  # urlsplit drops a fragment: file:///tmp/run#2/joints.jsonl would write to /tmp/run
+        raise SinkConfigError(url, "fragment", parts.fragment, "a '#' ends the URL; write a '#' in a path or "
+                                                               "value as %23")
     query: dict[str, str] = {}
     for key, values in parse_qs(parts.query, keep_blank_values=True, strict_parsing=False).items():
         if len(values) > 1:

@@ -7,10 +7,15 @@ comes from ``libusb_package`` unless a pyusb backend is passed as ``backend=``.
 Error handling: a stalled endpoint (EPIPE) has its halt cleared and the frame
 dropped; a timeout drops the frame; a vanished device (ENODEV and anything
 else) is released and searched for again with backoff.
+
+A kernel driver bound to the interface (cdc_acm on a CDC board) is detached to
+claim it and attached again when the sink lets the device go, so its
+/dev/ttyACM* comes back once the daemon stops.
 """
 from __future__ import annotations
 
 import errno
+import logging
 from typing import Any, Optional
 
 import usb.core
@@ -20,6 +25,8 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, non_negative_int, parse_url, positive_int
+
+_log = logging.getLogger(__name__)
 
 
 def _vid_pid(url: str, netloc: str) -> tuple[int, int]:
@@ -51,6 +58,7 @@ class UsbSink(ProtocolSink):
         self.vid, self.pid, self.ep, self.interface, self.timeout_ms = vid, pid, ep, interface, timeout_ms
         self._backend = backend
         self._dev: Optional[usb.core.Device] = None
+        self._detached = False  # the sink detached the interface's kernel driver: attach it again on release
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "UsbSink":
@@ -87,6 +95,7 @@ class UsbSink(ProtocolSink):
         try:
             self._configure(dev)
         except (usb.core.USBError, ValueError) as e:
+            self._reattach(dev)
             usb.util.dispose_resources(dev)
             # The device is there but not as the URL describes it (interface, ep) or is held by another
             # program; the base class warns once per outage and per new error, as for any failed connect.
@@ -102,6 +111,7 @@ class UsbSink(ProtocolSink):
         try:
             if dev.is_kernel_driver_active(self.interface):
                 dev.detach_kernel_driver(self.interface)
+                self._detached = True
         except NotImplementedError:
             pass  # backends without kernel drivers (macOS, Windows, fakes)
         try:
@@ -120,7 +130,18 @@ class UsbSink(ProtocolSink):
                 usb.util.release_interface(dev, self.interface)
             except (usb.core.USBError, ValueError):
                 pass  # the device is probably gone
+            self._reattach(dev)
             usb.util.dispose_resources(dev)
+
+    def _reattach(self, dev: usb.core.Device) -> None:
+        """Give the interface back to the kernel driver this sink detached; must not raise."""
+        if not self._detached:
+            return
+        self._detached = False
+        try:
+            dev.attach_kernel_driver(self.interface)
+        except (usb.core.USBError, NotImplementedError) as e:  # gone, or the driver was unloaded meanwhile
+            _log.debug("%s: kernel driver of interface %d not attached again: %s", self.url, self.interface, e)
 
     def _write_bytes(self, data: bytes) -> None:
         if self._dev is None:

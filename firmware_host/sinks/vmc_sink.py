@@ -6,11 +6,16 @@ numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
 report what it decimated or dropped. ``max_fps`` caps the rate (receivers
 render at display rate; 60 is plenty). Host names are resolved like udp://
 (IPv4 first, looked up again every ``resolve_s``, default 30).
+
+The binary protocol's options (``send_2d``, ``status_s``, ``joint_count``, ``rig_id``, ``cameras``)
+mean nothing to VMC: in the URL they are errors, so no one expects them to work. As keywords they are
+accepted and unused, because the daemon hands every sink the rig's id and camera names.
 """
 from __future__ import annotations
 
 from typing import Any, Optional
 
+from firmware_host.errors import SinkConfigError
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
@@ -20,6 +25,17 @@ from firmware_host.sinks.vmc_osc import build_bundle
 from firmware_host.sinks.vmc_pose import solve_pose
 
 VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
+
+#: SinkOptions fields only the binary-protocol sinks use (HELLO, STATUS, JOINTS_2D, their link budget).
+PROTOCOL_ONLY = ("cameras", "joint_count", "rig_id", "send_2d", "status_s")
+
+
+def _reject_protocol_options(u: SinkUrl) -> None:
+    given = [key for key in PROTOCOL_ONLY if key in u.query]
+    if given:
+        raise SinkConfigError(u.url, given[0], u.query[given[0]],
+                              f"vmc:// sends no HELLO, STATUS or 2D joints, so {', '.join(given)} would be "
+                              "ignored; remove it")
 
 
 class VmcSink(Sink):
@@ -35,6 +51,7 @@ class VmcSink(Sink):
         u: SinkUrl = parse_url(url)
         host, port = host_port(u, VMC_DEFAULT_PORT)
         resolve_s = u.take("resolve_s", positive_float, RESOLVE_S, kw)
+        _reject_protocol_options(u)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)

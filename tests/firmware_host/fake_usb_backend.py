@@ -7,14 +7,19 @@ interface holding a bulk OUT endpoint (0x01) and a bulk IN endpoint (0x81).
 
 Modelled: descriptors for enumeration; configuration state; bulk OUT writes
 (bytes are appended to ``device.received``); a stalled endpoint (writes raise
-USBError with errno EPIPE until ``clear_halt``); disappearance (the device
-leaves enumeration and every call on an open handle raises USBError with
-errno ENODEV, also after it comes back: a replugged device needs a new handle).
+USBError with errno EPIPE until ``clear_halt``); a write that times out part
+way (``time_out_after``: that many bytes arrive, then USBTimeoutError, as
+libusb reports a bulk transfer whose later packets the device never took);
+disappearance (the device leaves enumeration and every call on an open handle
+raises USBError with errno ENODEV, also after it comes back: a replugged
+device needs a new handle); a kernel driver bound to the interface
+(``kernel_driver``, as cdc_acm holds a CDC board's /dev/ttyACM*): claiming
+fails with EBUSY until it is detached, and ``attach_kernel_driver`` binds it
+again.
 
 Not modelled: control transfers and string descriptors, IN/interrupt/iso
-transfers, timing and timeouts, packet sizes and short packets, kernel
-drivers (never active), alternate settings, hubs and parents, more than one
-device or configuration.
+transfers, timing, packet sizes, alternate settings, hubs and parents, more
+than one device or configuration.
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ import errno
 import threading
 from dataclasses import dataclass, field
 from types import SimpleNamespace
+from typing import Optional
 
 import usb.backend
 import usb.core
@@ -39,6 +45,10 @@ class FakeDevice:
     generation: int = 0  # bumped on every unplug: old handles go stale
     writes: int = 0
     halts_cleared: int = 0
+    time_out_after: Optional[int] = None  # the next write delivers this many bytes, then times out
+    kernel_driver: bool = False  # a kernel driver is bound to interface 0
+    detaches: int = 0
+    attaches: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def unplug(self) -> None:
@@ -133,13 +143,28 @@ class FakeBackend(usb.backend.IBackend):
         return self._check(dev_handle).configuration
 
     def claim_interface(self, dev_handle, intf):
-        self._check(dev_handle).claimed.add(intf)
+        dev = self._check(dev_handle)
+        if dev.kernel_driver:
+            raise usb.core.USBError("Resource busy", error_code=-6, errno=errno.EBUSY)
+        dev.claimed.add(intf)
 
     def release_interface(self, dev_handle, intf):
         self._check(dev_handle).claimed.discard(intf)
 
     def is_kernel_driver_active(self, dev_handle, intf):
-        return False
+        return self._check(dev_handle).kernel_driver
+
+    def detach_kernel_driver(self, dev_handle, intf):
+        dev = self._check(dev_handle)
+        dev.kernel_driver = False
+        dev.detaches += 1
+
+    def attach_kernel_driver(self, dev_handle, intf):
+        dev = self._check(dev_handle)
+        if intf in dev.claimed:
+            raise usb.core.USBError("Resource busy", error_code=-6, errno=errno.EBUSY)
+        dev.kernel_driver = True
+        dev.attaches += 1
 
     # ---- transfers ----
 
@@ -153,6 +178,10 @@ class FakeBackend(usb.backend.IBackend):
             dev.writes += 1
             if dev.stalled:
                 raise usb.core.USBError("Pipe error", error_code=-9, errno=errno.EPIPE)
+            if dev.time_out_after is not None:
+                dev.received += bytes(data[: dev.time_out_after])
+                dev.time_out_after = None
+                raise usb.core.USBTimeoutError("Operation timed out", error_code=-7, errno=errno.ETIMEDOUT)
             dev.received += bytes(data)
         return len(data)
 

@@ -175,3 +175,13 @@ def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_u
     for msg in rows:
         joints = np.array(msg["joints"])
         assert joints.shape == (25, 5) and np.all(joints[:, 4] == 0) and np.all(joints[:, 3] == 255)
+
+
+def test_the_default_sink_writes_into_an_out_folder_with_a_space_and_a_hash(tmp_path, capsys, sim_url):
+    # file://{path} unescaped: the "#" began a fragment and the joints went to a file called "my run"
+    out = tmp_path / "my run#2"
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(out),
+                    "--model-dir", str(tmp_path / "no-model")])
+    printed = capsys.readouterr().out
+    assert rc == 0, printed
+    assert _joints_rows(out / "joints.jsonl") and not (tmp_path / "my run").exists()

@@ -64,6 +64,9 @@ def test_serial_json_lines_over_a_pty():
     ("serial://", "give the device"),
     ("serial:///dev/nonexistent-ghnerf?baud=9600", "cannot open"),
     ("serial:///dev/null?baud=fast", "baud must be"),
+    # ignored: the port opened at 115200, the user believing 921600
+    ("serial:///dev/null?baudrate=921600", "unknown parameter baudrate; it takes baud"),
+    ("udp://127.0.0.1:0?baud=9600&x=", "unknown parameter baud, x; it takes none"),
 ])
 def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2
@@ -161,3 +164,8 @@ def test_the_listener_and_the_udp_sink_pick_a_name_s_address_by_one_rule(monkeyp
     udp_sink.resolve("udp://localhost:0", "localhost", 0)
     listen._bind("127.0.0.1", 0).close()
     assert len(used) == 2  # both went through the shared rule
+
+
+def test_the_scheme_is_case_insensitive():
+    port = listen.open_port("UDP://127.0.0.1:0")
+    port.close()

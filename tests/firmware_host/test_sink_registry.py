@@ -53,6 +53,16 @@ def test_importing_sinks_loads_no_backend_library() -> None:
         ("memory://?status_s=1e12", {}, "status_s", 1e12),
         ("memory://?fps=nan", {}, "fps", "nan"),
         ("udp://[::1:9870", {}, "url", "udp://[::1:9870"),
+        # a fragment was dropped: the file went to /tmp/run; a host made a relative path of localhost/...
+        ("file:///tmp/run#2/joints.jsonl", {}, "fragment", "2/joints.jsonl"),
+        ("udp://127.0.0.1:9870#robot", {}, "fragment", "robot"),
+        ("file://robot/var/joints.jsonl", {}, "host", "robot"),
+        ("file://", {}, "path", ""),
+        # vmc:// has no HELLO, STATUS or JOINTS_2D: these were accepted and ignored
+        ("vmc://127.0.0.1?send_2d=1&cameras=left,right", {}, "cameras", "left,right"),
+        ("vmc://127.0.0.1?status_s=5", {}, "status_s", "5"),
+        ("vmc://127.0.0.1?rig_id=stage", {}, "rig_id", "stage"),
+        ("vmc://127.0.0.1?joint_count=25", {}, "joint_count", "25"),
     ],
 )
 def test_config_errors_name_url_field_and_value(url: str, kw: dict, field: str, value: object) -> None:
@@ -78,3 +88,15 @@ def test_vmc_default_port() -> None:
         assert sink._link.port == 39539  # type: ignore[attr-defined]
     finally:
         sink.close()
+
+
+def test_vmc_takes_the_rig_s_id_and_cameras_as_keywords() -> None:
+    # the daemon hands every sink the rig's id and camera names; vmc:// just does not use them
+    sink = open_sink("vmc://127.0.0.1?max_fps=60", rig_id="stage", cameras=("left", "right"))
+    sink.close()
+
+
+def test_vmc_names_every_protocol_option_it_refuses() -> None:
+    with pytest.raises(SinkConfigError) as info:
+        open_sink("vmc://127.0.0.1?send_2d=1&status_s=5")
+    assert "send_2d, status_s" in str(info.value)

@@ -258,16 +258,40 @@ def test_what_a_cut_write_counts_as_delivered(monkeypatch: pytest.MonkeyPatch, s
 
     sink = SerialSink.from_url("serial:///dev/ttyGHNERF-unused?baud=921600")  # never started: no port
     sink._resync = False
-    messages = [joints_message(make_frame(0), 1, 0), sink._hello(1), sink._status(1)]
+    messages = [joints_message(make_frame(0), 1, 0), sink._hello(1), sink._status(1)[0]]
     joints_len = len(encode(messages[0]))
     out = {"joints": joints_len - 2, "joints_delimiter": joints_len - 1, "status": joints_len + 5}[short_by]
     monkeypatch.setattr(sink, "_write_within", lambda data, timeout_s: out)
     if delivered:
-        sink._write_messages(messages)
+        assert sink._write_messages(messages) is False  # delivered, but its STATUS is owed
     else:
         with pytest.raises(SinkWriteError, match="timed out"):
             sink._write_messages(messages)
     assert sink._resync  # either way the next write starts with 0x00
+
+
+def test_a_status_cut_off_a_delivered_frame_is_owed_by_the_next(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the frame counted as out, so the STATUS behind it counted as out too: its latched fault was lost
+    from firmware_host.protocol import Fault, Status
+    from firmware_host.protocol.encoder import encode
+    from firmware_host.protocol.from_frame import joints_message
+    from firmware_host.sinks.serial_sink import SerialSink
+
+    sink = SerialSink.from_url("serial:///dev/ttyGHNERF-unused?baud=921600", clock_us=lambda: 5_000_000)
+    cut_at = len(encode(joints_message(make_frame(0), 1, 0))) + 6  # 0x00, the JOINTS packet, part of HELLO
+    writes: list[bytes] = []
+
+    def write_within(data: bytes, timeout_s: float) -> int:
+        writes.append(bytes(data))
+        return cut_at if len(writes) == 1 else len(data)
+
+    monkeypatch.setattr(sink, "_write_within", write_within)
+    sink.set_fault(Fault.CAMERA_FAULT)
+    sink.set_fault(Fault.OK)
+    sink._deliver(make_frame(0), 0)  # with HELLO + STATUS (the first), cut
+    sink._deliver(make_frame(1), 0)  # the clock stands still: no STATUS due but the owed one
+    statuses = [m for m in messages_of(writes[1]) if isinstance(m, Status)]
+    assert [st.fault for st in statuses] == [Fault.CAMERA_FAULT]
 
 
 def test_write_bytes_cut_short_makes_the_next_write_start_a_new_frame(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -1,18 +1,28 @@
 """udp:// on 127.0.0.1, file:// JSON lines, memory:// buffer."""
 from __future__ import annotations
 
+import errno
 import json
 import socket
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from firmware_host.errors import SinkConfigError
+from firmware_host.errors import SinkConfigError, SinkUnavailableError
 from firmware_host.protocol import Fault, Hello, Joints, Joints2D, StreamDecoder
 from firmware_host.protocol.messages import Status
 from firmware_host.sinks import open_sink
-from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
+from firmware_host.sinks.memory_sink import MemorySink
+from tests.firmware_host.joint_stream_helpers import (
+    FAST_BACKOFF,
+    FRAME_US,
+    joints_seqs,
+    make_frame,
+    messages_of,
+    wait_until,
+)
 
 
 def test_udp_one_packet_per_datagram() -> None:
@@ -97,6 +107,78 @@ def test_file_sink_reopens_after_the_file_goes_away(tmp_path: Path) -> None:
     assert sink.wait_drained(5)
     sink.close()
     assert '"seq":0' in (folder / "joints.jsonl").read_text()
+
+
+class _CutShort:
+    """A file whose next write stops half way through its text with ENOSPC, as on a full disk."""
+
+    def __init__(self, fh: Any) -> None:
+        self.fh = fh
+
+    def write(self, text: str) -> int:
+        self.fh.write(text[: len(text) // 2])
+        self.fh.flush()
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    def flush(self) -> None:
+        self.fh.flush()
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+def test_file_sink_ends_a_line_a_failed_write_cut_short(tmp_path: Path) -> None:
+    # the reopened file's HELLO went on the end of the half line: one unparsable line of both
+    path = tmp_path / "joints.jsonl"
+    sink = open_sink(path.as_uri() + "?status_s=3600", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        sink._fh = _CutShort(sink._fh)  # type: ignore[attr-defined]  # idle: no STATUS due for an hour
+        sink.send(make_frame(1))
+        wait_until(lambda: sink.stats().connects == 2, what="the file reopened")
+        sink.send(make_frame(2))
+        assert sink.wait_drained(5)
+    finally:
+        sink.close()
+    types = []
+    for line in path.read_text().splitlines():
+        try:
+            types.append(json.loads(line)["type"])
+        except json.JSONDecodeError:
+            types.append("cut")
+    assert types == ["HELLO", "STATUS", "JOINTS", "cut", "HELLO", "STATUS", "JOINTS"]
+
+
+def test_file_sink_writes_at_the_start_of_a_file_truncated_under_it(tmp_path: Path) -> None:
+    # logrotate's copytruncate, as docs/protocol.md advises: no hole of NULs before the next line
+    path = tmp_path / "joints.jsonl"
+    sink = open_sink(path.as_uri() + "?status_s=3600", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        path.write_bytes(b"")  # truncated, the file itself kept
+        sink.send(make_frame(1))
+        assert sink.wait_drained(5)
+    finally:
+        sink.close()
+    assert [json.loads(line)["seq"] for line in path.read_text().splitlines()] == [1]
+
+
+@pytest.mark.parametrize(("written", "opened"), [
+    ("file://{folder}/my%20run%232/joints.jsonl", "my run#2/joints.jsonl"),  # Path.as_uri() quotes so
+    ("file://localhost{folder}/joints.jsonl", "joints.jsonl"),  # RFC 8089: the local host, an absolute path
+])
+def test_file_urls_name_the_local_path(tmp_path: Path, written: str, opened: str) -> None:
+    (tmp_path / "my run#2").mkdir()
+    sink = open_sink(written.format(folder=tmp_path), backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+    finally:
+        sink.close()
+    assert json.loads((tmp_path / opened).read_text().splitlines()[0])["type"] == "HELLO"
 
 
 def test_memory_sink_bounded_buffer_counts_overflow() -> None:
@@ -197,3 +279,121 @@ def test_2d_joints_of_an_unannounced_camera_are_left_out_not_the_frame(caplog: p
     assert [m.camera for m in messages if isinstance(m, Joints2D)] == [0, 0, 0]
     warnings = [r.getMessage() for r in caplog.records if "not among the announced cameras" in r.getMessage()]
     assert len(warnings) == 2  # once per unknown camera, not once per frame
+
+
+class _Clock:
+    """A clock the test moves: the sink's STATUS schedule follows it, not the wall."""
+
+    def __init__(self) -> None:
+        self.us = 1_000_000
+
+    def __call__(self) -> int:
+        return self.us
+
+
+def _statuses(data: bytes) -> list[Status]:
+    return [m for m in messages_of(data) if isinstance(m, Status)]
+
+
+def test_a_latched_fault_survives_a_status_that_could_not_be_written() -> None:
+    # the STATUS that was to report the camera fault hit a full buffer; clearing the latch before the write
+    # lost the fault for good
+    clock = _Clock()
+    sink = open_sink("memory://?max_bytes=300&status_s=1", backoff=FAST_BACKOFF, clock_us=clock)
+    try:
+        assert sink.wait_connected(5)  # HELLO + STATUS: 78 bytes held
+        sink.set_fault(Fault.CAMERA_FAULT)
+        sink.set_fault(Fault.OK)
+        clock.us += 2_000_000
+        sink.send(make_frame(0))  # JOINTS + HELLO + STATUS do not fit beside them
+        assert sink.wait_drained(5) and sink.stats().dropped_error == 1
+        assert [st.fault for st in _statuses(sink.read())] == [Fault.OK]  # only the connect's
+        clock.us += 2_000_000
+        got: list[Status] = []
+
+        def a_status_came() -> bool:
+            got.extend(_statuses(sink.read()))
+            return bool(got)
+
+        wait_until(a_status_came, what="the STATUS after the failed one")
+    finally:
+        sink.close()
+    assert got[0].fault == Fault.CAMERA_FAULT
+
+
+def test_an_unwritten_status_is_owed_by_the_next_frame() -> None:
+    clock = _Clock()
+    sink = open_sink("memory://?max_bytes=300&status_s=3600", backoff=FAST_BACKOFF, clock_us=clock)
+    try:
+        assert sink.wait_connected(5)
+        sink.set_fault(Fault.ESTIMATOR_STALLED)
+        clock.us += 3601_000_000
+        sink.send(make_frame(0))  # its STATUS does not fit
+        assert sink.wait_drained(5)
+        sink.read()
+        sink.send(make_frame(1))  # the next STATUS is an hour away, but this one is owed now
+        assert sink.wait_drained(5)
+        messages = messages_of(sink.read())
+    finally:
+        sink.close()
+    assert joints_seqs(messages) == [1]
+    assert [st.fault for st in messages if isinstance(st, Status)] == [Fault.ESTIMATOR_STALLED]
+
+
+def test_link_errors_show_while_decimating() -> None:
+    # a deliberate max_fps decimates all the time: RATE_LIMITED first hid every lost frame
+    clock = _Clock()
+    sink = open_sink("memory://?max_bytes=150&max_fps=10&status_s=1", backoff=FAST_BACKOFF, clock_us=clock)
+    try:
+        assert sink.wait_connected(5)
+        sink.read()
+        for seq in range(6):  # 30 fps into 10: two in three decimated, the rest too big for the buffer
+            sink.send(make_frame(seq))
+            assert sink.wait_drained(5)
+        stats = sink.stats()
+        assert stats.decimated > 0 and stats.dropped_error > 0
+        clock.us += 2_000_000  # HELLO + STATUS alone fit
+        got: list[Status] = []
+
+        def a_status_came() -> bool:
+            got.extend(_statuses(sink.read()))
+            return bool(got)
+
+        wait_until(a_status_came, what="an idle STATUS")
+    finally:
+        sink.close()
+    assert got[0].fault == Fault.LINK_ERRORS
+
+
+class _Unpluggable(MemorySink):
+    """memory:// whose link can go away (writes raise SinkUnavailableError) and come back."""
+
+    unplugged = False
+
+    def _write_bytes(self, data: bytes) -> None:
+        if self.unplugged:
+            raise SinkUnavailableError(self.url, "unplugged")
+        super()._write_bytes(data)
+
+
+def test_the_first_status_after_an_outage_has_no_rate_from_before_it() -> None:
+    clock = _Clock()
+    sink = _Unpluggable.from_url("memory://?status_s=10&queue=64", backoff=FAST_BACKOFF, clock_us=clock).start()
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(30):  # one second at 30 fps, no STATUS due yet
+            clock.us += FRAME_US
+            sink.send(make_frame(seq))
+            assert sink.wait_drained(5)
+        sink.read()
+        sink.unplugged = True
+        clock.us += 100_000_000  # a 100 s outage
+        sink.send(make_frame(30))
+        wait_until(lambda: sink.stats().disconnects == 1, what="the link lost")
+        sink.unplugged = False
+        wait_until(lambda: sink.stats().connects == 2, what="connected again")
+        statuses = _statuses(sink.read())
+    finally:
+        sink.close()
+    assert statuses[0].fps_centi == 0  # not 30 frames over 101 s
+    assert statuses[0].fault == Fault.LINK_ERRORS

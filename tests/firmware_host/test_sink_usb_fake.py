@@ -6,7 +6,7 @@ import logging
 import pytest
 import usb.core
 
-from firmware_host.protocol import Flags, Hello, Joints
+from firmware_host.protocol import Flags, Hello, Joints, decode_stream
 from firmware_host.sinks import open_sink
 from tests.firmware_host.fake_usb_backend import FakeBackend, FakeDevice
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, joints_seqs, make_frame, messages_of, wait_until
@@ -103,3 +103,46 @@ def test_a_device_unlike_its_url_is_warned_about_once_and_retried(
         assert word in (stats.last_error or "")
     warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]
     assert len(warnings) == 1 and "cannot claim" in warnings[0].getMessage()  # no traceback per attempt
+
+
+def test_a_kernel_driver_detached_to_claim_the_board_is_attached_again() -> None:
+    # a CDC board's /dev/ttyACM* stayed gone after the daemon stopped
+    device = FakeDevice(kernel_driver=True)
+    sink = open_sink(URL, backend=FakeBackend(device), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    assert device.detaches == 1 and not device.kernel_driver
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.close()
+    assert device.kernel_driver and device.attaches == 1 and not device.claimed
+    assert joints_seqs(messages_of(device.take())) == [0]
+
+
+def test_a_kernel_driver_is_attached_again_when_the_device_is_not_as_the_url_says() -> None:
+    device = FakeDevice(kernel_driver=True)
+    sink = open_sink("usb://1209:0001?ep=0x02", backend=FakeBackend(device), backoff=FAST_BACKOFF)
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="two connect attempts")
+    sink.close()
+    assert device.kernel_driver and device.attaches == device.detaches >= 2
+
+
+def test_a_bulk_write_that_times_out_part_way_costs_the_receiver_that_frame_only() -> None:
+    device = FakeDevice()
+    sink = open_sink(URL, backend=FakeBackend(device), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    device.time_out_after = 40  # frame 1's first 40 bytes reach the board, then the transfer times out
+    sink.send(make_frame(1))
+    assert sink.wait_drained(5)
+    for seq in (2, 3):
+        sink.send(make_frame(seq))
+    assert sink.wait_drained(5)
+    stats = sink.close()
+    assert stats.dropped_error == 1 and stats.disconnects == 0 and "timed out" in (stats.last_error or "")
+    events, decoded = decode_stream(device.take())
+    joints = [e.message for e in events if isinstance(e.message, Joints)]
+    # the 0x00 the next write starts with ends the cut frame: one decode error, not frame 2 as well
+    assert [m.header.seq for m in joints] == [0, 2, 3]
+    assert sum(decoded.errors.values()) == 1
+    assert joints[1].header.flags & Flags.DROPPED and not joints[2].header.flags & Flags.DROPPED
