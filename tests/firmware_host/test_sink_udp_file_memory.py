@@ -167,6 +167,32 @@ def test_file_sink_writes_at_the_start_of_a_file_truncated_under_it(tmp_path: Pa
     assert [json.loads(line)["seq"] for line in path.read_text().splitlines()] == [1]
 
 
+def test_file_sink_writes_into_a_fifo(tmp_path: Path) -> None:
+    # file:///dev/stdout or a named pipe: nothing to read back for a cut line, and no error for trying
+    import os
+    import threading
+
+    fifo = tmp_path / "joints.fifo"
+    os.mkfifo(fifo)
+    lines: list[str] = []
+
+    def read() -> None:
+        with open(fifo, encoding="utf-8") as f:
+            lines.extend(line for _, line in zip(range(3), f))
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    sink = open_sink(fifo.as_uri() + "?status_s=3600", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        reader.join(5)
+    finally:
+        sink.close()
+    assert [json.loads(line)["type"] for line in lines] == ["HELLO", "STATUS", "JOINTS"]
+
+
 @pytest.mark.parametrize(("written", "opened"), [
     ("file://{folder}/my%20run%232/joints.jsonl", "my run#2/joints.jsonl"),  # Path.as_uri() quotes so
     ("file://localhost{folder}/joints.jsonl", "joints.jsonl"),  # RFC 8089: the local host, an absolute path
