@@ -526,7 +526,8 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))
     sq = ((p - t) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
-    mse = np.where(counts > 0, (sq * m).sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
+    sq = np.where(m, sq, 0.0)  # not sq * m: a NaN outside the mask would poison the sum (0 * NaN is NaN)
+    mse = np.where(counts > 0, sq.sum(axis=(1, 2)) / np.maximum(counts * p.shape[-1], 1), np.nan)
     with np.errstate(divide="ignore"):
         values = 10.0 * np.log10(data_range ** 2 / mse)
     return _per_image_result(values, counts, batch_shape)
@@ -538,6 +539,8 @@ def _ssim_map(x: np.ndarray, y: np.ndarray, m: np.ndarray, data_range: float) ->
         # Constant (zero) border: pixels outside the image weigh like pixels outside the mask.
         return cv2.GaussianBlur(a, (SSIM_WINDOW, SSIM_WINDOW), SSIM_SIGMA, borderType=cv2.BORDER_CONSTANT)
 
+    inside = m > 0  # a NaN or inf outside the mask must not reach the sums: 0 * NaN is NaN
+    x, y = np.where(inside, x, 0.0), np.where(inside, y, 0.0)
     w = window_sum(m)
     inv_w = np.where(w > 1e-12, 1.0 / np.maximum(w, 1e-12), 0.0)
     mx, my = window_sum(m * x) * inv_w, window_sum(m * y) * inv_w

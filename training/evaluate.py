@@ -72,8 +72,14 @@ from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.metrics import (finite_or_none, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility,
                                     pck)
+from training.model_card import write_atomic
 
 PCK_ALPHA = 0.2
+
+
+class EvalInputError(ValueError):
+    """A model spec, its files or the dataset cannot be evaluated; the message names the file and what is wrong."""
+
 #: Bin edges (degrees) of a novel view's angle from the nearest source camera, for the PSNR split.
 SOURCE_ANGLE_BINS_DEG = (0.0, 15.0, 30.0, 60.0, 90.0, 180.0)
 
@@ -168,17 +174,20 @@ class OnnxRenderer:
     def __init__(self, folder: str | Path, precision: str = "fp32", threads: int = 2):
         import onnx
 
-        from training.export.parity import make_session
-
         folder = Path(folder)
         suffix = ".int8.onnx" if precision == "int8" else ".onnx"
         self.paths = {g: folder / f"{g}{suffix}" for g in ("encoder", "volume", "render_heat", "render_rgb")}
-        missing = [str(p) for p in self.paths.values() if not p.exists()]
+        missing = [p.name for p in self.paths.values() if not p.exists()]
         if missing:
-            raise FileNotFoundError(f"missing ONNX graphs: {missing}")
-        props = {p.key: p.value for p in onnx.load(str(self.paths["encoder"]), load_external_data=False).metadata_props}
-        self.contract = ModelContract.from_metadata(props)
-        self.sessions = {g: make_session(p, threads) for g, p in self.paths.items()}
+            raise EvalInputError(f"{folder}: missing ONNX graphs {', '.join(missing)} (export the model there, or "
+                                 f"give another folder{'; without #int8 for fp32' if precision == 'int8' else ''})")
+        try:
+            props = {p.key: p.value
+                     for p in onnx.load(str(self.paths["encoder"]), load_external_data=False).metadata_props}
+            self.contract = ModelContract.from_metadata(props)
+        except Exception as e:  # protobuf's DecodeError, the contract's own errors
+            raise EvalInputError(f"{self.paths['encoder']}: not a readable GHNeRF graph ({_short(e)})") from e
+        self.sessions = {g: _session(p, threads) for g, p in self.paths.items()}
         self.height, self.width = self.contract.height, self.contract.width
         self.heatmap_stride = self.contract.heatmap_stride
         self.background = self.contract.background
@@ -201,6 +210,20 @@ class OnnxRenderer:
 
     def colour(self, scene, targets, ray_uv):
         return self._run(scene, targets, ray_uv, "render_rgb")["rgb"]
+
+
+def _session(path: Path, threads: int):
+    """An onnxruntime session of ``path``; a damaged file is an :class:`EvalInputError` naming it."""
+    from training.export.parity import make_session
+
+    try:
+        return make_session(path, threads)
+    except Exception as e:  # onnxruntime's InvalidProtobuf / Fail
+        raise EvalInputError(f"{path}: onnxruntime cannot load it ({_short(e)})") from e
+
+
+def _short(e: BaseException) -> str:
+    return f"{type(e).__name__}: {' '.join(str(e).split())[:200]}"
 
 
 @torch.no_grad()
@@ -546,7 +569,10 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
         img = scene["tgt_images"][novel_targets]
         m = scene["tgt_masks"][novel_targets]
         truth = img * m[:, None] + background * (1 - m[:, None])
-        pred = np.clip(novel_rgb, 0, 1)
+        # a view with any non-finite pixel is a broken render: NaN throughout, so it is counted (nonfinite_views),
+        # not scored; tested before clipping, which would turn +-inf into 1 / 0
+        finite = np.isfinite(novel_rgb).all(axis=(1, 2, 3), keepdims=True)
+        pred = np.where(finite, np.clip(novel_rgb, 0, 1), np.nan)
         # metrics take channels-last images (..., H, W, C) or (..., H, W)
         out["psnr"] = masked_psnr(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
         out["ssim"] = masked_ssim(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
@@ -598,20 +624,51 @@ def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, pr
 
 
 def make_renderer(spec: str, threads: int = 2) -> tuple[Renderer, dict]:
-    """A renderer and a description from a model spec (``x.pt``, ``folder`` or ``folder#int8``)."""
+    """A renderer and a description from a model spec (``x.pt``, ``folder`` or ``folder#int8``); a spec that
+    cannot be loaded is an :class:`EvalInputError` (or the trainer's ``ConfigError``) naming the file."""
     path, _, precision = spec.partition("#")
     p = Path(path)
     if p.suffix == ".pt":
         from training.train import load_model
 
+        if not p.is_file():
+            raise EvalInputError(f"{p}: no such checkpoint")
         model, ck = load_model(p)
         return TorchRenderer(model), {"kind": "torch", "path": str(p), "step": ck.get("step"),
                                       "variant": "ghnerf" if model.human is not None else "baseline"}
     precision = precision or "fp32"
     if precision not in ("fp32", "int8"):
-        raise ValueError(f"{spec}: precision must be fp32 or int8")
+        raise EvalInputError(f"{spec}: precision must be fp32 or int8, got {precision!r}")
+    if not p.is_dir():
+        raise EvalInputError(f"{p}: no such model folder (a spec is x.pt, a folder of graphs, or folder#int8)")
     r = OnnxRenderer(p, precision, threads)
     return r, {"kind": f"onnx-{precision}", "path": str(p), "variant": r.contract.variant}
+
+
+def open_eval_dataset(data: str, split: str, renderer: Renderer, label: str):
+    """The split as ``renderer`` reads it, refused up front when its resolution is not the model's (it would
+    render a scene first and then fail)."""
+    from training.data.targets import TargetConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    ds = MultiViewDataset(data, split, TargetConfig(heatmap_stride=renderer.heatmap_stride))
+    if (ds.resolution, ds.resolution) != (renderer.height, renderer.width):
+        raise EvalInputError(f"{data}: holds {ds.resolution} px scenes, model {label} takes "
+                             f"{renderer.width}x{renderer.height}: evaluate it on a dataset of its resolution")
+    return ds
+
+
+def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple[str, Renderer, dict, object]]:
+    """``(label, renderer, description, dataset)`` of every ``--model``: all loaded and checked before the first
+    scene is rendered, so a bad spec fails in seconds, not after the models before it were scored."""
+    out = []
+    for item in specs:
+        label, sep, spec = item.partition("=")
+        if not sep:
+            label, spec = Path(item).stem, item
+        renderer, desc = make_renderer(spec, threads)
+        out.append((label, renderer, desc, open_eval_dataset(data, split, renderer, label)))
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -631,23 +688,22 @@ def main(argv: list[str] | None = None) -> int:
     if args.out:  # written after minutes of evaluation: its place is settled first
         args.out = ready_output_arg(ap, args.out, "--out")
     torch.set_num_threads(args.threads)
-    from training.data.targets import TargetConfig
-    from training.data.torch_dataset import MultiViewDataset
+    from training.data.errors import DataError
+    from training.model.config import ConfigError
 
+    try:
+        runs = prepare(args.model, args.data, args.split, args.threads)
+    except (EvalInputError, ConfigError, DataError) as e:
+        print(f"ghnerf-eval: error: {e}", file=sys.stderr)
+        return 2
     results: dict = {"data": args.data, "split": args.split, "pck_alpha": PCK_ALPHA,
                      "pck_reference": "neck--mid-hip distance (fallback: torso box diagonal)", "models": {}}
-    for item in args.model:
-        label, sep, spec = item.partition("=")
-        if not sep:
-            label, spec = Path(item).stem, item
-        renderer, desc = make_renderer(spec, args.threads)
-        ds = MultiViewDataset(args.data, args.split, TargetConfig(heatmap_stride=renderer.heatmap_stride))
+    for label, renderer, desc, ds in runs:
         print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
         results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
-    text = json.dumps(finite_or_none(results), indent=1)
-    print(text)
-    if args.out:
-        args.out.write_text(text)
+        if args.out:  # each finished model kept, whole, whatever happens to the next
+            write_atomic(args.out, json.dumps(finite_or_none(results), indent=1))
+    print(json.dumps(finite_or_none(results), indent=1))
     return 0
 
 

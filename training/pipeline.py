@@ -12,7 +12,10 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
 5. ``quantize_<variant>``: static int8 QDQ graphs, calibrated on training-split scenes (real frames and
    cameras), and the int8-vs-fp32 parity on a held-out scene.
    Both write into ``<variant>.staging`` beside the model folder and move their files in only once the parity
-   checks pass: a failure leaves the folder as it was and the rejected files in the staging folder.
+   checks pass: a failure leaves the folder as it was and the rejected files in the staging folder
+   (``training.export.staging``). When new files move in, a ``model_card.json`` recording other versions of them
+   is set aside as ``model_card.stale.json`` (with ``MODEL_CARD.md`` and ``metrics.json``): until the card stage
+   writes a new one, no card describes the replaced model with the new files' names.
 6. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
    split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks, ``--prior-set``
    overrides them: the ``cpu`` recipe's, about 27 min on the fast two-core host with its 20000 extra scenes, as
@@ -548,6 +551,11 @@ def dataset_matches(cfg: PipelineConfig) -> bool:
     d = json.loads(meta.read_text())
     if d.get("resolution") != cfg.res:
         return False
+    from training.data.cache import generator_version
+    from training.data.generate import GENERATOR_VERSION
+
+    if generator_version(d) != GENERATOR_VERSION:
+        return False  # rendered by another generator: generate names the difference
     want = {"train": cfg.train, "val": cfg.val, "val_seen_motions": cfg.val_seen_motions}
     splits = d.get("splits", {})
     for name, n in want.items():
@@ -596,6 +604,16 @@ def _set_aside_forced(cfg: PipelineConfig, forced: set[str]) -> None:
             aside, n = folder.with_name(f"{folder.name}.replaced-{stamp}-{n}"), n + 1
         folder.rename(aside)
         log.info("--force %s: moved %s aside to %s", stage, folder, aside)
+
+
+def data_request(cfg: PipelineConfig) -> dict:
+    """The data stage's stamp input. Keys join only when they leave their old value, so the stamps of datasets
+    made before them keep matching: ``freestyle`` when not 0, ``generator`` when not version 1."""
+    from training.data.generate import GENERATOR_VERSION
+
+    return {"data": str(cfg.data), "res": cfg.res, "train": cfg.train, "val": cfg.val, "vsm": cfg.val_seen_motions,
+            **({"freestyle": cfg.freestyle_share} if cfg.freestyle_share else {}),
+            **({"generator": GENERATOR_VERSION} if GENERATOR_VERSION != 1 else {})}
 
 
 def stage_data(cfg: PipelineConfig) -> tuple[list[Path], dict]:
@@ -830,9 +848,6 @@ def calibration_items(dataset, scenes: int) -> list[tuple[int, dict]]:
     return [(i, dataset[i]) for i in range(0, step * scenes, step)[:scenes]]
 
 
-#: ``<variant>`` + this: where the export and quantize stages write and check their files before they replace
-#: the model folder's (beside it, so on the same file system for ``os.replace``).
-STAGING_SUFFIX = ".staging"
 #: The quantize stage's calibration inputs (``training.early_prior`` calibrates its keypoint graph alike).
 CALIB_RAY_STRIDE = 2
 CALIB_RAYS_PER_TARGET = 2048
@@ -859,54 +874,29 @@ def quantize_settings() -> dict:
 
 
 def _staging(folder: Path) -> Path:
-    """An empty ``<folder>.staging`` (a failed attempt's files, kept for inspection, go now)."""
-    import shutil
+    from training.export.staging import staging_dir
 
-    staging = folder.with_name(folder.name + STAGING_SUFFIX)
-    if staging.exists():
-        log.info("removing %s (the rejected files of an earlier attempt)", staging)
-        shutil.rmtree(staging)
-    staging.mkdir(parents=True)
-    return staging
+    return staging_dir(folder)
 
 
 def _rejected(folder: Path, staging: Path, e: BaseException) -> None:
-    """Say that a stage's failure left ``folder`` as it was, and where its files are; a failed parity check is
-    raised again with that said (the pipeline prints it as the error)."""
-    from training.export.parity import ParityError
+    from training.export.staging import rejected
 
-    where = f"{folder} is left as it was; the rejected files are kept in {staging}"
-    if isinstance(e, ParityError):
-        raise ParityError(f"{e} ({where})") from e
-    log.error("%s", where)
+    rejected(folder, staging, e)
 
 
-def _move_into(staging: Path, folder: Path, files: list[Path]) -> list[Path]:
-    """Move ``files`` (in ``staging``, checked) over the model folder's, one ``os.replace`` each, then remove
-    ``staging``; returns their paths in ``folder``."""
-    import shutil
+def _move_into(staging: Path, folder: Path, files: list[Path], removed: list[Path] = ()) -> list[Path]:
+    """``training.export.staging.move_into``: the card (``cfg.out/model_card.json``, the folder's parent) is set
+    aside as the first new file moves in, when it records other versions of them (the card stage writes it again)."""
+    from training.export.staging import move_into
 
-    folder.mkdir(parents=True, exist_ok=True)
-    moved = []
-    for f in files:
-        os.replace(f, folder / f.name)
-        moved.append(folder / f.name)
-    shutil.rmtree(staging)
-    return moved
+    return move_into(staging, folder, files, removed)
 
 
-def _drop_stale_int8(folder: Path, fresh: dict[str, Path]) -> None:
-    """Before fp32 graphs that differ from the folder's replace them: remove the ``<graph>.int8.onnx`` quantized
-    from the old ones, which the runtime would load beside the new graphs as one model (``auto`` precision mixes
-    int8 and fp32 files) until the quantize stage remakes them; a missing one falls back to the fp32 file."""
-    from training.model_card import sha256
+def _drop_stale_int8(folder: Path, fresh: dict[str, Path]) -> list[Path]:
+    from training.export.staging import drop_stale_int8
 
-    for graph, new in fresh.items():
-        old, int8 = folder / new.name, folder / f"{graph}.int8.onnx"
-        if int8.exists() and not (old.exists() and sha256(old) == sha256(new)):
-            log.info("removing %s: quantized from the %s being replaced (the quantize stage makes it anew)",
-                     int8, old.name)
-            int8.unlink()
+    return drop_stale_int8(folder, fresh)
 
 
 def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Path], dict]:
@@ -935,8 +925,8 @@ def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Pa
         except BaseException as e:
             _rejected(folder, staging, e)
             raise
-        _drop_stale_int8(folder, paths)
-        outputs += _move_into(staging, folder, [weights, *paths.values()])
+        removed = _drop_stale_int8(folder, paths)
+        outputs += _move_into(staging, folder, [weights, *paths.values()], removed)
     return outputs, info
 
 
@@ -986,7 +976,8 @@ def stage_eval(cfg: PipelineConfig, variant: str, ckpt: Path) -> tuple[list[Path
         argv += ["--limit", str(cfg.eval_limit)]
     for runtime in EVAL_RUNTIMES[variant]:
         argv += ["--model", f"{variant}_{runtime}={specs[runtime]}"]
-    ev.main(argv)
+    if ev.main(argv) != 0:  # a bad input: ghnerf-eval has said which, in one line
+        raise RuntimeError(f"eval_{variant}: ghnerf-eval refused its inputs (the line above names them)")
     return [out], {}
 
 
@@ -1121,8 +1112,13 @@ def kept_painter_sections(cfg: PipelineConfig) -> dict:
     a section whose files changed or went is dropped with a warning naming them."""
     from training.model_card import sha256
 
+    from training.export.staging import STALE_CARD
+
+    card = cfg.out / "model_card.json"
+    if not card.exists():  # set aside when new graphs moved in (training.export.staging): its painter still counts
+        card = cfg.out / STALE_CARD
     try:
-        old = json.loads((cfg.out / "model_card.json").read_text())
+        old = json.loads(card.read_text())
         sections, files = old.get("novel_painter") or {}, old.get("files") or {}
     except (OSError, ValueError, AttributeError):
         return {}  # no card yet (or an unreadable one: nothing of it to keep)
@@ -1225,6 +1221,9 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
     if painter := kept_painter_sections(cfg):  # the painter's figures, while its files are the ones they describe
         card["novel_painter"] = painter
     j, m = write_card(cfg.out, card)
+    from training.export.staging import drop_stale_leftovers
+
+    drop_stale_leftovers(cfg.out)  # the card set aside by the export stage is replaced now
     return [j, m], {}
 
 
@@ -1262,8 +1261,7 @@ def run(cfg: PipelineConfig) -> dict | None:
     cfg.out.mkdir(parents=True, exist_ok=True)
     st = Stages(cfg.out, cfg.force)
     _set_aside_forced(cfg, st.force)
-    data_in = {"data": str(cfg.data), "res": cfg.res, "train": cfg.train, "val": cfg.val,
-               "vsm": cfg.val_seen_motions, **({"freestyle": cfg.freestyle_share} if cfg.freestyle_share else {})}
+    data_in = data_request(cfg)
     d = st.run("data", data_in, lambda: stage_data(cfg))
     if cfg.until == "data":
         return None

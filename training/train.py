@@ -22,8 +22,11 @@ evaluated at the ray in model pixels (sigma ``1.5 * stride``), identical to ``tg
 Checkpoints (``ckpt_XXXXXXX.pt`` and ``last.pt``) hold the model, the optimiser, the step, the config,
 the process count and every RNG state, so ``--resume`` continues bit-identically to an uninterrupted run
 (on CPU): from ``last.pt``, else from the newest readable ``ckpt_*.pt``; in an empty folder it starts fresh.
-It refuses another config or process count. Without ``--resume`` a folder that holds checkpoints is refused
-(exit 2), so a new run never overwrites another.
+It refuses another config, another model config (the one the checkpoint stores), another process count, and a
+file that is no training checkpoint (a weights-only ``ghnerf.pt`` placed as ``last.pt``), before anything is written;
+``log.jsonl`` keeps the records up to the checkpoint's step. Without ``--resume`` a folder that holds checkpoints is
+refused (exit 2), so a new run never overwrites another. The dataset and split are opened (and checked against
+the model's resolution) before ``config.json`` is written; a missing one exits 2 with one line.
 """
 from __future__ import annotations
 
@@ -50,6 +53,7 @@ from training.configs import PRESETS, preset
 from training.losses import LossConfig, compute_losses
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
+from training.model_card import write_atomic
 from training.run_clock import RunClock
 
 CHECKPOINT_VERSION = 1
@@ -169,6 +173,13 @@ class TrainConfig(Config):
             from training.pretrain_human import config_from_train_config  # lazy: it imports this module
             config_from_train_config(asdict(self))  # a bad block fails here, named pretrain_human.<key>
         mcfg = self.model_config()  # unknown or mistyped model keys fail here, named by their path
+        try:  # sizes that do not fit (a zero stride) fail here, not as a ZeroDivisionError after config.json
+            mcfg.validate()
+        except ConfigError as e:
+            raise ConfigError(f"model.{e}") from e
+        for key in ("init", "freeze_human"):  # named here, before a dataset is opened or a file written
+            if getattr(self, key) and not mcfg.use_human_encoder:
+                fail(key, "the preset has no human encoder")
         if self.patch_size > min(mcfg.height, mcfg.width):  # sample_rays would place the patch off the image
             fail("patch_size", f"must be at most the model's {mcfg.width}x{mcfg.height} input, got {self.patch_size}")
         lw = self.loss.level_weights
@@ -190,14 +201,58 @@ def model_config_of(preset_name: str, overrides: Mapping[str, Any]) -> ModelConf
     return ModelConfig.from_dict(_deep_merge(base.to_dict(), overrides), "model")
 
 
-def _deep_merge(base: dict, over: Mapping[str, Any]) -> dict:
+def _deep_merge(base: dict, over: Mapping[str, Any], path: str = "model") -> dict:
+    """``over`` on top of ``base``: sections merge key by key, lists of sections entry by entry
+    (:func:`_merge_list`), anything else is replaced."""
     out = dict(base)
     for key, value in over.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), dict):
-            out[key] = _deep_merge(out[key], value)
+        here, old = f"{path}.{key}", out.get(key)
+        if isinstance(value, Mapping) and isinstance(old, dict):
+            out[key] = _deep_merge(old, value, here)
+        elif isinstance(old, (list, tuple)) and old and all(isinstance(e, dict) for e in old):
+            out[key] = _merge_list(list(old), value, here)
         else:
             out[key] = value
     return out
+
+
+def _merge_list(base: list[dict], over: Any, path: str) -> Any:
+    """A list of sections (``levels``) with an override on top. A list of the preset's length, or a mapping of
+    indices (``--set model.levels.0.planes=16``), merges entry by entry onto the preset's entries; a list of
+    another length replaces the preset's list, so each of its entries must give every key (else the rest would
+    silently take the class defaults, not the preset's)."""
+    if isinstance(over, Mapping) and all(str(k).isdigit() for k in over):
+        over = {int(k): v for k, v in over.items()}
+        bad = sorted(k for k in over if k >= len(base))
+        if bad:
+            raise ConfigError(f"{path}: no entry {bad[0]}; the preset has {len(base)} (0..{len(base) - 1})")
+        return [_merge_entry(e, over[i], f"{path}[{i}]") if i in over else e for i, e in enumerate(base)]
+    if not isinstance(over, (list, tuple)):
+        return over  # ModelConfig.from_dict names the wrong type
+    if len(over) == len(base):
+        return [_merge_entry(e, o, f"{path}[{i}]") for i, (e, o) in enumerate(zip(base, over))]
+    for i, entry in enumerate(over):
+        missing = _missing_keys(base[0], entry) if isinstance(entry, Mapping) else []
+        if missing:
+            raise ConfigError(f"{path}[{i}]: the override has {len(over)} entries for the preset's {len(base)}, so "
+                              f"it replaces the list and each entry must be whole; missing {', '.join(missing)} "
+                              f"(or give {len(base)} entries, merged onto the preset's one by one)")
+    return list(over)
+
+
+def _merge_entry(base: dict, over: Any, path: str) -> Any:
+    return _deep_merge(base, over, path) if isinstance(over, Mapping) else over
+
+
+def _missing_keys(template: Mapping[str, Any], entry: Mapping[str, Any], prefix: str = "") -> list[str]:
+    """Keys of ``template`` (nested sections too) that ``entry`` lacks, as dotted paths."""
+    missing = []
+    for key, value in template.items():
+        if key not in entry:
+            missing.append(prefix + key)
+        elif isinstance(value, dict) and isinstance(entry[key], Mapping):
+            missing += _missing_keys(value, entry[key], f"{prefix}{key}.")
+    return missing
 
 
 def load_config_file(path: str | Path) -> dict:
@@ -508,7 +563,10 @@ def save_checkpoint(path: Path, model, opt, step: int, cfg: TrainConfig, gen: to
              "step": step, "config": asdict(cfg), "model_config": unwrap(model).config.to_dict(),
              "rng": rng_state(gen), "extra": extra or {}}
     tmp = path.with_suffix(".tmp")
-    torch.save(state, tmp)
+    with open(tmp, "wb") as fh:
+        torch.save(state, fh)
+        fh.flush()
+        os.fsync(fh.fileno())  # on disk before the rename: a power cut must not leave a renamed empty last.pt
     os.replace(tmp, path)
 
 
@@ -520,15 +578,20 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
     files you made), the weights-only files ``make model`` ships, and bare state dicts; the model
     config stored in the file wins, ``default_config`` serves files that carry none.
     """
-    ck = load_checkpoint(path, map_location)
+    ck = load_checkpoint(path, map_location, hint=READ_HINT)
+    if not isinstance(ck, Mapping):
+        raise ConfigError(f"{path}: not a model checkpoint (a {type(ck).__name__}); {READ_HINT}")
     if "model_config" in ck:
-        mcfg = ModelConfig.from_dict(ck["model_config"])
+        mcfg = ModelConfig.from_dict(ck["model_config"], "model_config")
     elif default_config is not None:
         mcfg = default_config
     else:
-        raise ValueError(f"{path}: no 'model_config' in the checkpoint; give default_config")
+        raise ConfigError(f"{path}: no 'model_config' in the checkpoint; {READ_HINT}")
     model = GHNeRF(mcfg)
-    model.load_state_dict(ck.get("model", ck))
+    try:
+        model.load_state_dict(ck.get("model", ck))
+    except RuntimeError as e:  # missing or mis-shaped tensors
+        raise ConfigError(f"{path}: its weights do not fit its model config ({' '.join(str(e).split())[:200]})") from e
     return model.eval(), ck
 
 
@@ -595,9 +658,13 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     if start is not None:
         check_resumable(cfg, start, world=info.world)  # before config.json is overwritten with the new one
     if info.main:
+        _refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
+    # a missing dataset or split, or one of another resolution: named before anything is written
+    dataset = dataset if dataset is not None else open_dataset(cfg, info.world)
+    if info.main:
         out_dir.mkdir(parents=True, exist_ok=True)
         _take_lock(out_dir / "train.pid")
-        (out_dir / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
+        write_atomic(out_dir / "config.json", json.dumps(asdict(cfg), indent=1))
     try:
         return _train(cfg, out_dir, info, device, start=start, resume=resume, quiet=quiet, dataset=dataset)
     finally:
@@ -610,14 +677,20 @@ RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "
                      "checkpoint_every")
 
 
-def load_checkpoint(path: str | Path, map_location="cpu") -> dict:
-    """``torch.load`` of a checkpoint; a damaged file is a ``ConfigError`` naming it."""
+#: What to do about a damaged checkpoint of a run folder (``--resume``'s advice).
+RESUME_HINT = ("delete it (--resume then continues from the newest ckpt_*.pt), or restore one of the run's "
+               "ckpt_*.pt as last.pt")
+#: ... and about a damaged model file given to be read (evaluation, export): no run to resume.
+READ_HINT = "give another checkpoint (a run's last.pt or ckpt_*.pt, or a model folder's <variant>.pt)"
+
+
+def load_checkpoint(path: str | Path, map_location="cpu", hint: str = RESUME_HINT) -> dict:
+    """``torch.load`` of a checkpoint; a damaged file is a ``ConfigError`` naming it, with ``hint``."""
     try:
         return torch.load(str(path), map_location=map_location, weights_only=False)
     except Exception as e:  # torch's zip reader, pickle, EOF...
         raise ConfigError(f"{path}: unreadable checkpoint ({type(e).__name__}: {' '.join(str(e).split())[:200]}); "
-                          "delete it (--resume then continues from the newest ckpt_*.pt), or restore one of the "
-                          "run's ckpt_*.pt as last.pt") from e
+                          f"{hint}") from e
 
 
 def _step_checkpoints(out_dir: Path) -> list[Path]:
@@ -677,23 +750,67 @@ def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[st
                           "for another config")
 
 
+#: What ``--resume`` reads from a checkpoint; a weights-only file (``make model``'s ``ghnerf.pt``) lacks most.
+RESUME_KEYS = ("model", "optimizer", "step", "config", "rng")
+
+
+def require_resume_keys(ck: Any, path: Path) -> None:
+    """Refuse a checkpoint ``--resume`` cannot continue from, naming the keys it lacks."""
+    if not isinstance(ck, Mapping):
+        raise ConfigError(f"{path}: not a training checkpoint (a {type(ck).__name__}, not a mapping); "
+                          "start a new run (another --out)")
+    missing = [k for k in RESUME_KEYS if k not in ck]
+    if missing:
+        raise ConfigError(f"{path}: not a training checkpoint --resume can continue from: no "
+                          f"{', '.join(missing)} (a weights-only file?); restore one of the run's ckpt_*.pt as "
+                          "last.pt, or start a new run (another --out)")
+
+
+def _differing_paths(was: Any, now: Any, path: str = "") -> list[str]:
+    """Dotted paths (``levels[0].samples``) where two JSON-like trees differ."""
+    if isinstance(was, dict) and isinstance(now, dict):
+        return [p for k in sorted(set(was) | set(now), key=str)
+                for p in _differing_paths(was.get(k), now.get(k), f"{path}.{k}" if path else str(k))]
+    if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
+        return [p for i, (a, b) in enumerate(zip(was, now)) for p in _differing_paths(a, b, f"{path}[{i}]")]
+    return [] if was == now else [path or "(root)"]
+
+
+def refuse_another_model(last: Path, stored: Any, now: ModelConfig) -> None:
+    """Refuse to resume ``last`` when the model it holds was built from another model config (a preset changed
+    since, or other ``model`` overrides): the weights would load into another architecture, or silently not."""
+    try:
+        was = ModelConfig.from_dict(stored, "model_config").to_dict()  # keys added since read as their defaults
+    except ConfigError as e:
+        raise ConfigError(f"{last}: its stored model config does not read: {e}") from e
+    differ = _differing_paths(json.loads(json.dumps(was)), json.loads(json.dumps(now.to_dict())))
+    if differ:
+        raise ConfigError(f"{last}: resuming under another model config ({', '.join(differ)} differ from the "
+                          "model the checkpoint holds); start a new run (another --out) for another model")
+
+
 def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> None:
-    """:func:`refuse_another_config` for a training run (only :data:`RESUME_MAY_CHANGE` may differ); with
-    ``world``, also refuse another process count (each rank's scenes and RNG state depend on it)."""
+    """:func:`refuse_another_config` for a training run (only :data:`RESUME_MAY_CHANGE` may differ) and
+    :func:`refuse_another_model`; with ``world``, also refuse another process count (each rank's scenes and RNG
+    state depend on it). A file without :data:`RESUME_KEYS` is refused first."""
     ck = load_checkpoint(last)
+    require_resume_keys(ck, last)
     if world is not None and checkpoint_world_size(ck) != world:
         n = checkpoint_world_size(ck)
         raise ConfigError(f"{last}: saved by a run of {n} process(es), resumed with {world}: the scene split and "
                           f"the per-process random states depend on the count; resume with {n} "
                           f"(torchrun --nproc_per_node {n}) or start a new run (another --out)")
-    old = ck.get("config")
-    if old:
-        was = json.loads(json.dumps(asdict(build_config(old))))  # keys added since read as their defaults
-        refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE)
+    try:
+        was = json.loads(json.dumps(asdict(build_config(ck["config"]))))  # keys added since read as their defaults
+    except ConfigError as e:
+        raise ConfigError(f"{last}: its stored train config does not read: {e}") from e
+    refuse_another_config(last, was, json.loads(json.dumps(asdict(cfg))), RESUME_MAY_CHANGE)
+    if "model_config" in ck:
+        refuse_another_model(last, ck["model_config"], cfg.model_config())
 
 
-def _take_lock(path: Path) -> None:
-    """One training process per run folder: refuse when ``path`` names a live process."""
+def _refuse_live_lock(path: Path) -> None:
+    """One training process per run folder: refuse when ``path`` names another live process."""
     if path.exists():
         try:
             pid = int(path.read_text().strip())
@@ -702,18 +819,61 @@ def _take_lock(path: Path) -> None:
                 raise RuntimeError(f"{path.parent}: another training process ({pid}) is using this run folder")
         except (ValueError, ProcessLookupError, PermissionError):
             pass  # stale lock
+
+
+def _take_lock(path: Path) -> None:
+    _refuse_live_lock(path)
     path.write_text(str(os.getpid()))
 
 
-def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device, *, start: Path | None,
-           resume: bool, quiet: bool, dataset) -> tuple[dict, GHNeRF]:
+def open_dataset(cfg: TrainConfig, world: int = 1):
+    """The ``MultiViewDataset`` of ``cfg.data`` / ``cfg.split``, checked against the model and the process count
+    (a :class:`~training.data.errors.DataError` or :class:`ConfigError` names what does not fit)."""
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
 
     mcfg = cfg.model_config()
-    ds = dataset or MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=mcfg.heatmap_stride))
-    if len(ds) < info.world:
-        raise ValueError(f"split {cfg.split!r} has {len(ds)} scenes for {info.world} processes")
+    ds = MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=mcfg.heatmap_stride))
+    if ds.resolution != mcfg.height or ds.resolution != mcfg.width:
+        raise ConfigError(f"data: {cfg.data} holds {ds.resolution} px scenes, the {cfg.preset!r} model takes "
+                          f"{mcfg.width}x{mcfg.height}: use a dataset of its resolution or another preset")
+    if len(ds) < world:
+        raise ConfigError(f"split: {cfg.split!r} of {cfg.data} has {len(ds)} scenes for {world} processes")
+    return ds
+
+
+def ddp_find_unused(cfg: TrainConfig, mcfg: ModelConfig) -> bool:
+    """Whether some parameters can go without a gradient in a step, which DDP must be told of: a head (or a cascade
+    level) whose loss weight is zero, or the encoder's auxiliary head without its loss."""
+    lc = cfg.loss
+    return bool((mcfg.heads.coord_head and not lc.coord_weight)
+                or (mcfg.use_human_encoder and mcfg.human.aux_heatmaps and not lc.encoder_heat_weight
+                    and not cfg.freeze_human)
+                or not lc.heat_weight  # g_h (and the human encoder's features it reads)
+                or not (lc.colour_weight or (lc.ssim_weight and cfg.patch_size))  # g_c
+                or any(w == 0 for w in lc.level_weights))  # that level's heads and 3D network
+
+
+def truncate_log(path: Path, step: int) -> None:
+    """Keep the records of ``path`` (``log.jsonl``) up to ``step``: a resumed run logs the later steps again
+    (a line cut short by a crash goes too)."""
+    if not path.exists():
+        return
+    kept = []
+    for line in path.read_text().splitlines():
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(rec, dict) and isinstance(rec.get("step"), int) and rec["step"] <= step:
+            kept.append(line + "\n")
+    write_atomic(path, "".join(kept))
+
+
+def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device, *, start: Path | None,
+           resume: bool, quiet: bool, dataset) -> tuple[dict, GHNeRF]:
+    mcfg = cfg.model_config()
+    ds = dataset
 
     seed_everything(cfg.seed)  # same initial weights on every rank
     model = GHNeRF(mcfg).to(device).train()
@@ -744,20 +904,20 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
         model.load_state_dict(ck["model"])
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])
-        if info.world == 1 or "rng_ranks" not in ck["extra"]:
+        extra = ck.get("extra") or {}
+        if info.world == 1 or "rng_ranks" not in extra:
             set_rng_state(ck["rng"], gen)
         else:
-            set_rng_state(ck["extra"]["rng_ranks"][info.rank], gen)
+            set_rng_state(extra["rng_ranks"][info.rank], gen)
     ddp_model: torch.nn.Module = model
     if info.world > 1:
         from torch.nn.parallel import DistributedDataParallel as DDP
-        find_unused = bool((mcfg.heads.coord_head and not cfg.loss.coord_weight)
-                           or (mcfg.use_human_encoder and mcfg.human.aux_heatmaps and not cfg.loss.encoder_heat_weight
-                               and not cfg.freeze_human))
         ddp_model = DDP(model, device_ids=[device.index] if device.type == "cuda" else None,
-                        find_unused_parameters=find_unused)
+                        find_unused_parameters=ddp_find_unused(cfg, mcfg))
 
     log_path = out_dir / "log.jsonl"
+    if info.main:
+        truncate_log(log_path, step)  # records past the checkpoint would appear twice
     prog = Progress(cfg.iterations, step, enabled=info.main and not quiet)
     per_epoch = len(ds) // info.world
     clock = RunClock.resumed(ck and ck.get("extra"), step, torch.get_num_threads())
@@ -796,7 +956,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
                 raise FloatingPointError(f"loss is {loss_v} at step {step}")
             window.setdefault("loss", []).append(loss_v)
             window.setdefault("psnr", []).append(psnr_of(out["levels"][-1]["rgb"], batch["rgb"]))
-            window.setdefault("heat", []).append(float(terms[f"l{len(out['levels']) - 1}_heat"].detach()))
+            last_heat = terms.get(f"l{len(out['levels']) - 1}_heat")  # absent with loss.heat_weight 0
+            if last_heat is not None:
+                window.setdefault("heat", []).append(float(last_heat.detach()))
             last_depth = f"l{len(out['levels']) - 1}_depth"
             if last_depth in terms:  # metres, mean absolute error on the subject
                 window.setdefault("depth_err_m", []).append(float(terms[last_depth].detach()))
@@ -829,7 +991,7 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
                **({"gpu": torch.cuda.get_device_name(device)} if device.type == "cuda" else {}),
                "threads": torch.get_num_threads(), "checkpoint": str(last)}
     if info.main:
-        (out_dir / "summary.json").write_text(json.dumps(summary, indent=1))
+        write_atomic(out_dir / "summary.json", json.dumps(summary, indent=1))
     return summary, model
 
 
@@ -876,10 +1038,13 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(asdict(cfg), indent=1))
         return 0
     out = Path(args.out)
+    from training.data.errors import DataError
+
     try:
         summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
-    except ConfigError as e:  # raised by the run itself: an existing run folder, a damaged or foreign checkpoint
-        print(f"ghnerf-train: config error: {e}", file=sys.stderr)
+    except (ConfigError, DataError) as e:  # of the run itself: its folder, a checkpoint, the dataset or split
+        kind = "config error" if isinstance(e, ConfigError) else "data error"
+        print(f"ghnerf-train: {kind}: {e}", file=sys.stderr)
         if dist.is_initialized():
             dist.destroy_process_group()
         return 2

@@ -291,6 +291,23 @@ def test_ssim_masked_ignores_outside_pixels():
     assert math.isnan(masked_ssim(pred, target, np.zeros((40, 40), bool)).value)
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_pixels_outside_the_mask_do_not_reach_the_score(bad):
+    rng = np.random.default_rng(5)
+    target = rng.random((2, 24, 24, 3))
+    pred = np.clip(target + rng.normal(0, 0.05, target.shape), 0, 1)
+    mask = np.zeros((2, 24, 24), bool)
+    mask[:, 6:18, 5:20] = True
+    broken = pred.copy()
+    broken[~mask] = bad  # 0 * NaN (and 0 * inf) is NaN: a masked product would score NaN
+    for metric in (masked_psnr, masked_ssim):
+        assert metric(broken, target, mask).value == pytest.approx(metric(pred, target, mask).value, abs=1e-12)
+    inside = broken.copy()
+    inside[0, 10, 10] = np.nan  # inside the mask a broken pixel still propagates
+    assert math.isnan(masked_psnr(inside, target, mask).per_image[0])
+    assert math.isnan(masked_ssim(inside, target, mask).per_image[0])
+
+
 def test_image_metric_shape_errors():
     with pytest.raises(ShapeError):
         masked_psnr(np.zeros((8, 8, 3)), np.zeros((8, 8, 3)), np.ones((8, 7), bool))

@@ -369,3 +369,89 @@ def test_a_broken_prediction_is_counted_not_hidden_and_pck_accounts_for_every_jo
     assert res["pck_views"] == 2 * int((p.reference > 0).sum()) and 0 <= res["pck_fallback_views"] <= res["pck_views"]
     total = int(np.asarray(sc["tgt_visible"][:2]).sum()) * 2
     assert res["pck_evaluated_joints"] + res["pck_unreferenced"] == total  # every visible joint accounted for
+
+
+@pytest.mark.parametrize("bad", [np.inf, -np.inf])
+def test_an_infinite_render_is_counted_not_clipped_into_a_score(data64, bad):
+    sc = _scene(data64)
+    nov = np.flatnonzero(~sc["tgt_is_source"])
+    truth = sc["tgt_images"][nov] * sc["tgt_masks"][nov][:, None]
+    rgb = truth.copy()
+    ys, xs = np.nonzero(sc["tgt_masks"][nov[0]])
+    rgb[0, :, ys[0], xs[0]] = bad  # np.clip used to make it a 1 (or 0) and score the view
+    acc = Accumulator()
+    acc.add(scene_metrics(sc, sc["tgt_heatmaps"][:2], rgb, nov))
+    res = acc.result()
+    assert res["nonfinite_views"] == 1 and res["novel_views"] == len(nov) - 1
+
+
+# ------------------------------------------------------------------------------------------ the CLI's inputs
+@pytest.fixture
+def tiny_pt(tmp_path):
+    """An untrained tiny checkpoint (64 px) as the trainer's files carry it."""
+    import torch
+
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    path = tmp_path / "tiny.pt"
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": 0}, path)
+    return path
+
+
+def _one_line_exit_2(capsys, argv, says):
+    from training.evaluate import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and len(err.splitlines()) == 1 and "Traceback" not in err
+    return err
+
+
+def test_the_cli_names_bad_inputs_in_one_line_before_rendering(data64, tiny_pt, tmp_path, capsys, monkeypatch):
+    import json
+    import shutil
+
+    import training.evaluate as ev
+
+    rendered = []
+    monkeypatch.setattr(ev, "evaluate", lambda *a, **kw: rendered.append(a) or {"scenes": 0})
+    base = ["--data", str(data64), "--split", "val"]
+    damaged = tmp_path / "damaged.pt"
+    damaged.write_bytes(tiny_pt.read_bytes()[:500])
+    err = _one_line_exit_2(capsys, [*base, "--model", f"good={tiny_pt}", "--model", f"bad={damaged}"],
+                           f"{damaged}: unreadable checkpoint")
+    assert "--resume" not in err  # training advice, not for a file given to evaluate
+    _one_line_exit_2(capsys, ["--data", str(data64), "--split", "vall", "--model", str(tiny_pt)],
+                     "has no split 'vall'")
+    (tmp_path / "graphs").mkdir()
+    _one_line_exit_2(capsys, [*base, "--model", str(tiny_pt), "--model", f"{tmp_path / 'graphs'}#int8"],
+                     f"{tmp_path / 'graphs'}: missing ONNX graphs encoder.int8.onnx")
+    big = tmp_path / "data128"  # the same shards under a 128 px manifest: readable, but not the model's size
+    shutil.copytree(data64, big)
+    manifest = json.loads((big / "dataset.json").read_text())
+    (big / "dataset.json").write_text(json.dumps({**manifest, "resolution": 128}))
+    _one_line_exit_2(capsys, ["--data", str(big), "--split", "val", "--model", f"m={tiny_pt}"],
+                     f"{big}: holds 128 px scenes, model m takes 64x64")
+    assert rendered == []  # every spec checked before the first is evaluated
+
+
+def test_the_cli_keeps_each_finished_model_when_a_later_one_fails(data64, tiny_pt, tmp_path, monkeypatch):
+    import json
+
+    import training.evaluate as ev
+
+    def evaluate(renderer, ds, limit, novel):
+        if evaluate.calls:
+            raise RuntimeError("the second model crashed")
+        evaluate.calls += 1
+        return {"scenes": 2, "pck@0.2": 0.5}
+
+    evaluate.calls = 0
+    monkeypatch.setattr(ev, "evaluate", evaluate)
+    out = tmp_path / "metrics.json"
+    with pytest.raises(RuntimeError, match="second model"):
+        ev.main(["--data", str(data64), "--split", "val", "--model", f"a={tiny_pt}", "--model", f"b={tiny_pt}",
+                 "--out", str(out)])
+    assert json.loads(out.read_text())["models"]["a"]["pck@0.2"] == 0.5

@@ -271,3 +271,78 @@ def test_the_card_stage_keeps_the_painters_section_while_its_files_are_unchanged
     assert "novel_painter" not in json.loads((cfg.out / "model_card.json").read_text())
     assert "Novel-view painter" not in (cfg.out / "MODEL_CARD.md").read_text()
     assert f"{painter.with_suffix('.int8.onnx')} changed or went" in caplog.text
+
+
+def test_new_graphs_moving_in_set_the_card_aside_until_the_card_stage_writes_it_again(tmp_path, monkeypatch,
+                                                                                     caplog):
+    pytest.importorskip("torch")
+    from training.export.parity import ParityError
+
+    cfg = PipelineConfig(out=tmp_path / "models", data=tmp_path / "data", quick=True)
+    folder, old = _old_folder(cfg)
+    (folder / "novel_painter.onnx").write_bytes(b"painter")  # learnt_fill's section: kept through the set-aside card
+    painter = {"steps": 100}
+    recorded = [*old, "novel_painter.onnx"]
+    write_card(cfg.out, {"name": "old", "novel_painter": {"ghnerf": painter},
+                         "files": {f"ghnerf/{n}": {"sha256": sha256(folder / n)} for n in recorded}})
+    (cfg.out / "metrics.json").write_text('{"models": "old"}')
+    card, stale = cfg.out / "model_card.json", cfg.out / "model_card.stale.json"
+    _fake_export(monkeypatch, max_abs=1.0)
+    with pytest.raises(ParityError):
+        pipeline.stage_export(cfg, {"ghnerf": tmp_path / "last.pt"})
+    assert card.is_file() and not stale.exists()  # nothing moved in: the card still describes the folder
+
+    _fake_export(monkeypatch, max_abs=0.0)
+    caplog.set_level(logging.WARNING)
+    pipeline.stage_export(cfg, {"ghnerf": tmp_path / "last.pt"})  # a later stage may fail: no card may lie meanwhile
+    assert not card.exists() and not (cfg.out / "metrics.json").exists() and not (cfg.out / "MODEL_CARD.md").exists()
+    assert json.loads(stale.read_text())["name"] == "old" and (cfg.out / "metrics.stale.json").is_file()
+    assert f"{card}: set aside as model_card.stale.json" in caplog.text and "ghnerf/encoder.onnx" in caplog.text
+
+    _card_inputs(cfg)
+    pipeline.stage_card(cfg, Stages(cfg.out, ()))
+    new_card = json.loads(card.read_text())
+    assert new_card["files"]["ghnerf/encoder.onnx"]["sha256"] == sha256(folder / "encoder.onnx")
+    assert new_card["novel_painter"] == {"ghnerf": painter}
+    assert sorted(p.name for p in cfg.out.glob("*.stale*")) == []
+
+
+# ------------------------------------------------------------------------------------- python -m training.export
+def test_the_export_cli_stages_its_graphs_and_moves_them_in_only_after_the_parity_check(tmp_path, monkeypatch,
+                                                                                        capsys, caplog):
+    pytest.importorskip("torch")
+    import training.export.cli as cli
+
+    cfg = PipelineConfig(out=tmp_path / "models")
+    folder, old = _old_folder(cfg)  # a live model folder, its card beside it (the shipped layout)
+    write_card(cfg.out, {"name": "old", "files": {f"ghnerf/{n}": {"sha256": sha256(folder / n)} for n in old}})
+    staging = cfg.out / "ghnerf.staging"
+    got = {}
+
+    def export_all(model, out_dir, graphs, opset, inputs):
+        paths = {g: Path(out_dir) / f"{g}.onnx" for g in graphs}
+        for g, p in paths.items():
+            p.write_bytes(b"volume" if g == "volume" else b"new encoder")  # the volume graph as it was
+        return paths
+
+    monkeypatch.setattr(cli, "export_all", export_all)
+    monkeypatch.setattr(cli, "example_inputs", lambda model, **kw: None)
+    monkeypatch.setattr(cli, "torch_vs_ort", lambda model, paths, inputs: {
+        g: {"out": {"max_abs": got["max_abs"], "ref_max": 1.0}} for g in paths})
+    argv = ["--preset", "tiny", "--graphs", "encoder,volume", "--out", str(folder)]
+
+    got["max_abs"] = 1.0  # onnxruntime strays from torch: rejected
+    assert cli.main(argv) == 1
+    err = capsys.readouterr().err
+    assert f"{staging}/encoder.onnx output 'out'" in err and f"{folder} is left as it was" in err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == old  # byte for byte
+    assert (staging / "encoder.onnx").read_bytes() == b"new encoder" and (cfg.out / "model_card.json").is_file()
+
+    got["max_abs"] = 0.0  # an fp32-only export over a folder with int8 twins
+    caplog.set_level(logging.INFO)
+    assert cli.main(argv) == 0
+    assert (folder / "encoder.onnx").read_bytes() == b"new encoder" and not staging.exists()
+    assert not (folder / "encoder.int8.onnx").exists()  # quantized from the replaced graph: "auto" would mix them
+    assert (folder / "volume.int8.onnx").read_bytes() == b"volume int8"  # its fp32 graph is unchanged
+    assert not (cfg.out / "model_card.json").exists() and (cfg.out / "model_card.stale.json").is_file()
+    assert "set aside as model_card.stale.json" in caplog.text

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -299,3 +300,117 @@ def test_the_step_timing_benchmark_runs_the_trainers_step(data64, capsys):
     assert all(float(r[3]) > 0 for r in rows) and rows[1][5].endswith("x")
     with pytest.raises(SystemExit):
         bench.main(["--data", str(data64), "--precisions", "fp16"])
+
+
+# ------------------------------------------------------------------------------ review: config and resume
+@pytest.mark.parametrize("model, key", [
+    ({"heatmap_stride": 0}, "model.heatmap_stride"),  # used to pass, then a ZeroDivisionError after config.json
+    ({"cost_volume": {"groups": 0}}, "model.cost_volume.groups"),
+    ({"levels": {"0": {"volume_stride": 0}}}, "model.levels[0].volume_stride"),
+    ({"human": {"out_stride": 0}}, "model.human.out_stride"),
+])
+def test_the_merged_model_config_is_validated(model, key):
+    with pytest.raises(ConfigError) as e:
+        build_config({"preset": "tiny", "model": model})
+    assert str(e.value).startswith(key)
+
+
+def test_list_overrides_merge_onto_the_presets_entries():
+    from training.configs import preset
+
+    base = preset("edge128")
+    cfg = build_config({"model": {"levels": [{"planes": 32}, {}]}}).model_config()
+    assert cfg.levels[0].planes == 32 and cfg.levels[0].range_scale == base.levels[0].range_scale == 1.5
+    assert cfg.levels[1] == base.levels[1]
+    by_index = apply_overrides({}, ["model.levels.0.planes=32"])  # --set with an index
+    assert build_config(by_index).model_config().levels == cfg.levels
+    # another length replaces the list: then every entry must be whole, not half class defaults
+    with pytest.raises(ConfigError, match=r"^model.levels\[0\]: the override has 1 entries for the preset's 2.*"
+                                          r"missing volume_stride"):
+        build_config({"model": {"levels": [{"planes": 16}]}})
+    whole = [{**base.to_dict()["levels"][0], "planes": 16}]
+    assert [lv.planes for lv in build_config({"model": {"levels": whole}}).model_config().levels] == [16]
+
+
+def _resume_run(data64, tmp_path):
+    """A one-step run to resume, and its config.json as written."""
+    run = tmp_path / "r"
+    train(tiny_cfg(data64, iterations=1, pck_every=0), run, quiet=True)
+    return run, (run / "config.json").read_text()
+
+
+def test_resume_refuses_another_model_config_and_a_weights_only_file(data64, tmp_path):
+    run, before = _resume_run(data64, tmp_path)
+    last = run / "last.pt"
+    ck = torch.load(last, weights_only=False)
+    ck["model_config"]["levels"][0]["samples"] = 2  # the preset changed since the run started
+    torch.save(ck, last)
+    with pytest.raises(ConfigError, match=rf"^{last}: resuming under another model config \(levels\[0\].samples "):
+        train(tiny_cfg(data64, pck_every=0), run, resume=True, quiet=True)
+    assert (run / "config.json").read_text() == before
+
+    ck["model_config"]["levels"][0]["samples"] = 4
+    torch.save({k: ck[k] for k in ("model", "model_config", "step")}, last)  # what make model ships
+    with pytest.raises(ConfigError, match=rf"^{last}: not a training checkpoint .*no optimizer, config, rng"):
+        train(tiny_cfg(data64, pck_every=0, lr=0.1), run, resume=True, quiet=True)
+    assert (run / "config.json").read_text() == before
+
+
+def test_resume_drops_the_log_records_past_the_checkpoint(data64, tmp_path):
+    import shutil
+
+    run = tmp_path / "r"
+    train(tiny_cfg(data64, pck_every=0), run, quiet=True)
+    shutil.copyfile(run / "ckpt_0000001.pt", run / "last.pt")  # the step-2 checkpoint lost
+    with open(run / "log.jsonl", "a") as fh:
+        fh.write('{"step": 3, "lo')  # and a line cut short by a crash
+    train(tiny_cfg(data64, pck_every=0), run, resume=True, quiet=True)
+    assert [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()] == [1, 2]
+
+
+def test_a_zero_heat_weight_trains_and_ddp_is_told_of_unused_heads(data64, tmp_path):
+    summary, _ = train(tiny_cfg(data64, iterations=1, pck_every=0, loss={"heat_weight": 0.0}), tmp_path / "r",
+                       quiet=True)
+    assert summary["steps"] == 1  # it used to stop at step 1 with KeyError 'l1_heat'
+    from training.train import ddp_find_unused
+
+    full = {"encoder_heat_weight": 0.5, "coord_weight": 0.01}
+    cfg = build_config({"preset": "tiny", "loss": full})
+    assert not ddp_find_unused(cfg, cfg.model_config())
+    for loss in ({"heat_weight": 0.0}, {"colour_weight": 0.0, "ssim_weight": 0.0}, {"level_weights": [0.0, 1.0]},
+                 {"coord_weight": 0.0}, {"encoder_heat_weight": 0.0}):
+        cfg = build_config({"preset": "tiny", "loss": {**full, **loss}})
+        assert ddp_find_unused(cfg, cfg.model_config()), loss
+
+
+@pytest.mark.parametrize("sets, says", [
+    (['data="{missing}"'], "{missing}/dataset.json: no dataset manifest here"),
+    (['split="trian"'], "has no split 'trian'"),
+    (['preset="edge128"'], "holds 64 px scenes, the 'edge128' model takes 128x128"),
+])
+def test_cli_names_a_bad_dataset_in_one_line_before_writing(data64, tmp_path, capsys, sets, says):
+    missing = tmp_path / "nowhere"
+    argv = ["--set", 'preset="tiny"', "--set", f"data={json.dumps(str(data64))}", "--iterations", "1",
+            "--out", str(tmp_path / "o"), "--quiet"]
+    for s in sets:  # later --set win
+        argv += ["--set", s.format(missing=missing)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert says.format(missing=missing) in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_run_records_and_checkpoints_are_written_whole(data64, tmp_path, monkeypatch):
+    import os
+
+    import training.train as tr
+
+    written, events = [], []
+    real_write, real_fsync, real_replace = tr.write_atomic, os.fsync, os.replace
+    monkeypatch.setattr(tr, "write_atomic",
+                        lambda path, data: written.append(Path(path).name) or real_write(path, data))
+    monkeypatch.setattr(tr.os, "fsync", lambda fd: events.append("fsync") or real_fsync(fd))
+    monkeypatch.setattr(tr.os, "replace", lambda a, b: events.append(Path(b).name) or real_replace(a, b))
+    train(tiny_cfg(data64, iterations=1, pck_every=0), tmp_path / "r", quiet=True)
+    assert {"config.json", "summary.json"} <= set(written)
+    assert events[events.index("last.pt") - 1] == "fsync"  # the checkpoint reached the disk before the rename

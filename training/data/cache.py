@@ -2,8 +2,9 @@
 
 Layout::
 
-    <root>/dataset.json                  manifest: format, schema version, resolution, view
-                                         names, source config, per-split spec and count
+    <root>/dataset.json                  manifest: format, schema version, generator version,
+                                         resolution, view names, source config, per-split spec
+                                         and count
     <root>/<split>/shard_000000/         samples [0, shard_size)
         images.npy  masks.npy  ...       one array per entry of ``sample.FIELDS``, stacked over
                                          the shard's samples (leading axis)
@@ -29,7 +30,7 @@ import shutil
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -85,6 +86,15 @@ def _check_manifest_fields(manifest: dict, path: Path) -> None:
             v = info.get(key)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise DatasetError(path, f"splits.{name}.{key} must be an int >= {lo}, got {v!r}")
+
+
+#: The version a manifest without ``generator_version`` was made by: every cache written before the field existed.
+UNVERSIONED_GENERATOR = 1
+
+
+def generator_version(manifest: Mapping[str, Any]) -> int:
+    """The version of the code that rendered the samples of ``manifest`` (``generate.GENERATOR_VERSION``)."""
+    return manifest.get("generator_version", UNVERSIONED_GENERATOR)
 
 
 def write_manifest(root: str | Path, manifest: dict) -> None:
@@ -268,5 +278,6 @@ class ShardedSplit:
         return state
 
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "MANIFEST", "ShardedSplit", "read_manifest", "write_manifest", "new_manifest",
+__all__ = ["FORMAT", "SCHEMA_VERSION", "MANIFEST", "UNVERSIONED_GENERATOR", "generator_version",
+           "ShardedSplit", "read_manifest", "write_manifest", "new_manifest",
            "write_shard", "shard_plan", "shard_name", "shard_is_complete", "remove_stale_temporaries"]

@@ -4,6 +4,12 @@ Example::
 
     python -m training.export --preset edge128 --out out/edge128 --int8 --bench --report out/edge128/report.json
 
+The graphs are written and checked in ``OUT.staging`` and moved into ``OUT`` only once the parity checks pass
+(or with ``--no-parity-check``): a failure leaves ``OUT`` as it was (exit 1) and the rejected files in
+``OUT.staging``. Moving in removes the ``<graph>.int8.onnx`` of every replaced fp32 graph (unless ``--int8``
+makes a new one) and sets aside a ``model_card.json`` (in ``OUT`` or its parent) whose hashes no longer match,
+as ``model_card.stale.json`` (a warning says so).
+
 Without a checkpoint the weights are random (useful for latency and plumbing, not accuracy). The
 calibration frames are random images on a synthetic rig unless ``--calib-npz`` gives real frames
 (``images`` array ``(F, 2, 3, H, W)`` RGB in [0, 1]).
@@ -28,13 +34,16 @@ from training.export.parity import (
     ParityError, benchmark, check_fp32_parity, check_int8_parity, int8_vs_fp32, make_session, torch_vs_ort,
 )
 from training.export.quantize import calibration_feeds, quantize_all
+from training.export.staging import drop_stale_int8, move_into, rejected, staging_dir
 from training.model import GHNeRF
+from training.model_card import write_atomic
 
 log = logging.getLogger("training.export")
 
 #: Per-graph timing scenarios: (graph, label, targets, ray stride, points); targets 2 = the two sources.
 SCENARIOS = (
     ("encoder", "S=2", 2, None, 0),
+    ("human", "S=2 (encoder heatmaps only)", 2, None, 0),
     ("volume", "B=2 (source views)", 2, None, 0),
     ("render_heat", "B=2 R=2x(H/4)^2", 2, 4, 0),
     ("volume", "B=1 (novel view)", 1, None, 0),
@@ -97,17 +106,49 @@ def main(argv: list[str] | None = None) -> int:
     torch.manual_seed(0)
 
     if args.checkpoint:
+        from training.model.config import ConfigError
         from training.train import load_model  # lazy: the trainer is not needed for random weights
 
-        model, _ = load_model(args.checkpoint, default_config=preset(args.preset))
+        try:
+            model, _ = load_model(args.checkpoint, default_config=preset(args.preset))
+        except ConfigError as e:  # a damaged or foreign file, named
+            print(f"python -m training.export: error: {e}", file=sys.stderr)
+            return 2
     else:
         log.warning("no --checkpoint: exporting random weights (to test the export, not to run)")
         model = GHNeRF(preset(args.preset)).eval()
-    graphs = tuple(g for g in args.graphs.split(",") if g) or model.contract(opset=args.opset).graph_names
+    has = model.contract(opset=args.opset).graph_names
+    graphs = tuple(g for g in args.graphs.split(",") if g) or has
+    if unknown := [g for g in graphs if g not in has]:
+        ap.error(f"--graphs: {', '.join(unknown)} not among this model's graphs ({', '.join(has)})")
     out = Path(args.out)
+    # everything is written and checked in OUT.staging; OUT (perhaps a live model folder) changes only once the
+    # parity checks pass (training.export.staging)
+    staging = staging_dir(out)
+    try:
+        fp32, int8 = _export_and_check(args, model, graphs, staging)
+    except ParityError as e:
+        try:
+            rejected(out, staging, e)
+        except ParityError as said:
+            print(f"python -m training.export: {said}", file=sys.stderr)
+        return 1
+    except BaseException as e:
+        rejected(out, staging, e)
+        raise
+    removed = drop_stale_int8(out, fp32)
+    move_into(staging, out, [*fp32.values(), *int8.values()], removed)
+    log.info("moved %d graph(s) into %s", len(fp32) + len(int8), out)
+    return 0
+
+
+def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str, ...], staging: Path
+                      ) -> tuple[dict[str, Path], dict[str, Path]]:
+    """Export (and quantize, time) into ``staging``, print and write the report, then check the parity (unless
+    ``--no-parity-check``): a :class:`ParityError` names the graph. Returns the staged fp32 and int8 files."""
     report: dict = {"preset": args.preset, "parameters": model.parameter_counts(),
                     "contract": {"resolution": f"{model.config.width}x{model.config.height}"}}
-    fp32 = export_all(model, out, graphs=graphs, opset=args.opset, inputs=example_inputs(model))
+    fp32 = export_all(model, staging, graphs=graphs, opset=args.opset, inputs=example_inputs(model))
     report["fp32_parity"] = torch_vs_ort(model, fp32, example_inputs(model, targets=3, ray_stride=2, seed=1))
     int8 = {}
     if args.int8:
@@ -120,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
             g = torch.Generator().manual_seed(1)
             frames = [torch.rand(2, 3, H, W, generator=g) for _ in range(args.calib_frames)]
         calib = [example_inputs(model, images=f, targets=3, ray_stride=2, seed=i) for i, f in enumerate(frames)]
-        int8 = quantize_all(fp32, out, calibration_feeds(model, calib, graphs, rays_per_target=2048))
+        int8 = quantize_all(fp32, staging, calibration_feeds(model, calib, graphs, rays_per_target=2048))
         report["int8_vs_fp32"] = int8_vs_fp32(fp32, int8, model.contract(),
                                               example_inputs(model, targets=2, seed=7))
     if args.bench:
@@ -131,16 +172,12 @@ def main(argv: list[str] | None = None) -> int:
     text = json.dumps(report, indent=2, default=float)
     print(text)  # first: the figures reach the terminal whatever happens to the file
     if args.report:
-        args.report.write_text(text)
+        write_atomic(args.report, text)
     if not args.no_parity_check:
-        try:
-            check_fp32_parity(report["fp32_parity"], f"{out}/")
-            if int8:
-                check_int8_parity(report["int8_vs_fp32"], f"{out}/")
-        except ParityError as e:
-            print(f"python -m training.export: {e}", file=sys.stderr)
-            return 1
-    return 0
+        check_fp32_parity(report["fp32_parity"], f"{staging}/")
+        if int8:
+            check_int8_parity(report["int8_vs_fp32"], f"{staging}/")
+    return fp32, int8
 
 
 if __name__ == "__main__":

@@ -109,6 +109,7 @@ class ModelConfig(Config):
             raise ConfigError(f"height/width: must be within 64..256, got {W}x{H}")
         if not self.levels:
             raise ConfigError("levels: at least one level is required")
+        self._check_positive()  # before any ``%`` below: a 0 there is a ZeroDivisionError, not a named key
         chans = dict(zip(("feat_s1", "feat_s2", "feat_s4"), self.features.channels))
         for i, lv in enumerate(self.levels):
             m = lv.volume_stride * 2 ** lv.regularizer.stages
@@ -137,6 +138,19 @@ class ModelConfig(Config):
                                   f"16 (got {W * s}x{H * s})")
         if self.heads.num_joints != NUM_JOINTS:
             raise ConfigError(f"heads.num_joints: BODY_25 has {NUM_JOINTS} joints, got {self.heads.num_joints}")
+
+    def _check_positive(self) -> None:
+        """Strides, group counts and stage counts the size checks divide by must be >= 1 (stages >= 0)."""
+        ones = {"heatmap_stride": self.heatmap_stride, "cost_volume.groups": self.cost_volume.groups,
+                "human.out_stride": self.human.out_stride}
+        for i, lv in enumerate(self.levels):
+            ones[f"levels[{i}].volume_stride"] = lv.volume_stride
+        for key, v in ones.items():
+            if v < 1:
+                raise ConfigError(f"{key}: must be >= 1, got {v}")
+        for i, lv in enumerate(self.levels):
+            if lv.regularizer.stages < 0:
+                raise ConfigError(f"levels[{i}].regularizer.stages: must be >= 0, got {lv.regularizer.stages}")
 
 
 class GHNeRF(nn.Module):
