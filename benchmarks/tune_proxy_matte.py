@@ -7,7 +7,8 @@
 
 For every view of each scene (the rig's two cameras and ``ghnerf-eval``'s circling novel views) the
 model's picture as the runtime shows it (``novel_view.opaque_at``) is matted with the body proxy of the
-device's joints (``--joints``, ``training.device_joints``) at each ``--margins`` x ``--feathers`` (metres),
+device's joints (``--joints``, ``training.device_joints``; those the runtime reports, their expected error
+within ``joints3d.max_prior_error_m``, the rest missing as there) at each ``--margins`` x ``--feathers`` (metres),
 and scored against the dataset's view over the background: the masked PSNR (inside the true subject,
 ``ghnerf-eval``'s), the PSNR over the whole view (the fog counts) and the share of the subject's pixels
 the matte dims or the clearing turns to background (``cut``). ``--clear-below`` adds an axis: the
@@ -67,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from training.data.torch_dataset import MultiViewDataset
-    from training.device_joints import load_joints
+    from training.device_joints import load_found, load_joints
     from training.fill_features import render_views
     from training.evaluate import TorchRenderer
     from training.train import load_model
@@ -76,15 +77,15 @@ def main(argv: list[str] | None = None) -> int:
     renderer = TorchRenderer(load_model(Path(args.model))[0])
     ds = MultiViewDataset(args.data, split=args.split)
     n = min(args.limit, len(ds)) if args.limit else len(ds)
-    joints = load_joints(args.joints, n)
+    joints, found = load_joints(args.joints, n), load_found(args.joints, n)
     nvc = NovelViewConfig()
     mattes = [None, *[(m, f) for m in args.margins for f in args.feathers]]
     settings = [(c, m) for c in args.clear_below for m in mattes]
     scores: dict[str, dict] = {kind: {s: [] for s in settings} for kind in ("source", "novel")}
-    valid = np.ones(len(joints[0]), bool)
     for i in range(n):
         scene = {k: v.numpy() for k, v in ds[i].items()}
         rgb, _, acc = render_views(renderer, scene)
+        valid = found[i]  # the runtime's joints: those whose expected error passes its gate
         body = proxy_body(joints[i], valid)
         for t in range(len(scene["tgt_is_source"])):
             mask = np.asarray(scene["tgt_masks"][t], bool)

@@ -103,6 +103,23 @@ def load_joints(path: str | Path, n: int = 0) -> np.ndarray:
     return joints
 
 
+def load_found(path: str | Path, n: int = 0, max_error_m: float | None = None) -> np.ndarray:
+    """``(N, 25)`` bool: the cached joints the runtime reports (their expected error within ``max_error_m``,
+    default the runtime's ``joints3d.max_prior_error_m``); the others it leaves out, as missing."""
+    from ghnerf_runtime.config import Joints3DConfig  # noqa: PLC0415
+
+    limit = Joints3DConfig().max_prior_error_m if max_error_m is None else max_error_m
+    path = Path(path)
+    try:
+        with np.load(path) as z:
+            errors = np.asarray(z["expected_error_m"], np.float64)
+    except (OSError, ValueError, KeyError) as e:
+        raise JointsCacheError(f"{path}: not a joints cache with expected errors ({e})") from e
+    if errors.ndim != 2 or errors.shape[1] != 25 or len(errors) < n:
+        raise JointsCacheError(f"{path}: expected_error_m has shape {errors.shape}, expected (N >= {n}, 25)")
+    return errors <= limit
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", required=True)

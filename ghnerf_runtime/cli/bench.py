@@ -35,8 +35,8 @@ from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, \
     Joints3DConfig, NovelViewConfig, SessionConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
-from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE, NOVEL_STAGES, Estimator,
-                                      load_session)
+from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
+                                      NOVEL_STAGES, Estimator, load_session)
 from ghnerf_runtime.metrics import finite_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest
 from ghnerf_runtime.tracking import track_from_joints
@@ -52,7 +52,7 @@ STAGE_GROUPS = {
     "depth (volume)": ("volume",),
     "rendering (heat)": ("render_heat",),
     "decoding (2D+3D)": ("decode_2d", "joints_3d"),
-    "novel view": (*NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE),
+    "novel view": (*NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE, NOVEL_MATTE_STAGE),
     "total": ("total",),
 }
 
@@ -68,7 +68,7 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     Returns per-stage lists of ms (warm-up pairs excluded) and the wall time of the counted pairs.
     """
     stages: dict[str, list[float]] = {k: [] for k in (*KEYPOINT_STAGES, *NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
-                                                      "total")}
+                                                      NOVEL_MATTE_STAGE, "total")}
     request = NovelViewRequest(alpha=0.5) if novel else None
     wall = 0.0
     n = 0
