@@ -9,7 +9,10 @@ the encoder sees several times more images per minute than inside the full model
 has the measured figures).
 
 The run folder holds ``human.pt`` (the encoder's state dict and the model config it belongs to),
-``last.pt`` (resume), ``log.jsonl`` and ``summary.json``. ``ghnerf-train`` loads ``human.pt`` with
+``last.pt`` (resume), ``log.jsonl`` and ``summary.json``. Like ``ghnerf-train``, ``--resume`` refuses another
+config and a file that is no pretraining checkpoint (a ``human.pt`` copied to ``last.pt``), and cuts
+``log.jsonl`` back to the checkpoint's step; the dataset is opened before anything is written; checkpoints
+are fsynced before their rename. ``ghnerf-train`` loads ``human.pt`` with
 ``human_init: "<run>/human.pt"``; the pipeline does both when the train config names a
 ``pretrain_human`` block.
 
@@ -43,9 +46,10 @@ from training.run_clock import RunClock
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
+from training.model_card import write_atomic
 from training.train import HEATMAP_SIGMA_HM_PX, DistInfo, Progress, apply_overrides, learning_rate, \
     load_checkpoint, load_config_file, mirrored, model_config_of, refuse_another_config, refuse_existing_run, \
-    scene_order, seed_everything
+    require_resume_keys, save_atomic, scene_order, seed_everything, truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -322,9 +326,7 @@ def save_human(path: Path, model: GHNeRF, step: int) -> None:
     """``human.pt``: the encoder's weights (trunk, projections, heatmap head) and the model config."""
     state = {"version": HUMAN_CHECKPOINT_VERSION, "human": model.human.state_dict(), "step": step,
              "model_config": model.config.to_dict()}
-    tmp = path.with_suffix(".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    save_atomic(state, path)
 
 
 def load_human(model: GHNeRF, path: str | Path) -> int:
@@ -404,9 +406,16 @@ RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "
                      "eval_scenes", "checkpoint_every", "loader_workers")
 
 
+#: What ``--resume`` reads from ``last.pt`` (a ``human.pt`` put in its place lacks the optimiser).
+RESUME_KEYS = ("human", "optimizer", "step")
+
+
 def _check_resumable(cfg: PretrainConfig, last: Path) -> None:
-    """Refuse to resume ``last`` under another config (checkpoints from before the config was stored pass)."""
-    old = load_checkpoint(last).get("config")
+    """Refuse to resume ``last`` when it is no pretraining checkpoint (named keys missing), or under another
+    config (checkpoints from before the config was stored pass)."""
+    ck = load_checkpoint(last)
+    require_resume_keys(ck, last, RESUME_KEYS)
+    old = ck.get("config")
     if old:
         now = json.loads(json.dumps(asdict(cfg)))
         was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
@@ -429,21 +438,23 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
         _check_resumable(cfg, out / "last.pt")  # before config.json is overwritten with the new one
     elif not resume:
         refuse_existing_run(out)  # a new run never overwrites another's config.json and last.pt
+    mcfg = cfg.model_config()
+    targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride)
+    # the dataset and its splits are opened (a missing one named) before anything is written
+    ds = dataset or MultiViewDataset(cfg.data, cfg.split, targets)
+    if len(ds) < cfg.scenes_per_step:
+        raise ConfigError(f"split: {cfg.split!r} of {cfg.data} has {len(ds)} scenes, fewer than "
+                          f"scenes_per_step={cfg.scenes_per_step}")
+    val = eval_dataset
+    if val is None and cfg.eval_every:
+        val = MultiViewDataset(cfg.data, cfg.eval_split, targets)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(asdict(cfg), indent=1))
+    write_atomic(out / "config.json", json.dumps(asdict(cfg), indent=1))
     use_cuda = cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available())
     device = torch.device("cuda" if use_cuda else "cpu")
     if device.type == "cpu":
         torch.set_num_threads(cfg.threads or os.cpu_count() or 1)
         torch.set_flush_denormal(True)
-    mcfg = cfg.model_config()
-    targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride)
-    ds = dataset or MultiViewDataset(cfg.data, cfg.split, targets)
-    if len(ds) < cfg.scenes_per_step:
-        raise ValueError(f"split {cfg.split!r} has {len(ds)} scenes, fewer than scenes_per_step={cfg.scenes_per_step}")
-    val = eval_dataset
-    if val is None and cfg.eval_every:
-        val = MultiViewDataset(cfg.data, cfg.eval_split, targets)
 
     seed_everything(cfg.seed)  # same initial weights as the joint run of the same seed
     model = GHNeRF(mcfg).to(device).train()
@@ -473,10 +484,10 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     def checkpoint(s: int) -> None:
         state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s,
                  "segments": clock.segments(s), "config": asdict(cfg), "precision_probe": probed}
-        torch.save(state, last.with_suffix(".tmp"))
-        os.replace(last.with_suffix(".tmp"), last)
+        save_atomic(state, last)
         save_human(out / "human.pt", model, s)
 
+    truncate_log(out / "log.jsonl", step)  # records past the checkpoint would appear twice after a resume
     prog = Progress(cfg.iterations, step, enabled=not quiet)
     losses: list[float] = []
     last_pck = float("nan")
@@ -528,7 +539,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
                "images_per_step": cfg.scenes_per_step * ds[0]["tgt_images"].shape[0] * (2 if cfg.flip else 1),
                "eval_pck@0.2": last_pck, "eval_split": cfg.eval_split if cfg.eval_every else None,
                "human": str(out / "human.pt")}
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    write_atomic(out / "summary.json", json.dumps(summary, indent=1))
     return summary
 
 
@@ -592,10 +603,12 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    from training.data.errors import DataError
+
     try:
         summary = pretrain(cfg, args.out, resume=args.resume, quiet=args.quiet)
-    except ConfigError as e:  # raised while starting: a run folder in use, a resume under another config
-        print(f"error: {e}", file=sys.stderr)
+    except (ConfigError, DataError) as e:  # while starting: a run folder in use, a resume under another config,
+        print(f"error: {e}", file=sys.stderr)  # a file that is no checkpoint, a missing dataset or split
         return 2
     print(json.dumps(summary, indent=1))
     return 0

@@ -562,11 +562,17 @@ def save_checkpoint(path: Path, model, opt, step: int, cfg: TrainConfig, gen: to
     state = {"version": CHECKPOINT_VERSION, "model": unwrap(model).state_dict(), "optimizer": opt.state_dict(),
              "step": step, "config": asdict(cfg), "model_config": unwrap(model).config.to_dict(),
              "rng": rng_state(gen), "extra": extra or {}}
+    save_atomic(state, path)
+
+
+def save_atomic(state: Any, path: Path) -> None:
+    """``torch.save`` through ``<path>.tmp``, fsynced, then renamed: a crash or power cut leaves the old file or
+    the new one, never a renamed empty or half-written ``last.pt``."""
     tmp = path.with_suffix(".tmp")
     with open(tmp, "wb") as fh:
         torch.save(state, fh)
         fh.flush()
-        os.fsync(fh.fileno())  # on disk before the rename: a power cut must not leave a renamed empty last.pt
+        os.fsync(fh.fileno())
     os.replace(tmp, path)
 
 
@@ -754,12 +760,12 @@ def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[st
 RESUME_KEYS = ("model", "optimizer", "step", "config", "rng")
 
 
-def require_resume_keys(ck: Any, path: Path) -> None:
-    """Refuse a checkpoint ``--resume`` cannot continue from, naming the keys it lacks."""
+def require_resume_keys(ck: Any, path: Path, keys: tuple[str, ...] = RESUME_KEYS) -> None:
+    """Refuse a checkpoint ``--resume`` cannot continue from, naming the ``keys`` it lacks."""
     if not isinstance(ck, Mapping):
         raise ConfigError(f"{path}: not a training checkpoint (a {type(ck).__name__}, not a mapping); "
                           "start a new run (another --out)")
-    missing = [k for k in RESUME_KEYS if k not in ck]
+    missing = [k for k in keys if k not in ck]
     if missing:
         raise ConfigError(f"{path}: not a training checkpoint --resume can continue from: no "
                           f"{', '.join(missing)} (a weights-only file?); restore one of the run's ckpt_*.pt as "

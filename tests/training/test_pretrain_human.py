@@ -142,6 +142,38 @@ def test_pretraining_resume_refuses_another_config(data64, tmp_path):
     assert {f.name: f.read_bytes() for f in (tmp_path / "p").iterdir() if f.is_file()} == before
 
 
+def test_pretraining_resume_refuses_a_weights_only_file_and_keeps_one_log_record_per_step(data64, tmp_path):
+    import shutil
+
+    run = tmp_path / "p"
+    pretrain(tiny_pretrain(data64, iterations=2, checkpoint_every=1), run, quiet=True)
+    # a crash after step 1's checkpoint, with step 2 already logged: the resumed run logs step 2 once
+    kept = run / "kept.pt"
+    shutil.copy(run / "last.pt", kept)
+    ck = torch.load(kept, weights_only=False)
+    ck["step"] = 1
+    torch.save(ck, run / "last.pt")
+    with open(run / "log.jsonl", "a") as fh:
+        fh.write('{"step": 3, "loss": 1.0')  # a line a crash cut short
+    pretrain(tiny_pretrain(data64, iterations=2, checkpoint_every=1), run, resume=True, quiet=True)
+    assert [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()] == [1, 2]
+
+    # human.pt (the weights alone) put in place of last.pt: named, before config.json is touched
+    shutil.copy(run / "human.pt", run / "last.pt")
+    before = (run / "config.json").read_bytes()
+    with pytest.raises(ConfigError, match=r"last\.pt: not a training checkpoint --resume can continue from: no "
+                                          r"optimizer"):
+        pretrain(tiny_pretrain(data64, iterations=3), run, resume=True, quiet=True)
+    assert (run / "config.json").read_bytes() == before
+
+
+def test_pretraining_names_a_missing_dataset_before_writing_anything(tmp_path, capsys):
+    out = tmp_path / "p"
+    assert main(["--out", str(out), "--set", "preset=\"tiny\"", "--data", str(tmp_path / "nowhere")]) == 2
+    assert "nowhere" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def _gauss(cy, cx, size=32, sigma=1.5):
     ys, xs = torch.meshgrid(torch.arange(size).float(), torch.arange(size).float(), indexing="ij")
     return torch.exp(-((ys - cy) ** 2 + (xs - cx) ** 2) / (2 * sigma ** 2))
