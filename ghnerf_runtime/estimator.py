@@ -58,13 +58,13 @@ from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
 from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
-from ghnerf_runtime.errors import FrameError, ModelError
+from ghnerf_runtime.errors import FrameError, GeometryError, ModelError
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presence, gate_to_box, query_grid, \
     triangulate_joints, volumetric_joints
-from ghnerf_runtime.keypoints import KeypointDecoderConfig, Keypoints2D, decode_keypoints, heatmap_to_model_pixels
+from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, draw_skeleton, heatmap_overlay, \
     interpolate_camera, novel_target, render_novel_view
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
@@ -277,6 +277,7 @@ class Estimator:
     Raises:
         ModelError: the session lacks a graph the configuration needs.
         ConfigError: a novel-view stride does not divide the model's resolution.
+        GeometryError: the rig's two cameras stand at one point (no baseline to triangulate over).
     """
 
     def __init__(self, session: Any, rig: Rig, config: EstimatorConfig | None = None) -> None:
@@ -284,6 +285,8 @@ class Estimator:
         self.config = config.beside_prior(getattr(session, "skeleton_prior", None) is not None)
         if self.config is not config:
             log.info("joints3d.single_view_fallback is off: the skeleton prior places the joints it would")
+        if problem := rig.baseline_problem():  # a rig file says so on load; a camera's own readback may not
+            raise GeometryError(f"rig {rig.rig_id!r}: {problem}")
         self.session = session
         self.rig = rig
         self.contract = session.contract
@@ -323,7 +326,6 @@ class Estimator:
         self._last_timestamp_s: float | None = None
         self._last_pair_cold = False
         self._rays_cache: dict[tuple, np.ndarray] = {}
-        self._decoders: dict[float, KeypointDecoderConfig] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
         self._between: dict[float, Camera] = {}  # alpha -> interpolated camera (the rig does not move)
         self._worker: ThreadPoolExecutor | None = None  # novel views during the keypoint stages
@@ -405,22 +407,6 @@ class Estimator:
         else:
             state.cache.move_to_end(roi)
         return entry
-
-    def _decoder_for(self, block) -> KeypointDecoderConfig:
-        """The decoder config with ``max_region_frac`` taken of the *rendered* block, not the grid.
-
-        Outside the block the heatmaps are 0 (not rendered); a flooded map (a region covering a
-        large part of what was looked at) must stay "no peak" when fewer rays are rendered.
-        """
-        frac = block[2] * block[3] / float(self.grid * self.grid)
-        if frac >= 1.0:
-            return self.config.decoder
-        key = round(frac, 4)
-        cfg = self._decoders.get(key)
-        if cfg is None:
-            cfg = replace(self.config.decoder, max_region_frac=max(self.config.decoder.max_region_frac * frac, 1e-3))
-            self._decoders[key] = cfg
-        return cfg
 
     def _ray_uv(self, blocks: tuple, stride: int) -> np.ndarray:
         """``(2, R, 2)`` rays of the two views' blocks (cached: blocks recur while tracking)."""
@@ -632,8 +618,8 @@ class Estimator:
             kp = decode_keypoints(heat, cfg.decoder)
         else:
             heat = np.stack([scatter_block(out["heatmaps"][i], blocks[i], g, g) for i in range(2)])  # (2, g, g, J)
-            heat = np.ascontiguousarray(heat.transpose(0, 3, 1, 2))  # (2, J, g, g)
-            kp = decode_keypoints(heat, self._decoder_for(blocks[0]))
+            heat = np.ascontiguousarray(heat.transpose(0, 3, 1, 2))  # (2, J, g, g), for the 3D stage
+            kp = decode_blocks(out["heatmaps"], blocks, self.config.decoder)
         uv_model = heatmap_to_model_pixels(kp.uv, g, S)
         joints_2d, conf_2d, missing_2d = self._image_joints(kp, uv_model, crops)
         _add_ms(timing, "decode_2d", t)

@@ -53,7 +53,7 @@ Pure functions; numpy and OpenCV only.
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import cv2
@@ -64,7 +64,7 @@ from ghnerf_runtime.geometry.camera import Camera, check_last_dim
 from ghnerf_runtime.preprocess import Roi, camera_normalized, crop_camera
 
 __all__ = [
-    "MISSING_FILL", "KeypointConfigError", "KeypointDecoderConfig", "Keypoints2D", "decode_keypoints",
+    "MISSING_FILL", "KeypointConfigError", "KeypointDecoderConfig", "Keypoints2D", "decode_keypoints", "decode_blocks",
     "heatmap_to_model_pixels", "model_to_heatmap_pixels", "model_to_image_pixels", "heatmap_to_image_pixels",
 ]
 
@@ -323,6 +323,29 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     runner_up = np.where(finite, runner_up, 0.0).astype(np.float32)
     return Keypoints2D(uv.reshape(batch_shape + (2,)), conf.reshape(batch_shape), valid.reshape(batch_shape),
                        runner_up.reshape(batch_shape))
+
+
+def decode_blocks(rendered: np.ndarray, blocks, config: KeypointDecoderConfig | None = None) -> Keypoints2D:
+    """Decode heatmaps rendered for a block of grid cells per view; ``uv`` in the whole grid's cells.
+
+    Args:
+        rendered: ``(V, R, J)`` heatmaps of each view's rays, row-major in its block.
+        blocks: ``V`` blocks ``(r0, c0, rows, cols)`` of one size (``rays.common_blocks``).
+        config: decoder settings.
+
+    Each block is decoded alone: scattered onto the grid, the unrendered zeros around it would pull a peak near
+    its border inward (up to 0.7 cells for the default filter, whose edge handling applies only at a map's own
+    edge). ``max_region_frac`` is then a fraction of the block, of what was looked at, so a flooded map stays
+    "no peak" however few rays were rendered.
+    """
+    rows, cols = blocks[0][2], blocks[0][3]
+    if any((b[2], b[3]) != (rows, cols) for b in blocks) or len(rendered) != len(blocks):
+        raise ShapeError(f"{len(rendered)} views of rendered heatmaps for blocks {list(blocks)}: one block of one "
+                         "size per view")
+    maps = np.stack([np.asarray(r, np.float32).reshape(rows, cols, -1).transpose(2, 0, 1) for r in rendered])
+    kp = decode_keypoints(np.ascontiguousarray(maps), config)
+    corner = np.array([[b[1], b[0]] for b in blocks], np.float64)[:, None, :]  # (V, 1, (c0, r0))
+    return replace(kp, uv=np.where(kp.valid[..., None], kp.uv + corner, kp.uv))
 
 
 # ---------------------------------------------------------------- coordinates

@@ -79,6 +79,24 @@ def subject_region(image_bgr: np.ndarray, background: float, min_diff: float) ->
     return np.abs(np.asarray(image_bgr, np.float32) / 255.0 - background).max(axis=-1) >= min_diff
 
 
+#: Points per row of :func:`sample_at`'s maps: ``cv2.remap`` refuses maps of 32767 rows or more (SHRT_MAX), which
+#: one ``(N, 1)`` column reaches once the subject covers a third of a 320x320 view.
+SAMPLE_ROW = 1024
+
+
+def sample_at(image: np.ndarray, u: np.ndarray, v: np.ndarray, interpolation: int) -> np.ndarray:
+    """``image`` (H, W[, C]) at the ``N`` pixel positions ``(u, v)``: ``(N[, C])``, 0 outside the image."""
+    n = len(u)
+    rows = max(-(-n // SAMPLE_ROW), 1)
+    pad = rows * SAMPLE_ROW - n
+
+    def as_map(a: np.ndarray) -> np.ndarray:
+        return np.pad(np.asarray(a, np.float32), (0, pad), constant_values=-1.0).reshape(rows, SAMPLE_ROW)
+
+    out = cv2.remap(image, as_map(u), as_map(v), interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+    return out.reshape((rows * SAMPLE_ROW,) + image.shape[2:])[:n]
+
+
 def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
                 source_rgb: np.ndarray, tolerance_m: float = 0.03, region: np.ndarray | None = None,
                 max_angle_deg: float = 180.0, source_depth: Sequence[np.ndarray] | None = None,
@@ -143,16 +161,15 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         if rgb.shape[:2] != (cam.height, cam.width):
             raise ShapeError(f"source image {rgb.shape[:2]} does not match its camera {(cam.height, cam.width)}")
         uv, zs = cam.project(points, distort=False)
-        u = np.nan_to_num(uv[:, 0], nan=-1.0).astype(np.float32).reshape(-1, 1)
-        v = np.nan_to_num(uv[:, 1], nan=-1.0).astype(np.float32).reshape(-1, 1)
-        colour = cv2.remap(rgb, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT).reshape(-1, 3)
+        u = np.nan_to_num(uv[:, 0], nan=-1.0).astype(np.float32)
+        v = np.nan_to_num(uv[:, 1], nan=-1.0).astype(np.float32)
+        colour = sample_at(rgb, u, v, cv2.INTER_LINEAR)
         # full resolution: at half, visibility along the silhouettes' edges goes wrong
         own_depth = proxy_depth(body, cam) if source_depth is None else np.asarray(source_depth[k])
         if own_depth.shape != rgb.shape[:2]:
             raise ShapeError(f"source depth {own_depth.shape} does not match its camera {(cam.height, cam.width)}")
-        own = cv2.remap(own_depth.astype(np.float32), u, v, cv2.INTER_NEAREST,
-                        borderMode=cv2.BORDER_CONSTANT, borderValue=0.0).ravel()
-        inside = (u[:, 0] >= 0) & (u[:, 0] <= cam.width - 1) & (v[:, 0] >= 0) & (v[:, 0] <= cam.height - 1)
+        own = sample_at(own_depth.astype(np.float32), u, v, cv2.INTER_NEAREST)
+        inside = (u >= 0) & (u <= cam.width - 1) & (v >= 0) & (v <= cam.height - 1)
         sees = inside & (zs > 0) & (np.abs(own - zs) < tolerance_m)
         to_source = cam.center - points
         cos = np.sum(to_view * to_source, axis=-1) / np.linalg.norm(to_source, axis=-1)

@@ -257,6 +257,13 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
     metadata = data.get("metadata", {})
     if not isinstance(metadata, dict):
         chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
+    try:
+        rig = Rig(tuple(cameras), WorkingVolume(lo, hi), rig_id=rig_id, metadata=_plain(metadata))
+    except GeometryError as e:  # pragma: no cover - every case is checked above
+        raise chk.fail(None, str(e)) from e
+    problem = rig.baseline_problem()
+    if problem:
+        chk._raise("cameras[1].t", problem)
     for cam in cameras:
         if cam.fold_inside_image():
             log.warning(
@@ -265,10 +272,7 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
                 "model (8 coefficients) usually covers the whole frame", f"{path}: " if path else "", cam.name,
                 cam.fold_radius,
             )
-    try:
-        return Rig(tuple(cameras), WorkingVolume(lo, hi), rig_id=rig_id, metadata=_plain(metadata))
-    except GeometryError as e:  # pragma: no cover - every case is checked above
-        raise chk.fail(None, str(e)) from e
+    return rig
 
 
 def _plain(value: Any) -> Any:

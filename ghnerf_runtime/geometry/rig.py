@@ -8,6 +8,9 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError
 from ghnerf_runtime.geometry.camera import Camera, check_last_dim
 
+#: The shortest stereo baseline the runtime accepts. Real rigs have centimetres to a metre; a shorter one is a
+#: calibration that never placed the cameras (at 1 cm and 3 m, one pixel of disparity is about 0.5 m of depth).
+MIN_BASELINE_M = 0.01
 
 @dataclass(frozen=True, eq=False)
 class WorkingVolume:
@@ -93,6 +96,16 @@ class Rig:
     def baseline(self) -> float:
         a, b = self.pair
         return float(np.linalg.norm(a.center - b.center))
+
+    def baseline_problem(self) -> str | None:
+        """Why the pair cannot triangulate (its centres closer than :data:`MIN_BASELINE_M`), or None."""
+        if self.baseline >= MIN_BASELINE_M:
+            return None
+        a, b = self.pair
+        return (f"cameras {a.name!r} and {b.name!r} are {self.baseline * 1e3:.1f} mm apart (at least "
+                f"{MIN_BASELINE_M * 1e3:.0f} mm needed): two views from one point give no depth, so every joint would "
+                "be missing. Were only the intrinsics calibrated, or one camera's pose copied to both? Solve the "
+                "pair's extrinsics (ghcal solve)")
 
     def projection_matrices(self) -> np.ndarray:
         """``(C, 3, 4)`` projection matrices for undistorted pixels."""

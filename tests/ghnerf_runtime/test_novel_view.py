@@ -168,8 +168,9 @@ def test_the_estimator_checks_the_novel_strides_against_its_model_at_load():
     from ghnerf_runtime.estimator import Estimator
     from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 
-    rig = Rig((_camera().resized(640, 640), replace(_camera(), name="other").resized(640, 640)),
-              WorkingVolume(BOX[0], BOX[1]))
+    other = _camera()
+    other = replace(other, name="other", t=other.t + [0.3, 0.0, 0.0])  # 30 cm to the side: a stereo pair
+    rig = Rig((_camera().resized(640, 640), other.resized(640, 640)), WorkingVolume(BOX[0], BOX[1]))
     bad = EstimatorConfig(novel_view=NovelViewConfig(enabled=True, silhouette_stride=16))
     with pytest.raises(ConfigError, match=r"novel_view\.silhouette_stride"):
         Estimator(OracleSession(_contract(120)), rig, bad)

@@ -166,3 +166,33 @@ def test_depth_given_by_the_caller_gives_the_same_blend(shot):
         proxy_blend(image, target, body, sources, rgb, source_depth=[np.zeros((4, 4))] * 2)
     with pytest.raises(ShapeError, match="2 source cameras for 1 source depth"):
         proxy_blend(image, target, body, sources, rgb, source_depth=[np.zeros((128, 128))])
+
+
+def test_sample_at_reads_any_number_of_points_as_remap_does():
+    import cv2
+
+    from ghnerf_runtime.proxy_blend import SAMPLE_ROW, sample_at
+
+    rng = np.random.default_rng(0)
+    image = rng.random((50, 70, 3)).astype(np.float32)
+    n = 3 * SAMPLE_ROW + 17  # rows padded: the tail must not leak
+    u, v = rng.uniform(-2, 72, n).astype(np.float32), rng.uniform(-2, 52, n).astype(np.float32)
+    want = np.concatenate([cv2.remap(image, u[i:i + 1000, None], v[i:i + 1000, None], cv2.INTER_LINEAR,
+                                     borderMode=cv2.BORDER_CONSTANT).reshape(-1, 3) for i in range(0, n, 1000)])
+    assert np.array_equal(sample_at(image, u, v, cv2.INTER_LINEAR), want)
+    assert sample_at(image[..., 0], u[:0], v[:0], cv2.INTER_NEAREST).shape == (0,)
+
+
+def test_a_subject_covering_more_than_32767_pixels_is_blended(shot):
+    """A large novel view: one (N, 1) remap map of the subject's pixels was past OpenCV's 32767-row limit,
+    and the blend raised cv2.error out of the estimator (a model of 256 px or more, the subject filling its view, reaches it)."""
+    joints, sources, rgb, target, _, truth = shot
+    big = novel_target(interpolate_camera(target, target, 0.0), np.stack([joints.min(0) - 0.15,
+                                                                          joints.max(0) + 0.15]), 640)
+    grey = np.full((640, 640, 3), 77, np.uint8)
+    out = proxy_blend(grey, big, proxy_body(joints, np.ones(25, bool)), sources, rgb)
+    assert (out.depth > 0).sum() > 32767 and out.replaced.sum() > 0.5 * (out.depth > 0).sum()
+    small = proxy_blend(np.full((128, 128, 3), 77, np.uint8), target, proxy_body(joints, np.ones(25, bool)),
+                        sources, rgb)
+    # the same subject, the same colours: the big view's mean colour over its recoloured pixels matches
+    assert np.abs(out.image[out.replaced].mean(0) - small.image[small.replaced].mean(0)).max() < 6.0

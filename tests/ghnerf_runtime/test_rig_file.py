@@ -312,3 +312,27 @@ def test_save_refuses_a_rig_the_reader_would_refuse(tmp_path):
         save_rig(Rig(tuple(cams), rig.volume), tmp_path / "rig.json")
     assert info.value.path == str(tmp_path / "rig.json")
     assert (tmp_path / "rig.json").read_text() == "old"
+
+
+def test_a_pair_standing_at_one_point_is_refused_naming_the_cameras(example_dict, tmp_path):
+    """Both cameras given one pose (an intrinsics-only calibration, a block copied twice) loaded, and every joint
+    then came back missing without a word about the calibration."""
+    example_dict["cameras"][1]["R"] = example_dict["cameras"][0]["R"]
+    example_dict["cameras"][1]["t"] = example_dict["cameras"][0]["t"]
+    path = tmp_path / "flat.json"
+    path.write_text(json.dumps(example_dict))
+    with pytest.raises(RigFileError) as info:
+        load_rig(path)
+    assert info.value.field == "cameras[1].t" and str(path) in str(info.value)
+    assert "'left' and 'right' are 0.0 mm apart" in str(info.value) and "ghcal solve" in str(info.value)
+
+
+def test_the_estimator_refuses_a_rig_without_a_baseline():
+    from ghnerf_runtime.errors import GeometryError
+    from ghnerf_runtime.estimator import Estimator
+
+    rig = load_rig(EXAMPLE)
+    a, b = rig.pair
+    same = Rig((a, Camera(b.name, b.width, b.height, b.K, b.dist, a.R, a.t + [0.004, 0, 0])), rig.volume)
+    with pytest.raises(GeometryError, match=r"'left' and 'right' are 4\.0 mm apart"):
+        Estimator(object(), same)  # refused before the session is looked at
