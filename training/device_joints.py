@@ -88,14 +88,19 @@ def cache_true_joints(data: str | Path, split: str, out: str | Path, limit: int 
     return out
 
 
+def _read(path: Path, key: str, what: str) -> np.ndarray:
+    """One float64 array of a joints cache; a missing or damaged file or key is a :class:`JointsCacheError`."""
+    try:
+        with np.load(path) as z:
+            return np.asarray(z[key], np.float64)
+    except (OSError, ValueError, KeyError) as e:
+        raise JointsCacheError(f"{path}: {what} ({e})") from e
+
+
 def load_joints(path: str | Path, n: int = 0) -> np.ndarray:
     """The cached ``(N, 25, 3)`` joints; ``n``: how many scenes they must cover at least."""
     path = Path(path)
-    try:
-        with np.load(path) as z:
-            joints = np.asarray(z["joints"], np.float64)
-    except (OSError, ValueError, KeyError) as e:
-        raise JointsCacheError(f"{path}: not a joints cache ({e})") from e
+    joints = _read(path, "joints", "not a joints cache")
     if joints.ndim != 3 or joints.shape[1:] != (25, 3):
         raise JointsCacheError(f"{path}: joints have shape {joints.shape}, expected (N, 25, 3)")
     if len(joints) < n:
@@ -110,11 +115,7 @@ def load_found(path: str | Path, n: int = 0, max_error_m: float | None = None) -
 
     limit = Joints3DConfig().max_prior_error_m if max_error_m is None else max_error_m
     path = Path(path)
-    try:
-        with np.load(path) as z:
-            errors = np.asarray(z["expected_error_m"], np.float64)
-    except (OSError, ValueError, KeyError) as e:
-        raise JointsCacheError(f"{path}: not a joints cache with expected errors ({e})") from e
+    errors = _read(path, "expected_error_m", "not a joints cache with expected errors")
     if errors.ndim != 2 or errors.shape[1] != 25 or len(errors) < n:
         raise JointsCacheError(f"{path}: expected_error_m has shape {errors.shape}, expected (N >= {n}, 25)")
     return errors <= limit

@@ -80,6 +80,7 @@ PCK_ALPHA = 0.2
 class EvalInputError(ValueError):
     """A model spec, its files or the dataset cannot be evaluated; the message names the file and what is wrong."""
 
+
 #: Bin edges (degrees) of a novel view's angle from the nearest source camera, for the PSNR split.
 SOURCE_ANGLE_BINS_DEG = (0.0, 15.0, 30.0, 60.0, 90.0, 180.0)
 

@@ -12,6 +12,7 @@ from ghnerf_runtime.geometry.camera import Camera, check_last_dim
 #: calibration that never placed the cameras (at 1 cm and 3 m, one pixel of disparity is about 0.5 m of depth).
 MIN_BASELINE_M = 0.01
 
+
 @dataclass(frozen=True, eq=False)
 class WorkingVolume:
     """Axis-aligned box in the rig frame (metres) where the subject can be."""

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch")
 from ghnerf_runtime.body25 import JOINT_INDEX  # noqa: E402
 from training.body_proxy import (ProxyTemplate, _depth_error, fit_scale, iou, proxy_body, proxy_depth,  # noqa: E402
                                  proxy_scene, tune, view_camera)
-from training.device_joints import JointsCacheError, cache_joints, cache_true_joints, load_joints  # noqa: E402
+from training.device_joints import JointsCacheError, cache_joints, cache_true_joints, load_found, load_joints  # noqa: E402
 from training.fill_features import MASK_BIT, TRUTH_BIT, cache_split, load_cache  # noqa: E402
 
 SHIPPED = Path(__file__).resolve().parents[2] / "models" / "ghnerf"
@@ -125,6 +125,23 @@ def test_a_broken_joints_cache_is_named(tmp_path):
     np.savez(tmp_path / "short.npz", joints=np.zeros((2, 25, 3)))
     with pytest.raises(JointsCacheError, match="holds 2 scenes, 5 asked for"):
         load_joints(tmp_path / "short.npz", 5)
+
+
+def test_the_found_joints_are_those_the_runtimes_error_gate_passes(tmp_path):
+    from ghnerf_runtime.config import Joints3DConfig
+
+    gate = Joints3DConfig().max_prior_error_m
+    errors = np.full((2, 25), gate / 2)
+    errors[0, 3], errors[1, 7] = gate * 1.01, gate  # just past the gate: left out; on it: reported
+    np.savez(tmp_path / "j.npz", joints=np.zeros((2, 25, 3)), expected_error_m=errors)
+    found = load_found(tmp_path / "j.npz", 2)
+    assert found.shape == (2, 25) and (~found).sum() == 1 and not found[0, 3] and found[1, 7]
+    assert load_found(tmp_path / "j.npz", max_error_m=gate / 4).sum() == 0
+    np.savez(tmp_path / "old.npz", joints=np.zeros((2, 25, 3)))
+    with pytest.raises(JointsCacheError, match=r"old\.npz: not a joints cache with expected errors"):
+        load_found(tmp_path / "old.npz")
+    with pytest.raises(JointsCacheError, match=r"expected \(N >= 5, 25\)"):
+        load_found(tmp_path / "j.npz", 5)
 
 
 def test_a_proxy_cache_takes_its_geometry_and_joints_from_the_device_joints(data64, tmp_path):

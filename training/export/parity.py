@@ -189,13 +189,13 @@ def check_int8_parity(report: Mapping, what: str = "") -> None:
     """Raise :class:`ParityError` when the int8 keypoint pipeline (the rendered one, and the encoder's own
     heatmaps), the novel view or the volumetric heatmaps (:data:`INT8_OUTPUT_BOUNDS`) stray from fp32 beyond the
     bounds above (``report``: :func:`int8_vs_fp32`)."""
-    for graph, outputs in (report.get("graphs") or {}).items():
+    graphs = report.get("graphs") or {}
+    for graph, outputs in graphs.items():
         # the encoder's own heatmaps (``encoder``, ``human``): the runtime's default 2D joints read them
         st = outputs.get("encoder_heatmaps")
         if st is not None and not st["max_abs"] <= INT8_HEATMAP_MAX_ABS:
             raise ParityError(f"{what}{graph}.int8.onnx: its heatmaps differ from fp32 by {st['max_abs']:.3g} (bound "
                               f"{INT8_HEATMAP_MAX_ABS}): the calibration or the quantization is wrong")
-    graphs = report.get("graphs") or {}
     for graph, output, key, bound in INT8_OUTPUT_BOUNDS:
         st = (graphs.get(graph) or {}).get(output)
         if st is not None and not st[key] <= bound:  # (a NaN fails too)
@@ -209,4 +209,3 @@ def check_int8_parity(report: Mapping, what: str = "") -> None:
     if pipe and not pipe["depth_mean_abs_m"] <= INT8_DEPTH_MEAN_ABS_M:
         raise ParityError(f"{what}int8 depth differs from fp32 by {pipe['depth_mean_abs_m']:.3g} m on average "
                           f"(bound {INT8_DEPTH_MEAN_ABS_M} m): the calibration or the quantization is wrong")
-
