@@ -23,7 +23,11 @@ import numpy as np
 
 from calibration.errors import BoardError
 
-__all__ = ["BoardSpec", "load_board", "DICTIONARIES"]
+__all__ = ["BoardSpec", "load_board", "DICTIONARIES", "MIN_CORNERS"]
+
+#: Fewest corners a view needs to constrain a pose (and not all on one line); a board with fewer inner
+#: corners could never be found.
+MIN_CORNERS = 6
 
 #: ArUco dictionaries a board may use (OpenCV's predefined ones, by name).
 DICTIONARIES = tuple(sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and "APRILTAG" not in n
@@ -55,6 +59,10 @@ class BoardSpec:
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or not 3 <= value <= 64:
                 raise BoardError(f"must be a whole number of squares in [3, 64], got {value!r}", key=key)
+        if self.corner_count < MIN_CORNERS:
+            raise BoardError(f"a {self.squares_x}x{self.squares_y} board has {self.corner_count} inner corners; a view "
+                             f"needs at least {MIN_CORNERS}, so it could never be found: add squares",
+                             key="squares_x")
         for key in ("square_m", "marker_m"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \

@@ -84,8 +84,8 @@ def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) ->
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise CaptureError(f"{path}: cannot read the camera order ({e})") from e
     names = data.get("cameras") if isinstance(data, dict) else None
-    if (not isinstance(names, list) or len(names) != 2 or len(set(names)) != 2
-            or not all(isinstance(n, str) for n in names)):
+    if (not isinstance(names, list) or len(names) != 2 or not all(isinstance(n, str) for n in names)
+            or len(set(names)) != 2):  # strings first: a list entry is unhashable
         raise CaptureError(f"{path}: must be {{\"cameras\": [FIRST, SECOND]}}, two different names, got {data!r}")
     for name in names:
         check_camera_name(name)

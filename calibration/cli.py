@@ -62,6 +62,10 @@ MAX_RIG_ID_LEN = 32
 MAX_CAMERA_NAME_LEN = 16
 #: The board definition ``ghcal synth`` writes beside its views, and ``solve`` / ``check`` look for there.
 BOARD_FILE = "board.json"
+#: ``board``: a square must be this many pixels for its marker to be drawn (``BoardSpec.image``), and the print
+#: at most this many megapixels (a mistyped --dpi 100000 asked for terabytes).
+MIN_PX_PER_SQUARE = 20
+MAX_BOARD_MEGAPIXELS = 400
 
 
 def _stream_name(text: str, limit: int, what: str) -> str:
@@ -85,6 +89,8 @@ def _measuring_board(given: str | None, images: str, recorded: BoardSpec | None 
     """``solve`` / ``check``: the board and where it came from: ``--board``, else ``board.json`` beside the
     images, else (``check``) the board the rig records. Never the default board: its 80 mm squares
     scaled the whole rig silently when ``--board`` was forgotten."""
+    if not Path(images).is_dir():  # before the board: a mistyped folder is not a missing board
+        raise UsageError(f"--images {images}: no such folder of calibration images (one subfolder per camera)")
     if given:
         return load_board(given), given
     beside = Path(images) / BOARD_FILE
@@ -151,6 +157,14 @@ def cmd_board(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     px = int(round(board.square_m / 0.0254 * args.dpi))
+    if px < MIN_PX_PER_SQUARE:  # the markers' cells would not be drawn
+        raise UsageError(f"--dpi {args.dpi}: a square of {1000 * board.square_m:g} mm would be {px} px; at least "
+                         f"{MIN_PX_PER_SQUARE} are needed: --dpi {math.ceil(MIN_PX_PER_SQUARE * 0.0254 / board.square_m)} "
+                         "or more")
+    megapixels = (board.squares_x + 1) * (board.squares_y + 1) * px * px / 1e6  # the margins add a square
+    if megapixels > MAX_BOARD_MEGAPIXELS:
+        raise UsageError(f"--dpi {args.dpi}: the print would be {megapixels:.0f} megapixels (at most "
+                         f"{MAX_BOARD_MEGAPIXELS}); 300 dpi is plenty for a board")
     image = board.image(px_per_square=px, margin_px=px // 2)
     png, spec = out / "board.png", out / "board.json"
     if spec.exists() and not args.force:
@@ -482,7 +496,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write into a folder that already holds views, board.json or cameras.json")
     p.add_argument("--count", type=_positive_int, default=15, help="views both cameras see (default 15)")
     p.add_argument("--edge-count", type=_count, default=6, help="views per camera in its image corners (default 6)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_count, default=0)
     p.set_defaults(run=cmd_synth)
 
     p = sub.add_parser("capture", help="save image pairs in which a camera sees the board (both images)")

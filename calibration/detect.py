@@ -6,12 +6,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from calibration.board import BoardSpec
+from calibration.board import MIN_CORNERS, BoardSpec
 
 __all__ = ["BoardView", "BoardDetector", "MIN_CORNERS"]
-
-#: Fewest corners a view needs to constrain a pose (and not all on one line).
-MIN_CORNERS = 6
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from calibration.detect import MIN_CORNERS, BoardView
 from calibration.errors import SolveError
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.geometry.rig import MIN_BASELINE_M, Rig, WorkingVolume
 from ghnerf_runtime.rig_file import principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
@@ -47,6 +47,11 @@ MIN_VIEWS = 4
 OUTLIER_FACTOR = 3.0
 #: The image is divided into this grid to measure how much of it the board's corners covered.
 COVERAGE_GRID = (8, 6)
+#: OpenCV's standard deviation of the focal length, as a share of it: above the first a camera is refused (views
+#: that all show the board at one angle fit any focal length: 175 % for eight fronto-parallel views, where twelve
+#: tilted ones give 0.7 %); above the second the report warns.
+MAX_FOCAL_STD_SHARE = 0.10
+WARN_FOCAL_STD_SHARE = 0.02
 
 
 @dataclass(frozen=True)
@@ -58,6 +63,7 @@ class Intrinsics:
     dropped: tuple[str, ...]
     coverage: float
     image_size: tuple[int, int]
+    focal_std_px: float = 0.0  # OpenCV's standard deviation of fx and fy, the larger
 
 
 @dataclass(frozen=True)
@@ -119,7 +125,12 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     views = dict(views)
     sizes = {v.image_size for v in views.values()}
     if len(sizes) > 1:
-        raise SolveError(f"camera {camera!r}: its images differ in size: {sorted(sizes)}")
+        by_size = {size: sorted(n for n, v in views.items() if v.image_size == size) for size in sizes}
+        odd = min(by_size.values(), key=len)  # the fewer: most likely the mistake
+        raise SolveError(f"camera {camera!r}: its images differ in size: "
+                         + "; ".join(f"{w}x{h}: {len(names)} ({', '.join(names[:5])}{', ...' if len(names) > 5 else ''})"
+                                     for (w, h), names in sorted(by_size.items()))
+                         + f"; take every view at one size (remove or retake {', '.join(odd[:5])})")
     if len(views) < MIN_VIEWS:
         raise SolveError(f"camera {camera!r}: the board was found in {len(views)} image(s); at least {MIN_VIEWS} "
                          "are needed (15-30 is usual: near and far, tilted, reaching the image corners)")
@@ -127,7 +138,7 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     dropped: list[str] = []
     for attempt in range(2):
         names = sorted(views)
-        rms, K, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
+        rms, K, dist, _, _, std_intrinsics, _, per_view = cv2.calibrateCameraExtended(
             [_object_points(board, views[n]) for n in names], [_image_points(views[n]) for n in names],
             size, None, None, flags=LENS_MODELS[lens])
         errors = dict(zip(names, np.asarray(per_view, float).reshape(-1)))
@@ -139,9 +150,16 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
         views = {n: v for n, v in views.items() if n not in outliers}
     if not np.all(np.isfinite(K)) or not np.all(np.isfinite(dist)):
         raise SolveError(f"camera {camera!r}: the solve diverged (the views may all show the board at one angle)")
+    focal = float(min(K[0, 0], K[1, 1]))
+    focal_std = float(np.max(np.asarray(std_intrinsics, float).reshape(-1)[:2]))
+    if not focal > 0 or not focal_std <= MAX_FOCAL_STD_SHARE * focal:  # NaN refused too
+        raise SolveError(f"camera {camera!r}: the views do not determine the focal length (f {focal:.1f} px, give "
+                         f"or take {focal_std:.1f} px; at most {MAX_FOCAL_STD_SHARE:.0%} is accepted): the board was "
+                         "seen at too few angles. Tilt it 20-45 degrees towards and away from the camera, both ways, "
+                         "near and far, and capture again")
     return Intrinsics(K=np.asarray(K, float), dist=np.asarray(dist, float).reshape(-1), rms_px=float(rms),
                       per_view_px={n: round(float(e), 4) for n, e in errors.items()}, dropped=tuple(dropped),
-                      coverage=_coverage(views, size), image_size=size)
+                      coverage=_coverage(views, size), image_size=size, focal_std_px=focal_std)
 
 
 def _lens_terms_flags(*dists: np.ndarray) -> int:
@@ -324,7 +342,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     for name in names:
         if name not in views:
             raise SolveError(f"no views of camera {name!r}; cameras with views: {sorted(views)}")
-    if not (math.isfinite(board_thickness_m) and 0.0 <= board_thickness_m < 0.1):
+    if not (math.isfinite(board_thickness_m) and 0.0 <= board_thickness_m <= 0.1):
         raise SolveError(f"the board's thickness must be between 0 and 0.1 m, got {board_thickness_m!r}")
     calib = {cam: {n: v for n, v in views[cam].items() if n != floor_view} for cam in names}
     intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam) for cam in names}
@@ -339,6 +357,10 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     cams = (Camera(a, *intr[a].image_size, intr[a].K, intr[a].dist),
             Camera(b, *intr[b].image_size, intr[b].K, intr[b].dist, pose.R, pose.T))
     tool_rig = Rig(cams, LEVEL_VOLUME, rig_id=rig_id)
+    if tool_rig.baseline_problem():  # the rig file's reader refuses such a pair: no file that cannot be loaded
+        raise SolveError(f"cameras {a!r} and {b!r} came out {1e3 * tool_rig.baseline:.1f} mm apart (at least "
+                         f"{1e3 * MIN_BASELINE_M:.0f} mm needed): do both camera folders hold the same images, or "
+                         "did one camera capture for both (the rig source's first and second)?")
     floor = None
     if floor_view is not None:
         seen_by = [cam for cam in names if floor_view in views[cam]]
@@ -384,6 +406,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
             cam: {"image_size": list(intr[cam].image_size), "views": len(intr[cam].per_view_px),
                   "dropped_views": list(intr[cam].dropped), "rms_px": round(intr[cam].rms_px, 4),
                   "coverage": round(intr[cam].coverage, 3), "K": _round(intr[cam].K, 4),
+                  "focal_std_px": round(intr[cam].focal_std_px, 3),
                   "dist": _round(intr[cam].dist), "per_view_px": intr[cam].per_view_px}
             for cam in names},
         "pair": {"views": len(pose.per_view_px), "dropped_views": list(pose.dropped), "rms_px": round(pose.rms_px, 4),
@@ -409,6 +432,9 @@ def _warnings(report: dict[str, Any]) -> list[str]:
         if r["coverage"] < 0.5:
             out.append(f"{cam}: the board's corners covered {r['coverage']:.0%} of the image: move it into the "
                        "image's corners and edges, where the lens distorts most")
+        if r.get("focal_std_px", 0.0) > WARN_FOCAL_STD_SHARE * min(r["K"][0][0], r["K"][1][1]):
+            out.append(f"{cam}: the focal length is known to {r['focal_std_px']:.1f} px (over "
+                       f"{WARN_FOCAL_STD_SHARE:.0%} of it): tilt the board more between views")
         if r["views"] < 10:
             out.append(f"{cam}: {r['views']} views (15-30 is usual): the lens model is weakly determined")
         if r["dropped_views"]:

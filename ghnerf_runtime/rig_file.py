@@ -426,8 +426,8 @@ def save_rig(rig: Rig, path: str | os.PathLike) -> None:
     """Write ``rig`` to ``path`` atomically (see :func:`write_text_atomic`).
 
     The text is produced and checked in memory before the file system is touched, so a
-    rig that cannot be written (e.g. non-JSON metadata, or a principal point :func:`load_rig`
-    would refuse) leaves the old file as it was.
+    rig that cannot be written (e.g. non-JSON metadata, or a principal point or a baseline
+    :func:`load_rig` would refuse) leaves the old file as it was.
 
     Raises:
         RigFileError: the rig cannot be serialised, or the file cannot be written.
@@ -436,6 +436,9 @@ def save_rig(rig: Rig, path: str | os.PathLike) -> None:
         problem = principal_point_problem(cam.K, cam.width, cam.height)
         if problem:
             raise RigFileError(f"camera {cam.name!r}: {problem}", path=str(path), field=f"cameras[{i}].K")
+    problem = rig.baseline_problem()
+    if problem:
+        raise RigFileError(problem, path=str(path), field="cameras[1].t")
     write_text_atomic(path, dumps_rig(rig, path=path))
 
 

@@ -584,3 +584,21 @@ def test_check_measures_the_floor_view_solve_was_given(truth, capture, tmp_path,
     captured = capsys.readouterr()
     report = json.loads(captured.out)  # --json: the board line goes to stderr, stdout stays JSON
     assert report["floor"]["view"] == "000" and "board:" in captured.err
+
+
+def test_mistyped_options_and_files_are_named(capture, tmp_path, capsys):
+    # each was a traceback (exit 1) or an error that named something else
+    assert cli.main(["solve", "--images", str(tmp_path / "captrue"), "--out", str(tmp_path / "r.json"),
+                     "--camera-height", "1.4"]) == 2
+    assert "--images " in (err := capsys.readouterr().err) and "no such folder of calibration images" in err
+    bad = _copy_capture(capture, tmp_path / "cj")
+    (bad / "cameras.json").write_text(json.dumps({"cameras": [["left"], ["right"]]}))
+    assert cli.main(["solve", "--images", str(bad), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4"]) == 2
+    assert "cameras.json: must be {\"cameras\": [FIRST, SECOND]}" in capsys.readouterr().err
+    assert cli.main(["board", "--out", str(tmp_path / "b1"), "--dpi", "1"]) == 2
+    assert "--dpi 1: a square of 80 mm would be 3 px; at least 20 are needed: --dpi 7 or more" in capsys.readouterr().err
+    assert cli.main(["board", "--out", str(tmp_path / "b2"), "--dpi", "100000"]) == 2
+    assert "--dpi 100000: the print would be" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        cli.main(["synth", "--out", str(tmp_path / "s"), "--seed", "-1"])
+    assert e.value.code == 2 and "--seed: must be 0 or more" in capsys.readouterr().err

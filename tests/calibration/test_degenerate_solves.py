@@ -1,0 +1,102 @@
+"""What ``ghcal solve`` refuses rather than write a rig that is wrong or that the rig file's reader refuses:
+views that do not determine a focal length, a pair solved at one point, a board too small to be found,
+images of one camera at two sizes. The views are projected corners (no images), so each case is exact."""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration.board import BoardSpec
+from calibration.detect import MIN_CORNERS, BoardView
+from calibration.errors import BoardError, SolveError
+from calibration.solve import MAX_FOCAL_STD_SHARE, WARN_FOCAL_STD_SHARE, calibrate_intrinsics, solve_rig
+from ghnerf_runtime.errors import RigFileError
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.rig_file import save_rig
+
+BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.08, marker_m=0.06)
+SIZE = (640, 480)
+K = np.array([[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]])
+
+
+def _views(tilts_deg, *, seed: int = 0, noise_px: float = 0.2, K=K, t_offset=(0.0, 0.0, 0.0)) -> dict[str, BoardView]:
+    """The board's corners seen by a pinhole camera at (yaw, pitch) tilts, 1.2-1.8 m away, with pixel noise."""
+    rng = np.random.default_rng(seed)
+    corners = BOARD.corners_m()
+    centre = np.array([*np.array(BOARD.size_m) / 2, 0.0])
+    views = {}
+    for i, (yaw, pitch) in enumerate(tilts_deg):
+        R, _ = cv2.Rodrigues(np.radians([pitch, yaw, rng.uniform(-10, 10)]))
+        t = np.array([rng.uniform(-0.15, 0.15), rng.uniform(-0.1, 0.1), rng.uniform(1.2, 1.8)]) - R @ centre
+        t = t + np.asarray(t_offset)
+        uv, _ = cv2.projectPoints(corners, cv2.Rodrigues(R)[0], t, K, None)
+        uv = uv.reshape(-1, 2) + rng.normal(0.0, noise_px, (len(corners), 2))
+        views[f"{i:03d}"] = BoardView(np.arange(len(corners)), uv, SIZE)
+    return views
+
+
+def test_tilted_views_give_the_focal_length_within_its_stated_uncertainty():
+    tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)] + [(15, 0), (-15, 0)]
+    intr = calibrate_intrinsics(BOARD, _views(tilts), camera="left")
+    assert 0.0 < intr.focal_std_px < WARN_FOCAL_STD_SHARE * intr.K[0, 0]  # about 1 % with 8 views and 0.2 px noise
+    assert abs(intr.K[0, 0] - 500.0) < 3.0 * intr.focal_std_px
+
+
+def test_square_on_views_do_not_determine_the_focal_length():
+    # every view parallel to the image: any focal length fits, given a distance to match (OpenCV solved one
+    # such capture to f 219 and 2492 px for two 500 px lenses, and a baseline 19 times too long)
+    with pytest.raises(SolveError, match=r"camera 'left': the views do not determine the focal length .* give or take "
+                                         r".* at most 10% is accepted.*Tilt it"):
+        calibrate_intrinsics(BOARD, _views([(0, 0)] * 8, seed=4), camera="left")
+    assert MAX_FOCAL_STD_SHARE == 0.10
+
+
+def test_a_pair_solved_at_one_point_is_refused_before_any_file():
+    # the same images in both folders: the reader would refuse the rig file (cameras[1].t), so the solve does
+    tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)]
+    left = _views(tilts)
+    with pytest.raises(SolveError, match=r"cameras 'left' and 'right' came out 0.0 mm apart .* hold the same images"):
+        solve_rig(BOARD, {"left": left, "right": dict(left)}, ("left", "right"), camera_height_m=1.4)
+
+
+def test_save_rig_refuses_what_load_rig_would(tmp_path):
+    cams = tuple(Camera(n, *SIZE, K) for n in ("left", "right"))  # both at the origin
+    rig = Rig(cams, WorkingVolume([-1.5, -2.5, 0.5], [1.5, 0.5, 5.0]))
+    path = tmp_path / "rig.json"
+    path.write_text("the old file")
+    with pytest.raises(RigFileError, match=r"0.0 mm apart") as e:
+        save_rig(rig, path)
+    assert e.value.field == "cameras[1].t"
+    assert path.read_text() == "the old file"
+
+
+def test_images_of_two_sizes_are_named():
+    views = _views([(a, b) for a in (-30, 0, 30) for b in (-25, 25)])
+    odd = views["004"]
+    views["004"] = BoardView(odd.ids, odd.corners, (800, 600))
+    with pytest.raises(SolveError, match=r"camera 'left': its images differ in size: 640x480: 5 \(000, 001, 002, "
+                                         r"003, 005\); 800x600: 1 \(004\); .*retake 004\)"):
+        calibrate_intrinsics(BOARD, views, camera="left")
+
+
+def test_a_board_too_small_to_be_found_is_refused():
+    with pytest.raises(BoardError, match=r"3x3 board has 4 inner corners; a view needs at least 6") as e:
+        BoardSpec(squares_x=3, squares_y=3, square_m=0.08, marker_m=0.06)
+    assert e.value.key == "squares_x"
+    assert BoardSpec(squares_x=3, squares_y=4, square_m=0.08, marker_m=0.06).corner_count == MIN_CORNERS
+
+
+def test_the_floor_board_may_be_as_thick_as_the_option_allows():
+    # --board-thickness accepts [0, 0.1]: the solver no longer refuses 0.1 after the whole detection
+    tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)]
+    left = _views(tilts, seed=1)
+    # the right camera 0.3 m to the side: the same boards, each seen from there
+    right = _views(tilts, seed=1, t_offset=(-0.3, 0.0, 0.0))
+    floor = {"floor": BoardView(*[getattr(left["000"], k) for k in ("ids", "corners", "image_size")])}
+    sol = solve_rig(BOARD, {"left": {**left, **floor}, "right": right}, ("left", "right"), floor_view="floor",
+                    board_thickness_m=0.1)
+    assert math.isfinite(sol.report["levelling"]["camera_height_m"])
