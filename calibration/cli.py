@@ -28,8 +28,8 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec, load_board
-from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, check_camera_name, detect_folder, next_view_number,
-                                 read_camera_order, write_camera_order)
+from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
+                                 next_view_number, read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
@@ -365,6 +365,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     cameras = _cameras(args.cameras)
     ordered = cameras is not None or read_camera_order(args.images) is not None
     board, where = _measuring_board(args.board, args.images)
+    for name in camera_folders(args.images, cameras):  # before the detection, which takes a while
+        _stream_name(name, MAX_CAMERA_NAME_LEN, "camera name (its folder)")
     print(f"board: {where}: {_describe(board)}")
     views, missed = detect_folder(board, args.images, cameras)
     names = tuple(views)
@@ -372,8 +374,6 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(f"note: no {Path(args.images) / CAMERAS_FILE} (written by 'ghcal capture'): the pair's order is the "
               f"folder names sorted, {names[0]!r} first; the first must be the camera the rig source opens first "
               "(opencv://?first=): if it is not, pass --cameras FIRST,SECOND")
-    for name in names:
-        _stream_name(name, MAX_CAMERA_NAME_LEN, "camera name (its folder)")
     for cam in names:
         extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")

@@ -33,6 +33,12 @@ while [ $# -gt 0 ]; do
 done
 case "$PREFIX" in /*) ;; *) die "--prefix must be an absolute path, got $PREFIX" ;; esac
 case "$PREFIX" in *[!A-Za-z0-9/._-]*) die "--prefix may hold only letters, digits and / . _ -, got $PREFIX" ;; esac
+# The unit runs from the prefix (WorkingDirectory, ExecStart) under ProtectHome=yes, which hides /home,
+# /root and /run/user: a prefix there fails every start (status 200/CHDIR) until the start limit.
+under_home() { case "$1/" in /home/*|/root/*|/run/user/*) return 0 ;; esac; return 1; }
+if under_home "$(realpath -m -s "$PREFIX")" || { [ -z "$DESTDIR" ] && under_home "$(realpath -m "$PREFIX")"; }; then
+    die "--prefix $PREFIX is under a home folder (/home, /root or /run/user), which the service's sandbox (ProtectHome=yes) hides: it could not start from there; pass a system folder, e.g. --prefix /opt/ghnerf"
+fi
 
 REPO=$(cd "$(dirname "$0")/.." && pwd)
 ROOT=${DESTDIR%/}
@@ -50,16 +56,26 @@ fi
 echo "installing the ghnerf daemon from $REPO into ${ROOT}${PREFIX}"
 install -d "$ROOT$PREFIX" "$ROOT$PREFIX/docs" "$ROOT/etc/ghnerf" "$ROOT/etc/systemd/system" "$ROOT/etc/udev/rules.d"
 
+IN_PLACE=0
 if [ "$(cd "$ROOT$PREFIX" && pwd -P)" = "$(cd "$REPO" && pwd -P)" ]; then
     echo "the checkout is the prefix: its models and docs are used in place"
-else
-    # Models: replaced as a whole, so no graph of an older model is left beside the new ones.
-    rm -rf "$ROOT$PREFIX/models.new"
-    cp -R "$REPO/models" "$ROOT$PREFIX/models.new"
-    rm -rf "$ROOT$PREFIX/models"
-    mv "$ROOT$PREFIX/models.new" "$ROOT$PREFIX/models"
-    cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/"
+    IN_PLACE=1
 fi
+# Models: replaced as a whole, so no graph of an older model is left beside the new ones. Copied to
+# models.new first; swapped in (with the docs) only once the new environment is built and runs, just
+# before the venv link is switched, so a failed build leaves the old models beside the old code.
+stage_models() {
+    [ "$IN_PLACE" = 0 ] || return 0
+    rm -rf "$ROOT$PREFIX/models.new" && cp -R "$REPO/models" "$ROOT$PREFIX/models.new"
+}
+swap_models() {
+    [ "$IN_PLACE" = 0 ] || return 0
+    rm -rf "$ROOT$PREFIX/models.old"
+    [ ! -e "$ROOT$PREFIX/models" ] || mv "$ROOT$PREFIX/models" "$ROOT$PREFIX/models.old"
+    mv "$ROOT$PREFIX/models.new" "$ROOT$PREFIX/models"
+    rm -rf "$ROOT$PREFIX/models.old"
+    cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/"
+}
 
 if [ -z "$DESTDIR" ]; then
     getent group plugdev >/dev/null || groupadd --system plugdev
@@ -76,25 +92,41 @@ if [ "$VENV" = 1 ]; then
     # home folder (ProtectHome=yes hides /home, /root and /run/user), nor one its user cannot read.
     INTERPRETER=$(readlink -f "$(command -v "$PYTHON" || echo "$PYTHON")")
     [ -x "$INTERPRETER" ] || die "no Python interpreter $PYTHON (pass --python /usr/bin/python3.11)"
-    case "$("$PYTHON" -c 'import sys, os; print(os.path.realpath(sys.base_prefix))')/" in
-        /home/*|/root/*|/run/user/*)
-            die "$PYTHON lives under a home folder, which the service's sandbox hides; pass --python with a system interpreter, e.g. --python /usr/bin/python3.11" ;;
-    esac
+    if under_home "$("$PYTHON" -c 'import sys, os; print(os.path.realpath(sys.base_prefix))')"; then
+        die "$PYTHON lives under a home folder, which the service's sandbox hides; pass --python with a system interpreter, e.g. --python /usr/bin/python3.11"
+    fi
     # A new environment beside the old one, switched to by renaming a link: a failed build (no network)
     # leaves the running service its working environment.
     NEW="venv-$(date -u +%Y%m%dT%H%M%S)"
-    "$PYTHON" -m venv "$PREFIX/$NEW"
-    "$PREFIX/$NEW/bin/python" -m pip install --quiet --upgrade "pip>=24"
+    # never the name of one already there (a re-run within the second): a failed build removes its folder
+    while [ -e "$PREFIX/$NEW" ]; do sleep 1; NEW="venv-$(date -u +%Y%m%dT%H%M%S)"; done
+    "$PYTHON" -m venv "$PREFIX/$NEW" \
+        || { rm -rf "${PREFIX:?}/$NEW"; die "$PYTHON could not make a virtual environment; the previous environment and models are kept"; }
+    "$PREFIX/$NEW/bin/python" -m pip install --quiet --upgrade "pip>=24" \
+        || { rm -rf "${PREFIX:?}/$NEW"; die "pip could not upgrade itself; the previous environment and models are kept"; }
     # The runtime only: onnxruntime, OpenCV, depthai, pyserial, pyusb, numpy (no [training] extra).
     "$PREFIX/$NEW/bin/python" -m pip install --quiet -c "$REPO/constraints.txt" "$REPO" \
-        || { rm -rf "${PREFIX:?}/$NEW"; die "pip could not install the runtime; the previous environment is kept"; }
+        || { rm -rf "${PREFIX:?}/$NEW"; die "pip could not install the runtime; the previous environment and models are kept"; }
     runuser -u ghnerf -- "$PREFIX/$NEW/bin/python" -c "import firmware_host.daemon" \
         || { rm -rf "${PREFIX:?}/$NEW"; die "the service user ghnerf cannot run $INTERPRETER; pass --python with an interpreter every user can run, e.g. --python /usr/bin/python3.11"; }
+    stage_models || { rm -rf "${PREFIX:?}/$NEW" "$PREFIX/models.new"; die "could not copy $REPO/models; the previous environment and models are kept"; }
+    # The environment the link points to now (maybe an older one, after a rollback by relinking): kept.
+    PREVIOUS=$(readlink "$PREFIX/venv" 2>/dev/null || true)
+    PREVIOUS=${PREVIOUS%/}
+    PREVIOUS=${PREVIOUS##*/}
+    swap_models
     [ -d "$PREFIX/venv" ] && [ ! -L "$PREFIX/venv" ] && mv "$PREFIX/venv" "$PREFIX/venv-before-links"
     ln -sfn "$NEW" "$PREFIX/venv.link" && mv -T "$PREFIX/venv.link" "$PREFIX/venv"
-    # keep the environment just replaced (to roll back by relinking) and remove older ones
-    for old in $(ls -1d "$PREFIX"/venv-2* 2>/dev/null | sort | head -n -2); do rm -rf "$old"; done
+    # keep the environment just replaced (to roll back by relinking) and the new one; remove the others
+    for old in "$PREFIX"/venv-2*; do
+        [ -e "$old" ] || continue
+        case "${old##*/}" in "$NEW"|"$PREVIOUS") continue ;; esac
+        rm -rf "$old"
+    done
     rm -rf "$PREFIX/venv-before-links"
+else
+    stage_models
+    swap_models
 fi
 
 sed "s|/opt/ghnerf|$PREFIX|g" "$REPO/systemd/ghnerf.service" > "$ROOT/etc/systemd/system/ghnerf.service"
@@ -113,13 +145,21 @@ if [ "$VENV" = 1 ]; then
         || die "/etc/ghnerf/daemon.json does not validate (message above); fix it and run install.sh again"
 fi
 
+# Run here, or printed for the device: restart (not enable --now), so an upgraded, running service
+# picks up the new environment, and the udev rules reloaded for an OAK already plugged in.
+START_COMMANDS=(
+    "systemctl daemon-reload"
+    "udevadm control --reload-rules"
+    "udevadm trigger --subsystem-match=usb"
+    "systemctl enable ghnerf.service"
+    "systemctl restart ghnerf.service"
+)
 if [ "$START" = 1 ]; then
-    systemctl daemon-reload
-    udevadm control --reload-rules
-    udevadm trigger --subsystem-match=usb
-    systemctl enable ghnerf.service
-    systemctl restart ghnerf.service
+    for command in "${START_COMMANDS[@]}"; do
+        $command  # plain words, split on purpose
+    done
     systemctl --no-pager --lines=5 status ghnerf.service || true
 else
-    echo "not started; on the device: systemctl daemon-reload && systemctl enable --now ghnerf.service"
+    hint=$(printf ' && %s' "${START_COMMANDS[@]}")
+    echo "not started; on the device: ${hint# && }"
 fi

@@ -13,6 +13,9 @@ main loop progresses and logs without timestamps (the journal adds its own).
 SIGHUP (``systemctl reload ghnerf``) reads the config file again: a file that passes every check of
 ``--validate-config`` (and whose model loads) is applied without a restart, touching only what
 changed; one that does not is refused with its error in the journal, and the daemon runs on as it was.
+A SIGHUP during the start (imports, config, model load) does not kill it: it is recorded from the
+first import of the package on (``early_sighup``); one that came before the config file was read is
+met by that read, one after it becomes a reload once the daemon runs.
 
 Exit status: 0 after SIGTERM / SIGINT or the end of a recording; 2 for what a restart cannot fix
 (a bad config, a sink URL, a model that does not load: the message names the file and the key),
@@ -32,6 +35,7 @@ from collections.abc import Sequence
 from urllib.parse import parse_qs, urlsplit
 
 import drivers
+from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_sink_urls
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
@@ -166,6 +170,16 @@ class _StopOnSignal:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    # Already installed on import in ghnerf-daemon; here for any other caller, put back on return.
+    installed_here = early_sighup.install()
+    try:
+        return _main(argv)
+    finally:
+        if installed_here:
+            early_sighup.uninstall()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     args = build_parser().parse_args(argv)
     if args.print_example_config:
         print(json.dumps(EXAMPLE_CONFIG, indent=2))
@@ -181,6 +195,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.validate_config:
             print(json.dumps(config_to_dict(read_checked_config(args.config)), indent=2))
             return 0
+        early_sighup.take()  # a SIGHUP until now: the file is read now
         config = read_checked_config(args.config)  # as a reload checks it: what starts also reloads
     except DaemonConfigError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
@@ -193,6 +208,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     # SIGHUP only sets a plain flag, taking no lock either (the reload logs itself).
     previous_hup = signal.signal(signal.SIGHUP, lambda _signum, _frame: daemon.request_reload())
+    if early_sighup.take():  # one since the config was read (recorded, not fatal): the file may have changed
+        logging.getLogger("ghnerf.daemon").info("SIGHUP received while starting: reloading the config once running")
+        daemon.request_reload()
     if args.max_seconds is not None:
         timer = threading.Timer(args.max_seconds, stop.set)
         timer.daemon = True

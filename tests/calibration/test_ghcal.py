@@ -602,3 +602,18 @@ def test_mistyped_options_and_files_are_named(capture, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         cli.main(["synth", "--out", str(tmp_path / "s"), "--seed", "-1"])
     assert e.value.code == 2 and "--seed: must be 0 or more" in capsys.readouterr().err
+
+
+def test_a_camera_name_the_stream_cannot_carry_is_refused_before_the_detection(capture, tmp_path, capsys,
+                                                                                monkeypatch):
+    long = "a-camera-name-of-20c"
+    copy = _copy_capture(capture, tmp_path / "long")
+    (copy / "left").rename(copy / long)
+
+    def no_detection(*args, **kwargs):
+        raise AssertionError("detected before refusing the name")
+
+    monkeypatch.setattr(cli, "detect_folder", no_detection)
+    assert cli.main(["solve", "--images", str(copy), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
+                     "--cameras", f"{long},right"]) == 2
+    assert f"camera name (its folder) '{long}' must be printable ASCII of 1-16" in capsys.readouterr().err

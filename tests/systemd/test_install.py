@@ -80,6 +80,29 @@ def test_bad_options_exit_2(args, message):
     assert proc.returncode == 2 and message in proc.stderr
 
 
+@pytest.mark.parametrize("prefix", ["/home/pi/ghnerf", "/root/ghnerf", "/run/user/1000/ghnerf", "/home",
+                                    "/opt/../home/pi/ghnerf"])
+def test_a_prefix_the_sandbox_hides_is_refused(tmp_path, prefix):
+    """ProtectHome=yes hides /home, /root and /run/user from the service: it could not chdir to the prefix
+    (status 200/CHDIR) and would restart until its start limit. Refused before anything is written."""
+    stage = tmp_path / "stage"
+    proc = _install("--destdir", str(stage), "--prefix", prefix)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert f"--prefix {prefix} is under a home folder" in proc.stderr
+    assert "ProtectHome" in proc.stderr and "--prefix /opt/ghnerf" in proc.stderr
+    assert not stage.exists()
+
+
+def test_no_start_prints_the_commands_a_start_runs(staged):
+    root, prefix = staged
+    proc = _install("--destdir", str(root), "--prefix", str(prefix))
+    assert proc.returncode == 0, proc.stderr
+    # restart, not enable --now: an upgrade of a running service must restart it; udev for a plugged OAK
+    assert ("not started; on the device: systemctl daemon-reload && udevadm control --reload-rules && "
+            "udevadm trigger --subsystem-match=usb && systemctl enable ghnerf.service && "
+            "systemctl restart ghnerf.service") in proc.stdout
+
+
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is not installed")
 def test_systemd_accepts_the_installed_unit(staged):
     root, prefix = staged
@@ -99,6 +122,8 @@ def test_unit_and_daemon_agree():
     assert service["Type"] == "notify"  # the daemon sends READY=1 (firmware_host.daemon.service)
     assert service["RestartPreventExitStatus"] == "2"  # the CLI's exit status for what a restart cannot fix
     assert service["Restart"] == "on-failure"
+    # on-failure counts a death by SIGHUP as clean; SIGHUP is the reload signal, never a wanted end
+    assert "SIGHUP" in service["RestartForceExitStatus"].split()
     # systemctl reload: the signal the CLI reloads the config on, sent to the daemon itself.
     assert service["ExecReload"].split()[1:] == ["-HUP", "$MAINPID"]
     default = load_daemon_config(REPO / "systemd/daemon.json")

@@ -276,3 +276,139 @@ def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
     assert proc.returncode == 0, err
     assert "SIGTERM received: stopping" in err and "Traceback" not in err
     assert json.loads(status.read_text())["state"] == "stopping"
+
+
+# ------------------------------------------------------------------ SIGHUP during the start
+# SIGHUP's default action kills, and systemd (Restart=on-failure) counts a death by SIGHUP as clean: a
+# reload landing while the daemon still imports, reads its config or loads its model must not kill it.
+
+_HUP_ON_IMPORT = '''
+import os, signal, sys
+
+class _HupOnImport:
+    """Sends this process SIGHUP as the package's first heavy module is imported."""
+    def find_spec(self, name, path=None, target=None):
+        if name == "firmware_host.daemon.config":
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGHUP)
+        return None
+
+sys.meta_path.insert(0, _HupOnImport())
+'''
+
+
+@pytest.mark.parametrize("how", ["console script", "-m"])
+def test_a_sighup_during_the_imports_does_not_kill_it(tmp_path, how):
+    script = Path(sys.executable).parent / "ghnerf-daemon"
+    if how == "console script" and not script.is_file():
+        pytest.skip(f"{script} is not installed")
+    (tmp_path / "hook").mkdir()
+    (tmp_path / "hook/sitecustomize.py").write_text(_HUP_ON_IMPORT)
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    command = [str(script)] if how == "console script" else [sys.executable, "-m", "firmware_host.daemon.cli"]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path / "hook"), str(REPO),
+                                                                      os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.run([*command, "--config", str(path), "--validate-config"], capture_output=True, text=True,
+                          timeout=120, env=env, cwd=REPO)
+    assert proc.returncode != -signal.SIGHUP, "killed by the SIGHUP"
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["rig"]["url"] == "sim://"
+
+
+_HUP_AFTER_THE_READ = '''
+import os, signal, sys
+sys.argv[0] = os.path.join(os.path.dirname(sys.executable), "ghnerf-daemon")  # as the console script
+from firmware_host.daemon import cli
+
+_read = cli.read_checked_config
+_sent = []
+
+def _read_then_hup(path):
+    config = _read(path)
+    if not _sent:  # the start's read only, not the reload's
+        _sent.append(1)
+        os.kill(os.getpid(), signal.SIGHUP)
+    return config
+
+cli.read_checked_config = _read_then_hup
+sys.exit(cli.main())
+'''
+
+
+@needs_model
+def test_a_sighup_after_the_config_was_read_becomes_a_reload_once_running(tmp_path):
+    """The file may have changed after the start read it: the recorded SIGHUP is a reload once the loop
+    runs (here at once: the loop waits for an absent rig)."""
+    sock_path = tmp_path / "notify.sock"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(sock_path))
+    sock.settimeout(1.0)
+    status = tmp_path / "status.json"
+    path = _write(tmp_path, {
+        "rig": {"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 300, "reopen_max_s": 300},
+        "sinks": [f"file://{tmp_path / 'joints.jsonl'}"],
+        "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
+        "health": {"status_file": str(status), "status_every_s": 0.2},
+    })
+    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "JOURNAL_STREAM": "8:1"}
+    proc = subprocess.Popen([sys.executable, "-c", _HUP_AFTER_THE_READ, "--config", str(path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    notes: list[dict[str, str]] = []
+    try:
+        _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
+                     "waiting for the rig")
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        sock.close()
+    assert proc.returncode != -signal.SIGHUP, "killed by the SIGHUP"
+    assert proc.returncode == 0, err
+    assert "SIGHUP received while starting" in err and "config reloaded: nothing changed" in err
+    assert any("RELOADING" in n for n in notes)
+    assert json.loads(status.read_text())["config"]["reloads"] == 1
+
+
+def test_a_sighup_before_the_config_is_read_is_met_by_the_read(tmp_path, monkeypatch):
+    """In process, with a stand-in daemon: a SIGHUP before the read asks nothing more; one after it asks
+    one reload; neither kills. The test's own handler stands by in case main() leaves SIGHUP fatal."""
+    from firmware_host.daemon import daemon_config_from_dict
+
+    config = daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": ["memory://"],
+                                      "estimator": {"session": {"model_dir": str(tmp_path)}}})
+    reloads: list[int] = []
+
+    class Stub:
+        def __init__(self, config, **_kw) -> None:
+            pass
+
+        def request_reload(self) -> None:
+            reloads.append(1)
+
+        def run(self, stop: threading.Event) -> int:
+            return 0
+
+    def hup() -> None:
+        os.kill(os.getpid(), signal.SIGHUP)
+        time.sleep(0.01)  # the Python-level handler runs between two bytecodes
+
+    fell_through: list[int] = []
+    before = signal.signal(signal.SIGHUP, lambda *_: fell_through.append(1))
+    monkeypatch.setattr(cli, "Daemon", Stub)
+    monkeypatch.setattr(cli, "_setup_logging", lambda level: None)
+    monkeypatch.setattr(cli.faulthandler, "enable", lambda: None)
+    real_parser = cli.build_parser
+    try:
+        monkeypatch.setattr(cli, "build_parser", lambda: (hup(), real_parser())[1])
+        monkeypatch.setattr(cli, "read_checked_config", lambda path: config)
+        assert cli.main(["--config", "x.json"]) == 0
+        assert reloads == [] and fell_through == []
+        monkeypatch.setattr(cli, "build_parser", real_parser)
+        monkeypatch.setattr(cli, "read_checked_config", lambda path: (hup(), config)[1])
+        assert cli.main(["--config", "x.json"]) == 0
+        assert reloads == [1] and fell_through == []
+        assert signal.getsignal(signal.SIGHUP) is not cli.early_sighup._record  # put back
+    finally:
+        signal.signal(signal.SIGHUP, before)
