@@ -49,7 +49,7 @@ OUTPUTS = ("joints", "log_error")
 # A good triangulation has a small reprojection error; a root from a few such joints is robust.
 _ROOT_MAX_REPROJECTION_PX = 3.0
 _REPROJECTION_CLIP_PX = 20.0
-_DEFAULT_DISTANCE_M = 2.5  # no joint at all: a guess in front of the cameras
+_DEFAULT_DISTANCE_M = 2.5  # no joint at all: a guess this far along the cameras' mean heading
 # No joint lies farther than this from the body's robust centre (the synthetic bodies' joints: within
 # 1.4 m of their geometric median, 1.3 m of the pelvis; 2 m leaves room for taller people and the root's
 # own error, and still drops the wild points, which lie 10 m to 1 km away).
@@ -98,6 +98,24 @@ def _geometric_median(points: np.ndarray, iterations: int = 20) -> np.ndarray:
     return c
 
 
+def _mean_heading(P: np.ndarray) -> np.ndarray:
+    """``(N, 3)`` unit horizontal direction the two cameras of each pair look along on average (the mean of
+    their principal rays, the third row of each ``P[:, :3]`` turned towards the scene, with y dropped);
+    rig +z where the cameras look straight up or down, or opposite ways.
+
+    It places the body centre when no joint is triangulated, so that turning the rig turns that guess
+    (and so the canonical frame and every feature) with it, as it does when joints are triangulated.
+    The guess used to be rig +z, whatever the rig's heading. The change alters the features of such pairs
+    only, and :data:`FEATURE_VERSION` stays 2 (files trained before it are still accepted): pairs with no
+    triangulated joint are rare, and the presence gate usually stops them before the prior runs."""
+    M = P[..., :3]
+    axis = M[..., 2, :] * np.sign(np.linalg.det(M))[..., None]  # (N, 2, 3) towards the scene
+    axis = axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
+    d = axis.mean(1) * [1.0, 0.0, 1.0]
+    n = np.linalg.norm(d, axis=-1, keepdims=True)
+    return np.where(n > 1e-6, d / np.maximum(n, 1e-12), [0.0, 0.0, 1.0])
+
+
 def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray, *,
                  max_joint_from_root_m: float = MAX_JOINT_FROM_ROOT_M) -> PriorInputs:
     """The prior's inputs from decoded 2D peaks.
@@ -133,7 +151,7 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
 
     C = _centres(P)  # (N, 2, 3)
     mid = C.mean(1)
-    root = mid + [0.0, 0.0, _DEFAULT_DISTANCE_M]
+    root = mid + _DEFAULT_DISTANCE_M * _mean_heading(P)  # no joint triangulated: a guess ahead of the cameras
     for i in range(N):
         good = ok[i] & (rep[i].max(-1) < _ROOT_MAX_REPROJECTION_PX)
         pick = good if good.sum() >= 3 else ok[i]

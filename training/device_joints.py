@@ -19,14 +19,17 @@ Cached fields: ``joints`` ``(N, 25, 3)`` float32 (rig frame, metres), ``expected
 from __future__ import annotations
 
 import argparse
+import io
 import sys
 import time
+import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
 from ghnerf_runtime.cli.output_path import ready_output_arg
+from training.model_card import write_atomic
 
 
 class JointsCacheError(ValueError):
@@ -55,7 +58,7 @@ def cache_joints(data: str | Path, split: str, model: str | Path, out: str | Pat
 
     renderer = OnnxRenderer(model, precision, threads)
     ds = MultiViewDataset(data, split=split)
-    n = min(limit, len(ds)) if limit else len(ds)
+    n = _scenes(limit, len(ds))
     t0 = time.monotonic()
     joints, errors = [], []
     for i in range(n):
@@ -65,9 +68,8 @@ def cache_joints(data: str | Path, split: str, model: str | Path, out: str | Pat
         errors.append(e)
         if (i + 1) % 256 == 0:
             log(f"  {split}: {i + 1}/{n} scenes, {time.monotonic() - t0:.0f} s")
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(out, joints=np.stack(joints), expected_error_m=np.stack(errors), index=np.arange(n, dtype=np.int32))
+    out = _write_cache(out, joints=np.stack(joints), expected_error_m=np.stack(errors),
+                       index=np.arange(n, dtype=np.int32))
     log(f"{out}: joints of {n} {split} scenes in {time.monotonic() - t0:.0f} s")
     return out
 
@@ -78,22 +80,38 @@ def cache_true_joints(data: str | Path, split: str, out: str | Path, limit: int 
     from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
 
     ds = MultiViewDataset(data, split=split)
-    n = min(limit, len(ds)) if limit else len(ds)
+    n = _scenes(limit, len(ds))
     joints = np.stack([ds[i]["joints_3d"].numpy() for i in range(n)]).astype(np.float32)
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(out, joints=joints, expected_error_m=np.zeros(joints.shape[:2], np.float32),
-             index=np.arange(n, dtype=np.int32))
+    out = _write_cache(out, joints=joints, expected_error_m=np.zeros(joints.shape[:2], np.float32),
+                       index=np.arange(n, dtype=np.int32))
     log(f"{out}: true joints of {n} {split} scenes")
     return out
 
 
+def _scenes(limit: int, available: int) -> int:
+    """How many scenes ``limit`` asks for (0: all)."""
+    if limit < 0:
+        raise ValueError(f"limit must be 0 (all scenes) or more, not {limit}")
+    return min(limit, available) if limit else available
+
+
+def _write_cache(out: str | Path, **arrays: np.ndarray) -> Path:
+    """``arrays`` as the ``.npz`` file ``out`` (that very name), written whole: a temporary file in the same
+    folder, then ``os.replace`` (an interrupted write leaves the old cache or the new one, never a cut one)."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return write_atomic(out, buf.getvalue())
+
+
 def _read(path: Path, key: str, what: str) -> np.ndarray:
-    """One float64 array of a joints cache; a missing or damaged file or key is a :class:`JointsCacheError`."""
+    """One float64 array of a joints cache; a missing or damaged file (a cut one: ``BadZipFile``) or key is a
+    :class:`JointsCacheError` naming the file."""
     try:
         with np.load(path) as z:
             return np.asarray(z[key], np.float64)
-    except (OSError, ValueError, KeyError) as e:
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:
         raise JointsCacheError(f"{path}: {what} ({e})") from e
 
 
@@ -132,6 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--truth", action="store_true", help="cache the dataset's true joints instead (an oracle)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
+    if args.limit < 0:
+        ap.error(f"--limit must be 0 (all scenes) or more, not {args.limit}")
     # a pass over every scene comes first: where its file goes (with the name savez writes) is settled now
     args.out = ready_output_arg(ap, args.out, "--out", suffix=".npz")
     if args.truth:

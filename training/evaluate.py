@@ -23,7 +23,8 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
     projection matrices ``src_P``; ``mpjpe`` (mm, rig frame) against ``joints_3d``; joints that
     cannot be triangulated (not decoded in both views) are excluded and counted (``mpjpe_pred_missing``).
 * **Encoder heatmaps** (models with the human encoder's auxiliary head): its 2D heatmaps of the two
-  sources, decoded and triangulated exactly as above (``encoder_heatmaps_pck@0.2``,
+  sources (an ONNX folder's ``human`` graph where it has one, as the runtime runs it, else ``encoder``),
+  decoded and triangulated exactly as above (``encoder_heatmaps_pck@0.2``,
   ``encoder_heatmaps_mpjpe_mm``): the cheap heatmap source of the runtime; and flip-tested, averaged
   with the heatmaps of the mirrored images mirrored back (``encoder_heatmaps_flip_*``, the runtime's
   ``heatmaps.flip_test``). PCK is also reported per source view (``*_by_view``), and MPJPE per
@@ -156,14 +157,18 @@ class TorchRenderer:
 
 def _folder_prior(folder: Path, threads: int):
     """The folder's skeleton prior (the runtime's), or None: none there, or one this runtime refuses (the
-    model's own metrics do not need it; a warning says why it is not scored)."""
+    model's own metrics do not need it; a warning says why it is not scored): another feature version, or
+    trained on another encoder file than the folder's (``SkeletonPrior.check_encoder``, as
+    ``ModelSession.load`` checks it)."""
     from ghnerf_runtime.errors import ModelError
     from ghnerf_runtime.skeleton_prior import FILE_NAME, SkeletonPrior
 
     if not (folder / FILE_NAME).is_file():
         return None
     try:
-        return SkeletonPrior.load(folder / FILE_NAME, threads)
+        prior = SkeletonPrior.load(folder / FILE_NAME, threads)
+        prior.check_encoder(folder)
+        return prior
     except ModelError as e:
         print(f"warning: the skeleton prior is not scored: {e}", file=sys.stderr)
         return None
@@ -188,7 +193,13 @@ class OnnxRenderer:
             self.contract = ModelContract.from_metadata(props)
         except Exception as e:  # protobuf's DecodeError, the contract's own errors
             raise EvalInputError(f"{self.paths['encoder']}: not a readable GHNeRF graph ({_short(e)})") from e
+        # the 2D joints' graph, as the runtime (and the prior's collection) runs it: ``human`` where the folder
+        # has it (at int8 it differs from ``encoder``, whose first convolution the quantizer keeps in float)
+        human = folder / f"human{suffix}"
+        self.keypoint_graph = "human" if human.exists() else "encoder"
         self.sessions = {g: _session(p, threads) for g, p in self.paths.items()}
+        if self.keypoint_graph == "human":
+            self.sessions["human"] = _session(human, threads)
         self.height, self.width = self.contract.height, self.contract.width
         self.heatmap_stride = self.contract.heatmap_stride
         self.background = self.contract.background
@@ -207,7 +218,7 @@ class OnnxRenderer:
         if not self.contract.encoder_heatmaps:
             return None
         images = np.ascontiguousarray(scene["images"], dtype=np.float32)
-        return self.sessions["encoder"].run(["encoder_heatmaps"], {"images": images})[0]
+        return self.sessions[self.keypoint_graph].run(["encoder_heatmaps"], {"images": images})[0]
 
     def colour(self, scene, targets, ray_uv):
         return self._run(scene, targets, ray_uv, "render_rgb")["rgb"]

@@ -48,6 +48,7 @@ from ghnerf_runtime.skeleton_prior import (
     mirror_inputs,
     prior_inputs,
 )
+from training.model_card import write_atomic
 
 #: Expected-error gates the evaluation reports (m); the runtime's default is one of them.
 GATES_M = (0.03, 0.05, 0.075, 0.1, 0.15, math.inf)
@@ -97,6 +98,8 @@ def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0,
     from training.data.torch_dataset import MultiViewDataset
     from training.evaluate import _decode
 
+    if limit < 0:
+        raise ValueError(f"limit must be 0 (all scenes) or more, not {limit}")
     sess, graph = _heatmap_session(Path(model_dir), threads)
     ds = MultiViewDataset(data, split)
     n = min(limit, len(ds)) if limit else len(ds)
@@ -183,19 +186,34 @@ def make_ensemble(nets):
 
 
 def _hide_in_one_view(f, prob: float, gen):
-    """Some joints lose one view (as occlusion and the gates do): no triangulated point, no peak there.
-    Columns past :data:`JOINT_FEATURES` (a measurement's extra features) are per view, view 0's half first."""
+    """Some joints lose one view (as occlusion and the gates do): each joint with probability ``prob``, in a
+    view drawn at random (:func:`_hide_joints`)."""
     import torch
 
-    N, J, width = f.shape
+    N, J, _ = f.shape
     hide = torch.rand(N, J, generator=gen) < prob
     view = torch.randint(0, 2, (N, J), generator=gen)
+    return _hide_joints(f, hide, view)
+
+
+def _hide_joints(f, hide, view):
+    """``f`` with the joints ``hide`` ``(N, J)`` bool undecoded in their view ``view`` ``(N, J)`` (0 or 1), as
+    :func:`prior_inputs` builds such a joint: no triangulated point, ray angle nor reprojection error (in
+    either view: the device has none without a DLT point), no peak value, ray or decoded flag in that view;
+    the other view's peak value, ray and flag stay. The pair is not rebuilt: on the device, losing a joint
+    that helped place the body's centre also moves the canonical frame a little (the other view's ray and
+    the other joints' features with it), which rebuilding every batch through :func:`prior_inputs` (a DLT
+    per pair) would cost too much to follow. Columns past :data:`JOINT_FEATURES` (a measurement's extra
+    features) are per view, view 0's half first."""
+    import torch
+
+    width = f.shape[-1]
     f = f.clone()
     f[..., 0:4] = torch.where(hide[..., None], 0.0, f[..., 0:4])
-    f[..., 8] = torch.where(hide, 0.0, f[..., 8])
+    f[..., 6:9] = torch.where(hide[..., None], 0.0, f[..., 6:9])
     for v in (0, 1):
         h = hide & (view == v)
-        for col in (4 + v, 6 + v, 15 + v):
+        for col in (4 + v, 15 + v):
             f[..., col] = torch.where(h, 0.0, f[..., col])
         f[..., 9 + 3 * v:12 + 3 * v] = torch.where(h[..., None], 0.0, f[..., 9 + 3 * v:12 + 3 * v])
         k = (width - JOINT_FEATURES) // 2
@@ -303,21 +321,28 @@ def _train_one(joint_features: np.ndarray, context: np.ndarray, truth: np.ndarra
 
 # ---------------------------------------------------------------------------------------------- export
 def export(net, path: str | Path, metadata: dict[str, str]) -> Path:
-    """``net`` as an ONNX file with a dynamic batch and the ``ghnerf_skeleton.*`` metadata."""
+    """``net`` as an ONNX file with a dynamic batch and the ``ghnerf_skeleton.*`` metadata.
+
+    Built in memory and written whole (a temporary file in the same folder, then ``os.replace``): an
+    interrupted export leaves the old file or the new one, never one without the metadata, which the
+    runtime refuses (and with it the whole model folder's prior)."""
+    import io
+
     import onnx
     import torch
 
     path = Path(path)
     f = torch.zeros(1, NUM_JOINTS, JOINT_FEATURES)
     c = torch.zeros(1, CONTEXT_FEATURES)
-    torch.onnx.export(net, (f, c), str(path), input_names=list(INPUTS), output_names=list(OUTPUTS),
+    buf = io.BytesIO()
+    torch.onnx.export(net, (f, c), buf, input_names=list(INPUTS), output_names=list(OUTPUTS),
                       opset_version=17, dynamo=False, dynamic_axes={n: {0: "N"} for n in (*INPUTS, *OUTPUTS)})
-    model = onnx.load(str(path))
+    model = onnx.load_from_string(buf.getvalue())
     meta = {"feature_version": str(FEATURE_VERSION), "num_joints": str(NUM_JOINTS), **metadata}
     for k, v in meta.items():
         entry = model.metadata_props.add()
         entry.key, entry.value = META_PREFIX + k, str(v)
-    onnx.save(model, str(path))
+    write_atomic(path, model.SerializeToString())
     return path
 
 
@@ -363,9 +388,16 @@ def card_summary(folder: str | Path) -> dict | None:
 
 
 def add_to_card(card_dir: str | Path, out: Path) -> Path:
-    """Record the prior ``out`` (figures, size, hash) in the model card of ``card_dir`` and re-render it."""
+    """Record the prior ``out`` (figures, size, hash) in the model card of ``card_dir`` and re-render it.
+
+    ``out`` must be named :data:`FILE_NAME`: the card keeps one prior per model folder, the file the runtime
+    loads (its figures are read from ``skeleton_prior.json`` beside it; another name's would be recorded
+    under this one's)."""
     from training.model_card import write_card
 
+    out = Path(out)
+    if out.name != FILE_NAME:
+        raise ValueError(f"{out}: the model card records the prior the runtime loads, {FILE_NAME}")
     card_dir = Path(card_dir)
     card = json.loads((card_dir / "model_card.json").read_text())
     variant = out.parent.name
@@ -405,10 +437,26 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     torch.set_num_threads(args.threads)
-    model_dir = Path(args.model_dir)
+    from ghnerf_runtime.session import resolve_model_dir
+
+    # read as the runtime and collect() read it (models -> models/ghnerf): for the default --out and the
+    # encoder's hash too
+    model_dir = resolve_model_dir(args.model_dir)
     out = Path(args.out) if args.out else model_dir / FILE_NAME
     if args.members < 1:
         ap.error(f"--members must be at least 1, not {args.members}")
+    if args.limit < 0:
+        ap.error(f"--limit must be 0 (all scenes) or more, not {args.limit}")
+    # the held-out figures must be of scenes the prior did not learn from
+    if args.train_split == args.val_split:
+        ap.error(f"--train-split and --val-split are both {args.train_split!r}: the held-out figures would be "
+                 "training figures")
+    seen = {Path(args.data).resolve(): "--data"}
+    for extra in args.extra_data:
+        if Path(extra).resolve() in seen:
+            ap.error(f"--extra-data {extra} is the folder {seen[Path(extra).resolve()]} already gives: its "
+                     f"{args.train_split!r} scenes would count twice")
+        seen[Path(extra).resolve()] = "--extra-data"
     out = ready_output_arg(ap, out, "--out")  # written after minutes of collecting and training: settled first
     if args.card:
         from training.model_card import CardError, check_card_dir
@@ -417,6 +465,9 @@ def main(argv: list[str] | None = None) -> int:
             check_card_dir(args.card, out, "--card")
         except CardError as e:
             ap.error(str(e))
+        if out.name != FILE_NAME:  # the card records the file the runtime loads, under that name
+            ap.error(f"--card records the prior the runtime loads, {FILE_NAME}; --out {out} has another name "
+                     f"(drop --card, or write {FILE_NAME})")
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
                               members=args.members)
     t0 = time.monotonic()
@@ -431,6 +482,8 @@ def main(argv: list[str] | None = None) -> int:
     train_s = time.monotonic() - t0 - collect_s
     encoder_file = str(tr["encoder_file"])
     trained_on = ",".join(f"{d}:{args.train_split}" for d in [args.data, *args.extra_data])
+    # the old figures describe the old file: gone before the new file takes its place, written anew at the end
+    out.with_suffix(".json").unlink(missing_ok=True)
     export(net, out, {"trained_on": trained_on, "scenes": str(len(tr["uv"])),
                       "encoder_file": encoder_file,
                       "encoder_sha256": _sha256(model_dir / encoder_file),
@@ -460,7 +513,7 @@ def main(argv: list[str] | None = None) -> int:
               "scenes": len(va["uv"]), "train_scenes": len(tr["uv"]), "trained_on": trained_on,
               "encoder_file": encoder_file, "flip_test": not args.no_flip_test, "config": asdict(config),
               "collect_s": round(collect_s, 1), "train_s": round(train_s, 1), "metrics": metrics}
-    out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
+    write_atomic(out.with_suffix(".json"), json.dumps(result, indent=1) + "\n")
     m, tg = metrics, metrics["triangulation_gated"]
 
     def mm(v):

@@ -84,6 +84,29 @@ def test_inputs_do_not_depend_on_where_the_rig_stands(yaw, shift):
     np.testing.assert_allclose(moved.context, base.context, atol=2e-5)
 
 
+@pytest.mark.parametrize("yaw, shift", [(90.0, (0.0, 0.0)), (-37.0, (1.5, -2.0))])
+def test_with_no_joint_triangulated_the_inputs_still_turn_with_the_rig(yaw, shift):
+    """One view decoded nothing, so no joint is triangulated and the body centre is a guess: 2.5 m along the
+    cameras' mean heading, which turns with the rig (it was rig +z, beside a rig turned 90 degrees)."""
+    X = _skeleton(1)
+
+    def inputs(yaw_deg, where):
+        P = _rig(yaw_deg, where)
+        Xm = (np.c_[X, np.ones(len(X))] @ _scene_motion(yaw_deg, where).T)[:, :3]
+        uv, conf, valid = _observe(P, Xm)
+        valid[1] = False  # view 1 undecoded (occluded, or gated)
+        return prior_inputs(uv[None], conf[None], valid[None], np.stack(P)[None]), Xm
+
+    (base, Xb), (moved, Xm) = inputs(0.0, (0.0, 0.0)), inputs(yaw, shift)
+    assert not base.triangulated.any() and not moved.triangulated.any()
+    # the frame itself, in float64: the same body lands on the same canonical points
+    np.testing.assert_allclose(moved.frame.to_canonical(Xm[None]), base.frame.to_canonical(Xb[None]), atol=1e-9)
+    # the float32 features: equal to their rounding (values up to a few metres: 1e-6 is a few float32 ulps)
+    np.testing.assert_allclose(moved.joint_features, base.joint_features, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(moved.context, base.context, rtol=0, atol=1e-6)
+    assert base.context[0, 7] == pytest.approx(2.5)  # the guess: 2.5 m ahead of the cameras' midpoint
+
+
 def test_mirror_is_the_inputs_of_the_mirrored_scene():
     """``mirror_inputs`` (training's augmentation) equals the features of the world seen in a mirror, with the
     detector calling the mirrored left joints right."""

@@ -127,6 +127,34 @@ def test_a_broken_joints_cache_is_named(tmp_path):
         load_joints(tmp_path / "short.npz", 5)
 
 
+def test_a_cut_joints_cache_is_named_and_a_cache_is_written_whole(data64, tmp_path, monkeypatch, capsys):
+    import os
+
+    from training.device_joints import main
+
+    path = cache_true_joints(data64, "val", tmp_path / "t.npz", log=lambda *_: None)
+    data = path.read_bytes()
+    (tmp_path / "cut.npz").write_bytes(data[: len(data) // 2])  # a write cut short
+    for load in (load_joints, load_found):
+        with pytest.raises(JointsCacheError, match="cut.npz"):
+            load(tmp_path / "cut.npz")
+
+    def stop(*args):
+        raise KeyboardInterrupt("stopped")
+
+    monkeypatch.setattr(os, "replace", stop)  # stopped before the new cache takes the old one's place
+    with pytest.raises(KeyboardInterrupt):
+        cache_true_joints(data64, "val", path, limit=1, log=lambda *_: None)
+    monkeypatch.undo()
+    assert path.read_bytes() == data and sorted(p.name for p in tmp_path.iterdir()) == ["cut.npz", "t.npz"]
+    with pytest.raises(ValueError, match="limit"):
+        cache_true_joints(data64, "val", tmp_path / "n.npz", limit=-1, log=lambda *_: None)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:
+        main(["--data", str(data64), "--truth", "--limit", "-1", "--out", str(tmp_path / "m.npz")])
+    assert e.value.code == 2 and "--limit must be 0 (all scenes) or more" in capsys.readouterr().err
+
+
 def test_the_found_joints_are_those_the_runtimes_error_gate_passes(tmp_path):
     from ghnerf_runtime.config import Joints3DConfig
 

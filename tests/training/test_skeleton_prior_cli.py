@@ -26,7 +26,8 @@ def test_collect_train_export_score_and_card(tmp_path, data64):
     assert arrays["uv"].shape == (3, 2, 25, 2) and arrays["P"].shape == (3, 2, 3, 4)
     assert str(arrays["encoder_file"]) in ("human.onnx", "human.int8.onnx")
 
-    argv = ["--model-dir", str(models / "ghnerf"), "--data", str(data64), "--extra-data", str(data64),
+    extra = shutil.copytree(data64, tmp_path / "extra")  # another folder (the same one twice is refused)
+    argv = ["--model-dir", str(models / "ghnerf"), "--data", str(data64), "--extra-data", str(extra),
             "--steps", "3", "--hidden", "16", "--card", str(models)]
     assert sp.main(argv) == 0
     out = models / "ghnerf" / FILE_NAME
@@ -201,3 +202,154 @@ def test_peak_shape_measurement_trains_each_variant(tmp_path, data64, capsys):
     assert _without_time(json.loads(again[-1])["base"]) == _without_time(res["base"])
     with pytest.raises(SystemExit):
         m.main(argv + ["--variants", "base,nope"])
+
+
+def test_a_hidden_joint_is_what_the_device_builds_for_it():
+    """Training hides a joint in one view as :func:`prior_inputs` builds a joint that view did not decode: no
+    DLT point, angle or reprojection error in either view (the device has none without a point), no peak, ray or
+    flag in that view. The scene is made so that the joint does not place the body's centre (its reprojection
+    error is past the root's 3 px), so the device's frame is the same and the features must match exactly
+    (training does not rebuild the frame: a joint that helps place the centre moves it a little)."""
+    import torch
+
+    from ghnerf_runtime.skeleton_prior import prior_inputs
+    from tests.ghnerf_runtime.test_skeleton_prior import _observe, _rig, _skeleton
+    from training.skeleton_prior import _hide_joints
+
+    P, X = np.stack(_rig()), _skeleton(3)
+    uv, conf, valid = _observe(list(P), X)
+    conf = conf * np.linspace(0.4, 1.0, 25)
+    uv = uv + np.random.default_rng(0).normal(0.0, 0.3, uv.shape)  # every joint a little off
+    j = 7
+    uv[0, j, 1] += 12.0  # across the epipolar lines: a reprojection error the DLT cannot absorb
+    full = prior_inputs(uv[None], conf[None], valid[None], P[None])
+    assert full.triangulated[0].all() and full.joint_features[0, j, 6:8].min() > 3.0 / 5.0
+    for v in (0, 1):
+        gone = valid.copy()
+        gone[v, j] = False
+        device = prior_inputs(uv[None], conf[None], gone[None], P[None])
+        np.testing.assert_array_equal(device.frame.rotation, full.frame.rotation)
+        np.testing.assert_array_equal(device.frame.origin, full.frame.origin)
+        hide = torch.zeros(1, 25, dtype=torch.bool)
+        hide[0, j] = True
+        trained = _hide_joints(torch.from_numpy(full.joint_features), hide, torch.full((1, 25), v)).numpy()
+        # one float32 computation on both sides: equal bit for bit
+        np.testing.assert_array_equal(trained[0, j], device.joint_features[0, j])
+        np.testing.assert_array_equal(trained, device.joint_features)  # the other joints are untouched
+
+
+def _stop(*args, **kwargs):
+    raise KeyboardInterrupt("stopped")
+
+
+def test_an_interrupted_export_leaves_the_old_file_whole(tmp_path, monkeypatch):
+    """The ONNX file is built in memory and replaces the old one whole: stopped before that, the old file (with
+    its ``ghnerf_skeleton.*`` metadata, without which the runtime refuses it) is still there, and no other file."""
+    import onnx
+
+    from ghnerf_runtime.skeleton_prior import FILE_NAME, SkeletonPrior
+    from training import skeleton_prior as sp
+
+    path = tmp_path / FILE_NAME
+    sp.export(sp.make_network(8), path, {"scenes": "1"})
+    before = path.read_bytes()
+    for name in ("load", "load_from_string", "save"):  # stopped while the metadata is added
+        monkeypatch.setattr(onnx, name, _stop)
+    with pytest.raises(KeyboardInterrupt):
+        sp.export(sp.make_network(8), path, {"scenes": "2"})
+    monkeypatch.undo()
+    assert path.read_bytes() == before and SkeletonPrior.load(path).metadata["ghnerf_skeleton.scenes"] == "1"
+    assert [p.name for p in tmp_path.iterdir()] == [FILE_NAME]
+
+
+def test_the_models_folder_is_read_as_the_runtime_reads_it_and_a_stopped_run_leaves_no_stale_report(
+        tmp_path, data64, monkeypatch):
+    """``--model-dir models`` is ``models/ghnerf`` for the collection, the default ``--out`` and the encoder's
+    hash alike; a run stopped after its file replaced the old one leaves no report of the old file beside it."""
+    from ghnerf_runtime.skeleton_prior import FILE_NAME, SkeletonPrior
+    from tests.ghnerf_runtime.test_session import export_tiny
+    from training import skeleton_prior as sp
+
+    models = tmp_path / "models"
+    shutil.copytree(export_tiny(tmp_path / "export"), models / "ghnerf")
+    base = ["--data", str(data64), "--steps", "2", "--hidden", "8", "--threads", "1"]
+    assert sp.main(["--model-dir", str(models), *base]) == 0
+    out = models / "ghnerf" / FILE_NAME
+    assert out.is_file() and out.with_suffix(".json").is_file() and not (models / FILE_NAME).exists()
+    SkeletonPrior.load(out).check_encoder(models / "ghnerf")  # the runtime takes it beside this encoder
+
+    monkeypatch.setattr(SkeletonPrior, "estimate", _stop)  # stopped while scoring the new file
+    with pytest.raises(KeyboardInterrupt):
+        sp.main(["--model-dir", str(models / "ghnerf"), *base, "--seed", "1"])
+    monkeypatch.undo()
+    assert not out.with_suffix(".json").exists()  # the old figures went with the old file
+    assert json.loads(SkeletonPrior.load(out).metadata["ghnerf_skeleton.config"])["seed"] == 1
+    assert not [p.name for p in (models / "ghnerf").iterdir() if p.name.startswith(".")]  # no temporary left
+
+
+@pytest.mark.parametrize("more, says", [
+    (["--limit", "-1"], "--limit must be 0 (all scenes) or more, not -1"),
+    (["--val-split", "train"], "--train-split and --val-split are both 'train'"),
+    (["--extra-data", "{data}/../{name}"], "is the folder --data already gives"),
+    (["--out", "{model}/prior_b.onnx", "--card", "{models}"], "--card records the prior the runtime loads"),
+])
+def test_runs_whose_figures_would_mislead_are_refused_before_collecting(tmp_path, data64, capsys, more, says):
+    """A negative ``--limit``; held-out scenes that are training scenes (the same split, or the same folder
+    as extra data); a card entry for a file of another name (the card records ``skeleton_prior.onnx``, the file
+    the runtime loads, and reads its figures from ``skeleton_prior.json``)."""
+    from training import skeleton_prior as sp
+    from training.model_card import write_card
+
+    models = tmp_path / "models"
+    (models / "ghnerf").mkdir(parents=True)  # no graphs: a run that got past the checks would fail otherwise
+    write_card(models, {"name": "t", "files": {}, "metrics": {}})
+    fill = {"data": str(data64), "name": data64.name, "model": str(models / "ghnerf"), "models": str(models)}
+    argv = ["--model-dir", str(models / "ghnerf"), "--data", str(data64), *(a.format(**fill) for a in more)]
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:
+        sp.main(argv)
+    assert e.value.code == 2 and says in capsys.readouterr().err
+    with pytest.raises(ValueError, match="runtime loads"):
+        sp.add_to_card(models, models / "ghnerf" / "prior_b.onnx")
+
+
+def test_ghnerf_eval_skips_a_prior_of_another_encoder_as_the_runtime_refuses_it(tmp_path, capsys):
+    from ghnerf_runtime.skeleton_prior import FILE_NAME
+    from tests.ghnerf_runtime.test_session import export_tiny
+    from training import skeleton_prior as sp
+    from training.evaluate import make_renderer
+
+    model = tmp_path / "ghnerf"
+    shutil.copytree(export_tiny(tmp_path / "export"), model)
+    own = {"encoder_file": "human.onnx", "encoder_sha256": sp._sha256(model / "human.onnx")}
+    sp.export(sp.make_network(8), model / FILE_NAME, own)
+    assert make_renderer(str(model))[0].skeleton_prior is not None
+    sp.export(sp.make_network(8), model / FILE_NAME, {**own, "encoder_sha256": "0" * 64})  # another encoder's
+    capsys.readouterr()
+    assert make_renderer(str(model))[0].skeleton_prior is None
+    err = capsys.readouterr().err
+    assert "the skeleton prior is not scored" in err and "human.onnx" in err
+
+
+def test_ghnerf_eval_reads_the_2d_joints_from_the_human_graph_as_the_runtime_does(tmp_path, data64):
+    """The ``human`` graph where the folder has one (the runtime's keypoint graph, and the prior's collection's;
+    at int8 it differs from ``encoder``), else ``encoder``."""
+    from tests.ghnerf_runtime.test_session import export_tiny
+    from training.data.torch_dataset import MultiViewDataset
+    from training.evaluate import OnnxRenderer
+
+    model = tmp_path / "ghnerf"
+    shutil.copytree(export_tiny(tmp_path / "export"), model)
+    renderer = OnnxRenderer(model)
+    assert renderer.keypoint_graph == "human"
+    images = MultiViewDataset(data64, "val")[0]["images"].numpy()
+    want = renderer.sessions["human"].run(["encoder_heatmaps"], {"images": images})[0]
+
+    class Refuse:
+        def run(self, *args, **kwargs):
+            raise AssertionError("the encoder graph ran for the 2D joints")
+
+    renderer.sessions["encoder"] = Refuse()
+    np.testing.assert_array_equal(renderer.encoder_heatmaps({"images": images}), want)
+    (model / "human.onnx").unlink()
+    assert OnnxRenderer(model).keypoint_graph == "encoder"
