@@ -66,7 +66,8 @@ fi
 # before the venv link is switched, so a failed build leaves the old models beside the old code.
 stage_models() {
     [ "$IN_PLACE" = 0 ] || return 0
-    rm -rf "$ROOT$PREFIX/models.new" && cp -R "$REPO/models" "$ROOT$PREFIX/models.new"
+    rm -rf "$ROOT$PREFIX/models.new" && cp -R "$REPO/models" "$ROOT$PREFIX/models.new" \
+        && chmod -R u+rwX,go+rX "$ROOT$PREFIX/models.new"  # a checkout cloned under umask 077: the service reads them
 }
 swap_models() {
     [ "$IN_PLACE" = 0 ] || return 0
@@ -74,7 +75,7 @@ swap_models() {
     [ ! -e "$ROOT$PREFIX/models" ] || mv "$ROOT$PREFIX/models" "$ROOT$PREFIX/models.old"
     mv "$ROOT$PREFIX/models.new" "$ROOT$PREFIX/models"
     rm -rf "$ROOT$PREFIX/models.old"
-    cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/"
+    cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/" && chmod go+r "$ROOT$PREFIX"/docs/*.md
 }
 
 if [ -z "$DESTDIR" ]; then
@@ -82,8 +83,10 @@ if [ -z "$DESTDIR" ]; then
     getent group dialout >/dev/null || groupadd --system dialout
     getent group video >/dev/null || groupadd --system video
     if ! id ghnerf >/dev/null 2>&1; then
+        # its own group, or the one a partial install (or an image build) left: --user-group fails on that
+        if getent group ghnerf >/dev/null; then own_group=(--gid ghnerf); else own_group=(--user-group); fi
         useradd --system --home-dir /var/lib/ghnerf --no-create-home --shell /usr/sbin/nologin \
-            --user-group --groups plugdev,dialout,video ghnerf
+            "${own_group[@]}" --groups plugdev,dialout,video ghnerf
     fi
 fi
 

@@ -57,7 +57,9 @@ class SystemdNotifier:
         """Send ``KEY=value`` lines (``ready=1`` becomes ``READY=1``); False when not sent."""
         if not self._address:
             return False
-        text = "\n".join(f"{key.upper()}={value}" for key, value in fields.items())
+        # one line per field: a value's own line break (an error message quoting a file) would start a
+        # new assignment, READY= or ERRNO= among them
+        text = "\n".join(f"{key.upper()}={' '.join(str(value).splitlines())}" for key, value in fields.items())
         with self._lock:
             try:
                 if self._sock is None:

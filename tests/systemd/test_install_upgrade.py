@@ -162,3 +162,30 @@ def test_the_environment_the_link_points_to_survives_a_new_install(host):
     assert new not in olds
     assert sorted(p.name for p in host.prefix.iterdir() if p.name.startswith("venv-")) == \
         sorted(["venv-20200101T000000", new])
+
+
+def test_the_service_user_joins_a_group_an_earlier_install_left(host):
+    # the stand-in getent finds every group, ghnerf's own among them: --user-group would fail on it
+    proc = host.install("--no-start")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    (useradd,) = host.calls("useradd")
+    assert "--gid ghnerf" in useradd and "--user-group" not in useradd
+    (host.bin / "getent").write_text('#!/bin/bash\n[ "$2" != ghnerf ]\n')  # no group ghnerf yet
+    proc = host.install("--no-start")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    (useradd,) = host.calls("useradd")
+    assert "--user-group" in useradd and "--gid" not in useradd
+
+
+def test_models_from_a_private_checkout_are_readable_by_the_service(host):
+    # a checkout cloned under umask 077: cp -R kept its owner-only modes, and the service user could not
+    # read the graphs (--validate-config only lists them)
+    for path in (host.repo / "models").iterdir():
+        path.chmod(0o600)
+    (host.repo / "models").chmod(0o700)
+    (host.repo / "docs/daemon.md").chmod(0o600)
+    proc = host.install("--no-start")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (host.prefix / "models").stat().st_mode & 0o055 == 0o055
+    assert all(p.stat().st_mode & 0o044 == 0o044 for p in (host.prefix / "models").iterdir())
+    assert (host.prefix / "docs/daemon.md").stat().st_mode & 0o044 == 0o044

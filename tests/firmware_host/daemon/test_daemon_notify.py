@@ -34,6 +34,14 @@ def test_messages_reach_the_socket(notify_socket):
     n.close()
 
 
+def test_a_value_stays_on_its_line(notify_socket):
+    path, sock = notify_socket
+    n = SystemdNotifier({"NOTIFY_SOCKET": path})
+    assert n.notify(status="reload refused: bad.json:\nREADY=1\r\nline 3")
+    assert _fields(sock) == {"STATUS": "reload refused: bad.json: READY=1 line 3"}
+    n.close()
+
+
 def test_abstract_namespace_socket():
     name = f"ghnerf-test-{uuid.uuid4().hex}"
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
