@@ -217,6 +217,9 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
             break
         dropped.append(shared[worst][0])
         shared = shared[:worst] + shared[worst + 1:]
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(T)) and np.isfinite(rms)):
+        raise SolveError(f"cameras {names[0]!r} and {names[1]!r}: the pair's pose diverged (the shared views may all "
+                         "show the board at one angle, or the two images of a pair were not taken together)")
     return PairPose(R=np.asarray(R, float), T=np.asarray(T, float).reshape(3), rms_px=float(rms),
                     per_view_px={n: round(float(e), 4) for (n, _), e in zip(shared, per)}, dropped=tuple(dropped))
 

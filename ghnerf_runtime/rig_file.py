@@ -448,12 +448,15 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     Writes a temporary file in the same directory, flushes and fsyncs it, renames it over
     ``path`` (``os.replace`` is atomic on POSIX and Windows) and fsyncs the directory. An
     existing file's permission bits are kept; a new file gets the usual ``0666 & ~umask``.
+    A symbolic link is written through: its target is replaced, the link stays.
     On any failure the temporary file is removed and the old file is untouched.
 
     Raises:
         RigFileError: the file cannot be written.
     """
     path = Path(path)
+    if path.is_symlink():  # write through the link (a rig file linked from /etc): replacing it would cut the link
+        path = Path(os.path.realpath(path))
     directory = path.parent if str(path.parent) else Path(".")
     tmp = directory / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp"
     data = text.encode("utf-8")

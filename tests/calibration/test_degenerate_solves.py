@@ -100,3 +100,20 @@ def test_the_floor_board_may_be_as_thick_as_the_option_allows():
     sol = solve_rig(BOARD, {"left": {**left, **floor}, "right": right}, ("left", "right"), floor_view="floor",
                     board_thickness_m=0.1)
     assert math.isfinite(sol.report["levelling"]["camera_height_m"])
+
+
+def test_a_diverged_pair_pose_is_refused(monkeypatch):
+    from calibration import solve
+
+    real = solve.cv2.stereoCalibrateExtended
+
+    def diverged(*args, **kwargs):
+        result = list(real(*args, **kwargs))
+        result[6] = np.full((3, 1), np.nan)  # T
+        return tuple(result)
+
+    monkeypatch.setattr(solve.cv2, "stereoCalibrateExtended", diverged)
+    tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)]
+    left, right = _views(tilts, seed=1), _views(tilts, seed=1, t_offset=(-0.3, 0.0, 0.0))
+    with pytest.raises(SolveError, match=r"cameras 'left' and 'right': the pair's pose diverged"):
+        solve_rig(BOARD, {"left": left, "right": right}, ("left", "right"), camera_height_m=1.4)

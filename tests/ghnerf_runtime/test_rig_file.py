@@ -248,6 +248,18 @@ def test_write_text_atomic_new_file(tmp_path):
     assert target.read_text(encoding="utf-8") == "héllo\n"
 
 
+def test_write_text_atomic_writes_through_a_link(tmp_path):
+    # /etc/ghnerf/rig.json -> /data/rig.json: the calibration replaces the data, the link stays
+    (tmp_path / "data").mkdir()
+    target = tmp_path / "data" / "rig.json"
+    target.write_text("old")
+    link = tmp_path / "rig.json"
+    link.symlink_to(target)
+    write_text_atomic(link, "new")
+    assert link.is_symlink() and target.read_text() == "new"
+    assert sorted(p.name for p in (tmp_path / "data").iterdir()) == ["rig.json"]  # no temporary left
+
+
 def test_dumps_is_stable():
     rig = load_rig(EXAMPLE)
     text = dumps_rig(rig)
