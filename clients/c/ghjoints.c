@@ -168,6 +168,7 @@ static int walk_hello(const uint8_t *p, size_t n, ghj_hello *out)
         if (!take_ascii(p, n, &off, GHJ_MAX_CAMERA_NAME_LEN, out ? out->cameras[c] : NULL)) return 0;
     }
     if (out) {
+        for (c = cameras; c < GHJ_MAX_CAMERAS; c++) out->cameras[c][0] = '\0'; /* no stale name past n_cameras */
         out->protocol_version = p[0];
         out->joint_set = p[1];
         out->joint_count = p[2];

@@ -146,7 +146,7 @@ typedef struct {
     uint8_t frame; /* 0 = rig frame */
     char rig_id[GHJ_MAX_RIG_ID_LEN + 1]; /* NUL-terminated printable ASCII */
     uint8_t n_cameras;
-    char cameras[GHJ_MAX_CAMERAS][GHJ_MAX_CAMERA_NAME_LEN + 1];
+    char cameras[GHJ_MAX_CAMERAS][GHJ_MAX_CAMERA_NAME_LEN + 1]; /* NUL-terminated; "" past n_cameras */
 } ghj_hello;
 
 /* One decoded message. The payloads share one union: a STATUS or HELLO

@@ -52,6 +52,21 @@ def _joint_count(name: str, n: int) -> None:
         raise EncodeError(name, n, f"at most {MAX_JOINTS} joints per packet")
 
 
+def _check_joint_array(name: str, values: np.ndarray, shape: tuple[int, ...], dtype: type) -> None:
+    """A joint array of ``shape`` whose values fit the wire's ``dtype`` (int16 or uint8): numpy's cast would
+    wrap 40000 mm to -25536 silently, and a mask of another length makes a packet every decoder refuses. The
+    device's own arrays (``quantize``) already have the wire's dtype, so only other callers pay the range scan."""
+    values = np.asarray(values)
+    if values.shape != shape:
+        raise EncodeError(name, values.shape, f"must have the shape {shape}")
+    if values.dtype != dtype and values.size:
+        info = np.iinfo(dtype)
+        if not (np.issubdtype(values.dtype, np.integer) or np.issubdtype(values.dtype, np.bool_)) \
+                or values.min() < info.min or values.max() > info.max:
+            raise EncodeError(name, f"{values.dtype} in [{values.min()}, {values.max()}]",
+                              f"must be whole numbers in [{info.min}, {info.max}]")
+
+
 def _mask(missing: np.ndarray) -> bytes:
     return np.packbits(missing.astype(bool), bitorder="little").tobytes()
 
@@ -60,6 +75,9 @@ def _joints_payload(m: Joints) -> bytes:
     n = len(m.conf)
     _joint_count("joints.count", n)
     _check_range("joints.joint_set", m.joint_set, 0xFF)
+    _check_joint_array("joints.xyz_mm", m.xyz_mm, (n, 3), np.int16)
+    _check_joint_array("joints.conf", m.conf, (n,), np.uint8)
+    _check_joint_array("joints.missing", m.missing, (n,), np.bool_)
     rows = np.empty(n, dtype=_J3D)
     rows["x"], rows["y"], rows["z"] = m.xyz_mm[:, 0], m.xyz_mm[:, 1], m.xyz_mm[:, 2]
     rows["c"] = m.conf
@@ -71,6 +89,9 @@ def _joints2d_payload(m: Joints2D) -> bytes:
     _joint_count("joints_2d.count", n)
     _check_range("joints_2d.camera", m.camera, 0xFF)
     _check_range("joints_2d.joint_set", m.joint_set, 0xFF)
+    _check_joint_array("joints_2d.uv_q", m.uv_q, (n, 2), np.int16)
+    _check_joint_array("joints_2d.conf", m.conf, (n,), np.uint8)
+    _check_joint_array("joints_2d.missing", m.missing, (n,), np.bool_)
     rows = np.empty(n, dtype=_J2D)
     rows["u"], rows["v"] = m.uv_q[:, 0], m.uv_q[:, 1]
     rows["c"] = m.conf

@@ -6,7 +6,7 @@
  *   {"result":"skipped","skipped_type":127,"untouched":1}
  *   {"result":"crc","untouched":1}
  * tail_missing: every slot from count to GHJ_MAX_JOINTS is missing with zero
- * fields; untouched: the packet is byte-for-byte as before the frame.
+ * fields (HELLO: every camera name past n_cameras is empty); untouched: the packet is byte-for-byte as before the frame.
  */
 #include <stdio.h>
 #include <string.h>
@@ -25,6 +25,10 @@ static int tail_missing(const ghj_packet *p)
         for (i = p->u.joints2d.count; i < GHJ_MAX_JOINTS; i++) {
             const ghj_joint2d *j = &p->u.joints2d.joints[i];
             if (!(j->missing == 1u && j->conf == 0u && j->u == 0 && j->v == 0)) return 0;
+        }
+    } else if (p->header.msg_type == GHJ_MSG_HELLO) {
+        for (i = p->u.hello.n_cameras; i < GHJ_MAX_CAMERAS; i++) {
+            if (p->u.hello.cameras[i][0] != '\0') return 0;
         }
     }
     return 1;
@@ -51,6 +55,8 @@ int main(void)
                        tail_missing(&pkt), pkt.u.joints.count ? pkt.u.joints.joints[0].x : 0);
             } else if (pkt.header.msg_type == GHJ_MSG_JOINTS_2D) {
                 printf(",\"count\":%u,\"tail_missing\":%d", (unsigned)pkt.u.joints2d.count, tail_missing(&pkt));
+            } else if (pkt.header.msg_type == GHJ_MSG_HELLO) {
+                printf(",\"count\":%u,\"tail_missing\":%d", (unsigned)pkt.u.hello.n_cameras, tail_missing(&pkt));
             }
         } else {
             if (r == GHJ_SKIPPED) printf(",\"skipped_type\":%u", (unsigned)dec.skipped_type);

@@ -106,6 +106,21 @@ def test_joints_beyond_count_are_missing(driver: Path) -> None:
     assert ev[0]["j0x"] == 111 and ev[1]["j0x"] == -5
 
 
+def _hello(cameras: list[str], seq: int) -> bytes:
+    payload = bytes([1, 0, 25, 0, 0, 3]) + b"rig" + bytes([len(cameras)])
+    payload += b"".join(bytes([len(c)]) + c.encode() for c in cameras)
+    return _frame(0x01, payload, seq)
+
+
+def test_camera_names_beyond_n_cameras_are_empty(driver: Path) -> None:
+    """A HELLO shares the union with JOINTS: after a JOINTS packet, the name slots a HELLO does not fill held
+    joint bytes without a NUL, which a caller scanning every slot with strcmp read past."""
+    data = _joints(25, 0x4141, 1) + _hello([], 2) + _joints(25, 0x4141, 3) + _hello(["left", "right"], 4)
+    ev = _run(driver, data)
+    assert [(e["type"], e["count"], e["tail_missing"]) for e in ev] == [(16, 25, 1), (1, 0, 1), (16, 25, 1),
+                                                                         (1, 2, 1)]
+
+
 def test_only_a_packet_writes_out(driver: Path) -> None:
     """GHJ_SKIPPED and errors leave the caller's packet byte-for-byte as it was; the skipped type
     is in the decoder (it used to be written into the packet's header, beside the old payload)."""
@@ -206,3 +221,15 @@ def test_avr_build_and_ram_figures() -> None:
         if "decoding only" in ln or lines[0] in doc:
             assert ln in doc, f"docs/c-decoder.md does not quote `make avr-ram`: {ln}"
         assert re.search(r"decoding only: \d+ bytes = .* \+ other 0$", ln) or "ghj_result_name" in ln, ln
+
+
+def test_ci_fails_rather_than_skips_without_a_compiler(monkeypatch: pytest.MonkeyPatch) -> None:
+    from tests.clients import c_build
+
+    monkeypatch.setattr(c_build, "c_compiler", lambda: None)
+    monkeypatch.setenv(c_build.REQUIRE_ENV, "0")
+    with pytest.raises(pytest.skip.Exception):
+        c_build.require_compiler()
+    monkeypatch.setenv(c_build.REQUIRE_ENV, "1")
+    with pytest.raises(pytest.fail.Exception, match="GHJ_REQUIRE_CC says the C client must be tested"):
+        c_build.require_compiler()

@@ -13,6 +13,7 @@ from firmware_host.protocol import (
     Hello,
     JointFrame,
     Joints,
+    Joints2D,
     MsgType,
     Status,
     StreamDecoder,
@@ -111,6 +112,20 @@ def test_sequence_wraps_modulo_2_32() -> None:
         (Status(make_header(MsgType.STATUS, 0, -1, 0), 0, 0, 0, 0, 0), "header.capture_us"),
         (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((65, 3), np.int16), np.zeros(65, np.uint8),
                 np.zeros(65, bool)), "joints.count"),
+        # values that numpy's cast wrapped (40000 mm went out as -25536) and a mask of another length (a
+        # packet every decoder refused)
+        (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.array([[40000, 0, 0]]), np.array([200]),
+                np.array([False])), "joints.xyz_mm"),
+        (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.array([[1.5, 0, 0]]), np.array([200]),
+                np.array([False])), "joints.xyz_mm"),
+        (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((1, 3), np.int16), np.array([300]),
+                np.array([False])), "joints.conf"),
+        (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((25, 3), np.int16), np.zeros(25, np.uint8),
+                np.zeros(8, bool)), "joints.missing"),
+        (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 3), np.int16), np.zeros(2, np.uint8),
+                  np.zeros(2, bool)), "joints_2d.uv_q"),
+        (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 2), np.int16), np.full(2, -1),
+                  np.zeros(2, bool)), "joints_2d.conf"),
     ],
 )
 def test_encode_errors_name_the_field(msg: object, field: str) -> None:
