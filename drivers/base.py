@@ -239,12 +239,19 @@ class RigSource(abc.ABC):
         if self._is_open and not self._closed:
             try:
                 self._close()
-            finally:
+            finally:  # closed even when closing failed: never opened again (a second device link)
                 self._is_open = False
+                self._closed = True
         self._closed = True
 
     def __enter__(self) -> "RigSource":
         return self.open()
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+            return
+        try:  # the error that ended the block (a camera unplugged) is the one to report, not the close's
+            self.close()
+        except Exception:
+            log.warning("closing %s after %s failed too", type(self).__name__, exc_type.__name__, exc_info=True)

@@ -6,7 +6,6 @@ frame.
 """
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,6 +27,10 @@ class DropPolicy(str, Enum):
     ALL = "all"
 
 
+#: Frames more than this apart (10 s) are never one moment, whatever the source.
+MAX_TOLERANCE_MS = 10_000.0
+
+
 @dataclass(frozen=True)
 class PairingConfig:
     """How frames of the two cameras are matched.
@@ -46,8 +49,9 @@ class PairingConfig:
     max_ready: int = 64
 
     def __post_init__(self) -> None:
-        if not 0 < self.tolerance_ms < math.inf:
-            raise RigConfigError(f"pairing tolerance_ms must be a finite number > 0, got {self.tolerance_ms}")
+        if not 0 < self.tolerance_ms <= MAX_TOLERANCE_MS:  # NaN too; int(ns) of a huge one overflowed
+            raise RigConfigError(f"pairing tolerance_ms must be a number in (0, {MAX_TOLERANCE_MS:g}], "
+                                 f"got {self.tolerance_ms}")
         try:
             object.__setattr__(self, "policy", DropPolicy(self.policy))
         except ValueError:

@@ -98,6 +98,13 @@ from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import load_rig
 
 log = logging.getLogger(__name__)
+#: The rig id of the nominal rig an ``opencv://`` source without ``rig=`` makes (for ``ghcal capture`` only).
+NOMINAL_RIG_ID = "opencv-uncalibrated"
+
+
+def is_nominal_rig(rig: Rig) -> bool:
+    """Whether ``rig`` is that nominal, uncalibrated rig (also as a recording of it replays it)."""
+    return bool(rig.metadata.get("uncalibrated")) or rig.rig_id == NOMINAL_RIG_ID
 
 #: ``api=`` -> OpenCV's capture backend constant.
 APIS = {"any": cv2.CAP_ANY, "v4l2": cv2.CAP_V4L2, "ffmpeg": cv2.CAP_FFMPEG, "gstreamer": cv2.CAP_GSTREAMER,
@@ -496,8 +503,9 @@ class OpenCVRigSource(RigSource):
             raise RigInitializationError(f"the cameras deliver {sizes[0][0]}x{sizes[0][1]} and "
                                          f"{sizes[1][0]}x{sizes[1][1]}; give width= and height= so both match")
         width, height = sizes[0]
-        return RigPlacement(width=width, height=height, hfov_deg=o.hfov_deg,
-                            names=o.names).build(rig_id="opencv-uncalibrated")
+        rig = RigPlacement(width=width, height=height, hfov_deg=o.hfov_deg, names=o.names).build(rig_id=NOMINAL_RIG_ID)
+        # marked, so that a recording of it, replayed, is still known for what it is (the daemon refuses it)
+        return Rig(rig.cameras, rig.volume, rig.rig_id, metadata={**rig.metadata, "uncalibrated": True})
 
     # ------------------------------------------------------ from the camera threads
     def _put(self, frame: Frame, *, wait: bool) -> bool:

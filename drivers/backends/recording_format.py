@@ -172,8 +172,9 @@ def _check_row(path: Path, line_no: int, obj: Any, rig: Rig) -> FrameRow:
     unknown = sorted(set(obj) - set(_ROW_KEYS))
     if unknown:
         raise _fail(path, unknown[0], f"{where}: unknown key(s) {unknown}")
-    if obj["camera"] not in rig.names:
-        raise _fail(path, "camera", f"{where}: {obj['camera']!r} is not a camera of the rig {list(rig.names)}")
+    pair = [c.name for c in rig.pair]  # only the pair is recorded and paired (a rig may list more cameras)
+    if obj["camera"] not in pair:
+        raise _fail(path, "camera", f"{where}: {obj['camera']!r} is not a camera of the rig's pair {pair}")
     for key in ("index", "timestamp_ns"):
         if isinstance(obj[key], bool) or not isinstance(obj[key], int):
             raise _fail(path, key, f"{where}: must be an integer, got {obj[key]!r}")

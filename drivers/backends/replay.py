@@ -14,8 +14,8 @@ URL options:
 
 Frames carry the recorded timestamps, indices and ground truth unchanged on the
 first pass. Each further ``loop`` pass shifts timestamps by the recording's span
-(plus one frame period) and indices by the per-camera count, so both keep
-increasing per camera. A take that was not closed cleanly plays without the rows
+(plus one frame period) and indices by the per-camera index span (last - first
++ 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
 whose files are missing or empty
 (:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
 validation: docs/recording-format.md.
@@ -42,7 +42,7 @@ from drivers.base import RigSource
 from drivers.clock import Clock
 from drivers.errors import EndOfStream, RigConfigError, RigInitializationError, RigOperationError
 from drivers.frames import CameraTruth, Frame
-from drivers.pairing import DropPolicy, FramePairer, PairingConfig
+from drivers.pairing import MAX_TOLERANCE_MS, DropPolicy, FramePairer, PairingConfig
 from drivers.url import RigUrl
 
 log = logging.getLogger(__name__)
@@ -109,7 +109,7 @@ class ReplayRigSource(RigSource):
             raise RigConfigError(f"rig URL {url.url!r}: give the recording directory, e.g. replay:///data/take1")
         speed = _parse_speed(url)
         loop = url.take_bool("loop", False)
-        tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001)
+        tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=MAX_TOLERANCE_MS)
         policy = url.take_str("policy", DropPolicy.ALL.value, choices=tuple(p.value for p in DropPolicy))
         url.finish()
         directory = Path(url.target)

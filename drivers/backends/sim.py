@@ -284,6 +284,8 @@ class SimRigSource(RigSource):
                 self.clock.sleep_until(deadline)
                 return None
             self.clock.sleep_until(due)
+            if self._schedule is not schedule or self._loop is None:  # closed by another thread meanwhile
+                raise RigOperationError("sim source closed while a read waited for its frame")
             if due == self._unplug_ns:
                 self._unplugged = True
                 raise RigDisconnectedError(

@@ -32,9 +32,13 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
 import drivers
+from drivers.backends.opencv import is_nominal_rig
+from drivers.backends.recording_format import MANIFEST, read_manifest
+from drivers.url import RigUrl
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_sink_urls
@@ -81,10 +85,21 @@ def check_config(config: DaemonConfig) -> None:
     except drivers.DriverError:
         pass  # a recording or device not there yet: the daemon waits for it, so the config is fine
     rig_file = parse_qs(urlsplit(config.rig.url).query).get("rig")
-    if urlsplit(config.rig.url).scheme == "opencv" and not rig_file:
+    url = RigUrl.parse(config.rig.url)
+    if url.scheme == "opencv" and not rig_file:
         # Its rig without a file is a nominal one, for ghcal capture: 3D joints from it would be wrong.
         raise DaemonConfigError("opencv:// cameras need their calibration: add rig=/path/to/rig.json (ghcal solve)",
                                 key="rig.url")
+    manifest = Path(url.target) / MANIFEST if url.scheme == "replay" and url.target else None
+    if manifest is not None and manifest.is_file():  # a take of such cameras carries the same nominal rig
+        try:
+            nominal = is_nominal_rig(read_manifest(manifest.parent).rig)
+        except drivers.DriverError:
+            nominal = False  # the source reports a broken take itself, naming the field
+        if nominal:
+            raise DaemonConfigError(f"{manifest}: the take was recorded from opencv:// cameras without their "
+                                    "calibration (rig 'opencv-uncalibrated'): its 3D joints would be wrong; record "
+                                    "again with rig=/path/to/rig.json (ghcal solve)", key="rig.url")
     if rig_file:  # a calibration of our own (ghcal): the stream announces its id and camera names
         try:
             rig = load_rig(rig_file[0])

@@ -86,6 +86,10 @@ class DepthaiRigSource(RigSource):
                 rig = load_rig(options.rig_path)
             except RigFileError as e:
                 raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
+            try:
+                return cls(options, rig=rig, link_factory=link_factory, pairing=pairing, clock=clock)
+            except RigConfigError as e:  # the rig file's size against the stream's: name the URL and the file
+                raise RigConfigError(f"rig URL {url.url!r}: option rig={options.rig_path}: {e}") from e
         return cls(options, rig=rig, link_factory=link_factory, pairing=pairing, clock=clock)
 
     def _request(self) -> StereoRequest:

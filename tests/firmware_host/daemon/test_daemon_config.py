@@ -149,3 +149,40 @@ def test_the_configs_in_the_docs_are_valid(doc):
     assert configs, f"no daemon config in {doc}"
     for data in configs:
         daemon_config_from_dict(data)
+
+
+def test_check_config_refuses_a_take_of_uncalibrated_webcams(tmp_path):
+    # the nominal rig of opencv:// without rig= went into the take, and replay:// of it passed as a calibration
+    from drivers.backends.opencv import NOMINAL_RIG_ID
+    from drivers.backends.recording_format import Manifest, write_manifest
+    from ghnerf_runtime.geometry.rig import Rig
+    from ghnerf_runtime.rig_file import load_rig
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "x.onnx").write_bytes(b"")
+    rig = load_rig(REPO_RIG)
+
+    def cfg(url):
+        return daemon_config_from_dict({"rig": {"url": url}, "sinks": [SINK],
+                                        "estimator": {"session": {"model_dir": str(models)}}})
+
+    for name, take_rig in (("marked", Rig(rig.cameras, rig.volume, "webcams", metadata={"uncalibrated": True})),
+                           ("old", Rig(rig.cameras, rig.volume, NOMINAL_RIG_ID))):
+        (tmp_path / name).mkdir()
+        write_manifest(tmp_path / name, Manifest(rig=take_rig, complete=True))
+        with pytest.raises(DaemonConfigError, match=r"^rig\.url: .*manifest\.json: the take was recorded from "
+                                                    r"opencv:// cameras without their calibration"):
+            check_config(cfg(f"replay://{tmp_path / name}"))
+    (tmp_path / "calibrated").mkdir()
+    write_manifest(tmp_path / "calibrated", Manifest(rig=rig, complete=True))
+    check_config(cfg(f"replay://{tmp_path / 'calibrated'}"))
+
+
+def test_the_nominal_webcam_rig_is_marked():
+    from drivers.backends.opencv import OpenCVRigSource, is_nominal_rig
+    from drivers.url import RigUrl
+
+    source = OpenCVRigSource.from_url(RigUrl.parse("opencv://?first=0&second=1"))
+    rig = source._nominal_rig([(640, 480), (640, 480)])
+    assert rig.metadata["uncalibrated"] is True and is_nominal_rig(rig)

@@ -1,0 +1,111 @@
+"""Edges of the sources a reviewer found: a pairing tolerance too large to count in nanoseconds, a close that
+fails, a journal row of a camera outside the pair, a rig file of another size than a depthai stream, a close
+from another thread while a sim read waits."""
+from __future__ import annotations
+
+import json
+import shutil
+import threading
+import time
+
+import pytest
+
+from drivers import (
+    ManualClock,
+    PairingConfig,
+    RigConfigError,
+    RigDisconnectedError,
+    RigInitializationError,
+    RigOperationError,
+    create_rig_source,
+    open_rig,
+)
+from drivers.backends.recording_format import FRAMES, MANIFEST
+from tests.drivers.depthai_host import ScriptedLink
+
+
+@pytest.fixture(scope="module")
+def take(tmp_path_factory, sim_cache):
+    out = tmp_path_factory.mktemp("edges") / "take"
+    with open_rig(f"record+sim://?width=40&height=30&policy=all&seed=3&cache={sim_cache}&out={out}",
+                  clock=ManualClock()) as source:
+        for _ in range(6):
+            source.read(timeout_s=5.0)
+    return out
+
+
+def test_a_tolerance_too_large_is_refused_by_name(take):
+    # int(1e303 ms in ns) overflowed to a bare OverflowError, which took the daemon down
+    with pytest.raises(RigConfigError, match=r"tolerance_ms.*1e\+?303"):
+        create_rig_source(f"replay://{take}?tolerance_ms=1e303")
+    with pytest.raises(RigConfigError, match=r"tolerance_ms must be a number in \(0, 10000\]"):
+        PairingConfig(tolerance_ms=1e303)
+    assert PairingConfig(tolerance_ms=10_000.0).tolerance_ms == 10_000.0
+
+
+def test_a_row_of_a_camera_outside_the_pair_is_refused_at_open(take, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(take, copy)
+    manifest = json.loads((copy / MANIFEST).read_text())
+    extra = dict(manifest["rig"]["cameras"][0], name="extra")
+    manifest["rig"]["cameras"].append(extra)  # a rig may list more cameras than the pair it records
+    (copy / MANIFEST).write_text(json.dumps(manifest))
+    lines = (copy / FRAMES).read_text().splitlines()
+    row = json.loads(lines[3])
+    row["camera"] = "extra"
+    lines[3] = json.dumps(row)
+    (copy / FRAMES).write_text("\n".join(lines) + "\n")
+    with pytest.raises(RigInitializationError, match=r"frames\.jsonl, field 'camera': line 4: 'extra' is not a "
+                                                     r"camera of the rig's pair"):
+        create_rig_source(f"replay://{copy}")
+
+
+class _FailingClose(ScriptedLink):
+    def close(self) -> None:
+        super().close()
+        raise RuntimeError("X_LINK_ERROR while stopping")
+
+
+def test_a_close_that_fails_still_closes_and_the_block_keeps_its_own_error():
+    links: list[ScriptedLink] = []
+
+    def factory():
+        links.append(_FailingClose([(k, k) for k in range(3)], stops=True))
+        return links[-1]
+
+    source = create_rig_source("depthai://", link_factory=factory)
+    with pytest.raises(RigDisconnectedError):  # was the close's RigOperationError
+        with source:
+            while True:
+                source.read(timeout_s=0.5)
+    assert not source.is_open
+    with pytest.raises(RigOperationError):
+        source.open()  # closed stays closed: no second device link
+    assert len(links) == 1
+
+
+def test_a_rig_file_of_another_size_names_the_url_and_the_file():
+    url = "depthai://?rig=docs/examples/rig.json"
+    with pytest.raises(RigConfigError, match=r"rig URL 'depthai://\?rig=docs/examples/rig\.json': option "
+                                             r"rig=docs/examples/rig\.json: rig .* is \d+x\d+ but the stream is"):
+        create_rig_source(url)
+
+
+def test_a_sim_read_waiting_when_another_thread_closes_says_so(sim_cache):
+    source = open_rig(f"sim://?width=40&height=30&fps=1&cache={sim_cache}")
+    source.read(timeout_s=5.0)
+    result: list[object] = []
+
+    def reader():
+        try:
+            result.append(source.read(timeout_s=5.0))
+        except Exception as e:  # noqa: BLE001 - the test looks at what it was
+            result.append(e)
+
+    thread = threading.Thread(target=reader)
+    thread.start()
+    time.sleep(0.3)
+    source.close()
+    thread.join(6.0)
+    assert len(result) == 1 and isinstance(result[0], RigOperationError), result
+    assert "closed" in str(result[0])
