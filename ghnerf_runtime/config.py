@@ -359,6 +359,9 @@ class Joints3DConfig:
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)
         _choice(self, "skeleton_prior", SKELETON_PRIOR_MODES)
+        if self.skeleton_prior == "on" and self.method != "triangulate":  # not "the folder has none" at load
+            _fail(type(self), "skeleton_prior", f"'on' needs method 'triangulate' (the prior refines triangulated "
+                                                f"joints; method is {self.method!r})", self.skeleton_prior)
         _number(self, "max_prior_error_m", 0.0, 100.0, lo_open=True)
         _boolean(self, "prior_flip_test")
         _boolean(self, "single_view_fallback")

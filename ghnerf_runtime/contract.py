@@ -65,6 +65,8 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 #: Channels of the ``depth_stats`` tensor, in order.
 DEPTH_STATS_CHANNELS = ("mean", "std", "lo", "hi")
+#: The image feature maps a sweep level or the render heads may read (``human_feat`` is a stride's key too).
+IMAGE_FEATURES = ("feat_s1", "feat_s2", "feat_s4")
 
 
 class ContractError(RuntimeErrorBase, ValueError):
@@ -99,7 +101,7 @@ class TensorSpec:
         try:
             shape = tuple(d if isinstance(d, str) else int(d) for d in obj["shape"])
             return TensorSpec(str(obj["name"]), shape, str(obj.get("dtype", "float32")), str(obj.get("doc", "")))
-        except (KeyError, TypeError, ValueError) as e:
+        except (KeyError, TypeError, ValueError, OverflowError) as e:  # int(inf): OverflowError
             raise ContractError(f"malformed tensor spec {obj!r} ({e})", key=key) from e
 
 
@@ -256,7 +258,7 @@ class ModelContract:
         last = self.levels[-1]
         hv, wv = H // last.volume_stride, W // last.volume_stride
         feats = [TensorSpec(k, (S, self.channels[k], *self._size(k)), doc=f"image features at 1/{self.strides[k]}")
-                 for k in ("feat_s1", "feat_s2", "feat_s4")]
+                 for k in IMAGE_FEATURES]
         human = ([TensorSpec("human_feat", (S, self.channels["human_feat"], *self._size("human_feat")),
                              doc="pixel-aligned human (ResNet18) features")] if self.has_human else [])
         images = TensorSpec("images", (S, 3, H, W), doc="source images, RGB, [0, 1], undistorted")
@@ -335,12 +337,12 @@ class ModelContract:
             if (lv.spacing not in ("inverse", "linear") or lv.sampling not in ("interval", "planes")
                     or lv.planes < 2 or lv.samples < 1 or lv.volume_stride < 1):
                 fail("levels", f"level {i} is invalid: {lv.to_json()}")
-            if lv.feature not in self.strides:
-                fail("levels", f"level {i} uses unknown feature {lv.feature!r}")
+            if lv.feature not in IMAGE_FEATURES:
+                fail("levels", f"level {i} uses feature {lv.feature!r}, not one of {list(IMAGE_FEATURES)}")
             if self.height % lv.volume_stride or self.width % lv.volume_stride:
                 fail("levels", f"level {i} stride {lv.volume_stride} does not divide {self.width}x{self.height}")
-        if self.render_feature not in self.strides:
-            fail("render_feature", f"unknown render feature {self.render_feature!r}")
+        if self.render_feature not in IMAGE_FEATURES:  # a key of strides is not enough: human_feat is one
+            fail("render_feature", f"render feature {self.render_feature!r} is not one of {list(IMAGE_FEATURES)}")
         if self.heatmap_stride < 1 or self.height % self.heatmap_stride or self.width % self.heatmap_stride:
             fail("heatmap_stride", f"heatmap stride {self.heatmap_stride} must divide {self.width}x{self.height}")
         if self.encoder_heatmaps and not self.has_human:
@@ -395,7 +397,7 @@ class ModelContract:
                 return fn(raw)
             except ContractError:
                 raise
-            except (ValueError, TypeError, KeyError, json.JSONDecodeError) as e:
+            except (ValueError, TypeError, KeyError, OverflowError, json.JSONDecodeError) as e:  # int(inf)
                 raise ContractError(f"cannot parse {raw!r} ({e})", key=p + key) from e
 
         version = get("contract_version")
@@ -599,7 +601,7 @@ def ray_grid(height: int, width: int, stride: int = 1) -> np.ndarray:
 
 
 __all__ = [
-    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "IMAGENET_MEAN", "IMAGENET_STD",
+    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "IMAGE_FEATURES", "IMAGENET_MEAN", "IMAGENET_STD",
     "ContractError", "TensorSpec", "GraphSpec", "LevelSpec", "Normalisation", "ModelContract",
     "source_projections", "source_centers", "target_inputs", "target_projections", "near_far_from_box", "ray_grid",
 ]

@@ -166,7 +166,8 @@ class NovelPainter:
             raise ModelContractError(f"feature version {meta.get(key)!r}; this runtime builds version "
                                      f"{FEATURE_VERSION}", path=str(path), key=key)
         ins = {i.name: i.shape for i in sess.get_inputs()}
-        if set(ins) != set(INPUTS) or ins["planes"][1] != len(PLANES) or list(ins["joints"][1:]) != [NUM_JOINTS, 3]:
+        if (set(ins) != set(INPUTS) or len(ins["planes"]) != 4 or len(ins["joints"]) != 3  # ranks before sizes
+                or ins["planes"][1] != len(PLANES) or list(ins["joints"][1:]) != [NUM_JOINTS, 3]):
             raise ModelContractError(f"inputs planes (N, {len(PLANES)}, H, W) and joints (N, {NUM_JOINTS}, 3) "
                                      f"expected, the file has {ins}", path=str(path), key="planes")
         if OUTPUT not in {o.name for o in sess.get_outputs()}:

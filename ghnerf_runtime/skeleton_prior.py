@@ -243,7 +243,7 @@ class SkeletonPrior:
         ins = {i.name: i.shape for i in sess.get_inputs()}
         outs = {o.name for o in sess.get_outputs()}
         for name, width in zip(INPUTS, (JOINT_FEATURES, CONTEXT_FEATURES)):
-            if name not in ins or ins[name][-1] != width:
+            if name not in ins or len(ins[name]) != (3 if name == INPUTS[0] else 2) or ins[name][-1] != width:
                 raise ModelContractError(f"input {name!r} of width {width} expected, the file has {ins}",
                                          path=str(path), key=name)
         if not set(OUTPUTS) <= outs:

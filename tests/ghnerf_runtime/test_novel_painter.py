@@ -160,3 +160,22 @@ def test_the_views_angle_from_the_sources_is_ghnerf_evals(shot):
     assert np.isnan(angle_from_sources_deg(target, sources, joints, np.zeros(25, bool)))
     with pytest.raises(ConfigError, match="painter_min_angle_deg"):
         NovelViewConfig(painter_min_angle_deg=-1.0)
+
+
+def test_a_painter_whose_inputs_have_another_rank_is_refused(tmp_path):
+    # the shapes were indexed before their rank was checked: an IndexError instead of the contract's error
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph(
+        [helper.make_node("Identity", ["joints"], ["rgb"])], "odd_painter",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, ["N"]),
+         helper.make_tensor_value_info("joints", TensorProto.FLOAT, ["N", 25, 3])],
+        [helper.make_tensor_value_info("rgb", TensorProto.FLOAT, ["N", 25, 3])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    entry = model.metadata_props.add()
+    entry.key, entry.value = META_PREFIX + "feature_version", str(FEATURE_VERSION)
+    onnx.save(model, str(tmp_path / "odd.onnx"))
+    with pytest.raises(ModelContractError, match=r"inputs planes \(N, 12, H, W\)") as e:
+        NovelPainter.load(tmp_path / "odd.onnx")
+    assert e.value.key == "planes" and "odd.onnx" in str(e.value)

@@ -7,6 +7,7 @@ The model is the ``tiny`` preset exported once per test session by the real expo
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
@@ -150,6 +151,20 @@ def test_metadata_resolution_disagreeing_with_the_graph_refused(tiny_model_dir, 
     with pytest.raises(ModelContractError) as e:
         _load_encoder(folder)
     assert e.value.key == "images" and "[2, 3, 64, 64]" in str(e.value) and "encoder.onnx" in str(e.value)
+
+
+@pytest.mark.parametrize(("key", "edit"), [
+    # a key of strides, but no image feature: next() over the features raised a bare StopIteration
+    ("ghnerf.render_feature", lambda v: "human_feat"),
+    # int(inf) raised OverflowError, which no handler took
+    ("ghnerf.channels", lambda v: json.dumps({**json.loads(v), "feat_s1": 1e400}).replace("Infinity", "1e400")),
+])
+def test_impossible_metadata_values_are_refused_by_key(tiny_model_dir, tmp_path, key, edit):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, key: edit(p[key])})
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder)
+    assert e.value.key == key and "encoder.onnx" in str(e.value)
 
 
 def test_missing_metadata_key_refused(tiny_model_dir, tmp_path):

@@ -302,9 +302,36 @@ def test_bad_files_are_refused_with_the_file_named(tiny_prior, tmp_path):
     assert str(other) in str(e.value)
 
 
+def test_a_prior_whose_inputs_have_another_rank_is_refused(tiny_prior, tmp_path):
+    # the last dimension was read before the rank was checked: a scalar input raised IndexError
+    import onnx
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph(
+        [helper.make_node("Identity", ["joint_features"], ["joints"]),
+         helper.make_node("Identity", ["context"], ["log_error"])], "odd_prior",
+        [helper.make_tensor_value_info("joint_features", TensorProto.FLOAT, []),
+         helper.make_tensor_value_info("context", TensorProto.FLOAT, ["N", 8])],
+        [helper.make_tensor_value_info("joints", TensorProto.FLOAT, []),
+         helper.make_tensor_value_info("log_error", TensorProto.FLOAT, ["N", 8])])
+    m = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    m.ir_version = 8
+    for p in onnx.load(str(tiny_prior.path)).metadata_props:  # the real file's version and joint count
+        m.metadata_props.add(key=p.key, value=p.value)
+    odd = tmp_path / "scalar.onnx"
+    onnx.save(m, str(odd))
+    with pytest.raises(ModelContractError, match="input 'joint_features' of width 17 expected") as e:
+        SkeletonPrior.load(odd)
+    assert str(odd) in str(e.value) and e.value.key == "joint_features"
+
+
 def test_config_rejects_unknown_modes():
     with pytest.raises(ConfigError, match="skeleton_prior"):
         Joints3DConfig(skeleton_prior="maybe")
+    # 'on' with a method that never runs the prior was a load error claiming the folder had no prior
+    with pytest.raises(ConfigError, match=r"'on' needs method 'triangulate'.*'volumetric'") as e:
+        Joints3DConfig(method="volumetric", skeleton_prior="on")
+    assert e.value.key == "Joints3DConfig.skeleton_prior"
     with pytest.raises(ConfigError, match="max_prior_error_m"):
         Joints3DConfig(max_prior_error_m=0.0)
     with pytest.raises(ConfigError, match="prior_flip_test"):
