@@ -24,7 +24,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
+import signal
 import sys
+import threading
 from dataclasses import replace
 from pathlib import Path
 from typing import Iterator
@@ -264,8 +267,9 @@ def _run(args) -> int:
     novel = _Sink(args.novel_view, fps, "--novel-view") if args.novel_view else None
     overlay = _Sink(args.overlay, fps, "--overlay") if args.overlay else None
     as_list = not to_stdout and Path(out_path).suffix.lower() == ".json"
-    # .jsonl / stdout: a line per pair as it is done; .json: one list, written whole at the end (below)
-    out = sys.stdout if to_stdout else None if as_list else open(out_path, "w", encoding="utf-8")
+    # .jsonl / stdout: a line per pair as it is done, the file opened at the first (an input that does not
+    # open leaves an earlier file as it was); .json: one list, written whole at the end (below)
+    out = sys.stdout if to_stdout else None
     frames: list[dict] = []
     done = False
     try:
@@ -279,6 +283,8 @@ def _run(args) -> int:
             if as_list:
                 frames.append(obj)
             else:
+                if out is None:
+                    out = open(out_path, "w", encoding="utf-8")
                 out.write(json.dumps(obj, allow_nan=False) + "\n")
                 out.flush()
             if novel is not None:
@@ -313,17 +319,34 @@ def _write_list(path: str, frames: list[dict], done: bool) -> None:
         print(f"ghnerf-run: stopped early; the {len(frames)} pair(s) finished are in {path}", file=sys.stderr)
 
 
+def _interrupt(signum: int, _frame) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
     _check_args(ap, args)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
+    # SIGTERM (timeout, systemd, docker) stops a run as Ctrl-C does: the outputs are closed whole
+    previous = signal.signal(signal.SIGTERM, _interrupt) if threading.current_thread() is threading.main_thread() \
+        else None
     try:
         return _run(args)
+    except KeyboardInterrupt as e:
+        name = str(e) or "SIGINT"
+        print(f"ghnerf-run: stopped ({name}); the outputs hold the pairs finished", file=sys.stderr)
+        return 128 + signal.Signals[name].value  # the shell's figure for a death by that signal: 130, 143
+    except BrokenPipeError:  # `ghnerf-run ... | head`: the reader has what it wanted
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return 0
     except (RuntimeErrorBase, OSError) as e:
         print(f"ghnerf-run: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -436,11 +436,12 @@ def test_a_json_output_is_left_as_it_was_when_no_pair_finished(monkeypatch, tmp_
     assert rc == 2 and out.read_text() == "[{\"sequence\": 7}]\n"
 
 
-def test_a_json_output_keeps_the_pairs_finished_before_ctrl_c(monkeypatch, tmp_path):
+def test_a_json_output_keeps_the_pairs_finished_before_ctrl_c(monkeypatch, tmp_path, capsys):
     out = tmp_path / "joints.json"
-    with pytest.raises(KeyboardInterrupt):
-        _stub_run(monkeypatch, out, fail_at=1, fail=KeyboardInterrupt())
-    assert json.loads(out.read_text()) == [{"sequence": 0}]
+    rc, _ = _stub_run(monkeypatch, out, fail_at=1, fail=KeyboardInterrupt())
+    assert rc == 130 and json.loads(out.read_text()) == [{"sequence": 0}]
+    err = capsys.readouterr().err
+    assert "ghnerf-run: stopped (SIGINT)" in err and "Traceback" not in err  # was a 25-line traceback
     rc, _ = _stub_run(monkeypatch, out)  # a whole run replaces it
     assert rc == 0 and len(json.loads(out.read_text())) == 3
 
@@ -452,3 +453,60 @@ def test_out_is_checked_before_the_model_loads(monkeypatch, tmp_path, capsys):
     assert f"--out {tmp_path / 'dir.json'}: is a folder" in capsys.readouterr().err
     rc, _ = _stub_run(monkeypatch, tmp_path / "new" / "joints.jsonl")  # its folder is made, lines as they come
     assert rc == 0 and len((tmp_path / "new" / "joints.jsonl").read_text().splitlines()) == 3
+
+
+def test_sigterm_stops_a_run_as_ctrl_c_does(monkeypatch, tmp_path, capsys):
+    import os
+    import signal
+
+    out = tmp_path / "joints.jsonl"
+
+    class _Killed(_StubEstimator):
+        def estimate(self, images, *, sequence, novel_view=None, timestamp_s=None):
+            if sequence == 1:
+                os.kill(os.getpid(), signal.SIGTERM)  # as timeout(1) or systemd stop it
+            return super().estimate(images, sequence=sequence)
+
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Killed())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
+    before = signal.getsignal(signal.SIGTERM)
+    rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out)])
+    assert rc == 143 and "stopped (SIGTERM)" in capsys.readouterr().err
+    assert [json.loads(line)["sequence"] for line in out.read_text().splitlines()] == [0]
+    assert signal.getsignal(signal.SIGTERM) == before  # put back
+
+
+def test_a_jsonl_output_is_left_as_it_was_when_an_input_fails_before_the_first_pair(monkeypatch, tmp_path, capsys):
+    out = tmp_path / "joints.jsonl"
+    out.write_text("an earlier run's lines\n")
+
+    def no_pairs(args):
+        raise cli_run.UsageError("b.mp4: cannot open the video")
+        yield  # pragma: no cover - a generator, as the real one
+
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run, "_pairs", no_pairs)
+    assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out)]) == 2
+    assert out.read_text() == "an earlier run's lines\n"  # was emptied before the input was read
+
+
+def test_a_closed_pipe_ends_the_run_quietly(monkeypatch, tmp_path):
+    # `ghnerf-run ... --out - | head`: was "error: [Errno 32] Broken pipe" and status 2
+    class _Closed:
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self):
+            pass
+
+        def fileno(self):
+            return -1
+
+    monkeypatch.setattr(cli_run.sys, "stdout", _Closed())
+    monkeypatch.setattr(cli_run.os, "dup2", lambda fd, target: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
+    assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", "-"]) == 0
