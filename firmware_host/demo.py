@@ -28,6 +28,7 @@ ground-truth joints are streamed and printed instead, every one labelled ground 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -204,10 +205,17 @@ def _print_joints(pair: drivers.FramePair, result: PairResult | None) -> None:
 
 
 # ------------------------------------------------------------------ main
+def _positive_seconds(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):  # -1 or nan ran no pair and said all was well
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, got {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("--url", default=DEFAULT_URL, help="rig URL (sim://, replay://DIR, depthai://)")
-    parser.add_argument("--seconds", type=float, default=3.0, help="how long to read pairs")
+    parser.add_argument("--seconds", type=_positive_seconds, default=3.0, help="how long to read pairs")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
     parser.add_argument("--sink", default=None,
                         help="joint-stream sink URL (default: file://OUT/joints.jsonl, rewritten each run)")
@@ -224,6 +232,8 @@ def _run(args: argparse.Namespace) -> int:
     if not args.truth_only:
         cfg = _estimator_config(args)
         _check_model_dir(cfg.session.model_dir)
+    if args.out.exists() and not args.out.is_dir():
+        raise DemoError(f"--out {args.out}: is a file; give a folder for the demo's outputs")
     args.out.mkdir(parents=True, exist_ok=True)
     if args.sink:
         sink_url = args.sink
@@ -266,6 +276,9 @@ def _run(args: argparse.Namespace) -> int:
                     break
                 except (drivers.RigTimeoutError, drivers.RigDisconnectedError) as e:
                     print(f"stopping: {e}")
+                    break
+                except KeyboardInterrupt:  # Ctrl-C: the summary of what ran, not a traceback
+                    print("stopping: Ctrl-C")
                     break
                 delivered += 1
                 if estimator is None:
@@ -314,6 +327,11 @@ def _run(args: argparse.Namespace) -> int:
         print(f"wrote {png} (pair {last_pair.sequence} with {what})")
     if last_pair is not None:
         _print_joints(last_pair, last_result)
+    if sink_stats.submitted and not sink_stats.sent:  # a sink that never connected: say so in the status too
+        print(f"{PROG}: error: the sink {sink_url} sent none of the {sink_stats.submitted} frames "
+              f"({sink_stats.connect_failures} failed connects; last error: {sink_stats.last_error})",
+              file=sys.stderr)
+        return 2
     return 0
 
 

@@ -185,3 +185,40 @@ def test_the_default_sink_writes_into_an_out_folder_with_a_space_and_a_hash(tmp_
     printed = capsys.readouterr().out
     assert rc == 0, printed
     assert _joints_rows(out / "joints.jsonl") and not (tmp_path / "my run").exists()
+
+
+def test_a_sink_that_sent_nothing_fails_the_run(tmp_path, capsys, sim_url):
+    # a sink folder that does not exist: it retried, sent nothing, and the demo exited 0
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path / "out"),
+                    "--sink", (tmp_path / "nowhere" / "j.jsonl").as_uri()])
+    err = capsys.readouterr().err
+    assert rc == 2 and "sent none of the" in err and "No such file or directory" in err
+
+
+def test_seconds_and_out_are_checked_by_name(tmp_path, capsys):
+    for seconds in ("-1", "nan", "0"):
+        with pytest.raises(SystemExit) as e:
+            demo.main(["--truth-only", "--seconds", seconds])
+        assert e.value.code == 2 and "--seconds: must be a finite number of seconds > 0" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("")
+    assert demo.main(["--truth-only", "--out", str(tmp_path / "afile")]) == 2
+    assert f"--out {tmp_path / 'afile'}: is a file" in capsys.readouterr().err
+
+
+def test_ctrl_c_ends_the_run_with_its_summary(tmp_path, capsys, sim_url, monkeypatch):
+    import drivers
+
+    real_read = drivers.RigSource.read
+    calls = {"n": 0}
+
+    def read(self, timeout_s=None):
+        calls["n"] += 1
+        if calls["n"] == 4:
+            raise KeyboardInterrupt
+        return real_read(self, timeout_s=timeout_s)
+
+    monkeypatch.setattr(drivers.RigSource, "read", read)
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "5", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "stopping: Ctrl-C" in out and "the rig delivered 3 pairs" in out
+    assert (tmp_path / "sim_pair.png").is_file()
