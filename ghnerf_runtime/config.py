@@ -742,8 +742,9 @@ def _build(cls: type, data: Any, path: str) -> Any:
         field_name = (e.key or "").split(".")[-1]
         where = f"{path}.{field_name}" if path else field_name
         raise ConfigError(str(e).split(": ", 1)[-1], key=where) from None
-    except KeypointConfigError as e:
-        raise ConfigError(str(e), key=path or cls.__name__) from None
+    except KeypointConfigError as e:  # keyed by the dotted path the user wrote, as the other sections are
+        where = ".".join(k for k in (path, e.field) if k) or cls.__name__
+        raise ConfigError(str(e).split(": ", 1)[-1] if e.field else str(e), key=where) from None
 
 
 def config_from_dict(data: Mapping[str, Any]) -> EstimatorConfig:

@@ -75,7 +75,11 @@ RefineMethod = Literal["quadratic", "centroid", "none"]
 
 
 class KeypointConfigError(RuntimeErrorBase, ValueError):
-    """A :class:`KeypointDecoderConfig` field is out of range; the message names it."""
+    """A :class:`KeypointDecoderConfig` field is out of range; the message names it, ``field`` too."""
+
+    def __init__(self, message: str, field: str | None = None) -> None:
+        super().__init__(message)
+        self.field = field
 
 
 @dataclass(frozen=True)
@@ -99,7 +103,7 @@ class KeypointDecoderConfig:
 
     def __post_init__(self) -> None:
         def fail(field: str, why: str) -> None:
-            raise KeypointConfigError(f"KeypointDecoderConfig.{field}: {why}, got {getattr(self, field)!r}")
+            raise KeypointConfigError(f"KeypointDecoderConfig.{field}: {why}, got {getattr(self, field)!r}", field)
 
         def real(value) -> bool:
             return isinstance(value, numbers.Real) and not isinstance(value, bool) and bool(np.isfinite(value))

@@ -46,7 +46,7 @@ def test_unknown_keys_are_named(data, key):
     ({"novel_view": {"enabled": "yes"}}, "novel_view.enabled"),
     ({"tracking": {"min_joints": 1}}, "tracking.min_joints"),
     ({"frame_check": {"min_std": float("nan")}}, "frame_check.min_std"),
-    ({"decoder": {"threshold": 2.0}}, "decoder"),
+    ({"decoder": {"threshold": 2.0}}, "decoder.threshold"),  # was "decoder" alone
     ({"roi": []}, "roi"),
 ])
 def test_bad_values_are_named(data, key):
