@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import select
 import socket
@@ -28,7 +29,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
 
 from firmware_host.addresses import ipv4_first
 from firmware_host.protocol.constants import Fault
@@ -132,25 +133,63 @@ def _reject_unknown_keys(url: str, query: dict[str, list[str]], accepted: Sequen
         raise ListenError(f"{url}: unknown parameter {', '.join(unknown)}; {takes}")
 
 
-def open_port(url: str) -> "_UdpPort | _SerialPort":
-    """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces, IPv4 and IPv6) or ``serial://DEVICE?baud=N``."""
-    parts = urlsplit(url)
+def _refuse_repeats(url: str, query: dict[str, list[str]]) -> None:
+    """``baud=9600&baud=921600`` is refused, as the sinks refuse it, rather than one of them quietly winning."""
+    repeated = sorted(k for k, values in query.items() if len(values) > 1)
+    if repeated:
+        raise ListenError(f"{url}: {', '.join(repeated)} given more than once")
+
+
+def _udp_host(url: str, parts: SplitResult) -> str:
+    """The host to bind: empty for every interface; an IPv6 zone (``[fe80::1%25eth0]``, RFC 6874) decoded."""
+    if parts.username is not None or parts.password is not None:
+        raise ListenError(f"{url}: a udp:// URL takes no user info (the part before '@')")
+    if parts.path not in ("", "/"):
+        raise ListenError(f"{url}: a udp:// URL takes no path ({parts.path!r}); e.g. udp://:9870")
+    host = parts.netloc.rpartition("@")[2]
+    if host.startswith("["):  # the bracketed literal as written: a zone id keeps its case (hostname lowers it)
+        return unquote(host[1:host.index("]")])
+    return unquote(parts.hostname or "")
+
+
+def _ipv6_hint(parts: SplitResult) -> str:
+    return "; an IPv6 address goes in brackets, e.g. udp://[::1]:9870" if parts.netloc.count(":") > 1 \
+        and "[" not in parts.netloc else ""
+
+
+def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
+    """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces, IPv4 and IPv6) or ``serial:///dev/DEVICE?baud=N``.
+
+    ``ephemeral``: accept port 0, a port the system picks (read it from ``.address``); the command line
+    refuses it, since nothing would tell the sender which port to use.
+    """
+    try:
+        parts = urlsplit(url)
+    except ValueError as e:  # e.g. "Invalid IPv6 URL": an unclosed [
+        raise ListenError(f"{url}: cannot be parsed: {e}") from None
     scheme = parts.scheme.lower()  # UDP:// is udp:// (as for the sinks)
     query = parse_qs(parts.query, keep_blank_values=True)
     if scheme in _ACCEPTED:  # another scheme is refused as such below
         _reject_unknown_keys(url, query, _ACCEPTED[scheme])
+        _refuse_repeats(url, query)
     if scheme == "udp":
         try:
             port = parts.port
         except ValueError as e:
-            raise ListenError(f"{url}: bad port: {e}") from None
+            raise ListenError(f"{url}: bad port: {e}{_ipv6_hint(parts)}") from None
         if port is None:
-            raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870")
-        return _UdpPort(parts.hostname or "", port)
+            raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870{_ipv6_hint(parts)}")
+        if port == 0 and not ephemeral:
+            raise ListenError(f"{url}: bad port 0: the system would pick one that no sender knows; "
+                              f"give 1..65535, e.g. udp://:9870")
+        return _UdpPort(_udp_host(url, parts), port)
     if scheme == "serial":
         device = parts.netloc + parts.path
         if not device:
             raise ListenError(f"{url}: give the device, e.g. serial:///dev/ttyUSB0?baud=921600")
+        if parts.netloc or not parts.path.startswith("/"):
+            # serial://dev/ttyUSB0 is the relative path dev/ttyUSB0 (its "dev" a URL's host): three slashes
+            raise ListenError(f"{url}: the device is an absolute path, e.g. serial:///{device.lstrip('/')}")
         try:
             baud = int(query.get("baud", ["115200"])[0])
         except ValueError:
@@ -246,16 +285,28 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     return tally
 
 
+def _positive_seconds(raw: str) -> float:
+    """``--seconds``: a finite number > 0 (``-1`` or ``nan`` would end the listening before it began)."""
+    try:
+        value = float(raw)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, not {raw!r}")
+    return value
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Protocol: docs/protocol.md")
     ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6) or "
-                                "serial://DEVICE?baud=N")
+                                "serial:///dev/DEVICE?baud=N (three slashes: an absolute path)")
     ap.add_argument("--json", action="store_true", help="every message (and decode error) as a JSON line")
-    ap.add_argument("--seconds", type=float, default=None, help="stop after this long (default: Ctrl-C)")
+    ap.add_argument("--seconds", type=_positive_seconds, default=None,
+                    help="stop after this long (default: Ctrl-C)")
     args = ap.parse_args(argv)
     try:
-        port = open_port(args.url)
+        port = open_port(args.url)  # port 0 refused: nobody would learn which port was bound
     except ListenError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2

@@ -49,6 +49,10 @@ class SerialSink(ProtocolSink):
         port = u.netloc + u.path
         if not port:
             raise SinkConfigError(url, "port", port, "expected serial:///dev/ttyACM0")
+        if u.netloc or not u.path.startswith("/"):
+            # serial://dev/ttyACM0 would be the relative path dev/ttyACM0 (its "dev" a URL's host), opened
+            # from the daemon's working directory and retried forever: the path is absolute (as for file://)
+            raise SinkConfigError(url, "port", port, f"expected an absolute path: serial:///{port.lstrip('/')}")
         baud = u.take("baud", positive_int, 115200, kw)
         timeout_ms = u.take("write_timeout_ms", positive_int, 100, kw)
         options = SinkOptions.take(u, kw)

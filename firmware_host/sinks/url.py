@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs, unquote, urlsplit
 
 from firmware_host.errors import SinkConfigError
 
@@ -96,15 +96,27 @@ def boolean(raw: str) -> bool:
 
 
 def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]:
-    """``host:port`` from the URL's location; IPv6 hosts in brackets."""
+    """``host:port`` from the URL's location; IPv6 hosts in brackets, a zone percent-encoded
+    (``udp://[fe80::1%25eth0]:9000``, RFC 6874). User info and a path are refused, not ignored."""
     parts = urlsplit(u.url)
+    if parts.username is not None or parts.password is not None:
+        raise SinkConfigError(u.url, "user info", parts.netloc.rpartition("@")[0],
+                              f"{u.scheme}:// takes no user info (the part before '@')")
+    if u.path not in ("", "/"):
+        raise SinkConfigError(u.url, "path", u.path, f"{u.scheme}:// takes host:port and no path")
+    hint = f"; an IPv6 address goes in brackets, e.g. {u.scheme}://[::1]:9000" if u.netloc.count(":") > 1 \
+        and "[" not in u.netloc else ""
     host = parts.hostname
     if not host:
-        raise SinkConfigError(u.url, "host", u.netloc, "missing host")
+        raise SinkConfigError(u.url, "host", u.netloc, "missing host" + hint)
+    hostinfo = parts.netloc.rpartition("@")[2]
+    if hostinfo.startswith("["):  # as written: hostname lowers it, and a zone (interface name) keeps its case
+        host = hostinfo[1:hostinfo.index("]")]
+    host = unquote(host)  # fe80::1%25eth0 -> fe80::1%eth0, as getaddrinfo takes it
     try:
         port = parts.port
     except ValueError as e:
-        raise SinkConfigError(u.url, "port", u.netloc, str(e)) from e
+        raise SinkConfigError(u.url, "port", u.netloc, str(e) + hint) from e
     if port is None:
         if default_port is None:
             raise SinkConfigError(u.url, "port", u.netloc, "missing port")

@@ -15,7 +15,7 @@ from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame
 
 
 def test_udp_summary_counts_what_the_sink_sent():
-    port = listen.open_port("udp://127.0.0.1:0")
+    port = listen.open_port("udp://127.0.0.1:0", ephemeral=True)
     host, number = port.address
     out = io.StringIO()
     result: list = []
@@ -105,7 +105,7 @@ def _datagram_reaches(port, family: int, address: str) -> bool:
 
 def test_udp_on_every_interface_hears_ipv4_and_ipv6_senders():
     # udp://localhost sinks used to send to ::1 (glibc's first answer on many hosts) and nobody heard them
-    port = listen.open_port("udp://:0")
+    port = listen.open_port("udp://:0", ephemeral=True)
     try:
         if port.sock.family == socket.AF_INET6:
             assert port.sock.getsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY) == 0
@@ -127,7 +127,7 @@ def test_udp_on_every_interface_falls_back_to_ipv4_without_ipv6(monkeypatch):
         return real_socket(family, *args, **kwargs)
 
     monkeypatch.setattr(listen.socket, "socket", no_ipv6)
-    port = listen.open_port("udp://:0")
+    port = listen.open_port("udp://:0", ephemeral=True)
     try:
         assert port.sock.family == socket.AF_INET and port.address[0] == "0.0.0.0"
         assert _datagram_reaches(port, socket.AF_INET, "127.0.0.1")
@@ -138,7 +138,7 @@ def test_udp_on_every_interface_falls_back_to_ipv4_without_ipv6(monkeypatch):
 def test_udp_on_an_ipv6_literal():
     if not socket.has_ipv6:
         pytest.skip("no IPv6 here")
-    port = listen.open_port("udp://[::1]:0")
+    port = listen.open_port("udp://[::1]:0", ephemeral=True)
     try:
         assert port.sock.family == socket.AF_INET6 and _datagram_reaches(port, socket.AF_INET6, "::1")
     finally:
@@ -167,5 +167,5 @@ def test_the_listener_and_the_udp_sink_pick_a_name_s_address_by_one_rule(monkeyp
 
 
 def test_the_scheme_is_case_insensitive():
-    port = listen.open_port("UDP://127.0.0.1:0")
+    port = listen.open_port("UDP://127.0.0.1:0", ephemeral=True)
     port.close()

@@ -1,0 +1,110 @@
+"""Edge cases of the udp:// and serial:// URLs, for the sinks and for ``ghnerf-listen``: a mistake is refused,
+named, never taken as something else (a relative path, a random port, one of two bauds) or ignored."""
+from __future__ import annotations
+
+from urllib.parse import urlsplit
+
+import pytest
+
+from firmware_host import listen
+from firmware_host.errors import SinkConfigError
+from firmware_host.sinks import open_sink
+from firmware_host.sinks.serial_sink import SerialSink
+from firmware_host.sinks.url import host_port, parse_url
+
+
+def _refused(url: str) -> SinkConfigError:
+    """The SinkConfigError ``open_sink(url)`` raises; a sink that opens instead is closed (no thread left behind)."""
+    try:
+        sink = open_sink(url)
+    except SinkConfigError as e:
+        return e
+    sink.close(0.5)
+    pytest.fail(f"{url} was accepted")
+
+
+def _listen_fails(capsys, *argv: str) -> str:
+    assert listen.main(list(argv)) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("ghnerf-listen: error: ") and "\n" not in err and "Traceback" not in err
+    return err
+
+
+@pytest.mark.parametrize("url, message", [
+    ("udp://[::1:9871", "cannot be parsed"),  # an unclosed [: was a ValueError traceback, exit 1
+    ("udp://:0", "bad port 0"),  # was bound to a port nobody was told, exit 0
+    ("udp://127.0.0.1:0", "bad port 0"),
+    ("serial:///dev/null?baud=9600&baud=921600", "baud given more than once"),  # was the first, quietly
+    ("serial://dev/ttyUSB0?baud=9600", "serial:///dev/ttyUSB0"),  # was the relative path dev/ttyUSB0
+    ("serial:dev/ttyUSB0", "serial:///dev/ttyUSB0"),
+    ("udp://::1:9870", "brackets, e.g. udp://[::1]:9870"),
+    ("udp://:9870/extra/path", "no path"),
+    ("udp://user:pw@127.0.0.1:9870", "no user info"),
+])
+def test_listen_refuses_a_bad_url_in_one_line_exit_2(url, message, capsys):
+    err = _listen_fails(capsys, url, "--seconds", "0.1")
+    assert url in err and message in err
+
+
+def test_listen_api_takes_port_0_only_when_asked():
+    with pytest.raises(listen.ListenError, match="bad port 0"):
+        listen.open_port("udp://127.0.0.1:0")
+    port = listen.open_port("udp://127.0.0.1:0/", ephemeral=True)  # a trailing / is no path
+    try:
+        assert port.address[1] > 0
+    finally:
+        port.close()
+
+
+def test_listen_decodes_an_ipv6_zone():
+    url = "udp://[fe80::1%25Eth0]:9870"
+    assert listen._udp_host(url, urlsplit(url)) == "fe80::1%Eth0"  # decoded; the interface name keeps its case
+    assert listen._udp_host("udp://[::1]:1", urlsplit("udp://[::1]:1")) == "::1"
+    assert listen._udp_host("udp://:1", urlsplit("udp://:1")) == ""
+
+
+@pytest.mark.parametrize("seconds", ["-1", "0", "nan", "inf", "-inf", "soon"])
+def test_listen_seconds_must_be_positive_and_finite(seconds, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        listen.main(["udp://127.0.0.1:9", f"--seconds={seconds}"])  # = : argparse takes -inf for an option
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "--seconds" in err and "finite number of seconds > 0" in err
+
+
+@pytest.mark.parametrize("url", ["serial://dev/ttyACM0", "serial://dev/ttyACM0?baud=921600", "serial:dev/ttyACM0",
+                                 "serial://localhost/dev/ttyACM0"])
+def test_serial_sink_refuses_a_relative_or_hosted_device(url):
+    e = _refused(url)
+    assert e.field == "port" and e.url == url and "absolute path" in str(e) and "serial:///" in str(e)
+
+
+def test_serial_sink_still_takes_an_absolute_path():
+    assert SerialSink.from_url("serial:///dev/ttyACM0?baud=921600").port == "/dev/ttyACM0"
+    assert SerialSink.from_url("serial:/dev/ttyACM0").port == "/dev/ttyACM0"
+
+
+@pytest.mark.parametrize("url, field, value", [
+    ("udp://127.0.0.1:9000/extra/path", "path", "/extra/path"),
+    ("udp://user:pw@127.0.0.1:9000", "user info", "user:pw"),
+    ("udp://user@127.0.0.1:9000", "user info", "user"),
+    ("vmc://127.0.0.1:39539/x", "path", "/x"),
+    ("vmc://me@127.0.0.1", "user info", "me"),
+])
+def test_udp_and_vmc_refuse_what_they_would_ignore(url, field, value):
+    e = _refused(url)
+    assert (e.field, e.value, e.url) == (field, value, url)
+
+
+def test_an_unbracketed_ipv6_address_gets_a_hint():
+    assert "missing host; an IPv6 address goes in brackets, e.g. udp://[::1]:9000" in str(_refused("udp://::1:9000"))
+    assert "in brackets, e.g. vmc://[::1]" in str(_refused("vmc://::1"))
+    plain = str(_refused("udp://:9000"))
+    assert "missing host" in plain and "brackets" not in plain
+
+
+def test_host_port_decodes_a_zone_and_takes_a_trailing_slash():
+    assert host_port(parse_url("udp://[fe80::1%25Eth0]:9000")) == ("fe80::1%Eth0", 9000)
+    assert host_port(parse_url("udp://[::1]:9000")) == ("::1", 9000)
+    assert host_port(parse_url("udp://Example.COM:9000/")) == ("example.com", 9000)
+    assert host_port(parse_url("vmc://127.0.0.1"), 39539) == ("127.0.0.1", 39539)
