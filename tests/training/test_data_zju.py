@@ -277,3 +277,51 @@ def test_convert_refuses_a_bad_shard_size(tmp_path, subject, shard_size):
     with pytest.raises(DataConfigError, match="shard_size"):
         convert_zju(subject[0], tmp_path / "ds", ZjuConfig(resolution=RES, view_sets=((0, 1),)), shard_size=shard_size)
     assert not (tmp_path / "ds" / "dataset.json").exists()
+
+
+def test_a_copy_with_t_in_metres_is_refused(tmp_path, subject):
+    # read as millimetres, every camera sat within millimetres of the origin and the samples were wrong, silently
+    annots = np.load(subject[0] / ANNOTS, allow_pickle=True).item()
+    annots["cams"] = {k: list(v) for k, v in annots["cams"].items()}
+    annots["cams"]["T"] = [np.asarray(t) / 1000.0 for t in annots["cams"]["T"]]
+    np.save(tmp_path / ANNOTS, annots, allow_pickle=True)
+    with pytest.raises(DatasetError, match=r"cams.T: the 4 camera centres lie within .* mm .* in metres") as err:
+        ZjuSequence(tmp_path)
+    assert err.value.path == str(tmp_path / ANNOTS)
+
+
+def test_masks_and_sizes_are_read_as_a_partial_copy_needs(tmp_path, subject):
+    import cv2
+
+    _, cams, frames = subject
+    root = write_zju_format(tmp_path / "s", cams[:2], [ZjuFrame(f.images[:2], f.masks[:2], f.kpts2d[:2], f.joints_3d)
+                                                        for f in frames[:2]],
+                            image_ext=".png")
+    # an RGBA mask (re-saved by an editor): its opaque alpha made every pixel the person
+    mask_path = root / "mask" / "Camera_B1" / "000001.png"
+    grey = cv2.imread(str(mask_path), cv2.IMREAD_UNCHANGED)
+    rgba = np.dstack([grey, grey, grey, np.full_like(grey, 255)])
+    cv2.imwrite(str(mask_path), rgba)
+    seq = ZjuSequence(root)
+    assert np.array_equal(seq.read_mask(1, 0), grey != 0) and not seq.read_mask(1, 0).all()
+    # a camera's size from the frame asked for: without its frame 0 the other frames still have a camera
+    (root / "Camera_B2" / "000000.png").unlink()
+    assert seq.camera(1, frame=1).size == (cams[1].width, cams[1].height)
+    # a mask of another size than its image is named, not the image
+    small = root / "mask" / "Camera_B2" / "000001.png"
+    cv2.imwrite(str(small), np.zeros((10, 10), np.uint8))
+    with pytest.raises(DatasetError, match=r"mask \(10, 10\) differs from its image") as err:
+        zju_sample(seq, 1, (0, 1), ZjuConfig(resolution=64, view_sets=((0, 1),)))
+    assert err.value.path == str(small)
+
+
+def test_a_cut_cache_array_is_named_and_rendered_again(tmp_path):
+    from training.data.cache import _array_is_whole
+
+    path = tmp_path / "images.npy"
+    np.save(path, np.zeros((4, 8), np.float32))
+    assert _array_is_whole(path)
+    path.write_bytes(path.read_bytes()[:60])
+    assert not _array_is_whole(path)
+    path.write_bytes(b"")  # a stop mid-write: np.load raised a bare EOFError
+    assert not _array_is_whole(path)

@@ -155,7 +155,17 @@ def shard_is_complete(folder: Path, first_index: int, count: int) -> bool:
     if not isinstance(data, dict):  # damaged: render the shard again
         return False
     return data.get("first_index") == first_index and data.get("count") == count and all(
-        (folder / f"{name}.npy").is_file() for name in FIELDS)
+        _array_is_whole(folder / f"{name}.npy") for name in FIELDS)
+
+
+def _array_is_whole(path: Path) -> bool:
+    """``path`` is a .npy file as long as its header says (a cut one is rendered again on resume): numpy maps
+    it only then (an empty file: EOFError; a short one: ValueError)."""
+    try:
+        np.load(path, mmap_mode="r")
+        return True
+    except (OSError, ValueError, EOFError):
+        return False
 
 
 def remove_stale_temporaries(split_dir: Path) -> None:
@@ -244,8 +254,8 @@ class ShardedSplit:
             path = shard.folder / f"{name}.npy"
             try:
                 a = np.load(path, mmap_mode="r")
-            except (OSError, ValueError) as e:
-                raise DatasetError(path, f"unreadable array: {e}") from e
+            except (OSError, ValueError, EOFError) as e:  # EOFError: an empty file (a stop mid-write)
+                raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
             expect = (shard.count, *shape_fn(self.num_views, self.resolution))
             if a.shape != expect or a.dtype != dtype:
                 raise DatasetError(path, f"has shape {a.shape} {a.dtype}, expected {expect} {dtype}")

@@ -76,6 +76,11 @@ def _as_rotation(value, path: Path, c: int) -> np.ndarray:
     return R
 
 
+#: Camera centres closer together than this (m) are taken for a T in the wrong unit: ZJU-MoCap's rings of
+#: cameras span metres, and T in metres read as millimetres puts them all within a few millimetres.
+MIN_CAMERA_SPREAD_M = 0.1
+
+
 def parse_cameras(annots: dict, path: Path) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """``[(K, R, t_metres, D), ...]`` per camera from ``annots["cams"]`` (errors name ``path``)."""
     cams = annots.get("cams")
@@ -96,6 +101,12 @@ def parse_cameras(annots: dict, path: Path) -> list[tuple[np.ndarray, np.ndarray
             raise DatasetError(path, f"camera {c}: cams.K[{c}] must be 3x3 and cams.T[{c}] a 3-vector, "
                                      f"got {K.shape}, {T.shape}")
         out.append((K, _as_rotation(cams["R"][c], path, c), T / MM_PER_M, D))
+    centres = np.array([-R.T @ t for _, R, t, _ in out])
+    spread = float(np.ptp(centres, axis=0).max()) if len(out) > 1 else np.inf
+    if spread < MIN_CAMERA_SPREAD_M:  # a copy already in metres, read as millimetres: every camera at the origin
+        raise DatasetError(path, f"cams.T: the {len(out)} camera centres lie within {1000 * spread:.1f} mm of one "
+                                 f"another once read as millimetres (ZJU-MoCap stores T in mm): is this copy's T "
+                                 "in metres? Multiply it by 1000")
     return out
 
 
@@ -204,19 +215,21 @@ class ZjuSequence:
         return image
 
     def read_mask(self, frame: int, cam: int) -> np.ndarray:
-        """``(H, W)`` bool, True where the mask file is non-zero."""
+        """``(H, W)`` bool, True where the mask file is non-zero (its colour channels: a re-saved RGBA mask's
+        opaque alpha would make it all person)."""
         path = self.mask_path(frame, cam)
         mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if mask is None:
             raise DatasetError(path, "missing or unreadable mask")
-        return (mask if mask.ndim == 2 else mask.max(axis=-1)) != 0
+        return (mask if mask.ndim == 2 else mask[..., :3].max(axis=-1)) != 0
 
-    def camera(self, cam: int) -> Camera:
-        """Camera ``cam`` (metres); its image size is read from its frame-0 image once."""
-        self._check(0, cam)
+    def camera(self, cam: int, frame: int = 0) -> Camera:
+        """Camera ``cam`` (metres); its image size is read once, from the first frame asked for (not always
+        frame 0: a copy without a camera's first images still converts the frames it has)."""
+        self._check(frame, cam)
         if cam not in self._cameras:
             K, R, t, D = self._calib[cam]
-            h, w = self.read_image(0, cam).shape[:2]
+            h, w = self.read_image(frame, cam).shape[:2]
             name = Path(self.relative_image_path(0, cam)).parent.name or f"cam{cam}"
             try:
                 self._cameras[cam] = Camera(name, w, h, K, D, R, t)

@@ -122,7 +122,7 @@ def _frame_joints(seq: ZjuSequence, frame: int, kp2d: np.ndarray | None, config:
         valid = (j3[:, 3] > 0) & np.all(np.isfinite(j3[:, :3]), axis=1)
         return np.where(valid[:, None], j3[:, :3], 0.0), valid, "keypoints3d"
     if kp2d is not None:
-        cams = [seq.camera(c) for c in range(seq.num_cameras)]
+        cams = [seq.camera(c, frame) for c in range(seq.num_cameras)]
         weights = np.where(kp2d[..., 2] > config.min_confidence, kp2d[..., 2], 0.0)
         result = triangulate_robust(kp2d[..., :2], cams, weights)
         return result.points, result.valid, "triangulated"
@@ -152,13 +152,16 @@ def zju_view(seq: ZjuSequence, frame: int, cam_index: int, name: str, joints: np
              kp2d: np.ndarray | None, config: ZjuConfig) -> ViewData:
     """One crop view of camera ``cam_index`` at ``frame`` (see the module docstring)."""
     S = config.resolution
-    camera = seq.camera(cam_index)
+    camera = seq.camera(cam_index, frame)
     image = seq.read_image(frame, cam_index)
     mask_full = seq.read_mask(frame, cam_index)
-    if image.shape[:2] != (camera.height, camera.width) or mask_full.shape != image.shape[:2]:
+    if image.shape[:2] != (camera.height, camera.width):
         raise DatasetError(seq.image_path(frame, cam_index),
-                           f"image {image.shape[:2]} / mask {mask_full.shape} differ from the camera's "
-                           f"{camera.height}x{camera.width}")
+                           f"image {image.shape[:2]} differs from the camera's {camera.height}x{camera.width} "
+                           "(its other frames' size)")
+    if mask_full.shape != image.shape[:2]:  # the mask is the odd one: name it
+        raise DatasetError(seq.mask_path(frame, cam_index),
+                           f"mask {mask_full.shape} differs from its image {image.shape[:2]}")
     kp = None if kp2d is None else kp2d[cam_index]
     roi = _view_roi(camera, joints, valid, kp, mask_full, config, seq.mask_path(frame, cam_index))
     maps = build_undistort_crop_maps(camera, roi, S)
