@@ -126,7 +126,8 @@ class RecordingWriter:
         self.manifest = manifest
         self.options = options
         self.frames_written = 0
-        self.writes_dropped = 0
+        self._submit_dropped = 0  # by the reader thread: a full queue, a failed writer
+        self._writer_dropped = 0  # by the writer threads (under _journal_lock): the failed frame, the rest drained
         self.error: BaseException | None = None
         self._queue: queue.Queue[tuple[Frame, FrameRow] | None] = queue.Queue(options.write_queue)
         self._per_camera: dict[str, int] = {}
@@ -170,10 +171,15 @@ class RecordingWriter:
             self._threads.append(thread)
         log.info("recording to %s (%s images)", self.directory, self.options.image_format)
 
+    @property
+    def writes_dropped(self) -> int:
+        """Frames not written, every one counted: ``frames_written + writes_dropped`` is every frame submitted."""
+        return self._submit_dropped + self._writer_dropped
+
     def submit(self, frame: Frame) -> None:
         """Queue ``frame`` for writing; a full queue or a failed writer drops it, counted (``lossless``: waits)."""
         if self.error is not None:
-            self.writes_dropped += 1
+            self._submit_dropped += 1
             return
         n = self._per_camera.get(frame.camera, 0)
         cam_dir = camera_dir_name(self.manifest.rig, frame.camera)
@@ -192,7 +198,7 @@ class RecordingWriter:
         try:
             self._queue.put((frame, row), block=self.options.lossless)
         except queue.Full:
-            self.writes_dropped += 1
+            self._submit_dropped += 1
             return
         self._per_camera[frame.camera] = n + 1
 
@@ -201,9 +207,12 @@ class RecordingWriter:
             item = self._queue.get()
             if item is None:
                 return
-            if self.error is not None:
-                continue  # drain without writing: the recording already failed
+            if self.error is not None:  # drain without writing: the recording already failed
+                with self._journal_lock:
+                    self._writer_dropped += 1
+                continue
             frame, row = item
+            written = False  # its row in the journal: counted there, not dropped, if a later fsync fails
             try:
                 data = encode_image(frame.image, self.options.image_format, self.options.jpeg_quality)
                 (self.directory / row.image).write_bytes(data)
@@ -216,9 +225,13 @@ class RecordingWriter:
                     self.frames_written += 1
                     self._unsynced.extend(rel for rel in (row.image, row.truth) if rel is not None)
                     batch = self._take_unsynced(SYNC_BATCH)
+                    written = True
                 self._sync_files(batch)
             except BaseException as e:  # noqa: BLE001 - reported to the reader thread, see module doc
                 log.error("recording to %s failed at %s: %s", self.directory, row.image, e)
+                if not written:
+                    with self._journal_lock:
+                        self._writer_dropped += 1  # this frame: its row never went in
                 self.error = e
 
     def _take_unsynced(self, at_least: int) -> list[str]:

@@ -26,12 +26,19 @@ class SinkUrl:
         """Remove ``key`` from the query (and from ``kw``, which wins) and convert it.
 
         Keyword values that are strings or numbers go through the same check as
-        query values; other objects (tuples, policies) are taken as they are.
+        query values (``None`` counts as not given; ``True``/``False`` only for a
+        yes/no option); other objects (tuples, policies) are taken as they are.
         """
         raw: object = self.query.pop(key, None)
-        if kw is not None and key in kw:
+        if kw is not None and kw.get(key) is None:
+            kw.pop(key, None)  # not given: the query's value, else the default
+        elif kw is not None:
             raw = kw.pop(key)
-            if isinstance(raw, bool) or not isinstance(raw, (str, int, float)):
+            if isinstance(raw, bool):  # ep=True was endpoint 1
+                if convert is boolean:
+                    return raw  # type: ignore[return-value]
+                raise SinkConfigError(self.url, key, raw, "must be a value, not true/false")
+            if not isinstance(raw, (str, int, float)):
                 return raw  # type: ignore[return-value]
         if raw is None:
             return default

@@ -64,7 +64,7 @@ class UsbSink(ProtocolSink):
     def from_url(cls, url: str, **kw: Any) -> "UsbSink":
         u: SinkUrl = parse_url(url)
         vid, pid = _vid_pid(url, u.netloc)
-        if "ep" not in u.query and "ep" not in kw:
+        if "ep" not in u.query and kw.get("ep") is None:
             raise SinkConfigError(url, "ep", None, "the bulk OUT endpoint is required, e.g. ?ep=0x01")
         ep = u.take("ep", _out_endpoint, 0, kw)
         interface = u.take("interface", non_negative_int, 0, kw)

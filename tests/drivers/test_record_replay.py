@@ -224,6 +224,35 @@ def test_a_failing_writer_is_reported_once_then_frames_pass_through(tmp_path, si
     assert read_manifest(out).complete is False
 
 
+def test_after_a_write_error_every_frame_is_written_or_counted(tmp_path, sim_cache, monkeypatch):
+    # the failed frame and those drained from the queue after it were counted nowhere (2 + 4 of 20)
+    import threading
+
+    real, calls, gate = record_module.encode_image, [0], threading.Event()
+
+    def fails_third(*args):
+        calls[0] += 1
+        if calls[0] == 3:
+            gate.wait(2.0)  # the queue fills behind it
+            raise OSError(28, "No space left on device")
+        return real(*args)
+
+    monkeypatch.setattr(record_module, "encode_image", fails_third)
+    out = tmp_path / "full"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&write_queue=16"
+    with open_rig(url, clock=ManualClock()) as source:
+        for _ in range(10):
+            try:
+                source.read(timeout_s=1.0)
+            except RigOperationError:
+                pass  # the failure, reported once
+        gate.set()
+    stats = source.stats
+    assert stats.frames_written + stats.writes_dropped == sum(stats.frames_in.values()) == 20
+    counters = read_manifest(out).counters
+    assert counters["frames_written"] + counters["writes_dropped"] == 20
+
+
 # ----------------------------------------------------------------- broken takes
 @pytest.fixture
 def copy_of_take(take, tmp_path):

@@ -108,3 +108,21 @@ def test_host_port_decodes_a_zone_and_takes_a_trailing_slash():
     assert host_port(parse_url("udp://[::1]:9000")) == ("::1", 9000)
     assert host_port(parse_url("udp://Example.COM:9000/")) == ("example.com", 9000)
     assert host_port(parse_url("vmc://127.0.0.1"), 39539) == ("127.0.0.1", 39539)
+
+
+def test_keyword_none_is_not_given_and_true_is_no_number():
+    # ep=None passed every check and retried forever; ep=True was endpoint 1
+    from firmware_host.sinks.url import positive_int
+
+    u = parse_url("usb://1209:0001?timeout_ms=250")
+    assert u.take("timeout_ms", positive_int, 100, {"timeout_ms": None}) == 250  # the query's value stays
+    assert parse_url("usb://1209:0001").take("timeout_ms", positive_int, 100, {"timeout_ms": None}) == 100
+    with pytest.raises(SinkConfigError, match="timeout_ms.*not true/false"):
+        parse_url("usb://1209:0001").take("timeout_ms", positive_int, 100, {"timeout_ms": True})
+
+
+def test_a_usb_sink_without_an_endpoint_is_refused_at_once():
+    from firmware_host.sinks.usb_sink import UsbSink
+
+    with pytest.raises(SinkConfigError, match="ep.*the bulk OUT endpoint is required"):
+        UsbSink.from_url("usb://1209:0001", ep=None)
