@@ -365,7 +365,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
     cameras = _cameras(args.cameras)
     ordered = cameras is not None or read_camera_order(args.images) is not None
     board, where = _measuring_board(args.board, args.images)
-    for name in camera_folders(args.images, cameras):  # before the detection, which takes a while
+    cameras = list(camera_folders(args.images, cameras))  # the order, read once
+    for name in cameras:  # before the detection, which takes a while
         _stream_name(name, MAX_CAMERA_NAME_LEN, "camera name (its folder)")
     print(f"board: {where}: {_describe(board)}")
     views, missed = detect_folder(board, args.images, cameras)

@@ -236,13 +236,12 @@ class RigSource(abc.ABC):
                 return
 
     def close(self) -> None:
-        if self._is_open and not self._closed:
-            try:
+        try:
+            if self._is_open and not self._closed:
                 self._close()
-            finally:  # closed even when closing failed: never opened again (a second device link)
-                self._is_open = False
-                self._closed = True
-        self._closed = True
+        finally:  # closed even when closing failed: never opened again (a second device link)
+            self._is_open = False
+            self._closed = True
 
     def __enter__(self) -> "RigSource":
         return self.open()

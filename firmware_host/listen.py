@@ -29,12 +29,13 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
-from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
+from urllib.parse import parse_qs, urlsplit
 
 from firmware_host.addresses import ipv4_first
 from firmware_host.protocol.constants import Fault
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
+from firmware_host.sinks.url import LocationError, ipv6_hint, location_host
 
 __all__ = ["main", "open_port", "Tally", "ListenError"]
 
@@ -140,23 +141,6 @@ def _refuse_repeats(url: str, query: dict[str, list[str]]) -> None:
         raise ListenError(f"{url}: {', '.join(repeated)} given more than once")
 
 
-def _udp_host(url: str, parts: SplitResult) -> str:
-    """The host to bind: empty for every interface; an IPv6 zone (``[fe80::1%25eth0]``, RFC 6874) decoded."""
-    if parts.username is not None or parts.password is not None:
-        raise ListenError(f"{url}: a udp:// URL takes no user info (the part before '@')")
-    if parts.path not in ("", "/"):
-        raise ListenError(f"{url}: a udp:// URL takes no path ({parts.path!r}); e.g. udp://:9870")
-    host = parts.netloc.rpartition("@")[2]
-    if host.startswith("["):  # the bracketed literal as written: a zone id keeps its case (hostname lowers it)
-        return unquote(host[1:host.index("]")])
-    return unquote(parts.hostname or "")
-
-
-def _ipv6_hint(parts: SplitResult) -> str:
-    return "; an IPv6 address goes in brackets, e.g. udp://[::1]:9870" if parts.netloc.count(":") > 1 \
-        and "[" not in parts.netloc else ""
-
-
 def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
     """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces, IPv4 and IPv6) or ``serial:///dev/DEVICE?baud=N``.
 
@@ -176,13 +160,17 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
         try:
             port = parts.port
         except ValueError as e:
-            raise ListenError(f"{url}: bad port: {e}{_ipv6_hint(parts)}") from None
+            raise ListenError(f"{url}: bad port: {e}{ipv6_hint(parts, 'udp', 9870)}") from None
         if port is None:
-            raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870{_ipv6_hint(parts)}")
+            raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870{ipv6_hint(parts, 'udp', 9870)}")
         if port == 0 and not ephemeral:
             raise ListenError(f"{url}: bad port 0: the system would pick one that no sender knows; "
                               f"give 1..65535, e.g. udp://:9870")
-        return _UdpPort(_udp_host(url, parts), port)
+        try:
+            host = location_host(parts, "udp")  # "": every interface
+        except LocationError as e:
+            raise ListenError(f"{url}: {e.why} ({e.value!r})") from None
+        return _UdpPort(host, port)
     if scheme == "serial":
         device = parts.netloc + parts.path
         if not device:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
-from urllib.parse import parse_qs, unquote, urlsplit
+from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
 
 from firmware_host.errors import SinkConfigError
 
@@ -102,24 +102,48 @@ def boolean(raw: str) -> bool:
     raise ValueError("expected 0/1, true/false, yes/no or on/off")
 
 
-def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]:
-    """``host:port`` from the URL's location; IPv6 hosts in brackets, a zone percent-encoded
-    (``udp://[fe80::1%25eth0]:9000``, RFC 6874). User info and a path are refused, not ignored."""
-    parts = urlsplit(u.url)
+class LocationError(ValueError):
+    """A ``scheme://host:port`` location part that is refused: ``field`` (user info, path), its ``value``, ``why``."""
+
+    def __init__(self, field: str, value: str, why: str) -> None:
+        super().__init__(why)
+        self.field, self.value, self.why = field, value, why
+
+
+def location_host(parts: SplitResult, scheme: str) -> str:
+    """The host of a ``scheme://host:port`` URL as ``getaddrinfo`` takes it, ``""`` when none is given: an IPv6
+    zone percent-encoded (``[fe80::1%25eth0]``, RFC 6874) decoded and keeping its case (``hostname`` lowers it).
+
+    :raises LocationError: user info or a path, refused rather than ignored (a typo is never silently dropped).
+    """
     if parts.username is not None or parts.password is not None:
-        raise SinkConfigError(u.url, "user info", parts.netloc.rpartition("@")[0],
-                              f"{u.scheme}:// takes no user info (the part before '@')")
-    if u.path not in ("", "/"):
-        raise SinkConfigError(u.url, "path", u.path, f"{u.scheme}:// takes host:port and no path")
-    hint = f"; an IPv6 address goes in brackets, e.g. {u.scheme}://[::1]:9000" if u.netloc.count(":") > 1 \
-        and "[" not in u.netloc else ""
-    host = parts.hostname
+        raise LocationError("user info", parts.netloc.rpartition("@")[0],
+                            f"{scheme}:// takes no user info (the part before '@')")
+    if parts.path not in ("", "/"):
+        raise LocationError("path", parts.path, f"{scheme}:// takes host:port and no path")
+    hostinfo = parts.netloc.rpartition("@")[2]
+    if hostinfo.startswith("["):
+        return unquote(hostinfo[1:hostinfo.index("]")])
+    return unquote(parts.hostname or "")
+
+
+def ipv6_hint(parts: SplitResult, scheme: str, port: int) -> str:
+    """A hint for a location with an IPv6 address outside brackets, else ``""``."""
+    if parts.netloc.count(":") > 1 and "[" not in parts.netloc:
+        return f"; an IPv6 address goes in brackets, e.g. {scheme}://[::1]:{port}"
+    return ""
+
+
+def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]:
+    """``host:port`` from the URL's location (:func:`location_host`); IPv6 hosts in brackets."""
+    parts = urlsplit(u.url)
+    try:
+        host = location_host(parts, u.scheme)
+    except LocationError as e:
+        raise SinkConfigError(u.url, e.field, e.value, e.why) from None
+    hint = ipv6_hint(parts, u.scheme, 9000)
     if not host:
         raise SinkConfigError(u.url, "host", u.netloc, "missing host" + hint)
-    hostinfo = parts.netloc.rpartition("@")[2]
-    if hostinfo.startswith("["):  # as written: hostname lowers it, and a zone (interface name) keeps its case
-        host = hostinfo[1:hostinfo.index("]")]
-    host = unquote(host)  # fe80::1%25eth0 -> fe80::1%eth0, as getaddrinfo takes it
     try:
         port = parts.port
     except ValueError as e:

@@ -10,7 +10,7 @@ from firmware_host import listen
 from firmware_host.errors import SinkConfigError
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.serial_sink import SerialSink
-from firmware_host.sinks.url import host_port, parse_url
+from firmware_host.sinks.url import host_port, location_host, parse_url
 
 
 def _refused(url: str) -> SinkConfigError:
@@ -58,9 +58,10 @@ def test_listen_api_takes_port_0_only_when_asked():
 
 def test_listen_decodes_an_ipv6_zone():
     url = "udp://[fe80::1%25Eth0]:9870"
-    assert listen._udp_host(url, urlsplit(url)) == "fe80::1%Eth0"  # decoded; the interface name keeps its case
-    assert listen._udp_host("udp://[::1]:1", urlsplit("udp://[::1]:1")) == "::1"
-    assert listen._udp_host("udp://:1", urlsplit("udp://:1")) == ""
+    # the listener and the sinks read the location through one function
+    assert location_host(urlsplit(url), "udp") == "fe80::1%Eth0"  # decoded; the interface name keeps its case
+    assert location_host(urlsplit("udp://[::1]:1"), "udp") == "::1"
+    assert location_host(urlsplit("udp://:1"), "udp") == ""
 
 
 @pytest.mark.parametrize("seconds", ["-1", "0", "nan", "inf", "-inf", "soon"])

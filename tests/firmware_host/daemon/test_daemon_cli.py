@@ -244,10 +244,9 @@ def test_the_stop_signal_handler_never_waits_on_the_stop_events_lock(tmp_path, m
             signal.signal(signum, handler)
 
 
-@needs_model
-def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
-    """The loop waits for an absent rig in short ``stop.wait`` calls (where a signal may land): SIGTERM
-    still stops it long before its backoff ends, with the final status written."""
+def _daemon_waiting_for_an_absent_rig(tmp_path, *python_args: str):
+    """``python *python_args --config ...`` under a notify socket, on a rig that never appears (it waits in
+    300 s backoffs): ``(socket, process, status file)``."""
     sock_path = tmp_path / "notify.sock"
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     sock.bind(str(sock_path))
@@ -260,8 +259,16 @@ def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
         "health": {"status_file": str(status), "status_every_s": 0.2},
     })
     env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "JOURNAL_STREAM": "8:1"}
-    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
+    proc = subprocess.Popen([sys.executable, *python_args, "--config", str(path)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    return sock, proc, status
+
+
+@needs_model
+def test_sigterm_while_waiting_for_the_rig_stops_at_once(tmp_path):
+    """The loop waits for an absent rig in short ``stop.wait`` calls (where a signal may land): SIGTERM
+    still stops it long before its backoff ends, with the final status written."""
+    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-m", "firmware_host.daemon.cli")
     notes: list[dict[str, str]] = []
     try:
         _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
@@ -340,20 +347,7 @@ sys.exit(cli.main())
 def test_a_sighup_after_the_config_was_read_becomes_a_reload_once_running(tmp_path):
     """The file may have changed after the start read it: the recorded SIGHUP is a reload once the loop
     runs (here at once: the loop waits for an absent rig)."""
-    sock_path = tmp_path / "notify.sock"
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    sock.bind(str(sock_path))
-    sock.settimeout(1.0)
-    status = tmp_path / "status.json"
-    path = _write(tmp_path, {
-        "rig": {"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 300, "reopen_max_s": 300},
-        "sinks": [f"file://{tmp_path / 'joints.jsonl'}"],
-        "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
-        "health": {"status_file": str(status), "status_every_s": 0.2},
-    })
-    env = {**os.environ, "NOTIFY_SOCKET": str(sock_path), "JOURNAL_STREAM": "8:1"}
-    proc = subprocess.Popen([sys.executable, "-c", _HUP_AFTER_THE_READ, "--config", str(path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
+    sock, proc, status = _daemon_waiting_for_an_absent_rig(tmp_path, "-c", _HUP_AFTER_THE_READ)
     notes: list[dict[str, str]] = []
     try:
         _notes_until(sock, proc, notes, lambda ns: any(n.get("STATUS", "").startswith("waiting") for n in ns),
