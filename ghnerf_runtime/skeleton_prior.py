@@ -28,7 +28,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
-from ghnerf_runtime.geometry.triangulation import triangulate_dlt
+from ghnerf_runtime.geometry.triangulation import triangulate_two_views
 from ghnerf_runtime.onnx_file import open_onnx_file
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
@@ -90,11 +90,15 @@ def _centres(P: np.ndarray) -> np.ndarray:
 
 
 def _geometric_median(points: np.ndarray, iterations: int = 20) -> np.ndarray:
-    """Robust centre of ``(K, 3)`` points (Weiszfeld); unlike a per-axis median it turns with the points."""
+    """Robust centre of ``(K, 3)`` points (Weiszfeld); unlike a per-axis median it turns with the points.
+
+    Always ``iterations`` steps: Weiszfeld converges slowly, and the prior was trained on these centres
+    (stopping at a small step moved a few by centimetres)."""
     c = points.mean(0)
     for _ in range(iterations):
-        w = 1.0 / np.maximum(np.linalg.norm(points - c, axis=-1), 1e-6)
-        c = (points * w[:, None]).sum(0) / w.sum()
+        d = points - c
+        w = 1.0 / np.maximum(np.sqrt(np.einsum("ij,ij->i", d, d)), 1e-6)
+        c = (w @ points) / w.sum()
     return c
 
 
@@ -140,11 +144,13 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     dec = np.asarray(valid, bool) & np.isfinite(uv).all(-1) & np.isfinite(conf)
     uv = np.where(dec[..., None], uv, 0.0)
     conf = np.where(dec, np.clip(conf, 0.0, 1.0), 0.0)
-    # cameras differ per pair: one DLT per pair (weights: peak values; a decoded joint counts a little at least)
+    # cameras differ per pair: one DLT per pair (weights: peak values; a decoded joint counts a little at least),
+    # through the two-view solver (triangulate_dlt's results in a third of the numpy calls: this runs every pair)
     X, ok = np.zeros((N, J, 3)), np.zeros((N, J), bool)
     rep, ang = np.zeros((N, J, 2)), np.zeros((N, J))
+    weights = np.where(dec, np.maximum(conf, 1e-3), 0.0)
     for i in range(N):
-        r = triangulate_dlt(uv[i], list(P[i]), np.where(dec[i], np.maximum(conf[i], 1e-3), 0.0))
+        r = triangulate_two_views(uv[i], P[i], weights[i])
         X[i], ok[i], rep[i], ang[i] = r.points, r.valid, r.reprojection_error, r.ray_angle_deg
     ok = ok & dec.all(1) & np.isfinite(X).all(-1)
     rep, ang = np.nan_to_num(rep), np.nan_to_num(ang)

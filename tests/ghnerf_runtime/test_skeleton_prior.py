@@ -439,3 +439,25 @@ def test_estimator_uses_the_prior_when_the_folder_has_one(model_with_prior, tmp_
     with pytest.raises(ModelError, match="skeleton_prior.onnx"):
         Estimator(load_session(on), rig, on)
     assert load_session(_config(bare)).skeleton_prior is None
+
+
+def test_inputs_triangulate_as_the_general_dlt():
+    """prior_inputs solves each pair with the lean two-view solver; its points, reprojection errors and ray
+    angles are triangulate_dlt's (the features the shipped prior was trained on), noisy and hidden joints too."""
+    from ghnerf_runtime.geometry.triangulation import triangulate_dlt
+
+    rng = np.random.default_rng(7)
+    P = np.stack(_rig(yaw_deg=25.0, shift=(0.4, -0.2)))
+    X = _skeleton(3)
+    uv, _, valid = _observe(list(P), X)
+    uv = uv + rng.normal(0.0, 1.5, uv.shape)
+    conf = rng.uniform(0.05, 1.0, valid.shape)
+    valid[0, 4] = valid[1, 9] = False
+    inp = prior_inputs(uv[None], conf[None], valid[None], P[None])
+    ref = triangulate_dlt(np.where(valid[..., None], uv, 0.0), list(P), np.where(valid, np.maximum(conf, 1e-3), 0.0))
+    tri = inp.triangulated[0]
+    assert tri.sum() == NUM_JOINTS - 2 and not tri[4] and not tri[9]
+    f = inp.joint_features[0]
+    np.testing.assert_allclose(inp.frame.to_rig(f[None, :, :3].astype(np.float64))[0][tri], ref.points[tri], atol=2e-5)
+    np.testing.assert_allclose(f[tri, 6:8], np.clip(ref.reprojection_error[tri], 0, 20) / 5.0, atol=1e-5)
+    np.testing.assert_allclose(f[tri, 8], ref.ray_angle_deg[tri] / 10.0, atol=1e-5)
