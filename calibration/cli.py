@@ -328,6 +328,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
     except KeyboardInterrupt:
+        if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
+            print(f"{PROG}: stopped before any view was kept in {out}", file=sys.stderr)
+            return 130
         print(f"stopped: kept {kept} view(s) in {out}")
         return 0
     finally:

@@ -617,3 +617,42 @@ def test_a_camera_name_the_stream_cannot_carry_is_refused_before_the_detection(c
     assert cli.main(["solve", "--images", str(copy), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
                      "--cameras", f"{long},right"]) == 2
     assert f"camera name (its folder) '{long}' must be printable ASCII of 1-16" in capsys.readouterr().err
+
+
+def test_capture_stopped_by_ctrl_c_succeeds_only_with_views_kept(truth, tmp_path, capsys, monkeypatch):
+    """Ctrl-C is how a hand-held capture ends: exit 0 with the views kept, 130 (and a line on stderr) when it
+    kept none, so a script does not go on to solve an empty folder."""
+    import drivers
+
+    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_recording(take, truth, {cam: {"0": v["000"], "1": v["000"]} for cam, v in images.items()}, period_s=1.0)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    real = drivers.create_rig_source
+
+    def interrupted_after(reads: int):
+        def create(url, **kwargs):
+            source = real(url, **kwargs)
+            read, calls = source.read, []
+
+            def read_then_interrupt(*args, **kw):
+                calls.append(1)
+                if len(calls) > reads:
+                    raise KeyboardInterrupt
+                return read(*args, **kw)
+            source.read = read_then_interrupt
+            return source
+        return create
+
+    argv = ["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--count", "5",
+            "--interval-s", "0", "--still-s", "0"]
+    monkeypatch.setattr(drivers, "create_rig_source", interrupted_after(0))
+    assert cli.main(argv + ["--out", str(tmp_path / "none")]) == 130
+    captured = capsys.readouterr()
+    assert "stopped before any view was kept" in captured.err and not list((tmp_path / "none").glob("*/*.png"))
+    monkeypatch.setattr(drivers, "create_rig_source", interrupted_after(2))
+    assert cli.main(argv + ["--out", str(tmp_path / "some")]) == 0
+    assert "stopped: kept 1 view(s)" in capsys.readouterr().out
+    assert (tmp_path / "some" / truth.pair[0].name / "000.png").exists()
