@@ -1,13 +1,19 @@
 """Confidence of phantom joints in empty rooms vs joints of real people (sets the presence gate).
 
-    .venv/bin/python benchmarks/measure_presence.py [--model-dir models] [--rooms 8] [--flip-test]
+    .venv/bin/python benchmarks/measure_presence.py [--model-dir models] [--rooms 8] [--flip-test] [--time]
 
 The trained model has only ever seen views with a person in them, so for an empty room it still
 answers "someone", with weaker peaks. For each heatmap source (with its best 3D method) this
 prints, with the presence gate and the frame check off, the joints found and the 6th-strongest 3D
-joint confidence of empty simulated rooms, and the same of the held-out pairs of
-``tests/ghnerf_runtime/test_estimator_accuracy.py`` (4 sequences x 10 pairs). A presence threshold
-(``config.PRESENCE_MIN_CONFIDENCE``) belongs between the two. A tool, not a test.
+joint confidence of empty simulated rooms (the skeleton prior off: the gate is decided on the
+triangulation before it, and its confidence is its expected error, which it reports for any noise),
+and the same of the held-out pairs of ``tests/ghnerf_runtime/test_estimator_accuracy.py`` (4
+sequences x 10 pairs). A presence threshold
+(``config.PRESENCE_MIN_CONFIDENCE``) belongs between the two. With ``--flip-test`` it also prints the
+statistic ``heatmaps.flip_test_skip_below`` is compared with (``flip_test.presence_peak`` of the heatmaps
+before the mirrored run); its default belongs between the two as well. ``--time`` then times the runtime's
+defaults (the frame check off, as for a textured room) on the empty rooms, ``flip_test_skip_below`` at its
+default and at 0 (both run the flip test), the pairs interleaved: median ms per pair. A tool, not a test.
 """
 from __future__ import annotations
 
@@ -31,6 +37,17 @@ from ghnerf_runtime.config import (  # noqa: E402
     SessionConfig,
 )
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
+from ghnerf_runtime.flip_test import presence_peak  # noqa: E402
+
+
+class _PeakRecorder(Estimator):
+    """The estimator, noting each pair's :func:`presence_peak` before the flip test's mirrored run."""
+
+    peaks: list = []
+
+    def _flip_test(self, batch, heat, timing, src_P=None):
+        self.peaks.append(presence_peak(heat, (0, 1), self.config.presence.min_joints))
+        return super()._flip_test(batch, heat, timing, src_P)
 
 
 def sixth_strongest(result) -> float:
@@ -43,6 +60,8 @@ def main(argv=None) -> int:
     ap.add_argument("--model-dir", default="models")
     ap.add_argument("--rooms", type=int, default=8, help="empty rooms (scene seeds 1..N)")
     ap.add_argument("--flip-test", action="store_true", help="heatmaps.flip_test on (encoder heatmaps)")
+    ap.add_argument("--time", action="store_true",
+                    help="also time the empty rooms with the defaults, heatmaps.flip_test_skip_below default vs 0")
     args = ap.parse_args(argv)
     import drivers.sim as sim
 
@@ -51,19 +70,21 @@ def main(argv=None) -> int:
     for source in HEATMAP_SOURCES:
         heatmaps = HeatmapsConfig(source=source, flip_test=args.flip_test)
         cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir), heatmaps=heatmaps,
-                              joints3d=Joints3DConfig(method=BEST_METHOD[source]),
+                              joints3d=Joints3DConfig(method=BEST_METHOD[source], skeleton_prior="off"),
                               frame_check=FrameCheckConfig(enabled=False), presence=PresenceConfig(enabled=False))
-        est = Estimator.from_config(rig, cfg)
+        est = _PeakRecorder.from_config(rig, cfg)
         empty = []
+        _PeakRecorder.peaks = []
         for seed in range(1, args.rooms + 1):
             room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))  # nobody in view
             pair = tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
             est.reset()
             r = est.estimate(pair)
             empty.append((r.num_found, sixth_strongest(r)))
+        empty_peaks, _PeakRecorder.peaks = _PeakRecorder.peaks, []
         real = []
         for seq in sequences:
-            est = Estimator(est.session, seq.rig, cfg)
+            est = _PeakRecorder(est.session, seq.rig, cfg)
             for i in range(len(seq)):
                 r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])))
                 real.append((r.num_found, sixth_strongest(r)))
@@ -72,7 +93,39 @@ def main(argv=None) -> int:
         print(f"{source:>8} heatmaps ({BEST_METHOD[source]}{flip}): empty rooms: joints found {int(e[:, 0].min())}-"
               f"{int(e[:, 0].max())}, 6th-strongest confidence max {e[:, 1].max():.3f} | {len(p)} pairs with a "
               f"person: 6th-strongest min {p[:, 1].min():.3f}, 5th percentile {np.percentile(p[:, 1], 5):.3f}")
+        if empty_peaks and _PeakRecorder.peaks:
+            print(f"{'':>8} before the mirrored run (heatmaps.flip_test_skip_below): empty rooms max "
+                  f"{max(empty_peaks):.3f} | with a person min {min(_PeakRecorder.peaks):.3f}")
+    if args.time:
+        time_empty_rooms(args.model_dir, args.rooms)
     return 0
+
+
+def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10) -> None:
+    """Median ms per empty-room pair with the defaults (frame check off), skipping the flip test's mirrored
+    run where nobody may be (the default) against running it always (``flip_test_skip_below`` 0)."""
+    import time
+
+    import drivers.sim as sim
+
+    rig = sim.RigPlacement().build()
+    base = EstimatorConfig(session=SessionConfig(model_dir=model_dir), frame_check=FrameCheckConfig(enabled=False))
+    skip = Estimator.from_config(rig, base)
+    always = Estimator(skip.session, rig, EstimatorConfig(
+        session=base.session, frame_check=base.frame_check, heatmaps=HeatmapsConfig(flip_test_skip_below=0.0)))
+    times: dict[str, list[float]] = {"skipped": [], "always": []}
+    for seed in range(1, rooms + 1):
+        room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))
+        pair = tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
+        for rep in range(repeats + 1):
+            for name, est in (("skipped", skip), ("always", always)):
+                t = time.perf_counter()
+                est.estimate(pair)
+                if rep:  # the first of each room warms the caches
+                    times[name].append((time.perf_counter() - t) * 1e3)
+    a, b = (float(np.median(times[k])) for k in ("skipped", "always"))
+    print(f"empty rooms, the defaults (frame check off): {a:.2f} ms median per pair with the mirrored run skipped, "
+          f"{b:.2f} ms with it (flip_test_skip_below 0): {a / b:.2f}x ({len(times['skipped'])} pairs each)")
 
 
 if __name__ == "__main__":

@@ -59,7 +59,7 @@ from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
 from ghnerf_runtime.errors import FrameError, GeometryError, ModelError
-from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections
+from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections, presence_peak
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presence, gate_to_box, query_grid, \
@@ -577,7 +577,7 @@ class Estimator:
         encoder = "human" if self._human_graph and not features else "encoder"
         env.update(self.session.run(encoder, env))
         _add_ms(timing, "encoder", t)
-        if cfg.flips_encoder_heatmaps:
+        if cfg.flips_encoder_heatmaps and self._may_be_someone(env["encoder_heatmaps"], (0, 1)):
             env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"])
         stride, g = self.contract.heatmap_stride, self.grid
         blocks = [full_block(g, g)] * 2
@@ -644,6 +644,15 @@ class Estimator:
         _add_ms(timing, "joints_3d", t)
         return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job, crops)
 
+    def _may_be_someone(self, heat: np.ndarray, views: Sequence[int]) -> bool:
+        """Whether the flip test's second run can change the presence gate's answer
+        (``heatmaps.flip_test_skip_below``, :func:`~ghnerf_runtime.flip_test.presence_peak`); always with
+        the gate off."""
+        floor = self.config.heatmaps.flip_test_skip_below
+        if not self.config.presence.enabled or floor <= 0:
+            return True
+        return presence_peak(heat, views, self.config.presence.min_joints) >= floor
+
     def _flip_test(self, batch: np.ndarray, heat: np.ndarray, timing: dict,
                    src_P: np.ndarray | None = None) -> np.ndarray:
         """``heat`` averaged with the encoder heatmaps of the mirrored crops (``heatmaps.flip_test``): the
@@ -689,7 +698,7 @@ class Estimator:
         heat = self.session.run("human" if self.session.has("human") else "encoder", {"images": batch})
         _add_ms(timing, "encoder", t)
         heat = heat["encoder_heatmaps"]
-        if cfg.heatmaps.flip_test:
+        if cfg.heatmaps.flip_test and self._may_be_someone(heat, (good,)):
             heat = self._flip_test(batch, heat, timing)
         t = time.perf_counter()
         kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), cfg.decoder)

@@ -45,3 +45,24 @@ def flip_averaged(heatmaps: np.ndarray, mirrored: np.ndarray) -> np.ndarray:
     if heatmaps.shape != mirrored.shape:
         raise ValueError(f"heatmaps {heatmaps.shape} and mirrored {mirrored.shape} differ in shape")
     return (0.5 * (np.asarray(heatmaps, np.float32) + unmirror_heatmaps(np.asarray(mirrored, np.float32))))
+
+
+def presence_peak(heatmaps: np.ndarray, views, rank: int) -> float:
+    """The ``rank``-th strongest joint's peak value in ``views`` of ``(S, J, h, w)`` heatmaps: per joint the
+    geometric mean over those views of its heatmap maxima (clipped to [0, 1], NaN as 0); 0 with fewer joints.
+
+    What the estimator compares with ``heatmaps.flip_test_skip_below`` before the flip test's second run: a
+    pair where fewer than ``presence.min_joints`` joints reach it shows nobody.
+
+    Example:
+        >>> h = np.zeros((2, 3, 4, 4), np.float32)
+        >>> h[0, :, 1, 1], h[1, :, 2, 2] = [0.9, 0.4, 0.1], [0.4, 0.9, 0.0]
+        >>> round(presence_peak(h, (0, 1), 2), 3), round(presence_peak(h, (0,), 2), 3)
+        (0.6, 0.4)
+    """
+    heat = np.asarray(heatmaps)
+    if heat.ndim != 4 or rank < 1:
+        raise ValueError(f"heatmaps: expected (S, J, h, w) and rank >= 1, got {heat.shape} and {rank}")
+    peaks = np.nan_to_num(heat[list(views)].reshape(len(views), heat.shape[1], -1).max(-1).astype(np.float64))
+    joint = np.exp(np.log(np.clip(peaks, 1e-30, 1.0)).mean(0))
+    return float(np.sort(joint)[::-1][rank - 1]) if len(joint) >= rank else 0.0

@@ -113,6 +113,29 @@ def test_shipped_model_finds_nobody_in_an_empty_room(source, flip, prior):
             assert r.num_found == 0 and not r.confidence.any() and not r.joints_3d.any()
 
 
+@pytest.mark.parametrize("skip_below", [0.1, 0.0])
+def test_the_flip_test_runs_only_where_someone_may_be(skip_below):
+    """``heatmaps.flip_test_skip_below``: an empty room costs one encoder run, not two, and still finds nobody;
+    a pair with a person runs the mirrored pass; 0 runs it always, the empty room then judged on the average."""
+    sim = pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.cli.simdata import load_sequences
+    from ghnerf_runtime.estimator import Estimator
+
+    rig = sim.RigPlacement().build()
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS)),
+                          heatmaps=HeatmapsConfig(flip_test=True, flip_test_skip_below=skip_below),
+                          frame_check=FrameCheckConfig(enabled=False))
+    est = Estimator.from_config(rig, cfg)
+    room = sim.SimScene(sim.SceneConfig(seed=3, motion="wave", position_xz=(40.0, 3.0)))  # person far away
+    r = est.estimate(tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair))
+    assert r.num_found == 0 and not r.confidence.any()
+    assert ("encoder_flip" in r.timing_ms) == (skip_below == 0), r.timing_ms
+    seq = load_sequences(1, 2)[0]
+    est = Estimator(est.session, seq.rig, cfg)
+    r = est.estimate((np.asarray(seq.images[0, 0]), np.asarray(seq.images[0, 1])))
+    assert r.num_found > 0 and "encoder_flip" in r.timing_ms, r.timing_ms
+
+
 def test_shipped_prior_gate_reports_fewer_3d_joints_not_fewer_people():
     """The skeleton prior's error gate decides which 3D joints are reported, not whether someone is there: with a
     gate no joint passes, the 2D joints are still reported and the crop still follows the prior's skeleton."""
