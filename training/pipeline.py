@@ -1366,7 +1366,10 @@ def main(argv: list[str] | None = None) -> int:
                          "extra_train=0 --prior-set steps=15000 --prior-set members=1: session 17's smaller prior, "
                          "about 23 min sooner (docs/training.md, `make model`)")
     ap.add_argument("--workers", type=int, default=None,
-                    help="dataset generation processes (default 2; the files do not depend on it)")
+                    help=f"dataset generation processes (default {PipelineConfig.workers}; "
+                         + "".join(f"the {k} recipe's {r.workers}, at most the cores; " for k, r in RECIPES.items()
+                                   if r.workers)
+                         + "the files do not depend on it)")
     ap.add_argument("--until", choices=("data", "pretrain", "train"),
                     help="stop after this stage kind, e.g. train on a GPU machine and export, quantize and "
                          "evaluate elsewhere: the same command there reuses the finished runs")

@@ -809,3 +809,18 @@ def test_the_lanes_benchmark_estimates_each_plan_from_its_rates(tmp_path):
     collecting = 25256 * 0.015  # the joint run's steps beside the collection at its rate there, then the rest
     assert phase3 == pytest.approx(max(collecting + (10000 - collecting / 0.29) * 0.31,
                                        collecting + 2 * 30000 * 0.035))
+
+
+def test_the_workers_help_names_the_recipes_own_counts(capsys):
+    """--help said "default 2" while the gpu recipe (the default where torch sees a GPU) takes 16."""
+    from training import pipeline
+
+    with pytest.raises(SystemExit):
+        pipeline.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    start = text.index("--workers WORKERS dataset")
+    workers = text[start:text.index("--until", start)]
+    assert f"default {PipelineConfig.workers};" in workers
+    for name, recipe in pipeline.RECIPES.items():
+        if recipe.workers:
+            assert f"the {name} recipe's {recipe.workers}, at most the cores" in workers
