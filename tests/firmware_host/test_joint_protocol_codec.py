@@ -141,6 +141,25 @@ def test_joint_frame_checks_shapes() -> None:
         JointFrame(0, 0, 0, np.zeros((25, 4)), {"left": np.zeros((25, 2))})
 
 
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        # time.monotonic() * 1e6 is a float: it failed in the sink's worker and poisoned every later HELLO/STATUS
+        ({"capture_time_us": 1_000_000.5}, "capture_time_us"),
+        ({"capture_time_us": -1}, "capture_time_us"),
+        ({"capture_time_us": 2**64}, "capture_time_us"),
+        ({"sequence": 3.0}, "sequence"),
+        ({"joint_set": 256}, "joint_set"),
+    ],
+)
+def test_joint_frame_checks_its_wire_integers(kwargs: dict, field: str) -> None:
+    args = {"sequence": 0, "capture_time_us": 0, "joint_set": 0, **kwargs}
+    with pytest.raises(ValueError, match=rf"JointFrame\.{field} must be"):
+        JointFrame(joints_3d=np.zeros((25, 4)), **args)
+    # numpy integers are whole numbers too (a driver's timestamp_ns // 1000)
+    assert JointFrame(np.int64(7), np.uint64(2**63), np.uint8(0), np.zeros((25, 4))).capture_time_us == 2**63
+
+
 def test_unknown_camera_name_is_a_clear_error() -> None:
     frame = JointFrame(0, 0, 0, np.zeros((25, 4)), {"middle": np.zeros((25, 3))})
     with pytest.raises(KeyError, match="middle"):
