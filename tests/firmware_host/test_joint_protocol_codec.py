@@ -122,6 +122,11 @@ def test_sequence_wraps_modulo_2_32() -> None:
                 np.array([False])), "joints.conf"),
         (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((25, 3), np.int16), np.zeros(25, np.uint8),
                 np.zeros(8, bool)), "joints.missing"),
+        # a mask of integers other than 0/1, or of floats (was numpy's ValueError, naming no field)
+        (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((2, 3), np.int16), np.zeros(2, np.uint8),
+                np.array([0, 2])), "joints.missing"),
+        (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 2), np.int16), np.zeros(2, np.uint8),
+                  np.array([0.0, 1.0])), "joints_2d.missing"),
         (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 3), np.int16), np.zeros(2, np.uint8),
                   np.zeros(2, bool)), "joints_2d.uv_q"),
         (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 2), np.int16), np.full(2, -1),
@@ -132,6 +137,13 @@ def test_encode_errors_name_the_field(msg: object, field: str) -> None:
     with pytest.raises(EncodeError, match=field.replace(".", r"\.")) as info:
         encode(msg)  # type: ignore[arg-type]
     assert info.value.field == field
+
+
+def test_integer_missing_mask_encodes_as_bits() -> None:
+    msg = Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((9, 3), np.int16), np.ones(9, np.uint8),
+                 np.array([0, 1, 0, 0, 0, 0, 0, 0, 1]))
+    decoded = decode_stream(encode(msg))[0][0].message
+    assert decoded is not None and np.flatnonzero(decoded.missing).tolist() == [1, 8]
 
 
 def test_joint_frame_checks_shapes() -> None:
