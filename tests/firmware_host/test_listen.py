@@ -91,6 +91,12 @@ def test_sequence_numbers_wrap_and_errors_are_per_line():
     tally.add(joints(5))
     tally.add(joints(3))  # a step back (reordering, a sender restart) is not 4 billion gaps
     assert tally.total_gaps == 4
+    tally.add(joints(6))  # 5 was the newest: 3 arrived late, so 3 -> 6 is no second gap of 4 and 5
+    assert tally.total_gaps == 4
+    restarted = listen.Tally()
+    for seq in (500, 501, 0, 1, 3):  # a sender that restarted: its numbering is followed from there
+        restarted.add(joints(seq))
+    assert restarted.total_gaps == 1 and restarted.last_seq == 3
     first = tally.line(1.0, {"crc": 2, "cobs": 0})
     second = tally.line(1.0, {"crc": 2, "cobs": 0})
     assert "decode errors {'crc': 2}" in first and "decode errors" not in second
