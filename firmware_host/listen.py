@@ -57,7 +57,12 @@ class _UdpPort:
 
     def read(self, timeout_s: float) -> bytes:
         ready, _, _ = select.select([self.sock], [], [], timeout_s)
-        return self.sock.recv(65536) if ready else b""
+        if not ready:
+            return b""
+        datagram = self.sock.recv(65536)
+        # A datagram is one whole frame (docs/protocol.md): one from a stray sender without the closing 0x00
+        # is ended here, or the decoder glued it to the next datagram and lost that frame too.
+        return datagram if datagram.endswith(b"\x00") else datagram + b"\x00"
 
     def close(self) -> None:
         self.sock.close()

@@ -102,6 +102,26 @@ def test_sequence_numbers_wrap_and_errors_are_per_line():
     assert "decode errors {'crc': 2}" in first and "decode errors" not in second
 
 
+def test_a_stray_datagram_without_delimiter_costs_only_itself():
+    from firmware_host.protocol import decode_stream, encode
+    from firmware_host.protocol.messages import Joints, make_header
+    from firmware_host.protocol.constants import MsgType
+    import numpy as np
+
+    msg = Joints(make_header(MsgType.JOINTS, 7, 0, 1000), 0, np.zeros((25, 3), np.int16),
+                 np.zeros(25, np.uint8), np.zeros(25, bool))
+    port = listen.open_port("udp://127.0.0.1:0", ephemeral=True)
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            tx.sendto(b"/VMC/Ext/OK,i\x01", port.address)  # e.g. a VMC sender pointed at this port
+            tx.sendto(encode(msg), port.address)
+        events, stats = decode_stream(port.read(2.0) + port.read(2.0))
+    finally:
+        port.close()
+    # it was glued to the JOINTS datagram behind it: one crc error, and the frame lost with it
+    assert [e.to_json().get("type") for e in events] == [None, "JOINTS"] and stats.messages == 1
+
+
 def _datagram_reaches(port, family: int, address: str) -> bool:
     """Send one datagram from a ``family`` socket to ``address`` and the port's number; True if it is read."""
     with socket.socket(family, socket.SOCK_DGRAM) as tx:
