@@ -10,7 +10,7 @@ late, with what faults?), and a reference receiver in Python beside the C one in
 The summary: JOINTS messages per second, joints present per message, the sender's latency
 (``send_us - capture_us`` of the JOINTS headers: capture to the wire), sequence gaps (frames the
 sender numbered but dropped or decimated, or the link lost; camera pairs the sender never made a
-frame of take no number, and a seq that steps back, a restarted sender, is not a gap), the latest
+frame of take no number, and a seq that steps back, a restarted sender or a late datagram, is not a gap), the latest
 STATUS (its fault code, docs/protocol.md) and HELLO, and the decoder's error counts (a noisy serial
 line shows as ``crc``/``cobs`` errors). Exit status: 0; 2 for a bad URL or a port that cannot be
 opened (named).
@@ -57,7 +57,12 @@ class _UdpPort:
 
     def read(self, timeout_s: float) -> bytes:
         ready, _, _ = select.select([self.sock], [], [], timeout_s)
-        return self.sock.recv(65536) if ready else b""
+        if not ready:
+            return b""
+        datagram = self.sock.recv(65536)
+        # A datagram is one whole frame (docs/protocol.md): one from a stray sender without the closing 0x00
+        # is ended here, or the decoder glued it to the next datagram and lost that frame too.
+        return datagram if datagram.endswith(b"\x00") else datagram + b"\x00"
 
     def close(self) -> None:
         self.sock.close()
@@ -186,6 +191,11 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
     raise ListenError(f"{url}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")
 
 
+#: A JOINTS seq at most this many frames behind the newest is a reordered datagram, one further back a sender
+#: that restarted (at 0).
+LATE_WINDOW = 32
+
+
 def _fault_name(code: int) -> str:
     try:
         return Fault(code).name
@@ -222,6 +232,10 @@ class Tally:
                 if 1 < step < (1 << 31):  # a larger step is a sender restart or a reordering, not a gap
                     self.gaps += step - 1
                     self.total_gaps += step - 1
+                elif (1 << 32) - step <= LATE_WINDOW:
+                    # A late datagram: the newest seq stays the reference, or the step from this one up to
+                    # the next would count the frames that already arrived as a second gap.
+                    return
             self.last_seq = h.seq
         elif isinstance(message, Status):
             self.status, self.status_at = message, time.monotonic()

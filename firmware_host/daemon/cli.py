@@ -203,8 +203,10 @@ def _main(argv: Sequence[str] | None) -> int:
         print(f"{PROG}: error: --config is required (--print-example-config prints one to start from)",
               file=sys.stderr)
         return 2
-    if args.max_seconds is not None and not args.max_seconds > 0:
-        print(f"{PROG}: error: --max-seconds must be > 0, got {args.max_seconds}", file=sys.stderr)
+    # inf (or 1e12) passed "> 0", then killed the stop timer's thread with an OverflowError: an unbounded run
+    if args.max_seconds is not None and not 0 < args.max_seconds <= threading.TIMEOUT_MAX:
+        print(f"{PROG}: error: --max-seconds must be > 0 and at most {threading.TIMEOUT_MAX:g}, "
+              f"got {args.max_seconds}", file=sys.stderr)
         return 2
     try:
         if args.validate_config:

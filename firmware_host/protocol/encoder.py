@@ -60,11 +60,12 @@ def _check_joint_array(name: str, values: np.ndarray, shape: tuple[int, ...], dt
     if values.shape != shape:
         raise EncodeError(name, values.shape, f"must have the shape {shape}")
     if values.dtype != dtype and values.size:
-        info = np.iinfo(dtype)
+        # np.iinfo knows no bool: a 0/1 integer mask raised numpy's "Invalid integer data type", naming nothing
+        lo, hi = (0, 1) if dtype is np.bool_ else (np.iinfo(dtype).min, np.iinfo(dtype).max)
         if not (np.issubdtype(values.dtype, np.integer) or np.issubdtype(values.dtype, np.bool_)) \
-                or values.min() < info.min or values.max() > info.max:
+                or values.min() < lo or values.max() > hi:
             raise EncodeError(name, f"{values.dtype} in [{values.min()}, {values.max()}]",
-                              f"must be whole numbers in [{info.min}, {info.max}]")
+                              f"must be whole numbers in [{lo}, {hi}]")
 
 
 def _mask(missing: np.ndarray) -> bytes:

@@ -7,13 +7,24 @@ used by the test vectors).
 """
 from __future__ import annotations
 
+import operator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Union
 
 import numpy as np
 
-from firmware_host.protocol.constants import PROTOCOL_VERSION, MsgType
+from firmware_host.protocol.constants import PROTOCOL_VERSION, U64_MAX, MsgType
+
+
+def _whole(name: str, value: object, lo: int | None = None, hi: int | None = None) -> None:
+    """A JointFrame field that goes on the wire as an integer (numpy integers too) within [lo, hi]."""
+    try:
+        number = operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        raise ValueError(f"JointFrame.{name} must be a whole number, got {value!r}") from None
+    if (lo is not None and number < lo) or (hi is not None and number > hi):
+        raise ValueError(f"JointFrame.{name} must be in [{lo}, {hi}], got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -36,6 +47,11 @@ class JointFrame:
     """Optional per-camera (J, 3) float: u, v in pixels and confidence 0..1."""
 
     def __post_init__(self) -> None:
+        # Checked here, at send(): a float or negative time failed only in the sink's worker, and was then
+        # kept for every HELLO/STATUS, so the link announced nothing until a good frame came.
+        _whole("sequence", self.sequence)
+        _whole("capture_time_us", self.capture_time_us, 0, U64_MAX)
+        _whole("joint_set", self.joint_set, 0, 0xFF)
         j = np.asarray(self.joints_3d)
         if j.ndim != 2 or j.shape[1] != 4:
             raise ValueError(f"JointFrame.joints_3d must have shape (J, 4), got {j.shape}")

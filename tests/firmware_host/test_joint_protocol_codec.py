@@ -122,6 +122,11 @@ def test_sequence_wraps_modulo_2_32() -> None:
                 np.array([False])), "joints.conf"),
         (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((25, 3), np.int16), np.zeros(25, np.uint8),
                 np.zeros(8, bool)), "joints.missing"),
+        # a mask of integers other than 0/1, or of floats (was numpy's ValueError, naming no field)
+        (Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((2, 3), np.int16), np.zeros(2, np.uint8),
+                np.array([0, 2])), "joints.missing"),
+        (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 2), np.int16), np.zeros(2, np.uint8),
+                  np.array([0.0, 1.0])), "joints_2d.missing"),
         (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 3), np.int16), np.zeros(2, np.uint8),
                   np.zeros(2, bool)), "joints_2d.uv_q"),
         (Joints2D(make_header(MsgType.JOINTS_2D, 0, 0, 0), 0, 0, np.zeros((2, 2), np.int16), np.full(2, -1),
@@ -134,11 +139,37 @@ def test_encode_errors_name_the_field(msg: object, field: str) -> None:
     assert info.value.field == field
 
 
+def test_integer_missing_mask_encodes_as_bits() -> None:
+    msg = Joints(make_header(MsgType.JOINTS, 0, 0, 0), 0, np.zeros((9, 3), np.int16), np.ones(9, np.uint8),
+                 np.array([0, 1, 0, 0, 0, 0, 0, 0, 1]))
+    decoded = decode_stream(encode(msg))[0][0].message
+    assert decoded is not None and np.flatnonzero(decoded.missing).tolist() == [1, 8]
+
+
 def test_joint_frame_checks_shapes() -> None:
     with pytest.raises(ValueError, match=r"joints_3d must have shape \(J, 4\)"):
         JointFrame(0, 0, 0, np.zeros((25, 3)))
     with pytest.raises(ValueError, match=r"joints_2d\['left'\]"):
         JointFrame(0, 0, 0, np.zeros((25, 4)), {"left": np.zeros((25, 2))})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        # time.monotonic() * 1e6 is a float: it failed in the sink's worker and poisoned every later HELLO/STATUS
+        ({"capture_time_us": 1_000_000.5}, "capture_time_us"),
+        ({"capture_time_us": -1}, "capture_time_us"),
+        ({"capture_time_us": 2**64}, "capture_time_us"),
+        ({"sequence": 3.0}, "sequence"),
+        ({"joint_set": 256}, "joint_set"),
+    ],
+)
+def test_joint_frame_checks_its_wire_integers(kwargs: dict, field: str) -> None:
+    args = {"sequence": 0, "capture_time_us": 0, "joint_set": 0, **kwargs}
+    with pytest.raises(ValueError, match=rf"JointFrame\.{field} must be"):
+        JointFrame(joints_3d=np.zeros((25, 4)), **args)
+    # numpy integers are whole numbers too (a driver's timestamp_ns // 1000)
+    assert JointFrame(np.int64(7), np.uint64(2**63), np.uint8(0), np.zeros((25, 4))).capture_time_us == 2**63
 
 
 def test_unknown_camera_name_is_a_clear_error() -> None:

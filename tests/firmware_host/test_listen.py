@@ -91,9 +91,35 @@ def test_sequence_numbers_wrap_and_errors_are_per_line():
     tally.add(joints(5))
     tally.add(joints(3))  # a step back (reordering, a sender restart) is not 4 billion gaps
     assert tally.total_gaps == 4
+    tally.add(joints(6))  # 5 was the newest: 3 arrived late, so 3 -> 6 is no second gap of 4 and 5
+    assert tally.total_gaps == 4
+    restarted = listen.Tally()
+    for seq in (500, 501, 0, 1, 3):  # a sender that restarted: its numbering is followed from there
+        restarted.add(joints(seq))
+    assert restarted.total_gaps == 1 and restarted.last_seq == 3
     first = tally.line(1.0, {"crc": 2, "cobs": 0})
     second = tally.line(1.0, {"crc": 2, "cobs": 0})
     assert "decode errors {'crc': 2}" in first and "decode errors" not in second
+
+
+def test_a_stray_datagram_without_delimiter_costs_only_itself():
+    from firmware_host.protocol import decode_stream, encode
+    from firmware_host.protocol.messages import Joints, make_header
+    from firmware_host.protocol.constants import MsgType
+    import numpy as np
+
+    msg = Joints(make_header(MsgType.JOINTS, 7, 0, 1000), 0, np.zeros((25, 3), np.int16),
+                 np.zeros(25, np.uint8), np.zeros(25, bool))
+    port = listen.open_port("udp://127.0.0.1:0", ephemeral=True)
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            tx.sendto(b"/VMC/Ext/OK,i\x01", port.address)  # e.g. a VMC sender pointed at this port
+            tx.sendto(encode(msg), port.address)
+        events, stats = decode_stream(port.read(2.0) + port.read(2.0))
+    finally:
+        port.close()
+    # it was glued to the JOINTS datagram behind it: one crc error, and the frame lost with it
+    assert [e.to_json().get("type") for e in events] == [None, "JOINTS"] and stats.messages == 1
 
 
 def _datagram_reaches(port, family: int, address: str) -> bool:

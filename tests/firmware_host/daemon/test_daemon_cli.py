@@ -55,6 +55,10 @@ def test_usage_errors(capsys):
     assert cli.main([]) == 2
     assert "--config is required" in capsys.readouterr().err
     assert cli.main(["--config", "x.json", "--max-seconds", "0"]) == 2
+    assert "--max-seconds must be" in capsys.readouterr().err
+    for endless in ("inf", "nan", "1e12"):  # inf killed the stop timer's thread: the run had no bound
+        assert cli.main(["--config", "x.json", "--max-seconds", endless]) == 2
+        assert "--max-seconds must be > 0 and at most" in capsys.readouterr().err
     assert cli.main(["--print-example-config"]) == 0
     assert json.loads(capsys.readouterr().out) == cli.EXAMPLE_CONFIG
 
