@@ -182,7 +182,12 @@ class NovelPainter:
             raise ModelRunError(f"painter failed: {type(e).__name__}: {str(e).strip()[:200]}", path=str(self.path)) from e
         if not np.isfinite(rgb).all():
             raise ModelRunError("painter returned non-finite colours", path=str(self.path))
-        return np.ascontiguousarray(rgb[0].transpose(1, 2, 0), np.float32)
+        want = (1, 3) + inputs.planes.shape[1:]
+        if rgb.shape != want:  # else repaint's indexing fails with an IndexError far from the cause
+            raise ModelRunError(f"painter returned {OUTPUT!r} of shape {rgb.shape}, expected {want}",
+                                path=str(self.path))
+        # clipped: a residual overshooting [0, 1] (a file exported without the clamp) wrapped round in uint8
+        return np.ascontiguousarray(np.clip(rgb[0].transpose(1, 2, 0), 0.0, 1.0), np.float32)
 
     def repaint(self, image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
                 source_rgb: np.ndarray, joints: np.ndarray, valid: np.ndarray, tolerance_m: float = 0.03,

@@ -13,7 +13,7 @@ import pytest
 
 from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
 from ghnerf_runtime.config import ConfigError, NovelViewConfig
-from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ShapeError
+from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.metrics import masked_psnr
 from ghnerf_runtime.novel_painter import (FEATURE_VERSION, META_PREFIX, PLANES, NovelPainter, PainterPlanes,
                                           angle_from_sources_deg, painter_planes)
@@ -179,3 +179,57 @@ def test_a_painter_whose_inputs_have_another_rank_is_refused(tmp_path):
     with pytest.raises(ModelContractError, match=r"inputs planes \(N, 12, H, W\)") as e:
         NovelPainter.load(tmp_path / "odd.onnx")
     assert e.value.key == "planes" and "odd.onnx" in str(e.value)
+
+
+def _answering_painter(path: Path, nodes: list, consts: list) -> Path:
+    """A painter graph of ``nodes`` that ends in ``rgb`` (the blend painter's file contract)."""
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph(
+        nodes, "answering_painter",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, ["N", len(PLANES), "H", "W"]),
+         helper.make_tensor_value_info("joints", TensorProto.FLOAT, ["N", 25, 3])],
+        [helper.make_tensor_value_info("rgb", TensorProto.FLOAT, None)], initializer=consts)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    entry = model.metadata_props.add()
+    entry.key, entry.value = META_PREFIX + "feature_version", str(FEATURE_VERSION)
+    onnx.save(model, str(path))
+    return path
+
+
+def test_a_painter_answer_past_white_or_black_is_clipped_not_wrapped(shot, tmp_path):
+    # np.round(1.2 * 255) = 306 became uint8 50: the brightest pixels turned dark (and -0.2: 205, near white)
+    from onnx import TensorProto, helper
+
+    joints, sources, rgb, target, _, _ = shot
+    consts = [helper.make_tensor(n, TensorProto.INT64, [1], [v]) for n, v in (("s", 0), ("e", 3), ("a", 1))]
+    consts.append(helper.make_tensor("gain", TensorProto.FLOAT, [], [8.0]))
+    consts.append(helper.make_tensor("one", TensorProto.FLOAT, [], [1.0]))
+    nodes = [helper.make_node("Slice", ["planes", "s", "e", "a"], ["blend"]),
+             helper.make_node("Mul", ["blend", "gain"], ["loud"]),
+             helper.make_node("Sub", ["loud", "one"], ["rgb"])]  # 8 x - 1: [-1, 7]
+    painter = NovelPainter.load(_answering_painter(tmp_path / "loud.onnx", nodes, consts))
+    body = proxy_body(joints, np.ones(25, bool))
+    planes = _planes(shot)
+    painted = painter.paint(planes)
+    want = np.clip(8.0 * planes.planes[:3].transpose(1, 2, 0) - 1.0, 0.0, 1.0)
+    assert want.max() == 1.0 and want.min() == 0.0  # both ends overshot
+    np.testing.assert_allclose(painted, want, atol=1e-6)
+    out, changed = painter.repaint(np.full((128, 128, 3), 77, np.uint8), target, body, sources, rgb, joints,
+                                   np.ones(25, bool))
+    expected = np.round(want[..., ::-1] * 255.0)  # BGR; the boxed crop paints as the whole view (above)
+    np.testing.assert_allclose(out[changed], expected[changed], atol=1)
+    assert (out[changed] == 255).sum() > 20 and (out[changed] == 0).sum() > 20
+
+
+def test_a_painter_answer_of_another_size_is_a_model_error(shot, tmp_path):
+    from onnx import TensorProto, helper
+
+    consts = [helper.make_tensor(n, TensorProto.INT64, [2], v) for n, v in (("s", [0, 0]), ("e", [3, -1]),
+                                                                           ("a", [1, 2]))]
+    nodes = [helper.make_node("Slice", ["planes", "s", "e", "a"], ["rgb"])]  # one row short
+    painter = NovelPainter.load(_answering_painter(tmp_path / "short.onnx", nodes, consts))
+    with pytest.raises(ModelRunError, match=r"shape \(1, 3, 127, 128\), expected \(1, 3, 128, 128\)") as e:
+        painter.paint(_planes(shot))
+    assert "short.onnx" in str(e.value)
