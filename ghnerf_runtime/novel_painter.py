@@ -209,7 +209,11 @@ class NovelPainter:
         depth = proxy_depth(body, camera) if depth is None else np.asarray(depth)
         if depth.shape != (H, W):
             raise ShapeError(f"depth must be {(H, W)}, got {depth.shape}")
-        keep = depth > 0 if region is None else (depth > 0) | np.asarray(region, bool)
+        if region is not None:
+            region = np.asarray(region, bool)
+            if region.shape != (H, W):  # a row of H flags broadcast over the view and painted all of it
+                raise ShapeError(f"region must be {(H, W)}, got {region.shape}")
+        keep = depth > 0 if region is None else (depth > 0) | region
         if not (depth > 0).any():
             return image, np.zeros((H, W), bool)
         rs, cs = np.nonzero(keep.any(axis=1))[0], np.nonzero(keep.any(axis=0))[0]

@@ -6,6 +6,7 @@ which is enough to check what the runtime feeds it and what it keeps of the answ
 painter is fed what it was trained on is ``tests/training/test_novel_painter_export.py``."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -233,3 +234,14 @@ def test_a_painter_answer_of_another_size_is_a_model_error(shot, tmp_path):
     with pytest.raises(ModelRunError, match=r"shape \(1, 3, 127, 128\), expected \(1, 3, 128, 128\)") as e:
         painter.paint(_planes(shot))
     assert "short.onnx" in str(e.value)
+
+
+def test_a_region_of_another_shape_is_named_not_broadcast(shot, tmp_path):
+    # a (128,) region broadcast over the rows and repainted the whole view; (64, 64) was numpy's ValueError
+    joints, sources, rgb, target, _, _ = shot
+    painter = NovelPainter.load(blend_painter(tmp_path / "p.onnx"))
+    body = proxy_body(joints, np.ones(25, bool))
+    grey = np.full((128, 128, 3), 77, np.uint8)
+    for bad in (np.ones(128, bool), np.ones((64, 64), bool), np.ones((1, 128), bool)):
+        with pytest.raises(ShapeError, match=re.escape(f"region must be (128, 128), got {bad.shape}")):
+            painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool), region=bad)
