@@ -35,6 +35,7 @@ from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_normals
 from ghnerf_runtime.onnx_file import open_onnx_file
+from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
            "painter_planes", "angle_from_sources_deg", "NovelPainter"]
@@ -94,7 +95,7 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
         tolerance_m: a source sees a surface point when its own proxy depth there is this close.
     """
     H, W = camera.height, camera.width
-    shown = np.asarray(shown_rgb, np.float64)
+    shown = unit_rgb(shown_rgb, "picture").astype(np.float64)
     depth = np.asarray(depth, np.float64)
     if shown.shape != (H, W, 3) or depth.shape != (H, W):
         raise ShapeError(f"picture {shown.shape} and depth {depth.shape} must be {(H, W, 3)} and {(H, W)}")
@@ -110,8 +111,8 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     points = ((np.concatenate([xy, np.ones((H, W, 1))], -1) * depth[..., None]) - camera.t) @ camera.R
     flat = points.reshape(-1, 3)
     colours, sees = [], []
-    for cam, rgb, own_depth in zip(sources, source_rgb, source_depth):
-        rgb = np.ascontiguousarray(rgb, np.float32)
+    for k, (cam, rgb, own_depth) in enumerate(zip(sources, source_rgb, source_depth)):
+        rgb = unit_rgb(rgb, f"source image {k}")
         if rgb.shape[:2] != (cam.height, cam.width) or np.shape(own_depth) != rgb.shape[:2]:
             raise ShapeError(f"source image {rgb.shape[:2]} / depth {np.shape(own_depth)} do not match its camera "
                              f"{(cam.height, cam.width)}")

@@ -245,3 +245,18 @@ def test_a_region_of_another_shape_is_named_not_broadcast(shot, tmp_path):
     for bad in (np.ones(128, bool), np.ones((64, 64), bool), np.ones((1, 128), bool)):
         with pytest.raises(ShapeError, match=re.escape(f"region must be (128, 128), got {bad.shape}")):
             painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool), region=bad)
+
+
+def test_8_bit_pictures_and_sources_are_named_not_taken_for_white(shot):
+    # planes built from 0..255 colours were all ones (white): what the painter repainted was not the view
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    depth, src = proxy_depth(body, target), [proxy_depth(body, c) for c in sources]
+    valid = np.ones(25, bool)
+    shown8 = np.full((128, 128, 3), 200, np.uint8)
+    with pytest.raises(ShapeError, match=r"picture must be float RGB in \[0, 1\], got uint8 up to 200"):
+        painter_planes(shown8, target, depth, sources, rgb, src, joints, valid)
+    with pytest.raises(ShapeError, match=r"source image 1 must be float RGB in \[0, 1\], got float32 up to 1\.\d+$"):
+        painter_planes(shown8 / 255.0, target, depth, sources, [rgb[0], rgb[1] + 0.5], src, joints, valid)
+    p = painter_planes(shown8 / 255.0, target, depth, sources, rgb, src, joints, valid)
+    assert np.allclose(p.planes[9:], 200 / 255.0, atol=1e-6) and p.planes[:3].max() < 1.0
