@@ -300,7 +300,7 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         rgb, depth, heat = images["rgb"], images["depth"], images.get("heat")
         rays += sum(int(m.sum()) for m, _ in groups)
     t2 = time.perf_counter()
-    rgb = np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0)
+    rgb = np.clip(np.nan_to_num(rgb, nan=contract.background), 0.0, 1.0)  # a failed ray shows nothing, not black
     if stride > 1:
         rgb = cv2.resize(rgb, (contract.width, S), interpolation=cv2.INTER_LINEAR)
         if heat is not None:
