@@ -404,4 +404,4 @@ def heatmap_overlay(image: np.ndarray, heat: np.ndarray, weight: float = 0.5) ->
         heat = cv2.resize(heat, (image.shape[1], image.shape[0]), interpolation=cv2.INTER_LINEAR)
     colour = cv2.applyColorMap((heat * 255).astype(np.uint8), cv2.COLORMAP_JET)
     alpha = (weight * heat)[..., None]
-    return (image * (1 - alpha) + colour * alpha).astype(np.uint8)
+    return np.round(image * (1 - alpha) + colour * alpha).astype(np.uint8)  # rounded: truncation darkened it
