@@ -35,6 +35,7 @@ from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_normals
 from ghnerf_runtime.onnx_file import open_onnx_file
+from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
            "painter_planes", "angle_from_sources_deg", "NovelPainter"]
@@ -94,7 +95,7 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
         tolerance_m: a source sees a surface point when its own proxy depth there is this close.
     """
     H, W = camera.height, camera.width
-    shown = np.asarray(shown_rgb, np.float64)
+    shown = unit_rgb(shown_rgb, "picture").astype(np.float64)
     depth = np.asarray(depth, np.float64)
     if shown.shape != (H, W, 3) or depth.shape != (H, W):
         raise ShapeError(f"picture {shown.shape} and depth {depth.shape} must be {(H, W, 3)} and {(H, W)}")
@@ -110,8 +111,8 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     points = ((np.concatenate([xy, np.ones((H, W, 1))], -1) * depth[..., None]) - camera.t) @ camera.R
     flat = points.reshape(-1, 3)
     colours, sees = [], []
-    for cam, rgb, own_depth in zip(sources, source_rgb, source_depth):
-        rgb = np.ascontiguousarray(rgb, np.float32)
+    for k, (cam, rgb, own_depth) in enumerate(zip(sources, source_rgb, source_depth)):
+        rgb = unit_rgb(rgb, f"source image {k}")
         if rgb.shape[:2] != (cam.height, cam.width) or np.shape(own_depth) != rgb.shape[:2]:
             raise ShapeError(f"source image {rgb.shape[:2]} / depth {np.shape(own_depth)} do not match its camera "
                              f"{(cam.height, cam.width)}")
@@ -182,7 +183,12 @@ class NovelPainter:
             raise ModelRunError(f"painter failed: {type(e).__name__}: {str(e).strip()[:200]}", path=str(self.path)) from e
         if not np.isfinite(rgb).all():
             raise ModelRunError("painter returned non-finite colours", path=str(self.path))
-        return np.ascontiguousarray(rgb[0].transpose(1, 2, 0), np.float32)
+        want = (1, 3) + inputs.planes.shape[1:]
+        if rgb.shape != want:  # else repaint's indexing fails with an IndexError far from the cause
+            raise ModelRunError(f"painter returned {OUTPUT!r} of shape {rgb.shape}, expected {want}",
+                                path=str(self.path))
+        # clipped: a residual overshooting [0, 1] (a file exported without the clamp) wrapped round in uint8
+        return np.ascontiguousarray(np.clip(rgb[0].transpose(1, 2, 0), 0.0, 1.0), np.float32)
 
     def repaint(self, image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources: Sequence[Camera],
                 source_rgb: np.ndarray, joints: np.ndarray, valid: np.ndarray, tolerance_m: float = 0.03,
@@ -204,7 +210,11 @@ class NovelPainter:
         depth = proxy_depth(body, camera) if depth is None else np.asarray(depth)
         if depth.shape != (H, W):
             raise ShapeError(f"depth must be {(H, W)}, got {depth.shape}")
-        keep = depth > 0 if region is None else (depth > 0) | np.asarray(region, bool)
+        if region is not None:
+            region = np.asarray(region, bool)
+            if region.shape != (H, W):  # a row of H flags broadcast over the view and painted all of it
+                raise ShapeError(f"region must be {(H, W)}, got {region.shape}")
+        keep = depth > 0 if region is None else (depth > 0) | region
         if not (depth > 0).any():
             return image, np.zeros((H, W), bool)
         rs, cs = np.nonzero(keep.any(axis=1))[0], np.nonzero(keep.any(axis=0))[0]

@@ -300,7 +300,7 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         rgb, depth, heat = images["rgb"], images["depth"], images.get("heat")
         rays += sum(int(m.sum()) for m, _ in groups)
     t2 = time.perf_counter()
-    rgb = np.clip(np.nan_to_num(rgb, nan=0.0), 0.0, 1.0)
+    rgb = np.clip(np.nan_to_num(rgb, nan=contract.background), 0.0, 1.0)  # a failed ray shows nothing, not black
     if stride > 1:
         rgb = cv2.resize(rgb, (contract.width, S), interpolation=cv2.INTER_LINEAR)
         if heat is not None:
@@ -404,4 +404,4 @@ def heatmap_overlay(image: np.ndarray, heat: np.ndarray, weight: float = 0.5) ->
         heat = cv2.resize(heat, (image.shape[1], image.shape[0]), interpolation=cv2.INTER_LINEAR)
     colour = cv2.applyColorMap((heat * 255).astype(np.uint8), cv2.COLORMAP_JET)
     alpha = (weight * heat)[..., None]
-    return (image * (1 - alpha) + colour * alpha).astype(np.uint8)
+    return np.round(image * (1 - alpha) + colour * alpha).astype(np.uint8)  # rounded: truncation darkened it

@@ -79,6 +79,17 @@ def subject_region(image_bgr: np.ndarray, background: float, min_diff: float) ->
     return np.abs(np.asarray(image_bgr, np.float32) / 255.0 - background).max(axis=-1) >= min_diff
 
 
+def unit_rgb(rgb: np.ndarray, name: str) -> np.ndarray:
+    """``rgb`` as float32, refused (:class:`ShapeError` naming ``name``) unless it is a float array within
+    [0, 1]: 8-bit colours (0..255) taken for [0, 1] clip to white everywhere, silently."""
+    a = np.asarray(rgb)
+    if not np.issubdtype(a.dtype, np.floating) or np.any(a > 1.0 + 1e-3) or np.any(a < -1e-3):
+        top = float(np.nanmax(a)) if a.size else float("nan")
+        raise ShapeError(f"{name} must be float RGB in [0, 1], got {a.dtype} up to {top:g}"
+                         f"{' (8-bit? divide by 255)' if top > 2.0 else ''}")
+    return np.ascontiguousarray(a, np.float32)
+
+
 #: Points per row of :func:`sample_at`'s maps: ``cv2.remap`` refuses maps of 32767 rows or more (SHRT_MAX), which
 #: one ``(N, 1)`` column reaches once the subject covers a third of a 320x320 view.
 SAMPLE_ROW = 1024
@@ -157,7 +168,7 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
     to_view = camera.center - points
     to_view /= np.linalg.norm(to_view, axis=-1, keepdims=True)
     for k, (cam, rgb) in enumerate(zip(sources, source_rgb)):
-        rgb = np.ascontiguousarray(rgb, np.float32)
+        rgb = unit_rgb(rgb, f"source image {k}")
         if rgb.shape[:2] != (cam.height, cam.width):
             raise ShapeError(f"source image {rgb.shape[:2]} does not match its camera {(cam.height, cam.width)}")
         uv, zs = cam.project(points, distort=False)

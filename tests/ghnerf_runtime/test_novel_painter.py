@@ -6,6 +6,7 @@ which is enough to check what the runtime feeds it and what it keeps of the answ
 painter is fed what it was trained on is ``tests/training/test_novel_painter_export.py``."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,7 @@ import pytest
 
 from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
 from ghnerf_runtime.config import ConfigError, NovelViewConfig
-from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ShapeError
+from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.metrics import masked_psnr
 from ghnerf_runtime.novel_painter import (FEATURE_VERSION, META_PREFIX, PLANES, NovelPainter, PainterPlanes,
                                           angle_from_sources_deg, painter_planes)
@@ -179,3 +180,83 @@ def test_a_painter_whose_inputs_have_another_rank_is_refused(tmp_path):
     with pytest.raises(ModelContractError, match=r"inputs planes \(N, 12, H, W\)") as e:
         NovelPainter.load(tmp_path / "odd.onnx")
     assert e.value.key == "planes" and "odd.onnx" in str(e.value)
+
+
+def _answering_painter(path: Path, nodes: list, consts: list) -> Path:
+    """A painter graph of ``nodes`` that ends in ``rgb`` (the blend painter's file contract)."""
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph(
+        nodes, "answering_painter",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, ["N", len(PLANES), "H", "W"]),
+         helper.make_tensor_value_info("joints", TensorProto.FLOAT, ["N", 25, 3])],
+        [helper.make_tensor_value_info("rgb", TensorProto.FLOAT, None)], initializer=consts)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    entry = model.metadata_props.add()
+    entry.key, entry.value = META_PREFIX + "feature_version", str(FEATURE_VERSION)
+    onnx.save(model, str(path))
+    return path
+
+
+def test_a_painter_answer_past_white_or_black_is_clipped_not_wrapped(shot, tmp_path):
+    # np.round(1.2 * 255) = 306 became uint8 50: the brightest pixels turned dark (and -0.2: 205, near white)
+    from onnx import TensorProto, helper
+
+    joints, sources, rgb, target, _, _ = shot
+    consts = [helper.make_tensor(n, TensorProto.INT64, [1], [v]) for n, v in (("s", 0), ("e", 3), ("a", 1))]
+    consts.append(helper.make_tensor("gain", TensorProto.FLOAT, [], [8.0]))
+    consts.append(helper.make_tensor("one", TensorProto.FLOAT, [], [1.0]))
+    nodes = [helper.make_node("Slice", ["planes", "s", "e", "a"], ["blend"]),
+             helper.make_node("Mul", ["blend", "gain"], ["loud"]),
+             helper.make_node("Sub", ["loud", "one"], ["rgb"])]  # 8 x - 1: [-1, 7]
+    painter = NovelPainter.load(_answering_painter(tmp_path / "loud.onnx", nodes, consts))
+    body = proxy_body(joints, np.ones(25, bool))
+    planes = _planes(shot)
+    painted = painter.paint(planes)
+    want = np.clip(8.0 * planes.planes[:3].transpose(1, 2, 0) - 1.0, 0.0, 1.0)
+    assert want.max() == 1.0 and want.min() == 0.0  # both ends overshot
+    np.testing.assert_allclose(painted, want, atol=1e-6)
+    out, changed = painter.repaint(np.full((128, 128, 3), 77, np.uint8), target, body, sources, rgb, joints,
+                                   np.ones(25, bool))
+    expected = np.round(want[..., ::-1] * 255.0)  # BGR; the boxed crop paints as the whole view (above)
+    np.testing.assert_allclose(out[changed], expected[changed], atol=1)
+    assert (out[changed] == 255).sum() > 20 and (out[changed] == 0).sum() > 20
+
+
+def test_a_painter_answer_of_another_size_is_a_model_error(shot, tmp_path):
+    from onnx import TensorProto, helper
+
+    consts = [helper.make_tensor(n, TensorProto.INT64, [2], v) for n, v in (("s", [0, 0]), ("e", [3, -1]),
+                                                                           ("a", [1, 2]))]
+    nodes = [helper.make_node("Slice", ["planes", "s", "e", "a"], ["rgb"])]  # one row short
+    painter = NovelPainter.load(_answering_painter(tmp_path / "short.onnx", nodes, consts))
+    with pytest.raises(ModelRunError, match=r"shape \(1, 3, 127, 128\), expected \(1, 3, 128, 128\)") as e:
+        painter.paint(_planes(shot))
+    assert "short.onnx" in str(e.value)
+
+
+def test_a_region_of_another_shape_is_named_not_broadcast(shot, tmp_path):
+    # a (128,) region broadcast over the rows and repainted the whole view; (64, 64) was numpy's ValueError
+    joints, sources, rgb, target, _, _ = shot
+    painter = NovelPainter.load(blend_painter(tmp_path / "p.onnx"))
+    body = proxy_body(joints, np.ones(25, bool))
+    grey = np.full((128, 128, 3), 77, np.uint8)
+    for bad in (np.ones(128, bool), np.ones((64, 64), bool), np.ones((1, 128), bool)):
+        with pytest.raises(ShapeError, match=re.escape(f"region must be (128, 128), got {bad.shape}")):
+            painter.repaint(grey, target, body, sources, rgb, joints, np.ones(25, bool), region=bad)
+
+
+def test_8_bit_pictures_and_sources_are_named_not_taken_for_white(shot):
+    # planes built from 0..255 colours were all ones (white): what the painter repainted was not the view
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    depth, src = proxy_depth(body, target), [proxy_depth(body, c) for c in sources]
+    valid = np.ones(25, bool)
+    shown8 = np.full((128, 128, 3), 200, np.uint8)
+    with pytest.raises(ShapeError, match=r"picture must be float RGB in \[0, 1\], got uint8 up to 200"):
+        painter_planes(shown8, target, depth, sources, rgb, src, joints, valid)
+    with pytest.raises(ShapeError, match=r"source image 1 must be float RGB in \[0, 1\], got float32 up to 1\.\d+$"):
+        painter_planes(shown8 / 255.0, target, depth, sources, [rgb[0], rgb[1] + 0.5], src, joints, valid)
+    p = painter_planes(shown8 / 255.0, target, depth, sources, rgb, src, joints, valid)
+    assert np.allclose(p.planes[9:], 200 / 255.0, atol=1e-6) and p.planes[:3].max() < 1.0

@@ -352,3 +352,45 @@ def test_a_non_finite_subject_box_is_an_error_not_an_empty_view():
 def _render_box(box):
     env = {"images": np.zeros((2, 3, 128, 128), np.float32)}
     return render_novel_view(DiscSession(), env, _camera(), box, NovelViewConfig(enabled=True))
+
+
+class NaNGreySession(DiscSession):
+    """A model over a grey background (0.5) whose rays left of the disc's centre come back NaN."""
+
+    def __init__(self):
+        super().__init__(opaque_background=True)
+        self.contract = replace(self.contract, background=0.5)
+
+    def run(self, graph, feeds):
+        out = super().run(graph, feeds)
+        if graph != "volume":
+            uv = feeds["ray_uv"][0]
+            inside = np.linalg.norm(uv - CENTRE, axis=-1) <= self.radius
+            out["rgb"] = np.where(inside[:, None], out["rgb"][0], 0.5)[None].astype(np.float32)
+            out["rgb"][0, uv[:, 0] < CENTRE[0]] = np.nan
+        return out
+
+
+@pytest.mark.parametrize("stride", [1, 2])
+def test_a_nan_ray_is_drawn_as_the_background_not_black(stride):
+    # nan_to_num(nan=0.0) drew it black: a black half-disc and black rays round it on a grey background
+    nv, _ = _render(NovelViewConfig(enabled=True, stride=stride, silhouette_stride=0), NaNGreySession())
+    left = np.arange(128) < CENTRE[0] - stride
+    assert np.all(nv.image[:, left] == 128)  # round(0.5 * 255)
+    assert nv.image[:, ~left].min() > 0 and np.isfinite(nv.depth).all()
+
+
+def test_the_heatmap_overlay_rounds_its_blend_to_the_nearest_level():
+    # astype(uint8) truncated: every blended pixel came out up to one level darker, on average half of one
+    import cv2
+
+    from ghnerf_runtime.novel_view import heatmap_overlay
+
+    image = np.random.default_rng(0).integers(0, 256, (32, 32, 3)).astype(np.uint8)
+    heat = np.linspace(0.0, 1.0, 32 * 32, dtype=np.float32).reshape(32, 32)
+    colour = cv2.applyColorMap((heat * 255).astype(np.uint8), cv2.COLORMAP_JET).astype(np.float64)
+    alpha = 0.5 * heat.astype(np.float64)[..., None]
+    exact = image * (1 - alpha) + colour * alpha
+    got = heatmap_overlay(image, heat)
+    assert np.abs(got - exact).max() <= 0.5 + 1e-3
+    assert np.array_equal(got[0, 0], image[0, 0])  # no heat: the picture itself

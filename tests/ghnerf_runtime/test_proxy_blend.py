@@ -196,3 +196,15 @@ def test_a_subject_covering_more_than_32767_pixels_is_blended(shot):
                         sources, rgb)
     # the same subject, the same colours: the big view's mean colour over its recoloured pixels matches
     assert np.abs(out.image[out.replaced].mean(0) - small.image[small.replaced].mean(0)).max() < 6.0
+
+
+def test_8_bit_source_images_are_named_not_taken_for_white(shot):
+    # uint8 crops (0..255) were clipped to [0, 1] in the blend: every recoloured pixel came out white
+    joints, sources, rgb, target, image, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    rgb8 = np.round(rgb * 255.0)
+    for bad in (rgb8.astype(np.uint8), rgb8):
+        with pytest.raises(ShapeError, match=r"source image 0 must be float RGB in \[0, 1\].*divide by 255"):
+            proxy_blend(image, target, body, sources, bad)
+    ok = proxy_blend(image, target, body, sources, rgb.astype(np.float64))
+    assert ok.replaced.sum() > 500 and ok.image[ok.replaced].mean() < 200  # the subject's colours, not white
