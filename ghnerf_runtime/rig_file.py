@@ -56,6 +56,9 @@ ROTATION_TOLERANCE = 1e-4
 #: (1280x720 read as 1920x1080) or a quarter (the other way), which the old "inside the image" test
 #: let through. 10 % leaves margin on both sides.
 PRINCIPAL_POINT_TOLERANCE = 0.1
+#: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
+#: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
+MAX_IMAGE_SIDE = 32767
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -137,9 +140,11 @@ class _Checker:
             self._raise(field, f"must be a non-empty string, got {_show(value)}")
         return value
 
-    def positive_int(self, value: Any, field: str) -> int:
+    def positive_int(self, value: Any, field: str, limit: int | None = None) -> int:
         if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
             self._raise(field, f"must be a positive integer, got {_show(value)}")
+        if limit is not None and value > limit:
+            self._raise(field, f"must be at most {limit}, got {_show(value)}")
         return value
 
     def array(self, value: Any, field: str, shape: tuple | None = None, what: str = "") -> np.ndarray:
@@ -287,8 +292,8 @@ def _plain(value: Any) -> Any:
 def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
     raw = chk.mapping(raw, field, _CAMERA_KEYS)
     name = chk.string(raw["name"], f"{field}.name")
-    width = chk.positive_int(raw["width"], f"{field}.width")
-    height = chk.positive_int(raw["height"], f"{field}.height")
+    width = chk.positive_int(raw["width"], f"{field}.width", MAX_IMAGE_SIDE)
+    height = chk.positive_int(raw["height"], f"{field}.height", MAX_IMAGE_SIDE)
 
     K = chk.array(raw["K"], f"{field}.K", (3, 3))
     if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
@@ -400,6 +405,10 @@ def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
         data = json.loads(text, object_pairs_hook=_object_hook)
     except json.JSONDecodeError as e:
         raise RigFileError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}", path=where) from e
+    except ValueError as e:  # an integer literal of more digits than Python converts (4300)
+        raise RigFileError(f"invalid JSON: {e}", path=where) from e
+    except RecursionError as e:  # arrays or objects nested thousands deep
+        raise RigFileError("invalid JSON: nested too deeply", path=where) from e
     return rig_from_dict(data, path=path)
 
 
@@ -415,6 +424,8 @@ def load_rig(path: str | os.PathLike) -> Rig:
         raw = path.read_bytes()
     except OSError as e:
         raise RigFileError(f"cannot read rig file: {e.strerror or e}", path=str(path)) from e
+    except ValueError as e:  # a path with a NUL character
+        raise RigFileError(f"cannot read rig file: {e}", path=str(path).replace("\0", "\\x00")) from e
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:

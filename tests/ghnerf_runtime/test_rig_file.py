@@ -202,6 +202,32 @@ def test_unreadable_files(tmp_path):
         loads_rig("", path="inline")
 
 
+@pytest.mark.parametrize("text, why", [
+    ('{"format": "ghnerf-rig", "version": ' + "1" * 5000 + "}", "4300"),  # was a bare ValueError
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),  # was a RecursionError
+])
+def test_json_python_cannot_hold_is_a_rig_file_error(tmp_path, text, why):
+    path = tmp_path / "odd.json"
+    path.write_text(text)
+    with pytest.raises(RigFileError, match=why) as info:
+        load_rig(path)
+    assert info.value.path == str(path) and "invalid JSON" in str(info.value)
+
+
+def test_a_path_with_a_nul_character_is_a_rig_file_error():
+    with pytest.raises(RigFileError, match=r"cannot read rig file.*null byte") as info:  # was a bare ValueError
+        load_rig("rig\0.json")
+    assert "rig\\x00.json" in str(info.value)
+
+
+@pytest.mark.parametrize("side", ["width", "height"])
+def test_an_image_side_beyond_the_remap_limit_is_named(example_dict, side):
+    example_dict["cameras"][1][side] = 10**400  # overflowed the principal point check (OverflowError)
+    with pytest.raises(RigFileError, match="must be at most 32767") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == f"cameras[1].{side}"
+
+
 def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
     rig = load_rig(EXAMPLE)
     path = tmp_path / "rig.json"
