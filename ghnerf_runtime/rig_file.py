@@ -138,6 +138,8 @@ class _Checker:
     def string(self, value: Any, field: str) -> str:
         if not isinstance(value, str) or not value:
             self._raise(field, f"must be a non-empty string, got {_show(value)}")
+        if not _utf8(value):  # a lone surrogate escape ("\ud800"): the file could not be saved again
+            self._raise(field, f"must be UTF-8 text (no lone surrogate escapes), got {_show(value)}")
         return value
 
     def positive_int(self, value: Any, field: str, limit: int | None = None) -> int:
@@ -180,6 +182,14 @@ def principal_point_problem(K: Any, width: int, height: int, *, advice: str = _R
     return (f"its principal point ({cx:g}, {cy:g}) lies {off_x:.0%} of the width and {off_y:.0%} of the height "
             f"from the centre of the {width}x{height} image (a real lens: within {PRINCIPAL_POINT_TOLERANCE:.0%}): "
             + advice)
+
+
+def _utf8(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _join(parent: str, key: str) -> str:
@@ -262,6 +272,12 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
     metadata = data.get("metadata", {})
     if not isinstance(metadata, dict):
         chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
+    try:  # what save_rig could not write back (it refuses NaN; a lone surrogate cannot be UTF-8)
+        metadata_text = json.dumps(metadata, allow_nan=False, ensure_ascii=False)
+    except ValueError:
+        chk._raise("metadata", f"must contain only finite numbers, got {_show(metadata)}")
+    if not _utf8(metadata_text):
+        chk._raise("metadata", f"must be UTF-8 text (no lone surrogate escapes), got {_show(metadata)}")
     try:
         rig = Rig(tuple(cameras), WorkingVolume(lo, hi), rig_id=rig_id, metadata=_plain(metadata))
     except GeometryError as e:  # pragma: no cover - every case is checked above
@@ -470,7 +486,11 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
         path = Path(os.path.realpath(path))
     directory = path.parent if str(path.parent) else Path(".")
     tmp = directory / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp"
-    data = text.encode("utf-8")
+    try:
+        data = text.encode("utf-8")
+    except UnicodeEncodeError as e:  # a lone surrogate in a name or the metadata
+        raise RigFileError(f"cannot write file: the text is not UTF-8 ({e.reason} at character {e.start})",
+                           path=str(path)) from e
     try:
         mode = path.stat().st_mode & 0o7777 if path.exists() else None
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)

@@ -228,6 +228,34 @@ def test_an_image_side_beyond_the_remap_limit_is_named(example_dict, side):
     assert info.value.field == f"cameras[1].{side}"
 
 
+@pytest.mark.parametrize("field, value, why", [
+    ("metadata", {"rms": float("nan")}, "finite numbers"),  # loaded, then save_rig refused it
+    ("metadata", {"note": "\udcff"}, "UTF-8"),  # loaded, then save_rig raised UnicodeEncodeError
+    ("rig_id", "bench-\ud800", "UTF-8"),
+    ("cameras[0].name", "left\ud800", "UTF-8"),
+])
+def test_what_save_could_not_write_back_is_refused_at_load(tmp_path, example_dict, field, value, why):
+    if field == "cameras[0].name":
+        example_dict["cameras"][0]["name"] = value
+    else:
+        example_dict[field] = value
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(example_dict))  # NaN and "\ud800" escapes are what a JSON file can hold
+    with pytest.raises(RigFileError, match=why) as info:
+        load_rig(path)
+    assert info.value.field == field and info.value.path == str(path)
+
+
+def test_save_of_text_that_is_not_utf8_is_a_rig_file_error(tmp_path):
+    rig = load_rig(EXAMPLE)
+    cams = (Camera("left\ud800", *rig.cameras[0].size, rig.cameras[0].K, rig.cameras[0].dist, rig.cameras[0].R,
+                   rig.cameras[0].t), rig.cameras[1])
+    path = tmp_path / "rig.json"
+    with pytest.raises(RigFileError, match="not UTF-8") as info:  # was a bare UnicodeEncodeError
+        save_rig(Rig(cams, rig.volume, rig_id=rig.rig_id), path)
+    assert info.value.path == str(path) and not path.exists() and not list(tmp_path.iterdir())
+
+
 def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
     rig = load_rig(EXAMPLE)
     path = tmp_path / "rig.json"
