@@ -47,6 +47,8 @@ def test_unknown_keys_are_named(data, key):
     ({"tracking": {"min_joints": 1}}, "tracking.min_joints"),
     ({"frame_check": {"min_std": float("nan")}}, "frame_check.min_std"),
     ({"decoder": {"threshold": 2.0}}, "decoder.threshold"),  # was "decoder" alone
+    ({"decoder": {"sigma": 10**400}}, "decoder.sigma"),  # np.isfinite raised a bare TypeError
+    ({"decoder": {"max_region_frac": float("inf")}}, "decoder.max_region_frac"),
     ({"roi": []}, "roi"),
 ])
 def test_bad_values_are_named(data, key):
