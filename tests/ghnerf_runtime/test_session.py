@@ -158,6 +158,13 @@ def test_metadata_resolution_disagreeing_with_the_graph_refused(tiny_model_dir, 
     ("ghnerf.render_feature", lambda v: "human_feat"),
     # int(inf) raised OverflowError, which no handler took
     ("ghnerf.channels", lambda v: json.dumps({**json.loads(v), "feat_s1": 1e400}).replace("Infinity", "1e400")),
+    # int() truncated 8.5 to 8 and read true as 1: a contract nobody wrote
+    ("ghnerf.channels", lambda v: json.dumps({**json.loads(v), "feat_s1": json.loads(v)["feat_s1"] + 0.5})),
+    ("ghnerf.strides", lambda v: json.dumps({**json.loads(v), "feat_s1": True})),
+    ("ghnerf.levels", lambda v: json.dumps([{**lv, "planes": lv["planes"] + 0.5} for lv in json.loads(v)])),
+    # bool("false") is True: the host would skip the mean/std the graph does not apply
+    ("ghnerf.normalisation", lambda v: json.dumps({**json.loads(v), "mean_std_in_graph": "false"})),
+    ("ghnerf.levels", lambda v: "[" * 100_000 + "]" * 100_000),  # a bare RecursionError
 ])
 def test_impossible_metadata_values_are_refused_by_key(tiny_model_dir, tmp_path, key, edit):
     folder = _copy(tiny_model_dir, tmp_path / "m")
