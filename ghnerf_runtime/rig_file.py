@@ -333,8 +333,9 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
         chk._raise(coef_field, f"tilt terms tx, ty (the last two) must be 0, got {dist[12:].tolist()}")
 
     R = chk.array(raw["R"], f"{field}.R", (3, 3))
-    dev = float(np.abs(R @ R.T - np.eye(3)).max())
-    det = float(np.linalg.det(R))
+    with np.errstate(over="ignore", invalid="ignore"):  # entries of 1e200 overflow: dev is then inf, refused below
+        dev = float(np.abs(R @ R.T - np.eye(3)).max())
+        det = float(np.linalg.det(R))
     if dev > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
         chk._raise(
             f"{field}.R",

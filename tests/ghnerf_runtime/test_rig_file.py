@@ -256,6 +256,14 @@ def test_save_of_text_that_is_not_utf8_is_a_rig_file_error(tmp_path):
     assert info.value.path == str(path) and not path.exists() and not list(tmp_path.iterdir())
 
 
+@pytest.mark.filterwarnings("error")
+def test_a_rotation_of_huge_numbers_is_refused_without_numpy_warnings(example_dict):
+    example_dict["cameras"][1]["R"] = [[1e200] * 3] * 3  # R R^T overflowed with numpy's RuntimeWarning first
+    with pytest.raises(RigFileError, match="must be a rotation matrix") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == "cameras[1].R" and "1e+200" in str(info.value)
+
+
 def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
     rig = load_rig(EXAMPLE)
     path = tmp_path / "rig.json"
