@@ -785,18 +785,58 @@ def config_to_dict(config: Any) -> dict:
     return out
 
 
+class _JsonObject(dict):
+    """A parsed JSON object that remembers the keys it was given more than once."""
+
+    duplicates: tuple[str, ...] = ()
+
+
+def _json_object(pairs: list[tuple[str, Any]]) -> _JsonObject:
+    obj = _JsonObject()
+    dups = []
+    for key, value in pairs:
+        if key in obj:
+            dups.append(key)
+        obj[key] = value
+    obj.duplicates = tuple(dups)
+    return obj
+
+
+def _plain_json(value: Any, where: str, duplicates: list[str]) -> Any:
+    """``value`` with plain dicts, the dotted path of every repeated key appended to ``duplicates``."""
+    if isinstance(value, dict):
+        duplicates.extend(f"{where}.{k}" if where else k for k in getattr(value, "duplicates", ()))
+        return {k: _plain_json(v, f"{where}.{k}" if where else k, duplicates) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain_json(v, f"{where}[{i}]", duplicates) for i, v in enumerate(value)]
+    return value
+
+
 def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], what: str = "config file") -> Any:
-    """The JSON value in ``path``; an unreadable file, invalid JSON or non-UTF-8 text raises ``fail(message)``
-    (the caller's error type, naming the file), the message saying which and where."""
+    """The JSON value in ``path``; an unreadable file, invalid JSON, non-UTF-8 text or a key given twice in one
+    object (JSON keeps the last: the first would be lost without a word) raises ``fail(message)`` (the caller's
+    error type, naming the file), the message saying which and where. A UTF-8 byte order mark is skipped."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            return json.load(fh)
+        with open(path, encoding="utf-8-sig") as fh:
+            text = fh.read()
     except OSError as e:
         raise fail(f"cannot read {what} ({e.strerror or e})") from e
-    except json.JSONDecodeError as e:
-        raise fail(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
     except UnicodeDecodeError as e:
         raise fail(f"not UTF-8 text (byte {e.start}): {e.reason}") from e
+    except ValueError as e:  # a NUL character in the path
+        raise fail(f"cannot read {what} ({e})") from e
+    try:
+        duplicates: list[str] = []
+        data = _plain_json(json.loads(text, object_pairs_hook=_json_object), "", duplicates)
+    except json.JSONDecodeError as e:
+        raise fail(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
+    except ValueError as e:  # an integer of more digits than Python converts (4300)
+        raise fail(f"not valid JSON ({e})") from e
+    except RecursionError as e:
+        raise fail("not valid JSON (nested too deeply)") from e
+    if duplicates:
+        raise fail(f"duplicate key {duplicates[0]!r} (JSON keeps only its last value)")
+    return data
 
 
 def load_config(path: str | os.PathLike) -> EstimatorConfig:

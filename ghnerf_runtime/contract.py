@@ -399,6 +399,8 @@ class ModelContract:
                 raise
             except (ValueError, TypeError, KeyError, OverflowError, json.JSONDecodeError) as e:  # int(inf)
                 raise ContractError(f"cannot parse {raw!r} ({e})", key=p + key) from e
+            except RecursionError as e:  # JSON nested thousands deep
+                raise ContractError(f"cannot parse {raw[:60]!r}... (nested too deeply)", key=p + key) from e
 
         version = get("contract_version")
         if version.split(".")[0] != CONTRACT_VERSION.split(".")[0]:
@@ -410,20 +412,21 @@ class ModelContract:
             return int(w), int(h)
 
         def levels(raw: str) -> tuple[LevelSpec, ...]:
-            return tuple(LevelSpec(int(d["volume_stride"]), int(d["planes"]), int(d["samples"]), str(d["spacing"]),
-                                   str(d["feature"]), str(d.get("sampling", "interval"))) for d in json.loads(raw))
+            return tuple(LevelSpec(_whole(d["volume_stride"]), _whole(d["planes"]), _whole(d["samples"]),
+                                   str(d["spacing"]), str(d["feature"]), str(d.get("sampling", "interval")))
+                         for d in json.loads(raw))
 
         def normalisation(raw: str) -> Normalisation:
             d = json.loads(raw)
             return Normalisation(str(d["channel_order"]), tuple(map(float, d["value_range"])),
                                  tuple(map(float, d["mean"])), tuple(map(float, d["std"])),
-                                 bool(d["mean_std_in_graph"]))
+                                 _json_boolean(d["mean_std_in_graph"]))
 
         def int_map(raw: str) -> dict[str, int]:
             d = json.loads(raw)
             if not isinstance(d, dict):
                 raise ValueError("expected a JSON object")
-            return {str(k): int(v) for k, v in d.items()}
+            return {str(k): _whole(v) for k, v in d.items()}
 
         def graphs(raw: str) -> tuple[GraphSpec, ...]:
             return tuple(GraphSpec.from_json(g, p + "graphs") for g in json.loads(raw))
@@ -494,6 +497,20 @@ class ModelContract:
                 ):
                     raise ContractError(f"graph {graph!r} {kind} shape {list(shape)} != contract {list(t.shape)}",
                                         key=t.name)
+
+
+def _whole(value: Any) -> int:
+    """A JSON integer: not a bool, not 8.7 (which ``int`` would truncate to 8 without a word)."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"expected an integer, got {value!r}")
+    return value
+
+
+def _json_boolean(value: Any) -> bool:
+    """A JSON true/false (``bool("false")`` is True)."""
+    if not isinstance(value, bool):
+        raise ValueError(f"expected true or false, got {value!r}")
+    return value
 
 
 def _boolean(raw: str) -> bool:

@@ -106,7 +106,9 @@ class KeypointDecoderConfig:
             raise KeypointConfigError(f"KeypointDecoderConfig.{field}: {why}, got {getattr(self, field)!r}", field)
 
         def real(value) -> bool:
-            return isinstance(value, numbers.Real) and not isinstance(value, bool) and bool(np.isfinite(value))
+            # not np.isfinite: an integer beyond float64 (10**400, from a JSON config) raised its TypeError
+            return (isinstance(value, numbers.Real) and not isinstance(value, bool) and value == value
+                    and abs(value) != float("inf"))
 
         if not (real(self.sigma) and 0 <= self.sigma <= 20):
             fail("sigma", "must be a number in [0, 20]")

@@ -93,7 +93,7 @@ class Roi:
     def __post_init__(self) -> None:
         for name in ("x0", "y0", "size"):
             value = getattr(self, name)
-            if isinstance(value, (bool, np.bool_)) or int(value) != value:
+            if isinstance(value, (bool, np.bool_)) or not _whole(value):
                 raise GeometryError(f"Roi.{name} must be an integer, got {value!r}")
             object.__setattr__(self, name, int(value))
         if self.size < 1:
@@ -126,8 +126,16 @@ class Roi:
         return (uv + 0.5) / s - 0.5 + [self.x0, self.y0]
 
 
+def _whole(value) -> bool:
+    """Whether ``value`` is a whole number (``int`` of NaN, infinity or None raises instead of saying no)."""
+    try:
+        return int(value) == value
+    except (TypeError, ValueError, OverflowError):
+        return False
+
+
 def _check_out_size(out_size: int) -> int:
-    if isinstance(out_size, (bool, np.bool_)) or int(out_size) != out_size or out_size < 1:
+    if isinstance(out_size, (bool, np.bool_)) or not _whole(out_size) or out_size < 1:
         raise GeometryError(f"out_size must be a positive integer, got {out_size!r}")
     return int(out_size)
 
@@ -380,6 +388,8 @@ class CropMaps:
 
 
 _OUTSIDE = -1e6  # a map coordinate far off any frame: cv2.remap's constant border (0)
+#: Frame dtypes both of OpenCV's steps (INTER_AREA resize, remap) take.
+_FRAME_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 
 
 def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
@@ -482,11 +492,19 @@ def apply_crop_maps(image: np.ndarray, maps: CropMaps) -> np.ndarray:
     """Undistort + crop + resize a frame: ``(H, W[, C])`` -> ``(S, S[, C])``, same dtype.
 
     Model pixels that fall outside the frame are 0 (padding policy, module docstring).
+
+    Raises:
+        ShapeError: ``image`` is not of the maps' size, has other than 1 to 4 channels, or a dtype OpenCV
+            cannot remap (uint8, uint16, int16, float32 and float64 are taken).
     """
     image = np.asarray(image)
     if image.ndim not in (2, 3) or (image.shape[1], image.shape[0]) != maps.image_size:
         raise ShapeError(f"image must have shape ({maps.image_size[1]}, {maps.image_size[0]}[, C]) "
                          f"for these maps, got {image.shape}")
+    if image.ndim == 3 and not 1 <= image.shape[2] <= 4:  # OpenCV's error named neither the image nor the count
+        raise ShapeError(f"image must have 1 to 4 channels, got shape {image.shape}")
+    if image.dtype not in _FRAME_DTYPES:
+        raise ShapeError(f"image dtype must be one of {[np.dtype(d).name for d in _FRAME_DTYPES]}, got {image.dtype}")
     x0, y0, x1, y1 = maps.window
     src = image[y0:y1, x0:x1]
     if x1 > image.shape[1] or y1 > image.shape[0]:  # the box steps' window reaches past the frame (_aligned_span)

@@ -56,6 +56,9 @@ ROTATION_TOLERANCE = 1e-4
 #: (1280x720 read as 1920x1080) or a quarter (the other way), which the old "inside the image" test
 #: let through. 10 % leaves margin on both sides.
 PRINCIPAL_POINT_TOLERANCE = 0.1
+#: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
+#: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
+MAX_IMAGE_SIDE = 32767
 
 _TOP_REQUIRED = ("format", "version", "rig_id", "units", "cameras", "working_volume")
 _TOP_OPTIONAL = ("metadata",)
@@ -135,11 +138,15 @@ class _Checker:
     def string(self, value: Any, field: str) -> str:
         if not isinstance(value, str) or not value:
             self._raise(field, f"must be a non-empty string, got {_show(value)}")
+        if not _utf8(value):  # a lone surrogate escape ("\ud800"): the file could not be saved again
+            self._raise(field, f"must be UTF-8 text (no lone surrogate escapes), got {_show(value)}")
         return value
 
-    def positive_int(self, value: Any, field: str) -> int:
+    def positive_int(self, value: Any, field: str, limit: int | None = None) -> int:
         if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
             self._raise(field, f"must be a positive integer, got {_show(value)}")
+        if limit is not None and value > limit:
+            self._raise(field, f"must be at most {limit}, got {_show(value)}")
         return value
 
     def array(self, value: Any, field: str, shape: tuple | None = None, what: str = "") -> np.ndarray:
@@ -175,6 +182,14 @@ def principal_point_problem(K: Any, width: int, height: int, *, advice: str = _R
     return (f"its principal point ({cx:g}, {cy:g}) lies {off_x:.0%} of the width and {off_y:.0%} of the height "
             f"from the centre of the {width}x{height} image (a real lens: within {PRINCIPAL_POINT_TOLERANCE:.0%}): "
             + advice)
+
+
+def _utf8(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _join(parent: str, key: str) -> str:
@@ -257,6 +272,12 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
     metadata = data.get("metadata", {})
     if not isinstance(metadata, dict):
         chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
+    try:  # what save_rig could not write back (it refuses NaN; a lone surrogate cannot be UTF-8)
+        metadata_text = json.dumps(metadata, allow_nan=False, ensure_ascii=False)
+    except ValueError:
+        chk._raise("metadata", f"must contain only finite numbers, got {_show(metadata)}")
+    if not _utf8(metadata_text):
+        chk._raise("metadata", f"must be UTF-8 text (no lone surrogate escapes), got {_show(metadata)}")
     try:
         rig = Rig(tuple(cameras), WorkingVolume(lo, hi), rig_id=rig_id, metadata=_plain(metadata))
     except GeometryError as e:  # pragma: no cover - every case is checked above
@@ -287,8 +308,8 @@ def _plain(value: Any) -> Any:
 def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
     raw = chk.mapping(raw, field, _CAMERA_KEYS)
     name = chk.string(raw["name"], f"{field}.name")
-    width = chk.positive_int(raw["width"], f"{field}.width")
-    height = chk.positive_int(raw["height"], f"{field}.height")
+    width = chk.positive_int(raw["width"], f"{field}.width", MAX_IMAGE_SIDE)
+    height = chk.positive_int(raw["height"], f"{field}.height", MAX_IMAGE_SIDE)
 
     K = chk.array(raw["K"], f"{field}.K", (3, 3))
     if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
@@ -312,8 +333,9 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
         chk._raise(coef_field, f"tilt terms tx, ty (the last two) must be 0, got {dist[12:].tolist()}")
 
     R = chk.array(raw["R"], f"{field}.R", (3, 3))
-    dev = float(np.abs(R @ R.T - np.eye(3)).max())
-    det = float(np.linalg.det(R))
+    with np.errstate(over="ignore", invalid="ignore"):  # entries of 1e200 overflow: dev is then inf, refused below
+        dev = float(np.abs(R @ R.T - np.eye(3)).max())
+        det = float(np.linalg.det(R))
     if dev > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
         chk._raise(
             f"{field}.R",
@@ -400,6 +422,10 @@ def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
         data = json.loads(text, object_pairs_hook=_object_hook)
     except json.JSONDecodeError as e:
         raise RigFileError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}", path=where) from e
+    except ValueError as e:  # an integer literal of more digits than Python converts (4300)
+        raise RigFileError(f"invalid JSON: {e}", path=where) from e
+    except RecursionError as e:  # arrays or objects nested thousands deep
+        raise RigFileError("invalid JSON: nested too deeply", path=where) from e
     return rig_from_dict(data, path=path)
 
 
@@ -415,6 +441,8 @@ def load_rig(path: str | os.PathLike) -> Rig:
         raw = path.read_bytes()
     except OSError as e:
         raise RigFileError(f"cannot read rig file: {e.strerror or e}", path=str(path)) from e
+    except ValueError as e:  # a path with a NUL character
+        raise RigFileError(f"cannot read rig file: {e}", path=str(path).replace("\0", "\\x00")) from e
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
@@ -459,7 +487,11 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
         path = Path(os.path.realpath(path))
     directory = path.parent if str(path.parent) else Path(".")
     tmp = directory / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp"
-    data = text.encode("utf-8")
+    try:
+        data = text.encode("utf-8")
+    except UnicodeEncodeError as e:  # a lone surrogate in a name or the metadata
+        raise RigFileError(f"cannot write file: the text is not UTF-8 ({e.reason} at character {e.start})",
+                           path=str(path)) from e
     try:
         mode = path.stat().st_mode & 0o7777 if path.exists() else None
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)

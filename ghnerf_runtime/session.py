@@ -157,6 +157,9 @@ def _contract_of(sess: ort.InferenceSession, path: Path) -> tuple[ModelContract,
     except ContractError as e:
         raise ModelContractError(str(e).split(": ", 1)[-1] if e.key else str(e), path=str(path), key=e.key) from e
     precision = props.get(META_PREFIX + "precision", "fp32")
+    if precision not in ("fp32", "int8"):  # what session.precision chooses between
+        raise ModelContractError(f"precision must be 'fp32' or 'int8', got {precision!r}", path=str(path),
+                                 key=META_PREFIX + "precision")
     return contract, graph, precision
 
 
@@ -226,10 +229,13 @@ class ModelSession:
             config = SessionConfig(model_dir=str(config))
         folder = resolve_model_dir(config.model_dir)
         if not folder.is_dir():
-            raise ModelLoadError("model folder does not exist", path=str(folder))
+            raise ModelLoadError("is not a folder (session.model_dir names the model folder, not a file)"
+                                 if folder.exists() else "model folder does not exist", path=str(folder))
         unknown = [g for g in graphs if g not in GRAPH_NAMES]
         if unknown:
             raise ModelError(f"unknown graph(s) {unknown}; graphs are {list(GRAPH_NAMES)}", path=str(folder))
+        if not graphs:  # the contract comes from the graph files: none loaded, no model
+            raise ModelError(f"no graphs to load; graphs are {list(GRAPH_NAMES)}", path=str(folder))
 
         sessions: dict[str, ort.InferenceSession] = {}
         files: dict[str, GraphFile] = {}
@@ -339,8 +345,8 @@ class ModelSession:
         if not path.is_file():
             return {}
         try:
-            card = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+            card = json.loads(path.read_text(encoding="utf-8-sig"))
+        except (OSError, ValueError, RecursionError) as e:  # ValueError: bad JSON or UTF-8, 5000-digit integers
             log.warning("%s: unreadable model card ignored (%s)", path, e)
             return {}
         return card if isinstance(card, dict) else {"card": card}

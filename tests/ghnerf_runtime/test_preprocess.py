@@ -45,7 +45,8 @@ def test_doctests():
     assert result.attempted >= 4 and result.failed == 0, result  # 4 examples when written
 
 
-@pytest.mark.parametrize("args", [(0, 0, 0), (0.5, 0, 10), (0, 0, -3), (True, 0, 4)])
+@pytest.mark.parametrize("args", [(0, 0, 0), (0.5, 0, 10), (0, 0, -3), (True, 0, 4),
+                                  (float("nan"), 0, 4), (0, float("inf"), 4), (0, 0, None)])  # were bare errors
 def test_roi_validation(args):
     with pytest.raises(GeometryError):
         Roi(*args)
@@ -361,3 +362,22 @@ def test_a_rotated_crop_is_sized_for_what_it_shows(roll):
     lo, hi = undistorted_image_bounds(cam)
     assert vol.size <= 1.5 * max(hi - lo)  # a rotated crop of the volume stays about the image's size
     assert np.all(np.isfinite(inside))
+
+
+@pytest.mark.parametrize("out_size", [float("nan"), float("inf"), None, "64"])
+def test_an_out_size_that_is_no_whole_number_is_named(out_size):
+    with pytest.raises(GeometryError, match="out_size must be a positive integer"):  # nan, inf: bare errors
+        build_undistort_crop_maps(make_camera(), Roi(200, 100, 128), out_size)
+
+
+@pytest.mark.parametrize("frame, why", [
+    (np.zeros((480, 640, 3), np.int64), "dtype"), (np.zeros((480, 640, 3), bool), "dtype"),
+    (np.zeros((480, 640), np.float16), "dtype"), (np.zeros((480, 640, 3), np.int8), "dtype"),
+    (np.zeros((480, 640, 0), np.uint8), "channels"), (np.zeros((480, 640, 200), np.uint8), "channels"),
+])
+@pytest.mark.parametrize("size", [64, 256])  # without and with the box steps
+def test_apply_crop_maps_names_a_frame_opencv_cannot_take(frame, why, size):
+    maps = build_undistort_crop_maps(make_camera(), Roi(200, 100, size), 64)
+    with pytest.raises(ShapeError, match=why) as e:  # was a bare cv2.error
+        apply_crop_maps(frame, maps)
+    assert str(frame.shape) in str(e.value) or str(frame.dtype) in str(e.value)

@@ -202,6 +202,68 @@ def test_unreadable_files(tmp_path):
         loads_rig("", path="inline")
 
 
+@pytest.mark.parametrize("text, why", [
+    ('{"format": "ghnerf-rig", "version": ' + "1" * 5000 + "}", "4300"),  # was a bare ValueError
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),  # was a RecursionError
+])
+def test_json_python_cannot_hold_is_a_rig_file_error(tmp_path, text, why):
+    path = tmp_path / "odd.json"
+    path.write_text(text)
+    with pytest.raises(RigFileError, match=why) as info:
+        load_rig(path)
+    assert info.value.path == str(path) and "invalid JSON" in str(info.value)
+
+
+def test_a_path_with_a_nul_character_is_a_rig_file_error():
+    with pytest.raises(RigFileError, match=r"cannot read rig file.*null byte") as info:  # was a bare ValueError
+        load_rig("rig\0.json")
+    assert "rig\\x00.json" in str(info.value)
+
+
+@pytest.mark.parametrize("side", ["width", "height"])
+def test_an_image_side_beyond_the_remap_limit_is_named(example_dict, side):
+    example_dict["cameras"][1][side] = 10**400  # overflowed the principal point check (OverflowError)
+    with pytest.raises(RigFileError, match="must be at most 32767") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == f"cameras[1].{side}"
+
+
+@pytest.mark.parametrize("field, value, why", [
+    ("metadata", {"rms": float("nan")}, "finite numbers"),  # loaded, then save_rig refused it
+    ("metadata", {"note": "\udcff"}, "UTF-8"),  # loaded, then save_rig raised UnicodeEncodeError
+    ("rig_id", "bench-\ud800", "UTF-8"),
+    ("cameras[0].name", "left\ud800", "UTF-8"),
+])
+def test_what_save_could_not_write_back_is_refused_at_load(tmp_path, example_dict, field, value, why):
+    if field == "cameras[0].name":
+        example_dict["cameras"][0]["name"] = value
+    else:
+        example_dict[field] = value
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(example_dict))  # NaN and "\ud800" escapes are what a JSON file can hold
+    with pytest.raises(RigFileError, match=why) as info:
+        load_rig(path)
+    assert info.value.field == field and info.value.path == str(path)
+
+
+def test_save_of_text_that_is_not_utf8_is_a_rig_file_error(tmp_path):
+    rig = load_rig(EXAMPLE)
+    cams = (Camera("left\ud800", *rig.cameras[0].size, rig.cameras[0].K, rig.cameras[0].dist, rig.cameras[0].R,
+                   rig.cameras[0].t), rig.cameras[1])
+    path = tmp_path / "rig.json"
+    with pytest.raises(RigFileError, match="not UTF-8") as info:  # was a bare UnicodeEncodeError
+        save_rig(Rig(cams, rig.volume, rig_id=rig.rig_id), path)
+    assert info.value.path == str(path) and not path.exists() and not list(tmp_path.iterdir())
+
+
+@pytest.mark.filterwarnings("error")
+def test_a_rotation_of_huge_numbers_is_refused_without_numpy_warnings(example_dict):
+    example_dict["cameras"][1]["R"] = [[1e200] * 3] * 3  # R R^T overflowed with numpy's RuntimeWarning first
+    with pytest.raises(RigFileError, match="must be a rotation matrix") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == "cameras[1].R" and "1e+200" in str(info.value)
+
+
 def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
     rig = load_rig(EXAMPLE)
     path = tmp_path / "rig.json"

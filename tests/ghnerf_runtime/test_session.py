@@ -158,6 +158,13 @@ def test_metadata_resolution_disagreeing_with_the_graph_refused(tiny_model_dir, 
     ("ghnerf.render_feature", lambda v: "human_feat"),
     # int(inf) raised OverflowError, which no handler took
     ("ghnerf.channels", lambda v: json.dumps({**json.loads(v), "feat_s1": 1e400}).replace("Infinity", "1e400")),
+    # int() truncated 8.5 to 8 and read true as 1: a contract nobody wrote
+    ("ghnerf.channels", lambda v: json.dumps({**json.loads(v), "feat_s1": json.loads(v)["feat_s1"] + 0.5})),
+    ("ghnerf.strides", lambda v: json.dumps({**json.loads(v), "feat_s1": True})),
+    ("ghnerf.levels", lambda v: json.dumps([{**lv, "planes": lv["planes"] + 0.5} for lv in json.loads(v)])),
+    # bool("false") is True: the host would skip the mean/std the graph does not apply
+    ("ghnerf.normalisation", lambda v: json.dumps({**json.loads(v), "mean_std_in_graph": "false"})),
+    ("ghnerf.levels", lambda v: "[" * 100_000 + "]" * 100_000),  # a bare RecursionError
 ])
 def test_impossible_metadata_values_are_refused_by_key(tiny_model_dir, tmp_path, key, edit):
     folder = _copy(tiny_model_dir, tmp_path / "m")
@@ -230,6 +237,24 @@ def test_missing_file_and_folder_refused(tiny_model_dir, tmp_path):
         _load_encoder(tmp_path / "nowhere")
 
 
+def test_a_model_dir_that_is_a_file_or_no_graphs_is_named(tiny_model_dir):
+    with pytest.raises(ModelLoadError, match="is not a folder") as e:  # said "model folder does not exist"
+        _load_encoder(tiny_model_dir / "encoder.onnx")
+    assert str(tiny_model_dir / "encoder.onnx") in str(e.value)
+    with pytest.raises(ModelError, match="no graphs to load") as e:  # was a bare AssertionError
+        ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False), ())
+    assert str(tiny_model_dir) in str(e.value)
+
+
+@pytest.mark.parametrize("precision", ["fp16", ""])
+def test_a_precision_the_runtime_does_not_know_is_refused(tiny_model_dir, tmp_path, precision):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, "ghnerf.precision": precision})
+    with pytest.raises(ModelContractError) as e:  # was loaded and reported as an "fp16" graph
+        _load_encoder(folder, precision="int8")
+    assert e.value.key == "ghnerf.precision" and repr(precision) in str(e.value) and "encoder.onnx" in str(e.value)
+
+
 def test_graph_files_from_different_models_refused(tiny_model_dir, tmp_path):
     folder = _copy(tiny_model_dir, tmp_path / "m")
     _edit_metadata(folder / "volume.onnx", lambda p: {**p, "ghnerf.model_version": "9.9.9"})
@@ -262,6 +287,11 @@ def test_model_card_is_read_when_present(tiny_model_dir, tmp_path):
     assert _load_encoder(folder).card == {"name": "tiny-test", "pck": 0.5}
     (folder / "model_card.json").write_text("{not json")
     assert _load_encoder(folder).card == {}  # an unreadable card is not fatal
+    for text in ("[" * 100_000, '{"n": ' + "1" * 5000 + "}"):  # were a bare RecursionError, ValueError
+        (folder / "model_card.json").write_text(text)
+        assert _load_encoder(folder).card == {}
+    (folder / "model_card.json").write_bytes(b"\xef\xbb\xbf" + b'{"name": "bom"}')  # was ignored as bad JSON
+    assert _load_encoder(folder).card == {"name": "bom"}
 
 
 @pytest.mark.skipif(not (REPO / "models" / "model_card.json").is_file(), reason="no trained model in models/")

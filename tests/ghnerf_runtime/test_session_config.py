@@ -47,6 +47,8 @@ def test_unknown_keys_are_named(data, key):
     ({"tracking": {"min_joints": 1}}, "tracking.min_joints"),
     ({"frame_check": {"min_std": float("nan")}}, "frame_check.min_std"),
     ({"decoder": {"threshold": 2.0}}, "decoder.threshold"),  # was "decoder" alone
+    ({"decoder": {"sigma": 10**400}}, "decoder.sigma"),  # np.isfinite raised a bare TypeError
+    ({"decoder": {"max_region_frac": float("inf")}}, "decoder.max_region_frac"),
     ({"roi": []}, "roi"),
 ])
 def test_bad_values_are_named(data, key):
@@ -83,3 +85,38 @@ def test_load_config_names_the_file(tmp_path):
         load_config(typo)
     with pytest.raises(ConfigError, match="cannot read"):
         load_config(tmp_path / "absent.json")
+
+
+@pytest.mark.parametrize("text, key", [
+    ('{"joints3d": {"method": "volumetric"}, "joints3d": {"grid": 8}}', "joints3d"),  # lost method, silently
+    ('{"joints3d": {"method": "volumetric", "method": "triangulate"}}', "joints3d.method"),
+])
+def test_a_key_given_twice_is_named_not_dropped(tmp_path, text, key):
+    path = tmp_path / "dup.json"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_config(path)
+    assert f"duplicate key {key!r}" in str(e.value) and str(e.value).startswith(str(path))
+
+
+def test_a_config_file_with_a_byte_order_mark_loads(tmp_path):
+    path = tmp_path / "bom.json"  # Windows editors write one; it was refused as invalid JSON
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps({"session": {"threads": 1}}).encode())
+    assert load_config(path).session.threads == 1
+
+
+@pytest.mark.parametrize("text, why", [
+    ('{"session": {"threads": ' + "1" * 5000 + "}}", "4300 digits"),  # was a bare ValueError
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),  # was a RecursionError
+])
+def test_json_python_cannot_hold_is_a_config_error(tmp_path, text, why):
+    path = tmp_path / "odd.json"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=why) as e:
+        load_config(path)
+    assert e.value.key == str(path) and "not valid JSON" in str(e.value)
+
+
+def test_a_config_path_with_a_nul_character_is_a_config_error():
+    with pytest.raises(ConfigError, match="cannot read config file.*null byte"):  # was a bare ValueError
+        load_config("runtime\0.json")
