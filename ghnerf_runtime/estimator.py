@@ -504,6 +504,10 @@ class Estimator:
                     # again on this first tracked pair rather than pulling it back there. (Without tracking
                     # every pair is cold, and smoothing runs on them all.)
                     self._smoother.reset()
+                elif not p.regions.tracked and not self._last_pair_cold:
+                    # The track was lost since the last reported pair (retry_cold: the subject left the tracked
+                    # crop): whoever the working volume shows now is not pulled toward where the track was.
+                    self._smoother.reset()
                 points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
         self._last_pair_cold = not p.regions.tracked
         timing["total"] = 1e3 * (time.perf_counter() - t_start)

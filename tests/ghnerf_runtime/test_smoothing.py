@@ -165,3 +165,33 @@ def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
     f(0.1, jump, ok)
     out = f(0.133, x, ok)
     assert np.isfinite(out).all() and np.abs(out).max() < 1.0
+
+
+def test_a_subject_found_again_from_the_working_volume_is_not_pulled_toward_the_lost_track():
+    """tracking.retry_cold: the tracked crop found nobody (the subject left it) and the working volume's crop
+    found someone 1.3 m away, in the same pair. That cold pair is reported as it is, as the first pair of any
+    (re)acquisition is: smoothed from the lost track it lagged ~8 cm behind, toward where nobody is."""
+    sim = pytest.importorskip("drivers.sim")
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.estimator import Estimator
+
+    rig = sim.RigPlacement().build()
+    here = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 3.0)))
+    there = sim.SimScene(sim.SceneConfig(seed=3, motion="wave", position_xz=(1.1, 2.4)))
+    clip = []
+    for i, scene in enumerate((here, here, here, there)):
+        rendered = [scene.render(c, i / FPS) for c in rig.pair]
+        clip.append((tuple(img for img, _ in rendered), scene.joints_3d(i / FPS),
+                     np.stack([tr.visible for _, tr in rendered])))
+    out = {}
+    for enabled in (False, True):
+        oracle = OracleSession(edge128_contract())
+        est = Estimator(oracle, rig, EstimatorConfig(smoothing=SmoothingConfig(enabled=enabled)))
+        out[enabled] = []
+        for i, (pair, truth, vis) in enumerate(clip):
+            oracle.set_truth(truth, vis)
+            out[enabled].append(est.estimate(pair, timestamp_s=i / FPS))
+    raw, smooth = out[False], out[True]
+    assert raw[2].tracked and not raw[3].tracked and raw[3].num_found > 6  # found again, cold, in the same pair
+    assert not np.allclose(raw[2].joints_3d, smooth[2].joints_3d)  # the tracked pairs were smoothed
+    assert np.array_equal(smooth[3].joints_3d, raw[3].joints_3d)
