@@ -44,6 +44,7 @@ The :class:`~ghnerf_runtime.session.ModelSession` is injected (or built by
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -452,7 +453,7 @@ class Estimator:
                 ``None``).
 
         Raises:
-            FrameError: an image has the wrong size or type for its camera.
+            FrameError: an image has the wrong size or type for its camera; ``timestamp_s`` is not finite.
             ModelError: a novel view was requested but not enabled; a graph failed.
         """
         t_start = time.perf_counter()
@@ -460,6 +461,9 @@ class Estimator:
             sequence = self._sequence
         self._sequence = sequence + 1
         self._check_images(images)
+        if timestamp_s is not None and not math.isfinite(timestamp_s):
+            # NaN compares false with every time: the track and the smoothing would restart on this pair and the next
+            raise FrameError(f"timestamp_s must be a finite capture time (seconds), got {timestamp_s!r}")
         if novel_view is not None and not self.config.novel_view.enabled:
             raise ModelError("a novel view was requested but novel_view.enabled is false (the colour graph is "
                              "not loaded)")
