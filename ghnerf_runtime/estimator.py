@@ -478,6 +478,7 @@ class Estimator:
             if p.novel is not None and not p.novel.cancel():
                 p.novel.exception()  # leave no render running behind
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
+        cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         if (p.j3 is not None and not p.regions.tracked and tcfg.refine_cold_start
                 and self.tracker.track is not None):
             # Cold start that found the subject: run again on its crop and box, in this pair.
@@ -508,9 +509,10 @@ class Estimator:
                     # again on this first tracked pair rather than pulling it back there. (Without tracking
                     # every pair is cold, and smoothing runs on them all.)
                     self._smoother.reset()
-                elif not p.regions.tracked and not self._last_pair_cold:
+                elif cold_pass and not self._last_pair_cold:
                     # The track was lost since the last reported pair (retry_cold: the subject left the tracked
-                    # crop): whoever the working volume shows now is not pulled toward where the track was.
+                    # crop): whoever the working volume shows now (refined or not) is not pulled toward where the
+                    # track was.
                     self._smoother.reset()
                 points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
         self._last_pair_cold = not p.regions.tracked

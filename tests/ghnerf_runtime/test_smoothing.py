@@ -167,12 +167,15 @@ def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
     assert np.isfinite(out).all() and np.abs(out).max() < 1.0
 
 
-def test_a_subject_found_again_from_the_working_volume_is_not_pulled_toward_the_lost_track():
+@pytest.mark.parametrize("refine", [False, True])
+def test_a_subject_found_again_from_the_working_volume_is_not_pulled_toward_the_lost_track(refine):
     """tracking.retry_cold: the tracked crop found nobody (the subject left it) and the working volume's crop
-    found someone 1.3 m away, in the same pair. That cold pair is reported as it is, as the first pair of any
-    (re)acquisition is: smoothed from the lost track it lagged ~8 cm behind, toward where nobody is."""
+    found someone 1.3 m away, in the same pair (then, with refine_cold_start, cropped around them). That pair
+    is reported as it is, as the first pair of any (re)acquisition is: smoothed from the lost track it lagged
+    ~8 cm behind, toward where nobody is."""
     sim = pytest.importorskip("drivers.sim")
     from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.config import TrackingConfig
     from ghnerf_runtime.estimator import Estimator
 
     rig = sim.RigPlacement().build()
@@ -186,12 +189,13 @@ def test_a_subject_found_again_from_the_working_volume_is_not_pulled_toward_the_
     out = {}
     for enabled in (False, True):
         oracle = OracleSession(edge128_contract())
-        est = Estimator(oracle, rig, EstimatorConfig(smoothing=SmoothingConfig(enabled=enabled)))
+        est = Estimator(oracle, rig, EstimatorConfig(smoothing=SmoothingConfig(enabled=enabled),
+                                                     tracking=TrackingConfig(refine_cold_start=refine)))
         out[enabled] = []
         for i, (pair, truth, vis) in enumerate(clip):
             oracle.set_truth(truth, vis)
             out[enabled].append(est.estimate(pair, timestamp_s=i / FPS))
     raw, smooth = out[False], out[True]
-    assert raw[2].tracked and not raw[3].tracked and raw[3].num_found > 6  # found again, cold, in the same pair
+    assert raw[2].tracked and raw[3].tracked == refine and raw[3].num_found > 6  # found again, in the same pair
     assert not np.allclose(raw[2].joints_3d, smooth[2].joints_3d)  # the tracked pairs were smoothed
     assert np.array_equal(smooth[3].joints_3d, raw[3].joints_3d)
