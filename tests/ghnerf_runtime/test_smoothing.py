@@ -148,6 +148,24 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
         assert np.array_equal(r.joints_3d, untracked[i].joints_3d) == (i == 0)
 
 
+def test_a_pair_at_the_same_instant_again_keeps_the_state():
+    """The estimator keeps its track for a pair of the last pair's time (the same frames estimated again); the
+    filter restarted there, reporting the raw joint and forgetting the smoothing for the pairs after."""
+    f, g = OneEuroJoints(SmoothingConfig(beta=0.0)), OneEuroJoints(SmoothingConfig(beta=0.0))
+    ok = np.ones(2, bool)
+    a, b = np.zeros((2, 3)), np.full((2, 3), 0.1)
+    for filt in (f, g):
+        filt(0.0, a, ok)
+    first = f(1 / FPS, b, ok)
+    assert 0 < first[0, 0] < 0.1
+    g(1 / FPS, b, ok)
+    again = f(1 / FPS, b, np.array([True, False]))  # joint 1 not reported this time: as given, no state kept
+    assert np.array_equal(again[0], first[0]) and np.array_equal(again[1], b[1])
+    after_f, after_g = f(2 / FPS, b, ok), g(2 / FPS, b, ok)
+    assert np.array_equal(after_f[0], after_g[0])  # as if the repeat had not been
+    assert np.array_equal(after_f[1], b[1])  # joint 1 restarts where it comes back
+
+
 def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
     from ghnerf_runtime.config import SmoothingConfig
 
