@@ -44,6 +44,7 @@ The :class:`~ghnerf_runtime.session.ModelSession` is injected (or built by
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -452,7 +453,7 @@ class Estimator:
                 ``None``).
 
         Raises:
-            FrameError: an image has the wrong size or type for its camera.
+            FrameError: an image has the wrong size or type for its camera; ``timestamp_s`` is not finite.
             ModelError: a novel view was requested but not enabled; a graph failed.
         """
         t_start = time.perf_counter()
@@ -460,6 +461,9 @@ class Estimator:
             sequence = self._sequence
         self._sequence = sequence + 1
         self._check_images(images)
+        if timestamp_s is not None and not math.isfinite(timestamp_s):
+            # NaN compares false with every time: the track and the smoothing would restart on this pair and the next
+            raise FrameError(f"timestamp_s must be a finite capture time (seconds), got {timestamp_s!r}")
         if novel_view is not None and not self.config.novel_view.enabled:
             raise ModelError("a novel view was requested but novel_view.enabled is false (the colour graph is "
                              "not loaded)")
@@ -474,6 +478,7 @@ class Estimator:
             if p.novel is not None and not p.novel.cancel():
                 p.novel.exception()  # leave no render running behind
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
+        cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         if (p.j3 is not None and not p.regions.tracked and tcfg.refine_cold_start
                 and self.tracker.track is not None):
             # Cold start that found the subject: run again on its crop and box, in this pair.
@@ -503,6 +508,11 @@ class Estimator:
                     # The pair before was cold (cropped from the whole working volume): crude. The filter starts
                     # again on this first tracked pair rather than pulling it back there. (Without tracking
                     # every pair is cold, and smoothing runs on them all.)
+                    self._smoother.reset()
+                elif cold_pass and not self._last_pair_cold:
+                    # The track was lost since the last reported pair (retry_cold: the subject left the tracked
+                    # crop): whoever the working volume shows now (refined or not) is not pulled toward where the
+                    # track was.
                     self._smoother.reset()
                 points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
         self._last_pair_cold = not p.regions.tracked

@@ -9,8 +9,10 @@ second, measured on the whole 3D point so the three axes move together.
 
 Time comes from the pairs' capture timestamps, so a dropped pair is a longer step, not a jump. A
 joint that goes missing restarts from its next reported position; a gap longer than ``max_gap_s``
-(the subject left, the stream stalled) restarts every joint. Only what is reported is smoothed: the
-tracker still follows the raw joints, so the crop never lags the subject.
+(the subject left, the stream stalled) restarts every joint; a pair at the last pair's instant again (the
+same frames estimated twice, a coarse clock) is answered from the state, the filter's limit as the step
+goes to 0. Only what is reported is smoothed: the tracker still follows the raw joints, so the crop never
+lags the subject.
 
 Pure numpy; the state is the filter object's own (one per estimator).
 """
@@ -61,6 +63,8 @@ class OneEuroJoints:
         # a non-finite joint is not reported: it must not enter (and poison) the state
         valid = np.asarray(valid, bool) & np.isfinite(x).all(axis=-1)
         dt = None if self._t is None else float(t_s) - self._t
+        if dt == 0.0 and self._x is not None and self._x.shape == x.shape:
+            return self._same_instant(x, valid)
         if dt is None or not (0.0 < dt <= cfg.max_gap_s) or self._x is None or self._x.shape != x.shape:
             # First pair, a gap, or time running backwards (a restarted source): start over.
             self._x, self._dx = x.copy(), np.zeros_like(x)
@@ -81,4 +85,13 @@ class OneEuroJoints:
         self._x = out
         self._alive = valid.copy()
         self._t = float(t_s)
+        return out.copy()
+
+    def _same_instant(self, x: np.ndarray, valid: np.ndarray) -> np.ndarray:
+        """A second pair at the last pair's time: a step of 0 gives the new position no weight (alpha 0), so a
+        joint with a state keeps it; restarting there instead reported the raw joint and lost the state."""
+        keep = valid & self._alive
+        out = np.where(keep[:, None], self._x, x)
+        self._dx = np.where(keep[:, None], self._dx, 0.0)
+        self._x, self._alive = out, valid.copy()
         return out.copy()

@@ -481,6 +481,25 @@ def test_a_track_older_than_max_gap_or_from_the_future_is_dropped(clip):
     assert tracked == [False, True, True, False, True, True, False]
 
 
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+def test_a_capture_time_that_is_not_finite_is_a_frame_error_that_keeps_the_track(clip, bad):
+    """NaN is neither before nor after the last time: taken, it dropped the track on its pair and on the next."""
+    from ghnerf_runtime.errors import FrameError
+
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig())
+    tracked = []
+    for k, t in ((0, 0.0), (1, 1 / 30), (2, bad), (2, 2 / 30), (3, 3 / 30)):
+        oracle.set_truth(truth[k], visible[k])
+        if not np.isfinite(t):
+            with pytest.raises(FrameError, match="timestamp_s"):
+                est.estimate(frames[k], timestamp_s=t)
+            continue
+        tracked.append(est.estimate(frames[k], timestamp_s=t).tracked)
+    assert tracked == [False, True, True, True]
+
+
 def test_a_flat_frame_with_min_std_zero_is_rejected_not_a_crash(clip):
     from ghnerf_runtime.config import FrameCheckConfig
 

@@ -148,6 +148,24 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
         assert np.array_equal(r.joints_3d, untracked[i].joints_3d) == (i == 0)
 
 
+def test_a_pair_at_the_same_instant_again_keeps_the_state():
+    """The estimator keeps its track for a pair of the last pair's time (the same frames estimated again); the
+    filter restarted there, reporting the raw joint and forgetting the smoothing for the pairs after."""
+    f, g = OneEuroJoints(SmoothingConfig(beta=0.0)), OneEuroJoints(SmoothingConfig(beta=0.0))
+    ok = np.ones(2, bool)
+    a, b = np.zeros((2, 3)), np.full((2, 3), 0.1)
+    for filt in (f, g):
+        filt(0.0, a, ok)
+    first = f(1 / FPS, b, ok)
+    assert 0 < first[0, 0] < 0.1
+    g(1 / FPS, b, ok)
+    again = f(1 / FPS, b, np.array([True, False]))  # joint 1 not reported this time: as given, no state kept
+    assert np.array_equal(again[0], first[0]) and np.array_equal(again[1], b[1])
+    after_f, after_g = f(2 / FPS, b, ok), g(2 / FPS, b, ok)
+    assert np.array_equal(after_f[0], after_g[0])  # as if the repeat had not been
+    assert np.array_equal(after_f[1], b[1])  # joint 1 restarts where it comes back
+
+
 def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
     from ghnerf_runtime.config import SmoothingConfig
 
@@ -165,3 +183,37 @@ def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
     f(0.1, jump, ok)
     out = f(0.133, x, ok)
     assert np.isfinite(out).all() and np.abs(out).max() < 1.0
+
+
+@pytest.mark.parametrize("refine", [False, True])
+def test_a_subject_found_again_from_the_working_volume_is_not_pulled_toward_the_lost_track(refine):
+    """tracking.retry_cold: the tracked crop found nobody (the subject left it) and the working volume's crop
+    found someone 1.3 m away, in the same pair (then, with refine_cold_start, cropped around them). That pair
+    is reported as it is, as the first pair of any (re)acquisition is: smoothed from the lost track it lagged
+    ~8 cm behind, toward where nobody is."""
+    sim = pytest.importorskip("drivers.sim")
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.config import TrackingConfig
+    from ghnerf_runtime.estimator import Estimator
+
+    rig = sim.RigPlacement().build()
+    here = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.0, 3.0)))
+    there = sim.SimScene(sim.SceneConfig(seed=3, motion="wave", position_xz=(1.1, 2.4)))
+    clip = []
+    for i, scene in enumerate((here, here, here, there)):
+        rendered = [scene.render(c, i / FPS) for c in rig.pair]
+        clip.append((tuple(img for img, _ in rendered), scene.joints_3d(i / FPS),
+                     np.stack([tr.visible for _, tr in rendered])))
+    out = {}
+    for enabled in (False, True):
+        oracle = OracleSession(edge128_contract())
+        est = Estimator(oracle, rig, EstimatorConfig(smoothing=SmoothingConfig(enabled=enabled),
+                                                     tracking=TrackingConfig(refine_cold_start=refine)))
+        out[enabled] = []
+        for i, (pair, truth, vis) in enumerate(clip):
+            oracle.set_truth(truth, vis)
+            out[enabled].append(est.estimate(pair, timestamp_s=i / FPS))
+    raw, smooth = out[False], out[True]
+    assert raw[2].tracked and raw[3].tracked == refine and raw[3].num_found > 6  # found again, in the same pair
+    assert not np.allclose(raw[2].joints_3d, smooth[2].joints_3d)  # the tracked pairs were smoothed
+    assert np.array_equal(smooth[3].joints_3d, raw[3].joints_3d)
