@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import signal
 import sys
@@ -262,7 +263,10 @@ def _run(args) -> int:
     fps = 30.0
     if args.videos:
         cap = cv2.VideoCapture(args.videos[0])
-        fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        # a container without a usable rate gives 0 or NaN: the pairs' times (tracking.max_gap_s) and the
+        # written videos assume 30 fps then
+        fps = fps if math.isfinite(fps) and fps > 0 else 30.0
         cap.release()
     novel = _Sink(args.novel_view, fps, "--novel-view") if args.novel_view else None
     overlay = _Sink(args.overlay, fps, "--overlay") if args.overlay else None

@@ -510,3 +510,23 @@ def test_a_closed_pipe_ends_the_run_quietly(monkeypatch, tmp_path):
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
     monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", "-"]) == 0
+
+
+@pytest.mark.parametrize("rate", [float("nan"), 0.0, -25.0, float("inf")])
+def test_a_video_without_a_usable_frame_rate_is_timed_at_30_fps(monkeypatch, tmp_path, rate):
+    """A container whose rate reads NaN, 0, negative or inf: the pairs are timed at 30 fps (a NaN time is a
+    FrameError since the estimator refuses it, which ended the run at its first pair)."""
+    times = []
+
+    class _Timed(_StubEstimator):
+        def estimate(self, images, *, sequence, novel_view=None, timestamp_s=None):
+            times.append(timestamp_s)
+            return super().estimate(images, sequence=sequence, novel_view=novel_view, timestamp_s=timestamp_s)
+
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture",
+                        lambda path: type("C", (), {"get": lambda self, prop: rate, "release": lambda self: None})())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
+    assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
+    assert times == pytest.approx([0.0, 1 / 30, 2 / 30])
