@@ -199,9 +199,25 @@ def _prepare(uv, cameras, weights, undistorted: bool | None) -> _Views:
             & np.isfinite(w)
             & (w > 0)
         )
-    w = np.where(used, w, 0.0)
+    w, used = _relative_weights(np.where(used, w, 0.0), used, axis=1)
     x = np.where(used[..., None], x, 0.0)
     return _Views(uv=uv, x=x, w=w, used=used, P=P, cameras=objects, lens=lens, batch_shape=batch_shape)
+
+
+def _relative_weights(w: np.ndarray, used: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's weights over their largest (along the camera ``axis``), and ``used`` without the
+    observations whose share underflows to 0.
+
+    The solutions do not change, but huge weights cannot overflow the solvers' sums (the midpoint's
+    system went inf, a valid joint invalid) nor tiny ones underflow them (all-denormal weights made it
+    exactly singular: LinAlgError); an observation whose share is 0 takes no part, so it is not used
+    (a joint with weights 1e300 and 1e-300 was reported valid from one view's ray, at an arbitrary depth).
+    """
+    top = w.max(axis=axis, keepdims=True)
+    with np.errstate(all="ignore"):
+        w = np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)
+    used = used & (w > 0)
+    return np.where(used, w, 0.0), used
 
 
 # --------------------------------------------------------------------------- shared geometry
@@ -361,8 +377,9 @@ def triangulate_dlt(
         cameras: C :class:`Camera` objects, or C ``(3, 4)`` projection matrices (a
             ``(C, 3, 4)`` array or a sequence; mixing is allowed). Matrices act on
             undistorted pixels.
-        weights: optional ``(..., C, J)`` confidences (broadcastable). Observations with
-            weight ``<= 0``, NaN or inf are ignored.
+        weights: optional ``(..., C, J)`` confidences (broadcastable), relative per joint.
+            Observations with weight ``<= 0``, NaN or inf are ignored, and so are those
+            whose weight over the joint's largest underflows to 0.
         undistorted: True: ``uv`` are ideal (undistorted) pixels for every camera.
             False: ``uv`` are distorted pixels; every camera must be a :class:`Camera`.
             None (default): distorted for :class:`Camera` entries, undistorted for matrices.
@@ -446,6 +463,9 @@ def triangulate_midpoint(
         # Rays that are (near-)parallel make A singular; those joints are marked invalid by
         # the angle test, so solve a harmless identity system for them instead.
         solvable = (views.used.sum(axis=1) >= 2) & (angle >= min_ray_angle_deg) & np.all(np.isfinite(A), axis=(-2, -1))
+        # So do weights that leave one ray all the say (1 and 1e-300): np.linalg.solve raised LinAlgError on those.
+        trace = np.trace(A, axis1=-2, axis2=-1)
+        solvable &= np.abs(np.linalg.det(np.where(solvable[..., None, None], A, np.eye(3)))) > 1e-14 * trace**3
         A = np.where(solvable[..., None, None], A, np.eye(3))
         b = np.where(solvable[..., None], b, 0.0)
         points = np.linalg.solve(A, b[..., None])[..., 0]
@@ -587,7 +607,7 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
     J = uv.shape[1]
     with np.errstate(all="ignore"):
         used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
-        w = np.where(used, w, 0.0)
+        w, used = _relative_weights(np.where(used, w, 0.0), used, axis=0)  # as _prepare
         x = np.where(used[..., None], uv, 0.0)
         # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
         T = _conditioning_similarity(P)
