@@ -113,6 +113,16 @@ class _Views:
     batch_shape: tuple
 
 
+def _check_thresholds(min_ray_angle_deg, max_reprojection_error=None) -> None:
+    """Refuse thresholds that would silently pass or fail every joint: a NaN angle made every joint invalid, a
+    NaN reprojection limit of :func:`triangulate_two_views` gated nothing."""
+    if not (isinstance(min_ray_angle_deg, (int, float, np.number)) and 0 <= min_ray_angle_deg <= 90):
+        raise GeometryError(f"min_ray_angle_deg must be a number of degrees in [0, 90], got {min_ray_angle_deg!r}")
+    if max_reprojection_error is not None and not (
+            isinstance(max_reprojection_error, (int, float, np.number)) and 0 < max_reprojection_error < np.inf):
+        raise GeometryError(f"max_reprojection_error must be a positive number of pixels, got {max_reprojection_error!r}")
+
+
 def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
     """Projection matrices ``(C, 3, 4)`` and the Camera objects (or None) they came from."""
     if isinstance(cameras, Camera):
@@ -393,8 +403,8 @@ def triangulate_dlt(
 
     Raises:
         ShapeError: ``uv``, ``weights`` or ``cameras`` have the wrong shape.
-        GeometryError: a projection matrix is non-finite or singular, or distorted pixels
-            were requested for a projection matrix.
+        GeometryError: a projection matrix is non-finite or singular, distorted pixels
+            were requested for a projection matrix, or ``min_ray_angle_deg`` is not in [0, 90].
 
     Example:
         >>> import numpy as np
@@ -410,6 +420,7 @@ def triangulate_dlt(
         >>> bool(res.reprojection_error.max() < 1e-9), np.round(res.ray_angle_deg, 2).tolist()
         (True, [3.78, 4.2])
     """
+    _check_thresholds(min_ray_angle_deg)
     return _dlt(_prepare(uv, cameras, weights, undistorted), min_ray_angle_deg)
 
 
@@ -452,6 +463,7 @@ def triangulate_midpoint(
         >>> np.round(triangulate_midpoint(uv, cams).points, 9).tolist()
         [[0.2, -1.2, 3.0]]
     """
+    _check_thresholds(min_ray_angle_deg)
     views = _prepare(uv, cameras, weights, undistorted)
     with np.errstate(all="ignore"):
         centres, d = _rays(views)  # (C, 3), (N, C, J, 3)
@@ -529,8 +541,7 @@ def triangulate_robust(
         >>> np.round(res.points, 6).tolist(), res.used.tolist()
         ([[0.1, -1.0, 3.0]], [[True, False, True]])
     """
-    if not (max_reprojection_error > 0 and np.isfinite(max_reprojection_error)):
-        raise GeometryError(f"max_reprojection_error must be a positive number of pixels, got {max_reprojection_error}")
+    _check_thresholds(min_ray_angle_deg, max_reprojection_error)
     views = _prepare(uv, cameras, weights, undistorted)
     N, C, J = views.w.shape
     result = _dlt(views, min_ray_angle_deg)
@@ -592,8 +603,10 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
         min_ray_angle_deg: as :func:`triangulate_dlt`.
 
     Raises:
-        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix.
+        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, or a threshold
+        that is not a number in range.
     """
+    _check_thresholds(min_ray_angle_deg, max_reprojection_error)
     uv = np.asarray(uv, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     P = np.asarray(P, dtype=np.float64)

@@ -512,3 +512,20 @@ def test_extreme_weights_keep_the_solution_or_drop_the_view():
     fast = triangulate_two_views(uv, P, w)
     assert fast.valid.tolist()[:3] == [True, True, False] and fast.num_views[2] == 1
     assert not triangulate_midpoint(uv, cams, w).valid[3]
+
+
+@pytest.mark.parametrize("bad", [np.nan, -1.0, 91.0, "0.1"])
+def test_thresholds_out_of_range_are_refused_by_name(bad):
+    """A NaN min_ray_angle_deg made every joint invalid and a NaN max_reprojection_error of the two-view solver
+    gated nothing, silently."""
+    cams, _, uv = generate_scene(2, 3)
+    P = np.stack([c.P for c in cams])
+    for call in (lambda: triangulate_dlt(uv, cams, min_ray_angle_deg=bad),
+                 lambda: triangulate_midpoint(uv, cams, min_ray_angle_deg=bad),
+                 lambda: triangulate_robust(uv, cams, min_ray_angle_deg=bad),
+                 lambda: triangulate_two_views(uv, P, np.ones((2, 3)), min_ray_angle_deg=bad)):
+        with pytest.raises(GeometryError, match="min_ray_angle_deg"):
+            call()
+    if bad != 91.0:
+        with pytest.raises(GeometryError, match="max_reprojection_error"):
+            triangulate_two_views(uv, P, np.ones((2, 3)), max_reprojection_error=bad)
