@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, config_from_dict
+from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.smoothing import OneEuroJoints, smoothing_alpha
 
 FPS = 30.0
@@ -165,3 +166,13 @@ def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
     f(0.1, jump, ok)
     out = f(0.133, x, ok)
     assert np.isfinite(out).all() and np.abs(out).max() < 1.0
+
+
+@pytest.mark.parametrize("points, valid", [(np.zeros(3), np.ones(3, bool)), (np.zeros((4, 3)), np.ones(2, bool)),
+                                           (np.zeros((4, 2)), np.ones(4, bool))])
+def test_points_and_valid_of_the_wrong_shape_are_refused(points, valid):
+    """(3,) points were taken for three joints and came back (3, 3) from the second pair on."""
+    f = OneEuroJoints(SmoothingConfig())
+    with pytest.raises(ShapeError, match=r"points \(J, 3\)"):
+        f(0.0, points, valid)
+        f(1 / FPS, points, valid)
