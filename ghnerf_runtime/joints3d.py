@@ -142,7 +142,8 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
                                  max_reprojection_error=config.max_reprojection_px)
     both = use.all(axis=0)
     good = res.valid & both
-    conf3 = np.sqrt(np.prod(np.where(use, conf, 0.0), axis=0))
+    # the C-th root: a square root is the geometric mean of two views only (three views of 0.8 gave 0.72)
+    conf3 = np.prod(np.where(use, conf, 0.0), axis=0) ** (1.0 / len(conf))
     return Joints3D(res.points, conf3.astype(np.float32), good, res.reprojection_error).sanitised()
 
 

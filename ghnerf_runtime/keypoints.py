@@ -283,7 +283,7 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     if hm.ndim not in (3, 4) or min(hm.shape[-2:]) < 1 or not np.issubdtype(hm.dtype, np.number):
         raise ShapeError(f"heatmaps must be numeric (J, H, W) or (B, J, H, W), got {hm.dtype} {hm.shape}")
     batch_shape, (h, w) = hm.shape[:-2], hm.shape[-2:]
-    maps = hm.reshape(-1, h, w).astype(np.float32, copy=False)
+    maps = hm.reshape(-1, h, w)
     n = len(maps)
     if n == 0:
         empty = np.zeros(batch_shape, np.float32)
@@ -291,10 +291,11 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
 
     finite = np.isfinite(maps).all(axis=(1, 2))
     if not finite.all():  # keep NaN/Inf out of the filter; those joints are dropped below
-        maps = np.where(finite[:, None, None], maps, 0.0).astype(np.float32)
+        maps = np.where(finite[:, None, None], maps, 0.0)
     # heatmaps are probabilities: a model that strays outside [0, 1] (huge values overflow the filter to
-    # inf) must not report a confidence outside it
-    maps = np.clip(maps, 0.0, 1.0)
+    # inf) must not report a confidence outside it. Clipped before the float32 cast, which turned a finite
+    # float64 value past 3.4e38 into inf and so dropped its joint instead.
+    maps = np.clip(maps, 0.0, 1.0).astype(np.float32, copy=False)
 
     padded, pad = _filter(maps, cfg.sigma)
     filtered = padded[:, pad:pad + h, pad:pad + w]
@@ -360,7 +361,7 @@ def _sizes(heatmap_size, model_size) -> tuple[np.ndarray, np.ndarray]:
         s = np.asarray(size, dtype=np.float64).reshape(-1)
         if s.size == 1:
             s = np.repeat(s, 2)
-        if s.shape != (2,) or not np.all(s >= 1):
+        if s.shape != (2,) or not np.all((s >= 1) & (s < np.inf)):  # inf mapped every point to -0.5
             raise ShapeError(f"{name} must be a positive int or (width, height), got {size!r}")
         return s
     return wh("heatmap_size", heatmap_size), wh("model_size", model_size)

@@ -491,6 +491,13 @@ def _image_args(pred, target, mask) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return p.reshape(-1, h, w, c), t.reshape(-1, h, w, c), m.astype(bool).reshape(-1, h, w)
 
 
+def _check_data_range(data_range) -> None:
+    """A peak value of -1 scored as 1 (it is squared) and 0 gave -inf dB and a NaN SSIM: refuse them by name."""
+    if not (isinstance(data_range, (int, float, np.number)) and 0 < data_range < np.inf):
+        raise ValueError(f"data_range must be a positive number (1.0 for [0, 1] images, 255 for 8-bit), "
+                         f"got {data_range!r}")
+
+
 def _per_image_result(values: np.ndarray, counts: np.ndarray, batch_shape: tuple[int, ...]) -> ImageMetricResult:
     has = counts > 0
     values = np.where(has, values, np.nan)
@@ -512,7 +519,7 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         pred: ``(..., H, W, C)`` or ``(..., H, W)`` images (the mask shape decides which).
         target: same shape as ``pred``.
         mask: ``(..., H, W)`` bool, pixels to score.
-        data_range: peak value (1.0 for [0, 1] images, 255 for 8-bit).
+        data_range: peak value (1.0 for [0, 1] images, 255 for 8-bit); a positive number, else ValueError.
 
     Returns:
         :class:`ImageMetricResult`; ``nan`` (undefined) for images with an empty mask.
@@ -522,6 +529,7 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         >>> round(masked_psnr(a, b, np.ones((4, 4), bool)).value, 6)
         20.0
     """
+    _check_data_range(data_range)
     p, t, m = _image_args(pred, target, mask)
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))
@@ -567,7 +575,7 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         pred: ``(..., H, W, C)`` or ``(..., H, W)`` images (the mask shape decides which).
         target: same shape as ``pred``.
         mask: ``(..., H, W)`` bool.
-        data_range: peak value (1.0 for [0, 1] images).
+        data_range: peak value (1.0 for [0, 1] images); a positive number, else ValueError.
 
     Returns:
         :class:`ImageMetricResult`; ``nan`` (undefined) for images with an empty mask.
@@ -577,6 +585,7 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         >>> round(masked_ssim(img, img, np.ones((16, 16), bool)).value, 9)
         1.0
     """
+    _check_data_range(data_range)
     p, t, m = _image_args(pred, target, mask)
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))

@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from ghnerf_runtime.config import SmoothingConfig
+from ghnerf_runtime.errors import ShapeError
 
 __all__ = ["OneEuroJoints", "smoothing_alpha"]
 
@@ -57,11 +58,17 @@ class OneEuroJoints:
 
         Returns:
             ``(J, 3)`` float64; invalid joints are returned as given.
+
+        Raises:
+            ShapeError: ``points`` is not ``(J, 3)`` or ``valid`` not ``(J,)``.
         """
         cfg = self.config
         x = np.asarray(points, np.float64)
+        valid = np.asarray(valid, bool)
+        if x.ndim != 2 or x.shape[-1] != 3 or valid.shape != x.shape[:1]:  # (3,) points came back (3, 3)
+            raise ShapeError(f"points (J, 3) and valid (J,) expected, got {x.shape} and {valid.shape}")
         # a non-finite joint is not reported: it must not enter (and poison) the state
-        valid = np.asarray(valid, bool) & np.isfinite(x).all(axis=-1)
+        valid = valid & np.isfinite(x).all(axis=-1)
         dt = None if self._t is None else float(t_s) - self._t
         if dt == 0.0 and self._x is not None and self._x.shape == x.shape:
             return self._same_instant(x, valid)

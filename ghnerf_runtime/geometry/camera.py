@@ -46,6 +46,17 @@ def _as_dist(coefficients) -> np.ndarray:
     return full
 
 
+def _whole_positive(value) -> bool:
+    """Whether ``value`` is a positive whole number (``640``, ``640.0``, ``np.int64(640)``; not ``True`` or ``"640"``)."""
+    if isinstance(value, (bool, str, bytes)):
+        return False
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return False
+    return math.isfinite(number) and number >= 1 and number == int(number)
+
+
 def image_rotation(degrees: float) -> np.ndarray:
     """``(2, 2)``: pixel offsets (x right, y down) turned ``degrees`` counterclockwise on the screen."""
     a = math.radians(degrees)
@@ -109,8 +120,8 @@ class Camera:
         where = f"camera {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
             raise GeometryError(f"camera name must be a non-empty string, got {self.name!r}")
-        if int(self.width) <= 0 or int(self.height) <= 0:
-            raise GeometryError(f"{where}: image size must be positive, got {self.width}x{self.height}")
+        if not all(_whole_positive(v) for v in (self.width, self.height)):  # int() cut 640.7 to 640, failed on NaN
+            raise GeometryError(f"{where}: image size must be positive whole pixels, got {self.width!r}x{self.height!r}")
         K = np.asarray(self.K, dtype=np.float64)
         R = np.asarray(self.R, dtype=np.float64)
         t = np.asarray(self.t, dtype=np.float64).reshape(-1)

@@ -113,6 +113,16 @@ class _Views:
     batch_shape: tuple
 
 
+def _check_thresholds(min_ray_angle_deg, max_reprojection_error=None) -> None:
+    """Refuse thresholds that would silently pass or fail every joint: a NaN angle made every joint invalid, a
+    NaN reprojection limit of :func:`triangulate_two_views` gated nothing."""
+    if not (isinstance(min_ray_angle_deg, (int, float, np.number)) and 0 <= min_ray_angle_deg <= 90):
+        raise GeometryError(f"min_ray_angle_deg must be a number of degrees in [0, 90], got {min_ray_angle_deg!r}")
+    if max_reprojection_error is not None and not (
+            isinstance(max_reprojection_error, (int, float, np.number)) and 0 < max_reprojection_error < np.inf):
+        raise GeometryError(f"max_reprojection_error must be a positive number of pixels, got {max_reprojection_error!r}")
+
+
 def _as_cameras(cameras) -> tuple[np.ndarray, tuple]:
     """Projection matrices ``(C, 3, 4)`` and the Camera objects (or None) they came from."""
     if isinstance(cameras, Camera):
@@ -199,9 +209,25 @@ def _prepare(uv, cameras, weights, undistorted: bool | None) -> _Views:
             & np.isfinite(w)
             & (w > 0)
         )
-    w = np.where(used, w, 0.0)
+    w, used = _relative_weights(np.where(used, w, 0.0), used, axis=1)
     x = np.where(used[..., None], x, 0.0)
     return _Views(uv=uv, x=x, w=w, used=used, P=P, cameras=objects, lens=lens, batch_shape=batch_shape)
+
+
+def _relative_weights(w: np.ndarray, used: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each joint's weights over their largest (along the camera ``axis``), and ``used`` without the
+    observations whose share underflows to 0.
+
+    The solutions do not change, but huge weights cannot overflow the solvers' sums (the midpoint's
+    system went inf, a valid joint invalid) nor tiny ones underflow them (all-denormal weights made it
+    exactly singular: LinAlgError); an observation whose share is 0 takes no part, so it is not used
+    (a joint with weights 1e300 and 1e-300 was reported valid from one view's ray, at an arbitrary depth).
+    """
+    top = w.max(axis=axis, keepdims=True)
+    with np.errstate(all="ignore"):
+        w = np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)
+    used = used & (w > 0)
+    return np.where(used, w, 0.0), used
 
 
 # --------------------------------------------------------------------------- shared geometry
@@ -361,8 +387,9 @@ def triangulate_dlt(
         cameras: C :class:`Camera` objects, or C ``(3, 4)`` projection matrices (a
             ``(C, 3, 4)`` array or a sequence; mixing is allowed). Matrices act on
             undistorted pixels.
-        weights: optional ``(..., C, J)`` confidences (broadcastable). Observations with
-            weight ``<= 0``, NaN or inf are ignored.
+        weights: optional ``(..., C, J)`` confidences (broadcastable), relative per joint.
+            Observations with weight ``<= 0``, NaN or inf are ignored, and so are those
+            whose weight over the joint's largest underflows to 0.
         undistorted: True: ``uv`` are ideal (undistorted) pixels for every camera.
             False: ``uv`` are distorted pixels; every camera must be a :class:`Camera`.
             None (default): distorted for :class:`Camera` entries, undistorted for matrices.
@@ -376,8 +403,8 @@ def triangulate_dlt(
 
     Raises:
         ShapeError: ``uv``, ``weights`` or ``cameras`` have the wrong shape.
-        GeometryError: a projection matrix is non-finite or singular, or distorted pixels
-            were requested for a projection matrix.
+        GeometryError: a projection matrix is non-finite or singular, distorted pixels
+            were requested for a projection matrix, or ``min_ray_angle_deg`` is not in [0, 90].
 
     Example:
         >>> import numpy as np
@@ -393,6 +420,7 @@ def triangulate_dlt(
         >>> bool(res.reprojection_error.max() < 1e-9), np.round(res.ray_angle_deg, 2).tolist()
         (True, [3.78, 4.2])
     """
+    _check_thresholds(min_ray_angle_deg)
     return _dlt(_prepare(uv, cameras, weights, undistorted), min_ray_angle_deg)
 
 
@@ -435,6 +463,7 @@ def triangulate_midpoint(
         >>> np.round(triangulate_midpoint(uv, cams).points, 9).tolist()
         [[0.2, -1.2, 3.0]]
     """
+    _check_thresholds(min_ray_angle_deg)
     views = _prepare(uv, cameras, weights, undistorted)
     with np.errstate(all="ignore"):
         centres, d = _rays(views)  # (C, 3), (N, C, J, 3)
@@ -446,6 +475,9 @@ def triangulate_midpoint(
         # Rays that are (near-)parallel make A singular; those joints are marked invalid by
         # the angle test, so solve a harmless identity system for them instead.
         solvable = (views.used.sum(axis=1) >= 2) & (angle >= min_ray_angle_deg) & np.all(np.isfinite(A), axis=(-2, -1))
+        # So do weights that leave one ray all the say (1 and 1e-300): np.linalg.solve raised LinAlgError on those.
+        trace = np.trace(A, axis1=-2, axis2=-1)
+        solvable &= np.abs(np.linalg.det(np.where(solvable[..., None, None], A, np.eye(3)))) > 1e-14 * trace**3
         A = np.where(solvable[..., None, None], A, np.eye(3))
         b = np.where(solvable[..., None], b, 0.0)
         points = np.linalg.solve(A, b[..., None])[..., 0]
@@ -509,8 +541,7 @@ def triangulate_robust(
         >>> np.round(res.points, 6).tolist(), res.used.tolist()
         ([[0.1, -1.0, 3.0]], [[True, False, True]])
     """
-    if not (max_reprojection_error > 0 and np.isfinite(max_reprojection_error)):
-        raise GeometryError(f"max_reprojection_error must be a positive number of pixels, got {max_reprojection_error}")
+    _check_thresholds(min_ray_angle_deg, max_reprojection_error)
     views = _prepare(uv, cameras, weights, undistorted)
     N, C, J = views.w.shape
     result = _dlt(views, min_ray_angle_deg)
@@ -572,8 +603,10 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
         min_ray_angle_deg: as :func:`triangulate_dlt`.
 
     Raises:
-        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix.
+        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, or a threshold
+        that is not a number in range.
     """
+    _check_thresholds(min_ray_angle_deg, max_reprojection_error)
     uv = np.asarray(uv, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     P = np.asarray(P, dtype=np.float64)
@@ -587,7 +620,7 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
     J = uv.shape[1]
     with np.errstate(all="ignore"):
         used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
-        w = np.where(used, w, 0.0)
+        w, used = _relative_weights(np.where(used, w, 0.0), used, axis=0)  # as _prepare
         x = np.where(used[..., None], uv, 0.0)
         # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
         T = _conditioning_similarity(P)

@@ -129,6 +129,9 @@ def test_cropped_and_resized_are_consistent():
         (dict(dist=[0.0] * 12 + [0.01, 0.0]), "tilt"),
         (dict(dist=[np.inf, 0, 0, 0]), "finite"),
         (dict(width=0), "image size"),
+        (dict(width=640.7), "image size"),  # was cut to 640
+        (dict(height=float("nan")), "image size"),  # was a bare ValueError of int()
+        (dict(width="640"), "image size"),
         (dict(name=""), "name"),
     ],
 )

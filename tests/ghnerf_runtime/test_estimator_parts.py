@@ -137,6 +137,20 @@ def test_triangulation_gates_views_that_disagree():
     assert not triangulate_joints(uv, low, np.ones((2, 5), bool), cams, Joints3DConfig()).valid[0]
 
 
+def test_triangulated_confidence_is_the_geometric_mean_of_any_number_of_views():
+    K = [[150.0, 0.0, 63.5], [0.0, 150.0, 63.5], [0.0, 0.0, 1.0]]
+    cams = [Camera(f"c{i}", 128, 128, K, [], *look_at((x, -1.2, 0.0), (0.0, -1.0, 3.0)))
+            for i, x in enumerate((-0.5, 0.0, 0.5))]
+    X = _joints(2)
+    uv = np.stack([c.project(X)[0] for c in cams])
+    conf = np.array([[0.8, 0.9], [0.8, 0.5], [0.8, 0.6]])
+    r = triangulate_joints(uv, conf, np.ones((3, 2), bool), cams, Joints3DConfig())
+    assert r.valid.all()
+    np.testing.assert_allclose(r.confidence, [0.8, (0.9 * 0.5 * 0.6) ** (1 / 3)], rtol=1e-6)  # was 0.716 for 0.8s
+    two = triangulate_joints(uv[:2], conf[:2], np.ones((2, 2), bool), cams[:2], Joints3DConfig())
+    np.testing.assert_allclose(two.confidence, [0.8, np.sqrt(0.45)], rtol=1e-6)
+
+
 def test_volumetric_refinement_is_exact_for_gaussian_responses():
     box = np.array([[-0.5, -1.9, 2.6], [0.5, 0.1, 3.4]])
     pts, shape = query_grid(box, 12)

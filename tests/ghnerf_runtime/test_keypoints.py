@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import doctest
+import warnings
 
 import numpy as np
 import pytest
@@ -176,6 +177,11 @@ def test_heatmap_model_pixel_conversion():
     np.testing.assert_allclose(heatmap_to_model_pixels(uv, (32, 16), (128, 64)), [[1.5, 1.5], [125.5, 63.5]])
     with pytest.raises(ShapeError):
         heatmap_to_model_pixels(uv, (32, 16, 4), 128)
+    for size in (np.inf, (32, np.inf)):  # was accepted: every point mapped to -0.5
+        with pytest.raises(ShapeError, match="heatmap_size"):
+            heatmap_to_model_pixels(uv, size, 128)
+        with pytest.raises(ShapeError, match="model_size"):
+            model_to_heatmap_pixels(uv, 32, size)
 
 
 def _rig_camera() -> Camera:
@@ -266,6 +272,20 @@ def test_values_outside_zero_one_never_give_a_confidence_outside_it():
     assert np.isfinite(kp.confidence).all() and (kp.confidence <= 1.0).all() and (kp.confidence >= 0.0).all()
     assert kp.valid[0] and np.abs(kp.uv[0] - 15.0).max() < 0.5  # the block's centre
     assert np.abs(kp.uv[2] - [10.3, 20.6]).max() < 0.05
+
+
+def test_float64_values_past_the_float32_range_are_clipped_like_any_other():
+    """A finite float64 value past 3.4e38 overflowed the float32 cast to inf, so its joint was dropped as
+    non-finite (with a RuntimeWarning), where the same map in float32 range is clipped to 1 and decoded."""
+    huge = np.zeros((1, 32, 32))
+    huge[0, 14:17, 14:17] = 1e39
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        kp = decode_keypoints(huge)
+    ref = decode_keypoints(np.minimum(huge, 1.0).astype(np.float32))
+    assert kp.valid[0] and ref.valid[0]
+    np.testing.assert_array_equal(kp.uv, ref.uv)
+    np.testing.assert_array_equal(kp.confidence, ref.confidence)
 
 
 def test_a_peak_by_a_rendered_blocks_border_is_not_pulled_inward():

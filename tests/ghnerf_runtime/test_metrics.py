@@ -315,6 +315,16 @@ def test_image_metric_shape_errors():
         masked_ssim(np.zeros((8, 8)), np.zeros((8, 9)), np.ones((8, 8), bool))
 
 
+
+@pytest.mark.parametrize("metric", [masked_psnr, masked_ssim])
+@pytest.mark.parametrize("bad", [-1.0, 0.0, np.nan, np.inf, "255"])
+def test_image_metrics_refuse_a_data_range_that_is_not_a_positive_number(metric, bad):
+    """-1 scored as 1 (squared), 0 gave -inf dB and a NaN SSIM."""
+    a, m = np.zeros((4, 4)), np.ones((4, 4), bool)
+    with pytest.raises(ValueError, match="data_range"):
+        metric(a, a + 0.1, m, data_range=bad)
+
+
 # ---------------------------------------------------------------------- heatmaps
 def test_heatmap_mse_and_valid_selection():
     target = np.zeros((2, 3, 4, 4))

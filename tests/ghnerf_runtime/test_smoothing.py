@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, config_from_dict
+from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.smoothing import OneEuroJoints, smoothing_alpha
 
 FPS = 30.0
@@ -217,3 +218,13 @@ def test_a_subject_found_again_from_the_working_volume_is_not_pulled_toward_the_
     assert raw[2].tracked and raw[3].tracked == refine and raw[3].num_found > 6  # found again, in the same pair
     assert not np.allclose(raw[2].joints_3d, smooth[2].joints_3d)  # the tracked pairs were smoothed
     assert np.array_equal(smooth[3].joints_3d, raw[3].joints_3d)
+
+
+@pytest.mark.parametrize("points, valid", [(np.zeros(3), np.ones(3, bool)), (np.zeros((4, 3)), np.ones(2, bool)),
+                                           (np.zeros((4, 2)), np.ones(4, bool))])
+def test_points_and_valid_of_the_wrong_shape_are_refused(points, valid):
+    """(3,) points were taken for three joints and came back (3, 3) from the second pair on."""
+    f = OneEuroJoints(SmoothingConfig())
+    with pytest.raises(ShapeError, match=r"points \(J, 3\)"):
+        f(0.0, points, valid)
+        f(1 / FPS, points, valid)

@@ -494,3 +494,38 @@ def test_overflowing_weights_or_pixels_return_invalid_joints_instead_of_hanging(
     """)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stdout + done.stderr
+
+
+def test_extreme_weights_keep_the_solution_or_drop_the_view():
+    """Weights are relative: equal huge or denormal ones change nothing (the midpoint's system overflowed to an
+    invalid joint, and underflowed to LinAlgError); a view whose share underflows to 0 is not used (a joint of
+    weights 1e308 and 1e-308 was valid from one ray, at an arbitrary depth); one with all but none of the say
+    leaves the midpoint's system singular: invalid, not LinAlgError."""
+    cams, points, uv = generate_scene(2, 4)
+    P = np.stack([c.P for c in cams])
+    w = np.array([[1e308, 5e-324, 1e308, 1.0], [1e308, 5e-324, 1e-308, 1e-300]])
+    for solver in (triangulate_dlt, triangulate_midpoint, triangulate_robust):
+        res = solver(uv, cams, w)
+        assert res.valid[:2].all(), solver.__name__
+        np.testing.assert_allclose(res.points[:2], points[:2], atol=1e-6)
+        assert res.num_views[2] == 1 and not res.valid[2] and not res.used[2, 1], solver.__name__
+    fast = triangulate_two_views(uv, P, w)
+    assert fast.valid.tolist()[:3] == [True, True, False] and fast.num_views[2] == 1
+    assert not triangulate_midpoint(uv, cams, w).valid[3]
+
+
+@pytest.mark.parametrize("bad", [np.nan, -1.0, 91.0, "0.1"])
+def test_thresholds_out_of_range_are_refused_by_name(bad):
+    """A NaN min_ray_angle_deg made every joint invalid and a NaN max_reprojection_error of the two-view solver
+    gated nothing, silently."""
+    cams, _, uv = generate_scene(2, 3)
+    P = np.stack([c.P for c in cams])
+    for call in (lambda: triangulate_dlt(uv, cams, min_ray_angle_deg=bad),
+                 lambda: triangulate_midpoint(uv, cams, min_ray_angle_deg=bad),
+                 lambda: triangulate_robust(uv, cams, min_ray_angle_deg=bad),
+                 lambda: triangulate_two_views(uv, P, np.ones((2, 3)), min_ray_angle_deg=bad)):
+        with pytest.raises(GeometryError, match="min_ray_angle_deg"):
+            call()
+    if bad != 91.0:
+        with pytest.raises(GeometryError, match="max_reprojection_error"):
+            triangulate_two_views(uv, P, np.ones((2, 3)), max_reprojection_error=bad)
