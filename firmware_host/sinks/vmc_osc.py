@@ -2,6 +2,13 @@
 
 Bundle contents, in order: /VMC/Ext/OK, /VMC/Ext/T, /VMC/Ext/Root/Pos, then
 one /VMC/Ext/Bone/Pos per solved bone. Floats are OSC float32.
+
+All 17 bones make a bundle of about 1460 bytes: over the 1452 an IPv6 packet
+carries on Ethernet, and over what a VPN or PPPoE link (MTU 1400-1420) carries
+at all, so it went out in IP fragments, and losing either one lost the frame (many
+Wi-Fi paths and firewalls drop fragments outright). ``build_datagrams`` splits
+a frame's messages, in order, over bundles of at most ``MAX_DATAGRAM`` bytes;
+VMC receivers apply each message as it comes, whatever bundle it is in.
 """
 from __future__ import annotations
 
@@ -18,6 +25,10 @@ from firmware_host.sinks.vmc_pose import VmcPose
 # mode 0 (normal), then the v2.7 tracking status (1 = tracked, 0 = lost).
 _LOADED, _CALIBRATED, _MODE_NORMAL = 1, 3, 0
 
+#: Largest datagram sent: IPv6's minimum MTU (1280) less its 40 + 8 bytes of headers, so no path fragments it.
+MAX_DATAGRAM = 1232
+_BUNDLE_HEAD = 16  # "#bundle\0" and the time tag; each element adds its 4-byte size
+
 
 def _msg(address: str, *args: tuple[str, Any]) -> OscMessage:
     b = OscMessageBuilder(address)
@@ -31,14 +42,39 @@ def _pose7(name: str, position: Iterable[float], rotation: Iterable[float]) -> t
     return (("s", name), *(("f", float(v)) for v in position), *(("f", float(v)) for v in rotation))
 
 
-def build_bundle(pose: Optional[VmcPose], time_s: float) -> bytes:
-    """Datagram for one frame. ``pose=None`` (hips not seen) sends only OK (tracking lost) and T."""
-    bundle = OscBundleBuilder(IMMEDIATELY)
+def _messages(pose: Optional[VmcPose], time_s: float) -> list[OscMessage]:
     tracked = 1 if pose is not None else 0
-    bundle.add_content(_msg("/VMC/Ext/OK", ("i", _LOADED), ("i", _CALIBRATED), ("i", _MODE_NORMAL), ("i", tracked)))
-    bundle.add_content(_msg("/VMC/Ext/T", ("f", float(time_s))))
+    msgs = [_msg("/VMC/Ext/OK", ("i", _LOADED), ("i", _CALIBRATED), ("i", _MODE_NORMAL), ("i", tracked)),
+            _msg("/VMC/Ext/T", ("f", float(time_s)))]
     if pose is not None:
-        bundle.add_content(_msg("/VMC/Ext/Root/Pos", *_pose7("root", pose.root_position, (0.0, 0.0, 0.0, 1.0))))
+        msgs.append(_msg("/VMC/Ext/Root/Pos", *_pose7("root", pose.root_position, (0.0, 0.0, 0.0, 1.0))))
         for bone in pose.bones.values():
-            bundle.add_content(_msg("/VMC/Ext/Bone/Pos", *_pose7(bone.name, bone.local_position, bone.local_rotation)))
+            msgs.append(_msg("/VMC/Ext/Bone/Pos", *_pose7(bone.name, bone.local_position, bone.local_rotation)))
+    return msgs
+
+
+def _bundle(msgs: list[OscMessage]) -> bytes:
+    bundle = OscBundleBuilder(IMMEDIATELY)
+    for m in msgs:
+        bundle.add_content(m)
     return bundle.build().dgram
+
+
+def build_bundle(pose: Optional[VmcPose], time_s: float) -> bytes:
+    """One frame as a single bundle, whatever its size (see ``build_datagrams`` for what the sink sends).
+    ``pose=None`` (hips not seen) sends only OK (tracking lost) and T."""
+    return _bundle(_messages(pose, time_s))
+
+
+def build_datagrams(pose: Optional[VmcPose], time_s: float, max_bytes: int = MAX_DATAGRAM) -> list[bytes]:
+    """One frame as bundles of at most ``max_bytes`` each, its messages in order (OK and T in the first)."""
+    groups: list[list[OscMessage]] = [[]]
+    size = _BUNDLE_HEAD
+    for m in _messages(pose, time_s):
+        need = 4 + m.size
+        if groups[-1] and size + need > max_bytes:
+            groups.append([])
+            size = _BUNDLE_HEAD
+        groups[-1].append(m)
+        size += need
+    return [_bundle(g) for g in groups]

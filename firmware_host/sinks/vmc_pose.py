@@ -43,7 +43,7 @@ are anchored at 10 % and 45 % of the way from MidHip to Neck.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Optional
 
 import numpy as np
@@ -335,3 +335,22 @@ def solve_pose(joints_3d: np.ndarray) -> Optional[VmcPose]:
             local_p = quat_rotate(inv, anchor[name] - anchor[parent])
         bones[name] = BonePose(name, local_p, local_q / np.linalg.norm(local_q), glob[name], anchor[name])
     return VmcPose(root_position=mid_hip, bones=bones)
+
+
+def keep_hemisphere(pose: Optional[VmcPose], last: dict[str, np.ndarray]) -> Optional[VmcPose]:
+    """``pose`` with each local rotation's sign chosen to be nearest the one sent last (``last``, by bone name,
+    updated here). q and -q are the same rotation, but the solver's sign jumps wherever w crosses 0: a person
+    facing the cameras has Hips at a 180 degree yaw, so the sign flipped with every frame's noise, and a
+    receiver that smooths or interpolates component-wise swung the avatar round through the T-pose."""
+    if pose is None:
+        return None
+    bones: dict[str, BonePose] = {}
+    for name, bone in pose.bones.items():
+        q = bone.local_rotation
+        prev = last.get(name)
+        if prev is not None and float(np.dot(q, prev)) < 0:
+            q = -q
+            bone = replace(bone, local_rotation=q)
+        last[name] = q
+        bones[name] = bone
+    return VmcPose(root_position=pose.root_position, bones=bones)

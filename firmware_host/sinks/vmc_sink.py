@@ -1,6 +1,7 @@
 """vmc://host:39539 - the VMC protocol (OSC over UDP) for VSeeFace / Unity-style receivers.
 
-One OSC bundle per frame: /VMC/Ext/OK, /VMC/Ext/T, Root/Pos (hip position) and
+Per frame, OSC bundles of at most 1232 bytes (two for all bones, so no path
+fragments them): /VMC/Ext/OK, /VMC/Ext/T, Root/Pos (hip position) and
 Bone/Pos (local rotations) solved by ``vmc_pose``. VMC has no sequence
 numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
 report what it decimated or dropped. ``max_fps`` caps the rate (receivers
@@ -15,14 +16,16 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
+import numpy as np
+
 from firmware_host.errors import SinkConfigError
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.udp_sink import RESOLVE_S, DatagramLink
 from firmware_host.sinks.url import SinkUrl, host_port, parse_url, positive_float
-from firmware_host.sinks.vmc_osc import build_bundle
-from firmware_host.sinks.vmc_pose import solve_pose
+from firmware_host.sinks.vmc_osc import build_datagrams
+from firmware_host.sinks.vmc_pose import keep_hemisphere, solve_pose
 
 VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
 
@@ -45,6 +48,7 @@ class VmcSink(Sink):
         super().__init__(url, options)
         self._link = DatagramLink(url, host, port, resolve_s)
         self._t0_us: Optional[int] = None
+        self._last_rotations: dict[str, np.ndarray] = {}  # by bone name: the sign sent last (keep_hemisphere)
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "VmcSink":
@@ -69,4 +73,6 @@ class VmcSink(Sink):
         # Seconds since the first frame, not since boot: OSC floats are float32
         # (about 1 ms resolution after an hour, 2 ms after four).
         t = (frame.capture_time_us - self._t0_us) / 1e6
-        self._link.send(build_bundle(solve_pose(frame.joints_3d), t))
+        pose = keep_hemisphere(solve_pose(frame.joints_3d), self._last_rotations)
+        for datagram in build_datagrams(pose, t):  # two bundles of all bones: one would fragment
+            self._link.send(datagram)

@@ -423,3 +423,32 @@ def test_the_first_status_after_an_outage_has_no_rate_from_before_it() -> None:
         sink.close()
     assert statuses[0].fps_centi == 0  # not 30 frames over 101 s
     assert statuses[0].fault == Fault.LINK_ERRORS
+
+
+def test_udp_frame_out_but_status_refused_counts_as_delivered(monkeypatch: pytest.MonkeyPatch) -> None:
+    # JOINTS went out and only the HELLO behind it met a full send buffer: the frame was counted dropped
+    # (and the next one flagged DROPPED, a gap the receiver never saw)
+    from firmware_host.errors import SinkWriteError
+    from firmware_host.protocol.encoder import encode
+    from firmware_host.sinks.udp_sink import UdpSink
+
+    sink = UdpSink.from_url("udp://127.0.0.1:9", clock_us=lambda: 5_000_000)  # never started
+    sent: list[bytes] = []
+    refuse = [True]
+
+    def send(datagram: bytes) -> None:
+        if refuse[0] and isinstance(messages_of(datagram)[0], Hello):
+            refuse[0] = False
+            raise SinkWriteError(sink.url, "socket send buffer full")
+        sent.append(datagram)
+
+    monkeypatch.setattr(sink._link, "send", send)
+    sink._deliver(make_frame(0), 0)  # with HELLO + STATUS (the first); the HELLO refused
+    assert [type(m) for d in sent for m in messages_of(d)] == [Joints]
+    sink._deliver(make_frame(1), 0)  # the clock stands still: the owed STATUS comes with it
+    assert [type(m) for d in sent[1:] for m in messages_of(d)] == [Joints, Hello, Status]
+    # a HELLO + STATUS with no frame before it is not delivered when refused
+    refuse[0] = True
+    with pytest.raises(SinkWriteError):
+        sink._write_messages([sink._hello(1), sink._status(1)[0]])
+    assert encode(sink._hello(1)) not in sent[3:]

@@ -1,64 +1,157 @@
-"""vmc:// on 127.0.0.1, parsed by python-osc's own parser."""
+"""vmc:// on 127.0.0.1, decoded by the small OSC parser below (not the library that encodes it)."""
 from __future__ import annotations
 
 import socket
+import struct
 
 import numpy as np
-from pythonosc.osc_bundle import OscBundle
-from pythonosc.osc_packet import OscPacket
 
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.vmc_pose import BONE_PARENTS
 from ghnerf_runtime.body25 import JOINT_INDEX as J
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, t_pose_rig
 
+Msg = tuple[str, list]
 
-def _receive(frames: list) -> list[bytes]:
+
+def _osc_string(b: bytes, i: int) -> tuple[str, int]:
+    end = b.index(b"\0", i)
+    nxt = (end + 4) & ~3  # the string, at least one NUL, padded to a multiple of 4
+    assert b[end:nxt] == b"\0" * (nxt - end), "padding must be NULs"
+    return b[i:end].decode("utf-8"), nxt
+
+
+def _osc_message(b: bytes) -> Msg:
+    address, i = _osc_string(b, 0)
+    tags, i = _osc_string(b, i)
+    assert address.startswith("/") and tags.startswith(","), (address, tags)
+    args: list = []
+    for tag in tags[1:]:
+        if tag == "i":
+            args.append(struct.unpack(">i", b[i:i + 4])[0])
+            i += 4
+        elif tag == "f":
+            args.append(struct.unpack(">f", b[i:i + 4])[0])
+            i += 4
+        elif tag == "s":
+            s, i = _osc_string(b, i)
+            args.append(s)
+        else:
+            raise AssertionError(f"unexpected type tag {tag!r}")
+    assert i == len(b), "trailing bytes after the arguments"
+    return address, args
+
+
+def _osc_packet(b: bytes) -> list[Msg]:
+    assert len(b) % 4 == 0, len(b)
+    if not b.startswith(b"#bundle\0"):
+        return [_osc_message(b)]
+    assert b[8:16] == struct.pack(">Q", 1)  # time tag "immediately"
+    out: list[Msg] = []
+    i = 16
+    while i < len(b):
+        (n,) = struct.unpack(">i", b[i:i + 4])
+        assert n > 0 and n % 4 == 0 and i + 4 + n <= len(b), (i, n, len(b))
+        out += _osc_packet(b[i + 4:i + 4 + n])
+        i += 4 + n
+    return out
+
+
+def _receive(frames: list) -> tuple[list[list[Msg]], list[bytes]]:
+    """Send ``frames`` through a vmc:// sink; returns the messages of each frame (a frame starts at
+    /VMC/Ext/OK) and the datagrams as they came."""
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
-    rx.settimeout(5)
-    sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=8", backoff=FAST_BACKOFF)
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64", backoff=FAST_BACKOFF)
     try:
         assert sink.wait_connected(5)
         for f in frames:
             sink.send(f)
-        got = [rx.recv(65536) for _ in frames]
-    finally:
+        assert sink.wait_drained(5)
         stats = sink.close()
+        # loopback queues a datagram on the receiver within sendto: all of them are here now
+        rx.setblocking(False)
+        dgrams: list[bytes] = []
+        while True:
+            try:
+                dgrams.append(rx.recv(65536))
+            except BlockingIOError:
+                break
+    finally:
+        sink.close()
         rx.close()
     assert stats.sent == len(frames)
-    return got
+    per_frame: list[list[Msg]] = []
+    for d in dgrams:
+        for m in _osc_packet(d):
+            if m[0] == "/VMC/Ext/OK":
+                per_frame.append([])
+            per_frame[-1].append(m)
+    assert len(per_frame) == len(frames)
+    return per_frame, dgrams
 
 
-def test_one_bundle_per_frame_with_ok_time_root_and_bones() -> None:
+def _yawed(deg: float) -> np.ndarray:
+    """The T-pose turned ``deg`` degrees about the vertical (180: facing the cameras)."""
+    j = t_pose_rig()
+    a = np.radians(deg)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    centre = np.array([0.0, 0.0, 3.0])
+    j[:, :3] = (j[:, :3] - centre) @ rot.T + centre
+    return j
+
+
+def test_one_frame_of_ok_time_root_and_bones() -> None:
     j = t_pose_rig(facing_camera=True)
     j[J["LWrist"], :3] = j[J["LElbow"], :3] + [0, -0.25, 0]  # forearm raised
-    dgram, second = _receive([make_frame(0, joints=j), make_frame(1, joints=j)])
-    assert OscBundle.dgram_is_bundle(dgram)
-    msgs = [m.message for m in OscPacket(dgram).messages]
-    addresses = [m.address for m in msgs]
+    (msgs, second), _ = _receive([make_frame(0, joints=j), make_frame(1, joints=j)])
+    addresses = [a for a, _ in msgs]
     assert addresses[:3] == ["/VMC/Ext/OK", "/VMC/Ext/T", "/VMC/Ext/Root/Pos"]
     assert addresses[3:] == ["/VMC/Ext/Bone/Pos"] * len(BONE_PARENTS)
-    assert msgs[0].params == [1, 3, 0, 1]
-    assert msgs[1].params == [0.0]
-    root = msgs[2].params
+    assert msgs[0][1] == [1, 3, 0, 1]
+    assert msgs[1][1] == [0.0]
+    root = msgs[2][1]
     assert root[0] == "root" and np.allclose(root[1:4], [0.0, 0.0, 3.0]) and np.allclose(root[4:], [0, 0, 0, 1])
-    bones = {m.params[0]: np.array(m.params[1:], dtype=float) for m in msgs[3:]}
-    assert set(bones) == set(BONE_PARENTS)
+    bones = {p[0]: np.array(p[1:], dtype=float) for _, p in msgs[3:]}
+    assert list(bones) == list(BONE_PARENTS)  # parents first
     # Facing the cameras: the hips turn half way round (q = +-(0, 1, 0, 0)).
     assert np.allclose(np.abs(bones["Hips"][3:]), [0, 1, 0, 0], atol=1e-6)
     # The person's left forearm points up (Unity +y) instead of along the upper arm.
     assert not np.allclose(bones["LeftLowerArm"][3:], [0, 0, 0, 1], atol=1e-3)
     assert np.allclose(bones["RightLowerArm"][3:], [0, 0, 0, 1], atol=1e-6)
     assert all(len(v) == 7 for v in bones.values())
-    t1 = [m.message for m in OscPacket(second).messages][1].params[0]
+    t1 = second[1][1][0]
     assert abs(t1 - 0.033333) < 1e-5  # seconds since the first frame
+
+
+def test_a_frame_of_all_bones_fits_datagrams_no_path_fragments() -> None:
+    # All 17 bones in one bundle made 1456 bytes: over IPv6-on-Ethernet's 1452 and a VPN's ~1390, so the
+    # frame went out in IP fragments that Wi-Fi and firewalls drop (and with either one, the whole frame).
+    frames, dgrams = _receive([make_frame(0, joints=t_pose_rig(facing_camera=True))])
+    assert len(dgrams) > 1
+    assert all(len(d) <= 1232 for d in dgrams), [len(d) for d in dgrams]  # IPv6's minimum MTU, less headers
+    assert all(d.startswith(b"#bundle\0") for d in dgrams)
+    (msgs,) = frames
+    assert [a for a, _ in msgs[:3]] == ["/VMC/Ext/OK", "/VMC/Ext/T", "/VMC/Ext/Root/Pos"]
+    assert [p[0] for _, p in msgs[3:]] == list(BONE_PARENTS)
+
+
+def test_rotations_keep_their_sign_from_frame_to_frame() -> None:
+    # Facing the cameras, Hips sit at a 180 degree yaw, where w crosses 0: with w >= 0 forced, a degree of
+    # noise either way sent (0, 1, 0, 0.009) then (0, -1, 0, 0.009), which a receiver smoothing or
+    # interpolating component-wise turns into a spin through the T-pose.
+    frames, _ = _receive([make_frame(i, joints=_yawed(179.0 if i % 2 else 181.0)) for i in range(6)])
+    hips = [np.array(next(p[4:] for a, p in f if a == "/VMC/Ext/Bone/Pos" and p[0] == "Hips")) for f in frames]
+    for q in hips:
+        assert abs(abs(q[1]) - 1.0) < 1e-3  # (x, y, z, w): the same half turn about y each frame
+    for a, b in zip(hips, hips[1:]):
+        assert float(np.dot(a, b)) > 0.99, (a, b)
 
 
 def test_lost_hips_sends_tracking_lost_only() -> None:
     j = t_pose_rig()
     j[J["MidHip"], 3] = 0.0
-    (dgram,) = _receive([make_frame(0, joints=j)])
-    msgs = [m.message for m in OscPacket(dgram).messages]
-    assert [m.address for m in msgs] == ["/VMC/Ext/OK", "/VMC/Ext/T"]
-    assert msgs[0].params[3] == 0
+    (msgs,), _ = _receive([make_frame(0, joints=j)])
+    assert [a for a, _ in msgs] == ["/VMC/Ext/OK", "/VMC/Ext/T"]
+    assert msgs[0][1][3] == 0
