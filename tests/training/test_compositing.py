@@ -65,3 +65,15 @@ def test_gradients_finite_over_a_wide_range():
 def test_single_sample():
     sigma = torch.tensor([[0.0], [1.0]])
     torch.testing.assert_close(compositing_weights(sigma), 1.0 - torch.exp(-sigma))
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_half_precision_densities_composite_without_nan_gradients(dtype):
+    # float16: exp(-20) and the 1e-10 both round to 0, so log(0) = -inf and its gradient was NaN
+    sigma32 = torch.tensor([[20.0, 1.0, 1.0], [0.5, 80.0, 2.0], [0.0, 0.0, 0.0], [1e4, 3.0, 0.1]])
+    sigma = sigma32.to(dtype).requires_grad_(True)
+    w = compositing_weights(sigma)
+    assert w.dtype == dtype and torch.all(torch.isfinite(w))
+    torch.testing.assert_close(w.float(), compositing_weights(sigma.detach().float()).to(dtype).float())
+    (w.float() * torch.arange(3.0)).sum().backward()
+    assert torch.all(torch.isfinite(sigma.grad))

@@ -23,6 +23,11 @@ TRANSMITTANCE_EPS = 1e-10
 
 def compositing_weights(sigma: Tensor, dim: int = -1) -> Tensor:
     """Per-sample weights from densities ordered near to far along ``dim`` (same shape as ``sigma``)."""
+    if sigma.dtype in (torch.float16, torch.bfloat16):
+        # In float16 exp(-sigma) underflows to 0 from sigma ~17 and the 1e-10 rounds to 0, so the log is -inf
+        # and its gradient NaN; bfloat16 keeps the range but not the precision. Composite in float32 (a branch
+        # on the dtype at trace time: the float32 graphs are unchanged).
+        return compositing_weights(sigma.float(), dim).to(sigma.dtype)
     s = torch.clamp(sigma, min=0.0, max=SIGMA_CLAMP)
     e = torch.exp(-s)
     alpha = 1.0 - e
