@@ -54,12 +54,18 @@ __all__ = [
 
 def finite_or_none(value):
     """A metrics report with every non-finite float (a metric with nothing to score, a broken model's
-    NaN) as ``None``: strict JSON, which refuses NaN and infinity."""
+    NaN) as ``None``: strict JSON, which refuses NaN and infinity. numpy floats too (a float32 is no Python
+    float, and ``json.dump(default=float)`` wrote its NaN).
+
+    Example:
+        >>> finite_or_none({"a": [1.5, float("nan")], "b": np.float32("inf"), "c": np.float32(2.0)})
+        {'a': [1.5, None], 'b': None, 'c': np.float32(2.0)}
+    """
     if isinstance(value, dict):
         return {k: finite_or_none(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [finite_or_none(v) for v in value]
-    if isinstance(value, float) and not np.isfinite(value):
+    if isinstance(value, (float, np.floating)) and not np.isfinite(value):
         return None
     return value
 

@@ -368,3 +368,15 @@ def test_pck_counts_add_up(data, batch):
     if r.num_evaluated:
         assert 0.0 <= r.value <= 1.0
     assert np.all(np.isfinite(r.reference)) and not np.any(r.correct & ~r.evaluated)
+
+
+def test_a_report_with_numpy_nan_writes_strict_json():
+    """finite_or_none turns numpy float NaN/inf (float32 is no Python float) into null, so the strict JSON
+    dump ghnerf-bench and ghnerf-eval write never holds NaN."""
+    import json
+
+    from ghnerf_runtime.metrics import finite_or_none
+
+    report = {"mpjpe_mm": np.float32("nan"), "rows": [np.float16("inf"), np.float64("nan"), 3], "ok": np.float32(1)}
+    text = json.dumps(finite_or_none(report), default=float, allow_nan=False)
+    assert json.loads(text) == {"mpjpe_mm": None, "rows": [None, None, 3], "ok": 1.0}
