@@ -229,6 +229,8 @@ class SimRigSource(RigSource):
     def cache_key(self) -> str:
         """Hash of everything that changes the pre-rendered pixels (options, rig, simulator code)."""
         import drivers.sim  # the package, to hash its sources
+        import ghnerf_runtime.body25
+        import ghnerf_runtime.geometry
 
         scene = self.options.scene
         bvh = Path(str(scene.motion))
@@ -240,7 +242,12 @@ class SimRigSource(RigSource):
         }, sort_keys=True, default=repr).encode())
         if bvh.suffix.lower() == ".bvh":
             h.update(bvh.read_bytes())
-        for source in sorted(Path(drivers.sim.__file__).parent.rglob("*.py")):
+        # The ray casting and lens model the renderer uses live in ghnerf_runtime.geometry, the joint
+        # order in body25, and which instant a loop frame shows here: all of them make the pixels.
+        sources = sorted(Path(drivers.sim.__file__).parent.rglob("*.py"))
+        sources += sorted(Path(ghnerf_runtime.geometry.__file__).parent.rglob("*.py"))
+        sources += [Path(ghnerf_runtime.body25.__file__), Path(__file__)]
+        for source in sources:
             h.update(source.read_bytes())  # a renderer change invalidates old entries
         return h.hexdigest()[:32]
 

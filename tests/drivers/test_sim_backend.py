@@ -82,6 +82,26 @@ def test_cache_key_changes_with_what_changes_the_pixels():
     assert key("seed=1&jitter_ms=3&drop=0.2") == base  # timing only: same pixels
 
 
+@pytest.mark.parametrize("module", ["ghnerf_runtime/geometry/raycast.py", "ghnerf_runtime/geometry/camera.py",
+                                    "ghnerf_runtime/body25.py", "drivers/backends/sim.py", "drivers/sim/render.py"])
+def test_cache_key_changes_with_the_code_that_renders_and_times_the_frames(module, monkeypatch):
+    """The ray casting and the lens model live in ghnerf_runtime.geometry (drivers.sim re-exports them),
+    the joint order in body25, and which instant a loop frame shows in this backend: a change to any of
+    them must not be served the old pixels and truth from the disk cache."""
+    from pathlib import Path
+
+    source = create_rig_source(f"sim://?{SMALL}&seed=1&cache=off")
+    base = source.cache_key()
+    read_bytes = Path.read_bytes
+
+    def edited(path):
+        data = read_bytes(path)
+        return data + b"\n# edited\n" if path.as_posix().endswith(module) else data
+
+    monkeypatch.setattr(Path, "read_bytes", edited)
+    assert source.cache_key() != base
+
+
 def test_corrupt_cache_entry_is_rendered_again(tmp_path, caplog):
     url = f"sim://?{SMALL}&seed=6&cache={tmp_path}"
     open_rig(url, clock=ManualClock()).close()
