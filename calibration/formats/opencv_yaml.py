@@ -11,6 +11,8 @@ Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level 
     ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
     ``T``                                   3-vector, file units (optional, default 0)
     ``name``                                string (optional; default the file's stem)
+    ``fisheye_model`` or ``fisheye``        if non-zero the file is refused (``cv::fisheye``'s model is not
+                                            supported; the calibration sample writes ``fisheye_model``)
 
 Multi-camera (our export; one map per camera, in rig order):
     ``cameras``     sequence of maps, each with the single-camera keys above; ``R`` and
@@ -64,6 +66,9 @@ from ghnerf_runtime.rig_file import write_text_atomic
 
 _K_KEYS = ("camera_matrix", "K")
 _D_KEYS = ("distortion_coefficients", "D")
+#: OpenCV's calibration sample writes ``fisheye_model: 1`` for a ``cv::fisheye`` calibration, whose four
+#: coefficients (k1..k4, equidistant) would otherwise be read as the pinhole model's k1 k2 p1 p2.
+_FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
 __all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "write_opencv_rig"]
 
@@ -167,7 +172,17 @@ def _string(node, path, field: str) -> str | None:
     return node.string()
 
 
+def _refuse_fisheye(node, path, field: str) -> None:
+    for key in _FISHEYE_KEYS:
+        if key in _keys(node):
+            value = _numeric(node.getNode(key), path, join(field, key))
+            if value is not None and np.any(value != 0):
+                raise fail(path, join(field, key), f"is {show(value)}: the fisheye model is not supported (only "
+                                                   "OpenCV's pinhole model; its coefficients mean something else)")
+
+
 def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool) -> Camera:
+    _refuse_fisheye(node, path, field)
     name = _string(node.getNode("name"), path, join(field, "name")) if "name" in _keys(node) else None
     k_key, K = _pick(node, _K_KEYS, path, field)
     d_key, D = _pick(node, _D_KEYS, path, field)
@@ -330,6 +345,7 @@ def read_opencv_rig(
 
 def _stereo_calib(fs, path, extrinsics_path, image_size, units) -> tuple[list[Camera], list[str]]:
     root = fs.root()
+    _refuse_fisheye(root, path, "")
     *size, size_keys = _image_size(root, path, "", image_size)
     ext_fs, ext_path = (None, path) if extrinsics_path is None else (_open(extrinsics_path), extrinsics_path)
     try:

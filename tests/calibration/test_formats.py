@@ -540,3 +540,30 @@ def test_imported_rig_gets_default_volume(tmp_path):
         read_anipose_toml(path, units_to_metres=0.001, volume=([0, 0, 0], [1, 1, 1]))  # type: ignore[arg-type]
     custom = WorkingVolume([-1, -2, 1], [1, 0, 4])
     assert read_anipose_toml(path, units_to_metres=0.001, volume=custom).volume is custom
+
+
+@pytest.mark.parametrize("ext", ["yml", "xml"])
+def test_a_fisheye_calibration_is_refused_not_read_as_pinhole(tmp_path, ext):
+    # OpenCV's calibration sample marks a cv::fisheye calibration with fisheye_model: 1; its k1..k4 read as the
+    # pinhole model's k1 k2 p1 p2 gave a camera that projects elsewhere, silently
+    path = tmp_path / f"out_camera_data.{ext}"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 640)
+    fs.write("image_height", 480)
+    fs.write("fisheye_model", 1)
+    fs.write("camera_matrix", np.array([[300.0, 0, 319.5], [0, 300.0, 239.5], [0, 0, 1]]))
+    fs.write("distortion_coefficients", np.array([[0.05], [-0.01], [0.002], [-0.0003]]))
+    fs.release()
+    with pytest.raises(RigFileError, match="fisheye") as info:
+        read_opencv_camera(path)
+    assert info.value.path == str(path) and info.value.field == "fisheye_model"
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])  # the same flag beside stereo_calib's intrinsics
+    intrinsics = tmp_path / "intrinsics.yml"
+    intrinsics.write_text(intrinsics.read_text() + "fisheye_model: 1\n")
+    with pytest.raises(RigFileError, match="fisheye") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml",
+                        image_size=(640, 480), units_to_metres=0.001)
+    assert info.value.field == "fisheye_model"
+    path.write_text(path.read_text().replace("<fisheye_model>1<", "<fisheye_model>0<").replace("fisheye_model: 1",
+                                                                                             "fisheye_model: 0"))
+    assert read_opencv_camera(path).dist.size == 4  # the pinhole model, said so
