@@ -327,12 +327,13 @@ def read_opencv_rig(
                                        need_pose=True))
                 fields.append(field)
             file_rig_id = _string(root.getNode("rig_id"), path, "rig_id") if "rig_id" in keys else None
-            list_field = "cameras"
+            list_field, pair_t = "cameras", (path, "cameras[1].T")
         elif "M1" in keys:
             layout = "opencv-stereo-calib"
             units = _units(root, path, units_to_metres, needed=True)
             cameras, fields = _stereo_calib(fs, path, extrinsics_path, image_size, units)
             file_rig_id, list_field = None, "M1"
+            pair_t = (path if extrinsics_path is None else extrinsics_path, "T")
         else:
             raise fail(path, None, "no known layout: expected a 'cameras' sequence (multi-camera) or 'M1', 'D1', "
                                    f"'M2', 'D2', 'R', 'T' (stereo_calib); found keys {list(keys)}")
@@ -340,7 +341,7 @@ def read_opencv_rig(
         fs.release()
     metadata = {"source": {"format": layout, "path": str(path), "units_to_metres": units}}
     return make_rig(path, cameras, fields, volume=volume, rig_id=rig_id or file_rig_id or Path(path).stem,
-                    metadata=metadata, list_field=list_field)
+                    metadata=metadata, list_field=list_field, pair_t=pair_t)
 
 
 def _stereo_calib(fs, path, extrinsics_path, image_size, units) -> tuple[list[Camera], list[str]]:

@@ -567,3 +567,29 @@ def test_a_fisheye_calibration_is_refused_not_read_as_pinhole(tmp_path, ext):
     path.write_text(path.read_text().replace("<fisheye_model>1<", "<fisheye_model>0<").replace("fisheye_model: 1",
                                                                                              "fisheye_model: 0"))
     assert read_opencv_camera(path).dist.size == 4  # the pinhole model, said so
+
+
+def test_a_pair_without_a_baseline_is_refused_naming_the_translation(tmp_path):
+    # an intrinsics-only calibration leaves every pose at zero: read, it could not be saved (save_rig and
+    # load_rig refuse a pair under 10 mm apart) and every joint would be missing
+    path = tmp_path / "calibration.toml"
+    path.write_text(ANIPOSE_TOML.replace("rotation = [ 0.012, -0.523, 0.004,]", "rotation = [ 0.0, 0.0, 0.0,]")
+                    .replace("translation = [ 1480.3, -4.1, 410.7,]", "translation = [ 0.0, 0.0, 0.0,]"))
+    with pytest.raises(RigFileError, match="apart") as info:
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.path == str(path) and info.value.field == "cam_1.translation"
+    _write_stereo_calib(tmp_path, [-0.004, 0.0, 0.0])  # 4 um: a mm calibration read with a um unit
+    with pytest.raises(RigFileError, match="apart") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml",
+                        image_size=(640, 480), units_to_metres=0.001)
+    assert info.value.path == str(tmp_path / "extrinsics.yml") and info.value.field == "T"
+    cams = _cams()
+    cams[1]["T"] = "[0.095, 0, 0]"  # 5 mm from the first camera (T = [0.1, 0, 0])
+    (tmp_path / "rig.yaml").write_text(_multi_yaml(cams))
+    with pytest.raises(RigFileError, match="apart") as info:
+        read_opencv_rig(tmp_path / "rig.yaml")
+    assert info.value.field == "cameras[1].T"
+    path.write_text(ANIPOSE_TOML.replace("translation = [ 1480.3, -4.1, 410.7,]", "translation = [ 1e20, 0.0, 0.0,]"))
+    with pytest.raises(RigFileError, match="working volume") as info:  # no default volume fits: was a GeometryError
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.path == str(path)
