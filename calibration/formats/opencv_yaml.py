@@ -157,7 +157,10 @@ def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str
         w, h = (float(v) for v in size.reshape(-1))
         return w, h, ("image_size", "image_size")
     if image_size is not None:
-        w, h = image_size
+        try:  # a frame's shape (h, w, 3) or "640x480" raised a bare ValueError / TypeError when unpacked
+            w, h = image_size
+        except (TypeError, ValueError):
+            raise fail(path, "image_size argument", f"must be (width, height), got {show(image_size)}") from None
         return w, h, ("image_size argument", "image_size argument")
     raise fail(path, join(field, "image_width"),
                "missing image size: give image_width + image_height or image_size in the file, or the image_size argument")
@@ -177,8 +180,9 @@ def _refuse_fisheye(node, path, field: str) -> None:
         if key in _keys(node):
             value = _numeric(node.getNode(key), path, join(field, key))
             if value is not None and np.any(value != 0):
-                raise fail(path, join(field, key), f"is {show(value)}: the fisheye model is not supported (only "
-                                                   "OpenCV's pinhole model; its coefficients mean something else)")
+                got = ", ".join(f"{v:g}" for v in value.reshape(-1))
+                raise fail(path, join(field, key), f"is {got}: the fisheye model is not supported (only OpenCV's "
+                                                   "pinhole model; its coefficients mean something else)")
 
 
 def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool) -> Camera:

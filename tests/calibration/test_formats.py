@@ -554,7 +554,7 @@ def test_a_fisheye_calibration_is_refused_not_read_as_pinhole(tmp_path, ext):
     fs.write("camera_matrix", np.array([[300.0, 0, 319.5], [0, 300.0, 239.5], [0, 0, 1]]))
     fs.write("distortion_coefficients", np.array([[0.05], [-0.01], [0.002], [-0.0003]]))
     fs.release()
-    with pytest.raises(RigFileError, match="fisheye") as info:
+    with pytest.raises(RigFileError, match="is 1: the fisheye model") as info:
         read_opencv_camera(path)
     assert info.value.path == str(path) and info.value.field == "fisheye_model"
     _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])  # the same flag beside stereo_calib's intrinsics
@@ -593,3 +593,12 @@ def test_a_pair_without_a_baseline_is_refused_naming_the_translation(tmp_path):
     with pytest.raises(RigFileError, match="working volume") as info:  # no default volume fits: was a GeometryError
         read_anipose_toml(path, units_to_metres=0.001)
     assert info.value.path == str(path)
+
+
+@pytest.mark.parametrize("size", [(480, 640, 3), (640,), "640x480", 640])
+def test_an_image_size_argument_that_is_not_a_pair_names_it(tmp_path, size):
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    with pytest.raises(RigFileError, match="must be \\(width, height\\)") as info:  # was a bare ValueError/TypeError
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml", image_size=size,
+                        units_to_metres=0.001)
+    assert info.value.field == "image_size argument" and info.value.path == str(tmp_path / "intrinsics.yml")
