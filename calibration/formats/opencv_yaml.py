@@ -60,6 +60,7 @@ from calibration.formats._common import (
     rotation,
     show,
 )
+from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import write_text_atomic
@@ -229,15 +230,15 @@ def _units(root, path, given: float | None, needed: bool) -> float:
     return 1.0
 
 
-def _has_translation(node) -> bool:
+def _has_translation(node, path) -> bool:
     keys = _keys(node)
     if "T" not in keys:
         return False
-    try:
-        T = node.getNode("T").mat()
-    except cv2.error:
+    try:  # not node.mat(): it raises for a plain sequence, so T: [0, 0, 0] demanded units_to_metres
+        T = _numeric(node.getNode("T"), path, "T")
+    except RigFileError:
         return True  # malformed: the camera reader names it
-    return T is None or bool(np.any(np.asarray(T) != 0))
+    return T is None or bool(np.any(T != 0))
 
 
 def _volume(root, path) -> WorkingVolume | None:
@@ -274,7 +275,7 @@ def read_opencv_camera(path: str | os.PathLike, *, name: str | None = None, imag
         root = fs.root()
         if "cameras" in _keys(root) or "M1" in _keys(root):
             raise fail(path, None, "this is a multi-camera file; use read_opencv_rig")
-        units = _units(root, path, units_to_metres, needed=_has_translation(root))
+        units = _units(root, path, units_to_metres, needed=_has_translation(root, path))
         cam = _camera(root, path, "", default_name=Path(path).stem, image_size=image_size, units=units, need_pose=False)
     finally:
         fs.release()

@@ -602,3 +602,15 @@ def test_an_image_size_argument_that_is_not_a_pair_names_it(tmp_path, size):
         read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml", image_size=size,
                         units_to_metres=0.001)
     assert info.value.field == "image_size argument" and info.value.path == str(tmp_path / "intrinsics.yml")
+
+
+def test_a_zero_translation_needs_no_units_whichever_way_it_is_written(tmp_path):
+    # a zero T as a plain sequence demanded units_to_metres, the same T as an !!opencv-matrix did not
+    path = tmp_path / "cam.yaml"
+    path.write_text("%YAML:1.0\n---\nimage_size: [800, 600]\nK: [[500, 0, 399.5], [0, 500, 299.5], [0, 0, 1]]\n"
+                    "D: [0.1, -0.01, 0, 0]\nR: [0.0, 0.1, 0.0]\nT: [0, 0, 0.0]\n")
+    np.testing.assert_array_equal(read_opencv_camera(path).t, np.zeros(3))
+    path.write_text(path.read_text().replace("T: [0, 0, 0.0]", "T: [0, 0, 5.0]"))
+    with pytest.raises(RigFileError, match="pass units_to_metres") as info:
+        read_opencv_camera(path)
+    assert info.value.field == "T"
