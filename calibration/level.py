@@ -35,6 +35,11 @@ def down_in_camera(pitch_deg: float = 0.0, roll_deg: float = 0.0) -> np.ndarray:
     return roll @ level
 
 
+def _is_number(value) -> bool:
+    return (not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+            and math.isfinite(value))
+
+
 def level_rig(rig: Rig, *, camera_height_m: float, pitch_deg: float = 0.0, roll_deg: float = 0.0,
               reference: int = 0, volume: WorkingVolume | None = None) -> Rig:
     """``rig`` re-expressed in a level rig frame.
@@ -48,10 +53,19 @@ def level_rig(rig: Rig, *, camera_height_m: float, pitch_deg: float = 0.0, roll_
         volume: the working volume in the new frame; default :data:`LEVEL_VOLUME`.
 
     Raises:
-        GeometryError: a height that is not positive and finite, or a pair looking straight along gravity.
+        GeometryError: a height that is not positive and finite, an angle that is not finite, a
+            ``reference`` that is not a camera's index, or a pair looking straight along gravity.
     """
-    if not (math.isfinite(camera_height_m) and camera_height_m > 0):
+    if not (_is_number(camera_height_m) and camera_height_m > 0):
         raise GeometryError(f"camera_height_m must be a positive number of metres, got {camera_height_m!r}")
+    # an infinite angle raised a bare ValueError from math.cos, a NaN one a GeometryError about R
+    for what, value in (("pitch_deg", pitch_deg), ("roll_deg", roll_deg)):
+        if not _is_number(value):
+            raise GeometryError(f"{what} must be a finite number of degrees, got {value!r}")
+    if isinstance(reference, bool) or not isinstance(reference, (int, np.integer)) \
+            or not 0 <= reference < len(rig.cameras):
+        raise GeometryError(f"reference must be the index of one of the rig's {len(rig.cameras)} cameras, "
+                            f"got {reference!r}")
     ref = rig.cameras[reference]
     down = down_in_camera(pitch_deg, roll_deg)
     # everything below in the reference camera's frame

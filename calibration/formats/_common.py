@@ -122,7 +122,8 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
 
 
 def make_rig(path, cameras: Sequence[Camera], fields: Sequence[str], *, volume: WorkingVolume | None,
-             rig_id: str, metadata: dict, list_field: str) -> Rig:
+             rig_id: str, metadata: dict, list_field: str, pair_t: tuple[Any, str]) -> Rig:
+    """``pair_t``: the file and field the second camera's translation came from (for the baseline's error)."""
     if len(cameras) < 2:
         raise fail(path, list_field, f"a rig needs at least two cameras, got {len(cameras)}")
     seen: dict[str, str] = {}
@@ -132,8 +133,17 @@ def make_rig(path, cameras: Sequence[Camera], fields: Sequence[str], *, volume: 
         seen[cam.name] = field
     if volume is not None and not isinstance(volume, WorkingVolume):
         raise GeometryError(f"volume must be a WorkingVolume or None, got {type(volume).__name__}")
-    return Rig(tuple(cameras), volume if volume is not None else default_working_volume(cameras),
-               rig_id=rig_id, metadata=metadata)
+    try:
+        rig = Rig(tuple(cameras), volume if volume is not None else default_working_volume(cameras),
+                  rig_id=rig_id, metadata=metadata)
+    except GeometryError as e:  # translations so large (1e20 file units) that no volume fits in front of them
+        raise fail(path, list_field, str(e)) from e
+    # the rig file's reader refuses a pair this close (intrinsics-only calibrations leave both poses at zero):
+    # accepted here, it failed later, naming the file it was saved to
+    problem = rig.baseline_problem()
+    if problem:
+        raise fail(pair_t[0], pair_t[1], problem)
+    return rig
 
 
 def default_working_volume(

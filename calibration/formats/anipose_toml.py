@@ -113,7 +113,8 @@ def read_anipose_toml(
         fields.append(section)
     metadata = {"source": {"format": "anipose-toml", "path": str(path), "units_to_metres": units}}
     return make_rig(path, cameras, fields, volume=volume if volume is not None else file_volume,
-                    rig_id=rig_id or file_rig_id or p.stem, metadata=metadata, list_field="cam_0")
+                    rig_id=rig_id or file_rig_id or p.stem, metadata=metadata, list_field="cam_0",
+                    pair_t=(path, f"{fields[1]}.translation" if len(fields) > 1 else "cam_1.translation"))
 
 
 def _camera(path, section: str, table: dict, units: float):

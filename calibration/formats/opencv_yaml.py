@@ -11,6 +11,8 @@ Single camera (OpenCV's calibration sample, ``out_camera_data.yml``), top-level 
     ``R``                                   3x3 matrix or 3-vector Rodrigues (optional, default I)
     ``T``                                   3-vector, file units (optional, default 0)
     ``name``                                string (optional; default the file's stem)
+    ``fisheye_model`` or ``fisheye``        if non-zero the file is refused (``cv::fisheye``'s model is not
+                                            supported; the calibration sample writes ``fisheye_model``)
 
 Multi-camera (our export; one map per camera, in rig order):
     ``cameras``     sequence of maps, each with the single-camera keys above; ``R`` and
@@ -58,12 +60,16 @@ from calibration.formats._common import (
     rotation,
     show,
 )
+from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import write_text_atomic
 
 _K_KEYS = ("camera_matrix", "K")
 _D_KEYS = ("distortion_coefficients", "D")
+#: OpenCV's calibration sample writes ``fisheye_model: 1`` for a ``cv::fisheye`` calibration, whose four
+#: coefficients (k1..k4, equidistant) would otherwise be read as the pinhole model's k1 k2 p1 p2.
+_FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
 __all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "write_opencv_rig"]
 
@@ -152,7 +158,10 @@ def _image_size(node, path, field: str, image_size) -> tuple[Any, Any, tuple[str
         w, h = (float(v) for v in size.reshape(-1))
         return w, h, ("image_size", "image_size")
     if image_size is not None:
-        w, h = image_size
+        try:  # a frame's shape (h, w, 3) or "640x480" raised a bare ValueError / TypeError when unpacked
+            w, h = image_size
+        except (TypeError, ValueError):
+            raise fail(path, "image_size argument", f"must be (width, height), got {show(image_size)}") from None
         return w, h, ("image_size argument", "image_size argument")
     raise fail(path, join(field, "image_width"),
                "missing image size: give image_width + image_height or image_size in the file, or the image_size argument")
@@ -167,7 +176,18 @@ def _string(node, path, field: str) -> str | None:
     return node.string()
 
 
+def _refuse_fisheye(node, path, field: str) -> None:
+    for key in _FISHEYE_KEYS:
+        if key in _keys(node):
+            value = _numeric(node.getNode(key), path, join(field, key))
+            if value is not None and np.any(value != 0):
+                got = ", ".join(f"{v:g}" for v in value.reshape(-1))
+                raise fail(path, join(field, key), f"is {got}: the fisheye model is not supported (only OpenCV's "
+                                                   "pinhole model; its coefficients mean something else)")
+
+
 def _camera(node, path, field: str, *, default_name: str, image_size, units: float, need_pose: bool) -> Camera:
+    _refuse_fisheye(node, path, field)
     name = _string(node.getNode("name"), path, join(field, "name")) if "name" in _keys(node) else None
     k_key, K = _pick(node, _K_KEYS, path, field)
     d_key, D = _pick(node, _D_KEYS, path, field)
@@ -210,15 +230,15 @@ def _units(root, path, given: float | None, needed: bool) -> float:
     return 1.0
 
 
-def _has_translation(node) -> bool:
+def _has_translation(node, path) -> bool:
     keys = _keys(node)
     if "T" not in keys:
         return False
-    try:
-        T = node.getNode("T").mat()
-    except cv2.error:
+    try:  # not node.mat(): it raises for a plain sequence, so T: [0, 0, 0] demanded units_to_metres
+        T = _numeric(node.getNode("T"), path, "T")
+    except RigFileError:
         return True  # malformed: the camera reader names it
-    return T is None or bool(np.any(np.asarray(T) != 0))
+    return T is None or bool(np.any(T != 0))
 
 
 def _volume(root, path) -> WorkingVolume | None:
@@ -255,7 +275,7 @@ def read_opencv_camera(path: str | os.PathLike, *, name: str | None = None, imag
         root = fs.root()
         if "cameras" in _keys(root) or "M1" in _keys(root):
             raise fail(path, None, "this is a multi-camera file; use read_opencv_rig")
-        units = _units(root, path, units_to_metres, needed=_has_translation(root))
+        units = _units(root, path, units_to_metres, needed=_has_translation(root, path))
         cam = _camera(root, path, "", default_name=Path(path).stem, image_size=image_size, units=units, need_pose=False)
     finally:
         fs.release()
@@ -312,12 +332,13 @@ def read_opencv_rig(
                                        need_pose=True))
                 fields.append(field)
             file_rig_id = _string(root.getNode("rig_id"), path, "rig_id") if "rig_id" in keys else None
-            list_field = "cameras"
+            list_field, pair_t = "cameras", (path, "cameras[1].T")
         elif "M1" in keys:
             layout = "opencv-stereo-calib"
             units = _units(root, path, units_to_metres, needed=True)
             cameras, fields = _stereo_calib(fs, path, extrinsics_path, image_size, units)
             file_rig_id, list_field = None, "M1"
+            pair_t = (path if extrinsics_path is None else extrinsics_path, "T")
         else:
             raise fail(path, None, "no known layout: expected a 'cameras' sequence (multi-camera) or 'M1', 'D1', "
                                    f"'M2', 'D2', 'R', 'T' (stereo_calib); found keys {list(keys)}")
@@ -325,11 +346,12 @@ def read_opencv_rig(
         fs.release()
     metadata = {"source": {"format": layout, "path": str(path), "units_to_metres": units}}
     return make_rig(path, cameras, fields, volume=volume, rig_id=rig_id or file_rig_id or Path(path).stem,
-                    metadata=metadata, list_field=list_field)
+                    metadata=metadata, list_field=list_field, pair_t=pair_t)
 
 
 def _stereo_calib(fs, path, extrinsics_path, image_size, units) -> tuple[list[Camera], list[str]]:
     root = fs.root()
+    _refuse_fisheye(root, path, "")
     *size, size_keys = _image_size(root, path, "", image_size)
     ext_fs, ext_path = (None, path) if extrinsics_path is None else (_open(extrinsics_path), extrinsics_path)
     try:

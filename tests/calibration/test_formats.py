@@ -540,3 +540,77 @@ def test_imported_rig_gets_default_volume(tmp_path):
         read_anipose_toml(path, units_to_metres=0.001, volume=([0, 0, 0], [1, 1, 1]))  # type: ignore[arg-type]
     custom = WorkingVolume([-1, -2, 1], [1, 0, 4])
     assert read_anipose_toml(path, units_to_metres=0.001, volume=custom).volume is custom
+
+
+@pytest.mark.parametrize("ext", ["yml", "xml"])
+def test_a_fisheye_calibration_is_refused_not_read_as_pinhole(tmp_path, ext):
+    # OpenCV's calibration sample marks a cv::fisheye calibration with fisheye_model: 1; its k1..k4 read as the
+    # pinhole model's k1 k2 p1 p2 gave a camera that projects elsewhere, silently
+    path = tmp_path / f"out_camera_data.{ext}"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 640)
+    fs.write("image_height", 480)
+    fs.write("fisheye_model", 1)
+    fs.write("camera_matrix", np.array([[300.0, 0, 319.5], [0, 300.0, 239.5], [0, 0, 1]]))
+    fs.write("distortion_coefficients", np.array([[0.05], [-0.01], [0.002], [-0.0003]]))
+    fs.release()
+    with pytest.raises(RigFileError, match="is 1: the fisheye model") as info:
+        read_opencv_camera(path)
+    assert info.value.path == str(path) and info.value.field == "fisheye_model"
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])  # the same flag beside stereo_calib's intrinsics
+    intrinsics = tmp_path / "intrinsics.yml"
+    intrinsics.write_text(intrinsics.read_text() + "fisheye_model: 1\n")
+    with pytest.raises(RigFileError, match="fisheye") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml",
+                        image_size=(640, 480), units_to_metres=0.001)
+    assert info.value.field == "fisheye_model"
+    path.write_text(path.read_text().replace("<fisheye_model>1<", "<fisheye_model>0<").replace("fisheye_model: 1",
+                                                                                             "fisheye_model: 0"))
+    assert read_opencv_camera(path).dist.size == 4  # the pinhole model, said so
+
+
+def test_a_pair_without_a_baseline_is_refused_naming_the_translation(tmp_path):
+    # an intrinsics-only calibration leaves every pose at zero: read, it could not be saved (save_rig and
+    # load_rig refuse a pair under 10 mm apart) and every joint would be missing
+    path = tmp_path / "calibration.toml"
+    path.write_text(ANIPOSE_TOML.replace("rotation = [ 0.012, -0.523, 0.004,]", "rotation = [ 0.0, 0.0, 0.0,]")
+                    .replace("translation = [ 1480.3, -4.1, 410.7,]", "translation = [ 0.0, 0.0, 0.0,]"))
+    with pytest.raises(RigFileError, match="apart") as info:
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.path == str(path) and info.value.field == "cam_1.translation"
+    _write_stereo_calib(tmp_path, [-0.004, 0.0, 0.0])  # 4 um: a mm calibration read with a um unit
+    with pytest.raises(RigFileError, match="apart") as info:
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml",
+                        image_size=(640, 480), units_to_metres=0.001)
+    assert info.value.path == str(tmp_path / "extrinsics.yml") and info.value.field == "T"
+    cams = _cams()
+    cams[1]["T"] = "[0.095, 0, 0]"  # 5 mm from the first camera (T = [0.1, 0, 0])
+    (tmp_path / "rig.yaml").write_text(_multi_yaml(cams))
+    with pytest.raises(RigFileError, match="apart") as info:
+        read_opencv_rig(tmp_path / "rig.yaml")
+    assert info.value.field == "cameras[1].T"
+    path.write_text(ANIPOSE_TOML.replace("translation = [ 1480.3, -4.1, 410.7,]", "translation = [ 1e20, 0.0, 0.0,]"))
+    with pytest.raises(RigFileError, match="working volume") as info:  # no default volume fits: was a GeometryError
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.path == str(path)
+
+
+@pytest.mark.parametrize("size", [(480, 640, 3), (640,), "640x480", 640])
+def test_an_image_size_argument_that_is_not_a_pair_names_it(tmp_path, size):
+    _write_stereo_calib(tmp_path, [-60.0, 0.5, 1.0])
+    with pytest.raises(RigFileError, match="must be \\(width, height\\)") as info:  # was a bare ValueError/TypeError
+        read_opencv_rig(tmp_path / "intrinsics.yml", extrinsics_path=tmp_path / "extrinsics.yml", image_size=size,
+                        units_to_metres=0.001)
+    assert info.value.field == "image_size argument" and info.value.path == str(tmp_path / "intrinsics.yml")
+
+
+def test_a_zero_translation_needs_no_units_whichever_way_it_is_written(tmp_path):
+    # a zero T as a plain sequence demanded units_to_metres, the same T as an !!opencv-matrix did not
+    path = tmp_path / "cam.yaml"
+    path.write_text("%YAML:1.0\n---\nimage_size: [800, 600]\nK: [[500, 0, 399.5], [0, 500, 299.5], [0, 0, 1]]\n"
+                    "D: [0.1, -0.01, 0, 0]\nR: [0.0, 0.1, 0.0]\nT: [0, 0, 0.0]\n")
+    np.testing.assert_array_equal(read_opencv_camera(path).t, np.zeros(3))
+    path.write_text(path.read_text().replace("T: [0, 0, 0.0]", "T: [0, 0, 5.0]"))
+    with pytest.raises(RigFileError, match="pass units_to_metres") as info:
+        read_opencv_camera(path)
+    assert info.value.field == "T"

@@ -45,6 +45,18 @@ def test_level_rig_refuses_what_it_cannot_do():
         level_rig(rig, camera_height_m=0.0)
     with pytest.raises(GeometryError, match="along gravity"):
         level_rig(rig, camera_height_m=3.0, pitch_deg=90.0)  # a pair looking straight down: no forward
+    # a NaN or infinite angle (an inclinometer that read nothing) raised a bare ValueError or blamed R;
+    # a reference past the cameras an IndexError
+    for bad in (math.nan, math.inf, -math.inf, "10", None):
+        for key in ("pitch_deg", "roll_deg"):
+            with pytest.raises(GeometryError, match=key):
+                level_rig(rig, camera_height_m=1.5, **{key: bad})
+        with pytest.raises(GeometryError, match="camera_height_m"):
+            level_rig(rig, camera_height_m=bad)
+    for reference in (2, -1, True, 0.0):
+        with pytest.raises(GeometryError, match="reference"):
+            level_rig(rig, camera_height_m=1.5, reference=reference)
+    assert level_rig(rig, camera_height_m=1.5, reference=1).metadata["levelled"]["reference"] == "b"
 
 
 def test_the_estimator_warns_about_a_tool_frame_until_the_rig_is_levelled(caplog):
