@@ -9,7 +9,12 @@ Workflow (docs/calibration.md)::
     ghcal check --rig rig.json --board board/board.json --images capture/        # later: does it still fit?
 
 ``ghcal synth --out synth/`` renders the views a careful user would take, of a known rig, so the
-tool can be tried (and is tested) without cameras.
+tool can be tried (and is tested) without cameras. A rig calibrated with another tool comes in (and goes
+out) through ``ghcal import`` / ``ghcal export`` (OpenCV FileStorage YAML/XML/JSON, anipose
+``calibration.toml``; docs/rig-file.md, "Importing and exporting")::
+
+    ghcal import calibration.toml --units-to-metres 0.001 --camera-height 1.4 --pitch 10 --out rig.json
+    ghcal export --rig rig.json --out rig.yml
 
 Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the user fixes (the
 message names the file, folder, camera or key).
@@ -408,6 +413,110 @@ def cmd_solve(args: argparse.Namespace) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ import / export
+#: The foreign formats by file suffix (``--format`` names one for other suffixes).
+FORMAT_SUFFIXES = {".toml": "anipose", ".yml": "opencv", ".yaml": "opencv", ".xml": "opencv", ".json": "opencv"}
+
+
+def _format_of(path: Path, given: str | None, flag: str) -> str:
+    if given:
+        return given
+    fmt = FORMAT_SUFFIXES.get(path.suffix.lower())
+    if fmt is None:
+        raise UsageError(f"{flag} {path}: cannot tell the format from the suffix {path.suffix!r} (one of "
+                         f"{', '.join(sorted(FORMAT_SUFFIXES))}): pass --format opencv or anipose")
+    return fmt
+
+
+def _image_size(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+        if w < 1 or h < 1:
+            raise ValueError
+    except ValueError:
+        raise UsageError(f"--image-size must be WIDTHxHEIGHT in pixels, e.g. 1280x720, got {text!r}") from None
+    return w, h
+
+
+def _rig_path(text: str, flag: str) -> Path:
+    out = Path(text)
+    if not out.parent.is_dir():
+        raise UsageError(f"{flag} {out}: no such folder {out.parent}")
+    if out.is_dir():
+        raise UsageError(f"{flag} {out}: is a folder; give the file's path")
+    return out
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from calibration.formats import read_anipose_toml, read_opencv_rig
+    from calibration.level import level_rig
+
+    source = Path(args.file)
+    out = _rig_path(args.out, "--out")
+    if out.exists() and out.resolve() == source.resolve():
+        raise UsageError(f"--out {out} is the file being imported: give the rig file another path")
+    if args.camera_height is None and (args.pitch is not None or args.roll is not None):
+        raise UsageError("--pitch and --roll go with --camera-height (the first camera's height above the floor)")
+    if args.rig_id is not None:
+        _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
+    fmt = _format_of(source, args.format, "FILE")
+    volume = _volume(args.volume)
+    if fmt == "anipose":
+        if args.units_to_metres is None:
+            raise UsageError(f"{source}: anipose files do not record the unit of their translations: pass "
+                             "--units-to-metres (0.001 for a board measured in millimetres, 1 for metres)")
+        if args.extrinsics or args.image_size:
+            raise UsageError("--extrinsics and --image-size go with OpenCV files; anipose files carry both")
+        rig = read_anipose_toml(source, units_to_metres=args.units_to_metres, volume=None if
+                                args.camera_height is not None else volume, rig_id=args.rig_id)
+    else:
+        rig = read_opencv_rig(source, extrinsics_path=args.extrinsics, image_size=_image_size(args.image_size),
+                              volume=None if args.camera_height is not None else volume, rig_id=args.rig_id,
+                              units_to_metres=args.units_to_metres)
+    for cam in rig.pair:  # the joint stream announces them
+        _stream_name(cam.name, MAX_CAMERA_NAME_LEN, f"{source}: camera name")
+    _stream_name(rig.rig_id, MAX_RIG_ID_LEN, f"{source}: rig id (--rig-id sets another)")
+    if args.camera_height is not None:
+        rig = level_rig(rig, camera_height_m=args.camera_height, pitch_deg=args.pitch or 0.0,
+                        roll_deg=args.roll or 0.0, volume=volume)
+    save_rig(rig, out)
+    a, b = rig.pair
+    units = rig.metadata.get("source", {}).get("units_to_metres")
+    print(f"{source} ({fmt}): cameras {a.name!r} {a.width}x{a.height} and {b.name!r} {b.width}x{b.height}, "
+          f"baseline {1000 * float(np.linalg.norm(a.center - b.center)):.1f} mm"
+          + (f" (file units x {units:g} m)" if units is not None else ""))
+    if args.camera_height is not None:
+        print(f"levelled: {a.name} {args.camera_height:g} m above the floor, pitch {args.pitch or 0.0:g} deg, "
+              f"roll {args.roll or 0.0:g} deg")
+    else:
+        print("warning: not levelled: the rig frame is the calibration tool's own, and the runtime reads y as down "
+              "with the floor at y = 0 (the skeleton prior, upright crops, the working volume): import again "
+              "with --camera-height M (and --pitch, --roll) of the first camera")
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from calibration.formats import write_anipose_toml, write_opencv_rig
+
+    rig = load_rig(args.rig)
+    out = _rig_path(args.out, "--out")
+    if out.exists() and out.resolve() == Path(args.rig).resolve():
+        raise UsageError(f"--out {out} is the rig file (--rig): give the export another path")
+    fmt = _format_of(out, args.format, "--out")
+    if fmt == "anipose":
+        if args.units_to_metres is None:
+            raise UsageError("anipose files do not record the unit of their translations: pass --units-to-metres "
+                             "(0.001 to write millimetres, 1 for metres), the unit the reading tool expects")
+        write_anipose_toml(rig, out, units_to_metres=args.units_to_metres)
+    else:
+        write_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres)
+    print(f"wrote {out} ({fmt}, cameras {', '.join(repr(c.name) for c in rig.cameras)})")
+    return 0
+
+
 # ------------------------------------------------------------------ check
 def cmd_check(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
@@ -558,6 +667,36 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"the floor view's height off the floor (default {CheckLimits.max_floor_mm:g})")
     p.add_argument("--json", action="store_true", help="print the full report")
     p.set_defaults(run=cmd_check)
+
+    p = sub.add_parser("import", help="write a rig file from another tool's calibration (OpenCV, anipose)")
+    p.add_argument("file", help="OpenCV FileStorage .yml/.yaml/.xml/.json (our multi-camera layout or "
+                                "stereo_calib's intrinsics.yml) or anipose calibration.toml")
+    p.add_argument("--out", required=True, help="rig file to write (docs/rig-file.md)")
+    p.add_argument("--format", choices=("opencv", "anipose"), help="default: from FILE's suffix")
+    p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
+                   help="metres per unit of the file's translations (0.001: millimetres); required for anipose "
+                        "and stereo_calib files, which do not say")
+    p.add_argument("--extrinsics", help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
+    p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size")
+    p.add_argument("--camera-height", type=_finite(0.05, 10.0),
+                   help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
+                        "the tool's own frame, and a warning says so)")
+    p.add_argument("--pitch", type=_finite(-90.0, 90.0),
+                   help="with --camera-height: degrees below the horizon (default 0)")
+    p.add_argument("--roll", type=_finite(-180.0, 180.0),
+                   help="with --camera-height: degrees about the optical axis (default 0)")
+    p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, in the written rig's frame)")
+    p.add_argument("--rig-id", help="default: the file's, else its name")
+    p.set_defaults(run=cmd_import)
+
+    p = sub.add_parser("export", help="write a rig file for another tool (OpenCV FileStorage, anipose)")
+    p.add_argument("--rig", required=True)
+    p.add_argument("--out", required=True, help=".yml/.yaml/.xml/.json (OpenCV FileStorage) or .toml (anipose)")
+    p.add_argument("--format", choices=("opencv", "anipose"), help="default: from --out's suffix")
+    p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
+                   help="metres per unit of the written translations (OpenCV: default 1, recorded in the file; "
+                        "anipose: required, as its files do not say)")
+    p.set_defaults(run=cmd_export)
     return ap
 
 

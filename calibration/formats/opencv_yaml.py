@@ -385,8 +385,14 @@ def _write_camera(fs: cv2.FileStorage, cam: Camera, units: float, with_name: boo
     fs.write("T", np.ascontiguousarray((cam.t / units).reshape(3, 1)))
 
 
-def _memory_writer() -> cv2.FileStorage:
-    return cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | cv2.FILE_STORAGE_FORMAT_YAML)
+#: The FileStorage format written for a destination's suffix (YAML for any other): a ``rig.xml`` used to
+#: hold YAML text, which OpenCV reads by content but a tool that parses the XML itself does not.
+_FORMATS = {".xml": cv2.FILE_STORAGE_FORMAT_XML, ".json": cv2.FILE_STORAGE_FORMAT_JSON}
+
+
+def _memory_writer(path) -> cv2.FileStorage:
+    fmt = _FORMATS.get(Path(path).suffix.lower(), cv2.FILE_STORAGE_FORMAT_YAML)
+    return cv2.FileStorage("", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY | fmt)
 
 
 def _check_strings_read_back(text: str, path, expected: dict[str, tuple[Any, str]]) -> None:
@@ -413,8 +419,9 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     """
     units = check_units(units_to_metres)
     refuse_skew(rig.cameras, "an OpenCV YAML file")
-    fs = _memory_writer()
-    fs.writeComment(" ghnerf rig exported as OpenCV YAML; R, T map rig -> camera (X_cam = R X + T)")
+    fs = _memory_writer(path)
+    if Path(path).suffix.lower() != ".json":  # OpenCV writes comments into JSON as //, which JSON has not
+        fs.writeComment(" ghnerf rig exported for OpenCV FileStorage; R, T map rig -> camera (X_cam = R X + T)")
     fs.write("rig_id", rig.rig_id)
     fs.write("units_to_metres", float(units))
     fs.write("working_volume_min", np.ascontiguousarray(rig.volume.min_corner.reshape(3, 1)))  # metres
@@ -437,7 +444,7 @@ def write_opencv_camera(camera: Camera, path: str | os.PathLike, *, units_to_met
     """Write the single-camera layout, plus ``name``, ``R`` and ``T`` (readers that do not know them ignore them)."""
     units = check_units(units_to_metres)
     refuse_skew([camera], "an OpenCV YAML file")
-    fs = _memory_writer()
+    fs = _memory_writer(path)
     _write_camera(fs, camera, units, with_name=True)
     fs.write("units_to_metres", float(units))
     text = fs.releaseAndGetString()
