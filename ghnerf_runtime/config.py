@@ -479,16 +479,23 @@ class HeatmapsConfig:
             costs one encoder run, not two. Only while the presence gate is on; 0 always runs it.
             With the shipped model, 32 empty rooms (frame check off) reach <= 0.006 and 40 held-out
             pairs with a person >= 0.80 (``benchmarks/measure_presence.py --rooms 32 --flip-test``).
+        flip_test_side_by_side: on a tracked pair (someone was there), run the ``human`` graph on the crops and
+            on their mirror images side by side, one thread each (``ModelSession.run_both``), not one after
+            the other on two threads; the same heatmaps, sooner (docs/runtime.md, "Flip test"). Only with a
+            pool of two or more threads per session (``session.threads``, ``thread_pool: "per_session"``);
+            cold pairs run in turn, so the skip above still applies to them.
     """
 
     source: str = "encoder"
     flip_test: bool = True
     flip_test_skip_below: float = 0.1
+    flip_test_side_by_side: bool = True
 
     def __post_init__(self) -> None:
         _choice(self, "source", HEATMAP_SOURCES)
         _boolean(self, "flip_test")
         _number(self, "flip_test_skip_below", 0.0, 1.0)
+        _boolean(self, "flip_test_side_by_side")
 
 
 #: The best 3D method of each heatmap source on held-out sequences (docs/runtime.md, 3D methods).

@@ -314,6 +314,10 @@ class Estimator:
                                  f"the heatmap grid's stride {self.contract.heatmap_stride}")
         self.skeleton_prior = self._prior_of(session)
         self.novel_painter = self._painter_of(session)
+        # the flip test's two human-graph runs side by side on tracked pairs (heatmaps.flip_test_side_by_side)
+        self._flip_lanes = (self._human_graph and self.config.flips_encoder_heatmaps
+                            and self.config.heatmaps.flip_test_side_by_side and hasattr(session, "open_lane")
+                            and session.open_lane("human"))
         self._prior_follow: Joints3D | None = None
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
@@ -585,10 +589,17 @@ class Estimator:
         # onnxruntime runs a whole graph whatever is asked of it: without a volume to build, the
         # human-only graph skips the image feature network.
         encoder = "human" if self._human_graph and not features else "encoder"
-        env.update(self.session.run(encoder, env))
-        _add_ms(timing, "encoder", t)
-        if cfg.flips_encoder_heatmaps and self._may_be_someone(env["encoder_heatmaps"], (0, 1)):
-            env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"])
+        if self._flip_lanes and encoder == "human" and regions.tracked:
+            # someone was there: the mirrored crops beside the crops, not after them (the same heatmaps, sooner)
+            out, mirrored = self.session.run_both("human", env, self._mirrored_feeds(batch, env["src_P"]))
+            env.update(out)
+            env["encoder_heatmaps"] = flip_averaged(out["encoder_heatmaps"], mirrored["encoder_heatmaps"])
+            _add_ms(timing, "encoder", t)
+        else:
+            env.update(self.session.run(encoder, env))
+            _add_ms(timing, "encoder", t)
+            if cfg.flips_encoder_heatmaps and self._may_be_someone(env["encoder_heatmaps"], (0, 1)):
+                env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"])
         stride, g = self.contract.heatmap_stride, self.grid
         blocks = [full_block(g, g)] * 2
         out: dict[str, np.ndarray] = {}
@@ -668,13 +679,18 @@ class Estimator:
         """``heat`` averaged with the encoder heatmaps of the mirrored crops (``heatmaps.flip_test``): the
         ``human`` graph when the model has one, else ``encoder``; the time goes to ``encoder_flip``."""
         t = time.perf_counter()
-        feeds = {"images": mirror_images(batch)}
-        if src_P is not None:  # graphs read images only, but a graph that read cameras would see consistent ones
-            feeds["src_P"] = mirror_projections(src_P, self.size)
+        feeds = self._mirrored_feeds(batch, src_P)
         mirrored = self.session.run("human" if self.session.has("human") else "encoder", feeds)["encoder_heatmaps"]
         out = flip_averaged(heat, mirrored)
         _add_ms(timing, "encoder_flip", t)
         return out
+
+    def _mirrored_feeds(self, batch: np.ndarray, src_P: np.ndarray | None) -> dict[str, np.ndarray]:
+        """The flip test's feeds: the mirrored crops (and, for a graph that read cameras, their cameras)."""
+        feeds = {"images": mirror_images(batch)}
+        if src_P is not None:
+            feeds["src_P"] = mirror_projections(src_P, self.size)
+        return feeds
 
     def _image_joints(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                       views: Sequence[int] = (0, 1)) -> tuple[dict, dict, dict]:

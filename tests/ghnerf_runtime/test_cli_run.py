@@ -105,7 +105,8 @@ def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
                          "--model-dir", "/opt/m"]) == 0
     tree = json.loads(capsys.readouterr().out)
     assert tree["joints3d"]["method"] == "volumetric" and tree["session"]["model_dir"] == "/opt/m"
-    assert tree["heatmaps"] == {"source": "encoder", "flip_test": True, "flip_test_skip_below": 0.1}  # documented
+    assert tree["heatmaps"] == {"source": "encoder", "flip_test": True, "flip_test_skip_below": 0.1,
+                                "flip_test_side_by_side": True}  # the documented defaults
     assert cli_run.main(["--rig", "unused.json", "--images", "a", "b", "--validate-config", "--no-flip-test"]) == 0
     assert json.loads(capsys.readouterr().out)["heatmaps"]["flip_test"] is False
     cfg.write_text('{"heatmaps": {"flip_test": false}}')  # the flag overrides the config, both ways

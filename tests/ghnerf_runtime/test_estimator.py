@@ -42,6 +42,9 @@ class Recorder:
         self.calls.append((graph, {k: np.shape(v) for k, v in feeds.items()}))
         return self.session.run(graph, feeds)
 
+    def run_both(self, graph, first, second):  # the flip test's two runs (side by side in the real session)
+        return self.run(graph, first), self.run(graph, second)
+
     def ran(self, graph) -> int:
         return sum(1 for g, _ in self.calls if g == graph)
 

@@ -136,6 +136,28 @@ def test_the_flip_test_runs_only_where_someone_may_be(skip_below):
     assert r.num_found > 0 and "encoder_flip" in r.timing_ms, r.timing_ms
 
 
+def test_the_flip_test_side_by_side_gives_the_same_joints():
+    """heatmaps.flip_test_side_by_side: on tracked pairs the crops and their mirror images run side by side (no
+    encoder_flip stage: one encoder time for both); every joint, 2D and 3D, is what the runs in turn give."""
+    pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.cli.simdata import load_sequences
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    seq = load_sequences(1, 4)[0]
+    results = {}
+    for side in (True, False):
+        cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), threads=2),
+                              heatmaps=HeatmapsConfig(flip_test_side_by_side=side))
+        est = Estimator(load_session(cfg), seq.rig, cfg)
+        results[side] = [est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=i,
+                                      timestamp_s=i / 30) for i in range(len(seq))]
+    for i, (a, b) in enumerate(zip(results[True], results[False])):
+        assert np.array_equal(a.joints_3d, b.joints_3d) and np.array_equal(a.missing, b.missing), i
+        assert all(np.array_equal(a.joints_2d[c], b.joints_2d[c]) for c in a.joints_2d), i
+        assert ("encoder_flip" in a.timing_ms) == (not a.tracked) and "encoder_flip" in b.timing_ms, i
+    assert sum(r.tracked for r in results[True]) >= 3 and results[True][-1].num_found > 20
+
+
 def test_shipped_prior_gate_reports_fewer_3d_joints_not_fewer_people():
     """The skeleton prior's error gate decides which 3D joints are reported, not whether someone is there: with a
     gate no joint passes, the 2D joints are still reported and the crop still follows the prior's skeleton."""

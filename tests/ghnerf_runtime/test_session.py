@@ -92,6 +92,29 @@ def test_run_returns_contract_shapes_and_counts(tiny_session):
     tiny_session.reset_counts()
 
 
+def test_run_both_side_by_side_answers_as_two_runs(tiny_model_dir):
+    """open_lane / run_both: the two feeds run side by side, one thread each, and answer exactly what two runs
+    in turn answer; with one thread per session there is nothing to run beside: in turn."""
+    s = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), threads=2), ("human",))
+    feeds = warmup_feeds(s.contract)
+    mirrored = {"images": np.ascontiguousarray(feeds["images"][..., ::-1])}
+    apart = s.run("human", feeds), s.run("human", mirrored)
+    assert s.open_lane("human") and s.open_lane("human")  # idempotent
+    s.reset_counts()
+    both = s.run_both("human", feeds, mirrored)
+    assert s.run_counts["human"] == 2
+    for one, other in zip(apart, both):
+        assert set(one) == set(other) and all(np.array_equal(one[k], other[k]) for k in one)
+    with pytest.raises(ModelError, match="needs input 'images'"):
+        s.run_both("human", feeds, {})
+    # (the global pool, process-wide once installed, is not tried here: it would refuse every later session)
+    alone = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False, threads=1), ("human",))
+    assert not alone.open_lane("human")
+    in_turn = alone.run_both("human", feeds, mirrored)
+    assert all(np.array_equal(in_turn[i][k], apart[i][k]) for i in (0, 1) for k in apart[i])
+    assert not s.open_lane("encoder")  # not loaded
+
+
 def test_run_unknown_graph_and_missing_input(tiny_model_dir):
     s = _load_encoder(tiny_model_dir)
     with pytest.raises(ModelError, match="not loaded"):
