@@ -48,6 +48,7 @@ class Health:
     pairs_estimated: int = 0
     pairs_dropped: int = 0  # skipped by the driver under the latest-pair policy, or lost whole (an OAK's host queue)
     estimate_errors: int = 0
+    read_errors: int = 0  # reads that failed once and the next went on (a corrupt frame in a recording)
     rig_opens: int = 0
     rig_open_failures: int = 0
     rig_lost: int = 0  # an open rig that vanished, ended or fell silent
@@ -93,7 +94,7 @@ class Health:
                     "camera_fault": self.camera_fault,
                     "last_pair_age_s": None if self.last_pair_at is None else round(now - self.last_pair_at, 3)},
             "pairs": {"read": self.pairs_read, "estimated": self.pairs_estimated, "dropped": self.pairs_dropped,
-                      "estimate_errors": self.estimate_errors},
+                      "estimate_errors": self.estimate_errors, "read_errors": self.read_errors},
             "estimator": {"stalled": self.estimator_stalled,
                           "pairs_per_s": round(rate, 2),
                           "latency_ms_median": round(float(np.median(lat)), 2) if lat.size else None,

@@ -13,6 +13,8 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   flag ``CAMERA_FAULT`` in their STATUS until pairs flow again;
 * **a rig that comes back with another calibration** (another OAK): the estimator is rebuilt for
   it from the loaded model (no reload), and the sinks are reopened when the camera names change;
+* **a read that fails once** (a corrupt image in a recording; ``RigOperationError``): counted, read
+  on; failing again before a pair, the rig is reopened;
 * **a pair the estimator rejects** (``FrameError``): counted and skipped; an estimate slower than
   ``health.slow_estimate_s`` flags ``ESTIMATOR_STALLED``;
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
@@ -291,6 +293,7 @@ class Daemon:
         """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
         self.health.enter(State.RUNNING)
         last_pair = self._clock()
+        read_failed = False  # the last read raised a RigOperationError and no pair came since
         while not stop.is_set():
             if "rig.url" in self._maybe_reload(source.rig):
                 self._reopen_rig = True  # run() closes this rig and opens the new rig.url
@@ -312,9 +315,26 @@ class Daemon:
                     self._lost(f"no pair for {silent:.1f} s (rig.stall_s {rig_cfg.stall_s:g}): reopening the rig")
                     return False
                 continue
-            except drivers.DriverError as e:  # unplugged, device reset, a failed driver thread
+            except drivers.RigDisconnectedError as e:  # unplugged, device reset
                 self._lost(f"the rig failed: {e}")
                 return False
+            except drivers.RigOperationError as e:
+                # A frame the backend could not deliver (a corrupt image in a recording, a malformed device
+                # message) is raised once and the next read goes on (RigSource.read): reopening for it played a
+                # replay:// from its start again, for ever. Raised again before a pair: the rig itself failed.
+                if read_failed:
+                    self._lost(f"the rig failed: {e}")
+                    return False
+                read_failed = True
+                self.health.read_errors += 1
+                self.health.last_error = f"{rig_cfg.url}: a read failed: {e}"
+                if self.health.read_errors == 1 or self.health.read_errors % 100 == 0:
+                    _log.warning("%s (%d so far); reading on", self.health.last_error, self.health.read_errors)
+                continue
+            except drivers.DriverError as e:  # a failed driver thread
+                self._lost(f"the rig failed: {e}")
+                return False
+            read_failed = False
             last_pair = self._clock()
             self.health.pairs_read += 1
             self.health.pairs_dropped = self._dropped_closed + source.stats.pairs_dropped

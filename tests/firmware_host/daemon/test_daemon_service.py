@@ -240,6 +240,41 @@ def test_an_absent_rig_is_waited_for_then_a_recording_plays_to_its_end(sim_url, 
     assert run.daemon.health.rig_opens == 1
 
 
+def test_a_corrupt_frame_in_a_recording_is_skipped_and_the_recording_plays_to_its_end(sim_url, tmp_path):
+    """A frame a backend cannot deliver is raised once and the next read goes on (RigSource.read): the
+    daemon counts it and reads on. (It took it for a failed rig: the replay was reopened from its start,
+    hit the same frame, and played its first pairs for ever, never reaching the end.)"""
+    take = tmp_path / "take"
+    with drivers.open_rig(f"record+{sim_url}&policy=all&out={take}") as rig:
+        for _ in range(16):
+            rig.read(timeout_s=5)
+    corrupt = sorted((take / "images" / "left").iterdir())[5]
+    corrupt.write_bytes(b"not a png")
+    cfg = _config({"url": f"replay://{take}", "reopen_min_s": 0.01, "reopen_max_s": 0.01}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        run.thread.join(timeout=20)  # rig.exit_at_end: the daemon stops by itself at the recording's end
+        assert not run.thread.is_alive(), f"still running after {run.daemon.health.rig_opens} opens"
+        assert run.rc == [0]
+    health = run.daemon.health
+    assert health.rig_opens == 1 and health.rig_lost == 0
+    assert health.read_errors == 1 and health.pairs_estimated >= 12
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["pairs"]["read_errors"] == 1
+
+
+def test_a_rig_whose_reads_keep_failing_is_reopened(sim_url, tmp_path, monkeypatch):
+    """A failure raised again on the next read (an opencv:// capture thread that died) is the rig's: reopened."""
+    def fail(self, timeout_s):
+        raise drivers.RigOperationError("capture thread died")
+
+    monkeypatch.setattr(type(drivers.create_rig_source(sim_url)), "_read_frame", fail)
+    cfg = _config({"url": sim_url, "reopen_min_s": 0.01, "reopen_max_s": 0.01}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.rig_lost >= 2, timeout=30, what="two reopens")
+        assert run.finish() == 0
+    assert "capture thread died" in run.daemon.health.last_error
+
+
 def test_stop_while_waiting_is_prompt(tmp_path):
     cfg = _config({"url": f"replay://{tmp_path / 'never'}", "reopen_min_s": 30, "reopen_max_s": 30}, tmp_path)
     with _Running(cfg, tmp_path) as run:
