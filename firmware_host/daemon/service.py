@@ -15,7 +15,9 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   it from the loaded model (no reload), and the sinks are reopened when the camera names change;
 * **a read that fails once** (a corrupt image in a recording; ``RigOperationError``): counted, read
   on; failing again before a pair, the rig is reopened;
-* **a pair the estimator rejects** (``FrameError``): counted and skipped; an estimate slower than
+* **a pair the estimator rejects** (``FrameError``) or onnxruntime fails on (``ModelRunError``): counted and
+  skipped (``MAX_FAILED_RUNS`` failures of the model in a row stop the daemon, exit 1, for systemd to
+  restart it with the model loaded afresh); an estimate slower than
   ``health.slow_estimate_s`` flags ``ESTIMATOR_STALLED``;
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
   watchdog pings and systemd restarts the service.
@@ -64,7 +66,7 @@ from firmware_host.sinks.base import Sink
 from firmware_host.sinks.registry import sink_class
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.config import config_to_dict
-from ghnerf_runtime.errors import FrameError, ModelError, RuntimeErrorBase
+from ghnerf_runtime.errors import FrameError, ModelError, ModelRunError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, load_session
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import dumps_rig
@@ -99,6 +101,10 @@ def _session_key(config: DaemonConfig) -> tuple:
             est.joints3d.uses_skeleton_prior(True), est.novel_view.uses_painter(True))
 
 _log = logging.getLogger("ghnerf.daemon")
+
+#: The model failing on this many pairs in a row (no estimate between) is no longer one bad pair: the daemon
+#: stops with the error (exit 1) and systemd restarts it, the model loaded afresh.
+MAX_FAILED_RUNS = 30
 
 
 class DaemonStartError(FirmwareHostError):
@@ -208,6 +214,10 @@ class Daemon:
                     # Opened but lost before a single pair (a flapping device): back off as after a failed open.
                     if self._wait(stop, self._backoff_s):
                         self._backoff_s = min(self._backoff_s * 2, self.config.rig.reopen_max_s)
+        except Exception as e:
+            # What stopped it stays in the status file, which outlives the process (the traceback: the journal).
+            self.health.last_error = f"stopped by {type(e).__name__}: {e}"
+            raise
         finally:
             self._shutdown()
         return 0
@@ -294,6 +304,7 @@ class Daemon:
         self.health.enter(State.RUNNING)
         last_pair = self._clock()
         read_failed = False  # the last read raised a RigOperationError and no pair came since
+        failed_runs = 0  # pairs in a row the model failed on (ModelRunError)
         while not stop.is_set():
             if "rig.url" in self._maybe_reload(source.rig):
                 self._reopen_rig = True  # run() closes this rig and opens the new rig.url
@@ -344,12 +355,20 @@ class Daemon:
             try:
                 result = estimator.estimate(pair.images, sequence=pair.sequence,
                                             timestamp_s=pair.timestamps_ns[0] * 1e-9)
-            except FrameError as e:
+            except (FrameError, ModelRunError) as e:
+                # One pair onnxruntime fails on is skipped like a rejected one; it took the daemon down (exit 1,
+                # a restart: the model loaded again, the seqs from 0), with nothing in the status file to say why.
+                failed_runs = failed_runs + 1 if isinstance(e, ModelRunError) else 0
                 self.health.estimate_errors += 1
-                self.health.last_error = f"pair {pair.sequence} rejected: {e}"
-                if self.health.estimate_errors == 1 or self.health.estimate_errors % 100 == 0:
+                self.health.last_error = f"pair {pair.sequence} rejected: {e}" if isinstance(e, FrameError) else \
+                    f"pair {pair.sequence}: the model failed: {e}"
+                if failed_runs >= MAX_FAILED_RUNS:
+                    _log.error("the model failed on %d pairs in a row: stopping, for a restart", failed_runs)
+                    raise
+                if self.health.estimate_errors == 1 or self.health.estimate_errors % 100 == 0 or failed_runs == 1:
                     _log.warning("%s (%d so far)", self.health.last_error, self.health.estimate_errors)
                 continue
+            failed_runs = 0
             took = self._clock() - t0
             self.watchdog.beat("handing the joints to the sinks")
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))

@@ -220,6 +220,54 @@ def test_seqs_stay_contiguous_through_reopens_and_rejected_pairs(sim_url, tmp_pa
     assert report["pairs"]["read"] == health.pairs_estimated + health.estimate_errors
 
 
+class _FailingRunsEstimator(_CountingEstimator):
+    """onnxruntime failing (ModelRunError) on the 4th pair, and on every pair from the 10th on if ``always``;
+    the others all joints found (no FrameError)."""
+
+    always = False
+
+    def estimate(self, images, *, sequence: int, timestamp_s: float):
+        from ghnerf_runtime.errors import ModelRunError
+
+        self.n = getattr(self, "n", 0) + 1
+        if self.n == 4 or (self.always and self.n >= 10):
+            raise ModelRunError("graph 'human' failed: RuntimeException: out of memory", path="human.onnx")
+        self.calls = 0  # the parent's third call is a FrameError: never reached
+        return super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
+
+
+def test_the_model_failing_on_one_pair_skips_it(sim_url, tmp_path, monkeypatch):
+    """One pair onnxruntime fails on is counted and skipped, like a rejected one (it stopped the daemon)."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _FailingRunsEstimator)
+    with _Running(_config({"url": sim_url}, tmp_path), tmp_path) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 8 or run.rc, timeout=30, what="pairs after it")
+        assert run.finish() == 0
+    assert run.daemon.health.estimate_errors == 1
+    assert "the model failed" in run.daemon.health.last_error and "out of memory" in run.daemon.health.last_error
+
+
+def test_the_model_failing_on_every_pair_stops_the_daemon_saying_why(sim_url, tmp_path, monkeypatch):
+    """MAX_FAILED_RUNS failures in a row stop it (exit 1 in the CLI: systemd restarts it), and the status
+    file, which outlives the process, says why."""
+    import firmware_host.daemon.service as service
+    from ghnerf_runtime.errors import ModelRunError
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", type("Always", (_FailingRunsEstimator,), {"always": True}))
+    monkeypatch.setattr(service, "MAX_FAILED_RUNS", 5)
+    with _Running(_config({"url": sim_url}, tmp_path), tmp_path) as run:
+        run.thread.join(timeout=30)
+        assert not run.thread.is_alive()
+    assert isinstance(run.rc[0], ModelRunError)
+    assert run.daemon.health.estimate_errors == 6  # the 4th pair, then the 10th to the 14th
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["state"] == State.STOPPING
+    assert report["last_error"].startswith("stopped by ModelRunError: human.onnx: graph 'human' failed")
+
+
 def test_an_absent_rig_is_waited_for_then_a_recording_plays_to_its_end(sim_url, tmp_path):
     take = tmp_path / "take"
     with drivers.open_rig(f"record+{sim_url}&policy=all&out={tmp_path / 'made'}") as rig:
