@@ -22,6 +22,9 @@ __all__ = ["State", "Health", "write_status_file"]
 
 #: Window of recent estimates the latency and joints-found figures are taken over.
 WINDOW = 100
+#: Running with no estimate for this long: the rate reads 0 and the status line says so (the rate of the last
+#: window stayed on, reading healthy while every pair was rejected or none came).
+STALE_S = 2.0
 
 
 class State:
@@ -83,6 +86,8 @@ class Health:
         lat = np.asarray(self.latencies_ms, float)
         times = self.estimate_times
         rate = (len(times) - 1) / (times[-1] - times[0]) if len(times) > 1 and times[-1] > times[0] else 0.0
+        if times and now - times[-1] > STALE_S:
+            rate = 0.0
         return {
             "state": self.state,
             "state_for_s": round(now - self.state_since, 3),
@@ -112,7 +117,12 @@ class Health:
         """One line for systemd's ``STATUS=`` (``systemctl status ghnerf``); a refused reload stays on it
         until one is accepted (``systemctl reload`` returns before the daemon has read the file). ``sinks``:
         each sink's counters by URL (as in :meth:`report`); those down are named with their error."""
-        if self.state == State.RUNNING:
+        last = self.state_since if self.last_pair_at is None else max(self.state_since, self.last_pair_at)
+        idle_s = self.clock() - last  # (since the rig opened: it may have been away)
+        if self.state == State.RUNNING and idle_s > STALE_S:
+            why = f"; last error: {self.last_error}" if self.last_error else ""
+            line = f"running: no pair estimated for {idle_s:.0f} s{why}"
+        elif self.state == State.RUNNING:
             r = self.report()["estimator"]
             lat = f", {r['latency_ms_median']:.0f} ms" if r["latency_ms_median"] is not None else ""
             line = f"running: {r['pairs_per_s']:.1f} pairs/s{lat}, {self.pairs_estimated} estimated"

@@ -717,6 +717,30 @@ def test_the_status_line_keeps_a_refusal_whatever_the_rig_error(tmp_path):
     assert line.endswith("; reload refused: /etc/ghnerf/daemon.json: rig.ulr: unknown key")
 
 
+def test_the_rate_and_status_line_do_not_stay_healthy_when_no_pair_is_estimated():
+    """Every pair rejected (or none coming): the rate of the last window stayed on, and STATUS read
+    "running: 30.0 pairs/s" for as long as nothing was estimated."""
+    from firmware_host.daemon.health import STALE_S, Health
+
+    now = [100.0]
+    health = Health(clock=lambda: now[0])
+    health.enter(State.RUNNING)
+    for _ in range(30):
+        now[0] += 1 / 30
+        health.estimated(20.0, 1.0)
+    assert health.status_line().startswith("running: 30.0 pairs/s, 20 ms, 30 estimated")
+    health.last_error = "pair 40 rejected: camera 'left': image is 320x240x1, expected 320x240x3"
+    now[0] += STALE_S + 3
+    assert health.report()["estimator"]["pairs_per_s"] == 0.0
+    assert health.status_line() == ("running: no pair estimated for 5 s; last error: pair 40 rejected: camera "
+                                    "'left': image is 320x240x1, expected 320x240x3")
+    now[0] += 10
+    health.enter(State.WAITING)
+    health.enter(State.RUNNING)  # a rig opened again after 10 s away: counted from the open
+    now[0] += 1
+    assert health.status_line().startswith("running: 0.0 pairs/s")
+
+
 def test_on_two_videos_through_opencv(sim_url, tmp_path):
     """The daemon on ``opencv://``: two videos of a simulated take (what two webcams would give, OpenCV
     decoding them at their pace) with the take's rig file; the shipped model finds the person in them."""
