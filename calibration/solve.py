@@ -306,12 +306,13 @@ def floor_from_pair(board: BoardSpec, first: BoardView, second: BoardView, tool_
 
     Steadier than one camera's pose of a flat, foreshortened board, whose tilt one view leaves to
     perspective cues a few pixels deep: the second camera, a baseline away, sees the same corners
-    from elsewhere. The result is in the first camera's frame (``tool_rig``'s frame).
+    from elsewhere. The result is in the first camera's frame (``tool_rig``'s first camera, posed anywhere).
     """
     R, t, rms = _board_pose_two_views(board, first, second, tool_rig)
-    reference = tool_rig.pair[0]  # the tool rig's frame is this camera's own
-    down = reference.R @ R[:, 2]  # the board's z points into the board: down, for a board face up
-    height = float(down @ (reference.R @ t + reference.t)) + board_thickness_m
+    # R, t are already board -> first camera, whatever the rig's frame: applying the first camera's own
+    # pose again was right only while it was the identity (a levelled rig gave twice the tilt)
+    down = R[:, 2]  # the board's z points into the board: down, for a board face up
+    height = float(down @ t) + board_thickness_m
     if height <= 0:
         raise SolveError("the floor view puts the camera below the floor: is the board face down?")
     pitch = math.degrees(math.asin(float(np.clip(down[2], -1.0, 1.0))))
