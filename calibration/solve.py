@@ -182,12 +182,17 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
                    min_common: int = MIN_CORNERS) -> PairPose:
     """The second camera's pose relative to the first, from views both saw (same view name).
 
-    :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners.
+    :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners, not
+        all on one line.
     """
     shared = []
+    cv_board = board.cv_board()
     for name in sorted(set(first) & set(second)):
         ids = np.intersect1d(first[name].ids, second[name].ids)
-        if ids.size >= min_common:
+        # Each camera's corners are off one line (the detector sees to that), but the corners both found
+        # can still be one row: no pose from those, and OpenCV's fit of it went to 1e106 px, or it was
+        # dropped as a pair "not taken at the same instant" in place of one that was.
+        if ids.size >= min_common and not cv_board.checkCharucoCornersCollinear(ids):
             shared.append((name, ids))
     if len(shared) < MIN_VIEWS:
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r} both saw the board in {len(shared)} image pair(s); "

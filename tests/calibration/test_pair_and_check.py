@@ -17,6 +17,7 @@ from calibration.board import BoardSpec, load_board
 from calibration.check import CheckLimits, check_failures, check_rig
 from calibration.detect import BoardView
 from calibration.render import board_pose_facing, example_rig
+from calibration.errors import SolveError
 from calibration.solve import Intrinsics, _lens_terms_flags, calibrate_pair
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.geometry.rig import Rig
@@ -77,6 +78,27 @@ def test_the_pair_is_solved_through_a_rational_lens():
     assert pose.rms_px < 0.3, pose.rms_px
     assert np.linalg.norm(pose.T - _relative_t(*cams)) < 0.005, (pose.T, _relative_t(*cams))
     assert pose.dropped == ()
+
+
+def test_a_pair_whose_shared_corners_are_one_row_is_not_used():
+    # Each camera found two rows of the board, each pair of rows off one line as the detector demands,
+    # but the corners both found are a single row: no pose. It was solved with the others (a pair error
+    # of 1e106 px where it could not be dropped) or dropped as a pair not taken at the same instant.
+    rig = example_rig()
+    intr = {cam.name: Intrinsics(K=cam.K, dist=cam.dist, rms_px=0.1, per_view_px={}, dropped=(), coverage=1.0,
+                                 image_size=cam.size) for cam in rig.pair}
+    views = _views(rig, _facing_poses(rig, 6, seed=3), noise_px=0.05, seed=4)
+    per_row = BOARD.squares_x - 1
+    for cam, rows in (("left", (0, 1)), ("right", (1, 2))):
+        v = views[cam]["000"]
+        keep = np.isin(v.ids // per_row, rows)
+        views[cam]["000"] = BoardView(v.ids[keep], v.corners[keep], v.image_size)
+    pose = calibrate_pair(BOARD, views["left"], views["right"], intr["left"], intr["right"])
+    assert pose.dropped == () and sorted(pose.per_view_px) == ["001", "002", "003", "004", "005"]
+    assert pose.rms_px < 0.2 and np.linalg.norm(pose.T - _relative_t(*rig.pair)) < 0.005
+    four = {cam: {n: v for n, v in views[cam].items() if n < "004"} for cam in views}  # three usable pairs
+    with pytest.raises(SolveError, match="both saw the board in 3 image pair"):
+        calibrate_pair(BOARD, four["left"], four["right"], intr["left"], intr["right"])
 
 
 @pytest.mark.parametrize("size,flags", [(4, 0), (5, 0), (8, cv2.CALIB_RATIONAL_MODEL),
