@@ -157,7 +157,10 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
                          f"or take {focal_std:.1f} px; at most {MAX_FOCAL_STD_SHARE:.0%} is accepted): the board was "
                          "seen at too few angles. Tilt it 20-45 degrees towards and away from the camera, both ways, "
                          "near and far, and capture again")
-    return Intrinsics(K=np.asarray(K, float), dist=np.asarray(dist, float).reshape(-1), rms_px=float(rms),
+    # OpenCV hands the rational model back as 14 terms, the thin-prism and tilt ones held at 0: the rig
+    # file and the report get the 8 it fits (docs/calibration.md), as the other models get their 5
+    dist = np.asarray(dist, float).reshape(-1)[:8 if lens == "rational" else 5]
+    return Intrinsics(K=np.asarray(K, float), dist=dist, rms_px=float(rms),
                       per_view_px={n: round(float(e), 4) for n, e in errors.items()}, dropped=tuple(dropped),
                       coverage=_coverage(views, size), image_size=size, focal_std_px=focal_std)
 

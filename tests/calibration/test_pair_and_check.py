@@ -18,7 +18,7 @@ from calibration.check import CheckLimits, check_failures, check_rig
 from calibration.detect import BoardView
 from calibration.render import board_pose_facing, example_rig
 from calibration.errors import SolveError
-from calibration.solve import Intrinsics, _lens_terms_flags, calibrate_pair
+from calibration.solve import Intrinsics, _lens_terms_flags, calibrate_intrinsics, calibrate_pair
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.geometry.rig import Rig
 
@@ -78,6 +78,11 @@ def test_the_pair_is_solved_through_a_rational_lens():
     assert pose.rms_px < 0.3, pose.rms_px
     assert np.linalg.norm(pose.T - _relative_t(*cams)) < 0.005, (pose.T, _relative_t(*cams))
     assert pose.dropped == ()
+    # the rational model solved is its 8 terms (OpenCV gave 14, six held at 0, into the rig file and report)
+    solved = calibrate_intrinsics(BOARD, views["left"], lens="rational")
+    assert solved.dist.size == 8 and solved.rms_px < 0.3
+    assert {lens: calibrate_intrinsics(BOARD, views["left"], lens=lens).dist.size
+            for lens in ("standard", "narrow")} == {"standard": 5, "narrow": 5}
 
 
 def test_a_pair_whose_shared_corners_are_one_row_is_not_used():
