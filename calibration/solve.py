@@ -157,7 +157,10 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
                          f"or take {focal_std:.1f} px; at most {MAX_FOCAL_STD_SHARE:.0%} is accepted): the board was "
                          "seen at too few angles. Tilt it 20-45 degrees towards and away from the camera, both ways, "
                          "near and far, and capture again")
-    return Intrinsics(K=np.asarray(K, float), dist=np.asarray(dist, float).reshape(-1), rms_px=float(rms),
+    # OpenCV hands the rational model back as 14 terms, the thin-prism and tilt ones held at 0: the rig
+    # file and the report get the 8 it fits (docs/calibration.md), as the other models get their 5
+    dist = np.asarray(dist, float).reshape(-1)[:8 if lens == "rational" else 5]
+    return Intrinsics(K=np.asarray(K, float), dist=dist, rms_px=float(rms),
                       per_view_px={n: round(float(e), 4) for n, e in errors.items()}, dropped=tuple(dropped),
                       coverage=_coverage(views, size), image_size=size, focal_std_px=focal_std)
 
@@ -182,22 +185,25 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
                    min_common: int = MIN_CORNERS) -> PairPose:
     """The second camera's pose relative to the first, from views both saw (same view name).
 
-    :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners.
+    :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners, not
+        all on one line.
     """
     shared = []
+    cv_board = board.cv_board()
     for name in sorted(set(first) & set(second)):
         ids = np.intersect1d(first[name].ids, second[name].ids)
-        if ids.size >= min_common:
+        # Each camera's corners are off one line (the detector sees to that), but the corners both found
+        # can still be one row: no pose from those, and OpenCV's fit of it went to 1e106 px, or it was
+        # dropped as a pair "not taken at the same instant" in place of one that was.
+        if ids.size >= min_common and not cv_board.checkCharucoCornersCollinear(ids):
             shared.append((name, ids))
     if len(shared) < MIN_VIEWS:
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r} both saw the board in {len(shared)} image pair(s); "
                          f"at least {MIN_VIEWS} are needed: hold it where both cameras see it")
-    dropped: list[str] = []
-    max_dropped = max(1, len(shared) // 4)
-    while True:
-        obj = [board.corners_m()[ids].astype(np.float32).reshape(-1, 1, 3) for _, ids in shared]
-        img_a = [_image_points(first[n], ids) for n, ids in shared]
-        img_b = [_image_points(second[n], ids) for n, ids in shared]
+    def solve(pairs: list) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        obj = [board.corners_m()[ids].astype(np.float32).reshape(-1, 1, 3) for _, ids in pairs]
+        img_a = [_image_points(first[n], ids) for n, ids in pairs]
+        img_b = [_image_points(second[n], ids) for n, ids in pairs]
         R0, T0 = np.eye(3), np.zeros((3, 1))
         # -> rms, K1, D1, K2, D2, R, T, E, F, rvecs, tvecs, per-view errors
         result = cv2.stereoCalibrateExtended(
@@ -205,18 +211,34 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
             obj, img_a, img_b, intr_first.K.copy(), intr_first.dist.copy(), intr_second.K.copy(),
             intr_second.dist.copy(), intr_first.image_size, R0, T0,
             flags=cv2.CALIB_FIX_INTRINSIC | _lens_terms_flags(intr_first.dist, intr_second.dist))
-        rms, R, T, per_view = result[0], result[5], result[6], result[-1]
-        per = np.asarray(per_view, float).reshape(len(shared), 2).mean(axis=1)
-        # A pair far worse than the others: its two images not taken at the same instant, or one blurred.
-        # One bad pair drags the fit and raises the good ones' errors too, so drop only the worst, solve
-        # again, and repeat while the worst is still an outlier (at most a quarter of the pairs).
+        per = np.asarray(result[-1], float).reshape(len(pairs), 2).mean(axis=1)
+        return float(result[0]), result[5], result[6], per
+
+    dropped: list[str] = []
+    max_dropped = max(1, len(shared) // 4)
+    rms, R, T, per = solve(shared)
+    # A pair far worse than the others: its two images not taken at the same instant, or one blurred.
+    # One bad pair drags the fit and raises the good ones' errors too, so drop only the worst, solve
+    # again, and repeat while the worst is still an outlier (at most a quarter of the pairs).
+    while len(shared) - 1 >= MIN_VIEWS and len(dropped) < max_dropped:
         worst = int(np.argmax(per))
-        others = np.delete(per, worst)
-        if (per[worst] <= max(OUTLIER_FACTOR * float(np.median(others)), 1.0)
-                or len(shared) - 1 < MIN_VIEWS or len(dropped) >= max_dropped):
+        if per[worst] > max(OUTLIER_FACTOR * float(np.median(np.delete(per, worst))), 1.0):
+            dropped.append(shared[worst][0])
+            shared = shared[:worst] + shared[worst + 1:]
+            rms, R, T, per = solve(shared)
+            continue
+        # With few pairs the bad one's error need not stand out at all (five pairs at 10-31 px, the
+        # unsynchronised one not the worst; the pose 1.3 m off): where the fit is poor, the pair
+        # without which the others fit far better is the one to drop.
+        if not rms > 1.0:
             break
-        dropped.append(shared[worst][0])
-        shared = shared[:worst] + shared[worst + 1:]
+        trials = [solve(shared[:k] + shared[k + 1:]) for k in range(len(shared))]
+        best = int(np.argmin([t[0] if np.isfinite(t[0]) else np.inf for t in trials]))
+        if not OUTLIER_FACTOR * trials[best][0] < rms:
+            break
+        dropped.append(shared[best][0])
+        shared = shared[:best] + shared[best + 1:]
+        rms, R, T, per = trials[best]
     if not (np.all(np.isfinite(R)) and np.all(np.isfinite(T)) and np.isfinite(rms)):
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r}: the pair's pose diverged (the shared views may all "
                          "show the board at one angle, or the two images of a pair were not taken together)")
@@ -306,12 +328,13 @@ def floor_from_pair(board: BoardSpec, first: BoardView, second: BoardView, tool_
 
     Steadier than one camera's pose of a flat, foreshortened board, whose tilt one view leaves to
     perspective cues a few pixels deep: the second camera, a baseline away, sees the same corners
-    from elsewhere. The result is in the first camera's frame (``tool_rig``'s frame).
+    from elsewhere. The result is in the first camera's frame (``tool_rig``'s first camera, posed anywhere).
     """
     R, t, rms = _board_pose_two_views(board, first, second, tool_rig)
-    reference = tool_rig.pair[0]  # the tool rig's frame is this camera's own
-    down = reference.R @ R[:, 2]  # the board's z points into the board: down, for a board face up
-    height = float(down @ (reference.R @ t + reference.t)) + board_thickness_m
+    # R, t are already board -> first camera, whatever the rig's frame: applying the first camera's own
+    # pose again was right only while it was the identity (a levelled rig gave twice the tilt)
+    down = R[:, 2]  # the board's z points into the board: down, for a board face up
+    height = float(down @ t) + board_thickness_m
     if height <= 0:
         raise SolveError("the floor view puts the camera below the floor: is the board face down?")
     pitch = math.degrees(math.asin(float(np.clip(down[2], -1.0, 1.0))))

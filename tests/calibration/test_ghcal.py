@@ -21,7 +21,7 @@ from calibration.detect import BoardDetector, BoardView
 from calibration.check import check_rig
 from calibration.errors import CaptureError, SolveError
 from calibration.render import calibration_views, example_rig
-from calibration.solve import solve_rig
+from calibration.solve import floor_from_pair, solve_rig
 from drivers.backends.recording_format import FRAMES, FrameRow, Manifest, write_manifest
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import load_rig, save_rig
@@ -93,6 +93,18 @@ def test_levelling_by_measured_height_and_tilt(truth, views):
     err = _compare(solution.rig, truth)
     assert err["left_centre_mm"] < 10 and err["right_centre_mm"] < 15, err
     assert solution.report["levelling"]["method"] == "measured"
+
+
+@pytest.mark.parametrize("order", [("left", "right"), ("right", "left")])
+def test_the_floor_from_both_cameras_is_in_the_first_cameras_frame_wherever_it_stands(truth, views, order):
+    # The truth is levelled: its first camera is not at the rig frame's origin, as the tool rig's is.
+    # The floor was once turned by that camera's rotation a second time (2.68 m for 1.40 m).
+    rig = Rig(tuple(truth.camera(n) for n in order), truth.volume)
+    first = rig.pair[0]
+    floor = floor_from_pair(BOARD, views[order[0]]["floor"], views[order[1]]["floor"], rig)
+    assert abs(floor.height_m + first.center[1]) < 0.01, (floor.height_m, -first.center[1])
+    true_down = first.R @ np.array([0.0, 1.0, 0.0])
+    assert math.degrees(math.acos(float(np.clip(floor.down @ true_down, -1.0, 1.0)))) < 0.3
 
 
 def test_too_little_to_solve_is_said_plainly(views):
