@@ -45,9 +45,9 @@ grabs, decodes and queues its frames and releases the capture when it stops (nev
 being read). A live camera's frame is stamped with the host's monotonic clock when its grab
 returns, except where both cameras are V4L2 devices (Linux webcams): there each frame carries the
 kernel's own stamp of its capture (``CAP_PROP_POS_MSEC``, on the same monotonic clock), which a busy
-host's late wake-ups do not delay. A driver stamp that is not on that clock (in the future, or more than
-``DRIVER_STAMP_MAX_AGE_S`` before the grab) turns driver stamps off for both cameras, with a warning,
-so the two are never stamped differently for long. Webcams are not synchronised in hardware, so a pair
+host's late wake-ups do not delay. A driver stamp that is not on that clock (in the future, more than
+``DRIVER_STAMP_MAX_AGE_S`` before the grab, or not after the camera's previous one) turns driver stamps off
+for both cameras, with a warning, so the two are never stamped differently for long. Webcams are not synchronised in hardware, so a pair
 is two frames within ``tolerance_ms``:
 the default pairs each frame with the other camera's nearest, so a fast movement is seen up to
 half a frame apart by the two cameras (an OAK's shared trigger avoids that). That default leaves
@@ -349,12 +349,15 @@ class _Camera:
             return grabbed_ns
         ms = float(self.capture.get(cv2.CAP_PROP_POS_MSEC))
         driver_ns = round(ms * 1e6) if math.isfinite(ms) else -1
-        if grabbed_ns - DRIVER_STAMP_MAX_AGE_S * 1e9 <= driver_ns <= grabbed_ns:
+        # A stamp at or before the previous frame's (a driver whose clock jumped back, or repeats a stamp) is
+        # off the clock too: clamped after the previous one, the camera's frames would stay behind the other's
+        # by the jump and never pair again.
+        if grabbed_ns - DRIVER_STAMP_MAX_AGE_S * 1e9 <= driver_ns <= grabbed_ns and driver_ns > self.last_stamp_ns:
             return driver_ns
         src.driver_stamps = False
         log.warning("camera %r (%s): its driver's frame stamp (%.3f ms) is not on the host's monotonic clock (%.3f "
-                    "ms at the grab): both cameras' frames are stamped at their grab from now on", self.name,
-                    self.spec, ms, grabbed_ns / 1e6)
+                    "ms at the grab, %.3f ms at its previous frame): both cameras' frames are stamped at their grab "
+                    "from now on", self.name, self.spec, ms, grabbed_ns / 1e6, self.last_stamp_ns / 1e6)
         return grabbed_ns
 
 

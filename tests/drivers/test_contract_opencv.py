@@ -295,6 +295,24 @@ def test_driver_stamps_off_the_monotonic_clock_or_one_camera_without_them_mean_g
     assert not used and all(pair.frames[0].timestamp_ns not in _Webcam.made[0].stamped for pair in pairs)
 
 
+def test_a_driver_stamp_that_jumps_back_turns_driver_stamps_off(webcam, caplog):
+    # from its 4th frame the second camera's driver stamps run 1 s behind (a driver clock that jumped back):
+    # clamped after the previous stamp, its frames stayed 1 s behind the other's and no pair formed again
+    class JumpsBack(_V4l2Webcam):
+        def grab(self) -> bool:
+            ok = super().grab()
+            self.grabs = getattr(self, "grabs", 0) + 1
+            if self.target == 1 and self.grabs >= 4:
+                self.stamp_ms -= 1000.0
+            return ok
+
+    _Webcam.made.clear()
+    webcam.frames = 40
+    pairs, used = _read_pairs("opencv://?first=0&second=1&tolerance_ms=30", JumpsBack, 12)
+    assert not used and "at its previous frame" in caplog.text
+    assert all(pair.skew_ns < 30e6 for pair in pairs)
+
+
 def test_each_camera_is_asked_its_own_rig_size(takes, webcam, tmp_path):
     loaded = load_rig(takes[0][2])
     mixed = tmp_path / "mixed.json"
