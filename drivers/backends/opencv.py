@@ -37,7 +37,8 @@ Options:
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
   under ``all`` two videos are read in step, neither more than a frame ahead, and wait for room
   instead of dropping: every pair of the take is delivered, however slowly one decodes);
-  ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10). A
+  ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10), and how
+  long a live camera may then go without delivering one before it counts as disconnected. A
   failed :meth:`open` is final: open a new source.
 
 Timing. Each camera's capture is opened by :meth:`open`, then owned by that camera's thread, which
@@ -62,7 +63,8 @@ the same instant pair frame by frame (a phone's variable-rate video drifts). Not
 exposure, white balance or rolling-shutter differences between the two cameras.
 
 Ends. A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the
-next read, after the frames it delivered before. When a video ends, the stream ends
+next read, after the frames it delivered before; so does one whose grab hangs (a stalled stream or
+pipeline) for ``open_timeout_s``, naming it. When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
 """
@@ -229,6 +231,7 @@ class _Camera:
         self.index_queued = -1  # the last queued frame's index (written under the source's lock)
         self.at_pass_end = False  # loop: waiting for the other video to end its pass (under the lock)
         self.last_stamp_ns = -1  # the last queued frame's (written under the source's lock)
+        self.last_frame_s = 0.0  # time.monotonic() of its last queued frame, or of its start (under the lock)
         self.v4l2 = False  # a live V4L2 device: its driver stamps frames on the host's monotonic clock
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
 
@@ -467,6 +470,7 @@ class OpenCVRigSource(RigSource):
             self._anchor_ns = self.clock.now_ns()
             self.driver_stamps = all(cam.v4l2 for cam in self._cameras)
             for cam in self._cameras:
+                cam.last_frame_s = time.monotonic()
                 cam.thread.start()
             sizes = self._first_frames()
             rig = self._fixed_rig or self._nominal_rig(sizes)
@@ -539,6 +543,7 @@ class OpenCVRigSource(RigSource):
             self._camera(frame.camera).index_queued = frame.index
             self._delivered.add(frame.camera)
             self._camera(frame.camera).last_stamp_ns = frame.timestamp_ns
+            self._camera(frame.camera).last_frame_s = time.monotonic()
             self._cond.notify_all()
             return True
 
@@ -599,6 +604,22 @@ class OpenCVRigSource(RigSource):
                 self._failed = True
             self._cond.notify_all()
 
+    def _stalled_in(self) -> float:
+        """(Under the lock.) Seconds until a live camera has gone ``open_timeout_s`` without a frame; at 0 the
+        stream fails with :class:`RigDisconnectedError` naming it. A grab that hangs (a stalled USB stream, a
+        GStreamer pipeline that stopped) never returns to say so, and the reads only timed out, naming no camera."""
+        if self._failed:
+            return math.inf
+        now, limit = time.monotonic(), self.options.open_timeout_s
+        live = [cam for cam in self._cameras if not cam.video]
+        silent = [cam for cam in live if now - cam.last_frame_s >= limit]
+        if silent:
+            self._fail(RigDisconnectedError(
+                ", ".join(f"camera {cam.name!r} ({cam.spec})" for cam in silent)
+                + f" delivered no frame for {limit:g} s (open_timeout_s): stalled or unplugged"))
+            return math.inf
+        return min((cam.last_frame_s + limit - now for cam in live), default=math.inf)
+
     # ------------------------------------------------------------ reader side
     def _read_frame(self, timeout_s: float) -> Frame | None:
         deadline = time.monotonic() + timeout_s
@@ -606,10 +627,13 @@ class OpenCVRigSource(RigSource):
             while not self._queue:
                 if self._stop.is_set():
                     raise RigOperationError("opencv:// source closed")
+                stall_s = self._stalled_in()
+                if self._queue:
+                    break  # the stall, failed just now
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return None
-                self._cond.wait(left)
+                self._cond.wait(min(left, stall_s))
             item = self._queue[0]
             if isinstance(item, Exception):
                 raise type(item)(*item.args)  # a fresh one each read: it stays queued until close

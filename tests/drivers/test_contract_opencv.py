@@ -230,6 +230,26 @@ def test_a_live_camera_that_stops_delivering_is_a_disconnect_after_its_frames(ta
     assert cv2.CAP_PROP_BUFFERSIZE not in props  # a thread per camera grabs all the time: the driver's queue stays empty
 
 
+def test_a_live_camera_whose_grab_hangs_is_a_disconnect_naming_it(webcam):
+    # the second camera's 4th grab hangs (a stalled stream) while the first delivers on: the reads only timed
+    # out, naming no camera, for as long as the grab hung
+    class Hangs(_Webcam):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.left = 3 if target == 1 else 200
+
+    webcam.block_s = 2.0
+    t0 = time.monotonic()
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=40&open_timeout_s=0.5", capture_factory=Hangs) as source:
+        with pytest.raises(RigDisconnectedError,
+                           match=r"camera 'right' \(1\) delivered no frame for 0\.5 s \(open_timeout_s\)"):
+            while True:
+                source.read(timeout_s=5.0)
+        took = time.monotonic() - t0
+    assert took < 1.6  # not the 2 s the grab hangs, after which it says it stopped delivering
+    time.sleep(max(0.0, t0 + 2.3 - time.monotonic()))  # the hung grab returns and its thread ends
+
+
 def test_a_gstreamer_pipeline_is_a_live_camera(webcam):
     # a Jetson's CSI camera is opened through a pipeline; it was taken for a missing video file
     pipeline = "nvarguscamerasrc sensor-id=0 ! video/x-raw(memory:NVMM) ! nvvidconv ! appsink"
