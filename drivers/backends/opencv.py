@@ -64,7 +64,8 @@ exposure, white balance or rolling-shutter differences between the two cameras.
 
 Ends. A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the
 next read, after the frames it delivered before; so does one whose grab hangs (a stalled stream or
-pipeline) for ``open_timeout_s``, naming it. When a video ends, the stream ends
+pipeline) for ``open_timeout_s``, naming it, and one whose grabbed frames do not decode ``MAX_UNDECODABLE``
+times in a row (fewer are skipped: the camera's index gap). When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
 """
@@ -117,6 +118,8 @@ FALLBACK_FPS = 30.0
 HFOV_RANGE = (20.0, 150.0)
 #: A V4L2 driver's frame stamp older than this at the grab is not on the host's monotonic clock.
 DRIVER_STAMP_MAX_AGE_S = 2.0
+#: Grabbed frames in a row that cannot be decoded before a camera counts as lost (fewer are skipped).
+MAX_UNDECODABLE = 10
 
 
 @dataclass
@@ -293,6 +296,7 @@ class _Camera:
     def _grab_loop(self) -> None:
         src = self.source
         since_rewind = 0
+        undecodable = 0  # grabbed frames in a row that did not decode
         while not src._stop.is_set():
             if not self.capture.grab():
                 if self.video and src.options.loop and since_rewind > 0:
@@ -318,9 +322,18 @@ class _Camera:
             since_rewind += 1
             ok, image = self.capture.retrieve()
             if not ok or image is None:
-                src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}): a grabbed frame could not be "
-                                               f"decoded"))
+                # A webcam sharing a USB bus sends the odd truncated MJPG frame: skipped (a camera gap, as the
+                # index moves on), where one such frame took the whole rig down; a run of them is a lost camera.
+                undecodable += 1
+                if undecodable < MAX_UNDECODABLE:
+                    log.warning("camera %r (%s): grabbed frame %d could not be decoded; skipped", self.name,
+                                self.spec, self.index)
+                    self.index += 1
+                    continue
+                src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}): {undecodable} grabbed frames "
+                                               f"in a row could not be decoded"))
                 return
+            undecodable = 0
             image = _bgr(image)
             if image is None or (self.size is not None and (image.shape[1], image.shape[0]) != self.size):
                 got = "an image that is not 8-bit colour or grey" if image is None else \

@@ -250,6 +250,35 @@ def test_a_live_camera_whose_grab_hangs_is_a_disconnect_naming_it(webcam):
     time.sleep(max(0.0, t0 + 2.3 - time.monotonic()))  # the hung grab returns and its thread ends
 
 
+def test_a_frame_that_does_not_decode_is_skipped_and_a_run_of_them_is_a_disconnect(webcam):
+    # a webcam on a shared USB bus sends the odd truncated MJPG frame; one took the whole rig down
+    class Garbled(_Webcam):
+        bad: set[int] = set()
+
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.left, self.grabs = 40, 0
+
+        def grab(self) -> bool:
+            self.grabs += 1
+            return super().grab()
+
+        def retrieve(self):
+            return (False, None) if self.target == 1 and self.grabs in self.bad else super().retrieve()
+
+    Garbled.bad = {4, 5}
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=Garbled) as source:
+        pairs = [source.read(timeout_s=2.0) for _ in range(10)]
+        assert source.stats.camera_gaps["right"] >= 2  # the two skipped, seen as the camera's gap
+    assert not {3, 4} & {p.frames[1].index for p in pairs} and pairs[-1].frames[1].index >= 11
+    Garbled.bad = set(range(4, 40))
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=Garbled) as source:
+        with pytest.raises(RigDisconnectedError, match=r"camera 'right' \(1\): 10 grabbed frames in a row could not "
+                                                       r"be decoded"):
+            for _ in range(40):
+                source.read(timeout_s=2.0)
+
+
 def test_a_gstreamer_pipeline_is_a_live_camera(webcam):
     # a Jetson's CSI camera is opened through a pipeline; it was taken for a missing video file
     pipeline = "nvarguscamerasrc sensor-id=0 ! video/x-raw(memory:NVMM) ! nvvidconv ! appsink"
