@@ -203,7 +203,7 @@ def _same_camera(first: str, second: str) -> bool:
     def resolved(spec: str) -> str:
         if "://" in spec:
             return spec
-        return os.path.realpath(f"/dev/video{spec}" if spec.isdigit() else spec)
+        return os.path.realpath(f"/dev/video{int(spec)}" if spec.isdigit() else spec)  # int(): 00 is index 0
     return resolved(first) == resolved(second)
 
 

@@ -141,6 +141,7 @@ def test_without_a_rig_file_a_nominal_rig_names_the_cameras(takes):
     ("", "option first="),
     ("first=0", "option second="),
     ("first=0&second=0", "the same camera"),
+    ("first=0&second=00", "the same camera"),  # both open index 0
     ("first=0&second=1&fsp=30", r"unknown option\(s\) \['fsp'\]"),
     ("first=0&second=1&fourcc=MJPEG", "four characters"),
     ("first=0&second=1&names=a,a", "two different names"),
