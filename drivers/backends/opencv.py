@@ -37,7 +37,8 @@ Options:
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
   under ``all`` two videos are read in step, neither more than a frame ahead, and wait for room
   instead of dropping: every pair of the take is delivered, however slowly one decodes);
-  ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10). A
+  ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10), and how
+  long a live camera may then go without delivering one before it counts as disconnected. A
   failed :meth:`open` is final: open a new source.
 
 Timing. Each camera's capture is opened by :meth:`open`, then owned by that camera's thread, which
@@ -45,9 +46,9 @@ grabs, decodes and queues its frames and releases the capture when it stops (nev
 being read). A live camera's frame is stamped with the host's monotonic clock when its grab
 returns, except where both cameras are V4L2 devices (Linux webcams): there each frame carries the
 kernel's own stamp of its capture (``CAP_PROP_POS_MSEC``, on the same monotonic clock), which a busy
-host's late wake-ups do not delay. A driver stamp that is not on that clock (in the future, or more than
-``DRIVER_STAMP_MAX_AGE_S`` before the grab) turns driver stamps off for both cameras, with a warning,
-so the two are never stamped differently for long. Webcams are not synchronised in hardware, so a pair
+host's late wake-ups do not delay. A driver stamp that is not on that clock (in the future, more than
+``DRIVER_STAMP_MAX_AGE_S`` before the grab, or not after the camera's previous one) turns driver stamps off
+for both cameras, with a warning, so the two are never stamped differently for long. Webcams are not synchronised in hardware, so a pair
 is two frames within ``tolerance_ms``:
 the default pairs each frame with the other camera's nearest, so a fast movement is seen up to
 half a frame apart by the two cameras (an OAK's shared trigger avoids that). That default leaves
@@ -62,7 +63,9 @@ the same instant pair frame by frame (a phone's variable-rate video drifts). Not
 exposure, white balance or rolling-shutter differences between the two cameras.
 
 Ends. A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the
-next read, after the frames it delivered before. When a video ends, the stream ends
+next read, after the frames it delivered before; so does one whose grab hangs (a stalled stream or
+pipeline) for ``open_timeout_s``, naming it, and one whose grabbed frames do not decode ``MAX_UNDECODABLE``
+times in a row (fewer are skipped: the camera's index gap). When a video ends, the stream ends
 (:class:`EndOfStream`) once the other camera has delivered past the ended one's last frame: no pair
 can follow, so a longer video is not played out to its end.
 """
@@ -115,6 +118,8 @@ FALLBACK_FPS = 30.0
 HFOV_RANGE = (20.0, 150.0)
 #: A V4L2 driver's frame stamp older than this at the grab is not on the host's monotonic clock.
 DRIVER_STAMP_MAX_AGE_S = 2.0
+#: Grabbed frames in a row that cannot be decoded before a camera counts as lost (fewer are skipped).
+MAX_UNDECODABLE = 10
 
 
 @dataclass
@@ -198,7 +203,7 @@ def _same_camera(first: str, second: str) -> bool:
     def resolved(spec: str) -> str:
         if "://" in spec:
             return spec
-        return os.path.realpath(f"/dev/video{spec}" if spec.isdigit() else spec)
+        return os.path.realpath(f"/dev/video{int(spec)}" if spec.isdigit() else spec)  # int(): 00 is index 0
     return resolved(first) == resolved(second)
 
 
@@ -229,6 +234,7 @@ class _Camera:
         self.index_queued = -1  # the last queued frame's index (written under the source's lock)
         self.at_pass_end = False  # loop: waiting for the other video to end its pass (under the lock)
         self.last_stamp_ns = -1  # the last queued frame's (written under the source's lock)
+        self.last_frame_s = 0.0  # time.monotonic() of its last queued frame, or of its start (under the lock)
         self.v4l2 = False  # a live V4L2 device: its driver stamps frames on the host's monotonic clock
         self.thread = threading.Thread(target=self._run, name=f"opencv {name}", daemon=True)
 
@@ -290,6 +296,7 @@ class _Camera:
     def _grab_loop(self) -> None:
         src = self.source
         since_rewind = 0
+        undecodable = 0  # grabbed frames in a row that did not decode
         while not src._stop.is_set():
             if not self.capture.grab():
                 if self.video and src.options.loop and since_rewind > 0:
@@ -315,9 +322,18 @@ class _Camera:
             since_rewind += 1
             ok, image = self.capture.retrieve()
             if not ok or image is None:
-                src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}): a grabbed frame could not be "
-                                               f"decoded"))
+                # A webcam sharing a USB bus sends the odd truncated MJPG frame: skipped (a camera gap, as the
+                # index moves on), where one such frame took the whole rig down; a run of them is a lost camera.
+                undecodable += 1
+                if undecodable < MAX_UNDECODABLE:
+                    log.warning("camera %r (%s): grabbed frame %d could not be decoded; skipped", self.name,
+                                self.spec, self.index)
+                    self.index += 1
+                    continue
+                src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}): {undecodable} grabbed frames "
+                                               f"in a row could not be decoded"))
                 return
+            undecodable = 0
             image = _bgr(image)
             if image is None or (self.size is not None and (image.shape[1], image.shape[0]) != self.size):
                 got = "an image that is not 8-bit colour or grey" if image is None else \
@@ -349,12 +365,15 @@ class _Camera:
             return grabbed_ns
         ms = float(self.capture.get(cv2.CAP_PROP_POS_MSEC))
         driver_ns = round(ms * 1e6) if math.isfinite(ms) else -1
-        if grabbed_ns - DRIVER_STAMP_MAX_AGE_S * 1e9 <= driver_ns <= grabbed_ns:
+        # A stamp at or before the previous frame's (a driver whose clock jumped back, or repeats a stamp) is
+        # off the clock too: clamped after the previous one, the camera's frames would stay behind the other's
+        # by the jump and never pair again.
+        if grabbed_ns - DRIVER_STAMP_MAX_AGE_S * 1e9 <= driver_ns <= grabbed_ns and driver_ns > self.last_stamp_ns:
             return driver_ns
         src.driver_stamps = False
         log.warning("camera %r (%s): its driver's frame stamp (%.3f ms) is not on the host's monotonic clock (%.3f "
-                    "ms at the grab): both cameras' frames are stamped at their grab from now on", self.name,
-                    self.spec, ms, grabbed_ns / 1e6)
+                    "ms at the grab, %.3f ms at its previous frame): both cameras' frames are stamped at their grab "
+                    "from now on", self.name, self.spec, ms, grabbed_ns / 1e6, self.last_stamp_ns / 1e6)
         return grabbed_ns
 
 
@@ -464,6 +483,7 @@ class OpenCVRigSource(RigSource):
             self._anchor_ns = self.clock.now_ns()
             self.driver_stamps = all(cam.v4l2 for cam in self._cameras)
             for cam in self._cameras:
+                cam.last_frame_s = time.monotonic()
                 cam.thread.start()
             sizes = self._first_frames()
             rig = self._fixed_rig or self._nominal_rig(sizes)
@@ -536,6 +556,7 @@ class OpenCVRigSource(RigSource):
             self._camera(frame.camera).index_queued = frame.index
             self._delivered.add(frame.camera)
             self._camera(frame.camera).last_stamp_ns = frame.timestamp_ns
+            self._camera(frame.camera).last_frame_s = time.monotonic()
             self._cond.notify_all()
             return True
 
@@ -596,6 +617,22 @@ class OpenCVRigSource(RigSource):
                 self._failed = True
             self._cond.notify_all()
 
+    def _stalled_in(self) -> float:
+        """(Under the lock.) Seconds until a live camera has gone ``open_timeout_s`` without a frame; at 0 the
+        stream fails with :class:`RigDisconnectedError` naming it. A grab that hangs (a stalled USB stream, a
+        GStreamer pipeline that stopped) never returns to say so, and the reads only timed out, naming no camera."""
+        if self._failed:
+            return math.inf
+        now, limit = time.monotonic(), self.options.open_timeout_s
+        live = [cam for cam in self._cameras if not cam.video]
+        silent = [cam for cam in live if now - cam.last_frame_s >= limit]
+        if silent:
+            self._fail(RigDisconnectedError(
+                ", ".join(f"camera {cam.name!r} ({cam.spec})" for cam in silent)
+                + f" delivered no frame for {limit:g} s (open_timeout_s): stalled or unplugged"))
+            return math.inf
+        return min((cam.last_frame_s + limit - now for cam in live), default=math.inf)
+
     # ------------------------------------------------------------ reader side
     def _read_frame(self, timeout_s: float) -> Frame | None:
         deadline = time.monotonic() + timeout_s
@@ -603,10 +640,13 @@ class OpenCVRigSource(RigSource):
             while not self._queue:
                 if self._stop.is_set():
                     raise RigOperationError("opencv:// source closed")
+                stall_s = self._stalled_in()
+                if self._queue:
+                    break  # the stall, failed just now
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return None
-                self._cond.wait(left)
+                self._cond.wait(min(left, stall_s))
             item = self._queue[0]
             if isinstance(item, Exception):
                 raise type(item)(*item.args)  # a fresh one each read: it stays queued until close

@@ -141,6 +141,7 @@ def test_without_a_rig_file_a_nominal_rig_names_the_cameras(takes):
     ("", "option first="),
     ("first=0", "option second="),
     ("first=0&second=0", "the same camera"),
+    ("first=0&second=00", "the same camera"),  # both open index 0
     ("first=0&second=1&fsp=30", r"unknown option\(s\) \['fsp'\]"),
     ("first=0&second=1&fourcc=MJPEG", "four characters"),
     ("first=0&second=1&names=a,a", "two different names"),
@@ -230,6 +231,55 @@ def test_a_live_camera_that_stops_delivering_is_a_disconnect_after_its_frames(ta
     assert cv2.CAP_PROP_BUFFERSIZE not in props  # a thread per camera grabs all the time: the driver's queue stays empty
 
 
+def test_a_live_camera_whose_grab_hangs_is_a_disconnect_naming_it(webcam):
+    # the second camera's 4th grab hangs (a stalled stream) while the first delivers on: the reads only timed
+    # out, naming no camera, for as long as the grab hung
+    class Hangs(_Webcam):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.left = 3 if target == 1 else 200
+
+    webcam.block_s = 2.0
+    t0 = time.monotonic()
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=40&open_timeout_s=0.5", capture_factory=Hangs) as source:
+        with pytest.raises(RigDisconnectedError,
+                           match=r"camera 'right' \(1\) delivered no frame for 0\.5 s \(open_timeout_s\)"):
+            while True:
+                source.read(timeout_s=5.0)
+        took = time.monotonic() - t0
+    assert took < 1.6  # not the 2 s the grab hangs, after which it says it stopped delivering
+    time.sleep(max(0.0, t0 + 2.3 - time.monotonic()))  # the hung grab returns and its thread ends
+
+
+def test_a_frame_that_does_not_decode_is_skipped_and_a_run_of_them_is_a_disconnect(webcam):
+    # a webcam on a shared USB bus sends the odd truncated MJPG frame; one took the whole rig down
+    class Garbled(_Webcam):
+        bad: set[int] = set()
+
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.left, self.grabs = 40, 0
+
+        def grab(self) -> bool:
+            self.grabs += 1
+            return super().grab()
+
+        def retrieve(self):
+            return (False, None) if self.target == 1 and self.grabs in self.bad else super().retrieve()
+
+    Garbled.bad = {4, 5}
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30&policy=all", capture_factory=Garbled) as source:
+        pairs = [source.read(timeout_s=2.0) for _ in range(10)]
+        assert source.stats.camera_gaps["right"] >= 2  # the two skipped, seen as the camera's gap
+    assert not {3, 4} & {p.frames[1].index for p in pairs} and pairs[-1].frames[1].index >= 11
+    Garbled.bad = set(range(4, 40))
+    with open_rig("opencv://?first=0&second=1&tolerance_ms=30", capture_factory=Garbled) as source:
+        with pytest.raises(RigDisconnectedError, match=r"camera 'right' \(1\): 10 grabbed frames in a row could not "
+                                                       r"be decoded"):
+            for _ in range(40):
+                source.read(timeout_s=2.0)
+
+
 def test_a_gstreamer_pipeline_is_a_live_camera(webcam):
     # a Jetson's CSI camera is opened through a pipeline; it was taken for a missing video file
     pipeline = "nvarguscamerasrc sensor-id=0 ! video/x-raw(memory:NVMM) ! nvvidconv ! appsink"
@@ -293,6 +343,24 @@ def test_driver_stamps_off_the_monotonic_clock_or_one_camera_without_them_mean_g
     pairs, used = _read_pairs("opencv://?first=0&second=1&policy=all&tolerance_ms=30",
                               lambda target, api: (_V4l2Webcam if target == 0 else _Webcam)(target, api), 3)
     assert not used and all(pair.frames[0].timestamp_ns not in _Webcam.made[0].stamped for pair in pairs)
+
+
+def test_a_driver_stamp_that_jumps_back_turns_driver_stamps_off(webcam, caplog):
+    # from its 4th frame the second camera's driver stamps run 1 s behind (a driver clock that jumped back):
+    # clamped after the previous stamp, its frames stayed 1 s behind the other's and no pair formed again
+    class JumpsBack(_V4l2Webcam):
+        def grab(self) -> bool:
+            ok = super().grab()
+            self.grabs = getattr(self, "grabs", 0) + 1
+            if self.target == 1 and self.grabs >= 4:
+                self.stamp_ms -= 1000.0
+            return ok
+
+    _Webcam.made.clear()
+    webcam.frames = 40
+    pairs, used = _read_pairs("opencv://?first=0&second=1&tolerance_ms=30", JumpsBack, 12)
+    assert not used and "at its previous frame" in caplog.text
+    assert all(pair.skew_ns < 30e6 for pair in pairs)
 
 
 def test_each_camera_is_asked_its_own_rig_size(takes, webcam, tmp_path):
