@@ -170,6 +170,10 @@ class RoiConfig:
             in training: a camera mounted upside down (a ceiling mount), on its side or crooked. The
             angle comes from the rig file's R; free at run time (it is in the remap tables). False:
             crops keep the sensor's orientation.
+        supersample: each model pixel is the box mean of ``supersample x supersample`` bilinear samples
+            of the frame, as the synthetic training crops were rendered at 2x and box-reduced
+            (``preprocess``, "Supersampling"); 1: the one-sample remap, blurrier than training by a
+            Gaussian of sigma 0.4-0.7 model pixels on the bench rigs' crops.
     """
 
     volume_margin_m: float = 0.0
@@ -179,9 +183,11 @@ class RoiConfig:
     keep_frac: float = 0.2
     map_cache_size: int = 32
     upright: bool = True
+    supersample: int = 2
 
     def __post_init__(self) -> None:
         _boolean(self, "upright")
+        _integer(self, "supersample", 1, 4)
         _number(self, "volume_margin_m", 0.0, 2.0)
         _number(self, "joint_margin_frac", 0.0, 2.0)
         _integer(self, "min_size_px", 8, 4096)

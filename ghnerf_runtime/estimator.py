@@ -404,7 +404,8 @@ class Estimator:
         """Remap tables and the pinhole crop camera of one window (building both costs ~0.8 ms)."""
         entry = state.cache.get(roi)
         if entry is None:
-            entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.roll_deg),
+            entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.roll_deg,
+                                               supersample=self.config.roi.supersample),
                      crop_camera(state.camera, roi, self.size, state.roll_deg))
             state.cache[roi] = entry
             while len(state.cache) > self.config.roi.map_cache_size:

@@ -35,6 +35,18 @@ Anti-aliasing
     where the frame's side is not one, the window passes the frame's edge and is
     padded by repeating it (what lies past the edge still shows zeros).
 
+Supersampling (``supersample = f > 1``, the estimator's ``roi.supersample``)
+    The synthetic training crops are rendered at ``f S x f S`` point samples of the crop
+    camera and reduced with ``INTER_AREA`` (``training/data/views.py``, ``f = 2``). The
+    box + bilinear path above is blurrier than that: on the bench rigs' tracked crops
+    (scale 2-3) a training crop blurred by a Gaussian of sigma 0.4-0.7 model pixels
+    matches it best. With ``f > 1`` the maps sample the crop camera at ``f S``
+    (bilinear, after ``L = floor(log2(roi.size / (f S)))`` box steps, so the bilinear step
+    stays within 1-2 reduced pixels) and ``apply_crop_maps`` reduces the result by
+    ``f x f`` box means, as training did: the crops then differ from the training
+    crops of the same camera by 0.2-0.9 levels (mean absolute) instead of 0.3-1.2, and
+    without the blur.
+
 Speed
     Maps are built by ``cv2.initUndistortRectifyMap`` (same lens model as
     :class:`~ghnerf_runtime.geometry.Camera`) when ``K`` has no skew, and from
@@ -381,10 +393,14 @@ class CropMaps:
     image_size: tuple[int, int]
     fixed: tuple[np.ndarray, np.ndarray]
     inside: np.ndarray | None = None
+    supersample: int = 1
+    """The maps are ``(f S, f S)``; :func:`apply_crop_maps` reduces the remapped crop by ``f x f``
+    box means (module docstring, "Supersampling"); ``inside`` is ``(S, S)``, the pixels all of whose
+    samples show the frame."""
 
     @property
     def out_size(self) -> int:
-        return int(self.map_x.shape[0])
+        return int(self.map_x.shape[0]) // self.supersample
 
 
 _OUTSIDE = -1e6  # a map coordinate far off any frame: cv2.remap's constant border (0)
@@ -434,7 +450,7 @@ def _aligned_span(lo: int, hi: int, limit: int, factor: int) -> tuple[int, int]:
 
 
 def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antialias: bool = True,
-                              roll_deg: float = 0.0) -> CropMaps:
+                              roll_deg: float = 0.0, supersample: int = 1) -> CropMaps:
     """Maps for one ``cv2.remap`` that undistorts, crops and resizes a frame in one pass.
 
     Each model-input pixel centre goes through :func:`crop_camera` to normalised
@@ -450,18 +466,26 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
         antialias: allow the box pre-reduction.
         roll_deg: rotate the crop counterclockwise about its centre, as
             ``crop_camera(..., roll_deg)`` does its camera.
+        supersample: sample the crop at ``supersample x`` the resolution and box-reduce it, as the
+            synthetic training crops were made (module docstring); 1: one sample per pixel.
 
     Returns:
         :class:`CropMaps` for :func:`apply_crop_maps` / :func:`preprocess_image`.
     """
     out_size = _check_out_size(out_size)
-    map_x, map_y = _lens_maps(camera, crop_camera(camera, roi, out_size, roll_deg))
+    f = _check_out_size(supersample)
+    map_x, map_y = _lens_maps(camera, crop_camera(camera, roi, out_size * f, roll_deg))
 
-    level = max(0, int(round(math.log2(roi.size / out_size)))) if antialias else 0
+    if not antialias:
+        level = 0
+    elif f == 1:
+        level = max(0, int(round(math.log2(roi.size / out_size))))
+    else:  # the bilinear step stays within 1-2 reduced pixels: no blur beyond what the f x f box means add
+        level = max(0, int(math.floor(math.log2(roi.size / (out_size * f)))))
     factor = 2 ** level
     if level == 0 or min(camera.width, camera.height) < factor:
         return CropMaps(map_x, map_y, 0, (0, 0, camera.width, camera.height), camera.size,
-                        cv2.convertMaps(map_x, map_y, cv2.CV_16SC2), _inside(map_x, map_y, camera.size))
+                        cv2.convertMaps(map_x, map_y, cv2.CV_16SC2), _inside(map_x, map_y, camera.size, f), f)
 
     # Reduce only the touched window (+ one reduced pixel of context for the bilinear taps).
     pad = 2 * factor
@@ -479,12 +503,16 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
     map_x = ((map_x - x0 + 0.5) / factor - 0.5).astype(np.float32)
     map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32)
     return CropMaps(map_x, map_y, level, (x0, y0, x1, y1), camera.size, cv2.convertMaps(map_x, map_y, cv2.CV_16SC2),
-                    _inside(map_x, map_y, ((x1 - x0) // factor, (y1 - y0) // factor)))
+                    _inside(map_x, map_y, ((x1 - x0) // factor, (y1 - y0) // factor), f), f)
 
 
-def _inside(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int]) -> np.ndarray | None:
-    """Model pixels whose bilinear taps all lie in the ``(width, height)`` source (``None``: every one)."""
+def _inside(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int], supersample: int = 1) -> np.ndarray | None:
+    """Model pixels whose bilinear taps (of every one of their ``supersample x supersample`` samples) all lie
+    in the ``(width, height)`` source (``None``: every one)."""
     inside = (map_x >= 0) & (map_x <= size[0] - 1) & (map_y >= 0) & (map_y <= size[1] - 1)
+    if supersample > 1:
+        n = inside.shape[0] // supersample
+        inside = inside.reshape(n, supersample, n, supersample).all(axis=(1, 3))
     return None if inside.all() else inside
 
 
@@ -511,8 +539,11 @@ def apply_crop_maps(image: np.ndarray, maps: CropMaps) -> np.ndarray:
         src = cv2.copyMakeBorder(src, 0, y1 - y0 - src.shape[0], 0, x1 - x0 - src.shape[1], cv2.BORDER_REPLICATE)
     for _ in range(maps.level):
         src = cv2.resize(src, (src.shape[1] // 2, src.shape[0] // 2), interpolation=cv2.INTER_AREA)
-    return cv2.remap(src, maps.fixed[0], maps.fixed[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                     borderValue=0)
+    out = cv2.remap(src, maps.fixed[0], maps.fixed[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                    borderValue=0)
+    if maps.supersample > 1:  # f x f box means (exact for an integer factor), as the training crops were reduced
+        out = cv2.resize(out, (maps.out_size, maps.out_size), interpolation=cv2.INTER_AREA)
+    return out
 
 
 def preprocess_image(image_bgr: np.ndarray, maps: CropMaps, normalisation: Normalisation) -> np.ndarray:
