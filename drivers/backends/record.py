@@ -35,7 +35,8 @@ they go (so the backlog stays bounded and close stays quick); at close the
 writers fsync what is outstanding, then the folders and the journal are fsynced,
 and only then is the manifest rewritten with ``complete: true`` (itself fsynced),
 so the mark never reaches the disk before the data it vouches for. A take cut
-short before that stays ``complete: false``; replay drops the rows whose files are missing or empty.
+short before that stays ``complete: false``; replay drops the rows whose files are missing, empty or
+cut short.
 """
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ from drivers import (
 )
 from drivers.backends import record as record_module
 from drivers.backends.record import inner_url_text
-from drivers.backends.recording_format import FRAMES, MANIFEST, read_manifest
+from drivers.backends.recording_format import FRAMES, MANIFEST, encode_image, read_manifest
 from drivers.url import RigUrl
 
 SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
@@ -388,6 +388,24 @@ def test_broken_rows_anywhere_in_an_interrupted_take_are_dropped(copy_of_take, c
         source.open()
     assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 2
     assert "dropped 2 journal row(s)" in caplog.text
+
+
+def test_files_a_power_cut_left_half_written_are_dropped_not_replayed(copy_of_take, caplog, tmp_path):
+    """Only a file's first blocks reached the disk: not empty, but undecodable; the take plays without them."""
+    rows = journal(copy_of_take)
+    for path in (copy_of_take / rows[3]["image"], copy_of_take / rows[-1]["truth"]):
+        path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 2  # no RigOperationError
+    assert "dropped 2 journal row(s)" in caplog.text
+    from drivers.backends.recording_format import payload_is_whole
+
+    image = np.zeros((30, 40, 3), np.uint8)
+    for image_format in ("png", "jpg"):
+        path = tmp_path / f"x.{image_format}"
+        path.write_bytes(encode_image(image, image_format, 90))
+        assert payload_is_whole(path)
+        path.write_bytes(path.read_bytes()[:-1])
+        assert not payload_is_whole(path)
 
 
 def test_complete_is_marked_only_once_the_take_is_on_disk(tmp_path, sim_cache, monkeypatch):
