@@ -154,12 +154,22 @@ class RecordingWriter:
                 raise RigInitializationError(
                     f"recording directory {self.directory} is not empty; choose a new out= directory"
                 )
+            # Claim the folder first, exclusively: of two recorders started on it at once (both found it
+            # empty) only one goes on; the other, with other camera names, would mix its frames into the take.
+            try:
+                self._journal = open(self.directory / FRAMES, "x", encoding="utf-8")
+            except FileExistsError:
+                raise RigInitializationError(
+                    f"recording directory {self.directory} is being written by another recorder "
+                    f"({FRAMES} appeared after it was found empty); choose a new out= directory"
+                ) from None
             for cam in self.manifest.rig.names:
                 name = camera_dir_name(self.manifest.rig, cam)
                 (self.directory / "images" / name).mkdir(parents=True)
                 (self.directory / "truth" / name).mkdir(parents=True)
-            self._journal = open(self.directory / FRAMES, "a", encoding="utf-8")
         except OSError as e:
+            if self._journal is not None:
+                self._journal.close()
             raise RigInitializationError(f"cannot create recording directory {self.directory}: {e}") from e
         try:
             write_manifest(self.directory, self.manifest)

@@ -465,6 +465,51 @@ def test_the_writers_fsync_as_they_go_so_the_backlog_stays_bounded(take, tmp_pat
     assert {str(p) for p in synced if p.is_file()} == {str(tmp_path / "take" / r["image"]) for r in journal(tmp_path / "take")}
 
 
+def test_of_two_recorders_started_on_one_empty_folder_only_one_records(take, tmp_path, monkeypatch):
+    """Both find the folder empty; rigs with other camera names made no folder in common: both recorded."""
+    import dataclasses
+    import threading
+
+    out = tmp_path / "take"
+    manifest = read_manifest(take[0])
+    other = dataclasses.replace(manifest.rig, cameras=tuple(
+        dataclasses.replace(cam, name=cam.name.upper()) for cam in manifest.rig.cameras))
+    both_looked = threading.Barrier(2)
+    real_iterdir = Path.iterdir
+
+    def iterdir(self):
+        found = list(real_iterdir(self))
+        if self == out:
+            both_looked.wait(timeout=5)
+        return iter(found)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    outcomes = {}
+
+    def start(rig):
+        writer = record_module.RecordingWriter(
+            out, record_module.Manifest(rig), record_module.RecordOptions(out=out))
+        try:
+            writer.start()
+        except RigInitializationError as e:
+            outcomes[rig.names] = e
+        else:
+            outcomes[rig.names] = None
+            writer.close({})
+
+    threads = [threading.Thread(target=start, args=(rig,)) for rig in (manifest.rig, other)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(10)
+    errors = [e for e in outcomes.values() if e is not None]
+    assert len(outcomes) == 2 and len(errors) == 1
+    assert "another recorder" in str(errors[0]) and str(out) in str(errors[0])
+    winner = next(names for names, e in outcomes.items() if e is None)
+    assert sorted(p.name for p in (out / "images").iterdir()) == sorted(winner)
+    assert read_manifest(out).rig.names == winner
+
+
 def test_a_rig_replay_would_refuse_is_not_recorded(take, tmp_path):
     """rig_from_dict (replay) checks the principal point: the recorder must not write a take it cannot open."""
     import dataclasses
