@@ -243,6 +243,14 @@ class RecordingWriter:
                 if not written:
                     with self._journal_lock:
                         self._writer_dropped += 1  # this frame: its row never went in
+                    # Its files (half an image on a full disk) are in no row: free their space, so that
+                    # close can still rewrite the manifest with the counters.
+                    for rel in (row.image, row.truth):
+                        if rel is not None:
+                            try:
+                                (self.directory / rel).unlink(missing_ok=True)
+                            except OSError:
+                                pass
                 self.error = e
 
     def _take_unsynced(self, at_least: int) -> list[str]:

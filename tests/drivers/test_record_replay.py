@@ -253,6 +253,33 @@ def test_after_a_write_error_every_frame_is_written_or_counted(tmp_path, sim_cac
     assert counters["frames_written"] + counters["writes_dropped"] == 20
 
 
+def test_a_frame_the_full_disk_cut_short_leaves_no_file_behind(tmp_path, sim_cache, monkeypatch):
+    """Its image was written, its truth half: both are in no row; kept, they hold the space that close needs
+    to rewrite the manifest with the counters (seen on a 300 kB tmpfs: close failed, counters lost)."""
+    real, calls = record_module.write_truth, [0]
+
+    def fills_the_disk(path, *args):
+        calls[0] += 1
+        if calls[0] == 3:
+            Path(path).write_bytes(b"PK\x03\x04")
+            raise OSError(28, "No space left on device")
+        return real(path, *args)
+
+    monkeypatch.setattr(record_module, "write_truth", fills_the_disk)
+    out = tmp_path / "full"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&lossless=1"
+    with open_rig(url, clock=ManualClock()) as source:
+        for _ in range(4):
+            try:
+                source.read(timeout_s=1.0)
+            except RigOperationError:
+                pass  # the failure, reported once
+    listed = {r[key] for r in journal(out) for key in ("image", "truth") if r[key]}
+    on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()} - {MANIFEST, FRAMES}
+    assert len(listed) == 4 and on_disk == listed  # two whole frames, nothing of the third
+    assert read_manifest(out).counters["writes_dropped"] == source.stats.writes_dropped > 0
+
+
 # ----------------------------------------------------------------- broken takes
 @pytest.fixture
 def copy_of_take(take, tmp_path):
