@@ -224,6 +224,7 @@ class RecordingWriter:
                 continue
             frame, row = item
             written = False  # its row in the journal: counted there, not dropped, if a later fsync fails
+            journaled = False  # its row handed to the journal: a flush retried at close may still write it: files kept
             try:
                 data = encode_image(frame.image, self.options.image_format, self.options.jpeg_quality)
                 (self.directory / row.image).write_bytes(data)
@@ -231,6 +232,7 @@ class RecordingWriter:
                     write_truth(self.directory / row.truth, frame.truth, frame.joints_3d)
                 with self._journal_lock:  # the row goes in only once its files are complete
                     assert self._journal is not None
+                    journaled = True
                     self._journal.write(row.to_json() + "\n")
                     self._journal.flush()
                     self.frames_written += 1
@@ -245,7 +247,7 @@ class RecordingWriter:
                         self._writer_dropped += 1  # this frame: its row never went in
                     # Its files (half an image on a full disk) are in no row: free their space, so that
                     # close can still rewrite the manifest with the counters.
-                    for rel in (row.image, row.truth):
+                    for rel in (row.image, row.truth) if not journaled else ():
                         if rel is not None:
                             try:
                                 (self.directory / rel).unlink(missing_ok=True)
@@ -281,7 +283,12 @@ class RecordingWriter:
                 log.error("recording to %s: cannot make the take durable: %s", self.directory, e)
                 self.error = e
             finally:
-                self._journal.close()
+                try:
+                    self._journal.close()
+                except OSError as e:  # flushing what a failed write left buffered (disk full): say so, and
+                    # still rewrite the manifest with the counters
+                    log.error("recording to %s: cannot close %s: %s", self.directory, FRAMES, e)
+                    self.error = self.error or e
         self.manifest.complete = self.error is None
         self.manifest.counters = dict(counters, frames_written=self.frames_written, writes_dropped=self.writes_dropped)
         write_manifest(self.directory, self.manifest)

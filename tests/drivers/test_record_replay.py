@@ -280,6 +280,32 @@ def test_a_frame_the_full_disk_cut_short_leaves_no_file_behind(tmp_path, sim_cac
     assert read_manifest(out).counters["writes_dropped"] == source.stats.writes_dropped > 0
 
 
+def test_a_journal_the_full_disk_cannot_take_still_closes_with_the_counters(tmp_path, sim_cache, monkeypatch):
+    """The rows left in the journal's buffer fail again at close: that raised OSError before the manifest's
+    last rewrite, so close failed and the counters were lost."""
+    if not os.path.exists("/dev/full"):
+        pytest.skip("needs /dev/full (every write: ENOSPC)")
+    real_start = record_module.RecordingWriter.start
+
+    def start(self):
+        real_start(self)
+        self._journal.close()
+        self._journal = open("/dev/full", "w", encoding="utf-8")
+
+    monkeypatch.setattr(record_module.RecordingWriter, "start", start)
+    out = tmp_path / "full"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&lossless=1"
+    with open_rig(url, clock=ManualClock()) as source:
+        for _ in range(3):
+            try:
+                source.read(timeout_s=1.0)
+            except RigOperationError:
+                pass  # the failure, reported once
+    manifest = read_manifest(out)
+    assert manifest.complete is False
+    assert manifest.counters["writes_dropped"] == source.stats.writes_dropped == sum(source.stats.frames_in.values())
+
+
 # ----------------------------------------------------------------- broken takes
 @pytest.fixture
 def copy_of_take(take, tmp_path):
