@@ -35,7 +35,8 @@ they go (so the backlog stays bounded and close stays quick); at close the
 writers fsync what is outstanding, then the folders and the journal are fsynced,
 and only then is the manifest rewritten with ``complete: true`` (itself fsynced),
 so the mark never reaches the disk before the data it vouches for. A take cut
-short before that stays ``complete: false``; replay drops the rows whose files are missing or empty.
+short before that stays ``complete: false``; replay drops the rows whose files are missing, empty or
+cut short.
 """
 from __future__ import annotations
 
@@ -153,12 +154,22 @@ class RecordingWriter:
                 raise RigInitializationError(
                     f"recording directory {self.directory} is not empty; choose a new out= directory"
                 )
+            # Claim the folder first, exclusively: of two recorders started on it at once (both found it
+            # empty) only one goes on; the other, with other camera names, would mix its frames into the take.
+            try:
+                self._journal = open(self.directory / FRAMES, "x", encoding="utf-8")
+            except FileExistsError:
+                raise RigInitializationError(
+                    f"recording directory {self.directory} is being written by another recorder "
+                    f"({FRAMES} appeared after it was found empty); choose a new out= directory"
+                ) from None
             for cam in self.manifest.rig.names:
                 name = camera_dir_name(self.manifest.rig, cam)
                 (self.directory / "images" / name).mkdir(parents=True)
                 (self.directory / "truth" / name).mkdir(parents=True)
-            self._journal = open(self.directory / FRAMES, "a", encoding="utf-8")
         except OSError as e:
+            if self._journal is not None:
+                self._journal.close()
             raise RigInitializationError(f"cannot create recording directory {self.directory}: {e}") from e
         try:
             write_manifest(self.directory, self.manifest)
@@ -213,6 +224,7 @@ class RecordingWriter:
                 continue
             frame, row = item
             written = False  # its row in the journal: counted there, not dropped, if a later fsync fails
+            journaled = False  # its row handed to the journal: a flush retried at close may still write it: files kept
             try:
                 data = encode_image(frame.image, self.options.image_format, self.options.jpeg_quality)
                 (self.directory / row.image).write_bytes(data)
@@ -220,6 +232,7 @@ class RecordingWriter:
                     write_truth(self.directory / row.truth, frame.truth, frame.joints_3d)
                 with self._journal_lock:  # the row goes in only once its files are complete
                     assert self._journal is not None
+                    journaled = True
                     self._journal.write(row.to_json() + "\n")
                     self._journal.flush()
                     self.frames_written += 1
@@ -232,6 +245,14 @@ class RecordingWriter:
                 if not written:
                     with self._journal_lock:
                         self._writer_dropped += 1  # this frame: its row never went in
+                    # Its files (half an image on a full disk) are in no row: free their space, so that
+                    # close can still rewrite the manifest with the counters.
+                    for rel in (row.image, row.truth) if not journaled else ():
+                        if rel is not None:
+                            try:
+                                (self.directory / rel).unlink(missing_ok=True)
+                            except OSError:
+                                pass
                 self.error = e
 
     def _take_unsynced(self, at_least: int) -> list[str]:
@@ -262,7 +283,12 @@ class RecordingWriter:
                 log.error("recording to %s: cannot make the take durable: %s", self.directory, e)
                 self.error = e
             finally:
-                self._journal.close()
+                try:
+                    self._journal.close()
+                except OSError as e:  # flushing what a failed write left buffered (disk full): say so, and
+                    # still rewrite the manifest with the counters
+                    log.error("recording to %s: cannot close %s: %s", self.directory, FRAMES, e)
+                    self.error = self.error or e
         self.manifest.complete = self.error is None
         self.manifest.counters = dict(counters, frames_written=self.frames_written, writes_dropped=self.writes_dropped)
         write_manifest(self.directory, self.manifest)

@@ -237,15 +237,15 @@ def _parse_line(line: bytes) -> Any:
 
 
 def drop_broken_rows(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], int]:
-    """A take cut short (``complete: false``): ``rows`` without those whose image or truth file is missing or
-    empty, and how many were dropped.
+    """A take cut short (``complete: false``): ``rows`` without those whose image or truth file is missing,
+    empty or cut short (:func:`payload_is_whole`), and how many were dropped.
 
     Journal rows can reach the disk before their files, and with several writer threads and no per-frame
     fsync the rows a power cut tore need not be the last ones: every broken row is dropped, wherever it is.
     A ``complete: true`` take promises whole files, so there any broken row is reported when it is opened.
     """
     kept = [row for row in rows
-            if all(file_is_whole(directory / rel) for rel in (row.image, row.truth) if rel is not None)]
+            if all(payload_is_whole(directory / rel) for rel in (row.image, row.truth) if rel is not None)]
     return kept, len(rows) - len(kept)
 
 
@@ -253,6 +253,31 @@ def file_is_whole(path: Path) -> bool:
     """A file that exists and is not empty."""
     try:
         return path.stat().st_size > 0
+    except OSError:
+        return False
+
+
+#: How each payload file ends, and how far from its end that starts: PNG's IEND chunk, JPEG's end-of-image
+#: marker, the npz's zip end-of-central-directory record (no archive comment is written).
+_TRAILERS = {".png": (b"IEND\xaeB`\x82", 8), ".jpg": (b"\xff\xd9", 2), ".npz": (b"PK\x05\x06", 22)}
+
+
+def payload_is_whole(path: Path) -> bool:
+    """A file that exists, is not empty and, for an image or truth file, ends as its format ends.
+
+    A power cut can leave a file with only its first blocks on disk: not empty, yet undecodable, and replay
+    would fail on it mid-take; a few bytes read from its end tell.
+    """
+    marker, span = _TRAILERS.get(path.suffix.lower(), (b"", 0))
+    if not span:
+        return file_is_whole(path)
+    try:
+        with open(path, "rb") as f:
+            size = f.seek(0, 2)
+            if size < span:
+                return False
+            f.seek(size - span)
+            return f.read(len(marker)) == marker
     except OSError:
         return False
 

@@ -16,7 +16,7 @@ Frames carry the recorded timestamps, indices and ground truth unchanged on the
 first pass. Each further ``loop`` pass shifts timestamps by the recording's span
 (plus one frame period) and indices by the per-camera index span (last - first
 + 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
-whose files are missing or empty
+whose files are missing, empty or cut short
 (:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
 validation: docs/recording-format.md.
 """
@@ -118,7 +118,7 @@ class ReplayRigSource(RigSource):
         if not manifest.complete:
             rows, broken = drop_broken_rows(directory, rows)
             if broken:
-                log.warning("recording %s: dropped %d journal row(s) whose files are missing or empty "
+                log.warning("recording %s: dropped %d journal row(s) whose files are missing, empty or cut short "
                             "(written after the last flush before the take was cut short)", directory, broken)
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
         return cls(

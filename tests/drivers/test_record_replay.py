@@ -19,7 +19,7 @@ from drivers import (
 )
 from drivers.backends import record as record_module
 from drivers.backends.record import inner_url_text
-from drivers.backends.recording_format import FRAMES, MANIFEST, read_manifest
+from drivers.backends.recording_format import FRAMES, MANIFEST, encode_image, read_manifest
 from drivers.url import RigUrl
 
 SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
@@ -253,6 +253,59 @@ def test_after_a_write_error_every_frame_is_written_or_counted(tmp_path, sim_cac
     assert counters["frames_written"] + counters["writes_dropped"] == 20
 
 
+def test_a_frame_the_full_disk_cut_short_leaves_no_file_behind(tmp_path, sim_cache, monkeypatch):
+    """Its image was written, its truth half: both are in no row; kept, they hold the space that close needs
+    to rewrite the manifest with the counters (seen on a 300 kB tmpfs: close failed, counters lost)."""
+    real, calls = record_module.write_truth, [0]
+
+    def fills_the_disk(path, *args):
+        calls[0] += 1
+        if calls[0] == 3:
+            Path(path).write_bytes(b"PK\x03\x04")
+            raise OSError(28, "No space left on device")
+        return real(path, *args)
+
+    monkeypatch.setattr(record_module, "write_truth", fills_the_disk)
+    out = tmp_path / "full"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&lossless=1"
+    with open_rig(url, clock=ManualClock()) as source:
+        for _ in range(4):
+            try:
+                source.read(timeout_s=1.0)
+            except RigOperationError:
+                pass  # the failure, reported once
+    listed = {r[key] for r in journal(out) for key in ("image", "truth") if r[key]}
+    on_disk = {str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()} - {MANIFEST, FRAMES}
+    assert len(listed) == 4 and on_disk == listed  # two whole frames, nothing of the third
+    assert read_manifest(out).counters["writes_dropped"] == source.stats.writes_dropped > 0
+
+
+def test_a_journal_the_full_disk_cannot_take_still_closes_with_the_counters(tmp_path, sim_cache, monkeypatch):
+    """The rows left in the journal's buffer fail again at close: that raised OSError before the manifest's
+    last rewrite, so close failed and the counters were lost."""
+    if not os.path.exists("/dev/full"):
+        pytest.skip("needs /dev/full (every write: ENOSPC)")
+    real_start = record_module.RecordingWriter.start
+
+    def start(self):
+        real_start(self)
+        self._journal.close()
+        self._journal = open("/dev/full", "w", encoding="utf-8")
+
+    monkeypatch.setattr(record_module.RecordingWriter, "start", start)
+    out = tmp_path / "full"
+    url = f"record+sim://?width=32&height=24&cache={sim_cache}&out={out}&writers=1&lossless=1"
+    with open_rig(url, clock=ManualClock()) as source:
+        for _ in range(3):
+            try:
+                source.read(timeout_s=1.0)
+            except RigOperationError:
+                pass  # the failure, reported once
+    manifest = read_manifest(out)
+    assert manifest.complete is False
+    assert manifest.counters["writes_dropped"] == source.stats.writes_dropped == sum(source.stats.frames_in.values())
+
+
 # ----------------------------------------------------------------- broken takes
 @pytest.fixture
 def copy_of_take(take, tmp_path):
@@ -390,6 +443,24 @@ def test_broken_rows_anywhere_in_an_interrupted_take_are_dropped(copy_of_take, c
     assert "dropped 2 journal row(s)" in caplog.text
 
 
+def test_files_a_power_cut_left_half_written_are_dropped_not_replayed(copy_of_take, caplog, tmp_path):
+    """Only a file's first blocks reached the disk: not empty, but undecodable; the take plays without them."""
+    rows = journal(copy_of_take)
+    for path in (copy_of_take / rows[3]["image"], copy_of_take / rows[-1]["truth"]):
+        path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 2  # no RigOperationError
+    assert "dropped 2 journal row(s)" in caplog.text
+    from drivers.backends.recording_format import payload_is_whole
+
+    image = np.zeros((30, 40, 3), np.uint8)
+    for image_format in ("png", "jpg"):
+        path = tmp_path / f"x.{image_format}"
+        path.write_bytes(encode_image(image, image_format, 90))
+        assert payload_is_whole(path)
+        path.write_bytes(path.read_bytes()[:-1])
+        assert not payload_is_whole(path)
+
+
 def test_complete_is_marked_only_once_the_take_is_on_disk(tmp_path, sim_cache, monkeypatch):
     if not os.path.isdir("/proc/self/fd"):
         pytest.skip("needs /proc to name fsynced files")
@@ -445,6 +516,51 @@ def test_the_writers_fsync_as_they_go_so_the_backlog_stays_bounded(take, tmp_pat
         writer.close({})
     assert read_manifest(tmp_path / "take").complete
     assert {str(p) for p in synced if p.is_file()} == {str(tmp_path / "take" / r["image"]) for r in journal(tmp_path / "take")}
+
+
+def test_of_two_recorders_started_on_one_empty_folder_only_one_records(take, tmp_path, monkeypatch):
+    """Both find the folder empty; rigs with other camera names made no folder in common: both recorded."""
+    import dataclasses
+    import threading
+
+    out = tmp_path / "take"
+    manifest = read_manifest(take[0])
+    other = dataclasses.replace(manifest.rig, cameras=tuple(
+        dataclasses.replace(cam, name=cam.name.upper()) for cam in manifest.rig.cameras))
+    both_looked = threading.Barrier(2)
+    real_iterdir = Path.iterdir
+
+    def iterdir(self):
+        found = list(real_iterdir(self))
+        if self == out:
+            both_looked.wait(timeout=5)
+        return iter(found)
+
+    monkeypatch.setattr(Path, "iterdir", iterdir)
+    outcomes = {}
+
+    def start(rig):
+        writer = record_module.RecordingWriter(
+            out, record_module.Manifest(rig), record_module.RecordOptions(out=out))
+        try:
+            writer.start()
+        except RigInitializationError as e:
+            outcomes[rig.names] = e
+        else:
+            outcomes[rig.names] = None
+            writer.close({})
+
+    threads = [threading.Thread(target=start, args=(rig,)) for rig in (manifest.rig, other)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(10)
+    errors = [e for e in outcomes.values() if e is not None]
+    assert len(outcomes) == 2 and len(errors) == 1
+    assert "another recorder" in str(errors[0]) and str(out) in str(errors[0])
+    winner = next(names for names, e in outcomes.items() if e is None)
+    assert sorted(p.name for p in (out / "images").iterdir()) == sorted(winner)
+    assert read_manifest(out).rig.names == winner
 
 
 def test_a_rig_replay_would_refuse_is_not_recorded(take, tmp_path):
