@@ -48,7 +48,10 @@ class RigUrl:
             )
         target = unquote(parts.netloc + parts.path)
         options: dict[str, str] = {}
-        for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):
+        # '+' is a plus here, as in the path (a form's '+' for a space turned out=/data/take+1 into '/data/take 1');
+        # a space is %20
+        for key, value in parse_qsl(parts.query.replace("+", "%2B"), keep_blank_values=True,
+                                    strict_parsing=False):
             if key in options:
                 raise RigConfigError(f"rig URL {url!r}: option {key!r} given twice")
             options[key] = value

@@ -65,7 +65,9 @@ def parse_url(url: str) -> SinkUrl:
         raise SinkConfigError(url, "fragment", parts.fragment, "a '#' ends the URL; write a '#' in a path or "
                                                                "value as %23")
     query: dict[str, str] = {}
-    for key, values in parse_qs(parts.query, keep_blank_values=True, strict_parsing=False).items():
+    # '+' is a plus, as in the path (a form's '+' for a space changed a value silently); a space is %20
+    for key, values in parse_qs(parts.query.replace("+", "%2B"), keep_blank_values=True,
+                                strict_parsing=False).items():
         if len(values) > 1:
             raise SinkConfigError(url, key, values, "given more than once")
         query[key] = values[0]

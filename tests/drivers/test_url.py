@@ -84,3 +84,12 @@ def test_every_backend_rejects_unknown_options_by_name(url):
     name = {"sim": "fsp", "rep": "sped", "rec": "bogus", "dep": "widht"}[url[:3]]
     with pytest.raises(RigConfigError, match=name):
         create_rig_source(url)
+
+
+def test_a_plus_in_an_option_is_a_plus_and_a_space_is_percent_20():
+    """Query values read as the path does: '+' is a plus (a form's '+' for a space recorded out=/data/take+1 into
+    '/data/take 1'); a space is written %20."""
+    from drivers.url import RigUrl
+
+    url = RigUrl.parse("record+sim://?out=/data/take+1&note=a%20b%2Bc")
+    assert url.options == {"out": "/data/take+1", "note": "a b+c"}

@@ -127,3 +127,10 @@ def test_a_usb_sink_without_an_endpoint_is_refused_at_once():
 
     with pytest.raises(SinkConfigError, match="ep.*the bulk OUT endpoint is required"):
         UsbSink.from_url("usb://1209:0001", ep=None)
+
+
+def test_a_plus_in_a_sink_option_is_a_plus():
+    """As in rig URLs: '+' in an option value is a plus, a space is %20."""
+    from firmware_host.sinks.url import parse_url
+
+    assert parse_url("udp://127.0.0.1:9000?name=a+b&x=c%20d").query == {"name": "a+b", "x": "c d"}
