@@ -56,6 +56,9 @@ VARIANTS: dict[str, dict] = {
     "roi.joint_margin_frac 0.1": {"roi": {"joint_margin_frac": 0.1}},
     "roi.joint_margin_frac 0.125": {"roi": {"joint_margin_frac": 0.125}},
     "roi.joint_margin_frac 0.25": {"roi": {"joint_margin_frac": 0.25}},
+    # crops sampled once per pixel (before session 48) against 2x2 and box-reduced, as training rendered them
+    "roi.supersample 1": {"roi": {"supersample": 1}},
+    "roi.supersample 3": {"roi": {"supersample": 3}},
     # the skeleton prior (a model folder with skeleton_prior.onnx): off, and its expected-error gate
     "joints3d.skeleton_prior off": {"joints3d": {"skeleton_prior": "off"}},
     "joints3d.max_prior_error_m 0.05": {"joints3d": {"max_prior_error_m": 0.05}},
