@@ -67,3 +67,13 @@ def test_make_painter_without_its_dataset_says_what_makes_one(tmp_path):
     assert done.returncode != 0
     assert "no dataset in" in done.stderr and "`make model`" in done.stderr and "no GPU needed" in done.stderr
     assert "Traceback" not in done.stderr and not (tmp_path / "runs").exists()
+
+
+def test_a_python_whose_path_has_a_space_is_run(tmp_path):
+    # PYTHON=<a venv's python>: a folder with a space in its name is an ordinary place for one
+    python = tmp_path / "my venv" / "python"
+    python.parent.mkdir()
+    python.write_text('#!/usr/bin/env bash\necho "ran $2" >&2; exit 7\n')
+    python.chmod(0o755)
+    done = _run(tmp_path, PYTHON=str(python))
+    assert done.returncode == 7 and "ran training.data.generate" in done.stderr, done.stderr[-2000:]
