@@ -60,6 +60,9 @@ PAINTER_DATA ?= data/edge128
 PAINTER_RUNS ?= runs/painter
 PAINTER_MODELS ?= models
 painter: $(DEV_STAMP)
+	@test -f $(PAINTER_DATA)/dataset.json || { echo "make painter: no dataset in $(PAINTER_DATA) (no dataset.json):" \
+	    "\`make model\` makes it there first (no GPU needed), or set PAINTER_DATA=<a dataset folder>;" \
+	    "\`make painter-gpu\` generates its own" >&2; exit 1; }
 	$(PY) -m training.device_joints --data $(PAINTER_DATA) --split train --limit 2048 --model $(PAINTER_MODELS)/ghnerf \
 	    --out $(PAINTER_RUNS)/joints_train.npz
 	$(PY) -m training.device_joints --data $(PAINTER_DATA) --split val --limit 256 --model $(PAINTER_MODELS)/ghnerf \

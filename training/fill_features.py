@@ -11,7 +11,8 @@ comes from that model instead (its depth at every view, its opacity above 0.5 as
 picture as the runtime shows it at ``novel_view.opaque_at``) but the 3D joints; the view's image and
 mask stay the target. Given also the device's 3D joints (``cache_split(joints=...)``,
 ``training.device_joints``), the geometry is instead the body proxy built from them
-(``training.body_proxy``, the template's mean girth) and the joints are those too: then nothing but the
+(``training.body_proxy``, the template's mean girth) and the joints are those too, less those the runtime
+leaves out (``training.device_joints.load_found``): then nothing but the
 target comes from the truth.
 
 Per novel view with a non-empty subject mask (numpy, one array per field, views stacked):
@@ -118,12 +119,14 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
 
 def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int = PART_BINS,
                    renderer=None, joints: np.ndarray | None = None,
-                   relight: bool = True) -> list[dict[str, np.ndarray]]:
+                   relight: bool = True, found: np.ndarray | None = None) -> list[dict[str, np.ndarray]]:
     """Features of every novel view of one dataset item (numpy arrays) that shows the subject.
 
     ``renderer``: a ``training.evaluate.TorchRenderer`` whose geometry and picture (at the runtime's
     ``novel_view.opaque_at``) replace the truth's; default the true geometry. ``joints``: with a
-    renderer, the device's ``(25, 3)`` joints, whose body proxy is the geometry (module docstring).
+    renderer, the device's ``(25, 3)`` joints, whose body proxy is the geometry (module docstring);
+    ``found``: which of them the runtime reports (``training.device_joints.load_found``: it leaves the
+    others out of the proxy and the joint maps; default all).
     ``relight`` false skips the light fit and the relit fill (:func:`view_features`)."""
     from training.evaluate import source_angles_deg  # noqa: PLC0415 - torch-side module, loaded late
 
@@ -142,7 +145,7 @@ def scene_features(scene: Mapping[str, np.ndarray], index: int = -1, bins: int =
         else:
             from training.body_proxy import proxy_scene  # noqa: PLC0415
 
-            valid = np.ones(len(joints), bool)
+            valid = np.ones(len(joints), bool) if found is None else np.asarray(found, bool)
             geometry, _ = proxy_scene({**scene, "joints_3d": joints, "joints_3d_valid": valid}, joints, valid)
             label = "proxy"
         at = NovelViewConfig().opaque_at
@@ -177,11 +180,14 @@ def _open(data: str, split: str, bins: int, model: str | None, joints: str | Non
         torch.set_num_threads(1)  # one scene per process
         renderer = TorchRenderer(load_model(Path(model))[0])
     if joints:
-        from training.device_joints import load_joints  # noqa: PLC0415
+        from training.device_joints import load_found, load_joints  # noqa: PLC0415
 
-        joints = load_joints(joints)
+        # the runtime leaves a joint whose expected error is past its gate out (joints3d.max_prior_error_m)
+        joints, found = load_joints(joints), load_found(joints)
+    else:
+        found = None
     _WORKER.update(ds=MultiViewDataset(data, split=split), bins=bins, renderer=renderer, joints=joints,
-                   relight=relight)
+                   found=found, relight=relight)
 
 
 def _one(index: int) -> list[dict[str, np.ndarray]]:
@@ -192,7 +198,8 @@ def _one(index: int) -> list[dict[str, np.ndarray]]:
 
         raise JointsCacheError(f"the joints cache holds {len(joints)} scenes; scene {index} asked for")
     return scene_features(scene, index, _WORKER["bins"], _WORKER["renderer"],
-                          None if joints is None else joints[index], relight=_WORKER["relight"])
+                          None if joints is None else joints[index], relight=_WORKER["relight"],
+                          found=None if joints is None else _WORKER["found"][index])
 
 
 def stack(views: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:

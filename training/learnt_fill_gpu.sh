@@ -19,18 +19,18 @@ GEOMETRY=(); NET=()
 if [ -n "${MODEL:-}" ]; then GEOMETRY=(--model "$MODEL"); NET=(--set net.shown_input=true); fi
 mkdir -p "$WORK" "$REPORT"
 t0=$(date +%s)
-$PY -m training.data.generate --out "$WORK/data" --train "$N" --val "$VAL" --res 128 --workers "$W" --freestyle-share 0.5
+"$PY" -m training.data.generate --out "$WORK/data" --train "$N" --val "$VAL" --res 128 --workers "$W" --freestyle-share 0.5
 echo "data: $(( $(date +%s) - t0 )) s"
-$PY -m training.learnt_fill cache --data "$WORK/data" --split val --limit "$VAL" --workers "$W" "${GEOMETRY[@]}" --out "$WORK/fill_val.npz"
-$PY -m training.learnt_fill cache --data "$WORK/data" --split train --limit "$N" --workers "$W" "${GEOMETRY[@]}" --out "$WORK/fill_train.npz"
+"$PY" -m training.learnt_fill cache --data "$WORK/data" --split val --limit "$VAL" --workers "$W" "${GEOMETRY[@]}" --out "$WORK/fill_val.npz"
+"$PY" -m training.learnt_fill cache --data "$WORK/data" --split train --limit "$N" --workers "$W" "${GEOMETRY[@]}" --out "$WORK/fill_train.npz"
 echo "caches: $(( $(date +%s) - t0 )) s"
-VIEWS=$($PY -c "import numpy as np; print(len(np.load('$WORK/fill_train.npz')['angle']))")
-$PY -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
+VIEWS=$("$PY" -c "import sys, numpy as np; print(len(np.load(sys.argv[1])['angle']))" "$WORK/fill_train.npz")
+"$PY" -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
     --out "$WORK/all" --set steps=1000000 --set max_seconds="$SECS" "${NET[@]}"
 cp "$WORK/all/fill_net.pt" "$REPORT/fill_net_all.pt"; cp "$WORK/all/score.md" "$REPORT/score_all.md"
 cp "$WORK/all/score.json" "$REPORT/score_all.json"
 [ "$HALF" = 0 ] && { echo "total: $(( $(date +%s) - t0 )) s"; exit 0; }
-$PY -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
+"$PY" -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
     --out "$WORK/half" --train-views $(( VIEWS / 2 )) --set steps=1000000 --set max_seconds=$(( SECS / 2 )) "${NET[@]}"
 cp "$WORK/half/score.md" "$REPORT/score_half.md"; cp "$WORK/half/score.json" "$REPORT/score_half.json"
 echo "total: $(( $(date +%s) - t0 )) s"

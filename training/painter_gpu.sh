@@ -27,28 +27,28 @@ stamp() { echo "$1: $(( $(date +%s) - t0 )) s"; }
 wait_all() { local p; for p in "$@"; do wait "$p"; done; }
 trap 'kill $(jobs -p) 2>/dev/null || true' EXIT
 
-$PY -m training.data.generate --out "$WORK/data" --train "$N" --val "$VAL" --res 128 --workers "$W" --freestyle-share 0.5
+"$PY" -m training.data.generate --out "$WORK/data" --train "$N" --val "$VAL" --res 128 --workers "$W" --freestyle-share 0.5
 stamp data
 
-$PY -m training.device_joints --data "$WORK/data" --split train --limit "$N" --model "$MODELS/ghnerf" \
+"$PY" -m training.device_joints --data "$WORK/data" --split train --limit "$N" --model "$MODELS/ghnerf" \
     --threads 4 --out "$WORK/joints_train.npz" & a=$!
-$PY -m training.device_joints --data "$WORK/data" --split val --limit "$VAL" --model "$MODELS/ghnerf" \
+"$PY" -m training.device_joints --data "$WORK/data" --split val --limit "$VAL" --model "$MODELS/ghnerf" \
     --threads 2 --out "$WORK/joints_val.npz" & b=$!
 wait_all $a $b
 [ "$WORK/joints_val.npz" -ef "$REPORT/joints_val.npz" ] || cp "$WORK/joints_val.npz" "$REPORT/joints_val.npz"
 stamp joints
 
 VW=$(( W / 4 > 1 ? W / 4 : 1 )); TW=$(( W - VW > 1 ? W - VW : 1 ))
-$PY -m training.learnt_fill cache --data "$WORK/data" --split train --limit "$N" --workers "$TW" --no-relit \
+"$PY" -m training.learnt_fill cache --data "$WORK/data" --split train --limit "$N" --workers "$TW" --no-relit \
     --model "$MODELS/ghnerf/ghnerf.pt" --joints "$WORK/joints_train.npz" --out "$WORK/fill_train.npz" & a=$!
-$PY -m training.learnt_fill cache --data "$WORK/data" --split val --limit "$VAL" --workers "$VW" --no-relit \
+"$PY" -m training.learnt_fill cache --data "$WORK/data" --split val --limit "$VAL" --workers "$VW" --no-relit \
     --model "$MODELS/ghnerf/ghnerf.pt" --joints "$WORK/joints_val.npz" --out "$WORK/fill_val.npz" & b=$!
 wait_all $a $b
 stamp caches
 
 pids=()
 for w in $WIDTHS; do
-    $PY -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
+    "$PY" -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
         --out "$WORK/w$w" --threads 2 --set net.width="$w" --set batch=32 --set steps=1000000 \
         --set max_seconds="$SECS" --set net.shown_input=true --set net.relit_input=false \
         --set around_weight=0.03 >"$REPORT/train_w$w.log" 2>&1 & pids+=($!)

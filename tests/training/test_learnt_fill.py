@@ -102,6 +102,27 @@ def test_a_cache_without_the_light_fit_holds_the_same_painter_inputs_and_no_reli
     assert net.steps_trained == 1
 
 
+def test_a_proxy_cache_leaves_out_the_joints_the_runtime_leaves_out(model_cache, data64, tmp_path):
+    """The runtime drops a joint whose expected error is past its gate (``joints3d.max_prior_error_m``)
+    from the body proxy and the painter's joint maps: the caches the painter trains on must too."""
+    from ghnerf_runtime.config import Joints3DConfig
+    from training.data.torch_dataset import MultiViewDataset
+
+    n = len(MultiViewDataset(data64, split="val"))
+    truth = np.stack([MultiViewDataset(data64, split="val")[i]["joints_3d"].numpy() for i in range(n)])
+    errors = np.full((n, 25), 0.01, np.float32)
+    wrist = JOINT_INDEX["RWrist"]
+    errors[:, wrist] = Joints3DConfig().max_prior_error_m + 0.05
+    np.savez(tmp_path / "joints.npz", joints=truth.astype(np.float32), expected_error_m=errors,
+             index=np.arange(n, dtype=np.int32))
+    c = load_cache(cache_split(data64, "val", tmp_path / "val.npz", limit=1, workers=1, relight=False,
+                               model=Path(model_cache).parent / "tiny.pt", joints=tmp_path / "joints.npz",
+                               log=lambda *_: None))
+    assert (c["geometry"] == "proxy").all()
+    assert not c["joints"][:, wrist, 2].any()  # as the runtime's painter_planes gives it
+    assert c["joints"][:, JOINT_INDEX["LWrist"], 2].any()
+
+
 def test_the_around_term_teaches_the_painter_to_paint_the_fog_as_background(model_cache):
     """``around_weight``: the runtime's painter changes the proxy's pixels and those the model's picture
     shows (:func:`repainted`), the fog included; with the term the net learns the background there and

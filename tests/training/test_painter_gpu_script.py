@@ -5,6 +5,7 @@ this runs every stage (data, the device's joints, the caches, a net per width) o
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -54,3 +55,25 @@ exec {sys.executable} "$@"
     assert done.returncode == 7, done.stdout[-2000:] + done.stderr[-2000:]
     assert "train joints failed" in done.stderr
     assert "joints:" not in done.stdout and not (tmp_path / "work" / "fill_val.npz").exists()
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make")
+def test_make_painter_without_its_dataset_says_what_makes_one(tmp_path):
+    # `make painter` trains on the dataset `make model` makes: from a clean clone it must say so, not fail
+    # with a traceback from the first stage
+    done = subprocess.run(["make", "-s", "painter", "DEV_STAMP=", f"PY={sys.executable}",
+                           f"PAINTER_DATA={tmp_path / 'none'}", f"PAINTER_RUNS={tmp_path / 'runs'}"],
+                          cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert done.returncode != 0
+    assert "no dataset in" in done.stderr and "`make model`" in done.stderr and "no GPU needed" in done.stderr
+    assert "Traceback" not in done.stderr and not (tmp_path / "runs").exists()
+
+
+def test_a_python_whose_path_has_a_space_is_run(tmp_path):
+    # PYTHON=<a venv's python>: a folder with a space in its name is an ordinary place for one
+    python = tmp_path / "my venv" / "python"
+    python.parent.mkdir()
+    python.write_text('#!/usr/bin/env bash\necho "ran $2" >&2; exit 7\n')
+    python.chmod(0o755)
+    done = _run(tmp_path, PYTHON=str(python))
+    assert done.returncode == 7 and "ran training.data.generate" in done.stderr, done.stderr[-2000:]
