@@ -318,7 +318,9 @@ def _run(args: argparse.Namespace) -> int:
             print(f"before pairing the rig lost {lost_frames} camera frames (see the driver counters)")
         for line in tally.report():
             print(line)
-    print(f"driver counters: {stats}")
+    # read again after close: a recorder (record+) writes what it still holds queued as it closes, and the
+    # counters read before it showed frames_written short of what the take's manifest records
+    print(f"driver counters: {source.stats}")
     print(f"sink {sink_url}: {sink_stats}")
     png = args.out / "sim_pair.png"
     if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result)):
