@@ -200,6 +200,22 @@ def test_the_counters_of_a_recording_are_those_of_the_finished_take(tmp_path, ca
     assert counters["frames_written"] == len((take / "frames.jsonl").read_text().splitlines())
 
 
+@needs_model
+def test_a_replay_prints_no_capture_latency_and_no_loop_note(tmp_path, capsys, sim_url):
+    # a replay printed "capture to joints: median 78955.2 ms" (the recorded capture times against this
+    # run's clock) and "the first open pre-renders the motion loop", which only sim:// does
+    take = tmp_path / "take"
+    assert demo.main(["--truth-only", "--url", f"record+{sim_url}&out={take}&lossless=1", "--seconds", "0.4",
+                      "--out", str(tmp_path / "rec"), "--model-dir", str(tmp_path / "no-model")]) == 0
+    assert "pre-renders the motion loop" in capsys.readouterr().out
+    rc = demo.main(["--url", f"replay://{take}?speed=free", "--out", str(tmp_path / "out"),
+                    "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "pre-renders" not in out
+    assert "capture to joints: not measured (a replay" in out and not re.search(r"capture to joints: median", out)
+
+
 def test_the_default_sink_writes_into_an_out_folder_with_a_space_and_a_hash(tmp_path, capsys, sim_url):
     # file://{path} unescaped: the "#" began a fragment and the joints went to a file called "my run"
     out = tmp_path / "my run#2"
