@@ -530,15 +530,25 @@ def cmd_check(args: argparse.Namespace) -> int:
     record_floor = _calibration_record(rig).get("floor_view")
     floor_view = args.floor_view or (record_floor if isinstance(record_floor, str) else FLOOR_VIEW)
     print(f"board: {where}: {_describe(board)}", file=sys.stderr if args.json else sys.stdout)
-    views, _ = detect_folder(board, args.images, [c.name for c in rig.pair])
+    views, missed = detect_folder(board, args.images, [c.name for c in rig.pair])
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
                 raise UsageError(f"{args.images}/{cam.name}/{name}: the image is {view.image_size[0]}x"
                                  f"{view.image_size[1]}, camera {cam.name!r} of {args.rig} {cam.width}x{cam.height}")
+    floor_taken = any(floor_view in views[c] or floor_view in missed[c] for c in views)
+    if args.floor_view is not None and not floor_taken:
+        # a mistyped name passed silently, and with it a rig tilted on its mount, which only the floor shows
+        raise UsageError(f"--floor-view {args.floor_view!r}: neither camera's folder in {args.images} has an image "
+                         "of that name")
     report = check_rig(rig, board, views, board_thickness_m=args.board_thickness, floor_view=floor_view)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
+    if "floor" not in report:
+        print(f"note: the levelling is not checked (a rig tilted on its mount passes): "
+              + (f"the board was not found in both cameras' floor view {floor_view!r}" if floor_taken else
+                 f"no floor view {floor_view!r} in {args.images} (--floor-view NAME names another)"),
+              file=sys.stderr if args.json else sys.stdout)
     rms = report["reprojection_px_rms"]
     print(json.dumps(report, indent=1, allow_nan=False) if args.json else
           f"{report['pairs']} pairs: reprojection "

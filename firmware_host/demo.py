@@ -107,6 +107,7 @@ def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
 class _Tally:
     """What the estimated pairs produced, pooled for the summary (accuracy: ``cli.simdata.Accuracy``)."""
 
+    live: bool = True  # False for a replay: its capture times are the recording's clock, not this run's
     totals_ms: list[float] = field(default_factory=list)
     capture_to_joints_ms: list[float] = field(default_factory=list)
     found: list[np.ndarray] = field(default_factory=list)  # (25,) per estimated pair
@@ -131,8 +132,9 @@ class _Tally:
         t = np.asarray(self.totals_ms)
         c = np.asarray(self.capture_to_joints_ms)
         lines.append(f"estimator latency (timing_ms total): median {np.median(t):.1f} ms, "
-                     f"p99 {np.percentile(t, 99):.1f} ms; capture to joints: median {np.median(c):.1f} ms, "
-                     f"p99 {np.percentile(c, 99):.1f} ms")
+                     f"p99 {np.percentile(t, 99):.1f} ms; capture to joints: "
+                     + (f"median {np.median(c):.1f} ms, p99 {np.percentile(c, 99):.1f} ms" if self.live else
+                        "not measured (a replay: its capture times are those of the recording)"))
         found = np.asarray(self.found)
         lines.append(f"estimated joints found: {found.mean():.1%} ({int(found.sum())} of {found.size}; "
                      f"the rest are streamed as missing)")
@@ -242,7 +244,9 @@ def _run(args: argparse.Namespace) -> int:
         sink_path.unlink(missing_ok=True)  # the file sink appends: keep this run only
         sink_url = sink_path.as_uri()  # percent-encoded: a space or "#" in --out stays part of the path
 
-    print(f"opening {args.url} (the first open pre-renders the motion loop; later opens use the cache)")
+    scheme = args.url.removeprefix("record+").partition("://")[0]
+    print(f"opening {args.url}" + (" (the first open pre-renders the motion loop; later opens use the cache)"
+                                   if scheme == "sim" else ""))
     source = drivers.create_rig_source(args.url)
     try:
         estimator = None
@@ -260,7 +264,7 @@ def _run(args: argparse.Namespace) -> int:
         if cfg is not None and estimator is None:
             estimator = _load_estimator(source.rig, cfg)
         latest = source.pairing.policy is drivers.DropPolicy.LATEST
-        tally = _Tally()
+        tally = _Tally(live=scheme != "replay")
         delivered, skipped, skews = 0, 0, []
         last_pair, last_result = None, None
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
@@ -318,7 +322,9 @@ def _run(args: argparse.Namespace) -> int:
             print(f"before pairing the rig lost {lost_frames} camera frames (see the driver counters)")
         for line in tally.report():
             print(line)
-    print(f"driver counters: {stats}")
+    # read again after close: a recorder (record+) writes what it still holds queued as it closes, and the
+    # counters read before it showed frames_written short of what the take's manifest records
+    print(f"driver counters: {source.stats}")
     print(f"sink {sink_url}: {sink_stats}")
     png = args.out / "sim_pair.png"
     if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result)):

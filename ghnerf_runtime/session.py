@@ -234,7 +234,9 @@ class ModelSession:
         folder = resolve_model_dir(config.model_dir)
         if not folder.is_dir():
             raise ModelLoadError("is not a folder (session.model_dir names the model folder, not a file)"
-                                 if folder.exists() else "model folder does not exist", path=str(folder))
+                                 if folder.exists() else "model folder does not exist"
+                                 + ("" if folder.is_absolute() else f" (read from the current directory {Path.cwd()})"),
+                                 path=str(folder))
         unknown = [g for g in graphs if g not in GRAPH_NAMES]
         if unknown:
             raise ModelError(f"unknown graph(s) {unknown}; graphs are {list(GRAPH_NAMES)}", path=str(folder))

@@ -113,7 +113,14 @@ def check_config(config: DaemonConfig) -> None:
                                         f"(printable ASCII, at most {limit} characters)", key="rig.url")
     check_sink_urls(config.sinks)
     model_dir = resolve_model_dir(config.estimator.session.model_dir)
-    if not model_dir.is_dir() or not any(model_dir.glob("*.onnx")):
+    if not model_dir.is_dir():
+        # said "holds no *.onnx graphs (make model builds ./models)": the example config's relative
+        # "models", read from another folder than the repository's, sent the user to a two-hour build
+        relative = "" if model_dir.is_absolute() else (f", read from the current directory {Path.cwd()}: run from the "
+                                                       "folder that holds it, or give an absolute path")
+        raise DaemonConfigError(f"{model_dir}: {'not a folder' if model_dir.exists() else 'no such folder'}"
+                                f"{relative}", key="estimator.session.model_dir")
+    if not any(model_dir.glob("*.onnx")):
         raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
                                 key="estimator.session.model_dir")
 

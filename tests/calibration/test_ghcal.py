@@ -598,6 +598,22 @@ def test_check_measures_the_floor_view_solve_was_given(truth, capture, tmp_path,
     assert report["floor"]["view"] == "000" and "board:" in captured.err
 
 
+def test_check_says_when_the_floor_is_not_checked(truth, capture, tmp_path, capsys):
+    # a mistyped --floor-view, or a capture without a floor view, passed with no word that the
+    # levelling (the only figure a rig tilted on its mount shows in) went unchecked
+    rig_path = tmp_path / "rig.json"
+    save_rig(truth, rig_path)
+    board = ["--board", str(capture / "board.json")]
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(capture), *board, "--floor-view", "flor"]) == 2
+    assert "--floor-view 'flor': neither camera's folder" in capsys.readouterr().err
+    images = _copy_capture(capture, tmp_path / "capture", rename={"floor": "ground"})
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(images), *board]) == 0
+    out = capsys.readouterr().out
+    assert "the levelling is not checked" in out and "no floor view 'floor'" in out and "off the floor" not in out
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(capture), *board]) == 0
+    assert "not checked" not in capsys.readouterr().out
+
+
 def test_mistyped_options_and_files_are_named(capture, tmp_path, capsys):
     # each was a traceback (exit 1) or an error that named something else
     assert cli.main(["solve", "--images", str(tmp_path / "captrue"), "--out", str(tmp_path / "r.json"),

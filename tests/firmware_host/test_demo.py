@@ -177,6 +177,45 @@ def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_u
         assert joints.shape == (25, 5) and np.all(joints[:, 4] == 0) and np.all(joints[:, 3] == 255)
 
 
+def test_the_counters_of_a_recording_are_those_of_the_finished_take(tmp_path, capsys, sim_url, monkeypatch):
+    # printed before the recorder closed: frames_written=41 where the take's manifest says 106
+    from drivers.backends import record
+
+    real = record.encode_image
+
+    def slow(*args, **kwargs):  # a writer slower than the rig: frames are still queued when the run ends
+        time.sleep(0.1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(record, "encode_image", slow)
+    take = tmp_path / "take"
+    rc = demo.main(["--truth-only", "--url", f"record+{sim_url}&out={take}", "--seconds", "0.5",
+                    "--out", str(tmp_path / "out"), "--model-dir", str(tmp_path / "no-model")])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    counters = json.loads((take / "manifest.json").read_text())["counters"]
+    m = re.search(r"frames_written=(\d+), writes_dropped=(\d+)", out)
+    assert m, out
+    assert (int(m[1]), int(m[2])) == (counters["frames_written"], counters["writes_dropped"])
+    assert counters["frames_written"] == len((take / "frames.jsonl").read_text().splitlines())
+
+
+@needs_model
+def test_a_replay_prints_no_capture_latency_and_no_loop_note(tmp_path, capsys, sim_url):
+    # a replay printed "capture to joints: median 78955.2 ms" (the recorded capture times against this
+    # run's clock) and "the first open pre-renders the motion loop", which only sim:// does
+    take = tmp_path / "take"
+    assert demo.main(["--truth-only", "--url", f"record+{sim_url}&out={take}&lossless=1", "--seconds", "0.4",
+                      "--out", str(tmp_path / "rec"), "--model-dir", str(tmp_path / "no-model")]) == 0
+    assert "pre-renders the motion loop" in capsys.readouterr().out
+    rc = demo.main(["--url", f"replay://{take}?speed=free", "--out", str(tmp_path / "out"),
+                    "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "pre-renders" not in out
+    assert "capture to joints: not measured (a replay" in out and not re.search(r"capture to joints: median", out)
+
+
 def test_the_default_sink_writes_into_an_out_folder_with_a_space_and_a_hash(tmp_path, capsys, sim_url):
     # file://{path} unescaped: the "#" began a fragment and the joints went to a file called "my run"
     out = tmp_path / "my run#2"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -258,6 +259,14 @@ def test_missing_file_and_folder_refused(tiny_model_dir, tmp_path):
         ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), ("encoder", "volume"))
     with pytest.raises(ModelLoadError, match="model folder does not exist"):
         _load_encoder(tmp_path / "nowhere")
+
+
+def test_a_relative_model_dir_that_is_not_there_names_the_folder_it_was_read_from(tmp_path, monkeypatch):
+    # `ghnerf-run` outside the repository said only "models: model folder does not exist"
+    monkeypatch.chdir(tmp_path)
+    where = f"model folder does not exist (read from the current directory {tmp_path})"
+    with pytest.raises(ModelLoadError, match=re.escape(where)):
+        _load_encoder("models")
 
 
 def test_a_model_dir_that_is_a_file_or_no_graphs_is_named(tiny_model_dir):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -83,7 +84,7 @@ def test_file_errors_name_the_file(tmp_path):
         load_daemon_config(typo)
 
 
-def test_check_config_names_bad_urls_and_models(tmp_path):
+def test_check_config_names_bad_urls_and_models(tmp_path, monkeypatch):
     models = tmp_path / "models"
     models.mkdir()
     (models / "x.onnx").write_bytes(b"not checked here")
@@ -109,6 +110,13 @@ def test_check_config_names_bad_urls_and_models(tmp_path):
     empty.mkdir()
     with pytest.raises(DaemonConfigError, match=r"^estimator\.session\.model_dir: .*no \*\.onnx"):
         check_config(cfg(estimator={"session": {"model_dir": str(empty)}}))
+    # a relative folder that is not there: said "holds no *.onnx graphs (make model builds ./models)"
+    # where the example config was run from outside the repository, whose models/ it names
+    monkeypatch.chdir(tmp_path)
+    where = f"estimator.session.model_dir: nowhere: no such folder, read from the current directory {tmp_path}:"
+    with pytest.raises(DaemonConfigError, match=re.escape(where)) as e:
+        check_config(cfg(estimator={"session": {"model_dir": "nowhere"}}))
+    assert "make model" not in str(e.value)
 
 
 def test_check_config_reads_a_rig_file_named_in_the_url(tmp_path):
