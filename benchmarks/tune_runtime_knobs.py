@@ -59,6 +59,9 @@ VARIANTS: dict[str, dict] = {
     # crops sampled once per pixel (before session 48) against 2x2 and box-reduced, as training rendered them
     "roi.supersample 1": {"roi": {"supersample": 1}},
     "roi.supersample 3": {"roi": {"supersample": 3}},
+    # a cold pair that found someone run again on the subject's crop (on by default since session 48)
+    "tracking.refine_cold_start off": {"tracking": {"refine_cold_start": False}},
+    "tracking.refine_cold_start on": {"tracking": {"refine_cold_start": True}},
     # the skeleton prior (a model folder with skeleton_prior.onnx): off, and its expected-error gate
     "joints3d.skeleton_prior off": {"joints3d": {"skeleton_prior": "off"}},
     "joints3d.max_prior_error_m 0.05": {"joints3d": {"max_prior_error_m": 0.05}},

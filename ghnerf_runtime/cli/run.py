@@ -85,8 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
                          "reports each pair's raw joints")
     ap.add_argument("--refine-cold-start", action=argparse.BooleanOptionalAction, default=None,
                     help="run a cold pair (no track yet) again on the subject it found (tracking.refine_cold_start): "
-                         "on by default for --images, a still pair that has no next pair to track with "
-                         "(docs/runtime.md); off by default for --videos, whose later pairs are tracked")
+                         "on by default (a still pair, a video's first pair; docs/runtime.md); "
+                         "--no-refine-cold-start reports the working volume's crop")
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, help="novel camera between the rig cameras: 0 = first, "

@@ -381,8 +381,8 @@ def test_a_still_pair_refines_its_cold_start_by_default(capsys):
 
     assert resolved("--rig", "r.json", "--images", "a", "b") is True
     assert resolved("--rig", "r.json", "--images", "a", "b", "--no-refine-cold-start") is False
-    assert resolved("--rig", "r.json", "--videos", "a", "b") is False  # later pairs are tracked
-    assert resolved("--rig", "r.json", "--videos", "a", "b", "--refine-cold-start") is True
+    assert resolved("--rig", "r.json", "--videos", "a", "b") is True  # the config's default: the first pair too
+    assert resolved("--rig", "r.json", "--videos", "a", "b", "--no-refine-cold-start") is False
 
 
 class _StubEstimator:

@@ -14,7 +14,7 @@ import pytest
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, \
-    PresenceConfig, SessionConfig
+    PresenceConfig, SessionConfig, TrackingConfig
 from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError, FrameError, ModelError
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
@@ -230,7 +230,8 @@ def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method, mon
 
     def estimator(m):
         cfg = EstimatorConfig(joints3d=Joints3DConfig(method=m), presence=PresenceConfig(enabled=False),
-                              decoder=KeypointDecoderConfig(max_region_frac=1.0))
+                              decoder=KeypointDecoderConfig(max_region_frac=1.0),
+                              tracking=TrackingConfig(refine_cold_start=False))  # graph runs counted per pair
         est = Estimator(full_session, rig, cfg)
         est.session = Recorder(est.session)
         return est

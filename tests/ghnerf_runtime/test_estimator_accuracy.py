@@ -11,7 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, SessionConfig
+from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, SessionConfig, \
+    TrackingConfig
+
+#: Tests that watch the first pair itself (cold, then tracked) keep it unrefined (refined, the default since
+#: session 48, it reports its second, tracked pass).
+COLD = TrackingConfig(refine_cold_start=False)
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"  # the shipped layout: models/ghnerf/<graph>.onnx, models/model_card.json
@@ -147,7 +152,7 @@ def test_the_flip_test_side_by_side_gives_the_same_joints():
     results = {}
     for side in (True, False):
         cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), threads=2),
-                              heatmaps=HeatmapsConfig(flip_test_side_by_side=side))
+                              heatmaps=HeatmapsConfig(flip_test_side_by_side=side), tracking=COLD)
         est = Estimator(load_session(cfg), seq.rig, cfg)
         results[side] = [est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=i,
                                       timestamp_s=i / 30) for i in range(len(seq))]
@@ -167,7 +172,7 @@ def test_shipped_prior_gate_reports_fewer_3d_joints_not_fewer_people():
 
     seq = load_sequences(SEQUENCES, FRAMES)[0]
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS)),
-                          joints3d=Joints3DConfig(skeleton_prior="on", max_prior_error_m=1e-6))
+                          joints3d=Joints3DConfig(skeleton_prior="on", max_prior_error_m=1e-6), tracking=COLD)
     est = Estimator.from_config(seq.rig, cfg)
     for i in range(len(seq)):
         r = est.estimate((np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])), sequence=i)
@@ -234,7 +239,7 @@ def test_shipped_model_through_a_camera_dropout():
     from ghnerf_runtime.estimator import Estimator
 
     seq = load_sequences(SEQUENCES, FRAMES)[0]
-    est = Estimator.from_config(seq.rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS))))
+    est = Estimator.from_config(seq.rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS)), tracking=COLD))
     names = est.camera_names
     dark = range(3, 6)
     for i in range(len(seq)):

@@ -355,7 +355,8 @@ def model_with_prior(tmp_path_factory, tiny_prior):
 def _config(folder: Path, **joints3d) -> EstimatorConfig:
     cfg = EstimatorConfig()
     return replace(cfg, session=replace(cfg.session, model_dir=str(folder), warmup=False),
-                   joints3d=replace(cfg.joints3d, **joints3d), presence=replace(cfg.presence, enabled=False))
+                   joints3d=replace(cfg.joints3d, **joints3d), presence=replace(cfg.presence, enabled=False),
+                   tracking=replace(cfg.tracking, refine_cold_start=False))  # one pass a pair: prior calls counted
 
 
 def test_a_prior_beside_another_encoder_than_its_own_is_refused(model_with_prior, tiny_prior, tmp_path):

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, config_from_dict
+from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, TrackingConfig, \
+    config_from_dict
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.smoothing import OneEuroJoints, smoothing_alpha
 
@@ -98,7 +99,8 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
     for enabled in (False, True):
         oracle = OracleSession(edge128_contract())
         cfg = EstimatorConfig(joints3d=Joints3DConfig(method="triangulate"),
-                              smoothing=SmoothingConfig(enabled=enabled, beta=0.0))
+                              smoothing=SmoothingConfig(enabled=enabled, beta=0.0),
+                              tracking=TrackingConfig(refine_cold_start=False))  # the first pair reported cold
         est = Estimator(oracle, rig, cfg)
         out = []
         for i, (pair, truth, vis) in enumerate(frames):
@@ -120,7 +122,8 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
     # a pair without a capture time is reported raw and restarts the filter (no time to filter on)
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig, EstimatorConfig(joints3d=Joints3DConfig(method="triangulate"),
-                                                 smoothing=SmoothingConfig(beta=0.0)))
+                                                 smoothing=SmoothingConfig(beta=0.0),
+                                                 tracking=TrackingConfig(refine_cold_start=False)))
     for i, (pair, truth, vis) in enumerate(frames):
         oracle.set_truth(truth, vis)
         r = est.estimate(pair, timestamp_s=i / FPS if i != 1 else None)
@@ -129,7 +132,6 @@ def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
         else:
             assert np.array_equal(r.joints_3d, smooth[i][0].joints_3d) == (i == 0)
     # without tracking every pair is cold: smoothing still runs (it restarts only on the step to a tracked pair)
-    from ghnerf_runtime.config import TrackingConfig
 
     oracle = OracleSession(edge128_contract())
     est = Estimator(oracle, rig, EstimatorConfig(joints3d=Joints3DConfig(method="triangulate"),
