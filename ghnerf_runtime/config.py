@@ -217,8 +217,9 @@ class TrackingConfig:
             second pass (costs one more keypoint pass on cold pairs only; the first pair's sweep
             spans the whole volume, coarser than the subject box the model was trained on). On by default
             since session 48: a stream's first pair after each acquisition is reported from the subject's
-            crop, not the working volume's (90 still pairs: MPJPE 29.9 against 36.2 mm; a pair with a larger
-            volume in view was 318 mm off), for about 17 ms more on that pair alone.
+            crop, not the working volume's (90 still pairs: MPJPE 29.9 against 36.2 mm,
+            ``benchmarks/measure_still_pairs.py --sequences 30 --every 10``), for one more keypoint pass
+            on that pair alone.
         follow_encoder: with ``heatmaps.source = "rendered"``, the next crop and sweep box follow the
             joints triangulated from the encoder's own heatmaps (an output of the encoder graph the
             pair runs anyway: ~1 ms to decode and triangulate) instead of the reported joints, whose
