@@ -449,6 +449,31 @@ def _rig_path(text: str, flag: str) -> Path:
     return out
 
 
+def _is_rig_file(path: Path) -> bool:
+    """A JSON file in our own rig format (given to ``import`` by mistake: it names no OpenCV key)."""
+    from ghnerf_runtime.rig_file import FORMAT
+
+    if path.suffix.lower() != ".json" or not path.is_file():
+        return False
+    try:
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except (OSError, ValueError, RecursionError):
+        return False  # the reader names what is wrong with it
+    return isinstance(data, dict) and data.get("format") == FORMAT
+
+
+def _declared_units(path: Path) -> float | None:
+    """``[metadata] units_to_metres`` of an anipose file our exporter wrote (others do not say)."""
+    import tomllib
+
+    try:
+        meta = tomllib.loads(path.read_text(encoding="utf-8")).get("metadata")
+    except (OSError, ValueError):
+        return None  # the reader names what is wrong with it
+    units = meta.get("units_to_metres") if isinstance(meta, dict) else None
+    return float(units) if isinstance(units, (int, float)) and not isinstance(units, bool) else None
+
+
 def cmd_import(args: argparse.Namespace) -> int:
     from calibration.formats import read_anipose_toml, read_opencv_rig
     from calibration.level import level_rig
@@ -462,11 +487,15 @@ def cmd_import(args: argparse.Namespace) -> int:
     if args.rig_id is not None:
         _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
     fmt = _format_of(source, args.format, "FILE")
+    if fmt == "opencv" and _is_rig_file(source):
+        raise UsageError(f"{source} is a rig file already (docs/rig-file.md): use it as it is, no import needed")
     volume = _volume(args.volume)
     if fmt == "anipose":
-        if args.units_to_metres is None:
+        units = args.units_to_metres if args.units_to_metres is not None else _declared_units(source)
+        if units is None:
             raise UsageError(f"{source}: anipose files do not record the unit of their translations: pass "
                              "--units-to-metres (0.001 for a board measured in millimetres, 1 for metres)")
+        args.units_to_metres = units
         if args.extrinsics or args.image_size:
             raise UsageError("--extrinsics and --image-size go with OpenCV files; anipose files carry both")
         rig = read_anipose_toml(source, units_to_metres=args.units_to_metres, volume=None if

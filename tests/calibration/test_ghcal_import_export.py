@@ -60,7 +60,7 @@ def test_import_without_levelling_keeps_the_tools_frame_and_says_so(rig_file, tm
 
 
 @pytest.mark.parametrize("args, words", [
-    (["import", "{toml}", "--out", "{out}"], ["do not record the unit", "--units-to-metres"]),
+    (["import", "{foreign}", "--out", "{out}"], ["do not record the unit", "--units-to-metres"]),
     (["export", "--rig", "{rig}", "--out", "{dir}/c.toml"], ["--units-to-metres"]),
     (["export", "--rig", "{rig}", "--out", "{dir}/c.cal"], ["suffix '.cal'", "--format"]),
     (["import", "{toml}", "--out", "{out}", "--units-to-metres", "1", "--pitch", "10"], ["--camera-height"]),
@@ -73,8 +73,24 @@ def test_what_the_user_must_give_is_named(rig_file, tmp_path, capsys, args, word
     toml = tmp_path / "calibration.toml"
     assert cli.main(["export", "--rig", str(rig_file), "--out", str(toml), "--units-to-metres", "0.001"]) == 0
     capsys.readouterr()
-    argv = [a.format(toml=toml, out=tmp_path / "out.json", rig=rig_file, dir=tmp_path) for a in args]
+    foreign = tmp_path / "foreign.toml"  # as anipose writes it: no unit in [metadata]
+    foreign.write_text("".join(line for line in toml.read_text().splitlines(keepends=True)
+                               if not line.startswith("units_to_metres")))
+    argv = [a.format(toml=toml, foreign=foreign, out=tmp_path / "out.json", rig=rig_file, dir=tmp_path)
+            for a in args]
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and all(w in err for w in words), err
     assert not (tmp_path / "out.json").exists()
+
+
+def test_our_own_anipose_export_needs_no_units_and_a_rig_file_needs_no_import(rig_file, tmp_path, capsys):
+    """The unit our anipose writer records is used when none is given; a rig file given to import is named."""
+    toml = tmp_path / "calibration.toml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(toml), "--units-to-metres", "0.001"]) == 0
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(toml), "--out", str(back)]) == 0
+    _same_cameras(load_rig(rig_file), load_rig(back))
+    capsys.readouterr()
+    assert cli.main(["import", str(rig_file), "--out", str(tmp_path / "again.json")]) == 2
+    assert "is a rig file already" in capsys.readouterr().err
