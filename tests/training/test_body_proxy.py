@@ -178,7 +178,8 @@ def test_a_proxy_cache_takes_its_geometry_and_joints_from_the_device_joints(data
 
     scenes = _scenes(data64)
     joints = np.stack([s["joints_3d"] + 0.01 for s in scenes]).astype(np.float32)  # 1 cm off the truth
-    np.savez(tmp_path / "joints.npz", joints=joints)
+    # as training.device_joints writes a cache: the joints and their expected errors (all within the gate here)
+    np.savez(tmp_path / "joints.npz", joints=joints, expected_error_m=np.zeros(joints.shape[:2], np.float32))
     model = GHNeRF(preset("tiny"))
     torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, tmp_path / "tiny.pt")
     path = cache_split(data64, "val", tmp_path / "val.npz", workers=1, model=tmp_path / "tiny.pt",
@@ -196,7 +197,7 @@ def test_a_proxy_cache_takes_its_geometry_and_joints_from_the_device_joints(data
         assert np.allclose(a["joints"][k][:, :2], uv, atol=1e-2)
     with pytest.raises(ValueError, match="takes a model"):
         cache_split(data64, "val", tmp_path / "x.npz", workers=1, joints=tmp_path / "joints.npz")
-    np.savez(tmp_path / "one.npz", joints=joints[:1])
+    np.savez(tmp_path / "one.npz", joints=joints[:1], expected_error_m=np.zeros((1, joints.shape[1]), np.float32))
     with pytest.raises(JointsCacheError, match="holds 1 scenes"):
         cache_split(data64, "val", tmp_path / "y.npz", workers=1, model=tmp_path / "tiny.pt",
                     joints=tmp_path / "one.npz", log=lambda *_: None)
