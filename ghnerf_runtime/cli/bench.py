@@ -55,6 +55,8 @@ STAGE_GROUPS = {
     "novel view": (*NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE, NOVEL_MATTE_STAGE),
     "total": ("total",),
 }
+#: The totals of the pairs after each sequence's first (a stream's steady state), beside ``total``.
+STEADY = "total after the first pair"
 
 
 def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, oracle=None,
@@ -65,10 +67,13 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     the previous pair's *true* joints, as a trained model's own joints would set it; this times
     the tracked path (smaller crops, subject rays only) with untrained weights.
 
-    Returns per-stage lists of ms (warm-up pairs excluded) and the wall time of the counted pairs.
+    Returns per-stage lists of ms (warm-up pairs excluded) and the wall time of the counted pairs;
+    ``STEADY`` holds the totals of the pairs after each sequence's first (a stream's steady state: the first
+    pair starts cold, and with ``tracking.refine_cold_start`` runs twice).
     """
     stages: dict[str, list[float]] = {k: [] for k in (*KEYPOINT_STAGES, *NOVEL_STAGES, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
                                                       NOVEL_MATTE_STAGE, "total")}
+    steady: list[float] = []
     request = NovelViewRequest(alpha=0.5) if novel else None
     wall = 0.0
     n = 0
@@ -91,8 +96,11 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
                 wall += dt
                 for k in stages:
                     stages[k].append(result.timing_ms.get(k, 0.0))
+                if i > 0:
+                    steady.append(result.timing_ms.get("total", 0.0))
                 if accuracy is not None:
                     accuracy.add(result, seq, i)
+    stages[STEADY] = steady
     return stages, wall
 
 
@@ -103,6 +111,7 @@ def _row(stages: dict[str, list[float]], wall: float) -> dict:
     for name, keys in STAGE_GROUPS.items():
         vals = np.sum([stages[k] for k in keys], axis=0) if stages["total"] else []
         out[name] = percentiles(vals)
+    out[STEADY] = percentiles(stages.get(STEADY, []))
     count = len(stages["total"])
     out["pairs"] = count
     out["pairs_per_s"] = count / wall if wall > 0 else float("nan")
@@ -221,6 +230,8 @@ def run_runtime_bench(args) -> dict:
 def _print_row(row: dict) -> None:
     cols = " ".join(f"{name.split(' ')[0]} {row[name]['median']:.2f}/{row[name]['p99']:.2f}"
                     for name in STAGE_GROUPS)
+    if STEADY in row:
+        cols += f" (after the first {row[STEADY]['median']:.2f}/{row[STEADY]['p99']:.2f})"
     tracked = " (tracked from truth)" if row.get("track_from_truth") else ""
     if row.get("flip_label"):
         tracked += " flip" if row["flip_test"] else " no-flip"
