@@ -43,7 +43,9 @@ import drivers
 from drivers.sim.demo import draw_truth
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
+from firmware_host.protocol.constants import MAX_RIG_ID_LEN
 from firmware_host.sinks import open_sink
+from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
@@ -268,8 +270,14 @@ def _run(args: argparse.Namespace) -> int:
         delivered, skipped, skews = 0, 0, []
         last_pair, last_result = None, None
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
-        # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO.
-        with open_sink(sink_url, cameras=tuple(camera.name for camera in source.rig.pair)) as sink:
+        # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO, with the
+        # rig's id as the daemon does (unless the URL names one, or the id does not fit HELLO: then none).
+        sink_kw = {"cameras": tuple(camera.name for camera in source.rig.pair)}
+        rig_id = source.rig.rig_id
+        if ("rig_id" not in parse_url(sink_url).query and 0 < len(rig_id) <= MAX_RIG_ID_LEN and rig_id.isascii()
+                and rig_id.isprintable()):
+            sink_kw["rig_id"] = rig_id
+        with open_sink(sink_url, **sink_kw) as sink:
             start = time.monotonic()
             deadline = start + args.seconds
             while time.monotonic() < deadline:

@@ -177,6 +177,21 @@ def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_u
         assert joints.shape == (25, 5) and np.all(joints[:, 4] == 0) and np.all(joints[:, 3] == 255)
 
 
+def test_hello_names_the_rig_as_the_daemon_does(tmp_path, capsys, sim_url):
+    """The demo's stream says which rig it is (HELLO's rig_id was empty, the daemon's says ``sim``); a
+    rig_id= in the sink URL wins."""
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path)])
+    assert rc == 0, capsys.readouterr().out
+    hellos = [m for m in map(json.loads, (tmp_path / "joints.jsonl").read_text().splitlines())
+              if m["type"] == "HELLO"]
+    assert hellos and {(m["rig_id"], tuple(m["cameras"])) for m in hellos} == {("sim", ("left", "right"))}
+    own = tmp_path / "own.jsonl"
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path),
+                    "--sink", f"{own.as_uri()}?rig_id=bench-7"])
+    assert rc == 0, capsys.readouterr().out
+    assert {m["rig_id"] for m in map(json.loads, own.read_text().splitlines()) if m["type"] == "HELLO"} == {"bench-7"}
+
+
 def test_the_counters_of_a_recording_are_those_of_the_finished_take(tmp_path, capsys, sim_url, monkeypatch):
     # printed before the recorder closed: frames_written=41 where the take's manifest says 106
     from drivers.backends import record
