@@ -46,6 +46,10 @@ def _check_frame(obj: dict, cameras: tuple[str, ...], width: int, height: int) -
             assert 0.0 <= c <= 1.0
             if c > 0:
                 assert -width <= u <= 2 * width and -height <= v <= 2 * height
+            else:  # a 2D joint's missing flag is its confidence 0 (docs/runtime.md)
+                assert (u, v) == (0.0, 0.0)
+    assert list(obj["joints_2d"]) == list(cameras) == list(obj["frame_ok"])  # the rig's camera order
+    assert all(isinstance(v, float) for v in numbers) and isinstance(obj["sequence"], int)  # floats, never 0
 
 
 def test_run_on_a_sim_pair_writes_the_documented_json(sim_pair, tiny_model_dir, tmp_path):  # noqa: F811
