@@ -163,6 +163,8 @@ class PairResult:
             "joints_2d": {name: [[r(u, 2), r(v, 2), r(c, 4)] for (u, v), c in zip(uv, self.confidence_2d[name])]
                           for name, uv in self.joints_2d.items()},
             "missing": [bool(m) for m in self.missing],
+            # the 2D joints' own flags (a camera's 2D joint may be missing where the 3D one is not, and back)
+            "missing_2d": {name: [bool(m) for m in self.missing_2d[name]] for name in self.joints_2d},
             "tracked": bool(self.tracked),
             "frame_ok": {k: bool(v) for k, v in self.frame_ok.items()},
             "method": self.method,

@@ -42,13 +42,14 @@ def _check_frame(obj: dict, cameras: tuple[str, ...], width: int, height: int) -
         if missing:
             assert (x, y, z, c) == (0.0, 0.0, 0.0, 0.0)
     for name, rows in obj["joints_2d"].items():
-        for u, v, c in rows:
-            assert 0.0 <= c <= 1.0
+        assert len(obj["missing_2d"][name]) == 25 and all(isinstance(m, bool) for m in obj["missing_2d"][name])
+        for (u, v, c), missing in zip(rows, obj["missing_2d"][name]):
+            assert 0.0 <= c <= 1.0 and missing == (c == 0)  # the flag and confidence 0 say the same
             if c > 0:
                 assert -width <= u <= 2 * width and -height <= v <= 2 * height
-            else:  # a 2D joint's missing flag is its confidence 0 (docs/runtime.md)
+            else:  # a missing 2D joint is zeros (docs/runtime.md)
                 assert (u, v) == (0.0, 0.0)
-    assert list(obj["joints_2d"]) == list(cameras) == list(obj["frame_ok"])  # the rig's camera order
+    assert list(obj["joints_2d"]) == list(cameras) == list(obj["frame_ok"]) == list(obj["missing_2d"])  # rig order
     assert all(isinstance(v, float) for v in numbers) and isinstance(obj["sequence"], int)  # floats, never 0
 
 
