@@ -407,7 +407,7 @@ class Estimator:
         entry = state.cache.get(roi)
         if entry is None:
             entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.roll_deg,
-                                               supersample=self.config.roi.supersample),
+                                               supersample=self.config.roi.supersample).compact(),
                      crop_camera(state.camera, roi, self.size, state.roll_deg))
             state.cache[roi] = entry
             while len(state.cache) > self.config.roi.map_cache_size:

@@ -61,7 +61,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -386,8 +386,8 @@ class CropMaps:
             zero padding of a crop reaching past the frame's edge); ``None``: all of them.
     """
 
-    map_x: np.ndarray
-    map_y: np.ndarray
+    map_x: np.ndarray | None
+    map_y: np.ndarray | None
     level: int
     window: tuple[int, int, int, int]
     image_size: tuple[int, int]
@@ -397,10 +397,18 @@ class CropMaps:
     """The maps are ``(f S, f S)``; :func:`apply_crop_maps` reduces the remapped crop by ``f x f``
     box means (module docstring, "Supersampling"); ``inside`` is ``(S, S)``, the pixels all of whose
     samples show the frame."""
+    side: int | None = None
+    """``S``, kept by :meth:`compact` (whose maps have no float tables to read it from)."""
 
     @property
     def out_size(self) -> int:
-        return int(self.map_x.shape[0]) // self.supersample
+        return self.side if self.side is not None else int(self.map_x.shape[0]) // self.supersample
+
+    def compact(self) -> "CropMaps":
+        """The same maps without the float tables (``map_x``/``map_y`` None): :func:`apply_crop_maps` reads
+        only the fixed-point ones, and a cache of 32 supersampled tables per camera held ~57 MB, 60 % of it
+        float tables."""
+        return replace(self, map_x=None, map_y=None, side=self.out_size)
 
 
 _OUTSIDE = -1e6  # a map coordinate far off any frame: cv2.remap's constant border (0)

@@ -436,3 +436,19 @@ def test_apply_crop_maps_names_a_frame_opencv_cannot_take(frame, why, size):
     with pytest.raises(ShapeError, match=why) as e:  # was a bare cv2.error
         apply_crop_maps(frame, maps)
     assert str(frame.shape) in str(e.value) or str(frame.dtype) in str(e.value)
+
+
+def test_compact_maps_crop_the_same_without_the_float_tables():
+    """CropMaps.compact (what the estimator caches): no float tables, the same crop, frame mask and size."""
+    from ghnerf_runtime.geometry.camera import Camera
+    from ghnerf_runtime.preprocess import Roi, apply_crop_maps, build_undistort_crop_maps
+
+    cam = Camera("c", 960, 600, [[700.0, 0, 480], [0, 700.0, 300], [0, 0, 1]], [-0.1, 0.02, 0, 0, 0])
+    image = np.random.default_rng(0).integers(0, 256, (600, 960, 3), dtype=np.uint8)
+    for roi, f in ((Roi(200, 100, 300), 2), (Roi(-100, -50, 400), 2), (Roi(300, 200, 128), 1)):
+        maps = build_undistort_crop_maps(cam, roi, 128, supersample=f)
+        small = maps.compact()
+        assert small.map_x is None and small.map_y is None and small.out_size == maps.out_size == 128
+        assert np.array_equal(apply_crop_maps(image, small), apply_crop_maps(image, maps))
+        assert (small.inside is None) == (maps.inside is None)
+        assert small.inside is None or np.array_equal(small.inside, maps.inside)
