@@ -357,16 +357,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
         raise UsageError("--pitch and --roll go with --camera-height; a floor view measures them")
     if args.camera_height is not None and args.board_thickness:
         raise UsageError("--board-thickness goes with --floor-view")
-    out = Path(args.out)
-    if not out.parent.is_dir():
-        raise UsageError(f"{out.parent}: no such folder for the rig file")
-    if out.is_dir():  # found now, not after the detection and the solve
-        raise UsageError(f"--out {out}: is a folder; give the rig file's path")
-    report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
-    if not report_path.parent.is_dir():
-        raise UsageError(f"{report_path.parent}: no such folder for the report")
-    if report_path.is_dir():
-        raise UsageError(f"report {report_path}: is a folder; give the report file's path")
+    out = _output_path(args.out, "--out", "rig file")  # found now, not after the detection and the solve
+    report_path = _output_path(args.report or out.with_name(out.stem + ".report.json"),
+                               "--report" if args.report else "report", "report file")
     if report_path.resolve() == out.resolve():  # the report written over the rig it describes
         raise UsageError(f"--report {report_path} is the rig file (--out {out}): give the report another path")
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
@@ -440,12 +433,13 @@ def _image_size(text: str | None) -> tuple[int, int] | None:
     return w, h
 
 
-def _rig_path(text: str, flag: str) -> Path:
+def _output_path(text: str | Path, flag: str, what: str) -> Path:
+    """A file a command will write: its folder must exist and it must not be one."""
     out = Path(text)
     if not out.parent.is_dir():
-        raise UsageError(f"{flag} {out}: no such folder {out.parent}")
+        raise UsageError(f"{flag} {out}: no such folder for the {what} ({out.parent})")
     if out.is_dir():
-        raise UsageError(f"{flag} {out}: is a folder; give the file's path")
+        raise UsageError(f"{flag} {out}: is a folder; give the {what}'s path")
     return out
 
 
@@ -463,7 +457,8 @@ def _is_rig_file(path: Path) -> bool:
 
 
 def _declared_units(path: Path) -> float | None:
-    """``[metadata] units_to_metres`` of an anipose file our exporter wrote (others do not say)."""
+    """``[metadata] units_to_metres`` of an anipose file our exporter wrote (others do not say); the reader checks
+    an argument against it, but requires one."""
     import tomllib
 
     try:
@@ -479,7 +474,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     from calibration.level import level_rig
 
     source = Path(args.file)
-    out = _rig_path(args.out, "--out")
+    out = _output_path(args.out, "--out", "rig file")
     if out.exists() and out.resolve() == source.resolve():
         raise UsageError(f"--out {out} is the file being imported: give the rig file another path")
     if args.camera_height is None and (args.pitch is not None or args.roll is not None):
@@ -495,10 +490,9 @@ def cmd_import(args: argparse.Namespace) -> int:
         if units is None:
             raise UsageError(f"{source}: anipose files do not record the unit of their translations: pass "
                              "--units-to-metres (0.001 for a board measured in millimetres, 1 for metres)")
-        args.units_to_metres = units
         if args.extrinsics or args.image_size:
             raise UsageError("--extrinsics and --image-size go with OpenCV files; anipose files carry both")
-        rig = read_anipose_toml(source, units_to_metres=args.units_to_metres, volume=None if
+        rig = read_anipose_toml(source, units_to_metres=units, volume=None if
                                 args.camera_height is not None else volume, rig_id=args.rig_id)
     else:
         rig = read_opencv_rig(source, extrinsics_path=args.extrinsics, image_size=_image_size(args.image_size),
@@ -531,7 +525,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from calibration.formats import write_anipose_toml, write_opencv_rig
 
     rig = load_rig(args.rig)
-    out = _rig_path(args.out, "--out")
+    out = _output_path(args.out, "--out", "export")
     if out.exists() and out.resolve() == Path(args.rig).resolve():
         raise UsageError(f"--out {out} is the rig file (--rig): give the export another path")
     fmt = _format_of(out, args.format, "--out")
@@ -628,6 +622,14 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _add_tilt(p: argparse.ArgumentParser) -> None:
+    """``--pitch`` / ``--roll``: the first camera's tilt, given with ``--camera-height`` (solve, import)."""
+    p.add_argument("--pitch", type=_finite(-90.0, 90.0),
+                   help="with --camera-height: degrees below the horizon (default 0)")
+    p.add_argument("--roll", type=_finite(-180.0, 180.0),
+                   help="with --camera-height: degrees about the optical axis (default 0)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Guide: docs/calibration.md")
@@ -683,10 +685,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0, help="metres, for the floor view")
     p.add_argument("--camera-height", type=_finite(0.05, 10.0),
                    help="instead of a floor view: the first camera above the floor, m")
-    p.add_argument("--pitch", type=_finite(-90.0, 90.0),
-                   help="with --camera-height: degrees below the horizon (default 0)")
-    p.add_argument("--roll", type=_finite(-180.0, 180.0),
-                   help="with --camera-height: degrees about the optical axis (default 0)")
+    _add_tilt(p)
     p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, rig frame)")
     p.add_argument("--rig-id", default="rig")
     p.set_defaults(run=cmd_solve)
@@ -720,10 +719,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-height", type=_finite(0.05, 10.0),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
                         "the tool's own frame, and a warning says so)")
-    p.add_argument("--pitch", type=_finite(-90.0, 90.0),
-                   help="with --camera-height: degrees below the horizon (default 0)")
-    p.add_argument("--roll", type=_finite(-180.0, 180.0),
-                   help="with --camera-height: degrees about the optical axis (default 0)")
+    _add_tilt(p)
     p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, in the written rig's frame)")
     p.add_argument("--rig-id", help="default: the file's, else its name")
     p.set_defaults(run=cmd_import)

@@ -31,6 +31,7 @@ from typing import Any, Callable, Mapping
 
 from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError
+from ghnerf_runtime.json_keys import remember_repeats
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
@@ -802,23 +803,6 @@ def config_to_dict(config: Any) -> dict:
     return out
 
 
-class _JsonObject(dict):
-    """A parsed JSON object that remembers the keys it was given more than once."""
-
-    duplicates: tuple[str, ...] = ()
-
-
-def _json_object(pairs: list[tuple[str, Any]]) -> _JsonObject:
-    obj = _JsonObject()
-    dups = []
-    for key, value in pairs:
-        if key in obj:
-            dups.append(key)
-        obj[key] = value
-    obj.duplicates = tuple(dups)
-    return obj
-
-
 def _plain_json(value: Any, where: str, duplicates: list[str]) -> Any:
     """``value`` with plain dicts, the dotted path of every repeated key appended to ``duplicates``."""
     if isinstance(value, dict):
@@ -844,7 +828,7 @@ def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], wh
         raise fail(f"cannot read {what} ({e})") from e
     try:
         duplicates: list[str] = []
-        data = _plain_json(json.loads(text, object_pairs_hook=_json_object), "", duplicates)
+        data = _plain_json(json.loads(text, object_pairs_hook=remember_repeats), "", duplicates)
     except json.JSONDecodeError as e:
         raise fail(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
     except ValueError as e:  # an integer of more digits than Python converts (4300)

@@ -39,6 +39,7 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
+from ghnerf_runtime.json_keys import remember_repeats
 
 log = logging.getLogger(__name__)
 
@@ -89,23 +90,6 @@ def _show(value: Any, limit: int = 120) -> str:
     except (TypeError, ValueError):
         text = repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-class _Object(dict):
-    """A JSON object that remembers keys which appeared more than once."""
-
-    duplicates: tuple[str, ...] = ()
-
-
-def _object_hook(pairs: list[tuple[str, Any]]) -> _Object:
-    obj = _Object()
-    dups = []
-    for key, value in pairs:
-        if key in obj:
-            dups.append(key)
-        obj[key] = value
-    obj.duplicates = tuple(dups)
-    return obj
 
 
 class _Checker:
@@ -419,7 +403,7 @@ def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
     where = None if path is None else str(path)
     try:
         # NaN/Infinity literals parse to floats here and are then rejected with the field name.
-        data = json.loads(text, object_pairs_hook=_object_hook)
+        data = json.loads(text, object_pairs_hook=remember_repeats)
     except json.JSONDecodeError as e:
         raise RigFileError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}", path=where) from e
     except ValueError as e:  # an integer literal of more digits than Python converts (4300)

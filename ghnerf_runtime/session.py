@@ -382,17 +382,24 @@ class ModelSession:
         sess = self._sessions.get(graph)
         if sess is None:
             raise ModelError(f"graph {graph!r} is not loaded (loaded: {list(self._sessions)})")
-        try:
-            inputs = {n: feeds[n] for n in self._input_names[graph]}
-        except KeyError as e:
-            raise ModelError(f"graph {graph!r} needs input {e.args[0]!r}") from None
+        inputs = self._inputs(graph, feeds)
         self.run_counts[graph] += 1
         try:
             out = sess.run(self._output_names[graph], inputs)
         except Exception as e:  # onnxruntime's pybind exceptions
-            raise ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {str(e).strip()[:300]}",
-                                path=str(self.files[graph].path)) from e
+            raise self._failed(graph, e) from e
         return dict(zip(self._output_names[graph], out))
+
+    def _inputs(self, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The graph's own inputs out of ``feeds`` (which may hold more)."""
+        try:
+            return {n: feeds[n] for n in self._input_names[graph]}
+        except KeyError as e:
+            raise ModelError(f"graph {graph!r} needs input {e.args[0]!r}") from None
+
+    def _failed(self, graph: str, e: Exception) -> ModelRunError:
+        return ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {str(e).strip()[:300]}",
+                             path=str(self.files[graph].path))
 
     # ------------------------------------------------------------------ lanes
     def open_lane(self, graph: str) -> bool:
@@ -407,8 +414,7 @@ class ModelSession:
         if cfg is None or cfg.thread_pool != "per_session" or cfg.threads < 2 or graph not in self._sessions:
             return False
         lane = _open(self.files[graph].path, replace(cfg, threads=1))
-        feeds = warmup_feeds(self.contract)
-        lane.run(self._output_names[graph], {n: feeds[n] for n in self._input_names[graph]})  # the first run is slow
+        lane.run(self._output_names[graph], self._inputs(graph, warmup_feeds(self.contract)))  # the first run is slow
         self._lanes[graph] = lane
         if self._lane_worker is None:
             self._lane_worker = ThreadPoolExecutor(1, thread_name_prefix="ghnerf-lane")
@@ -422,10 +428,7 @@ class ModelSession:
         lane = self._lanes.get(graph)
         if lane is None:
             return self.run(graph, first), self.run(graph, second)
-        try:
-            inputs = [{n: feeds[n] for n in self._input_names[graph]} for feeds in (first, second)]
-        except KeyError as e:
-            raise ModelError(f"graph {graph!r} needs input {e.args[0]!r}") from None
+        inputs = [self._inputs(graph, feeds) for feeds in (first, second)]
         names = self._output_names[graph]
         self.run_counts[graph] += 2
         try:
@@ -435,8 +438,7 @@ class ModelSession:
             finally:
                 out2 = later.result()  # never leave a run behind, whatever the first did
         except Exception as e:  # onnxruntime's pybind exceptions
-            raise ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {str(e).strip()[:300]}",
-                                path=str(self.files[graph].path)) from e
+            raise self._failed(graph, e) from e
         return dict(zip(names, out)), dict(zip(names, out2))
 
     def warm_up(self) -> dict[str, float]:
