@@ -102,6 +102,9 @@ def _check_views(uv: np.ndarray, conf: np.ndarray, valid: np.ndarray) -> tuple[n
     if uv.ndim != 3 or uv.shape[-1] != 2 or conf.shape != uv.shape[:2] or valid.shape != uv.shape[:2]:
         raise ShapeError(f"uv (C, J, 2), confidence (C, J), valid (C, J) expected, got {uv.shape}, {conf.shape}, "
                          f"{valid.shape}")
+    # peak values are in [0, 1] (the decoder's): one past it gave a 3D confidence past it (1.5 -> 1.1), and
+    # a non-finite one no view at all, so NaN and inf count as no peak
+    conf = np.where(np.isfinite(conf), np.clip(conf, 0.0, 1.0), 0.0)
     return uv, conf, valid
 
 
@@ -207,7 +210,12 @@ def volumetric_joints(joint_heat: np.ndarray, points: np.ndarray, shape: tuple[i
         raise ShapeError(f"joint_heat (B, N, J) and points (N, 3) with N = {nx}*{ny}*{nz} expected, got "
                          f"{heat.shape}, {pts.shape}")
     J = heat.shape[2]
-    resp = np.nan_to_num(heat.mean(axis=0), nan=0.0, posinf=0.0, neginf=0.0)  # (N, J)
+    with np.errstate(over="ignore", invalid="ignore"):
+        mean = heat.mean(axis=0)  # (N, J)
+    # As the 2D decoder: a non-finite response anywhere makes the joint missing (zeroed, its true peak could
+    # be the NaN and the argmax found the next-best cell instead), and a negative one counts as 0.
+    finite = np.isfinite(mean).all(axis=0)
+    resp = np.where(np.isfinite(mean), np.maximum(mean, 0.0), 0.0)
     cube = resp.T.reshape(J, nz, ny, nx)
     best = resp.argmax(axis=0)
     peak = resp[best, np.arange(J)]
@@ -240,8 +248,10 @@ def volumetric_joints(joint_heat: np.ndarray, points: np.ndarray, shape: tuple[i
     # A peak, not a flat or flooded response (a constant one's argmax is the grid's first cell): as the 2D
     # decoder's max_region_frac, at most that share of the grid may reach half the peak.
     region = (resp >= 0.5 * peak[None, :]).mean(axis=0)
-    valid = (peak >= max(config.min_volumetric_response, 1e-6)) & (region <= VOLUMETRIC_MAX_REGION_FRAC)
-    return Joints3D(points_out, peak.astype(np.float32), valid, np.zeros((J, heat.shape[0]))).sanitised()
+    valid = finite & (peak >= max(config.min_volumetric_response, 1e-6)) & (region <= VOLUMETRIC_MAX_REGION_FRAC)
+    # sigmoid responses are at most 1: a stray larger one is no confidence above it (1e30 reached the JSON)
+    conf = np.minimum(peak, 1.0).astype(np.float32)
+    return Joints3D(points_out, conf, valid, np.zeros((J, heat.shape[0]))).sanitised()
 
 
 # ----------------------------------------------------------------- depth centroid
@@ -271,6 +281,11 @@ def depth_centroid_joints(heatmaps: np.ndarray, depth: np.ndarray, peaks_uv: np.
                          f"{hm.shape}, {dep.shape}, {uv.shape}, {len(cameras)}")
     r = config.centroid_radius_cells
     offs = np.arange(-r, r + 1)
+    # A peak off the map (or not finite) has no rays around it: clamped to the edge, the window read the
+    # edge's cells and reported their centroid as the joint.
+    on_map = (np.isfinite(uv).all(axis=-1) & (uv[..., 0] >= -0.5) & (uv[..., 0] < w - 0.5)
+              & (uv[..., 1] >= -0.5) & (uv[..., 1] < h - 0.5))
+    uv = np.where(on_map[..., None], uv, 0.0)
     cy = np.clip(np.rint(uv[..., 1]).astype(int), 0, h - 1)  # (C, J)
     cx = np.clip(np.rint(uv[..., 0]).astype(int), 0, w - 1)
     yy = cy[..., None, None] + offs[:, None]  # (C, J, k, 1)
@@ -283,7 +298,9 @@ def depth_centroid_joints(heatmaps: np.ndarray, depth: np.ndarray, peaks_uv: np.
     hv = hm[ci, ji, yc, xc]
     dv = dep[ci, yc, xc]
     good = inside & np.isfinite(hv) & np.isfinite(dv) & (dv > 1e-3)
-    wgt = np.where(good, np.nan_to_num(hv) ** 2, 0.0)
+    # heatmap values in [0, 1], as the decoder reads them: squared, a negative one weighed like a positive one
+    # (a cell of -0.95 pulled the joint 1.6 m towards its depth) and a huge one overflowed to inf
+    wgt = np.where(good, np.clip(np.nan_to_num(hv), 0.0, 1.0) ** 2, 0.0)
     cells = np.stack([xc, yc], axis=-1).astype(np.float64)  # heatmap pixels
     model_uv = heatmap_to_model_pixels(cells, (w, h), model_size)
     points = np.zeros((C, J) + yy.shape[2:] + (3,))
@@ -296,7 +313,7 @@ def depth_centroid_joints(heatmaps: np.ndarray, depth: np.ndarray, peaks_uv: np.
         points[c] = p_cam @ cam.R + cam.center  # R^T p + centre, row vectors
     wsum = wgt.sum(axis=(-2, -1))
     per_view = (wgt[..., None] * points).sum(axis=(-3, -2)) / np.where(wsum > 0, wsum, 1.0)[..., None]  # (C, J, 3)
-    use = ok & (conf >= config.min_view_confidence) & (conf > 0) & (wsum > 0)
+    use = ok & on_map & (conf >= config.min_view_confidence) & (conf > 0) & (wsum > 0)
     vw = np.where(use, conf, 0.0)
     total = vw.sum(axis=0)
     joint = (vw[..., None] * per_view).sum(axis=0) / np.where(total > 0, total, 1.0)[:, None]

@@ -17,7 +17,9 @@ lowers peaks: a unit-height Gaussian blob of sigma ``s`` peaks at about
 
 Missing joints (peak not above threshold, non-finite values anywhere in the map,
 or an oversized region) get ``valid = False``, ``confidence = 0`` and ``uv = 0``
-(:data:`MISSING_FILL`). Outputs are always finite.
+(:data:`MISSING_FILL`). Outputs are always finite. Values outside [0, 1] are out of contract:
+negative ones count as 0, and a map whose maximum exceeds 1 is divided by it (its shape, and
+so its peak, kept), so every confidence lies in [0, 1].
 
 Subpixel refinement: ``"quadratic"`` (default) fits a quadratic to the log of the
 map over the 3x3 neighbourhood of the peak (one Newton step, full 2x2 Hessian,
@@ -293,9 +295,15 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     if not finite.all():  # keep NaN/Inf out of the filter; those joints are dropped below
         maps = np.where(finite[:, None, None], maps, 0.0)
     # heatmaps are probabilities: a model that strays outside [0, 1] (huge values overflow the filter to
-    # inf) must not report a confidence outside it. Clipped before the float32 cast, which turned a finite
-    # float64 value past 3.4e38 into inf and so dropped its joint instead.
-    maps = np.clip(maps, 0.0, 1.0).astype(np.float32, copy=False)
+    # inf) must not report a confidence outside it. A map above 1 is scaled down by its maximum, not
+    # clipped: clipping flattened a blob's top into a plateau whose first pixel became the peak (2.3 px
+    # off for a blob of peak 255, sigma 2). Scaled before the float32 cast, which turned a finite float64
+    # value past 3.4e38 into inf and so dropped its joint instead.
+    maps = np.maximum(maps, 0.0)
+    top = maps.max(axis=(1, 2))
+    if (top > 1.0).any():
+        maps = maps / np.where(top > 1.0, top, 1.0)[:, None, None]
+    maps = maps.astype(np.float32, copy=False)
 
     padded, pad = _filter(maps, cfg.sigma)
     filtered = padded[:, pad:pad + h, pad:pad + w]
@@ -349,7 +357,9 @@ def decode_blocks(rendered: np.ndarray, blocks, config: KeypointDecoderConfig | 
     if any((b[2], b[3]) != (rows, cols) for b in blocks) or len(rendered) != len(blocks):
         raise ShapeError(f"{len(rendered)} views of rendered heatmaps for blocks {list(blocks)}: one block of one "
                          "size per view")
-    maps = np.stack([np.asarray(r, np.float32).reshape(rows, cols, -1).transpose(2, 0, 1) for r in rendered])
+    # in their own dtype: decode_keypoints scales values past 1 before its float32 cast (a float64 1e39 cast
+    # here overflowed to inf and dropped its joint)
+    maps = np.stack([np.asarray(r).reshape(rows, cols, -1).transpose(2, 0, 1) for r in rendered])
     kp = decode_keypoints(np.ascontiguousarray(maps), config)
     corner = np.array([[b[1], b[0]] for b in blocks], np.float64)[:, None, :]  # (V, 1, (c0, r0))
     return replace(kp, uv=np.where(kp.valid[..., None], kp.uv + corner, kp.uv))

@@ -210,8 +210,12 @@ class SubjectTracker:
         self.track = None
         self._last_rois = None
         previous = self.view_track[1] if self.view_track is not None and self.view_track[0] == camera else None
-        roi = roi_from_joints(self.rig.pair[camera], joints_2d, confidence, rc.joint_margin_frac, rc.min_size_px,
-                              min_confidence=cfg.min_confidence, min_joints=cfg.min_joints,
+        # a joint at exactly min_confidence counts, as for the 3D track (roi_from_joints asks for more than its
+        # min_confidence; missing joints have confidence 0 and still do not count)
+        conf = np.asarray(confidence, dtype=np.float64)
+        counted = np.where(conf >= cfg.min_confidence, conf, 0.0)
+        roi = roi_from_joints(self.rig.pair[camera], joints_2d, counted, rc.joint_margin_frac, rc.min_size_px,
+                              min_confidence=0.0, min_joints=cfg.min_joints,
                               roll_deg=self.rolls[camera]) if cfg.enabled else None
         self.view_track = None if roi is None else (camera, keep_roi(previous, snap_roi(roi, rc.snap_px),
                                                                      rc.keep_frac))

@@ -1,6 +1,8 @@
 """The estimator's pure pieces: ray blocks, ROI snapping, tracks, 3D methods, novel cameras, frame check."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -112,11 +114,27 @@ def test_view_track_crops_one_camera_around_its_2d_joints():
     lo, hi = rig.pair[1].undistort_pixels(uv).min(0), rig.pair[1].undistort_pixels(uv).max(0)
     assert r.rois[1].x0 <= lo[0] and r.rois[1].y0 <= lo[1]
     assert r.rois[1].x0 + r.rois[1].size >= hi[0] and r.rois[1].y0 + r.rois[1].size >= hi[1]
-    assert not tracker.update_view(1, uv, np.full(25, 0.1))  # nothing confident: cold again
+    assert not tracker.update_view(1, uv, np.full(25, 0.05))  # below min_confidence: cold again
     assert tracker.regions() is tracker._volume
     tracker.update_view(0, uv, np.full(25, 0.9))
     tracker.update(_joints(), np.full(25, 0.9), np.ones(25, bool))
     assert tracker.view_track is None and tracker.regions().tracked
+
+
+def test_a_2d_joint_at_exactly_min_confidence_counts_for_the_view_track():
+    """The 3D track counts joints with confidence >= tracking.min_confidence; the view track asked for more
+    (roi_from_joints' strict >), so the same joints at exactly the threshold carried one and not the other."""
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    cfg = TrackingConfig(min_joints=6, min_confidence=0.5)
+    uv, _ = rig.pair[1].project(_joints())
+    conf = np.zeros(25)
+    conf[:6] = 0.5  # exactly min_joints joints, exactly at min_confidence; the rest missing
+    assert track_from_joints(_joints(), conf, conf > 0, cfg) is not None
+    tracker = SubjectTracker(rig, cfg, RoiConfig())
+    assert tracker.update_view(1, uv, conf)
+    conf[5] = np.nextafter(0.5, 0.0)  # one below: too few
+    assert not tracker.update_view(1, uv, conf)
 
 
 # ------------------------------------------------------------------ 3D methods
@@ -166,6 +184,63 @@ def test_volumetric_refinement_is_exact_for_gaussian_responses():
     for flooded in (np.full_like(heat, 0.6), np.maximum(heat, 0.5)):
         r = volumetric_joints(flooded, pts, shape, Joints3DConfig())
         assert not r.valid.any() and not r.confidence.any()
+
+
+def test_volumetric_extremes_give_a_confidence_in_zero_one_or_a_missing_joint():
+    """Responses past 1 reported a confidence past it (1e30 reached the JSON); a NaN or inf cell was zeroed, so
+    a joint whose true peak was that cell was placed at the next-best cell instead of being missing, as the
+    2D decoder makes it."""
+    box = np.array([[-0.5, -1.9, 2.6], [0.5, 0.1, 3.4]])
+    pts, shape = query_grid(box, 12)
+    X = _joints(3, seed=4)
+    heat = np.exp(-((pts[:, None, :] - X[None]) ** 2).sum(-1) / (2 * 0.06 ** 2))[None].repeat(2, axis=0)
+    heat[:, :, 0] *= 1e30
+    best = heat[0, :, 1].argmax()
+    heat[1, best, 1] = np.nan  # joint 1's peak cell, in one source volume
+    heat[:, best + 1, 2] = np.inf
+    r = volumetric_joints(heat, pts, shape, Joints3DConfig())
+    assert r.valid.tolist() == [True, False, False]
+    assert r.confidence[0] == 1.0 and np.abs(r.points[0] - X[0]).max() < 1e-3
+    assert not r.points[1:].any() and not r.confidence[1:].any()
+
+
+def test_depth_centroid_reads_no_cells_for_a_peak_off_the_map_nor_weighs_negative_heat():
+    """A peak given off the map (or NaN) was clamped to the map's edge and the edge's cells became a valid
+    joint; a negative heatmap value was squared into a positive weight (-0.95 pulled a joint 1.6 m deep)."""
+    cams = _cams()
+    hm = np.zeros((2, 1, 32, 32))
+    hm[:, 0, 0:3, 0:3] = 0.9  # something in the corner
+    depth = np.full((2, 32, 32), 3.0)
+    conf, valid = np.full((2, 1), 0.8), np.ones((2, 1), bool)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the NaN's cast to int warned
+        for u in (np.nan, -40.0, 1e30, -0.51, 31.5):
+            r = depth_centroid_joints(hm, depth, np.full((2, 1, 2), u), conf, valid, cams, 128, Joints3DConfig())
+            assert not r.valid.any() and not r.points.any(), u
+    inside = depth_centroid_joints(hm, depth, np.full((2, 1, 2), -0.49), conf, valid, cams, 128, Joints3DConfig())
+    assert inside.valid.all()  # rounds to cell 0: on the map
+    hm = np.zeros((2, 1, 32, 32))
+    hm[:, 0, 16, 16] = 0.9
+    alone = depth_centroid_joints(hm, depth, np.full((2, 1, 2), 16.0), conf, valid, cams, 128, Joints3DConfig())
+    hm[:, 0, 18, 18] = -0.95
+    depth[:, 18, 18] = 6.0
+    r = depth_centroid_joints(hm, depth, np.full((2, 1, 2), 16.0), conf, valid, cams, 128, Joints3DConfig())
+    np.testing.assert_allclose(r.points, alone.points, atol=1e-12)
+    hm[:, 0] = -1.0  # negative everywhere: no weight anywhere
+    assert not depth_centroid_joints(hm, depth, np.full((2, 1, 2), 16.0), conf, valid, cams, 128,
+                                     Joints3DConfig()).valid.any()
+
+
+def test_peak_values_outside_zero_one_give_no_3d_confidence_outside_it():
+    """A peak value of 1.5 gave a triangulated confidence of 1.1 (Joints3D.confidence is in [0, 1]); inf is
+    no peak at all."""
+    cams = _cams()
+    X = _joints(3)
+    uv = np.stack([c.project(X)[0] for c in cams])
+    conf = np.array([[1.5, np.inf, 1.0], [0.8, 0.8, 1e30]])
+    r = triangulate_joints(uv, conf, np.ones((2, 3), bool), cams, Joints3DConfig())
+    assert r.valid.tolist() == [True, False, True]
+    np.testing.assert_allclose(r.confidence, [np.sqrt(0.8), 0.0, 1.0], rtol=1e-6)
 
 
 def test_depth_centroid_recovers_points_from_rendered_depth():

@@ -274,6 +274,20 @@ def test_values_outside_zero_one_never_give_a_confidence_outside_it():
     assert np.abs(kp.uv[2] - [10.3, 20.6]).max() < 0.05
 
 
+def test_a_blob_past_one_keeps_its_peak():
+    """A map above 1 (a model without its sigmoid, a uint8 map) was clipped to 1: the blob's top became a
+    plateau whose first pixel was the peak, 2.3 px off for peak 255; scaled by its maximum it stays a blob."""
+    yy, xx = np.mgrid[:32, :32]
+    centres = [(10.3, 20.6), (17.45, 9.8), (21.9, 14.2)]
+    for scale in (1.5, 20.0, 255.0, 1e30):
+        maps = np.stack([scale * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * 2.0 ** 2)) for x, y in centres])
+        kp = decode_keypoints(maps.astype(np.float32))
+        assert kp.valid.all() and (kp.confidence <= 1.0).all()
+        np.testing.assert_allclose(kp.uv, centres, atol=0.01)
+    as_uint8 = decode_keypoints((255 * maps / maps.max(axis=(1, 2), keepdims=True)).astype(np.uint8))
+    np.testing.assert_allclose(as_uint8.uv, centres, atol=0.1)  # rounded to integers, but no plateau
+
+
 def test_float64_values_past_the_float32_range_are_clipped_like_any_other():
     """A finite float64 value past 3.4e38 overflowed the float32 cast to inf, so its joint was dropped as
     non-finite (with a RuntimeWarning), where the same map in float32 range is clipped to 1 and decoded."""
@@ -311,3 +325,17 @@ def test_a_peak_by_a_rendered_blocks_border_is_not_pulled_inward():
     assert np.abs(decode_keypoints(grid).uv[:, 0] - np.array(truth)).max() > 0.3
     with pytest.raises(ShapeError, match="one block of one size per view"):
         decode_blocks(np.stack(rendered), [(0, 8, 28, 24), (4, 0, 24, 28)])
+
+
+def test_rendered_blocks_past_the_float32_range_decode_as_decode_keypoints_does():
+    """decode_blocks cast the rendered rays to float32 first: a float64 value past 3.4e38 became inf and its
+    joint was dropped, where decode_keypoints scales the same map and decodes it."""
+    from ghnerf_runtime.keypoints import decode_blocks
+
+    rendered = np.zeros((2, 64, 1))
+    rendered[:, 8 * 3 + 5, 0] = 1e39  # row 3, column 5 of an 8x8 block
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        kp = decode_blocks(rendered, [(0, 0, 8, 8), (2, 4, 8, 8)])
+    assert kp.valid.all()
+    np.testing.assert_allclose(kp.uv[:, 0], [[5.0, 3.0], [9.0, 5.0]], atol=1e-6)
