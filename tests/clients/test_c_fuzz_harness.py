@@ -6,8 +6,10 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from firmware_host.protocol import Hello, Joints, MsgType, encode, make_header
 from tests.clients.c_build import C_DIR, VECTOR_DIR, compile_c, require_compiler, sanitizer_flags
 
 
@@ -24,6 +26,27 @@ def test_harness_replays_vectors_and_random_inputs(tmp_path: Path) -> None:
     proc = subprocess.run([str(exe), *map(str, inputs)], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     assert f"replayed {len(inputs)} inputs" in proc.stdout
+
+
+def _joints_then_hello() -> bytes:
+    """A JOINTS packet whose bytes fill the union, then a HELLO with fewer cameras than slots."""
+    xyz = np.full((25, 3), 0x4141, np.int16)
+    joints = Joints(make_header(MsgType.JOINTS, 1, 10, 20), 0, xyz, np.full(25, 0x41, np.uint8), np.zeros(25, bool))
+    hello = Hello(make_header(MsgType.HELLO, 1, 10, 30), 1, 0, 25, 0, 0, "rig", ("left",))
+    return encode(joints) + encode(hello)
+
+
+def test_harness_checks_camera_names_past_n_cameras(tmp_path: Path) -> None:
+    """The decoder clears the HELLO name slots it does not fill (they share the union with the joints); the
+    harness holds it to that, so a regression shows up as a crash, not as stale bytes a caller reads."""
+    cc = require_compiler()
+    exe = compile_c(cc, tmp_path / "fuzz_replay", [C_DIR / "ghjoints.c", C_DIR / "fuzz" / "fuzz_ghjoints.c"],
+                    ["-DGHJ_FUZZ_STANDALONE", *sanitizer_flags(cc, tmp_path)])
+    case = tmp_path / "joints_then_hello.bin"
+    case.write_bytes(_joints_then_hello())
+    proc = subprocess.run([str(exe), str(case)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "replayed 1 inputs" in proc.stdout
 
 
 def _libfuzzer_clang() -> str | None:
