@@ -70,3 +70,25 @@ def test_run_fuzz_script_for_a_few_seconds(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "crashes=0" in proc.stdout and "run_fuzz: OK" in proc.stdout
     assert (tmp_path / "crashes.prev" / "crash-earlier-run").exists()
+
+
+@pytest.mark.parametrize(("fails_on", "status"), [("fuzz_ghjoints.c", 1), ("probe.c", 77)])
+def test_run_fuzz_fails_when_the_harness_does_not_build(tmp_path: Path, fails_on: str, status: int) -> None:
+    """77 (skip) means "no libFuzzer here" only: a clang that builds a fuzzer but not this harness (a compile
+    error in it or in ghjoints.c) fails the run. Every build failure used to give 77, so CI skipped it."""
+    cc = tmp_path / "fake-clang"
+    cc.write_text(f"""#!/bin/sh
+out=
+for a in "$@"; do
+    case "$a" in *{fails_on}) echo "fake-clang: error in $a" >&2; exit 1 ;; esac
+    [ "$prev" = -o ] && out=$a
+    prev=$a
+done
+: > "$out"
+""")
+    cc.chmod(0o755)
+    proc = subprocess.run([str(C_DIR / "fuzz" / "run_fuzz.sh"), "1"], capture_output=True, text=True, timeout=60,
+                          env={"PATH": "/usr/bin:/bin", "CC": str(cc), "OUT": str(tmp_path / "out")})
+    assert proc.returncode == status, proc.stdout + proc.stderr
+    if status == 1:
+        assert "fake-clang: error in" in proc.stderr and "harness does not build" in proc.stderr
