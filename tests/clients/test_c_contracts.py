@@ -147,6 +147,25 @@ def test_null_out_counts_like_a_full_decode(ghj_dump: Path, name: str) -> None:
     assert _run(ghj_dump, (VECTOR_DIR / f"{name}.bin").read_bytes(), "-n", "-c", "1", "-") == [{"stats": expected}]
 
 
+@pytest.mark.parametrize("args", [["-c", "0"], ["-c", "4097"], ["-c", "abc"], ["-c", "-1"], ["-c", "7x"],
+                                  ["-x"], ["two", "files"], ["-c"]])
+def test_ghj_dump_refuses_bad_arguments(ghj_dump: Path, args: list[str]) -> None:
+    """A CHUNK outside 1..4096 used to become 4096 without a word, so a run asked to feed 0 or 5000 bytes at a
+    time tested another chunking than it said; like an unknown option, it is a usage error (status 2)."""
+    path = VECTOR_DIR / "status.bin"
+    proc = subprocess.run([str(ghj_dump), *args, *([] if "files" in args else [str(path)])], capture_output=True,
+                          text=True)
+    assert proc.returncode == 2 and proc.stdout == "", proc.stdout
+    assert "CHUNK" in proc.stderr
+
+
+def test_ghj_dump_accepts_every_chunk_in_range(ghj_dump: Path) -> None:
+    expected = json.loads((VECTOR_DIR / "session.json").read_text())["stats"]
+    for chunk in ("1", "4096"):
+        lines = _run(ghj_dump, (VECTOR_DIR / "session.bin").read_bytes(), "-n", "-c", chunk, "-")
+        assert lines == [{"stats": expected}]
+
+
 # --- make check --------------------------------------------------------------------------------
 
 
@@ -181,6 +200,23 @@ def test_check_vectors_fails_when_the_decoder_fails(tmp_path: Path) -> None:
                           capture_output=True, text=True)
     assert proc.returncode == 1
     assert "exited with status 3" in proc.stdout
+
+
+def test_check_vectors_stops_on_a_signal(tmp_path: Path) -> None:
+    """A TERM (or Ctrl-C) ends check_vectors.sh at once with 143 and its temporary directory gone; its trap used
+    to remove the directory and carry on, printing a FAIL for each of the remaining runs and exiting 1."""
+    calls = tmp_path / "calls"
+    dump = tmp_path / "dump"
+    dump.write_text(f"#!/bin/sh\necho x >> {calls}\nkill -TERM $PPID\necho '{{\"stats\":{{}}}}'\n")
+    dump.chmod(0o755)
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    proc = subprocess.run([str(C_DIR / "tools" / "check_vectors.sh"), str(dump), str(VECTOR_DIR)],
+                          capture_output=True, text=True, env={**os.environ, "TMPDIR": str(scratch)}, timeout=60)
+    assert proc.returncode == 143, proc.stdout
+    assert "FAIL" not in proc.stdout
+    assert calls.read_text().count("x") == 1
+    assert list(scratch.iterdir()) == []
 
 
 # --- memory figures in docs/c-decoder.md -------------------------------------------------------

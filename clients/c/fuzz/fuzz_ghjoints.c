@@ -6,8 +6,9 @@
  *   - the result sequence does not depend on how the bytes are chunked
  *     (byte-at-a-time vs. chunks of a size taken from the input);
  *   - every decoded packet is within bounds (count <= GHJ_MAX_JOINTS, missing
- *     is 0/1, strings are NUL-terminated printable ASCII of legal length) and
- *     joints beyond count are marked missing with zero fields; the comparison
+ *     is 0/1, strings are NUL-terminated printable ASCII of legal length),
+ *     joints beyond count are marked missing with zero fields and a HELLO's
+ *     camera names beyond n_cameras are empty; the comparison
  *     covers every decoded field (header, payload, the skipped type);
  *   - the counters add up: frames == messages + skipped + all errors;
  *   - only GHJ_PACKET writes the caller's ghj_packet: an error or GHJ_SKIPPED
@@ -128,6 +129,10 @@ static uint32_t digest(ghj_result r, const ghj_packet *p, uint8_t skipped_type)
         for (i = 0; i < p->u.hello.n_cameras; i++) {
             check_string(p->u.hello.cameras[i], GHJ_MAX_CAMERA_NAME_LEN);
             h = fnv(h, p->u.hello.cameras[i], strlen(p->u.hello.cameras[i]) + 1u);
+        }
+        /* The slots past n_cameras share the union with joints: a caller scanning all of them must find "". */
+        for (; i < GHJ_MAX_CAMERAS; i++) {
+            check(p->u.hello.cameras[i][0] == '\0', "camera names past n_cameras are empty");
         }
         break;
     default:

@@ -8,7 +8,8 @@
 # Seeds the corpus with the shared vectors, runs with ASan + UBSan, prints the
 # libFuzzer summary and exits 0 if no crash was found, 1 if one was (the
 # reproducer is under $OUT/crashes/; those of the run before move to
-# $OUT/crashes.prev/), 77 if no libFuzzer-capable clang exists.
+# $OUT/crashes.prev/) or the harness does not build, 77 if no libFuzzer-capable
+# clang exists.
 set -eu
 
 secs=${1:-60}
@@ -35,11 +36,22 @@ if [ -d "$out/crashes" ] && [ -n "$(ls -A "$out/crashes")" ]; then
     echo "run_fuzz: the previous run's reproducers are now in $out/crashes.prev/"
 fi
 mkdir -p "$out/corpus" "$out/crashes"
-if ! "$CC" -g -O1 -std=c99 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
-        -I"$root/clients/c" "$root/clients/c/ghjoints.c" "$here/fuzz_ghjoints.c" \
-        -o "$out/fuzz_ghjoints" 2>"$out/build.log"; then
+sanitize="-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined"
+# Whether $CC can build a fuzzer at all (77, skip) is asked of an empty target first, so that a harness or
+# decoder that does not compile fails the run (1) instead of passing for a missing libFuzzer.
+printf '#include <stddef.h>\n#include <stdint.h>\n%s\n' \
+    'int LLVMFuzzerTestOneInput(const uint8_t *d, size_t n) { (void)d; (void)n; return 0; }' >"$out/probe.c"
+# shellcheck disable=SC2086
+if ! "$CC" $sanitize "$out/probe.c" -o "$out/probe" >"$out/build.log" 2>&1; then
     echo "run_fuzz: $CC cannot build with -fsanitize=fuzzer (see $out/build.log)" >&2
     exit 77
+fi
+# shellcheck disable=SC2086
+if ! "$CC" -g -O1 -std=c99 $sanitize -I"$root/clients/c" "$root/clients/c/ghjoints.c" "$here/fuzz_ghjoints.c" \
+        -o "$out/fuzz_ghjoints" 2>"$out/build.log"; then
+    cat "$out/build.log" >&2
+    echo "run_fuzz: FAILED, the harness does not build with $CC (see $out/build.log)" >&2
+    exit 1
 fi
 cp "$root"/tests/vectors/joint_stream/*.bin "$out/corpus/"
 

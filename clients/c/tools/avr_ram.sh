@@ -19,7 +19,11 @@ if ! command -v "$cc" >/dev/null 2>&1; then
     exit 77
 fi
 tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT INT TERM
+# A signal ends the script (its EXIT trap removes $tmp): trapping INT/TERM with the rm alone went on with the
+# loop after the directory was gone, reporting a FAIL for every remaining run.
+trap 'rm -rf "$tmp"' EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
 
 # ram ELF: ".data + .bss" of a linked program, in bytes
 ram() {

@@ -10,7 +10,11 @@ set -u
 dump=$1
 dir=$2
 tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT INT TERM
+# A signal ends the script (its EXIT trap removes $tmp): trapping INT/TERM with the rm alone went on with the
+# loop after the directory was gone, reporting a FAIL for every remaining run.
+trap 'rm -rf "$tmp"' EXIT
+trap 'exit 130' INT
+trap 'exit 143' TERM
 fail=0
 n=0
 

@@ -5,8 +5,8 @@
  * shared vectors (tests/vectors/joint_stream) and with the Python decoder.
  *
  * usage: ghj_dump [-c CHUNK] [-n] FILE|-
- *   -c CHUNK  feed the decoder CHUNK bytes per ghj_feed() call (default 4096;
- *             1 exercises byte-at-a-time streaming)
+ *   -c CHUNK  feed the decoder CHUNK bytes per ghj_feed() call, 1..4096
+ *             (default 4096; 1 exercises byte-at-a-time streaming)
  *   -n        counters only: pass out = NULL and result = NULL to ghj_feed()
  *             and print only the stats line
  *
@@ -113,16 +113,26 @@ int main(int argc, char **argv)
 
     for (i = 1; i < argc; i++) {
         if (strcmp(argv[i], "-c") == 0 && i + 1 < argc) {
-            chunk = (size_t)strtoul(argv[++i], NULL, 10);
-            if (chunk == 0 || chunk > sizeof buf) chunk = sizeof buf;
+            /* A bad CHUNK is a usage error: falling back to 4096 made `-c 0` or `-c 5000` test another chunking
+             * than the one asked for, silently. */
+            char *end;
+            unsigned long v = strtoul(argv[++i], &end, 10);
+            if (*argv[i] < '0' || *argv[i] > '9' || *end != '\0' || v == 0 || v > sizeof buf) {
+                fprintf(stderr, "ghj_dump: -c %s: CHUNK must be 1..%u\n", argv[i], (unsigned)sizeof buf);
+                return 2;
+            }
+            chunk = (size_t)v;
         } else if (strcmp(argv[i], "-n") == 0) {
             counters_only = 1;
-        } else {
+        } else if (path == NULL && (argv[i][0] != '-' || argv[i][1] == '\0')) {
             path = argv[i];
+        } else {
+            path = NULL; /* an unknown option, a second file or -c without CHUNK */
+            break;
         }
     }
     if (!path) {
-        fprintf(stderr, "usage: ghj_dump [-c CHUNK] [-n] FILE|-\n");
+        fprintf(stderr, "usage: ghj_dump [-c CHUNK] [-n] FILE|-   (CHUNK 1..%u)\n", (unsigned)sizeof buf);
         return 2;
     }
     f = strcmp(path, "-") == 0 ? stdin : fopen(path, "rb");
