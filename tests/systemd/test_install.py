@@ -191,3 +191,11 @@ def test_a_reinstall_keeps_the_udev_rules_a_user_added(tmp_path):
     proc = _install("--destdir", str(root), "--prefix", str(prefix))  # idempotent: nothing moves twice
     assert proc.returncode == 0 and "moved" not in proc.stdout
     assert (rules_d / "61-ghnerf-local.rules").read_text() == local
+
+
+def test_help_is_the_header_comment_only():
+    # it printed the header's lines by number, and with them the script's "set -euo pipefail"
+    proc = _install("--help")
+    assert proc.returncode == 0
+    assert proc.stdout.startswith("Install the ghnerf daemon") and "docs/daemon.md has the details." in proc.stdout
+    assert "set -euo" not in proc.stdout and "#" not in proc.stdout.splitlines()[0]
