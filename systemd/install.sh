@@ -7,7 +7,7 @@
 #
 # What it does: a virtual environment with the runtime only (no PyTorch) at PREFIX/venv, pinned by
 # constraints.txt; the models and docs under PREFIX; the unit file, the udev rules and, when none is
-# there yet, /etc/ghnerf/daemon.json (an existing config is never overwritten); a system user
+# there yet, /etc/ghnerf/daemon.json and 61-ghnerf-local.rules (yours: never overwritten); a system user
 # `ghnerf` in plugdev, dialout and video; the config checked with --validate-config; then systemd and
 # udev reloaded and the service enabled and started. docs/daemon.md has the details.
 set -euo pipefail
@@ -19,7 +19,7 @@ START=1
 VENV=1
 
 die() { echo "install.sh: error: $*" >&2; exit 2; }
-usage() { sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; exit "${1:-0}"; }
+usage() { sed -n '2,/^set -euo/p' "$0" | sed '$d' | sed 's/^# \{0,1\}//'; exit "${1:-0}"; }
 
 while [ $# -gt 0 ]; do
     case "$1" in
@@ -78,6 +78,24 @@ swap_models() {
     cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/" && chmod go+r "$ROOT$PREFIX"/docs/*.md
 }
 
+# udev: 60-ghnerf.rules is ours and replaced; 61-ghnerf-local.rules is the user's and written only when absent.
+# Rules a user added to an installed 60-ghnerf.rules (its templates used to be there) move to the local file
+# first: overwritten, a usb:// receiver lost its permissions and a serial one its stable name at the upgrade.
+active_rules() { grep -v '^[[:space:]]*\(#\|$\)' "$1" || true; }
+install_rules() {
+    local dir="$ROOT/etc/udev/rules.d" added
+    local ours="$dir/60-ghnerf.rules" local_rules="$dir/61-ghnerf-local.rules"
+    [ -e "$local_rules" ] || install -m 0644 "$REPO/systemd/61-ghnerf-local.rules" "$local_rules"
+    if [ -f "$ours" ]; then
+        added=$(active_rules "$ours" | grep -vxF -f <(active_rules "$REPO/systemd/60-ghnerf.rules"; active_rules "$local_rules") || true)
+        if [ -n "$added" ]; then
+            printf '\n# moved here from 60-ghnerf.rules by install.sh (%s)\n%s\n' "$(date -u +%F)" "$added" >> "$local_rules"
+            echo "moved $(printf '%s\n' "$added" | wc -l) rule(s) of yours from $ours to $local_rules"
+        fi
+    fi
+    install -m 0644 "$REPO/systemd/60-ghnerf.rules" "$ours"
+}
+
 if [ -z "$DESTDIR" ]; then
     getent group plugdev >/dev/null || groupadd --system plugdev
     getent group dialout >/dev/null || groupadd --system dialout
@@ -134,7 +152,7 @@ fi
 
 sed "s|/opt/ghnerf|$PREFIX|g" "$REPO/systemd/ghnerf.service" > "$ROOT/etc/systemd/system/ghnerf.service"
 chmod 0644 "$ROOT/etc/systemd/system/ghnerf.service"
-install -m 0644 "$REPO/systemd/60-ghnerf.rules" "$ROOT/etc/udev/rules.d/60-ghnerf.rules"
+install_rules
 if [ -e "$ROOT/etc/ghnerf/daemon.json" ]; then
     echo "kept the existing $ROOT/etc/ghnerf/daemon.json"
 else

@@ -1,8 +1,10 @@
 """serial:///dev/ttyACM0?baud=921600 - the protocol over a UART or USB CDC port (pyserial).
 
-Query: ``baud`` (default 115200), ``write_timeout_ms`` (default 100), plus the
-common options. The rate is capped at what the baud rate carries (8N1, with
-headroom); a faster producer is decimated with a warning, never backed up.
+Query: ``baud`` (default 115200; 50 to 2**31 - 1), ``write_timeout_ms`` (default
+100, at most 60000), plus the common options. The device path is percent-decoded
+(a ``#`` in it is written ``%23``), as in file:// and rig URLs. The rate is capped
+at what the baud rate carries (8N1, with headroom); a faster producer is
+decimated with a warning, never backed up.
 Unplug shows up as a failed write (EIO on Linux); the port is then reopened by
 path with backoff, so use a stable path such as /dev/serial/by-id/....
 
@@ -20,6 +22,7 @@ import os
 import select
 import time
 from typing import Any, Optional
+from urllib.parse import unquote
 
 import serial
 
@@ -30,7 +33,14 @@ from firmware_host.protocol.messages import Message
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.rate import serial_capacity_fps
-from firmware_host.sinks.url import SinkUrl, parse_url, positive_int
+from firmware_host.sinks.url import SinkUrl, int_in, parse_url
+
+#: The rates a port may be asked for: B50 is the lowest POSIX rate, and pyserial hands any other rate to
+#: termios as a signed 32-bit int (a larger one failed every open with an OverflowError, retried forever).
+MIN_BAUD, MAX_BAUD = 50, 2**31 - 1
+#: Longest wait for room in a stalled port: a joint frame a minute late is of no use (and a value past
+#: select()'s range, once accepted, failed every frame of a stalled port with a traceback in the journal).
+MAX_WRITE_TIMEOUT_MS = 60_000
 
 
 class SerialSink(ProtocolSink):
@@ -53,8 +63,10 @@ class SerialSink(ProtocolSink):
             # serial://dev/ttyACM0 would be the relative path dev/ttyACM0 (its "dev" a URL's host), opened
             # from the daemon's working directory and retried forever: the path is absolute (as for file://)
             raise SinkConfigError(url, "port", port, f"expected an absolute path: serial:///{port.lstrip('/')}")
-        baud = u.take("baud", positive_int, 115200, kw)
-        timeout_ms = u.take("write_timeout_ms", positive_int, 100, kw)
+        # percent-decoded as file:// and rig URLs are: a '#' in a by-id name can only be written %23
+        port = unquote(port)
+        baud = u.take("baud", int_in(MIN_BAUD, MAX_BAUD, "bits per second"), 115200, kw)
+        timeout_ms = u.take("write_timeout_ms", int_in(1, MAX_WRITE_TIMEOUT_MS, "milliseconds"), 100, kw)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)

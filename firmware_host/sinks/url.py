@@ -81,6 +81,16 @@ def positive_int(raw: str) -> int:
     return v
 
 
+def int_in(lo: int, hi: int, why: str = "") -> Callable[[str], int]:
+    """A converter for an integer in ``[lo, hi]``; ``why`` (the reason for the bounds) ends its message."""
+    def convert(raw: str) -> int:
+        v = int(raw, 0)
+        if not lo <= v <= hi:
+            raise ValueError(f"must be in [{lo}, {hi}]" + (f": {why}" if why else ""))
+        return v
+    return convert
+
+
 def non_negative_int(raw: str) -> int:
     v = int(raw, 0)
     if v < 0:

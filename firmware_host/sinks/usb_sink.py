@@ -1,7 +1,7 @@
 """usb://VID:PID?ep=0x01 - the protocol over a USB bulk OUT endpoint (pyusb).
 
 Query: ``ep`` (bulk OUT endpoint address, required), ``interface`` (default 0),
-``timeout_ms`` (default 100), plus the common options. The libusb backend
+``timeout_ms`` (default 100, at most 60000), plus the common options. The libusb backend
 comes from ``libusb_package`` unless a pyusb backend is passed as ``backend=``.
 
 Error handling: a stalled endpoint (EPIPE) has its halt cleared and the frame
@@ -24,9 +24,13 @@ import usb.util
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
-from firmware_host.sinks.url import SinkUrl, non_negative_int, parse_url, positive_int
+from firmware_host.sinks.url import SinkUrl, int_in, non_negative_int, parse_url
 
 _log = logging.getLogger(__name__)
+
+#: Longest bulk write: a joint frame a minute late is of no use, and libusb takes the timeout as an unsigned
+#: 32-bit int in which 0 means never (ctypes wraps 2**32 ms to 0: a stalled receiver held the worker for ever).
+MAX_TIMEOUT_MS = 60_000
 
 
 def _vid_pid(url: str, netloc: str) -> tuple[int, int]:
@@ -68,7 +72,7 @@ class UsbSink(ProtocolSink):
             raise SinkConfigError(url, "ep", None, "the bulk OUT endpoint is required, e.g. ?ep=0x01")
         ep = u.take("ep", _out_endpoint, 0, kw)
         interface = u.take("interface", non_negative_int, 0, kw)
-        timeout_ms = u.take("timeout_ms", positive_int, 100, kw)
+        timeout_ms = u.take("timeout_ms", int_in(1, MAX_TIMEOUT_MS, "milliseconds"), 100, kw)
         backend = kw.pop("backend", None)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()

@@ -134,3 +134,35 @@ def test_a_plus_in_a_sink_option_is_a_plus():
     from firmware_host.sinks.url import parse_url
 
     assert parse_url("udp://127.0.0.1:9000?name=a+b&x=c%20d").query == {"name": "a+b", "x": "c d"}
+
+
+@pytest.mark.parametrize("url, field", [
+    # termios takes a custom rate as a signed 32-bit int: this one failed every open (OverflowError,
+    # logged as a backend bug) and was retried forever, after --validate-config had passed it
+    ("serial:///dev/ttyACM0?baud=2147483648", "baud"),
+    ("serial:///dev/ttyACM0?baud=9", "baud"),  # below B50: a frame every few minutes
+    # past select()'s range: every frame of a stalled port failed with a traceback in the journal
+    ("serial:///dev/ttyACM0?write_timeout_ms=10000000000000", "write_timeout_ms"),
+    ("serial:///dev/ttyACM0?write_timeout_ms=60001", "write_timeout_ms"),
+    # libusb's timeout is an unsigned 32-bit int where 0 means never: 2**32 wrapped to a write that never timed out
+    ("usb://1209:0001?ep=0x01&timeout_ms=4294967296", "timeout_ms"),
+])
+def test_serial_and_usb_numbers_out_of_range_are_refused_up_front(url, field):
+    e = _refused(url)
+    assert e.field == field and e.url == url and "must be in [" in str(e)
+
+
+def test_serial_and_usb_numbers_at_their_bounds_are_taken():
+    from firmware_host.sinks.usb_sink import UsbSink
+
+    sink = SerialSink.from_url("serial:///dev/ttyACM0?baud=2147483647&write_timeout_ms=60000")
+    assert (sink.baud, sink.write_timeout_s) == (2**31 - 1, 60.0)
+    assert SerialSink.from_url("serial:///dev/ttyACM0?baud=50").baud == 50
+    assert UsbSink.from_url("usb://1209:0001?ep=0x01&timeout_ms=60000").timeout_ms == 60000
+
+
+def test_serial_device_path_is_percent_decoded_as_the_docs_say():
+    # docs/protocol.md: a '#' in a path is written %23; the serial sink opened the literal ".../a%23b"
+    # (no such file, retried forever) where file:// and rig URLs decode it
+    url = "serial:///dev/serial/by-id/usb-Board%231-if00?baud=921600"
+    assert SerialSink.from_url(url).port == "/dev/serial/by-id/usb-Board#1-if00"

@@ -146,12 +146,56 @@ _RULE_KEY = re.compile(r'^(SUBSYSTEM|ATTRS\{\w+\}|ATTR\{\w+\}|KERNEL|ENV\{\w+\}|
                        r'(==|!=|\+=|=)"[^"]*"$')
 
 
+def _active_rules(path: Path) -> list[str]:
+    return [line.strip() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
+
+
 def test_udev_rules_parse():
-    lines = [line.strip() for line in (REPO / "systemd/60-ghnerf.rules").read_text().splitlines()]
+    lines = [line.strip() for name in ("60-ghnerf.rules", "61-ghnerf-local.rules")
+             for line in (REPO / "systemd" / name).read_text().splitlines()]
     rules = [line for line in lines if line and not line.startswith("#")]
     assert rules, "no active rule"
+    assert not _active_rules(REPO / "systemd/61-ghnerf-local.rules")  # templates only: the user's ids go there
     commented = [line.lstrip("# ") for line in lines if line.startswith("# SUBSYSTEM")]
+    assert len(commented) == 2  # a USB receiver, a serial receiver's stable name
     for rule in rules + commented:  # the templates must be valid once uncommented too
         for pair in (p.strip() for p in rule.split(",")):
             assert _RULE_KEY.match(pair), f"bad udev pair {pair!r} in {rule!r}"
     assert any('ATTRS{idVendor}=="03e7"' in rule for rule in rules)  # Luxonis / Movidius
+
+
+def test_a_reinstall_keeps_the_udev_rules_a_user_added(tmp_path):
+    """The rules' templates said to uncomment them in the installed file, which every install replaced: after an
+    upgrade a usb:// receiver could no longer be claimed (EACCES, retried for ever) and a serial receiver's
+    /dev/ghnerf-robot was gone. Now rules of one's own live in 61-ghnerf-local.rules, written only when absent,
+    and a rule found added to an installed 60-ghnerf.rules is moved there before that file is replaced."""
+    root, prefix = tmp_path / "stage", tmp_path / "prefix"
+    rules_d = root / "etc/udev/rules.d"
+    assert _install("--destdir", str(root), "--prefix", str(prefix)).returncode == 0
+    receiver = 'SUBSYSTEM=="usb", ATTRS{idVendor}=="cafe", ATTRS{idProduct}=="4011", MODE="0660", GROUP="plugdev"'
+    robot = 'SUBSYSTEM=="tty", ATTRS{idVendor}=="2e8a", ATTRS{idProduct}=="000a", SYMLINK+="ghnerf-robot"'
+    with open(rules_d / "60-ghnerf.rules", "a") as fh:  # as an earlier layout's comment told the user
+        fh.write(receiver + "\n")
+    with open(rules_d / "61-ghnerf-local.rules", "a") as fh:
+        fh.write(robot + "\n")
+
+    proc = _install("--destdir", str(root), "--prefix", str(prefix))
+    assert proc.returncode == 0, proc.stderr
+    assert "moved 1 rule(s) of yours" in proc.stdout
+    assert (rules_d / "60-ghnerf.rules").read_text() == (REPO / "systemd/60-ghnerf.rules").read_text()
+    active = [rule for path in sorted(rules_d.glob("*.rules")) for rule in _active_rules(path)]
+    assert receiver in active and robot in active
+    assert active.count(receiver) == 1
+    local = (rules_d / "61-ghnerf-local.rules").read_text()
+
+    proc = _install("--destdir", str(root), "--prefix", str(prefix))  # idempotent: nothing moves twice
+    assert proc.returncode == 0 and "moved" not in proc.stdout
+    assert (rules_d / "61-ghnerf-local.rules").read_text() == local
+
+
+def test_help_is_the_header_comment_only():
+    # it printed the header's lines by number, and with them the script's "set -euo pipefail"
+    proc = _install("--help")
+    assert proc.returncode == 0
+    assert proc.stdout.startswith("Install the ghnerf daemon") and "docs/daemon.md has the details." in proc.stdout
+    assert "set -euo" not in proc.stdout and "#" not in proc.stdout.splitlines()[0]

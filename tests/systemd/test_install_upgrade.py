@@ -61,7 +61,7 @@ class Host:
     def __init__(self, tmp: Path) -> None:
         self.repo = tmp / "repo"
         (self.repo / "systemd").mkdir(parents=True)
-        for name in ("install.sh", "ghnerf.service", "60-ghnerf.rules", "daemon.json"):
+        for name in ("install.sh", "ghnerf.service", "60-ghnerf.rules", "61-ghnerf-local.rules", "daemon.json"):
             shutil.copy(REPO / "systemd" / name, self.repo / "systemd" / name)
         (self.repo / "docs").mkdir()
         (self.repo / "docs/daemon.md").write_text("# daemon\n")
