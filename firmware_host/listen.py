@@ -29,7 +29,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import parse_qs, unquote, urlsplit
 
 from firmware_host.addresses import ipv4_first
 from firmware_host.protocol.constants import Fault
@@ -187,7 +187,8 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
             baud = int(query.get("baud", ["115200"])[0])
         except ValueError:
             raise ListenError(f"{url}: baud must be a whole number") from None
-        return _SerialPort(device, baud)
+        # percent-decoded as the serial sink's path is: a '#' in a udev by-id name can only be written %23
+        return _SerialPort(unquote(device), baud)
     raise ListenError(f"{url}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")
 
 

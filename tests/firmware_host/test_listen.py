@@ -37,6 +37,20 @@ def test_udp_summary_counts_what_the_sink_sent():
     assert "JOINTS/s" in text and "25.0 joints present" in text and "rig 'bench'" in text
 
 
+def test_serial_device_path_is_percent_decoded_as_the_sink_decodes_it(tmp_path):
+    """A udev by-id name with a '#' is written %23 in a URL; the listener opens the decoded path."""
+    master, slave = os.openpty()
+    link = tmp_path / "usb-Robot#1-if00"
+    link.symlink_to(os.ttyname(slave))
+    port = listen.open_port(f"serial://{str(tmp_path)}/usb-Robot%231-if00?baud=115200")
+    try:
+        assert port.port.port == str(link)
+    finally:
+        port.close()
+        os.close(master)
+        os.close(slave)
+
+
 def test_serial_json_lines_over_a_pty():
     master, slave = os.openpty()
     name = os.ttyname(slave)
