@@ -135,7 +135,7 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     planes = np.concatenate([_u8(blend), mask[..., None], seen[..., None], normals,
                              rel.astype(np.float16)[..., None], _u8(shown)], -1)
     ju, jz = camera.project(joints, distort=False)
-    ok = valid & (np.nan_to_num(jz) > 0)
+    ok = valid & (np.nan_to_num(jz) > 0) & np.all(np.isfinite(ju), axis=-1)  # NaN: no pixel (Camera.project)
     j = np.stack([np.where(ok, np.nan_to_num(ju[:, 0]), 0.0), np.where(ok, np.nan_to_num(ju[:, 1]), 0.0), ok], -1)
     return PainterPlanes(np.ascontiguousarray(planes.transpose(2, 0, 1), np.float32), j.astype(np.float32), mask)
 

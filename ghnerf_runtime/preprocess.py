@@ -307,7 +307,7 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
     ok = (conf > min_confidence) & np.all(np.isfinite(joints), axis=1)
     if joints.shape[1] == 3:
         uv, depth = camera.project(np.where(ok[:, None], joints, 0.0), distort=False)
-        ok &= depth > NEAR_PLANE
+        ok &= (depth > NEAR_PLANE) & np.all(np.isfinite(uv), axis=1)  # NaN: a pixel past float64's range
     else:
         uv = camera.undistort_pixels(np.where(ok[:, None], joints, 0.0)) if camera.has_distortion else joints
         ok &= np.all(np.isfinite(uv), axis=1)  # beyond the lens model's reach

@@ -4,8 +4,9 @@ Lighting is one distant light (Lambert) plus a hemispherical ambient term
 (a little brighter from above), evaluated in linear BGR radiance; the
 sensor model (sensor.py) applies exposure, gamma and noise afterwards.
 
-Joint visibility (``CameraTruth.visible``) means: in front of the camera,
-inside the image, and not hidden by the body: the rendered depth at the
+Joint visibility (``CameraTruth.visible``) means: in front of the camera and
+inside its lens model's fold (``Camera.within_lens``; a joint behind the camera
+or past the fold gets ``joints_2d`` (-1, -1)), inside the image, and not hidden by the body: the rendered depth at the
 joint's pixel is no nearer than the joint's depth minus the joint's
 embedding depth (how far it sits under the skin) minus ``VISIBILITY_MARGIN_M``,
 and, for joints on the skin (nose, eyes, ears, toes, heels), the skin there
@@ -197,14 +198,17 @@ class BodyRenderer:
         in_front = z > NEAR
         safe_z = np.where(in_front, z, 1.0)
         xy = joints_cam[:, :2] / safe_z[:, None]
-        uv = camera.normalized_to_pixels(xy)
-        uv = np.where(in_front[:, None], uv, -1.0)  # behind the camera: (-1, -1), never visible
+        # Past the lens model's fold the polynomial mirrors a joint onto a pixel showing another direction
+        # (Camera.project gives NaN there): no pixel shows it, like a joint behind the camera.
+        in_front &= camera.within_lens(xy)
+        uv = camera.normalized_to_pixels(np.where(in_front[:, None], xy, 0.0))
+        uv = np.where(in_front[:, None], uv, -1.0)  # behind the camera or past the fold: (-1, -1), never visible
         xmin, xmax, ymin, ymax = grid.bounds
         W, H = camera.width, camera.height
         inside = (
             in_front
             & (uv[:, 0] >= -0.5) & (uv[:, 0] < W - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] < H - 0.5)
-            # The lens polynomial can fold far off-image points back in; reject them by angle.
+            # and within the angles the image's pixels see (with a margin)
             & (xy[:, 0] >= xmin - 0.05) & (xy[:, 0] <= xmax + 0.05) & (xy[:, 1] >= ymin - 0.05) & (xy[:, 1] <= ymax + 0.05)
         )
         cols = np.clip(np.rint(uv[:, 0]), 0, W - 1).astype(np.int64)

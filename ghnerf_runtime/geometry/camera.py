@@ -291,8 +291,14 @@ class Camera:
         A lens model that does not fold is checked out to :data:`LENS_REACH` only: beyond it
         (within 0.0001 degrees of the camera plane) points count as outside too."""
         xy = check_last_dim("xy", xy, 2)
-        limit = self.fold_radius if not self.has_distortion or math.isfinite(self.fold_radius) else LENS_REACH
-        return np.sum(xy * xy, axis=-1) < limit**2
+        return np.sum(xy * xy, axis=-1) < self._lens_limit() ** 2
+
+    def _lens_limit(self) -> float:
+        """The normalised radius :meth:`within_lens` (and :meth:`project`) trust the lens model to."""
+        if not self.has_distortion:
+            return math.inf
+        fold = self.fold_radius
+        return fold if math.isfinite(fold) else LENS_REACH
 
     @property
     def fold_radius(self) -> float:
@@ -328,9 +334,15 @@ class Camera:
             distort: apply the lens model (``False`` gives ideal pinhole pixels).
 
         Returns:
-            ``uv`` ``(..., 2)`` pixels and ``depth`` ``(...)`` (camera z, metres). Points at or
-            behind the camera plane get ``uv = NaN`` and their (non-positive) depth, so callers
-            can flag them; nothing else is ever NaN.
+            ``uv`` ``(..., 2)`` pixels and ``depth`` ``(...)`` (camera z, metres). ``uv`` is NaN
+            for every point no pixel shows, so callers need one test (``np.isfinite``):
+
+            * at or behind the camera plane (depth <= 1e-9; the depth is returned as is);
+            * with ``distort``, past the lens model's fold (:meth:`within_lens`): the polynomial
+              would mirror it onto a pixel nearer the centre that shows another direction;
+            * NaN or inf coordinates, or a pixel too large for float64: never ``inf``.
+
+            Every other point gets a finite pixel (it may lie outside the image).
 
         Example:
             >>> cam = Camera("c", 640, 480, [[500, 0, 320], [0, 500, 240], [0, 0, 1]])
@@ -338,14 +350,22 @@ class Camera:
             >>> uv.tolist(), float(z)
             ([320.0, 240.0], 2.0)
         """
-        pc = self.to_camera(points)
-        z = pc[..., 2]
-        in_front = z > 1e-9
-        safe_z = np.where(in_front, z, 1.0)
-        xy = pc[..., :2] / safe_z[..., None]
-        uv = self.normalized_to_pixels(xy, distort=distort)
-        uv = np.where(in_front[..., None], uv, np.nan)
-        return uv, z
+        with np.errstate(over="ignore", invalid="ignore"):  # huge or NaN points: flagged below
+            pc = self.to_camera(points)
+            z = pc[..., 2]
+            seen = z > 1e-9
+            xy = pc[..., :2] / np.where(seen, z, 1.0)[..., None]
+            if distort and self.has_distortion:
+                seen &= np.sum(xy * xy, axis=-1) < self._lens_limit() ** 2  # within_lens; False for NaN, inf
+            everywhere = bool(seen.all())
+            if not everywhere:  # flagged points go through the lens model at the axis: no overflow from them
+                xy = np.where(seen[..., None], xy, 0.0)
+            uv = self.normalized_to_pixels(xy, distort=distort)
+            finite = np.isfinite(uv)  # not: inf coordinates, or a pixel past float64's range
+            if not finite.all():
+                seen &= np.all(finite, axis=-1)
+                everywhere = False
+        return (uv if everywhere else np.where(seen[..., None], uv, np.nan)), z
 
     def rays(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rays through distorted pixel coordinates ``(..., 2)``.

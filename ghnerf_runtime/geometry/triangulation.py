@@ -62,15 +62,16 @@ class TriangulationResult:
         reprojection_error: ``(..., J, C)`` distance in pixels between the observation and
             the reprojected point, in the pixel space of the input (distorted pixels unless
             the input was undistorted). Given for every finite observation of a valid joint,
-            including ones that were ignored (weight 0) or dropped, as long as the point is in
-            front of that camera; ``0.0`` everywhere else. Use ``used`` to tell them apart.
+            including ones that were ignored (weight 0) or dropped, as long as that camera can
+            see the point (in front of it and, for distorted pixels, inside its lens model's fold:
+            :meth:`Camera.project`); ``0.0`` everywhere else. Use ``used`` to tell them apart.
         ray_angle_deg: ``(..., J)`` conditioning figure: the largest angle, in degrees within
             [0, 90], between the lines of any two used rays. ``0.0`` with fewer than two
             used views. Reported for invalid joints too (as a diagnostic).
         num_views: ``(..., J)`` number of used observations (int).
         valid: ``(..., J)`` True where the point is trustworthy: at least two used views,
             ``ray_angle_deg >= min_ray_angle_deg``, a finite solution that is not at
-            infinity, and in front of every used camera.
+            infinity, and seen by every used camera (in front of it, inside its lens fold).
         used: ``(..., J, C)`` which observations took part in the solution.
     """
 
@@ -285,7 +286,8 @@ def _finish(views: _Views, points: np.ndarray, ok: np.ndarray, angle: np.ndarray
                 uv_hat = ph[..., :2] / ph[..., 2:3]
             uv_hat = np.where((depth[:, c] > MIN_DEPTH)[..., None], uv_hat, np.nan)
             err[:, c] = np.linalg.norm(uv_hat - views.uv[:, c], axis=-1)
-        # A used view whose error is not finite (overflow) makes the joint untrustworthy.
+        # A used view whose error is not finite makes the joint untrustworthy: the point is past that
+        # camera's lens fold (Camera.project: NaN, the view cannot have seen it) or overflowed.
         ok &= ~np.any(views.used & ~np.isfinite(err), axis=1)
         err = np.where(np.isfinite(err) & ok[:, None, :], err, 0.0)
 
@@ -515,8 +517,10 @@ def triangulate_robust(
     ``max_reprojection_error``, each used view is left out in turn (leave-one-out DLT);
     the view whose removal gives the smallest remaining largest error is dropped, if that
     improves the joint. This repeats while the joint still exceeds the threshold and has
-    more than two views. Joints that still exceed the threshold afterwards (including
-    two-view joints, where the culprit cannot be told) are marked invalid.
+    more than two views. A joint the DLT found invalid with more than two views (a wrong view
+    put it behind a camera or past a lens model's fold) is tried the same way, and kept if
+    leaving a view out makes it valid. Joints that still exceed the threshold afterwards
+    (including two-view joints, where the culprit cannot be told) are marked invalid.
 
     Dropped views show up as ``used == False`` with their reprojection error against the
     final point still reported.
@@ -546,8 +550,10 @@ def triangulate_robust(
     N, C, J = views.w.shape
     result = _dlt(views, min_ray_angle_deg)
     for _ in range(max(C - 2, 0)):
-        worst = result.max_reprojection_error()
-        bad = result.valid & (worst > max_reprojection_error) & (result.num_views > 2)
+        # An invalid joint is a candidate too: a wrong view can put the point behind a camera or past
+        # its lens model's fold, where no reprojection error exists to compare (inf: any valid trial is better).
+        worst = np.where(result.valid, result.max_reprojection_error(), np.inf)
+        bad = (worst > max_reprojection_error) & (result.num_views > 2)
         if not np.any(bad):
             break
         bad_flat = bad.reshape(N, J)

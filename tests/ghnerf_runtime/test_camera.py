@@ -329,3 +329,57 @@ def test_a_lens_folding_far_out_is_flagged_and_inverted_up_to_its_fold():
     mild = make_camera([0.3, 0.1, 0.0, 0.0, 0.0])  # pincushion
     assert mild.fold_radius == np.inf and mild.within_lens([LENS_REACH * 0.99, 0.0])
     assert not mild.within_lens([LENS_REACH * 1.01, 0.0]) and make_camera(DISTORTIONS["none"]).within_lens([1e9, 0.0])
+
+
+# A strongly folding lens: r * radial(r) = r - 0.5 r^3 + 0.05 r^5 peaks at r = 0.874 (41 degrees off the
+# axis, 283 px out with f = 500), well inside the 640x480 image, and falls back towards the centre beyond.
+FOLD_K = np.array([[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]])
+FOLD_DIST = np.array([-0.5, 0.05, 0.0, 0.0, 0.0])
+
+
+def test_points_past_the_lens_fold_project_to_nan_not_to_a_mirrored_pixel():
+    cam = Camera("fold", 640, 480, FOLD_K, FOLD_DIST)
+    assert cam.fold_radius == pytest.approx(0.874, abs=2e-3)
+    # r = 1.2 (50 degrees) and r = sqrt(2): the model puts them at 115 and 100 px from the centre, pixels
+    # that show points at r = 0.24 and 0.21. The old projection returned exactly those (549.7, 239.5) and
+    # (419.5, 339.5): finite, inside the image, wrong.
+    past = np.array([[1.2, 0.0, 1.0], [1e200, 1e200, 1e200]])
+    mirrored = cam.normalized_to_pixels(past[:, :2] / past[:, 2:])
+    assert np.all((mirrored > 0) & (mirrored < [640, 480]))
+    uv, depth = cam.project(past)
+    assert np.all(np.isnan(uv)) and depth.tolist() == [1.0, 1e200]
+    # inside the fold: unchanged, and the pixel undistorts back to the point's ray
+    inside = np.array([[0.8, 0.0, 1.0], [-0.5, 0.6, 1.0], [0.1, 0.2, 2.0]])
+    uv, _ = cam.project(inside)
+    np.testing.assert_allclose(uv, cam.normalized_to_pixels(inside[:, :2] / inside[:, 2:]), atol=0)
+    np.testing.assert_allclose(cam.pixels_to_normalized(uv), inside[:, :2] / inside[:, 2:], atol=1e-6)
+    # the lens model is not applied to ideal pixels: a pinhole does not fold
+    uv, _ = cam.project(past[:1], distort=False)
+    np.testing.assert_allclose(uv, [[919.5, 239.5]])
+
+
+@pytest.mark.parametrize("dist", [np.zeros(5), FOLD_DIST, np.array([0.3, 0.1, 0.0, 0.0, 0.0])],
+                         ids=["pinhole", "folding", "pincushion"])
+def test_projection_of_extreme_points_is_finite_or_nan_and_silent(dist):
+    import warnings
+
+    cam = Camera("c", 640, 480, FOLD_K, dist)
+    points = np.array([
+        [0.0, 0.0, 1e-12],     # in front, but inside the 1e-9 near plane
+        [0.0, 0.0, 0.0],       # on the camera centre
+        [0.1, 0.0, -1.0],      # behind
+        [1e306, 1e306, 1.0],   # the pixel overflows float64 (was inf)
+        [1.0, 1.0, 1e-300],
+        [np.nan, 0.0, 1.0], [0.0, np.nan, 1.0], [0.0, 0.0, np.nan],
+        [np.inf, 0.0, 1.0], [0.0, 0.0, np.inf], [-np.inf, 0.0, 1.0],
+    ])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # overflow and invalid-value warnings from flagged points were noise
+        uv, depth = cam.project(points)
+    assert np.all(np.isnan(uv)), uv
+    np.testing.assert_array_equal(depth[:5], points[:5, 2])
+    # far but finite pixels stay finite: the image does not bound them
+    far = np.array([[1e200, 0.0, 1e200], [0.3, -0.2, 1e-6], [0.0, 0.0, 1e300]])
+    uv, _ = cam.project(far, distort=False)
+    assert np.all(np.isfinite(uv))
+    np.testing.assert_allclose(uv[2], [319.5, 239.5])

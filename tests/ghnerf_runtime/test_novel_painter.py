@@ -77,6 +77,13 @@ def test_unknown_joints_are_marked_and_bad_inputs_named(shot):
     valid[4] = False
     p = painter_planes(np.zeros((128, 128, 3)), target, depth, sources, rgb, src, joints, valid)
     assert p.joints[4].tolist() == [0.0, 0.0, 0.0] and p.joints[3, 2] == 1.0
+    # a known joint the view has no pixel for (in front, but inside Camera.project's 1e-9 m near plane) is
+    # marked unknown too: it was marked known at pixel (0, 0)
+    close = joints.copy()
+    close[5] = target.center + 5e-10 * target.R[2] + 0.1 * target.R[0]
+    assert 0 < target.to_camera(close[5])[2] < 1e-9
+    p = painter_planes(np.zeros((128, 128, 3)), target, depth, sources, rgb, src, close, valid)
+    assert p.joints[5].tolist() == [0.0, 0.0, 0.0] and p.joints[6, 2] == 1.0
     with pytest.raises(ShapeError, match="picture"):
         painter_planes(np.zeros((64, 64, 3)), target, depth, sources, rgb, src, joints, valid)
     with pytest.raises(ShapeError, match="2 source cameras, 1 images"):

@@ -146,6 +146,19 @@ def test_roi_from_joints_leaves_out_confident_joints_behind_the_camera():
     assert roi_from_joints(cam, joints[:4], conf[:4], min_joints=3) is None  # two usable joints only
 
 
+def test_roi_from_joints_leaves_out_a_joint_whose_pixel_overflows():
+    # 1e307 m to the side, 3 m ahead: Camera.project gives NaN (its pixel overflows float64); it was inf, and
+    # the ROI became the whole frame
+    cam = Camera("c", 640, 480, K, DIST)  # at the origin, looking along z: no rounding of the huge point
+    rng = np.random.default_rng(5)
+    joints = rng.uniform([-0.3, -0.8, 2.8], [0.3, 0.8, 3.2], size=(25, 3))
+    conf = np.ones(25)
+    want = roi_from_joints(cam, joints[1:], conf[1:], margin_frac=0.1)
+    joints[0] = [1e307, 0.0, 3.0]
+    assert np.all(np.isnan(cam.project(joints[0], distort=False)[0]))
+    assert roi_from_joints(cam, joints, conf, margin_frac=0.1) == want
+
+
 # -------------------------------------------------------------------------- maps
 def _reference_crop(image, cam, roi, out_size, interpolation):
     """cv2.undistort to the ideal camera, crop the ROI, resize: three passes."""

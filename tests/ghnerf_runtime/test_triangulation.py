@@ -529,3 +529,30 @@ def test_thresholds_out_of_range_are_refused_by_name(bad):
     if bad != 91.0:
         with pytest.raises(GeometryError, match="max_reprojection_error"):
             triangulate_two_views(uv, P, np.ones((2, 3)), max_reprojection_error=bad)
+
+
+def test_a_view_that_cannot_see_the_point_past_its_lens_fold_is_not_counted_as_agreeing():
+    """The middle camera's lens model folds at r = 0.874; the joint lies at r = 1.1 in it, where the model
+    mirrors it onto pixel (626.5, 212.1). A (weak) detection there reprojected with error 0: the plain DLT
+    called the joint valid with three agreeing views and the robust solver kept the view. Now the view that
+    cannot see the point makes the DLT joint invalid (as a used camera behind the point does), and the
+    robust solver drops that view instead of losing the joint."""
+    cams = []
+    for i, x in enumerate((-1.0, 0.0, 1.0)):
+        R, t = look_at((x, -1.4 + 0.05 * i, 0.3 * abs(x)), TARGET)
+        cams.append(Camera(f"c{i}", 640, 480, K, [-0.5, 0.05, 0.0, 0.0, 0.0] if i == 1 else np.zeros(5), R, t))
+    mid = cams[1]
+    assert mid.fold_radius == pytest.approx(0.874, abs=2e-3)
+    points = np.array([mid.center + mid.R.T @ (np.array([1.1, -0.1, 1.0]) * 2.5), TARGET])
+    uv = np.stack([c.project(points)[0] for c in cams])
+    assert np.all(np.isnan(uv[1, 0])) and np.all(np.isfinite(np.delete(uv, 1, axis=0)))
+    uv[1, 0] = mid.normalized_to_pixels(np.array([1.1, -0.1]))  # the mirrored pixel, inside the image
+    assert np.all((uv[1, 0] > 0) & (uv[1, 0] < [640, 480]))
+    w = np.array([[1.0, 1.0], [1e-3, 1.0], [1.0, 1.0]])
+    dlt = triangulate_dlt(uv, cams, w)
+    assert dlt.valid.tolist() == [False, True] and dlt.used[0].all()
+    assert_finite(dlt)
+    robust = triangulate_robust(uv, cams, w, max_reprojection_error=3.0)
+    assert robust.valid.all() and robust.used[0].tolist() == [True, False, True] and robust.used[1].all()
+    np.testing.assert_allclose(robust.points, points, atol=1e-9)
+    assert robust.reprojection_error[0, 1] == 0.0  # not computed: that camera cannot see the point

@@ -227,3 +227,27 @@ def test_culling_drops_no_pixel(dist, eye, monkeypatch):
     np.testing.assert_array_equal(culled.depth, full.depth)
     np.testing.assert_array_equal(culled.prim, full.prim)
     assert full.fg_pixel.size > 0
+
+
+def test_a_joint_past_the_lens_fold_is_not_visible_at_its_mirrored_pixel():
+    """k1 = -0.5, k2 = 0.05 folds at r = 0.874, inside the 160x120 image. The mid-hip at normalised
+    (0.85, 0.72) (r = 1.11) is past it, yet inside the angle box of the image's pixels: the truth put it at
+    the mirrored pixel (128.0, 100.6) and called it visible, though no pixel of the frame shows it."""
+    import cv2
+
+    scene = _scene("stand")
+    j = JOINT_INDEX["MidHip"]
+    eye = np.array([0.0, -1.0, 0.5])
+    R0, _ = look_at(eye, scene.posed(0.0).joints[j])  # the joint on the optical axis ...
+    a = np.array([0.85, 0.72, 1.0]) / np.linalg.norm([0.85, 0.72, 1.0])
+    axis = np.cross([0.0, 0.0, 1.0], a)
+    R = cv2.Rodrigues(axis / np.linalg.norm(axis) * np.arcsin(np.linalg.norm(axis)))[0] @ R0  # ... turned out
+    cam = Camera("fold", 160, 120, [[125.0, 0.0, 79.5], [0.0, 125.0, 59.5], [0.0, 0.0, 1.0]],
+                 [-0.5, 0.05, 0.0, 0.0, 0.0], R, -R @ eye)
+    pc = cam.to_camera(scene.posed(0.0).joints[j])
+    assert cam.fold_radius < np.hypot(*(pc[:2] / pc[2])) and np.isnan(cam.project(scene.posed(0.0).joints[j])[0]).all()
+    mirrored = cam.normalized_to_pixels(pc[:2] / pc[2])
+    assert np.all((mirrored >= 0) & (mirrored < [160, 120]))  # where the lens model puts it
+    _, truth = scene.render(cam, 0.0)
+    assert not truth.visible[j]
+    np.testing.assert_array_equal(truth.joints_2d[j], -1.0)
