@@ -78,7 +78,8 @@ from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
 log = logging.getLogger(__name__)
 
-__all__ = ["AUTO_PRECISION", "GraphFile", "ModelSession", "MODEL_CARD", "resolve_model_dir", "warmup_feeds"]
+__all__ = ["AUTO_PRECISION", "GraphFile", "ModelSession", "MODEL_CARD", "check_graph_file", "resolve_model_dir",
+           "warmup_feeds"]
 
 #: Optional model card next to the graphs.
 MODEL_CARD = "model_card.json"
@@ -175,6 +176,29 @@ def _check_io(sess: ort.InferenceSession, contract: ModelContract, graph: str, p
         if arg.type != _ONNX_FLOAT:
             raise ModelContractError(f"tensor type {arg.type}, the contract says float32", path=str(path),
                                      key=arg.name)
+
+
+def check_graph_file(path: str | os.PathLike, graph: str, precision: str | None = None) -> ModelContract:
+    """What :meth:`ModelSession.load` checks of one graph file, on its own: onnxruntime loads it, its metadata
+    parse into a contract, it holds ``graph`` (of ``precision``, when given), and its inputs and outputs match
+    the contract. The exporter and the quantizer run it on each file they write (and the quantizer on the fp32
+    file it reads), so a file the runtime would refuse is refused where it is made, naming the file.
+
+    Raises:
+        ModelLoadError: a missing, truncated or corrupt file.
+        ModelContractError: naming the file and the metadata key or tensor that is wrong.
+    """
+    path = Path(path)
+    sess = _open(path, SessionConfig(model_dir=str(path.parent), threads=1, warmup=False))
+    contract, file_graph, file_precision = _contract_of(sess, path)
+    if file_graph != graph:
+        raise ModelContractError(f"holds graph {file_graph!r}, expected {graph!r}", path=str(path),
+                                 key=META_PREFIX + "graph")
+    if precision is not None and file_precision != precision:
+        raise ModelContractError(f"holds {file_precision} weights, expected {precision}", path=str(path),
+                                 key=META_PREFIX + "precision")
+    _check_io(sess, contract, graph, path)
+    return contract
 
 
 class ModelSession:

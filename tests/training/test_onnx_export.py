@@ -2,6 +2,8 @@
 dynamic targets/rays/points, contract metadata, and the ONNX-friendliness rules."""
 from __future__ import annotations
 
+import re
+
 import pytest
 
 torch = pytest.importorskip("torch")
@@ -87,3 +89,27 @@ def test_no_inverse_and_static_channel_dims(exported):
     dims = {i.name: i.shape for i in sess.get_inputs()}
     assert dims["tgt_K_inv"][1:] == [3, 3] and isinstance(dims["tgt_K_inv"][0], str)
     assert dims["src_P"] == [2, 3, 4]
+
+
+@pytest.mark.parametrize("fault", ["channels", "dynamic_sources"])
+def test_an_export_that_differs_from_its_contract_is_refused_at_export(tmp_path, monkeypatch, fault):
+    """A graph the runtime would refuse at load (ModelSession's I/O check) is refused by the exporter, naming the
+    file and the tensor: a channel count the contract states wrongly, a fixed axis exported symbolic."""
+    import training.export.export as export_mod
+    from ghnerf_runtime.errors import ModelContractError
+    from training.configs import preset
+
+    torch.manual_seed(0)
+    model = GHNeRF(preset("tiny")).eval()
+    if fault == "channels":  # the contract says 1 more feat_s1 channel than the network makes
+        channels = model.channels
+        monkeypatch.setattr(model, "channels", lambda: {**channels(), "feat_s1": channels()["feat_s1"] + 1})
+        key, what = "feat_s1", r"output shape \[2, 4, 64, 64\] != contract \[2, 5, 64, 64\]"
+    else:  # the sources axis (fixed at 2 by the contract) left dynamic
+        dynamic = export_mod._dynamic_axes
+        monkeypatch.setattr(export_mod, "_dynamic_axes", lambda spec: {**dynamic(spec), "images": {0: "S"}})
+        key, what = "images", r"input shape \['S', 3, 64, 64\] != contract \[2, 3, 64, 64\]"
+    path = tmp_path / "encoder.onnx"
+    with pytest.raises(ModelContractError, match=rf"^{re.escape(str(path))}: {key}: graph 'encoder' {what}") as e:
+        export_mod.export_graph(model, "encoder", path)
+    assert e.value.key == key and e.value.path == str(path)

@@ -156,3 +156,38 @@ def test_int8_novel_view_and_volumetric_outputs_are_bounded(graph, output, key, 
     for bad in (1.01 * bound, float("nan")):
         with pytest.raises(ParityError, match=rf"^m/{graph}\.int8\.onnx: its '{output}' differs from fp32"):
             check_int8_parity(report(bad), "m/")
+
+
+def test_quantize_refuses_a_source_the_runtime_would_refuse(tmp_path):
+    """The fp32 file a quantization reads is checked as the runtime loads it: a truncated one, one without a
+    contract, another graph's, an int8 one are refused naming the file (not a bare protobuf DecodeError, nor an
+    int8 file quietly stamped as the graph asked for)."""
+    from ghnerf_runtime.errors import ModelContractError, ModelLoadError
+    from training.configs import preset
+    from training.export.quantize import POLICIES, quantize_graph
+
+    torch.manual_seed(0)
+    model = GHNeRF(preset("tiny")).eval()
+    good = export_all(model, tmp_path / "fp32", graphs=("human",), inputs=example_inputs(model))["human"]
+    feeds = calibration_feeds(model, [torch.rand(2, 3, 64, 64)], ("human",))["human"]
+    bad = tmp_path / "bad"
+    bad.mkdir()
+
+    truncated = bad / "truncated.onnx"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    bare = onnx.load(str(good))
+    del bare.metadata_props[:]
+    onnx.save(bare, str(bad / "bare.onnx"))
+    int8 = quantize_graph(good, bad / "human.int8.onnx", feeds, POLICIES["human"], "human")
+    cases = [
+        (truncated, "human", ModelLoadError, r"truncated or corrupt\?"),
+        (bad / "bare.onnx", "human", ModelContractError, r"ghnerf\.contract_version: the file has no ghnerf\.\*"),
+        (good, "encoder", ModelContractError, r"ghnerf\.graph: holds graph 'human', expected 'encoder'"),
+        (int8, "human", ModelContractError, r"ghnerf\.precision: holds int8 weights, expected fp32"),
+    ]
+    for source, graph, error, what in cases:
+        out = tmp_path / "out" / f"{graph}.int8.onnx"
+        for policy in (POLICIES["human"], None):  # quantized or copied
+            with pytest.raises(error, match=rf"^{re.escape(str(source))}: .*{what}"):
+                quantize_graph(source, out, feeds, policy, graph)
+            assert not out.exists()

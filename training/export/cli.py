@@ -12,7 +12,8 @@ as ``model_card.stale.json`` (a warning says so).
 
 Without a checkpoint the weights are random (useful for latency and plumbing, not accuracy). The
 calibration frames are random images on a synthetic rig unless ``--calib-npz`` gives real frames
-(``images`` array ``(F, 2, 3, H, W)`` RGB in [0, 1]).
+(``images`` array ``(F, 2, 3, H, W)`` float RGB in [0, 1] at the model's resolution, as the runtime feeds it);
+a file that holds anything else is refused before the export, exit 2 (``training.export.calibration``).
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ import torch
 from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
+from training.export.calibration import CalibrationDataError, load_calibration_npz
 from training.export.export import ExampleInputs, example_inputs, export_all
 from training.export.parity import (
     ParityError, benchmark, check_fp32_parity, check_int8_parity, int8_vs_fp32, make_session, torch_vs_ort,
@@ -91,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--opset", type=int, default=17)
     ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
     ap.add_argument("--calib-frames", type=int, default=8, help="random calibration frames (no --calib-npz)")
-    ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) RGB [0, 1]")
+    ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) float RGB in [0, 1] at the model's "
+                    "resolution (checked before the export)")
     ap.add_argument("--bench", action="store_true", help="time every graph (fp32 and int8)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--report", help="write the figures as JSON here")
@@ -121,12 +124,19 @@ def main(argv: list[str] | None = None) -> int:
     graphs = tuple(g for g in args.graphs.split(",") if g) or has
     if unknown := [g for g in graphs if g not in has]:
         ap.error(f"--graphs: {', '.join(unknown)} not among this model's graphs ({', '.join(has)})")
+    calib_frames = None
+    if args.int8 and args.calib_npz:  # checked before anything is written: a wrong file fails in a second
+        try:
+            calib_frames = load_calibration_npz(args.calib_npz, model.contract(opset=args.opset))
+        except CalibrationDataError as e:
+            print(f"python -m training.export: error: --calib-npz {e}", file=sys.stderr)
+            return 2
     out = Path(args.out)
     # everything is written and checked in OUT.staging; OUT (perhaps a live model folder) changes only once the
     # parity checks pass (training.export.staging)
     staging = staging_dir(out)
     try:
-        fp32, int8 = _export_and_check(args, model, graphs, staging)
+        fp32, int8 = _export_and_check(args, model, graphs, staging, calib_frames)
     except ParityError as e:
         try:
             rejected(out, staging, e)
@@ -142,10 +152,11 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str, ...], staging: Path
-                      ) -> tuple[dict[str, Path], dict[str, Path]]:
+def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str, ...], staging: Path,
+                      calib_frames: list[np.ndarray] | None = None) -> tuple[dict[str, Path], dict[str, Path]]:
     """Export (and quantize, time) into ``staging``, print and write the report, then check the parity (unless
-    ``--no-parity-check``): a :class:`ParityError` names the graph. Returns the staged fp32 and int8 files."""
+    ``--no-parity-check``): a :class:`ParityError` names the graph. ``calib_frames``: the checked ``--calib-npz``
+    frames (None: random ones). Returns the staged fp32 and int8 files."""
     report: dict = {"preset": args.preset, "parameters": model.parameter_counts(),
                     "contract": {"resolution": f"{model.config.width}x{model.config.height}"}}
     fp32 = export_all(model, staging, graphs=graphs, opset=args.opset, inputs=example_inputs(model))
@@ -153,8 +164,8 @@ def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str
     int8 = {}
     if args.int8:
         H, W = model.config.height, model.config.width
-        if args.calib_npz:
-            frames = [torch.from_numpy(f) for f in np.load(args.calib_npz)["images"].astype(np.float32)]
+        if calib_frames is not None:
+            frames = [torch.from_numpy(f) for f in calib_frames]
         else:
             log.warning("no --calib-npz: calibrating int8 on random images; a trained model wants real frames "
                         "(make model calibrates on training scenes)")

@@ -28,6 +28,7 @@ import torch
 from torch import Tensor, nn
 
 from ghnerf_runtime.contract import GRAPH_NAMES, GraphSpec, ModelContract, ray_grid
+from ghnerf_runtime.session import check_graph_file
 from training.model.camera_inputs import box_corners, orbit_camera, scene_inputs, synthetic_rig
 from training.model.ghnerf import GHNeRF
 from training.model_card import write_atomic
@@ -160,7 +161,12 @@ def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precis
 
 def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInputs | None = None,
                  opset: int = DEFAULT_OPSET) -> Path:
-    """Export one graph (fp32) to ``path`` with the contract stamped in."""
+    """Export one graph (fp32) to ``path`` with the contract stamped in.
+
+    Raises:
+        ModelContractError: the file written is one the runtime would refuse (its inputs or outputs differ from
+            the contract); the message names the file and the tensor.
+    """
     if graph not in GRAPH_NAMES:
         raise ValueError(f"unknown graph {graph!r}; graphs: {GRAPH_NAMES}")
     path = Path(path)
@@ -188,6 +194,10 @@ def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInp
         model.train(was_training)
     stamp_metadata(path, contract, graph, "fp32")
     onnx.checker.check_model(str(path))
+    # the runtime's own load checks, here: a graph whose inputs or outputs differ from the contract (a channel
+    # count the config states wrongly, a fixed axis the tracer left symbolic) is refused now, naming the file and
+    # the tensor, not when a device loads it
+    check_graph_file(path, graph, "fp32")
     log.info("exported %s -> %s", graph, path)
     return path
 

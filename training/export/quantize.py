@@ -36,7 +36,7 @@ from onnxruntime.quantization import (
 )
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
-from ghnerf_runtime.contract import ModelContract
+from ghnerf_runtime.session import check_graph_file
 
 log = logging.getLogger(__name__)
 
@@ -153,19 +153,27 @@ def quantize_qdq(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[di
 
 def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],
                    policy: QuantPolicy | None, graph: str) -> Path:
-    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract."""
+    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract.
+
+    Raises:
+        ModelLoadError, ModelContractError: the source (or the file written) is not a ``graph`` file the runtime
+            would load as fp32 (int8); the message names the file (``ghnerf_runtime.session.check_graph_file``).
+    """
     from training.export.export import stamp_metadata
 
     fp32_path, out_path = Path(fp32_path), Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    contract = ModelContract.from_metadata({p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props})
+    # the source as the runtime would load it: a truncated file, one without a contract, another graph's or an
+    # int8 one is refused naming the file (not a bare protobuf DecodeError, nor an int8 file stamped as this graph)
+    contract = check_graph_file(fp32_path, graph, "fp32")
+    precision = "fp32" if policy is None else "int8"
     if policy is None:
         shutil.copyfile(fp32_path, out_path)
-        stamp_metadata(out_path, contract, graph, "fp32")
-        return out_path
-    quantize_qdq(fp32_path, out_path, feeds, policy, graph)
-    stamp_metadata(out_path, contract, graph, "int8")
-    log.info("quantized %s -> %s", graph, out_path)
+    else:
+        quantize_qdq(fp32_path, out_path, feeds, policy, graph)
+    stamp_metadata(out_path, contract, graph, precision)
+    check_graph_file(out_path, graph, precision)
+    log.info("quantized %s -> %s (%s)", graph, out_path, precision)
     return out_path
 
 

@@ -1,0 +1,78 @@
+"""``python -m training.export --int8 --calib-npz``: calibration frames that are not what the runtime feeds the
+model (0..255 pixels, channels last, another resolution) are refused before anything is exported."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("onnx")
+pytest.importorskip("onnxruntime")
+
+from ghnerf_runtime.contract import ModelContract  # noqa: E402
+from training.configs import preset  # noqa: E402
+from training.export.calibration import CalibrationDataError, load_calibration_npz  # noqa: E402
+from training.export.cli import main  # noqa: E402
+from training.model import GHNeRF  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def contract() -> ModelContract:
+    return GHNeRF(preset("tiny")).contract()  # 64x64, two sources
+
+
+def _npz(path, **arrays):
+    np.savez(path, **arrays)
+    return path
+
+
+GOOD = np.random.default_rng(0).random((2, 2, 3, 64, 64)).astype(np.float32)
+
+
+@pytest.mark.parametrize("arrays, what", [
+    ({"images": (GOOD * 255).astype(np.uint8)}, r"'images' is uint8; the model wants float pixels in \[0, 1\]"),
+    ({"images": GOOD * 255}, r"'images' values span \[0\.\d+, 254\.\d+\]; the model wants \[0, 1\]"),
+    ({"images": GOOD.transpose(0, 1, 3, 4, 2)}, r"'images' has shape \[2, 2, 64, 64, 3\]; the model wants "
+                                                r"\(F, 2, 3, 64, 64\)"),
+    ({"images": np.zeros((2, 2, 3, 128, 128), np.float32)}, r"'images' has shape \[2, 2, 3, 128, 128\].* at the contract resolution 64x64"),
+    ({"images": np.zeros((0, 2, 3, 64, 64), np.float32)}, r"'images' has shape \[0, 2, 3, 64, 64\]"),
+    ({"images": np.where(GOOD > 0.5, np.nan, GOOD)}, r"'images' holds NaN or infinite values"),
+    ({"frames": GOOD}, r"no 'images' array \(it holds \['frames'\]\)"),
+])
+def test_frames_unlike_the_runtime_input_are_refused_naming_the_file(tmp_path, contract, arrays, what):
+    path = _npz(tmp_path / "calib.npz", **arrays)
+    with pytest.raises(CalibrationDataError, match=rf"^{re.escape(str(path))}: {what}"):
+        load_calibration_npz(path, contract)
+
+
+def test_an_unreadable_file_is_named(tmp_path, contract):
+    path = tmp_path / "calib.npz"
+    path.write_bytes(b"not a zip")
+    with pytest.raises(CalibrationDataError, match=rf"^{re.escape(str(path))}: cannot read it as an npz file"):
+        load_calibration_npz(path, contract)
+
+
+def test_runtime_like_frames_load(tmp_path, contract):
+    frames = load_calibration_npz(_npz(tmp_path / "calib.npz", images=GOOD.astype(np.float64)), contract)
+    assert len(frames) == 2 and all(f.dtype == np.float32 and f.shape == (2, 3, 64, 64) for f in frames)
+    np.testing.assert_array_equal(frames[1], GOOD[1])
+
+
+def test_the_cli_refuses_uint8_frames_before_exporting(tmp_path, capsys):
+    """0..255 frames calibrated every range 255x too wide and the export went on (exit 0); now exit 2, nothing
+    written."""
+    path = _npz(tmp_path / "calib.npz", images=(GOOD * 255).astype(np.uint8))
+    out = tmp_path / "model"
+    assert main(["--preset", "tiny", "--out", str(out), "--graphs", "human", "--int8", "--calib-npz",
+                 str(path)]) == 2
+    assert f"--calib-npz {path}: 'images' is uint8" in capsys.readouterr().err
+    assert not out.exists() and not (tmp_path / "model.staging").exists()
+
+
+def test_the_cli_calibrates_on_checked_frames(tmp_path):
+    out = tmp_path / "model"
+    assert main(["--preset", "tiny", "--out", str(out), "--graphs", "human", "--int8", "--calib-npz",
+                 str(_npz(tmp_path / "calib.npz", images=GOOD))]) == 0
+    assert (out / "human.onnx").is_file() and (out / "human.int8.onnx").is_file()
