@@ -76,3 +76,14 @@ def test_the_cli_calibrates_on_checked_frames(tmp_path):
     assert main(["--preset", "tiny", "--out", str(out), "--graphs", "human", "--int8", "--calib-npz",
                  str(_npz(tmp_path / "calib.npz", images=GOOD))]) == 0
     assert (out / "human.onnx").is_file() and (out / "human.int8.onnx").is_file()
+
+
+def test_the_cli_refuses_calibration_frames_without_int8(tmp_path, capsys):
+    """--calib-npz without --int8 was silently ignored: an fp32-only export the user thought calibrated."""
+    out = tmp_path / "model"
+    with pytest.raises(SystemExit) as e:
+        main(["--preset", "tiny", "--out", str(out), "--graphs", "human", "--calib-npz",
+              str(_npz(tmp_path / "calib.npz", images=GOOD))])
+    assert e.value.code == 2
+    assert "--calib-npz calibrates the int8 graphs: give --int8" in capsys.readouterr().err
+    assert not out.exists()

@@ -102,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="exit 0 even when onnxruntime strays from torch, or int8 from fp32, beyond "
                          "training.export.parity's bounds")
     args = ap.parse_args(argv)
+    if args.calib_npz and not args.int8:  # calibration frames are only read for int8: ignoring them misleads
+        ap.error("--calib-npz calibrates the int8 graphs: give --int8 with it")
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first
         args.report = ready_output_arg(ap, args.report, "--report")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
