@@ -40,7 +40,7 @@ from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, solve_rig
-from ghnerf_runtime.errors import RuntimeErrorBase
+from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_text_atomic
 
@@ -116,6 +116,15 @@ def _calibration_record(rig) -> dict:
 def _recorded_board(rig, rig_path: str) -> BoardSpec | None:
     data = _calibration_record(rig).get("board")
     return None if data is None else BoardSpec.from_dict(data, path=f"{rig_path}: metadata.calibration.board")
+
+
+def _recorded_thickness(rig) -> float:
+    """The floor board's thickness ``solve`` levelled with (0 for other rigs): checked with another, the floor
+    view of the very images solved from lay that difference off the floor, and a 30 mm board failed the check."""
+    value = _calibration_record(rig).get("board_thickness_m")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 0.1:
+        return 0.0
+    return float(value)
 
 
 def _existing_capture(out: Path) -> Path | None:
@@ -465,8 +474,15 @@ def _declared_units(path: Path) -> float | None:
         meta = tomllib.loads(path.read_text(encoding="utf-8")).get("metadata")
     except (OSError, ValueError):
         return None  # the reader names what is wrong with it
-    units = meta.get("units_to_metres") if isinstance(meta, dict) else None
-    return float(units) if isinstance(units, (int, float)) and not isinstance(units, bool) else None
+    if not isinstance(meta, dict) or "units_to_metres" not in meta:
+        return None
+    units = meta["units_to_metres"]
+    # named here: the reader's own check comes after this value has been taken as the argument (an error
+    # naming neither file nor key), and a string unit read as none recorded
+    if isinstance(units, bool) or not isinstance(units, (int, float)) or not (math.isfinite(units) and units > 0):
+        raise RigFileError(f"must be a positive number of metres per unit, got {units!r}", path=str(path),
+                           field="metadata.units_to_metres")
+    return float(units)
 
 
 def cmd_import(args: argparse.Namespace) -> int:
@@ -510,13 +526,20 @@ def cmd_import(args: argparse.Namespace) -> int:
     print(f"{source} ({fmt}): cameras {a.name!r} {a.width}x{a.height} and {b.name!r} {b.width}x{b.height}, "
           f"baseline {1000 * float(np.linalg.norm(a.center - b.center)):.1f} mm"
           + (f" (file units x {units:g} m)" if units is not None else ""))
+    recorded = rig.metadata.get("levelled")
     if args.camera_height is not None:
         print(f"levelled: {a.name} {args.camera_height:g} m above the floor, pitch {args.pitch or 0.0:g} deg, "
               f"roll {args.roll or 0.0:g} deg")
+    elif isinstance(recorded, dict):  # our own export of a levelled rig: the file says so and its poses agree
+        print(f"levelled already (the file records it, and its poses agree): {recorded['reference']} "
+              f"{recorded['camera_height_m']:.3f} m above the floor, pitch {recorded['pitch_deg']:.2f} deg, "
+              f"roll {recorded['roll_deg']:.2f} deg")
     else:
-        print("warning: not levelled: the rig frame is the calibration tool's own, and the runtime reads y as down "
-              "with the floor at y = 0 (the skeleton prior, upright crops, the working volume): import again "
-              "with --camera-height M (and --pitch, --roll) of the first camera")
+        mismatch = rig.metadata.get("source", {}).get("levelling_mismatch")
+        print("warning: not levelled: the rig frame is the calibration tool's own"
+              + (f" ({mismatch})" if mismatch else "")
+              + ", and the runtime reads y as down with the floor at y = 0 (the skeleton prior, upright crops, the "
+              "working volume): import again with --camera-height M (and --pitch, --roll) of the first camera")
     print(f"wrote {out}")
     return 0
 
@@ -552,6 +575,7 @@ def cmd_check(args: argparse.Namespace) -> int:
                          "with the board it was solved with, or calibrate again")
     record_floor = _calibration_record(rig).get("floor_view")
     floor_view = args.floor_view or (record_floor if isinstance(record_floor, str) else FLOOR_VIEW)
+    thickness = args.board_thickness if args.board_thickness is not None else _recorded_thickness(rig)
     print(f"board: {where}: {_describe(board)}", file=sys.stderr if args.json else sys.stdout)
     views, missed = detect_folder(board, args.images, [c.name for c in rig.pair])
     for cam in rig.pair:
@@ -564,7 +588,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         # a mistyped name passed silently, and with it a rig tilted on its mount, which only the floor shows
         raise UsageError(f"--floor-view {args.floor_view!r}: neither camera's folder in {args.images} has an image "
                          "of that name")
-    report = check_rig(rig, board, views, board_thickness_m=args.board_thickness, floor_view=floor_view)
+    report = check_rig(rig, board, views, board_thickness_m=thickness, floor_view=floor_view)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
     if "floor" not in report:
@@ -697,7 +721,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--images", required=True)
     p.add_argument("--floor-view", help="the view of the board lying on the floor (default: the rig's, as given "
                                         "to solve, else 'floor')")
-    p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0)
+    p.add_argument("--board-thickness", type=_finite(0.0, 0.1),
+                   help="metres, for the floor view (default: the one given to solve, as recorded, else 0)")
     p.add_argument("--max-px", type=_finite(0.01, 100.0), default=1.0,
                    help="largest acceptable reprojection rms (default 1 px)")
     p.add_argument("--max-scale-error", type=_finite(0.0001, 1.0), default=CheckLimits.max_scale_error, help="default 0.01 (1 %%)")

@@ -214,36 +214,58 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
         per = np.asarray(result[-1], float).reshape(len(pairs), 2).mean(axis=1)
         return float(result[0]), result[5], result[6], per
 
-    dropped: list[str] = []
-    max_dropped = max(1, len(shared) // 4)
-    rms, R, T, per = solve(shared)
-    # A pair far worse than the others: its two images not taken at the same instant, or one blurred.
-    # One bad pair drags the fit and raises the good ones' errors too, so drop only the worst, solve
-    # again, and repeat while the worst is still an outlier (at most a quarter of the pairs).
-    while len(shared) - 1 >= MIN_VIEWS and len(dropped) < max_dropped:
+    def bad_pair(rms: float, per: np.ndarray) -> tuple[int, tuple] | None:
+        """A pair that does not fit with the others (its two images not taken at the same instant, or one
+        blurred or mis-detected) and the fit without it; None when every pair fits."""
         worst = int(np.argmax(per))
         if per[worst] > max(OUTLIER_FACTOR * float(np.median(np.delete(per, worst))), 1.0):
-            dropped.append(shared[worst][0])
-            shared = shared[:worst] + shared[worst + 1:]
-            rms, R, T, per = solve(shared)
-            continue
+            return worst, solve(shared[:worst] + shared[worst + 1:])
         # With few pairs the bad one's error need not stand out at all (five pairs at 10-31 px, the
         # unsynchronised one not the worst; the pose 1.3 m off): where the fit is poor, the pair
-        # without which the others fit far better is the one to drop.
+        # without which the others fit far better is the bad one.
         if not rms > 1.0:
-            break
+            return None
         trials = [solve(shared[:k] + shared[k + 1:]) for k in range(len(shared))]
         best = int(np.argmin([t[0] if np.isfinite(t[0]) else np.inf for t in trials]))
-        if not OUTLIER_FACTOR * trials[best][0] < rms:
-            break
-        dropped.append(shared[best][0])
-        shared = shared[:best] + shared[best + 1:]
-        rms, R, T, per = trials[best]
+        return (best, trials[best]) if OUTLIER_FACTOR * trials[best][0] < rms else None
+
+    dropped: list[str] = []
+    total, max_dropped = len(shared), max(1, len(shared) // 4)
+    rms, R, T, per = solve(shared)
+    # One bad pair drags the fit and raises the good ones' errors too, so drop only the worst, solve
+    # again, and repeat while one is still bad. A bad pair is never kept: where dropping it would leave
+    # fewer than MIN_VIEWS pairs, or drop more than a quarter of them, the solve stops (with exactly
+    # MIN_VIEWS pairs one unsynchronised pair put the second camera 0.4-1.7 m off, and only warned).
+    while (found := bad_pair(rms, per)) is not None:
+        k, without = found
+        if len(shared) - 1 < MIN_VIEWS or len(dropped) >= max_dropped:
+            raise SolveError(_bad_pairs_message(names, shared[k][0], dropped, rms, without[0], len(shared) - 1,
+                                                total))
+        dropped.append(shared[k][0])
+        shared = shared[:k] + shared[k + 1:]
+        rms, R, T, per = without
     if not (np.all(np.isfinite(R)) and np.all(np.isfinite(T)) and np.isfinite(rms)):
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r}: the pair's pose diverged (the shared views may all "
                          "show the board at one angle, or the two images of a pair were not taken together)")
     return PairPose(R=np.asarray(R, float), T=np.asarray(T, float).reshape(3), rms_px=float(rms),
                     per_view_px={n: round(float(e), 4) for (n, _), e in zip(shared, per)}, dropped=tuple(dropped))
+
+
+def _bad_pairs_message(names: tuple[str, str], bad: str, dropped: list[str], rms: float, rms_without: float,
+                       left: int, total: int) -> str:
+    """Why the pair's pose is not solved: the pair ``bad`` does not fit, and it cannot be dropped."""
+    head = (f"cameras {names[0]!r} and {names[1]!r}: the image pair {bad!r} does not fit the others (pair error "
+            f"{rms:.2f} px with it, {rms_without:.2f} px without): its two images were not taken at the same "
+            "instant, or the board was found wrongly in one")
+    if dropped:
+        head += f"; pair(s) {', '.join(repr(n) for n in dropped)} were dropped already for the same reason"
+    if left < MIN_VIEWS:
+        return (f"{head}. That leaves {left} good pair(s) of {total}, and at least {MIN_VIEWS} are needed: capture "
+                f"{MIN_VIEWS - left} more view(s) where both cameras see the board (8 or more is usual), or retake "
+                f"{bad!r}")
+    return (f"{head}. More than a quarter of the {total} pairs do not fit: are both cameras' images taken at the "
+            "same instant (hold the board still for each view)? Remove or retake "
+            + ", ".join(repr(n) for n in [*dropped, bad]))
 
 
 def floor_from_view(board: BoardSpec, view: BoardView, intr: Intrinsics, *, board_thickness_m: float = 0.0) \
@@ -356,7 +378,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     else the second) or ``camera_height_m`` with ``pitch_deg`` / ``roll_deg`` of the first camera.
     Views named ``floor_view`` are used for levelling only, not for the intrinsics.
 
-    The rig's ``metadata["calibration"]`` records the board, the floor view and the lens model.
+    The rig's ``metadata["calibration"]`` records the board, the floor view, the board's thickness and the
+    lens model.
 
     :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved
         principal point far from the image centre.
@@ -422,7 +445,7 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     # what ``ghcal check`` needs to measure with the same board and floor view (docs/calibration.md)
     rig = Rig(rig.cameras, rig.volume, rig_id=rig.rig_id, metadata={
         **rig.metadata, "calibration": {"tool": "ghcal", "board": board.to_dict(), "floor_view": floor_view,
-                                        "lens_model": lens}})
+                                        "board_thickness_m": board_thickness_m, "lens_model": lens}})
     axes = [rig.camera(n).R[2] for n in names]
     convergence = math.degrees(math.acos(float(np.clip(axes[0] @ axes[1], -1.0, 1.0))))
     report: dict[str, Any] = {

@@ -7,7 +7,8 @@
 * :mod:`calibration.formats.anipose_toml`: anipose / aniposelib ``calibration.toml``.
 
 Foreign files carry no working volume: pass one, or get
-:func:`default_working_volume`. Every error is a
+:func:`default_working_volume`. Nor do they say whether their frame is levelled: our writers
+record it, and our readers take it back where the poses show it (:mod:`calibration.formats._frame`). Every error is a
 :class:`~ghnerf_runtime.errors.RigFileError` naming the file and the field.
 Keys are documented in docs/rig-file.md ("Importing and exporting").
 """

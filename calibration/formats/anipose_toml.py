@@ -19,13 +19,15 @@ Keys read per camera table: ``name`` (string or integer; default the table name)
 ``size``, ``matrix``, ``distortions``, ``rotation``, ``translation`` (all required) and
 ``fisheye`` (if true the file is rejected: the fisheye model is not supported). Other
 keys are ignored. Every top-level table except ``metadata`` is a camera; from
-``metadata`` an optional ``rig_id`` string, our ``working_volume_min``/``max`` and our
-``units_to_metres`` (checked against the argument) are read (our exporter writes them;
-aniposelib ignores them).
+``metadata`` an optional ``rig_id`` string, our ``working_volume_min``/``max``, our
+``units_to_metres`` (checked against the argument) and our ``levelled_*`` keys (the first
+camera's height and tilt in a levelled rig frame; :mod:`calibration.formats._frame`) are read
+(our exporter writes them; aniposelib ignores them).
 
 Units: anipose's translations are in whatever unit the calibration board was measured
 in (often millimetres), so ``units_to_metres`` is a required argument. The world frame
-is anipose's (usually the first camera or the board), not our floor-origin rig frame.
+is anipose's (usually the first camera or the board), not our floor-origin rig frame, unless
+the file records a levelling that its poses show (``metadata["levelled"]``).
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ import cv2
 import numpy as np
 
 from calibration.formats._common import as_array, check_units, fail, make_camera, make_rig, refuse_skew, show
+from calibration.formats._frame import KEYS as LEVELLING_KEYS, levelling_metadata, levelling_of, recorded_levelling
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import write_text_atomic
 
@@ -65,7 +68,8 @@ def read_anipose_toml(
 
     Returns:
         The :class:`Rig`, cameras in sorted section order (as aniposelib loads them), metadata
-        ``{"source": {"format": "anipose-toml", "path", "units_to_metres"}}``.
+        ``{"source": {"format": "anipose-toml", "path", "units_to_metres"}}``, plus ``"levelled"``
+        where the file records a levelled frame that its poses show.
 
     Raises:
         RigFileError: naming the file and the field (``cam_1.matrix``); invalid TOML
@@ -92,7 +96,7 @@ def read_anipose_toml(
             raise fail(path, "metadata.units_to_metres", f"the file says {declared!r} m per unit, the argument "
                                                          f"{units!r}: the rig would be scaled by their ratio")
     cameras, fields = [], []
-    file_rig_id, file_volume = None, None
+    file_rig_id, file_volume, levelling = None, None, None
     # aniposelib's CameraGroup.load takes the cameras in sorted key order, whatever the file's order
     for section, table in sorted(doc.items(), key=lambda item: item[0]):
         if not isinstance(table, dict):
@@ -108,10 +112,12 @@ def read_anipose_toml(
                 if np.any(hi <= lo):
                     raise fail(path, "metadata.working_volume_max", f"must exceed working_volume_min, got {lo} .. {hi}")
                 file_volume = WorkingVolume(lo, hi)
+            levelling = recorded_levelling(path, table, prefix="metadata.")  # ours: the rig frame was levelled
             continue
         cameras.append(_camera(path, section, table, units))
         fields.append(section)
-    metadata = {"source": {"format": "anipose-toml", "path": str(path), "units_to_metres": units}}
+    metadata = levelling_metadata(cameras, levelling,
+                                  {"format": "anipose-toml", "path": str(path), "units_to_metres": units})
     return make_rig(path, cameras, fields, volume=volume if volume is not None else file_volume,
                     rig_id=rig_id or file_rig_id or p.stem, metadata=metadata, list_field="cam_0",
                     pair_t=(path, f"{fields[1]}.translation" if len(fields) > 1 else "cam_1.translation"))
@@ -213,8 +219,13 @@ def dumps_anipose_toml(rig: Rig, *, units_to_metres: float) -> str:
     lines += ["", "[metadata]", "adjusted = false", f"rig_id = {_toml_string(rig.rig_id)}",
               f"units_to_metres = {units!r}",  # read back and checked against the reader's argument
               f"working_volume_min = {_toml_array(rig.volume.min_corner)}",  # metres, whatever the translations'
-              f"working_volume_max = {_toml_array(rig.volume.max_corner)}", ""]
-    return "\n".join(lines)
+              f"working_volume_max = {_toml_array(rig.volume.max_corner)}"]
+    levelling = levelling_of(rig)
+    if levelling is not None:  # the rig frame is levelled: read back, the rig needs no --camera-height
+        lines += [f"{LEVELLING_KEYS[0]} = {_toml_string(levelling['reference'])}"]
+        lines += [f"{key} = {_toml_float(levelling[name])}"
+                  for key, name in zip(LEVELLING_KEYS[1:], ("camera_height_m", "pitch_deg", "roll_deg"))]
+    return "\n".join(lines + [""])
 
 
 def write_anipose_toml(rig: Rig, path: str | os.PathLike, *, units_to_metres: float) -> None:

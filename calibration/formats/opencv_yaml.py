@@ -19,6 +19,10 @@ Multi-camera (our export; one map per camera, in rig order):
                     ``T`` are required there (rig -> camera, ``X_cam = R X + T``), and
                     ``name`` defaults to ``cam<i>``
     ``rig_id``      string (optional)
+    ``levelled_reference``, ``levelled_camera_height_m``, ``levelled_pitch_deg``, ``levelled_roll_deg``
+                    (optional, all or none; our writer's): the rig frame is levelled, the first camera
+                    this high and tilted so; taken as ``metadata["levelled"]`` where the poses show it
+                    (:mod:`calibration.formats._frame`)
 
 Stereo pair (OpenCV's ``stereo_calib`` sample: ``intrinsics.yml`` + ``extrinsics.yml``):
     ``M1``, ``D1``, ``M2``, ``D2``   intrinsics of cameras 1 and 2 (required)
@@ -36,8 +40,8 @@ the argument, else from the file's own ``units_to_metres`` key (our writers stor
 it is an error; the multi-camera layout (ours) is in metres unless its key says otherwise. Writers
 produce the multi-camera / single-camera layouts with 17 significant digits (lossless),
 store ``units_to_metres`` and (multi-camera) the working volume in metres
-(``working_volume_min`` / ``working_volume_max``, which OpenCV ignores), and replace the
-file atomically.
+(``working_volume_min`` / ``working_volume_max``, which OpenCV ignores) and, for a rig in a
+levelled frame, the ``levelled_*`` keys, and replace the file atomically.
 """
 from __future__ import annotations
 
@@ -60,6 +64,7 @@ from calibration.formats._common import (
     rotation,
     show,
 )
+from calibration.formats._frame import KEYS as LEVELLING_KEYS, levelling_metadata, levelling_of, recorded_levelling
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
@@ -241,6 +246,21 @@ def _has_translation(node, path) -> bool:
     return T is None or bool(np.any(T != 0))
 
 
+def _levelling_values(root, path) -> dict[str, Any]:
+    """Our writer's ``levelled_*`` keys, as Python values (:func:`recorded_levelling` checks them)."""
+    values: dict[str, Any] = {}
+    for key in LEVELLING_KEYS:
+        if key not in _keys(root):
+            continue
+        node = root.getNode(key)
+        if node.isString():
+            values[key] = node.string()
+        else:
+            value = _numeric(node, path, key)
+            values[key] = float(value.reshape(-1)[0]) if value is not None and value.size == 1 else value
+    return values
+
+
 def _volume(root, path) -> WorkingVolume | None:
     keys = _keys(root)
     if "working_volume_min" not in keys and "working_volume_max" not in keys:
@@ -305,7 +325,8 @@ def read_opencv_rig(
             the stereo_calib layout, whose ``T`` is in the board's units.
 
     Returns:
-        The :class:`Rig`, metadata ``{"source": {"format", "path", "units_to_metres"}}``.
+        The :class:`Rig`, metadata ``{"source": {"format", "path", "units_to_metres"}}``, plus
+        ``"levelled"`` where the file records a levelled frame that its poses show.
 
     Raises:
         RigFileError: naming the file and the field, e.g. ``cameras[1].camera_matrix``.
@@ -332,19 +353,21 @@ def read_opencv_rig(
                                        need_pose=True))
                 fields.append(field)
             file_rig_id = _string(root.getNode("rig_id"), path, "rig_id") if "rig_id" in keys else None
+            levelling = recorded_levelling(path, _levelling_values(root, path))  # ours: the frame was levelled
             list_field, pair_t = "cameras", (path, "cameras[1].T")
         elif "M1" in keys:
             layout = "opencv-stereo-calib"
             units = _units(root, path, units_to_metres, needed=True)
             cameras, fields = _stereo_calib(fs, path, extrinsics_path, image_size, units)
-            file_rig_id, list_field = None, "M1"
+            file_rig_id, list_field, levelling = None, "M1", None
             pair_t = (path if extrinsics_path is None else extrinsics_path, "T")
         else:
             raise fail(path, None, "no known layout: expected a 'cameras' sequence (multi-camera) or 'M1', 'D1', "
                                    f"'M2', 'D2', 'R', 'T' (stereo_calib); found keys {list(keys)}")
     finally:
         fs.release()
-    metadata = {"source": {"format": layout, "path": str(path), "units_to_metres": units}}
+    metadata = levelling_metadata(cameras, levelling,
+                                  {"format": layout, "path": str(path), "units_to_metres": units})
     return make_rig(path, cameras, fields, volume=volume, rig_id=rig_id or file_rig_id or Path(path).stem,
                     metadata=metadata, list_field=list_field, pair_t=pair_t)
 
@@ -426,6 +449,11 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     fs.write("units_to_metres", float(units))
     fs.write("working_volume_min", np.ascontiguousarray(rig.volume.min_corner.reshape(3, 1)))  # metres
     fs.write("working_volume_max", np.ascontiguousarray(rig.volume.max_corner.reshape(3, 1)))
+    levelling = levelling_of(rig)
+    if levelling is not None:  # the rig frame is levelled: read back, the rig needs no --camera-height
+        fs.write(LEVELLING_KEYS[0], levelling["reference"])
+        for key, name in zip(LEVELLING_KEYS[1:], ("camera_height_m", "pitch_deg", "roll_deg")):
+            fs.write(key, float(levelling[name]))
     fs.startWriteStruct("cameras", cv2.FileNode_SEQ)
     for cam in rig.cameras:
         fs.startWriteStruct("", cv2.FileNode_MAP)
@@ -436,6 +464,8 @@ def write_opencv_rig(rig: Rig, path: str | os.PathLike, *, units_to_metres: floa
     strings = {"rig_id": (lambda root: root.getNode("rig_id"), rig.rig_id)}
     for i, cam in enumerate(rig.cameras):
         strings[f"cameras[{i}].name"] = (lambda root, i=i: root.getNode("cameras").at(i).getNode("name"), cam.name)
+    if levelling is not None:  # the first camera's name again: checked above, named as the camera's
+        strings[LEVELLING_KEYS[0]] = (lambda root: root.getNode(LEVELLING_KEYS[0]), levelling["reference"])
     _check_strings_read_back(text, path, strings)
     write_text_atomic(path, text)
 

@@ -385,6 +385,27 @@ def test_one_unsynchronised_pair_is_dropped_alone(views):
     assert report["pair"]["rms_px"] < 0.6
 
 
+def test_one_bad_pair_among_four_writes_no_rig(capture, tmp_path, capsys):
+    # Four shared views, the right image of '001' from another instant: too few to drop it, so the pose
+    # was solved with it (baseline 1524 mm for 600, 21 px) and the rig file written, with only warnings.
+    images = tmp_path / "four"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+        for path in (capture / cam).iterdir():
+            if path.stem in ("004", "005", "006", "007"):
+                continue
+            # the right camera's corner views renamed: no longer pairs, still its intrinsics' views
+            paired = cam == "left" or path.stem < "008" or path.stem == "floor"
+            (images / cam / (path.name if paired else f"r{path.name}")).write_bytes(path.read_bytes())
+    (images / "right" / "001.png").write_bytes((capture / "right" / "005.png").read_bytes())
+    out = tmp_path / "rig.json"
+    assert cli.main(["solve", "--board", str(capture / "board.json"), "--images", str(images),
+                     "--floor-view", "floor", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "the image pair '001' does not fit" in err and "capture 1 more view(s)" in err, err
+    assert not out.exists() and not (tmp_path / "rig.report.json").exists()
+
+
 def test_numeric_options_are_checked(capture, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         cli.main(["solve", "--images", str(capture), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
@@ -596,6 +617,20 @@ def test_check_measures_the_floor_view_solve_was_given(truth, capture, tmp_path,
     captured = capsys.readouterr()
     report = json.loads(captured.out)  # --json: the board line goes to stderr, stdout stays JSON
     assert report["floor"]["view"] == "000" and "board:" in captured.err
+
+
+def test_check_measures_the_floor_with_the_board_thickness_solve_was_given(views, capture, tmp_path, capsys):
+    # solve levelled with a 30 mm board, check (without --board-thickness) measured the floor with 0 mm: the
+    # very images the rig was solved from lay 30 mm off the floor, and "calibrate again"
+    rig = solve_rig(BOARD, views, ("left", "right"), floor_view="floor", board_thickness_m=0.03).rig
+    assert rig.metadata["calibration"]["board_thickness_m"] == 0.03
+    rig_path = tmp_path / "rig.json"
+    save_rig(rig, rig_path)
+    argv = ["check", "--rig", str(rig_path), "--images", str(capture), "--json"]
+    assert cli.main(argv) == 0
+    assert abs(json.loads(capsys.readouterr().out)["floor"]["height_mm_median"]) < 5
+    assert cli.main(argv + ["--board-thickness", "0"]) == 1  # the option still says otherwise
+    assert json.loads(capsys.readouterr().out)["floor"]["height_mm_median"] > 25
 
 
 def test_check_says_when_the_floor_is_not_checked(truth, capture, tmp_path, capsys):

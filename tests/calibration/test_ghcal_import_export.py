@@ -3,6 +3,7 @@ what the user must say (units, the format of an unknown suffix) is asked for by 
 from __future__ import annotations
 
 import json
+import logging
 import math
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 
 from calibration import cli
 from calibration.render import example_rig
+from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import load_rig, save_rig
 
 #: example_rig's first camera: 1.4 m up at x = -0.3 m, looking at a point 2.5 m ahead and 0.3 m up (x = 0), no roll
@@ -48,15 +50,89 @@ def test_export_then_import_levelled_gives_the_rig_back(rig_file, tmp_path, caps
     _same_cameras(load_rig(rig_file), load_rig(back))
 
 
+def _without_levelling(path):
+    """The file as another tool writes it: without our ``levelled_*`` keys (OpenCV: their XML elements)."""
+    path.write_text("".join(line for line in path.read_text().splitlines(keepends=True)
+                            if "levelled_" not in line))
+
+
 def test_import_without_levelling_keeps_the_tools_frame_and_says_so(rig_file, tmp_path, capsys):
     foreign = tmp_path / "calibration.toml"
     assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign), "--units-to-metres", "1"]) == 0
+    _without_levelling(foreign)
     back = tmp_path / "back.json"
     assert cli.main(["import", str(foreign), "--out", str(back), "--units-to-metres", "1", "--rig-id", "lab"]) == 0
     assert "warning: not levelled" in capsys.readouterr().out
     rig = load_rig(back)
-    assert rig.rig_id == "lab"
+    assert rig.rig_id == "lab" and "levelled" not in rig.metadata
     _same_cameras(load_rig(rig_file), rig)  # anipose keeps the world frame it was given: ours
+    # exported again, the rig in a tool's frame is not claimed to be levelled
+    again = tmp_path / "again.yml"
+    assert cli.main(["export", "--rig", str(back), "--out", str(again)]) == 0
+    assert "levelled_" not in again.read_text()
+    assert cli.main(["import", str(again), "--out", str(tmp_path / "again.json")]) == 0
+    assert "warning: not levelled" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("suffix, units", [(".toml", "0.001"), (".yml", None), (".yaml", "0.001"), (".xml", "0.01"),
+                                           (".json", None)])
+def test_our_export_of_a_levelled_rig_imports_levelled(rig_file, tmp_path, capsys, caplog, suffix, units):
+    # The formats have no word for the rig frame: re-importing our own export of a levelled rig warned
+    # "not levelled" (and the runtime did too, for anipose), asking for a height it already had.
+    foreign = tmp_path / f"calibration{suffix}"
+    unit_args = ["--units-to-metres", units] if units else []
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)] + unit_args) == 0
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--out", str(back)]) == 0  # anipose: the unit the file records
+    out = capsys.readouterr().out
+    assert "warning" not in out and "levelled already" in out and "left 1.400 m above the floor" in out, out
+    original, rig = load_rig(rig_file), load_rig(back)
+    _same_cameras(original, rig)
+    np.testing.assert_allclose(rig.volume.min_corner, original.volume.min_corner, atol=1e-12)
+    np.testing.assert_allclose(rig.volume.max_corner, original.volume.max_corner, atol=1e-12)
+    levelled = rig.metadata["levelled"]
+    assert levelled["reference"] == "left" and abs(levelled["camera_height_m"] - 1.4) < 1e-9
+    assert abs(levelled["pitch_deg"] - PITCH_DEG) < 1e-9 and abs(levelled["roll_deg"]) < 1e-9
+    from ghnerf_runtime.estimator import _warn_if_not_levelled  # nor does the runtime warn about it
+
+    with caplog.at_level(logging.WARNING):
+        _warn_if_not_levelled(rig)
+        _warn_if_not_levelled(Rig(rig.cameras, rig.volume, metadata={"source": rig.metadata["source"]}))
+    assert len(caplog.records) == (suffix == ".toml")  # (the runtime warns about anipose files only)
+
+
+@pytest.mark.parametrize("suffix, key, value, words", [
+    (".toml", "levelled_camera_height_m", "1.2", ["is 1.4000 m above the floor", "1.2000 m in the levelling"]),
+    (".yml", "levelled_pitch_deg", "10.0", ["tilted 13.599 degrees away from the pitch 10.00"]),
+    (".toml", "levelled_reference", '"right"', ["names camera 'right' as the first, but the first is 'left'"]),
+])
+def test_a_levelling_the_poses_do_not_show_is_not_taken(rig_file, tmp_path, capsys, suffix, key, value, words):
+    # another tool re-solved the poses in a frame of its own and kept our keys: its frame is not levelled
+    foreign = tmp_path / f"calibration{suffix}"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign), "--units-to-metres", "1"]) == 0
+    sep = " = " if suffix == ".toml" else ": "
+    foreign.write_text("".join(f"{key}{sep}{value}\n" if line.startswith(key + sep) else line
+                               for line in foreign.read_text().splitlines(keepends=True)))
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--out", str(back), "--units-to-metres", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "warning: not levelled" in out and "the file records a levelled frame, but" in out, out
+    assert all(w in out for w in words), out
+    assert "levelled" not in load_rig(back).metadata
+
+
+@pytest.mark.parametrize("suffix, edit, words", [
+    (".toml", lambda line: not line.startswith("levelled_roll_deg"), ["metadata.levelled_roll_deg", "missing"]),
+    (".yml", lambda line: not line.startswith("levelled_roll_deg"), ["levelled_roll_deg", "missing"]),
+])
+def test_a_levelling_recorded_in_part_is_named(rig_file, tmp_path, capsys, suffix, edit, words):
+    foreign = tmp_path / f"calibration{suffix}"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign), "--units-to-metres", "1"]) == 0
+    foreign.write_text("".join(line for line in foreign.read_text().splitlines(keepends=True) if edit(line)))
+    capsys.readouterr()
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "back.json"), "--units-to-metres", "1"]) == 2
+    err = capsys.readouterr().err
+    assert all(w in err for w in words), err
 
 
 @pytest.mark.parametrize("args, words", [
@@ -82,6 +158,20 @@ def test_what_the_user_must_give_is_named(rig_file, tmp_path, capsys, args, word
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and all(w in err for w in words), err
     assert not (tmp_path / "out.json").exists()
+
+
+@pytest.mark.parametrize("value", ["0", "nan", '"mm"', "true"])
+def test_a_unit_our_anipose_file_records_wrongly_is_named(rig_file, tmp_path, capsys, value):
+    # 0 and nan were taken as the argument and refused naming neither file nor key; "mm" was read as no
+    # unit recorded, and the user told that anipose files do not record one
+    toml = tmp_path / "calibration.toml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(toml), "--units-to-metres", "0.001"]) == 0
+    toml.write_text(toml.read_text().replace("units_to_metres = 0.001", f"units_to_metres = {value}"))
+    capsys.readouterr()
+    assert cli.main(["import", str(toml), "--out", str(tmp_path / "back.json")]) == 2
+    err = capsys.readouterr().err
+    assert str(toml) in err and "'metadata.units_to_metres'" in err and "positive number" in err, err
+    assert not (tmp_path / "back.json").exists()
 
 
 def test_our_own_anipose_export_needs_no_units_and_a_rig_file_needs_no_import(rig_file, tmp_path, capsys):

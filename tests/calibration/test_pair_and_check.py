@@ -122,6 +122,52 @@ def test_one_unsynchronised_pair_among_few_is_found_though_its_error_does_not_st
     assert np.linalg.norm(pose.T - _relative_t(*rig.pair)) < 0.005
 
 
+def _with_unsynchronised(rig: Rig, pairs: int, bad: int, seed: int) -> dict:
+    """``pairs`` shared views whose first ``bad`` have their right image from another instant."""
+    views = _views(rig, _facing_poses(rig, pairs + bad, seed=seed), noise_px=0.2, seed=seed)
+    for k in range(bad):
+        other = f"{pairs + k:03d}"
+        views["right"][f"{k:03d}"] = views["right"].pop(other)
+        del views["left"][other]
+    return views
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_a_bad_pair_among_the_fewest_stops_the_solve(seed):
+    # Exactly MIN_VIEWS pairs, one unsynchronised: nothing could be dropped, so the pose was solved with it
+    # (the second camera 0.4-1.7 m off, the pair error 11-26 px) and the rig file written with a warning.
+    rig = example_rig()
+    intr = {cam.name: Intrinsics(K=cam.K, dist=cam.dist, rms_px=0.1, per_view_px={}, dropped=(), coverage=1.0,
+                                 image_size=cam.size) for cam in rig.pair}
+    views = _with_unsynchronised(rig, 4, 1, seed)
+    with pytest.raises(SolveError) as e:
+        calibrate_pair(BOARD, views["left"], views["right"], intr["left"], intr["right"], names=("left", "right"))
+    message = str(e.value)
+    assert "image pair '000' does not fit" in message and "3 good pair(s) of 4" in message
+    assert "capture 1 more view(s)" in message, message
+    # the same four pairs, in sync, solve
+    views = _views(rig, _facing_poses(rig, 4, seed=seed), noise_px=0.2, seed=seed)
+    pose = calibrate_pair(BOARD, views["left"], views["right"], intr["left"], intr["right"])
+    assert pose.dropped == () and np.linalg.norm(pose.T - _relative_t(*rig.pair)) < 0.005
+
+
+@pytest.mark.parametrize("pairs, bad, seed, words", [
+    (6, 2, 0, ["'001' does not fit", "'000' were dropped already", "More than a quarter of the 6 pairs",
+               "retake '000', '001'"]),
+    (8, 3, 3, ["'001' does not fit", "'000', '002' were dropped already", "More than a quarter of the 8 pairs"]),
+])
+def test_bad_pairs_beyond_what_may_be_dropped_stop_the_solve(pairs, bad, seed, words):
+    # once the pairs allowed were dropped, the next bad one was kept: the pose solved with it (16 px, 0.5 m
+    # off for six pairs), and only a warning
+    rig = example_rig()
+    intr = {cam.name: Intrinsics(K=cam.K, dist=cam.dist, rms_px=0.1, per_view_px={}, dropped=(), coverage=1.0,
+                                 image_size=cam.size) for cam in rig.pair}
+    views = _with_unsynchronised(rig, pairs, bad, seed=seed)
+    with pytest.raises(SolveError) as e:
+        calibrate_pair(BOARD, views["left"], views["right"], intr["left"], intr["right"])
+    assert all(w in str(e.value) for w in words), str(e.value)
+
+
 @pytest.mark.parametrize("size,flags", [(4, 0), (5, 0), (8, cv2.CALIB_RATIONAL_MODEL),
                                          (12, cv2.CALIB_RATIONAL_MODEL | cv2.CALIB_THIN_PRISM_MODEL),
                                          (14, cv2.CALIB_RATIONAL_MODEL | cv2.CALIB_THIN_PRISM_MODEL
