@@ -47,6 +47,10 @@ class RigSource(abc.ABC):
     #: faster than frames can be drained cannot hold ``read()`` forever. Backends that hold more
     #: (a deeper queue) raise it.
     drain_limit: int = 32
+    #: Whether a frame's timestamp is the time it was captured on this host's monotonic clock, so that
+    #: ``now - timestamp`` is the latency since capture (a replay re-stamped and played at the recorded
+    #: pace: yes; one keeping the recorded stamps, or played faster or slower: no).
+    live_timestamps: bool = True
 
     def __init__(
         self, rig: Rig | None, *, pairing: PairingConfig | None = None, clock: Clock | None = None

@@ -109,7 +109,7 @@ def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
 class _Tally:
     """What the estimated pairs produced, pooled for the summary (accuracy: ``cli.simdata.Accuracy``)."""
 
-    live: bool = True  # False for a replay: its capture times are the recording's clock, not this run's
+    live: bool = True  # False where capture times are not this run's clock (a replay keeping the recorded ones)
     totals_ms: list[float] = field(default_factory=list)
     capture_to_joints_ms: list[float] = field(default_factory=list)
     found: list[np.ndarray] = field(default_factory=list)  # (25,) per estimated pair
@@ -136,7 +136,7 @@ class _Tally:
         lines.append(f"estimator latency (timing_ms total): median {np.median(t):.1f} ms, "
                      f"p99 {np.percentile(t, 99):.1f} ms; capture to joints: "
                      + (f"median {np.median(c):.1f} ms, p99 {np.percentile(c, 99):.1f} ms" if self.live else
-                        "not measured (a replay: its capture times are those of the recording)"))
+                        "not measured (a replay with keep_time=1 or at another speed: its capture times are not this run's)"))
         found = np.asarray(self.found)
         lines.append(f"estimated joints found: {found.mean():.1%} ({int(found.sum())} of {found.size}; "
                      f"the rest are streamed as missing)")
@@ -266,7 +266,7 @@ def _run(args: argparse.Namespace) -> int:
         if cfg is not None and estimator is None:
             estimator = _load_estimator(source.rig, cfg)
         latest = source.pairing.policy is drivers.DropPolicy.LATEST
-        tally = _Tally(live=scheme != "replay")
+        tally = _Tally(live=source.live_timestamps)
         delivered, skipped, skews = 0, 0, []
         last_pair, last_result = None, None
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)

@@ -29,6 +29,7 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
+from ghnerf_runtime.config_paths import paths_from_file
 from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.json_keys import remember_repeats
@@ -39,8 +40,11 @@ __all__ = [
     "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
     "PresenceConfig", "NovelViewConfig", "SmoothingConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
-    "load_config", "read_json_file",
+    "load_config", "read_json_file", "PATH_KEYS",
 ]
+
+#: The keys holding file-system paths; a relative one written in a config file is read from the file's folder.
+PATH_KEYS: tuple[tuple[str, ...], ...] = (("session", "model_dir"),)
 
 #: Precision choices of :class:`SessionConfig`.
 PRECISIONS = ("fp32", "int8", "auto")
@@ -93,7 +97,9 @@ class SessionConfig:
 
     Attributes:
         model_dir: folder holding ``<graph>.onnx`` (fp32) and ``<graph>.int8.onnx`` files, as
-            ``python -m training.export`` writes them (and optionally ``model_card.json``).
+            ``python -m training.export`` writes them (and optionally ``model_card.json``). A relative
+            path written in a config file is read from the file's folder (:func:`load_config`); the
+            default, and a path given in code, from the current directory.
             Switching to another model is only this path.
         precision: ``"fp32"``: the fp32 file of every graph; ``"int8"``: the int8 file of every
             graph that has one; ``"auto"``: the faster file per graph as measured on the
@@ -841,9 +847,10 @@ def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], wh
 
 
 def load_config(path: str | os.PathLike) -> EstimatorConfig:
-    """Read a JSON config file; errors name the file and the key."""
+    """Read a JSON config file; errors name the file and the key. A relative ``session.model_dir`` in the
+    file is read from the file's folder (:mod:`ghnerf_runtime.config_paths`)."""
     data = read_json_file(path, lambda message: ConfigError(message, key=str(path)))
     try:
-        return config_from_dict(data)
+        return config_from_dict(paths_from_file(data, PATH_KEYS, path))
     except ConfigError as e:
         raise ConfigError(str(e), key=str(path)) from None

@@ -398,6 +398,10 @@ class RecordingRigSource(RigSource):
     def drain_limit(self) -> int:  # type: ignore[override]
         return self.inner.drain_limit  # what the inner source can hold; its _catch_up is not used: all is recorded
 
+    @property
+    def live_timestamps(self) -> bool:  # type: ignore[override]
+        return self.inner.live_timestamps  # frames pass through with the inner source's stamps
+
     def _pairs_lost(self) -> int:
         return self.inner._pairs_lost()
 

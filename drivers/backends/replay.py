@@ -12,10 +12,18 @@ URL options:
   far behind the reader is, and the older ones are dropped (counted, their images
   never decoded); free-running playback never skips ahead.
 
-Frames carry the recorded timestamps, indices and ground truth unchanged on the
-first pass. Each further ``loop`` pass shifts timestamps by the recording's span
-(plus one frame period) and indices by the per-camera index span (last - first
-+ 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
+* ``keep_time``: ``1`` delivers the recorded timestamps. By default (``0``) frames are
+  re-stamped onto the source's clock: the first frame gets the clock time at which playback
+  started (the first read), every other frame its recorded distance from the first. A live
+  rig's stamps are its host's monotonic clock, and the joint stream carries them as capture
+  times: a recorded stamp (another boot, another machine) made every receiver's latency
+  (``send - capture``) hours long. Only the origin moves, so pairing, smoothing, tracking
+  and rate limits see the recorded spacing; at ``speed=recorded`` a stamp is the time its
+  frame plays, at other speeds (and ``free``) the stamps run ahead of or behind the clock.
+
+Indices and ground truth are delivered unchanged on the first pass. Each further ``loop``
+pass shifts timestamps by the recording's span (plus one frame period) and indices by the
+per-camera index span (last - first + 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
 whose files are missing, empty or cut short
 (:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
 validation: docs/recording-format.md.
@@ -75,6 +83,7 @@ class ReplayRigSource(RigSource):
         manifest, rows: the loaded recording (see :mod:`drivers.backends.recording_format`).
         speed: playback rate, ``None`` for free-running.
         loop: start over at the end.
+        keep_time: deliver the recorded timestamps rather than re-stamping them onto ``clock``.
     """
 
     scheme = "replay"
@@ -87,6 +96,7 @@ class ReplayRigSource(RigSource):
         *,
         speed: float | None = 1.0,
         loop: bool = False,
+        keep_time: bool = False,
         pairing: PairingConfig | None = None,
         clock: Clock | None = None,
     ) -> None:
@@ -97,6 +107,7 @@ class ReplayRigSource(RigSource):
         self._rows = sorted(rows, key=lambda r: r.timestamp_ns)
         self.speed = speed
         self.loop = loop
+        self.keep_time = keep_time
         self._cursor = 0
         self._pass = 0
         self._anchor_ns: int | None = None  # clock time at which the first frame is due (set by the first read)
@@ -109,6 +120,7 @@ class ReplayRigSource(RigSource):
             raise RigConfigError(f"rig URL {url.url!r}: give the recording directory, e.g. replay:///data/take1")
         speed = _parse_speed(url)
         loop = url.take_bool("loop", False)
+        keep_time = url.take_bool("keep_time", False)
         tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=MAX_TOLERANCE_MS)
         policy = url.take_str("policy", DropPolicy.ALL.value, choices=tuple(p.value for p in DropPolicy))
         url.finish()
@@ -122,7 +134,7 @@ class ReplayRigSource(RigSource):
                             "(written after the last flush before the take was cut short)", directory, broken)
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
         return cls(
-            directory, manifest, rows, speed=speed, loop=loop,
+            directory, manifest, rows, speed=speed, loop=loop, keep_time=keep_time,
             pairing=pairing or PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)), clock=clock,
         )
 
@@ -174,9 +186,10 @@ class ReplayRigSource(RigSource):
         if upcoming is None:
             raise EndOfStream(f"recording {self.directory} ended after {len(self._rows)} frames")
         row, shift_ns = upcoming
+        if self._anchor_ns is None:
+            self._start_playing()
+        assert self._anchor_ns is not None
         if self.speed is not None:
-            if self._anchor_ns is None:
-                self._anchor_ns = self.clock.now_ns()
             due = self._due_ns(row, shift_ns, self._anchor_ns, self.speed)
             deadline = self.clock.now_ns() + int(timeout_s * 1e9)
             if due > deadline:
@@ -185,6 +198,19 @@ class ReplayRigSource(RigSource):
             self.clock.sleep_until(due)
         self._advance()
         return self._load(row, shift_ns)
+
+    def _start_playing(self) -> None:
+        """Anchor playback (pacing and re-stamping) at the clock's now: the first frame plays now."""
+        self._anchor_ns = self.clock.now_ns()
+        if not self.keep_time and self._rows:
+            # Logged so a stream can be matched with the take (recorded = delivered + offset).
+            log.info("replay %s: frames stamped on this clock; recorded time = stamp %+d ns (keep_time=1: "
+                     "the recorded stamps)", self.directory, self._rows[0].timestamp_ns - self._anchor_ns)
+
+    @property
+    def live_timestamps(self) -> bool:  # type: ignore[override]
+        """Re-stamped frames played at the recorded pace carry the time they play, as a live rig's would."""
+        return not self.keep_time and self.speed == 1.0
 
     def _due_ns(self, row: FrameRow, shift_ns: int, anchor_ns: int, speed: float) -> int:
         """Clock time at which ``row`` (on the loop pass shifted by ``shift_ns``) plays."""
@@ -268,10 +294,12 @@ class ReplayRigSource(RigSource):
     def _frame(self, row: FrameRow, shift_ns: int, image: np.ndarray, truth: CameraTruth | None,
                joints_3d: np.ndarray | None) -> Frame:
         passes = shift_ns // self._time_span_ns if self._time_span_ns else 0
+        # Re-stamped: the same distance from the first frame, measured from the clock time playback started.
+        origin = 0 if self.keep_time or self._anchor_ns is None else self._anchor_ns - self._rows[0].timestamp_ns
         return Frame(
             camera=row.camera,
             image=image,
-            timestamp_ns=row.timestamp_ns + shift_ns,
+            timestamp_ns=row.timestamp_ns + shift_ns + origin,
             index=row.index + passes * self._index_span.get(row.camera, 0),
             truth=truth,
             scene_time_s=row.scene_time_s,

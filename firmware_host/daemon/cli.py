@@ -44,6 +44,7 @@ from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_da
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_sink_urls
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
 from ghnerf_runtime.config import config_to_dict
+from ghnerf_runtime.config_paths import config_folder
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
@@ -73,8 +74,10 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def check_config(config: DaemonConfig) -> None:
+def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) -> None:
     """What can be checked without hardware: the URLs parse for their backends, the model folder holds graphs.
+
+    ``source``: the config file ``config`` was read from, for the hint on where its relative paths point.
 
     :raises DaemonConfigError: naming the key.
     """
@@ -116,20 +119,28 @@ def check_config(config: DaemonConfig) -> None:
     if not model_dir.is_dir():
         # said "holds no *.onnx graphs (make model builds ./models)": the example config's relative
         # "models", read from another folder than the repository's, sent the user to a two-hour build
-        relative = "" if model_dir.is_absolute() else (f", read from the current directory {Path.cwd()}: run from the "
-                                                       "folder that holds it, or give an absolute path")
         raise DaemonConfigError(f"{model_dir}: {'not a folder' if model_dir.exists() else 'no such folder'}"
-                                f"{relative}", key="estimator.session.model_dir")
+                                f"{_where_read(model_dir, source)}", key="estimator.session.model_dir")
     if not any(model_dir.glob("*.onnx")):
         raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
                                 key="estimator.session.model_dir")
+
+
+def _where_read(folder: Path, source: str | os.PathLike | None) -> str:
+    """Where a model folder that is not there was looked for, when that is not plain from the path."""
+    if not folder.is_absolute():  # not from a file (the default, where the file leaves model_dir out)
+        return (f", read from the current directory {Path.cwd()}: give the folder in the config file (a relative "
+                "path there is read from the file's folder) or an absolute one")
+    if source is not None and folder.is_relative_to(config_folder(source)):
+        return f" (a relative path in {source} is read from its folder, {config_folder(source)})"
+    return ""
 
 
 def read_checked_config(path: str) -> DaemonConfig:
     """Load the config file and run :func:`check_config` on it; every error names the file and the key."""
     config = load_daemon_config(path)
     try:
-        check_config(config)
+        check_config(config, path)
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None
     return config

@@ -23,13 +23,16 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from firmware_host.errors import FirmwareHostError
-from ghnerf_runtime.config import EstimatorConfig, config_from_dict, read_json_file
+from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
+from ghnerf_runtime.config_paths import paths_from_file
 from ghnerf_runtime.errors import ConfigError
 
 __all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "daemon_config_from_dict",
            "load_daemon_config", "LOG_LEVELS"]
 
 LOG_LEVELS = ("debug", "info", "warning", "error")
+#: The keys holding file-system paths: a relative one written in the config file is read from the file's folder.
+DAEMON_PATH_KEYS: tuple[tuple[str, ...], ...] = (("health", "status_file"),) + tuple(("estimator",) + k for k in PATH_KEYS)
 #: Time one estimate may take on top of a read before the watchdog's allowance runs out (see DaemonConfig).
 LOOP_MARGIN_S = 5.0
 
@@ -210,10 +213,12 @@ def daemon_config_from_dict(data: Mapping[str, Any]) -> DaemonConfig:
 
 
 def load_daemon_config(path: str | os.PathLike) -> DaemonConfig:
-    """Read the daemon's JSON config file; every error names the file and the key. (The tree back to plain
-    data, for ``--validate-config``, is the runtime's ``config_to_dict``: it walks any dataclass tree.)"""
+    """Read the daemon's JSON config file; every error names the file and the key. Relative paths written in
+    it (``estimator.session.model_dir``, ``health.status_file``) are read from the file's folder, whatever the
+    current directory (:mod:`ghnerf_runtime.config_paths`). (The tree back to plain data, for
+    ``--validate-config``, is the runtime's ``config_to_dict``: it walks any dataclass tree.)"""
     data = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
     try:
-        return daemon_config_from_dict(data)
+        return daemon_config_from_dict(paths_from_file(data, DAEMON_PATH_KEYS, path))
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None

@@ -32,7 +32,8 @@ def record(out, cache, pairs=30, sim=SIM, **record_options):
     return read, source.stats  # after close: the writers have finished
 
 
-def replay_all(take, options="speed=free"):
+def replay_all(take, options="speed=free&keep_time=1"):
+    """Every pair of ``take``; by default with its recorded stamps (keep_time=1), to compare with the live pairs."""
     with open_rig(f"replay://{take}?{options}&policy=all") as source:
         return list(source)
 
@@ -98,13 +99,46 @@ def test_manifest_and_journal_describe_the_take(take):
 def test_recorded_speed_honours_the_recorded_timing(take):
     out, live, _ = take
     clock = ManualClock(123_000_000_000)
-    with open_rig(f"replay://{out}?policy=all", clock=clock) as source:
+    with open_rig(f"replay://{out}?policy=all&keep_time=1", clock=clock) as source:
+        assert not source.live_timestamps
         t_first = live[0].frames[0].timestamp_ns
         for pair in live[:10]:
             got = source.read(timeout_s=5.0)
-            assert got.timestamps_ns == pair.timestamps_ns  # recorded stamps, unchanged
+            assert got.timestamps_ns == pair.timestamps_ns  # keep_time=1: recorded stamps, unchanged
             # delivered when the clock reached the later frame's recorded offset
             assert clock.now_ns() - 123_000_000_000 == max(got.timestamps_ns) - t_first
+
+
+def test_replay_stamps_frames_on_the_clock_with_the_recorded_spacing(take):
+    """A replay streamed the recorded stamps as capture times: a receiver's latency (send - capture, on the
+    sender's clock) was the distance to another boot's clock, hours or days. Now the first frame is stamped
+    with the clock time playback started and every frame keeps its recorded distance from it."""
+    out, live, _ = take
+    start = 123_000_000_000
+    clock = ManualClock(start)
+    t_first = min(json.loads(line)["timestamp_ns"] for line in (out / FRAMES).read_text().splitlines())
+    with open_rig(f"replay://{out}?policy=all", clock=clock) as source:
+        assert source.live_timestamps
+        for pair in live[:10]:
+            got = source.read(timeout_s=5.0)
+            assert got.timestamps_ns == tuple(t - t_first + start for t in pair.timestamps_ns)
+            assert max(got.timestamps_ns) == clock.now_ns()  # stamped with the time it played: latency 0 here
+    # Any speed keeps the recorded spacing (pairing, smoothing and tracking see the take as it was);
+    # free-running playback is anchored where it started.
+    for options in ("speed=2", "speed=free"):
+        clock = ManualClock(start)
+        with open_rig(f"replay://{out}?policy=all&{options}", clock=clock) as source:
+            assert not source.live_timestamps
+            got = [source.read(timeout_s=5.0) for _ in range(10)]
+        assert [p.timestamps_ns for p in got] == [tuple(t - t_first + start for t in p.timestamps_ns)
+                                                  for p in live[:10]], options
+
+
+def test_a_recorder_tells_its_inner_replays_kind_of_stamps(take, tmp_path):
+    """record+replay:// passes the replay's stamps through: the demo's latency figure asks the wrapper."""
+    out, _, _ = take
+    assert create_rig_source(f"record+replay://{out}?out={tmp_path / 'a'}").live_timestamps
+    assert not create_rig_source(f"record+replay://{out}?keep_time=1&out={tmp_path / 'b'}").live_timestamps
 
 
 def test_speed_factor_scales_waiting(take):

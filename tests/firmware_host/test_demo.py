@@ -229,6 +229,13 @@ def test_a_replay_prints_no_capture_latency_and_no_loop_note(tmp_path, capsys, s
     assert rc == 0, out
     assert "pre-renders" not in out
     assert "capture to joints: not measured (a replay" in out and not re.search(r"capture to joints: median", out)
+    # At the recorded pace the replay stamps its frames with the time they play (drivers' replay
+    # backend, keep_time=0): capture to joints is this run's, and measured.
+    rc = demo.main(["--url", f"replay://{take}", "--out", str(tmp_path / "out"), "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    m = re.search(r"capture to joints: median ([\d.]+) ms", out)
+    assert m and 0 <= float(m[1]) < 5000, out
 
 
 def test_the_default_sink_writes_into_an_out_folder_with_a_space_and_a_hash(tmp_path, capsys, sim_url):

@@ -120,3 +120,14 @@ def test_json_python_cannot_hold_is_a_config_error(tmp_path, text, why):
 def test_a_config_path_with_a_nul_character_is_a_config_error():
     with pytest.raises(ConfigError, match="cannot read config file.*null byte"):  # was a bare ValueError
         load_config("runtime\0.json")
+
+
+def test_a_relative_model_dir_in_a_config_file_is_read_from_its_folder(tmp_path, monkeypatch):
+    # read from the current directory, ghnerf-run --config / ghnerf-demo --config found it only from one folder
+    (tmp_path / "conf").mkdir()
+    path = tmp_path / "conf" / "runtime.json"
+    path.write_text(json.dumps({"session": {"model_dir": "models"}}))
+    monkeypatch.chdir(tmp_path)
+    assert load_config(path).session.model_dir == str(tmp_path / "conf" / "models")
+    path.write_text(json.dumps({"session": {"threads": 1}}))
+    assert load_config(path).session.model_dir == "models"  # left out: the default, as before

@@ -410,3 +410,39 @@ def test_a_sighup_before_the_config_is_read_is_met_by_the_read(tmp_path, monkeyp
         assert signal.getsignal(signal.SIGHUP) is not cli.early_sighup._record  # put back
     finally:
         signal.signal(signal.SIGHUP, before)
+
+
+def _fake_models(folder: Path) -> Path:
+    (folder / "models").mkdir(parents=True)
+    (folder / "models" / "encoder.onnx").write_bytes(b"only globbed by --validate-config")
+    return folder / "models"
+
+
+def test_the_example_config_beside_its_models_validates_from_any_folder(tmp_path, monkeypatch, capsys):
+    """The example config names "models" relative: read from the current directory, it worked only from the
+    folder holding both (the repository root); run from anywhere else, its model folder did not exist."""
+    home = tmp_path / "checkout"
+    models = _fake_models(home)
+    path = _write(home, cli.EXAMPLE_CONFIG)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert cli.main(["--config", str(path), "--validate-config"]) == 0, capsys.readouterr().err
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["estimator"]["session"]["model_dir"] == str(models)
+    assert printed["health"]["status_file"] == str(home / "ghnerf-status.json")
+    # a relative --config path too: the file's folder, not the current one
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["--config", "checkout/daemon.json", "--validate-config"]) == 0
+    assert json.loads(capsys.readouterr().out)["estimator"]["session"]["model_dir"] == str(models)
+
+
+def test_a_missing_model_folder_names_the_resolved_path_and_the_config_file(tmp_path, monkeypatch, capsys):
+    _fake_models(tmp_path)  # in the current directory, where a relative path used to be read
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "etc").mkdir()
+    path = _write(tmp_path / "etc", cli.EXAMPLE_CONFIG)
+    assert cli.main(["--config", str(path), "--validate-config"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"ghnerf-daemon: error: {path}: estimator.session.model_dir: {tmp_path / 'etc' / 'models'}: "
+                   f"no such folder (a relative path in {path} is read from its folder, {tmp_path / 'etc'})")

@@ -194,3 +194,26 @@ def test_the_nominal_webcam_rig_is_marked():
     source = OpenCVRigSource.from_url(RigUrl.parse("opencv://?first=0&second=1"))
     rig = source._nominal_rig([(640, 480), (640, 480)])
     assert rig.metadata["uncalibrated"] is True and is_nominal_rig(rig)
+
+
+def test_relative_paths_in_the_file_are_read_from_its_folder(tmp_path, monkeypatch):
+    """As systemd drop-ins and docker compose read theirs: the same file works from any current directory."""
+    folder = tmp_path / "etc" / "ghnerf"
+    folder.mkdir(parents=True)
+    path = folder / "daemon.json"
+    path.write_text(json.dumps({"sinks": ["udp://127.0.0.1:9870"],
+                                "estimator": {"session": {"model_dir": "../models"}},
+                                "health": {"status_file": "run/status.json"}}))
+    monkeypatch.chdir(tmp_path)
+    config = load_daemon_config("etc/ghnerf/daemon.json")  # a relative --config: its folder, made absolute
+    assert config.estimator.session.model_dir == str(folder / "../models")
+    assert config.health.status_file == str(folder / "run/status.json")
+    # absolute paths are kept; a key the file leaves out keeps its default (relative to the current directory,
+    # where the unit's WorkingDirectory=/opt/ghnerf finds /opt/ghnerf/models)
+    path.write_text(json.dumps({"sinks": ["udp://127.0.0.1:9870"], "health": {"status_file": "/run/g.json"}}))
+    config = load_daemon_config(path)
+    assert config.estimator.session.model_dir == "models" and config.health.status_file == "/run/g.json"
+    # a value of the wrong type is still the validation's to report, by its key
+    path.write_text(json.dumps({"sinks": ["udp://127.0.0.1:9870"], "health": {"status_file": 3}}))
+    with pytest.raises(DaemonConfigError, match=r"health\.status_file: must be a file path or null"):
+        load_daemon_config(path)

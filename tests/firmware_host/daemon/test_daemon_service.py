@@ -25,6 +25,7 @@ import drivers
 from firmware_host.daemon import Daemon, DaemonConfigError, DaemonStartError, daemon_config_from_dict
 from firmware_host.daemon.health import State
 from firmware_host.daemon.notify import SystemdNotifier
+from firmware_host.listen import Tally
 from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.protocol.messages import Hello, Joints, Status
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, messages_of, wait_until
@@ -308,6 +309,30 @@ def test_a_corrupt_frame_in_a_recording_is_skipped_and_the_recording_plays_to_it
     assert health.read_errors == 1 and health.pairs_estimated >= 12
     report = json.loads((tmp_path / "status.json").read_text())
     assert report["pairs"]["read_errors"] == 1
+
+
+def test_a_replay_streams_capture_times_on_the_daemons_clock(sim_url, tmp_path):
+    """A take recorded on another clock (here three days ahead, a device with a longer uptime) streamed its
+    recorded stamps as capture times: a receiver's latency (send - capture) was minus three days. Replayed,
+    the frames are stamped on the daemon's clock with the recorded spacing."""
+    take = tmp_path / "take"
+    ahead = drivers.ManualClock(time.monotonic_ns() + 3 * 86_400 * 10**9)
+    with drivers.open_rig(f"record+{sim_url}&policy=all&out={take}&lossless=1", clock=ahead) as rig:
+        recorded = [rig.read(timeout_s=5).frames[0].timestamp_ns for _ in range(12)]
+    cfg = _config({"url": f"replay://{take}"}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.sinks, timeout=30, what="the sink opened")
+        sink = run.daemon.sinks["memory://?status_s=0.05"]
+        run.thread.join(timeout=60)  # rig.exit_at_end: the daemon stops by itself at the recording's end
+        assert not run.thread.is_alive() and run.rc == [0]
+    joints = [m for m in messages_of(sink.read()) if isinstance(m, Joints)]
+    assert len(joints) == len(recorded)
+    tally = Tally()  # what ghnerf-listen computes
+    for message in joints:
+        tally.add(message)
+    assert all(0 <= ms < 5000 for ms in tally.latency_ms), tally.latency_ms  # the estimate's time, not days
+    sent = [m.header.capture_us for m in joints]
+    assert all(abs((s - sent[0]) - (t - recorded[0]) // 1000) <= 1 for s, t in zip(sent, recorded))
 
 
 def test_a_rig_whose_reads_keep_failing_is_reopened(sim_url, tmp_path, monkeypatch):
