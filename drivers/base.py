@@ -61,6 +61,7 @@ class RigSource(abc.ABC):
         self._pairer: FramePairer | None = None  # built with the rig: it pairs the rig's camera names
         self._is_open = False
         self._closed = False
+        self._held_error: RigDisconnectedError | EndOfStream | None = None  # see _take_frame
         if rig is not None:
             self._set_rig(rig)
 
@@ -158,7 +159,9 @@ class RigSource(abc.ABC):
         With ``DropPolicy.LATEST`` that is the newest pair: every frame the backend already
         holds is taken in first (up to :attr:`drain_limit`, what the backend can hold), and
         older complete pairs are dropped, counted in ``stats.pairs_dropped`` and seen as
-        sequence gaps. With ``DropPolicy.ALL`` it is the oldest pair not yet read.
+        sequence gaps. With ``DropPolicy.ALL`` it is the oldest pair not yet read. A pair whose
+        frames were not captured together is formed once the pairer knows no later frame is
+        closer (:class:`~drivers.pairing.FramePairer`): at most one frame later.
 
         Raises:
             RigTimeoutError: no pair within the timeout (frames may still be flowing
@@ -191,8 +194,10 @@ class RigSource(abc.ABC):
             drain -= self._drain(pairer, drain)
             ready = pairer.pop()
             if ready is not None:
-                sequence, first, second = ready
-                return FramePair(frames=(first, second), sequence=sequence, rig=self.rig)
+                return self._frame_pair(ready)
+            if self._held_error is not None:  # raised once the pairs of the frames before it are read
+                error, self._held_error = self._held_error, None
+                raise error
             remaining = (deadline - self.clock.now_ns()) / 1e9
             if remaining <= 0:
                 late_reads -= 1
@@ -200,25 +205,35 @@ class RigSource(abc.ABC):
                     raise RigTimeoutError(
                         f"no frame pair within {seconds:.3f} s from {type(self).__name__} (stats: {self.stats})"
                     )
-            try:
-                frame = self._read_frame(max(remaining, 0.0))
-            except RigDisconnectedError:
-                pairer.reset()
-                raise
+            frame = self._take_frame(pairer, max(remaining, 0.0))
             if frame is not None:
                 self._push(pairer, frame)
-            elif remaining <= 0:
+            elif remaining <= 0 and self._held_error is None:
                 late_reads = -1  # nothing held: time out now
+
+    def _frame_pair(self, ready: tuple[int, Frame, Frame]) -> FramePair:
+        sequence, first, second = ready
+        return FramePair(frames=(first, second), sequence=sequence, rig=self.rig)
+
+    def _take_frame(self, pairer: FramePairer, timeout_s: float) -> Frame | None:
+        """:meth:`_read_frame`; a disconnect or the end of the stream is held for :meth:`read` to raise
+        after the pairs still owed: the pairer decides the frames it holds now, as no later frame of
+        theirs will come (one waiting to see whether a closer frame follows pairs now)."""
+        try:
+            return self._read_frame(timeout_s)
+        except RigDisconnectedError as e:
+            pairer.reset()
+            self._held_error = e
+        except EndOfStream as e:
+            pairer.flush()
+            self._held_error = e
+        return None
 
     def _drain(self, pairer: FramePairer, limit: int) -> int:
         """Push up to ``limit`` frames the backend holds already; returns how many were read."""
         n = 0
-        while n < limit and self._frame_available():
-            try:
-                frame = self._read_frame(0.0)  # zero timeout: never wait, even if availability was wrong
-            except RigDisconnectedError:
-                pairer.reset()
-                raise
+        while n < limit and self._held_error is None and self._frame_available():
+            frame = self._take_frame(pairer, 0.0)  # zero timeout: never wait, even if availability was wrong
             if frame is None:
                 break
             self._push(pairer, frame)

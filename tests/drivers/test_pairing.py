@@ -35,12 +35,16 @@ def stream(offset_ns: int = 0, n: int = 10, drop_a=(), drop_b=()):
     return sorted(events, key=lambda f: f.timestamp_ns)
 
 
-def run(config: PairingConfig, events) -> tuple[FramePairer, list]:
+def run(config: PairingConfig, events, end: bool = True) -> tuple[FramePairer, list]:
+    """Push ``events``, reading after each as a reader that keeps up; ``end``: then the stream ends."""
     pairer = FramePairer(("a", "b"), config)
     pairs = []
     for f in events:
         pairer.push(f)
-        pairs += drain(pairer)  # a reader that keeps up
+        pairs += drain(pairer)
+    if end:
+        pairer.flush()  # the last pair may wait for a frame that would have been closer
+        pairs += drain(pairer)
     return pairer, pairs
 
 
@@ -106,7 +110,7 @@ def test_all_keeps_every_pair_up_to_max_ready():
 
 def test_one_camera_stalling_is_bounded_by_max_pending():
     events = [frame("a", k, k * PERIOD) for k in range(20)]
-    pairer, pairs = run(PairingConfig(max_pending=4), events)
+    pairer, pairs = run(PairingConfig(max_pending=4), events, end=False)  # stalled, not ended
     assert pairs == [] and pairer.stats.unpaired["a"] == 16
 
 
@@ -154,3 +158,155 @@ def test_pairs_respect_tolerance_and_order(offset_ms, tolerance_ms, drops):
     for cam, k in (("a", 1), ("b", 2)):
         used = len(pairs)
         assert stats.frames_in[cam] - used - stats.unpaired[cam] in range(0, PairingConfig().max_pending + 1)
+
+
+# ------------------------------------------------ the nearest partner, at different rates and with jitter
+def rates(fps_a: float, fps_b: float, seconds: float = 2.0, jitter_ms: float = 0.0, offset_ms: float = 0.0,
+          seed: int = 0):
+    """Both cameras' frames in capture order: a at ``fps_a``, b at ``fps_b`` (``offset_ms`` later), jittered."""
+    rng = np.random.default_rng(seed)
+    events = []
+    for cam, fps, offset in (("a", fps_a, 0.0), ("b", fps_b, offset_ms)):
+        period = 1e9 / fps
+        for k in range(int(seconds * fps)):
+            jitter = float(np.clip(rng.normal(0.0, jitter_ms * MS), -0.45 * period, 0.45 * period)) if jitter_ms else 0
+            events.append(frame(cam, k, round(k * period + offset * MS + jitter)))
+    return sorted(events, key=lambda f: (f.timestamp_ns, f.camera))
+
+
+def closest_first(events, tolerance_ms: float) -> list[tuple[int, int]]:
+    """Offline reference: every frame known, the closest two frames in tolerance paired first, and so on.
+    Only neighbours in time can pair (a frame between two is closer to one of them)."""
+    edges = sorted((b.timestamp_ns - a.timestamp_ns, i) for i, (a, b) in enumerate(zip(events, events[1:]))
+                   if a.camera != b.camera and b.timestamp_ns - a.timestamp_ns <= tolerance_ms * MS)
+    used = set()
+    pairs = []
+    for _, i in edges:
+        if i not in used and i + 1 not in used:
+            used |= {i, i + 1}
+            x, y = sorted((events[i], events[i + 1]), key=lambda f: f.camera)
+            pairs.append((x.index, y.index))
+    return sorted(pairs)
+
+
+def index_pairs(pairs) -> list[tuple[int, int]]:
+    return [(a.index, b.index) for _, a, b in pairs]
+
+
+def test_a_closer_later_frame_wins_over_the_first_in_tolerance():
+    # b@15 is in tolerance of a@0, but a@25 is closer: paired on arrival, b@15 went to a@0 and a@25 was lost
+    events = [frame("a", 0, 0), frame("b", 0, 15 * MS), frame("a", 1, 25 * MS), frame("b", 1, 48 * MS)]
+    pairer, pairs = run(PairingConfig(tolerance_ms=20.0), events, end=False)
+    assert index_pairs(pairs) == [(1, 0)] and pairer.stats.unpaired == {"a": 1, "b": 0}  # b@48 still waits
+
+
+def test_30_and_25_fps_pair_each_frame_with_its_nearest():
+    # opencv://'s default tolerance for a 25 fps camera: half its period. Every 25 fps frame pairs, each with
+    # the 30 fps frame nearest it (at most a third of the 30 fps period away); the sixth 30 fps frame is left.
+    events = rates(30.0, 25.0)
+    pairer, pairs = run(PairingConfig(tolerance_ms=20.0, policy="all"), events)
+    assert index_pairs(pairs) == closest_first(events, 20.0)
+    assert len(pairs) == 50 and pairer.stats.unpaired == {"a": 10, "b": 0}
+    assert max(abs(a.timestamp_ns - b.timestamp_ns) for _, a, b in pairs) < 13.4 * MS  # was 20 ms: the edge
+    for cam in (1, 2):
+        used = [p[cam].index for p in pairs]
+        assert used == sorted(set(used))  # nothing paired twice
+
+
+@pytest.mark.parametrize("offset_ms", [0.0, 8.0, 14.0])
+def test_30_fps_pairs_with_3_ms_jitter_match_the_offline_reference(offset_ms):
+    events = rates(30.0, 30.0, seconds=4.0, jitter_ms=3.0, offset_ms=offset_ms, seed=int(offset_ms))
+    _, pairs = run(PairingConfig(tolerance_ms=16.7, policy="all"), events)
+    assert index_pairs(pairs) == closest_first(events, 16.7)
+
+
+def test_a_frame_between_two_others_breaks_their_link():
+    # b@12 lies between b@10 and a@15: a@15 pairs with it, so b@10 stays a@0's partner
+    events = [frame("a", 0, 0), frame("b", 0, 10 * MS), frame("b", 1, 12 * MS), frame("a", 1, 15 * MS)]
+    _, pairs = run(PairingConfig(tolerance_ms=20.0), events)
+    assert index_pairs(pairs) == [(0, 0), (1, 1)]
+
+
+def test_a_pair_waits_only_while_a_closer_frame_could_come():
+    pairer = FramePairer(("a", "b"), PairingConfig(policy="all"))
+    pairer.push(frame("a", 0, 0))
+    pairer.push(frame("b", 0, 3 * MS))
+    assert drain(pairer) == []  # a's next frame could come within 3 ms of b@3: a's rate is not known yet
+    pairer.push(frame("a", 1, PERIOD))
+    assert index_pairs(drain(pairer)) == [(0, 0)]
+    pairer.push(frame("b", 1, PERIOD + 3 * MS))
+    assert index_pairs(drain(pairer)) == [(1, 1)]  # a's frames come a period apart: its next is too late
+    pairer.push(frame("a", 2, 2 * PERIOD))
+    pairer.push(frame("b", 2, 2 * PERIOD))
+    assert index_pairs(drain(pairer)) == [(2, 2)]  # simultaneous (a shared trigger): nothing can be closer
+
+
+def test_a_camera_that_stops_holds_a_pair_for_one_frame_of_the_other():
+    pairer = FramePairer(("a", "b"), PairingConfig(policy="all"))
+    pairer.push(frame("a", 0, 0))
+    pairer.push(frame("b", 0, 3 * MS))  # a delivers nothing more
+    assert drain(pairer) == []
+    pairer.push(frame("b", 1, PERIOD + 3 * MS))  # b has moved on: a frame of a closer to b@3 would have come
+    assert index_pairs(drain(pairer)) == [(0, 0)]
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    fps=st.tuples(st.sampled_from([15.0, 24.0, 25.0, 30.0, 60.0]), st.sampled_from([15.0, 24.0, 25.0, 30.0, 60.0])),
+    jitter_ms=st.floats(0, 4),
+    offset_ms=st.floats(-20, 20),
+    tolerance_ms=st.floats(2, 25),
+    seed=st.integers(0, 1000),
+)
+def test_pairs_are_the_closest_first_and_wait_one_frame_at_most(fps, jitter_ms, offset_ms, tolerance_ms, seed):
+    events = rates(*fps, seconds=1.0, jitter_ms=jitter_ms, offset_ms=offset_ms, seed=seed)
+    pairer = FramePairer(("a", "b"), PairingConfig(tolerance_ms=tolerance_ms, policy="all", max_pending=64))
+    pairs, newest = [], {}
+    for f in events:
+        # released at the latest once both cameras delivered a frame after it (sooner when that cannot matter)
+        before = min(newest.values()) if len(newest) == 2 else None
+        pairer.push(f)
+        newest[f.camera] = f.timestamp_ns
+        for item in drain(pairer):
+            assert before is None or before <= max(item[1].timestamp_ns, item[2].timestamp_ns), "held too long"
+            pairs.append(item)
+    pairer.flush()
+    pairs += drain(pairer)
+    for _, a, b in pairs:
+        assert abs(a.timestamp_ns - b.timestamp_ns) <= tolerance_ms * MS
+    reference = closest_first(events, tolerance_ms)
+    got = index_pairs(pairs)
+    # the same as the offline reference but where a run of ever closer frames is longer than the lookahead
+    assert len(set(got) ^ set(reference)) <= len(events) // 20, (got, reference)
+    for cam in (0, 1):
+        used = [p[cam] for p in got]
+        assert used == sorted(set(used))
+    stats = pairer.stats
+    assert {c: stats.frames_in[c] - len(pairs) - stats.unpaired[c] for c in "ab"} == {"a": 0, "b": 0}
+
+
+# ----------------------------------------------------------------- edges: equal stamps, time going back
+def test_equal_stamps_of_one_camera_pair_once():
+    events = [frame("a", 0, 0), frame("a", 1, 0), frame("b", 0, 0), frame("b", 1, PERIOD), frame("a", 2, PERIOD)]
+    pairer, pairs = run(PairingConfig(), events)
+    assert index_pairs(pairs) == [(1, 0), (2, 1)] and pairer.stats.unpaired == {"a": 1, "b": 0}  # as close: the later
+
+
+def test_a_clock_going_back_starts_a_new_timeline_without_losing_its_pairs():
+    events = [frame("a", 0, 100 * MS), frame("b", 0, 103 * MS),  # waits for a's next frame...
+              frame("a", 1, 0), frame("b", 1, 3 * MS),  # ...which comes from a clock started over
+              frame("a", 2, PERIOD), frame("b", 2, PERIOD + 3 * MS), frame("a", 3, 2 * PERIOD)]
+    pairer, pairs = run(PairingConfig(policy="all"), events, end=False)
+    assert index_pairs(pairs) == [(0, 0), (1, 1), (2, 2)] and pairer.stats.unpaired == {"a": 0, "b": 0}
+    assert [a.timestamp_ns for _, a, _ in pairs] == [100 * MS, 0, PERIOD]
+
+
+def test_the_measurement_script_matches_its_offline_reference():
+    from benchmarks import measure_pairing
+
+    rng = np.random.default_rng(0)
+    a = measure_pairing.stamps(30.0, 0.0, 1.0, 2.0, rng)
+    b = measure_pairing.stamps(25.0, 0.0, 1.0, 2.0, rng)
+    gaps, waits = measure_pairing.online(a, b, 20.0)
+    assert sorted(gaps) == sorted(measure_pairing.reference(a, b, 20.0)) and len(gaps) == 50
+    assert max(waits) <= 40 * MS + 4 * MS  # one 25 fps frame, jitter included
