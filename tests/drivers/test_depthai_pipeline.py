@@ -151,6 +151,49 @@ def test_runtime_errors_become_the_requested_error_with_the_cause():
             raise RigConfigError("bad")
 
 
+def test_a_device_closed_under_depthai_is_converted_too():
+    """depthai-core's DeviceBase::checkClosed() throws std::invalid_argument, which Python sees as ValueError."""
+    with pytest.raises(RigInitializationError, match="Device already closed") as info:
+        with depthai_errors("opening", RigInitializationError):
+            raise ValueError("Device already closed or disconnected")
+    assert isinstance(info.value.__cause__, ValueError)
+
+
+class _LostDuringStart(ScriptedLink):
+    """Connects, then the device drops off the bus: its next device call fails as depthai's would."""
+
+    def __init__(self, fails: str, error: Exception) -> None:
+        super().__init__([(0, 0)])
+        self.fails, self.error = fails, error
+
+    def calibration(self) -> dai.CalibrationHandler:
+        if self.fails == "calibration":
+            raise self.error
+        return super().calibration()
+
+    def device_id(self) -> str:
+        if self.fails == "device_id" and not self.closed:
+            raise self.error
+        return super().device_id()
+
+
+def test_a_device_lost_while_its_calibration_is_read_is_an_initialization_error():
+    link = _LostDuringStart("calibration", ValueError("Device already closed or disconnected"))
+    with pytest.raises(RigInitializationError, match="starting depthai device.*Device already closed"):
+        open_rig(URL, link_factory=lambda: link)
+    assert link.closed == 1
+
+
+def test_a_device_lost_when_asked_its_id_is_an_initialization_error_and_the_link_is_closed(rig):
+    """With a rig given, the device id is first asked after the calibration step: still a typed error, and
+    the link (the device) closed, since a source whose open() failed is never closed by its owner."""
+    link = _LostDuringStart("device_id", RuntimeError("Couldn't read data from stream (X_LINK_ERROR)"))
+    source = create_rig_source(URL.replace("&mount_height=1.2", ""), rig=rig, link_factory=lambda: link)
+    with pytest.raises(RigInitializationError, match="X_LINK_ERROR"):
+        source.open()
+    assert link.closed == 1 and not source.is_open
+
+
 # ----------------------------------------------------------------- the backend on the host link
 def test_backend_delivers_pairs_from_real_groups():
     link = HostPipelineLink(offset_ms=1.0)

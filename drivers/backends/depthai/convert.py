@@ -76,7 +76,10 @@ def depthai_errors(action: str, error: type[DriverError]) -> Iterator[None]:
 
     A closed queue means the pipeline stopped under us (device lost): always
     :class:`RigDisconnectedError`. Other depthai errors (``RuntimeError`` and its
-    ``XLinkError``/``EepromError`` subclasses) become ``error``.
+    ``XLinkError``/``EepromError`` subclasses) become ``error``, and so does ``ValueError``:
+    depthai-core's ``DeviceBase::checkClosed()`` throws ``std::invalid_argument`` ("Device already
+    closed or disconnected"), which pybind11 raises as ``ValueError``, from any device call made
+    after the device dropped off the bus (``readCalibration()`` right after a flaky USB boot).
     """
     try:
         yield
@@ -84,5 +87,5 @@ def depthai_errors(action: str, error: type[DriverError]) -> Iterator[None]:
         raise
     except dai.MessageQueue.QueueException as e:
         raise RigDisconnectedError(f"{action}: depthai queue closed (device lost or pipeline stopped): {e}") from e
-    except RuntimeError as e:
+    except (RuntimeError, ValueError) as e:
         raise error(f"{action}: {e}") from e

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -60,6 +61,44 @@ class DeviceLink(Protocol):
         """Stop the pipeline and release the device. Safe to call more than once."""
 
 
+#: Links slower than USB3 (``getUsbSpeed()``; ``UNKNOWN`` is a PoE device, not slow).
+_SLOW_USB = ("LOW", "FULL", "HIGH")
+
+
+def open_device(request: StereoRequest, device_class: Callable[..., dai.Device] = dai.Device) -> dai.Device:
+    """Connect to the requested device (or the first found) and prepare it for a stream we own.
+
+    * depthai's own reconnection is switched off (``setMaxReconnectionAttempts(0)``: "0 to disable
+      reconnection"). While it retries, depthai 3.12's host bridges wait for the device ("Waiting
+      for reconnect") and the output queue stays open and silent, so an unplug would read as
+      timeouts; a device back from a reconnect is rebooted with its pipeline restarted behind the
+      pairer's back. Switched off, a lost device ends the pipeline, its queue closes and the
+      source raises :class:`~drivers.errors.RigDisconnectedError`; whoever owns the source
+      reopens it (the daemon does, re-reading the EEPROM).
+    * a link below USB3 is logged as a warning with the stream's bandwidth: two NV12 streams at
+      640x400 and 30 fps are about 23 MB/s, 1280x800 four times that, more than USB2's 480 Mbit/s.
+    """
+    device = device_class(request.device_id) if request.device_id else device_class()
+    try:  # the caller only learns of the device once this returns: close it on any failure here
+        device.setMaxReconnectionAttempts(0)
+        speed = device.getUsbSpeed()
+        name = getattr(speed, "name", str(speed))
+        if name in _SLOW_USB:
+            mb_s = 2 * request.width * request.height * 1.5 * request.fps / 1e6
+            log.warning(
+                "depthai device %s is on a USB link of speed %s (USB2 or slower): two %dx%d streams at %.0f fps "
+                "need about %.0f MB/s as NV12; frames will drop if the link cannot carry them. Use a USB3 port "
+                "and cable, or lower width/height/fps", device.getDeviceId(), name, request.width, request.height,
+                request.fps, mb_s,
+            )
+        else:
+            log.info("depthai device %s on USB speed %s", device.getDeviceId(), name)
+    except BaseException:
+        device.close()
+        raise
+    return device
+
+
 class DaiDeviceLink:
     """:class:`DeviceLink` on a real OAK device through depthai 3.x."""
 
@@ -69,7 +108,7 @@ class DaiDeviceLink:
         self._queue: dai.MessageQueue | None = None
 
     def start(self, request: StereoRequest) -> None:
-        self._device = dai.Device(request.device_id) if request.device_id else dai.Device()
+        self._device = open_device(request)
         pipeline = dai.Pipeline(self._device)
         self._pipeline = pipeline
         outputs = []

@@ -102,6 +102,9 @@ class DepthaiRigSource(RigSource):
             with depthai_errors(f"starting depthai device {self.options.device_id or '(first found)'}", RigInitializationError):
                 link.start(self._request())
                 rig = self._fixed_rig or self._rig_from_device(link)
+                # Asked here, guarded: a device lost just after start fails this call too, and the link
+                # must then be closed (open() failing leaves no source to close it later).
+                device_id = link.device_id()
         except BaseException:
             try:
                 link.close()
@@ -110,7 +113,7 @@ class DepthaiRigSource(RigSource):
             raise
         self._set_rig(rig)
         self._link = link
-        self._device_id = link.device_id()
+        self._device_id = device_id
 
     def _rig_from_device(self, link: DeviceLink) -> Rig:
         o = self.options
