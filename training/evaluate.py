@@ -27,7 +27,8 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
   sources (an ONNX folder's ``human`` graph where it has one, as the runtime runs it, else ``encoder``),
   decoded and triangulated exactly as above (``encoder_heatmaps_pck@0.2``,
   ``encoder_heatmaps_mpjpe_mm``, over the joints decoded in both views: ``*_mpjpe_found`` is their share of
-  the joints with truth, ``*_mpjpe_pred_missing`` the rest): the cheap heatmap source of the runtime; and flip-tested, averaged
+  the joints with truth, ``*_mpjpe_pred_missing`` the rest): the cheap heatmap source of the runtime; and
+  flip-tested, averaged
   with the heatmaps of the mirrored images mirrored back (``encoder_heatmaps_flip_*``, the runtime's
   ``heatmaps.flip_test``). PCK is also reported per source view (``*_by_view``), and MPJPE per
   visibility class of the joint in the two sources (``*_mpjpe_by_visibility``: both see it, one, none;
