@@ -24,7 +24,8 @@ source camera* (the device's ``alpha = 0``) and score its masked PSNR: A and B a
 camera against the stored crop (as ``ghnerf-eval`` scores a view), C through ``Estimator.estimate``
 with ``NovelViewRequest(alpha=0)`` (its own crop, sweep box and coarse/fine rays) against the
 simulator's picture of the camera it rendered (``bench_runtime_common.truth_view``). This tells
-the runtime's novel-view error apart from the scenes' difficulty.
+the runtime's novel-view error apart from the scenes' difficulty. A scene with no view (C) or a
+non-finite PSNR is left out of that path's mean and counted on its line (:func:`psnr_summary`).
 
 A tool (imports ``training.data`` and ``drivers``); not a test.
 """
@@ -91,6 +92,30 @@ def _render_first_source(session: ModelSession, images: np.ndarray, cams, near_f
     return session.run("render_rgb", env)["rgb"].reshape(S, S, 3)
 
 
+#: A view identical to its truth scores +inf dB: counted as this, as ``ghnerf-eval`` caps it (training.evaluate).
+PSNR_CAP_DB = 100.0
+
+
+def psnr_summary(values: list[float | None]) -> dict:
+    """Mean and median masked PSNR of one path's scenes, and what they leave out, by name.
+
+    ``values`` holds one entry per scene: the view's PSNR, or None where the path produced no view
+    (the estimator can return none). A missing or non-finite view (NaN: empty mask or a broken render)
+    is left out of the mean but counted: before, a missing view vanished from C's mean, and a NaN made
+    the mean NaN. +inf (identical images) is capped at :data:`PSNR_CAP_DB`.
+
+    Example:
+        >>> psnr_summary([20.0, None, 30.0, float("nan")])
+        {'mean': 25.0, 'median': 25.0, 'scored': 2, 'no_view': 1, 'nonfinite': 1}
+    """
+    no_view = sum(v is None for v in values)
+    got = np.array([v for v in values if v is not None], np.float64)
+    finite = np.minimum(got[~np.isnan(got)], PSNR_CAP_DB)
+    return {"mean": float(finite.mean()) if finite.size else float("nan"),
+            "median": float(np.median(finite)) if finite.size else float("nan"),
+            "scored": int(finite.size), "no_view": no_view, "nonfinite": int(np.isnan(got).sum())}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model-dir", default="models")
@@ -114,7 +139,7 @@ def main(argv=None) -> int:
     sources = ["rendered"] + (["encoder"] if session.contract.encoder_heatmaps else [])
     rows = {(k, src): ([], [], [], []) for src in sources for k in "ABC"}
     diffs = []
-    psnr: dict[str, list[float]] = {"A": [], "B": [], "C": []}
+    psnr: dict[str, list[float | None]] = {"A": [], "B": [], "C": []}  # per scene; None: no view
     for idx in range(min(args.limit, len(split))):
         a, meta = split.arrays(idx), split.metadata(idx)
         pl = dict(meta["placement"])
@@ -159,7 +184,9 @@ def main(argv=None) -> int:
                                                           novel_view=raw_view)) as est:
                 est.tracker.track = track_from_joints(a["joints_3d"], np.ones(25), np.ones(25, bool), est.config.tracking)
                 view = est.estimate(tuple(full), novel_view=NovelViewRequest(alpha=0.0)).novel_view
-            if view is not None:
+            if view is None:  # counted, not dropped: a view the runtime did not make must not flatter C
+                psnr["C"].append(None)
+            else:
                 sim_truth, sim_mask = truth_view(scene, view.camera, t, float(session.contract.background))
                 pred = view.image[..., ::-1].astype(np.float64) / 255.0
                 psnr["C"].append(masked_psnr(pred, sim_truth, sim_mask).value)
@@ -173,8 +200,10 @@ def main(argv=None) -> int:
     print(f"  mean |stored crop - runtime crop|: {np.mean(diffs):.2f} levels of 255")
     for key, values in psnr.items():
         if values:
-            print(f"  {key} novel view at the first source camera {labels[key]:<46} masked PSNR mean {np.mean(values):.2f} "
-                  f"dB, median {np.median(values):.2f} ({len(values)} scenes)")
+            p = psnr_summary(values)
+            print(f"  {key} novel view at the first source camera {labels[key]:<46} masked PSNR mean {p['mean']:.2f} "
+                  f"dB, median {p['median']:.2f} ({p['scored']} scenes; {p['no_view']} without a view, "
+                  f"{p['nonfinite']} not finite)")
     return 0
 
 

@@ -21,11 +21,14 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
     ``tgt_joints_2d``, truth valid where ``tgt_visible``; undecoded joints count as wrong;
   - 3D joints: ``geometry.triangulate_dlt`` of the decoded joints of both sources with the crop
     projection matrices ``src_P``; ``mpjpe`` (mm, rig frame) against ``joints_3d``; joints that
-    cannot be triangulated (not decoded in both views) are excluded and counted (``mpjpe_pred_missing``).
+    cannot be triangulated (not decoded in both views) are excluded and counted (``mpjpe_pred_missing``,
+    ``mpjpe_found``: the share of the joints with truth that the MPJPE covers).
 * **Encoder heatmaps** (models with the human encoder's auxiliary head): its 2D heatmaps of the two
   sources (an ONNX folder's ``human`` graph where it has one, as the runtime runs it, else ``encoder``),
   decoded and triangulated exactly as above (``encoder_heatmaps_pck@0.2``,
-  ``encoder_heatmaps_mpjpe_mm``): the cheap heatmap source of the runtime; and flip-tested, averaged
+  ``encoder_heatmaps_mpjpe_mm``, over the joints decoded in both views: ``*_mpjpe_found`` is their share of
+  the joints with truth, ``*_mpjpe_pred_missing`` the rest): the cheap heatmap source of the runtime; and
+  flip-tested, averaged
   with the heatmaps of the mirrored images mirrored back (``encoder_heatmaps_flip_*``, the runtime's
   ``heatmaps.flip_test``). PCK is also reported per source view (``*_by_view``), and MPJPE per
   visibility class of the joint in the two sources (``*_mpjpe_by_visibility``: both see it, one, none;
@@ -276,6 +279,9 @@ class HeatmapScores:
     pck_evaluated: int = 0
     mpjpe_sum_mm: float = 0.0
     mpjpe_joints: int = 0
+    # joints with truth that the plain (ungated) triangulation could not place (not decoded in both views):
+    # out of the MPJPE, so reported beside it, or the encoder's MPJPE looks like one over every joint
+    mpjpe_pred_missing: int = 0
     # per body part (body25.BODY_PARTS) and per source view: [correct, evaluated]
     parts: dict[str, list[int]] = field(default_factory=dict)
     views: list[list[int]] = field(default_factory=list)
@@ -294,6 +300,7 @@ class HeatmapScores:
         _add_views(self.views, p)
         self.mpjpe_sum_mm += float(e.errors[e.evaluated].sum())
         self.mpjpe_joints += e.num_evaluated
+        self.mpjpe_pred_missing += e.num_pred_missing
         if visible is not None:
             _add_visibility(self.visibility, e, visible)
         if gated is not None:
@@ -310,8 +317,17 @@ class HeatmapScores:
     def mpjpe_mm(self) -> float | None:
         return self.mpjpe_sum_mm / self.mpjpe_joints if self.mpjpe_joints else None
 
+    @property
+    def mpjpe_found(self) -> float | None:
+        """Share of the joints with truth that the plain MPJPE scores (the rest were not triangulated)."""
+        known = self.mpjpe_joints + self.mpjpe_pred_missing
+        return self.mpjpe_joints / known if known else None
+
     def result(self, prefix: str) -> dict:
         return {f"{prefix}_pck@0.2": self.pck, f"{prefix}_mpjpe_mm": self.mpjpe_mm,
+                f"{prefix}_mpjpe_evaluated_joints": self.mpjpe_joints,
+                f"{prefix}_mpjpe_pred_missing": self.mpjpe_pred_missing,
+                f"{prefix}_mpjpe_found": self.mpjpe_found,
                 f"{prefix}_pck@0.2_by_part": _part_scores(self.parts) if self.parts else None,
                 f"{prefix}_pck@0.2_by_view": _view_scores(self.views) if self.views else None,
                 f"{prefix}_mpjpe_by_visibility": _visibility_scores(self.visibility) if self.visibility else None,
@@ -413,7 +429,7 @@ class Accumulator:
             "pck_fallback_views": self.pck_fallback_views, "pck_views": self.pck_views,
             "mpjpe_mm": r.mpjpe_mm if r.mpjpe_mm is not None else float("nan"),
             "mpjpe_evaluated_joints": r.mpjpe_joints, "mpjpe_missing_truth": self.mpjpe_missing,
-            "mpjpe_pred_missing": self.mpjpe_pred_missing,
+            "mpjpe_pred_missing": self.mpjpe_pred_missing, "mpjpe_found": r.mpjpe_found,
             "heatmap_mse": mean(self.heat_mse),
             "psnr_masked": mean(self.psnr), "ssim_masked": mean(self.ssim), "novel_views": len(self.psnr),
             "nonfinite_scenes": self.nonfinite_scenes, "nonfinite_views": self.nonfinite_views,

@@ -104,6 +104,14 @@ def _gated(m: Mapping[str, Any], prefix: str) -> str:
     return f"{_fmt(mm, 1)}{'' if median is None else ' / ' + _fmt(median, 1)} ({100 * found:.0f} %)"
 
 
+def _plain(m: Mapping[str, Any], prefix: str) -> str:
+    """``"<mean> (<share> %)"`` of the plain MPJPE: the share of the joints with truth it covers (those decoded
+    in both views; without it an MPJPE over 72 % of the joints reads as one over all); the mean alone when
+    the metrics predate the share."""
+    mm, found = m.get(f"{prefix}mpjpe_mm"), m.get(f"{prefix}mpjpe_found")
+    return _fmt(mm, 1) if mm is None or found is None else f"{_fmt(mm, 1)} ({100 * found:.0f} %)"
+
+
 def _prior_cells(m: Mapping[str, Any]) -> str:
     """`` <mean> / <median> | <gated mean> (<share> % within <gate> m) |`` of the skeleton prior, else n/a."""
     mm = m.get("skeleton_prior_mpjpe_mm")
@@ -281,7 +289,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append("## Metrics (held-out split)")
     L.append("")
     L.append("PCK@0.2 of the neck--mid-hip distance in each source view (2D joints decoded from the rendered "
-             "heatmaps), MPJPE of the triangulated joints (mm, rig frame), masked PSNR/SSIM of the novel views, "
+             "heatmaps), MPJPE of the triangulated joints (mm, rig frame; share of the joints with truth it covers, "
+             "those decoded in both views, in brackets), masked PSNR/SSIM of the novel views, "
              "heatmap MSE in the source views. Definitions: `ghnerf_runtime/metrics.py`, `training/evaluate.py`.")
     L.append("")
     L.append("MPJPE gated: the runtime's triangulation (`joints3d.triangulate_joints`: reprojection gate, "
@@ -292,7 +301,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
              "| undecoded joints |")
     L.append("|---|---|---|---|---|---|---|---|---|")
     for label, m in (card.get("metrics") or {}).items():
-        L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('pck@0.2'))} | {_fmt(m.get('mpjpe_mm'), 1)} | "
+        L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('pck@0.2'))} | {_plain(m, '')} | "
                  f"{_gated(m, '')} | "
                  f"{_fmt(m.get('psnr_masked'), 2)} | {_fmt(m.get('ssim_masked'))} | {_fmt(m.get('heatmap_mse'))} | "
                  f"{m.get('pck_undecoded')}/{m.get('pck_evaluated_joints')} |")
@@ -311,9 +320,9 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         L.append("|---|---|---|---|---|---|---|---|" + ("---|---|" if with_prior else ""))
         for label, m in enc.items():
             L.append(f"| {label} | {m.get('kind')} | {_fmt(m.get('encoder_heatmaps_pck@0.2'))} | "
-                     f"{_fmt(m.get('encoder_heatmaps_mpjpe_mm'), 1)} | {_gated(m, 'encoder_heatmaps_')} | "
+                     f"{_plain(m, 'encoder_heatmaps_')} | {_gated(m, 'encoder_heatmaps_')} | "
                      f"{_fmt(m.get('encoder_heatmaps_flip_pck@0.2'))} | "
-                     f"{_fmt(m.get('encoder_heatmaps_flip_mpjpe_mm'), 1)} | {_gated(m, 'encoder_heatmaps_flip_')} |"
+                     f"{_plain(m, 'encoder_heatmaps_flip_')} | {_gated(m, 'encoder_heatmaps_flip_')} |"
                      + (_prior_cells(m) if with_prior else ""))
         L.append("")
         if with_prior:

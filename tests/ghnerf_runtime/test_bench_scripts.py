@@ -85,3 +85,16 @@ def test_measure_novel_overlap_times_frames_in_ram(tmp_path, monkeypatch, capsys
     monkeypatch.setattr(_FakeEstimator, "received", [])
     assert measure_novel_overlap.main(["--precisions", "int8", "--warmup", "0"]) == 0
     _assert_in_ram(seq)
+
+
+def test_the_runtime_vs_eval_psnr_counts_scenes_without_a_view():
+    """Path C's mean used to skip the scenes where the estimator made no novel view (flattering it) and a NaN
+    (empty mask) made a path's mean NaN; now both are left out by name and counted."""
+    from benchmarks.bench_runtime_vs_eval import PSNR_CAP_DB, psnr_summary
+
+    p = psnr_summary([18.0, None, 22.0, float("nan"), None])
+    assert (p["mean"], p["median"]) == (20.0, 20.0)  # by hand: (18 + 22) / 2
+    assert (p["scored"], p["no_view"], p["nonfinite"]) == (2, 2, 1)
+    assert psnr_summary([float("inf"), 20.0])["mean"] == (PSNR_CAP_DB + 20.0) / 2  # capped as ghnerf-eval caps it
+    none = psnr_summary([None])
+    assert np.isnan(none["mean"]) and none["no_view"] == 1 and none["scored"] == 0

@@ -91,6 +91,13 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     assert "| model | heatmaps | head | arms |" in md and "| ghnerf_int8 | rendered | 0.750 | n/a |" in md
     # plain and flip-tested encoder; the gated MPJPE only where the metrics have it (older cards: n/a)
     assert "| ghnerf_int8 | onnx-int8 | 0.800 | 100.0 | n/a | 0.810 | n/a | n/a |" in md
+    # the plain MPJPE with the share of the joints it covers (decoded in both views), where the metrics have it
+    covered = json.loads(json.dumps(card))
+    covered["metrics"]["ghnerf_int8"].update({"mpjpe_mm": 128.7, "mpjpe_found": 0.975,
+                                              "encoder_heatmaps_mpjpe_found": 0.72})
+    cmd = render_markdown(covered)
+    assert "| ghnerf_int8 | onnx-int8 | 0.500 | 128.7 (98 %) | 61.2 / 40.0 (62 %) |" in cmd
+    assert "| ghnerf_int8 | onnx-int8 | 0.800 | 100.0 (72 %) | n/a | 0.810 | n/a | n/a |" in cmd
     assert "| ghnerf_int8 | encoder, flip test | 0.500 | 1.000 |" in md
     assert "| model | heatmaps | view 0 | view 1 |" in md and "| ghnerf_int8 | rendered | 0.400 | 0.600 |" in md
     assert "| ghnerf_int8 | encoder, flip test | 0.900 | n/a |" in md
