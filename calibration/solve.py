@@ -19,12 +19,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import cv2
 import numpy as np
 
 from calibration.board import BoardSpec
+from calibration.consensus import agreeing_pairs, pair_relative_pose
 from calibration.detect import MIN_CORNERS, BoardView
 from calibration.errors import SolveError
 from calibration.level import LEVEL_VOLUME, level_rig
@@ -33,7 +34,7 @@ from ghnerf_runtime.geometry.rig import MIN_BASELINE_M, Rig, WorkingVolume
 from ghnerf_runtime.rig_file import principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
-           "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "MIN_VIEWS"]
+           "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "MIN_VIEWS", "MAX_PAIR_PX"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -45,6 +46,11 @@ LENS_MODELS = {
 MIN_VIEWS = 4
 #: A view whose error exceeds this multiple of the median (and 1 px) is dropped once as an outlier.
 OUTLIER_FACTOR = 3.0
+#: No image pair kept for the pair's pose may fit worse than this (px, the mean of its two images' rms error). A
+#: still board seen by both cameras at the same instant fits at 0.3 px with 0.2 px noise
+#: (benchmarks/measure_pair_outliers.py), 0.08-0.12 px rendered (benchmarks/measure_calibration.py), real
+#: captures usually under 1 px; two unsynchronised pairs of five left in the fit put it at 17-42 px (the first).
+MAX_PAIR_PX = 3.0
 #: The image is divided into this grid to measure how much of it the board's corners covered.
 COVERAGE_GRID = (8, 6)
 #: OpenCV's standard deviation of the focal length, as a share of it: above the first a camera is refused (views
@@ -182,11 +188,16 @@ def _lens_terms_flags(*dists: np.ndarray) -> int:
 
 def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Mapping[str, BoardView],
                    intr_first: Intrinsics, intr_second: Intrinsics, *, names: tuple[str, str] = ("first", "second"),
-                   min_common: int = MIN_CORNERS) -> PairPose:
+                   min_common: int = MIN_CORNERS, max_pair_px: float = MAX_PAIR_PX) -> PairPose:
     """The second camera's pose relative to the first, from views both saw (same view name).
 
+    Pairs that do not fit (two instants, a board found wrongly) are dropped, and named in ``dropped``:
+    first those that disagree with the consensus of the pairs' single-pair poses, then the worst one at
+    a time; no pair kept may fit worse than ``max_pair_px`` (docs/calibration.md).
+
     :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners, not
-        all on one line.
+        all on one line; bad pairs that would leave fewer than :data:`MIN_VIEWS` or are more than a quarter;
+        a pair kept over ``max_pair_px``.
     """
     shared = []
     cv_board = board.cv_board()
@@ -232,14 +243,27 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
     dropped: list[str] = []
     total, max_dropped = len(shared), max(1, len(shared) // 4)
     rms, R, T, per = solve(shared)
-    # One bad pair drags the fit and raises the good ones' errors too, so drop only the worst, solve
+    # First the pairs that disagree with the others one by one (calibration/consensus.py): two or more
+    # bad pairs among few drag every pair's error up together, and dropping one at a time found neither
+    # (two of five put the second camera 0.5-1.5 m off, with only a warning).
+    bad = _disagreeing_pairs(board, first, second, intr_first, intr_second, shared, solve)
+    if bad:
+        good = [p for k, p in enumerate(shared) if k not in bad]
+        without = solve(good)
+        if len(good) < MIN_VIEWS or len(bad) > max_dropped:
+            raise SolveError(_bad_pairs_message(names, [shared[k][0] for k in bad], [], rms, without[0], len(good),
+                                                total))
+        dropped = [shared[k][0] for k in bad]
+        shared = good
+        rms, R, T, per = without
+    # Then one bad pair drags the fit and raises the good ones' errors too, so drop only the worst, solve
     # again, and repeat while one is still bad. A bad pair is never kept: where dropping it would leave
     # fewer than MIN_VIEWS pairs, or drop more than a quarter of them, the solve stops (with exactly
     # MIN_VIEWS pairs one unsynchronised pair put the second camera 0.4-1.7 m off, and only warned).
     while (found := bad_pair(rms, per)) is not None:
         k, without = found
         if len(shared) - 1 < MIN_VIEWS or len(dropped) >= max_dropped:
-            raise SolveError(_bad_pairs_message(names, shared[k][0], dropped, rms, without[0], len(shared) - 1,
+            raise SolveError(_bad_pairs_message(names, [shared[k][0]], dropped, rms, without[0], len(shared) - 1,
                                                 total))
         dropped.append(shared[k][0])
         shared = shared[:k] + shared[k + 1:]
@@ -247,25 +271,67 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
     if not (np.all(np.isfinite(R)) and np.all(np.isfinite(T)) and np.isfinite(rms)):
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r}: the pair's pose diverged (the shared views may all "
                          "show the board at one angle, or the two images of a pair were not taken together)")
+    # Last, a hard limit: whatever the rules above let through, no pair kept fits this badly
+    over = sorted(((float(e), n) for (n, _), e in zip(shared, per) if not e <= max_pair_px), reverse=True)
+    if over:
+        raise SolveError(
+            f"cameras {names[0]!r} and {names[1]!r}: {len(over)} of the {len(shared)} image pairs kept fit at more "
+            f"than {max_pair_px:g} px (" + ", ".join(f"{n!r} {e:.2f} px" for e, n in over[:5])
+            + (", ..." if len(over) > 5 else "") + f"; pair error {rms:.2f} px): a still board seen by both cameras "
+            "at the same instant fits well under 1 px. Were the two cameras' images taken together (the board held "
+            "still), and did each camera's own fit go well (its reprojection error)? Remove or retake "
+            + ", ".join(repr(n) for _, n in over[:5]))
     return PairPose(R=np.asarray(R, float), T=np.asarray(T, float).reshape(3), rms_px=float(rms),
                     per_view_px={n: round(float(e), 4) for (n, _), e in zip(shared, per)}, dropped=tuple(dropped))
 
 
-def _bad_pairs_message(names: tuple[str, str], bad: str, dropped: list[str], rms: float, rms_without: float,
+def _disagreeing_pairs(board: BoardSpec, first: Mapping[str, BoardView], second: Mapping[str, BoardView],
+                       intr_first: Intrinsics, intr_second: Intrinsics, shared: list,
+                       solve: Callable[[list], tuple[float, np.ndarray, np.ndarray, np.ndarray]]) -> list[int]:
+    """Indices into ``shared`` of the pairs that do not fit with the consensus of the others.
+
+    The consensus is the largest group whose single-pair poses agree (:func:`calibration.consensus.
+    agreeing_pairs`); it is trusted only as a majority (else nothing is decided here). Each pair outside
+    it is solved with the group and kept when its own error in that fit is within the outlier bound
+    (:data:`OUTLIER_FACTOR` times the group's median error, at least 1 px): a good pair whose single-
+    camera pose was loose comes back, a pair of two instants does not.
+    """
+    poses = [pair_relative_pose(board, first[n], second[n], ids, intr_first.K, intr_first.dist, intr_second.K,
+                                intr_second.dist) for n, ids in shared]
+    group = agreeing_pairs(poses)
+    if len(group) == len(shared) or 2 * len(group) <= len(shared):
+        return []
+    base = [shared[k] for k in group]
+    _, _, _, per = solve(base)
+    bound = max(OUTLIER_FACTOR * float(np.median(per)), 1.0)
+    bad = []
+    for k in range(len(shared)):
+        if k in group:
+            continue
+        # its own error only: a bad pair the group let in (a board moved a few cm) must not make a good one bad
+        if not solve(base + [shared[k]])[3][-1] <= bound:
+            bad.append(k)
+    return bad
+
+
+def _bad_pairs_message(names: tuple[str, str], bad: list[str], dropped: list[str], rms: float, rms_without: float,
                        left: int, total: int) -> str:
-    """Why the pair's pose is not solved: the pair ``bad`` does not fit, and it cannot be dropped."""
-    head = (f"cameras {names[0]!r} and {names[1]!r}: the image pair {bad!r} does not fit the others (pair error "
-            f"{rms:.2f} px with it, {rms_without:.2f} px without): its two images were not taken at the same "
-            "instant, or the board was found wrongly in one")
+    """Why the pair's pose is not solved: the pairs ``bad`` do not fit, and they cannot be dropped."""
+    listed = ", ".join(repr(n) for n in bad)
+    head = (f"cameras {names[0]!r} and {names[1]!r}: "
+            + (f"the image pair {listed} does not fit" if len(bad) == 1 else f"the image pairs {listed} do not fit")
+            + f" the others (pair error {rms:.2f} px with {'it' if len(bad) == 1 else 'them'}, {rms_without:.2f} px "
+            "without): " + ("its two images were" if len(bad) == 1 else "the two images of each were")
+            + " not taken at the same instant, or the board was found wrongly in one")
     if dropped:
         head += f"; pair(s) {', '.join(repr(n) for n in dropped)} were dropped already for the same reason"
+    retake = ", ".join(repr(n) for n in [*dropped, *bad])
     if left < MIN_VIEWS:
         return (f"{head}. That leaves {left} good pair(s) of {total}, and at least {MIN_VIEWS} are needed: capture "
                 f"{MIN_VIEWS - left} more view(s) where both cameras see the board (8 or more is usual), or retake "
-                f"{bad!r}")
+                f"{retake}")
     return (f"{head}. More than a quarter of the {total} pairs do not fit: are both cameras' images taken at the "
-            "same instant (hold the board still for each view)? Remove or retake "
-            + ", ".join(repr(n) for n in [*dropped, bad]))
+            f"same instant (hold the board still for each view)? Remove or retake {retake}")
 
 
 def floor_from_view(board: BoardSpec, view: BoardView, intr: Intrinsics, *, board_thickness_m: float = 0.0) \

@@ -406,6 +406,27 @@ def test_one_bad_pair_among_four_writes_no_rig(capture, tmp_path, capsys):
     assert not out.exists() and not (tmp_path / "rig.report.json").exists()
 
 
+def test_two_bad_pairs_among_five_write_no_rig(capture, tmp_path, capsys):
+    # Five shared views, the right images of '001' and '002' from other instants: together they drag every
+    # pair's error up, dropping one at a time found neither, and the rig file was written far off.
+    images = tmp_path / "five"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+        for path in (capture / cam).iterdir():
+            if path.stem in ("004", "005", "006"):
+                continue
+            paired = cam == "left" or path.stem < "008" or path.stem == "floor"
+            (images / cam / (path.name if paired else f"r{path.name}")).write_bytes(path.read_bytes())
+    (images / "right" / "001.png").write_bytes((capture / "right" / "005.png").read_bytes())
+    (images / "right" / "002.png").write_bytes((capture / "right" / "006.png").read_bytes())
+    out = tmp_path / "rig.json"
+    assert cli.main(["solve", "--board", str(capture / "board.json"), "--images", str(images),
+                     "--floor-view", "floor", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "the image pairs '001', '002' do not fit" in err and "capture 1 more view(s)" in err, err
+    assert not out.exists() and not (tmp_path / "rig.report.json").exists()
+
+
 def test_numeric_options_are_checked(capture, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         cli.main(["solve", "--images", str(capture), "--out", str(tmp_path / "r.json"), "--camera-height", "1.4",
