@@ -13,7 +13,9 @@ The held-out split ``val`` shares **nothing** with ``train``:
   with legs abducted (jumping jacks; training motions raise an arm to ~100 degrees at most
   and never spread the legs), and a 135-degree forward reach with trunk flexion and twist
   (the closest training pose, squatting, lifts the arms forward to 90 degrees). Holding
-  them out measures generalisation to unseen poses, the hard case for heatmaps.
+  them out measures generalisation to unseen poses, the hard case for heatmaps, unless ``train``
+  also moves ``freestyle`` (``SyntheticConfig.freestyle_share``, half the scenes in ``make model``):
+  its range of motion covers these poses, and ``val`` then measures unseen *sequences* of poses.
 
 ``val_seen_motions`` has unseen bodies and rigs (same baseline gap as ``val``) but the
 training motions, to tell pose generalisation apart from subject/rig generalisation.
