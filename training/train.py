@@ -711,6 +711,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         out_dir.mkdir(parents=True, exist_ok=True)
         _take_lock(out_dir / "train.pid")
         write_atomic(out_dir / "config.json", json.dumps(asdict(cfg), indent=1))
+        # summary.json describes the invocation that wrote it: one stopped at max_minutes, then resumed and
+        # interrupted, would still read "stopped early at step N" beside a last.pt of a later step
+        # (`make model --accept-stopped` then used the run as its stale summary described it)
+        (out_dir / "summary.json").unlink(missing_ok=True)
     try:
         return _train(cfg, out_dir, info, device, start=start, resume=resume, quiet=quiet, dataset=dataset)
     finally:

@@ -484,3 +484,32 @@ def test_a_checkpoint_that_cannot_be_written_is_named_and_leaves_no_half_file(da
     monkeypatch.setattr(tr.torch, "save", real_save)
     assert main(argv) == 0  # space freed: it resumes from step 1
     assert torch.load(tmp_path / "r" / "last.pt", weights_only=False)["step"] == 2
+
+
+def test_a_resumed_run_that_is_interrupted_leaves_no_stale_summary(data64, tmp_path, monkeypatch):
+    """summary.json is written when an invocation ends; a resumed invocation cut short (Ctrl-C) must not leave
+    the previous one's ("stopped early at step 1") beside a last.pt of a later step."""
+    import training.train as tr
+
+    run = tmp_path / "r"
+    cfg = tiny_cfg(data64, iterations=3, pck_every=0)
+    monkeypatch.setattr(tr.RunClock, "elapsed", lambda self: 1e9)  # past any max_minutes at once
+    first, _ = train(tiny_cfg(data64, iterations=3, pck_every=0, max_minutes=1.0), run, quiet=True)
+    assert first["stopped_early"] and first["steps"] == 1
+    monkeypatch.undo()
+    real, calls = tr.train_step, []
+
+    def ctrl_c_at_the_second(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "train_step", ctrl_c_at_the_second)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, run, resume=True, quiet=True)
+    assert torch.load(run / "last.pt", weights_only=False)["step"] == 2
+    assert not (run / "summary.json").exists()
+    monkeypatch.setattr(tr, "train_step", real)
+    done, _ = train(cfg, run, resume=True, quiet=True)
+    assert json.loads((run / "summary.json").read_text()) == json.loads(json.dumps(done)) and done["steps"] == 3
