@@ -26,7 +26,9 @@ It refuses another config, another model config (the one the checkpoint stores),
 file that is no training checkpoint (a weights-only ``ghnerf.pt`` placed as ``last.pt``), before anything is written;
 ``log.jsonl`` keeps the records up to the checkpoint's step. Without ``--resume`` a folder that holds checkpoints is
 refused (exit 2), so a new run never overwrites another. The dataset and split are opened (and checked against
-the model's resolution) before ``config.json`` is written; a missing one exits 2 with one line.
+the model's resolution) before ``config.json`` is written; a missing one exits 2 with one line. A NaN or infinite
+loss term or gradient stops the run before that update, and a checkpoint that cannot be written (a full disk)
+stops it with the previous one intact: each in one line naming the step and term, or the file (exit 1).
 """
 from __future__ import annotations
 
