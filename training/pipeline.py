@@ -780,10 +780,13 @@ def _run_finished(cfg: PipelineConfig, variant: str) -> bool:
 def _check_run_folder(cfg: PipelineConfig, variant: str) -> None:
     """Refuse to (re)start a run over one in progress or one of another config."""
     run = cfg.runs / VARIANTS[variant]
-    lg, cfg_p = run / "log.jsonl", run / "config.json"
-    if not (run / "summary.json").exists() and lg.exists() and time.time() - lg.stat().st_mtime < 180:
-        raise RuntimeError(f"{run}: a training run seems to be in progress (log.jsonl written "
-                           f"{time.time() - lg.stat().st_mtime:.0f} s ago); wait for it or stop it")
+    cfg_p = run / "config.json"
+    # The trainer holds train.pid while it runs and removes it on the way out (Ctrl-C too); after a kill -9 it
+    # names a dead process. A fresh log.jsonl alone used to count as a run in progress, so running the command
+    # again just after a Ctrl-C was refused for three minutes.
+    if _pid_alive(run / "train.pid"):
+        raise RuntimeError(f"{run}: a training run is in progress (process {(run / 'train.pid').read_text().strip()} "
+                           "holds its train.pid); wait for it or stop it")
     tc = train_inputs(cfg, VARIANTS[variant])
     if (run / "last.pt").exists() and cfg_p.exists() and \
             _result_keys(_run_config(cfg_p)) != _result_keys(tc):
@@ -1429,12 +1432,15 @@ def main(argv: list[str] | None = None) -> int:
         cfg.apply_prior_overrides(args.prior_set)
     except ValueError as e:
         ap.error(str(e))
+    from training.model.config import ConfigError  # (lazy: it imports torch)
+
     cfg.command = shlex.join(["python", "-m", "training.pipeline",
                               *_recipe_args(argv if argv is not None else sys.argv[1:]), *recipe_flag])
     try:
         card = run(cfg)
-    except (RuntimeError, subprocess.CalledProcessError) as e:
-        # the stage that failed has said why (a refused run folder, or the step's own log / stderr)
+    except (RuntimeError, subprocess.CalledProcessError, ConfigError) as e:
+        # the stage that failed has said why (a refused run folder, a damaged checkpoint named with what to do,
+        # or the step's own log / stderr)
         print(f"python -m training.pipeline: error: {e}", file=sys.stderr)
         return 2
     if card is not None:

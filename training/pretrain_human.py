@@ -410,10 +410,17 @@ RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "
 RESUME_KEYS = ("human", "optimizer", "step")
 
 
+#: What to do about a damaged ``last.pt``: the trainer's advice (delete it, resume from the newest ``ckpt_*.pt``)
+#: would restart the pretraining from step 0 here, where no other checkpoint is kept.
+DAMAGED_HINT = ("the pretraining keeps no other checkpoint (its human.pt holds the encoder's weights of that step, "
+                "without the optimiser): restore last.pt from a copy, or move the folder away and start again; "
+                "deleting it alone makes --resume start again from step 0")
+
+
 def _check_resumable(cfg: PretrainConfig, last: Path) -> None:
     """Refuse to resume ``last`` when it is no pretraining checkpoint (named keys missing), or under another
     config (checkpoints from before the config was stored pass)."""
-    ck = load_checkpoint(last)
+    ck = load_checkpoint(last, hint=DAMAGED_HINT)
     require_resume_keys(ck, last, RESUME_KEYS)
     old = ck.get("config")
     if old:

@@ -26,7 +26,9 @@ It refuses another config, another model config (the one the checkpoint stores),
 file that is no training checkpoint (a weights-only ``ghnerf.pt`` placed as ``last.pt``), before anything is written;
 ``log.jsonl`` keeps the records up to the checkpoint's step. Without ``--resume`` a folder that holds checkpoints is
 refused (exit 2), so a new run never overwrites another. The dataset and split are opened (and checked against
-the model's resolution) before ``config.json`` is written; a missing one exits 2 with one line.
+the model's resolution) before ``config.json`` is written; a missing one exits 2 with one line. A NaN or infinite
+loss term or gradient stops the run before that update, and a checkpoint that cannot be written (a full disk)
+stops it with the previous one intact: each in one line naming the step and term, or the file (exit 1).
 """
 from __future__ import annotations
 
@@ -525,10 +527,34 @@ def train_step(ddp_model: torch.nn.Module, model: GHNeRF, opt: torch.optim.Optim
     terms = step_losses(out, batch, cfg)
     opt.zero_grad(set_to_none=True)
     terms["loss"].backward()
+    # Checked before the update, so the weights (and the next checkpoint) never take a non-finite step. After the
+    # backward pass: under DDP a NaN on one rank reaches every rank's gradients, so every rank stops here alike.
+    values = {k: float(v.detach()) for k, v in terms.items()}
+    bad = [f"{k}={v:g}" for k, v in values.items() if k != "loss" and not math.isfinite(v)]
+    if bad or not math.isfinite(values["loss"]):
+        raise NonFiniteLoss(f"non-finite loss ({', '.join(bad) or 'loss={:g}'.format(values['loss'])})")
     if cfg.grad_clip:
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+    else:  # the same norm, read only: the gradients stay bit for bit as they were
+        grads = [p.grad for p in model.parameters() if p.grad is not None]
+        norm = torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(g) for g in grads])) if grads \
+            else torch.zeros(())
+    if not torch.isfinite(norm):  # a finite loss can still have one (sqrt at 0, an overflow in the backward pass)
+        raise NonFiniteLoss(f"non-finite gradient norm ({float(norm):g}) of a finite loss "
+                            f"({values['loss']:.6g})")
     opt.step()
     return out, terms
+
+
+class NonFiniteLoss(FloatingPointError):
+    """A step's loss terms or gradients are NaN or infinite; raised before the update (the message names them)."""
+
+
+def _saved_step(path: Path) -> Any:
+    try:
+        return int(load_checkpoint(path)["step"])
+    except (ConfigError, KeyError, TypeError, ValueError):
+        return "?"
 
 
 def psnr_of(pred: Tensor, target: Tensor) -> float:
@@ -565,15 +591,31 @@ def save_checkpoint(path: Path, model, opt, step: int, cfg: TrainConfig, gen: to
     save_atomic(state, path)
 
 
+class CheckpointWriteError(OSError):
+    """A checkpoint could not be written (a full disk, say); the message names the file. The previous one is
+    left as it was."""
+
+
 def save_atomic(state: Any, path: Path) -> None:
     """``torch.save`` through ``<path>.tmp``, fsynced, then renamed: a crash or power cut leaves the old file or
-    the new one, never a renamed empty or half-written ``last.pt``."""
+    the new one, never a renamed empty or half-written ``last.pt``. A failed write (a full disk, Ctrl-C) removes
+    the half-written ``.tmp``, which would otherwise keep the disk full, and is a :class:`CheckpointWriteError`
+    naming ``path`` (torch's own error names neither the file nor the cause)."""
     tmp = path.with_suffix(".tmp")
-    with open(tmp, "wb") as fh:
-        torch.save(state, fh)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            torch.save(state, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException as e:
+        tmp.unlink(missing_ok=True)
+        if not isinstance(e, Exception):  # Ctrl-C: stop as asked
+            raise
+        kept = f"the previous {path.name} is as it was" if path.exists() else f"no {path.name} was written"
+        raise CheckpointWriteError(f"{path}: cannot write the checkpoint ({type(e).__name__}: "
+                                   f"{' '.join(str(e).split())[:200]}); {kept}. Free space and run again with "
+                                   "--resume") from e
 
 
 def load_model(path: str | Path, map_location: str | torch.device = "cpu",
@@ -671,6 +713,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         out_dir.mkdir(parents=True, exist_ok=True)
         _take_lock(out_dir / "train.pid")
         write_atomic(out_dir / "config.json", json.dumps(asdict(cfg), indent=1))
+        # summary.json describes the invocation that wrote it: one stopped at max_minutes, then resumed and
+        # interrupted, would still read "stopped early at step N" beside a last.pt of a later step
+        # (`make model --accept-stopped` then used the run as its stale summary described it)
+        (out_dir / "summary.json").unlink(missing_ok=True)
     try:
         return _train(cfg, out_dir, info, device, start=start, resume=resume, quiet=quiet, dataset=dataset)
     finally:
@@ -955,11 +1001,14 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
             lr = learning_rate(cfg, step)
             for g in opt.param_groups:
                 g["lr"] = lr
-            out, terms = train_step(ddp_model, model, opt, batch, cfg)
+            try:
+                out, terms = train_step(ddp_model, model, opt, batch, cfg)
+            except NonFiniteLoss as e:
+                saved = f"{last} holds step {_saved_step(last)}" if last.exists() else "no checkpoint was saved"
+                raise NonFiniteLoss(f"step {step + 1} (scene {idx}): {e}; the weights were not updated and {saved}: "
+                                    "start a new run with a lower lr or a grad_clip") from None
             step += 1
             loss_v = float(terms["loss"].detach())
-            if not math.isfinite(loss_v):
-                raise FloatingPointError(f"loss is {loss_v} at step {step}")
             window.setdefault("loss", []).append(loss_v)
             window.setdefault("psnr", []).append(psnr_of(out["levels"][-1]["rgb"], batch["rgb"]))
             last_heat = terms.get(f"l{len(out['levels']) - 1}_heat")  # absent with loss.heat_weight 0
@@ -1054,6 +1103,12 @@ def main(argv: list[str] | None = None) -> int:
         if dist.is_initialized():
             dist.destroy_process_group()
         return 2
+    except (NonFiniteLoss, CheckpointWriteError) as e:  # mid-run: named in one line, the last checkpoint intact
+        kind = "diverged" if isinstance(e, NonFiniteLoss) else "checkpoint not written"
+        print(f"ghnerf-train: {kind}: {e}", file=sys.stderr)
+        if dist.is_initialized():
+            dist.destroy_process_group()
+        return 1
     if int(os.environ.get("RANK", "0")) == 0:
         print(json.dumps(summary))
     if dist.is_initialized():

@@ -831,3 +831,40 @@ def test_the_workers_help_names_the_recipes_own_counts(capsys):
     for name, recipe in pipeline.RECIPES.items():
         if recipe.workers:
             assert f"the {name} recipe's {recipe.workers}, at most the cores" in workers
+
+
+def test_a_run_stopped_by_ctrl_c_resumes_at_once_and_a_live_one_is_refused(tmp_path):
+    """A trainer stopped by Ctrl-C (or killed) leaves a fresh log.jsonl and no summary.json; running the command
+    again right away must resume it (a fresh log alone used to read as a run in progress for three minutes).
+    Only a train.pid naming a live process is a run in progress."""
+    import subprocess
+    import sys
+
+    from training.pipeline import PipelineConfig, _check_run_folder
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    run = cfg.runs / "edge128_baseline"
+    run.mkdir(parents=True)
+    (run / "log.jsonl").write_text('{"step": 50, "loss": 0.1}\n')  # written a moment ago, then Ctrl-C
+    _check_run_folder(cfg, "baseline")  # no train.pid: the trainer removed it on the way out
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (run / "train.pid").write_text(gone.stdout)  # kill -9: a stale lock naming a dead process
+    _check_run_folder(cfg, "baseline")
+    (run / "train.pid").write_text(str(os.getpid()))  # a live trainer
+    with pytest.raises(RuntimeError, match=f"in progress \\(process {os.getpid()} holds its train.pid\\)"):
+        _check_run_folder(cfg, "baseline")
+
+
+def test_a_damaged_checkpoint_in_a_run_folder_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
+    """A torn ``last.pt`` is named with what to do (delete it: the run resumes from its newest ckpt_*.pt), not
+    a traceback of the ConfigError that names it."""
+    import training.pipeline as pipeline
+
+    runs = tmp_path / "runs"
+    (runs / "edge128_baseline").mkdir(parents=True)
+    (runs / "edge128_baseline" / "last.pt").write_bytes(b"PK\x03\x04 torn by a power cut")
+    monkeypatch.setattr(pipeline, "run", lambda cfg: pipeline._check_run_folder(cfg, "baseline"))
+    assert pipeline.main(["--out", str(tmp_path / "m"), "--runs", str(runs), "--recipe", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len([line for line in err.splitlines() if "error:" in line]) == 1
+    assert "edge128_baseline/last.pt: unreadable checkpoint" in err and "delete it" in err

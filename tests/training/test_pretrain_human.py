@@ -492,3 +492,15 @@ def test_trunk_input_scale_is_restored_when_the_step_fails():
             assert model.human.config.input_scale == 0.5
             raise RuntimeError("boom")
     assert model.human.config.input_scale == 1.0
+
+
+def test_a_damaged_pretraining_checkpoint_is_named_without_the_trainers_advice(data64, tmp_path):
+    """The pretraining keeps only last.pt: the trainer's advice for a damaged one (delete it, --resume continues
+    from the newest ckpt_*.pt) would silently restart hours of pretraining from step 0 here."""
+    run = tmp_path / "p"
+    pretrain(tiny_pretrain(data64, iterations=1), run, quiet=True)
+    (run / "last.pt").write_bytes((run / "last.pt").read_bytes()[:1000])  # torn
+    with pytest.raises(ConfigError, match="last.pt: unreadable checkpoint") as e:
+        pretrain(tiny_pretrain(data64), run, resume=True, quiet=True)
+    assert "ckpt_" not in str(e.value) and "no other checkpoint" in str(e.value)
+    assert "from step 0" in str(e.value)

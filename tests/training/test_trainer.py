@@ -414,3 +414,102 @@ def test_run_records_and_checkpoints_are_written_whole(data64, tmp_path, monkeyp
     train(tiny_cfg(data64, iterations=1, pck_every=0), tmp_path / "r", quiet=True)
     assert {"config.json", "summary.json"} <= set(written)
     assert events[events.index("last.pt") - 1] == "fsync"  # the checkpoint reached the disk before the rename
+
+
+@pytest.mark.parametrize("where", ["loss", "gradient"])
+def test_a_non_finite_step_stops_before_the_update_naming_the_step_and_the_term(data64, tmp_path, monkeypatch,
+                                                                                 capsys, where):
+    """A NaN loss term, or a NaN gradient of a finite loss, stops the run in one line naming the step and what
+    went non-finite, before the weights take that step: the last checkpoint stays finite (a NaN gradient
+    used to be stepped into the weights and saved as last.pt, which every resume then diverged from)."""
+    import training.train as tr
+
+    real = tr.step_losses
+    calls = []
+
+    def poisoned(out, batch, cfg):
+        terms = real(out, batch, cfg)
+        calls.append(1)
+        if len(calls) == 2:  # the second step
+            if where == "loss":
+                terms["l1_heat"] = terms["l1_heat"] * float("nan")
+                terms["loss"] = terms["loss"] + terms["l1_heat"]
+            else:  # d sqrt(x)/dx at 0 is inf: a finite loss (0 added) whose gradient is NaN
+                w = out["levels"][-1]["rgb"]
+                terms["loss"] = terms["loss"] + 0.0 * torch.sqrt((w - w.detach()).abs().sum())
+        return terms
+
+    monkeypatch.setattr(tr, "step_losses", poisoned)
+    argv = ["--set", 'preset="tiny"', "--set", f"data={json.dumps(str(data64))}", "--iterations", "3",
+            "--set", "checkpoint_every=1", "--set", "pck_every=0", "--set", "heat_rays=32", "--set", "patch_size=8",
+            "--set", "targets_per_iter=2", "--out", str(tmp_path / "r"), "--quiet"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "ghnerf-train: diverged: step 2 (scene" in err and "last.pt holds step 1" in err
+    assert ("l1_heat=nan" in err) if where == "loss" else ("non-finite gradient norm (nan)" in err)
+    ck = torch.load(tmp_path / "r" / "last.pt", weights_only=False)
+    assert ck["step"] == 1 and all(torch.isfinite(v).all() for v in ck["model"].values() if v.is_floating_point())
+    assert not (tmp_path / "r" / "ckpt_0000002.pt").exists()
+
+
+def test_a_checkpoint_that_cannot_be_written_is_named_and_leaves_no_half_file(data64, tmp_path, monkeypatch,
+                                                                               capsys):
+    """A full disk while a checkpoint is written: one line naming the file, the half-written ``.tmp`` removed
+    (it used to stay, keeping the disk full), the previous ``last.pt`` whole, and ``--resume`` continues."""
+    import errno
+
+    import training.train as tr
+
+    train(tiny_cfg(data64, iterations=1, pck_every=0), tmp_path / "r", quiet=True)
+    real_save = tr.torch.save
+
+    def disk_full(state, fh, *a, **k):
+        fh.write(b"\0" * 4096)  # part of the file, then the disk is full
+        raise RuntimeError("[enforce fail at inline_container.cc:672] . PytorchStreamWriter failed writing file "
+                           f"data/0: file write failed ({errno.errorcode[errno.ENOSPC]})")
+
+    monkeypatch.setattr(tr.torch, "save", disk_full)
+    argv = ["--set", 'preset="tiny"', "--set", f"data={json.dumps(str(data64))}", "--iterations", "2",
+            "--set", "checkpoint_every=1", "--set", "pck_every=0", "--set", "heat_rays=32", "--set", "patch_size=8",
+            "--set", "targets_per_iter=2", "--set", "loss.coord_weight=0.01", "--set", "threads=2",
+            "--set", "log_every=1", "--out", str(tmp_path / "r"), "--resume", "--quiet"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert f"{tmp_path / 'r' / 'last.pt'}: cannot write the checkpoint" in err
+    assert "the previous last.pt is as it was" in err and "ENOSPC" in err
+    assert not list((tmp_path / "r").glob("*.tmp"))
+    assert torch.load(tmp_path / "r" / "last.pt", weights_only=False)["step"] == 1
+    monkeypatch.setattr(tr.torch, "save", real_save)
+    assert main(argv) == 0  # space freed: it resumes from step 1
+    assert torch.load(tmp_path / "r" / "last.pt", weights_only=False)["step"] == 2
+
+
+def test_a_resumed_run_that_is_interrupted_leaves_no_stale_summary(data64, tmp_path, monkeypatch):
+    """summary.json is written when an invocation ends; a resumed invocation cut short (Ctrl-C) must not leave
+    the previous one's ("stopped early at step 1") beside a last.pt of a later step."""
+    import training.train as tr
+
+    run = tmp_path / "r"
+    cfg = tiny_cfg(data64, iterations=3, pck_every=0)
+    monkeypatch.setattr(tr.RunClock, "elapsed", lambda self: 1e9)  # past any max_minutes at once
+    first, _ = train(tiny_cfg(data64, iterations=3, pck_every=0, max_minutes=1.0), run, quiet=True)
+    assert first["stopped_early"] and first["steps"] == 1
+    monkeypatch.undo()
+    real, calls = tr.train_step, []
+
+    def ctrl_c_at_the_second(*a, **k):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(tr, "train_step", ctrl_c_at_the_second)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, run, resume=True, quiet=True)
+    assert torch.load(run / "last.pt", weights_only=False)["step"] == 2
+    assert not (run / "summary.json").exists()
+    monkeypatch.setattr(tr, "train_step", real)
+    done, _ = train(cfg, run, resume=True, quiet=True)
+    assert json.loads((run / "summary.json").read_text()) == json.loads(json.dumps(done)) and done["steps"] == 3
