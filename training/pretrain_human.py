@@ -397,8 +397,16 @@ def pretrain_step(model: GHNeRF, opt: torch.optim.Optimizer, images: Tensor, hea
         loss = loss + cfg.centroid_weight * window_centroid_loss(pred, heat)
     opt.zero_grad(set_to_none=True)
     loss.backward()
+    # Checked before the update (as train_step does): a NaN gradient of a finite loss, once applied, was saved
+    # in last.pt, the pretraining's only checkpoint, and every resume diverged from it.
+    lv = float(loss.detach())
+    if not math.isfinite(lv):
+        raise FloatingPointError(f"non-finite loss ({lv:g}); the weights were not updated")
+    grads = [p.grad for p in model.parameters() if p.grad is not None]
+    if grads and not all(bool(torch.isfinite(g).all()) for g in grads):
+        raise FloatingPointError(f"non-finite gradient of a finite loss ({lv:.6g}); the weights were not updated")
     opt.step()
-    return float(loss.detach())
+    return lv
 
 
 #: Pretraining keys a resumed run may change: its length, where the data lives and how it runs.
@@ -512,10 +520,11 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
                   f"(s/step {times})", file=sys.stderr)  # a decision, not progress: printed under --quiet too
         if probe:
             precision = probed[scale][0]
-        lv = pretrain_step(model, opt, images, heat, cfg, precision, scale)
+        try:
+            lv = pretrain_step(model, opt, images, heat, cfg, precision, scale)
+        except FloatingPointError as e:
+            raise FloatingPointError(f"step {step + 1}: {e}") from None
         step += 1
-        if not math.isfinite(lv):
-            raise FloatingPointError(f"loss is {lv} at step {step}")
         losses.append(lv)
         if cfg.eval_every and step % cfg.eval_every == 0:
             with trunk_input_scale(model, cfg.input_scale_at(step - 1)):  # scored as it is being trained

@@ -504,3 +504,26 @@ def test_a_damaged_pretraining_checkpoint_is_named_without_the_trainers_advice(d
         pretrain(tiny_pretrain(data64), run, resume=True, quiet=True)
     assert "ckpt_" not in str(e.value) and "no other checkpoint" in str(e.value)
     assert "from step 0" in str(e.value)
+
+
+@pytest.mark.parametrize("poison", ["loss", "gradient"])
+def test_a_non_finite_pretraining_step_leaves_the_weights_untouched(data64, poison):
+    """The loss was checked after opt.step(): a NaN gradient of a finite loss was applied, and last.pt (the
+    pretraining's only checkpoint) could save it. Now the step stops before the update."""
+    from training.data.torch_dataset import MultiViewDataset
+    from training.model import GHNeRF
+
+    cfg = tiny_pretrain(data64, eval_every=0)
+    model = GHNeRF(cfg.model_config()).train()
+    images, heat = view_batch([MultiViewDataset(data64, "train")[0]], flip=False)
+    if poison == "loss":
+        heat = heat.clone()
+        heat.view(-1)[0] = float("nan")
+    else:  # a finite loss whose gradient is not (an overflow in the backward pass)
+        next(p for p in model.human.parameters() if p.requires_grad).register_hook(lambda g: g * float("nan"))
+    opt = torch.optim.Adam(model.human.parameters(), lr=1e-3)
+    weights = {k: v.clone() for k, v in model.human.state_dict().items() if v.is_floating_point()}
+    with pytest.raises(FloatingPointError, match=f"non-finite {poison}.*not updated"):
+        pretrain_step(model, opt, images, heat, cfg, "fp32")
+    assert all(torch.equal(weights[k], v) for k, v in model.human.state_dict().items() if k in weights
+               and "running" not in k)  # BatchNorm's statistics move in the forward pass; the weights did not
