@@ -559,6 +559,12 @@ class NovelViewConfig:
             then cropped to the tracked subject box (the previous pair's joints plus the
             tracking margin) instead of this pair's joints, which are not known yet. Off, or on
             a cold pair: the view follows the keypoints, cropped to this pair's joints.
+        lanes: with ``overlap``, the worker renders on one-thread sessions of the view's graphs and starts as soon
+            as the encoder graph has run, the flip test's run going beside it on one thread too: two threads on
+            the two cores rather than four (a two-thread run waits for its slower thread). Only where the graphs
+            have a pool of their own of two threads or more (``session.thread_pool`` "per_session"); the same
+            pictures (docs/runtime.md, "The novel view alongside the keypoints"). Off: the view starts after the
+            flip test and renders on the graphs' own sessions.
         opaque_at: a ray whose accumulated opacity reaches this counts as opaque in the picture:
             its colour is the composite divided by the opacity (the subject's own colour), and a
             fainter ray keeps ``opacity / opaque_at`` of it over the background. The model leaves
@@ -611,6 +617,7 @@ class NovelViewConfig:
     silhouette_dilate: int = 0
     interior_stride: int = 0
     overlap: bool = True
+    lanes: bool = True
     opaque_at: float = 0.5
     proxy_blend: bool = True
     proxy_tolerance_m: float = 0.03
@@ -638,6 +645,7 @@ class NovelViewConfig:
         _boolean(self, "rays_in_box_only")
         _boolean(self, "crop_to_subject")
         _boolean(self, "overlap")
+        _boolean(self, "lanes")
         _integer(self, "silhouette_stride", 0, 16)
         # the coarse grid must tile the model resolution, else its cells refined to `stride` miss the image's
         # last rows (6 at 128: 21 cells -> 126 pixels) and the render fails on the mismatch

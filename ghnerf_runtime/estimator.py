@@ -49,14 +49,14 @@ import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import cv2
 import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
-from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
+from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
 from ghnerf_runtime.errors import FrameError, GeometryError, ModelError
@@ -244,8 +244,34 @@ class _Pass:
     joints_2d: dict | None = None
     conf_2d: dict | None = None
     missing_2d: dict | None = None
-    novel: Future | None = None  # the novel view rendering in the worker (overlap)
+    novel: "_NovelJob | None" = None  # the novel view rendering in the worker (overlap)
     crops: list | None = None  # the source crop cameras (the novel view's proxy blend reads them)
+
+
+@dataclass(frozen=True)
+class _NovelJob:
+    """A novel view rendering in the worker thread: its camera (known before the picture) and the future that
+    gives ``(NovelView, timing)``."""
+
+    camera: Camera
+    future: Future
+
+    def abandon(self) -> None:
+        """Leave no render running behind: cancel it, or wait for it to end (its error is dropped)."""
+        self.future.cancel() or self.future.exception()
+
+
+@dataclass(frozen=True, eq=False)
+class _ProxyInputs:
+    """What the painter, the proxy blend and the matte read that depends on the pair's joints and the view's
+    camera but not on the rendered picture (:meth:`Estimator._proxy_inputs`): built while the worker renders."""
+
+    body: BodyProxy  # not empty
+    paint: bool  # the painter runs on this view
+    rgb: np.ndarray | None  # the source crops, RGB in [0, 1] (painter, blend)
+    src_depth: list | None  # the proxy's depth in each source crop (painter, blend)
+    depth: np.ndarray | None  # the proxy's depth in the view (painter, matte)
+    ms: float  # the time it took (it counts in the first stage that reads it)
 
 
 @dataclass
@@ -320,6 +346,14 @@ class Estimator:
         self._flip_lanes = (self._human_graph and self.config.flips_encoder_heatmaps
                             and self.config.heatmaps.flip_test_side_by_side and hasattr(session, "open_lane")
                             and session.open_lane("human"))
+        # a tracked pair's novel view renders in the worker on one-thread sessions (novel_view.overlap), and the
+        # flip test's run beside it on one thread too: two threads on two cores, not four
+        nv_cfg = self.config.novel_view
+        self._novel_lanes = (nv_cfg.enabled and nv_cfg.overlap and nv_cfg.lanes and hasattr(session, "open_lane")
+                             and all(session.open_lane(g) for g in ("volume", "render" if nv_cfg.heatmaps else
+                                                                    "render_rgb"))
+                             and (not (self._human_graph and self.config.flips_encoder_heatmaps)
+                                  or session.open_lane("human")))
         self._prior_follow: Joints3D | None = None
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
@@ -463,6 +497,23 @@ class Estimator:
             FrameError: an image has the wrong size or type for its camera; ``timestamp_s`` is not finite.
             ModelError: a novel view was requested but not enabled; a graph failed.
         """
+        result, finish = self.estimate_then_view(images, sequence=sequence, novel_view=novel_view,
+                                                 timestamp_s=timestamp_s)
+        return result if finish is None else finish()
+
+    def estimate_then_view(self, images: Sequence[np.ndarray], *, sequence: int | None = None,
+                           novel_view: NovelViewRequest | None = None, timestamp_s: float | None = None
+                           ) -> tuple[PairResult, Callable[[], PairResult] | None]:
+        """:meth:`estimate` in two steps: the pair's joints now, and the novel view later.
+
+        Returns the pair's result without its novel view and, when one was requested and the pair has one,
+        a function that finishes the view (waits for its rendering, recolours and mattes it, draws the
+        overlay) and returns the whole result, the one :meth:`estimate` returns. Every state the next pair
+        reads (the track, the smoothing) is updated before this returns: the function reads only this pair's
+        own data, so it may run in another thread while the next pair is estimated
+        (:class:`~ghnerf_runtime.pipeline.NovelViewPipeline`), one such function at a time. Its ``total``
+        runs from this call to the view's end. Arguments and errors as :meth:`estimate`'s.
+        """
         t_start = time.perf_counter()
         if sequence is None:
             sequence = self._sequence
@@ -482,8 +533,8 @@ class Estimator:
         p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if self._lost_on_a_tracked_pass(p):
             # The tracked crop found nobody: the subject may have left it. Look at the working volume now.
-            if p.novel is not None and not p.novel.cancel():
-                p.novel.exception()  # leave no render running behind
+            if p.novel is not None:
+                p.novel.abandon()
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         if (p.j3 is not None and not p.regions.tracked and tcfg.refine_cold_start
@@ -494,18 +545,7 @@ class Estimator:
             if self._smoother is not None:
                 self._smoother.reset()
             timing["total"] = 1e3 * (time.perf_counter() - t_start)
-            return self._empty_result(sequence, p.regions, p.frame_ok, timing)
-        nv = None
-        if novel_view is not None and all(p.frame_ok.values()):  # a single-view pair has no novel view
-            if p.novel is not None:  # rendered in the worker, on the tracked box
-                nv, novel_timing = p.novel.result()
-                timing.update(novel_timing)
-            else:
-                nv = self._render_novel(novel_view, p.env, self._novel_box(p.regions, p.j3), timing)
-            cfg = self.config.novel_view
-            if self.novel_painter is not None or cfg.proxy_blend or cfg.matte:
-                nv = self._over_proxy(nv, p, timing)
-            nv = self._compose_novel(novel_view, nv, p.j3, timing)
+            return self._empty_result(sequence, p.regions, p.frame_ok, timing), None
         points = p.j3.points
         if self._smoother is not None:
             if timestamp_s is None:
@@ -525,9 +565,36 @@ class Estimator:
         self._last_pair_cold = not p.regions.tracked
         timing["total"] = 1e3 * (time.perf_counter() - t_start)
         names = self.camera_names
-        return PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
-                          p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
-                          self.config.joints3d.method, nv)
+        result = PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
+                            p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
+                            self.config.joints3d.method)
+        if novel_view is None or not all(p.frame_ok.values()):  # a single-view pair has no novel view
+            return result, None
+
+        def finish() -> PairResult:
+            view_timing = dict(timing)
+            nv = self._finish_novel(novel_view, p, view_timing)
+            view_timing["total"] = 1e3 * (time.perf_counter() - t_start)
+            return replace(result, timing_ms=view_timing, novel_view=nv)
+
+        return result, finish
+
+    def _finish_novel(self, request: NovelViewRequest, p: "_Pass", timing: dict) -> NovelView:
+        """The pair's novel view: rendered in the worker (a tracked pair) or here, then repainted, recoloured and
+        matted over the body proxy of its joints, with the requested overlay."""
+        cfg = self.config.novel_view
+        over_proxy = self.novel_painter is not None or cfg.proxy_blend or cfg.matte
+        if p.novel is not None:  # rendering in the worker, on the tracked box
+            # the proxy's depth maps need the joints and the view's camera, not its picture: cast them meanwhile
+            inputs = self._proxy_inputs(p, p.novel.camera) if over_proxy else None
+            nv, novel_timing = p.novel.future.result()
+            timing.update(novel_timing)
+        else:
+            nv = self._render_novel(request, p.env, self._novel_box(p.regions, p.j3), timing)
+            inputs = self._proxy_inputs(p, nv.camera) if over_proxy else None
+        if inputs is not None:
+            nv = self._over_proxy(nv, p, timing, inputs)
+        return self._compose_novel(request, nv, p.j3, timing)
 
     def _lost_on_a_tracked_pass(self, p: "_Pass") -> bool:
         """Whether ``tracking.retry_cold`` runs the pair again from the working volume: a tracked pass that
@@ -592,7 +659,8 @@ class Estimator:
         # onnxruntime runs a whole graph whatever is asked of it: without a volume to build, the
         # human-only graph skips the image feature network.
         encoder = "human" if self._human_graph and not features else "encoder"
-        if self._flip_lanes and encoder == "human" and regions.tracked:
+        flipped = self._flip_lanes and encoder == "human" and regions.tracked
+        if flipped:
             # someone was there: the mirrored crops beside the crops, not after them (the same heatmaps, sooner)
             out, mirrored = self.session.run_both("human", env, self._mirrored_feeds(batch, env["src_P"]))
             env.update(out)
@@ -601,36 +669,40 @@ class Estimator:
         else:
             env.update(self.session.run(encoder, env))
             _add_ms(timing, "encoder", t)
-            if cfg.flips_encoder_heatmaps and self._may_be_someone(env["encoder_heatmaps"], (0, 1)):
-                env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"])
-        stride, g = self.contract.heatmap_stride, self.grid
-        blocks = [full_block(g, g)] * 2
-        out: dict[str, np.ndarray] = {}
-        if cfg.runs_source_volume:
-            t = time.perf_counter()
-            env.update(self.session.run("volume", env))
-            _add_ms(timing, "volume", t)
-        if cfg.renders_source_heatmaps:
-            t = time.perf_counter()
-            if cfg.rays.restrict_to_subject and regions.tracked:
-                blocks = common_blocks([box_block(c, regions.box, stride, cfg.rays.margin_cells) for c in crops],
-                                       g, g, cfg.rays.align_cells)
-            env["ray_uv"] = self._ray_uv(tuple(blocks), stride)
-            out = self.session.run("render_heat", env)
-            _add_ms(timing, "render_heat", t)
-
         job = None
-        if novel_view is not None and cfg.novel_view.overlap and regions.tracked:
+        if novel_view is not None and cfg.novel_view.overlap and regions.tracked and self._novel_lanes:
+            # The view reads the image features and the tracked box, nothing that the flip test or the stages
+            # below change: it starts now, on one thread, and the flip test's run goes beside it on the other.
             job = self._start_novel(novel_view, env, regions.box)
         try:
+            if not flipped and cfg.flips_encoder_heatmaps and self._may_be_someone(env["encoder_heatmaps"], (0, 1)):
+                env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"],
+                                                          beside=job is not None)
+            stride, g = self.contract.heatmap_stride, self.grid
+            blocks = [full_block(g, g)] * 2
+            out: dict[str, np.ndarray] = {}
+            if cfg.runs_source_volume:
+                t = time.perf_counter()
+                env.update(self.session.run("volume", env))
+                _add_ms(timing, "volume", t)
+            if cfg.renders_source_heatmaps:
+                t = time.perf_counter()
+                if cfg.rays.restrict_to_subject and regions.tracked:
+                    blocks = common_blocks([box_block(c, regions.box, stride, cfg.rays.margin_cells) for c in crops],
+                                           g, g, cfg.rays.align_cells)
+                env["ray_uv"] = self._ray_uv(tuple(blocks), stride)
+                out = self.session.run("render_heat", env)
+                _add_ms(timing, "render_heat", t)
+            if novel_view is not None and cfg.novel_view.overlap and regions.tracked and job is None:
+                job = self._start_novel(novel_view, env, regions.box)  # once the keypoint graphs have run
             return self._finish_pass(env, out, blocks, crops, regions, frame_ok, sequence, timing, job)
         except BaseException:
             if job is not None:  # leave no render running behind an error
-                job.cancel() or job.exception()
+                job.abandon()
             raise
 
     def _finish_pass(self, env: dict, out: dict, blocks, crops: list[Camera], regions: Regions, frame_ok: dict,
-                     sequence: int, timing: dict, job: Future | None) -> "_Pass":
+                     sequence: int, timing: dict, job: _NovelJob | None) -> "_Pass":
         """Stages 5-6 of :meth:`_pass`."""
         cfg = self.config
         S, g = self.size, self.grid
@@ -678,12 +750,15 @@ class Estimator:
         return presence_peak(heat, views, self.config.presence.min_joints) >= floor
 
     def _flip_test(self, batch: np.ndarray, heat: np.ndarray, timing: dict,
-                   src_P: np.ndarray | None = None) -> np.ndarray:
+                   src_P: np.ndarray | None = None, beside: bool = False) -> np.ndarray:
         """``heat`` averaged with the encoder heatmaps of the mirrored crops (``heatmaps.flip_test``): the
-        ``human`` graph when the model has one, else ``encoder``; the time goes to ``encoder_flip``."""
+        ``human`` graph when the model has one, else ``encoder``; the time goes to ``encoder_flip``. ``beside``:
+        on its one-thread lane, as a novel view renders beside it (the same numbers)."""
         t = time.perf_counter()
         feeds = self._mirrored_feeds(batch, src_P)
-        mirrored = self.session.run("human" if self.session.has("human") else "encoder", feeds)["encoder_heatmaps"]
+        graph = "human" if self.session.has("human") else "encoder"
+        run = self.session.run_on_lane if beside else self.session.run
+        mirrored = run(graph, feeds)["encoder_heatmaps"]
         out = flip_averaged(heat, mirrored)
         _add_ms(timing, "encoder_flip", t)
         return out
@@ -828,9 +903,8 @@ class Estimator:
             return np.stack([pts.min(axis=0) - m, pts.max(axis=0) + m])
         return regions.box
 
-    def _render_novel(self, request: NovelViewRequest, env: dict, box: np.ndarray, timing: dict) -> NovelView:
-        """The novel view (no overlay) of ``request`` cropped to ``box``."""
-        cfg = self.config.novel_view
+    def _novel_camera(self, request: NovelViewRequest, box: np.ndarray) -> Camera:
+        """The ``S x S`` camera of ``request``'s view cropped to ``box``."""
         full = request.camera
         if full is None:
             if request.alpha not in self._between:
@@ -839,46 +913,64 @@ class Estimator:
                 cam_a, cam_b = (st.upright_pinhole for st in self._cams)  # no view spinning between them
                 self._between[request.alpha] = interpolate_camera(cam_a, cam_b, request.alpha)
             full = self._between[request.alpha]
-        target = novel_target(full, box, self.size, cfg.crop_to_subject)
-        return render_novel_view(self.session, env, target, box, cfg,
+        return novel_target(full, box, self.size, self.config.novel_view.crop_to_subject)
+
+    def _render_novel(self, request: NovelViewRequest, env: dict, box: np.ndarray, timing: dict,
+                      target: Camera | None = None, session: Any = None) -> NovelView:
+        """The novel view (no overlay) of ``request`` cropped to ``box`` (``target``: its camera, when known;
+        ``session``: what runs the graphs, default the estimator's)."""
+        cfg = self.config.novel_view
+        target = self._novel_camera(request, box) if target is None else target
+        return render_novel_view(self.session if session is None else session, env, target, box, cfg,
                                  near_far_margin=self.config.tracking.near_far_margin_m,
                                  want_heat=cfg.heatmaps, timing=timing)
 
-    def _start_novel(self, request: NovelViewRequest, env: dict, box: np.ndarray) -> Future:
-        """Render the novel view in the worker thread; the future gives ``(NovelView, timing)``."""
+    def _start_novel(self, request: NovelViewRequest, env: dict, box: np.ndarray) -> _NovelJob:
+        """Render the novel view in the worker thread (its camera is placed here, so that the proxy's depth in
+        it can be cast while the worker renders)."""
         if self._worker is None:
             self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ghnerf-novel-view")
+        target = self._novel_camera(request, box)
+        runner = self.session.on_lanes() if self._novel_lanes else self.session
 
         def job(feeds: dict) -> tuple[NovelView, dict]:
             timing: dict[str, float] = {}
-            return self._render_novel(request, feeds, box, timing), timing
+            return self._render_novel(request, feeds, box, timing, target, runner), timing
 
-        return self._worker.submit(job, dict(env))
+        return _NovelJob(target, self._worker.submit(job, dict(env)))
 
-    def _over_proxy(self, nv: NovelView, p: "_Pass", timing: dict) -> NovelView:
+    def _proxy_inputs(self, p: "_Pass", camera: Camera) -> _ProxyInputs | None:
+        """The body proxy of this pair's joints and its depth maps in the sources and in the view at ``camera``,
+        as far as the painter, the blend and the matte read them; ``None`` when none of them runs (no joints)."""
+        t = time.perf_counter()
+        body = proxy_body(p.j3.points, p.j3.valid)
+        if body.empty:
+            return None
+        cfg = self.config.novel_view
+        paint = self.novel_painter is not None and not (
+            angle_from_sources_deg(camera, p.crops, p.j3.points, p.j3.valid) < cfg.painter_min_angle_deg)
+        if not (paint or cfg.proxy_blend or cfg.matte):
+            return None
+        rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation) if paint or cfg.proxy_blend else None
+        # the painter and the blend read the proxy's depth in the sources; the painter and the matte read it
+        # in the whole view (the blend alone casts only the region's box)
+        src_depth = [proxy_depth(body, c) for c in p.crops] if paint or cfg.proxy_blend else None
+        depth = proxy_depth(body, camera) if paint or cfg.matte else None
+        return _ProxyInputs(body, paint, rgb, src_depth, depth, 1e3 * (time.perf_counter() - t))
+
+    def _over_proxy(self, nv: NovelView, p: "_Pass", timing: dict, inputs: _ProxyInputs) -> NovelView:
         """The view's subject repainted by the learnt painter (``novel_view.painter``, on views at least
         ``painter_min_angle_deg`` from the nearest source camera), then recoloured from the
         source crops (``novel_view.proxy_blend``), both over the body proxy of this pair's joints and only
         where the rendered picture shows the subject (or the proxy, for the painter), then faded to the
-        background away from the proxy (``novel_view.matte``); unchanged without joints. The proxy's
-        construction counts in the first stage that runs."""
-        t = time.perf_counter()
-        body = proxy_body(p.j3.points, p.j3.valid)
-        if body.empty:
-            return nv
+        background away from the proxy (``novel_view.matte``). ``inputs`` (:meth:`_proxy_inputs`, of
+        ``nv.camera``): the proxy and its depth maps, whose time counts in the first stage that runs."""
+        t = time.perf_counter() - 1e-3 * inputs.ms
         cfg = self.config.novel_view
-        paint = self.novel_painter is not None and not (
-            angle_from_sources_deg(nv.camera, p.crops, p.j3.points, p.j3.valid) < cfg.painter_min_angle_deg)
-        if not (paint or cfg.proxy_blend or cfg.matte):
-            return nv
-        rgb = model_input_to_rgb(p.env["images"], self.contract.normalisation) if paint or cfg.proxy_blend else None
+        body, rgb, src_depth, depth = inputs.body, inputs.rgb, inputs.src_depth, inputs.depth
         region = subject_region(nv.image, self.contract.background, cfg.silhouette_min_diff)  # the picture's own
-        # the painter and the blend read the proxy's depth in the sources; the painter and the matte read it
-        # in the whole view (the blend alone casts only the region's box)
-        src_depth = [proxy_depth(body, c) for c in p.crops] if paint or cfg.proxy_blend else None
-        depth = proxy_depth(body, nv.camera) if paint or cfg.matte else None
         image = nv.image
-        if paint:
+        if inputs.paint:
             image, _ = self.novel_painter.repaint(image, nv.camera, body, p.crops, rgb, p.j3.points, p.j3.valid,
                                                   cfg.proxy_tolerance_m, region=region, source_depth=src_depth,
                                                   depth=depth)

@@ -78,8 +78,8 @@ from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
 log = logging.getLogger(__name__)
 
-__all__ = ["AUTO_PRECISION", "GraphFile", "ModelSession", "MODEL_CARD", "check_graph_file", "resolve_model_dir",
-           "warmup_feeds"]
+__all__ = ["AUTO_PRECISION", "GraphFile", "LaneRunner", "ModelSession", "MODEL_CARD", "check_graph_file",
+           "resolve_model_dir", "warmup_feeds"]
 
 #: Optional model card next to the graphs.
 MODEL_CARD = "model_card.json"
@@ -427,8 +427,8 @@ class ModelSession:
 
     # ------------------------------------------------------------------ lanes
     def open_lane(self, graph: str) -> bool:
-        """Prepare :meth:`run_both` for ``graph``: a second session of its file with one intra-op thread, run
-        once. Only where the graphs have a pool of their own of two or more threads (``thread_pool:
+        """Prepare :meth:`run_both` and :meth:`run_on_lane` for ``graph``: a second session of its file with one
+        intra-op thread, run once. Only where the graphs have a pool of their own of two or more threads (``thread_pool:
         "per_session"``, ``threads >= 2``): two one-thread runs side by side then take the cores the one run
         shared (a 2-thread ``human`` run scales 1.5x over one thread, so two runs side by side finish sooner
         than two in turn). Returns whether :meth:`run_both` runs side by side."""
@@ -438,11 +438,41 @@ class ModelSession:
         if cfg is None or cfg.thread_pool != "per_session" or cfg.threads < 2 or graph not in self._sessions:
             return False
         lane = _open(self.files[graph].path, replace(cfg, threads=1))
-        lane.run(self._output_names[graph], self._inputs(graph, warmup_feeds(self.contract)))  # the first run is slow
+        lane.run(self._output_names[graph], self._inputs(graph, self._lane_warmup_feeds(graph)))  # the first is slow
         self._lanes[graph] = lane
         if self._lane_worker is None:
             self._lane_worker = ThreadPoolExecutor(1, thread_name_prefix="ghnerf-lane")
         return True
+
+    def _lane_warmup_feeds(self, graph: str) -> dict[str, np.ndarray]:
+        """Inputs for a lane's first run at the estimator's shapes: the novel view's graphs (one target, every
+        ray) read the encoder's and the volume's outputs, run here on the loaded sessions (not counted)."""
+        if graph not in ("volume", "render_rgb", "render"):
+            return warmup_feeds(self.contract)
+        feeds = warmup_feeds(self.contract, targets=1, ray_stride=1)
+        for g in ("encoder", "volume") if graph != "volume" else ("encoder",):
+            names = self._output_names[g]
+            feeds.update(zip(names, self._sessions[g].run(names, self._inputs(g, feeds))))
+        return feeds
+
+    def run_on_lane(self, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """:meth:`run` on ``graph``'s one-thread lane (:meth:`open_lane`) when it has one, else as :meth:`run`: for
+        a run beside another thread's, so that the two take one core each rather than four threads two cores
+        (a 2-thread run waits for its slower thread, and one descheduled stalls it). The same numbers."""
+        lane = self._lanes.get(graph)
+        if lane is None:
+            return self.run(graph, feeds)
+        inputs = self._inputs(graph, feeds)
+        self.run_counts[graph] += 1
+        try:
+            out = lane.run(self._output_names[graph], inputs)
+        except Exception as e:  # onnxruntime's pybind exceptions
+            raise self._failed(graph, e) from e
+        return dict(zip(self._output_names[graph], out))
+
+    def on_lanes(self) -> "LaneRunner":
+        """This session with :meth:`run` on the lanes (:meth:`run_on_lane`): what a worker thread is handed."""
+        return LaneRunner(self)
 
     def run_both(self, graph: str, first: Mapping[str, np.ndarray],
                  second: Mapping[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -497,6 +527,21 @@ class ModelSession:
                 "contract_version": c.version,
                 "files": {g: {"path": str(f.path), "precision": f.precision} for g, f in self.files.items()},
                 "card": bool(self.card)}
+
+
+class LaneRunner:
+    """A :class:`ModelSession` whose :meth:`run` goes to the graphs' one-thread lanes where they have one
+    (:meth:`ModelSession.run_on_lane`); ``contract`` and :meth:`has` as the session's."""
+
+    def __init__(self, session: ModelSession) -> None:
+        self.session = session
+        self.contract = session.contract
+
+    def has(self, graph: str) -> bool:
+        return self.session.has(graph)
+
+    def run(self, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return self.session.run_on_lane(graph, feeds)
 
 
 def warmup_feeds(contract: ModelContract, targets: int = 2, ray_stride: int | None = None,

@@ -39,6 +39,7 @@ from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_
                                       NOVEL_STAGES, Estimator, load_session)
 from ghnerf_runtime.metrics import finite_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest
+from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.tracking import track_from_joints
 
 log = logging.getLogger("ghnerf-bench")
@@ -60,8 +61,13 @@ STEADY = "total after the first pair"
 
 
 def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, oracle=None,
-              accuracy=None, track_from_truth: bool = False) -> tuple[dict[str, list[float]], float]:
+              accuracy=None, track_from_truth: bool = False, pipeline: bool = False
+              ) -> tuple[dict[str, list[float]], float]:
     """Run the estimator over every pair of every sequence (a fresh track per sequence).
+
+    ``pipeline``: through a :class:`~ghnerf_runtime.pipeline.NovelViewPipeline` (each novel view finished while
+    the next pair is estimated); a call's time counts for the pair it estimated, and the sequence's last view's
+    wait counts for that pair too.
 
     ``track_from_truth``: before each pair (but the first of a sequence), the track is set from
     the previous pair's *true* joints, as a trained model's own joints would set it; this times
@@ -77,8 +83,21 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     request = NovelViewRequest(alpha=0.5) if novel else None
     wall = 0.0
     n = 0
-    for seq in sequences:
-        with Estimator(estimator.session, seq.rig, estimator.config) as est:
+    counted: set[tuple[int, int]] = set()  # (sequence, pair) past the warm-up
+
+    def add(k_seq: int, seq, result) -> None:
+        i = result.sequence
+        if (k_seq, i) not in counted:
+            return
+        for k in stages:
+            stages[k].append(result.timing_ms.get(k, 0.0))
+        if i > 0:
+            steady.append(result.timing_ms.get("total", 0.0))
+        if accuracy is not None:
+            accuracy.add(result, seq, i)
+
+    for k_seq, seq in enumerate(sequences):
+        with Estimator(estimator.session, seq.rig, estimator.config) as est, NovelViewPipeline(est) as pipe:
             for i in range(len(seq)):
                 images = (np.array(seq.images[i, 0]), np.array(seq.images[i, 1]))  # in RAM, as a driver delivers
                 if oracle is not None:
@@ -87,19 +106,17 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
                     est.tracker.track = track_from_joints(seq.joints_3d[i - 1], np.ones(25), np.ones(25, bool),
                                                           est.config.tracking, i - 1)
                 t = time.perf_counter()
-                result = est.estimate(images, sequence=i, novel_view=request,
-                                      timestamp_s=i / float(seq.info.get("fps", 30.0)))
+                kwargs = dict(sequence=i, novel_view=request, timestamp_s=i / float(seq.info.get("fps", 30.0)))
+                results = pipe.submit(images, **kwargs) if pipeline else [est.estimate(images, **kwargs)]
+                if pipeline and i == len(seq) - 1:
+                    results += pipe.flush()
                 dt = time.perf_counter() - t
                 n += 1
-                if n <= warmup:
-                    continue
-                wall += dt
-                for k in stages:
-                    stages[k].append(result.timing_ms.get(k, 0.0))
-                if i > 0:
-                    steady.append(result.timing_ms.get("total", 0.0))
-                if accuracy is not None:
-                    accuracy.add(result, seq, i)
+                if n > warmup:
+                    wall += dt
+                    counted.add((k_seq, i))
+                for result in results:
+                    add(k_seq, seq, result)
     stages[STEADY] = steady
     return stages, wall
 
@@ -177,28 +194,35 @@ def run_runtime_bench(args) -> dict:
             if side is not None:
                 flip_cfg = replace(flip_cfg, heatmaps=replace(flip_cfg.heatmaps, flip_test_side_by_side=side))
             novel_rows = itertools.product(args.novel_interior_strides or [None], args.proxy_blends or [None],
-                                           args.painters or [None]) if mode == "novel" else [(None, None, None)]
-            for interior, blend, paint in novel_rows:
+                                           args.painters or [None], args.novel_pipelines or [None],
+                                           args.novel_lanes or [None]) \
+                if mode == "novel" else [(None, None, None, None, None)]
+            for interior, blend, paint, piped, lanes in novel_rows:
                 row_cfg = flip_cfg if interior is None else \
                     replace(flip_cfg, novel_view=replace(flip_cfg.novel_view, interior_stride=interior))
                 if blend is not None:
                     row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, proxy_blend=blend))
                 if paint is not None:
                     row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, painter="on" if paint else "off"))
+                if lanes is not None:
+                    row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, lanes=lanes))
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
                              "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
                              "flip_label": flip is not None, "follow_label": follow is not None,
                              "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
                              "smoothing_label": smooth is not None, "proxy_label": blend is not None,
                              "side_label": side is not None,
-                             "painter_label": paint is not None})
+                             "painter_label": paint is not None,
+                             "pipeline": bool(piped), "pipeline_label": piped is not None,
+                             "lanes_label": lanes is not None})
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
             est = Estimator(row["session"], seq.rig, row["cfg"])  # run_pairs makes one per sequence from it
             warmup = max(0, args.warmup - row["seen"])
             stages, wall = run_pairs(est, [seq], novel=(row["mode"] == "novel"), warmup=warmup,
-                                     accuracy=row["accuracy"], track_from_truth=args.track_from_truth)
+                                     accuracy=row["accuracy"], track_from_truth=args.track_from_truth,
+                                     pipeline=row["pipeline"])
             row["seen"] += len(seq)
             row["wall"] += wall
             for key, values in stages.items():
@@ -218,7 +242,9 @@ def run_runtime_bench(args) -> dict:
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
                    "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"],
                    "painter": cfg.novel_view.uses_painter(getattr(session, "novel_painter", None) is not None),
-                   "painter_label": row["painter_label"]}
+                   "painter_label": row["painter_label"],
+                   "pipeline": row["pipeline"], "pipeline_label": row["pipeline_label"],
+                   "novel_lanes": cfg.novel_view.lanes, "lanes_label": row["lanes_label"]}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
                "accuracy": row["accuracy"].summary(), "load_average": float(np.mean(loads))}
@@ -249,6 +275,10 @@ def _print_row(row: dict) -> None:
         tracked += " proxy-blend" if row["proxy_blend"] else " no-proxy-blend"
     if row.get("painter_label"):
         tracked += " painter" if row["painter"] else " no-painter"
+    if row.get("lanes_label"):
+        tracked += " lanes" if row["novel_lanes"] else " no-lanes"
+    if row.get("pipeline_label"):
+        tracked += " pipelined" if row["pipeline"] else " one-by-one"
     if row.get("novel_interior_stride") and row["novel_interior_stride"] > row.get("novel_stride", 1):
         tracked += f" interior/{row['novel_interior_stride']}"
     acc = row["accuracy"]
@@ -324,6 +354,13 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--painters", default=None, type=_on_off_list,
                     help="comma list of novel_view.painter values (on,off), one novel row each; on needs the model "
                          "folder's novel_painter.onnx (default: the config's, auto)")
+    rt.add_argument("--novel-pipelines", default=None, type=_on_off_list,
+                    help="comma list of on,off: one novel row each run through ghnerf_runtime.pipeline."
+                         "NovelViewPipeline (each pair's view finished while the next pair is estimated) or "
+                         "one pair at a time (default: one at a time)")
+    rt.add_argument("--novel-lanes", default=None, type=_on_off_list,
+                    help="comma list of novel_view.lanes values (on,off), one novel row each (default: the config's, "
+                         "on)")
     rt.add_argument("--threads", type=int, default=2)
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")

@@ -163,6 +163,62 @@ def test_the_flip_test_side_by_side_gives_the_same_joints():
     assert sum(r.tracked for r in results[True]) >= 3 and results[True][-1].num_found > 20
 
 
+class _NoLanes:
+    """The session without its one-thread lanes: every graph on its own two-thread session, in turn."""
+
+    def __init__(self, session) -> None:
+        self._session = session
+        self.contract, self.skeleton_prior, self.novel_painter = (session.contract, session.skeleton_prior,
+                                                                  session.novel_painter)
+
+    def has(self, graph: str) -> bool:
+        return self._session.has(graph)
+
+    def run(self, graph: str, feeds):
+        return self._session.run(graph, feeds)
+
+
+def test_novel_views_on_lanes_and_through_the_pipeline_are_the_same_pictures():
+    """With a novel view, a tracked pair's view starts rendering once the encoder graph has run, on one-thread
+    lanes (``ModelSession.on_lanes``), with the flip test's run beside it on the ``human`` lane; and
+    ``NovelViewPipeline`` finishes each view while the next pair is estimated. Neither changes a number: every
+    joint and every pixel of the view is what the graphs run in turn on their two-thread sessions give."""
+    pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.cli.simdata import load_sequences
+    from ghnerf_runtime.config import NovelViewConfig
+    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.novel_view import NovelViewRequest
+    from ghnerf_runtime.pipeline import NovelViewPipeline
+
+    seq = load_sequences(1, 6)[0]
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), threads=2),
+                          novel_view=NovelViewConfig(enabled=True))
+    session = load_session(cfg)
+    request = NovelViewRequest(alpha=0.3, overlay="skeleton")
+    pairs = [(np.asarray(seq.images[i, 0]), np.asarray(seq.images[i, 1])) for i in range(len(seq))]
+    runs = {}
+    for name, sess in (("lanes", session), ("in turn", _NoLanes(session))):
+        with Estimator(sess, seq.rig, cfg) as est:
+            assert est._novel_lanes == (name == "lanes")
+            runs[name] = [est.estimate(p, sequence=i, novel_view=request, timestamp_s=i / 30)
+                          for i, p in enumerate(pairs)]
+    with Estimator(session, seq.rig, cfg) as est, NovelViewPipeline(est) as pipe:
+        out = [pipe.submit(p, sequence=i, novel_view=request, timestamp_s=i / 30) for i, p in enumerate(pairs)]
+        assert out[0] == [] and all(len(o) == 1 for o in out[1:])  # one pair in flight
+        runs["pipeline"] = [r for o in out for r in o] + pipe.flush()
+    assert sum(r.tracked for r in runs["in turn"]) >= 4 and runs["in turn"][-1].num_found > 20
+    for name in ("lanes", "pipeline"):
+        for i, (a, b) in enumerate(zip(runs[name], runs["in turn"], strict=True)):
+            assert a.sequence == b.sequence == i and a.tracked == b.tracked, (name, i)
+            assert np.array_equal(a.joints_3d, b.joints_3d) and np.array_equal(a.missing, b.missing), (name, i)
+            assert all(np.array_equal(a.joints_2d[c], b.joints_2d[c]) for c in a.joints_2d), (name, i)
+            assert np.array_equal(a.novel_view.image, b.novel_view.image), (name, i)
+            assert np.array_equal(a.novel_view.depth, b.novel_view.depth), (name, i)
+            assert a.novel_view.camera.P.tolist() == b.novel_view.camera.P.tolist(), (name, i)
+            assert {"novel_render", "novel_proxy", "novel_matte", "total"} <= set(a.timing_ms), (name, i)
+    assert session.run_counts["render_rgb"] > 0 and session.novel_painter is not None
+
+
 def test_shipped_prior_gate_reports_fewer_3d_joints_not_fewer_people():
     """The skeleton prior's error gate decides which 3D joints are reported, not whether someone is there: with a
     gate no joint passes, the 2D joints are still reported and the crop still follows the prior's skeleton."""

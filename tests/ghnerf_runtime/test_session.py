@@ -116,6 +116,38 @@ def test_run_both_side_by_side_answers_as_two_runs(tiny_model_dir):
     assert not s.open_lane("encoder")  # not loaded
 
 
+def test_novel_view_graphs_run_on_lanes_with_the_same_numbers(tiny_model_dir):
+    """open_lane / run_on_lane for the novel view's graphs (the estimator's worker renders on them beside the
+    keypoint stages): a lane opens for ``volume`` and ``render_rgb`` (their first run reads the encoder's and the
+    volume's outputs at one target) and answers what the two-thread sessions answer, to float rounding (this
+    fp32 model's sums may split differently over one thread or two; the shipped model's answers are the same
+    bits: test_estimator_accuracy); a graph without a lane runs on its session; the runs are counted, and the
+    lanes' warm-up runs are not."""
+    s = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), threads=2),
+                          ("encoder", "volume", "render_rgb"))
+    feeds = warmup_feeds(s.contract, targets=1, ray_stride=2)
+    feeds.update(s.run("encoder", feeds))
+    volume = s.run("volume", feeds)
+    rgb = s.run("render_rgb", {**feeds, **volume})
+    assert s.open_lane("volume") and s.open_lane("render_rgb")
+    assert s.run_counts == {"encoder": 1, "volume": 1, "render_rgb": 1}
+    lanes = s.on_lanes()
+    assert lanes.contract is s.contract and lanes.has("volume") and not lanes.has("render")
+    on_lane = lanes.run("volume", feeds)
+    assert set(on_lane) == set(volume)
+    for k in volume:
+        np.testing.assert_allclose(on_lane[k], volume[k], rtol=1e-5, atol=1e-6 * np.abs(volume[k]).max())
+    on_lane = lanes.run("render_rgb", {**feeds, **volume})
+    assert set(on_lane) == set(rgb)
+    for k in rgb:
+        np.testing.assert_allclose(on_lane[k], rgb[k], rtol=1e-5, atol=1e-6)
+    no_lane, own = lanes.run("encoder", feeds), s.run("encoder", feeds)  # no lane: the session itself
+    assert all(np.array_equal(no_lane[k], v) for k, v in own.items())
+    assert s.run_counts == {"encoder": 3, "volume": 2, "render_rgb": 2}
+    with pytest.raises(ModelError, match="needs input 'ray_uv'"):
+        lanes.run("render_rgb", {k: v for k, v in {**feeds, **volume}.items() if k != "ray_uv"})
+
+
 def test_run_unknown_graph_and_missing_input(tiny_model_dir):
     s = _load_encoder(tiny_model_dir)
     with pytest.raises(ModelError, match="not loaded"):
