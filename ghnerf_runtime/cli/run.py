@@ -41,6 +41,7 @@ from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorCon
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
+from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
 
 log = logging.getLogger("ghnerf-run")
@@ -276,28 +277,42 @@ def _run(args) -> int:
     out = sys.stdout if to_stdout else None
     frames: list[dict] = []
     done = False
+    held: dict[int, list[np.ndarray]] = {}  # the pairs in flight, for their overlay
+
+    def emit(result) -> None:
+        images = held.pop(result.sequence)
+        nonlocal out
+        obj = result.to_json()
+        if as_list:
+            frames.append(obj)
+        else:
+            if out is None:
+                out = open(out_path, "w", encoding="utf-8")
+            out.write(json.dumps(obj, allow_nan=False) + "\n")
+            out.flush()
+        if novel is not None:
+            # A pair whose frames were rejected has no novel view: keep the video in step with black.
+            novel.add(result.novel_view.image if result.novel_view is not None
+                      else np.zeros((estimator.size, estimator.size, 3), np.uint8))
+        if overlay is not None:
+            overlay.add(overlay_image(images, result))
+        log.info("pair %d: %d/25 joints, %.1f ms", result.sequence, result.num_found, result.timing_ms["total"])
+
     try:
-        for seq, images in enumerate(_pairs(args)):
-            try:
-                result = estimator.estimate(images, sequence=seq, novel_view=request, timestamp_s=seq / fps)
-            except FrameError as e:
-                names = args.images or args.videos
-                raise UsageError(f"{names[0]}, {names[1]}: {e}") from e
-            obj = result.to_json()
-            if as_list:
-                frames.append(obj)
-            else:
-                if out is None:
-                    out = open(out_path, "w", encoding="utf-8")
-                out.write(json.dumps(obj, allow_nan=False) + "\n")
-                out.flush()
-            if novel is not None:
-                # A pair whose frames were rejected has no novel view: keep the video in step with black.
-                novel.add(result.novel_view.image if result.novel_view is not None
-                          else np.zeros((estimator.size, estimator.size, 3), np.uint8))
-            if overlay is not None:
-                overlay.add(overlay_image(images, result))
-            log.info("pair %d: %d/25 joints, %.1f ms", seq, result.num_found, result.timing_ms["total"])
+        # Each pair's novel view is finished while the next pair is estimated (the same numbers, more pairs per
+        # second: docs/runtime.md, "The novel view alongside the keypoints"); without one, a pair comes out at once.
+        with NovelViewPipeline(estimator) as pipe:
+            for seq, images in enumerate(_pairs(args)):
+                held[seq] = images
+                try:
+                    finished = pipe.submit(images, sequence=seq, novel_view=request, timestamp_s=seq / fps)
+                except FrameError as e:
+                    names = args.images or args.videos
+                    raise UsageError(f"{names[0]}, {names[1]}: {e}") from e
+                for result in finished:
+                    emit(result)
+            for result in pipe.flush():
+                emit(result)
         done = True
     finally:
         try:

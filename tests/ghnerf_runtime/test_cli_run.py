@@ -86,6 +86,26 @@ def test_run_on_two_videos_writes_one_object_per_line(tiny_model_dir, tmp_path, 
         _check_frame(obj, rig.names[:2], 320, 240)
 
 
+def test_a_video_run_with_a_novel_view_writes_every_pair_in_order(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    """ghnerf-run finishes each pair's novel view while the next pair is estimated (NovelViewPipeline): every
+    pair still comes out, in order, with its view and its overlay, as one by one."""
+    clip = simdata.write_sim_example(tmp_path / "clip", frames=4, width=320, height=240)
+    outputs = {}
+    for name in ("piped", "again"):
+        out, novel = tmp_path / f"{name}.jsonl", tmp_path / f"{name}.mp4"
+        assert cli_run.main(["--rig", clip["rig"], "--videos", clip["left"], clip["right"], "--model-dir",
+                             str(tiny_model_dir), "--out", str(out), "--novel-view", str(novel),
+                             "--overlay", str(tmp_path / f"{name}-overlay.mp4")]) == 0
+        frames = [json.loads(line) for line in out.read_text().splitlines()]
+        assert [f["sequence"] for f in frames] == [0, 1, 2, 3]
+        for path in (novel, tmp_path / f"{name}-overlay.mp4"):
+            cap = cv2.VideoCapture(str(path))
+            assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 4, path
+            cap.release()
+        outputs[name] = [(f["joints_3d"], f["joints_2d"]) for f in frames]
+    assert outputs["piped"] == outputs["again"]  # deterministic: nothing of one pair leaks into the next
+
+
 def test_errors_exit_2_and_name_the_problem(sim_pair, tiny_model_dir, tmp_path, capsys):  # noqa: F811
     args = ["--rig", sim_pair["rig"], "--model-dir", str(tiny_model_dir)]
     assert cli_run.main(args + ["--images", sim_pair["left"], str(tmp_path / "absent.png")]) == 2
@@ -399,11 +419,12 @@ class _StubEstimator:
         self.fail_at, self.fail = fail_at, fail
         self.session = type("S", (), {"describe": staticmethod(lambda: {})})()
 
-    def estimate(self, images, *, sequence, novel_view=None, timestamp_s=None):
+    def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
+        """Estimator.estimate_then_view: the result, and no novel view to finish."""
         if sequence == self.fail_at:
             raise self.fail
         return type("R", (), {"to_json": lambda r: {"sequence": sequence}, "num_found": 0, "novel_view": None,
-                              "timing_ms": {"total": 1.0}})()
+                              "sequence": sequence, "timing_ms": {"total": 1.0}})(), None
 
 
 def _stub_run(monkeypatch, out: Path, pairs: int = 3, **stub) -> tuple[int, list]:
@@ -468,10 +489,10 @@ def test_sigterm_stops_a_run_as_ctrl_c_does(monkeypatch, tmp_path, capsys):
     out = tmp_path / "joints.jsonl"
 
     class _Killed(_StubEstimator):
-        def estimate(self, images, *, sequence, novel_view=None, timestamp_s=None):
+        def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
             if sequence == 1:
                 os.kill(os.getpid(), signal.SIGTERM)  # as timeout(1) or systemd stop it
-            return super().estimate(images, sequence=sequence)
+            return super().estimate_then_view(images, sequence=sequence)
 
     monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Killed())
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
@@ -525,9 +546,10 @@ def test_a_video_without_a_usable_frame_rate_is_timed_at_30_fps(monkeypatch, tmp
     times = []
 
     class _Timed(_StubEstimator):
-        def estimate(self, images, *, sequence, novel_view=None, timestamp_s=None):
+        def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
             times.append(timestamp_s)
-            return super().estimate(images, sequence=sequence, novel_view=novel_view, timestamp_s=timestamp_s)
+            return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
+                                              timestamp_s=timestamp_s)
 
     monkeypatch.setattr(cli_run.cv2, "VideoCapture",
                         lambda path: type("C", (), {"get": lambda self, prop: rate, "release": lambda self: None})())
