@@ -15,6 +15,8 @@ import dataclasses
 import json
 import math
 import os
+import struct
+import zlib
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -23,7 +25,7 @@ import numpy as np
 
 from calibration.errors import BoardError
 
-__all__ = ["BoardSpec", "load_board", "DICTIONARIES", "MIN_CORNERS"]
+__all__ = ["BoardSpec", "load_board", "png_with_dpi", "DICTIONARIES", "MIN_CORNERS"]
 
 #: Fewest corners a view needs to constrain a pose (and not all on one line); a board with fewer inner
 #: corners could never be found.
@@ -43,8 +45,9 @@ class BoardSpec:
         square_m: side of one chessboard square, metres (measured on the print).
         marker_m: side of one ArUco marker, metres (smaller than ``square_m``).
         dictionary: the ArUco dictionary (``DICT_5X5_100``...); it must hold a marker per white square.
-        legacy_pattern: boards made by OpenCV before 4.6 with an even number of rows start with a
-            marker in the other colour; set true to read such a print.
+        legacy_pattern: boards made by OpenCV before 4.6 with an even number of rows (``squares_y``)
+            have their markers in the other squares; set true to read such a print (the detector names
+            this setting when an image shows the other pattern).
     """
 
     squares_x: int = 9
@@ -138,3 +141,19 @@ def load_board(path: str | os.PathLike) -> BoardSpec:
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise BoardError(f"not a JSON file: {e}", path=str(path)) from e
     return BoardSpec.from_dict(data, path=str(path))
+
+
+def png_with_dpi(png: bytes, dpi: float) -> bytes:
+    """``png`` (a PNG file's bytes) recording its resolution, ``dpi``, in a ``pHYs`` chunk.
+
+    OpenCV writes none, and a viewer prints such an image at its own default (72 or 96 dpi): a board
+    drawn for 300 dpi came out 3-4 times too large, or "fitted" to the page at an arbitrary scale.
+    """
+    if png[:8] != b"\x89PNG\r\n\x1a\n" or png[12:16] != b"IHDR":
+        raise BoardError("not a PNG image")
+    per_metre = int(round(dpi / 0.0254))
+    body = b"pHYs" + struct.pack(">IIB", per_metre, per_metre, 1)  # unit 1: the metre
+    chunk = struct.pack(">I", len(body) - 4) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
+    end_of_ihdr = 8 + 8 + struct.unpack(">I", png[8:12])[0] + 4  # length, type, data, CRC
+    return png[:end_of_ihdr] + chunk + png[end_of_ihdr:]
+

@@ -7,7 +7,7 @@ Layout (what ``ghcal capture`` writes and ``ghcal solve`` reads)::
     DIR/left/floor.png DIR/right/floor.png  # optional: the board lying on the floor
     DIR/cameras.json                        # {"cameras": ["left", "right"]}: the stream's order
 
-Images may be PNG, JPEG, BMP or TIFF; a name present in one folder only is still used for that
+Images may be PNG, JPEG, BMP or TIFF, grey or colour, 8 or 16 bits; a name present in one folder only is still used for that
 camera's intrinsics. ``cameras.json`` keeps the order the rig source gave the cameras in: the first
 is the one a driver opens as its first device (``opencv://?first=``), so the solved rig must list it
 first too, whatever the names sort as (``names=right,left``).
@@ -24,7 +24,7 @@ import cv2
 
 from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView
-from calibration.errors import CaptureError
+from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
@@ -136,8 +136,10 @@ def list_images(folder: Path) -> dict[str, Path]:
 def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[str] | None = None) \
         -> tuple[dict[str, dict[str, BoardView]], dict[str, list[str]]]:
     """Detect the board in every image: (camera -> view name -> view, camera -> names without the board).
+    Images are read as grey at their own depth (8 or 16 bits; 16-bit ones scaled by :func:`~calibration.detect.grey8`).
 
-    :raises CaptureError: an unreadable image (named), a camera folder without images.
+    :raises CaptureError: an unreadable image (named), a camera folder without images, an image of the board
+        printed with the other chessboard pattern (named, with the ``legacy_pattern`` to set).
     """
     detector = BoardDetector(board)
     views: dict[str, dict[str, BoardView]] = {}
@@ -148,10 +150,15 @@ def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[s
             raise CaptureError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)})")
         views[camera], missed[camera] = {}, []
         for name, path in images.items():
-            image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+            # grey at the file's own depth: IMREAD_GRAYSCALE cut a 16-bit file to its top 8 bits, all but
+            # black for a 10- or 12-bit camera's frame (the detector scales it: detect.grey8)
+            image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)
             if image is None:
                 raise CaptureError(f"{path}: not a readable image")
-            view = detector.detect(image)
+            try:
+                view = detector.detect(image)
+            except (BoardError, CaptureError) as e:
+                raise CaptureError(f"{path}: {e}") from e
             if view is None:
                 missed[camera].append(name)
             else:

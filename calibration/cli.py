@@ -32,7 +32,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from calibration.board import BoardSpec, load_board
+from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  next_view_number, read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
@@ -191,13 +191,19 @@ def cmd_board(args: argparse.Namespace) -> int:
         if not same:
             raise UsageError(f"{spec} exists and defines another board (measured on the print?): give it as "
                              f"--board {spec} to print it again, or --force to replace it")
-    if not cv2.imwrite(str(png), image):
-        raise UsageError(f"{png}: cannot write the image")
+    ok, encoded = cv2.imencode(".png", image)
+    if not ok:
+        raise UsageError(f"{png}: cannot encode the image")
+    png.write_bytes(png_with_dpi(encoded.tobytes(), args.dpi))  # the PNG says its dpi: printed at 100 %, to scale
     write_text_atomic(spec, json.dumps(board.to_dict(), indent=2) + "\n")
     w_cm, h_cm = (100 * image.shape[1] / args.dpi * 0.0254, 100 * image.shape[0] / args.dpi * 0.0254)
-    print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px) and {spec}")
+    # a square is a whole number of pixels: at a low dpi the print's squares differ from square_m
+    printed_mm = 1000 * px / args.dpi * 0.0254
+    print(f"wrote {png} ({image.shape[1]}x{image.shape[0]} px at {args.dpi} dpi) and {spec}")
     print(f"print it at {args.dpi} dpi, 100 % scale (no 'fit to page'): {w_cm:.1f} x {h_cm:.1f} cm with its margin; "
-          f"{board.squares_x}x{board.squares_y} squares of {1000 * board.square_m:g} mm")
+          f"{board.squares_x}x{board.squares_y} squares of {printed_mm:.2f} mm"
+          + (f" ({px} px each; the board file says {1000 * board.square_m:g} mm)"
+             if abs(printed_mm / (1000 * board.square_m) - 1) > 0.001 else ""))
     print(f"then measure a square with a ruler and put the measured size in {spec} (square_m, and marker_m "
           "scaled alike); glue the print to something flat and rigid")
     return 0
@@ -327,7 +333,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
                     continue
                 moves = [_largest_move_px(v, last) for v, last in zip(found, last_views)]
                 known = [m for m in moves if m is not None]
-                if known and max(known) < args.min_move_px:
+                # a camera that sees the board now and did not in the last kept pair (glare, a hand over it)
+                # adds a view, and the first pair of this pose both cameras see: kept however little it moved
+                newly_seen = any(v is not None and last is None for v, last in zip(found, last_views))
+                if known and max(known) < args.min_move_px and not newly_seen:
                     continue  # the board has not moved or turned: the same view again adds nothing
                 last_views = found
             name = FLOOR_VIEW if args.floor else f"{number:03d}"

@@ -7,8 +7,13 @@ import cv2
 import numpy as np
 
 from calibration.board import MIN_CORNERS, BoardSpec
+from calibration.errors import BoardError, CaptureError
 
-__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS"]
+__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS", "grey8", "fixes_a_pose"]
+
+#: Markers seen, with no corners found, before the detector tries the board's other chessboard pattern
+#: (a print from OpenCV before 4.6, or from it since, read with the other ``legacy_pattern``).
+PATTERN_CHECK_MARKERS = 4
 
 
 @dataclass(frozen=True)
@@ -29,6 +34,53 @@ class BoardView:
         return int(self.ids.size)
 
 
+def grey8(image: np.ndarray) -> np.ndarray:
+    """``image`` as the 8-bit greyscale the ArUco detector takes: grey, ``(H, W, 1)``, BGR or BGRA; 8 or 16 bits.
+
+    16-bit images are scaled by their own maximum, not by 256: a 10- or 12-bit camera's frame stored in a
+    16-bit PNG or TIFF uses only its low bits, and cut to its top 8 it kept 4-16 grey levels, in which the
+    board was not found.
+
+    :raises CaptureError: another number of channels or another pixel type (named).
+    """
+    image = np.asarray(image)
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[..., 0]
+    if image.dtype not in (np.uint8, np.uint16):
+        raise CaptureError(f"an image of {image.dtype} pixels: the board is found in 8- or 16-bit images only")
+    if image.ndim == 3 and image.shape[2] in (3, 4):
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+    elif image.ndim != 2:
+        raise CaptureError(f"an image of shape {image.shape}: the board is found in grey, BGR or BGRA images only")
+    if image.dtype == np.uint16:
+        top = int(image.max())
+        image = cv2.convertScaleAbs(image, alpha=255.0 / top) if top > 0 else np.zeros(image.shape, np.uint8)
+    return image
+
+
+def fixes_a_pose(board: BoardSpec, ids: np.ndarray) -> bool:
+    """Whether the corners ``ids`` fix the board's pose in an image: four of them with no three on one line.
+
+    That fails only where all but (at most) one lie on one line: a row, a column or a diagonal of the grid.
+    OpenCV's ``checkCharucoCornersCollinear`` asks only whether all lie on one row or column, so a row
+    and one corner below it passed: no homography, no pose, and the solve blamed the view (or the pair)
+    as a blurred frame or two instants.
+    """
+    ids = np.unique(np.asarray(ids, np.int64).reshape(-1))
+    if ids.size < 4:
+        return False
+    per_row = board.squares_x - 1
+    grid = np.stack([ids % per_row, ids // per_row], axis=1)
+    # a line holding all but one of the corners holds two of any three of them
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        d = grid[b] - grid[a]
+        rel = grid - grid[a]
+        on_line = int(np.count_nonzero(rel[:, 0] * d[1] - rel[:, 1] * d[0] == 0))
+        if on_line >= ids.size - 1:
+            return False
+    return True
+
+
 class BoardDetector:
     """Detects one board in images; reuse it across images (it holds OpenCV's detector)."""
 
@@ -37,18 +89,44 @@ class BoardDetector:
         self.min_corners = max(int(min_corners), 4)
         self._cv_board = board.cv_board()
         self._detector = cv2.aruco.CharucoDetector(self._cv_board)
+        # The two chessboard patterns differ only for an even number of rows (OpenCV's setLegacyPattern)
+        self._other: cv2.aruco.CharucoDetector | None = None
+        if board.squares_y % 2 == 0:
+            other = board.cv_board()
+            other.setLegacyPattern(not board.legacy_pattern)
+            self._other = cv2.aruco.CharucoDetector(other)
 
     def detect(self, image: np.ndarray) -> BoardView | None:
-        """The board's corners in ``image`` (grey or BGR, uint8), or None when too few are found or
-        they all lie on one line (such a view does not fix a pose)."""
-        if image.ndim == 3:
-            image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        corners, ids, _, _ = self._detector.detectBoard(image)
+        """The board's corners in ``image`` (:func:`grey8`'s inputs), or None when too few are found or
+        they do not fix a pose (:func:`fixes_a_pose`).
+
+        :raises BoardError: the image shows this board printed with the other chessboard pattern
+            (key ``legacy_pattern``): no image of it would ever give a corner.
+        :raises CaptureError: an image of a type :func:`grey8` does not take.
+        """
+        image = grey8(image)
+        corners, ids, marker_corners, marker_ids = self._detector.detectBoard(image)
         if ids is None or len(ids) < self.min_corners:
-            return None
-        if self._cv_board.checkCharucoCornersCollinear(ids):
+            self._check_pattern(image, marker_corners, marker_ids)
             return None
         ids = ids.reshape(-1).astype(np.int64)
+        if not fixes_a_pose(self.board, ids):
+            return None
         corners = corners.reshape(-1, 2).astype(np.float64)
         order = np.argsort(ids)
         return BoardView(ids[order], corners[order], (int(image.shape[1]), int(image.shape[0])))
+
+    def _check_pattern(self, image: np.ndarray, marker_corners, marker_ids) -> None:
+        """Markers but no corners: is it the board printed with the other pattern? Its markers sit in the
+        other squares, so each image was silently "no board" and a capture ran out of time."""
+        if self._other is None or marker_ids is None or len(marker_ids) < PATTERN_CHECK_MARKERS:
+            return
+        _, ids, _, _ = self._other.detectBoard(image, markerCorners=marker_corners, markerIds=marker_ids)
+        if ids is not None and len(ids) >= self.min_corners:
+            setting = not self.board.legacy_pattern
+            raise BoardError(
+                f"the board in view is printed with the other chessboard pattern ({len(ids)} corners found with "
+                f"legacy_pattern {str(setting).lower()}, none with {str(self.board.legacy_pattern).lower()}): "
+                + ("boards of an even number of rows printed by OpenCV before 4.6 need it" if setting else
+                   "boards printed by OpenCV 4.6 or later do not use it")
+                + f"; set \"legacy_pattern\": {str(setting).lower()} in the board file", key="legacy_pattern")

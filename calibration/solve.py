@@ -26,7 +26,7 @@ import numpy as np
 
 from calibration.board import BoardSpec
 from calibration.consensus import agreeing_pairs, pair_relative_pose
-from calibration.detect import MIN_CORNERS, BoardView
+from calibration.detect import MIN_CORNERS, BoardView, fixes_a_pose
 from calibration.errors import SolveError
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera
@@ -195,18 +195,17 @@ def calibrate_pair(board: BoardSpec, first: Mapping[str, BoardView], second: Map
     first those that disagree with the consensus of the pairs' single-pair poses, then the worst one at
     a time; no pair kept may fit worse than ``max_pair_px`` (docs/calibration.md).
 
-    :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners, not
-        all on one line; bad pairs that would leave fewer than :data:`MIN_VIEWS` or are more than a quarter;
+    :raises SolveError: fewer than :data:`MIN_VIEWS` shared views with ``min_common`` shared corners that
+        fix a pose (:func:`~calibration.detect.fixes_a_pose`); bad pairs that would leave fewer than :data:`MIN_VIEWS` or are more than a quarter;
         a pair kept over ``max_pair_px``.
     """
     shared = []
-    cv_board = board.cv_board()
     for name in sorted(set(first) & set(second)):
         ids = np.intersect1d(first[name].ids, second[name].ids)
-        # Each camera's corners are off one line (the detector sees to that), but the corners both found
-        # can still be one row: no pose from those, and OpenCV's fit of it went to 1e106 px, or it was
-        # dropped as a pair "not taken at the same instant" in place of one that was.
-        if ids.size >= min_common and not cv_board.checkCharucoCornersCollinear(ids):
+        # Each camera's corners fix a pose (the detector sees to that), but the corners both found can
+        # still be one row, or one row and a corner: no pose from those, and OpenCV's fit of it went to
+        # 1e106 px, or it was dropped as a pair "not taken at the same instant" in place of one that was.
+        if ids.size >= min_common and fixes_a_pose(board, ids):
             shared.append((name, ids))
     if len(shared) < MIN_VIEWS:
         raise SolveError(f"cameras {names[0]!r} and {names[1]!r} both saw the board in {len(shared)} image pair(s); "

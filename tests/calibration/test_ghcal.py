@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 import math
 import re
+import struct
+import zlib
 from pathlib import Path
 
 import cv2
@@ -21,7 +23,7 @@ from calibration.detect import BoardDetector, BoardView
 from calibration.check import check_rig
 from calibration.errors import CaptureError, SolveError
 from calibration.render import calibration_views, example_rig
-from calibration.solve import floor_from_pair, solve_rig
+from calibration.solve import calibrate_intrinsics, calibrate_pair, floor_from_pair, solve_rig
 from drivers.backends.recording_format import FRAMES, FrameRow, Manifest, write_manifest
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import load_rig, save_rig
@@ -216,6 +218,33 @@ def test_board_command_writes_a_print_at_scale(tmp_path, capsys):
     assert "100 % scale" in capsys.readouterr().out
 
 
+def _png_chunks(data: bytes) -> dict[bytes, bytes]:
+    chunks, at = {}, 8
+    while at < len(data):
+        length = int.from_bytes(data[at:at + 4], "big")
+        kind, body = data[at + 4:at + 8], data[at + 8:at + 8 + length]
+        assert zlib.crc32(kind + body) == int.from_bytes(data[at + 8 + length:at + 12 + length], "big")
+        chunks[kind] = body
+        at += 12 + length
+    return chunks
+
+
+def test_the_printed_board_says_its_dpi_and_the_size_its_squares_come_out(tmp_path, capsys):
+    # The PNG carried no resolution: printed "at 100 %" a viewer used its own 72 or 96 dpi, and a board
+    # drawn for 300 dpi came out 3-4 times too large (or fitted to the page at whatever scale)
+    assert cli.main(["board", "--out", str(tmp_path / "a")]) == 0
+    chunks = _png_chunks((tmp_path / "a" / "board.png").read_bytes())
+    x, y, unit = struct.unpack(">IIB", chunks[b"pHYs"])
+    assert (x, y, unit) == (round(300 / 0.0254), round(300 / 0.0254), 1)  # pixels per metre
+    assert "squares of 80.01 mm" in capsys.readouterr().out  # 945 px at 300 dpi
+    # a square is whole pixels: 20 mm at 26 dpi is 20.47 px, drawn as 20 (19.54 mm, 2.3 % small)
+    (tmp_path / "small.json").write_text(json.dumps({**BoardSpec().to_dict(), "square_m": 0.02, "marker_m": 0.015}))
+    assert cli.main(["board", "--out", str(tmp_path / "b"), "--board", str(tmp_path / "small.json"),
+                     "--dpi", "26"]) == 0
+    out = capsys.readouterr().out
+    assert "squares of 19.54 mm (20 px each; the board file says 20 mm)" in out, out
+
+
 def _write_recording(root: Path, rig: Rig, images: dict[str, dict[str, np.ndarray]], period_s: float) -> None:
     """A recording in docs/recording-format.md's layout, one pair every ``period_s``."""
     rows = []
@@ -327,6 +356,43 @@ def test_capture_keeps_a_hand_held_view_only_once_it_is_held_still(truth, tmp_pa
     assert np.array_equal(saved, held["left"]["09"])
 
 
+def test_capture_keeps_the_view_again_once_the_other_camera_sees_the_board(truth, tmp_path, capsys):
+    # The board held still where both cameras see it, the left camera's view of it blocked at first (a
+    # hand, glare): the pair kept then has no left view. Once the left camera saw it, the board had not
+    # moved 40 px, so that pair, the only one of this pose both cameras see, was skipped as a duplicate.
+    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=7, floor_view=False)
+    blocked = np.full_like(images["left"]["000"], 90)
+    frames = {"left": {f"{k:02d}": blocked if k < 5 else images["left"]["000"] for k in range(10)},
+              "right": {f"{k:02d}": images["right"]["000"] for k in range(10)}}
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_recording(take, truth, frames, period_s=0.1)
+    out = tmp_path / "kept"
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+                     "--count", "2", "--interval-s", "0"]) == 0
+    printed = capsys.readouterr().out
+    assert "000: left 0 corners, right" in printed and re.search(r"001: left [1-9]\d* corners", printed), printed
+    saved = cv2.imread(str(out / "left" / "001.png"), cv2.IMREAD_GRAYSCALE)
+    assert np.array_equal(saved, images["left"]["000"])
+
+
+def test_capture_of_a_board_printed_with_the_other_pattern_stops_naming_the_setting(truth, tmp_path, capsys):
+    # Read with the wrong legacy_pattern, every frame was "no board" until --max-seconds ran out
+    printed = BoardSpec(squares_x=7, squares_y=6, square_m=0.1, marker_m=0.075, legacy_pattern=True)
+    images = calibration_views(truth, printed, count=1, edge_count=0, seed=7, floor_view=False)
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_recording(take, truth, {cam: {f"{k:02d}": v["000"] for k in range(3)} for cam, v in images.items()},
+                     period_s=0.1)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps({**printed.to_dict(), "legacy_pattern": False}))
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board),
+                     "--out", str(tmp_path / "out")]) == 2
+    assert 'set "legacy_pattern": true in the board file' in capsys.readouterr().err
+
+
 def test_a_view_dropped_from_the_intrinsics_is_not_used_for_the_pair(views):
     smeared = {cam: dict(v) for cam, v in views.items()}
     view = smeared["left"]["004"]
@@ -336,6 +402,27 @@ def test_a_view_dropped_from_the_intrinsics_is_not_used_for_the_pair(views):
     assert report["cameras"]["left"]["dropped_views"] == ["004"]
     assert "004" not in report["pair"]["per_view_px"]
     assert any("dropped as outliers" in w for w in report["warnings"])
+
+
+def test_pairs_whose_shared_corners_fix_no_pose_are_left_out_not_dropped_as_bad(views):
+    # Each camera found the whole board, but the corners both found are one row and one corner (the
+    # board at the edge of one image): no pose from those. OpenCV's collinearity check passed them, and
+    # the pair was dropped as "not taken at the same instant", which counts towards stopping the solve.
+    pairs = [n for n in sorted(set(views["left"]) & set(views["right"])) if n != "floor"]
+    first = {n: views["left"][n] for n in pairs}
+    second = {n: views["right"][n] for n in pairs}
+    intr_first, intr_second = calibrate_intrinsics(BOARD, first), calibrate_intrinsics(BOARD, second)
+    clean = calibrate_pair(BOARD, first, second, intr_first, intr_second)
+    row_and_one = [6, 7, 8, 9, 10, 11, 14]  # corner row 1 of the 7x5 board, and one corner of row 2
+    for name in pairs[:2]:
+        view = views["left"][name]
+        keep = np.isin(view.ids, row_and_one)
+        assert keep.sum() == len(row_and_one)
+        first[f"{name}edge"] = BoardView(view.ids[keep], view.corners[keep], view.image_size)
+        second[f"{name}edge"] = views["right"][name]
+    pair = calibrate_pair(BOARD, first, second, intr_first, intr_second)
+    assert pair.dropped == () and not any(n.endswith("edge") for n in pair.per_view_px)
+    np.testing.assert_allclose(pair.T, clean.T, atol=1e-9)
 
 
 def test_a_board_held_up_as_the_floor_view_is_questioned(views):

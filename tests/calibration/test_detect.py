@@ -1,0 +1,168 @@
+"""Finding the board in an image: pixel types, the board's two chessboard patterns, views that fix no pose.
+
+Images come from :func:`calibration.render.render_board` (the board through a real lens model), so each
+corner's true pixel is known.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration.board import BoardSpec
+from calibration.capture import detect_folder
+from calibration.detect import BoardDetector, fixes_a_pose, grey8
+from calibration.errors import BoardError, CaptureError
+from calibration.render import board_pose_facing, example_rig, render_board
+
+BOARD = BoardSpec(squares_x=7, squares_y=6, square_m=0.12, marker_m=0.09)  # an even number of rows
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return example_rig().pair[0].resized(640, 400)
+
+
+def _pose(board: BoardSpec, camera, distance: float = 1.6):
+    return board_pose_facing(board, camera.center + distance * camera.R[2], camera.center, yaw_deg=20,
+                             pitch_deg=-15, spin_deg=10)
+
+
+def _render(board: BoardSpec, camera, **kwargs) -> tuple[np.ndarray, np.ndarray]:
+    """The image and each corner's true pixel."""
+    R, t = _pose(board, camera)
+    uv, _ = camera.project(board.corners_m() @ R.T + t)
+    return render_board(camera, board, R, t, **kwargs), uv
+
+
+def _rms(view, truth: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((view.corners - truth[view.ids]) ** 2, axis=1))))
+
+
+def test_a_12_bit_frame_saved_in_a_16_bit_png_is_found_as_precisely(camera, tmp_path):
+    # A machine-vision camera's 12-bit frame in a 16-bit PNG (values 0-4095): read as 8 bits by its top
+    # byte it was 0-15 grey, and the board was "not found" in every image
+    image, truth = _render(BOARD, camera)
+    reference = BoardDetector(BOARD).detect(image)
+    assert reference is not None and len(reference) == BOARD.corner_count
+    rng = np.random.default_rng(1)
+    frame12 = np.clip(np.rint(image * 16.0 + rng.uniform(-8, 8, image.shape)), 0, 4095).astype(np.uint16)
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        assert cv2.imwrite(str(tmp_path / cam / "000.png"), frame12)
+    views, missed = detect_folder(BOARD, tmp_path)
+    assert missed == {"left": [], "right": []}
+    view = views["left"]["000"]
+    assert len(view) == BOARD.corner_count and view.image_size == (camera.width, camera.height)
+    assert _rms(view, truth) < _rms(reference, truth) + 0.02
+
+
+@pytest.mark.parametrize("convert", [
+    lambda im: im.astype(np.uint16) * 257,                      # 16-bit grey
+    lambda im: im[..., None],                                   # (H, W, 1)
+    lambda im: cv2.cvtColor(im, cv2.COLOR_GRAY2BGRA),           # BGRA
+    lambda im: cv2.cvtColor(im, cv2.COLOR_GRAY2BGR).astype(np.uint16) * 16,  # 16-bit colour
+], ids=["uint16", "hw1", "bgra", "uint16-bgr"])
+def test_frames_of_other_layouts_give_the_same_corners(camera, convert):
+    image, _ = _render(BOARD, camera)
+    detector = BoardDetector(BOARD)
+    reference = detector.detect(image)
+    view = detector.detect(convert(image))
+    assert view is not None and np.array_equal(view.ids, reference.ids)
+    assert np.max(np.abs(view.corners - reference.corners)) < 0.05
+
+
+def test_frames_the_detector_cannot_take_are_named(camera):
+    image, _ = _render(BOARD, camera)
+    detector = BoardDetector(BOARD)
+    with pytest.raises(CaptureError, match="float32 pixels"):
+        detector.detect(image.astype(np.float32) / 255)
+    with pytest.raises(CaptureError, match=r"shape \(400, 640, 2\)"):
+        detector.detect(np.stack([image, image], axis=-1))
+    assert grey8(np.zeros((4, 5), np.uint16)).dtype == np.uint8  # all black: no division by 0
+
+
+@pytest.mark.parametrize("printed_legacy", [True, False])
+def test_a_print_with_the_other_chessboard_pattern_is_named(camera, tmp_path, printed_legacy):
+    # A board of even rows printed by OpenCV before 4.6 has its markers in the other squares: read with
+    # the wrong legacy_pattern it was no board in any image, and a capture just ran out of time
+    printed = BoardSpec(**{**BOARD.to_dict(), "legacy_pattern": printed_legacy})
+    expected = BoardSpec(**{**BOARD.to_dict(), "legacy_pattern": not printed_legacy})
+    image, _ = _render(printed, camera)
+    with pytest.raises(BoardError, match=f'"legacy_pattern": {str(printed_legacy).lower()} in the board file') as e:
+        BoardDetector(expected).detect(image)
+    assert e.value.key == "legacy_pattern"
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        assert cv2.imwrite(str(tmp_path / cam / "007.png"), image)
+    with pytest.raises(CaptureError, match=r"left[/\\]007\.png: legacy_pattern: the board in view is printed"):
+        detect_folder(expected, tmp_path)
+    assert len(BoardDetector(printed).detect(image)) >= BOARD.corner_count - 2  # read with its own pattern
+
+
+def test_boards_of_odd_rows_have_one_pattern(camera):
+    # Odd rows: both settings print the same board, so either reads it and neither is an error
+    odd = BoardSpec(squares_x=8, squares_y=5, square_m=0.1, marker_m=0.075)
+    image, _ = _render(odd, camera)
+    modern, legacy = (BoardDetector(BoardSpec(**{**odd.to_dict(), "legacy_pattern": flag})).detect(image)
+                      for flag in (False, True))
+    assert len(modern) >= odd.corner_count - 2 and np.array_equal(modern.ids, legacy.ids)
+
+
+def test_no_board_and_a_few_markers_are_no_view_not_an_error(camera):
+    image, _ = _render(BOARD, camera)
+    detector = BoardDetector(BOARD)
+    assert detector.detect(np.full_like(image, 90)) is None
+    # keep a single square's neighbourhood: a marker or two, no corner
+    R, t = _pose(BOARD, camera)
+    mask = _board_region_mask(camera, R, t, [(2, 2, 3, 3)])
+    assert detector.detect(np.where(mask, image, 90).astype(np.uint8)) is None
+
+
+def _board_region_mask(camera, R, t, rects) -> np.ndarray:
+    """Pixels showing the board's squares in ``rects`` (col0, row0, col1, row1: square indices, end
+    exclusive)."""
+    mask = np.zeros((camera.height, camera.width), np.uint8)
+    s = BOARD.square_m
+    for c0, r0, c1, r1 in rects:
+        xs, ys = np.linspace(c0 * s, c1 * s, 20), np.linspace(r0 * s, r1 * s, 20)
+        edge = np.concatenate([np.stack([xs, np.full_like(xs, ys[0])], 1), np.stack([np.full_like(ys, xs[-1]), ys], 1),
+                               np.stack([xs[::-1], np.full_like(xs, ys[-1])], 1),
+                               np.stack([np.full_like(ys, xs[0]), ys[::-1]], 1)])
+        uv, _ = camera.project(np.concatenate([edge, np.zeros((len(edge), 1))], 1) @ R.T + t)
+        cv2.fillPoly(mask, [np.round(uv).astype(np.int32)], 1)
+    return mask.astype(bool)
+
+
+def test_a_row_and_one_corner_is_no_view(camera):
+    # Square rows 1-2 in full give corner row 1 (ids 6-11); the last square of row 3 adds the one corner
+    # (id 17) between its marker and row 2's. All but one on a line: no homography, no pose, yet OpenCV's
+    # collinearity check passed it, and the solve dropped it as a blurred frame (or, shared by both
+    # cameras, as a pair "not taken at the same instant", which can stop the solve)
+    image, truth = _render(BOARD, camera)
+    R, t = _pose(BOARD, camera)
+    detector = BoardDetector(BOARD)
+    region = _board_region_mask(camera, R, t, [(0, 1, 7, 3), (6, 3, 7, 4)])
+    masked = np.where(region, image, 90).astype(np.uint8)
+    corners, ids, _, _ = cv2.aruco.CharucoDetector(BOARD.cv_board()).detectBoard(masked)
+    assert sorted(ids.ravel().tolist()) == [6, 7, 8, 9, 10, 11, 17]  # what OpenCV finds there
+    assert detector.detect(masked) is None
+    # the first square of row 3 as well: a second corner off the row, and four corners fix the pose
+    region = _board_region_mask(camera, R, t, [(0, 1, 7, 3), (6, 3, 7, 4), (0, 3, 1, 4)])
+    view = detector.detect(np.where(region, image, 90).astype(np.uint8))
+    assert view is not None and view.ids.tolist() == [6, 7, 8, 9, 10, 11, 12, 17]
+    assert _rms(view, truth) < 0.3
+
+
+@pytest.mark.parametrize("ids, fixes", [
+    ([0, 1, 2, 3, 4, 5], False),         # one row
+    ([0, 6, 12, 18, 24], False),         # one column
+    ([0, 7, 14, 21, 28, 5], False),      # a diagonal and one corner
+    ([6, 7, 8, 9, 10, 11, 17], False),   # a row and one corner
+    ([0, 1, 2], False),                  # too few for any pose
+    ([6, 7, 8, 9, 10, 11, 12, 17], True),
+    ([0, 1, 6, 7], True),                # one square's four corners
+    ([0, 2, 4, 12, 13], True),
+])
+def test_which_corners_fix_a_pose(ids, fixes):
+    assert fixes_a_pose(BOARD, np.array(ids)) is fixes
