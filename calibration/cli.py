@@ -747,12 +747,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("opencv", "anipose"), help="default: from FILE's suffix")
     p.add_argument("--units-to-metres", type=_finite(1e-9, 1e9),
                    help="metres per unit of the file's translations (0.001: millimetres); required for anipose "
-                        "and stereo_calib files, which do not say")
+                        "and stereo_calib files, which do not say (an anipose file ghcal export wrote records it)")
     p.add_argument("--extrinsics", help="stereo_calib's extrinsics.yml, when R and T are not in FILE")
     p.add_argument("--image-size", help="WIDTHxHEIGHT for cameras whose entry states no image size")
     p.add_argument("--camera-height", type=_finite(0.05, 10.0),
                    help="level the rig: the first camera's height above the floor, m (without it the rig keeps "
-                        "the tool's own frame, and a warning says so)")
+                        "the file's frame: levelled where the file records a levelling its poses show, as ghcal "
+                        "export writes for a levelled rig; else the tool's own, and a warning says so)")
     _add_tilt(p)
     p.add_argument("--volume", help="working volume xmin,ymin,zmin,xmax,ymax,zmax (m, in the written rig's frame)")
     p.add_argument("--rig-id", help="default: the file's, else its name")

@@ -187,6 +187,12 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
             baud = int(query.get("baud", ["115200"])[0])
         except ValueError:
             raise ListenError(f"{url}: baud must be a whole number") from None
+        from firmware_host.sinks.serial_sink import MAX_BAUD, MIN_BAUD  # the sink's bounds: one rule for both ends
+
+        if not MIN_BAUD <= baud <= MAX_BAUD:
+            # past 2**31 - 1 pyserial's OverflowError escaped as a traceback; 0 asks termios to hang up the line
+            raise ListenError(f"{url}: baud must be in [{MIN_BAUD}, {MAX_BAUD}] (what termios can be asked for), "
+                              f"got {baud}")
         # percent-decoded as the serial sink's path is: a '#' in a udev by-id name can only be written %23
         return _SerialPort(unquote(device), baud)
     raise ListenError(f"{url}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")

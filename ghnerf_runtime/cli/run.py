@@ -302,15 +302,20 @@ def _run(args) -> int:
         # Each pair's novel view is finished while the next pair is estimated (the same numbers, more pairs per
         # second: docs/runtime.md, "The novel view alongside the keypoints"); without one, a pair comes out at once.
         with NovelViewPipeline(estimator) as pipe:
-            for seq, images in enumerate(_pairs(args)):
-                held[seq] = images
-                try:
-                    finished = pipe.submit(images, sequence=seq, novel_view=request, timestamp_s=seq / fps)
-                except FrameError as e:
-                    names = args.images or args.videos
-                    raise UsageError(f"{names[0]}, {names[1]}: {e}") from e
-                for result in finished:
-                    emit(result)
+            try:
+                for seq, images in enumerate(_pairs(args)):
+                    held[seq] = images
+                    try:
+                        finished = pipe.submit(images, sequence=seq, novel_view=request, timestamp_s=seq / fps)
+                    except FrameError as e:
+                        names = args.images or args.videos
+                        raise UsageError(f"{names[0]}, {names[1]}: {e}") from e
+                    for result in finished:
+                        emit(result)
+            except (Exception, KeyboardInterrupt) as e:
+                if not isinstance(e, BrokenPipeError):
+                    _emit_in_flight(pipe, held, emit)
+                raise
             for result in pipe.flush():
                 emit(result)
         done = True
@@ -325,6 +330,19 @@ def _run(args) -> int:
                 if sink is not None:
                     sink.close()
     return 0
+
+
+def _emit_in_flight(pipe: NovelViewPipeline, held: dict, emit) -> None:
+    """On a stop (an error in the next pair, Ctrl-C): the pair whose view was being finished is one the run
+    finished, written as one by one it was before the next pair began (dropped, a stop lost it). Only the next
+    pair in order: a pair after one whose view failed is not written past the gap; the first error stands."""
+    try:
+        in_flight = pipe.flush()
+    except Exception:  # its view failed as well: the error already on its way is the one reported
+        return
+    for result in in_flight:
+        if result.sequence == min(held, default=None):
+            emit(result)
 
 
 def _write_list(path: str, frames: list[dict], done: bool) -> None:

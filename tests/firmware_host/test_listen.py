@@ -51,6 +51,19 @@ def test_serial_device_path_is_percent_decoded_as_the_sink_decodes_it(tmp_path):
         os.close(slave)
 
 
+def test_a_baud_termios_cannot_take_is_refused_on_a_real_tty(capsys):
+    """On a tty (not /dev/null, which fails to open anyway) a baud past 2**31 - 1 reached pyserial's
+    OverflowError: a traceback and exit 1 instead of the one-line exit 2 the sink's bounds give."""
+    master, slave = os.openpty()
+    try:
+        assert listen.main([f"serial://{os.ttyname(slave)}?baud={2**31}", "--seconds", "0.1"]) == 2
+    finally:
+        os.close(master)
+        os.close(slave)
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("ghnerf-listen: error: ") and "baud must be in [50, 2147483647]" in err
+
+
 def test_serial_json_lines_over_a_pty():
     master, slave = os.openpty()
     name = os.ttyname(slave)
@@ -78,6 +91,9 @@ def test_serial_json_lines_over_a_pty():
     ("serial://", "give the device"),
     ("serial:///dev/nonexistent-ghnerf?baud=9600", "cannot open"),
     ("serial:///dev/null?baud=fast", "baud must be"),
+    # the serial sink's bounds: past 2**31 - 1 pyserial raised OverflowError (a traceback, exit 1); 0 opened
+    ("serial:///dev/null?baud=2147483648", "baud must be in [50, 2147483647]"),
+    ("serial:///dev/null?baud=0", "baud must be in [50, 2147483647]"),
     # ignored: the port opened at 115200, the user believing 921600
     ("serial:///dev/null?baudrate=921600", "unknown parameter baudrate; it takes baud"),
     ("udp://127.0.0.1:0?baud=9600&x=", "unknown parameter baud, x; it takes none"),

@@ -12,6 +12,7 @@ import pytest
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.cli import run as cli_run
 from ghnerf_runtime.config import EstimatorConfig, config_to_dict
+from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
@@ -452,6 +453,50 @@ def test_a_json_output_keeps_the_pairs_finished_before_an_error(monkeypatch, tmp
     err = capsys.readouterr().err
     assert "render_heat failed" in err and "2 pair(s) finished" in err
     assert [p.name for p in tmp_path.iterdir()] == ["joints.json"]  # no temporary file left behind
+
+
+class _ViewStub(_StubEstimator):
+    """As the stub, each pair's view left to finish (NovelViewPipeline then holds one pair in flight)."""
+
+    def __init__(self, fail_at: int | None = None, fail: BaseException | None = None, view_fails_at=None):
+        super().__init__(fail_at, fail)
+        self.view_fails_at = view_fails_at
+
+    def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
+        result, _ = super().estimate_then_view(images, sequence=sequence)
+
+        def finish():
+            if sequence == self.view_fails_at:
+                raise ModelRunError(f"render_rgb failed on pair {sequence}")
+            return result
+        return result, finish
+
+
+@pytest.mark.parametrize("fail", ["error", "ctrl_c"])
+def test_a_stop_keeps_the_pair_whose_view_was_being_finished(monkeypatch, tmp_path, capsys, fail):
+    """ghnerf-run --novel-view finishes pair N's view while pair N+1 is estimated: a stop at pair N+1 (an
+    error, Ctrl-C) still writes pair N, as one by one it was written before N+1 began (it was dropped)."""
+    out = tmp_path / "joints.jsonl"
+    error = ModelRunError("encoder failed") if fail == "error" else KeyboardInterrupt()
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _ViewStub(fail_at=2, fail=error))
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 4))
+    rc = cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out)])
+    assert rc == (2 if fail == "error" else 130)
+    assert [json.loads(line)["sequence"] for line in out.read_text().splitlines()] == [0, 1]
+    assert ("encoder failed" if fail == "error" else "stopped (SIGINT)") in capsys.readouterr().err
+
+
+def test_a_pair_after_a_failed_view_is_not_written_past_the_gap(monkeypatch, tmp_path, capsys):
+    """Pair 1's view fails while pair 2 is estimated: the run stops with that error, pairs 0 only (pair 2,
+    finished behind it, is not written after the missing pair 1)."""
+    out = tmp_path / "joints.jsonl"
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _ViewStub(view_fails_at=1))
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 4))
+    assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out)]) == 2
+    assert [json.loads(line)["sequence"] for line in out.read_text().splitlines()] == [0]
+    assert "render_rgb failed on pair 1" in capsys.readouterr().err
 
 
 def test_a_json_output_is_left_as_it_was_when_no_pair_finished(monkeypatch, tmp_path):
