@@ -27,6 +27,7 @@ import onnxruntime as ort
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.bench_runtime_common import SessionTap  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, SessionConfig,
@@ -36,20 +37,16 @@ from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 from ghnerf_runtime.session import resolve_model_dir  # noqa: E402
 
 
-class _FeedTap:
-    """The session, keeping the inputs of every graph call."""
+class _FeedTap(SessionTap):
+    """The session, keeping the inputs of every graph call (the novel view's, run on its lanes, included)."""
 
     def __init__(self, session, feeds: dict):
-        self._session = session
+        super().__init__(session)
         self.feeds = feeds
 
-    def __getattr__(self, name):
-        return getattr(self._session, name)
-
-    def run(self, graph, feeds):
+    def record(self, graph, feeds, out):
         names = self._session.contract.graph(graph).input_names
         self.feeds.setdefault(graph, []).append({n: np.array(feeds[n]) for n in names})
-        return self._session.run(graph, feeds)
 
 
 def capture(model_dir: str, sequences, pairs: int) -> dict[str, list[dict]]:

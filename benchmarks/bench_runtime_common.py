@@ -1,4 +1,5 @@
-"""Shared pieces of the runtime benchmarks and tests: the *oracle* session, and re-exports of the
+"""Shared pieces of the runtime benchmarks and tests: the *oracle* session, the session taps
+(:class:`SessionTap`, :class:`RenderTap`: what the estimator ran, lanes included), and re-exports of the
 simulator sequences (``ghnerf_runtime.cli.simdata``).
 
 Not part of the runtime; used by ``benchmarks/compare_3d_methods.py``,
@@ -148,22 +149,57 @@ class OracleSession:
         return {t.name: out[t.name] for t in spec.outputs}
 
 
-class RenderTap:
-    """A session wrapper recording ``(ray_uv, acc)`` of every colour render (``render_rgb`` / ``render``) it runs,
-    for the novel-view scripts (opacity statistics); everything else passes through."""
+class SessionTap:
+    """A session wrapper that hands :meth:`record` every graph run it passes on; everything else passes through.
+
+    The estimator runs graphs by four doors, not only ``run``: a tracked pair's novel view renders on the
+    one-thread lanes (``on_lanes()``, whose ``run`` is ``run_on_lane``) and the flip test's second ``human`` run
+    goes beside it (``run_on_lane``) or beside the first (``run_both``). A tap that overrode ``run`` alone let
+    those through to the wrapped session unseen (``__getattr__``), so the novel-view scripts recorded only the
+    untracked pairs' renders. The lanes stay on: what is timed is the runtime's own path."""
 
     def __init__(self, session):
         self._session = session
-        self.runs: list[tuple[np.ndarray, np.ndarray]] = []
 
     def __getattr__(self, name):
         return getattr(self._session, name)
 
+    def record(self, graph: str, feeds: Mapping[str, np.ndarray], out: Mapping[str, np.ndarray]) -> None:
+        """Called after every run (from the lane worker's thread too); a subclass keeps what it needs."""
+
     def run(self, graph, feeds):
         out = self._session.run(graph, feeds)
+        self.record(graph, feeds, out)
+        return out
+
+    def run_on_lane(self, graph, feeds):
+        out = self._session.run_on_lane(graph, feeds)
+        self.record(graph, feeds, out)
+        return out
+
+    def on_lanes(self):
+        from ghnerf_runtime.session import LaneRunner
+
+        return LaneRunner(self)  # its run is this tap's run_on_lane
+
+    def run_both(self, graph, first, second):
+        out, out2 = self._session.run_both(graph, first, second)
+        self.record(graph, first, out)
+        self.record(graph, second, out2)
+        return out, out2
+
+
+class RenderTap(SessionTap):
+    """A session wrapper recording ``(ray_uv, acc)`` of every colour render (``render_rgb`` / ``render``) it runs,
+    for the novel-view scripts (opacity statistics); everything else passes through."""
+
+    def __init__(self, session):
+        super().__init__(session)
+        self.runs: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def record(self, graph, feeds, out):
         if graph in ("render_rgb", "render"):
             self.runs.append((np.asarray(feeds["ray_uv"][0]), np.asarray(out["acc"][0])))
-        return out
 
 
 #: Render factor of :func:`truth_view` before its area reduction (the novel-view scripts' reference picture).

@@ -94,7 +94,8 @@ def main(argv=None) -> int:
             if len(images) == len(variants):
                 for name in quality:
                     quality[name].append(psnr(images[name], images["all box rays"]))
-    print(f"{len(quality['coarse pass'])} pairs; novel view 128x128, stride 1")
+    c = session.contract  # the model's size (the shipped one's is 128x128)
+    print(f"{len(quality['coarse pass'])} pairs; novel view {c.width}x{c.height}, stride 1")
     for name in variants:
         t = percentiles(ms[name])
         print(f"  {name:<18} rays median {np.median(rays[name]):7.0f}   novel_render {t['median']:6.2f} / "

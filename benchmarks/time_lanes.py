@@ -88,7 +88,11 @@ class Job:
 
 def log_rate(folder: Path) -> float:
     """Seconds per step from a run's ``log.jsonl`` (``step``, ``time_s``), the first records left out."""
-    records = [json.loads(line) for line in (folder / "log.jsonl").read_text().splitlines() if line.strip()]
+    log = folder / "log.jsonl"
+    # a job stopped by --seconds before its first log_every steps writes no log at all (the pretraining logs
+    # every 10 steps of seconds each on two cores): the advice of a short log, not a FileNotFoundError
+    lines = log.read_text().splitlines() if log.is_file() else []
+    records = [json.loads(line) for line in lines if line.strip()]
     records = [r for r in records if "time_s" in r][SKIP_RECORDS:]
     if len(records) < 2:
         raise RuntimeError(f"{folder}: too few log records for a rate ({len(records)}); give more --seconds")

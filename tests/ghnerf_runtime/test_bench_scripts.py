@@ -98,3 +98,55 @@ def test_the_runtime_vs_eval_psnr_counts_scenes_without_a_view():
     assert psnr_summary([float("inf"), 20.0])["mean"] == (PSNR_CAP_DB + 20.0) / 2  # capped as ghnerf-eval caps it
     none = psnr_summary([None])
     assert np.isnan(none["mean"]) and none["no_view"] == 1 and none["scored"] == 0
+
+
+class _LanedSession:
+    """A session with the lanes' doors (``run_on_lane``, ``on_lanes``, ``run_both``), each answering its own
+    ``acc`` so a test can tell which door a recorded run came through."""
+
+    contract = SimpleNamespace(graph=lambda graph: SimpleNamespace(input_names=("ray_uv",)))
+
+    def run(self, graph, feeds):
+        return {"acc": np.full((1, 2), 0.1, np.float32)}
+
+    def run_on_lane(self, graph, feeds):
+        return {"acc": np.full((1, 2), 0.2, np.float32)}
+
+    def on_lanes(self):
+        from ghnerf_runtime.session import LaneRunner
+
+        return LaneRunner(self)
+
+    def run_both(self, graph, first, second):
+        return {"acc": np.full((1, 2), 0.3, np.float32)}, {"acc": np.full((1, 2), 0.4, np.float32)}
+
+
+def _ray_feeds(x: float) -> dict:
+    return {"ray_uv": np.full((1, 2, 2), x, np.float32)}
+
+
+def test_the_session_taps_record_the_runs_on_the_lanes():
+    """A tracked pair's novel view renders through ``session.on_lanes()`` (and the flip test's second run through
+    ``run_on_lane`` / ``run_both``): the taps overrode ``run`` alone and let those pass unseen, so
+    measure_novel_quality/measure_novel_rays lost every tracked pair's opacity and bench_graph_threads said
+    ``render_rgb`` was "not run by the estimator" (the shipped model, --sequences 1 --pairs 4)."""
+    from benchmarks.bench_graph_threads import _FeedTap
+    from benchmarks.bench_runtime_common import RenderTap
+
+    render = RenderTap(_LanedSession())
+    render.run("render_rgb", _ray_feeds(1))
+    render.on_lanes().run("render_rgb", _ray_feeds(2))  # the estimator's worker, novel view on the lanes
+    render.run_on_lane("render", _ray_feeds(3))
+    render.run_both("render_rgb", _ray_feeds(4), _ray_feeds(5))
+    render.run_on_lane("human", _ray_feeds(6))  # not a colour render: not kept
+    assert [(float(uv[0, 0]), float(acc[0])) for uv, acc in render.runs] == [
+        (1, np.float32(0.1)), (2, np.float32(0.2)), (3, np.float32(0.2)), (4, np.float32(0.3)),
+        (5, np.float32(0.4))]
+
+    feeds: dict = {}
+    tap = _FeedTap(_LanedSession(), feeds)
+    tap.on_lanes().run("volume", _ray_feeds(1))
+    tap.run_both("human", _ray_feeds(2), _ray_feeds(3))
+    tap.run("render_heat", _ray_feeds(4))
+    assert {g: [float(f["ray_uv"][0, 0, 0]) for f in calls] for g, calls in feeds.items()} == {
+        "volume": [1.0], "human": [2.0, 3.0], "render_heat": [4.0]}

@@ -795,6 +795,9 @@ def test_the_lanes_benchmark_estimates_each_plan_from_its_rates(tmp_path):
     (tmp_path / "log.jsonl").write_text(json.dumps({"step": 10, "time_s": 30.0}))
     with pytest.raises(RuntimeError, match="too few"):
         bench.log_rate(tmp_path)
+    (tmp_path / "log.jsonl").unlink()  # a job stopped before its first log record writes none
+    with pytest.raises(RuntimeError, match=r"too few log records for a rate \(0\); give more --seconds"):
+        bench.log_rate(tmp_path)
 
     cfg = PipelineConfig(out=tmp_path)
     cfg.apply_recipe("cpu", cores=2)  # 17600 + 26400 pretraining steps, 25256 scenes collected

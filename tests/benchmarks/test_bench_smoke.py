@@ -1,0 +1,244 @@
+"""Smoke runs of the benchmark scripts: each cheap script's main path, run as its command line runs it
+(``runpy`` as ``__main__``, so its own ``sys.path`` set-up and exit status count), at its smallest sizes.
+
+The model is the tiny test export (``tests/ghnerf_runtime/test_session.py``, random weights: it finds no
+joints, so the figures mean nothing); what is checked is that each script gets through to its table and
+prints the rows its arguments ask for, so that an API change of the runtime, the drivers or the calibration
+cannot break one silently (most are tools nobody runs for weeks). The simulator sequences render once into a
+scratch cache (``XDG_CACHE_HOME``), never the user's ``~/.cache/ghnerf-bench``. About 25 s on two cores
+(``.venv/bin/python -m pytest tests/benchmarks``, the tiny export included).
+
+Left out, as too slow for every CI run or needing what CI does not have: ``measure_calibration`` (9 s at one
+seed of four views), ``time_lanes`` (a minute or more a measurement), ``time_train_step`` and
+``time_pretrain_step`` (training steps of seconds each; tests/training/test_trainer.py runs the former),
+``measure_body_proxy`` and ``tune_proxy_matte`` (a trained torch checkpoint), ``measure_prior_outliers`` and
+``measure_prior_peak_shape`` (a skeleton prior; tests/training/test_skeleton_prior_cli.py runs them).
+"""
+from __future__ import annotations
+
+import json
+import re
+import runpy
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
+
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
+#: One sequence of three pairs for every script that takes the sizes (rendered once, then read from the cache).
+SIZES = ("--sequences", "1", "--frames", "3")
+
+
+@pytest.fixture(scope="module")
+def scratch_cache(tmp_path_factory):
+    """The sequence cache every script reads (``default_cache_dir`` follows ``XDG_CACHE_HOME``)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("XDG_CACHE_HOME", str(tmp_path_factory.mktemp("xdg-cache")))
+        yield
+
+
+@pytest.fixture(scope="module")
+def data64(tmp_path_factory):
+    """A 64 px dataset (the tiny model's resolution) of two held-out scenes."""
+    pytest.importorskip("torch")
+    from training.data.generate import main as generate
+
+    out = tmp_path_factory.mktemp("data64")
+    generate(["--out", str(out), "--train", "0", "--val", "2", "--val-seen-motions", "0", "--res", "64",
+              "--workers", "1"])
+    return out
+
+
+def run_script(name: str, *args: str, capsys, monkeypatch) -> str:
+    """Run ``benchmarks/<name>.py`` with ``args`` as its command line; its standard output."""
+    path = BENCH / f"{name}.py"
+    monkeypatch.setattr(sys, "argv", [str(path), *args])
+    try:
+        runpy.run_path(str(path), run_name="__main__")
+    except SystemExit as e:
+        if e.code not in (0, None):
+            captured = capsys.readouterr()
+            pytest.fail(f"{name} {' '.join(args)}: exit {e.code}\n{captured.out[-2000:]}\n{captured.err[-2000:]}")
+    return capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------------------------- no model
+def test_bench_protocol(capsys, monkeypatch):
+    out = run_script("bench_protocol", "--frames", "20", "--repeats", "1", capsys=capsys, monkeypatch=monkeypatch)
+    assert "20 frames x 1 runs" in out
+    for row in ("encode", "decode", "vmc"):
+        assert re.search(rf"^{row} .* frames/s$", out, re.M), out
+
+
+def test_bench_sim_render(capsys, monkeypatch):
+    out = run_script("bench_sim_render", "--repeats", "1", capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^pair 2x640x480 \(default rig\) +\d+\.\d+ +\d+\.\d+$", out, re.M), out
+
+
+def test_bench_sim_rig(capsys, monkeypatch):
+    out = run_script("bench_sim_rig", "--options", "fps=30&width=160&height=120", "--seconds", "0.5",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    pairs = int(re.search(r"pairs read in 0.5 s: (\d+)", out)[1])
+    assert pairs >= 5, out  # 15 at 30 fps; a loaded host may drop some (policy latest)
+    assert "pair skew: median 0.000 ms" in out  # the simulator's two cameras fire together
+
+
+def test_measure_pairing(capsys, monkeypatch):
+    out = run_script("measure_pairing", "--seconds", "2", "--seeds", "1", capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^(30 vs \S+ fps.*?) +[\d.]+ (pairer|reference) +(\d+) ", out, re.M)
+    assert len(rows) == 10, out  # five scenarios, the pairer and the offline reference each
+    by_scenario: dict[str, dict[str, int]] = {}
+    for scenario, method, pairs in rows:
+        by_scenario.setdefault(scenario, {})[method] = int(pairs)
+    assert all(p["pairer"] == p["reference"] > 0 for p in by_scenario.values()), out  # closest-first, as offline
+
+
+def test_measure_pair_outliers(capsys, monkeypatch):
+    out = run_script("measure_pair_outliers", "--seeds", "1", capsys=capsys, monkeypatch=monkeypatch)
+    assert "good (7)" in out and "bad (3)" in out  # one seed: 10 pairs, 3 unsynchronised
+    # calibrate_pair refuses two unsynchronised pairs of five, naming them
+    assert len(re.findall(r"now refused: the image pairs '000', '001'", out)) == 6, out
+    assert len(re.findall(r"^   2 of [58] moved \d+ cm, seed \d: (solved|refused)", out, re.M)) == 24, out
+
+
+# ---------------------------------------------------------------------------------- the tiny model
+@pytest.fixture
+def model(tiny_model_dir, scratch_cache):  # noqa: F811
+    return str(tiny_model_dir)
+
+
+def test_bench_runtime(model, capsys, monkeypatch):
+    out = run_script("bench_runtime", "--model-dir", model, *SIZES, "--warmup", "1", "--precisions", "fp32",
+                     "--modes", "novel", "--novel-pipelines", "on,off", capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^fp32 .*keypoints\+novel (pipelined|one-by-one) ms median/p99: .* \| [\d.]+ pairs/s", out,
+                      re.M)
+    assert sorted(rows) == ["one-by-one", "pipelined"], out
+
+
+def test_bench_runtime_regions(model, capsys, monkeypatch):
+    out = run_script("bench_runtime_regions", "--model-dir", model, *SIZES, "--warmup", "1", "--repeats", "1",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "end to end over 3 pairs (1 warm-up)" in out
+    assert re.search(r"^  encoder heatmaps: \+ novel view stride 1 .* [\d.]+/s$", out, re.M), out
+
+
+def test_compare_3d_methods(model, tmp_path, capsys, monkeypatch):
+    run_script("compare_3d_methods", "--model-dir", model, *SIZES, "--methods", "triangulate,depth_centroid",
+               "--json", str(tmp_path / "r.json"), capsys=capsys, monkeypatch=monkeypatch)
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert [row["method"] for row in report["rows"]] == ["triangulate", "depth_centroid"]
+
+
+def test_measure_mounting(model, capsys, monkeypatch):
+    out = run_script("measure_mounting", "--model-dir", model, "--sequences", "1", "--frames", "2", "--rolls", "0,90",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    # a camera on its side is turned upright (roi.upright), or not
+    assert "roll    90 deg, roi.upright on  (crops rotated [-90.0, -90.0])" in out, out
+    assert "roll    90 deg, roi.upright off (crops rotated [0.0, 0.0])" in out, out
+
+
+def test_measure_novel_overlap(model, capsys, monkeypatch):
+    out = run_script("measure_novel_overlap", "--model-dir", model, *SIZES, "--warmup", "1", "--repeats", "1",
+                     "--precisions", "fp32", capsys=capsys, monkeypatch=monkeypatch)
+    assert "fp32: 2 pairs per variant; joints identical: True" in out, out
+
+
+def test_bench_graph_threads(model, capsys, monkeypatch):
+    out = run_script("bench_graph_threads", "--model-dir", model, "--sequences", "1", "--pairs", "2", "--rounds", "1",
+                     "--graphs", "encoder,render_rgb", capsys=capsys, monkeypatch=monkeypatch)
+    for graph, calls in (("encoder", r"\d+"), ("render_rgb", "2")):  # one novel view: its coarse and fine passes
+        assert re.search(rf"^{graph}\.onnx +{calls} +[\d.]+ +[\d.]+ +[\d.]+$", out, re.M), out
+
+
+def test_a_tracked_pairs_view_on_the_lanes_reaches_the_render_tap(model):
+    """On a tracked pair the novel view renders in the estimator's worker on the one-thread lanes
+    (``session.on_lanes()``); the scripts' taps must see those renders too (they saw none: see
+    ``test_the_session_taps_record_the_runs_on_the_lanes``). The tiny model tracks nobody: the track is
+    placed from the truth, as ``measure_novel_quality --track-from-truth`` does."""
+    from benchmarks.bench_runtime_common import RenderTap
+    from ghnerf_runtime.cli.simdata import load_sequences
+    from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig
+    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.novel_view import NovelViewRequest
+    from ghnerf_runtime.tracking import track_from_joints
+
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=model, threads=2, thread_pool="per_session"),
+                          novel_view=NovelViewConfig(enabled=True, overlap=True, lanes=True))
+    tap = RenderTap(load_session(cfg))
+    seq = load_sequences(1, 3)[0]
+    with Estimator(tap, seq.rig, cfg) as est:
+        est.tracker.track = track_from_joints(seq.joints_3d[0], np.ones(25), np.ones(25, bool), cfg.tracking, 0)
+        r = est.estimate((np.array(seq.images[1, 0]), np.array(seq.images[1, 1])),
+                         novel_view=NovelViewRequest(alpha=0.5))
+    assert r.novel_view is not None  # (r.tracked is after the pair: the random model lost the track)
+    renders = tap.run_counts["render_rgb"]  # counted by the session, on a lane or not
+    assert renders >= 1 and len(tap.runs) == renders
+
+
+def test_measure_novel_quality(model, capsys, monkeypatch):
+    out = run_script("measure_novel_quality", "--model-dir", model, *SIZES, "--every", "1", "--alphas", "0,1",
+                     "--strides", "1", "--track-from-truth", capsys=capsys, monkeypatch=monkeypatch)
+    for alpha in (0, 1):
+        assert re.search(rf"^\| {alpha} \| 1 \| off \| off \| off \| 3 \| [\d.]+ ", out, re.M), out
+    assert "accumulated opacity, coarse-pass rays of the stride-1 views" in out
+
+
+def test_measure_novel_rays(model, capsys, monkeypatch):
+    out = run_script("measure_novel_rays", "--model-dir", model, *SIZES, capsys=capsys, monkeypatch=monkeypatch)
+    assert "3 pairs; novel view 64x64, stride 1" in out, out  # the model's size (it said 128x128 whatever it was)
+    assert re.search(r"^  coarse pass +rays median +\d+ ", out, re.M), out
+
+
+def test_measure_single_view(model, capsys, monkeypatch):
+    out = run_script("measure_single_view", "--model-dir", model, *SIZES, "--rooms", "1",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "3 pairs of 1 held-out-like sequences" in out, out
+    assert "empty rooms with one camera black: " in out
+
+
+@pytest.mark.filterwarnings("ignore:Mean of empty slice", "ignore:invalid value encountered")
+def test_measure_still_pairs(model, capsys, monkeypatch):
+    out = run_script("measure_still_pairs", "--model-dir", model, *SIZES, "--every", "2",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "2 still pairs of 1 held-out-like sequences" in out, out
+    assert out.count("refine_cold_start") == 2
+
+
+def test_tune_runtime_knobs(model, capsys, monkeypatch):
+    out = run_script("tune_runtime_knobs", "--model-dir", model, *SIZES, "--precision", "fp32", "--only", "default",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^default +tuning .* \| bench ", out, re.M), out
+
+
+def test_soak_daemon(model, capsys, monkeypatch):
+    out = run_script("soak_daemon", "--model-dir", model, "--minutes", "0.05", "--unplug-every-s", "1",
+                     "--sample-s", "1", "--reload-every-s", "1", "--fps", "10", capsys=capsys, monkeypatch=monkeypatch)
+    stopped = re.search(r"stopped: (\d+) pairs estimated, (\d+) opens, (\d+) estimate errors, (\d+) reloads "
+                        r"\((\d+) refused\)", out)
+    assert stopped, out
+    pairs, opens, errors, reloads, refused = map(int, stopped.groups())
+    assert pairs > 0 and opens >= 2 and errors == 0 and reloads >= 1 and refused == 0, out
+
+
+def test_bench_runtime_vs_eval(model, data64, capsys, monkeypatch):
+    out = run_script("bench_runtime_vs_eval", "--model-dir", model, "--data", str(data64), "--split", "val",
+                     "--novel", capsys=capsys, monkeypatch=monkeypatch)
+    assert "2 scenes" in out
+    assert len(re.findall(r"^  [ABC] (rendered|encoder) heatmaps", out, re.M)) == 6, out
+    assert len(re.findall(r"masked PSNR mean .* \(2 scenes; ", out)) == 3, out
+
+
+def test_measure_novel_ceiling(data64, capsys, monkeypatch):
+    out = run_script("measure_novel_ceiling", "--data", str(data64), "--split", "val",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^\| novel, all \| \d+ \| [\d.]+ \|", out, re.M), out
+
+
+def test_measure_presence(model, capsys, monkeypatch):
+    out = run_script("measure_presence", "--model-dir", model, "--rooms", "1", capsys=capsys, monkeypatch=monkeypatch)
+    for source in ("rendered", "encoder"):
+        assert re.search(rf"^ *{source} heatmaps .*: empty rooms: joints found \d+-\d+, .* \| 40 pairs with a person",
+                         out, re.M), out
