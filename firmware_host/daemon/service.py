@@ -58,6 +58,7 @@ import numpy as np
 import drivers
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, write_status_file
+from firmware_host.daemon.memory import return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame
@@ -541,8 +542,11 @@ class Daemon:
         if "estimator" in changed:  # (then ``estimator`` is a new one, or None)
             if self._estimator is not None:
                 self._estimator.close()
+            replaced = session is not self._session
             self._session, self._estimator = session, estimator  # None: built when the next rig opens
             self._rig_text = dumps_rig(estimator.rig) if estimator is not None else None
+            if replaced:  # the old model's sessions are free now: hand their pages back (firmware_host.daemon.memory)
+                return_freed_memory()
         with self._fault_lock:
             for url in [u for u in self._sinks if u not in new.sinks]:
                 self._close_sink(url)  # at once, rig or not: a removed serial sink frees its port now

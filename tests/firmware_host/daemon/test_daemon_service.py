@@ -567,6 +567,31 @@ def test_a_reload_of_the_estimator_and_health_keeps_the_rig_open(sim_url, tmp_pa
     assert run.daemon.health.rig_opens == 1 and run.daemon.health.rig_lost == 0
 
 
+def test_a_reload_that_loads_the_model_again_hands_the_old_ones_pages_back(sim_url, tmp_path, monkeypatch):
+    """A reload that replaces the session trims the heap once (each left the daemon megabytes larger:
+    docs/daemon.md, "Reloaded again and again"); one that keeps it does not."""
+    import firmware_host.daemon.service as service
+
+    trims = []
+    monkeypatch.setattr(service, "return_freed_memory", lambda: trims.append(1) or True)
+    configs = _Configs()
+    with _Running(_config({"url": sim_url}, tmp_path), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 3, timeout=60, what="3 estimated pairs")
+        data = _config_dict(sim_url, tmp_path)
+        data["estimator"]["smoothing"] = {"beta": 3.0}  # the same session
+        configs.next = daemon_config_from_dict(data)
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 1, timeout=60, what="the first reload")
+        assert trims == []
+        first = run.daemon._session
+        data["estimator"].setdefault("session", {})["threads"] = 1  # the model loaded again
+        configs.next = daemon_config_from_dict(data)
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 2, timeout=120, what="the second reload")
+        assert run.daemon._session is not first and trims == [1]
+        assert run.finish() == 0
+
+
 def test_a_reload_with_another_rig_url_opens_it(sim_url, tmp_path):
     configs = _Configs()
     with _Running(_config({"url": sim_url}, tmp_path), tmp_path, reload_config=configs) as run:
