@@ -406,6 +406,10 @@ class ModelSession:
         sess = self._sessions.get(graph)
         if sess is None:
             raise ModelError(f"graph {graph!r} is not loaded (loaded: {list(self._sessions)})")
+        return self._run_in(sess, graph, feeds)
+
+    def _run_in(self, sess: ort.InferenceSession, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``graph`` run in ``sess`` (its session or its lane), counted; a failure names the graph and file."""
         inputs = self._inputs(graph, feeds)
         self.run_counts[graph] += 1
         try:
@@ -462,13 +466,7 @@ class ModelSession:
         lane = self._lanes.get(graph)
         if lane is None:
             return self.run(graph, feeds)
-        inputs = self._inputs(graph, feeds)
-        self.run_counts[graph] += 1
-        try:
-            out = lane.run(self._output_names[graph], inputs)
-        except Exception as e:  # onnxruntime's pybind exceptions
-            raise self._failed(graph, e) from e
-        return dict(zip(self._output_names[graph], out))
+        return self._run_in(lane, graph, feeds)
 
     def on_lanes(self) -> "LaneRunner":
         """This session with :meth:`run` on the lanes (:meth:`run_on_lane`): what a worker thread is handed."""
