@@ -14,12 +14,19 @@ dropped and counted. The next write starts with a 0x00 delimiter, so the
 receiver discards the cut frame (one decode error) and decodes the next one.
 pyserial's own ``write()`` is not used: on a full buffer it retries without
 waiting (a busy loop), and it reports a timeout for a write that did go out.
+
+Closing gives the bytes the tty still holds ``CLOSE_DRAIN_S`` to go out and
+discards the rest (TCOFLUSH) before the close: the kernel's close of a USB CDC
+port whose receiver stopped reading would otherwise wait for them up to the
+tty's ``closing_wait`` (30 s), past the unit's ``TimeoutStopSec``.
 """
 from __future__ import annotations
 
 import itertools
+import logging
 import os
 import select
+import termios
 import time
 from typing import Any, Optional
 from urllib.parse import unquote
@@ -35,12 +42,17 @@ from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.rate import serial_capacity_fps
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url
 
+_log = logging.getLogger(__name__)
+
 #: The rates a port may be asked for: B50 is the lowest POSIX rate, and pyserial hands any other rate to
 #: termios as a signed 32-bit int (a larger one failed every open with an OverflowError, retried forever).
 MIN_BAUD, MAX_BAUD = 50, 2**31 - 1
 #: Longest wait for room in a stalled port: a joint frame a minute late is of no use (and a value past
 #: select()'s range, once accepted, failed every frame of a stalled port with a traceback in the journal).
 MAX_WRITE_TIMEOUT_MS = 60_000
+#: How long a closing port may take to send what its tty still holds (TIOCOUTQ) before the rest is
+#: discarded: a few frames at 115200 baud; a stop or reload must not wait on a receiver that stopped reading.
+CLOSE_DRAIN_S = 0.25
 
 
 class SerialSink(ProtocolSink):
@@ -89,9 +101,14 @@ class SerialSink(ProtocolSink):
         ser, self._ser = self._ser, None
         if ser is not None:
             try:
-                ser.close()
-            except (serial.SerialException, OSError):
-                pass  # already gone; nothing left to release
+                if not _drain_then_discard(ser, CLOSE_DRAIN_S):
+                    _log.info("%s: discarded what the port had not sent within %.2f s of closing "
+                              "(the receiver is not reading)", self.url, CLOSE_DRAIN_S)
+            finally:
+                try:
+                    ser.close()
+                except (serial.SerialException, OSError):
+                    pass  # already gone; nothing left to release
 
     def _write_messages(self, messages: list[Message]) -> bool:
         packets = [encode(m) for m in messages]
@@ -145,6 +162,26 @@ class SerialSink(ProtocolSink):
                     return done
         except OSError as e:
             raise SinkUnavailableError(self.url, f"write to {self.port} failed: {e}") from e
+
+
+def _drain_then_discard(ser: serial.Serial, drain_s: float) -> bool:
+    """Wait up to ``drain_s`` for the port's output queue to empty, then discard what is left.
+
+    Returns whether it emptied in time. Without the discard, close() on a USB CDC port (cdc-acm's flush
+    unlinks the pending URBs) or on a UART held off by flow control blocks in the kernel until the queue
+    drains or the tty's ``closing_wait`` (30 s by default) runs out. An unplugged port's ioctls fail:
+    nothing is left to send then.
+    """
+    deadline = time.monotonic() + drain_s
+    try:
+        while ser.out_waiting:
+            if time.monotonic() >= deadline:
+                ser.reset_output_buffer()  # TCOFLUSH: stale joints, of no use to anyone now
+                return False
+            time.sleep(0.01)
+    except (serial.SerialException, OSError, termios.error):
+        pass  # the port is gone (EIO): the kernel has already dropped its queue
+    return True
 
 
 def _frame_bytes(messages: list[Message], packets: list[bytes]) -> int:

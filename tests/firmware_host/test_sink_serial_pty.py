@@ -319,3 +319,97 @@ def test_write_bytes_cut_short_makes_the_next_write_start_a_new_frame(monkeypatc
     sink._write_bytes(packet)
     sink._write_bytes(packet)
     assert writes == [packet, b"\x00" + packet, packet]
+
+
+class _PortQueue:
+    """Stands in for the tty's output queue (TIOCOUTQ) of a port that holds ``stuck`` bytes: a pty's
+    queue reads 0, a USB CDC port whose receiver stopped reading keeps its bytes until flushed."""
+
+    def __init__(self, stuck: int, drains_after_polls: int | None = None) -> None:
+        self.stuck, self.polls, self.drains_after_polls = stuck, 0, drains_after_polls
+        self.calls: list[str] = []
+
+    def out_waiting(self) -> int:
+        self.polls += 1
+        if self.drains_after_polls is not None and self.polls > self.drains_after_polls:
+            self.stuck = 0
+        return self.stuck
+
+
+def _patch_port_queue(monkeypatch: pytest.MonkeyPatch, queue: _PortQueue) -> None:
+    import serial
+
+    real_reset, real_close = serial.Serial.reset_output_buffer, serial.Serial.close
+
+    def reset_output_buffer(self: serial.Serial) -> None:
+        queue.calls.append("discard")
+        queue.stuck = 0
+        real_reset(self)
+
+    def close(self: serial.Serial) -> None:
+        if self.is_open:
+            queue.calls.append("close")
+        real_close(self)
+
+    monkeypatch.setattr(serial.Serial, "out_waiting", property(lambda self: queue.out_waiting()))
+    monkeypatch.setattr(serial.Serial, "reset_output_buffer", reset_output_buffer)
+    monkeypatch.setattr(serial.Serial, "close", close)
+
+
+def test_closing_a_port_whose_queue_does_not_drain_discards_it_before_the_close(
+        link: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # The kernel's close of such a port (/dev/ttyACM* with the receiver stalled) waits for the queue up to
+    # closing_wait (30 s), past TimeoutStopSec=20: the queue is given CLOSE_DRAIN_S, then discarded.
+    from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
+
+    port = PtyPort(link)
+    queue = _PortQueue(stuck=4096)
+    _patch_port_queue(monkeypatch, queue)
+    sink = open_sink(f"serial://{link}?baud=921600", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        t0 = time.monotonic()
+        sink.close()
+        took = time.monotonic() - t0
+    finally:
+        port.unplug()
+    assert queue.calls == ["discard", "close"]
+    assert CLOSE_DRAIN_S <= took < CLOSE_DRAIN_S + 1.0, took
+
+
+def test_closing_a_port_whose_queue_drains_in_time_discards_nothing(
+        link: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    port = PtyPort(link)
+    queue = _PortQueue(stuck=300, drains_after_polls=3)  # a frame still on the wire, gone in ~30 ms
+    _patch_port_queue(monkeypatch, queue)
+    sink = open_sink(f"serial://{link}?baud=921600&queue=32&status_s=3600", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(5):
+            sink.send(make_frame(seq))
+        assert sink.wait_drained(5)
+        wait_until(lambda: len(received_joints(port.data)) == 5, what="the five frames")
+        stats = sink.close()
+    finally:
+        port.unplug()
+    assert queue.calls == ["close"] and queue.polls >= 4
+    assert stats.sent == 5
+
+
+def test_closing_an_unplugged_port_does_not_wait_for_its_queue() -> None:
+    # After an unplug the port's ioctls fail (EIO): nothing is left to send, the close is immediate.
+    from firmware_host.sinks.serial_sink import _drain_then_discard
+    import serial
+
+    master, slave = os.openpty()
+    ser = serial.Serial(os.ttyname(slave), 921600)
+    os.close(slave)
+    os.close(master)  # the unplug
+    t0 = time.monotonic()
+    try:
+        assert _drain_then_discard(ser, 5.0)
+    finally:
+        ser.close()
+    assert time.monotonic() - t0 < 1.0
