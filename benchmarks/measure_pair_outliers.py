@@ -32,7 +32,7 @@ from calibration.board import BoardSpec  # noqa: E402
 from calibration.consensus import pair_relative_pose  # noqa: E402
 from calibration.detect import BoardView  # noqa: E402
 from calibration.errors import SolveError  # noqa: E402
-from calibration.render import board_pose_facing, example_rig  # noqa: E402
+from calibration.render import board_poses_both_see, example_rig  # noqa: E402
 from calibration.solve import Intrinsics, calibrate_pair  # noqa: E402
 
 BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
@@ -56,24 +56,7 @@ def _views(poses: dict, noise_px: float, seed: int) -> dict:
 
 
 def _facing_poses(count: int, seed: int) -> dict:
-    rng = np.random.default_rng(seed)
-    mid = 0.5 * (A.center + B.center)
-    forward = A.R[2] + B.R[2]
-    forward /= np.linalg.norm(forward)
-    poses = {}
-    while len(poses) < count:
-        depth = rng.uniform(1.0, 2.2)
-        centre = mid + depth * forward + np.array([rng.uniform(-0.4, 0.4) * depth, rng.uniform(-0.25, 0.25) * depth, 0])
-        R, t = board_pose_facing(BOARD, centre, mid, yaw_deg=rng.uniform(-35, 35), pitch_deg=rng.uniform(-35, 35),
-                                 spin_deg=rng.uniform(-25, 25))
-        corners = BOARD.corners_m() @ R.T + t
-        inside = True
-        for cam in RIG.pair:
-            uv, _ = cam.project(corners)
-            inside &= bool(np.all(np.isfinite(uv)) and np.all((uv > 2) & (uv < [cam.width - 3, cam.height - 3])))
-        if inside:
-            poses[f"{len(poses):03d}"] = (R, t)
-    return poses
+    return board_poses_both_see(RIG, BOARD, count, seed)
 
 
 def _unsynchronised(pairs: int, bad: int, seed: int) -> dict:

@@ -105,6 +105,31 @@ def board_pose_facing(board: BoardSpec, centre: np.ndarray, toward: np.ndarray, 
     return R, t
 
 
+def board_poses_both_see(rig: Rig, board: BoardSpec, count: int, seed: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``count`` board poses (board -> rig) that both of the rig's pair see whole, 1-2.2 m in front of
+    the pair and turned up to 35 degrees: views for pair solves in tests and benchmarks. Named
+    ``"000"``...; the same ``seed`` gives the same poses."""
+    rng = np.random.default_rng(seed)
+    mid = 0.5 * (rig.pair[0].center + rig.pair[1].center)
+    forward = rig.pair[0].R[2] + rig.pair[1].R[2]
+    forward /= np.linalg.norm(forward)
+    corners_board = board.corners_m()
+    poses: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    while len(poses) < count:
+        depth = rng.uniform(1.0, 2.2)
+        centre = mid + depth * forward + np.array([rng.uniform(-0.4, 0.4) * depth, rng.uniform(-0.25, 0.25) * depth, 0])
+        R, t = board_pose_facing(board, centre, mid, yaw_deg=rng.uniform(-35, 35), pitch_deg=rng.uniform(-35, 35),
+                                 spin_deg=rng.uniform(-25, 25))
+        corners = corners_board @ R.T + t
+        inside = True
+        for cam in rig.pair:
+            uv, _ = cam.project(corners)
+            inside &= bool(np.all(np.isfinite(uv)) and np.all((uv > 2) & (uv < [cam.width - 3, cam.height - 3])))
+        if inside:
+            poses[f"{len(poses):03d}"] = (R, t)
+    return poses
+
+
 def calibration_views(rig: Rig, board: BoardSpec, *, count: int = 20, edge_count: int = 6, seed: int = 0,
                       floor_view: bool = True, distance_m: tuple[float, float] = (1.0, 2.4)) \
         -> dict[str, dict[str, np.ndarray]]:

@@ -16,7 +16,7 @@ from calibration import cli
 from calibration.board import BoardSpec, load_board
 from calibration.check import CheckLimits, check_failures, check_rig
 from calibration.detect import BoardView
-from calibration.render import board_pose_facing, example_rig
+from calibration.render import board_poses_both_see, example_rig
 from calibration.errors import SolveError
 from calibration import solve
 from calibration.consensus import agreeing_pairs, pair_relative_pose
@@ -40,24 +40,7 @@ def _views(rig: Rig, poses: dict, noise_px: float = 0.0, seed: int = 0) -> dict:
 
 def _facing_poses(rig: Rig, count: int, seed: int) -> dict:
     """Board poses both cameras see whole, spread over depth and angle."""
-    rng = np.random.default_rng(seed)
-    mid = 0.5 * (rig.pair[0].center + rig.pair[1].center)
-    forward = rig.pair[0].R[2] + rig.pair[1].R[2]
-    forward /= np.linalg.norm(forward)
-    poses = {}
-    while len(poses) < count:
-        depth = rng.uniform(1.0, 2.2)
-        centre = mid + depth * forward + np.array([rng.uniform(-0.4, 0.4) * depth, rng.uniform(-0.25, 0.25) * depth, 0])
-        R, t = board_pose_facing(BOARD, centre, mid, yaw_deg=rng.uniform(-35, 35), pitch_deg=rng.uniform(-35, 35),
-                                 spin_deg=rng.uniform(-25, 25))
-        corners = BOARD.corners_m() @ R.T + t
-        inside = True
-        for cam in rig.pair:
-            uv, _ = cam.project(corners)
-            inside &= bool(np.all(np.isfinite(uv)) and np.all((uv > 2) & (uv < [cam.width - 3, cam.height - 3])))
-        if inside:
-            poses[f"{len(poses):03d}"] = (R, t)
-    return poses
+    return board_poses_both_see(rig, BOARD, count, seed)
 
 
 def _relative_t(first: Camera, second: Camera) -> np.ndarray:
