@@ -84,10 +84,13 @@ class RigUrl:
         raw = self.options.pop(name, None)
         if raw is None:
             return default
-        try:
-            value = int(raw, 0)
+        try:  # decimal first: int('010', 0) refuses the leading zero ("must be an integer" for seed=010)
+            value = int(raw, 10)
         except ValueError:
-            raise self._error(name, raw, "an integer") from None
+            try:
+                value = int(raw, 0)  # 0x10, 0o17, 0b101
+            except ValueError:
+                raise self._error(name, raw, "an integer") from None
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise self._error(name, raw, f"an integer in [{lo}, {hi}]")
         return value

@@ -4,7 +4,7 @@ URL options:
 
 * ``speed``: ``recorded`` (default) honours the recorded inter-frame timing on the
   injected clock; ``free`` delivers frames as fast as they decode; a number
-  (``speed=2``) plays at that multiple of real time.
+  (``speed=2``, at least 0.001) plays at that multiple of real time.
 * ``loop``: ``1`` starts over at the end instead of raising :class:`EndOfStream`.
 * ``tolerance_ms``, ``policy``: pairing (default policy ``all``: a recording is
   usually processed offline, every pair counts). ``policy=latest`` with a paced
@@ -55,6 +55,8 @@ from drivers.url import RigUrl
 
 log = logging.getLogger(__name__)
 
+#: The slowest ``speed=`` played.
+MIN_SPEED = 0.001
 #: The image of a frame pushed by :meth:`ReplayRigSource._catch_up` before its file is decoded.
 _NOT_LOADED = np.empty((0, 0, 3), np.uint8)
 
@@ -70,8 +72,12 @@ def _parse_speed(url: RigUrl) -> float | None:
         speed = float(raw)  # type: ignore[arg-type]
     except ValueError:
         speed = float("nan")
-    if not speed > 0 or speed == float("inf"):
-        raise RigConfigError(f"rig URL {url.url!r}: option speed={raw!r} must be 'recorded', 'free' or a number > 0")
+    # A floor: a frame's due time is its recorded offset / speed in integer nanoseconds, and speed=1e-320
+    # made that infinite (an OverflowError from read); at 1/1000 an hour's take already plays for six weeks.
+    if not MIN_SPEED <= speed < float("inf"):
+        raise RigConfigError(
+            f"rig URL {url.url!r}: option speed={raw!r} must be 'recorded', 'free' or a number >= {MIN_SPEED:g}"
+        )
     return speed
 
 

@@ -16,9 +16,12 @@ URL options (every one validated; unknown ones are rejected by name)::
   ``bvh=PATH``: a BVH clip (the two are exclusive).
 * ``width``, ``height`` (640x480): image size of both cameras.
 * ``baseline`` (1.2 m), ``convergence`` (degrees; default: both aimed at the
-  subject), ``distance`` (3.0 m to the subject), ``mount_height`` (1.3 m: the
-  cameras above the floor; ``height`` is the image height): rig placement
-  (:class:`drivers.sim.RigPlacement`).
+  subject), ``distance`` (3.0 m, 1 to 8: the subject stands this far ahead,
+  where the working volume is centred; 2 m deep, shallower under 1.5 m so it
+  starts 0.5 m from the rig), ``mount_height`` (1.3 m: the cameras above the
+  floor; ``height`` is the image height): rig placement
+  (:class:`drivers.sim.RigPlacement`). A placement whose cameras do not both
+  see the subject's hips (``convergence=120``) is a ``RigConfigError``.
 * ``jitter_ms`` (0): standard deviation of each capture instant.
 * ``offset_ms`` (0): capture offset of the second camera after the first.
 * ``drop`` (0): probability that a camera loses a frame (per camera, per frame).
@@ -61,7 +64,9 @@ What it does NOT model: the image does not move with the jitter (it shows the
 nominal capture instant; ``scene_time_s`` says which); noise, like the image,
 repeats every loop pass; the loop is stretched to a whole number of frames
 (``round(period_s * fps)``), so motion speed is off by at most half a frame per
-loop; no exposure time, motion blur or rolling shutter; no clock drift between
+loop (at a low rate, where a period has few frames, the loop spans several
+periods instead, each frame at most 1 % of a period off the instant a real
+camera would show: ``_loop_length``); no exposure time, motion blur or rolling shutter; no clock drift between
 the cameras; no USB bandwidth limits or reconnection after an unplug; nothing
 of the scene model's own omissions (see :mod:`drivers.sim`).
 """
@@ -71,10 +76,13 @@ import dataclasses
 import hashlib
 import json
 import logging
+import math
 import os
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from drivers.backends.sim_loop import FrameLoop, LoopFrame, default_cache_root
 from drivers.backends.sim_timing import Capture, CaptureSchedule, TimingModel
@@ -85,6 +93,7 @@ from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig, PairingStats
 from drivers.sim import MOTION_NAMES, MotionParams, RigPlacement, SceneConfig, SensorModel, SimScene
 from drivers.url import RigUrl
+from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import rig_to_dict
 
@@ -94,6 +103,31 @@ log = logging.getLogger(__name__)
 BACKLOG_FRAMES = 8
 #: Bytes per pixel of a pre-rendered frame: BGR image 3, mask 1, depth 4, part labels 1.
 LOOP_BYTES_PER_PIXEL = 9
+#: How far (in motion periods) a loop frame's instant may drift per frame before the loop spans several
+#: periods, and the most it spans (see _loop_length).
+MAX_LOOP_PHASE_ERROR = 0.01
+MAX_LOOP_PERIODS = 64
+
+
+def _check_subject_in_view(scene: SimScene, rig: Rig, placement: RigPlacement) -> None:
+    """Refuse a placement whose cameras do not see the subject: its hips (at scene time 0) must be in
+    front of both cameras and inside both images (``convergence=120`` turned each camera 60 degrees
+    away from a subject 3 m ahead, and the rig filmed an empty room without a word)."""
+    hips = scene.joints_3d(0.0)[JOINT_INDEX["MidHip"]]
+    for cam in rig.pair:
+        uv, depth = cam.project(hips)
+        if np.all(np.isfinite(uv)) and 0 <= uv[0] < cam.width and 0 <= uv[1] < cam.height:
+            continue
+        where = (f"behind the camera (depth {float(depth):.2f} m)" if not depth > 0 else
+                 f"outside the {cam.width}x{cam.height} image" if not np.all(np.isfinite(uv)) else
+                 f"at pixel ({uv[0]:.0f}, {uv[1]:.0f}), outside the {cam.width}x{cam.height} image")
+        convergence = "aimed at the subject" if placement.convergence_deg is None else f"{placement.convergence_deg:g}"
+        raise RigConfigError(
+            f"sim: camera {cam.name!r} does not see the subject standing {placement.distance_m:g} m ahead: its hips "
+            f"are {where}, with baseline={placement.baseline_m:g}, convergence={convergence}, "
+            f"distance={placement.distance_m:g}, mount_height={placement.camera_height_m:g} (lower convergence, "
+            "or leave it out to aim both cameras at the subject)"
+        )
 
 
 @dataclass
@@ -156,10 +190,12 @@ class SimOptions:
             kwargs["motion_params"] = MotionParams(seed=seed)
         return cls(
             timing=timing,
-            scene=SceneConfig(seed=seed, sensor=SensorModel(read_noise=noise), **kwargs),
+            # The subject stands `distance` ahead, where the cameras aim and the working volume is centred
+            # (it stayed at 3 m whatever distance said: out of the rig's volume at distance=1.5 or 8).
+            scene=SceneConfig(seed=seed, sensor=SensorModel(read_noise=noise), position_xz=(0.0, distance), **kwargs),
             placement=RigPlacement(
                 baseline_m=baseline, convergence_deg=convergence, camera_height_m=mount_height,
-                distance_m=distance, width=width, height=height,
+                distance_m=distance, width=width, height=height, volume_depth_m=_volume_depth(distance),
             ),
             unplug_after_s=unplug,
             pairing=PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)),
@@ -167,6 +203,41 @@ class SimOptions:
             workers=workers,
             max_loop_mb=max_loop_mb,
         )
+
+
+def _volume_depth(distance_m: float) -> float:
+    """The working volume's depth: 2 m, shallower for a subject closer than 1.5 m, so that the volume still
+    starts 0.5 m from the rig (:class:`RigPlacement`'s limit), instead of refusing distance=1..1.5 with an
+    error about a field the URL does not have."""
+    return min(RigPlacement.volume_depth_m, 2.0 * (distance_m - 0.5))
+
+
+def _loop_length(period_s: float, fps: float) -> tuple[int, int]:
+    """The pre-rendered loop: how many motion periods ``n`` it spans and its frames ``L`` per camera.
+
+    Frame ``j`` shows the instant ``j * n * period_s / L`` (modulo the period), where a camera at ``fps``
+    would see ``j / fps``: the loop is right when each frame moves the motion on by what one frame period
+    does. One period of ``round(period_s * fps)`` frames is, at the usual rates; at a low rate it was not
+    (``fps=1`` and the 1.2 s ``wave``: one frame, the same instant in every frame, a person frozen). So
+    ``n`` is the fewest periods whose ``L = round(n * period_s * fps)`` frames step through the motion
+    at most :data:`MAX_LOOP_PHASE_ERROR` of a period per frame off a real camera's step (the phases a
+    slow camera strobes through; one exactly in step with the motion sees one pose, and so does the
+    loop). From 10 frames a period on, ``n = 1`` always qualifies: loops at the usual rates are unchanged.
+    """
+    per_period = period_s * fps
+    if not per_period > 0 or not math.isfinite(per_period):
+        raise RigConfigError(f"sim: a motion period of {period_s:g} s at {fps:g} fps cannot be simulated")
+    best: tuple[float, int, int] | None = None
+    for n in range(1, MAX_LOOP_PERIODS + 1):
+        frames = round(n * per_period)
+        if frames < 1:
+            continue
+        error = abs(n * per_period - frames) / (frames * per_period)  # periods per frame
+        if error <= MAX_LOOP_PHASE_ERROR:
+            return n, frames
+        if best is None or error < best[0]:
+            best = (error, n, frames)
+    return (best[1], best[2]) if best is not None else (1, max(1, round(per_period)))
 
 
 class SimRigSource(RigSource):
@@ -185,7 +256,8 @@ class SimRigSource(RigSource):
         rig: Rig = options.placement.build(rig_id="sim")
         super().__init__(rig, pairing=pairing or options.pairing, clock=clock)
         self.period_s = self._scene.period_s
-        self.loop_frames = max(1, round(self.period_s * options.timing.fps))
+        self.loop_periods, self.loop_frames = _loop_length(self.period_s, options.timing.fps)
+        _check_subject_in_view(self._scene, rig, options.placement)
         w, h = rig.pair[0].size
         loop_mb = 2 * self.loop_frames * w * h * LOOP_BYTES_PER_PIXEL / 1e6
         if loop_mb > options.max_loop_mb:
@@ -216,7 +288,7 @@ class SimRigSource(RigSource):
     def scene_time(self, camera: int, j: int) -> float:
         """The scene instant shown by loop frame ``j`` of camera ``camera`` (0 or 1)."""
         offset_s = self.options.timing.offset_ms / 1000.0 if camera == 1 else 0.0
-        return (j * self.period_s / self.loop_frames + offset_s) % self.period_s
+        return (j * self.loop_periods * self.period_s / self.loop_frames + offset_s) % self.period_s
 
     def _render(self, camera: int, j: int) -> LoopFrame:
         scene = getattr(self._local, "scene", None)
@@ -238,7 +310,7 @@ class SimRigSource(RigSource):
         h.update(json.dumps({
             "scene": repr(scene),
             "rig": rig_to_dict(self.rig),
-            "loop": [self.loop_frames, self.period_s, self.options.timing.offset_ms],
+            "loop": [self.loop_frames, self.period_s, self.options.timing.offset_ms, self.loop_periods],
         }, sort_keys=True, default=repr).encode())
         if bvh.suffix.lower() == ".bvh":
             h.update(bvh.read_bytes())

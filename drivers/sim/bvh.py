@@ -7,7 +7,7 @@ acting on column vectors, the convention of the format). Position channels
 replace the matching component of the joint's OFFSET.
 
 Not supported: several ROOTs (multi-character files), scale channels, files
-whose frames span several lines.
+whose frames span several lines, a ``Frame Time`` over a minute.
 """
 from __future__ import annotations
 
@@ -18,6 +18,9 @@ import numpy as np
 
 from drivers.sim.errors import BvhError
 from drivers.sim.rotations import euler_to_matrix
+
+#: Longest ``Frame Time`` accepted (seconds).
+MAX_FRAME_TIME_S = 60.0
 
 _CHANNELS = {
     "xposition": "Xposition", "yposition": "Yposition", "zposition": "Zposition",
@@ -265,8 +268,10 @@ def _parse_motion(lines: list[str], start: int, num_channels: int, source: str) 
         frame_time = float(raw)
     except ValueError:
         raise BvhError(source, n + 2, f"Frame Time must be a number, got {raw!r}") from None
-    if not (np.isfinite(frame_time) and frame_time > 0):
-        raise BvhError(source, n + 2, f"Frame Time must be positive, got {raw!r}")
+    # At most a minute a frame: no motion clip is slower, and a garbled 1e308 made the clip's length
+    # (frames x frame time) infinite, an OverflowError where sim:// sizes its loop.
+    if not (np.isfinite(frame_time) and 0 < frame_time <= MAX_FRAME_TIME_S):
+        raise BvhError(source, n + 2, f"Frame Time must be positive and at most {MAX_FRAME_TIME_S:g} s, got {raw!r}")
     if count > len(lines) - (n + 2):  # before allocating: a garbled count must not ask for terabytes
         given = sum(1 for line in lines[n + 2:] if line.strip())
         raise BvhError(source, n + 1, f"Frames: {count} but only {given} frame lines")

@@ -664,6 +664,17 @@ def test_replay_option_errors():
         create_rig_source("replay://")
 
 
+@pytest.mark.parametrize("speed", ["1e-320", "0.0001"])
+def test_a_speed_too_slow_to_time_is_refused_by_name(take, speed):
+    """speed=1e-320 was taken, and read() then failed with an OverflowError (a due time of inf ns)."""
+    out, _, _ = take
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(f"replay://{out}?speed={speed}")
+    assert f"speed='{speed}'" in str(info.value) and ">= 0.001" in str(info.value)
+    with open_rig(f"replay://{out}?speed=0.001", clock=ManualClock()) as source:  # the floor plays, 1000x slower
+        assert source.read(timeout_s=600.0).sequence == 0
+
+
 def test_camera_folder_names_are_safe_and_distinct():
     from drivers.backends.recording_format import camera_dir_name
     from drivers.sim import RigPlacement

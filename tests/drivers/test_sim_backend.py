@@ -167,3 +167,59 @@ def test_bvh_motion_loops_over_the_clip(sim_cache):
         assert source.loop_frames == max(1, round(source.period_s * 10))
         pair = source.read(timeout_s=1.0)
         assert pair.joints_3d.shape == (25, 3)
+
+
+@pytest.mark.parametrize("distance", [1.0, 1.2, 1.5, 2.0, 5.0, 8.0])
+def test_the_subject_stands_at_the_distance_inside_the_working_volume(distance):
+    """distance= moved the cameras' aim and the working volume but not the person, who stayed at 3 m
+    (outside the volume at 1.5 or 8); and 1 <= distance < 1.5 was refused with an error about
+    RigPlacement.volume_depth_m, a field the URL does not have."""
+    source = create_rig_source(f"sim://?distance={distance}&width=64&height=48&cache=off")
+    hips = source._scene.joints_3d(0.0)[8]  # MidHip
+    assert (hips[0], hips[2]) == pytest.approx((0.0, distance))
+    volume = source.rig.volume
+    assert volume.contains(hips)
+    assert volume.min_corner[2] >= 0.5 - 1e-9 and volume.max_corner[2] - volume.min_corner[2] <= 2.0 + 1e-9
+    for cam in source.rig.pair:  # both cameras see the hips
+        uv, depth = cam.project(hips)
+        assert depth > 0 and 0 <= uv[0] < 64 and 0 <= uv[1] < 48
+    source.close()
+
+
+def test_a_placement_whose_cameras_miss_the_subject_is_refused_by_name():
+    """convergence=120 turned each camera 60 degrees away from the subject: the left camera saw none
+    of the 25 joints, and the rig filmed an empty room without a word."""
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source("sim://?convergence=120&width=64&height=48&cache=off")
+    for words in ("camera 'left'", "does not see the subject", "convergence=120", "distance=3", "baseline=1.2"):
+        assert words in str(info.value)
+    create_rig_source("sim://?convergence=60&width=64&height=48&cache=off").close()  # still in view: accepted
+
+
+@pytest.mark.parametrize(("query", "fps"), [("fps=1", 1.0), ("fps=2", 2.0), ("fps=0.5", 0.5), ("fps=0.3&motion=walk", 0.3)])
+def test_a_low_rate_loop_shows_the_instants_a_real_camera_would(query, fps):
+    """At fps=1 the 1.2 s wave loop had one frame: every frame showed scene time 0, a frozen person.
+    Loop frame k must show k / fps into the motion (modulo its period), off by at most 1 % of a period
+    per frame (the loop then starts over, like any loop stretched to whole frames)."""
+    source = create_rig_source(f"sim://?{query}&width=16&height=16&cache=off")
+    period = source.period_s
+    for k in range(max(source.loop_frames, 3)):  # at least three frames: a one-frame loop froze the person
+        off = (source.scene_time(0, k % source.loop_frames) - k / fps) % period
+        assert min(off, period - off) <= 0.01 * period * k + 1e-9, k
+    source.close()
+
+
+def test_a_slow_rig_delivers_a_moving_subject(sim_cache):
+    with open_rig(f"sim://?fps=1&{SMALL}&cache={sim_cache}", clock=ManualClock()) as source:
+        pairs = [source.read(timeout_s=2.0) for _ in range(6)]
+    assert [p.frames[0].index for p in pairs] == list(range(6))
+    assert [p.frames[0].scene_time_s for p in pairs] == pytest.approx([0.0, 1.0, 0.8, 0.6, 0.4, 0.2])  # k s into 1.2 s
+    wrist = np.array([p.joints_3d[4] for p in pairs])  # RWrist: the waving hand moves
+    assert np.ptp(wrist, axis=0).max() > 0.1
+
+
+def test_loops_at_the_usual_rates_are_one_motion_period():
+    for fps, frames in ((30, 36), (10, 12), (5, 6)):
+        source = create_rig_source(f"sim://?fps={fps}&{SMALL}&cache=off")
+        assert (source.loop_periods, source.loop_frames) == (1, frames)
+        source.close()

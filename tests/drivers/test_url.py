@@ -25,6 +25,12 @@ def test_typed_getters_convert_and_consume():
     url.finish()  # everything was consumed
 
 
+def test_an_integer_with_a_leading_zero_is_decimal():
+    """int(raw, 0) refused '010' ("option seed='010' must be an integer"); prefixed bases still work."""
+    url = RigUrl.parse("sim://?seed=010&width=0640&a=0x10&b=0o17&c=0")
+    assert [url.take_int(k, -1) for k in ("seed", "width", "a", "b", "c")] == [10, 640, 16, 15, 0]
+
+
 @pytest.mark.parametrize(
     ("query", "getter", "expected_words"),
     [

@@ -290,6 +290,8 @@ def _line_of(text: str, needle: str) -> int:
         ("CHANNELS 3 Xrotation Yrotation Zrotation", "CHANNELS 3 Xrotation Wrotation Zrotation", "Wrotation", "unknown channel"),
         ("JOINT RightUpLeg", "JIONT RightUpLeg", "JIONT", "unexpected 'JIONT'"),
         ("Frame Time: 0.5", "Frame Time: fast", "Frame Time", "Frame Time must be a number"),
+        # frames x 1e308 was an infinite clip: an OverflowError where sim:// sized its loop
+        ("Frame Time: 0.5", "Frame Time: 1e308", "Frame Time", "at most 60 s, got '1e308'"),
         ("Frames: 2", "Frames: -1", "Frames:", "at least 1"),
     ],
 )
