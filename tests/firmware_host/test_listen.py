@@ -211,9 +211,9 @@ def test_the_listener_and_the_udp_sink_pick_a_name_s_address_by_one_rule(monkeyp
     assert addresses.ipv4_first(infos[:1]) == (socket.AF_INET6, v6)
     used: list[object] = []
 
-    def spy(answer):
+    def spy(answer, *keep):
         used.append(answer)
-        return addresses.ipv4_first(answer)
+        return addresses.ipv4_first(answer, *keep)
 
     monkeypatch.setattr(listen, "ipv4_first", spy)
     monkeypatch.setattr(udp_sink, "ipv4_first", spy)
