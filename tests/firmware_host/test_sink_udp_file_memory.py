@@ -4,6 +4,7 @@ from __future__ import annotations
 import errno
 import json
 import socket
+import time
 from pathlib import Path
 from typing import Any
 
@@ -73,6 +74,27 @@ def test_udp_to_a_broadcast_address() -> None:
         rx.close()
     assert isinstance(received[0], Hello) and joints_seqs(received) == [0]
     assert stats.sent == 1 and stats.connect_failures == 0 and stats.disconnects == 0
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "[::1]"])
+def test_udp_to_a_port_nobody_listens_on_keeps_sending(host: str) -> None:
+    # Each datagram draws an ICMP port unreachable. On a connected socket the next send would fail with
+    # ECONNREFUSED; the sink's socket is unconnected, so the receiver that is not up yet costs nothing.
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    probe = socket.socket(family, socket.SOCK_DGRAM)
+    probe.bind(("::1" if ":" in host else "127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()  # the port is now closed
+    sink = open_sink(f"udp://{host}:{port}?queue=64&status_s=0.01", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(20):
+            sink.send(make_frame(seq))
+            time.sleep(0.002)
+        assert sink.wait_drained(5)
+    finally:
+        stats = sink.close()
+    assert stats.sent == 20 and stats.dropped == 0 and stats.disconnects == 0 and stats.connect_failures == 0
 
 
 def test_file_sink_writes_canonical_json_lines(tmp_path: Path) -> None:
