@@ -13,12 +13,18 @@ from typing import Any
 AddrInfo = tuple[Any, Any, Any, Any, Any]  # as socket.getaddrinfo lists them
 
 
-def ipv4_first(infos: Sequence[AddrInfo]) -> tuple[int, Any]:
+def ipv4_first(infos: Sequence[AddrInfo], keep: Any = None) -> tuple[int, Any]:
     """``(family, sockaddr)`` of the first IPv4 entry of a ``getaddrinfo`` answer, else of its first entry.
+
+    ``keep``: the sockaddr in use, kept while the answer still lists it in the chosen family. A name with
+    several addresses (round-robin DNS, a robot on Wi-Fi and Ethernet) comes back in another order from
+    one lookup to the next; taking the first each time moved the stream between them.
 
     :raises ValueError: ``infos`` is empty.
     """
     if not infos:
         raise ValueError("no address")
     family, _, _, _, addr = min(infos, key=lambda info: info[0] != socket.AF_INET)  # stable: keeps the order
+    if keep is not None and any(info[0] == family and info[4] == keep for info in infos):
+        return family, keep
     return family, addr

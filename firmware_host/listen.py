@@ -6,6 +6,7 @@ late, with what faults?), and a reference receiver in Python beside the C one in
     ghnerf-listen udp://:9870                             # a summary line every second (IPv4 and IPv6)
     ghnerf-listen serial:///dev/ttyUSB0?baud=921600 --json  # every message as a JSON line
     ghnerf-listen udp://0.0.0.0:9870 --seconds 10           # IPv4 only; stop after 10 s (default: Ctrl-C)
+    ghnerf-listen udp://239.255.0.1:9870                    # a multicast group (joined), as a sink sends to it
 
 The summary: JOINTS messages per second, joints present per message, the sender's latency
 (``send_us - capture_us`` of the JOINTS headers: capture to the wire), sequence gaps (frames the
@@ -18,12 +19,14 @@ opened (named).
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import json
 import math
 import os
 import select
 import socket
 import statistics
+import struct
 import sys
 import time
 from collections.abc import Sequence
@@ -83,10 +86,24 @@ def _bind(host: str, port: int) -> socket.socket:
         raise _cannot_listen(host, port, e) from e
     try:
         sock.bind(addr)
+        _join_if_multicast(sock, family, addr)
     except OSError as e:
         sock.close()
         raise _cannot_listen(host, port, e) from e
     return sock
+
+
+def _join_if_multicast(sock: socket.socket, family: int, addr: Any) -> None:
+    """Join the group of a multicast ``addr`` (udp://239.1.2.3:9870, udp://[ff02::1%25eth0]:9870): a socket
+    only bound to a group address hears nothing, though a udp:// sink sends to it fine. The kernel picks the
+    interface (IPv4), or the zone does (IPv6; none: the default)."""
+    ip = ipaddress.ip_address(addr[0].partition("%")[0])
+    if not ip.is_multicast:
+        return
+    if family == socket.AF_INET:
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, ip.packed + socket.inet_aton("0.0.0.0"))
+    else:
+        sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_JOIN_GROUP, ip.packed + struct.pack("@I", addr[3]))
 
 
 def _bind_any(port: int) -> socket.socket:

@@ -1,7 +1,9 @@
 """JointFrame (floats from the estimator) -> wire messages."""
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
+from typing import Optional
 
 from firmware_host.protocol.constants import U32_MAX, MsgType
 from firmware_host.protocol.messages import JointFrame, Joints, Joints2D, make_header
@@ -19,22 +21,35 @@ def joints_message(frame: JointFrame, send_us: int, flags: int = 0) -> Joints:
     return Joints(header, frame.joint_set, xyz, conf, missing)
 
 
-def camera_index(key: str | int, cameras: Sequence[str]) -> int:
-    """Index of a ``joints_2d`` key: ints index ``cameras`` (the order announced in HELLO),
-    names are looked up in it. :raises KeyError: a camera HELLO does not announce."""
-    if isinstance(key, int):
-        if not 0 <= key < len(cameras):
-            raise KeyError(f"camera index {key} is not among the {len(cameras)} announced cameras {list(cameras)!r}")
-        return key
+def _as_number(key: object) -> Optional[int]:
+    """A ``joints_2d`` key that numbers its camera: a Python or numpy integer (keys taken from ``np.arange``
+    or an array's indices were np.int64, looked up as names and left out); None for a name."""
+    if isinstance(key, str):
+        return None
     try:
-        return list(cameras).index(key)
+        return operator.index(key)  # type: ignore[arg-type]
+    except TypeError:
+        return None
+
+
+def camera_index(key: str | int, cameras: Sequence[str]) -> int:
+    """Index of a ``joints_2d`` key: integers index ``cameras`` (the order announced in HELLO),
+    names are looked up in it. :raises KeyError: a camera HELLO does not announce."""
+    number = _as_number(key)
+    if number is not None:
+        if not 0 <= number < len(cameras):
+            raise KeyError(f"camera index {key} is not among the {len(cameras)} announced cameras {list(cameras)!r}")
+        return number
+    try:
+        return list(cameras).index(key)  # type: ignore[arg-type]
     except ValueError:
         raise KeyError(f"camera {key!r} is not in the announced cameras {list(cameras)!r}") from None
 
 
 def is_announced(key: str | int, cameras: Sequence[str]) -> bool:
     """Whether :func:`camera_index` knows ``key``."""
-    return 0 <= key < len(cameras) if isinstance(key, int) else key in cameras
+    number = _as_number(key)
+    return 0 <= number < len(cameras) if number is not None else key in cameras
 
 
 def joints2d_messages(

@@ -44,7 +44,8 @@ class JointFrame:
     joints_3d: np.ndarray
     """(J, 4) float: x, y, z in metres and confidence 0..1; NaN or confidence 0 = missing."""
     joints_2d: Mapping[Union[str, int], np.ndarray] = field(default_factory=dict)
-    """Optional per-camera (J, 3) float: u, v in pixels and confidence 0..1."""
+    """Optional per-camera (J, 3) float: u, v in pixels and confidence 0..1, keyed by camera name or by index
+    (a Python or numpy integer) into the cameras the sink announces."""
 
     def __post_init__(self) -> None:
         # Checked here, at send(): a float or negative time failed only in the sink's worker, and was then

@@ -5,7 +5,8 @@ Rules (docs/protocol.md, "Quantisation"):
 - a joint is missing when any coordinate or its confidence is NaN, its
   confidence is <= 0, or a coordinate does not fit in int16; a missing joint is
   sent as zeros with its bit set in the mask;
-- confidence 0..1 maps to 1..255 for present joints, so 0 always means missing.
+- confidence 0..1 maps to 1..255 for present joints, so 0 always means missing; a
+  confidence above 1 (inf included) is sent as 255.
 """
 from __future__ import annotations
 
@@ -17,9 +18,11 @@ _I16_MIN, _I16_MAX = -32768, 32767
 
 
 def _quantise(values: np.ndarray, conf: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    scaled = np.rint(values.astype(np.float64) * scale)
-    conf = conf.astype(np.float64)
-    with np.errstate(invalid="ignore"):
+    # A coordinate (or confidence) past about 1e305 overflows to inf when scaled; the rules below make it
+    # missing (or 255), so numpy's "overflow encountered" warning told nothing, and under -W error it raised.
+    with np.errstate(invalid="ignore", over="ignore"):
+        scaled = np.rint(values.astype(np.float64) * scale)
+        conf = conf.astype(np.float64)
         missing = (
             np.isnan(scaled).any(axis=1)
             | ~(conf > 0.0)  # also true for NaN confidence

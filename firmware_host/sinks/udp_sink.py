@@ -10,7 +10,9 @@ A host name is resolved to its IPv4 address when it has one (a receiver bound to
 0.0.0.0 never hears ::1, which glibc may list first for ``localhost``), to IPv6
 when that is all it has or the host is an IPv6 literal. The name is looked up
 again every ``resolve_s`` (30) seconds in a thread of its own, so a robot whose
-DHCP or mDNS address changes is found again while the frames keep going out.
+DHCP or mDNS address changes is found again while the frames keep going out. While
+the name still lists the address in use, that address is kept, whatever the order
+of the answer (round-robin DNS, a host on two networks).
 """
 from __future__ import annotations
 
@@ -36,8 +38,9 @@ _log = logging.getLogger(__name__)
 RESOLVE_S = 30.0
 
 
-def resolve(url: str, host: str, port: int) -> tuple[int, Any]:
-    """``(family, sockaddr)`` for ``host``: its first IPv4 address, else its first address.
+def resolve(url: str, host: str, port: int, keep: Any = None) -> tuple[int, Any]:
+    """``(family, sockaddr)`` for ``host``: its first IPv4 address, else its first address; ``keep`` (the
+    sockaddr in use) instead while the name still lists it.
 
     :raises SinkUnavailableError: the name does not resolve (now).
     """
@@ -46,7 +49,7 @@ def resolve(url: str, host: str, port: int) -> tuple[int, Any]:
     except OSError as e:
         raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: {e}") from e
     try:
-        return ipv4_first(infos)
+        return ipv4_first(infos, keep)
     except ValueError as e:
         raise SinkUnavailableError(url, f"cannot resolve {host}:{port}: {e}") from e
 
@@ -129,7 +132,7 @@ class DatagramLink:
         """One lookup for the connection ``generation`` (sending to ``addr`` when it started); its answer is
         dropped when the link was reopened meanwhile: that open() looked the name up afresh."""
         try:
-            fresh: Optional[tuple[int, Any]] = resolve(self.url, self.host, self.port)
+            fresh: Optional[tuple[int, Any]] = resolve(self.url, self.host, self.port, keep=addr)
         except SinkUnavailableError as e:  # keep sending to the address it had; the next lookup may work
             _log.debug("%s; still sending to %s", e, addr[0] if addr else addr)
             fresh = None

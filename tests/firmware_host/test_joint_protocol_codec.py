@@ -1,6 +1,8 @@
 """Encoder, quantisation and streaming decoder of the joint protocol."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -96,6 +98,27 @@ def test_quantisation_rules() -> None:
     uv, conf2, missing2 = quantise_joints_2d(np.array([[10.1, 20.9, 0.5], [9000.0, 0.0, 1.0]]))
     assert uv[0].tolist() == [40, 84] and conf2[0] == 128 and missing2.tolist() == [False, True]
 
+
+
+def test_absurd_values_quantise_by_the_rules_without_numpy_warnings() -> None:
+    # 1e308 m scaled to mm overflows to inf: numpy warned "overflow encountered in multiply" (raised under
+    # -W error) although the rules already make such a joint missing, and cap the confidence at 255.
+    j = np.array(
+        [
+            [1e308, 0.0, 1.0, 0.9],  # coordinate overflows when scaled -> missing
+            [-np.inf, 0.0, 1.0, 0.9],  # infinite coordinate -> missing
+            [0.1, 0.2, 0.3, 1e308],  # confidence overflows when scaled -> 255
+            [0.1, 0.2, 0.3, np.inf],  # infinite confidence -> 255
+            [0.1, 0.2, 0.3, 2.0],  # above 1 -> 255
+        ]
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        xyz, conf, missing = quantise_joints_3d(j)
+        uv, conf2, missing2 = quantise_joints_2d(np.array([[1e308, 0.0, 1.0], [5.0, 6.0, 1e308]]))
+    assert missing.tolist() == [True, True, False, False, False]
+    assert conf.tolist() == [0, 0, 255, 255, 255] and xyz[2].tolist() == [100, 200, 300]
+    assert missing2.tolist() == [True, False] and conf2.tolist() == [0, 255] and uv[1].tolist() == [20, 24]
 
 def test_sequence_wraps_modulo_2_32() -> None:
     frame = JointFrame(2**32 + 5, 0, 0, np.zeros((25, 4)))

@@ -211,9 +211,9 @@ def test_the_listener_and_the_udp_sink_pick_a_name_s_address_by_one_rule(monkeyp
     assert addresses.ipv4_first(infos[:1]) == (socket.AF_INET6, v6)
     used: list[object] = []
 
-    def spy(answer):
+    def spy(answer, *keep):
         used.append(answer)
-        return addresses.ipv4_first(answer)
+        return addresses.ipv4_first(answer, *keep)
 
     monkeypatch.setattr(listen, "ipv4_first", spy)
     monkeypatch.setattr(udp_sink, "ipv4_first", spy)
@@ -225,3 +225,22 @@ def test_the_listener_and_the_udp_sink_pick_a_name_s_address_by_one_rule(monkeyp
 def test_the_scheme_is_case_insensitive():
     port = listen.open_port("UDP://127.0.0.1:0", ephemeral=True)
     port.close()
+
+
+@pytest.mark.parametrize("group", ["239.255.77.1", "[ff05::77]"])
+def test_udp_on_a_multicast_group_joins_it(group):
+    # A socket bound to a group's address, without joining it, heard nothing a udp:// sink sent to the group.
+    family = socket.AF_INET6 if ":" in group else socket.AF_INET
+    try:
+        port = listen.open_port(f"udp://{group}:0", ephemeral=True)
+    except listen.ListenError as e:
+        pytest.skip(f"no multicast here: {e}")
+    try:
+        with socket.socket(family, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.sendto(b"", (group.strip("[]"), 9))
+            except OSError as e:  # no route for multicast on this host (a bare container)
+                pytest.skip(f"cannot send multicast here: {e}")
+        assert _datagram_reaches(port, family, group.strip("[]"))
+    finally:
+        port.close()

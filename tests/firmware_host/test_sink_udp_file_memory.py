@@ -4,6 +4,7 @@ from __future__ import annotations
 import errno
 import json
 import socket
+import time
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +13,7 @@ import pytest
 
 from firmware_host.errors import SinkConfigError, SinkUnavailableError
 from firmware_host.protocol import Fault, Hello, Joints, Joints2D, StreamDecoder
+from firmware_host.protocol.from_frame import camera_index, is_announced
 from firmware_host.protocol.messages import Status
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.memory_sink import MemorySink
@@ -72,6 +74,27 @@ def test_udp_to_a_broadcast_address() -> None:
         rx.close()
     assert isinstance(received[0], Hello) and joints_seqs(received) == [0]
     assert stats.sent == 1 and stats.connect_failures == 0 and stats.disconnects == 0
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "[::1]"])
+def test_udp_to_a_port_nobody_listens_on_keeps_sending(host: str) -> None:
+    # Each datagram draws an ICMP port unreachable. On a connected socket the next send would fail with
+    # ECONNREFUSED; the sink's socket is unconnected, so the receiver that is not up yet costs nothing.
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    probe = socket.socket(family, socket.SOCK_DGRAM)
+    probe.bind(("::1" if ":" in host else "127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()  # the port is now closed
+    sink = open_sink(f"udp://{host}:{port}?queue=64&status_s=0.01", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        for seq in range(20):
+            sink.send(make_frame(seq))
+            time.sleep(0.002)
+        assert sink.wait_drained(5)
+    finally:
+        stats = sink.close()
+    assert stats.sent == 20 and stats.dropped == 0 and stats.disconnects == 0 and stats.connect_failures == 0
 
 
 def test_file_sink_writes_canonical_json_lines(tmp_path: Path) -> None:
@@ -305,6 +328,25 @@ def test_2d_joints_of_an_unannounced_camera_are_left_out_not_the_frame(caplog: p
     assert [m.camera for m in messages if isinstance(m, Joints2D)] == [0, 0, 0]
     warnings = [r.getMessage() for r in caplog.records if "not among the announced cameras" in r.getMessage()]
     assert len(warnings) == 2  # once per unknown camera, not once per frame
+
+
+def test_numpy_integer_camera_keys_number_their_cameras() -> None:
+    # {i: uv for i in np.arange(2)}: np.int64 keys were looked up as names, so the sink warned "not among the
+    # announced cameras" and left every 2D joint out; they number the cameras as Python ints do.
+    sink = open_sink("memory://?send_2d=1&cameras=left,right", backoff=FAST_BACKOFF)
+    uv = np.full((25, 3), 10.0)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0, joints_2d={np.int64(1): uv, np.uint8(0): uv}))
+        assert sink.wait_drained(5)
+    finally:
+        stats = sink.close()
+    assert stats.sent == 1
+    assert [m.camera for m in messages_of(sink.read()) if isinstance(m, Joints2D)] == [0, 1]
+    assert camera_index(np.int32(1), ["left", "right"]) == 1 and is_announced(np.int16(1), ["left", "right"])
+    assert not is_announced(np.int64(2), ["left", "right"])
+    with pytest.raises(KeyError, match="camera index 2 is not among the 2 announced"):
+        camera_index(np.int64(2), ["left", "right"])
 
 
 class _Clock:

@@ -165,3 +165,47 @@ def test_a_lookup_started_before_a_reconnect_does_not_undo_its_answer(monkeypatc
         link.close()
         old_rx.close()
         new_rx.close()
+
+
+class RotatingResolver(Resolver):
+    """Round-robin DNS: each answer lists the same addresses, the first moved to the end."""
+
+    def __call__(self, host: Any, port: Any, *args: Any, **kwargs: Any) -> list:
+        infos = super().__call__(host, port, *args, **kwargs)
+        if host == NAME:
+            self.answers = self.answers[1:] + self.answers[:1]
+        return infos
+
+
+@pytest.mark.parametrize("scheme", ["udp", "vmc"])
+def test_a_name_with_several_addresses_stays_on_the_one_in_use(monkeypatch: pytest.MonkeyPatch, scheme: str) -> None:
+    # Each lookup of a round-robin name (or a robot on Wi-Fi and Ethernet) lists its addresses in another
+    # order: taking the first every resolve_s moved the stream from one to the other and back.
+    first, second = receiver(), receiver()
+    resolver = RotatingResolver(monkeypatch, first.getsockname(), second.getsockname())
+    sink = open_sink(f"{scheme}://{NAME}:{first.getsockname()[1]}?queue=64&resolve_s=0.01", backoff=FAST_BACKOFF)
+    seq = 0
+
+    def step() -> bool:
+        nonlocal seq
+        sink.send(make_frame(seq))
+        seq += 1
+        time.sleep(0.005)
+        return resolver.calls >= 6
+
+    try:
+        assert sink.wait_connected(5)
+        wait_until(step, what="several lookups")
+        assert sink.wait_drained(5)
+        assert new_got_one(first)
+        with pytest.raises(BlockingIOError):
+            second.recv(4096)  # listed by every lookup, but never the address in use
+    finally:
+        sink.close()
+        first.close()
+        second.close()
+    answer = [(socket.AF_INET, socket.SOCK_DGRAM, 17, "", a) for a in (("10.0.0.2", 9), ("10.0.0.1", 9))]
+    assert udp_sink.ipv4_first(answer, keep=("10.0.0.1", 9)) == (socket.AF_INET, ("10.0.0.1", 9))
+    assert udp_sink.ipv4_first(answer, keep=("10.0.0.3", 9)) == (socket.AF_INET, ("10.0.0.2", 9))  # gone: the first
+    v6_first = [(socket.AF_INET6, socket.SOCK_DGRAM, 17, "", ("::1", 9, 0, 0)), *answer]
+    assert udp_sink.ipv4_first(v6_first, keep=("::1", 9, 0, 0))[0] == socket.AF_INET  # IPv4 still preferred

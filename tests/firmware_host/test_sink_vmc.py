@@ -155,3 +155,18 @@ def test_lost_hips_sends_tracking_lost_only() -> None:
     (msgs,), _ = _receive([make_frame(0, joints=j)])
     assert [a for a, _ in msgs] == ["/VMC/Ext/OK", "/VMC/Ext/T"]
     assert msgs[0][1][3] == 0
+
+
+def test_a_joint_beyond_the_wire_s_reach_is_missing_not_a_dropped_frame() -> None:
+    # A left wrist at 1e39 m (past float32) made python-osc raise OverflowError on every frame, so the whole
+    # avatar froze; a hip at 1e20 m sent the root 1e20 m away. Beyond 32.767 m (the binary protocol's i16 mm)
+    # a joint is missing, as on the wire: the arm's bones are left out, the rest of the frame goes out.
+    arm = t_pose_rig()
+    arm[J["LWrist"], 0] = 1e39
+    hips = t_pose_rig()
+    hips[J["MidHip"], 1] = 1e20
+    (with_arm, no_hips), _ = _receive([make_frame(0, joints=arm), make_frame(1, joints=hips)])
+    bones = [p[0] for a, p in with_arm if a == "/VMC/Ext/Bone/Pos"]
+    assert "LeftUpperArm" in bones and "LeftLowerArm" not in bones and "LeftHand" not in bones
+    assert "RightHand" in bones
+    assert [a for a, _ in no_hips] == ["/VMC/Ext/OK", "/VMC/Ext/T"] and no_hips[0][1][3] == 0  # tracking lost

@@ -90,6 +90,20 @@ def test_missing_joints_leave_bones_out() -> None:
     assert solve_pose(j) is None
 
 
+@pytest.mark.parametrize("value", [32.8, -40.0, 1e20, 1e39, np.inf, -np.inf])
+def test_a_coordinate_beyond_the_wire_s_reach_is_missing(value: float) -> None:
+    j = t_pose_rig()
+    j[J["RKnee"], 2] = value
+    pose = solve_pose(j)
+    assert pose is not None
+    assert not {"RightUpperLeg", "RightLowerLeg", "RightFoot"} & set(pose.bones)
+    assert "LeftFoot" in pose.bones
+    for bone in pose.bones.values():
+        assert np.abs(bone.local_position).max() < 33 and np.isfinite(bone.local_rotation).all()
+    j[J["RKnee"], 2] = 32.0  # inside the reach: still a joint
+    assert "RightLowerLeg" in solve_pose(j).bones
+
+
 def test_shape_is_checked() -> None:
     with pytest.raises(ValueError, match=r"\(25, 4\)"):
         solve_pose(np.zeros((18, 4)))
