@@ -89,6 +89,12 @@ def _check_compatible(manifest: dict, fresh: dict, path: Path) -> None:
                                      f"use a new --out folder or the original settings")
 
 
+def source_config(config: SyntheticConfig, dataset_seed: int) -> dict:
+    """The manifest's ``source_config`` of a synthetic dataset: everything besides the split specs and the
+    generator version that decides what a sample holds (``_check_compatible`` and the pipeline compare it)."""
+    return {"synthetic": config.to_json(), "dataset_seed": int(dataset_seed)}
+
+
 def _folder_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
 
@@ -118,9 +124,8 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
             raise DataConfigError(f"counts.{split}", f"must be a non-negative int, got {n!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    source_config = {"synthetic": config.to_json(), "dataset_seed": int(dataset_seed)}
     fresh = new_manifest(resolution=config.resolution, view_names=config.view_names, source="synthetic",
-                         source_config=source_config)
+                         source_config=source_config(config, dataset_seed))
     fresh["generator_version"] = GENERATOR_VERSION
     if (out / MANIFEST).exists():
         manifest = read_manifest(out)
