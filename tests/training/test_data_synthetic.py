@@ -148,6 +148,34 @@ def test_the_pipelines_data_stage_refuses_a_dataset_made_with_other_settings(tmp
     assert "source_config" in capfd.readouterr().err and (root / MANIFEST).read_bytes() == before
 
 
+def test_a_second_generate_into_a_folder_being_generated_is_refused(tmp_path, monkeypatch):
+    # Two writers of one folder: the second's start deleted the first's unfinished shards (*.tmp-*) and both
+    # rewrote the manifest. Here a second generate starts while the first renders its first sample.
+    import subprocess
+    import sys
+
+    import training.data.generate as gen
+
+    root, repo = tmp_path / "ds", Path(__file__).resolve().parents[2]
+    cmd = [sys.executable, "-m", "training.data.generate", "--out", str(root), "--train", "2", "--res", str(RES),
+           "--shard-size", "1", "--workers", "1"]
+    second, real = [], gen.make_sample
+
+    def rendering(*args, **kwargs):
+        if not second:
+            second.append(subprocess.run(cmd, cwd=repo, capture_output=True, text=True, timeout=120))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(gen, "make_sample", rendering)
+    report = generate(root, {"train": 2}, SyntheticConfig(resolution=RES), workers=1, shard_size=1)
+    assert second[0].returncode == 2, second[0].stderr
+    assert "dataset.lock: another process holds this lock" in second[0].stderr
+    assert report.samples_rendered == 2 and len(ShardedSplit(root, "train")) == 2
+    # the lock goes with its process: the same command afterwards finds the folder whole and free
+    done = subprocess.run(cmd, cwd=repo, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and "0 shards written, 2 skipped" in done.stderr
+
+
 def test_freestyle_joins_train_only_on_request():
     assert "freestyle" not in SPLITS["train"].motions and SPLITS["train"].motion_weights is None
     assert SPLITS["val_seen_motions"].motions == ROUTINE_MOTIONS == TRAIN_MOTIONS
