@@ -226,6 +226,10 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
 
     if joints is not None and model is None:
         raise ValueError("a joints cache takes a model too (its picture is the one repainted)")
+    if joints is not None:  # here, not in the workers' initializer (a pool respawns a worker that fails there)
+        from training.device_joints import check_source  # noqa: PLC0415
+
+        check_source(joints, data, split)
     n = len(MultiViewDataset(data, split=split))
     n = min(limit, n) if limit else n
     t0, views = time.monotonic(), []
