@@ -14,7 +14,9 @@ when it stands for what a device could do.
 what better joints would give).
 
 Cached fields: ``joints`` ``(N, 25, 3)`` float32 (rig frame, metres), ``expected_error_m`` ``(N, 25)``
-(the prior's own estimate), ``index`` ``(N,)`` the dataset items.
+(the prior's own estimate), ``index`` ``(N,)`` the dataset items, and where they came from: ``split`` and
+``dataset_sha256`` (of its ``dataset.json``), which :func:`check_source` compares before a cache's joints
+are paired with a split's scenes by index.
 """
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ghnerf_runtime.cli.output_path import ready_output_arg
-from training.model_card import write_atomic
+from training.model_card import sha256, write_atomic
 
 
 class JointsCacheError(ValueError):
@@ -68,7 +70,7 @@ def cache_joints(data: str | Path, split: str, model: str | Path, out: str | Pat
         errors.append(e)
         if (i + 1) % 256 == 0:
             log(f"  {split}: {i + 1}/{n} scenes, {time.monotonic() - t0:.0f} s")
-    out = _write_cache(out, joints=np.stack(joints), expected_error_m=np.stack(errors),
+    out = _write_cache(out, data, split, joints=np.stack(joints), expected_error_m=np.stack(errors),
                        index=np.arange(n, dtype=np.int32))
     log(f"{out}: joints of {n} {split} scenes in {time.monotonic() - t0:.0f} s")
     return out
@@ -82,7 +84,7 @@ def cache_true_joints(data: str | Path, split: str, out: str | Path, limit: int 
     ds = MultiViewDataset(data, split=split)
     n = _scenes(limit, len(ds))
     joints = np.stack([ds[i]["joints_3d"].numpy() for i in range(n)]).astype(np.float32)
-    out = _write_cache(out, joints=joints, expected_error_m=np.zeros(joints.shape[:2], np.float32),
+    out = _write_cache(out, data, split, joints=joints, expected_error_m=np.zeros(joints.shape[:2], np.float32),
                        index=np.arange(n, dtype=np.int32))
     log(f"{out}: true joints of {n} {split} scenes")
     return out
@@ -95,14 +97,33 @@ def _scenes(limit: int, available: int) -> int:
     return min(limit, available) if limit else available
 
 
-def _write_cache(out: str | Path, **arrays: np.ndarray) -> Path:
-    """``arrays`` as the ``.npz`` file ``out`` (that very name), written whole: a temporary file in the same
-    folder, then ``os.replace`` (an interrupted write leaves the old cache or the new one, never a cut one)."""
+def _write_cache(out: str | Path, data: str | Path, split: str, **arrays: np.ndarray) -> Path:
+    """``arrays`` and their source (``split``, ``data``'s manifest hash) as the ``.npz`` file ``out`` (that very
+    name), written whole: a temporary file in the same folder, then ``os.replace`` (an interrupted write leaves
+    the old cache or the new one, never a cut one)."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, **arrays, split=np.str_(split), dataset_sha256=np.str_(sha256(Path(data) / "dataset.json")))
     return write_atomic(out, buf.getvalue())
+
+
+def check_source(path: str | Path, data: str | Path, split: str) -> None:
+    """Refuse a joints cache made from another split or dataset than ``data``'s ``split``: its joints are taken
+    by scene index, so another split's would be paired with the wrong scenes without a word. A cache from
+    before the fields (or made by hand without them) is taken as it is."""
+    path = Path(path)
+    try:
+        with np.load(path) as z:
+            made = {k: str(z[k]) for k in ("split", "dataset_sha256") if k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise JointsCacheError(f"{path}: not a joints cache ({e})") from e
+    if made.get("split", split) != split:
+        raise JointsCacheError(f"{path}: holds the joints of split {made['split']!r}, not {split!r}")
+    want = sha256(Path(data) / "dataset.json")
+    if made.get("dataset_sha256", want) != want:
+        raise JointsCacheError(f"{path}: was made from another dataset than {data} (its dataset.json differs: "
+                               "regenerated or another folder); make it again")
 
 
 def _read(path: Path, key: str, what: str) -> np.ndarray:

@@ -34,18 +34,23 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
 * ``angle`` float32: the view's angle from the nearest source camera (``ghnerf-eval``'s bins);
 * ``scene``, ``view`` int32: where it came from; ``geometry``: ``truth``, ``model`` or ``proxy``.
 
-Cached as one uncompressed ``.npz`` per split (about 250 KB per view at 128x128).
+Cached as one uncompressed ``.npz`` per split (about 250 KB per view at 128x128), written whole (a temporary
+file, then a rename: a stop mid-write leaves the previous cache); :func:`load_cache` names a cut or damaged
+one.
 """
 from __future__ import annotations
 
+import io
 import multiprocessing as mp
 import time
+import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
 from training.blend_ceiling import blend_sources, project
+from training.model_card import write_atomic
 from training.unseen_fill import PART_BINS, Lighting, fit_lighting, relit_fill, seen_surface, surface_normals
 
 FIELDS = ("blend", "relit", "shown", "truth", "flags", "normals", "depth", "joints", "light", "angle", "scene",
@@ -221,6 +226,10 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
 
     if joints is not None and model is None:
         raise ValueError("a joints cache takes a model too (its picture is the one repainted)")
+    if joints is not None:  # here, not in the workers' initializer (a pool respawns a worker that fails there)
+        from training.device_joints import check_source  # noqa: PLC0415
+
+        check_source(joints, data, split)
     n = len(MultiViewDataset(data, split=split))
     n = min(limit, n) if limit else n
     t0, views = time.monotonic(), []
@@ -237,7 +246,11 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
             views.extend(_one(i))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(out, **stack(views))
+    # whole or not at all: savez straight into ``out`` left a cut zip after a stop mid-write, which a rerun's
+    # training then failed to open (and the previous cache was gone); written to that very name, .npz or not
+    buf = io.BytesIO()
+    np.savez(buf, **stack(views))
+    write_atomic(out, buf.getvalue())
     log(f"{out}: {len(views)} views of {n} {split} scenes in {time.monotonic() - t0:.0f} s")
     return out
 
@@ -253,8 +266,9 @@ def load_cache(path: str | Path) -> dict[str, np.ndarray]:
     try:
         with np.load(path) as z:
             arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not a fill-feature cache ({e})") from e
+    # a cut or damaged zip is BadZipFile (an empty file EOFError), neither an OSError nor a ValueError
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise ValueError(f"{path}: not a fill-feature cache, or a damaged one: make it again ({e})") from e
     missing = [k for k in FIELDS if k not in arrays]
     if missing:
         raise ValueError(f"{path}: fill-feature cache lacks {', '.join(missing)}")

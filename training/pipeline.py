@@ -541,7 +541,8 @@ def _sh(cmd: list[str], log_path: Path | None = None) -> None:
 
 # ------------------------------------------------------------------------------------------ stages
 def dataset_matches(cfg: PipelineConfig) -> bool:
-    """``dataset.json`` has the resolution and at least the requested, complete splits."""
+    """``dataset.json`` has the resolution, the generator settings ``stage_data`` asks for, and at least the
+    requested, complete splits."""
     from training.data.cache import ShardedSplit
     from training.data.splits import split_spec
 
@@ -556,6 +557,14 @@ def dataset_matches(cfg: PipelineConfig) -> bool:
 
     if generator_version(d) != GENERATOR_VERSION:
         return False  # rendered by another generator: generate names the difference
+    from training.data.generate import source_config
+    from training.data.synthetic import SyntheticConfig
+
+    # stage_data asks generate for its defaults (views, supersampling, cold starts, ROI margins, dataset seed 0):
+    # a folder made by hand with other ones must not be trained on silently; generate names the differing key
+    want_source = source_config(SyntheticConfig(resolution=cfg.res, freestyle_share=cfg.freestyle_share), 0)
+    if d.get("source") != "synthetic" or d.get("source_config") != want_source:
+        return False
     want = {"train": cfg.train, "val": cfg.val, "val_seen_motions": cfg.val_seen_motions}
     splits = d.get("splits", {})
     for name, n in want.items():

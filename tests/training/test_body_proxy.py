@@ -201,3 +201,30 @@ def test_a_proxy_cache_takes_its_geometry_and_joints_from_the_device_joints(data
     with pytest.raises(JointsCacheError, match="holds 1 scenes"):
         cache_split(data64, "val", tmp_path / "y.npz", workers=1, model=tmp_path / "tiny.pt",
                     joints=tmp_path / "one.npz", log=lambda *_: None)
+
+
+def test_a_joints_cache_of_another_split_or_dataset_is_refused_before_it_is_paired_by_index(data64, tmp_path):
+    # the joints are taken by scene index: val's first two scenes' joints must not become train's first two
+    import json
+    import shutil
+
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, tmp_path / "tiny.pt")
+    val = cache_true_joints(data64, "val", tmp_path / "joints_val.npz", log=lambda *_: None)
+    with pytest.raises(JointsCacheError, match=r"joints_val.npz: holds the joints of split 'val', not 'train'"):
+        cache_split(data64, "train", tmp_path / "t.npz", limit=2, workers=1, model=tmp_path / "tiny.pt",
+                    joints=val, log=lambda *_: None)
+    other = tmp_path / "regenerated"  # the same folder name and split, other data (its manifest differs)
+    shutil.copytree(data64, other)
+    manifest = json.loads((other / "dataset.json").read_text())
+    manifest["source_config"]["dataset_seed"] = 7
+    (other / "dataset.json").write_text(json.dumps(manifest))
+    with pytest.raises(JointsCacheError, match=r"joints_val.npz: was made from another dataset"):
+        cache_split(other, "val", tmp_path / "v.npz", workers=1, model=tmp_path / "tiny.pt", joints=val,
+                    log=lambda *_: None)
+    # its own split and dataset: taken (the scene count is checked as before)
+    assert cache_split(data64, "val", tmp_path / "v.npz", workers=1, model=tmp_path / "tiny.pt", joints=val,
+                       log=lambda *_: None).is_file()

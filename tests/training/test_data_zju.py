@@ -258,7 +258,7 @@ def test_a_failed_reconversion_leaves_the_previous_split_whole(tmp_path, subject
     split = ShardedSplit(out, "s")
     assert [split.arrays(i)["roi"].tolist() for i in range(2)] == before  # not one shard of each
     assert json.loads((out / "dataset.json").read_text()) == manifest
-    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "s"]  # no temporary left
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]  # no temporary left
 
     # a conversion that succeeds replaces the split and records its settings
     shutil.copy(subject[0] / "mask" / "Camera_B2" / "000001.png", root / "mask" / "Camera_B2" / "000001.png")
@@ -268,8 +268,31 @@ def test_a_failed_reconversion_leaves_the_previous_split_whole(tmp_path, subject
     manifest = json.loads((out / "dataset.json").read_text())
     assert manifest["splits"]["s"]["source_config"]["zju"]["margin_frac"] == 1.0
     assert manifest["source_config"]["zju"]["margin_frac"] == 1.0
-    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "s"]
+    assert sorted(p.name for p in out.iterdir()) == ["dataset.json", "dataset.lock", "s"]
     assert sorted(p.name for p in (out / "s").iterdir()) == ["shard_000000"]  # the old 1-sample shards are gone
+
+
+def test_a_conversion_into_a_folder_another_process_writes_is_refused(tmp_path, subject):
+    import subprocess
+    import sys
+
+    from training.data.cache import WRITER_LOCK
+
+    out = tmp_path / "ds"
+    out.mkdir()
+    # another process holds the folder's writer lock (a generate or a conversion of another split)
+    holder = subprocess.Popen([sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'a'); "
+                               "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(60)",
+                               str(out / WRITER_LOCK)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(DatasetError, match="dataset.lock: another process holds this lock"):
+            convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),)), split="s", shard_size=1)
+        assert sorted(p.name for p in out.iterdir()) == [WRITER_LOCK]  # nothing read or written
+    finally:
+        holder.kill()
+        holder.wait()
+    assert convert_zju(subject[0], out, ZjuConfig(resolution=RES, view_sets=((0, 1),)), split="s", shard_size=1) == 2
 
 
 @pytest.mark.parametrize("shard_size", [0, -1, 100_001, 2.0, True])

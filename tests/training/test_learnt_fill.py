@@ -305,3 +305,32 @@ def test_overrides_reach_the_net_and_unknown_keys_are_refused():
         _parse_sets(FillTrainConfig(), ["stepz=1"])
     with pytest.raises(ValueError, match="net.depth"):
         _parse_sets(FillTrainConfig(), ["net.depth=3"])
+
+
+def test_a_cut_or_empty_cache_is_named_and_a_stopped_write_keeps_the_previous_cache(truth_cache, data64, tmp_path,
+                                                                                     monkeypatch):
+    whole = truth_cache.read_bytes()
+    for name, data in (("cut.npz", whole[: len(whole) // 2]), ("empty.npz", b"")):
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(ValueError, match=f"{name}: not a fill-feature cache, or a damaged one"):
+            load_cache(tmp_path / name)
+    # a stop (Ctrl-C, a kill) while savez writes the second array: the cache made before stays whole and readable
+    out = tmp_path / "val.npz"
+    out.write_bytes(whole)
+    import numpy.lib.format as fmt
+
+    real, calls = fmt.write_array, []
+
+    def stopped(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fmt, "write_array", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        cache_split(data64, "val", out, limit=1, workers=1, relight=False, log=lambda *_: None)
+    monkeypatch.setattr(fmt, "write_array", real)
+    assert len(calls) == 2 and out.read_bytes() == whole
+    assert sorted(load_cache(out)) == sorted(FIELDS) and [p.name for p in tmp_path.iterdir() if "val" in p.name] == \
+        ["val.npz"]  # no temporary left beside it

@@ -10,6 +10,7 @@ Layout::
                                          the shard's samples (leading axis)
         meta.json                        {"first_index", "count", "samples": [metadata...]}
     <root>/<split>/shard_000001/ ...
+    <root>/dataset.lock                  the one writer's lock (``writer_lock``; empty)
 
 A shard folder is written under a temporary name and renamed when complete, so a
 folder named ``shard_*`` is always whole; an interrupted run leaves only ``*.tmp-*``
@@ -23,11 +24,13 @@ most ``max_open_shards`` shards stay mapped (LRU), bounding file descriptors.
 """
 from __future__ import annotations
 
+import fcntl
 import json
 import logging
 import os
 import shutil
 from collections import OrderedDict
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Mapping, Sequence
@@ -43,6 +46,8 @@ FORMAT = "ghnerf-multiview"
 SCHEMA_VERSION = 1
 MANIFEST = "dataset.json"
 SHARD_META = "meta.json"
+#: Held (``flock``) by the one process writing a dataset folder (an empty file; ``writer_lock``).
+WRITER_LOCK = "dataset.lock"
 
 
 def shard_name(k: int) -> str:
@@ -111,6 +116,33 @@ def new_manifest(*, resolution: int, view_names: Sequence[str], source: str, sou
 
 
 # ------------------------------------------------------------------ writing
+@contextmanager
+def writer_lock(root: str | Path) -> Iterator[None]:
+    """Be the only writer of the dataset folder ``root`` while the block runs.
+
+    Two writers at once break a folder: each one's start deletes the other's unfinished ``*.tmp-*`` shards
+    (taken for a crash's leftovers), a shard renamed over one being renamed fails, and both rewrite the
+    manifest from what they read before (the last one drops the other's splits). So a second writer is
+    refused, naming the lock file. The lock goes with the process (``flock``): a killed writer leaves none
+    behind. The file stays, empty (two folders made alike stay byte-identical).
+
+    Raises:
+        DatasetError: another process holds the lock.
+    """
+    path = Path(root) / WRITER_LOCK
+    fh = open(path, "a")
+    try:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise DatasetError(path, "another process holds this lock: it is writing this dataset (generate or a "
+                                     "conversion); wait for it to finish, then run the command again (it "
+                                     "resumes)") from None
+        yield
+    finally:
+        fh.close()  # releases the lock
+
+
 def write_shard(folder: str | Path, samples: Sequence[Sample], first_index: int) -> Path:
     """Write ``samples`` (indices ``first_index ..``) as the complete shard ``folder`` (atomic rename)."""
     folder = Path(folder)
@@ -288,6 +320,6 @@ class ShardedSplit:
         return state
 
 
-__all__ = ["FORMAT", "SCHEMA_VERSION", "MANIFEST", "UNVERSIONED_GENERATOR", "generator_version",
-           "ShardedSplit", "read_manifest", "write_manifest", "new_manifest",
+__all__ = ["FORMAT", "SCHEMA_VERSION", "MANIFEST", "WRITER_LOCK", "UNVERSIONED_GENERATOR", "generator_version",
+           "ShardedSplit", "read_manifest", "write_manifest", "new_manifest", "writer_lock",
            "write_shard", "shard_plan", "shard_name", "shard_is_complete", "remove_stale_temporaries"]

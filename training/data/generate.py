@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 
 from training.data.cache import (
     MANIFEST, generator_version, new_manifest, read_manifest, remove_stale_temporaries, shard_is_complete, shard_name,
-    shard_plan, write_manifest, write_shard,
+    shard_plan, write_manifest, write_shard, writer_lock,
 )
 from training.data.errors import DataConfigError, DatasetError
 from training.data.splits import check_dataset_seed, split_spec
@@ -89,6 +89,12 @@ def _check_compatible(manifest: dict, fresh: dict, path: Path) -> None:
                                      f"use a new --out folder or the original settings")
 
 
+def source_config(config: SyntheticConfig, dataset_seed: int) -> dict:
+    """The manifest's ``source_config`` of a synthetic dataset: everything besides the split specs and the
+    generator version that decides what a sample holds (``_check_compatible`` and the pipeline compare it)."""
+    return {"synthetic": config.to_json(), "dataset_seed": int(dataset_seed)}
+
+
 def _folder_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
 
@@ -107,7 +113,8 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
 
     Raises:
         DataConfigError: a bad argument (the message names it).
-        DatasetError: ``out`` holds an incompatible dataset (the message names the manifest).
+        DatasetError: ``out`` holds an incompatible dataset (the message names the manifest), or another
+            process is writing it (the message names ``cache.WRITER_LOCK``).
     """
     check_dataset_seed(dataset_seed)
     if isinstance(shard_size, bool) or not isinstance(shard_size, int) or not 1 <= shard_size <= 100_000:
@@ -118,9 +125,14 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
             raise DataConfigError(f"counts.{split}", f"must be a non-negative int, got {n!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    source_config = {"synthetic": config.to_json(), "dataset_seed": int(dataset_seed)}
+    with writer_lock(out):  # one writer per folder (cache.writer_lock says why)
+        return _generate(out, counts, config, dataset_seed, workers, shard_size)
+
+
+def _generate(out: Path, counts: Mapping[str, int], config: SyntheticConfig, dataset_seed: int, workers: int,
+              shard_size: int) -> GenerationReport:
     fresh = new_manifest(resolution=config.resolution, view_names=config.view_names, source="synthetic",
-                         source_config=source_config)
+                         source_config=source_config(config, dataset_seed))
     fresh["generator_version"] = GENERATOR_VERSION
     if (out / MANIFEST).exists():
         manifest = read_manifest(out)

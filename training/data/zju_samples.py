@@ -40,7 +40,7 @@ from ghnerf_runtime.preprocess import (
     Roi, apply_crop_maps, build_undistort_crop_maps, crop_camera, roi_from_joints,
 )
 from training.data.cache import (
-    MANIFEST, new_manifest, read_manifest, shard_name, shard_plan, write_manifest, write_shard,
+    MANIFEST, new_manifest, read_manifest, shard_name, shard_plan, write_manifest, write_shard, writer_lock,
 )
 from training.data.errors import DataConfigError, DatasetError
 from training.data.sample import NUM_SOURCES, Sample, ViewData
@@ -231,7 +231,8 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
 
     Raises:
         DataConfigError: a bad ``split``, ``shard_size`` or camera index (the message names it).
-        DatasetError: the subject folder or ``out``'s manifest is unusable (the message names the file).
+        DatasetError: the subject folder or ``out``'s manifest is unusable (the message names the file), or
+            another process is writing ``out`` (``cache.writer_lock``).
     """
     if not isinstance(split, str) or not split or not split.replace("_", "").isalnum():
         raise DataConfigError("split", f"must be an identifier, got {split!r}")
@@ -244,6 +245,12 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
                                                          f"({seq.num_cameras} cameras in {seq.root})")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    with writer_lock(out):  # one writer per folder: two conversions at once would drop a split's entry
+        return _convert(seq, subject, out, config, split, shard_size)
+
+
+def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig, split: str,
+             shard_size: int) -> int:
     source_config = {"zju": config.to_json()}
     if (out / MANIFEST).exists():
         manifest = read_manifest(out)
