@@ -339,6 +339,11 @@ class Joints3DConfig:
         max_reprojection_px: triangulation: a joint whose reprojection error exceeds this in
             either view (model-input pixels) is missing (the views disagree).
         min_view_confidence: a 2D peak below this does not enter the 3D estimate.
+        min_ray_angle_deg: triangulation: a joint whose two rays meet at less than this angle (degrees) is
+            missing: its depth is meaningless (about ``sigma * Z / (f * sin(angle))``, docs/geometry.md). The
+            default 0.5 is below every joint the estimator keeps on the example rig (7.5 cm baseline: 0.71 at
+            the far corner of its working volume plus ``max_outside_box_m``) and above a joint 30 m from a
+            10 cm baseline (0.19), which the solvers' own 0.1 (the numerically degenerate) kept.
         max_outside_box_m: a 3D joint further than this outside the sweep box (the tracked
             subject box, or the working volume) or outside the working volume is missing (so a
             track cannot drift out of the volume either). Two views cannot catch an error
@@ -364,6 +369,7 @@ class Joints3DConfig:
     single_view_fallback: bool = False
     max_reprojection_px: float = 6.0
     min_view_confidence: float = 0.1
+    min_ray_angle_deg: float = 0.5
     max_outside_box_m: float = 0.5
     grid: int = 16
     min_volumetric_response: float = 0.1
@@ -384,6 +390,7 @@ class Joints3DConfig:
         _boolean(self, "single_view_fallback")
         _number(self, "max_reprojection_px", 0.0, 1000.0, lo_open=True)
         _number(self, "min_view_confidence", 0.0, 1.0)
+        _number(self, "min_ray_angle_deg", 0.0, 90.0)  # the solvers' own range (the angle between lines)
         _number(self, "max_outside_box_m", 0.0, 100.0)
         _integer(self, "grid", 4, 48)
         _number(self, "min_volumetric_response", 0.0, 1.0)

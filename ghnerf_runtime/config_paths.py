@@ -4,17 +4,18 @@ The convention of systemd drop-ins and docker compose: a config names its model 
 file the same way wherever the program is started from. Read from the current directory instead,
 the example config's ``"models"`` worked only from the folder that held it, and a daemon started
 from anywhere else was told its model folder did not exist. A default (a key the file leaves out)
-is not in the file, so it stays relative to the current directory. Paths inside URLs are the
-backends' own syntax, as on the command line, and are left as written.
+is not in the file, so it stays relative to the current directory. Paths inside URLs follow the
+same rule, through a converter that knows the URL's syntax (:func:`values_from_file`; the daemon's
+rig URL: ``drivers.url_paths``); given on a command line, paths and URLs stay as written.
 """
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["config_folder", "paths_from_file"]
+__all__ = ["config_folder", "paths_from_file", "values_from_file"]
 
 
 def config_folder(path: str | os.PathLike) -> Path:
@@ -32,20 +33,32 @@ def paths_from_file(data: Any, keys: Sequence[tuple[str, ...]], path: str | os.P
     >>> paths_from_file({"session": {"model_dir": "models"}}, [("session", "model_dir")], "/etc/ghnerf/a.json")
     {'session': {'model_dir': '/etc/ghnerf/models'}}
     """
+    return values_from_file(data, keys, path, _plain_path)
+
+
+def values_from_file(data: Any, keys: Sequence[tuple[str, ...]], path: str | os.PathLike,
+                     convert: Callable[[str, Path], str]) -> Any:
+    """``data`` with each non-empty string at ``keys`` replaced by ``convert(value, folder)``, ``folder``
+    being :func:`config_folder` of ``path`` (for a URL naming files: its relative paths read from there);
+    ``data`` is not changed, and anything else is left for validation to report."""
     folder = config_folder(path)
     for key in keys:
-        data = _replace(data, key, folder)
+        data = _replace(data, key, folder, convert)
     return data
 
 
-def _replace(node: Any, key: tuple[str, ...], folder: Path) -> Any:
+def _plain_path(value: str, folder: Path) -> str:
+    return value if os.path.isabs(value) else str(folder / value)
+
+
+def _replace(node: Any, key: tuple[str, ...], folder: Path, convert: Callable[[str, Path], str]) -> Any:
     if not isinstance(node, Mapping) or key[0] not in node:
         return node
     value = node[key[0]]
     if len(key) > 1:
-        new = _replace(value, key[1:], folder)
-    elif isinstance(value, str) and value and not os.path.isabs(value):
-        new = str(folder / value)
+        new = _replace(value, key[1:], folder, convert)
+    elif isinstance(value, str) and value:
+        new = convert(value, folder)
     else:
         return node
     return {**node, key[0]: new}

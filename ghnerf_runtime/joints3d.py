@@ -3,7 +3,8 @@
 * :func:`triangulate_joints` -- DLT of the two views' decoded 2D peaks (in the crop cameras,
   so no lens model is involved), weighted by peak confidence, with a per-joint reprojection
   check: a joint whose reprojection error exceeds ``max_reprojection_px`` in either view is
-  missing (with two views the culprit cannot be told, so neither is trusted).
+  missing (with two views the culprit cannot be told, so neither is trusted), and so is one
+  whose rays meet at less than ``min_ray_angle_deg`` (too far for its baseline to give a depth).
 * :func:`volumetric_joints` -- the ``query`` graph's joint heatmap head evaluated on a regular
   grid inside the subject box (:func:`query_grid`), averaged over the two source volumes; per
   joint the weighted centroid of the grid points near its maximum (sub-cell estimate).
@@ -117,7 +118,8 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
         confidence: ``(C, J)`` peak values.
         valid: ``(C, J)`` decoded.
         cameras: the C pinhole crop cameras (``preprocess.crop_camera``).
-        config: ``max_reprojection_px``, ``min_view_confidence``.
+        config: ``max_reprojection_px``, ``min_view_confidence``, ``min_ray_angle_deg`` (a joint whose rays
+            meet at a smaller angle is missing: nearly parallel rays give no depth worth reporting).
 
     Returns:
         :class:`Joints3D`; confidence is the geometric mean of the views' peak values.
@@ -139,10 +141,12 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
     mats = [np.asarray(c.P if isinstance(c, Camera) else c, dtype=np.float64) for c in cameras]  # pinhole: P suffices
     if len(mats) == 2:  # the rig: the lean two-view solver (same results, a third of the numpy calls)
         res = triangulate_two_views(np.where(use[..., None], uv, 0.0), np.stack(mats), weights,
-                                    max_reprojection_error=config.max_reprojection_px)
+                                    max_reprojection_error=config.max_reprojection_px,
+                                    min_ray_angle_deg=config.min_ray_angle_deg)
     else:
         res = triangulate_robust(np.where(use[..., None], uv, 0.0), mats, weights, undistorted=True,
-                                 max_reprojection_error=config.max_reprojection_px)
+                                 max_reprojection_error=config.max_reprojection_px,
+                                 min_ray_angle_deg=config.min_ray_angle_deg)
     both = use.all(axis=0)
     good = res.valid & both
     # the C-th root: a square root is the geometric mean of two views only (three views of 0.8 gave 0.72)

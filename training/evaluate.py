@@ -36,7 +36,8 @@ Per held-out scene (one ``MultiViewDataset`` item), every metric from ``ghnerf_r
   source's MPJPE is also given **gated** (``*_mpjpe_gated_mm``, with the share of joints kept,
   ``*_mpjpe_gated_found``, and its split by visibility): the runtime's triangulation
   (``joints3d.triangulate_joints``, default ``Joints3DConfig``: a joint whose views disagree beyond
-  the reprojection gate, or whose peak is weak, is missing), so the card states what a device reports.
+  the reprojection gate, whose rays are nearly parallel (``min_ray_angle_deg``), or whose peak is weak,
+  is missing), so the card states what a device reports.
 * **Skeleton prior** (an ONNX folder with ``skeleton_prior.onnx`` the runtime accepts): the prior run on
   the flip-tested encoder joints, as the runtime runs it (with its own flip test):
   ``skeleton_prior_mpjpe_mm`` over every true joint, and ``skeleton_prior_gated_mpjpe_mm`` /
@@ -534,7 +535,7 @@ def _part_scores(totals: Mapping[str, list[int]]) -> dict[str, float | None]:
 
 
 #: The runtime's triangulation (``joints3d.triangulate_joints`` with the default ``Joints3DConfig``:
-#: reprojection gate, minimum view confidence), applied to the eval's crops for the gated MPJPE.
+#: reprojection gate, minimum view confidence, minimum ray angle), applied to the eval's crops for the gated MPJPE.
 RUNTIME_TRIANGULATION = Joints3DConfig()
 
 

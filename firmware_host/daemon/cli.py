@@ -33,7 +33,6 @@ import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from urllib.parse import parse_qs, urlsplit
 
 import drivers
 from drivers.backends.opencv import is_nominal_rig
@@ -82,13 +81,37 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) 
     :raises DaemonConfigError: naming the key.
     """
     try:
-        drivers.create_rig_source(config.rig.url)  # parses and checks the options; opens nothing
+        _check_rig_url(config.rig.url)
+    except DaemonConfigError as e:  # a file it names, read from the config file's folder: say so, as for models
+        why = str(e).split(": ", 1)[-1]
+        raise DaemonConfigError(why + _where_url_read(why, source), key="rig.url") from None
+    check_sink_urls(config.sinks)
+    model_dir = resolve_model_dir(config.estimator.session.model_dir)
+    if not model_dir.is_dir():
+        # said "holds no *.onnx graphs (make model builds ./models)": the example config's relative
+        # "models", read from another folder than the repository's, sent the user to a two-hour build
+        raise DaemonConfigError(f"{model_dir}: {'not a folder' if model_dir.exists() else 'no such folder'}"
+                                f"{_where_read(model_dir, source)}", key="estimator.session.model_dir")
+    if not any(model_dir.glob("*.onnx")):
+        raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
+                                key="estimator.session.model_dir")
+
+
+def _check_rig_url(text: str) -> None:
+    """:func:`check_config` of ``rig.url``: it parses for its backend, a rig file it names loads and fits the
+    joint stream, webcams come with their calibration.
+
+    :raises DaemonConfigError: keyed ``rig.url``.
+    """
+    try:
+        drivers.create_rig_source(text)  # parses and checks the options; opens nothing
     except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
         raise DaemonConfigError(str(e), key="rig.url") from None
     except drivers.DriverError:
         pass  # a recording or device not there yet: the daemon waits for it, so the config is fine
-    rig_file = parse_qs(urlsplit(config.rig.url).query).get("rig")
-    url = RigUrl.parse(config.rig.url)
+    url = RigUrl.parse(text)
+    # as the backend reads it ('+' a plus): parse_qs read rig=/etc/rig+1.json as '/etc/rig 1.json'
+    rig_file = url.options.get("rig")
     if url.scheme == "opencv" and not rig_file:
         # Its rig without a file is a nominal one, for ghcal capture: 3D joints from it would be wrong.
         raise DaemonConfigError("opencv:// cameras need their calibration: add rig=/path/to/rig.json (ghcal solve)",
@@ -105,25 +128,23 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) 
                                     "again with rig=/path/to/rig.json (ghcal solve)", key="rig.url")
     if rig_file:  # a calibration of our own (ghcal): the stream announces its id and camera names
         try:
-            rig = load_rig(rig_file[0])
+            rig = load_rig(rig_file)
         except RuntimeErrorBase as e:
             raise DaemonConfigError(str(e), key="rig.url") from None
         names = [("rig id", rig.rig_id, MAX_RIG_ID_LEN)] + [("camera name", c.name, MAX_CAMERA_NAME_LEN)
                                                             for c in rig.pair]
-        for what, text, limit in names:
-            if not (0 < len(text) <= limit and text.isascii() and text.isprintable()):
-                raise DaemonConfigError(f"{rig_file[0]}: its {what} {text!r} cannot go in the joint stream's HELLO "
+        for what, name, limit in names:
+            if not (0 < len(name) <= limit and name.isascii() and name.isprintable()):
+                raise DaemonConfigError(f"{rig_file}: its {what} {name!r} cannot go in the joint stream's HELLO "
                                         f"(printable ASCII, at most {limit} characters)", key="rig.url")
-    check_sink_urls(config.sinks)
-    model_dir = resolve_model_dir(config.estimator.session.model_dir)
-    if not model_dir.is_dir():
-        # said "holds no *.onnx graphs (make model builds ./models)": the example config's relative
-        # "models", read from another folder than the repository's, sent the user to a two-hour build
-        raise DaemonConfigError(f"{model_dir}: {'not a folder' if model_dir.exists() else 'no such folder'}"
-                                f"{_where_read(model_dir, source)}", key="estimator.session.model_dir")
-    if not any(model_dir.glob("*.onnx")):
-        raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
-                                key="estimator.session.model_dir")
+
+
+def _where_url_read(why: str, source: str | os.PathLike | None) -> str:
+    """The hint of :func:`_where_read` for a rig URL's error that names a path in the config file's folder
+    (``drivers.url_paths`` read a relative one from there)."""
+    if source is not None and f"{config_folder(source)}{os.sep}" in why:
+        return f" (a relative path in {source} is read from its folder, {config_folder(source)})"
+    return ""
 
 
 def _where_read(folder: Path, source: str | os.PathLike | None) -> str:

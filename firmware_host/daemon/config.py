@@ -24,7 +24,8 @@ from typing import Any, Mapping
 
 from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
-from ghnerf_runtime.config_paths import paths_from_file
+from drivers.url_paths import rig_url_from_folder
+from ghnerf_runtime.config_paths import paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
 
 __all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "daemon_config_from_dict",
@@ -33,6 +34,10 @@ __all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "da
 LOG_LEVELS = ("debug", "info", "warning", "error")
 #: The keys holding file-system paths: a relative one written in the config file is read from the file's folder.
 DAEMON_PATH_KEYS: tuple[tuple[str, ...], ...] = (("health", "status_file"),) + tuple(("estimator",) + k for k in PATH_KEYS)
+#: The keys holding rig URLs: a relative file path in one (``replay://takes/walk``, ``rig=rig.json``) is read from
+#: the file's folder too (``drivers.url_paths``). Sink URLs name no relative file: ``file://`` and ``serial://``
+#: take absolute paths only.
+DAEMON_RIG_URL_KEYS: tuple[tuple[str, ...], ...] = (("rig", "url"),)
 #: Time one estimate may take on top of a read before the watchdog's allowance runs out (see DaemonConfig).
 LOOP_MARGIN_S = 5.0
 
@@ -214,11 +219,14 @@ def daemon_config_from_dict(data: Mapping[str, Any]) -> DaemonConfig:
 
 def load_daemon_config(path: str | os.PathLike) -> DaemonConfig:
     """Read the daemon's JSON config file; every error names the file and the key. Relative paths written in
-    it (``estimator.session.model_dir``, ``health.status_file``) are read from the file's folder, whatever the
-    current directory (:mod:`ghnerf_runtime.config_paths`). (The tree back to plain data, for
-    ``--validate-config``, is the runtime's ``config_to_dict``: it walks any dataclass tree.)"""
+    it (``estimator.session.model_dir``, ``health.status_file``, and the files in ``rig.url``: a replay:// take,
+    ``rig=``, ``bvh=``...) are read from the file's folder, whatever the current directory
+    (:mod:`ghnerf_runtime.config_paths`). (The tree back to plain data, for ``--validate-config``, is the
+    runtime's ``config_to_dict``: it walks any dataclass tree.)"""
     data = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
+    data = values_from_file(paths_from_file(data, DAEMON_PATH_KEYS, path), DAEMON_RIG_URL_KEYS, path,
+                            rig_url_from_folder)
     try:
-        return daemon_config_from_dict(paths_from_file(data, DAEMON_PATH_KEYS, path))
+        return daemon_config_from_dict(data)
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None

@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, RoiConfig, TrackingConfig
+from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.estimator import check_crop
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.joints3d import depth_centroid_joints, query_grid, triangulate_joints, volumetric_joints
@@ -17,6 +19,7 @@ from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, scatter_
 from ghnerf_runtime.tracking import SubjectTracker, snap_roi, track_from_joints
 
 K128 = [[150.0, 0.0, 63.5], [0.0, 150.0, 63.5], [0.0, 0.0, 1.0]]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _cams():
@@ -153,6 +156,50 @@ def test_triangulation_gates_views_that_disagree():
     low = np.full((2, 5), 0.7)
     low[0, 0] = 0.05  # below min_view_confidence: one view only
     assert not triangulate_joints(uv, low, np.ones((2, 5), bool), cams, Joints3DConfig()).valid[0]
+
+
+def test_triangulation_drops_a_joint_too_far_for_its_baseline():
+    """A joint 30 m from a 10 cm baseline (rays 0.19 degrees apart) came back valid: the solvers' own gate
+    (0.1 degree) only rejects the numerically degenerate, and one pixel there is metres of depth."""
+    cams = [Camera(n, 128, 128, K128, [], *look_at((x, -1.2, 0.0), (0.0, -1.2, 30.0))) for n, x in (("a", -0.05),
+                                                                                                     ("b", 0.05))]
+    X = np.array([[0.0, -1.2, 3.0], [0.2, -1.0, 30.0]])
+    uv = np.stack([c.project(X)[0] for c in cams])
+    a, b = (X[1] - c.center for c in cams)
+    assert round(float(np.degrees(np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b)))), 2) == 0.19
+    conf, seen = np.full((2, 2), 0.8), np.ones((2, 2), bool)
+    r = triangulate_joints(uv, conf, seen, cams, Joints3DConfig())
+    assert r.valid.tolist() == [True, False]  # missing as any other: 0, confidence 0
+    assert not r.points[1].any() and r.confidence[1] == 0 and np.allclose(r.points[0], X[0], atol=1e-6)
+    kept = triangulate_joints(uv, conf, seen, cams, Joints3DConfig(min_ray_angle_deg=0.1))  # the old gate
+    assert kept.valid.all() and np.allclose(kept.points, X, atol=1e-4)
+    three = cams + [Camera("c", 128, 128, K128, [], *look_at((0.0, -1.1, 0.0), (0.0, -1.2, 30.0)))]
+    uv3 = np.stack([c.project(X)[0] for c in three])  # the robust solver (more views) is gated the same way
+    r3 = triangulate_joints(uv3, np.full((3, 2), 0.8), np.ones((3, 2), bool), three, Joints3DConfig())
+    assert r3.valid.tolist() == [True, False]
+    for bad in (-1.0, 91.0, float("nan")):
+        with pytest.raises(ConfigError, match="min_ray_angle_deg"):
+            Joints3DConfig(min_ray_angle_deg=bad)
+
+
+def test_the_ray_angle_gate_keeps_every_joint_of_the_example_rig():
+    """The default sits below the smallest angle of a joint the estimator keeps on docs/examples/rig.json
+    (7.5 cm baseline): seen by both cameras, within ``max_outside_box_m`` of the working volume (docs/runtime.md)."""
+    from ghnerf_runtime.rig_file import load_rig
+
+    rig = load_rig(REPO / "docs" / "examples" / "rig.json")
+    cfg = Joints3DConfig()
+    lo = rig.volume.min_corner - cfg.max_outside_box_m
+    hi = rig.volume.max_corner + cfg.max_outside_box_m
+    grid = np.stack(np.meshgrid(*[np.linspace(lo[k], hi[k], 41) for k in range(3)], indexing="ij"), -1).reshape(-1, 3)
+    seen = np.ones(len(grid), bool)
+    for cam in rig.pair:
+        uv, _ = cam.project(grid)
+        seen &= np.isfinite(uv).all(-1) & (uv >= 0).all(-1) & (uv[:, 0] < cam.width) & (uv[:, 1] < cam.height)
+    a, b = (grid[seen] - cam.center for cam in rig.pair)
+    angle = np.degrees(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.abs((a * b).sum(-1))))
+    assert round(float(angle.min()), 2) == 0.71  # the figure docs/runtime.md gives
+    assert cfg.min_ray_angle_deg < angle.min()
 
 
 def test_triangulated_confidence_is_the_geometric_mean_of_any_number_of_views():

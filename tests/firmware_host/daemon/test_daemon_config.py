@@ -217,3 +217,66 @@ def test_relative_paths_in_the_file_are_read_from_its_folder(tmp_path, monkeypat
     path.write_text(json.dumps({"sinks": ["udp://127.0.0.1:9870"], "health": {"status_file": 3}}))
     with pytest.raises(DaemonConfigError, match=r"health\.status_file: must be a file path or null"):
         load_daemon_config(path)
+
+
+def test_relative_files_in_the_rig_url_are_read_from_the_files_folder(tmp_path, monkeypatch):
+    """As the plain path keys: a take, a rig file, a video named relative in rig.url (the daemon runs in '/')."""
+    from drivers.url import RigUrl
+
+    folder = tmp_path / "etc" / "my ghnerf#2"  # a space and a '#': percent-encoded in the URL, read back as such
+    folder.mkdir(parents=True)
+    path = folder / "daemon.json"
+    sink = "file:///var/log/joints%231.jsonl"
+
+    def load(url: str) -> RigUrl:
+        path.write_text(json.dumps({"rig": {"url": url}, "sinks": [sink]}))
+        config = load_daemon_config("etc/my ghnerf#2/daemon.json")  # a relative --config: its folder, absolute
+        assert config.sinks == (sink,)  # sinks take absolute paths only: as written
+        return RigUrl.parse(config.rig.url)
+
+    monkeypatch.chdir(tmp_path)
+    assert load("replay://takes/walk%2301?loop=1").target == str(folder / "takes/walk#01")
+    assert load("opencv://?first=takes/left.mp4&second=/dev/video2&rig=rigs/rig%20a+b.json").options == {
+        "first": str(folder / "takes/left.mp4"), "second": "/dev/video2", "rig": str(folder / "rigs/rig a+b.json")}
+    assert load("sim://?bvh=walk.bvh&cache=off").options == {"bvh": str(folder / "walk.bvh"), "cache": "off"}
+    assert load("replay:///data/take1").target == "/data/take1"  # absolute: kept
+    # not from a file (a command line, code): relative to the current directory, as the backends read it
+    assert daemon_config_from_dict({"rig": {"url": "replay://takes/walk"}, "sinks": [sink]}).rig.url \
+        == "replay://takes/walk"
+
+
+def test_a_missing_file_in_the_rig_url_names_its_resolved_path_and_the_config_file(tmp_path, monkeypatch):
+    from firmware_host.daemon.cli import read_checked_config
+
+    folder = tmp_path / "etc"
+    (folder / "models").mkdir(parents=True)
+    (folder / "models" / "x.onnx").write_bytes(b"")
+    (folder / "rigs").mkdir()
+    (folder / "rigs" / "rig+1.json").write_bytes(REPO_RIG.read_bytes())
+    path = folder / "daemon.json"
+    elsewhere = tmp_path / "cwd"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)  # where a relative path used to be read
+
+    def write(rig_file: str) -> None:
+        path.write_text(json.dumps({"rig": {"url": f"opencv://?first=0&second=2&rig={rig_file}"},
+                                    "sinks": [SINK], "estimator": {"session": {"model_dir": "models"}}}))
+
+    write("rigs/rig%2B1.json")
+    read_checked_config(str(path))  # found beside the file
+    write("rigs/missing.json")
+    with pytest.raises(DaemonConfigError) as e:
+        read_checked_config(str(path))
+    assert str(e.value).startswith(f"{path}: rig.url: ")
+    assert f"file {folder / 'rigs' / 'missing.json'}: cannot read rig file" in str(e.value)
+    assert str(e.value).endswith(f" (a relative path in {path} is read from its folder, {folder})")
+
+
+def test_check_config_reads_a_plus_in_the_rig_file_as_the_backend_does(tmp_path):
+    # parse_qs read rig=/etc/rig+1.json as '/etc/rig 1.json', which the backend (a '+' is a plus) never opens
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "x.onnx").write_bytes(b"")
+    (tmp_path / "rig+1.json").write_bytes(REPO_RIG.read_bytes())
+    check_config(daemon_config_from_dict({"rig": {"url": f"opencv://?first=0&second=2&rig={tmp_path}/rig+1.json"},
+                                          "sinks": [SINK], "estimator": {"session": {"model_dir": str(models)}}}))

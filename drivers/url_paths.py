@@ -1,0 +1,104 @@
+"""Relative file paths inside a rig URL written in a config file, read from the file's folder.
+
+A config file reads its plain paths (``session.model_dir``, ``health.status_file``) from its own folder
+(``ghnerf_runtime.config_paths``); its rig URL must name files the same way, not from the daemon's
+current directory (``/`` under systemd). :data:`FILE_PARTS` says which parts of each scheme's URL name a
+file; :func:`rig_url_from_folder` makes the relative ones absolute and leaves every other byte as written.
+A URL typed on a command line never comes here: there a relative path stays relative to the current
+directory, as the backends read it.
+"""
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import quote, unquote
+
+__all__ = ["FileParts", "FILE_PARTS", "rig_url_from_folder"]
+
+
+def _any_path(value: str) -> bool:
+    return True
+
+
+def _not_off(value: str) -> bool:
+    return value != "off"  # sim://?cache=off turns the cache off; any other value is its folder
+
+
+def _video_file(value: str) -> bool:
+    # opencv:// also takes device indices, /dev nodes, stream URLs and GStreamer pipelines: only a file is a path.
+    # Imported here, as the registry imports a backend: only for a URL of that scheme.
+    try:
+        from drivers.backends.opencv import is_video_file
+    except ImportError:  # no OpenCV: the URL is left as written, and opening it reports the backend missing
+        return False
+    return is_video_file(value)
+
+
+@dataclass(frozen=True)
+class FileParts:
+    """The parts of one scheme's URL that name files.
+
+    Attributes:
+        target: what follows ``scheme://`` up to ``?`` is a path (``replay://takes/walk``).
+        options: option name -> whether a value of it names a file (``cache=off`` does not).
+    """
+
+    target: bool = False
+    options: Mapping[str, Callable[[str], bool]] = field(default_factory=dict)
+
+
+#: Every scheme of ``drivers.registry.BACKENDS`` (a test keeps the two in step). ``record+`` URLs are not
+#: here: the daemon, the one program whose config file holds a rig URL, refuses them.
+FILE_PARTS: Mapping[str, FileParts] = {
+    "replay": FileParts(target=True),
+    "sim": FileParts(options={"bvh": _any_path, "cache": _not_off}),
+    "opencv": FileParts(options={"rig": _any_path, "first": _video_file, "second": _video_file}),
+    "depthai": FileParts(options={"rig": _any_path}),
+}
+
+
+def _absolute(value: str, folder: Path) -> str | None:
+    """``value`` read from ``folder`` as :func:`ghnerf_runtime.config_paths.paths_from_file` reads a plain path;
+    None when it is empty or already absolute (kept as written)."""
+    if not value or os.path.isabs(value):
+        return None
+    return str(folder / value)
+
+
+def rig_url_from_folder(url: str, folder: str | os.PathLike) -> str:
+    """``url`` with each relative file path in it (:data:`FILE_PARTS`) made absolute against ``folder``.
+
+    The new path is percent-encoded (a space, ``#``, ``%``, ``&`` or ``+`` in the folder or the path reads
+    back as itself through :class:`drivers.url.RigUrl`); the rest of the URL, the other options and their
+    encoding included, is kept byte for byte. A URL of an unknown scheme, or one its parser refuses
+    (no ``://``, a ``#``), is returned as it is, for the backend to report.
+
+    >>> rig_url_from_folder("opencv://?first=0&second=/dev/video2&rig=rigs/a%20b.json", "/etc/ghnerf")
+    'opencv://?first=0&second=/dev/video2&rig=/etc/ghnerf/rigs/a%20b.json'
+    >>> rig_url_from_folder("replay://takes/walk?loop=1", "/etc/ghnerf")
+    'replay:///etc/ghnerf/takes/walk?loop=1'
+    """
+    if not isinstance(url, str) or "://" not in url or "#" in url:
+        return url
+    scheme, _, rest = url.partition("://")
+    parts = FILE_PARTS.get(scheme.lower())
+    if parts is None:
+        return url
+    folder = Path(os.path.abspath(folder))
+    target, question, query = rest.partition("?")  # urlsplit's netloc + path: everything before the '?'
+    if parts.target:
+        new = _absolute(unquote(target), folder)
+        if new is not None:  # absolute, so scheme:///path: an empty host, as replay:///data/take1
+            target = quote(new, safe="/")
+    if query and parts.options:
+        pieces = []
+        for piece in query.split("&"):  # as parse_qsl splits it; '+' is a plus there (drivers.url)
+            key, equals, value = piece.partition("=")
+            names_file = parts.options.get(unquote(key))
+            plain = unquote(value)
+            new = _absolute(plain, folder) if equals and names_file is not None and names_file(plain) else None
+            pieces.append(piece if new is None else f"{key}={quote(new, safe='/')}")
+        query = "&".join(pieces)
+    return f"{scheme}://{target}{question}{query}"

@@ -1,0 +1,48 @@
+"""Relative file paths inside a rig URL written in a config file: read from the file's folder."""
+from __future__ import annotations
+
+import pytest
+
+from drivers.registry import BACKENDS
+from drivers.url import RigUrl
+from drivers.url_paths import FILE_PARTS, rig_url_from_folder
+
+#: A folder with every character that needs encoding in a URL path or query value.
+ODD = "/srv/my cfg#1 %23+&=?x"
+
+
+def test_every_backend_says_which_parts_of_its_url_are_files():
+    # a new backend with a file option would otherwise read it from the daemon's current directory ('/')
+    assert set(FILE_PARTS) == set(BACKENDS)
+
+
+@pytest.mark.parametrize("url, target, options", [
+    ("replay://takes/walk?loop=1", f"{ODD}/takes/walk", {"loop": "1"}),
+    ("replay://take%2320/a%20b", f"{ODD}/take#20/a b", {}),  # the path's own %-escapes survive
+    ("opencv://?first=take/left.mp4&second=0&rig=rigs/a+b.json&fps=30",
+     "", {"first": f"{ODD}/take/left.mp4", "second": "0", "rig": f"{ODD}/rigs/a+b.json", "fps": "30"}),
+    # an image sequence's %04d is a file; a stream URL and a GStreamer pipeline are not
+    ("opencv://?first=seq/%2504d.png&second=rtsp%3A%2F%2Fcam%2Fs&rig=r.json",
+     "", {"first": f"{ODD}/seq/%04d.png", "second": "rtsp://cam/s", "rig": f"{ODD}/r.json"}),
+    ("opencv://?first=v4l2src%20!%20appsink&second=/dev/video2&rig=/etc/rig.json",
+     "", {"first": "v4l2src ! appsink", "second": "/dev/video2", "rig": "/etc/rig.json"}),
+    ("sim://?bvh=walk.bvh&cache=off&fps=30", "", {"bvh": f"{ODD}/walk.bvh", "cache": "off", "fps": "30"}),
+    ("sim://?cache=cache", "", {"cache": f"{ODD}/cache"}),
+    ("depthai://14442C10?rig=rig.json&fps=30", "14442C10", {"rig": f"{ODD}/rig.json", "fps": "30"}),
+])
+def test_relative_files_are_read_from_the_folder_and_survive_the_encoding(url, target, options):
+    parsed = RigUrl.parse(rig_url_from_folder(url, ODD))
+    assert (parsed.target, parsed.options) == (target, options)
+
+
+@pytest.mark.parametrize("url", [
+    "replay:///var/lib/ghnerf/take%231?loop=1",  # absolute: as written
+    "sim://?fps=30&seed=0&motion=wave",  # no file in it
+    "opencv://?first=/dev/video0&second=2&rig=/etc/ghnerf/rig.json",
+    "record+sim://?out=takes/t1",  # refused by the daemon, with the URL as the user wrote it
+    "foo://bar/baz",  # unknown scheme: the registry names it
+    "replay://takes/walk#2",  # a fragment: RigUrl refuses it, naming it
+    "no url",
+])
+def test_other_urls_are_kept_byte_for_byte(url):
+    assert rig_url_from_folder(url, ODD) == url
