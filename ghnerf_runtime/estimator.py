@@ -66,8 +66,8 @@ from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presence, gate_to_box, query_grid, \
     triangulate_joints, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
-from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, draw_skeleton, heatmap_overlay, \
-    interpolate_camera, novel_target, render_novel_view
+from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
+    novel_target, render_novel_view, skeleton_overlay
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
@@ -992,8 +992,7 @@ class Estimator:
         t = time.perf_counter()
         image = nv.image
         if request.overlay == "skeleton":
-            uv, depth = nv.camera.project(j3.points, distort=False)
-            image = draw_skeleton(image, np.nan_to_num(uv), j3.valid & (depth > 0))
+            image = skeleton_overlay(image, nv.camera, j3.points, j3.valid)
         elif request.overlay == "heatmap" and nv.heat is not None:
             image = heatmap_overlay(image, nv.heat)
         timing["novel_compose"] = timing.get("novel_compose", 0.0) + 1e3 * (time.perf_counter() - t)

@@ -45,7 +45,8 @@ from ghnerf_runtime.rays import (
 from ghnerf_runtime.tracking import box_corners
 
 __all__ = ["NovelViewRequest", "NovelView", "slerp_rotation", "interpolate_camera", "fit_intrinsics",
-           "novel_target", "check_strides", "render_novel_view", "opaque_colour", "draw_skeleton", "heatmap_overlay"]
+           "novel_target", "check_strides", "render_novel_view", "opaque_colour", "draw_skeleton", "skeleton_overlay",
+           "heatmap_overlay"]
 
 
 @dataclass(frozen=True)
@@ -282,9 +283,12 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         feeds["ray_uv"] = np.concatenate([cells_ray_uv(m, s) for m, s in groups])[None]
         out = session.run(graph, feeds)
         colour = opaque_colour(out["rgb"][0], out["acc"][0], contract.background, config.opaque_at)
-        channels = {"rgb": (colour, contract.background), "depth": (out["depth"][0], 0.0)}
+        # A failed ray (NaN, inf) is made the fill here, before the bilinear upsampling and interior filling
+        # below: there a NaN spread to every pixel the ray reaches (a 4x4 hole of heat at stride 2).
+        channels = {"rgb": (_finite(colour, contract.background), contract.background),
+                    "depth": (_finite(out["depth"][0], 0.0), 0.0)}
         if want_heat:
-            channels["heat"] = (out["heatmaps"][0].max(axis=-1), 0.0)
+            channels["heat"] = (_finite(out["heatmaps"][0], 0.0).max(axis=-1), 0.0)
         n_edge = 0 if edge is None else int(edge.sum())
         inside = None if sparse is None else \
             refine_cells(sparse.interior, config.silhouette_stride // stride) & in_box
@@ -300,7 +304,7 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         rgb, depth, heat = images["rgb"], images["depth"], images.get("heat")
         rays += sum(int(m.sum()) for m, _ in groups)
     t2 = time.perf_counter()
-    rgb = np.clip(np.nan_to_num(rgb, nan=contract.background), 0.0, 1.0)  # a failed ray shows nothing, not black
+    rgb = np.clip(rgb, 0.0, 1.0)  # finite: a failed ray was made the background above (nothing, not black)
     if stride > 1:
         rgb = cv2.resize(rgb, (contract.width, S), interpolation=cv2.INTER_LINEAR)
         if heat is not None:
@@ -310,8 +314,12 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         timing["novel_volume"] = 1e3 * (t1 - t0)
         timing["novel_render"] = 1e3 * (t2 - t1)
         timing["novel_compose"] = 1e3 * (time.perf_counter() - t2)
-    return NovelView(image, camera, np.nan_to_num(depth).astype(np.float32),
-                     None if heat is None else np.nan_to_num(heat).astype(np.float32), rays)
+    return NovelView(image, camera, depth.astype(np.float32), None if heat is None else heat.astype(np.float32), rays)
+
+
+def _finite(values: np.ndarray, fill: float) -> np.ndarray:
+    """``values`` with NaN and +-inf replaced by ``fill`` (what a ray that rendered nothing shows)."""
+    return np.nan_to_num(values, nan=fill, posinf=fill, neginf=fill)
 
 
 def opaque_colour(rgb: np.ndarray, acc: np.ndarray, background: float, opaque_at: float) -> np.ndarray:
@@ -382,23 +390,85 @@ def _silhouette_cells(session: Any, graph: str, feeds: dict, camera: Camera, box
 # ------------------------------------------------------------------ overlays
 def draw_skeleton(image: np.ndarray, uv: np.ndarray, valid: np.ndarray, *, color=(0, 255, 0),
                   joint_color=(0, 0, 255), thickness: int = 1) -> np.ndarray:
-    """Draw BODY_25 limbs between valid joints ``(J, 2)`` (pixels) on a copy of a BGR image."""
+    """Draw BODY_25 limbs between valid joints ``(J, 2)`` (pixels) on a copy of a BGR image.
+
+    Joints are drawn inside a window three times the image's size around it (``(-w, 2w) x (-h, 2h)``, so
+    that the integers OpenCV draws with stay small); a limb to a joint beyond it is cut at the window's
+    edge, not left out (a close view whose hand lies far off the picture still shows the forearm).
+    """
     out = np.array(image, copy=True)
     pts = np.asarray(uv, dtype=np.float64)
     ok = np.asarray(valid, bool) & np.all(np.isfinite(pts), axis=-1)
     h, w = out.shape[:2]
-    ok &= (pts[:, 0] > -w) & (pts[:, 0] < 2 * w) & (pts[:, 1] > -h) & (pts[:, 1] < 2 * h)
-    p = np.rint(np.where(ok[:, None], pts, 0)).astype(int)
+    window = (-w, 2 * w, -h, 2 * h)
+    near = ok & (pts[:, 0] > -w) & (pts[:, 0] < 2 * w) & (pts[:, 1] > -h) & (pts[:, 1] < 2 * h)
+    p = np.rint(np.where(near[:, None], pts, 0)).astype(int)
     for a, b in LIMBS:
-        if ok[a] and ok[b]:
-            cv2.line(out, tuple(int(v) for v in p[a]), tuple(int(v) for v in p[b]), color, thickness, cv2.LINE_AA)
-    for j in np.flatnonzero(ok):
+        if near[a] and near[b]:
+            ends = (p[a], p[b])
+        elif ok[a] and ok[b]:
+            ends = _clip_segment(pts[a], pts[b], window)
+            if ends is None:
+                continue
+        else:
+            continue
+        cv2.line(out, tuple(int(v) for v in ends[0]), tuple(int(v) for v in ends[1]), color, thickness, cv2.LINE_AA)
+    for j in np.flatnonzero(near):
         cv2.circle(out, tuple(int(v) for v in p[j]), max(1, thickness + 1), joint_color, -1, cv2.LINE_AA)
     return out
 
 
+def _clip_segment(a: np.ndarray, b: np.ndarray, window: tuple[float, float, float, float]
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The part of the segment ``a``-``b`` (pixels) inside ``window`` ``(x0, x1, y0, y1)``, rounded to whole
+    pixels, or ``None``. In float64 before any integer is made: a joint just in front of the camera plane
+    projects to 1e12 px and more. Each cut point is measured from the segment's nearer end (a cut next to
+    ``b`` reckoned as ``a + t d`` with ``t`` near 1 would lose ``b``'s digits to ``a``'s size)."""
+    d = b - a
+    if not np.all(np.isfinite(d)):
+        return None
+    t0, t1 = _liang_barsky(a, d, window)
+    if not t0 < t1:
+        return None
+    s0, s1 = _liang_barsky(b, -d, window)  # the same cut from b's end: s0 = 1 - t1, s1 = 1 - t0
+    start = a + t0 * d if t0 <= 0.5 else b - s1 * d
+    end = a + t1 * d if t1 <= 0.5 else b - s0 * d
+    return np.rint(start).astype(int), np.rint(end).astype(int)
+
+
+def _liang_barsky(a: np.ndarray, d: np.ndarray, window: tuple[float, float, float, float]) -> tuple[float, float]:
+    """Parameters ``(t0, t1)`` of the part of ``a + t d``, ``0 <= t <= 1``, inside ``window``; empty when
+    ``t0 >= t1`` (Liang-Barsky)."""
+    t0, t1 = 0.0, 1.0
+    for p, q in ((-d[0], a[0] - window[0]), (d[0], window[1] - a[0]), (-d[1], a[1] - window[2]),
+                 (d[1], window[3] - a[1])):
+        if p == 0.0:  # parallel to this edge: wholly inside or wholly outside it
+            if q < 0.0:
+                return 1.0, 0.0
+        elif p < 0.0:
+            t0 = max(t0, q / p)
+        else:
+            t1 = min(t1, q / p)
+    return t0, t1
+
+
+def skeleton_overlay(image: np.ndarray, camera: Camera, points: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The valid rig-frame joints ``(J, 3)`` projected into pinhole ``camera`` and drawn (:func:`draw_skeleton`).
+
+    Joints no pixel shows (behind or on the camera plane: ``Camera.project`` gives them NaN) are left out,
+    never drawn at a placeholder pixel."""
+    uv, depth = camera.project(points, distort=False)
+    return draw_skeleton(image, uv, np.asarray(valid, bool) & (depth > 0))
+
+
 def heatmap_overlay(image: np.ndarray, heat: np.ndarray, weight: float = 0.5) -> np.ndarray:
-    """Blend a ``(H, W)`` heatmap in [0, 1] (JET colours) over a BGR image of the same size."""
+    """Blend a ``(H, W)`` heatmap in [0, 1] (JET colours) over a BGR image of the same size.
+
+    Raises:
+        ValueError: ``weight`` is not within [0, 1] (outside it the blend leaves 0..255 and wraps round in uint8).
+    """
+    if not 0.0 <= weight <= 1.0:  # False for NaN too
+        raise ValueError(f"heatmap_overlay: weight must be within [0, 1], got {weight!r}")
     heat = np.clip(np.nan_to_num(np.asarray(heat, np.float32)), 0.0, 1.0)
     if heat.shape != image.shape[:2]:
         heat = cv2.resize(heat, (image.shape[1], image.shape[0]), interpolation=cv2.INTER_LINEAR)

@@ -394,3 +394,101 @@ def test_the_heatmap_overlay_rounds_its_blend_to_the_nearest_level():
     got = heatmap_overlay(image, heat)
     assert np.abs(got - exact).max() <= 0.5 + 1e-3
     assert np.array_equal(got[0, 0], image[0, 0])  # no heat: the picture itself
+
+
+# ------------------------------------------------------------------ extremes (session 50's numerical review)
+class FailedRaySession(DiscSession):
+    """The disc, with the rays within 0.75 px of the centre pixel (64.5, 64.5) failed: colour and heatmaps NaN,
+    depth +inf (``failed=True``), or rendered as an empty ray would be: background colour, heat 0, depth 0."""
+
+    def __init__(self, failed: bool):
+        super().__init__()
+        self.failed = failed
+
+    def run(self, graph, feeds):
+        out = super().run(graph, feeds)
+        if graph == "volume":
+            return out
+        bad = np.all(np.abs(feeds["ray_uv"][0] - 64.5) < 0.75, axis=-1)
+        out = {k: v.astype(np.float32) for k, v in out.items()}
+        out["rgb"][0, bad] = np.nan if self.failed else self.contract.background
+        out["depth"][0, bad] = np.inf if self.failed else 0.0
+        if "heatmaps" in out:
+            out["heatmaps"][0, bad] = np.nan if self.failed else 0.0
+        return out
+
+
+@pytest.mark.parametrize("config", [
+    NovelViewConfig(enabled=True, stride=2, silhouette_stride=0),  # upsampled x2
+    NovelViewConfig(enabled=True, stride=1, silhouette_stride=4, interior_stride=2),  # the interior filled in
+    NovelViewConfig(enabled=True, stride=1, silhouette_stride=0),
+], ids=["stride2", "interior", "stride1"])
+def test_a_failed_ray_renders_as_an_empty_ray_not_a_hole_around_it(config):
+    """A NaN ray shows what a ray that rendered nothing shows, and only where that ray would: before, the NaN
+    went through the bilinear upsampling (heat at stride 2) and the interior's filling (every channel), which
+    spread it to each pixel it reached (16 pixels of heat 0 at stride 2), and an inf depth came out as 3.4e38."""
+    env = {"images": np.zeros((2, 3, 128, 128), np.float32)}
+    failed, empty = (render_novel_view(FailedRaySession(f), env, _camera(), BOX, config, want_heat=True)
+                     for f in (True, False))
+    assert failed.rays == empty.rays
+    assert np.array_equal(failed.image, empty.image)
+    assert np.array_equal(failed.depth, empty.depth) and failed.depth.max() == pytest.approx(3.0)
+    assert np.array_equal(failed.heat, empty.heat)
+    centre = np.hypot(*(np.mgrid[:128, :128] - 64.5)) <= 3.0  # the failed ray's neighbourhood, inside the disc
+    assert np.count_nonzero(failed.heat[centre] == 0) <= 4  # the four failed pixels at stride 1; none upsampled
+
+
+def _diagonal_drawn(image, start, n):
+    """Whether the limb's green runs down the diagonal from ``start`` (past the joint's red dot) for ``n`` pixels."""
+    return all(image[start[1] + k, start[0] + k, 1] > 0 for k in range(3, n))
+
+
+@pytest.mark.parametrize("far", [1e3, 1e8, 1e18])
+@pytest.mark.parametrize("joints", [(1, 0), (15, 0)], ids=["far joint last", "far joint first"])
+def test_a_limb_to_a_joint_far_off_the_picture_is_cut_at_the_edge_not_left_out(far, joints):
+    """A close view whose joint lies beyond the drawing window (three times the picture) still shows the limb
+    towards it, the same line however far the joint is (each cut reckoned from the nearer end: from the far
+    end, 1e18 px swallowed the near end's digits). Before, the limb was left out."""
+    from ghnerf_runtime.novel_view import draw_skeleton
+
+    near_joint, far_joint = joints  # limbs (1, 0) Neck-Nose and (0, 15) Nose-REye: the far joint at either end
+    uv, valid = np.zeros((25, 2)), np.zeros(25, bool)
+    uv[near_joint], uv[far_joint] = (32.0, 16.0), (32.0 + far, 16.0 + far)  # down the diagonal
+    valid[[near_joint, far_joint]] = True
+    out = draw_skeleton(np.zeros((64, 64, 3), np.uint8), uv, valid)
+    assert _diagonal_drawn(out, (32, 16), 32)  # to the picture's edge (63, 47)
+    lit = np.argwhere(out[..., 1] > 0)
+    assert np.abs((lit[:, 1] - 32) - (lit[:, 0] - 16)).max() <= 2  # and only along the diagonal
+    uv[far_joint] = (128.0, 112.0)  # the cut point itself (the window's edge): the same picture
+    assert np.array_equal(out, draw_skeleton(np.zeros((64, 64, 3), np.uint8), uv, valid))
+
+
+def test_a_joint_no_pixel_shows_is_left_out_of_the_skeleton_not_drawn_at_the_corner():
+    """A joint 1e-10 m in front of the camera plane has no pixel (``Camera.project``: NaN). The estimator turned
+    the NaN into pixel (0, 0) and drew the joint and its limbs there."""
+    from ghnerf_runtime.novel_view import draw_skeleton, skeleton_overlay
+
+    cam = _camera()
+    points, valid = np.zeros((25, 3)), np.zeros(25, bool)
+    points[1] = BOX.mean(axis=0)  # the neck, in view
+    points[0] = cam.center + 1e-10 * cam.R[2] + 0.3 * cam.R[0]  # the nose, on the camera plane
+    valid[[0, 1]] = True
+    assert 0 < cam.to_camera(points[0])[2] <= 1e-9 and np.isnan(cam.project(points[0], distort=False)[0]).all()
+    image = np.zeros((128, 128, 3), np.uint8)
+    out = skeleton_overlay(image, cam, points, valid)
+    assert not out[:8, :8].any()  # nothing at the corner
+    uv, _ = cam.project(points[1], distort=False)
+    only_neck = np.zeros((25, 2))
+    only_neck[1] = uv
+    assert np.array_equal(out, draw_skeleton(image, only_neck, np.arange(25) == 1))
+
+
+@pytest.mark.parametrize("weight", [1.5, -0.5, float("nan")])
+def test_the_heatmap_overlay_refuses_a_weight_outside_0_1(weight):
+    # 1.5 over a white-ish picture: 200 * -0.5 + 0 * 1.5 = -100 wrapped round to 156 in uint8
+    from ghnerf_runtime.novel_view import heatmap_overlay
+
+    with pytest.raises(ValueError, match="weight"):
+        heatmap_overlay(np.full((4, 4, 3), 200, np.uint8), np.ones((4, 4), np.float32), weight)
+    full = heatmap_overlay(np.full((4, 4, 3), 200, np.uint8), np.ones((4, 4), np.float32), 1.0)
+    assert full[0, 0].tolist() == [0, 0, 128]  # weight 1: the colour map itself (JET at 1: dark red, BGR)
