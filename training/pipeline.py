@@ -602,11 +602,13 @@ def _set_aside_forced(cfg: PipelineConfig, forced: set[str]) -> None:
     for stage, folder in folders.items():
         if stage not in forced or not folder.exists():
             continue
-        log_p = folder / "log.jsonl"
-        if _pid_alive(folder / "train.pid") or (log_p.exists() and not (folder / "summary.json").exists()
-                                                and time.time() - log_p.stat().st_mtime < 180):
-            raise RuntimeError(f"--force {stage}: {folder} seems to be in use by a training run (train.pid or a "
-                               "fresh log.jsonl); wait for it or stop it first")
+        # The trainer and the pretraining hold train.pid while they run and remove it on the way out (Ctrl-C);
+        # after a kill it names a dead process. A fresh log.jsonl without summary.json also counted as in use,
+        # so --force right after a Ctrl-C was refused for three minutes.
+        if _pid_alive(folder / "train.pid"):
+            raise RuntimeError(f"--force {stage}: {folder} is in use by a training run (process "
+                               f"{(folder / 'train.pid').read_text().strip()} holds its train.pid); wait for it or "
+                               "stop it first")
         aside = folder.with_name(f"{folder.name}.replaced-{stamp}")
         n = 1
         while aside.exists():
@@ -700,9 +702,14 @@ def _check_pretrain_folder(cfg: PipelineConfig, variant: str) -> None:
     """Refuse to resume a pretraining run of another config or on another dataset (``--resume`` would
     carry on from its checkpoint)."""
     run = pretrain_dir(cfg, variant)
-    if (run / "last.pt").exists() and (run / "config.json").exists() and not _pretrain_config_matches(cfg, variant):
+    if _pid_alive(run / "train.pid"):  # (the pretraining holds it as the trainer does)
+        pid = (run / "train.pid").read_text().strip()
+        raise RuntimeError(f"{run}: a pretraining run is in progress (process {pid} holds its train.pid); wait for "
+                           "it or stop it")
+    held = (run / "last.pt").exists() or (run / "prev.pt").exists()  # prev.pt alone: resumed from it
+    if held and (run / "config.json").exists() and not _pretrain_config_matches(cfg, variant):
         raise RuntimeError(f"{run} holds a pretraining run with another config; move it away or pass --runs")
-    if (run / "last.pt").exists() and not _data_marker_ok(cfg, run):
+    if held and not _data_marker_ok(cfg, run):
         raise RuntimeError(f"{run} holds a pretraining run on another dataset ({DATA_MARKER} differs from "
                            f"{cfg.data}/dataset.json); move it away or pass --runs")
 

@@ -9,8 +9,9 @@ the encoder sees several times more images per minute than inside the full model
 has the measured figures).
 
 The run folder holds ``human.pt`` (the encoder's state dict and the model config it belongs to),
-``last.pt`` (resume), ``log.jsonl`` and ``summary.json``. Like ``ghnerf-train``, ``--resume`` refuses another
-config and a file that is no pretraining checkpoint (a ``human.pt`` copied to ``last.pt``), and cuts
+``last.pt`` and ``prev.pt`` (resume: ``training.pretrain_checkpoint``), ``log.jsonl``, ``summary.json`` and, while
+it runs, ``train.pid``. Like ``ghnerf-train``, ``--resume`` refuses another config or model config and a file that
+is no pretraining checkpoint (a ``human.pt`` copied to ``last.pt``), and cuts
 ``log.jsonl`` back to the checkpoint's step; the dataset is opened before anything is written; checkpoints
 are fsynced before their rename. ``ghnerf-train`` loads ``human.pt`` with
 ``human_init: "<run>/human.pt"``; the pipeline does both when the train config names a
@@ -47,9 +48,11 @@ from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
 from training.model_card import write_atomic
-from training.train import HEATMAP_SIGMA_HM_PX, DistInfo, Progress, apply_overrides, learning_rate, \
-    load_checkpoint, load_config_file, mirrored, model_config_of, refuse_another_config, refuse_existing_run, \
-    require_resume_keys, save_atomic, scene_order, seed_everything, truncate_log
+from training import pretrain_checkpoint
+from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
+    learning_rate, load_config_file, mirrored, model_config_of, refuse_another_config, refuse_another_model, \
+    refuse_existing_run, refuse_live_lock, require_resume_keys, save_atomic, scene_order, seed_everything, \
+    take_lock, truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -418,23 +421,27 @@ RESUME_MAY_CHANGE = ("iterations", "data", "threads", "device", "max_minutes", "
 RESUME_KEYS = ("human", "optimizer", "step")
 
 
-#: What to do about a damaged ``last.pt``: the trainer's advice (delete it, resume from the newest ``ckpt_*.pt``)
-#: would restart the pretraining from step 0 here, where no other checkpoint is kept.
-DAMAGED_HINT = ("the pretraining keeps no other checkpoint (its human.pt holds the encoder's weights of that step, "
-                "without the optimiser): restore last.pt from a copy, or move the folder away and start again; "
-                "deleting it alone makes --resume start again from step 0")
-
-
-def _check_resumable(cfg: PretrainConfig, last: Path) -> None:
-    """Refuse to resume ``last`` when it is no pretraining checkpoint (named keys missing), or under another
-    config (checkpoints from before the config was stored pass)."""
-    ck = load_checkpoint(last, hint=DAMAGED_HINT)
+def _check_resumable(cfg: PretrainConfig, last: Path, ck: dict) -> None:
+    """Refuse to resume ``last`` (loaded: ``ck``) when it is no pretraining checkpoint (named keys missing), under
+    another config (checkpoints from before the config was stored pass), or when the encoder it holds was built
+    from another model config (the preset changed since: its weights would not load)."""
     require_resume_keys(ck, last, RESUME_KEYS)
     old = ck.get("config")
     if old:
         now = json.loads(json.dumps(asdict(cfg)))
         was = {**now, **json.loads(json.dumps(old))}  # keys added since read as the new run's
         refuse_another_config(last, was, now, RESUME_MAY_CHANGE)
+    if "model_config" in ck:
+        refuse_another_model(last, ck["model_config"], cfg.model_config())
+
+
+def _refuse_existing_pretraining(out: Path) -> None:
+    """A new run must not overwrite another's checkpoints: ``last.pt`` (``refuse_existing_run``) or a ``prev.pt``
+    left alone (a crash between its two renames)."""
+    refuse_existing_run(out)
+    if (out / pretrain_checkpoint.PREV).exists():
+        raise ConfigError(f"{out}: holds a training run ({pretrain_checkpoint.PREV}); pass --resume to continue "
+                          "it, or another --out for a new run")
 
 
 def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, quiet: bool = False,
@@ -449,10 +456,12 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
               f"step feeds the trunk at input scale {cfg.coarse_input_scale}, none at the model's "
               f"({cfg.model_config().human.input_scale})", file=sys.stderr)
     out = Path(out_dir)
-    if resume and (out / "last.pt").exists():
-        _check_resumable(cfg, out / "last.pt")  # before config.json is overwritten with the new one
+    refuse_live_lock(out / "train.pid")  # a folder in use is named first, whatever else is wrong
+    start = pretrain_checkpoint.resume_point(out) if resume else None  # last.pt, else prev.pt
+    if start is not None:
+        _check_resumable(cfg, *start)  # before config.json is overwritten with the new one
     elif not resume:
-        refuse_existing_run(out)  # a new run never overwrites another's config.json and last.pt
+        _refuse_existing_pretraining(out)  # a new run never overwrites another's config.json and last.pt
     mcfg = cfg.model_config()
     targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride)
     # the dataset and its splits are opened (a missing one named) before anything is written
@@ -464,7 +473,21 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     if val is None and cfg.eval_every:
         val = MultiViewDataset(cfg.data, cfg.eval_split, targets)
     out.mkdir(parents=True, exist_ok=True)
+    # train.pid, as the trainer's: held while the run lives and removed on the way out (Ctrl-C too), so the pipeline
+    # tells a run in progress (a live pid) from one stopped a moment ago, which it may resume or set aside at once
+    take_lock(out / "train.pid")
+    try:
+        return _pretrain(cfg, out, start, quiet, ds, val)
+    finally:
+        (out / "train.pid").unlink(missing_ok=True)
+
+
+def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, quiet: bool, ds, val) -> dict:
     write_atomic(out / "config.json", json.dumps(asdict(cfg), indent=1))
+    # summary.json describes the invocation that wrote it (as the trainer's): an interrupted resume leaves none,
+    # not the previous invocation's (a stop_at part's "stopped early at step N" beside a last.pt of a later step)
+    (out / "summary.json").unlink(missing_ok=True)
+    mcfg = cfg.model_config()
     use_cuda = cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available())
     device = torch.device("cuda" if use_cuda else "cpu")
     if device.type == "cpu":
@@ -479,11 +502,17 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     params = list(model.human.parameters())
     opt = torch.optim.Adam(params, lr=cfg.lr)
     step = 0
-    last = out / "last.pt"
     ck = None
-    if resume and last.exists():
-        ck = load_checkpoint(last, map_location=device)
-        model.human.load_state_dict(ck["human"])
+    # last.pt becomes prev.pt at the next checkpoint only when it is good: after a resume from prev.pt (last.pt
+    # damaged), the damaged file is overwritten and the good prev.pt kept
+    rotate = start is None or start[0].name == pretrain_checkpoint.LAST
+    if start is not None:
+        path, ck = start
+        try:
+            model.human.load_state_dict(ck["human"])
+        except RuntimeError as e:  # a checkpoint from before model_config was stored, of another architecture
+            raise ConfigError(f"{path}: its encoder weights do not fit the {cfg.preset!r} model of this config "
+                              f"({' '.join(str(e).split())[:200]}); start a new run (another --out)") from e
         opt.load_state_dict(ck["optimizer"])
         step = int(ck["step"])
     clock = RunClock.resumed(ck, step, torch.get_num_threads())
@@ -497,9 +526,12 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     seed_everything(cfg.seed + 1)
 
     def checkpoint(s: int) -> None:
+        nonlocal rotate
         state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s,
-                 "segments": clock.segments(s), "config": asdict(cfg), "precision_probe": probed}
-        save_atomic(state, last)
+                 "segments": clock.segments(s), "config": asdict(cfg), "precision_probe": probed,
+                 "model_config": mcfg.to_dict()}
+        pretrain_checkpoint.save(state, out, rotate)
+        rotate = True
         save_human(out / "human.pt", model, s)
 
     truncate_log(out / "log.jsonl", step)  # records past the checkpoint would appear twice after a resume
@@ -626,6 +658,10 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, DataError) as e:  # while starting: a run folder in use, a resume under another config,
         print(f"error: {e}", file=sys.stderr)  # a file that is no checkpoint, a missing dataset or split
         return 2
+    except (FloatingPointError, CheckpointWriteError) as e:  # mid-run, as ghnerf-train: one line, last.pt intact
+        print(f"error: {'diverged' if isinstance(e, FloatingPointError) else 'checkpoint not written'}: {e}",
+              file=sys.stderr)
+        return 1
     print(json.dumps(summary, indent=1))
     return 0
 

@@ -596,17 +596,22 @@ class CheckpointWriteError(OSError):
     left as it was."""
 
 
-def save_atomic(state: Any, path: Path) -> None:
+def save_atomic(state: Any, path: Path, keep_previous: Path | None = None) -> None:
     """``torch.save`` through ``<path>.tmp``, fsynced, then renamed: a crash or power cut leaves the old file or
     the new one, never a renamed empty or half-written ``last.pt``. A failed write (a full disk, Ctrl-C) removes
     the half-written ``.tmp``, which would otherwise keep the disk full, and is a :class:`CheckpointWriteError`
-    naming ``path`` (torch's own error names neither the file nor the cause)."""
+    naming ``path`` (torch's own error names neither the file nor the cause).
+
+    ``keep_previous``: the file ``path`` held is renamed to it, once the new one is written whole (a crash
+    between the two renames leaves it and no ``path``: a reader falls back to it)."""
     tmp = path.with_suffix(".tmp")
     try:
         with open(tmp, "wb") as fh:
             torch.save(state, fh)
             fh.flush()
             os.fsync(fh.fileno())
+        if keep_previous is not None and path.exists():
+            os.replace(path, keep_previous)
         os.replace(tmp, path)
     except BaseException as e:
         tmp.unlink(missing_ok=True)
@@ -706,12 +711,12 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     if start is not None:
         check_resumable(cfg, start, world=info.world)  # before config.json is overwritten with the new one
     if info.main:
-        _refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
+        refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
     dataset = dataset if dataset is not None else open_dataset(cfg, info.world)
     if info.main:
         out_dir.mkdir(parents=True, exist_ok=True)
-        _take_lock(out_dir / "train.pid")
+        take_lock(out_dir / "train.pid")
         write_atomic(out_dir / "config.json", json.dumps(asdict(cfg), indent=1))
         # summary.json describes the invocation that wrote it: one stopped at max_minutes, then resumed and
         # interrupted, would still read "stopped early at step N" beside a last.pt of a later step
@@ -861,7 +866,7 @@ def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> N
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 
 
-def _refuse_live_lock(path: Path) -> None:
+def refuse_live_lock(path: Path) -> None:
     """One training process per run folder: refuse when ``path`` names another live process."""
     if path.exists():
         try:
@@ -873,8 +878,8 @@ def _refuse_live_lock(path: Path) -> None:
             pass  # stale lock
 
 
-def _take_lock(path: Path) -> None:
-    _refuse_live_lock(path)
+def take_lock(path: Path) -> None:
+    refuse_live_lock(path)
     path.write_text(str(os.getpid()))
 
 

@@ -779,6 +779,34 @@ def test_force_sets_aside_only_what_this_run_redoes_and_never_a_live_run(tmp_pat
         _set_aside_forced(cfg, {"train_ghnerf"})
 
 
+def test_force_right_after_a_ctrl_c_sets_the_run_aside_at_once(tmp_path):
+    """A trainer or a pretraining stopped by Ctrl-C leaves a fresh log.jsonl, no summary.json and no train.pid
+    (both remove it on the way out): ``--force`` used to take that for a run in use for three minutes."""
+    import os
+    import subprocess
+    import sys
+
+    from training.pipeline import PipelineConfig, _set_aside_forced
+
+    cfg = PipelineConfig(out=tmp_path / "m", runs=tmp_path / "runs", data=tmp_path / "data")
+    cfg.variants = ("ghnerf",)
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    for stage, name, pid in (("train_ghnerf", "edge128", None), ("pretrain_ghnerf", "edge128_human", None),
+                             ("pretrain_ghnerf", "edge128_human", gone.stdout.strip())):  # kill: a dead pid
+        run = cfg.runs / name
+        run.mkdir(parents=True)
+        (run / "log.jsonl").write_text('{"step": 50, "loss": 0.1}\n')  # written a moment ago
+        if pid:
+            (run / "train.pid").write_text(pid)
+        _set_aside_forced(cfg, {stage})
+        assert not run.exists()
+    assert len(list(cfg.runs.glob("edge128_human.replaced-*"))) == 2
+    (cfg.runs / "edge128_human").mkdir()
+    (cfg.runs / "edge128_human" / "train.pid").write_text(str(os.getpid()))  # a live pretraining
+    with pytest.raises(RuntimeError, match=f"in use by a training run \\(process {os.getpid()} holds"):
+        _set_aside_forced(cfg, {"pretrain_ghnerf"})
+
+
 def test_the_lanes_benchmark_estimates_each_plan_from_its_rates(tmp_path):
     """``benchmarks/time_lanes.py``: rates from a run's log after its warm-up records, and each plan's phases
     from the rates and the recipe's counts (hand-computed here; the benchmark itself runs real jobs)."""

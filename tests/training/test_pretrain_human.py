@@ -3,6 +3,7 @@ result into the joint trainer."""
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 
 import pytest
 
@@ -527,3 +528,184 @@ def test_a_non_finite_pretraining_step_leaves_the_weights_untouched(data64, pois
         pretrain_step(model, opt, images, heat, cfg, "fp32")
     assert all(torch.equal(weights[k], v) for k, v in model.human.state_dict().items() if k in weights
                and "running" not in k)  # BatchNorm's statistics move in the forward pass; the weights did not
+
+
+def _steps_of(path) -> int:
+    return int(torch.load(path, weights_only=False)["step"])
+
+
+@pytest.mark.parametrize("damage", ["torn", "non-finite", "missing"])
+def test_a_damaged_last_pt_resumes_from_prev_pt_which_is_kept(data64, tmp_path, capsys, damage):
+    """The pretraining kept last.pt alone: one file corrupted after it was written (or a NaN saved) lost the
+    whole run. The checkpoint before it is kept as prev.pt; --resume falls back to it in one line naming both,
+    and learns what the undamaged run did. The damaged last.pt is overwritten, never rotated over prev.pt."""
+    run = tmp_path / "p"
+    pretrain(tiny_pretrain(data64, eval_every=0), run, quiet=True)  # checkpoints at steps 1 and 2
+    assert _steps_of(run / "last.pt") == 2 and _steps_of(run / "prev.pt") == 1
+    want = torch.load(run / "human.pt", weights_only=True)["human"]
+    if damage == "torn":
+        (run / "last.pt").write_bytes((run / "last.pt").read_bytes()[:1000])
+    elif damage == "non-finite":
+        ck = torch.load(run / "last.pt", weights_only=False)
+        w = next(v for v in ck["human"].values() if v.is_floating_point())
+        w[(0,) * w.dim()] = float("nan")
+        torch.save(ck, run / "last.pt")
+    else:  # a crash between prev.pt's rename and last.pt's
+        (run / "last.pt").unlink()
+    capsys.readouterr()
+    summary = pretrain(tiny_pretrain(data64, eval_every=0), run, resume=True, quiet=True)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{run / 'last.pt'} " in err[0] and f"{run / 'prev.pt'} (step 1)" in err[0]
+    assert ("is missing" if damage == "missing" else "cannot be used") in err[0]
+    assert summary["steps"] == 2 and [g["steps"] for g in summary["segments"]] == [1, 1]
+    assert _steps_of(run / "last.pt") == 2 and _steps_of(run / "prev.pt") == 1  # the good prev.pt kept
+    got = torch.load(run / "human.pt", weights_only=True)["human"]
+    assert all(torch.equal(got[k], v) for k, v in want.items())
+    assert [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()] == [1, 2]
+
+
+def test_when_neither_checkpoint_reads_the_error_names_both_before_anything_is_written(data64, tmp_path):
+    run = tmp_path / "p"
+    pretrain(tiny_pretrain(data64, eval_every=0), run, quiet=True)
+    for name in ("last.pt", "prev.pt"):
+        (run / name).write_bytes((run / name).read_bytes()[:1000])
+    before = (run / "config.json").read_bytes()
+    with pytest.raises(ConfigError, match=r"last\.pt: unreadable checkpoint .*prev\.pt, cannot be used either "
+                                          r"\(unreadable checkpoint .*from step 0") as e:
+        pretrain(tiny_pretrain(data64, eval_every=0, iterations=3), run, resume=True, quiet=True)
+    assert "ckpt_" not in str(e.value)
+    assert (run / "config.json").read_bytes() == before
+    (run / "last.pt").unlink()  # prev.pt alone still holds a run: a new run there is refused
+    with pytest.raises(ConfigError, match=r"holds a training run \(prev\.pt\); pass --resume"):
+        pretrain(tiny_pretrain(data64, eval_every=0), run, quiet=True)
+
+
+def test_resume_refuses_a_checkpoint_of_another_model_before_anything_is_written(data64, tmp_path, monkeypatch):
+    """The preset changed since the checkpoint (same config, another encoder size): named by setting, not a
+    load_state_dict traceback after config.json was rewritten; a checkpoint from before model_config was stored
+    is named by its weights."""
+    import dataclasses
+
+    import training.pretrain_human as ph
+
+    run = tmp_path / "p"
+    pretrain(tiny_pretrain(data64, iterations=1, eval_every=0), run, quiet=True)
+    real = ph.model_config_of
+
+    def wider(name, overrides):
+        m = real(name, overrides)
+        return dataclasses.replace(m, human=dataclasses.replace(m.human, out_channels=16))
+
+    monkeypatch.setattr(ph, "model_config_of", wider)
+    before = (run / "config.json").read_bytes()
+    with pytest.raises(ConfigError, match=r"last\.pt: resuming under another model config \(human\.out_channels"):
+        pretrain(tiny_pretrain(data64, eval_every=0), run, resume=True, quiet=True)
+    assert (run / "config.json").read_bytes() == before
+    ck = torch.load(run / "last.pt", weights_only=False)
+    del ck["model_config"]  # as saved before it was stored
+    torch.save(ck, run / "last.pt")
+    with pytest.raises(ConfigError, match=r"last\.pt: its encoder weights do not fit the 'tiny' model"):
+        pretrain(tiny_pretrain(data64, eval_every=0), run, resume=True, quiet=True)
+
+
+def test_an_interrupted_resume_leaves_no_stale_summary_and_no_lock(data64, tmp_path, monkeypatch):
+    """summary.json describes the invocation that wrote it (as the trainer's): a stop_at part's "stopped early at
+    step 1" stayed beside a later last.pt when the resume was interrupted. Ctrl-C also removes train.pid."""
+    import training.pretrain_human as ph
+
+    run = tmp_path / "p"
+    first = pretrain(tiny_pretrain(data64, iterations=3, stop_at=1, eval_every=0), run, quiet=True)
+    assert first["stopped_early"] and (run / "summary.json").exists() and not (run / "train.pid").exists()
+    seen = []
+    real_step = ph.pretrain_step
+
+    def ctrl_c_at_step_3(*a, **kw):
+        seen.append((run / "train.pid").read_text())
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+        return real_step(*a, **kw)
+
+    monkeypatch.setattr(ph, "pretrain_step", ctrl_c_at_step_3)
+    with pytest.raises(KeyboardInterrupt):
+        pretrain(tiny_pretrain(data64, iterations=3, eval_every=0), run, resume=True, quiet=True)
+    import os
+    assert seen[0] == str(os.getpid())  # held while it ran
+    assert not (run / "summary.json").exists() and not (run / "train.pid").exists()
+    assert _steps_of(run / "last.pt") == 2
+
+
+def _wait_for(cond, seconds: float, what: str) -> None:
+    import time
+
+    deadline = time.monotonic() + seconds
+    while not cond():
+        if time.monotonic() > deadline:
+            pytest.fail(f"{what} within {seconds} s")
+        time.sleep(0.2)
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_pretraining_stopped_by_a_signal_is_resumed_or_forced_at_once_and_a_live_one_refused(data64, tmp_path,
+                                                                                               sig):
+    """The pipeline took a pretraining folder with a fresh log.jsonl and no summary.json for a run in progress:
+    ``--force pretrain`` right after a Ctrl-C was refused for three minutes, and a live pretraining in another
+    process was never refused by the resume. The pretraining now holds train.pid as the trainer does."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from training.pipeline import PipelineConfig, _check_pretrain_folder, _set_aside_forced
+
+    pcfg = PipelineConfig(out=tmp_path / "m", runs=tmp_path / "runs", data=tmp_path / "data")
+    pcfg.variants = ("ghnerf",)
+    run = tmp_path / "runs" / "edge128_human"
+    conf = tmp_path / "pre.json"
+    conf.write_text(json.dumps({**asdict(tiny_pretrain(data64)), "iterations": 100000, "eval_every": 0}))
+    repo = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(repo), os.environ.get("PYTHONPATH")]))}
+    proc = subprocess.Popen([sys.executable, "-m", "training.pretrain_human", "--config", str(conf), "--out",
+                             str(run), "--quiet"], cwd=repo, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(lambda: (run / "log.jsonl").exists() and (run / "last.pt").exists() or proc.poll() is not None,
+                  180, "no checkpoint")
+        assert proc.poll() is None, proc.stderr.read()
+        assert (run / "train.pid").read_text() == str(proc.pid)
+        with pytest.raises(RuntimeError, match=f"in progress \\(process {proc.pid} holds its train.pid\\)"):
+            _check_pretrain_folder(pcfg, "ghnerf")
+        with pytest.raises(RuntimeError, match=f"in use by a training run \\(process {proc.pid}"):
+            _set_aside_forced(pcfg, {"pretrain_ghnerf"})
+        with pytest.raises(RuntimeError, match=f"another training process \\({proc.pid}\\)"):
+            pretrain(tiny_pretrain(data64, iterations=100000, eval_every=0), run, resume=True, quiet=True)
+        proc.send_signal(getattr(signal, sig))
+        proc.wait(60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    # SIGINT: the lock removed on the way out; SIGTERM: left naming a dead process (as the trainer's)
+    assert not (run / "train.pid").exists() if sig == "SIGINT" else (run / "train.pid").exists()
+    step = _steps_of(run / "last.pt")
+    resumed = pretrain(tiny_pretrain(data64, iterations=step + 1, eval_every=0), run, resume=True, quiet=True)
+    assert resumed["steps"] == step + 1
+    (run / "summary.json").unlink()  # as if that resume was stopped too: a fresh log, no summary, no live pid
+    _set_aside_forced(pcfg, {"pretrain_ghnerf"})  # at once, not three minutes later
+    assert not run.exists() and len(list(run.parent.glob("edge128_human.replaced-*"))) == 1
+
+
+def test_the_cli_names_a_failed_checkpoint_write_or_a_divergence_in_one_line(data64, tmp_path, monkeypatch, capsys):
+    """ghnerf-train stops on these in one line (exit 1); the pretraining's CLI printed a traceback."""
+    import training.pretrain_human as ph
+    from training.train import CheckpointWriteError
+
+    for exc, kind in ((CheckpointWriteError("p/last.pt: cannot write the checkpoint (disk full)"), "checkpoint not "
+                       "written"), (FloatingPointError("step 3: non-finite loss (nan)"), "diverged")):
+        def fail(*a, **kw):
+            raise exc
+
+        monkeypatch.setattr(ph, "pretrain", fail)
+        assert main(["--out", str(tmp_path / "p"), "--set", 'preset="tiny"', "--data", str(data64)]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"error: {kind}: {exc}"]
