@@ -778,6 +778,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         # RuntimeErrorBase: a bad rig file (RigFileError) or geometry; OSError: a folder we cannot write
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # synth renders for about half a minute, solve detects and solves: no traceback
+        print(f"{PROG}: stopped (Ctrl-C); the {args.command} did not finish", file=sys.stderr)
+        return 130
     except Exception as e:  # noqa: BLE001 - a driver error in capture: one line, not a traceback
         import drivers
 

@@ -687,14 +687,19 @@ def open_eval_dataset(data: str, split: str, renderer: Renderer, label: str):
     return ds
 
 
+def _label(item: str) -> str:
+    """A ``--model`` item's label: before ``=``, else the spec's file or folder name."""
+    label, sep, _ = item.partition("=")
+    return label if sep else Path(item).stem
+
+
 def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple[str, Renderer, dict, object]]:
     """``(label, renderer, description, dataset)`` of every ``--model``: all loaded and checked before the first
     scene is rendered, so a bad spec fails in seconds, not after the models before it were scored."""
     out = []
     for item in specs:
-        label, sep, spec = item.partition("=")
-        if not sep:
-            label, spec = Path(item).stem, item
+        _, sep, spec = item.partition("=")
+        label, spec = _label(item), spec if sep else item
         renderer, desc = make_renderer(spec, threads)
         out.append((label, renderer, desc, open_eval_dataset(data, split, renderer, label)))
     return out
@@ -714,6 +719,12 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.limit < 0:
         ap.error(f"--limit: must be >= 0 (0: every scene), got {args.limit}")
+    if args.threads < 1:  # torch.set_num_threads raised a RuntimeError traceback
+        ap.error(f"--threads: must be at least 1, got {args.threads}")
+    labels = [_label(item) for item in args.model]
+    if dup := sorted({label for label in labels if labels.count(label) > 1}):
+        # two runs' last.pt are both "last": the second model's scores replaced the first's in the JSON
+        ap.error(f"--model: the label {', '.join(dup)} is given twice; name each model, e.g. --model a=runs/a/last.pt")
     if args.out:  # written after minutes of evaluation: its place is settled first
         args.out = ready_output_arg(ap, args.out, "--out")
     torch.set_num_threads(args.threads)
@@ -727,11 +738,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     results: dict = {"data": args.data, "split": args.split, "pck_alpha": PCK_ALPHA,
                      "pck_reference": "neck--mid-hip distance (fallback: torso box diagonal)", "models": {}}
-    for label, renderer, desc, ds in runs:
-        print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
-        results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
-        if args.out:  # each finished model kept, whole, whatever happens to the next
-            write_atomic(args.out, json.dumps(finite_or_none(results), indent=1))
+    try:
+        for label, renderer, desc, ds in runs:
+            print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
+            results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
+            if args.out:  # each finished model kept, whole, whatever happens to the next
+                write_atomic(args.out, json.dumps(finite_or_none(results), indent=1))
+    except KeyboardInterrupt:  # Ctrl-C: a line saying what was kept, not a traceback
+        done = ", ".join(results["models"]) or "none"
+        kept = f"; {args.out} holds them" if args.out and results["models"] else ""
+        print(f"ghnerf-eval: stopped (Ctrl-C); models finished: {done}{kept}", file=sys.stderr)
+        return 130
     print(json.dumps(finite_or_none(results), indent=1))
     return 0
 

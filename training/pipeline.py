@@ -995,7 +995,10 @@ def stage_eval(cfg: PipelineConfig, variant: str, ckpt: Path) -> tuple[list[Path
         argv += ["--limit", str(cfg.eval_limit)]
     for runtime in EVAL_RUNTIMES[variant]:
         argv += ["--model", f"{variant}_{runtime}={specs[runtime]}"]
-    if ev.main(argv) != 0:  # a bad input: ghnerf-eval has said which, in one line
+    rc = ev.main(argv)
+    if rc == 130:  # Ctrl-C: ghnerf-eval said so and what it kept; the pipeline stops as a Ctrl-C stops it
+        raise KeyboardInterrupt
+    if rc != 0:  # a bad input: ghnerf-eval has said which, in one line
         raise RuntimeError(f"eval_{variant}: ghnerf-eval refused its inputs (the line above names them)")
     return [out], {}
 

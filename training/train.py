@@ -697,6 +697,13 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     (this rank's copy). ``dataset`` replaces the ``MultiViewDataset`` of ``cfg.data`` (tests).
     """
     out_dir = Path(out_dir)
+    # named before the dataset opens or a file is written: these were tracebacks (exit 1), an --init one after
+    # config.json was written into the new run folder
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(f"{out_dir}: is a file; --out names the run folder")
+    for key in ("init", "human_init"):
+        if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
+            raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
     if not resume:
         refuse_existing_run(out_dir)  # before config.json is overwritten with the new one
     device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
@@ -715,7 +722,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     # a missing dataset or split, or one of another resolution: named before anything is written
     dataset = dataset if dataset is not None else open_dataset(cfg, info.world)
     if info.main:
-        out_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise ConfigError(f"{out_dir}: cannot make the run folder ({e.strerror or e})") from e
         take_lock(out_dir / "train.pid")
         write_atomic(out_dir / "config.json", json.dumps(asdict(cfg), indent=1))
         # summary.json describes the invocation that wrote it: one stopped at max_minutes, then resumed and
@@ -1114,6 +1124,10 @@ def main(argv: list[str] | None = None) -> int:
         if dist.is_initialized():
             dist.destroy_process_group()
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the checkpoints are whole (save_checkpoint), so say how to go on
+        print(f"ghnerf-train: stopped (Ctrl-C); `--resume --out {out}` continues from its last checkpoint",
+              file=sys.stderr)
+        return 130
     if int(os.environ.get("RANK", "0")) == 0:
         print(json.dumps(summary))
     if dist.is_initialized():

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from pathlib import Path
 
 import cv2
 import numpy as np
 
+from drivers.errors import RigConfigError
 from drivers.frames import CameraTruth
 from drivers.sim.motions import MOTION_NAMES
 from drivers.sim.placement import RigPlacement
@@ -39,16 +41,25 @@ def draw_truth(image: np.ndarray, truth: CameraTruth) -> np.ndarray:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="ghnerf-sim-demo", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="sim_pair.png", help="PNG file to write")
     parser.add_argument("--seed", type=int, default=0, help="scene seed (body, clothes, room)")
     parser.add_argument("--motion", default="wave", help=f"one of {', '.join(MOTION_NAMES)}, or a .bvh path")
     parser.add_argument("--t", type=float, default=0.3, help="scene time in seconds")
     args = parser.parse_args(argv)
+    # said before the render, as a usage error: cv2.imwrite raised a cv2.error traceback for these
+    if Path(args.out).is_dir():
+        parser.error(f"--out {args.out}: is a folder; give the PNG file's path")
+    if not cv2.haveImageWriter(args.out):
+        parser.error(f"--out {args.out}: cannot write an image of this kind; give .png or .jpg")
     rig = RigPlacement().build()
-    scene = SimScene(SceneConfig(seed=args.seed, motion=args.motion))
+    try:  # an unknown --motion, an unreadable .bvh, a --t of nan: one line naming it, not a traceback
+        scene = SimScene(SceneConfig(seed=args.seed, motion=args.motion))
+        rendered = scene.render_batch(rig.pair, args.t)
+    except RigConfigError as e:
+        parser.error(str(e))
     views = []
-    for cam, (image, truth) in zip(rig.pair, scene.render_batch(rig.pair, args.t)):
+    for cam, (image, truth) in zip(rig.pair, rendered):
         panel = draw_truth(image, truth)
         cv2.putText(panel, f"{cam.name}  t={args.t:.2f}s", (10, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2, cv2.LINE_AA)
         views.append(panel)

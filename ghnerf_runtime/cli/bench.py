@@ -146,19 +146,10 @@ def run_runtime_bench(args) -> dict:
     """
     from ghnerf_runtime.cli.simdata import Accuracy, depth_per_disparity_px, load_sequences
 
-    sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
-    depth_per_px = [1000 * depth_per_disparity_px(s.rig, s.info["distance_m"]) for s in sequences]
-    baselines = [s.rig.baseline for s in sequences]
-    print(f"rigs: baseline {min(baselines):.2f}-{max(baselines):.2f} m, "
-          f"subject at {min(s.info['distance_m'] for s in sequences):.1f}-"
-          f"{max(s.info['distance_m'] for s in sequences):.1f} m: 1 px of disparity error there is "
-          f"{min(depth_per_px):.0f}-{max(depth_per_px):.0f} mm of depth (median {np.median(depth_per_px):.0f}; "
-          f"z^2 / (f b))", flush=True)
-    report = {"model_dir": args.model_dir, "thread_pool": args.thread_pool, "allow_spinning": args.allow_spinning,
-              "pairs_per_run": sum(len(s) for s in sequences) - args.warmup, "interleaved": True,
-              "sequences": [{**s.info, "depth_mm_per_disparity_px": d} for s, d in zip(sequences, depth_per_px)],
-              "method": args.method, "runs": [],
-              "load_average_start": os.getloadavg(), "cpus": os.cpu_count()}
+    # The model and every row's config first (a missing model folder, --threads 0, a bad interior stride), the
+    # sequences after: those take minutes to render on a cold cache, and an error named after them wasted those.
+    load_average_start = os.getloadavg()
+    model_desc = None
     rows = []
     for precision, source in itertools.product(args.precisions, args.heatmap_sources):
         cfg = EstimatorConfig(
@@ -168,7 +159,7 @@ def run_runtime_bench(args) -> dict:
             joints3d=Joints3DConfig(method=args.method or BEST_METHOD[source]),
             novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
         session = load_session(cfg)
-        report["model"] = session.describe()
+        model_desc = session.describe()
         flips = (args.flip_tests or [None]) if source == "encoder" else [None]
         follows = (args.follow_encoder or [None]) if source == "rendered" else [None]
         priors = (args.skeleton_priors or [None]) if cfg.joints3d.method == "triangulate" else [None]
@@ -215,6 +206,19 @@ def run_runtime_bench(args) -> dict:
                              "painter_label": paint is not None,
                              "pipeline": bool(piped), "pipeline_label": piped is not None,
                              "lanes_label": lanes is not None})
+    sequences = load_sequences(args.sequences, args.frames, cache_dir=args.cache, seen_motions=args.seen_motions)
+    depth_per_px = [1000 * depth_per_disparity_px(s.rig, s.info["distance_m"]) for s in sequences]
+    baselines = [s.rig.baseline for s in sequences]
+    print(f"rigs: baseline {min(baselines):.2f}-{max(baselines):.2f} m, "
+          f"subject at {min(s.info['distance_m'] for s in sequences):.1f}-"
+          f"{max(s.info['distance_m'] for s in sequences):.1f} m: 1 px of disparity error there is "
+          f"{min(depth_per_px):.0f}-{max(depth_per_px):.0f} mm of depth (median {np.median(depth_per_px):.0f}; "
+          f"z^2 / (f b))", flush=True)
+    report = {"model_dir": args.model_dir, "thread_pool": args.thread_pool, "allow_spinning": args.allow_spinning,
+              "pairs_per_run": sum(len(s) for s in sequences) - args.warmup, "interleaved": True,
+              "sequences": [{**s.info, "depth_mm_per_disparity_px": d} for s, d in zip(sequences, depth_per_px)],
+              "method": args.method, "runs": [], "model": model_desc,
+              "load_average_start": load_average_start, "cpus": os.cpu_count()}
     loads = []
     for k, seq in enumerate(sequences):
         for row in rows[k % len(rows):] + rows[:k % len(rows)]:
@@ -433,6 +437,9 @@ def main(argv: list[str] | None = None) -> int:
     except (RuntimeErrorBase, OSError, OutputPathError) as e:
         print(f"ghnerf-bench: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # the --json report is written only when the bench ends: nothing half-written
+        print("ghnerf-bench: stopped (Ctrl-C); no report written", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -283,3 +283,42 @@ def test_ctrl_c_ends_the_run_with_its_summary(tmp_path, capsys, sim_url, monkeyp
     out = capsys.readouterr().out
     assert rc == 0 and "stopping: Ctrl-C" in out and "the rig delivered 3 pairs" in out
     assert (tmp_path / "sim_pair.png").is_file()
+
+
+def _main_no_escape(argv: list[str]) -> int:
+    """``demo.main``, with a Ctrl-C that escapes it (a traceback for the user) failing the test, not ending the run."""
+    try:
+        return demo.main(argv)
+    except KeyboardInterrupt:
+        pytest.fail("Ctrl-C escaped demo.main: the user saw a traceback")
+
+
+@needs_model
+def test_ctrl_c_in_an_estimate_ends_the_run_with_its_summary(tmp_path, capsys, sim_url, monkeypatch):
+    """The estimate is most of a pair's time, so that is where a Ctrl-C mostly lands: it was a traceback."""
+    original = Estimator.estimate
+    calls = {"n": 0}
+
+    def estimate(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Estimator, "estimate", estimate)
+    rc = _main_no_escape(["--url", sim_url, "--seconds", "20", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0 and "stopping: Ctrl-C" in out
+    assert _summary(out)[1] == 2  # the two pairs estimated before it
+    assert len(_joints_rows(tmp_path / "joints.jsonl")) == 2 and (tmp_path / "sim_pair.png").is_file()
+
+
+def test_ctrl_c_before_the_first_pair_exits_130_without_a_traceback(tmp_path, capsys, sim_url, monkeypatch):
+    import drivers
+
+    def source(url):  # the first open of sim:// renders the motion loop: a Ctrl-C there was a traceback
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(drivers, "create_rig_source", source)
+    assert _main_no_escape(["--truth-only", "--url", sim_url, "--out", str(tmp_path)]) == 130
+    assert "stopped (Ctrl-C)" in capsys.readouterr().err

@@ -102,6 +102,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="exit 0 even when onnxruntime strays from torch, or int8 from fp32, beyond "
                          "training.export.parity's bounds")
     args = ap.parse_args(argv)
+    # what torch raised a traceback for, after the export into OUT.staging (the frames) or before it (the threads)
+    if args.threads < 1:
+        ap.error(f"--threads: must be at least 1, got {args.threads}")
+    if args.calib_frames < 1:
+        ap.error(f"--calib-frames: must be at least 1, got {args.calib_frames}")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        ap.error(f"--out {args.out}: is a file; give the model folder")
     if args.calib_npz and not args.int8:  # calibration frames are only read for int8: ignoring them misleads
         ap.error("--calib-npz calibrates the int8 graphs: give --int8 with it")
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first

@@ -1,0 +1,94 @@
+"""The training tools' arguments and Ctrl-C (ghnerf-eval, ghnerf-train, python -m training.export): usage errors exit 2
+before the work, Ctrl-C exits 130 with a line, never a traceback."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytest.importorskip("torch")
+from training import evaluate  # noqa: E402
+
+
+def test_threads_below_one_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        evaluate.main(["--data", str(tmp_path), "--model", "m=x.pt", "--threads", "0"])
+    assert e.value.code == 2  # was torch's RuntimeError traceback
+    assert "--threads: must be at least 1, got 0" in capsys.readouterr().err
+
+
+def test_two_models_with_one_label_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    """Two runs' ``last.pt`` are both labelled "last": the second's scores replaced the first's in the JSON."""
+    monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))
+    with pytest.raises(SystemExit) as e:
+        evaluate.main(["--data", str(tmp_path), "--model", "runs/a/last.pt", "--model", "runs/b/last.pt"])
+    assert e.value.code == 2
+    assert "the label last is given twice" in capsys.readouterr().err
+
+
+def test_ctrl_c_exits_130_and_keeps_the_models_finished(tmp_path, capsys, monkeypatch):
+    runs = [(label, object(), {"kind": "stub"}, None) for label in ("a", "b")]
+    monkeypatch.setattr(evaluate, "prepare", lambda *a: runs)
+    calls = []
+
+    def scores(renderer, ds, limit, novel):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return {"pck@0.2": 0.5}
+
+    monkeypatch.setattr(evaluate, "evaluate", scores)
+    out = tmp_path / "m.json"
+    try:
+        rc = evaluate.main(["--data", str(tmp_path), "--model", "a=x.pt", "--model", "b=y.pt", "--out", str(out)])
+    except KeyboardInterrupt:
+        pytest.fail("Ctrl-C escaped ghnerf-eval: the user saw a traceback")
+    assert rc == 130
+    assert f"stopped (Ctrl-C); models finished: a; {out} holds them" in capsys.readouterr().err
+    assert list(json.loads(out.read_text())["models"]) == ["a"]
+
+
+# ------------------------------------------------------------------ ghnerf-train (same kind of checks)
+def test_train_refuses_a_file_for_its_run_folder_and_a_missing_init_before_writing(tmp_path, capsys):
+    from training.train import main
+
+    (tmp_path / "afile").write_text("")
+    assert main(["--preset", "tiny", "--data", str(tmp_path / "data"), "--out", str(tmp_path / "afile")]) == 2
+    assert f"{tmp_path / 'afile'}: is a file; --out names the run folder" in capsys.readouterr().err  # was mkdir's
+    run = tmp_path / "run"
+    assert main(["--preset", "tiny", "--data", str(tmp_path / "data"), "--out", str(run),
+                 "--init", str(tmp_path / "resnet18.pth")]) == 2
+    assert f"init: {tmp_path / 'resnet18.pth'}: no such file" in capsys.readouterr().err
+    assert not run.exists()  # was a FileNotFoundError traceback after run/config.json was written
+
+
+def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeypatch):
+    import training.train as tr
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tr, "train", interrupted)
+    try:
+        rc = tr.main(["--preset", "tiny", "--data", str(tmp_path), "--out", str(tmp_path / "run")])
+    except KeyboardInterrupt:
+        pytest.fail("Ctrl-C escaped ghnerf-train: the user saw a traceback")
+    assert rc == 130 and f"`--resume --out {tmp_path / 'run'}` continues" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ python -m training.export
+@pytest.mark.parametrize(("extra", "words"), [
+    (["--threads", "0"], "--threads: must be at least 1, got 0"),  # was torch's RuntimeError
+    (["--int8", "--calib-frames", "0"], "--calib-frames: must be at least 1, got 0"),  # was after the fp32 export
+    (["--out", "AFILE"], "is a file; give the model folder"),  # was mkdir's FileExistsError
+])
+def test_export_refuses_bad_values_before_the_export(tmp_path, capsys, extra, words):
+    from training.export.cli import main
+
+    (tmp_path / "afile").write_text("")
+    extra = [str(tmp_path / "afile") if a == "AFILE" else a for a in extra]
+    out = [] if "--out" in extra else ["--out", str(tmp_path / "m")]
+    with pytest.raises(SystemExit) as e:
+        main(["--preset", "tiny", *out, *extra])
+    assert e.value.code == 2 and words in capsys.readouterr().err
+    assert not (tmp_path / "m.staging").exists()
