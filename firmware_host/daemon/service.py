@@ -58,7 +58,7 @@ import numpy as np
 import drivers
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, write_status_file
-from firmware_host.daemon.memory import return_freed_memory
+from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame
@@ -225,6 +225,9 @@ class Daemon:
 
     # ------------------------------------------------------------------ model
     def _load_model(self) -> None:
+        # Before the first model's blocks are allocated: so that they, and every reload's, are mapped and go
+        # back to the system when freed (firmware_host.daemon.memory)
+        pin_mmap_threshold()
         t0 = time.monotonic()
         try:
             self._session = load_session(self.config.estimator)

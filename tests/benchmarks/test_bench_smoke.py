@@ -223,6 +223,15 @@ def test_soak_daemon(model, capsys, monkeypatch):
     assert pairs > 0 and opens >= 2 and errors == 0 and reloads >= 1 and refused == 0, out
 
 
+def test_measure_reload_memory(model, capsys, monkeypatch):
+    # glibc's threshold left as it is (0): the script's default would fix it for this whole test process
+    out = run_script("measure_reload_memory", "--model-dir", model, "--loads", "2", "--pairs", "2",
+                     "--mmap-threshold", "0", capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^ +(\d+) +([12]) +[\d.]+ +[-+][\d.]+ +(True|False) ", out, re.M)
+    assert [(n, t) for n, t, _ in rows] == [("1", "1"), ("2", "2")], out
+    assert re.search(r"^after 2 loads: [\d.]+ -> [\d.]+ MB", out, re.M), out
+
+
 def test_bench_runtime_vs_eval(model, data64, capsys, monkeypatch):
     out = run_script("bench_runtime_vs_eval", "--model-dir", model, "--data", str(data64), "--split", "val",
                      "--novel", capsys=capsys, monkeypatch=monkeypatch)

@@ -28,6 +28,7 @@ from firmware_host.daemon.notify import SystemdNotifier
 from firmware_host.listen import Tally
 from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.protocol.messages import Hello, Joints, Status
+from tests.firmware_host.daemon.test_daemon_memory import glibc_only_reason, probe_big_block
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, messages_of, wait_until
 
 REPO = Path(__file__).resolve().parents[3]
@@ -590,6 +591,22 @@ def test_a_reload_that_loads_the_model_again_hands_the_old_ones_pages_back(sim_u
         wait_until(lambda: run.daemon.health.reloads == 2, timeout=120, what="the second reload")
         assert run.daemon._session is not first and trims == [1]
         assert run.finish() == 0
+
+
+def test_the_daemon_keeps_the_models_big_blocks_out_of_the_heap():
+    """After the daemon has loaded its model, a big block freed does not send the next model's into the heap
+    (where each reload that loads the model left the daemon megabytes larger: docs/daemon.md, "Reloaded
+    again and again"; firmware_host.daemon.memory)."""
+    if glibc_only_reason():
+        pytest.skip(glibc_only_reason())
+    cfg = {"rig": {"url": "sim://"}, "sinks": ["memory://"], "estimator": {"session": {"model_dir": str(MODELS)}}}
+    started = "\n".join([
+        "import threading",
+        "from firmware_host.daemon import Daemon, daemon_config_from_dict",
+        "from firmware_host.daemon.notify import SystemdNotifier",
+        "stop = threading.Event(); stop.set()  # the model loaded, then stopped before the rig",
+        f"assert Daemon(daemon_config_from_dict({cfg!r}), notifier=SystemdNotifier({{}})).run(stop) == 0"])
+    assert probe_big_block(started) == "mapped"
 
 
 def test_a_reload_with_another_rig_url_opens_it(sim_url, tmp_path):
