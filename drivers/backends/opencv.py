@@ -35,7 +35,8 @@ Options:
   ``queue``: frames held per camera for the reader (default 4, at most 256; under ``latest`` each read
   takes in all of them and returns the newest pair; a camera whose queue is full loses its oldest
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
-  under ``all`` two videos are read in step, neither more than a frame ahead, and wait for room
+  two videos are read in step, neither more than a frame ahead, so one that decodes slower than its
+  rate holds the other back and their frames still pair; under ``all`` they also wait for room
   instead of dropping: every pair of the take is delivered, however slowly one decodes);
   ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10), and how
   long a live camera may then go without delivering one before it counts as disconnected. A
@@ -353,7 +354,7 @@ class _Camera:
             else:
                 stamp = max(self._live_stamp(grabbed_ns), self.last_stamp_ns + 1)
             if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
-                            wait=self.video and src.pairing.policy is DropPolicy.ALL):
+                            wait_room=self.video and src.pairing.policy is DropPolicy.ALL):
                 return
             self.index += 1
 
@@ -528,14 +529,15 @@ class OpenCVRigSource(RigSource):
         return Rig(rig.cameras, rig.volume, rig.rig_id, metadata={**rig.metadata, "uncalibrated": True})
 
     # ------------------------------------------------------ from the camera threads
-    def _put(self, frame: Frame, *, wait: bool) -> bool:
+    def _put(self, frame: Frame, *, wait_room: bool) -> bool:
         """Queue a frame; False: stop grabbing (closed, or the stream has ended or failed).
 
-        A full queue (``queue`` frames of this camera) waits for room when ``wait`` (a video under
+        A full queue (``queue`` frames of this camera) waits for room when ``wait_room`` (a video under
         ``policy=all``: every pair counts); otherwise its oldest frame goes (a live camera runs on).
+        A video first waits for the other video to catch up (:meth:`_must_wait`), under either policy.
         """
         with self._cond:
-            while wait and self._must_wait(frame) and not self._stop.is_set() and not self._failed:
+            while self._must_wait(frame, wait_room) and not self._stop.is_set() and not self._failed:
                 self._cond.wait(0.1)
             if self._stop.is_set() or self._failed:
                 return False
@@ -563,12 +565,15 @@ class OpenCVRigSource(RigSource):
     def _camera(self, name: str) -> _Camera:
         return next(cam for cam in self._cameras if cam.name == name)
 
-    def _must_wait(self, frame: Frame) -> bool:
-        """(Under the lock.) A video under ``policy=all`` waits for room, and for the other video to be no
-        more than one frame behind: paced alone, a video that decodes slower would leave the other's
-        frames to go unpaired."""
-        if self._per_camera[frame.camera] >= self.options.queue:
+    def _must_wait(self, frame: Frame, wait_room: bool) -> bool:
+        """(Under the lock.) With ``wait_room``, a full queue waits for the reader. A video also waits for
+        the other video to be no more than one frame behind, under either policy: paced alone, a video
+        that decodes slower than its rate fell ever further behind the other, whose frames it could then
+        never pair with (under ``latest`` no pair at all formed after the first few)."""
+        if wait_room and self._per_camera[frame.camera] >= self.options.queue:
             return True
+        if not self._camera(frame.camera).video:
+            return False  # a live camera runs at its own rate; it cannot be held back
         return any(other.video and other.name not in self._ended and not other.at_pass_end
                    and other.name != frame.camera and frame.index > other.index_queued + 1 for other in self._cameras)
 

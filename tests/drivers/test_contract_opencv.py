@@ -526,6 +526,19 @@ def test_under_policy_all_two_videos_keep_step_however_slowly_one_decodes(tmp_pa
     assert [p.frames[0].index for p in pairs] == [p.frames[1].index for p in pairs] == list(range(40))
 
 
+def test_under_policy_latest_a_video_that_decodes_slower_than_its_rate_still_pairs(tmp_path, webcam):
+    # the second decodes at 20 fps, its file says 30: paced alone, the first ran ever further ahead and, after
+    # the first few pairs, none formed (every frame of the slower one older than the other's newest)
+    (first, second), video = _videos(tmp_path, (60, 60), (0.0, 1.5 / 30))
+    with open_rig(f"opencv://?first={first}&second={second}", capture_factory=video) as source:
+        pairs = []
+        with pytest.raises(EndOfStream):
+            while True:
+                pairs.append(source.read(timeout_s=2.0))
+    assert len(pairs) >= 50  # a reader this fast misses few (it got about 10, then the reads timed out)
+    assert all(p.frames[0].index == p.frames[1].index for p in pairs)
+
+
 def test_under_policy_all_a_slow_reader_gets_every_pair(takes):
     with open_rig(_url(takes[0], "&policy=all&queue=1")) as source:
         time.sleep(0.5)  # 15 frames' time: the videos wait for room rather than drop
