@@ -4,7 +4,8 @@ Always: the real backend on two video files OpenCV wrote (MJPG in AVI) from a si
 its rig file: ``cv2.VideoCapture`` decoding them on the backend's grabbing threads, paced at the
 files' frame rate. A live camera that stops delivering is shown with a stand-in capture (the one
 thing a file cannot do). With ``GHNERF_TEST_UVC=1``: on two attached webcams (``GHNERF_UVC_FIRST``,
-``GHNERF_UVC_SECOND``: default 0 and 1, at their own size: no rig file).
+``GHNERF_UVC_SECOND``; by default the first two webcams under ``/dev/v4l/by-path/``, else 0 and 1;
+at their own size: no rig file).
 """
 from __future__ import annotations
 
@@ -409,6 +410,28 @@ def test_a_hung_camera_fails_the_open_and_is_never_released_under_a_grab(webcam)
     assert not any(cam.released_while_grabbing for cam in webcam.made)
 
 
+def uvc_specs(environ, by_path: Path = Path("/dev/v4l/by-path")) -> tuple[str, str]:
+    """The two webcams the hardware contract opens: ``GHNERF_UVC_FIRST`` / ``GHNERF_UVC_SECOND``, else the
+    first two capture nodes under ``by_path`` (in USB port order), else indices 0 and 1 (not Linux).
+
+    Indices 0 and 1 were the default on Linux too, where each webcam takes two nodes: index 1 is the first
+    webcam's metadata node, which OpenCV cannot open, so ``GHNERF_TEST_UVC=1`` alone failed every test."""
+    found = sorted(str(p) for p in by_path.glob("*-video-index0")) if by_path.is_dir() else []
+    defaults = found[:2] if len(found) >= 2 else ["0", "1"]
+    return environ.get("GHNERF_UVC_FIRST", defaults[0]), environ.get("GHNERF_UVC_SECOND", defaults[1])
+
+
+def test_the_webcam_contract_opens_two_webcams_not_one_and_its_metadata_node(tmp_path):
+    ports = ["pci-0000:00:14.0-usb-0:2:1.0", "pci-0000:00:14.0-usb-0:1:1.0"]
+    for port in ports:  # what udev makes for two UVC webcams: a capture node and a metadata node each
+        for node in ("video-index0", "video-index1"):
+            (tmp_path / f"{port}-{node}").touch()
+    first, second = (str(tmp_path / f"{port}-video-index0") for port in sorted(ports))
+    assert uvc_specs({}, tmp_path) == (first, second)
+    assert uvc_specs({"GHNERF_UVC_SECOND": "/dev/video4"}, tmp_path) == (first, "/dev/video4")
+    assert uvc_specs({}, tmp_path / "none") == ("0", "1")  # no /dev/v4l: macOS, Windows number the cameras
+
+
 @pytest.mark.hardware
 @pytest.mark.skipif(os.environ.get("GHNERF_TEST_UVC") != "1",
                     reason="needs two webcams; set GHNERF_TEST_UVC=1 (GHNERF_UVC_FIRST/SECOND pick them) to run")
@@ -419,7 +442,7 @@ class TestWebcamContract(RigSourceContract):
 
     @classmethod
     def make_source(cls):
-        first, second = os.environ.get("GHNERF_UVC_FIRST", "0"), os.environ.get("GHNERF_UVC_SECOND", "1")
+        first, second = (quote(spec, safe="/") for spec in uvc_specs(os.environ))
         return create_rig_source(f"opencv://?first={first}&second={second}&fourcc=MJPG")
 
     @classmethod
