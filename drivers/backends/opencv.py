@@ -35,8 +35,8 @@ Options:
   ``queue``: frames held per camera for the reader (default 4, at most 256; under ``latest`` each read
   takes in all of them and returns the newest pair; a camera whose queue is full loses its oldest
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
-  two videos are read in step, neither more than a frame ahead, so one that decodes slower than its
-  rate holds the other back and their frames still pair; under ``all`` they also wait for room
+  two videos are read in step, neither past the other's next frame (in time: they may differ in
+  rate), so one that decodes slower than its rate holds the other back and their frames still pair; under ``all`` they also wait for room
   instead of dropping: every pair of the take is delivered, however slowly one decodes);
   ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10), and how
   long a live camera may then go without delivering one before it counts as disconnected. A
@@ -285,6 +285,10 @@ class _Camera:
     def pace_fps(self) -> float:
         return self.fps or self.source.options.fps or FALLBACK_FPS
 
+    def due_ns(self, index: int) -> int:
+        """A video's frame ``index``: its stamp, and when it is due, from the start both videos share."""
+        return self.source._anchor_ns + round(index * 1e9 / self.pace_fps)
+
     def _run(self) -> None:
         src = self.source
         try:
@@ -348,7 +352,7 @@ class _Camera:
             if self.size is None:
                 self.size = (image.shape[1], image.shape[0])
             if self.video:  # paced: due at its frame number's time from the shared start
-                stamp = src._anchor_ns + round(self.index * 1e9 / self.pace_fps)
+                stamp = self.due_ns(self.index)
                 if src._stop.wait(max(0.0, (stamp - src.clock.now_ns()) / 1e9)):
                     return
             else:
@@ -566,16 +570,19 @@ class OpenCVRigSource(RigSource):
         return next(cam for cam in self._cameras if cam.name == name)
 
     def _must_wait(self, frame: Frame, wait_room: bool) -> bool:
-        """(Under the lock.) With ``wait_room``, a full queue waits for the reader. A video also waits for
-        the other video to be no more than one frame behind, under either policy: paced alone, a video
-        that decodes slower than its rate fell ever further behind the other, whose frames it could then
-        never pair with (under ``latest`` no pair at all formed after the first few)."""
+        """(Under the lock.) With ``wait_room``, a full queue waits for the reader. A video also waits while
+        its frame is later than the other video's next, under either policy: paced alone, a video that
+        decodes slower than its rate fell ever further behind the other, whose frames it could then never
+        pair with (under ``latest`` no pair at all formed after the first few). Compared by time, not frame
+        number: a 30 fps video held to a 15 fps one's frame number played at half its rate, its frames
+        ever further behind the other's."""
         if wait_room and self._per_camera[frame.camera] >= self.options.queue:
             return True
         if not self._camera(frame.camera).video:
             return False  # a live camera runs at its own rate; it cannot be held back
         return any(other.video and other.name not in self._ended and not other.at_pass_end
-                   and other.name != frame.camera and frame.index > other.index_queued + 1 for other in self._cameras)
+                   and other.name != frame.camera and frame.timestamp_ns > other.due_ns(other.index_queued + 1)
+                   for other in self._cameras)
 
     def _end(self, camera: _Camera, end: EndOfStream) -> None:
         """A video ended: the stream ends once every camera has, or another has delivered past its last

@@ -562,6 +562,26 @@ def test_under_policy_latest_a_video_that_decodes_slower_than_its_rate_still_pai
     assert all(p.frames[0].index == p.frames[1].index for p in pairs)
 
 
+@pytest.mark.parametrize("policy", ["all", "latest"])
+def test_two_videos_of_different_rates_pair_by_time(tmp_path, policy):
+    # a 30 fps and a 15 fps video of the same 4/3 s: held in step by frame number, the 30 fps one played at 15
+    # and its frames fell ever further behind the other's (under all, 18 pairs of the 20, mostly mismatched)
+    paths = []
+    for fps, frames in ((30.0, 40), (15.0, 20)):
+        paths.append(tmp_path / f"{fps:g}.avi")
+        writer = cv2.VideoWriter(str(paths[-1]), cv2.VideoWriter_fourcc(*"MJPG"), fps, SIZE)
+        for k in range(frames):
+            writer.write(np.full((SIZE[1], SIZE[0], 3), 6 * k, np.uint8))
+        writer.release()
+    with open_rig(f"opencv://?first={paths[0]}&second={paths[1]}&policy={policy}") as source:
+        pairs = []
+        with pytest.raises(EndOfStream):
+            while True:
+                pairs.append(source.read(timeout_s=2.0))
+    assert len(pairs) >= (20 if policy == "all" else 16)
+    assert all(p.frames[0].index == 2 * p.frames[1].index for p in pairs)  # the frames of one instant
+
+
 def test_under_policy_all_a_slow_reader_gets_every_pair(takes):
     with open_rig(_url(takes[0], "&policy=all&queue=1")) as source:
         time.sleep(0.5)  # 15 frames' time: the videos wait for room rather than drop
