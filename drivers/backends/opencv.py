@@ -29,7 +29,8 @@ Options:
   ``dshow``, ``msmf``, ``avfoundation``.
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
   horizontal field of view in degrees (20 to 150, default 70).
-* ``loop`` (two videos of the same length): start over at the end instead of ending the stream.
+* ``loop`` (two videos of the same length in time: 40 frames at 30 fps and 20 at 15 fps are): start
+  over at the end instead of ending the stream.
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
   the cameras report and ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
   ``queue``: frames held per camera for the reader (default 4, at most 256; under ``latest`` each read
@@ -382,6 +383,18 @@ class _Camera:
         return grabbed_ns
 
 
+def _pass_mismatch(videos: list[tuple[_Camera, int]]) -> str | None:
+    """loop=1: None where passes of these many frames of the videos last as long (to a microsecond, so their
+    stamps stay in step pass after pass: 40 frames at 30 fps and 20 at 15 fps do), else their lengths, for the
+    error. Frame counts alone refused two videos of one take at two rates."""
+    spans = [round(frames * 1e9 / cam.pace_fps) for cam, frames in videos]
+    if max(spans) - min(spans) <= 1_000:
+        return None
+    if len({cam.pace_fps for cam, _ in videos}) == 1:
+        return " and ".join(str(frames) for _, frames in videos) + " frames"
+    return " and ".join(f"{frames} frames at {cam.pace_fps:g} fps" for cam, frames in videos)
+
+
 def _backend_name(capture: Any) -> str:
     """The capture's OpenCV backend (``"V4L2"``, ``"FFMPEG"``, ...); ``""`` where it does not say."""
     try:
@@ -475,11 +488,12 @@ class OpenCVRigSource(RigSource):
             for cam in self._cameras:
                 cam.open()
             videos = [cam for cam in self._cameras if cam.video]
-            if o.loop and len(videos) == 2 and videos[0].frame_count and videos[1].frame_count \
-                    and videos[0].frame_count != videos[1].frame_count:
+            mismatch = _pass_mismatch([(cam, cam.frame_count) for cam in videos]) \
+                if o.loop and len(videos) == 2 and all(cam.frame_count for cam in videos) else None
+            if mismatch:
                 raise RigInitializationError(
-                    f"loop=1: the videos have {videos[0].frame_count} and {videos[1].frame_count} frames; looping "
-                    f"them would pair different instants from the second pass on (trim them to one length)")
+                    f"loop=1: the videos have {mismatch}; looping them would pair different instants from the "
+                    f"second pass on (trim them to one length)")
             if not self._pairing_given:
                 # half a frame period at the slowest rate known: a camera's report, or fps= where that
                 # is lower (a webcam may report 30 fps and keep 15 in dim light: fps= says so)
@@ -615,10 +629,11 @@ class OpenCVRigSource(RigSource):
             camera.at_pass_end = False
             if self._stop.is_set() or self._failed:
                 return False
-            lengths = {frames, *(self._pass_frames[o.name][len(passes) - 1] for o in others)}
-        if len(lengths) > 1:
-            self._fail(RigOperationError(f"loop=1: the videos have {sorted(lengths)} frames; looping them would "
-                                         f"pair different instants (trim them to one length)"))
+            lengths = {camera.name: frames, **{o.name: self._pass_frames[o.name][len(passes) - 1] for o in others}}
+            mismatch = _pass_mismatch([(c, lengths[c.name]) for c in self._cameras if c.name in lengths])
+        if mismatch:
+            self._fail(RigOperationError(f"loop=1: the videos have {mismatch}; looping them would pair different "
+                                         f"instants (trim them to one length)"))
             return False
         return True
 

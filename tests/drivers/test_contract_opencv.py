@@ -562,17 +562,23 @@ def test_under_policy_latest_a_video_that_decodes_slower_than_its_rate_still_pai
     assert all(p.frames[0].index == p.frames[1].index for p in pairs)
 
 
-@pytest.mark.parametrize("policy", ["all", "latest"])
-def test_two_videos_of_different_rates_pair_by_time(tmp_path, policy):
-    # a 30 fps and a 15 fps video of the same 4/3 s: held in step by frame number, the 30 fps one played at 15
-    # and its frames fell ever further behind the other's (under all, 18 pairs of the 20, mostly mismatched)
+def _rated_videos(folder: Path, rates_and_lengths) -> list[Path]:
+    """Plain videos (frame k a grey of 6 k) at the given ``(fps, frames)``."""
     paths = []
-    for fps, frames in ((30.0, 40), (15.0, 20)):
-        paths.append(tmp_path / f"{fps:g}.avi")
+    for fps, frames in rates_and_lengths:
+        paths.append(folder / f"{len(paths)}-{fps:g}.avi")
         writer = cv2.VideoWriter(str(paths[-1]), cv2.VideoWriter_fourcc(*"MJPG"), fps, SIZE)
         for k in range(frames):
             writer.write(np.full((SIZE[1], SIZE[0], 3), 6 * k, np.uint8))
         writer.release()
+    return paths
+
+
+@pytest.mark.parametrize("policy", ["all", "latest"])
+def test_two_videos_of_different_rates_pair_by_time(tmp_path, policy):
+    # a 30 fps and a 15 fps video of the same 4/3 s: held in step by frame number, the 30 fps one played at 15
+    # and its frames fell ever further behind the other's (under all, 18 pairs of the 20, mostly mismatched)
+    paths = _rated_videos(tmp_path, ((30.0, 40), (15.0, 20)))
     with open_rig(f"opencv://?first={paths[0]}&second={paths[1]}&policy={policy}") as source:
         pairs = []
         with pytest.raises(EndOfStream):
@@ -580,6 +586,20 @@ def test_two_videos_of_different_rates_pair_by_time(tmp_path, policy):
                 pairs.append(source.read(timeout_s=2.0))
     assert len(pairs) >= (20 if policy == "all" else 16)
     assert all(p.frames[0].index == 2 * p.frames[1].index for p in pairs)  # the frames of one instant
+
+
+def test_loop_takes_two_videos_of_one_length_in_time_at_different_rates(tmp_path):
+    # 40 frames at 30 fps and 20 at 15 fps last as long: refused for their frame counts (40 and 20)
+    first, second = _rated_videos(tmp_path, ((30.0, 40), (15.0, 20)))
+    with open_rig(f"opencv://?first={first}&second={second}&loop=1&policy=all") as source:
+        pairs = [source.read(timeout_s=2.0) for _ in range(30)]  # into the second pass
+    assert [p.frames[1].index for p in pairs] == list(range(30))
+    assert all(p.frames[0].index == 2 * p.frames[1].index for p in pairs)
+    (tmp_path / "longer").mkdir()
+    _, longer = _rated_videos(tmp_path / "longer", ((30.0, 1), (15.0, 21)))
+    with pytest.raises(RigInitializationError, match=r"loop=1: the videos have 40 frames at 30 fps and 21 frames "
+                                                     r"at 15 fps"):
+        open_rig(f"opencv://?first={first}&second={longer}&loop=1")
 
 
 def test_under_policy_all_a_slow_reader_gets_every_pair(takes):
@@ -593,7 +613,7 @@ def test_loop_refuses_videos_that_turn_out_to_differ_in_length(tmp_path, webcam)
     (first, second), video = _videos(tmp_path, (5, 6), (1 / 30, 1 / 30))  # containers that do not say
     with open_rig(f"opencv://?first={first}&second={second}&loop=1&policy=all", capture_factory=video) as source:
         pairs = []
-        with pytest.raises(RigOperationError, match=r"loop=1: the videos have \[5, 6\] frames"):
+        with pytest.raises(RigOperationError, match=r"loop=1: the videos have 5 and 6 frames"):
             while True:
                 pairs.append(source.read(timeout_s=5.0))
         second_error = None
