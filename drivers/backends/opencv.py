@@ -205,20 +205,26 @@ def _same_camera(first: str, second: str) -> bool:
     def resolved(spec: str) -> str:
         if "://" in spec:
             return spec
-        return os.path.realpath(f"/dev/video{int(spec)}" if spec.isdigit() else spec)  # int(): 00 is index 0
+        return os.path.realpath(f"/dev/video{int(spec)}" if is_device_index(spec) else spec)  # int(): 00 is 0
     return resolved(first) == resolved(second)
+
+
+def is_device_index(spec: str) -> bool:
+    """``0``, ``2``: ASCII digits only (``str.isdigit`` is true of ``²``, which ``int`` refuses: a bare
+    ValueError from the URL, naming no option)."""
+    return spec.isascii() and spec.isdigit()
 
 
 def capture_target(spec: str) -> int | str:
     """What ``cv2.VideoCapture`` is given for ``first=`` / ``second=``: a device index as an int."""
-    return int(spec) if spec.isdigit() else spec
+    return int(spec) if is_device_index(spec) else spec
 
 
 def is_video_file(spec: str) -> bool:
     """A video file or image sequence, played at its own pace; a device, a stream or a GStreamer
     pipeline (its elements linked by ``!``, e.g. a Jetson's CSI camera: ``nvarguscamerasrc ! ... !
     appsink``) is live."""
-    return not spec.isdigit() and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
+    return not is_device_index(spec) and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
 
 
 class _Camera:

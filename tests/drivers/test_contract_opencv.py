@@ -160,6 +160,8 @@ def test_a_missing_video_or_a_size_the_rig_does_not_have_is_refused_at_open(take
     first, second, rig, _ = takes[0]
     with pytest.raises(RigInitializationError, match=r"camera 'right': no such video file .*nope\.avi"):
         open_rig(f"opencv://?first={first}&second={tmp_path / 'nope.avi'}&rig={rig}")
+    with pytest.raises(RigInitializationError, match=r"camera 'right': no such video file '\xb2'"):
+        open_rig(f"opencv://?first={first}&second=%C2%B2&rig={rig}")  # a digit to str.isdigit, not to int()
     other = tmp_path / "rig.json"
     loaded = load_rig(rig)
     save_rig(Rig(tuple(c.resized(320, 240) for c in loaded.cameras), loaded.volume, rig_id="big"), other)
