@@ -37,8 +37,9 @@ Options:
   takes in all of them and returns the newest pair; a camera whose queue is full loses its oldest
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
   two videos are read in step, neither past the other's next frame (in time: they may differ in
-  rate), so one that decodes slower than its rate holds the other back and their frames still pair; under ``all`` they also wait for room
-  instead of dropping: every pair of the take is delivered, however slowly one decodes);
+  rate), so one that decodes slower than its rate holds the other back and their frames still pair;
+  under ``all`` they also wait for room instead of dropping: every pair of the take is delivered,
+  however slowly one decodes);
   ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10), and how
   long a live camera may then go without delivering one before it counts as disconnected. A
   failed :meth:`open` is final: open a new source.
