@@ -29,14 +29,17 @@ Options:
   ``dshow``, ``msmf``, ``avfoundation``.
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
   horizontal field of view in degrees (20 to 150, default 70).
-* ``loop`` (two videos of the same length): start over at the end instead of ending the stream.
+* ``loop`` (two videos of the same length in time: 40 frames at 30 fps and 20 at 15 fps are): start
+  over at the end instead of ending the stream.
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
   the cameras report and ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
   ``queue``: frames held per camera for the reader (default 4, at most 256; under ``latest`` each read
   takes in all of them and returns the newest pair; a camera whose queue is full loses its oldest
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
-  under ``all`` two videos are read in step, neither more than a frame ahead, and wait for room
-  instead of dropping: every pair of the take is delivered, however slowly one decodes);
+  two videos are read in step, neither past the other's next frame (in time: they may differ in
+  rate), so one that decodes slower than its rate holds the other back and their frames still pair;
+  under ``all`` they also wait for room instead of dropping: every pair of the take is delivered,
+  however slowly one decodes);
   ``open_timeout_s``: how long :meth:`open` waits for each camera's first frame (default 10), and how
   long a live camera may then go without delivering one before it counts as disconnected. A
   failed :meth:`open` is final: open a new source.
@@ -203,20 +206,26 @@ def _same_camera(first: str, second: str) -> bool:
     def resolved(spec: str) -> str:
         if "://" in spec:
             return spec
-        return os.path.realpath(f"/dev/video{int(spec)}" if spec.isdigit() else spec)  # int(): 00 is index 0
+        return os.path.realpath(f"/dev/video{int(spec)}" if is_device_index(spec) else spec)  # int(): 00 is 0
     return resolved(first) == resolved(second)
+
+
+def is_device_index(spec: str) -> bool:
+    """``0``, ``2``: ASCII digits only (``str.isdigit`` is true of ``²``, which ``int`` refuses: a bare
+    ValueError from the URL, naming no option)."""
+    return spec.isascii() and spec.isdigit()
 
 
 def capture_target(spec: str) -> int | str:
     """What ``cv2.VideoCapture`` is given for ``first=`` / ``second=``: a device index as an int."""
-    return int(spec) if spec.isdigit() else spec
+    return int(spec) if is_device_index(spec) else spec
 
 
 def is_video_file(spec: str) -> bool:
     """A video file or image sequence, played at its own pace; a device, a stream or a GStreamer
     pipeline (its elements linked by ``!``, e.g. a Jetson's CSI camera: ``nvarguscamerasrc ! ... !
     appsink``) is live."""
-    return not spec.isdigit() and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
+    return not is_device_index(spec) and "://" not in spec and not spec.startswith("/dev/") and "!" not in spec
 
 
 class _Camera:
@@ -284,6 +293,10 @@ class _Camera:
     def pace_fps(self) -> float:
         return self.fps or self.source.options.fps or FALLBACK_FPS
 
+    def due_ns(self, index: int) -> int:
+        """A video's frame ``index``: its stamp, and when it is due, from the start both videos share."""
+        return self.source._anchor_ns + round(index * 1e9 / self.pace_fps)
+
     def _run(self) -> None:
         src = self.source
         try:
@@ -347,13 +360,13 @@ class _Camera:
             if self.size is None:
                 self.size = (image.shape[1], image.shape[0])
             if self.video:  # paced: due at its frame number's time from the shared start
-                stamp = src._anchor_ns + round(self.index * 1e9 / self.pace_fps)
+                stamp = self.due_ns(self.index)
                 if src._stop.wait(max(0.0, (stamp - src.clock.now_ns()) / 1e9)):
                     return
             else:
                 stamp = max(self._live_stamp(grabbed_ns), self.last_stamp_ns + 1)
             if not src._put(Frame(camera=self.name, image=image, timestamp_ns=stamp, index=self.index),
-                            wait=self.video and src.pairing.policy is DropPolicy.ALL):
+                            wait_room=self.video and src.pairing.policy is DropPolicy.ALL):
                 return
             self.index += 1
 
@@ -375,6 +388,18 @@ class _Camera:
                     "ms at the grab, %.3f ms at its previous frame): both cameras' frames are stamped at their grab "
                     "from now on", self.name, self.spec, ms, grabbed_ns / 1e6, self.last_stamp_ns / 1e6)
         return grabbed_ns
+
+
+def _pass_mismatch(videos: list[tuple[_Camera, int]]) -> str | None:
+    """loop=1: None where passes of these many frames of the videos last as long (to a microsecond, so their
+    stamps stay in step pass after pass: 40 frames at 30 fps and 20 at 15 fps do), else their lengths, for the
+    error. Frame counts alone refused two videos of one take at two rates."""
+    spans = [round(frames * 1e9 / cam.pace_fps) for cam, frames in videos]
+    if max(spans) - min(spans) <= 1_000:
+        return None
+    if len({cam.pace_fps for cam, _ in videos}) == 1:
+        return " and ".join(str(frames) for _, frames in videos) + " frames"
+    return " and ".join(f"{frames} frames at {cam.pace_fps:g} fps" for cam, frames in videos)
 
 
 def _backend_name(capture: Any) -> str:
@@ -470,11 +495,12 @@ class OpenCVRigSource(RigSource):
             for cam in self._cameras:
                 cam.open()
             videos = [cam for cam in self._cameras if cam.video]
-            if o.loop and len(videos) == 2 and videos[0].frame_count and videos[1].frame_count \
-                    and videos[0].frame_count != videos[1].frame_count:
+            mismatch = _pass_mismatch([(cam, cam.frame_count) for cam in videos]) \
+                if o.loop and len(videos) == 2 and all(cam.frame_count for cam in videos) else None
+            if mismatch:
                 raise RigInitializationError(
-                    f"loop=1: the videos have {videos[0].frame_count} and {videos[1].frame_count} frames; looping "
-                    f"them would pair different instants from the second pass on (trim them to one length)")
+                    f"loop=1: the videos have {mismatch}; looping them would pair different instants from the "
+                    f"second pass on (trim them to one length)")
             if not self._pairing_given:
                 # half a frame period at the slowest rate known: a camera's report, or fps= where that
                 # is lower (a webcam may report 30 fps and keep 15 in dim light: fps= says so)
@@ -528,14 +554,15 @@ class OpenCVRigSource(RigSource):
         return Rig(rig.cameras, rig.volume, rig.rig_id, metadata={**rig.metadata, "uncalibrated": True})
 
     # ------------------------------------------------------ from the camera threads
-    def _put(self, frame: Frame, *, wait: bool) -> bool:
+    def _put(self, frame: Frame, *, wait_room: bool) -> bool:
         """Queue a frame; False: stop grabbing (closed, or the stream has ended or failed).
 
-        A full queue (``queue`` frames of this camera) waits for room when ``wait`` (a video under
+        A full queue (``queue`` frames of this camera) waits for room when ``wait_room`` (a video under
         ``policy=all``: every pair counts); otherwise its oldest frame goes (a live camera runs on).
+        A video first waits for the other video to catch up (:meth:`_must_wait`), under either policy.
         """
         with self._cond:
-            while wait and self._must_wait(frame) and not self._stop.is_set() and not self._failed:
+            while self._must_wait(frame, wait_room) and not self._stop.is_set() and not self._failed:
                 self._cond.wait(0.1)
             if self._stop.is_set() or self._failed:
                 return False
@@ -563,14 +590,20 @@ class OpenCVRigSource(RigSource):
     def _camera(self, name: str) -> _Camera:
         return next(cam for cam in self._cameras if cam.name == name)
 
-    def _must_wait(self, frame: Frame) -> bool:
-        """(Under the lock.) A video under ``policy=all`` waits for room, and for the other video to be no
-        more than one frame behind: paced alone, a video that decodes slower would leave the other's
-        frames to go unpaired."""
-        if self._per_camera[frame.camera] >= self.options.queue:
+    def _must_wait(self, frame: Frame, wait_room: bool) -> bool:
+        """(Under the lock.) With ``wait_room``, a full queue waits for the reader. A video also waits while
+        its frame is later than the other video's next, under either policy: paced alone, a video that
+        decodes slower than its rate fell ever further behind the other, whose frames it could then never
+        pair with (under ``latest`` no pair at all formed after the first few). Compared by time, not frame
+        number: a 30 fps video held to a 15 fps one's frame number played at half its rate, its frames
+        ever further behind the other's."""
+        if wait_room and self._per_camera[frame.camera] >= self.options.queue:
             return True
+        if not self._camera(frame.camera).video:
+            return False  # a live camera runs at its own rate; it cannot be held back
         return any(other.video and other.name not in self._ended and not other.at_pass_end
-                   and other.name != frame.camera and frame.index > other.index_queued + 1 for other in self._cameras)
+                   and other.name != frame.camera and frame.timestamp_ns > other.due_ns(other.index_queued + 1)
+                   for other in self._cameras)
 
     def _end(self, camera: _Camera, end: EndOfStream) -> None:
         """A video ended: the stream ends once every camera has, or another has delivered past its last
@@ -603,10 +636,11 @@ class OpenCVRigSource(RigSource):
             camera.at_pass_end = False
             if self._stop.is_set() or self._failed:
                 return False
-            lengths = {frames, *(self._pass_frames[o.name][len(passes) - 1] for o in others)}
-        if len(lengths) > 1:
-            self._fail(RigOperationError(f"loop=1: the videos have {sorted(lengths)} frames; looping them would "
-                                         f"pair different instants (trim them to one length)"))
+            lengths = {camera.name: frames, **{o.name: self._pass_frames[o.name][len(passes) - 1] for o in others}}
+            mismatch = _pass_mismatch([(c, lengths[c.name]) for c in self._cameras if c.name in lengths])
+        if mismatch:
+            self._fail(RigOperationError(f"loop=1: the videos have {mismatch}; looping them would pair different "
+                                         f"instants (trim them to one length)"))
             return False
         return True
 

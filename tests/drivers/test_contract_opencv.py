@@ -4,7 +4,8 @@ Always: the real backend on two video files OpenCV wrote (MJPG in AVI) from a si
 its rig file: ``cv2.VideoCapture`` decoding them on the backend's grabbing threads, paced at the
 files' frame rate. A live camera that stops delivering is shown with a stand-in capture (the one
 thing a file cannot do). With ``GHNERF_TEST_UVC=1``: on two attached webcams (``GHNERF_UVC_FIRST``,
-``GHNERF_UVC_SECOND``: default 0 and 1, at their own size: no rig file).
+``GHNERF_UVC_SECOND``; by default the first two webcams under ``/dev/v4l/by-path/``, else 0 and 1;
+at their own size: no rig file).
 """
 from __future__ import annotations
 
@@ -159,6 +160,8 @@ def test_a_missing_video_or_a_size_the_rig_does_not_have_is_refused_at_open(take
     first, second, rig, _ = takes[0]
     with pytest.raises(RigInitializationError, match=r"camera 'right': no such video file .*nope\.avi"):
         open_rig(f"opencv://?first={first}&second={tmp_path / 'nope.avi'}&rig={rig}")
+    with pytest.raises(RigInitializationError, match=r"camera 'right': no such video file '\xb2'"):
+        open_rig(f"opencv://?first={first}&second=%C2%B2&rig={rig}")  # a digit to str.isdigit, not to int()
     other = tmp_path / "rig.json"
     loaded = load_rig(rig)
     save_rig(Rig(tuple(c.resized(320, 240) for c in loaded.cameras), loaded.volume, rig_id="big"), other)
@@ -409,6 +412,28 @@ def test_a_hung_camera_fails_the_open_and_is_never_released_under_a_grab(webcam)
     assert not any(cam.released_while_grabbing for cam in webcam.made)
 
 
+def uvc_specs(environ, by_path: Path = Path("/dev/v4l/by-path")) -> tuple[str, str]:
+    """The two webcams the hardware contract opens: ``GHNERF_UVC_FIRST`` / ``GHNERF_UVC_SECOND``, else the
+    first two capture nodes under ``by_path`` (in USB port order), else indices 0 and 1 (not Linux).
+
+    Indices 0 and 1 were the default on Linux too, where each webcam takes two nodes: index 1 is the first
+    webcam's metadata node, which OpenCV cannot open, so ``GHNERF_TEST_UVC=1`` alone failed every test."""
+    found = sorted(str(p) for p in by_path.glob("*-video-index0")) if by_path.is_dir() else []
+    defaults = found[:2] if len(found) >= 2 else ["0", "1"]
+    return environ.get("GHNERF_UVC_FIRST", defaults[0]), environ.get("GHNERF_UVC_SECOND", defaults[1])
+
+
+def test_the_webcam_contract_opens_two_webcams_not_one_and_its_metadata_node(tmp_path):
+    ports = ["pci-0000:00:14.0-usb-0:2:1.0", "pci-0000:00:14.0-usb-0:1:1.0"]
+    for port in ports:  # what udev makes for two UVC webcams: a capture node and a metadata node each
+        for node in ("video-index0", "video-index1"):
+            (tmp_path / f"{port}-{node}").touch()
+    first, second = (str(tmp_path / f"{port}-video-index0") for port in sorted(ports))
+    assert uvc_specs({}, tmp_path) == (first, second)
+    assert uvc_specs({"GHNERF_UVC_SECOND": "/dev/video4"}, tmp_path) == (first, "/dev/video4")
+    assert uvc_specs({}, tmp_path / "none") == ("0", "1")  # no /dev/v4l: macOS, Windows number the cameras
+
+
 @pytest.mark.hardware
 @pytest.mark.skipif(os.environ.get("GHNERF_TEST_UVC") != "1",
                     reason="needs two webcams; set GHNERF_TEST_UVC=1 (GHNERF_UVC_FIRST/SECOND pick them) to run")
@@ -419,7 +444,7 @@ class TestWebcamContract(RigSourceContract):
 
     @classmethod
     def make_source(cls):
-        first, second = os.environ.get("GHNERF_UVC_FIRST", "0"), os.environ.get("GHNERF_UVC_SECOND", "1")
+        first, second = (quote(spec, safe="/") for spec in uvc_specs(os.environ))
         return create_rig_source(f"opencv://?first={first}&second={second}&fourcc=MJPG")
 
     @classmethod
@@ -526,6 +551,59 @@ def test_under_policy_all_two_videos_keep_step_however_slowly_one_decodes(tmp_pa
     assert [p.frames[0].index for p in pairs] == [p.frames[1].index for p in pairs] == list(range(40))
 
 
+def test_under_policy_latest_a_video_that_decodes_slower_than_its_rate_still_pairs(tmp_path, webcam):
+    # the second decodes at 20 fps, its file says 30: paced alone, the first ran ever further ahead and, after
+    # the first few pairs, none formed (every frame of the slower one older than the other's newest)
+    (first, second), video = _videos(tmp_path, (60, 60), (0.0, 1.5 / 30))
+    with open_rig(f"opencv://?first={first}&second={second}", capture_factory=video) as source:
+        pairs = []
+        with pytest.raises(EndOfStream):
+            while True:
+                pairs.append(source.read(timeout_s=2.0))
+    assert len(pairs) >= 50  # a reader this fast misses few (it got about 10, then the reads timed out)
+    assert all(p.frames[0].index == p.frames[1].index for p in pairs)
+
+
+def _rated_videos(folder: Path, rates_and_lengths) -> list[Path]:
+    """Plain videos (frame k a grey of 6 k) at the given ``(fps, frames)``."""
+    paths = []
+    for fps, frames in rates_and_lengths:
+        paths.append(folder / f"{len(paths)}-{fps:g}.avi")
+        writer = cv2.VideoWriter(str(paths[-1]), cv2.VideoWriter_fourcc(*"MJPG"), fps, SIZE)
+        for k in range(frames):
+            writer.write(np.full((SIZE[1], SIZE[0], 3), 6 * k, np.uint8))
+        writer.release()
+    return paths
+
+
+@pytest.mark.parametrize("policy", ["all", "latest"])
+def test_two_videos_of_different_rates_pair_by_time(tmp_path, policy):
+    # a 30 fps and a 15 fps video of the same 4/3 s: held in step by frame number, the 30 fps one played at 15
+    # and its frames fell ever further behind the other's (under all, 18 pairs of the 20, mostly mismatched)
+    paths = _rated_videos(tmp_path, ((30.0, 40), (15.0, 20)))
+    with open_rig(f"opencv://?first={paths[0]}&second={paths[1]}&policy={policy}") as source:
+        pairs = []
+        with pytest.raises(EndOfStream):
+            while True:
+                pairs.append(source.read(timeout_s=2.0))
+    assert len(pairs) >= (20 if policy == "all" else 16)
+    assert all(p.frames[0].index == 2 * p.frames[1].index for p in pairs)  # the frames of one instant
+
+
+def test_loop_takes_two_videos_of_one_length_in_time_at_different_rates(tmp_path):
+    # 40 frames at 30 fps and 20 at 15 fps last as long: refused for their frame counts (40 and 20)
+    first, second = _rated_videos(tmp_path, ((30.0, 40), (15.0, 20)))
+    with open_rig(f"opencv://?first={first}&second={second}&loop=1&policy=all") as source:
+        pairs = [source.read(timeout_s=2.0) for _ in range(30)]  # into the second pass
+    assert [p.frames[1].index for p in pairs] == list(range(30))
+    assert all(p.frames[0].index == 2 * p.frames[1].index for p in pairs)
+    (tmp_path / "longer").mkdir()
+    _, longer = _rated_videos(tmp_path / "longer", ((30.0, 1), (15.0, 21)))
+    with pytest.raises(RigInitializationError, match=r"loop=1: the videos have 40 frames at 30 fps and 21 frames "
+                                                     r"at 15 fps"):
+        open_rig(f"opencv://?first={first}&second={longer}&loop=1")
+
+
 def test_under_policy_all_a_slow_reader_gets_every_pair(takes):
     with open_rig(_url(takes[0], "&policy=all&queue=1")) as source:
         time.sleep(0.5)  # 15 frames' time: the videos wait for room rather than drop
@@ -537,7 +615,7 @@ def test_loop_refuses_videos_that_turn_out_to_differ_in_length(tmp_path, webcam)
     (first, second), video = _videos(tmp_path, (5, 6), (1 / 30, 1 / 30))  # containers that do not say
     with open_rig(f"opencv://?first={first}&second={second}&loop=1&policy=all", capture_factory=video) as source:
         pairs = []
-        with pytest.raises(RigOperationError, match=r"loop=1: the videos have \[5, 6\] frames"):
+        with pytest.raises(RigOperationError, match=r"loop=1: the videos have 5 and 6 frames"):
             while True:
                 pairs.append(source.read(timeout_s=5.0))
         second_error = None
