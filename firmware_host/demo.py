@@ -218,7 +218,8 @@ def _positive_seconds(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument("--url", default=DEFAULT_URL, help="rig URL (sim://, replay://DIR, depthai://)")
+    parser.add_argument("--url", default=DEFAULT_URL, help="rig URL (sim://, replay://DIR, depthai://, opencv://; "
+                                                            "relative files read from the current directory)")
     parser.add_argument("--seconds", type=_positive_seconds, default=3.0, help="how long to read pairs")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
     parser.add_argument("--sink", default=None,

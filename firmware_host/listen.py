@@ -325,8 +325,9 @@ def _positive_seconds(raw: str) -> float:
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                  epilog="Protocol: docs/protocol.md")
-    ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6) or "
-                                "serial:///dev/DEVICE?baud=N (three slashes: an absolute path)")
+    ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6; a multicast HOST, "
+                                "udp://239.255.0.1:PORT, is joined) or serial:///dev/DEVICE?baud=N (three "
+                                "slashes: an absolute path)")
     ap.add_argument("--json", action="store_true", help="every message (and decode error) as a JSON line")
     ap.add_argument("--seconds", type=_positive_seconds, default=None,
                     help="stop after this long (default: Ctrl-C)")

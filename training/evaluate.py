@@ -711,10 +711,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default="data/edge128")
     ap.add_argument("--split", default="val", help="held-out split (default val: unseen bodies, motions, rigs)")
     ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC",
-                    help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable")
+                    help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable, each "
+                         "LABEL its own (without LABEL=, the file's or folder's name)")
     ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
     ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=2, help="torch and onnxruntime threads (at least 1)")
     ap.add_argument("--out", help="write the JSON here (also printed)")
     args = ap.parse_args(argv)
     if args.limit < 0:

@@ -626,7 +626,9 @@ def main(argv: list[str] | None = None) -> int:
                                                          "(--data, default data/edge128; --scenes, default all)")
     ap.add_argument("--split", default="val")
     ap.add_argument("--scenes", type=int, default=0)
-    ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--resume", action="store_true",
+                    help="continue from OUT/last.pt (from OUT/prev.pt when last.pt is missing or damaged); without "
+                         "--resume an OUT holding checkpoints is refused")
     ap.add_argument("--data")
     ap.add_argument("--iterations", type=int)
     ap.add_argument("--threads", type=int)

@@ -42,7 +42,7 @@ def draw_truth(image: np.ndarray, truth: CameraTruth) -> np.ndarray:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ghnerf-sim-demo", description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="sim_pair.png", help="PNG file to write")
+    parser.add_argument("--out", default="sim_pair.png", help="image file to write (.png or .jpg)")
     parser.add_argument("--seed", type=int, default=0, help="scene seed (body, clothes, room)")
     parser.add_argument("--motion", default="wave", help=f"one of {', '.join(MOTION_NAMES)}, or a .bvh path")
     parser.add_argument("--t", type=float, default=0.3, help="scene time in seconds")

@@ -1,0 +1,59 @@
+"""The code's constants and lists that the docs quote, quoted as they are.
+
+Each of these was written into a doc by hand beside a change of the code (session 50); a later change of the
+constant would leave the doc stating the old value without a word. (The runtime's defaults JSON is checked by
+``tests/ghnerf_runtime/test_cli_run.py``, the daemon configs in the docs by
+``tests/firmware_host/daemon/test_daemon_config.py``.)
+"""
+from __future__ import annotations
+
+import inspect
+import re
+from pathlib import Path
+
+import pytest
+
+from drivers.backends.replay import MIN_SPEED
+from drivers.url_paths import FILE_PARTS
+from firmware_host.daemon.config import DAEMON_PATH_KEYS
+from firmware_host.daemon.memory import MMAP_THRESHOLD
+from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
+from firmware_host.sinks.vmc_pose import MAX_COORD_M
+from ghnerf_runtime.config import Joints3DConfig
+from ghnerf_runtime.geometry import triangulate_dlt
+
+REPO = Path(__file__).resolve().parents[1]
+RAY = Joints3DConfig().min_ray_angle_deg
+SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
+
+
+def _doc(name: str) -> str:
+    # one line per paragraph's worth of text: a phrase may be wrapped anywhere
+    return re.sub(r"\s+", " ", (REPO / name).read_text())
+
+
+@pytest.mark.parametrize(("doc", "phrase"), [
+    ("docs/daemon.md", f"gives the queue {CLOSE_DRAIN_S:g} s (`CLOSE_DRAIN_S`"),
+    ("docs/protocol.md", f"`CLOSE_DRAIN_S` ({CLOSE_DRAIN_S:g} s)"),
+    ("docs/daemon.md", f"fixes the threshold at {MMAP_THRESHOLD / (1 << 20):g} MiB"),
+    ("docs/recording-format.md", f"twice real time; at least {MIN_SPEED:g})"),
+    ("docs/protocol.md", f"a coordinate beyond ±{MAX_COORD_M:.3f} m"),
+    ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
+    ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
+    ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
+])
+def test_the_docs_quote_the_constants(doc, phrase):
+    assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"
+
+
+def test_the_daemon_doc_names_every_file_in_a_rig_url():
+    """docs/daemon.md, "Paths": every part of a rig URL that ``drivers.url_paths`` reads from the config file's
+    folder, and every plain path key, is named there (a backend given a file option is listed with it)."""
+    text = _doc("docs/daemon.md")
+    paths = text.split("**Paths.**", 1)[1].split("```", 1)[0]
+    for scheme, parts in FILE_PARTS.items():
+        assert f"`{scheme}://" in paths, scheme
+        for option in parts.options:
+            assert f"`{option}=" in paths, f"{scheme}://?{option}= is read from the config's folder; say so"
+    for key in DAEMON_PATH_KEYS:
+        assert f"`{'.'.join(key)}`" in paths, key
