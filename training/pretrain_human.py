@@ -664,6 +664,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {'diverged' if isinstance(e, FloatingPointError) else 'checkpoint not written'}: {e}",
               file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the checkpoints are whole (save_atomic), so say how to go on
+        print(f"stopped (Ctrl-C); `--resume --out {args.out}` continues from its last checkpoint", file=sys.stderr)
+        return 130
     print(json.dumps(summary, indent=1))
     return 0
 

@@ -681,10 +681,13 @@ def test_a_pretraining_stopped_by_a_signal_is_resumed_or_forced_at_once_and_a_li
             pretrain(tiny_pretrain(data64, iterations=100000, eval_every=0), run, resume=True, quiet=True)
         proc.send_signal(getattr(signal, sig))
         proc.wait(60)
+        stderr = proc.stderr.read()
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+    if sig == "SIGINT":  # one line and 130, as ghnerf-train: no traceback
+        assert proc.returncode == 130 and "Traceback" not in stderr and "--resume --out" in stderr, stderr
     # SIGINT: the lock removed on the way out; SIGTERM: left naming a dead process (as the trainer's)
     assert not (run / "train.pid").exists() if sig == "SIGINT" else (run / "train.pid").exists()
     step = _steps_of(run / "last.pt")
