@@ -37,12 +37,15 @@ import json
 import math
 import os
 import random
+import signal
 import sys
+import threading
 import time
 import tomllib
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Literal, Mapping
+from typing import Any, Iterator, Literal, Mapping
 
 import numpy as np
 import torch
@@ -596,6 +599,28 @@ class CheckpointWriteError(OSError):
     left as it was."""
 
 
+@contextmanager
+def ctrl_c_after() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) that comes during the block until the block is done, then raise it.
+
+    A checkpoint write takes a second or so: a KeyboardInterrupt raised inside torch's writer came out as a
+    RuntimeError ("unexpected pos"), reported as a failed write with advice to free space, and the step's
+    checkpoint was lost. Only in the main thread with Python's own handler installed (elsewhere: no change).
+    """
+    if threading.current_thread() is not threading.main_thread() \
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    caught: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
 def save_atomic(state: Any, path: Path, keep_previous: Path | None = None) -> None:
     """``torch.save`` through ``<path>.tmp``, fsynced, then renamed: a crash or power cut leaves the old file or
     the new one, never a renamed empty or half-written ``last.pt``. A failed write (a full disk, Ctrl-C) removes
@@ -606,13 +631,14 @@ def save_atomic(state: Any, path: Path, keep_previous: Path | None = None) -> No
     between the two renames leaves it and no ``path``: a reader falls back to it)."""
     tmp = path.with_suffix(".tmp")
     try:
-        with open(tmp, "wb") as fh:
-            torch.save(state, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if keep_previous is not None and path.exists():
-            os.replace(path, keep_previous)
-        os.replace(tmp, path)
+        with ctrl_c_after():
+            with open(tmp, "wb") as fh:
+                torch.save(state, fh)
+                fh.flush()
+                os.fsync(fh.fileno())
+            if keep_previous is not None and path.exists():
+                os.replace(path, keep_previous)
+            os.replace(tmp, path)
     except BaseException as e:
         tmp.unlink(missing_ok=True)
         if not isinstance(e, Exception):  # Ctrl-C: stop as asked
