@@ -34,7 +34,7 @@ import numpy as np
 from ghnerf_runtime.config import RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.rig import Rig
-from ghnerf_runtime.preprocess import Roi, roi_from_joints, roi_from_volume
+from ghnerf_runtime.preprocess import Roi, crop_camera, roi_from_joints, roi_from_volume
 
 __all__ = ["Track", "Regions", "SubjectTracker", "keep_roi", "plan_regions", "snap_roi", "track_from_joints",
            "volume_regions", "box_corners"]
@@ -252,10 +252,10 @@ class SubjectTracker:
         if self.track is None or self._used is None:
             return None
         out = np.zeros(len(self.track.joints), bool)
-        for cam, roi in zip(self.rig.pair, self._used.rois):
-            uv, depth = cam.project(self.track.joints, distort=False)
-            edge_lo, edge_hi = np.array([roi.x0, roi.y0]) - 0.5, np.array([roi.x0, roi.y0]) + roi.size - 0.5
-            out |= ~((depth > 0) & np.all((uv >= edge_lo) & (uv <= edge_hi), axis=1))
+        for cam, roi, roll in zip(self.rig.pair, self._used.rois, self.rolls):
+            # the crop as the model saw it (rotated upright about its centre): its pixels span [-0.5, size - 0.5]
+            uv, depth = crop_camera(cam, roi, roi.size, roll).project(self.track.joints, distort=False)
+            out |= ~((depth > 0) & np.all((uv >= -0.5) & (uv <= roi.size - 0.5), axis=1))
         return out
 
     def update_view(self, camera: int, joints_2d: np.ndarray, confidence: np.ndarray) -> bool:
