@@ -238,7 +238,7 @@ class SubjectTracker:
 
     def update(self, joints: np.ndarray, confidence: np.ndarray, valid: np.ndarray, sequence: int = 0) -> bool:
         """Replace the track by this pair's joints; returns whether a track is held afterwards."""
-        new = (track_from_joints(joints, confidence, valid, self.config, sequence, self.track, self._unseen())
+        new = (track_from_joints(joints, confidence, valid, self.config, sequence, self.track, self._unseen(valid))
                if self.config.enabled else None)
         if new is None and self.track is not None:
             self.drops += 1
@@ -246,16 +246,25 @@ class SubjectTracker:
         self.view_track = None
         return new is not None
 
-    def _unseen(self) -> np.ndarray | None:
+    def _unseen(self, valid: np.ndarray) -> np.ndarray | None:
         """``(J,)`` the held track's places that lie outside the crop this pair used in either camera (what
-        :meth:`regions` last gave), where the model could not have found them; ``None`` without a track."""
+        :meth:`regions` last gave), where the model could not have found them; ``None`` without a track.
+        Only the joints this pair did not report (``valid``) are looked at: the others are not carried."""
         if self.track is None or self._used is None:
             return None
-        out = np.zeros(len(self.track.joints), bool)
+        known = self.track.valid if self.track.known is None else self.track.known
+        out = np.zeros(len(known), bool)
+        ask = known & ~np.asarray(valid, bool).reshape(-1) if np.shape(valid) == known.shape else known
+        if not ask.any():  # (every joint reported: nothing to carry, the usual pair)
+            return out
+        points = self.track.joints[ask]
         for cam, roi, roll in zip(self.rig.pair, self._used.rois, self.rolls):
-            # the crop as the model saw it (rotated upright about its centre): its pixels span [-0.5, size - 0.5]
-            uv, depth = crop_camera(cam, roi, roi.size, roll).project(self.track.joints, distort=False)
-            out |= ~((depth > 0) & np.all((uv >= -0.5) & (uv <= roi.size - 0.5), axis=1))
+            if roll == 0.0:  # the window itself, in undistorted pixels
+                uv, depth = cam.project(points, distort=False)
+                uv = uv - [roi.x0, roi.y0]
+            else:  # the crop as the model saw it, rotated upright about its centre
+                uv, depth = crop_camera(cam, roi, roi.size, roll).project(points, distort=False)
+            out[ask] |= ~((depth > 0) & np.all((uv >= -0.5) & (uv <= roi.size - 0.5), axis=1))
         return out
 
     def update_view(self, camera: int, joints_2d: np.ndarray, confidence: np.ndarray) -> bool:
