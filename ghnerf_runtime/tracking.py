@@ -244,18 +244,20 @@ class SubjectTracker:
             self.drops += 1
         self.track = new
         self.view_track = None
+        self._used = None  # the next pair's crop is known once regions() gives it
         return new is not None
 
     def _unseen(self, valid: np.ndarray) -> np.ndarray | None:
         """``(J,)`` the held track's places that lie outside the crop this pair used in either camera (what
-        :meth:`regions` last gave), where the model could not have found them; ``None`` without a track.
-        Only the joints this pair did not report (``valid``) are looked at: the others are not carried."""
-        if self.track is None or self._used is None:
+        :meth:`regions` last gave), where the model could not have found them; ``None`` without a track; none
+        when no crop is known (no :meth:`regions` since the track was made). Only the joints this pair did not
+        report (``valid``) are looked at: the others are not carried."""
+        if self.track is None:
             return None
         known = self.track.valid if self.track.known is None else self.track.known
         out = np.zeros(len(known), bool)
         ask = known & ~np.asarray(valid, bool).reshape(-1) if np.shape(valid) == known.shape else known
-        if not ask.any():  # (every joint reported: nothing to carry, the usual pair)
+        if self._used is None or not ask.any():  # (every joint reported: nothing to carry, the usual pair)
             return out
         points = self.track.joints[ask]
         for cam, roi, roll in zip(self.rig.pair, self._used.rois, self.rolls):
