@@ -9,10 +9,12 @@ second, measured on the whole 3D point so the three axes move together.
 
 Time comes from the pairs' capture timestamps, so a dropped pair is a longer step, not a jump. A
 joint that goes missing restarts from its next reported position; a gap longer than ``max_gap_s``
-(the subject left, the stream stalled) restarts every joint; a pair at the last pair's instant again (the
-same frames estimated twice, a coarse clock) is answered from the state, the filter's limit as the step
-goes to 0. Only what is reported is smoothed: the tracker still follows the raw joints, so the crop never
-lags the subject.
+(the subject left, the stream stalled) restarts every joint; a pair at the last pair's instant again is
+answered from the state where a joint comes back where it was (the same frames estimated twice: the filter's
+limit as the step goes to 0), and restarts a joint that moved (a clock that did not tick between two
+captures: a coarse clock, a caller's constant stamp; answered from the state, the joints froze at the first
+pair while the subject walked on). Only what is reported is smoothed: the tracker still follows the raw
+joints, so the crop never lags the subject.
 
 Pure numpy; the state is the filter object's own (one per estimator).
 """
@@ -46,6 +48,7 @@ class OneEuroJoints:
         self._x: np.ndarray | None = None  # (J, 3) filtered positions
         self._dx: np.ndarray | None = None  # (J, 3) filtered velocities, m/s
         self._alive: np.ndarray | None = None  # (J,) joints with a state
+        self._raw: np.ndarray | None = None  # (J, 3) the last pair's joints as given (a repeat is told by them)
         self._t: float | None = None
 
     def __call__(self, t_s: float, points: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -76,6 +79,7 @@ class OneEuroJoints:
             # First pair, a gap, or time running backwards (a restarted source): start over.
             self._x, self._dx = x.copy(), np.zeros_like(x)
             self._alive = valid.copy()
+            self._raw = x.copy()
             self._t = float(t_s)
             return x.copy()
         keep = valid & self._alive
@@ -91,14 +95,18 @@ class OneEuroJoints:
         self._dx = np.where(keep[:, None], dx_hat, 0.0)
         self._x = out
         self._alive = valid.copy()
+        self._raw = x.copy()
         self._t = float(t_s)
         return out.copy()
 
     def _same_instant(self, x: np.ndarray, valid: np.ndarray) -> np.ndarray:
-        """A second pair at the last pair's time: a step of 0 gives the new position no weight (alpha 0), so a
-        joint with a state keeps it; restarting there instead reported the raw joint and lost the state."""
-        keep = valid & self._alive
+        """A second pair at the last pair's time. A joint given where it was given last (the same frames again): a
+        step of 0 gives it no weight (alpha 0), so it keeps its state; restarting there reported the raw joint and
+        lost the state. A joint given elsewhere moved while the clock stood still (a coarse clock, a constant
+        stamp): there is no step to filter over, so it restarts where it is; kept, every joint stayed at the first
+        pair of that instant however far the subject went."""
+        keep = valid & self._alive & np.all(x == self._raw, axis=-1)
         out = np.where(keep[:, None], self._x, x)
         self._dx = np.where(keep[:, None], self._dx, 0.0)
-        self._x, self._alive = out, valid.copy()
+        self._x, self._alive, self._raw = out, valid.copy(), x.copy()
         return out.copy()

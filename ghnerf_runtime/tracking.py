@@ -11,6 +11,14 @@ The track holds the previous pair's joints only to *place* the next crop: they a
 reported again. When a pair yields fewer than ``min_joints`` confident joints, or an
 implausible box, the track is dropped and the next pair starts from the volume.
 
+A joint the pair did not find keeps its last place in the track, moved with the body (the median
+step of the joints found in both pairs), for as long as the track holds. Where that place lies
+outside the crop the pair used, in either camera, the joint could not have been found there: it is
+*carried* (the crop and the box cover it) until it is found again. Before, a crop framed the joints
+found alone: legs hidden for a few pairs (a table) shrank it to the upper body, and when they came
+back they lay outside every later crop, never found again while the track held. A hidden joint
+still inside the crop is not carried: the crop stays what the joints found make it.
+
 A pair with one unusable camera (``frame_check.single_view_2d``) gives 2D joints in the other
 camera only: there is no 3D track then, but that camera's next crop follows its 2D joints (a
 *view track*), while the other camera and the sweep stay on the working volume.
@@ -26,7 +34,7 @@ import numpy as np
 from ghnerf_runtime.config import RoiConfig, TrackingConfig
 from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.rig import Rig
-from ghnerf_runtime.preprocess import Roi, roi_from_joints, roi_from_volume
+from ghnerf_runtime.preprocess import Roi, crop_camera, roi_from_joints, roi_from_volume
 
 __all__ = ["Track", "Regions", "SubjectTracker", "keep_roi", "plan_regions", "snap_roi", "track_from_joints",
            "volume_regions", "box_corners"]
@@ -39,9 +47,11 @@ class Track:
     Attributes:
         joints: ``(J, 3)`` rig-frame joints (metres); only ``valid`` rows mean anything.
         confidence: ``(J,)``.
-        valid: ``(J,)`` bool, joints that count for the track.
+        valid: ``(J,)`` bool, joints that count for the track (found, or carried).
         box: ``(2, 3)`` subject box ``(min, max)``, the valid joints' box grown by the margin.
         sequence: the pair number the joints came from.
+        carried: ``(J,)`` bool, the valid joints this pair did not find (module docstring); ``None``: none.
+        known: ``(J,)`` bool, the joints with a place in ``joints`` (valid, or remembered); ``None``: the valid.
     """
 
     joints: np.ndarray
@@ -49,6 +59,13 @@ class Track:
     valid: np.ndarray
     box: np.ndarray
     sequence: int
+    carried: np.ndarray | None = None
+    known: np.ndarray | None = None
+
+    @property
+    def found(self) -> np.ndarray:
+        """``(J,)`` the joints this track's pair found."""
+        return self.valid if self.carried is None else self.valid & ~self.carried
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,26 +91,49 @@ def box_corners(box: np.ndarray) -> np.ndarray:
 
 
 def track_from_joints(joints: np.ndarray, confidence: np.ndarray, valid: np.ndarray, config: TrackingConfig,
-                      sequence: int = 0) -> Track | None:
+                      sequence: int = 0, previous: Track | None = None,
+                      unseen: np.ndarray | None = None) -> Track | None:
     """A :class:`Track` from one pair's 3D joints, or ``None`` when they cannot carry one.
 
     A track needs ``config.min_joints`` finite joints with confidence ``>= min_confidence``
-    and a box no larger than ``max_box_size_m``.
+    and a box no larger than ``max_box_size_m``. ``previous`` (the track before): the joints this pair
+    did not find keep their places, moved with the body (module docstring); those ``unseen`` marks
+    (``(J,)``: placed outside this pair's crop; ``None``: all), or carried before, are carried, unless
+    that makes the box larger than ``max_box_size_m``.
     """
     joints = np.asarray(joints, dtype=np.float64)
     if joints.ndim != 2 or joints.shape[1] != 3:
         raise ShapeError(f"joints must have shape (J, 3), got {joints.shape}")
     conf = np.asarray(confidence, dtype=np.float64).reshape(-1)
-    ok = np.asarray(valid, bool).reshape(-1) & (conf >= config.min_confidence) & np.all(np.isfinite(joints), axis=1)
-    if conf.shape != ok.shape or ok.shape[0] != joints.shape[0]:
-        raise ShapeError(f"confidence and valid must have shape ({len(joints)},)")
+    found = np.asarray(valid, bool).reshape(-1)
+    if conf.shape != found.shape or found.shape[0] != joints.shape[0]:
+        raise ShapeError(f"confidence and valid must have shape ({len(joints)},), got {conf.shape} and "
+                         f"{found.shape}")
+    ok = found & (conf >= config.min_confidence) & np.all(np.isfinite(joints), axis=1)
     if int(ok.sum()) < config.min_joints:
         return None
     lo, hi = joints[ok].min(axis=0), joints[ok].max(axis=0)
     if np.any(hi - lo > config.max_box_size_m):
         return None
+    points, known, carried = joints.copy(), ok.copy(), np.zeros_like(ok)
+    if previous is not None and previous.joints.shape == joints.shape:
+        both = ok & previous.found
+        remembered = (previous.valid if previous.known is None else previous.known) & ~ok
+        if both.any() and remembered.any():
+            points[remembered] = previous.joints[remembered] + np.median(joints[both] - previous.joints[both], axis=0)
+            remembered &= np.all(np.isfinite(points), axis=1)
+            before = np.zeros_like(ok) if previous.carried is None else previous.carried
+            carried = remembered & (before | (True if unseen is None else np.asarray(unseen, bool)))
+            if carried.any():
+                wide_lo, wide_hi = np.minimum(lo, points[carried].min(0)), np.maximum(hi, points[carried].max(0))
+                if np.any(wide_hi - wide_lo > config.max_box_size_m):  # one far off (an outlier found once): forgotten
+                    remembered &= ~carried
+                    carried[:] = False
+                else:
+                    lo, hi = wide_lo, wide_hi
+            known |= remembered
     box = np.stack([lo - config.box_margin_m, hi + config.box_margin_m])
-    return Track(joints.copy(), conf.astype(np.float32), ok, box, int(sequence))
+    return Track(points, conf.astype(np.float32), ok | carried, box, int(sequence), carried, known)
 
 
 def snap_roi(roi: Roi, step: int) -> Roi:
@@ -178,11 +218,13 @@ class SubjectTracker:
         self.view_track: tuple[int, Roi] | None = None
         self._volume = volume_regions(rig, roi_config, self.rolls)
         self._last_rois: tuple[Roi, ...] | None = None
+        self._used: Regions | None = None  # the regions of the pair being estimated (carried joints)
         self.drops = 0
 
     def regions(self) -> Regions:
         if self.track is None or not self.config.enabled:
             self._last_rois = None
+            self._used = None  # no track to carry joints from
             if self.view_track is not None:
                 k, roi = self.view_track
                 rois = list(self._volume.rois)
@@ -191,16 +233,41 @@ class SubjectTracker:
             return self._volume
         regions = plan_regions(self.rig, self.track, self.roi_config, self._last_rois, self.rolls)
         self._last_rois = regions.rois if regions.tracked else None
+        self._used = regions
         return regions
 
     def update(self, joints: np.ndarray, confidence: np.ndarray, valid: np.ndarray, sequence: int = 0) -> bool:
         """Replace the track by this pair's joints; returns whether a track is held afterwards."""
-        new = track_from_joints(joints, confidence, valid, self.config, sequence) if self.config.enabled else None
+        new = (track_from_joints(joints, confidence, valid, self.config, sequence, self.track, self._unseen(valid))
+               if self.config.enabled else None)
         if new is None and self.track is not None:
             self.drops += 1
         self.track = new
         self.view_track = None
+        self._used = None  # the next pair's crop is known once regions() gives it
         return new is not None
+
+    def _unseen(self, valid: np.ndarray) -> np.ndarray | None:
+        """``(J,)`` the held track's places that lie outside the crop this pair used in either camera (what
+        :meth:`regions` last gave), where the model could not have found them; ``None`` without a track; none
+        when no crop is known (no :meth:`regions` since the track was made). Only the joints this pair did not
+        report (``valid``) are looked at: the others are not carried."""
+        if self.track is None:
+            return None
+        known = self.track.valid if self.track.known is None else self.track.known
+        out = np.zeros(len(known), bool)
+        ask = known & ~np.asarray(valid, bool).reshape(-1) if np.shape(valid) == known.shape else known
+        if self._used is None or not ask.any():  # (every joint reported: nothing to carry, the usual pair)
+            return out
+        points = self.track.joints[ask]
+        for cam, roi, roll in zip(self.rig.pair, self._used.rois, self.rolls):
+            if roll == 0.0:  # the window itself, in undistorted pixels
+                uv, depth = cam.project(points, distort=False)
+                uv = uv - [roi.x0, roi.y0]
+            else:  # the crop as the model saw it, rotated upright about its centre
+                uv, depth = crop_camera(cam, roi, roi.size, roll).project(points, distort=False)
+            out[ask] |= ~((depth > 0) & np.all((uv >= -0.5) & (uv <= roi.size - 0.5), axis=1))
+        return out
 
     def update_view(self, camera: int, joints_2d: np.ndarray, confidence: np.ndarray) -> bool:
         """A single-view pair: camera ``camera`` (rig order) saw ``(J, 2)`` joints (distorted image
@@ -226,3 +293,4 @@ class SubjectTracker:
         self.track = None
         self.view_track = None
         self._last_rois = None
+        self._used = None

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ghnerf_runtime.config import FrameCheckConfig, Joints3DConfig, RoiConfig, TrackingConfig
-from ghnerf_runtime.errors import ConfigError
+from ghnerf_runtime.errors import ConfigError, ShapeError
 from ghnerf_runtime.estimator import check_crop
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.joints3d import depth_centroid_joints, query_grid, triangulate_joints, volumetric_joints
@@ -100,6 +100,47 @@ def test_track_needs_enough_confident_joints_and_a_plausible_box():
     far = j.copy()
     far[0] = [30.0, 0.0, 3.0]
     assert track_from_joints(far, conf, valid, cfg) is None  # a 30 m box is nobody
+
+
+def test_a_joint_not_found_keeps_its_place_in_the_track_moved_with_the_body():
+    """The crop framed the joints found alone: a hidden part (legs behind a table) shrank it to the rest, and when
+    the part came back it lay outside every later crop. It is carried, moved by the body's step, while the
+    track holds; found again, it is where it is found; a carried joint that would make an implausible box is not."""
+    cfg = TrackingConfig(min_joints=6, box_margin_m=0.2)
+    j, conf, all_ = _joints(), np.full(25, 0.9), np.ones(25, bool)
+    first = track_from_joints(j, conf, all_, cfg)
+    upper = all_.copy()
+    upper[15:] = False  # ten joints hidden
+    step = np.array([0.05, 0.0, -0.02])
+    second = track_from_joints(j + step, conf, upper, cfg, previous=first)
+    assert second.valid.all() and np.array_equal(second.carried, ~upper)
+    np.testing.assert_allclose(second.joints, j + step)  # the hidden ones moved with the body
+    np.testing.assert_allclose(second.box, [(j + step).min(0) - 0.2, (j + step).max(0) + 0.2])
+    third = track_from_joints(j + 2 * step, conf, upper, cfg, previous=second)  # still hidden: still carried
+    np.testing.assert_allclose(third.joints, j + 2 * step)
+    back = j + 3 * step
+    back[20] += 0.01
+    fourth = track_from_joints(back, conf, all_, cfg, previous=third)
+    assert not fourth.carried.any() and np.array_equal(fourth.joints, back)  # found again: where it is found
+    # hidden inside the crop (unseen False): remembered, not carried, so the crop is what the joints found make it;
+    # once its place falls outside the crop it is carried, and stays so until found
+    inside = track_from_joints(j, conf, upper, cfg, previous=first, unseen=np.zeros(25, bool))
+    assert np.array_equal(inside.valid, upper) and np.array_equal(inside.known, all_)
+    np.testing.assert_allclose(inside.box, [j[upper].min(0) - 0.2, j[upper].max(0) + 0.2])
+    outside = track_from_joints(j, conf, upper, cfg, previous=inside, unseen=~upper)
+    assert outside.valid.all() and np.array_equal(outside.carried, ~upper)
+    sticky = track_from_joints(j, conf, upper, cfg, previous=outside, unseen=np.zeros(25, bool))
+    assert sticky.valid.all()
+    with pytest.raises(ShapeError, match=r"confidence and valid must have shape \(25,\)"):
+        track_from_joints(j, conf[:24], all_, cfg)  # was numpy's broadcasting ValueError
+    outlier = j.copy()
+    outlier[24] = [2.5, -1.0, 3.0]  # found once 2.5 m to the side (a box of 2.8 m with it)
+    odd = track_from_joints(outlier, conf, all_, cfg)
+    reach = j.copy()
+    reach[0] = [-0.6, -1.0, 3.0]  # a hand reaches the other way: carried on, the outlier made a 3.1 m box
+    moved = track_from_joints(reach, conf, upper, cfg, previous=odd)
+    assert moved is not None and not moved.carried.any() and np.array_equal(moved.valid, upper)
+    np.testing.assert_allclose(moved.box, [reach[upper].min(0) - 0.2, reach[upper].max(0) + 0.2])
 
 
 def test_view_track_crops_one_camera_around_its_2d_joints():

@@ -169,6 +169,41 @@ def test_a_pair_at_the_same_instant_again_keeps_the_state():
     assert np.array_equal(after_f[1], b[1])  # joint 1 restarts where it comes back
 
 
+def test_a_joint_that_moved_at_the_same_instant_restarts_there_and_never_freezes():
+    """A clock that does not tick between captures (a coarse clock, a caller's constant stamp): answered from the
+    state, every joint stayed where the first pair of that instant put it, however far the subject went."""
+    f = OneEuroJoints(SmoothingConfig())
+    ok = np.ones(2, bool)
+    f(0.0, np.zeros((2, 3)), ok)
+    for i in range(1, 6):
+        walked = np.zeros((2, 3))
+        walked[0, 0] = 0.1 * i  # joint 0 walks 0.1 m a pair, joint 1 stands still
+        out = f(0.0, walked, ok)
+        assert np.array_equal(out, walked), (i, out)  # the moved joint as given; the still one is its state (0)
+    # the clock ticks again: filtered from where the joint was last given, not from the first pair
+    on = f(1 / FPS, np.array([[0.52, 0.0, 0.0], [0.0, 0.0, 0.0]]), ok)
+    assert 0.5 < on[0, 0] < 0.52 and np.array_equal(on[1], np.zeros(3))
+
+
+def test_the_estimator_follows_a_walking_subject_whose_pairs_share_one_stamp():
+    sim = pytest.importorskip("drivers.sim")
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.estimator import Estimator
+
+    rig = sim.RigPlacement().build()
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig())
+    for i in range(4):
+        scene = sim.SimScene(sim.SceneConfig(seed=11, motion="wave", position_xz=(0.15 * i, 3.0)))
+        rendered = [scene.render(c, i / FPS) for c in rig.pair]
+        truth = scene.joints_3d(i / FPS)
+        oracle.set_truth(truth, np.stack([tr.visible for _, tr in rendered]))
+        r = est.estimate(tuple(img for img, _ in rendered), timestamp_s=0.0)
+        found = ~r.missing
+        err = np.linalg.norm(r.joints_3d[found] - truth[found], axis=-1)
+        assert r.num_found > 6 and err.max() < 0.01, (i, err.max())  # the oracle's joints are exact; frozen: 0.45 m
+
+
 def test_a_non_finite_joint_or_an_overflowing_jump_does_not_poison_the_state():
     from ghnerf_runtime.config import SmoothingConfig
 
