@@ -480,7 +480,7 @@ def _declared_units(path: Path) -> float | None:
     import tomllib
 
     try:
-        meta = tomllib.loads(path.read_text(encoding="utf-8")).get("metadata")
+        meta = tomllib.loads(path.read_text(encoding="utf-8-sig")).get("metadata")  # as the reader: a BOM is skipped
     except (OSError, ValueError):
         return None  # the reader names what is wrong with it
     if not isinstance(meta, dict) or "units_to_metres" not in meta:

@@ -30,7 +30,7 @@ from calibration.detect import MIN_CORNERS, BoardView, fixes_a_pose
 from calibration.errors import SolveError
 from calibration.level import LEVEL_VOLUME, level_rig
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.geometry.rig import MIN_BASELINE_M, Rig, WorkingVolume
+from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M, Rig, WorkingVolume
 from ghnerf_runtime.rig_file import principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
@@ -472,6 +472,10 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
             Camera(b, *intr[b].image_size, intr[b].K, intr[b].dist, pose.R, pose.T))
     tool_rig = Rig(cams, LEVEL_VOLUME, rig_id=rig_id)
     if tool_rig.baseline_problem():  # the rig file's reader refuses such a pair: no file that cannot be loaded
+        if tool_rig.baseline > MAX_BASELINE_M:  # the scale is the board's: a square_m far too large
+            raise SolveError(f"cameras {a!r} and {b!r} came out {tool_rig.baseline:.4g} m apart (at most "
+                             f"{MAX_BASELINE_M:g} m accepted): is the board's square_m ({board.square_m:g}) the side "
+                             "of a printed square in metres?")
         raise SolveError(f"cameras {a!r} and {b!r} came out {1e3 * tool_rig.baseline:.1f} mm apart (at least "
                          f"{1e3 * MIN_BASELINE_M:.0f} mm needed): do both camera folders hold the same images, or "
                          "did one camera capture for both (the rig source's first and second)?")

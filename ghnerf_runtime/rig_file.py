@@ -214,6 +214,11 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
             model, a K that is not a pinhole matrix, an R that is not a rotation, a
             working volume with ``max <= min``, duplicate camera names.
     """
+    return _rig_from_dict(data, path=path, warn=True)
+
+
+def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> Rig:
+    """:func:`rig_from_dict`; ``warn=False`` (:func:`save_rig`'s check of its own text) logs no lens warning."""
     chk = _Checker(None if path is None else str(path))
     if not isinstance(data, dict):
         chk._raise(None, f"the document must be a JSON object, got {type(data).__name__} {_show(data)}")
@@ -253,6 +258,10 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
     hi = chk.array(vol["max"], "working_volume.max", (3,), "3-vector of numbers")
     if np.any(hi <= lo):
         chk._raise("working_volume", f"max {hi.tolist()} must exceed min {lo.tolist()} on every axis")
+    with np.errstate(over="ignore"):
+        span = np.concatenate([hi - lo, hi + lo])  # the size and (twice) the centre
+    if not np.all(np.isfinite(span)):  # +-1e308: loaded, and its size or centre was inf
+        chk._raise("working_volume", f"from {lo.tolist()} to {hi.tolist()} is too large (its size overflows)")
     metadata = data.get("metadata", {})
     if not isinstance(metadata, dict):
         chk._raise("metadata", f"must be a JSON object, got {_show(metadata)}")
@@ -269,7 +278,7 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
     problem = rig.baseline_problem()
     if problem:
         chk._raise("cameras[1].t", problem)
-    for cam in cameras:
+    for cam in cameras if warn else ():
         if cam.fold_inside_image():
             log.warning(
                 "%scamera %r: its lens model folds over %.2f (normalised radius) from the centre, before the "
@@ -401,6 +410,8 @@ def dumps_rig(rig: Rig, *, path: str | os.PathLike | None = None) -> str:
 def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
     """Parse and validate rig file text. ``path`` is used only in error messages."""
     where = None if path is None else str(path)
+    if not text.strip():  # JSON's "Expecting value" at line 1 did not say so
+        raise RigFileError("the file is empty", path=where)
     try:
         # NaN/Infinity literals parse to floats here and are then rejected with the field name.
         data = json.loads(text, object_pairs_hook=remember_repeats)
@@ -437,21 +448,19 @@ def load_rig(path: str | os.PathLike) -> Rig:
 def save_rig(rig: Rig, path: str | os.PathLike) -> None:
     """Write ``rig`` to ``path`` atomically (see :func:`write_text_atomic`).
 
-    The text is produced and checked in memory before the file system is touched, so a
-    rig that cannot be written (e.g. non-JSON metadata, or a principal point or a baseline
-    :func:`load_rig` would refuse) leaves the old file as it was.
+    The text is produced and read back with :func:`load_rig`'s checks in memory before the
+    file system is touched, so a rig that cannot be written (e.g. non-JSON metadata, or a
+    principal point, image size or baseline :func:`load_rig` would refuse) leaves the old
+    file as it was.
 
     Raises:
         RigFileError: the rig cannot be serialised, or the file cannot be written.
     """
-    for i, cam in enumerate(rig.cameras):  # a file the reader refuses is worse than none
-        problem = principal_point_problem(cam.K, cam.width, cam.height)
-        if problem:
-            raise RigFileError(f"camera {cam.name!r}: {problem}", path=str(path), field=f"cameras[{i}].K")
-    problem = rig.baseline_problem()
-    if problem:
-        raise RigFileError(problem, path=str(path), field="cameras[1].t")
-    write_text_atomic(path, dumps_rig(rig, path=path))
+    text = dumps_rig(rig, path=path)
+    # a file the reader refuses is worse than none: read the text back with the reader's every check (a Camera
+    # accepts what the file may not hold, such as a 40000-pixel side from an imported calibration)
+    _rig_from_dict(json.loads(text, object_pairs_hook=remember_repeats), path=path, warn=False)
+    write_text_atomic(path, text)
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:

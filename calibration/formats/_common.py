@@ -9,7 +9,7 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import ROTATION_TOLERANCE, principal_point_problem
+from ghnerf_runtime.rig_file import MAX_IMAGE_SIDE, ROTATION_TOLERANCE, principal_point_problem
 
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: Foreign files often print rotations with few digits: rotations whose ``|R R^T - I|``
@@ -91,6 +91,8 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
         if (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v)
                 or v <= 0 or v != int(v)):
             raise fail(path, join(field, key), f"image {what} must be a positive integer, got {show(v)}")
+        if v > MAX_IMAGE_SIDE:  # the rig file's limit: imported, it was saved to a rig file load_rig refused
+            raise fail(path, join(field, key), f"image {what} must be at most {MAX_IMAGE_SIDE}, got {show(v)}")
     K = as_array(path, join(field, K_key), K, [(3, 3)], "a 3x3 camera matrix")
     if not (K[0, 0] > 0 and K[1, 1] > 0) or K[2, 2] != 1.0 or np.any(K[2, :2] != 0) or K[1, 0] != 0:
         raise fail(path, join(field, K_key),

@@ -78,11 +78,13 @@ def read_anipose_toml(
     units = check_units(units_to_metres)
     p = Path(path)
     try:
-        text = p.read_bytes().decode("utf-8")
+        text = p.read_bytes().decode("utf-8-sig")  # a byte-order mark (Windows editors): tomllib refused line 1
     except OSError as e:
         raise fail(path, None, f"cannot read: {e.strerror or e}") from e
     except UnicodeDecodeError as e:
         raise fail(path, None, f"not UTF-8 text (byte {e.start}): {e.reason}") from e
+    if not text.strip():  # read as a rig of no cameras, named as one
+        raise fail(path, None, "the file is empty")
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

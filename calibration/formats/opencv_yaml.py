@@ -85,7 +85,20 @@ def _open(path) -> cv2.FileStorage:
     if not p.is_file():
         raise fail(path, None, "no such file" if not p.exists() else "not a regular file")
     try:
-        fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
+        with open(p, "rb") as f:
+            head = f.read(3)
+        # FileStorage's own words for an empty file: "(-215:Assertion failed) buf in function 'open'"
+        if not head.strip() and not p.read_bytes().strip():
+            raise fail(path, None, "the file is empty")
+        if head == b"\xef\xbb\xbf":  # a byte-order mark (Windows editors): FileStorage refused line 1's syntax
+            text = p.read_bytes()[3:].decode("utf-8")
+            fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+        else:
+            fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
+    except OSError as e:
+        raise fail(path, None, f"cannot read: {e.strerror or e}") from e
+    except UnicodeDecodeError as e:
+        raise fail(path, None, f"not UTF-8 text (byte {e.start + 3}): {e.reason}") from e
     except (cv2.error, SystemError) as e:
         cause = e.__cause__ or e
         msg = str(cause).split("error: ", 1)[-1].strip()

@@ -11,6 +11,10 @@ from ghnerf_runtime.geometry.camera import Camera, check_last_dim
 #: The shortest stereo baseline the runtime accepts. Real rigs have centimetres to a metre; a shorter one is a
 #: calibration that never placed the cameras (at 1 cm and 3 m, one pixel of disparity is about 0.5 m of depth).
 MIN_BASELINE_M = 0.01
+#: The longest stereo baseline the runtime accepts. The model learnt 0.1-1.8 m and the bench's rigs are about a
+#: metre; a rig whose translations are in millimetres but read as metres has its pair a thousand times too far
+#: apart (the example rig's 7.5 cm: 75 m), and one of 1e200 overflowed the baseline to inf, both accepted.
+MAX_BASELINE_M = 10.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -27,6 +31,10 @@ class WorkingVolume:
             raise GeometryError(f"working volume corners must be finite 3-vectors, got {lo.tolist()}, {hi.tolist()}")
         if np.any(hi <= lo):
             raise GeometryError(f"working volume max {hi.tolist()} must exceed min {lo.tolist()} on every axis")
+        with np.errstate(over="ignore"):
+            span = np.concatenate([hi - lo, hi + lo])  # the size and (twice) the centre
+        if not np.all(np.isfinite(span)):  # corners of +-1e308: its size or centre overflowed to inf
+            raise GeometryError(f"working volume from {lo.tolist()} to {hi.tolist()} is too large for float64")
         for name, value in (("min_corner", lo), ("max_corner", hi)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -95,15 +103,24 @@ class Rig:
 
     @property
     def baseline(self) -> float:
+        """Distance between the pair's centres, metres (``inf`` where it overflows float64)."""
         a, b = self.pair
-        return float(np.linalg.norm(a.center - b.center))
+        with np.errstate(over="ignore", invalid="ignore"):  # translations of 1e200: inf, refused by baseline_problem
+            distance = float(np.linalg.norm(a.center - b.center))
+        return distance if not np.isnan(distance) else np.inf
 
     def baseline_problem(self) -> str | None:
-        """Why the pair cannot triangulate (its centres closer than :data:`MIN_BASELINE_M`), or None."""
-        if self.baseline >= MIN_BASELINE_M:
+        """Why the pair cannot triangulate (its centres closer than :data:`MIN_BASELINE_M`), or why its translations
+        are not metres (farther apart than :data:`MAX_BASELINE_M`), or None."""
+        baseline = self.baseline
+        if MIN_BASELINE_M <= baseline <= MAX_BASELINE_M:
             return None
         a, b = self.pair
-        return (f"cameras {a.name!r} and {b.name!r} are {self.baseline * 1e3:.1f} mm apart (at least "
+        if baseline > MAX_BASELINE_M:
+            return (f"cameras {a.name!r} and {b.name!r} are {baseline:.4g} m apart (at most {MAX_BASELINE_M:g} m "
+                    "accepted): translations in millimetres read as metres? The rig's translations are in metres "
+                    "(a foreign file's are converted with units_to_metres, 0.001 for millimetres)")
+        return (f"cameras {a.name!r} and {b.name!r} are {baseline * 1e3:.1f} mm apart (at least "
                 f"{MIN_BASELINE_M * 1e3:.0f} mm needed): two views from one point give no depth, so every joint would "
                 "be missing. Were only the intrinsics calibrated, or one camera's pose copied to both? Solve the "
                 "pair's extrinsics (ghcal solve)")

@@ -117,3 +117,14 @@ def test_a_diverged_pair_pose_is_refused(monkeypatch):
     left, right = _views(tilts, seed=1), _views(tilts, seed=1, t_offset=(-0.3, 0.0, 0.0))
     with pytest.raises(SolveError, match=r"cameras 'left' and 'right': the pair's pose diverged"):
         solve_rig(BOARD, {"left": left, "right": right}, ("left", "right"), camera_height_m=1.4)
+
+
+def test_a_pair_solved_too_far_apart_names_the_boards_square():
+    # the views of an 8 cm board solved with a square of 2 m: the pair 25 times too far apart (12.5 m), which the
+    # reader refuses (cameras[1].t); said here, naming the board's square, not as the rig file's millimetres
+    tilts = [(a, b) for a in (-30, 0, 30) for b in (-25, 25)]
+    left, right = _views(tilts, seed=1), _views(tilts, seed=1, t_offset=(-0.5, 0.0, 0.0))
+    huge = BoardSpec(squares_x=7, squares_y=5, square_m=2.0, marker_m=1.5)
+    with pytest.raises(SolveError, match=r"cameras 'left' and 'right' came out 12\.\d+ m apart \(at most 10 m "
+                                         r"accepted\): is the board's square_m \(2\)"):
+        solve_rig(huge, {"left": left, "right": right}, ("left", "right"), camera_height_m=1.4)

@@ -247,7 +247,7 @@ def test_anipose_units_are_required(tmp_path):
     with pytest.raises(GeometryError, match="units_to_metres"):
         read_anipose_toml(path, units_to_metres=0.0)
     with pytest.raises(GeometryError, match="units_to_metres"):
-        write_opencv_rig(read_anipose_toml(path, units_to_metres=1.0), tmp_path / "x.yaml", units_to_metres=-1)
+        write_opencv_rig(read_anipose_toml(path, units_to_metres=0.001), tmp_path / "x.yaml", units_to_metres=-1)
 
 
 def test_toml_writer_escapes_and_is_anipose_shaped(rig):
@@ -442,7 +442,7 @@ def test_yaml_unparseable_and_missing_files(tmp_path):
     with pytest.raises(RigFileError, match="no such file"):
         read_opencv_rig(tmp_path / "nope.yaml")
     (tmp_path / "empty.yaml").write_text("")
-    with pytest.raises(RigFileError, match="cannot parse"):
+    with pytest.raises(RigFileError, match="the file is empty"):  # was OpenCV's "(-215:Assertion failed) buf"
         read_opencv_camera(tmp_path / "empty.yaml")
     matrix = tmp_path / "matrix.yaml"
     matrix.write_text("%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n  rows: 3\n  cols: 3\n  dt: d\n  data: [1, 2]\n"
@@ -614,3 +614,52 @@ def test_a_zero_translation_needs_no_units_whichever_way_it_is_written(tmp_path)
     with pytest.raises(RigFileError, match="pass units_to_metres") as info:
         read_opencv_camera(path)
     assert info.value.field == "T"
+
+
+def test_an_image_side_the_rig_file_cannot_hold_is_refused_on_import(rig, tmp_path):
+    """Imported, a 40000-pixel camera was saved by ghcal import to a rig file load_rig refused."""
+    K = [[20000.0, 0.0, 19999.5], [0.0, 20000.0, 14999.5], [0.0, 0.0, 1.0]]
+    big = Rig(tuple(Camera(c.name, 40000, 30000, K, c.dist, c.R, c.t) for c in rig.cameras), rig.volume)
+    write_opencv_rig(big, tmp_path / "big.yml")
+    with pytest.raises(RigFileError, match="must be at most 32767, got 40000") as info:
+        read_opencv_rig(tmp_path / "big.yml")
+    assert info.value.field == "cameras[0].image_width"
+    write_anipose_toml(big, tmp_path / "big.toml", units_to_metres=1.0)
+    with pytest.raises(RigFileError, match="must be at most 32767, got 40000") as info:
+        read_anipose_toml(tmp_path / "big.toml", units_to_metres=1.0)
+    assert info.value.field == "cam_0.size"
+
+
+def test_millimetres_read_as_metres_are_refused_naming_the_translation(tmp_path):
+    path = tmp_path / "calibration.toml"
+    path.write_text(ANIPOSE_TOML)  # millimetres: read as metres it was a rig 1.5 km wide
+    with pytest.raises(RigFileError, match="1536 m apart.*millimetres") as info:
+        read_anipose_toml(path, units_to_metres=1.0)
+    assert info.value.field == "cam_1.translation" and info.value.path == str(path)
+    assert read_anipose_toml(path, units_to_metres=0.001).baseline == pytest.approx(1.536, abs=1e-3)
+
+
+@pytest.mark.parametrize("suffix", [".yml", ".xml", ".json", ".toml"])
+def test_a_byte_order_mark_is_skipped(rig, tmp_path, suffix):
+    """Saved by a Windows editor: OpenCV and tomllib refused line 1 ("unsupported syntax", "invalid statement")."""
+    plain, marked = tmp_path / f"plain{suffix}", tmp_path / f"marked{suffix}"
+    if suffix == ".toml":
+        write_anipose_toml(rig, plain, units_to_metres=0.001)
+        read = lambda p: read_anipose_toml(p, units_to_metres=0.001)  # noqa: E731
+    else:
+        write_opencv_rig(rig, plain)
+        read = read_opencv_rig
+    marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    assert_cameras_close(read(plain), read(marked), atol=0)
+
+
+def test_an_empty_foreign_file_says_so(tmp_path):
+    path = tmp_path / "calibration.toml"
+    path.write_text("\n")
+    with pytest.raises(RigFileError, match="the file is empty") as info:  # was "a rig needs at least two cameras"
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.path == str(path) and info.value.field is None
+    yaml = tmp_path / "rig.yml"
+    yaml.write_text("\n\n\n%YAML:1.0\n---\nrig_id: r\n")  # blank lines first: not empty
+    with pytest.raises(RigFileError, match="no known layout"):
+        read_opencv_rig(yaml)

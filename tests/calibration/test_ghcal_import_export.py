@@ -184,3 +184,15 @@ def test_our_own_anipose_export_needs_no_units_and_a_rig_file_needs_no_import(ri
     capsys.readouterr()
     assert cli.main(["import", str(rig_file), "--out", str(tmp_path / "again.json")]) == 2
     assert "is a rig file already" in capsys.readouterr().err
+
+
+def test_our_anipose_export_saved_with_a_byte_order_mark_imports_with_its_recorded_unit(rig_file, tmp_path, capsys):
+    """Opened and saved in a Windows editor: the recorded unit was not found (an invalid TOML line 1), so the
+    unit was asked for, and the reader refused the file anyway."""
+    foreign = tmp_path / "calibration.toml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign), "--units-to-metres", "0.001"]) == 0
+    foreign.write_bytes(b"\xef\xbb\xbf" + foreign.read_bytes())
+    back = tmp_path / "back.json"
+    assert cli.main(["import", str(foreign), "--out", str(back)]) == 0
+    assert "baseline 600.0 mm (file units x 0.001 m)" in capsys.readouterr().out
+    _same_cameras(load_rig(rig_file), load_rig(back))

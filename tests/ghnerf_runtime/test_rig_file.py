@@ -198,8 +198,9 @@ def test_unreadable_files(tmp_path):
     bad.write_bytes(b'{"rig_id": "caf\xe9"}')
     with pytest.raises(RigFileError, match="not UTF-8"):
         load_rig(bad)
-    with pytest.raises(RigFileError, match="invalid JSON"):
-        loads_rig("", path="inline")
+    for text in ("", " \n"):  # was "invalid JSON at line 1, column 1: Expecting value"
+        with pytest.raises(RigFileError, match="inline: the file is empty"):
+            loads_rig(text, path="inline")
 
 
 @pytest.mark.parametrize("text, why", [
@@ -251,9 +252,10 @@ def test_save_of_text_that_is_not_utf8_is_a_rig_file_error(tmp_path):
     cams = (Camera("left\ud800", *rig.cameras[0].size, rig.cameras[0].K, rig.cameras[0].dist, rig.cameras[0].R,
                    rig.cameras[0].t), rig.cameras[1])
     path = tmp_path / "rig.json"
-    with pytest.raises(RigFileError, match="not UTF-8") as info:  # was a bare UnicodeEncodeError
+    with pytest.raises(RigFileError, match="must be UTF-8") as info:  # was a bare UnicodeEncodeError
         save_rig(Rig(cams, rig.volume, rig_id=rig.rig_id), path)
     assert info.value.path == str(path) and not path.exists() and not list(tmp_path.iterdir())
+    assert info.value.field == "cameras[0].name"  # the reader's own check, run before writing
 
 
 @pytest.mark.filterwarnings("error")
@@ -410,3 +412,51 @@ def test_the_estimator_refuses_a_rig_without_a_baseline():
     same = Rig((a, Camera(b.name, b.width, b.height, b.K, b.dist, a.R, a.t + [0.004, 0, 0])), rig.volume)
     with pytest.raises(GeometryError, match=r"'left' and 'right' are 4\.0 mm apart"):
         Estimator(object(), same)  # refused before the session is looked at
+
+
+def test_translations_in_millimetres_are_refused_naming_the_pair(example_dict, tmp_path):
+    """A rig whose t were written in millimetres loaded as a 75 m baseline, and every joint came out wrong."""
+    for cam in example_dict["cameras"]:
+        cam["t"] = [1000.0 * v for v in cam["t"]]
+    path = tmp_path / "mm.json"
+    path.write_text(json.dumps(example_dict))
+    with pytest.raises(RigFileError) as info:
+        load_rig(path)
+    assert info.value.field == "cameras[1].t" and str(path) in str(info.value)
+    assert "'left' and 'right' are 75 m apart (at most 10 m" in str(info.value) and "millimetres" in str(info.value)
+
+
+@pytest.mark.filterwarnings("error")
+def test_translations_that_overflow_are_refused_without_numpy_warnings(example_dict):
+    example_dict["cameras"][1]["t"] = [1e200, 0.0, 0.0]  # loaded, with a baseline of inf and an overflow warning
+    with pytest.raises(RigFileError, match="are inf m apart") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == "cameras[1].t"
+    example_dict["cameras"][0]["t"], example_dict["cameras"][1]["t"] = [1e308] * 3, [-1e308] * 3  # inf - inf
+    with pytest.raises(RigFileError, match="are inf m apart"):
+        rig_from_dict(example_dict, path="rig.json")
+
+
+def test_save_refuses_an_image_side_the_reader_would_refuse(tmp_path):
+    """A Camera takes any size (an imported calibration's 40000 pixels): saved, load_rig refused the file."""
+    rig = load_rig(EXAMPLE)
+    K = [[20000.0, 0.0, 19999.5], [0.0, 20000.0, 14999.5], [0.0, 0.0, 1.0]]
+    cams = tuple(Camera(c.name, 40000, 30000, K, c.dist, c.R, c.t) for c in rig.cameras)
+    path = tmp_path / "rig.json"
+    path.write_text("old")
+    with pytest.raises(RigFileError, match="must be at most 32767, got 40000") as info:
+        save_rig(Rig(cams, rig.volume), path)
+    assert info.value.field == "cameras[0].width" and info.value.path == str(path)
+    assert path.read_text() == "old" and len(list(tmp_path.iterdir())) == 1
+
+
+@pytest.mark.filterwarnings("error")
+def test_a_working_volume_too_large_for_float64_is_refused(example_dict):
+    from ghnerf_runtime.errors import GeometryError
+
+    example_dict["working_volume"] = {"min": [-1e308] * 3, "max": [1e308] * 3}  # loaded; its size was inf
+    with pytest.raises(RigFileError, match="too large") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == "working_volume"
+    with pytest.raises(GeometryError, match="too large"):
+        WorkingVolume(np.full(3, 1e308), np.full(3, 1.7e308))  # its centre overflows
