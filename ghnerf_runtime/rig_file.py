@@ -57,6 +57,10 @@ ROTATION_TOLERANCE = 1e-4
 #: (1280x720 read as 1920x1080) or a quarter (the other way), which the old "inside the image" test
 #: let through. 10 % leaves margin on both sides.
 PRINCIPAL_POINT_TOLERANCE = 0.1
+#: Focal lengths (fx, fy) as a multiple of the image's longer side, outside which no lens on a body-capture rig
+#: lies: 0.01 is a 179-degree view through the pinhole part (fisheyes are modelled by their distortion), 100 a
+#: 0.6-degree one. Past them a file holds a typo or another unit (1e308 loaded and gave NaN pixels).
+FOCAL_RANGE = (0.01, 100.0)
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
@@ -78,6 +82,7 @@ __all__ = [
     "loads_rig",
     "write_text_atomic",
     "principal_point_problem",
+    "focal_length_problem",
     "PRINCIPAL_POINT_TOLERANCE",
 ]
 
@@ -166,6 +171,21 @@ def principal_point_problem(K: Any, width: int, height: int, *, advice: str = _R
     return (f"its principal point ({cx:g}, {cy:g}) lies {off_x:.0%} of the width and {off_y:.0%} of the height "
             f"from the centre of the {width}x{height} image (a real lens: within {PRINCIPAL_POINT_TOLERANCE:.0%}): "
             + advice)
+
+
+def focal_length_problem(K: Any, width: int, height: int) -> str | None:
+    """Why ``K``'s focal lengths are not a lens's for a ``width`` x ``height`` image (``FOCAL_RANGE``); None when
+    they are."""
+    K = np.asarray(K, dtype=np.float64)
+    side = float(max(width, height))
+    low, high = FOCAL_RANGE[0] * side, FOCAL_RANGE[1] * side
+    for name, f in (("fx", float(K[0, 0])), ("fy", float(K[1, 1]))):
+        if not low <= f <= high:
+            fov = math.degrees(2.0 * math.atan(side / (2.0 * f))) if f > 0 else float("nan")
+            return (f"its focal length {name} = {f:g} px is outside {low:g}-{high:g} px ({FOCAL_RANGE[0]:g}-"
+                    f"{FOCAL_RANGE[1]:g} times the {width}x{height} image's longer side; a {fov:.3g}-degree view): a "
+                    f"typo, or a focal length in other units?")
+    return None
 
 
 def _utf8(text: str) -> bool:
@@ -310,7 +330,7 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
             f"{field}.K",
             f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {K.tolist()}",
         )
-    problem = principal_point_problem(K, width, height)
+    problem = principal_point_problem(K, width, height) or focal_length_problem(K, width, height)
     if problem:
         chk._raise(f"{field}.K", f"camera {name!r}: {problem}")
 

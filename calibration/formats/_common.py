@@ -9,7 +9,7 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import MAX_IMAGE_SIDE, ROTATION_TOLERANCE, principal_point_problem
+from ghnerf_runtime.rig_file import MAX_IMAGE_SIDE, ROTATION_TOLERANCE, focal_length_problem, principal_point_problem
 
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: Foreign files often print rotations with few digits: rotations whose ``|R R^T - I|``
@@ -99,7 +99,7 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
                    f"must be a pinhole matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {show(K)}")
     # a calibration of another image size (often not in the file: the caller's image_size) would make
     # the rig wrong silently; "inside the image" let through 1280x720 read as 1920x1080
-    problem = principal_point_problem(K, int(width), int(height))
+    problem = principal_point_problem(K, int(width), int(height)) or focal_length_problem(K, int(width), int(height))
     if problem:
         sizes = " x ".join(dict.fromkeys(size_keys))
         raise fail(path, join(field, K_key), f"camera {str(name)!r}, image size from {sizes}: {problem}")

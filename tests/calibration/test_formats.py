@@ -663,3 +663,15 @@ def test_an_empty_foreign_file_says_so(tmp_path):
     yaml.write_text("\n\n\n%YAML:1.0\n---\nrig_id: r\n")  # blank lines first: not empty
     with pytest.raises(RigFileError, match="no known layout"):
         read_opencv_rig(yaml)
+
+
+def test_a_focal_length_no_lens_has_is_refused_on_import(rig, tmp_path):
+    # 1e300 px was imported and written to a rig.json; every point then projected onto the principal point
+    import dataclasses
+
+    K = rig.cameras[1].K.copy()
+    K[0, 0] = 1e300
+    cams = (rig.cameras[0], dataclasses.replace(rig.cameras[1], K=K))
+    write_opencv_rig(dataclasses.replace(rig, cameras=cams), tmp_path / "rig.yaml")
+    with pytest.raises(RigFileError, match=r"cameras\[1\]\.camera_matrix.*camera 'right'.*focal length fx = 1e\+300"):
+        read_opencv_rig(tmp_path / "rig.yaml")

@@ -460,3 +460,21 @@ def test_a_working_volume_too_large_for_float64_is_refused(example_dict):
     assert info.value.field == "working_volume"
     with pytest.raises(GeometryError, match="too large"):
         WorkingVolume(np.full(3, 1e308), np.full(3, 1.7e308))  # its centre overflows
+
+
+@pytest.mark.parametrize("key, scale", [("fx", 1e300), ("fy", 1e-300), ("fx", 150.0), ("fy", 0.005)])
+def test_a_focal_length_no_lens_has_is_refused_naming_the_camera(example_dict, key, scale):
+    # fx 1e308 loaded and projected every point to the principal point, fy 1e-300 to inf (NaN pixels)
+    cam = example_dict["cameras"][1]
+    i = 0 if key == "fx" else 1
+    cam["K"][i][i] = max(cam["width"], cam["height"]) * scale
+    with pytest.raises(RigFileError, match=f"focal length {key} = .* times the .* longer side") as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == "cameras[1].K" and repr(cam["name"]) in str(info.value)
+
+
+@pytest.mark.parametrize("scale", [0.02, 0.3, 1.2, 90.0])
+def test_focal_lengths_of_real_lenses_load(example_dict, scale):
+    for cam in example_dict["cameras"]:
+        cam["K"][0][0] = cam["K"][1][1] = max(cam["width"], cam["height"]) * scale
+    assert rig_from_dict(example_dict, path="rig.json").pair[0].K[0, 0] > 0
