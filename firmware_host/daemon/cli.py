@@ -32,6 +32,7 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from typing import Any
 from pathlib import Path
 
 import drivers
@@ -233,11 +234,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             early_sighup.uninstall()
 
 
+def _print_json(data: Any) -> int:
+    """Print ``data`` as JSON; a reader that stopped early (``| head``) is not an error (it was a
+    BrokenPipeError traceback, at the print or at the interpreter's last flush)."""
+    try:
+        print(json.dumps(data, indent=2), flush=True)
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # the interpreter's last flush would fail again
+        os.close(devnull)
+    return 0
+
+
 def _main(argv: Sequence[str] | None) -> int:
     args = build_parser().parse_args(argv)
     if args.print_example_config:
-        print(json.dumps(EXAMPLE_CONFIG, indent=2))
-        return 0
+        return _print_json(EXAMPLE_CONFIG)
     if not args.config:
         print(f"{PROG}: error: --config is required (--print-example-config prints one to start from)",
               file=sys.stderr)
@@ -249,8 +261,7 @@ def _main(argv: Sequence[str] | None) -> int:
         return 2
     try:
         if args.validate_config:
-            print(json.dumps(config_to_dict(read_checked_config(args.config)), indent=2))
-            return 0
+            return _print_json(config_to_dict(read_checked_config(args.config)))
         early_sighup.take()  # a SIGHUP until now: the file is read now
         config = read_checked_config(args.config)  # as a reload checks it: what starts also reloads
     except DaemonConfigError as e:

@@ -446,3 +446,16 @@ def test_a_missing_model_folder_names_the_resolved_path_and_the_config_file(tmp_
     err = capsys.readouterr().err.strip()
     assert err == (f"ghnerf-daemon: error: {path}: estimator.session.model_dir: {tmp_path / 'etc' / 'models'}: "
                    f"no such folder (a relative path in {path} is read from its folder, {tmp_path / 'etc'})")
+
+
+def test_printing_the_example_config_into_a_closed_pipe_is_no_error():
+    # `ghnerf-daemon --print-example-config | head -3` (or --validate-config): a reader that stops early ended in
+    # a BrokenPipeError traceback
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before anything is written
+    try:
+        proc = subprocess.run([sys.executable, "-m", "firmware_host.daemon.cli", "--print-example-config"],
+                              stdout=write_end, stderr=subprocess.PIPE, text=True, timeout=120, cwd=REPO)
+    finally:
+        os.close(write_end)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr, proc.stderr
