@@ -84,8 +84,7 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) 
     try:
         _check_rig_url(config.rig.url)
     except DaemonConfigError as e:  # a file it names, read from the config file's folder: say so, as for models
-        why = str(e).split(": ", 1)[-1]
-        raise DaemonConfigError(why + _where_url_read(why, source), key="rig.url") from None
+        raise DaemonConfigError(e.message + _where_url_read(e.message, source), key="rig.url") from None
     check_sink_urls(config.sinks)
     model_dir = resolve_model_dir(config.estimator.session.model_dir)
     if not model_dir.is_dir():

@@ -48,6 +48,7 @@ class DaemonConfigError(FirmwareHostError, ValueError):
     def __init__(self, message: str, *, key: str | None = None) -> None:
         super().__init__(f"{key}: {message}" if key else message)
         self.key = key
+        self.message = message  # without the key: for a caller that re-keys it
 
 
 def _fail(field_name: str, why: str, value: Any) -> None:
