@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX
+from ghnerf_runtime.errors import ShapeError
 
 
 def mirror_images(images: np.ndarray) -> np.ndarray:
@@ -35,16 +36,20 @@ def unmirror_heatmaps(heatmaps: np.ndarray) -> np.ndarray:
     Exact when the heatmap stride divides the image width: cell ``x`` of a mirrored image covers the
     pixels of cell ``w - 1 - x`` of the original. A left joint of the mirror image is the right joint.
     """
+    heatmaps = np.asarray(heatmaps)
     if heatmaps.ndim != 4 or heatmaps.shape[1] != len(FLIP_INDEX):
-        raise ValueError(f"heatmaps: expected (S, {len(FLIP_INDEX)}, h, w), got {heatmaps.shape}")
+        raise ShapeError(f"heatmaps: expected (S, {len(FLIP_INDEX)}, h, w), got {heatmaps.shape}")
     return np.ascontiguousarray(heatmaps[:, list(FLIP_INDEX), :, ::-1])
 
 
 def flip_averaged(heatmaps: np.ndarray, mirrored: np.ndarray) -> np.ndarray:
     """The mean of ``heatmaps`` and ``mirrored`` (the heatmaps of the mirrored images), in float32."""
+    heatmaps, mirrored = np.asarray(heatmaps, np.float32), np.asarray(mirrored, np.float32)
     if heatmaps.shape != mirrored.shape:
-        raise ValueError(f"heatmaps {heatmaps.shape} and mirrored {mirrored.shape} differ in shape")
-    return (0.5 * (np.asarray(heatmaps, np.float32) + unmirror_heatmaps(np.asarray(mirrored, np.float32))))
+        raise ShapeError(f"heatmaps {heatmaps.shape} and mirrored {mirrored.shape} differ in shape")
+    # Halved before the sum: two out-of-contract values past half float32's range (1.7e38) summed to inf, and
+    # the decoder drops a joint with an inf where it scales any other map past 1 back to its peak.
+    return 0.5 * heatmaps + 0.5 * unmirror_heatmaps(mirrored)
 
 
 def presence_peak(heatmaps: np.ndarray, views, rank: int) -> float:
@@ -61,8 +66,9 @@ def presence_peak(heatmaps: np.ndarray, views, rank: int) -> float:
         (0.6, 0.4)
     """
     heat = np.asarray(heatmaps)
-    if heat.ndim != 4 or rank < 1:
-        raise ValueError(f"heatmaps: expected (S, J, h, w) and rank >= 1, got {heat.shape} and {rank}")
+    if heat.ndim != 4 or min(heat.shape[2:]) < 1 or rank < 1 or len(views) < 1:  # else numpy's bare errors
+        raise ShapeError(f"heatmaps: expected (S, J, h, w) with h, w >= 1, rank >= 1 and at least one view, got "
+                         f"{heat.shape}, rank {rank} and views {tuple(views)}")
     peaks = np.nan_to_num(heat[list(views)].reshape(len(views), heat.shape[1], -1).max(-1).astype(np.float64))
     joint = np.exp(np.log(np.clip(peaks, 1e-30, 1.0)).mean(0))
     return float(np.sort(joint)[::-1][rank - 1]) if len(joint) >= rank else 0.0

@@ -27,7 +27,12 @@ falling back per axis when the Hessian is not negative definite). The log of a
 Gaussian is exactly quadratic, and a Gaussian filtered by a Gaussian stays
 Gaussian, so this is unbiased for Gaussian-shaped peaks. Near the map edge (within
 the filter radius) the zero border biases the filtered map, so the fit uses the raw
-map there. ``"centroid"`` is the value-weighted centroid over a ``(2r+1)^2`` window
+map there, from the raw map's own maximum next to the filtered one (stopping a pixel
+short of the edge, from where the fit still reaches it): with a decoder sigma of 2-3 the
+filtered peak of a sigma-3 blob on the edge lies 2 px inside, and a fit from there was
+a pixel off (now < 0.01 px: ``tests/ghnerf_runtime/test_keypoints.py -k wide_decoder_filter``).
+Results stay in ``[0, W - 1] x [0, H - 1]``; a blob centred past the edge is placed on
+the edge pixel. ``"centroid"`` is the value-weighted centroid over a ``(2r+1)^2`` window
 restricted to the peak's region; the window truncates the Gaussian's tails, which
 biases it towards the centre pixel. Measured on 200 random subpixel centres per
 case (64x64 maps, decoder sigma 1; ``tests/ghnerf_runtime/test_keypoints.py``
@@ -221,23 +226,52 @@ def _newton_log(patch: np.ndarray, edge_x: np.ndarray, edge_y: np.ndarray) -> np
     return np.clip(np.stack([dx, dy], axis=-1), -1.0, 1.0)
 
 
+def _climb(maps: np.ndarray, iy: np.ndarray, ix: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Move each pixel ``(iy, ix)`` of its ``(N, H, W)`` map uphill (to its highest 8-neighbour, while that is
+    strictly higher) for at most ``steps`` moves: the raw map's maximum next to the filtered map's.
+
+    A pixel not on the map's edge stops one short of it: the fit from there, whose step reaches a pixel,
+    still finds a peak on the edge pixel, and one between the two (where the edge pixel, not refined
+    across the edge, would be up to half a pixel off)."""
+    h, w = maps.shape[1:]
+    lo_y, hi_y = np.where(iy == 0, 0, min(1, h - 1)), np.where(iy == h - 1, h - 1, max(h - 2, 0))
+    lo_x, hi_x = np.where(ix == 0, 0, min(1, w - 1)), np.where(ix == w - 1, w - 1, max(w - 2, 0))
+    rows = np.arange(len(iy))
+    for _ in range(steps):
+        patch = _patch3(maps, 0, iy, ix).reshape(len(iy), 9)  # clipped: an edge pixel repeats itself, no move
+        best = patch.argmax(axis=1)
+        dy, dx = np.divmod(best, 3)
+        to_y, to_x = np.clip(iy + dy - 1, lo_y, hi_y), np.clip(ix + dx - 1, lo_x, hi_x)
+        up = maps[rows, to_y, to_x] > maps[rows, iy, ix]  # (a target clipped off the edge may be no higher)
+        if not up.any():
+            break
+        iy, ix = np.where(up, to_y, iy), np.where(up, to_x, ix)
+    return iy, ix
+
+
 def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.ndarray, ix: np.ndarray,
                       sigma: float) -> np.ndarray:
-    """Log-quadratic refinement, on the filtered map except near the map edge.
+    """Log-quadratic refinement, on the filtered map except near the map edge; returns positions ``(N, 2)``.
 
     Where the filter kernel (radius ``ceil(3 sigma)``) reaches past the edge, its zero border
-    pulls the filtered peak inwards (0.2-1.2 px at the edge for blobs of sigma 1.5-3 px), so
-    those peaks are refined on the raw map, which has no such bias but is noisier. A peak on
-    the edge pixel itself is not refined across the edge (its centre may lie outside the map).
+    pulls the filtered peak inwards (0.2-1.2 px at the edge for blobs of sigma 1.5-3 px, 2 px and
+    more with a decoder sigma of 2 or more), so those peaks are refined on the raw map, which has no
+    such bias but is noisier: from the raw map's own maximum next to the filtered one (the fit's step is
+    clipped to a pixel, so starting 2 px off left the joint a pixel off). A peak on the edge pixel itself
+    is not refined across the edge (its centre may lie outside the map).
     """
     n, h, w = maps.shape
-    patch = _patch3(padded, pad, iy, ix)
     band = _radius(sigma) if sigma > 0 else h + w  # sigma 0: the raw map is all there is
     near = np.minimum(np.minimum(ix, w - 1 - ix), np.minimum(iy, h - 1 - iy)) < band
+    patch = _patch3(padded, pad, iy, ix)
     if near.any():
+        iy, ix = iy.copy(), ix.copy()
+        if sigma > 0:  # the filter moved the peak by at most its radius
+            iy[near], ix[near] = _climb(maps[near], iy[near], ix[near], _radius(sigma))
         patch[near] = _patch3(maps[near], 0, iy[near], ix[near])
     # One fit for all: an axis with no outer neighbour is only flagged on the raw (edge) patches.
-    return _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
+    offset = _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
+    return np.stack([ix, iy], axis=-1) + offset
 
 
 def _refine_centroid(padded: np.ndarray, pad: int, labels: np.ndarray, top: np.ndarray, iy: np.ndarray,
@@ -282,8 +316,10 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     """
     cfg = config if config is not None else KeypointDecoderConfig()
     hm = np.asarray(heatmaps)
-    if hm.ndim not in (3, 4) or min(hm.shape[-2:]) < 1 or not np.issubdtype(hm.dtype, np.number):
-        raise ShapeError(f"heatmaps must be numeric (J, H, W) or (B, J, H, W), got {hm.dtype} {hm.shape}")
+    # complex is numeric too, but its cast to float32 below dropped the imaginary part with only a warning
+    if (hm.ndim not in (3, 4) or min(hm.shape[-2:]) < 1 or not np.issubdtype(hm.dtype, np.number)
+            or np.issubdtype(hm.dtype, np.complexfloating)):
+        raise ShapeError(f"heatmaps must be real-valued (J, H, W) or (B, J, H, W), got {hm.dtype} {hm.shape}")
     batch_shape, (h, w) = hm.shape[:-2], hm.shape[-2:]
     maps = hm.reshape(-1, h, w)
     n = len(maps)
@@ -326,12 +362,11 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
         runner_up[multi] = (filtered[multi] * others[multi]).max(axis=(1, 2))
 
     if cfg.refine == "quadratic":
-        offset = _refine_quadratic(maps, padded, pad, iy, ix, cfg.sigma)
+        uv = _refine_quadratic(maps, padded, pad, iy, ix, cfg.sigma)
     elif cfg.refine == "centroid":
-        offset = _refine_centroid(padded, pad, labels, top, iy, ix, cfg.centroid_radius)
+        uv = np.stack([ix, iy], axis=-1) + _refine_centroid(padded, pad, labels, top, iy, ix, cfg.centroid_radius)
     else:
-        offset = np.zeros((n, 2))
-    uv = np.stack([ix, iy], axis=-1) + offset
+        uv = np.stack([ix, iy], axis=-1).astype(np.float64)
 
     uv = np.where(valid[:, None], uv, MISSING_FILL)
     conf = np.where(valid, peak, 0.0).astype(np.float32)

@@ -256,9 +256,13 @@ def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: 
         lo, hi = corners.min(axis=0), corners.max(axis=0)
     if not (np.isfinite(margin) and np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise GeometryError("volume corners and margin must be finite")
-    lo, hi = lo - margin, hi + margin
-    bits = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
-    pc = camera.to_camera(np.where(bits == 1, hi, lo))  # (8, 3) camera frame
+    with np.errstate(over="ignore", invalid="ignore"):
+        lo, hi = lo - margin, hi + margin
+        bits = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
+        pc = camera.to_camera(np.where(bits == 1, hi, lo))  # (8, 3) camera frame
+    if not np.all(np.isfinite(pc)):  # corners near 1e308: grown or turned into the camera's frame, inf
+        raise GeometryError(f"camera {camera.name!r}: the volume from {lo.tolist()} to {hi.tolist()} (margin "
+                            f"{margin}) is too large for float64")
 
     z = pc[:, 2]
     pts = [pc[z >= NEAR_PLANE]]
@@ -266,10 +270,13 @@ def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: 
         if (z[a] >= NEAR_PLANE) != (z[b] >= NEAR_PLANE):
             f = (NEAR_PLANE - z[a]) / (z[b] - z[a])
             pts.append((pc[a] + f * (pc[b] - pc[a]))[None])
+            pts[-1][0, 2] = NEAR_PLANE  # exactly: with corners of 1e15 m rounding left it 0 or below (x / 0)
     pts = np.concatenate(pts)
     if len(pts) == 0:
         raise GeometryError(f"camera {camera.name!r}: the volume is entirely behind the camera")
-    uv = camera.normalized_to_pixels(pts[:, :2] / pts[:, 2:], distort=False)
+    # Clipping the rays to +-1e9 (normalised) cannot change their box's overlap with the image (a few
+    # normalised units wide) and keeps the pixels finite: an inf there met K's zero skew as 0 * inf = NaN.
+    uv = camera.normalized_to_pixels(np.clip(pts[:, :2] / pts[:, 2:], -1e9, 1e9), distort=False)
     return _roi_of_points(uv, camera, roll_deg=roll_deg)
 
 
@@ -303,6 +310,9 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
         raise ShapeError(f"confidences must have shape ({len(joints)},), got {conf.shape}")
     if not (np.isfinite(margin_frac) and margin_frac >= 0):
         raise GeometryError(f"margin_frac must be >= 0, got {margin_frac}")
+    if not np.isfinite(min_size):  # was a bare "cannot convert float NaN to integer"
+        raise GeometryError(f"min_size must be a finite number of pixels, got {min_size}")
+    image_rotation(roll_deg)  # a roll that is not finite is named here: the None below means "too few joints"
 
     ok = (conf > min_confidence) & np.all(np.isfinite(joints), axis=1)
     if joints.shape[1] == 3:
@@ -435,6 +445,11 @@ def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
         # the picture): show nothing there instead, as outside the frame.
         outside = np.sum(xy * xy, axis=-1) >= camera.fold_radius**2
         map_x[outside] = map_y[outside] = _OUTSIDE
+    # A crop far off the frame (or a short focal length) sends the lens polynomial past float32: inf or NaN,
+    # which the window below cannot round to a pixel (OverflowError). Nothing of the frame is seen there.
+    lost = ~(np.isfinite(map_x) & np.isfinite(map_y))
+    if lost.any():
+        map_x[lost] = map_y[lost] = _OUTSIDE
     return map_x, map_y
 
 
@@ -525,9 +540,11 @@ def _inside(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int], supersa
 
 
 def apply_crop_maps(image: np.ndarray, maps: CropMaps) -> np.ndarray:
-    """Undistort + crop + resize a frame: ``(H, W[, C])`` -> ``(S, S[, C])``, same dtype.
+    """Undistort + crop + resize a frame: ``(H, W[, C])`` -> ``(S, S[, C])``, same dtype (a ``(H, W, 1)``
+    frame gives ``(S, S, 1)``).
 
-    Model pixels that fall outside the frame are 0 (padding policy, module docstring).
+    Model pixels that fall outside the frame are 0 (padding policy, module docstring), as are those whose
+    lens mapping overflows (a crop far off the frame).
 
     Raises:
         ShapeError: ``image`` is not of the maps' size, has other than 1 to 4 channels, or a dtype OpenCV
@@ -551,6 +568,8 @@ def apply_crop_maps(image: np.ndarray, maps: CropMaps) -> np.ndarray:
                     borderValue=0)
     if maps.supersample > 1:  # f x f box means (exact for an integer factor), as the training crops were reduced
         out = cv2.resize(out, (maps.out_size, maps.out_size), interpolation=cv2.INTER_AREA)
+    if image.ndim == 3 and out.ndim == 2:  # OpenCV drops a single channel's axis: (H, W, 1) -> (S, S, 1)
+        out = out[:, :, None]
     return out
 
 

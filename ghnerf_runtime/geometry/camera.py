@@ -58,7 +58,13 @@ def _whole_positive(value) -> bool:
 
 
 def image_rotation(degrees: float) -> np.ndarray:
-    """``(2, 2)``: pixel offsets (x right, y down) turned ``degrees`` counterclockwise on the screen."""
+    """``(2, 2)``: pixel offsets (x right, y down) turned ``degrees`` counterclockwise on the screen.
+
+    Raises:
+        GeometryError: ``degrees`` is not finite (NaN made a NaN crop camera, inf a bare math domain error).
+    """
+    if not math.isfinite(degrees):
+        raise GeometryError(f"rotation degrees must be finite, got {degrees!r}")
     a = math.radians(degrees)
     return np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
 

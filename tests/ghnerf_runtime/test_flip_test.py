@@ -53,3 +53,33 @@ def test_images_mirror_along_their_width_and_shapes_are_checked():
         unmirror_heatmaps(np.zeros((2, 3, 4, 4), np.float32))
     with pytest.raises(ValueError, match="differ"):
         flip_averaged(np.zeros((2, NUM_JOINTS, 4, 4)), np.zeros((1, NUM_JOINTS, 4, 4)))
+
+
+def test_averaging_maps_past_half_the_float32_range_does_not_overflow():
+    """Two out-of-contract maps of peak 3e38 (a model without its sigmoid) summed to inf before halving, and
+    the decoder drops a joint with an inf where it scales any other map past 1 back to its peak."""
+    import warnings
+
+    g = 32
+    heat = np.zeros((1, NUM_JOINTS, g, g), np.float32)
+    heat[0, 0] = 3e38 * _gaussian(g, 12.3, 20.6)
+    mirrored = mirror_images(heat)  # an equivariant encoder: the nose mirrored is the nose
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        avg = flip_averaged(heat, mirrored)
+    assert np.all(np.isfinite(avg)) and avg.dtype == np.float32
+    kp = decode_keypoints(avg[:, :1])
+    assert kp.valid[0, 0] and np.abs(kp.uv[0, 0] - [12.3, 20.6]).max() < 0.05
+
+
+@pytest.mark.parametrize("heat, views, rank", [
+    (np.zeros((2, NUM_JOINTS, 4, 4), np.float32), (), 3),             # numpy's "cannot reshape"
+    (np.zeros((2, NUM_JOINTS, 0, 4), np.float32), (0, 1), 3),         # numpy's "zero-size array"
+    (np.zeros((2, NUM_JOINTS, 4, 4), np.float32), (0, 1), 0),
+])
+def test_presence_peak_names_what_it_cannot_take(heat, views, rank):
+    from ghnerf_runtime.errors import ShapeError
+    from ghnerf_runtime.flip_test import presence_peak
+
+    with pytest.raises(ShapeError, match="at least one view"):
+        presence_peak(heat, views, rank)

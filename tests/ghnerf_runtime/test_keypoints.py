@@ -339,3 +339,66 @@ def test_rendered_blocks_past_the_float32_range_decode_as_decode_keypoints_does(
         kp = decode_blocks(rendered, [(0, 0, 8, 8), (2, 4, 8, 8)])
     assert kp.valid.all()
     np.testing.assert_allclose(kp.uv[:, 0], [[5.0, 3.0], [9.0, 5.0]], atol=1e-6)
+
+
+# --------------------------------------------------- extremes (session 51's numerical review)
+@pytest.mark.parametrize("sigma", [2.0, 3.0])
+def test_a_peak_at_the_map_edge_is_found_with_a_wide_decoder_filter(sigma):
+    """The filter's zero border pulls an edge peak of the filtered map 2 px and more inward with a decoder
+    sigma of 2 or more; the raw-map fit there started from that pixel and, its step clipped to one pixel,
+    left the joint up to a pixel off (0.99 px for a blob on the edge). It now starts from the raw map's own
+    maximum (one pixel short of the edge), and the result never leaves the map."""
+    centres = np.array([[0.0, 30.4], [0.25, 12.2], [0.75, 44.0], [1.5, 50.2], [63.0, 40.7], [20.3, 0.0],
+                        [44.6, 63.0], [0.0, 0.0], [63.0, 63.0], [62.4, 0.6]])
+    kp = decode_keypoints(blobs(centres, 3.0), KeypointDecoderConfig(sigma=sigma))
+    assert kp.valid.all()
+    err = np.linalg.norm(kp.uv - centres, axis=-1)
+    assert err.max() < 0.01, err
+    assert np.all((kp.uv >= 0) & (kp.uv <= SIZE - 1))
+
+
+def test_a_peak_outside_the_map_stays_on_its_edge():
+    """A blob centred past the edge (the joint left the crop): never placed outside the map, whatever the
+    filter and method; the quadratic fit puts it on the edge pixel (sigma 3 left one a pixel inside)."""
+    centres = np.array([[-2.0, 30.0], [65.5, 20.0], [30.0, -1.0], [-3.0, 66.0]])
+    for sigma in (0.0, 1.0, 3.0):
+        for refine in ("quadratic", "centroid", "none"):
+            kp = decode_keypoints(blobs(centres, 3.0), KeypointDecoderConfig(sigma=sigma, refine=refine))
+            assert kp.valid[:3].all(), (sigma, refine)  # the corner blob is too faint after a sigma 3 filter
+            assert np.all((kp.uv >= 0) & (kp.uv <= SIZE - 1)), (sigma, refine, kp.uv)
+            if refine == "quadratic":  # the others are biased inward (module docstring)
+                np.testing.assert_allclose(kp.uv[kp.valid], np.clip(centres, 0, SIZE - 1)[kp.valid], atol=1e-6)
+
+
+def test_complex_heatmaps_are_refused():
+    """Complex maps are "numeric": the float32 cast dropped their imaginary part with only a warning."""
+    hm = blobs(np.array([[20.0, 30.0]]), 2.0).astype(np.complex64)
+    with pytest.raises(ShapeError, match="complex64"):
+        decode_keypoints(hm)
+
+
+@pytest.mark.parametrize("h, w", [(1, 1), (2, 3), (3, 2), (5, 7), (16, 4000), (4000, 16)])
+def test_tiny_and_extreme_maps_at_every_border_pixel(h, w):
+    """A single peak on each border pixel (every pixel of a small map), two equal peaks, float16 and
+    read-only/negative-stride views: no exception, finite outputs, joints inside the map."""
+    border = [(y, x) for y in range(h) for x in range(w) if min(y, x, h - 1 - y, w - 1 - x) == 0]
+    if len(border) > 40:
+        border = border[:: len(border) // 40]
+    maps = np.zeros((len(border) + 1, h, w), np.float16)
+    for k, (y, x) in enumerate(border):
+        maps[k, y, x] = 1.0
+    maps[-1, 0, 0] = maps[-1, -1, -1] = 1.0  # two equal peaks
+    for flipped, view in ((False, maps), (True, maps[:, ::-1, ::-1])):
+        view = view.view()
+        view.flags.writeable = False
+        for sigma in (0.0, 1.0, 3.0):
+            kp = decode_keypoints(view, KeypointDecoderConfig(sigma=sigma, max_region_frac=1.0))
+            for arr in (kp.uv, kp.confidence, kp.runner_up):
+                assert np.all(np.isfinite(arr))
+            assert np.all((kp.uv >= 0) & (kp.uv <= [w - 1, h - 1]))
+            # a one-pixel peak is decoded on its pixel (the filter cannot move a lone pixel's maximum)
+            found = kp.valid[:-1]
+            expect = np.array([[x, y] for y, x in border], float)
+            if flipped:
+                expect = [w - 1, h - 1] - expect
+            np.testing.assert_allclose(kp.uv[:-1][found], expect[found], atol=1e-6)

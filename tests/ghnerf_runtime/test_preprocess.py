@@ -465,3 +465,106 @@ def test_compact_maps_crop_the_same_without_the_float_tables():
         assert np.array_equal(apply_crop_maps(image, small), apply_crop_maps(image, maps))
         assert (small.inside is None) == (maps.inside is None)
         assert small.inside is None or np.array_equal(small.inside, maps.inside)
+
+
+# --------------------------------------------------- extremes (session 51's numerical review)
+def test_a_crop_far_off_the_frame_is_black_not_an_overflow():
+    """A crop a billion pixels off a small frame: the lens polynomial sent the maps past float32 (inf), and
+    rounding the box steps' window to a pixel raised a bare OverflowError. Nothing of the frame shows there."""
+    cam = Camera("small", 7, 5, [[7.0, 0, 3.0], [0, 7.0, 2.0], [0, 0, 1]], [-0.2, 0.05, 0, 0, 0])
+    for roi in (Roi(10**9, 10**9, 64), Roi(-10**9, 0, 64)):
+        for supersample in (1, 2):
+            maps = build_undistort_crop_maps(cam, roi, 16, supersample=supersample)
+            out = apply_crop_maps(np.full((5, 7, 3), 200, np.uint8), maps)
+            assert out.shape == (16, 16, 3) and not out.any()
+            assert maps.inside is not None and not maps.inside.any()
+
+
+def test_a_volume_reaching_far_around_the_camera_crops_the_whole_image():
+    """A working volume of +-1e15 m (the rig file takes it: only an overflowing size is refused) holds the
+    camera: where its edges cross the near plane, rounding left the crossing at depth 0 (x / 0 = inf, and
+    0 skew * inf = NaN), so the ROI raised a bare "cannot convert float NaN to integer"."""
+    cam = make_camera(dist=np.zeros(5))
+    whole = roi_from_volume(cam, WorkingVolume([-1e3] * 3, [1e3] * 3))
+    for extent in (1e15, 1e20, 1e200):
+        assert roi_from_volume(cam, WorkingVolume([-extent] * 3, [extent] * 3)) == whole
+    lo, hi = undistorted_image_bounds(cam)
+    assert whole.size >= np.max(hi - lo)
+    with pytest.raises(GeometryError, match="too large"):
+        roi_from_volume(cam, VOLUME, margin=1.7e308)  # the grown corners overflow
+
+
+@pytest.mark.parametrize("roll", [float("nan"), float("inf"), -float("inf")])
+def test_a_roll_that_is_not_finite_is_named(roll):
+    """NaN made a crop camera of NaNs (every mapped joint NaN), inf a bare "math domain error"."""
+    cam = make_camera()
+    with pytest.raises(GeometryError, match="finite"):
+        crop_camera(cam.without_distortion(), Roi(100, 50, 300), 128, roll)
+    with pytest.raises(GeometryError, match="finite"):
+        roi_from_joints(cam, np.array([[100.0, 100], [300, 200], [200, 400]]), np.ones(3), roll_deg=roll)
+    with pytest.raises(GeometryError, match="finite"):
+        build_undistort_crop_maps(cam, Roi(100, 50, 300), 128, roll_deg=roll)
+
+
+def test_a_min_size_that_is_not_finite_is_named():
+    with pytest.raises(GeometryError, match="min_size"):  # was a bare "cannot convert float NaN to integer"
+        roi_from_joints(make_camera(), np.array([[100.0, 100], [300, 200], [200, 400]]), np.ones(3),
+                        min_size=float("nan"))
+
+
+@pytest.mark.parametrize("channels", [None, 1, 2, 4])
+@pytest.mark.parametrize("dtype, value", [(np.uint8, 200), (np.uint16, 60000), (np.float32, 0.5), (np.float64, -3.0)])
+def test_frames_of_any_taken_layout_keep_their_shape_and_values(channels, dtype, value):
+    """Grayscale, 1, 2 and 4 channels, uint16 and float frames, negative-stride and read-only views: the crop
+    has the frame's channel axis and dtype (a (H, W, 1) frame came back (S, S): OpenCV drops that axis)."""
+    cam = make_camera()
+    shape = (480, 640) if channels is None else (480, 640, channels)
+    frame = np.full(shape, value, dtype)[:, ::-1]  # a negative-stride view
+    frame.flags.writeable = False
+    for roi, supersample in ((Roi(200, 100, 128), 1), (Roi(-100, -60, 300), 2)):
+        maps = build_undistort_crop_maps(cam, roi, 64, supersample=supersample)
+        out = apply_crop_maps(frame, maps)
+        assert out.shape == (64, 64) + shape[2:] and out.dtype == dtype
+        inside = np.ones((64, 64), bool) if maps.inside is None else maps.inside
+        assert np.all(out[inside] == value) and np.all(out[~inside] * np.sign(value) <= abs(value))
+
+
+def test_a_gaussian_peak_round_trips_through_crops_that_pass_the_frame_edge():
+    """A Gaussian dot drawn in the (distorted) frame at a known sub-pixel place, cropped (undistort, crop past
+    the frame's edge, black padding, supersampled as the estimator does), decoded, and mapped back to frame
+    pixels with ``model_to_image_pixels``: within 0.05 model pixels of where it was drawn. The mapping itself
+    is exact (1e-6 px), also for crops a billion pixels off."""
+    from ghnerf_runtime.keypoints import model_to_image_pixels
+
+    cam = make_camera()
+    yy, xx = np.mgrid[:480, :640].astype(np.float64)
+    rng = np.random.default_rng(51)
+    for roi, size, roll in ((Roi(-100, -60, 300), 128, 0.0), (Roi(400, 300, 300), 128, 30.0),
+                            (Roi(-200, -200, 1000), 128, 0.0), (Roi(-50, 300, 256), 32, 0.0)):
+        assert roi.x0 < 0 or roi.y0 < 0 or roi.x0 + roi.size > 640 or roi.y0 + roi.size > 480
+        maps = build_undistort_crop_maps(cam, roi, size, roll_deg=roll, supersample=2)
+        sigma = 2.0 * roi.size / size  # 2 model pixels
+        drawn = 0
+        for q in rng.uniform(6, size - 7, (40, 2)):
+            p = model_to_image_pixels(q, cam, roi, size, roll_deg=roll)
+            if not (3 * sigma < p[0] < 639 - 3 * sigma and 3 * sigma < p[1] < 479 - 3 * sigma):
+                continue  # on the padding, or cut by the frame's edge
+            dot = np.clip(255 * np.exp(-((xx - p[0]) ** 2 + (yy - p[1]) ** 2) / (2 * sigma ** 2)), 0, 255)
+            crop = apply_crop_maps(dot.astype(np.uint8), maps).astype(np.float32) / 255
+            kp = decode_keypoints(crop[None], KeypointDecoderConfig(sigma=0.0))
+            assert kp.valid[0] and np.linalg.norm(kp.uv[0] - q) < 0.05, (roi, q, kp.uv[0])
+            back = model_to_image_pixels(kp.uv, cam, roi, size, valid=kp.valid, roll_deg=roll)[0]
+            assert np.linalg.norm(back - p) < 0.05 * roi.size / size
+            drawn += 1
+            if drawn == 4:
+                break
+        assert drawn == 4, roi
+    pinhole = cam.without_distortion()
+    for roi in (Roi(-100, -60, 300), Roi(10**9, -10**9, 64)):
+        crop = crop_camera(pinhole, roi, 128)
+        uv = rng.uniform(-0.5, 127.5, (20, 2))
+        back = roi.image_to_model(model_to_image_pixels(uv, pinhole, roi, 128), 128)
+        np.testing.assert_allclose(back, uv, atol=1e-6)
+        if roi.size > 64:  # (a billion pixels off, the rays graze the image plane: 3D points lose precision)
+            origin, direction = pinhole.rays(roi.model_to_image(uv, 128))  # points on those pixels' rays
+            np.testing.assert_allclose(crop.project(origin + 2.0 * direction)[0], uv, atol=1e-6)
