@@ -20,7 +20,11 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   restart it with the model loaded afresh); an estimate slower than
   ``health.slow_estimate_s`` flags ``ESTIMATOR_STALLED``;
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
-  watchdog pings and systemd restarts the service.
+  watchdog pings and systemd restarts the service;
+* **a camera stuck in a device call** the rig's close could not end (an opencv:// grab that hangs): the
+  loop goes on, but the stuck call holds the device, so every reopen fails; once it has lingered
+  ``health.open_allowance_s`` after the close, the watchdog's pings stop for good and systemd restarts
+  the service, which frees it.
 
 **Sequence numbers**: the daemon numbers the frames it sends itself (0 at start, one more a frame, on
 through rig reopens, reloads and reopened sinks), not by the driver's pair numbers (which restart at 0
@@ -103,6 +107,14 @@ def _session_key(config: DaemonConfig) -> tuple:
 
 _log = logging.getLogger("ghnerf.daemon")
 
+
+def _lingering(source: drivers.RigSource) -> tuple[str, ...]:
+    """:meth:`RigSource.lingering`, nothing for a source that cannot say (a test's stand-in, a failing one)."""
+    try:
+        return tuple(source.lingering())
+    except Exception:  # noqa: BLE001 - asked from the watchdog's thread, which must keep ticking
+        return ()
+
 #: The model failing on this many pairs in a row (no estimate between) is no longer one bad pair: the daemon
 #: stops with the error (exit 1) and systemd restarts it, the model loaded afresh.
 MAX_FAILED_RUNS = 30
@@ -178,6 +190,10 @@ class Daemon:
         # interrupted main thread may hold.
         self._reload_requested = False
         self._reopen_rig = False  # a reload changed rig.url: close the open rig and open the new one
+        # Closed rigs still inside a device call (RigSource.lingering), with when they were closed; the
+        # watchdog's thread checks them, the main loop adds them.
+        self._lingering: list[tuple[drivers.RigSource, float]] = []
+        self._lingering_lock = threading.Lock()
 
     def request_reload(self) -> None:
         """Ask the main loop to reload the config at its next pass (safe from a signal handler)."""
@@ -302,6 +318,27 @@ class Daemon:
             source.close()
         except Exception as e:  # noqa: BLE001 - a vanished device may fail its close too; it is gone either
             _log.warning("closing the rig: %s", e)  # way, and raising here would hide why it was closed
+        if _lingering(source):
+            with self._lingering_lock:
+                self._lingering.append((source, self._clock()))
+
+    def _check_lingering(self) -> None:
+        """From the watchdog's thread: a closed rig still inside a device call ``health.open_allowance_s`` (what
+        an open may take) after its close holds the device for good: every reopen fails, the loop beats on,
+        and only a new process frees it. So the pings stop (systemd restarts the service)."""
+        with self._lingering_lock:
+            self._lingering = [(source, since) for source, since in self._lingering if _lingering(source)]
+            oldest = self._lingering[0] if self._lingering else None
+        if oldest is None or self.watchdog.wedged is not None:
+            return
+        source, since = oldest
+        age = self._clock() - since
+        if age > self.config.health.open_allowance_s:
+            why = (f"{', '.join(_lingering(source))} still in a device call {age:.0f} s after the rig was closed "
+                   f"(health.open_allowance_s {self.config.health.open_allowance_s:g}): it holds the device, "
+                   f"which only a new process frees")
+            self.health.last_error = why
+            self.watchdog.wedge(why)
 
     def _stream(self, source: drivers.RigSource, stop: threading.Event) -> bool:
         """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
@@ -434,6 +471,9 @@ class Daemon:
             sink.carry_gap(carried)
         if url in self._carried_totals and hasattr(sink, "carry_totals"):  # STATUS totals go on, not from zero
             sink.carry_totals(*self._carried_totals[url])
+        last = self._frame_numbers.last
+        if last is not None and hasattr(sink, "carry_seq"):  # its HELLO and STATUS: the numbering runs on
+            sink.carry_seq(last)
         self._apply_fault(sink)  # before start: its first STATUS already carries the fault
         return sink
 
@@ -587,7 +627,8 @@ class Daemon:
 
     def _on_watchdog_tick(self, where: str, silent_s: float) -> None:
         """From the watchdog's thread: an estimate still running past ``slow_estimate_s`` is flagged now,
-        not only once it returns."""
+        not only once it returns; a camera stuck past its rig's close stops the pings (:meth:`_check_lingering`)."""
+        self._check_lingering()
         if where == "estimating a pair" and silent_s > self.config.health.slow_estimate_s \
                 and self._fault != int(Fault.ESTIMATOR_STALLED):
             self.health.estimator_stalled = True
