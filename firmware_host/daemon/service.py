@@ -7,7 +7,8 @@ pulled serial cable or a slow link never holds up the estimate or the other outp
 What it rides out, and how (each is counted in the health report, ``docs/daemon.md``):
 
 * **a rig that cannot be opened** (OAK not plugged in yet, USB reset): retried forever with a
-  backoff from ``rig.reopen_min_s`` doubling to ``rig.reopen_max_s``; state ``waiting``;
+  backoff from ``rig.reopen_min_s`` doubling to ``rig.reopen_max_s``; state ``waiting``; so is one lost
+  before its pairs flowed for ``rig.stall_s`` (a device that flaps);
 * **a camera that vanishes** (``RigDisconnectedError``) or **falls silent** for ``rig.stall_s``:
   the rig is closed and opened again, and the tracker restarts from the working volume; the sinks
   flag ``CAMERA_FAULT`` in their STATUS until pairs flow again;
@@ -173,6 +174,7 @@ class Daemon:
         self._sinks: dict[str, Sink] = {}
         self._sinks_for: Optional[tuple[str, tuple[str, ...]]] = None  # (rig_id, camera names)
         self._backoff_s = config.rig.reopen_min_s
+        self._steady = False  # the open rig has delivered pairs for rig.stall_s (the backoff was reset)
         self._next_status = 0.0
         self._fault = int(Fault.OK)
         self._fault_lock = threading.RLock()  # the watchdog's thread flags a stuck estimate too
@@ -215,6 +217,7 @@ class Daemon:
                 source = self._open_rig(stop)
                 if source is None:
                     break
+                self._steady = False  # set by _stream once pairs have flowed for rig.stall_s
                 read_before = self.health.pairs_read
                 try:
                     ended = self._stream(source, stop)
@@ -227,8 +230,10 @@ class Daemon:
                 if ended and self.config.rig.exit_at_end:
                     _log.info("the rig's stream ended (rig.exit_at_end): stopping")
                     break
-                if self.health.pairs_read == read_before:
-                    # Opened but lost before a single pair (a flapping device): back off as after a failed open.
+                if (not self._steady and not ended) or self.health.pairs_read == read_before:
+                    # Lost before pairs had flowed for rig.stall_s (a flapping device, up for a pair or two):
+                    # back off as after a failed open. A pair alone reset the backoff: a device lost right after
+                    # each open was reopened at once, for ever, with two log lines each time.
                     if self._wait(stop, self._backoff_s):
                         self._backoff_s = min(self._backoff_s * 2, self.config.rig.reopen_max_s)
         except Exception as e:
@@ -343,7 +348,7 @@ class Daemon:
     def _stream(self, source: drivers.RigSource, stop: threading.Event) -> bool:
         """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
         self.health.enter(State.RUNNING)
-        last_pair = self._clock()
+        last_pair = opened_at = self._clock()
         read_failed = False  # the last read raised a RigOperationError and no pair came since
         failed_runs = 0  # pairs in a row the model failed on (ModelRunError)
         while not stop.is_set():
@@ -390,7 +395,9 @@ class Daemon:
             last_pair = self._clock()
             self.health.pairs_read += 1
             self.health.pairs_dropped = self._dropped_closed + source.stats.pairs_dropped
-            self._backoff_s = rig_cfg.reopen_min_s  # pairs flow again: the next loss retries quickly
+            if not self._steady and last_pair - opened_at >= rig_cfg.stall_s:
+                self._steady = True  # pairs flow, and have for a while: the next loss retries quickly
+                self._backoff_s = rig_cfg.reopen_min_s
             self.watchdog.beat("estimating a pair")
             t0 = self._clock()
             try:

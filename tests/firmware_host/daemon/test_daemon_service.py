@@ -1057,3 +1057,30 @@ def test_a_full_disk_leaves_the_last_status_file_whole_and_is_logged_once(tmp_pa
     monkeypatch.setattr(health.json, "dump", real_dump)
     daemon._tick(force=True)
     assert json.loads((tmp_path / "status.json").read_text())["pairs"]["read"] == 5
+
+
+def test_a_rig_lost_right_after_each_open_is_backed_off_and_does_not_flood_the_log(sim_url, tmp_path, monkeypatch,
+                                                                                    caplog):
+    """A device up for a pair or two, then gone, again and again: one pair reset the backoff, so it was reopened
+    at once for ever (ten opens a second and more on sim://, two log lines each). Lost before pairs flowed for
+    rig.stall_s, it is backed off as a rig that did not open: doubling up to reopen_max_s."""
+    import logging
+
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    cfg = _config({"url": f"{sim_url}&unplug_after_s=0.05", "reopen_min_s": 0.1, "reopen_max_s": 0.4}, tmp_path)
+    with caplog.at_level(logging.INFO, logger="ghnerf.daemon"):
+        with _Running(cfg, tmp_path) as run:
+            wait_until(lambda: run.daemon.health.rig_opens >= 1, timeout=60, what="the first open")
+            caplog.clear()
+            opens, t0 = run.daemon.health.rig_opens, time.monotonic()
+            time.sleep(3.0)
+            opens, seconds = run.daemon.health.rig_opens - opens, time.monotonic() - t0
+            assert run.finish() == 0
+    assert run.daemon.health.pairs_read > 0  # up for a pair or two each time
+    # waits of 0.1, 0.2, 0.4, 0.4... s: at most about one open per 0.4 s once capped, not one per open's time
+    assert opens <= seconds / 0.4 + 3, f"{opens} opens in {seconds:.1f} s"
+    lines = [r for r in caplog.records if r.name == "ghnerf.daemon"]
+    assert len(lines) <= 2 * (seconds / 0.4 + 3) + 2, f"{len(lines)} log lines in {seconds:.1f} s"
