@@ -116,6 +116,7 @@ def _lingering(source: drivers.RigSource) -> tuple[str, ...]:
     except Exception:  # noqa: BLE001 - asked from the watchdog's thread, which must keep ticking
         return ()
 
+
 #: The model failing on this many pairs in a row (no estimate between) is no longer one bad pair: the daemon
 #: stops with the error (exit 1) and systemd restarts it, the model loaded afresh.
 MAX_FAILED_RUNS = 30
