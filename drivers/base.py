@@ -262,6 +262,14 @@ class RigSource(abc.ABC):
             self._is_open = False
             self._closed = True
 
+    def lingering(self) -> tuple[str, ...]:
+        """After :meth:`close`: what of this source is still inside a device call that the close could not
+        end (a camera thread in a grab that hangs), by name; empty once all is released. Such a call holds
+        the device, so no new source can open it, and only a new process frees it (the daemon stops its
+        watchdog pings for that: ``docs/daemon.md``). Default: nothing (a backend without threads of its
+        own blocks in ``close`` instead)."""
+        return ()
+
     def __enter__(self) -> "RigSource":
         return self.open()
 

@@ -25,11 +25,19 @@ class FrameNumbers:
 
     def __init__(self) -> None:
         self._next = 0
+        self._taken = False
 
     def take(self) -> int:
         number = self._next
         self._next = (number + 1) & U32_MAX
+        self._taken = True
         return number
+
+    @property
+    def last(self) -> int | None:
+        """The number taken last (None before the first): what a sink opened now announces in its HELLO and
+        STATUS (:meth:`ProtocolSink.carry_seq`), so a reopened or added output does not go back to 0."""
+        return (self._next - 1) & U32_MAX if self._taken else None
 
 
 def truth_frame(pair: drivers.FramePair, *, sequence: int) -> JointFrame | None:

@@ -693,6 +693,11 @@ class OpenCVRigSource(RigSource):
         with self._cond:
             return bool(self._queue) and isinstance(self._queue[0], Frame)
 
+    def lingering(self) -> tuple[str, ...]:
+        if not self._stop.is_set():  # open (or never opened): nothing was left behind yet
+            return ()
+        return tuple(f"camera {cam.name!r} ({cam.spec})" for cam in self._cameras if cam.thread.is_alive())
+
     def _close(self) -> None:
         self._stop.set()
         with self._cond:

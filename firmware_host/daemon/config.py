@@ -123,7 +123,8 @@ class HealthConfig:
             ``/run/ghnerf/status.json``.
         status_every_s: how often the report (and systemd's ``STATUS=`` line) is refreshed.
         open_allowance_s: how long opening the rig (or a reload) may block the main loop before the watchdog
-            treats the daemon as hung (an OAK boots its firmware in a few seconds).
+            treats the daemon as hung (an OAK boots its firmware in a few seconds); also how long a camera
+            may stay stuck in a device call after its rig was closed before the watchdog's pings stop.
         loop_allowance_s: how long one pass of the main loop (a read plus an estimate) may take
             before the watchdog treats the daemon as hung: systemd's ``WATCHDOG=1`` pings stop, the
             thread stacks go to the journal and systemd restarts the service.

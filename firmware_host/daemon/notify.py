@@ -10,6 +10,8 @@ calls :meth:`HangWatchdog.beat` on each pass (or :meth:`HangWatchdog.allow` arou
 block longer, such as opening an OAK); a thread pings ``WATCHDOG=1`` only while the last beat is
 within its allowance. When the loop hangs (a deadlocked driver, a stuck estimate) the pings stop,
 the thread writes every thread's stack to the log once, and systemd kills and restarts the service.
+:meth:`HangWatchdog.wedge` stops the pings for good while the loop still beats: for what only a new
+process can undo (a camera thread stuck in a device call holds the device, and every reopen fails).
 """
 from __future__ import annotations
 
@@ -115,6 +117,8 @@ class HangWatchdog:
         self._last_beat = clock()
         self._where = "start"
         self._hung_reported = False
+        self._wedged: Optional[str] = None  # why the pings stopped for good (wedge)
+        self._wedge_reported = False
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
@@ -150,10 +154,21 @@ class HangWatchdog:
         finally:
             self.beat(where)
 
-    def alive(self) -> bool:
-        """Whether the loop beat within its allowance (what a ping vouches for)."""
+    def wedge(self, why: str) -> None:
+        """Stop the pings for good, however the loop beats: the service cannot recover in this process
+        (``why`` says how; logged once, with the thread stacks), so systemd restarts it after WatchdogSec."""
         with self._lock:
-            return self._clock() - self._last_beat <= self._allowance
+            if self._wedged is None:
+                self._wedged = why
+
+    @property
+    def wedged(self) -> Optional[str]:
+        return self._wedged
+
+    def alive(self) -> bool:
+        """Whether the loop beat within its allowance and nothing wedged it (what a ping vouches for)."""
+        with self._lock:
+            return self._wedged is None and self._clock() - self._last_beat <= self._allowance
 
     def since_beat(self) -> tuple[str, float]:
         """Where the loop last beat, and how long ago."""
@@ -175,12 +190,19 @@ class HangWatchdog:
                 self._last_ping = now
             return True
         with self._lock:
-            report = not self._hung_reported
-            self._hung_reported = True
+            wedged = self._wedged
+            if wedged is not None:  # once: the loop's beats reset the hang's flag, not this one
+                report, self._wedge_reported = not self._wedge_reported, True
+            else:
+                report, self._hung_reported = not self._hung_reported, True
             where, silent_s = self._where, self._clock() - self._last_beat
         if report:
-            _log.error("the main loop has not progressed for %.1f s (last in %s); watchdog pings stopped, "
-                       "thread stacks follow", silent_s, where)
+            if wedged is not None:
+                _log.error("%s; watchdog pings stopped for systemd to restart the service, thread stacks follow",
+                           wedged)
+            else:
+                _log.error("the main loop has not progressed for %.1f s (last in %s); watchdog pings stopped, "
+                           "thread stacks follow", silent_s, where)
             out = self._stacks_to if self._stacks_to is not None else sys.stderr
             try:
                 faulthandler.dump_traceback(file=out, all_threads=True)

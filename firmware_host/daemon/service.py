@@ -7,7 +7,8 @@ pulled serial cable or a slow link never holds up the estimate or the other outp
 What it rides out, and how (each is counted in the health report, ``docs/daemon.md``):
 
 * **a rig that cannot be opened** (OAK not plugged in yet, USB reset): retried forever with a
-  backoff from ``rig.reopen_min_s`` doubling to ``rig.reopen_max_s``; state ``waiting``;
+  backoff from ``rig.reopen_min_s`` doubling to ``rig.reopen_max_s``; state ``waiting``; so is one lost
+  before its pairs flowed for ``rig.stall_s`` (a device that flaps);
 * **a camera that vanishes** (``RigDisconnectedError``) or **falls silent** for ``rig.stall_s``:
   the rig is closed and opened again, and the tracker restarts from the working volume; the sinks
   flag ``CAMERA_FAULT`` in their STATUS until pairs flow again;
@@ -20,7 +21,11 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   restart it with the model loaded afresh); an estimate slower than
   ``health.slow_estimate_s`` flags ``ESTIMATOR_STALLED``;
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
-  watchdog pings and systemd restarts the service.
+  watchdog pings and systemd restarts the service;
+* **a camera stuck in a device call** the rig's close could not end (an opencv:// grab that hangs): the
+  loop goes on, but the stuck call holds the device, so every reopen fails; once it has lingered
+  ``health.open_allowance_s`` after the close, the watchdog's pings stop for good and systemd restarts
+  the service, which frees it.
 
 **Sequence numbers**: the daemon numbers the frames it sends itself (0 at start, one more a frame, on
 through rig reopens, reloads and reopened sinks), not by the driver's pair numbers (which restart at 0
@@ -103,6 +108,15 @@ def _session_key(config: DaemonConfig) -> tuple:
 
 _log = logging.getLogger("ghnerf.daemon")
 
+
+def _lingering(source: drivers.RigSource) -> tuple[str, ...]:
+    """:meth:`RigSource.lingering`, nothing for a source that cannot say (a test's stand-in, a failing one)."""
+    try:
+        return tuple(source.lingering())
+    except Exception:  # noqa: BLE001 - asked from the watchdog's thread, which must keep ticking
+        return ()
+
+
 #: The model failing on this many pairs in a row (no estimate between) is no longer one bad pair: the daemon
 #: stops with the error (exit 1) and systemd restarts it, the model loaded afresh.
 MAX_FAILED_RUNS = 30
@@ -161,6 +175,7 @@ class Daemon:
         self._sinks: dict[str, Sink] = {}
         self._sinks_for: Optional[tuple[str, tuple[str, ...]]] = None  # (rig_id, camera names)
         self._backoff_s = config.rig.reopen_min_s
+        self._steady = False  # the open rig has delivered pairs for rig.stall_s (the backoff was reset)
         self._next_status = 0.0
         self._fault = int(Fault.OK)
         self._fault_lock = threading.RLock()  # the watchdog's thread flags a stuck estimate too
@@ -178,6 +193,10 @@ class Daemon:
         # interrupted main thread may hold.
         self._reload_requested = False
         self._reopen_rig = False  # a reload changed rig.url: close the open rig and open the new one
+        # Closed rigs still inside a device call (RigSource.lingering), with when they were closed; the
+        # watchdog's thread checks them, the main loop adds them.
+        self._lingering: list[tuple[drivers.RigSource, float]] = []
+        self._lingering_lock = threading.Lock()
 
     def request_reload(self) -> None:
         """Ask the main loop to reload the config at its next pass (safe from a signal handler)."""
@@ -199,6 +218,7 @@ class Daemon:
                 source = self._open_rig(stop)
                 if source is None:
                     break
+                self._steady = False  # set by _stream once pairs have flowed for rig.stall_s
                 read_before = self.health.pairs_read
                 try:
                     ended = self._stream(source, stop)
@@ -211,8 +231,10 @@ class Daemon:
                 if ended and self.config.rig.exit_at_end:
                     _log.info("the rig's stream ended (rig.exit_at_end): stopping")
                     break
-                if self.health.pairs_read == read_before:
-                    # Opened but lost before a single pair (a flapping device): back off as after a failed open.
+                if (not self._steady and not ended) or self.health.pairs_read == read_before:
+                    # Lost before pairs had flowed for rig.stall_s (a flapping device, up for a pair or two):
+                    # back off as after a failed open. A pair alone reset the backoff: a device lost right after
+                    # each open was reopened at once, for ever, with two log lines each time.
                     if self._wait(stop, self._backoff_s):
                         self._backoff_s = min(self._backoff_s * 2, self.config.rig.reopen_max_s)
         except Exception as e:
@@ -302,11 +324,32 @@ class Daemon:
             source.close()
         except Exception as e:  # noqa: BLE001 - a vanished device may fail its close too; it is gone either
             _log.warning("closing the rig: %s", e)  # way, and raising here would hide why it was closed
+        if _lingering(source):
+            with self._lingering_lock:
+                self._lingering.append((source, self._clock()))
+
+    def _check_lingering(self) -> None:
+        """From the watchdog's thread: a closed rig still inside a device call ``health.open_allowance_s`` (what
+        an open may take) after its close holds the device for good: every reopen fails, the loop beats on,
+        and only a new process frees it. So the pings stop (systemd restarts the service)."""
+        with self._lingering_lock:
+            self._lingering = [(source, since) for source, since in self._lingering if _lingering(source)]
+            oldest = self._lingering[0] if self._lingering else None
+        if oldest is None or self.watchdog.wedged is not None:
+            return
+        source, since = oldest
+        age = self._clock() - since
+        if age > self.config.health.open_allowance_s:
+            why = (f"{', '.join(_lingering(source))} still in a device call {age:.0f} s after the rig was closed "
+                   f"(health.open_allowance_s {self.config.health.open_allowance_s:g}): it holds the device, "
+                   f"which only a new process frees")
+            self.health.last_error = why
+            self.watchdog.wedge(why)
 
     def _stream(self, source: drivers.RigSource, stop: threading.Event) -> bool:
         """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
         self.health.enter(State.RUNNING)
-        last_pair = self._clock()
+        last_pair = opened_at = self._clock()
         read_failed = False  # the last read raised a RigOperationError and no pair came since
         failed_runs = 0  # pairs in a row the model failed on (ModelRunError)
         while not stop.is_set():
@@ -353,7 +396,9 @@ class Daemon:
             last_pair = self._clock()
             self.health.pairs_read += 1
             self.health.pairs_dropped = self._dropped_closed + source.stats.pairs_dropped
-            self._backoff_s = rig_cfg.reopen_min_s  # pairs flow again: the next loss retries quickly
+            if not self._steady and last_pair - opened_at >= rig_cfg.stall_s:
+                self._steady = True  # pairs flow, and have for a while: the next loss retries quickly
+                self._backoff_s = rig_cfg.reopen_min_s
             self.watchdog.beat("estimating a pair")
             t0 = self._clock()
             try:
@@ -434,6 +479,9 @@ class Daemon:
             sink.carry_gap(carried)
         if url in self._carried_totals and hasattr(sink, "carry_totals"):  # STATUS totals go on, not from zero
             sink.carry_totals(*self._carried_totals[url])
+        last = self._frame_numbers.last
+        if last is not None and hasattr(sink, "carry_seq"):  # its HELLO and STATUS: the numbering runs on
+            sink.carry_seq(last)
         self._apply_fault(sink)  # before start: its first STATUS already carries the fault
         return sink
 
@@ -587,7 +635,8 @@ class Daemon:
 
     def _on_watchdog_tick(self, where: str, silent_s: float) -> None:
         """From the watchdog's thread: an estimate still running past ``slow_estimate_s`` is flagged now,
-        not only once it returns."""
+        not only once it returns; a camera stuck past its rig's close stops the pings (:meth:`_check_lingering`)."""
+        self._check_lingering()
         if where == "estimating a pair" and silent_s > self.config.health.slow_estimate_s \
                 and self._fault != int(Fault.ESTIMATOR_STALLED):
             self.health.estimator_stalled = True

@@ -29,6 +29,10 @@ from firmware_host.sinks.options import SinkOptions
 
 _log = logging.getLogger(__name__)
 
+#: The seq HELLO and STATUS carry before the first frame: the one before 0, as they carry the last frame's seq
+#: and the next JOINTS carries that plus one (docs/protocol.md section 3). 0 there read as "frame 0 sent".
+NO_FRAME_SEQ = U32_MAX
+
 #: After a STATUS that could not be written, how soon (at most) another is tried while no frame comes.
 STATUS_RETRY_S = 0.1
 
@@ -37,7 +41,7 @@ class ProtocolSink(Sink):
     def __init__(self, url: str, options: SinkOptions) -> None:
         super().__init__(url, options)
         self._joint_set = int(JointSet.BODY_25)
-        self._last_seq = 0
+        self._last_seq = NO_FRAME_SEQ
         self._last_capture_us = 0
         self._resync = True
         self._fault = int(Fault.OK)
@@ -172,6 +176,13 @@ class ProtocolSink(Sink):
             h, PROTOCOL_VERSION, self._joint_set, self.options.joint_count, int(Units.MILLIMETRES),
             int(CoordFrame.RIG), self.options.rig_id, tuple(self.options.cameras),
         )
+
+    def carry_seq(self, last_sent: int) -> None:
+        """Announce ``last_sent``, the producer's last frame (sent by a sink this one replaces, or by the other
+        outputs), in HELLO and STATUS until this sink sends a frame: the numbering runs on through a reopened
+        or added output, and a HELLO back at the start would read as a producer that restarted."""
+        with self._cond:
+            self._last_seq = wire_seq(int(last_sent))
 
     def carry_totals(self, dropped: int, decimated: int) -> None:
         """Count ``dropped`` and ``decimated`` frames of sinks this one replaces (a rebuilt link) in STATUS, whose

@@ -190,3 +190,26 @@ def test_the_time_before_start_is_not_a_hang():
         assert not wd.check()  # a real hang still shows
     finally:
         wd.stop()
+
+
+def test_a_wedge_stops_the_pings_for_good_and_is_reported_once(notify_socket, tmp_path, caplog):
+    path, sock = notify_socket
+    clock = _Clock()
+    n = SystemdNotifier({"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "2000000"})
+    with open(tmp_path / "stacks.txt", "w+") as stacks:
+        wd = HangWatchdog(n, allowance_s=5.0, clock=clock, stacks_to=stacks)
+        wd.beat()
+        assert wd.check() and _fields(sock) == {"WATCHDOG": "1"}
+        wd.wedge("camera 'left' (0) still in a device call")
+        for _ in range(3):  # the loop beats on (it waits and reopens): no ping, one report
+            clock.t += 2.0
+            wd.beat("waiting to reopen the rig")
+            assert not wd.check()
+        stacks.seek(0)
+        assert stacks.read().count("test_a_wedge_stops_the_pings_for_good") == 1
+    assert [r.getMessage() for r in caplog.records if "still in a device call" in r.getMessage()] == [
+        "camera 'left' (0) still in a device call; watchdog pings stopped for systemd to restart the service, "
+        "thread stacks follow"]
+    sock.settimeout(0.2)
+    with pytest.raises(socket.timeout):
+        sock.recv(4096)

@@ -909,3 +909,178 @@ def test_a_gap_carried_to_a_readded_sink_survives_a_refused_reload(tmp_path):
     joints = [m for m in messages if m["type"] == "JOINTS"]
     assert [m["seq"] for m in joints] == [2] and joints[0]["flags"] & Flags.DROPPED
     assert [m["dropped"] for m in messages if m["type"] == "STATUS"][0] == 2
+
+
+def _seqs_announced_before_each_frame(messages: list) -> list[tuple[set, int]]:
+    """(the seqs of the HELLO and STATUS messages just before a JOINTS, that JOINTS's seq), for each JOINTS."""
+    pairs, announced = [], set()
+    for m in messages:
+        if isinstance(m, (Hello, Status)):
+            announced.add(m.header.seq)
+        elif isinstance(m, Joints):
+            pairs.append((announced, m.header.seq))
+            announced = set()
+    return pairs
+
+
+def test_hello_and_status_carry_the_last_frames_seq_also_on_a_reopened_sink(tmp_path):
+    """docs/protocol.md section 3: HELLO and STATUS carry the seq of the producer's last frame, so the next
+    JOINTS carries theirs plus one; before the first frame, 2**32 - 1. A sink rebuilt for another rig (or
+    added by a reload) announced 0, a producer gone back to its start, in the middle of the numbering."""
+    from drivers.sim.placement import RigPlacement
+    from firmware_host.protocol.constants import U32_MAX
+    from tests.firmware_host.joint_stream_helpers import make_frame
+
+    url = "memory://?status_s=0.01"
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path, sinks=[url]), notifier=SystemdNotifier({}))
+    sinks = []
+    try:
+        for rig_id in ("first", "second"):  # another OAK: the sink is rebuilt, the numbering runs on
+            daemon._open_sinks(RigPlacement().build(rig_id=rig_id))
+            sink = daemon.sinks[url]
+            sinks.append(sink)
+            wait_until(lambda: any(isinstance(m, Hello) for m in messages_of(sink.read())), timeout=10,
+                       what="the HELLO on connect")
+            time.sleep(0.05)  # a few STATUS before any frame
+            for _ in range(3):
+                sink.send(make_frame(daemon._frame_numbers.take()))
+            assert sink.wait_drained(5)
+            time.sleep(0.05)
+    finally:
+        daemon._close_sinks()
+    first, second = (_seqs_announced_before_each_frame(messages_of(s.read())) for s in sinks)
+    assert [seq for _, seq in first] == [0, 1, 2] and [seq for _, seq in second] == [3, 4, 5]
+    assert first[0][0] == {U32_MAX}  # no frame sent yet: the one before 0, not 0 itself
+    assert second[0][0] == {2}  # the last frame the producer sent, on the sink it replaces
+    for announced, seq in first + second:
+        assert announced <= {(seq - 1) & U32_MAX}, (announced, seq)
+
+
+class _HungWebcam:
+    """A stand-in ``cv2.VideoCapture`` whose every grab hangs until ``release_all`` is set: a wedged UVC stream."""
+
+    release_all = threading.Event()
+
+    def __init__(self, target, api) -> None:
+        self.props: dict = {}
+
+    def isOpened(self) -> bool:  # noqa: N802 - OpenCV's name
+        return True
+
+    def set(self, prop, value) -> bool:
+        self.props[prop] = value
+        return True
+
+    def get(self, prop) -> float:
+        return float(self.props.get(prop, 0.0))
+
+    def grab(self) -> bool:
+        self.release_all.wait()
+        return False
+
+    def retrieve(self):
+        return False, None
+
+    def release(self) -> None:
+        pass
+
+
+def test_a_camera_stuck_past_its_rigs_close_stops_the_watchdog_pings(tmp_path, monkeypatch):
+    """A grab that never returns holds the camera: the driver gives up on it (the open fails), the loop waits and
+    reopens, beating all along, and every reopen fails. Only a new process frees the device: once the stuck
+    call outlives the close by health.open_allowance_s, the pings stop and systemd restarts the service."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    _HungWebcam.release_all.clear()
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(tmp_path / "notify.sock"))
+    sock.settimeout(0.1)
+    notifier = SystemdNotifier({"NOTIFY_SOCKET": str(tmp_path / "notify.sock"), "WATCHDOG_USEC": "100000"})
+    cfg = _config({"url": "opencv://?first=0&second=1&open_timeout_s=0.2", "reopen_min_s": 0.05,
+                   "reopen_max_s": 0.1}, tmp_path, open_allowance_s=1.0)
+    daemon = Daemon(cfg, notifier=notifier, rig_kwargs={"capture_factory": _HungWebcam})
+    stop = threading.Event()
+    thread = threading.Thread(target=daemon.run, args=(stop,), daemon=True)
+    thread.start()
+    pings: list[float] = []
+    try:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and not (getattr(daemon.watchdog, "wedged", None) and pings
+                                                   and time.monotonic() - pings[-1] > 1.0):
+            try:
+                if b"WATCHDOG=1" in sock.recv(4096):
+                    pings.append(time.monotonic())
+            except socket.timeout:
+                pass
+        assert daemon.health.rig_open_failures >= 1 and thread.is_alive()  # the loop went on, retrying
+        assert pings, "no ping while the rig was first tried"
+        assert time.monotonic() - pings[-1] > 1.0, "still pinging: systemd never restarts the wedged service"
+        assert "camera 'left' (0)" in daemon.watchdog.wedged
+        assert "still in a device call" in daemon.health.last_error
+    finally:
+        stop.set()
+        thread.join(timeout=10)
+        _HungWebcam.release_all.set()  # the stuck grabs return; their threads end
+        sock.close()
+    assert not thread.is_alive()  # a stop still works
+
+
+def test_a_full_disk_leaves_the_last_status_file_whole_and_is_logged_once(tmp_path, monkeypatch, caplog):
+    """Checked, not changed: a write that fails half way (ENOSPC) leaves the previous report in place (the
+    rename never happens), no temporary file behind, one warning however many refreshes fail, and the
+    next write that succeeds replaces it."""
+    import errno
+    import logging
+
+    import firmware_host.daemon.health as health
+
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path), notifier=SystemdNotifier({}))
+    daemon._tick(force=True)
+    before = (tmp_path / "status.json").read_text()
+    real_dump = health.json.dump
+
+    def full_disk(obj, fh, **kw):
+        fh.write("{\"state\": ")
+        fh.flush()
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(health.json, "dump", full_disk)
+    with caplog.at_level(logging.WARNING, logger="ghnerf.daemon"):
+        for _ in range(5):
+            daemon.health.pairs_read += 1
+            daemon._tick(force=True)
+    warnings = [r.getMessage() for r in caplog.records if "status file" in r.getMessage()]
+    assert len(warnings) == 1 and "No space left on device" in warnings[0]
+    assert (tmp_path / "status.json").read_text() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["status.json"]
+    monkeypatch.setattr(health.json, "dump", real_dump)
+    daemon._tick(force=True)
+    assert json.loads((tmp_path / "status.json").read_text())["pairs"]["read"] == 5
+
+
+def test_a_rig_lost_right_after_each_open_is_backed_off_and_does_not_flood_the_log(sim_url, tmp_path, monkeypatch,
+                                                                                    caplog):
+    """A device up for a pair or two, then gone, again and again: one pair reset the backoff, so it was reopened
+    at once for ever (ten opens a second and more on sim://, two log lines each). Lost before pairs flowed for
+    rig.stall_s, it is backed off as a rig that did not open: doubling up to reopen_max_s."""
+    import logging
+
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    cfg = _config({"url": f"{sim_url}&unplug_after_s=0.05", "reopen_min_s": 0.1, "reopen_max_s": 0.4}, tmp_path)
+    with caplog.at_level(logging.INFO, logger="ghnerf.daemon"):
+        with _Running(cfg, tmp_path) as run:
+            wait_until(lambda: run.daemon.health.rig_opens >= 1, timeout=60, what="the first open")
+            caplog.clear()
+            opens, t0 = run.daemon.health.rig_opens, time.monotonic()
+            time.sleep(3.0)
+            opens, seconds = run.daemon.health.rig_opens - opens, time.monotonic() - t0
+            assert run.finish() == 0
+    assert run.daemon.health.pairs_read > 0  # up for a pair or two each time
+    # waits of 0.1, 0.2, 0.4, 0.4... s: at most about one open per 0.4 s once capped, not one per open's time
+    assert opens <= seconds / 0.4 + 3, f"{opens} opens in {seconds:.1f} s"
+    lines = [r for r in caplog.records if r.name == "ghnerf.daemon"]
+    assert len(lines) <= 2 * (seconds / 0.4 + 3) + 2, f"{len(lines)} log lines in {seconds:.1f} s"
