@@ -171,3 +171,18 @@ def test_the_proxy_of_degenerate_joints_is_finite_and_warns_of_nothing(case):
         depth = proxy_depth(proxy_body(j, np.ones(25, bool)), cam)
     assert np.isfinite(depth).all() and (depth >= 0).all()
     assert 0 < (depth > 0).sum() <= 1.5 * (normal > 0).sum()  # what is left is drawn; nothing endless
+
+
+def test_a_bad_girth_scale_or_joint_array_is_named():
+    # a NaN scale gave NaN primitives, each cast over the whole view to hit nothing; 24 joints an IndexError
+    from ghnerf_runtime.errors import GeometryError, ShapeError
+
+    j = _person()
+    for bad in (float("nan"), 0.0, -1.0, float("inf")):
+        with pytest.raises(GeometryError, match=r"proxy_body: scale \(the girth factor\) must be a positive finite"):
+            proxy_body(j, np.ones(25, bool), scale=bad)
+    with pytest.raises(ShapeError, match=r"joints must be \(25, 3\) with \(25,\) valid flags, got \(24, 3\)"):
+        proxy_body(j[:24], np.ones(24, bool))
+    with pytest.raises(ShapeError, match=r"got \(25, 3\) and \(24,\)"):
+        proxy_body(j, np.ones(24, bool))
+    assert not proxy_body(j, np.ones(25, bool), scale=1.2).empty
