@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_INDEX as J
+from ghnerf_runtime.body25 import NUM_JOINTS
+from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.raycast import RayGrid, rasterize
 
@@ -87,8 +89,19 @@ def _frame(up: np.ndarray, side: np.ndarray) -> np.ndarray:
 
 def proxy_body(joints: np.ndarray, valid: np.ndarray, template: ProxyTemplate = ProxyTemplate(),
                scale: float = 1.0) -> BodyProxy:
-    """The proxy's primitives for BODY_25 ``joints (25, 3)`` (primitives on invalid joints are left out)."""
+    """The proxy's primitives for BODY_25 ``joints (25, 3)`` (primitives on invalid joints are left out).
+
+    Raises:
+        ShapeError: ``joints`` is not ``(25, 3)`` with ``(25,)`` ``valid`` flags.
+        GeometryError: ``scale`` is not a positive finite number (NaN gave NaN primitives whose windows
+            were the whole view; 0 or less, radii of 0 or inside out).
+    """
     j = np.asarray(joints, np.float64)
+    if j.shape != (NUM_JOINTS, 3) or np.shape(valid) != (NUM_JOINTS,):
+        raise ShapeError(f"proxy_body: joints must be ({NUM_JOINTS}, 3) with ({NUM_JOINTS},) valid flags, got "
+                         f"{j.shape} and {np.shape(valid)}")
+    if not (np.isfinite(scale) and scale > 0):
+        raise GeometryError(f"proxy_body: scale (the girth factor) must be a positive finite number, got {scale!r}")
     ok = np.asarray(valid, bool) & np.isfinite(j).all(axis=-1)
     j = np.where(ok[:, None], j, 0.0)
     t, s = template, float(scale)

@@ -51,6 +51,8 @@ PLANES = ("blend_r", "blend_g", "blend_b", "mask", "seen", "normal_x", "normal_y
           "shown_r", "shown_g", "shown_b")
 INPUTS = ("planes", "joints")
 OUTPUT = "rgb"
+#: The largest finite float16: the depth plane is held as float16, as the caches hold it.
+F16_MAX = float(np.finfo(np.float16).max)
 
 
 def _u8(rgb: np.ndarray) -> np.ndarray:
@@ -70,11 +72,13 @@ class PainterPlanes:
 
 def angle_from_sources_deg(view: Camera, sources: Sequence[Camera], joints: np.ndarray, valid: np.ndarray) -> float:
     """The angle (degrees) at the subject's centre (the mean of its known joints) between ``view``'s centre and
-    the nearest source camera's: ``ghnerf-eval``'s angle bins. NaN without a known joint."""
-    valid = np.asarray(valid, bool)
+    the nearest source camera's: ``ghnerf-eval``'s angle bins. NaN without a known joint (a NaN joint marked
+    valid is not known: its NaN would make the angle NaN, which passes every ``<`` gate)."""
+    joints = np.asarray(joints, np.float64)
+    valid = np.asarray(valid, bool) & np.isfinite(joints).all(axis=-1)
     if not valid.any():
         return float("nan")
-    centre = np.asarray(joints, np.float64)[valid].mean(axis=0)
+    centre = joints[valid].mean(axis=0)
     dirs = np.array([c.center - centre for c in (view, *sources)])
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
     return float(np.degrees(np.arccos(np.clip(dirs[1:] @ dirs[0], -1.0, 1.0).max())))
@@ -132,6 +136,7 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     normals = surface_normals(points, mask, camera.center) @ camera.R.T  # rig frame -> camera frame
     normals = np.round(np.where(mask[..., None], normals, 0.0) * 127.0) / 127.0
     rel = np.where(mask, depth - np.median(depth[mask]), 0.0) if mask.any() else np.zeros((H, W))
+    rel = np.clip(rel, -F16_MAX, F16_MAX)  # a proxy spanning over 65 km (a wild joint): float16's inf else
     planes = np.concatenate([_u8(blend), mask[..., None], seen[..., None], normals,
                              rel.astype(np.float16)[..., None], _u8(shown)], -1)
     ju, jz = camera.project(joints, distort=False)

@@ -81,8 +81,12 @@ def subject_region(image_bgr: np.ndarray, background: float, min_diff: float) ->
 
 def unit_rgb(rgb: np.ndarray, name: str) -> np.ndarray:
     """``rgb`` as float32, refused (:class:`ShapeError` naming ``name``) unless it is a float array within
-    [0, 1]: 8-bit colours (0..255) taken for [0, 1] clip to white everywhere, silently."""
+    [0, 1]: 8-bit colours (0..255) taken for [0, 1] clip to white everywhere, silently, and a NaN would
+    pass every bound and end as an arbitrary uint8 pixel (or a painter's NaN answer)."""
     a = np.asarray(rgb)
+    if np.issubdtype(a.dtype, np.floating) and not np.isfinite(a).all():
+        raise ShapeError(f"{name} must be float RGB in [0, 1], got {int(np.count_nonzero(~np.isfinite(a)))} "
+                         f"non-finite values (NaN or inf)")
     if not np.issubdtype(a.dtype, np.floating) or np.any(a > 1.0 + 1e-3) or np.any(a < -1e-3):
         top = float(np.nanmax(a)) if a.size else float("nan")
         raise ShapeError(f"{name} must be float RGB in [0, 1], got {a.dtype} up to {top:g}"

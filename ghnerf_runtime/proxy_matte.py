@@ -137,12 +137,12 @@ def proxy_matte(image_bgr: np.ndarray, camera: Camera, depth: np.ndarray, region
             where it covers nothing).
         region: ``(H, W)`` bool, where the picture shows the subject
             (``proxy_blend.subject_region``).
-        background: the model's background value in [0, 1].
+        background: the model's background value in [0, 1] (finite; past it, black or white).
         margin_m: pixels within this distance of the silhouette keep the picture (metres).
         feather_m: beyond the margin the picture fades linearly to the background over this
             distance (metres; 0: a hard edge).
         min_support: the share of the proxy's pixels the picture must show as the subject for the
-            matte to run.
+            matte to run, in [0, 1].
         joints, valid: the ``(25, 3)`` joints the proxy was built from and which were found: the parts
             of missing ones are kept within their reach (:func:`reach_spheres`), and without the neck or
             the mid-hip nothing is matted. Default: every part is in the proxy.
@@ -158,6 +158,10 @@ def proxy_matte(image_bgr: np.ndarray, camera: Camera, depth: np.ndarray, region
             raise ShapeError(f"{name} must be {image.shape[:2]}, got {plane.shape}")
     if not (np.isfinite(margin_m) and margin_m >= 0 and np.isfinite(feather_m) and feather_m >= 0):
         raise ValueError(f"margin_m and feather_m must be finite and >= 0, got {margin_m!r}, {feather_m!r}")
+    if not 0.0 <= min_support <= 1.0:  # NaN too: it failed every support test, so the matte always ran
+        raise ValueError(f"min_support must be within [0, 1], got {min_support!r}")
+    if not np.isfinite(background):
+        raise ValueError(f"background must be finite, got {background!r}")
     covered = np.isfinite(depth) & (depth > 0)
     keep_all = np.ones(image.shape[:2], np.float32)
     if not covered.any() or region[covered].mean() < min_support:
@@ -180,4 +184,6 @@ def proxy_matte(image_bgr: np.ndarray, camera: Camera, depth: np.ndarray, region
         return ProxyMatte(image, weight, True)
     bg = np.float32(background * 255.0)
     out = bg + weight[..., None] * (image.astype(np.float32) - bg)
-    return ProxyMatte(np.round(out).astype(np.uint8), weight, True)
+    # clipped: a contract's background past [0, 1] (only its finiteness is checked) wrapped round in uint8,
+    # where the rendered view clips it (novel_view)
+    return ProxyMatte(np.round(np.clip(out, 0.0, 255.0)).astype(np.uint8), weight, True)

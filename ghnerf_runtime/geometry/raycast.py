@@ -11,15 +11,18 @@ coordinates, so the hit parameter ``t`` *is* the depth (camera z).
 Speed: each primitive is tested only against the pixels of its projected
 bounding box (a rounded cone: the union of its two spheres' exact projected
 boxes; an ellipsoid: the projection of its oriented bounding box). All
-(primitive, pixel) pairs of all primitives are then intersected in one
-vectorised pass and the nearest hit per pixel is kept with
-``np.minimum.at``, so the cost is a few dozen numpy calls per camera, not
+(primitive, pixel) pairs of all primitives are then intersected in vectorised
+passes of at most :data:`RASTER_CHUNK` pairs (one pass at the runtime's view
+sizes; bounded memory at any) and the nearest hit per pixel is kept with
+``np.minimum.at``, so the cost is a few dozen numpy calls per pass, not
 per primitive.
 
 Intersections are closed-form: an ellipsoid is a unit sphere after an affine
 map; a rounded cone (convex hull of two spheres) is entered through one of
 its spheres or through the tangent cone between them, and the smallest valid
-root of the three quadrics is the entry point.
+root of the three quadrics is the entry point. Degenerate primitives (a cone
+of zero length, an ellipsoid with a zero radius or a lost axis) never divide
+by zero: the first is its larger sphere, the second hits nothing.
 """
 from __future__ import annotations
 
@@ -31,6 +34,10 @@ import numpy as np
 from ghnerf_runtime.geometry.camera import Camera
 
 NEAR = 1e-3  # metres: hits closer than this to the camera are ignored
+#: (primitive, pixel) pairs intersected per pass of :func:`rasterize`: about 350 bytes each in flight, so
+#: about 90 MB at most whatever the image size (a camera inside the body puts most primitives' windows on
+#: the whole image: 14 pairs per pixel, 56 M at 2000x2000).
+RASTER_CHUNK = 1 << 18
 _BOX_SIGNS = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=np.float64) * 2.0 - 1.0
 
 
@@ -111,6 +118,7 @@ class RayGrid:
         ell = np.stack([nx.min(-1), nx.max(-1), ny.min(-1), ny.max(-1)], axis=-1)
         fallback = _sphere_boxes(body.ell_center, body.ell_radii.max(axis=-1))
         ell = np.where(front[:, None], ell, fallback)
+        ell = np.where(solid_ellipsoids(body)[:, None], ell, np.array([1e6, -1e6, 1e6, -1e6]))  # flat: no pixel
         return self._pixel_windows(np.concatenate([ell, cone]))
 
     def _pixel_windows(self, boxes: np.ndarray) -> np.ndarray:
@@ -166,15 +174,34 @@ def _sphere_boxes(centers: np.ndarray, radii: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- intersections
+def solid_ellipsoids(body: Primitives) -> np.ndarray:
+    """``(E,)`` bool: the ellipsoids with three positive finite radii and independent axes. The others (a
+    body proxy's head from two ears at one point, a torso whose neck is on its mid-hip) are flat or
+    unbounded: a radius of 0 divides by zero, and a zero axis turns the ellipsoid into an endless slab."""
+    radii, axes = np.asarray(body.ell_radii, np.float64), np.asarray(body.ell_axes, np.float64)
+    ok = np.all((radii > 0) & (radii < np.inf), axis=-1) & np.isfinite(axes).all(axis=(-2, -1))
+    if len(axes):  # the axes' volume: 1 for orthonormal columns, 0 for a lost one
+        ok &= np.abs(np.linalg.det(np.where(ok[:, None, None], axes, np.eye(3)))) > 1e-6
+    return ok
+
+
 def ellipsoid_coefficients(body: Primitives) -> np.ndarray:
-    """``(E, 10)`` per-ellipsoid constants of the hit quadratic ``a t^2 + 2 b t + c`` in (x, y)."""
-    Q = np.swapaxes(body.ell_axes, -1, -2) / body.ell_radii[:, :, None]  # camera -> unit sphere
-    o = -np.einsum("kab,kb->ka", Q, body.ell_center)
+    """``(E, 10)`` per-ellipsoid constants of the hit quadratic ``a t^2 + 2 b t + c`` in (x, y); an ellipsoid
+    that is not solid (:func:`solid_ellipsoids`) gets ``a = c = 1, b = 0``: every ray misses it."""
+    radii, axes, centre = body.ell_radii, body.ell_axes, body.ell_center
+    solid = solid_ellipsoids(body)
+    if not solid.all():  # stand-ins where it is not, so that nothing divides by zero
+        radii = np.where(solid[:, None], radii, 1.0)
+        axes = np.where(solid[:, None, None], axes, np.eye(3))
+        centre = np.where(solid[:, None], centre, 0.0)
+    Q = np.swapaxes(axes, -1, -2) / radii[:, :, None]  # camera -> unit sphere
+    o = -np.einsum("kab,kb->ka", Q, centre)
     A = np.swapaxes(Q, -1, -2) @ Q
     bq = np.einsum("kba,kb->ka", Q, o)
     cq = np.einsum("ka,ka->k", o, o) - 1.0
-    return np.stack([A[:, 0, 0], 2 * A[:, 0, 2], A[:, 1, 1], 2 * A[:, 1, 2], 2 * A[:, 0, 1], A[:, 2, 2],
+    coef = np.stack([A[:, 0, 0], 2 * A[:, 0, 2], A[:, 1, 1], 2 * A[:, 1, 2], 2 * A[:, 0, 1], A[:, 2, 2],
                      bq[:, 0], bq[:, 1], bq[:, 2], cq], axis=-1)
+    return coef if solid.all() else np.where(solid[:, None], coef, np.array([0, 0, 0, 0, 0, 1.0, 0, 0, 0, 1.0]))
 
 
 def ellipsoid_depth(X: np.ndarray, Y: np.ndarray, coef: np.ndarray) -> np.ndarray:
@@ -192,8 +219,12 @@ def cone_coefficients(body: Primitives) -> tuple[np.ndarray, np.ndarray]:
     a, b, ra, rb = body.cone_a, body.cone_b, body.cone_ra, body.cone_rb
     axis = b - a
     length = np.linalg.norm(axis, axis=-1)
-    w = axis / length[:, None]
-    s = (ra - rb) / length  # sine of the cone's half-angle
+    # Where one sphere holds the other (a zero-length limb among them) the hull is that sphere: no tangent
+    # cone (an empty axial range below), and no division by a length of 0.
+    sheathed = length > np.abs(ra - rb)
+    safe = np.where(sheathed, length, 1.0)
+    w = np.where(sheathed[:, None], axis / safe[:, None], np.array([0.0, 0.0, 1.0]))
+    s = np.where(sheathed, (ra - rb) / safe, 0.0)  # sine of the cone's half-angle
     c2 = 1.0 - s * s
     mw = -np.einsum("ka,ka->k", a, w)  # camera centre relative to sphere a, along the axis
     mm = np.einsum("ka,ka->k", a, a)
@@ -203,7 +234,7 @@ def cone_coefficients(body: Primitives) -> tuple[np.ndarray, np.ndarray]:
         b[:, 0], b[:, 1], b[:, 2], np.einsum("ka,ka->k", b, b) - rb * rb,
         w[:, 0], w[:, 1], w[:, 2],
         c2, k * s - c2 * mw, c2 * (mm - mw * mw) - k * k, mw,
-    ], axis=-1), np.stack([ra * s, length + rb * s], axis=-1)
+    ], axis=-1), np.where(sheathed[:, None], np.stack([ra * s, length + rb * s], axis=-1), [np.inf, -np.inf])
 
 
 def round_cone_depth(X: np.ndarray, Y: np.ndarray, coef: np.ndarray, h_range: np.ndarray) -> np.ndarray:
@@ -254,44 +285,63 @@ class Raster:
     fg_depth: np.ndarray
 
 
-def rasterize(body: Primitives, grid: RayGrid) -> Raster:
-    """Ray-cast every primitive of ``body`` (already in this camera's frame) into a z-buffer."""
+def rasterize(body: Primitives, grid: RayGrid, chunk: int = RASTER_CHUNK) -> Raster:
+    """Ray-cast every primitive of ``body`` (already in this camera's frame) into a z-buffer.
+
+    The (primitive, pixel) pairs are intersected ``chunk`` at a time (:data:`RASTER_CHUNK`), so memory
+    stays bounded when the windows cover many pixels (a large image, a camera inside the body)."""
     cam = grid.camera
     H, W = cam.height, cam.width
     win = grid.windows(body)
     heights = win[:, 1] - win[:, 0]
     widths = win[:, 3] - win[:, 2]
     sizes = heights * widths
-    total = int(sizes.sum())
+    ends = np.cumsum(sizes)
+    total = int(ends[-1]) if len(ends) else 0
     depth = np.full(H * W, np.inf)
     prim = np.full(H * W, -1, dtype=np.int16)
-    if total == 0:
-        empty = np.zeros(0, dtype=np.int64)
-        return Raster(depth.reshape(H, W), prim.reshape(H, W), empty, empty, np.zeros(0))
-    # Every (primitive, pixel) pair inside the windows, without a Python loop.
-    k = np.repeat(np.arange(len(win)), sizes)
-    j = np.arange(total) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-    w_k = widths[k]
-    rows = win[k, 0] + j // w_k
-    cols = win[k, 2] + j % w_k
-    X, Y = grid.at(rows, cols)
     n_ell = len(body.ell_center)
-    t = np.empty(total)
-    is_ell = k < n_ell
-    if np.any(is_ell):
-        e = np.nonzero(is_ell)[0]  # pairs are grouped by primitive, ellipsoids first
-        t[e] = ellipsoid_depth(X[e], Y[e], ellipsoid_coefficients(body)[k[e]])
-    if not np.all(is_ell):
-        c = np.nonzero(~is_ell)[0]
-        coef, h_range = cone_coefficients(body)
-        kc = k[c] - n_ell
-        t[c] = round_cone_depth(X[c], Y[c], coef[kc], h_range[kc])
-    pix = rows * W + cols
-    hit = np.isfinite(t)
-    pix, k, t = pix[hit], k[hit], t[hit]
-    np.minimum.at(depth, pix, t)
-    win_mask = t == depth[pix]
-    # Exact ties (two primitives at the same depth) go to the higher id, deterministically.
-    np.maximum.at(prim, pix[win_mask], k[win_mask].astype(np.int16))
-    keep = win_mask & (prim[pix] == k)
-    return Raster(depth.reshape(H, W), prim.reshape(H, W), pix[keep], k[keep], t[keep])
+    ell_coef = ellipsoid_coefficients(body) if n_ell and total else None
+    cone_coef, h_range = cone_coefficients(body) if len(body.cone_a) and total else (None, None)
+    starts, step = ends - sizes, max(int(chunk), 1)
+    for lo in range(0, total, step):
+        # The pairs lo..hi of all primitives' windows (grouped by primitive, ellipsoids first), without a
+        # Python loop over primitives.
+        hi = min(lo + step, total)
+        if hi - lo == total:  # one pass, the usual case
+            k = np.repeat(np.arange(len(win)), sizes)
+            j = np.arange(total) - np.repeat(starts, sizes)
+        else:
+            pair = np.arange(lo, hi)
+            k = np.searchsorted(ends, pair, side="right")
+            j = pair - starts[k]
+        w_k = widths[k]
+        rows = win[k, 0] + j // w_k
+        cols = win[k, 2] + j % w_k
+        X, Y = grid.at(rows, cols)
+        t = np.empty(hi - lo)
+        is_ell = k < n_ell
+        if np.any(is_ell):
+            e = np.nonzero(is_ell)[0]
+            t[e] = ellipsoid_depth(X[e], Y[e], ell_coef[k[e]])
+        if not np.all(is_ell):
+            c = np.nonzero(~is_ell)[0]
+            kc = k[c] - n_ell
+            t[c] = round_cone_depth(X[c], Y[c], cone_coef[kc], h_range[kc])
+        hit = np.isfinite(t)
+        pix, k, t = (rows * W + cols)[hit], k[hit], t[hit]
+        before = depth[pix] if lo else None
+        np.minimum.at(depth, pix, t)
+        if lo:  # a nearer hit in this pass: the earlier passes' primitive there is void
+            prim[pix[depth[pix] < before]] = -1
+        win_mask = t == depth[pix]
+        # Exact ties (two primitives at the same depth) go to the higher id, deterministically.
+        np.maximum.at(prim, pix[win_mask], k[win_mask].astype(np.int16))
+    # One entry per foreground pixel, grouped by primitive (ascending) and row-major within each: in one pass
+    # the winning pairs are in that order already.
+    if 0 < total <= step:
+        keep = win_mask & (prim[pix] == k)
+        return Raster(depth.reshape(H, W), prim.reshape(H, W), pix[keep], k[keep], t[keep])
+    fg = np.flatnonzero(prim >= 0)
+    fg = fg[np.argsort(prim[fg], kind="stable")]
+    return Raster(depth.reshape(H, W), prim.reshape(H, W), fg, prim[fg].astype(np.int64), depth[fg])

@@ -267,3 +267,33 @@ def test_8_bit_pictures_and_sources_are_named_not_taken_for_white(shot):
         painter_planes(shown8 / 255.0, target, depth, sources, [rgb[0], rgb[1] + 0.5], src, joints, valid)
     p = painter_planes(shown8 / 255.0, target, depth, sources, rgb, src, joints, valid)
     assert np.allclose(p.planes[9:], 200 / 255.0, atol=1e-6) and p.planes[:3].max() < 1.0
+
+
+def test_a_nan_joint_marked_valid_does_not_make_the_angle_nan(shot):
+    # the mean of the valid joints was NaN, and so the angle: "angle < painter_min_angle_deg" was False, and
+    # the painter ran on views next to a source camera
+    joints, sources, _, target, _, _ = shot
+    valid = np.ones(25, bool)
+    broken = joints.copy()
+    broken[4] = np.nan
+    without = valid.copy()
+    without[4] = False
+    got = angle_from_sources_deg(sources[0], sources, broken, valid)
+    assert got == angle_from_sources_deg(sources[0], sources, joints, without)
+    assert got == pytest.approx(0.0, abs=1e-6)
+    assert np.isnan(angle_from_sources_deg(target, sources, np.full((25, 3), np.nan), valid))
+
+
+def test_a_depth_beyond_float16_is_held_at_its_largest_not_inf(shot):
+    # the depth plane is float16 about the median: a surface 70 km behind the subject (a wild joint's
+    # ellipsoid) became inf, and the painter's answer NaN, a ModelRunError for the view
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    depth = proxy_depth(body, target)
+    far = depth.copy()
+    far[0, :8] = 7e4
+    p = painter_planes(np.zeros((128, 128, 3)), target, far, sources, rgb, [proxy_depth(body, c) for c in sources],
+                       joints, np.ones(25, bool))
+    assert np.isfinite(p.planes).all()
+    assert p.planes[8, 0, :8].min() == np.finfo(np.float16).max
+    assert np.abs(p.planes[8][depth > 0]).max() < 1.0  # the subject keeps its depth about the median

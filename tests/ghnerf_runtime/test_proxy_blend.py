@@ -208,3 +208,15 @@ def test_8_bit_source_images_are_named_not_taken_for_white(shot):
             proxy_blend(image, target, body, sources, bad)
     ok = proxy_blend(image, target, body, sources, rgb.astype(np.float64))
     assert ok.replaced.sum() > 500 and ok.image[ok.replaced].mean() < 200  # the subject's colours, not white
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_source_colours_are_named_not_blended(shot, bad):
+    # NaN passed both bounds of the [0, 1] check: the pixels blended from it came out as whatever uint8 NaN
+    # casts to (black here), with a RuntimeWarning at most
+    joints, sources, rgb, target, image, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    broken = rgb.copy()
+    broken[1, 40:90, 40:90] = bad
+    with pytest.raises(ShapeError, match=r"source image 1 must be float RGB in \[0, 1\], got 7500 non-finite values"):
+        proxy_blend(image, target, body, sources, broken)

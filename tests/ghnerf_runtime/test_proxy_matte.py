@@ -173,3 +173,28 @@ def test_reach_spheres_are_drawn_with_their_exact_outline(centre_cam, r, share):
         assert 0.0 < got.mean() < 1.0
     none = _discs((256, 256), camera, np.zeros((0, 3)), np.zeros(0))
     assert none.shape == (256, 256) and not none.any()
+
+
+@pytest.mark.parametrize("background,want", [(-0.2, 0), (1.2, 255)])
+def test_a_background_past_0_1_is_clipped_not_wrapped(shot, background, want):
+    # the contract checks only that its background is finite: -0.2 faded the fog to 205 (-51 wrapped round in
+    # uint8) and 1.2 to 50, where the rendered view clips it to black and white
+    joints, _, _, target, image, truth = shot
+    depth = proxy_depth(proxy_body(joints, np.ones(25, bool)), target)
+    out = proxy_matte(foggy(image, truth.mask), target, depth, np.ones(truth.mask.shape, bool), background)
+    assert out.applied and (out.weight == 0.0).mean() > 0.3
+    assert (out.image[out.weight == 0.0] == want).all()
+
+
+def test_a_min_support_outside_0_1_is_named(shot):
+    # NaN failed the support test "share < min_support" everywhere: the matte ran on a picture that showed
+    # none of the proxy (the case the test is there to leave alone)
+    joints, _, _, target, image, _ = shot
+    depth = proxy_depth(proxy_body(joints, np.ones(25, bool)), target)
+    nowhere = np.zeros(depth.shape, bool)
+    assert not proxy_matte(image, target, depth, nowhere, 0.0).applied
+    for bad in (float("nan"), -0.5, 1.5):
+        with pytest.raises(ValueError, match=r"min_support must be within \[0, 1\], got"):
+            proxy_matte(image, target, depth, nowhere, 0.0, min_support=bad)
+    with pytest.raises(ValueError, match="background must be finite"):
+        proxy_matte(image, target, depth, nowhere, float("nan"))
