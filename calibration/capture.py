@@ -28,7 +28,7 @@ from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
-           "next_view_number", "read_camera_order", "write_camera_order"]
+           "earlier_views", "next_view_number", "read_camera_order", "write_camera_order"]
 
 CAMERAS_FILE = "cameras.json"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -52,6 +52,16 @@ def next_view_number(folders: Iterable[Path]) -> int:
     numbers = [int(m[1]) for folder in folders if folder.is_dir() for p in folder.iterdir()
                if p.suffix.lower() in IMAGE_SUFFIXES and (m := _NUMBERED.match(p.stem))]
     return max(numbers, default=-1) + 1
+
+
+def earlier_views(root: str | os.PathLike) -> list[Path]:
+    """The numbered views (``000.png``...) already in ``root``'s camera folders: an earlier session's,
+    which a new one would be mixed with (the floor view is not counted: it is taken on its own)."""
+    root = Path(root)
+    if not root.is_dir():
+        return []
+    return sorted(p for folder in root.iterdir() if folder.is_dir() and not folder.name.startswith(".")
+                  for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and _NUMBERED.match(p.stem))
 
 
 def write_camera_order(root: str | os.PathLike, names: Iterable[str], *, replace: bool = False) -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -34,12 +35,13 @@ import numpy as np
 
 from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
-                                 next_view_number, read_camera_order, write_camera_order)
+                                 earlier_views, next_view_number, read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, solve_rig
+from calibration.writable import existing_ancestor, unwritable_reason
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_text_atomic
@@ -62,6 +64,8 @@ STILL_P90_PX = 1.5
 #: places by cameras that are not triggered together) never passes.
 HELD_MEDIAN_PX = 1.0
 HELD_P90_PX = 2.5
+#: ``capture``: seconds without an image pair before it says so (once, until pairs come again).
+STALL_NOTE_S = 5.0
 #: What the joint stream's HELLO carries (firmware_host.protocol.constants; this package may not import it).
 MAX_RIG_ID_LEN = 32
 MAX_CAMERA_NAME_LEN = 16
@@ -269,6 +273,26 @@ def _largest_move_px(view: BoardView | None, last: BoardView | None) -> float | 
     return float(np.max(np.linalg.norm(here - there, axis=1)))
 
 
+def _write_view(folders: list[Path], name: str, images: Sequence[np.ndarray]) -> None:
+    """Both images of a view as ``FOLDER/NAME.png``, each written aside and renamed into place only once both
+    are: a capture stopped (Ctrl-C) or killed while writing left half a pair, or a cut-off PNG that stopped the
+    solve ("not a readable image")."""
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for folder, image in zip(folders, images):
+            ok, encoded = cv2.imencode(".png", image)
+            if not ok:
+                raise CaptureError(f"{folder / name}.png: cannot encode the image")
+            tmp = folder / f".{name}.png.tmp"  # not an image suffix: never read as a view
+            tmp.write_bytes(encoded.tobytes())
+            staged.append((tmp, folder / f"{name}.png"))
+        for tmp, final in staged:
+            os.replace(tmp, final)
+    finally:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)
+
+
 def cmd_capture(args: argparse.Namespace) -> int:
     import drivers
 
@@ -282,6 +306,20 @@ def cmd_capture(args: argparse.Namespace) -> int:
     resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
     holding: list[BoardView | None] = [None, None]  # the views where the hand-held board stopped
     holding_since = 0.0
+    # before the cameras are opened (seconds for an OAK): a folder it cannot write, or another session's views
+    base = existing_ancestor(out)
+    if not base.is_dir():
+        raise UsageError(f"--out {out}: {base} is a file; give a folder for the views")
+    reason = unwritable_reason(base)
+    if reason is not None:
+        raise UsageError(f"--out {out}: cannot write the views in {base} ({reason})")
+    earlier = earlier_views(out)
+    if earlier and not args.floor and not args.append:
+        # mixed silently with a session from before the rig was moved, its pairs were dropped by the
+        # solve as "not taken at the same instant", or outvoted the new ones
+        names = sorted({p.stem for p in earlier})
+        raise UsageError(f"{out} already holds {len(names)} views from an earlier capture ({names[0]}-{names[-1]}): "
+                         "capture into a new folder, or pass --append to add to them (the cameras not moved since)")
     source = drivers.create_rig_source(args.url)
     try:
         source.open()
@@ -295,20 +333,36 @@ def cmd_capture(args: argparse.Namespace) -> int:
         for folder in folders:
             folder.mkdir(parents=True, exist_ok=True)
         number = next_view_number(folders)
-        print(f"capturing from {args.url} (cameras {cams}) into {out}: "
+        print(f"capturing from {args.url} (cameras {cams}) into {out}"
+              + (f", after the {len({p.stem for p in earlier})} views there (numbered from {number:03d})"
+                 if earlier and not args.floor
+                 else "") + ": "
               + (f"lay the board flat on the floor, face up, where both cameras see it, and leave it "
                  f"({args.steady_s:g} s still)" if args.floor else
                  f"{count} views; move the board between them: near and far, tilted, into each image's corners, "
                  "mostly where both cameras see it"))
         deadline = time.monotonic() + args.max_seconds
+        last_pair_at, stall_said = time.monotonic(), False
         while kept < count and time.monotonic() < deadline:
             try:
                 pair = source.read(timeout_s=2.0)
             except drivers.RigTimeoutError:
+                # a camera that stops delivering without a disconnect (a hung USB camera) kept the capture
+                # waiting up to --max-seconds (10 minutes) without a word
+                if not stall_said and time.monotonic() - last_pair_at >= STALL_NOTE_S:
+                    print(f"{PROG}: no image pair from {args.url} for {time.monotonic() - last_pair_at:.0f} s: is a "
+                          "camera stalled or unplugged? (waiting up to --max-seconds; Ctrl-C ends the capture)",
+                          file=sys.stderr)
+                    stall_said = True
                 continue
             except drivers.EndOfStream:
                 ended = True
                 break
+            except drivers.DriverError as e:  # a camera unplugged or failed: say what the session kept
+                raise CaptureError(f"{args.url}: {e}; "
+                                   + (f"the {kept} view(s) kept before it are whole pairs in {out}: capture the rest "
+                                      "with --append once the camera is back" if kept else "no view was kept")) from e
+            last_pair_at, stall_said = time.monotonic(), False
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
             found = [detector.detect(image) for image in pair.images]
             if args.floor:
@@ -341,10 +395,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 last_views = found
             name = FLOOR_VIEW if args.floor else f"{number:03d}"
             number += 1
-            for folder, image in zip(folders, pair.images):  # both, so a view one camera missed stays a pair
-                if not cv2.imwrite(str(folder / f"{name}.png"), image):
-                    raise CaptureError(f"{folder / name}.png: cannot write the image")
-                if args.floor:  # --force: the view replaced may have been a .jpg; two floors stop the solve
+            _write_view(folders, name, pair.images)  # both, so a view one camera missed stays a pair
+            if args.floor:  # --force: the view replaced may have been a .jpg; two floors stop the solve
+                for folder in folders:
                     for stale in (folder / f"{name}{suffix}" for suffix in IMAGE_SUFFIXES if suffix != ".png"):
                         stale.unlink(missing_ok=True)
             kept += 1
@@ -398,8 +451,12 @@ def cmd_solve(args: argparse.Namespace) -> int:
         extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
     if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
+        if any(args.floor_view in missed[c] for c in names):  # taken, and the board not found in it
+            raise UsageError(f"--floor-view {args.floor_view!r}: neither camera found the board in that view (lying "
+                             "on the floor it is seen small and edge-on: lay it nearer the cameras, use a larger "
+                             "board, or level with --camera-height M --pitch DEG --roll DEG instead)")
         raise UsageError(f"--floor-view {args.floor_view!r}: neither camera's folder has an image of that name "
-                         "with the board found in it")
+                         "(ghcal capture --floor names it 'floor')")
     solution = solve_rig(board, views, names, lens=args.lens, floor_view=args.floor_view,
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
@@ -411,12 +468,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
     r = solution.report
     for cam in names:
         c = r["cameras"][cam]
-        print(f"{cam}: reprojection {c['rms_px']:.3f} px over {c['views']} views, coverage {c['coverage']:.0%}, "
-              f"f {c['K'][0][0]:.1f} px")
+        print(f"{cam}: reprojection {c['rms_px']:.3f} px rms over {c['views']} views, corners over "
+              f"{c['coverage']:.0%} of the image, f {c['K'][0][0]:.1f} px")
     p, lv = r["pair"], r["levelling"]
-    print(f"pair: reprojection {p['rms_px']:.3f} px over {p['views']} views, baseline {1000 * p['baseline_m']:.1f} mm, "
+    print(f"pair: reprojection {p['rms_px']:.3f} px rms over {p['views']} views, baseline {1000 * p['baseline_m']:.1f} mm, "
           f"convergence {p['convergence_deg']:.2f} deg")
-    print(f"levelled by {lv['method']}: {lv['camera']} {lv['camera_height_m']:.3f} m above the floor, "
+    how = "the height and tilt given" if lv["method"] == "measured" else lv["method"]
+    print(f"levelled by {how}: {lv['camera']} {lv['camera_height_m']:.3f} m above the floor, "
           f"pitch {lv['pitch_deg']:.2f} deg, roll {lv['roll_deg']:.2f} deg")
     for warning in r["warnings"]:
         print(f"warning: {warning}")
@@ -452,12 +510,19 @@ def _image_size(text: str | None) -> tuple[int, int] | None:
 
 
 def _output_path(text: str | Path, flag: str, what: str) -> Path:
-    """A file a command will write: its folder must exist and it must not be one."""
+    """A file a command will write: its folder must exist and take a new file, and it must not be a folder
+    or a file made read-only. Checked before the work: a solve found it out only when writing, after it."""
     out = Path(text)
     if not out.parent.is_dir():
         raise UsageError(f"{flag} {out}: no such folder for the {what} ({out.parent})")
     if out.is_dir():
         raise UsageError(f"{flag} {out}: is a folder; give the {what}'s path")
+    target = Path(os.path.realpath(out)) if out.is_symlink() else out  # written through a link, as save_rig does
+    reason = unwritable_reason(target.parent)
+    if reason is not None:
+        raise UsageError(f"{flag} {out}: cannot write the {what} in {target.parent} ({reason})")
+    if target.exists() and not os.access(target, os.W_OK):  # replaced by a rename, but read-only on purpose
+        raise UsageError(f"{flag} {out}: the file exists and is read-only; make it writable or give another path")
     return out
 
 
@@ -586,7 +651,14 @@ def cmd_check(args: argparse.Namespace) -> int:
     floor_view = args.floor_view or (record_floor if isinstance(record_floor, str) else FLOOR_VIEW)
     thickness = args.board_thickness if args.board_thickness is not None else _recorded_thickness(rig)
     print(f"board: {where}: {_describe(board)}", file=sys.stderr if args.json else sys.stdout)
-    views, missed = detect_folder(board, args.images, [c.name for c in rig.pair])
+    names = [c.name for c in rig.pair]
+    missing = [n for n in names if not (Path(args.images) / n).is_dir()]
+    if missing:  # said as what it likely is: the views of another rig, not a lost folder
+        held = read_camera_order(args.images, check_folders=False) or sorted(
+            p.name for p in Path(args.images).iterdir() if p.is_dir() and not p.name.startswith("."))
+        raise UsageError(f"{args.images} holds views of the cameras {held}, but {args.rig} is the rig of the cameras "
+                         f"{names} (no folder {missing[0]!r}): views of another rig? check them with its rig file")
+    views, missed = detect_folder(board, args.images, names)
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
@@ -697,6 +769,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="keep one view named 'floor': the board lying still on the floor, seen by both cameras")
     p.add_argument("--steady-s", type=_seconds, default=1.0, help="--floor: how long the board must lie still")
     p.add_argument("--force", action="store_true", help="--floor: replace an existing floor view")
+    p.add_argument("--append", action="store_true",
+                   help="add views to a folder that holds an earlier capture's (the cameras not moved since)")
     p.add_argument("--interval-s", type=_seconds, default=1.0, help="at least this long between kept views")
     p.add_argument("--still-s", type=_seconds, default=0.3,
                    help="how long the hand-held board must be held still before its view is kept (default 0.3)")

@@ -34,7 +34,8 @@ from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M, Rig, Wor
 from ghnerf_runtime.rig_file import principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
-           "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "MIN_VIEWS", "MAX_PAIR_PX"]
+           "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
+           "USUAL_PITCH_DEG"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -58,6 +59,9 @@ COVERAGE_GRID = (8, 6)
 #: tilted ones give 0.7 %); above the second the report warns.
 MAX_FOCAL_STD_SHARE = 0.10
 WARN_FOCAL_STD_SHARE = 0.02
+#: The first camera's pitch (degrees below the horizon) usual for a rig filming people; outside it the report
+#: warns (a floor view of a board not lying flat, or a --pitch read from the vertical).
+USUAL_PITCH_DEG = (-15.0, 60.0)
 
 
 @dataclass(frozen=True)
@@ -535,10 +539,16 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     report["warnings"] = _warnings(report)
     for cam in rig.pair:
         if cam.fold_inside_image():
-            report["warnings"].append(
-                f"{cam.name}: the solved lens model folds over inside the image (radius {cam.fold_radius:.2f}): "
-                "views did not reach the image corners; capture some there, or use --lens narrow")
+            report["warnings"].append(fold_warning(cam))
     return RigSolution(rig=rig, report=report)
+
+
+def fold_warning(cam: Camera) -> str:
+    """The warning for a lens model that folds over inside the image, the fold said as an angle off the
+    optical axis (its normalised radius, the tangent of that angle, meant nothing to a reader)."""
+    return (f"{cam.name}: the solved lens model folds over inside the image, "
+            f"{math.degrees(math.atan(cam.fold_radius)):.0f} degrees off the optical axis (normalised radius "
+            f"{cam.fold_radius:.2f}): views did not reach the image corners; capture some there, or use --lens narrow")
 
 
 def _warnings(report: dict[str, Any]) -> list[str]:
@@ -564,9 +574,15 @@ def _warnings(report: dict[str, Any]) -> list[str]:
         out.append(f"pair: views {report['pair']['dropped_views']} were dropped as outliers (the two images not "
                    "taken at the same instant?)")
     lv = report["levelling"]
-    if lv["method"].startswith("floor view") and not -15.0 <= lv["pitch_deg"] <= 60.0:
+    if lv["method"].startswith("floor view") and not USUAL_PITCH_DEG[0] <= lv["pitch_deg"] <= USUAL_PITCH_DEG[1]:
         out.append(f"levelling: the floor view gives camera {lv['camera']!r} a pitch of {lv['pitch_deg']:.1f} "
                    "degrees, unusual for a rig filming people: was the board lying flat on the floor?")
+    elif lv["method"] == "measured" and not USUAL_PITCH_DEG[0] <= lv["pitch_deg"] <= USUAL_PITCH_DEG[1]:
+        # a level app or an inclinometer may read from the vertical: 80 typed for 10 levelled the rig
+        # looking at the floor, with no word
+        out.append(f"levelling: --pitch {lv['pitch_deg']:g} degrees for camera {lv['camera']!r} is unusual for a rig "
+                   "filming people: it is the angle of the optical axis below the horizon (0 level, 90 straight "
+                   "down), not from the vertical")
     if report["pair"]["views"] < 8:
         out.append(f"pair: {report['pair']['views']} views seen by both cameras: the relative pose is weakly "
                    "determined")

@@ -279,11 +279,17 @@ def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys
         for k, name in enumerate(sorted(images[cam])):
             saved = cv2.imread(str(out / cam / kept[k]), cv2.IMREAD_GRAYSCALE)
             assert np.array_equal(saved, images[cam][name])  # the pair as the cameras gave it
-    # a second session adds to the folder, after the highest number there, even with a gap below it
+    # a second session is not mixed with the first unasked: it may come after the cameras were moved
     for cam in ("left", "right"):
         (out / cam / "001.png").unlink()
     assert cli.main(["capture", "--url", f"replay://{recording}?speed=free", "--board", str(board), "--out", str(out),
-                     "--count", "1"]) == 0
+                     "--count", "1"]) == 2
+    assert (f"{out} already holds 2 views from an earlier capture (000-002): capture into a new folder, or pass "
+            "--append" in capsys.readouterr().err)
+    # --append adds to the folder, after the highest number there, even with a gap below it
+    assert cli.main(["capture", "--url", f"replay://{recording}?speed=free", "--board", str(board), "--out", str(out),
+                     "--count", "1", "--append"]) == 0
+    assert "after the 2 views there (numbered from 003)" in capsys.readouterr().out
     assert sorted(p.name for p in (out / "left").iterdir()) == ["000.png", "002.png", "003.png"]
     # --floor keeps the board lying still on the floor, not the views of it carried into place
     floor_images = calibration_views(truth, BOARD, count=2, edge_count=0, seed=6, floor_view=True)
@@ -323,7 +329,7 @@ def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys
     assert cli.main(["capture", "--url", f"replay://{floor_take}?speed=free", "--board", str(board),
                      "--out", str(out), "--floor", "--force"]) == 0
     assert sorted(p.name for p in (out / "left").glob("floor.*")) == ["floor.png"]
-    assert cli.main(["capture", "--url", f"replay://{tmp_path / 'nothing'}", "--out", str(out)]) == 2
+    assert cli.main(["capture", "--url", f"replay://{tmp_path / 'nothing'}", "--out", str(out), "--append"]) == 2
     assert "does not exist" in capsys.readouterr().err
 
 
@@ -664,7 +670,7 @@ def test_capture_records_the_streams_camera_order(truth, tmp_path, capsys):
     _write_recording(take2, truth, {cam: {"0": v["000"]} for cam, v in images.items()}, period_s=1.0)
     capsys.readouterr()
     assert cli.main(["capture", "--url", f"replay://{take2}?speed=free", "--board", str(board), "--out", str(out),
-                     "--count", "1"]) == 2
+                     "--count", "1", "--append"]) == 2
     assert "records the cameras ['right', 'left'], this source gives ['left', 'right']" in capsys.readouterr().err
 
 
@@ -827,3 +833,42 @@ def test_capture_stopped_by_ctrl_c_succeeds_only_with_views_kept(truth, tmp_path
     assert cli.main(argv + ["--out", str(tmp_path / "some")]) == 0
     assert "stopped: kept 1 view(s)" in capsys.readouterr().out
     assert (tmp_path / "some" / truth.pair[0].name / "000.png").exists()
+
+
+# ------------------------------------------------------------------ review 51: levelling and the printed figures
+def test_a_measured_pitch_read_from_the_vertical_is_warned_about(views):
+    # --pitch 80 from a level app that reads from the vertical (10 degrees down) levelled the rig looking at
+    # the floor without a word; a floor view of the same pitch was questioned
+    warned = solve_rig(BOARD, views, ("left", "right"), camera_height_m=1.4, pitch_deg=89.0).report["warnings"]
+    assert any("--pitch 89 degrees for camera 'left' is unusual" in w and "not from the vertical" in w
+               for w in warned), warned
+    usual = solve_rig(BOARD, views, ("left", "right"), camera_height_m=1.4, pitch_deg=24.0).report["warnings"]
+    assert not any("pitch" in w for w in usual), usual
+
+
+def test_a_floor_view_without_the_board_found_is_told_from_a_missing_one(capture, tmp_path, capsys):
+    # the board lying at 89-90 degrees to the cameras' view (edge-on) is not found: the error said the
+    # folder had no image of that name
+    images = _copy_capture(capture, tmp_path / "capture")
+    for cam in ("left", "right"):
+        assert cv2.imwrite(str(images / cam / "floor.png"), np.full((500, 800), 128, np.uint8))
+    argv = ["solve", "--images", str(images), "--out", str(tmp_path / "rig.json")]
+    assert cli.main(argv + ["--floor-view", "floor"]) == 2
+    err = capsys.readouterr().err
+    assert "--floor-view 'floor': neither camera found the board in that view" in err and "--camera-height" in err
+    assert not (tmp_path / "rig.json").exists()
+    assert cli.main(argv + ["--floor-view", "flor"]) == 2
+    assert "--floor-view 'flor': neither camera's folder has an image of that name" in capsys.readouterr().err
+
+
+def test_solve_prints_its_figures_with_their_units(capture, tmp_path, capsys):
+    assert cli.main(["solve", "--images", str(capture), "--out", str(tmp_path / "rig.json"),
+                     "--camera-height", "1.4", "--pitch", "24"]) == 0
+    out = capsys.readouterr().out
+    report = json.loads((tmp_path / "rig.report.json").read_text())
+    c, p = report["cameras"]["left"], report["pair"]
+    # the rms figures the report and docs/calibration.md give, named as such
+    assert (f"left: reprojection {c['rms_px']:.3f} px rms over {c['views']} views, corners over "
+            f"{c['coverage']:.0%} of the image, f {c['K'][0][0]:.1f} px") in out, out
+    assert f"pair: reprojection {p['rms_px']:.3f} px rms over {p['views']} views, baseline " in out, out
+    assert "levelled by the height and tilt given: left 1.400 m above the floor, pitch 24.00 deg" in out, out

@@ -1,0 +1,225 @@
+"""``ghcal`` from a user's side: outputs it cannot write, sessions mixed in one folder, a camera lost or
+stalled mid-capture, Ctrl-C while a view is written, views of another rig, and the units of what it prints."""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration import cli
+from calibration.board import BoardSpec
+from calibration.render import calibration_views, example_rig
+from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.rig_file import save_rig
+from tests.calibration.test_ghcal import _write_recording
+
+BOARD = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
+
+
+def _refusing_folder() -> Path:
+    """A folder that refuses a new file even to root (sysfs), where os.access still says yes."""
+    try:
+        fd, name = tempfile.mkstemp(dir="/sys")
+    except OSError:
+        return Path("/sys")
+    os.close(fd)
+    os.unlink(name)
+    pytest.skip("no folder here refuses a new file")
+
+
+@pytest.fixture(scope="module")
+def truth() -> Rig:
+    rig = example_rig()
+    return Rig(tuple(c.resized(800, 500) for c in rig.cameras), rig.volume, rig_id="truth")
+
+
+@pytest.fixture(scope="module")
+def one_view(truth):
+    return calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
+
+
+def _take(root: Path, truth: Rig, one_view, frames: int = 3) -> Path:
+    root.mkdir()
+    _write_recording(root, truth, {cam: {str(k): v["000"] for k in range(frames)} for cam, v in one_view.items()},
+                     period_s=1.0)
+    return root
+
+
+def _board_file(tmp_path: Path) -> Path:
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    return board
+
+
+def _no_detection(*args, **kwargs):
+    raise AssertionError("the images were read before the output was checked")
+
+
+def test_solve_refuses_an_output_it_cannot_write_before_the_detection(tmp_path, capsys, monkeypatch):
+    # found out only after the detection and the solve (seconds; minutes on a real capture), and named
+    # as "No such file or directory" for a folder that was there
+    refusing = _refusing_folder()
+    images = tmp_path / "capture"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    _board_file(images)
+    monkeypatch.setattr(cli, "detect_folder", _no_detection)
+    base = ["solve", "--images", str(images), "--floor-view", "floor"]
+    assert cli.main(base + ["--out", str(refusing / "rig.json")]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {refusing / 'rig.json'}: cannot write the rig file in {refusing} (" in err and err.count("\n") == 1
+    assert cli.main(base + ["--out", str(tmp_path / "rig.json"), "--report", str(refusing / "r.json")]) == 2
+    assert f"--report {refusing / 'r.json'}: cannot write the report file in {refusing}" in capsys.readouterr().err
+    # a rig file linked to one in such a folder is written through the link: its folder is the one checked
+    (tmp_path / "linked.json").symlink_to(refusing / "rig.json")
+    assert cli.main(base + ["--out", str(tmp_path / "linked.json")]) == 2
+    assert f"cannot write the rig file in {refusing}" in capsys.readouterr().err
+    assert not list(tmp_path.glob(".*tmp"))  # the test file made and removed
+
+
+def test_export_refuses_an_output_it_cannot_write(tmp_path, capsys):
+    refusing = _refusing_folder()
+    save_rig(example_rig(), tmp_path / "rig.json")
+    assert cli.main(["export", "--rig", str(tmp_path / "rig.json"), "--out", str(refusing / "rig.yml")]) == 2
+    assert f"--out {refusing / 'rig.yml'}: cannot write the export in {refusing}" in capsys.readouterr().err
+
+
+def test_capture_refuses_a_folder_it_cannot_write_before_opening_the_cameras(tmp_path, capsys, monkeypatch):
+    import drivers
+
+    refusing = _refusing_folder()
+
+    def no_open(url, **kwargs):
+        raise AssertionError("the cameras were opened before the folder was checked")
+
+    monkeypatch.setattr(drivers, "create_rig_source", no_open)
+    assert cli.main(["capture", "--url", "sim://", "--out", str(refusing / "capture" / "today")]) == 2
+    assert f"cannot write the views in {refusing} (" in capsys.readouterr().err
+
+
+def test_capture_into_an_earlier_sessions_folder_needs_append(truth, one_view, tmp_path, capsys):
+    take = _take(tmp_path / "take", truth, one_view)
+    board = _board_file(tmp_path)
+    out = tmp_path / "capture"
+    argv = ["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+            "--count", "1", "--interval-s", "0", "--still-s", "0"]
+    assert cli.main(argv) == 0
+    capsys.readouterr()
+    before = {p: p.read_bytes() for p in out.glob("*/*.png")}
+    assert cli.main(argv) == 2  # mixed in silently, after the cameras were perhaps moved
+    assert f"{out} already holds 1 views from an earlier capture (000-000)" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in out.glob("*/*.png")} == before  # nothing overwritten or added
+    assert cli.main(argv + ["--append"]) == 0
+    assert sorted(p.name for p in (out / "left").iterdir()) == ["000.png", "001.png"]
+    # the floor view joins the session it belongs to without --append
+    assert cli.main(argv[:-6] + ["--floor", "--steady-s", "0"]) == 0
+    assert (out / "left" / "floor.png").exists()
+
+
+def _failing_after(real, reads: int, error: Exception):
+    def create(url, **kwargs):
+        source = real(url, **kwargs)
+        read, calls = source.read, []
+
+        def read_then_fail(*args, **kw):
+            calls.append(1)
+            if len(calls) > reads:
+                raise error
+            return read(*args, **kw)
+        source.read = read_then_fail
+        return source
+    return create
+
+
+def test_a_camera_unplugged_mid_capture_says_what_was_kept(truth, one_view, tmp_path, capsys, monkeypatch):
+    import drivers
+
+    take = _take(tmp_path / "take", truth, one_view)
+    board = _board_file(tmp_path)
+    out = tmp_path / "capture"
+    monkeypatch.setattr(drivers, "create_rig_source", _failing_after(
+        drivers.create_rig_source, 2, drivers.RigDisconnectedError("camera 'right' vanished (USB reset)")))
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+                     "--count", "5", "--interval-s", "0", "--still-s", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "camera 'right' vanished (USB reset); the 1 view(s) kept before it are whole pairs in" in err, err
+    assert "--append" in err and err.count("\n") == 1
+    for cam in truth.pair:  # and they are
+        assert np.array_equal(cv2.imread(str(out / cam.name / "000.png"), cv2.IMREAD_GRAYSCALE),
+                              one_view[cam.name]["000"])
+
+
+def test_a_sim_camera_unplugged_before_any_view_is_kept(tmp_path, capsys):
+    url = "sim://?width=64&height=48&fps=5&cache=off&workers=1&unplug_after_s=0.5"
+    assert cli.main(["capture", "--url", url, "--out", str(tmp_path / "c"), "--max-seconds", "20"]) == 2
+    err = capsys.readouterr().err
+    assert "unplugged" in err and "no view was kept" in err and "Traceback" not in err
+
+
+def test_a_stalled_camera_is_said_not_waited_on_silently(truth, one_view, tmp_path, capsys, monkeypatch):
+    import drivers
+
+    take = _take(tmp_path / "take", truth, one_view)
+    monkeypatch.setattr(drivers, "create_rig_source", _failing_after(
+        drivers.create_rig_source, 0, drivers.RigTimeoutError("no pair within 2 s")))
+    monkeypatch.setattr(cli, "STALL_NOTE_S", 0.05, raising=False)
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--out", str(tmp_path / "c"),
+                     "--max-seconds", "0.3"]) == 2
+    err = capsys.readouterr().err
+    assert err.count(f"no image pair from replay://{take}?speed=free for") == 1, err  # once, not every 2 s
+    assert "kept 0 of 20 views: --max-seconds ran out" in err
+
+
+def test_ctrl_c_while_a_view_is_written_leaves_no_half_pair(truth, one_view, tmp_path, capsys, monkeypatch):
+    take = _take(tmp_path / "take", truth, one_view)
+    board = _board_file(tmp_path)
+    out = tmp_path / "capture"
+    images = []
+
+    def counted(real):
+        def write(*args, **kwargs):
+            images.append(1)
+            if len(images) == 2:  # the second camera's image of the first view
+                raise KeyboardInterrupt
+            return real(*args, **kwargs)
+        return write
+
+    monkeypatch.setattr(cv2, "imwrite", counted(cv2.imwrite))
+    monkeypatch.setattr(cv2, "imencode", counted(cv2.imencode))
+    try:
+        rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+                       "--count", "5", "--interval-s", "0", "--still-s", "0"])
+    except KeyboardInterrupt:
+        pytest.fail("Ctrl-C escaped ghcal: the user saw a traceback")
+    assert rc == 130 and "stopped before any view was kept" in capsys.readouterr().err
+    # not the first camera's image alone as view 000 (kept by no count), nor a half-written file
+    assert [p.name for p in out.rglob("*") if p.is_file() and p.name != "cameras.json"] == []
+
+
+def test_check_names_both_pairs_for_the_views_of_another_rig(tmp_path, capsys):
+    rig = tmp_path / "rig.json"
+    save_rig(example_rig(), rig)  # cameras left, right
+    images = tmp_path / "other"
+    for cam in ("cam_a", "cam_b"):
+        (images / cam).mkdir(parents=True)
+    (images / "cameras.json").write_text(json.dumps({"cameras": ["cam_b", "cam_a"]}))
+    _board_file(images)
+    assert cli.main(["check", "--rig", str(rig), "--images", str(images)]) == 2
+    assert (f"{images} holds views of the cameras ['cam_b', 'cam_a'], but {rig} is the rig of the cameras "
+            "['left', 'right'] (no folder 'left'): views of another rig?") in capsys.readouterr().err
+
+
+def test_a_lens_that_folds_is_said_in_degrees_off_the_axis():
+    from calibration.solve import fold_warning  # "(radius 1.29)": of what, in what unit?
+
+    # r (1 - 0.2 r^2) stops growing at r = 1 / sqrt(0.6) = 1.29: 52 degrees off the axis
+    cam = Camera("left", 800, 500, np.array([[300.0, 0, 400], [0, 300, 250], [0, 0, 1]]),
+                 np.array([-0.2, 0, 0, 0, 0]))
+    text = fold_warning(cam)
+    assert "folds over inside the image, 52 degrees off the optical axis (normalised radius 1.29)" in text, text
