@@ -17,6 +17,7 @@ from drivers.backends.replay import MIN_SPEED
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.config import DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
+from firmware_host.listen import LATE_WINDOW
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from ghnerf_runtime.config import Joints3DConfig
@@ -41,6 +42,8 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
     ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
+    ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),
+    ("docs/daemon.md", f"at most {LATE_WINDOW} behind the newest (`LATE_WINDOW`)"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"
