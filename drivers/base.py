@@ -222,10 +222,10 @@ class RigSource(abc.ABC):
         try:
             return self._read_frame(timeout_s)
         except RigDisconnectedError as e:
+            # EndOfStream is a RigDisconnectedError: one clause for both (a second one for it, after this, was
+            # never reached). reset() decides the held frames as flush() would, then forgets the cameras'
+            # timelines, which a reconnect restarts and which nothing follows at the end of a recording.
             pairer.reset()
-            self._held_error = e
-        except EndOfStream as e:
-            pairer.flush()
             self._held_error = e
         return None
 

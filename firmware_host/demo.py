@@ -55,7 +55,18 @@ from ghnerf_runtime.estimator import Estimator, PairResult
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
 #: Colour of the estimated joints in the PNG (BGR magenta; the ground truth is red/blue/green + yellow).
 ESTIMATE_BGR = (255, 0, 255)
-PROG = "firmware_host.demo"
+#: The console script (pyproject.toml [project.scripts]) and the module run (``make demo``): usage lines and
+#: errors name the one the user ran, so the command they show can be typed again as it is.
+SCRIPT = "ghnerf-demo"
+MODULE = "python -m firmware_host.demo"
+
+
+def prog_name(argv0: str | None = None) -> str:
+    """The command that was run, from ``argv0`` (default ``sys.argv[0]``): :data:`SCRIPT` when it is the console
+    script (its wrapper, or a link to it; ``.exe`` on Windows), else :data:`MODULE` (``-m`` puts the module's
+    file path there, which names no command)."""
+    name = Path(sys.argv[0] if argv0 is None else argv0).name
+    return SCRIPT if name.removesuffix(".exe") == SCRIPT else MODULE
 
 
 class DemoError(Exception):
@@ -216,8 +227,9 @@ def _positive_seconds(text: str) -> float:
     return value
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
+def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
+    """The parser; ``prog`` (default :func:`prog_name`) heads its usage line and errors."""
+    parser = argparse.ArgumentParser(prog=prog or prog_name(), description=__doc__.splitlines()[0])
     parser.add_argument("--url", default=DEFAULT_URL, help="rig URL (sim://, replay://DIR, depthai://, opencv://; "
                                                             "relative files read from the current directory)")
     parser.add_argument("--seconds", type=_positive_seconds, default=3.0, help="how long to read pairs")
@@ -232,7 +244,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _run(args: argparse.Namespace) -> int:
+def _run(args: argparse.Namespace, prog: str) -> int:
     cfg = None
     if not args.truth_only:
         cfg = _estimator_config(args)
@@ -346,7 +358,7 @@ def _run(args: argparse.Namespace) -> int:
     if last_pair is not None:
         _print_joints(last_pair, last_result)
     if sink_stats.submitted and not sink_stats.sent:  # a sink that never connected: say so in the status too
-        print(f"{PROG}: error: the sink {sink_url} sent none of the {sink_stats.submitted} frames "
+        print(f"{prog}: error: the sink {sink_url} sent none of the {sink_stats.submitted} frames "
               f"({sink_stats.connect_failures} failed connects; last error: {sink_stats.last_error})",
               file=sys.stderr)
         return 2
@@ -354,15 +366,16 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    prog = prog_name()
+    args = build_parser(prog).parse_args(argv)
     try:
-        return _run(args)
+        return _run(args, prog)
     except (DemoError, drivers.DriverError, FirmwareHostError, OSError) as e:
         # a wrong --url / --sink / --out, a camera that is not there: one line, not a traceback
-        print(f"{PROG}: error: {e}", file=sys.stderr)
+        print(f"{prog}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # before the pairs (the motion loop's first render, the model load) or after them
-        print(f"{PROG}: stopped (Ctrl-C)", file=sys.stderr)
+        print(f"{prog}: stopped (Ctrl-C)", file=sys.stderr)
         return 130
 
 

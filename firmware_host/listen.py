@@ -11,10 +11,11 @@ late, with what faults?), and a reference receiver in Python beside the C one in
 The summary: JOINTS messages per second, joints present per message, the sender's latency
 (``send_us - capture_us`` of the JOINTS headers: capture to the wire), sequence gaps (frames the
 sender numbered but dropped or decimated, or the link lost; camera pairs the sender never made a
-frame of take no number, and a seq that steps back, a restarted sender or a late datagram, is not a gap), the latest
-STATUS (its fault code, docs/protocol.md) and HELLO, and the decoder's error counts (a noisy serial
-line shows as ``crc``/``cobs`` errors). Exit status: 0; 2 for a bad URL or a port that cannot be
-opened (named).
+frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW` behind the newest; one
+that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
+docs/protocol.md) and HELLO, and the decoder's error counts (a noisy serial line shows as ``crc``/``cobs``
+errors). A seq further back is a restarted sender, not a gap. Exit status: 0; 2 for a bad URL or a port
+that cannot be opened (named).
 """
 from __future__ import annotations
 
@@ -215,9 +216,11 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
     raise ListenError(f"{url}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")
 
 
-#: A JOINTS seq at most this many frames behind the newest is a reordered datagram, one further back a sender
-#: that restarted (at 0).
+#: A JOINTS seq at most this many frames behind the newest is a reordered (late) datagram, one further back a
+#: sender that restarted (at 0). A gap's frames are counted lost at once; one that arrives within the window
+#: after all is taken back out of the loss and counted late instead.
 LATE_WINDOW = 32
+_SEQ_MOD = 1 << 32  # sequence numbers wrap (docs/protocol.md)
 
 
 def _fault_name(code: int) -> str:
@@ -229,20 +232,36 @@ def _fault_name(code: int) -> str:
 
 @dataclass
 class Tally:
-    """What arrived since the last summary (and in total)."""
+    """What arrived since the last summary (and in total).
+
+    ``gaps`` / ``total_gaps``: JOINTS frames lost, the seqs skipped less those that came late after all;
+    ``late`` / ``total_late``: JOINTS that arrived after a later seq (reordered on the link); ``duplicates`` /
+    ``total_duplicates``: a seq that had arrived already. A summary's ``gaps`` are the frames skipped in its own
+    interval that had not arrived by its end: one that arrives in a later interval is late there, and leaves
+    the totals' loss.
+    """
 
     joints: int = 0
     present: list[int] = field(default_factory=list)
     latency_ms: list[float] = field(default_factory=list)
     gaps: int = 0
+    late: int = 0
+    duplicates: int = 0
     last_seq: Optional[int] = None
     status: Optional[Status] = None
     hello: Optional[Hello] = None
     total_joints: int = 0
     total_gaps: int = 0
+    total_late: int = 0
+    total_duplicates: int = 0
     status_at: float = 0.0
     hello_at: float = 0.0
     errors_before: dict[str, int] = field(default_factory=dict)
+    # The LATE_WINDOW seqs up to the newest: those that arrived, and those skipped (each with the summary interval
+    # it was counted lost in). Only seqs of the current numbering: a restart forgets them.
+    _arrived: set[int] = field(default_factory=set, repr=False)
+    _missing: dict[int, int] = field(default_factory=dict, repr=False)
+    _interval: int = field(default=0, repr=False)
 
     def add(self, message: Message) -> None:
         if isinstance(message, Joints):
@@ -251,20 +270,55 @@ class Tally:
             self.present.append(int((~message.missing).sum()))
             h = message.header
             self.latency_ms.append((h.send_us - h.capture_us) / 1000.0)
-            if self.last_seq is not None:
-                step = (h.seq - self.last_seq) % (1 << 32)  # sequence numbers wrap (docs/protocol.md)
-                if 1 < step < (1 << 31):  # a larger step is a sender restart or a reordering, not a gap
-                    self.gaps += step - 1
-                    self.total_gaps += step - 1
-                elif (1 << 32) - step <= LATE_WINDOW:
-                    # A late datagram: the newest seq stays the reference, or the step from this one up to
-                    # the next would count the frames that already arrived as a second gap.
-                    return
-            self.last_seq = h.seq
+            self._sequence(h.seq)
         elif isinstance(message, Status):
             self.status, self.status_at = message, time.monotonic()
         elif isinstance(message, Hello):
             self.hello, self.hello_at = message, time.monotonic()
+
+    def _sequence(self, seq: int) -> None:
+        """Count ``seq`` as the next frame, a gap's end, a late or repeated one, or a restarted sender's first."""
+        if self.last_seq is None:
+            self._restart(seq)
+            return
+        step = (seq - self.last_seq) % _SEQ_MOD
+        if 0 < step < _SEQ_MOD // 2:  # forward: the frames stepped over are lost until they come late
+            skipped = step - 1
+            self.gaps += skipped
+            self.total_gaps += skipped
+            for k in range(max(1, step - LATE_WINDOW), step):  # only those that can still count as late
+                self._missing[(self.last_seq + k) % _SEQ_MOD] = self._interval
+            self.last_seq = seq
+            self._arrived.add(seq)
+            self._forget_behind_window()
+        elif step == 0 or _SEQ_MOD - step <= LATE_WINDOW:
+            # Behind the newest, within the window: the newest stays the reference, or the step from this one up
+            # to the next would count the frames that already arrived as a second gap.
+            if seq in self._arrived:
+                self.duplicates += 1
+                self.total_duplicates += 1
+                return
+            self.late += 1
+            self.total_late += 1
+            self._arrived.add(seq)
+            counted_in = self._missing.pop(seq, None)
+            if counted_in is not None:  # else it was sent before the first seq heard: never counted lost
+                self.total_gaps -= 1
+                if counted_in == self._interval:
+                    self.gaps -= 1
+        else:
+            self._restart(seq)
+
+    def _restart(self, seq: int) -> None:
+        """A new numbering (the first JOINTS heard, or a restarted sender): the old one's window is forgotten."""
+        self._arrived, self._missing = {seq}, {}
+        self.last_seq = seq
+
+    def _forget_behind_window(self) -> None:
+        newest = self.last_seq
+        assert newest is not None
+        self._arrived = {s for s in self._arrived if (newest - s) % _SEQ_MOD <= LATE_WINDOW}
+        self._missing = {s: i for s, i in self._missing.items() if (newest - s) % _SEQ_MOD <= LATE_WINDOW}
 
     def line(self, seconds: float, errors: dict[str, int]) -> str:
         parts = [f"{self.joints / max(seconds, 1e-9):.1f} JOINTS/s"]
@@ -272,6 +326,10 @@ class Tally:
             parts.append(f"{statistics.mean(self.present):.1f} joints present")
             parts.append(f"latency {statistics.median(self.latency_ms):.1f} ms")
         parts.append(f"{self.gaps} seq gaps")
+        if self.late:
+            parts.append(f"{self.late} late (reordered)")
+        if self.duplicates:
+            parts.append(f"{self.duplicates} duplicate")
         now = time.monotonic()
         if self.status is not None:
             age = f" ({now - self.status_at:.0f} s ago)" if now - self.status_at > 2 * seconds + 1 else ""
@@ -283,7 +341,8 @@ class Tally:
         self.errors_before = dict(errors)
         if bad:
             parts.append(f"decode errors {bad}")
-        self.joints, self.present, self.latency_ms, self.gaps = 0, [], [], 0
+        self.joints, self.present, self.latency_ms, self.gaps, self.late, self.duplicates = 0, [], [], 0, 0, 0
+        self._interval += 1  # a frame skipped before now that comes late no longer changes this line's gaps
         return "; ".join(parts)
 
 
@@ -347,7 +406,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     finally:
         port.close()
-    print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps", file=sys.stderr)
+    print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps (lost), {tally.total_late} late "
+          f"(reordered), {tally.total_duplicates} duplicate", file=sys.stderr)
     return 0
 
 

@@ -311,8 +311,11 @@ class ModelContract:
         if self.variant not in ("ghnerf", "baseline"):
             fail("variant", f"variant must be 'ghnerf' or 'baseline', got {self.variant!r}")
         if tuple(self.joint_names) != JOINT_NAMES:
-            fail("joint_names", f"joint names must be BODY_25 in OpenPose order {list(JOINT_NAMES)}, "
-                                f"got {list(self.joint_names)}")
+            # the count first: a model of other joints fails here, at load, not in a sink's worker (the joint
+            # stream carries at most 64 per packet) or in the BODY_25 post-processing
+            fail("joint_names", f"the runtime takes BODY_25's {len(JOINT_NAMES)} joints, in OpenPose order "
+                                f"{list(JOINT_NAMES)}; this model has {len(self.joint_names)}: "
+                                f"{list(self.joint_names)}")
         if self.num_sources != 2:
             fail("num_sources", f"the runtime feeds exactly 2 source views, got {self.num_sources}")
         n = self.normalisation

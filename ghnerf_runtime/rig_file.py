@@ -61,6 +61,16 @@ PRINCIPAL_POINT_TOLERANCE = 0.1
 #: lies: 0.01 is a 179-degree view through the pinhole part (fisheyes are modelled by their distortion), 100 a
 #: 0.6-degree one. Past them a file holds a typo or another unit (1e308 loaded and gave NaN pixels).
 FOCAL_RANGE = (0.01, 100.0)
+#: Largest magnitude of a distortion coefficient. A lens's are small numbers (the example rig's below 0.05; a wide
+#: lens's rational model, numerator and denominator nearly cancelling, runs larger, which this leaves room for).
+#: Past it a file holds a typo or a fit that diverged: k1 = 1e308 loaded (the lens fold check only warned), and
+#: the projection overflowed to inf/NaN pixels.
+MAX_DISTORTION = 1e3
+#: Names of the OpenCV coefficients, in file order, for error messages.
+DISTORTION_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tx", "ty")
+#: Largest rig file read, bytes: the example rig (docs/examples/rig.json) is 1.5 KB, so this holds hundreds of cameras
+#: with their metadata; anything larger (a log, an image, /dev/zero named by mistake) is refused before it is read.
+MAX_RIG_FILE_BYTES = 1 << 20
 #: Largest image width or height: the runtime's remap tables (OpenCV's fixed-point maps) address
 #: pixels with 16-bit integers. It also keeps absurd sizes (10**400) from overflowing the float checks.
 MAX_IMAGE_SIDE = 32767
@@ -83,7 +93,10 @@ __all__ = [
     "write_text_atomic",
     "principal_point_problem",
     "focal_length_problem",
+    "distortion_problem",
     "PRINCIPAL_POINT_TOLERANCE",
+    "MAX_DISTORTION",
+    "MAX_RIG_FILE_BYTES",
 ]
 
 
@@ -138,8 +151,9 @@ class _Checker:
             self._raise(field, f"must be at most {limit}, got {_show(value)}")
         return value
 
-    def array(self, value: Any, field: str, shape: tuple | None = None, what: str = "") -> np.ndarray:
-        """A nested list of finite numbers of the given shape (``None`` entries mean any length)."""
+    def array(self, value: Any, field: str, shape: tuple | None = None, what: str = "", label: str = "") -> np.ndarray:
+        """A nested list of finite numbers of the given shape (``None`` entries mean any length); ``label``
+        ("camera 'left': ") starts the message of a non-finite number."""
         expect = what or ("x".join("N" if s is None else str(s) for s in shape) + " array of numbers" if shape else "list of numbers")
         found = _shape_of(value)
         if found is None:
@@ -151,7 +165,7 @@ class _Checker:
         except OverflowError:  # an integer beyond any float, e.g. 10**400
             arr = np.array(np.inf)
         if not np.all(np.isfinite(arr)):
-            self._raise(field, f"must contain only finite numbers, got {_show(value)}")
+            self._raise(field, f"{label}must contain only finite numbers, got {_show(value)}")
         return arr
 
 
@@ -185,6 +199,17 @@ def focal_length_problem(K: Any, width: int, height: int) -> str | None:
             return (f"its focal length {name} = {f:g} px is outside {low:g}-{high:g} px ({FOCAL_RANGE[0]:g}-"
                     f"{FOCAL_RANGE[1]:g} times the {width}x{height} image's longer side; a {fov:.3g}-degree view): a "
                     f"typo, or a focal length in other units?")
+    return None
+
+
+def distortion_problem(dist: Any) -> str | None:
+    """Why OpenCV coefficients ``dist`` are not a real lens's (one beyond ``MAX_DISTORTION`` in magnitude, or not
+    finite), naming the first such coefficient; None when they are."""
+    d = np.asarray(dist, dtype=np.float64).reshape(-1)
+    for name, value in zip(DISTORTION_NAMES, d.tolist()):
+        if not abs(value) <= MAX_DISTORTION:  # NaN too
+            return (f"its distortion coefficient {name} = {value!r} is beyond any lens's (|coefficient| at most "
+                    f"{MAX_DISTORTION:g}): a typo, or a calibration that diverged?")
     return None
 
 
@@ -298,6 +323,8 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
     problem = rig.baseline_problem()
     if problem:
         chk._raise("cameras[1].t", problem)
+    if far := rig.far_camera_problem():
+        chk._raise(f"cameras[{far[0]}].t", far[1])
     for cam in cameras if warn else ():
         if cam.fold_inside_image():
             log.warning(
@@ -339,7 +366,9 @@ def _camera_from_dict(chk: _Checker, raw: Any, field: str) -> Camera:
     if model not in DISTORTION_MODELS:
         chk._raise(f"{field}.distortion.model", f"unsupported distortion model {_show(model)} (supported: {', '.join(DISTORTION_MODELS)})")
     coef_field = f"{field}.distortion.coefficients"
-    dist = chk.array(dist_raw["coefficients"], coef_field, (None,), "list of numbers")
+    dist = chk.array(dist_raw["coefficients"], coef_field, (None,), "list of numbers", label=f"camera {name!r}: ")
+    if problem := distortion_problem(dist):
+        chk._raise(coef_field, f"camera {name!r}: {problem}")
     if dist.size not in DISTORTION_LENGTHS:
         chk._raise(coef_field, f"must have 0, 4, 5, 8, 12 or 14 coefficients, got {dist.size}: {dist.tolist()}")
     if dist.size == 14 and np.any(dist[12:] != 0):
@@ -453,11 +482,19 @@ def load_rig(path: str | os.PathLike) -> Rig:
     """
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        with path.open("rb") as f:
+            # the size before reading, and a read that stops past it: a file that grows, or a device, holds no more
+            size = os.fstat(f.fileno()).st_size
+            raw = f.read(MAX_RIG_FILE_BYTES + 1) if size <= MAX_RIG_FILE_BYTES else b""
+            size = max(size, len(raw))
     except OSError as e:
         raise RigFileError(f"cannot read rig file: {e.strerror or e}", path=str(path)) from e
     except ValueError as e:  # a path with a NUL character
         raise RigFileError(f"cannot read rig file: {e}", path=str(path).replace("\0", "\\x00")) from e
+    if size > MAX_RIG_FILE_BYTES:
+        what = f"{size} bytes" if len(raw) <= MAX_RIG_FILE_BYTES else f"more than {MAX_RIG_FILE_BYTES} bytes"
+        raise RigFileError(f"the file holds {what}, over the {MAX_RIG_FILE_BYTES} (1 MiB, MAX_RIG_FILE_BYTES) a rig file "
+                           "may: not a rig file?", path=str(path))
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:

@@ -17,10 +17,12 @@ from drivers.backends.replay import MIN_SPEED
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.config import DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
+from firmware_host.listen import LATE_WINDOW
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.geometry import triangulate_dlt
+from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 
 REPO = Path(__file__).resolve().parents[1]
 RAY = Joints3DConfig().min_ray_angle_deg
@@ -41,6 +43,10 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
     ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
+    ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),
+    ("docs/daemon.md", f"at most {LATE_WINDOW} behind the newest (`LATE_WINDOW`)"),
+    ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),
+    ("docs/rig-file.md", f"files over {MAX_RIG_FILE_BYTES / (1 << 20):g} MiB (`MAX_RIG_FILE_BYTES`"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

@@ -9,7 +9,13 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.rig_file import MAX_IMAGE_SIDE, ROTATION_TOLERANCE, focal_length_problem, principal_point_problem
+from ghnerf_runtime.rig_file import (
+    MAX_IMAGE_SIDE,
+    ROTATION_TOLERANCE,
+    distortion_problem,
+    focal_length_problem,
+    principal_point_problem,
+)
 
 DISTORTION_LENGTHS = (0, 4, 5, 8, 12, 14)
 #: Foreign files often print rotations with few digits: rotations whose ``|R R^T - I|``
@@ -113,6 +119,8 @@ def make_camera(path, field: str, *, name: str, width: Any, height: Any, K: Any,
     if d.size not in DISTORTION_LENGTHS or not np.all(np.isfinite(d)):
         raise fail(path, join(field, dist_key),
                    f"must be 0, 4, 5, 8, 12 or 14 finite OpenCV coefficients, got {d.size}: {show(d)}")
+    if problem := distortion_problem(d):  # the rig file's bound: imported, it was saved to a file load_rig refused
+        raise fail(path, join(field, dist_key), f"camera {str(name)!r}: {problem}")
     if d.size == 14 and np.any(d[12:] != 0):
         raise fail(path, join(field, dist_key), f"tilt terms tx, ty must be 0, got {show(d[12:])}")
     R = rotation(path, join(field, R_key), R)
@@ -145,6 +153,8 @@ def make_rig(path, cameras: Sequence[Camera], fields: Sequence[str], *, volume: 
     problem = rig.baseline_problem()
     if problem:
         raise fail(pair_t[0], pair_t[1], problem)
+    if far := rig.far_camera_problem():  # a third camera under the pair's bound, as the rig file's reader has it
+        raise fail(path, join(fields[far[0]], pair_t[1].rpartition(".")[2]), far[1])
     return rig
 
 

@@ -14,7 +14,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from firmware_host.protocol.constants import PROTOCOL_VERSION, U64_MAX, MsgType
+from firmware_host.protocol.constants import MAX_JOINTS, PROTOCOL_VERSION, U64_MAX, MsgType
 
 
 def _whole(name: str, value: object, lo: int | None = None, hi: int | None = None) -> None:
@@ -56,10 +56,20 @@ class JointFrame:
         j = np.asarray(self.joints_3d)
         if j.ndim != 2 or j.shape[1] != 4:
             raise ValueError(f"JointFrame.joints_3d must have shape (J, 4), got {j.shape}")
+        _joint_count("joints_3d", j.shape[0])
         for cam, uv in self.joints_2d.items():
             a = np.asarray(uv)
             if a.ndim != 2 or a.shape[1] != 3:
                 raise ValueError(f"JointFrame.joints_2d[{cam!r}] must have shape (J, 3), got {a.shape}")
+            _joint_count(f"joints_2d[{cam!r}]", a.shape[0])
+
+
+def _joint_count(name: str, count: int) -> None:
+    """At most MAX_JOINTS joints, what a packet carries: checked when the frame is made, in the producer's thread.
+    More (65) failed only as an EncodeError inside a protocol sink's worker, one logged traceback per frame."""
+    if count > MAX_JOINTS:
+        raise ValueError(f"JointFrame.{name} has {count} joints: the joint stream carries at most {MAX_JOINTS} "
+                         f"per frame (MAX_JOINTS, docs/protocol.md)")
 
 
 @dataclass(frozen=True)

@@ -109,6 +109,20 @@ class Rig:
             distance = float(np.linalg.norm(a.center - b.center))
         return distance if not np.isnan(distance) else np.inf
 
+    def far_camera_problem(self) -> tuple[int, str] | None:
+        """The first camera after the pair whose centre lies farther than :data:`MAX_BASELINE_M` from the first
+        camera's, and why; or None. The pair's bound, for the same reason: translations in millimetres read as
+        metres (or of 1e200) were refused for the pair and loaded for a third camera."""
+        first = self.cameras[0]
+        for k, cam in enumerate(self.cameras[2:], start=2):
+            with np.errstate(over="ignore", invalid="ignore"):  # translations of 1e200: inf
+                distance = float(np.linalg.norm(cam.center - first.center))
+            if not distance <= MAX_BASELINE_M:  # NaN too
+                return k, (f"camera {cam.name!r} is {distance:.4g} m from camera {first.name!r} (at most "
+                           f"{MAX_BASELINE_M:g} m accepted, as between the pair's): translations in millimetres read "
+                           "as metres? The rig's translations are in metres")
+        return None
+
     def baseline_problem(self) -> str | None:
         """Why the pair cannot triangulate (its centres closer than :data:`MIN_BASELINE_M`), or why its translations
         are not metres (farther apart than :data:`MAX_BASELINE_M`), or None."""

@@ -675,3 +675,25 @@ def test_a_focal_length_no_lens_has_is_refused_on_import(rig, tmp_path):
     write_opencv_rig(dataclasses.replace(rig, cameras=cams), tmp_path / "rig.yaml")
     with pytest.raises(RigFileError, match=r"cameras\[1\]\.camera_matrix.*camera 'right'.*focal length fx = 1e\+300"):
         read_opencv_rig(tmp_path / "rig.yaml")
+
+
+def test_a_distortion_or_a_third_camera_the_rig_file_refuses_is_refused_on_import(rig, tmp_path):
+    # imported, each was written to a rig.json that load_rig refuses (|k| > 1e3; a third camera 10 m off the first)
+    side = rig.cameras[2]
+    far = Rig(rig.cameras[:2] + (dataclasses.replace(side, t=side.t + side.R @ np.array([-40.0, 0.0, 0.0])),),
+              rig.volume, rig_id=rig.rig_id)
+    write_opencv_rig(far, tmp_path / "far.yaml")
+    with pytest.raises(RigFileError, match=r"camera 'side cam' is 4\d\.\d+ m from camera 'left' \(at most 10 m") as info:
+        read_opencv_rig(tmp_path / "far.yaml")
+    assert info.value.field == "cameras[2].T"
+    write_anipose_toml(far, tmp_path / "far.toml", units_to_metres=1.0)
+    with pytest.raises(RigFileError, match="camera 'side cam' is") as info:
+        read_anipose_toml(tmp_path / "far.toml", units_to_metres=1.0)
+    assert info.value.field.endswith(".translation")
+    dist = side.dist.copy()
+    dist[0] = 1e308
+    wild = Rig(rig.cameras[:2] + (dataclasses.replace(side, dist=dist),), rig.volume, rig_id=rig.rig_id)
+    write_opencv_rig(wild, tmp_path / "wild.yaml")
+    with pytest.raises(RigFileError, match=r"camera 'side cam': its distortion coefficient k1 = 1e\+308") as info:
+        read_opencv_rig(tmp_path / "wild.yaml")
+    assert info.value.field == "cameras[2].distortion_coefficients"

@@ -173,6 +173,39 @@ def test_end_of_stream_and_loop(take):
     assert np.array_equal(pairs[len(live)].images[0], pairs[0].images[0])  # second pass, same pictures
 
 
+def _take_ending_in_a_held_pair(out):
+    """Cut the take's journal after its fourth pair's frames, the second moved to 15 ms after the first: a frame of
+    the first camera 3/4 of a period later (25 ms) could still be closer to it, so the pairer holds that pair back
+    for a frame that never comes. Returns the (camera, index, timestamp_ns) of the pair's two frames."""
+    lines = (out / FRAMES).read_text().splitlines()
+    rows = [json.loads(line) for line in lines]
+    first = next(r for r in rows if r["camera"] == "left" and r["index"] == 3)
+    second = next(r for r in rows if r["camera"] == "right" and r["index"] == 3)
+    second["timestamp_ns"] = first["timestamp_ns"] + 15_000_000
+    kept = [r for r in rows if r["timestamp_ns"] < first["timestamp_ns"]] + [first, second]
+    (out / FRAMES).write_text("".join(json.dumps(r) + "\n" for r in kept))
+    return [(r["camera"], r["index"], r["timestamp_ns"]) for r in (first, second)]
+
+
+@pytest.mark.parametrize("options", ["speed=free&policy=all", "speed=free&policy=latest",
+                                     "speed=recorded&policy=latest"])
+def test_the_end_of_a_replay_delivers_the_pair_it_held_then_stays_ended(copy_of_take, options):
+    # The end of the recording decides the pair the pairer held (RigSource._take_frame): it is read before
+    # EndOfStream, which every later read raises again.
+    last = _take_ending_in_a_held_pair(copy_of_take)
+    with open_rig(f"replay://{copy_of_take}?{options}&keep_time=1&tolerance_ms=20", clock=ManualClock()) as source:
+        pairs = []
+        with pytest.raises(EndOfStream, match="ended after"):
+            while True:
+                pairs.append(source.read(timeout_s=1.0))
+        for _ in range(2):
+            with pytest.raises(EndOfStream):
+                source.read(timeout_s=1.0)
+        stats = source.stats
+    assert [(f.camera, f.index, f.timestamp_ns) for f in pairs[-1].frames] == last
+    assert stats.pairs_out == len(pairs) and sum(stats.unpaired.values()) == 0
+
+
 def test_jpeg_recording(tmp_path, sim_cache):
     live, _ = record(tmp_path / "jpg", sim_cache, pairs=5, image_format="jpg", jpeg_quality=90, lossless=1)
     assert read_manifest(tmp_path / "jpg").image_format == "jpg"

@@ -266,6 +266,32 @@ def test_seconds_and_out_are_checked_by_name(tmp_path, capsys):
     assert f"--out {tmp_path / 'afile'}: is a file" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv0, prog", [
+    ("/home/me/.venv/bin/ghnerf-demo", "ghnerf-demo"),  # the console script (pyproject.toml [project.scripts])
+    ("C:/venv/Scripts/ghnerf-demo.exe", "ghnerf-demo"),
+    (str(REPO / "firmware_host" / "demo.py"), "python -m firmware_host.demo"),  # make demo's -m run
+])
+def test_usage_and_errors_name_the_command_that_was_run(tmp_path, capsys, monkeypatch, argv0, prog):
+    monkeypatch.setattr("sys.argv", [argv0])
+    with pytest.raises(SystemExit) as e:
+        demo.main(["--truth-only", "--seconds", "-1"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.startswith(f"usage: {prog} [-h]") and f"\n{prog}: error: argument --seconds" in err
+    (tmp_path / "afile").write_text("")
+    assert demo.main(["--truth-only", "--out", str(tmp_path / "afile")]) == 2
+    assert capsys.readouterr().err.startswith(f"{prog}: error: --out ")
+
+
+def test_python_dash_m_still_runs_and_names_itself():
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-m", "firmware_host.demo", "--help"], cwd=REPO, capture_output=True,
+                         text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("usage: python -m firmware_host.demo [-h]")
+
+
 def test_ctrl_c_ends_the_run_with_its_summary(tmp_path, capsys, sim_url, monkeypatch):
     import drivers
 

@@ -176,6 +176,17 @@ def test_joint_frame_checks_shapes() -> None:
         JointFrame(0, 0, 0, np.zeros((25, 4)), {"left": np.zeros((25, 2))})
 
 
+def test_a_frame_of_more_joints_than_a_packet_carries_is_refused_when_made() -> None:
+    # 65 joints: made and sent without a word, then an EncodeError (a logged traceback) in a protocol sink's worker
+    # thread for every frame, none of them sent
+    with pytest.raises(ValueError, match=r"JointFrame\.joints_3d has 65 joints: .* at most 64 per frame \(MAX_JOINTS"):
+        JointFrame(0, 0, 0, np.zeros((65, 4)))
+    with pytest.raises(ValueError, match=r"JointFrame\.joints_2d\[1\] has 70 joints: .* at most 64"):
+        JointFrame(0, 0, 0, np.zeros((25, 4)), {1: np.zeros((70, 3))})
+    frame = JointFrame(0, 0, 0, np.zeros((64, 4)), {0: np.zeros((64, 3))})  # the most a packet carries: sent
+    assert decode_stream(encode(joints_message(frame, 0, 0)))[0][0].message.xyz_mm.shape == (64, 3)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "field"),
     [

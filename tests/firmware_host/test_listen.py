@@ -119,10 +119,10 @@ def test_sequence_numbers_wrap_and_errors_are_per_line():
         tally.add(joints(seq))
     assert tally.total_gaps == 1
     tally.add(joints(5))
-    tally.add(joints(3))  # a step back (reordering, a sender restart) is not 4 billion gaps
-    assert tally.total_gaps == 4
+    tally.add(joints(3))  # a step back (reordering, a sender restart) is not 4 billion gaps; 3 came late after all
+    assert tally.total_gaps == 3 and tally.total_late == 1
     tally.add(joints(6))  # 5 was the newest: 3 arrived late, so 3 -> 6 is no second gap of 4 and 5
-    assert tally.total_gaps == 4
+    assert tally.total_gaps == 3
     restarted = listen.Tally()
     for seq in (500, 501, 0, 1, 3):  # a sender that restarted: its numbering is followed from there
         restarted.add(joints(seq))
@@ -130,6 +130,47 @@ def test_sequence_numbers_wrap_and_errors_are_per_line():
     first = tally.line(1.0, {"crc": 2, "cobs": 0})
     second = tally.line(1.0, {"crc": 2, "cobs": 0})
     assert "decode errors {'crc': 2}" in first and "decode errors" not in second
+
+
+def _joints(seq: int):
+    from firmware_host.protocol.constants import MsgType
+    from firmware_host.protocol.messages import Joints, make_header
+    import numpy as np
+
+    return Joints(make_header(MsgType.JOINTS, seq, 0, 1000), 0, np.zeros((25, 3), np.int16), np.zeros(25, np.uint8),
+                  np.zeros(25, bool))
+
+
+def test_a_late_datagram_is_counted_late_and_takes_its_gap_out_of_the_loss():
+    tally = listen.Tally()
+    for seq in (0, 1, 3):
+        tally.add(_joints(seq))
+    first = tally.line(1.0, {})  # 2 is missing at the end of this second
+    for seq in (2, 4, 4):  # 2 arrives late (reordered on the link), 4 twice
+        tally.add(_joints(seq))
+    second = tally.line(1.0, {})
+    assert "1 seq gaps" in first and "late (" not in first
+    assert "0 seq gaps; 1 late (reordered); 1 duplicate" in second
+    assert (tally.total_gaps, tally.total_late, tally.total_duplicates, tally.last_seq) == (0, 1, 1, 4)
+    tally.add(_joints(7))
+    tally.add(_joints(6))  # within one summary: skipped and back, no gap in its line either
+    assert "1 seq gaps; 1 late (reordered)" in tally.line(1.0, {}) and tally.total_gaps == 1
+
+
+def test_the_late_window_bounds_what_counts_late():
+    tally = listen.Tally()
+    for seq in (100, 99):  # sent before the first seq heard: late, never counted lost
+        tally.add(_joints(seq))
+    assert (tally.total_gaps, tally.total_late) == (0, 1)
+    tally.add(_joints(100 + 1 + 50))  # 50 lost
+    tally.add(_joints(151 - listen.LATE_WINDOW))  # the oldest seq that can still come late
+    assert (tally.total_gaps, tally.total_late, tally.last_seq) == (49, 2, 151)
+    tally.add(_joints(151 - listen.LATE_WINDOW - 1))  # further back: a sender that restarted, followed from there
+    assert (tally.total_gaps, tally.total_late, tally.last_seq) == (49, 2, 151 - listen.LATE_WINDOW - 1)
+    wrap = listen.Tally()
+    for seq in (2**32 - 2, 1, 2**32 - 1, 0):  # across the wrap, both skipped seqs arrive late
+        wrap.add(_joints(seq))
+    assert (wrap.total_gaps, wrap.total_late, wrap.last_seq) == (0, 2, 1)
 
 
 def test_a_stray_datagram_without_delimiter_costs_only_itself():

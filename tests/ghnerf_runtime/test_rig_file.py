@@ -4,6 +4,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -478,3 +479,90 @@ def test_focal_lengths_of_real_lenses_load(example_dict, scale):
     for cam in example_dict["cameras"]:
         cam["K"][0][0] = cam["K"][1][1] = max(cam["width"], cam["height"]) * scale
     assert rig_from_dict(example_dict, path="rig.json").pair[0].K[0, 0] > 0
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("index, value, shown", [
+    (0, 1e308, "k1 = 1e+308"),  # loaded (the fold check only warned) and projected to inf/NaN pixels
+    (4, -2000.0, "k3 = -2000.0"),
+    (7, 1500.0, "k6 = 1500.0"),
+])
+def test_a_distortion_coefficient_no_lens_has_is_refused_naming_the_camera(example_dict, index, value, shown):
+    cam = example_dict["cameras"][1]
+    cam["distortion"]["coefficients"] = (cam["distortion"]["coefficients"] + [0.0] * 3)[:8]
+    cam["distortion"]["coefficients"][index] = value
+    with pytest.raises(RigFileError, match=re.escape(f"camera 'right': its distortion coefficient {shown} is beyond "
+                                                     "any lens's (|coefficient| at most 1000)")) as info:
+        rig_from_dict(example_dict, path="rig.json")
+    assert info.value.field == "cameras[1].distortion.coefficients" and info.value.path == "rig.json"
+
+
+def test_non_finite_distortion_is_refused_naming_the_camera(tmp_path):
+    text = EXAMPLE.read_text().replace("[-0.0412, 0.0231,", "[NaN, 0.0231,", 1)
+    assert "NaN" in text
+    with pytest.raises(RigFileError, match="camera 'left': must contain only finite numbers, got \\[NaN") as info:
+        loads_rig(text, path="rig.json")
+    assert info.value.field == "cameras[0].distortion.coefficients"
+
+
+def test_distortion_of_real_lenses_loads(example_dict):
+    # a wide lens's rational model: tens, numerator and denominator nearly cancelling
+    example_dict["cameras"][0]["distortion"]["coefficients"] = [25.0, -40.0, 0.001, -0.002, 120.0, 25.5, -38.0, 118.0]
+    example_dict["cameras"][1]["distortion"]["coefficients"] = [1000.0, -1000.0, 0.0, 0.0]  # the bound itself
+    assert rig_from_dict(example_dict, path="rig.json").cameras[0].dist[4] == 120.0
+
+
+def _third(example_dict, t):
+    third = copy.deepcopy(example_dict["cameras"][1])
+    third["name"], third["t"] = "third", t
+    example_dict["cameras"].append(third)
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("t, distance", [([1e200, 0.0, 0.0], "inf"),  # loaded: only the pair was bounded
+                                         ([12.0, 1.2, 0.1], "11.96")])
+def test_a_third_camera_is_bounded_like_the_pair(example_dict, tmp_path, t, distance):
+    _third(example_dict, t)
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(example_dict))
+    with pytest.raises(RigFileError) as info:
+        load_rig(path)
+    assert info.value.field == "cameras[2].t" and info.value.path == str(path)
+    assert f"camera 'third' is {distance} m from camera 'left' (at most 10 m accepted" in str(info.value)
+
+
+def test_a_third_camera_within_the_bound_loads(example_dict):
+    _third(example_dict, [-3.0, 1.2, 0.5])
+    assert rig_from_dict(example_dict, path="rig.json").cameras[2].name == "third"
+
+
+def test_a_file_over_the_size_cap_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    from ghnerf_runtime import rig_file
+
+    path = tmp_path / "big.json"
+    text = EXAMPLE.read_text()
+    assert text.isascii() and text.endswith("}\n")
+    path.write_text(text[:-2] + " " * (rig_file.MAX_RIG_FILE_BYTES + 1 - len(text)) + "}\n")  # 1 MiB + 1 byte
+    size = path.stat().st_size
+    assert size == rig_file.MAX_RIG_FILE_BYTES + 1
+    read = []
+    monkeypatch.setattr(Path, "read_bytes", lambda self: read.append(self) or b"")
+    with pytest.raises(RigFileError, match=f"the file holds {size} bytes, over the 1048576 \\(1 MiB") as info:
+        load_rig(path)
+    assert info.value.path == str(path) and read == []
+    path.write_text(text[:-2] + " " * (rig_file.MAX_RIG_FILE_BYTES - len(text)) + "}\n")  # 1 MiB exactly: loads
+    assert load_rig(path).rig_id
+
+
+def test_a_file_larger_than_its_stated_size_is_refused_at_the_cap(tmp_path, monkeypatch):
+    # a device or a /proc file states size 0 (/dev/zero, read whole, never returned): the read stops at the cap
+    from ghnerf_runtime import rig_file
+
+    path = tmp_path / "device.json"
+    text = EXAMPLE.read_text()
+    path.write_text(text[:-2] + " " * (rig_file.MAX_RIG_FILE_BYTES + 1 - len(text)) + "}\n")
+    real_fstat = os.fstat
+    monkeypatch.setattr(rig_file.os, "fstat", lambda fd: os.stat_result((*real_fstat(fd)[:6], 0, *real_fstat(fd)[7:])))
+    with pytest.raises(RigFileError, match="holds more than 1048576 bytes") as info:
+        load_rig(path)
+    assert info.value.path == str(path)

@@ -230,6 +230,17 @@ def test_impossible_metadata_values_are_refused_by_key(tiny_model_dir, tmp_path,
     assert e.value.key == key and "encoder.onnx" in str(e.value)
 
 
+def test_a_model_of_more_joints_than_body_25_is_refused_at_load_naming_the_count(tiny_model_dir, tmp_path):
+    # 65 joints: more than a joint-stream packet carries (64); refused here, before any frame is made
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    names = json.dumps([f"joint{k}" for k in range(65)])
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, "ghnerf.joint_names": names})
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder)
+    assert e.value.key == "ghnerf.joint_names" and "encoder.onnx" in str(e.value)
+    assert "BODY_25's 25 joints" in str(e.value) and "this model has 65:" in str(e.value)
+
+
 def test_missing_metadata_key_refused(tiny_model_dir, tmp_path):
     folder = _copy(tiny_model_dir, tmp_path / "m")
     _edit_metadata(folder / "encoder.onnx", lambda p: {k: v for k, v in p.items() if k != "ghnerf.levels"})
