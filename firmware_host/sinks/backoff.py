@@ -1,6 +1,8 @@
 """Exponential backoff for reconnect attempts (pure; the worker does the sleeping)."""
 from __future__ import annotations
 
+import math
+import threading
 from dataclasses import dataclass
 
 
@@ -11,11 +13,14 @@ class BackoffPolicy:
     factor: float = 2.0
     """Each further failure multiplies the wait by this."""
     max_s: float = 2.0
-    """The wait never exceeds this, so a replugged device is found within max_s."""
+    """The wait never exceeds this, so a replugged device is found within max_s; finite, at most
+    ``threading.TIMEOUT_MAX`` (a longer wait raised OverflowError in the worker, which died)."""
 
     def __post_init__(self) -> None:
-        if not (self.initial_s > 0 and self.factor >= 1 and self.max_s >= self.initial_s):
-            raise ValueError(f"invalid backoff policy {self}")
+        if not (self.initial_s > 0 and math.isfinite(self.factor) and self.factor >= 1
+                and self.initial_s <= self.max_s <= threading.TIMEOUT_MAX):
+            raise ValueError(f"invalid backoff policy {self}: want 0 < initial_s <= max_s <= "
+                             f"{threading.TIMEOUT_MAX:g} s and a finite factor >= 1")
 
 
 class Backoff:

@@ -3,8 +3,10 @@
 The path is absolute and percent-decoded (``file:///data/my%20run/joints.jsonl``; ``Path.as_uri()``
 writes such URLs); the host is empty or ``localhost``. The values are the quantised wire values (mm,
 confidence 0..255), so the file is a faithful record of what robots received. Lines are flushed one
-by one; a failed write (disk full, removed medium) closes the file and reopens it in append mode with
-backoff, first ending a line the failed write cut short, so the one broken line stays on its own.
+by one, not fsynced (a stopped or killed daemon leaves whole lines; a power cut loses what the kernel
+had not written back); a failed write (disk full, removed medium) closes the file and reopens it in
+append mode with backoff, first ending a line the failed write cut short, so the one broken line stays
+on its own. A path that cannot be opened (a folder, no permission) is retried like an absent device.
 
 The file grows for as long as the sink runs (about 650 bytes per JOINTS line); rotate it with
 logrotate's ``copytruncate``: every write is O_APPEND, so it lands at the end of the truncated file.

@@ -7,6 +7,7 @@ from typing import Callable, Optional
 
 from firmware_host.errors import SinkConfigError
 from firmware_host.sinks.backoff import BackoffPolicy
+from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.url import SinkUrl, boolean, positive_float, positive_int
 
 
@@ -56,6 +57,10 @@ class SinkOptions:
             backoff=kw.pop("backoff", BackoffPolicy()),
             clock_us=kw.pop("clock_us", monotonic_us),
         )
+        if opts.max_fps is not None and opts.max_fps < MIN_MAX_FPS:
+            # RateLimiter refuses it at start(); refused here it is named with its URL, at open_sink()
+            raise SinkConfigError(u.url, "max_fps", opts.max_fps, f"must be at least {MIN_MAX_FPS:.6g} "
+                                                                  "(a frame an hour)")
         if opts.queue < 1:
             raise SinkConfigError(u.url, "queue", opts.queue, "must be >= 1")
         if not 0 < opts.status_s <= MAX_STATUS_S:

@@ -1,7 +1,12 @@
 """Keeping a sink within its link's capacity (pure; driven by capture timestamps)."""
 from __future__ import annotations
 
+import math
 from typing import Optional
+
+#: Lowest ``max_fps``: a frame an hour, the longest STATUS period. Below a subnormal one the interval
+#: overflowed to inf, and inf - inf made every comparison false, so every frame was admitted.
+MIN_MAX_FPS = 1 / 3600
 
 # Share of a serial link's raw byte rate given to JOINTS frames; the rest covers
 # HELLO/STATUS packets and scheduling jitter so the UART never backs up.
@@ -23,21 +28,36 @@ class RateLimiter:
     long-run rate at or below ``max_fps``. Time is the frames' capture
     timestamps, so decimation is deterministic and testable. ``max_fps=None``
     admits everything.
+
+    A capture clock that steps back by more than a second (a new session) starts
+    the schedule again; a smaller step back holds frames (decimated) until the
+    clock is past the last admitted frame again, so it never admits a burst.
+
+    :raises ValueError: ``max_fps`` not a finite number >= :data:`MIN_MAX_FPS`.
     """
 
     def __init__(self, max_fps: Optional[float]) -> None:
+        if max_fps is not None and not (math.isfinite(max_fps) and max_fps >= MIN_MAX_FPS):
+            # 0 divided by zero; a negative or NaN rate admitted every frame
+            raise ValueError(f"max_fps={max_fps!r}: must be a finite number >= {MIN_MAX_FPS:.6g} (a frame an hour)")
         self.max_fps = max_fps
         self._interval_us = None if max_fps is None else 1e6 / max_fps
         self._tat: Optional[float] = None  # theoretical arrival time of the next frame
+        self._last_us: Optional[int] = None  # capture time of the last frame admitted
 
     def admit(self, t_us: int) -> bool:
         if self._interval_us is None:
             return True
-        if self._tat is None or t_us < self._tat - self._interval_us - 1e6:
+        # A step back is measured from the last admitted frame, not from the schedule: that runs up to
+        # half an interval ahead of it, so with an interval over 2 s every frame after an admitted one
+        # looked like a clock a second back, restarted the schedule and went out too (4x the cap at 0.1 fps).
+        if self._tat is None or self._last_us is None or t_us < self._last_us - 1_000_000:
             # First frame, or the capture clock jumped back by more than a second (a new session).
             self._tat = float(t_us) + self._interval_us
+            self._last_us = t_us
             return True
         if t_us < self._tat - self._interval_us / 2:
             return False
         self._tat = max(self._tat, float(t_us)) + self._interval_us
+        self._last_us = t_us
         return True

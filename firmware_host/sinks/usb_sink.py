@@ -1,12 +1,16 @@
 """usb://VID:PID?ep=0x01 - the protocol over a USB bulk OUT endpoint (pyusb).
 
-Query: ``ep`` (bulk OUT endpoint address, required), ``interface`` (default 0),
-``timeout_ms`` (default 100, at most 60000), plus the common options. The libusb backend
-comes from ``libusb_package`` unless a pyusb backend is passed as ``backend=``.
+VID and PID are hexadecimal, 1 to 4 digits each (``0x`` allowed). Query: ``ep`` (bulk OUT endpoint
+address, required), ``interface`` (default 0, at most 255), ``timeout_ms`` (default 100, at most 60000),
+plus the common options. The libusb backend comes from ``libusb_package`` unless a pyusb backend is
+passed as ``backend=``. With several devices of that VID:PID plugged in, the first libusb lists is used
+and a warning names how many matched (the order can change on a replug).
 
-Error handling: a stalled endpoint (EPIPE) has its halt cleared and the frame
-dropped; a timeout drops the frame; a vanished device (ENODEV and anything
-else) is released and searched for again with backoff.
+Error handling: a stalled endpoint (EPIPE) has its halt cleared and the frame written once more (a
+second stall drops it); a timeout or a short write drops the frame, and the next write starts with a
+0x00 so the receiver discards the cut fragment; a vanished device (ENODEV and anything else) is
+released and searched for again with backoff. One frame holds the worker at most ``2 * timeout_ms``
+(the write and its retry); ``send()`` never waits for it.
 
 A kernel driver bound to the interface (cdc_acm on a CDC board) is detached to
 claim it and attached again when the sink lets the device go, so its
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 import errno
 import logging
+import re
 from typing import Any, Optional
 
 import usb.core
@@ -24,7 +29,7 @@ import usb.util
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
-from firmware_host.sinks.url import SinkUrl, int_in, non_negative_int, parse_url
+from firmware_host.sinks.url import SinkUrl, int_in, parse_url
 
 _log = logging.getLogger(__name__)
 
@@ -33,15 +38,25 @@ _log = logging.getLogger(__name__)
 MAX_TIMEOUT_MS = 60_000
 
 
+#: One USB ID: 1 to 4 hex digits, ``0x`` allowed. int(s, 16) alone also took "1_2", "-1" and non-ASCII digits.
+_HEX_ID = re.compile(r"(?:0[xX])?[0-9a-fA-F]{1,4}")
+
+#: Interface numbers are a descriptor byte (bInterfaceNumber).
+MAX_INTERFACE = 255
+
+
 def _vid_pid(url: str, netloc: str) -> tuple[int, int]:
-    try:
-        vid_s, pid_s = netloc.split(":")
-        vid, pid = int(vid_s, 16), int(pid_s, 16)
-    except ValueError as e:
-        raise SinkConfigError(url, "VID:PID", netloc, "expected four hex digits each, e.g. usb://1209:0001") from e
-    if not (0 <= vid <= 0xFFFF and 0 <= pid <= 0xFFFF):
-        raise SinkConfigError(url, "VID:PID", netloc, "IDs are 16-bit")
-    return vid, pid
+    """VID and PID of ``usb://VID:PID``; an error names which of the two is wrong and its text."""
+    if netloc.count(":") != 1:
+        raise SinkConfigError(url, "VID:PID", netloc, "expected two hex IDs, e.g. usb://1209:0001")
+    ids = []
+    for name, text in zip(("VID", "PID"), netloc.split(":")):
+        if not _HEX_ID.fullmatch(text):
+            # a 16-bit ID has at most four hex digits: 10000 is past 0xffff
+            raise SinkConfigError(url, name, text, "expected a 16-bit hex ID, 1 to 4 digits (0000..ffff), "
+                                                   "e.g. usb://1209:0001")
+        ids.append(int(text, 16))
+    return ids[0], ids[1]
 
 
 def _out_endpoint(raw: str) -> int:
@@ -63,15 +78,18 @@ class UsbSink(ProtocolSink):
         self._backend = backend
         self._dev: Optional[usb.core.Device] = None
         self._detached = False  # the sink detached the interface's kernel driver: attach it again on release
+        self._warned_several = False  # "several devices match" is said once per sink, not on every reconnect
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "UsbSink":
         u: SinkUrl = parse_url(url)
         vid, pid = _vid_pid(url, u.netloc)
+        if u.path not in ("", "/"):  # usb://1209:0001/2 was taken as 1209:0001, the rest ignored
+            raise SinkConfigError(url, "path", u.path, "a usb:// URL has no path: usb://VID:PID?ep=0x01")
         if "ep" not in u.query and kw.get("ep") is None:
             raise SinkConfigError(url, "ep", None, "the bulk OUT endpoint is required, e.g. ?ep=0x01")
         ep = u.take("ep", _out_endpoint, 0, kw)
-        interface = u.take("interface", non_negative_int, 0, kw)
+        interface = u.take("interface", int_in(0, MAX_INTERFACE, "a descriptor byte"), 0, kw)
         timeout_ms = u.take("timeout_ms", int_in(1, MAX_TIMEOUT_MS, "milliseconds"), 100, kw)
         backend = kw.pop("backend", None)
         options = SinkOptions.take(u, kw)
@@ -91,11 +109,18 @@ class UsbSink(ProtocolSink):
     def _connect(self) -> None:
         backend = self._get_backend()
         try:
-            dev = usb.core.find(idVendor=self.vid, idProduct=self.pid, backend=backend)
+            found = list(usb.core.find(find_all=True, idVendor=self.vid, idProduct=self.pid, backend=backend))
         except usb.core.USBError as e:
             raise SinkUnavailableError(self.url, f"enumeration failed: {e}") from e
-        if dev is None:
+        if not found:
             raise SinkUnavailableError(self.url, f"no device {self.vid:04x}:{self.pid:04x}")
+        dev = found[0]
+        if len(found) > 1 and not self._warned_several:
+            # which one is first is libusb's order and may change on a replug: frames could go to the other board
+            self._warned_several = True
+            _log.warning("%s: %d devices %04x:%04x found (%s); using the first, bus %s address %s",
+                         self.url, len(found), self.vid, self.pid,
+                         ", ".join(f"bus {d.bus} address {d.address}" for d in found), dev.bus, dev.address)
         try:
             self._configure(dev)
         except (usb.core.USBError, ValueError) as e:
@@ -150,6 +175,23 @@ class UsbSink(ProtocolSink):
     def _write_bytes(self, data: bytes) -> None:
         if self._dev is None:
             raise SinkUnavailableError(self.url, "device not open")
+        if not self._bulk_write(data):
+            return
+        # A stall the device raised once (a full buffer, a transient error) need not cost the frame: clear
+        # the halt and write it once more, after a 0x00 that ends whatever part the stalled transfer left.
+        self._clear_stall()
+        if self._bulk_write(data if data.startswith(b"\x00") else b"\x00" + data):
+            self._clear_stall()
+            raise SinkWriteError(self.url, f"endpoint 0x{self.ep:02x} stalled again after its halt was cleared; "
+                                           "halt cleared, frame dropped")
+
+    def _bulk_write(self, data: bytes) -> bool:
+        """One bulk transfer of ``data``; True when the endpoint stalled (the caller clears it).
+
+        :raises SinkWriteError: timeout or short write (the next write resyncs the receiver).
+        :raises SinkUnavailableError: any other USB error (the device is gone).
+        """
+        assert self._dev is not None
         try:
             n = self._dev.write(self.ep, data, timeout=self.timeout_ms)
         except usb.core.USBTimeoutError as e:
@@ -157,12 +199,12 @@ class UsbSink(ProtocolSink):
             raise SinkWriteError(self.url, f"bulk write timed out after {self.timeout_ms} ms") from e
         except usb.core.USBError as e:
             if e.errno == errno.EPIPE:
-                self._clear_stall()
-                raise SinkWriteError(self.url, f"endpoint 0x{self.ep:02x} stalled; halt cleared") from e
+                return True
             raise SinkUnavailableError(self.url, f"bulk write failed: {e}") from e
         if n != len(data):
             self._resync = True
             raise SinkWriteError(self.url, f"short bulk write: {n} of {len(data)} bytes")
+        return False
 
     def _clear_stall(self) -> None:
         assert self._dev is not None

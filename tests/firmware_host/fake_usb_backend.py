@@ -1,4 +1,4 @@
-"""A pyusb backend (usb.backend.IBackend) with one simulated vendor-class device.
+"""A pyusb backend (usb.backend.IBackend) with simulated vendor-class devices (one, or more of one VID:PID).
 
 It lets ``usb.core.find(backend=...)``, ``Device.set_configuration``,
 ``usb.util.claim_interface``, ``Device.write`` and ``Device.clear_halt`` run
@@ -7,19 +7,23 @@ interface holding a bulk OUT endpoint (0x01) and a bulk IN endpoint (0x81).
 
 Modelled: descriptors for enumeration; configuration state; bulk OUT writes
 (bytes are appended to ``device.received``); a stalled endpoint (writes raise
-USBError with errno EPIPE until ``clear_halt``); a write that times out part
-way (``time_out_after``: that many bytes arrive, then USBTimeoutError, as
-libusb reports a bulk transfer whose later packets the device never took);
-disappearance (the device leaves enumeration and every call on an open handle
-raises USBError with errno ENODEV, also after it comes back: a replugged
-device needs a new handle); a kernel driver bound to the interface
+USBError with errno EPIPE until ``clear_halt``; ``stall_next`` stalls that many
+of the coming writes, each until its ``clear_halt``); a write that returns
+fewer bytes than asked (``short_write``: the next write takes that many); a
+write that times out part way (``time_out_after``: that many bytes arrive, then
+USBTimeoutError, as libusb reports a bulk transfer whose later packets the
+device never took); disappearance (the device leaves enumeration and every call
+on an open handle raises USBError with errno ENODEV, also after it comes back:
+a replugged device needs a new handle); a kernel driver bound to the interface
 (``kernel_driver``, as cdc_acm holds a CDC board's /dev/ttyACM*): claiming
 fails with EBUSY until it is detached, and ``attach_kernel_driver`` binds it
-again.
+again; an interface another program holds (``held_elsewhere``: EBUSY); several
+devices of one VID:PID (``FakeBackend(first, second)``, listed in that order,
+told apart by ``address``).
 
 Not modelled: control transfers and string descriptors, IN/interrupt/iso
 transfers, timing, packet sizes, alternate settings, hubs and parents, more
-than one device or configuration.
+than one configuration.
 """
 from __future__ import annotations
 
@@ -46,7 +50,11 @@ class FakeDevice:
     writes: int = 0
     halts_cleared: int = 0
     time_out_after: Optional[int] = None  # the next write delivers this many bytes, then times out
+    stall_next: int = 0  # this many of the coming writes stall the endpoint (each needs a clear_halt)
+    short_write: Optional[int] = None  # the next write takes this many bytes and returns that count
+    address: int = 5
     kernel_driver: bool = False  # a kernel driver is bound to interface 0
+    held_elsewhere: bool = False  # another program claimed interface 0: claiming fails with EBUSY
     detaches: int = 0
     attaches: int = 0
     lock: threading.Lock = field(default_factory=threading.Lock)
@@ -74,15 +82,15 @@ _ENODEV = usb.core.USBError("No such device (it may have been disconnected)", er
 
 
 class FakeBackend(usb.backend.IBackend):
-    def __init__(self, device: FakeDevice) -> None:
+    def __init__(self, device: FakeDevice, *more: FakeDevice) -> None:
         super().__init__()
         self.device = device
+        self.devices = (device, *more)
 
     # ---- enumeration and descriptors ----
 
     def enumerate_devices(self):
-        if self.device.present:
-            yield self.device
+        yield from (d for d in self.devices if d.present)
 
     def get_parent(self, dev):
         return None
@@ -91,7 +99,7 @@ class FakeBackend(usb.backend.IBackend):
         return SimpleNamespace(
             bLength=18, bDescriptorType=1, bcdUSB=0x0200, bDeviceClass=0xFF, bDeviceSubClass=0,
             bDeviceProtocol=0, bMaxPacketSize0=64, idVendor=dev.vid, idProduct=dev.pid, bcdDevice=0x0100,
-            iManufacturer=0, iProduct=0, iSerialNumber=0, bNumConfigurations=1, address=5, bus=1,
+            iManufacturer=0, iProduct=0, iSerialNumber=0, bNumConfigurations=1, address=dev.address, bus=1,
             port_number=1, port_numbers=(1,), speed=2,
         )
 
@@ -144,7 +152,7 @@ class FakeBackend(usb.backend.IBackend):
 
     def claim_interface(self, dev_handle, intf):
         dev = self._check(dev_handle)
-        if dev.kernel_driver:
+        if dev.kernel_driver or dev.held_elsewhere:
             raise usb.core.USBError("Resource busy", error_code=-6, errno=errno.EBUSY)
         dev.claimed.add(intf)
 
@@ -176,8 +184,15 @@ class FakeBackend(usb.backend.IBackend):
             raise usb.core.USBError("invalid endpoint", error_code=-2, errno=errno.EINVAL)
         with dev.lock:
             dev.writes += 1
+            if dev.stall_next > 0:
+                dev.stall_next -= 1
+                dev.stalled = True
             if dev.stalled:
                 raise usb.core.USBError("Pipe error", error_code=-9, errno=errno.EPIPE)
+            if dev.short_write is not None:
+                n, dev.short_write = dev.short_write, None
+                dev.received += bytes(data[:n])
+                return n
             if dev.time_out_after is not None:
                 dev.received += bytes(data[: dev.time_out_after])
                 dev.time_out_after = None

@@ -304,3 +304,51 @@ def test_a_link_that_opens_but_fails_its_first_write_warns_once_and_stays_down(
         wait_until(lambda: "connected again" in sink_records(caplog, logging.INFO)[-1].getMessage(),
                    what="'connected again' logged")
     assert sink.close().state == "closed"
+
+
+@pytest.mark.parametrize("max_fps", [0.0, -1.0, float("nan"), float("inf"), 1e-320, 1e-6])
+def test_rate_limiter_refuses_a_cap_it_cannot_keep(max_fps: float) -> None:
+    # 0 divided by zero; -1 and NaN admitted every frame; 1e-320's interval overflowed to inf and then
+    # admitted every frame too (inf - inf is NaN, and every comparison with it is false)
+    with pytest.raises(ValueError, match="max_fps"):
+        RateLimiter(max_fps)
+
+
+@pytest.mark.parametrize("max_fps", [1 / 3600, 0.1, 0.4, 1.0])
+def test_rate_limiter_keeps_a_slow_cap(max_fps: float) -> None:
+    # below 0.5 fps (an interval over 2 s) every frame right after an admitted one was taken for a clock
+    # a second back, restarted the schedule and went out: 23 frames in a minute at max_fps=0.1
+    lim = RateLimiter(max_fps)
+    interval_us = round(1e6 / max_fps)
+    span_us = 10 * interval_us
+    step = max(100_000, interval_us // 600)  # a frame every 0.1 s, or 600 per interval
+    admitted = [t for t in range(0, span_us, step) if lim.admit(t)]
+    assert 10 <= len(admitted) <= 11  # the cap over the span, plus the limiter's one frame of tolerance
+    assert min(b - a for a, b in zip(admitted, admitted[1:])) >= interval_us // 2
+
+
+def test_rate_limiter_after_the_clock_steps_back() -> None:
+    lim = RateLimiter(10)
+    assert [lim.admit(t) for t in (0, 100_000, 200_000)] == [True] * 3
+    # half a second back: held (no burst) until half an interval past the last admitted frame, then paced
+    assert [lim.admit(t) for t in (-300_000, 100_000, 250_000, 300_000, 350_000)] == [False, False, True, False, True]
+    # more than a second back: a new session, admitted at once and paced from there
+    assert [lim.admit(t) for t in (-5_000_000, -4_990_000, -4_900_000)] == [True, False, True]
+
+
+@pytest.mark.parametrize("url", ["memory://?max_fps=1e-320", "memory://?max_fps=0.0001"])
+def test_a_max_fps_below_a_frame_an_hour_is_refused_by_name(url: str) -> None:
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks import open_sink
+
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url)
+    assert info.value.field == "max_fps" and "a frame an hour" in str(info.value)
+
+
+@pytest.mark.parametrize("policy", [dict(max_s=float("inf")), dict(initial_s=1e12, max_s=1e12),
+                                    dict(factor=float("inf")), dict(factor=float("nan"))])
+def test_a_backoff_the_worker_cannot_wait_is_refused(policy: dict) -> None:
+    # Event.wait(1e12) raises OverflowError: the worker died after the first failed connect
+    with pytest.raises(ValueError, match="backoff policy"):
+        BackoffPolicy(**policy)

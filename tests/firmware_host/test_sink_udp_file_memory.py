@@ -494,3 +494,43 @@ def test_udp_frame_out_but_status_refused_counts_as_delivered(monkeypatch: pytes
     with pytest.raises(SinkWriteError):
         sink._write_messages([sink._hello(1), sink._status(1)[0]])
     assert encode(sink._hello(1)) not in sent[3:]
+
+
+_RECORD_UNTIL_KILLED = """
+import sys
+from firmware_host.sinks import open_sink
+from tests.firmware_host.joint_stream_helpers import make_frame
+sink = open_sink("file://" + sys.argv[1] + "?queue=64&status_s=0.01")
+assert sink.wait_connected(5)
+seq = 0
+while True:
+    sink.send(make_frame(seq))
+    seq += 1
+    if seq == 200:
+        print("recording", flush=True)
+"""
+
+
+def test_a_recording_stopped_by_sigterm_is_whole_lines_to_its_last_frame(tmp_path: Path) -> None:
+    # docs/protocol.md: one write per frame, flushed at once, so a killed daemon leaves no cut line
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    path = tmp_path / "joints.jsonl"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    proc = subprocess.Popen([sys.executable, "-c", _RECORD_UNTIL_KILLED, str(path)], stdout=subprocess.PIPE,
+                            env=env, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline() == "recording\n"
+        wait_until(lambda: path.stat().st_size > 100_000, what="a recording under way")
+        proc.send_signal(signal.SIGTERM)  # no handler: killed wherever its writer thread was
+        assert proc.wait(10) == -signal.SIGTERM
+    finally:
+        proc.kill()
+    data = path.read_bytes()
+    assert data.endswith(b"\n")
+    messages = [json.loads(line) for line in data.splitlines()]
+    seqs = [m["seq"] for m in messages if m["type"] == "JOINTS"]
+    assert len(seqs) > 50 and seqs == sorted(set(seqs))

@@ -35,24 +35,116 @@ def test_frames_reach_the_bulk_endpoint() -> None:
     assert stats.sent == 10 and stats.dropped == 0
 
 
-def test_stalled_endpoint_is_cleared_and_the_frame_counted() -> None:
+def test_a_stalled_endpoint_is_cleared_and_the_frame_written_again() -> None:
+    # the frame that met a stall was dropped although the halt was cleared and the endpoint took the next one
     device = FakeDevice()
     sink = open_sink(URL, backend=FakeBackend(device), backoff=FAST_BACKOFF)
     assert sink.wait_connected(5)
     sink.send(make_frame(0))
     assert sink.wait_drained(5)
     device.stalled = True
-    sink.send(make_frame(1))  # hits the stall
+    sink.send(make_frame(1))  # hits the stall, then goes out once the halt is cleared
     assert sink.wait_drained(5)
     sink.send(make_frame(2))
     assert sink.wait_drained(5)
     stats = sink.close()
     assert device.halts_cleared == 1 and not device.stalled
+    assert stats.dropped_error == 0 and stats.disconnects == 0 and stats.sent == 3
+    events, decoded = decode_stream(device.take())
+    joints = [e.message for e in events if isinstance(e.message, Joints)]
+    assert [m.header.seq for m in joints] == [0, 1, 2] and sum(decoded.errors.values()) == 0
+    assert not any(m.header.flags & Flags.DROPPED for m in joints)
+
+
+def test_an_endpoint_that_stalls_again_costs_one_frame_and_no_more_tries() -> None:
+    device = FakeDevice()
+    sink = open_sink(URL, backend=FakeBackend(device), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    writes = device.writes
+    device.stall_next = 2  # the write and its one retry both stall
+    sink.send(make_frame(1))
+    assert sink.wait_drained(5)
+    sink.send(make_frame(2))
+    assert sink.wait_drained(5)
+    stats = sink.close()
+    assert device.writes - writes == 3 and device.halts_cleared == 2 and not device.stalled
     assert stats.dropped_error == 1 and stats.disconnects == 0 and stats.sent == 2
-    assert "stalled" in (stats.last_error or "")
+    assert "stalled again" in (stats.last_error or "")
     joints = [m for m in messages_of(device.take()) if isinstance(m, Joints)]
     assert [m.header.seq for m in joints] == [0, 2]
     assert joints[1].header.flags & Flags.DROPPED
+
+
+def test_a_short_bulk_write_drops_the_frame_and_the_receiver_resyncs() -> None:
+    # a half frame must not run into the next frame's bytes: the next write starts with a delimiter
+    device = FakeDevice()
+    sink = open_sink(URL, backend=FakeBackend(device), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    device.short_write = 50
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.send(make_frame(1))
+    assert sink.wait_drained(5)
+    stats = sink.close()
+    assert stats.dropped_error == 1 and "short bulk write: 50 of" in (stats.last_error or "")
+    events, decoded = decode_stream(device.take())
+    joints = [e.message for e in events if isinstance(e.message, Joints)]
+    assert [m.header.seq for m in joints] == [1] and joints[0].header.flags & Flags.DROPPED
+    assert sum(decoded.errors.values()) == 1
+
+
+def test_with_two_matching_devices_the_first_is_used_and_a_warning_says_so(
+        caplog: pytest.LogCaptureFixture) -> None:
+    first, second = FakeDevice(address=7), FakeDevice(address=9)
+    with caplog.at_level(logging.WARNING, logger="firmware_host.sinks"):
+        sink = open_sink(URL, backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        first.unplug()  # reconnects: to the second now, and the warning is not repeated
+        sink.send(make_frame(1))
+        wait_until(lambda: sink.stats().connects == 2, what="reconnected")
+        first.plug()
+        sink.send(make_frame(2))
+        assert sink.wait_drained(5)
+        sink.close()
+    warnings = [r.getMessage() for r in caplog.records if "devices 1209:0001 found" in r.getMessage()]
+    assert len(warnings) == 1
+    assert "2 devices" in warnings[0] and "using the first, bus 1 address 7" in warnings[0]
+    assert joints_seqs(messages_of(first.take())) == [0]
+    assert joints_seqs(messages_of(second.take())) == [2]
+
+
+@pytest.mark.parametrize(("url", "field", "value"), [
+    ("usb://10000:0001?ep=0x01", "VID", "10000"),  # 0x10000 is past 16 bits
+    ("usb://1209:10000?ep=0x01", "PID", "10000"),
+    ("usb://12g9:0001?ep=0x01", "VID", "12g9"),
+    ("usb://1_2:0001?ep=0x01", "VID", "1_2"),  # int(s, 16) took it as 0x12
+    ("usb://-1:0001?ep=0x01", "VID", "-1"),
+    ("usb://1209:?ep=0x01", "PID", ""),
+    ("usb://1209?ep=0x01", "VID:PID", "1209"),
+    ("usb://?ep=0x01", "VID:PID", ""),
+    ("usb://1209:0001/0002?ep=0x01", "path", "/0002"),  # the path was ignored
+    ("usb://1209:0001?ep=0x01&interface=256", "interface", "256"),  # retried forever as "no interface 256"
+])
+def test_a_usb_url_error_names_the_field_and_value(url: str, field: str, value: str) -> None:
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks.usb_sink import UsbSink
+
+    with pytest.raises(SinkConfigError) as info:
+        UsbSink.from_url(url)
+    assert (info.value.field, info.value.value) == (field, value)
+
+
+@pytest.mark.parametrize(("netloc", "ids"), [("1209:0001", (0x1209, 1)), ("0x1209:0XFFFF", (0x1209, 0xFFFF)),
+                                             ("ABCD:ef01", (0xABCD, 0xEF01)), ("0:1", (0, 1))])
+def test_usb_ids_are_hex(netloc: str, ids: tuple[int, int]) -> None:
+    from firmware_host.sinks.usb_sink import UsbSink
+
+    sink = UsbSink.from_url(f"usb://{netloc}/?ep=0x01&interface=255")
+    assert (sink.vid, sink.pid, sink.interface) == (*ids, 255)
 
 
 def test_device_that_disappears_is_found_again() -> None:
@@ -103,6 +195,22 @@ def test_a_device_unlike_its_url_is_warned_about_once_and_retried(
         assert word in (stats.last_error or "")
     warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]
     assert len(warnings) == 1 and "cannot claim" in warnings[0].getMessage()  # no traceback per attempt
+
+
+def test_an_interface_another_program_holds_is_waited_for_with_one_warning(
+        caplog: pytest.LogCaptureFixture) -> None:
+    device = FakeDevice(held_elsewhere=True)
+    with caplog.at_level(logging.WARNING):
+        sink = open_sink(URL, backend=FakeBackend(device), backoff=FAST_BACKOFF)
+        wait_until(lambda: sink.stats().connect_failures >= 3, what="three connect attempts")
+        assert sink.stats().state == "down" and "Resource busy" in (sink.stats().last_error or "")
+        device.held_elsewhere = False  # the other program let go
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        sink.close()
+    assert len([r for r in caplog.records if r.levelno >= logging.WARNING]) == 1
+    assert joints_seqs(messages_of(device.take())) == [0]
 
 
 def test_a_kernel_driver_detached_to_claim_the_board_is_attached_again() -> None:
