@@ -4,22 +4,27 @@
 * ``edge128``: the shipped model, 128x128 on a 2-core CPU through onnxruntime (int8 where it pays).
 * ``edge128_baseline``: ``edge128`` without the human encoder ("ENeRF + heatmap").
 
-Each call returns a fresh config; nothing is global.
+Each call returns a fresh config; nothing is global. Importing this module does not import torch (the
+model's modules load when a preset is built): the command lines list the presets in ``--help`` without it.
 """
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from training.model.cost_volume import CostVolumeConfig
-from training.model.features import FeatureNetConfig
-from training.model.ghnerf import LevelConfig, ModelConfig
-from training.model.heads import HeadsConfig
-from training.model.human_encoder import HumanEncoderConfig
-from training.model.regularizer import RegularizerConfig
+if TYPE_CHECKING:
+    from training.model.ghnerf import ModelConfig
 
 
 def tiny() -> ModelConfig:
+    # the model's modules import torch: loaded here, so the tools' --help (preset choices) runs without it
+    from training.model.cost_volume import CostVolumeConfig  # noqa: PLC0415
+    from training.model.features import FeatureNetConfig  # noqa: PLC0415
+    from training.model.ghnerf import LevelConfig, ModelConfig  # noqa: PLC0415
+    from training.model.heads import HeadsConfig  # noqa: PLC0415
+    from training.model.human_encoder import HumanEncoderConfig  # noqa: PLC0415
+    from training.model.regularizer import RegularizerConfig  # noqa: PLC0415
+
     return ModelConfig(
         height=64, width=64,
         features=FeatureNetConfig(channels=(4, 8, 8)),
@@ -37,6 +42,13 @@ def tiny() -> ModelConfig:
 
 
 def edge128() -> ModelConfig:
+    from training.model.cost_volume import CostVolumeConfig  # noqa: PLC0415
+    from training.model.features import FeatureNetConfig  # noqa: PLC0415
+    from training.model.ghnerf import LevelConfig, ModelConfig  # noqa: PLC0415
+    from training.model.heads import HeadsConfig  # noqa: PLC0415
+    from training.model.human_encoder import HumanEncoderConfig  # noqa: PLC0415
+    from training.model.regularizer import RegularizerConfig  # noqa: PLC0415
+
     return ModelConfig(
         height=128, width=128,
         features=FeatureNetConfig(channels=(8, 16, 16), full_res_convs=1, full_res_smooth=False, norm="scene"),

@@ -15,7 +15,11 @@ the human encoder is pretrained on batches that mix scenes, and the 3D ones meas
 """
 from __future__ import annotations
 
-import argparse
+if __name__ == "__main__":  # python -m: the arguments are parsed before torch loads (training.cli)
+    from training.cli.convert_norm import main as _cli_main
+
+    raise SystemExit(_cli_main())
+
 import sys
 from pathlib import Path
 
@@ -51,9 +55,9 @@ def to_scene_norm(checkpoint: dict) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("src", help="a .pt checkpoint trained with features.norm = 'batch'")
-    ap.add_argument("dst", help="where to write the converted checkpoint")
+    from training.cli.convert_norm import build_parser  # noqa: PLC0415
+
+    ap = build_parser()
     args = ap.parse_args(argv)
     src, dst = Path(args.src), Path(args.dst)
     if src.resolve() == dst.resolve():
@@ -70,6 +74,3 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{src} -> {dst}: image feature network normalised by scene statistics")
     return 0
 
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -55,7 +55,11 @@ PSNR/SSIM/heatmap MSE: mean over views).
 """
 from __future__ import annotations
 
-import argparse
+if __name__ == "__main__":  # python -m: the arguments are parsed before torch loads (training.cli)
+    from training.cli.evaluate import main as _cli_main
+
+    raise SystemExit(_cli_main())
+
 import json
 import sys
 import time
@@ -706,17 +710,9 @@ def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="ghnerf-eval", description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    ap.add_argument("--data", default="data/edge128")
-    ap.add_argument("--split", default="val", help="held-out split (default val: unseen bodies, motions, rigs)")
-    ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC",
-                    help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable, each "
-                         "LABEL its own (without LABEL=, the file's or folder's name)")
-    ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
-    ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
-    ap.add_argument("--threads", type=int, default=2, help="torch and onnxruntime threads (at least 1)")
-    ap.add_argument("--out", help="write the JSON here (also printed)")
+    from training.cli.evaluate import build_parser  # noqa: PLC0415
+
+    ap = build_parser()
     args = ap.parse_args(argv)
     if args.limit < 0:
         ap.error(f"--limit: must be >= 0 (0: every scene), got {args.limit}")
@@ -753,6 +749,3 @@ def main(argv: list[str] | None = None) -> int:
     print(json.dumps(finite_or_none(results), indent=1))
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

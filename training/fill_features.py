@@ -34,13 +34,20 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
 * ``angle`` float32: the view's angle from the nearest source camera (``ghnerf-eval``'s bins);
 * ``scene``, ``view`` int32: where it came from; ``geometry``: ``truth``, ``model`` or ``proxy``.
 
+Beside the views, ``source`` (a JSON string) records where the cache came from: ``split``, ``dataset_sha256``
+(of the dataset's ``dataset.json``), ``geometry``, ``model_sha256`` (the checkpoint's, '' with the true
+geometry) and ``relight``. :func:`check_held_out` reads it (:func:`cache_source`) to refuse a validation cache
+that is the training cache, of the training split or of the same split, or made from another dataset or
+model: its held-out figures would be wrong without a word.
+
 Cached as one uncompressed ``.npz`` per split (about 250 KB per view at 128x128), written whole (a temporary
 file, then a rename: a stop mid-write leaves the previous cache); :func:`load_cache` names a cut or damaged
-one.
+one (:class:`FillCacheError`).
 """
 from __future__ import annotations
 
 import io
+import json
 import multiprocessing as mp
 import time
 import zipfile
@@ -50,12 +57,20 @@ from pathlib import Path
 import numpy as np
 
 from training.blend_ceiling import blend_sources, project
-from training.model_card import write_atomic
+from training.model_card import sha256, write_atomic
 from training.unseen_fill import PART_BINS, Lighting, fit_lighting, relit_fill, seen_surface, surface_normals
 
 FIELDS = ("blend", "relit", "shown", "truth", "flags", "normals", "depth", "joints", "light", "angle", "scene",
           "view", "geometry")
 MASK_BIT, SEEN_BIT, TRUTH_BIT = 1, 2, 4
+#: The cache's record of where it came from (module docstring); not a per-view field.
+SOURCE_KEY = "source"
+#: What a training and a validation cache must share: the held-out scores compare like with like.
+SHARED_SOURCE = ("dataset_sha256", "geometry", "model_sha256")
+
+
+class FillCacheError(ValueError):
+    """A fill-feature cache that is missing, damaged, or the wrong one for its use; the message names the file."""
 
 
 def _to_u8(rgb: np.ndarray) -> np.ndarray:
@@ -226,12 +241,19 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
 
     if joints is not None and model is None:
         raise ValueError("a joints cache takes a model too (its picture is the one repainted)")
-    if joints is not None:  # here, not in the workers' initializer (a pool respawns a worker that fails there)
-        from training.device_joints import check_source  # noqa: PLC0415
-
-        check_source(joints, data, split)
     n = len(MultiViewDataset(data, split=split))
     n = min(limit, n) if limit else n
+    if joints is not None:  # here, not in the workers' initializer (a pool respawns a worker that fails there,
+        # for ever: a cache of the right split without its joints or expected errors hung the command)
+        from training.device_joints import check_source, load_found, load_joints  # noqa: PLC0415
+
+        check_source(joints, data, split)
+        load_joints(joints, n)  # covering every scene asked for: a short cache is named now, not in a worker
+        load_found(joints, n)
+    if model is not None and workers > 1:  # the same: a checkpoint the initializer failed to load hung the pool
+        from training.train import load_model  # noqa: PLC0415
+
+        load_model(Path(model))  # a ConfigError naming the file
     t0, views = time.monotonic(), []
     if workers > 1:
         init = (str(data), split, bins, model and str(model), joints and str(joints), relight)
@@ -248,8 +270,11 @@ def cache_split(data: str | Path, split: str, out: str | Path, limit: int = 0, w
     out.parent.mkdir(parents=True, exist_ok=True)
     # whole or not at all: savez straight into ``out`` left a cut zip after a stop mid-write, which a rerun's
     # training then failed to open (and the previous cache was gone); written to that very name, .npz or not
+    source = {"split": split, "dataset_sha256": sha256(Path(data) / "dataset.json"),
+              "geometry": "truth" if model is None else "model" if joints is None else "proxy",
+              "model_sha256": "" if model is None else sha256(model), "relight": bool(relight)}
     buf = io.BytesIO()
-    np.savez(buf, **stack(views))
+    np.savez(buf, **stack(views), **{SOURCE_KEY: np.str_(json.dumps(source))})
     write_atomic(out, buf.getvalue())
     log(f"{out}: {len(views)} views of {n} {split} scenes in {time.monotonic() - t0:.0f} s")
     return out
@@ -261,22 +286,59 @@ def relit_in(arrays: Mapping[str, np.ndarray]) -> bool:
 
 
 def load_cache(path: str | Path) -> dict[str, np.ndarray]:
-    """A cache written by :func:`cache_split`, checked for every field."""
+    """A cache written by :func:`cache_split`, checked for every field: the per-view arrays (not its
+    ``source`` record: :func:`cache_source`)."""
     path = Path(path)
     try:
         with np.load(path) as z:
-            arrays = {k: z[k] for k in z.files}
+            arrays = {k: z[k] for k in z.files if k != SOURCE_KEY}
     # a cut or damaged zip is BadZipFile (an empty file EOFError), neither an OSError nor a ValueError
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise ValueError(f"{path}: not a fill-feature cache, or a damaged one: make it again ({e})") from e
+        raise FillCacheError(f"{path}: not a fill-feature cache, or a damaged one: make it again ({e})") from e
     missing = [k for k in FIELDS if k not in arrays]
     if missing:
-        raise ValueError(f"{path}: fill-feature cache lacks {', '.join(missing)}")
+        raise FillCacheError(f"{path}: fill-feature cache lacks {', '.join(missing)}")
     n = {k: len(arrays[k]) for k in FIELDS}
     if len(set(n.values())) != 1:
-        raise ValueError(f"{path}: fill-feature fields disagree on the number of views: {n}")
+        raise FillCacheError(f"{path}: fill-feature fields disagree on the number of views: {n}")
     return arrays
 
 
-__all__ = ["FIELDS", "MASK_BIT", "SEEN_BIT", "TRUTH_BIT", "render_views", "modelled_scene", "view_features",
-           "scene_features", "stack", "cache_split", "load_cache", "relit_in"]
+def cache_source(path: str | Path) -> dict | None:
+    """Where the cache at ``path`` came from (module docstring), or None for a cache made before the record."""
+    path = Path(path)
+    try:
+        with np.load(path) as z:
+            if SOURCE_KEY not in z.files:
+                return None
+            return json.loads(str(z[SOURCE_KEY]))
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:  # json's errors are ValueErrors too
+        raise FillCacheError(f"{path}: not a fill-feature cache, or a damaged one: make it again ({e})") from e
+
+
+def check_held_out(train: str | Path, val: str | Path) -> None:
+    """Refuse a validation cache ``val`` that does not hold out ``train``'s views: the same file, the same split,
+    the training split, or made from another dataset, geometry or model (the scores would compare another
+    thing). Caches made before the ``source`` record are checked for being the same file only."""
+    train, val = Path(train), Path(val)
+    if train.resolve() == val.resolve():
+        raise FillCacheError(f"--train-cache and --val-cache are the same file ({train}): the held-out figures "
+                             "would be those of the training views")
+    t, v = cache_source(train), cache_source(val)
+    if t is None or v is None:
+        return
+    if t["split"] == v["split"]:
+        raise FillCacheError(f"--train-cache {train} and --val-cache {val} both hold split {t['split']!r}: "
+                             "validate on a held-out split (cache --split val)")
+    if v["split"] == "train":
+        raise FillCacheError(f"--val-cache {val} holds the training split 'train' (and --train-cache {train} "
+                             f"split {t['split']!r}): the two caches are swapped")
+    for key in SHARED_SOURCE:
+        if t.get(key) != v.get(key):
+            raise FillCacheError(f"--train-cache {train} and --val-cache {val} differ in {key} ({t.get(key)!r} vs "
+                                 f"{v.get(key)!r}): make both from the same dataset, geometry and model")
+
+
+__all__ = ["FIELDS", "MASK_BIT", "SEEN_BIT", "TRUTH_BIT", "SOURCE_KEY", "FillCacheError", "render_views",
+           "modelled_scene", "view_features", "scene_features", "stack", "cache_split", "load_cache", "cache_source",
+           "check_held_out", "relit_in"]

@@ -37,7 +37,11 @@ print the whole view as the runtime shows it beside the masked columns (``shown:
 """
 from __future__ import annotations
 
-import argparse
+if __name__ == "__main__":  # python -m: the arguments are parsed before torch loads (training.cli)
+    from training.cli.learnt_fill import main as _cli_main
+
+    raise SystemExit(_cli_main())
+
 import json
 import math
 import pickle
@@ -58,7 +62,8 @@ from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.config import NovelViewConfig
 from ghnerf_runtime.metrics import masked_psnr
 from training.evaluate import SOURCE_ANGLE_BINS_DEG
-from training.fill_features import MASK_BIT, SEEN_BIT, TRUTH_BIT, load_cache, relit_in
+from training.fill_features import (MASK_BIT, SEEN_BIT, TRUTH_BIT, FillCacheError, check_held_out, load_cache,
+                                    relit_in)
 
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
 #: with ``FillNetConfig.shown_input``, the model's picture 3 more.
@@ -515,8 +520,37 @@ def _parse_sets(cfg: FillTrainConfig, sets: list[str]) -> FillTrainConfig:
         if not sep or name not in target:
             raise ValueError(f"--set {s}: expected key=value with key one of {sorted(top)} or net.{sorted(net)}")
         kind = type(target[name])
-        target[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
-    return replace(FillTrainConfig(**top), net=FillNetConfig(**net))
+        try:
+            target[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+        except ValueError:
+            raise ValueError(f"--set {s}: {key} takes a {kind.__name__}, got {value!r}") from None
+    cfg = replace(FillTrainConfig(**top), net=FillNetConfig(**net))
+    if problem := _config_problem(cfg):
+        raise ValueError(f"--set {problem}")
+    return cfg
+
+
+def _config_problem(cfg: FillTrainConfig) -> str | None:
+    """What is wrong with ``cfg`` (``key: why, got value``), or None: values that trained nothing (lr 0),
+    divided by zero (log_every 0) or failed inside torch (a width GroupNorm's 8 groups do not divide)."""
+    checks = (
+        ("steps", cfg.steps >= 1, "must be at least 1"), ("batch", cfg.batch >= 1, "must be at least 1"),
+        ("lr", cfg.lr > 0 and math.isfinite(cfg.lr), "must be a positive number"),
+        ("weight_decay", cfg.weight_decay >= 0 and math.isfinite(cfg.weight_decay), "must be a finite number >= 0"),
+        ("log_every", cfg.log_every >= 1, "must be at least 1"),
+        ("max_seconds", cfg.max_seconds >= 0 and math.isfinite(cfg.max_seconds),
+         "must be a finite number >= 0 (0: none)"),
+        ("around_weight", cfg.around_weight >= 0 and math.isfinite(cfg.around_weight), "must be a finite number >= 0"),
+        ("net.width", cfg.net.width >= 8 and cfg.net.width % 8 == 0, "must be a multiple of 8 (GroupNorm's groups)"),
+        ("net.levels", cfg.net.levels >= 1, "must be at least 1"),
+        ("net.joint_sigma_px", cfg.net.joint_sigma_px > 0 and math.isfinite(cfg.net.joint_sigma_px),
+         "must be a positive number"),
+    )
+    for key, ok, why in checks:
+        if not ok:
+            value = getattr(cfg.net, key[4:]) if key.startswith("net.") else getattr(cfg, key)
+            return f"{key}: {why}, got {value}"
+    return None
 
 
 def _export_cli(args) -> int:
@@ -585,49 +619,43 @@ def painter_parity(net: FillNet, path: Path, arrays: dict[str, np.ndarray], view
             "psnr_db": float(10 * np.log10(1.0 / max(mse, 1e-20)))}
 
 
+def _cache_cli(args) -> int:
+    """``cache``: a joints cache, dataset or checkpoint that is missing or wrong is one line naming it, exit 2."""
+    from training.data.errors import DataError  # noqa: PLC0415
+    from training.device_joints import JointsCacheError  # noqa: PLC0415
+    from training.fill_features import cache_split  # noqa: PLC0415
+    from training.model.config import ConfigError  # noqa: PLC0415
+
+    try:
+        cache_split(args.data, args.split, args.out, args.limit, args.workers, model=args.model, joints=args.joints,
+                    relight=not args.no_relit)
+    except (JointsCacheError, DataError, ConfigError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _held_out_pair(train_path: Path, val_path: Path,
+                   cfg: FillTrainConfig) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The training and validation caches, checked to be a held-out pair (``fill_features.check_held_out``) that
+    holds what the net reads; a :class:`FillCacheError` names the file otherwise."""
+    check_held_out(train_path, val_path)
+    train, val = load_cache(train_path), load_cache(val_path)
+    if cfg.net.relit_input:  # a cache without the light fit: the net would read the picture as the relit fill
+        for flag, path, arrays in (("--train-cache", train_path, train), ("--val-cache", val_path, val)):
+            if not relit_in(arrays):
+                raise FillCacheError(f"{flag} {path}: made without the light fit (cache --no-relit): it holds no "
+                                     "relit fill; train with --set net.relit_input=false")
+    return train, val
+
+
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    c = sub.add_parser("cache", help="compute a split's fill features (training.fill_features)")
-    c.add_argument("--data", required=True)
-    c.add_argument("--split", default="val")
-    c.add_argument("--limit", type=int, default=0, help="first N scenes (0: all)")
-    c.add_argument("--workers", type=int, default=2)
-    c.add_argument("--model", default=None, metavar="CKPT",
-                   help="a GHNeRF checkpoint whose geometry and picture replace the truth's (default: the truth)")
-    c.add_argument("--joints", default=None, metavar="NPZ",
-                   help="with --model: the device's joints of the split (python -m training.device_joints), whose "
-                        "body proxy (training.body_proxy) is the geometry")
-    c.add_argument("--no-relit", action="store_true",
-                   help="skip the light fit and the relit fill (docs/training.md, \"The painter and the fog\"): what the "
-                        "runtime's painter (net.relit_input=false) reads is unchanged")
-    c.add_argument("--out", required=True, type=Path)
-    t = sub.add_parser("train", help="train the fill net and score it on the held-out cache")
-    t.add_argument("--train-cache", required=True, type=Path)
-    t.add_argument("--val-cache", required=True, type=Path)
-    t.add_argument("--out", required=True, type=Path, help="folder for fill_net.pt and score.md")
-    t.add_argument("--train-views", type=int, default=0, help="train on the cache's first N views (0: all)")
-    t.add_argument("--device", default=None, help="auto (default), cpu or cuda")
-    t.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
-    t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="FillTrainConfig override (steps, batch, lr, ..., net.width, net.levels)")
-    s = sub.add_parser("score", help="score a trained fill net on a held-out cache")
-    s.add_argument("--val-cache", required=True, type=Path)
-    s.add_argument("--net", required=True, type=Path, action="append",
-                   help="a fill_net.pt; given more than once, the nets' mean picture is scored (an ensemble)")
-    s.add_argument("--flip-test", action="store_true",
-                   help="average each net's picture with its picture of the mirrored views")
-    s.add_argument("--device", default="auto")
-    e = sub.add_parser("export", help="the runtime's painter: novel_painter.onnx (and its figures) from a fill net")
-    e.add_argument("--net", required=True, type=Path, help="a fill_net.pt trained with net.relit_input=false, "
-                                                           "net.shown_input=true")
-    e.add_argument("--out", required=True, type=Path, help="the .onnx to write (models/ghnerf/novel_painter.onnx)")
-    e.add_argument("--val-cache", type=Path, default=None, help="check onnxruntime against torch on its first views")
-    e.add_argument("--calib-cache", type=Path, default=None,
-                   help="also write the int8 file (<out stem>.int8.onnx), calibrated on this cache's first views "
-                        "(the training cache)")
-    e.add_argument("--card-dir", type=Path, default=None, help="record the painter in this model card (models/)")
+    from training.cli.learnt_fill import build_parser  # noqa: PLC0415
+
+    ap = build_parser()
     args = ap.parse_args(argv)
+    if args.cmd == "cache" and args.joints and not args.model:  # cache_split's ValueError, a traceback
+        ap.error("--joints: takes --model too (the model's picture is the one repainted)")
     # the cache, the training and the export take minutes to hours: where they go is settled first
     if args.cmd == "train":
         args.out = ready_output_arg(ap, args.out, "--out", kind="folder")
@@ -646,22 +674,29 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd == "export":
         return _export_cli(args)
     if args.cmd == "cache":
-        from training.fill_features import cache_split  # noqa: PLC0415
-
-        cache_split(args.data, args.split, args.out, args.limit, args.workers, model=args.model, joints=args.joints,
-                    relight=not args.no_relit)
-        return 0
+        return _cache_cli(args)
     if args.cmd == "score":
-        nets = [load_net(path, pick_device(args.device)) for path in args.net]
-        val = load_cache(args.val_cache)
+        try:
+            nets = [load_net(path, pick_device(args.device)) for path in args.net]
+            val = load_cache(args.val_cache)
+        except ValueError as e:  # a FillCacheError, or load_net's: the message names the file
+            print(f"error: {e}", file=sys.stderr)
+            return 2
         print(table(score_rows(val, *paintings(nets, val, flip_test=args.flip_test))))
         return 0
+    try:
+        cfg = _parse_sets(FillTrainConfig(), args.set)
+    except ValueError as e:
+        ap.error(str(e))
     if args.threads:
         torch.set_num_threads(args.threads)
-    cfg = _parse_sets(FillTrainConfig(), args.set)
     if args.device:
         cfg = replace(cfg, device=args.device)
-    train, val = load_cache(args.train_cache), load_cache(args.val_cache)
+    try:
+        train, val = _held_out_pair(args.train_cache, args.val_cache, cfg)
+    except FillCacheError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     if args.train_views:
         train = {k: v[:args.train_views] for k, v in train.items()}
     t0 = time.monotonic()
@@ -683,6 +718,3 @@ def main(argv: list[str] | None = None) -> int:
     print(report)
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -24,7 +24,11 @@ Example::
 """
 from __future__ import annotations
 
-import argparse
+if __name__ == "__main__":  # python -m: the arguments are parsed before torch loads (training.cli)
+    from training.cli.pretrain_human import main as _cli_main
+
+    raise SystemExit(_cli_main())
+
 import copy
 import json
 import math
@@ -619,21 +623,9 @@ def score_human(path: str | Path, data: str | Path, split: str = "val", scenes: 
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m training.pretrain_human", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--config", help="JSON file: a PretrainConfig, or a train config with a 'pretrain_human' block")
-    ap.add_argument("--out", help="run folder (required unless --score)")
-    ap.add_argument("--score", metavar="HUMAN_PT", help="only score this human.pt's heatmaps on --split "
-                                                         "(--data, default data/edge128; --scenes, default all)")
-    ap.add_argument("--split", default="val")
-    ap.add_argument("--scenes", type=int, default=0)
-    ap.add_argument("--resume", action="store_true",
-                    help="continue from OUT/last.pt (from OUT/prev.pt when last.pt is missing or damaged); without "
-                         "--resume an OUT holding checkpoints is refused")
-    ap.add_argument("--data")
-    ap.add_argument("--iterations", type=int)
-    ap.add_argument("--threads", type=int)
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    ap.add_argument("--quiet", action="store_true")
+    from training.cli.pretrain_human import build_parser  # noqa: PLC0415
+
+    ap = build_parser()
     args = ap.parse_args(argv)
     if args.score:
         if args.threads:
@@ -670,6 +662,3 @@ def main(argv: list[str] | None = None) -> int:
     print(json.dumps(summary, indent=1))
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -32,6 +32,11 @@ stops it with the previous one intact: each in one line naming the step and term
 """
 from __future__ import annotations
 
+if __name__ == "__main__":  # python -m: the arguments are parsed before torch loads (training.cli)
+    from training.cli.train import main as _cli_main
+
+    raise SystemExit(_cli_main())
+
 import argparse
 import json
 import math
@@ -1093,24 +1098,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
 
 # ------------------------------------------------------------------------------------------------ CLI
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(prog="ghnerf-train", description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--config", help="JSON or TOML train config (training/train_configs/*.json)")
-    p.add_argument("--out", required=True, help="run folder: checkpoints, log.jsonl, config.json")
-    p.add_argument("--resume", action="store_true",
-                   help="continue from OUT/last.pt (without it, the newest OUT/ckpt_*.pt) when it exists; "
-                        "without --resume an OUT holding checkpoints is refused")
-    p.add_argument("--init", help="torchvision resnet18 state dict for the human encoder")
-    p.add_argument("--preset", choices=sorted(PRESETS))
-    p.add_argument("--data")
-    p.add_argument("--iterations", type=int)
-    p.add_argument("--threads", type=int)
-    p.add_argument("--seed", type=int)
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any config key (dotted for nested, JSON value), e.g. --set loss.heat_weight=0.5")
-    p.add_argument("--validate-config", action="store_true", help="check the config and exit")
-    p.add_argument("--quiet", action="store_true")
-    return p.parse_args(argv)
+    from training.cli.train import build_parser  # noqa: PLC0415
+
+    return build_parser().parse_args(argv)
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
@@ -1160,6 +1150,3 @@ def main(argv: list[str] | None = None) -> int:
         dist.destroy_process_group()
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -24,6 +24,12 @@ def truth_cache(data64, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def train_cache(data64, tmp_path_factory):
+    return cache_split(data64, "train", tmp_path_factory.mktemp("fill") / "train.npz", limit=1, workers=1,
+                       log=lambda *_: None)
+
+
+@pytest.fixture(scope="module")
 def model_cache(data64, tmp_path_factory):
     from training.configs import preset
     from training.model import GHNeRF
@@ -279,9 +285,9 @@ def test_a_time_budget_ends_training_early(truth_cache):
     assert 1 <= steps < 10 ** 6 and sum(" step " in ln for ln in lines) == steps
 
 
-def test_the_cli_trains_saves_and_scores_the_same_table(truth_cache, tmp_path, capsys):
+def test_the_cli_trains_saves_and_scores_the_same_table(train_cache, truth_cache, tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(["train", "--train-cache", str(truth_cache), "--val-cache", str(truth_cache), "--out", str(out),
+    assert main(["train", "--train-cache", str(train_cache), "--val-cache", str(truth_cache), "--out", str(out),
                  "--device", "cpu", "--set", "steps=3", "--set", "batch=2", "--set", "net.width=8"]) == 0
     report = (out / "score.md").read_text()
     assert "3 steps of 2" in report and "| novel, all |" in report
@@ -334,3 +340,106 @@ def test_a_cut_or_empty_cache_is_named_and_a_stopped_write_keeps_the_previous_ca
     assert len(calls) == 2 and out.read_bytes() == whole
     assert sorted(load_cache(out)) == sorted(FIELDS) and [p.name for p in tmp_path.iterdir() if "val" in p.name] == \
         ["val.npz"]  # no temporary left beside it
+
+
+# ------------------------------------------------------------------ what the caches record, and the CLI's refusals
+def test_a_cache_records_its_split_dataset_geometry_and_model(truth_cache, model_cache, data64):
+    from training.fill_features import cache_source
+    from training.model_card import sha256
+
+    assert cache_source(truth_cache) == {"split": "val", "dataset_sha256": sha256(data64 / "dataset.json"),
+                                         "geometry": "truth", "model_sha256": "", "relight": True}
+    made = cache_source(model_cache)
+    assert made["geometry"] == "model" and made["model_sha256"] == sha256(Path(model_cache).parent / "tiny.pt")
+    assert "source" not in load_cache(truth_cache)  # the per-view arrays only: they are sliced by view
+
+
+def _train(train, val, out):
+    return main(["train", "--train-cache", str(train), "--val-cache", str(val), "--out", str(out), "--device", "cpu",
+                 "--set", "steps=1", "--set", "batch=2", "--set", "net.width=8"])
+
+
+def test_train_refuses_caches_that_do_not_hold_out_the_training_views(train_cache, truth_cache, model_cache,
+                                                                      tmp_path, capsys):
+    """The same cache twice, swapped caches, two of one split, or caches of another geometry: the held-out table
+    was printed from them without a word."""
+    same_split = tmp_path / "val_again.npz"
+    same_split.write_bytes(Path(truth_cache).read_bytes())
+    cases = (
+        (truth_cache, truth_cache, "are the same file"),
+        (truth_cache, train_cache, "holds the training split 'train'"),  # swapped
+        (truth_cache, same_split, "both hold split 'val'"),
+        (train_cache, model_cache, "differ in geometry ('truth' vs 'model')"),
+    )
+    for train, val, words in cases:
+        assert _train(train, val, tmp_path / "run") == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and words in err and err.count("\n") == 1, err
+        assert not (tmp_path / "run" / "fill_net.pt").exists()  # refused before the training
+
+
+def test_train_refuses_a_cache_without_the_relit_fill_the_net_reads(train_cache, data64, tmp_path, capsys):
+    lightless = cache_split(data64, "val", tmp_path / "val.npz", limit=1, workers=1, relight=False,
+                            log=lambda *_: None)
+    assert _train(train_cache, lightless, tmp_path / "run") == 2  # the net read its picture as the relit fill
+    assert f"--val-cache {lightless}: made without the light fit" in capsys.readouterr().err
+
+
+def test_bad_training_values_are_usage_errors(train_cache, truth_cache, tmp_path, capsys):
+    for sets, words in ((["batch=0"], "batch: must be at least 1, got 0"), (["lr=0"], "lr: must be a positive number"),
+                        (["log_every=0"], "log_every: must be at least 1"), (["net.width=12"], "multiple of 8"),
+                        (["steps=many"], "steps takes a int, got 'many'")):
+        with pytest.raises(ValueError, match=words):
+            _parse_sets(FillTrainConfig(), sets)
+    with pytest.raises(SystemExit) as e:  # was a traceback from _parse_sets (or ZeroDivisionError mid-run)
+        main(["train", "--train-cache", str(train_cache), "--val-cache", str(truth_cache), "--out",
+              str(tmp_path / "run"), "--set", "log_every=0"])
+    assert e.value.code == 2 and "--set log_every: must be at least 1, got 0" in capsys.readouterr().err
+    for argv, words in ((["--workers", "0"], "--workers: must be at least 1, got 0"),
+                        (["--limit", "-1"], "--limit: must be at least 0, got -1"),
+                        (["--joints", "j.npz"], "--joints: takes --model too")):
+        with pytest.raises(SystemExit) as e:
+            main(["cache", "--data", "d", "--out", str(tmp_path / "c.npz"), *argv])
+        assert e.value.code == 2 and words in capsys.readouterr().err
+
+
+def test_the_cache_command_names_a_bad_joints_cache_in_one_line(model_cache, data64, tmp_path, capsys):
+    """A JointsCacheError escaped ``cache`` as a traceback (and a short cache failed in a worker)."""
+    from training.data.torch_dataset import MultiViewDataset
+
+    n = len(MultiViewDataset(data64, split="val"))
+    joints = np.zeros((n - 1, 25, 3), np.float32)  # one scene short
+    (tmp_path / "short.npz").write_bytes(b"")
+    np.savez(tmp_path / "short.npz", joints=joints, expected_error_m=np.zeros((n - 1, 25), np.float32))
+    np.savez(tmp_path / "other.npz", joints=joints, split=np.str_("train"))
+    np.savez(tmp_path / "nojoints.npz", index=np.arange(n))
+    (tmp_path / "cut.npz").write_bytes(b"PK\x03\x04")
+    ckpt = str(Path(model_cache).parent / "tiny.pt")
+    for name, words in (("short.npz", f"holds {n - 1} scenes, {n} asked for"), ("other.npz", "split 'train'"),
+                        ("nojoints.npz", "not a joints cache"), ("cut.npz", "not a joints cache"),
+                        ("missing.npz", "not a joints cache")):
+        out = tmp_path / "c.npz"
+        assert main(["cache", "--data", str(data64), "--split", "val", "--workers", "1", "--model", ckpt,
+                     "--joints", str(tmp_path / name), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err == f"error: {tmp_path / name}: " + err.split(": ", 2)[2] and words in err and not out.exists(), err
+    assert main(["cache", "--data", str(tmp_path / "nodata"), "--split", "val", "--out", str(tmp_path / "c.npz")]) == 2
+    assert "nodata" in capsys.readouterr().err
+
+
+def test_a_checkpoint_the_workers_cannot_load_is_named_not_a_hang(data64, tmp_path):
+    """With --workers 2 the checkpoint was first loaded in the pool's initializer, which respawned the failing
+    workers for ever."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    try:
+        r = subprocess.run([sys.executable, "-m", "training.learnt_fill", "cache", "--data", str(data64), "--split",
+                            "val", "--workers", "2", "--model", str(tmp_path / "missing.pt"), "--out",
+                            str(tmp_path / "c.npz")], capture_output=True, text=True, timeout=120, env=env)
+    except subprocess.TimeoutExpired:
+        pytest.fail("cache --workers 2 with an unreadable checkpoint hung")
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.startswith(f"error: {tmp_path / 'missing.pt'}: unreadable checkpoint"), r.stderr

@@ -113,3 +113,18 @@ def test_an_export_that_differs_from_its_contract_is_refused_at_export(tmp_path,
     with pytest.raises(ModelContractError, match=rf"^{re.escape(str(path))}: {key}: graph 'encoder' {what}") as e:
         export_mod.export_graph(model, "encoder", path)
     assert e.value.key == key and e.value.path == str(path)
+
+
+def test_the_lowest_opset_the_cli_takes_exports_and_the_one_below_does_not(tmp_path):
+    """``training.export.opsets.MIN_OPSET``: the feature sampling is GridSample, in ONNX since opset 16."""
+    from training.configs import tiny
+    from training.export.export import export_graph
+    from training.export.opsets import MIN_OPSET
+
+    torch.manual_seed(0)
+    model = GHNeRF(tiny()).eval()
+    ex = example_inputs(model, targets=2)
+    path = export_graph(model, "volume", tmp_path / "volume.onnx", ex, opset=MIN_OPSET)
+    assert {o.domain: o.version for o in onnx.load(str(path)).opset_import}[""] == MIN_OPSET
+    with pytest.raises(Exception, match="grid_sampler"):
+        export_graph(model, "volume", tmp_path / "below.onnx", ex, opset=MIN_OPSET - 1)

@@ -325,9 +325,13 @@ def test_the_export_cli_stages_its_graphs_and_moves_them_in_only_after_the_parit
             p.write_bytes(b"volume" if g == "volume" else b"new encoder")  # the volume graph as it was
         return paths
 
-    monkeypatch.setattr(cli, "export_all", export_all)
-    monkeypatch.setattr(cli, "example_inputs", lambda model, **kw: None)
-    monkeypatch.setattr(cli, "torch_vs_ort", lambda model, paths, inputs: {
+    # the CLI imports the torch side after its arguments (fast --help): patched where it is read from
+    import training.export.export as export
+    import training.export.parity as parity
+
+    monkeypatch.setattr(export, "export_all", export_all)
+    monkeypatch.setattr(export, "example_inputs", lambda model, **kw: None)
+    monkeypatch.setattr(parity, "torch_vs_ort", lambda model, paths, inputs: {
         g: {"out": {"max_abs": got["max_abs"], "ref_max": 1.0}} for g in paths})
     argv = ["--preset", "tiny", "--graphs", "encoder,volume", "--out", str(folder)]
 

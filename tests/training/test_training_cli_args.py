@@ -81,6 +81,10 @@ def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeyp
     (["--threads", "0"], "--threads: must be at least 1, got 0"),  # was torch's RuntimeError
     (["--int8", "--calib-frames", "0"], "--calib-frames: must be at least 1, got 0"),  # was after the fp32 export
     (["--out", "AFILE"], "is a file; give the model folder"),  # was mkdir's FileExistsError
+    # was "Unsupported onnx_opset_version: 3" (or grid_sampler unsupported below 16) after loading the model
+    (["--opset", "3"], "--opset: must be 16 to 20 (GridSample needs 16; torch's exporter stops at 20), got 3"),
+    (["--opset", "15"], "--opset: must be 16 to 20"),
+    (["--opset", "24"], "got 24"),
 ])
 def test_export_refuses_bad_values_before_the_export(tmp_path, capsys, extra, words):
     from training.export.cli import main
@@ -92,3 +96,13 @@ def test_export_refuses_bad_values_before_the_export(tmp_path, capsys, extra, wo
         main(["--preset", "tiny", *out, *extra])
     assert e.value.code == 2 and words in capsys.readouterr().err
     assert not (tmp_path / "m.staging").exists()
+
+
+def test_the_opset_range_is_what_torch_exports():
+    """``training.export.opsets``: 16 needs GridSample (ONNX 16), 20 is the TorchScript exporter's newest here."""
+    from torch.onnx import _constants
+
+    from training.export.opsets import DEFAULT_OPSET, MAX_OPSET, MIN_OPSET
+
+    assert MIN_OPSET <= DEFAULT_OPSET <= MAX_OPSET
+    assert _constants.ONNX_MIN_OPSET <= MIN_OPSET and MAX_OPSET <= _constants.ONNX_TORCHSCRIPT_EXPORTER_MAX_OPSET

@@ -23,22 +23,19 @@ import logging
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
-from training.export.calibration import CalibrationDataError, load_calibration_npz
-from training.export.export import ExampleInputs, example_inputs, export_all
-from training.export.parity import (
-    ParityError, benchmark, check_fp32_parity, check_int8_parity, int8_vs_fp32, make_session, torch_vs_ort,
-)
-from training.export.quantize import calibration_feeds, quantize_all
-from training.export.staging import drop_stale_int8, move_into, rejected, staging_dir
-from training.model import GHNeRF
+from training.export.opsets import DEFAULT_OPSET, opset_problem
 from training.model_card import write_atomic
+
+if TYPE_CHECKING:  # torch and the modules on it load in main, after the arguments (--help without torch's 3 s)
+    from training.export.export import ExampleInputs
+    from training.model import GHNeRF
 
 log = logging.getLogger("training.export")
 
@@ -58,6 +55,8 @@ SCENARIOS = (
 
 def _inputs(model: GHNeRF, targets: int, stride: int | None, points: int) -> ExampleInputs:
     """Example inputs with ``targets`` targets: 2 = both sources, 1 = one novel camera."""
+    from training.export.export import ExampleInputs, example_inputs  # noqa: PLC0415
+
     if targets == 2:
         return example_inputs(model, targets=2, ray_stride=stride, points=max(points, 1))
     ex = example_inputs(model, targets=3, ray_stride=stride, points=max(points, 1))
@@ -66,6 +65,8 @@ def _inputs(model: GHNeRF, targets: int, stride: int | None, points: int) -> Exa
 
 
 def time_graphs(model: GHNeRF, paths: dict[str, Path], threads: int = 2, repeats: int = 30) -> list[dict]:
+    from training.export.parity import benchmark, make_session  # noqa: PLC0415
+
     contract = model.contract()
     rows = []
     cache: dict = {}
@@ -81,7 +82,8 @@ def time_graphs(model: GHNeRF, paths: dict[str, Path], threads: int = 2, repeats
     return rows
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line (torch-free: ``--help`` and usage errors come before torch loads)."""
     ap = argparse.ArgumentParser(prog="python -m training.export", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--preset", default="edge128", choices=sorted(PRESETS))
@@ -90,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", required=True, help="output folder for <graph>.onnx / <graph>.int8.onnx")
     ap.add_argument("--graphs", default="", help=f"comma-separated subset of {','.join(GRAPH_NAMES)} "
                     "(default: every graph the model has)")
-    ap.add_argument("--opset", type=int, default=17)
+    ap.add_argument("--opset", type=int, default=DEFAULT_OPSET,
+                    help=f"ONNX opset of the graphs (training.export.opsets; default {DEFAULT_OPSET})")
     ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
     ap.add_argument("--calib-frames", type=int, default=8, help="random calibration frames (no --calib-npz)")
     ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) float RGB in [0, 1] at the model's "
@@ -101,8 +104,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-parity-check", action="store_true",
                     help="exit 0 even when onnxruntime strays from torch, or int8 from fp32, beyond "
                          "training.export.parity's bounds")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
     args = ap.parse_args(argv)
-    # what torch raised a traceback for, after the export into OUT.staging (the frames) or before it (the threads)
+    # what torch raised a traceback for, after the export into OUT.staging (the frames) or before it (the threads,
+    # the opset: "Unsupported onnx_opset_version" or an unsupported grid_sampler, after loading the model)
+    if problem := opset_problem(args.opset):
+        ap.error(f"--opset: {problem}, got {args.opset}")
     if args.threads < 1:
         ap.error(f"--threads: must be at least 1, got {args.threads}")
     if args.calib_frames < 1:
@@ -114,6 +125,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first
         args.report = ready_output_arg(ap, args.report, "--report")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    import torch  # noqa: PLC0415 - after the arguments: torch takes seconds to load
+
+    from training.export.calibration import CalibrationDataError, load_calibration_npz  # noqa: PLC0415
+    from training.export.parity import ParityError  # noqa: PLC0415
+    from training.export.staging import drop_stale_int8, move_into, rejected, staging_dir  # noqa: PLC0415
+    from training.model import GHNeRF  # noqa: PLC0415
+
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
 
@@ -166,6 +184,12 @@ def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str
     """Export (and quantize, time) into ``staging``, print and write the report, then check the parity (unless
     ``--no-parity-check``): a :class:`ParityError` names the graph. ``calib_frames``: the checked ``--calib-npz``
     frames (None: random ones). Returns the staged fp32 and int8 files."""
+    import torch  # noqa: PLC0415
+
+    from training.export.export import example_inputs, export_all  # noqa: PLC0415
+    from training.export.parity import check_fp32_parity, check_int8_parity, int8_vs_fp32, torch_vs_ort  # noqa: PLC0415
+    from training.export.quantize import calibration_feeds, quantize_all  # noqa: PLC0415
+
     report: dict = {"preset": args.preset, "parameters": model.parameter_counts(),
                     "contract": {"resolution": f"{model.config.width}x{model.config.height}"}}
     fp32 = export_all(model, staging, graphs=graphs, opset=args.opset, inputs=example_inputs(model))

@@ -29,13 +29,12 @@ from torch import Tensor, nn
 
 from ghnerf_runtime.contract import GRAPH_NAMES, GraphSpec, ModelContract, ray_grid
 from ghnerf_runtime.session import check_graph_file
+from training.export.opsets import DEFAULT_OPSET
 from training.model.camera_inputs import box_corners, orbit_camera, scene_inputs, synthetic_rig
 from training.model.ghnerf import GHNeRF
 from training.model_card import write_atomic
 
 log = logging.getLogger(__name__)
-
-DEFAULT_OPSET = 17
 
 
 class _GraphModule(nn.Module):

@@ -1,0 +1,60 @@
+"""The training tools answer ``--help`` and usage errors without importing torch (about 3 s here): the parsers
+live in ``training.cli`` and the tools' modules parse before they import it."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+#: ``python -m`` module, an argv that is a usage error.
+TOOLS = (
+    ("training.train", ["--out", "r", "--preset", "nope"]),
+    ("training.evaluate", ["--data", "d"]),  # --model is required
+    ("training.pretrain_human", ["--iterations", "x"]),
+    ("training.convert_norm", ["only-src"]),
+    ("training.learnt_fill", ["cache", "--data", "d", "--out", "c.npz", "--workers", "0"]),
+    ("training.export", ["--out", "m", "--opset", "3"]),
+)
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-X", "importtime", *args], capture_output=True, text=True, env=env,
+                          cwd=ROOT, timeout=120)
+
+
+def _imported_torch(importtime_log: str) -> bool:
+    """Whether ``-X importtime``'s log (stderr) lists the torch package."""
+    return any(line.rsplit("|", 1)[-1].strip() == "torch" for line in importtime_log.splitlines())
+
+
+@pytest.mark.parametrize(("module", "usage_error"), TOOLS, ids=[m for m, _ in TOOLS])
+def test_help_and_usage_errors_come_before_torch(module, usage_error):
+    r = _run("-m", module, "--help")
+    assert r.returncode == 0 and r.stdout.startswith("usage:"), r.stderr[-2000:]
+    assert not _imported_torch(r.stderr), f"python -m {module} --help imported torch"
+    r = _run("-m", module, *usage_error)
+    assert r.returncode == 2 and "error:" in r.stderr, r.stderr[-2000:]
+    assert not _imported_torch(r.stderr), f"python -m {module} {' '.join(usage_error)} imported torch"
+
+
+def test_the_console_scripts_parse_before_torch():
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    for name in ("ghnerf-train", "ghnerf-eval"):
+        module, _, func = scripts[name].partition(":")
+        code = (f"import sys\nfrom {module} import {func}\ntry:\n    {func}(['--help'])\nexcept SystemExit as e:\n"
+                "    assert e.code == 0, e.code\nassert 'torch' not in sys.modules, 'torch imported'\n")
+        r = _run("-c", code)
+        assert r.returncode == 0 and "usage: " + name in r.stdout, (name, r.stderr[-2000:])
+
+
+def test_the_console_scripts_still_run_the_tool():
+    """After parsing, the tool's own main runs (here ``--validate-config``, which prints the config)."""
+    pytest.importorskip("torch")
+    r = _run("-m", "training.train", "--preset", "tiny", "--validate-config", "--out", "unused")
+    assert r.returncode == 0 and '"preset": "tiny"' in r.stdout, r.stderr[-2000:]

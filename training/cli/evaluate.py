@@ -1,0 +1,27 @@
+"""``ghnerf-eval``'s command line (torch-free; ``training.evaluate`` runs it)."""
+from __future__ import annotations
+
+import argparse
+
+from training.cli import doc_of, parse_then_run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    doc = doc_of("training.evaluate")
+    ap = argparse.ArgumentParser(prog="ghnerf-eval", description=doc.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=doc)
+    ap.add_argument("--data", default="data/edge128")
+    ap.add_argument("--split", default="val", help="held-out split (default val: unseen bodies, motions, rigs)")
+    ap.add_argument("--model", action="append", required=True, metavar="LABEL=SPEC",
+                    help="x.pt (torch checkpoint) | folder (ONNX fp32) | folder#int8; repeatable, each "
+                         "LABEL its own (without LABEL=, the file's or folder's name)")
+    ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
+    ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
+    ap.add_argument("--threads", type=int, default=2, help="torch and onnxruntime threads (at least 1)")
+    ap.add_argument("--out", help="write the JSON here (also printed)")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The ``ghnerf-eval`` console script."""
+    return parse_then_run(build_parser, "training.evaluate", argv)

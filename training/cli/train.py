@@ -1,0 +1,33 @@
+"""``ghnerf-train``'s command line (torch-free; ``training.train`` runs it)."""
+from __future__ import annotations
+
+import argparse
+
+from training.cli import doc_of, parse_then_run
+from training.configs import PRESETS
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ghnerf-train", description=doc_of("training.train").split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--config", help="JSON or TOML train config (training/train_configs/*.json)")
+    p.add_argument("--out", required=True, help="run folder: checkpoints, log.jsonl, config.json")
+    p.add_argument("--resume", action="store_true",
+                   help="continue from OUT/last.pt (without it, the newest OUT/ckpt_*.pt) when it exists; "
+                        "without --resume an OUT holding checkpoints is refused")
+    p.add_argument("--init", help="torchvision resnet18 state dict for the human encoder")
+    p.add_argument("--preset", choices=sorted(PRESETS))
+    p.add_argument("--data")
+    p.add_argument("--iterations", type=int)
+    p.add_argument("--threads", type=int)
+    p.add_argument("--seed", type=int)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any config key (dotted for nested, JSON value), e.g. --set loss.heat_weight=0.5")
+    p.add_argument("--validate-config", action="store_true", help="check the config and exit")
+    p.add_argument("--quiet", action="store_true")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The ``ghnerf-train`` console script."""
+    return parse_then_run(build_parser, "training.train", argv)
