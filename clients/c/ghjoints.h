@@ -96,7 +96,8 @@ typedef struct {
     uint8_t version;
     uint8_t msg_type;
     uint8_t flags;
-    uint32_t seq;        /* frame sequence; gaps = frames that did not arrive */
+    uint32_t seq;        /* JOINTS, JOINTS_2D: the frame's number (gaps = frames lost); HELLO, STATUS: the
+                          * last frame sent, 0xFFFFFFFF before the first (docs/protocol.md, section 3) */
     uint64_t capture_us; /* capture time, sender's monotonic microseconds */
     uint64_t send_us;    /* time the sender wrote the packet, same clock */
 } ghj_header;

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import warnings
@@ -13,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 C_DIR = ROOT / "clients" / "c"
 VECTOR_DIR = ROOT / "tests" / "vectors" / "joint_stream"
+C_DECODER_DOC = ROOT / "docs" / "c-decoder.md"
 STRICT = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wsign-conversion",
           "-Wshadow", "-Wcast-qual", "-Werror"]
 
@@ -63,3 +65,8 @@ def sanitizer_flags(cc: str, tmp: Path) -> list[str]:
                     f"with them: {proc.stderr.strip()[:300]}")
     warnings.warn(f"{cc} cannot link AddressSanitizer/UBSan here: the C tests run without them", stacklevel=2)
     return []
+
+
+def doc_code_blocks(lang: str) -> list[str]:
+    """The ```lang code blocks of docs/c-decoder.md, in order (the tests compile and run them)."""
+    return re.findall(rf"```{lang}\n(.*?)```", C_DECODER_DOC.read_text(), re.S)

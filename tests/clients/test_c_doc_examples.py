@@ -2,16 +2,13 @@
 strict warnings, the Arduino one as C++. Only the board's own functions are stubbed (declared, never run)."""
 from __future__ import annotations
 
-import re
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
 
-from tests.clients.c_build import C_DIR, ROOT, compile_c, require_compiler
-
-DOC = ROOT / "docs" / "c-decoder.md"
+from tests.clients.c_build import C_DIR, compile_c, doc_code_blocks, require_compiler
 
 # What the examples call but a board support package provides.
 C_BOARD = """\
@@ -34,18 +31,14 @@ long map(long, long, long, long, long);
 """
 
 
-def _blocks(lang: str) -> list[str]:
-    return re.findall(rf"```{lang}\n(.*?)```", DOC.read_text(), re.S)
-
-
 def test_c_examples_compile(tmp_path: Path) -> None:
-    """The UART example and the USB CDC one after it form one program (the second uses the first's dec and
-    pkt); handle_packet is the reader's own."""
+    """The UART example and the USB CDC and UDP ones after it form one program (the other two use the first's
+    dec and pkt); handle_packet is the reader's own."""
     cc = require_compiler()
-    blocks = _blocks("c")
-    assert len(blocks) == 2, "docs/c-decoder.md's C examples changed: update this test"
+    blocks = doc_code_blocks("c")
+    assert len(blocks) == 3, "docs/c-decoder.md's C examples changed: update this test"
     src = tmp_path / "doc_examples.c"
-    src.write_text(C_BOARD + blocks[0] + "\nvoid handle_packet(const ghj_packet *p);\n" + blocks[1])
+    src.write_text(C_BOARD + blocks[0] + "\nvoid handle_packet(const ghj_packet *p);\n" + blocks[1] + blocks[2])
     compile_c(cc, tmp_path / "doc_examples.o", [src], ["-c"])
 
 
@@ -53,7 +46,7 @@ def test_arduino_example_compiles_as_cpp(tmp_path: Path) -> None:
     cxx = shutil.which("g++") or shutil.which("clang++")
     if cxx is None:
         pytest.skip("no C++ compiler for the Arduino example")
-    blocks = _blocks("cpp")
+    blocks = doc_code_blocks("cpp")
     assert len(blocks) == 1, "docs/c-decoder.md's Arduino example changed: update this test"
     src = tmp_path / "sketch.cpp"
     src.write_text(CPP_BOARD + blocks[0])
