@@ -36,7 +36,7 @@ from typing import Any, Optional, TextIO
 from urllib.parse import parse_qs, unquote, urlsplit
 
 from firmware_host.addresses import ipv4_first
-from firmware_host.protocol.constants import Fault
+from firmware_host.protocol.constants import NO_FRAME_SEQ, Fault
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import LocationError, ipv6_hint, location_host
@@ -275,6 +275,10 @@ class Tally:
             self.status, self.status_at = message, time.monotonic()
         elif isinstance(message, Hello):
             self.hello, self.hello_at = message, time.monotonic()
+            if message.header.seq == NO_FRAME_SEQ and self.last_seq is not None:
+                # a sender that has numbered no frame yet: a new process, whose JOINTS start again at 0. Without
+                # this, one that restarted within LATE_WINDOW of its old seq had its first frames read as late.
+                self.last_seq, self._arrived, self._missing = None, set(), {}
 
     def _sequence(self, seq: int) -> None:
         """Count ``seq`` as the next frame, a gap's end, a late or repeated one, or a restarted sender's first."""

@@ -21,6 +21,10 @@ MAX_CAMERAS = 8
 MAX_CAMERA_NAME_LEN = 16
 
 U32_MAX = 0xFFFF_FFFF
+#: The seq HELLO and STATUS carry before the sender's first frame: the one before 0, as they carry the last
+#: frame's seq and the next JOINTS carries that plus one (docs/protocol.md section 3). 0 there read as "frame 0
+#: sent"; a receiver reads this one as a sender that (re)started.
+NO_FRAME_SEQ = U32_MAX
 U64_MAX = 0xFFFF_FFFF_FFFF_FFFF
 
 

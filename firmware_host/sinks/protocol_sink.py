@@ -14,6 +14,7 @@ from typing import Optional
 from firmware_host.errors import EncodeError, SinkConfigError
 from firmware_host.protocol.constants import (
     PROTOCOL_VERSION,
+    NO_FRAME_SEQ,
     U32_MAX,
     CoordFrame,
     Fault,
@@ -28,10 +29,6 @@ from firmware_host.sinks.base import Sink, SinkStats
 from firmware_host.sinks.options import SinkOptions
 
 _log = logging.getLogger(__name__)
-
-#: The seq HELLO and STATUS carry before the first frame: the one before 0, as they carry the last frame's seq
-#: and the next JOINTS carries that plus one (docs/protocol.md section 3). 0 there read as "frame 0 sent".
-NO_FRAME_SEQ = U32_MAX
 
 #: After a STATUS that could not be written, how soon (at most) another is tried while no frame comes.
 STATUS_RETRY_S = 0.1

@@ -173,6 +173,32 @@ def test_the_late_window_bounds_what_counts_late():
     assert (wrap.total_gaps, wrap.total_late, wrap.last_seq) == (0, 2, 1)
 
 
+def _hello(seq: int):
+    from firmware_host.protocol.constants import CoordFrame, JointSet, MsgType, PROTOCOL_VERSION, Units
+    from firmware_host.protocol.messages import Hello, make_header
+
+    return Hello(make_header(MsgType.HELLO, seq, 0, 1000), PROTOCOL_VERSION, int(JointSet.BODY_25), 25,
+                 int(Units.MILLIMETRES), int(CoordFrame.RIG), "rig", ("left", "right"))
+
+
+def test_a_hello_of_a_sender_with_no_frame_yet_starts_a_new_numbering():
+    from firmware_host.protocol.constants import NO_FRAME_SEQ
+
+    restarted = listen.Tally()
+    for seq in (28, 29, 30):
+        restarted.add(_joints(seq))
+    restarted.add(_hello(NO_FRAME_SEQ))  # a new process, within LATE_WINDOW of the old seq
+    for seq in (0, 1, 2, 5):
+        restarted.add(_joints(seq))
+    assert (restarted.total_gaps, restarted.total_late, restarted.last_seq) == (2, 0, 5)
+    reopened = listen.Tally()  # an output reopened by the same sender: its HELLO carries the last frame, no reset
+    for seq in (28, 30):
+        reopened.add(_joints(seq))
+    reopened.add(_hello(30))
+    reopened.add(_joints(29))
+    assert (reopened.total_gaps, reopened.total_late, reopened.last_seq) == (0, 1, 30)
+
+
 def test_a_stray_datagram_without_delimiter_costs_only_itself():
     from firmware_host.protocol import decode_stream, encode
     from firmware_host.protocol.messages import Joints, make_header
