@@ -9,6 +9,7 @@ their own whose workers do not spin, or on the global pool once one is installed
 from __future__ import annotations
 
 import logging
+import os
 import re
 import threading
 from pathlib import Path
@@ -49,13 +50,17 @@ def global_pool_threads() -> int | None:
 _ORT_LOAD_PREFIX = re.compile(r"Load model from .*? failed:\s*")
 _ORT_SOURCE = re.compile(r"\S+\.(?:cc|cpp|h|hpp):\d+ [^()]*\([^()]*\)\s*")
 _REASON_CHARS = 500
+# what onnxruntime says when the operating system refuses the file (13: permission denied, 5: an I/O error)
+_ORT_ERRNO = re.compile(r"system error number (\d+)")
 
 
 def load_failure(error: Exception, path: Path, what: str) -> ModelLoadError:
     """The error for an onnxruntime that cannot load ``path``: its reason, without the C++ source location
     and function signature that would take up the message (an IR version or opset too new, an unknown
-    operator), and "truncated or corrupt?" only where the file did not parse."""
+    operator), the operating system's words for an error number it gives ("system error number 13": a file
+    the service's user may not read), and "truncated or corrupt?" only where the file did not parse."""
     text = _ORT_SOURCE.sub("", _ORT_LOAD_PREFIX.sub("", " ".join(str(error).split())))
+    text = _ORT_ERRNO.sub(lambda m: f"{os.strerror(int(m.group(1)))} ({m.group(0)})", text)
     if len(text) > _REASON_CHARS:  # onnxruntime says why at the end
         text = "..." + text[-_REASON_CHARS:]
     damaged = "; truncated or corrupt?" if "protobuf" in text.lower() else ""  # else: it parsed, and said why
