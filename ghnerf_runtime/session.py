@@ -77,7 +77,7 @@ from ghnerf_runtime.contract import (
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.novel_painter import NovelPainter
-from ghnerf_runtime.onnx_file import ensure_global_pool, load_failure
+from ghnerf_runtime.onnx_file import ORT_LOG_SEVERITY, ensure_global_pool, load_failure, ort_reason
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
@@ -155,7 +155,7 @@ def _file_name(graph: str, precision: str) -> str:
 def _session_options(config: SessionConfig) -> ort.SessionOptions:
     so = ort.SessionOptions()
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    so.log_severity_level = 3
+    so.log_severity_level = ORT_LOG_SEVERITY
     if config.thread_pool == "global":
         ensure_global_pool(config.threads)
         so.use_per_session_threads = False
@@ -484,7 +484,7 @@ class ModelSession:
             raise ModelError(f"graph {graph!r} needs input {e.args[0]!r}") from None
 
     def _failed(self, graph: str, e: Exception) -> ModelRunError:
-        return ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {str(e).strip()[:300]}",
+        return ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {ort_reason(e, 300)}",
                              path=str(self.files[graph].path))
 
     # ------------------------------------------------------------------ lanes

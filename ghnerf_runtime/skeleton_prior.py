@@ -29,7 +29,7 @@ import numpy as np
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.triangulation import triangulate_two_views
-from ghnerf_runtime.onnx_file import open_onnx_file
+from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
            "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame",
@@ -308,7 +308,7 @@ class SkeletonPrior:
         try:
             joints, log_error = self._session.run(list(OUTPUTS), dict(zip(INPUTS, (features, context))))
         except Exception as e:
-            raise ModelRunError(f"skeleton prior failed: {type(e).__name__}: {str(e)[:200]}",
+            raise ModelRunError(f"skeleton prior failed: {type(e).__name__}: {ort_reason(e, 200)}",
                                 path=str(self.path)) from e
         joints = joints.astype(np.float64)
         err = np.exp(np.clip(log_error.astype(np.float64), -12.0, 5.0))

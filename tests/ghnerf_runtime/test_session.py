@@ -156,6 +156,25 @@ def test_run_unknown_graph_and_missing_input(tiny_model_dir):
         s.run("encoder", {})
 
 
+def test_a_graph_failing_inside_says_why_once_without_onnxruntime_s_own_log(tiny_model_dir, capfd):
+    """A node failing mid-run (one target's volume for two targets' rays) also put onnxruntime's own line on
+    stderr, ANSI-coloured with its C++ source location, beside the ModelRunError; the error kept the source
+    location and the template signature before the reason."""
+    graphs = ("encoder", "volume", "render_heat")
+    s = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False), graphs)
+    feeds = warmup_feeds(s.contract)
+    feeds.update(s.run("encoder", feeds))
+    feeds.update(s.run("volume", feeds))
+    feeds["volume"] = feeds["volume"][:1]
+    capfd.readouterr()
+    with pytest.raises(ModelRunError) as e:
+        s.run("render_heat", feeds)
+    assert e.value.path == str(tiny_model_dir / "render_heat.onnx") and "graph 'render_heat' failed" in str(e.value)
+    assert "batch size" in str(e.value)  # onnxruntime's reason, at the end of its message
+    assert ".cc:" not in str(e.value) and "[with T" not in str(e.value) and "::" not in str(e.value)
+    assert "onnxruntime" not in capfd.readouterr().err
+
+
 def test_loads_only_requested_graphs_and_int8_falls_back_to_fp32(tiny_model_dir):
     s = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), precision="int8", warmup=False),
                           ("encoder", "volume"))
