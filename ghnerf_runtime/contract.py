@@ -390,8 +390,7 @@ class ModelContract:
 
         def get(key: str) -> str:
             if p + key not in props:
-                raise ContractError("missing from the model metadata (not a GHNeRF export, or too old)",
-                                    key=p + key)
+                raise ContractError(_missing_why(props), key=p + key)
             return props[p + key]
 
         def parse(key: str, fn):
@@ -467,7 +466,7 @@ class ModelContract:
         """Which graph an ONNX file holds, from its metadata."""
         key = META_PREFIX + "graph"
         if key not in props:
-            raise ContractError("missing from the model metadata", key=key)
+            raise ContractError(_missing_why(props), key=key)
         if props[key] not in GRAPH_NAMES:
             raise ContractError(f"unknown graph {props[key]!r}; expected one of {GRAPH_NAMES}", key=key)
         return props[key]
@@ -500,6 +499,17 @@ class ModelContract:
                 ):
                     raise ContractError(f"graph {graph!r} {kind} shape {list(shape)} != contract {list(t.shape)}",
                                         key=t.name)
+
+
+def _missing_why(props: Mapping[str, str]) -> str:
+    """Why a required key is not in a file's metadata. Every 1.x export writes them all, and an ONNX file's
+    metadata follow its graph, at the end of the file (protobuf writes fields in number order), so a file that
+    has the contract's version but not one of its keys was most likely cut short there, where the old hint
+    ("too old") sent the user to re-export: a copy that stopped early, a full disk."""
+    if META_PREFIX + "contract_version" in props:
+        return ("missing from the model metadata, which has the contract's other keys: the file may be cut short "
+                "(its metadata come last in it); copy or export it again")
+    return "missing from the model metadata (not a GHNeRF export, or too old)"
 
 
 def _whole(value: Any) -> int:

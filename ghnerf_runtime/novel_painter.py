@@ -34,7 +34,7 @@ from ghnerf_runtime.body_proxy import BodyProxy, proxy_depth
 from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.surface import surface_normals
-from ghnerf_runtime.onnx_file import open_onnx_file
+from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
@@ -185,7 +185,7 @@ class NovelPainter:
         try:
             rgb = self._session.run([OUTPUT], {"planes": inputs.planes[None], "joints": inputs.joints[None]})[0]
         except Exception as e:  # onnxruntime's own exception types
-            raise ModelRunError(f"painter failed: {type(e).__name__}: {str(e).strip()[:200]}", path=str(self.path)) from e
+            raise ModelRunError(f"painter failed: {type(e).__name__}: {ort_reason(e, 200)}", path=str(self.path)) from e
         if not np.isfinite(rgb).all():
             raise ModelRunError("painter returned non-finite colours", path=str(self.path))
         want = (1, 3) + inputs.planes.shape[1:]

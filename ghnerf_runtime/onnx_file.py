@@ -9,13 +9,15 @@ their own whose workers do not spin, or on the global pool once one is installed
 from __future__ import annotations
 
 import logging
+import os
 import re
 import threading
 from pathlib import Path
 
 from ghnerf_runtime.errors import ModelError, ModelLoadError
 
-__all__ = ["open_onnx_file", "ensure_global_pool", "global_pool_threads", "load_failure"]
+__all__ = ["ORT_LOG_SEVERITY", "open_onnx_file", "ensure_global_pool", "global_pool_threads", "load_failure",
+           "ort_reason"]
 
 log = logging.getLogger(__name__)
 
@@ -46,18 +48,33 @@ def global_pool_threads() -> int | None:
 
 
 # "Load model from <path> failed:" and the C++ source line and signature onnxruntime puts before its reason
+# (a template's "const [with T = float]" too)
 _ORT_LOAD_PREFIX = re.compile(r"Load model from .*? failed:\s*")
-_ORT_SOURCE = re.compile(r"\S+\.(?:cc|cpp|h|hpp):\d+ [^()]*\([^()]*\)\s*")
+_ORT_SOURCE = re.compile(r"\S+\.(?:cc|cpp|h|hpp):\d+ [^()]*\([^()]*\)\s*(?:const\s*)?(?:\[with [^\]]*\]\s*)?")
 _REASON_CHARS = 500
+# what onnxruntime says when the operating system refuses the file (13: permission denied, 5: an I/O error)
+_ORT_ERRNO = re.compile(r"system error number (\d+)")
+#: onnxruntime's own log, to stderr: only what is fatal. Its errors come back as exceptions, which the runtime
+#: raises as its own naming the graph and file; logged as well, each put a second, raw line in the journal
+#: (ANSI-coloured, with the C++ source location) before the daemon's own.
+ORT_LOG_SEVERITY = 4
+
+
+def ort_reason(error: Exception, limit: int = _REASON_CHARS) -> str:
+    """onnxruntime's words for ``error``, on one line: without the C++ source location and function signature
+    that would take up the message, with the operating system's words for an error number it gives ("system
+    error number 13": a file the service's user may not read), and at most ``limit`` characters of its end
+    (where onnxruntime says why)."""
+    text = _ORT_SOURCE.sub("", _ORT_LOAD_PREFIX.sub("", " ".join(str(error).split())))
+    text = _ORT_ERRNO.sub(lambda m: f"{os.strerror(int(m.group(1)))} ({m.group(0)})", text)
+    return "..." + text[-limit:] if len(text) > limit else text
 
 
 def load_failure(error: Exception, path: Path, what: str) -> ModelLoadError:
-    """The error for an onnxruntime that cannot load ``path``: its reason, without the C++ source location
-    and function signature that would take up the message (an IR version or opset too new, an unknown
-    operator), and "truncated or corrupt?" only where the file did not parse."""
-    text = _ORT_SOURCE.sub("", _ORT_LOAD_PREFIX.sub("", " ".join(str(error).split())))
-    if len(text) > _REASON_CHARS:  # onnxruntime says why at the end
-        text = "..." + text[-_REASON_CHARS:]
+    """The error for an onnxruntime that cannot load ``path``: its reason (:func:`ort_reason`: an IR version or
+    opset too new, an unknown operator, a file it may not read), and "truncated or corrupt?" only where the file
+    did not parse."""
+    text = ort_reason(error)
     damaged = "; truncated or corrupt?" if "protobuf" in text.lower() else ""  # else: it parsed, and said why
     size = path.stat().st_size if path.is_file() else 0
     return ModelLoadError(f"onnxruntime cannot load the {what} ({size} bytes{damaged}): {type(error).__name__}: "
@@ -73,6 +90,7 @@ def open_onnx_file(path: str | Path, threads: int, what: str):
     if not path.is_file():
         raise ModelLoadError(f"no such {what} file", path=str(path))
     opts = ort.SessionOptions()
+    opts.log_severity_level = ORT_LOG_SEVERITY
     if global_pool_threads() is not None:  # every session of the process must then run on it
         opts.use_per_session_threads = False
     else:

@@ -32,7 +32,12 @@ What is checked at load (each failure names the file and what is wrong):
 * it holds the graph it is loaded as, and its inputs/outputs match the contract's names and
   fixed dimensions (``ModelContract.check_io``), all float32;
 * every graph file of the model carries the same contract (same model, same version);
-* the resolution and variant match :class:`SessionConfig` when it pins them.
+* the resolution and variant match :class:`SessionConfig` when it pins them;
+* the folder can be read by the user running this (:class:`ModelLoadError` naming it, not a bare
+  PermissionError);
+* at warm-up, and on every run after it, each output has the contract's shape, its symbolic sizes
+  those of the inputs (:class:`ModelRunError`): the file's own output shapes leave some fixed sizes
+  symbolic, so this is where a graph returning 24 joints shows.
 
 Threads: the graphs run one after another on a 2-core CPU. Measured here (docs/runtime.md),
 per-session pools whose workers do not spin are as fast as one global pool and far faster
@@ -72,7 +77,7 @@ from ghnerf_runtime.contract import (
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.novel_painter import NovelPainter
-from ghnerf_runtime.onnx_file import ensure_global_pool, load_failure
+from ghnerf_runtime.onnx_file import ORT_LOG_SEVERITY, ensure_global_pool, load_failure, ort_reason
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 from ghnerf_runtime.skeleton_prior import SkeletonPrior
 
@@ -106,14 +111,41 @@ class GraphFile:
 
 def resolve_model_dir(path: str | os.PathLike) -> Path:
     """The folder holding the graph files: ``path`` itself, else its ``ghnerf/`` subfolder, else its
-    only subfolder holding ``*.onnx`` files (the shipped ``models/<variant>/`` layout)."""
+    only subfolder holding ``*.onnx`` files (the shipped ``models/<variant>/`` layout). A path that is no
+    folder comes back as it is, for the caller to say so.
+
+    Raises:
+        ModelLoadError: naming the folder, when it (or its ``ghnerf/`` subfolder) cannot be read: the service
+            runs as its own user (``User=ghnerf``, ``ProtectHome=yes``), and a bare PermissionError from a
+            ``stat`` left the daemon with a traceback instead of its "cannot load the model" exit.
+    """
     folder = Path(path)
-    if not folder.is_dir() or any(folder.glob("*.onnx")):
-        return folder
-    if (folder / "ghnerf").is_dir() and any((folder / "ghnerf").glob("*.onnx")):
-        return folder / "ghnerf"
-    subs = [d for d in sorted(folder.iterdir()) if d.is_dir() and any(d.glob("*.onnx"))]
+    try:
+        if not folder.is_dir():
+            return folder
+        _check_readable(folder)
+        if any(folder.glob("*.onnx")):
+            return folder
+        if (folder / "ghnerf").is_dir():
+            _check_readable(folder / "ghnerf")
+            if any((folder / "ghnerf").glob("*.onnx")):
+                return folder / "ghnerf"
+        subs = [d for d in sorted(folder.iterdir()) if d.is_dir() and any(d.glob("*.onnx"))]
+    except ModelError:
+        raise
+    except OSError as e:  # a folder above it that this user may not enter, an I/O error
+        where = f" ({e.filename})" if e.filename and str(e.filename) != str(folder) else ""
+        why = " (the user this runs as may not enter a folder on its path)" if isinstance(e, PermissionError) else ""
+        raise ModelLoadError(f"cannot read the model folder: {e.strerror or e}{where}{why}", path=str(folder)) from None
     return subs[0] if len(subs) == 1 else folder
+
+
+def _check_readable(folder: Path) -> None:
+    # Listing needs read permission and opening the files search (x) permission; glob() says neither, it
+    # finds nothing in a folder it may not list.
+    if not os.access(folder, os.R_OK | os.X_OK):
+        raise ModelLoadError("cannot read the model folder: permission denied (the user this runs as needs read "
+                             "and execute permission on it)", path=str(folder))
 
 
 def _file_name(graph: str, precision: str) -> str:
@@ -123,7 +155,7 @@ def _file_name(graph: str, precision: str) -> str:
 def _session_options(config: SessionConfig) -> ort.SessionOptions:
     so = ort.SessionOptions()
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    so.log_severity_level = 3
+    so.log_severity_level = ORT_LOG_SEVERITY
     if config.thread_pool == "global":
         ensure_global_pool(config.threads)
         so.use_per_session_threads = False
@@ -230,6 +262,10 @@ class ModelSession:
         self.novel_painter = None
         self._output_names = {g: list(contract.graph(g).output_names) for g in self._sessions}
         self._input_names = {g: list(contract.graph(g).input_names) for g in self._sessions}
+        # (input, axis, symbol) binding each symbolic size, and the outputs' shapes: _check_outputs' tables
+        self._symbols = {g: [(t.name, axis, d) for t in contract.graph(g).inputs for axis, d in enumerate(t.shape)
+                             if isinstance(d, str)] for g in self._sessions}
+        self._output_shapes = {g: [(t.name, t.shape) for t in contract.graph(g).outputs] for g in self._sessions}
         self._config: SessionConfig | None = None  # set by load(); lanes need it
         self._lanes: dict[str, ort.InferenceSession] = {}
         self._lane_worker: ThreadPoolExecutor | None = None
@@ -258,7 +294,10 @@ class ModelSession:
         folder = resolve_model_dir(config.model_dir)
         if not folder.is_dir():
             raise ModelLoadError("is not a folder (session.model_dir names the model folder, not a file)"
-                                 if folder.exists() else "model folder does not exist"
+                                 if folder.exists() else
+                                 # is_dir() and exists() are False for a link that leads nowhere, or in a loop
+                                 "is a symbolic link that leads to no folder (dangling, or a loop)"
+                                 if folder.is_symlink() else "model folder does not exist"
                                  + ("" if folder.is_absolute() else f" (read from the current directory {Path.cwd()})"),
                                  path=str(folder))
         unknown = [g for g in graphs if g not in GRAPH_NAMES]
@@ -416,7 +455,26 @@ class ModelSession:
             out = sess.run(self._output_names[graph], inputs)
         except Exception as e:  # onnxruntime's pybind exceptions
             raise self._failed(graph, e) from e
-        return dict(zip(self._output_names[graph], out))
+        outputs = dict(zip(self._output_names[graph], out))
+        self._check_outputs(graph, inputs, outputs)
+        return outputs
+
+    def _check_outputs(self, graph: str, inputs: Mapping[str, np.ndarray], outputs: Mapping[str, np.ndarray]) -> None:
+        """Each output's shape is the contract's, its symbolic sizes (``B``, ``R``, ``N``) those of the inputs.
+
+        The file's own output shapes are often symbolic where the contract fixes a size (the fp32 heatmaps'
+        joint axis reads ``Transposeheatmaps_dim_2``), so the load cannot see a graph that returns 24 joints,
+        or one target for two: the estimator then sent 24 "BODY_25" joints on the wire, or failed with an
+        IndexError that stopped the daemon. Run at warm-up, this refuses such a file at load.
+        """
+        sizes = {d: np.shape(inputs[name])[axis] for name, axis, d in self._symbols[graph]}  # ranks: checked by ort
+        for name, shape in self._output_shapes[graph]:
+            want = tuple([sizes.get(d, d) for d in shape]) if sizes else shape
+            got = np.shape(outputs[name])
+            if got != want and (len(got) != len(want)  # (a symbol no input binds matches any size)
+                                or any(w != n for w, n in zip(want, got) if not isinstance(w, str))):
+                raise ModelRunError(f"graph {graph!r} returned {name!r} of shape {list(got)}, the contract says "
+                                    f"{list(shape)} ({list(want)} for these inputs)", path=str(self.files[graph].path))
 
     def _inputs(self, graph: str, feeds: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The graph's own inputs out of ``feeds`` (which may hold more)."""
@@ -426,7 +484,7 @@ class ModelSession:
             raise ModelError(f"graph {graph!r} needs input {e.args[0]!r}") from None
 
     def _failed(self, graph: str, e: Exception) -> ModelRunError:
-        return ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {str(e).strip()[:300]}",
+        return ModelRunError(f"graph {graph!r} failed: {type(e).__name__}: {ort_reason(e, 300)}",
                              path=str(self.files[graph].path))
 
     # ------------------------------------------------------------------ lanes
@@ -491,7 +549,10 @@ class ModelSession:
                 out2 = later.result()  # never leave a run behind, whatever the first did
         except Exception as e:  # onnxruntime's pybind exceptions
             raise self._failed(graph, e) from e
-        return dict(zip(names, out)), dict(zip(names, out2))
+        answers = dict(zip(names, out)), dict(zip(names, out2))
+        for feeds, outputs in zip(inputs, answers):
+            self._check_outputs(graph, feeds, outputs)
+        return answers
 
     def warm_up(self) -> dict[str, float]:
         """Run every loaded graph once at the estimator's shapes (so the first frame is not slow)."""

@@ -27,9 +27,9 @@ from typing import Sequence
 import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
-from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
+from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.triangulation import triangulate_two_views
-from ghnerf_runtime.onnx_file import open_onnx_file
+from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
            "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame",
@@ -266,6 +266,7 @@ class SkeletonPrior:
 
         Raises:
             ModelContractError: the recorded encoder file is missing or has other bytes.
+            ModelLoadError: it cannot be read.
         """
         name = self.metadata.get(META_PREFIX + "encoder_file")
         digest = self.metadata.get(META_PREFIX + "encoder_sha256")
@@ -277,7 +278,11 @@ class SkeletonPrior:
         if not encoder.is_file():
             raise ModelContractError(f"was trained on the 2D joints of {name}, which {folder} does not have: {fix}",
                                      path=str(self.path), key=META_PREFIX + "encoder_file")
-        actual = hashlib.sha256(encoder.read_bytes()).hexdigest()
+        try:
+            actual = hashlib.sha256(encoder.read_bytes()).hexdigest()
+        except OSError as e:  # a file the service's user may not read: was a bare PermissionError
+            raise ModelLoadError(f"cannot read the encoder file {name} this prior was trained on, to check it: "
+                                 f"{e.strerror or e}", path=str(encoder)) from None
         if actual != digest:
             raise ModelContractError(f"was trained on the 2D joints of {name} with sha256 {digest[:12]}..., and "
                                      f"{encoder} is another file (sha256 {actual[:12]}...): {fix}",
@@ -308,7 +313,7 @@ class SkeletonPrior:
         try:
             joints, log_error = self._session.run(list(OUTPUTS), dict(zip(INPUTS, (features, context))))
         except Exception as e:
-            raise ModelRunError(f"skeleton prior failed: {type(e).__name__}: {str(e)[:200]}",
+            raise ModelRunError(f"skeleton prior failed: {type(e).__name__}: {ort_reason(e, 200)}",
                                 path=str(self.path)) from e
         joints = joints.astype(np.float64)
         err = np.exp(np.clip(log_error.astype(np.float64), -12.0, 5.0))

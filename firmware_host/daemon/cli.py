@@ -45,7 +45,7 @@ from firmware_host.daemon.service import Daemon, DaemonStartError, check_sink_ur
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
 from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.config_paths import config_folder
-from ghnerf_runtime.errors import RuntimeErrorBase
+from ghnerf_runtime.errors import ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
 
@@ -86,11 +86,16 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) 
     except DaemonConfigError as e:  # a file it names, read from the config file's folder: say so, as for models
         raise DaemonConfigError(e.message + _where_url_read(e.message, source), key="rig.url") from None
     check_sink_urls(config.sinks)
-    model_dir = resolve_model_dir(config.estimator.session.model_dir)
+    try:
+        model_dir = resolve_model_dir(config.estimator.session.model_dir)
+    except ModelLoadError as e:  # a folder the service's user may not read (was a traceback, exit 1)
+        raise DaemonConfigError(str(e), key="estimator.session.model_dir") from None
     if not model_dir.is_dir():
         # said "holds no *.onnx graphs (make model builds ./models)": the example config's relative
         # "models", read from another folder than the repository's, sent the user to a two-hour build
-        raise DaemonConfigError(f"{model_dir}: {'not a folder' if model_dir.exists() else 'no such folder'}"
+        what = ("not a folder" if model_dir.exists() else "no such folder" if not model_dir.is_symlink()
+                else "a symbolic link that leads to no folder (dangling, or a loop)")
+        raise DaemonConfigError(f"{model_dir}: {what}"
                                 f"{_where_read(model_dir, source)}", key="estimator.session.model_dir")
     if not any(model_dir.glob("*.onnx")):
         raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",

@@ -20,7 +20,7 @@ import pytest
 
 from ghnerf_runtime.config import SessionConfig
 from ghnerf_runtime.contract import GRAPH_NAMES, ModelContract
-from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, RuntimeErrorBase
+from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError, RuntimeErrorBase
 from ghnerf_runtime.session import ModelSession, warmup_feeds
 
 REPO = Path(__file__).resolve().parents[2]
@@ -156,6 +156,25 @@ def test_run_unknown_graph_and_missing_input(tiny_model_dir):
         s.run("encoder", {})
 
 
+def test_a_graph_failing_inside_says_why_once_without_onnxruntime_s_own_log(tiny_model_dir, capfd):
+    """A node failing mid-run (one target's volume for two targets' rays) also put onnxruntime's own line on
+    stderr, ANSI-coloured with its C++ source location, beside the ModelRunError; the error kept the source
+    location and the template signature before the reason."""
+    graphs = ("encoder", "volume", "render_heat")
+    s = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False), graphs)
+    feeds = warmup_feeds(s.contract)
+    feeds.update(s.run("encoder", feeds))
+    feeds.update(s.run("volume", feeds))
+    feeds["volume"] = feeds["volume"][:1]
+    capfd.readouterr()
+    with pytest.raises(ModelRunError) as e:
+        s.run("render_heat", feeds)
+    assert e.value.path == str(tiny_model_dir / "render_heat.onnx") and "graph 'render_heat' failed" in str(e.value)
+    assert "batch size" in str(e.value)  # onnxruntime's reason, at the end of its message
+    assert ".cc:" not in str(e.value) and "[with T" not in str(e.value) and "::" not in str(e.value)
+    assert "onnxruntime" not in capfd.readouterr().err
+
+
 def test_loads_only_requested_graphs_and_int8_falls_back_to_fp32(tiny_model_dir):
     s = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), precision="int8", warmup=False),
                           ("encoder", "volume"))
@@ -249,6 +268,23 @@ def test_missing_metadata_key_refused(tiny_model_dir, tmp_path):
     assert e.value.key == "ghnerf.levels" and "missing" in str(e.value) and "encoder.onnx" in str(e.value)
 
 
+@pytest.mark.parametrize("keep", [5, -1])  # cut in the contract's keys; cut before the last, ghnerf.graph
+def test_a_file_cut_short_in_its_metadata_says_so(tiny_model_dir, tmp_path, keep):
+    """A copy that stopped at an entry's end parses: it was called "not a GHNeRF export, or too old"."""
+    onnx = pytest.importorskip("onnx")
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    path = folder / "encoder.onnx"
+    whole = path.read_bytes()
+    model = onnx.load(str(path))
+    del model.metadata_props[keep:]
+    cut = model.SerializeToString()
+    assert whole.startswith(cut) and len(cut) < len(whole)  # exactly the file's first bytes
+    path.write_bytes(cut)
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder)
+    assert e.value.path == str(path) and "cut short" in str(e.value) and "too old" not in str(e.value)
+
+
 def test_file_without_any_contract_refused(tiny_model_dir, tmp_path):
     folder = _copy(tiny_model_dir, tmp_path / "m")
     _edit_metadata(folder / "encoder.onnx", lambda p: {})
@@ -319,6 +355,108 @@ def test_a_model_dir_that_is_a_file_or_no_graphs_is_named(tiny_model_dir):
     with pytest.raises(ModelError, match="no graphs to load") as e:  # was a bare AssertionError
         ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False), ())
     assert str(tiny_model_dir) in str(e.value)
+
+
+def test_a_model_dir_that_is_a_link_to_nowhere_says_so(tmp_path):
+    (tmp_path / "loop").symlink_to("loop")  # said "model folder does not exist" of a path ls shows
+    (tmp_path / "dangling").symlink_to(tmp_path / "gone")
+    for name in ("loop", "dangling"):
+        with pytest.raises(ModelLoadError, match="symbolic link that leads to no folder") as e:
+            _load_encoder(tmp_path / name)
+        assert e.value.path == str(tmp_path / name)
+
+
+_LOAD_AS_THE_SERVICE = """
+import sys
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig
+from ghnerf_runtime.estimator import load_session
+from ghnerf_runtime.session import ModelSession
+session = SessionConfig(model_dir=sys.argv[1], warmup=False)
+try:
+    if sys.argv[2] == "estimator":
+        load_session(EstimatorConfig(session=session))
+    else:
+        ModelSession.load(session, ("encoder",))
+except Exception as e:
+    print(f"{type(e).__name__}|{e}")
+"""
+
+
+@pytest.mark.parametrize(("locked", "mode"), [
+    ("folder", 0o000), ("folder", 0o111), ("folder", 0o444),  # neither; enter but not list; list but not enter
+    ("parent", 0o000),  # a folder above it (ProtectHome=yes makes /home so for the service)
+    ("ghnerf", 0o000),  # the shipped layout's subfolder: was "no file for graph" in the folder above it
+])
+def test_a_model_folder_this_user_may_not_read_is_a_load_error_naming_it(tmp_path, locked, mode):
+    """Was a bare PermissionError from a stat in resolve_model_dir (the daemon: a traceback and exit 1)."""
+    from tests.unprivileged import run_unprivileged
+
+    top = tmp_path / "models"
+    folder = top / "ghnerf" if locked == "ghnerf" else top / "m" if locked == "parent" else top
+    folder.mkdir(parents=True)
+    (folder / "encoder.onnx").write_bytes(b"\x08\x07not read")
+    lock = {"folder": top, "parent": top, "ghnerf": folder}[locked]
+    lock.chmod(mode)
+    try:
+        model_dir = top / "m" if locked == "parent" else top
+        proc = run_unprivileged([sys.executable, "-c", _LOAD_AS_THE_SERVICE, str(model_dir), "estimator"],
+                                cwd=REPO, timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
+    finally:
+        lock.chmod(0o755)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    kind, message = proc.stdout.strip().split("|", 1)
+    assert kind == "ModelLoadError", proc.stdout
+    assert message.startswith(f"{folder if locked == 'ghnerf' else model_dir}: cannot read the model folder")
+    assert "ermission denied" in message
+
+
+def test_a_graph_file_this_user_may_not_read_says_so(tmp_path):
+    """onnxruntime says "system error number 13"; the message now says what that is."""
+    from tests.unprivileged import run_unprivileged
+
+    (tmp_path / "encoder.onnx").write_bytes(b"\x08\x07not read")
+    (tmp_path / "encoder.onnx").chmod(0)
+    proc = run_unprivileged([sys.executable, "-c", _LOAD_AS_THE_SERVICE, str(tmp_path), "session"],
+                            cwd=REPO, timeout=120, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    kind, message = proc.stdout.strip().split("|", 1)
+    assert kind == "ModelLoadError" and message.startswith(str(tmp_path / "encoder.onnx"))
+    assert "Permission denied (system error number 13)" in message and "corrupt" not in message
+
+
+def _slice_output(path: Path, output: str, axis: int, keep: int) -> None:
+    """Rewrite ``path`` so that ``output`` keeps the first ``keep`` entries of ``axis``; its declared shape (and
+    so the file's I/O as the load reads it) stays as it was."""
+    onnx = pytest.importorskip("onnx")
+    model = onnx.load(str(path))
+    node = next(n for n in model.graph.node if output in n.output)
+    node.output[list(node.output).index(output)] = output + "_full"
+    for name, value in (("starts", 0), ("ends", keep), ("axes", axis)):
+        model.graph.initializer.append(onnx.numpy_helper.from_array(np.array([value], np.int64), f"cut_{name}"))
+    model.graph.node.append(onnx.helper.make_node("Slice", [output + "_full", "cut_starts", "cut_ends", "cut_axes"],
+                                                  [output]))
+    onnx.save(model, str(path))
+
+
+@pytest.mark.parametrize(("axis", "keep", "said"), [
+    (2, 24, "[2, 256, 24]"),  # 24 joints: the estimator sent 24 "BODY_25" joints on the wire
+    (0, 1, "[1, 256, 25]"),  # one target's heatmaps for two: an IndexError in the estimator stopped the daemon
+])
+def test_a_graph_whose_outputs_break_the_contract_is_refused_at_warm_up(tiny_model_dir, tmp_path, axis, keep, said):
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _slice_output(folder / "render_heat.onnx", "heatmaps", axis, keep)
+    graphs = ("encoder", "volume", "render_heat")
+    session = ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), graphs)  # the I/O read fine
+    feeds = warmup_feeds(session.contract)
+    feeds.update(session.run("encoder", feeds))
+    feeds.update(session.run("volume", feeds))
+    with pytest.raises(ModelRunError) as e:
+        session.run("render_heat", feeds)
+    assert e.value.path == str(folder / "render_heat.onnx") and "'heatmaps'" in str(e.value)
+    assert said in str(e.value) and "['B', 'R', 25]" in str(e.value)
+    with pytest.raises(ModelRunError, match="render_heat.onnx") as e:  # the warm-up runs it: refused at load
+        ModelSession.load(SessionConfig(model_dir=str(folder)), graphs)
+    assert "'heatmaps'" in str(e.value)
 
 
 @pytest.mark.parametrize("precision", ["fp16", ""])

@@ -2,6 +2,7 @@
 file (torch parity, refusal of bad files), extremes, and its place in the estimator."""
 from __future__ import annotations
 
+import os
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -383,6 +384,39 @@ def test_a_prior_beside_another_encoder_than_its_own_is_refused(model_with_prior
     with pytest.raises(ModelContractError, match="human.int8.onnx, which .* does not have") as e:
         load_session(cfg)
     assert e.value.key == "ghnerf_skeleton.encoder_file"
+
+
+def test_a_prior_whose_encoder_file_this_user_may_not_read_is_a_load_error_naming_it(model_with_prior, tiny_prior,
+                                                                                    tmp_path):
+    """The encoder the prior names need not be a graph the configuration loads (the keypoint path runs
+    ``human``): hashing it raised a bare PermissionError, a traceback from the daemon's start."""
+    import hashlib
+    import subprocess
+    import sys
+
+    from tests.unprivileged import unprivileged_prefix
+    from training.skeleton_prior import export
+
+    folder = tmp_path / "m"
+    shutil.copytree(model_with_prior, folder)
+    digest = hashlib.sha256((folder / "encoder.onnx").read_bytes()).hexdigest()
+    export(tiny_prior.net, folder / FILE_NAME, {"trained_on": "test", "encoder_file": "encoder.onnx",
+                                                "encoder_sha256": digest})
+    (folder / "encoder.onnx").chmod(0)
+    script = ("import sys\n"
+              "from ghnerf_runtime.config import EstimatorConfig, SessionConfig\n"
+              "from ghnerf_runtime.estimator import load_session\n"
+              "try:\n"
+              "    load_session(EstimatorConfig(session=SessionConfig(model_dir=sys.argv[1], warmup=False)))\n"
+              "except Exception as e:\n"
+              "    print(f'{type(e).__name__}|{e}')\n")
+    repo = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([*unprivileged_prefix(), sys.executable, "-c", script, str(folder)], capture_output=True,
+                          text=True, timeout=120, cwd=repo, env={**os.environ, "PYTHONPATH": str(repo)})
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    kind, message = proc.stdout.strip().split("|", 1)
+    assert kind == "ModelLoadError" and message.startswith(f"{folder / 'encoder.onnx'}: cannot read the encoder file")
+    assert "Permission denied" in message
 
 
 def test_the_prior_replaces_the_single_view_fallback_and_its_graphs(model_with_prior):

@@ -76,6 +76,30 @@ def test_a_corrupt_model_exits_2_naming_it(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize("mode", [0o000, 0o111, 0o444], ids=["none", "enter-only", "list-only"])
+def test_a_model_folder_the_service_user_may_not_read_exits_2_naming_it(tmp_path, mode):
+    """The unit runs as User=ghnerf: a folder it may not read was a PermissionError traceback and exit 1 (which
+    systemd restarts), from --validate-config and from the start alike (list-only passed the check)."""
+    from tests.unprivileged import run_unprivileged
+
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "encoder.onnx").write_bytes(b"\x08\x07not read")
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(models)}}})
+    models.chmod(mode)
+    try:
+        for extra in (["--validate-config"], ["--max-seconds", "30"]):
+            proc = run_unprivileged([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path), *extra],
+                                    timeout=120, cwd=REPO)
+            assert proc.returncode == 2, proc.stderr[-2000:]
+            assert "Traceback" not in proc.stderr
+            assert f"estimator.session.model_dir: {models}: cannot read the model folder: permission denied" \
+                in proc.stderr
+    finally:
+        models.chmod(0o755)
+
+
 def _notes_until(sock: socket.socket, proc: subprocess.Popen, notes: list[dict[str, str]], done, what: str,
                  timeout: float = 120) -> None:
     """Read systemd notifications into ``notes`` until ``done(notes)``; fail naming ``what``."""
