@@ -494,12 +494,48 @@ def _image_args(pred, target, mask) -> tuple[np.ndarray, np.ndarray, np.ndarray]
         raise ShapeError(f"mask must have shape (..., H, W) matching pred (..., H, W[, C]); got mask {m.shape}, "
                          f"pred {p.shape}")
     h, w, c = p.shape[-3:]
+    if h == 0 or w == 0:  # reshape(-1, 0, 0, c) failed with numpy's own message
+        raise ShapeError(f"images must be at least 1x1 pixels, got pred {p.shape}")
     return p.reshape(-1, h, w, c), t.reshape(-1, h, w, c), m.astype(bool).reshape(-1, h, w)
+
+
+#: Slack of the truth's range check, as a share of ``data_range``: float noise and resampling overshoot, not
+#: the factor of 255 between an 8-bit image and a [0, 1] one.
+RANGE_SLACK = 0.01
+
+
+def _check_image_range(pred, target, p: np.ndarray, t: np.ndarray, m: np.ndarray, data_range: float) -> None:
+    """Images that do not live in ``[0, data_range]`` scored silently wrong (a uint8 pair at the default 1.0:
+    20 log10 255 = 48 dB too low; uint8 against [0, 1] floats: anything): refuse them by name.
+
+    * an integer-typed image beside a float one: two ranges, say which;
+    * the truth inside the mask outside ``[0, data_range]`` (give or take :data:`RANGE_SLACK`);
+    * an integer-typed prediction inside the mask beyond ``data_range`` (a float one may overshoot: it is
+      scored as it is).
+
+    ``pred``, ``target``: the arrays as given (their dtypes); ``p``, ``t``, ``m``: :func:`_image_args`'s.
+    """
+    dtypes = {name: np.asarray(a).dtype for name, a in (("pred", pred), ("target", target))}
+    ints = {name: np.issubdtype(d, np.integer) for name, d in dtypes.items()}
+    if ints["pred"] != ints["target"]:
+        raise ValueError(f"pred is {dtypes['pred']} and target {dtypes['target']}: give both images in one type and "
+                         f"range (e.g. uint8 with data_range=255, or both float in [0, 1] with data_range=1.0)")
+    slack = RANGE_SLACK * data_range
+    inside = t[m]
+    inside = inside[np.isfinite(inside)]  # a non-finite truth propagates as NaN, as a non-finite prediction does
+    if inside.size and (inside.min() < -slack or inside.max() > data_range + slack):
+        raise ValueError(f"target values inside the mask span [{inside.min():g}, {inside.max():g}], outside "
+                         f"[0, data_range={data_range:g}]: pass the images' peak as data_range (255 for 8-bit)")
+    top = p[m].max(initial=0.0) if ints["pred"] else 0.0
+    if top > data_range:
+        raise ValueError(f"pred is {dtypes['pred']} with values up to {top:g} inside the mask, beyond "
+                         f"data_range={data_range:g}: pass the images' peak as data_range (255 for 8-bit)")
 
 
 def _check_data_range(data_range) -> None:
     """A peak value of -1 scored as 1 (it is squared) and 0 gave -inf dB and a NaN SSIM: refuse them by name."""
-    if not (isinstance(data_range, (int, float, np.number)) and 0 < data_range < np.inf):
+    # a bool is an int to Python: True scored as a peak of 1
+    if isinstance(data_range, bool) or not (isinstance(data_range, (int, float, np.number)) and 0 < data_range < np.inf):
         raise ValueError(f"data_range must be a positive number (1.0 for [0, 1] images, 255 for 8-bit), "
                          f"got {data_range!r}")
 
@@ -526,6 +562,8 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         target: same shape as ``pred``.
         mask: ``(..., H, W)`` bool, pixels to score.
         data_range: peak value (1.0 for [0, 1] images, 255 for 8-bit); a positive number, else ValueError.
+            The truth inside the mask must lie in ``[0, data_range]`` (1 % slack), an integer-typed prediction
+            too, and an integer image is not scored against a float one: ValueError (:func:`_check_image_range`).
 
     Returns:
         :class:`ImageMetricResult`; ``nan`` (undefined) for images with an empty mask.
@@ -537,6 +575,7 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
     """
     _check_data_range(data_range)
     p, t, m = _image_args(pred, target, mask)
+    _check_image_range(pred, target, p, t, m, data_range)
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))
     sq = ((p - t) ** 2).sum(axis=-1)  # (N, H, W), summed over channels
@@ -581,7 +620,8 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
         pred: ``(..., H, W, C)`` or ``(..., H, W)`` images (the mask shape decides which).
         target: same shape as ``pred``.
         mask: ``(..., H, W)`` bool.
-        data_range: peak value (1.0 for [0, 1] images); a positive number, else ValueError.
+        data_range: peak value (1.0 for [0, 1] images); a positive number, else ValueError; the images'
+            range is checked as for :func:`masked_psnr`.
 
     Returns:
         :class:`ImageMetricResult`; ``nan`` (undefined) for images with an empty mask.
@@ -593,6 +633,7 @@ def masked_ssim(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
     """
     _check_data_range(data_range)
     p, t, m = _image_args(pred, target, mask)
+    _check_image_range(pred, target, p, t, m, data_range)
     batch_shape = np.asarray(mask).shape[:-2]
     counts = m.sum(axis=(1, 2))
     values = np.full(len(p), np.nan)

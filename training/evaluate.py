@@ -60,7 +60,6 @@ if __name__ == "__main__":  # python -m: the arguments are parsed before torch l
 
     raise SystemExit(_cli_main())
 
-import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -79,9 +78,8 @@ from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
-from ghnerf_runtime.metrics import (finite_or_none, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility,
-                                    pck)
-from training.model_card import write_atomic
+from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility, pck
+from training.model_card import strict_json, write_atomic
 
 PCK_ALPHA = 0.2
 
@@ -628,13 +626,16 @@ def prior_estimate(skeleton_prior, heatmaps: np.ndarray, src_P: np.ndarray, mode
 
 
 def evaluate(renderer: Renderer, dataset, limit: int = 0, novel: bool = True, progress: bool = True) -> dict:
-    """Pooled metrics of ``renderer`` over ``dataset`` (``MultiViewDataset``)."""
+    """Pooled metrics of ``renderer`` over ``dataset`` (``MultiViewDataset``); an empty dataset is an
+    :class:`EvalInputError` (its metrics would all be nan)."""
     H, W, s = renderer.height, renderer.width, renderer.heatmap_stride
     grid_h, grid_1 = ray_grid(H, W, s), ray_grid(H, W, 1)
     acc = Accumulator()
     if limit < 0:  # min(-1, len) would evaluate nothing and report empty metrics
         raise ValueError(f"limit must be >= 0 (0: every scene), got {limit}")
     n = min(limit, len(dataset)) if limit else len(dataset)
+    if n == 0:  # every metric would be nan (null in the JSON): an empty split is an input error, not a score
+        raise EvalInputError("the dataset holds no scenes: nothing to evaluate")
     t0 = time.monotonic()
     for i in range(n):
         scene = {k: v.numpy() for k, v in dataset[i].items()}
@@ -679,12 +680,14 @@ def make_renderer(spec: str, threads: int = 2) -> tuple[Renderer, dict]:
 
 
 def open_eval_dataset(data: str, split: str, renderer: Renderer, label: str):
-    """The split as ``renderer`` reads it, refused up front when its resolution is not the model's (it would
-    render a scene first and then fail)."""
+    """The split as ``renderer`` reads it, refused up front when it holds no scene or its resolution is not the
+    model's (it would render a scene first and then fail)."""
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
 
     ds = MultiViewDataset(data, split, TargetConfig(heatmap_stride=renderer.heatmap_stride))
+    if len(ds) == 0:  # scored nothing and wrote "scenes": 0 with every metric null, exit 0
+        raise EvalInputError(f"{data}: split {split!r} holds no scenes: nothing to evaluate")
     if (ds.resolution, ds.resolution) != (renderer.height, renderer.width):
         raise EvalInputError(f"{data}: holds {ds.resolution} px scenes, model {label} takes "
                              f"{renderer.width}x{renderer.height}: evaluate it on a dataset of its resolution")
@@ -740,12 +743,12 @@ def main(argv: list[str] | None = None) -> int:
             print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
             results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
             if args.out:  # each finished model kept, whole, whatever happens to the next
-                write_atomic(args.out, json.dumps(finite_or_none(results), indent=1))
+                write_atomic(args.out, strict_json(results))
     except KeyboardInterrupt:  # Ctrl-C: a line saying what was kept, not a traceback
         done = ", ".join(results["models"]) or "none"
         kept = f"; {args.out} holds them" if args.out and results["models"] else ""
         print(f"ghnerf-eval: stopped (Ctrl-C); models finished: {done}{kept}", file=sys.stderr)
         return 130
-    print(json.dumps(finite_or_none(results), indent=1))
+    print(strict_json(results))
     return 0
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import numbers
 import os
 import platform
 import sys
@@ -75,6 +76,8 @@ def hardware() -> dict[str, Any]:
 
 
 def _fmt(v: Any, digits: int = 3) -> str:
+    if isinstance(v, numbers.Real) and not isinstance(v, numbers.Integral):
+        v = float(v)  # a numpy float32 is no float: its NaN printed as "nan", 0.5 as "0.5"
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "n/a"
     if isinstance(v, float):
@@ -82,10 +85,34 @@ def _fmt(v: Any, digits: int = 3) -> str:
     return str(v)
 
 
+def _json_default(value: Any) -> Any:
+    """A value ``json`` cannot write: numpy scalars as Python numbers (``default=str`` wrote a float32 2.5 as the
+    string ``"2.5"``), arrays as lists (non-finite entries ``None``), anything else (a path) as text."""
+    import numpy as np
+
+    from ghnerf_runtime.metrics import finite_or_none
+
+    if isinstance(value, np.generic):
+        return finite_or_none(value.item())
+    if isinstance(value, np.ndarray):
+        return finite_or_none(value.tolist())
+    return str(value)
+
+
+def strict_json(report: Any, indent: int | None = 1) -> str:
+    """``report`` as strict JSON: every NaN or infinity (a metric with nothing to score, a PSNR of identical
+    images) as ``null``. ``json.dumps`` writes them as bare ``NaN`` / ``Infinity``, which is not JSON: other
+    readers (``jq``, browsers, most languages) refuse the whole file."""
+    from ghnerf_runtime.metrics import finite_or_none
+
+    return json.dumps(finite_or_none(report), indent=indent, default=_json_default, allow_nan=False)
+
+
 def write_card(out_dir: str | Path, card: Mapping[str, Any]) -> tuple[Path, Path]:
-    """Write ``model_card.json`` and ``MODEL_CARD.md`` into ``out_dir``; returns both paths."""
+    """Write ``model_card.json`` (strict JSON: :func:`strict_json`) and ``MODEL_CARD.md`` into ``out_dir``;
+    returns both paths."""
     out_dir = Path(out_dir)
-    jpath = write_atomic(out_dir / "model_card.json", json.dumps(card, indent=1, default=str))
+    jpath = write_atomic(out_dir / "model_card.json", strict_json(card))
     mpath = write_atomic(out_dir / "MODEL_CARD.md", render_markdown(card))
     return jpath, mpath
 
@@ -288,9 +315,11 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     L.append("")
     L.append("## Metrics (held-out split)")
     L.append("")
-    L.append("PCK@0.2 of the neck--mid-hip distance in each source view (2D joints decoded from the rendered "
+    # the reference length as metrics.pck takes it: the fallback sets the threshold of many synthetic views
+    L.append("PCK@0.2 of the neck--mid-hip distance (the diagonal of the torso joints' box where the neck or the "
+             "mid-hip is hidden) in each source view (2D joints decoded from the rendered "
              "heatmaps), MPJPE of the triangulated joints (mm, rig frame; share of the joints with truth it covers, "
-             "those decoded in both views, in brackets), masked PSNR/SSIM of the novel views, "
+             "those decoded in both views, in brackets), masked PSNR (dB) / SSIM of the novel views, "
              "heatmap MSE in the source views. Definitions: `ghnerf_runtime/metrics.py`, `training/evaluate.py`.")
     L.append("")
     L.append("MPJPE gated: the runtime's triangulation (`joints3d.triangulate_joints`: reprojection gate, "
@@ -412,4 +441,4 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     return "\n".join(L)
 
 
-__all__ = ["sha256", "hardware", "write_card", "render_markdown"]
+__all__ = ["sha256", "hardware", "strict_json", "write_card", "render_markdown"]

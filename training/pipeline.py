@@ -1161,7 +1161,7 @@ def kept_painter_sections(cfg: PipelineConfig) -> dict:
 
 
 def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
-    from training.model_card import hardware, sha256, write_card
+    from training.model_card import hardware, sha256, strict_json, write_card
     from training.skeleton_prior import card_summary
 
     data_s = st.stamp("data")
@@ -1170,7 +1170,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         m = json.loads((cfg.out / f"metrics_{v}.json").read_text())
         metrics["models"].update(m["models"])
         metrics.update({k: m[k] for k in ("data", "split", "pck_alpha", "pck_reference")})
-    write_atomic(cfg.out / "metrics.json", json.dumps(metrics, indent=1))
+    write_atomic(cfg.out / "metrics.json", strict_json(metrics))  # a NaN read back from a variant's file: null
     files = {}
     for variant in VARIANTS:
         for p in sorted((cfg.out / variant).glob("*")):

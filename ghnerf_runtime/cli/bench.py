@@ -301,10 +301,16 @@ def _print_row(row: dict) -> None:
         print(f"      2D error of the visible joints decoded: median {e2['median']:.1f} px, p90 {e2['p90']:.1f} px "
               f"(original image pixels)", flush=True)
     if sw := acc.get("left_right_swaps"):
+        views = enumerate(zip(sw["by_view"], sw["by_view_evaluated"]))
         print("      left/right pairs swapped in 2D: " + ", ".join(
-            f"view {c} {100 * f:.1f} %" for c, f in enumerate(sw["by_view"]))
-            + f" of the pairs decoded there; in every view alike {100 * sw['all_views_frac']:.2f} % "
+            f"view {c} {_percent(f, 1)} ({n} pairs)" for c, (f, n) in views)
+            + f" of the pairs decoded there; in every view alike {_percent(sw['all_views_frac'], 2)} "
               f"({sw['all_views_evaluated']} pairs)", flush=True)
+
+
+def _percent(share: float, digits: int) -> str:
+    """``"12.5 %"``; ``"n/a"`` for the nan share of no pairs."""
+    return f"{100 * share:.{digits}f} %" if np.isfinite(share) else "n/a"
 
 
 def _on_off_list(text: str) -> list[bool]:

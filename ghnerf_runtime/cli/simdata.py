@@ -185,9 +185,11 @@ class Accuracy:
         r = left_right_swaps(p2.reshape(*shape, -1, 2), t2.reshape(*shape, -1, 2), v2.reshape(*shape, -1),
                              pred_valid=pv2.reshape(*shape, -1))
         every = r.evaluated.all(axis=1)
-        per_view = [float(r.swapped[:, c].sum() / max(r.evaluated[:, c].sum(), 1)) for c in range(views)]
+        # nan, not 0, where no pair was evaluated (max(n, 1) read as "never swapped"); the counts say why
+        per_view = [_share(r.swapped[:, c].sum(), r.evaluated[:, c].sum()) for c in range(views)]
         return {"frac": r.value, "by_view": per_view, "evaluated": r.num_evaluated,
-                "all_views_frac": float((r.swapped.all(axis=1) & every).sum() / max(every.sum(), 1)),
+                "by_view_evaluated": [int(r.evaluated[:, c].sum()) for c in range(views)],
+                "all_views_frac": _share((r.swapped.all(axis=1) & every).sum(), every.sum()),
                 "all_views_evaluated": int(every.sum())}
 
     def summary(self) -> dict:
@@ -219,6 +221,11 @@ class Accuracy:
                 out[f"mpjpe_mm_{name}"] = m.value
                 out[f"found_3d_frac_{name}"] = float(pv3[sel].mean())
         return out
+
+
+def _share(count, of) -> float:
+    """``count / of``, nan when ``of`` is 0: a share of nothing is undefined, not 0."""
+    return float(count / of) if of else float("nan")
 
 
 def visibility_summary(result, visible: np.ndarray, found: np.ndarray,

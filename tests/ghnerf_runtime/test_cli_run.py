@@ -219,7 +219,9 @@ def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir,
         assert sum(c["share"] for c in by.values()) == pytest.approx(1.0)
         assert sum(c["joints"] for c in by.values()) == row["accuracy"]["mpjpe_evaluated"]
         swaps = row["accuracy"]["left_right_swaps"]
-        assert len(swaps["by_view"]) == 2 and all(0.0 <= f <= 1.0 for f in swaps["by_view"])
+        assert len(swaps["by_view"]) == 2 and len(swaps["by_view_evaluated"]) == 2
+        for f, n in zip(swaps["by_view"], swaps["by_view_evaluated"]):  # null (nan) only for a view of no pairs
+            assert (f is None) if n == 0 else 0.0 <= f <= 1.0
         assert "jitter_mm" in row["accuracy"] and row["smoothing"] is True  # the config's default
 
 
@@ -244,10 +246,38 @@ def test_bench_accuracy_counts_left_right_swaps_per_view():
     acc.add_truth(result, np.zeros((NUM_JOINTS, 3)), truth_2d, np.ones((2, NUM_JOINTS), bool))
     sw = acc.summary()["left_right_swaps"]
     assert sw["by_view"] == [0.0, pytest.approx(1 / 11)]  # 11 pairs, all evaluated in each view
+    assert sw["by_view_evaluated"] == [11, 11]
     assert sw["all_views_frac"] == 0.0 and sw["all_views_evaluated"] == 11
     # the 2D error: 48 of the 50 visible joints exact, the two exchanged shoulders 120 px off
     e2 = acc.summary()["error_2d_px"]
     assert e2["median"] == 0.0 and e2["p90"] == 0.0
+
+
+def test_bench_swap_shares_of_no_pairs_are_nan_not_zero(capsys):
+    """A view with no left/right pair decoded (nothing found there) reported 0.0 % swapped, as if every pair
+    were right: the share of nothing is nan (null in --json, n/a printed), with the count beside it."""
+    from types import SimpleNamespace
+
+    from ghnerf_runtime.body25 import JOINT_INDEX, NUM_JOINTS
+    from ghnerf_runtime.cli import bench
+    from ghnerf_runtime.cli.simdata import Accuracy
+
+    truth_2d = np.random.default_rng(1).uniform(100, 400, (2, NUM_JOINTS, 2))
+    truth_2d[:, JOINT_INDEX["MidHip"]] = truth_2d[:, JOINT_INDEX["Neck"]] + [0.0, 150.0]
+    none, every = np.zeros(NUM_JOINTS, bool), np.ones(NUM_JOINTS, bool)
+    result = SimpleNamespace(joints_2d={"a": truth_2d[0], "b": truth_2d[1]}, missing_2d={"a": none, "b": every},
+                             joints_3d=np.zeros((NUM_JOINTS, 3)), missing=none,
+                             confidence=np.ones(NUM_JOINTS, np.float32), tracked=True)
+    acc = Accuracy()
+    acc.add_truth(result, np.zeros((NUM_JOINTS, 3)), truth_2d, np.ones((2, NUM_JOINTS), bool))
+    sw = acc.summary()["left_right_swaps"]
+    assert sw["by_view"][0] == 0.0 and math.isnan(sw["by_view"][1]) and sw["by_view_evaluated"] == [11, 0]
+    assert math.isnan(sw["all_views_frac"]) and sw["all_views_evaluated"] == 0
+    bench._print_row({"precision": "fp32", "heatmaps": "encoder", "method": "triangulate", "mode": "keypoints",
+                      "pairs_per_s": 1.0, "load_average": 0.0, "accuracy": {"left_right_swaps": sw},
+                      **{name: {"median": 1.0, "p99": 1.0} for name in bench.STAGE_GROUPS}})
+    line = [s for s in capsys.readouterr().out.splitlines() if "swapped" in s][0]
+    assert "view 0 0.0 % (11 pairs), view 1 n/a (0 pairs)" in line and "in every view alike n/a (0 pairs)" in line
 
 
 def test_bench_accuracy_jitter_chains_consecutive_frames_of_one_stream():

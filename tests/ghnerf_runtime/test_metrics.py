@@ -317,12 +317,48 @@ def test_image_metric_shape_errors():
 
 
 @pytest.mark.parametrize("metric", [masked_psnr, masked_ssim])
-@pytest.mark.parametrize("bad", [-1.0, 0.0, np.nan, np.inf, "255"])
+@pytest.mark.parametrize("bad", [-1.0, 0.0, np.nan, np.inf, "255", True])
 def test_image_metrics_refuse_a_data_range_that_is_not_a_positive_number(metric, bad):
     """-1 scored as 1 (squared), 0 gave -inf dB and a NaN SSIM."""
     a, m = np.zeros((4, 4)), np.ones((4, 4), bool)
     with pytest.raises(ValueError, match="data_range"):
         metric(a, a + 0.1, m, data_range=bad)
+
+
+@pytest.mark.parametrize("metric", [masked_psnr, masked_ssim])
+def test_image_metrics_refuse_images_outside_the_data_range(metric):
+    """An 8-bit pair at the default data_range 1.0 scored -20 dB (PSNR) and a uint8 prediction against a [0, 1]
+    truth anything at all, silently; the same pair with data_range 255 is scored."""
+    m = np.ones((16, 16), bool)
+    a8, b8 = np.full((16, 16, 3), 200, np.uint8), np.full((16, 16, 3), 190, np.uint8)
+    with pytest.raises(ValueError, match=r"target values inside the mask span \[190, 190\].*data_range=1"):
+        metric(a8, b8, m)
+    with pytest.raises(ValueError, match="pred is uint8 and target float64"):
+        metric(a8, b8 / 255.0, m)
+    with pytest.raises(ValueError, match="pred is float64 and target uint8"):
+        metric(a8 / 255.0, b8, m, data_range=255)
+    with pytest.raises(ValueError, match="pred is uint16 with values up to 300"):
+        metric(a8.astype(np.uint16) + 100, b8.astype(np.uint16), m, data_range=255)
+    assert metric(a8, b8, m, data_range=255).value == pytest.approx(metric(a8 / 255.0, b8 / 255.0, m).value)
+    # only the mask counts; a float prediction may overshoot (scored as it is), the truth a hair (float noise)
+    outside = np.zeros((16, 16), bool)
+    outside[4:8, 4:8] = True
+    wild = np.where(outside[..., None], b8 / 255.0, 7.0)
+    assert math.isfinite(metric(b8 / 255.0 + 0.5, wild, outside).value)
+    assert math.isfinite(metric(b8 / 255.0, b8 / 255.0 * 1.005, m).value)
+    with pytest.raises(ShapeError, match="at least 1x1"):
+        metric(np.zeros((0, 0)), np.zeros((0, 0)), np.ones((0, 0), bool))
+
+
+def test_image_metrics_on_images_smaller_than_the_ssim_window():
+    """1x1 and 3x3 images: the window is renormalised over the pixels there are, never NaN."""
+    one = masked_ssim(np.full((1, 1), 0.5), np.full((1, 1), 0.6), np.ones((1, 1), bool))
+    c1 = 0.01 ** 2
+    assert one.value == pytest.approx((2 * 0.5 * 0.6 + c1) / (0.25 + 0.36 + c1))  # flat: luminance only
+    rng = np.random.default_rng(6)
+    x = rng.random((3, 3, 3))
+    assert masked_ssim(x, x, np.ones((3, 3), bool)).value == pytest.approx(1.0)
+    assert masked_psnr(x, x, np.ones((3, 3), bool)).value == math.inf
 
 
 # ---------------------------------------------------------------------- heatmaps

@@ -465,6 +465,26 @@ def test_the_cli_names_bad_inputs_in_one_line_before_rendering(data64, tiny_pt, 
     assert rendered == []  # every spec checked before the first is evaluated
 
 
+def test_an_empty_split_is_refused_not_scored_as_null(data64, tiny_pt, tmp_path, capsys, monkeypatch):
+    """A split of no scenes was "evaluated": exit 0, "scenes": 0 and every metric null (nan)."""
+    import json
+    import shutil
+
+    import training.evaluate as ev
+
+    empty = tmp_path / "empty"
+    shutil.copytree(data64, empty)
+    manifest = json.loads((empty / "dataset.json").read_text())
+    manifest["splits"]["val"]["count"] = 0
+    (empty / "dataset.json").write_text(json.dumps(manifest))
+    out = tmp_path / "metrics.json"
+    _one_line_exit_2(capsys, ["--data", str(empty), "--split", "val", "--model", f"m={tiny_pt}", "--out", str(out)],
+                     f"{empty}: split 'val' holds no scenes: nothing to evaluate")
+    assert not out.exists()
+    with pytest.raises(ev.EvalInputError, match="no scenes"):  # the library call too
+        evaluate(_Oracle([]), [], progress=False)
+
+
 def test_the_cli_keeps_each_finished_model_when_a_later_one_fails(data64, tiny_pt, tmp_path, monkeypatch):
     import json
 

@@ -350,3 +350,50 @@ def test_the_export_cli_stages_its_graphs_and_moves_them_in_only_after_the_parit
     assert (folder / "volume.int8.onnx").read_bytes() == b"volume int8"  # its fp32 graph is unchanged
     assert not (cfg.out / "model_card.json").exists() and (cfg.out / "model_card.stale.json").is_file()
     assert "set aside as model_card.stale.json" in caplog.text
+
+
+# ----------------------------------------------------------------------------------------- strict JSON
+def _strict(text: str):
+    """``json.loads`` that refuses the bare NaN / Infinity Python writes and other readers refuse."""
+    def refuse(word):
+        raise ValueError(f"not JSON: {word}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_the_card_and_metrics_json_are_strict_json(tmp_path):
+    """``write_card`` wrote a NaN or infinite metric as bare ``NaN`` / ``Infinity`` (``jq`` and browsers refuse the
+    file) and a numpy float32 as a string (``default=str``); the card stage's ``metrics.json`` the same."""
+    import numpy as np
+
+    pytest.importorskip("torch")
+    card = {"metrics": {"m": {"psnr_masked": float("nan"), "best_psnr": float("inf"), "ssim_masked": np.float32(0.5),
+                              "pck@0.2": np.float32("nan"), "scenes": np.int64(2), "by_view": np.array([0.5, np.nan]),
+                              "kind": "onnx-int8"}},
+            "novel_painter": {"ghnerf": {"held_out": {"all": {"n": 3, "shown": float("-inf"), "fill:learnt": 21.5}}}}}
+    j, m = write_card(tmp_path, card)
+    got = _strict(j.read_text())["metrics"]["m"]
+    assert got == {"psnr_masked": None, "best_psnr": None, "ssim_masked": 0.5, "pck@0.2": None, "scenes": 2,
+                   "by_view": [0.5, None], "kind": "onnx-int8"}
+    # the markdown: n/a, numpy floats too (a float32 NaN printed "nan", 0.5 "0.5")
+    assert "| m | onnx-int8 | n/a | n/a | n/a | n/a | 0.500 |" in m.read_text()
+
+    cfg = PipelineConfig(out=tmp_path / "models", data=tmp_path / "data", quick=True)
+    _card_inputs(cfg)
+    # a variant's metrics file written by an older ghnerf-eval (json.dumps' default: bare NaN)
+    (cfg.out / "metrics_baseline.json").write_text(json.dumps({
+        "models": {"baseline_int8": {"kind": "onnx-int8", "scenes": 2, "pck@0.2": 0.5, "psnr_masked": float("nan")}},
+        "data": str(cfg.data), "split": "val", "pck_alpha": 0.2, "pck_reference": "bbox"}))
+    pipeline.stage_card(cfg, Stages(cfg.out, ()))
+    assert _strict((cfg.out / "metrics.json").read_text())["models"]["baseline_int8"]["psnr_masked"] is None
+    assert _strict((cfg.out / "model_card.json").read_text())["metrics"]["baseline_int8"]["psnr_masked"] is None
+
+
+def test_the_card_names_the_pck_fallback_reference_and_the_psnr_unit():
+    """The card said PCK@0.2 "of the neck--mid-hip distance" only; ``metrics.pck`` takes the torso box's diagonal
+    where either is hidden (docs/metrics.md; the design notes ask to write down which)."""
+    from training.model_card import render_markdown
+
+    md = render_markdown({"metrics": {"m": {"kind": "onnx-int8", "pck@0.2": 0.5}}})
+    assert "(the diagonal of the torso joints' box where the neck or the mid-hip is hidden)" in md
+    assert "masked PSNR (dB) / SSIM" in md
