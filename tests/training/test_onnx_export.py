@@ -113,3 +113,12 @@ def test_an_export_that_differs_from_its_contract_is_refused_at_export(tmp_path,
     with pytest.raises(ModelContractError, match=rf"^{re.escape(str(path))}: {key}: graph 'encoder' {what}") as e:
         export_mod.export_graph(model, "encoder", path)
     assert e.value.key == key and e.value.path == str(path)
+
+
+def test_the_export_is_byte_identical_for_the_same_weights(exported, tmp_path):
+    """The same model exports to the same bytes (node names, initializers, the contract metadata: no time or path
+    stamped), so a stage stamp's sha256 or drop_stale_int8's comparison tells a changed graph from a re-export."""
+    model, paths = exported
+    again = export_all(model, tmp_path, graphs=("encoder", "render_heat"), inputs=example_inputs(model, targets=2))
+    for graph, path in again.items():
+        assert path.read_bytes() == paths[graph].read_bytes(), graph
