@@ -28,18 +28,27 @@ def _npz(path, **arrays):
     return path
 
 
-GOOD = np.random.default_rng(0).random((2, 2, 3, 64, 64)).astype(np.float32)
+GOOD = np.random.default_rng(0).random((4, 2, 3, 64, 64)).astype(np.float32)  # MIN_FRAMES pairs
 
 
 @pytest.mark.parametrize("arrays, what", [
     ({"images": (GOOD * 255).astype(np.uint8)}, r"'images' is uint8; the model wants float pixels in \[0, 1\]"),
     ({"images": GOOD * 255}, r"'images' values span \[0\.\d+, 254\.\d+\]; the model wants \[0, 1\]"),
-    ({"images": GOOD.transpose(0, 1, 3, 4, 2)}, r"'images' has shape \[2, 2, 64, 64, 3\]; the model wants "
+    ({"images": GOOD.transpose(0, 1, 3, 4, 2)}, r"'images' has shape \[4, 2, 64, 64, 3\]; the model wants "
                                                 r"\(F, 2, 3, 64, 64\)"),
     ({"images": np.zeros((2, 2, 3, 128, 128), np.float32)}, r"'images' has shape \[2, 2, 3, 128, 128\].* at the contract resolution 64x64"),
     ({"images": np.zeros((0, 2, 3, 64, 64), np.float32)}, r"'images' has shape \[0, 2, 3, 64, 64\]"),
     ({"images": np.where(GOOD > 0.5, np.nan, GOOD)}, r"'images' holds NaN or infinite values"),
     ({"frames": GOOD}, r"no 'images' array \(it holds \['frames'\]\)"),
+    # too few pairs: MinMax ranges of one scene (one frame was accepted)
+    ({"images": GOOD[:1]}, r"'images' holds 1 frame pair\(s\); int8 calibration wants at least 4"),
+    ({"images": GOOD[:3]}, r"'images' holds 3 frame pair\(s\); int8 calibration wants at least 4"),
+    # all black (a lens cap, a zero-filled buffer): accepted before, every range then fixed at one value
+    ({"images": np.zeros_like(GOOD)}, r"'images' frame 0 source 0 is uniform \(every pixel 0; 8 of the 8 views "
+                                      r"are\): a blank capture, not a scene"),
+    # one blank view among real ones (a camera that had not started) is named
+    ({"images": np.concatenate([GOOD[:2], np.ones_like(GOOD[:1]) * [[[[[1.0]]], [[[0.5]]]]], GOOD[3:]])},
+     r"'images' frame 2 source 0 is uniform \(every pixel 1; 2 of the 8 views are\)"),
 ])
 def test_frames_unlike_the_runtime_input_are_refused_naming_the_file(tmp_path, contract, arrays, what):
     path = _npz(tmp_path / "calib.npz", **arrays)
@@ -56,7 +65,7 @@ def test_an_unreadable_file_is_named(tmp_path, contract):
 
 def test_runtime_like_frames_load(tmp_path, contract):
     frames = load_calibration_npz(_npz(tmp_path / "calib.npz", images=GOOD.astype(np.float64)), contract)
-    assert len(frames) == 2 and all(f.dtype == np.float32 and f.shape == (2, 3, 64, 64) for f in frames)
+    assert len(frames) == 4 and all(f.dtype == np.float32 and f.shape == (2, 3, 64, 64) for f in frames)
     np.testing.assert_array_equal(frames[1], GOOD[1])
 
 

@@ -128,3 +128,12 @@ def test_the_lowest_opset_the_cli_takes_exports_and_the_one_below_does_not(tmp_p
     assert {o.domain: o.version for o in onnx.load(str(path)).opset_import}[""] == MIN_OPSET
     with pytest.raises(Exception, match="grid_sampler"):
         export_graph(model, "volume", tmp_path / "below.onnx", ex, opset=MIN_OPSET - 1)
+
+
+def test_the_export_is_byte_identical_for_the_same_weights(exported, tmp_path):
+    """The same model exports to the same bytes (node names, initializers, the contract metadata: no time or path
+    stamped), so a stage stamp's sha256 or drop_stale_int8's comparison tells a changed graph from a re-export."""
+    model, paths = exported
+    again = export_all(model, tmp_path, graphs=("encoder", "render_heat"), inputs=example_inputs(model, targets=2))
+    for graph, path in again.items():
+        assert path.read_bytes() == paths[graph].read_bytes(), graph

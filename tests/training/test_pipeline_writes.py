@@ -165,7 +165,8 @@ def test_a_failed_int8_parity_leaves_the_int8_graphs_as_they_were(tmp_path, monk
         return paths
 
     def int8_vs_fp32(fp32, int8, contract, inputs):
-        return {"pipeline": {"heatmaps": {"max_abs": got["heat"]}, "depth_mean_abs_m": 0.0}}
+        return {"graphs": {g: {"out": {"max_abs": 0.0, "mean_abs": 0.0, "ref_max": 1.0}} for g in int8},
+                "pipeline": {"heatmaps": {"max_abs": got["heat"]}, "depth_mean_abs_m": 0.0}}
 
     monkeypatch.setattr(train, "load_model", lambda ckpt: (_Model(), {"step": 6}))
     monkeypatch.setattr(torch_dataset, "MultiViewDataset", lambda *a: [{"scene": 0}])

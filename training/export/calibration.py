@@ -19,6 +19,11 @@ from ghnerf_runtime.contract import ModelContract
 
 #: The array of the npz file that holds the frames.
 KEY = "images"
+#: Fewest frame pairs a file may hold. Static int8 fixes every activation's range at the extremes the calibration
+#: frames reach, so the ranges of one or two pairs are one scene's, and a device's other scenes clip against them;
+#: nothing after the export would say so but the int8 parity check on other images. A floor, not a measured
+#: optimum: ``make model`` calibrates on 16 training scenes, ``python -m training.export`` on 8 random frames.
+MIN_FRAMES = 4
 
 
 class CalibrationDataError(ValueError):
@@ -35,8 +40,9 @@ def load_calibration_npz(path: str | Path, contract: ModelContract) -> list[np.n
     one float32 ``(S, 3, H, W)`` array each.
 
     Raises:
-        CalibrationDataError: an unreadable file, no ``images`` array, another shape or size, integer or
-            non-finite pixels, values outside the contract's range.
+        CalibrationDataError: an unreadable file, no ``images`` array, another shape or size, fewer than
+            :data:`MIN_FRAMES` frames, integer or non-finite pixels, values outside the contract's range, a
+            uniform (blank) view.
     """
     path = Path(path)
     try:
@@ -53,6 +59,9 @@ def load_calibration_npz(path: str | Path, contract: ModelContract) -> list[np.n
     if images.ndim != 5 or images.shape[1:] != (S, 3, H, W) or images.shape[0] < 1:
         raise CalibrationDataError(path, f"{KEY!r} has shape {list(images.shape)}; the model wants {want}: "
                                          f"F frame pairs, channels first, at the contract resolution {W}x{H}")
+    if images.shape[0] < MIN_FRAMES:
+        raise CalibrationDataError(path, f"{KEY!r} holds {images.shape[0]} frame pair(s); int8 calibration wants at "
+                                         f"least {MIN_FRAMES} (its ranges would be one scene's)")
     lo, hi = (float(v) for v in contract.normalisation.value_range)
     if not np.issubdtype(images.dtype, np.floating):
         raise CalibrationDataError(path, f"{KEY!r} is {images.dtype}; the model wants float pixels in [{lo:g}, "
@@ -63,7 +72,17 @@ def load_calibration_npz(path: str | Path, contract: ModelContract) -> list[np.n
     if vmin < lo or vmax > hi:
         raise CalibrationDataError(path, f"{KEY!r} values span [{vmin:g}, {vmax:g}]; the model wants [{lo:g}, "
                                          f"{hi:g}] (uint8 / 255, as the runtime feeds it)")
+    # a uniform view (all black: a lens cap, a camera not started, a zero-filled buffer) is a capture fault, not a
+    # scene: a file of them fixes every range at one value and the int8 graphs clip every real frame; one among
+    # real frames says the file is not what it was meant to be
+    flat = images.reshape(images.shape[0], S, -1)
+    uniform = np.argwhere(flat.max(axis=2) == flat.min(axis=2))
+    if len(uniform):
+        f, s = (int(v) for v in uniform[0])
+        raise CalibrationDataError(path, f"{KEY!r} frame {f} source {s} is uniform (every pixel "
+                                         f"{float(images[f, s].flat[0]):g}; {len(uniform)} of the {images.shape[0] * S} "
+                                         f"views are): a blank capture, not a scene")
     return [np.ascontiguousarray(f, dtype=np.float32) for f in images]
 
 
-__all__ = ["CalibrationDataError", "KEY", "load_calibration_npz"]
+__all__ = ["CalibrationDataError", "KEY", "MIN_FRAMES", "load_calibration_npz"]

@@ -5,6 +5,7 @@ into a model card.
 """
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Mapping
@@ -162,8 +163,18 @@ INT8_DEPTH_MEAN_ABS_M = 0.1
 INT8_RGB_MAX_ABS = 0.2
 INT8_DENSITY_MEAN_ABS = 0.1
 #: ``(graph, output, statistic, bound)`` of the int8 outputs :func:`check_int8_parity` bounds besides the keypoint
-#: path: the novel view's colour and depth, the volumetric heatmaps and density.
+#: path: the novel view's colour and depth, the volumetric heatmaps and density, and the rendered graphs' own outputs.
+#: ``render`` and ``render_heat`` run the same heads as ``render_rgb`` and the keypoint pipeline, and take the same
+#: bounds on their own outputs: without them a ``--graphs render_heat`` export (no pipeline to run) or ``render``
+#: went unchecked. The shipped models (``parity.<variant>.graphs`` in models/model_card.json, written by
+#: ``make model``): rgb max 0.047 (ghnerf) / 0.043 (baseline), heatmaps max 0.070 / 0.10, depth 1.3 / 2.3 cm on
+#: average, the same figures in both graphs.
 INT8_OUTPUT_BOUNDS = (
+    ("render", "rgb", "max_abs", INT8_RGB_MAX_ABS),
+    ("render", "heatmaps", "max_abs", INT8_HEATMAP_MAX_ABS),
+    ("render", "depth", "mean_abs", INT8_DEPTH_MEAN_ABS_M),
+    ("render_heat", "heatmaps", "max_abs", INT8_HEATMAP_MAX_ABS),
+    ("render_heat", "depth", "mean_abs", INT8_DEPTH_MEAN_ABS_M),
     ("render_rgb", "rgb", "max_abs", INT8_RGB_MAX_ABS),
     ("render_rgb", "depth", "mean_abs", INT8_DEPTH_MEAN_ABS_M),
     ("query", "joint_heat", "max_abs", INT8_HEATMAP_MAX_ABS),
@@ -175,9 +186,20 @@ class ParityError(RuntimeError):
     """An exported or quantized graph does not compute what it should."""
 
 
+def _compared_something(report: Mapping, what: str, check: str) -> None:
+    """Raise :class:`ParityError` when ``report`` (graph -> output -> figures) holds no graph, or a graph no output:
+    every bound below is a test of the figures present, so an empty report would pass."""
+    if not report:
+        raise ParityError(f"{what}{check}: no graph was compared")
+    if empty := [g for g, outputs in report.items() if not outputs]:
+        raise ParityError(f"{what}{check}: no output of {', '.join(empty)} was compared")
+
+
 def check_fp32_parity(report: Mapping[str, Mapping[str, Mapping[str, float]]], what: str = "") -> None:
     """Raise :class:`ParityError` naming the graph and output whose onnxruntime result is off torch's by
-    more than :data:`FP32_MAX_REL` of ``max(|ref|, 1)`` (``report``: :func:`torch_vs_ort`)."""
+    more than :data:`FP32_MAX_REL` of ``max(|ref|, 1)`` (``report``: :func:`torch_vs_ort`), or when it compared
+    no graph or no output (a check of nothing must not pass)."""
+    _compared_something(report, what, "fp32 parity")
     for graph, outputs in report.items():
         for name, st in outputs.items():
             if not st["max_abs"] <= FP32_MAX_REL * max(st["ref_max"], 1.0):
@@ -188,9 +210,17 @@ def check_fp32_parity(report: Mapping[str, Mapping[str, Mapping[str, float]]], w
 def check_int8_parity(report: Mapping, what: str = "") -> None:
     """Raise :class:`ParityError` when the int8 keypoint pipeline (the rendered one, and the encoder's own
     heatmaps), the novel view or the volumetric heatmaps (:data:`INT8_OUTPUT_BOUNDS`) stray from fp32 beyond the
-    bounds above (``report``: :func:`int8_vs_fp32`)."""
+    bounds above, when any output compared holds NaN or infinite values (bounded or not), or when nothing was
+    compared (``report``: :func:`int8_vs_fp32`)."""
     graphs = report.get("graphs") or {}
+    _compared_something(graphs, what, "int8 parity")
     for graph, outputs in graphs.items():
+        for name, st in outputs.items():
+            # NaN compares False with every bound, and most outputs have no bound of their own: a NaN or infinite
+            # output on either side is refused here, for every output (``_stats`` makes it a NaN or inf max)
+            if not math.isfinite(st["max_abs"]):
+                raise ParityError(f"{what}{graph}.int8.onnx: its {name!r} differs from fp32 by {st['max_abs']:.3g} "
+                                  "(NaN or infinite values): the calibration or the quantization is wrong")
         # the encoder's own heatmaps (``encoder``, ``human``): the runtime's default 2D joints read them
         st = outputs.get("encoder_heatmaps")
         if st is not None and not st["max_abs"] <= INT8_HEATMAP_MAX_ABS:

@@ -6,6 +6,11 @@ new graphs in also drops what no longer describes them: the ``<graph>.int8.onnx`
 graph (the runtime's ``auto`` precision would load it beside the new graphs as one model), and a model card (with
 its metrics) whose recorded sha256 no longer match the folder's files; the card is set aside as
 ``model_card.stale.json`` (the pipeline's card stage writes a new one and reads the painter's section from it).
+
+The move itself is one ``os.replace`` per file, so it cannot be one step; what keeps a folder from holding some new
+graphs beside old ones (same contract, other weights: the runtime would load them as one model) is that a Ctrl-C
+or SIGTERM during it is held until the last file is in, and that a move cut short by a crash is finished by the
+next :func:`staging_dir` of the folder (the staging folder lists what it was moving, :data:`MOVING`).
 """
 from __future__ import annotations
 
@@ -13,6 +18,9 @@ import json
 import logging
 import os
 import shutil
+import signal
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable, Mapping
 
@@ -29,9 +37,16 @@ STALE_CARD = "model_card.stale.json"
 _CARD_COMPANIONS = ("MODEL_CARD.md", "metrics.json")
 
 
+#: Written into the staging folder before its files move into the model folder: their names (JSON). Found by the
+#: next :func:`staging_dir`, it means a move was cut short (a crash, a kill), and the files still staged go in.
+MOVING = "moving.json"
+
+
 def staging_dir(folder: Path) -> Path:
-    """An empty ``<folder>.staging`` (a failed attempt's files, kept for inspection, go now)."""
+    """An empty ``<folder>.staging`` (a failed attempt's files, kept for inspection, go now; a move into ``folder``
+    cut short is finished first, :func:`finish_interrupted_move`)."""
     staging = folder.with_name(folder.name + STAGING_SUFFIX)
+    finish_interrupted_move(staging, folder)
     if staging.exists():
         log.info("removing %s (the rejected files of an earlier attempt)", staging)
         shutil.rmtree(staging)
@@ -73,12 +88,61 @@ def move_into(staging: Path, folder: Path, files: Iterable[Path], removed: Itera
     files = list(files)
     folder.mkdir(parents=True, exist_ok=True)
     set_aside_stale_cards(folder, {f.name: sha256(f) for f in files}, [p.name for p in removed])
+    # the list first (whole: a temporary file, then os.replace), so a crash among the moves below is finished by the
+    # next staging_dir; the moves themselves with Ctrl-C held, so one cannot leave half the files in
+    marker = staging / MOVING
+    tmp = marker.with_name(MOVING + ".tmp")
+    tmp.write_text(json.dumps({"folder": str(folder), "files": [f.name for f in files]}))
+    os.replace(tmp, marker)
     moved = []
-    for f in files:
-        os.replace(f, folder / f.name)
-        moved.append(folder / f.name)
+    with _signals_held():
+        for f in files:
+            os.replace(f, folder / f.name)
+            moved.append(folder / f.name)
+        marker.unlink()
     shutil.rmtree(staging)
     return moved
+
+
+def finish_interrupted_move(staging: Path, folder: Path) -> list[Path]:
+    """Move into ``folder`` the files a cut-short :func:`move_into` left in ``staging`` (its :data:`MOVING` list
+    names them), so the folder holds the new set whole, not some new graphs beside old ones; returns them (none
+    when no move was cut short)."""
+    marker = staging / MOVING
+    try:
+        names = json.loads(marker.read_text())["files"]
+    except FileNotFoundError:
+        return []
+    except (OSError, ValueError, KeyError, TypeError) as e:  # the list is written whole: this is not ours to guess
+        raise RuntimeError(f"{marker}: cannot read the list of a cut-short move into {folder} ({e}); move the "
+                           f"files in {staging} into {folder} by hand, or remove {staging} and export again") from e
+    left = [staging / n for n in names if (staging / n).is_file()]
+    log.warning("%s: a move into %s was cut short; moving its %d remaining file(s) in now (%s)", staging, folder,
+                len(left), ", ".join(p.name for p in left) or "none")
+    with _signals_held():
+        for f in left:
+            os.replace(f, folder / f.name)
+        marker.unlink()
+    return [folder / f.name for f in left]
+
+
+@contextmanager
+def _signals_held():
+    """Hold SIGINT and SIGTERM until the block ends, then deliver them to the handlers they would have met (a
+    Ctrl-C still stops the program, after the block). Python runs signal handlers in the main thread only, so
+    elsewhere nothing is held."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+    old = {s: signal.signal(s, lambda n, _frame: got.append(n)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in old.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)  # None: one set outside Python
+        for s in dict.fromkeys(got):
+            signal.raise_signal(s)
 
 
 def set_aside_stale_cards(folder: Path, incoming: Mapping[str, str], gone: Iterable[str] = ()) -> list[Path]:
@@ -129,5 +193,6 @@ def drop_stale_leftovers(card_dir: Path) -> None:
         (card_dir / name).unlink(missing_ok=True)
 
 
-__all__ = ["STAGING_SUFFIX", "STALE_CARD", "staging_dir", "rejected", "drop_stale_int8", "move_into",
+__all__ = ["STAGING_SUFFIX", "STALE_CARD", "MOVING", "staging_dir", "rejected", "drop_stale_int8", "move_into",
+           "finish_interrupted_move",
            "set_aside_stale_cards", "drop_stale_leftovers"]
