@@ -20,6 +20,7 @@ from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
+from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
@@ -47,6 +48,7 @@ def _doc(name: str) -> str:
     ("docs/daemon.md", f"at most {LATE_WINDOW} behind the newest (`LATE_WINDOW`)"),
     ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),
     ("docs/rig-file.md", f"files over {MAX_RIG_FILE_BYTES / (1 << 20):g} MiB (`MAX_RIG_FILE_BYTES`"),
+    ("docs/protocol.md", f"`facing` (`{FACINGS[0]}`, the default, or `{FACINGS[1]}`)"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

@@ -105,6 +105,15 @@ def positive_float(raw: str) -> float:
     return v
 
 
+def one_of(*choices: str) -> Callable[[str], str]:
+    """A converter for a word from ``choices``, exactly as written there (lower case)."""
+    def convert(raw: str) -> str:
+        if raw not in choices:
+            raise ValueError(f"must be one of {list(choices)}")
+        return raw
+    return convert
+
+
 def boolean(raw: str) -> bool:
     low = raw.strip().lower()
     if low in ("1", "true", "yes", "on"):

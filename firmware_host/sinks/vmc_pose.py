@@ -21,7 +21,8 @@ Rotations are relative to a T-pose facing Unity +z (a VRM "normalised" avatar,
 whose bones all have identity rotation in that pose), so each bone has a rest
 direction: arms point to -x (left) / +x (right), spine and neck +y, legs -y,
 feet +z. A person facing the cameras faces rig -z, so their Hips carry a 180
-degree yaw.
+degree yaw (unless the vmc:// ``facing=camera`` option turned the joints round
+first: ``vmc_view``).
 
 How each bone is solved
 -----------------------

@@ -6,7 +6,8 @@ Bone/Pos (local rotations) solved by ``vmc_pose``. VMC has no sequence
 numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
 report what it decimated or dropped. ``max_fps`` caps the rate (receivers
 render at display rate; 60 is plenty). Host names are resolved like udp://
-(IPv4 first, looked up again every ``resolve_s``, default 30).
+(IPv4 first, looked up again every ``resolve_s``, default 30). ``facing`` (``away``, the default, or
+``camera``) and ``mirror`` (0, the default, or 1) choose how the avatar shows the person (``vmc_view``).
 
 The binary protocol's options (``send_2d``, ``status_s``, ``joint_count``, ``rig_id``, ``cameras``)
 mean nothing to VMC: in the URL they are errors, so no one expects them to work. As keywords they are
@@ -23,9 +24,10 @@ from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.udp_sink import RESOLVE_S, DatagramLink
-from firmware_host.sinks.url import SinkUrl, host_port, parse_url, positive_float
+from firmware_host.sinks.url import SinkUrl, boolean, host_port, one_of, parse_url, positive_float
 from firmware_host.sinks.vmc_osc import build_datagrams
 from firmware_host.sinks.vmc_pose import keep_hemisphere, solve_pose
+from firmware_host.sinks.vmc_view import FACINGS, AvatarView
 
 VMC_DEFAULT_PORT = 39539  # the Marionette (receiver) port
 
@@ -44,8 +46,10 @@ def _reject_protocol_options(u: SinkUrl) -> None:
 class VmcSink(Sink):
     scheme = "vmc"
 
-    def __init__(self, url: str, host: str, port: int, options: SinkOptions, resolve_s: float = RESOLVE_S) -> None:
+    def __init__(self, url: str, host: str, port: int, options: SinkOptions, resolve_s: float = RESOLVE_S,
+                 view: AvatarView = AvatarView()) -> None:
         super().__init__(url, options)
+        self.view = view
         self._link = DatagramLink(url, host, port, resolve_s)
         self._t0_us: Optional[int] = None
         self._last_rotations: dict[str, np.ndarray] = {}  # by bone name: the sign sent last (keep_hemisphere)
@@ -55,11 +59,13 @@ class VmcSink(Sink):
         u: SinkUrl = parse_url(url)
         host, port = host_port(u, VMC_DEFAULT_PORT)
         resolve_s = u.take("resolve_s", positive_float, RESOLVE_S, kw)
+        view = AvatarView(facing=u.take("facing", one_of(*FACINGS), FACINGS[0], kw),
+                          mirror=u.take("mirror", boolean, False, kw))
         _reject_protocol_options(u)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
-        return cls(url, host, port, options, resolve_s)
+        return cls(url, host, port, options, resolve_s, view)
 
     def _connect(self) -> None:
         self._link.open()
@@ -73,6 +79,6 @@ class VmcSink(Sink):
         # Seconds since the first frame, not since boot: OSC floats are float32
         # (about 1 ms resolution after an hour, 2 ms after four).
         t = (frame.capture_time_us - self._t0_us) / 1e6
-        pose = keep_hemisphere(solve_pose(frame.joints_3d), self._last_rotations)
+        pose = keep_hemisphere(solve_pose(self.view.apply(frame.joints_3d)), self._last_rotations)
         for datagram in build_datagrams(pose, t):  # two bundles of all bones: one would fragment
             self._link.send(datagram)

@@ -63,6 +63,15 @@ def test_importing_sinks_loads_no_backend_library() -> None:
         ("vmc://127.0.0.1?status_s=5", {}, "status_s", "5"),
         ("vmc://127.0.0.1?rig_id=stage", {}, "rig_id", "stage"),
         ("vmc://127.0.0.1?joint_count=25", {}, "joint_count", "25"),
+        # the avatar's view: a word from its list, exactly; yes/no for mirror; neither on other sinks
+        ("vmc://127.0.0.1?facing=front", {}, "facing", "front"),
+        ("vmc://127.0.0.1?facing=Camera", {}, "facing", "Camera"),
+        ("vmc://127.0.0.1?facing=", {}, "facing", ""),
+        ("vmc://127.0.0.1", {"facing": True}, "facing", True),
+        ("vmc://127.0.0.1?mirror=maybe", {}, "mirror", "maybe"),
+        ("vmc://127.0.0.1?mirror=1&facing=camera", {"mirror": "2"}, "mirror", "2"),
+        ("udp://127.0.0.1:9870?mirror=1", {}, "mirror", "1"),
+        ("memory://?facing=camera", {}, "facing", "camera"),
     ],
 )
 def test_config_errors_name_url_field_and_value(url: str, kw: dict, field: str, value: object) -> None:
@@ -100,3 +109,19 @@ def test_vmc_names_every_protocol_option_it_refuses() -> None:
     with pytest.raises(SinkConfigError) as info:
         open_sink("vmc://127.0.0.1?send_2d=1&status_s=5")
     assert "send_2d, status_s" in str(info.value)
+
+
+@pytest.mark.parametrize("url, kw, facing, mirror", [
+    ("vmc://127.0.0.1", {}, "away", False),  # the defaults: what vmc:// sent before the options existed
+    ("vmc://127.0.0.1?facing=camera&mirror=1", {}, "camera", True),
+    ("vmc://127.0.0.1?mirror=on&facing=away", {}, "away", True),
+    ("vmc://127.0.0.1?mirror=1", {"mirror": False, "facing": "camera"}, "camera", False),  # keywords win
+])
+def test_vmc_takes_facing_and_mirror(url: str, kw: dict, facing: str, mirror: bool) -> None:
+    from firmware_host.sinks.vmc_view import AvatarView
+
+    sink = open_sink(url, **kw)
+    try:
+        assert sink.view == AvatarView(facing=facing, mirror=mirror)  # type: ignore[attr-defined]
+    finally:
+        sink.close()

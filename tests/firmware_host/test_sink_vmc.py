@@ -5,9 +5,11 @@ import socket
 import struct
 
 import numpy as np
+import pytest
 
 from firmware_host.sinks import open_sink
-from firmware_host.sinks.vmc_pose import BONE_PARENTS
+from firmware_host.sinks.vmc_pose import BONE_PARENTS, FORWARD, quat_mul, quat_rotate, rig_to_unity, solve_pose
+from firmware_host.sinks.vmc_view import AvatarView
 from ghnerf_runtime.body25 import JOINT_INDEX as J
 from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, t_pose_rig
 
@@ -57,13 +59,13 @@ def _osc_packet(b: bytes) -> list[Msg]:
     return out
 
 
-def _receive(frames: list) -> tuple[list[list[Msg]], list[bytes]]:
-    """Send ``frames`` through a vmc:// sink; returns the messages of each frame (a frame starts at
-    /VMC/Ext/OK) and the datagrams as they came."""
+def _receive(frames: list, query: str = "") -> tuple[list[list[Msg]], list[bytes]]:
+    """Send ``frames`` through a vmc:// sink (``query`` added to its URL); returns the messages of each frame
+    (a frame starts at /VMC/Ext/OK) and the datagrams as they came."""
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-    sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64", backoff=FAST_BACKOFF)
+    sink = open_sink(f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64{query}", backoff=FAST_BACKOFF)
     try:
         assert sink.wait_connected(5)
         for f in frames:
@@ -170,3 +172,88 @@ def test_a_joint_beyond_the_wire_s_reach_is_missing_not_a_dropped_frame() -> Non
     assert "LeftUpperArm" in bones and "LeftLowerArm" not in bones and "LeftHand" not in bones
     assert "RightHand" in bones
     assert [a for a, _ in no_hips] == ["/VMC/Ext/OK", "/VMC/Ext/T"] and no_hips[0][1][3] == 0  # tracking lost
+
+
+# ---- facing= and mirror= (vmc_view) --------------------------------------------------------------
+
+def _rotation_matrix(q: np.ndarray) -> np.ndarray:
+    """The 3x3 matrix of quaternion (x, y, z, w), normalised or not: a reflection would show as det -1."""
+    x, y, z, w = q
+    return np.array([
+        [w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z],
+    ])
+
+
+def _world(msgs: list[Msg]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Forward kinematics from the decoded Root/Pos and Bone/Pos: each bone's Unity position and rotation."""
+    root = next(np.array(p[1:4], dtype=float) for a, p in msgs if a == "/VMC/Ext/Root/Pos")
+    world_p: dict[str, np.ndarray] = {}
+    world_q: dict[str, np.ndarray] = {}
+    for a, p in msgs:
+        if a != "/VMC/Ext/Bone/Pos":
+            continue
+        name, pos, q = p[0], np.array(p[1:4], dtype=float), np.array(p[4:], dtype=float)
+        parent = BONE_PARENTS[name]
+        if parent is None:
+            world_p[name], world_q[name] = root + pos, q
+        else:
+            world_p[name] = world_p[parent] + quat_rotate(world_q[parent], pos)
+            world_q[name] = quat_mul(world_q[parent], q)
+    return world_p, world_q
+
+
+def _left_wrist_raised() -> np.ndarray:
+    """The person faces the cameras (as at a webcam) in a T-pose, their left forearm raised."""
+    j = t_pose_rig(facing_camera=True)
+    j[J["LWrist"], :3] = j[J["LElbow"], :3] + [0, -0.25, 0]  # rig y is down
+    return j
+
+
+# The receiver's camera looks at a VRM avatar's front (Unity +z) from +z, so screen left is Unity +x.
+@pytest.mark.parametrize("query, moved, still, faces_viewer, screen_side", [
+    ("", "LeftLowerArm", "RightLowerArm", False, "left"),  # the default: seen from behind
+    ("&facing=away&mirror=0", "LeftLowerArm", "RightLowerArm", False, "left"),  # the defaults, written out
+    ("&facing=camera", "LeftLowerArm", "RightLowerArm", True, "right"),  # turned round, not mirrored
+    ("&mirror=1", "RightLowerArm", "LeftLowerArm", False, "right"),
+    ("&facing=camera&mirror=1", "RightLowerArm", "LeftLowerArm", True, "left"),  # a mirror, as webcam trackers
+])
+def test_the_left_wrist_raised_moves_the_bone_each_view_says(query: str, moved: str, still: str,
+                                                            faces_viewer: bool, screen_side: str) -> None:
+    (msgs,), _ = _receive([make_frame(0, joints=_left_wrist_raised())], query)
+    bones = {p[0]: np.array(p[4:], dtype=float) for a, p in msgs if a == "/VMC/Ext/Bone/Pos"}
+    assert list(bones) == list(BONE_PARENTS)
+    assert not np.allclose(np.abs(bones[moved]), [0, 0, 0, 1], atol=1e-3), bones[moved]
+    assert np.allclose(np.abs(bones[still]), [0, 0, 0, 1], atol=1e-6), bones[still]
+    for name, q in bones.items():  # float32 on the wire: unit to its precision, and never a reflection
+        assert abs(np.linalg.norm(q) - 1.0) < 1e-6, (name, q)
+        r = _rotation_matrix(q)
+        np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-5)
+        assert abs(np.linalg.det(r) - 1.0) < 1e-5, (name, np.linalg.det(r))
+    world_p, world_q = _world(msgs)
+    forward_z = quat_rotate(world_q["Hips"], FORWARD)[2]
+    assert (forward_z > 0.99) if faces_viewer else (forward_z < -0.99)
+    hand = "RightHand" if moved.startswith("Right") else "LeftHand"
+    other = "LeftHand" if hand == "RightHand" else "RightHand"
+    assert world_p[hand][1] > world_p[other][1] + 0.2  # the raised one
+    root_x = next(p[1] for a, p in msgs if a == "/VMC/Ext/Root/Pos")
+    assert (world_p[hand][0] > root_x) == (screen_side == "left"), world_p[hand]
+
+
+def test_mirror_and_facing_round_trip_the_solved_pose_through_osc() -> None:
+    # What the receiver decodes is the view's pose, bone for bone, to float32 precision; Root/Pos turns with it.
+    j = _left_wrist_raised()
+    j[:, :3] += np.random.default_rng(5).normal(scale=0.03, size=(25, 3))  # no symmetry to hide a slip
+    (msgs,), _ = _receive([make_frame(0, joints=j)], "&facing=camera&mirror=1")
+    pose = solve_pose(AvatarView(facing="camera", mirror=True).apply(j))
+    assert pose is not None
+    root = next(p for a, p in msgs if a == "/VMC/Ext/Root/Pos")
+    np.testing.assert_allclose(root[1:4], pose.root_position, atol=1e-5)
+    np.testing.assert_allclose(root[1:4], rig_to_unity(j[J["MidHip"], :3] * [1, 1, -1]), atol=1e-5)  # z only
+    sent = {p[0]: np.array(p[1:], dtype=float) for a, p in msgs if a == "/VMC/Ext/Bone/Pos"}
+    assert list(sent) == list(pose.bones)
+    for name, bone in pose.bones.items():
+        np.testing.assert_allclose(sent[name][:3], bone.local_position, atol=1e-5)
+        q = sent[name][3:]
+        assert min(np.abs(q - bone.local_rotation).max(), np.abs(q + bone.local_rotation).max()) < 1e-6
