@@ -336,3 +336,35 @@ def test_the_defaults_table_in_the_docs_is_the_config():
             assert _doc_value(documented[key]) == getattr(getattr(defaults, section), f.name), key
     assert _doc_value(documented["log_level"]) == defaults.log_level
     assert documented["sinks"].strip() == "(required)"
+
+
+def test_check_config_wants_the_files_of_a_part_turned_on(tmp_path):
+    """``joints3d.skeleton_prior`` / ``novel_view.painter`` ``"on"`` without their file in the model folder: the
+    estimator refuses it, but it is built once the rig opens, so such a config passed ``--validate-config``, loaded
+    its model and exited 2 when the camera came (or waited for ever for an absent one)."""
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "human.onnx").write_bytes(b"not checked here")
+
+    def cfg(**estimator):
+        return daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": [SINK],
+                                        "estimator": {"session": {"model_dir": str(models)}, **estimator}})
+
+    check_config(cfg(joints3d={"skeleton_prior": "auto"}, novel_view={"enabled": True}))  # auto: used if there
+    check_config(cfg(novel_view={"painter": "on"}))  # no novel view: the painter is never asked for
+    with pytest.raises(DaemonConfigError, match=r"^estimator\.joints3d\.skeleton_prior: 'on', but .* has no "
+                                                r"skeleton_prior\.onnx"):
+        check_config(cfg(joints3d={"skeleton_prior": "on"}))
+    with pytest.raises(DaemonConfigError, match=r"^estimator\.novel_view\.painter: 'on' with novel_view\.enabled, "
+                                                r"but .* has no novel_painter\.onnx"):
+        check_config(cfg(novel_view={"enabled": True, "painter": "on"}))
+    (models / "skeleton_prior.onnx").write_bytes(b"")
+    (models / "novel_painter.onnx").write_bytes(b"")
+    check_config(cfg(joints3d={"skeleton_prior": "on"}, novel_view={"enabled": True, "painter": "on"}))
+    # fp32 asks for the fp32 painter, as the session loads it (NovelPainter.find)
+    (models / "novel_painter.onnx").unlink()
+    (models / "novel_painter.int8.onnx").write_bytes(b"")
+    check_config(cfg(novel_view={"enabled": True, "painter": "on"}))
+    with pytest.raises(DaemonConfigError, match=r"^estimator\.novel_view\.painter"):
+        check_config(cfg(session={"model_dir": str(models), "precision": "fp32"},
+                         novel_view={"enabled": True, "painter": "on"}))
