@@ -766,7 +766,8 @@ def _build(cls: type, data: Any, path: str) -> Any:
     if isinstance(data, cls):
         return data
     if not isinstance(data, Mapping):
-        raise ConfigError(f"must be a mapping (JSON object), got {type(data).__name__}", key=path or cls.__name__)
+        # the root has no key: keyed by its class, the daemon reported "estimator.EstimatorConfig: ..."
+        raise ConfigError(f"must be a mapping (JSON object), got {type(data).__name__}", key=path or None)
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
     for key in data:
@@ -837,7 +838,8 @@ def _plain_json(value: Any, where: str, duplicates: list[str]) -> Any:
 def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], what: str = "config file") -> Any:
     """The JSON value in ``path``; an unreadable file, invalid JSON, non-UTF-8 text or a key given twice in one
     object (JSON keeps the last: the first would be lost without a word) raises ``fail(message)`` (the caller's
-    error type, naming the file), the message saying which and where. A UTF-8 byte order mark is skipped."""
+    error type, naming the file), the message saying which and where; so does an empty (or blank) file. A UTF-8
+    byte order mark is skipped."""
     try:
         with open(path, encoding="utf-8-sig") as fh:
             text = fh.read()
@@ -847,6 +849,8 @@ def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], wh
         raise fail(f"not UTF-8 text (byte {e.start}): {e.reason}") from e
     except ValueError as e:  # a NUL character in the path
         raise fail(f"cannot read {what} ({e})") from e
+    if not text.strip():  # said "not valid JSON (line 1, column 1: Expecting value)"
+        raise fail(f"{what} is empty")
     try:
         duplicates: list[str] = []
         data = _plain_json(json.loads(text, object_pairs_hook=remember_repeats), "", duplicates)

@@ -3,7 +3,7 @@
 Each of these was written into a doc by hand beside a change of the code (session 50); a later change of the
 constant would leave the doc stating the old value without a word. (The runtime's defaults JSON is checked by
 ``tests/ghnerf_runtime/test_cli_run.py``, the daemon configs in the docs by
-``tests/firmware_host/daemon/test_daemon_config.py``.)
+``tests/firmware_host/daemon/test_daemon_config.py``, which also holds the daemon's defaults table to the dataclasses.)
 """
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.config import DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
+from firmware_host.sinks.options import MAX_STATUS_S, SinkOptions
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
@@ -49,6 +50,11 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),
     ("docs/rig-file.md", f"files over {MAX_RIG_FILE_BYTES / (1 << 20):g} MiB (`MAX_RIG_FILE_BYTES`"),
     ("docs/protocol.md", f"`facing` (`{FACINGS[0]}`, the default, or `{FACINGS[1]}`)"),
+    # the sink options' defaults, as the common query parameters list them
+    ("docs/protocol.md", f"`queue` ({SinkOptions.queue}) frames held"),
+    ("docs/protocol.md", f"`status_s` ({SinkOptions.status_s!r}, at most {MAX_STATUS_S:g}:"),
+    ("docs/protocol.md", f"`send_2d` ({int(SinkOptions.send_2d)});"),
+    ("docs/protocol.md", f"`joint_count` ({SinkOptions.joint_count}; more than"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

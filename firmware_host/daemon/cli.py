@@ -46,8 +46,11 @@ from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
 from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.config_paths import config_folder
 from ghnerf_runtime.errors import ModelLoadError, RuntimeErrorBase
+from ghnerf_runtime.novel_painter import FILE_NAME as PAINTER_FILE
+from ghnerf_runtime.novel_painter import NovelPainter
 from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
+from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 
 __all__ = ["main", "build_parser", "check_config", "read_checked_config", "EXAMPLE_CONFIG"]
 
@@ -75,7 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) -> None:
-    """What can be checked without hardware: the URLs parse for their backends, the model folder holds graphs.
+    """What can be checked without hardware: the URLs parse for their backends, the model folder holds graphs (and
+    the skeleton prior or painter the config turns ``on``).
 
     ``source``: the config file ``config`` was read from, for the hint on where its relative paths point.
 
@@ -100,6 +104,23 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) 
     if not any(model_dir.glob("*.onnx")):
         raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
                                 key="estimator.session.model_dir")
+    _check_optional_model_files(config, model_dir)
+
+
+def _check_optional_model_files(config: DaemonConfig, model_dir: Path) -> None:
+    """A part the config turns ``on`` needs its file in the model folder. The estimator refuses it, but it is
+    built only once the rig opens: such a config passed ``--validate-config``, loaded its model, and exited 2
+    when the camera came (or never, waiting for one that does not)."""
+    est = config.estimator
+    if est.joints3d.skeleton_prior == "on" and not (model_dir / PRIOR_FILE).is_file():
+        raise DaemonConfigError(f"'on', but {model_dir} has no {PRIOR_FILE} (make one with python -m "
+                                "training.skeleton_prior, or set 'auto' or 'off')",
+                                key="estimator.joints3d.skeleton_prior")
+    if est.novel_view.enabled and est.novel_view.painter == "on" \
+            and NovelPainter.find(model_dir, est.session.precision) is None:
+        raise DaemonConfigError(f"'on' with novel_view.enabled, but {model_dir} has no {PAINTER_FILE} (make one "
+                                "with python -m training.learnt_fill export, or set 'auto' or 'off')",
+                                key="estimator.novel_view.painter")
 
 
 def _check_rig_url(text: str) -> None:

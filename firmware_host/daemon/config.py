@@ -18,9 +18,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import posixpath
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Mapping
+from urllib.parse import unquote, urlsplit
 
 from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
@@ -165,6 +167,7 @@ class DaemonConfig:
                 _fail(f"sinks[{k}]", "must be a sink URL such as 'serial:///dev/ttyACM0'", url)
         if len(set(sinks)) != len(sinks):
             _fail("sinks", "lists a URL twice", list(sinks))
+        _one_sink_per_destination(sinks)
         object.__setattr__(self, "sinks", tuple(sinks))
         if self.log_level not in LOG_LEVELS:
             _fail("log_level", f"must be one of {list(LOG_LEVELS)}", self.log_level)
@@ -175,6 +178,34 @@ class DaemonConfig:
             _fail("health.loop_allowance_s", f"must be at least rig.read_timeout_s + {LOOP_MARGIN_S:g} s "
                                              f"({self.rig.read_timeout_s + LOOP_MARGIN_S:g})",
                   self.health.loop_allowance_s)
+
+
+def _destination(url: str) -> tuple[str, str, str] | None:
+    """Where a sink URL sends: its scheme, location and path, without its options (None: it names no place, as
+    ``memory://``, or does not parse, which the sink's own check reports)."""
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return None
+    path = posixpath.normpath(unquote(parts.path)) if parts.path else ""
+    if not parts.netloc and not path:
+        return None
+    return parts.scheme.lower(), parts.netloc.lower(), path
+
+
+def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:
+    """Two URLs that differ only in their options (``?queue=8``), the case of the scheme or a ``//`` in a path name
+    one destination: two sinks on it would send each frame twice to one UDP port, interleave two writers in one
+    file, or leave the second serial sink down for ever behind the first one's lock."""
+    seen: dict[tuple[str, str, str], int] = {}
+    for k, url in enumerate(sinks):
+        place = _destination(url)
+        if place is not None and place in seen:
+            j = seen[place]
+            _fail(f"sinks[{k}]", f"sends where sinks[{j}] ({sinks[j]!r}) does: one URL per destination, with all "
+                                 "its options", url)
+        if place is not None:
+            seen[place] = k
 
 
 def _build(cls: type, data: Any, path: str) -> Any:

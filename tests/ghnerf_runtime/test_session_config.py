@@ -131,3 +131,23 @@ def test_a_relative_model_dir_in_a_config_file_is_read_from_its_folder(tmp_path,
     assert load_config(path).session.model_dir == str(tmp_path / "conf" / "models")
     path.write_text(json.dumps({"session": {"threads": 1}}))
     assert load_config(path).session.model_dir == "models"  # left out: the default, as before
+
+
+@pytest.mark.parametrize("data", [[], None, "session", 3])
+def test_a_root_that_is_not_an_object_is_named_as_the_root(data):
+    """Keyed "EstimatorConfig" (a class, not a key the user wrote), the daemon named it
+    ``estimator.EstimatorConfig: must be a mapping``; the root has no key."""
+    with pytest.raises(ConfigError) as e:
+        config_from_dict(data)
+    assert e.value.key is None and str(e.value).startswith("must be a mapping (JSON object)"), str(e.value)
+
+
+@pytest.mark.parametrize("content", [b"", b" \r\n\t\n", b"\xef\xbb\xbf"])
+def test_an_empty_config_file_is_called_empty(tmp_path, content):
+    """An empty file (a failed ``> config.json`` redirect) was "not valid JSON (line 1, column 1: Expecting
+    value)"; it says so now, as the rig file does."""
+    path = tmp_path / "empty.json"
+    path.write_bytes(content)
+    with pytest.raises(ConfigError) as e:
+        load_config(path)
+    assert str(e.value) == f"{path}: config file is empty"

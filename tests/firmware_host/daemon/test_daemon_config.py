@@ -55,9 +55,28 @@ def test_minimal_config_takes_the_defaults():
      "health.loop_allowance_s: must be at least rig.read_timeout_s"),
     ({"sinks": [SINK], "health": {"loop_allowance_s": 5}}, "health.loop_allowance_s: must be at least"),
     ({"sinks": [SINK], "rig": {"stall_s": 10 ** 400}}, "rig.stall_s: must be a number of seconds"),
+    # was "estimator.EstimatorConfig: ...": the runtime keyed its root by its class name
+    ({"sinks": [SINK], "estimator": []}, "estimator: must be a mapping (JSON object), got list"),
+    ({"sinks": [SINK], "estimator": None}, "estimator: must be a mapping (JSON object), got NoneType"),
+    # one destination twice, its URLs told apart by their options, case or spelling: each frame went out twice
+    ({"sinks": [SINK, SINK + "?queue=8"]}, f"sinks[1]: sends where sinks[0] ({SINK!r}) does"),
+    ({"sinks": [SINK, "UDP://127.0.0.1:9870"]}, "sinks[1]: sends where sinks[0]"),
+    ({"sinks": ["file:///tmp/j.jsonl", SINK, "file:///tmp//j.jsonl?queue=9"]}, "sinks[2]: sends where sinks[0]"),
+    ({"sinks": ["file:///tmp/a%20b.jsonl", "file:///tmp/a b.jsonl"]}, "sinks[1]: sends where sinks[0]"),
+    ({"sinks": ["serial:///dev/ttyACM0", "serial:///dev/ttyACM0?baud=115200"]}, "sinks[1]: sends where sinks[0]"),
 ])
 def test_errors_name_the_key(data, key):
     assert _error(data).startswith(key)
+
+
+@pytest.mark.parametrize("sinks", [
+    ["memory://?status_s=0.05", "memory://?status_s=0.06"],  # in-process buffers: each sink is its own
+    ["serial:///dev/ttyACM0", "serial:///dev/ttyACM1"],
+    [SINK, "udp://127.0.0.1:9871", "vmc://127.0.0.1:9870"],  # another port; another scheme (the receiver's choice)
+    ["file:///tmp/a.jsonl", "file:///tmp/b.jsonl"],
+])
+def test_sinks_to_different_destinations_are_kept(sinks):
+    assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
 
 
 def test_round_trip_and_example_is_valid():
@@ -78,6 +97,11 @@ def test_file_errors_name_the_file(tmp_path):
     latin.write_bytes(b'{"sinks": ["udp://caf\xe9:1"]}')
     with pytest.raises(DaemonConfigError, match=f"^{latin}: not UTF-8"):
         load_daemon_config(latin)
+    for content in (b"", b"\n \r\n", b"\xef\xbb\xbf"):  # was "not valid JSON (line 1, column 1: Expecting value)"
+        empty = tmp_path / "empty.json"
+        empty.write_bytes(content)
+        with pytest.raises(DaemonConfigError, match=f"^{empty}: the config file is empty$"):
+            load_daemon_config(empty)
     typo = tmp_path / "typo.json"
     typo.write_text(json.dumps({"sinks": [SINK], "rig": {"urll": "sim://"}}))
     with pytest.raises(DaemonConfigError, match=f"^{typo}: rig.urll: unknown key"):
@@ -280,3 +304,67 @@ def test_check_config_reads_a_plus_in_the_rig_file_as_the_backend_does(tmp_path)
     (tmp_path / "rig+1.json").write_bytes(REPO_RIG.read_bytes())
     check_config(daemon_config_from_dict({"rig": {"url": f"opencv://?first=0&second=2&rig={tmp_path}/rig+1.json"},
                                           "sinks": [SINK], "estimator": {"session": {"model_dir": str(models)}}}))
+
+
+def _doc_value(text: str):
+    """A cell of the defaults column as JSON reads it (`depthai://` -> 'depthai://', 1.0, true, null)."""
+    text = text.strip()
+    return text.strip("`") if text.startswith("`") else json.loads(text)
+
+
+def test_the_defaults_table_in_the_docs_is_the_config():
+    """docs/daemon.md's table of keys and defaults names every field of ``rig`` and ``health`` with the dataclasses'
+    default (nothing checked it: a changed default would have left the doc stating the old one)."""
+    from dataclasses import fields
+
+    from firmware_host.daemon.config import HealthConfig, RigConfig
+
+    text = (REPO_RIG.parents[2] / "docs" / "daemon.md").read_text()
+    table = text.split("| key | default | meaning |\n|---|---|---|\n", 1)[1].split("\n\n", 1)[0]
+    documented = {}
+    for row in table.splitlines():
+        keys, defaults = row.split(" | ")[0].lstrip("| "), row.split(" | ")[1]
+        keys = [k.strip(" `") for k in keys.split(",")]
+        values = [defaults] if len(keys) == 1 else defaults.split(",")
+        assert len(values) == len(keys), row
+        documented.update(zip(keys, values))
+    defaults = DaemonConfig(sinks=(SINK,))
+    for section, cls in (("rig", RigConfig), ("health", HealthConfig)):
+        for f in fields(cls):
+            key = f"{section}.{f.name}"
+            assert key in documented, f"docs/daemon.md's table leaves out {key}"
+            assert _doc_value(documented[key]) == getattr(getattr(defaults, section), f.name), key
+    assert _doc_value(documented["log_level"]) == defaults.log_level
+    assert documented["sinks"].strip() == "(required)"
+
+
+def test_check_config_wants_the_files_of_a_part_turned_on(tmp_path):
+    """``joints3d.skeleton_prior`` / ``novel_view.painter`` ``"on"`` without their file in the model folder: the
+    estimator refuses it, but it is built once the rig opens, so such a config passed ``--validate-config``, loaded
+    its model and exited 2 when the camera came (or waited for ever for an absent one)."""
+    models = tmp_path / "models"
+    models.mkdir()
+    (models / "human.onnx").write_bytes(b"not checked here")
+
+    def cfg(**estimator):
+        return daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": [SINK],
+                                        "estimator": {"session": {"model_dir": str(models)}, **estimator}})
+
+    check_config(cfg(joints3d={"skeleton_prior": "auto"}, novel_view={"enabled": True}))  # auto: used if there
+    check_config(cfg(novel_view={"painter": "on"}))  # no novel view: the painter is never asked for
+    with pytest.raises(DaemonConfigError, match=r"^estimator\.joints3d\.skeleton_prior: 'on', but .* has no "
+                                                r"skeleton_prior\.onnx"):
+        check_config(cfg(joints3d={"skeleton_prior": "on"}))
+    with pytest.raises(DaemonConfigError, match=r"^estimator\.novel_view\.painter: 'on' with novel_view\.enabled, "
+                                                r"but .* has no novel_painter\.onnx"):
+        check_config(cfg(novel_view={"enabled": True, "painter": "on"}))
+    (models / "skeleton_prior.onnx").write_bytes(b"")
+    (models / "novel_painter.onnx").write_bytes(b"")
+    check_config(cfg(joints3d={"skeleton_prior": "on"}, novel_view={"enabled": True, "painter": "on"}))
+    # fp32 asks for the fp32 painter, as the session loads it (NovelPainter.find)
+    (models / "novel_painter.onnx").unlink()
+    (models / "novel_painter.int8.onnx").write_bytes(b"")
+    check_config(cfg(novel_view={"enabled": True, "painter": "on"}))
+    with pytest.raises(DaemonConfigError, match=r"^estimator\.novel_view\.painter"):
+        check_config(cfg(session={"model_dir": str(models), "precision": "fp32"},
+                         novel_view={"enabled": True, "painter": "on"}))
