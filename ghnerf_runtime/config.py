@@ -36,7 +36,7 @@ from ghnerf_runtime.json_keys import remember_repeats
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
-    "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES", "NOVEL_SILHOUETTE_STRIDES",
+    "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES", "NOVEL_SILHOUETTE_STRIDES", "NOVEL_PATHS",
     "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
     "PresenceConfig", "NovelViewConfig", "SmoothingConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
@@ -55,6 +55,8 @@ SKELETON_PRIOR_MODES = ("auto", "on", "off")
 #: :attr:`NovelViewConfig.silhouette_stride` choices: the powers of two up to 16, which divide the model
 #: resolutions in use (64, 128); :class:`~ghnerf_runtime.estimator.Estimator` checks them against its model's.
 NOVEL_SILHOUETTE_STRIDES = (0, 1, 2, 4, 8, 16)
+#: :attr:`NovelViewConfig.path` choices: how a camera between the rig's two moves from one to the other.
+NOVEL_PATHS = ("line", "orbit", "auto")
 
 
 # ------------------------------------------------------------------ checks
@@ -541,6 +543,13 @@ class NovelViewConfig:
             background).
         crop_to_subject: a requested camera is cropped (in its own image) to the subject, as
             the model sees the sources; off: its whole image is resized to the model resolution.
+        path: how a view between the rig's cameras (``NovelViewRequest.alpha``) moves from one to the other.
+            ``"line"``: its centre on the straight line between theirs (crosses the subject when they face
+            each other); ``"orbit"``: on an arc round the point nearest both optical axes, its distance to it
+            lerped (the subject box's centre when the axes are parallel or that point lies behind a camera;
+            the line when that is behind one too); ``"auto"``: the orbit when the optical axes are more than
+            ``novel_view.AUTO_ORBIT_MIN_ANGLE_DEG`` (60) degrees apart, else the line. Its rotation is
+            slerped either way (docs/runtime.md, "Between the cameras: a line or an orbit").
         silhouette_stride: coarse-to-fine in the image: a first pass renders every
             ``silhouette_stride``-th pixel of the box, and only the cells where it finds the subject (plus
             ``silhouette_dilate`` cells around them) are rendered at ``stride``; the rest is
@@ -619,6 +628,7 @@ class NovelViewConfig:
     heatmaps: bool = False
     rays_in_box_only: bool = True
     crop_to_subject: bool = True
+    path: str = "auto"
     silhouette_stride: int = 4
     silhouette_min_diff: float = 0.05
     silhouette_dilate: int = 0
@@ -651,6 +661,7 @@ class NovelViewConfig:
         _boolean(self, "heatmaps")
         _boolean(self, "rays_in_box_only")
         _boolean(self, "crop_to_subject")
+        _choice(self, "path", NOVEL_PATHS)
         _boolean(self, "overlap")
         _boolean(self, "lanes")
         _integer(self, "silhouette_stride", 0, 16)

@@ -67,7 +67,7 @@ from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presen
     triangulate_joints, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
-    novel_target, render_novel_view, skeleton_overlay
+    novel_pivot, novel_target, render_novel_view, skeleton_overlay
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
@@ -368,7 +368,8 @@ class Estimator:
         self._last_pair_cold = False
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
-        self._between: dict[float, Camera] = {}  # alpha -> interpolated camera (the rig does not move)
+        self._between: dict[tuple, Camera] = {}  # (alpha, pivot) -> interpolated camera (the rig does not move)
+        self._between_pair: tuple[Camera, Camera] | None = None  # the cameras a view between them turns with
         self._worker: ThreadPoolExecutor | None = None  # novel views during the keypoint stages
         # 2D joints of the good camera when the other's frame fails the check (needs encoder heatmaps)
         self._single_view_2d = self.config.frame_check.single_view_2d and bool(
@@ -904,15 +905,21 @@ class Estimator:
         return regions.box
 
     def _novel_camera(self, request: NovelViewRequest, box: np.ndarray) -> Camera:
-        """The ``S x S`` camera of ``request``'s view cropped to ``box``."""
+        """The ``S x S`` camera of ``request``'s view cropped to ``box`` (whose centre is the subject's, the orbit's
+        pivot when the rig's optical axes give none: ``novel_view.path``)."""
         full = request.camera
         if full is None:
-            if request.alpha not in self._between:
+            if self._between_pair is None:
+                self._between_pair = tuple(st.upright_pinhole for st in self._cams)  # no view spinning between them
+            cam_a, cam_b = self._between_pair
+            pivot = novel_pivot(cam_a, cam_b, self.config.novel_view.path, np.mean(box, axis=0))
+            # the axes' pivot is the rig's (fixed); the subject's moves, so its cameras come and go
+            key = (request.alpha, None if pivot is None else pivot.tobytes())
+            if key not in self._between:
                 if len(self._between) >= 16:
                     self._between.clear()
-                cam_a, cam_b = (st.upright_pinhole for st in self._cams)  # no view spinning between them
-                self._between[request.alpha] = interpolate_camera(cam_a, cam_b, request.alpha)
-            full = self._between[request.alpha]
+                self._between[key] = interpolate_camera(cam_a, cam_b, request.alpha, pivot=pivot)
+            full = self._between[key]
         return novel_target(full, box, self.size, self.config.novel_view.crop_to_subject)
 
     def _render_novel(self, request: NovelViewRequest, env: dict, box: np.ndarray, timing: dict,

@@ -1,8 +1,9 @@
 """Novel views: a virtual camera, the rays inside the subject, and the rendered image.
 
-The virtual camera is either one *between* the two rig cameras (rotation slerped, centre and
-intrinsics interpolated linearly, the second camera's fitted to the first's image size with square
-pixels kept: :func:`interpolate_camera`) or any given calibrated camera.
+The virtual camera is either one *between* the two rig cameras (rotation slerped, intrinsics
+interpolated linearly, the second camera's fitted to the first's image size with square pixels kept;
+the centre on the line between theirs or on an orbit round the pivot :func:`novel_pivot` picks:
+:func:`interpolate_camera`) or any given calibrated camera.
 Like the sources, it is cropped to the subject (:func:`novel_target`) and rendered at the model
 resolution (``S x S``, e.g. 128x128) -- the "reduced resolution" of the novel view -- every
 ``stride`` pixels. Only the rays inside the projected subject box are rendered; the rest is the
@@ -28,10 +29,11 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.body25 import LIMBS
-from ghnerf_runtime.config import NovelViewConfig
+from ghnerf_runtime.config import NOVEL_PATHS, NovelViewConfig
 from ghnerf_runtime.contract import near_far_from_box, target_inputs
 from ghnerf_runtime.errors import ConfigError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
 from ghnerf_runtime.rays import (
     block_ray_uv,
@@ -44,9 +46,17 @@ from ghnerf_runtime.rays import (
 )
 from ghnerf_runtime.tracking import box_corners
 
-__all__ = ["NovelViewRequest", "NovelView", "slerp_rotation", "interpolate_camera", "fit_intrinsics",
+__all__ = ["AUTO_ORBIT_MIN_ANGLE_DEG", "NovelViewRequest", "NovelView", "slerp_rotation", "novel_pivot",
+           "interpolate_camera", "fit_intrinsics",
            "novel_target", "check_strides", "render_novel_view", "opaque_colour", "draw_skeleton", "skeleton_overlay",
            "heatmap_overlay"]
+
+#: ``novel_view.path`` "auto" orbits when the cameras' optical axes are more than this many degrees apart. At 60
+#: the line's halfway camera is 13 % nearer the pivot than the two ends (1 - cos 30 degrees; 29 % at 90, 50 % at
+#: 120, all the way at 180), and every rig the documented novel-view figures come from is below it (the
+#: simulator's default 23, ``RigPlacement.random``'s at most 45, docs/examples/rig.json 0.3), so they keep the
+#: line (docs/runtime.md, "Between the cameras: a line or an orbit").
+AUTO_ORBIT_MIN_ANGLE_DEG = 60.0
 
 
 @dataclass(frozen=True)
@@ -144,21 +154,52 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
     return _matrix(q)
 
 
-def interpolate_camera(cam_a: Camera, cam_b: Camera, alpha: float, name: str = "novel") -> Camera:
-    """A pinhole camera between two cameras: slerped rotation, lerped centre and intrinsics.
+def novel_pivot(cam_a: Camera, cam_b: Camera, path: str, subject: np.ndarray | None = None) -> np.ndarray | None:
+    """The point a camera between ``cam_a`` and ``cam_b`` orbits under ``novel_view.path``, or ``None`` for the line.
+
+    ``"line"``: ``None``. ``"auto"``: ``None`` unless the optical axes are more than
+    :data:`AUTO_ORBIT_MIN_ANGLE_DEG` apart, then as ``"orbit"``: the point nearest both optical axes
+    (:func:`~ghnerf_runtime.geometry.orbit.axes_pivot`); when the axes are parallel or that point is behind
+    either camera, ``subject`` (the subject's centre, rig frame); when that is missing or behind one too,
+    ``None`` (the line: no orbit has the subject in front of both ends).
+
+    Raises:
+        ConfigError: ``path`` is not one of ``"line"``, ``"orbit"``, ``"auto"`` (named as ``novel_view.path``).
+    """
+    if path not in NOVEL_PATHS:
+        raise ConfigError(f"must be one of {list(NOVEL_PATHS)}, got {path!r}", key="novel_view.path")
+    if path == "line" or (path == "auto" and not axes_angle_deg(cam_a, cam_b) > AUTO_ORBIT_MIN_ANGLE_DEG):
+        return None
+    for point in (axes_pivot(cam_a, cam_b), subject):
+        if point is not None and in_front(cam_a, point) and in_front(cam_b, point):
+            return np.array(point, dtype=np.float64)
+    return None
+
+
+def interpolate_camera(cam_a: Camera, cam_b: Camera, alpha: float, name: str = "novel", *,
+                       pivot: np.ndarray | None = None) -> Camera:
+    """A pinhole camera between two cameras: slerped rotation, lerped intrinsics, the centre on the line between
+    theirs or, with ``pivot``, on the orbit round it.
 
     The image size is ``cam_a``'s; ``cam_b``'s intrinsics are first fitted into it by one uniform scale
     (:func:`fit_intrinsics`: its pixels stay square when the two images' shapes differ, e.g. one camera
     mounted on its side). Lens distortion is dropped (a virtual camera is ideal). ``alpha`` outside [0, 1]
-    extrapolates.
+    extrapolates. ``pivot`` (rig frame, in front of both cameras; :func:`novel_pivot` picks it): the camera is
+    as far from it as the lerp of the two cameras' distances and sees it where their views of it lerp
+    (:func:`~ghnerf_runtime.geometry.orbit.orbit_centre`), so it does not cut through a subject the two face
+    across; ``None``: the centre is lerped (the straight line).
 
     Raises:
-        GeometryError: the extrapolated focal length is not positive (``alpha`` too far out for two
-            cameras whose focal lengths differ more than twofold).
+        GeometryError: the extrapolated focal length (or distance to ``pivot``) is not positive (``alpha`` too
+            far out for two cameras whose focal lengths, or distances to it, differ more than twofold), or
+            ``pivot`` is behind a camera.
     """
     K_b = cam_b.K if cam_b.size == cam_a.size else fit_intrinsics(cam_b, cam_a.width, cam_a.height)
     R = slerp_rotation(cam_a.R, cam_b.R, alpha)
-    centre = (1 - alpha) * cam_a.center + alpha * cam_b.center
+    if pivot is None:
+        centre = (1 - alpha) * cam_a.center + alpha * cam_b.center
+    else:
+        centre = orbit_centre(cam_a, cam_b, R, alpha, pivot)
     K = (1 - alpha) * cam_a.K + alpha * K_b
     K[2] = [0.0, 0.0, 1.0]
     K[1, 0] = 0.0

@@ -24,6 +24,8 @@ from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.geometry import triangulate_dlt
+from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG
+from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 
 REPO = Path(__file__).resolve().parents[1]
@@ -43,6 +45,8 @@ def _doc(name: str) -> str:
     ("docs/recording-format.md", f"twice real time; at least {MIN_SPEED:g})"),
     ("docs/protocol.md", f"a coordinate beyond ±{MAX_COORD_M:.3f} m"),
     ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
+    ("docs/runtime.md", f"more than {AUTO_ORBIT_MIN_ANGLE_DEG:g} degrees apart (`AUTO_ORBIT_MIN_ANGLE_DEG`)"),
+    ("docs/runtime.md", f"within {PARALLEL_AXES_DEG:g} degrees (`PARALLEL_AXES_DEG`)"),
     ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
     ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),

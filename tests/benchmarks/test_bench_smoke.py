@@ -96,6 +96,14 @@ def test_measure_pairing(capsys, monkeypatch):
     assert all(p["pairer"] == p["reference"] > 0 for p in by_scenario.values()), out  # closest-first, as offline
 
 
+def test_measure_novel_path(capsys, monkeypatch):
+    out = run_script("measure_novel_path", "--sim", "aimed", "--around", "180", "--alphas", "0.5",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "docs/examples/rig.json: optical axes 0.318 deg apart" in out and "auto takes the line" in out
+    assert "around 180: optical axes 166.691 deg apart" in out and "auto takes the orbit" in out
+    assert "| 0.5 | 3000.0000 | 0.000000 |" in out  # the orbit 3 m out where the line is at the subject
+
+
 def test_measure_pair_outliers(capsys, monkeypatch):
     out = run_script("measure_pair_outliers", "--seeds", "1", capsys=capsys, monkeypatch=monkeypatch)
     assert "good (7)" in out and "bad (3)" in out  # one seed: 10 pairs, 3 unsynchronised

@@ -199,6 +199,30 @@ def test_novel_view_on_request(full_session, scene_rig, stride, overlay):
     assert set(NOVEL_STAGES) <= set(r.timing_ms)
 
 
+@pytest.mark.parametrize("height", [-1.3, -0.95])  # tilted down (axes 167 degrees apart), level (collinear)
+def test_a_view_between_facing_cameras_takes_the_configured_path(full_session, height):
+    """``novel_view.path``: the line puts the halfway camera in the subject; the orbit (and auto, the axes 167-180
+    degrees apart) keeps it 3 m out, round the axes' pivot or, collinear, the subject box's centre."""
+    from ghnerf_runtime.geometry import Camera, Rig, WorkingVolume, intrinsics_from_fov, look_at
+
+    subject = np.array([0.0, -0.95, 3.0])
+    K = intrinsics_from_fov(160, 120, 80.0)
+    cams = tuple(Camera(n, 160, 120, K, [], *look_at((x, height, 3.0), subject)) for n, x in (("l", -3.0), ("r", 3.0)))
+    rig = Rig(cams, WorkingVolume(subject - [0.8, 1.15, 0.8], subject + [0.8, 1.0, 0.8]))
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
+    centre = {}
+    for path in ("line", "orbit", "auto"):
+        est = Estimator(full_session, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, path=path)))
+        r = est.estimate(frames, novel_view=NovelViewRequest(alpha=0.5))
+        centre[path] = r.novel_view.camera.center
+    line_xz = np.hypot(centre["line"][0], centre["line"][2] - 3.0)
+    assert line_xz < 1e-9  # above or at the subject's feet-to-head axis: inside the body
+    for path in ("orbit", "auto"):
+        assert np.hypot(centre[path][0], centre[path][2] - 3.0) > 1.5, path
+    np.testing.assert_allclose(centre["auto"], centre["orbit"])
+
+
 def test_novel_view_with_heatmaps_uses_the_render_graph(full_session, scene_rig):
     rig, frames = scene_rig
     rec = Recorder(full_session)

@@ -1,0 +1,118 @@
+"""An orbit between two cameras: the pivot their optical axes meet nearest, and a centre on an arc round it.
+
+A virtual camera between two rig cameras that face each other across the subject (120-180 degrees apart)
+must not move on the straight line between their centres: that line passes by or through the subject.
+Round a pivot, the camera keeps its distance (lerped between the two cameras') and its view of the pivot
+(:func:`orbit_centre`). The pivot is the point nearest both optical axes (:func:`axes_pivot`), where a
+converging rig aims.
+
+Pure numpy; rig frame (metres), cameras as :class:`~ghnerf_runtime.geometry.camera.Camera`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ghnerf_runtime.errors import GeometryError
+from ghnerf_runtime.geometry.camera import Camera
+
+__all__ = ["PARALLEL_AXES_DEG", "axes_angle_deg", "axes_pivot", "in_front", "orbit_centre"]
+
+#: Optical axes within this angle of parallel (or of antiparallel: collinear cameras facing each other) have
+#: no pivot. Nearer, the nearest point runs off along the axes (the solve divides by sin^2 of the angle,
+#: 3e-6 here), and for converging axes it lies over 570 baselines away, where an orbit is the line to within
+#: an eighth of the angle (radians) times the baseline (0.2 mm for a 1 m baseline).
+PARALLEL_AXES_DEG = 0.1
+
+
+def _axis(camera: Camera) -> np.ndarray:
+    """The optical axis (the camera's +z) in the rig frame, unit length."""
+    return camera.R[2]
+
+
+def axes_angle_deg(cam_a: Camera, cam_b: Camera) -> float:
+    """The angle between the two cameras' optical axes (degrees, 0 to 180; a roll about an axis does not count).
+
+    Example:
+        >>> from ghnerf_runtime.geometry.camera import intrinsics_from_fov, look_at
+        >>> K = intrinsics_from_fov(64, 64, 60.0)
+        >>> a = Camera("a", 64, 64, K, [], *look_at((-3, 0, 0), (0, 0, 0)))
+        >>> b = Camera("b", 64, 64, K, [], *look_at((0, 0, -3), (0, 0, 0)))
+        >>> round(axes_angle_deg(a, b), 6)
+        90.0
+    """
+    cos = float(np.clip(np.dot(_axis(cam_a), _axis(cam_b)), -1.0, 1.0))
+    return float(np.degrees(np.arccos(cos)))
+
+
+def axes_pivot(cam_a: Camera, cam_b: Camera) -> np.ndarray | None:
+    """The point nearest both optical axes (least squares: the midpoint of their common perpendicular), or ``None``
+    when the axes are within :data:`PARALLEL_AXES_DEG` of parallel or antiparallel (a whole line is nearest).
+
+    The axes are whole lines: the point may lie behind a camera (diverging cameras); :func:`in_front` says.
+
+    Example:
+        >>> from ghnerf_runtime.geometry.camera import intrinsics_from_fov, look_at
+        >>> K = intrinsics_from_fov(64, 64, 60.0)
+        >>> a = Camera("a", 64, 64, K, [], *look_at((-1, -1.2, 0), (0, -1, 3)))
+        >>> b = Camera("b", 64, 64, K, [], *look_at((1, -1.2, 0), (0, -1, 3)))
+        >>> np.round(axes_pivot(a, b), 9).tolist()  # where both aim
+        [0.0, -1.0, 3.0]
+        >>> b = Camera("b", 64, 64, K, [], *look_at((1, -1.2, 0), (0, -0.8, 3)))  # aimed 20 cm higher: skew axes
+        >>> np.round(axes_pivot(a, b), 3).tolist()  # halfway between them where they pass nearest
+        [0.003, -0.903, 2.971]
+    """
+    da, db = _axis(cam_a), _axis(cam_b)
+    ca, cb = cam_a.center, cam_b.center
+    cos = float(np.dot(da, db))
+    det = 1.0 - cos * cos  # sin^2 of the angle between the axes
+    if det < np.sin(np.radians(PARALLEL_AXES_DEG)) ** 2:
+        return None
+    w = ca - cb
+    d, e = float(np.dot(da, w)), float(np.dot(db, w))
+    s = (cos * e - d) / det  # the nearest points ca + s da and cb + u db (the common perpendicular's feet)
+    u = (e - cos * d) / det
+    return 0.5 * (ca + s * da + cb + u * db)
+
+
+def in_front(camera: Camera, point: np.ndarray) -> bool:
+    """Whether a finite rig-frame ``point`` lies in front of ``camera`` (positive depth along its axis)."""
+    point = np.asarray(point, dtype=np.float64)
+    return bool(np.all(np.isfinite(point)) and np.dot(_axis(camera), point - camera.center) > 0.0)
+
+
+def _slerp_unit(a: np.ndarray, b: np.ndarray, alpha: float) -> np.ndarray:
+    """Spherical interpolation of two unit vectors less than 180 degrees apart (``alpha`` may extrapolate)."""
+    omega = float(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0)))
+    if omega < 1e-9:  # the same direction: the formula would divide 0 by 0
+        v = a + alpha * (b - a)
+    else:
+        v = (np.sin((1.0 - alpha) * omega) * a + np.sin(alpha * omega) * b) / np.sin(omega)
+    return v / np.linalg.norm(v)
+
+
+def orbit_centre(cam_a: Camera, cam_b: Camera, R: np.ndarray, alpha: float, pivot: np.ndarray) -> np.ndarray:
+    """The centre of the camera with rotation ``R`` (rig -> camera; the two cameras' slerped) on the orbit round
+    ``pivot``, ``alpha`` of the way from ``cam_a`` to ``cam_b``.
+
+    Each camera sees the pivot at ``q = R (pivot - centre)`` in its own frame; the virtual camera sees it in the
+    direction slerped between the two and at the distance lerped between them, so it is as far from the pivot as
+    the lerp of the two cameras' distances and looks at it as they do (straight at it when both do). At
+    ``alpha`` 0 and 1 this is ``cam_a``'s and ``cam_b``'s centre (when ``R`` is theirs).
+
+    Raises:
+        GeometryError: the pivot is not in front of both cameras (a caller's error: :func:`in_front` first), or
+            the extrapolated distance to it is not positive (``alpha`` too far out for two cameras at very
+            different distances).
+    """
+    pivot = np.asarray(pivot, dtype=np.float64)
+    if not (in_front(cam_a, pivot) and in_front(cam_b, pivot)):
+        raise GeometryError(f"orbit pivot {pivot.tolist()} is not in front of cameras {cam_a.name!r} and "
+                            f"{cam_b.name!r}")
+    qa, qb = cam_a.R @ (pivot - cam_a.center), cam_b.R @ (pivot - cam_b.center)
+    ra, rb = float(np.linalg.norm(qa)), float(np.linalg.norm(qb))
+    r = (1.0 - alpha) * ra + alpha * rb
+    if not r > 0.0:
+        raise GeometryError(f"novel-view alpha {alpha} (--novel-alpha, NovelViewRequest.alpha) extrapolates the "
+                            f"distances of cameras {cam_a.name!r} and {cam_b.name!r} to their orbit's pivot "
+                            f"({ra:.3f}, {rb:.3f} m) to {r:.3f} m; keep it nearer [0, 1]")
+    return pivot - np.asarray(R, dtype=np.float64).T @ (r * _slerp_unit(qa / ra, qb / rb, alpha))

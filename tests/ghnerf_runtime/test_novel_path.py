@@ -1,0 +1,212 @@
+"""The path of a view between the rig's cameras (``novel_view.path``): the line, the orbit round the axes' pivot,
+and ``auto``; the pivot's fall-backs (the subject, then the line)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.config import ConfigError, EstimatorConfig, NovelViewConfig, config_from_dict
+from ghnerf_runtime.errors import GeometryError
+from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at
+from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, axes_angle_deg, axes_pivot, in_front
+from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, interpolate_camera, novel_pivot
+from ghnerf_runtime.rig_file import load_rig
+
+REPO = Path(__file__).resolve().parents[2]
+K = intrinsics_from_fov(128, 128, 60.0)
+
+
+def _cam(name: str, eye, target, up=(0.0, -1.0, 0.0), K=K) -> Camera:
+    return Camera(name, 128, 128, K, [], *look_at(eye, target, up))
+
+
+def _facing(distance_a: float = 3.0, distance_b: float = 3.0):
+    """Two cameras 180 degrees apart on the x axis, both aimed at a subject at the origin."""
+    return _cam("a", (-distance_a, 0.0, 0.0), (0.0, 0.0, 0.0)), _cam("b", (distance_b, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def _around(angle_deg: float, radius: float = 3.0, subject=(0.0, -0.95, 3.0)):
+    """Two cameras ``radius`` from ``subject``, ``angle_deg`` apart round it, 1.3 m high, aimed at it."""
+    subject = np.asarray(subject)
+    cams = []
+    for name, sign in (("a", -1.0), ("b", 1.0)):
+        yaw = np.radians(sign * angle_deg / 2)
+        eye = subject + radius * np.array([np.sin(yaw), 0.0, -np.cos(yaw)])
+        eye[1] = -1.3
+        cams.append(_cam(name, eye, subject))
+    return cams
+
+
+def _looks_at(camera: Camera, point: np.ndarray) -> bool:
+    direction = (point - camera.center) / np.linalg.norm(point - camera.center)
+    return bool(np.allclose(camera.R[2], direction, atol=1e-9))
+
+
+def _rotation_ok(R: np.ndarray) -> bool:
+    return bool(np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.linalg.det(R) == pytest.approx(1.0, abs=1e-9))
+
+
+# ------------------------------------------------------------------ the defect and its fix
+def test_facing_cameras_orbit_round_the_subject_where_the_line_goes_through_it():
+    a, b = _facing()
+    subject = np.zeros(3)
+    # collinear axes have no nearest point: the subject's centre is the pivot
+    assert axes_pivot(a, b) is None
+    pivot = novel_pivot(a, b, "orbit", subject)
+    np.testing.assert_array_equal(pivot, subject)
+    orbit = interpolate_camera(a, b, 0.5, pivot=pivot)
+    line = interpolate_camera(a, b, 0.5)
+    np.testing.assert_allclose(line.center, subject, atol=1e-12)  # the old defect: the view from inside the body
+    assert np.linalg.norm(orbit.center - pivot) == pytest.approx(3.0, abs=1e-9)  # as far as the ends
+    assert _looks_at(orbit, pivot)
+    uv, depth = orbit.project(pivot[None], distort=False)
+    np.testing.assert_allclose(uv[0], K[:2, 2], atol=1e-6)  # the pivot in the middle of the picture
+    assert depth[0] == pytest.approx(3.0)
+    for alpha in (0.1, 0.25, 0.75, 0.9):  # the whole way round, never nearer
+        cam = interpolate_camera(a, b, alpha, pivot=pivot)
+        assert np.linalg.norm(cam.center - pivot) == pytest.approx(3.0, abs=1e-9) and _looks_at(cam, pivot)
+
+
+def test_cameras_round_the_subject_orbit_its_pivot_at_the_lerped_distance():
+    """Cameras 150 degrees apart round the subject, tilted down at it (axes 147 degrees apart, crossing at it):
+    the pivot is the subject without being told; the distance to it is lerped when the two differ."""
+    subject = np.array([0.0, -0.95, 3.0])
+    a, b = _around(150.0)
+    np.testing.assert_allclose(axes_pivot(a, b), subject, atol=1e-9)
+    np.testing.assert_allclose(novel_pivot(a, b, "auto"), subject, atol=1e-9)
+    line = interpolate_camera(a, b, 0.5)
+    assert np.linalg.norm(line.center - subject) < 0.9  # the line's camera nearly in the subject's box
+    ra = np.linalg.norm(a.center - subject)
+    far = _cam("b", subject + 2.0 * (b.center - subject), subject)  # b twice as far
+    for alpha in (0.25, 0.5, 0.75):
+        cam = interpolate_camera(a, far, alpha, pivot=subject)
+        assert np.linalg.norm(cam.center - subject) == pytest.approx((1 - alpha) * ra + alpha * 2 * ra, abs=1e-9)
+        assert _looks_at(cam, subject)
+
+
+def test_the_ends_are_the_rig_cameras_exactly():
+    """Skew axes (the pivot on neither), different focal lengths: alpha 0 and 1 are the two cameras."""
+    a = _cam("a", (-1.0, -1.2, 0.0), (0.1, -1.0, 3.0))
+    Kb = K.copy()
+    Kb[0, 0] = Kb[1, 1] = 1.3 * K[0, 0]
+    b = _cam("b", (1.5, -1.4, 0.5), (-0.2, -0.9, 3.2), K=Kb)
+    pivot = novel_pivot(a, b, "orbit")
+    assert pivot is not None and not _looks_at(a, pivot) and not _looks_at(b, pivot)
+    for alpha, cam in ((0.0, a), (1.0, b)):
+        end = interpolate_camera(a, b, alpha, pivot=pivot)
+        np.testing.assert_allclose(end.center, cam.center, atol=1e-12)
+        np.testing.assert_allclose(end.R, cam.R, atol=1e-12)
+        np.testing.assert_allclose(end.K, cam.K, atol=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [-1.0, -0.3, 0.0, 0.2, 0.5, 0.8, 1.0, 1.4, 2.0])
+def test_the_orbit_camera_is_a_proper_rotation(alpha):
+    rng = np.random.default_rng(7)
+    subject = np.array([0.0, -1.0, 3.0])
+    checked = 0
+    for _ in range(40):
+        eyes = subject + rng.uniform(-3, 3, (2, 3)) * [1, 0.2, 1]
+        a, b = (_cam(n, e, subject + rng.normal(0, 0.2, 3)) for n, e in zip("ab", eyes))
+        pivot = novel_pivot(a, b, "orbit", subject)
+        if pivot is None:
+            continue
+        try:
+            cam = interpolate_camera(a, b, alpha, pivot=pivot)
+        except GeometryError as e:  # far out, two cameras at very different distances: refused, never mirrored
+            assert "extrapolates the distances" in str(e) and not 0 <= alpha <= 1
+            continue
+        assert _rotation_ok(cam.R) and np.all(np.isfinite(cam.center))
+        checked += 1
+    assert checked >= 20
+
+
+# ------------------------------------------------------------------ fall-backs
+def test_parallel_axes_fall_back_to_the_subject_then_to_the_line():
+    a = _cam("a", (-0.5, -1.2, 0.0), (-0.5, -1.2, 3.0))
+    b = _cam("b", (0.5, -1.2, 0.0), (0.5, -1.2, 3.0))  # side by side, both straight ahead
+    assert axes_angle_deg(a, b) == pytest.approx(0.0, abs=1e-6) and axes_pivot(a, b) is None
+    assert novel_pivot(a, b, "orbit") is None  # no subject: the line
+    for alpha in (0.25, 0.5):
+        np.testing.assert_allclose(interpolate_camera(a, b, alpha, pivot=None).center,
+                                   (1 - alpha) * a.center + alpha * b.center)
+    subject = np.array([0.0, -1.0, 3.0])
+    np.testing.assert_array_equal(novel_pivot(a, b, "orbit", subject), subject)
+    # just short of parallel: a pivot of its own (PARALLEL_AXES_DEG is the limit)
+    tilt = 2 * PARALLEL_AXES_DEG
+    c = _cam("c", (0.5, -1.2, 0.0), (0.5 - 3.0 * np.tan(np.radians(tilt)), -1.2, 3.0))
+    pivot = novel_pivot(a, c, "orbit", subject)
+    assert pivot is not None and pivot[2] == pytest.approx(1.0 / np.tan(np.radians(tilt)), rel=1e-6)
+
+
+def test_a_pivot_behind_a_camera_falls_back():
+    # toed out: the axes' nearest point is behind both cameras
+    a = _cam("a", (-0.5, -1.2, 0.0), (-2.0, -1.2, 3.0))
+    b = _cam("b", (0.5, -1.2, 0.0), (2.0, -1.2, 3.0))
+    behind = axes_pivot(a, b)
+    assert behind is not None and not in_front(a, behind) and not in_front(b, behind)
+    assert novel_pivot(a, b, "orbit") is None  # the line
+    assert novel_pivot(a, b, "orbit", np.array([0.0, -1.0, -3.0])) is None  # the subject behind them too: the line
+    subject = np.array([0.0, -1.0, 3.0])
+    np.testing.assert_array_equal(novel_pivot(a, b, "orbit", subject), subject)
+    # behind one camera only: b looks away from the point a's axis crosses
+    c = _cam("c", (0.5, -1.2, 4.0), (0.0, -1.2, 6.0))
+    cross = axes_pivot(a, c)
+    assert cross is not None and not (in_front(a, cross) and in_front(c, cross))
+    assert novel_pivot(a, c, "orbit") is None
+    with pytest.raises(GeometryError, match="not in front"):
+        interpolate_camera(a, c, 0.5, pivot=cross)
+
+
+def test_an_extrapolated_distance_that_is_not_positive_is_an_error_naming_alpha():
+    a, b = _facing(1.0, 3.0)
+    assert interpolate_camera(a, b, -0.4, pivot=np.zeros(3)) is not None  # 1.4 * 1 - 0.4 * 3 = 0.2 m
+    with pytest.raises(GeometryError, match="alpha -1"):
+        interpolate_camera(a, b, -1.0, pivot=np.zeros(3))  # 2 * 1 - 3 = -1 m
+
+
+# ------------------------------------------------------------------ auto and the config
+def test_auto_orbits_only_past_the_threshold():
+    assert AUTO_ORBIT_MIN_ANGLE_DEG == 60.0  # the figure docs/runtime.md justifies
+    narrow, wide = _around(50.0), _around(70.0)
+    assert axes_angle_deg(*narrow) < AUTO_ORBIT_MIN_ANGLE_DEG < axes_angle_deg(*wide)
+    assert novel_pivot(*narrow, "auto") is None and novel_pivot(*narrow, "orbit") is not None
+    assert novel_pivot(*wide, "auto") is not None
+    assert novel_pivot(*wide, "line") is None
+
+
+def test_auto_keeps_the_line_for_the_rigs_of_the_documented_figures():
+    """docs/examples/rig.json, the simulator's default rig and the widest ``RigPlacement.random`` rig (1.8 m
+    baseline at 2.2 m): their novel-view figures were measured on the line."""
+    sim = pytest.importorskip("drivers.sim")
+    widest = sim.RigPlacement(baseline_m=1.8, distance_m=2.2, camera_height_m=0.8, target_height_m=0.8,
+                              volume_depth_m=1.0).build()
+    for rig in (load_rig(REPO / "docs" / "examples" / "rig.json"), sim.RigPlacement().build(), widest):
+        assert axes_angle_deg(*rig.pair) < 45.0
+        assert novel_pivot(*rig.pair, "auto", rig.volume.min_corner / 2 + rig.volume.max_corner / 2) is None
+    assert NovelViewConfig().path == "auto"
+
+
+def test_the_path_is_validated_naming_the_field():
+    for path in ("line", "orbit", "auto"):
+        assert NovelViewConfig(path=path).path == path
+    with pytest.raises(ConfigError, match="path.*'arc'"):
+        NovelViewConfig(path="arc")
+    with pytest.raises(ConfigError, match=r"^novel_view\.path"):
+        config_from_dict({"novel_view": {"path": "Orbit"}})
+    with pytest.raises(ConfigError, match=r"novel_view\.path"):
+        config_from_dict({"novel_view": {"path": None}})
+    with pytest.raises(ConfigError, match=r"^novel_view\.path"):
+        novel_pivot(*_facing(), "circle")
+    line = EstimatorConfig(novel_view=NovelViewConfig(path="line"))
+    assert config_from_dict({"novel_view": {"path": "line"}}) == line
+
+
+def test_docstring_examples():
+    import doctest
+
+    import ghnerf_runtime.geometry.orbit as module
+
+    result = doctest.testmod(module)
+    assert result.attempted >= 4 and result.failed == 0, result
