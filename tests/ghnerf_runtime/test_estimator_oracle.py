@@ -285,6 +285,31 @@ def test_a_failing_novel_view_in_the_worker_is_raised_and_the_estimator_goes_on(
     est.close()  # idempotent
 
 
+def test_a_pair_that_finds_nobody_renders_no_novel_view(clip):
+    """An empty room (one the frame check passes: a textured wall) with a novel view requested on every pair:
+    there is no subject to view, so no novel-view graph runs and the pair has none. Before, each such pair
+    built the novel camera's volume and rendered the working volume's box for nothing, the dearest thing an
+    empty room cost."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = ThreadRecorder()
+    cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True), tracking=TrackingConfig(retry_cold=False))
+    request = NovelViewRequest(alpha=0.5, overlay="skeleton")
+    with Estimator(oracle, rig, cfg) as est:
+        oracle.set_truth(None)  # the model sees nobody in the (textured) frames
+        for k in range(3):
+            r = est.estimate(frames[k], novel_view=request)
+            assert all(r.frame_ok.values()) and r.missing.all() and r.novel_view is None
+        assert not {g for g, _ in oracle.threads} & {"volume", "render", "render_rgb"}
+        for k in (3, 4):  # someone comes in: viewed from the first pair on
+            oracle.set_truth(truth[k], visible[k])
+            r = est.estimate(frames[k], novel_view=request)
+            assert r.num_found > 6 and r.novel_view is not None and (r.novel_view.image > 0).any()
+        oracle.set_truth(None)  # and leaves: the tracked pass (its view started in the worker) finds nobody
+        r = est.estimate(frames[0], novel_view=request)
+        assert r.tracked and r.missing.all() and r.novel_view is None
+        assert not set(NOVEL_STAGES) & set(r.timing_ms)
+
+
 class RenderedOffset(OracleSession):
     """The oracle, but its rendered heatmaps show every joint ``offset`` metres away from the truth
     (a rendered path that errs), while the encoder's heatmaps stay exact."""
