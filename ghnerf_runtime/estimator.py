@@ -469,8 +469,10 @@ class Estimator:
             arr = np.asarray(img)
             w, h = st.camera.size
             if arr.dtype != np.uint8 or arr.shape != (h, w, 3):
-                raise FrameError(f"camera {st.camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image, got "
-                                 f"{arr.dtype} {arr.shape}")
+                # (a missing frame read "got object ()"; a camera reconfigured to another size names both sizes)
+                got = "None (no frame)" if img is None else f"{arr.dtype} {arr.shape}"
+                raise FrameError(f"camera {st.camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image (the rig "
+                                 f"file's {w}x{h}), got {got}")
 
     def _empty_result(self, sequence: int, regions: Regions, frame_ok: dict, timing: dict) -> PairResult:
         J = len(JOINT_NAMES)

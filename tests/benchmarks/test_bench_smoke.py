@@ -279,3 +279,9 @@ def test_measure_presence_with_the_flip_test_and_its_timing(model, capsys, monke
                      re.M), out
     assert re.search(r"^empty rooms, the defaults with a novel view requested on every pair: [\d.]+ ms median per "
                      r"pair, 0 of 10 pairs with a novel view$", out, re.M), out
+
+
+def test_measure_two_people(capsys, monkeypatch):
+    out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^2 pairs of two people \(1 scenes\), .* [\d.]+ joints reported per pair; of them \d+% at the "
+                     r"first person's, \d+% at the second's, \d+% at neither", out, re.M), out

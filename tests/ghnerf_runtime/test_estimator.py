@@ -272,6 +272,12 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
         est.estimate((frames[0][0].astype(np.float32), frames[0][1]))
     with pytest.raises(FrameError, match="expected 2 images"):
         est.estimate((frames[0][0],))
+    # a frame missing, empty, or of a camera reconfigured to another size: named, never projected as it comes
+    h, w = frames[0][0].shape[:2]
+    for bad, got in ((None, r"got None \(no frame\)"), (np.zeros((0, 0, 3), np.uint8), r"got uint8 \(0, 0, 3\)"),
+                     (np.zeros((2 * h, 2 * w, 3), np.uint8), rf"file's {w}x{h}\), got uint8 \({2 * h}, {2 * w}, 3\)")):
+        with pytest.raises(FrameError, match=rf"camera {rig.names[1]!r}: expected a \({h}, {w}, 3\).*{got}"):
+            est.estimate((frames[0][0], bad))
     small = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False),
                               ("encoder", "volume", "render_heat"))
     with pytest.raises(ModelError, match="query"):

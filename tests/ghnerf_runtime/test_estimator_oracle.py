@@ -310,6 +310,26 @@ def test_a_pair_that_finds_nobody_renders_no_novel_view(clip):
         assert not set(NOVEL_STAGES) & set(r.timing_ms)
 
 
+def test_a_person_seen_by_one_camera_only_is_nobody_and_the_frames_say_they_were_looked_at(clip):
+    """Someone entering at the edge of one camera's view, outside the other's: both frames pass the check and
+    the model runs (not "not computed"), one view has no depth, so the presence gate counts no 3D joint and
+    every joint, 2D ones included, is missing ("not found"); no novel view. The other camera's 2D joints are
+    not reported: single_view_2d answers a rejected frame only (docs/runtime.md, "Known gaps")."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True)))
+    for k in (0, 1):
+        one = visible[0].copy()
+        one[1 - k] = False  # camera k sees the person, the other nobody
+        oracle.set_truth(truth[0], one)
+        runs = oracle.run_counts["encoder"]
+        r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
+        assert oracle.run_counts["encoder"] > runs and all(r.frame_ok.values())
+        assert r.missing.all() and not r.joints_3d.any() and r.novel_view is None
+        assert all(r.missing_2d[n].all() and not r.joints_2d[n].any() for n in rig.names[:2])
+        assert est.tracker.track is None and est.tracker.view_track is None
+
+
 class RenderedOffset(OracleSession):
     """The oracle, but its rendered heatmaps show every joint ``offset`` metres away from the truth
     (a rendered path that errs), while the encoder's heatmaps stay exact."""
