@@ -142,8 +142,9 @@ def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool 
     print(f"empty rooms, the defaults (frame check off): {a:.2f} ms median per pair with the mirrored run skipped, "
           f"{b:.2f} ms with it (flip_test_skip_below 0): {a / b:.2f}x ({len(times['skipped'])} pairs each)")
     if novel:
-        print(f"empty rooms, the defaults with a novel view requested on every pair: {np.median(times['novel']):.2f} ms "
-              f"median per pair, {views} of {len(times['novel'])} pairs with a novel view")
+        print(f"empty rooms, the defaults with a novel view requested on every pair: "
+              f"{np.median(times['novel']):.2f} ms median per pair, {views} of {len(times['novel'])} pairs with a "
+              f"novel view")
 
 
 if __name__ == "__main__":
