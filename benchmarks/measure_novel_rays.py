@@ -1,7 +1,7 @@
 """What the novel view's coarse silhouette pass (and its sparse interior) saves, and what it changes in the image.
 
     .venv/bin/python benchmarks/measure_novel_rays.py --model-dir models [--sequences 4 --frames 30]
-                                                      [--interior-stride 2]
+                                                      [--interior-stride 2] [--config runtime.json]
 
 On held-out-like simulator sequences, with the shipped model's own joints tracking the subject,
 each pair's novel view (alpha 0.5, 128x128, stride 1) is rendered twice at the same camera:
@@ -31,8 +31,7 @@ from ghnerf_runtime.cli.simdata import load_sequences, percentiles  # noqa: E402
 from ghnerf_runtime.config import (  # noqa: E402
     EstimatorConfig,
     HeatmapsConfig,
-    NovelViewConfig,
-    SessionConfig,
+    load_config,
 )
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.metrics import masked_psnr  # noqa: E402
@@ -56,10 +55,13 @@ def main(argv=None) -> int:
     ap.add_argument("--interior-stride", type=int, default=0,
                     help="also render with the interior at this stride (0: not; default)")
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
+    ap.add_argument("--config", help="estimator config JSON (ghnerf_runtime.config; the novel view is enabled "
+                                     "whatever it says; --model-dir/--precision/--silhouette-stride still apply)")
     args = ap.parse_args(argv)
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
-                          heatmaps=HeatmapsConfig(flip_test=False),  # as docs/runtime.md measured it
-                          novel_view=NovelViewConfig(enabled=True, silhouette_stride=args.silhouette_stride))
+    # without --config: the flip test off, as docs/runtime.md measured it
+    base = load_config(args.config) if args.config else EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False))
+    cfg = replace(base, session=replace(base.session, model_dir=args.model_dir, precision=args.precision),
+                  novel_view=replace(base.novel_view, enabled=True, silhouette_stride=args.silhouette_stride))
     if args.min_diff is not None:
         cfg = replace(cfg, novel_view=replace(cfg.novel_view, silhouette_min_diff=args.min_diff))
     if args.dilate is not None:

@@ -1,6 +1,7 @@
 """Confidence of phantom joints in empty rooms vs joints of real people (sets the presence gate).
 
     .venv/bin/python benchmarks/measure_presence.py [--model-dir models] [--rooms 8] [--flip-test] [--time]
+                                                    [--novel-view]
 
 The trained model has only ever seen views with a person in them, so for an empty room it still
 answers "someone", with weaker peaks. For each heatmap source (with its best 3D method) this
@@ -13,7 +14,9 @@ sequences x 10 pairs). A presence threshold
 statistic ``heatmaps.flip_test_skip_below`` is compared with (``flip_test.presence_peak`` of the heatmaps
 before the mirrored run); its default belongs between the two as well. ``--time`` then times the runtime's
 defaults (the frame check off, as for a textured room) on the empty rooms, ``flip_test_skip_below`` at its
-default and at 0 (both run the flip test), the pairs interleaved: median ms per pair. A tool, not a test.
+default and at 0 (both run the flip test), the pairs interleaved: median ms per pair; with ``--novel-view``
+also the defaults with a novel view requested on every pair (none is rendered for a pair that shows nobody).
+A tool, not a test.
 """
 from __future__ import annotations
 
@@ -45,9 +48,9 @@ class _PeakRecorder(Estimator):
 
     peaks: list = []
 
-    def _flip_test(self, batch, heat, timing, src_P=None):
+    def _flip_test(self, batch, heat, timing, src_P=None, beside=False):
         self.peaks.append(presence_peak(heat, (0, 1), self.config.presence.min_joints))
-        return super()._flip_test(batch, heat, timing, src_P)
+        return super()._flip_test(batch, heat, timing, src_P, beside)
 
 
 def sixth_strongest(result) -> float:
@@ -62,6 +65,8 @@ def main(argv=None) -> int:
     ap.add_argument("--flip-test", action="store_true", help="heatmaps.flip_test on (encoder heatmaps)")
     ap.add_argument("--time", action="store_true",
                     help="also time the empty rooms with the defaults, heatmaps.flip_test_skip_below default vs 0")
+    ap.add_argument("--novel-view", action="store_true",
+                    help="with --time: also time the defaults with a novel view requested on every pair")
     args = ap.parse_args(argv)
     import drivers.sim as sim
 
@@ -97,36 +102,49 @@ def main(argv=None) -> int:
             print(f"{'':>8} before the mirrored run (heatmaps.flip_test_skip_below): empty rooms max "
                   f"{max(empty_peaks):.3f} | with a person min {min(_PeakRecorder.peaks):.3f}")
     if args.time:
-        time_empty_rooms(args.model_dir, args.rooms)
+        time_empty_rooms(args.model_dir, args.rooms, novel=args.novel_view)
     return 0
 
 
-def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10) -> None:
+def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool = False) -> None:
     """Median ms per empty-room pair with the defaults (frame check off), skipping the flip test's mirrored
-    run where nobody may be (the default) against running it always (``flip_test_skip_below`` 0)."""
+    run where nobody may be (the default) against running it always (``flip_test_skip_below`` 0); ``novel``:
+    also the defaults with a novel view (alpha 0.5) requested on every pair."""
     import time
+    from dataclasses import replace
 
     import drivers.sim as sim
+    from ghnerf_runtime.config import NovelViewConfig
+    from ghnerf_runtime.novel_view import NovelViewRequest
 
     rig = sim.RigPlacement().build()
     base = EstimatorConfig(session=SessionConfig(model_dir=model_dir), frame_check=FrameCheckConfig(enabled=False))
+    if novel:  # one session for all (the colour graphs loaded)
+        base = replace(base, novel_view=NovelViewConfig(enabled=True))
     skip = Estimator.from_config(rig, base)
-    always = Estimator(skip.session, rig, EstimatorConfig(
-        session=base.session, frame_check=base.frame_check, heatmaps=HeatmapsConfig(flip_test_skip_below=0.0)))
-    times: dict[str, list[float]] = {"skipped": [], "always": []}
+    always = Estimator(skip.session, rig, replace(base, heatmaps=HeatmapsConfig(flip_test_skip_below=0.0)))
+    order = [("skipped", skip, None), ("always", always, None)]
+    if novel:
+        order.append(("novel", Estimator(skip.session, rig, base), NovelViewRequest(alpha=0.5)))
+    times: dict[str, list[float]] = {name: [] for name, _, _ in order}
+    views = 0
     for seed in range(1, rooms + 1):
         room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))
         pair = tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
         for rep in range(repeats + 1):
-            order = (("skipped", skip), ("always", always))
-            for name, est in order[::-1] if rep % 2 else order:  # alternate which runs first
+            for name, est, request in order[::-1] if rep % 2 else order:  # alternate which runs first
                 t = time.perf_counter()
-                est.estimate(pair)
+                r = est.estimate(pair, novel_view=request)
                 if rep:  # the first of each room warms the caches
                     times[name].append((time.perf_counter() - t) * 1e3)
+                    views += r.novel_view is not None
     a, b = (float(np.median(times[k])) for k in ("skipped", "always"))
     print(f"empty rooms, the defaults (frame check off): {a:.2f} ms median per pair with the mirrored run skipped, "
           f"{b:.2f} ms with it (flip_test_skip_below 0): {a / b:.2f}x ({len(times['skipped'])} pairs each)")
+    if novel:
+        print(f"empty rooms, the defaults with a novel view requested on every pair: "
+              f"{np.median(times['novel']):.2f} ms median per pair, {views} of {len(times['novel'])} pairs with a "
+              f"novel view")
 
 
 if __name__ == "__main__":

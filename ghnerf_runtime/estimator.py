@@ -128,7 +128,8 @@ class PairResult:
         frame_ok: camera name -> False when the frame check rejected the crop (model not run).
         rois: camera name -> the crop window used (undistorted pixels).
         method: the 3D method used.
-        novel_view: the rendered novel view when requested, else ``None``.
+        novel_view: the rendered novel view when requested, else ``None`` (also when requested for a
+            pair that has no subject to view: a frame rejected, or nobody found).
     """
 
     sequence: int
@@ -246,6 +247,7 @@ class _Pass:
     missing_2d: dict | None = None
     novel: "_NovelJob | None" = None  # the novel view rendering in the worker (overlap)
     crops: list | None = None  # the source crop cameras (the novel view's proxy blend reads them)
+    someone: bool = False  # the presence gate found someone (always, with the gate off)
 
 
 @dataclass(frozen=True)
@@ -468,8 +470,10 @@ class Estimator:
             arr = np.asarray(img)
             w, h = st.camera.size
             if arr.dtype != np.uint8 or arr.shape != (h, w, 3):
-                raise FrameError(f"camera {st.camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image, got "
-                                 f"{arr.dtype} {arr.shape}")
+                # (a missing frame read "got object ()"; a camera reconfigured to another size names both sizes)
+                got = "None (no frame)" if img is None else f"{arr.dtype} {arr.shape}"
+                raise FrameError(f"camera {st.camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image (the rig "
+                                 f"file's {w}x{h}), got {got}")
 
     def _empty_result(self, sequence: int, regions: Regions, frame_ok: dict, timing: dict) -> PairResult:
         J = len(JOINT_NAMES)
@@ -491,8 +495,8 @@ class Estimator:
                 the pair's joints are reported unsmoothed and the filter restarts: the host's clock would
                 count processing jitter as motion, so a caller that wants smoothing passes the time.
             novel_view: render a novel view too (needs ``novel_view.enabled`` in the config). A
-                pair whose frames fail the frame check has none (``PairResult.novel_view`` is
-                ``None``).
+                pair whose frames fail the frame check, or that the presence gate says shows nobody,
+                has none (``PairResult.novel_view`` is ``None``): nothing is rendered.
 
         Raises:
             FrameError: an image has the wrong size or type for its camera; ``timestamp_s`` is not finite.
@@ -569,7 +573,11 @@ class Estimator:
         result = PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
                             p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
                             self.config.joints3d.method)
-        if novel_view is None or not all(p.frame_ok.values()):  # a single-view pair has no novel view
+        if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
+            # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
+            # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
+            if p.novel is not None:  # (a tracked pass that lost the subject started one in the worker)
+                p.novel.abandon()
             return result, None
 
         def finish() -> PairResult:
@@ -591,6 +599,7 @@ class Estimator:
             nv, novel_timing = p.novel.future.result()
             timing.update(novel_timing)
         else:
+            self._add_features(p.env, timing)
             nv = self._render_novel(request, p.env, self._novel_box(p.regions, p.j3), timing)
             inputs = self._proxy_inputs(p, nv.camera) if over_proxy else None
         if inputs is not None:
@@ -628,7 +637,8 @@ class Estimator:
         """
         cfg = self.config
         S = self.size
-        features = novel_view is not None  # the novel view reads the image features of the pair
+        # the novel view reads the image features of the pair (a cold pass may leave them for later)
+        features = novel_view is not None and not self._features_may_wait(regions)
 
         # 1. preprocess + frame check
         t = time.perf_counter()
@@ -725,6 +735,7 @@ class Estimator:
         t = time.perf_counter()
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
         j3 = self._gate_to_boxes(j3, regions)
+        nobody = False  # (the presence gate off: nothing decides that nobody is there)
         if cfg.presence.enabled:
             if self.skeleton_prior is None:
                 j3 = gate_presence(j3, cfg.presence.min_joints, cfg.presence.threshold(cfg.heatmaps.source))
@@ -739,7 +750,26 @@ class Estimator:
         follow = self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         _add_ms(timing, "joints_3d", t)
-        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job, crops)
+        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody)
+
+    def _features_may_wait(self, regions: Regions) -> bool:
+        """Whether a pass with a novel view asked for may run the keypoint-only ``human`` graph, leaving out
+        the image features: a cold pass, with the cold start refined. One that finds the subject is run again
+        on their crop, with the features, and that pass is reported; one that finds nobody has no view. Only a
+        cold pass that finds someone but forms no track is reported with a view: :meth:`_add_features` runs
+        the ``encoder`` graph for it then. Before, every pair of an empty room ran the ``encoder`` graph."""
+        t = self.config.tracking
+        return self._human_graph and not regions.tracked and t.enabled and t.refine_cold_start
+
+    def _add_features(self, env: dict, timing: dict) -> None:
+        """The image features a cold pass left out (:meth:`_features_may_wait`), from the ``encoder`` graph; the
+        heatmaps the pass decoded (the flip test's average) are kept. The time counts as ``encoder``."""
+        need = [t.name for t in self.contract.graph("encoder").outputs if t.name not in env]
+        if need:
+            t = time.perf_counter()
+            out = self.session.run("encoder", env)
+            env.update({k: out[k] for k in need})
+            _add_ms(timing, "encoder", t)
 
     def _may_be_someone(self, heat: np.ndarray, views: Sequence[int]) -> bool:
         """Whether the flip test's second run can change the presence gate's answer

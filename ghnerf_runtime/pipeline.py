@@ -51,7 +51,7 @@ class NovelViewPipeline:
                novel_view: NovelViewRequest | None = None, timestamp_s: float | None = None) -> list:
         """Estimate one pair (arguments as :meth:`Estimator.estimate`'s) and return the results finished
         meanwhile, oldest first: the previous pair's once its view is done, and this pair's too when it has no
-        view to finish (none requested, or a pair whose frames failed the check).
+        view to finish (none requested, a pair whose frames failed the check, or one that found nobody).
 
         Raises:
             what :meth:`Estimator.estimate` raises, for this pair or (its view) for the previous one; the

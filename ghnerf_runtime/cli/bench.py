@@ -165,9 +165,10 @@ def run_runtime_bench(args) -> dict:
         priors = (args.skeleton_priors or [None]) if cfg.joints3d.method == "triangulate" else [None]
         prior_flips = (args.prior_flip_tests or [None]) if cfg.joints3d.method == "triangulate" else [None]
         smooths = args.smoothing or [None]
+        presences = args.presence_gates or [None]
         sides = (args.flip_side_by_side or [None]) if source == "encoder" else [None]
-        for mode, flip, follow, prior, prior_flip, smooth, side in itertools.product(
-                args.modes, flips, follows, priors, prior_flips, smooths, sides):
+        for mode, flip, follow, prior, prior_flip, smooth, side, presence in itertools.product(
+                args.modes, flips, follows, priors, prior_flips, smooths, sides, presences):
             if flip is False and side is not None and side != sides[0]:
                 continue  # without the flip test there is nothing to run side by side: one row
             if prior is False and prior_flip is not None and prior_flip != prior_flips[0]:
@@ -182,6 +183,8 @@ def run_runtime_bench(args) -> dict:
                 flip_cfg = replace(flip_cfg, tracking=replace(flip_cfg.tracking, follow_encoder=follow))
             if smooth is not None:
                 flip_cfg = replace(flip_cfg, smoothing=replace(flip_cfg.smoothing, enabled=smooth))
+            if presence is not None:
+                flip_cfg = replace(flip_cfg, presence=replace(flip_cfg.presence, enabled=presence))
             if side is not None:
                 flip_cfg = replace(flip_cfg, heatmaps=replace(flip_cfg.heatmaps, flip_test_side_by_side=side))
             novel_rows = itertools.product(args.novel_interior_strides or [None], args.proxy_blends or [None],
@@ -202,6 +205,7 @@ def run_runtime_bench(args) -> dict:
                              "flip_label": flip is not None, "follow_label": follow is not None,
                              "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
                              "smoothing_label": smooth is not None, "proxy_label": blend is not None,
+                             "presence_label": presence is not None,
                              "side_label": side is not None,
                              "painter_label": paint is not None,
                              "pipeline": bool(piped), "pipeline_label": piped is not None,
@@ -242,6 +246,7 @@ def run_runtime_bench(args) -> dict:
                "prior_label": row["prior_label"], "prior_flip_test": cfg.joints3d.prior_flip_test,
                "prior_flip_label": row["prior_flip_label"],
                "smoothing": cfg.smoothing.enabled, "smoothing_label": row["smoothing_label"],
+               "presence": cfg.presence.enabled, "presence_label": row["presence_label"],
                "flip_side_by_side": cfg.heatmaps.flip_test_side_by_side, "side_label": row["side_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
                    "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"],
@@ -273,6 +278,8 @@ def _print_row(row: dict) -> None:
         tracked += " prior-flip" if row["prior_flip_test"] else " prior-no-flip"
     if row.get("smoothing_label"):
         tracked += " smooth" if row["smoothing"] else " no-smooth"
+    if row.get("presence_label"):
+        tracked += " presence" if row["presence"] else " no-presence"
     if row.get("side_label") and row.get("flip_test"):
         tracked += " flip-side-by-side" if row["flip_side_by_side"] else " flip-in-turn"
     if row.get("proxy_label"):
@@ -355,6 +362,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--smoothing", default=None, type=_on_off_list,
                     help="comma list of smoothing.enabled values (on,off), one row each (interleaved; default: "
                          "the config's, on)")
+    rt.add_argument("--presence-gates", default=None, type=_on_off_list,
+                    help="comma list of presence.enabled values (on,off), one row each (interleaved; default: the "
+                         "config's, on). A pair the gate says shows nobody has no novel view: off views every pair")
     rt.add_argument("--flip-side-by-side", default=None, type=_on_off_list,
                     help="comma list of heatmaps.flip_test_side_by_side values (on,off), one row each for the "
                          "encoder heatmaps with the flip test (interleaved; default: the config's, on)")

@@ -291,7 +291,8 @@ def _run(args) -> int:
             out.write(json.dumps(obj, allow_nan=False) + "\n")
             out.flush()
         if novel is not None:
-            # A pair whose frames were rejected has no novel view: keep the video in step with black.
+            # A pair whose frames were rejected, or that found nobody, has no novel view: keep the video in step
+            # with black.
             novel.add(result.novel_view.image if result.novel_view is not None
                       else np.zeros((estimator.size, estimator.size, 3), np.uint8))
         if overlay is not None:

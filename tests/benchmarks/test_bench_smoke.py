@@ -168,13 +168,15 @@ def test_a_tracked_pairs_view_on_the_lanes_reaches_the_render_tap(model):
     placed from the truth, as ``measure_novel_quality --track-from-truth`` does."""
     from benchmarks.bench_runtime_common import RenderTap
     from ghnerf_runtime.cli.simdata import load_sequences
-    from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, SessionConfig
+    from ghnerf_runtime.config import EstimatorConfig, NovelViewConfig, PresenceConfig, SessionConfig
     from ghnerf_runtime.estimator import Estimator, load_session
     from ghnerf_runtime.novel_view import NovelViewRequest
     from ghnerf_runtime.tracking import track_from_joints
 
+    # the presence gate off: the random weights find nobody, and a pair with nobody has no novel view
     cfg = EstimatorConfig(session=SessionConfig(model_dir=model, threads=2, thread_pool="per_session"),
-                          novel_view=NovelViewConfig(enabled=True, overlap=True, lanes=True))
+                          novel_view=NovelViewConfig(enabled=True, overlap=True, lanes=True),
+                          presence=PresenceConfig(enabled=False))
     tap = RenderTap(load_session(cfg))
     seq = load_sequences(1, 3)[0]
     with Estimator(tap, seq.rig, cfg) as est:
@@ -186,16 +188,27 @@ def test_a_tracked_pairs_view_on_the_lanes_reaches_the_render_tap(model):
     assert renders >= 1 and len(tap.runs) == renders
 
 
-def test_measure_novel_quality(model, capsys, monkeypatch):
+@pytest.fixture(scope="module")
+def everyone_config(tmp_path_factory):
+    """A config with the presence gate off: the random weights find nobody, and a pair with nobody has no novel
+    view, so the novel-view scripts would have no pair to measure (the flip test off, as without a config)."""
+    path = tmp_path_factory.mktemp("config") / "everyone.json"
+    path.write_text(json.dumps({"presence": {"enabled": False}, "heatmaps": {"flip_test": False}}))
+    return str(path)
+
+
+def test_measure_novel_quality(model, everyone_config, capsys, monkeypatch):
     out = run_script("measure_novel_quality", "--model-dir", model, *SIZES, "--every", "1", "--alphas", "0,1",
-                     "--strides", "1", "--track-from-truth", capsys=capsys, monkeypatch=monkeypatch)
+                     "--strides", "1", "--track-from-truth", "--config", everyone_config,
+                     capsys=capsys, monkeypatch=monkeypatch)
     for alpha in (0, 1):
         assert re.search(rf"^\| {alpha} \| 1 \| off \| off \| off \| 3 \| [\d.]+ ", out, re.M), out
     assert "accumulated opacity, coarse-pass rays of the stride-1 views" in out
 
 
-def test_measure_novel_rays(model, capsys, monkeypatch):
-    out = run_script("measure_novel_rays", "--model-dir", model, *SIZES, capsys=capsys, monkeypatch=monkeypatch)
+def test_measure_novel_rays(model, everyone_config, capsys, monkeypatch):
+    out = run_script("measure_novel_rays", "--model-dir", model, *SIZES, "--config", everyone_config,
+                     capsys=capsys, monkeypatch=monkeypatch)
     assert "3 pairs; novel view 64x64, stride 1" in out, out  # the model's size (it said 128x128 whatever it was)
     assert re.search(r"^  coarse pass +rays median +\d+ ", out, re.M), out
 
@@ -245,7 +258,9 @@ def test_bench_runtime_vs_eval(model, data64, capsys, monkeypatch):
                      "--novel", capsys=capsys, monkeypatch=monkeypatch)
     assert "2 scenes" in out
     assert len(re.findall(r"^  [ABC] (rendered|encoder) heatmaps", out, re.M)) == 6, out
-    assert len(re.findall(r"masked PSNR mean .* \(2 scenes; ", out)) == 3, out
+    # C: the runtime's own view; the random weights find nobody, and a pair with nobody has none (counted)
+    views = re.findall(r"masked PSNR mean .* \((\d+) scenes; (\d+) without a view", out)
+    assert len(views) == 3 and all(int(a) + int(b) == 2 for a, b in views), out
 
 
 def test_measure_novel_ceiling(data64, capsys, monkeypatch):
@@ -259,3 +274,22 @@ def test_measure_presence(model, capsys, monkeypatch):
     for source in ("rendered", "encoder"):
         assert re.search(rf"^ *{source} heatmaps .*: empty rooms: joints found \d+-\d+, .* \| 40 pairs with a person",
                          out, re.M), out
+
+
+def test_measure_presence_with_the_flip_test_and_its_timing(model, capsys, monkeypatch):
+    """The documented ``--flip-test`` run (its recorder's ``_flip_test`` lacked the estimator's ``beside``
+    argument: a TypeError on the first pair) and ``--time --novel-view`` (docs/runtime.md, "Compute only what
+    the scene requires")."""
+    out = run_script("measure_presence", "--model-dir", model, "--rooms", "1", "--flip-test", "--time",
+                     "--novel-view", capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^ *encoder heatmaps \(triangulate, flip test\): empty rooms", out, re.M), out
+    assert re.search(r"^ *before the mirrored run \(heatmaps.flip_test_skip_below\): empty rooms max [\d.]+", out,
+                     re.M), out
+    assert re.search(r"^empty rooms, the defaults with a novel view requested on every pair: [\d.]+ ms median per "
+                     r"pair, 0 of 10 pairs with a novel view$", out, re.M), out
+
+
+def test_measure_two_people(capsys, monkeypatch):
+    out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^2 pairs of two people \(1 scenes\), .* [\d.]+ joints reported per pair; of them \d+% at the "
+                     r"first person's, \d+% at the second's, \d+% at neither", out, re.M), out

@@ -58,9 +58,12 @@ def test_run_on_a_sim_pair_writes_the_documented_json(sim_pair, tiny_model_dir, 
     out = tmp_path / "joints.json"
     novel = tmp_path / "novel.png"
     overlay = tmp_path / "overlay.png"
+    # the random weights find nobody, and a pair with nobody has no novel view: the presence gate off views it
+    config = tmp_path / "everyone.json"
+    config.write_text(json.dumps({"presence": {"enabled": False}}))
     rc = cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"],
                        "--model-dir", str(tiny_model_dir), "--out", str(out), "--novel-view", str(novel),
-                       "--novel-overlay", "skeleton", "--overlay", str(overlay)])
+                       "--novel-overlay", "skeleton", "--overlay", str(overlay), "--config", str(config)])
     assert rc == 0
     frames = json.loads(out.read_text())
     rig = load_rig(sim_pair["rig"])
@@ -201,12 +204,15 @@ def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir,
     from ghnerf_runtime.cli import bench
 
     report_path = tmp_path / "bench.json"
+    # the random weights find nobody, and a pair with nobody has no novel view: the presence gate off views them
     code = bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "3",
                        "--precisions", "fp32,int8", "--heatmap-sources", "encoder", "--warmup", "2",
+                       "--presence-gates", "off",
                        "--cache", str(tmp_path / "cache"), "--json", str(report_path)])
     assert code == 0
     report = json.loads(report_path.read_text())
     assert report["interleaved"] and len(report["runs"]) == 4  # 2 precisions x (keypoints, + novel view)
+    assert all(r["presence"] is False and r["presence_label"] for r in report["runs"])
     for row in report["runs"]:
         assert row["pairs"] == 2 * 3 - 2
         assert row["pairs_per_s"] > 0 and math.isfinite(row["total"]["median"])

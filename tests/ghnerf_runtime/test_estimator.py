@@ -177,12 +177,18 @@ def test_novel_view_off_with_colour_graph_loaded_still_never_runs_it(full_sessio
     assert rec.ran("volume") == 0  # encoder heatmaps + triangulation: no volume for keypoints either
 
 
+#: Random weights: the presence gate says nobody is there, and such a pair has no novel view; the novel-view
+#: tests run with the gate off (nothing then decides that nobody is there: every pair is viewed).
+NOBODY_UNDECIDED = PresenceConfig(enabled=False)
+
+
 @pytest.mark.parametrize("stride, overlay", [(1, "skeleton"), (2, "none")])
 def test_novel_view_on_request(full_session, scene_rig, stride, overlay):
     rig, frames = scene_rig
     rec = Recorder(full_session)
     cfg = NovelViewConfig(enabled=True, stride=stride, silhouette_stride=0)  # every ray of the box
-    est = Estimator(rec, rig, EstimatorConfig(novel_view=cfg))
+    # random weights: the presence gate would say nobody, and a pair with nobody has no novel view
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=cfg, presence=NOBODY_UNDECIDED))
     r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.3, overlay=overlay))
     S = full_session.contract.height
     assert r.novel_view is not None and r.novel_view.image.shape == (S, S, 3) and r.novel_view.image.dtype == np.uint8
@@ -191,7 +197,8 @@ def test_novel_view_on_request(full_session, scene_rig, stride, overlay):
     assert rays[0] == 1 and rays[1] <= (S // stride) ** 2
     # With the coarse silhouette pass (the default): a coarse run, then a fine one over at most the box.
     rec.calls.clear()
-    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, stride=stride)))
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, stride=stride),
+                                              presence=NOBODY_UNDECIDED))
     coarse = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.3, overlay=overlay))
     calls = [shapes["ray_uv"][1] for g, shapes in rec.calls if g == "render_rgb"]
     assert len(calls) in (1, 2) and calls[0] <= (S // 4) ** 2
@@ -226,7 +233,8 @@ def test_a_view_between_facing_cameras_takes_the_configured_path(full_session, h
 def test_novel_view_with_heatmaps_uses_the_render_graph(full_session, scene_rig):
     rig, frames = scene_rig
     rec = Recorder(full_session)
-    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, heatmaps=True)))
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, heatmaps=True),
+                                              presence=NOBODY_UNDECIDED))
     from ghnerf_runtime.geometry import look_at
     cam = rig.pair[0]
     R, t = look_at((0.0, -1.5, 0.5), (0.0, -1.0, 3.0))
@@ -288,6 +296,12 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
         est.estimate((frames[0][0].astype(np.float32), frames[0][1]))
     with pytest.raises(FrameError, match="expected 2 images"):
         est.estimate((frames[0][0],))
+    # a frame missing, empty, or of a camera reconfigured to another size: named, never projected as it comes
+    h, w = frames[0][0].shape[:2]
+    for bad, got in ((None, r"got None \(no frame\)"), (np.zeros((0, 0, 3), np.uint8), r"got uint8 \(0, 0, 3\)"),
+                     (np.zeros((2 * h, 2 * w, 3), np.uint8), rf"file's {w}x{h}\), got uint8 \({2 * h}, {2 * w}, 3\)")):
+        with pytest.raises(FrameError, match=rf"camera {rig.names[1]!r}: expected a \({h}, {w}, 3\).*{got}"):
+            est.estimate((frames[0][0], bad))
     small = ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir), warmup=False),
                               ("encoder", "volume", "render_heat"))
     with pytest.raises(ModelError, match="query"):
@@ -391,15 +405,17 @@ def test_older_model_without_human_graph_runs_the_encoder(tiny_model_dir, scene_
 
 def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_session, scene_rig):
     rig, frames = scene_rig
+    # the cold start not refined: the pass itself reads the image features (the default: below)
     cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"),
-                          novel_view=NovelViewConfig(enabled=True))
+                          novel_view=NovelViewConfig(enabled=True), presence=NOBODY_UNDECIDED,
+                          tracking=TrackingConfig(refine_cold_start=False))
     assert cfg.required_graphs(human_graph=True) == ("encoder", "human", "volume", "render_rgb")
     rec = Recorder(full_session)
     est = Estimator(rec, rig, cfg)
     est.estimate(frames[0])
     plain = [g for g, _ in rec.calls]
     rec.calls.clear()
-    est.estimate(frames[1], novel_view=NovelViewRequest(alpha=0.5))
+    reference = est.estimate(frames[1], novel_view=NovelViewRequest(alpha=0.5))
     novel = [g for g, _ in rec.calls]
     assert "encoder" not in plain and "human" in plain
     assert "human" not in novel and novel.count("encoder") >= 1 and "render_rgb" in novel
@@ -408,6 +424,32 @@ def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_sessi
     rec.calls.clear()
     est.estimate(frames[1], novel_view=NovelViewRequest(alpha=0.5))
     assert [g for g, _ in rec.calls if g in ("encoder", "human")] == ["encoder", "human"]
+    # Refined (the default), a cold pass runs the human graph: a subject found is run again on their crop, with
+    # the features. A cold pass reported with a view (here: no joints, so no track to refine on) gets the
+    # features for its view then, and the same view and joints.
+    est = Estimator(rec, rig, replace(cfg, tracking=TrackingConfig()))
+    rec.calls.clear()
+    later = est.estimate(frames[1], novel_view=NovelViewRequest(alpha=0.5))
+    assert [g for g, _ in rec.calls if g in ("encoder", "human")] == ["human", "encoder"]
+    assert not later.tracked and "render_rgb" in [g for g, _ in rec.calls]
+    np.testing.assert_array_equal(later.novel_view.image, reference.novel_view.image)
+    np.testing.assert_array_equal(later.missing, reference.missing)
+    for cam in later.joints_2d:
+        np.testing.assert_allclose(later.joints_2d[cam], reference.joints_2d[cam], atol=1e-3)
+
+
+def test_an_empty_room_with_a_novel_view_asked_runs_the_keypoint_graph_alone(full_session, scene_rig):
+    """Random weights: the presence gate says nobody (frames the frame check passes, as a textured empty room).
+    Such a pair has no novel view, and its cold pass runs the human graph, not the encoder's image features:
+    before, every such pair ran the encoder, the novel camera's volume and the colour graph."""
+    rig, frames = scene_rig
+    rec = Recorder(full_session)
+    est = Estimator(rec, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True)))
+    for pair in frames * 2:
+        r = est.estimate(pair, novel_view=NovelViewRequest(alpha=0.5))
+        assert all(r.frame_ok.values()) and r.missing.all() and r.novel_view is None and _all_finite(r)
+        assert not r.tracked and not set(NOVEL_STAGES) & set(r.timing_ms)
+    assert {g for g, _ in rec.calls} == {"human"}
 
 
 class _Without:

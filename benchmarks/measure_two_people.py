@@ -1,0 +1,89 @@
+"""Two people in the working volume: whose joints does the runtime report?
+
+    .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10]
+
+The runtime follows one subject and its model answers one peak per joint per view. With two people in view,
+each view's peak of a joint is whichever person's is stronger there, and the two views need not pick the same
+person. This runs the oracle session (``bench_runtime_common.OracleSession``: heatmaps a perfectly trained
+model would give) with both people's Gaussians in every heatmap (their maximum), the estimator at its defaults,
+over simulated scenes of two people a metre apart side by side, and prints, over every pair, the joints
+reported and how many lie within 5 cm of the first person's, of the second's, or of neither (a point
+triangulated from one person's peak in one view and the other's in the other). A tool, not a test:
+docs/runtime.md, "Known gaps".
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig  # noqa: E402
+from ghnerf_runtime.estimator import Estimator  # noqa: E402
+
+#: A reported joint this close to a person's is theirs (m).
+NEAR_M = 0.05
+
+
+class TwoPeopleOracle(OracleSession):
+    """The oracle, its 2D heatmaps the maximum of two people's (``set_people``)."""
+
+    people: tuple[np.ndarray, ...] = ()
+
+    def set_people(self, *joints_3d: np.ndarray) -> None:
+        self.people = tuple(np.asarray(j, np.float64) for j in joints_3d)
+        self.set_truth(self.people[0])
+
+    def _source_heatmaps(self, src_P: np.ndarray) -> np.ndarray:
+        maps = []
+        for joints in self.people:
+            self.truth = joints
+            maps.append(super()._source_heatmaps(src_P))
+        self.truth = self.people[0]
+        return np.max(maps, axis=0)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
+    ap.add_argument("--pairs", type=int, default=10, help="pairs per scene, at 30 fps")
+    args = ap.parse_args(argv)
+    import drivers.sim as sim
+
+    rig = sim.RigPlacement().build()
+    counts = {"reported": 0, "first": 0, "second": 0, "neither": 0}
+    pairs = 0
+    for seed in range(1, args.scenes + 1):
+        first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(-0.5, 3.0)))
+        second = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=(0.5, 3.4)))
+        oracle = TwoPeopleOracle(edge128_contract())
+        with Estimator(oracle, rig, EstimatorConfig()) as est:
+            for i in range(args.pairs):
+                t = i / 30.0
+                a, b = first.joints_3d(t), second.joints_3d(t)
+                oracle.set_people(a, b)
+                # the frames only pass the frame check here: the oracle's heatmaps come from the joints
+                images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+                r = est.estimate(images, timestamp_s=t)
+                found = ~r.missing
+                near_a = np.linalg.norm(r.joints_3d - a, axis=-1) < NEAR_M
+                near_b = np.linalg.norm(r.joints_3d - b, axis=-1) < NEAR_M
+                counts["reported"] += int(found.sum())
+                counts["first"] += int((found & near_a).sum())
+                counts["second"] += int((found & near_b & ~near_a).sum())
+                counts["neither"] += int((found & ~near_a & ~near_b).sum())
+                pairs += 1
+    n = max(counts["reported"], 1)
+    print(f"{pairs} pairs of two people ({args.scenes} scenes), the oracle's heatmaps, the defaults: "
+          f"{counts['reported'] / pairs:.1f} joints reported per pair; of them {counts['first'] / n:.0%} at the first "
+          f"person's, {counts['second'] / n:.0%} at the second's, {counts['neither'] / n:.0%} at neither "
+          f"(> {NEAR_M * 100:.0f} cm from both)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
