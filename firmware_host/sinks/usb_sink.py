@@ -3,8 +3,15 @@
 VID and PID are hexadecimal, 1 to 4 digits each (``0x`` allowed). Query: ``ep`` (bulk OUT endpoint
 address, required), ``interface`` (default 0, at most 255), ``timeout_ms`` (default 100, at most 60000),
 plus the common options. The libusb backend comes from ``libusb_package`` unless a pyusb backend is
-passed as ``backend=``. With several devices of that VID:PID plugged in, the first libusb lists is used
-and a warning names how many matched (the order can change on a replug).
+passed as ``backend=``.
+
+Which device: ``serial=ABC123`` takes the one whose serial number string is that, ``port=1-1.4`` the one
+at that physical port path (bus 1, ports 1 then 4; see usb_select); the two are exclusive. A selector
+that matches nothing is a failed connect like an absent device (retried with backoff), its message
+naming what was looked for and the serials or ports of the VID:PID devices that were there, including a
+serial that could not be read (permission: the udev rule). Without a selector, with several devices of
+that VID:PID plugged in, the first libusb lists is used and a warning names them all (the order can
+change on a replug) and says how to choose.
 
 Error handling: a stalled endpoint (EPIPE) has its halt cleared and the frame written once more (a
 second stall drops it); a timeout or a short write drops the frame, and the next write starts with a
@@ -30,6 +37,7 @@ from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWrit
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url
+from firmware_host.sinks.usb_select import NoMatch, PortPath, describe, parse_port, parse_serial, select
 
 _log = logging.getLogger(__name__)
 
@@ -71,10 +79,11 @@ class UsbSink(ProtocolSink):
 
     def __init__(
         self, url: str, vid: int, pid: int, ep: int, interface: int, timeout_ms: int,
-        options: SinkOptions, backend: Any = None,
+        options: SinkOptions, backend: Any = None, serial: Optional[str] = None, port: Optional[PortPath] = None,
     ) -> None:
         super().__init__(url, options)
         self.vid, self.pid, self.ep, self.interface, self.timeout_ms = vid, pid, ep, interface, timeout_ms
+        self.serial, self.port = serial, port  # at most one: which of several devices of VID:PID
         self._backend = backend
         self._dev: Optional[usb.core.Device] = None
         self._detached = False  # the sink detached the interface's kernel driver: attach it again on release
@@ -91,11 +100,15 @@ class UsbSink(ProtocolSink):
         ep = u.take("ep", _out_endpoint, 0, kw)
         interface = u.take("interface", int_in(0, MAX_INTERFACE, "a descriptor byte"), 0, kw)
         timeout_ms = u.take("timeout_ms", int_in(1, MAX_TIMEOUT_MS, "milliseconds"), 100, kw)
+        serial = u.take("serial", parse_serial, None, kw)
+        port = u.take("port", parse_port, None, kw)
+        if serial is not None and port is not None:  # two answers to "which board" could disagree
+            raise SinkConfigError(url, "port", str(port), f"give serial= or port=, not both (serial={serial!r})")
         backend = kw.pop("backend", None)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
-        return cls(url, vid, pid, ep, interface, timeout_ms, options, backend)
+        return cls(url, vid, pid, ep, interface, timeout_ms, options, backend, serial, port)
 
     def _get_backend(self) -> Any:
         if self._backend is None:
@@ -112,15 +125,7 @@ class UsbSink(ProtocolSink):
             found = list(usb.core.find(find_all=True, idVendor=self.vid, idProduct=self.pid, backend=backend))
         except usb.core.USBError as e:
             raise SinkUnavailableError(self.url, f"enumeration failed: {e}") from e
-        if not found:
-            raise SinkUnavailableError(self.url, f"no device {self.vid:04x}:{self.pid:04x}")
-        dev = found[0]
-        if len(found) > 1 and not self._warned_several:
-            # which one is first is libusb's order and may change on a replug: frames could go to the other board
-            self._warned_several = True
-            _log.warning("%s: %d devices %04x:%04x found (%s); using the first, bus %s address %s",
-                         self.url, len(found), self.vid, self.pid,
-                         ", ".join(f"bus {d.bus} address {d.address}" for d in found), dev.bus, dev.address)
+        dev = self._choose(found)
         try:
             self._configure(dev)
         except (usb.core.USBError, ValueError) as e:
@@ -130,6 +135,25 @@ class UsbSink(ProtocolSink):
             # program; the base class warns once per outage and per new error, as for any failed connect.
             raise SinkUnavailableError(self.url, f"cannot claim {self.vid:04x}:{self.pid:04x}: {e}") from e
         self._dev = dev
+
+    def _choose(self, found: list) -> usb.core.Device:
+        """The device to claim: the one the selector names, else the first libusb lists."""
+        ids = f"{self.vid:04x}:{self.pid:04x}"
+        if self.serial is not None or self.port is not None:
+            try:
+                return select(found, self.serial, self.port, ids)
+            except NoMatch as e:  # as an absent device: the right board may be plugged in later
+                raise SinkUnavailableError(self.url, str(e)) from None
+        if not found:
+            raise SinkUnavailableError(self.url, f"no device {ids}")
+        dev = found[0]
+        if len(found) > 1 and not self._warned_several:
+            # which one is first is libusb's order and may change on a replug: frames could go to the other board
+            self._warned_several = True
+            _log.warning("%s: %d devices %s found (%s); using the first, bus %s address %s; choose one with "
+                         "?port=BUS-PORT (as listed) or ?serial=", self.url, len(found), ids,
+                         ", ".join(describe(d) for d in found), dev.bus, dev.address)
+        return dev
 
     def _configure(self, dev: usb.core.Device) -> None:
         try:

@@ -19,15 +19,26 @@ a replugged device needs a new handle); a kernel driver bound to the interface
 fails with EBUSY until it is detached, and ``attach_kernel_driver`` binds it
 again; an interface another program holds (``held_elsewhere``: EBUSY); several
 devices of one VID:PID (``FakeBackend(first, second)``, listed in that order,
-told apart by ``address``).
+told apart by ``address``, ``bus`` and ``port_numbers``); a serial number string
+(``serial``: iSerialNumber is 3 when set, 0 when None) read through pyusb's own
+``usb.util.get_langids``/``get_string``, which reach ``ctrl_transfer`` with a
+standard GET_DESCRIPTOR request (string descriptor 0 lists ``langids``; a
+language the device does not list, any other request, or ``string_stall`` is
+answered with a stall, EPIPE, as a device does; ``string_reads`` counts them;
+``open_handles`` those opened and not closed); a
+device node the user may not open (``access_denied``: ``open_device`` raises
+USBError with errno EACCES, as libusb does on Linux without a udev rule, so
+string reads and claiming both fail).
 
-Not modelled: control transfers and string descriptors, IN/interrupt/iso
-transfers, timing, packet sizes, alternate settings, hubs and parents, more
-than one configuration.
+Not modelled: other control transfers, IN/interrupt/iso transfers, timing,
+packet sizes, alternate settings, hubs and parents (``port_numbers`` is just
+reported), more than one configuration.
 """
 from __future__ import annotations
 
+import array
 import errno
+import struct
 import threading
 from dataclasses import dataclass, field
 from types import SimpleNamespace
@@ -57,6 +68,14 @@ class FakeDevice:
     held_elsewhere: bool = False  # another program claimed interface 0: claiming fails with EBUSY
     detaches: int = 0
     attaches: int = 0
+    bus: int = 1
+    port_numbers: tuple = (1,)
+    serial: Optional[str] = None  # the serial number string; None: the device declares none
+    langids: tuple = (0x0409,)  # string descriptor 0: the languages its strings come in
+    string_stall: bool = False  # string descriptor requests stall (EPIPE), as on a buggy firmware
+    access_denied: bool = False  # opening fails with EACCES (Linux, no udev rule for the user)
+    string_reads: int = 0
+    open_handles: int = 0  # opened and not yet closed (a handle left open keeps the device busy)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def unplug(self) -> None:
@@ -79,6 +98,16 @@ class FakeDevice:
 
 
 _ENODEV = usb.core.USBError("No such device (it may have been disconnected)", error_code=-4, errno=errno.ENODEV)
+_EPIPE = usb.core.USBError("Pipe error", error_code=-9, errno=errno.EPIPE)
+
+_GET_DESCRIPTOR = 0x06
+_STANDARD_IN_TO_DEVICE = 0x80  # bmRequestType: device-to-host, standard, recipient device
+_DESC_STRING = 3
+_SERIAL_INDEX = 3  # iSerialNumber when the device has a serial
+
+
+def _string_descriptor(payload: bytes) -> bytes:
+    return bytes((2 + len(payload), _DESC_STRING)) + payload
 
 
 class FakeBackend(usb.backend.IBackend):
@@ -99,8 +128,9 @@ class FakeBackend(usb.backend.IBackend):
         return SimpleNamespace(
             bLength=18, bDescriptorType=1, bcdUSB=0x0200, bDeviceClass=0xFF, bDeviceSubClass=0,
             bDeviceProtocol=0, bMaxPacketSize0=64, idVendor=dev.vid, idProduct=dev.pid, bcdDevice=0x0100,
-            iManufacturer=0, iProduct=0, iSerialNumber=0, bNumConfigurations=1, address=dev.address, bus=1,
-            port_number=1, port_numbers=(1,), speed=2,
+            iManufacturer=0, iProduct=0, iSerialNumber=0 if dev.serial is None else _SERIAL_INDEX,
+            bNumConfigurations=1, address=dev.address, bus=dev.bus, port_number=dev.port_numbers[-1],
+            port_numbers=dev.port_numbers, speed=2,
         )
 
     def get_configuration_descriptor(self, dev, config):
@@ -139,10 +169,13 @@ class FakeBackend(usb.backend.IBackend):
     def open_device(self, dev):
         if not dev.present:
             raise _ENODEV
+        if dev.access_denied:
+            raise usb.core.USBError("Access denied (insufficient permissions)", error_code=-3, errno=errno.EACCES)
+        dev.open_handles += 1
         return SimpleNamespace(device=dev, generation=dev.generation)
 
     def close_device(self, dev_handle):
-        pass
+        dev_handle.device.open_handles -= 1
 
     def set_configuration(self, dev_handle, config_value):
         self._check(dev_handle).configuration = config_value
@@ -175,6 +208,25 @@ class FakeBackend(usb.backend.IBackend):
         dev.attaches += 1
 
     # ---- transfers ----
+
+    def ctrl_transfer(self, dev_handle, bmRequestType, bRequest, wValue, wIndex, data, timeout):
+        """Only GET_DESCRIPTOR for string descriptors (what usb.util.get_string sends); the rest stalls."""
+        dev = self._check(dev_handle)
+        kind, index = wValue >> 8, wValue & 0xFF
+        with dev.lock:
+            dev.string_reads += 1
+            if (bmRequestType, bRequest, kind) != (_STANDARD_IN_TO_DEVICE, _GET_DESCRIPTOR, _DESC_STRING) \
+                    or dev.string_stall:
+                raise _EPIPE
+            if index == 0:
+                desc = _string_descriptor(struct.pack(f"<{len(dev.langids)}H", *dev.langids))
+            elif index == _SERIAL_INDEX and dev.serial is not None and wIndex in dev.langids:
+                desc = _string_descriptor(dev.serial.encode("utf-16-le"))
+            else:
+                raise _EPIPE
+        n = min(len(desc), len(data))
+        data[:n] = array.array("B", desc[:n])  # pyusb hands an array('B') to fill and keeps the first n bytes
+        return n
 
     def bulk_write(self, dev_handle, ep, intf, data, timeout):
         dev = self._check(dev_handle)

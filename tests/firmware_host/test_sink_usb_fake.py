@@ -254,3 +254,182 @@ def test_a_bulk_write_that_times_out_part_way_costs_the_receiver_that_frame_only
     assert [m.header.seq for m in joints] == [0, 2, 3]
     assert sum(decoded.errors.values()) == 1
     assert joints[1].header.flags & Flags.DROPPED and not joints[2].header.flags & Flags.DROPPED
+
+
+# ---- choosing one of two boards of one VID:PID: ?serial= and ?port= ----
+
+def _two_boards() -> tuple[FakeDevice, FakeDevice]:
+    """Two identical boards: libusb lists ``first`` first; only serial and port tell them apart."""
+    return (FakeDevice(address=7, serial="ABC123", port_numbers=(1, 4)),
+            FakeDevice(address=9, serial="XYZ789", port_numbers=(2,)))
+
+
+@pytest.mark.parametrize(("query", "chosen"), [
+    ("serial=ABC123", 0), ("serial=XYZ789", 1), ("port=1-1.4", 0), ("port=1-2", 1),
+])
+def test_a_selector_sends_to_the_board_it_names(query: str, chosen: int) -> None:
+    boards = _two_boards()
+    sink = open_sink(f"{URL}&{query}", backend=FakeBackend(*boards), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.close()
+    assert joints_seqs(messages_of(boards[chosen].take())) == [0]
+    other = boards[1 - chosen]
+    assert other.take() == b"" and not other.claimed
+    assert other.open_handles == 0  # reading its serial opened it: that handle must not stay open
+
+
+def test_the_selected_board_is_found_again_after_a_replug_in_another_order() -> None:
+    # the gap: after a replug libusb may list the other board first, and frames went to it
+    first, second = _two_boards()
+    backend = FakeBackend(first, second)
+    sink = open_sink(f"{URL}&serial=XYZ789", backend=backend, backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    second.unplug()
+    backend.devices = (second, first)  # plugged back in, now listed first... as it happens
+    sink.send(make_frame(1))
+    wait_until(lambda: sink.stats().disconnects == 1, what="unplug noticed")
+    second.plug()
+    wait_until(lambda: sink.stats().connected, what="found again")
+    sink.send(make_frame(2))
+    assert sink.wait_drained(5)
+    sink.close()
+    assert first.take() == b""
+    assert joints_seqs(messages_of(second.take())) == [2]
+
+
+@pytest.mark.parametrize(("query", "words"), [
+    ("serial=NOPE", ["no device 1209:0001 with serial 'NOPE'", "found 2 of 1209:0001",
+                     "bus 1 address 7 port 1-1.4 serial 'ABC123'", "bus 1 address 9 port 1-2 serial 'XYZ789'"]),
+    ("port=1-3", ["no device 1209:0001 with port 1-3", "found 2 of 1209:0001",
+                  "bus 1 address 7 port 1-1.4", "bus 1 address 9 port 1-2"]),
+])
+def test_a_selector_that_matches_nothing_is_waited_for_and_says_what_it_found(
+        query: str, words: list[str], caplog: pytest.LogCaptureFixture) -> None:
+    boards = _two_boards()
+    backend = FakeBackend(*boards)
+    with caplog.at_level(logging.WARNING, logger="firmware_host.sinks"):
+        sink = open_sink(f"{URL}&{query}", backend=backend, backoff=FAST_BACKOFF)
+        wait_until(lambda: sink.stats().connect_failures >= 3, what="three connect attempts")
+        assert sink.stats().state == "down"
+        # the right board turns up: taken without a restart, like an absent device plugged in
+        wanted = FakeDevice(address=11, serial="NOPE", port_numbers=(3,))
+        backend.devices = (*boards, wanted)
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        sink.close()
+    warnings = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) == 1  # once per outage, not on every retry
+    for word in words:
+        assert word in warnings[0]
+    assert joints_seqs(messages_of(wanted.take())) == [0]
+    assert all(b.take() == b"" and b.open_handles == 0 for b in boards)
+
+
+def test_a_selector_with_no_board_of_that_vid_pid_says_so() -> None:
+    sink = open_sink(f"{URL}&port=1-1.4", backend=FakeBackend(FakeDevice(present=False)), backoff=FAST_BACKOFF)
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
+    stats = sink.close()
+    assert "no device 1209:0001 with port 1-1.4: no 1209:0001 found at all" in (stats.last_error or "")
+
+
+def test_a_serial_that_cannot_be_read_for_permission_names_the_udev_rule() -> None:
+    board = FakeDevice(serial="ABC123", access_denied=True)
+    sink = open_sink(f"{URL}&serial=ABC123", backend=FakeBackend(board), backoff=FAST_BACKOFF)
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
+    error = sink.stats().last_error or ""
+    assert "serial unreadable: permission denied" in error and "Access denied" in error
+    assert "udev rule" in error and "systemd/61-ghnerf-local.rules" in error
+    board.access_denied = False  # the rule was added and udevadm trigger run: no restart needed
+    assert sink.wait_connected(5)
+    sink.close()
+
+
+def test_a_board_whose_serial_read_fails_is_listed_and_the_other_still_chosen() -> None:
+    first, second = _two_boards()
+    first.string_stall = True  # a firmware that stalls string requests
+    sink = open_sink(f"{URL}&serial=XYZ789", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.close()
+    assert joints_seqs(messages_of(second.take())) == [0] and first.take() == b""
+    # and when it is the only one, the log says why its serial is not known
+    sink = open_sink(f"{URL}&serial=ABC123", backend=FakeBackend(first), backoff=FAST_BACKOFF)
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
+    stats = sink.close()
+    assert "port 1-1.4 (serial unreadable: [Errno 32] Pipe error)" in (stats.last_error or "")
+
+
+def test_two_boards_with_one_serial_are_not_guessed_between() -> None:
+    first, second = _two_boards()
+    second.serial = first.serial  # flashed alike
+    sink = open_sink(f"{URL}&serial=ABC123", backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
+    wait_until(lambda: sink.stats().connect_failures >= 2, what="retries")
+    stats = sink.close()
+    assert "2 devices 1209:0001 have serial 'ABC123'" in (stats.last_error or "")
+    assert "choose one by port=" in (stats.last_error or "")
+    assert not first.claimed and not second.claimed and first.open_handles == second.open_handles == 0
+
+
+def test_without_a_selector_no_string_descriptor_is_read() -> None:
+    # the default is unchanged: no serial read (which could fail on permissions), the first board taken
+    first, second = _two_boards()
+    sink = open_sink(URL, backend=FakeBackend(first, second), backoff=FAST_BACKOFF)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0))
+    assert sink.wait_drained(5)
+    sink.close()
+    assert first.string_reads == second.string_reads == 0
+    assert joints_seqs(messages_of(first.take())) == [0] and second.take() == b""
+
+
+def test_the_several_devices_warning_lists_ports_and_how_to_choose(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING, logger="firmware_host.sinks"):
+        sink = open_sink(URL, backend=FakeBackend(*_two_boards()), backoff=FAST_BACKOFF)
+        assert sink.wait_connected(5)
+        sink.close()
+    [warning] = [r.getMessage() for r in caplog.records if "devices 1209:0001 found" in r.getMessage()]
+    assert "bus 1 address 7 port 1-1.4, bus 1 address 9 port 1-2" in warning and "?port=" in warning
+
+
+@pytest.mark.parametrize(("query", "field", "value"), [
+    ("serial=ABC123&port=1-1.4", "port", "1-1.4"),  # which board would win?
+    ("serial=", "serial", ""),
+    ("serial=" + "A" * 127, "serial", "A" * 127),  # a string descriptor holds 126 characters
+    ("serial=AB%00C", "serial", "AB\x00C"),
+    ("port=", "port", ""),
+    ("port=1", "port", "1"),  # a bus alone
+    ("port=1-", "port", "1-"),
+    ("port=1-1..4", "port", "1-1..4"),
+    ("port=1-0", "port", "1-0"),  # ports are numbered from 1
+    ("port=1-256", "port", "1-256"),
+    ("port=256-1", "port", "256-1"),
+    ("port=1-1.2.3.4.5.6.7.8", "port", "1-1.2.3.4.5.6.7.8"),  # deeper than USB allows
+    ("port=1:1.4", "port", "1:1.4"),
+    ("port=usb1/1-1.4", "port", "usb1/1-1.4"),
+])
+def test_a_bad_selector_is_refused_naming_option_and_value(query: str, field: str, value: str) -> None:
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks.usb_sink import UsbSink
+
+    with pytest.raises(SinkConfigError) as info:
+        UsbSink.from_url(f"usb://1209:0001?ep=0x01&{query}")
+    assert (info.value.field, info.value.value) == (field, value)
+
+
+def test_selectors_parse_and_may_come_as_keywords() -> None:
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks.usb_select import PortPath
+    from firmware_host.sinks.usb_sink import UsbSink
+
+    sink = UsbSink.from_url("usb://1209:0001?ep=0x01&port=3-1.2.7")
+    assert (sink.port, sink.serial) == (PortPath(3, (1, 2, 7)), None) and str(sink.port) == "3-1.2.7"
+    sink = UsbSink.from_url("usb://1209:0001?ep=0x01", serial="ab+c d")
+    assert (sink.serial, sink.port) == ("ab+c d", None)
+    assert UsbSink.from_url("usb://1209:0001?ep=0x01&serial=a%2Bb+c").serial == "a+b+c"  # '+' is a plus
+    with pytest.raises(SinkConfigError) as info:
+        UsbSink.from_url("usb://1209:0001?ep=0x01&serial=X", port="1-2")
+    assert info.value.field == "port"
