@@ -220,7 +220,9 @@ def test_a_view_between_facing_cameras_takes_the_configured_path(full_session, h
     frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
     centre = {}
     for path in ("line", "orbit", "auto"):
-        est = Estimator(full_session, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, path=path)))
+        # (the random weights find nobody, and a pair with nobody gets no view: the presence gate is off here)
+        est = Estimator(full_session, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, path=path),
+                                                           presence=NOBODY_UNDECIDED))
         r = est.estimate(frames, novel_view=NovelViewRequest(alpha=0.5))
         centre[path] = r.novel_view.camera.center
     line_xz = np.hypot(centre["line"][0], centre["line"][2] - 3.0)
