@@ -18,7 +18,7 @@ from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.config import DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
-from firmware_host.sinks.options import MAX_STATUS_S, SinkOptions
+from firmware_host.sinks.options import MAX_QUEUE, MAX_STATUS_S, MIN_STATUS_S, SinkOptions
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
@@ -56,7 +56,9 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"`facing` (`{FACINGS[0]}`, the default, or `{FACINGS[1]}`)"),
     # the sink options' defaults, as the common query parameters list them
     ("docs/protocol.md", f"`queue` ({SinkOptions.queue}) frames held"),
-    ("docs/protocol.md", f"`status_s` ({SinkOptions.status_s!r}, at most {MAX_STATUS_S:g}:"),
+    ("docs/protocol.md", f"at most {MAX_QUEUE} (`MAX_QUEUE`:"),
+    ("docs/protocol.md", f"`status_s` ({SinkOptions.status_s!r}, at least {MIN_STATUS_S:g}, at most {MAX_STATUS_S:g}:"),
+    ("docs/protocol.md", f"below {MIN_STATUS_S:g} an idle link"),
     ("docs/protocol.md", f"`send_2d` ({int(SinkOptions.send_2d)});"),
     ("docs/protocol.md", f"`joint_count` ({SinkOptions.joint_count}; more than"),
 ])

@@ -18,8 +18,9 @@ first import of the package on (``early_sighup``); one that came before the conf
 met by that read, one after it becomes a reload once the daemon runs.
 
 Exit status: 0 after SIGTERM / SIGINT or the end of a recording; 2 for what a restart cannot fix
-(a bad config, a sink URL, a model that does not load: the message names the file and the key),
-which the unit file keeps systemd from restarting; 1 for an unexpected error, which it restarts.
+(a bad config, a sink URL, a model that does not load or cannot serve the estimator's settings: the
+message names the file or part and the key), which the unit file keeps systemd from restarting; 1 for
+an unexpected error, which it restarts.
 """
 from __future__ import annotations
 
@@ -79,7 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) -> None:
     """What can be checked without hardware: the URLs parse for their backends, the model folder holds graphs (and
-    the skeleton prior or painter the config turns ``on``).
+    the skeleton prior or painter the config turns ``on``). It loads no model: the start and every reload run
+    these checks and then load it themselves (once), and build the estimator on it, which checks the rest of
+    what the settings need of the model (``heatmaps.source`` 'encoder': encoder heatmaps) before READY.
 
     ``source``: the config file ``config`` was read from, for the hint on where its relative paths point.
 

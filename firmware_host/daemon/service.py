@@ -43,8 +43,8 @@ without a gap; a new estimator tree replaces the estimator between two pairs; th
 health, log level) applies from the next pass.
 
 What stops it: ``stop`` being set (SIGTERM / SIGINT in the CLI), a finite source ending when
-``rig.exit_at_end`` is on, or an error no retry can fix (a model that will not load: raised as
-:class:`DaemonStartError` before the loop starts).
+``rig.exit_at_end`` is on, or an error no retry can fix (a model that will not load, or estimator settings it
+cannot serve: raised as :class:`DaemonStartError` before the loop starts).
 """
 from __future__ import annotations
 
@@ -206,6 +206,7 @@ class Daemon:
     def run(self, stop: threading.Event) -> int:
         """The main loop; returns the exit status (0). :raises DaemonStartError: cannot start."""
         self._load_model()
+        self._check_estimator()
         self._check_sinks()
         if stop.is_set():  # SIGTERM while the model loaded: never report ready
             self.notifier.notify(stopping=1)
@@ -257,6 +258,17 @@ class Daemon:
             raise DaemonStartError(f"cannot load the model in {self.config.estimator.session.model_dir}: {e}") \
                 from None
         _log.info("model %s loaded in %.2f s", self.config.estimator.session.model_dir, time.monotonic() - t0)
+
+    def _check_estimator(self) -> None:
+        """Build the estimator once for a stand-in rig, as a reload does: settings the loaded model cannot serve
+        (``heatmaps.source`` 'encoder' with a model that has no encoder heatmaps) stop the start here, before
+        READY. Built only once the rig opened, such a config exited 2 when the camera came, or waited for ever for
+        one that never did. What depends on the real rig is still checked when it opens (:meth:`_estimator_for`)."""
+        try:
+            Estimator(self._session, _stand_in_rig(), self.config.estimator).close()
+        except (RuntimeErrorBase, ValueError) as e:  # ModelError, ConfigError: as the reload's check
+            raise DaemonStartError(f"estimator: the settings do not fit the model in "
+                                   f"{self.config.estimator.session.model_dir}: {e}") from None
 
     def _estimator_for(self, rig: Rig) -> Estimator:
         """The estimator of ``rig``: kept across reopens of the same rig, rebuilt for another one."""

@@ -17,6 +17,12 @@ def monotonic_us() -> int:
 
 #: Longest STATUS (and HELLO) period: an hour.
 MAX_STATUS_S = 3600.0
+#: Shortest STATUS (and HELLO) period: at most 100 of each a second on an idle link, a frame rate's worth (1e-300
+#: was accepted: ~1000 a second, the worker doing nothing else). The tests' fast STATUS uses this floor.
+MIN_STATUS_S = 0.01
+#: Most frames a sink holds: over 2 minutes of outage at 30 fps (over one at 60 fps), ~11 MiB of BODY_25 frames with
+#: both cameras' 2D joints (~23 MiB at 64 joints); 10**23 was accepted and grew without bound during an outage.
+MAX_QUEUE = 4096
 
 
 @dataclass(frozen=True)
@@ -61,11 +67,14 @@ class SinkOptions:
             # RateLimiter refuses it at start(); refused here it is named with its URL, at open_sink()
             raise SinkConfigError(u.url, "max_fps", opts.max_fps, f"must be at least {MIN_MAX_FPS:.6g} "
                                                                   "(a frame an hour)")
-        if opts.queue < 1:
-            raise SinkConfigError(u.url, "queue", opts.queue, "must be >= 1")
-        if not 0 < opts.status_s <= MAX_STATUS_S:
-            # a receiver that joins late waits this long for HELLO; far larger also overflows the waits
-            raise SinkConfigError(u.url, "status_s", opts.status_s, f"must be in (0, {MAX_STATUS_S:g}] seconds")
+        if not 1 <= opts.queue <= MAX_QUEUE:
+            # held in memory: a long outage keeps the newest MAX_QUEUE frames, the older ones dropped and counted
+            raise SinkConfigError(u.url, "queue", opts.queue, f"must be in [1, {MAX_QUEUE}] frames")
+        if not MIN_STATUS_S <= opts.status_s <= MAX_STATUS_S:
+            # a receiver that joins late waits this long for HELLO; far larger also overflows the waits, and far
+            # smaller floods an idle link with HELLO + STATUS
+            raise SinkConfigError(u.url, "status_s", opts.status_s,
+                                  f"must be in [{MIN_STATUS_S:g}, {MAX_STATUS_S:g}] seconds")
         return opts
 
 

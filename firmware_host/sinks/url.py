@@ -5,6 +5,7 @@ Every error names the URL, the parameter and the value (SinkConfigError).
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
@@ -74,8 +75,27 @@ def parse_url(url: str) -> SinkUrl:
     return SinkUrl(url, parts.scheme.lower(), parts.netloc, parts.path, query)
 
 
+_LEADING_ZERO = re.compile(r"[+-]?0[0-9_]*[1-9][0-9_]*")
+
+
+def integer(raw: str) -> int:
+    """A whole number as a URL writes it: decimal digits, or hex, octal or binary with its prefix (``0x01`` for
+    endpoints). A leading zero (``08``, ``010``) is refused with that said, not guessed at: C reads 010 as
+    octal 8, and Python's own message was "invalid literal for int() with base 0"."""
+    try:
+        return int(raw, 0)
+    except ValueError:
+        pass
+    text = raw.strip()
+    if _LEADING_ZERO.fullmatch(text):
+        sign = text[0] if text[0] in "+-" else ""
+        raise ValueError(f"decimal digits expected, without a leading zero (write {sign}{text.lstrip('+-0_')}; "
+                         "hex as 0x..)")
+    raise ValueError("expected a whole number: decimal digits, or hex as 0x..")
+
+
 def positive_int(raw: str) -> int:
-    v = int(raw, 0)  # accepts 0x01 for endpoints
+    v = integer(raw)  # accepts 0x01 for endpoints
     if v <= 0:
         raise ValueError("must be > 0")
     return v
@@ -84,7 +104,7 @@ def positive_int(raw: str) -> int:
 def int_in(lo: int, hi: int, why: str = "") -> Callable[[str], int]:
     """A converter for an integer in ``[lo, hi]``; ``why`` (the reason for the bounds) ends its message."""
     def convert(raw: str) -> int:
-        v = int(raw, 0)
+        v = integer(raw)
         if not lo <= v <= hi:
             raise ValueError(f"must be in [{lo}, {hi}]" + (f": {why}" if why else ""))
         return v
@@ -92,7 +112,7 @@ def int_in(lo: int, hi: int, why: str = "") -> Callable[[str], int]:
 
 
 def non_negative_int(raw: str) -> int:
-    v = int(raw, 0)
+    v = integer(raw)
     if v < 0:
         raise ValueError("must be >= 0")
     return v

@@ -36,7 +36,7 @@ import usb.util
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
-from firmware_host.sinks.url import SinkUrl, int_in, parse_url
+from firmware_host.sinks.url import SinkUrl, int_in, integer, parse_url
 from firmware_host.sinks.usb_select import NoMatch, PortPath, describe, parse_port, parse_serial, select
 
 _log = logging.getLogger(__name__)
@@ -68,7 +68,7 @@ def _vid_pid(url: str, netloc: str) -> tuple[int, int]:
 
 
 def _out_endpoint(raw: str) -> int:
-    ep = int(raw, 0)
+    ep = integer(raw)
     if not 0x01 <= ep <= 0x0F:
         raise ValueError("a bulk OUT endpoint address is 0x01..0x0F")
     return ep

@@ -51,6 +51,11 @@ def test_importing_sinks_loads_no_backend_library() -> None:
         # the sink never connected, or its worker died with frames queued
         ("memory://?status_s=inf", {}, "status_s", "inf"),
         ("memory://?status_s=1e12", {}, "status_s", 1e12),
+        # no floor: an idle sink sent ~1000 HELLO + STATUS a second; no ceiling: the queue grew through an outage
+        ("memory://?status_s=1e-300", {}, "status_s", 1e-300),
+        ("memory://?status_s=0.0099", {}, "status_s", 0.0099),
+        ("memory://?queue=100000000000000000000000", {}, "queue", 10**23),
+        ("memory://", {"queue": 4097}, "queue", 4097),
         ("memory://?fps=nan", {}, "fps", "nan"),
         ("udp://[::1:9870", {}, "url", "udp://[::1:9870"),
         # a fragment was dropped: the file went to /tmp/run; a host made a relative path of localhost/...
@@ -81,6 +86,57 @@ def test_config_errors_name_url_field_and_value(url: str, kw: dict, field: str, 
     assert isinstance(err, ValueError)
     assert (err.url, err.field, err.value) == (url, field, value)
     assert url in str(err) and field in str(err)
+
+
+def test_the_bounds_of_status_s_and_queue_are_named_and_their_ends_accepted() -> None:
+    from firmware_host.sinks.options import MAX_QUEUE, MAX_STATUS_S, MIN_STATUS_S
+
+    with pytest.raises(SinkConfigError, match=r"status_s=1e-300: must be in \[0\.01, 3600\] seconds"):
+        open_sink("memory://?status_s=1e-300")
+    with pytest.raises(SinkConfigError, match=rf"queue=4097: must be in \[1, {MAX_QUEUE}\] frames"):
+        open_sink("memory://?queue=4097")
+    for url in (f"memory://?status_s={MIN_STATUS_S}&queue={MAX_QUEUE}", f"memory://?status_s={MAX_STATUS_S}&queue=1"):
+        open_sink(url).close()
+
+
+@pytest.mark.parametrize("url, field, value, says", [
+    ("memory://?queue=08", "queue", "08", "decimal digits expected, without a leading zero (write 8;"),
+    ("memory://?queue=010", "queue", "010", "(write 10;"),
+    ("memory://?joint_count=-025", "joint_count", "-025", "(write -25;"),
+    ("usb://1209:0001?ep=01", "ep", "01", "without a leading zero (write 1; hex as 0x..)"),
+    ("memory://?queue=1e3", "queue", "1e3", "expected a whole number: decimal digits, or hex as 0x.."),
+])
+def test_an_integer_that_does_not_parse_says_what_is_expected(url: str, field: str, value: str, says: str) -> None:
+    """queue=08 said "invalid literal for int() with base 0: '08'" (Python refuses a leading zero there)."""
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url)
+    assert (info.value.field, info.value.value) == (field, value)
+    assert says in str(info.value) and "base 0" not in str(info.value)
+
+
+def test_a_full_queue_stays_within_its_memory_bound() -> None:
+    """MAX_QUEUE frames of the largest kind (64 joints, both cameras' 2D joints, float64) held as a sink's queue
+    holds them: the figure docs/protocol.md quotes for a long outage (~11 MiB for BODY_25, ~23 MiB at 64)."""
+    import tracemalloc
+    from collections import deque
+
+    import numpy as np
+
+    from firmware_host.protocol.messages import JointFrame
+    from firmware_host.sinks.options import MAX_QUEUE
+
+    used = {}
+    for joints in (25, 64):
+        tracemalloc.start()
+        try:
+            queue = deque([JointFrame(k, k, 0, np.zeros((joints, 4)), {0: np.zeros((joints, 3)),
+                                                                      1: np.zeros((joints, 3))}), 0]
+                          for k in range(MAX_QUEUE))
+            used[joints] = tracemalloc.get_traced_memory()[0] / (1 << 20)
+        finally:
+            tracemalloc.stop()
+        assert len(queue) == MAX_QUEUE
+    assert used[25] < 12 and used[64] < 24, used  # measured 11.1 and 23.2 MiB (numpy 2, CPython 3.11)
 
 
 def test_keywords_override_the_query() -> None:

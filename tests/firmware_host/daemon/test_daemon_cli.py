@@ -76,6 +76,20 @@ def test_a_corrupt_model_exits_2_naming_it(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+@pytest.mark.skipif(not (MODELS / "baseline").is_dir(), reason="no models/baseline")
+def test_settings_the_model_cannot_serve_exit_2_at_start_naming_the_key(tmp_path):
+    """The baseline has no encoder heatmaps, which heatmaps.source 'encoder' (the default) needs: the daemon sent
+    READY and waited for the rig (here one that never comes, until --max-seconds: exit 0). Refused right after the
+    model loads now, exit 2, naming the key; --validate-config does not load the model (docs/daemon.md)."""
+    path = _write(tmp_path, {"rig": {"url": f"replay://{tmp_path / 'never'}"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS / "baseline"), "warmup": False}}})
+    proc = subprocess.run([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path),
+                           "--max-seconds", "20"], capture_output=True, text=True, timeout=120, cwd=REPO)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert "ghnerf-daemon: error: estimator: the settings do not fit the model in" in proc.stderr
+    assert "heatmaps.source = 'encoder'" in proc.stderr and "Traceback" not in proc.stderr
+
+
 @pytest.mark.parametrize("mode", [0o000, 0o111, 0o444], ids=["none", "enter-only", "list-only"])
 def test_a_model_folder_the_service_user_may_not_read_exits_2_naming_it(tmp_path, mode):
     """The unit runs as User=ghnerf: a folder it may not read was a PermissionError traceback and exit 1 (which

@@ -368,6 +368,54 @@ def test_a_model_that_does_not_load_stops_the_start(tmp_path):
         Daemon(cfg, notifier=SystemdNotifier({})).run(threading.Event())
 
 
+class _RecordingNotifier(SystemdNotifier):
+    """What the daemon tells systemd, kept (no socket)."""
+
+    def __init__(self) -> None:
+        super().__init__({})
+        self.notes: list[dict] = []
+
+    def notify(self, **fields: object) -> bool:
+        self.notes.append(fields)
+        return True
+
+
+BASELINE = MODELS / "baseline"  # a model without encoder heatmaps (docs/runtime.md, "Heatmap sources")
+
+
+@pytest.mark.skipif(not BASELINE.is_dir(), reason="no models/baseline")
+def test_settings_the_model_cannot_serve_stop_the_start_before_ready(tmp_path):
+    """heatmaps.source 'encoder' (the default) with the baseline, which has no encoder heatmaps: the estimator
+    refused it only once built, when the rig opened, so the daemon loaded the model, sent READY and exited 2 when
+    the camera came, or waited for ever for one that never did (as here). It is refused now, before READY."""
+    cfg = daemon_config_from_dict({"rig": {"url": f"replay://{tmp_path / 'never'}"}, "sinks": ["memory://"],
+                                   "estimator": {"session": {"model_dir": str(BASELINE), "warmup": False}}})
+    notifier, stop = _RecordingNotifier(), threading.Event()
+    timer = threading.Timer(15.0, stop.set)  # the old code waits for the rig: stopped, it returned 0
+    timer.start()
+    try:
+        with pytest.raises(DaemonStartError, match=r"^estimator: .*heatmaps\.source = 'encoder' needs a model "
+                                                   r"exported with encoder heatmaps"):
+            Daemon(cfg, notifier=notifier).run(stop)
+    finally:
+        timer.cancel()
+    assert not stop.is_set(), "refused only after the wait for the rig"
+    assert not any("ready" in note for note in notifier.notes)  # systemd never heard READY
+
+
+@pytest.mark.skipif(not BASELINE.is_dir(), reason="no models/baseline")
+def test_the_start_check_passes_settings_the_model_serves(tmp_path):
+    """The same baseline with the heatmaps it has passes the stand-in check (the real rig's estimator is built
+    when it opens)."""
+    cfg = daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": ["memory://"],
+                                   "estimator": {"session": {"model_dir": str(BASELINE), "warmup": False},
+                                                 "heatmaps": {"source": "rendered"}}})
+    daemon = Daemon(cfg, notifier=SystemdNotifier({}))
+    daemon._load_model()
+    daemon._check_estimator()
+    assert daemon._estimator is None  # the stand-in's is not kept
+
+
 def test_a_bad_rig_url_stops_the_start(tmp_path):
     cfg = _config({"url": "sim://?fps=-1"}, tmp_path)
     with pytest.raises(DaemonStartError, match=r"rig\.url .*fps"):
@@ -992,6 +1040,7 @@ def test_a_camera_stuck_past_its_rigs_close_stops_the_watchdog_pings(tmp_path, m
     import firmware_host.daemon.service as service
 
     monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)  # the start's stand-in check: no model here
     _HungWebcam.release_all.clear()
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     sock.bind(str(tmp_path / "notify.sock"))
