@@ -91,7 +91,7 @@ class NovelView:
         image: ``(S, S, 3)`` uint8 BGR (with the overlay, if requested).
         camera: the pinhole camera of ``image`` (rig frame).
         depth: ``(S / stride, S / stride)`` float32 rendered depth (0 outside the rendered rays).
-        heat: ``(S, S)`` float32 max over joints of the rendered heatmaps, or ``None``.
+        heat: ``(S, S)`` float32 max over joints of the rendered heatmaps, in [0, 1], or ``None``.
         rays: number of rays rendered.
     """
 
@@ -329,7 +329,9 @@ def render_novel_view(session: Any, env: Mapping[str, np.ndarray], camera: Camer
         channels = {"rgb": (_finite(colour, contract.background), contract.background),
                     "depth": (_finite(out["depth"][0], 0.0), 0.0)}
         if want_heat:
-            channels["heat"] = (_finite(out["heatmaps"][0], 0.0).max(axis=-1), 0.0)
+            # sigmoid responses lie in [0, 1], as the colour does (clipped below): a graph that answers past them
+            # (1e30) gave NovelView.heat past them too, where the keypoint path clips the same values
+            channels["heat"] = (np.clip(_finite(out["heatmaps"][0], 0.0), 0.0, 1.0).max(axis=-1), 0.0)
         n_edge = 0 if edge is None else int(edge.sum())
         inside = None if sparse is None else \
             refine_cells(sparse.interior, config.silhouette_stride // stride) & in_box

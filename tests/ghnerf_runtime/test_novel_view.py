@@ -438,6 +438,38 @@ def test_a_failed_ray_renders_as_an_empty_ray_not_a_hole_around_it(config):
     assert np.count_nonzero(failed.heat[centre] == 0) <= 4  # the four failed pixels at stride 1; none upsampled
 
 
+class OutOfRangeHeatSession(DiscSession):
+    """The disc, its heatmaps answered ``value`` inside it on every joint: a finite answer past [0, 1] that no
+    sigmoid gives (a graph that ends otherwise, a corrupt file)."""
+
+    def __init__(self, value: float):
+        super().__init__()
+        self.value = value
+
+    def run(self, graph, feeds):
+        out = super().run(graph, feeds)
+        if "heatmaps" in out:
+            out["heatmaps"] = np.where(out["heatmaps"] > 0, np.float32(self.value), np.float32(0.0))
+        return out
+
+
+@pytest.mark.parametrize("config", [
+    NovelViewConfig(enabled=True, stride=2, silhouette_stride=0),
+    NovelViewConfig(enabled=True, stride=1, silhouette_stride=4, interior_stride=2),
+], ids=["stride2", "interior"])
+@pytest.mark.parametrize("value", [1e30, 1.5, -1e30])
+def test_novel_view_heat_stays_in_the_unit_range_whatever_the_graph_answers(config, value):
+    """``NovelView.heat`` is the max over joints of sigmoid responses, so in [0, 1] (the colour is clipped
+    the same way, and the keypoint path clips the same values). Only NaN and inf were replaced: a finite
+    answer past the range (1e30, -1e30) came out as it was, and the upsampling and interior filling spread it."""
+    env = {"images": np.zeros((2, 3, 128, 128), np.float32)}
+    got = render_novel_view(OutOfRangeHeatSession(value), env, _camera(), BOX, config, want_heat=True)
+    disc = render_novel_view(DiscSession(), env, _camera(), BOX, config, want_heat=True)  # heat 1 in the disc
+    assert disc.heat.max() == 1.0 and np.isfinite(got.heat).all()
+    # past 1: the disc at 1, as a response of 1 shows; below 0: no heat at all
+    assert np.array_equal(got.heat, disc.heat if value > 0 else np.zeros_like(disc.heat))
+
+
 def _diagonal_drawn(image, start, n):
     """Whether the limb's green runs down the diagonal from ``start`` (past the joint's red dot) for ``n`` pixels."""
     return all(image[start[1] + k, start[0] + k, 1] > 0 for k in range(3, n))
