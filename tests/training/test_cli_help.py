@@ -58,3 +58,15 @@ def test_the_console_scripts_still_run_the_tool():
     pytest.importorskip("torch")
     r = _run("-m", "training.train", "--preset", "tiny", "--validate-config", "--out", "unused")
     assert r.returncode == 0 and '"preset": "tiny"' in r.stdout, r.stderr[-2000:]
+
+
+def test_the_export_help_states_the_limits_it_checks():
+    """``--opset`` and ``--calib-npz`` say in ``--help`` what the export refuses (docs/model.md): the help named
+    neither the opset range nor the calibration file's minimum."""
+    from training.export.calibration import MIN_FRAMES
+    from training.export.cli import build_parser
+    from training.export.opsets import MAX_OPSET, MIN_OPSET
+
+    helps = {a.option_strings[0]: " ".join(a.help.split()) for a in build_parser()._actions if a.help}
+    assert f"{MIN_OPSET} to {MAX_OPSET}" in helps["--opset"]
+    assert f"at least {MIN_FRAMES} frame pairs" in helps["--calib-npz"]
