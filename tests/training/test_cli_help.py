@@ -70,3 +70,12 @@ def test_the_export_help_states_the_limits_it_checks():
     helps = {a.option_strings[0]: " ".join(a.help.split()) for a in build_parser()._actions if a.help}
     assert f"{MIN_OPSET} to {MAX_OPSET}" in helps["--opset"]
     assert f"at least {MIN_FRAMES} frame pairs" in helps["--calib-npz"]
+
+
+@pytest.mark.parametrize("module", ["training.convert_norm", "training.learnt_fill", "training.pretrain_human",
+                                    "training.export"])
+def test_a_tool_without_a_console_script_names_the_command_the_docs_give(module):
+    """docs/training.md runs these as ``python -m MODULE``; their usage line said ``convert_norm.py`` and
+    ``learnt_fill.py`` (argparse's file name), a command that does not run from the repository root."""
+    r = _run("-m", module, "--help")
+    assert r.returncode == 0 and r.stdout.startswith(f"usage: python -m {module} "), r.stdout[:200]
