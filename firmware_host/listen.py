@@ -386,8 +386,13 @@ def _positive_seconds(raw: str) -> float:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
-                                 epilog="Protocol: docs/protocol.md")
+    # the counters the docs describe (docs/daemon.md), in the words each line prints them in
+    epilog = ("Each second a line: JOINTS/s, joints present, latency (capture to the wire), 'N seq gaps' (frames "
+              f"lost), and when any came 'N late (reordered)' (a seq up to {LATE_WINDOW} behind the newest: one a "
+              "gap stepped over leaves the lost frames) and 'N duplicate'; the sender's last STATUS fault and HELLO; "
+              "decode errors. Ctrl-C or --seconds ends it with the totals. Counters: docs/daemon.md; protocol: "
+              "docs/protocol.md")
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0], epilog=epilog)
     ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6; a multicast HOST, "
                                 "udp://239.255.0.1:PORT, is joined) or serial:///dev/DEVICE?baud=N (three "
                                 "slashes: an absolute path)")

@@ -8,25 +8,34 @@ constant would leave the doc stating the old value without a word. (The runtime'
 from __future__ import annotations
 
 import inspect
+import json
 import re
 from pathlib import Path
 
 import pytest
 
+from calibration.cli import STALL_NOTE_S
+from calibration.solve import COVERAGE_GRID, USUAL_PITCH_DEG
 from drivers.backends.replay import MIN_SPEED
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.config import DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
+from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STATUS_S, MIN_STATUS_S, SinkOptions
+from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG
+from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
+from ghnerf_runtime.geometry.rig import MAX_BASELINE_M
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
+from training.export.calibration import MIN_FRAMES
+from training.export.opsets import MAX_OPSET, MIN_OPSET
 
 REPO = Path(__file__).resolve().parents[1]
 RAY = Joints3DConfig().min_ray_angle_deg
@@ -61,6 +70,16 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"below {MIN_STATUS_S:g} an idle link"),
     ("docs/protocol.md", f"`send_2d` ({int(SinkOptions.send_2d)});"),
     ("docs/protocol.md", f"`joint_count` ({SinkOptions.joint_count}; more than"),
+    # session 51's limits, quoted where the docs describe them
+    ("docs/protocol.md", f"of more than {MAX_JOINTS} joints (`MAX_JOINTS`"),
+    ("docs/protocol.md", f"`max_fps` extra cap, at least 1/{round(1 / MIN_MAX_FPS)} (a frame an hour)"),
+    ("docs/runtime.md", f"`RASTER_CHUNK` ({RASTER_CHUNK})"),
+    ("docs/rig-file.md", f"at most {MAX_BASELINE_M:g} m apart (`MAX_BASELINE_M`"),
+    ("docs/calibration.md", f"after {STALL_NOTE_S:g} s without an image pair (`STALL_NOTE_S`)"),
+    ("docs/calibration.md", f"outside {USUAL_PITCH_DEG[0]:g} to {USUAL_PITCH_DEG[1]:g} degrees (`USUAL_PITCH_DEG`)"),
+    ("docs/calibration.md", f"an {COVERAGE_GRID[0]}x{COVERAGE_GRID[1]} grid, `COVERAGE_GRID`"),
+    ("docs/model.md", f"fewer than {MIN_FRAMES} frame pairs (`calibration.MIN_FRAMES`"),
+    ("docs/model.md", f"`python -m training.export --opset` takes {MIN_OPSET} to {MAX_OPSET}"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"
@@ -77,3 +96,26 @@ def test_the_daemon_doc_names_every_file_in_a_rig_url():
             assert f"`{option}=" in paths, f"{scheme}://?{option}= is read from the config's folder; say so"
     for key in DAEMON_PATH_KEYS:
         assert f"`{'.'.join(key)}`" in paths, key
+
+
+def test_hello_and_status_seq_before_the_first_frame_is_said_alike_in_every_doc():
+    """HELLO/STATUS carry 2**32 - 1 before the first frame (``NO_FRAME_SEQ``); the protocol doc, the C decoder's
+    doc and its header say so in their own words, which must stay with the constant."""
+    assert NO_FRAME_SEQ == 2**32 - 1  # the docs write it 2³² − 1
+    assert "before the producer's first frame, 2³² − 1" in _doc("docs/protocol.md")
+    assert f"2³² − 1 (`0x{NO_FRAME_SEQ:08X}`) before the sender's first" in _doc("docs/c-decoder.md")
+    assert f"0x{NO_FRAME_SEQ:08X} before the first" in _doc("clients/c/ghjoints.h")
+    assert "HELLO, STATUS: the last frame's, 2³² − 1 before the first" in _doc("docs/protocol.md")  # the header
+
+
+def test_the_model_doc_quotes_the_card_s_int8_parity():
+    """docs/model.md quotes the worst int8-vs-fp32 figures of ``parity`` in models/model_card.json (the held-out
+    scene ``make model`` checks); a new model card must bring the doc along."""
+    parity = json.loads((REPO / "models/model_card.json").read_text())["parity"]
+    graphs = [parity[variant]["graphs"] for variant in parity]
+    rgb = max(g["render_rgb"]["rgb"]["max_abs"] for g in graphs)
+    depth_cm = 100 * max(g["render_rgb"]["depth"]["mean_abs"] for g in graphs)
+    heat = max(g["query"]["joint_heat"]["max_abs"] for g in graphs)
+    density = max(g["query"]["density"]["mean_abs"] for g in graphs)
+    phrase = f"gives at most {rgb:.3f}, {depth_cm:.1f} cm, {heat:.2f} and {density:.3f}"
+    assert phrase in _doc("docs/model.md"), phrase

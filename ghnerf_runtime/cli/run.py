@@ -91,8 +91,10 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--threads", type=int, help="onnxruntime intra-op threads")
     ap.add_argument("--novel-view", metavar="PATH", help="also render a novel view: .png (last frame) or .mp4")
     ap.add_argument("--novel-alpha", type=float, help="novel camera between the rig cameras: 0 = first, "
-                                                      "1 = second (default 0.5); -1..2 extrapolates, "
-                                                      "refused where the focal length would reach 0")
+                                                      "1 = second (default 0.5), on the line between them or an "
+                                                      "orbit round the subject (novel_view.path); -1..2 "
+                                                      "extrapolates, refused where the focal length (or, on an "
+                                                      "orbit, the distance to its pivot) would reach 0")
     ap.add_argument("--novel-overlay", choices=("none", "skeleton", "heatmap"), help="drawn on the novel view "
                                                                                      "(default none)")
     ap.add_argument("--novel-stride", type=int, choices=(1, 2, 4), help="render every n-th novel-view pixel")

@@ -311,3 +311,19 @@ def test_udp_on_a_multicast_group_joins_it(group):
         assert _datagram_reaches(port, family, group.strip("[]"))
     finally:
         port.close()
+
+
+def test_the_help_names_the_counters_in_the_words_the_line_prints(capsys):
+    """``--help`` says what each counter of the per-second line is, as docs/daemon.md does (it said nothing)."""
+    with pytest.raises(SystemExit) as e:
+        listen.main(["--help"])
+    assert e.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps anywhere
+    tally = listen.Tally()
+    for seq in (0, 2, 1, 1):  # a gap, the late frame that fills it, a duplicate
+        tally.add(_joints(seq))
+    tally.add(_joints(4))
+    line = tally.line(1.0, {})
+    for label in ("seq gaps", "late (reordered)", "duplicate"):
+        assert label in line and f"'N {label}'" in text, label
+    assert f"up to {listen.LATE_WINDOW} behind the newest" in text

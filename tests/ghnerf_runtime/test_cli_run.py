@@ -11,7 +11,7 @@ import pytest
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.cli import run as cli_run
-from ghnerf_runtime.config import EstimatorConfig, config_to_dict
+from ghnerf_runtime.config import NOVEL_PATHS, EstimatorConfig, config_to_dict
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
@@ -639,3 +639,13 @@ def test_a_video_without_a_usable_frame_rate_is_timed_at_30_fps(monkeypatch, tmp
     monkeypatch.setattr(cli_run, "_pairs", lambda args: iter([(np.zeros((4, 4, 3), np.uint8),) * 2] * 3))
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
     assert times == pytest.approx([0.0, 1 / 30, 2 / 30])
+
+
+def test_the_novel_alpha_help_names_the_path_and_the_orbit_s_limit():
+    """``--novel-alpha``'s help says what docs/runtime.md does since ``novel_view.path``: the view moves on the
+    line or an orbit, and an orbit's extrapolated distance to its pivot is refused too (it named the focal
+    length only)."""
+    action = next(a for a in cli_run.build_parser()._actions if "--novel-alpha" in a.option_strings)
+    text = " ".join(action.help.split())
+    assert "novel_view.path" in text and "distance to its pivot" in text
+    assert set(NOVEL_PATHS) == {"line", "orbit", "auto"}  # the two paths the help names, and the rule choosing

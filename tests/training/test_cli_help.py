@@ -58,3 +58,24 @@ def test_the_console_scripts_still_run_the_tool():
     pytest.importorskip("torch")
     r = _run("-m", "training.train", "--preset", "tiny", "--validate-config", "--out", "unused")
     assert r.returncode == 0 and '"preset": "tiny"' in r.stdout, r.stderr[-2000:]
+
+
+def test_the_export_help_states_the_limits_it_checks():
+    """``--opset`` and ``--calib-npz`` say in ``--help`` what the export refuses (docs/model.md): the help named
+    neither the opset range nor the calibration file's minimum."""
+    from training.export.calibration import MIN_FRAMES
+    from training.export.cli import build_parser
+    from training.export.opsets import MAX_OPSET, MIN_OPSET
+
+    helps = {a.option_strings[0]: " ".join(a.help.split()) for a in build_parser()._actions if a.help}
+    assert f"{MIN_OPSET} to {MAX_OPSET}" in helps["--opset"]
+    assert f"at least {MIN_FRAMES} frame pairs" in helps["--calib-npz"]
+
+
+@pytest.mark.parametrize("module", ["training.convert_norm", "training.learnt_fill", "training.pretrain_human",
+                                    "training.export"])
+def test_a_tool_without_a_console_script_names_the_command_the_docs_give(module):
+    """docs/training.md runs these as ``python -m MODULE``; their usage line said ``convert_norm.py`` and
+    ``learnt_fill.py`` (argparse's file name), a command that does not run from the repository root."""
+    r = _run("-m", module, "--help")
+    assert r.returncode == 0 and r.stdout.startswith(f"usage: python -m {module} "), r.stdout[:200]

@@ -7,7 +7,8 @@ from training.cli import doc_of, parse_then_run
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(description=doc_of("training.convert_norm").split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m training.convert_norm",  # not "convert_norm.py"
+                                 description=doc_of("training.convert_norm").split("\n\n")[0])
     ap.add_argument("src", help="a .pt checkpoint trained with features.norm = 'batch'")
     ap.add_argument("dst", help="where to write the converted checkpoint")
     return ap

@@ -8,7 +8,8 @@ from training.cli import at_least, doc_of, parse_then_run
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(description=doc_of("training.learnt_fill").split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m training.learnt_fill",  # not "learnt_fill.py"
+                                 description=doc_of("training.learnt_fill").split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("cache", help="compute a split's fill features (training.fill_features)")
     c.add_argument("--data", required=True)

@@ -30,7 +30,8 @@ import numpy as np
 from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
-from training.export.opsets import DEFAULT_OPSET, opset_problem
+from training.export.calibration import MIN_FRAMES
+from training.export.opsets import DEFAULT_OPSET, MAX_OPSET, MIN_OPSET, opset_problem
 from training.model_card import write_atomic
 
 if TYPE_CHECKING:  # torch and the modules on it load in main, after the arguments (--help without torch's 3 s)
@@ -93,11 +94,12 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--graphs", default="", help=f"comma-separated subset of {','.join(GRAPH_NAMES)} "
                     "(default: every graph the model has)")
     ap.add_argument("--opset", type=int, default=DEFAULT_OPSET,
-                    help=f"ONNX opset of the graphs (training.export.opsets; default {DEFAULT_OPSET})")
+                    help=f"ONNX opset of the graphs, {MIN_OPSET} to {MAX_OPSET} (training.export.opsets; default "
+                         f"{DEFAULT_OPSET})")
     ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
     ap.add_argument("--calib-frames", type=int, default=8, help="random calibration frames (no --calib-npz)")
     ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) float RGB in [0, 1] at the model's "
-                    "resolution (checked before the export)")
+                    f"resolution, at least {MIN_FRAMES} frame pairs, no view uniform (checked before the export)")
     ap.add_argument("--bench", action="store_true", help="time every graph (fp32 and int8)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--report", help="write the figures as JSON here")
