@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, NovelViewConfig, RoiConfig, SessionConfig
+from ghnerf_runtime.config import (EstimatorConfig, FrameCheckConfig, NovelViewConfig, PresenceConfig, RoiConfig,
+                                   SessionConfig)
 from ghnerf_runtime.errors import GeometryError
 
 REPO = Path(__file__).resolve().parents[2]
@@ -202,15 +203,16 @@ def _rig(**placement):
     return sim.RigPlacement(**placement).build()
 
 
-def _estimator(precision: str, frame_check: bool = True, roi: RoiConfig | None = None):
+def _estimator(precision: str, frame_check: bool = True, roi: RoiConfig | None = None, presence: bool = True):
     """An estimator over the default simulated rig with the novel view (and its heatmaps) on; reset."""
     from ghnerf_runtime.estimator import Estimator
 
-    key = (precision, frame_check, roi)
+    key = (precision, frame_check, roi, presence)
     if key not in _ESTIMATORS:
         cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), precision=precision, threads=2),
                               frame_check=FrameCheckConfig(enabled=frame_check), roi=roi or RoiConfig(),
-                              novel_view=NovelViewConfig(enabled=True, heatmaps=True))
+                              novel_view=NovelViewConfig(enabled=True, heatmaps=True),
+                              presence=PresenceConfig(enabled=presence))
         _ESTIMATORS[key] = Estimator.from_config(_rig(), cfg)
     est = _ESTIMATORS[key]
     est.reset()
@@ -276,12 +278,17 @@ def _estimate_with_views(est, frames, name: str, alphas=ALPHAS, subject=None):
 @pytest.mark.parametrize("kind", FRAME_KINDS)
 def test_estimator_on_frames_of_nobody(precision, frame_check, kind):
     """With the frame check (the default) these crops never reach the model; without it the model runs on them
-    and must say "nobody" in finite numbers, with a novel view at every alpha."""
+    and must say "nobody" in finite numbers. Neither pair gets a novel view (a rejected pair, and one with nobody
+    in it: documented); with the presence gate off as well, the view is rendered at every alpha, finite."""
     est = _estimator(precision, frame_check)
     r = _estimate_with_views(est, _frames(kind), f"{precision} {kind}")
     assert r.num_found == 0 and not r.confidence.any()
     assert (not any(r.frame_ok.values())) if frame_check else all(r.frame_ok.values()), r.frame_ok
-    assert (r.novel_view is None) == frame_check  # a pair the check rejects has no novel view (documented)
+    assert r.novel_view is None
+    if not frame_check:
+        r = _estimate_with_views(_estimator(precision, frame_check, presence=False), _frames(kind),
+                                 f"{precision} {kind} (presence gate off)")
+        assert r.novel_view is not None and all(r.frame_ok.values())
 
 
 @pytest.mark.parametrize("precision", PRECISIONS)
