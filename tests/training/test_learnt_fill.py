@@ -72,6 +72,26 @@ def test_a_true_geometry_cache_holds_every_novel_view_with_the_blend_and_the_tar
     assert np.allclose(j[j[:, 2] > 0, :2], scene["tgt_joints_2d"][t][j[:, 2] > 0], atol=1e-3)
 
 
+def test_a_depth_beyond_float16_is_cached_at_its_largest_as_on_the_device_not_inf(data64):
+    """Review 51: the runtime's painter clips its float16 depth plane (a surface over 65 km from the median became
+    inf, and the painter NaN); the training cache cast it unclipped, so the net could train on inf."""
+    from ghnerf_runtime.novel_painter import F16_MAX
+    from training.data.torch_dataset import MultiViewDataset
+    from training.fill_features import view_features
+
+    scene = {k: v.numpy() for k, v in MultiViewDataset(data64, "val")[0].items()}
+    t = next(i for i in range(len(scene["tgt_masks"]))
+             if not scene["tgt_is_source"][i] and scene["tgt_masks"][i].sum() > 1)
+    depth = np.array(scene["tgt_depth"], np.float64)
+    ys, xs = np.nonzero(scene["tgt_masks"][t])
+    depth[t, ys[0], xs[0]] = 7e4  # a wild surface 70 km away
+    scene["tgt_depth"] = depth
+    f = view_features(scene, t, None, 30.0, relight=False)
+    assert f["depth"].dtype == np.float16 and np.isfinite(f["depth"]).all()
+    assert float(f["depth"][ys[0], xs[0]]) == F16_MAX
+    assert np.abs(f["depth"][ys[1:], xs[1:]].astype(float)).max() < 10.0  # the rest keeps its depth about the median
+
+
 def test_a_model_geometry_cache_takes_the_mask_and_picture_from_the_model_and_the_target_from_the_truth(
         model_cache, truth_cache):
     m, t = load_cache(model_cache), load_cache(truth_cache)
