@@ -2,6 +2,7 @@
 network, trainer and score (``training.learnt_fill``)."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -463,3 +464,24 @@ def test_a_checkpoint_the_workers_cannot_load_is_named_not_a_hang(data64, tmp_pa
         pytest.fail("cache --workers 2 with an unreadable checkpoint hung")
     assert r.returncode == 2, r.stderr
     assert r.stderr.startswith(f"error: {tmp_path / 'missing.pt'}: unreadable checkpoint"), r.stderr
+
+
+def test_the_train_commands_score_json_is_strict_json(train_cache, truth_cache, tmp_path, monkeypatch):
+    # Review 51: a held-out bin without views scores NaN; json.dumps wrote score.json with a bare NaN (not JSON)
+    import training.learnt_fill as lf
+
+    def with_an_empty_bin(*args, **kw):
+        return {"novel, all": {"n": 3, "shown": 19.0, "fill:learnt": 20.0},
+                "novel, 150-180": {"n": 0, "shown": float("nan"), "fill:learnt": float("-inf")}}
+
+    monkeypatch.setattr(lf, "score_rows", with_an_empty_bin)
+    out = tmp_path / "run"
+    assert main(["train", "--train-cache", str(train_cache), "--val-cache", str(truth_cache), "--out", str(out),
+                 "--device", "cpu", "--set", "steps=1", "--set", "batch=2", "--set", "net.width=8"]) == 0
+
+    def refuse(word):
+        raise ValueError(f"not JSON: {word}")
+
+    score = json.loads((out / "score.json").read_text(), parse_constant=refuse)
+    assert score["rows"]["novel, 150-180"] == {"n": 0, "shown": None, "fill:learnt": None}
+    assert score["steps"] == 1 and score["config"]["net"]["width"] == 8
