@@ -40,7 +40,7 @@ from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
 from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
-from calibration.solve import LENS_MODELS, solve_rig
+from calibration.solve import LENS_MODELS, solve_rig, typed_pitch_warning
 from calibration.writable import existing_ancestor, unwritable_reason
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
@@ -604,6 +604,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     if args.camera_height is not None:
         print(f"levelled: {a.name} {args.camera_height:g} m above the floor, pitch {args.pitch or 0.0:g} deg, "
               f"roll {args.roll or 0.0:g} deg")
+        warning = typed_pitch_warning(args.pitch or 0.0, a.name)  # as solve warns: 80 typed for 10 passed silently
+        if warning:
+            print(f"warning: {warning}")
     elif isinstance(recorded, dict):  # our own export of a levelled rig: the file says so and its poses agree
         print(f"levelled already (the file records it, and its poses agree): {recorded['reference']} "
               f"{recorded['camera_height_m']:.3f} m above the floor, pitch {recorded['pitch_deg']:.2f} deg, "

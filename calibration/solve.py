@@ -35,7 +35,7 @@ from ghnerf_runtime.rig_file import principal_point_problem
 
 __all__ = ["LENS_MODELS", "Intrinsics", "PairPose", "Floor", "RigSolution", "calibrate_intrinsics",
            "calibrate_pair", "floor_from_view", "floor_from_pair", "solve_rig", "fold_warning", "MIN_VIEWS", "MAX_PAIR_PX",
-           "USUAL_PITCH_DEG"]
+           "USUAL_PITCH_DEG", "typed_pitch_warning"]
 
 #: Lens models: OpenCV flags and what they suit.
 LENS_MODELS = {
@@ -551,6 +551,16 @@ def fold_warning(cam: Camera) -> str:
             f"{cam.fold_radius:.2f}): views did not reach the image corners; capture some there, or use --lens narrow")
 
 
+def typed_pitch_warning(pitch_deg: float, camera: str) -> str | None:
+    """The warning for a typed ``--pitch`` outside ``USUAL_PITCH_DEG`` (None inside it), for ``solve`` and
+    ``import`` alike: a level app or an inclinometer may read from the vertical, and 80 typed for 10
+    levelled the rig looking at the floor, with no word."""
+    if USUAL_PITCH_DEG[0] <= pitch_deg <= USUAL_PITCH_DEG[1]:
+        return None
+    return (f"--pitch {pitch_deg:g} degrees for camera {camera!r} is unusual for a rig filming people: it is the "
+            "angle of the optical axis below the horizon (0 level, 90 straight down), not from the vertical")
+
+
 def _warnings(report: dict[str, Any]) -> list[str]:
     out = []
     for cam, r in report["cameras"].items():
@@ -577,12 +587,8 @@ def _warnings(report: dict[str, Any]) -> list[str]:
     if lv["method"].startswith("floor view") and not USUAL_PITCH_DEG[0] <= lv["pitch_deg"] <= USUAL_PITCH_DEG[1]:
         out.append(f"levelling: the floor view gives camera {lv['camera']!r} a pitch of {lv['pitch_deg']:.1f} "
                    "degrees, unusual for a rig filming people: was the board lying flat on the floor?")
-    elif lv["method"] == "measured" and not USUAL_PITCH_DEG[0] <= lv["pitch_deg"] <= USUAL_PITCH_DEG[1]:
-        # a level app or an inclinometer may read from the vertical: 80 typed for 10 levelled the rig
-        # looking at the floor, with no word
-        out.append(f"levelling: --pitch {lv['pitch_deg']:g} degrees for camera {lv['camera']!r} is unusual for a rig "
-                   "filming people: it is the angle of the optical axis below the horizon (0 level, 90 straight "
-                   "down), not from the vertical")
+    elif lv["method"] == "measured" and (warning := typed_pitch_warning(lv["pitch_deg"], lv["camera"])):
+        out.append(f"levelling: {warning}")
     if report["pair"]["views"] < 8:
         out.append(f"pair: {report['pair']['views']} views seen by both cameras: the relative pose is weakly "
                    "determined")

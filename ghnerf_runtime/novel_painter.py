@@ -38,7 +38,7 @@ from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
-           "painter_planes", "angle_from_sources_deg", "NovelPainter"]
+           "painter_planes", "float16_depth", "F16_MAX", "angle_from_sources_deg", "NovelPainter"]
 
 #: Bump when a plane's meaning changes: a file trained on other planes is refused.
 FEATURE_VERSION = 1
@@ -53,6 +53,13 @@ INPUTS = ("planes", "joints")
 OUTPUT = "rgb"
 #: The largest finite float16: the depth plane is held as float16, as the caches hold it.
 F16_MAX = float(np.finfo(np.float16).max)
+
+
+def float16_depth(rel: np.ndarray) -> np.ndarray:
+    """The depth plane as float16, clipped first to float16's largest finite value: a surface over 65 km from the
+    median (a wild joint's ellipsoid) became inf, and the painter's answer NaN. Shared with the training caches
+    (``training.fill_features``), so the network sees on the device what it saw in training."""
+    return np.clip(rel, -F16_MAX, F16_MAX).astype(np.float16)
 
 
 def _u8(rgb: np.ndarray) -> np.ndarray:
@@ -136,9 +143,8 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     normals = surface_normals(points, mask, camera.center) @ camera.R.T  # rig frame -> camera frame
     normals = np.round(np.where(mask[..., None], normals, 0.0) * 127.0) / 127.0
     rel = np.where(mask, depth - np.median(depth[mask]), 0.0) if mask.any() else np.zeros((H, W))
-    rel = np.clip(rel, -F16_MAX, F16_MAX)  # a proxy spanning over 65 km (a wild joint): float16's inf else
     planes = np.concatenate([_u8(blend), mask[..., None], seen[..., None], normals,
-                             rel.astype(np.float16)[..., None], _u8(shown)], -1)
+                             float16_depth(rel)[..., None], _u8(shown)], -1)
     ju, jz = camera.project(joints, distort=False)
     ok = valid & (np.nan_to_num(jz) > 0) & np.all(np.isfinite(ju), axis=-1)  # NaN: no pixel (Camera.project)
     j = np.stack([np.where(ok, np.nan_to_num(ju[:, 0]), 0.0), np.where(ok, np.nan_to_num(ju[:, 1]), 0.0), ok], -1)

@@ -77,8 +77,10 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"at most {MAX_BASELINE_M:g} m apart (`MAX_BASELINE_M`"),
     ("docs/calibration.md", f"after {STALL_NOTE_S:g} s without an image pair (`STALL_NOTE_S`)"),
     ("docs/calibration.md", f"outside {USUAL_PITCH_DEG[0]:g} to {USUAL_PITCH_DEG[1]:g} degrees (`USUAL_PITCH_DEG`)"),
+    ("docs/rig-file.md", f"outside {USUAL_PITCH_DEG[0]:g} to {USUAL_PITCH_DEG[1]:g} degrees, `USUAL_PITCH_DEG`"),
     ("docs/calibration.md", f"an {COVERAGE_GRID[0]}x{COVERAGE_GRID[1]} grid, `COVERAGE_GRID`"),
     ("docs/model.md", f"fewer than {MIN_FRAMES} frame pairs (`calibration.MIN_FRAMES`"),
+    ("docs/model.md", f"fewer than {MIN_FRAMES}, `calibration.MIN_FRAMES` as for"),
     ("docs/model.md", f"`python -m training.export --opset` takes {MIN_OPSET} to {MAX_OPSET}"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):

@@ -25,7 +25,8 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
 * ``flags`` ``(H, W)`` uint8: bit 0 the geometry's subject mask, bit 1 some source sees the pixel,
   bit 2 the true subject mask (the score's; the same as bit 0 with the true geometry);
 * ``normals`` ``(H, W, 3)`` int8: camera-frame unit normals times 127 (zero off the subject);
-* ``depth`` ``(H, W)`` float16: camera z minus its median on the subject, metres (zero off it);
+* ``depth`` ``(H, W)`` float16: camera z minus its median on the subject, metres (zero off it), clipped to
+  float16's largest finite value (``novel_painter.float16_depth``, as on the device);
 * ``joints`` ``(25, 3)`` float32: the 3D joints projected into the view (pixel u, v; valid 0/1);
 * ``light`` ``(4,)`` float32: the fitted key light's direction in the camera frame and its ambient
   share (zeros when nothing was seen to fit it, or when the cache was made without the light fit:
@@ -56,6 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ghnerf_runtime.novel_painter import float16_depth
 from training.blend_ceiling import blend_sources, project
 from training.model_card import sha256, write_atomic
 from training.unseen_fill import PART_BINS, Lighting, fit_lighting, relit_fill, seen_surface, surface_normals
@@ -130,7 +132,7 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
         "truth": _to_u8(target),
         "flags": (mask * MASK_BIT + (mask & seen) * SEEN_BIT + subject * TRUTH_BIT).astype(np.uint8),
         "normals": np.round(np.where(mask[..., None], normals, 0.0) * 127.0).astype(np.int8),
-        "depth": z.astype(np.float16),
+        "depth": float16_depth(z),  # clipped as on the device: past 65504 m float16 is inf, and the painter NaN
         "joints": np.stack([np.where(valid, u, 0.0), np.where(valid, v, 0.0), valid], -1).astype(np.float32),
         "light": light, "angle": np.float32(angle), "scene": np.int32(index), "view": np.int32(view),
         "geometry": np.str_(geometry or ("truth" if shown is None else "model")),

@@ -64,6 +64,7 @@ from ghnerf_runtime.metrics import masked_psnr
 from training.evaluate import SOURCE_ANGLE_BINS_DEG
 from training.fill_features import (MASK_BIT, SEEN_BIT, TRUTH_BIT, FillCacheError, check_held_out, load_cache,
                                     relit_in)
+from training.model_card import strict_json
 
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
 #: with ``FillNetConfig.shown_input``, the model's picture 3 more.
@@ -593,7 +594,8 @@ def _export_cli(args) -> int:
             precision = "int8" if path.name.endswith(".int8.onnx") else "fp32"
             report["onnx_held_out"][precision] = rows = onnx_rows(path, val)
             print(f"{path.name} (onnxruntime, {precision}) held out:\n{table(rows)}")
-    out.with_suffix(".json").write_text(json.dumps(report, indent=1))
+    # strict JSON: a held-out bin with no views scores NaN, identical pictures inf; bare NaN is not JSON
+    out.with_suffix(".json").write_text(strict_json(report))
     for path in outs:
         print(f"{path}: {path.stat().st_size / 1e6:.2f} MB, sha256 {hashlib.sha256(path.read_bytes()).hexdigest()[:16]}")
     if args.card_dir is not None:
@@ -714,7 +716,7 @@ def main(argv: list[str] | None = None) -> int:
               f"views ({args.train_cache}), {net.steps_trained} steps of {cfg.batch} in {seconds:.0f} s on "
               f"{hardware}; masked PSNR, dB\n\n{table(rows)}\n")
     (args.out / "score.md").write_text(report)
-    (args.out / "score.json").write_text(json.dumps({"config": asdict(cfg), "rows": rows, **info}, indent=1))
+    (args.out / "score.json").write_text(strict_json({"config": asdict(cfg), "rows": rows, **info}))
     print(report)
     return 0
 

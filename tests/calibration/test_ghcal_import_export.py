@@ -196,3 +196,21 @@ def test_our_anipose_export_saved_with_a_byte_order_mark_imports_with_its_record
     assert cli.main(["import", str(foreign), "--out", str(back)]) == 0
     assert "baseline 600.0 mm (file units x 0.001 m)" in capsys.readouterr().out
     _same_cameras(load_rig(rig_file), load_rig(back))
+
+
+def test_a_typed_pitch_read_from_the_vertical_is_warned_about_on_import_as_in_solve(rig_file, tmp_path, capsys):
+    """Review 51: ``solve --pitch 80`` warned (USUAL_PITCH_DEG) while ``import --pitch 80`` levelled the rig
+    looking at the floor without a word; both now say the same, from one function."""
+    from calibration.solve import typed_pitch_warning
+
+    foreign = tmp_path / "calibration.yml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    capsys.readouterr()
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "steep.json"), "--camera-height", "1.4",
+                     "--pitch", "80"]) == 0
+    out = capsys.readouterr().out
+    assert f"warning: {typed_pitch_warning(80.0, 'left')}" in out, out
+    assert "--pitch 80 degrees for camera 'left' is unusual" in out and "not from the vertical" in out, out
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "usual.json"), "--camera-height", "1.4",
+                     "--pitch", "24"]) == 0
+    assert "warning" not in capsys.readouterr().out

@@ -2,6 +2,7 @@
 network, trainer and score (``training.learnt_fill``)."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,26 @@ def test_a_true_geometry_cache_holds_every_novel_view_with_the_blend_and_the_tar
     j = a["joints"][0]
     assert set(np.unique(j[:, 2])) <= {0.0, 1.0}
     assert np.allclose(j[j[:, 2] > 0, :2], scene["tgt_joints_2d"][t][j[:, 2] > 0], atol=1e-3)
+
+
+def test_a_depth_beyond_float16_is_cached_at_its_largest_as_on_the_device_not_inf(data64):
+    """Review 51: the runtime's painter clips its float16 depth plane (a surface over 65 km from the median became
+    inf, and the painter NaN); the training cache cast it unclipped, so the net could train on inf."""
+    from ghnerf_runtime.novel_painter import F16_MAX
+    from training.data.torch_dataset import MultiViewDataset
+    from training.fill_features import view_features
+
+    scene = {k: v.numpy() for k, v in MultiViewDataset(data64, "val")[0].items()}
+    t = next(i for i in range(len(scene["tgt_masks"]))
+             if not scene["tgt_is_source"][i] and scene["tgt_masks"][i].sum() > 1)
+    depth = np.array(scene["tgt_depth"], np.float64)
+    ys, xs = np.nonzero(scene["tgt_masks"][t])
+    depth[t, ys[0], xs[0]] = 7e4  # a wild surface 70 km away
+    scene["tgt_depth"] = depth
+    f = view_features(scene, t, None, 30.0, relight=False)
+    assert f["depth"].dtype == np.float16 and np.isfinite(f["depth"]).all()
+    assert float(f["depth"][ys[0], xs[0]]) == F16_MAX
+    assert np.abs(f["depth"][ys[1:], xs[1:]].astype(float)).max() < 10.0  # the rest keeps its depth about the median
 
 
 def test_a_model_geometry_cache_takes_the_mask_and_picture_from_the_model_and_the_target_from_the_truth(
@@ -443,3 +464,24 @@ def test_a_checkpoint_the_workers_cannot_load_is_named_not_a_hang(data64, tmp_pa
         pytest.fail("cache --workers 2 with an unreadable checkpoint hung")
     assert r.returncode == 2, r.stderr
     assert r.stderr.startswith(f"error: {tmp_path / 'missing.pt'}: unreadable checkpoint"), r.stderr
+
+
+def test_the_train_commands_score_json_is_strict_json(train_cache, truth_cache, tmp_path, monkeypatch):
+    # Review 51: a held-out bin without views scores NaN; json.dumps wrote score.json with a bare NaN (not JSON)
+    import training.learnt_fill as lf
+
+    def with_an_empty_bin(*args, **kw):
+        return {"novel, all": {"n": 3, "shown": 19.0, "fill:learnt": 20.0},
+                "novel, 150-180": {"n": 0, "shown": float("nan"), "fill:learnt": float("-inf")}}
+
+    monkeypatch.setattr(lf, "score_rows", with_an_empty_bin)
+    out = tmp_path / "run"
+    assert main(["train", "--train-cache", str(train_cache), "--val-cache", str(truth_cache), "--out", str(out),
+                 "--device", "cpu", "--set", "steps=1", "--set", "batch=2", "--set", "net.width=8"]) == 0
+
+    def refuse(word):
+        raise ValueError(f"not JSON: {word}")
+
+    score = json.loads((out / "score.json").read_text(), parse_constant=refuse)
+    assert score["rows"]["novel, 150-180"] == {"n": 0, "shown": None, "fill:learnt": None}
+    assert score["steps"] == 1 and score["config"]["net"]["width"] == 8

@@ -172,3 +172,26 @@ def test_a_net_exported_without_its_score_file_keeps_its_record_and_is_scored_on
     torch_all = report["held_out"]["novel, all"]["fill:learnt"]
     assert abs(torch_all - report["onnx_held_out"]["fp32"]["novel, all"]["fill:learnt"]) < 0.01
     assert "Novel-view painter" in (card_dir / "MODEL_CARD.md").read_text()
+
+
+def _strict(text: str):
+    """``json.loads`` that refuses the bare NaN / Infinity Python's ``json.dumps`` writes and other readers refuse."""
+    def refuse(word):
+        raise ValueError(f"not JSON: {word}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_the_painters_figures_are_strict_json(tmp_path, data64):
+    # Review 51: a held-out bin without views scores NaN (identical pictures inf), and json.dumps wrote the
+    # painter's .json with bare NaN / Infinity, which jq, browsers and most languages refuse
+    card_dir, out = _export_setup(tmp_path, data64)
+    rows = {"novel, all": {"n": 3, "shown": 19.0, "fill:learnt": 20.0},
+            "novel, 150-180": {"n": 0, "shown": float("nan"), "fill:learnt": float("inf")}}
+    config = torch.load(tmp_path / "fill_net.pt", weights_only=True)["config"]
+    (tmp_path / "score.json").write_text(json.dumps({"rows": rows, "seconds": 1.0, "hardware": "cpu",
+                                                     "train_views": 3, "steps": 7, "config": config}))
+    assert main(["export", "--net", str(tmp_path / "fill_net.pt"), "--out", str(out)]) == 0
+    report = _strict(out.with_suffix(".json").read_text())
+    assert report["held_out"]["novel, 150-180"] == {"n": 0, "shown": None, "fill:learnt": None}
+    assert report["held_out"]["novel, all"] == rows["novel, all"] and report["steps"] == 7

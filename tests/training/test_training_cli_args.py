@@ -8,6 +8,7 @@ import pytest
 
 pytest.importorskip("torch")
 from training import evaluate  # noqa: E402
+from training.export.calibration import MIN_FRAMES  # noqa: E402
 
 
 def test_threads_below_one_is_a_usage_error(tmp_path, capsys):
@@ -79,7 +80,12 @@ def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeyp
 # ------------------------------------------------------------------ python -m training.export
 @pytest.mark.parametrize(("extra", "words"), [
     (["--threads", "0"], "--threads: must be at least 1, got 0"),  # was torch's RuntimeError
-    (["--int8", "--calib-frames", "0"], "--calib-frames: must be at least 1, got 0"),  # was after the fp32 export
+    (["--int8", "--calib-frames", "0"], f"--calib-frames: must be at least {MIN_FRAMES}"),  # was after the fp32 export
+    # review 51: one random frame passed where --calib-npz wants MIN_FRAMES pairs
+    *[(["--int8", "--calib-frames", str(n)], f"--calib-frames: must be at least {MIN_FRAMES} (calibration.MIN_FRAMES, "
+                                             f"as for --calib-npz), got {n}") for n in (1, MIN_FRAMES - 1)],
+    # MIN_FRAMES itself passes that check and reaches the next one
+    (["--calib-frames", str(MIN_FRAMES), "--calib-npz", "x.npz"], "--calib-npz calibrates the int8 graphs"),
     (["--out", "AFILE"], "is a file; give the model folder"),  # was mkdir's FileExistsError
     # was "Unsupported onnx_opset_version: 3" (or grid_sampler unsupported below 16) after loading the model
     (["--opset", "3"], "--opset: must be 16 to 20 (GridSample needs 16; torch's exporter stops at 20), got 3"),

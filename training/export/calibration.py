@@ -22,7 +22,8 @@ KEY = "images"
 #: Fewest frame pairs a file may hold. Static int8 fixes every activation's range at the extremes the calibration
 #: frames reach, so the ranges of one or two pairs are one scene's, and a device's other scenes clip against them;
 #: nothing after the export would say so but the int8 parity check on other images. A floor, not a measured
-#: optimum: ``make model`` calibrates on 16 training scenes, ``python -m training.export`` on 8 random frames.
+#: optimum: ``make model`` calibrates on 16 training scenes, ``python -m training.export`` on 8 random frames
+#: (``--calib-frames``, which refuses fewer than this floor too).
 MIN_FRAMES = 4
 
 

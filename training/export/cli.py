@@ -97,7 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"ONNX opset of the graphs, {MIN_OPSET} to {MAX_OPSET} (training.export.opsets; default "
                          f"{DEFAULT_OPSET})")
     ap.add_argument("--int8", action="store_true", help="also write static int8 QDQ graphs")
-    ap.add_argument("--calib-frames", type=int, default=8, help="random calibration frames (no --calib-npz)")
+    ap.add_argument("--calib-frames", type=int, default=8,
+                    help=f"random calibration frames (no --calib-npz), at least {MIN_FRAMES} (default 8)")
     ap.add_argument("--calib-npz", help="npz with images (F, 2, 3, H, W) float RGB in [0, 1] at the model's "
                     f"resolution, at least {MIN_FRAMES} frame pairs, no view uniform (checked before the export)")
     ap.add_argument("--bench", action="store_true", help="time every graph (fp32 and int8)")
@@ -118,8 +119,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--opset: {problem}, got {args.opset}")
     if args.threads < 1:
         ap.error(f"--threads: must be at least 1, got {args.threads}")
-    if args.calib_frames < 1:
-        ap.error(f"--calib-frames: must be at least 1, got {args.calib_frames}")
+    if args.calib_frames < MIN_FRAMES:  # the floor --calib-npz has: one or two frames' ranges are one scene's
+        ap.error(f"--calib-frames: must be at least {MIN_FRAMES} (calibration.MIN_FRAMES, as for --calib-npz), "
+                 f"got {args.calib_frames}")
     if Path(args.out).exists() and not Path(args.out).is_dir():
         ap.error(f"--out {args.out}: is a file; give the model folder")
     if args.calib_npz and not args.int8:  # calibration frames are only read for int8: ignoring them misleads
