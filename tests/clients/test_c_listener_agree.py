@@ -284,3 +284,19 @@ def test_udp_example_and_listener_agree_datagram_by_datagram(udp_example: Path) 
     [c] = _run_c(udp_example, b"".join(struct.pack("<H", len(w)) + w for w in writes))
     assert c["stats"] == _counters(py_events)
     assert c["joints"] == tally.total_joints == good
+
+
+@pytest.mark.parametrize("old_last", [2**32 - 8, 2**31 + 5, 30], ids=["8-before-wrap", "past-2^31", "30"])
+def test_restart_after_hello_none_sent_starts_a_new_numbering(uart_example: Path, old_last: int) -> None:
+    """A producer that restarts with its old seq within 32 of the new one (or past 2^31 frames): only the HELLO of
+    seq 2^32 - 1 tells that apart from a gap or a late datagram. Before it, 2^32 - 8 -> 0 was a step of 8 (7
+    frames lost) and 2^31 + 5 -> 0 one of 2^31 - 5; 30 -> 0 the listener read as late. The stream loses 1 frame
+    before the restart and 1 after it; a second restart, 5 -> 0, loses none."""
+    data = b"\x00" + _hello(old_last - 3) + _joints(old_last - 2) + _joints(old_last)  # old_last - 1 lost
+    data += _hello(NONE_SENT) + _status(NONE_SENT)  # the restarted producer, before its first frame
+    data += b"".join(_joints(s) for s in (0, 1, 2, 4, 5))  # 3 lost
+    data += _hello(NONE_SENT) + b"".join(_joints(s) for s in (0, 1, 2))  # restarted again, 5 -> 0
+    [uart] = _run_c(uart_example, data)
+    _, tally = _listener(_Replay([data]))
+    assert tally.total_joints == 2 + 5 + 3 and tally.total_late == 0
+    assert uart["lost_frames"] == tally.total_gaps == 2
