@@ -275,10 +275,11 @@ class Tally:
             self.status, self.status_at = message, time.monotonic()
         elif isinstance(message, Hello):
             self.hello, self.hello_at = message, time.monotonic()
-            if message.header.seq == NO_FRAME_SEQ and self.last_seq is not None:
-                # a sender that has numbered no frame yet: a new process, whose JOINTS start again at 0. Without
+            if message.header.seq == NO_FRAME_SEQ:
+                # a sender that has numbered no frame yet: a new process, whose JOINTS start again at 0, counted
+                # from the seq its HELLO carries (frames lost before its first JOINTS arrives are gaps). Without
                 # this, one that restarted within LATE_WINDOW of its old seq had its first frames read as late.
-                self.last_seq, self._arrived, self._missing = None, set(), {}
+                self.last_seq, self._arrived, self._missing = NO_FRAME_SEQ, set(), {}
 
     def _sequence(self, seq: int) -> None:
         """Count ``seq`` as the next frame, a gap's end, a late or repeated one, or a restarted sender's first."""

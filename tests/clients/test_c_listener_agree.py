@@ -291,12 +291,14 @@ def test_restart_after_hello_none_sent_starts_a_new_numbering(uart_example: Path
     """A producer that restarts with its old seq within 32 of the new one (or past 2^31 frames): only the HELLO of
     seq 2^32 - 1 tells that apart from a gap or a late datagram. Before it, 2^32 - 8 -> 0 was a step of 8 (7
     frames lost) and 2^31 + 5 -> 0 one of 2^31 - 5; 30 -> 0 the listener read as late. The stream loses 1 frame
-    before the restart and 1 after it; a second restart, 5 -> 0, loses none."""
+    before the restart and 1 after it; a second restart, 5 -> 0, loses none; a third loses its first two, counted
+    from the seq its HELLO carries."""
     data = b"\x00" + _hello(old_last - 3) + _joints(old_last - 2) + _joints(old_last)  # old_last - 1 lost
     data += _hello(NONE_SENT) + _status(NONE_SENT)  # the restarted producer, before its first frame
     data += b"".join(_joints(s) for s in (0, 1, 2, 4, 5))  # 3 lost
     data += _hello(NONE_SENT) + b"".join(_joints(s) for s in (0, 1, 2))  # restarted again, 5 -> 0
+    data += _hello(NONE_SENT) + b"".join(_joints(s) for s in (2, 3))  # again, its frames 0 and 1 lost
     [uart] = _run_c(uart_example, data)
     _, tally = _listener(_Replay([data]))
-    assert tally.total_joints == 2 + 5 + 3 and tally.total_late == 0
-    assert uart["lost_frames"] == tally.total_gaps == 2
+    assert tally.total_joints == 2 + 5 + 3 + 2 and tally.total_late == 0
+    assert uart["lost_frames"] == tally.total_gaps == 4

@@ -191,6 +191,11 @@ def test_a_hello_of_a_sender_with_no_frame_yet_starts_a_new_numbering():
     for seq in (0, 1, 2, 5):
         restarted.add(_joints(seq))
     assert (restarted.total_gaps, restarted.total_late, restarted.last_seq) == (2, 0, 5)
+    first_lost = listen.Tally()  # heard from its HELLO on: a first JOINTS of 3 means 0, 1 and 2 were lost
+    first_lost.add(_hello(NO_FRAME_SEQ))
+    first_lost.add(_joints(3))
+    first_lost.add(_joints(1))  # one of them late after all
+    assert (first_lost.total_gaps, first_lost.total_late, first_lost.last_seq) == (2, 1, 3)
     reopened = listen.Tally()  # an output reopened by the same sender: its HELLO carries the last frame, no reset
     for seq in (28, 30):
         reopened.add(_joints(seq))
