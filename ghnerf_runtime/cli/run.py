@@ -37,7 +37,8 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
-from ghnerf_runtime.config import HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, config_to_dict, load_config
+from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
+    load_config
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
@@ -97,6 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
                                                       "orbit, the distance to its pivot) would reach 0")
     ap.add_argument("--novel-overlay", choices=("none", "skeleton", "heatmap"), help="drawn on the novel view "
                                                                                      "(default none)")
+    ap.add_argument("--novel-path", choices=NOVEL_PATHS, help="how the view between the cameras moves "
+                                                              "(novel_view.path; default from the config: auto, "
+                                                              "an orbit where the cameras' axes are over 60 "
+                                                              "degrees apart, else the line)")
     ap.add_argument("--novel-stride", type=int, choices=(1, 2, 4), help="render every n-th novel-view pixel")
     ap.add_argument("--overlay", metavar="PATH", help="both input frames with the 2D joints drawn: .png or .mp4")
     ap.add_argument("--max-frames", type=int, help="stop after this many pairs (videos; at least 1)")
@@ -114,7 +119,8 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
             ap.error("one of the arguments --images --videos is required")
     if not args.novel_view:
         given = [f for f, v in (("--novel-alpha", args.novel_alpha), ("--novel-overlay", args.novel_overlay),
-                                ("--novel-stride", args.novel_stride)) if v is not None]
+                                ("--novel-path", args.novel_path), ("--novel-stride", args.novel_stride))
+                 if v is not None]
         if given:
             ap.error(f"{', '.join(given)} without --novel-view: there is no novel view to apply it to")
     if args.max_frames is not None:
@@ -157,6 +163,8 @@ def _config(args) -> EstimatorConfig:
         nv = replace(cfg.novel_view, enabled=True, heatmaps=cfg.novel_view.heatmaps or args.novel_overlay == "heatmap")
         if args.novel_stride:
             nv = replace(nv, stride=args.novel_stride)
+        if args.novel_path:
+            nv = replace(nv, path=args.novel_path)
         cfg = replace(cfg, novel_view=nv)
     return cfg
 

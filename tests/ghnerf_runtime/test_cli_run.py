@@ -169,6 +169,9 @@ def test_validate_config_needs_no_rig_or_images(tmp_path, capsys):
     (["--rig", "r.json", "--images", "a", "b", "--novel-stride", "2"], ["--novel-stride", "without --novel-view"]),
     (["--rig", "r.json", "--images", "a", "b", "--novel-alpha", "0.3", "--novel-overlay", "skeleton"],
      ["--novel-alpha, --novel-overlay"]),
+    (["--rig", "r.json", "--images", "a", "b", "--novel-path", "orbit"], ["--novel-path", "without --novel-view"]),
+    (["--rig", "r.json", "--images", "a", "b", "--novel-view", "n.png", "--novel-path", "arc"], ["--novel-path",
+                                                                                                "invalid choice"]),
     (["--rig", "r.json", "--images", "a", "b", "--max-frames", "3"], ["--max-frames applies to --videos"]),
     (["--rig", "r.json", "--videos", "a", "b", "--max-frames", "0"], ["at least 1"]),
 ])
@@ -178,6 +181,13 @@ def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert all(w in err for w in words), err
+
+
+@pytest.mark.parametrize("path", ["line", "orbit", "auto"])
+def test_novel_path_sets_the_configs_path(path, capsys):
+    args = ["--rig", "unused.json", "--images", "a", "b", "--novel-view", "n.png", "--validate-config"]
+    assert cli_run.main(args + ["--novel-path", path]) == 0
+    assert json.loads(capsys.readouterr().out)["novel_view"]["path"] == path
 
 
 def test_threads_zero_is_refused_by_the_config_check(capsys):
