@@ -7,7 +7,7 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    (:mod:`ghnerf_runtime.tracking`); one ``cv2.remap`` per camera undistorts, crops and resizes
    to the model resolution (remap tables cached per window); RGB float in [0, 1]. Each crop is
    checked: a flat (black, saturated) or noise crop skips the model, and every joint comes back
-   missing.
+   missing (``PairResult.frame_reason`` says which camera, and why).
 2. ``encoder`` -- image and human features of both views.
 3. ``volume`` -- plane-sweep cost volume and depth of each source view (the sources are the
    targets), between near/far of the subject box (the working volume when cold).
@@ -60,6 +60,7 @@ from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
 from ghnerf_runtime.errors import FrameError, GeometryError, ModelError
+from ghnerf_runtime.frame_reasons import FLAT, NOISE, NON_FINITE, REASONS
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections, presence_peak
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
@@ -126,6 +127,9 @@ class PairResult:
         timing_ms: stage -> milliseconds (``total`` included).
         tracked: the crops came from the track (False: from the working volume).
         frame_ok: camera name -> False when the frame check rejected the crop (model not run).
+        frame_reason: camera name -> ``None`` when the crop passed the frame check, else why it was
+            rejected: one of :data:`ghnerf_runtime.frame_reasons.REASONS` (``"flat"``, ``"noise"``,
+            ``"non-finite"``). Left out, every camera whose frame passed gets ``None``.
         rois: camera name -> the crop window used (undistorted pixels).
         method: the 3D method used.
         novel_view: the rendered novel view when requested, else ``None`` (also when requested for a
@@ -146,6 +150,22 @@ class PairResult:
     rois: dict[str, Roi]
     method: str
     novel_view: NovelView | None = None
+    frame_reason: dict[str, str | None] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        reasons = self.frame_reason
+        if not reasons:  # built without reasons: a passing frame has none, a rejected one must say why
+            reasons = {name: None for name in self.frame_ok}
+            object.__setattr__(self, "frame_reason", reasons)
+        if list(reasons) != list(self.frame_ok):
+            raise ValueError(f"PairResult.frame_reason: cameras {list(reasons)} are not frame_ok's "
+                             f"{list(self.frame_ok)}")
+        for name, why in reasons.items():
+            if why is not None and why not in REASONS:
+                raise ValueError(f"PairResult.frame_reason[{name!r}]: {why!r} is not one of {list(REASONS)}")
+            if (why is None) != bool(self.frame_ok[name]):
+                raise ValueError(f"PairResult.frame_reason[{name!r}] is {why!r} but frame_ok[{name!r}] is "
+                                 f"{bool(self.frame_ok[name])}")
 
     @property
     def num_found(self) -> int:
@@ -168,6 +188,7 @@ class PairResult:
             "missing_2d": {name: [bool(m) for m in self.missing_2d[name]] for name in self.joints_2d},
             "tracked": bool(self.tracked),
             "frame_ok": {k: bool(v) for k, v in self.frame_ok.items()},
+            "frame_reason": dict(self.frame_reason),  # null: the frame passed (since session 51)
             "method": self.method,
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
@@ -186,11 +207,11 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
                inside: np.ndarray | None = None) -> tuple[bool, str]:
     """Is a model-input plane ``(S, S)`` (one channel, float) worth running the model on?
 
-    Returns ``(ok, reason)``: ``"flat"`` when its standard deviation is below ``min_std``
-    8-bit levels (black, saturated, covered lens), ``"noise"`` when more than
-    ``max_noise_ratio`` of its variance is pixel-to-pixel detail (``x - box3(x)``; white
-    noise 0.48-0.79 after the crop's resampling, simulator frames 0.008-0.08),
-    ``"non-finite"`` for NaN/inf, else ``""``.
+    Returns ``(ok, reason)``, the reason a word of :mod:`ghnerf_runtime.frame_reasons`: ``"flat"``
+    when its standard deviation is below ``min_std`` 8-bit levels (black, saturated, covered lens),
+    ``"noise"`` when more than ``max_noise_ratio`` of its variance is pixel-to-pixel detail
+    (``x - box3(x)``; white noise 0.48-0.79 after the crop's resampling, simulator frames
+    0.008-0.08), ``"non-finite"`` for NaN/inf, else ``""``.
 
     ``inside`` (``CropMaps.inside``) limits the statistics to the pixels that show the frame: the
     zero padding of a crop reaching past the frame's edge would otherwise give a saturated frame
@@ -199,19 +220,19 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
     if not config.enabled:
         return True, ""
     if not np.all(np.isfinite(plane)):
-        return False, "non-finite"
+        return False, NON_FINITE
     shown = plane if inside is None else plane[inside]
     if shown.size == 0:
-        return False, "flat"
+        return False, FLAT
     var = float(shown.var())
     if var <= 0.0 or np.sqrt(var) * levels_per_unit < config.min_std:  # (min_std 0 lets a flat crop this far)
-        return False, "flat"
+        return False, FLAT
     detail = plane - cv2.blur(plane, (3, 3), borderType=cv2.BORDER_REFLECT)
     if inside is not None:  # pixels whose 3x3 box shows the frame: the padding's edge is no detail
         core = cv2.erode(inside.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
         detail = detail[core if core.any() else inside]
     if float(detail.var()) / var > config.max_noise_ratio:
-        return False, "noise"
+        return False, NOISE
     return True, ""
 
 
@@ -239,7 +260,7 @@ class _Pass:
     """What one pass over a pair produced (``j3`` is ``None`` when the frame check stopped it)."""
 
     regions: Regions
-    frame_ok: dict
+    frame_reason: dict  # camera name -> None (the crop passed the frame check) or why it was rejected
     env: dict | None = None
     j3: Joints3D | None = None
     joints_2d: dict | None = None
@@ -248,6 +269,10 @@ class _Pass:
     novel: "_NovelJob | None" = None  # the novel view rendering in the worker (overlap)
     crops: list | None = None  # the source crop cameras (the novel view's proxy blend reads them)
     someone: bool = False  # the presence gate found someone (always, with the gate off)
+
+    @property
+    def frame_ok(self) -> dict:
+        return {name: why is None for name, why in self.frame_reason.items()}
 
 
 @dataclass(frozen=True)
@@ -475,13 +500,14 @@ class Estimator:
                 raise FrameError(f"camera {st.camera.name!r}: expected a ({h}, {w}, 3) uint8 BGR image (the rig "
                                  f"file's {w}x{h}), got {got}")
 
-    def _empty_result(self, sequence: int, regions: Regions, frame_ok: dict, timing: dict) -> PairResult:
+    def _empty_result(self, sequence: int, regions: Regions, frame_reason: dict, timing: dict) -> PairResult:
         J = len(JOINT_NAMES)
         names = self.camera_names
         return PairResult(sequence, JOINT_NAMES, np.zeros((J, 3)), np.zeros(J, np.float32), np.ones(J, bool),
                           {n: np.zeros((J, 2)) for n in names}, {n: np.zeros(J, np.float32) for n in names},
-                          {n: np.ones(J, bool) for n in names}, timing, regions.tracked, frame_ok,
-                          dict(zip(names, regions.rois)), self.config.joints3d.method)
+                          {n: np.ones(J, bool) for n in names}, timing, regions.tracked,
+                          {n: why is None for n, why in frame_reason.items()}, dict(zip(names, regions.rois)),
+                          self.config.joints3d.method, frame_reason=dict(frame_reason))
 
     # -------------------------------------------------------------- main
     def estimate(self, images: Sequence[np.ndarray], *, sequence: int | None = None,
@@ -550,7 +576,7 @@ class Estimator:
             if self._smoother is not None:
                 self._smoother.reset()
             timing["total"] = 1e3 * (time.perf_counter() - t_start)
-            return self._empty_result(sequence, p.regions, p.frame_ok, timing), None
+            return self._empty_result(sequence, p.regions, p.frame_reason, timing), None
         points = p.j3.points
         if self._smoother is not None:
             if timestamp_s is None:
@@ -572,7 +598,7 @@ class Estimator:
         names = self.camera_names
         result = PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
                             p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
-                            self.config.joints3d.method)
+                            self.config.joints3d.method, frame_reason=dict(p.frame_reason))
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -643,19 +669,20 @@ class Estimator:
         # 1. preprocess + frame check
         t = time.perf_counter()
         batch = np.empty((2, 3, S, S), np.float32)
-        frame_ok, crops = {}, []
+        frame_reason, crops = {}, []  # camera name -> None, or why the frame check rejected its crop
         for i, (img, st, roi) in enumerate(zip(images, self._cams, regions.rois)):
             maps, crop = self._crop(st, roi)
             crops.append(crop)
             batch[i] = preprocess_image(img, maps, self.contract.normalisation)
-            ok, _ = check_crop(batch[i, 1], self._levels, cfg.frame_check, maps.inside)
-            frame_ok[st.camera.name] = ok
+            ok, why = check_crop(batch[i, 1], self._levels, cfg.frame_check, maps.inside)
+            frame_reason[st.camera.name] = None if ok else why
         _add_ms(timing, "preprocess", t)
-        if not all(frame_ok.values()):
-            if any(frame_ok.values()) and self._single_view_2d:
-                return self._single_view_pass(batch, crops, regions, frame_ok, timing)
+        passed = [why is None for why in frame_reason.values()]
+        if not all(passed):
+            if any(passed) and self._single_view_2d:
+                return self._single_view_pass(batch, crops, regions, frame_reason, timing)
             self.tracker.reset()  # nothing seen: the next pair starts cold
-            return _Pass(regions, frame_ok)
+            return _Pass(regions, frame_reason)
 
         # 2-4. encoder, volume (sources as targets), heatmaps on the subject's rays
         env: dict[str, np.ndarray] = {
@@ -706,13 +733,13 @@ class Estimator:
                 _add_ms(timing, "render_heat", t)
             if novel_view is not None and cfg.novel_view.overlap and regions.tracked and job is None:
                 job = self._start_novel(novel_view, env, regions.box)  # once the keypoint graphs have run
-            return self._finish_pass(env, out, blocks, crops, regions, frame_ok, sequence, timing, job)
+            return self._finish_pass(env, out, blocks, crops, regions, frame_reason, sequence, timing, job)
         except BaseException:
             if job is not None:  # leave no render running behind an error
                 job.abandon()
             raise
 
-    def _finish_pass(self, env: dict, out: dict, blocks, crops: list[Camera], regions: Regions, frame_ok: dict,
+    def _finish_pass(self, env: dict, out: dict, blocks, crops: list[Camera], regions: Regions, frame_reason: dict,
                      sequence: int, timing: dict, job: _NovelJob | None) -> "_Pass":
         """Stages 5-6 of :meth:`_pass`."""
         cfg = self.config
@@ -750,7 +777,7 @@ class Estimator:
         follow = self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         _add_ms(timing, "joints_3d", t)
-        return _Pass(regions, frame_ok, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody)
+        return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody)
 
     def _features_may_wait(self, regions: Regions) -> bool:
         """Whether a pass with a novel view asked for may run the keypoint-only ``human`` graph, leaving out
@@ -820,14 +847,14 @@ class Estimator:
             missing_2d[name] = ~ok
         return joints_2d, conf_2d, missing_2d
 
-    def _single_view_pass(self, batch: np.ndarray, crops: list[Camera], regions: Regions, frame_ok: dict,
+    def _single_view_pass(self, batch: np.ndarray, crops: list[Camera], regions: Regions, frame_reason: dict,
                           timing: dict) -> "_Pass":
         """One camera's crop failed the frame check (lens covered, blinded, a broken stream): the
         other camera's 2D joints from the encoder heatmaps. One view gives no depth, so every 3D
         joint is missing; the presence gate applies to the view's own peak values, and the view's
         next crop follows its joints (``SubjectTracker.update_view``)."""
         cfg = self.config
-        good = next(i for i, st in enumerate(self._cams) if frame_ok[st.camera.name])
+        good = next(i for i, st in enumerate(self._cams) if frame_reason[st.camera.name] is None)
         name = self.camera_names[good]
         t = time.perf_counter()
         heat = self.session.run("human" if self.session.has("human") else "encoder", {"images": batch})
@@ -845,7 +872,8 @@ class Estimator:
             missing_2d[name] = np.ones_like(missing_2d[name])
         self.tracker.update_view(good, joints_2d[name], conf_2d[name])  # its next crop follows the subject
         _add_ms(timing, "decode_2d", t)
-        return _Pass(regions, frame_ok, None, Joints3D.missing(len(JOINT_NAMES)), joints_2d, conf_2d, missing_2d)
+        return _Pass(regions, frame_reason, None, Joints3D.missing(len(JOINT_NAMES)), joints_2d, conf_2d,
+                     missing_2d)
 
     def _track_joints(self, env: dict, crops: list[Camera], regions: Regions, reported: Joints3D) -> Joints3D:
         """The joints the next pair's crop follows: the reported ones, or (``tracking.follow_encoder``,

@@ -2,8 +2,8 @@
 
 The report (``docs/daemon.md`` lists the fields) is what an operator reads to tell a pulled camera
 from a slow estimator from a dead link: the state, what the rig delivered and what was estimated,
-latency and joints found over the last window, camera reopen counts with the last error, and each
-sink's counters.
+latency and joints found over the last window, camera reopen counts with the last error, the frames
+the estimator's frame check rejected per camera and reason, and each sink's counters.
 """
 from __future__ import annotations
 
@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
+
+from ghnerf_runtime.frame_reasons import REASONS
 
 __all__ = ["State", "Health", "write_status_file"]
 
@@ -62,6 +64,8 @@ class Health:
     reloads: int = 0  # config reloads accepted (SIGHUP)
     reload_failures: int = 0  # refused: the daemon ran on with the config it had
     reload_error: Optional[str] = None  # why the last reload was refused (None once one is accepted)
+    # camera name -> frame-check reason -> frames rejected for it (bounded: the rig's cameras x REASONS)
+    frames_rejected: dict = field(default_factory=dict)
     latencies_ms: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     found_fraction: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     estimate_times: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
@@ -81,6 +85,19 @@ class Health:
         self.found_fraction.append(float(found))
         self.estimate_times.append(now)
 
+    def frames_checked(self, frame_reason: dict[str, Optional[str]]) -> None:
+        """Count each camera's frame the estimator's frame check rejected (``PairResult.frame_reason``), by
+        reason: the answer to "why no joints?" when a lens is covered or a stream sends garbage."""
+        for camera, why in frame_reason.items():
+            if why is not None:
+                counts = self.frames_rejected.setdefault(camera, dict.fromkeys(REASONS, 0))
+                counts[why] = counts.get(why, 0) + 1
+
+    def _rejected_report(self) -> dict[str, dict[str, int]]:
+        """Every camera of the rig (and any counted before a rig change) with every reason, 0 included."""
+        cameras = list(self.cameras) + [c for c in self.frames_rejected if c not in self.cameras]
+        return {c: {**dict.fromkeys(REASONS, 0), **self.frames_rejected.get(c, {})} for c in cameras}
+
     def report(self, sinks: Optional[dict[str, Any]] = None) -> dict[str, Any]:
         now = self.clock()
         lat = np.asarray(self.latencies_ms, float)
@@ -96,7 +113,7 @@ class Health:
             "pid": os.getpid(),
             "rig": {"url": self.rig_url, "cameras": list(self.cameras), "opens": self.rig_opens,
                     "open_failures": self.rig_open_failures, "lost": self.rig_lost,
-                    "camera_fault": self.camera_fault,
+                    "camera_fault": self.camera_fault, "frames_rejected": self._rejected_report(),
                     "last_pair_age_s": None if self.last_pair_at is None else round(now - self.last_pair_at, 3)},
             "pairs": {"read": self.pairs_read, "estimated": self.pairs_estimated, "dropped": self.pairs_dropped,
                       "estimate_errors": self.estimate_errors, "read_errors": self.read_errors},

@@ -433,6 +433,7 @@ class Daemon:
             took = self._clock() - t0
             self.watchdog.beat("handing the joints to the sinks")
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))
+            self.health.frames_checked(result.frame_reason)
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
             self.health.camera_fault = False
             self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)

@@ -832,6 +832,49 @@ def test_the_status_line_keeps_a_refusal_whatever_the_rig_error(tmp_path):
     assert line.endswith("; reload refused: /etc/ghnerf/daemon.json: rig.ulr: unknown key")
 
 
+def test_the_status_file_counts_rejected_frames_per_camera_and_reason():
+    """"Why no joints?": the frame check's reason for each camera's rejected frame, counted (every reason of
+    every rig camera listed, 0 included, so the section's shape never changes)."""
+    from firmware_host.daemon.health import Health
+    from ghnerf_runtime.frame_reasons import FLAT, NOISE, NON_FINITE
+
+    health = Health(cameras=("left", "right"))
+    zero = {NON_FINITE: 0, FLAT: 0, NOISE: 0}
+    assert health.report()["rig"]["frames_rejected"] == {"left": zero, "right": zero}
+    for reasons in ({"left": None, "right": FLAT}, {"left": None, "right": FLAT}, {"left": NOISE, "right": FLAT},
+                    {"left": None, "right": None}):
+        health.frames_checked(reasons)
+    report = json.loads(json.dumps(health.report(), allow_nan=False))
+    assert report["rig"]["frames_rejected"] == {"left": {**zero, NOISE: 1}, "right": {**zero, FLAT: 3}}
+
+
+class _RejectingEstimator(_CountingEstimator):
+    """Every pair's second camera rejected by the frame check as flat (a covered lens); no FrameError."""
+
+    def estimate(self, images, *, sequence: int, timestamp_s: float):
+        from dataclasses import replace
+
+        self.calls = 0  # (the parent's third call is a FrameError: never reached)
+        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
+        first, second = (c.name for c in self.rig.pair)
+        return replace(result, frame_ok={first: True, second: False}, frame_reason={first: None, second: "flat"})
+
+
+def test_the_daemon_writes_the_frame_checks_reasons_to_the_status_file(sim_url, tmp_path, monkeypatch):
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _RejectingEstimator)
+    with _Running(_config({"url": sim_url}, tmp_path), tmp_path) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 5, timeout=60, what="5 estimated pairs")
+        assert run.finish() == 0
+    health = run.daemon.health
+    first, second = health.cameras
+    rejected = json.loads((tmp_path / "status.json").read_text())["rig"]["frames_rejected"]
+    assert rejected[first] == {"non-finite": 0, "flat": 0, "noise": 0}
+    assert rejected[second] == {"non-finite": 0, "flat": health.pairs_estimated, "noise": 0}
+
+
 def test_the_rate_and_status_line_do_not_stay_healthy_when_no_pair_is_estimated():
     """Every pair rejected (or none coming): the rate of the last window stayed on, and STATUS read
     "running: 30.0 pairs/s" for as long as nothing was estimated."""
