@@ -41,7 +41,7 @@ from calibration.detect import BoardDetector, BoardView
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, solve_rig, typed_pitch_warning
-from calibration.writable import existing_ancestor, unwritable_reason
+from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_text_atomic

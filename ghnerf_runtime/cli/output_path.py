@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 from pathlib import Path
 from typing import Literal
 
@@ -40,11 +41,38 @@ def ready_output(path: str | os.PathLike, flag: str, kind: Literal["file", "fold
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise OutputPathError(f"{flag} {p}: cannot make the folder {folder} ({e.strerror or e})") from e
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{flag} {p}: the folder {folder} is not writable")
+    reason = unwritable_reason(folder)
+    if reason is not None:
+        raise OutputPathError(f"{flag} {p}: the folder {folder} is not writable ({reason})")
     if kind == "file" and p.exists() and not os.access(p, os.W_OK):
         raise OutputPathError(f"{flag} {p}: the file exists and is not writable")
     return p
+
+
+def unwritable_reason(folder: Path) -> str | None:
+    """Why no file can be made in ``folder`` (None: one can), found by making and removing one.
+
+    Tried rather than read from the permission bits: ``os.access`` says yes to root everywhere,
+    also on sysfs and similar mounts that refuse the file, and says nothing of a full inode table.
+    """
+    try:
+        fd, name = tempfile.mkstemp(dir=folder, prefix=".write-test-", suffix=".tmp")
+    except OSError as e:
+        return e.strerror or str(e)
+    os.close(fd)
+    try:
+        os.unlink(name)
+    except OSError:  # made but not removable: writable enough, and nothing to do about the leftover
+        pass
+    return None
+
+
+def existing_ancestor(path: Path) -> Path:
+    """``path`` itself if it exists, else its nearest existing parent (where ``mkdir -p`` starts)."""
+    path = Path(os.path.abspath(path))
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
 
 
 def ready_output_arg(ap: argparse.ArgumentParser, path: str | os.PathLike, flag: str,

@@ -39,9 +39,11 @@ def test_a_folder_or_file_without_write_permission_is_refused(tmp_path, monkeypa
     import ghnerf_runtime.cli.output_path as op
 
     (tmp_path / "r.json").write_text("{}")
-    monkeypatch.setattr(op.os, "access", lambda path, mode: False)  # what a read-only mount says (root ignores chmod)
+    # what a read-only mount says (root ignores chmod, so the folder is tried by making a file in it)
+    monkeypatch.setattr(op, "unwritable_reason", lambda folder: "Read-only file system")
     with pytest.raises(OutputPathError, match=f"--out {tmp_path / 'r.json'}: the folder {tmp_path} is not writable"):
         ready_output(tmp_path / "r.json", "--out")
+    monkeypatch.undo()
     monkeypatch.setattr(op.os, "access", lambda path, mode: str(path) == str(tmp_path))
     with pytest.raises(OutputPathError, match="the file exists and is not writable"):
         ready_output(tmp_path / "r.json", "--out")

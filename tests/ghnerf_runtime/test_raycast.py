@@ -6,36 +6,24 @@ from __future__ import annotations
 
 import tracemalloc
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 
 from ghnerf_runtime.body25 import JOINT_INDEX
-from ghnerf_runtime.body_proxy import proxy_body, proxy_depth
+from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
 from ghnerf_runtime.geometry.raycast import RayGrid, rasterize
 
 
-@dataclass(frozen=True, eq=False)
-class Prims:
-    ell_center: np.ndarray
-    ell_axes: np.ndarray
-    ell_radii: np.ndarray
-    cone_a: np.ndarray
-    cone_b: np.ndarray
-    cone_ra: np.ndarray
-    cone_rb: np.ndarray
-
-
-def prims(ells=(), cones=()) -> Prims:
+def prims(ells=(), cones=()) -> BodyProxy:
     E, C = len(ells), len(cones)
 
     def field(items, i, shape):
         return np.array([x[i] for x in items], float).reshape(shape)
 
-    return Prims(field(ells, 0, (E, 3)), field(ells, 1, (E, 3, 3)), field(ells, 2, (E, 3)), field(cones, 0, (C, 3)),
-                 field(cones, 1, (C, 3)), field(cones, 2, (C,)), field(cones, 3, (C,)))
+    return BodyProxy(field(ells, 0, (E, 3)), field(ells, 1, (E, 3, 3)), field(ells, 2, (E, 3)),
+                     field(cones, 0, (C, 3)), field(cones, 1, (C, 3)), field(cones, 2, (C,)), field(cones, 3, (C,)))
 
 
 def camera(size: int = 64, fov: float = 60.0) -> Camera:
