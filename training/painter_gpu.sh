@@ -14,11 +14,14 @@
 # WORK holds the data and caches (a few GB); REPORT (WORK itself will do) gets each width's fill_net_w<W>.pt,
 # score and log, and the val split's joints. Export the nets on any machine with `python -m training.learnt_fill
 # export` (docs/training.md, "The painter on a GPU"). MODELS=<folder> reads that folder's model instead
-# of models/; WIDTHS="32 16" by default. Runs on a CPU as well, slowly.
+# of models/; WIDTHS="32 16" by default. VIEWS="all 4096" trains each width once per entry, on all the cache's
+# training views and on its first 4096 (two per scene), so what more training scenes give is measured in the same
+# run; a net of VIEWS=all (the default, alone) is w<W>, any other w<W>_v<N>. Runs on a CPU as well, slowly.
 set -euo pipefail
 WORK=${1:?work folder}; REPORT=${2:?report folder}; N=${3:-2048}; SECS=${4:-240}
 PY=${PYTHON:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3 )}; W=${WORKERS:-$(nproc)}; VAL=${VAL:-256}; MODELS=${MODELS:-models}
-WIDTHS=${WIDTHS:-32 16}
+WIDTHS=${WIDTHS:-32 16}; VIEWS=${VIEWS:-all}
+for v in $VIEWS; do [[ $v == all || $v =~ ^[1-9][0-9]*$ ]] || { echo "VIEWS: '$v' is neither all nor a count" >&2; exit 2; }; done
 mkdir -p "$WORK" "$REPORT"
 t0=$(date +%s)
 stamp() { echo "$1: $(( $(date +%s) - t0 )) s"; }
@@ -46,16 +49,25 @@ VW=$(( W / 4 > 1 ? W / 4 : 1 )); TW=$(( W - VW > 1 ? W - VW : 1 ))
 wait_all $a $b
 stamp caches
 
+# one name per net: w<W> on every training view, w<W>_v<N> on the first N
+name() { [ "$2" = all ] && echo "w$1" || echo "w$1_v$2"; }
 pids=()
 for w in $WIDTHS; do
-    "$PY" -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
-        --out "$WORK/w$w" --threads 2 --set net.width="$w" --set batch=32 --set steps=1000000 \
-        --set max_seconds="$SECS" --set net.shown_input=true --set net.relit_input=false \
-        --set around_weight=0.03 >"$REPORT/train_w$w.log" 2>&1 & pids+=($!)
+    for v in $VIEWS; do
+        n=$(name "$w" "$v")
+        "$PY" -m training.learnt_fill train --train-cache "$WORK/fill_train.npz" --val-cache "$WORK/fill_val.npz" \
+            --out "$WORK/$n" --threads 2 --train-views "$([ "$v" = all ] && echo 0 || echo "$v")" \
+            --set net.width="$w" --set batch=32 --set steps=1000000 \
+            --set max_seconds="$SECS" --set net.shown_input=true --set net.relit_input=false \
+            --set around_weight=0.03 >"$REPORT/train_$n.log" 2>&1 & pids+=($!)
+    done
 done
 wait_all "${pids[@]}"
 for w in $WIDTHS; do
-    cp "$WORK/w$w/fill_net.pt" "$REPORT/fill_net_w$w.pt"; cp "$WORK/w$w/score.md" "$REPORT/score_w$w.md"
-    echo "== width $w"; tail -n 12 "$REPORT/train_w$w.log"
+    for v in $VIEWS; do
+        n=$(name "$w" "$v")
+        cp "$WORK/$n/fill_net.pt" "$REPORT/fill_net_$n.pt"; cp "$WORK/$n/score.md" "$REPORT/score_$n.md"
+        echo "== width $w, training views $v"; tail -n 12 "$REPORT/train_$n.log"
+    done
 done
 stamp total

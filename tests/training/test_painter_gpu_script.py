@@ -77,3 +77,22 @@ def test_a_python_whose_path_has_a_space_is_run(tmp_path):
     python.chmod(0o755)
     done = _run(tmp_path, PYTHON=str(python))
     assert done.returncode == 7 and "ran training.data.generate" in done.stderr, done.stderr[-2000:]
+
+
+def test_views_trains_each_width_on_all_and_on_the_first_n_training_views(tmp_path):
+    from training.learnt_fill import load_net
+
+    done = _run(tmp_path, VIEWS="all 3")
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    report = tmp_path / "report"
+    every, few = load_net(report / "fill_net_w8.pt"), load_net(report / "fill_net_w8_v3.pt")
+    assert few.trained["train_views"] == 3 and every.trained["train_views"] > 3
+    assert "fill net trained on 3 views" in (report / "score_w8_v3.md").read_text()
+    assert "training views 3" in done.stdout and "training views all" in done.stdout
+
+
+@pytest.mark.parametrize("views", ["0", "some", "all -1"])
+def test_a_views_entry_that_is_not_a_count_stops_the_script_before_any_work(tmp_path, views):
+    done = _run(tmp_path, VIEWS=views)
+    assert done.returncode == 2 and "VIEWS:" in done.stderr, done.stderr[-2000:]
+    assert not (tmp_path / "work").exists()
