@@ -3,12 +3,18 @@
 Examples::
 
     ghnerf-daemon --config /etc/ghnerf/daemon.json
-    ghnerf-daemon --config daemon.json --validate-config      # check, print the full config, exit
+    ghnerf-daemon --config daemon.json --validate-config      # check it (the model loaded too), print it, exit
+    ghnerf-daemon --config daemon.json --validate-config --no-model   # the same, the model folder's names only
     ghnerf-daemon --print-example-config > daemon.json        # a starting point (sim:// rig, UDP sink)
 
 Under systemd (``systemd/ghnerf.service``, ``Type=notify``) it reports ``READY=1`` once the model
 is loaded, keeps a one-line ``STATUS=`` (``systemctl status ghnerf``), pings the watchdog while its
 main loop progresses and logs without timestamps (the journal adds its own).
+
+``--validate-config`` runs the checks the start runs before READY (the model loaded and the estimator
+built for a stand-in rig) without opening the rig or a sink, so a config it passes does not exit 2 at start
+(bar a rig the model cannot run on, known when it opens). ``--no-model`` leaves the model unloaded, for a
+machine without it.
 
 SIGHUP (``systemctl reload ghnerf``) reads the config file again: a file that passes every check of
 ``--validate-config`` (and whose model loads) is applied without a restart, touching only what
@@ -42,7 +48,7 @@ from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.url import RigUrl
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
-from firmware_host.daemon.service import Daemon, DaemonStartError, check_sink_urls
+from firmware_host.daemon.service import Daemon, DaemonStartError, check_estimator, check_sink_urls, load_model
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
 from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.config_paths import config_folder
@@ -53,7 +59,7 @@ from ghnerf_runtime.rig_file import load_rig
 from ghnerf_runtime.session import resolve_model_dir
 from ghnerf_runtime.skeleton_prior import FILE_NAME as PRIOR_FILE
 
-__all__ = ["main", "build_parser", "check_config", "read_checked_config", "EXAMPLE_CONFIG"]
+__all__ = ["main", "build_parser", "check_config", "check_model", "read_checked_config", "EXAMPLE_CONFIG"]
 
 PROG = "ghnerf-daemon"
 
@@ -71,7 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
                                  epilog="Config reference: docs/daemon.md")
     ap.add_argument("--config", help="daemon config, JSON (docs/daemon.md)")
     ap.add_argument("--validate-config", action="store_true",
-                    help="check the config (keys, values, rig and sink URLs, model folder), print it in full, exit")
+                    help="check the config (keys, values, rig and sink URLs, the model loaded and the estimator "
+                         "settings against it, as the start does; no camera or sink opened), print it in full, exit")
+    ap.add_argument("--no-model", action="store_true",
+                    help="with --validate-config: do not load the model, check only its folder's file names "
+                         "(a machine without the model, or where it lives elsewhere)")
     ap.add_argument("--print-example-config", action="store_true", help="print a config to start from, exit")
     ap.add_argument("--max-seconds", type=float, default=None,
                     help="stop after this long (a bounded run for trials; default: until SIGTERM)")
@@ -79,10 +89,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) -> None:
-    """What can be checked without hardware: the URLs parse for their backends, the model folder holds graphs (and
-    the skeleton prior or painter the config turns ``on``). It loads no model: the start and every reload run
-    these checks and then load it themselves (once), and build the estimator on it, which checks the rest of
-    what the settings need of the model (``heatmaps.source`` 'encoder': encoder heatmaps) before READY.
+    """What can be checked without hardware or the model: the URLs parse for their backends, the model folder holds
+    graphs (and the skeleton prior or painter the config turns ``on``). It loads no model: the start and every
+    reload run these checks and then load it themselves (once), and build the estimator on it, which checks the
+    rest of what the settings need of the model (``heatmaps.source`` 'encoder': encoder heatmaps) before READY;
+    ``--validate-config`` does the same after it (:func:`check_model`).
 
     ``source``: the config file ``config`` was read from, for the hint on where its relative paths point.
 
@@ -186,6 +197,27 @@ def _where_read(folder: Path, source: str | os.PathLike | None) -> str:
     return ""
 
 
+def check_model(config: DaemonConfig) -> str:
+    """What the start does with the model before READY, for ``--validate-config``: load it (:func:`load_model`:
+    every graph the settings run, checked against the model contract) and build the estimator once for a stand-in
+    rig (:func:`check_estimator`), so settings the model cannot serve fail the check, not the start (exit 2 before
+    READY). Opens no camera and no sink. ``check_config`` runs first: a missing folder is named by it.
+
+    :returns: one line saying what was checked.
+    :raises DaemonConfigError: keyed ``estimator.session`` (does not load) or ``estimator`` (does not fit).
+    """
+    session = load_model(config)
+    check_estimator(session, config)
+    files = list(session.files.values())
+    precision = "+".join(sorted({f.precision for f in files}))
+    contract = session.contract
+    parts = list(session.graphs) + [name for name, part in (("skeleton prior", session.skeleton_prior),
+                                                            ("novel-view painter", session.novel_painter))
+                                    if part is not None]
+    return (f"model: {files[0].path.parent} ({contract.variant}, {precision}, {contract.width}x{contract.height}; "
+            f"{', '.join(parts)}) loaded, the estimator settings fit it")
+
+
 def read_checked_config(path: str) -> DaemonConfig:
     """Load the config file and run :func:`check_config` on it; every error names the file and the key."""
     config = load_daemon_config(path)
@@ -274,6 +306,23 @@ def _print_json(data: Any) -> int:
     return 0
 
 
+def _validate(path: str, *, with_model: bool) -> int:
+    """``--validate-config``: the config in full on stdout (JSON), then on stderr one line saying what was checked.
+
+    :raises DaemonConfigError: naming the file and the key.
+    """
+    config = read_checked_config(path)
+    checked = "model: not loaded (--no-model), its folder holds graph files"
+    if with_model:
+        try:
+            checked = check_model(config)
+        except DaemonConfigError as e:
+            raise DaemonConfigError(str(e), key=str(path)) from None
+    status = _print_json(config_to_dict(config))
+    print(f"{PROG}: {path}: ok; {checked}", file=sys.stderr)
+    return status
+
+
 def _main(argv: Sequence[str] | None) -> int:
     args = build_parser().parse_args(argv)
     if args.print_example_config:
@@ -287,9 +336,13 @@ def _main(argv: Sequence[str] | None) -> int:
         print(f"{PROG}: error: --max-seconds must be > 0 and at most {threading.TIMEOUT_MAX:g}, "
               f"got {args.max_seconds}", file=sys.stderr)
         return 2
+    if args.no_model and not args.validate_config:
+        print(f"{PROG}: error: --no-model goes with --validate-config (the daemon itself needs its model)",
+              file=sys.stderr)
+        return 2
     try:
         if args.validate_config:
-            return _print_json(config_to_dict(read_checked_config(args.config)))
+            return _validate(args.config, with_model=not args.no_model)
         early_sighup.take()  # a SIGHUP until now: the file is read now
         config = read_checked_config(args.config)  # as a reload checks it: what starts also reloads
     except DaemonConfigError as e:

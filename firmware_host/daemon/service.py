@@ -56,7 +56,7 @@ import os
 import threading
 import time
 from collections.abc import Sequence
-from typing import Any, Callable, Optional
+from typing import TYPE_CHECKING, Any, Callable, Optional
 
 import numpy as np
 
@@ -77,7 +77,10 @@ from ghnerf_runtime.estimator import Estimator, load_session
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.rig_file import dumps_rig
 
-__all__ = ["Daemon", "DaemonStartError", "check_sink_urls"]
+if TYPE_CHECKING:  # onnxruntime is imported with the session, when a model loads
+    from ghnerf_runtime.session import ModelSession
+
+__all__ = ["Daemon", "DaemonStartError", "check_sink_urls", "load_model", "check_estimator"]
 
 
 #: The parts of the config a reload tells apart ("rig": its fields but the url).
@@ -142,6 +145,34 @@ def check_sink_urls(urls: Sequence[str], **sink_kwargs: Any) -> None:
             raise
         except (FirmwareHostError, ValueError) as e:
             raise DaemonConfigError(str(e), key=f"sinks[{k}]") from None
+
+
+def load_model(config: DaemonConfig) -> "ModelSession":
+    """The :class:`~ghnerf_runtime.session.ModelSession` the start loads for ``config.estimator``: the graphs its
+    settings run, each checked against the model contract (and ``session.expected_resolution`` /
+    ``expected_variant``), warmed up when ``session.warmup`` is on.
+
+    :raises DaemonConfigError: keyed ``estimator.session``, naming the folder and the file that did not load.
+    """
+    try:
+        return load_session(config.estimator)
+    except ModelError as e:
+        raise DaemonConfigError(f"cannot load the model in {config.estimator.session.model_dir}: {e}",
+                                key="estimator.session") from None
+
+
+def check_estimator(session: "ModelSession", config: DaemonConfig) -> None:
+    """Build the estimator of ``config.estimator`` once on ``session`` for a stand-in rig, and close it: settings the
+    model cannot serve (``heatmaps.source`` 'encoder' with a model without encoder heatmaps) are refused here.
+    What depends on the real rig's calibration is checked only when it opens.
+
+    :raises DaemonConfigError: keyed ``estimator``, naming the model folder and the setting.
+    """
+    try:
+        Estimator(session, _stand_in_rig(), config.estimator).close()
+    except (RuntimeErrorBase, ValueError) as e:  # ModelError, ConfigError: as the reload's check
+        raise DaemonConfigError(f"the settings do not fit the model in {config.estimator.session.model_dir}: {e}",
+                                key="estimator") from None
 
 
 class Daemon:
@@ -253,22 +284,21 @@ class Daemon:
         pin_mmap_threshold()
         t0 = time.monotonic()
         try:
-            self._session = load_session(self.config.estimator)
-        except ModelError as e:
-            raise DaemonStartError(f"cannot load the model in {self.config.estimator.session.model_dir}: {e}") \
-                from None
+            self._session = load_model(self.config)
+        except DaemonConfigError as e:
+            raise DaemonStartError(str(e)) from None
         _log.info("model %s loaded in %.2f s", self.config.estimator.session.model_dir, time.monotonic() - t0)
 
     def _check_estimator(self) -> None:
         """Build the estimator once for a stand-in rig, as a reload does: settings the loaded model cannot serve
         (``heatmaps.source`` 'encoder' with a model that has no encoder heatmaps) stop the start here, before
         READY. Built only once the rig opened, such a config exited 2 when the camera came, or waited for ever for
-        one that never did. What depends on the real rig is still checked when it opens (:meth:`_estimator_for`)."""
+        one that never did. What depends on the real rig is still checked when it opens (:meth:`_estimator_for`).
+        ``--validate-config`` runs the same check (:func:`check_estimator`)."""
         try:
-            Estimator(self._session, _stand_in_rig(), self.config.estimator).close()
-        except (RuntimeErrorBase, ValueError) as e:  # ModelError, ConfigError: as the reload's check
-            raise DaemonStartError(f"estimator: the settings do not fit the model in "
-                                   f"{self.config.estimator.session.model_dir}: {e}") from None
+            check_estimator(self._session, self.config)
+        except DaemonConfigError as e:
+            raise DaemonStartError(str(e)) from None
 
     def _estimator_for(self, rig: Rig) -> Estimator:
         """The estimator of ``rig``: kept across reopens of the same rig, rebuilt for another one."""

@@ -179,7 +179,7 @@ def test_the_service_user_joins_a_group_an_earlier_install_left(host):
 
 def test_models_from_a_private_checkout_are_readable_by_the_service(host):
     # a checkout cloned under umask 077: cp -R kept its owner-only modes, and the service user could not
-    # read the graphs (--validate-config only lists them)
+    # read the graphs (--validate-config only listed them then; it loads them now, but here the daemon is a stand-in)
     for path in (host.repo / "models").iterdir():
         path.chmod(0o600)
     (host.repo / "models").chmod(0o700)

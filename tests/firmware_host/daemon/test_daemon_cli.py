@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -61,6 +62,83 @@ def test_usage_errors(capsys):
         assert "--max-seconds must be > 0 and at most" in capsys.readouterr().err
     assert cli.main(["--print-example-config"]) == 0
     assert json.loads(capsys.readouterr().out) == cli.EXAMPLE_CONFIG
+    assert cli.main(["--config", "x.json", "--no-model"]) == 2  # the daemon itself cannot run without its model
+    assert "--no-model goes with --validate-config" in capsys.readouterr().err
+
+
+BASELINE = MODELS / "baseline"  # a model without encoder heatmaps (docs/runtime.md, "Heatmap sources")
+needs_baseline = pytest.mark.skipif(not (BASELINE / "encoder.onnx").is_file(), reason="no models/baseline")
+
+
+@needs_baseline
+@pytest.mark.parametrize("estimator, message", [
+    # heatmaps.source 'encoder' (the default) needs encoder heatmaps, which the baseline has not
+    ({"session": {"model_dir": str(BASELINE)}},
+     f"estimator: the settings do not fit the model in {BASELINE}: heatmaps.source = 'encoder' needs a model"),
+    # a resolution the model's graphs are not exported at
+    ({"session": {"model_dir": str(BASELINE), "expected_resolution": 96}, "heatmaps": {"source": "rendered"}},
+     f"estimator.session: cannot load the model in {BASELINE}: {BASELINE / 'encoder.int8.onnx'}: ghnerf.resolution: "
+     "model resolution is 128x128, the runtime is configured for 96x96 (session.expected_resolution)"),
+    # a variant other than the folder's
+    ({"session": {"model_dir": str(BASELINE), "expected_variant": "ghnerf"}, "heatmaps": {"source": "rendered"}},
+     f"estimator.session: cannot load the model in {BASELINE}: {BASELINE / 'encoder.int8.onnx'}: ghnerf.variant: "
+     "model variant is 'baseline', configured 'ghnerf'"),
+])
+def test_validate_config_refuses_settings_the_model_cannot_serve(tmp_path, capsys, estimator, message):
+    """These passed --validate-config (which read the folder's file names only), then the start loaded the model
+    and exited 2 before READY: install.sh and a CI check took them for good. The model is loaded now, as at
+    start, and the one line names the file, the key and what does not fit; --no-model still passes them."""
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"], "estimator": estimator})
+    assert cli.main(["--config", str(path), "--validate-config"]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""  # no config printed for one that fails
+    assert "\n" not in err.strip()
+    assert err.strip().startswith(f"ghnerf-daemon: error: {path}: {message}"), err
+    assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0
+    assert "model: not loaded (--no-model)" in capsys.readouterr().err
+
+
+@needs_baseline
+def test_validate_config_passes_what_the_model_serves_and_says_what_it_checked(tmp_path, capsys):
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(BASELINE)},
+                                           "heatmaps": {"source": "rendered"}}})
+    assert cli.main(["--config", str(path), "--validate-config"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["estimator"]["heatmaps"]["source"] == "rendered"  # stdout stays the config alone
+    assert err == (f"ghnerf-daemon: {path}: ok; model: {BASELINE} (baseline, fp32+int8, 128x128; encoder, volume, "
+                   "render_heat) loaded, the estimator settings fit it\n")
+
+
+@needs_baseline
+def test_validate_config_refuses_novel_views_from_a_folder_without_their_graph(tmp_path, capsys):
+    """novel_view.enabled runs render_rgb, which this copy of the baseline lacks: found when the start loaded it."""
+    models = tmp_path / "models"
+    shutil.copytree(BASELINE, models, ignore=shutil.ignore_patterns("render_rgb.*"))
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": "models"}, "heatmaps": {"source": "rendered"},
+                                           "novel_view": {"enabled": True}}})
+    assert cli.main(["--config", str(path), "--validate-config"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"ghnerf-daemon: error: {path}: estimator.session: cannot load the model in {models}: "
+                          f"{models}: no file for graph 'render_rgb'"), err
+
+
+@needs_baseline
+def test_validate_config_names_a_corrupt_graph_file(tmp_path, capsys):
+    """One graph file of a good model cut short (a copy that stopped half-way): the folder still holds *.onnx
+    files, which was all the check looked at."""
+    models = tmp_path / "models"
+    shutil.copytree(BASELINE, models)
+    broken = models / "render_heat.onnx"  # fp32 under precision 'auto': loaded after encoder and volume
+    broken.write_bytes(broken.read_bytes()[: broken.stat().st_size // 2])
+    path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": "models"}, "heatmaps": {"source": "rendered"}}})
+    assert cli.main(["--config", str(path), "--validate-config"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err
+    assert err.startswith(f"ghnerf-daemon: error: {path}: estimator.session: cannot load the model in {models}: "
+                          f"{broken}: onnxruntime cannot load the graph file"), err
 
 
 def test_a_corrupt_model_exits_2_naming_it(tmp_path):
@@ -72,7 +150,7 @@ def test_a_corrupt_model_exits_2_naming_it(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path)],
                           capture_output=True, text=True, timeout=120, cwd=REPO)
     assert proc.returncode == 2, proc.stderr
-    assert f"cannot load the model in {broken}" in proc.stderr
+    assert f"ghnerf-daemon: error: estimator.session: cannot load the model in {broken}" in proc.stderr
     assert "Traceback" not in proc.stderr
 
 
@@ -80,7 +158,7 @@ def test_a_corrupt_model_exits_2_naming_it(tmp_path):
 def test_settings_the_model_cannot_serve_exit_2_at_start_naming_the_key(tmp_path):
     """The baseline has no encoder heatmaps, which heatmaps.source 'encoder' (the default) needs: the daemon sent
     READY and waited for the rig (here one that never comes, until --max-seconds: exit 0). Refused right after the
-    model loads now, exit 2, naming the key; --validate-config does not load the model (docs/daemon.md)."""
+    model loads now, exit 2, naming the key; --validate-config refuses it too (the tests below)."""
     path = _write(tmp_path, {"rig": {"url": f"replay://{tmp_path / 'never'}"}, "sinks": ["udp://127.0.0.1:9870"],
                              "estimator": {"session": {"model_dir": str(MODELS / "baseline"), "warmup": False}}})
     proc = subprocess.run([sys.executable, "-m", "firmware_host.daemon.cli", "--config", str(path),
@@ -465,13 +543,14 @@ def test_the_example_config_beside_its_models_validates_from_any_folder(tmp_path
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
-    assert cli.main(["--config", str(path), "--validate-config"]) == 0, capsys.readouterr().err
+    # --no-model: the fake folder's graph file is no graph (loaded by the tests above)
+    assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0, capsys.readouterr().err
     printed = json.loads(capsys.readouterr().out)
     assert printed["estimator"]["session"]["model_dir"] == str(models)
     assert printed["health"]["status_file"] == str(home / "ghnerf-status.json")
     # a relative --config path too: the file's folder, not the current one
     monkeypatch.chdir(tmp_path)
-    assert cli.main(["--config", "checkout/daemon.json", "--validate-config"]) == 0
+    assert cli.main(["--config", "checkout/daemon.json", "--validate-config", "--no-model"]) == 0
     assert json.loads(capsys.readouterr().out)["estimator"]["session"]["model_dir"] == str(models)
 
 
