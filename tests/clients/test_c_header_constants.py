@@ -120,3 +120,16 @@ def test_header_defines_reads_literals(line, value):
 def test_header_defines_refuses_a_second_different_value():
     with pytest.raises(AssertionError, match="GHJ_X defined again as 2, was 1"):
         header_defines("#define GHJ_X 1u\n#define GHJ_X 2u\n")
+
+
+def test_the_decoder_reads_fields_byte_by_byte():
+    """docs/c-decoder.md promises any byte order and alignment: the little-endian wire is read from single bytes
+    with shifts. A cast to a wider pointer, a memcpy into a field or a byte-order macro would tie it to the host."""
+    body = re.sub(r"/\*.*?\*/", "", SOURCE.read_text(), flags=re.S)
+    wide_cast = re.compile(r"\(\s*(?:const\s+)?u?int(?:16|32|64)_t\s*\*\s*\)")
+    assert not wide_cast.search(body), wide_cast.search(body)
+    for word in ("memcpy", "memmove", "__BYTE_ORDER__", "htons", "ntohs", "htole", "le16toh", "le32toh", "le64toh"):
+        assert word not in body, f"{SOURCE.name} uses {word}"
+    # every multi-byte field goes through the readers that shift bytes into place
+    assert re.search(r"static uint16_t rd_u16\(const uint8_t \*p\).*p\[1\] << 8", body)
+    assert re.search(r"static uint32_t rd_u32\(const uint8_t \*p\)", body)
