@@ -73,7 +73,7 @@ static ghj_result parse_joints(const uint8_t *p, size_t n, ghj_joints *out)
     size_t i, off, count;
     if (n < 2u) return GHJ_ERR_MALFORMED;
     count = p[1];
-    if (count > 64u || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
+    if (count > GHJ_PROTOCOL_MAX_JOINTS || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
     off = 2u + mask_len(count);
     if (n < off + 7u * count) return GHJ_ERR_MALFORMED;
     if (!out) return GHJ_PACKET;
@@ -102,7 +102,7 @@ static ghj_result parse_joints2d(const uint8_t *p, size_t n, ghj_joints2d *out)
     size_t i, off, count;
     if (n < 3u) return GHJ_ERR_MALFORMED;
     count = p[2];
-    if (count > 64u || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
+    if (count > GHJ_PROTOCOL_MAX_JOINTS || count > GHJ_MAX_JOINTS) return GHJ_ERR_MALFORMED;
     off = 3u + mask_len(count);
     if (n < off + 5u * count) return GHJ_ERR_MALFORMED;
     if (!out) return GHJ_PACKET;
@@ -159,7 +159,7 @@ static int take_ascii(const uint8_t *p, size_t n, size_t *off, size_t max_len, c
 static int walk_hello(const uint8_t *p, size_t n, ghj_hello *out)
 {
     size_t off = 5u, c, cameras;
-    if (n < 5u || p[2] > 64u) return 0;
+    if (n < 5u || p[2] > GHJ_PROTOCOL_MAX_JOINTS) return 0;
     if (!take_ascii(p, n, &off, GHJ_MAX_RIG_ID_LEN, out ? out->rig_id : NULL)) return 0;
     if (off + 1u > n || p[off] > GHJ_MAX_CAMERAS) return 0;
     cameras = p[off];

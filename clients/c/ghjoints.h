@@ -47,10 +47,11 @@ extern "C" {
 #define GHJ_CRC_LEN 2u
 #define GHJ_MAX_PACKET_LEN 512u /* decoded packet: header + payload + CRC */
 #define GHJ_MAX_FRAME_LEN 515u  /* COBS-encoded bytes between delimiters */
+#define GHJ_PROTOCOL_MAX_JOINTS 64u /* the protocol's bound on a joint count; GHJ_MAX_JOINTS may be less */
 #ifndef GHJ_MAX_JOINTS
 #define GHJ_MAX_JOINTS 64u
 #endif
-#if GHJ_MAX_JOINTS < 1 || GHJ_MAX_JOINTS > 64
+#if GHJ_MAX_JOINTS < 1 || GHJ_MAX_JOINTS > GHJ_PROTOCOL_MAX_JOINTS
 #error "GHJ_MAX_JOINTS must be 1..64 (the protocol's maximum is 64)"
 #endif
 #define GHJ_MAX_RIG_ID_LEN 32u

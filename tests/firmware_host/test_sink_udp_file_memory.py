@@ -132,6 +132,40 @@ def test_file_sink_reopens_after_the_file_goes_away(tmp_path: Path) -> None:
     assert '"seq":0' in (folder / "joints.jsonl").read_text()
 
 
+def test_file_sink_on_a_read_only_path_says_how_the_service_may_write_there(tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """The unit's ProtectSystem=strict makes every folder but /run/ghnerf and /var/lib/ghnerf read-only, which
+    --validate-config (outside the sandbox) cannot see: docs/daemon.md promises the failed write names the fix,
+    but the sink said only "Read-only file system", as for a read-only medium."""
+    import firmware_host.sinks.file_sink as file_sink
+    path = tmp_path / "joints.jsonl"
+
+    def read_only(name: Any, *args: Any, **kwargs: Any) -> Any:
+        if str(name) == str(path):
+            raise OSError(errno.EROFS, "Read-only file system", str(name))
+        return open(name, *args, **kwargs)
+
+    monkeypatch.setattr(file_sink, "open", read_only, raising=False)
+    sink = open_sink(path.as_uri(), backoff=FAST_BACKOFF)
+    try:
+        wait_until(lambda: sink.stats().connect_failures >= 1, what="a failed open")
+        error = sink.stats().last_error or ""
+    finally:
+        sink.close()
+    assert f"cannot open {path}" in error and "Read-only file system" in error
+    assert "ReadWritePaths= in systemctl edit ghnerf" in error
+    monkeypatch.undo()
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("")
+    sink = open_sink((blocked / "joints.jsonl").as_uri(), backoff=FAST_BACKOFF)  # ENOTDIR: no sandbox hint
+    try:
+        wait_until(lambda: sink.stats().connect_failures >= 1, what="a failed open")
+        error = sink.stats().last_error or ""
+        assert "cannot open" in error and "ReadWritePaths" not in error
+    finally:
+        sink.close()
+
+
 class _CutShort:
     """A file whose next write stops half way through its text with ENOSPC, as on a full disk."""
 

@@ -117,7 +117,7 @@ static uint32_t digest(ghj_result r, const ghj_packet *p, uint8_t skipped_type)
         break;
     case GHJ_MSG_HELLO:
         check(p->u.hello.n_cameras <= GHJ_MAX_CAMERAS, "camera count bound");
-        check(p->u.hello.joint_count <= 64u, "HELLO joint_count bound");
+        check(p->u.hello.joint_count <= GHJ_PROTOCOL_MAX_JOINTS, "HELLO joint_count bound");
         h = HASH(h, p->u.hello.protocol_version);
         h = HASH(h, p->u.hello.joint_set);
         h = HASH(h, p->u.hello.joint_count);
