@@ -944,7 +944,10 @@ class Estimator:
         (``max_outside_box_m``) still apply after."""
         est = self.skeleton_prior.estimate(uv_model, kp.confidence, kp.valid, [c.P for c in crops],
                                           self.config.joints3d.prior_flip_test)
-        score = np.exp(-est.expected_error_m / _PRIOR_CONFIDENCE_SCALE_M).astype(np.float32)
+        # floored for the joints the gate keeps: past ~10.4 m of expected error the float32 score underflowed to 0,
+        # and sanitised() dropped every such joint whatever the gate (max_prior_error_m may be up to 100 m)
+        score = np.maximum(np.exp(-est.expected_error_m / _PRIOR_CONFIDENCE_SCALE_M), np.finfo(np.float32).tiny
+                           ).astype(np.float32)
 
         def gated(max_error_m: float) -> Joints3D:
             keep = est.expected_error_m <= max_error_m

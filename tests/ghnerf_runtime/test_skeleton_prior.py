@@ -476,6 +476,27 @@ def test_estimator_uses_the_prior_when_the_folder_has_one(model_with_prior, tmp_
     assert load_session(_config(bare)).skeleton_prior is None
 
 
+def test_a_joint_the_gate_admits_is_reported_however_large_its_expected_error(model_with_prior):
+    """Confidence is exp(-expected error / 0.1 m): past about 10.4 m it underflowed to 0 in float32, and a joint
+    with no confidence is missing, so a gate of up to 100 m (``max_prior_error_m``'s range) reported nothing the
+    prior expected more than 10.4 m off. Such a joint is reported, with the smallest confidence there is."""
+    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
+    centre = 0.5 * (rig.volume.min_corner + rig.volume.max_corner)  # inside every box gate
+    cfg = _config(model_with_prior, max_prior_error_m=100.0)
+    session = load_session(cfg)
+    for error_m, expect in ((20.0, True), (101.0, False)):
+        session.skeleton_prior.estimate = lambda *a, e=error_m, **k: SkeletonEstimate(
+            np.tile(centre, (NUM_JOINTS, 1)), np.full(NUM_JOINTS, e), np.ones(NUM_JOINTS, bool))
+        r = Estimator(session, rig, cfg).estimate(frames, sequence=0)
+        assert (~r.missing).all() == expect and (r.missing.all() != expect), (error_m, r.missing)
+        assert ((r.confidence > 0) == ~r.missing).all() and (r.confidence < 1e-30).all()
+
+
 def test_inputs_triangulate_as_the_general_dlt():
     """prior_inputs solves each pair with the lean two-view solver; its points, reprojection errors and ray
     angles are triangulate_dlt's (the features the shipped prior was trained on), noisy and hidden joints too."""
