@@ -31,6 +31,7 @@ validation: docs/recording-format.md.
 from __future__ import annotations
 
 import logging
+import statistics
 from pathlib import Path
 
 import numpy as np
@@ -154,12 +155,12 @@ class ReplayRigSource(RigSource):
             mine = [r for r in self._rows if r.camera == cam]
             if not mine:
                 continue
-            stamps = np.array([r.timestamp_ns for r in mine], dtype=np.int64)
-            if stamps.size > 1:
-                periods.append(float(np.median(np.diff(stamps))))
+            stamps = [r.timestamp_ns for r in mine]
+            if len(stamps) > 1:  # Python integers: two 64-bit stamps far apart overflow an int64 difference
+                periods.append(statistics.median(b - a for a, b in zip(stamps, stamps[1:])))
             indices = [r.index for r in mine]
             index_span[cam] = max(indices) - min(indices) + 1
-        period = int(np.median(periods)) if periods else 33_333_333
+        period = int(statistics.median(periods)) if periods else 33_333_333
         return self._rows[-1].timestamp_ns - self._rows[0].timestamp_ns + max(period, 1), index_span
 
     def _open(self) -> None:

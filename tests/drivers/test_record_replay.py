@@ -432,6 +432,9 @@ def test_corrupt_manifest_names_the_file_and_the_field(copy_of_take, change, fie
     ("change", "field"),
     [
         (lambda r: r.update(timestamp_ns="soon"), "timestamp_ns"),
+        # beyond 64 bits: taken, then a bare OverflowError from numpy when the source was made
+        (lambda r: r.update(timestamp_ns=2**70), "timestamp_ns"),
+        (lambda r: r.update(index=-(2**63) - 1), "index"),
         (lambda r: r.update(camera="middle"), "camera"),
         (lambda r: r.pop("index"), "index"),
         (lambda r: r.update(image="../../etc/passwd"), "image"),
