@@ -176,7 +176,8 @@ class RigSource(abc.ABC):
             seconds = float(timeout_s)
         except (TypeError, ValueError):
             seconds = math.nan
-        if not 0 <= seconds < math.inf:
+        # In nanoseconds too: the deadline is an integer of them, and int(inf) is an OverflowError (1e300 s).
+        if not (0 <= seconds < math.inf and seconds * 1e9 < math.inf):
             raise ValueError(f"read(timeout_s={timeout_s!r}): give a finite number of seconds >= 0 "
                              "(to wait without limit, read again after each RigTimeoutError)")
         pairer = self._pairer

@@ -148,8 +148,11 @@ class RecordingWriter:
                 raise RigInitializationError(
                     f"cannot record to {self.directory}: the take could not be replayed: camera {cam.name!r}: {problem}"
                 )
+        created: list[Path] = []  # what this start made, in order: undone if it fails
         try:
+            missing = [d for d in (self.directory, *self.directory.parents) if not d.exists()]
             self.directory.mkdir(parents=True, exist_ok=True)
+            created.extend(reversed(missing))
             if any(self.directory.iterdir()):
                 raise RigInitializationError(
                     f"recording directory {self.directory} is not empty; choose a new out= directory"
@@ -163,24 +166,39 @@ class RecordingWriter:
                     f"recording directory {self.directory} is being written by another recorder "
                     f"({FRAMES} appeared after it was found empty); choose a new out= directory"
                 ) from None
+            created.append(self.directory / FRAMES)
             for cam in self.manifest.rig.names:
                 name = camera_dir_name(self.manifest.rig, cam)
-                (self.directory / "images" / name).mkdir(parents=True)
-                (self.directory / "truth" / name).mkdir(parents=True)
-        except OSError as e:
-            if self._journal is not None:
-                self._journal.close()
-            raise RigInitializationError(f"cannot create recording directory {self.directory}: {e}") from e
-        try:
+                for kind in ("images", "truth"):
+                    for folder in (self.directory / kind, self.directory / kind / name):
+                        if not folder.exists():
+                            folder.mkdir()
+                            created.append(folder)
             write_manifest(self.directory, self.manifest)
+        except (OSError, RigOperationError) as e:  # RigOperationError: the manifest (a full disk)
+            self._undo_start(created)
+            raise RigInitializationError(f"cannot start recording in {self.directory}: {e}") from e
         except BaseException:
-            self._journal.close()
+            self._undo_start(created)
             raise
         for i in range(self.options.writers):
             thread = threading.Thread(target=self._run, name=f"rig-recorder-{i}", daemon=True)
             thread.start()
             self._threads.append(thread)
         log.info("recording to %s (%s images)", self.directory, self.options.image_format)
+
+    def _undo_start(self, created: list[Path]) -> None:
+        """A start that failed (a full disk at the manifest) leaves the folder as it found it: a journal and
+        camera folders without a manifest are no take, yet made ``out=`` "not empty", so a retry after freeing
+        space was refused. Only what this start made goes, newest first; anything else stays."""
+        if self._journal is not None:
+            self._journal.close()
+            self._journal = None
+        for path in reversed(created):
+            try:
+                path.rmdir() if path.is_dir() else path.unlink()
+            except OSError as e:  # not empty (another program wrote there meanwhile), or gone: leave it
+                log.debug("recording: not removing %s after a failed start: %s", path, e)
 
     @property
     def writes_dropped(self) -> int:

@@ -39,6 +39,8 @@ _TRUTH_FIELDS = ("joints_2d", "visible", "mask", "depth", "part_labels")
 _MANIFEST_KEYS = ("format", "version", "rig", "image_format", "source", "created_utc", "complete", "counters")
 _ROW_KEYS = ("camera", "index", "timestamp_ns", "image", "truth", "scene_time_s")
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+#: The range of a journal row's ``index`` and ``timestamp_ns`` (signed 64-bit).
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
 
 
 @dataclass(frozen=True)
@@ -176,8 +178,10 @@ def _check_row(path: Path, line_no: int, obj: Any, rig: Rig) -> FrameRow:
     if obj["camera"] not in pair:
         raise _fail(path, "camera", f"{where}: {obj['camera']!r} is not a camera of the rig's pair {pair}")
     for key in ("index", "timestamp_ns"):
-        if isinstance(obj[key], bool) or not isinstance(obj[key], int):
-            raise _fail(path, key, f"{where}: must be an integer, got {obj[key]!r}")
+        # 64-bit, as every clock and counter that records them is: a larger one (a corrupt digit run) was taken,
+        # and opening the take then failed with a bare OverflowError from numpy, naming no file or line.
+        if isinstance(obj[key], bool) or not isinstance(obj[key], int) or not INT64_MIN <= obj[key] <= INT64_MAX:
+            raise _fail(path, key, f"{where}: must be a 64-bit integer, got {obj[key]!r}")
     for key in ("image", "truth"):
         value = obj[key]
         if value is None and key == "truth":

@@ -22,7 +22,8 @@ URL options:
   frame plays, at other speeds (and ``free``) the stamps run ahead of or behind the clock.
 
 Indices and ground truth are delivered unchanged on the first pass. Each further ``loop``
-pass shifts timestamps by the recording's span (plus one frame period) and indices by the
+pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
+successive distinct stamps, else 1/30 s) and indices by the
 per-camera index span (last - first + 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
 whose files are missing, empty or cut short
 (:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
@@ -31,6 +32,7 @@ validation: docs/recording-format.md.
 from __future__ import annotations
 
 import logging
+import statistics
 from pathlib import Path
 
 import numpy as np
@@ -154,13 +156,17 @@ class ReplayRigSource(RigSource):
             mine = [r for r in self._rows if r.camera == cam]
             if not mine:
                 continue
-            stamps = np.array([r.timestamp_ns for r in mine], dtype=np.int64)
-            if stamps.size > 1:
-                periods.append(float(np.median(np.diff(stamps))))
+            stamps = [r.timestamp_ns for r in mine]
+            # Python integers: two 64-bit stamps far apart overflow an int64 difference. Repeated stamps say
+            # nothing of the period: a take whose stamps were all one had a 1 ns period, so each loop pass came
+            # 1 ns after the last, and a paced read after any stall pushed millions of passes (a hang).
+            steps = [b - a for a, b in zip(stamps, stamps[1:]) if b > a]
+            if steps:
+                periods.append(statistics.median(steps))
             indices = [r.index for r in mine]
             index_span[cam] = max(indices) - min(indices) + 1
-        period = int(np.median(periods)) if periods else 33_333_333
-        return self._rows[-1].timestamp_ns - self._rows[0].timestamp_ns + max(period, 1), index_span
+        period = int(statistics.median(periods)) if periods else 33_333_333
+        return self._rows[-1].timestamp_ns - self._rows[0].timestamp_ns + period, index_span
 
     def _open(self) -> None:
         broken = [(row, rel) for row in self._rows for rel in (row.image, row.truth)

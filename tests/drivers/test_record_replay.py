@@ -173,6 +173,18 @@ def test_end_of_stream_and_loop(take):
     assert np.array_equal(pairs[len(live)].images[0], pairs[0].images[0])  # second pass, same pictures
 
 
+def test_a_loop_pass_of_a_take_whose_stamps_are_all_one_comes_a_frame_period_later(copy_of_take):
+    """Repeated stamps gave a 1 ns loop period: each pass 1 ns after the last, so a paced policy=latest read
+    after a 10 ms stall had ten million passes due, and hung. The period is the default frame period then."""
+    rows = [json.loads(line) for line in (copy_of_take / FRAMES).read_text().splitlines()][:8]
+    for row in rows:
+        row["timestamp_ns"] = 5_000
+    (copy_of_take / FRAMES).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    with open_rig(f"replay://{copy_of_take}?speed=free&loop=1&keep_time=1&policy=all") as source:
+        stamps = sorted({f.timestamp_ns for _ in range(8) for f in source.read(timeout_s=1.0).frames})
+    assert stamps[0] == 5_000 and stamps[1] - stamps[0] >= 30_000_000, stamps
+
+
 def _take_ending_in_a_held_pair(out):
     """Cut the take's journal after its fourth pair's frames, the second moved to 15 ms after the first: a frame of
     the first camera 3/4 of a period later (25 ms) could still be closer to it, so the pairer holds that pair back
@@ -432,6 +444,9 @@ def test_corrupt_manifest_names_the_file_and_the_field(copy_of_take, change, fie
     ("change", "field"),
     [
         (lambda r: r.update(timestamp_ns="soon"), "timestamp_ns"),
+        # beyond 64 bits: taken, then a bare OverflowError from numpy when the source was made
+        (lambda r: r.update(timestamp_ns=2**70), "timestamp_ns"),
+        (lambda r: r.update(index=-(2**63) - 1), "index"),
         (lambda r: r.update(camera="middle"), "camera"),
         (lambda r: r.pop("index"), "index"),
         (lambda r: r.update(image="../../etc/passwd"), "image"),

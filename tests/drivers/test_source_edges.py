@@ -1,6 +1,7 @@
 """Edges of the sources a reviewer found: a pairing tolerance too large to count in nanoseconds, a close that
 fails, a journal row of a camera outside the pair, a rig file of another size than a depthai stream, a close
-from another thread while a sim read waits."""
+from another thread while a sim read waits, a read timeout too long to count in nanoseconds, a recorder that
+cannot start."""
 from __future__ import annotations
 
 import json
@@ -109,3 +110,43 @@ def test_a_sim_read_waiting_when_another_thread_closes_says_so(sim_cache):
     thread.join(6.0)
     assert len(result) == 1 and isinstance(result[0], RigOperationError), result
     assert "closed" in str(result[0])
+
+
+@pytest.mark.parametrize("timeout_s", [1e300, float("inf")])
+def test_a_read_timeout_too_long_to_count_in_nanoseconds_is_refused_by_name(take, timeout_s):
+    """read(timeout_s=1e300) passed the finite-number check, then int(1e300 * 1e9) raised a bare OverflowError."""
+    with open_rig(f"replay://{take}?speed=recorded", clock=ManualClock()) as source:
+        with pytest.raises(ValueError, match=r"read\(timeout_s="):
+            source.read(timeout_s=timeout_s)
+        assert source.read(timeout_s=1e12).sequence == 0  # long, yet countable: still a wait
+
+
+def _full_disk_at_the_manifest(monkeypatch):
+    from drivers.backends import recording_format
+    from ghnerf_runtime.errors import RigFileError
+
+    def no_space(path, text):
+        raise RigFileError("No space left on device", path=str(path))
+
+    monkeypatch.setattr(recording_format, "write_text_atomic", no_space)
+
+
+@pytest.mark.parametrize("exists", [False, True])
+def test_a_recording_that_cannot_start_leaves_its_folder_as_it_found_it(tmp_path, sim_cache, monkeypatch, exists):
+    """A full disk at the manifest left frames.jsonl and the camera folders behind: no take, but a folder
+    "not empty", so the retry after freeing space was refused; and the error was a RigOperationError."""
+    out = tmp_path / "takes" / "take1"
+    if exists:
+        out.mkdir(parents=True)
+    url = f"record+sim://?width=40&height=30&seed=3&cache={sim_cache}&out={out}"
+    with monkeypatch.context() as patch:
+        _full_disk_at_the_manifest(patch)
+        with pytest.raises(RigInitializationError, match=f"cannot start recording in {out}.*No space left"):
+            open_rig(url, clock=ManualClock())
+    if exists:
+        assert out.is_dir() and not any(out.iterdir())  # the folder given stays, empty
+    else:
+        assert not (tmp_path / "takes").exists()  # the folders the start made are gone
+    with open_rig(url, clock=ManualClock()) as source:  # space freed: the same out= records
+        source.read(timeout_s=5.0)
+    assert (out / MANIFEST).is_file()
