@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass, field, replace
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -67,6 +68,13 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 DEPTH_STATS_CHANNELS = ("mean", "std", "lo", "hi")
 #: The image feature maps a sweep level or the render heads may read (``human_feat`` is a stride's key too).
 IMAGE_FEATURES = ("feat_s1", "feat_s2", "feat_s4")
+#: Metadata key of the weights id: one value (a sha256, 64 hex digits) in every graph file, fp32 and int8, that
+#: one export of one set of weights writes, so that graphs of two exports left in one folder (a move cut short
+#: by a power cut, a file copied in by hand) are told apart at load (``ModelSession.load``). Kept out of the
+#: contract (:meth:`ModelContract.to_metadata`, :meth:`ModelContract.same_model`): it says which weights, not
+#: how to feed them. Files exported before it have none (:func:`weights_id_of`).
+WEIGHTS_ID_KEY = META_PREFIX + "weights_id"
+_WEIGHTS_ID = re.compile(r"[0-9a-f]{64}")
 
 
 class ContractError(RuntimeErrorBase, ValueError):
@@ -501,6 +509,22 @@ class ModelContract:
                                         key=t.name)
 
 
+def weights_id_of(props: Mapping[str, str]) -> str | None:
+    """The weights id in a graph file's metadata (:data:`WEIGHTS_ID_KEY`); None in a file exported before
+    there was one.
+
+    Raises:
+        ContractError: naming the key, when the value is not what the exporter writes (64 lowercase hex
+            digits): a file edited or damaged there, which no comparison with the other files can vouch for.
+    """
+    value = props.get(WEIGHTS_ID_KEY)
+    if value is None:
+        return None
+    if not _WEIGHTS_ID.fullmatch(value):
+        raise ContractError(f"expected 64 lowercase hex digits (a sha256), got {value[:80]!r}", key=WEIGHTS_ID_KEY)
+    return value
+
+
 def _missing_why(props: Mapping[str, str]) -> str:
     """Why a required key is not in a file's metadata. Every 1.x export writes them all, and an ONNX file's
     metadata follow its graph, at the end of the file (protobuf writes fields in number order), so a file that
@@ -632,6 +656,7 @@ def ray_grid(height: int, width: int, stride: int = 1) -> np.ndarray:
 
 __all__ = [
     "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "IMAGE_FEATURES", "IMAGENET_MEAN", "IMAGENET_STD",
+    "WEIGHTS_ID_KEY", "weights_id_of",
     "ContractError", "TensorSpec", "GraphSpec", "LevelSpec", "Normalisation", "ModelContract",
     "source_projections", "source_centers", "target_inputs", "target_projections", "near_far_from_box", "ray_grid",
 ]

@@ -32,6 +32,12 @@ What is checked at load (each failure names the file and what is wrong):
 * it holds the graph it is loaded as, and its inputs/outputs match the contract's names and
   fixed dimensions (``ModelContract.check_io``), all float32;
 * every graph file of the model carries the same contract (same model, same version);
+* the graph files that carry a weights id (``ghnerf.weights_id``, which the exporter stamps, the same in every
+  graph of one set of weights, fp32 and int8) carry the same one: a folder holding graphs of two
+  exports (a move into it cut short by a power cut, a file copied in from another export) is refused, naming
+  two files and their ids. Files without one (exported before) are taken as before, beside stamped ones too
+  (a warning names them); the painter and the skeleton prior are other networks, checked by their own
+  metadata, not by this id;
 * the resolution and variant match :class:`SessionConfig` when it pins them;
 * the folder can be read by the user running this (:class:`ModelLoadError` naming it, not a bare
   PermissionError);
@@ -65,6 +71,7 @@ from ghnerf_runtime.config import SessionConfig
 from ghnerf_runtime.contract import (
     GRAPH_NAMES,
     META_PREFIX,
+    WEIGHTS_ID_KEY,
     ContractError,
     ModelContract,
     near_far_from_box,
@@ -73,6 +80,7 @@ from ghnerf_runtime.contract import (
     source_projections,
     target_inputs,
     target_projections,
+    weights_id_of,
 )
 from ghnerf_runtime.errors import ModelContractError, ModelError, ModelLoadError, ModelRunError
 from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
@@ -107,6 +115,7 @@ class GraphFile:
     path: Path
     precision: str  # from the file's metadata
     load_ms: float
+    weights_id: str | None = None  # ghnerf.weights_id; None in files exported before it
 
 
 def resolve_model_dir(path: str | os.PathLike) -> Path:
@@ -197,6 +206,14 @@ def _contract_of(sess: ort.InferenceSession, path: Path) -> tuple[ModelContract,
     return contract, graph, precision
 
 
+def _weights_of(sess: ort.InferenceSession, path: Path) -> str | None:
+    """The file's weights id (``ghnerf.weights_id``), None in a file exported before there was one."""
+    try:
+        return weights_id_of(dict(sess.get_modelmeta().custom_metadata_map))
+    except ContractError as e:
+        raise ModelContractError(str(e).split(": ", 1)[-1], path=str(path), key=e.key) from e
+
+
 def _check_io(sess: ort.InferenceSession, contract: ModelContract, graph: str, path: Path) -> None:
     inputs = {i.name: i.shape for i in sess.get_inputs()}
     outputs = {o.name: o.shape for o in sess.get_outputs()}
@@ -230,6 +247,7 @@ def check_graph_file(path: str | os.PathLike, graph: str, precision: str | None 
         raise ModelContractError(f"holds {file_precision} weights, expected {precision}", path=str(path),
                                  key=META_PREFIX + "precision")
     _check_io(sess, contract, graph, path)
+    _weights_of(sess, path)
     return contract
 
 
@@ -310,6 +328,7 @@ class ModelSession:
         files: dict[str, GraphFile] = {}
         contract: ModelContract | None = None
         first: Path | None = None
+        stamped: tuple[Path, str] | None = None  # the first file loaded that has a weights id, and the id
         by_meta: dict[tuple[str, str], Path] | None = None
         for graph in dict.fromkeys(graphs):
             wanted = config.precision_overrides.get(
@@ -344,10 +363,26 @@ class ModelSession:
                               if file_contract.to_metadata().get(k) != v)
                 raise ModelContractError(f"its contract differs from {first.name}'s in {diff}: the graph files "
                                          "come from different models", path=str(path), key=diff[0] if diff else None)
+            # the same contract, other weights: graphs of two exports of one model, which would run as one and
+            # give wrong but plausible joints
+            weights = _weights_of(sess, path)
+            if weights is not None and stamped is None:
+                stamped = (path, weights)
+            elif weights is not None and stamped is not None and weights != stamped[1]:
+                raise ModelContractError(
+                    f"{path.name} has weights id {weights[:16]}... and {stamped[0].name} {stamped[1][:16]}...: the "
+                    "graph files come from two different exports (a move into the folder cut short, by a power cut "
+                    "say, or a file copied in from another export); export the model again into this folder "
+                    "(python -m training.export --out, or make model)", path=str(path), key=WEIGHTS_ID_KEY)
             sessions[graph] = sess
-            files[graph] = GraphFile(graph, path, precision, load_ms)
+            files[graph] = GraphFile(graph, path, precision, load_ms, weights)
             log.info("loaded %s (%s, %.0f ms)", path, precision, load_ms)
         assert contract is not None
+        unstamped = [f.path.name for f in files.values() if f.weights_id is None]
+        if stamped is not None and unstamped:  # taken, as a folder of older files is: nothing to compare them with
+            log.warning("%s: %s carry no weights id (exported before there were ids), so they cannot be checked to "
+                        "be of the same export as %s; export the model again to check them", folder,
+                        ", ".join(unstamped), stamped[0].name)
         session = cls(sessions, contract, files, cls._read_card(folder))
         session._config = config
         if skeleton_prior and (folder / PRIOR_FILE).is_file():
@@ -425,6 +460,11 @@ class ModelSession:
     @property
     def graphs(self) -> tuple[str, ...]:
         return tuple(self._sessions)
+
+    @property
+    def weights_id(self) -> str | None:
+        """The weights id the loaded graphs share (:meth:`load` checks that they do), None when none has one."""
+        return next((f.weights_id for f in self.files.values() if f.weights_id is not None), None)
 
     def has(self, graph: str) -> bool:
         return graph in self._sessions
@@ -583,7 +623,7 @@ class ModelSession:
         """A JSON-ready summary: contract basics, files and their precision."""
         c = self.contract
         return {"resolution": f"{c.width}x{c.height}", "variant": c.variant, "model_version": c.model_version,
-                "contract_version": c.version,
+                "contract_version": c.version, "weights_id": self.weights_id,
                 "files": {g: {"path": str(f.path), "precision": f.precision} for g, f in self.files.items()},
                 "card": bool(self.card)}
 

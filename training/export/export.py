@@ -1,4 +1,5 @@
-"""Export the model as the contract's ONNX graphs, each stamped with the contract metadata.
+"""Export the model as the contract's ONNX graphs, each stamped with the contract metadata and the weights id
+(one per set of weights, the same in every graph: the runtime refuses a folder whose graphs disagree).
 
 Graph split (``ghnerf_runtime.contract`` has the exact input/output specs):
 
@@ -17,6 +18,7 @@ TorchScript exporter is used (``dynamo=False``): it needs no onnxscript and hand
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 import warnings
 from dataclasses import dataclass
@@ -27,7 +29,7 @@ import onnx
 import torch
 from torch import Tensor, nn
 
-from ghnerf_runtime.contract import GRAPH_NAMES, GraphSpec, ModelContract, ray_grid
+from ghnerf_runtime.contract import GRAPH_NAMES, WEIGHTS_ID_KEY, GraphSpec, ModelContract, ray_grid
 from ghnerf_runtime.session import check_graph_file
 from training.export.opsets import DEFAULT_OPSET
 from training.model.camera_inputs import box_corners, orbit_camera, scene_inputs, synthetic_rig
@@ -145,11 +147,30 @@ def _dynamic_axes(spec: GraphSpec) -> dict[str, dict[int, str]]:
     return axes
 
 
-def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precision: str) -> None:
-    """Write the contract into ``metadata_props`` of the ONNX file at ``path`` (in place)."""
+def weights_id(model: nn.Module) -> str:
+    """The weights id of ``model`` (``ghnerf_runtime.contract.WEIGHTS_ID_KEY``): the sha256 of its state dict
+    (each tensor's name, dtype, shape and bytes, by name), so every graph exported from these weights, in this
+    export or a later one, carries the same id, and graphs of other weights another."""
+    h = hashlib.sha256()
+    for name, tensor in sorted(model.state_dict().items()):
+        t = tensor.detach().cpu().contiguous()
+        h.update(f"{name}\0{t.dtype}\0{list(t.shape)}\0".encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes())  # the bytes of any dtype (bf16 has no numpy)
+    return h.hexdigest()
+
+
+def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precision: str, *,
+                   weights_id: str | None) -> None:
+    """Write the contract and ``weights_id`` (:func:`weights_id`; None: a graph of unknown weights, say a
+    quantization of a file exported before there were ids) into ``metadata_props`` of the ONNX file at ``path``
+    (in place)."""
     m = onnx.load(str(path))
-    props = contract.to_metadata(graph=graph, precision=precision)
-    keep = [p for p in m.metadata_props if p.key not in props]
+    # the id first: a copy cut short in the metadata (they end the file) then loses a contract key, which the
+    # runtime refuses as a file cut short, before it could lose the id alone and pass for an older export
+    props = {**({WEIGHTS_ID_KEY: weights_id} if weights_id is not None else {}),
+             **contract.to_metadata(graph=graph, precision=precision)}
+    # an id already in the file (a copied source's) never outlives a restamp, whatever replaces it
+    keep = [p for p in m.metadata_props if p.key not in props and p.key != WEIGHTS_ID_KEY]
     del m.metadata_props[:]
     m.metadata_props.extend(keep)
     onnx.helper.set_model_props(m, {**{p.key: p.value for p in keep}, **props})
@@ -159,8 +180,9 @@ def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precis
 
 
 def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInputs | None = None,
-                 opset: int = DEFAULT_OPSET) -> Path:
-    """Export one graph (fp32) to ``path`` with the contract stamped in.
+                 opset: int = DEFAULT_OPSET, weights: str | None = None) -> Path:
+    """Export one graph (fp32) to ``path`` with the contract and the weights id stamped in (``weights``: the
+    model's :func:`weights_id`, computed here when not given).
 
     Raises:
         ModelContractError: the file written is one the runtime would refuse (its inputs or outputs differ from
@@ -191,7 +213,7 @@ def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInp
             )
     finally:
         model.train(was_training)
-    stamp_metadata(path, contract, graph, "fp32")
+    stamp_metadata(path, contract, graph, "fp32", weights_id=weights or weights_id(model))
     onnx.checker.check_model(str(path))
     # the runtime's own load checks, here: a graph whose inputs or outputs differ from the contract (a channel
     # count the config states wrongly, a fixed axis the tracer left symbolic) is refused now, naming the file and
@@ -203,13 +225,14 @@ def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInp
 
 def export_all(model: GHNeRF, out_dir: str | Path, graphs: tuple[str, ...] | None = None,
                opset: int = DEFAULT_OPSET, inputs: ExampleInputs | None = None) -> dict[str, Path]:
-    """Export ``graphs`` (default: every graph of the model's contract) as ``<out_dir>/<graph>.onnx`` (fp32).
-    Returns graph -> path."""
+    """Export ``graphs`` (default: every graph of the model's contract) as ``<out_dir>/<graph>.onnx`` (fp32), each
+    with the model's :func:`weights_id`. Returns graph -> path."""
     out_dir = Path(out_dir)
     graphs = model.contract(opset=opset).graph_names if graphs is None else graphs
     inputs = inputs or example_inputs(model)
-    return {g: export_graph(model, g, out_dir / f"{g}.onnx", inputs, opset) for g in graphs}
+    weights = weights_id(model)
+    return {g: export_graph(model, g, out_dir / f"{g}.onnx", inputs, opset, weights) for g in graphs}
 
 
-__all__ = ["export_all", "export_graph", "example_inputs", "ExampleInputs", "stamp_metadata", "GRAPH_MODULES",
-           "DEFAULT_OPSET"]
+__all__ = ["export_all", "export_graph", "example_inputs", "ExampleInputs", "stamp_metadata", "weights_id",
+           "GRAPH_MODULES", "DEFAULT_OPSET"]

@@ -36,6 +36,7 @@ from onnxruntime.quantization import (
 )
 from onnxruntime.quantization.shape_inference import quant_pre_process
 
+from ghnerf_runtime.contract import weights_id_of
 from ghnerf_runtime.session import check_graph_file
 
 log = logging.getLogger(__name__)
@@ -153,7 +154,8 @@ def quantize_qdq(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[di
 
 def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[dict[str, np.ndarray]],
                    policy: QuantPolicy | None, graph: str) -> Path:
-    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract.
+    """Quantize one fp32 graph to QDQ int8 (or copy it when ``policy`` is None) and restamp the contract and the
+    source's weights id (``ghnerf_runtime.contract.WEIGHTS_ID_KEY``: the int8 file is of the same weights).
 
     Raises:
         ModelLoadError, ModelContractError: the source (or the file written) is not a ``graph`` file the runtime
@@ -166,12 +168,14 @@ def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[
     # the source as the runtime would load it: a truncated file, one without a contract, another graph's or an
     # int8 one is refused naming the file (not a bare protobuf DecodeError, nor an int8 file stamped as this graph)
     contract = check_graph_file(fp32_path, graph, "fp32")
+    # (a malformed id was refused by check_graph_file just now)
+    weights = weights_id_of({p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props})
     precision = "fp32" if policy is None else "int8"
     if policy is None:
         shutil.copyfile(fp32_path, out_path)
     else:
         quantize_qdq(fp32_path, out_path, feeds, policy, graph)
-    stamp_metadata(out_path, contract, graph, precision)
+    stamp_metadata(out_path, contract, graph, precision, weights_id=weights)
     check_graph_file(out_path, graph, precision)
     log.info("quantized %s -> %s (%s)", graph, out_path, precision)
     return out_path

@@ -8,9 +8,11 @@ its metrics) whose recorded sha256 no longer match the folder's files; the card 
 ``model_card.stale.json`` (the pipeline's card stage writes a new one and reads the painter's section from it).
 
 The move itself is one ``os.replace`` per file, so it cannot be one step; what keeps a folder from holding some new
-graphs beside old ones (same contract, other weights: the runtime would load them as one model) is that a Ctrl-C
-or SIGTERM during it is held until the last file is in, and that a move cut short by a crash is finished by the
-next :func:`staging_dir` of the folder (the staging folder lists what it was moving, :data:`MOVING`).
+graphs beside old ones (same contract, other weights) is that a Ctrl-C or SIGTERM during it is held until the
+last file is in, and that a move cut short by a crash is finished by the next :func:`staging_dir` of the folder
+(the staging folder lists what it was moving, :data:`MOVING`). Until then (a power cut in the move) the folder
+is mixed, and the runtime refuses it: every graph of one export carries the same weights id
+(``ghnerf_runtime.contract.WEIGHTS_ID_KEY``), which ``ModelSession.load`` compares.
 """
 from __future__ import annotations
 
