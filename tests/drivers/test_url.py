@@ -33,7 +33,8 @@ def test_prefixed_bases_are_whole_numbers():
 @pytest.mark.parametrize(
     ("url", "says"),
     [
-        ("sim://?seed=010", "option seed='010': decimal digits expected, without a leading zero (write 10; hex as 0x..)"),
+        ("sim://?seed=010",
+         "option seed='010': decimal digits expected, without a leading zero (write 10; hex as 0x..)"),
         ("sim://?width=0640", "option width='0640': decimal digits expected, without a leading zero (write 640;"),
         ("record+sim://?out=/tmp/x&writers=02", "option writers='02': decimal digits expected"),
         ("depthai://?queue=08", "option queue='08': decimal digits expected, without a leading zero (write 8;"),
