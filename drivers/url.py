@@ -8,6 +8,7 @@ A ``#`` would start a fragment, which URL parsing drops: it is refused (write ``
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, unquote, urlsplit
 
@@ -15,6 +16,24 @@ from drivers.errors import RigConfigError
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
+_LEADING_ZERO = re.compile(r"[+-]?0[0-9_]*[1-9][0-9_]*")
+
+
+def whole_number(raw: str) -> int:
+    """A whole number as a URL writes it: decimal digits, or hex, octal or binary with its prefix (``0x10``,
+    ``0o17``, ``0b101``). A leading zero (``08``, ``010``) is refused with that said, not guessed at: C reads 010
+    as octal 8, and a user who typed 08 meant something. Camera URLs (here) and sink URLs
+    (``firmware_host.sinks.url.integer``) share this rule. Raises ValueError with the reason."""
+    try:
+        return int(raw, 0)
+    except ValueError:
+        pass
+    text = raw.strip()
+    if _LEADING_ZERO.fullmatch(text):
+        sign = text[0] if text[0] in "+-" else ""
+        raise ValueError(f"decimal digits expected, without a leading zero (write {sign}{text.lstrip('+-0_')}; "
+                         "hex as 0x..)")
+    raise ValueError("expected a whole number: decimal digits, or hex as 0x..")
 
 
 @dataclass
@@ -84,13 +103,10 @@ class RigUrl:
         raw = self.options.pop(name, None)
         if raw is None:
             return default
-        try:  # decimal first: int('010', 0) refuses the leading zero ("must be an integer" for seed=010)
-            value = int(raw, 10)
-        except ValueError:
-            try:
-                value = int(raw, 0)  # 0x10, 0o17, 0b101
-            except ValueError:
-                raise self._error(name, raw, "an integer") from None
+        try:
+            value = whole_number(raw)
+        except ValueError as e:  # the reason says what to write instead (seed=010: "write 10")
+            raise RigConfigError(f"rig URL {self.url!r}: option {name}={raw!r}: {e}") from None
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise self._error(name, raw, f"an integer in [{lo}, {hi}]")
         return value

@@ -57,9 +57,11 @@ F16_MAX = float(np.finfo(np.float16).max)
 
 def float16_depth(rel: np.ndarray) -> np.ndarray:
     """The depth plane as float16, clipped first to float16's largest finite value: a surface over 65 km from the
-    median (a wild joint's ellipsoid) became inf, and the painter's answer NaN. Shared with the training caches
-    (``training.fill_features``), so the network sees on the device what it saw in training."""
-    return np.clip(rel, -F16_MAX, F16_MAX).astype(np.float16)
+    median (a wild joint's ellipsoid) became inf, and the painter's answer NaN; so is an infinite one (+-inf to
+    +-65504). A NaN (no depth known there) becomes 0, the plane's value off the subject ("no depth"): clip kept
+    it, and one NaN pixel spread through the convolutions into a NaN patch of the picture. Shared with the
+    training caches (``training.fill_features``), so the network sees on the device what it saw in training."""
+    return np.clip(np.nan_to_num(rel, nan=0.0, posinf=F16_MAX, neginf=-F16_MAX), -F16_MAX, F16_MAX).astype(np.float16)
 
 
 def _u8(rgb: np.ndarray) -> np.ndarray:

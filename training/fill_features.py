@@ -26,7 +26,8 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
   bit 2 the true subject mask (the score's; the same as bit 0 with the true geometry);
 * ``normals`` ``(H, W, 3)`` int8: camera-frame unit normals times 127 (zero off the subject);
 * ``depth`` ``(H, W)`` float16: camera z minus its median on the subject, metres (zero off it), clipped to
-  float16's largest finite value (``novel_painter.float16_depth``, as on the device);
+  float16's largest finite value, a NaN zero as off the subject (``novel_painter.float16_depth``, as on the
+  device);
 * ``joints`` ``(25, 3)`` float32: the 3D joints projected into the view (pixel u, v; valid 0/1);
 * ``light`` ``(4,)`` float32: the fitted key light's direction in the camera frame and its ambient
   share (zeros when nothing was seen to fit it, or when the cache was made without the light fit:

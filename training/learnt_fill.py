@@ -34,6 +34,10 @@ print the whole view as the runtime shows it beside the masked columns (``shown:
 
 ``train`` takes the GPU when torch sees one (``--device``) and prints the held-out table at the end
 (also written to ``<out>/score.md``).
+
+Every file ``train`` and ``export`` write (``fill_net.pt``, ``score.md``, ``score.json``, the ONNX files and
+their ``.json``) goes through a temporary file and a rename (``training.model_card.write_atomic``): a crash
+or a full disk leaves the previous file or none, never a cut one that ``export`` would then read.
 """
 from __future__ import annotations
 
@@ -42,10 +46,12 @@ if __name__ == "__main__":  # python -m: the arguments are parsed before torch l
 
     raise SystemExit(_cli_main())
 
+import io
 import json
 import math
 import pickle
 import sys
+import tempfile
 import time
 import warnings
 from collections.abc import Sequence
@@ -64,7 +70,7 @@ from ghnerf_runtime.metrics import masked_psnr
 from training.evaluate import SOURCE_ANGLE_BINS_DEG
 from training.fill_features import (MASK_BIT, SEEN_BIT, TRUTH_BIT, FillCacheError, check_held_out, load_cache,
                                     relit_in)
-from training.model_card import strict_json
+from training.model_card import strict_json, write_atomic
 
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
 #: with ``FillNetConfig.shown_input``, the model's picture 3 more.
@@ -396,7 +402,10 @@ def table(rows: dict[str, dict[str, float]]) -> str:
 
 
 def save_net(net: FillNet, cfg: FillTrainConfig, path: Path, **info) -> None:
-    torch.save({"config": asdict(cfg), "state_dict": net.state_dict(), "info": info}, path)
+    # whole or not at all: a cut fill_net.pt under its name is what export would read next
+    buf = io.BytesIO()
+    torch.save({"config": asdict(cfg), "state_dict": net.state_dict(), "info": info}, buf)
+    write_atomic(path, buf.getvalue())
 
 
 def load_net(path: str | Path, device: torch.device | str = "cpu") -> FillNet:
@@ -454,15 +463,17 @@ def export_painter(net: FillNet, path: str | Path, metadata: dict[str, str], siz
     graph = PainterGraph(net.cpu().eval())
     planes, joints = torch.zeros(1, len(rt.PLANES), size, size), torch.zeros(1, NUM_JOINTS, 3)
     axes = {"planes": {0: "N", 2: "H", 3: "W"}, "joints": {0: "N"}, rt.OUTPUT: {0: "N", 2: "H", 3: "W"}}
-    torch.onnx.export(graph, (planes, joints), str(path), input_names=list(rt.INPUTS), output_names=[rt.OUTPUT],
-                      opset_version=17, dynamo=False, dynamic_axes=axes)
-    model = onnx.load(str(path))
+    with tempfile.TemporaryDirectory() as tmp:  # the graph without its metadata never sits under path
+        raw = Path(tmp) / "painter.onnx"
+        torch.onnx.export(graph, (planes, joints), str(raw), input_names=list(rt.INPUTS),
+                          output_names=[rt.OUTPUT], opset_version=17, dynamo=False, dynamic_axes=axes)
+        model = onnx.load(str(raw))
     meta = {"feature_version": str(rt.FEATURE_VERSION), "joint_sigma_px": str(net.cfg.joint_sigma_px),
             "width": str(net.cfg.width), "levels": str(net.cfg.levels), "steps": str(net.steps_trained), **metadata}
     for k, v in meta.items():
         entry = model.metadata_props.add()
         entry.key, entry.value = rt.META_PREFIX + k, str(v)
-    onnx.save(model, str(path))
+    write_atomic(path, model.SerializeToString())
     return path
 
 
@@ -480,16 +491,17 @@ def quantize_painter(fp32_path: str | Path, out_path: str | Path, arrays: dict[s
     few = {k: v[:views] for k, v in arrays.items()}
     planes, joints = painter_planes_of(to_device(few, torch.device("cpu")))
     feeds = [{"planes": planes[i:i + 1].numpy(), "joints": joints[i:i + 1].numpy()} for i in range(len(planes))]
-    quantize_qdq(fp32_path, out_path, feeds, QuantPolicy(), "novel_painter")
     meta = {p.key: p.value for p in onnx.load(str(fp32_path)).metadata_props}
     meta[rt.META_PREFIX + "precision"] = "int8"
     meta[rt.META_PREFIX + "calibration_views"] = str(len(feeds))
-    model = onnx.load(str(out_path))
+    with tempfile.TemporaryDirectory() as tmp:  # quantized, then stamped: only the stamped file takes the name
+        raw = quantize_qdq(fp32_path, Path(tmp) / "painter.int8.onnx", feeds, QuantPolicy(), "novel_painter")
+        model = onnx.load(str(raw))
     del model.metadata_props[:]
     for k, v in meta.items():
         entry = model.metadata_props.add()
         entry.key, entry.value = k, v
-    onnx.save(model, str(out_path))
+    write_atomic(out_path, model.SerializeToString())
     return out_path
 
 
@@ -595,7 +607,7 @@ def _export_cli(args) -> int:
             report["onnx_held_out"][precision] = rows = onnx_rows(path, val)
             print(f"{path.name} (onnxruntime, {precision}) held out:\n{table(rows)}")
     # strict JSON: a held-out bin with no views scores NaN, identical pictures inf; bare NaN is not JSON
-    out.with_suffix(".json").write_text(strict_json(report))
+    write_atomic(out.with_suffix(".json"), strict_json(report))
     for path in outs:
         print(f"{path}: {path.stat().st_size / 1e6:.2f} MB, sha256 {hashlib.sha256(path.read_bytes()).hexdigest()[:16]}")
     if args.card_dir is not None:
@@ -715,8 +727,8 @@ def main(argv: list[str] | None = None) -> int:
     report = (f"{len(val['flags'])} held-out views ({args.val_cache}), fill net trained on {len(train['flags'])} "
               f"views ({args.train_cache}), {net.steps_trained} steps of {cfg.batch} in {seconds:.0f} s on "
               f"{hardware}; masked PSNR, dB\n\n{table(rows)}\n")
-    (args.out / "score.md").write_text(report)
-    (args.out / "score.json").write_text(strict_json({"config": asdict(cfg), "rows": rows, **info}))
+    write_atomic(args.out / "score.md", report)
+    write_atomic(args.out / "score.json", strict_json({"config": asdict(cfg), "rows": rows, **info}))
     print(report)
     return 0
 

@@ -25,10 +25,51 @@ def test_typed_getters_convert_and_consume():
     url.finish()  # everything was consumed
 
 
-def test_an_integer_with_a_leading_zero_is_decimal():
-    """int(raw, 0) refused '010' ("option seed='010' must be an integer"); prefixed bases still work."""
-    url = RigUrl.parse("sim://?seed=010&width=0640&a=0x10&b=0o17&c=0")
-    assert [url.take_int(k, -1) for k in ("seed", "width", "a", "b", "c")] == [10, 640, 16, 15, 0]
+def test_prefixed_bases_are_whole_numbers():
+    url = RigUrl.parse("sim://?a=0x10&b=0o17&c=0b101&d=0&e=00&f=1_000&g=-7")
+    assert [url.take_int(k, -1) for k in "abcdefg"] == [16, 15, 5, 0, 0, 1000, -7]
+
+
+@pytest.mark.parametrize(
+    ("url", "says"),
+    [
+        ("sim://?seed=010",
+         "option seed='010': decimal digits expected, without a leading zero (write 10; hex as 0x..)"),
+        ("sim://?width=0640", "option width='0640': decimal digits expected, without a leading zero (write 640;"),
+        ("record+sim://?out=/tmp/x&writers=02", "option writers='02': decimal digits expected"),
+        ("depthai://?queue=08", "option queue='08': decimal digits expected, without a leading zero (write 8;"),
+        ("opencv://?first=0&second=1&queue=04", "option queue='04': decimal digits expected"),
+    ],
+)
+def test_an_integer_with_a_leading_zero_is_refused_as_sink_urls_refuse_it(url, says):
+    """seed=010 read as 10 here, while a sink URL refused queue=010 (C reads 010 as octal 8; a user who typed 08
+    meant something): one rule for both, refused before anything opens, naming the option and the value."""
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(url)
+    assert says in str(info.value) and url.split("?")[1] in str(info.value)  # record+ names its inner URL
+
+
+def test_camera_and_sink_urls_give_one_reason_for_a_leading_zero():
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks import open_sink
+
+    for raw, write in (("010", "write 10;"), ("-025", "write -25;"), ("+08", "write +8;")):
+        with pytest.raises(RigConfigError) as rig:
+            RigUrl.parse(f"sim://?offset={raw.replace('+', '%2B')}").take_int("offset", 0)
+        with pytest.raises(SinkConfigError) as sink:
+            open_sink(f"memory://?queue={raw.replace('+', '%2B')}")
+        rig_reason = str(rig.value).split(f"offset={raw!r}: ")[1]
+        sink_reason = str(sink.value).split(f"queue={raw!r}: ")[1]
+        assert rig_reason == sink_reason and write in rig_reason
+
+
+def test_a_number_with_a_fraction_reads_a_leading_zero_as_decimal():
+    """Floats are not ambiguous (C's strtod reads 08.5 and 010 as decimal), as in sink URLs."""
+    url = RigUrl.parse("sim://?fps=030&noise=01.5&offset_ms=-010&drop=.05")
+    assert url.take_float("fps", 0.0) == 30.0
+    assert url.take_float("noise", 0.0) == 1.5
+    assert url.take_float("offset_ms", 0.0, lo=-1000.0) == -10.0
+    assert url.take_float("drop", 0.0) == 0.05
 
 
 @pytest.mark.parametrize(
@@ -38,7 +79,7 @@ def test_an_integer_with_a_leading_zero_is_decimal():
         ("fps=-1", lambda u: u.take_float("fps", 30.0, lo=0.0), ["fps='-1'", "[0.0, None]"]),
         ("fps=nan", lambda u: u.take_float("fps", 30.0), ["fps='nan'"]),
         ("fps=inf", lambda u: u.take_float("fps", 30.0, lo=0.0), ["fps='inf'"]),
-        ("seed=1.5", lambda u: u.take_int("seed", 0), ["seed='1.5'", "an integer"]),
+        ("seed=1.5", lambda u: u.take_int("seed", 0), ["seed='1.5'", "expected a whole number"]),
         ("loop=maybe", lambda u: u.take_bool("loop", False), ["loop='maybe'", "boolean"]),
         ("policy=best", lambda u: u.take_str("policy", "latest", choices=("latest", "all")), ["policy='best'", "latest"]),
     ],

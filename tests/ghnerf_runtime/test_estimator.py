@@ -499,3 +499,20 @@ def test_encoder_heatmaps_need_a_model_that_has_them(full_session, scene_rig):
         Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False)))
     with pytest.raises(ConfigError, match="heatmaps.source"):
         config_from_dict({"heatmaps": {"source": "volumetric"}})
+
+
+def test_an_empty_room_with_rendered_heatmaps_renders_them_to_ask_whether_someone_is_there(full_session, scene_rig):
+    """The rendered source cannot skip its render graphs where nobody is (the encoder source runs the human graph
+    alone there): the presence gate reads the rendered heatmaps' own peaks against their own threshold
+    (presence.min_confidence, 0.4 rendered), so nothing is known of presence before render_heat has run
+    (docs/runtime.md, "Compute only what the scene requires", "Rendered heatmaps, nobody there")."""
+    rig, frames = scene_rig
+    ran = {}
+    for source in ("rendered", "encoder"):
+        rec = Recorder(full_session)
+        est = Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source, flip_test=False)))
+        for pair in frames:
+            r = est.estimate(pair)
+            assert all(r.frame_ok.values()) and r.missing.all() and not r.tracked and _all_finite(r)
+        ran[source] = {g for g, _ in rec.calls}
+    assert ran == {"rendered": {"encoder", "volume", "render_heat"}, "encoder": {"human"}}

@@ -297,3 +297,16 @@ def test_a_depth_beyond_float16_is_held_at_its_largest_not_inf(shot):
     assert np.isfinite(p.planes).all()
     assert p.planes[8, 0, :8].min() == np.finfo(np.float16).max
     assert np.abs(p.planes[8][depth > 0]).max() < 1.0  # the subject keeps its depth about the median
+
+
+def test_a_nan_depth_is_the_planes_no_depth_value_and_an_infinite_one_its_largest():
+    """float16_depth passed NaN through (np.clip keeps it): one NaN pixel spread through the painter's
+    convolutions into a NaN patch. NaN is now 0, the plane's value off the subject; +-inf clip as a wild finite
+    depth does. The training caches call the same function (training.fill_features), so both sides agree."""
+    from ghnerf_runtime.novel_painter import F16_MAX, float16_depth
+
+    rel = np.array([[np.nan, np.inf, -np.inf], [1.5, 7e4, -7e4]])
+    got = float16_depth(rel)
+    assert got.dtype == np.float16 and np.isfinite(got).all()
+    assert got.astype(np.float64).tolist() == [[0.0, F16_MAX, -F16_MAX], [1.5, F16_MAX, -F16_MAX]]
+    assert float16_depth(np.float64(np.nan)) == 0.0  # a scalar too

@@ -485,3 +485,23 @@ def test_the_train_commands_score_json_is_strict_json(train_cache, truth_cache, 
     score = json.loads((out / "score.json").read_text(), parse_constant=refuse)
     assert score["rows"]["novel, 150-180"] == {"n": 0, "shown": None, "fill:learnt": None}
     assert score["steps"] == 1 and score["config"]["net"]["width"] == 8
+
+
+@pytest.mark.parametrize("name", ["fill_net.pt", "score.md", "score.json"])
+def test_a_write_cut_short_leaves_the_previous_file_not_half_of_one(name, train_cache, truth_cache, tmp_path,
+                                                                      disk_full_at, monkeypatch):
+    """train wrote fill_net.pt, score.md and score.json in place: a full disk or a crash left half a file under
+    its name, which export reads next (a cut checkpoint, a score.json that is not JSON)."""
+    out = tmp_path / "run"
+    assert _train(train_cache, truth_cache, out) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {"fill_net.pt", "score.md", "score.json"}
+    disk_full_at(out, name)
+    with pytest.raises(OSError, match="No space left"):
+        _train(train_cache, truth_cache, out)
+    monkeypatch.undo()
+    after = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(after) == set(before)  # no temporary file left beside them
+    assert after[name] == before[name]  # the files written before the cut one are the new run's, whole
+    load_net(out / "fill_net.pt")
+    json.loads((out / "score.json").read_text())

@@ -195,3 +195,16 @@ def test_the_painters_figures_are_strict_json(tmp_path, data64):
     report = _strict(out.with_suffix(".json").read_text())
     assert report["held_out"]["novel, 150-180"] == {"n": 0, "shown": None, "fill:learnt": None}
     assert report["held_out"]["novel, all"] == rows["novel, all"] and report["steps"] == 7
+
+
+def test_an_export_cut_short_leaves_the_previous_graph_not_half_of_one(tmp_path, disk_full_at, monkeypatch):
+    """export_painter wrote the graph in place, then rewrote it with its metadata: a crash or a full disk left
+    a graph without its contract, or half of one, under the name the runtime loads."""
+    out = export_painter(_net(0), tmp_path / "novel_painter.onnx", {"trained_on": "first"})
+    before = out.read_bytes()
+    disk_full_at(tmp_path, "novel_painter.onnx")
+    with pytest.raises(OSError, match="No space left"):
+        export_painter(_net(1), out, {"trained_on": "second"})
+    monkeypatch.undo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["novel_painter.onnx"]  # no temporary file beside it
+    assert out.read_bytes() == before and NovelPainter.load(out).meta["ghnerf_painter.trained_on"] == "first"
