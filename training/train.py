@@ -24,7 +24,8 @@ the process count and every RNG state, so ``--resume`` continues bit-identically
 (on CPU): from ``last.pt``, else from the newest readable ``ckpt_*.pt``; in an empty folder it starts fresh.
 It refuses another config, another model config (the one the checkpoint stores), another process count, and a
 file that is no training checkpoint (a weights-only ``ghnerf.pt`` placed as ``last.pt``), before anything is written;
-``log.jsonl`` keeps the records up to the checkpoint's step. Without ``--resume`` a folder that holds checkpoints is
+``log.jsonl`` keeps the records up to the checkpoint's step, and the later ones are an uninterrupted run's (the
+checkpoint keeps the log's running window and last PCK). Without ``--resume`` a folder that holds checkpoints is
 refused (exit 2), so a new run never overwrites another. The dataset and split are opened (and checked against
 the model's resolution) before ``config.json`` is written; a missing one exits 2 with one line. A NaN or infinite
 loss term or gradient stops the run before that update, and a checkpoint that cannot be written (a full disk)
@@ -1020,12 +1021,17 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     per_epoch = len(ds) // info.world
     clock = RunClock.resumed(ck and ck.get("extra"), step, torch.get_num_threads())
     stopped_early = False
-    window: dict[str, list[float]] = {}
-    last_pck = float("nan")
+    # The log's state: the steps since the last record and the last PCK. A checkpoint keeps it, so the records
+    # after a resume are those of an uninterrupted run (the first one averaged only the resumed steps, and its
+    # pck was NaN until the next pck_every step); checkpoints made before it was kept start afresh.
+    logged = ((ck and ck.get("extra")) or {}).get("log_state") or {}
+    window: dict[str, list[float]] = {k: [float(x) for x in v] for k, v in logged.get("window", {}).items()}
+    last_pck = float(logged.get("pck", float("nan")))
     item = None
 
     def checkpoint(s: int) -> None:
-        extra = {"segments": clock.segments(s), "world_size": info.world}
+        extra = {"segments": clock.segments(s), "world_size": info.world,
+                 "log_state": {"window": {k: list(v) for k, v in window.items()}, "pck": last_pck}}
         if info.world > 1:
             states = [None] * info.world
             dist.all_gather_object(states, rng_state(gen))
