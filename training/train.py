@@ -733,9 +733,6 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     # config.json was written into the new run folder
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"{out_dir}: is a file; --out names the run folder")
-    for key in ("init", "human_init"):
-        if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
-            raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
     if not resume:
         refuse_existing_run(out_dir)  # before config.json is overwritten with the new one
     device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
@@ -749,6 +746,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     start = resume_checkpoint(out_dir, verbose=info.main) if resume else None
     if start is not None:
         check_resumable(cfg, start, world=info.world)  # before config.json is overwritten with the new one
+    else:  # a resume takes the checkpoint's weights, not these files: they may have moved since the run began
+        for key in ("init", "human_init"):
+            if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
+                raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -976,14 +977,15 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
 
     seed_everything(cfg.seed)  # same initial weights on every rank
     model = GHNeRF(mcfg).to(device).train()
-    if cfg.init:
+    if cfg.init and start is None:  # (a resume's checkpoint holds the weights these files gave its start)
         if model.human is None:
             raise ConfigError("init: the preset has no human encoder")
         from training.model.human_encoder import load_torchvision_resnet18
         load_torchvision_resnet18(model.human.trunk, cfg.init)
     if cfg.human_init:
-        from training.pretrain_human import load_human
-        load_human(model, cfg.human_init)
+        if start is None:
+            from training.pretrain_human import load_human
+            load_human(model, cfg.human_init)
     elif cfg.pretrain_human and info.main and not resume:
         print("warning: the config has a pretrain_human block but no human_init: the human encoder starts from "
               "scratch (run `python -m training.pretrain_human` first and pass its human.pt, or `make model`)",

@@ -251,6 +251,26 @@ def test_init_loads_torchvision_weights_into_the_human_encoder(data64, tmp_path)
         train(build_config({"preset": "edge128_baseline", "data": str(data64), "init": "x.pth"}), tmp_path / "r2")
 
 
+def test_a_resume_does_not_need_the_init_file_the_checkpoint_replaces(data64, tmp_path):
+    # --resume refused a run whose torchvision file had since been moved ("init: ...: no such file"), though the
+    # checkpoint's weights replace whatever init loads; a fresh start still needs it
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    torch.manual_seed(5)
+    torch.save(GHNeRF(preset("tiny")).human.trunk.state_dict(), tmp_path / "resnet18.pth")
+    cfg = tiny_cfg(data64, iterations=2, init=str(tmp_path / "resnet18.pth"), pck_every=0)
+    _, straight = train(cfg, tmp_path / "a", quiet=True)
+    train(tiny_cfg(data64, iterations=1, init=str(tmp_path / "resnet18.pth"), pck_every=0), tmp_path / "b", quiet=True)
+    (tmp_path / "resnet18.pth").unlink()
+    summary, resumed = train(cfg, tmp_path / "b", resume=True, quiet=True)
+    assert summary["steps"] == 2
+    a, b = straight.state_dict(), resumed.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with pytest.raises(ConfigError, match="^init: .*no such file"):  # nothing to resume from: the file is needed
+        train(cfg, tmp_path / "c", resume=True, quiet=True)
+
+
 def test_step_losses_keep_every_loss_setting():
     from dataclasses import replace
 
