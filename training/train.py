@@ -24,7 +24,8 @@ the process count and every RNG state, so ``--resume`` continues bit-identically
 (on CPU): from ``last.pt``, else from the newest readable ``ckpt_*.pt``; in an empty folder it starts fresh.
 It refuses another config, another model config (the one the checkpoint stores), another process count, and a
 file that is no training checkpoint (a weights-only ``ghnerf.pt`` placed as ``last.pt``), before anything is written;
-``log.jsonl`` keeps the records up to the checkpoint's step. Without ``--resume`` a folder that holds checkpoints is
+``log.jsonl`` keeps the records up to the checkpoint's step, and the later ones are an uninterrupted run's (the
+checkpoint keeps the log's running window and last PCK). Without ``--resume`` a folder that holds checkpoints is
 refused (exit 2), so a new run never overwrites another. The dataset and split are opened (and checked against
 the model's resolution) before ``config.json`` is written; a missing one exits 2 with one line. A NaN or infinite
 loss term or gradient stops the run before that update, and a checkpoint that cannot be written (a full disk)
@@ -732,9 +733,6 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     # config.json was written into the new run folder
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"{out_dir}: is a file; --out names the run folder")
-    for key in ("init", "human_init"):
-        if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
-            raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
     if not resume:
         refuse_existing_run(out_dir)  # before config.json is overwritten with the new one
     device_kind = "cuda" if cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available()) else "cpu"
@@ -748,6 +746,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
     start = resume_checkpoint(out_dir, verbose=info.main) if resume else None
     if start is not None:
         check_resumable(cfg, start, world=info.world)  # before config.json is overwritten with the new one
+    else:  # a resume takes the checkpoint's weights, not these files: they may have moved since the run began
+        for key in ("init", "human_init"):
+            if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
+                raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -975,14 +977,15 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
 
     seed_everything(cfg.seed)  # same initial weights on every rank
     model = GHNeRF(mcfg).to(device).train()
-    if cfg.init:
+    if cfg.init and start is None:  # (a resume's checkpoint holds the weights these files gave its start)
         if model.human is None:
             raise ConfigError("init: the preset has no human encoder")
         from training.model.human_encoder import load_torchvision_resnet18
         load_torchvision_resnet18(model.human.trunk, cfg.init)
     if cfg.human_init:
-        from training.pretrain_human import load_human
-        load_human(model, cfg.human_init)
+        if start is None:
+            from training.pretrain_human import load_human
+            load_human(model, cfg.human_init)
     elif cfg.pretrain_human and info.main and not resume:
         print("warning: the config has a pretrain_human block but no human_init: the human encoder starts from "
               "scratch (run `python -m training.pretrain_human` first and pass its human.pt, or `make model`)",
@@ -1020,12 +1023,17 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
     per_epoch = len(ds) // info.world
     clock = RunClock.resumed(ck and ck.get("extra"), step, torch.get_num_threads())
     stopped_early = False
-    window: dict[str, list[float]] = {}
-    last_pck = float("nan")
+    # The log's state: the steps since the last record and the last PCK. A checkpoint keeps it, so the records
+    # after a resume are those of an uninterrupted run (the first one averaged only the resumed steps, and its
+    # pck was NaN until the next pck_every step); checkpoints made before it was kept start afresh.
+    logged = ((ck and ck.get("extra")) or {}).get("log_state") or {}
+    window: dict[str, list[float]] = {k: [float(x) for x in v] for k, v in logged.get("window", {}).items()}
+    last_pck = float(logged.get("pck", float("nan")))
     item = None
 
     def checkpoint(s: int) -> None:
-        extra = {"segments": clock.segments(s), "world_size": info.world}
+        extra = {"segments": clock.segments(s), "world_size": info.world,
+                 "log_state": {"window": {k: list(v) for k, v in window.items()}, "pck": last_pck}}
         if info.world > 1:
             states = [None] * info.world
             dist.all_gather_object(states, rng_state(gen))

@@ -313,6 +313,30 @@ def test_a_copy_with_t_in_metres_is_refused(tmp_path, subject):
     assert err.value.path == str(tmp_path / ANNOTS)
 
 
+@pytest.mark.parametrize("eyes", [
+    [(-0.0375, 0.0, 0.0), (0.0375, 0.0, 0.0)],  # the example rig's 7.5 cm pair
+    [(0.0, 0.0, 0.0), (0.008, 0.008, 0.0)],  # 11 mm on a diagonal: under 10 mm along either axis
+])
+def test_a_short_baseline_rig_written_in_millimetres_reads_back(tmp_path, subject, eyes):
+    # the wrong-unit check refused every rig under 10 cm (per axis), so write_zju_format's own output of a stereo
+    # pair a few centimetres apart could not be read; only a rig no usable calibration has is taken for metres now
+    _, _, frames = subject
+    f = frames[0]
+    cams = []
+    for name, eye in zip(("left", "right"), eyes):
+        R, t = look_at(np.array(eye), np.array([0.0, -0.9, 3.0]))
+        cams.append(Camera(name, SIZE, SIZE, intrinsics_from_fov(SIZE, SIZE, 62.0), np.zeros(5), R, t))
+    root = write_zju_format(tmp_path / "pair", cams, [ZjuFrame(f.images[:2], f.masks[:2])], image_ext=".png")
+    seq = ZjuSequence(root)
+    assert np.allclose(seq.camera(1).t, cams[1].t, rtol=0, atol=1e-12)
+    # the same pair in metres, read as millimetres, is 0.075 mm (0.011 mm) wide: still refused
+    annots = np.load(root / ANNOTS, allow_pickle=True).item()
+    annots["cams"]["T"] = [np.asarray(t) / 1000.0 for t in annots["cams"]["T"]]
+    np.save(root / ANNOTS, annots, allow_pickle=True)
+    with pytest.raises(DatasetError, match=r"cams.T: the 2 camera centres lie within 0\.\d+ mm"):
+        ZjuSequence(root)
+
+
 def test_masks_and_sizes_are_read_as_a_partial_copy_needs(tmp_path, subject):
     import cv2
 

@@ -251,6 +251,26 @@ def test_init_loads_torchvision_weights_into_the_human_encoder(data64, tmp_path)
         train(build_config({"preset": "edge128_baseline", "data": str(data64), "init": "x.pth"}), tmp_path / "r2")
 
 
+def test_a_resume_does_not_need_the_init_file_the_checkpoint_replaces(data64, tmp_path):
+    # --resume refused a run whose torchvision file had since been moved ("init: ...: no such file"), though the
+    # checkpoint's weights replace whatever init loads; a fresh start still needs it
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    torch.manual_seed(5)
+    torch.save(GHNeRF(preset("tiny")).human.trunk.state_dict(), tmp_path / "resnet18.pth")
+    cfg = tiny_cfg(data64, iterations=2, init=str(tmp_path / "resnet18.pth"), pck_every=0)
+    _, straight = train(cfg, tmp_path / "a", quiet=True)
+    train(tiny_cfg(data64, iterations=1, init=str(tmp_path / "resnet18.pth"), pck_every=0), tmp_path / "b", quiet=True)
+    (tmp_path / "resnet18.pth").unlink()
+    summary, resumed = train(cfg, tmp_path / "b", resume=True, quiet=True)
+    assert summary["steps"] == 2
+    a, b = straight.state_dict(), resumed.state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    with pytest.raises(ConfigError, match="^init: .*no such file"):  # nothing to resume from: the file is needed
+        train(cfg, tmp_path / "c", resume=True, quiet=True)
+
+
 def test_step_losses_keep_every_loss_setting():
     from dataclasses import replace
 
@@ -366,6 +386,30 @@ def test_resume_drops_the_log_records_past_the_checkpoint(data64, tmp_path):
         fh.write('{"step": 3, "lo')  # and a line cut short by a crash
     train(tiny_cfg(data64, pck_every=0), run, resume=True, quiet=True)
     assert [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()] == [1, 2]
+
+
+def test_a_resumed_run_logs_the_records_an_uninterrupted_one_does(data64, tmp_path):
+    # the log window (steps since the last record) and the last PCK were not kept: the first record after a resume
+    # averaged only the resumed steps and carried pck NaN until the next pck_every step
+    import math
+    import shutil
+
+    def records(run):
+        out = []
+        for line in (run / "log.jsonl").read_text().splitlines():
+            rec = json.loads(line)
+            rec.pop("time_s")
+            out.append({k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in rec.items()})
+        return out
+
+    cfg = tiny_cfg(data64, iterations=4, log_every=2, pck_every=3)
+    train(cfg, tmp_path / "straight", quiet=True)
+    shutil.copytree(tmp_path / "straight", tmp_path / "cut")
+    shutil.copyfile(tmp_path / "cut" / "ckpt_0000003.pt", tmp_path / "cut" / "last.pt")  # killed after step 3
+    train(cfg, tmp_path / "cut", resume=True, quiet=True)
+    straight = records(tmp_path / "straight")
+    assert [r["step"] for r in straight] == [2, 4] and straight[1]["pck"] is not None  # step 3's PCK
+    assert records(tmp_path / "cut") == straight
 
 
 def test_a_zero_heat_weight_trains_and_ddp_is_told_of_unused_heads(data64, tmp_path):

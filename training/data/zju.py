@@ -45,6 +45,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import NUM_JOINTS
 from ghnerf_runtime.geometry import Camera
+from ghnerf_runtime.geometry.rig import MIN_BASELINE_M
 from training.data.errors import DatasetError
 
 log = logging.getLogger(__name__)
@@ -76,9 +77,11 @@ def _as_rotation(value, path: Path, c: int) -> np.ndarray:
     return R
 
 
-#: Camera centres closer together than this (m) are taken for a T in the wrong unit: ZJU-MoCap's rings of
-#: cameras span metres, and T in metres read as millimetres puts them all within a few millimetres.
-MIN_CAMERA_SPREAD_M = 0.1
+#: Camera centres all closer together than this (m) are taken for a T in the wrong unit: T in metres read as
+#: millimetres shrinks a rig a thousandfold (ZJU-MoCap's ring of several metres to a few millimetres). It is the
+#: runtime's shortest stereo baseline, so no usable rig is refused: a two-camera rig of a few centimetres (the
+#: example rig's 7.5 cm, written by ``write_zju_format``) is read, and any rig under 10 m in metres is caught.
+MIN_CAMERA_SPREAD_M = MIN_BASELINE_M
 
 
 def parse_cameras(annots: dict, path: Path) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
@@ -102,11 +105,13 @@ def parse_cameras(annots: dict, path: Path) -> list[tuple[np.ndarray, np.ndarray
                                      f"got {K.shape}, {T.shape}")
         out.append((K, _as_rotation(cams["R"][c], path, c), T / MM_PER_M, D))
     centres = np.array([-R.T @ t for _, R, t, _ in out])
-    spread = float(np.ptp(centres, axis=0).max()) if len(out) > 1 else np.inf
+    # the largest distance between two centres (not one axis' extent: a pair on a diagonal spans less per axis)
+    spread = float(np.linalg.norm(centres[:, None] - centres[None], axis=-1).max()) if len(out) > 1 else np.inf
     if spread < MIN_CAMERA_SPREAD_M:  # a copy already in metres, read as millimetres: every camera at the origin
-        raise DatasetError(path, f"cams.T: the {len(out)} camera centres lie within {1000 * spread:.1f} mm of one "
-                                 f"another once read as millimetres (ZJU-MoCap stores T in mm): is this copy's T "
-                                 "in metres? Multiply it by 1000")
+        raise DatasetError(path, f"cams.T: the {len(out)} camera centres lie within {1000 * spread:.2f} mm of one "
+                                 f"another once read as millimetres (ZJU-MoCap stores T in mm; no usable rig is "
+                                 f"under {1000 * MIN_CAMERA_SPREAD_M:g} mm): is this copy's T in metres? Multiply "
+                                 "it by 1000")
     return out
 
 
