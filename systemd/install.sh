@@ -9,8 +9,8 @@
 # constraints.txt; the models and docs under PREFIX; the unit file, the udev rules and, when none is
 # there yet, /etc/ghnerf/daemon.json and 61-ghnerf-local.rules (yours: never overwritten); a system user
 # `ghnerf` in plugdev, dialout and video; the config checked with --validate-config (the model loaded, as
-# the start does); then systemd and udev reloaded and the service enabled and started. docs/daemon.md has
-# the details.
+# the start does); then systemd and udev reloaded and the service enabled and started.
+# docs/daemon.md has the details.
 set -euo pipefail
 
 PREFIX=/opt/ghnerf

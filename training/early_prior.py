@@ -1,8 +1,9 @@
 """``python -m training.early_prior JOB``: the skeleton prior from the pretrained encoder, beside the joint run.
 
 The joint run keeps the pretrained encoder frozen (``freeze_human``), so the keypoint graph that ``make model``
-exports after it is the pretraining's encoder, byte for byte (the ``human`` graph of a model built from the run's
-config with ``human_init`` loaded has the same sha256 as the one exported from the finished run). The prior
+exports after it is the pretraining's encoder (the ``human`` graph of a model built from the run's config with
+``human_init`` loaded is the one exported from the finished run, byte for byte but for the weights id each export
+stamps: ``training.model_card.graph_sha256``, which leaves the id out, is the same). The prior
 learns from that graph alone, so it need not wait for the joint run: on two cores the pipeline trains it at one
 thread while the joint run takes the other (``training.pipeline.side_by_side_plan``).
 
@@ -66,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from training import skeleton_prior as sp
-    from training.model_card import sha256
+    from training.model_card import graph_sha256, sha256
     from training.pipeline import early_prior_current
 
     job_path = Path(args.job)
@@ -81,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     # the lane's share of the cores (onnxruntime's calibration sessions take their own for a few seconds)
     torch.set_num_threads(job["threads"])
     graphs = export_keypoint_graph(job["train_config"], job["data"], job["calib_scenes"], folder)
-    request = {**job["request"], "keypoints": {name: sha256(p) for name, p in graphs.items()}}
+    request = {**job["request"], "keypoints": {name: graph_sha256(p) for name, p in graphs.items()}}
     if sp.main(job["prior_argv"]) != 0:
         return 1
     (folder / REQUEST_FILE).write_text(json.dumps({"request": request, "prior": str(prior),

@@ -24,6 +24,26 @@ def sha256(path: str | Path, chunk: int = 1 << 20) -> str:
     return h.hexdigest()
 
 
+def graph_sha256(path: str | Path) -> str:
+    """The sha256 of the ONNX graph at ``path`` with its weights id left out of the metadata: what the graph
+    computes. The early prior's keypoint graph and the finished export's are the same frozen encoder, but each
+    export stamps the id of the whole model it came from (``training.export.export.weights_id``), so their file
+    hashes differ while their joints do not."""
+    import onnx  # noqa: PLC0415 (the card itself needs no onnx)
+    from google.protobuf.message import DecodeError  # noqa: PLC0415
+
+    from ghnerf_runtime.contract import WEIGHTS_ID_KEY  # noqa: PLC0415
+
+    try:
+        m = onnx.load(str(path))
+    except (DecodeError, ValueError):  # not a graph: its bytes are all there is to compare
+        return sha256(path)
+    kept = [p for p in m.metadata_props if p.key != WEIGHTS_ID_KEY]
+    del m.metadata_props[:]
+    m.metadata_props.extend(kept)
+    return hashlib.sha256(m.SerializeToString(deterministic=True)).hexdigest()
+
+
 def write_atomic(path: str | Path, data: str | bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file in the same folder and ``os.replace``: a crash leaves
     the old file or the new one, never half of one (the pipeline's stamps and cards are read back as JSON)."""

@@ -451,7 +451,7 @@ def _pretrain_progress(cfg: PipelineConfig, variant: str) -> int:
 
 def early_prior_current(folder: Path, request: dict, human: Path) -> bool:
     """The early prior in ``folder`` learnt from this ``human.pt`` for this request (keypoint graphs aside, which
-    follow from the encoder: its export is byte for byte the same) and is intact. The pipeline asks before it
+    follow from the encoder: its export is the same graph, the weights id aside) and is intact. The pipeline asks before it
     plans the lane, :mod:`training.early_prior` before it exports."""
     from training.early_prior import REQUEST_FILE
     from training.model_card import sha256
@@ -1053,9 +1053,10 @@ def early_prior_request(cfg: PipelineConfig, keypoints: dict[str, str], data: An
 
 def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
     """Copy the early prior into the model folder when it was trained on this folder's keypoint graphs (same
-    sha256) for the same request, and intact; False (nothing copied) otherwise."""
+    :func:`~training.model_card.graph_sha256`: the weights id aside) for the same request, and intact; False
+    (nothing copied) otherwise."""
     from training.early_prior import REQUEST_FILE
-    from training.model_card import sha256
+    from training.model_card import graph_sha256, sha256
     from training.skeleton_prior import FILE_NAME
 
     folder, staged = cfg.out / variant, early_prior_dir(cfg, variant)
@@ -1063,7 +1064,7 @@ def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
         record = json.loads((staged / REQUEST_FILE).read_text())
         prior = Path(record["prior"])
         graphs = keypoint_graphs({str(p): None for p in folder.glob("*.onnx")})
-        wanted = early_prior_request(cfg, {Path(p).name: sha256(p) for p in graphs}, data, cfg.threads)
+        wanted = early_prior_request(cfg, {Path(p).name: graph_sha256(p) for p in graphs}, data, cfg.threads)
         if not graphs or _digest(record["request"]) != _digest(wanted) or sha256(prior) != record["prior_sha256"]:
             log.info("prior: the early prior in %s does not match %s; training it here", staged, folder)
             return False
@@ -1073,12 +1074,36 @@ def adopt_early_prior(cfg: PipelineConfig, variant: str, data: Any) -> bool:
             log.info("prior: the early prior in %s is unreadable (%s); training it here", staged, e)
         return False
     out = folder / FILE_NAME
-    write_atomic(out, prior.read_bytes())  # (a small MLP) never half a prior beside the graphs
+    write_atomic(out, prior_for_folder(prior, folder))  # (a small MLP) never half a prior beside the graphs
     report.update({"file": str(out), "trained_in": str(prior),
                    "trained_beside": "the joint run (training.early_prior, from the pretrained encoder)"})
     write_atomic(out.with_suffix(".json"), json.dumps(report, indent=1) + "\n")
     log.info("prior: taken from %s (trained beside the joint run on the same keypoint graphs)", staged)
     return True
+
+
+def prior_for_folder(prior: Path, folder: Path) -> bytes:
+    """The early prior's file with its encoder's sha256 (``ghnerf_skeleton.encoder_sha256``, which the runtime
+    checks against the file beside it) set to that of ``folder``'s encoder file: the same graph as the one it
+    learnt from (:func:`adopt_early_prior` checked it), under another weights id, so another file hash."""
+    import onnx  # noqa: PLC0415
+    from google.protobuf.message import DecodeError  # noqa: PLC0415
+
+    from ghnerf_runtime.skeleton_prior import META_PREFIX  # noqa: PLC0415
+    from training.model_card import sha256  # noqa: PLC0415
+
+    try:
+        m = onnx.load(str(prior))
+    except (DecodeError, ValueError):  # not a graph (the runtime refuses it, naming it): copied as it is
+        return prior.read_bytes()
+    props = {p.key: p.value for p in m.metadata_props}
+    name = props.get(META_PREFIX + "encoder_file")
+    if not name:  # a prior that records no encoder is taken as it is (SkeletonPrior.check_encoder)
+        return prior.read_bytes()
+    props[META_PREFIX + "encoder_sha256"] = sha256(folder / name)
+    del m.metadata_props[:]
+    onnx.helper.set_model_props(m, props)
+    return m.SerializeToString()
 
 
 def stage_prior(cfg: PipelineConfig, variant: str, data: Any = None, adopt: bool = True) -> tuple[list[Path], dict]:

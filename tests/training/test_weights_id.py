@@ -127,3 +127,43 @@ def test_the_painter_is_not_part_of_the_check(two_exports, tmp_path):
     blend_painter(folder / "novel_painter.onnx")
     s = ModelSession.load(SessionConfig(model_dir=str(folder), warmup=False), GRAPHS, novel_painter=True)
     assert s.novel_painter is not None and s.weights_id == weights_id(model)
+
+
+def test_the_graph_hash_leaves_the_weights_id_out_and_the_adopted_prior_names_the_folders_encoder(tmp_path):
+    # the early prior's keypoint graph and the finished export's are one frozen encoder under two weights ids:
+    # the pipeline compares them without the id, and the prior it adopts must pass the runtime's encoder check
+    import onnx
+    from onnx import TensorProto, helper
+
+    from ghnerf_runtime.contract import WEIGHTS_ID_KEY
+    from ghnerf_runtime.skeleton_prior import META_PREFIX
+    from training.model_card import graph_sha256, sha256
+    from training.pipeline import prior_for_folder
+
+    def graph(path, weights, scale=1.0):
+        x = helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])
+        y = helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])
+        k = helper.make_tensor("k", TensorProto.FLOAT, [1], [scale])
+        m = helper.make_model(helper.make_graph([helper.make_node("Mul", ["x", "k"], ["y"])], "g", [x], [y], [k]))
+        helper.set_model_props(m, {WEIGHTS_ID_KEY: weights, "other": "kept"})
+        onnx.save(m, str(path))
+        return path
+
+    early = graph(tmp_path / "early.onnx", "a" * 64)
+    final = graph(tmp_path / "human.int8.onnx", "b" * 64)
+    other = graph(tmp_path / "other.onnx", "a" * 64, scale=2.0)
+    assert sha256(early) != sha256(final) and graph_sha256(early) == graph_sha256(final)
+    assert graph_sha256(other) != graph_sha256(early)  # other weights, same id: still another graph
+    (tmp_path / "junk.onnx").write_bytes(b"not a graph")
+    assert graph_sha256(tmp_path / "junk.onnx") == sha256(tmp_path / "junk.onnx")
+
+    prior = tmp_path / "prior.onnx"
+    graph(prior, "c" * 64)
+    m = onnx.load(str(prior))
+    helper.set_model_props(m, {META_PREFIX + "encoder_file": "human.int8.onnx",
+                               META_PREFIX + "encoder_sha256": sha256(early), "kept": "yes"})
+    onnx.save(m, str(prior))
+    adopted = onnx.load_from_string(prior_for_folder(prior, tmp_path))
+    props = {p.key: p.value for p in adopted.metadata_props}
+    assert props[META_PREFIX + "encoder_sha256"] == sha256(final) and props["kept"] == "yes"
+    assert props[META_PREFIX + "encoder_file"] == "human.int8.onnx"
