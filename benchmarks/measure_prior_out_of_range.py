@@ -165,7 +165,8 @@ def held_out(data: str, model_dir: Path, scenes: int, limits: list[float]) -> in
         name = "no check" if limit == np.inf else f"limit {limit:g} m"
         print(f"  {name:14s} pairs falling back {int(back.sum()):3d}/{n}  MPJPE over the joints reported "
               f"{1e3 * err[found].mean():6.2f} mm (median {1e3 * np.median(err[found]):5.1f}), found "
-              f"{100 * found.sum() / ok.sum():6.2f} %" + (f"  (scenes {np.flatnonzero(back).tolist()})" if 0 < back.sum() <= 5 else ""))
+              f"{100 * found.sum() / ok.sum():6.2f} %"
+              + (f"  (scenes {np.flatnonzero(back).tolist()})" if 0 < back.sum() <= 5 else ""))
     return 0
 
 
