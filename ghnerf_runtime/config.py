@@ -365,6 +365,11 @@ class Joints3DConfig:
             estimate) exceeds this is missing (docs/runtime.md, "The skeleton prior").
         prior_flip_test: skeleton prior: also run it on the mirrored pair and average the two
             answers (in the same batch: about 0.15 ms more; docs/runtime.md, "The skeleton prior").
+        max_prior_disagreement_m: skeleton prior: a pair whose prior skeleton lies further than this (the
+            median distance over the triangulated joints, :func:`ghnerf_runtime.skeleton_prior.disagreement_m`)
+            from the triangulation is reported as triangulated, as without the prior (``PairResult.prior_fallback``):
+            the prior learnt upright people only and answers a near-upright skeleton for one lying or upside down,
+            with a small expected error. ``0`` turns the check off (docs/runtime.md, "The skeleton prior").
     """
 
     method: str = "triangulate"
@@ -380,6 +385,7 @@ class Joints3DConfig:
     skeleton_prior: str = "auto"
     max_prior_error_m: float = 0.15
     prior_flip_test: bool = True
+    max_prior_disagreement_m: float = 0.25
 
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)
@@ -389,6 +395,7 @@ class Joints3DConfig:
                                                 f"joints; method is {self.method!r})", self.skeleton_prior)
         _number(self, "max_prior_error_m", 0.0, 100.0, lo_open=True)
         _boolean(self, "prior_flip_test")
+        _number(self, "max_prior_disagreement_m", 0.0, 100.0)
         _boolean(self, "single_view_fallback")
         _number(self, "max_reprojection_px", 0.0, 1000.0, lo_open=True)
         _number(self, "min_view_confidence", 0.0, 1.0)

@@ -81,6 +81,7 @@ from ghnerf_runtime.preprocess import (
     preprocess_image,
     upright_roll_deg,
 )
+from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
@@ -134,6 +135,11 @@ class PairResult:
         method: the 3D method used.
         novel_view: the rendered novel view when requested, else ``None`` (also when requested for a
             pair that has no subject to view: a frame rejected, or nobody found).
+        prior_disagreement_m: the skeleton prior's distance from the triangulation (the median over the
+            triangulated joints, :func:`ghnerf_runtime.skeleton_prior.disagreement_m`); ``None`` where the prior
+            did not run or too few joints were triangulated to tell.
+        prior_fallback: the prior ran but its skeleton disagreed with the triangulation by more than
+            ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior).
     """
 
     sequence: int
@@ -151,6 +157,8 @@ class PairResult:
     method: str
     novel_view: NovelView | None = None
     frame_reason: dict[str, str | None] = field(default_factory=dict)
+    prior_disagreement_m: float | None = None
+    prior_fallback: bool = False
 
     def __post_init__(self) -> None:
         reasons = self.frame_reason
@@ -190,6 +198,9 @@ class PairResult:
             "frame_ok": {k: bool(v) for k, v in self.frame_ok.items()},
             "frame_reason": dict(self.frame_reason),  # null: the frame passed (since session 51)
             "method": self.method,
+            # the skeleton prior's check (since session 52): null where the prior did not run or could not be checked
+            "prior_disagreement_m": None if self.prior_disagreement_m is None else r(self.prior_disagreement_m, 4),
+            "prior_fallback": bool(self.prior_fallback),
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
 
@@ -269,6 +280,8 @@ class _Pass:
     novel: "_NovelJob | None" = None  # the novel view rendering in the worker (overlap)
     crops: list | None = None  # the source crop cameras (the novel view's proxy blend reads them)
     someone: bool = False  # the presence gate found someone (always, with the gate off)
+    prior_disagreement_m: float | None = None  # the skeleton prior's check (PairResult's fields of that name)
+    prior_fallback: bool = False
 
     @property
     def frame_ok(self) -> dict:
@@ -382,6 +395,7 @@ class Estimator:
                              and (not (self._human_graph and self.config.flips_encoder_heatmaps)
                                   or session.open_lane("human")))
         self._prior_follow: Joints3D | None = None
+        self._prior_check: tuple[float | None, bool] = (None, False)  # this pair's (disagreement, fell back)
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
@@ -598,7 +612,8 @@ class Estimator:
         names = self.camera_names
         result = PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
                             p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
-                            self.config.joints3d.method, frame_reason=dict(p.frame_reason))
+                            self.config.joints3d.method, frame_reason=dict(p.frame_reason),
+                            prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback)
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -777,7 +792,8 @@ class Estimator:
         follow = self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         _add_ms(timing, "joints_3d", t)
-        return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody)
+        return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
+                     *self._prior_check)
 
     def _features_may_wait(self, regions: Regions) -> bool:
         """Whether a pass with a novel view asked for may run the keypoint-only ``human`` graph, leaving out
@@ -901,6 +917,7 @@ class Estimator:
                    crops: list[Camera], regions: Regions) -> Joints3D:
         cfg = self.config.joints3d
         self._prior_follow = None  # this pair's, set by _with_prior (someone is there) for _track_joints
+        self._prior_check = (None, False)  # this pair's, set by _with_prior
 
         def centroid() -> Joints3D:
             g = self.grid
@@ -940,7 +957,8 @@ class Estimator:
     def _with_prior(self, tri: Joints3D, uv_model: np.ndarray, kp: Keypoints2D, crops: list[Camera]) -> Joints3D:
         """The skeleton prior's joints: refined where triangulated, placed where hidden; a joint whose
         expected error exceeds ``max_prior_error_m`` is missing. Confidence: ``exp(-expected error /
-        0.1 m)`` (0.7 at 35 mm, 0.37 at 100 mm), so it says how far off the joint may be. The box gates
+        0.1 m)`` (0.7 at 35 mm, 0.37 at 100 mm), so it says how far off the joint may be. A skeleton further
+        than ``max_prior_disagreement_m`` from ``tri`` gives ``tri`` instead. The box gates
         (``max_outside_box_m``) still apply after."""
         est = self.skeleton_prior.estimate(uv_model, kp.confidence, kp.valid, [c.P for c in crops],
                                           self.config.joints3d.prior_flip_test)
@@ -953,6 +971,16 @@ class Estimator:
             keep = est.expected_error_m <= max_error_m
             return Joints3D(est.points, np.where(keep, score, 0.0), keep, tri.reprojection_px).sanitised()
 
+        # The prior's expected error is its own guess, small also on poses it never learnt (lying, upside down),
+        # where it answers a near-upright skeleton: a pair whose skeleton lies far from the well-triangulated
+        # joints is reported as triangulated (docs/runtime.md, "The skeleton prior").
+        limit = self.config.joints3d.max_prior_disagreement_m
+        apart = disagreement_m(est.points, tri.points, tri.valid)
+        fallback = limit > 0 and apart is not None and apart > limit
+        self._prior_check = (apart, fallback)
+        if fallback:
+            self._prior_follow = tri  # someone is there (asked of the peaks before); the crop follows what is reported
+            return tri
         self._prior_follow = gated(max(_PRIOR_FOLLOW_MAX_ERROR_M, self.config.joints3d.max_prior_error_m))
         return gated(self.config.joints3d.max_prior_error_m)
 

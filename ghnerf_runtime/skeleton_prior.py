@@ -33,7 +33,8 @@ from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
            "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame",
-           "PriorInputs", "SkeletonEstimate", "SkeletonPrior", "prior_inputs", "mirror_inputs"]
+           "PriorInputs", "SkeletonEstimate", "SkeletonPrior", "prior_inputs", "mirror_inputs",
+           "MIN_CHECK_JOINTS", "disagreement_m"]
 
 #: Bump when the meaning of a feature changes: a file trained on other features is refused.
 FEATURE_VERSION = 2  # 2: DLT points farther than MAX_JOINT_FROM_ROOT_M from the root are not triangulated
@@ -54,6 +55,9 @@ _DEFAULT_DISTANCE_M = 2.5  # no joint at all: a guess this far along the cameras
 # 1.4 m of their geometric median, 1.3 m of the pelvis; 2 m leaves room for taller people and the root's
 # own error, and still drops the wild points, which lie 10 m to 1 km away).
 MAX_JOINT_FROM_ROOT_M = 2.0
+#: :func:`disagreement_m` needs this many triangulated joints: fewer say too little about the whole body (held
+#: out, every pair has 9 or more, docs/runtime.md "The skeleton prior").
+MIN_CHECK_JOINTS = 5
 
 
 @dataclass(frozen=True)
@@ -211,6 +215,27 @@ def mirror_inputs(joint_features: np.ndarray, context: np.ndarray, joints: np.nd
     j = joints[:, list(FLIP_INDEX)] * 1.0
     j[..., 0] = -j[..., 0]
     return f, c, j
+
+
+def disagreement_m(points: np.ndarray, triangulated_points: np.ndarray, triangulated: np.ndarray) -> float | None:
+    """How far the prior's skeleton lies from the triangulation: the median distance (m) between ``points``
+    ``(J, 3)`` and ``triangulated_points`` ``(J, 3)`` over the joints ``triangulated`` ``(J,)`` (those both views
+    found and agree on, :func:`ghnerf_runtime.joints3d.triangulate_joints`); ``None`` with fewer than
+    :data:`MIN_CHECK_JOINTS` of them.
+
+    The prior learnt upright people 2.2-4 m from the rig; on other poses (lying, upside down) it answers a
+    near-upright skeleton and its expected error stays small, while the triangulation follows the peaks. The
+    median, not the mean: the prior exists to overrule the few joints whose two peaks are wrong alike.
+    """
+    pts = np.asarray(points, np.float64)
+    tri = np.asarray(triangulated_points, np.float64)
+    if pts.ndim != 2 or pts.shape[-1] != 3 or tri.shape != pts.shape or np.shape(triangulated) != pts.shape[:1]:
+        raise ShapeError(f"points and triangulated_points must be (J, 3) and triangulated (J,), got {pts.shape}, "
+                         f"{tri.shape}, {np.shape(triangulated)}")
+    use = np.asarray(triangulated, bool) & np.isfinite(pts).all(-1) & np.isfinite(tri).all(-1)
+    if int(use.sum()) < MIN_CHECK_JOINTS:
+        return None
+    return float(np.median(np.linalg.norm(pts[use] - tri[use], axis=-1)))
 
 
 @dataclass(frozen=True)

@@ -517,3 +517,53 @@ def test_inputs_triangulate_as_the_general_dlt():
     np.testing.assert_allclose(inp.frame.to_rig(f[None, :, :3].astype(np.float64))[0][tri], ref.points[tri], atol=2e-5)
     np.testing.assert_allclose(f[tri, 6:8], np.clip(ref.reprojection_error[tri], 0, 20) / 5.0, atol=1e-5)
     np.testing.assert_allclose(f[tri, 8], ref.ray_angle_deg[tri] / 10.0, atol=1e-5)
+
+
+def test_disagreement_is_the_median_distance_over_the_triangulated_joints():
+    from ghnerf_runtime.errors import ShapeError
+    from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS, disagreement_m
+
+    X = _skeleton(1)
+    moved = X.copy()
+    moved[:, 2] += np.linspace(0.0, 0.48, NUM_JOINTS)  # 0, 0.02, ..., 0.48 m apart
+    every = np.ones(NUM_JOINTS, bool)
+    assert disagreement_m(moved, X, every) == pytest.approx(0.24)
+    few = np.zeros(NUM_JOINTS, bool)
+    few[-MIN_CHECK_JOINTS:] = True  # 0.40 ... 0.48: the untriangulated joints do not count
+    assert disagreement_m(moved, X, few) == pytest.approx(0.44)
+    few[-MIN_CHECK_JOINTS] = False
+    assert disagreement_m(moved, X, few) is None  # too few to tell
+    with pytest.raises(ShapeError, match="triangulated"):
+        disagreement_m(moved, X, every[:-1])
+
+
+@pytest.mark.parametrize("offset_m, limit_m, falls_back", [(0.5, 0.25, True), (0.05, 0.25, False), (0.5, 0.0, False)])
+def test_a_prior_that_disagrees_with_the_triangulation_falls_back_to_it(model_with_prior, monkeypatch, offset_m,
+                                                                        limit_m, falls_back):
+    """A prior skeleton far from the well-triangulated joints (a pose the prior never learnt: lying, upside down)
+    is not reported: the pair gets the triangulated joints, as without the prior, and says so. One that agrees
+    keeps the prior's joints; ``max_prior_disagreement_m: 0`` turns the check off."""
+    from ghnerf_runtime import estimator as estimator_module
+    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.joints3d import Joints3D
+    from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
+    centre = 0.5 * (rig.volume.min_corner + rig.volume.max_corner)  # inside every box gate
+    truth = centre + 0.3 * (_skeleton(2) - _skeleton(2).mean(0))
+    tri = Joints3D(truth, np.full(NUM_JOINTS, 0.9, np.float32), np.ones(NUM_JOINTS, bool), np.zeros((NUM_JOINTS, 2)))
+    monkeypatch.setattr(estimator_module, "triangulate_joints", lambda *a, **k: tri)
+    cfg = _config(model_with_prior, max_prior_disagreement_m=limit_m)
+    session = load_session(cfg)
+    prior_points = truth + [0.0, 0.0, offset_m]
+    session.skeleton_prior.estimate = lambda *a, **k: SkeletonEstimate(
+        prior_points, np.full(NUM_JOINTS, 0.02), np.ones(NUM_JOINTS, bool))
+    r = Estimator(session, rig, cfg).estimate(frames, sequence=0)
+    assert not r.missing.any()
+    np.testing.assert_allclose(r.joints_3d, truth if falls_back else prior_points, atol=1e-9)
+    np.testing.assert_allclose(r.confidence, 0.9 if falls_back else np.exp(-0.2), rtol=1e-6)
+    assert r.prior_fallback is falls_back and r.prior_disagreement_m == pytest.approx(offset_m)
+    obj = r.to_json()
+    assert obj["prior_fallback"] is falls_back and obj["prior_disagreement_m"] == pytest.approx(offset_m)
