@@ -822,3 +822,23 @@ def test_a_reset_of_one_camera_keeps_it_beside_the_other():
     assert [(r.camera, r.index, r.timestamp_ns // ms) for r in played] == [
         ("left", 0, 0), ("right", 0, 1), ("left", 1, 33), ("right", 1, 34), ("left", 2, 66), ("right", 2, 67),
         ("left", 3, 99), ("right", 3, 100), ("left", 4, 132), ("right", 4, 133)]
+
+
+def test_a_recorded_stream_url_keeps_no_password_in_the_manifest(tmp_path, sim_cache):
+    """record+opencv://?first=rtsp://user:pass@... wrote the password into manifest.json, in plain text."""
+    from drivers.backends.record import RecordingRigSource
+    from drivers.url import RigUrl
+
+    stream = "rtsp%3A%2F%2Fadmin%3Ahunter2%40cam1%2Fstream%3Ftoken%3Dhunter2"
+    url = RigUrl.parse(f"opencv://?first={stream}&second=0&out={tmp_path / 'take'}")
+    inner_urls = []
+
+    def factory(text, **kwargs):  # the URL the recorder opens, here played by the simulator
+        inner_urls.append(text)
+        return create_rig_source(f"{SIM}&cache={sim_cache}", clock=ManualClock())
+
+    with RecordingRigSource.wrap(url, factory) as source:
+        source.read(timeout_s=5.0)
+    assert "hunter2" in inner_urls[0]  # the stream itself is opened with its credentials
+    shown = read_manifest(tmp_path / "take").source
+    assert "hunter2" not in shown and "rtsp%3A%2F%2Fadmin%3A***%40cam1" in shown and "token%3D***" in shown
