@@ -4,19 +4,56 @@ Every option a backend reads is taken through a typed getter; whatever is left
 afterwards is an unknown option and :meth:`RigUrl.finish` rejects it by name,
 so a typo such as ``sim://?fsp=60`` fails loudly instead of being ignored.
 A ``#`` would start a fragment, which URL parsing drops: it is refused (write ``%23``).
+
+:func:`redact_url` is how a URL is shown (messages, logs, a recording's manifest): without the passwords
+it may carry (a stream URL ``rtsp://user:pass@host/...`` inside an option, a ``token=``).
 """
 from __future__ import annotations
 
 import math
 import re
 from dataclasses import dataclass, field
-from urllib.parse import parse_qsl, unquote, urlsplit
+from urllib.parse import parse_qsl, quote, unquote, urlsplit
 
 from drivers.errors import RigConfigError
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 _LEADING_ZERO = re.compile(r"[+-]?0[0-9_]*[1-9][0-9_]*")
+#: Query keys whose values are secrets (lower-cased): a password or token given as an option.
+_SECRET_KEY = re.compile(r"(.*[_-])?(password|passwd|pass|pwd|token|secret|api_?key|auth|credentials?)")
+#: What a secret is shown as.
+REDACTED = "***"
+
+
+def redact_url(text: str) -> str:
+    """``text`` as it may be shown: the password of any ``user:password@`` (kept: the user and host) and the
+    value of any secret query key (``password=``, ``token=``, ``api_key=``...) replaced by ``***``, also in
+    URLs nested in option values (``opencv://?first=rtsp%3A%2F%2Fuser%3Apass%40cam``). Anything else is
+    returned as written, so text without a secret comes back unchanged.
+    """
+    if not isinstance(text, str) or "://" not in text:
+        return text
+    head, sep, rest = text.partition("://")
+    netloc = re.match(r"[^/?#]*", rest).group()  # as urlsplit takes it, without its ValueErrors (a broken host)
+    userinfo, at, host = netloc.rpartition("@")
+    if at and ":" in userinfo:
+        user = userinfo.split(":", 1)[0]
+        rest = f"{user}:{REDACTED}@{host}" + rest[len(netloc):]
+    before, question, query = rest.partition("?")
+    if not question:
+        return head + sep + rest
+    query, hash_, fragment = query.partition("#")
+    pieces = []
+    for piece in query.split("&"):
+        key, eq, value = piece.partition("=")
+        plain = unquote(value)
+        if eq and _SECRET_KEY.fullmatch(unquote(key).lower()):
+            value = REDACTED
+        elif "://" in plain and redact_url(plain) != plain:
+            value = quote(redact_url(plain), safe="*")
+        pieces.append(key + eq + value)
+    return head + sep + before + question + "&".join(pieces) + hash_ + fragment
 
 
 def whole_number(raw: str) -> int:
@@ -41,7 +78,7 @@ class RigUrl:
     """A parsed rig URL.
 
     Attributes:
-        url: the original text, for error messages.
+        url: the text as given, for messages: passwords redacted (:func:`redact_url`).
         scheme: backend name (``sim``, ``replay``, ``depthai``...).
         target: what follows ``scheme://`` up to ``?`` (a path, a device id, or empty).
         options: the query options not consumed yet.
@@ -59,10 +96,10 @@ class RigUrl:
         try:
             parts = urlsplit(url)
         except ValueError as e:  # e.g. an unclosed '[' reads as a broken IPv6 host
-            raise RigConfigError(f"rig URL {url!r} cannot be parsed: {e}") from None
+            raise RigConfigError(f"rig URL {redact_url(url)!r} cannot be parsed: {e}") from None
         if "#" in url:  # urlsplit would drop the fragment: record into, or play, another directory
             raise RigConfigError(
-                f"rig URL {url!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "
+                f"rig URL {redact_url(url)!r}: '#' starts a URL fragment ({'#' + parts.fragment!r}), which rig URLs do not "
                 "use; write a '#' in a path or option value as %23"
             )
         target = unquote(parts.netloc + parts.path)
@@ -72,9 +109,9 @@ class RigUrl:
         for key, value in parse_qsl(parts.query.replace("+", "%2B"), keep_blank_values=True,
                                     strict_parsing=False):
             if key in options:
-                raise RigConfigError(f"rig URL {url!r}: option {key!r} given twice")
+                raise RigConfigError(f"rig URL {redact_url(url)!r}: option {key!r} given twice")
             options[key] = value
-        return cls(url=url, scheme=parts.scheme.lower(), target=target, options=options)
+        return cls(url=redact_url(url), scheme=parts.scheme.lower(), target=target, options=options)
 
     def _error(self, name: str, value: str, expected: str) -> RigConfigError:
         return RigConfigError(f"rig URL {self.url!r}: option {name}={value!r} must be {expected}")

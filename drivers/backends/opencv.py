@@ -11,7 +11,8 @@ Options:
 
 * ``first``, ``second`` (required): what ``cv2.VideoCapture`` opens for the rig's first and second
   camera: a device path, a device index (``0``), a video file, or a stream URL (percent-encoded
-  inside the query: ``rtsp%3A%2F%2Fcam1%2Fstream``). Prefer the stable paths under
+  inside the query: ``rtsp%3A%2F%2Fcam1%2Fstream``; its password, ``user:pass@`` or ``token=``, is shown as
+  ``***`` in messages, logs and a recording's manifest). Prefer the stable paths under
   ``/dev/v4l/by-id/`` (or ``by-path/``, for two webcams of one model): indices can swap between
   boots, which would swap left and right under a rig file of the same size, and on Linux each
   webcam usually takes two nodes (``/dev/video0`` and its metadata node ``/dev/video1``), so the
@@ -98,7 +99,7 @@ from drivers.errors import (
 )
 from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig, PairingStats
-from drivers.url import RigUrl
+from drivers.url import RigUrl, redact_url
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import load_rig
@@ -164,7 +165,7 @@ class OpenCVOptions:
             if not value:
                 raise fail(f"option {name}= (a device path or index, a video file or a stream URL) is required")
         if _same_camera(first, second):  # type: ignore[arg-type]
-            raise fail(f"first= and second= are the same camera ({first!r}, {second!r})")
+            raise fail(f"first= and second= are the same camera ({redact_url(first)!r}, {redact_url(second)!r})")
         rig_path = url.take_str("rig")
         given = set(url.options)
         fourcc = url.take_str("fourcc")
@@ -233,6 +234,7 @@ class _Camera:
 
     def __init__(self, name: str, spec: str, size: tuple[int, int] | None, source: "OpenCVRigSource") -> None:
         self.name, self.spec, self.source = name, spec, source
+        self.shown = redact_url(spec)  # in messages and logs: a stream URL's password never
         self.size = size  # (width, height) every frame must have; None: the first frame's (a nominal rig)
         self.size_from = "rig" if source._fixed_rig is not None else ("asked" if size is not None else "first")
         self.video = is_video_file(spec)
@@ -252,12 +254,12 @@ class _Camera:
     def open(self) -> None:
         o = self.source.options
         if self.video and "%" not in self.spec and not os.path.exists(self.spec):
-            raise RigInitializationError(f"camera {self.name!r}: no such video file {self.spec!r}")
+            raise RigInitializationError(f"camera {self.name!r}: no such video file {self.shown!r}")
         capture = self.source._capture_factory(capture_target(self.spec), APIS[o.api])
         if not capture.isOpened():
             capture.release()
             raise RigInitializationError(
-                f"camera {self.name!r}: OpenCV cannot open {self.spec!r} (api={o.api}): "
+                f"camera {self.name!r}: OpenCV cannot open {self.shown!r} (api={o.api}): "
                 + ("not a video OpenCV decodes" if self.video else
                    "not plugged in, busy in another program, no permission (the video group), or not this index "
                    "(a webcam's second node is its metadata: use /dev/v4l/by-id/ paths)"))
@@ -274,11 +276,11 @@ class _Camera:
                 capture.set(cv2.CAP_PROP_FPS, o.fps)
             got_fourcc = int(capture.get(cv2.CAP_PROP_FOURCC))
             if o.fourcc and got_fourcc and got_fourcc != cv2.VideoWriter_fourcc(*o.fourcc):
-                log.warning("camera %r (%s) did not take fourcc=%s", self.name, self.spec, o.fourcc)
+                log.warning("camera %r (%s) did not take fourcc=%s", self.name, self.shown, o.fourcc)
         fps = float(capture.get(cv2.CAP_PROP_FPS) or 0.0)
         self.fps = fps if 0.0 < fps < 1000.0 else 0.0
         if not self.video and o.fps and self.fps and abs(self.fps - o.fps) > 0.5:
-            log.warning("camera %r (%s) runs at %.1f fps, not the fps=%g asked", self.name, self.spec, self.fps, o.fps)
+            log.warning("camera %r (%s) runs at %.1f fps, not the fps=%g asked", self.name, self.shown, self.fps, o.fps)
         self.frame_count = max(int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0), 0) if self.video else 0
 
     def release(self) -> None:
@@ -286,7 +288,7 @@ class _Camera:
             try:
                 self.capture.release()
             except Exception as e:  # noqa: BLE001 - releasing a vanished device: it is gone either way
-                log.debug("opencv: releasing %s: %s", self.spec, e)
+                log.debug("opencv: releasing %s: %s", self.shown, e)
             self.capture = None
 
     @property
@@ -302,7 +304,7 @@ class _Camera:
         try:
             self._grab_loop()
         except Exception as e:  # noqa: BLE001 - a capture backend failing: the reader gets it, typed
-            src._fail(RigOperationError(f"camera {self.name!r} ({self.spec}): {type(e).__name__}: {e}"))
+            src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}): {type(e).__name__}: {e}"))
         finally:
             self.release()
 
@@ -321,14 +323,14 @@ class _Camera:
                     since_rewind = 0
                     continue
                 if self.video:
-                    src._end(self, EndOfStream(f"video {self.spec} (camera {self.name!r}) ended after {self.index} "
+                    src._end(self, EndOfStream(f"video {self.shown} (camera {self.name!r}) ended after {self.index} "
                                                f"frames"))
                 elif self.index == 0:
                     src._fail(RigInitializationError(
-                        f"camera {self.name!r} ({self.spec}) opened but delivered no frame (two webcams on one USB "
+                        f"camera {self.name!r} ({self.shown}) opened but delivered no frame (two webcams on one USB "
                         f"bus: try fourcc=MJPG, a smaller size or a lower fps)"))
                 else:
-                    src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}) stopped delivering frames "
+                    src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.shown}) stopped delivering frames "
                                                    f"(unplugged?)"))
                 return
             grabbed_ns = src.clock.now_ns()
@@ -340,10 +342,10 @@ class _Camera:
                 undecodable += 1
                 if undecodable < MAX_UNDECODABLE:
                     log.warning("camera %r (%s): grabbed frame %d could not be decoded; skipped", self.name,
-                                self.spec, self.index)
+                                self.shown, self.index)
                     self.index += 1
                     continue
-                src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.spec}): {undecodable} grabbed frames "
+                src._fail(RigDisconnectedError(f"camera {self.name!r} ({self.shown}): {undecodable} grabbed frames "
                                                f"in a row could not be decoded"))
                 return
             undecodable = 0
@@ -355,7 +357,7 @@ class _Camera:
                     "rig": f", but its rig camera is {self.size[0]}x{self.size[1]}",
                     "asked": f", not the width={self.size[0]}&height={self.size[1]} asked",
                     "first": f", not the {self.size[0]}x{self.size[1]} of its first frame"}[self.size_from]
-                src._fail(RigOperationError(f"camera {self.name!r} ({self.spec}) delivered {got}{want}"))
+                src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}) delivered {got}{want}"))
                 return
             if self.size is None:
                 self.size = (image.shape[1], image.shape[0])
@@ -386,7 +388,7 @@ class _Camera:
         src.driver_stamps = False
         log.warning("camera %r (%s): its driver's frame stamp (%.3f ms) is not on the host's monotonic clock (%.3f "
                     "ms at the grab, %.3f ms at its previous frame): both cameras' frames are stamped at their grab "
-                    "from now on", self.name, self.spec, ms, grabbed_ns / 1e6, self.last_stamp_ns / 1e6)
+                    "from now on", self.name, self.shown, ms, grabbed_ns / 1e6, self.last_stamp_ns / 1e6)
         return grabbed_ns
 
 

@@ -65,7 +65,7 @@ from drivers.backends.recording_format import (
 from drivers.errors import RigConfigError, RigInitializationError, RigOperationError
 from drivers.frames import Frame
 from drivers.pairing import PairingStats
-from drivers.url import RigUrl
+from drivers.url import RigUrl, redact_url
 from ghnerf_runtime.rig_file import principal_point_problem
 
 log = logging.getLogger(__name__)
@@ -389,7 +389,7 @@ class RecordingRigSource(RigSource):
             manifest = Manifest(
                 rig=self.inner.rig,
                 image_format=self.options.image_format,
-                source=self._source_url,
+                source=redact_url(self._source_url),  # a take is shared: never a stream's password
                 created_utc=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             )
             self._writer = RecordingWriter(self.options.out, manifest, self.options)

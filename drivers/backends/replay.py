@@ -21,7 +21,10 @@ URL options:
   and rate limits see the recorded spacing; at ``speed=recorded`` a stamp is the time its
   frame plays, at other speeds (and ``free``) the stamps run ahead of or behind the clock.
 
-Indices and ground truth are delivered unchanged on the first pass. Each further ``loop``
+Each camera plays in its recorded order (its image file numbers), the cameras merged by capture time. A
+camera's stamp going back is a clock reset: warned of, and the frames after it re-based to follow on one
+frame period after those before, one shift for both cameras (:func:`playback_order`; with ``keep_time=1``
+too). Indices and ground truth are delivered unchanged on the first pass. Each further ``loop``
 pass shifts timestamps by the recording's span (plus one frame period: the median step between a camera's
 successive distinct stamps, else 1/30 s) and indices by the
 per-camera index span (last - first + 1), so both keep increasing per camera. A take that was not closed cleanly plays without the rows
@@ -33,7 +36,9 @@ from __future__ import annotations
 
 import logging
 import statistics
-from pathlib import Path
+from collections import deque
+from dataclasses import replace
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
@@ -83,6 +88,102 @@ def _parse_speed(url: RigUrl) -> float | None:
     return speed
 
 
+def frame_period_ns(rows: list[FrameRow]) -> int:
+    """The take's frame period: the median over cameras of the median step between a camera's successive
+    distinct stamps (``rows`` in each camera's playing order), else 1/30 s."""
+    periods = []
+    for cam in dict.fromkeys(r.camera for r in rows):
+        stamps = [r.timestamp_ns for r in rows if r.camera == cam]
+        # Python integers: two 64-bit stamps far apart overflow an int64 difference. Repeated stamps say
+        # nothing of the period: a take whose stamps were all one had a 1 ns period, so each loop pass came
+        # 1 ns after the last, and a paced read after any stall pushed millions of passes (a hang). Steps
+        # back (a clock reset) say nothing of it either.
+        steps = [b - a for a, b in zip(stamps, stamps[1:]) if b > a]
+        if steps:
+            periods.append(statistics.median(steps))
+    return int(statistics.median(periods)) if periods else 33_333_333
+
+
+def _file_number(row: FrameRow) -> int | None:
+    """The number the recorder gave the row's image file (``images/<camera>/00000012.png``: 12), if it has one."""
+    stem = PurePosixPath(row.image).stem
+    return int(stem) if stem.isdigit() else None
+
+
+def recorded_order(rows: list[FrameRow]) -> dict[str, list[int]]:
+    """Each camera's rows (positions in ``rows``) in the order it recorded them: by image file number, which the
+    recorder counts per camera as frames arrive. Not the journal's order (two writer threads can swap rows
+    there), nor the stamps' (a clock reset sends them back). A camera whose files are not all numbered keeps
+    its journal order."""
+    by_camera: dict[str, list[int]] = {}
+    for i, row in enumerate(rows):
+        by_camera.setdefault(row.camera, []).append(i)
+    for cam, mine in by_camera.items():
+        numbers = [_file_number(rows[i]) for i in mine]
+        if None not in numbers:
+            by_camera[cam] = [i for _, i in sorted(zip(numbers, mine))]  # a tie (never written): journal order
+    return by_camera
+
+
+def playback_order(rows: list[FrameRow], directory: Path | str = "") -> list[FrameRow]:
+    """The rows in the order they play, those after a clock reset re-based.
+
+    Each camera plays in its recorded order (:func:`recorded_order`), the cameras merged by capture time. A
+    camera's stamp going back is taken as a clock reset (a device that restarted, a host clock set back)
+    and splits that camera's rows into segments; a camera's k-th segment is taken to follow the other
+    camera's k-th. The rows of segment k (k >= 1) are re-based by one shift common to the cameras that
+    have one, so that it starts one frame period after the latest frame of segment k-1: the segments play
+    one after another, in the order recorded, and the cameras keep their relative timing within a segment,
+    so pairs stay pairs. The true gap at a reset is not recorded; one frame period stands for it. A warning
+    per camera that went back names its first reset and the shift (recorded stamp = played stamp - shift).
+
+    Re-based, not played with the stamps going back: every later stage (pairing, tracking, smoothing, sinks)
+    takes a camera's stamps as increasing, and a pairer that sees one camera go back while the other still
+    holds a frame of the old timeline loses the first pair after the reset.
+    """
+    segments: dict[str, list[list[int]]] = {}
+    for cam, mine in recorded_order(rows).items():
+        split: list[list[int]] = []
+        for i in mine:
+            if not split or rows[i].timestamp_ns < rows[split[-1][-1]].timestamp_ns:
+                split.append([])
+            split[-1].append(i)
+        segments[cam] = split
+    stamps = {i: row.timestamp_ns for i, row in enumerate(rows)}
+    if any(len(split) > 1 for split in segments.values()):
+        period = frame_period_ns([rows[i] for split in segments.values() for segment in split for i in segment])
+        shifts = [0]
+        for k in range(1, max(len(split) for split in segments.values())):
+            reset = [split for split in segments.values() if len(split) > k]
+            previous_end = max(stamps[split[k - 1][-1]] for split in reset) + shifts[k - 1]
+            shifts.append(previous_end + period - min(stamps[split[k][0]] for split in reset))
+        for cam, split in segments.items():
+            for k, segment in enumerate(split[1:], start=1):
+                for i in segment:
+                    stamps[i] += shifts[k]
+            if len(split) > 1:
+                before, after = rows[split[0][-1]], rows[split[1][0]]
+                log.warning(
+                    "recording %s: camera %r's timestamps go back at frame %s (index %d, %s line %d): %d ns after "
+                    "%d ns, taken as a clock reset (%d in this camera); the take plays in the recorded order, "
+                    "the frames after a reset stamped to follow one frame period after those before (after the "
+                    "first: recorded stamp = played stamp - %d ns, keep_time=1 too)",
+                    directory, cam, after.image, after.index, FRAMES, after.line, after.timestamp_ns,
+                    before.timestamp_ns, len(split) - 1, shifts[1],
+                )
+    # Capture order across cameras, ties in journal order; then each camera's rows are put back in its
+    # recorded order at the places its rows took: a camera's stamps are non-decreasing in that order, so the
+    # stamps at those places are the same, and only a camera's equal stamps change places.
+    merged = sorted(range(len(rows)), key=lambda i: (stamps[i], i))
+    queues = {cam: deque(i for segment in split for i in segment) for cam, split in segments.items()}
+    played = []
+    for position in merged:
+        i = queues[rows[position].camera].popleft()
+        row = rows[i]
+        played.append(row if stamps[i] == row.timestamp_ns else replace(row, timestamp_ns=stamps[i]))
+    return played
+
+
 class ReplayRigSource(RigSource):
     """A recording played back as a rig.
 
@@ -111,8 +212,8 @@ class ReplayRigSource(RigSource):
         super().__init__(manifest.rig, pairing=pairing, clock=clock)
         self.directory = directory
         self.manifest = manifest
-        # Capture order across cameras; stable, so each camera keeps its recorded order.
-        self._rows = sorted(rows, key=lambda r: r.timestamp_ns)
+        # Each camera in its recorded order, the cameras merged by capture time (re-based after a clock reset).
+        self._rows = playback_order(rows, directory)
         self.speed = speed
         self.loop = loop
         self.keep_time = keep_time
@@ -150,22 +251,12 @@ class ReplayRigSource(RigSource):
         """How far timestamps and per-camera indices move on each loop pass."""
         if not self._rows:
             return 0, {}
-        periods = []
         index_span: dict[str, int] = {}
         for cam in self.rig.names:
-            mine = [r for r in self._rows if r.camera == cam]
-            if not mine:
-                continue
-            stamps = [r.timestamp_ns for r in mine]
-            # Python integers: two 64-bit stamps far apart overflow an int64 difference. Repeated stamps say
-            # nothing of the period: a take whose stamps were all one had a 1 ns period, so each loop pass came
-            # 1 ns after the last, and a paced read after any stall pushed millions of passes (a hang).
-            steps = [b - a for a, b in zip(stamps, stamps[1:]) if b > a]
-            if steps:
-                periods.append(statistics.median(steps))
-            indices = [r.index for r in mine]
-            index_span[cam] = max(indices) - min(indices) + 1
-        period = int(statistics.median(periods)) if periods else 33_333_333
+            indices = [r.index for r in self._rows if r.camera == cam]
+            if indices:
+                index_span[cam] = max(indices) - min(indices) + 1
+        period = frame_period_ns(self._rows)
         return self._rows[-1].timestamp_ns - self._rows[0].timestamp_ns + period, index_span
 
     def _open(self) -> None:

@@ -26,6 +26,7 @@ from urllib.parse import unquote, urlsplit
 
 from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
+from drivers.url import redact_url
 from drivers.url_paths import rig_url_from_folder
 from ghnerf_runtime.config_paths import paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
@@ -99,11 +100,11 @@ class RigConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.url, str) or "://" not in self.url:
-            _fail("url", "must be a rig URL such as 'depthai://' or 'sim://?fps=30'", self.url)
+            _fail("url", "must be a rig URL such as 'depthai://' or 'sim://?fps=30'", redact_url(self.url))
         if self.url.startswith("record+"):
             # A recorder needs an empty out= folder, and the daemon reopens the rig after every unplug.
             _fail("url", "record+ is not supported by the daemon (each reopen would need a new out= folder); "
-                         "record with ghnerf-demo --url record+... instead", self.url)
+                         "record with ghnerf-demo --url record+... instead", redact_url(self.url))
         _seconds(self, "read_timeout_s", 0.01, 60.0)
         _seconds(self, "stall_s", 0.1, 3600.0)
         if self.stall_s < self.read_timeout_s:

@@ -61,6 +61,7 @@ from typing import TYPE_CHECKING, Any, Callable, Optional
 import numpy as np
 
 import drivers
+from drivers.url import redact_url
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
@@ -192,7 +193,7 @@ class Daemon:
                  on_reload: Optional[Callable[[DaemonConfig], None]] = None) -> None:
         self.config = config
         self.notifier = notifier if notifier is not None else SystemdNotifier()
-        self.health = Health(clock=clock, rig_url=config.rig.url)
+        self.health = Health(clock=clock, rig_url=redact_url(config.rig.url))
         # Woken often enough to flag a stuck estimate within about half of slow_estimate_s.
         self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock,
                                      interval_s=min(config.health.slow_estimate_s / 2, 1.0),
@@ -244,7 +245,7 @@ class Daemon:
             return 0
         self.watchdog.start()
         self.notifier.notify(ready=1, status="started: opening the rig", mainpid=os.getpid())
-        _log.info("started: rig %s, sinks %s", self.config.rig.url, ", ".join(self.config.sinks))
+        _log.info("started: rig %s, sinks %s", redact_url(self.config.rig.url), ", ".join(self.config.sinks))
         try:
             while not stop.is_set():
                 source = self._open_rig(stop)
@@ -322,7 +323,7 @@ class Daemon:
         while not stop.is_set():
             self._maybe_reload(None)  # nothing is open: this attempt opens the reloaded rig.url
             rig_cfg = self.config.rig
-            self.health.rig_url = rig_cfg.url
+            self.health.rig_url = redact_url(rig_cfg.url)  # shown (status file, logs): no password
             self.health.enter(State.OPENING)
             self._set_fault(Fault.CAMERA_FAULT)
             self._tick(force=True)
@@ -335,11 +336,11 @@ class Daemon:
                     self._open_sinks(source.rig)
             except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
                 self._close_rig(source)
-                raise DaemonStartError(f"rig.url {rig_cfg.url!r}: {e}") from None
+                raise DaemonStartError(f"rig.url {self.health.rig_url!r}: {e}") from None
             except drivers.DriverError as e:
                 self._close_rig(source)
                 self.health.rig_open_failures += 1
-                self.health.last_error = f"cannot open {rig_cfg.url}: {e}"
+                self.health.last_error = f"cannot open {self.health.rig_url}: {e}"
                 self.health.enter(State.WAITING)
                 _log.warning("%s; retrying in %.1f s", self.health.last_error, self._backoff_s)
                 if self._wait(stop, self._backoff_s):  # not cut short by a new rig section
@@ -406,7 +407,7 @@ class Daemon:
             try:
                 pair = source.read(timeout_s=rig_cfg.read_timeout_s)
             except drivers.EndOfStream as e:
-                self.health.last_error = f"{rig_cfg.url}: {e}"
+                self.health.last_error = f"{self.health.rig_url}: {e}"
                 return True
             except drivers.RigTimeoutError:
                 self._set_fault(Fault.CAMERA_FAULT)
@@ -427,7 +428,7 @@ class Daemon:
                     return False
                 read_failed = True
                 self.health.read_errors += 1
-                self.health.last_error = f"{rig_cfg.url}: a read failed: {e}"
+                self.health.last_error = f"{self.health.rig_url}: a read failed: {e}"
                 if self.health.read_errors == 1 or self.health.read_errors % 100 == 0:
                     _log.warning("%s (%d so far); reading on", self.health.last_error, self.health.read_errors)
                 continue

@@ -9,6 +9,7 @@ at their own size: no rig file).
 """
 from __future__ import annotations
 
+import logging
 import os
 import time
 from pathlib import Path
@@ -651,3 +652,21 @@ def _raises(call):
     except Exception as e:  # noqa: BLE001 - returned for the test to look at
         return e
     return None
+
+
+def test_a_stream_that_does_not_open_is_named_without_its_password(caplog):
+    class Refused:
+        def isOpened(self):
+            return False
+
+        def release(self):
+            pass
+
+    stream = "rtsp%3A%2F%2Fadmin%3Ahunter2%40cam1%2Fstream"
+    source = create_rig_source(f"opencv://?first={stream}&second={stream.replace('cam1', 'cam2')}&width=64&height=48",
+                               capture_factory=lambda target, api: Refused())
+    with caplog.at_level(logging.DEBUG):
+        with pytest.raises(RigInitializationError) as info:
+            source.open()
+    assert "rtsp://admin:***@cam1/stream" in str(info.value)
+    assert "hunter2" not in str(info.value) and "hunter2" not in caplog.text

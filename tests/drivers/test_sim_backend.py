@@ -118,6 +118,55 @@ def test_corrupt_cache_entry_is_rendered_again(tmp_path, caplog):
         assert third.fill_report.source == "disk"  # repaired once, not rendered at every open
 
 
+def _zero_filled(path, keep_header):
+    """What a power cut can leave of a file written without fsync: its size, zeros where the data was."""
+    data = path.read_bytes()
+    kept = data[: data.index(b"\n") + 1] if keep_header else b""  # the .npy header ends in a newline
+    path.write_bytes(kept + b"\0" * (len(data) - len(kept)))
+
+
+@pytest.mark.parametrize("keep_header", [True, False])
+def test_a_cache_entry_a_power_cut_left_full_of_zeros_is_rendered_again(tmp_path, caplog, keep_header):
+    """Renamed into place without fsync, an entry could reach the disk before its data: a file of the right
+    size full of zeros, its header whole, loaded as black frames. The checksum in meta.json catches it."""
+    url = f"sim://?{SMALL}&seed=7&cache={tmp_path}"
+    with open_rig(url, clock=ManualClock()) as first:
+        expected = first.read(timeout_s=1.0).images[0]
+    assert expected.any()
+    entry = next(tmp_path.iterdir())
+    _zero_filled(entry / "image.npy", keep_header)
+    with caplog.at_level(logging.WARNING):
+        with open_rig(url, clock=ManualClock()) as source:
+            assert source.fill_report.source == "rendered"
+            assert np.array_equal(source.read(timeout_s=1.0).images[0], expected)
+    assert "unusable" in caplog.text and "image.npy" in caplog.text
+    with open_rig(url, clock=ManualClock()) as third:
+        assert third.fill_report.source == "disk"  # the entry stored again is whole
+
+
+def test_a_cache_entry_is_on_disk_before_it_is_named(tmp_path, monkeypatch):
+    """Each file and the entry's folder are fsynced before the rename that names the entry, the root after."""
+    import os
+
+    if not os.path.isdir("/proc/self/fd"):
+        pytest.skip("needs /proc to name fsynced files")
+    from drivers.backends import sim_loop
+
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+    monkeypatch.setattr(os, "fsync", lambda fd: (events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}"))),
+                                                 real_fsync(fd))[1])
+    monkeypatch.setattr(os, "replace", lambda a, b: (events.append(("replace", str(a))), real_replace(a, b))[1])
+    open_rig(f"sim://?{SMALL}&seed=9&cache={tmp_path}", clock=ManualClock()).close()
+    root = os.path.realpath(tmp_path)
+    (renamed,) = [i for i, (kind, _) in enumerate(events) if kind == "replace"]
+    tmp = os.path.realpath(events[renamed][1])
+    before = {path for kind, path in events[:renamed] if kind == "fsync"}
+    names = [f"{name}.npy" for name in sim_loop._CAMERA_FIELDS] + ["meta.json"]
+    assert {os.path.join(tmp, name) for name in names} | {tmp} <= before
+    assert ("fsync", root) in events[renamed + 1:]
+
+
 def test_cache_off_writes_nothing_and_the_default_honours_xdg(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     assert default_cache_root() == tmp_path / "ghnerf-sim"

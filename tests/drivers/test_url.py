@@ -140,3 +140,42 @@ def test_a_plus_in_an_option_is_a_plus_and_a_space_is_percent_20():
 
     url = RigUrl.parse("record+sim://?out=/data/take+1&note=a%20b%2Bc")
     assert url.options == {"out": "/data/take+1", "note": "a b+c"}
+
+
+# ----------------------------------------------------------------- passwords are never shown
+STREAM = "opencv://?first=rtsp%3A%2F%2Fadmin%3Ahunter2%40cam1%2Fstream&second=%2Fdev%2Fvideo2"
+
+
+@pytest.mark.parametrize(("url", "shown"), [
+    ("rtsp://admin:hunter2@cam1:554/live?x=1", "rtsp://admin:***@cam1:554/live?x=1"),
+    ("rtsp://admin:hun:ter@2@cam1/live", "rtsp://admin:***@cam1/live"),
+    (STREAM, "opencv://?first=rtsp%3A%2F%2Fadmin%3A***%40cam1%2Fstream&second=%2Fdev%2Fvideo2"),
+    ("opencv://?first=rtsp%3A%2F%2Fcam%2Fs%3Ftoken%3Dhunter2&second=0",
+     "opencv://?first=rtsp%3A%2F%2Fcam%2Fs%3Ftoken%3D***&second=0"),
+    ("http://cam/x?password=hunter2&Token=hunter2&api_key=hunter2&stream_secret=hunter2&fps=30",
+     "http://cam/x?password=***&Token=***&api_key=***&stream_secret=***&fps=30"),
+    ("record+opencv://?first=rtsp%3A%2F%2Fu%3Ahunter2%40h&second=0&out=/d",
+     "record+opencv://?first=rtsp%3A%2F%2Fu%3A***%40h&second=0&out=/d"),
+    ("x://u:hunter2@[::1/", "x://u:***@[::1/"),  # a host urlsplit cannot parse
+])
+def test_a_url_is_shown_without_its_passwords(url, shown):
+    from drivers.url import redact_url
+
+    assert redact_url(url) == shown
+
+
+@pytest.mark.parametrize("url", ["sim://?fps=30&seed=3", "replay:///data/take 1", "rtsp://admin@cam1/live",
+                                 "opencv://?first=%2Fdev%2Fvideo0&second=2&passes=3", "depthai://"])
+def test_a_url_without_a_password_is_shown_as_written(url):
+    from drivers.url import redact_url
+
+    assert redact_url(url) == url
+
+
+def test_a_parsed_rig_url_shows_no_password_but_keeps_it_to_open():
+    url = RigUrl.parse(STREAM)
+    assert "hunter2" not in url.url and "admin%3A***%40cam1" in url.url
+    assert url.options["first"] == "rtsp://admin:hunter2@cam1/stream"
+    with pytest.raises(RigConfigError) as info:
+        RigUrl.parse(STREAM + "&fps=1&fps=2")
+    assert "hunter2" not in str(info.value)

@@ -10,6 +10,7 @@ for events, never asserting how long something took.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import socket
@@ -1176,3 +1177,35 @@ def test_a_rig_lost_right_after_each_open_is_backed_off_and_does_not_flood_the_l
     assert opens <= seconds / 0.4 + 3, f"{opens} opens in {seconds:.1f} s"
     lines = [r for r in caplog.records if r.name == "ghnerf.daemon"]
     assert len(lines) <= 2 * (seconds / 0.4 + 3) + 2, f"{len(lines)} log lines in {seconds:.1f} s"
+
+
+def test_a_rig_url_password_stays_out_of_the_status_file_and_the_log(tmp_path, caplog):
+    """The daemon logged its rig URL and wrote it to the status file (and into last_error) as configured:
+    a camera stream's password in plain text for anyone who reads either."""
+    from drivers.sim.placement import RigPlacement
+    from ghnerf_runtime.rig_file import save_rig
+
+    rig_file = tmp_path / "rig.json"
+    save_rig(RigPlacement().build(), rig_file)
+    stream = "rtsp%3A%2F%2Fadmin%3Ahunter2%40cam1%2Fs"
+    url = f"opencv://?first={stream}&second={stream.replace('cam1', 'cam2')}&rig={rig_file}"
+    cfg = _config({"url": url, "reopen_min_s": 30, "reopen_max_s": 30}, tmp_path)
+
+    class Refused:  # the camera is not there: the daemon waits for it, saying why
+        def isOpened(self):
+            return False
+
+        def release(self):
+            pass
+
+    with caplog.at_level(logging.DEBUG):
+        with _Running(cfg, tmp_path, rig_kwargs={"capture_factory": lambda target, api: Refused()}) as run:
+            wait_until(lambda: run.daemon.health.rig_open_failures >= 1, timeout=30, what="a failed open")
+            wait_until(lambda: "last_error" in (tmp_path / "status.json").read_text()
+                       and json.loads((tmp_path / "status.json").read_text())["last_error"], timeout=10,
+                       what="the status file")
+            status = (tmp_path / "status.json").read_text()
+            assert run.finish() == 0
+    assert "hunter2" not in status and "hunter2" not in caplog.text
+    assert "admin%3A***%40cam1" in json.loads(status)["rig"]["url"]
+    assert "rtsp://admin:***@cam1/s" in json.loads(status)["last_error"]
