@@ -528,20 +528,25 @@ def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, q
     if probe and ck is not None:
         probed = {k: tuple(v) for k, v in (ck.get("precision_probe") or {}).items()}
     seed_everything(cfg.seed + 1)
+    # The log's state, as the joint trainer keeps it: the losses since the last record and the last PCK. A
+    # checkpoint holds it, so the records after a resume are those of an uninterrupted run (the first one
+    # averaged only the resumed steps, and its pck, like the summary's, was NaN until the next eval_every step);
+    # checkpoints made before it was kept start afresh.
+    logged = (ck or {}).get("log_state") or {}
+    losses: list[float] = [float(x) for x in logged.get("losses", [])]
+    last_pck = float(logged.get("pck", float("nan")))
 
     def checkpoint(s: int) -> None:
         nonlocal rotate
         state = {"human": model.human.state_dict(), "optimizer": opt.state_dict(), "step": s,
                  "segments": clock.segments(s), "config": asdict(cfg), "precision_probe": probed,
-                 "model_config": mcfg.to_dict()}
+                 "model_config": mcfg.to_dict(), "log_state": {"losses": list(losses), "pck": last_pck}}
         pretrain_checkpoint.save(state, out, rotate)
         rotate = True
         save_human(out / "human.pt", model, s)
 
     truncate_log(out / "log.jsonl", step)  # records past the checkpoint would appear twice after a resume
     prog = Progress(cfg.iterations, step, enabled=not quiet)
-    losses: list[float] = []
-    last_pck = float("nan")
     # stop_at: a run resumed at or past it has nothing to do in this invocation
     stopped_early = bool(cfg.stop_at) and cfg.stop_at <= step < cfg.iterations
     for images, heat in ([] if stopped_early else step_batches(ds, cfg, step)):

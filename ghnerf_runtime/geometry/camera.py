@@ -24,7 +24,8 @@ import numpy as np
 
 from ghnerf_runtime.errors import GeometryError, ShapeError
 
-_DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
+#: Distortion coefficient counts OpenCV's models take (and :class:`Camera` accepts).
+DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 
 
 def check_last_dim(name: str, array: np.ndarray, size: int) -> np.ndarray:
@@ -37,7 +38,7 @@ def check_last_dim(name: str, array: np.ndarray, size: int) -> np.ndarray:
 
 def _as_dist(coefficients) -> np.ndarray:
     dist = np.asarray(coefficients, dtype=np.float64).reshape(-1)
-    if dist.size not in _DIST_LENGTHS:
+    if dist.size not in DIST_LENGTHS:
         raise GeometryError(f"dist must have 0, 4, 5, 8, 12 or 14 coefficients, got {dist.size}")
     if dist.size == 14 and np.any(dist[12:] != 0.0):
         raise GeometryError(f"dist tilt terms tx, ty must be 0, got {dist[12:].tolist()}")

@@ -168,3 +168,21 @@ def test_shard_metadata_that_is_not_an_object_names_the_file(tmp_path):
     with pytest.raises(DatasetError, match="JSON object") as err:
         ShardedSplit(root, "train")
     assert err.value.path == str(meta)
+
+
+def test_only_the_last_shard_may_hold_more_than_its_split_reads(tmp_path):
+    # a split shrunk by a smaller generate keeps its longer last shard: its first samples are read, no more
+    root = _dataset(tmp_path / "ds", count=5, shard_size=2)
+    manifest = json.loads((root / MANIFEST).read_text())
+    manifest["splits"]["train"]["count"] = 3
+    (root / MANIFEST).write_text(json.dumps(manifest))
+    data = ShardedSplit(root, "train")
+    assert len(data) == 3 and [m["seed"] for m in data.all_metadata()] == [0, 1, 2]
+    assert np.array_equal(data.arrays(2)["images"], sample_to_arrays(_sample(2))["images"])
+    # a shard holding fewer than its samples, or more than the shard size, is still refused, naming it
+    for count, shard_size, expected in ((6, 2, r"4 x 1, expected 4 x 2"), (3, 1, r"0 x 2, expected 0 x 1")):
+        manifest["splits"]["train"].update(count=count, shard_size=shard_size)
+        (root / MANIFEST).write_text(json.dumps(manifest))
+        with pytest.raises(DatasetError, match=rf"shard holds samples from {expected}") as err:
+            ShardedSplit(root, "train")
+        assert err.value.path.endswith("meta.json")

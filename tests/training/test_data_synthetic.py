@@ -412,3 +412,37 @@ def test_a_manifest_split_without_shard_size_is_named(tmp_path):
     with pytest.raises(DatasetError, match="splits.train.shard_size") as err:
         generate(out, {"train": 2}, config, workers=1)
     assert err.value.path == str(out / MANIFEST)
+
+
+def test_a_smaller_count_shrinks_a_split_without_rendering_and_a_larger_one_reuses_its_shards(dataset, tmp_path,
+                                                                                                caplog):
+    # generate again with fewer samples re-rendered the now-shorter last shard, and extending back rendered it
+    # once more; the manifest says the count and readers read no shard past it
+    import logging
+    import shutil
+
+    root = tmp_path / "shrink"
+    shutil.copytree(dataset, root)
+    before = _digest(root / "train")
+    with caplog.at_level(logging.INFO, logger="training.data.generate"):
+        report = generate(root, {"train": 3}, CONFIG, dataset_seed=3, workers=1, shard_size=4)
+    assert (report.shards_written, report.samples_rendered, report.shards_skipped) == (0, 0, 1)
+    assert "train: 1 shard(s) past the 3 samples asked for are kept on disk, unread (shard_000001..shard_000001)" \
+        in caplog.text
+    assert _digest(root / "train") == before  # nothing rewritten, nothing deleted
+    assert read_manifest(root)["splits"]["train"]["count"] == 3
+    small, reference = ShardedSplit(root, "train"), ShardedSplit(dataset, "train")
+    assert len(small) == 3 and len(list(small.all_metadata())) == 3
+    for i in range(3):
+        assert all(np.array_equal(small.arrays(i)[k], reference.arrays(i)[k]) for k in FIELDS)
+        assert small.metadata(i) == reference.metadata(i)
+    with pytest.raises(IndexError, match="of 3 samples"):
+        small.arrays(3)
+    # the report's bytes per sample is of the shards read: shard 0's bytes over its 4 samples
+    assert report.samples_on_disk == 4 + COUNTS["val"]
+    assert report.bytes_on_disk == sum(p.stat().st_size for d in ("train/shard_000000", "val")
+                                       for p in (root / d).rglob("*") if p.is_file())
+
+    report = generate(root, {"train": 6}, CONFIG, dataset_seed=3, workers=1, shard_size=4)
+    assert (report.shards_written, report.samples_rendered) == (0, 0)
+    assert _digest(root / "train") == before and len(ShardedSplit(root, "train")) == 6

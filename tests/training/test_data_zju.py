@@ -372,3 +372,106 @@ def test_a_cut_cache_array_is_named_and_rendered_again(tmp_path):
     assert not _array_is_whole(path)
     path.write_bytes(b"")  # a stop mid-write: np.load raised a bare EOFError
     assert not _array_is_whole(path)
+
+
+def test_triangulating_reads_no_image_of_a_camera_the_view_set_does_not_use(tmp_path, subject):
+    # the joints of a frame without keypoints3d are triangulated from every camera's keypoints: each camera's
+    # image size was read from one of its images, so a copy without cameras 2 and 3's images failed for (0, 1)
+    _, cams, frames = subject
+    f = frames[1]
+    root = write_zju_format(tmp_path / "no3d", cams, [ZjuFrame(f.images, f.masks, f.kpts2d, None)], image_ext=".png")
+    for c in (3, 4):
+        (root / f"Camera_B{c}" / "000000.png").unlink()
+    config = ZjuConfig(resolution=RES, view_sets=((0, 1),))
+    sample = zju_sample(ZjuSequence(root), 0, (0, 1), config)
+    assert sample.metadata["joints_3d_source"] == "triangulated"
+    valid = sample.joints_3d_valid
+    assert valid.sum() >= 15
+    assert np.median(np.linalg.norm(sample.joints_3d[valid] - f.joints_3d[valid, :3], axis=-1)) < 0.02
+    # a used camera's missing image is still named
+    (root / "Camera_B2" / "000000.png").unlink()
+    with pytest.raises(DatasetError, match="missing or unreadable image") as err:
+        zju_sample(ZjuSequence(root), 0, (0, 1), config)
+    assert err.value.path == str(root / "Camera_B2" / "000000.png")
+
+
+@pytest.mark.parametrize("field, value, says", [
+    ("D", np.zeros((3, 1)), r"cams.D\[2\] must hold 0, 4, 5, 8, 12 or 14 OpenCV distortion coefficients, got "
+                            r"shape \(3, 1\)"),
+    ("D", np.zeros((5, 2)), r"cams.D\[2\] must hold .* got shape \(5, 2\)"),
+    ("K", np.eye(4), r"cams.K\[2\] must be a 3x3 intrinsic matrix, got shape \(4, 4\)"),
+    ("T", np.zeros((2, 1)), r"cams.T\[2\] must be a 3-vector .* got shape \(2, 1\)"),
+    ("R", np.eye(2), r"cams.R\[2\] must be a 3x3 rotation or a Rodrigues 3-vector, got shape \(2, 2\)"),
+])
+def test_every_cameras_calibration_shapes_are_checked_when_annots_are_opened(tmp_path, subject, field, value, says):
+    # a D of another length was refused only when its camera made its first sample, and named "camera 2", not
+    # the field: a conversion of other view sets went through, and one using it failed midway
+    annots = np.load(subject[0] / ANNOTS, allow_pickle=True).item()
+    annots["cams"] = {k: list(v) for k, v in annots["cams"].items()}
+    annots["cams"][field][2] = value
+    np.save(tmp_path / ANNOTS, annots, allow_pickle=True)
+    with pytest.raises(DatasetError, match=says) as err:
+        ZjuSequence(tmp_path)
+    assert err.value.path == str(tmp_path / ANNOTS)
+
+
+def _copy_without_masks(tmp_path, subject, missing):
+    import shutil
+
+    root = tmp_path / "s"
+    shutil.copytree(subject[0], root)
+    shutil.copytree(root / "mask", root / "mask_cihp")
+    for path in missing:
+        (root / path).unlink()
+    return root
+
+
+def test_a_missing_mask_stops_the_conversion_unless_skipped_and_counted(tmp_path, subject, caplog):
+    import logging
+
+    root = _copy_without_masks(tmp_path, subject, ["mask/Camera_B2/000001.png"])
+    out = tmp_path / "ds"
+    strict = ZjuConfig(resolution=RES, view_sets=((0, 1), (2, 3)))
+    with pytest.raises(DatasetError, match="missing or unreadable mask") as err:
+        convert_zju(root, out, strict, split="s", shard_size=2)
+    assert err.value.path == str(root / "mask" / "Camera_B2" / "000001.png")
+
+    skip = ZjuConfig(resolution=RES, view_sets=((0, 1), (2, 3)), skip_missing_masks=True)
+    with caplog.at_level(logging.WARNING, logger="training.data.zju_samples"):
+        assert convert_zju(root, out, skip, split="s", shard_size=2) == 3  # frame 1 of (0, 1) left out, (2, 3) kept
+    assert "s: 1 of 4 samples skipped for a missing mask (frames 1; first missing: " in caplog.text
+    assert str(root / "mask" / "Camera_B2" / "000001.png") in caplog.text
+    split = ShardedSplit(out, "s")
+    assert [(m["frame"], m["cameras"]) for m in split.all_metadata()] == [(0, [0, 1]), (0, [2, 3]), (1, [2, 3])]
+    assert json.loads((out / "dataset.json").read_text())["splits"]["s"]["skipped_missing_masks"] == 1
+
+    # with every mask missing the conversion is refused (a wrong mask_dir, more likely than a sparse copy)
+    for path in (root / "mask_cihp").rglob("*.png"):
+        path.unlink()
+    with pytest.raises(DatasetError, match="every one of the 4 samples lacks one"):
+        convert_zju(root, out, ZjuConfig(resolution=RES, view_sets=((0, 1), (2, 3)), mask_dir="mask_cihp",
+                                         skip_missing_masks=True), split="t", shard_size=2)
+    assert "t" not in json.loads((out / "dataset.json").read_text())["splits"]
+
+
+def test_a_missing_mask_falls_back_to_the_other_mask_folder_on_request(tmp_path, subject):
+    root = _copy_without_masks(tmp_path, subject, ["mask/Camera_B2/000001.png", "mask_cihp/Camera_B1/000000.png"])
+    seq = ZjuSequence(root, mask_fallback=True)
+    assert seq.mask_path(1, 1) == root / "mask_cihp" / "Camera_B2" / "000001.png"
+    assert seq.mask_path(0, 0) == root / "mask" / "Camera_B1" / "000000.png"
+    assert np.array_equal(seq.read_mask(1, 1), subject[2][1].masks[1])
+    assert ZjuSequence(root, mask_dir="mask_cihp", mask_fallback=True).mask_path(0, 0) == \
+        root / "mask" / "Camera_B1" / "000000.png"
+    out = tmp_path / "ds"
+    config = ZjuConfig(resolution=RES, view_sets=((0, 1),), mask_fallback=True)
+    assert convert_zju(root, out, config, split="s", shard_size=2) == 2
+    masks = [m["masks"] for m in ShardedSplit(out, "s").all_metadata()]
+    assert masks == [["mask/Camera_B1/000000.png", "mask/Camera_B2/000000.png"],
+                     ["mask/Camera_B1/000001.png", "mask_cihp/Camera_B2/000001.png"]]
+    # missing from both: named under mask_dir
+    (root / "mask_cihp" / "Camera_B2" / "000001.png").unlink()
+    with pytest.raises(DatasetError, match="missing or unreadable mask") as err:
+        ZjuSequence(root, mask_fallback=True).read_mask(1, 1)
+    assert err.value.path == str(root / "mask" / "Camera_B2" / "000001.png")
+    with pytest.raises(DataConfigError, match="ZjuConfig.mask_fallback"):
+        ZjuConfig(mask_fallback="yes")

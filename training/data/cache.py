@@ -16,7 +16,9 @@ A shard folder is written under a temporary name and renamed when complete, so a
 folder named ``shard_*`` is always whole; an interrupted run leaves only ``*.tmp-*``
 folders, which the next run deletes. Shard ``k`` holds samples
 ``[k * shard_size, min((k + 1) * shard_size, count))``; since samples are deterministic per
-index, a larger ``count`` regenerates only the missing or short shards.
+index, a larger ``count`` regenerates only the missing or short shards. After a smaller ``count``
+(``generate`` asked for fewer) the last shard may hold more samples than the split's: readers use
+its first ones, and the shards past the count stay on disk unread (a larger count reuses them).
 
 Reading memory-maps the arrays (``np.load(mmap_mode="r")``): opening a split reads only
 the manifest and the shards' ``meta.json``; a sample costs one page-in of its slices. At
@@ -176,7 +178,9 @@ def shard_plan(count: int, shard_size: int) -> list[tuple[int, int, int]]:
     return [(k, i0, min(shard_size, count - i0)) for k, i0 in enumerate(range(0, count, shard_size))]
 
 
-def shard_is_complete(folder: Path, first_index: int, count: int) -> bool:
+def shard_is_complete(folder: Path, first_index: int, count: int, *, max_count: int | None = None) -> bool:
+    """Whether ``folder`` is a whole shard of samples ``first_index ..`` holding ``count`` of them, or up to
+    ``max_count`` (the split's shard size): a shard of a larger count of the split holds the same first ones."""
     meta = folder / SHARD_META
     if not meta.is_file():
         return False
@@ -186,8 +190,20 @@ def shard_is_complete(folder: Path, first_index: int, count: int) -> bool:
         return False
     if not isinstance(data, dict):  # damaged: render the shard again
         return False
-    return data.get("first_index") == first_index and data.get("count") == count and all(
+    stored = data.get("count")
+    if isinstance(stored, bool) or not isinstance(stored, int):
+        return False
+    return data.get("first_index") == first_index and count <= stored <= max(count, max_count or count) and all(
         _array_is_whole(folder / f"{name}.npy") for name in FIELDS)
+
+
+def stored_count(folder: Path) -> int:
+    """The samples shard ``folder``'s metadata says it holds (0 when it is missing or unreadable)."""
+    try:
+        count = json.loads((folder / SHARD_META).read_text()).get("count")
+    except (OSError, json.JSONDecodeError, AttributeError):
+        return 0
+    return count if isinstance(count, int) and not isinstance(count, bool) else 0
 
 
 def _array_is_whole(path: Path) -> bool:
@@ -211,7 +227,8 @@ def remove_stale_temporaries(split_dir: Path) -> None:
 class _ShardInfo:
     folder: Path
     first_index: int
-    count: int
+    count: int  # the samples of the split in it
+    stored: int  # the samples in its files: more than count in the last shard of a split made smaller
     metadata: list
 
 
@@ -260,10 +277,14 @@ class ShardedSplit:
             if not isinstance(meta, dict) or not isinstance(meta.get("samples", []), list):
                 raise DatasetError(meta_path, "shard metadata must be a JSON object with first_index, count and a "
                                               f"samples list, got {type(meta).__name__}")
-            if meta.get("first_index") != i0 or meta.get("count") != n or len(meta.get("samples", [])) != n:
+            stored = meta.get("count")
+            # the last shard of a split generated larger, then asked smaller, holds more: its first n are the split's
+            fits = isinstance(stored, int) and not isinstance(stored, bool) and n <= stored <= max(n, shard_size)
+            if meta.get("first_index") != i0 or not fits or len(meta.get("samples", [])) != stored:
+                want = f"{i0} x {n}" if n == shard_size else f"{i0} x {n} to {shard_size}"
                 raise DatasetError(meta_path, f"shard holds samples from {meta.get('first_index')} x {meta.get('count')}, "
-                                              f"expected {i0} x {n}")
-            shards.append(_ShardInfo(folder, i0, n, meta["samples"]))
+                                              f"expected {want}")
+            shards.append(_ShardInfo(folder, i0, n, stored, meta["samples"][:n]))
         return shards
 
     def __len__(self) -> int:
@@ -288,10 +309,10 @@ class ShardedSplit:
                 a = np.load(path, mmap_mode="r")
             except (OSError, ValueError, EOFError) as e:  # EOFError: an empty file (a stop mid-write)
                 raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
-            expect = (shard.count, *shape_fn(self.num_views, self.resolution))
+            expect = (shard.stored, *shape_fn(self.num_views, self.resolution))
             if a.shape != expect or a.dtype != dtype:
                 raise DatasetError(path, f"has shape {a.shape} {a.dtype}, expected {expect} {dtype}")
-            arrays[name] = a
+            arrays[name] = a[:shard.count]  # (a view: still memory-mapped)
         self._open[k] = arrays
         while len(self._open) > self._max_open:
             self._open.popitem(last=False)
@@ -322,4 +343,4 @@ class ShardedSplit:
 
 __all__ = ["FORMAT", "SCHEMA_VERSION", "MANIFEST", "WRITER_LOCK", "UNVERSIONED_GENERATOR", "generator_version",
            "ShardedSplit", "read_manifest", "write_manifest", "new_manifest", "writer_lock",
-           "write_shard", "shard_plan", "shard_name", "shard_is_complete", "remove_stale_temporaries"]
+           "write_shard", "shard_plan", "shard_name", "shard_is_complete", "stored_count", "remove_stale_temporaries"]

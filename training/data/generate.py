@@ -7,7 +7,9 @@ Usage::
 Every sample is a pure function of ``(split, --seed, index, config)``, so the output is
 byte-identical whatever the worker count, and re-running the same command after an
 interruption only renders the shards that are missing. Asking for more samples later
-extends the splits (the config must match the manifest's; the error names the field).
+extends the splits (the config must match the manifest's; the error names the field);
+asking for fewer shrinks them without rendering or deleting anything (the manifest's count
+is what readers read; the shards past it stay, unread, for a later larger count).
 Shards are the unit of work: each worker renders a shard's samples and writes the shard.
 """
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Mapping, Sequence
 
 from training.data.cache import (
     MANIFEST, generator_version, new_manifest, read_manifest, remove_stale_temporaries, shard_is_complete, shard_name,
-    shard_plan, write_manifest, write_shard, writer_lock,
+    shard_plan, stored_count, write_manifest, write_shard, writer_lock,
 )
 from training.data.errors import DataConfigError, DatasetError
 from training.data.splits import check_dataset_seed, split_spec
@@ -45,8 +47,8 @@ class GenerationReport:
     shards_written: int
     shards_skipped: int
     seconds: float
-    bytes_on_disk: int
-    samples_on_disk: int
+    bytes_on_disk: int  # of the shards the splits read (not those left past a smaller count)
+    samples_on_disk: int  # in those shards (their last may hold more than its split's count)
 
     @property
     def samples_per_s(self) -> float:
@@ -97,6 +99,17 @@ def source_config(config: SyntheticConfig, dataset_seed: int) -> dict:
 
 def _folder_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
+
+
+def _disk_use(out: Path, manifest: dict) -> tuple[int, int]:
+    """Bytes and samples of the shards the manifest's splits read (kept shards past a count are not data)."""
+    size = samples = 0
+    for split, info in manifest["splits"].items():
+        for k, _, n in shard_plan(int(info["count"]), int(info["shard_size"])):
+            folder = out / split / shard_name(k)
+            size += _folder_bytes(folder)
+            samples += max(n, stored_count(folder))
+    return size, samples
 
 
 def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig, *, dataset_seed: int = 0,
@@ -159,10 +172,17 @@ def _generate(out: Path, counts: Mapping[str, int], config: SyntheticConfig, dat
         remove_stale_temporaries(split_dir)
         for k, first, n in shard_plan(count, shard_size):
             folder = split_dir / shard_name(k)
-            if shard_is_complete(folder, first, n):
+            # max_count: the last shard of a split made smaller holds the same first samples, and more
+            if shard_is_complete(folder, first, n, max_count=shard_size):
                 skipped += 1
                 continue
             tasks.append((split, k, first, n, folder, int(dataset_seed), config.to_json()))
+        shards = len(shard_plan(count, shard_size))
+        past = sorted(p.name for p in split_dir.glob("shard_*")
+                      if p.is_dir() and p.name[6:].isdigit() and int(p.name[6:]) >= shards)
+        if past:  # a smaller count than before: kept for a larger one, never read (the manifest says the count)
+            log.info("%s: %d shard(s) past the %d samples asked for are kept on disk, unread (%s..%s)", split,
+                     len(past), count, past[0], past[-1])
     total = sum(t[3] for t in tasks)
     log.info("%d shards (%d samples) to render, %d already complete, %d worker(s)", len(tasks), total, skipped, workers)
 
@@ -198,8 +218,7 @@ def _generate(out: Path, counts: Mapping[str, int], config: SyntheticConfig, dat
                                          "spec": split_spec(split, config.freestyle_share).to_json(),
                                          "seed_range": list(split_spec(split).seed_range(dataset_seed))}
     write_manifest(out, manifest)
-    on_disk = sum(int(info["count"]) for info in manifest["splits"].values())
-    size = sum(_folder_bytes(out / s) for s in manifest["splits"])
+    size, on_disk = _disk_use(out, manifest)
     return GenerationReport(total, len(tasks), skipped, seconds, size, on_disk)
 
 

@@ -45,6 +45,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import NUM_JOINTS
 from ghnerf_runtime.geometry import Camera
+from ghnerf_runtime.geometry.camera import DIST_LENGTHS
 from ghnerf_runtime.geometry.rig import MIN_BASELINE_M
 from training.data.errors import DatasetError
 
@@ -96,14 +97,20 @@ def parse_cameras(annots: dict, path: Path) -> list[tuple[np.ndarray, np.ndarray
     if len(set(counts.values())) != 1 or counts["K"] == 0:
         raise DatasetError(path, f"cams lists must be non-empty and of equal length, got {counts}")
     out = []
+    # every camera's shapes are checked here, when the file is opened: a bad entry of a camera no view set uses
+    # yet would otherwise surface only when (and if) a sample first needs it
     for c in range(counts["K"]):
         K = _numeric(cams["K"][c], path, f"cams.K[{c}]")
-        T = _numeric(cams["T"][c], path, f"cams.T[{c}]").reshape(-1)
-        D = _numeric(cams["D"][c], path, f"cams.D[{c}]").reshape(-1)
-        if K.shape != (3, 3) or T.shape != (3,):
-            raise DatasetError(path, f"camera {c}: cams.K[{c}] must be 3x3 and cams.T[{c}] a 3-vector, "
-                                     f"got {K.shape}, {T.shape}")
-        out.append((K, _as_rotation(cams["R"][c], path, c), T / MM_PER_M, D))
+        T = _numeric(cams["T"][c], path, f"cams.T[{c}]")
+        D = _numeric(cams["D"][c], path, f"cams.D[{c}]")
+        if K.shape != (3, 3):
+            raise DatasetError(path, f"cams.K[{c}] must be a 3x3 intrinsic matrix, got shape {K.shape}")
+        if T.size != 3 or T.ndim > 2:
+            raise DatasetError(path, f"cams.T[{c}] must be a 3-vector ((3,) or (3, 1)), got shape {T.shape}")
+        if D.size not in DIST_LENGTHS or D.ndim > 2:
+            raise DatasetError(path, f"cams.D[{c}] must hold {', '.join(map(str, DIST_LENGTHS[:-1]))} or "
+                                     f"{DIST_LENGTHS[-1]} OpenCV distortion coefficients, got shape {D.shape}")
+        out.append((K, _as_rotation(cams["R"][c], path, c), T.reshape(-1) / MM_PER_M, D.reshape(-1)))
     centres = np.array([-R.T @ t for _, R, t, _ in out])
     # the largest distance between two centres (not one axis' extent: a pair on a diagonal spans less per axis)
     spread = float(np.linalg.norm(centres[:, None] - centres[None], axis=-1).max()) if len(out) > 1 else np.inf
@@ -153,17 +160,20 @@ class ZjuSequence:
     Args:
         root: the subject folder (holding ``annots.npy``).
         mask_dir: ``"mask"`` or ``"mask_cihp"``.
+        mask_fallback: where ``mask_dir`` lacks an image's mask, use the other folder's (real copies miss a
+            few masks of one kind or the other); :meth:`mask_path` says which file is read.
 
     Raises:
         DatasetError: ``annots.npy`` is missing or malformed (the message names it); later
             calls name the image, mask or keypoint file they could not read.
     """
 
-    def __init__(self, root: str | Path, *, mask_dir: str = "mask") -> None:
+    def __init__(self, root: str | Path, *, mask_dir: str = "mask", mask_fallback: bool = False) -> None:
         self.root = Path(root)
         if mask_dir not in MASK_DIRS:
             raise DatasetError(self.root, f"mask_dir must be one of {MASK_DIRS}, got {mask_dir!r}")
         self.mask_dir = mask_dir
+        self.mask_fallback = bool(mask_fallback)
         path = self.root / ANNOTS
         if not path.is_file():
             raise DatasetError(path, "missing: not a ZJU-MoCap subject folder")
@@ -209,7 +219,15 @@ class ZjuSequence:
         return self.root / self.relative_image_path(frame, cam)
 
     def mask_path(self, frame: int, cam: int) -> Path:
-        return (self.root / self.mask_dir / self.relative_image_path(frame, cam)).with_suffix(".png")
+        """The mask file of the image: under ``mask_dir``, or with ``mask_fallback`` under the other mask folder
+        when only that one has it (a mask missing from both is named under ``mask_dir``)."""
+        rel = Path(self.relative_image_path(frame, cam)).with_suffix(".png")
+        path = self.root / self.mask_dir / rel
+        if self.mask_fallback and not path.is_file():
+            other = self.root / next(d for d in MASK_DIRS if d != self.mask_dir) / rel
+            if other.is_file():
+                return other
+        return path
 
     def read_image(self, frame: int, cam: int) -> np.ndarray:
         """``(H, W, 3)`` uint8 **BGR** (as OpenCV reads it)."""
@@ -235,12 +253,30 @@ class ZjuSequence:
         if cam not in self._cameras:
             K, R, t, D = self._calib[cam]
             h, w = self.read_image(frame, cam).shape[:2]
-            name = Path(self.relative_image_path(0, cam)).parent.name or f"cam{cam}"
             try:
-                self._cameras[cam] = Camera(name, w, h, K, D, R, t)
+                self._cameras[cam] = Camera(self._camera_name(cam), w, h, K, D, R, t)
             except ValueError as e:
                 raise DatasetError(self._annots_path, f"camera {cam}: {e}") from e
         return self._cameras[cam]
+
+    def ray_camera(self, cam: int) -> Camera:
+        """Camera ``cam`` for ray geometry alone (projection, undistortion of points, triangulation), read
+        without an image: the camera of :meth:`camera` once an image gave its size, else one whose size is a
+        nominal one from K's principal point. Triangulating a frame's joints from every camera's keypoints so
+        needs no image of the cameras no view set uses (a partial copy may lack them). Never crop with it."""
+        self._check(0, cam)
+        if cam in self._cameras:
+            return self._cameras[cam]
+        K, R, t, D = self._calib[cam]
+        # the size only bounds the image (crops, fold checks), which ray geometry does not look at
+        w, h = (max(1, int(np.ceil(2 * (v + 0.5)))) if np.isfinite(v) else 1 for v in (K[0, 2], K[1, 2]))
+        try:
+            return Camera(self._camera_name(cam), w, h, K, D, R, t)
+        except ValueError as e:
+            raise DatasetError(self._annots_path, f"camera {cam}: {e}") from e
+
+    def _camera_name(self, cam: int) -> str:
+        return Path(self.relative_image_path(0, cam)).parent.name or f"cam{cam}"
 
     def calibration(self, cam: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(K, R, t_metres, D)`` as stored (no image read)."""

@@ -8,13 +8,16 @@ preprocessed **exactly as the runtime does** (``build_undistort_crop_maps`` +
 the joints, so the crops are the same kind of image the device feeds the model.
 
 * **3D joints**: ``keypoints3d/`` when present (EasyMocap, metres); otherwise triangulated
-  from the 2D keypoints of *all* cameras (``triangulate_robust``, confidence-weighted);
+  from the 2D keypoints of *all* cameras (``triangulate_robust``, confidence-weighted; their
+  calibrations only: no image of a camera outside the view set is read);
   ``joints_3d_valid`` says which are known.
 * **2D joints** (``joints_2d_from``): ``"auto"`` projects the 3D joints into the crop when
   enough are valid (multi-view consistent targets; ``visible`` = valid, in front and inside
   the crop; occlusion is unknown), else maps the view's 2D keypoints (undistort, then the
   ROI transform; ``visible`` = confidence > ``min_confidence`` and inside the crop).
-* **Mask**: the mask file through the same remap (bilinear), thresholded at 0.5.
+* **Mask**: the mask file through the same remap (bilinear), thresholded at 0.5. A missing one
+  stops a conversion unless ``mask_fallback`` (the other mask folder's file) or
+  ``skip_missing_masks`` (leave the sample out, counted) says otherwise.
 * **Depth**: none (``has_depth`` False, depth 0).
 * **Subject box**: the valid 3D joints' box grown by ``bbox_margin_m`` (joints lie inside
   the body; hands, head top and feet reach ~0.1-0.2 m beyond them).
@@ -63,6 +66,11 @@ class ZjuConfig:
         min_confidence: 2D keypoints with confidence at or below this are missing.
         bbox_margin_m: growth of the joints' box into the subject box.
         mask_dir: ``"mask"`` or ``"mask_cihp"``.
+        mask_fallback: an image whose mask ``mask_dir`` lacks takes the other mask folder's
+            (``mask_cihp/`` for ``mask/``, and back); the sample's metadata names the mask files read.
+        skip_missing_masks: leave out the samples with a view whose mask is missing (after the
+            fallback), counted and logged at the end of a conversion; off, the first missing mask
+            stops the conversion, naming the file.
     """
 
     resolution: int = 128
@@ -74,6 +82,8 @@ class ZjuConfig:
     min_confidence: float = 0.1
     bbox_margin_m: float = 0.2
     mask_dir: str = "mask"
+    mask_fallback: bool = False
+    skip_missing_masks: bool = False
 
     def __post_init__(self) -> None:
         def fail(name: str, message: str) -> None:
@@ -98,6 +108,9 @@ class ZjuConfig:
             fail("joints_2d_from", f"must be 'auto', 'keypoints3d' or 'kpts2d', got {self.joints_2d_from!r}")
         if self.mask_dir not in ("mask", "mask_cihp"):
             fail("mask_dir", f"must be 'mask' or 'mask_cihp', got {self.mask_dir!r}")
+        for name in ("mask_fallback", "skip_missing_masks"):
+            if not isinstance(getattr(self, name), bool):
+                fail(name, f"must be true or false, got {getattr(self, name)!r}")
 
     @property
     def view_names(self) -> tuple[str, ...]:
@@ -122,7 +135,8 @@ def _frame_joints(seq: ZjuSequence, frame: int, kp2d: np.ndarray | None, config:
         valid = (j3[:, 3] > 0) & np.all(np.isfinite(j3[:, :3]), axis=1)
         return np.where(valid[:, None], j3[:, :3], 0.0), valid, "keypoints3d"
     if kp2d is not None:
-        cams = [seq.camera(c, frame) for c in range(seq.num_cameras)]
+        # every camera's keypoints, but no image: a partial copy lacks the images of cameras no view set uses
+        cams = [seq.ray_camera(c) for c in range(seq.num_cameras)]
         weights = np.where(kp2d[..., 2] > config.min_confidence, kp2d[..., 2], 0.0)
         result = triangulate_robust(kp2d[..., :2], cams, weights)
         return result.points, result.valid, "triangulated"
@@ -208,14 +222,38 @@ def zju_sample(seq: ZjuSequence, frame: int, view_set: Sequence[int], config: Zj
         "source": "zju", "root": str(seq.root), "frame": int(frame), "cameras": [int(c) for c in view_set],
         "camera_names": [seq.camera(c).name for c in view_set], "joints_3d_source": origin,
         "images": [seq.relative_image_path(frame, c) for c in view_set],
+        "masks": [str(seq.mask_path(frame, c).relative_to(seq.root)) for c in view_set],
     }
     return Sample(views, joints, valid, bbox, metadata)
 
 
-def iter_zju_samples(seq: ZjuSequence, config: ZjuConfig) -> Iterator[Sample]:
+@dataclass(frozen=True)
+class SamplePlan:
+    """The ``(frame, view_set)`` samples a conversion makes, and those it leaves out for a missing mask."""
+
+    samples: list[tuple[int, tuple[int, ...]]]
+    skipped: list[tuple[int, tuple[int, ...], list[Path]]]  # frame, view set, the missing mask files
+
+
+def plan_zju_samples(seq: ZjuSequence, config: ZjuConfig) -> SamplePlan:
+    """Every frame x view set of ``config``; with ``skip_missing_masks``, those whose views all have a mask
+    file (``seq.mask_path``, so after its fallback) apart from the skipped ones."""
+    samples, skipped = [], []
     for frame in config.frame_indices(seq.num_frames):
         for view_set in config.view_sets:
-            yield zju_sample(seq, frame, view_set, config)
+            item = (frame, tuple(view_set))
+            missing = [seq.mask_path(frame, c) for c in view_set] if config.skip_missing_masks else []
+            missing = [m for m in missing if not m.is_file()]
+            if missing:
+                skipped.append((*item, missing))
+            else:
+                samples.append(item)
+    return SamplePlan(samples, skipped)
+
+
+def iter_zju_samples(seq: ZjuSequence, config: ZjuConfig) -> Iterator[Sample]:
+    for frame, view_set in plan_zju_samples(seq, config).samples:
+        yield zju_sample(seq, frame, view_set, config)
 
 
 def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, split: str = "train",
@@ -228,6 +266,9 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
     sample converted, so a conversion that fails midway (a missing mask, say) leaves the
     previous split as it was. The split's manifest entry records the settings that made it
     (``source_config``); the top-level ``source_config`` of a ZJU dataset is the latest conversion's.
+    With ``config.skip_missing_masks`` the samples lacking a mask are left out (the count returned is
+    of those converted); their number goes into the split's entry (``skipped_missing_masks``) and a
+    warning at the end lists their frames.
 
     Raises:
         DataConfigError: a bad ``split``, ``shard_size`` or camera index (the message names it).
@@ -238,7 +279,7 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
         raise DataConfigError("split", f"must be an identifier, got {split!r}")
     if isinstance(shard_size, bool) or not isinstance(shard_size, int) or not 1 <= shard_size <= 100_000:
         raise DataConfigError("shard_size", f"must be an int in [1, 100000], got {shard_size!r}")
-    seq = ZjuSequence(subject, mask_dir=config.mask_dir)
+    seq = ZjuSequence(subject, mask_dir=config.mask_dir, mask_fallback=config.mask_fallback)
     for view_set in config.view_sets:
         if max(view_set) >= seq.num_cameras:
             raise DataConfigError("ZjuConfig.view_sets", f"camera {max(view_set)} does not exist "
@@ -264,11 +305,15 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
         log.info("removing %s, left by an interrupted conversion", stale)
         shutil.rmtree(stale, ignore_errors=True)
 
-    count = len(config.frame_indices(seq.num_frames)) * len(config.view_sets)
+    plan = plan_zju_samples(seq, config)
+    count = len(plan.samples)
+    if plan.skipped and not count:  # every sample lacks a mask: more likely the wrong mask_dir than a sparse copy
+        raise DatasetError(plan.skipped[0][2][0], f"missing mask: every one of the {len(plan.skipped)} samples "
+                                                  f"lacks one (is mask_dir={config.mask_dir!r} the copy's folder?)")
     tmp = out / f"{split}.tmp-{os.getpid()}"
     try:
         tmp.mkdir()
-        samples = iter_zju_samples(seq, config)
+        samples = (zju_sample(seq, frame, view_set, config) for frame, view_set in plan.samples)
         for k, first, n in shard_plan(count, shard_size):
             write_shard(tmp / shard_name(k), [next(samples) for _ in range(n)], first)
             log.info("%s: shard %d written (%d samples)", split, k, n)
@@ -287,12 +332,18 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
     os.replace(tmp, split_dir)
     manifest["splits"][split] = {"count": count, "shard_size": shard_size,
                                  "spec": {"name": split, "source": "zju", "subject": str(subject)},
-                                 "source_config": source_config}
+                                 "source_config": source_config,
+                                 **({"skipped_missing_masks": len(plan.skipped)} if config.skip_missing_masks else {})}
     if manifest.get("source") == "zju":  # (another source's top-level settings are its own: generate checks them)
         manifest["source_config"] = source_config
     write_manifest(out, manifest)
     shutil.rmtree(old, ignore_errors=True)
+    if plan.skipped:  # said last, after the shard lines, so it is not scrolled away
+        frames = sorted({f for f, _, _ in plan.skipped})
+        log.warning("%s: %d of %d samples skipped for a missing mask (frames %s%s; first missing: %s)", split,
+                    len(plan.skipped), count + len(plan.skipped), ", ".join(map(str, frames[:20])),
+                    ", ..." if len(frames) > 20 else "", plan.skipped[0][2][0])
     return count
 
 
-__all__ = ["ZjuConfig", "zju_sample", "zju_view", "iter_zju_samples", "convert_zju"]
+__all__ = ["ZjuConfig", "SamplePlan", "zju_sample", "zju_view", "plan_zju_samples", "iter_zju_samples", "convert_zju"]
