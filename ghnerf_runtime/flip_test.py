@@ -55,7 +55,7 @@ def flip_averaged(heatmaps: np.ndarray, mirrored: np.ndarray) -> np.ndarray:
 def presence_peak(heatmaps: np.ndarray, views, rank: int) -> float:
     """The ``rank``-th strongest joint's peak value in ``views`` of ``(S, J, h, w)`` heatmaps: per joint the
     geometric mean over those views of its heatmap maxima (clipped to [0, 1]); a map holding any non-finite value
-    has no peak (a maximum of 0), as the 2D decoder drops that joint (:func:`~ghnerf_runtime.keypoints.decode_keypoints`); 0 with
+    has no peak (a maximum of 0), as :func:`~ghnerf_runtime.keypoints.decode_keypoints` drops that joint; 0 with
     fewer joints.
 
     What the estimator compares with ``heatmaps.flip_test_skip_below`` before the flip test's second run: a
