@@ -214,7 +214,8 @@ class TrackingConfig:
             the working volume.
         min_joints: keep the track only when at least this many 3D joints were found
             (otherwise the next pair starts from the working volume again).
-        min_confidence: joints below this confidence do not count for the track.
+        min_confidence: joints below this confidence do not count for the track (peak values; the skeleton
+            prior's joints count by their expected error instead: docs/runtime.md, "The skeleton prior").
         box_margin_m: the subject box is the tracked joints' box grown by this (the body
             reaches past its joints: head top, hands, flesh); near/far and ray limits use it.
         near_far_margin_m: extra metres around the subject box for the plane sweep's

@@ -899,7 +899,12 @@ class Estimator:
         Nobody reported (the presence gate): nothing to follow either."""
         cfg = self.config
         if self._prior_follow is not None:
-            return self._gate_to_boxes(self._prior_follow, regions)
+            # the prior's follow set is chosen by expected error alone (_PRIOR_FOLLOW_MAX_ERROR_M, or the report
+            # gate if looser): its joints count for the track whatever tracking.min_confidence, a threshold for peak
+            # values. Its score exp(-error / 0.1 m) falls below the default 0.1 past 0.23 m, which cut that gate short.
+            f = self._prior_follow
+            counted = np.where(f.valid, np.maximum(f.confidence, cfg.tracking.min_confidence), 0.0).astype(np.float32)
+            return self._gate_to_boxes(Joints3D(f.points, counted, f.valid, f.reprojection_px), regions)
         if (cfg.heatmaps.source == "encoder" or not cfg.tracking.follow_encoder or not reported.valid.any()
                 or "encoder_heatmaps" not in env):
             return reported

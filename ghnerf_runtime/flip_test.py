@@ -54,7 +54,9 @@ def flip_averaged(heatmaps: np.ndarray, mirrored: np.ndarray) -> np.ndarray:
 
 def presence_peak(heatmaps: np.ndarray, views, rank: int) -> float:
     """The ``rank``-th strongest joint's peak value in ``views`` of ``(S, J, h, w)`` heatmaps: per joint the
-    geometric mean over those views of its heatmap maxima (clipped to [0, 1], NaN as 0); 0 with fewer joints.
+    geometric mean over those views of its heatmap maxima (clipped to [0, 1]); a map holding any non-finite value
+    has no peak (a maximum of 0), as :func:`~ghnerf_runtime.keypoints.decode_keypoints` drops that joint; 0 with
+    fewer joints.
 
     What the estimator compares with ``heatmaps.flip_test_skip_below`` before the flip test's second run: a
     pair where fewer than ``presence.min_joints`` joints reach it shows nobody.
@@ -69,6 +71,8 @@ def presence_peak(heatmaps: np.ndarray, views, rank: int) -> float:
     if heat.ndim != 4 or min(heat.shape[2:]) < 1 or rank < 1 or len(views) < 1:  # else numpy's bare errors
         raise ShapeError(f"heatmaps: expected (S, J, h, w) with h, w >= 1, rank >= 1 and at least one view, got "
                          f"{heat.shape}, rank {rank} and views {tuple(views)}")
-    peaks = np.nan_to_num(heat[list(views)].reshape(len(views), heat.shape[1], -1).max(-1).astype(np.float64))
+    maps = heat[list(views)].reshape(len(views), heat.shape[1], -1)
+    # nan_to_num made an inf map a full-strength peak, a joint the decoder reports missing
+    peaks = np.where(np.isfinite(maps).all(-1), maps.max(-1), 0.0).astype(np.float64)
     joint = np.exp(np.log(np.clip(peaks, 1e-30, 1.0)).mean(0))
     return float(np.sort(joint)[::-1][rank - 1]) if len(joint) >= rank else 0.0

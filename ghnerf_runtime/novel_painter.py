@@ -38,7 +38,8 @@ from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
-           "painter_planes", "float16_depth", "F16_MAX", "angle_from_sources_deg", "NovelPainter"]
+           "painter_planes", "depth_about_median", "float16_depth", "F16_MAX", "angle_from_sources_deg",
+           "NovelPainter"]
 
 #: Bump when a plane's meaning changes: a file trained on other planes is refused.
 FEATURE_VERSION = 1
@@ -62,6 +63,24 @@ def float16_depth(rel: np.ndarray) -> np.ndarray:
     it, and one NaN pixel spread through the convolutions into a NaN patch of the picture. Shared with the
     training caches (``training.fill_features``), so the network sees on the device what it saw in training."""
     return np.clip(np.nan_to_num(rel, nan=0.0, posinf=F16_MAX, neginf=-F16_MAX), -F16_MAX, F16_MAX).astype(np.float16)
+
+
+def depth_about_median(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``(H, W)`` float64: camera z minus its median over the subject's (``mask``) finite depths, 0 off the subject;
+    a pixel of the subject without a finite depth keeps it (NaN, +-inf: :func:`float16_depth` makes them 0 and
+    +-65504). One NaN inside the mask made the median NaN, so the whole subject's plane became 0; an inf counted
+    in it moved it. Shared with the training caches (``training.fill_features``), so both take the same median.
+
+    Raises:
+        ShapeError: ``depth`` and ``mask`` differ in shape.
+    """
+    depth, mask = np.asarray(depth, np.float64), np.asarray(mask, bool)
+    if depth.shape != mask.shape:
+        raise ShapeError(f"depth {depth.shape} and subject mask {mask.shape} must have the same shape")
+    known = mask & np.isfinite(depth)
+    if not known.any():  # nothing to measure from: no depth plane
+        return np.zeros(depth.shape)
+    return np.where(mask, depth - np.median(depth[known]), 0.0)
 
 
 def _u8(rgb: np.ndarray) -> np.ndarray:
@@ -144,7 +163,7 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     seen = mask & (n[..., 0] > 0)
     normals = surface_normals(points, mask, camera.center) @ camera.R.T  # rig frame -> camera frame
     normals = np.round(np.where(mask[..., None], normals, 0.0) * 127.0) / 127.0
-    rel = np.where(mask, depth - np.median(depth[mask]), 0.0) if mask.any() else np.zeros((H, W))
+    rel = depth_about_median(depth, mask)
     planes = np.concatenate([_u8(blend), mask[..., None], seen[..., None], normals,
                              float16_depth(rel)[..., None], _u8(shown)], -1)
     ju, jz = camera.project(joints, distort=False)

@@ -33,7 +33,8 @@ __all__ = ["OneEuroJoints", "smoothing_alpha"]
 def smoothing_alpha(cutoff_hz: np.ndarray | float, dt_s: float) -> np.ndarray:
     """The exponential smoothing factor of a first-order low-pass at ``cutoff_hz`` over a step ``dt_s``."""
     tau = 1.0 / (2.0 * math.pi * np.asarray(cutoff_hz, np.float64))
-    return 1.0 / (1.0 + tau / dt_s)
+    # dt / (dt + tau), not 1 / (1 + tau / dt): tau / dt overflowed (a RuntimeWarning) for a denormal step
+    return dt_s / (dt_s + tau)
 
 
 class OneEuroJoints:
@@ -83,11 +84,17 @@ class OneEuroJoints:
             self._t = float(t_s)
             return x.copy()
         keep = valid & self._alive
-        dx = (x - self._x) / dt
-        dx_hat = self._dx + smoothing_alpha(cfg.d_cutoff_hz, dt) * (dx - self._dx)
-        speed = np.linalg.norm(dx_hat, axis=-1, keepdims=True)
-        a = smoothing_alpha(cfg.min_cutoff_hz + cfg.beta * speed, dt)
-        x_hat = self._x + a * (x - self._x)
+        a_d = smoothing_alpha(cfg.d_cutoff_hz, dt)
+        tau_d = 1.0 / (2.0 * math.pi * cfg.d_cutoff_hz)
+        # the low-passed velocity dx + a_d * (step / dt - dx), with a_d / dt = 1 / (dt + tau_d): step / dt overflowed
+        # for a tiny step of time (5e-324 s), warning on the device's log. Only a jump near the float range (1e308 m)
+        # still overflows; it is caught below (the joint restarts), so numpy is not to warn of it either.
+        with np.errstate(over="ignore", invalid="ignore"):
+            step = x - self._x
+            dx_hat = (1.0 - a_d) * self._dx + step / (dt + tau_d)
+            speed = np.linalg.norm(dx_hat, axis=-1, keepdims=True)
+            a = smoothing_alpha(cfg.min_cutoff_hz + cfg.beta * speed, dt)
+            x_hat = self._x + a * step
         out = np.where(keep[:, None], x_hat, x)
         keep &= np.isfinite(out).all(axis=-1)  # an overflowing step (a jump of 1e308 m) restarts the joint
         out = np.where(keep[:, None], out, x)

@@ -28,6 +28,7 @@ from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.config import Joints3DConfig
+from ghnerf_runtime.estimator import _PRIOR_FOLLOW_MAX_ERROR_M
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG
 from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
@@ -74,6 +75,9 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"of more than {MAX_JOINTS} joints (`MAX_JOINTS`"),
     ("docs/protocol.md", f"`max_fps` extra cap, at least 1/{round(1 / MIN_MAX_FPS)} (a frame an hour)"),
     ("docs/runtime.md", f"`RASTER_CHUNK` ({RASTER_CHUNK})"),
+    # session 52: the crop's follow gate under the skeleton prior
+    ("docs/runtime.md", f"its joints expected within {_PRIOR_FOLLOW_MAX_ERROR_M:g} m, or the report gate if looser: "
+                        "`_PRIOR_FOLLOW_MAX_ERROR_M`"),
     ("docs/rig-file.md", f"at most {MAX_BASELINE_M:g} m apart (`MAX_BASELINE_M`"),
     ("docs/calibration.md", f"after {STALL_NOTE_S:g} s without an image pair (`STALL_NOTE_S`)"),
     ("docs/calibration.md", f"outside {USUAL_PITCH_DEG[0]:g} to {USUAL_PITCH_DEG[1]:g} degrees (`USUAL_PITCH_DEG`)"),

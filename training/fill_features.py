@@ -25,9 +25,9 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
 * ``flags`` ``(H, W)`` uint8: bit 0 the geometry's subject mask, bit 1 some source sees the pixel,
   bit 2 the true subject mask (the score's; the same as bit 0 with the true geometry);
 * ``normals`` ``(H, W, 3)`` int8: camera-frame unit normals times 127 (zero off the subject);
-* ``depth`` ``(H, W)`` float16: camera z minus its median on the subject, metres (zero off it), clipped to
-  float16's largest finite value, a NaN zero as off the subject (``novel_painter.float16_depth``, as on the
-  device);
+* ``depth`` ``(H, W)`` float16: camera z minus its median over the subject's finite depths, metres (zero off
+  it), clipped to float16's largest finite value, a NaN zero as off the subject
+  (``novel_painter.depth_about_median`` and ``float16_depth``, as on the device);
 * ``joints`` ``(25, 3)`` float32: the 3D joints projected into the view (pixel u, v; valid 0/1);
 * ``light`` ``(4,)`` float32: the fitted key light's direction in the camera frame and its ambient
   share (zeros when nothing was seen to fit it, or when the cache was made without the light fit:
@@ -58,7 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ghnerf_runtime.novel_painter import float16_depth
+from ghnerf_runtime.novel_painter import depth_about_median, float16_depth
 from training.blend_ceiling import blend_sources, project
 from training.model_card import sha256, write_atomic
 from training.unseen_fill import PART_BINS, Lighting, fit_lighting, relit_fill, seen_surface, surface_normals
@@ -122,7 +122,7 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
     target = truth["tgt_images"][view].transpose(1, 2, 0) * subject[..., None]
     R = c2w[:, :3]  # camera to world: a world vector v is v @ R in the camera frame
     normals = surface_normals(depth, mask, K_inv, c2w) @ R
-    z = np.where(mask, depth - np.median(depth[mask]), 0.0)
+    z = depth_about_median(depth, mask)  # the median over the finite depths, as on the device
     u, v, jz = project(np.asarray(scene["joints_3d"], np.float64), scene["tgt_P"][view])
     valid = np.asarray(scene["joints_3d_valid"], bool) & (jz > 0)
     light = np.zeros(4, np.float32)

@@ -48,6 +48,7 @@ from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.url import RigUrl
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
+from firmware_host.daemon.sandbox import rig_url_hint, sandbox_warnings, service_hint
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_estimator, check_sink_urls, load_model
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
 from ghnerf_runtime.config import config_to_dict
@@ -107,14 +108,15 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) 
     try:
         model_dir = resolve_model_dir(config.estimator.session.model_dir)
     except ModelLoadError as e:  # a folder the service's user may not read (was a traceback, exit 1)
-        raise DaemonConfigError(str(e), key="estimator.session.model_dir") from None
+        raise DaemonConfigError(f"{e}{service_hint(config.estimator.session.model_dir)}",
+                                key="estimator.session.model_dir") from None
     if not model_dir.is_dir():
         # said "holds no *.onnx graphs (make model builds ./models)": the example config's relative
         # "models", read from another folder than the repository's, sent the user to a two-hour build
         what = ("not a folder" if model_dir.exists() else "no such folder" if not model_dir.is_symlink()
                 else "a symbolic link that leads to no folder (dangling, or a loop)")
-        raise DaemonConfigError(f"{model_dir}: {what}"
-                                f"{_where_read(model_dir, source)}", key="estimator.session.model_dir")
+        raise DaemonConfigError(f"{model_dir}: {what}{_where_read(model_dir, source)}{service_hint(model_dir)}",
+                                key="estimator.session.model_dir")
     if not any(model_dir.glob("*.onnx")):
         raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
                                 key="estimator.session.model_dir")
@@ -145,8 +147,8 @@ def _check_rig_url(text: str) -> None:
     """
     try:
         drivers.create_rig_source(text)  # parses and checks the options; opens nothing
-    except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
-        raise DaemonConfigError(str(e), key="rig.url") from None
+    except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:  # a rig file it cannot read, too
+        raise DaemonConfigError(f"{e}{rig_url_hint(text)}", key="rig.url") from None
     except drivers.DriverError:
         pass  # a recording or device not there yet: the daemon waits for it, so the config is fine
     url = RigUrl.parse(text)
@@ -170,7 +172,7 @@ def _check_rig_url(text: str) -> None:
         try:
             rig = load_rig(rig_file)
         except RuntimeErrorBase as e:
-            raise DaemonConfigError(str(e), key="rig.url") from None
+            raise DaemonConfigError(f"{e}{service_hint(rig_file)}", key="rig.url") from None
         names = [("rig id", rig.rig_id, MAX_RIG_ID_LEN)] + [("camera name", c.name, MAX_CAMERA_NAME_LEN)
                                                             for c in rig.pair]
         for what, name, limit in names:
@@ -319,6 +321,10 @@ def _validate(path: str, *, with_model: bool) -> int:
         except DaemonConfigError as e:
             raise DaemonConfigError(str(e), key=str(path)) from None
     status = _print_json(config_to_dict(config))
+    # this runs outside the unit's sandbox, so it sees paths the service will not: say so, but pass (the config
+    # may be meant for a run from a shell)
+    for line in sandbox_warnings(config):
+        print(f"{PROG}: warning: {path}: {line}", file=sys.stderr)
     print(f"{PROG}: {path}: ok; {checked}", file=sys.stderr)
     return status
 

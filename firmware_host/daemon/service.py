@@ -66,6 +66,7 @@ from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
 from firmware_host.daemon.notify import HangWatchdog, SystemdNotifier
+from firmware_host.daemon.sandbox import rig_url_hint, service_hint
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame
 from firmware_host.protocol.constants import Fault, Flags
@@ -340,7 +341,7 @@ class Daemon:
             except drivers.DriverError as e:
                 self._close_rig(source)
                 self.health.rig_open_failures += 1
-                self.health.last_error = f"cannot open {self.health.rig_url}: {e}"
+                self.health.last_error = f"cannot open {self.health.rig_url}: {e}{rig_url_hint(rig_cfg.url)}"
                 self.health.enter(State.WAITING)
                 _log.warning("%s; retrying in %.1f s", self.health.last_error, self._backoff_s)
                 if self._wait(stop, self._backoff_s):  # not cut short by a new rig section
@@ -716,9 +717,10 @@ class Daemon:
                 self._status_file_failing = False
             except (OSError, ValueError) as e:
                 if not self._status_file_failing:  # once until it works again, not every tick
-                    hint = (" (the ghnerf unit writes only under /run/ghnerf and /var/lib/ghnerf: add the folder "
-                            "with ReadWritePaths= in systemctl edit ghnerf)"
-                            if isinstance(e, OSError) and e.errno in (errno.EROFS, errno.EACCES) else "")
+                    hint = service_hint(path, written=True) or (
+                        " (the ghnerf unit writes only under /run/ghnerf and /var/lib/ghnerf: add the folder "
+                        "with ReadWritePaths= in systemctl edit ghnerf)"
+                        if isinstance(e, OSError) and e.errno in (errno.EROFS, errno.EACCES) else "")
                     _log.warning("cannot write the status file %s: %s%s", path, e, hint)
                 self._status_file_failing = True
 

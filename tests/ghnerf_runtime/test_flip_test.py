@@ -83,3 +83,23 @@ def test_presence_peak_names_what_it_cannot_take(heat, views, rank):
 
     with pytest.raises(ShapeError, match="at least one view"):
         presence_peak(heat, views, rank)
+
+
+@pytest.mark.parametrize("bad", [np.inf, -np.inf, np.nan])
+def test_presence_peak_counts_no_peak_where_the_decoder_drops_the_joint(bad):
+    """A map with a non-finite value anywhere is a missing joint to the 2D decoder; presence_peak counted an inf
+    map as a full-strength peak (1.0) and a map with -inf beside a real blob as that blob, so the flip test's skip
+    saw joints that the pair then did not report. (NaN already gave none: np.max passes it on.) No peak is the
+    floor of the geometric mean, 1e-30."""
+    from ghnerf_runtime.flip_test import presence_peak
+
+    g = 16
+    heat = np.zeros((2, NUM_JOINTS, g, g), np.float32)
+    heat[:, :3] = 0.9 * _gaussian(g, 7.0, 7.0)  # three good joints in both views
+    heat[:, 3] = 0.8 * _gaussian(g, 4.0, 9.0)   # a fourth, spoilt below by one bad cell per view
+    heat[:, 3, 0, 0] = bad
+    kp = decode_keypoints(heat)
+    assert kp.valid[:, :3].all() and not kp.valid[:, 3].any()
+    assert presence_peak(heat, (0, 1), 3) == pytest.approx(0.9)
+    assert presence_peak(heat, (0, 1), 4) < 1e-20  # the fourth strongest: no peak (was 1.0 or 0.8)
+    assert presence_peak(heat, (0,), 4) < 1e-20

@@ -310,3 +310,30 @@ def test_a_nan_depth_is_the_planes_no_depth_value_and_an_infinite_one_its_larges
     assert got.dtype == np.float16 and np.isfinite(got).all()
     assert got.astype(np.float64).tolist() == [[0.0, F16_MAX, -F16_MAX], [1.5, F16_MAX, -F16_MAX]]
     assert float16_depth(np.float64(np.nan)) == 0.0  # a scalar too
+
+
+def test_the_depth_plane_is_about_the_median_of_the_subject_s_finite_depths(shot):
+    """The device's subject mask is depth > 0, which holds +inf: the median counted it (a third of the subject at
+    inf moved it to the rest's 75th percentile), while the training caches' median is over finite depths
+    (training.fill_features; a NaN there made the whole plane 0). Both call depth_about_median now."""
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    depth = proxy_depth(body, target)
+    ys, xs = np.nonzero(depth > 0)
+    wild = depth.copy()
+    wild[ys[::3], xs[::3]] = np.inf  # no finite depth known for a third of the subject
+    finite = (depth > 0) & np.isfinite(wild)
+    p = painter_planes(np.zeros((128, 128, 3)), target, wild, sources, rgb,
+                       [proxy_depth(body, c) for c in sources], joints, np.ones(25, bool))
+    expect = (depth[finite] - np.median(depth[finite])).astype(np.float16).astype(np.float32)
+    np.testing.assert_array_equal(p.planes[8][finite], expect)
+
+    from ghnerf_runtime.novel_painter import depth_about_median  # what both sides call
+
+    rel = depth_about_median(np.array([[1.0, np.nan, 3.0], [np.inf, 2.0, 9.0]]),
+                             np.array([[True, True, True], [True, True, False]]))
+    assert rel[0, 0] == -1.0 and rel[1, 1] == 0.0 and rel[0, 2] == 1.0 and rel[1, 2] == 0.0  # median 2, of 1, 2, 3
+    assert np.isnan(rel[0, 1]) and rel[1, 0] == np.inf  # float16_depth's to make 0 and 65504
+    assert not depth_about_median(np.full((2, 2), np.nan), np.ones((2, 2), bool)).any()  # nothing to measure from
+    with pytest.raises(ShapeError, match=r"depth \(2, 2\) and subject mask \(2, 3\)"):
+        depth_about_median(np.zeros((2, 2)), np.zeros((2, 3), bool))

@@ -567,3 +567,30 @@ def test_a_prior_that_disagrees_with_the_triangulation_falls_back_to_it(model_wi
     assert r.prior_fallback is falls_back and r.prior_disagreement_m == pytest.approx(offset_m)
     obj = r.to_json()
     assert obj["prior_fallback"] is falls_back and obj["prior_disagreement_m"] == pytest.approx(offset_m)
+
+
+def test_the_crop_follows_every_joint_the_follow_gate_keeps(model_with_prior):
+    """The crop follows the prior's joints expected within ``_PRIOR_FOLLOW_MAX_ERROR_M`` (0.25 m), or the report
+    gate if looser (docs/runtime.md). Their score exp(-error / 0.1 m) is below tracking.min_confidence (0.1) past
+    0.23 m, and the track dropped them: a skeleton expected 0.24 m off, or 0.4 m off under a 0.5 m report gate,
+    held no track. The gate itself still holds: 0.26 m (default report gate) forms none."""
+    from ghnerf_runtime.estimator import _PRIOR_FOLLOW_MAX_ERROR_M, Estimator, load_session
+    from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+
+    assert _PRIOR_FOLLOW_MAX_ERROR_M == 0.25  # the case below sits between 0.23 m and it
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
+    centre = 0.5 * (rig.volume.min_corner + rig.volume.max_corner)  # inside every box gate
+    skeleton = centre + np.linspace(-0.3, 0.3, NUM_JOINTS)[:, None] * np.array([0.3, 1.0, 0.2])
+    for report_m, error_m, tracked in ((0.15, 0.24, True), (0.15, 0.26, False), (0.5, 0.4, True), (0.5, 0.55, False)):
+        cfg = _config(model_with_prior, max_prior_error_m=report_m)
+        session = load_session(cfg)
+        session.skeleton_prior.estimate = lambda *a, e=error_m, **k: SkeletonEstimate(
+            skeleton, np.full(NUM_JOINTS, e), np.ones(NUM_JOINTS, bool))
+        est = Estimator(session, rig, cfg)
+        r = est.estimate(frames, sequence=0)
+        assert r.missing.all() == (error_m > report_m), (report_m, error_m)
+        assert (est.tracker.track is not None) == tracked, (report_m, error_m)
+        if tracked:
+            np.testing.assert_allclose(est.tracker.track.joints, skeleton, atol=1e-6)

@@ -265,3 +265,39 @@ def test_points_and_valid_of_the_wrong_shape_are_refused(points, valid):
     with pytest.raises(ShapeError, match=r"points \(J, 3\)"):
         f(0.0, points, valid)
         f(1 / FPS, points, valid)
+
+
+@pytest.mark.parametrize("dt", [5e-324, 1e-310, 1e-300])
+def test_a_tiny_step_of_time_warns_of_nothing_and_is_the_filter_s_limit(dt):
+    """A step of 5e-324 s overflowed the velocity (step / dt) and tau / dt: numpy warned on the device's log, the
+    joint restarted at its raw place (5e-324 s) or lost its speed (1e-310 s), unlike any other small step. Now
+    every tiny step answers the limit of the filter as dt goes to 0 (the state), and the next pair as after any."""
+    import warnings
+
+    ok = np.ones(2, bool)
+    a, b, c = np.zeros((2, 3)), np.full((2, 3), 0.01), np.full((2, 3), 0.02)
+    f, ref = OneEuroJoints(SmoothingConfig()), OneEuroJoints(SmoothingConfig())
+    f(0.0, a, ok)
+    ref(0.0, a, ok)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tiny = f(dt, b, ok)
+        after = f(1 / FPS, c, ok)
+    np.testing.assert_allclose(tiny, a, atol=1e-12)
+    ref(1e-12, b, ok)  # a small step of time that never overflowed
+    np.testing.assert_allclose(after, ref(1 / FPS, c, ok), rtol=1e-9)
+
+
+def test_a_jump_near_the_float_range_restarts_the_joint_without_a_warning():
+    """The overflowing jump (test above) restarted the joint as meant, but numpy warned of the overflow first."""
+    import warnings
+
+    f = OneEuroJoints(SmoothingConfig())
+    x, ok = np.zeros((2, 3)), np.ones(2, bool)
+    f(0.0, x, ok)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        up = f(0.1, x + 1e308, ok)
+        down = f(0.2, x - 1e308, ok)
+        back = f(0.3, x, ok)
+    assert np.array_equal(up, x + 1e308) and np.array_equal(down, x - 1e308) and np.array_equal(back, x)

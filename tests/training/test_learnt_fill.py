@@ -93,6 +93,29 @@ def test_a_depth_beyond_float16_is_cached_at_its_largest_as_on_the_device_not_in
     assert np.abs(f["depth"][ys[1:], xs[1:]].astype(float)).max() < 10.0  # the rest keeps its depth about the median
 
 
+def test_a_nan_depth_inside_the_subject_leaves_the_rest_of_the_cached_depth_plane_about_its_median(data64):
+    """Review 52: the cache's median over the subject mask took a NaN depth in (NaN), so the whole subject's depth
+    plane became 0; the median is over the finite depths now, as on the device (novel_painter.depth_about_median)."""
+    from training.data.torch_dataset import MultiViewDataset
+    from training.fill_features import view_features
+
+    scene = {k: v.numpy() for k, v in MultiViewDataset(data64, "val")[0].items()}
+    t = next(i for i in range(len(scene["tgt_masks"]))
+             if not scene["tgt_is_source"][i] and scene["tgt_masks"][i].sum() > 3)
+    depth = np.array(scene["tgt_depth"], np.float64)
+    mask = np.asarray(scene["tgt_masks"][t], bool)
+    ys, xs = np.nonzero(mask)
+    depth[t, ys[0], xs[0]] = np.nan  # no depth known at one pixel of the subject
+    scene["tgt_depth"] = depth
+    f = view_features(scene, t, None, 30.0, relight=False)
+    rest = mask.copy()
+    rest[ys[0], xs[0]] = False
+    expect = (depth[t][rest] - np.median(depth[t][rest])).astype(np.float16)
+    assert float(f["depth"][ys[0], xs[0]]) == 0.0  # the NaN pixel: no depth, as off the subject
+    np.testing.assert_array_equal(f["depth"][rest], expect)
+    assert np.abs(expect.astype(float)).max() > 0  # a plane with depth in it, not all 0
+
+
 def test_a_model_geometry_cache_takes_the_mask_and_picture_from_the_model_and_the_target_from_the_truth(
         model_cache, truth_cache):
     m, t = load_cache(model_cache), load_cache(truth_cache)
