@@ -70,6 +70,8 @@ VARIANTS: dict[str, dict] = {
     "joints3d.max_prior_error_m 0.15": {"joints3d": {"max_prior_error_m": 0.15}},
     "joints3d.max_prior_error_m 0.2": {"joints3d": {"max_prior_error_m": 0.2}},
     "joints3d.max_prior_error_m 10": {"joints3d": {"max_prior_error_m": 10.0}},
+    "joints3d.max_prior_disagreement_m 0": {"joints3d": {"max_prior_disagreement_m": 0.0}},
+    "joints3d.max_prior_disagreement_m 0.15": {"joints3d": {"max_prior_disagreement_m": 0.15}},
     "joints3d.prior_flip_test off": {"joints3d": {"prior_flip_test": False}},
     "joints3d.prior_flip_test off + max_prior_error_m 10": {"joints3d": {"prior_flip_test": False,
                                                                          "max_prior_error_m": 10.0}},
