@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import inspect
 import json
+import math
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from calibration.cli import STALL_NOTE_S
 from calibration.solve import COVERAGE_GRID, USUAL_PITCH_DEG
 from drivers.backends.replay import MIN_SPEED
+from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.config import DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
@@ -27,19 +30,27 @@ from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
-from ghnerf_runtime.config import Joints3DConfig
-from ghnerf_runtime.estimator import _PRIOR_FOLLOW_MAX_ERROR_M
+from ghnerf_runtime.body25 import JOINT_NAMES
+from ghnerf_runtime.config import Joints3DConfig, TrackingConfig
+from ghnerf_runtime.contract import WEIGHTS_ID_KEY
+from ghnerf_runtime.estimator import _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, PairResult
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG
 from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
-from ghnerf_runtime.geometry.rig import MAX_BASELINE_M
+from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
+from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
+from training.data.errors import DatasetError
+from training.data.zju import MIN_CAMERA_SPREAD_M, parse_cameras
 from training.export.calibration import MIN_FRAMES
 from training.export.opsets import MAX_OPSET, MIN_OPSET
 
 REPO = Path(__file__).resolve().parents[1]
 RAY = Joints3DConfig().min_ray_angle_deg
+DISAGREE = Joints3DConfig().max_prior_disagreement_m
+PRIOR_GATE = Joints3DConfig().max_prior_error_m
+TRACK_CONF = TrackingConfig().min_confidence
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
 
 
@@ -78,6 +89,25 @@ def _doc(name: str) -> str:
     # session 52: the crop's follow gate under the skeleton prior
     ("docs/runtime.md", f"its joints expected within {_PRIOR_FOLLOW_MAX_ERROR_M:g} m, or the report gate if looser: "
                         "`_PRIOR_FOLLOW_MAX_ERROR_M`"),
+    # session 52: the skeleton prior's disagreement check, its confidence and the weights id
+    ("docs/runtime.md", f"`joints3d.max_prior_disagreement_m`, default {DISAGREE:g} m;"),
+    ("docs/runtime.md", f"**{DISAGREE:g} m (default)**"),
+    ("docs/runtime.md", f"`joints3d.max_prior_disagreement_m` ({DISAGREE:g} m)"),
+    ("README.md", f"lies more than {DISAGREE:g} m from the triangulation (`joints3d.max_prior_disagreement_m`"),
+    ("docs/runtime.md", f"at least {MIN_CHECK_JOINTS} of them; `skeleton_prior.disagreement_m`"),
+    ("docs/runtime.md", f"fewer than {MIN_CHECK_JOINTS} joints were triangulated"),
+    ("docs/runtime.md", f"confidence `exp(-expected error / {_PRIOR_CONFIDENCE_SCALE_M:g} m)` "
+                        f"({math.exp(-PRIOR_GATE / _PRIOR_CONFIDENCE_SCALE_M):.2f} to 1 under the default gate"),
+    # the follow gate was cut short where exp(-error / scale) fell below tracking.min_confidence
+    ("docs/runtime.md", f"the prior's score falls below its default {TRACK_CONF:g} past "
+                        f"{-_PRIOR_CONFIDENCE_SCALE_M * math.log(TRACK_CONF):.2f} m"),
+    ("docs/runtime.md", f"(`{WEIGHTS_ID_KEY}`, the same in every graph"),
+    ("docs/runtime.md", f"`weights_id` (the loaded graphs' shared `{WEIGHTS_ID_KEY}`"),
+    ("docs/training.md", f"carries the same `{WEIGHTS_ID_KEY}` in its metadata"),
+    ("docs/training.md", f"with its `{WEIGHTS_ID_KEY}` left out"),
+    ("docs/model.md", f"with `{WEIGHTS_ID_KEY}` beside it"),
+    ("docs/dataset.md", f"within {100 * MIN_CAMERA_SPREAD_M:g} cm of one another (the runtime's shortest baseline, "
+                        "`rig.MIN_BASELINE_M`"),
     ("docs/rig-file.md", f"at most {MAX_BASELINE_M:g} m apart (`MAX_BASELINE_M`"),
     ("docs/calibration.md", f"after {STALL_NOTE_S:g} s without an image pair (`STALL_NOTE_S`)"),
     ("docs/calibration.md", f"outside {USUAL_PITCH_DEG[0]:g} to {USUAL_PITCH_DEG[1]:g} degrees (`USUAL_PITCH_DEG`)"),
@@ -125,3 +155,40 @@ def test_the_model_doc_quotes_the_card_s_int8_parity():
     density = max(g["query"]["density"]["mean_abs"] for g in graphs)
     phrase = f"gives at most {rgb:.3f}, {depth_cm:.1f} cm, {heat:.2f} and {density:.3f}"
     assert phrase in _doc("docs/model.md"), phrase
+
+
+def test_the_zju_unit_check_is_the_runtime_s_shortest_baseline():
+    """docs/dataset.md says the ZJU loader's metres-or-millimetres threshold is ``rig.MIN_BASELINE_M``."""
+    assert MIN_CAMERA_SPREAD_M == MIN_BASELINE_M
+
+
+def test_the_dataset_doc_quotes_the_zju_distortion_error_as_the_loader_words_it():
+    """docs/dataset.md quotes the message of a camera whose ``D`` has a count OpenCV does not take."""
+    K, R, T = [[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]], [[1.0, 0, 0], [0, 1, 0], [0, 0, 1]], [[0.0], [0.0], [0.0]]
+    annots = {"cams": {"K": [K] * 3, "R": [R] * 3, "T": [T, [[100.0], [0.0], [0.0]], [[0.0], [100.0], [0.0]]],
+                       "D": [[[0.0]] * 5, [[0.0]] * 5, [[0.0]] * 3]}}
+    with pytest.raises(DatasetError) as e:
+        parse_cameras(annots, Path("annots.npy"))
+    said = str(e.value).split("annots.npy: ", 1)[-1]
+    assert said.startswith("cams.D[2] must hold ")
+    assert f"`{said}`" in _doc("docs/dataset.md"), said
+
+
+def test_the_readme_quotes_what_a_rig_url_s_leading_zero_is_told():
+    """README, "Rig URLs": a leading zero is refused saying what to write (``drivers.url.whole_number``)."""
+    with pytest.raises(ValueError, match=r"\(write 10;") as e:
+        whole_number("010")
+    assert "saying what to write (`write 10`)" in _doc("README.md"), str(e.value)
+
+
+def test_the_runtime_doc_names_every_key_of_a_pair_s_json():
+    """docs/runtime.md, "Output": every top-level key ``PairResult.to_json`` writes is named there (quoted in the
+    example or in backticks), so a key added to the JSON (``prior_fallback``, session 52) is documented."""
+    n = len(JOINT_NAMES)
+    result = PairResult(0, JOINT_NAMES, np.zeros((n, 3)), np.zeros(n, np.float32), np.ones(n, bool),
+                        {"left": np.zeros((n, 2))}, {"left": np.zeros(n)}, {"left": np.ones(n, bool)},
+                        {"total": 1.0}, False, {"left": True}, {}, "triangulate")
+    text = (REPO / "docs/runtime.md").read_text()
+    output = text.split("**Output**: one object per frame pair", 1)[1].split("\n## ", 1)[0]
+    unnamed = [k for k in result.to_json() if f'"{k}"' not in output and f"`{k}`" not in output]
+    assert not unnamed, f"docs/runtime.md, Output, does not name {unnamed}"
