@@ -370,7 +370,9 @@ class Joints3DConfig:
             median distance over the triangulated joints, :func:`ghnerf_runtime.skeleton_prior.disagreement_m`)
             from the triangulation is reported as triangulated, as without the prior (``PairResult.prior_fallback``):
             the prior learnt upright people only and answers a near-upright skeleton for one lying or upside down,
-            with a small expected error. ``0`` turns the check off (docs/runtime.md, "The skeleton prior").
+            with a small expected error. ``0``, the default, turns the check off: on tracked sequences it also sends
+            pairs whose triangulation is wrong to it (docs/runtime.md, "The skeleton prior"); 0.25 catches a
+            person upside down.
     """
 
     method: str = "triangulate"
@@ -386,7 +388,7 @@ class Joints3DConfig:
     skeleton_prior: str = "auto"
     max_prior_error_m: float = 0.15
     prior_flip_test: bool = True
-    max_prior_disagreement_m: float = 0.25
+    max_prior_disagreement_m: float = 0.0
 
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)

@@ -90,10 +90,11 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"its joints expected within {_PRIOR_FOLLOW_MAX_ERROR_M:g} m, or the report gate if looser: "
                         "`_PRIOR_FOLLOW_MAX_ERROR_M`"),
     # session 52: the skeleton prior's disagreement check, its confidence and the weights id
-    ("docs/runtime.md", f"`joints3d.max_prior_disagreement_m`, default {DISAGREE:g} m;"),
-    ("docs/runtime.md", f"**{DISAGREE:g} m (default)**"),
-    ("docs/runtime.md", f"`joints3d.max_prior_disagreement_m` ({DISAGREE:g} m)"),
-    ("README.md", f"lies more than {DISAGREE:g} m from the triangulation (`joints3d.max_prior_disagreement_m`"),
+    ("docs/runtime.md", f"default {DISAGREE:g} m; off; session 52"),
+    ("docs/runtime.md", f"**{DISAGREE:g} m, no check (default)**"),
+    ("docs/runtime.md", f"**{DISAGREE:g}, no check (default)**"),
+    ("docs/runtime.md", f"`joints3d.max_prior_disagreement_m` {DISAGREE:g} (off, default)"),
+    ("README.md", "`joints3d.max_prior_disagreement_m: 0.25` (off by default:"),
     ("docs/runtime.md", f"at least {MIN_CHECK_JOINTS} of them; `skeleton_prior.disagreement_m`"),
     ("docs/runtime.md", f"fewer than {MIN_CHECK_JOINTS} joints were triangulated"),
     ("docs/runtime.md", f"confidence `exp(-expected error / {_PRIOR_CONFIDENCE_SCALE_M:g} m)` "
