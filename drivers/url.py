@@ -21,7 +21,7 @@ _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 _LEADING_ZERO = re.compile(r"[+-]?0[0-9_]*[1-9][0-9_]*")
 #: Query keys whose values are secrets (lower-cased): a password or token given as an option.
-_SECRET_KEY = re.compile(r"(.*[_-])?(password|passwd|pass|pwd|token|secret|api_?key|auth|credentials?)")
+_SECRET_KEY = re.compile(r"(.*[_-])?(password|passwd|pass|pwd|token|secret|api[_-]?key|access[_-]?key|auth|credentials?)")
 #: What a secret is shown as.
 REDACTED = "***"
 

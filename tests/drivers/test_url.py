@@ -157,6 +157,8 @@ STREAM = "opencv://?first=rtsp%3A%2F%2Fadmin%3Ahunter2%40cam1%2Fstream&second=%2
     ("record+opencv://?first=rtsp%3A%2F%2Fu%3Ahunter2%40h&second=0&out=/d",
      "record+opencv://?first=rtsp%3A%2F%2Fu%3A***%40h&second=0&out=/d"),
     ("x://u:hunter2@[::1/", "x://u:***@[::1/"),  # a host urlsplit cannot parse
+    ("http://cam/x?api-key=hunter2&apikey=hunter2&AccessKey=hunter2&access_key=hunter2&keyframes=2",
+     "http://cam/x?api-key=***&apikey=***&AccessKey=***&access_key=***&keyframes=2"),  # hyphenated too
 ])
 def test_a_url_is_shown_without_its_passwords(url, shown):
     from drivers.url import redact_url
