@@ -137,10 +137,12 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     if joints.shape != (NUM_JOINTS, 3) or valid.shape != (NUM_JOINTS,):
         raise ShapeError(f"joints must be ({NUM_JOINTS}, 3) with ({NUM_JOINTS},) valid, got {joints.shape}, {valid.shape}")
     mask = depth > 0
-    # Every pixel unprojected at its depth (off the proxy: the camera centre, as the caches do).
+    # Every pixel unprojected at its depth (off the proxy: the camera centre, as the caches do); a NaN or
+    # infinite depth has no position (NaN: no source colour, no normal), as the caches' unproject gives it.
     v, u = np.mgrid[0:H, 0:W].astype(np.float64)
     xy = camera.pixels_to_normalized(np.stack([u, v], -1).reshape(-1, 2)).reshape(H, W, 2)
-    points = ((np.concatenate([xy, np.ones((H, W, 1))], -1) * depth[..., None]) - camera.t) @ camera.R
+    placed = np.where(np.isfinite(depth), depth, np.nan)
+    points = ((np.concatenate([xy, np.ones((H, W, 1))], -1) * placed[..., None]) - camera.t) @ camera.R
     flat = points.reshape(-1, 3)
     colours, sees = [], []
     for k, (cam, rgb, own_depth) in enumerate(zip(sources, source_rgb, source_depth)):

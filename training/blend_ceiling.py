@@ -21,11 +21,14 @@ VISIBILITY_TOLERANCE_M = 0.03
 
 
 def unproject(depth: np.ndarray, K_inv: np.ndarray, c2w: np.ndarray) -> np.ndarray:
-    """World points ``(H, W, 3)`` of a camera-z ``depth`` map ``(H, W)``; ``c2w`` ``(3, 4)``."""
+    """World points ``(H, W, 3)`` of a camera-z ``depth`` map ``(H, W)``; ``c2w`` ``(3, 4)``. A NaN or infinite
+    depth has no position: its point is NaN (an infinite one times a zero ray or rotation entry warned and gave
+    NaN or inf by chance), as the device's painter places it (``novel_painter.painter_planes``)."""
+    depth = np.asarray(depth, np.float64)
     H, W = depth.shape
     v, u = np.mgrid[0:H, 0:W].astype(np.float64)
     rays = np.stack([u, v, np.ones_like(u)], -1) @ np.asarray(K_inv, np.float64).T  # z = 1
-    cam = rays * np.asarray(depth, np.float64)[..., None]
+    cam = rays * np.where(np.isfinite(depth), depth, np.nan)[..., None]
     c2w = np.asarray(c2w, np.float64)
     return cam @ c2w[:, :3].T + c2w[:, 3]
 
@@ -58,6 +61,8 @@ def blend_sources(scene: Mapping[str, np.ndarray], view: int, depth: np.ndarray,
     colours, sees = [], []
     for s in range(S):
         u, v, z = project(points, scene["src_P"][s])
+        # a point without a position (NaN) falls outside every source, as on the device (painter_planes)
+        u, v = np.nan_to_num(u, nan=-1.0), np.nan_to_num(v, nan=-1.0)
         img = np.ascontiguousarray(scene["images"][s].transpose(1, 2, 0), np.float32)
         colours.append(cv2.remap(img, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT))
         inside = (u >= 0) & (u <= img.shape[1] - 1) & (v >= 0) & (v <= img.shape[0] - 1) & (z > 0)

@@ -24,7 +24,8 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
   and the view over black (the target, ``ghnerf-eval``'s);
 * ``flags`` ``(H, W)`` uint8: bit 0 the geometry's subject mask, bit 1 some source sees the pixel,
   bit 2 the true subject mask (the score's; the same as bit 0 with the true geometry);
-* ``normals`` ``(H, W, 3)`` int8: camera-frame unit normals times 127 (zero off the subject);
+* ``normals`` ``(H, W, 3)`` int8: camera-frame unit normals times 127 (zero off the subject, and where the
+  depth is not finite: no surface there, its neighbours' normals taken from their own side, as on the device);
 * ``depth`` ``(H, W)`` float16: camera z minus its median over the subject's finite depths, metres (zero off
   it), clipped to float16's largest finite value, a NaN zero as off the subject
   (``novel_painter.depth_about_median`` and ``float16_depth``, as on the device);

@@ -40,21 +40,24 @@ def bone_coordinates(points: np.ndarray, joints: np.ndarray, valid: np.ndarray,
     """Each point's nearest BODY_25 bone (index into ``LIMBS``) and its bin along that bone.
 
     ``points`` ``(N, 3)``, ``joints`` ``(25, 3)`` with ``valid`` ``(25,)``; a bone with an invalid end
-    is never chosen. Returns ``bone`` ``(N,)`` (-1 where no bone is valid) and ``bin`` ``(N,)`` in
-    ``[0, bins)``: the point's position along the bone from parent to child, clamped to its ends.
+    is never chosen. Returns ``bone`` ``(N,)`` (-1 where no bone is valid, or the point has no finite
+    position: a NaN or infinite depth's) and ``bin`` ``(N,)`` in ``[0, bins)``: the point's position along
+    the bone from parent to child, clamped to its ends (0 without a bone).
     """
     a = np.array([joints[i] for i, _ in LIMBS], np.float64)
     b = np.array([joints[j] for _, j in LIMBS], np.float64)
     ok = np.array([bool(valid[i]) and bool(valid[j]) for i, j in LIMBS])
     p = np.asarray(points, np.float64).reshape(-1, 1, 3)
+    placed = np.isfinite(p).all(axis=-1)[:, 0]
+    p = np.where(placed[:, None, None], p, 0.0)  # a NaN bin cast to int is garbage: an IndexError downstream
     ab = b - a
     t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)  # (N, L)
     dist = np.linalg.norm(p - (a + t[..., None] * ab), axis=-1)
     dist[:, ~ok] = np.inf
     bone = np.argmin(dist, axis=1)
     along = t[np.arange(len(p)), bone]
-    bone = np.where(ok.any(), bone, -1)
-    return bone, np.minimum((along * bins).astype(int), bins - 1)
+    bone = np.where(ok.any() & placed, bone, -1)
+    return bone, np.where(placed, np.minimum((along * bins).astype(int), bins - 1), 0)
 
 
 def surface_normals(depth: np.ndarray, mask: np.ndarray, K_inv: np.ndarray, c2w: np.ndarray) -> np.ndarray:
@@ -93,7 +96,8 @@ def seen_surface(scene: Mapping[str, np.ndarray], bins: int = PART_BINS) -> Seen
     for s in range(len(scene["images"])):
         if not scene["tgt_has_depth"][s]:
             continue
-        mask = np.asarray(scene["tgt_masks"][s], bool) & (np.asarray(scene["tgt_depth"][s]) > 0)
+        depth = np.asarray(scene["tgt_depth"][s])
+        mask = np.asarray(scene["tgt_masks"][s], bool) & (depth > 0) & np.isfinite(depth)  # no position, no sample
         inner = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
         colours = scene["images"][s].transpose(1, 2, 0)
         inner &= colours.max(-1) < 0.98

@@ -32,12 +32,19 @@ def surface_normals(points: np.ndarray, mask: np.ndarray, center: np.ndarray) ->
 
     From the points' image-space differences, one-sided at the silhouette so that an edge pixel's
     normal comes from its own side rather than from the background; a pixel with no neighbour in the
-    mask along an axis (a one-pixel sliver) faces the camera. Outside ``mask`` the values are
-    meaningless (callers zero them)."""
-    mask = np.asarray(mask, bool)
+    mask along an axis (a one-pixel sliver) faces the camera. A point without a finite position (a NaN
+    or infinite depth) has no surface: its neighbours difference across it as across the silhouette,
+    and its own normal is the zero vector, the "no normal" value callers give pixels off the subject
+    (NaN arithmetic made it NaN, cast to int8 as garbage, and turned its neighbours to face the camera).
+    Outside ``mask`` the values are meaningless (callers zero them)."""
+    points = np.asarray(points, np.float64)
+    finite = np.isfinite(points).all(axis=-1)
+    mask = np.asarray(mask, bool) & finite
+    points = np.where(finite[..., None], points, 0.0)  # NaN * 0 is NaN: keep it out of the differences
     n = np.cross(masked_difference(points, mask, 1), masked_difference(points, mask, 0))
     length = np.linalg.norm(n, axis=-1, keepdims=True)
     towards_camera = np.asarray(center, np.float64) - points
     view = towards_camera / np.maximum(np.linalg.norm(towards_camera, axis=-1, keepdims=True), 1e-12)
     n = np.where(length > 1e-12, n / np.maximum(length, 1e-12), view)
-    return np.where(((n * towards_camera).sum(-1) < 0)[..., None], -n, n)
+    n = np.where(((n * towards_camera).sum(-1) < 0)[..., None], -n, n)
+    return np.where(finite[..., None], n, 0.0)

@@ -299,6 +299,33 @@ def test_a_depth_beyond_float16_is_held_at_its_largest_not_inf(shot):
     assert np.abs(p.planes[8][depth > 0]).max() < 1.0  # the subject keeps its depth about the median
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_pixel_without_a_finite_depth_has_no_normal_and_its_neighbours_keep_theirs(shot, bad):
+    """Review 52: an infinite depth inside the proxy (depth > 0 holds it) made a NaN normal plane there (inf - inf),
+    so the painter's answer NaN; a NaN one (off the mask) turned its neighbours' normals to face the camera. Both
+    have no normal now (the zero vector, as off the subject) and their neighbours difference across them as across
+    the silhouette: the normals are those with the pixel off the proxy, as the training caches make them
+    (training.fill_features, through the same ghnerf_runtime.geometry.surface.surface_normals)."""
+    import warnings
+
+    joints, sources, rgb, target, _, _ = shot
+    body = proxy_body(joints, np.ones(25, bool))
+    depth = proxy_depth(body, target)
+    src_depth = [proxy_depth(body, c) for c in sources]
+    ys, xs = np.nonzero(depth > 0)
+    y, x = ys[len(ys) // 2], xs[len(xs) // 2]
+    wild, off = depth.copy(), depth.copy()
+    wild[y, x], off[y, x] = bad, 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        p = painter_planes(np.zeros((128, 128, 3)), target, wild, sources, rgb, src_depth, joints, np.ones(25, bool))
+    ref = painter_planes(np.zeros((128, 128, 3)), target, off, sources, rgb, src_depth, joints, np.ones(25, bool))
+    assert np.isfinite(p.planes).all()
+    assert not p.planes[5:8, y, x].any()  # no normal
+    np.testing.assert_array_equal(p.planes[5:8], ref.planes[5:8])
+    assert np.abs(p.planes[5:8, y - 1:y + 2, x - 1:x + 2]).sum() > 0  # its neighbours have normals
+
+
 def test_a_nan_depth_is_the_planes_no_depth_value_and_an_infinite_one_its_largest():
     """float16_depth passed NaN through (np.clip keeps it): one NaN pixel spread through the painter's
     convolutions into a NaN patch. NaN is now 0, the plane's value off the subject; +-inf clip as a wild finite

@@ -116,6 +116,47 @@ def test_a_nan_depth_inside_the_subject_leaves_the_rest_of_the_cached_depth_plan
     assert np.abs(expect.astype(float)).max() > 0  # a plane with depth in it, not all 0
 
 
+def test_a_nan_depth_inside_the_subject_has_no_normal_and_its_cached_view_is_defined_without_a_warning(data64):
+    """Review 52: a NaN depth made a NaN normal, cast to int8 (undefined, a numpy RuntimeWarning), turned its
+    neighbours' normals to face the camera, made the blend NaN there (cast to uint8 too), and crashed the relit
+    fill (a NaN bin cast to int). Its normal is now the zero vector ("no normal", as off the subject), its
+    neighbours difference across it as across the silhouette, and no source colours it, as on the device."""
+    import warnings
+
+    from training.data.torch_dataset import MultiViewDataset
+    from training.fill_features import view_features
+    from training.unseen_fill import fit_lighting, seen_surface, surface_normals
+
+    scene = {k: v.numpy() for k, v in MultiViewDataset(data64, "val")[0].items()}
+    t = next(i for i in range(len(scene["tgt_masks"]))
+             if not scene["tgt_is_source"][i] and scene["tgt_masks"][i].sum() > 30)
+    mask = np.asarray(scene["tgt_masks"][t], bool)
+    inner = np.zeros_like(mask)
+    inner[1:-1, 1:-1] = mask[:-2, 1:-1] & mask[2:, 1:-1] & mask[1:-1, :-2] & mask[1:-1, 2:] & mask[1:-1, 1:-1]
+    ys, xs = np.nonzero(inner[1:-1, 1:-1])
+    y, x = ys[len(ys) // 2] + 1, xs[len(xs) // 2] + 1  # a pixel inside the subject, its four neighbours too
+    depth = np.array(scene["tgt_depth"], np.float64)
+    depth[t, y, x] = np.nan
+    scene["tgt_depth"] = depth
+    lighting = fit_lighting(seen_surface(scene))
+    assert lighting is not None  # the relit fill runs, as the caches' default does
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        f = view_features(scene, t, lighting, 30.0)
+    normals = f["normals"].astype(float) / 127
+    assert not normals[y, x].any()  # no normal: the zero vector
+    rest = mask.copy()
+    rest[y, x] = False
+    assert np.allclose(np.linalg.norm(normals[rest], axis=-1), 1.0, atol=0.02)  # the neighbours keep unit normals
+    # every other normal is the one with that pixel off the subject: its neighbours difference on their own side
+    # (they faced the camera, the stand-in for a pixel with no neighbour)
+    c2w = np.asarray(scene["tgt_c2w"][t], np.float64)
+    off = surface_normals(np.nan_to_num(depth[t]), rest, scene["tgt_K_inv"][t], c2w) @ c2w[:, :3]
+    assert np.array_equal(f["normals"][rest], np.round(off[rest] * 127.0).astype(np.int8))
+    assert f["blend"][y, x].tolist() == [0, 0, 0] and not f["flags"][y, x] & SEEN_BIT  # no source colours it
+    assert float(f["depth"][y, x]) == 0.0
+
+
 def test_a_model_geometry_cache_takes_the_mask_and_picture_from_the_model_and_the_target_from_the_truth(
         model_cache, truth_cache):
     m, t = load_cache(model_cache), load_cache(truth_cache)
