@@ -8,8 +8,9 @@
 # What it does: a virtual environment with the runtime only (no PyTorch) at PREFIX/venv, pinned by
 # constraints.txt; the models and docs under PREFIX; the unit file, the udev rules and, when none is
 # there yet, /etc/ghnerf/daemon.json and 61-ghnerf-local.rules (yours: never overwritten); a system user
-# `ghnerf` in plugdev, dialout and video; the config checked with --validate-config (the model loaded, as
-# the start does); then systemd and udev reloaded and the service enabled and started.
+# `ghnerf` in plugdev, dialout and video; the config checked with --validate-config against the new
+# environment and models (the model loaded, as the start does), the previous ones put back if it fails;
+# then systemd and udev reloaded and the service enabled and started.
 # docs/daemon.md has the details.
 set -euo pipefail
 
@@ -63,8 +64,9 @@ if [ "$(cd "$ROOT$PREFIX" && pwd -P)" = "$(cd "$REPO" && pwd -P)" ]; then
     IN_PLACE=1
 fi
 # Models: replaced as a whole, so no graph of an older model is left beside the new ones. Copied to
-# models.new first; swapped in (with the docs) only once the new environment is built and runs, just
-# before the venv link is switched, so a failed build leaves the old models beside the old code.
+# models.new first; swapped in only once the new environment is built and runs, just before the venv
+# link is switched, so a failed build leaves the old models beside the old code. The replaced ones wait
+# in models.old until the config validates against the new pair (restore_models puts them back).
 stage_models() {
     [ "$IN_PLACE" = 0 ] || return 0
     rm -rf "$ROOT$PREFIX/models.new" && cp -R "$REPO/models" "$ROOT$PREFIX/models.new" \
@@ -75,8 +77,25 @@ swap_models() {
     rm -rf "$ROOT$PREFIX/models.old"
     [ ! -e "$ROOT$PREFIX/models" ] || mv "$ROOT$PREFIX/models" "$ROOT$PREFIX/models.old"
     mv "$ROOT$PREFIX/models.new" "$ROOT$PREFIX/models"
+}
+restore_models() {
+    [ "$IN_PLACE" = 0 ] && [ -e "$ROOT$PREFIX/models.old" ] || return 0  # a first install: nothing to put back
+    rm -rf "$ROOT$PREFIX/models" && mv "$ROOT$PREFIX/models.old" "$ROOT$PREFIX/models"
+}
+keep_models() {
+    [ "$IN_PLACE" = 0 ] || return 0
     rm -rf "$ROOT$PREFIX/models.old"
     cp "$REPO"/docs/*.md "$ROOT$PREFIX/docs/" && chmod go+r "$ROOT$PREFIX"/docs/*.md
+}
+# The config: yours once there (never overwritten); written before the check, which reads it.
+write_config() {
+    if [ -e "$ROOT/etc/ghnerf/daemon.json" ]; then
+        echo "kept the existing $ROOT/etc/ghnerf/daemon.json"
+    else
+        sed "s|/opt/ghnerf|$PREFIX|g" "$REPO/systemd/daemon.json" > "$ROOT/etc/ghnerf/daemon.json"
+        chmod 0644 "$ROOT/etc/ghnerf/daemon.json"
+        echo "wrote $ROOT/etc/ghnerf/daemon.json: set its rig.url and sinks for this rig (docs/daemon.md)"
+    fi
 }
 
 # udev: 60-ghnerf.rules is ours and replaced; 61-ghnerf-local.rules is the user's and written only when absent.
@@ -136,9 +155,23 @@ if [ "$VENV" = 1 ]; then
     PREVIOUS=$(readlink "$PREFIX/venv" 2>/dev/null || true)
     PREVIOUS=${PREVIOUS%/}
     PREVIOUS=${PREVIOUS##*/}
+    write_config
     swap_models
     [ -d "$PREFIX/venv" ] && [ ! -L "$PREFIX/venv" ] && mv "$PREFIX/venv" "$PREFIX/venv-before-links"
     ln -sfn "$NEW" "$PREFIX/venv.link" && mv -T "$PREFIX/venv.link" "$PREFIX/venv"
+    # The check runs the new environment on the new models at the paths the config names, before anything
+    # else of the install is in place: a config they cannot serve (a setting the new model lacks) puts the
+    # previous environment and models back, so the running service's next restart still starts.
+    if ! runuser -u ghnerf -- "$PREFIX/venv/bin/ghnerf-daemon" --config /etc/ghnerf/daemon.json --validate-config >/dev/null; then
+        restore_models
+        if [ -d "$PREFIX/venv-before-links" ]; then
+            rm -f "$PREFIX/venv" && mv "$PREFIX/venv-before-links" "$PREFIX/venv" && rm -rf "${PREFIX:?}/$NEW"
+        elif [ -n "$PREVIOUS" ] && [ -d "$PREFIX/$PREVIOUS" ]; then
+            ln -sfn "$PREVIOUS" "$PREFIX/venv.link" && mv -T "$PREFIX/venv.link" "$PREFIX/venv" && rm -rf "${PREFIX:?}/$NEW"
+        fi  # else a first install: nothing to put back, nothing started
+        die "/etc/ghnerf/daemon.json does not validate with the new environment and models (message above); the previous environment and models are kept; fix the config (or the models) and run install.sh again"
+    fi
+    keep_models
     # keep the environment just replaced (to roll back by relinking) and the new one; remove the others
     for old in "$PREFIX"/venv-2*; do
         [ -e "$old" ] || continue
@@ -147,25 +180,15 @@ if [ "$VENV" = 1 ]; then
     done
     rm -rf "$PREFIX/venv-before-links"
 else
+    write_config
     stage_models
     swap_models
+    keep_models
 fi
 
 sed "s|/opt/ghnerf|$PREFIX|g" "$REPO/systemd/ghnerf.service" > "$ROOT/etc/systemd/system/ghnerf.service"
 chmod 0644 "$ROOT/etc/systemd/system/ghnerf.service"
 install_rules
-if [ -e "$ROOT/etc/ghnerf/daemon.json" ]; then
-    echo "kept the existing $ROOT/etc/ghnerf/daemon.json"
-else
-    sed "s|/opt/ghnerf|$PREFIX|g" "$REPO/systemd/daemon.json" > "$ROOT/etc/ghnerf/daemon.json"
-    chmod 0644 "$ROOT/etc/ghnerf/daemon.json"
-    echo "wrote $ROOT/etc/ghnerf/daemon.json: set its rig.url and sinks for this rig (docs/daemon.md)"
-fi
-
-if [ "$VENV" = 1 ]; then
-    runuser -u ghnerf -- "$PREFIX/venv/bin/ghnerf-daemon" --config /etc/ghnerf/daemon.json --validate-config >/dev/null \
-        || die "/etc/ghnerf/daemon.json does not validate (message above); fix it and run install.sh again"
-fi
 
 # Run here, or printed for the device: restart (not enable --now), so an upgraded, running service
 # picks up the new environment, and the udev rules reloaded for an OAK already plugged in.

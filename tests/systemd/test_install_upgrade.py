@@ -37,7 +37,15 @@ _STUBS = {
                    'esac\n'),
     "venv-python": ('echo "python $*" >> "$FAKE_LOG"\n'
                     'case "$*" in *"pip install"*" -c "*) [ -z "${FAKE_PIP_FAIL:-}" ] || exit 1 ;; esac\n'),
-    "venv-daemon": 'echo "ghnerf-daemon $*" >> "$FAKE_LOG"\n',
+    # --validate-config reads the model card in the folder the config names, as the real check loads the
+    # model there: a model whose version is $FAKE_UNSERVED cannot serve the config (exit 2, as the daemon's)
+    "venv-daemon": ('echo "ghnerf-daemon $*" >> "$FAKE_LOG"\n'
+                    'case "$*" in *--validate-config*)\n'
+                    '  dir=$(sed -n \'s/.*"model_dir": *"\\([^"]*\\)".*/\\1/p\' /etc/ghnerf/daemon.json)\n'
+                    '  if [ -n "${FAKE_UNSERVED:-}" ] && grep -qF "\\"version\\": \\"$FAKE_UNSERVED\\"" "$dir/model_card.json"; then\n'
+                    '    echo "daemon.json: estimator.session: model $FAKE_UNSERVED in $dir cannot serve it" >&2; exit 2\n'
+                    '  fi ;;\n'
+                    'esac\n'),
 }
 
 
@@ -95,12 +103,16 @@ class Host:
         (self.prefix / "models").mkdir()
         (self.prefix / "models/model_card.json").write_text(json.dumps({"version": model}))
 
-    def install(self, *args: str, pip_fails: bool = False) -> subprocess.CompletedProcess:
+    def install(self, *args: str, pip_fails: bool = False, unserved: str = "") -> subprocess.CompletedProcess:
+        """``unserved``: the model version the config cannot be served by (the fake daemon's check fails on it)."""
         env = {**os.environ, "PATH": f"{self.bin}:{os.environ['PATH']}", "FAKE_LOG": str(self.log),
                "FAKE_BIN": str(self.bin)}
         env.pop("FAKE_PIP_FAIL", None)
+        env.pop("FAKE_UNSERVED", None)
         if pip_fails:
             env["FAKE_PIP_FAIL"] = "1"
+        if unserved:
+            env["FAKE_UNSERVED"] = unserved
         self.log.write_text("")
         script = 'mount --bind "$1" /etc && shift && exec bash "$@"'
         return subprocess.run(["unshare", "-rm", "bash", "-c", script, "_", str(self.etc),
@@ -149,6 +161,40 @@ def test_a_failed_build_keeps_the_old_models_beside_the_old_environment(host):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert host.model() == "v2" and os.readlink(host.prefix / "venv") != "venv-20200101T000000"
     assert not (host.prefix / "models/graph-v1.onnx").exists() and (host.prefix / "models/graph-v2.onnx").exists()
+
+
+def test_a_config_the_new_models_cannot_serve_leaves_the_previous_install_in_place(host):
+    """Review 52: the check ran once the new environment and models were in place, so its failure (exit 2,
+    "fix it and run again") left them there, and the running service's next restart exited 2 and stayed down.
+    The check now runs the new pair where the config will see it and puts the previous one back on failure."""
+    host.old_install("venv-20200101T000000", live="venv-20200101T000000", model="v1")
+    (host.prefix / "models/graph-v1.onnx").write_text("v1")
+    (host.prefix / "docs").mkdir()
+    (host.prefix / "docs/daemon.md").write_text("# old daemon\n")
+    host.set_model("v2")
+    proc = host.install(unserved="v2")
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    # the check ran the new environment on the new models at the config's path ...
+    (check,) = host.calls("ghnerf-daemon")
+    assert check == "ghnerf-daemon --config /etc/ghnerf/daemon.json --validate-config"
+    # ... and they are gone again: the previous pair is back, and nothing was started or reloaded
+    assert os.readlink(host.prefix / "venv") == "venv-20200101T000000"
+    assert host.model() == "v1" and (host.prefix / "models/graph-v1.onnx").exists()
+    assert not (host.prefix / "models/graph-v2.onnx").exists()
+    assert sorted(p.name for p in host.prefix.iterdir() if p.name.startswith(("venv", "models"))) == \
+        ["models", "venv", "venv-20200101T000000"]
+    assert (host.prefix / "docs/daemon.md").read_text() == "# old daemon\n"
+    assert host.calls("systemctl", "udevadm") == []
+    assert (host.etc / "ghnerf/daemon.json").is_file()  # the config to fix, written for the check
+    assert "model v2" in proc.stderr and "does not validate with the new environment and models" in proc.stderr
+    assert "the previous environment and models are kept" in proc.stderr
+    # a model that serves it goes in, the previous environment kept for a rollback
+    proc = host.install("--no-start")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert host.model() == "v2" and not (host.prefix / "models.old").exists()
+    assert os.readlink(host.prefix / "venv") != "venv-20200101T000000"
+    assert (host.prefix / "venv-20200101T000000").is_dir()
+    assert (host.prefix / "docs/daemon.md").read_text() == "# daemon\n"
 
 
 def test_the_environment_the_link_points_to_survives_a_new_install(host):
