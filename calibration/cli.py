@@ -295,6 +295,7 @@ def _write_view(folders: list[Path], name: str, images: Sequence[np.ndarray]) ->
 
 def cmd_capture(args: argparse.Namespace) -> int:
     import drivers
+    from drivers.url import redact_url
 
     board = _board(args.board)
     detector = BoardDetector(board)
@@ -321,6 +322,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
         raise UsageError(f"{out} already holds {len(names)} views from an earlier capture ({names[0]}-{names[-1]}): "
                          "capture into a new folder, or pass --append to add to them (the cameras not moved since)")
     source = drivers.create_rig_source(args.url)
+    shown_url = redact_url(args.url)  # a camera URL may carry a password (rtsp://user:pass@..., token=)
     try:
         source.open()
         cams = [check_camera_name(c.name) for c in source.rig.pair]
@@ -333,7 +335,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
         for folder in folders:
             folder.mkdir(parents=True, exist_ok=True)
         number = next_view_number(folders)
-        print(f"capturing from {args.url} (cameras {cams}) into {out}"
+        print(f"capturing from {shown_url} (cameras {cams}) into {out}"
               + (f", after the {len({p.stem for p in earlier})} views there (numbered from {number:03d})"
                  if earlier and not args.floor
                  else "") + ": "
@@ -350,7 +352,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 # a camera that stops delivering without a disconnect (a hung USB camera) kept the capture
                 # waiting up to --max-seconds (10 minutes) without a word
                 if not stall_said and time.monotonic() - last_pair_at >= STALL_NOTE_S:
-                    print(f"{PROG}: no image pair from {args.url} for {time.monotonic() - last_pair_at:.0f} s: is a "
+                    print(f"{PROG}: no image pair from {shown_url} for {time.monotonic() - last_pair_at:.0f} s: is a "
                           "camera stalled or unplugged? (waiting up to --max-seconds; Ctrl-C ends the capture)",
                           file=sys.stderr)
                     stall_said = True
@@ -359,7 +361,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 ended = True
                 break
             except drivers.DriverError as e:  # a camera unplugged or failed: say what the session kept
-                raise CaptureError(f"{args.url}: {e}; "
+                raise CaptureError(f"{shown_url}: {e}; "
                                    + (f"the {kept} view(s) kept before it are whole pairs in {out}: capture the rest "
                                       "with --append once the camera is back" if kept else "no view was kept")) from e
             last_pair_at, stall_said = time.monotonic(), False

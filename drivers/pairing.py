@@ -140,8 +140,7 @@ class FramePairer:
             # has ended. They are decided now, on what is known, so its queue stays in capture order.
             self._settle(final=True, until_gone=cam)
             self._intervals[cam].clear()
-            if not self._pending[self._other(cam)]:
-                self._newest_ns.pop(self._other(cam), None)  # on the old timeline: says nothing of this one
+            self._drop_stale(self._other(cam), frame.timestamp_ns)
         elif newest is not None:
             self._intervals[cam].append(frame.timestamp_ns - newest)
         self._newest_ns[cam] = frame.timestamp_ns
@@ -159,6 +158,25 @@ class FramePairer:
 
     def _other(self, cam: str) -> str:
         return self.cameras[1] if cam == self.cameras[0] else self.cameras[0]
+
+    def _drop_stale(self, cam: str, reset_ns: int) -> None:
+        """The other camera's clock went back to ``reset_ns``: drop (as unpaired) ``cam``'s held frames
+        beyond its tolerance. They were captured before that reset (on a live rig both clocks usually
+        reset together); kept, they are older than the other camera's first frames after it by more than
+        the tolerance, which then went unpaired: a pair lost per reset. A frame within tolerance may still
+        pair (a stamp stepped back a little) and is kept. The cost: where only one stamp was bad and the
+        clock comes back, a frame ``cam`` held beyond it is lost, which its partner's next frame could
+        have paired with (the frame the bad stamp belonged to is lost either way)."""
+        held = self._pending[cam]
+        dropped = 0
+        while held and held[-1].timestamp_ns > reset_ns + self._tolerance_ns:
+            held.pop()
+            dropped += 1
+        self.stats.unpaired[cam] += dropped
+        if not held:
+            self._newest_ns.pop(cam, None)  # on the old timeline: says nothing of the new one
+        elif dropped:
+            self._newest_ns[cam] = held[-1].timestamp_ns  # the dropped stamps are of the old timeline
 
     def _earliest_next_ns(self, cam: str) -> int | None:
         """The earliest capture time ``cam``'s next frame can have: three quarters of its shortest recent

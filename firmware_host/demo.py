@@ -41,6 +41,7 @@ import numpy as np
 
 import drivers
 from drivers.sim.demo import draw_truth
+from drivers.url import redact_url
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
@@ -260,8 +261,9 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         sink_url = sink_path.as_uri()  # percent-encoded: a space or "#" in --out stays part of the path
 
     scheme = args.url.removeprefix("record+").partition("://")[0]
-    print(f"opening {args.url}" + (" (the first open pre-renders the motion loop; later opens use the cache)"
-                                   if scheme == "sim" else ""))
+    # a camera URL may carry a password (rtsp://user:pass@..., token=): shown without it
+    print(f"opening {redact_url(args.url)}"
+          + (" (the first open pre-renders the motion loop; later opens use the cache)" if scheme == "sim" else ""))
     source = drivers.create_rig_source(args.url)
     try:
         estimator = None
@@ -349,7 +351,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     # read again after close: a recorder (record+) writes what it still holds queued as it closes, and the
     # counters read before it showed frames_written short of what the take's manifest records
     print(f"driver counters: {source.stats}")
-    print(f"sink {sink_url}: {sink_stats}")
+    print(f"sink {redact_url(sink_url)}: {sink_stats}")
     png = args.out / "sim_pair.png"
     if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result)):
         what = ("estimated 2D joints (magenta) over the ground truth (dots)" if last_result is not None
@@ -358,7 +360,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     if last_pair is not None:
         _print_joints(last_pair, last_result)
     if sink_stats.submitted and not sink_stats.sent:  # a sink that never connected: say so in the status too
-        print(f"{prog}: error: the sink {sink_url} sent none of the {sink_stats.submitted} frames "
+        print(f"{prog}: error: the sink {redact_url(sink_url)} sent none of the {sink_stats.submitted} frames "
               f"({sink_stats.connect_failures} failed connects; last error: {sink_stats.last_error})",
               file=sys.stderr)
         return 2

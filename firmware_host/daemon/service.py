@@ -246,7 +246,8 @@ class Daemon:
             return 0
         self.watchdog.start()
         self.notifier.notify(ready=1, status="started: opening the rig", mainpid=os.getpid())
-        _log.info("started: rig %s, sinks %s", redact_url(self.config.rig.url), ", ".join(self.config.sinks))
+        _log.info("started: rig %s, sinks %s", redact_url(self.config.rig.url),
+                  ", ".join(redact_url(url) for url in self.config.sinks))  # the journal keeps no password
         try:
             while not stop.is_set():
                 source = self._open_rig(stop)
@@ -545,7 +546,7 @@ class Daemon:
             self._carried_totals[url] = (d + stats["dropped"], k + stats["decimated"])
             gap = sink.pending_gap_flags()
         except Exception as e:  # noqa: BLE001 - a link that fails even to close (a USB error): it is gone
-            _log.warning("closing sink %s: %s", url, e)
+            _log.warning("closing sink %s: %s", redact_url(url), e)
             gap = int(Flags.DROPPED)  # what it still held is unknown: assume lost
         if gap:  # passed on to the next sink of this URL (_build_sink)
             self._carried_gaps[url] = self._carried_gaps.get(url, 0) | gap

@@ -176,6 +176,27 @@ def test_a_stalled_camera_is_said_not_waited_on_silently(truth, one_view, tmp_pa
     assert "kept 0 of 20 views: --max-seconds ran out" in err
 
 
+@pytest.mark.parametrize("stalled", [True, False])
+def test_capture_prints_the_camera_url_without_its_password(truth, one_view, tmp_path, capsys, monkeypatch, stalled):
+    import drivers
+
+    take = _take(tmp_path / "take", truth, one_view)
+    error = (drivers.RigTimeoutError("no pair within 2 s") if stalled
+             else drivers.RigDisconnectedError("camera 'right' vanished (USB reset)"))
+    real = _failing_after(drivers.create_rig_source, 0, error)
+    # replay:// takes no token: the URL given stands for a network camera's, read from the take
+    monkeypatch.setattr(drivers, "create_rig_source", lambda url, **kw: real(url.replace("&token=s3cret", ""), **kw))
+    monkeypatch.setattr(cli, "STALL_NOTE_S", 0.05, raising=False)
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free&token=s3cret", "--out", str(tmp_path / "c"),
+                     "--max-seconds", "0.3"]) == 2
+    captured = capsys.readouterr()
+    shown = f"replay://{take}?speed=free&token=***"
+    assert f"capturing from {shown} (cameras" in captured.out
+    assert (f"no image pair from {shown} for" if stalled
+            else f"{shown}: camera 'right' vanished (USB reset); no view was kept") in captured.err
+    assert "s3cret" not in captured.out + captured.err
+
+
 def test_ctrl_c_while_a_view_is_written_leaves_no_half_pair(truth, one_view, tmp_path, capsys, monkeypatch):
     take = _take(tmp_path / "take", truth, one_view)
     board = _board_file(tmp_path)

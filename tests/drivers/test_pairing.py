@@ -301,6 +301,36 @@ def test_a_clock_going_back_starts_a_new_timeline_without_losing_its_pairs():
     assert [a.timestamp_ns for _, a, _ in pairs] == [100 * MS, 0, PERIOD]
 
 
+def test_a_clock_reset_while_the_other_camera_holds_a_stale_frame_loses_no_new_pair():
+    # Both clocks start over between b's frame 3 (still stamped on the old timeline, held: a's frame 3
+    # never comes on that timeline) and a's frame 3 (the first after the reset, at 0 again).
+    events = [frame("a", 0, 0), frame("b", 0, 3 * MS), frame("a", 1, PERIOD), frame("b", 1, PERIOD + 3 * MS),
+              frame("a", 2, 2 * PERIOD), frame("b", 2, 2 * PERIOD + 3 * MS), frame("b", 3, 3 * PERIOD + 3 * MS),
+              frame("a", 3, 0), frame("b", 4, 3 * MS), frame("a", 4, PERIOD), frame("b", 5, PERIOD + 3 * MS)]
+    pairer, pairs = run(PairingConfig(policy="all"), events)
+    # the stale frame is the only loss: a's first frame after the reset pairs with b's
+    assert index_pairs(pairs) == [(0, 0), (1, 1), (2, 2), (3, 4), (4, 5)]
+    assert pairer.stats.unpaired == {"a": 0, "b": 1}
+
+
+def test_a_stamp_going_back_keeps_the_other_cameras_frames_still_in_tolerance():
+    # a's stamp goes back 10 ms (a bad stamp, a clock stepped): b's held frame is 43 ms on, within the
+    # 50 ms tolerance of it, so it may still pair and is kept (only frames beyond it are stale)
+    events = [frame("a", 0, 100 * MS), frame("b", 0, 100 * MS), frame("b", 1, 100 * MS + PERIOD),
+              frame("a", 1, 90 * MS)]
+    pairer, pairs = run(PairingConfig(tolerance_ms=50.0, policy="all"), events)
+    assert index_pairs(pairs) == [(0, 0), (1, 1)] and pairer.stats.unpaired == {"a": 0, "b": 0}
+
+
+def test_a_stale_frame_dropped_no_longer_decides_the_new_timelines_frames():
+    # b's frame 2 is 400 ms on (beyond a's post-reset frame) and dropped; its stamp must not then count as
+    # b's newest, or a's frame 2 would be taken as one b is already past, and lost
+    events = [frame("a", 0, 100 * MS), frame("b", 0, 100 * MS), frame("b", 1, 105 * MS), frame("b", 2, 500 * MS),
+              frame("a", 1, 99 * MS), frame("a", 2, 99 * MS + PERIOD), frame("b", 3, 102 * MS + PERIOD)]
+    pairer, pairs = run(PairingConfig(policy="all"), events)
+    assert index_pairs(pairs) == [(0, 0), (1, 1), (2, 3)] and pairer.stats.unpaired == {"a": 0, "b": 1}
+
+
 def test_the_measurement_script_matches_its_offline_reference():
     from benchmarks import measure_pairing
 

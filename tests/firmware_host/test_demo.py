@@ -163,6 +163,28 @@ def test_a_wrong_url_or_sink_is_a_one_line_error(tmp_path, capsys, sim_url, args
     assert len(err.splitlines()) == 1 and all(w in err for w in words), err
 
 
+RTSP_PAIR = ("opencv://?first=rtsp%3A%2F%2Fuser%3As3cret%40127.0.0.1%3A1%2Fs"
+             "&second=rtsp%3A%2F%2Fuser%3As3cret%40127.0.0.1%3A1%2Fs")  # refused (one camera twice) before a connect
+
+
+@pytest.mark.parametrize(("url", "shown"), [
+    ("replay:///nonexistent/take?token=s3cret", "opening replay:///nonexistent/take?token=***"),
+    (RTSP_PAIR, "opening opencv://?first=rtsp%3A%2F%2Fuser%3A***%40127.0.0.1"),
+])
+def test_a_camera_url_is_printed_without_its_password(tmp_path, capsys, url, shown):
+    assert demo.main(["--truth-only", "--url", url, "--seconds", "0.2", "--out", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    assert shown in captured.out and "s3cret" not in captured.out + captured.err
+
+
+def test_a_sink_url_is_printed_without_its_password(tmp_path, capsys, sim_url):
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path),
+                    "--sink", "memory://viewer:s3cret@here"])  # memory:// takes any location, user info too
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert "sink memory://viewer:***@here: " in captured.out and "s3cret" not in captured.out + captured.err
+
+
 def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_url):
     rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path),
                     "--model-dir", str(tmp_path / "no-model")])

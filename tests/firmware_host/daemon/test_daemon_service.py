@@ -443,6 +443,51 @@ def test_stopped_while_loading_never_reports_ready(tmp_path):
         sock.close()
 
 
+class _StopWhenReady(SystemdNotifier):
+    """Sets ``stop`` as the daemon reports ready: it logs its start, then stops without opening the rig."""
+
+    def __init__(self, stop: threading.Event) -> None:
+        super().__init__({})
+        self.stop = stop
+
+    def notify(self, **fields: object) -> bool:
+        if "ready" in fields:
+            self.stop.set()
+        return True
+
+
+def test_the_start_log_line_shows_sink_urls_without_their_passwords(tmp_path, caplog):
+    secret = "memory://viewer:s3cret@here?status_s=0.05"  # memory:// takes any location, user info too
+    cfg = _config({"url": "sim://"}, tmp_path, sinks=[secret])
+    stop = threading.Event()
+    with caplog.at_level(logging.INFO, logger="ghnerf.daemon"):
+        assert Daemon(cfg, notifier=_StopWhenReady(stop)).run(stop) == 0
+    started = [r.getMessage() for r in caplog.records if r.getMessage().startswith("started:")]
+    assert started and "memory://viewer:***@here?status_s=0.05" in started[0]
+    assert "s3cret" not in caplog.text
+
+
+def test_a_sink_that_fails_to_close_is_logged_without_its_password(tmp_path, caplog):
+    from firmware_host.sinks import open_sink
+
+    url = "memory://viewer:s3cret@here?status_s=0.01"
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path), notifier=SystemdNotifier({}))
+    sink = open_sink(url)
+
+    def fail() -> None:
+        raise OSError("the link is gone")
+
+    daemon._sinks[url] = sink
+    sink_close, sink.close = sink.close, fail
+    try:
+        with caplog.at_level(logging.WARNING, logger="ghnerf.daemon"):
+            daemon._close_sink(url)
+    finally:
+        sink_close()
+    assert "closing sink memory://viewer:***@here?status_s=0.01: the link is gone" in caplog.text
+    assert "s3cret" not in caplog.text
+
+
 def test_a_stuck_estimate_is_flagged_while_it_runs(tmp_path):
     from firmware_host.sinks import open_sink
 
