@@ -712,6 +712,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     if args.train_views:
+        held = len(train["flags"])
+        if args.train_views > held:  # was trained on every view and reported as --train-views' share
+            print(f"error: --train-views {args.train_views}: {args.train_cache} holds {held} training views",
+                  file=sys.stderr)
+            return 2
         train = {k: v[:args.train_views] for k, v in train.items()}
     t0 = time.monotonic()
     net = train_fill(train, cfg, val=val)

@@ -463,6 +463,20 @@ def test_train_refuses_caches_that_do_not_hold_out_the_training_views(train_cach
         assert not (tmp_path / "run" / "fill_net.pt").exists()  # refused before the training
 
 
+def test_train_views_beyond_the_cache_are_refused_before_the_training(train_cache, truth_cache, tmp_path, capsys):
+    """``--train-views N`` (painter_gpu.sh's VIEWS) past the cache's views trained on all of them, and the run was
+    reported as N views' worth."""
+    from training.fill_features import load_cache
+
+    held = len(load_cache(train_cache)["flags"])
+    argv = ["train", "--train-cache", str(train_cache), "--val-cache", str(truth_cache), "--out",
+            str(tmp_path / "run"), "--device", "cpu", "--set", "steps=1", "--set", "batch=2", "--set", "net.width=8"]
+    assert main([*argv, "--train-views", str(held + 1)]) == 2
+    assert f"--train-views {held + 1}: {train_cache} holds {held} training views" in capsys.readouterr().err
+    assert not (tmp_path / "run" / "fill_net.pt").exists()
+    assert main([*argv, "--train-views", str(held)]) == 0  # all of them, asked for by number
+
+
 def test_train_refuses_a_cache_without_the_relit_fill_the_net_reads(train_cache, data64, tmp_path, capsys):
     lightless = cache_split(data64, "val", tmp_path / "val.npz", limit=1, workers=1, relight=False,
                             log=lambda *_: None)
