@@ -43,7 +43,7 @@ def hidden_by_sandbox(path: str | os.PathLike) -> str | None:
     written = os.path.abspath(os.fspath(path))
     for candidate in dict.fromkeys((written, os.path.realpath(written))):
         for folder in HOME_FOLDERS + PRIVATE_TMP_FOLDERS:
-            if candidate == folder or candidate.startswith(folder + "/"):
+            if _under(candidate, folder):
                 return folder
     return None
 

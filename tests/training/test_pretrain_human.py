@@ -10,7 +10,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from ghnerf_runtime.body25 import FLIP_INDEX  # noqa: E402
-from tests.training.test_trainer import tiny_cfg  # noqa: E402  (data64: conftest)
+from tests.training.test_trainer import log_records, tiny_cfg  # noqa: E402  (data64: conftest)
 from training.model.config import ConfigError  # noqa: E402
 from training.pretrain_human import (PretrainConfig, load_human, main, pretrain, pretrain_step,  # noqa: E402
                                      trunk_input_scale, view_batch)
@@ -132,24 +132,14 @@ def test_a_run_split_by_stop_at_and_thread_count_learns_what_a_straight_one_does
 def test_a_resumed_pretraining_logs_the_records_an_uninterrupted_one_does(data64, tmp_path):
     # as the joint trainer's: the losses since the last record and the last PCK were not kept, so the first
     # record after a resume averaged only the resumed steps and carried pck NaN, and so did the summary
-    import math
-
-    def records(run):
-        out = []
-        for line in (run / "log.jsonl").read_text().splitlines():
-            rec = json.loads(line)
-            rec.pop("time_s")
-            out.append({k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in rec.items()})
-        return out
-
     kw = {"iterations": 4, "log_every": 2, "eval_every": 3, "checkpoint_every": 10, "threads": 1}
     straight = pretrain(tiny_pretrain(data64, **kw), tmp_path / "straight", quiet=True)
     first = pretrain(tiny_pretrain(data64, stop_at=3, **kw), tmp_path / "cut", quiet=True)  # saved at step 3
     assert first["steps"] == 3 and first["stopped_early"]
     resumed = pretrain(tiny_pretrain(data64, **kw), tmp_path / "cut", resume=True, quiet=True)
-    expect = records(tmp_path / "straight")
+    expect = log_records(tmp_path / "straight")
     assert [r["step"] for r in expect] == [2, 4] and expect[1]["pck"] is not None  # step 3's PCK
-    assert records(tmp_path / "cut") == expect
+    assert log_records(tmp_path / "cut") == expect
     assert resumed["eval_pck@0.2"] == straight["eval_pck@0.2"]
 
 

@@ -388,28 +388,31 @@ def test_resume_drops_the_log_records_past_the_checkpoint(data64, tmp_path):
     assert [json.loads(line)["step"] for line in (run / "log.jsonl").read_text().splitlines()] == [1, 2]
 
 
+def log_records(run: Path) -> list[dict]:
+    """``run``'s log.jsonl records without their wall times, NaN as None (so two runs' logs compare equal)."""
+    import math
+
+    out = []
+    for line in (run / "log.jsonl").read_text().splitlines():
+        rec = json.loads(line)
+        rec.pop("time_s")
+        out.append({k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in rec.items()})
+    return out
+
+
 def test_a_resumed_run_logs_the_records_an_uninterrupted_one_does(data64, tmp_path):
     # the log window (steps since the last record) and the last PCK were not kept: the first record after a resume
     # averaged only the resumed steps and carried pck NaN until the next pck_every step
-    import math
     import shutil
-
-    def records(run):
-        out = []
-        for line in (run / "log.jsonl").read_text().splitlines():
-            rec = json.loads(line)
-            rec.pop("time_s")
-            out.append({k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in rec.items()})
-        return out
 
     cfg = tiny_cfg(data64, iterations=4, log_every=2, pck_every=3)
     train(cfg, tmp_path / "straight", quiet=True)
     shutil.copytree(tmp_path / "straight", tmp_path / "cut")
     shutil.copyfile(tmp_path / "cut" / "ckpt_0000003.pt", tmp_path / "cut" / "last.pt")  # killed after step 3
     train(cfg, tmp_path / "cut", resume=True, quiet=True)
-    straight = records(tmp_path / "straight")
+    straight = log_records(tmp_path / "straight")
     assert [r["step"] for r in straight] == [2, 4] and straight[1]["pck"] is not None  # step 3's PCK
-    assert records(tmp_path / "cut") == straight
+    assert log_records(tmp_path / "cut") == straight
 
 
 def test_a_zero_heat_weight_trains_and_ddp_is_told_of_unused_heads(data64, tmp_path):

@@ -190,11 +190,19 @@ def shard_is_complete(folder: Path, first_index: int, count: int, *, max_count: 
         return False
     if not isinstance(data, dict):  # damaged: render the shard again
         return False
-    stored = data.get("count")
-    if isinstance(stored, bool) or not isinstance(stored, int):
-        return False
-    return data.get("first_index") == first_index and count <= stored <= max(count, max_count or count) and all(
+    return data.get("first_index") == first_index and _serves(data.get("count"), count, max_count or count) and all(
         _array_is_whole(folder / f"{name}.npy") for name in FIELDS)
+
+
+def _is_count(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _serves(stored: object, count: int, max_count: int) -> bool:
+    """Whether a shard whose metadata says it stores ``stored`` samples serves ``count`` of them: exactly that many,
+    or up to ``max_count`` (the split's shard size: the last shard of a split generated larger, then asked
+    smaller, holds more, and its first ``count`` are the split's)."""
+    return _is_count(stored) and count <= stored <= max(count, max_count)  # type: ignore[operator]
 
 
 def stored_count(folder: Path) -> int:
@@ -203,7 +211,7 @@ def stored_count(folder: Path) -> int:
         count = json.loads((folder / SHARD_META).read_text()).get("count")
     except (OSError, json.JSONDecodeError, AttributeError):
         return 0
-    return count if isinstance(count, int) and not isinstance(count, bool) else 0
+    return count if _is_count(count) else 0
 
 
 def _array_is_whole(path: Path) -> bool:
@@ -278,9 +286,8 @@ class ShardedSplit:
                 raise DatasetError(meta_path, "shard metadata must be a JSON object with first_index, count and a "
                                               f"samples list, got {type(meta).__name__}")
             stored = meta.get("count")
-            # the last shard of a split generated larger, then asked smaller, holds more: its first n are the split's
-            fits = isinstance(stored, int) and not isinstance(stored, bool) and n <= stored <= max(n, shard_size)
-            if meta.get("first_index") != i0 or not fits or len(meta.get("samples", [])) != stored:
+            if meta.get("first_index") != i0 or not _serves(stored, n, shard_size) \
+                    or len(meta.get("samples", [])) != stored:
                 want = f"{i0} x {n}" if n == shard_size else f"{i0} x {n} to {shard_size}"
                 raise DatasetError(meta_path, f"shard holds samples from {meta.get('first_index')} x {meta.get('count')}, "
                                               f"expected {want}")
