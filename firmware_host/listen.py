@@ -39,7 +39,7 @@ from firmware_host.addresses import ipv4_first
 from firmware_host.protocol.constants import NO_FRAME_SEQ, Fault
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
-from firmware_host.sinks.url import LocationError, ipv6_hint, location_host
+from firmware_host.sinks.url import LocationError, host_name_problem, integer, ipv6_hint, location_host
 
 __all__ = ["main", "open_port", "Tally", "ListenError"]
 
@@ -193,6 +193,9 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
             host = location_host(parts, "udp")  # "": every interface
         except LocationError as e:
             raise ListenError(f"{url}: {e.why} ({e.value!r})") from None
+        problem = host_name_problem(host) if host else ""
+        if problem:  # the sinks' rule, in their words (the resolver's own error was an IDNA codec's)
+            raise ListenError(f"{url}: bad host {host!r}: {problem}")
         return _UdpPort(host, port)
     if scheme == "serial":
         device = parts.netloc + parts.path
@@ -201,10 +204,10 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
         if parts.netloc or not parts.path.startswith("/"):
             # serial://dev/ttyUSB0 is the relative path dev/ttyUSB0 (its "dev" a URL's host): three slashes
             raise ListenError(f"{url}: the device is an absolute path, e.g. serial:///{device.lstrip('/')}")
-        try:
-            baud = int(query.get("baud", ["115200"])[0])
-        except ValueError:
-            raise ListenError(f"{url}: baud must be a whole number") from None
+        try:  # the sinks' rule for whole numbers: a baud copied from a sink URL (0x1C200) means what it meant there
+            baud = integer(query.get("baud", ["115200"])[0])
+        except ValueError as e:
+            raise ListenError(f"{url}: baud must be a whole number: {e}") from None
         from firmware_host.sinks.serial_sink import MAX_BAUD, MIN_BAUD  # the sink's bounds: one rule for both ends
 
         if not MIN_BAUD <= baud <= MAX_BAUD:

@@ -28,6 +28,7 @@ from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STATUS_S, MIN_STATUS_S, SinkOptions
 from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
+from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
@@ -117,6 +118,8 @@ def _doc(name: str) -> str:
     ("docs/model.md", f"fewer than {MIN_FRAMES} frame pairs (`calibration.MIN_FRAMES`"),
     ("docs/model.md", f"fewer than {MIN_FRAMES}, `calibration.MIN_FRAMES` as for"),
     ("docs/model.md", f"`python -m training.export --opset` takes {MIN_OPSET} to {MAX_OPSET}"),
+    # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
+    ("docs/protocol.md", f"a name past {MAX_HOST_NAME} characters), named when the sink opens"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

@@ -4,6 +4,7 @@ Every error names the URL, the parameter and the value (SinkConfigError).
 """
 from __future__ import annotations
 
+import ipaddress
 import math
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
@@ -154,6 +155,31 @@ def location_host(parts: SplitResult, scheme: str) -> str:
     return unquote(parts.hostname or "")
 
 
+#: Longest host name, written out without a trailing dot (RFC 1035: 255 octets on the wire).
+MAX_HOST_NAME = 253
+
+
+def host_name_problem(host: str) -> str:
+    """Why ``host`` can never be looked up, ``""`` when it may be: an IP literal (an IPv6 zone included), or a name
+    of labels of 1 to 63 characters (as IDNA encodes it), at most :data:`MAX_HOST_NAME` in all, without spaces or
+    control characters. Such a name failed every connect of a udp:// sink, for ever, one of them logged as a
+    backend bug with its traceback (getaddrinfo's UnicodeError): a typo is refused when the URL is read."""
+    try:
+        ipaddress.ip_address(host)
+        return ""
+    except ValueError:
+        pass
+    if any(ch.isspace() or not ch.isprintable() for ch in host):
+        return "a host name has no spaces or control characters"
+    try:
+        encoded = host.encode("idna")  # what getaddrinfo does with it
+    except UnicodeError as e:  # the codec's own reason is on its cause ("label empty or too long")
+        return f"not a host name: each dot-separated label is 1 to 63 characters ({e.__cause__ or e})"
+    if len(encoded.removesuffix(b".")) > MAX_HOST_NAME:
+        return f"not a host name: {len(encoded.removesuffix(b'.'))} characters, at most {MAX_HOST_NAME}"
+    return ""
+
+
 def ipv6_hint(parts: SplitResult, scheme: str, port: int) -> str:
     """A hint for a location with an IPv6 address outside brackets, else ``""``."""
     if parts.netloc.count(":") > 1 and "[" not in parts.netloc:
@@ -171,6 +197,9 @@ def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]
     hint = ipv6_hint(parts, u.scheme, 9000)
     if not host:
         raise SinkConfigError(u.url, "host", u.netloc, "missing host" + hint)
+    problem = host_name_problem(host)
+    if problem:
+        raise SinkConfigError(u.url, "host", host, problem)
     try:
         port = parts.port
     except ValueError as e:

@@ -166,3 +166,44 @@ def test_serial_device_path_is_percent_decoded_as_the_docs_say():
     # (no such file, retried forever) where file:// and rig URLs decode it
     url = "serial:///dev/serial/by-id/usb-Board%231-if00?baud=921600"
     assert SerialSink.from_url(url).port == "/dev/serial/by-id/usb-Board#1-if00"
+
+
+@pytest.mark.parametrize("url, host", [
+    # getaddrinfo's IDNA codec raised UnicodeError on each: every connect failed, for ever, the first logged as a
+    # backend bug with its traceback ("connect failed unexpectedly"), after --validate-config had passed the URL
+    ("udp://robot..local:5005", "robot..local"),  # an empty label
+    ("udp://" + "r" * 64 + ".local:5005", "r" * 64 + ".local"),  # a label past 63 characters
+    ("vmc://%E2%80%8B:39539", "\u200b"),  # a zero-width space pasted with the name
+    # never a name that resolves: each retried for ever as "not known"
+    ("udp://robot%20one:5005", "robot one"),
+    ("vmc://robot%00x:39539", "robot\x00x"),
+    ("udp://" + "a." * 127 + "ab:5005", "a." * 127 + "ab"),  # 256 characters, past DNS's 253
+])
+def test_udp_and_vmc_refuse_a_host_that_can_never_be_looked_up(url, host):
+    e = _refused(url)
+    assert (e.field, e.value, e.url) == ("host", host, url)
+    assert "host name" in str(e)
+
+
+@pytest.mark.parametrize("host", ["robot.local", "robot.local.", "été.local", "a." * 126 + "a", "127.0.0.1",
+                                  "fe80::1%Eth0", "r" * 63])
+def test_host_names_dns_can_carry_are_taken(host):
+    from firmware_host.sinks.url import host_name_problem
+
+    assert host_name_problem(host) == ""
+
+
+def test_listen_refuses_a_host_that_can_never_be_looked_up_in_the_sinks_words(capsys):
+    # was "cannot listen: encoding with 'idna' codec failed (UnicodeError: label empty or too long)"
+    err = _listen_fails(capsys, "udp://robot..local:9870", "--seconds", "0.1")
+    assert "bad host 'robot..local'" in err and "each dot-separated label is 1 to 63 characters" in err
+
+
+def test_listen_reads_a_baud_as_the_serial_sink_does(capsys):
+    url = "serial:///dev/ttyACM0?baud=0x1C200"  # hex, as a sink URL may write it: was "baud must be a whole number"
+    assert SerialSink.from_url(url).baud == 115200
+    assert "baud must be" not in _listen_fails(capsys, url.replace("/dev/ttyACM0", "/dev/nonexistent-ghnerf"),
+                                               "--seconds", "0.1")
+    # a leading zero, refused by the sink (C reads 010 as octal 8), was taken as decimal 9600
+    err = _listen_fails(capsys, "serial:///dev/null?baud=09600", "--seconds", "0.1")
+    assert "baud must be a whole number: decimal digits expected, without a leading zero" in err
