@@ -6,7 +6,8 @@ confidence 0..255), so the file is a faithful record of what robots received. Li
 by one, not fsynced (a stopped or killed daemon leaves whole lines; a power cut loses what the kernel
 had not written back); a failed write (disk full, removed medium) closes the file and reopens it in
 append mode with backoff, first ending a line the failed write cut short, so the one broken line stays
-on its own. A path that cannot be opened (a folder, no permission) is retried like an absent device.
+on its own. A path that cannot be opened (a folder, no permission, a named pipe no program reads yet) is
+retried like an absent device.
 
 The file grows for as long as the sink runs (about 650 bytes per JOINTS line); rotate it with
 logrotate's ``copytruncate``: every write is O_APPEND, so it lands at the end of the truncated file.
@@ -36,6 +37,24 @@ def _read_only_hint(e: OSError) -> str:
             "with ReadWritePaths= in systemctl edit ghnerf)")
 
 
+def _no_reader_hint(e: OSError) -> str:
+    """What ENXIO means here: a named pipe that no program has open for reading (yet)."""
+    return " (a named pipe with no reader: retried until one opens it)" if e.errno == errno.ENXIO else ""
+
+
+def _open_append(path: str) -> IO[str]:
+    """``open(path, "a")``, except that a named pipe with no reader fails at once (ENXIO) instead of blocking: the
+    worker waited in open() for ever, the sink ``connecting`` rather than ``down`` in the status file, and a
+    close() left that thread behind (it wrote a HELLO into the pipe once a reader came, for a closed sink)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK, 0o666)
+    try:
+        os.set_blocking(fd, True)  # once open, a slow reader holds the worker (never send()); its queue drops
+        return os.fdopen(fd, "a", encoding="utf-8")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
 class FileSink(ProtocolSink):
     scheme = "file"
 
@@ -55,11 +74,12 @@ class FileSink(ProtocolSink):
 
     def _connect(self) -> None:
         try:
-            self._fh = open(self.path, "a", encoding="utf-8")
+            self._fh = _open_append(self.path)
             self._end_cut_line()
         except OSError as e:
             self._disconnect()
-            raise SinkUnavailableError(self.url, f"cannot open {self.path}: {e}{_read_only_hint(e)}") from e
+            raise SinkUnavailableError(self.url, f"cannot open {self.path}: {e}{_read_only_hint(e)}"
+                                                 f"{_no_reader_hint(e)}") from e
 
     def _end_cut_line(self) -> None:
         """End the last line if a write cut it short (disk full, EFBIG): the HELLO written next must start

@@ -250,6 +250,35 @@ def test_file_sink_writes_into_a_fifo(tmp_path: Path) -> None:
     assert [json.loads(line)["type"] for line in lines] == ["HELLO", "STATUS", "JOINTS"]
 
 
+def test_file_sink_into_a_fifo_without_a_reader_is_down_and_never_holds_its_worker(tmp_path: Path) -> None:
+    # open() of a named pipe waits for a reader: the worker waited there for ever, the sink said "connecting" (not
+    # "down") in the status file, and close() left that thread behind
+    import os
+
+    fifo = tmp_path / "joints.fifo"
+    os.mkfifo(fifo)
+    sink = open_sink(fifo.as_uri() + "?status_s=3600", backoff=FAST_BACKOFF)
+    try:
+        wait_until(lambda: sink.stats().state == "down", what="a pipe without a reader reported down")
+        assert "a named pipe with no reader" in (sink.stats().last_error or "")
+
+        with open(fifo, encoding="utf-8") as reader:  # a reader comes: the retry opens the pipe
+            assert sink.wait_connected(5)
+            assert json.loads(reader.readline())["type"] == "HELLO"
+
+        def down_after_a_frame() -> bool:  # ... and goes: a write meets EPIPE, and the sink is down again
+            sink.send(make_frame(0))
+            return sink.stats().state == "down"
+
+        wait_until(down_after_a_frame, what="down once the reader went")
+        assert sink.stats().disconnects == 1
+    finally:
+        stats = sink.close(1.0)
+        unblock = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # frees a worker stuck in open() (the old code's)
+        os.close(unblock)
+    assert stats.state == "closed" and not sink._thread.is_alive()
+
+
 @pytest.mark.parametrize(("written", "opened"), [
     ("file://{folder}/my%20run%232/joints.jsonl", "my run#2/joints.jsonl"),  # Path.as_uri() quotes so
     ("file://localhost{folder}/joints.jsonl", "joints.jsonl"),  # RFC 8089: the local host, an absolute path
