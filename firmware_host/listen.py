@@ -15,7 +15,8 @@ frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW
 that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
 docs/protocol.md) and HELLO, and the decoder's error counts (a noisy serial line shows as ``crc``/``cobs``
 errors). A seq further back is a restarted sender, not a gap. Exit status: 0; 2 for a bad URL or a port
-that cannot be opened (named).
+that cannot be opened (named), or one that fails while read (an unplugged serial port: the totals of what
+arrived until then are still printed).
 """
 from __future__ import annotations
 
@@ -354,10 +355,12 @@ class Tally:
         return "; ".join(parts)
 
 
-def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, every_s: float = 1.0) -> Tally:
-    """Read until ``seconds`` pass (None: until interrupted), writing summaries or JSON lines to ``out``."""
+def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, every_s: float = 1.0,
+           tally: Optional[Tally] = None) -> Tally:
+    """Read until ``seconds`` pass (None: until interrupted), writing summaries or JSON lines to ``out``; counts into
+    ``tally`` (a new one when None), which keeps what arrived if the port fails (:class:`ListenError`)."""
     decoder = StreamDecoder()
-    tally = Tally()
+    tally = Tally() if tally is None else tally
     start = last = time.monotonic()
     try:
         while seconds is None or time.monotonic() - start < seconds:
@@ -409,19 +412,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ListenError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    tally, status = Tally(), 0
     try:
-        tally = listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout)
+        listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout, tally=tally)
     except BrokenPipeError:  # `ghnerf-listen ... | head`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except ListenError as e:
+    except ListenError as e:  # e.g. the serial port unplugged: what arrived until then is still said below
         print(f"{PROG}: error: {e}", file=sys.stderr)
-        return 2
+        status = 2
     finally:
         port.close()
     print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps (lost), {tally.total_late} late "
           f"(reordered), {tally.total_duplicates} duplicate", file=sys.stderr)
-    return 0
+    return status
 
 
 if __name__ == "__main__":

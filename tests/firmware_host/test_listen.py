@@ -332,3 +332,28 @@ def test_the_help_names_the_counters_in_the_words_the_line_prints(capsys):
     for label in ("seq gaps", "late (reordered)", "duplicate"):
         assert label in line and f"'N {label}'" in text, label
     assert f"up to {listen.LATE_WINDOW} behind the newest" in text
+
+
+def test_a_port_that_fails_while_read_still_ends_with_the_totals(monkeypatch, capsys):
+    # an unplugged serial port: the error, exit 2, and nothing of what had arrived (the totals were lost)
+    sink = open_sink("memory://", rig_id="pty")
+    for seq in (0, 1, 3):
+        sink.send(make_frame(seq))
+    sink.close()
+
+    class Unplugged:
+        reads = [sink.read()]
+
+        def read(self, timeout_s: float) -> bytes:
+            if self.reads:
+                return self.reads.pop()
+            raise listen.ListenError("serial:///dev/ttyACM0: read failed: [Errno 5] Input/output error")
+
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(listen, "open_port", lambda url: Unplugged())
+    assert listen.main(["serial:///dev/ttyACM0", "--json"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["ghnerf-listen: error: serial:///dev/ttyACM0: read failed: [Errno 5] Input/output error",
+                   "3 JOINTS messages, 1 sequence gaps (lost), 0 late (reordered), 0 duplicate"]
