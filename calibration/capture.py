@@ -23,7 +23,7 @@ from typing import Iterable
 import cv2
 
 from calibration.board import BoardSpec
-from calibration.detect import BoardDetector, BoardView
+from calibration.detect import BoardDetector, BoardView, board_mismatch
 from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.rig_file import write_text_atomic
 
@@ -133,10 +133,14 @@ def camera_folders(root: str | os.PathLike, cameras: Iterable[str] | None = None
 
 
 def list_images(folder: Path) -> dict[str, Path]:
-    """View name (file stem) -> image path."""
+    """View name (file stem) -> image path; hidden files (``.NAME``) are not views.
+
+    Hidden as camera folders are: macOS writes a ``._000.png`` of metadata beside each image copied to a
+    USB stick or network share, and each stopped the solve as "not a readable image", one at a time.
+    """
     images = {}
     for path in sorted(folder.iterdir()):
-        if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file():
+        if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file() and not path.name.startswith("."):
             if path.stem in images:
                 raise CaptureError(f"{folder}: two images named {path.stem!r} ({images[path.stem].name}, {path.name})")
             images[path.stem] = path
@@ -173,4 +177,24 @@ def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[s
                 missed[camera].append(name)
             else:
                 views[camera][name] = view
+        if not views[camera]:
+            _name_board_mismatch(board, [images[n] for n in missed[camera]])
     return views, missed
+
+
+#: A camera that found the board in none of its images: this many of them (spread over the capture) are tried
+#: with the other ArUco dictionaries (three detections each).
+MISMATCH_TRIES = 3
+
+
+def _name_board_mismatch(board: BoardSpec, paths: list[Path]) -> None:
+    """Raise naming the board file's mistake if the images show the board with another dictionary's markers.
+
+    :raises CaptureError: the image and the key to set (:func:`~calibration.detect.board_mismatch`).
+    """
+    step = max(1, len(paths) // MISMATCH_TRIES)
+    for path in paths[::step][:MISMATCH_TRIES]:
+        image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)
+        error = None if image is None else board_mismatch(board, image)
+        if error is not None:
+            raise CaptureError(f"{path}: {error}") from error

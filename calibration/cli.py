@@ -37,10 +37,10 @@ from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_views, next_view_number, read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
-from calibration.detect import BoardDetector, BoardView
+from calibration.detect import BoardDetector, BoardView, board_mismatch
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
-from calibration.solve import LENS_MODELS, solve_rig, typed_pitch_warning
+from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
@@ -307,6 +307,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
     resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
     holding: list[BoardView | None] = [None, None]  # the views where the hand-held board stopped
     holding_since = 0.0
+    # until the board is first seen, every STALL_NOTE_S: a board file with another marker dictionary finds no
+    # marker at all, and the capture ran its --max-seconds without a word
+    board_seen, mismatch_check_at = False, -math.inf
     # before the cameras are opened (seconds for an OAK): a folder it cannot write, or another session's views
     base = existing_ancestor(out)
     if not base.is_dir():
@@ -367,6 +370,12 @@ def cmd_capture(args: argparse.Namespace) -> int:
             last_pair_at, stall_said = time.monotonic(), False
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
             found = [detector.detect(image) for image in pair.images]
+            board_seen = board_seen or any(v is not None for v in found)
+            if not board_seen and now >= mismatch_check_at:
+                mismatch_check_at = now + STALL_NOTE_S
+                for cam, image in zip(cams, pair.images):
+                    if (error := board_mismatch(board, image)) is not None:
+                        raise CaptureError(f"{shown_url}, camera {cam!r}: {error}") from error
             if args.floor:
                 # Both cameras, and the board lying still: not the board carried into place.
                 if all(_still_since(v, r) for v, r in zip(found, resting)):
@@ -452,6 +461,13 @@ def cmd_solve(args: argparse.Namespace) -> int:
     for cam in names:
         extra = f"; no board in {', '.join(missed[cam])}" if missed[cam] else ""
         print(f"{cam}: the board found in {len(views[cam])} of {len(views[cam]) + len(missed[cam])} images{extra}")
+    blind = [cam for cam in names if not views[cam]]
+    if blind:  # said as such: it was blamed on the floor view, or on too few views ("15-30 is usual")
+        raise UsageError(f"camera {blind[0]!r} found the board in none of its {len(missed[blind[0]])} images "
+                         f"({Path(args.images) / blind[0]}): does {where} describe the print ({_describe(board)}; "
+                         "squares_x counts them along board.png's width)? Is the board in "
+                         "view, sharp, and without glare?")
+    _check_pairing(args.images, names, views, missed, args.floor_view)
     if args.floor_view is not None and not any(args.floor_view in views[c] for c in names):
         if any(args.floor_view in missed[c] for c in names):  # taken, and the board not found in it
             raise UsageError(f"--floor-view {args.floor_view!r}: neither camera found the board in that view (lying "
@@ -482,6 +498,30 @@ def cmd_solve(args: argparse.Namespace) -> int:
         print(f"warning: {warning}")
     print(f"wrote {out} and {report_path}")
     return 0
+
+
+def _check_pairing(images: str, names: Sequence[str], views: dict, missed: dict, floor_view: str | None) -> None:
+    """Say which images have no namesake in the other camera's folder: a pair is the two images of one name,
+    so another tool's naming (``left_000.png`` beside ``right_000.png``) left no pair at all, and the solve
+    said only "hold it where both cameras see it".
+
+    :raises UsageError: fewer than :data:`~calibration.solve.MIN_VIEWS` names in both folders.
+    """
+    taken = {cam: (set(views[cam]) | set(missed[cam])) - {floor_view} for cam in names}
+    a, b = names
+    shared = taken[a] & taken[b]
+    lonely = {cam: sorted(taken[cam] - shared) for cam in names}
+    if not any(lonely.values()):
+        return
+    def listed(cam: str) -> str:
+        some = lonely[cam]
+        return f"{len(some)} of {cam!r} ({', '.join(some[:4])}{', ...' if len(some) > 4 else ''})"
+    said = (f"images pair by file name ({a}/000.png with {b}/000.png): "
+            + " and ".join(listed(cam) for cam in names if lonely[cam]) + " have no namesake in the other folder")
+    if len(shared) < MIN_VIEWS:
+        raise UsageError(f"{images}: {said}, and only {len(shared)} name(s) are in both (at least {MIN_VIEWS} pairs are "
+                         "needed): name each pair's two images alike")
+    print(f"note: {said}: they count for that camera's lens only")
 
 
 # ------------------------------------------------------------------ import / export

@@ -1,15 +1,16 @@
 """Finding the board's corners in an image: ChArUco detection, labelled corners with sub-pixel positions."""
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from calibration.board import MIN_CORNERS, BoardSpec
+from calibration.board import DICTIONARIES, MIN_CORNERS, BoardSpec
 from calibration.errors import BoardError, CaptureError
 
-__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS", "grey8", "fixes_a_pose"]
+__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS", "grey8", "fixes_a_pose", "board_mismatch"]
 
 #: Markers seen, with no corners found, before the detector tries the board's other chessboard pattern
 #: (a print from OpenCV before 4.6, or from it since, read with the other ``legacy_pattern``).
@@ -95,6 +96,10 @@ class BoardDetector:
             other = board.cv_board()
             other.setLegacyPattern(not board.legacy_pattern)
             self._other = cv2.aruco.CharucoDetector(other)
+        # The board with squares_x and squares_y swapped, read from the same markers: the same marker count,
+        # so every marker is found, but OpenCV's marker check (CharucoParameters.checkMarkers) places them
+        # nowhere and no image of the print ever gave a corner
+        self._swapped = [(spec, cv2.aruco.CharucoDetector(spec.cv_board())) for spec in _swapped_boards(board)]
 
     def detect(self, image: np.ndarray) -> BoardView | None:
         """The board's corners in ``image`` (:func:`grey8`'s inputs), or None when too few are found or
@@ -117,9 +122,16 @@ class BoardDetector:
         return BoardView(ids[order], corners[order], (int(image.shape[1]), int(image.shape[0])))
 
     def _check_pattern(self, image: np.ndarray, marker_corners, marker_ids) -> None:
-        """Markers but no corners: is it the board printed with the other pattern? Its markers sit in the
-        other squares, so each image was silently "no board" and a capture ran out of time."""
-        if self._other is None or marker_ids is None or len(marker_ids) < PATTERN_CHECK_MARKERS:
+        """Markers but no corners: is it the board printed with the other pattern, or with its squares_x and
+        squares_y swapped? Its markers sit in other squares, so each image was silently "no board" and a
+        capture ran out of time."""
+        if marker_ids is None or len(marker_ids) < PATTERN_CHECK_MARKERS:
+            return
+        for spec, detector in self._swapped:
+            _, ids, _, _ = detector.detectBoard(image, markerCorners=marker_corners, markerIds=marker_ids)
+            if ids is not None and len(ids) >= self.min_corners and fixes_a_pose(spec, ids):
+                raise BoardError(_swapped_message(self.board, spec, len(ids)), key="squares_x")
+        if self._other is None:
             return
         _, ids, _, _ = self._other.detectBoard(image, markerCorners=marker_corners, markerIds=marker_ids)
         if ids is not None and len(ids) >= self.min_corners:
@@ -130,3 +142,69 @@ class BoardDetector:
                 + ("boards of an even number of rows printed by OpenCV before 4.6 need it" if setting else
                    "boards printed by OpenCV 4.6 or later do not use it")
                 + f"; set \"legacy_pattern\": {str(setting).lower()} in the board file", key="legacy_pattern")
+
+
+def _swapped_boards(board: BoardSpec) -> list[BoardSpec]:
+    """``board`` with squares_x and squares_y swapped (both chessboard patterns where they differ); none for a
+    square board."""
+    if board.squares_x == board.squares_y:
+        return []
+    swapped = dataclasses.replace(board, squares_x=board.squares_y, squares_y=board.squares_x)
+    if swapped.squares_y % 2:  # odd rows: both patterns print the same board
+        return [swapped]
+    return [swapped, dataclasses.replace(swapped, legacy_pattern=not swapped.legacy_pattern)]
+
+
+def _swapped_message(board: BoardSpec, found: BoardSpec, corners: int) -> str:
+    legacy = (f', "legacy_pattern": {str(found.legacy_pattern).lower()}'
+              if found.legacy_pattern != board.legacy_pattern else "")
+    return (f"the board in view is {found.squares_x}x{found.squares_y} squares ({corners} corners found so), the board "
+            f"file says {board.squares_x}x{board.squares_y}: set \"squares_x\": {found.squares_x}, "
+            f"\"squares_y\": {found.squares_y}{legacy} in the board file")
+
+
+def _other_dictionaries(board: BoardSpec) -> list[BoardSpec]:
+    """``board`` with the markers of each other ArUco family (4x4, 5x5, 6x6, 7x7 bits), the smallest dictionary
+    of the family that holds its markers: a family's dictionaries begin with the same markers
+    (DICT_6X6_50 is DICT_6X6_250's first 50), so that one reads a print made with any of them."""
+    own = board.dictionary.rsplit("_", 1)[0]
+    families: dict[str, list[str]] = {}
+    for name in DICTIONARIES:
+        families.setdefault(name.rsplit("_", 1)[0], []).append(name)
+    out = []
+    for family, names in sorted(families.items()):
+        if family == own:
+            continue
+        for name in sorted(names, key=lambda n: int(n.rsplit("_", 1)[1])):
+            try:
+                out.append(dataclasses.replace(board, dictionary=name))
+                break
+            except BoardError:  # too few markers for this board: the next size up
+                continue
+    return out
+
+
+def board_mismatch(board: BoardSpec, image: np.ndarray, *, min_corners: int = MIN_CORNERS) -> BoardError | None:
+    """What the board file gets wrong when ``image`` shows the board with the markers of another ArUco
+    dictionary family (:func:`_other_dictionaries`); None when none of them finds it.
+
+    Read with the wrong dictionary no marker is found at all, so every image was "no board", saying nothing
+    of why. Meant for an image in which ``board`` was not found, by a camera that found it in none of its
+    images: it runs a detection per family (three), so once per folder, not per frame. A board that is also
+    swapped or printed with the other pattern is named so too (the detector's own check, with the right
+    dictionary).
+    """
+    image = grey8(image)
+    for spec in _other_dictionaries(board):
+        try:
+            view = BoardDetector(spec, min_corners=min_corners).detect(image)
+            also = ""
+        except BoardError as e:  # found, read with this dictionary, as swapped or with the other pattern
+            view, also = None, f"; and with it: {e}"
+        if view is None and not also:
+            continue
+        found = f"{len(view)} corners found with it" if view is not None else "its markers found with it"
+        return BoardError(f"the board in view has the markers of another ArUco dictionary, {spec.dictionary} "
+                          f"({found}), not {board.dictionary}'s: set \"dictionary\": \"{spec.dictionary}\" in the "
+                          f"board file{also}", key="dictionary")
+    return None

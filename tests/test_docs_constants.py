@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from calibration.cli import STALL_NOTE_S
-from calibration.solve import COVERAGE_GRID, USUAL_PITCH_DEG
+from calibration.capture import MISMATCH_TRIES
+from calibration.solve import COVERAGE_GRID, MIN_VIEWS, USUAL_PITCH_DEG
 from drivers.backends.replay import MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
@@ -115,6 +116,8 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"outside {USUAL_PITCH_DEG[0]:g} to {USUAL_PITCH_DEG[1]:g} degrees (`USUAL_PITCH_DEG`)"),
     ("docs/rig-file.md", f"outside {USUAL_PITCH_DEG[0]:g} to {USUAL_PITCH_DEG[1]:g} degrees, `USUAL_PITCH_DEG`"),
     ("docs/calibration.md", f"an {COVERAGE_GRID[0]}x{COVERAGE_GRID[1]} grid, `COVERAGE_GRID`"),
+    ("docs/calibration.md", f"up to {MISMATCH_TRIES} of them (`MISMATCH_TRIES`)"),
+    ("docs/calibration.md", f"than {MIN_VIEWS} names are in both folders"),
     ("docs/model.md", f"fewer than {MIN_FRAMES} frame pairs (`calibration.MIN_FRAMES`"),
     ("docs/model.md", f"fewer than {MIN_FRAMES}, `calibration.MIN_FRAMES` as for"),
     ("docs/model.md", f"`python -m training.export --opset` takes {MIN_OPSET} to {MAX_OPSET}"),

@@ -1,0 +1,171 @@
+"""A user's mistakes in the board file and the image folders, said as what to fix: a board file with its squares
+swapped or another marker dictionary, a camera that never found the board, two folders whose images do not pair
+by name, the hidden files macOS leaves beside copied images.
+
+Images come from :func:`calibration.render.render_board` (one pose, a few hundred milliseconds each).
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from calibration import cli
+from calibration.board import BoardSpec
+from calibration.capture import detect_folder
+from calibration.detect import BoardDetector, board_mismatch
+from calibration.errors import BoardError, CaptureError
+from calibration.render import board_pose_facing, example_rig, render_board
+
+BOARD = BoardSpec(squares_x=7, squares_y=6, square_m=0.12, marker_m=0.09)  # DICT_5X5_100, an even number of rows
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return example_rig().pair[0].resized(640, 400)
+
+
+def _render(board: BoardSpec, camera, yaw_deg: float = 20.0) -> np.ndarray:
+    R, t = board_pose_facing(board, camera.center + 1.6 * camera.R[2], camera.center, yaw_deg=yaw_deg,
+                             pitch_deg=-15, spin_deg=10)
+    return render_board(camera, board, R, t)
+
+
+@pytest.fixture(scope="module")
+def image(camera) -> np.ndarray:
+    return _render(BOARD, camera)
+
+
+def _folders(root: Path, images: dict[str, dict[str, np.ndarray]]) -> Path:
+    for cam, named in images.items():
+        (root / cam).mkdir(parents=True)
+        for name, img in named.items():
+            assert cv2.imwrite(str(root / cam / f"{name}.png"), img)
+    return root
+
+
+@pytest.mark.parametrize("printed_legacy", [False, True])
+def test_a_board_file_with_its_squares_swapped_is_named(camera, tmp_path, printed_legacy):
+    # 7x6 printed, 6x7 in the file: every marker is found (the same 21), OpenCV's marker check places them
+    # nowhere, and each image was "no board": a capture ran out of time, a solve blamed the floor view
+    printed = dataclasses.replace(BOARD, legacy_pattern=printed_legacy)
+    written = dataclasses.replace(BOARD, squares_x=6, squares_y=7)
+    image = _render(printed, camera)
+    with pytest.raises(BoardError, match=r'7x6 squares \(\d+ corners found so\), the board file says 6x7: '
+                                         r'set "squares_x": 7, "squares_y": 6') as e:
+        BoardDetector(written).detect(image)
+    assert e.value.key == "squares_x"
+    assert ('"legacy_pattern": true' in str(e.value)) is printed_legacy  # said only where it differs too
+    _folders(tmp_path, {"left": {"003": image}, "right": {"003": image}})
+    with pytest.raises(CaptureError, match=r"left[/\\]003\.png: squares_x: the board in view is 7x6"):
+        detect_folder(written, tmp_path)
+
+
+def test_a_board_file_with_another_dictionary_is_named(image, tmp_path):
+    # Read with DICT_4X4 no marker of a DICT_5X5 print is found at all: nothing said why
+    written = dataclasses.replace(BOARD, dictionary="DICT_4X4_50")
+    assert BoardDetector(written).detect(image) is None  # per image: no marker, no error (no cost per frame)
+    blank = np.full_like(image, 90)
+    _folders(tmp_path, {"left": {"000": blank, "001": image}, "right": {"000": blank, "001": image}})
+    with pytest.raises(CaptureError, match=r'left[/\\]001\.png: dictionary: the board in view has the markers of another '
+                                           r'ArUco dictionary, DICT_5X5_50 \(\d+ corners found with it\), not '
+                                           r'DICT_4X4_50\'s: set "dictionary": "DICT_5X5_50"'):
+        detect_folder(written, tmp_path)
+    # the family's smallest dictionary that holds the board's markers: it reads a DICT_5X5_100 print
+    assert len(BoardDetector(dataclasses.replace(BOARD, dictionary="DICT_5X5_50")).detect(image)) == BOARD.corner_count
+
+
+def test_another_dictionary_and_swapped_squares_are_both_named(image):
+    written = dataclasses.replace(BOARD, squares_x=6, squares_y=7, dictionary="DICT_6X6_250")
+    error = board_mismatch(written, image)
+    assert error is not None and error.key == "dictionary"
+    assert '"dictionary": "DICT_5X5_50"' in str(error) and 'set "squares_x": 7, "squares_y": 6' in str(error)
+
+
+def test_no_board_in_view_is_no_mismatch(image):
+    assert board_mismatch(dataclasses.replace(BOARD, dictionary="DICT_4X4_50"), np.full_like(image, 90)) is None
+    # a board file of another layout altogether: its markers' ids are in view, but placed elsewhere, so no
+    # dictionary is named as the fix (checkMarkers)
+    other = BoardSpec(squares_x=5, squares_y=4, square_m=0.1, marker_m=0.07, dictionary="DICT_6X6_50")
+    assert board_mismatch(other, image) is None
+
+
+def _board_file(tmp_path: Path) -> str:
+    path = tmp_path / "board.json"
+    path.write_text(json.dumps(BOARD.to_dict()))
+    return str(path)
+
+
+def test_a_camera_that_never_found_the_board_is_said_so(image, tmp_path, capsys):
+    # the right camera's lens cap on: the solve blamed the floor view ("seen small and edge-on") or asked
+    # for more views ("15-30 is usual")
+    blank = np.full_like(image, 40)
+    images = _folders(tmp_path / "views", {"left": {f"{k:03d}": image for k in range(4)} | {"floor": image},
+                                           "right": {f"{k:03d}": blank for k in range(4)} | {"floor": blank}})
+    rc = cli.main(["solve", "--board", _board_file(tmp_path), "--images", str(images), "--cameras", "left,right",
+                   "--floor-view", "floor", "--out", str(tmp_path / "rig.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "camera 'right' found the board in none of its 5 images" in err
+    assert "7x6 squares of 120 mm" in err and "floor" not in err.split("error:")[1].split("(")[0]
+    assert not (tmp_path / "rig.json").exists()
+
+
+def test_folders_whose_images_do_not_pair_by_name_are_named(image, tmp_path, capsys):
+    # another tool's naming, left/000.png beside right/right_000.png: no pair at all, and the solve said
+    # "hold it where both cameras see it"
+    images = _folders(tmp_path / "views", {"left": {f"{k:03d}": image for k in range(5)},
+                                           "right": {f"right_{k:03d}": image for k in range(5)}})
+    rc = cli.main(["solve", "--board", _board_file(tmp_path), "--images", str(images), "--cameras", "left,right",
+                   "--camera-height", "1.4", "--out", str(tmp_path / "rig.json")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert ("5 of 'left' (000, 001, 002, 003, ...) and 5 of 'right' (right_000, right_001, right_002, right_003, ...) "
+            "have no namesake in the other folder, and only 0 name(s) are in both") in err
+    assert "name each pair's two images alike" in err
+
+
+def test_a_few_unpaired_images_are_noted_not_refused(capsys):
+    views = {"left": {f"{k:03d}": None for k in range(6)}, "right": {f"{k:03d}": None for k in range(1, 5)}}
+    missed = {"left": ["floor"], "right": ["floor", "099"]}
+    cli._check_pairing("views", ("left", "right"), views, missed, "floor")
+    out = capsys.readouterr().out
+    assert ("note: images pair by file name (left/000.png with right/000.png): 2 of 'left' (000, 005) and 1 of "
+            "'right' (099) have no namesake in the other folder: they count for that camera's lens only") in out
+    cli._check_pairing("views", ("left", "right"), {"left": {"000": None}, "right": {"000": None}},
+                       {"left": [], "right": []}, None)
+    assert capsys.readouterr().out == ""  # every image paired: nothing said
+
+
+def test_hidden_files_beside_the_images_are_not_views(image, tmp_path):
+    # macOS writes ._NAME beside each file copied to a USB stick: each stopped the solve, one at a time
+    root = _folders(tmp_path, {"left": {"000": image}, "right": {"000": image}})
+    for cam in ("left", "right"):
+        (root / cam / "._000.png").write_bytes(b"\x00\x05\x16\x07\x00\x02\x00\x00Mac OS X")
+    views, missed = detect_folder(BOARD, root)
+    assert sorted(views["left"]) == ["000"] and missed == {"left": [], "right": []}
+
+
+def test_a_capture_with_another_dictionary_says_so_at_once(tmp_path, capsys):
+    # the board file of a DICT_4X4 board, a DICT_5X5 print in view: no marker in any frame, and the capture
+    # ran its --max-seconds (10 minutes) without a word
+    from calibration.render import calibration_views
+    from ghnerf_runtime.geometry.rig import Rig
+    from tests.calibration.test_ghcal_user_flows import _take
+
+    rig = example_rig()
+    truth = Rig(tuple(c.resized(800, 500) for c in rig.cameras), rig.volume, rig_id="truth")
+    printed = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
+    one_view = calibration_views(truth, printed, count=1, edge_count=0, seed=5, floor_view=False)
+    take = _take(tmp_path / "take", truth, one_view)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(dataclasses.replace(printed, dictionary="DICT_4X4_50").to_dict()))
+    out = tmp_path / "capture"
+    rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+                   "--count", "1", "--interval-s", "0", "--still-s", "0"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "camera 'left': dictionary: the board in view has the markers of another ArUco dictionary" in err
+    assert 'set "dictionary": "DICT_5X5_50"' in err and not list(out.glob("*/*.png"))
