@@ -21,6 +21,7 @@ numpy, OpenCV; the session is passed in (never created here).
 """
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass
 from typing import Any, Mapping
@@ -87,6 +88,12 @@ class NovelViewRequest:
     overlay: str = "none"
 
     def __post_init__(self) -> None:
+        if self.camera is not None and not isinstance(self.camera, Camera):
+            # caught here, not as an AttributeError deep in the estimator's worker
+            raise GeometryError(f"NovelViewRequest.camera must be a Camera or None, got {type(self.camera).__name__}")
+        if self.camera is None and not (isinstance(self.alpha, numbers.Real) and not isinstance(self.alpha, bool)):
+            # np.isfinite raised a bare TypeError for None or "0.5"; True passed as 1
+            raise GeometryError(f"NovelViewRequest.alpha must be a number in [-1, 2], got {self.alpha!r}")
         if self.camera is None and not (np.isfinite(self.alpha) and -1.0 <= self.alpha <= 2.0):
             raise GeometryError(f"NovelViewRequest.alpha must be in [-1, 2], got {self.alpha!r}")
         if self.overlay not in ("none", "skeleton", "heatmap"):
