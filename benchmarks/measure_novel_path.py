@@ -1,17 +1,19 @@
 """How far a view between the rig's cameras moves when it orbits (``novel_view.path``) rather than takes the line.
 
 For each rig (rig files; the simulator's placements given by ``--sim``, side by side and toed in; and
-``--around``: two cameras 3 m from the subject, 1.3 m high, aimed at it from the given angle apart round it):
-the angle between the optical axes, the orbit's pivot (:func:`ghnerf_runtime.novel_view.novel_pivot`: the point
-nearest both axes, else the subject taken at the working volume's centre, as on a cold pair), the path ``"auto"``
-takes, and at each ``--alphas``: how far the orbit camera's centre is from the
+``--around``: two cameras 3 m from the subject, ``--height`` high (1.3 m; the subject's centre is 0.95 m), aimed
+at it from the given angle apart round it, the second aimed ``--aim-off`` cm to its left of it): the angle between
+the optical axes, the orbit's pivot (:func:`ghnerf_runtime.novel_view.novel_pivot`, given the subject taken at
+the working volume's centre, as on a cold pair) and how far it is from the subject (for ``--around``, the point
+the cameras are placed round; else the working volume's centre), where the orbit's halfway camera is (which
+way round the view turns), the path ``"auto"`` takes, and at each ``--alphas``: how far the orbit camera's centre is from the
 line camera's (mm), the angle between their rotations (degrees; both are slerped, so 0 by construction), how
 far the view of the subject turns between them (the angle at the working volume's centre, degrees), and both
 cameras' distance to that centre (mm). Pure geometry, milliseconds; the cameras as in the rig file (a rig with
 a camera on its side or upside down turns it upright first in the estimator; not here).
 
     .venv/bin/python benchmarks/measure_novel_path.py [RIG.json ...] [--sim aimed,60,120] [--around 90,180]
-        [--alphas 0.25,0.5,0.75]
+        [--height 1.3] [--aim-off 0] [--alphas 0.25,0.5,0.75]
 
 Default: docs/examples/rig.json alone.
 """
@@ -42,15 +44,18 @@ def _rotation_deg(R1: np.ndarray, R2: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip((np.trace(R1.T @ R2) - 1.0) / 2.0, -1.0, 1.0))))
 
 
-def rig_rows(name: str, rig: Rig, alphas: list[float]) -> list[str]:
-    """The table's lines for one rig."""
+def rig_rows(name: str, rig: Rig, alphas: list[float], aimed_at: np.ndarray | None = None) -> list[str]:
+    """The table's lines for one rig (``aimed_at``: the point its cameras are aimed at, default the volume's centre)."""
     a, b = rig.pair
     subject = 0.5 * (rig.volume.min_corner + rig.volume.max_corner)
+    aimed_at = subject if aimed_at is None else aimed_at
     pivot = novel_pivot(a, b, "orbit", subject)
     auto = "orbit" if novel_pivot(a, b, "auto", subject) is not None else "line"
     where = "none (line)" if pivot is None else (
         f"({pivot[0]:.3f}, {pivot[1]:.3f}, {pivot[2]:.3f}) m, {np.linalg.norm(pivot - a.center):.3f} / "
-        f"{np.linalg.norm(pivot - b.center):.3f} m from the cameras")
+        f"{np.linalg.norm(pivot - b.center):.3f} m from the cameras, "
+        f"{1e3 * np.linalg.norm(pivot - aimed_at):.1f} mm from the subject; halfway camera at "
+        f"({', '.join(f'{v:.3f}' for v in interpolate_camera(a, b, 0.5, pivot=pivot).center)}) m")
     lines = [f"{name}: optical axes {axes_angle_deg(a, b):.3f} deg apart, baseline "
              f"{1e3 * np.linalg.norm(a.center - b.center):.1f} mm; pivot {where}; auto takes the {auto}",
              "| alpha | orbit vs line: centre mm | rotation deg | view of the subject turns deg | "
@@ -67,16 +72,25 @@ def rig_rows(name: str, rig: Rig, alphas: list[float]) -> list[str]:
     return lines
 
 
-def around_rig(angle_deg: float) -> Rig:
-    """Two 640x480 cameras (80 degrees wide) 3 m from a subject at (0, -0.95, 3), ``angle_deg`` apart round it."""
-    subject = np.array([0.0, -0.95, 3.0])
+AROUND_SUBJECT = np.array([0.0, -0.95, 3.0])
+
+
+def around_rig(angle_deg: float, height_m: float = 1.3, aim_off_m: float = 0.0) -> Rig:
+    """Two 640x480 cameras (80 degrees wide) 3 m from a subject at (0, -0.95, 3), ``angle_deg`` apart round it,
+    ``height_m`` above the floor; the second aimed ``aim_off_m`` to its left of the subject (a calibration's
+    error, or a camera mounted a little off: its axis passes that far beside the first's)."""
+    subject = AROUND_SUBJECT
     K = intrinsics_from_fov(640, 480, 80.0)
     cams = []
     for name, sign in (("left", -1.0), ("right", 1.0)):
         yaw = np.radians(sign * angle_deg / 2.0)
         eye = subject + np.array([3.0 * np.sin(yaw), 0.0, -3.0 * np.cos(yaw)])
-        eye[1] = -1.3
-        cams.append(Camera(name, 640, 480, K, [], *look_at(eye, subject)))
+        eye[1] = -height_m
+        target = subject.copy()
+        if name == "right":  # its left: the camera's -x, horizontal across its line of sight
+            sight = subject - eye
+            target += aim_off_m * np.cross(sight, [0.0, 1.0, 0.0]) / np.linalg.norm(np.cross(sight, [0.0, 1.0, 0.0]))
+        cams.append(Camera(name, 640, 480, K, [], *look_at(eye, target)))
     volume = WorkingVolume(subject + [-0.8, -1.15, -0.8], subject + [0.8, 1.0, 0.8])
     return Rig(tuple(cams), volume, f"around-{angle_deg:g}")
 
@@ -87,6 +101,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sim", default="", help="comma list of simulator placements: 'aimed' (the default rig, "
                                               "both cameras aimed at the subject) or a convergence in degrees")
     ap.add_argument("--around", default="", help="comma list of angles (degrees) between two cameras round the subject")
+    ap.add_argument("--height", type=float, default=1.3, help="--around cameras' height above the floor (m; the "
+                                                              "subject's centre is at 0.95)")
+    ap.add_argument("--aim-off", type=float, default=0.0, help="--around: the second camera aimed this many cm to "
+                                                               "its left of the subject")
     ap.add_argument("--alphas", default="0.25,0.5,0.75", help="comma list of positions between the cameras")
     args = ap.parse_args(argv)
     alphas = [float(v) for v in args.alphas.split(",") if v]
@@ -95,9 +113,13 @@ def main(argv: list[str] | None = None) -> int:
     for spec in (s for s in args.sim.split(",") if s):
         placement = RigPlacement() if spec == "aimed" else RigPlacement(convergence_deg=float(spec))
         rigs.append((f"sim {spec}", placement.build()))
-    rigs += [(f"around {spec}", around_rig(float(spec))) for spec in args.around.split(",") if spec]
+    aimed = {}
+    for spec in (s for s in args.around.split(",") if s):
+        name = f"around {spec} ({args.height:g} m high, aimed {args.aim_off:g} cm off)"
+        rigs.append((name, around_rig(float(spec), args.height, args.aim_off / 100.0)))
+        aimed[name] = AROUND_SUBJECT
     for name, rig in rigs:
-        print("\n".join(rig_rows(name, rig, alphas)) + "\n")
+        print("\n".join(rig_rows(name, rig, alphas, aimed.get(name))) + "\n")
     return 0
 
 

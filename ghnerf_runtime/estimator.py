@@ -1007,7 +1007,8 @@ class Estimator:
                 self._between_pair = tuple(st.upright_pinhole for st in self._cams)  # no view spinning between them
             cam_a, cam_b = self._between_pair
             pivot = novel_pivot(cam_a, cam_b, self.config.novel_view.path, np.mean(box, axis=0))
-            # the axes' pivot is the rig's (fixed); the subject's moves, so its cameras come and go
+            # the line's camera is the rig's (fixed); an orbit's pivot follows the subject (along the axes, where
+            # they fix it badly), so its cameras come and go
             key = (request.alpha, None if pivot is None else pivot.tobytes())
             if key not in self._between:
                 if len(self._between) >= 16:

@@ -21,6 +21,7 @@ numpy, OpenCV; the session is passed in (never created here).
 """
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass
 from typing import Any, Mapping
@@ -33,7 +34,7 @@ from ghnerf_runtime.config import NOVEL_PATHS, NovelViewConfig
 from ghnerf_runtime.contract import near_far_from_box, target_inputs
 from ghnerf_runtime.errors import ConfigError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre
+from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre, subject_pivot
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
 from ghnerf_runtime.rays import (
     block_ray_uv,
@@ -46,7 +47,7 @@ from ghnerf_runtime.rays import (
 )
 from ghnerf_runtime.tracking import box_corners
 
-__all__ = ["AUTO_ORBIT_MIN_ANGLE_DEG", "NovelViewRequest", "NovelView", "slerp_rotation", "novel_pivot",
+__all__ = ["AUTO_ORBIT_MIN_ANGLE_DEG", "HALF_TURN_BAND_DEG", "NovelViewRequest", "NovelView", "slerp_rotation", "novel_pivot",
            "interpolate_camera", "fit_intrinsics",
            "novel_target", "check_strides", "render_novel_view", "opaque_colour", "draw_skeleton", "skeleton_overlay",
            "heatmap_overlay"]
@@ -57,6 +58,17 @@ __all__ = ["AUTO_ORBIT_MIN_ANGLE_DEG", "NovelViewRequest", "NovelView", "slerp_r
 #: simulator's default 23, ``RigPlacement.random``'s at most 45, docs/examples/rig.json 0.3), so they keep the
 #: line (docs/runtime.md, "Between the cameras: a line or an orbit").
 AUTO_ORBIT_MIN_ANGLE_DEG = 60.0
+
+#: Two cameras whose rotations are within this many degrees of a half turn apart (two upright cameras facing each
+#: other across the subject, whatever their tilt) turn the view between them by :func:`slerp_rotation`'s fixed
+#: rule, not the shorter way: their calibrations scatter by tenths of a degree either side of 180, and the shorter
+#: way flipped with them (the view going round the subject's other side after a recalibration). The way taken is
+#: at most this much longer than the other.
+HALF_TURN_BAND_DEG = 1.0
+
+#: The rig's up (y is down, gravity), forward and right: the turn's axis at a half turn points along the positive
+#: end of the one it is nearest (:func:`slerp_rotation`).
+_HALF_TURN_AXES = (np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]))
 
 
 @dataclass(frozen=True)
@@ -76,6 +88,12 @@ class NovelViewRequest:
     overlay: str = "none"
 
     def __post_init__(self) -> None:
+        if self.camera is not None and not isinstance(self.camera, Camera):
+            # caught here, not as an AttributeError deep in the estimator's worker
+            raise GeometryError(f"NovelViewRequest.camera must be a Camera or None, got {type(self.camera).__name__}")
+        if self.camera is None and not (isinstance(self.alpha, numbers.Real) and not isinstance(self.alpha, bool)):
+            # np.isfinite raised a bare TypeError for None or "0.5"; True passed as 1
+            raise GeometryError(f"NovelViewRequest.alpha must be a number in [-1, 2], got {self.alpha!r}")
         if self.camera is None and not (np.isfinite(self.alpha) and -1.0 <= self.alpha <= 2.0):
             raise GeometryError(f"NovelViewRequest.alpha must be in [-1, 2], got {self.alpha!r}")
         if self.overlay not in ("none", "skeleton", "heatmap"):
@@ -132,8 +150,23 @@ def _matrix(q: np.ndarray) -> np.ndarray:
     ])
 
 
+def _half_turn_sign(qa: np.ndarray, qb: np.ndarray) -> float:
+    """+1 or -1: the sign of ``qb`` that makes the slerp from ``qa`` turn the camera right-handed about the rig axis
+    nearest the turn's axis (``_HALF_TURN_AXES``: up, then forward, then right, on a tie)."""
+    mid = _matrix(qa + qb)  # halfway along the slerp from qa to qb (dot >= 0 or not: no sign flip here)
+    M = mid.T @ _matrix(qa)  # the camera's turn in the rig frame, from its rotation at qa to the halfway one
+    axis = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])  # 2 sin(angle) times the axis
+    along = [float(np.dot(axis, ref)) for ref in _HALF_TURN_AXES]
+    return 1.0 if along[int(np.argmax(np.abs(along)))] >= 0.0 else -1.0
+
+
 def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray:
-    """Spherical linear interpolation of two rotation matrices (shortest arc).
+    """Spherical linear interpolation of two rotation matrices (rig -> camera; shortest arc).
+
+    Two rotations within :data:`HALF_TURN_BAND_DEG` of a half turn apart have two arcs of nearly one length; the
+    shorter flips with a calibration's last digits, so there the camera turns right-handed about whichever of the
+    rig's up (-y), forward (+z) and right (+x) is nearest the turn's axis: for two upright cameras facing each
+    other, counterclockwise seen from above (the view leaves the first camera to its right).
 
     Example:
         >>> from ghnerf_runtime.geometry import look_at
@@ -141,10 +174,16 @@ def slerp_rotation(R_a: np.ndarray, R_b: np.ndarray, alpha: float) -> np.ndarray
         >>> R = slerp_rotation(Ra, Rb, 0.5)
         >>> np.round(R @ R.T, 9).tolist() == np.eye(3).tolist(), np.round(R[2], 6).tolist()
         (True, [0.0, 0.0, 1.0])
+        >>> Ra, _ = look_at((-3, 0, 3), (0, 0, 3)); Rb, _ = look_at((3, 0, 3), (0, 0, 3))  # facing each other
+        >>> np.round(slerp_rotation(Ra, Rb, 0.5)[2], 6).tolist()  # halfway: looking forward (+z), from z < 3
+        [0.0, 0.0, 1.0]
     """
     qa, qb = _quat(R_a), _quat(R_b)
     dot = float(np.dot(qa, qb))
-    if dot < 0:
+    if abs(dot) < np.sin(np.radians(HALF_TURN_BAND_DEG) / 2.0):  # |dot| is the cosine of half the turn
+        sign = _half_turn_sign(qa, qb)
+        qb, dot = sign * qb, sign * dot
+    elif dot < 0:
         qb, dot = -qb, -dot
     if dot > 0.9995:  # nearly equal: linear interpolation is exact enough and stable
         q = qa + alpha * (qb - qa)
@@ -158,10 +197,13 @@ def novel_pivot(cam_a: Camera, cam_b: Camera, path: str, subject: np.ndarray | N
     """The point a camera between ``cam_a`` and ``cam_b`` orbits under ``novel_view.path``, or ``None`` for the line.
 
     ``"line"``: ``None``. ``"auto"``: ``None`` unless the optical axes are more than
-    :data:`AUTO_ORBIT_MIN_ANGLE_DEG` apart, then as ``"orbit"``: the point nearest both optical axes
-    (:func:`~ghnerf_runtime.geometry.orbit.axes_pivot`); when the axes are parallel or that point is behind
-    either camera, ``subject`` (the subject's centre, rig frame); when that is missing or behind one too,
-    ``None`` (the line: no orbit has the subject in front of both ends).
+    :data:`AUTO_ORBIT_MIN_ANGLE_DEG` apart, then as ``"orbit"``: given ``subject`` (the subject's centre, rig
+    frame), the point nearest both optical axes and, along the direction they fix badly, nearest the subject
+    (:func:`~ghnerf_runtime.geometry.orbit.subject_pivot`: on the subject for axes near antiparallel, where
+    the axes' nearest point runs metres along them for an axis a centimetre off); without it, the axes' nearest
+    point (:func:`~ghnerf_runtime.geometry.orbit.axes_pivot`; none for parallel axes). When that point is behind
+    either camera, ``subject``; when that is missing or behind one too, ``None`` (the line: no orbit has the
+    subject in front of both ends).
 
     Raises:
         ConfigError: ``path`` is not one of ``"line"``, ``"orbit"``, ``"auto"`` (named as ``novel_view.path``).
@@ -170,7 +212,8 @@ def novel_pivot(cam_a: Camera, cam_b: Camera, path: str, subject: np.ndarray | N
         raise ConfigError(f"must be one of {list(NOVEL_PATHS)}, got {path!r}", key="novel_view.path")
     if path == "line" or (path == "auto" and not axes_angle_deg(cam_a, cam_b) > AUTO_ORBIT_MIN_ANGLE_DEG):
         return None
-    for point in (axes_pivot(cam_a, cam_b), subject):
+    axes = axes_pivot(cam_a, cam_b) if subject is None else subject_pivot(cam_a, cam_b, subject)
+    for point in (axes, subject):
         if point is not None and in_front(cam_a, point) and in_front(cam_b, point):
             return np.array(point, dtype=np.float64)
     return None

@@ -37,10 +37,10 @@ from ghnerf_runtime.config import Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import WEIGHTS_ID_KEY
 from ghnerf_runtime.estimator import _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, PairResult
 from ghnerf_runtime.geometry import triangulate_dlt
-from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG
+from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
 from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
-from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG
+from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from training.data.errors import DatasetError
@@ -70,6 +70,8 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
     ("docs/runtime.md", f"more than {AUTO_ORBIT_MIN_ANGLE_DEG:g} degrees apart (`AUTO_ORBIT_MIN_ANGLE_DEG`)"),
     ("docs/runtime.md", f"within {PARALLEL_AXES_DEG:g} degrees (`PARALLEL_AXES_DEG`)"),
+    ("docs/runtime.md", f"k = 1 - cos {PIVOT_CONDITION_DEG:g} degrees, `PIVOT_CONDITION_DEG`"),
+    ("docs/runtime.md", f"within {HALF_TURN_BAND_DEG:g} degree (`HALF_TURN_BAND_DEG`)"),
     ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
     ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),

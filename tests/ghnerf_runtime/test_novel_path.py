@@ -10,8 +10,8 @@ import pytest
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, NovelViewConfig, config_from_dict
 from ghnerf_runtime.errors import GeometryError
 from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at
-from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, axes_angle_deg, axes_pivot, in_front
-from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, interpolate_camera, novel_pivot
+from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, axes_angle_deg, axes_pivot, in_front, subject_pivot
+from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG, interpolate_camera, novel_pivot
 from ghnerf_runtime.rig_file import load_rig
 
 REPO = Path(__file__).resolve().parents[2]
@@ -122,6 +122,72 @@ def test_the_orbit_camera_is_a_proper_rotation(alpha):
     assert checked >= 20
 
 
+def _level_facing(angle_deg: float, aim_off_m: float, subject=(0.0, -0.95, 3.0)):
+    """Two level cameras 3 m from ``subject``, ``angle_deg`` apart round it; b aimed ``aim_off_m`` to its left."""
+    subject = np.asarray(subject)
+    yaw = np.radians(angle_deg / 2)
+    eye_a = subject + 3.0 * np.array([-np.sin(yaw), 0.0, -np.cos(yaw)])
+    eye_b = subject + 3.0 * np.array([np.sin(yaw), 0.0, -np.cos(yaw)])
+    left_of_b = np.cross(subject - eye_b, [0.0, 1.0, 0.0])
+    return _cam("a", eye_a, subject), _cam("b", eye_b, subject + aim_off_m * left_of_b / np.linalg.norm(left_of_b))
+
+
+@pytest.mark.parametrize("aim_off_m", [0.0, 0.01, 0.03])
+@pytest.mark.parametrize("angle_deg", [175.0, 178.0, 179.0, 179.9, 180.0])
+def test_near_antiparallel_axes_aimed_off_keep_the_pivot_on_the_subject(angle_deg, aim_off_m):
+    """The axes' nearest point moves along them by the offset over the tangent of the angle from antiparallel
+    (1.2 m for 3 cm at 178 degrees; at 180 the two axes meet at b, 3 m off): with the subject known, the pivot
+    stays on it (within the axes' own offset) and the halfway camera 3 m out, not inside the subject or at b."""
+    subject = np.array([0.0, -0.95, 3.0])
+    a, b = _level_facing(angle_deg, aim_off_m, subject)
+    assert axes_angle_deg(a, b) > 174.9
+    pivot = novel_pivot(a, b, "auto", subject + [0.0, -0.075, 0.0])  # the volume's centre, 7.5 cm above the aim
+    assert pivot is not None
+    assert np.linalg.norm(pivot - subject) <= max(aim_off_m, 1e-4)  # (the damping: 5 um towards the anchor)
+    half = interpolate_camera(a, b, 0.5, pivot=pivot)
+    assert np.linalg.norm(half.center - subject) == pytest.approx(3.0, abs=0.03)
+    uv, depth = half.project(subject[None], distort=False)
+    assert depth[0] > 2.9 and np.all(np.abs(uv[0] - K[:2, 2]) < 3.0)  # the subject in the middle of the picture
+
+
+def test_the_pivot_keeps_the_axes_nearest_point_where_it_is_well_conditioned():
+    """Skew axes 90 degrees apart: the subject 1 m off moves the pivot by under a millimetre."""
+    a = _cam("a", (-3.0, -1.2, 3.0), (0.0, -1.0, 3.0))
+    b = _cam("b", (0.0, -1.4, 0.0), (0.1, -0.9, 3.0))
+    np.testing.assert_allclose(subject_pivot(a, b, np.array([0.5, -0.3, 3.6])), axes_pivot(a, b), atol=1e-3)
+
+
+def _halfway_side(yaw_b: float, tilt: float = 0.0, roll_b: float = 0.0) -> float:
+    """The z of the orbit's halfway camera between a at x = -3 and b at x = +3 round the origin, b turned by
+    ``yaw_b`` (radians, about the rig's up) from facing a; both tilted ``tilt`` down; b rolled by ``roll_b``."""
+    def cam(name, x, yaw, roll):
+        R, _ = look_at((x, 0.0, 0.0), (0.0, 0.0, 0.0))
+        c, s = np.cos(yaw), np.sin(yaw)
+        R = R @ np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])  # turned about the rig's y
+        ct, st = np.cos(tilt), np.sin(tilt)
+        R = np.array([[1.0, 0.0, 0.0], [0.0, ct, -st], [0.0, st, ct]]) @ R  # pitched about its own x
+        cr, sr = np.cos(roll), np.sin(roll)
+        R = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]]) @ R  # rolled about its own axis
+        return Camera(name, 128, 128, K, [], R, -R @ np.array([x, 0.0, 0.0]))
+
+    a, b = cam("a", -3.0, 0.0, 0.0), cam("b", 3.0, yaw_b, roll_b)
+    return float(interpolate_camera(a, b, 0.5, pivot=np.zeros(3)).center[2])
+
+
+def test_the_view_between_cameras_a_half_turn_apart_turns_one_way_whatever_the_rounding():
+    """Calibrations a hair either side of 180 degrees (and of a tenth of one) used to send the view round the
+    subject's near or far side by their last digits; within HALF_TURN_BAND_DEG it is counterclockwise seen from
+    above (a's right: the near side, z < 0), also for cameras tilted down at the subject. Past it, the shorter way."""
+    for tilt in (0.0, np.radians(6.65)):
+        for yaw in (0.0, 1e-12, -1e-12, 1e-6, -1e-6, np.radians(0.3), -np.radians(0.3)):
+            assert _halfway_side(yaw, tilt) < -2.5, (tilt, yaw)
+    bend = np.radians(HALF_TURN_BAND_DEG)
+    assert _halfway_side(1.5 * bend) < -2.5 < 2.5 < _halfway_side(-1.5 * bend)  # b turned either way: shorter
+    # b upside down: the turn's axis is horizontal (the rig's forward): one way too
+    sides = {np.sign(_halfway_side(yaw, 0.0, np.pi)) for yaw in (0.0, 1e-12, -1e-12, 1e-6, -1e-6)}
+    assert len(sides) == 1
+
+
 # ------------------------------------------------------------------ fall-backs
 def test_parallel_axes_fall_back_to_the_subject_then_to_the_line():
     a = _cam("a", (-0.5, -1.2, 0.0), (-0.5, -1.2, 3.0))
@@ -132,12 +198,17 @@ def test_parallel_axes_fall_back_to_the_subject_then_to_the_line():
         np.testing.assert_allclose(interpolate_camera(a, b, alpha, pivot=None).center,
                                    (1 - alpha) * a.center + alpha * b.center)
     subject = np.array([0.0, -1.0, 3.0])
-    np.testing.assert_array_equal(novel_pivot(a, b, "orbit", subject), subject)
-    # just short of parallel: a pivot of its own (PARALLEL_AXES_DEG is the limit)
+    # with the subject: on the axes' plane, between them, as far out as the subject (parallel axes fix no depth)
+    np.testing.assert_allclose(novel_pivot(a, b, "orbit", subject), [0.0, -1.2, 3.0], atol=1e-4)
+    # just short of parallel: without the subject, a pivot of its own far out (PARALLEL_AXES_DEG is the limit);
+    # with it, still the subject's depth (the axes' nearest point is ill-conditioned along them)
     tilt = 2 * PARALLEL_AXES_DEG
     c = _cam("c", (0.5, -1.2, 0.0), (0.5 - 3.0 * np.tan(np.radians(tilt)), -1.2, 3.0))
-    pivot = novel_pivot(a, c, "orbit", subject)
+    pivot = novel_pivot(a, c, "orbit")
     assert pivot is not None and pivot[2] == pytest.approx(1.0 / np.tan(np.radians(tilt)), rel=1e-6)
+    pivot = novel_pivot(a, c, "orbit", subject)
+    x_c = 0.5 - 3.0 * np.tan(np.radians(tilt))  # c's axis at the subject's depth
+    np.testing.assert_allclose(pivot, [(x_c - 0.5) / 2, -1.2, 3.0], atol=1e-4)
 
 
 def test_a_pivot_behind_a_camera_falls_back():

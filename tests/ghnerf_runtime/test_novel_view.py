@@ -524,3 +524,23 @@ def test_the_heatmap_overlay_refuses_a_weight_outside_0_1(weight):
         heatmap_overlay(np.full((4, 4, 3), 200, np.uint8), np.ones((4, 4), np.float32), weight)
     full = heatmap_overlay(np.full((4, 4, 3), 200, np.uint8), np.ones((4, 4), np.float32), 1.0)
     assert full[0, 0].tolist() == [0, 0, 128]  # weight 1: the colour map itself (JET at 1: dark red, BGR)
+
+
+@pytest.mark.parametrize("alpha", [None, "0.5", True, [0.5]])
+def test_a_request_whose_alpha_is_not_a_number_is_a_geometry_error_naming_the_field(alpha):
+    """np.isfinite raised a bare TypeError for None or a string, and True passed as alpha 1."""
+    from ghnerf_runtime.errors import GeometryError
+    from ghnerf_runtime.novel_view import NovelViewRequest
+    with pytest.raises(GeometryError, match=r"NovelViewRequest\.alpha must be a number"):
+        NovelViewRequest(alpha=alpha)
+    assert NovelViewRequest(alpha=np.float32(0.25)).alpha == 0.25 and NovelViewRequest(alpha=1).alpha == 1
+    assert NovelViewRequest(alpha=None, camera=_camera()).camera is not None  # alpha unused with a camera
+
+
+@pytest.mark.parametrize("camera", [{"R": np.eye(3)}, "left", np.eye(3)])
+def test_a_request_whose_camera_is_not_a_camera_is_refused_when_made(camera):
+    """It was accepted and failed later, in the estimator's worker, as an AttributeError."""
+    from ghnerf_runtime.errors import GeometryError
+    from ghnerf_runtime.novel_view import NovelViewRequest
+    with pytest.raises(GeometryError, match=r"NovelViewRequest\.camera must be a Camera or None"):
+        NovelViewRequest(camera=camera)
