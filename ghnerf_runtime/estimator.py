@@ -832,7 +832,8 @@ class Estimator:
         track = self.tracker.track
         if track is None:
             return Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
-        near = track.valid & (np.linalg.norm(j3.points - track.joints, axis=-1) <= self.config.joints3d.max_track_step_m)
+        step = np.linalg.norm(j3.points - track.joints, axis=-1)
+        near = track.valid & (step <= self.config.joints3d.max_track_step_m)
         return Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
 
     def _features_may_wait(self, regions: Regions) -> bool:
