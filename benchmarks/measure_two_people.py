@@ -47,28 +47,29 @@ class TwoPeopleOracle(OracleSession):
         return np.max(maps, axis=0)
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
-    ap.add_argument("--pairs", type=int, default=10, help="pairs per scene, at 30 fps")
-    args = ap.parse_args(argv)
+def measure(scenes: int, pairs: int, alone: int) -> tuple[dict[str, int], int]:
+    """Counts over every pair with both people in view (the first ``alone`` pairs of each scene show the first
+    person only and are not counted): joints reported, at the first person's, the second's, neither; pairs flagged
+    ``several_people``. Returns ``(counts, pairs counted)``."""
     import drivers.sim as sim
 
     rig = sim.RigPlacement().build()
-    counts = {"reported": 0, "first": 0, "second": 0, "neither": 0}
-    pairs = 0
-    for seed in range(1, args.scenes + 1):
+    counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "flagged": 0}
+    counted = 0
+    for seed in range(1, scenes + 1):
         first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(-0.5, 3.0)))
         second = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=(0.5, 3.4)))
         oracle = TwoPeopleOracle(edge128_contract())
         with Estimator(oracle, rig, EstimatorConfig()) as est:
-            for i in range(args.pairs):
+            for i in range(alone + pairs):
                 t = i / 30.0
                 a, b = first.joints_3d(t), second.joints_3d(t)
-                oracle.set_people(a, b)
+                oracle.set_people(a) if i < alone else oracle.set_people(a, b)
                 # the frames only pass the frame check here: the oracle's heatmaps come from the joints
                 images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
                 r = est.estimate(images, timestamp_s=t)
+                if i < alone:
+                    continue
                 found = ~r.missing
                 near_a = np.linalg.norm(r.joints_3d - a, axis=-1) < NEAR_M
                 near_b = np.linalg.norm(r.joints_3d - b, axis=-1) < NEAR_M
@@ -76,12 +77,29 @@ def main(argv=None) -> int:
                 counts["first"] += int((found & near_a).sum())
                 counts["second"] += int((found & near_b & ~near_a).sum())
                 counts["neither"] += int((found & ~near_a & ~near_b).sum())
-                pairs += 1
-    n = max(counts["reported"], 1)
-    print(f"{pairs} pairs of two people ({args.scenes} scenes), the oracle's heatmaps, the defaults: "
-          f"{counts['reported'] / pairs:.1f} joints reported per pair; of them {counts['first'] / n:.0%} at the first "
-          f"person's, {counts['second'] / n:.0%} at the second's, {counts['neither'] / n:.0%} at neither "
-          f"(> {NEAR_M * 100:.0f} cm from both)")
+                counts["flagged"] += int(r.several_people)
+                counted += 1
+    return counts, counted
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
+    ap.add_argument("--pairs", type=int, default=10, help="pairs per scene with both people, at 30 fps")
+    ap.add_argument("--alone", type=int, default=3,
+                    help="second run: pairs of the first person alone before the second joins (0: no second run)")
+    args = ap.parse_args(argv)
+    runs = [(0, f"{args.pairs * args.scenes} pairs of two people ({args.scenes} scenes)")]
+    if args.alone:
+        runs.append((args.alone, f"the second person joining after {args.alone} pairs of the first alone, the next "
+                                 f"{args.pairs * args.scenes} pairs"))
+    for alone, what in runs:
+        counts, pairs = measure(args.scenes, args.pairs, alone)
+        n = max(counts["reported"], 1)
+        print(f"{what}, the oracle's heatmaps, the defaults: "
+              f"{counts['reported'] / pairs:.1f} joints reported per pair; of them {counts['first'] / n:.0%} at the "
+              f"first person's, {counts['second'] / n:.0%} at the second's, {counts['neither'] / n:.0%} at neither "
+              f"(> {NEAR_M * 100:.0f} cm from both); {counts['flagged'] / pairs:.0%} of pairs flagged several_people")
     return 0
 
 

@@ -373,6 +373,16 @@ class Joints3DConfig:
             with a small expected error. ``0``, the default, turns the check off: on tracked sequences it also sends
             pairs whose triangulation is wrong to it (docs/runtime.md, "The skeleton prior"); 0.25 catches a
             person upside down.
+        second_person_ratio: a view's joint map whose second-strongest peak (another region's, the decoder's
+            ``runner_up``) reaches this fraction of its strongest shows that joint twice: two people in view. On one
+            person the shipped model's maps stay below 0.44 in at least one of the two views (docs/runtime.md,
+            "Two people in the working volume").
+        second_person_min_joints: a pair with at least this many joints shown twice in *both* views
+            (``second_person_ratio``) is ``several_people`` (``PairResult``): its joints are kept only near the
+            tracked subject's (``max_track_step_m``), or, without a track, none. ``0`` turns the check off.
+        max_track_step_m: in a ``several_people`` pair, a joint further than this from the tracked subject's place
+            for it (the previous pair's) is missing: it is the other person's, or triangulated from one person's
+            peak in one view and the other's in the other.
     """
 
     method: str = "triangulate"
@@ -389,6 +399,9 @@ class Joints3DConfig:
     max_prior_error_m: float = 0.15
     prior_flip_test: bool = True
     max_prior_disagreement_m: float = 0.0
+    second_person_ratio: float = 0.5
+    second_person_min_joints: int = 6
+    max_track_step_m: float = 0.15
 
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)
@@ -408,6 +421,9 @@ class Joints3DConfig:
         _number(self, "min_volumetric_response", 0.0, 1.0)
         _integer(self, "centroid_radius_cells", 0, 8)
         _number(self, "surface_offset_m", -0.5, 0.5)
+        _number(self, "second_person_ratio", 0.0, 1.0, lo_open=True)
+        _integer(self, "second_person_min_joints", 0, 25)
+        _number(self, "max_track_step_m", 0.0, 10.0, lo_open=True)
 
     def uses_skeleton_prior(self, available: bool) -> bool:
         """Whether the skeleton prior runs, given whether the model folder has one (``on`` without one is the

@@ -140,6 +140,10 @@ class PairResult:
             did not run or too few joints were triangulated to tell.
         prior_fallback: the prior ran but its skeleton disagreed with the triangulation by more than
             ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior).
+        several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
+            both views (two people in view): only the joints within ``joints3d.max_track_step_m`` of the tracked
+            subject's are reported (3D and 2D), none without a track (docs/runtime.md, "Two people in the
+            working volume").
     """
 
     sequence: int
@@ -159,6 +163,7 @@ class PairResult:
     frame_reason: dict[str, str | None] = field(default_factory=dict)
     prior_disagreement_m: float | None = None
     prior_fallback: bool = False
+    several_people: bool = False
 
     def __post_init__(self) -> None:
         reasons = self.frame_reason
@@ -201,6 +206,7 @@ class PairResult:
             # the skeleton prior's check (since session 52): null where the prior did not run or could not be checked
             "prior_disagreement_m": None if self.prior_disagreement_m is None else r(self.prior_disagreement_m, 4),
             "prior_fallback": bool(self.prior_fallback),
+            "several_people": bool(self.several_people),  # since session 53
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
 
@@ -282,6 +288,7 @@ class _Pass:
     someone: bool = False  # the presence gate found someone (always, with the gate off)
     prior_disagreement_m: float | None = None  # the skeleton prior's check (PairResult's fields of that name)
     prior_fallback: bool = False
+    several_people: bool = False  # two people in view: only the tracked subject's joints kept (PairResult's)
 
     @property
     def frame_ok(self) -> dict:
@@ -613,7 +620,8 @@ class Estimator:
         result = PairResult(sequence, JOINT_NAMES, points, p.j3.confidence, ~p.j3.valid, p.joints_2d, p.conf_2d,
                             p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
                             self.config.joints3d.method, frame_reason=dict(p.frame_reason),
-                            prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback)
+                            prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback,
+                            several_people=p.several_people)
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -777,6 +785,9 @@ class Estimator:
         t = time.perf_counter()
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
         j3 = self._gate_to_boxes(j3, regions)
+        several = self._several_people(kp)
+        if several:  # before the presence gate: the subject's joints alone must make someone
+            j3 = self._keep_tracked_subject(j3)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
         if cfg.presence.enabled:
             if self.skeleton_prior is None:
@@ -789,11 +800,41 @@ class Estimator:
                     joints_2d[name] = np.zeros_like(joints_2d[name])
                     conf_2d[name] = np.zeros_like(conf_2d[name])
                     missing_2d[name] = np.ones_like(missing_2d[name])
-        follow = self._track_joints(env, crops, regions, j3)
+        if several:
+            # a camera's peak of a dropped joint may be the other person's: the 2D joints go with the 3D ones
+            for name in joints_2d:
+                missing_2d[name] = missing_2d[name] | ~j3.valid
+                joints_2d[name] = np.where(missing_2d[name][:, None], 0.0, joints_2d[name])
+                conf_2d[name] = np.where(missing_2d[name], 0.0, conf_2d[name]).astype(np.float32)
+        # two people: the crop follows what is reported, the subject's joints (the prior's skeleton and the
+        # encoder's peaks are both people's)
+        follow = j3 if several else self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         _add_ms(timing, "joints_3d", t)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
-                     *self._prior_check)
+                     *self._prior_check, several)
+
+    def _several_people(self, kp: Keypoints2D) -> bool:
+        """Two people in view: at least ``second_person_min_joints`` joints whose maps show a second peak of at
+        least ``second_person_ratio`` of the first in both views. Each view's peak is then whichever person's is
+        stronger there, and the two views need not pick the same person; the triangulation of a mixed pair often
+        passes the reprojection gate (people side by side: the error lies along the epipolar lines), so the maps
+        are what tells. On one person no joint came near it in both views (docs/runtime.md)."""
+        cfg = self.config.joints3d
+        if cfg.second_person_min_joints == 0:
+            return False
+        twice = kp.valid & (kp.runner_up >= cfg.second_person_ratio * kp.confidence)  # (2, J)
+        return int(np.count_nonzero(twice.all(axis=0))) >= cfg.second_person_min_joints
+
+    def _keep_tracked_subject(self, j3: Joints3D) -> Joints3D:
+        """Of a ``several_people`` pair's joints, those within ``max_track_step_m`` of the tracked subject's place
+        for them; all missing without a track (whose joints would these be?)."""
+        track = self.tracker.track
+        if track is None:
+            return Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
+        step = np.linalg.norm(j3.points - track.joints, axis=-1)
+        near = track.valid & (step <= self.config.joints3d.max_track_step_m)
+        return Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
 
     def _features_may_wait(self, regions: Regions) -> bool:
         """Whether a pass with a novel view asked for may run the keypoint-only ``human`` graph, leaving out

@@ -292,4 +292,7 @@ def test_measure_presence_with_the_flip_test_and_its_timing(model, capsys, monke
 def test_measure_two_people(capsys, monkeypatch):
     out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", capsys=capsys, monkeypatch=monkeypatch)
     assert re.search(r"^2 pairs of two people \(1 scenes\), .* [\d.]+ joints reported per pair; of them \d+% at the "
-                     r"first person's, \d+% at the second's, \d+% at neither", out, re.M), out
+                     r"first person's, \d+% at the second's, \d+% at neither .*; \d+% of pairs flagged several_people$",
+                     out, re.M), out
+    assert re.search(r"^the second person joining after 3 pairs of the first alone, the next 2 pairs, .* [\d.]+ joints "
+                     r"reported per pair; .*; \d+% of pairs flagged several_people$", out, re.M), out

@@ -74,8 +74,9 @@ def test_the_json_carries_the_reason_and_keeps_the_old_keys(shot):
     left, right = (c.name for c in rig.pair)
     r = _estimate(shot, (np.zeros_like(pair[0]), pair[1]), truth=False)
     obj = json.loads(json.dumps(r.to_json(), allow_nan=False))
-    # additive: every earlier key is still there (the skeleton prior's check came in session 52)
-    assert set(obj) == KEYS_BEFORE | {"frame_reason", "prior_disagreement_m", "prior_fallback"}
+    # additive: every earlier key is still there (the skeleton prior's check came in session 52, the two-people
+    # flag in 53)
+    assert set(obj) == KEYS_BEFORE | {"frame_reason", "prior_disagreement_m", "prior_fallback", "several_people"}
     assert obj["frame_reason"] == {left: FLAT, right: None}  # null: the frame passed
     assert list(obj["frame_reason"]) == list(obj["frame_ok"]) == [left, right]  # rig order
     assert obj["frame_ok"] == {left: False, right: True}
