@@ -233,6 +233,26 @@ def masked_mse(pred: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> t
     return (sq / (mask.sum((1, 2, 3)) * pred.shape[1]).clamp_min(1.0)).mean()
 
 
+class FillDiverged(FloatingPointError):
+    """A training step's loss or gradients are NaN or infinite; raised before the update (the message names the
+    step), so no NaN weights are trained on, scored or saved."""
+
+
+def finite_step(loss: torch.Tensor, net: torch.nn.Module, step: int) -> float:
+    """``loss``'s value once it and ``net``'s gradients are finite, else :class:`FillDiverged` naming ``step``.
+
+    Why: AdamW applies a NaN gradient to every weight, the painter then paints NaN, the held-out table drops
+    those views (``np.nanmean``) and ``fill_net.pt`` was saved with the NaN weights, exit 0 (the bfloat16
+    autocast on a GPU makes an overflow likelier than the float32 CPU run)."""
+    value = float(loss.detach())
+    if not math.isfinite(value):
+        raise FillDiverged(f"step {step}: non-finite loss ({value:g}); the weights were not updated")
+    if not all(bool(torch.isfinite(p.grad).all()) for p in net.parameters() if p.grad is not None):
+        raise FillDiverged(f"step {step}: non-finite gradient of a finite loss ({value:.6g}); the weights were not "
+                           f"updated")
+    return value
+
+
 def pick_device(kind: str) -> torch.device:
     if kind == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -327,8 +347,8 @@ def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str
             loss = loss + cfg.around_weight * masked_mse(pred, truth, repainted(b) * (1.0 - mask))
         opt.zero_grad(set_to_none=True)
         loss.backward()
+        running.append(finite_step(loss, net, step + 1))
         opt.step()
-        running.append(loss.item())
         step += 1
         if step % cfg.log_every == 0:
             msg = f"  step {step}: loss {np.mean(running):.5f}"
@@ -719,7 +739,11 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         train = {k: v[:args.train_views] for k, v in train.items()}
     t0 = time.monotonic()
-    net = train_fill(train, cfg, val=val)
+    try:
+        net = train_fill(train, cfg, val=val)
+    except FillDiverged as e:  # one line, and no fill_net.pt / score of NaN weights
+        print(f"error: training diverged: {e}", file=sys.stderr)
+        return 1
     seconds = time.monotonic() - t0
     rows = score_rows(val, *paintings(net, val))
     args.out.mkdir(parents=True, exist_ok=True)

@@ -1242,6 +1242,8 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         "training": training,
         "metrics": metrics["models"],
         "parity": {v: q[v].get("int8_vs_fp32", {}) for v in VARIANTS},
+        # which data fixed the int8 ranges: training scenes, never the held-out split the metrics score
+        "calibration": {v: {"split": "train", "scenes": q[v].get("calibration_scenes")} for v in VARIANTS},
         "fp32_parity_torch_vs_ort": {v: (st.stamp(f"export_{v}") or {}).get("info", {}).get(v, {})
                                      .get("fp32_parity_torch_vs_ort") for v in VARIANTS},
         "files": files,

@@ -583,3 +583,41 @@ def test_a_write_cut_short_leaves_the_previous_file_not_half_of_one(name, train_
     assert after[name] == before[name]  # the files written before the cut one are the new run's, whole
     load_net(out / "fill_net.pt")
     json.loads((out / "score.json").read_text())
+
+
+def _poisoned_mse(monkeypatch, from_call: int, grad_only: bool = False) -> None:
+    """``masked_mse`` whose value (or, ``grad_only``, only its gradient) turns NaN from its ``from_call``-th call."""
+    import training.learnt_fill as lf
+
+    real, calls = lf.masked_mse, []
+
+    def mse(pred, truth, mask):
+        calls.append(1)
+        value = real(pred, truth, mask)
+        if len(calls) < from_call:
+            return value
+        if grad_only:  # sqrt's slope at 0 is inf, times 0 is NaN: a finite loss with a NaN gradient
+            return value + 0.0 * torch.sqrt(pred.float() * 0.0).sum()
+        return value * float("nan")
+
+    monkeypatch.setattr(lf, "masked_mse", mse)
+
+
+@pytest.mark.parametrize("grad_only, says", [(False, "step 2: non-finite loss"),
+                                             (True, "step 2: non-finite gradient of a finite loss")])
+def test_a_non_finite_step_stops_the_training_before_the_update(truth_cache, monkeypatch, grad_only, says):
+    """AdamW used to apply the NaN to every weight and train on: the painter painted NaN, the table dropped those
+    views and the CLI saved the NaN weights, exit 0."""
+    _poisoned_mse(monkeypatch, from_call=2, grad_only=grad_only)  # around_weight 0: one call per step
+    cfg = FillTrainConfig(steps=4, batch=2, log_every=10 ** 6, device="cpu", net=FillNetConfig(width=8))
+    with pytest.raises(FloatingPointError, match=says):
+        train_fill(load_cache(truth_cache), cfg, log=lambda *_: None)
+
+
+def test_the_cli_names_a_diverged_training_and_saves_no_net(train_cache, truth_cache, tmp_path, monkeypatch, capsys):
+    _poisoned_mse(monkeypatch, from_call=1)
+    out = tmp_path / "run"
+    assert _train(train_cache, truth_cache, out) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == "error: training diverged: step 1: non-finite loss (nan); the weights were not updated"
+    assert not (out / "fill_net.pt").exists() and not (out / "score.md").exists()

@@ -398,3 +398,15 @@ def test_the_card_names_the_pck_fallback_reference_and_the_psnr_unit():
     md = render_markdown({"metrics": {"m": {"kind": "onnx-int8", "pck@0.2": 0.5}}})
     assert "(the diagonal of the torso joints' box where the neck or the mid-hip is hidden)" in md
     assert "masked PSNR (dB) / SSIM" in md
+
+
+def test_the_card_says_which_split_calibrated_the_int8_graphs():
+    """The card's int8 rows did not say whether the held-out scenes they are scored on also fixed their activation
+    ranges (they do not: the quantize stage calibrates on training scenes)."""
+    from training.model_card import render_markdown
+
+    md = render_markdown({"parity": {"ghnerf": {"pipeline": {}}},
+                          "calibration": {"ghnerf": {"split": "train", "scenes": 16}, "baseline": None}})
+    assert ("int8 calibration (static QDQ activation ranges): ghnerf on 16 scenes of the `train` split (evenly "
+            "spaced, `training.pipeline.calibration_items`), none of the held-out scenes scored above.") in md
+    assert "baseline on" not in md

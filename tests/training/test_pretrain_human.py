@@ -3,6 +3,7 @@ result into the joint trainer."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict
 
 import pytest
@@ -726,3 +727,30 @@ def test_the_cli_names_a_failed_checkpoint_write_or_a_divergence_in_one_line(dat
         assert main(["--out", str(tmp_path / "p"), "--set", 'preset="tiny"', "--data", str(data64)]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f"error: {kind}: {exc}"]
+
+
+def test_window_centroid_loss_of_a_prediction_with_no_mass_is_the_targets_offset_from_the_window_centre():
+    """A clamped total (1e-6) used to put an empty window's centroid at the map's corner (cell 0, 0): the
+    loss was the joint's distance from that corner (23 cells at (10.3, 20.7)), and a map of 1e-9 everywhere
+    had slopes of 2e7. With the prior mass at the window's centre both stay small wherever the joint is."""
+    from training.losses import CENTROID_PRIOR_MASS, window_centroid_loss
+
+    for cy, cx in ((10.3, 20.7), (25.0, 28.0)):
+        target = _gauss(cy, cx, sigma=1.0)[None, None]
+        # the window is centred on cell (10, 21) / (25, 28): the target's centroid is about (0.3, -0.3) / 0 off it
+        offset = math.hypot(cy - round(cy), cx - round(cx))
+        assert float(window_centroid_loss(torch.zeros_like(target), target)) == pytest.approx(offset, abs=0.05)
+        faint = torch.full_like(target, 1e-9, requires_grad=True)
+        window_centroid_loss(faint, target).backward()
+        assert float(faint.grad.abs().max()) < 10 * 3 * math.sqrt(2) / CENTROID_PRIOR_MASS
+
+
+def test_window_centroid_loss_hand_computed():
+    """Target symmetric about cell (16, 16): centroid offset 0. Prediction: mass 1 at cell (16, 17) only, so its
+    centroid is 1 / (1 + prior mass) cells to the right of the window's centre."""
+    from training.losses import CENTROID_PRIOR_MASS, window_centroid_loss
+
+    target = _gauss(16.0, 16.0, sigma=1.0)[None, None]
+    pred = torch.zeros_like(target)
+    pred[0, 0, 16, 17] = 1.0
+    assert float(window_centroid_loss(pred, target)) == pytest.approx(1.0 / (1.0 + CENTROID_PRIOR_MASS), rel=1e-6)
