@@ -286,8 +286,11 @@ class FrameCheckConfig:
             the crop is treated as noise: no joints from that camera.
         single_view_2d: when one camera's crop fails and the other's passes, still report the
             passing camera's 2D joints, from the encoder heatmaps of models that have them (one
-            view gives no depth: every 3D joint is missing, and there is no novel view). False:
-            such a pair reports nothing, as a pair with both crops rejected does.
+            view gives no depth: every 3D joint is missing, and there is no novel view). Likewise
+            (since session 53) a pair whose crops both pass but that shows nobody in 3D while exactly
+            one view's own encoder heatmaps show someone (a person seen by that camera only): that
+            camera's 2D joints (``PairResult.single_view`` names the camera). False: such pairs
+            report nothing, as a pair with both crops rejected, or an empty room, does.
     """
 
     enabled: bool = True
@@ -447,7 +450,9 @@ class PresenceConfig:
     A model trained only on people answers "someone" for an empty room too (phantom joints with
     weak peaks). A pair counts as showing a person only when at least ``min_joints`` of its 3D
     joints have confidence ``>= min_confidence``; otherwise every joint (3D and 2D) is reported
-    missing and the track is dropped.
+    missing and the track is dropped, unless exactly one view's own encoder heatmaps show someone
+    (``min_joints`` peaks at the encoder threshold): that camera's 2D joints then
+    (``FrameCheckConfig.single_view_2d``).
 
     Attributes:
         enabled: apply the gate.
@@ -526,8 +531,9 @@ class HeatmapsConfig:
             matters more. No effect on rendered heatmaps.
         flip_test_skip_below: the flip test's second run is skipped for a pair in which, without it,
             fewer than ``presence.min_joints`` joints reach this peak value in both views (the
-            geometric mean of the views' heatmap maxima; in one view on the single-view path): nobody
-            is there, and the presence gate would say so with the mirrored run too. An empty room then
+            geometric mean of the views' heatmap maxima; in one view on the single-view path), nor,
+            with ``frame_check.single_view_2d``, in either view alone (a person seen by one camera
+            only): nobody is there, and the presence gate would say so with the mirrored run too. An empty room then
             costs one encoder run, not two. Only while the presence gate is on; 0 always runs it.
             With the shipped model, 32 empty rooms (frame check off) reach <= 0.006 and 40 held-out
             pairs with a person >= 0.80 (``benchmarks/measure_presence.py --rooms 32 --flip-test``).

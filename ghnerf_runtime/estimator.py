@@ -24,7 +24,9 @@ Per pair (stage names are the keys of ``PairResult.timing_ms``):
    (:mod:`ghnerf_runtime.joints3d`; comparison in docs/runtime.md); with triangulation and a
    model folder that has one, the learnt skeleton prior then gives the whole skeleton
    (:mod:`ghnerf_runtime.skeleton_prior`, ``joints3d.skeleton_prior``); then the track is updated
-   (or dropped when too few joints were found).
+   (or dropped when too few joints were found). A pair that shows nobody in 3D but someone in one
+   view's own encoder heatmaps (a person seen by one camera only) reports that view's 2D joints
+   (``frame_check.single_view_2d``, ``PairResult.single_view``), and that camera's next crop follows them.
 7. on request, ``novel_volume`` / ``novel_render`` / ``novel_compose`` -- the novel view. On a
    tracked pair it is rendered in a worker thread during stages 5-6 (``novel_view.overlap``),
    so these stage times overlap the keypoint stages and ``total`` is less than their sum. Then, in
@@ -144,6 +146,9 @@ class PairResult:
             both views (two people in view): only the joints within ``joints3d.max_track_step_m`` of the tracked
             subject's are reported (3D and 2D), none without a track (docs/runtime.md, "Two people in the
             working volume").
+        single_view: the camera whose 2D joints alone are the pair's answer (``frame_check.single_view_2d``):
+            a person seen by that camera only, or the other camera's frame rejected. Every 3D joint is then
+            missing, and so is every 2D joint of the other camera. ``None``: a pair with 3D joints, or nobody.
     """
 
     sequence: int
@@ -164,6 +169,7 @@ class PairResult:
     prior_disagreement_m: float | None = None
     prior_fallback: bool = False
     several_people: bool = False
+    single_view: str | None = None
 
     def __post_init__(self) -> None:
         reasons = self.frame_reason
@@ -179,6 +185,10 @@ class PairResult:
             if (why is None) != bool(self.frame_ok[name]):
                 raise ValueError(f"PairResult.frame_reason[{name!r}] is {why!r} but frame_ok[{name!r}] is "
                                  f"{bool(self.frame_ok[name])}")
+        if self.single_view is not None and not self.frame_ok.get(self.single_view, False):
+            # the answer is the joints of a camera whose frame the model ran on
+            raise ValueError(f"PairResult.single_view: {self.single_view!r} is not a camera whose frame passed "
+                             f"(frame_ok {dict(self.frame_ok)})")
 
     @property
     def num_found(self) -> int:
@@ -207,6 +217,8 @@ class PairResult:
             "prior_disagreement_m": None if self.prior_disagreement_m is None else r(self.prior_disagreement_m, 4),
             "prior_fallback": bool(self.prior_fallback),
             "several_people": bool(self.several_people),  # since session 53
+            # the camera whose 2D joints alone are the answer (since session 53): null for 3D joints or nobody
+            "single_view": self.single_view,
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
 
@@ -289,6 +301,7 @@ class _Pass:
     prior_disagreement_m: float | None = None  # the skeleton prior's check (PairResult's fields of that name)
     prior_fallback: bool = False
     several_people: bool = False  # two people in view: only the tracked subject's joints kept (PairResult's)
+    single_view: str | None = None  # the camera whose 2D joints alone are the answer (PairResult.single_view)
 
     @property
     def frame_ok(self) -> dict:
@@ -422,6 +435,9 @@ class Estimator:
         # 2D joints of the good camera when the other's frame fails the check (needs encoder heatmaps)
         self._single_view_2d = self.config.frame_check.single_view_2d and bool(
             getattr(self.contract, "encoder_heatmaps", False))
+        # where the flip test's skip looks for someone: the pair, and each view alone when a person seen by one
+        # camera only is reported (its view gets the mirrored run as a rejected frame's other view does)
+        self._presence_views = ((0, 1), (0,), (1,)) if self._single_view_2d else ((0, 1),)
 
     def _upright_roll(self, camera: Camera) -> float:
         """The rotation that shows ``camera``'s crops upright (``roi.upright``; 0 when off), said in the log."""
@@ -621,7 +637,8 @@ class Estimator:
                             p.missing_2d, timing, p.regions.tracked, p.frame_ok, dict(zip(names, p.regions.rois)),
                             self.config.joints3d.method, frame_reason=dict(p.frame_reason),
                             prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback,
-                            several_people=p.several_people)
+                            several_people=p.several_people,
+                            single_view=p.single_view)
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -659,7 +676,9 @@ class Estimator:
         """Whether ``tracking.retry_cold`` runs the pair again from the working volume: a tracked pass that
         dropped the track and reported nobody. That includes a crop the frame check rejected: a subject who
         left shows the crop a flat wall, and the working volume's crop may show them (a view whose 2D joints
-        were reported, the single-view pass, is no loss: its next crop follows them)."""
+        were reported, the single-view pass, is no loss: its next crop follows them). A person seen by one
+        camera only is retried (the other camera's tracked crop may have lost them where its working volume's
+        crop shows them), from that camera's view track."""
         if not (self.config.tracking.retry_cold and p.regions.tracked and self.tracker.track is None):
             return False
         if all(p.frame_ok.values()):
@@ -736,7 +755,8 @@ class Estimator:
             # below change: it starts now, on one thread, and the flip test's run goes beside it on the other.
             job = self._start_novel(novel_view, env, regions.box)
         try:
-            if not flipped and cfg.flips_encoder_heatmaps and self._may_be_someone(env["encoder_heatmaps"], (0, 1)):
+            if not flipped and cfg.flips_encoder_heatmaps and any(self._may_be_someone(env["encoder_heatmaps"], v)
+                                                                  for v in self._presence_views):
                 env["encoder_heatmaps"] = self._flip_test(batch, env["encoder_heatmaps"], timing, env["src_P"],
                                                           beside=job is not None)
             stride, g = self.contract.heatmap_stride, self.grid
@@ -789,17 +809,21 @@ class Estimator:
         if several:  # before the presence gate: the subject's joints alone must make someone
             j3 = self._keep_tracked_subject(j3)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
+        seen_by = None  # the one view that shows someone when the pair shows nobody in 3D
         if cfg.presence.enabled:
             if self.skeleton_prior is None:
                 j3 = gate_presence(j3, cfg.presence.min_joints, cfg.presence.threshold(cfg.heatmaps.source))
                 nobody = not j3.valid.any()
             else:  # decided on the triangulation (_joints_3d); the prior's error gate may still leave no joint
                 nobody = self._prior_follow is None
-            if nobody:  # nobody: no 2D joints either
+            if nobody and several:  # two people in view: one view's joints alone would be no one's in particular
                 for name in joints_2d:
                     joints_2d[name] = np.zeros_like(joints_2d[name])
                     conf_2d[name] = np.zeros_like(conf_2d[name])
                     missing_2d[name] = np.ones_like(missing_2d[name])
+            elif nobody:
+                joints_2d, conf_2d, missing_2d, seen_by = self._seen_by_one_view(env, kp, uv_model, crops,
+                                                                                 (joints_2d, conf_2d, missing_2d))
         if several:
             # a camera's peak of a dropped joint may be the other person's: the 2D joints go with the 3D ones
             for name in joints_2d:
@@ -810,9 +834,13 @@ class Estimator:
         # encoder's peaks are both people's)
         follow = j3 if several else self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
+        if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
+            self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
+                                     conf_2d[self.camera_names[seen_by]])
         _add_ms(timing, "joints_3d", t)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
-                     *self._prior_check, several)
+                     *self._prior_check, several,
+                     None if seen_by is None else self.camera_names[seen_by])
 
     def _several_people(self, kp: Keypoints2D) -> bool:
         """Two people in view: at least ``second_person_min_joints`` joints whose maps show a second peak of at
@@ -835,6 +863,37 @@ class Estimator:
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
         near = track.valid & (step <= self.config.joints3d.max_track_step_m)
         return Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
+
+    def _seen_by_one_view(self, env: dict, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
+                          decoded: tuple[dict, dict, dict]) -> tuple[dict, dict, dict, int | None]:
+        """A pair the presence gate says shows nobody in 3D: ``(joints_2d, conf_2d, missing_2d, view)``, the
+        2D joints of the one view whose own encoder heatmaps pass the per-view presence rule
+        (:meth:`_shows_someone`, as a rejected frame's other view is judged) and that view's index: a person
+        seen by one camera only (entering at the edge of its view). Neither view, or both (their peaks do not
+        meet in 3D: no answer to trust), or ``single_view_2d`` off: every 2D joint missing and ``None``.
+        ``decoded``: the pair's 2D joints, which are the encoder heatmaps' with that heatmap source, so the
+        usual empty room costs two counts; the rendered source decodes the encoder heatmaps here."""
+        joints_2d, conf_2d, missing_2d = decoded
+        good = None
+        if self._single_view_2d and "encoder_heatmaps" in env:
+            if self.config.heatmaps.source != "encoder":  # the rendered heatmaps' peaks: the view's own are these
+                kp = decode_keypoints(np.ascontiguousarray(env["encoder_heatmaps"], dtype=np.float32),
+                                      self.config.decoder)
+                uv_model = heatmap_to_model_pixels(kp.uv, self.grid, self.size)
+                joints_2d, conf_2d, missing_2d = self._image_joints(kp, uv_model, crops)
+            seen = [i for i, name in enumerate(self.camera_names) if self._shows_someone(conf_2d[name])]
+            good = seen[0] if len(seen) == 1 else None
+        for i, name in enumerate(self.camera_names):
+            if i != good:
+                joints_2d[name], conf_2d[name] = np.zeros_like(joints_2d[name]), np.zeros_like(conf_2d[name])
+                missing_2d[name] = np.ones_like(missing_2d[name])
+        return joints_2d, conf_2d, missing_2d, good
+
+    def _shows_someone(self, conf_2d: np.ndarray) -> bool:
+        """The per-view presence rule: ``presence.min_joints`` of one view's 2D joints (``(J,)`` confidences,
+        0 where missing) at its encoder-heatmap threshold or above (6 at 0.35); always with the gate off."""
+        pres = self.config.presence
+        return not pres.enabled or int(np.count_nonzero(conf_2d >= pres.threshold("encoder"))) >= pres.min_joints
 
     def _features_may_wait(self, regions: Regions) -> bool:
         """Whether a pass with a novel view asked for may run the keypoint-only ``human`` graph, leaving out
@@ -923,14 +982,13 @@ class Estimator:
         kp = decode_keypoints(np.ascontiguousarray(heat, dtype=np.float32), cfg.decoder)
         uv_model = heatmap_to_model_pixels(kp.uv, self.grid, self.size)
         joints_2d, conf_2d, missing_2d = self._image_joints(kp, uv_model, crops, (good,))
-        strong = int(np.count_nonzero(conf_2d[name] >= cfg.presence.threshold("encoder")))
-        if cfg.presence.enabled and strong < cfg.presence.min_joints:  # nobody
+        if not self._shows_someone(conf_2d[name]):
             joints_2d[name], conf_2d[name] = np.zeros_like(joints_2d[name]), np.zeros_like(conf_2d[name])
             missing_2d[name] = np.ones_like(missing_2d[name])
         self.tracker.update_view(good, joints_2d[name], conf_2d[name])  # its next crop follows the subject
         _add_ms(timing, "decode_2d", t)
         return _Pass(regions, frame_reason, None, Joints3D.missing(len(JOINT_NAMES)), joints_2d, conf_2d,
-                     missing_2d)
+                     missing_2d, single_view=None if missing_2d[name].all() else name)
 
     def _track_joints(self, env: dict, crops: list[Camera], regions: Regions, reported: Joints3D) -> Joints3D:
         """The joints the next pair's crop follows: the reported ones, or (``tracking.follow_encoder``,

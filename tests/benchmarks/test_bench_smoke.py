@@ -220,6 +220,14 @@ def test_measure_single_view(model, capsys, monkeypatch):
     assert "empty rooms with one camera black: " in out
 
 
+def test_measure_one_camera(model, capsys, monkeypatch):
+    out = run_script("measure_one_camera", "--model-dir", model, *SIZES, "--rooms", "1",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "3 pairs of 1 held-out-like sequences" in out, out
+    assert re.search(r"^  camera 1 alone: camera 1 PCK@0.2 ", out, re.M), out
+    assert "the same rooms without anyone, both cameras: " in out and "1 empty rooms: " in out, out
+
+
 @pytest.mark.filterwarnings("ignore:Mean of empty slice", "ignore:invalid value encountered")
 def test_measure_still_pairs(model, capsys, monkeypatch):
     out = run_script("measure_still_pairs", "--model-dir", model, *SIZES, "--every", "2",

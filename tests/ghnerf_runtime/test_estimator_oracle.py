@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
-from ghnerf_runtime.config import ConfigError, EstimatorConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, \
-    PresenceConfig, TrackingConfig, config_from_dict
+from ghnerf_runtime.config import ConfigError, EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, \
+    NovelViewConfig, PresenceConfig, TrackingConfig, config_from_dict
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator
 from ghnerf_runtime.novel_view import NovelViewRequest
@@ -310,24 +310,125 @@ def test_a_pair_that_finds_nobody_renders_no_novel_view(clip):
         assert not set(NOVEL_STAGES) & set(r.timing_ms)
 
 
-def test_a_person_seen_by_one_camera_only_is_nobody_and_the_frames_say_they_were_looked_at(clip):
+def _seen_by(visible: np.ndarray, k: int) -> np.ndarray:
+    """``(2, 25)`` visibility of a person camera ``k`` sees (as in the truth) and the other camera does not."""
+    one = visible.copy()
+    one[1 - k] = False
+    return one
+
+
+@pytest.mark.parametrize("source, flip", [("encoder", True), ("encoder", False), ("rendered", False)])
+def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, source, flip):
     """Someone entering at the edge of one camera's view, outside the other's: both frames pass the check and
-    the model runs (not "not computed"), one view has no depth, so the presence gate counts no 3D joint and
-    every joint, 2D ones included, is missing ("not found"); no novel view. The other camera's 2D joints are
-    not reported: single_view_2d answers a rejected frame only (docs/runtime.md, "Known gaps")."""
+    the model runs; one view has no depth, so no 3D joint, but the camera that sees them reports its 2D joints
+    (its own encoder heatmaps pass the per-view presence rule, as a rejected frame's other view does), and
+    ``single_view`` names it. The other camera's 2D joints are zeros with ``missing_2d`` set; no novel view;
+    that camera's next crop follows its joints (the view track). Before session 53 every joint was missing.
+    The view gets the flip test's mirrored run (with the encoder source) as a two-view pair with someone does;
+    the pair's geometric mean alone (one view empty) skipped it."""
+    rig, frames, truth, visible, _, _, twod = clip
+    oracle = OracleSession(edge128_contract())
+    cfg = EstimatorConfig(novel_view=NovelViewConfig(enabled=True), heatmaps=HeatmapsConfig(source, flip_test=flip),
+                          joints3d=Joints3DConfig(method="triangulate"))
+    est = Estimator(oracle, rig, cfg)
+    names = est.camera_names
+    for k in (0, 1):
+        oracle.set_truth(truth[0], _seen_by(visible[0], k))
+        runs = oracle.run_counts["encoder"]
+        est.reset()
+        r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
+        assert oracle.run_counts["encoder"] > runs and r.frame_ok == {n: True for n in names}
+        assert r.frame_reason == {n: None for n in names}  # both frames were fine: not a rejected frame
+        assert r.single_view == names[k] and r.novel_view is None
+        assert r.missing.all() and not r.joints_3d.any() and not r.confidence.any()
+        other = names[1 - k]
+        assert r.missing_2d[other].all() and not r.joints_2d[other].any() and not r.confidence_2d[other].any()
+        found = ~r.missing_2d[names[k]]
+        assert found.sum() >= 0.9 * visible[0][k].sum() and not (found & ~visible[0][k]).any()
+        err = np.linalg.norm(r.joints_2d[names[k]][found] - twod[0][k][found], axis=-1)
+        assert err.max() < 1.5, err  # the oracle's heatmaps: exact up to the grid's decoding
+        assert ("encoder_flip" in r.timing_ms) == (source == "encoder" and flip), r.timing_ms
+        assert est.tracker.track is None and est.tracker.view_track is not None and est.tracker.view_track[0] == k
+        obj = r.to_json()
+        assert obj["single_view"] == names[k] and obj["frame_ok"] == {n: True for n in names}
+        assert all(row == [0.0, 0.0, 0.0, 0.0] for row in obj["joints_3d"]) and all(obj["missing"])
+        assert all(obj["missing_2d"][other]) and all(row == [0.0, 0.0, 0.0] for row in obj["joints_2d"][other])
+    # they walk in: both cameras see them, and the 3D joints take over (single_view null again)
+    oracle.set_truth(truth[1], visible[1])
+    r = est.estimate(frames[1])
+    assert r.num_found > 10 and r.single_view is None and r.to_json()["single_view"] is None
+    assert est.tracker.track is not None and est.tracker.view_track is None
+
+
+def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_in_the_other(clip):
+    """A 3D track, then the person seen by camera 0 only: the tracked pass finds nobody in 3D, the pair is run
+    again from the working volume in camera 1 (``tracking.retry_cold``) and camera 0's view track, and answers
+    camera 0's 2D joints; the next such pair starts from there, one pass."""
     rig, frames, truth, visible, *_ = clip
     oracle = OracleSession(edge128_contract())
-    est = Estimator(oracle, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True)))
-    for k in (0, 1):
-        one = visible[0].copy()
-        one[1 - k] = False  # camera k sees the person, the other nobody
-        oracle.set_truth(truth[0], one)
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False)))
+    oracle.set_truth(truth[0], visible[0])
+    assert est.estimate(frames[0]).num_found > 10 and est.tracker.track is not None
+    for k in (1, 2):
+        oracle.set_truth(truth[k], _seen_by(visible[k], 0))
         runs = oracle.run_counts["encoder"]
-        r = est.estimate(frames[0], novel_view=NovelViewRequest(alpha=0.5))
-        assert oracle.run_counts["encoder"] > runs and all(r.frame_ok.values())
-        assert r.missing.all() and not r.joints_3d.any() and r.novel_view is None
-        assert all(r.missing_2d[n].all() and not r.joints_2d[n].any() for n in rig.names[:2])
+        r = est.estimate(frames[k])
+        assert r.single_view == est.camera_names[0] and r.missing.all() and not r.tracked
+        assert oracle.run_counts["encoder"] - runs == (2 if k == 1 else 1)  # the tracked pass, then the retry
+        assert est.tracker.track is None and est.tracker.view_track[0] == 0
+
+
+def test_a_person_seen_by_one_camera_only_is_nobody_with_single_view_2d_off(clip):
+    """``frame_check.single_view_2d: false`` keeps the earlier answer: every joint missing, the frames said to
+    have been looked at (``frame_ok`` true), no track of any kind."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(frame_check=FrameCheckConfig(single_view_2d=False)))
+    for k in (0, 1):
+        oracle.set_truth(truth[0], _seen_by(visible[0], k))
+        r = est.estimate(frames[0])
+        assert all(r.frame_ok.values()) and r.single_view is None
+        assert r.missing.all() and all(r.missing_2d[n].all() and not r.joints_2d[n].any() for n in rig.names[:2])
         assert est.tracker.track is None and est.tracker.view_track is None
+
+
+class ApartViews(OracleSession):
+    """The oracle, but camera 1's encoder heatmaps show the person ``drop`` metres lower than camera 0's: both
+    views show someone, and their peaks meet nowhere in 3D."""
+
+    def __init__(self, drop: float):
+        super().__init__(edge128_contract())
+        self.drop = drop
+
+    def _source_heatmaps(self, src_P):
+        maps = super()._source_heatmaps(src_P)
+        truth = self.truth
+        self.truth = truth + [0.0, self.drop, 0.0]
+        try:
+            maps[1] = super()._source_heatmaps(src_P)[1]
+        finally:
+            self.truth = truth
+        return maps
+
+
+def test_an_empty_room_and_two_views_that_do_not_meet_stay_nobody(clip):
+    """The one-camera answer needs exactly one view that shows someone: an empty room (neither) reports
+    nobody, and so does a pair whose views both show someone who does not triangulate (the views' peaks are
+    0.4 m apart across the epipolar lines: whose joints would be the answer?)."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = ApartViews(0.4)
+    est = Estimator(oracle, rig)
+    oracle.set_truth(None)
+    r = est.estimate(frames[0])
+    assert all(r.frame_ok.values()) and r.single_view is None and r.missing.all()
+    assert all(r.missing_2d[n].all() for n in rig.names[:2]) and est.tracker.view_track is None
+    oracle.set_truth(truth[0], visible[0])
+    r = est.estimate(frames[0])
+    assert r.single_view is None and r.missing.all()
+    assert all(r.missing_2d[n].all() for n in rig.names[:2]) and est.tracker.view_track is None
+    oracle.drop = 0.0  # the same pair with views that agree: the person, in 3D
+    est.reset()
+    assert est.estimate(frames[0]).num_found > 10
 
 
 class RenderedOffset(OracleSession):

@@ -75,8 +75,10 @@ def test_the_json_carries_the_reason_and_keeps_the_old_keys(shot):
     r = _estimate(shot, (np.zeros_like(pair[0]), pair[1]), truth=False)
     obj = json.loads(json.dumps(r.to_json(), allow_nan=False))
     # additive: every earlier key is still there (the skeleton prior's check came in session 52, the two-people
-    # flag in 53)
-    assert set(obj) == KEYS_BEFORE | {"frame_reason", "prior_disagreement_m", "prior_fallback", "several_people"}
+    # flag and single_view in 53)
+    assert set(obj) == KEYS_BEFORE | {"frame_reason", "prior_disagreement_m", "prior_fallback", "several_people",
+                                      "single_view"}
+    assert obj["single_view"] is None  # (the oracle's heatmaps are zeros here: nobody in the good camera either)
     assert obj["frame_reason"] == {left: FLAT, right: None}  # null: the frame passed
     assert list(obj["frame_reason"]) == list(obj["frame_ok"]) == [left, right]  # rig order
     assert obj["frame_ok"] == {left: False, right: True}
@@ -100,6 +102,16 @@ def test_a_result_built_without_reasons_passes_only_when_every_frame_passed():
         _result({"a": True, "b": False}, frame_reason={"a": None})
     assert _result({"a": True, "b": False}, frame_reason={"a": None, "b": NON_FINITE}).to_json()["frame_reason"] \
         == {"a": None, "b": NON_FINITE}
+
+
+def test_single_view_names_a_camera_whose_frame_passed():
+    """``PairResult.single_view``: the camera whose 2D joints alone are the answer; the model ran on its frame."""
+    assert _result({"a": True, "b": True}).single_view is None
+    assert _result({"a": True, "b": True}, single_view="b").to_json()["single_view"] == "b"
+    with pytest.raises(ValueError, match=r"single_view: 'b' is not a camera whose frame passed"):
+        _result({"a": True, "b": False}, frame_reason={"a": None, "b": FLAT}, single_view="b")
+    with pytest.raises(ValueError, match=r"single_view: 'c' is not a camera"):
+        _result({"a": True, "b": True}, single_view="c")
 
 
 def test_the_reasons_are_the_words_the_check_returns():

@@ -1,0 +1,131 @@
+"""2D joints of a person seen by one camera only (``frame_check.single_view_2d``, since session 53).
+
+    .venv/bin/python benchmarks/measure_one_camera.py [--model-dir models] [--sequences 8] [--frames 10]
+                                                      [--rooms 32]
+
+Someone entering at the edge of one camera's view, outside the other's: both frames pass the frame check,
+the pair has no 3D joints, and the camera that sees them reports its 2D joints (``PairResult.single_view``).
+Made from the held-out-like bench sequences (``ghnerf-bench runtime``'s): each pair is run as it is, and
+with one camera's frame replaced in turn by the same room, at the same instant, without the person (the
+sequence's scene, its person moved 40 m to the side). It prints, for the camera that sees them, PCK@0.2
+and the share of pairs whose answer is that camera's (``single_view``), beside the same camera's PCK in the
+normal pair; each run keeps its own estimator. Then the false alarms: the pairs of those rooms with nobody
+in either camera, and ``--rooms`` empty simulated rooms (``measure_presence.py``'s), each room cold: how
+many report anyone, how many ran the flip test's mirrored run (each view alone is asked whether someone may
+be there), and each view's 6th-strongest heatmap peak before it (the per-view presence rule asks for 6 at
+>= 0.35; the mirrored run's skip, 0.1). The frame check is off throughout: many simulated rooms are plain
+walls, which it rejects (the rejected frame's path, ``measure_single_view.py``), where a real room passes it.
+A tool, not a test.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.cli.simdata import HELD_OUT_MOTIONS, load_sequences  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.flip_test import presence_peak  # noqa: E402
+from ghnerf_runtime.metrics import pck  # noqa: E402
+
+
+class _ViewPeaks(Estimator):
+    """The estimator, noting each view's :func:`presence_peak` of the pair's heatmaps before the flip test's run
+    (only where the pass reaches it: the pair's views may show someone)."""
+
+    peaks: list = []
+
+    def _may_be_someone(self, heat, views):
+        if len(views) == 1:
+            self.peaks.append(presence_peak(heat, views, self.config.presence.min_joints))
+        return super()._may_be_someone(heat, views)
+
+
+def empty_counterpart(seq) -> list:
+    """Per pair of ``seq``, its two frames of the same room without the person (``None`` where the sequence
+    does not say its scene)."""
+    import drivers.sim as sim  # a tool: the runtime library never imports drivers
+
+    scene = sim.random_scene(int(seq.info["scene_seed"]), volume=seq.rig.volume, motions=HELD_OUT_MOTIONS)
+    gone = sim.SimScene(replace(scene.config, position_xz=(40.0, scene.config.position_xz[1])))
+    t0, fps = float(seq.info["t0"]), float(seq.info["fps"])
+    return [[gone.render(c, t0 + i / fps, with_truth=False)[0] for c in seq.rig.pair] for i in range(len(seq))]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--precision", default="int8")
+    ap.add_argument("--sequences", type=int, default=8)
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--rooms", type=int, default=32, help="empty rooms (scene seeds 1..N), the frame check off")
+    args = ap.parse_args(argv)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir, precision=args.precision),
+                          frame_check=FrameCheckConfig(enabled=False))
+    session = load_session(cfg)
+    runs = {"both": None, "camera 0 alone": 0, "camera 1 alone": 1}  # run -> the camera that sees them
+    scored = {name: {c: ([], [], [], []) for c in (0, 1)} for name in runs}  # pred, true, visible, found
+    answered = {name: 0 for name in runs}  # pairs whose answer is the seeing camera's (single_view)
+    pairs = alarms = empty_pairs = 0
+    for seq in load_sequences(args.sequences, args.frames):
+        rooms = empty_counterpart(seq)
+        ests = {name: Estimator(session, seq.rig, cfg) for name in runs}
+        nobody = Estimator(session, seq.rig, cfg)
+        names = nobody.camera_names
+        for i in range(len(seq)):
+            pairs += 1
+            for name, seen in runs.items():
+                images = [np.array(seq.images[i, 0]), np.array(seq.images[i, 1])]
+                if seen is not None:
+                    images[1 - seen] = rooms[i][1 - seen]
+                r = ests[name].estimate(images, sequence=i)
+                if seen is not None and not r.missing.all():
+                    raise SystemExit(f"{name}, pair {i}: 3D joints were found where one camera sees nobody")
+                answered[name] += r.single_view == (None if seen is None else names[seen])
+                for c in ((0, 1) if seen is None else (seen,)):
+                    for lst, value in zip(scored[name][c], (r.joints_2d[names[c]], seq.joints_2d[i, c],
+                                                            seq.visible[i, c], ~r.missing_2d[names[c]])):
+                        lst.append(value)
+            r = nobody.estimate(rooms[i], sequence=i)
+            empty_pairs += 1
+            alarms += int(r.single_view is not None or not all(m.all() for m in r.missing_2d.values()))
+        for est in (*ests.values(), nobody):
+            est.close()
+    print(f"{pairs} pairs of {args.sequences} held-out-like sequences, {args.precision}, the frame check off, the "
+          f"other camera showing the room without the person:")
+    for name, seen in runs.items():
+        for c in ((0, 1) if seen is None else (seen,)):
+            p, t, v, f = (np.array(a) for a in scored[name][c])
+            print(f"  {name:>14}: camera {c} PCK@0.2 {pck(p, t, v, pred_valid=f).value:.3f}, visible joints found "
+                  f"{float(f[v].mean()):.3f}")
+        what = "3D joints (single_view null)" if seen is None else f"camera {seen}'s 2D joints (single_view)"
+        print(f"  {name:>14}: {answered[name]} of {pairs} pairs answered with {what}")
+    print(f"the same rooms without anyone, both cameras: {alarms} of {empty_pairs} pairs report a person")
+
+    import drivers.sim as sim
+
+    rig = sim.RigPlacement().build()
+    est = _ViewPeaks(session, rig, cfg)
+    _ViewPeaks.peaks = []
+    alarms = flips = 0
+    for seed in range(1, args.rooms + 1):
+        room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))  # nobody in view
+        est.reset()
+        r = est.estimate([room.render(c, 0.2, with_truth=False)[0] for c in rig.pair])
+        alarms += int(r.single_view is not None or not all(m.all() for m in r.missing_2d.values()))
+        flips += "encoder_flip" in r.timing_ms
+    est.close()
+    peak = max(_ViewPeaks.peaks) if _ViewPeaks.peaks else 0.0
+    print(f"{args.rooms} empty rooms: {alarms} report a person, {flips} ran the mirrored run; "
+          f"each view's 6th-strongest peak before it <= {peak:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
