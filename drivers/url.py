@@ -36,10 +36,7 @@ def redact_url(text: str) -> str:
         return text
     head, sep, rest = text.partition("://")
     netloc = re.match(r"[^/?#]*", rest).group()  # as urlsplit takes it, without its ValueErrors (a broken host)
-    userinfo, at, host = netloc.rpartition("@")
-    if at and ":" in userinfo:
-        user = userinfo.split(":", 1)[0]
-        rest = f"{user}:{REDACTED}@{host}" + rest[len(netloc):]
+    rest = redact_location(netloc) + rest[len(netloc):]
     before, question, query = rest.partition("?")
     if not question:
         return head + sep + rest
@@ -48,12 +45,29 @@ def redact_url(text: str) -> str:
     for piece in query.split("&"):
         key, eq, value = piece.partition("=")
         plain = unquote(value)
-        if eq and _SECRET_KEY.fullmatch(unquote(key).lower()):
+        if eq and is_secret_key(unquote(key)):
             value = REDACTED
         elif "://" in plain and redact_url(plain) != plain:
             value = quote(redact_url(plain), safe="*")
         pieces.append(key + eq + value)
     return head + sep + before + question + "&".join(pieces) + hash_ + fragment
+
+
+def redact_location(netloc: str) -> str:
+    """A URL's location (``user:password@host:port``) as it may be shown: the password replaced by ``***``,
+    the user and host kept; a location without a password comes back unchanged. :func:`redact_url` shows a
+    whole URL's location through it; a message that names only the location (a sink's refused host or
+    user info) calls it directly."""
+    userinfo, at, host = netloc.rpartition("@")
+    if not (at and ":" in userinfo):
+        return netloc
+    return f"{userinfo.split(':', 1)[0]}:{REDACTED}@{host}"
+
+
+def is_secret_key(key: str) -> bool:
+    """Whether an option named ``key`` holds a secret (``password``, ``token``, ``api_key``...): its value is
+    shown as ``***`` (:func:`redact_url`, and a sink's message naming the option)."""
+    return isinstance(key, str) and _SECRET_KEY.fullmatch(key.lower()) is not None
 
 
 def whole_number(raw: str) -> int:

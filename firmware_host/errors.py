@@ -5,6 +5,8 @@ with ``raise ... from e`` so callers only need to catch these.
 """
 from __future__ import annotations
 
+from drivers.url import REDACTED, is_secret_key, redact_location, redact_url
+
 
 class FirmwareHostError(Exception):
     """Base class of every error raised by firmware_host."""
@@ -14,30 +16,48 @@ class SinkError(FirmwareHostError):
     """A joint-stream output failed."""
 
 
+def _shown_value(field: str, value: object) -> object:
+    """A refused sink field's ``value`` as a message shows it: a secret option's as ``***``, a URL or a location
+    (``user:password@host``, the user info before the ``@``) without its password; anything else as it is."""
+    if is_secret_key(field):
+        return REDACTED
+    if not isinstance(value, str):
+        return value
+    if "://" in value:
+        return redact_url(value)
+    if field == "user info":  # what came before the '@': user[:password]
+        return redact_location(value + "@")[:-1]
+    return redact_location(value)
+
+
 class SinkConfigError(SinkError, ValueError):
-    """A sink URL or keyword is invalid; the message names the URL, field and value."""
+    """A sink URL or keyword is invalid; the message names the URL, field and value, without the passwords the
+    URL may carry (``drivers.url.redact_url``: messages reach logs and the journal). ``url`` and ``value`` keep
+    what was given."""
 
     def __init__(self, url: str, field: str, value: object, reason: str) -> None:
         self.url = url
         self.field = field
         self.value = value
-        super().__init__(f"{url}: invalid {field}={value!r}: {reason}")
+        super().__init__(f"{redact_url(url)}: invalid {field}={_shown_value(field, value)!r}: {reason}")
 
 
 class SinkUnavailableError(SinkError):
-    """The link is absent or went away (unplugged, refused); the sink retries with backoff."""
+    """The link is absent or went away (unplugged, refused); the sink retries with backoff. The message names the
+    URL without its passwords; ``url`` keeps it as given."""
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
-        super().__init__(f"{url}: unavailable: {reason}")
+        super().__init__(f"{redact_url(url)}: unavailable: {reason}")
 
 
 class SinkWriteError(SinkError):
-    """One write failed but the link is still up (endpoint stall, timeout): the frame is dropped."""
+    """One write failed but the link is still up (endpoint stall, timeout): the frame is dropped. The message names
+    the URL without its passwords; ``url`` keeps it as given."""
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
-        super().__init__(f"{url}: write failed: {reason}")
+        super().__init__(f"{redact_url(url)}: write failed: {reason}")
 
 
 class SinkClosedError(SinkError):

@@ -33,7 +33,7 @@ from ghnerf_runtime.body25 import NUM_JOINTS
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_depth
 from ghnerf_runtime.errors import ModelContractError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.geometry.surface import surface_normals
+from ghnerf_runtime.geometry.surface import surface_mask, surface_normals
 from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 from ghnerf_runtime.proxy_blend import unit_rgb
 
@@ -136,7 +136,7 @@ def painter_planes(shown_rgb: np.ndarray, camera: Camera, depth: np.ndarray, sou
     joints, valid = np.asarray(joints, np.float64), np.asarray(valid, bool)
     if joints.shape != (NUM_JOINTS, 3) or valid.shape != (NUM_JOINTS,):
         raise ShapeError(f"joints must be ({NUM_JOINTS}, 3) with ({NUM_JOINTS},) valid, got {joints.shape}, {valid.shape}")
-    mask = depth > 0
+    mask = surface_mask(depth)  # a NaN depth is no surface: off, as the training caches make it
     # Every pixel unprojected at its depth (off the proxy: the camera centre, as the caches do); a NaN or
     # infinite depth has no position (NaN: no source colour, no normal), as the caches' unproject gives it.
     v, u = np.mgrid[0:H, 0:W].astype(np.float64)

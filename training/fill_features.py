@@ -22,8 +22,9 @@ Per novel view with a non-empty subject mask (numpy, one array per field, views 
   runtime shows it (``novel_view.opaque_colour``; with the true geometry, ``relit``); ``relit``, the
   blend (with a model: ``shown``) with its unseen pixels repainted by ``unseen_fill.relit_fill``;
   and the view over black (the target, ``ghnerf-eval``'s);
-* ``flags`` ``(H, W)`` uint8: bit 0 the geometry's subject mask, bit 1 some source sees the pixel,
-  bit 2 the true subject mask (the score's; the same as bit 0 with the true geometry);
+* ``flags`` ``(H, W)`` uint8: bit 0 the geometry's subject mask less its pixels without a depth (a NaN
+  depth is no surface: ``ghnerf_runtime.geometry.surface.surface_mask``, as on the device), bit 1 some
+  source sees the pixel, bit 2 the true subject mask (the score's; the same as bit 0 with the true geometry);
 * ``normals`` ``(H, W, 3)`` int8: camera-frame unit normals times 127 (zero off the subject, and where the
   depth is not finite: no surface there, its neighbours' normals taken from their own side, as on the device);
 * ``depth`` ``(H, W)`` float16: camera z minus its median over the subject's finite depths, metres (zero off
@@ -59,6 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ghnerf_runtime.geometry.surface import surface_mask
 from ghnerf_runtime.novel_painter import depth_about_median, float16_depth
 from training.blend_ceiling import blend_sources, project
 from training.model_card import sha256, write_atomic
@@ -113,8 +115,8 @@ def view_features(scene: Mapping[str, np.ndarray], view: int, lighting: Lighting
     subject = np.asarray(truth["tgt_masks"][view], bool)
     if not subject.any():
         return None
-    mask = np.asarray(scene["tgt_masks"][view], bool)
     depth = np.asarray(scene["tgt_depth"][view], np.float64)
+    mask = surface_mask(depth, scene["tgt_masks"][view])  # a NaN depth is no surface: off, as on the device
     K_inv, c2w = scene["tgt_K_inv"][view], np.asarray(scene["tgt_c2w"][view], np.float64)
     blend, seen = blend_sources(scene, view, depth)
     picture = blend if shown is None else shown

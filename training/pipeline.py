@@ -2,7 +2,8 @@
 
 Stages (each skipped when its outputs exist and its stamp's inputs still match; ``--force STAGE`` redoes one):
 
-1. ``data``: the synthetic dataset (``training.data.generate``); reused when ``dataset.json`` matches.
+1. ``data``: the synthetic dataset (``training.data.generate``); reused when ``dataset.json`` matches (each split
+   of exactly the requested count: :func:`dataset_matches`).
 2. ``pretrain_ghnerf``: when the variant's train config has a ``pretrain_human`` block, the human encoder is
    first pretrained on 2D heatmaps alone (``training.pretrain_human``, into ``runs/<preset>_human``) and the
    joint training starts from it (``human_init``).
@@ -541,8 +542,13 @@ def _sh(cmd: list[str], log_path: Path | None = None) -> None:
 
 # ------------------------------------------------------------------------------------------ stages
 def dataset_matches(cfg: PipelineConfig) -> bool:
-    """``dataset.json`` has the resolution, the generator settings ``stage_data`` asks for, and at least the
-    requested, complete splits."""
+    """``dataset.json`` has the resolution, the generator settings ``stage_data`` asks for, and the requested,
+    complete splits, each of exactly the requested count.
+
+    Not "at least": the trainer, the pretraining, the calibration and the evaluation read every scene of a split
+    that ``dataset.json`` counts, so a folder generated with more would be trained on with more than the stamp
+    and the model card say. ``stage_data`` then asks ``generate`` for the requested count, which shrinks the
+    manifest's count without rendering or deleting anything (the shards past it stay for a later larger count)."""
     from training.data.cache import ShardedSplit
     from training.data.splits import split_spec
 
@@ -568,7 +574,7 @@ def dataset_matches(cfg: PipelineConfig) -> bool:
     want = {"train": cfg.train, "val": cfg.val, "val_seen_motions": cfg.val_seen_motions}
     splits = d.get("splits", {})
     for name, n in want.items():
-        if n and splits.get(name, {}).get("count", 0) < n:
+        if n and splits.get(name, {}).get("count", 0) != n:  # more is refused too: readers read every scene
             return False
         if n and splits[name].get("spec") != split_spec(name, cfg.freestyle_share).to_json():
             return False  # made by another recipe; generate names the difference

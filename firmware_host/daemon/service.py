@@ -70,6 +70,7 @@ from firmware_host.daemon.sandbox import rig_url_hint, service_hint
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame
 from firmware_host.protocol.constants import Fault, Flags
+from firmware_host.service_unit import read_only_hint
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.registry import sink_class
 from firmware_host.sinks.url import parse_url
@@ -718,10 +719,7 @@ class Daemon:
                 self._status_file_failing = False
             except (OSError, ValueError) as e:
                 if not self._status_file_failing:  # once until it works again, not every tick
-                    hint = service_hint(path, written=True) or (
-                        " (the ghnerf unit writes only under /run/ghnerf and /var/lib/ghnerf: add the folder "
-                        "with ReadWritePaths= in systemctl edit ghnerf)"
-                        if isinstance(e, OSError) and e.errno in (errno.EROFS, errno.EACCES) else "")
+                    hint = service_hint(path, written=True) or read_only_hint(e)  # worded as the file sink's
                     _log.warning("cannot write the status file %s: %s%s", path, e, hint)
                 self._status_file_failing = True
 

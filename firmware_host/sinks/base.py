@@ -26,6 +26,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Optional
 
+from drivers.url import redact_url
 from firmware_host.errors import SinkClosedError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import Flags
 from firmware_host.protocol.messages import JointFrame
@@ -72,6 +73,8 @@ class Sink(ABC):
 
     def __init__(self, url: str, options: SinkOptions) -> None:
         self.url = url
+        #: How logs, the thread name and repr show the URL: without its passwords (they reach the journal).
+        self.shown = redact_url(url)
         self.options = options
         self._cond = threading.Condition()
         self._stop = threading.Event()
@@ -145,9 +148,9 @@ class Sink(ABC):
             _log.warning(
                 "%s: %.1f fps requested but this link carries at most %.1f joint frames/s; "
                 "decimating to fit (gaps are flagged DECIMATED and counted)",
-                self.url, self.options.fps, cap,
+                self.shown, self.options.fps, cap,
             )
-        self._thread = threading.Thread(target=self._run, name=f"sink {self.url}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"sink {self.shown}", daemon=True)
         self._thread.start()
         return self
 
@@ -159,7 +162,7 @@ class Sink(ABC):
         warn_fps: Optional[float] = None
         with self._cond:
             if self._closed:
-                raise SinkClosedError(f"{self.url}: send() after close()")
+                raise SinkClosedError(f"{self.shown}: send() after close()")
             self._submitted += 1
             limiter = self._limiter
             if limiter is not None and not limiter.admit(frame.capture_time_us):
@@ -180,7 +183,7 @@ class Sink(ABC):
                 self._queue.append(item)
                 self._cond.notify_all()
         if warn_fps is not None:  # logged outside the lock: handlers may be slow
-            _log.warning("%s: frames arrive faster than %.1f fps; decimating", self.url, warn_fps)
+            _log.warning("%s: frames arrive faster than %.1f fps; decimating", self.shown, warn_fps)
 
     def stats(self) -> SinkStats:
         with self._cond:
@@ -262,7 +265,7 @@ class Sink(ABC):
         self.close()
 
     def __repr__(self) -> str:
-        return f"<{type(self).__name__} {self.url}>"
+        return f"<{type(self).__name__} {self.shown}>"
 
     # ---- worker ------------------------------------------------------------------
 
@@ -299,7 +302,7 @@ class Sink(ABC):
                 self._last_error = write_error
             self._cond.notify_all()
         if was_down:
-            _log.info("%s: connected again", self.url)
+            _log.info("%s: connected again", self.shown)
         backoff.reset()
 
     def _connect_failed(self, e: Exception, retry_s: float) -> None:
@@ -314,13 +317,13 @@ class Sink(ABC):
             self._last_error = error
             self._cond.notify_all()
         if repeat:
-            _log.debug("%s: %s; retrying", self.url, error)
+            _log.debug("%s: %s; retrying", self.shown, error)
         elif expected:
             _log.warning("%s; retrying at least every %g s (repeats of this error logged at DEBUG)",
                          error, retry_s)
         else:  # a backend bug: its traceback once, not on every retry
             _log.error("%s: connect failed unexpectedly; retrying at least every %g s (repeats of this error "
-                       "logged at DEBUG)", self.url, retry_s, exc_info=e)
+                       "logged at DEBUG)", self.shown, retry_s, exc_info=e)
 
     def _next_frame(self) -> Optional[tuple[JointFrame, int]]:
         """The next queued frame; None when closed with nothing queued, or when the idle timeout passed."""
@@ -341,14 +344,14 @@ class Sink(ABC):
             with self._cond:
                 self._last_error = str(e)
         except SinkUnavailableError as e:
-            _log.warning("%s: link lost (%s); reconnecting", self.url, e)
+            _log.warning("%s: link lost (%s); reconnecting", self.shown, e)
             self._release()
             with self._cond:
                 self._disconnects += 1
                 self._last_error = str(e)
                 self._down = True
         except Exception as e:  # a bug in a backend must not kill the worker silently
-            _log.exception("%s: idle hook failed", self.url)
+            _log.exception("%s: idle hook failed", self.shown)
             with self._cond:
                 self._last_error = f"{type(e).__name__}: {e}"
 
@@ -373,14 +376,14 @@ class Sink(ABC):
                 error = str(e)
             except SinkUnavailableError as e:
                 error = str(e)
-                _log.warning("%s: link lost (%s); reconnecting", self.url, e)
+                _log.warning("%s: link lost (%s); reconnecting", self.shown, e)
                 self._release()
                 with self._cond:
                     self._disconnects += 1
                     self._down = True
             except Exception as e:  # a bug in a backend must not kill the worker silently
                 error = f"{type(e).__name__}: {e}"
-                _log.exception("%s: frame %d could not be delivered", self.url, frame.sequence)
+                _log.exception("%s: frame %d could not be delivered", self.shown, frame.sequence)
             with self._cond:
                 if error is None:
                     self._sent += 1

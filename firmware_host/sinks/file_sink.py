@@ -23,18 +23,10 @@ from urllib.parse import unquote
 
 from firmware_host.errors import SinkConfigError, SinkUnavailableError
 from firmware_host.protocol.messages import Message
+from firmware_host.service_unit import read_only_hint  # the sandbox's EROFS: what to do
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
 from firmware_host.sinks.protocol_sink import ProtocolSink
 from firmware_host.sinks.url import SinkUrl, parse_url
-
-
-def _read_only_hint(e: OSError) -> str:
-    """Where the ghnerf unit's sandbox (ProtectSystem=strict) refused a path outside its own folders: what to do.
-    --validate-config runs outside the sandbox and cannot see it, so this line in the journal is the only clue."""
-    if e.errno != errno.EROFS:
-        return ""
-    return (" (read-only: the ghnerf service writes only under /run/ghnerf and /var/lib/ghnerf; add the folder "
-            "with ReadWritePaths= in systemctl edit ghnerf)")
 
 
 def _no_reader_hint(e: OSError) -> str:
@@ -78,7 +70,7 @@ class FileSink(ProtocolSink):
             self._end_cut_line()
         except OSError as e:
             self._disconnect()
-            raise SinkUnavailableError(self.url, f"cannot open {self.path}: {e}{_read_only_hint(e)}"
+            raise SinkUnavailableError(self.url, f"cannot open {self.path}: {e}{read_only_hint(e)}"
                                                  f"{_no_reader_hint(e)}") from e
 
     def _end_cut_line(self) -> None:

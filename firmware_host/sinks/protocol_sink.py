@@ -162,7 +162,7 @@ class ProtocolSink(Sink):
             if key not in self._unannounced_warned:
                 self._unannounced_warned.add(key)
                 _log.warning("%s: 2D joints of camera %r not sent: not among the announced cameras %s",
-                             self.url, key, list(cameras))
+                             self.shown, key, list(cameras))
         return replace(frame, joints_2d={k: v for k, v in frame.joints_2d.items() if k not in unknown})
 
     # ---- messages ------------------------------------------------------------------

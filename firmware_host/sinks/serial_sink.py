@@ -103,7 +103,7 @@ class SerialSink(ProtocolSink):
             try:
                 if not _drain_then_discard(ser, CLOSE_DRAIN_S):
                     _log.info("%s: discarded what the port had not sent within %.2f s of closing "
-                              "(the receiver is not reading)", self.url, CLOSE_DRAIN_S)
+                              "(the receiver is not reading)", self.shown, CLOSE_DRAIN_S)
             finally:
                 try:
                     ser.close()

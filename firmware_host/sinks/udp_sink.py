@@ -23,6 +23,7 @@ import threading
 import time
 from typing import Any, Optional
 
+from drivers.url import redact_url
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import MsgType
@@ -70,6 +71,7 @@ class DatagramLink:
 
     def __init__(self, url: str, host: str, port: int, resolve_s: float = RESOLVE_S) -> None:
         self.url, self.host, self.port = url, host, port
+        self.shown = redact_url(url)  # as logs show it: without a password
         self.resolve_s = resolve_s
         self._sock: Optional[socket.socket] = None
         self._family = 0
@@ -121,7 +123,7 @@ class DatagramLink:
                 self._looking_up, self._resolved_at = True, now
             generation = self._generation
         if fresh is not None and fresh[1] != self._addr:
-            _log.info("%s: %s now resolves to %s (was %s)", self.url, self.host, fresh[1][0], self._addr[0])
+            _log.info("%s: %s now resolves to %s (was %s)", self.shown, self.host, fresh[1][0], self._addr[0])
             self._use(*fresh)
         if due:
             # the thread gets what it needs as arguments: it never reads the worker's _addr

@@ -151,7 +151,7 @@ class UsbSink(ProtocolSink):
             # which one is first is libusb's order and may change on a replug: frames could go to the other board
             self._warned_several = True
             _log.warning("%s: %d devices %s found (%s); using the first, bus %s address %s; choose one with "
-                         "?port=BUS-PORT (as listed) or ?serial=", self.url, len(found), ids,
+                         "?port=BUS-PORT (as listed) or ?serial=", self.shown, len(found), ids,
                          ", ".join(describe(d) for d in found), dev.bus, dev.address)
         return dev
 
@@ -194,7 +194,7 @@ class UsbSink(ProtocolSink):
         try:
             dev.attach_kernel_driver(self.interface)
         except (usb.core.USBError, NotImplementedError) as e:  # gone, or the driver was unloaded meanwhile
-            _log.debug("%s: kernel driver of interface %d not attached again: %s", self.url, self.interface, e)
+            _log.debug("%s: kernel driver of interface %d not attached again: %s", self.shown, self.interface, e)
 
     def _write_bytes(self, data: bytes) -> None:
         if self._dev is None:

@@ -7,7 +7,33 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["masked_difference", "surface_normals"]
+from ghnerf_runtime.errors import ShapeError
+
+__all__ = ["masked_difference", "surface_mask", "surface_normals"]
+
+
+def surface_mask(depth: np.ndarray, subject: np.ndarray | None = None) -> np.ndarray:
+    """``(H, W)`` bool: where a depth map shows a surface, the learnt painter's subject mask: inside
+    ``subject`` (the geometry's silhouette; default every pixel) with a positive depth.
+
+    A NaN depth (nothing known there) is no surface, so off the mask; +inf is on (a wild surface far
+    off: the painter's depth plane holds it at float16's largest, :func:`surface_normals` gives it no
+    normal). The one rule the device's painter (``novel_painter.painter_planes``) and the training
+    caches (``training.fill_features``) both call: the device's ``depth > 0`` left a NaN pixel off,
+    while the caches took the geometry's mask as it was and kept it on, so the network trained on a
+    mask plane the device never builds there.
+
+    Raises:
+        ShapeError: ``subject`` is not ``depth``'s shape.
+    """
+    depth = np.asarray(depth, np.float64)
+    on = depth > 0  # NaN compares false: off
+    if subject is None:
+        return on
+    subject = np.asarray(subject, bool)
+    if subject.shape != depth.shape:
+        raise ShapeError(f"subject mask {subject.shape} must be the depth map's shape {depth.shape}")
+    return subject & on
 
 
 def masked_difference(points: np.ndarray, mask: np.ndarray, axis: int) -> np.ndarray:

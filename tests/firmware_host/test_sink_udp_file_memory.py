@@ -138,6 +138,7 @@ def test_file_sink_on_a_read_only_path_says_how_the_service_may_write_there(tmp_
     --validate-config (outside the sandbox) cannot see: docs/daemon.md promises the failed write names the fix,
     but the sink said only "Read-only file system", as for a read-only medium."""
     import firmware_host.sinks.file_sink as file_sink
+    from firmware_host.service_unit import read_only_hint
     path = tmp_path / "joints.jsonl"
 
     def read_only(name: Any, *args: Any, **kwargs: Any) -> Any:
@@ -153,6 +154,7 @@ def test_file_sink_on_a_read_only_path_says_how_the_service_may_write_there(tmp_
     finally:
         sink.close()
     assert f"cannot open {path}" in error and "Read-only file system" in error
+    assert error.endswith(read_only_hint(OSError(errno.EROFS, "")))  # worded as the status file's (service_unit)
     assert "ReadWritePaths= in systemctl edit ghnerf" in error
     monkeypatch.undo()
     blocked = tmp_path / "not-a-folder"

@@ -364,3 +364,16 @@ def test_the_depth_plane_is_about_the_median_of_the_subject_s_finite_depths(shot
     assert not depth_about_median(np.full((2, 2), np.nan), np.ones((2, 2), bool)).any()  # nothing to measure from
     with pytest.raises(ShapeError, match=r"depth \(2, 2\) and subject mask \(2, 3\)"):
         depth_about_median(np.zeros((2, 2)), np.zeros((2, 3), bool))
+
+
+def test_the_painter_mask_is_where_the_depth_shows_a_surface():
+    """The one rule the device's painter_planes and the training caches (training.fill_features) call: inside the
+    geometry's silhouette with a positive depth; a NaN depth is no surface (off), +inf a wild one (on)."""
+    from ghnerf_runtime.geometry.surface import surface_mask
+
+    depth = np.array([[1.0, np.nan, np.inf], [0.0, -2.0, 3.0]])
+    assert surface_mask(depth).tolist() == [[True, False, True], [False, False, True]]
+    subject = np.array([[True, True, True], [True, True, False]])
+    assert surface_mask(depth, subject).tolist() == [[True, False, True], [False, False, False]]
+    with pytest.raises(ShapeError, match=r"subject mask \(2, 2\) must be the depth map's shape \(2, 3\)"):
+        surface_mask(depth, np.ones((2, 2), bool))

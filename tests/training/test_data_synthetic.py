@@ -112,6 +112,27 @@ def test_a_cache_of_another_generator_version_is_refused_and_an_unversioned_one_
     assert json.loads((root / MANIFEST).read_text())["splits"]["train"]["count"] == 2
 
 
+def test_the_pipeline_trains_on_the_requested_count_not_on_a_larger_dataset(tmp_path):
+    """Review 52: dataset_matches took a split generated larger than asked (count >= requested), and the trainer
+    reads every scene dataset.json counts: a pipeline asked for 2 scenes trained on 3, its stamp and card saying 2.
+    A larger split is not a match now; the data stage's generate call shrinks the manifest's count to the request
+    without rendering, and the split then serves exactly the requested scenes."""
+    import training.pipeline as pipeline
+
+    root = tmp_path / "data"
+    config = SyntheticConfig(resolution=RES)  # what the pipeline's data stage asks generate for
+    generate(root, {"train": 3}, config, workers=1, shard_size=2)
+    cfg = pipeline.PipelineConfig(out=tmp_path / "m", data=root, train=2, val=0, val_seen_motions=0, res=RES,
+                                  freestyle_share=0.0)
+    assert len(ShardedSplit(root, "train")) == 3
+    assert not pipeline.dataset_matches(cfg)
+    report = generate(root, {"train": 2}, config, workers=1, shard_size=2)  # as stage_data asks it
+    assert report.samples_rendered == 0  # the first two scenes were there: nothing rendered
+    assert pipeline.dataset_matches(cfg) and len(ShardedSplit(root, "train")) == 2
+    assert (root / "train" / "shard_000001").is_dir()  # the third scene's shard kept for a later larger count
+    assert not pipeline.dataset_matches(replace(cfg, train=3))  # fewer than asked: still generate's to extend
+
+
 @pytest.mark.parametrize("made_with", [
     {"config": {"cold_start_fraction": 0.5}},
     {"config": {"novel_views": 1}},

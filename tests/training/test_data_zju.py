@@ -475,3 +475,78 @@ def test_a_missing_mask_falls_back_to_the_other_mask_folder_on_request(tmp_path,
     assert err.value.path == str(root / "mask" / "Camera_B2" / "000001.png")
     with pytest.raises(DataConfigError, match="ZjuConfig.mask_fallback"):
         ZjuConfig(mask_fallback="yes")
+
+
+# ------------------------------------------------------------------ the command line
+def test_the_convert_command_converts_a_subject_into_a_split(tmp_path, subject, caplog):
+    """Review 52: ZJU-MoCap had no command, only convert_zju to call from Python."""
+    import logging
+
+    from training.data.convert_zju import main
+
+    out = tmp_path / "ds"
+    with caplog.at_level(logging.INFO):
+        assert main([str(subject[0]), "--out", str(out), "--split", "train_sim", "--res", str(RES),
+                     "--view-set", "0,1,2", "--view-set", "2,3,0", "--frames", "0:-1:1", "--shard-size", "3"]) == 0
+    split = ShardedSplit(out, "train_sim")
+    assert [m["cameras"] for m in split.all_metadata()] == [[0, 1, 2], [2, 3, 0]] * 2
+    assert split.resolution == RES
+    entry = json.loads((out / "dataset.json").read_text())["splits"]["train_sim"]
+    assert entry["source_config"]["zju"]["view_sets"] == [[0, 1, 2], [2, 3, 0]] and entry["shard_size"] == 3
+    assert "4 samples converted into split 'train_sim'" in caplog.text
+    assert main([str(subject[0]), "--out", str(out), "--split", "one", "--res", str(RES), "--view-set", "1,2,3",
+                 "--frames", "1"]) == 0  # from frame 1 on, into the same dataset (of 3 views)
+    assert [(m["frame"], m["cameras"]) for m in ShardedSplit(out, "one").all_metadata()] == [(1, [1, 2, 3])]
+    assert len(ShardedSplit(out, "train_sim")) == 4  # the other split stays
+
+
+def test_the_convert_command_has_help(capsys):
+    from training.data.convert_zju import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    assert done.value.code == 0
+    said = capsys.readouterr().out
+    assert "python -m training.data.convert_zju" in said and "--view-set" in said and "annots.npy" in said
+    with pytest.raises(SystemExit) as bad:
+        main(["somewhere", "--out", "ds", "--view-set", "0,x"])
+    assert bad.value.code == 2 and "camera indices separated by commas" in capsys.readouterr().err
+
+
+def _convert_fails(caplog, *argv) -> str:
+    import logging
+
+    from training.data.convert_zju import main
+
+    caplog.clear()
+    with caplog.at_level(logging.ERROR):
+        assert main([str(a) for a in argv]) == 2
+    return caplog.text
+
+
+def test_the_convert_command_names_a_missing_file_or_folder(tmp_path, subject, caplog):
+    import shutil
+
+    out = tmp_path / "ds"
+    args = ("--out", out, "--res", RES, "--view-set", "0,1")
+    said = _convert_fails(caplog, tmp_path / "nowhere", *args)
+    assert f"{tmp_path / 'nowhere'}: missing: no such subject folder" in said
+    (tmp_path / "empty").mkdir()
+    said = _convert_fails(caplog, tmp_path / "empty", *args)
+    assert f"{tmp_path / 'empty' / ANNOTS}: missing: not a ZJU-MoCap subject folder" in said
+
+    root = tmp_path / "s"
+    shutil.copytree(subject[0], root)
+    shutil.rmtree(root / "Camera_B2")  # a copy unpacked without one camera
+    said = _convert_fails(caplog, root, *args)
+    assert f"{root / 'Camera_B2'}: missing: the images folder of camera 1 (annots.npy's ims[0] names " \
+           "Camera_B2/000000.png)" in said
+    said = _convert_fails(caplog, root, *args[:-1], "2,3", "--mask-dir", "mask_cihp")  # camera 1 not used: its masks
+    assert f"{root / 'mask_cihp'}: missing: the mask folder (mask_dir='mask_cihp'); this copy has mask/: choose it " \
+           "with mask_dir='mask'" in said
+    shutil.rmtree(root / "mask")
+    said = _convert_fails(caplog, root, *args[:-1], "2,3")
+    assert f"{root / 'mask'}: missing: the mask folder (mask_dir='mask') (nor mask_cihp/)" in said
+    said = _convert_fails(caplog, root, *args[:-1], "0,9")
+    assert "ZjuConfig.view_sets: camera 9 does not exist (4 cameras in" in said
+    assert not (out / "dataset.json").exists()  # nothing converted

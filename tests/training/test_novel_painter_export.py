@@ -68,6 +68,32 @@ def test_the_runtime_builds_the_inputs_the_painter_was_trained_on(data64):
         np.testing.assert_allclose(rt.joints, want_j, atol=1e-3)
 
 
+def test_a_nan_depth_is_off_the_mask_on_the_device_and_in_the_cache_alike(data64):
+    """Review 52: the device's painter mask is where the depth shows a surface (depth > 0: a NaN pixel off), while
+    the cache took the geometry's mask as it was (a NaN pixel on): the net trained on a mask plane the device never
+    builds there. Both call ghnerf_runtime.geometry.surface.surface_mask now: a NaN depth is no surface."""
+    scene = _scenes(data64)[0]
+    joints, valid = scene["joints_3d"] + 0.01, np.ones(25, bool)
+    geometry, _ = proxy_scene({**scene, "joints_3d": joints, "joints_3d_valid": valid}, joints, valid)
+    t = next(t for t in range(len(scene["tgt_is_source"])) if not scene["tgt_is_source"][t]
+             and geometry["tgt_masks"][t].sum() > 100)
+    depth = np.array(geometry["tgt_depth"], np.float64)
+    ys, xs = np.nonzero(geometry["tgt_masks"][t])
+    y, x = ys[len(ys) // 2], xs[len(xs) // 2]
+    depth[t, y, x] = np.nan  # inside the proxy's silhouette, as the geometry's mask still says
+    geometry = {**geometry, "tgt_depth": depth}
+    shown = np.zeros(scene["tgt_images"].shape[-2:] + (3,))
+    f = view_features(geometry, t, None, 0.0, truth=scene, shown=shown, geometry="proxy")
+    src = [v for v in range(len(scene["tgt_is_source"])) if scene["tgt_is_source"][v]]
+    rt = painter_planes(shown, view_camera(scene, t), depth[t], [view_camera(scene, s) for s in src],
+                        np.asarray(scene["images"]).transpose(0, 2, 3, 1), [depth[s] for s in src], joints, valid)
+    planes, _ = painter_planes_of(to_device(stack([f]), torch.device("cpu")))
+    want = planes[0].numpy()
+    assert want[3, y, x] == 0.0 and rt.planes[3, y, x] == 0.0 and not rt.mask[y, x]  # off on both sides
+    np.testing.assert_array_equal(rt.planes[3:5], want[3:5])  # the whole mask and seen planes agree
+    assert want[3].sum() > 100
+
+
 def test_the_exported_painter_paints_what_the_torch_net_paints(data64, tmp_path):
     scene = _scenes(data64)[0]
     t = next(t for t in range(len(scene["tgt_is_source"])) if not scene["tgt_is_source"][t])

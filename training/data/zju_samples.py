@@ -47,7 +47,7 @@ from training.data.cache import (
 )
 from training.data.errors import DataConfigError, DatasetError
 from training.data.sample import NUM_SOURCES, Sample, ViewData
-from training.data.zju import ZjuSequence
+from training.data.zju import MASK_DIRS, ZjuSequence
 
 log = logging.getLogger(__name__)
 
@@ -256,6 +256,29 @@ def iter_zju_samples(seq: ZjuSequence, config: ZjuConfig) -> Iterator[Sample]:
         yield zju_sample(seq, frame, view_set, config)
 
 
+def check_folders(seq: ZjuSequence, config: ZjuConfig) -> None:
+    """Refuse a subject folder without the image folders of the view sets' cameras, or without a mask folder to
+    read, naming the folder: checked before anything converts, where the first sample's read would name only
+    one file in it (a copy unpacked without one camera, or with its masks under the other folder's name).
+
+    Raises:
+        DatasetError: the missing folder, and what names it (``annots.npy``'s image paths, ``mask_dir``).
+    """
+    for cam in sorted({c for view_set in config.view_sets for c in view_set}):
+        folders: dict[Path, int] = {}  # each folder the camera's images are in (ZJU-MoCap: one), and a frame naming it
+        for frame in config.frame_indices(seq.num_frames):
+            folders.setdefault(seq.image_path(frame, cam).parent, frame)
+        for folder, frame in folders.items():
+            if not folder.is_dir():
+                raise DatasetError(folder, f"missing: the images folder of camera {cam} (annots.npy's ims[{frame}] "
+                                           f"names {seq.relative_image_path(frame, cam)})")
+    other = next(d for d in MASK_DIRS if d != config.mask_dir)
+    if not (seq.root / config.mask_dir).is_dir() and not (config.mask_fallback and (seq.root / other).is_dir()):
+        hint = (f"; this copy has {other}/: choose it with mask_dir={other!r}" if (seq.root / other).is_dir()
+                else f" (nor {other}/)")
+        raise DatasetError(seq.root / config.mask_dir, f"missing: the mask folder (mask_dir={config.mask_dir!r}){hint}")
+
+
 def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, split: str = "train",
                 shard_size: int = 64) -> int:
     """Convert one ZJU-MoCap subject into split ``split`` of the cached dataset ``out``; returns the count.
@@ -272,7 +295,8 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
 
     Raises:
         DataConfigError: a bad ``split``, ``shard_size`` or camera index (the message names it).
-        DatasetError: the subject folder or ``out``'s manifest is unusable (the message names the file), or
+        DatasetError: the subject folder or ``out``'s manifest is unusable (the message names the file; a
+            missing images or mask folder is named before anything converts: :func:`check_folders`), or
             another process is writing ``out`` (``cache.writer_lock``).
     """
     if not isinstance(split, str) or not split or not split.replace("_", "").isalnum():
@@ -284,6 +308,7 @@ def convert_zju(subject: str | Path, out: str | Path, config: ZjuConfig, *, spli
         if max(view_set) >= seq.num_cameras:
             raise DataConfigError("ZjuConfig.view_sets", f"camera {max(view_set)} does not exist "
                                                          f"({seq.num_cameras} cameras in {seq.root})")
+    check_folders(seq, config)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with writer_lock(out):  # one writer per folder: two conversions at once would drop a split's entry
@@ -346,4 +371,5 @@ def _convert(seq: ZjuSequence, subject: str | Path, out: Path, config: ZjuConfig
     return count
 
 
-__all__ = ["ZjuConfig", "SamplePlan", "zju_sample", "zju_view", "plan_zju_samples", "iter_zju_samples", "convert_zju"]
+__all__ = ["ZjuConfig", "SamplePlan", "zju_sample", "zju_view", "plan_zju_samples", "iter_zju_samples", "check_folders",
+           "convert_zju"]

@@ -147,3 +147,51 @@ def test_under_systemd_a_status_file_in_a_hidden_place_says_why(tmp_path, monkey
     assert len(said) == 1 and f"cannot write the status file {status}" in said[0], said
     assert f"(the path is under {home}, which the ghnerf unit's ProtectHome=yes" in said[0]
     assert f"BindPaths={status} " in said[0] and "add the folder with ReadWritePaths=" not in said[0]
+
+
+def _status_warning(tmp_path, monkeypatch, caplog, error: OSError) -> str:
+    """The daemon's warning for a status file whose write fails with ``error`` (outside systemd: no sandbox advice)."""
+    import logging
+
+    from firmware_host.daemon import Daemon, daemon_config_from_dict, service
+
+    def refuse(path, report):
+        raise error
+
+    monkeypatch.setattr(service, "write_status_file", refuse)
+    monkeypatch.delenv("INVOCATION_ID", raising=False)
+    config = daemon_config_from_dict({"rig": {"url": "sim://?fps=30"}, "sinks": ["memory://"],
+                                      "health": {"status_file": str(tmp_path / "status.json")}})
+    with caplog.at_level(logging.WARNING):
+        Daemon(config)._tick(force=True, tell_systemd=False)
+    said = [r.getMessage() for r in caplog.records if "status file" in r.getMessage()]
+    assert len(said) == 1, said
+    return said[0]
+
+
+def test_the_status_file_and_the_file_sink_give_one_read_only_hint(tmp_path, monkeypatch, caplog):
+    """Review 52: the status file's ReadWritePaths= hint and the file sink's were two wordings of one advice, in two
+    places (firmware_host/daemon/service.py, firmware_host/sinks/file_sink.py); firmware_host.service_unit owns it
+    now. It is for EROFS (ProtectSystem=strict's read-only system), which ReadWritePaths= undoes; the status file gave
+    it for EACCES too, a folder's owner or mode (or ProtectHome=), which that setting does not change."""
+    import errno
+
+    from firmware_host.service_unit import read_only_hint
+
+    hint = read_only_hint(OSError(errno.EROFS, "Read-only file system"))
+    assert hint == (" (read-only: the ghnerf unit writes only under /run/ghnerf and /var/lib/ghnerf; add the folder "
+                    "with ReadWritePaths= in systemctl edit ghnerf)")
+    said = _status_warning(tmp_path, monkeypatch, caplog, OSError(errno.EROFS, "Read-only file system"))
+    assert said.endswith("Read-only file system" + hint), said
+    caplog.clear()
+    said = _status_warning(tmp_path, monkeypatch, caplog, PermissionError(errno.EACCES, "Permission denied"))
+    assert said.endswith("Permission denied") and "ReadWritePaths" not in said, said
+    assert read_only_hint(ValueError("not an OSError")) == ""
+
+
+def test_the_folders_the_service_writes_are_the_installed_unit_s():
+    from firmware_host.service_unit import WRITABLE_FOLDERS
+
+    unit = _unit_settings()
+    assert unit["ProtectSystem"] == "strict"  # else more than these folders are writable
+    assert WRITABLE_FOLDERS == (f"/run/{unit['RuntimeDirectory']}", f"/var/lib/{unit['StateDirectory']}")

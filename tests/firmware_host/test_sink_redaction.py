@@ -1,0 +1,86 @@
+"""A sink shows its own URL without the passwords it may carry (review 52): its log lines, thread name, repr, its
+errors' messages (which the daemon logs, and the status file's ``last_error`` holds) and a refused URL's message.
+What was given stays on the objects (``sink.url``, ``error.url``, ``error.value``) for callers that need it."""
+from __future__ import annotations
+
+import logging
+import threading
+
+import pytest
+
+from firmware_host.errors import SinkClosedError, SinkConfigError, SinkUnavailableError, SinkWriteError
+from firmware_host.sinks import Sink, SinkOptions, open_sink
+from firmware_host.protocol import JointFrame
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, wait_until
+
+SECRET = "s3cret"
+
+
+class _DownSink(Sink):
+    """A link that is never there: its connect fails, as an unplugged one's does."""
+
+    def __init__(self, url: str) -> None:
+        super().__init__(url, SinkOptions(backoff=FAST_BACKOFF))
+        self.tries = 0
+
+    def _connect(self) -> None:
+        self.tries += 1
+        if self.tries == 1:
+            raise RuntimeError("a backend bug")  # logged once with its traceback
+        raise SinkUnavailableError(self.url, "not plugged in")
+
+    def _disconnect(self) -> None:
+        pass
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        raise AssertionError("never connected")
+
+
+def test_a_sink_logs_and_names_itself_without_its_password(caplog):
+    url = f"scripted://viewer:{SECRET}@here?token=abc"
+    with caplog.at_level(logging.DEBUG, logger="firmware_host.sinks"):
+        sink = _DownSink(url).start()
+        wait_until(lambda: sink.tries >= 3, what="three connect attempts")
+        names = [t.name for t in threading.enumerate() if t.name.startswith("sink ")]
+        shown = repr(sink)
+        stats = sink.close()
+    assert sink.url == url  # kept as given
+    assert "scripted://viewer:***@here?token=***" in caplog.text
+    assert "viewer:***@here" in shown and "sink scripted://viewer:***@here?token=***" in names
+    assert SECRET not in caplog.text and "abc" not in caplog.text and SECRET not in shown
+    assert SECRET not in (stats.last_error or "") and "not plugged in" in stats.last_error
+    with pytest.raises(SinkClosedError) as closed:
+        sink.send(make_frame(0))
+    assert SECRET not in str(closed.value) and "viewer:***@here" in str(closed.value)
+
+
+def test_a_memory_sink_s_dropped_frame_is_reported_without_its_password():
+    sink = open_sink(f"memory://viewer:{SECRET}@here?max_bytes=16")
+    try:
+        sink.send(make_frame(0))  # larger than 16 bytes: a write error, the frame dropped
+        wait_until(lambda: sink.stats().dropped_error == 1, what="the dropped frame")
+    finally:
+        stats = sink.close()
+    assert "memory://viewer:***@here" in stats.last_error and SECRET not in stats.last_error
+
+
+@pytest.mark.parametrize("error", [SinkUnavailableError, SinkWriteError])
+def test_a_link_error_names_the_url_without_its_password(error):
+    e = error(f"udp://viewer:{SECRET}@127.0.0.1:9000?api_key={SECRET}", "gone")
+    assert str(e).startswith("udp://viewer:***@127.0.0.1:9000?api_key=***: ") and SECRET not in str(e)
+    assert SECRET in e.url  # kept as given
+
+
+@pytest.mark.parametrize("url, field", [
+    (f"udp://viewer:{SECRET}@127.0.0.1:9000", "user info"),  # refused: user info
+    (f"file://viewer:{SECRET}@host/tmp/joints.jsonl", "host"),  # refused: a host
+    (f"memory://here?password={SECRET}", "password"),  # an unknown parameter, a secret one
+    (f"udp://viewer:{SECRET}@[::1:9000", "url"),  # cannot be parsed: the whole URL is the value
+])
+def test_a_refused_sink_url_is_named_without_its_password(url, field):
+    with pytest.raises(SinkConfigError) as refused:
+        open_sink(url).close()
+    e = refused.value
+    assert e.field == field and e.url == url and SECRET in repr(e.value)  # kept as given
+    assert SECRET not in str(e) and "***" in str(e)
+    assert str(e).startswith(url.replace(SECRET, "***").split("?")[0])  # the URL, its user and host kept
