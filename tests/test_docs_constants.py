@@ -26,9 +26,10 @@ from firmware_host.daemon.config import DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
-from firmware_host.sinks.options import MAX_QUEUE, MAX_STATUS_S, MIN_STATUS_S, SinkOptions
+from firmware_host.sinks.options import MAX_QUEUE, MAX_STALL_S, MAX_STATUS_S, MIN_STALL_S, MIN_STATUS_S, SinkOptions
 from firmware_host.sinks.rate import MIN_MAX_FPS
 from firmware_host.sinks.serial_sink import CLOSE_DRAIN_S
+from firmware_host.sinks.udp_sink import MIN_RESOLVE_S, RESOLVE_S
 from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
@@ -123,6 +124,13 @@ def _doc(name: str) -> str:
     ("docs/model.md", f"fewer than {MIN_FRAMES} frame pairs (`calibration.MIN_FRAMES`"),
     ("docs/model.md", f"fewer than {MIN_FRAMES}, `calibration.MIN_FRAMES` as for"),
     ("docs/model.md", f"`python -m training.export --opset` takes {MIN_OPSET} to {MAX_OPSET}"),
+    # session 53: a sink whose receiver stopped reading reads stalled; resolve_s has a floor
+    ("docs/protocol.md", f"`stall_s` ({SinkOptions.stall_s!r}, at least {MIN_STALL_S:g}, at most {MAX_STALL_S:g}):"),
+    ("docs/protocol.md", f"(below {MIN_STALL_S:g} one late write would read as a stall)"),
+    ("docs/daemon.md", f"the sink's `stall_s`, {SinkOptions.stall_s:g} s by default"),
+    ("docs/protocol.md", f"at least every {MIN_RESOLVE_S:g} s (`MIN_RESOLVE_S`"),
+    ("docs/protocol.md", f"`resolve_s` ({RESOLVE_S:g}, at least {MIN_RESOLVE_S:g});"),
+    ("docs/daemon.md", f"every `resolve_s` ({RESOLVE_S:g}, at least {MIN_RESOLVE_S:g}) seconds"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
     ("docs/protocol.md", f"a name past {MAX_HOST_NAME} characters), named when the sink opens"),
 ])

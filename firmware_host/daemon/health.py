@@ -133,7 +133,7 @@ class Health:
     def status_line(self, sinks: Optional[dict[str, Any]] = None) -> str:
         """One line for systemd's ``STATUS=`` (``systemctl status ghnerf``); a refused reload stays on it
         until one is accepted (``systemctl reload`` returns before the daemon has read the file). ``sinks``:
-        each sink's counters by URL (as in :meth:`report`); those down are named with their error."""
+        each sink's counters by URL (as in :meth:`report`); those down or stalled are named with their error."""
         last = self.state_since if self.last_pair_at is None else max(self.state_since, self.last_pair_at)
         idle_s = self.clock() - last  # (since the rig opened: it may have been away)
         if self.state == State.RUNNING and idle_s > STALE_S:
@@ -157,22 +157,31 @@ STATUS_MAX, STATUS_KEEP = 200, 60
 
 
 def _sinks_down(sinks: dict[str, Any], room: int) -> str:
-    """``; sink URL down: why`` for each sink that is down, or ``; N sinks down`` when that does not fit."""
+    """``; sink URL down: why`` for each sink that is down, ``; sink URL stalled N s: why`` for each whose receiver
+    stopped reading, or ``; N sinks down, M stalled`` when that does not fit."""
     down = {url: s for url, s in sinks.items() if s.get("state") == "down"}
-    if not down:
+    stalled = {url: s for url, s in sinks.items() if s.get("state") == "stalled"}
+    if not down and not stalled:
         return ""
     text = "".join(f"; sink {url} down: {_why(url, s.get('last_error'))}" for url, s in down.items())
+    text += "".join(f"; sink {url} stalled {s.get('stalled_s') or 0:.0f} s: "
+                    f"{_why(url, s.get('last_error'), 'a write that has not returned')}" for url, s in stalled.items())
     if len(text) <= room:
         return text
     if room >= 40:  # the first sink's URL and the start of its error say more than a count
         return text[:room]
-    return f"; {len(down)} sink{'s' if len(down) > 1 else ''} down"[:max(room, 0)]
+    counts = [f"{len(down)} sink{'s' if len(down) > 1 else ''} down"] if down else []
+    if stalled:
+        counts.append(f"{len(stalled)} stalled" if down else
+                      f"{len(stalled)} sink{'s' if len(stalled) > 1 else ''} stalled")
+    return ("; " + ", ".join(counts))[:max(room, 0)]
 
 
-def _why(url: str, error: Optional[str]) -> str:
-    """A sink's error without the URL and the ``unavailable:`` its exception message starts with."""
-    why = (error or "not connected").removeprefix(f"{url}: ")
-    return why.removeprefix("unavailable: ")
+def _why(url: str, error: Optional[str], unknown: str = "not connected") -> str:
+    """A sink's error without the URL and the ``unavailable:`` (``write failed:``) its exception message starts
+    with; ``unknown`` where it has none."""
+    why = (error or unknown).removeprefix(f"{url}: ")
+    return why.removeprefix("unavailable: ").removeprefix("write failed: ")
 
 
 def write_status_file(path: str | os.PathLike, report: dict[str, Any]) -> None:

@@ -30,6 +30,7 @@ from firmware_host.protocol.constants import (
     ERROR_CODES,
     HEADER,
     MAX_FRAME_LEN,
+    MAX_JOINTS,
     MAX_PACKET_LEN,
     U32_MAX,
     U64_MAX,
@@ -339,6 +340,47 @@ def _v_long_block() -> _Stream:
     return s.message(msg)
 
 
+def _v_joints_empty() -> _Stream:
+    """Count 0: no mask byte, no joint; a decoder must not read a mask or a joint that is not there."""
+    h = make_header(MsgType.JOINTS, 80, 3_000_000, 3_041_000, Flags.DROPPED)
+    empty = np.zeros((0, 3), np.int16), np.zeros(0, np.uint8), np.zeros(0, bool)
+    joints = Joints(h, int(JointSet.BODY_25), *empty)
+    h2 = make_header(MsgType.JOINTS_2D, 80, 3_000_000, 3_041_500)
+    joints_2d = Joints2D(h2, 1, int(JointSet.BODY_25), np.zeros((0, 2), np.int16), empty[1], empty[2])
+    assert len(encode_packet(joints)) == HEADER.size + 2 + 2 and len(encode_packet(joints_2d)) == HEADER.size + 3 + 2
+    return (
+        _Stream("JOINTS and JOINTS_2D of 0 joints (count 0: no mask byte, no joint; a sender that found no one), "
+                "then a BODY_25 JOINTS.")
+        .message(joints)
+        .message(joints_2d)
+        .message(_joints(81))
+    )
+
+
+def _v_joints_max() -> _Stream:
+    """The protocol's largest joint count: an 8-byte mask, its last bit the last joint's."""
+    n = MAX_JOINTS
+    idx = np.arange(n)
+    xyz = np.stack([idx * 37 - 1200, 500 - idx * 11, 2500 + idx * 3], axis=1).astype(np.int16)
+    miss = np.zeros(n, bool)
+    miss[[0, 9, 31, 32, n - 1]] = True  # the first and last bit, and across the mask's middle bytes
+    xyz[miss] = 0
+    conf = np.where(miss, 0, 1 + idx % 255).astype(np.uint8)
+    h = make_header(MsgType.JOINTS, 82, 3_100_000, 3_141_000)
+    joints = Joints(h, 7, xyz, conf, miss)
+    uv = np.stack([idx * 20 + 8, idx * 12 + 4], axis=1).astype(np.int16)
+    uv[miss] = 0
+    h2 = make_header(MsgType.JOINTS_2D, 82, 3_100_000, 3_141_500)
+    joints_2d = Joints2D(h2, 0, 7, uv, np.where(miss, 0, 180).astype(np.uint8), miss)
+    assert len(encode_packet(joints)) <= MAX_PACKET_LEN
+    return (
+        _Stream(f"JOINTS and JOINTS_2D of {n} joints (joint set 7), the most a packet carries: an 8-byte mask "
+                f"with joints 0, 9, 31, 32 and {n - 1} missing.")
+        .message(joints)
+        .message(joints_2d)
+    )
+
+
 def _v_malformed() -> _Stream:
     s = _Stream(
         "Valid CRC but bad payloads, all 'malformed': JOINTS count 26 with 25 joints of data, "
@@ -375,6 +417,8 @@ VECTORS = {
     "garbage_interleaved": _v_garbage,
     "limits": _v_limits,
     "long_block": _v_long_block,
+    "joints_empty": _v_joints_empty,
+    "joints_max": _v_joints_max,
     "malformed": _v_malformed,
 }
 

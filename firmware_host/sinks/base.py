@@ -14,6 +14,13 @@ A link that cannot be (re)opened is retried forever; the journal hears of it
 once per outage (a WARNING, again only when the error changes, repeats at
 DEBUG) and ``stats().state`` says ``down`` with the error in ``last_error``.
 
+A link that is open but whose receiver stopped reading (every write times out,
+a buffer stays full) is ``stalled`` rather than ``up`` once no frame has got
+through for ``options.stall_s`` since a write first failed, or once one write
+has been in progress that long; ``stalled_s`` says for how long. The first frame
+that gets through makes it ``up`` again. The journal hears of a stall once (a
+WARNING) and of its end once (INFO).
+
 Backend hooks: ``_connect``, ``_disconnect``, ``_deliver`` and optionally
 ``_on_connected`` and ``link_capacity_fps``.
 """
@@ -21,6 +28,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass
@@ -53,8 +61,12 @@ class SinkStats:
     disconnects: int
     last_error: Optional[str]
     state: str = "connecting"
-    """``connecting`` (not tried yet), ``up``, ``down`` (the link was lost or the last connect failed;
-    ``last_error`` says why) or ``closed``."""
+    """``connecting`` (not tried yet), ``up``, ``stalled`` (up, but no frame got through for ``stall_s``:
+    the receiver stopped reading; ``connected`` stays true), ``down`` (the link was lost or the last connect
+    failed; ``last_error`` says why) or ``closed``."""
+    stalled_s: Optional[float] = None
+    """While ``stalled``: seconds since the first write that failed (or the write still in progress) with
+    no frame through since; None otherwise."""
 
     @property
     def dropped(self) -> int:
@@ -98,6 +110,11 @@ class Sink(ABC):
         # since the last admitted frame, and failed deliveries since the last pop.
         self._gap_flags = 0
         self._error_flags = 0
+        # Stall watch, guarded by _cond (monotonic seconds): when the first write failed since a frame last got
+        # through, and when the write in progress (frame, or idle STATUS) began; None: no such write.
+        self._failing_since: Optional[float] = None
+        self._writing_since: Optional[float] = None
+        self._stall_logged = False  # the WARNING for this stall was written: its end gets an INFO
 
     # ---- hooks -------------------------------------------------------------
 
@@ -186,7 +203,9 @@ class Sink(ABC):
             _log.warning("%s: frames arrive faster than %.1f fps; decimating", self.shown, warn_fps)
 
     def stats(self) -> SinkStats:
+        now = time.monotonic()
         with self._cond:
+            stalled_s = self._stalled_s(now)
             return SinkStats(
                 submitted=self._submitted,
                 sent=self._sent,
@@ -201,15 +220,28 @@ class Sink(ABC):
                 connect_failures=self._connect_failures,
                 disconnects=self._disconnects,
                 last_error=self._last_error,
-                state=self._state(),
+                state=self._state(stalled_s),
+                stalled_s=None if stalled_s is None else round(stalled_s, 3),
             )
 
-    def _state(self) -> str:
+    def _state(self, stalled_s: Optional[float]) -> str:
         if self._closed and not self._connected:
             return "closed"
         if self._connected:
-            return "up"
+            return "up" if stalled_s is None else "stalled"
         return "down" if self._down else "connecting"
+
+    def _stalled_s(self, now: float) -> Optional[float]:
+        """How long the open link has delivered nothing, once that is ``stall_s`` or more; else None. Counted
+        from the first failed write since a frame got through, or from the start of a write still in progress
+        (a blocking write that never returns fails nothing): the earlier of the two. Call with _cond held."""
+        if not self._connected:
+            return None
+        starts = [t for t in (self._failing_since, self._writing_since) if t is not None]
+        if not starts:
+            return None
+        stalled = now - min(starts)
+        return stalled if stalled >= self.options.stall_s else None
 
     def pending_gap_flags(self) -> int:
         """The gap flags (DROPPED, DECIMATED) the next frame would have carried: after ``close()``, what
@@ -273,6 +305,8 @@ class Sink(ABC):
         with self._cond:
             was = self._connected
             self._connected = False
+            self._failing_since = None  # a link lost is down, not stalled; a new one starts afresh
+            self._stall_logged = False  # "link lost" says the rest
         if was:
             self._disconnect()
 
@@ -282,6 +316,7 @@ class Sink(ABC):
         that is gone) is still the same outage, logged once, not an up/down flicker on every retry."""
         opened = False
         write_error: Optional[str] = None
+        started = time.monotonic()
         try:
             self._connect()
             opened = True
@@ -298,6 +333,8 @@ class Sink(ABC):
             self._connected = True
             self._connects += 1
             was_down, self._down, self._down_error = self._down, False, None
+            # HELLO met a receiver that does not read: the new link counts toward a stall from the start
+            self._failing_since = None if write_error is None else started
             if write_error is not None:
                 self._last_error = write_error
             self._cond.notify_all()
@@ -337,12 +374,43 @@ class Sink(ABC):
             self._error_flags = 0
             return frame, flags
 
+    def _write_started(self) -> float:
+        """Mark a write (frame or idle STATUS) in progress, for the stall watch; returns its start."""
+        started = time.monotonic()
+        with self._cond:
+            self._writing_since = started
+        return started
+
+    def _write_failed(self, started: float) -> None:
+        """A write that began at ``started`` failed on a link still open: a stall counts from the first.
+        Call with _cond held."""
+        if self._connected and self._failing_since is None:
+            self._failing_since = started
+
+    def _log_stall(self, failed: bool) -> None:
+        """WARNING once when a stall is seen, INFO once when a frame gets through after it (outside _cond)."""
+        with self._cond:
+            stalled_s = self._stalled_s(time.monotonic())
+            if failed and stalled_s is not None and not self._stall_logged:
+                self._stall_logged, what, error = True, "warn", self._last_error
+            elif not failed and self._stall_logged:
+                self._stall_logged, what, error = False, "info", None
+            else:
+                return
+        if what == "warn":
+            _log.warning("%s: stalled: no frame got through for %.1f s, the receiver is not reading (%s); frames "
+                         "are dropped and counted until one gets through", self.url, stalled_s, error)
+        else:
+            _log.info("%s: frames get through again after a stall", self.url)
+
     def _idle(self) -> None:
+        started = self._write_started()
         try:
             self._on_idle()
         except SinkWriteError as e:
             with self._cond:
                 self._last_error = str(e)
+                self._write_failed(started)
         except SinkUnavailableError as e:
             _log.warning("%s: link lost (%s); reconnecting", self.shown, e)
             self._release()
@@ -354,6 +422,9 @@ class Sink(ABC):
             _log.exception("%s: idle hook failed", self.shown)
             with self._cond:
                 self._last_error = f"{type(e).__name__}: {e}"
+        finally:
+            with self._cond:
+                self._writing_since = None
 
     def _run(self) -> None:
         backoff = Backoff(self.options.backoff)
@@ -370,6 +441,7 @@ class Sink(ABC):
                 continue  # the loop's condition ends the worker once closed and drained
             frame, flags = item
             error: Optional[str] = None
+            started = self._write_started()
             try:
                 self._deliver(frame, flags)
             except SinkWriteError as e:
@@ -385,13 +457,17 @@ class Sink(ABC):
                 error = f"{type(e).__name__}: {e}"
                 _log.exception("%s: frame %d could not be delivered", self.shown, frame.sequence)
             with self._cond:
+                self._writing_since = None
                 if error is None:
                     self._sent += 1
+                    self._failing_since = None  # the receiver reads: no longer stalled
                 else:
                     self._dropped_error += 1
                     self._last_error = error
+                    self._write_failed(started)
                     # The next frame that gets through tells the receiver about this gap.
                     self._error_flags |= Flags.DROPPED | (flags & Flags.DECIMATED)
                 self._in_flight = 0
                 self._cond.notify_all()
+            self._log_stall(failed=error is not None)
         self._release()

@@ -9,6 +9,12 @@ append mode with backoff, first ending a line the failed write cut short, so the
 on its own. A path that cannot be opened (a folder, no permission, a named pipe no program reads yet) is
 retried like an absent device.
 
+A named pipe (or /dev/stdout on one) whose reader stops reading fills the pipe's buffer: each write then waits
+for room (select, no CPU) at most ``write_timeout_ms`` (default 100, at most 60000), and the frame is dropped
+and counted, the sink ``stalled`` once that lasts ``stall_s``; a line cut short by the timeout is ended by the
+next write's leading newline. (Blocking writes held the worker for as long as the reader stayed away, the sink
+reading ``up``.) A regular file's write is never cut short by it.
+
 The file grows for as long as the sink runs (about 650 bytes per JOINTS line); rotate it with
 logrotate's ``copytruncate``: every write is O_APPEND, so it lands at the end of the truncated file.
 """
@@ -18,15 +24,20 @@ import errno
 import json
 import os
 import stat
-from typing import IO, Any, Optional
+from typing import Any, Optional
 from urllib.parse import unquote
 
-from firmware_host.errors import SinkConfigError, SinkUnavailableError
+from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.messages import Message
 from firmware_host.service_unit import read_only_hint  # the sandbox's EROFS: what to do
+from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
-from firmware_host.sinks.protocol_sink import ProtocolSink
-from firmware_host.sinks.url import SinkUrl, parse_url
+from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
+from firmware_host.sinks.url import SinkUrl, int_in, parse_url
+
+#: Longest wait for room in a pipe whose reader stopped reading, as for serial:// (a joint line a minute late is
+#: of no use).
+MAX_WRITE_TIMEOUT_MS = 60_000
 
 
 def _no_reader_hint(e: OSError) -> str:
@@ -34,39 +45,39 @@ def _no_reader_hint(e: OSError) -> str:
     return " (a named pipe with no reader: retried until one opens it)" if e.errno == errno.ENXIO else ""
 
 
-def _open_append(path: str) -> IO[str]:
-    """``open(path, "a")``, except that a named pipe with no reader fails at once (ENXIO) instead of blocking: the
-    worker waited in open() for ever, the sink ``connecting`` rather than ``down`` in the status file, and a
-    close() left that thread behind (it wrote a HELLO into the pipe once a reader came, for a closed sink)."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK, 0o666)
-    try:
-        os.set_blocking(fd, True)  # once open, a slow reader holds the worker (never send()); its queue drops
-        return os.fdopen(fd, "a", encoding="utf-8")
-    except BaseException:
-        os.close(fd)
-        raise
+def _open_append(path: str) -> int:
+    """A descriptor like ``open(path, "a")``'s, except that a named pipe with no reader fails at once (ENXIO)
+    instead of blocking: the worker waited in open() for ever, the sink ``connecting`` rather than ``down`` in
+    the status file, and a close() left that thread behind (it wrote a HELLO into the pipe once a reader came,
+    for a closed sink). It stays non-blocking: a pipe whose reader stops reading must not hold the worker's
+    writes either (``write_within``)."""
+    return os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK, 0o666)
 
 
 class FileSink(ProtocolSink):
     scheme = "file"
 
-    def __init__(self, url: str, path: str, options: SinkOptions) -> None:
+    def __init__(self, url: str, path: str, options: SinkOptions, write_timeout_s: float = 0.1) -> None:
         super().__init__(url, options)
         self.path = path
-        self._fh: Optional[IO[str]] = None
+        self.write_timeout_s = write_timeout_s
+        self._fd: Optional[int] = None
+        self._cut_line = False  # a write timed out inside a line: the next write starts with a newline
 
     @classmethod
     def from_url(cls, url: str, **kw: Any) -> "FileSink":
         u: SinkUrl = parse_url(url)
         path = _local_path(url, u)
+        timeout_ms = u.take("write_timeout_ms", int_in(1, MAX_WRITE_TIMEOUT_MS, "milliseconds"), 100, kw)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
-        return cls(url, path, options)
+        return cls(url, path, options, timeout_ms / 1000.0)
 
     def _connect(self) -> None:
         try:
-            self._fh = _open_append(self.path)
+            self._fd = _open_append(self.path)
+            self._cut_line = False  # a new reader of a pipe starts at the next line; a file is checked below
             self._end_cut_line()
         except OSError as e:
             self._disconnect()
@@ -76,8 +87,8 @@ class FileSink(ProtocolSink):
     def _end_cut_line(self) -> None:
         """End the last line if a write cut it short (disk full, EFBIG): the HELLO written next must start
         a line of its own, not make one unparsable line of both."""
-        assert self._fh is not None
-        if not stat.S_ISREG(os.fstat(self._fh.fileno()).st_mode):
+        assert self._fd is not None
+        if not stat.S_ISREG(os.fstat(self._fd).st_mode):
             return  # a FIFO or /dev/stdout: nothing to read back, and a reader there sees whole lines anyway
         with open(self.path, "rb") as f:
             if f.seek(0, os.SEEK_END) == 0:
@@ -85,31 +96,42 @@ class FileSink(ProtocolSink):
             f.seek(-1, os.SEEK_END)
             if f.read(1) == b"\n":
                 return
-        self._fh.write("\n")
-        self._fh.flush()
+        os.write(self._fd, b"\n")  # a regular file: never EAGAIN
 
     def _disconnect(self) -> None:
-        fh, self._fh = self._fh, None
-        if fh is not None:
+        fd, self._fd = self._fd, None
+        if fd is not None:
             try:
-                fh.close()
+                os.close(fd)
             except OSError:
                 pass  # the write that failed already reported why
 
     def _write_messages(self, messages: list[Message]) -> bool:
-        text = "".join(json.dumps(m.to_json(), separators=(",", ":")) + "\n" for m in messages)
-        self._write_text(text)
-        return True
+        """One write of the messages' lines. False: the frame's lines went out but the HELLO + STATUS behind
+        them did not (a pipe that stopped taking them); that STATUS is owed (ProtocolSink)."""
+        lines = [(json.dumps(m.to_json(), separators=(",", ":")) + "\n").encode("utf-8") for m in messages]
+        lead = b"\n" if self._cut_line else b""
+        data = lead + b"".join(lines)
+        written = self._write_within(data)
+        if written == len(data):
+            self._cut_line = False
+            return True
+        if written:  # the reader holds part of a line unless the cut fell just after a newline
+            self._cut_line = data[written - 1:written] != b"\n"
+        if written < len(lead) + sum(len(line) for line in lines[:frame_messages(messages)]):
+            raise SinkWriteError(self.url, f"write timed out after {self.write_timeout_s * 1000:.0f} ms "
+                                           f"({written} of {len(data)} bytes out; the reader is not reading)")
+        return False
 
     def _write_bytes(self, data: bytes) -> None:
         raise NotImplementedError("the file sink writes JSON lines, not frames")
 
-    def _write_text(self, text: str) -> None:
-        if self._fh is None:
+    def _write_within(self, data: bytes) -> int:
+        """Write ``data`` as far as it goes within ``write_timeout_s`` (a regular file: all of it)."""
+        if self._fd is None:
             raise SinkUnavailableError(self.url, "file not open")
         try:
-            self._fh.write(text)
-            self._fh.flush()
+            return write_within(self._fd, data, self.write_timeout_s)
         except OSError as e:
             raise SinkUnavailableError(self.url, f"write to {self.path} failed: {e}") from e
 

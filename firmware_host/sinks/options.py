@@ -23,6 +23,9 @@ MIN_STATUS_S = 0.01
 #: Most frames a sink holds: over 2 minutes of outage at 30 fps (over one at 60 fps), ~11 MiB of BODY_25 frames with
 #: both cameras' 2D joints (~23 MiB at 64 joints); 10**23 was accepted and grew without bound during an outage.
 MAX_QUEUE = 4096
+#: Shortest and longest ``stall_s``: below a few frames' time at 30 fps one late write would read as a stall; an
+#: hour is as long as a STATUS period may be.
+MIN_STALL_S, MAX_STALL_S = 0.1, 3600.0
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,9 @@ class SinkOptions:
     """Cap on the rate sent, on top of the link's own capacity."""
     status_s: float = 1.0
     """Period of STATUS (and repeated HELLO) packets on protocol sinks."""
+    stall_s: float = 2.0
+    """An open link that got no frame through for this long since a write failed, or whose write has been in
+    progress this long, reads ``stalled`` (its receiver stopped reading) instead of ``up``."""
     send_2d: bool = False
     """Also send JOINTS_2D for each camera in ``JointFrame.joints_2d``."""
     rig_id: str = ""
@@ -56,6 +62,7 @@ class SinkOptions:
             fps=u.take("fps", positive_float, None, kw),
             max_fps=u.take("max_fps", positive_float, None, kw),
             status_s=u.take("status_s", positive_float, cls.status_s, kw),
+            stall_s=u.take("stall_s", positive_float, cls.stall_s, kw),
             send_2d=u.take("send_2d", boolean, cls.send_2d, kw),
             rig_id=u.take("rig_id", str, cls.rig_id, kw),
             cameras=tuple(u.take("cameras", lambda s: [c for c in s.split(",") if c], (), kw)),
@@ -75,6 +82,10 @@ class SinkOptions:
             # smaller floods an idle link with HELLO + STATUS
             raise SinkConfigError(u.url, "status_s", opts.status_s,
                                   f"must be in [{MIN_STATUS_S:g}, {MAX_STATUS_S:g}] seconds")
+        if not MIN_STALL_S <= opts.stall_s <= MAX_STALL_S:
+            # shorter reads one late write as a stalled receiver; longer hides one from the status file for hours
+            raise SinkConfigError(u.url, "stall_s", opts.stall_s,
+                                  f"must be in [{MIN_STALL_S:g}, {MAX_STALL_S:g}] seconds")
         return opts
 
 

@@ -6,6 +6,7 @@ so receivers that start late learn the stream's parameters.
 """
 from __future__ import annotations
 
+import itertools
 import logging
 from abc import abstractmethod
 from dataclasses import replace
@@ -32,6 +33,13 @@ _log = logging.getLogger(__name__)
 
 #: After a STATUS that could not be written, how soon (at most) another is tried while no frame comes.
 STATUS_RETRY_S = 0.1
+
+
+def frame_messages(messages: list[Message]) -> int:
+    """How many of ``messages`` must go out for a write to count as delivered: its leading frame packets (JOINTS,
+    JOINTS_2D; a HELLO + STATUS behind them may be cut and owed), or all of them in a write without a frame."""
+    frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)
+    return sum(1 for _ in itertools.takewhile(lambda m: m.header.msg_type in frame_types, messages)) or len(messages)
 
 
 class ProtocolSink(Sink):

@@ -22,10 +22,8 @@ tty's ``closing_wait`` (30 s), past the unit's ``TimeoutStopSec``.
 """
 from __future__ import annotations
 
-import itertools
 import logging
 import os
-import select
 import termios
 import time
 from typing import Any, Optional
@@ -34,11 +32,11 @@ from urllib.parse import unquote
 import serial
 
 from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
-from firmware_host.protocol.constants import MsgType
 from firmware_host.protocol.encoder import encode
 from firmware_host.protocol.messages import Message
+from firmware_host.sinks.fd_write import write_within
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
-from firmware_host.sinks.protocol_sink import ProtocolSink
+from firmware_host.sinks.protocol_sink import ProtocolSink, frame_messages
 from firmware_host.sinks.rate import serial_capacity_fps
 from firmware_host.sinks.url import SinkUrl, int_in, parse_url
 
@@ -144,22 +142,8 @@ class SerialSink(ProtocolSink):
         """
         if self._ser is None:
             raise SinkUnavailableError(self.url, "port not open")
-        fd = self._ser.fileno()
-        view = memoryview(data)
-        done = 0
-        deadline = time.monotonic() + timeout_s
         try:
-            while True:
-                try:
-                    done += os.write(fd, view[done:])
-                except BlockingIOError:
-                    pass  # full: wait for room below
-                remaining = deadline - time.monotonic()
-                if done == len(data) or remaining <= 0:
-                    return done
-                _, ready, _ = select.select([], [fd], [], remaining)
-                if not ready:
-                    return done
+            return write_within(self._ser.fileno(), data, timeout_s)
         except OSError as e:
             raise SinkUnavailableError(self.url, f"write to {self.port} failed: {e}") from e
 
@@ -188,6 +172,4 @@ def _frame_bytes(messages: list[Message], packets: list[bytes]) -> int:
     """Bytes that must be out for a write to count as delivered: the frame's own packets (JOINTS,
     JOINTS_2D; all of them for a HELLO + STATUS write), less the last 0x00, which the next write's
     leading delimiter supplies."""
-    frame_types = (MsgType.JOINTS, MsgType.JOINTS_2D)
-    n = sum(1 for _ in itertools.takewhile(lambda m: m.header.msg_type in frame_types, messages)) or len(messages)
-    return sum(len(p) for p in packets[:n]) - 1
+    return sum(len(p) for p in packets[:frame_messages(messages)]) - 1

@@ -9,7 +9,7 @@ broadcast address (``udp://192.168.1.255:9000``) sends to every receiver on the 
 A host name is resolved to its IPv4 address when it has one (a receiver bound to
 0.0.0.0 never hears ::1, which glibc may list first for ``localhost``), to IPv6
 when that is all it has or the host is an IPv6 literal. The name is looked up
-again every ``resolve_s`` (30) seconds in a thread of its own, so a robot whose
+again every ``resolve_s`` (30, at least 1) seconds in a thread of its own, so a robot whose
 DHCP or mDNS address changes is found again while the frames keep going out. While
 the name still lists the address in use, that address is kept, whatever the order
 of the answer (round-robin DNS, a host on two networks).
@@ -25,7 +25,7 @@ from typing import Any, Optional
 
 from drivers.url import redact_url
 from firmware_host.addresses import ipv4_first
-from firmware_host.errors import SinkUnavailableError, SinkWriteError
+from firmware_host.errors import SinkConfigError, SinkUnavailableError, SinkWriteError
 from firmware_host.protocol.constants import MsgType
 from firmware_host.protocol.encoder import encode
 from firmware_host.protocol.messages import Message
@@ -37,6 +37,21 @@ _log = logging.getLogger(__name__)
 
 #: Seconds between lookups of a host name (``resolve_s``); IP literals are never looked up again.
 RESOLVE_S = 30.0
+#: Shortest ``resolve_s``: a lookup a second finds a moved robot soon enough, and a name server is not asked once
+#: per frame (``resolve_s=1e-9`` was accepted: a lookup for every frame sent).
+MIN_RESOLVE_S = 1.0
+
+
+def take_resolve_s(u: SinkUrl, kw: dict) -> float:
+    """The ``resolve_s`` option of a udp:// or vmc:// URL (or keyword): at least ``MIN_RESOLVE_S``.
+
+    :raises SinkConfigError: naming the URL, ``resolve_s`` and the value.
+    """
+    resolve_s = u.take("resolve_s", positive_float, RESOLVE_S, kw)
+    if resolve_s < MIN_RESOLVE_S:
+        raise SinkConfigError(u.url, "resolve_s", resolve_s, f"must be at least {MIN_RESOLVE_S:g} seconds (a name "
+                                                             "looked up more often asks its name server per frame)")
+    return resolve_s
 
 
 def resolve(url: str, host: str, port: int, keep: Any = None) -> tuple[int, Any]:
@@ -166,7 +181,7 @@ class UdpSink(ProtocolSink):
     def from_url(cls, url: str, **kw: Any) -> "UdpSink":
         u: SinkUrl = parse_url(url)
         host, port = host_port(u)
-        resolve_s = u.take("resolve_s", positive_float, RESOLVE_S, kw)
+        resolve_s = take_resolve_s(u, kw)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)

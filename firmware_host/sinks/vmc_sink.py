@@ -6,7 +6,7 @@ Bone/Pos (local rotations) solved by ``vmc_pose``. VMC has no sequence
 numbers, so receivers cannot count gaps; the sink's own counters (``stats()``)
 report what it decimated or dropped. ``max_fps`` caps the rate (receivers
 render at display rate; 60 is plenty). Host names are resolved like udp://
-(IPv4 first, looked up again every ``resolve_s``, default 30). ``facing`` (``away``, the default, or
+(IPv4 first, looked up again every ``resolve_s``, default 30, at least 1). ``facing`` (``away``, the default, or
 ``camera``) and ``mirror`` (0, the default, or 1) choose how the avatar shows the person (``vmc_view``).
 
 The binary protocol's options (``send_2d``, ``status_s``, ``joint_count``, ``rig_id``, ``cameras``)
@@ -23,8 +23,8 @@ from firmware_host.errors import SinkConfigError
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
-from firmware_host.sinks.udp_sink import RESOLVE_S, DatagramLink
-from firmware_host.sinks.url import SinkUrl, boolean, host_port, one_of, parse_url, positive_float
+from firmware_host.sinks.udp_sink import RESOLVE_S, DatagramLink, take_resolve_s
+from firmware_host.sinks.url import SinkUrl, boolean, host_port, one_of, parse_url
 from firmware_host.sinks.vmc_osc import build_datagrams
 from firmware_host.sinks.vmc_pose import keep_hemisphere, solve_pose
 from firmware_host.sinks.vmc_view import FACINGS, AvatarView
@@ -58,7 +58,7 @@ class VmcSink(Sink):
     def from_url(cls, url: str, **kw: Any) -> "VmcSink":
         u: SinkUrl = parse_url(url)
         host, port = host_port(u, VMC_DEFAULT_PORT)
-        resolve_s = u.take("resolve_s", positive_float, RESOLVE_S, kw)
+        resolve_s = take_resolve_s(u, kw)
         view = AvatarView(facing=u.take("facing", one_of(*FACINGS), FACINGS[0], kw),
                           mirror=u.take("mirror", boolean, False, kw))
         _reject_protocol_options(u)

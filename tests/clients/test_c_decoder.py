@@ -72,6 +72,22 @@ def test_small_joint_budget_build(tmp_path: Path) -> None:
     assert events == json.loads((VECTOR_DIR / "session.json").read_text())["events"]
     events, _ = run_dump(exe, VECTOR_DIR / "long_block.bin")
     assert events == [{"error": "malformed"}]
+    # 0 joints fit any budget; the protocol's 64 do not fit 25 (each packet refused alone, the stream goes on)
+    events, _ = run_dump(exe, VECTOR_DIR / "joints_empty.bin")
+    assert events == json.loads((VECTOR_DIR / "joints_empty.json").read_text())["events"]
+    events, _ = run_dump(exe, VECTOR_DIR / "joints_max.bin")
+    assert events == [{"error": "malformed"}, {"error": "malformed"}]
+
+
+@pytest.mark.parametrize("name, counts", [("joints_empty", [0, 0, 25]), ("joints_max", [64, 64])])
+def test_c_decoder_takes_the_smallest_and_largest_joint_counts(ghj_dump: Path, name: str, counts: list[int]) -> None:
+    """Count 0 (no mask byte, no joint) and count 64 (an 8-byte mask) decode in C as in Python, whatever the
+    chunking: the vectors firmware ports check against (session 53)."""
+    expected = json.loads((VECTOR_DIR / f"{name}.json").read_text())["events"]
+    assert [len(e["joints"]) for e in expected] == counts
+    for chunk in (1, 3, 4096):
+        events, stats = run_dump(ghj_dump, VECTOR_DIR / f"{name}.bin", chunk)
+        assert events == expected and stats["malformed"] == 0
 
 
 def test_header_compiles_as_cpp(tmp_path: Path) -> None:

@@ -352,3 +352,132 @@ def test_a_backoff_the_worker_cannot_wait_is_refused(policy: dict) -> None:
     # Event.wait(1e12) raises OverflowError: the worker died after the first failed connect
     with pytest.raises(ValueError, match="backoff policy"):
         BackoffPolicy(**policy)
+
+
+# ---- stalled: up, but the receiver stopped reading (session 53) ---------------------------------------------
+
+
+def test_a_link_that_drops_every_frame_reads_stalled_until_one_gets_through(caplog: pytest.LogCaptureFixture) -> None:
+    # Every write timing out (a serial or USB receiver that stopped reading) only showed in dropped_error and
+    # last_error: the state read "up" and the daemon's STATUS= line said nothing.
+    sink = ScriptedSink(queue=1, stall_s=0.1).start()
+    with caplog.at_level(logging.INFO, logger="firmware_host.sinks"):
+        try:
+            wait_until(lambda: sink.stats().connected, what="connected")
+            seq = 0
+
+            def send_failing() -> bool:
+                nonlocal seq
+                sink.fail_next.append(SinkWriteError("scripted://", "write timed out"))
+                sink.send(make_frame(seq))
+                seq += 1
+                time.sleep(0.01)
+                return sink.stats().state == "stalled"
+
+            wait_until(send_failing, what="stalled")
+            s = sink.stats()
+            assert s.connected and s.stalled_s is not None and s.stalled_s >= 0.1
+            assert "write timed out" in (s.last_error or "")
+
+            def warned() -> list[logging.LogRecord]:
+                return [r for r in sink_records(caplog, logging.WARNING) if "stalled" in r.getMessage()]
+
+            wait_until(lambda: send_failing() and bool(warned()), what="the stall logged")
+            for _ in range(3):  # more failures: still one WARNING for this stall
+                send_failing()
+            assert sink.wait_drained(5)
+            warnings = warned()
+            assert len(warnings) == 1, [r.getMessage() for r in warnings]
+            sink.fail_next.clear()
+            sink.send(make_frame(seq))  # gets through: up again at once
+            assert sink.wait_drained(5)
+            s = sink.stats()
+            assert (s.state, s.stalled_s) == ("up", None)
+            # logged by the worker just after it counts the frame (outside the lock): wait for it
+            wait_until(lambda: any("get through again" in r.getMessage() for r in sink_records(caplog, logging.INFO)),
+                       what="the stall's end logged")
+        finally:
+            sink.close()
+
+
+def test_a_link_that_fails_now_and_then_is_not_stalled() -> None:
+    sink = ScriptedSink(stall_s=0.1).start()
+    try:
+        wait_until(lambda: sink.stats().connected, what="connected")
+        for seq in range(20):  # every other frame lost, for longer than stall_s: the receiver still reads
+            if seq % 2 == 0:
+                sink.fail_next.append(SinkWriteError("scripted://", "short write"))
+            sink.send(make_frame(seq))
+            assert sink.wait_drained(5)
+            assert sink.stats().state == "up"
+            time.sleep(0.01)
+    finally:
+        sink.close()
+
+
+def test_a_write_that_never_returns_reads_stalled() -> None:
+    # a blocking write (a named pipe whose reader stopped) fails nothing: its time in progress is what counts
+    sink = ScriptedSink(stall_s=0.1).start()
+    try:
+        wait_until(lambda: sink.stats().connected, what="connected")
+        sink.gate.clear()
+        sink.send(make_frame(0))
+        wait_until(lambda: sink.stats().in_flight == 1, what="frame 0 in flight")
+        assert sink.stats().state == "up"  # just started
+        wait_until(lambda: sink.stats().state == "stalled", what="stalled while the write hangs")
+        sink.gate.set()
+        assert sink.wait_drained(5)
+        assert (sink.stats().state, sink.stats().stalled_s) == ("up", None)
+    finally:
+        sink.gate.set()
+        sink.close()
+
+
+def test_a_stalled_link_that_is_lost_reads_down_not_stalled() -> None:
+    sink = ScriptedSink(queue=1, stall_s=0.1).start()
+    try:
+        wait_until(lambda: sink.stats().connected, what="connected")
+        seq = 0
+
+        def send_failing() -> bool:
+            nonlocal seq
+            sink.fail_next.append(SinkWriteError("scripted://", "write timed out"))
+            sink.send(make_frame(seq))
+            seq += 1
+            time.sleep(0.01)
+            return sink.stats().state == "stalled"
+
+        wait_until(send_failing, what="stalled")
+        assert sink.wait_drained(5)
+        sink.connect_failures_left = 10**6
+        sink.fail_next[:] = [SinkUnavailableError("scripted://", "unplugged")]
+        sink.send(make_frame(seq))
+        wait_until(lambda: sink.stats().connect_failures >= 1, what="a failed reconnect")
+        assert (sink.stats().state, sink.stats().stalled_s) == ("down", None)
+        sink.connect_failures_left = 0
+        wait_until(lambda: sink.stats().connected, what="reconnected")
+        assert sink.stats().state == "up"  # a new link: no stall carried over
+    finally:
+        sink.close()
+
+
+@pytest.mark.parametrize("url", ["memory://?stall_s=0.01", "memory://?stall_s=1e9", "memory://?stall_s=nan",
+                                 "memory://?stall_s=0"])
+def test_a_stall_time_out_of_range_is_refused_by_name(url: str) -> None:
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks import open_sink
+
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url)
+    assert info.value.field == "stall_s"
+
+
+def test_stall_s_is_a_url_option_of_every_sink() -> None:
+    from firmware_host.sinks import open_sink
+
+    for url in ("memory://?stall_s=0.5", "udp://127.0.0.1:9?stall_s=0.5", "vmc://127.0.0.1:9?stall_s=0.5"):
+        sink = open_sink(url)
+        try:
+            assert sink.options.stall_s == 0.5, url
+        finally:
+            sink.close()

@@ -51,3 +51,60 @@ def test_the_state_and_a_refusal_keep_their_place_beside_sinks_that_are_down() -
     health.reload_error = None
     one = health.status_line({"udp://robot.local:9870": {"state": "down", "last_error": "no route"}})
     assert one.endswith("; sink udp://robot.local:9870 down: no route") and len(one) <= 200
+
+
+def test_a_stalled_sink_is_named_with_how_long_and_its_error() -> None:
+    # A receiver that stopped reading left the sink "up": systemctl status said nothing of it
+    url = "serial:///dev/ttyACM0?baud=921600"
+    error = f"{url}: write failed: write timed out after 100 ms (0 of 208 bytes out; the peer is not reading)"
+    health = Health(rig_url="sim://")
+    health.enter(State.RUNNING)
+    line = health.status_line({url: {"state": "stalled", "stalled_s": 4.6, "connected": True, "last_error": error},
+                               "memory://": {"state": "up", "stalled_s": None, "last_error": None}})
+    assert line.endswith(f"; sink {url} stalled 5 s: write timed out after 100 ms (0 of 208 bytes out; the peer "
+                         "is not reading)"), line
+    assert "memory://" not in line and len(line) <= 200
+    # a write that never returned has no error yet: say so rather than "not connected"
+    line = health.status_line({"file:///run/joints.fifo": {"state": "stalled", "stalled_s": 3.0, "last_error": None}})
+    assert line.endswith("; sink file:///run/joints.fifo stalled 3 s: a write that has not returned")
+
+
+def test_many_sinks_down_and_stalled_are_counted_when_they_do_not_fit() -> None:
+    health = Health(rig_url="depthai://")
+    health.enter(State.WAITING)
+    health.last_error = "cannot open depthai://: " + "X_LINK_DEVICE_NOT_FOUND " * 20
+    health.reload_error = "reload refused: /etc/ghnerf/daemon.json: rig.ulr: unknown key"
+    sinks = {f"udp://robot-{k}.local:9870": {"state": "down", "last_error": "unavailable: " + "x" * 80}
+             for k in range(2)}
+    sinks.update({f"serial:///dev/ttyACM{k}": {"state": "stalled", "stalled_s": 9.0, "last_error": "y" * 80}
+                  for k in range(3)})
+    line = health.status_line(sinks)
+    assert len(line) <= 200
+    assert "; 2 sinks down, 3 stalled" in line or "; sink udp://robot-0.local:9870 down" in line
+    only_stalled = {k: v for k, v in sinks.items() if v["state"] == "stalled"}
+    line = health.status_line(only_stalled)
+    assert "; 3 sinks stalled" in line or "; sink serial:///dev/ttyACM0 stalled 9 s" in line
+
+
+def test_a_real_stalled_sink_reaches_the_report_and_the_status_line() -> None:
+    sink = open_sink("memory://?max_bytes=300&stall_s=0.1&status_s=3600", backoff=FAST_BACKOFF)
+    from tests.firmware_host.joint_stream_helpers import make_frame
+
+    seq = 0
+
+    def stalled() -> bool:  # the buffer is never read: once full, every frame is dropped
+        nonlocal seq
+        sink.send(make_frame(seq))
+        seq += 1
+        return sink.stats().state == "stalled"
+
+    try:
+        wait_until(stalled, what="a memory sink never read reported stalled")
+        health = Health(rig_url="sim://")
+        health.enter(State.RUNNING)
+        report = health.report(counters(sink))["sinks"]["memory://?max_bytes=300&stall_s=0.1&status_s=3600"]
+        line = health.status_line(counters(sink))
+    finally:
+        sink.close()
+    assert report["state"] == "stalled" and report["connected"] and report["stalled_s"] >= 0.1
+    assert "stalled" in line and "buffer full (300 bytes); call read()" in line

@@ -413,3 +413,32 @@ def test_closing_an_unplugged_port_does_not_wait_for_its_queue() -> None:
     finally:
         ser.close()
     assert time.monotonic() - t0 < 1.0
+
+
+def test_a_receiver_that_stops_reading_makes_the_port_read_stalled_then_up(link: Path) -> None:
+    # Every frame timing out showed only in dropped_error and last_error: the state read "up"
+    port = PtyPort(link)
+    sink = open_sink(f"serial://{link}?baud=921600&queue=4&write_timeout_ms=20&status_s=3600&stall_s=0.2",
+                     backoff=FAST_BACKOFF)
+    seq = 0
+
+    def send_then(state: str) -> bool:
+        nonlocal seq
+        sink.send(make_frame(seq))
+        seq += 1
+        time.sleep(0.005)
+        return sink.stats().state == state
+
+    try:
+        assert sink.wait_connected(5)
+        port.pause()
+        wait_until(lambda: send_then("stalled"), timeout=10, what="stalled once the pty's buffer is full")
+        s = sink.stats()
+        assert s.connected and s.stalled_s is not None and s.stalled_s >= 0.2
+        assert "the peer is not reading" in (s.last_error or "")
+        port.resume()
+        wait_until(lambda: send_then("up"), timeout=10, what="up once the receiver reads again")
+        assert sink.stats().stalled_s is None
+    finally:
+        sink.close()
+        port.unplug()

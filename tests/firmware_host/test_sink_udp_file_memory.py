@@ -169,32 +169,33 @@ def test_file_sink_on_a_read_only_path_says_how_the_service_may_write_there(tmp_
 
 
 class _CutShort:
-    """A file whose next write stops half way through its text with ENOSPC, as on a full disk."""
+    """``write_within`` whose next call stops half way through its data with ENOSPC, as on a full disk."""
 
-    def __init__(self, fh: Any) -> None:
-        self.fh = fh
+    def __init__(self, real: Any) -> None:
+        self.real = real
+        self.armed = False
 
-    def write(self, text: str) -> int:
-        self.fh.write(text[: len(text) // 2])
-        self.fh.flush()
+    def __call__(self, fd: int, data: bytes, timeout_s: float) -> int:
+        if not self.armed:
+            return self.real(fd, data, timeout_s)
+        self.armed = False
+        self.real(fd, data[: len(data) // 2], timeout_s)
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    def flush(self) -> None:
-        self.fh.flush()
 
-    def close(self) -> None:
-        self.fh.close()
-
-
-def test_file_sink_ends_a_line_a_failed_write_cut_short(tmp_path: Path) -> None:
+def test_file_sink_ends_a_line_a_failed_write_cut_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # the reopened file's HELLO went on the end of the half line: one unparsable line of both
+    from firmware_host.sinks import file_sink
+
+    cut = _CutShort(file_sink.write_within)
+    monkeypatch.setattr(file_sink, "write_within", cut)
     path = tmp_path / "joints.jsonl"
     sink = open_sink(path.as_uri() + "?status_s=3600", backoff=FAST_BACKOFF)
     try:
         assert sink.wait_connected(5)
         sink.send(make_frame(0))
         assert sink.wait_drained(5)
-        sink._fh = _CutShort(sink._fh)  # type: ignore[attr-defined]  # idle: no STATUS due for an hour
+        cut.armed = True  # idle: no STATUS due for an hour
         sink.send(make_frame(1))
         wait_until(lambda: sink.stats().connects == 2, what="the file reopened")
         sink.send(make_frame(2))
@@ -599,3 +600,73 @@ def test_a_recording_stopped_by_sigterm_is_whole_lines_to_its_last_frame(tmp_pat
     messages = [json.loads(line) for line in data.splitlines()]
     seqs = [m["seq"] for m in messages if m["type"] == "JOINTS"]
     assert len(seqs) > 50 and seqs == sorted(set(seqs))
+
+
+def test_file_sink_into_a_fifo_whose_reader_stops_reading_reads_stalled_and_never_holds_its_worker(
+        tmp_path: Path) -> None:
+    # Once open, the pipe was written blocking: a reader that stopped reading held the worker inside write() for
+    # as long as it stayed away, the sink reading "up" (no error, nothing dropped but the queue's) and close()
+    # leaving that thread behind.
+    import fcntl
+    import os
+
+    fifo = tmp_path / "joints.fifo"
+    os.mkfifo(fifo)
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        fcntl.fcntl(reader, fcntl.F_SETPIPE_SZ, 4096)  # the smallest pipe: a few lines fill it
+        sink = open_sink(fifo.as_uri() + "?status_s=3600&stall_s=0.2&write_timeout_ms=20&queue=2",
+                         backoff=FAST_BACKOFF)
+        seq = 0
+
+        def send_one() -> None:
+            nonlocal seq
+            sink.send(make_frame(seq))
+            seq += 1
+            time.sleep(0.005)
+
+        try:
+            assert sink.wait_connected(5)
+
+            def stalled() -> bool:  # the reader never reads: the pipe fills, then every write times out
+                send_one()
+                return sink.stats().state == "stalled"
+
+            wait_until(stalled, what="a pipe nobody reads reported stalled")
+            s = sink.stats()
+            assert s.connected and s.dropped_error >= 1 and "the reader is not reading" in (s.last_error or "")
+            assert s.stalled_s is not None and s.stalled_s >= 0.2
+            data = b""
+
+            def up_again() -> bool:  # the reader reads again: the next frame gets through
+                nonlocal data
+                try:
+                    while chunk := os.read(reader, 65536):
+                        data += chunk
+                except BlockingIOError:
+                    pass
+                send_one()
+                return sink.stats().state == "up"
+
+            wait_until(up_again, what="up once the reader reads again")
+            assert sink.wait_drained(5)
+            assert sink.stats().stalled_s is None
+        finally:
+            stats = sink.close(1.0)
+        assert stats.state == "closed" and not sink._thread.is_alive()  # type: ignore[attr-defined]
+        try:
+            while chunk := os.read(reader, 65536):
+                data += chunk
+        except BlockingIOError:
+            pass
+    finally:
+        os.close(reader)
+    lines = data.decode().splitlines()
+    parsed = []
+    for line in lines:  # a line cut by a timeout stands alone: every other line parses
+        try:
+            parsed.append(json.loads(line)["type"])
+        except json.JSONDecodeError:
+            parsed.append("cut")
+    assert parsed[:3] == ["HELLO", "STATUS", "JOINTS"] and parsed.count("JOINTS") >= 2
+    assert parsed.count("cut") <= stats.dropped_error

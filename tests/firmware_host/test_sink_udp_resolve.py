@@ -20,6 +20,13 @@ from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, w
 NAME = "robot.test"
 
 
+@pytest.fixture
+def fast_lookups(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Lets these tests look a name up every few ms: the floor (``MIN_RESOLVE_S``, 1 s) would make each wait
+    seconds for the lookups it watches."""
+    monkeypatch.setattr(udp_sink, "MIN_RESOLVE_S", 0.001)
+
+
 class Resolver:
     """Answers ``robot.test`` with ``answers`` (sockaddrs, in glibc's order); other names as usual."""
 
@@ -86,7 +93,7 @@ def test_an_ipv6_only_name_or_literal_still_uses_ipv6() -> None:
 
 @pytest.mark.parametrize("scheme", ["udp", "vmc"])
 def test_a_name_is_looked_up_again_without_holding_up_the_frames(
-        monkeypatch: pytest.MonkeyPatch, scheme: str) -> None:
+        monkeypatch: pytest.MonkeyPatch, scheme: str, fast_lookups: None) -> None:
     old, new = receiver(), receiver()
     resolver = Resolver(monkeypatch, old.getsockname())
     sink = open_sink(f"{scheme}://{NAME}:{old.getsockname()[1]}?queue=64&resolve_s=0.05", backoff=FAST_BACKOFF)
@@ -178,7 +185,8 @@ class RotatingResolver(Resolver):
 
 
 @pytest.mark.parametrize("scheme", ["udp", "vmc"])
-def test_a_name_with_several_addresses_stays_on_the_one_in_use(monkeypatch: pytest.MonkeyPatch, scheme: str) -> None:
+def test_a_name_with_several_addresses_stays_on_the_one_in_use(monkeypatch: pytest.MonkeyPatch, scheme: str,
+                                                                fast_lookups: None) -> None:
     # Each lookup of a round-robin name (or a robot on Wi-Fi and Ethernet) lists its addresses in another
     # order: taking the first every resolve_s moved the stream from one to the other and back.
     first, second = receiver(), receiver()
@@ -209,3 +217,24 @@ def test_a_name_with_several_addresses_stays_on_the_one_in_use(monkeypatch: pyte
     assert udp_sink.ipv4_first(answer, keep=("10.0.0.3", 9)) == (socket.AF_INET, ("10.0.0.2", 9))  # gone: the first
     v6_first = [(socket.AF_INET6, socket.SOCK_DGRAM, 17, "", ("::1", 9, 0, 0)), *answer]
     assert udp_sink.ipv4_first(v6_first, keep=("::1", 9, 0, 0))[0] == socket.AF_INET  # IPv4 still preferred
+
+
+@pytest.mark.parametrize("scheme", ["udp", "vmc"])
+@pytest.mark.parametrize("value", ["1e-9", "0.05", "0.999"])
+def test_a_lookup_period_below_the_floor_is_refused_by_name(scheme: str, value: str) -> None:
+    # resolve_s=1e-9 was taken: a name server asked once for every frame sent
+    from firmware_host.errors import SinkConfigError
+
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(f"{scheme}://{NAME}:9?resolve_s={value}")
+    assert info.value.field == "resolve_s" and info.value.value == float(value)
+    assert f"at least {udp_sink.MIN_RESOLVE_S:g} seconds" in str(info.value)
+
+
+@pytest.mark.parametrize("scheme", ["udp", "vmc"])
+def test_a_lookup_period_at_the_floor_is_taken(scheme: str) -> None:
+    sink = open_sink(f"{scheme}://127.0.0.1:9?resolve_s={udp_sink.MIN_RESOLVE_S:g}")
+    try:
+        assert sink._link.resolve_s == udp_sink.MIN_RESOLVE_S  # type: ignore[attr-defined]
+    finally:
+        sink.close()

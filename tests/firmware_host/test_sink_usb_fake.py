@@ -256,6 +256,31 @@ def test_a_bulk_write_that_times_out_part_way_costs_the_receiver_that_frame_only
     assert joints[1].header.flags & Flags.DROPPED and not joints[2].header.flags & Flags.DROPPED
 
 
+def test_a_board_that_stops_taking_transfers_reads_stalled_then_up() -> None:
+    # every bulk write timing out (firmware that stopped reading its endpoint) left the sink "up"
+    device = FakeDevice()
+    sink = open_sink(URL + "&stall_s=0.1&status_s=3600", backend=FakeBackend(device), backoff=FAST_BACKOFF)
+    seq = 0
+
+    def send_then(state: str, times_out: bool) -> bool:
+        nonlocal seq
+        if times_out:
+            device.time_out_after = 0  # the board takes none of this transfer
+        sink.send(make_frame(seq))
+        seq += 1
+        assert sink.wait_drained(5)
+        return sink.stats().state == state
+
+    try:
+        assert sink.wait_connected(5)
+        wait_until(lambda: send_then("stalled", True), what="stalled while every transfer times out")
+        s = sink.stats()
+        assert s.connected and s.disconnects == 0 and "timed out" in (s.last_error or "")
+        assert send_then("up", False) and sink.stats().stalled_s is None  # the first frame through
+    finally:
+        sink.close()
+
+
 # ---- choosing one of two boards of one VID:PID: ?serial= and ?port= ----
 
 def _two_boards() -> tuple[FakeDevice, FakeDevice]:
