@@ -44,7 +44,7 @@ from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_war
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
-from ghnerf_runtime.rig_file import load_rig, save_rig, write_text_atomic
+from ghnerf_runtime.rig_file import load_rig, save_rig, write_bytes_atomic, write_text_atomic
 
 __all__ = ["main", "build_parser"]
 
@@ -444,6 +444,8 @@ def cmd_solve(args: argparse.Namespace) -> int:
                                "--report" if args.report else "report", "report file")
     if report_path.resolve() == out.resolve():  # the report written over the rig it describes
         raise UsageError(f"--report {report_path} is the rig file (--out {out}): give the report another path")
+    previous = {out: _previous_path(out, "--out"), report_path: _previous_path(report_path, "--report")}
+    _check_kept_apart(previous, {"--out": out, "--report": report_path})
     _stream_name(args.rig_id, MAX_RIG_ID_LEN, "--rig-id")
     cameras = _cameras(args.cameras)
     ordered = cameras is not None or read_camera_order(args.images) is not None
@@ -479,8 +481,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
                          rig_id=args.rig_id)
-    # the report first, so the rig file is never newer than its report; if save_rig then fails, the new
-    # report is left beside the old rig
+    # the previous rig and report kept first (copies: rig.prev.json, rig.report.prev.json), then the report, so
+    # the rig file is never newer than its report; if save_rig then fails, the new report is left beside the old rig
+    kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
     write_text_atomic(report_path, json.dumps(solution.report, indent=1) + "\n")
     save_rig(solution.rig, out)
     r = solution.report
@@ -496,8 +499,15 @@ def cmd_solve(args: argparse.Namespace) -> int:
           f"pitch {lv['pitch_deg']:.2f} deg, roll {lv['roll_deg']:.2f} deg")
     for warning in r["warnings"]:
         print(f"warning: {warning}")
+    _say_kept(kept)
     print(f"wrote {out} and {report_path}")
     return 0
+
+
+def _say_kept(kept: dict[Path, Path | None]) -> None:
+    for path, prev in kept.items():
+        if prev is not None:
+            print(f"kept the previous {path} as {prev}")
 
 
 def _check_pairing(images: str, names: Sequence[str], views: dict, missed: dict, floor_view: str | None) -> None:
@@ -568,6 +578,37 @@ def _output_path(text: str | Path, flag: str, what: str) -> Path:
     return out
 
 
+def _previous_path(out: Path, flag: str) -> Path:
+    """Where ``solve`` and ``import`` keep the file ``out`` held before they replace it: ``<stem>.prev<suffix>``
+    beside it (``rig.json``: ``rig.prev.json``). A recalibration that came out worse can then be undone,
+    without a --force to remember (``board`` and ``synth`` ask for one: what they replace is not theirs to
+    keep). Checked before the work, as :func:`_output_path` checks ``out``."""
+    prev = out.with_name(f"{out.stem}.prev{out.suffix}")
+    if out.exists() and (prev.is_dir() or (prev.exists() and not os.access(prev, os.W_OK))):
+        raise UsageError(f"{flag} {out}: the file it holds is kept as {prev} before it is replaced, but that is "
+                         f"{'a folder' if prev.is_dir() else 'read-only'}: move it away or give another path")
+    return prev
+
+
+def _check_kept_apart(previous: dict[Path, Path], others: dict[str, Path]) -> None:
+    """Refuse a run where a previous file would be kept on top of another file it reads or writes
+    (``--report rig.prev.json``; ``import calib.prev.yml --out calib.yml`` copied the old rig over its input)."""
+    for out, prev in previous.items():
+        for flag, path in others.items():
+            if path.exists() and path.resolve() == prev.resolve() or path.absolute() == prev.absolute():
+                raise UsageError(f"{flag} {path} is where the previous {out} is kept ({prev}): give another path")
+
+
+def _keep_previous(out: Path, prev: Path) -> Path | None:
+    """Copy ``out``, when it exists, to ``prev`` (atomically, replacing an older one) before a new ``out`` takes
+    its name; the copy's path, or ``None`` when there was nothing to keep. Copied, not renamed: a daemon reading
+    ``out`` never finds it missing."""
+    if not out.exists():
+        return None
+    write_bytes_atomic(prev, out.read_bytes())
+    return prev
+
+
 def _is_rig_file(path: Path) -> bool:
     """A JSON file in our own rig format (given to ``import`` by mistake: it names no OpenCV key)."""
     from ghnerf_runtime.rig_file import FORMAT
@@ -609,6 +650,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     out = _output_path(args.out, "--out", "rig file")
     if out.exists() and out.resolve() == source.resolve():
         raise UsageError(f"--out {out} is the file being imported: give the rig file another path")
+    previous = {out: _previous_path(out, "--out")}
+    _check_kept_apart(previous, {"FILE": source} | ({"--extrinsics": Path(args.extrinsics)} if args.extrinsics else {}))
     if args.camera_height is None and (args.pitch is not None or args.roll is not None):
         raise UsageError("--pitch and --roll go with --camera-height (the first camera's height above the floor)")
     if args.rig_id is not None:
@@ -636,6 +679,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     if args.camera_height is not None:
         rig = level_rig(rig, camera_height_m=args.camera_height, pitch_deg=args.pitch or 0.0,
                         roll_deg=args.roll or 0.0, volume=volume)
+    kept = {out: _keep_previous(out, previous[out])}
     save_rig(rig, out)
     a, b = rig.pair
     units = rig.metadata.get("source", {}).get("units_to_metres")
@@ -659,6 +703,7 @@ def cmd_import(args: argparse.Namespace) -> int:
               + (f" ({mismatch})" if mismatch else "")
               + ", and the runtime reads y as down with the floor at y = 0 (the skeleton prior, upright crops, the "
               "working volume): import again with --camera-height M (and --pitch, --roll) of the first camera")
+    _say_kept(kept)
     print(f"wrote {out}")
     return 0
 

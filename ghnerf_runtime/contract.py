@@ -51,7 +51,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_NAMES
-from ghnerf_runtime.errors import GeometryError, RuntimeErrorBase
+from ghnerf_runtime.errors import DepthRangeError, GeometryError, RuntimeErrorBase
 
 #: Contract format version. A different *major* is refused by :meth:`ModelContract.from_metadata`.
 CONTRACT_VERSION = "1.2.0"
@@ -66,6 +66,12 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 #: Channels of the ``depth_stats`` tensor, in order.
 DEPTH_STATS_CHANNELS = ("mean", "std", "lo", "hi")
+#: The farthest a box handed to :func:`near_far_from_box` may reach from the camera (metres, along any of the
+#: camera's axes). ``near_far`` is float32: at 1e200 m it overflowed to inf, and past 16384 m the float32 spacing
+#: (2 mm) swallows the helper's 1 mm floor between near and far (they came out equal). The shipped graphs are
+#: tested finite up to 2e4 m (tests/ghnerf_runtime/test_model_extremes.py); a rig's cameras are at most
+#: ``MAX_BASELINE_M`` (10 m) apart, so nothing a rig can see is near this.
+MAX_DEPTH_M = 1e4
 #: The image feature maps a sweep level or the render heads may read (``human_feat`` is a stride's key too).
 IMAGE_FEATURES = ("feat_s1", "feat_s2", "feat_s4")
 #: Metadata key of the weights id: one value (a sha256, 64 hex digits) in every graph file, fp32 and int8, that
@@ -620,6 +626,9 @@ def near_far_from_box(camera, corners: np.ndarray, margin: float = 0.1, min_near
         GeometryError: the corners (or margin) are not finite, or the (grown) box lies wholly at or behind
             the near plane (``min_near`` in front of the camera): nothing of it can be rendered,
             and a range clamped to the near plane would look like a real one.
+        DepthRangeError: (a :class:`GeometryError`) the box reaches farther than :data:`MAX_DEPTH_M` from
+            the camera along one of its axes: float32 holds no near/far of it (the message names the box
+            and the distance).
     """
     corners = np.asarray(corners, dtype=np.float64)
     if corners.ndim != 2 or corners.shape[1] != 3:
@@ -630,10 +639,17 @@ def near_far_from_box(camera, corners: np.ndarray, margin: float = 0.1, min_near
     idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
     box = np.where(idx == 1, hi, lo)
     _, R, t = _cam_arrays(camera)
-    z = (box @ R.T + t)[:, 2]
-    if not float(z.max()) > min_near:
+    with np.errstate(over="ignore", invalid="ignore"):  # corners of 1e308 overflow to inf: refused below
+        in_cam = box @ R.T + t
+    z = in_cam[:, 2]
+    if np.isfinite(in_cam).all() and not float(z.max()) > min_near:  # an overflow is refused as too far, below
         raise GeometryError(f"the box is behind the camera's near plane ({min_near} m): camera depths "
                             f"{float(z.min()):.3f} to {float(z.max()):.3f} m")
+    reach = float(np.max(np.abs(in_cam)))  # NaN, inf where it overflowed: refused too
+    if not reach <= MAX_DEPTH_M:
+        raise DepthRangeError(f"the box from {lo.tolist()} to {hi.tolist()} (rig frame, grown by {margin:g} m) "
+                              f"reaches {reach:.6g} m from camera {getattr(camera, 'name', '?')!r}, farther "
+                              f"than the {MAX_DEPTH_M:g} m (MAX_DEPTH_M) a float32 near/far resolves")
     near = max(float(z.min()), min_near)
     far = max(float(z.max()), near + 1e-3)
     return np.array([near, far], dtype=np.float32)
@@ -655,7 +671,8 @@ def ray_grid(height: int, width: int, stride: int = 1) -> np.ndarray:
 
 
 __all__ = [
-    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "IMAGE_FEATURES", "IMAGENET_MEAN", "IMAGENET_STD",
+    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "MAX_DEPTH_M", "IMAGE_FEATURES", "IMAGENET_MEAN",
+    "IMAGENET_STD",
     "WEIGHTS_ID_KEY", "weights_id_of",
     "ContractError", "TensorSpec", "GraphSpec", "LevelSpec", "Normalisation", "ModelContract",
     "source_projections", "source_centers", "target_inputs", "target_projections", "near_far_from_box", "ray_grid",

@@ -18,6 +18,12 @@ class ShapeError(GeometryError):
     """An array argument does not have the documented shape."""
 
 
+class DepthRangeError(GeometryError):
+    """A box reaches farther from a camera than the model's float32 inputs resolve
+    (``contract.MAX_DEPTH_M``): no near/far of it can be handed to the graphs. Unlike a box wholly behind
+    the camera (nothing to render, an empty view), this is the caller's error."""
+
+
 class RigFileError(RuntimeErrorBase, ValueError):
     """A rig file (or imported calibration file) is malformed.
 

@@ -101,13 +101,24 @@ class PainterPlanes:
 def angle_from_sources_deg(view: Camera, sources: Sequence[Camera], joints: np.ndarray, valid: np.ndarray) -> float:
     """The angle (degrees) at the subject's centre (the mean of its known joints) between ``view``'s centre and
     the nearest source camera's: ``ghnerf-eval``'s angle bins. NaN without a known joint (a NaN joint marked
-    valid is not known: its NaN would make the angle NaN, which passes every ``<`` gate)."""
+    valid is not known: its NaN would make the angle NaN, which passes every ``<`` gate).
+
+    A camera standing exactly at the centre sees the subject from no side: a source there is left out, and a
+    view there (or with no source left) is at angle 0, as near a source as can be, so the painter's
+    ``painter_min_angle_deg`` gate keeps the rendered picture (it ran on such a view: the direction's
+    normalisation gave NaN, which passed the gate)."""
     joints = np.asarray(joints, np.float64)
     valid = np.asarray(valid, bool) & np.isfinite(joints).all(axis=-1)
     if not valid.any():
         return float("nan")
     centre = joints[valid].mean(axis=0)
     dirs = np.array([c.center - centre for c in (view, *sources)])
+    # scaled by the largest coordinate first: a direction of 1e-200 m squared underflowed to a norm of 0
+    scale = np.abs(dirs).max(axis=-1, keepdims=True)
+    placed = scale[:, 0] > 0.0
+    if not placed[0] or not placed[1:].any():
+        return 0.0
+    dirs = dirs[placed] / scale[placed]
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
     return float(np.degrees(np.arccos(np.clip(dirs[1:] @ dirs[0], -1.0, 1.0).max())))
 

@@ -32,7 +32,7 @@ import numpy as np
 from ghnerf_runtime.body25 import LIMBS
 from ghnerf_runtime.config import NOVEL_PATHS, NovelViewConfig
 from ghnerf_runtime.contract import near_far_from_box, target_inputs
-from ghnerf_runtime.errors import ConfigError, GeometryError
+from ghnerf_runtime.errors import ConfigError, DepthRangeError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre, subject_pivot
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
@@ -300,12 +300,15 @@ def check_strides(config: NovelViewConfig, size: int) -> None:
 
 def _near_far_in_view(camera: Camera, box: np.ndarray, margin: float) -> np.ndarray | None:
     """The near/far of the subject box for ``camera``, or None when the box is wholly behind it (a requested
-    camera facing away). A non-finite box is an error, not an empty view."""
+    camera facing away). A non-finite box is an error, not an empty view, and so is one farther from the camera
+    than float32 resolves (:class:`DepthRangeError`: its near/far overflowed to inf at 1e200 m)."""
     if not np.isfinite(box).all():
         raise GeometryError(f"novel view: the subject box is not finite: {np.asarray(box).tolist()}")
     try:
         return near_far_from_box(camera, box_corners(box), margin)
-    except GeometryError:  # finite, so: behind the near plane
+    except DepthRangeError:
+        raise
+    except GeometryError:  # finite and within reach, so: behind the near plane
         return None
 
 

@@ -174,12 +174,16 @@ def proxy_matte(image_bgr: np.ndarray, camera: Camera, depth: np.ndarray, region
         kept = covered | _discs(covered.shape, camera, *reach_spheres(joints, found))
     else:
         kept = covered
-    px_per_m = float(np.sqrt(camera.K[0, 0] * camera.K[1, 1])) / float(np.median(depth[covered]))
+    # Distances in metres at the proxy's median depth, not the margins in pixels: pixels per metre is
+    # f / depth, which overflowed to inf for a denormal depth (1e-308), and inf / inf made the weight NaN.
+    # A tiny depth now gives metres per pixel of 0: every pixel within the margin, nothing matted.
+    m_per_px = float(np.median(depth[covered])) / (float(np.sqrt(camera.K[0, 0])) * float(np.sqrt(camera.K[1, 1])))
+    m_per_px = min(m_per_px, float(np.finfo(np.float64).max))  # a huge depth over a tiny focal length: not inf
     distance = cv2.distanceTransform((~kept).astype(np.uint8), cv2.DIST_L2, 5)  # px to the silhouette
-    beyond = distance - margin_m * px_per_m
-    feather = feather_m * px_per_m
-    weight = (beyond <= 0).astype(np.float32) if feather <= 0 else \
-        np.clip(1.0 - beyond / feather, 0.0, 1.0).astype(np.float32)
+    with np.errstate(over="ignore"):  # a huge m_per_px: inf metres, beyond any feather (weight 0)
+        beyond_m = distance.astype(np.float64) * m_per_px - margin_m  # 0 px stays 0 m: never 0 * inf
+    weight = (beyond_m <= 0).astype(np.float32) if feather_m <= 0 else \
+        np.clip(1.0 - beyond_m / feather_m, 0.0, 1.0).astype(np.float32)
     if weight.min() >= 1.0:
         return ProxyMatte(image, weight, True)
     bg = np.float32(background * 255.0)

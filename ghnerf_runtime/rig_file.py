@@ -91,6 +91,7 @@ __all__ = [
     "dumps_rig",
     "loads_rig",
     "write_text_atomic",
+    "write_bytes_atomic",
     "principal_point_problem",
     "focal_length_problem",
     "distortion_problem",
@@ -532,16 +533,25 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     Raises:
         RigFileError: the file cannot be written.
     """
-    path = Path(path)
-    if path.is_symlink():  # write through the link (a rig file linked from /etc): replacing it would cut the link
-        path = Path(os.path.realpath(path))
-    directory = path.parent if str(path.parent) else Path(".")
-    tmp = directory / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp"
     try:
         data = text.encode("utf-8")
     except UnicodeEncodeError as e:  # a lone surrogate in a name or the metadata
         raise RigFileError(f"cannot write file: the text is not UTF-8 ({e.reason} at character {e.start})",
                            path=str(path)) from e
+    write_bytes_atomic(path, data)
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
+    """:func:`write_text_atomic` for bytes (a file copied as it is, whatever it holds).
+
+    Raises:
+        RigFileError: the file cannot be written.
+    """
+    path = Path(path)
+    if path.is_symlink():  # write through the link (a rig file linked from /etc): replacing it would cut the link
+        path = Path(os.path.realpath(path))
+    directory = path.parent if str(path.parent) else Path(".")
+    tmp = directory / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp"
     try:
         mode = path.stat().st_mode & 0o7777 if path.exists() else None
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)

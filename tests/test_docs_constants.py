@@ -35,7 +35,7 @@ from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import Joints3DConfig, TrackingConfig
-from ghnerf_runtime.contract import WEIGHTS_ID_KEY
+from ghnerf_runtime.contract import MAX_DEPTH_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.estimator import _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, PairResult
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
@@ -131,6 +131,9 @@ def _doc(name: str) -> str:
     ("docs/protocol.md", f"at least every {MIN_RESOLVE_S:g} s (`MIN_RESOLVE_S`"),
     ("docs/protocol.md", f"`resolve_s` ({RESOLVE_S:g}, at least {MIN_RESOLVE_S:g});"),
     ("docs/daemon.md", f"every `resolve_s` ({RESOLVE_S:g}, at least {MIN_RESOLVE_S:g}) seconds"),
+    # session 53: the farthest box a float32 near/far is made of
+    ("docs/model.md", f"for a box reaching farther than {MAX_DEPTH_M:g} m (`MAX_DEPTH_M`)"),
+    ("docs/runtime.md", f"farther than {MAX_DEPTH_M / 1000:g} km (`contract.MAX_DEPTH_M`)"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
     ("docs/protocol.md", f"a name past {MAX_HOST_NAME} characters), named when the sink opens"),
 ])

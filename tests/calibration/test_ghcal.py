@@ -872,3 +872,41 @@ def test_solve_prints_its_figures_with_their_units(capture, tmp_path, capsys):
             f"{c['coverage']:.0%} of the image, f {c['K'][0][0]:.1f} px") in out, out
     assert f"pair: reprojection {p['rms_px']:.3f} px rms over {p['views']} views, baseline " in out, out
     assert "levelled by the height and tilt given: left 1.400 m above the floor, pitch 24.00 deg" in out, out
+
+
+def test_solving_again_keeps_the_previous_rig_and_its_report(capture, tmp_path, capsys):
+    # the previous calibration was replaced without a word: a recalibration that came out worse could not be undone
+    rig_path, report_path = tmp_path / "rig.json", tmp_path / "rig.report.json"
+    save_rig(example_rig(), rig_path)
+    old_rig, old_report = rig_path.read_bytes(), b'{"earlier": "report"}\n'
+    report_path.write_bytes(old_report)
+    assert cli.main(["solve", "--images", str(capture), "--floor-view", "floor", "--out", str(rig_path)]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "rig.prev.json").read_bytes() == old_rig
+    assert (tmp_path / "rig.report.prev.json").read_bytes() == old_report
+    assert f"kept the previous {rig_path} as {tmp_path / 'rig.prev.json'}" in out
+    assert f"kept the previous {report_path} as {tmp_path / 'rig.report.prev.json'}" in out
+    assert load_rig(rig_path).metadata["calibration"]["floor_view"] == "floor"  # the new one took the name
+    assert json.loads(report_path.read_text())["cameras"]["left"]["views"] > 0
+    assert not list(tmp_path.glob(".*tmp"))
+
+
+def test_solve_refuses_to_keep_the_previous_rig_on_its_report_or_in_a_folder(tmp_path, capsys, monkeypatch):
+    def no_detection(*args, **kwargs):
+        raise AssertionError("the images were read before the outputs were checked")
+
+    images = tmp_path / "capture"
+    for cam in ("left", "right"):
+        (images / cam).mkdir(parents=True)
+    (images / "board.json").write_text(json.dumps(BOARD.to_dict()))
+    monkeypatch.setattr(cli, "detect_folder", no_detection)
+    rig_path = tmp_path / "rig.json"
+    rig_path.write_text("{}")
+    base = ["solve", "--images", str(images), "--floor-view", "floor", "--out", str(rig_path)]
+    assert cli.main(base + ["--report", str(tmp_path / "rig.prev.json")]) == 2
+    assert f"--report {tmp_path / 'rig.prev.json'} is where the previous {rig_path} is kept" in capsys.readouterr().err
+    (tmp_path / "rig.prev.json").mkdir()
+    assert cli.main(base) == 2
+    assert f"is kept as {tmp_path / 'rig.prev.json'} before it is replaced, but that is a folder" in \
+        capsys.readouterr().err
+    assert rig_path.read_text() == "{}"

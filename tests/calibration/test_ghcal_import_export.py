@@ -214,3 +214,32 @@ def test_a_typed_pitch_read_from_the_vertical_is_warned_about_on_import_as_in_so
     assert cli.main(["import", str(foreign), "--out", str(tmp_path / "usual.json"), "--camera-height", "1.4",
                      "--pitch", "24"]) == 0
     assert "warning" not in capsys.readouterr().out
+
+
+def test_importing_over_a_rig_keeps_the_previous_one_each_time(rig_file, tmp_path, capsys):
+    # import replaced the rig file without --force and without a copy: the previous calibration was lost
+    foreign = tmp_path / "calibration.yml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign)]) == 0
+    first = rig_file.read_bytes()
+    prev = tmp_path / "rig.prev.json"
+    assert cli.main(["import", str(foreign), "--out", str(rig_file), "--rig-id", "second"]) == 0
+    assert f"kept the previous {rig_file} as {prev}" in capsys.readouterr().out
+    assert prev.read_bytes() == first and load_rig(rig_file).rig_id == "second"
+    second = rig_file.read_bytes()
+    assert cli.main(["import", str(foreign), "--out", str(rig_file), "--rig-id", "third"]) == 0
+    assert prev.read_bytes() == second and load_rig(rig_file).rig_id == "third"  # replaced each time
+    capsys.readouterr()
+    # a new file keeps nothing and says nothing of it
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "new.json")]) == 0
+    assert "kept the previous" not in capsys.readouterr().out and not (tmp_path / "new.prev.json").exists()
+
+
+def test_import_refuses_to_keep_the_previous_rig_over_the_file_it_imports(rig_file, tmp_path, capsys):
+    source = tmp_path / "lab.prev.yml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(source)]) == 0
+    text = source.read_text()
+    out = tmp_path / "lab.yml"
+    out.write_text("an earlier rig\n")
+    assert cli.main(["import", str(source), "--out", str(out)]) == 2
+    assert f"FILE {source} is where the previous {out} is kept" in capsys.readouterr().err
+    assert source.read_text() == text and out.read_text() == "an earlier rig\n"

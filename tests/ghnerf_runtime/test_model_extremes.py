@@ -392,6 +392,25 @@ def test_novel_views_at_the_alpha_bounds_and_at_odd_cameras(precision):
         assert r.novel_view is not None and r.num_found > 0, name
 
 
+def test_a_requested_camera_beyond_float32_depths_is_a_typed_error_naming_the_box():
+    """A camera 20 km off (past ``MAX_DEPTH_M``): its near/far were handed to the graphs as float32 that had lost
+    the millimetre between them (at 1e200 m, inf). The view cannot be served: a DepthRangeError says why."""
+    from ghnerf_runtime.errors import DepthRangeError
+    from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at
+    from ghnerf_runtime.novel_view import NovelViewRequest
+
+    sim = pytest.importorskip("drivers.sim")
+    est = _estimator("fp32")
+    scene = sim.SimScene(sim.SceneConfig(seed=1, motion="wave"))
+    pair = [scene.render(c, 0.2, with_truth=False)[0] for c in est.rig.pair]
+    far = Camera("far", 640, 480, intrinsics_from_fov(640, 480, 2.0), np.zeros(5),
+                 *look_at((0.0, -1.0, -2e4), (0.0, -1.0, 3.0)))
+    said = r"\(rig frame, grown by 0\.1 m\) reaches 2000\d\.\d+ m from camera 'far'"
+    with pytest.raises(DepthRangeError, match=said):
+        est.estimate(pair, novel_view=NovelViewRequest(camera=far))
+    assert est.estimate(pair).num_found > 0  # the estimator goes on
+
+
 @pytest.mark.parametrize("alpha", [-1.0001, 2.0001, float("nan"), float("inf")])
 def test_a_novel_view_alpha_past_its_bounds_is_a_typed_error(alpha):
     """Past [-1, 2] the request is refused with the documented GeometryError, before any graph runs."""

@@ -377,3 +377,29 @@ def test_the_painter_mask_is_where_the_depth_shows_a_surface():
     assert surface_mask(depth, subject).tolist() == [[True, False, True], [False, False, False]]
     with pytest.raises(ShapeError, match=r"subject mask \(2, 2\) must be the depth map's shape \(2, 3\)"):
         surface_mask(depth, np.ones((2, 2), bool))
+
+
+def _cam_at(centre, name: str):
+    from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov
+    c = np.asarray(centre, np.float64)
+    return Camera(name, 64, 64, intrinsics_from_fov(64, 64, 40.0), np.zeros(5), np.eye(3), -c)
+
+
+def test_a_view_at_the_subjects_centre_is_at_angle_0_not_nan():
+    """The view exactly at the joints' centre: its direction normalised to NaN, the angle was NaN, and
+    ``angle < painter_min_angle_deg`` (False for NaN) let the painter run. By the documented rule it is 0."""
+    centre = np.array([0.0, -1.0, 3.0])  # the mean of 25 copies is exactly it (x = 0: 1e-200 beside it counts)
+    joints, valid = np.tile(centre, (25, 1)), np.ones(25, bool)
+    sources = [_cam_at(centre + [0.0, 0.0, -3.0], "a"), _cam_at(centre + [1.0, 0.0, -3.0], "b")]
+    view = _cam_at(centre, "view")
+    assert np.array_equal(view.center, centre)
+    assert angle_from_sources_deg(view, sources, joints, valid) == 0.0
+    assert not angle_from_sources_deg(view, sources, joints, valid) >= NovelViewConfig().painter_min_angle_deg
+    # 1e-200 m off the centre is a direction still: its squares underflowed, and the norm to 0 (NaN again)
+    beside = _cam_at(centre + [1e-200, 0.0, 0.0], "beside")
+    want = np.degrees(np.arccos(1.0 / np.sqrt(10.0)))  # +x from the centre against source b's (1, 0, -3)
+    assert angle_from_sources_deg(beside, sources, joints, valid) == pytest.approx(want, abs=1e-9)
+    # a source at the centre sees the subject from no side: the other source gives the angle
+    assert angle_from_sources_deg(beside, [_cam_at(centre, "in"), sources[1]], joints, valid) == \
+        pytest.approx(want, abs=1e-9)
+    assert angle_from_sources_deg(beside, [_cam_at(centre, "in")], joints, valid) == 0.0

@@ -1,6 +1,7 @@
 """Novel-view ray selection: the coarse silhouette pass renders only the cells the subject covers."""
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -544,3 +545,49 @@ def test_a_request_whose_camera_is_not_a_camera_is_refused_when_made(camera):
     from ghnerf_runtime.novel_view import NovelViewRequest
     with pytest.raises(GeometryError, match=r"NovelViewRequest\.camera must be a Camera or None"):
         NovelViewRequest(camera=camera)
+
+
+# ------------------------------------------------------------------ numerical extremes (session 53)
+@pytest.mark.parametrize("offset", [1e200, 1e30, 2e4])
+def test_a_subject_box_beyond_float32_depths_is_an_error_naming_it_not_an_inf_near_far(offset):
+    """A box around 1e200 m gave near/far of inf (float32 overflow), 1e30 m near == far (the 1 mm floor lost):
+    the graphs ran on them. Now a DepthRangeError names the box and how far it reaches, and nothing runs."""
+    from ghnerf_runtime.contract import MAX_DEPTH_M
+    from ghnerf_runtime.errors import DepthRangeError
+    box = BOX + np.array([0.0, 0.0, offset])
+    session = DiscSession()
+    env = {"images": np.zeros((2, 3, 128, 128), np.float32)}
+    reach = offset + BOX[1, 2] + 0.1  # the far corner of the box grown by the margin
+    said = re.escape(f"reaches {reach:.6g} m from camera 'novel', farther than the {MAX_DEPTH_M:g} m (MAX_DEPTH_M)")
+    with pytest.raises(DepthRangeError, match=said):
+        render_novel_view(session, env, _camera(), box, NovelViewConfig(enabled=True))
+    assert session.rays == []
+
+
+def test_near_far_holds_its_floor_in_float32_up_to_the_limit_and_refuses_past_it():
+    from ghnerf_runtime.contract import MAX_DEPTH_M, near_far_from_box
+    from ghnerf_runtime.errors import DepthRangeError
+    from ghnerf_runtime.tracking import box_corners
+    cam = _camera()
+    thin = np.array([[0.0, -0.9, 0.0], [0.0, -0.9, 0.0]])
+    deep = thin + [0.0, 0.0, MAX_DEPTH_M - 1.0]  # a point box 1 m inside the limit: far = near + 1 mm
+    near, far = near_far_from_box(cam, box_corners(deep), margin=0.0)
+    assert np.isfinite([near, far]).all() and far > near
+    wide = np.array([[-1e300, -0.9, 2.0], [1e300, -0.9, 3.0]])  # in front, but wider than anything rendered
+    with pytest.raises(DepthRangeError, match="MAX_DEPTH_M"):
+        near_far_from_box(cam, box_corners(wide), margin=0.0)
+    # a camera turned 45 degrees: the depth of (1.7e308, y, 1.7e308) is 2.4e308, past float64 (inf, not "behind")
+    R, t = look_at((0.0, 0.0, 0.0), (1.0, 0.0, 1.0))
+    turned = Camera("turned", 128, 128, intrinsics_from_fov(128, 128, 40.0), np.zeros(5), R, t)
+    huge = np.array([[1.6e308, -0.9, 1.6e308], [1.7e308, -0.9, 1.7e308]])
+    with pytest.raises(DepthRangeError, match="reaches inf m from camera 'turned'"):
+        near_far_from_box(turned, box_corners(huge), margin=0.0)
+
+
+def test_a_far_box_wholly_behind_the_camera_is_still_an_empty_view():
+    """Behind comes first: nothing of such a box is in front, so it renders nothing, as a near one behind does."""
+    box = BOX - np.array([0.0, 0.0, 1e200])
+    session = DiscSession()
+    nv = render_novel_view(session, {"images": np.zeros((2, 3, 128, 128), np.float32)}, _camera(), box,
+                           NovelViewConfig(enabled=True))
+    assert session.rays == [] and nv.rays == 0 and not nv.image.any()

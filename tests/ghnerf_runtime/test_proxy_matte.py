@@ -198,3 +198,23 @@ def test_a_min_support_outside_0_1_is_named(shot):
             proxy_matte(image, target, depth, nowhere, 0.0, min_support=bad)
     with pytest.raises(ValueError, match="background must be finite"):
         proxy_matte(image, target, depth, nowhere, float("nan"))
+
+
+@pytest.mark.parametrize("feather_m", [0.15, 0.0])
+def test_a_denormal_proxy_depth_keeps_the_whole_picture_not_nan(feather_m):
+    """A proxy at 1e-308 m: pixels per metre (f / depth) overflowed to inf, the weight came out NaN and the
+    picture a NaN cast to uint8. At that depth every pixel is within the margin: nothing is matted."""
+    from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov
+    camera = Camera("view", 64, 64, intrinsics_from_fov(64, 64, 40.0), np.zeros(5), np.eye(3), np.zeros(3))
+    depth = np.zeros((64, 64))
+    depth[24:40, 24:40] = 1e-308
+    picture = np.full((64, 64, 3), 200, np.uint8)
+    with np.errstate(over="raise", invalid="raise", divide="raise"):  # (underflow to 0 m is the answer)
+        out = proxy_matte(picture, camera, depth, np.ones((64, 64), bool), 0.0, feather_m=feather_m)
+    assert out.applied and np.isfinite(out.weight).all() and (out.weight == 1.0).all()
+    assert np.array_equal(out.image, picture)
+    # the other end, a proxy 1e300 m off: the silhouette's pixels stay, the rest is metres beyond any feather
+    depth[24:40, 24:40] = 1e300
+    with np.errstate(invalid="raise"):
+        far = proxy_matte(picture, camera, depth, np.ones((64, 64), bool), 0.0, feather_m=feather_m)
+    assert np.array_equal(far.weight == 1.0, depth > 0) and set(np.unique(far.weight)) == {0.0, 1.0}
