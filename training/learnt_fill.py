@@ -71,6 +71,7 @@ from training.evaluate import SOURCE_ANGLE_BINS_DEG
 from training.fill_features import (MASK_BIT, SEEN_BIT, TRUTH_BIT, FillCacheError, check_held_out, load_cache,
                                     relit_in)
 from training.model_card import strict_json, write_atomic
+from training.step_guard import TrainingDiverged, finite_step
 
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
 #: with ``FillNetConfig.shown_input``, the model's picture 3 more.
@@ -231,26 +232,6 @@ def masked_mse(pred: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> t
     """Per image, the mean squared error over the mask's pixels and the channels; the batch's mean."""
     sq = ((pred - truth) ** 2 * mask).sum((1, 2, 3))
     return (sq / (mask.sum((1, 2, 3)) * pred.shape[1]).clamp_min(1.0)).mean()
-
-
-class FillDiverged(FloatingPointError):
-    """A training step's loss or gradients are NaN or infinite; raised before the update (the message names the
-    step), so no NaN weights are trained on, scored or saved."""
-
-
-def finite_step(loss: torch.Tensor, net: torch.nn.Module, step: int) -> float:
-    """``loss``'s value once it and ``net``'s gradients are finite, else :class:`FillDiverged` naming ``step``.
-
-    Why: AdamW applies a NaN gradient to every weight, the painter then paints NaN, the held-out table drops
-    those views (``np.nanmean``) and ``fill_net.pt`` was saved with the NaN weights, exit 0 (the bfloat16
-    autocast on a GPU makes an overflow likelier than the float32 CPU run)."""
-    value = float(loss.detach())
-    if not math.isfinite(value):
-        raise FillDiverged(f"step {step}: non-finite loss ({value:g}); the weights were not updated")
-    if not all(bool(torch.isfinite(p.grad).all()) for p in net.parameters() if p.grad is not None):
-        raise FillDiverged(f"step {step}: non-finite gradient of a finite loss ({value:.6g}); the weights were not "
-                           f"updated")
-    return value
 
 
 def pick_device(kind: str) -> torch.device:
@@ -741,7 +722,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     try:
         net = train_fill(train, cfg, val=val)
-    except FillDiverged as e:  # one line, and no fill_net.pt / score of NaN weights
+    except TrainingDiverged as e:  # one line, and no fill_net.pt / score of NaN weights
         print(f"error: training diverged: {e}", file=sys.stderr)
         return 1
     seconds = time.monotonic() - t0
