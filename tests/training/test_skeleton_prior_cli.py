@@ -443,6 +443,7 @@ def test_the_cli_names_a_diverged_prior_and_writes_nothing(tmp_path, data64, mon
                 "--out", str(out)]
         assert sp.main(argv) == 1
         err = capsys.readouterr().err.strip().splitlines()
-        assert err[-1] == "error: training diverged: seed 0, step 1: non-finite loss (nan); the weights were not updated"
+        assert err[-1] == ("error: training diverged: seed 0, step 1: non-finite loss (nan); the weights were not "
+                           "updated")
     assert {p.name: p.read_bytes() for p in model.iterdir()} == before
     assert not new.exists() and not new.with_suffix(".json").exists()
