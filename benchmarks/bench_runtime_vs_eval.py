@@ -58,7 +58,7 @@ from ghnerf_runtime.contract import (  # noqa: E402
 from ghnerf_runtime.estimator import Estimator  # noqa: E402
 from ghnerf_runtime.geometry import Camera  # noqa: E402
 from ghnerf_runtime.keypoints import decode_keypoints, heatmap_to_model_pixels  # noqa: E402
-from ghnerf_runtime.metrics import masked_psnr, pck  # noqa: E402
+from ghnerf_runtime.metrics import capped_psnr, masked_psnr, pck  # noqa: E402
 from ghnerf_runtime.novel_view import NovelViewRequest  # noqa: E402
 from ghnerf_runtime.preprocess import Roi, build_undistort_crop_maps, preprocess_image  # noqa: E402
 from ghnerf_runtime.session import ModelSession  # noqa: E402
@@ -92,17 +92,14 @@ def _render_first_source(session: ModelSession, images: np.ndarray, cams, near_f
     return session.run("render_rgb", env)["rgb"].reshape(S, S, 3)
 
 
-#: A view identical to its truth scores +inf dB: counted as this, as ``ghnerf-eval`` caps it (training.evaluate).
-PSNR_CAP_DB = 100.0
-
-
 def psnr_summary(values: list[float | None]) -> dict:
     """Mean and median masked PSNR of one path's scenes, and what they leave out, by name.
 
     ``values`` holds one entry per scene: the view's PSNR, or None where the path produced no view
     (the estimator can return none). A missing or non-finite view (NaN: empty mask or a broken render)
     is left out of the mean but counted: before, a missing view vanished from C's mean, and a NaN made
-    the mean NaN. +inf (identical images) is capped at :data:`PSNR_CAP_DB`.
+    the mean NaN. +inf (identical images) is capped at :data:`PSNR_CAP_DB` (``ghnerf_runtime.metrics``, whose
+    :func:`capped_psnr` ``ghnerf-eval`` uses too).
 
     Example:
         >>> psnr_summary([20.0, None, 30.0, float("nan")])
@@ -110,7 +107,7 @@ def psnr_summary(values: list[float | None]) -> dict:
     """
     no_view = sum(v is None for v in values)
     got = np.array([v for v in values if v is not None], np.float64)
-    finite = np.minimum(got[~np.isnan(got)], PSNR_CAP_DB)
+    finite = capped_psnr(got[~np.isnan(got)])
     return {"mean": float(finite.mean()) if finite.size else float("nan"),
             "median": float(np.median(finite)) if finite.size else float("nan"),
             "scored": int(finite.size), "no_view": no_view, "nonfinite": int(np.isnan(got).sum())}

@@ -60,7 +60,7 @@ from ghnerf_runtime.body_proxy import proxy_body, proxy_depth  # noqa: E402
 from ghnerf_runtime.proxy_blend import proxy_blend, subject_region  # noqa: E402
 from ghnerf_runtime.proxy_matte import proxy_matte  # noqa: E402
 from training.body_proxy import proxy_scene, view_camera  # noqa: E402
-from training.evaluate import SOURCE_ANGLE_BINS_DEG  # noqa: E402
+from training.evaluate import angle_bins  # noqa: E402
 from training.unseen_fill import fit_lighting, relit_fill, seen_surface  # noqa: E402
 
 
@@ -252,16 +252,15 @@ def main(argv: list[str] | None = None) -> int:
         cols += ["runtime+matte"] + (["device+matte"] if painter is not None else [])
         cols += ["whole:shown", "whole:runtime", "whole:runtime+matte"]
         cols += ["whole:device", "whole:device+matte"] if painter is not None else []
-    edges = SOURCE_ANGLE_BINS_DEG
-    groups = [(f"novel {lo:.0f}-{hi:.0f} deg", lambda r, lo=lo, hi=hi: lo <= r["angle"] < hi)
-              for lo, hi in zip(edges[:-1], edges[1:])]
-    groups += [("novel, all", lambda r: True)]
+    # ghnerf-eval's bins (the last includes 180 degrees)
+    groups = [(f"novel {lo:.0f}-{hi:.0f} deg", inside) for lo, hi, inside in angle_bins([r["angle"] for r in rows])]
+    groups += [("novel, all", np.ones(len(rows), bool))]
     print(f"{n} scenes of {args.data} ({args.split}); depth errors: median mm, mean over views; PSNR dB; "
           f"proxy scale median {np.median([r['scale'] for r in rows]):.2f}")
     print("| views | n | " + " | ".join(cols) + " |")
     print("|---" * (len(cols) + 2) + "|")
     for label, keep in groups:
-        sel = [r for r in rows if keep(r)]
+        sel = [r for r, k in zip(rows, keep) if k]
         if sel:
             print(f"| {label} | {len(sel)} | " + " | ".join(f"{np.nanmean([r[c] for r in sel]):.2f}" for c in cols) + " |")
     return 0

@@ -55,7 +55,6 @@ from training.blend_ceiling import VISIBILITY_TOLERANCE_M, affine_fill, blend_so
 from training.fill_features import modelled_scene, render_views  # noqa: E402
 from training.unseen_fill import fit_lighting, part_fill, relit_fill, seen_surface  # noqa: E402
 
-BINS = ((0, 15), (15, 30), (30, 60), (60, 90), (90, 180))
 
 
 def psnr(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
@@ -83,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from training.data.torch_dataset import MultiViewDataset
-    from training.evaluate import TorchRenderer, source_angles_deg
+    from training.evaluate import TorchRenderer, angle_bins, source_angles_deg
     from training.train import load_model
 
     torch.set_num_threads(args.threads)
@@ -150,15 +149,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.oracles:
         per_model += ("relit@depth",)
     cols = ["ceiling", "seen"] + oracle_cols + [f"{name}:{k}" for name, _ in models for k in per_model]
-    groups = [("sources", lambda r: r["source"])]
-    groups += [(f"novel {lo}-{hi} deg", lambda r, lo=lo, hi=hi: not r["source"] and lo <= r["angle"] < hi)
-               for lo, hi in BINS]
-    groups += [("novel, all", lambda r: not r["source"])]
+    novel = np.array([not r["source"] for r in rows], bool)
+    groups = [("sources", ~novel)]
+    groups += [(f"novel {lo:g}-{hi:g} deg", novel & inside)  # ghnerf-eval's bins: the last includes 180
+               for lo, hi, inside in angle_bins([r["angle"] for r in rows])]
+    groups += [("novel, all", novel)]
     print(f"{n} scenes of {args.data} ({args.split}); PSNR in dB (mean over views), depth error median mm")
     print("| views | n | " + " | ".join(cols) + " |")
     print("|---" * (len(cols) + 2) + "|")
     for label, keep in groups:
-        sel = [r for r in rows if keep(r)]
+        sel = [r for r, k in zip(rows, keep) if k]
         if sel:
             print(f"| {label} | {len(sel)} | " + " | ".join(f"{np.nanmean([r[c] for r in sel]):.2f}" for c in cols) + " |")
     return 0

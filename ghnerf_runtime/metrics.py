@@ -7,7 +7,8 @@ Every definition here is restated in ``docs/metrics.md``; change both together.
 * :func:`mpjpe_by_visibility` -- that error split by how many views see each joint.
 * :func:`acceleration_error` -- jitter: the second difference of the 3D error from frame to frame.
 * :func:`left_right_swaps` -- how often a left/right pair of 2D joints comes out exchanged.
-* :func:`masked_psnr`, :func:`masked_ssim` -- image quality inside a mask.
+* :func:`masked_psnr`, :func:`masked_ssim` -- image quality inside a mask; :func:`scorable_images` and
+  :func:`capped_psnr` -- how a pooled score takes renders (a broken one counted, an identical one capped).
 * :func:`heatmap_mse` -- mean squared error between heatmaps.
 * :func:`gaussian_heatmaps` -- the ground-truth heatmap generator (training targets, tests).
 
@@ -48,7 +49,7 @@ __all__ = [
     "TORSO_BOX_JOINTS", "LEFT_RIGHT_PAIRS", "PckResult", "SwapResult", "MpjpeResult", "ImageMetricResult",
     "MseResult", "VISIBILITY_CLASSES", "visibility_class", "mpjpe_by_visibility", "left_right_swaps",
     "AccelerationResult", "acceleration_error", "pck", "mpjpe", "masked_psnr", "masked_ssim", "heatmap_mse",
-    "gaussian_heatmaps", "finite_or_none",
+    "gaussian_heatmaps", "finite_or_none", "PSNR_CAP_DB", "capped_psnr", "scorable_images",
 ]
 
 
@@ -584,6 +585,45 @@ def masked_psnr(pred, target, mask, data_range: float = 1.0) -> ImageMetricResul
     with np.errstate(divide="ignore"):
         values = 10.0 * np.log10(data_range ** 2 / mse)
     return _per_image_result(values, counts, batch_shape)
+
+
+#: A per-image PSNR of identical images (+inf) counts as this in a pooled mean (``ghnerf-eval``, the painter's
+#: held-out table, ``bench_runtime_vs_eval``), so one such image cannot make the mean infinite.
+PSNR_CAP_DB = 100.0
+
+
+def capped_psnr(values) -> np.ndarray:
+    """Per-image PSNRs (dB) with ``+inf`` (identical images) as :data:`PSNR_CAP_DB`; ``nan`` stays ``nan``.
+
+    Example:
+        >>> capped_psnr([20.0, float("inf"), float("nan")]).tolist()
+        [20.0, 100.0, nan]
+    """
+    return np.minimum(np.asarray(values, np.float64), PSNR_CAP_DB)
+
+
+def scorable_images(images, data_range: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Rendered images ``(N, ...)`` as a pooled score takes them, and the ``(N,)`` bool of the broken ones.
+
+    An image with any non-finite value (NaN or +-inf, anywhere, inside its mask or not) is a broken render:
+    ``nan`` throughout, so its PSNR and SSIM are ``nan`` and the caller leaves it out of its means and counts it
+    (``ghnerf-eval``'s ``nonfinite_views``). The others are clipped to ``[0, data_range]``. Finiteness is tested
+    before the clip, which would turn +-inf into ``data_range`` or 0 and score it.
+
+    Example:
+        >>> img, broken = scorable_images(np.array([[0.5, 1.5], [0.2, np.inf]]))
+        >>> img.tolist(), broken.tolist()
+        ([[0.5, 1.0], [nan, nan]], [False, True])
+    """
+    _check_data_range(data_range)
+    x = np.asarray(images)
+    if not np.issubdtype(x.dtype, np.floating):  # a float image keeps its precision (a float32 cache: half the bytes)
+        x = x.astype(np.float64)
+    if x.ndim < 1:
+        raise ShapeError(f"images must have a leading image axis (N, ...), got shape {x.shape}")
+    broken = ~np.isfinite(x.reshape(len(x), -1)).all(axis=1)
+    keep = broken.reshape((-1,) + (1,) * (x.ndim - 1))
+    return np.where(keep, np.nan, np.clip(x, 0.0, data_range)), broken
 
 
 def _ssim_map(x: np.ndarray, y: np.ndarray, m: np.ndarray, data_range: float) -> np.ndarray:

@@ -78,7 +78,8 @@ from ghnerf_runtime.flip_test import flip_averaged, mirror_images
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
-from ghnerf_runtime.metrics import heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility, pck
+from ghnerf_runtime.metrics import (capped_psnr, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility,
+                                    pck, scorable_images)
 from training.model_card import strict_json, write_atomic
 
 PCK_ALPHA = 0.2
@@ -345,10 +346,6 @@ class HeatmapScores:
                     _visibility_scores(self.gated_visibility) if self.gated_visibility else None}
 
 
-#: Per-image PSNR of identical images (+inf) counts as this, so one cannot make the split's mean infinite.
-PSNR_CAP_DB = 100.0
-
-
 @dataclass
 class Accumulator:
     """Pools per-scene results into split scores."""
@@ -403,7 +400,7 @@ class Accumulator:
             self.prior_expected_m.append(np.asarray(m["prior_expected_error_m"], np.float64)[e.evaluated])
         if m.get("psnr") is not None:
             # An empty mask is not scored; a non-finite render is excluded too, but counted; identical
-            # images (+inf) are capped at PSNR_CAP_DB so one such view cannot make the mean infinite.
+            # images (+inf) are capped at metrics.PSNR_CAP_DB so one such view cannot make the mean infinite.
             per_image = np.ravel(m["psnr"].per_image)
             scored = np.ravel(m["psnr"].num_pixels) > 0
             ssim = np.ravel(m["ssim"].per_image)
@@ -414,7 +411,7 @@ class Accumulator:
                 if np.isnan(v) or not np.isfinite(q):
                     self.nonfinite_views += 1
                     continue
-                self.psnr.append(float(min(v, PSNR_CAP_DB)))
+                self.psnr.append(float(capped_psnr(v)))
                 self.psnr_angle_deg.append(float(a))
                 self.ssim.append(float(q))
 
@@ -467,16 +464,28 @@ class Accumulator:
                                kept.size / e.size, gate)))
 
 
+def angle_bins(angles_deg, edges: tuple[float, ...] = SOURCE_ANGLE_BINS_DEG) -> list[tuple[float, float, np.ndarray]]:
+    """``(lo, hi, inside)`` for each bin of ``edges``: ``inside`` marks the angles in ``[lo, hi)``, in the last
+    bin ``[lo, hi]`` (a view straight behind a source, 180 degrees, is in it); a NaN angle (unknown) is in none.
+    One binning for ``ghnerf-eval`` (:func:`psnr_by_angle`) and the painter's table (``learnt_fill.score_rows``).
+
+    Example:
+        >>> [(lo, hi, m.tolist()) for lo, hi, m in angle_bins([15.0, 180.0, float("nan")], (0.0, 15.0, 180.0))]
+        [(0.0, 15.0, [False, False, False]), (15.0, 180.0, [True, True, False])]
+    """
+    a = np.asarray(angles_deg, np.float64)
+    last = len(edges) - 2
+    return [(lo, hi, (a >= lo) & ((a <= hi) if k == last else (a < hi)))
+            for k, (lo, hi) in enumerate(zip(edges[:-1], edges[1:]))]
+
+
 def psnr_by_angle(psnr: list[float], angles_deg: list[float],
                   edges: tuple[float, ...] = SOURCE_ANGLE_BINS_DEG) -> list[dict]:
-    """Mean PSNR of the views in each ``[lo, hi)`` angle bin (the last bin includes ``hi``)."""
-    p, a = np.asarray(psnr, np.float64), np.asarray(angles_deg, np.float64)
-    out = []
-    for k, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
-        inside = (a >= lo) & ((a <= hi) if k == len(edges) - 2 else (a < hi))
-        out.append({"range_deg": [lo, hi], "views": int(inside.sum()),
-                    "psnr": float(np.mean(p[inside])) if inside.any() else None})
-    return out
+    """Mean PSNR of the views in each angle bin (:func:`angle_bins`: ``[lo, hi)``, the last includes ``hi``)."""
+    p = np.asarray(psnr, np.float64)
+    return [{"range_deg": [lo, hi], "views": int(inside.sum()),
+             "psnr": float(np.mean(p[inside])) if inside.any() else None}
+            for lo, hi, inside in angle_bins(angles_deg, edges)]
 
 
 def source_angles_deg(scene: Mapping[str, np.ndarray], targets: np.ndarray) -> np.ndarray:
@@ -601,9 +610,8 @@ def scene_metrics(scene: Mapping[str, np.ndarray], source_heatmaps: np.ndarray, 
         m = scene["tgt_masks"][novel_targets]
         truth = img * m[:, None] + background * (1 - m[:, None])
         # a view with any non-finite pixel is a broken render: NaN throughout, so it is counted (nonfinite_views),
-        # not scored; tested before clipping, which would turn +-inf into 1 / 0
-        finite = np.isfinite(novel_rgb).all(axis=(1, 2, 3), keepdims=True)
-        pred = np.where(finite, np.clip(novel_rgb, 0, 1), np.nan)
+        # not scored
+        pred, _ = scorable_images(novel_rgb)
         # metrics take channels-last images (..., H, W, C) or (..., H, W)
         out["psnr"] = masked_psnr(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)
         out["ssim"] = masked_ssim(pred.transpose(0, 2, 3, 1), truth.transpose(0, 2, 3, 1), m)

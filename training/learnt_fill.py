@@ -66,11 +66,12 @@ from torch.nn import functional as F
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.cli.output_path import ready_output_arg
 from ghnerf_runtime.config import NovelViewConfig
-from ghnerf_runtime.metrics import masked_psnr
-from training.evaluate import SOURCE_ANGLE_BINS_DEG
+from ghnerf_runtime.metrics import capped_psnr, masked_psnr, scorable_images
+from training.evaluate import angle_bins
 from training.fill_features import (MASK_BIT, SEEN_BIT, TRUTH_BIT, FillCacheError, check_held_out, load_cache,
                                     relit_in)
 from training.model_card import strict_json, write_atomic
+from training.step_guard import TrainingDiverged, finite_step
 
 #: blend 3, relit 3, mask 1, seen 1, normals 3, depth 1, light 4 (constant planes), 25 joint maps;
 #: with ``FillNetConfig.shown_input``, the model's picture 3 more.
@@ -233,26 +234,6 @@ def masked_mse(pred: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> t
     return (sq / (mask.sum((1, 2, 3)) * pred.shape[1]).clamp_min(1.0)).mean()
 
 
-class FillDiverged(FloatingPointError):
-    """A training step's loss or gradients are NaN or infinite; raised before the update (the message names the
-    step), so no NaN weights are trained on, scored or saved."""
-
-
-def finite_step(loss: torch.Tensor, net: torch.nn.Module, step: int) -> float:
-    """``loss``'s value once it and ``net``'s gradients are finite, else :class:`FillDiverged` naming ``step``.
-
-    Why: AdamW applies a NaN gradient to every weight, the painter then paints NaN, the held-out table drops
-    those views (``np.nanmean``) and ``fill_net.pt`` was saved with the NaN weights, exit 0 (the bfloat16
-    autocast on a GPU makes an overflow likelier than the float32 CPU run)."""
-    value = float(loss.detach())
-    if not math.isfinite(value):
-        raise FillDiverged(f"step {step}: non-finite loss ({value:g}); the weights were not updated")
-    if not all(bool(torch.isfinite(p.grad).all()) for p in net.parameters() if p.grad is not None):
-        raise FillDiverged(f"step {step}: non-finite gradient of a finite loss ({value:.6g}); the weights were not "
-                           f"updated")
-    return value
-
-
 def pick_device(kind: str) -> torch.device:
     if kind == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -365,8 +346,10 @@ def train_fill(train: dict[str, np.ndarray], cfg: FillTrainConfig, val: dict[str
 
 
 def _psnr(pred: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Per-view masked PSNR (NaN where the mask is empty)."""
-    return np.ravel(masked_psnr(np.clip(pred, 0, 1), truth, mask).per_image)
+    """Per-view masked PSNR as ``ghnerf-eval`` scores a novel view: NaN where the mask is empty or the picture
+    has a non-finite pixel (:func:`~ghnerf_runtime.metrics.scorable_images`; :func:`score_rows` counts those),
+    an identical view at :data:`~ghnerf_runtime.metrics.PSNR_CAP_DB`."""
+    return capped_psnr(np.ravel(masked_psnr(scorable_images(pred)[0], truth, mask).per_image))
 
 
 def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray,
@@ -375,7 +358,13 @@ def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray,
     ceiling), the relit fill, the model's picture (caches made with a model) and the learnt fill, over
     the true subject's mask and over the pixels the geometry calls unseen or seen; ``n`` views.
     ``whole``: the learnt fill as the runtime shows it (:func:`paintings`), scored with the
-    model's picture over every pixel of the view (``shown:whole``, ``learnt:whole``: the fog counts)."""
+    model's picture over every pixel of the view (``shown:whole``, ``learnt:whole``: the fog counts).
+
+    Scored as ``ghnerf-eval`` scores its novel views: an identical view counts as
+    :data:`~ghnerf_runtime.metrics.PSNR_CAP_DB`, the bins are :func:`training.evaluate.angle_bins` (the last
+    includes 180 degrees), and a view whose painting (``learnt`` or ``whole``) has a NaN or infinite pixel is
+    left out of the painter's columns and counted in ``nonfinite`` (its ``nonfinite_views``); before, such a
+    view vanished from the means as if its mask were empty."""
     truth = arrays["truth"].astype(np.float64) / 255.0
     flags = arrays["flags"]
     mask, seen = (flags & TRUTH_BIT) > 0, (flags & SEEN_BIT) > 0
@@ -399,25 +388,33 @@ def score_rows(arrays: dict[str, np.ndarray], learnt: np.ndarray,
         cols["learnt:whole"] = _psnr(whole, truth, everywhere)
     if true_geometry:
         cols["ceil:seen"] = _psnr(blend, truth, mask & seen)
-    angle, edges = arrays["angle"], SOURCE_ANGLE_BINS_DEG
-    groups = [(f"novel {lo:g}-{hi:g} deg", (angle >= lo) & (angle < hi)) for lo, hi in zip(edges[:-1], edges[1:])]
+    broken = scorable_images(learnt)[1]
+    if whole is not None:
+        broken |= scorable_images(whole)[1]
+    angle = arrays["angle"]
+    groups = [(f"novel {lo:g}-{hi:g} deg", inside) for lo, hi, inside in angle_bins(angle)]
     groups.append(("novel, all", np.ones(len(angle), bool)))
     rows = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a bin whose views have no unseen pixel: NaN
         for label, keep in groups:
             if keep.any():
-                rows[label] = {"n": int(keep.sum()), **{k: float(np.nanmean(v[keep])) for k, v in cols.items()}}
+                rows[label] = {"n": int(keep.sum()), "nonfinite": int((keep & broken).sum()),
+                               **{k: float(np.nanmean(v[keep])) for k, v in cols.items()}}
     return rows
 
 
 def table(rows: dict[str, dict[str, float]]) -> str:
+    """:func:`score_rows` as a markdown table; a ``nonfinite`` column (views the painter's columns leave out)
+    only when some view's painting was non-finite, so a sound run's table reads as before."""
     first = next(iter(rows.values()))
     cols = [c for c in ("ceiling", "blend", "fill:relit", "shown", "fill:learnt", "relit:unseen", "learnt:unseen",
                         "ceil:seen", "learnt:seen", "shown:whole", "learnt:whole") if c in first]
-    lines = ["| views | n | " + " | ".join(cols) + " |", "|---" * (len(cols) + 2) + "|"]
+    counts = ["n"] + (["nonfinite"] if any(r.get("nonfinite", 0) for r in rows.values()) else [])
+    lines = ["| views | " + " | ".join(counts + cols) + " |", "|---" * (len(cols) + len(counts) + 1) + "|"]
     for label, r in rows.items():
-        lines.append(f"| {label} | {r['n']} | " + " | ".join(f"{r[c]:.2f}" for c in cols) + " |")
+        lines.append(f"| {label} | " + " | ".join([str(r.get(c, 0)) for c in counts] + [f"{r[c]:.2f}" for c in cols])
+                     + " |")
     return "\n".join(lines)
 
 
@@ -741,7 +738,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     try:
         net = train_fill(train, cfg, val=val)
-    except FillDiverged as e:  # one line, and no fill_net.pt / score of NaN weights
+    except TrainingDiverged as e:  # one line, and no fill_net.pt / score of NaN weights
         print(f"error: training diverged: {e}", file=sys.stderr)
         return 1
     seconds = time.monotonic() - t0

@@ -13,7 +13,8 @@
    of the detached distance for the error head. Augmented by mirroring and by hiding joints in
    one view (as the reprojection gate and occlusion do). ``--members K`` trains K such networks
    (seeds ``seed..seed+K-1``; side by side, one process each, as far as ``--threads`` goes) and exports
-   their mean as one file.
+   their mean as one file. A NaN or infinite loss or gradient stops the run before that update, in one
+   line naming the seed and the step (``training.step_guard``; exit 1, nothing written).
 3. **Export** ``skeleton_prior.onnx`` (fp32; 1.6 M weights per network: int8 would save nothing that
    matters) with ``ghnerf_skeleton.*`` metadata, and **evaluate** on the held-out split:
    ``skeleton_prior.json`` beside it (MPJPE over all joints, and gated by the expected error).
@@ -280,7 +281,11 @@ def _train_member(job) -> dict[str, np.ndarray]:
 
 def _train_one(joint_features: np.ndarray, context: np.ndarray, truth: np.ndarray, truth_valid: np.ndarray,
                config: PriorTrainConfig, seed: int, progress: bool):
+    """One network, trained on the arrays; :class:`~training.step_guard.TrainingDiverged` (naming the seed and
+    the step) where a step's loss or gradients are NaN or infinite, before that update."""
     import torch
+
+    from training.step_guard import TrainingDiverged, finite_step
 
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
@@ -309,8 +314,13 @@ def _train_one(joint_features: np.ndarray, context: np.ndarray, truth: np.ndarra
         log_b = log_err.clamp(-7.0, 3.0)
         loss_joints = dist.sum() / w.sum().clamp(min=1)
         loss_error = torch.where(w > 0, dist.detach() / log_b.exp() + log_b, 0.0).sum() / w.sum().clamp(min=1)
+        loss = loss_joints + 0.01 * loss_error
         opt.zero_grad()
-        (loss_joints + 0.01 * loss_error).backward()
+        loss.backward()
+        try:  # before the update: AdamW would spread a NaN to every weight, and the file would answer NaN
+            finite_step(loss, net, step + 1)
+        except TrainingDiverged as e:
+            raise TrainingDiverged(f"seed {seed}, {e}") from None
         opt.step()
         sched.step()
         if progress and (step % 1000 == 0 or step == config.steps - 1):
@@ -478,7 +488,13 @@ def main(argv: list[str] | None = None) -> int:
     va = collect(model_dir, args.data, args.val_split, args.limit, not args.no_flip_test, args.threads)
     collect_s = time.monotonic() - t0
     tr_in, tr_truth = inputs_of(tr)
-    net = train(tr_in, tr_truth, tr["joints_3d_valid"], config, threads=args.threads)
+    from training.step_guard import TrainingDiverged
+
+    try:
+        net = train(tr_in, tr_truth, tr["joints_3d_valid"], config, threads=args.threads)
+    except TrainingDiverged as e:  # one line; nothing written: the old file and its figures stay as they were
+        print(f"error: training diverged: {e}", file=sys.stderr)
+        return 1
     train_s = time.monotonic() - t0 - collect_s
     encoder_file = str(tr["encoder_file"])
     trained_on = ",".join(f"{d}:{args.train_split}" for d in [args.data, *args.extra_data])

@@ -66,6 +66,7 @@ from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.model_card import write_atomic
 from training.run_clock import RunClock
+from training.step_guard import TrainingDiverged
 
 CHECKPOINT_VERSION = 1
 HEATMAP_SIGMA_HM_PX = 1.5
@@ -555,8 +556,9 @@ def train_step(ddp_model: torch.nn.Module, model: GHNeRF, opt: torch.optim.Optim
     return out, terms
 
 
-class NonFiniteLoss(FloatingPointError):
-    """A step's loss terms or gradients are NaN or infinite; raised before the update (the message names them)."""
+class NonFiniteLoss(TrainingDiverged):
+    """A step's loss terms or gradients are NaN or infinite; raised before the update (the message names them).
+    Checked here, not by ``step_guard.finite_step``: it names the terms, and reads the norm the clipping takes."""
 
 
 def _saved_step(path: Path) -> Any:

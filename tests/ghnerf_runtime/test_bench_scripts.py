@@ -90,7 +90,8 @@ def test_measure_novel_overlap_times_frames_in_ram(tmp_path, monkeypatch, capsys
 def test_the_runtime_vs_eval_psnr_counts_scenes_without_a_view():
     """Path C's mean used to skip the scenes where the estimator made no novel view (flattering it) and a NaN
     (empty mask) made a path's mean NaN; now both are left out by name and counted."""
-    from benchmarks.bench_runtime_vs_eval import PSNR_CAP_DB, psnr_summary
+    from benchmarks.bench_runtime_vs_eval import psnr_summary
+    from ghnerf_runtime.metrics import PSNR_CAP_DB
 
     p = psnr_summary([18.0, None, 22.0, float("nan"), None])
     assert (p["mean"], p["median"]) == (20.0, 20.0)  # by hand: (18 + 22) / 2

@@ -416,3 +416,20 @@ def test_a_report_with_numpy_nan_writes_strict_json():
     report = {"mpjpe_mm": np.float32("nan"), "rows": [np.float16("inf"), np.float64("nan"), 3], "ok": np.float32(1)}
     text = json.dumps(finite_or_none(report), default=float, allow_nan=False)
     assert json.loads(text) == {"mpjpe_mm": None, "rows": [None, None, 3], "ok": 1.0}
+
+
+def test_scorable_images_marks_a_view_with_any_non_finite_pixel_and_keeps_a_float32_render_float32():
+    """What ghnerf-eval and the painter's table share: a NaN or +-inf anywhere breaks the whole view (before the
+    clip, which would score +inf as 1); the other views are clipped; a float32 render is not doubled in size."""
+    imgs = np.full((3, 4, 4, 3), 0.5, np.float32)
+    imgs[0, 0, 0, 0] = 1.7  # overshoot: clipped, scored
+    imgs[1, 3, 3, 2] = -np.inf
+    imgs[2, 1, 2, 0] = np.nan
+    out, broken = metrics.scorable_images(imgs)
+    assert out.dtype == np.float32 and broken.tolist() == [False, True, True]
+    assert out[0].max() == 1.0 and np.isnan(out[1:]).all()
+    assert metrics.scorable_images(np.full((1, 2, 2), 300, np.uint16), data_range=255)[0].max() == 255.0
+    with pytest.raises(ShapeError, match="leading image axis"):
+        metrics.scorable_images(np.float32(0.5))
+    with pytest.raises(ValueError, match="data_range"):
+        metrics.scorable_images(imgs, data_range=0)

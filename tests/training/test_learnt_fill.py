@@ -16,7 +16,7 @@ from training.fill_features import (FIELDS, MASK_BIT, SEEN_BIT, TRUTH_BIT, cache
                                     relit_in)
 from training.learnt_fill import (FillNet, FillNetConfig, FillTrainConfig, _parse_sets, flip_views,  # noqa: E402
                                   joint_maps, load_net, main, masked_mse, net_inputs, paint, paintings, repainted,
-                                  score_rows, to_device, train_fill)
+                                  score_rows, table, to_device, train_fill)
 
 
 @pytest.fixture(scope="module")
@@ -621,3 +621,63 @@ def test_the_cli_names_a_diverged_training_and_saves_no_net(train_cache, truth_c
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == "error: training diverged: step 1: non-finite loss (nan); the weights were not updated"
     assert not (out / "fill_net.pt").exists() and not (out / "score.md").exists()
+
+
+def _scored_views(angles):
+    """A true-geometry cache of ``len(angles)`` 8x8 views (the subject a 4x4 block, its left half seen) at the
+    given angles from the nearest source, and the painter's pictures as noisy copies of the truth."""
+    rng = np.random.default_rng(5)
+    n = len(angles)
+    flags = np.zeros((n, 8, 8), np.uint8)
+    flags[:, 2:6, 2:6] = TRUTH_BIT | MASK_BIT
+    flags[:, 2:6, 2:4] |= SEEN_BIT
+    truth = rng.integers(0, 256, (n, 8, 8, 3)).astype(np.uint8) * (flags[..., None] > 0)
+    arrays = {"truth": truth, "flags": flags, "geometry": np.full(n, "truth"), "angle": np.asarray(angles, np.float32),
+              "blend": rng.integers(0, 256, (n, 8, 8, 3)).astype(np.uint8),
+              "relit": rng.integers(0, 256, (n, 8, 8, 3)).astype(np.uint8), "light": np.ones((n, 4), np.float32)}
+    learnt = np.clip(truth / 255.0 + rng.normal(0.0, 0.05, truth.shape), 0, 1) * (flags[..., None] > 0)
+    return arrays, learnt
+
+
+def _view_psnr(arrays, learnt, views):
+    from ghnerf_runtime.metrics import masked_psnr
+
+    mask = (arrays["flags"][views] & TRUTH_BIT) > 0
+    return masked_psnr(learnt[views], arrays["truth"][views] / 255.0, mask).per_image
+
+
+def test_the_painters_table_caps_an_identical_view_and_counts_a_non_finite_one_as_ghnerf_eval_does():
+    """An identical view made the mean +inf (ghnerf-eval counts it as 100 dB); a NaN painting vanished from the
+    means as if its mask were empty and an infinite pixel was clipped and scored (ghnerf-eval leaves both out
+    and counts them, a pixel off the subject too)."""
+    from ghnerf_runtime.metrics import PSNR_CAP_DB
+
+    arrays, learnt = _scored_views([5.0, 45.0, 20.0, 120.0, 100.0])
+    learnt[0] = arrays["truth"][0] / 255.0  # identical: +inf dB
+    learnt[1, 3, 3, 0] = np.nan  # on the subject
+    learnt[3, 0, 0, 1] = np.inf  # off the subject: still a broken render
+    rows = score_rows(arrays, learnt)
+    scored = [PSNR_CAP_DB, *_view_psnr(arrays, learnt, [2, 4])]
+    assert rows["novel 0-15 deg"]["fill:learnt"] == PSNR_CAP_DB
+    assert rows["novel, all"]["fill:learnt"] == pytest.approx(np.mean(scored))
+    assert (rows["novel, all"]["n"], rows["novel, all"]["nonfinite"]) == (5, 2)
+    assert [rows[k]["nonfinite"] for k in ("novel 0-15 deg", "novel 15-30 deg", "novel 30-60 deg",
+                                           "novel 90-180 deg")] == [0, 0, 1, 1]
+    assert "novel 30-60 deg" in rows and np.isnan(rows["novel 30-60 deg"]["fill:learnt"])  # its only view broken
+    assert np.isfinite(rows["novel 30-60 deg"]["ceiling"])  # the cache's own pictures are still scored
+    assert "| views | n | nonfinite |" in table(rows)
+    assert "nonfinite" not in table(score_rows(arrays, _scored_views([5.0] * 5)[1]))  # a sound run reads as before
+
+
+def test_the_painters_angle_bins_are_ghnerf_evals_and_hold_a_view_at_180_degrees():
+    """A novel view straight behind a source camera (180 degrees) was in no bin of the table (only in "novel,
+    all"), where ghnerf-eval's last bin holds it."""
+    from training.evaluate import psnr_by_angle
+
+    angles = [0.0, 14.9, 15.0, 89.9, 90.0, 180.0, 180.0]
+    arrays, learnt = _scored_views(angles)
+    rows = score_rows(arrays, learnt)
+    ours = [rows[k]["n"] if k in rows else 0 for k in ("novel 0-15 deg", "novel 15-30 deg", "novel 30-60 deg",
+                                                        "novel 60-90 deg", "novel 90-180 deg")]
+    assert ours == [b["views"] for b in psnr_by_angle([20.0] * len(angles), angles)] == [2, 1, 0, 1, 3]
+    assert sum(ours) == rows["novel, all"]["n"]

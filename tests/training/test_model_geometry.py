@@ -99,6 +99,26 @@ def test_interpolate_planes_is_trilinear_with_zero_padding():
     torch.testing.assert_close(out[:, 4], 0.25 * col[0, :, 3, 4])
 
 
+def test_interpolate_planes_fades_to_zero_at_minus_one_and_d_as_grid_sample_does():
+    """Past the end planes the value fades linearly to zero at -1 and D (half the end plane's at -0.5 and
+    D - 0.5), as ``grid_sample`` with zero padding: the docstring said zero outside [-0.5, D - 0.5]."""
+    import torch.nn.functional as F
+
+    D = 5
+    plane = torch.randn(1, 3, D, 1)  # (B, C, D, 1): one column
+    idx = torch.tensor([-1.5, -1.0, -0.75, -0.5, 0.0, 2.3, D - 1.0, D - 0.5, D - 0.25, float(D), D + 0.5])
+    out = interpolate_planes(plane.expand(1, 3, D, len(idx)), idx.reshape(1, 1, -1))[0, :, 0]  # (C, K)
+    col = plane[0, :, :, 0]
+    for k, want in ((1, 0.0 * col[:, 0]), (2, 0.25 * col[:, 0]), (3, 0.5 * col[:, 0]), (4, col[:, 0]),
+                    (6, col[:, D - 1]), (7, 0.5 * col[:, D - 1]), (8, 0.25 * col[:, D - 1]), (9, 0.0 * col[:, 0])):
+        torch.testing.assert_close(out[:, k], want)
+    assert (out[:, 0] == 0).all() and (out[:, -1] == 0).all()
+    # grid_sample over the planes as an image of height D and width 1 (pixel centres: index i at (2i + 1) / D - 1)
+    grid = torch.stack([torch.zeros_like(idx), (2 * idx + 1) / D - 1], -1).reshape(1, -1, 1, 2)
+    ref = F.grid_sample(plane, grid, mode="bilinear", padding_mode="zeros", align_corners=False)[0, :, :, 0]
+    torch.testing.assert_close(out, ref)
+
+
 def test_refine_interval_respects_bounds_and_floor():
     mean = torch.tensor([2.0, 3.0, 3.99])
     std = torch.tensor([0.0, 0.2, 0.5])

@@ -3,6 +3,7 @@ export, score, and record in a model card (the pipeline's ``prior_ghnerf`` stage
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import numpy as np
@@ -353,3 +354,96 @@ def test_ghnerf_eval_reads_the_2d_joints_from_the_human_graph_as_the_runtime_doe
     np.testing.assert_array_equal(renderer.encoder_heatmaps({"images": images}), want)
     (model / "human.onnx").unlink()
     assert OnnxRenderer(model).keypoint_graph == "encoder"
+
+
+def _prior_arrays(n: int = 16):
+    """Random inputs of the prior's shapes (``train`` reads ``joint_features`` and ``context``) and a truth."""
+    from types import SimpleNamespace
+
+    from ghnerf_runtime.skeleton_prior import CONTEXT_FEATURES, JOINT_FEATURES
+
+    rng = np.random.default_rng(0)
+    inputs = SimpleNamespace(joint_features=rng.normal(size=(n, 25, JOINT_FEATURES)).astype(np.float32),
+                             context=rng.normal(size=(n, CONTEXT_FEATURES)).astype(np.float32))
+    return inputs, rng.normal(size=(n, 25, 3)), np.ones((n, 25), bool)
+
+
+def _poisoned_networks(monkeypatch, from_call: int, grad_only: bool = False) -> list:
+    """``make_network`` whose networks answer NaN joints from their ``from_call``-th forward pass on (or, with
+    ``grad_only``, finite joints with a NaN gradient: the slope of sqrt at 0 times 0); the networks made."""
+    import torch
+
+    from training import skeleton_prior as sp
+
+    real, made = sp.make_network, []
+
+    def make(hidden, *args):
+        net = real(hidden, *args)
+        forward, calls = net.forward, []
+
+        def poisoned(f, c):
+            calls.append(1)
+            joints, log_err = forward(f, c)
+            if len(calls) >= from_call:
+                joints = joints + 0.0 * torch.sqrt(joints * 0.0) if grad_only else joints * float("nan")
+            return joints, log_err
+
+        net.forward = poisoned
+        made.append(net)
+        return net
+
+    monkeypatch.setattr(sp, "make_network", make)
+    return made
+
+
+@pytest.mark.parametrize("grad_only, says", [(False, "seed 3, step 2: non-finite loss (nan)"),
+                                             (True, "seed 3, step 2: non-finite gradient of a finite loss")])
+def test_a_non_finite_step_stops_the_prior_before_the_update(monkeypatch, grad_only, says):
+    """AdamW used to apply the NaN to every weight and train on: the exported prior answered NaN joints and
+    its held-out figures were NaN, exit 0 (the painter and the main trainer already stopped)."""
+    from training import skeleton_prior as sp
+    from training.step_guard import TrainingDiverged
+
+    made = _poisoned_networks(monkeypatch, from_call=2, grad_only=grad_only)
+    with pytest.raises(TrainingDiverged, match=re.escape(says)):
+        sp.train(*_prior_arrays(), sp.PriorTrainConfig(steps=4, hidden=8, batch=4, seed=3), progress=False)
+    # the first step's update went through; the second's NaN did not reach the weights
+    assert all(bool(p.isfinite().all()) for p in made[0].parameters())
+
+
+def test_members_trained_side_by_side_stop_alike_on_a_nan_loss():
+    """In worker processes (two members, two threads) the divergence comes back to the caller by name."""
+    from training import skeleton_prior as sp
+    from training.step_guard import TrainingDiverged
+
+    inputs, truth, valid = _prior_arrays()
+    inputs.joint_features[:] = np.nan  # every batch: a NaN loss at the first step
+    with pytest.raises(TrainingDiverged, match=r"seed [01], step 1: non-finite loss \(nan\)"):
+        sp.train(inputs, truth, valid, sp.PriorTrainConfig(steps=3, hidden=8, batch=4, members=2), progress=False,
+                 threads=2)
+
+
+def test_the_cli_names_a_diverged_prior_and_writes_nothing(tmp_path, data64, monkeypatch, capsys):
+    """Exit 1 with one line; the old file and its figures are left as they were, no new one is written."""
+    from ghnerf_runtime.skeleton_prior import FILE_NAME
+    from tests.ghnerf_runtime.test_session import export_tiny
+    from training import skeleton_prior as sp
+
+    model = tmp_path / "ghnerf"
+    shutil.copytree(export_tiny(tmp_path / "export"), model)
+    old = model / FILE_NAME
+    sp.export(sp.make_network(8), old, {"scenes": "1"})
+    old.with_suffix(".json").write_text("{}\n")
+    before = {p.name: p.read_bytes() for p in model.iterdir()}
+    _poisoned_networks(monkeypatch, from_call=1)
+    capsys.readouterr()
+    new = tmp_path / "new" / FILE_NAME
+    for out in (old, new):
+        argv = ["--model-dir", str(model), "--data", str(data64), "--steps", "3", "--hidden", "8", "--threads", "1",
+                "--out", str(out)]
+        assert sp.main(argv) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[-1] == ("error: training diverged: seed 0, step 1: non-finite loss (nan); the weights were not "
+                           "updated")
+    assert {p.name: p.read_bytes() for p in model.iterdir()} == before
+    assert not new.exists() and not new.with_suffix(".json").exists()

@@ -87,7 +87,9 @@ def tent_weights(index: Tensor, planes: int) -> Tensor:
 def interpolate_planes(column: Tensor, index: Tensor) -> Tensor:
     """Linear interpolation over planes: ``column`` ``(B, C, D, M)``, ``index`` ``(B, N, M)`` -> ``(B, C, N, M)``.
 
-    Zero outside ``[-0.5, D - 0.5]`` exactly like trilinear ``grid_sample`` with zero padding in depth.
+    Linear in the index with zero beyond the end planes, exactly like ``grid_sample`` with zero padding in depth:
+    a plane's own value at its index, half of the end plane's at ``-0.5`` and ``D - 0.5``, fading to zero at
+    ``-1`` and ``D`` and zero beyond (not zero outside ``[-0.5, D - 0.5]``).
     """
     tent = tent_weights(index, column.shape[2])  # (B, N, D, M)
     return (column.unsqueeze(2) * tent.unsqueeze(1)).sum(dim=3)
