@@ -66,8 +66,8 @@ from ghnerf_runtime.frame_reasons import FLAT, NOISE, NON_FINITE, REASONS
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections, presence_peak
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
-from ghnerf_runtime.joints3d import Joints3D, depth_centroid_joints, gate_presence, gate_to_box, query_grid, \
-    triangulate_joints, volumetric_joints
+from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
+    query_grid, triangulate_joints, triangulate_joints_checked, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
     novel_pivot, novel_target, render_novel_view, skeleton_overlay
@@ -149,6 +149,13 @@ class PairResult:
         single_view: the camera whose 2D joints alone are the pair's answer (``frame_check.single_view_2d``):
             a person seen by that camera only, or the other camera's frame rejected. Every 3D joint is then
             missing, and so is every 2D joint of the other camera. ``None``: a pair with 3D joints, or nobody.
+        reprojection_px_median: how far apart the two views' confident peaks are from meeting in 3D, before the
+            ``joints3d.max_reprojection_px`` gate: the median over the joints with a peak of at least the presence
+            threshold in both views (at least ``presence.min_joints`` of them) of the larger of the views'
+            reprojection errors, in model-input pixels (:class:`ghnerf_runtime.joints3d.ViewAgreement`), whatever
+            ``joints3d.method``. It grows when a camera has moved since calibration (the daemon watches it:
+            docs/daemon.md). ``None``: too few such joints, a frame rejected, or two people in view (each view's
+            peak may be another person's).
     """
 
     sequence: int
@@ -170,6 +177,7 @@ class PairResult:
     prior_fallback: bool = False
     several_people: bool = False
     single_view: str | None = None
+    reprojection_px_median: float | None = None
 
     def __post_init__(self) -> None:
         reasons = self.frame_reason
@@ -219,6 +227,9 @@ class PairResult:
             "several_people": bool(self.several_people),  # since session 53
             # the camera whose 2D joints alone are the answer (since session 53): null for 3D joints or nobody
             "single_view": self.single_view,
+            # the views' agreement before the reprojection gate (since session 53): null where not measured
+            "reprojection_px_median": None if self.reprojection_px_median is None
+            else r(self.reprojection_px_median, 3),
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
 
@@ -302,6 +313,7 @@ class _Pass:
     prior_fallback: bool = False
     several_people: bool = False  # two people in view: only the tracked subject's joints kept (PairResult's)
     single_view: str | None = None  # the camera whose 2D joints alone are the answer (PairResult.single_view)
+    reprojection_px_median: float | None = None  # the views' agreement before the gate (PairResult's)
 
     @property
     def frame_ok(self) -> dict:
@@ -416,6 +428,7 @@ class Estimator:
                                   or session.open_lane("human")))
         self._prior_follow: Joints3D | None = None
         self._prior_check: tuple[float | None, bool] = (None, False)  # this pair's (disagreement, fell back)
+        self._agreement: ViewAgreement | None = None  # this pair's, set by _joints_3d
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
@@ -638,7 +651,7 @@ class Estimator:
                             self.config.joints3d.method, frame_reason=dict(p.frame_reason),
                             prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback,
                             several_people=p.several_people,
-                            single_view=p.single_view)
+                            single_view=p.single_view, reprojection_px_median=p.reprojection_px_median)
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -838,9 +851,11 @@ class Estimator:
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
         _add_ms(timing, "joints_3d", t)
+        # two people: each view's peak may be either person's, so the views' disagreement says nothing of the rig
+        agreement = None if several or self._agreement is None else self._agreement.median_px
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
-                     None if seen_by is None else self.camera_names[seen_by])
+                     None if seen_by is None else self.camera_names[seen_by], agreement)
 
     def _several_people(self, kp: Keypoints2D) -> bool:
         """Two people in view: at least ``second_person_min_joints`` joints whose maps show a second peak of at
@@ -1022,6 +1037,12 @@ class Estimator:
         cfg = self.config.joints3d
         self._prior_follow = None  # this pair's, set by _with_prior (someone is there) for _track_joints
         self._prior_check = (None, False)  # this pair's, set by _with_prior
+        # the views' agreement, from the peaks the presence gate calls strong (phantom peaks of an empty room are
+        # weaker), whatever the 3D method: it tells of the rig, not of the method
+        pres = self.config.presence
+        tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg,
+                                                          pres.threshold(self.config.heatmaps.source),
+                                                          pres.min_joints)
 
         def centroid() -> Joints3D:
             g = self.grid
@@ -1029,7 +1050,6 @@ class Estimator:
             return depth_centroid_joints(heat, depth, kp.uv, kp.confidence, kp.valid, crops, self.size, cfg)
 
         if cfg.method == "triangulate":
-            tri = triangulate_joints(uv_model, kp.confidence, kp.valid, crops, cfg)
             if self.skeleton_prior is not None:
                 # Someone there? Asked of the peaks (the presence gate's thresholds are the peaks'), never of
                 # the prior, which was trained on people only and places a skeleton in any noise.

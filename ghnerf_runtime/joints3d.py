@@ -29,8 +29,8 @@ from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.triangulation import triangulate_robust, triangulate_two_views
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
-__all__ = ["Joints3D", "gate_presence", "gate_to_box", "triangulate_joints", "grid_shape", "query_grid",
-           "volumetric_joints", "depth_centroid_joints"]
+__all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "triangulate_joints",
+           "triangulate_joints_checked", "grid_shape", "query_grid", "volumetric_joints", "depth_centroid_joints"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,6 +110,28 @@ def _check_views(uv: np.ndarray, conf: np.ndarray, valid: np.ndarray) -> tuple[n
 
 
 # ----------------------------------------------------------------- triangulation
+@dataclass(frozen=True)
+class ViewAgreement:
+    """How well the two views' confident peaks meet in 3D, measured before the reprojection gate.
+
+    A camera turned on its mount after calibration moves every joint off its epipolar line: the error
+    grows for all joints at once, and past ``max_reprojection_px`` the gate drops them, so the reported
+    joints alone would not show it (the worst are gone). This is what the daemon watches
+    (``docs/calibration.md``, "When the rig no longer fits").
+
+    Attributes:
+        median_px: median over the measured joints of the larger of the views' reprojection errors
+            (model-input pixels), before the gate; ``None`` when fewer than ``min_joints`` were measured
+            (nobody, or too little seen in both views to tell).
+        joints: joints measured: triangulated, with a peak of at least ``min_confidence`` in both views.
+        gated: of those, how many the ``max_reprojection_px`` gate dropped.
+    """
+
+    median_px: float | None
+    joints: int
+    gated: int
+
+
 def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig) -> Joints3D:
     """Triangulate 2D peaks given in model-input pixels of the crop cameras.
 
@@ -135,23 +157,62 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
         >>> np.round(r.points, 6).tolist(), r.valid.tolist(), round(float(r.confidence[0]), 3)
         ([[0.1, -1.2, 3.0]], [True], 0.8)
     """
+    return triangulate_joints_checked(uv_model, confidence, valid, cameras, config)[0]
+
+
+def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig,
+                               min_confidence: float = 0.0, min_joints: int = 1) -> tuple[Joints3D, ViewAgreement]:
+    """:func:`triangulate_joints` and the :class:`ViewAgreement` of the joints whose peaks are at least
+    ``min_confidence`` in every view (at least ``min_joints`` of them for a median), from one solve.
+
+    Example (the right camera's rig entry tilted by 1 degree: its peaks lie 1.7 px off where the rig puts them
+    in these 128 px crops, an error the triangulation shares between the views):
+        >>> from ghnerf_runtime.geometry import Camera, look_at
+        >>> K = [[100.0, 0, 63.5], [0, 100.0, 63.5], [0, 0, 1]]
+        >>> cams = [Camera(n, 128, 128, K, [], *look_at((x, -1.0, 0), (0, -1.0, 3))) for n, x in (("a", -0.5), ("b", 0.5))]
+        >>> X = np.array([[0.1, -1.2, 3.0], [-0.2, -0.4, 3.1], [0.0, 0.3, 2.9]])
+        >>> uv = np.stack([c.project(X)[0] for c in cams])
+        >>> a = np.radians(1.0); Rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+        >>> b = cams[1]; bumped = [cams[0], Camera("b", 128, 128, K, [], Rx @ b.R, Rx @ b.t)]
+        >>> ok, conf = np.ones((2, 3), bool), np.full((2, 3), 0.8)
+        >>> triangulate_joints_checked(uv, conf, ok, cams, Joints3DConfig())[1].median_px < 1e-6
+        True
+        >>> round(triangulate_joints_checked(uv, conf, ok, bumped, Joints3DConfig())[1].median_px, 1)
+        0.9
+    """
     uv, conf, ok = _check_views(uv_model, confidence, valid)
     use = ok & (conf >= config.min_view_confidence) & (conf > 0) & np.all(np.isfinite(uv), axis=-1)
     weights = np.where(use, conf, 0.0)
     mats = [np.asarray(c.P if isinstance(c, Camera) else c, dtype=np.float64) for c in cameras]  # pinhole: P suffices
+    both = use.all(axis=0)
     if len(mats) == 2:  # the rig: the lean two-view solver (same results, a third of the numpy calls)
+        # solved without its reprojection gate, applied below: the errors of the joints it drops are what a
+        # bumped camera raises
         res = triangulate_two_views(np.where(use[..., None], uv, 0.0), np.stack(mats), weights,
-                                    max_reprojection_error=config.max_reprojection_px,
                                     min_ray_angle_deg=config.min_ray_angle_deg)
+        solved = res.valid & both
+        err = np.where(solved[:, None], res.reprojection_error, 0.0)
+        worst = err.max(axis=-1)
+        gated = solved & (worst > config.max_reprojection_px)
+        good = solved & ~gated
+        reprojection = np.where(good[:, None], err, 0.0)
     else:
+        # more views: the robust solver drops a disagreeing view inside its gate, so only its result is measured
         res = triangulate_robust(np.where(use[..., None], uv, 0.0), mats, weights, undistorted=True,
                                  max_reprojection_error=config.max_reprojection_px,
                                  min_ray_angle_deg=config.min_ray_angle_deg)
-    both = use.all(axis=0)
-    good = res.valid & both
+        good = solved = res.valid & both
+        worst = res.reprojection_error.max(axis=-1)
+        gated = np.zeros_like(good)
+        reprojection = res.reprojection_error
     # the C-th root: a square root is the geometric mean of two views only (three views of 0.8 gave 0.72)
     conf3 = np.prod(np.where(use, conf, 0.0), axis=0) ** (1.0 / len(conf))
-    return Joints3D(res.points, conf3.astype(np.float32), good, res.reprojection_error).sanitised()
+    joints = Joints3D(np.where(good[:, None], res.points, 0.0), conf3.astype(np.float32), good,
+                      reprojection).sanitised()
+    measured = solved & np.all(conf >= min_confidence, axis=0) & np.isfinite(worst)
+    n = int(measured.sum())
+    median = float(np.median(worst[measured])) if n >= max(min_joints, 1) else None
+    return joints, ViewAgreement(median, n, int((gated & measured).sum()))
 
 
 # ----------------------------------------------------------------- volumetric

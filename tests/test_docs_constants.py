@@ -22,7 +22,8 @@ from calibration.solve import COVERAGE_GRID, MIN_VIEWS, USUAL_PITCH_DEG
 from drivers.backends.replay import MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
-from firmware_host.daemon.config import DAEMON_PATH_KEYS
+from firmware_host.daemon.calibration_watch import CLEAR_RATIO
+from firmware_host.daemon.config import CALIBRATION_MAX_PX, CALIBRATION_WINDOW, DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
@@ -134,6 +135,12 @@ def _doc(name: str) -> str:
     # session 53: the farthest box a float32 near/far is made of
     ("docs/model.md", f"for a box reaching farther than {MAX_DEPTH_M:g} m (`MAX_DEPTH_M`)"),
     ("docs/runtime.md", f"farther than {MAX_DEPTH_M / 1000:g} km (`contract.MAX_DEPTH_M`)"),
+    # session 53: the daemon's calibration check, its defaults quoted where it is explained
+    ("docs/calibration.md", f"the last `health.calibration_window` ({CALIBRATION_WINDOW}) measured pairs"),
+    ("docs/calibration.md", f"above `health.calibration_max_px` ({CALIBRATION_MAX_PX:g} px)"),
+    ("docs/calibration.md", f"the {CALIBRATION_MAX_PX:g} px limit is"),
+    ("docs/calibration.md", f"under {'three quarters' if CLEAR_RATIO == 0.75 else CLEAR_RATIO} of the limit"),
+    ("docs/daemon.md", f"under {'three quarters' if CLEAR_RATIO == 0.75 else CLEAR_RATIO} of it (`CLEAR_RATIO`)"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
     ("docs/protocol.md", f"a name past {MAX_HOST_NAME} characters), named when the sink opens"),
 ])

@@ -43,6 +43,11 @@ DAEMON_PATH_KEYS: tuple[tuple[str, ...], ...] = (("health", "status_file"),) + t
 DAEMON_RIG_URL_KEYS: tuple[tuple[str, ...], ...] = (("rig", "url"),)
 #: Time one estimate may take on top of a read before the watchdog's allowance runs out (see DaemonConfig).
 LOOP_MARGIN_S = 5.0
+#: The calibration check's defaults (HealthConfig): on the simulated rig the true rig's 30-pair medians reached
+#: 0.24 px, a camera tilted 1 degree gave 1.17 px or more (128 px crops; benchmarks/measure_calibration_drift.py,
+#: docs/calibration.md).
+CALIBRATION_WINDOW = 30
+CALIBRATION_MAX_PX = 0.8
 
 
 class DaemonConfigError(FirmwareHostError, ValueError):
@@ -132,6 +137,11 @@ class HealthConfig:
             before the watchdog treats the daemon as hung: systemd's ``WATCHDOG=1`` pings stop, the
             thread stacks go to the journal and systemd restarts the service.
         slow_estimate_s: an estimate slower than this flags ``ESTIMATOR_STALLED`` on the sinks' STATUS.
+        calibration_window: pairs (with someone seen well in both views) whose median view agreement
+            (``PairResult.reprojection_px_median``) the calibration check takes (:mod:`firmware_host.daemon.calibration_watch`).
+        calibration_max_px: that median, in model-input pixels, above which the status file and systemd's
+            STATUS line say the calibration is suspect (a camera moved since calibration: recalibrate); ``null``:
+            no check. Measured defaults (``benchmarks/measure_calibration_drift.py``, docs/calibration.md).
     """
 
     status_file: str | None = None
@@ -139,6 +149,8 @@ class HealthConfig:
     open_allowance_s: float = 60.0
     loop_allowance_s: float = 15.0
     slow_estimate_s: float = 1.0
+    calibration_window: int = CALIBRATION_WINDOW
+    calibration_max_px: float | None = CALIBRATION_MAX_PX
 
     def __post_init__(self) -> None:
         if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
@@ -147,6 +159,14 @@ class HealthConfig:
         _seconds(self, "open_allowance_s", 1.0, 3600.0)
         _seconds(self, "loop_allowance_s", 1.0, 3600.0)
         _seconds(self, "slow_estimate_s", 0.001, 3600.0)
+        window = self.calibration_window
+        if isinstance(window, bool) or not isinstance(window, int) or not 1 <= window <= 10000:
+            _fail("calibration_window", "must be a whole number of pairs in [1, 10000]", window)
+        if self.calibration_max_px is not None:
+            limit = self.calibration_max_px
+            if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not 0 < limit <= 100:
+                _fail("calibration_max_px", "must be a number of pixels in (0, 100], or null for no check", limit)
+            object.__setattr__(self, "calibration_max_px", float(limit))
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,8 @@
 The report (``docs/daemon.md`` lists the fields) is what an operator reads to tell a pulled camera
 from a slow estimator from a dead link: the state, what the rig delivered and what was estimated,
 latency and joints found over the last window, camera reopen counts with the last error, the frames
-the estimator's frame check rejected per camera and reason, and each sink's counters.
+the estimator's frame check rejected per camera and reason, whether the rig's calibration still fits
+(:mod:`firmware_host.daemon.calibration_watch`), and each sink's counters.
 """
 from __future__ import annotations
 
@@ -18,6 +19,8 @@ from typing import Any, Optional
 
 import numpy as np
 
+from firmware_host.daemon.calibration_watch import CalibrationWatch
+from firmware_host.daemon.config import CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from ghnerf_runtime.frame_reasons import REASONS
 
 __all__ = ["State", "Health", "write_status_file"]
@@ -69,6 +72,8 @@ class Health:
     latencies_ms: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     found_fraction: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     estimate_times: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
+    calibration: CalibrationWatch = field(default_factory=lambda: CalibrationWatch(CALIBRATION_WINDOW,
+                                                                                    CALIBRATION_MAX_PX))
 
     def __post_init__(self) -> None:
         self.started = self.state_since = self.clock()
@@ -124,6 +129,7 @@ class Health:
                           "joints_found": round(float(np.mean(self.found_fraction)), 3)
                           if self.found_fraction else None,
                           "window": len(lat)},
+            "calibration": self.calibration.report(),
             "last_error": self.last_error,
             "config": {"reloads": self.reloads, "reload_failures": self.reload_failures,
                        "reload_error": self.reload_error},
@@ -147,7 +153,11 @@ class Health:
             line = f"waiting for the rig: {self.last_error}"
         else:
             line = self.state
-        refused = f"; {self.reload_error}"[:120] if self.reload_error else ""  # kept whole however long the rest
+        # a rig that no longer fits its calibration is said whatever else the line holds (about 55 characters),
+        # and so is a refused reload, cut to leave the state its STATUS_KEEP
+        calibration = self.calibration.status()
+        room = min(120, STATUS_MAX - STATUS_KEEP - len(calibration))
+        refused = calibration + (f"; {self.reload_error}"[:room] if self.reload_error else "")
         down = _sinks_down(sinks or {}, STATUS_MAX - len(refused) - min(len(line), STATUS_KEEP))
         return line[:STATUS_MAX - len(refused) - len(down)] + down + refused
 

@@ -20,6 +20,10 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   skipped (``MAX_FAILED_RUNS`` failures of the model in a row stop the daemon, exit 1, for systemd to
   restart it with the model loaded afresh); an estimate slower than
   ``health.slow_estimate_s`` flags ``ESTIMATOR_STALLED``;
+* **a camera moved since calibration** (knocked on its mount): the pairs' views stop meeting in 3D; once
+  the median over ``health.calibration_window`` pairs passes ``health.calibration_max_px`` the status file
+  and systemd's STATUS say "calibration suspect: recalibrate (ghcal)", and the log warns once
+  (:mod:`firmware_host.daemon.calibration_watch`); the joints still flow;
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
   watchdog pings and systemd restarts the service;
 * **a camera stuck in a device call** the rig's close could not end (an opencv:// grab that hangs): the
@@ -196,6 +200,7 @@ class Daemon:
         self.config = config
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.health = Health(clock=clock, rig_url=redact_url(config.rig.url))
+        self.health.calibration.configure(config.health.calibration_window, config.health.calibration_max_px)
         # Woken often enough to flag a stuck estimate within about half of slow_estimate_s.
         self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock,
                                      interval_s=min(config.health.slow_estimate_s / 2, 1.0),
@@ -316,6 +321,7 @@ class Daemon:
             except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the runtime cannot use
                 raise DaemonStartError(f"the model does not fit rig {rig.rig_id!r}: {e}") from None
             self._rig_text = text
+            self.health.calibration.reset()  # the pairs of another calibration say nothing of this one
         else:
             self._estimator.reset()  # the subject may have moved while the camera was away
         return self._estimator
@@ -468,6 +474,7 @@ class Daemon:
             self.watchdog.beat("handing the joints to the sinks")
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))
             self.health.frames_checked(result.frame_reason)
+            self._calibration_changed(self.health.calibration.add(result.reprojection_px_median))
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
             self.health.camera_fault = False
             self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)
@@ -475,6 +482,19 @@ class Daemon:
             for sink in self._sinks.values():
                 sink.send(frame)
         return False
+
+    def _calibration_changed(self, suspect: Optional[bool]) -> None:
+        """Log the calibration check's verdict when it changes (not every pair: the status file has the figure)."""
+        watch = self.health.calibration
+        if suspect:
+            _log.warning("calibration suspect: the two views' peaks are %.2f px apart over the last %d pairs "
+                         "(health.calibration_max_px %g): a camera has moved since calibration; recalibrate (ghcal, "
+                         "docs/calibration.md) and restart", watch.median_px, len(watch.values), watch.max_px)
+        elif suspect is not None and watch.max_px is None:
+            _log.info("calibration check off (health.calibration_max_px null)")
+        elif suspect is not None:
+            _log.info("calibration fits again: the views' peaks are %.2f px apart over the last %d pairs",
+                      watch.median_px if watch.median_px is not None else 0.0, len(watch.values))
 
     def _lost(self, why: str) -> None:
         self.health.rig_lost += 1
@@ -643,6 +663,7 @@ class Daemon:
             replaced = session is not self._session
             self._session, self._estimator = session, estimator  # None: built when the next rig opens
             self._rig_text = dumps_rig(estimator.rig) if estimator is not None else None
+            self.health.calibration.reset()  # another model or settings: its peaks are judged afresh
             if replaced:  # the old model's sessions are free now: hand their pages back (firmware_host.daemon.memory)
                 return_freed_memory()
         with self._fault_lock:
@@ -651,6 +672,8 @@ class Daemon:
             for url, sink in added.items():
                 self._start_sink(url, sink)
         if "health" in changed:
+            self._calibration_changed(self.health.calibration.configure(new.health.calibration_window,
+                                                                        new.health.calibration_max_px))
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0
             if old_status_file and old_status_file != new.health.status_file:

@@ -1254,3 +1254,53 @@ def test_a_rig_url_password_stays_out_of_the_status_file_and_the_log(tmp_path, c
     assert "hunter2" not in status and "hunter2" not in caplog.text
     assert "admin%3A***%40cam1" in json.loads(status)["rig"]["url"]
     assert "rtsp://admin:***@cam1/s" in json.loads(status)["last_error"]
+
+
+def _take_on_video(sim_url: str, folder: Path, frames: int) -> tuple[Path, Path, object]:
+    """Two MJPG videos of a simulated take and its rig: ``(left video, right video, rig)``."""
+    import cv2
+
+    with drivers.open_rig(sim_url.replace("fps=30", "fps=30&policy=all"), clock=drivers.ManualClock()) as source:
+        pairs = [source.read(timeout_s=5) for _ in range(frames)]
+        rig = source.rig
+    paths = []
+    for k, cam in enumerate(rig.pair):
+        paths.append(folder / f"{cam.name}.avi")
+        writer = cv2.VideoWriter(str(paths[-1]), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (cam.width, cam.height))
+        for pair in pairs:
+            writer.write(pair.images[k])
+        writer.release()
+    return paths[0], paths[1], rig
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, 2.0])
+def test_a_rig_file_that_no_longer_fits_its_cameras_is_said(sim_url, tmp_path, caplog, tilt_deg):
+    """The cameras film through the true rig; the rig file has the second camera tilted 2 degrees (knocked on its
+    mount after calibration). The joints still flow, but the status file's ``calibration`` turns suspect, systemd's
+    STATUS says to recalibrate and the log warns once. With the true rig file none of it (docs/daemon.md)."""
+    from benchmarks.measure_calibration_drift import turned
+    from ghnerf_runtime.rig_file import save_rig
+
+    left, right, rig = _take_on_video(sim_url, tmp_path, 24)
+    save_rig(turned(rig, 1, "tilt", tilt_deg), tmp_path / "rig.json")
+    url = f"opencv://?first={left}&second={right}&rig={tmp_path / 'rig.json'}&policy=all"
+    cfg = daemon_config_from_dict({
+        "rig": {"url": url}, "sinks": ["memory://"],
+        "estimator": {"session": {"model_dir": str(MODELS), "warmup": False}},
+        "health": {"status_file": str(tmp_path / "status.json"), "status_every_s": 0.05, "calibration_window": 10},
+    })
+    with caplog.at_level(logging.INFO, logger="ghnerf.daemon"), _Running(cfg, tmp_path) as run:
+        run.thread.join(timeout=60)  # rig.exit_at_end: the videos' end stops it
+        assert not run.thread.is_alive() and run.rc == [0]
+    assert run.daemon.health.pairs_estimated >= 20
+    calibration = json.loads((tmp_path / "status.json").read_text())["calibration"]
+    assert calibration["pairs"] == 10 and calibration["window"] == 10 and calibration["max_px"] == 0.8
+    said = [n["STATUS"] for n in run.notes if "calibration suspect: recalibrate (ghcal)" in n.get("STATUS", "")]
+    warned = [r for r in caplog.records if r.getMessage().startswith("calibration suspect")]
+    if tilt_deg:
+        assert calibration["suspect"] and calibration["reprojection_px_median"] > 0.8
+        assert said and len(warned) == 1 and warned[0].levelno == logging.WARNING
+        assert run.daemon.health.report()["estimator"]["joints_found"] > 0.6  # wrong joints, not missing ones
+    else:
+        assert not calibration["suspect"] and calibration["reprojection_px_median"] < 0.8 / 2
+        assert not said and not warned

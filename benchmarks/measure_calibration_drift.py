@@ -1,0 +1,118 @@
+"""A camera bumped after calibration: how far the two views' peaks stay from meeting in 3D.
+
+    .venv/bin/python benchmarks/measure_calibration_drift.py [--model-dir models] [--sequences 4] [--frames 10]
+                                                             [--degrees 0.25,0.5,1,2] [--axes tilt,pan,roll]
+
+The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe: held-out motions,
+random rig placements) through the true rig; the estimator is given that rig with the second camera turned
+by each angle about one of its own axes (``tilt``: about its x axis, the picture moves up or down; ``pan``:
+about its y axis, sideways, along the epipolar lines of a level rig; ``roll``: about its optical axis), as
+a rig file that no longer fits a camera knocked on its mount. Per setting it prints, over the pairs that
+were measured (``PairResult.reprojection_px_median`` not None), the per-pair median reprojection error
+before the gate (model-input pixels): its median, 90th percentile and largest; the median over
+``--window`` consecutive measured pairs of one sequence (what the daemon compares with
+``health.calibration_max_px``) at its smallest and largest; 3D joints found per pair and the MPJPE of those.
+A tool, not a test.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.cli.simdata import HELD_OUT_BASELINE_M, HELD_OUT_MOTIONS, SEED_BASE  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.geometry import Camera, Rig  # noqa: E402
+
+#: Camera axis (in its own frame: x right, y down, z forward) each kind of bump turns about.
+AXES = {"tilt": 0, "pan": 1, "roll": 2}
+
+
+def turned(rig: Rig, camera: int, axis: str, degrees: float) -> Rig:
+    """``rig`` with camera ``camera`` turned ``degrees`` about its own ``axis`` (``AXES``), its centre kept."""
+    if degrees == 0:
+        return rig
+    a = np.radians(degrees)
+    i, j = [k for k in range(3) if k != AXES[axis]]
+    turn = np.eye(3)
+    turn[i, i] = turn[j, j] = np.cos(a)
+    turn[i, j], turn[j, i] = -np.sin(a), np.sin(a)
+    cams = list(rig.cameras)
+    c = cams[camera]
+    cams[camera] = Camera(c.name, c.width, c.height, c.K, c.dist, turn @ c.R, turn @ c.t)
+    return Rig(tuple(cams), rig.volume, rig.rig_id)
+
+
+def rolling_medians(values: list[float], window: int) -> list[float]:
+    """The medians over every ``window`` consecutive values (over all of them when fewer)."""
+    v = np.asarray(values, float)
+    if v.size <= window:
+        return [float(np.median(v))] if v.size else []
+    return [float(np.median(v[k:k + window])) for k in range(v.size - window + 1)]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--sequences", type=int, default=4)
+    ap.add_argument("--frames", type=int, default=10)
+    ap.add_argument("--degrees", default="0.25,0.5,1,2", help="comma-separated turns of the second camera")
+    ap.add_argument("--axes", default="tilt,pan,roll", help=f"comma-separated, of {list(AXES)}")
+    ap.add_argument("--window", type=int, default=10, help="pairs of the rolling median")
+    args = ap.parse_args(argv)
+    import drivers.sim as sim  # a tool: the runtime library never imports drivers
+
+    axes = args.axes.split(",")
+    if unknown := [a for a in axes if a not in AXES]:
+        ap.error(f"--axes: {unknown} not of {list(AXES)}")
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
+    session = load_session(cfg)
+    settings = [("true rig", 0.0)] + [(a, float(d)) for a in axes for d in args.degrees.split(",")]
+    tally = {s: {"px": [], "roll": [], "found": [], "err": [], "pairs": 0} for s in settings}
+    for k in range(args.sequences):
+        seed = SEED_BASE + k  # the bench's recipe (ghnerf_runtime.cli.simdata)
+        rng = np.random.default_rng([seed, 7])
+        base = sim.RigPlacement.random(rng, width=640, height=480)
+        rig = replace(base, baseline_m=float(rng.uniform(*HELD_OUT_BASELINE_M))).build(rig_id=f"bench-{k}")
+        scene = sim.random_scene(seed, volume=rig.volume, motions=HELD_OUT_MOTIONS)
+        t0 = float(rng.uniform(0.0, scene.period_s))
+        times = [t0 + i / 30.0 for i in range(args.frames)]
+        shots = [[scene.render(c, t)[0] for c in rig.pair] for t in times]  # filmed by the true rig
+        for axis, deg in settings:
+            acc = tally[(axis, deg)]
+            with Estimator(session, turned(rig, 1, axis, deg) if deg else rig, cfg) as est:
+                seq_px = []
+                for t, images in zip(times, shots):
+                    r = est.estimate(images, timestamp_s=t)
+                    acc["pairs"] += 1
+                    ok = ~r.missing
+                    acc["found"].append(int(ok.sum()))
+                    acc["err"] += list(1000 * np.linalg.norm(r.joints_3d[ok] - scene.joints_3d(t)[ok], axis=1))
+                    if r.reprojection_px_median is not None:
+                        seq_px.append(r.reprojection_px_median)
+            acc["px"] += seq_px
+            acc["roll"] += rolling_medians(seq_px, args.window)  # within a sequence: the daemon's window
+    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs, {args.model_dir}, the second camera's "
+          f"rig entry turned (model-input px, {session.contract.height} px crops):")
+    print(f"  {'setting':>14} | measured | per-pair median px: median   p90    max | rolling {args.window}: min    max | "
+          f"3D joints | MPJPE mm")
+    for (axis, deg), acc in tally.items():
+        px = np.asarray(acc["px"], float)
+        name = axis if not deg else f"{axis} {deg:g} deg"
+        stats = (f"{np.median(px):6.2f} {np.percentile(px, 90):6.2f} {px.max():6.2f}" if px.size
+                 else f"{'-':>6} {'-':>6} {'-':>6}")
+        roll = f"{min(acc['roll']):6.2f} {max(acc['roll']):6.2f}" if acc["roll"] else f"{'-':>6} {'-':>6}"
+        mpjpe = f"{np.mean(acc['err']):6.1f}" if acc["err"] else f"{'-':>6}"
+        print(f"  {name:>14} | {px.size:4d}/{acc['pairs']:<3d} | {' ' * 19}{stats} | {' ' * 4}{roll} | "
+              f"{np.mean(acc['found']):5.1f}/25 | {mpjpe}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""The daemon's calibration check (``firmware_host.daemon.calibration_watch``): the rule on synthetic sequences
+of the pairs' view agreement, its config keys, and what the status file and systemd's STATUS line say."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from firmware_host.daemon import DaemonConfigError, daemon_config_from_dict
+from firmware_host.daemon.calibration_watch import CLEAR_RATIO, CalibrationWatch
+from firmware_host.daemon.config import CALIBRATION_MAX_PX, CALIBRATION_WINDOW
+from firmware_host.daemon.health import STATUS_KEEP, STATUS_MAX, Health, State
+
+SINK = "memory://"
+
+
+def _feed(watch: CalibrationWatch, values) -> list[tuple[int, bool]]:
+    """The transitions ``(index, new state)`` over ``values``."""
+    return [(k, change) for k, v in enumerate(values) if (change := watch.add(v)) is not None]
+
+
+def _true_rig(n: int, seed: int = 0) -> np.ndarray:
+    """Per-pair medians as the true rig gave them (benchmarks/measure_calibration_drift.py: median 0.19 px,
+    90 % under 0.33, the largest 0.61), with a few worse pairs (a fast move, an odd pose)."""
+    rng = np.random.default_rng(seed)
+    v = rng.lognormal(np.log(0.2), 0.4, n)
+    v[rng.choice(n, n // 20, replace=False)] = 0.7
+    return v
+
+
+def test_the_true_rig_s_pairs_never_raise_it():
+    watch = CalibrationWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_PX)
+    assert _feed(watch, _true_rig(3000)) == []
+    assert not watch.report()["suspect"] and watch.report()["pairs"] == CALIBRATION_WINDOW
+
+
+def test_a_bumped_camera_raises_it_once_and_a_fixed_one_clears_it_once():
+    """A step from the true rig's figures to a 1 degree tilt's (1.2-2.2 px) is flagged once, after the window's
+    median passes the limit (not on the first bad pair), and said once; a recalibration brings it back once."""
+    watch = CalibrationWatch(30, 0.8)
+    rng = np.random.default_rng(1)
+    bumped = rng.uniform(1.2, 2.2, 200)
+    changes = _feed(watch, np.concatenate([_true_rig(100), bumped, _true_rig(200, seed=2)]))
+    assert [state for _, state in changes] == [True, False]
+    (up, _), (down, _) = changes
+    assert 100 + 10 <= up <= 100 + 16  # half the window bad: the median turns
+    assert 300 + 10 <= down <= 300 + 16
+    assert watch.report()["reprojection_px_median"] < CLEAR_RATIO * 0.8
+
+
+def test_it_does_not_flap_near_the_limit():
+    watch = CalibrationWatch(10, 1.0)
+    values = np.concatenate([np.full(10, 1.5), 0.95 + 0.04 * np.sin(np.arange(300))])  # hovering just under
+    assert [s for _, s in _feed(watch, values)] == [True]
+
+
+def test_pairs_without_a_figure_do_not_count_and_a_short_window_judges_nothing():
+    watch = CalibrationWatch(5, 0.8)
+    assert _feed(watch, [2.0, None, None, 2.0, float("nan"), 2.0, 2.0]) == []  # 4 figures of 5
+    assert watch.report() == {"reprojection_px_median": 2.0, "pairs": 4, "window": 5, "max_px": 0.8,
+                              "suspect": False}
+    assert watch.add(2.0) is True
+
+
+def test_reset_and_configure():
+    watch = CalibrationWatch(3, 0.8)
+    _feed(watch, [2.0, 2.0, 2.0])
+    assert watch.suspect
+    watch.reset()  # another calibration: judged afresh
+    assert not watch.suspect and watch.report()["pairs"] == 0
+    _feed(watch, [2.0, 2.0, 2.0])
+    assert watch.configure(3, 5.0) is False  # a looser limit clears it at once
+    assert watch.configure(2, 1.0) is True and watch.report()["pairs"] == 2  # the newest kept
+    assert watch.configure(2, None) is False and _feed(watch, [9.0] * 5) == []  # null: no check
+
+
+def test_the_status_file_and_line_say_it():
+    health = Health(clock=lambda: 0.0)
+    health.calibration.configure(3, 0.8)
+    health.enter(State.RUNNING)
+    for _ in range(3):
+        health.estimated(100.0, 1.0)
+        health.calibration.add(1.46)
+    report = health.report()
+    assert report["calibration"] == {"reprojection_px_median": 1.46, "pairs": 3, "window": 3, "max_px": 0.8,
+                                     "suspect": True}
+    assert "; calibration suspect: recalibrate (ghcal), 1.46 px > 0.8" in health.status_line()
+    # a refused reload and a long state keep the warning whole, and the state its STATUS_KEEP
+    health.reload_error = "reload refused: " + "x" * 300
+    health.last_error = "y" * 300
+    health.enter(State.WAITING)
+    line = health.status_line()
+    assert len(line) <= STATUS_MAX and "calibration suspect: recalibrate (ghcal), 1.46 px > 0.8" in line
+    assert line.startswith("waiting for the rig: " + "y" * (STATUS_KEEP - 21))
+
+
+def test_the_config_keys_and_their_checks():
+    cfg = daemon_config_from_dict({"sinks": [SINK]})
+    assert (cfg.health.calibration_window, cfg.health.calibration_max_px) == (CALIBRATION_WINDOW, CALIBRATION_MAX_PX)
+    off = daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_px": None, "calibration_window": 5}})
+    assert off.health.calibration_max_px is None and off.health.calibration_window == 5
+    assert isinstance(daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_px": 2}}
+                                              ).health.calibration_max_px, float)
+    for key, value in (("calibration_window", 0), ("calibration_window", 2.5), ("calibration_window", True),
+                       ("calibration_max_px", 0), ("calibration_max_px", "1"), ("calibration_max_px", float("nan"))):
+        with pytest.raises(DaemonConfigError, match=f"^health.{key}: .*got {value!r}"):
+            daemon_config_from_dict({"sinks": [SINK], "health": {key: value}})

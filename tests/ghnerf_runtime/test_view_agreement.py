@@ -1,0 +1,111 @@
+"""The two views' agreement before the reprojection gate (``joints3d.triangulate_joints_checked``,
+``PairResult.reprojection_px_median``): what tells the daemon that a camera moved since calibration
+(docs/calibration.md, "When the rig no longer fits")."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.measure_calibration_drift import turned
+from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, SessionConfig
+from ghnerf_runtime.geometry import Camera, look_at
+from ghnerf_runtime.geometry.triangulation import triangulate_two_views
+from ghnerf_runtime.joints3d import triangulate_joints, triangulate_joints_checked
+
+REPO = Path(__file__).resolve().parents[2]
+MODELS = REPO / "models"
+K = [[100.0, 0, 63.5], [0, 100.0, 63.5], [0, 0, 1]]
+
+
+def _cams() -> list[Camera]:
+    return [Camera(n, 128, 128, K, [], *look_at((x, -1.0, 0), (0, -1.0, 3))) for n, x in (("a", -0.5), ("b", 0.5))]
+
+
+def _joints(n: int = 12) -> np.ndarray:
+    rng = np.random.default_rng(3)
+    return np.column_stack([rng.uniform(-0.3, 0.3, n), rng.uniform(-1.8, 0.0, n), rng.uniform(2.8, 3.2, n)])
+
+
+def _views(cams, X):
+    return np.stack([c.project(X)[0] for c in cams])
+
+
+def _tilted(cams: list[Camera], degrees: float) -> list[Camera]:
+    a = np.radians(degrees)
+    Rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    b = cams[1]
+    return [cams[0], Camera(b.name, b.width, b.height, b.K, b.dist, Rx @ b.R, Rx @ b.t)]
+
+
+def test_the_error_of_joints_the_gate_drops_is_still_measured():
+    """A camera tilted 3 degrees puts every joint past a 2 px gate: no joint is reported, but the views'
+    disagreement is (only the reported joints, the gate's survivors, would never show more than the gate)."""
+    cams, X = _cams(), _joints()
+    uv, conf, ok = _views(cams, X), np.full((2, len(X)), 0.9), np.ones((2, len(X)), bool)
+    cfg = Joints3DConfig(max_reprojection_px=2.0)
+    joints, agreement = triangulate_joints_checked(uv, conf, ok, _tilted(cams, 3.0), cfg)
+    assert not joints.valid.any()
+    assert agreement.joints == len(X) and agreement.gated == len(X)
+    assert agreement.median_px > 2.0
+    fit, true = triangulate_joints_checked(uv, conf, ok, cams, cfg)
+    assert fit.valid.all() and true.median_px < 1e-6 and true.gated == 0
+
+
+def test_the_error_grows_with_the_tilt():
+    cams, X = _cams(), _joints()
+    uv, conf, ok = _views(cams, X), np.full((2, len(X)), 0.9), np.ones((2, len(X)), bool)
+    medians = [triangulate_joints_checked(uv, conf, ok, _tilted(cams, d), Joints3DConfig())[1].median_px
+               for d in (0.0, 0.5, 1.0, 2.0)]
+    assert medians == sorted(medians) and medians[0] < 1e-6 and medians[-1] > 1.5
+
+
+def test_only_joints_strong_in_both_views_are_measured_and_too_few_say_nothing():
+    cams, X = _cams(), _joints(8)
+    uv, ok = _views(cams, X), np.ones((2, 8), bool)
+    conf = np.full((2, 8), 0.9)
+    conf[1, :5] = 0.2  # weak in the second view: an empty room's phantom peaks are so
+    _, agreement = triangulate_joints_checked(uv, conf, ok, _tilted(cams, 2.0), Joints3DConfig(), 0.35, 3)
+    assert agreement.joints == 3 and agreement.median_px is not None
+    _, few = triangulate_joints_checked(uv, conf, ok, _tilted(cams, 2.0), Joints3DConfig(), 0.35, 4)
+    assert few.joints == 3 and few.median_px is None
+
+
+def test_the_joints_are_the_gated_solver_s():
+    """The gate applied after the solve keeps triangulate_joints' joints as the solver's own gate made them."""
+    cams, X = _cams(), _joints(20)
+    uv = _views(cams, X) + np.random.default_rng(5).normal(0, 1.0, (2, 20, 2))
+    uv[1, ::3, 1] += 20.0  # off their epipolar lines: past the gate
+    conf, ok = np.full((2, 20), 0.8), np.ones((2, 20), bool)
+    cfg = Joints3DConfig()
+    got = triangulate_joints(uv, conf, ok, cams, cfg)
+    ref = triangulate_two_views(uv, np.stack([c.P for c in cams]), conf, max_reprojection_error=cfg.max_reprojection_px,
+                                min_ray_angle_deg=cfg.min_ray_angle_deg)
+    assert 0 < ref.valid.sum() < 20
+    np.testing.assert_array_equal(got.valid, ref.valid)
+    np.testing.assert_allclose(got.points, ref.points)
+    np.testing.assert_allclose(got.reprojection_px, ref.reprojection_error)
+
+
+@pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model: models/model_card.json")
+def test_the_shipped_model_s_pairs_tell_a_tilted_rig_file_from_the_true_one():
+    """The simulator films through the true rig; the estimator given the rig with its second camera tilted 2
+    degrees finds joints still (the gate lets them through), but its pairs' agreement says the rig moved."""
+    sim = pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
+    session = load_session(cfg)
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
+    shots = [[scene.render(c, t, with_truth=False)[0] for c in rig.pair] for t in (0.0, 0.1, 0.2, 0.3)]
+    medians = {}
+    for name, r in (("true", rig), ("tilted", turned(rig, 1, "tilt", 2.0))):
+        with Estimator(session, r, cfg) as est:
+            results = [est.estimate(images, timestamp_s=0.1 * k) for k, images in enumerate(shots)]
+        assert all(res.reprojection_px_median is not None for res in results)
+        assert all(res.to_json()["reprojection_px_median"] == round(res.reprojection_px_median, 3) for res in results)
+        medians[name] = float(np.median([res.reprojection_px_median for res in results]))
+        assert np.mean([res.num_found for res in results]) > 15  # silently wrong, not missing
+    assert medians["true"] < 0.5 < 1.5 < medians["tilted"], medians
