@@ -545,7 +545,7 @@ def test_a_prior_that_disagrees_with_the_triangulation_falls_back_to_it(model_wi
     keeps the prior's joints; ``max_prior_disagreement_m: 0`` turns the check off."""
     from ghnerf_runtime import estimator as estimator_module
     from ghnerf_runtime.estimator import Estimator, load_session
-    from ghnerf_runtime.joints3d import Joints3D
+    from ghnerf_runtime.joints3d import Joints3D, ViewAgreement
     from ghnerf_runtime.skeleton_prior import SkeletonEstimate
 
     rig = sim.RigPlacement().build()
@@ -554,7 +554,9 @@ def test_a_prior_that_disagrees_with_the_triangulation_falls_back_to_it(model_wi
     centre = 0.5 * (rig.volume.min_corner + rig.volume.max_corner)  # inside every box gate
     truth = centre + 0.3 * (_skeleton(2) - _skeleton(2).mean(0))
     tri = Joints3D(truth, np.full(NUM_JOINTS, 0.9, np.float32), np.ones(NUM_JOINTS, bool), np.zeros((NUM_JOINTS, 2)))
-    monkeypatch.setattr(estimator_module, "triangulate_joints", lambda *a, **k: tri)
+    # the estimator's one solve (joints and the views' agreement, since session 53)
+    solve = (tri, ViewAgreement(None, 0, 0))
+    monkeypatch.setattr(estimator_module, "triangulate_joints_checked", lambda *a, **k: solve)
     cfg = _config(model_with_prior, max_prior_disagreement_m=limit_m)
     session = load_session(cfg)
     prior_points = truth + [0.0, 0.0, offset_m]
