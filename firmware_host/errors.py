@@ -17,8 +17,9 @@ class SinkError(FirmwareHostError):
 
 
 def shown_value(field: str, value: object) -> object:
-    """A refused sink (or ``ghnerf-listen``) URL field's ``value`` as a message shows it: a secret option's as ``***``, a URL or a location
-    (``user:password@host``, the user info before the ``@``) without its password; anything else as it is."""
+    """A refused sink (or ``ghnerf-listen``) URL field's ``value`` as a message shows it: a secret option's as
+    ``***``, a URL or a location (``user:password@host``, the user info before the ``@``) without its password;
+    anything else as it is."""
     if is_secret_key(field):
         return REDACTED
     if not isinstance(value, str):

@@ -131,4 +131,5 @@ def test_sinks_are_named_without_their_passwords_and_told_apart_when_only_those_
     from firmware_host.daemon.health import sink_keys
 
     swapped = sink_keys([second, first])  # the order given decides which is #2
-    assert swapped == {second: "memory://viewer:***@here?max_bytes=64", first: "memory://viewer:***@here?max_bytes=64#2"}
+    assert swapped == {second: "memory://viewer:***@here?max_bytes=64",
+                       first: "memory://viewer:***@here?max_bytes=64#2"}

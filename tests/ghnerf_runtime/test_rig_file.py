@@ -588,7 +588,8 @@ def test_a_working_volume_past_the_models_depth_range_is_refused_at_load(example
     assert f"{shown}" in said and f"farther than the {MAX_DEPTH_M:g} m (MAX_DEPTH_M)" in said
     rig = rig_from_dict(json.loads(EXAMPLE.read_text()))
     with pytest.raises(RigFileError, match="MAX_DEPTH_M"):
-        save_rig(Rig(rig.cameras, WorkingVolume([-1.0, -2.0, 1.0], [1.0, 0.0, far_z]), rig.rig_id), tmp_path / "out.json")
+        save_rig(Rig(rig.cameras, WorkingVolume([-1.0, -2.0, 1.0], [1.0, 0.0, far_z]), rig.rig_id),
+                 tmp_path / "out.json")
     assert not (tmp_path / "out.json").exists()
 
 

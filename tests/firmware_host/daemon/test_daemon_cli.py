@@ -332,7 +332,8 @@ def test_validate_config_refuses_a_rig_file_whose_volume_the_model_cannot_sweep(
     rig = tmp_path / "rig.json"
     rig.write_text(json.dumps(data))
     size = f"width={data['cameras'][0]['width']}&height={data['cameras'][0]['height']}"
-    url = f"depthai://?rig={rig}&{size}" if scheme == "depthai" else f"opencv://?first=/dev/video0&second=/dev/video2&rig={rig}"
+    url = (f"depthai://?rig={rig}&{size}" if scheme == "depthai"
+           else f"opencv://?first=/dev/video0&second=/dev/video2&rig={rig}")
     path = _write(tmp_path, {"rig": {"url": url}, "sinks": ["udp://127.0.0.1:9870"]})
     assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 2
     err = capsys.readouterr().err
