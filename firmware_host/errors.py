@@ -16,9 +16,10 @@ class SinkError(FirmwareHostError):
     """A joint-stream output failed."""
 
 
-def _shown_value(field: str, value: object) -> object:
-    """A refused sink field's ``value`` as a message shows it: a secret option's as ``***``, a URL or a location
-    (``user:password@host``, the user info before the ``@``) without its password; anything else as it is."""
+def shown_value(field: str, value: object) -> object:
+    """A refused sink (or ``ghnerf-listen``) URL field's ``value`` as a message shows it: a secret option's as
+    ``***``, a URL or a location (``user:password@host``, the user info before the ``@``) without its password;
+    anything else as it is."""
     if is_secret_key(field):
         return REDACTED
     if not isinstance(value, str):
@@ -39,7 +40,7 @@ class SinkConfigError(SinkError, ValueError):
         self.url = url
         self.field = field
         self.value = value
-        super().__init__(f"{redact_url(url)}: invalid {field}={_shown_value(field, value)!r}: {reason}")
+        super().__init__(f"{redact_url(url)}: invalid {field}={shown_value(field, value)!r}: {reason}")
 
 
 class SinkUnavailableError(SinkError):

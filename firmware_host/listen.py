@@ -36,7 +36,9 @@ from dataclasses import dataclass, field
 from typing import Any, Optional, TextIO
 from urllib.parse import parse_qs, unquote, urlsplit
 
+from drivers.url import redact_location, redact_url
 from firmware_host.addresses import ipv4_first
+from firmware_host.errors import shown_value
 from firmware_host.protocol.constants import NO_FRAME_SEQ, Fault
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
@@ -151,73 +153,76 @@ class _SerialPort:
 _ACCEPTED: dict[str, tuple[str, ...]] = {"udp": (), "serial": ("baud",)}
 
 
-def _reject_unknown_keys(url: str, query: dict[str, list[str]], accepted: Sequence[str]) -> None:
+def _reject_unknown_keys(shown: str, query: dict[str, list[str]], accepted: Sequence[str]) -> None:
     unknown = sorted(k for k in query if k not in accepted)
     if unknown:
         takes = f"it takes {', '.join(accepted)}" if accepted else "it takes none"
-        raise ListenError(f"{url}: unknown parameter {', '.join(unknown)}; {takes}")
+        raise ListenError(f"{shown}: unknown parameter {', '.join(unknown)}; {takes}")
 
 
-def _refuse_repeats(url: str, query: dict[str, list[str]]) -> None:
+def _refuse_repeats(shown: str, query: dict[str, list[str]]) -> None:
     """``baud=9600&baud=921600`` is refused, as the sinks refuse it, rather than one of them quietly winning."""
     repeated = sorted(k for k, values in query.items() if len(values) > 1)
     if repeated:
-        raise ListenError(f"{url}: {', '.join(repeated)} given more than once")
+        raise ListenError(f"{shown}: {', '.join(repeated)} given more than once")
 
 
 def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
     """``udp://[HOST]:PORT`` (bound; HOST defaults to all interfaces, IPv4 and IPv6) or ``serial:///dev/DEVICE?baud=N``.
 
     ``ephemeral``: accept port 0, a port the system picks (read it from ``.address``); the command line
-    refuses it, since nothing would tell the sender which port to use.
+    refuses it, since nothing would tell the sender which port to use. Its errors show the URL without any password
+    (``drivers.url.redact_url``), as the sinks' do: a terminal's scrollback and a shell's log keep them.
     """
+    shown = redact_url(url)
     try:
         parts = urlsplit(url)
     except ValueError as e:  # e.g. "Invalid IPv6 URL": an unclosed [
-        raise ListenError(f"{url}: cannot be parsed: {e}") from None
+        raise ListenError(f"{shown}: cannot be parsed: {e}") from None
     scheme = parts.scheme.lower()  # UDP:// is udp:// (as for the sinks)
     query = parse_qs(parts.query, keep_blank_values=True)
     if scheme in _ACCEPTED:  # another scheme is refused as such below
-        _reject_unknown_keys(url, query, _ACCEPTED[scheme])
-        _refuse_repeats(url, query)
+        _reject_unknown_keys(shown, query, _ACCEPTED[scheme])
+        _refuse_repeats(shown, query)
     if scheme == "udp":
         try:
             port = parts.port
         except ValueError as e:
-            raise ListenError(f"{url}: bad port: {e}{ipv6_hint(parts, 'udp', 9870)}") from None
+            raise ListenError(f"{shown}: bad port: {e}{ipv6_hint(parts, 'udp', 9870)}") from None
         if port is None:
-            raise ListenError(f"{url}: give the port to listen on, e.g. udp://:9870{ipv6_hint(parts, 'udp', 9870)}")
+            raise ListenError(f"{shown}: give the port to listen on, e.g. udp://:9870{ipv6_hint(parts, 'udp', 9870)}")
         if port == 0 and not ephemeral:
-            raise ListenError(f"{url}: bad port 0: the system would pick one that no sender knows; "
+            raise ListenError(f"{shown}: bad port 0: the system would pick one that no sender knows; "
                               f"give 1..65535, e.g. udp://:9870")
         try:
             host = location_host(parts, "udp")  # "": every interface
         except LocationError as e:
-            raise ListenError(f"{url}: {e.why} ({e.value!r})") from None
+            raise ListenError(f"{shown}: {e.why} ({shown_value(e.field, e.value)!r})") from None
         problem = host_name_problem(host) if host else ""
         if problem:  # the sinks' rule, in their words (the resolver's own error was an IDNA codec's)
-            raise ListenError(f"{url}: bad host {host!r}: {problem}")
+            raise ListenError(f"{shown}: bad host {host!r}: {problem}")
         return _UdpPort(host, port)
     if scheme == "serial":
         device = parts.netloc + parts.path
         if not device:
-            raise ListenError(f"{url}: give the device, e.g. serial:///dev/ttyUSB0?baud=921600")
+            raise ListenError(f"{shown}: give the device, e.g. serial:///dev/ttyUSB0?baud=921600")
         if parts.netloc or not parts.path.startswith("/"):
             # serial://dev/ttyUSB0 is the relative path dev/ttyUSB0 (its "dev" a URL's host): three slashes
-            raise ListenError(f"{url}: the device is an absolute path, e.g. serial:///{device.lstrip('/')}")
+            meant = (redact_location(parts.netloc) + parts.path).lstrip("/")  # a user:password@ shown as in `shown`
+            raise ListenError(f"{shown}: the device is an absolute path, e.g. serial:///{meant}")
         try:  # the sinks' rule for whole numbers: a baud copied from a sink URL (0x1C200) means what it meant there
             baud = integer(query.get("baud", ["115200"])[0])
         except ValueError as e:
-            raise ListenError(f"{url}: baud must be a whole number: {e}") from None
+            raise ListenError(f"{shown}: baud must be a whole number: {e}") from None
         from firmware_host.sinks.serial_sink import MAX_BAUD, MIN_BAUD  # the sink's bounds: one rule for both ends
 
         if not MIN_BAUD <= baud <= MAX_BAUD:
             # past 2**31 - 1 pyserial's OverflowError escaped as a traceback; 0 asks termios to hang up the line
-            raise ListenError(f"{url}: baud must be in [{MIN_BAUD}, {MAX_BAUD}] (what termios can be asked for), "
+            raise ListenError(f"{shown}: baud must be in [{MIN_BAUD}, {MAX_BAUD}] (what termios can be asked for), "
                               f"got {baud}")
         # percent-decoded as the serial sink's path is: a '#' in a udev by-id name can only be written %23
         return _SerialPort(unquote(device), baud)
-    raise ListenError(f"{url}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")
+    raise ListenError(f"{shown}: the listener reads udp:// or serial:// (file:// sinks write JSON lines already)")
 
 
 #: A JOINTS seq at most this many frames behind the newest is a reordered (late) datagram, one further back a

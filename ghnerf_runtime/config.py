@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
 from ghnerf_runtime.config_paths import paths_from_file
-from ghnerf_runtime.contract import GRAPH_NAMES
+from ghnerf_runtime.contract import GRAPH_NAMES, MAX_NEAR_FAR_MARGIN_M
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.json_keys import remember_repeats
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
@@ -266,7 +266,7 @@ class TrackingConfig:
         _integer(self, "min_joints", 2, 25)
         _number(self, "min_confidence", 0.0, 1.0)
         _number(self, "box_margin_m", 0.0, 2.0)
-        _number(self, "near_far_margin_m", 0.0, 2.0)
+        _number(self, "near_far_margin_m", 0.0, MAX_NEAR_FAR_MARGIN_M)  # the rig loader's volume check assumes it
         _number(self, "max_box_size_m", 0.1, 20.0)
 
 

@@ -72,6 +72,10 @@ DEPTH_STATS_CHANNELS = ("mean", "std", "lo", "hi")
 #: tested finite up to 2e4 m (tests/ghnerf_runtime/test_model_extremes.py); a rig's cameras are at most
 #: ``MAX_BASELINE_M`` (10 m) apart, so nothing a rig can see is near this.
 MAX_DEPTH_M = 1e4
+#: The widest margin (metres) the runtime grows a box by before taking its near/far: the bound of the config's
+#: ``tracking.near_far_margin_m``. The rig loader grows the working volume by it, so that a volume it accepts
+#: reaches no farther than :data:`MAX_DEPTH_M` however the near/far margin is set.
+MAX_NEAR_FAR_MARGIN_M = 2.0
 #: The image feature maps a sweep level or the render heads may read (``human_feat`` is a stride's key too).
 IMAGE_FEATURES = ("feat_s1", "feat_s2", "feat_s4")
 #: Metadata key of the weights id: one value (a sha256, 64 hex digits) in every graph file, fp32 and int8, that
@@ -630,17 +634,7 @@ def near_far_from_box(camera, corners: np.ndarray, margin: float = 0.1, min_near
             the camera along one of its axes: float32 holds no near/far of it (the message names the box
             and the distance).
     """
-    corners = np.asarray(corners, dtype=np.float64)
-    if corners.ndim != 2 or corners.shape[1] != 3:
-        raise ContractError(f"corners must have shape (8, 3), got {corners.shape}", key="corners")
-    if not (np.all(np.isfinite(corners)) and math.isfinite(margin)):
-        raise GeometryError(f"box corners and margin must be finite, got {corners.tolist()}, {margin!r}")
-    lo, hi = corners.min(0) - margin, corners.max(0) + margin
-    idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
-    box = np.where(idx == 1, hi, lo)
-    _, R, t = _cam_arrays(camera)
-    with np.errstate(over="ignore", invalid="ignore"):  # corners of 1e308 overflow to inf: refused below
-        in_cam = box @ R.T + t
+    lo, hi, in_cam = _grown_box_in_camera(camera, corners, margin)
     z = in_cam[:, 2]
     if np.isfinite(in_cam).all() and not float(z.max()) > min_near:  # an overflow is refused as too far, below
         raise GeometryError(f"the box is behind the camera's near plane ({min_near} m): camera depths "
@@ -653,6 +647,34 @@ def near_far_from_box(camera, corners: np.ndarray, margin: float = 0.1, min_near
     near = max(float(z.min()), min_near)
     far = max(float(z.max()), near + 1e-3)
     return np.array([near, far], dtype=np.float32)
+
+
+def box_reach(camera, corners: np.ndarray, margin: float = 0.0) -> float:
+    """How far (metres) the box around ``corners`` ``(N, 3)`` (rig frame), grown by ``margin``, reaches from
+    ``camera`` along any of its axes: the largest ``|coordinate|`` of a grown corner in the camera's frame, the
+    distance :func:`near_far_from_box` holds to :data:`MAX_DEPTH_M` (inf where it overflows).
+
+    Raises:
+        GeometryError: the corners (or margin) are not finite.
+    """
+    return float(np.max(np.abs(_grown_box_in_camera(camera, corners, margin)[2])))
+
+
+def _grown_box_in_camera(camera, corners: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(lo, hi, in_cam)``: the box around ``corners`` grown by ``margin`` (rig frame) and its 8 corners ``(8, 3)``
+    in ``camera``'s frame (inf where they overflow)."""
+    corners = np.asarray(corners, dtype=np.float64)
+    if corners.ndim != 2 or corners.shape[1] != 3:
+        raise ContractError(f"corners must have shape (8, 3), got {corners.shape}", key="corners")
+    if not (np.all(np.isfinite(corners)) and math.isfinite(margin)):
+        raise GeometryError(f"box corners and margin must be finite, got {corners.tolist()}, {margin!r}")
+    lo, hi = corners.min(0) - margin, corners.max(0) + margin
+    idx = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)])
+    box = np.where(idx == 1, hi, lo)
+    _, R, t = _cam_arrays(camera)
+    with np.errstate(over="ignore", invalid="ignore"):  # corners of 1e308 overflow to inf: refused as too far
+        in_cam = box @ R.T + t
+    return lo, hi, in_cam
 
 
 def ray_grid(height: int, width: int, stride: int = 1) -> np.ndarray:
@@ -671,9 +693,10 @@ def ray_grid(height: int, width: int, stride: int = 1) -> np.ndarray:
 
 
 __all__ = [
-    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "MAX_DEPTH_M", "IMAGE_FEATURES", "IMAGENET_MEAN",
-    "IMAGENET_STD",
+    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "MAX_DEPTH_M", "MAX_NEAR_FAR_MARGIN_M", "IMAGE_FEATURES",
+    "IMAGENET_MEAN", "IMAGENET_STD",
     "WEIGHTS_ID_KEY", "weights_id_of",
     "ContractError", "TensorSpec", "GraphSpec", "LevelSpec", "Normalisation", "ModelContract",
-    "source_projections", "source_centers", "target_inputs", "target_projections", "near_far_from_box", "ray_grid",
+    "source_projections", "source_centers", "target_inputs", "target_projections", "near_far_from_box", "box_reach",
+    "ray_grid",
 ]

@@ -169,8 +169,10 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
     total = np.zeros((len(z), 3), np.float64)
     weight = np.zeros(len(z), np.float64)
     nearest = np.full(len(z), np.inf)  # the smallest angle of a source that sees the point
-    to_view = camera.center - points
-    to_view /= np.linalg.norm(to_view, axis=-1, keepdims=True)
+    # From each point to the view's centre is its pixel's ray reversed, whatever the depth: ``camera.center -
+    # points`` was a zero vector for a point at the centre (a depth of 1e-300), and its 0/0 a NaN and a warning.
+    ray = np.concatenate([xy, np.ones((len(z), 1))], -1) @ camera.R  # camera frame -> rig frame; |ray| >= 1
+    to_view = -ray / np.linalg.norm(ray, axis=-1, keepdims=True)
     for k, (cam, rgb) in enumerate(zip(sources, source_rgb)):
         rgb = unit_rgb(rgb, f"source image {k}")
         if rgb.shape[:2] != (cam.height, cam.width):
@@ -187,7 +189,9 @@ def proxy_blend(image_bgr: np.ndarray, camera: Camera, body: BodyProxy, sources:
         inside = (u >= 0) & (u <= cam.width - 1) & (v >= 0) & (v <= cam.height - 1)
         sees = inside & (zs > 0) & (np.abs(own - zs) < tolerance_m)
         to_source = cam.center - points
-        cos = np.sum(to_view * to_source, axis=-1) / np.linalg.norm(to_source, axis=-1)
+        length = np.linalg.norm(to_source, axis=-1)
+        # a point at the source's centre (length 0) has no direction to it, and the source does not see it (zs 0)
+        cos = np.divide(np.sum(to_view * to_source, axis=-1), length, out=np.zeros_like(length), where=length > 0)
         angle = np.arccos(np.clip(cos, -1.0, 1.0))
         w = np.where(sees, 1.0 / (angle + ANGLE_FLOOR_RAD), 0.0)
         nearest = np.where(sees, np.minimum(nearest, angle), nearest)

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, box_reach
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
@@ -95,6 +96,7 @@ __all__ = [
     "principal_point_problem",
     "focal_length_problem",
     "distortion_problem",
+    "volume_reach_problem",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
     "MAX_RIG_FILE_BYTES",
@@ -258,7 +260,8 @@ def rig_from_dict(data: Any, *, path: str | os.PathLike | None = None) -> Rig:
             showing the bad value: missing, unknown or duplicate keys, wrong types or
             shapes, non-finite numbers, an unsupported format/version/units/distortion
             model, a K that is not a pinhole matrix, an R that is not a rotation, a
-            working volume with ``max <= min``, duplicate camera names.
+            working volume with ``max <= min`` or reaching farther from a camera than the model's
+            near/far resolve (:func:`volume_reach_problem`), duplicate camera names.
     """
     return _rig_from_dict(data, path=path, warn=True)
 
@@ -326,6 +329,8 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
         chk._raise("cameras[1].t", problem)
     if far := rig.far_camera_problem():
         chk._raise(f"cameras[{far[0]}].t", far[1])
+    if too_far := volume_reach_problem(rig):
+        chk._raise("working_volume", too_far)
     for cam in cameras if warn else ():
         if cam.fold_inside_image():
             log.warning(
@@ -335,6 +340,23 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
                 cam.fold_radius,
             )
     return rig
+
+
+def volume_reach_problem(rig: Rig) -> str | None:
+    """Why the model cannot sweep ``rig``'s working volume from one of its cameras, or None: grown by the widest
+    near/far margin the runtime may add (:data:`~ghnerf_runtime.contract.MAX_NEAR_FAR_MARGIN_M`), it reaches
+    farther than :data:`~ghnerf_runtime.contract.MAX_DEPTH_M` from the camera along one of its axes, where
+    ``near_far_from_box`` refuses it (``DepthRangeError``): on every pair, since a pair with no subject tracked
+    sweeps the whole volume."""
+    lo, hi = rig.volume.min_corner, rig.volume.max_corner
+    for cam in rig.cameras:
+        reach = box_reach(cam, np.stack([lo, hi]), MAX_NEAR_FAR_MARGIN_M)
+        if not reach <= MAX_DEPTH_M:
+            return (f"from {lo.tolist()} to {hi.tolist()} reaches {reach:.6g} m from camera {cam.name!r} (grown by "
+                    f"the {MAX_NEAR_FAR_MARGIN_M:g} m near/far margin the runtime may add), farther than the "
+                    f"{MAX_DEPTH_M:g} m (MAX_DEPTH_M) the model's near/far resolve: every pair would fail. A volume "
+                    "in millimetres read as metres? The working volume is in metres")
+    return None
 
 
 def _plain(value: Any) -> Any:

@@ -36,7 +36,7 @@ from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import Joints3DConfig, TrackingConfig
-from ghnerf_runtime.contract import MAX_DEPTH_M, WEIGHTS_ID_KEY
+from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.estimator import _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, PairResult
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
@@ -141,6 +141,8 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"the {CALIBRATION_MAX_PX:g} px limit is"),
     ("docs/calibration.md", f"under {'three quarters' if CLEAR_RATIO == 0.75 else CLEAR_RATIO} of the limit"),
     ("docs/daemon.md", f"under {'three quarters' if CLEAR_RATIO == 0.75 else CLEAR_RATIO} of it (`CLEAR_RATIO`)"),
+    ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
+    ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
     ("docs/protocol.md", f"a name past {MAX_HOST_NAME} characters), named when the sink opens"),
 ])

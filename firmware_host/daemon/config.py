@@ -187,7 +187,7 @@ class DaemonConfig:
             if not isinstance(url, str) or "://" not in url:
                 _fail(f"sinks[{k}]", "must be a sink URL such as 'serial:///dev/ttyACM0'", url)
         if len(set(sinks)) != len(sinks):
-            _fail("sinks", "lists a URL twice", list(sinks))
+            _fail("sinks", "lists a URL twice", [redact_url(url) for url in sinks])  # the journal keeps no password
         _one_sink_per_destination(sinks)
         object.__setattr__(self, "sinks", tuple(sinks))
         if self.log_level not in LOG_LEVELS:
@@ -223,8 +223,8 @@ def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:
         place = _destination(url)
         if place is not None and place in seen:
             j = seen[place]
-            _fail(f"sinks[{k}]", f"sends where sinks[{j}] ({sinks[j]!r}) does: one URL per destination, with all "
-                                 "its options", url)
+            _fail(f"sinks[{k}]", f"sends where sinks[{j}] ({redact_url(sinks[j])!r}) does: one URL per destination, "
+                                 "with all its options", redact_url(url))  # shown as the sinks show it: no password
         if place is not None:
             seen[place] = k
 

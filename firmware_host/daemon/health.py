@@ -15,21 +15,40 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Iterable, Optional
 
 import numpy as np
 
+from drivers.url import redact_url
 from firmware_host.daemon.calibration_watch import CalibrationWatch
 from firmware_host.daemon.config import CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from ghnerf_runtime.frame_reasons import REASONS
 
-__all__ = ["State", "Health", "write_status_file"]
+__all__ = ["State", "Health", "write_status_file", "sink_keys"]
 
 #: Window of recent estimates the latency and joints-found figures are taken over.
 WINDOW = 100
 #: Running with no estimate for this long: the rate reads 0 and the status line says so (the rate of the last
 #: window stayed on, reading healthy while every pair was rejected or none came).
 STALE_S = 2.0
+
+
+def sink_keys(urls: Iterable[str]) -> dict[str, str]:
+    """Each sink URL and the name the report's ``sinks`` and the STATUS line give it: the URL with any password as
+    ``***`` (``drivers.url.redact_url``; the status file is world-readable). Two URLs that differ only in their
+    password (two ``memory://`` test sinks: the other sinks refuse a ``user:pass@``) would share that name: the
+    later ones in ``urls``' order get ``#2``, ``#3``... (no sink URL holds a ``#``: each sink refuses one)."""
+    keys: dict[str, str] = {}
+    taken: set[str] = set()
+    for url in urls:
+        shown = key = redact_url(url)
+        n = 1
+        while key in taken:
+            n += 1
+            key = f"{shown}#{n}"
+        taken.add(key)
+        keys[url] = key
+    return keys
 
 
 class State:
@@ -133,13 +152,14 @@ class Health:
             "last_error": self.last_error,
             "config": {"reloads": self.reloads, "reload_failures": self.reload_failures,
                        "reload_error": self.reload_error},
-            "sinks": sinks or {},
+            "sinks": _shown_sinks(sinks or {}),
         }
 
     def status_line(self, sinks: Optional[dict[str, Any]] = None) -> str:
         """One line for systemd's ``STATUS=`` (``systemctl status ghnerf``); a refused reload stays on it
         until one is accepted (``systemctl reload`` returns before the daemon has read the file). ``sinks``:
-        each sink's counters by URL (as in :meth:`report`); those down or stalled are named with their error."""
+        each sink's counters by URL (as in :meth:`report`); those down or stalled are named with their error, by
+        their :func:`sink_keys` name."""
         last = self.state_since if self.last_pair_at is None else max(self.state_since, self.last_pair_at)
         idle_s = self.clock() - last  # (since the rig opened: it may have been away)
         if self.state == State.RUNNING and idle_s > STALE_S:
@@ -166,15 +186,22 @@ class Health:
 STATUS_MAX, STATUS_KEEP = 200, 60
 
 
+def _shown_sinks(sinks: dict[str, Any]) -> dict[str, Any]:
+    """``sinks`` (counters by URL as configured) keyed by their :func:`sink_keys` names, in the order given."""
+    keys = sink_keys(sinks)
+    return {keys[url]: counters for url, counters in sinks.items()}
+
+
 def _sinks_down(sinks: dict[str, Any], room: int) -> str:
     """``; sink URL down: why`` for each sink that is down, ``; sink URL stalled N s: why`` for each whose receiver
-    stopped reading, or ``; N sinks down, M stalled`` when that does not fit."""
+    stopped reading, or ``; N sinks down, M stalled`` when that does not fit (URL: its :func:`sink_keys` name)."""
+    keys = sink_keys(sinks)
     down = {url: s for url, s in sinks.items() if s.get("state") == "down"}
     stalled = {url: s for url, s in sinks.items() if s.get("state") == "stalled"}
     if not down and not stalled:
         return ""
-    text = "".join(f"; sink {url} down: {_why(url, s.get('last_error'))}" for url, s in down.items())
-    text += "".join(f"; sink {url} stalled {s.get('stalled_s') or 0:.0f} s: "
+    text = "".join(f"; sink {keys[url]} down: {_why(url, s.get('last_error'))}" for url, s in down.items())
+    text += "".join(f"; sink {keys[url]} stalled {s.get('stalled_s') or 0:.0f} s: "
                     f"{_why(url, s.get('last_error'), 'a write that has not returned')}" for url, s in stalled.items())
     if len(text) <= room:
         return text
@@ -188,9 +215,9 @@ def _sinks_down(sinks: dict[str, Any], room: int) -> str:
 
 
 def _why(url: str, error: Optional[str], unknown: str = "not connected") -> str:
-    """A sink's error without the URL and the ``unavailable:`` (``write failed:``) its exception message starts
-    with; ``unknown`` where it has none."""
-    why = (error or unknown).removeprefix(f"{url}: ")
+    """A sink's error without the URL (as its errors show it: redacted) and the ``unavailable:`` (``write
+    failed:``) its exception message starts with; ``unknown`` where it has none."""
+    why = (error or unknown).removeprefix(f"{redact_url(url)}: ")
     return why.removeprefix("unavailable: ").removeprefix("write failed: ")
 
 

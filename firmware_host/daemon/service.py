@@ -724,8 +724,11 @@ class Daemon:
         return {**dataclasses.asdict(stats), "dropped": stats.dropped}
 
     def sink_stats(self) -> dict[str, Any]:
-        """Each sink's counters (those closed by a reopen or the shutdown: as they were last)."""
-        return {**self._closed_sink_stats, **{url: self._stats_of(sink) for url, sink in self._sinks.items()}}
+        """Each sink's counters by URL as configured (those closed by a reopen or the shutdown: as they were last):
+        the config's sinks first, in its order, then those a reload removed. The report names them in this order
+        (``health.sink_keys``: redacted, ``#2`` for a second URL that differs only in its password)."""
+        stats = {**self._closed_sink_stats, **{url: self._stats_of(sink) for url, sink in self._sinks.items()}}
+        return {**{url: stats[url] for url in self.config.sinks if url in stats}, **stats}
 
     def _tick(self, force: bool = False, tell_systemd: bool = True) -> None:
         """Refresh the status file and systemd's STATUS line every ``health.status_every_s``."""

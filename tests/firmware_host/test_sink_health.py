@@ -108,3 +108,28 @@ def test_a_real_stalled_sink_reaches_the_report_and_the_status_line() -> None:
         sink.close()
     assert report["state"] == "stalled" and report["connected"] and report["stalled_s"] >= 0.1
     assert "stalled" in line and "buffer full (300 bytes); call read()" in line
+
+
+def test_sinks_are_named_without_their_passwords_and_told_apart_when_only_those_differ() -> None:
+    """The report's ``sinks`` and the STATUS line keyed each sink by its URL as configured, password and all (the
+    status file is world-readable). Now by :func:`sink_keys`: redacted, and a second URL that differs only in its
+    password (so its redacted name is the first one's) gets ``#2``, in the order given."""
+    first, second = "memory://viewer:s3cret@here?max_bytes=64", "memory://viewer:hunter2@here?max_bytes=64"
+    error = "memory://viewer:***@here?max_bytes=64: unavailable: the buffer is full"  # as the sink's error reads
+    sinks = {first: {"state": "down", "last_error": error}, second: {"state": "up", "last_error": None},
+             "memory://": {"state": "down", "last_error": None}}
+    health = Health(rig_url="sim://")
+    health.enter(State.RUNNING)
+    report = health.report(sinks)
+    assert list(report["sinks"]) == ["memory://viewer:***@here?max_bytes=64", "memory://viewer:***@here?max_bytes=64#2",
+                                     "memory://"]
+    assert report["sinks"]["memory://viewer:***@here?max_bytes=64#2"]["state"] == "up"  # the second one's counters
+    line = health.status_line(sinks)
+    assert line.endswith("; sink memory://viewer:***@here?max_bytes=64 down: the buffer is full; sink memory:// "
+                         "down: not connected"), line
+    assert "s3cret" not in line + str(report) and "hunter2" not in str(report)
+    from firmware_host.daemon.health import sink_keys
+
+    swapped = sink_keys([second, first])  # the order given decides which is #2
+    assert swapped == {second: "memory://viewer:***@here?max_bytes=64",
+                       first: "memory://viewer:***@here?max_bytes=64#2"}

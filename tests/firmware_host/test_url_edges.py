@@ -6,6 +6,7 @@ from urllib.parse import urlsplit
 
 import pytest
 
+from drivers.url import redact_url
 from firmware_host import listen
 from firmware_host.errors import SinkConfigError
 from firmware_host.sinks import open_sink
@@ -40,10 +41,22 @@ def _listen_fails(capsys, *argv: str) -> str:
     ("udp://::1:9870", "brackets, e.g. udp://[::1]:9870"),
     ("udp://:9870/extra/path", "no path"),
     ("udp://user:pw@127.0.0.1:9870", "no user info"),
+    ("serial://user:pw@dev/ttyUSB0", "serial:///user:***@dev/ttyUSB0"),
+    ("udp://127.0.0.1:9870?token=pw", "unknown parameter token; it takes none"),
 ])
 def test_listen_refuses_a_bad_url_in_one_line_exit_2(url, message, capsys):
+    """The URL is named, as the sinks name theirs: without its password (``redact_url``; it was shown as given,
+    ``pw`` and all, in a terminal's scrollback or a shell's log)."""
     err = _listen_fails(capsys, url, "--seconds", "0.1")
-    assert url in err and message in err
+    assert redact_url(url) in err and message in err
+    assert ":pw@" not in err and "=pw" not in err
+
+
+def test_listen_shows_the_user_but_not_the_password():
+    with pytest.raises(listen.ListenError) as refused:
+        listen.open_port("udp://viewer:hunter2@127.0.0.1:9870")
+    assert str(refused.value) == ("udp://viewer:***@127.0.0.1:9870: udp:// takes no user info (the part before '@') "
+                                  "('viewer:***')")
 
 
 def test_listen_api_takes_port_0_only_when_asked():

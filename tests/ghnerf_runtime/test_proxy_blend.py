@@ -2,6 +2,8 @@
 depth (``ghnerf_runtime.proxy_blend``), against the simulator's truth."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.config import ConfigError, NovelViewConfig
 from ghnerf_runtime.contract import Normalisation
 from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.metrics import masked_psnr
 from ghnerf_runtime.novel_view import interpolate_camera, novel_target
 from ghnerf_runtime.preprocess import Roi, build_undistort_crop_maps, preprocess_image
@@ -220,3 +223,30 @@ def test_non_finite_source_colours_are_named_not_blended(shot, bad):
     broken[1, 40:90, 40:90] = bad
     with pytest.raises(ShapeError, match=r"source image 1 must be float RGB in \[0, 1\], got 7500 non-finite values"):
         proxy_blend(image, target, body, sources, broken)
+
+
+
+def test_a_proxy_point_at_the_view_cameras_centre_has_a_direction(shot):
+    """A depth of 1e-300 puts a pixel's proxy point at the view camera's centre (exactly, for this level camera:
+    ``R`` the identity), which is also a third source's centre here. Its directions to the view and to that source
+    were ``center - point`` normalised: 0/0, a RuntimeWarning, and NaN weights that dropped the pixel only by
+    chance. Now the direction to the view is the pixel's ray reversed and a source at the point sees none of it:
+    no warning; the pixel keeps the picture, every other pixel blends as it did."""
+    joints, sources, rgb, target, _, _ = shot
+    level = Camera("level", 128, 128, target.K, np.zeros(5), np.eye(3), -target.center)
+    body = proxy_body(joints, np.ones(25, bool))
+    depth = proxy_depth(body, level)
+    rows, cols = np.nonzero(depth > 0)
+    r, c = rows[len(rows) // 2], cols[len(cols) // 2]
+    at_centre = depth.copy()
+    at_centre[r, c] = 1e-300
+    cams, images = [*sources, level], np.concatenate([rgb, np.full((1, 128, 128, 3), 0.5, np.float32)])
+    image = np.full((128, 128, 3), 5, np.uint8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning (divide by zero, invalid value) fails the test
+        out = proxy_blend(image, level, body, cams, images, depth=at_centre)
+    before = proxy_blend(image, level, body, cams, images, depth=depth)
+    others = np.ones(depth.shape, bool)
+    others[r, c] = False
+    assert before.replaced[r, c] and not out.replaced[r, c] and np.array_equal(out.image[r, c], image[r, c])
+    assert np.array_equal(out.image[others], before.image[others]) and before.replaced.sum() > 1000

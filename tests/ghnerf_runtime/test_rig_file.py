@@ -566,3 +566,69 @@ def test_a_file_larger_than_its_stated_size_is_refused_at_the_cap(tmp_path, monk
     with pytest.raises(RigFileError, match="holds more than 1048576 bytes") as info:
         load_rig(path)
     assert info.value.path == str(path)
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("far_z, shown", [(20000.0, "reaches 19903.1 m from camera 'left'"),
+                                           (1e300, "reaches 9.95037e+299 m from camera 'left'")])
+def test_a_working_volume_past_the_models_depth_range_is_refused_at_load(example_dict, tmp_path, far_z, shown):
+    """A volume reaching past MAX_DEPTH_M (10 km) loaded, then every pair failed: the sweep of a pair with no
+    subject tracked takes its near/far from the whole volume, which near_far_from_box refuses (DepthRangeError).
+    Now the loader refuses it, naming the file, the field, the volume and the distance; save_rig too."""
+    from ghnerf_runtime.contract import MAX_DEPTH_M
+
+    example_dict["working_volume"] = {"min": [-1.0, -2.0, 1.0], "max": [1.0, 0.0, far_z]}
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(example_dict))
+    with pytest.raises(RigFileError) as info:
+        load_rig(path)
+    assert info.value.field == "working_volume" and info.value.path == str(path)
+    said = str(info.value)
+    assert said.startswith(f"file {path}, field 'working_volume': from [-1.0, -2.0, 1.0] to [1.0, 0.0, {far_z!r}] ")
+    assert f"{shown}" in said and f"farther than the {MAX_DEPTH_M:g} m (MAX_DEPTH_M)" in said
+    rig = rig_from_dict(json.loads(EXAMPLE.read_text()))
+    with pytest.raises(RigFileError, match="MAX_DEPTH_M"):
+        save_rig(Rig(rig.cameras, WorkingVolume([-1.0, -2.0, 1.0], [1.0, 0.0, far_z]), rig.rig_id),
+                 tmp_path / "out.json")
+    assert not (tmp_path / "out.json").exists()
+
+
+def test_a_working_volume_the_loader_takes_is_one_the_runtime_can_sweep(example_dict):
+    """The bound holds with the widest near/far margin the config allows: a volume just inside it loads, and
+    near_far_from_box takes it from every camera at that margin; a metre farther is refused."""
+    from ghnerf_runtime.config import TrackingConfig
+    from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, box_reach, near_far_from_box
+
+    rig = rig_from_dict(example_dict)
+
+    def reach(far_z: float) -> float:  # the farthest any camera sees the volume reaching to far_z, so grown
+        box = np.array([[-1.0, -2.0, 1.0], [1.0, 0.0, far_z]])
+        return max(box_reach(c, box, MAX_NEAR_FAR_MARGIN_M) for c in rig.cameras)
+
+    slope = reach(9001.0) - reach(9000.0)  # linear in the far face's z (the cameras look along z, tilted)
+    bound = 9000.0 + (MAX_DEPTH_M - reach(9000.0)) / slope  # the far face where the volume reaches MAX_DEPTH_M
+    example_dict["working_volume"] = {"min": [-1.0, -2.0, 1.0], "max": [1.0, 0.0, bound - 0.05]}
+    loaded = rig_from_dict(example_dict)
+    corners = np.stack([loaded.volume.min_corner, loaded.volume.max_corner])
+    fars = [near_far_from_box(cam, corners, MAX_NEAR_FAR_MARGIN_M)[1] for cam in loaded.cameras]
+    assert max(fars) > MAX_DEPTH_M - 1.0  # a near/far right at the bound, taken
+    with pytest.raises(Exception, match="near_far_margin_m"):  # the config cannot ask for a wider margin
+        TrackingConfig(near_far_margin_m=MAX_NEAR_FAR_MARGIN_M + 0.1)
+    example_dict["working_volume"]["max"] = [1.0, 0.0, bound + 0.05]
+    with pytest.raises(RigFileError, match="MAX_DEPTH_M"):
+        rig_from_dict(example_dict)
+
+
+@pytest.mark.parametrize("options", ["distance=8&baseline=4&mount_height=3", "distance=1&convergence=120",
+                                     "distance=8&baseline=0.05&mount_height=0.3&convergence=-10"])
+def test_the_simulated_rigs_volume_stays_within_the_models_depth_range(options):
+    """sim:// builds its rig in memory, not through the loader: its URL options are bounded (distance <= 8 m, a
+    volume 2 m deep) so that its volume lies within a few metres of its cameras, far inside MAX_DEPTH_M."""
+    pytest.importorskip("drivers.sim")
+    from drivers.backends.sim import SimOptions
+    from drivers.url import RigUrl
+    from ghnerf_runtime.rig_file import volume_reach_problem
+
+    rig = SimOptions.from_url(RigUrl.parse(f"sim://?{options}&cache=off")).placement.build()
+    assert volume_reach_problem(rig) is None
+    assert rig_from_dict(rig_to_dict(rig)).volume.max_corner[2] <= 10.0  # and the loader takes it as saved

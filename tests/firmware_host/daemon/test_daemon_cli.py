@@ -323,6 +323,25 @@ def test_the_start_runs_the_checks_a_reload_runs(tmp_path, capsys):
     assert f"ghnerf-daemon: error: {path}: rig.url: " in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("scheme", ["depthai", "opencv"])
+def test_validate_config_refuses_a_rig_file_whose_volume_the_model_cannot_sweep(tmp_path, capsys, scheme):
+    """A working volume reaching 20 km passed --validate-config and the start, then every pair failed on the
+    model's near/far bound (MAX_DEPTH_M). The rig loader refuses it now, and --validate-config says so."""
+    data = json.loads((REPO / "docs/examples/rig.json").read_text())
+    data["working_volume"] = {"min": [-1.0, -2.0, 1.0], "max": [1.0, 0.0, 20000.0]}
+    rig = tmp_path / "rig.json"
+    rig.write_text(json.dumps(data))
+    size = f"width={data['cameras'][0]['width']}&height={data['cameras'][0]['height']}"
+    url = (f"depthai://?rig={rig}&{size}" if scheme == "depthai"
+           else f"opencv://?first=/dev/video0&second=/dev/video2&rig={rig}")
+    path = _write(tmp_path, {"rig": {"url": url}, "sinks": ["udp://127.0.0.1:9870"]})
+    assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 2
+    err = capsys.readouterr().err
+    assert f"ghnerf-daemon: error: {path}: rig.url: " in err
+    assert f"file {rig}, field 'working_volume': from [-1.0, -2.0, 1.0] to [1.0, 0.0, 20000.0] reaches" in err
+    assert "(MAX_DEPTH_M)" in err
+
+
 def test_the_stop_signal_handler_never_waits_on_the_stop_events_lock(tmp_path, monkeypatch):
     """SIGTERM's handler runs on the main thread between two bytecodes, maybe inside ``stop.wait()`` while
     that thread holds the Event's lock (a plain Lock): a handler taking it would wait for ever. Here the

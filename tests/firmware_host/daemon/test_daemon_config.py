@@ -69,6 +69,21 @@ def test_errors_name_the_key(data, key):
     assert _error(data).startswith(key)
 
 
+@pytest.mark.parametrize("sinks, said", [
+    (["memory://viewer:hunter2@here", "memory://viewer:hunter2@here"],
+     "sinks: lists a URL twice, got ['memory://viewer:***@here', 'memory://viewer:***@here']"),
+    (["udp://viewer:hunter2@127.0.0.1:9870?token=hunter2"] * 2, "sinks: lists a URL twice, got "
+     "['udp://viewer:***@127.0.0.1:9870?token=***', 'udp://viewer:***@127.0.0.1:9870?token=***']"),
+    (["memory://viewer:hunter2@here", "memory://viewer:hunter2@here?max_bytes=16"],
+     "sinks[1]: sends where sinks[0] ('memory://viewer:***@here') does: one URL per destination, with all its "
+     "options, got 'memory://viewer:***@here?max_bytes=16'"),
+])
+def test_a_sink_url_refused_for_its_duplicate_is_shown_without_its_password(sinks, said):
+    """As the sinks show their URLs (``redact_url``): these two errors printed them as configured, password and
+    all, to the journal and to ``--validate-config``'s output."""
+    assert _error({"sinks": sinks}) == said
+
+
 @pytest.mark.parametrize("sinks", [
     ["memory://?status_s=0.05", "memory://?status_s=0.06"],  # in-process buffers: each sink is its own
     ["serial:///dev/ttyACM0", "serial:///dev/ttyACM1"],

@@ -488,6 +488,31 @@ def test_a_sink_that_fails_to_close_is_logged_without_its_password(tmp_path, cap
     assert "s3cret" not in caplog.text
 
 
+def test_the_status_file_names_sinks_without_their_passwords(tmp_path):
+    """The status file (0644: operators read it) keyed ``sinks`` by the URLs as configured, so a ``memory://``
+    sink's password was there. Now redacted; two URLs differing only in their password are told apart by ``#2``
+    in the config's order, whatever order the sinks were opened in, and a sink a reload removed comes after."""
+    from firmware_host.sinks import open_sink
+
+    urls = ["memory://viewer:s3cret@here?status_s=0.01", "memory://viewer:hunter2@here?status_s=0.01", "memory://"]
+    removed = "memory://viewer:t0ken@here?status_s=0.01"
+    daemon = Daemon(_config({"url": "sim://"}, tmp_path, sinks=urls), notifier=SystemdNotifier({}))
+    daemon._sinks[removed] = open_sink(removed)
+    daemon._close_sink(removed)  # its last counters stay in the report, as after a reload that removed it
+    for url in reversed(urls):  # opened in the other order than the config's
+        daemon._sinks[url] = open_sink(url)
+    try:
+        daemon._tick(force=True, tell_systemd=False)
+    finally:
+        for url in urls:
+            daemon._close_sink(url)
+    text = (tmp_path / "status.json").read_text()
+    assert list(json.loads(text)["sinks"]) == ["memory://viewer:***@here?status_s=0.01",
+                                               "memory://viewer:***@here?status_s=0.01#2", "memory://",
+                                               "memory://viewer:***@here?status_s=0.01#3"]
+    assert not any(secret in text for secret in ("s3cret", "hunter2", "t0ken"))
+
+
 def test_a_stuck_estimate_is_flagged_while_it_runs(tmp_path):
     from firmware_host.sinks import open_sink
 
