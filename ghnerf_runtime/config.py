@@ -385,7 +385,8 @@ class Joints3DConfig:
             tracked subject's (``max_track_step_m``), or, without a track, none. ``0`` turns the check off.
         max_track_step_m: in a ``several_people`` pair, a joint further than this from the tracked subject's place
             for it (the previous pair's) is missing: it is the other person's, or triangulated from one person's
-            peak in one view and the other's in the other.
+            peak in one view and the other's in the other. With the triangulation, the pairing of the views' peaks
+            and runner-ups (``Keypoints2D.runner_up_uv``) nearest the track within this is reported instead.
     """
 
     method: str = "triangulate"

@@ -145,7 +145,8 @@ class PairResult:
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
             both views (two people in view): only the joints within ``joints3d.max_track_step_m`` of the tracked
             subject's are reported (3D and 2D), none without a track (docs/runtime.md, "Two people in the
-            working volume").
+            working volume"). With the triangulation each is the pairing of the views' peaks and runner-ups
+            nearest the track, and each camera's 2D joint the peak it came from.
         single_view: the camera whose 2D joints alone are the pair's answer (``frame_check.single_view_2d``):
             a person seen by that camera only, or the other camera's frame rejected. Every 3D joint is then
             missing, and so is every 2D joint of the other camera. ``None``: a pair with 3D joints, or nobody.
@@ -820,7 +821,9 @@ class Estimator:
         j3 = self._gate_to_boxes(j3, regions)
         several = self._several_people(kp)
         if several:  # before the presence gate: the subject's joints alone must make someone
-            j3 = self._keep_tracked_subject(j3)
+            j3, chosen = self._keep_tracked_subject(j3, kp, uv_model, crops, regions)
+            if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
+                joints_2d, conf_2d, missing_2d = self._image_joints(*chosen, crops)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
         seen_by = None  # the one view that shows someone when the pair shows nobody in 3D
         if cfg.presence.enabled:
@@ -869,15 +872,61 @@ class Estimator:
         twice = kp.valid & (kp.runner_up >= cfg.second_person_ratio * kp.confidence)  # (2, J)
         return int(np.count_nonzero(twice.all(axis=0))) >= cfg.second_person_min_joints
 
-    def _keep_tracked_subject(self, j3: Joints3D) -> Joints3D:
+    def _keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
+                              regions: Regions) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None]:
         """Of a ``several_people`` pair's joints, those within ``max_track_step_m`` of the tracked subject's place
-        for them; all missing without a track (whose joints would these be?)."""
+        for them; all missing without a track (whose joints would these be?). Returns them and, where the
+        pairings of peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D
+        joints come from (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks)."""
         track = self.tracker.track
         if track is None:
-            return Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
+            return Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1]), None
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
         near = track.valid & (step <= self.config.joints3d.max_track_step_m)
-        return Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
+        kept = Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
+        if self.config.joints3d.method != "triangulate":  # the 3D joint is no peaks' triangulation
+            return kept, None
+        return self._tracked_candidates(kept, kp, uv_model, crops, regions, track.joints, track.valid)
+
+    def _tracked_candidates(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
+                            regions: Regions, track_joints: np.ndarray, track_valid: np.ndarray
+                            ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None]:
+        """A ``several_people`` pair's joints from whichever peaks are the tracked subject's: each view's map of a
+        joint holds both people's peaks, the decoded one (the stronger) and the runner-up, so the subject's joint
+        is one of the four pairings across the views. Each is triangulated (reprojection and ray-angle gates, the
+        box gates) and the one nearest the track's joint, within ``max_track_step_m``, is reported; a joint with
+        none keeps ``kept``'s answer (the skeleton prior's or the depth centroid's, when they gave it)."""
+        cfg = self.config.joints3d
+        J = len(track_joints)
+        ru_model = heatmap_to_model_pixels(kp.runner_up_uv, self.grid, self.size)
+        uv_opt = np.stack([uv_model, ru_model])  # (peak | runner-up, view, J, 2)
+        conf_opt = np.stack([kp.confidence, kp.runner_up])
+        valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a region above the threshold
+        combos = np.array([[0, 0], [0, 1], [1, 0], [1, 1]])  # (view 0's, view 1's) option; first the decoded peaks
+
+        def paired(opt: np.ndarray) -> np.ndarray:  # (4 * J, ...) of each view, the combos one after the other
+            return np.stack([opt[combos[:, v], v].reshape((4 * J,) + opt.shape[3:]) for v in range(2)])
+
+        tri = self._gate_to_boxes(triangulate_joints(paired(uv_opt), paired(conf_opt), paired(valid_opt), crops, cfg),
+                                  regions)
+        points = tri.points.reshape(4, J, 3)
+        dist = np.linalg.norm(points - track_joints, axis=-1)
+        ok = tri.valid.reshape(4, J) & track_valid & (dist <= cfg.max_track_step_m)
+        best = np.argmin(np.where(ok, dist, np.inf), axis=0)
+        found = ok.any(axis=0)
+        if not found.any():
+            return kept, None
+        j = np.arange(J)
+        j3 = Joints3D(np.where(found[:, None], points[best, j], kept.points),
+                      np.where(found, tri.confidence.reshape(4, J)[best, j], kept.confidence).astype(np.float32),
+                      found | kept.valid,
+                      np.where(found[:, None], tri.reprojection_px.reshape(4, J, -1)[best, j], kept.reprojection_px))
+        # each view's option of the chosen pairing (the decoded peak where a joint kept its old answer)
+        opt = np.where(found, combos[best].T, 0)  # (2, J)
+        v = np.arange(2)[:, None]
+        chosen = Keypoints2D(np.where(opt[..., None] == 1, kp.runner_up_uv, kp.uv),
+                             conf_opt[opt, v, j], valid_opt[opt, v, j], kp.runner_up, kp.runner_up_uv)
+        return j3.sanitised(), (chosen, uv_opt[opt, v, j])
 
     def _seen_by_one_view(self, env: dict, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                           decoded: tuple[dict, dict, dict]) -> tuple[dict, dict, dict, int | None]:

@@ -10,6 +10,9 @@ Algorithm, per joint map (a single person is assumed):
    map's maximum. A region covering more than ``max_region_frac`` of the map is no
    peak (saturated, flat or noise-flooded map): the joint is missing.
 4. Subpixel refinement of that peak (below), confidence = filtered peak value.
+5. The runner-up: the highest filtered value outside the best region (so the peak of another
+   region above the threshold), and where it is, refined as the peak is (``runner_up``,
+   ``runner_up_uv``): with two people in view, the other person's peak of that joint.
 
 Threshold and confidence are both in *filtered* units (as in OpenPose). The filter
 lowers peaks: a unit-height Gaussian blob of sigma ``s`` peaks at about
@@ -141,12 +144,15 @@ class Keypoints2D:
         valid: ``(..., J)`` bool.
         runner_up: ``(..., J)`` float32 highest peak of any *other* region (0 if none): a
             value close to ``confidence`` flags an ambiguous joint (e.g. left/right).
+        runner_up_uv: ``(..., J, 2)`` float64 where that peak is, in the coordinates of ``uv`` and
+            refined as it is; :data:`MISSING_FILL` where ``runner_up`` is 0.
     """
 
     uv: np.ndarray
     confidence: np.ndarray
     valid: np.ndarray
     runner_up: np.ndarray
+    runner_up_uv: np.ndarray
 
 
 # ------------------------------------------------------------------- decoding
@@ -188,16 +194,18 @@ def _regions(above: np.ndarray) -> np.ndarray:
     return labels.reshape(n, h + 1, w)[:, :h]
 
 
-def _patch3(maps: np.ndarray, pad: int, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
-    """The 3x3 neighbourhoods ``(N, 3, 3)`` float64 of the given pixels of ``(N, H + 2 pad, W + 2 pad)`` maps.
+def _patch3(maps: np.ndarray, pad: int, iy: np.ndarray, ix: np.ndarray, which: np.ndarray | None = None
+            ) -> np.ndarray:
+    """The 3x3 neighbourhoods ``(N, 3, 3)`` float64 of the given pixels of ``(M, H + 2 pad, W + 2 pad)`` maps,
+    pixel ``k`` in map ``which[k]`` (default: map ``k``).
 
     Indices are clipped, so with ``pad == 0`` an edge pixel repeats itself (callers ignore
     that axis).
     """
-    n = len(iy)
+    which = np.arange(len(iy)) if which is None else which
     rows = np.clip((iy + pad)[:, None, None] + np.arange(-1, 2)[None, :, None], 0, maps.shape[1] - 1)
     cols = np.clip((ix + pad)[:, None, None] + np.arange(-1, 2)[None, None, :], 0, maps.shape[2] - 1)
-    return maps[np.arange(n)[:, None, None], rows, cols].astype(np.float64)
+    return maps[which[:, None, None], rows, cols].astype(np.float64)
 
 
 def _newton_log(patch: np.ndarray, edge_x: np.ndarray, edge_y: np.ndarray) -> np.ndarray:
@@ -250,8 +258,9 @@ def _climb(maps: np.ndarray, iy: np.ndarray, ix: np.ndarray, steps: int) -> tupl
 
 
 def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.ndarray, ix: np.ndarray,
-                      sigma: float) -> np.ndarray:
-    """Log-quadratic refinement, on the filtered map except near the map edge; returns positions ``(N, 2)``.
+                      sigma: float, which: np.ndarray) -> np.ndarray:
+    """Log-quadratic refinement, on the filtered map except near the map edge; returns positions ``(N, 2)`` of
+    the pixels ``(iy, ix)``, pixel ``k`` in map ``which[k]``.
 
     Where the filter kernel (radius ``ceil(3 sigma)``) reaches past the edge, its zero border
     pulls the filtered peak inwards (0.2-1.2 px at the edge for blobs of sigma 1.5-3 px, 2 px and
@@ -263,26 +272,27 @@ def _refine_quadratic(maps: np.ndarray, padded: np.ndarray, pad: int, iy: np.nda
     n, h, w = maps.shape
     band = _radius(sigma) if sigma > 0 else h + w  # sigma 0: the raw map is all there is
     near = np.minimum(np.minimum(ix, w - 1 - ix), np.minimum(iy, h - 1 - iy)) < band
-    patch = _patch3(padded, pad, iy, ix)
+    patch = _patch3(padded, pad, iy, ix, which)
     if near.any():
         iy, ix = iy.copy(), ix.copy()
         if sigma > 0:  # the filter moved the peak by at most its radius
-            iy[near], ix[near] = _climb(maps[near], iy[near], ix[near], _radius(sigma))
-        patch[near] = _patch3(maps[near], 0, iy[near], ix[near])
+            iy[near], ix[near] = _climb(maps[which[near]], iy[near], ix[near], _radius(sigma))
+        patch[near] = _patch3(maps, 0, iy[near], ix[near], which[near])
     # One fit for all: an axis with no outer neighbour is only flagged on the raw (edge) patches.
     offset = _newton_log(patch, near & ((ix == 0) | (ix == w - 1)), near & ((iy == 0) | (iy == h - 1)))
     return np.stack([ix, iy], axis=-1) + offset
 
 
 def _refine_centroid(padded: np.ndarray, pad: int, labels: np.ndarray, top: np.ndarray, iy: np.ndarray,
-                     ix: np.ndarray, radius: int) -> np.ndarray:
-    """Weighted centroid of the peak's region inside a window; offsets ``(N, 2)``."""
-    n, h, w = labels.shape
+                     ix: np.ndarray, radius: int, which: np.ndarray) -> np.ndarray:
+    """Weighted centroid of the peak's region ``top`` inside a window; offsets ``(N, 2)``, pixel ``k`` in map
+    ``which[k]``."""
+    h, w = labels.shape[1:]
     offs = np.arange(-radius, radius + 1)
     ry = iy[:, None, None] + offs[None, :, None]
     rx = ix[:, None, None] + offs[None, None, :]
     inside = (ry >= 0) & (ry < h) & (rx >= 0) & (rx < w)
-    idx_n = np.arange(n)[:, None, None]
+    idx_n = which[:, None, None]
     lab = labels[idx_n, np.clip(ry, 0, h - 1), np.clip(rx, 0, w - 1)]
     val = padded[idx_n, np.clip(ry, 0, h - 1) + pad, np.clip(rx, 0, w - 1) + pad].astype(np.float64)
     wgt = np.where(inside & (lab == top[:, None, None]), val, 0.0)
@@ -325,7 +335,8 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     n = len(maps)
     if n == 0:
         empty = np.zeros(batch_shape, np.float32)
-        return Keypoints2D(np.zeros(batch_shape + (2,)), empty, empty.astype(bool), empty.copy())
+        return Keypoints2D(np.zeros(batch_shape + (2,)), empty, empty.astype(bool), empty.copy(),
+                           np.zeros(batch_shape + (2,)))
 
     finite = np.isfinite(maps).all(axis=(1, 2))
     if not finite.all():  # keep NaN/Inf out of the filter; those joints are dropped below
@@ -354,25 +365,37 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     area = in_top.sum(axis=(1, 2))
     valid = finite & (peak > cfg.threshold) & (area <= cfg.max_region_frac * h * w)
 
-    # Runner-up peak: only maps with another region need the (full-map) masked max.
+    # Runner-up peak: only maps with another region need the (full-map) masked max, taken where it is.
     others = above & ~in_top
     runner_up = np.zeros(n, np.float32)
     multi = np.flatnonzero(others.any(axis=(1, 2)))
+    which = np.arange(n)
     if len(multi):
-        runner_up[multi] = (filtered[multi] * others[multi]).max(axis=(1, 2))
+        masked = (filtered[multi] * others[multi]).reshape(len(multi), -1)
+        ry, rx = np.divmod(masked.argmax(axis=1), w)
+        runner_up[multi] = masked[np.arange(len(multi)), ry * w + rx]
+        # refined in the peaks' own call, after them: one set of numpy calls whatever the number of maps
+        which, iy, ix = np.concatenate([which, multi]), np.concatenate([iy, ry]), np.concatenate([ix, rx])
+        top = np.concatenate([top, labels[multi, ry, rx]])
 
     if cfg.refine == "quadratic":
-        uv = _refine_quadratic(maps, padded, pad, iy, ix, cfg.sigma)
+        uv = _refine_quadratic(maps, padded, pad, iy, ix, cfg.sigma, which)
     elif cfg.refine == "centroid":
-        uv = np.stack([ix, iy], axis=-1) + _refine_centroid(padded, pad, labels, top, iy, ix, cfg.centroid_radius)
+        uv = np.stack([ix, iy], axis=-1) + _refine_centroid(padded, pad, labels, top, iy, ix, cfg.centroid_radius,
+                                                            which)
     else:
         uv = np.stack([ix, iy], axis=-1).astype(np.float64)
 
+    runner_up = np.where(finite, runner_up, 0.0).astype(np.float32)
+    runner_uv = np.full((n, 2), MISSING_FILL)
+    if len(multi):
+        runner_uv[multi] = uv[n:]
+        runner_uv[runner_up == 0] = MISSING_FILL  # (a map with a non-finite value has none)
+        uv = uv[:n]
     uv = np.where(valid[:, None], uv, MISSING_FILL)
     conf = np.where(valid, peak, 0.0).astype(np.float32)
-    runner_up = np.where(finite, runner_up, 0.0).astype(np.float32)
     return Keypoints2D(uv.reshape(batch_shape + (2,)), conf.reshape(batch_shape), valid.reshape(batch_shape),
-                       runner_up.reshape(batch_shape))
+                       runner_up.reshape(batch_shape), runner_uv.reshape(batch_shape + (2,)))
 
 
 def decode_blocks(rendered: np.ndarray, blocks, config: KeypointDecoderConfig | None = None) -> Keypoints2D:
@@ -397,7 +420,8 @@ def decode_blocks(rendered: np.ndarray, blocks, config: KeypointDecoderConfig | 
     maps = np.stack([np.asarray(r).reshape(rows, cols, -1).transpose(2, 0, 1) for r in rendered])
     kp = decode_keypoints(np.ascontiguousarray(maps), config)
     corner = np.array([[b[1], b[0]] for b in blocks], np.float64)[:, None, :]  # (V, 1, (c0, r0))
-    return replace(kp, uv=np.where(kp.valid[..., None], kp.uv + corner, kp.uv))
+    return replace(kp, uv=np.where(kp.valid[..., None], kp.uv + corner, kp.uv),
+                   runner_up_uv=np.where(kp.runner_up[..., None] > 0, kp.runner_up_uv + corner, kp.runner_up_uv))
 
 
 # ---------------------------------------------------------------- coordinates

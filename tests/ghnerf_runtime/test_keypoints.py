@@ -32,7 +32,7 @@ def assert_missing_and_finite(kp, where):
     assert not kp.valid[where].any()
     assert np.all(kp.confidence[where] == 0.0)
     assert np.all(kp.uv[where] == MISSING_FILL)
-    for arr in (kp.uv, kp.confidence, kp.runner_up):
+    for arr in (kp.uv, kp.confidence, kp.runner_up, kp.runner_up_uv):
         assert np.all(np.isfinite(arr))
 
 
@@ -118,6 +118,51 @@ def test_two_blobs_stronger_wins_and_runner_up_reported():
     assert 0.4 < kp.runner_up[0] < kp.confidence[0]
     single = decode_keypoints(strong[None].astype(np.float32))
     assert single.runner_up[0] == 0.0
+    np.testing.assert_array_equal(single.runner_up_uv[0], [keypoints.MISSING_FILL] * 2)
+
+
+@pytest.mark.parametrize("refine", ["quadratic", "centroid", "none"])
+def test_runner_up_is_located_as_the_peak_is(refine):
+    """Two people in view: the weaker blob (the other person's peak of that joint) comes back where the decoder
+    places that blob alone as a peak, in each map of a batch, on the map edge too; none where a map has one blob.
+    With the quadratic fit (the default) that is the blob's centre."""
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+
+    def blob(x, y, height=1.0, sigma=2.0):
+        return height * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma ** 2))
+
+    cfg = KeypointDecoderConfig(refine=refine)
+    strong = [(40.3, 12.8), (10.6, 30.2), (33.0, 33.0)]
+    weak = [(15.45, 50.7), (52.2, 0.0), None]  # the second one's centre on the top edge
+    maps = np.stack([blob(*s) + (0 if w is None else blob(*w, 0.7)) for s, w in zip(strong, weak)])
+    kp = decode_keypoints(np.stack([maps, maps[::-1]]).astype(np.float32), cfg)
+    assert kp.runner_up_uv.shape == (2, 3, 2) and kp.runner_up_uv.dtype == np.float64
+    for view, order in ((0, [0, 1, 2]), (1, [2, 1, 0])):
+        for j, k in enumerate(order):
+            if weak[k] is None:
+                assert kp.runner_up[view, j] == 0 and not kp.runner_up_uv[view, j].any()
+                continue
+            alone = decode_keypoints(blob(*weak[k], 0.7)[None].astype(np.float32), cfg)
+            assert kp.runner_up[view, j] == pytest.approx(alone.confidence[0], abs=1e-6)
+            np.testing.assert_allclose(kp.runner_up_uv[view, j], alone.uv[0], atol=1e-6)
+            if refine == "quadratic":
+                np.testing.assert_allclose(kp.runner_up_uv[view, j], weak[k], atol=0.01)
+
+
+def test_rendered_blocks_place_the_runner_up_in_the_grid_s_cells():
+    from ghnerf_runtime.keypoints import decode_blocks
+
+    g = 32
+    yy, xx = np.mgrid[:g, :g]
+    blocks = [(0, 8, 24, 20), (4, 0, 24, 20)]  # (r0, c0, rows, cols)
+    rendered = []
+    for r0, c0, rows, cols in blocks:
+        full = (np.exp(-((xx - 12.3) ** 2 + (yy - 9.6) ** 2) / 4.5)
+                + 0.6 * np.exp(-((xx - 18.0) ** 2 + (yy - 20.4) ** 2) / 4.5)).astype(np.float32)
+        rendered.append(full[r0:r0 + rows, c0:c0 + cols].reshape(-1, 1))
+    kp = decode_blocks(np.stack(rendered), blocks)
+    np.testing.assert_allclose(kp.uv[:, 0], [[12.3, 9.6]] * 2, atol=0.02)
+    np.testing.assert_allclose(kp.runner_up_uv[:, 0], [[18.0, 20.4]] * 2, atol=0.02)
 
 
 def test_oblique_anisotropic_blob():
@@ -239,7 +284,7 @@ _values = st.one_of(st.floats(-2.0, 2.0, width=32), st.sampled_from([np.nan, np.
 def test_outputs_always_finite_and_consistent(hm, sigma, refine):
     cfg = KeypointDecoderConfig(sigma=sigma, refine=refine)
     kp = decode_keypoints(hm, cfg)
-    for arr in (kp.uv, kp.confidence, kp.runner_up):
+    for arr in (kp.uv, kp.confidence, kp.runner_up, kp.runner_up_uv):
         assert np.all(np.isfinite(arr))
     h, w = hm.shape[-2:]
     assert np.all(kp.confidence[kp.valid] > cfg.threshold) and np.all(kp.confidence[~kp.valid] == 0)
@@ -393,7 +438,7 @@ def test_tiny_and_extreme_maps_at_every_border_pixel(h, w):
         view.flags.writeable = False
         for sigma in (0.0, 1.0, 3.0):
             kp = decode_keypoints(view, KeypointDecoderConfig(sigma=sigma, max_region_frac=1.0))
-            for arr in (kp.uv, kp.confidence, kp.runner_up):
+            for arr in (kp.uv, kp.confidence, kp.runner_up, kp.runner_up_uv):
                 assert np.all(np.isfinite(arr))
             assert np.all((kp.uv >= 0) & (kp.uv <= [w - 1, h - 1]))
             # a one-pixel peak is decoded on its pixel (the filter cannot move a lone pixel's maximum)
