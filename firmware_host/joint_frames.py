@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 
 import drivers
-from firmware_host.protocol.constants import U32_MAX
+from firmware_host.protocol.constants import U32_MAX, Flags
 from firmware_host.protocol.messages import JointFrame
 from ghnerf_runtime.estimator import PairResult
 
-__all__ = ["FrameNumbers", "estimate_frame", "truth_frame"]
+__all__ = ["FrameNumbers", "estimate_frame", "scene_flags", "truth_frame"]
 
 
 class FrameNumbers:
@@ -54,11 +54,29 @@ def truth_frame(pair: drivers.FramePair, *, sequence: int) -> JointFrame | None:
     )
 
 
-def estimate_frame(pair: drivers.FramePair, result: PairResult, *, sequence: int) -> JointFrame:
+def scene_flags(result: PairResult, *, calibration_suspect: bool = False) -> int:
+    """The wire flags that say what ``result`` is (docs/protocol.md section 3): what the status file's JSON says
+    of a pair, for a receiver (a robot that must stop when a second person is in view) that reads only the
+    joint stream."""
+    flags = Flags.NONE
+    if result.several_people:
+        flags |= Flags.SEVERAL_PEOPLE
+    if result.prior_fallback:
+        flags |= Flags.PRIOR_FALLBACK
+    if result.single_view is not None:
+        flags |= Flags.SINGLE_VIEW
+    if calibration_suspect:
+        flags |= Flags.CALIBRATION_SUSPECT
+    return int(flags)
+
+
+def estimate_frame(pair: drivers.FramePair, result: PairResult, *, sequence: int,
+                   calibration_suspect: bool = False) -> JointFrame:
     """The estimate as sink frame ``sequence``: missing joints are NaN with confidence 0 (missing on the wire).
 
     The 2D joints are keyed by camera index in ``pair.frames`` order (the rig's pair order), which is
-    the order of the names a sink announces in HELLO (``open_sink(url, cameras=...)``).
+    the order of the names a sink announces in HELLO (``open_sink(url, cameras=...)``). Its ``scene_flags`` are
+    :func:`scene_flags`; ``calibration_suspect`` is the daemon's calibration check (``CalibrationWatch.suspect``).
     """
     missing = np.asarray(result.missing, bool)
     xyz = np.where(missing[:, None], np.nan, result.joints_3d)
@@ -74,4 +92,5 @@ def estimate_frame(pair: drivers.FramePair, result: PairResult, *, sequence: int
         joint_set=0,
         joints_3d=np.column_stack([xyz, conf]),
         joints_2d=joints_2d,
+        scene_flags=scene_flags(result, calibration_suspect=calibration_suspect),
     )

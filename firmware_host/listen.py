@@ -13,10 +13,11 @@ The summary: JOINTS messages per second, joints present per message, the sender'
 sender numbered but dropped or decimated, or the link lost; camera pairs the sender never made a
 frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW` behind the newest; one
 that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
-docs/protocol.md) and HELLO, and the decoder's error counts (a noisy serial line shows as ``crc``/``cobs``
-errors). A seq further back is a restarted sender, not a gap. Exit status: 0; 2 for a bad URL or a port
-that cannot be opened (named), or one that fails while read (an unplugged serial port: the totals of what
-arrived until then are still printed).
+docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO, the JOINTS flagged with each scene
+flag (``3 several people``: the robot should not follow them), and the decoder's error counts (a noisy
+serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Exit
+status: 0; 2 for a bad URL or a port that cannot be opened (named), or one that fails while read (an
+unplugged serial port: the totals of what arrived until then are still printed).
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ from urllib.parse import parse_qs, unquote, urlsplit
 from drivers.url import redact_location, redact_url
 from firmware_host.addresses import ipv4_first
 from firmware_host.errors import shown_value
-from firmware_host.protocol.constants import NO_FRAME_SEQ, Fault
+from firmware_host.protocol.constants import NO_FRAME_SEQ, SCENE_FLAGS, Fault, Flags
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import LocationError, host_name_problem, integer, ipv6_hint, location_host
@@ -232,6 +233,11 @@ LATE_WINDOW = 32
 _SEQ_MOD = 1 << 32  # sequence numbers wrap (docs/protocol.md)
 
 
+#: The scene flags (docs/protocol.md section 3) as the summary counts them: JOINTS of that kind per interval.
+SCENE_WORDS = ((Flags.SEVERAL_PEOPLE, "several people"), (Flags.PRIOR_FALLBACK, "prior fallback"),
+               (Flags.SINGLE_VIEW, "single view"), (Flags.CALIBRATION_SUSPECT, "calibration suspect"))
+
+
 def _fault_name(code: int) -> str:
     try:
         return Fault(code).name
@@ -256,6 +262,7 @@ class Tally:
     gaps: int = 0
     late: int = 0
     duplicates: int = 0
+    scene: dict[str, int] = field(default_factory=dict)  # JOINTS per scene flag (SCENE_WORDS), this interval
     last_seq: Optional[int] = None
     status: Optional[Status] = None
     hello: Optional[Hello] = None
@@ -279,6 +286,9 @@ class Tally:
             self.present.append(int((~message.missing).sum()))
             h = message.header
             self.latency_ms.append((h.send_us - h.capture_us) / 1000.0)
+            for flag, word in SCENE_WORDS:
+                if h.flags & flag:
+                    self.scene[word] = self.scene.get(word, 0) + 1
             self._sequence(h.seq)
         elif isinstance(message, Status):
             self.status, self.status_at = message, time.monotonic()
@@ -344,18 +354,23 @@ class Tally:
             parts.append(f"{self.late} late (reordered)")
         if self.duplicates:
             parts.append(f"{self.duplicates} duplicate")
+        parts.extend(f"{self.scene[word]} {word}" for _, word in SCENE_WORDS if word in self.scene)
         now = time.monotonic()
         if self.status is not None:
             age = f" ({now - self.status_at:.0f} s ago)" if now - self.status_at > 2 * seconds + 1 else ""
-            parts.append(f"sender fault {_fault_name(self.status.fault)}, dropped {self.status.dropped}{age}")
+            suspect = ", CALIBRATION SUSPECT" if self.status.header.flags & Flags.CALIBRATION_SUSPECT else ""
+            parts.append(f"sender fault {_fault_name(self.status.fault)}{suspect}, dropped {self.status.dropped}{age}")
         if self.hello is not None:
             age = f" ({now - self.hello_at:.0f} s ago)" if now - self.hello_at > 2 * seconds + 1 else ""
-            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}{age}")
+            # an older sender never sets the scene flags: their absence then says nothing of the scene
+            older = "" if self.hello.header.flags & SCENE_FLAGS == SCENE_FLAGS else " (sends no scene flags)"
+            parts.append(f"rig {self.hello.rig_id!r} cameras {list(self.hello.cameras)}{older}{age}")
         bad = {k: v - self.errors_before.get(k, 0) for k, v in errors.items() if v - self.errors_before.get(k, 0)}
         self.errors_before = dict(errors)
         if bad:
             parts.append(f"decode errors {bad}")
         self.joints, self.present, self.latency_ms, self.gaps, self.late, self.duplicates = 0, [], [], 0, 0, 0
+        self.scene = {}
         self._interval += 1  # a frame skipped before now that comes late no longer changes this line's gaps
         return "; ".join(parts)
 
@@ -401,7 +416,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # the counters the docs describe (docs/daemon.md), in the words each line prints them in
     epilog = ("Each second a line: JOINTS/s, joints present, latency (capture to the wire), 'N seq gaps' (frames "
               f"lost), and when any came 'N late (reordered)' (a seq up to {LATE_WINDOW} behind the newest: one a "
-              "gap stepped over leaves the lost frames) and 'N duplicate'; the sender's last STATUS fault and HELLO; "
+              "gap stepped over leaves the lost frames) and 'N duplicate'; JOINTS flagged 'N several people', "
+              "'N prior fallback', 'N single view', 'N calibration suspect' (docs/protocol.md, section 3); "
+              "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO; "
               "decode errors. Ctrl-C or --seconds ends it with the totals. Counters: docs/daemon.md; protocol: "
               "docs/protocol.md")
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0], epilog=epilog)

@@ -217,6 +217,7 @@ class Daemon:
         self._steady = False  # the open rig has delivered pairs for rig.stall_s (the backoff was reset)
         self._next_status = 0.0
         self._fault = int(Fault.OK)
+        self._calibration_sent = False  # what the sinks' STATUS says of the calibration (CALIBRATION_SUSPECT)
         self._fault_lock = threading.RLock()  # the watchdog's thread flags a stuck estimate too
         self._dropped_closed = 0  # pairs the driver skipped, summed over rigs already closed
         # The wire's seq: one numbering for the daemon's life, through rig reopens (whose pair numbers start
@@ -322,6 +323,7 @@ class Daemon:
                 raise DaemonStartError(f"the model does not fit rig {rig.rig_id!r}: {e}") from None
             self._rig_text = text
             self.health.calibration.reset()  # the pairs of another calibration say nothing of this one
+            self._sync_calibration()
         else:
             self._estimator.reset()  # the subject may have moved while the camera was away
         return self._estimator
@@ -475,10 +477,12 @@ class Daemon:
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))
             self.health.frames_checked(result.frame_reason)
             self._calibration_changed(self.health.calibration.add(result.reprojection_px_median))
+            self._sync_calibration()
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
             self.health.camera_fault = False
             self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)
-            frame = estimate_frame(pair, result, sequence=self._frame_numbers.take())
+            frame = estimate_frame(pair, result, sequence=self._frame_numbers.take(),
+                                   calibration_suspect=self.health.calibration.suspect)
             for sink in self._sinks.values():
                 sink.send(frame)
         return False
@@ -664,6 +668,7 @@ class Daemon:
             self._session, self._estimator = session, estimator  # None: built when the next rig opens
             self._rig_text = dumps_rig(estimator.rig) if estimator is not None else None
             self.health.calibration.reset()  # another model or settings: its peaks are judged afresh
+            self._sync_calibration()
             if replaced:  # the old model's sessions are free now: hand their pages back (firmware_host.daemon.memory)
                 return_freed_memory()
         with self._fault_lock:
@@ -674,6 +679,7 @@ class Daemon:
         if "health" in changed:
             self._calibration_changed(self.health.calibration.configure(new.health.calibration_window,
                                                                         new.health.calibration_max_px))
+            self._sync_calibration()
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0
             if old_status_file and old_status_file != new.health.status_file:
@@ -716,6 +722,19 @@ class Daemon:
         set_fault = getattr(sink, "set_fault", None)  # the binary-protocol sinks carry STATUS
         if set_fault is not None:
             set_fault(self._fault)
+        set_suspect = getattr(sink, "set_calibration_suspect", None)
+        if set_suspect is not None:
+            set_suspect(self._calibration_sent)
+
+    def _sync_calibration(self) -> None:
+        """Tell the sinks' STATUS (header flag CALIBRATION_SUSPECT) the calibration check's verdict when it
+        changed: a receiver learns it while no frame flows too, not from the status file alone."""
+        with self._fault_lock:
+            suspect = bool(self.health.calibration.suspect)
+            if suspect != self._calibration_sent:
+                self._calibration_sent = suspect
+                for sink in self._sinks.values():
+                    self._apply_fault(sink)
 
     # ------------------------------------------------------------------ health
     @staticmethod

@@ -4,6 +4,7 @@ from firmware_host.protocol.constants import (
     MAX_JOINTS,
     MAX_PACKET_LEN,
     PROTOCOL_VERSION,
+    SCENE_FLAGS,
     CoordFrame,
     Fault,
     Flags,
@@ -18,7 +19,7 @@ from firmware_host.protocol.from_frame import joints2d_messages, joints_message
 from firmware_host.protocol.messages import Header, Hello, JointFrame, Joints, Joints2D, Message, Status, make_header
 
 __all__ = [
-    "MAX_FRAME_LEN", "MAX_JOINTS", "MAX_PACKET_LEN", "PROTOCOL_VERSION",
+    "MAX_FRAME_LEN", "MAX_JOINTS", "MAX_PACKET_LEN", "PROTOCOL_VERSION", "SCENE_FLAGS",
     "CoordFrame", "Fault", "Flags", "JointSet", "MsgType", "Units",
     "crc16", "DecodeEvent", "DecoderStats", "StreamDecoder", "decode_stream", "parse_packet",
     "encode", "encode_packet", "frame_packet", "joints_packet_len", "wire_len",

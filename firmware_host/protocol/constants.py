@@ -42,6 +42,24 @@ class Flags(enum.IntFlag):
     # The sender dropped at least one frame (queue overflow or failed write)
     # since the previous JOINTS packet on this link.
     DROPPED = 0x02
+    # Bits 2-5 say what the estimate is (set on the frame's JOINTS and JOINTS_2D; docs/protocol.md section 3).
+    # Header bits, not appended payload bytes: they cost no link budget, and decoders of before session 53
+    # already pass unknown bits through ("ignore when reading").
+    # Two people in view: the joints are the tracked subject's only (all missing while none is tracked).
+    SEVERAL_PEOPLE = 0x04
+    # The skeleton prior disagreed with the triangulation, which was sent instead.
+    PRIOR_FALLBACK = 0x08
+    # One camera alone saw the person: no 3D (every JOINTS joint missing), only that camera's JOINTS_2D.
+    SINGLE_VIEW = 0x10
+    # The daemon's calibration check finds the views no longer agree (a camera moved): 3D may be off. Also set
+    # in the STATUS header while it lasts, so it reaches a receiver while no frame flows.
+    CALIBRATION_SUSPECT = 0x20
+
+
+#: The flags that describe a frame's estimate (``JointFrame.scene_flags``), as opposed to the sender's link. A
+#: sender that sets them says so in its HELLO's header ``flags`` (this value); an older sender's HELLO has 0, so a
+#: receiver can tell "no second person" from "a sender too old to say".
+SCENE_FLAGS = int(Flags.SEVERAL_PEOPLE | Flags.PRIOR_FALLBACK | Flags.SINGLE_VIEW | Flags.CALIBRATION_SUSPECT)
 
 
 class JointSet(enum.IntEnum):

@@ -16,8 +16,10 @@ def wire_seq(sequence: int) -> int:
 
 
 def joints_message(frame: JointFrame, send_us: int, flags: int = 0) -> Joints:
+    """JOINTS of ``frame``: its header flags are the link's ``flags`` and the frame's own ``scene_flags``."""
     xyz, conf, missing = quantise_joints_3d(frame.joints_3d)
-    header = make_header(MsgType.JOINTS, wire_seq(frame.sequence), frame.capture_time_us, send_us, flags)
+    header = make_header(MsgType.JOINTS, wire_seq(frame.sequence), frame.capture_time_us, send_us,
+                         int(flags) | int(frame.scene_flags))
     return Joints(header, frame.joint_set, xyz, conf, missing)
 
 
@@ -58,6 +60,7 @@ def joints2d_messages(
     out = []
     for key in sorted(frame.joints_2d, key=lambda k: camera_index(k, cameras)):
         uv, conf, missing = quantise_joints_2d(frame.joints_2d[key])
-        header = make_header(MsgType.JOINTS_2D, wire_seq(frame.sequence), frame.capture_time_us, send_us, flags)
+        header = make_header(MsgType.JOINTS_2D, wire_seq(frame.sequence), frame.capture_time_us, send_us,
+                             int(flags) | int(frame.scene_flags))
         out.append(Joints2D(header, camera_index(key, cameras), frame.joint_set, uv, conf, missing))
     return out

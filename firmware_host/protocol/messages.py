@@ -14,7 +14,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from firmware_host.protocol.constants import MAX_JOINTS, PROTOCOL_VERSION, U64_MAX, MsgType
+from firmware_host.protocol.constants import MAX_JOINTS, PROTOCOL_VERSION, SCENE_FLAGS, U64_MAX, Flags, MsgType
 
 
 def _whole(name: str, value: object, lo: int | None = None, hi: int | None = None) -> None:
@@ -46,6 +46,9 @@ class JointFrame:
     joints_2d: Mapping[Union[str, int], np.ndarray] = field(default_factory=dict)
     """Optional per-camera (J, 3) float: u, v in pixels and confidence 0..1, keyed by camera name or by index
     (a Python or numpy integer) into the cameras the sink announces."""
+    scene_flags: int = 0
+    """What the estimate is (``Flags`` SEVERAL_PEOPLE, PRIOR_FALLBACK, SINGLE_VIEW, CALIBRATION_SUSPECT), sent in
+    the header flags of the frame's JOINTS and JOINTS_2D; the link's own DECIMATED / DROPPED are the sink's."""
 
     def __post_init__(self) -> None:
         # Checked here, at send(): a float or negative time failed only in the sink's worker, and was then
@@ -53,6 +56,11 @@ class JointFrame:
         _whole("sequence", self.sequence)
         _whole("capture_time_us", self.capture_time_us, 0, U64_MAX)
         _whole("joint_set", self.joint_set, 0, 0xFF)
+        _whole("scene_flags", self.scene_flags, 0, 0xFF)
+        if int(self.scene_flags) & ~SCENE_FLAGS:
+            # A link bit (DECIMATED, DROPPED) or a reserved one set here would tell receivers something untrue.
+            raise ValueError(f"JointFrame.scene_flags 0x{int(self.scene_flags):02x} sets bits other than the "
+                             f"scene flags 0x{SCENE_FLAGS:02x} ({Flags(SCENE_FLAGS)!r})")
         j = np.asarray(self.joints_3d)
         if j.ndim != 2 or j.shape[1] != 4:
             raise ValueError(f"JointFrame.joints_3d must have shape (J, 4), got {j.shape}")

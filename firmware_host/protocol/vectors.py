@@ -32,6 +32,7 @@ from firmware_host.protocol.constants import (
     MAX_FRAME_LEN,
     MAX_JOINTS,
     MAX_PACKET_LEN,
+    SCENE_FLAGS,
     U32_MAX,
     U64_MAX,
     CoordFrame,
@@ -106,24 +107,24 @@ def _joints(seq: int, *, flags: int = 0, missing: Iterable[int] = (), t0: int = 
     return Joints(h, int(JointSet.BODY_25), xyz, conf, miss)
 
 
-def _joints2d(seq: int, camera: int, missing: Iterable[int] = ()) -> Joints2D:
+def _joints2d(seq: int, camera: int, missing: Iterable[int] = (), flags: int = 0) -> Joints2D:
     miss = np.zeros(25, bool)
     miss[list(missing)] = True
     uv = np.stack([np.arange(25) * 40 + 100 * camera, np.arange(25) * 25 + 4], axis=1) * 4 + 1
     uv = np.where(miss[:, None], 0, uv).astype(np.int16)
     conf = np.where(miss, 0, 180).astype(np.uint8)
-    h = make_header(MsgType.JOINTS_2D, seq, 1_000_000 + seq * 33_333, 1_000_000 + seq * 33_333 + 41_500)
+    h = make_header(MsgType.JOINTS_2D, seq, 1_000_000 + seq * 33_333, 1_000_000 + seq * 33_333 + 41_500, flags)
     return Joints2D(h, camera, int(JointSet.BODY_25), uv, conf, miss)
 
 
-def _hello(seq: int = 0) -> Hello:
-    h = make_header(MsgType.HELLO, seq, 999_000, 999_100)
+def _hello(seq: int = 0, flags: int = 0) -> Hello:
+    h = make_header(MsgType.HELLO, seq, 999_000, 999_100, flags)
     return Hello(h, 1, int(JointSet.BODY_25), 25, int(Units.MILLIMETRES), int(CoordFrame.RIG),
                  "rig-A1", ("left", "right"))
 
 
-def _status(seq: int, dropped: int = 0, decimated: int = 0, fault: int = Fault.OK) -> Status:
-    h = make_header(MsgType.STATUS, seq, 1_000_000 + seq * 33_333, 1_000_000 + seq * 33_333 + 42_000)
+def _status(seq: int, dropped: int = 0, decimated: int = 0, fault: int = Fault.OK, flags: int = 0) -> Status:
+    h = make_header(MsgType.STATUS, seq, 1_000_000 + seq * 33_333, 1_000_000 + seq * 33_333 + 42_000, flags)
     return Status(h, 2997, 41_000, dropped, decimated, int(fault))
 
 
@@ -206,6 +207,25 @@ def _v_session() -> _Stream:
     s.raw(b"\x00", None)
     s.message(_joints(13, flags=Flags.DROPPED)).raw(b"\x00\x00\x00", None).message(_joints(14))
     return s.message(_status(14, dropped=1, fault=Fault.QUEUE_OVERFLOW))
+
+
+def _v_scene_flags() -> _Stream:
+    s = _Stream(
+        "Scene flags: a HELLO announcing them (flags 0x3C), JOINTS 40-43 with SEVERAL_PEOPLE, PRIOR_FALLBACK, "
+        "CALIBRATION_SUSPECT, and all four with DROPPED; a SINGLE_VIEW frame 44 (every 3D joint missing, "
+        "camera 0's 2D joints, camera 1's all missing, all three packets flagged); a STATUS with "
+        "CALIBRATION_SUSPECT; JOINTS 45 with the reserved bits 6 and 7, which decoders pass through."
+    )
+    s.message(_hello(39, flags=SCENE_FLAGS))
+    s.message(_joints(40, flags=Flags.SEVERAL_PEOPLE))
+    s.message(_joints(41, flags=Flags.PRIOR_FALLBACK))
+    s.message(_joints(42, flags=Flags.CALIBRATION_SUSPECT))
+    s.message(_joints(43, flags=SCENE_FLAGS | Flags.DROPPED))
+    s.message(_joints(44, flags=Flags.SINGLE_VIEW, missing=range(25)))
+    s.message(_joints2d(44, 0, flags=Flags.SINGLE_VIEW))
+    s.message(_joints2d(44, 1, missing=range(25), flags=Flags.SINGLE_VIEW))
+    s.message(_status(44, flags=Flags.CALIBRATION_SUSPECT))
+    return s.message(_joints(45, flags=0xC0))
 
 
 def _v_unknown_type() -> _Stream:
@@ -409,6 +429,7 @@ VECTORS = {
     "joints_extremes": _v_joints_extremes,
     "joints_2d": _v_joints_2d,
     "session": _v_session,
+    "scene_flags": _v_scene_flags,
     "unknown_type": _v_unknown_type,
     "future_version": _v_future_version,
     "extension_bytes": _v_extension_bytes,

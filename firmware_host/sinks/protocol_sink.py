@@ -17,8 +17,10 @@ from firmware_host.protocol.constants import (
     PROTOCOL_VERSION,
     NO_FRAME_SEQ,
     U32_MAX,
+    SCENE_FLAGS,
     CoordFrame,
     Fault,
+    Flags,
     JointSet,
     MsgType,
     Units,
@@ -51,6 +53,7 @@ class ProtocolSink(Sink):
         self._resync = True
         self._fault = int(Fault.OK)
         self._fault_since_status = int(Fault.OK)  # the last non-OK fault set since the previous STATUS
+        self._calibration_suspect = False  # STATUS header flag CALIBRATION_SUSPECT (set_calibration_suspect)
         self._faults_set = 0  # non-OK faults set so far: a STATUS clears the latch only if none came since it read it
         self._status_due_us: Optional[int] = None
         self._status_owed = False  # the last STATUS was not written: the next frame carries one
@@ -104,6 +107,13 @@ class ProtocolSink(Sink):
             if self._fault != Fault.OK:
                 self._fault_since_status = self._fault
                 self._faults_set += 1
+
+    def set_calibration_suspect(self, suspect: bool) -> None:
+        """Say in every STATUS (header flag CALIBRATION_SUSPECT) whether the daemon's calibration check finds
+        the views no longer agree. A flag, not a fault code: it lasts until a recalibration, and as fault 6 it
+        would have hidden RATE_LIMITED..CAMERA_FAULT all that time (or been hidden by them)."""
+        with self._cond:
+            self._calibration_suspect = bool(suspect)
 
     # ---- Sink hooks --------------------------------------------------------------
 
@@ -176,7 +186,9 @@ class ProtocolSink(Sink):
     # ---- messages ------------------------------------------------------------------
 
     def _hello(self, now: int) -> Hello:
-        h = make_header(MsgType.HELLO, self._last_seq, now, now)
+        # HELLO's flags: the scene flags this sender sets on its frames (an older sender's are 0, so a receiver
+        # can tell "no second person" from "a sender that cannot say").
+        h = make_header(MsgType.HELLO, self._last_seq, now, now, SCENE_FLAGS)
         return Hello(
             h, PROTOCOL_VERSION, self._joint_set, self.options.joint_count, int(Units.MILLIMETRES),
             int(CoordFrame.RIG), self.options.rig_id, tuple(self.options.cameras),
@@ -205,10 +217,11 @@ class ProtocolSink(Sink):
         with self._cond:
             current, latched, faults_set = self._fault, self._fault_since_status, self._faults_set
             earlier_dropped, earlier_decimated = self._earlier_totals
+            status_flags = int(Flags.CALIBRATION_SUSPECT) if self._calibration_suspect else 0
         fault = current if current != Fault.OK else latched
         if fault == Fault.OK:
             fault = self._link_fault(self._prev_stats or s, s)
-        h = make_header(MsgType.STATUS, self._last_seq, self._last_capture_us or now, now)
+        h = make_header(MsgType.STATUS, self._last_seq, self._last_capture_us or now, now, status_flags)
         latency = max(0, now - self._last_capture_us) if self._last_capture_us else 0
         status = Status(
             h,

@@ -85,6 +85,14 @@ def test_named_codes_match_both_ways(defines, prefix, enum, skip):
     assert _group(defines, prefix) == python
 
 
+def test_the_scene_flags_mask_matches(defines):
+    """GHJ_SCENE_FLAGS (what a HELLO's flags announce) is the Python SCENE_FLAGS, and names exactly the scene
+    flags: a firmware masks a frame's flags with it to tell the estimate's bits from the link's."""
+    assert defines.get("GHJ_SCENE_FLAGS") == proto.SCENE_FLAGS
+    scene = {"SEVERAL_PEOPLE", "PRIOR_FALLBACK", "SINGLE_VIEW", "CALIBRATION_SUSPECT"}
+    assert sum(defines[f"GHJ_FLAG_{name}"] for name in scene) == proto.SCENE_FLAGS
+
+
 def test_results_follow_the_protocol_s_check_order():
     """ghj_result's errors are -1, -2, ... in docs/protocol.md section 5's order (ERROR_CODES); the decoders'
     event names (ghj_result_name, ghj_dump, ghnerf-listen) come from them."""

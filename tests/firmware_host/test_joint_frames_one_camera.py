@@ -7,7 +7,7 @@ import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
 from firmware_host.joint_frames import estimate_frame
-from firmware_host.protocol.constants import UV_SCALE
+from firmware_host.protocol.constants import UV_SCALE, Flags
 from firmware_host.protocol.from_frame import joints2d_messages, joints_message
 from ghnerf_runtime.estimator import Estimator
 
@@ -40,3 +40,18 @@ def test_a_person_seen_by_one_camera_only_reaches_the_wire_as_that_cameras_2d_jo
     np.testing.assert_allclose(messages[seen].uv_q[found] / UV_SCALE, result.joints_2d[rig.pair[seen].name][found],
                                atol=0.5 / UV_SCALE)
     assert messages[1 - seen].missing.all() and not messages[1 - seen].conf.any()
+    # flagged, so a receiver tells "one camera saw the person" from "nobody there" (both: every 3D joint missing)
+    assert joints.header.flags == Flags.SINGLE_VIEW and {m.header.flags for m in messages} == {Flags.SINGLE_VIEW}
+
+
+def test_scene_flags_refuse_the_link_s_and_reserved_bits():
+    """JointFrame.scene_flags carries the estimate's flags only: DECIMATED / DROPPED are the sink's to set (a
+    frame claiming them would tell the receiver of losses that never happened), bits 6-7 are reserved."""
+    from tests.firmware_host.joint_stream_helpers import make_frame
+    from dataclasses import replace
+
+    frame = make_frame(0)
+    assert replace(frame, scene_flags=0x3C).scene_flags == 0x3C
+    for bad in (Flags.DROPPED, Flags.DECIMATED | Flags.SEVERAL_PEOPLE, 0x40, 0x100, -1):
+        with pytest.raises(ValueError, match="JointFrame.scene_flags"):
+            replace(frame, scene_flags=int(bad))

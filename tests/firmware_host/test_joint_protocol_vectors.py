@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from firmware_host.protocol import StreamDecoder, decode_stream
+from firmware_host.protocol.constants import SCENE_FLAGS, Flags
 from firmware_host.protocol.vectors import VECTORS, build, default_dir
 
 VECTOR_DIR = Path(__file__).resolve().parents[1] / "vectors" / "joint_stream"
@@ -30,6 +31,22 @@ def test_vectors_cover_the_required_damage() -> None:
     totals = {k: sum(v["stats"][k] for v in expected.values()) for k in next(iter(expected.values()))["stats"]}
     for code in ("oversize", "cobs", "short", "crc", "version", "malformed", "skipped"):
         assert totals[code] > 0, f"no vector exercises {code}"
+
+
+def test_vectors_carry_every_flag_where_it_is_sent() -> None:
+    """Each header flag on a JOINTS (the scene flags alone too: a decoder that reads one only next to DROPPED is
+    not tested), SINGLE_VIEW on JOINTS_2D, CALIBRATION_SUSPECT on STATUS, the scene-flag mask on HELLO, and the
+    reserved bits 6-7, which every decoder must pass through rather than refuse."""
+    events = [ev for name in VECTORS for ev in json.loads((VECTOR_DIR / f"{name}.json").read_text())["events"]]
+    flags_of = {kind: {ev["flags"] for ev in events if ev.get("type") == kind}
+                for kind in ("JOINTS", "JOINTS_2D", "STATUS", "HELLO")}
+    for flag in Flags:
+        if flag:
+            assert int(flag) in flags_of["JOINTS"], f"no vector has a JOINTS flagged {flag!r} alone"
+    assert int(Flags.SINGLE_VIEW) in flags_of["JOINTS_2D"]
+    assert int(Flags.CALIBRATION_SUSPECT) in flags_of["STATUS"]
+    assert SCENE_FLAGS in flags_of["HELLO"]
+    assert any(f & 0xC0 for f in flags_of["JOINTS"]), "no vector has the reserved flag bits set"
 
 
 @pytest.mark.parametrize("name", sorted(VECTORS))

@@ -357,3 +357,44 @@ def test_a_port_that_fails_while_read_still_ends_with_the_totals(monkeypatch, ca
     err = capsys.readouterr().err.splitlines()
     assert err == ["ghnerf-listen: error: serial:///dev/ttyACM0: read failed: [Errno 5] Input/output error",
                    "3 JOINTS messages, 1 sequence gaps (lost), 0 late (reordered), 0 duplicate"]
+
+
+def test_the_line_counts_scene_flags_and_the_calibration_suspicion_a_sink_sends():
+    """What the daemon's JSON says of a frame reaches the receiver: a real memory sink's frames flagged two people
+    / single view, its STATUS flagged CALIBRATION_SUSPECT, its HELLO announcing the scene flags. The line used to
+    say none of it, so a person at the robot could not see why it stopped."""
+    from dataclasses import replace
+
+    from firmware_host.protocol.constants import SCENE_FLAGS, Flags
+    from firmware_host.protocol.decoder import decode_stream
+
+    from firmware_host.sinks.memory_sink import MemorySink
+
+    sink = MemorySink.from_url("memory://", rig_id="arm")
+    sink.set_calibration_suspect(True)  # before start, as the daemon does: its first STATUS says so
+    sink.start()
+    for seq, flags in ((0, 0), (1, Flags.SEVERAL_PEOPLE), (2, Flags.SEVERAL_PEOPLE | Flags.CALIBRATION_SUSPECT),
+                       (3, Flags.SINGLE_VIEW)):
+        sink.send(replace(make_frame(seq), scene_flags=int(flags)))
+    sink.close()
+    events, _ = decode_stream(sink.read())
+    tally = listen.Tally()
+    for event in events:
+        tally.add(event.message)
+    assert tally.hello is not None and tally.hello.header.flags == SCENE_FLAGS
+    assert tally.status is not None and tally.status.header.flags == Flags.CALIBRATION_SUSPECT
+    line = tally.line(1.0, {})
+    assert "2 several people; 1 single view; 1 calibration suspect" in line, line
+    assert "sender fault OK, CALIBRATION SUSPECT, dropped 0" in line, line
+    assert "(sends no scene flags)" not in line
+    assert "several people" not in tally.line(1.0, {})  # counted per interval
+
+
+def test_the_line_says_when_a_sender_cannot_report_scene_flags():
+    """An older sender's HELLO has flags 0: no SEVERAL_PEOPLE from it means nothing, and the line says so."""
+    from firmware_host.protocol.constants import MsgType
+    from firmware_host.protocol.messages import Hello, make_header
+
+    tally = listen.Tally()
+    tally.add(Hello(make_header(MsgType.HELLO, 0, 0, 0), 1, 0, 25, 0, 0, "old", ("left", "right")))
+    assert "rig 'old' cameras ['left', 'right'] (sends no scene flags)" in tally.line(1.0, {})

@@ -223,6 +223,51 @@ def test_seqs_stay_contiguous_through_reopens_and_rejected_pairs(sim_url, tmp_pa
     assert report["pairs"]["read"] == health.pairs_estimated + health.estimate_errors
 
 
+class _SceneEstimator(_CountingEstimator):
+    """No rejected pairs; pairs 2, 3 (counting from 0) with two people in view, pair 4 a prior fallback, and from
+    pair 6 on views 3 px apart (a camera moved: the median of the calibration check's window of 3 passes 1 px
+    at pair 7)."""
+
+    def estimate(self, images, *, sequence: int, timestamp_s: float):
+        from dataclasses import replace
+
+        self.n = getattr(self, "n", -1) + 1
+        self.calls = 0  # the parent's third call is a FrameError: never reached
+        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
+        return replace(result, several_people=self.n in (2, 3), prior_fallback=self.n == 4,
+                       reprojection_px_median=3.0 if self.n >= 6 else 0.2)
+
+
+def test_what_the_status_file_says_of_a_frame_reaches_the_receiver(sim_url, tmp_path, monkeypatch):
+    """A robot reads only the joint stream: the pairs with two people in view or a prior fallback reach it as
+    JOINTS flagged SEVERAL_PEOPLE / PRIOR_FALLBACK, the suspect calibration as CALIBRATION_SUSPECT on the JOINTS
+    and on every STATUS from then on, and HELLO announces the flags (docs/protocol.md section 3). Nothing of it
+    left the daemon: the flags were 0."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _SceneEstimator)
+    cfg = _config({"url": sim_url}, tmp_path, calibration_window=3, calibration_max_px=1.0)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 14, timeout=60, what="14 estimated pairs")
+        sink = run.daemon.sinks["memory://?status_s=0.05"]
+        assert run.finish() == 0
+    messages = messages_of(sink.read())
+    # seq k is the k-th estimate (no pair rejected); keyed by it, a frame the sink dropped cannot shift the rest
+    flags = {m.header.seq: m.header.flags & ~(Flags.DROPPED | Flags.DECIMATED)
+             for m in messages if isinstance(m, Joints)}
+    assert set(range(10)) <= set(flags), sorted(flags)
+    expected = {2: Flags.SEVERAL_PEOPLE, 3: Flags.SEVERAL_PEOPLE, 4: Flags.PRIOR_FALLBACK}
+    assert all(f & ~Flags.CALIBRATION_SUSPECT == expected.get(seq, 0) for seq, f in flags.items()), flags
+    suspect = {seq: bool(f & Flags.CALIBRATION_SUSPECT) for seq, f in flags.items()}
+    assert suspect == {seq: seq >= 7 for seq in flags}, flags  # 2 of 3 px in the window of 3: median 3 px
+    assert run.daemon.health.calibration.suspect
+    statuses = [m for m in messages if isinstance(m, Status)]
+    assert not statuses[0].header.flags & Flags.CALIBRATION_SUSPECT
+    assert statuses[-1].header.flags == Flags.CALIBRATION_SUSPECT  # the link says so while no frame flows too
+    assert {m.header.flags for m in messages if isinstance(m, Hello)} == {0x3C}  # SCENE_FLAGS: the sender says them
+
+
 class _FailingRunsEstimator(_CountingEstimator):
     """onnxruntime failing (ModelRunError) on the 4th pair, and on every pair from the 10th on if ``always``;
     the others all joints found (no FrameError)."""
