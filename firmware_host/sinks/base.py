@@ -399,9 +399,9 @@ class Sink(ABC):
                 return
         if what == "warn":
             _log.warning("%s: stalled: no frame got through for %.1f s, the receiver is not reading (%s); frames "
-                         "are dropped and counted until one gets through", self.url, stalled_s, error)
+                         "are dropped and counted until one gets through", self.shown, stalled_s, error)
         else:
-            _log.info("%s: frames get through again after a stall", self.url)
+            _log.info("%s: frames get through again after a stall", self.shown)
 
     def _idle(self) -> None:
         started = self._write_started()
