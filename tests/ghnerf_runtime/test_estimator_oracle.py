@@ -422,10 +422,14 @@ def test_an_empty_room_and_two_views_that_do_not_meet_stay_nobody(clip):
     r = est.estimate(frames[0])
     assert all(r.frame_ok.values()) and r.single_view is None and r.missing.all()
     assert all(r.missing_2d[n].all() for n in rig.names[:2]) and est.tracker.view_track is None
+    assert r.reprojection_px_median is None  # an empty room: nothing strong in both views to measure
     oracle.set_truth(truth[0], visible[0])
     r = est.estimate(frames[0])
     assert r.single_view is None and r.missing.all()
     assert all(r.missing_2d[n].all() for n in rig.names[:2]) and est.tracker.view_track is None
+    # nobody reported, but the views' disagreement is measured before the gate: what the daemon's calibration
+    # check reads for a camera knocked far off (docs/daemon.md, "calibration")
+    assert r.reprojection_px_median is not None and r.reprojection_px_median > 6.0
     oracle.drop = 0.0  # the same pair with views that agree: the person, in 3D
     est.reset()
     assert est.estimate(frames[0]).num_found > 10
