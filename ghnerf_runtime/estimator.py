@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -198,6 +199,14 @@ class PairResult:
             # the answer is the joints of a camera whose frame the model ran on
             raise ValueError(f"PairResult.single_view: {self.single_view!r} is not a camera whose frame passed "
                              f"(frame_ok {dict(self.frame_ok)})")
+        if self.single_view is not None and self.several_people:
+            # one view's joints are no one's in particular when two people are in view (the estimator keeps none)
+            raise ValueError(f"PairResult.single_view {self.single_view!r} with several_people: one view's joints "
+                             "of two people are no one's in particular")
+        px = self.reprojection_px_median
+        if px is not None and not (isinstance(px, numbers.Real) and math.isfinite(px) and px >= 0):
+            # to_json promises JSON without NaN: a median of pixel distances is a finite number >= 0, or null
+            raise ValueError(f"PairResult.reprojection_px_median must be a finite number >= 0 or None, got {px!r}")
 
     @property
     def num_found(self) -> int:
