@@ -341,6 +341,8 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
         assert r.frame_reason == {n: None for n in names}  # both frames were fine: not a rejected frame
         assert r.single_view == names[k] and r.novel_view is None
         assert r.missing.all() and not r.joints_3d.any() and not r.confidence.any()
+        # one view's peaks meet nothing in the other: no agreement to measure, nothing for the calibration check
+        assert r.reprojection_px_median is None
         other = names[1 - k]
         assert r.missing_2d[other].all() and not r.joints_2d[other].any() and not r.confidence_2d[other].any()
         found = ~r.missing_2d[names[k]]
