@@ -91,7 +91,7 @@ from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
-           "NOVEL_MATTE_STAGE"]
+           "NOVEL_MATTE_STAGE", "joints_shown_twice"]
 
 log = logging.getLogger(__name__)
 
@@ -374,6 +374,14 @@ class _CameraState:
         pinhole = self.camera.without_distortion()
         # a skewed camera cannot be quarter-turned exactly: rotated about its centre, its size kept
         return pinhole.rotated(90.0 * turns) if turns % 2 and pinhole.K[0, 1] != 0.0 else pinhole.quarter_turned(turns)
+
+
+def joints_shown_twice(kp: Keypoints2D, ratio: float) -> int:
+    """How many joints' maps show, in *both* views, a second peak (another region's: ``kp.runner_up``) of at
+    least ``ratio`` of the first: what ``joints3d.second_person_min_joints`` is compared with (the
+    ``several_people`` check; ``ratio`` is ``joints3d.second_person_ratio``)."""
+    twice = kp.valid & (kp.runner_up >= ratio * kp.confidence)  # (2, J)
+    return int(np.count_nonzero(twice.all(axis=0)))
 
 
 class Estimator:
@@ -844,8 +852,8 @@ class Estimator:
                 nobody = self._prior_follow is None
                 # two people: that triangulation was both people's peaks, and the prior places a whole skeleton
                 # near the track from them; the subject's own peaks must make someone, as j3 must without the prior
-                if several and not nobody and not gate_presence(subject, cfg.presence.min_joints,
-                                                                cfg.presence.threshold(cfg.heatmaps.source)).valid.any():
+                strong = cfg.presence.threshold(cfg.heatmaps.source)
+                if several and not nobody and not gate_presence(subject, cfg.presence.min_joints, strong).valid.any():
                     nobody = True
                     j3 = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
             if nobody and several:  # two people in view: one view's joints alone would be no one's in particular
@@ -885,8 +893,7 @@ class Estimator:
         cfg = self.config.joints3d
         if cfg.second_person_min_joints == 0:
             return False
-        twice = kp.valid & (kp.runner_up >= cfg.second_person_ratio * kp.confidence)  # (2, J)
-        return int(np.count_nonzero(twice.all(axis=0))) >= cfg.second_person_min_joints
+        return joints_shown_twice(kp, cfg.second_person_ratio) >= cfg.second_person_min_joints
 
     def _keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                               regions: Regions) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
