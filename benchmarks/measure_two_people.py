@@ -1,6 +1,7 @@
 """Two people in the working volume: whose joints does the runtime report?
 
     .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10]
+    .venv/bin/python benchmarks/measure_two_people.py --one-person-model models [--sequences 30] [--frames 10]
 
 The runtime follows one subject and its model answers one peak per joint per view. With two people in view,
 each view's peak of a joint is whichever person's is stronger there, and the two views need not pick the same
@@ -8,13 +9,22 @@ person. This runs the oracle session (``bench_runtime_common.OracleSession``: he
 model would give) with both people's Gaussians in every heatmap (their maximum), the estimator at its defaults,
 over simulated scenes of two people a metre apart side by side, and prints, over every pair, the joints
 reported and how many lie within 5 cm of the first person's, of the second's, or of neither (a point
-triangulated from one person's peak in one view and the other's in the other). A tool, not a test:
-docs/runtime.md, "Known gaps".
+triangulated from one person's peak in one view and the other's in the other).
+
+With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
+folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghnerf-bench runtime``'s,
+``load_sequences``), each pair through two estimators, the check on and off (``second_person_min_joints: 0``).
+It prints the pairs flagged ``several_people``, whether the joints came out identical, their error against
+the truth (mean over the joints found, and the share found), and, over every pass of the checked estimator
+(a cold pass and its refined one are two), how many joints were shown twice in both views. A tool, not a
+test: docs/runtime.md, "Two people in the working volume".
 """
 from __future__ import annotations
 
 import argparse
 import sys
+from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +32,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig  # noqa: E402
-from ghnerf_runtime.estimator import Estimator  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
 
 #: A reported joint this close to a person's is theirs (m).
 NEAR_M = 0.05
@@ -82,13 +92,70 @@ def measure(scenes: int, pairs: int, alone: int) -> tuple[dict[str, int], int]:
     return counts, counted
 
 
+def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
+    """One person (module docstring, ``--one-person-model``): ``pairs``, ``flagged``, ``identical`` (every pair's
+    joints and missing flags equal with the check on and off), ``found`` and ``joints`` (joints found, of all),
+    ``error_mm`` (mean over those found; NaN with none), ``passes`` and ``shown_twice`` (passes by the number of
+    joints shown twice in both views, at the defaults' ``second_person_ratio``)."""
+    from ghnerf_runtime.cli.simdata import load_sequences
+
+    on = EstimatorConfig(session=SessionConfig(model_dir=model_dir))
+    off = replace(on, joints3d=replace(on.joints3d, second_person_min_joints=0))
+    session = load_session(on)
+    ratio = on.joints3d.second_person_ratio
+    shown: Counter[int] = Counter()
+    out = {"pairs": 0, "flagged": 0, "identical": True, "found": 0, "joints": 0}
+    errors: list[float] = []
+    for seq in load_sequences(sequences, frames):
+        with Estimator(session, seq.rig, on) as checked, Estimator(session, seq.rig, off) as unchecked:
+            decide = checked._several_people  # every pass asks it once: counted beside its answer
+
+            def counting(kp, decide=decide):
+                shown[joints_shown_twice(kp, ratio)] += 1
+                return decide(kp)
+
+            checked._several_people = counting
+            for i in range(len(seq)):
+                images = (np.array(seq.images[i, 0]), np.array(seq.images[i, 1]))
+                when = dict(sequence=i, timestamp_s=i / float(seq.info.get("fps", 30.0)))  # as ghnerf-bench runtime
+                r = checked.estimate(images, **when)
+                u = unchecked.estimate(images, **when)
+                out["pairs"] += 1
+                out["flagged"] += int(r.several_people)
+                out["identical"] &= bool(np.array_equal(r.missing, u.missing)
+                                         and np.array_equal(r.joints_3d, u.joints_3d))
+                found = ~r.missing
+                out["found"] += int(found.sum())
+                out["joints"] += found.size
+                errors.extend(np.linalg.norm(r.joints_3d[found] - seq.joints_3d[i][found], axis=-1) * 1000.0)
+    out["error_mm"] = float(np.mean(errors)) if errors else float("nan")
+    out["passes"] = sum(shown.values())
+    out["shown_twice"] = dict(sorted(shown.items()))
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
     ap.add_argument("--pairs", type=int, default=10, help="pairs per scene with both people, at 30 fps")
     ap.add_argument("--alone", type=int, default=3,
                     help="second run: pairs of the first person alone before the second joins (0: no second run)")
+    ap.add_argument("--one-person-model", metavar="DIR",
+                    help="instead: what the check costs on one person, this model folder on the bench sequences")
+    ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
+    ap.add_argument("--frames", type=int, default=10, help="with --one-person-model: pairs per sequence")
     args = ap.parse_args(argv)
+    if args.one_person_model:
+        m = measure_one_person(args.one_person_model, args.sequences, args.frames)
+        shown = ", ".join(f"{n} joints: {k}" for n, k in m["shown_twice"].items())
+        print(f"one person, {args.one_person_model} at the defaults, {args.sequences} bench sequences of "
+              f"{args.frames} pairs: {m['flagged']} of {m['pairs']} pairs flagged several_people; joints "
+              f"{'identical' if m['identical'] else 'DIFFERENT'} with the check on and off; "
+              f"{m['error_mm']:.2f} mm over {100.0 * m['found'] / max(m['joints'], 1):.2f} % of joints "
+              f"(against the truth)")
+        print(f"passes by joints shown twice in both views at {EstimatorConfig().joints3d.second_person_ratio}: "
+              f"{shown} ({m['passes']} passes)")
+        return 0
     runs = [(0, f"{args.pairs * args.scenes} pairs of two people ({args.scenes} scenes)")]
     if args.alone:
         runs.append((args.alone, f"the second person joining after {args.alone} pairs of the first alone, the next "

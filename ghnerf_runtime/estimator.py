@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -90,7 +91,7 @@ from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
-           "NOVEL_MATTE_STAGE"]
+           "NOVEL_MATTE_STAGE", "joints_shown_twice"]
 
 log = logging.getLogger(__name__)
 
@@ -198,6 +199,14 @@ class PairResult:
             # the answer is the joints of a camera whose frame the model ran on
             raise ValueError(f"PairResult.single_view: {self.single_view!r} is not a camera whose frame passed "
                              f"(frame_ok {dict(self.frame_ok)})")
+        if self.single_view is not None and self.several_people:
+            # one view's joints are no one's in particular when two people are in view (the estimator keeps none)
+            raise ValueError(f"PairResult.single_view {self.single_view!r} with several_people: one view's joints "
+                             "of two people are no one's in particular")
+        px = self.reprojection_px_median
+        if px is not None and not (isinstance(px, numbers.Real) and math.isfinite(px) and px >= 0):
+            # to_json promises JSON without NaN: a median of pixel distances is a finite number >= 0, or null
+            raise ValueError(f"PairResult.reprojection_px_median must be a finite number >= 0 or None, got {px!r}")
 
     @property
     def num_found(self) -> int:
@@ -365,6 +374,14 @@ class _CameraState:
         pinhole = self.camera.without_distortion()
         # a skewed camera cannot be quarter-turned exactly: rotated about its centre, its size kept
         return pinhole.rotated(90.0 * turns) if turns % 2 and pinhole.K[0, 1] != 0.0 else pinhole.quarter_turned(turns)
+
+
+def joints_shown_twice(kp: Keypoints2D, ratio: float) -> int:
+    """How many joints' maps show, in *both* views, a second peak (another region's: ``kp.runner_up``) of at
+    least ``ratio`` of the first: what ``joints3d.second_person_min_joints`` is compared with (the
+    ``several_people`` check; ``ratio`` is ``joints3d.second_person_ratio``)."""
+    twice = kp.valid & (kp.runner_up >= ratio * kp.confidence)  # (2, J)
+    return int(np.count_nonzero(twice.all(axis=0)))
 
 
 class Estimator:
@@ -820,8 +837,9 @@ class Estimator:
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
         j3 = self._gate_to_boxes(j3, regions)
         several = self._several_people(kp)
+        subject = j3  # a several_people pair's joints of the tracked subject that the views' peaks gave
         if several:  # before the presence gate: the subject's joints alone must make someone
-            j3, chosen = self._keep_tracked_subject(j3, kp, uv_model, crops, regions)
+            j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions)
             if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
                 joints_2d, conf_2d, missing_2d = self._image_joints(*chosen, crops)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
@@ -832,6 +850,12 @@ class Estimator:
                 nobody = not j3.valid.any()
             else:  # decided on the triangulation (_joints_3d); the prior's error gate may still leave no joint
                 nobody = self._prior_follow is None
+                # two people: that triangulation was both people's peaks, and the prior places a whole skeleton
+                # near the track from them; the subject's own peaks must make someone, as j3 must without the prior
+                strong = cfg.presence.threshold(cfg.heatmaps.source)
+                if several and not nobody and not gate_presence(subject, cfg.presence.min_joints, strong).valid.any():
+                    nobody = True
+                    j3 = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
             if nobody and several:  # two people in view: one view's joints alone would be no one's in particular
                 for name in joints_2d:
                     joints_2d[name] = np.zeros_like(joints_2d[name])
@@ -869,33 +893,36 @@ class Estimator:
         cfg = self.config.joints3d
         if cfg.second_person_min_joints == 0:
             return False
-        twice = kp.valid & (kp.runner_up >= cfg.second_person_ratio * kp.confidence)  # (2, J)
-        return int(np.count_nonzero(twice.all(axis=0))) >= cfg.second_person_min_joints
+        return joints_shown_twice(kp, cfg.second_person_ratio) >= cfg.second_person_min_joints
 
     def _keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                              regions: Regions) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None]:
+                              regions: Regions) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """Of a ``several_people`` pair's joints, those within ``max_track_step_m`` of the tracked subject's place
-        for them; all missing without a track (whose joints would these be?). Returns them and, where the
-        pairings of peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D
-        joints come from (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks)."""
+        for them; all missing without a track (whose joints would these be?). Returns them; where the pairings of
+        peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D joints come from
+        (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks); and the subject's joints
+        that the peaks gave (those pairings'; with the skeleton prior the rest are the prior's), which the
+        presence gate counts with the prior as it counts the reported joints without it."""
         track = self.tracker.track
         if track is None:
-            return Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1]), None
+            none = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
+            return none, None, none
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
         near = track.valid & (step <= self.config.joints3d.max_track_step_m)
         kept = Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
-        if self.config.joints3d.method != "triangulate":  # the 3D joint is no peaks' triangulation
-            return kept, None
+        if self.config.joints3d.method != "triangulate":  # the 3D joint is no peaks' triangulation (nor the prior's)
+            return kept, None, kept
         return self._tracked_candidates(kept, kp, uv_model, crops, regions, track.joints, track.valid)
 
     def _tracked_candidates(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                             regions: Regions, track_joints: np.ndarray, track_valid: np.ndarray
-                            ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None]:
+                            ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """A ``several_people`` pair's joints from whichever peaks are the tracked subject's: each view's map of a
         joint holds both people's peaks, the decoded one (the stronger) and the runner-up, so the subject's joint
         is one of the four pairings across the views. Each is triangulated (reprojection and ray-angle gates, the
         box gates) and the one nearest the track's joint, within ``max_track_step_m``, is reported; a joint with
-        none keeps ``kept``'s answer (the skeleton prior's or the depth centroid's, when they gave it)."""
+        none keeps ``kept``'s answer (the skeleton prior's or the depth centroid's, when they gave it). The third
+        value is the found joints alone (:meth:`_keep_tracked_subject`)."""
         cfg = self.config.joints3d
         J = len(track_joints)
         ru_model = heatmap_to_model_pixels(kp.runner_up_uv, self.grid, self.size)
@@ -915,7 +942,7 @@ class Estimator:
         best = np.argmin(np.where(ok, dist, np.inf), axis=0)
         found = ok.any(axis=0)
         if not found.any():
-            return kept, None
+            return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
         j = np.arange(J)
         j3 = Joints3D(np.where(found[:, None], points[best, j], kept.points),
                       np.where(found, tri.confidence.reshape(4, J)[best, j], kept.confidence).astype(np.float32),
@@ -926,7 +953,8 @@ class Estimator:
         v = np.arange(2)[:, None]
         chosen = Keypoints2D(np.where(opt[..., None] == 1, kp.runner_up_uv, kp.uv),
                              conf_opt[opt, v, j], valid_opt[opt, v, j], kp.runner_up, kp.runner_up_uv)
-        return j3.sanitised(), (chosen, uv_opt[opt, v, j])
+        peaks = Joints3D(j3.points, np.where(found, j3.confidence, 0.0).astype(np.float32), found, j3.reprojection_px)
+        return j3.sanitised(), (chosen, uv_opt[opt, v, j]), peaks.sanitised()
 
     def _seen_by_one_view(self, env: dict, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                           decoded: tuple[dict, dict, dict]) -> tuple[dict, dict, dict, int | None]:

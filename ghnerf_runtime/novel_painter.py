@@ -39,6 +39,7 @@ from ghnerf_runtime.proxy_blend import unit_rgb
 
 __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INPUTS", "OUTPUT", "PLANES", "PainterPlanes",
            "painter_planes", "depth_about_median", "float16_depth", "F16_MAX", "angle_from_sources_deg",
+           "angle_from_centres_deg",
            "NovelPainter"]
 
 #: Bump when a plane's meaning changes: a file trained on other planes is refused.
@@ -100,19 +101,26 @@ class PainterPlanes:
 
 def angle_from_sources_deg(view: Camera, sources: Sequence[Camera], joints: np.ndarray, valid: np.ndarray) -> float:
     """The angle (degrees) at the subject's centre (the mean of its known joints) between ``view``'s centre and
-    the nearest source camera's: ``ghnerf-eval``'s angle bins. NaN without a known joint (a NaN joint marked
+    the nearest source camera's: ``ghnerf-eval``'s angle bins (:func:`angle_from_centres_deg`, the rule)."""
+    return angle_from_centres_deg(view.center, [c.center for c in sources], joints, valid)
+
+
+def angle_from_centres_deg(view_centre: np.ndarray, source_centres: Sequence[np.ndarray], joints: np.ndarray,
+                           valid: np.ndarray) -> float:
+    """The angle (degrees) at the subject's centre (the mean of its known joints) between the camera centre
+    ``view_centre`` and the nearest of ``source_centres``. NaN without a known joint (a NaN joint marked
     valid is not known: its NaN would make the angle NaN, which passes every ``<`` gate).
 
     A camera standing exactly at the centre sees the subject from no side: a source there is left out, and a
     view there (or with no source left) is at angle 0, as near a source as can be, so the painter's
     ``painter_min_angle_deg`` gate keeps the rendered picture (it ran on such a view: the direction's
-    normalisation gave NaN, which passed the gate)."""
+    normalisation gave NaN, which passed the gate). ``training.evaluate.source_angles_deg`` uses this rule too."""
     joints = np.asarray(joints, np.float64)
     valid = np.asarray(valid, bool) & np.isfinite(joints).all(axis=-1)
     if not valid.any():
         return float("nan")
     centre = joints[valid].mean(axis=0)
-    dirs = np.array([c.center - centre for c in (view, *sources)])
+    dirs = np.array([np.asarray(c, np.float64) - centre for c in (view_centre, *source_centres)])
     # scaled by the largest coordinate first: a direction of 1e-200 m squared underflowed to a norm of 0
     scale = np.abs(dirs).max(axis=-1, keepdims=True)
     placed = scale[:, 0] > 0.0

@@ -80,6 +80,7 @@ from ghnerf_runtime.joints3d import triangulate_joints
 from ghnerf_runtime.keypoints import KeypointDecoderConfig, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.metrics import (capped_psnr, heatmap_mse, masked_psnr, masked_ssim, mpjpe, mpjpe_by_visibility,
                                     pck, scorable_images)
+from ghnerf_runtime.novel_painter import angle_from_centres_deg
 from training.model_card import strict_json, write_atomic
 
 PCK_ALPHA = 0.2
@@ -491,18 +492,16 @@ def psnr_by_angle(psnr: list[float], angles_deg: list[float],
 def source_angles_deg(scene: Mapping[str, np.ndarray], targets: np.ndarray) -> np.ndarray:
     """Angle (degrees) at the subject's centre between each target camera and the nearest source camera.
 
-    The centre is the mean of the scene's valid 3D joints; camera centres are ``tgt_c2w[:, :, 3]``. 0 for
-    a source itself; NaN when the scene has no valid joint.
+    The device's rule, :func:`ghnerf_runtime.novel_painter.angle_from_centres_deg` (one implementation, so the
+    painter's gate and these bins agree): the centre is the mean of the scene's valid, finite 3D joints; camera
+    centres are ``tgt_c2w[:, :, 3]``. 0 for a source itself and for a camera exactly at the centre (a source
+    there is left out); NaN when the scene has no valid joint.
     """
-    valid = np.asarray(scene["joints_3d_valid"], bool)
-    if not valid.any():
-        return np.full(len(targets), np.nan)
-    centre = np.asarray(scene["joints_3d"], np.float64)[valid].mean(axis=0)
-    eyes = np.asarray(scene["tgt_c2w"], np.float64)[:, :, 3] - centre
-    dirs = eyes / np.linalg.norm(eyes, axis=-1, keepdims=True)
-    src = dirs[np.asarray(scene["tgt_is_source"], bool)]
-    cos = np.clip(dirs[np.asarray(targets, int)] @ src.T, -1.0, 1.0)
-    return np.degrees(np.arccos(cos.max(axis=1)))
+    eyes = np.asarray(scene["tgt_c2w"], np.float64)[:, :, 3]
+    sources = list(eyes[np.asarray(scene["tgt_is_source"], bool)])
+    joints, valid = scene["joints_3d"], scene["joints_3d_valid"]
+    return np.array([angle_from_centres_deg(eyes[t], sources, joints, valid) for t in np.asarray(targets, int)],
+                    np.float64)
 
 
 def _add_parts(totals: dict[str, list[int]], result) -> None:

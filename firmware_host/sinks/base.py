@@ -18,8 +18,9 @@ A link that is open but whose receiver stopped reading (every write times out,
 a buffer stays full) is ``stalled`` rather than ``up`` once no frame has got
 through for ``options.stall_s`` since a write first failed, or once one write
 has been in progress that long; ``stalled_s`` says for how long. The first frame
-that gets through makes it ``up`` again. The journal hears of a stall once (a
-WARNING) and of its end once (INFO).
+that gets through makes it ``up`` again, and so does an idle write that does
+(``_on_idle`` says it wrote: a STATUS while no frame comes, the rig down). The
+journal hears of a stall once (a WARNING) and of its end once (INFO).
 
 Backend hooks: ``_connect``, ``_disconnect``, ``_deliver`` and optionally
 ``_on_connected`` and ``link_capacity_fps``.
@@ -141,9 +142,11 @@ class Sink(ABC):
         """How long the connected worker may wait for a frame before :meth:`_on_idle` (None: forever)."""
         return None
 
-    def _on_idle(self) -> None:
+    def _on_idle(self) -> bool:
         """Called when no frame came within :meth:`_idle_timeout_s` (e.g. a periodic STATUS while the
-        estimator stalls); may raise like _deliver."""
+        estimator stalls); may raise like _deliver. Returns whether it wrote to the link, whole: the receiver
+        reads, so a stall ends as at a frame that gets through (False: nothing was due, or a part was cut)."""
+        return False
 
     def link_capacity_fps(self) -> Optional[float]:
         """Highest frame rate the link carries, or None when it is not the bottleneck."""
@@ -387,8 +390,9 @@ class Sink(ABC):
         if self._connected and self._failing_since is None:
             self._failing_since = started
 
-    def _log_stall(self, failed: bool) -> None:
-        """WARNING once when a stall is seen, INFO once when a frame gets through after it (outside _cond)."""
+    def _log_stall(self, failed: bool, what_got_through: str = "frames") -> None:
+        """WARNING once when a stall is seen, INFO once when a frame (or an idle write) gets through after it
+        (outside _cond)."""
         with self._cond:
             stalled_s = self._stalled_s(time.monotonic())
             if failed and stalled_s is not None and not self._stall_logged:
@@ -399,15 +403,17 @@ class Sink(ABC):
                 return
         if what == "warn":
             _log.warning("%s: stalled: no frame got through for %.1f s, the receiver is not reading (%s); frames "
-                         "are dropped and counted until one gets through", self.url, stalled_s, error)
+                         "are dropped and counted until a write gets through", self.shown, stalled_s, error)
         else:
-            _log.info("%s: frames get through again after a stall", self.url)
+            _log.info("%s: %s get through again after a stall", self.shown, what_got_through)
 
     def _idle(self) -> None:
         started = self._write_started()
+        wrote = failed = False
         try:
-            self._on_idle()
+            wrote = bool(self._on_idle())
         except SinkWriteError as e:
+            failed = True
             with self._cond:
                 self._last_error = str(e)
                 self._write_failed(started)
@@ -425,6 +431,10 @@ class Sink(ABC):
         finally:
             with self._cond:
                 self._writing_since = None
+                if wrote:  # the receiver reads again: with no frame to send (the rig down) nothing else ends it
+                    self._failing_since = None
+        if wrote or failed:  # with no frame to send the idle writes are what tells of a stall, and of its end
+            self._log_stall(failed=failed, what_got_through="idle writes (STATUS)")
 
     def _run(self) -> None:
         backoff = Backoff(self.options.backoff)

@@ -131,10 +131,11 @@ class ProtocolSink(Sink):
             return None
         return max(0.001, (self._status_due_us - self.options.clock_us()) / 1e6)  # never a hot loop
 
-    def _on_idle(self) -> None:
+    def _on_idle(self) -> bool:
         now = self.options.clock_us()
         if self._status_due_us is not None and now >= self._status_due_us:
-            self._write_with_status([], now)
+            return self._write_with_status([], now)
+        return False
 
     def _deliver(self, frame: JointFrame, flags: int) -> None:
         now = self.options.clock_us()
@@ -149,9 +150,10 @@ class ProtocolSink(Sink):
         else:
             self._write_messages(messages)
 
-    def _write_with_status(self, messages: list[Message], now: int) -> None:
+    def _write_with_status(self, messages: list[Message], now: int) -> bool:
         """Write ``messages`` + HELLO + STATUS. The STATUS counts as reported only once written: a failed write
-        keeps the latched fault and the interval's counters for the next one, which is then due soon."""
+        keeps the latched fault and the interval's counters for the next one, which is then due soon. Returns
+        whether the STATUS was written (False: cut)."""
         status, taken = self._status(now)
         try:
             complete = self._write_messages(messages + [self._hello(now), status])
@@ -160,10 +162,11 @@ class ProtocolSink(Sink):
             raise
         if complete is False:  # the frame went out, the STATUS behind it did not
             self._status_not_written(now)
-            return
+            return False
         self._status_owed = False
         self._status_due_us = now + int(self.options.status_s * 1e6)
         self._status_written(*taken)
+        return True
 
     def _status_not_written(self, now: int) -> None:
         self._status_owed = True  # the next frame carries it; while none comes, retry shortly

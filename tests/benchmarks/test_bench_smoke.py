@@ -306,3 +306,15 @@ def test_measure_two_people(capsys, monkeypatch):
                      out, re.M), out
     assert re.search(r"^the second person joining after 3 pairs of the first alone, the next 2 pairs, .* [\d.]+ joints "
                      r"reported per pair; .*; \d+% of pairs flagged several_people$", out, re.M), out
+
+
+def test_measure_two_people_one_person(model, capsys, monkeypatch):
+    # the one-person figures of docs/runtime.md ("Two people in the working volume") come from this mode
+    out = run_script("measure_two_people", "--one-person-model", model, *SIZES, capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^one person, .* at the defaults, 1 bench sequences of 3 pairs: \d+ of 3 pairs flagged "
+                     r"several_people; joints (identical|DIFFERENT) with the check on and off; "
+                     r"(nan|[\d.]+) mm over [\d.]+ % of joints \(against the truth\)$", out, re.M), out
+    hist = re.search(r"^passes by joints shown twice in both views at 0\.5: (.*) \((\d+) passes\)$", out, re.M)
+    assert hist, out
+    counts = [int(c) for c in re.findall(r"\d+ joints: (\d+)", hist.group(1))]
+    assert counts and sum(counts) == int(hist.group(2)) >= 3, out  # every pass counted, at least one a pair

@@ -461,6 +461,49 @@ def test_a_stalled_link_that_is_lost_reads_down_not_stalled() -> None:
         sink.close()
 
 
+class IdleScriptedSink(ScriptedSink):
+    """A scripted link that writes (a STATUS, say) every 10 ms while no frame comes: ``idle`` is what each idle
+    write does, ``"fail"`` (times out), ``"nothing"`` (nothing due) or ``"write"`` (gets through)."""
+
+    def __init__(self, **opts: object) -> None:
+        super().__init__(**opts)
+        self.idle = "write"
+        self.idle_writes = 0
+
+    def _idle_timeout_s(self) -> float:
+        return 0.01
+
+    def _on_idle(self) -> bool:
+        if self.idle == "fail":
+            raise SinkWriteError("scripted://", "STATUS write timed out")
+        self.idle_writes += self.idle == "write"
+        return self.idle == "write"
+
+
+def test_a_stall_ends_when_an_idle_write_gets_through_with_no_frame_to_send(caplog: pytest.LogCaptureFixture) -> None:
+    # With the rig down no frame comes: a failed idle STATUS started a stall, but one that got through did not
+    # end it (only a frame did), so a receiver that read again still saw the sink "stalled" until the rig was back.
+    sink = IdleScriptedSink(stall_s=0.1).start()
+    with caplog.at_level(logging.INFO, logger="firmware_host.sinks"):
+        try:
+            wait_until(lambda: sink.stats().connected, what="connected")
+            sink.idle = "fail"
+            wait_until(lambda: sink.stats().state == "stalled", what="stalled by failed idle writes")
+            assert "STATUS write timed out" in (sink.stats().last_error or "")
+            # the journal hears of it too (it did only when a frame failed)
+            wait_until(lambda: any("stalled" in r.getMessage() for r in sink_records(caplog, logging.WARNING)),
+                       what="the stall logged")
+            sink.idle = "nothing"  # nothing written: the receiver may still be away
+            time.sleep(0.1)
+            assert sink.stats().state == "stalled"
+            sink.idle = "write"
+            wait_until(lambda: sink.stats().state == "up", what="up at the first idle write through")
+            assert sink.stats().stalled_s is None and sink.stats().sent == 0 and sink.idle_writes >= 1
+            wait_until(lambda: any("get through again" in r.getMessage()
+                                   for r in sink_records(caplog, logging.INFO)), what="the stall's end logged")
+        finally:
+            sink.close()
+
 @pytest.mark.parametrize("url", ["memory://?stall_s=0.01", "memory://?stall_s=1e9", "memory://?stall_s=nan",
                                  "memory://?stall_s=0"])
 def test_a_stall_time_out_of_range_is_refused_by_name(url: str) -> None:

@@ -84,3 +84,47 @@ def test_a_refused_sink_url_is_named_without_its_password(url, field):
     assert e.field == field and e.url == url and SECRET in repr(e.value)  # kept as given
     assert SECRET not in str(e) and "***" in str(e)
     assert str(e).startswith(url.replace(SECRET, "***").split("?")[0])  # the URL, its user and host kept
+
+
+class _StallingSink(Sink):
+    """A link that stays open while its receiver does not read: every write fails until ``reading`` is set."""
+
+    def __init__(self, url: str) -> None:
+        super().__init__(url, SinkOptions(backoff=FAST_BACKOFF, queue=1, stall_s=0.1))
+        self.reading = threading.Event()
+
+    def _connect(self) -> None:
+        pass
+
+    def _disconnect(self) -> None:
+        pass
+
+    def _deliver(self, frame: JointFrame, flags: int) -> None:
+        if not self.reading.is_set():
+            raise SinkWriteError(self.url, "write timed out")
+
+
+def test_a_stalled_sink_logs_its_stall_and_its_end_without_its_password(caplog):
+    # the stall watch (session 53) and the redaction (session 53) came from two branches: the stall's WARNING and
+    # INFO named the sink by its URL as given, password and all
+    url = f"scripted://viewer:{SECRET}@here?token=abc"
+    sink = _StallingSink(url).start()
+    with caplog.at_level(logging.INFO, logger="firmware_host.sinks"):
+        try:
+            seq = 0
+
+            def logged(words: str) -> bool:
+                nonlocal seq
+                sink.send(make_frame(seq))
+                seq += 1
+                sink.wait_drained(5)
+                return any(words in r.getMessage() for r in caplog.records)
+
+            wait_until(lambda: logged("stalled: no frame got through"), what="the stall logged")
+            sink.reading.set()
+            wait_until(lambda: logged("get through again"), what="the stall's end logged")
+        finally:
+            sink.close()
+    stall_lines = [r.getMessage() for r in caplog.records if "stall" in r.getMessage()]
+    assert len(stall_lines) >= 2 and all("scripted://viewer:***@here?token=***" in m for m in stall_lines)
+    assert SECRET not in caplog.text and "abc" not in caplog.text

@@ -670,3 +670,37 @@ def test_file_sink_into_a_fifo_whose_reader_stops_reading_reads_stalled_and_neve
             parsed.append("cut")
     assert parsed[:3] == ["HELLO", "STATUS", "JOINTS"] and parsed.count("JOINTS") >= 2
     assert parsed.count("cut") <= stats.dropped_error
+
+
+def test_file_sink_into_a_fifo_with_no_frames_is_up_again_once_its_reader_reads_a_status(tmp_path: Path) -> None:
+    # The rig down, so no frame: the idle STATUS writes that time out made the sink "stalled", but one that got
+    # through did not end it (only a frame did), so it read "stalled" with the reader back until the rig was.
+    import fcntl
+    import os
+
+    fifo = tmp_path / "joints.fifo"
+    os.mkfifo(fifo)
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        fcntl.fcntl(reader, fcntl.F_SETPIPE_SZ, 4096)  # the smallest pipe: a few STATUS fill it
+        sink = open_sink(fifo.as_uri() + "?status_s=0.02&stall_s=0.2&write_timeout_ms=20", backoff=FAST_BACKOFF)
+        try:
+            assert sink.wait_connected(5)
+            wait_until(lambda: sink.stats().state == "stalled", what="stalled by STATUS writes nobody reads")
+            assert sink.stats().submitted == 0
+
+            def read_and_up() -> bool:
+                try:
+                    while os.read(reader, 65536):
+                        pass
+                except BlockingIOError:
+                    pass
+                time.sleep(0.01)
+                return sink.stats().state == "up"
+
+            wait_until(read_and_up, what="up once the reader reads a STATUS again")
+            assert sink.stats().stalled_s is None
+        finally:
+            sink.close(1.0)
+    finally:
+        os.close(reader)

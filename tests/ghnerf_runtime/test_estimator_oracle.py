@@ -341,6 +341,8 @@ def test_a_person_seen_by_one_camera_only_gets_that_cameras_2d_joints(clip, sour
         assert r.frame_reason == {n: None for n in names}  # both frames were fine: not a rejected frame
         assert r.single_view == names[k] and r.novel_view is None
         assert r.missing.all() and not r.joints_3d.any() and not r.confidence.any()
+        # one view's peaks meet nothing in the other: no agreement to measure, nothing for the calibration check
+        assert r.reprojection_px_median is None
         other = names[1 - k]
         assert r.missing_2d[other].all() and not r.joints_2d[other].any() and not r.confidence_2d[other].any()
         found = ~r.missing_2d[names[k]]
@@ -422,10 +424,14 @@ def test_an_empty_room_and_two_views_that_do_not_meet_stay_nobody(clip):
     r = est.estimate(frames[0])
     assert all(r.frame_ok.values()) and r.single_view is None and r.missing.all()
     assert all(r.missing_2d[n].all() for n in rig.names[:2]) and est.tracker.view_track is None
+    assert r.reprojection_px_median is None  # an empty room: nothing strong in both views to measure
     oracle.set_truth(truth[0], visible[0])
     r = est.estimate(frames[0])
     assert r.single_view is None and r.missing.all()
     assert all(r.missing_2d[n].all() for n in rig.names[:2]) and est.tracker.view_track is None
+    # nobody reported, but the views' disagreement is measured before the gate: what the daemon's calibration
+    # check reads for a camera knocked far off (docs/daemon.md, "calibration")
+    assert r.reprojection_px_median is not None and r.reprojection_px_median > 6.0
     oracle.drop = 0.0  # the same pair with views that agree: the person, in 3D
     est.reset()
     assert est.estimate(frames[0]).num_found > 10

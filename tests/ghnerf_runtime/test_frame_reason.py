@@ -135,3 +135,16 @@ def test_the_docs_name_every_reason():
     for word in REASONS:
         assert f"| `{word}` |" in runtime, word  # the table of docs/runtime.md, "Frame check"
         assert f"`{word}`" in daemon.split("frames_rejected", 1)[1].split("\n", 1)[0], word  # rig.frames_rejected
+
+
+def test_the_session_53_fields_hold_only_what_the_json_can_say():
+    """``reprojection_px_median`` is a finite number >= 0 or None (``to_json`` promises no NaN: a NaN one was
+    accepted and failed only at ``json.dumps(..., allow_nan=False)``, in whoever wrote the line); ``single_view``
+    never goes with ``several_people`` (the estimator keeps no one view's joints of two people)."""
+    ok = _result({"a": True, "b": True}, reprojection_px_median=np.float64(0.25))
+    assert json.loads(json.dumps(ok.to_json(), allow_nan=False))["reprojection_px_median"] == 0.25
+    for bad in (float("nan"), float("inf"), -0.5, "0.3"):
+        with pytest.raises(ValueError, match=r"reprojection_px_median must be a finite number >= 0 or None"):
+            _result({"a": True, "b": True}, reprojection_px_median=bad)
+    with pytest.raises(ValueError, match=r"single_view 'a' with several_people"):
+        _result({"a": True, "b": True}, single_view="a", several_people=True)

@@ -596,3 +596,55 @@ def test_the_crop_follows_every_joint_the_follow_gate_keeps(model_with_prior):
         assert (est.tracker.track is not None) == tracked, (report_m, error_m)
         if tracked:
             np.testing.assert_allclose(est.tracker.track.joints, skeleton, atol=1e-6)
+
+
+@pytest.mark.parametrize("subject_joints, someone", [(3, False), (8, True)])
+def test_two_people_the_subject_s_own_peaks_must_make_someone_with_the_prior_as_without(model_with_prior, monkeypatch,
+                                                                                       subject_joints, someone):
+    """A several_people pair reports the tracked subject only if the subject's own peaks make someone (the presence
+    gate's ``min_joints``, 6): without the prior the kept joints were gated, with it not, and the prior, fed both
+    people's peaks, placed a whole skeleton near the track from 3 of the subject's joints. Stubbed: the second
+    pair's triangulation is the subject's for ``subject_joints`` joints and a second person's 0.3 m off elsewhere
+    (all strong: the pair shows someone), and the pairings of peaks and runner-ups add nothing."""
+    from ghnerf_runtime import estimator as estimator_module
+    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.joints3d import Joints3D, ViewAgreement
+    from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    frames = tuple(scene.render(c, 0.0, with_truth=False)[0] for c in rig.pair)
+    centre = 0.5 * (rig.volume.min_corner + rig.volume.max_corner)  # inside every box gate
+    truth = centre + 0.3 * (_skeleton(2) - _skeleton(2).mean(0))
+    strong, every = np.full(NUM_JOINTS, 0.9, np.float32), np.ones(NUM_JOINTS, bool)
+    alone = Joints3D(truth, strong, every, np.zeros((NUM_JOINTS, 2)))
+    mixed = np.where((np.arange(NUM_JOINTS) < subject_joints)[:, None], truth, truth + [0.3, 0.0, 0.0])
+    pair = {"tri": alone, "several": False}
+    monkeypatch.setattr(estimator_module, "triangulate_joints_checked",
+                        lambda *a, **k: (pair["tri"], ViewAgreement(None, 0, 0)))
+
+    def pairings(uv, *a, **k):  # the four pairings (J each): the decoded peaks' is the pair's, the rest none
+        assert np.shape(uv)[1] == 4 * NUM_JOINTS
+        t = pair["tri"]
+        return Joints3D(np.tile(t.points, (4, 1)), np.tile(t.confidence, 4),
+                        np.concatenate([t.valid, np.zeros(3 * NUM_JOINTS, bool)]), np.tile(t.reprojection_px, (4, 1)))
+
+    monkeypatch.setattr(estimator_module, "triangulate_joints", pairings)
+    found = {}
+    for mode in ("on", "off"):
+        cfg = _config(model_with_prior, skeleton_prior=mode)
+        cfg = replace(cfg, presence=replace(cfg.presence, enabled=True))
+        session = load_session(cfg)
+        if mode == "on":
+            session.skeleton_prior.estimate = lambda *a, **k: SkeletonEstimate(truth, np.full(NUM_JOINTS, 0.02), every)
+        est = Estimator(session, rig, cfg)
+        monkeypatch.setattr(est, "_several_people", lambda kp: pair["several"])
+        pair.update(tri=alone, several=False)
+        assert est.estimate(frames, sequence=0).num_found == NUM_JOINTS and est.tracker.track is not None
+        pair.update(tri=Joints3D(mixed, strong, every, np.zeros((NUM_JOINTS, 2))), several=True)
+        r = est.estimate(frames, sequence=1)
+        assert r.several_people
+        found[mode] = r.num_found
+        if someone:  # the subject's joints only (the prior's skeleton near the track, or the triangulated ones)
+            assert np.linalg.norm(r.joints_3d[~r.missing] - truth[~r.missing], axis=-1).max() < 0.15, mode
+    assert (found["on"] > 0, found["off"] > 0) == (someone, someone), found

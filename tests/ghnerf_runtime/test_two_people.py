@@ -62,6 +62,10 @@ def test_two_people_from_the_first_pair_are_flagged_and_no_mixed_skeleton_is_rep
             assert all(m.all() for m in r.missing_2d.values())
             obj = json.loads(json.dumps(r.to_json(), allow_nan=False))
             assert obj["several_people"] is True
+            # each view's peak may be either person's: their disagreement says nothing of the rig (the daemon's
+            # calibration check must not count it)
+            assert r.reprojection_px_median is None and obj["reprojection_px_median"] is None
+            assert r.single_view is None and obj["single_view"] is None
     # the old estimator on the same pairs: a mixed skeleton, most of it off the first person
     reported, off_first = _split(_scene(1, alone=0, pairs=4, config=UNCHECKED))
     assert reported >= 40 and off_first > reported / 2

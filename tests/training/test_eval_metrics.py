@@ -287,6 +287,47 @@ def test_source_angles_are_measured_at_the_subject_centre():
     assert np.isnan(source_angles_deg(scene, np.array([2]))).all()
 
 
+
+def _old_source_angles_deg(scene, targets):
+    """The training-side formula before it used the device's rule: the reference for ordinary views."""
+    valid = np.asarray(scene["joints_3d_valid"], bool)
+    centre = np.asarray(scene["joints_3d"], np.float64)[valid].mean(axis=0)
+    eyes = np.asarray(scene["tgt_c2w"], np.float64)[:, :, 3] - centre
+    dirs = eyes / np.linalg.norm(eyes, axis=-1, keepdims=True)
+    cos = np.clip(dirs[targets] @ dirs[np.asarray(scene["tgt_is_source"], bool)].T, -1.0, 1.0)
+    return np.degrees(np.arccos(cos.max(axis=1)))
+
+
+def test_source_angles_follow_the_devices_rule_and_a_camera_at_the_centre_is_at_0():
+    """ghnerf-eval's bins and the painter's gate share one rule (novel_painter.angle_from_centres_deg): on
+    ordinary views the figures are the old formula's; a camera exactly at the subject's centre was NaN
+    (its direction normalised to 0/0, in no bin) and is 0 now, and a source there is left out."""
+    from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov
+    from ghnerf_runtime.novel_painter import angle_from_sources_deg
+
+    rng = np.random.default_rng(53)
+    joints = rng.normal([0.2, -1.0, 3.0], 0.3, (25, 3))
+    valid = rng.random(25) > 0.2
+    eyes = rng.normal([0.2, -1.0, 3.0], 2.5, (12, 3))
+    scene = {"joints_3d": joints, "joints_3d_valid": valid, "tgt_c2w": np.stack([_look_from(e) for e in eyes]),
+             "tgt_is_source": np.arange(12) < 3}
+    got = source_angles_deg(scene, np.arange(12))
+    # to 1e-5 degrees: arccos near 1 turns a last-bit rounding into ~1e-6 degrees (a source itself, 0 or 1.2e-6)
+    assert np.allclose(got, _old_source_angles_deg(scene, np.arange(12)), rtol=0.0, atol=1e-5)
+    # one implementation: the device's angle for the same cameras, bit for bit
+    cams = [Camera(f"c{i}", 64, 64, intrinsics_from_fov(64, 64, 40.0), np.zeros(5), np.eye(3), -e)
+            for i, e in enumerate(eyes)]
+    assert got.tolist() == [angle_from_sources_deg(c, cams[:3], joints, valid) for c in cams]
+
+    centre = joints[valid].mean(axis=0)
+    scene["tgt_c2w"][5, :, 3] = centre  # a target standing at the subject's centre
+    assert source_angles_deg(scene, np.array([5]))[0] == 0.0
+    scene["tgt_c2w"][0, :, 3] = centre  # a source there sees from no side: the other two give the angles
+    scene["tgt_is_source"] = np.array([True, True, True] + [False] * 9)
+    without = dict(scene, tgt_is_source=np.array([False, True, True] + [False] * 9))
+    assert np.array_equal(source_angles_deg(scene, np.arange(6, 12)), source_angles_deg(without, np.arange(6, 12)))
+    assert np.isfinite(source_angles_deg(scene, np.arange(12))).all()
+
 def test_psnr_is_split_by_source_angle():
     bins = psnr_by_angle([20.0, 22.0, 15.0, 12.0, 30.0], [5.0, 14.9, 15.0, 180.0, np.nan])
     assert [b["views"] for b in bins] == [2, 1, 0, 0, 1]  # NaN angles fall in no bin; 180 in the last
