@@ -721,3 +721,25 @@ def test_a_turned_body_is_seen_by_the_same_cameras_with_the_encoders_errors_carr
     lost = ~small["valid"][8:] & out["valid"][8:]
     assert lost.any() and (small["uv"][8:][lost] == 0).all()
     assert ((small["uv"][8:][small["valid"][8:]] >= 0) & (small["uv"][8:][small["valid"][8:]] <= 39)).all()
+
+
+def test_the_out_of_range_measure_reads_the_prior_it_is_given(tiny_prior, tmp_path, capsys, monkeypatch):
+    """``measure_prior_out_of_range.py --prior FILE`` measures that file (here beside a model folder with none),
+    and refuses ``--held-out``, which runs the model folder's own prior."""
+    import runpy
+    import sys
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "measure_prior_out_of_range.py"
+
+    def run(*args):
+        monkeypatch.setattr(sys, "argv", [str(path), *args])
+        with pytest.raises(SystemExit) as e:
+            runpy.run_path(str(path), run_name="__main__")
+        return e.value.code, capsys.readouterr()
+
+    code, out = run("--model-dir", str(tmp_path), "--scenes", "1", "--prior", str(tiny_prior.path))
+    assert code == 0
+    rows = [line for line in out.out.splitlines() if line.startswith(("upright", "lying", "upside"))]
+    assert len(rows) == 4 and all("mm" in r for r in rows)
+    code, out = run("--prior", str(tiny_prior.path), "--held-out", str(tmp_path))
+    assert code == 2 and "--held-out runs the model folder's own prior" in out.err
