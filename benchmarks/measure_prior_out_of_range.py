@@ -1,7 +1,7 @@
 """The skeleton prior on poses it was never trained on: lying, upside down, very tall, far away.
 
     .venv/bin/python benchmarks/measure_prior_out_of_range.py [--model-dir models/ghnerf] [--scenes 12]
-        [--noise-px 1.0] [--limits 0.15,0.25]
+        [--noise-px 1.0] [--limits 0.15,0.25] [--prior FILE]
     .venv/bin/python benchmarks/measure_prior_out_of_range.py --held-out out/s52/data [--scenes 256]
 
 The prior learnt upright people 2.2-4 m from the rig (docs/dataset.md). Here val-split scenes of the simulator
@@ -79,14 +79,18 @@ def main(argv=None) -> int:
     ap.add_argument("--noise-px", type=float, default=1.0)
     ap.add_argument("--limits", default="0.15,0.25", help="disagreement limits (m) to count the pairs over")
     ap.add_argument("--held-out", metavar="DATA", help="measure the check on DATA's val scenes instead")
+    ap.add_argument("--prior", metavar="FILE", help=f"the prior to measure (default: the model folder's {FILE_NAME}; "
+                                                    "not with --held-out, which runs the folder's)")
     args = ap.parse_args(argv)
+    if args.prior and args.held_out:
+        ap.error("--prior measures poses out of range; --held-out runs the model folder's own prior")
     try:
         limits = [float(x) for x in args.limits.split(",")]
     except ValueError:
         ap.error(f"--limits: comma-separated metres expected, got {args.limits!r}")
     if args.held_out:
         return held_out(args.held_out, Path(args.model_dir), args.scenes, limits)
-    prior = SkeletonPrior.load(Path(args.model_dir) / FILE_NAME)
+    prior = SkeletonPrior.load(Path(args.prior) if args.prior else Path(args.model_dir) / FILE_NAME)
     cfg = Joints3DConfig()
     spec = split_spec("val")
     print(f"{'pose':32s} {'gated':>6s} {'true err':>9s} {'expected':>9s} {'triangulated':>13s}  "

@@ -51,6 +51,8 @@ from ghnerf_runtime.skeleton_prior import (
 )
 from training.model_card import write_atomic
 
+#: What a tilted training copy turns (``PriorTrainConfig.tilt_mode``).
+TILT_MODES = ("scene", "body")
 #: Expected-error gates the evaluation reports (m); the runtime's default is one of them.
 GATES_M = (0.03, 0.05, 0.075, 0.1, 0.15, math.inf)
 
@@ -69,6 +71,19 @@ class PriorTrainConfig:
     members: int = 1
     """Networks averaged in the exported file, trained alike but from seeds ``seed .. seed + members - 1``
     (their errors are partly independent: the mean of two is better than either)."""
+    tilt_share: float = 0.0
+    """Tilted copies of this share of the training scenes are added: bodies at any angle to the rig's up, so
+    that a lying person is not answered as an upright one."""
+    tilt_mode: str = "scene"
+    """How a copy is tilted: ``scene``, the whole scene, cameras too (:func:`tilt_scenes`: the peaks stay
+    exact), or ``body``, the body alone before the same cameras (:func:`turn_bodies`: the peaks carry the
+    encoder's errors over)."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.tilt_share <= 1.0:  # also refuses nan
+            raise ValueError(f"PriorTrainConfig.tilt_share must be a share from 0 to 1, not {self.tilt_share!r}")
+        if self.tilt_mode not in TILT_MODES:
+            raise ValueError(f"PriorTrainConfig.tilt_mode must be one of {TILT_MODES}, not {self.tilt_mode!r}")
 
 
 # ---------------------------------------------------------------------------------------------- collect
@@ -128,6 +143,113 @@ def collect(model_dir: str | Path, data: str | Path, split: str, limit: int = 0,
     arrays = {k: np.stack(v) for k, v in out.items()}
     arrays["encoder_file"] = np.array(sess.files[graph].path.name)
     return arrays
+
+
+def scene_tilt(joints: np.ndarray, joints_valid: np.ndarray, axis_deg: float, angle_deg: float) -> np.ndarray:
+    """The ``(4, 4)`` rigid motion that turns a scene by ``angle_deg`` about a horizontal axis (at ``axis_deg``
+    from rig +x towards +z) through the mean of the valid true joints ``(J, 3)``, then moves it up or down so
+    that its lowest valid joint is as high as before (the body still rests on the floor it stood on)."""
+    X = np.asarray(joints, np.float64)[np.asarray(joints_valid, bool)]
+    if not len(X) or not np.isfinite(X).all():
+        raise ValueError("a scene to tilt needs finite valid true joints; it has none")
+    a, t = np.radians(axis_deg), np.radians(angle_deg)
+    u = np.array([np.cos(a), 0.0, np.sin(a)])
+    ux = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+    R = np.cos(t) * np.eye(3) + np.sin(t) * ux + (1.0 - np.cos(t)) * np.outer(u, u)  # Rodrigues
+    c = X.mean(0)
+    Y = (X - c) @ R.T + c
+    G = np.eye(4)
+    G[:3, :3] = R
+    G[:3, 3] = c - R @ c + [0.0, X[:, 1].max() - Y[:, 1].max(), 0.0]  # y points down: max y is the lowest
+    return G
+
+
+def tilt_scenes(arrays: dict[str, np.ndarray], share: float, seed: int) -> dict[str, np.ndarray]:
+    """``arrays`` (:func:`collect`'s) with tilted copies of ``share`` of their scenes appended.
+
+    Each copy is the same scene turned as a whole, the true joints and both cameras together
+    (:func:`scene_tilt`: a random horizontal axis, an angle uniform in 0-180 degrees): the cameras see
+    exactly what they saw, so the decoded 2D peaks, their values and the decoded flags are the collected
+    ones (no rendering, no encoder run), while the rig's up, which :func:`prior_inputs`' canonical frame
+    keeps, now meets the body at that angle. The tilted cameras are not where a device's stand (a lying
+    body is then seen from above, below or the side), and the peaks are the encoder's errors on an upright
+    person's images, not on a lying one's: the copies teach that a body may lie at any angle, not how the
+    encoder errs on it. Scenes with no valid true joint are not chosen (nothing to learn from them).
+    """
+    if not 0.0 <= share <= 1.0:
+        raise ValueError(f"tilt share must be from 0 to 1, not {share!r}")
+    valid = np.asarray(arrays["joints_3d_valid"], bool)
+    usable = np.flatnonzero(valid.any(1))
+    rng = np.random.default_rng([seed, 0x7117])  # its own stream: the training's draws do not move
+    chosen = np.sort(rng.choice(usable, size=int(round(share * len(usable))), replace=False))
+    if not len(chosen):
+        return arrays
+    G = np.stack([scene_tilt(arrays["joints_3d"][i], valid[i], rng.uniform(0.0, 360.0), rng.uniform(0.0, 180.0))
+                  for i in chosen])
+    P = np.asarray(arrays["P"], np.float64)[chosen] @ np.linalg.inv(G)[:, None]  # P' X' = P X for X' = G X
+    J = np.asarray(arrays["joints_3d"], np.float64)[chosen]
+    J = np.einsum("nij,nkj->nki", G[:, :3, :3], J) + G[:, None, :3, 3]
+    tilted = {k: (np.asarray(v)[chosen] if k != "encoder_file" else v) for k, v in arrays.items()}
+    tilted["P"] = P.astype(np.asarray(arrays["P"]).dtype)
+    tilted["joints_3d"] = J.astype(np.asarray(arrays["joints_3d"]).dtype)
+    return {k: (v if k == "encoder_file" else np.concatenate([v, tilted[k]])) for k, v in arrays.items()}
+
+
+def _project(P: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels ``(J, 2)`` of points ``(J, 3)`` through ``P`` ``(3, 4)``, and whether each lies in front."""
+    h = np.c_[X, np.ones(len(X))] @ P.T
+    depth = h[:, 2] * np.sign(np.linalg.det(P[:, :3]))
+    return h[:, :2] / np.where(np.abs(h[:, 2:]) > 1e-12, h[:, 2:], 1e-12), depth > 1e-6
+
+
+def turn_bodies(arrays: dict[str, np.ndarray], share: float, seed: int, size: int) -> dict[str, np.ndarray]:
+    """``arrays`` with copies of ``share`` of their scenes appended whose *body alone* is turned
+    (:func:`scene_tilt`), before the same cameras: each view's crop is refitted to the turned body (a
+    pixel scale and shift of the crop camera, as the runtime's ROI follows a person), and each joint's
+    peak is its exact image there plus the encoder's error on it in the collected scene (peak minus the
+    true joint's image, model pixels). Peak values and decoded flags stay; a joint whose peak falls outside
+    the ``size``-pixel crop, or with no true joint, is not decoded. Scenes where a turned joint would lie
+    behind a camera are left out. The encoder's errors on a lying person's images are not these (they
+    come from the upright images), and a part hidden by the turned body is not hidden here."""
+    if not 0.0 <= share <= 1.0:
+        raise ValueError(f"tilt share must be from 0 to 1, not {share!r}")
+    valid = np.asarray(arrays["joints_3d_valid"], bool)
+    usable = np.flatnonzero(valid.sum(1) >= 2)  # a crop needs an extent
+    rng = np.random.default_rng([seed, 0x7117])
+    chosen = np.sort(rng.choice(usable, size=int(round(share * len(usable))), replace=False))
+    keep, new = [], {k: [] for k in ("uv", "valid", "P", "joints_3d")}
+    for i in chosen:
+        X, tv = np.asarray(arrays["joints_3d"][i], np.float64), valid[i]
+        G = scene_tilt(X, tv, rng.uniform(0.0, 360.0), rng.uniform(0.0, 180.0))
+        Y = np.where(tv[:, None], X @ G[:3, :3].T + G[:3, 3], X)
+        uv, dec = np.array(arrays["uv"][i], np.float64), np.array(arrays["valid"][i], bool) & tv
+        Ps, ok = [], True
+        for v in range(2):
+            P = np.asarray(arrays["P"][i, v], np.float64)
+            (q, front), (q2, front2) = _project(P, X), _project(P, Y)
+            if not (front2[tv].all() and front[tv].all()):
+                ok = False
+                break
+            lo, hi, lo2, hi2 = q[tv].min(0), q[tv].max(0), q2[tv].min(0), q2[tv].max(0)
+            scale = max(hi - lo) / max(max(hi2 - lo2), 1e-6)  # the body fills the crop as much as before
+            A = np.eye(3)
+            A[:2, :2] *= scale
+            A[:2, 2] = 0.5 * (lo + hi) - scale * 0.5 * (lo2 + hi2)
+            Ps.append(A @ P)
+            uv[v] = q2 * scale + A[:2, 2] + (uv[v] - q)
+            dec[v] &= np.isfinite(uv[v]).all(-1) & (uv[v] >= 0).all(-1) & (uv[v] <= size - 1).all(-1)
+        if not ok:
+            continue
+        keep.append(i)
+        for k, val in (("uv", np.where(dec[..., None], uv, 0.0)), ("valid", dec), ("P", np.stack(Ps)),
+                       ("joints_3d", Y)):
+            new[k].append(val)
+    if not keep:
+        return arrays
+    turned = {k: (np.asarray(v)[keep] if k != "encoder_file" else v) for k, v in arrays.items()}
+    for k, v in new.items():
+        turned[k] = np.stack(v).astype(np.asarray(arrays[k]).dtype)
+    return {k: (v if k == "encoder_file" else np.concatenate([v, turned[k]])) for k, v in arrays.items()}
 
 
 def inputs_of(arrays: dict[str, np.ndarray]) -> tuple[PriorInputs, np.ndarray]:
@@ -437,6 +559,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--members", type=int, default=1,
                     help="networks averaged in the file (seeds seed..seed+members-1), trained side by side "
                          "when --threads allows (one thread each at two members and two threads)")
+    ap.add_argument("--tilt-share", type=float, default=PriorTrainConfig.tilt_share,
+                    help="add tilted copies of this share (0-1) of the training scenes, turned about a random "
+                         "horizontal axis (--tilt-mode says what turns), so the prior learns bodies lying at any "
+                         "angle")
+    ap.add_argument("--tilt-mode", choices=TILT_MODES, default=PriorTrainConfig.tilt_mode,
+                    help="scene: the copies turn the whole scene, cameras too (the peaks stay exact); body: the "
+                         "body alone, before the same cameras (crop refitted, the encoder's 2D errors carried over)")
     ap.add_argument("--no-flip-test", action="store_true", help="collect without the flip test")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--card", help="a model card folder (models) to record the prior in (model_card.json, "
@@ -478,8 +607,10 @@ def main(argv: list[str] | None = None) -> int:
         if out.name != FILE_NAME:  # the card records the file the runtime loads, under that name
             ap.error(f"--card records the prior the runtime loads, {FILE_NAME}; --out {out} has another name "
                      f"(drop --card, or write {FILE_NAME})")
+    if not 0.0 <= args.tilt_share <= 1.0:  # before minutes of collecting
+        ap.error(f"--tilt-share must be a share from 0 to 1, not {args.tilt_share!r}")
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
-                              members=args.members)
+                              members=args.members, tilt_share=args.tilt_share, tilt_mode=args.tilt_mode)
     t0 = time.monotonic()
     tr = collect(model_dir, args.data, args.train_split, args.limit, not args.no_flip_test, args.threads)
     for extra in args.extra_data:
@@ -487,6 +618,14 @@ def main(argv: list[str] | None = None) -> int:
         tr = {k: (v if k == "encoder_file" else np.concatenate([v, more[k]])) for k, v in tr.items()}
     va = collect(model_dir, args.data, args.val_split, args.limit, not args.no_flip_test, args.threads)
     collect_s = time.monotonic() - t0
+    collected = len(tr["uv"])
+    if config.tilt_mode == "body":
+        from training.data.torch_dataset import MultiViewDataset
+
+        size = MultiViewDataset(args.data, args.train_split).resolution  # the crops' side, model pixels
+        tr = turn_bodies(tr, config.tilt_share, config.seed, size)
+    else:
+        tr = tilt_scenes(tr, config.tilt_share, config.seed)
     tr_in, tr_truth = inputs_of(tr)
     from training.step_guard import TrainingDiverged
 
@@ -500,7 +639,8 @@ def main(argv: list[str] | None = None) -> int:
     trained_on = ",".join(f"{d}:{args.train_split}" for d in [args.data, *args.extra_data])
     # the old figures describe the old file: gone before the new file takes its place, written anew at the end
     out.with_suffix(".json").unlink(missing_ok=True)
-    export(net, out, {"trained_on": trained_on, "scenes": str(len(tr["uv"])),
+    export(net, out, {"trained_on": trained_on, "scenes": str(collected),
+                      "tilted_scenes": str(len(tr["uv"]) - collected),
                       "encoder_file": encoder_file,
                       "encoder_sha256": _sha256(model_dir / encoder_file),
                       "flip_test": str(not args.no_flip_test).lower(), "config": json.dumps(asdict(config))})
@@ -526,7 +666,8 @@ def main(argv: list[str] | None = None) -> int:
     e = np.concatenate(tri_err)
     metrics["triangulation_gated"] = {**error_stats(e), "found": e.size / max(known, 1)}
     result = {"command": command, "file": str(out), "sha256": _sha256(out), "split": args.val_split,
-              "scenes": len(va["uv"]), "train_scenes": len(tr["uv"]), "trained_on": trained_on,
+              "scenes": len(va["uv"]), "train_scenes": collected, "tilted_scenes": len(tr["uv"]) - collected,
+              "trained_on": trained_on,
               "encoder_file": encoder_file, "flip_test": not args.no_flip_test, "config": asdict(config),
               "collect_s": round(collect_s, 1), "train_s": round(train_s, 1), "metrics": metrics}
     write_atomic(out.with_suffix(".json"), json.dumps(result, indent=1) + "\n")

@@ -648,3 +648,152 @@ def test_two_people_the_subject_s_own_peaks_must_make_someone_with_the_prior_as_
         if someone:  # the subject's joints only (the prior's skeleton near the track, or the triangulated ones)
             assert np.linalg.norm(r.joints_3d[~r.missing] - truth[~r.missing], axis=-1).max() < 0.15, mode
     assert (found["on"] > 0, found["off"] > 0) == (someone, someone), found
+
+
+def _collected(n: int, seed: int = 0) -> dict:
+    """``n`` noisy pairs of the test rig as :func:`training.skeleton_prior.collect` returns them."""
+    rng = np.random.default_rng(seed)
+    P = np.stack(_rig())
+    truth = np.stack([_skeleton(s) for s in range(n)])
+    obs = [_observe(P, X) for X in truth]
+    return {"uv": np.stack([o[0] for o in obs]) + rng.normal(0, 1.0, (n, 2, NUM_JOINTS, 2)),
+            "confidence": np.stack([o[1] for o in obs]), "valid": np.stack([o[2] for o in obs]),
+            "P": np.broadcast_to(P, (n, 2, 3, 4)).copy(), "joints_3d": truth,
+            "joints_3d_valid": np.ones((n, NUM_JOINTS), bool), "encoder_file": np.array("human.int8.onnx")}
+
+
+def test_a_tilted_copy_keeps_the_2d_inputs_and_turns_the_body_against_the_rigs_up():
+    """``tilt_scenes`` turns scenes as a whole (true joints and cameras): the cameras see what they saw, so the
+    collected peaks are exactly the tilted scene's and every 2D feature is unchanged, while in the canonical
+    frame (the rig's up kept) the body now lies at the tilt's angle."""
+    pytest.importorskip("torch")
+    from training.skeleton_prior import inputs_of, scene_tilt, tilt_scenes
+
+    arrays = _collected(8)
+    out = tilt_scenes(arrays, 0.5, seed=3)
+    assert len(out["uv"]) == 12 and str(out["encoder_file"]) == "human.int8.onnx"
+    for k in ("uv", "confidence", "valid", "P", "joints_3d"):
+        np.testing.assert_array_equal(out[k][:8], arrays[k])  # the scenes themselves stay
+    # which scenes were copied: their peaks are the copies' peaks, unchanged
+    src = [int(np.flatnonzero((arrays["uv"] == u).all((1, 2, 3)))[0]) for u in out["uv"][8:]]
+    assert len(set(src)) == 4
+    for k in ("uv", "confidence", "valid", "joints_3d_valid"):
+        np.testing.assert_array_equal(out[k][8:], arrays[k][src])
+    # the tilted cameras project the tilted joints onto the same pixels (the 2D peaks are exact images)
+    for i, s in enumerate(src):
+        for v in range(2):
+            def pix(P, X):
+                h = np.c_[X, np.ones(len(X))] @ P.T
+                return h[:, :2] / h[:, 2:]
+            np.testing.assert_allclose(pix(out["P"][8 + i, v], out["joints_3d"][8 + i]),
+                                       pix(arrays["P"][s, v], arrays["joints_3d"][s]), atol=1e-6)
+    base, base_truth = inputs_of({k: v[src] if k != "encoder_file" else v for k, v in arrays.items()})
+    tilt, tilt_truth = inputs_of({k: v[8:] if k != "encoder_file" else v for k, v in out.items()})
+    assert (tilt.triangulated == base.triangulated).all()
+    # what the peaks alone give is the same: triangulated or not, peak values, rays' angle, decoded flags
+    for cols in (slice(3, 6), slice(8, 9), slice(15, 17)):
+        np.testing.assert_array_equal(tilt.joint_features[..., cols], base.joint_features[..., cols])
+    # the DLT's algebraic minimum (a unit 4-vector) depends a little on where the world's origin lies: with a
+    # pixel of noise the reprojection error moves between the views (their sum by under 0.1 px) and a point
+    # by a millimetre or so (more along a poorly conditioned depth), what the device itself would give there
+    rep = lambda f: 5.0 * f[..., 6:8].sum(-1)  # noqa: E731
+    np.testing.assert_allclose(rep(tilt.joint_features), rep(base.joint_features), rtol=0, atol=0.1)
+    # the triangulated points are the same points, moved with the scene
+    G = np.stack([scene_tilt(arrays["joints_3d"][s], np.ones(NUM_JOINTS, bool), 0.0, 0.0) for s in src])
+    assert np.allclose(G, np.eye(4))  # (no tilt is no motion)
+    X_base = base.frame.to_rig(base.joint_features[..., :3].astype(np.float64))
+    X_tilt = tilt.frame.to_rig(tilt.joint_features[..., :3].astype(np.float64))
+    moved = [np.linalg.lstsq(np.c_[arrays["joints_3d"][s], np.ones(NUM_JOINTS)],
+                             np.c_[out["joints_3d"][8 + i], np.ones(NUM_JOINTS)], rcond=None)[0].T
+             for i, s in enumerate(src)]
+    apart = [np.linalg.norm((np.c_[X_base[i], np.ones(NUM_JOINTS)] @ moved[i].T)[:, :3] - X_tilt[i], axis=-1)
+             for i in range(4)]
+    assert np.median(apart) < 0.005 and np.max(apart) < 0.1  # the DLT's own error here: 75 mm median
+    # the canonical body is turned: its principal (long) axis was vertical, now it is not, by the drawn angles
+    def long_axis(J):
+        return np.linalg.svd(J - J.mean(0))[2][0]
+    tilt_deg = [np.degrees(np.arccos(abs(long_axis(a) @ long_axis(b)))) for a, b in zip(base_truth, tilt_truth)]
+    assert max(tilt_deg) > 20.0
+    assert all(abs(long_axis(a)[1]) > 0.7 for a in base_truth)  # the test skeletons are tall, upright
+    # a tilt rests the body on the floor it stood on: its lowest joint as high as before
+    np.testing.assert_allclose(out["joints_3d"][8:, :, 1].max(1), arrays["joints_3d"][src, :, 1].max(1), atol=1e-9)
+
+
+def test_tilt_share_is_checked_and_its_draws_are_the_seeds():
+    pytest.importorskip("torch")
+    from training.skeleton_prior import PriorTrainConfig, tilt_scenes
+
+    arrays = _collected(10)
+    assert tilt_scenes(arrays, 0.0, seed=0) is arrays
+    a, b, c = (tilt_scenes(arrays, 0.3, seed=s) for s in (1, 1, 2))
+    assert len(a["uv"]) == 13
+    np.testing.assert_array_equal(a["joints_3d"], b["joints_3d"])  # the same seed, the same copies
+    assert not np.allclose(a["joints_3d"][10:], c["joints_3d"][10:])
+    arrays["joints_3d_valid"][:9] = False  # only scene 9 has a true joint: the only one worth a copy
+    one = tilt_scenes(arrays, 1.0, seed=0)
+    assert len(one["uv"]) == 11 and np.array_equal(one["uv"][10], arrays["uv"][9])
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="tilt"):
+            tilt_scenes(arrays, bad, seed=0)
+        with pytest.raises(ValueError, match=f"tilt_share must be a share from 0 to 1, not {bad!r}"):
+            PriorTrainConfig(tilt_share=bad)
+
+
+def test_a_turned_body_is_seen_by_the_same_cameras_with_the_encoders_errors_carried_over():
+    """``turn_bodies`` turns the body alone: the cameras stay where they stood (their crops refitted, a pixel
+    scale and shift), each peak is the turned joint's image plus the collected peak's own error, and a peak that
+    leaves the crop is not decoded."""
+    pytest.importorskip("torch")
+    from ghnerf_runtime.skeleton_prior import _centres
+    from training.skeleton_prior import _project, inputs_of, turn_bodies
+
+    arrays = _collected(8)
+    out = turn_bodies(arrays, 0.5, seed=3, size=SIZE)
+    assert len(out["uv"]) == 12
+    for k in ("uv", "confidence", "valid", "P", "joints_3d"):
+        np.testing.assert_array_equal(out[k][:8], arrays[k])
+    # which scenes were copied: a turned body rests as low as it stood (the test skeletons' lowest joints differ)
+    src = [int(np.flatnonzero(np.isclose(arrays["joints_3d"][:, :, 1].max(1), Y[:, 1].max(), rtol=0, atol=1e-9))[0])
+           for Y in out["joints_3d"][8:]]
+    assert len(set(src)) == 4
+    for i, s in enumerate(src):
+        X, Y = arrays["joints_3d"][s], out["joints_3d"][8 + i]
+        # a rigid turn of the body, set on the floor it stood on; the cameras' centres did not move
+        np.testing.assert_allclose(np.linalg.norm(Y - Y.mean(0), axis=-1), np.linalg.norm(X - X.mean(0), axis=-1))
+        np.testing.assert_allclose(_centres(out["P"][8 + i]), _centres(arrays["P"][s]), atol=1e-9)
+        for v in range(2):
+            err = arrays["uv"][s, v] - _project(arrays["P"][s, v], X)[0]  # the collected peaks' 2D errors
+            dec = out["valid"][8 + i, v]
+            np.testing.assert_allclose(out["uv"][8 + i, v][dec], (_project(out["P"][8 + i, v], Y)[0] + err)[dec],
+                                       atol=1e-9)
+    tilted, truth = inputs_of({k: (v[8:] if k != "encoder_file" else v) for k, v in out.items()})
+    assert tilted.triangulated.mean() > 0.9
+    # in the canonical frame (the rig's up) the tall test bodies no longer all stand
+    assert min(abs(np.linalg.svd(J - J.mean(0))[2][0][1]) for J in truth) < 0.7
+    # a crop too small for the body: peaks outside it are not decoded (and keep no pixels)
+    small = turn_bodies(arrays, 0.5, seed=3, size=40)
+    lost = ~small["valid"][8:] & out["valid"][8:]
+    assert lost.any() and (small["uv"][8:][lost] == 0).all()
+    assert ((small["uv"][8:][small["valid"][8:]] >= 0) & (small["uv"][8:][small["valid"][8:]] <= 39)).all()
+
+
+def test_the_out_of_range_measure_reads_the_prior_it_is_given(tiny_prior, tmp_path, capsys, monkeypatch):
+    """``measure_prior_out_of_range.py --prior FILE`` measures that file (here beside a model folder with none),
+    and refuses ``--held-out``, which runs the model folder's own prior."""
+    import runpy
+    import sys
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "measure_prior_out_of_range.py"
+
+    def run(*args):
+        monkeypatch.setattr(sys, "argv", [str(path), *args])
+        with pytest.raises(SystemExit) as e:
+            runpy.run_path(str(path), run_name="__main__")
+        return e.value.code, capsys.readouterr()
+
+    code, out = run("--model-dir", str(tmp_path), "--scenes", "1", "--prior", str(tiny_prior.path))
+    assert code == 0
+    rows = [line for line in out.out.splitlines() if line.startswith(("upright", "lying", "upside"))]
+    assert len(rows) == 4 and all("mm" in r for r in rows)
+    code, out = run("--prior", str(tiny_prior.path), "--held-out", str(tmp_path))
+    assert code == 2 and "--held-out runs the model folder's own prior" in out.err

@@ -29,18 +29,22 @@ def test_collect_train_export_score_and_card(tmp_path, data64):
 
     extra = shutil.copytree(data64, tmp_path / "extra")  # another folder (the same one twice is refused)
     argv = ["--model-dir", str(models / "ghnerf"), "--data", str(data64), "--extra-data", str(extra),
-            "--steps", "3", "--hidden", "16", "--card", str(models)]
+            "--steps", "3", "--hidden", "16", "--card", str(models), "--tilt-share", "0.5", "--tilt-mode", "body"]
     assert sp.main(argv) == 0
     out = models / "ghnerf" / FILE_NAME
     result = json.loads(out.with_suffix(".json").read_text())
     assert result["train_scenes"] == 6 and result["scenes"] == 2  # the extra folder's scenes are added
+    # and turned copies of half of them (the recorded config says how)
+    assert result["tilted_scenes"] == 3 and result["config"]["tilt_share"] == 0.5
+    assert result["config"]["tilt_mode"] == "body"
     assert result["command"].startswith("python -m training.skeleton_prior --model-dir")
     gated = result["metrics"]["gated"]
     assert set(gated) == {"0.03", "0.05", "0.075", "0.1", "0.15", "inf"}
     assert gated["inf"]["found"] == 1.0 and gated["inf"]["joints"] == result["metrics"]["all"]["joints"] == 50
     assert [g["found"] for g in gated.values()] == sorted(g["found"] for g in gated.values())
     prior = SkeletonPrior.load(out)
-    assert prior.metadata["ghnerf_skeleton.scenes"] == "6"
+    assert prior.metadata["ghnerf_skeleton.scenes"] == "6" and prior.metadata["ghnerf_skeleton.tilted_scenes"] == "3"
+    assert json.loads(prior.metadata["ghnerf_skeleton.config"])["tilt_share"] == 0.5
     assert prior.metadata["ghnerf_skeleton.encoder_sha256"] == sp._sha256(models / "ghnerf" / result["encoder_file"])
     card = json.loads((models / "model_card.json").read_text())
     assert card["files"]["ghnerf/skeleton_prior.onnx"]["sha256"] == result["sha256"]
@@ -293,6 +297,9 @@ def test_the_models_folder_is_read_as_the_runtime_reads_it_and_a_stopped_run_lea
     (["--val-split", "train"], "--train-split and --val-split are both 'train'"),
     (["--extra-data", "{data}/../{name}"], "is the folder --data already gives"),
     (["--out", "{model}/prior_b.onnx", "--card", "{models}"], "--card records the prior the runtime loads"),
+    (["--tilt-share", "1.5"], "--tilt-share must be a share from 0 to 1, not 1.5"),
+    (["--tilt-share", "nan"], "--tilt-share must be a share from 0 to 1, not nan"),
+    (["--tilt-mode", "rig"], "argument --tilt-mode: invalid choice: 'rig'"),
 ])
 def test_runs_whose_figures_would_mislead_are_refused_before_collecting(tmp_path, data64, capsys, more, says):
     """A negative ``--limit``; held-out scenes that are training scenes (the same split, or the same folder
