@@ -18,14 +18,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.cli.simdata import HELD_OUT_BASELINE_M, HELD_OUT_MOTIONS, SEED_BASE  # noqa: E402
+from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig  # noqa: E402
@@ -65,9 +64,8 @@ def main(argv=None) -> int:
     ap.add_argument("--degrees", default="0.25,0.5,1,2", help="comma-separated turns of the second camera")
     ap.add_argument("--axes", default="tilt,pan,roll", help=f"comma-separated, of {list(AXES)}")
     ap.add_argument("--window", type=int, default=10, help="pairs of the rolling median")
+    ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
-    import drivers.sim as sim  # a tool: the runtime library never imports drivers
-
     axes = args.axes.split(",")
     if unknown := [a for a in axes if a not in AXES]:
         ap.error(f"--axes: {unknown} not of {list(AXES)}")
@@ -75,25 +73,20 @@ def main(argv=None) -> int:
     session = load_session(cfg)
     settings = [("true rig", 0.0)] + [(a, float(d)) for a in axes for d in args.degrees.split(",")]
     tally = {s: {"px": [], "roll": [], "found": [], "err": [], "pairs": 0} for s in settings}
-    for k in range(args.sequences):
-        seed = SEED_BASE + k  # the bench's recipe (ghnerf_runtime.cli.simdata)
-        rng = np.random.default_rng([seed, 7])
-        base = sim.RigPlacement.random(rng, width=640, height=480)
-        rig = replace(base, baseline_m=float(rng.uniform(*HELD_OUT_BASELINE_M))).build(rig_id=f"bench-{k}")
-        scene = sim.random_scene(seed, volume=rig.volume, motions=HELD_OUT_MOTIONS)
-        t0 = float(rng.uniform(0.0, scene.period_s))
-        times = [t0 + i / 30.0 for i in range(args.frames)]
-        shots = [[scene.render(c, t)[0] for c in rig.pair] for t in times]  # filmed by the true rig
+    # the bench's sequences (ghnerf-bench runtime's recipe and cache), filmed by the true rig
+    for seq in load_sequences(args.sequences, args.frames, cache_dir=args.cache):
+        t0, fps = float(seq.info["t0"]), float(seq.info["fps"])
         for axis, deg in settings:
             acc = tally[(axis, deg)]
-            with Estimator(session, turned(rig, 1, axis, deg) if deg else rig, cfg) as est:
+            with Estimator(session, turned(seq.rig, 1, axis, deg) if deg else seq.rig, cfg) as est:
                 seq_px = []
-                for t, images in zip(times, shots):
-                    r = est.estimate(images, timestamp_s=t)
+                for i in range(len(seq)):
+                    r = est.estimate([np.array(seq.images[i, 0]), np.array(seq.images[i, 1])],
+                                     timestamp_s=t0 + i / fps)
                     acc["pairs"] += 1
                     ok = ~r.missing
                     acc["found"].append(int(ok.sum()))
-                    acc["err"] += list(1000 * np.linalg.norm(r.joints_3d[ok] - scene.joints_3d(t)[ok], axis=1))
+                    acc["err"] += list(1000 * np.linalg.norm(r.joints_3d[ok] - seq.joints_3d[i][ok], axis=1))
                     if r.reprojection_px_median is not None:
                         seq_px.append(r.reprojection_px_median)
             acc["px"] += seq_px

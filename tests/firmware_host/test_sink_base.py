@@ -5,9 +5,11 @@ each failure can be triggered exactly when wanted.
 """
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
 from hypothesis import given, settings
@@ -357,6 +359,15 @@ def test_a_backoff_the_worker_cannot_wait_is_refused(policy: dict) -> None:
 # ---- stalled: up, but the receiver stopped reading (session 53) ---------------------------------------------
 
 
+def send_failing(sink: ScriptedSink, seqs: Iterator[int]) -> bool:
+    """Send the next frame with its write timing out (a receiver that stopped reading); whether the sink now
+    reads stalled."""
+    sink.fail_next.append(SinkWriteError("scripted://", "write timed out"))
+    sink.send(make_frame(next(seqs)))
+    time.sleep(0.01)
+    return sink.stats().state == "stalled"
+
+
 def test_a_link_that_drops_every_frame_reads_stalled_until_one_gets_through(caplog: pytest.LogCaptureFixture) -> None:
     # Every write timing out (a serial or USB receiver that stopped reading) only showed in dropped_error and
     # last_error: the state read "up" and the daemon's STATUS= line said nothing.
@@ -364,17 +375,8 @@ def test_a_link_that_drops_every_frame_reads_stalled_until_one_gets_through(capl
     with caplog.at_level(logging.INFO, logger="firmware_host.sinks"):
         try:
             wait_until(lambda: sink.stats().connected, what="connected")
-            seq = 0
-
-            def send_failing() -> bool:
-                nonlocal seq
-                sink.fail_next.append(SinkWriteError("scripted://", "write timed out"))
-                sink.send(make_frame(seq))
-                seq += 1
-                time.sleep(0.01)
-                return sink.stats().state == "stalled"
-
-            wait_until(send_failing, what="stalled")
+            seqs = itertools.count()
+            wait_until(lambda: send_failing(sink, seqs), what="stalled")
             s = sink.stats()
             assert s.connected and s.stalled_s is not None and s.stalled_s >= 0.1
             assert "write timed out" in (s.last_error or "")
@@ -382,14 +384,14 @@ def test_a_link_that_drops_every_frame_reads_stalled_until_one_gets_through(capl
             def warned() -> list[logging.LogRecord]:
                 return [r for r in sink_records(caplog, logging.WARNING) if "stalled" in r.getMessage()]
 
-            wait_until(lambda: send_failing() and bool(warned()), what="the stall logged")
+            wait_until(lambda: send_failing(sink, seqs) and bool(warned()), what="the stall logged")
             for _ in range(3):  # more failures: still one WARNING for this stall
-                send_failing()
+                send_failing(sink, seqs)
             assert sink.wait_drained(5)
             warnings = warned()
             assert len(warnings) == 1, [r.getMessage() for r in warnings]
             sink.fail_next.clear()
-            sink.send(make_frame(seq))  # gets through: up again at once
+            sink.send(make_frame(next(seqs)))  # gets through: up again at once
             assert sink.wait_drained(5)
             s = sink.stats()
             assert (s.state, s.stalled_s) == ("up", None)
@@ -437,21 +439,12 @@ def test_a_stalled_link_that_is_lost_reads_down_not_stalled() -> None:
     sink = ScriptedSink(queue=1, stall_s=0.1).start()
     try:
         wait_until(lambda: sink.stats().connected, what="connected")
-        seq = 0
-
-        def send_failing() -> bool:
-            nonlocal seq
-            sink.fail_next.append(SinkWriteError("scripted://", "write timed out"))
-            sink.send(make_frame(seq))
-            seq += 1
-            time.sleep(0.01)
-            return sink.stats().state == "stalled"
-
-        wait_until(send_failing, what="stalled")
+        seqs = itertools.count()
+        wait_until(lambda: send_failing(sink, seqs), what="stalled")
         assert sink.wait_drained(5)
         sink.connect_failures_left = 10**6
         sink.fail_next[:] = [SinkUnavailableError("scripted://", "unplugged")]
-        sink.send(make_frame(seq))
+        sink.send(make_frame(next(seqs)))
         wait_until(lambda: sink.stats().connect_failures >= 1, what="a failed reconnect")
         assert (sink.stats().state, sink.stats().stalled_s) == ("down", None)
         sink.connect_failures_left = 0
@@ -503,6 +496,7 @@ def test_a_stall_ends_when_an_idle_write_gets_through_with_no_frame_to_send(capl
                                    for r in sink_records(caplog, logging.INFO)), what="the stall's end logged")
         finally:
             sink.close()
+
 
 @pytest.mark.parametrize("url", ["memory://?stall_s=0.01", "memory://?stall_s=1e9", "memory://?stall_s=nan",
                                  "memory://?stall_s=0"])
