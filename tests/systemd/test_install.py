@@ -142,6 +142,17 @@ def test_unit_and_daemon_agree():
     assert 'GROUP="plugdev"' in rules and {"plugdev", "dialout", "video"} <= set(groups)  # OAK, serial, webcams
 
 
+def test_the_start_does_not_wait_for_the_network():
+    """Ordered after network-online.target (and pulling it in), the service waited at every boot without a link
+    for the wait-online service to give up (systemd-networkd's: 2 minutes), a serial- or USB-only rig too, though
+    nothing of the daemon needs the network at start (a UDP sink whose host does not resolve yet does not hold it
+    up: tests/firmware_host/daemon/test_daemon_service.py). network.target stays, for the order of the stop."""
+    unit = _unit(UNIT)["Unit"]
+    deps = {key: unit.get(key, "").split() for key in ("After", "Wants", "Requires", "BindsTo", "Requisite")}
+    assert not any("network-online.target" in names for names in deps.values()), deps
+    assert "network.target" in deps["After"]
+
+
 _RULE_KEY = re.compile(r'^(SUBSYSTEM|ATTRS\{\w+\}|ATTR\{\w+\}|KERNEL|ENV\{\w+\}|MODE|GROUP|SYMLINK|TAG)'
                        r'(==|!=|\+=|=)"[^"]*"$')
 

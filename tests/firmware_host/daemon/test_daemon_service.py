@@ -136,6 +136,52 @@ def test_pairs_stream_to_the_sink_and_systemd_hears_it(sim_url, tmp_path):
     assert "STOPPING" in keys[-1]
 
 
+def test_a_udp_sink_whose_host_does_not_resolve_yet_does_not_hold_up_the_start(sim_url, tmp_path, monkeypatch):
+    """Why the unit is not ordered after network-online.target (which held every boot without a link up to the
+    wait-online timeout, a serial-only rig too): a boot before the network is up. The UDP sink's host does not
+    resolve (EAI_AGAIN, as with no name server reachable), yet the daemon starts, says READY and streams to its
+    other sink; once the name resolves (the network came up) the UDP sink delivers too, with no restart."""
+    from firmware_host.sinks import udp_sink
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(0.05)
+    network_up = threading.Event()
+    real_getaddrinfo = socket.getaddrinfo
+
+    def getaddrinfo(host, port, *args, **kwargs):
+        if host != "robot.test":
+            return real_getaddrinfo(host, port, *args, **kwargs)
+        if not network_up.is_set():
+            raise socket.gaierror(socket.EAI_AGAIN, "Temporary failure in name resolution")
+        return [(socket.AF_INET, socket.SOCK_DGRAM, 17, "", rx.getsockname())]
+
+    monkeypatch.setattr(udp_sink.socket, "getaddrinfo", getaddrinfo)
+    udp = f"udp://robot.test:{rx.getsockname()[1]}"
+    cfg = _config({"url": sim_url}, tmp_path, sinks=("memory://?status_s=0.05", udp))
+    try:
+        with _Running(cfg, tmp_path) as run:
+            wait_until(lambda: run.daemon.health.pairs_estimated >= 5, timeout=60, what="5 estimated pairs")
+            assert any(n.get("READY") == "1" for n in run.notes)
+            down = run.daemon.sinks[udp].stats()  # still no network: the sink retries in its own thread
+            assert not down.connected and "cannot resolve robot.test" in (down.last_error or ""), down
+
+            network_up.set()
+            received = []
+
+            def got_datagram() -> bool:
+                try:
+                    received.append(rx.recv(65536))
+                except socket.timeout:
+                    pass
+                return bool(received)
+
+            wait_until(got_datagram, timeout=30, what="a datagram once the name resolves")
+            assert run.finish() == 0
+    finally:
+        rx.close()
+
+
 def test_a_vanished_camera_is_reopened_and_flagged(sim_url, tmp_path):
     cfg = _config({"url": f"{sim_url}&unplug_after_s=0.6", "reopen_min_s": 0.01}, tmp_path)
     with _Running(cfg, tmp_path) as run:
