@@ -6,6 +6,7 @@ the rest checks that the unit, the default config and the daemon agree with each
 from __future__ import annotations
 
 import configparser
+import fnmatch
 import json
 import re
 import shutil
@@ -153,8 +154,8 @@ def test_the_start_does_not_wait_for_the_network():
     assert "network.target" in deps["After"]
 
 
-_RULE_KEY = re.compile(r'^(SUBSYSTEM|ATTRS\{\w+\}|ATTR\{\w+\}|KERNEL|ENV\{\w+\}|MODE|GROUP|SYMLINK|TAG)'
-                       r'(==|!=|\+=|=)"[^"]*"$')
+_RULE_KEY = re.compile(r'^(?P<key>SUBSYSTEM|ATTRS\{\w+\}|ATTR\{\w+\}|KERNEL|ENV\{\w+\}|MODE|GROUP|SYMLINK|TAG)'
+                       r'(?P<op>==|!=|\+=|=)"(?P<value>[^"]*)"$')
 
 
 def _active_rules(path: Path) -> list[str]:
@@ -173,6 +174,86 @@ def test_udev_rules_parse():
         for pair in (p.strip() for p in rule.split(",")):
             assert _RULE_KEY.match(pair), f"bad udev pair {pair!r} in {rule!r}"
     assert any('ATTRS{idVendor}=="03e7"' in rule for rule in rules)  # Luxonis / Movidius
+
+
+def _udev_apply(rule: str, device: dict[str, str]) -> dict[str, str] | None:
+    """What ``rule`` assigns to ``device`` (its ``SUBSYSTEM`` and sysfs attributes, ``ATTRS{idVendor}`` ...), or
+    None when a match key fails. udev's own comparison: a shell glob, ``|`` between alternatives. The device's
+    attributes stand for the whole parent chain ``ATTRS`` searches (a USB device node has them itself)."""
+    assigned = {}
+    for pair in (p.strip() for p in rule.split(",")):
+        m = _RULE_KEY.match(pair)
+        assert m, f"bad udev pair {pair!r} in {rule!r}"
+        key, op, value = m["key"], m["op"], m["value"]
+        if op in ("==", "!="):
+            hit = key in device and any(fnmatch.fnmatchcase(device[key], alt) for alt in value.split("|"))
+            if hit != (op == "=="):
+                return None
+        else:
+            assigned[key] = value
+    return assigned
+
+
+def _oak(product: str) -> dict[str, str]:
+    return {"SUBSYSTEM": "usb", "ATTRS{idVendor}": "03e7", "ATTRS{idProduct}": product}
+
+
+#: The OAK's product ids (Luxonis XLink): unbooted (USB boot ROM), booted (depthai's firmware running), its flash
+#: bootloader and booted from flash. depthai boots it, so the device node changes id, and group, under the service.
+OAK_PRODUCTS = ("2485", "f63b", "f63c", "f63d")
+
+
+@pytest.mark.parametrize("product", OAK_PRODUCTS)
+def test_every_state_of_an_oak_goes_to_the_services_group(product):
+    """An OAK re-enumerates under another product id once depthai has booted it: a rule covering only the id
+    seen in lsusb before the boot lost the camera to EACCES right after its first open."""
+    groups = _unit(UNIT)["Service"]["SupplementaryGroups"].split()
+    rules = _active_rules(REPO / "systemd/60-ghnerf.rules")
+    assigned = [a for a in (_udev_apply(rule, _oak(product)) for rule in rules) if a is not None]
+    assert assigned, f"no rule of 60-ghnerf.rules matches the OAK as 03e7:{product}"
+    final = {k: v for a in assigned for k, v in a.items()}  # the last assignment wins, as in udev
+    assert final["GROUP"] in groups and final["MODE"] == "0660", final
+
+
+def test_the_oak_rule_leaves_other_devices_alone():
+    hub = {"SUBSYSTEM": "usb", "ATTRS{idVendor}": "1d6b", "ATTRS{idProduct}": "0002"}  # a Linux root hub
+    oak_interface = {**_oak("f63b"), "SUBSYSTEM": "tty"}  # not the usb subsystem
+    for rule in _active_rules(REPO / "systemd/60-ghnerf.rules"):
+        assert _udev_apply(rule, hub) is None and _udev_apply(rule, oak_interface) is None, rule
+
+
+def _group_names(text: str) -> set[str]:
+    return set(re.findall(r'GROUP="([^"]*)"', text))
+
+
+def test_every_group_the_rules_give_is_one_the_service_and_its_user_have():
+    """A rule (or a template, once uncommented) giving a device to a group the service is not in leaves it
+    EACCES to the daemon; install.sh makes the user and the groups, the unit adds them to the process."""
+    groups = set(_unit(UNIT)["Service"]["SupplementaryGroups"].split())
+    named = set()
+    for name in ("60-ghnerf.rules", "61-ghnerf-local.rules"):
+        named |= _group_names((REPO / "systemd" / name).read_text())
+    assert named and named <= groups, named - groups
+    script = INSTALL.read_text()
+    useradd = re.search(r"--groups (\S+) ghnerf", script)
+    assert useradd and set(useradd[1].split(",")) == groups
+    for group in groups:  # created where the distribution has no such group (useradd --groups would fail)
+        assert f"getent group {group} >/dev/null || groupadd --system {group}" in script
+
+
+def test_the_usb_receiver_template_is_the_documented_example_in_the_form_udev_compares():
+    """The template's ids were a made-up cafe:4011 beside docs/protocol.md's usb://1209:0001 example and its
+    rule; and udev compares the sysfs text (four lower-case hex digits), which the sink's URL need not be."""
+    from firmware_host.sinks.usb_sink import UsbSink
+
+    template = next(line.lstrip("# ") for line in (REPO / "systemd/61-ghnerf-local.rules").read_text().splitlines()
+                    if line.startswith('# SUBSYSTEM=="usb"'))
+    assert template in (REPO / "docs/protocol.md").read_text()  # the rule the usb:// section shows
+    ids = dict(re.findall(r'ATTRS\{(idVendor|idProduct)\}=="([^"]*)"', template))
+    sink = UsbSink.from_url("usb://0x1209:1?ep=0x01", cameras=("left", "right"))  # the example, written loosely
+    assert (ids["idVendor"], ids["idProduct"]) == (f"{sink.vid:04x}", f"{sink.pid:04x}")
+    assert _udev_apply(template, {"SUBSYSTEM": "usb", "ATTRS{idVendor}": ids["idVendor"],
+                                  "ATTRS{idProduct}": ids["idProduct"]}) == {"MODE": "0660", "GROUP": "plugdev"}
 
 
 def test_a_reinstall_keeps_the_udev_rules_a_user_added(tmp_path):
