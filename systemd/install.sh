@@ -206,5 +206,12 @@ if [ "$START" = 1 ]; then
     systemctl --no-pager --lines=5 status ghnerf.service || true
 else
     hint=$(printf ' && %s' "${START_COMMANDS[@]}")
+    if [ -n "$DESTDIR" ]; then
+        # Staged, the unit names an environment and a user that are not there: those commands alone would
+        # start a service that fails at once (203/EXEC, 217/USER) and restarts until its start limit.
+        echo "staged only: no environment $PREFIX/venv (the unit runs $PREFIX/venv/bin/ghnerf-daemon) and no user" \
+            "ghnerf (groups plugdev, dialout, video): the service cannot start without them; make them on the" \
+            "device with: sudo systemd/install.sh --prefix $PREFIX --no-start"
+    fi
     echo "not started; on the device: ${hint# && }"
 fi

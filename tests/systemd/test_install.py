@@ -58,6 +58,45 @@ def test_stages_every_file(staged):
     assert config.rig.url == "depthai://"
 
 
+def _install_section() -> str:
+    text = (REPO / "docs/daemon.md").read_text()
+    start = text.index("## Installing on the device")
+    return text[start:text.index("\n## ", start + 1)]
+
+
+def test_the_docs_name_every_path_it_installs(staged):
+    """docs/daemon.md's table names each path install.sh writes (what --destdir stages: the files; the prefix's
+    own folders by name) and what it makes that staging cannot (the environment the unit runs, the user)."""
+    root, prefix = staged
+    staged_prefix = root / str(prefix).lstrip("/")
+    installed = set()
+    for path in root.rglob("*"):
+        if path.is_dir():
+            continue
+        if staged_prefix in path.parents:  # under the prefix: its top-level entry, as the docs write it
+            top = path.relative_to(staged_prefix).parts[0]
+            installed.add(f"PREFIX/{top}/" if (staged_prefix / top).is_dir() else f"PREFIX/{top}")
+        else:
+            installed.add("/" + str(path.relative_to(root)))
+    assert {"/etc/systemd/system/ghnerf.service", "/etc/ghnerf/daemon.json", "PREFIX/models/"} <= installed
+    exec_start = _unit(root / "etc/systemd/system/ghnerf.service")["Service"]["ExecStart"].split()[0]
+    section = _install_section()
+    for path in sorted(installed) + [exec_start.replace(str(prefix), "PREFIX"), "PREFIX/venv"]:
+        assert f"`{path}`" in section, f"docs/daemon.md, Installing on the device, does not name {path}"
+    assert "| user `ghnerf` |" in section
+
+
+def test_staging_says_what_the_service_still_lacks(staged):
+    """Staged, the unit names PREFIX/venv and the user ghnerf, neither of which --destdir makes; the output said
+    only "not started; on the device: systemctl ... restart", which started a service that failed at once."""
+    root, prefix = staged
+    proc = _install("--destdir", str(root), "--prefix", str(prefix))
+    assert proc.returncode == 0, proc.stderr
+    assert (f"staged only: no environment {prefix}/venv (the unit runs {prefix}/venv/bin/ghnerf-daemon) and no user "
+            "ghnerf") in proc.stdout
+    assert f"sudo systemd/install.sh --prefix {prefix} --no-start" in proc.stdout
+
+
 def test_an_existing_config_is_kept(staged):
     root, prefix = staged
     config = root / "etc/ghnerf/daemon.json"
