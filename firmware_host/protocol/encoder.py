@@ -4,6 +4,7 @@ A packet is ``header | payload | crc16-le``; a frame is ``cobs(packet) | 0x00``.
 """
 from __future__ import annotations
 
+import operator
 import struct
 
 import numpy as np
@@ -33,7 +34,13 @@ assert _J3D.itemsize == JOINT3D_BYTES and _J2D.itemsize == JOINT2D_BYTES
 
 
 def _check_range(name: str, value: int, hi: int) -> None:
-    if not 0 <= value <= hi:
+    # A whole number first (Python or numpy integers, IntEnum/IntFlag): a float such as 1e6 or 3.0 passed the
+    # range test and then failed in struct.pack or bytes() with an error that named no field.
+    try:
+        number = operator.index(value)
+    except TypeError:
+        raise EncodeError(name, value, f"must be a whole number in 0..{hi}") from None
+    if not 0 <= number <= hi:
         raise EncodeError(name, value, f"must be in 0..{hi}")
 
 
@@ -110,6 +117,8 @@ def _status_payload(m: Status) -> bytes:
 
 def _ascii_field(name: str, text: str, max_len: int) -> bytes:
     # Printable ASCII only, so a C decoder can print and compare it without UTF-8 handling.
+    if not isinstance(text, str):
+        raise EncodeError(name, text, f"must be a str of printable ASCII, at most {max_len} characters")
     if len(text) > max_len or not all(0x20 <= ord(ch) <= 0x7E for ch in text):
         raise EncodeError(name, text, f"must be printable ASCII, at most {max_len} characters")
     return bytes((len(text),)) + text.encode("ascii")
@@ -124,6 +133,9 @@ def _hello_payload(m: Hello) -> bytes:
     ):
         _check_range(name, v, 0xFF)
     _check_range("hello.joint_count", m.joint_count, MAX_JOINTS)
+    if isinstance(m.cameras, (str, bytes)):
+        # cameras="left" went out as four cameras "l", "e", "f", "t": a sequence of names is meant
+        raise EncodeError("hello.cameras", m.cameras, "must be a sequence of camera names, not one string")
     if len(m.cameras) > MAX_CAMERAS:
         raise EncodeError("hello.cameras", m.cameras, f"at most {MAX_CAMERAS} cameras")
     parts = [bytes((m.protocol_version, m.joint_set, m.joint_count, m.units, m.frame))]

@@ -49,7 +49,9 @@ class ProtocolSink(Sink):
         super().__init__(url, options)
         self._joint_set = int(JointSet.BODY_25)
         self._last_seq = NO_FRAME_SEQ
-        self._last_capture_us = 0
+        # None until a frame is sent: a capture time of 0 (a test clock, a synthetic recording replayed with
+        # keep_time=1 whose clock starts at 0) is a real one, and as the "no frame yet" mark its STATUS said capture now, latency 0.
+        self._last_capture_us: Optional[int] = None
         self._resync = True
         self._fault = int(Fault.OK)
         self._fault_since_status = int(Fault.OK)  # the last non-OK fault set since the previous STATUS
@@ -224,8 +226,10 @@ class ProtocolSink(Sink):
         fault = current if current != Fault.OK else latched
         if fault == Fault.OK:
             fault = self._link_fault(self._prev_stats or s, s)
-        h = make_header(MsgType.STATUS, self._last_seq, self._last_capture_us or now, now, status_flags)
-        latency = max(0, now - self._last_capture_us) if self._last_capture_us else 0
+        last_capture = self._last_capture_us
+        h = make_header(MsgType.STATUS, self._last_seq, now if last_capture is None else last_capture, now,
+                        status_flags)
+        latency = 0 if last_capture is None else max(0, now - last_capture)
         status = Status(
             h,
             fps_centi=min(fps_centi, 0xFFFF),

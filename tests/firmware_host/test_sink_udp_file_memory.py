@@ -330,6 +330,29 @@ def test_status_reports_drops_to_the_receiver() -> None:
     assert first.fault == Fault.QUEUE_OVERFLOW and statuses[-1].fault == Fault.OK
 
 
+def test_status_after_a_frame_captured_at_time_0_carries_that_time() -> None:
+    """Capture time 0 is a time (a test clock, a recording whose clock starts at 0), not "no frame yet": the
+    STATUS after such a frame said capture_us = now and latency 0, as before any frame."""
+    t = [0]
+
+    def clock() -> int:  # each call advances 0.4 s: every STATUS is due by the next write
+        t[0] += 400_000
+        return t[0]
+
+    sink = open_sink("memory://?status_s=0.01", backoff=FAST_BACKOFF, clock_us=clock)
+    assert sink.wait_connected(5)
+    sink.send(make_frame(0, t0_us=0))
+    assert sink.wait_drained(5)
+    sink.close()
+    messages = messages_of(sink.read())
+    (frame,) = [i for i, m in enumerate(messages) if isinstance(m, Joints)]
+    assert messages[frame].header.capture_us == 0
+    after = [m for m in messages[frame:] if isinstance(m, Status)]
+    assert after, "no STATUS after the frame"
+    for status in after:
+        assert status.header.capture_us == 0 and status.latency_us == status.header.send_us > 0
+
+
 def test_status_and_hello_keep_coming_while_no_frame_does() -> None:
     """A stalled estimator is when the receiver most needs STATUS (its fault) and HELLO (a late joiner)."""
     sink = open_sink("memory://?status_s=0.05", backoff=FAST_BACKOFF)
