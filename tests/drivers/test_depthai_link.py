@@ -7,7 +7,7 @@ import depthai as dai
 import pytest
 
 from drivers import RigInitializationError
-from drivers.backends.depthai.link import StereoRequest, open_device
+from drivers.backends.depthai.link import StereoRequest, check_cameras, open_device
 
 ID_A, ID_B, ID_C = "14442C10D13EABCE00", "18443010D116631200", "1844301011F4C51200"
 FREE, IN_USE = dai.XLinkDeviceState.X_LINK_UNBOOTED, dai.XLinkDeviceState.X_LINK_BOOTED
@@ -164,3 +164,62 @@ def test_without_an_id_the_first_free_device_is_opened_and_the_others_named(capl
     (warning,) = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert f"2 devices are free ({ID_B} (1.4, UNBOOTED), {ID_C} (1.5, UNBOOTED))" in warning
     assert f"opening {ID_B}" in warning and "depthai://ID" in warning
+
+
+# ----------------------------------------------------------------- what the sensors can give
+def camera(socket: str, sensor: str, size: tuple[int, int], max_fps: float) -> dai.CameraFeatures:
+    """A camera as ``getConnectedCameraFeatures()`` describes it (depthai's own types)."""
+    features = dai.CameraFeatures()
+    features.socket, features.sensorName = dai.CameraBoardSocket.__members__[socket], sensor
+    features.width, features.height = size
+    config = dai.CameraSensorConfig()
+    config.width, config.height, config.minFps, config.maxFps = size[0], size[1], 1.0, max_fps
+    features.configs = [config]
+    return features
+
+
+OAK_D = [camera("CAM_A", "IMX378", (4056, 3040), 60.0), camera("CAM_B", "OV9282", (1280, 800), 120.0),
+         camera("CAM_C", "OV9282", (1280, 800), 120.0)]
+
+
+def test_a_stream_the_sensors_can_give_passes():
+    check_cameras(request(width=1280, height=800, fps=120.0), ID_A, OAK_D)
+    check_cameras(StereoRequest(None, "CAM_A", "CAM_B", 30.0, 640, 400, 11.0, 4), ID_A, OAK_D)
+
+
+def test_a_socket_without_a_camera_is_refused_naming_the_option_and_the_cameras_there_are():
+    req = StereoRequest(None, "CAM_B", "CAM_D", 30.0, 640, 400, 11.0, 4)
+    with pytest.raises(RigInitializationError, match=rf"{ID_A} has no camera on socket CAM_D \(option right=CAM_D\); "
+                                                     r"its cameras: CAM_A \(IMX378, 4056x3040\), CAM_B"):
+        check_cameras(req, ID_A, OAK_D)
+
+
+def test_a_size_or_fps_beyond_the_sensor_is_refused_naming_the_option():
+    with pytest.raises(RigInitializationError, match=r"width=1920 height=1080 exceed the CAM_B sensor's \(OV9282\) "
+                                                     r"1280x800"):
+        check_cameras(request(width=1920, height=1080), ID_A, OAK_D)
+    with pytest.raises(RigInitializationError, match=r"fps=200 exceeds the CAM_B sensor's \(OV9282\) fastest mode, "
+                                                     r"120 fps"):
+        check_cameras(request(fps=200.0), ID_A, OAK_D)
+
+
+def test_the_production_link_checks_the_cameras_before_building_its_pipeline(monkeypatch):
+    """DaiDeviceLink.start on a stand-in device (the pipeline itself needs hardware): the check runs on what
+    the device reports, and the source closes the device it refuses."""
+    from drivers import open_rig
+    from drivers.backends.depthai import link as link_module
+
+    made: list[FakeDevice] = []
+
+    class WithCameras(FakeDevice):
+        def getConnectedCameraFeatures(self):  # noqa: N802 - depthai's name
+            return OAK_D
+
+    def fake_open_device(req):
+        made.append(WithCameras())
+        return made[-1]
+
+    monkeypatch.setattr(link_module, "open_device", fake_open_device)
+    with pytest.raises(RigInitializationError, match="no camera on socket CAM_D"):
+        open_rig("depthai://?right=CAM_D")
+    assert len(made) == 1 and made[0].closed

@@ -191,6 +191,36 @@ def open_device(
     return device
 
 
+def check_cameras(request: StereoRequest, device_id: str, features: list[dai.CameraFeatures]) -> None:
+    """Refuse, naming the option, a stream the device's sensors cannot give (``getConnectedCameraFeatures()``):
+    a socket without a camera, a size larger than the sensor (it would be upscaled, or the image would not
+    have the rig's size) or an fps above every sensor mode's ``maxFps``.
+
+    Raises:
+        RigInitializationError: naming the option, its value and what the device has.
+    """
+    by_socket = {f.socket.name: f for f in features}
+    have = ", ".join(f"{f.socket.name} ({f.sensorName}, {f.width}x{f.height})" for f in features) or "none"
+    for option, socket in (("left", request.left), ("right", request.right)):
+        feature = by_socket.get(socket)
+        if feature is None:
+            raise RigInitializationError(
+                f"depthai device {device_id} has no camera on socket {socket} (option {option}={socket}); "
+                f"its cameras: {have}"
+            )
+        sensor = f"the {socket} sensor's ({feature.sensorName})"
+        if request.width > feature.width or request.height > feature.height:
+            raise RigInitializationError(
+                f"depthai device {device_id}: options width={request.width} height={request.height} exceed "
+                f"{sensor} {feature.width}x{feature.height}; ask for at most that"
+            )
+        fastest = max((config.maxFps for config in feature.configs), default=None)
+        if fastest is not None and request.fps > fastest:
+            raise RigInitializationError(
+                f"depthai device {device_id}: option fps={request.fps:g} exceeds {sensor} fastest mode, {fastest:g} fps"
+            )
+
+
 class DaiDeviceLink:
     """:class:`DeviceLink` on a real OAK device through depthai 3.x."""
 
@@ -201,6 +231,7 @@ class DaiDeviceLink:
 
     def start(self, request: StereoRequest) -> None:
         self._device = open_device(request)
+        check_cameras(request, self._device.getDeviceId(), self._device.getConnectedCameraFeatures())
         pipeline = dai.Pipeline(self._device)
         self._pipeline = pipeline
         outputs = []

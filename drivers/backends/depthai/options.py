@@ -10,8 +10,9 @@
   the first is the rig's first camera. Default ``CAM_B`` / ``CAM_C`` (OAK-D mono pair).
 * ``fps`` (30, 1 to 240), ``width`` (640), ``height`` (400): output stream, an even number of
   pixels each way (16 to 8192); the sensor image is centre-cropped to the output aspect ratio,
-  then scaled. Under ``policy=latest`` a stream that delivers under 80 % of ``fps`` (a USB2
-  link) is logged once as a warning with the measured rate.
+  then scaled. At open they are checked against the device's sensors (no larger, no faster; the
+  sockets must have cameras). Under ``policy=latest`` a stream that delivers under 80 % of ``fps``
+  (a USB2 link) is logged once as a warning with the measured rate.
 * ``mount_height``: height of the cameras above the floor, metres (default 1.0,
   logged as an assumption): places the rig frame's origin on the floor (see
   :mod:`.calibration`). ``height`` is the image height, hence the name.
