@@ -185,6 +185,8 @@ OAK_D = [camera("CAM_A", "IMX378", (4056, 3040), 60.0), camera("CAM_B", "OV9282"
 def test_a_stream_the_sensors_can_give_passes():
     check_cameras(request(width=1280, height=800, fps=120.0), ID_A, OAK_D)
     check_cameras(StereoRequest(None, "CAM_A", "CAM_B", 30.0, 640, 400, 11.0, 4), ID_A, OAK_D)
+    unreported = [camera("CAM_B", "OV9282", (-1, -1), 120.0), camera("CAM_C", "OV9282", (-1, -1), 120.0)]
+    check_cameras(request(), ID_A, unreported)  # a size the device does not report is not held against it
 
 
 def test_a_socket_without_a_camera_is_refused_naming_the_option_and_the_cameras_there_are():

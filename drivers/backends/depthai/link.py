@@ -209,7 +209,8 @@ def check_cameras(request: StereoRequest, device_id: str, features: list[dai.Cam
                 f"its cameras: {have}"
             )
         sensor = f"the {socket} sensor's ({feature.sensorName})"
-        if request.width > feature.width or request.height > feature.height:
+        known = feature.width > 0 and feature.height > 0  # CameraFeatures' default is -1: not reported
+        if known and (request.width > feature.width or request.height > feature.height):
             raise RigInitializationError(
                 f"depthai device {device_id}: options width={request.width} height={request.height} exceed "
                 f"{sensor} {feature.width}x{feature.height}; ask for at most that"
