@@ -99,6 +99,9 @@ class HostPipelineLink:
     def device_id(self) -> str:
         return "host-pipeline"
 
+    def device_name(self) -> str:
+        return "host"
+
     def calibration(self) -> dai.CalibrationHandler:
         return dai.CalibrationHandler(self.calibration_path)
 
@@ -154,6 +157,9 @@ class ScriptedLink:
 
     def device_id(self) -> str:
         return "" if self.closed else self.device  # as DaiDeviceLink: no device once closed
+
+    def device_name(self) -> str:
+        return "" if self.closed else "1.3"  # a USB port path, as depthai names a USB device
 
     def calibration(self) -> dai.CalibrationHandler:
         return dai.CalibrationHandler(CALIBRATION)

@@ -1,5 +1,6 @@
 """depthai without hardware, for real: host-only pipelines, the production Sync stage, real messages and errors."""
 import datetime
+import logging
 import subprocess
 import sys
 import textwrap
@@ -248,6 +249,64 @@ def test_a_device_that_stops_without_closing_its_queue_is_a_disconnect_not_a_tim
             source.read(timeout_s=0.1)
 
 
+class _XLinkLost(ScriptedLink):
+    """Streams its groups, then the cable is pulled: depthai's read fails as it does on an unplug."""
+
+    def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
+        if not self.groups:
+            raise RuntimeError("Communication exception - possible device error/misconfiguration. Original "
+                               "message 'Couldn't read data from stream: '__x_0_0' (X_LINK_ERROR)'")
+        return super().next_group(timeout_s)
+
+
+def test_an_xlink_error_mid_stream_is_a_disconnect_naming_the_device_its_port_and_cameras():
+    """What the daemon logs on an unplug: which OAK (id, USB port) and which of its cameras (name and socket)."""
+    link = _XLinkLost([(0, 0)])
+    with open_rig(f"{URL}&policy=all", link_factory=lambda: link) as source:
+        source.read(timeout_s=0.1)
+        with pytest.raises(RigDisconnectedError) as caught:
+            source.read(timeout_s=0.1)
+    message = str(caught.value)
+    assert "reading from depthai device 14442C10D1 (depthai://?width=160" in message
+    assert "at 1.3, cameras left (CAM_B) and right (CAM_C)" in message and "X_LINK_ERROR" in message
+    assert isinstance(caught.value.__cause__, RuntimeError)
+
+
+class _Paced(ScriptedLink):
+    """A reader that keeps up: each read finds one group, the host queue holds nothing more."""
+
+    def next_group(self, timeout_s: float) -> dai.MessageGroup | None:
+        return super().next_group(timeout_s) if timeout_s > 0 else None
+
+
+def _rate_warnings(link: ScriptedLink, reads: int, url: str = URL, caplog=None) -> list[str]:
+    with caplog.at_level(logging.WARNING, logger="drivers.backends.depthai.source"):
+        with open_rig(url, link_factory=lambda: link) as source:
+            for _ in range(reads):
+                source.read(timeout_s=0.1)
+    return [r.getMessage() for r in caplog.records if "pairs/s arrive" in r.getMessage()]
+
+
+def test_a_stream_slower_than_the_requested_fps_is_warned_once_with_the_measured_rate(caplog):
+    # every second frame arrives (a USB2 link): 15 pairs/s of 30, over 80 frame times (2.7 s of capture)
+    warnings = _rate_warnings(_Paced([(2 * k, 2 * k) for k in range(41)]), 41, caplog=caplog)
+    assert len(warnings) == 1
+    assert "15.0 pairs/s arrive of the 30 fps requested" in warnings[0]
+    assert "depthai device 14442C10D1" in warnings[0] and "use USB3" in warnings[0]
+
+
+def test_a_stream_at_the_requested_fps_is_not_warned(caplog):
+    assert _rate_warnings(_Paced([(k, k) for k in range(90)]), 90, caplog=caplog) == []
+
+
+def test_groups_a_slow_reader_let_the_queue_drop_are_not_taken_for_a_slow_link(caplog):
+    # every read finds the queue full (4 groups, then more): what it lost is the reader's doing
+    assert _rate_warnings(ScriptedLink([(2 * k, 2 * k) for k in range(200)]), 30, caplog=caplog) == []
+    # under policy=all nothing tells the two apart: no measurement
+    caplog.clear()
+    assert _rate_warnings(_Paced([(2 * k, 2 * k) for k in range(41)]), 41, f"{URL}&policy=all", caplog) == []
+
+
 def test_groups_lost_whole_are_dropped_pairs_not_camera_gaps():
     # (3, 3) and (4, 4) never reached the reader (the full host queue dropped them); then the left
     # camera alone skips one frame: that one is a camera gap
@@ -328,6 +387,16 @@ def test_record_a_depthai_source_and_replay_it(tmp_path):
         ("depthai://?left=CAM_B&right=CAM_B", "same socket"),
         ("depthai://?left=CAM_Z", "left"),
         ("depthai://?fps=0", "fps"),
+        ("depthai://?fps=-30", r"fps='-30' must be in \[1.0, 240.0\]"),
+        ("depthai://?fps=nan", r"fps='nan' must be in"),
+        ("depthai://?fps=inf", r"fps='inf' must be in"),
+        ("depthai://?fps=abc", r"fps='abc' must be a number"),
+        ("depthai://?right=cam_c", r"right='cam_c' must be one of \['CAM_A'"),
+        ("depthai://?left=RGB", r"left='RGB' must be one of"),
+        ("depthai://?width=641", r"width=641 must be even"),
+        ("depthai://?height=401", r"height=401 must be even"),
+        ("depthai://?width=8", r"width='8' must be an integer in \[16, 8192\]"),
+        ("depthai://?height=4.5", r"height='4.5'"),
         ("depthai://?queue=0", "queue"),
         ("depthai://?mount_roll=400", "mount_roll"),
     ],
@@ -360,7 +429,8 @@ def test_real_link_without_a_device_is_an_initialization_error():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env,
                             cwd=Path(__file__).resolve().parents[2])
     assert "converted: RuntimeError" in result.stdout, result.stdout + result.stderr
-    assert "starting depthai device" in result.stdout
+    # depthai's own listing ran too (getAllConnectedDevices), and the message says what it found
+    assert "cannot connect to a depthai device: No available devices; connected devices: none" in result.stdout
 
 
 def test_timeouts_run_on_the_injected_clock():

@@ -6,7 +6,9 @@ the next Sync group, stop. :class:`DaiDeviceLink` implements it with depthai.
 Tests implement it with a host-only depthai pipeline (tests/drivers), which
 exercises the same Sync stage and message types without hardware.
 
-Links raise depthai's own exceptions; the source converts them at its boundary.
+Links raise depthai's own exceptions, which the source converts at its boundary; only what
+:func:`open_device` finds wrong before it connects (a device in use, ambiguous or absent) is raised as
+our :class:`~drivers.errors.RigInitializationError` already.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import depthai as dai
 
 from drivers.backends.depthai.options import board_socket
 from drivers.backends.depthai.pipeline import build_sync_stage
+from drivers.errors import RigInitializationError
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +50,10 @@ class DeviceLink(Protocol):
     def device_id(self) -> str:
         """The connected device's id (for the rig id and logs)."""
 
+    def device_name(self) -> str:
+        """The connected device's XLink name (USB port path such as ``1.3``, or IP address), for messages:
+        with two identical OAKs it says which socket or cable to look at. Empty when unknown."""
+
     def calibration(self) -> dai.CalibrationHandler:
         """The device's calibration (EEPROM)."""
 
@@ -63,11 +70,79 @@ class DeviceLink(Protocol):
 
 #: Links slower than USB3 (``getUsbSpeed()``; ``UNKNOWN`` is a PoE device, not slow).
 _SLOW_USB = ("LOW", "FULL", "HIGH")
+#: XLink states of a device another process holds: USB OAKs show ``UNBOOTED`` (or ``BOOTLOADER``) when
+#: free and ``BOOTED`` while a host runs a pipeline on them; a crashed host's device stays ``BOOTED``
+#: until its watchdog resets it (seconds). Other states (the RVC4 gate's) are left to depthai to judge.
+_IN_USE_STATES = ("X_LINK_BOOTED",)
 
 
-def open_device(request: StereoRequest, device_class: Callable[..., dai.Device] = dai.Device) -> dai.Device:
-    """Connect to the requested device (or the first found) and prepare it for a stream we own.
+def _state(info: dai.DeviceInfo) -> str:
+    return getattr(info.state, "name", str(info.state))
 
+
+def describe_devices(devices: list[dai.DeviceInfo]) -> str:
+    """``id (name, STATE)`` for each device, for messages that must say what is connected."""
+    if not devices:
+        return "none"
+    return ", ".join(f"{d.getDeviceId()} ({d.name}, {_state(d).removeprefix('X_LINK_')})" for d in devices)
+
+
+def _in_use_error(info: dai.DeviceInfo) -> RigInitializationError:
+    return RigInitializationError(
+        f"depthai device {info.getDeviceId()} ({info.name}) is in use by another process (XLink state "
+        f"{_state(info).removeprefix('X_LINK_')}): stop that process, or wait a few seconds if it crashed "
+        "(the device resets itself)"
+    )
+
+
+def choose_device(target: str | None, connected: list[dai.DeviceInfo]) -> dai.DeviceInfo | None:
+    """The connected device the URL's target (device id or XLink name; ``None``: any) means.
+
+    Returns ``None`` when nothing connected matches (yet): depthai then searches for it for its
+    default search time, as it does for a device still rebooting; if that fails too, the caller names
+    the connected devices (:func:`open_device`).
+
+    Raises:
+        RigInitializationError: the device is in use by another process; the name matches several
+            devices; or, without a target, every connected device is in use.
+    """
+    if target:
+        matches = [d for d in connected if target in (d.getDeviceId(), d.name)]
+        if len(matches) > 1:
+            raise RigInitializationError(
+                f"depthai device {target!r} is ambiguous: it names {len(matches)} connected devices "
+                f"({describe_devices(matches)}); give the device id"
+            )
+        if matches and _state(matches[0]) in _IN_USE_STATES:
+            raise _in_use_error(matches[0])
+        return matches[0] if matches else None
+    free = [d for d in connected if _state(d) not in _IN_USE_STATES]
+    if connected and not free:
+        if len(connected) == 1:
+            raise _in_use_error(connected[0])
+        raise RigInitializationError(
+            f"every connected depthai device is in use by another process: {describe_devices(connected)}"
+        )
+    if len(free) > 1:
+        # "The first found" depends on USB enumeration order: which OAK a restart opens could change.
+        log.warning(
+            "depthai: %d devices are free (%s) and the URL names none: opening %s; give its id in the URL "
+            "(depthai://ID) to keep the choice", len(free), describe_devices(free), free[0].getDeviceId(),
+        )
+    return free[0] if free else None
+
+
+def open_device(
+    request: StereoRequest,
+    device_class: Callable[..., dai.Device] = dai.Device,
+    list_devices: Callable[[], list[dai.DeviceInfo]] = dai.Device.getAllConnectedDevices,
+) -> dai.Device:
+    """Connect to the requested device (or the first free one) and prepare it for a stream we own.
+
+    * the device is looked up first among all connected ones (``getAllConnectedDevices()``, which also
+      lists those in use): one in use by another process, a name that matches several devices, and a
+      device that cannot be found are errors that say so and list what is connected
+      (:func:`choose_device`).
     * depthai's own reconnection is switched off (``setMaxReconnectionAttempts(0)``: "0 to disable
       reconnection"). While it retries, depthai 3.12's host bridges wait for the device ("Waiting
       for reconnect") and the output queue stays open and silent, so an unplug would read as
@@ -77,8 +152,25 @@ def open_device(request: StereoRequest, device_class: Callable[..., dai.Device] 
       reopens it (the daemon does, re-reading the EEPROM).
     * a link below USB3 is logged as a warning with the stream's bandwidth: two NV12 streams at
       640x400 and 30 fps are about 23 MB/s, 1280x800 four times that, more than USB2's 480 Mbit/s.
+
+    Raises:
+        RigInitializationError: the device is in use, ambiguous or not connected.
+        RuntimeError, ValueError: depthai's own, from a device that fails while it is prepared.
     """
-    device = device_class(request.device_id) if request.device_id else device_class()
+    target = request.device_id
+    info = choose_device(target, list_devices())
+    try:
+        if info is not None:
+            device = device_class(info)  # exactly the device looked up, not the first that answers to its name
+        else:
+            device = device_class(target) if target else device_class()
+    except RuntimeError as e:
+        wanted = f"depthai device {target!r}" if target else "a depthai device"
+        try:  # asked again: the device may have gone, or come, during depthai's search
+            connected = describe_devices(list_devices())
+        except RuntimeError as listing:
+            connected = f"unknown (listing them failed: {listing})"
+        raise RigInitializationError(f"cannot connect to {wanted}: {e}; connected devices: {connected}") from e
     try:  # the caller only learns of the device once this returns: close it on any failure here
         device.setMaxReconnectionAttempts(0)
         speed = device.getUsbSpeed()
@@ -99,6 +191,37 @@ def open_device(request: StereoRequest, device_class: Callable[..., dai.Device] 
     return device
 
 
+def check_cameras(request: StereoRequest, device_id: str, features: list[dai.CameraFeatures]) -> None:
+    """Refuse, naming the option, a stream the device's sensors cannot give (``getConnectedCameraFeatures()``):
+    a socket without a camera, a size larger than the sensor (it would be upscaled, or the image would not
+    have the rig's size) or an fps above every sensor mode's ``maxFps``.
+
+    Raises:
+        RigInitializationError: naming the option, its value and what the device has.
+    """
+    by_socket = {f.socket.name: f for f in features}
+    have = ", ".join(f"{f.socket.name} ({f.sensorName}, {f.width}x{f.height})" for f in features) or "none"
+    for option, socket in (("left", request.left), ("right", request.right)):
+        feature = by_socket.get(socket)
+        if feature is None:
+            raise RigInitializationError(
+                f"depthai device {device_id} has no camera on socket {socket} (option {option}={socket}); "
+                f"its cameras: {have}"
+            )
+        sensor = f"the {socket} sensor's ({feature.sensorName})"
+        known = feature.width > 0 and feature.height > 0  # CameraFeatures' default is -1: not reported
+        if known and (request.width > feature.width or request.height > feature.height):
+            raise RigInitializationError(
+                f"depthai device {device_id}: options width={request.width} height={request.height} exceed "
+                f"{sensor} {feature.width}x{feature.height}; ask for at most that"
+            )
+        fastest = max((config.maxFps for config in feature.configs), default=None)
+        if fastest is not None and request.fps > fastest:
+            raise RigInitializationError(
+                f"depthai device {device_id}: option fps={request.fps:g} exceeds {sensor} fastest mode, {fastest:g} fps"
+            )
+
+
 class DaiDeviceLink:
     """:class:`DeviceLink` on a real OAK device through depthai 3.x."""
 
@@ -109,6 +232,7 @@ class DaiDeviceLink:
 
     def start(self, request: StereoRequest) -> None:
         self._device = open_device(request)
+        check_cameras(request, self._device.getDeviceId(), self._device.getConnectedCameraFeatures())
         pipeline = dai.Pipeline(self._device)
         self._pipeline = pipeline
         outputs = []
@@ -125,6 +249,9 @@ class DaiDeviceLink:
 
     def device_id(self) -> str:
         return self._device.getDeviceId() if self._device is not None else ""
+
+    def device_name(self) -> str:
+        return self._device.getDeviceInfo().name if self._device is not None else ""
 
     def calibration(self) -> dai.CalibrationHandler:
         assert self._device is not None, "start() first"

@@ -2,11 +2,17 @@
 
 ``depthai://[device-id]?left=CAM_B&right=CAM_C&fps=30&width=640&height=400``
 
-* target: a device id (MX id / serial) or name; empty = the first device found.
+* target: a device id (MX id / serial) or XLink name (USB port path such as ``1.3``, or IP);
+  empty = the first free device found (a warning names the others when several are free). A
+  device in use by another process, a name shared by several devices and a device that is not
+  connected are errors naming the connected devices.
 * ``left``, ``right``: board sockets of the stereo pair (``CAM_A`` .. ``CAM_J``);
   the first is the rig's first camera. Default ``CAM_B`` / ``CAM_C`` (OAK-D mono pair).
-* ``fps`` (30), ``width`` (640), ``height`` (400): output stream; the sensor image
-  is centre-cropped to the output aspect ratio, then scaled.
+* ``fps`` (30, 1 to 240), ``width`` (640), ``height`` (400): output stream, an even number of
+  pixels each way (16 to 8192); the sensor image is centre-cropped to the output aspect ratio,
+  then scaled. At open they are checked against the device's sensors (no larger, no faster; the
+  sockets must have cameras). Under ``policy=latest`` a stream that delivers under 80 % of ``fps``
+  (a USB2 link) is logged once as a warning with the measured rate.
 * ``mount_height``: height of the cameras above the floor, metres (default 1.0,
   logged as an assumption): places the rig frame's origin on the floor (see
   :mod:`.calibration`). ``height`` is the image height, hence the name.
@@ -35,7 +41,8 @@ from drivers.pairing import DropPolicy, PairingConfig
 from drivers.url import RigUrl
 
 DEFAULT_MOUNT_HEIGHT_M = 1.0
-_SOCKETS = tuple(name for name in dai.CameraBoardSocket.__members__ if name.startswith("CAM_"))
+# Sorted: depthai's enum lists CAM_I and CAM_J first, which an error message listing the choices should not.
+_SOCKETS = tuple(sorted(name for name in dai.CameraBoardSocket.__members__ if name.startswith("CAM_")))
 
 
 def board_socket(name: str) -> dai.CameraBoardSocket:
@@ -75,6 +82,9 @@ class DepthaiOptions:
         fps = url.take_float("fps", 30.0, lo=1.0, hi=240.0)
         width = url.take_int("width", 640, lo=16, hi=8192)
         height = url.take_int("height", 400, lo=16, hi=8192)
+        for name, value in (("width", width), ("height", height)):
+            if value % 2:  # NV12 (the Camera node's colour output) has one chroma sample per 2x2 pixels
+                raise RigConfigError(f"rig URL {url.url!r}: option {name}={value} must be even (NV12 images are)")
         mount = url.options.get("mount_height")
         mount_height = url.take_float("mount_height", DEFAULT_MOUNT_HEIGHT_M, lo=0.0, hi=10.0)
         roll = url.options.get("mount_roll")

@@ -25,6 +25,41 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: A stream delivering less than this share of the requested fps is reported (once per source).
+SLOW_SHARE = 0.8
+#: Capture time one measurement of the delivered rate spans.
+RATE_WINDOW_S = 2.0
+
+
+class DeliveryRate:
+    """Groups per second the device delivers, on their capture timestamps, over windows of ``window_s``.
+
+    Only groups that arrived one after another in the host queue count: the caller restarts the
+    window (:meth:`restart`) where the queue may have dropped some because the reader fell behind,
+    so a slow reader is not mistaken for a slow link.
+    """
+
+    def __init__(self, window_s: float = RATE_WINDOW_S) -> None:
+        self.window_ns = int(window_s * 1e9)
+        self.first_ns: int | None = None
+        self.count = 0
+
+    def restart(self, t_ns: int) -> None:
+        self.first_ns, self.count = t_ns, 1
+
+    def add(self, t_ns: int) -> float | None:
+        """Count a group captured at ``t_ns``; the rate once a window is complete, else ``None``."""
+        if self.first_ns is None:
+            self.restart(t_ns)
+            return None
+        self.count += 1
+        span = t_ns - self.first_ns
+        if span < self.window_ns:
+            return None
+        rate = (self.count - 1) * 1e9 / span
+        self.restart(t_ns)
+        return rate
+
 
 class DepthaiRigSource(RigSource):
     """One OAK device's stereo pair (options: :mod:`drivers.backends.depthai.options`).
@@ -66,6 +101,10 @@ class DepthaiRigSource(RigSource):
         # Frames the reader holds: the first group's second frame and up to ``queue`` groups taken after it.
         self.drain_limit = 2 * options.queue_size + 2
         self._device_id = ""  # kept from start(): a lost device no longer says
+        self._device_name = ""
+        # Measured under LATEST only: there a read shows whether the host queue could have overflowed.
+        self._rate = DeliveryRate() if self.pairing.policy is DropPolicy.LATEST else None
+        self._rate_warned = False
         self._last_indices: tuple[int, int] | None = None  # the last group's (first, second) frame indices
         self._lost_before: dict[Frame, int] = {}  # a group's first frame -> whole groups lost just before it
         self._lost = 0  # for _pairs_lost: before the frame _read_frame returned last
@@ -105,6 +144,7 @@ class DepthaiRigSource(RigSource):
                 # Asked here, guarded: a device lost just after start fails this call too, and the link
                 # must then be closed (open() failing leaves no source to close it later).
                 device_id = link.device_id()
+                device_name = link.device_name()
         except BaseException:
             try:
                 link.close()
@@ -114,6 +154,7 @@ class DepthaiRigSource(RigSource):
         self._set_rig(rig)
         self._link = link
         self._device_id = device_id
+        self._device_name = device_name
 
     def _rig_from_device(self, link: DeviceLink) -> Rig:
         o = self.options
@@ -132,8 +173,15 @@ class DepthaiRigSource(RigSource):
         )
 
     def _where(self) -> str:
-        device = f"depthai device {self._device_id or self.options.device_id or '(first found)'}"
-        return f"{device} ({self.options.url})" if self.options.url else device
+        """The device (id, URL, XLink name) and its cameras: with two OAKs, which one to look at."""
+        o = self.options
+        where = f"depthai device {self._device_id or o.device_id or '(first found)'}"
+        if o.url:
+            where += f" ({o.url})"
+        if self._device_name:
+            where += f" at {self._device_name}"
+        names = (self._rig.pair[0].name, self._rig.pair[1].name) if self._rig is not None else ("left", "right")
+        return f"{where}, cameras {names[0]} ({o.left}) and {names[1]} ({o.right})"
 
     def _read_frame(self, timeout_s: float) -> Frame | None:
         if self._pending:
@@ -146,14 +194,45 @@ class DepthaiRigSource(RigSource):
             group = link.next_group(timeout_s)
             if group is None:
                 if not link.is_running():
-                    raise RigDisconnectedError(f"{self._where()} stopped: the device was lost or its pipeline ended")
+                    raise RigDisconnectedError(
+                        f"{self._where()}: both cameras stopped: the device was lost or its pipeline ended"
+                    )
                 self.clock.sleep_until(deadline)  # the timeout has passed on our clock too (a ManualClock jumps)
                 return None
             first, second = self._frames(group)
         self._pending.append(second)
         if self.pairing.policy is DropPolicy.LATEST:
-            self._take_queued_groups(link)
+            self._measure_rate([first.timestamp_ns] + self._take_queued_groups(link))
         return self._served(first)
+
+    def _measure_rate(self, stamps: list[int]) -> None:
+        """Warn once when the device delivers well under the requested fps (a USB2 link, a cable).
+
+        ``stamps``: the capture times of the groups one read took from the host queue, in order.
+        Taking ``queue`` or more means the queue may have been full, and so may have dropped groups
+        while the reader was busy (it only drops when full, and only the reader empties it): the
+        measurement then restarts at the first of them.
+        """
+        rate = self._rate
+        if rate is None or self._rate_warned:
+            return
+        if len(stamps) >= self.options.queue_size:
+            rate.restart(stamps[0])
+            stamps = stamps[1:]
+        for t_ns in stamps:
+            measured = rate.add(t_ns)
+            if measured is not None and measured < SLOW_SHARE * self.options.fps:
+                self._rate_warned = True
+                o = self.options
+                log.warning(
+                    "%s: %.1f pairs/s arrive of the %g fps requested (over %.1f s or more of capture time). A USB2 "
+                    "link "
+                    "or cable (the USB speed is logged at open) cannot carry two %dx%d streams at that rate, and "
+                    "frames that do not pair within tolerance_ms=%g are discarded: use USB3, or lower "
+                    "fps/width/height", self._where(), measured, o.fps, rate.window_ns / 1e9, o.width, o.height,
+                    self.pairing.tolerance_ms,
+                )
+                return
 
     def _frames(self, group: dai.MessageGroup) -> tuple[Frame, Frame]:
         """A group's frames; whole groups lost before it (both indices jumped by as many) are noted on the first."""
@@ -172,21 +251,26 @@ class DepthaiRigSource(RigSource):
     def _pairs_lost(self) -> int:
         return self._lost
 
-    def _take_queued_groups(self, link: DeviceLink) -> None:
+    def _take_queued_groups(self, link: DeviceLink) -> list[int]:
         """Move the groups already waiting in the host queue into ``_pending``: read() drains them under
         the LATEST policy, so a reader slower than the cameras gets the newest pair (older ones counted in
         pairs_dropped) rather than one up to ``queue=`` groups old. Through ``next_group(0)``, which
         releases the GIL: depthai's ``has()``/``isClosed()`` wait on the queue's lock holding it, and a
-        host node that needs the GIL to hand over a message then deadlocks with them."""
+        host node that needs the GIL to hand over a message then deadlocks with them. Returns the capture
+        times of the groups it took (their first frames')."""
+        stamps: list[int] = []
         for _ in range(max(self.options.queue_size, 1)):
             try:
                 group = link.next_group(0.0)
                 if group is None:
-                    return
-                self._pending.extend(self._frames(group))
+                    break
+                frames = self._frames(group)
             except Exception as e:  # noqa: BLE001 - a closed queue: the next read raises it, typed
                 log.debug("depthai: no more queued groups (%s)", e)
-                return
+                break
+            self._pending.extend(frames)
+            stamps.append(frames[0].timestamp_ns)
+        return stamps
 
     def _frame_available(self) -> bool:
         return bool(self._pending)  # frames already taken from the link; the link itself is not polled
