@@ -40,7 +40,16 @@ from typing import Any
 import cv2
 import numpy as np
 
-from calibration.formats._common import as_array, check_units, fail, make_camera, make_rig, refuse_skew, show
+from calibration.formats._common import (
+    as_array,
+    check_units,
+    fail,
+    make_camera,
+    make_rig,
+    not_text_problem,
+    refuse_skew,
+    show,
+)
 from calibration.formats._frame import KEYS as LEVELLING_KEYS, levelling_metadata, levelling_of, recorded_levelling
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import write_text_atomic
@@ -78,7 +87,10 @@ def read_anipose_toml(
     units = check_units(units_to_metres)
     p = Path(path)
     try:
-        text = p.read_bytes().decode("utf-8-sig")  # a byte-order mark (Windows editors): tomllib refused line 1
+        raw = p.read_bytes()
+        if problem := not_text_problem(raw[:4096], "TOML"):
+            raise fail(path, None, problem)
+        text = raw.decode("utf-8-sig")  # a byte-order mark (Windows editors): tomllib refused line 1
     except OSError as e:
         raise fail(path, None, f"cannot read: {e.strerror or e}") from e
     except UnicodeDecodeError as e:

@@ -697,3 +697,70 @@ def test_a_distortion_or_a_third_camera_the_rig_file_refuses_is_refused_on_impor
     with pytest.raises(RigFileError, match=r"camera 'side cam': its distortion coefficient k1 = 1e\+308") as info:
         read_opencv_rig(tmp_path / "wild.yaml")
     assert info.value.field == "cameras[2].distortion_coefficients"
+
+
+@pytest.mark.parametrize("suffix", [".yml", ".xml", ".json", ".toml"])
+def test_a_binary_or_utf16_file_is_named_as_such(rig, tmp_path, suffix):
+    # OpenCV said "(-215:Assertion failed) buf" for NULs and "Invalid or unsupported syntax" for UTF-16 text
+    good = tmp_path / f"good{suffix}"
+    if suffix == ".toml":
+        write_anipose_toml(rig, good, units_to_metres=0.001)
+        read = lambda p: read_anipose_toml(p, units_to_metres=0.001)  # noqa: E731
+    else:
+        write_opencv_rig(rig, good)
+        read = read_opencv_rig
+    cases = {"nul": (bytes(16), "a binary file (a NUL byte at 0)"),
+             "png": (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "a binary file (a NUL byte at 8)"),
+             "utf16": (good.read_text().encode("utf-16"), "UTF-16 text")}
+    for name, (content, words) in cases.items():
+        path = tmp_path / f"{name}{suffix}"
+        path.write_bytes(content)
+        with pytest.raises(RigFileError) as info:
+            read(path)
+        assert info.value.path == str(path) and info.value.field is None
+        assert words in str(info.value), (name, str(info.value))
+
+
+OPENCV_TYPED_K = """%YAML:1.0
+---
+image_width: 640
+image_height: 480
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: {dt}
+   data: [ {fx}, 0., {cx}, 0., 600., 240., 0., 0., 1. ]
+distortion_coefficients: [0, 0, 0, 0, 0]
+"""
+
+
+@pytest.mark.parametrize("dt, fx, cx, words", [
+    ("i", "600", "320.5", "dt: i cannot hold data[2] = 320.5: OpenCV reads it as 320.0"),
+    ("u", "600", "320", "dt: u cannot hold data[0] = 600.0: OpenCV reads it as 255.0 (3 of 9 values change)"),
+])
+def test_a_matrix_type_that_changes_its_values_is_refused(tmp_path, dt, fx, cx, words):
+    # OpenCV converts data to dt silently: a principal point 0.5 px off, or a focal length of 255 px
+    path = tmp_path / "cam.yml"
+    path.write_text(OPENCV_TYPED_K.format(dt=dt, fx=fx, cx=cx))
+    with pytest.raises(RigFileError) as info:
+        read_opencv_camera(path)
+    assert info.value.field == "camera_matrix" and words in str(info.value), str(info.value)
+
+
+def test_a_float32_matrix_reads_the_digits_printed(tmp_path):
+    path = tmp_path / "cam.yml"
+    path.write_text(OPENCV_TYPED_K.format(dt="f", fx="600.1", cx="320.3"))
+    cam = read_opencv_camera(path)  # not float32's 600.0999755859375
+    assert cam.K[0, 0] == 600.1 and cam.K[0, 2] == 320.3
+    path.write_text(OPENCV_TYPED_K.format(dt="i", fx="600", cx="320"))  # whole numbers: nothing changes
+    assert read_opencv_camera(path).K[0, 2] == 320.0
+
+
+@pytest.mark.parametrize("units", ["0.001", "mm", True, None])
+def test_a_units_argument_that_is_not_a_number_is_named(rig, tmp_path, units):
+    # float() took "0.001" and True (1 m per unit), and "mm" raised a bare ValueError
+    write_anipose_toml(rig, tmp_path / "rig.toml", units_to_metres=1.0)
+    with pytest.raises(GeometryError, match="units_to_metres must be a positive finite number"):
+        read_anipose_toml(tmp_path / "rig.toml", units_to_metres=units)
+    with pytest.raises(GeometryError, match="units_to_metres"):
+        write_opencv_rig(rig, tmp_path / "rig.yml", units_to_metres=units)
