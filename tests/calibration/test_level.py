@@ -77,3 +77,13 @@ def test_the_estimator_warns_about_a_tool_frame_until_the_rig_is_levelled(caplog
     with caplog.at_level("WARNING"):
         Estimator(OracleSession(edge128_contract()), levelled)
     assert "level it first" not in caplog.text
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, "10", None, True])
+def test_gravity_from_angles_that_are_not_numbers_is_refused(bad):
+    # a NaN pitch gave a NaN direction, silently: every caller had to check the angles itself
+    for key in ("pitch_deg", "roll_deg"):
+        with pytest.raises(GeometryError, match=key):
+            down_in_camera(**{key: bad})
+    np.testing.assert_allclose(down_in_camera(90.0), [0.0, 0.0, 1.0], atol=1e-15)  # straight down: along the axis
+    np.testing.assert_allclose(down_in_camera(-90.0), [0.0, 0.0, -1.0], atol=1e-15)  # straight up

@@ -243,6 +243,25 @@ def test_each_pair_alone_gives_the_pose_and_bad_ones_disagree():
     assert agreeing_pairs([None, *poses[2:]]) == [1, 2, 3]  # a pose not solved agrees with none
 
 
+def test_corners_that_do_not_fix_the_board_give_no_single_pair_pose():
+    # exact corners: a row and one corner off it gave a pose 0.6 m off the truth (IPPE answers anyway), and
+    # three corners a cv2.error, where pair_relative_pose promises None
+    rig = example_rig()
+    intr = _true_intrinsics(rig)
+    views = _views(rig, _facing_poses(rig, 1, seed=6))
+    first, second = views["left"]["000"], views["right"]["000"]
+    per_row = BOARD.squares_x - 1
+
+    def pose(ids):
+        return pair_relative_pose(BOARD, first, second, np.asarray(ids), intr["left"].K, intr["left"].dist,
+                                  intr["right"].K, intr["right"].dist)
+
+    for ids in (range(3), range(per_row), [*range(per_row), per_row + 2], [0, per_row + 1, 2 * per_row + 2, 3]):
+        assert pose(list(ids)) is None, list(ids)
+    R, t = pose([*range(per_row), per_row, per_row + 3])  # two corners off the row: fixed
+    assert np.linalg.norm(t - _relative_t(*rig.pair)) < 1e-6
+
+
 def _with_moved_boards(rig: Rig, pairs: int, bad: int, shift_m: float, seed: int) -> dict:
     """``pairs`` shared views whose first ``bad`` have their right image of the board moved ``shift_m``."""
     poses = _facing_poses(rig, pairs, seed=seed)
