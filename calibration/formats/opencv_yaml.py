@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -127,10 +128,18 @@ def _numeric(node, path, field: str) -> np.ndarray | None:
     if node.isInt() or node.isReal():
         return np.array(node.real())
     if node.isString():
+        if node.string() == "...":  # OpenCV's reading of a last key left without a value (a file cut short)
+            raise fail(path, field, "has no value (the file cut short?)")
         raise fail(path, field, f"must be a number or a matrix, got the string {node.string()!r}")
     if node.isMap():
-        if "data" not in _keys(node):
-            raise fail(path, field, f"must be a number or a matrix, got a map with keys {list(_keys(node))}")
+        keys = _keys(node)
+        if "data" not in keys:
+            if {"rows", "cols", "dt"} & set(keys):  # a matrix whose data was cut off: said as a stray map
+                raise fail(path, field, f"an !!opencv-matrix without its data (it has {', '.join(keys)}; the file cut "
+                                        "short?)")
+            raise fail(path, field, f"must be a number or a matrix, got a map with keys {list(keys)}")
+        if count := _matrix_count_problem(node):  # OpenCV's words: "nelems == m.total()*m.channels()"
+            raise fail(path, field, f"malformed !!opencv-matrix: {count}")
         try:
             mat = node.mat()
         except cv2.error as e:
@@ -148,6 +157,21 @@ def _numeric(node, path, field: str) -> np.ndarray | None:
         except ValueError:
             raise fail(path, field, "must be a rectangular (nested) sequence of numbers") from None
     raise fail(path, field, "must be a number or a matrix")
+
+
+def _matrix_count_problem(node) -> str | None:
+    """Why an ``!!opencv-matrix``'s ``data`` does not fill its ``rows`` x ``cols`` (x channels); None: it does, or
+    the node is malformed otherwise (OpenCV names that)."""
+    rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
+    if not (rows.isInt() and cols.isInt() and dt.isString() and data.isSeq()):
+        return None
+    digits = re.match(r"\d*", dt.string()).group()
+    channels = int(digits) if digits else 1
+    want = int(rows.real()) * int(cols.real()) * channels
+    if data.size() == want:
+        return None
+    shape = f"rows {int(rows.real())} x cols {int(cols.real())}" + (f" x {channels} channels" if channels != 1 else "")
+    return f"{shape} is {want} values, but data has {data.size()}"
 
 
 def _matrix_as_written(node, mat: np.ndarray, path, field: str) -> np.ndarray:

@@ -764,3 +764,23 @@ def test_a_units_argument_that_is_not_a_number_is_named(rig, tmp_path, units):
         read_anipose_toml(tmp_path / "rig.toml", units_to_metres=units)
     with pytest.raises(GeometryError, match="units_to_metres"):
         write_opencv_rig(rig, tmp_path / "rig.yml", units_to_metres=units)
+
+
+@pytest.mark.parametrize("tail, words", [
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n", "an !!opencv-matrix without its data (it has rows; the file cut short?)"),
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n", "without its data (it has rows, cols, dt;"),
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 600., 0., 320., 0. ]\n",
+     "malformed !!opencv-matrix: rows 3 x cols 3 is 9 values, but data has 4"),
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 1\n   dt: \"3d\"\n   data: [ 600., 0., 320. ]\n",
+     "rows 3 x cols 1 x 3 channels is 9 values, but data has 3"),
+    ("camera_matrix:\n", "has no value (the file cut short?)"),
+])
+def test_a_file_cut_short_in_a_matrix_says_what_is_missing(tmp_path, tail, words):
+    # OpenCV's readings: "a map with keys ['rows']", "(-215:Assertion failed) nelems == m.total()*m.channels()",
+    # and a key left without a value read as "the string '...'"
+    path = tmp_path / "cam.yml"
+    path.write_text("%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\ndistortion_coefficients: [0, 0, 0, 0, 0]\n"
+                    + tail)
+    with pytest.raises(RigFileError) as info:
+        read_opencv_camera(path)
+    assert info.value.field == "camera_matrix" and words in str(info.value), str(info.value)
