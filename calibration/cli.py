@@ -897,8 +897,8 @@ def build_parser() -> argparse.ArgumentParser:
                                         "to solve, else 'floor')")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1),
                    help="metres, for the floor view (default: the one given to solve, as recorded, else 0)")
-    p.add_argument("--max-px", type=_finite(0.01, 100.0), default=1.0,
-                   help="largest acceptable reprojection rms (default 1 px)")
+    p.add_argument("--max-px", type=_finite(0.01, 100.0), default=CheckLimits.max_px,
+                   help=f"largest acceptable reprojection rms (default {CheckLimits.max_px:g} px)")
     p.add_argument("--max-scale-error", type=_finite(0.0001, 1.0), default=CheckLimits.max_scale_error, help="default 0.01 (1 %%)")
     p.add_argument("--max-floor-mm", type=_finite(0.1, 10000.0), default=CheckLimits.max_floor_mm,
                    help=f"the floor view's height off the floor (default {CheckLimits.max_floor_mm:g})")

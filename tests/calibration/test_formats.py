@@ -784,3 +784,25 @@ def test_a_file_cut_short_in_a_matrix_says_what_is_missing(tmp_path, tail, words
     with pytest.raises(RigFileError) as info:
         read_opencv_camera(path)
     assert info.value.field == "camera_matrix" and words in str(info.value), str(info.value)
+
+
+def test_a_rotation_printed_with_few_digits_is_snapped_and_one_that_is_not_a_rotation_refused(tmp_path):
+    # docs/rig-file.md: within 1e-4 of a rotation, snapped to the nearest (SVD); else refused naming R
+    true = cv2.Rodrigues(np.array([0.01, -0.05, 0.002]))[0]
+    printed = np.round(true, 5)
+    path = tmp_path / "rig.yaml"
+
+    def read_with(R):
+        rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in R)
+        path.write_text(_multi_yaml(_cams(R=f"[{rows}]")))
+        return read_opencv_rig(path).cameras[1].R
+
+    R = read_with(printed)
+    assert np.abs(R @ R.T - np.eye(3)).max() < 1e-12 and np.linalg.det(R) == pytest.approx(1.0, abs=1e-12)
+    assert np.abs(R - true).max() < 1e-5
+    for bad, words in ((true @ np.diag([1.0, 1.0, -1.0]), "det = -1"),  # a reflection: orthonormal, det -1
+                       (1.01 * true, "det = 1.03"),  # scaled: det far from 1
+                       (true + np.array([[0.0, 0.05, 0.0], [0, 0, 0], [0, 0, 0]]), "max |R R^T - I| = 0.05")):
+        with pytest.raises(RigFileError, match=r"must be a rotation \(orthonormal, det \+1\)") as info:
+            read_with(bad)
+        assert info.value.field == "cameras[1].R" and words in str(info.value), str(info.value)
