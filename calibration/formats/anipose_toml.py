@@ -104,8 +104,10 @@ def read_anipose_toml(
 
     declared = doc.get("metadata", {}).get("units_to_metres") if isinstance(doc.get("metadata"), dict) else None
     if declared is not None:  # ours: the unit the writer was given; aniposelib files say nothing
-        if isinstance(declared, bool) or not isinstance(declared, (int, float)) or not declared > 0:
-            raise fail(path, "metadata.units_to_metres", f"must be a positive number, got {show(declared)}")
+        if isinstance(declared, bool) or not isinstance(declared, (int, float)) or not (math.isfinite(declared)
+                                                                                     and declared > 0):
+            # inf passed here and was then called a unit that contradicts the argument
+            raise fail(path, "metadata.units_to_metres", f"must be a positive finite number, got {show(declared)}")
         if not math.isclose(float(declared), units, rel_tol=1e-9):
             raise fail(path, "metadata.units_to_metres", f"the file says {declared!r} m per unit, the argument "
                                                          f"{units!r}: the rig would be scaled by their ratio")

@@ -651,6 +651,11 @@ def test_a_byte_order_mark_is_skipped(rig, tmp_path, suffix):
         read = read_opencv_rig
     marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
     assert_cameras_close(read(plain), read(marked), atol=0)
+    crlf = tmp_path / f"crlf{suffix}"  # and Windows line ends, with the mark or without
+    crlf.write_bytes(plain.read_bytes().replace(b"\n", b"\r\n"))
+    marked.write_bytes(b"\xef\xbb\xbf" + crlf.read_bytes())
+    assert_cameras_close(read(plain), read(crlf), atol=0)
+    assert_cameras_close(read(plain), read(marked), atol=0)
 
 
 def test_an_empty_foreign_file_says_so(tmp_path):
@@ -806,3 +811,15 @@ def test_a_rotation_printed_with_few_digits_is_snapped_and_one_that_is_not_a_rot
         with pytest.raises(RigFileError, match=r"must be a rotation \(orthonormal, det \+1\)") as info:
             read_with(bad)
         assert info.value.field == "cameras[1].R" and words in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("declared", ["inf", "nan", "-0.001", '"mm"'])
+def test_a_units_key_in_a_toml_file_that_is_not_a_unit_is_named(rig, tmp_path, declared):
+    # inf passed the check and was then called a unit that contradicts the argument
+    text = dumps_anipose_toml(rig, units_to_metres=0.001).replace("units_to_metres = 0.001",
+                                                                  f"units_to_metres = {declared}")
+    path = tmp_path / "calibration.toml"
+    path.write_text(text)
+    with pytest.raises(RigFileError, match="must be a positive finite number") as info:
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.field == "metadata.units_to_metres"

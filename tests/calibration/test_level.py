@@ -45,6 +45,9 @@ def test_level_rig_refuses_what_it_cannot_do():
         level_rig(rig, camera_height_m=0.0)
     with pytest.raises(GeometryError, match="along gravity"):
         level_rig(rig, camera_height_m=3.0, pitch_deg=90.0)  # a pair looking straight down: no forward
+    with pytest.raises(GeometryError, match="along gravity"):
+        level_rig(rig, camera_height_m=3.0, pitch_deg=-90.0)  # or straight up
+    assert level_rig(rig, camera_height_m=3.0, pitch_deg=89.0).metadata["levelled"]["pitch_deg"] == 89.0  # nearly: fine
     # a NaN or infinite angle (an inclinometer that read nothing) raised a bare ValueError or blamed R;
     # a reference past the cameras an IndexError
     for bad in (math.nan, math.inf, -math.inf, "10", None):
