@@ -151,7 +151,7 @@ class BoardSpec:
         try:
             return cls(**data)
         except BoardError as e:
-            raise BoardError(str(e).split(": ", 1)[-1], key=e.key, path=path) from None
+            raise BoardError(e.detail, key=e.key, path=path) from None
 
 
 def load_board(path: str | os.PathLike) -> BoardSpec:

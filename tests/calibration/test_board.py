@@ -132,3 +132,13 @@ def test_markers_too_small_to_draw_are_named_not_an_opencv_traceback(tmp_path, c
     assert cli.main(["board", "--board", str(path), "--out", str(tmp_path / "out"), "--dpi", "72"]) == 2
     assert "marker_m: markers of 2 mm" in capsys.readouterr().err
     assert board.image(px_per_square=400).shape == (6 * 400, 9 * 400)  # 8 px: drawn
+
+
+def test_the_file_is_named_before_the_key_and_the_whole_message(tmp_path):
+    # the file's name is put before the message as raised (BoardError.detail), colons in it kept
+    path = tmp_path / "board.json"
+    path.write_text(json.dumps({"squares_x": 3, "squares_y": 3}))
+    with pytest.raises(BoardError) as e:
+        load_board(path)
+    assert str(e.value) == (f"{path}: squares_x: a 3x3 board has 4 inner corners; a view needs at least 6, so it "
+                            "could never be found: add squares")
