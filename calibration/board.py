@@ -36,6 +36,10 @@ DICTIONARIES = tuple(sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") a
                             and "ARUCO_ORIGINAL" not in n and "MIP" not in n))
 
 
+def _is_real(value: Any) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
 @dataclass(frozen=True)
 class BoardSpec:
     """A ChArUco board.
@@ -68,9 +72,11 @@ class BoardSpec:
                              key="squares_x")
         for key in ("square_m", "marker_m"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not 0.001 <= value <= 2.0:
-                raise BoardError(f"must be a length in metres in [0.001, 2], got {value!r}", key=key)
+            if not _is_real(value) or not 0.001 <= value <= 2.0:
+                # a size typed in millimetres (80 for 0.08) is said as such, not only as out of range
+                mm = (f" (millimetres? {value:g} mm is {value / 1000:g} m)"
+                      if _is_real(value) and 2.0 < value and 0.001 <= value / 1000 <= 2.0 else "")
+                raise BoardError(f"must be a length in metres in [0.001, 2], got {value!r}{mm}", key=key)
             object.__setattr__(self, key, float(value))
         if not self.marker_m < self.square_m:
             raise BoardError(f"must be smaller than square_m ({self.square_m:g}), got {self.marker_m:g}",
@@ -108,10 +114,27 @@ class BoardSpec:
 
     def image(self, px_per_square: int = 120, margin_px: int = 0) -> np.ndarray:
         """The board as a greyscale image (white margin of ``margin_px``), ``px_per_square`` per square."""
-        if px_per_square < 20:
-            raise BoardError(f"px_per_square must be at least 20 for the markers to be drawn, got {px_per_square}")
+        for key, value, least in (("px_per_square", px_per_square, 20), ("margin_px", margin_px, 0)):
+            # a float or a negative margin reached OpenCV, whose assertion named neither
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+                raise BoardError(f"must be a whole number of pixels, at least {least}, got {value!r}", key=key)
+        # a marker is its dictionary's cells plus a one-cell border, each a pixel at least: smaller, OpenCV's
+        # assertion (sidePixels >= markerSize + 2*borderBits) stopped `ghcal board` with a traceback
+        cells = self.cv_board().getDictionary().markerSize + 2
+        marker_px = int(px_per_square * self.marker_m / self.square_m)
+        if marker_px < cells:
+            raise BoardError(f"markers of {1000 * self.marker_m:g} mm in squares of {1000 * self.square_m:g} mm are "
+                             f"{marker_px} px at {px_per_square} px per square, and a marker's {cells} cells (its "
+                             f"border included) need {cells}: larger markers (about 0.75 of the square) or more "
+                             "pixels per square (--dpi)", key="marker_m")
         size = (self.squares_x * px_per_square + 2 * margin_px, self.squares_y * px_per_square + 2 * margin_px)
-        return self.cv_board().generateImage(size, marginSize=margin_px, borderBits=1)
+        try:
+            return self.cv_board().generateImage(size, marginSize=margin_px, borderBits=1)
+        except cv2.error as e:  # a few ratios round a marker's cell outside its square (OpenCV's roi assertion)
+            raise BoardError(f"OpenCV cannot draw markers of {1000 * self.marker_m:g} mm in squares of "
+                             f"{1000 * self.square_m:g} mm at {px_per_square} px per square "
+                             "(OpenCV places a marker cell outside its square): try another --dpi",
+                             key="px_per_square") from e
 
     # ------------------------------------------------------------------ I/O
     def to_dict(self) -> dict[str, Any]:
@@ -128,19 +151,41 @@ class BoardSpec:
         try:
             return cls(**data)
         except BoardError as e:
-            raise BoardError(str(e).split(": ", 1)[-1], key=e.key, path=path) from None
+            raise BoardError(e.detail, key=e.key, path=path) from None
 
 
 def load_board(path: str | os.PathLike) -> BoardSpec:
     """Read a board JSON file; errors name the file and the key."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
+        # utf-8-sig: a board.json saved by a Windows editor (the measured square size typed in) starts with a
+        # byte-order mark, which json refused as "not a JSON file"
+        with open(path, encoding="utf-8-sig") as fh:
+            text = fh.read()
     except OSError as e:
         raise BoardError(f"cannot read the board file ({e.strerror or e})", path=str(path)) from e
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+    except UnicodeDecodeError as e:
+        raise BoardError(f"not a JSON file: not UTF-8 text (byte {e.start}): {e.reason}", path=str(path)) from e
+    if not text.strip():
+        raise BoardError("the file is empty", path=str(path))
+    try:
+        data = json.loads(text, object_pairs_hook=_refuse_repeats(str(path)))
+    except json.JSONDecodeError as e:
         raise BoardError(f"not a JSON file: {e}", path=str(path)) from e
     return BoardSpec.from_dict(data, path=str(path))
+
+
+def _refuse_repeats(path: str):
+    """A JSON object hook refusing a key given twice: json kept the last silently, so a ``square_m`` measured on
+    the print and typed in above the old line was overridden by the old value, and the rig scaled by it."""
+    def hook(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        seen: dict[str, Any] = {}
+        for key, value in pairs:
+            if key in seen:
+                raise BoardError(f"given twice ({seen[key]!r} and {value!r}): keep the one measured on the print",
+                                 key=key, path=path)
+            seen[key] = value
+        return seen
+    return hook
 
 
 def png_with_dpi(png: bytes, dpi: float) -> bytes:

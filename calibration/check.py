@@ -22,7 +22,7 @@ from calibration.detect import MIN_CORNERS, BoardView
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
 
-__all__ = ["check_rig", "check_failures", "CheckLimits", "FLOOR_VIEW"]
+__all__ = ["check_rig", "check_failures", "floor_unmeasured", "CheckLimits", "FLOOR_VIEW"]
 
 FLOOR_VIEW = "floor"
 
@@ -136,3 +136,28 @@ def check_failures(report: Mapping[str, Any], limits: CheckLimits = CheckLimits(
         reasons.append(f"the floor view lies {floor['height_mm_median']:+.1f} mm off the floor, over "
                        f"{limits.max_floor_mm:g} mm (the rig tilted or moved on its mount)")
     return reasons
+
+
+def floor_unmeasured(report: Mapping[str, Any], views: Mapping[str, Mapping[str, BoardView]],
+                     floor_view: str = FLOOR_VIEW) -> str | None:
+    """Why the floor view in ``views`` gave ``report`` (from :func:`check_rig`) no height; None where it gave one
+    or where no camera found the board in it (the caller knows whether it was taken at all).
+
+    ``ghcal check`` said "the board was not found in both cameras' floor view" whatever the reason, also
+    where both found it and its corners did not triangulate (a camera turned far: the fix is to calibrate
+    again, not to retake the floor view).
+    """
+    if "floor" in report:
+        return None
+    seen = [camera for camera, named in views.items() if floor_view in named]
+    if floor_view in report.get("per_view", {}):
+        entry = report["per_view"][floor_view]
+        return (f"none of the {entry['corners']} corners both cameras found in floor view {floor_view!r} "
+                "triangulates in front of both cameras")
+    if len(seen) >= 2:
+        shared = np.intersect1d(*(views[camera][floor_view].ids for camera in seen[:2])).size
+        return (f"the cameras found {shared} of the same corners in floor view {floor_view!r}, fewer than the "
+                f"{MIN_CORNERS} a measurement needs")
+    if seen:
+        return f"only camera {seen[0]!r} found the board in floor view {floor_view!r}"
+    return None

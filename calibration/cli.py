@@ -36,7 +36,7 @@ import numpy as np
 from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_views, next_view_number, read_camera_order, write_camera_order)
-from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig
+from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
 from calibration.detect import BoardDetector, BoardView, board_mismatch
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
@@ -764,7 +764,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
     if "floor" not in report:
         print(f"note: the levelling is not checked (a rig tilted on its mount passes): "
-              + (f"the board was not found in both cameras' floor view {floor_view!r}" if floor_taken else
+              + ((floor_unmeasured(report, views, floor_view)
+                  or f"neither camera found the board in floor view {floor_view!r}") if floor_taken else
                  f"no floor view {floor_view!r} in {args.images} (--floor-view NAME names another)"),
               file=sys.stderr if args.json else sys.stdout)
     rms = report["reprojection_px_rms"]
@@ -896,8 +897,8 @@ def build_parser() -> argparse.ArgumentParser:
                                         "to solve, else 'floor')")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1),
                    help="metres, for the floor view (default: the one given to solve, as recorded, else 0)")
-    p.add_argument("--max-px", type=_finite(0.01, 100.0), default=1.0,
-                   help="largest acceptable reprojection rms (default 1 px)")
+    p.add_argument("--max-px", type=_finite(0.01, 100.0), default=CheckLimits.max_px,
+                   help=f"largest acceptable reprojection rms (default {CheckLimits.max_px:g} px)")
     p.add_argument("--max-scale-error", type=_finite(0.0001, 1.0), default=CheckLimits.max_scale_error, help="default 0.01 (1 %%)")
     p.add_argument("--max-floor-mm", type=_finite(0.1, 10000.0), default=CheckLimits.max_floor_mm,
                    help=f"the floor view's height off the floor (default {CheckLimits.max_floor_mm:g})")

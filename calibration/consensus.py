@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from calibration.board import BoardSpec
-from calibration.detect import BoardView
+from calibration.detect import BoardView, fixes_a_pose
 
 __all__ = ["CONSENSUS_MM", "CONSENSUS_DEG", "pair_relative_pose", "agreeing_pairs"]
 
@@ -34,10 +34,17 @@ Pose = tuple[np.ndarray, np.ndarray]  # R (3, 3), t (3,): X_second = R @ X_first
 
 
 def _board_pose(board: BoardSpec, view: BoardView, ids: np.ndarray, K: np.ndarray, dist: np.ndarray) -> Pose | None:
+    # a row and one corner off it leaves the pose free (no four corners without three on a line): IPPE still
+    # answered, 0.6 m off on exact corners, and under four it raised a cv2.error where None is promised
+    if not fixes_a_pose(board, np.asarray(ids)):
+        return None
     obj = board.corners_m()[ids].astype(np.float64)
     img = view.corners[np.searchsorted(view.ids, ids)].astype(np.float64)
     # IPPE: made for a planar target, and it picks the better of a flat board's two mirror poses
-    ok, rvec, tvec = cv2.solvePnP(obj, img, K, np.asarray(dist, float), flags=cv2.SOLVEPNP_IPPE)
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, img, K, np.asarray(dist, float), flags=cv2.SOLVEPNP_IPPE)
+    except cv2.error:  # corners OpenCV refuses outright (non-finite ones): no pose, as promised
+        return None
     if not ok or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
         return None
     return cv2.Rodrigues(rvec)[0], tvec.reshape(3)

@@ -12,6 +12,7 @@ class BoardError(CalibrationError, ValueError):
     def __init__(self, message: str, *, key: str | None = None, path: str | None = None) -> None:
         where = ": ".join(p for p in (path, key) if p)
         super().__init__(f"{where}: {message}" if where else message)
+        self.detail = message  # without the place, for re-raising it with the file's
         self.key = key
         self.path = path
 

@@ -28,7 +28,13 @@ def down_in_camera(pitch_deg: float = 0.0, roll_deg: float = 0.0) -> np.ndarray:
 
     ``pitch_deg``: the optical axis below the horizon (positive looks down). ``roll_deg``: the camera
     turned about its optical axis, counterclockwise as seen from behind it (180: upside down).
+
+    Raises:
+        GeometryError: an angle that is not a finite number (a NaN gave a NaN direction, silently).
     """
+    for what, value in (("pitch_deg", pitch_deg), ("roll_deg", roll_deg)):
+        if not _is_number(value):
+            raise GeometryError(f"{what} must be a finite number of degrees, got {value!r}")
     p, r = math.radians(pitch_deg), math.radians(roll_deg)
     level = np.array([0.0, math.cos(p), math.sin(p)])  # a camera looking down sees gravity partly ahead
     roll = np.array([[math.cos(r), -math.sin(r), 0.0], [math.sin(r), math.cos(r), 0.0], [0.0, 0.0, 1.0]])

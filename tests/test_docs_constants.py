@@ -16,8 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from calibration.board import MIN_CORNERS, BoardSpec
+from calibration.check import CheckLimits
 from calibration.cli import STALL_NOTE_S
 from calibration.capture import MISMATCH_TRIES
+from calibration.consensus import CONSENSUS_DEG, CONSENSUS_MM
 from calibration.solve import COVERAGE_GRID, MIN_VIEWS, USUAL_PITCH_DEG
 from drivers.backends.replay import MIN_SPEED
 from drivers.url import whole_number
@@ -145,6 +148,15 @@ def _doc(name: str) -> str:
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
     ("docs/protocol.md", f"a name past {MAX_HOST_NAME} characters), named when the sink opens"),
+    # session 54: the board, consensus and check constants docs/calibration.md explains
+    ("docs/calibration.md", f"The default board is {BoardSpec().squares_x}x{BoardSpec().squares_y} squares of "
+                            f"{1000 * BoardSpec().square_m:g} mm"),
+    ("docs/calibration.md", f"at least {MIN_CORNERS}, and not all but one on one line"),
+    ("docs/calibration.md", f"agree within {CONSENSUS_MM:g} mm and {CONSENSUS_DEG:g} degrees "
+                            "(`CONSENSUS_MM`, `CONSENSUS_DEG`)"),
+    ("docs/calibration.md", f"`--max-px` (default {CheckLimits.max_px:g} px rms)"),
+    ("docs/calibration.md", f"`--max-scale-error` (default {100 * CheckLimits.max_scale_error:g} %)"),
+    ("docs/calibration.md", f"`--max-floor-mm` off the floor (default {CheckLimits.max_floor_mm:g} mm)"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

@@ -33,6 +33,17 @@ def show(value: Any, limit: int = 120) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def not_text_problem(head: bytes, what: str) -> str | None:
+    """Why a file starting with ``head`` is not the UTF-8 text of ``what`` (None: it may be). The parsers said
+    "(-215:Assertion failed) buf" (OpenCV, a file of NULs), "Invalid or unsupported syntax" at line 1 (OpenCV,
+    UTF-16 text: a Windows editor's "Unicode") or "not UTF-8 (byte 0)", none naming what the file was."""
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return "UTF-16 text (its byte-order mark says so): save it as UTF-8"
+    if b"\x00" in head:
+        return f"a binary file (a NUL byte at {head.index(bytes(1))}), not {what} text"
+    return None
+
+
 def fail(path, field: str | None, message: str) -> RigFileError:
     return RigFileError(message, path=None if path is None else str(path), field=field)
 
@@ -43,6 +54,9 @@ def join(field: str, key: str) -> str:
 
 
 def check_units(units_to_metres: float) -> float:
+    # float() took "0.001" and True (1 m per unit) and raised a bare ValueError for "mm"
+    if isinstance(units_to_metres, bool) or not isinstance(units_to_metres, (int, float, np.integer, np.floating)):
+        raise GeometryError(f"units_to_metres must be a positive finite number, got {units_to_metres!r}")
     value = float(units_to_metres)
     if not (math.isfinite(value) and value > 0):
         raise GeometryError(f"units_to_metres must be a positive finite number, got {units_to_metres!r}")

@@ -40,7 +40,16 @@ from typing import Any
 import cv2
 import numpy as np
 
-from calibration.formats._common import as_array, check_units, fail, make_camera, make_rig, refuse_skew, show
+from calibration.formats._common import (
+    as_array,
+    check_units,
+    fail,
+    make_camera,
+    make_rig,
+    not_text_problem,
+    refuse_skew,
+    show,
+)
 from calibration.formats._frame import KEYS as LEVELLING_KEYS, levelling_metadata, levelling_of, recorded_levelling
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.rig_file import write_text_atomic
@@ -78,7 +87,10 @@ def read_anipose_toml(
     units = check_units(units_to_metres)
     p = Path(path)
     try:
-        text = p.read_bytes().decode("utf-8-sig")  # a byte-order mark (Windows editors): tomllib refused line 1
+        raw = p.read_bytes()
+        if problem := not_text_problem(raw[:4096], "TOML"):
+            raise fail(path, None, problem)
+        text = raw.decode("utf-8-sig")  # a byte-order mark (Windows editors): tomllib refused line 1
     except OSError as e:
         raise fail(path, None, f"cannot read: {e.strerror or e}") from e
     except UnicodeDecodeError as e:
@@ -92,8 +104,10 @@ def read_anipose_toml(
 
     declared = doc.get("metadata", {}).get("units_to_metres") if isinstance(doc.get("metadata"), dict) else None
     if declared is not None:  # ours: the unit the writer was given; aniposelib files say nothing
-        if isinstance(declared, bool) or not isinstance(declared, (int, float)) or not declared > 0:
-            raise fail(path, "metadata.units_to_metres", f"must be a positive number, got {show(declared)}")
+        if isinstance(declared, bool) or not isinstance(declared, (int, float)) or not (math.isfinite(declared)
+                                                                                     and declared > 0):
+            # inf passed here and was then called a unit that contradicts the argument
+            raise fail(path, "metadata.units_to_metres", f"must be a positive finite number, got {show(declared)}")
         if not math.isclose(float(declared), units, rel_tol=1e-9):
             raise fail(path, "metadata.units_to_metres", f"the file says {declared!r} m per unit, the argument "
                                                          f"{units!r}: the rig would be scaled by their ratio")

@@ -32,7 +32,8 @@ Stereo pair (OpenCV's ``stereo_calib`` sample: ``intrinsics.yml`` + ``extrinsics
                                      neither, so pass ``image_size``)
     The rig frame is camera 1's frame; cameras are named ``left`` and ``right``.
 
-Matrices may be ``!!opencv-matrix`` nodes or plain (nested) sequences. Translations are
+Matrices may be ``!!opencv-matrix`` nodes (read as the digits of their ``data``; one whose ``dt``
+changes them, ``dt: i`` for 320.5, is refused) or plain (nested) sequences. Translations are
 multiplied by ``units_to_metres`` on reading and divided by it on writing; OpenCV
 calibrations come out in the units of the board's square size (often millimetres), so a
 stereo_calib or single-camera file whose ``T`` is not zero needs ``units_to_metres``: from
@@ -47,6 +48,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -59,6 +61,7 @@ from calibration.formats._common import (
     fail,
     join,
     make_camera,
+    not_text_problem,
     make_rig,
     refuse_skew,
     rotation,
@@ -78,6 +81,9 @@ _FISHEYE_KEYS = ("fisheye_model", "fisheye")
 
 __all__ = ["read_opencv_camera", "read_opencv_rig", "write_opencv_camera", "write_opencv_rig"]
 
+#: How much of a file is looked at for the marks of one that is not FileStorage text (NULs, UTF-16).
+_SNIFF_BYTES = 4096
+
 
 # --------------------------------------------------------------------------- reading helpers
 def _open(path) -> cv2.FileStorage:
@@ -86,11 +92,14 @@ def _open(path) -> cv2.FileStorage:
         raise fail(path, None, "no such file" if not p.exists() else "not a regular file")
     try:
         with open(p, "rb") as f:
-            head = f.read(3)
+            head = f.read(_SNIFF_BYTES)
         # FileStorage's own words for an empty file: "(-215:Assertion failed) buf in function 'open'"
         if not head.strip() and not p.read_bytes().strip():
             raise fail(path, None, "the file is empty")
-        if head == b"\xef\xbb\xbf":  # a byte-order mark (Windows editors): FileStorage refused line 1's syntax
+        if not p.name.lower().endswith(".gz"):  # FileStorage reads a gzipped file itself
+            if problem := not_text_problem(head, "OpenCV FileStorage (YAML, XML or JSON)"):
+                raise fail(path, None, problem)
+        if head[:3] == b"\xef\xbb\xbf":  # a byte-order mark (Windows editors): FileStorage refused line 1's syntax
             text = p.read_bytes()[3:].decode("utf-8")
             fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
         else:
@@ -119,10 +128,18 @@ def _numeric(node, path, field: str) -> np.ndarray | None:
     if node.isInt() or node.isReal():
         return np.array(node.real())
     if node.isString():
+        if node.string() == "...":  # OpenCV's reading of a last key left without a value (a file cut short)
+            raise fail(path, field, "has no value (the file cut short?)")
         raise fail(path, field, f"must be a number or a matrix, got the string {node.string()!r}")
     if node.isMap():
-        if "data" not in _keys(node):
-            raise fail(path, field, f"must be a number or a matrix, got a map with keys {list(_keys(node))}")
+        keys = _keys(node)
+        if "data" not in keys:
+            if {"rows", "cols", "dt"} & set(keys):  # a matrix whose data was cut off: said as a stray map
+                raise fail(path, field, f"an !!opencv-matrix without its data (it has {', '.join(keys)}; the file cut "
+                                        "short?)")
+            raise fail(path, field, f"must be a number or a matrix, got a map with keys {list(keys)}")
+        if count := _matrix_count_problem(node):  # OpenCV's words: "nelems == m.total()*m.channels()"
+            raise fail(path, field, f"malformed !!opencv-matrix: {count}")
         try:
             mat = node.mat()
         except cv2.error as e:
@@ -130,7 +147,7 @@ def _numeric(node, path, field: str) -> np.ndarray | None:
             raise fail(path, field, f"malformed !!opencv-matrix: {msg}") from e
         if mat is None:  # OpenCV reads a 0-element matrix as None
             return np.zeros(0)
-        return np.asarray(mat, dtype=np.float64)
+        return _matrix_as_written(node, np.asarray(mat, dtype=np.float64), path, field)
     if node.isSeq():
         items = [_numeric(node.at(i), path, f"{field}[{i}]") for i in range(node.size())]
         if any(item is None for item in items):
@@ -140,6 +157,45 @@ def _numeric(node, path, field: str) -> np.ndarray | None:
         except ValueError:
             raise fail(path, field, "must be a rectangular (nested) sequence of numbers") from None
     raise fail(path, field, "must be a number or a matrix")
+
+
+def _matrix_count_problem(node) -> str | None:
+    """Why an ``!!opencv-matrix``'s ``data`` does not fill its ``rows`` x ``cols`` (x channels); None: it does, or
+    the node is malformed otherwise (OpenCV names that)."""
+    rows, cols, dt, data = (node.getNode(k) for k in ("rows", "cols", "dt", "data"))
+    if not (rows.isInt() and cols.isInt() and dt.isString() and data.isSeq()):
+        return None
+    digits = re.match(r"\d*", dt.string()).group()
+    channels = int(digits) if digits else 1
+    want = int(rows.real()) * int(cols.real()) * channels
+    if data.size() == want:
+        return None
+    shape = f"rows {int(rows.real())} x cols {int(cols.real())}" + (f" x {channels} channels" if channels != 1 else "")
+    return f"{shape} is {want} values, but data has {data.size()}"
+
+
+def _matrix_as_written(node, mat: np.ndarray, path, field: str) -> np.ndarray:
+    """An ``!!opencv-matrix``'s values as its ``data`` prints them, checked against ``mat`` (OpenCV's reading).
+
+    OpenCV converts ``data`` to the type ``dt`` names, silently: ``dt: i`` read a principal point of 320.5
+    as 320 and ``dt: u`` a focal length of 600 as 255. A value ``dt`` cannot hold is refused, naming both;
+    float32's rounding (``dt: f``) is not a loss, and the digits printed are taken.
+    """
+    data = node.getNode("data")
+    if not data.isSeq() or data.size() != mat.size:
+        return mat
+    items = [data.at(i) for i in range(data.size())]
+    if not all(item.isInt() or item.isReal() for item in items):
+        return mat
+    written = np.array([item.real() for item in items], dtype=np.float64)
+    read = mat.reshape(-1)
+    changed = ~np.isclose(read, written, rtol=1e-6, atol=0.0, equal_nan=True)
+    if np.any(changed):
+        k = int(np.argmax(changed))
+        dt = node.getNode("dt").string() if node.getNode("dt").isString() else "?"
+        raise fail(path, field, f"dt: {dt} cannot hold data[{k}] = {float(written[k])!r}: OpenCV reads it as {float(read[k])!r} "
+                                f"({int(changed.sum())} of {changed.size} values change); write the matrix with dt: d")
+    return written.reshape(mat.shape)
 
 
 def _pick(node, keys: Sequence[str], path, field: str, required: bool = True) -> tuple[str, Any]:

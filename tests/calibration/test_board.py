@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import cv2
 import numpy as np
@@ -70,3 +71,74 @@ def test_the_printed_image_detects_with_every_corner():
 def test_no_board_no_view():
     assert BoardDetector(BoardSpec()).detect(np.full((200, 300), 128, np.uint8)) is None
     assert BoardDetector(BoardSpec()).detect(cv2.cvtColor(np.zeros((50, 50), np.uint8), cv2.COLOR_GRAY2BGR)) is None
+
+
+def test_a_board_file_saved_by_a_windows_editor_reads(tmp_path):
+    # the measured square size typed in with Notepad: a byte-order mark and CRLF line ends, refused as "not JSON"
+    board = BoardSpec(square_m=0.0787, marker_m=0.059)
+    path = tmp_path / "board.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(board.to_dict(), indent=2).replace("\n", "\r\n").encode())
+    assert load_board(path) == board
+
+
+def test_a_key_given_twice_is_refused_naming_it(tmp_path):
+    # the measured size typed in above the old line: json kept the last, the old 80 mm, and scaled the rig by it
+    path = tmp_path / "board.json"
+    path.write_text('{"squares_x": 9, "squares_y": 6, "square_m": 0.0787, "marker_m": 0.059, "square_m": 0.08}')
+    with pytest.raises(BoardError, match=r"square_m: given twice \(0\.0787 and 0\.08\)") as e:
+        load_board(path)
+    assert e.value.key == "square_m" and e.value.path == str(path)
+
+
+@pytest.mark.parametrize("content, words", [(b"", "the file is empty"), (b" \r\n\t\n", "the file is empty"),
+                                            (b"\x89PNG\r\n\x1a\n\x00\x00", "not UTF-8 text (byte 0)")])
+def test_an_empty_or_binary_board_file_says_so(tmp_path, content, words):
+    path = tmp_path / "board.json"
+    path.write_bytes(content)
+    with pytest.raises(BoardError, match=f"^{re.escape(str(path))}: .*{re.escape(words)}"):  # was "Expecting value"
+        load_board(path)
+
+
+def test_a_size_typed_in_millimetres_is_said_as_such():
+    with pytest.raises(BoardError, match=r"square_m: .*got 80 \(millimetres\? 80 mm is 0\.08 m\)"):
+        BoardSpec(square_m=80, marker_m=60)
+    with pytest.raises(BoardError) as e:  # far out of range, and not a number: no guess
+        BoardSpec(square_m=5000.0)
+    assert "millimetres" not in str(e.value)
+
+
+@pytest.mark.parametrize("kwargs, key", [
+    ({"px_per_square": 30.5}, "px_per_square"),
+    ({"px_per_square": 19}, "px_per_square"),
+    ({"px_per_square": "60"}, "px_per_square"),
+    ({"px_per_square": 60, "margin_px": -1}, "margin_px"),
+])
+def test_image_parameters_are_named(kwargs, key):
+    # a float or a negative margin reached OpenCV: a bare cv2.error naming neither
+    with pytest.raises(BoardError) as e:
+        BoardSpec().image(**kwargs)
+    assert e.value.key == key
+
+
+def test_markers_too_small_to_draw_are_named_not_an_opencv_traceback(tmp_path, capsys):
+    from calibration import cli
+
+    board = BoardSpec(square_m=0.1, marker_m=0.002)  # 2 mm markers: valid, but 5 px at 72 dpi for 7 cells
+    with pytest.raises(BoardError, match="marker_m: markers of 2 mm in squares of 100 mm are 5 px") as e:
+        board.image(px_per_square=283)
+    assert e.value.key == "marker_m"
+    path = tmp_path / "tiny.json"
+    path.write_text(json.dumps(board.to_dict()))
+    assert cli.main(["board", "--board", str(path), "--out", str(tmp_path / "out"), "--dpi", "72"]) == 2
+    assert "marker_m: markers of 2 mm" in capsys.readouterr().err
+    assert board.image(px_per_square=400).shape == (6 * 400, 9 * 400)  # 8 px: drawn
+
+
+def test_the_file_is_named_before_the_key_and_the_whole_message(tmp_path):
+    # the file's name is put before the message as raised (BoardError.detail), colons in it kept
+    path = tmp_path / "board.json"
+    path.write_text(json.dumps({"squares_x": 3, "squares_y": 3}))
+    with pytest.raises(BoardError) as e:
+        load_board(path)
+    assert str(e.value) == (f"{path}: squares_x: a 3x3 board has 4 inner corners; a view needs at least 6, so it "
+                            "could never be found: add squares")

@@ -651,6 +651,11 @@ def test_a_byte_order_mark_is_skipped(rig, tmp_path, suffix):
         read = read_opencv_rig
     marked.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
     assert_cameras_close(read(plain), read(marked), atol=0)
+    crlf = tmp_path / f"crlf{suffix}"  # and Windows line ends, with the mark or without
+    crlf.write_bytes(plain.read_bytes().replace(b"\n", b"\r\n"))
+    marked.write_bytes(b"\xef\xbb\xbf" + crlf.read_bytes())
+    assert_cameras_close(read(plain), read(crlf), atol=0)
+    assert_cameras_close(read(plain), read(marked), atol=0)
 
 
 def test_an_empty_foreign_file_says_so(tmp_path):
@@ -697,3 +702,124 @@ def test_a_distortion_or_a_third_camera_the_rig_file_refuses_is_refused_on_impor
     with pytest.raises(RigFileError, match=r"camera 'side cam': its distortion coefficient k1 = 1e\+308") as info:
         read_opencv_rig(tmp_path / "wild.yaml")
     assert info.value.field == "cameras[2].distortion_coefficients"
+
+
+@pytest.mark.parametrize("suffix", [".yml", ".xml", ".json", ".toml"])
+def test_a_binary_or_utf16_file_is_named_as_such(rig, tmp_path, suffix):
+    # OpenCV said "(-215:Assertion failed) buf" for NULs and "Invalid or unsupported syntax" for UTF-16 text
+    good = tmp_path / f"good{suffix}"
+    if suffix == ".toml":
+        write_anipose_toml(rig, good, units_to_metres=0.001)
+        read = lambda p: read_anipose_toml(p, units_to_metres=0.001)  # noqa: E731
+    else:
+        write_opencv_rig(rig, good)
+        read = read_opencv_rig
+    cases = {"nul": (bytes(16), "a binary file (a NUL byte at 0)"),
+             "png": (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "a binary file (a NUL byte at 8)"),
+             "utf16": (good.read_text().encode("utf-16"), "UTF-16 text")}
+    for name, (content, words) in cases.items():
+        path = tmp_path / f"{name}{suffix}"
+        path.write_bytes(content)
+        with pytest.raises(RigFileError) as info:
+            read(path)
+        assert info.value.path == str(path) and info.value.field is None
+        assert words in str(info.value), (name, str(info.value))
+
+
+OPENCV_TYPED_K = """%YAML:1.0
+---
+image_width: 640
+image_height: 480
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: {dt}
+   data: [ {fx}, 0., {cx}, 0., 600., 240., 0., 0., 1. ]
+distortion_coefficients: [0, 0, 0, 0, 0]
+"""
+
+
+@pytest.mark.parametrize("dt, fx, cx, words", [
+    ("i", "600", "320.5", "dt: i cannot hold data[2] = 320.5: OpenCV reads it as 320.0"),
+    ("u", "600", "320", "dt: u cannot hold data[0] = 600.0: OpenCV reads it as 255.0 (3 of 9 values change)"),
+])
+def test_a_matrix_type_that_changes_its_values_is_refused(tmp_path, dt, fx, cx, words):
+    # OpenCV converts data to dt silently: a principal point 0.5 px off, or a focal length of 255 px
+    path = tmp_path / "cam.yml"
+    path.write_text(OPENCV_TYPED_K.format(dt=dt, fx=fx, cx=cx))
+    with pytest.raises(RigFileError) as info:
+        read_opencv_camera(path)
+    assert info.value.field == "camera_matrix" and words in str(info.value), str(info.value)
+
+
+def test_a_float32_matrix_reads_the_digits_printed(tmp_path):
+    path = tmp_path / "cam.yml"
+    path.write_text(OPENCV_TYPED_K.format(dt="f", fx="600.1", cx="320.3"))
+    cam = read_opencv_camera(path)  # not float32's 600.0999755859375
+    assert cam.K[0, 0] == 600.1 and cam.K[0, 2] == 320.3
+    path.write_text(OPENCV_TYPED_K.format(dt="i", fx="600", cx="320"))  # whole numbers: nothing changes
+    assert read_opencv_camera(path).K[0, 2] == 320.0
+
+
+@pytest.mark.parametrize("units", ["0.001", "mm", True, None])
+def test_a_units_argument_that_is_not_a_number_is_named(rig, tmp_path, units):
+    # float() took "0.001" and True (1 m per unit), and "mm" raised a bare ValueError
+    write_anipose_toml(rig, tmp_path / "rig.toml", units_to_metres=1.0)
+    with pytest.raises(GeometryError, match="units_to_metres must be a positive finite number"):
+        read_anipose_toml(tmp_path / "rig.toml", units_to_metres=units)
+    with pytest.raises(GeometryError, match="units_to_metres"):
+        write_opencv_rig(rig, tmp_path / "rig.yml", units_to_metres=units)
+
+
+@pytest.mark.parametrize("tail, words", [
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n", "an !!opencv-matrix without its data (it has rows; the file cut short?)"),
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n", "without its data (it has rows, cols, dt;"),
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 600., 0., 320., 0. ]\n",
+     "malformed !!opencv-matrix: rows 3 x cols 3 is 9 values, but data has 4"),
+    ("camera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 1\n   dt: \"3d\"\n   data: [ 600., 0., 320. ]\n",
+     "rows 3 x cols 1 x 3 channels is 9 values, but data has 3"),
+    ("camera_matrix:\n", "has no value (the file cut short?)"),
+])
+def test_a_file_cut_short_in_a_matrix_says_what_is_missing(tmp_path, tail, words):
+    # OpenCV's readings: "a map with keys ['rows']", "(-215:Assertion failed) nelems == m.total()*m.channels()",
+    # and a key left without a value read as "the string '...'"
+    path = tmp_path / "cam.yml"
+    path.write_text("%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\ndistortion_coefficients: [0, 0, 0, 0, 0]\n"
+                    + tail)
+    with pytest.raises(RigFileError) as info:
+        read_opencv_camera(path)
+    assert info.value.field == "camera_matrix" and words in str(info.value), str(info.value)
+
+
+def test_a_rotation_printed_with_few_digits_is_snapped_and_one_that_is_not_a_rotation_refused(tmp_path):
+    # docs/rig-file.md: within 1e-4 of a rotation, snapped to the nearest (SVD); else refused naming R
+    true = cv2.Rodrigues(np.array([0.01, -0.05, 0.002]))[0]
+    printed = np.round(true, 5)
+    path = tmp_path / "rig.yaml"
+
+    def read_with(R):
+        rows = ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in R)
+        path.write_text(_multi_yaml(_cams(R=f"[{rows}]")))
+        return read_opencv_rig(path).cameras[1].R
+
+    R = read_with(printed)
+    assert np.abs(R @ R.T - np.eye(3)).max() < 1e-12 and np.linalg.det(R) == pytest.approx(1.0, abs=1e-12)
+    assert np.abs(R - true).max() < 1e-5
+    for bad, words in ((true @ np.diag([1.0, 1.0, -1.0]), "det = -1"),  # a reflection: orthonormal, det -1
+                       (1.01 * true, "det = 1.03"),  # scaled: det far from 1
+                       (true + np.array([[0.0, 0.05, 0.0], [0, 0, 0], [0, 0, 0]]), "max |R R^T - I| = 0.05")):
+        with pytest.raises(RigFileError, match=r"must be a rotation \(orthonormal, det \+1\)") as info:
+            read_with(bad)
+        assert info.value.field == "cameras[1].R" and words in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("declared", ["inf", "nan", "-0.001", '"mm"'])
+def test_a_units_key_in_a_toml_file_that_is_not_a_unit_is_named(rig, tmp_path, declared):
+    # inf passed the check and was then called a unit that contradicts the argument
+    text = dumps_anipose_toml(rig, units_to_metres=0.001).replace("units_to_metres = 0.001",
+                                                                  f"units_to_metres = {declared}")
+    path = tmp_path / "calibration.toml"
+    path.write_text(text)
+    with pytest.raises(RigFileError, match="must be a positive finite number") as info:
+        read_anipose_toml(path, units_to_metres=0.001)
+    assert info.value.field == "metadata.units_to_metres"

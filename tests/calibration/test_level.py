@@ -45,6 +45,9 @@ def test_level_rig_refuses_what_it_cannot_do():
         level_rig(rig, camera_height_m=0.0)
     with pytest.raises(GeometryError, match="along gravity"):
         level_rig(rig, camera_height_m=3.0, pitch_deg=90.0)  # a pair looking straight down: no forward
+    with pytest.raises(GeometryError, match="along gravity"):
+        level_rig(rig, camera_height_m=3.0, pitch_deg=-90.0)  # or straight up
+    assert level_rig(rig, camera_height_m=3.0, pitch_deg=89.0).metadata["levelled"]["pitch_deg"] == 89.0  # nearly: fine
     # a NaN or infinite angle (an inclinometer that read nothing) raised a bare ValueError or blamed R;
     # a reference past the cameras an IndexError
     for bad in (math.nan, math.inf, -math.inf, "10", None):
@@ -77,3 +80,13 @@ def test_the_estimator_warns_about_a_tool_frame_until_the_rig_is_levelled(caplog
     with caplog.at_level("WARNING"):
         Estimator(OracleSession(edge128_contract()), levelled)
     assert "level it first" not in caplog.text
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, "10", None, True])
+def test_gravity_from_angles_that_are_not_numbers_is_refused(bad):
+    # a NaN pitch gave a NaN direction, silently: every caller had to check the angles itself
+    for key in ("pitch_deg", "roll_deg"):
+        with pytest.raises(GeometryError, match=key):
+            down_in_camera(**{key: bad})
+    np.testing.assert_allclose(down_in_camera(90.0), [0.0, 0.0, 1.0], atol=1e-15)  # straight down: along the axis
+    np.testing.assert_allclose(down_in_camera(-90.0), [0.0, 0.0, -1.0], atol=1e-15)  # straight up

@@ -14,7 +14,7 @@ import pytest
 
 from calibration import cli
 from calibration.board import BoardSpec, load_board
-from calibration.check import CheckLimits, check_failures, check_rig
+from calibration.check import CheckLimits, check_failures, check_rig, floor_unmeasured
 from calibration.detect import BoardView
 from calibration.render import board_poses_both_see, example_rig
 from calibration.errors import SolveError
@@ -243,6 +243,25 @@ def test_each_pair_alone_gives_the_pose_and_bad_ones_disagree():
     assert agreeing_pairs([None, *poses[2:]]) == [1, 2, 3]  # a pose not solved agrees with none
 
 
+def test_corners_that_do_not_fix_the_board_give_no_single_pair_pose():
+    # exact corners: a row and one corner off it gave a pose 0.6 m off the truth (IPPE answers anyway), and
+    # three corners a cv2.error, where pair_relative_pose promises None
+    rig = example_rig()
+    intr = _true_intrinsics(rig)
+    views = _views(rig, _facing_poses(rig, 1, seed=6))
+    first, second = views["left"]["000"], views["right"]["000"]
+    per_row = BOARD.squares_x - 1
+
+    def pose(ids):
+        return pair_relative_pose(BOARD, first, second, np.asarray(ids), intr["left"].K, intr["left"].dist,
+                                  intr["right"].K, intr["right"].dist)
+
+    for ids in (range(3), range(per_row), [*range(per_row), per_row + 2], [0, per_row + 1, 2 * per_row + 2, 3]):
+        assert pose(list(ids)) is None, list(ids)
+    R, t = pose([*range(per_row), per_row, per_row + 3])  # two corners off the row: fixed
+    assert np.linalg.norm(t - _relative_t(*rig.pair)) < 1e-6
+
+
 def _with_moved_boards(rig: Rig, pairs: int, bad: int, shift_m: float, seed: int) -> dict:
     """``pairs`` shared views whose first ``bad`` have their right image of the board moved ``shift_m``."""
     poses = _facing_poses(rig, pairs, seed=seed)
@@ -336,6 +355,33 @@ def test_a_tilted_rig_fails_on_the_floor(level_rig, level_views):
     reasons = check_failures(report)
     assert len(reasons) == 1 and "off the floor" in reasons[0], reasons
     assert check_failures(report, CheckLimits(max_floor_mm=1000.0)) == []
+
+
+def test_why_the_floor_view_was_not_measured_is_said(level_rig, level_views):
+    # ghcal check said "the board was not found in both cameras' floor view" whatever the reason, also where
+    # both found it and a camera turned far kept its corners from triangulating: retaking it would not help
+    assert floor_unmeasured(check_rig(level_rig, BOARD, level_views), level_views) is None
+    right = level_rig.camera("right")
+    back = cv2.Rodrigues(np.array([0.0, math.pi, 0.0]))[0]  # turned to face away: no ray meets in front of it
+    turned = Rig((level_rig.camera("left"), right.with_pose(back @ right.R, back @ right.t)), level_rig.volume)
+    report = check_rig(turned, BOARD, level_views)
+    assert "floor" not in report and report["per_view"]["floor"]["untriangulated"] == 24
+    assert floor_unmeasured(report, level_views) == ("none of the 24 corners both cameras found in floor view "
+                                                     "'floor' triangulates in front of both cameras")
+
+    def keep(views, camera, ids):
+        views = {cam: dict(named) for cam, named in views.items()}
+        view = views[camera]["floor"]
+        views[camera]["floor"] = BoardView(view.ids[ids], view.corners[ids], view.image_size)
+        return views
+
+    few = keep(keep(level_views, "right", slice(6, 24)), "left", slice(0, 9))  # corners 6, 7 and 8 in both
+    assert floor_unmeasured(check_rig(level_rig, BOARD, few), few) == (
+        "the cameras found 3 of the same corners in floor view 'floor', fewer than the 6 a measurement needs")
+    one = {cam: {n: v for n, v in named.items() if cam == "left" or n != "floor"} for cam, named in level_views.items()}
+    assert floor_unmeasured(check_rig(level_rig, BOARD, one), one) == "only camera 'left' found the board in floor view 'floor'"
+    none = {cam: {n: v for n, v in named.items() if n != "floor"} for cam, named in level_views.items()}
+    assert floor_unmeasured(check_rig(level_rig, BOARD, none), none) is None  # the caller says whether it was taken
 
 
 def test_the_board_file_measured_on_the_print_is_not_overwritten(tmp_path, capsys):
