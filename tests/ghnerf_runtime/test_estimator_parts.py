@@ -62,6 +62,14 @@ def test_box_block_covers_the_projected_box():
     assert box_block(cam, box + [0, 0, -10.0], 4) is None  # behind the camera
 
 
+def test_box_block_names_a_box_that_is_not_a_finite_min_max_pair():
+    """A NaN corner reached ``int(np.floor(nan))``: numpy's bare "cannot convert float NaN to integer"."""
+    cam = _cams()[0]
+    for box in ([[np.nan, -1.0, 2.0], [0.0, 0.0, 3.0]], [[0.0, -1.0, 2.0], [np.inf, 0.0, 3.0]], [[0.0, -1.0, 2.0]]):
+        with pytest.raises(ShapeError, match=r"box must be a finite \(2, 3\) array"):
+            box_block(cam, np.array(box), 4)
+
+
 def test_box_block_of_a_box_reaching_behind_or_off_the_image():
     cam = _cams()[0]
     centre, forward = cam.center, cam.R[2]  # the camera's position and optical axis (rig frame)
