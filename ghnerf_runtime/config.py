@@ -349,7 +349,9 @@ class Joints3DConfig:
             missing: its depth is meaningless (about ``sigma * Z / (f * sin(angle))``, docs/geometry.md). The
             default 0.5 is below every joint the estimator keeps on the example rig (7.5 cm baseline: 0.71 at
             the far corner of its working volume plus ``max_outside_box_m``) and above a joint 30 m from a
-            10 cm baseline (0.19), which the solvers' own 0.1 (the numerically degenerate) kept.
+            10 cm baseline (0.19), which the solvers' own 0.1 (the numerically degenerate) kept. 0 turns the
+            gate off, not the solvers' floor: rays on one line to rounding or from one centre give no joint
+            (``geometry.triangulation.MIN_RAY_ANGLE_FLOOR_DEG``, docs/geometry.md).
         max_outside_box_m: a 3D joint further than this outside the sweep box (the tracked
             subject box, or the working volume) or outside the working volume is missing (so a
             track cannot drift out of the volume either). Two views cannot catch an error

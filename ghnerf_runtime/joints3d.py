@@ -96,10 +96,19 @@ def gate_to_box(joints: Joints3D, box: np.ndarray, margin: float) -> Joints3D:
     return Joints3D(joints.points, joints.confidence, joints.valid & inside, joints.reprojection_px).sanitised()
 
 
+def _numeric(name: str, value, dtype) -> np.ndarray:
+    """``value`` as a ``dtype`` array; a ragged or non-numeric one is a :class:`ShapeError` naming ``name``
+    (numpy's bare ValueError did not say which argument)."""
+    try:
+        return np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as e:
+        raise ShapeError(f"{name} must be a numeric array, got {type(value).__name__}: {e}") from None
+
+
 def _check_views(uv: np.ndarray, conf: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    uv = np.asarray(uv, dtype=np.float64)
-    conf = np.asarray(conf, dtype=np.float64)
-    valid = np.asarray(valid, bool)
+    uv = _numeric("uv", uv, np.float64)
+    conf = _numeric("confidence", conf, np.float64)
+    valid = _numeric("valid", valid, bool)
     if uv.ndim != 3 or uv.shape[-1] != 2 or conf.shape != uv.shape[:2] or valid.shape != uv.shape[:2]:
         raise ShapeError(f"uv (C, J, 2), confidence (C, J), valid (C, J) expected, got {uv.shape}, {conf.shape}, "
                          f"{valid.shape}")
@@ -181,6 +190,9 @@ def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Ca
         0.9
     """
     uv, conf, ok = _check_views(uv_model, confidence, valid)
+    if len(cameras) != uv.shape[0]:  # (J, C, 2) with a matching (J, C) confidence passed _check_views
+        raise ShapeError(f"uv_model has {uv.shape[0]} views on axis 0 (shape {uv.shape}) but {len(cameras)} cameras "
+                         "were given: the peaks are (C, J, 2), views first")
     use = ok & (conf >= config.min_view_confidence) & (conf > 0) & np.all(np.isfinite(uv), axis=-1)
     weights = np.where(use, conf, 0.0)
     mats = [np.asarray(c.P if isinstance(c, Camera) else c, dtype=np.float64) for c in cameras]  # pinhole: P suffices

@@ -37,7 +37,14 @@ def box_block(camera: Camera, box: np.ndarray, stride: int, margin_cells: int = 
 
     Returns ``None`` when the box is entirely behind the camera or outside its image; the full
     grid when a corner is behind the camera (the projection is unbounded).
+
+    Raises:
+        ShapeError: ``box`` is not a finite ``(2, 3)`` array.
     """
+    box = np.asarray(box, dtype=np.float64)
+    if box.shape != (2, 3) or not np.isfinite(box).all():  # NaN reached int(np.floor(nan)): a bare ValueError
+        raise ShapeError(f"box must be a finite (2, 3) array (min and max corners), got shape {box.shape}: "
+                         f"{box.tolist()}")
     gh, gw = camera.height // stride, camera.width // stride
     pc = camera.to_camera(_box_corners(box))
     z = pc[:, 2]

@@ -42,9 +42,11 @@ from ghnerf_runtime.config import Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.estimator import _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, PairResult
 from ghnerf_runtime.geometry import triangulate_dlt
+from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
 from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
+from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_RAY_ANGLE_FLOOR_DEG
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
@@ -59,6 +61,11 @@ DISAGREE = Joints3DConfig().max_prior_disagreement_m
 PRIOR_GATE = Joints3DConfig().max_prior_error_m
 TRACK_CONF = TrackingConfig().min_confidence
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
+
+
+def _exp(value: float) -> str:
+    """``value`` as the docs write a power of ten: 1e-9, not Python's 1e-09."""
+    return f"{value:g}".replace("e-0", "e-")
 
 
 def _doc(name: str) -> str:
@@ -79,6 +86,9 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"within {HALF_TURN_BAND_DEG:g} degree (`HALF_TURN_BAND_DEG`)"),
     ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
+    ("docs/geometry.md", f"`MIN_RAY_ANGLE_FLOOR_DEG` = {_exp(MIN_RAY_ANGLE_FLOOR_DEG)} degrees"),
+    ("docs/geometry.md", f"(`CENTRE_TOLERANCE`: centres within {_exp(CENTRE_TOLERANCE)} of their distance"),
+    ("docs/geometry.md", f"`UNDISTORT_POLISH` = {_exp(UNDISTORT_POLISH)}, so"),
     ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),
     ("docs/daemon.md", f"at most {LATE_WINDOW} behind the newest (`LATE_WINDOW`)"),
     ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),

@@ -77,6 +77,11 @@ def _distorted_radius(dist: np.ndarray, r):
     return r * (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
 
 
+#: Residual (normalised) below which an undistorted point is taken as it is; one between this and the
+#: ``tolerance`` of :meth:`Camera.undistort_normalized` (1e-6) is solved again by Newton steps. 1e-9 is a
+#: ten-thousandth of a pixel at a focal length of 1e5 px.
+UNDISTORT_POLISH = 1e-9
+
 #: Normalised radius the lens model is checked (:func:`fold_radius`) and inverted out to: 89.9999 degrees off
 #: the axis. Real lenses stay far inside it (a 120-degree lens reaches about 1.7, a fisheye-like fit about 10).
 LENS_REACH = 10.0 * 4**8
@@ -205,9 +210,12 @@ class Camera:
         Points the lens model cannot reach come back NaN: a wide lens fitted with a few
         polynomial terms folds over (its distorted radius stops growing, :attr:`fold_radius`)
         before the image corners, so no undistorted point maps to them; so do points where
-        the iteration did not reach ``tolerance`` (normalised units: about a thousandth of a
-        pixel) or reached a root past the fold. ``cv2.undistortPoints`` returns finite,
-        wrong coordinates there instead.
+        neither the iteration nor Newton steps after it reached ``tolerance`` (normalised
+        units: a thousandth of a pixel at a focal length of 1000 px) or that reached a root
+        past the fold. ``cv2.undistortPoints`` returns finite, wrong coordinates there
+        instead. Points the iteration left between :data:`UNDISTORT_POLISH` and
+        ``tolerance`` are solved again, so the points returned agree with the lens model to
+        ``UNDISTORT_POLISH`` wherever Newton steps reach it, at any focal length.
         """
         xy_d = check_last_dim("xy_distorted", xy_distorted, 2)
         if not self.has_distortion:
@@ -224,21 +232,28 @@ class Camera:
                 if np.all(settled):  # most calls need few steps
                     break
 
-            def unsolved(xy: np.ndarray) -> np.ndarray:
-                residual = np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
-                return ~(residual <= tolerance) | ~self.within_lens(xy)
+            def residual(xy: np.ndarray, xy_d: np.ndarray = xy_d) -> np.ndarray:
+                return np.max(np.abs(self.distort(xy) - xy_d), axis=-1)
 
-            bad = unsolved(xy)
+            left = residual(xy)
+            bad = ~(left <= tolerance) | ~self.within_lens(xy)
             # The residual step overshoots where the lens model's slope passes 2 (strong pincushion,
-            # mixed signs) and diverges on points it can reach: solve those again. Points well past
-            # what the fold reaches stay out (a folding wide lens has many, every frame).
-            retry = bad
+            # mixed signs) and diverges on points it can reach: solve those again. So are points it
+            # left converging slowly, short of its own 1e-10 steps: within ``tolerance`` they were
+            # kept as they were, up to 1e-6 off (0.1 px with a focal length of 1e5 px). Points well
+            # past what the fold reaches stay out (a folding wide lens has many, every frame).
+            retry = bad | ~(left <= UNDISTORT_POLISH)
             if math.isfinite(self.fold_radius):
                 reach = _distorted_radius(self.dist, self.fold_radius)
-                retry = bad & (np.hypot(xy_d[..., 0], xy_d[..., 1]) < 1.05 * reach)
+                retry &= np.hypot(xy_d[..., 0], xy_d[..., 1]) < 1.05 * reach
             if np.any(retry):
-                xy[retry] = self._undistort_newton(xy_d[retry])
-                bad = unsolved(xy)
+                again = self._undistort_newton(xy_d[retry])
+                before = left[retry]
+                better = self.within_lens(again) & ((residual(again, xy_d[retry]) < before) | ~np.isfinite(before))
+                kept = xy[retry]
+                kept[better] = again[better]
+                xy[retry] = kept
+                bad = ~(residual(xy) <= tolerance) | ~self.within_lens(xy)
         if np.any(bad):
             xy[bad] = np.nan
         return xy

@@ -42,6 +42,14 @@ CameraLike = Union[Camera, np.ndarray]
 
 #: Smallest camera depth (rig units) a triangulated point may have in any used view.
 MIN_DEPTH = 1e-9
+#: Smallest ray angle (degrees) any joint is valid at, whatever ``min_ray_angle_deg`` says (0 included): below
+#: it the two rays are one line to rounding (a point on the line through two centres, or one pixel seen twice
+#: through one camera), the DLT's null space is two-dimensional and its point anywhere on that line. A real
+#: angle this small is a point 10^11 baselines away.
+MIN_RAY_ANGLE_FLOOR_DEG = 1e-9
+#: Camera centres closer than this share of their distance from the origin are one centre: views from one
+#: point give no depth, and the solvers' point for their (diverging) rays is that centre, a hair in front.
+CENTRE_TOLERANCE = 1e-9
 
 __all__ = [
     "TriangulationResult",
@@ -50,6 +58,8 @@ __all__ = [
     "triangulate_robust",
     "triangulate_two_views",
     "MIN_DEPTH",
+    "MIN_RAY_ANGLE_FLOOR_DEG",
+    "CENTRE_TOLERANCE",
 ]
 
 
@@ -69,9 +79,10 @@ class TriangulationResult:
             [0, 90], between the lines of any two used rays. ``0.0`` with fewer than two
             used views. Reported for invalid joints too (as a diagnostic).
         num_views: ``(..., J)`` number of used observations (int).
-        valid: ``(..., J)`` True where the point is trustworthy: at least two used views,
-            ``ray_angle_deg >= min_ray_angle_deg``, a finite solution that is not at
-            infinity, and seen by every used camera (in front of it, inside its lens fold).
+        valid: ``(..., J)`` True where the point is trustworthy: at least two used views, two of
+            them from distinct centres, ``ray_angle_deg >= min_ray_angle_deg`` and
+            ``>= MIN_RAY_ANGLE_FLOOR_DEG``, a finite solution that is not at infinity, and seen by
+            every used camera (in front of it, inside its lens fold).
         used: ``(..., J, C)`` which observations took part in the solution.
     """
 
@@ -256,6 +267,28 @@ def _max_ray_angle(d: np.ndarray, used: np.ndarray) -> np.ndarray:
     return np.where(pair, angle, 0.0).max(axis=(-1, -2), initial=0.0)
 
 
+def _distinct_centres(P: np.ndarray, Minv: np.ndarray | None = None) -> np.ndarray:
+    """``(C, C)`` bool: which pairs of cameras have distinct centres (:data:`CENTRE_TOLERANCE`); ``Minv``, the
+    inverses of the left 3x3 blocks, where the caller has them."""
+    if Minv is None:
+        Minv = np.linalg.inv(P[:, :, :3])
+    centres = -(Minv @ P[:, :, 3:])[..., 0]  # (C, 3)
+    gap2 = np.square(centres[:, None] - centres[None]).sum(axis=-1)
+    size2 = np.square(centres).sum(axis=-1)
+    return gap2 > CENTRE_TOLERANCE**2 * np.maximum(size2[:, None], size2[None])
+
+
+def _two_centres(P: np.ndarray, used: np.ndarray, axis: int) -> np.ndarray | bool:
+    """Per joint: whether two of its used views (camera ``axis`` of ``used``) have distinct centres; True
+    (every joint) where all the cameras' centres are distinct, as in any real rig."""
+    distinct = _distinct_centres(P)
+    if distinct.sum() == distinct.size - len(distinct):  # all but the diagonal
+        return True
+    u = np.moveaxis(used, axis, -1).astype(np.float64)  # (..., C)
+    # u D u^T counts the used pairs of distinct centres (D's diagonal is False)
+    return np.einsum("...a,ab,...b->...", u, distinct.astype(np.float64), u) > 0
+
+
 def _depths(P: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Signed depth of ``points`` ``(N, J, 3)`` in every camera ``(N, C, J)`` (H&Z 6.2.3)."""
     M = P[:, :, :3]
@@ -272,6 +305,8 @@ def _finish(views: _Views, points: np.ndarray, ok: np.ndarray, angle: np.ndarray
     num_views = views.used.sum(axis=1)
     with np.errstate(all="ignore"):
         ok = ok & np.all(np.isfinite(points), axis=-1) & (num_views >= 2) & (angle >= min_ray_angle_deg)
+        # With min_ray_angle_deg 0 these were valid: a point anywhere on one line, or at a shared centre.
+        ok &= (angle >= MIN_RAY_ANGLE_FLOOR_DEG) & _two_centres(views.P, views.used, axis=1)
         safe = np.where(ok[..., None], points, 0.0)
         depth = _depths(views.P, safe)  # (N, C, J)
         ok &= ~np.any(views.used & ~(depth > MIN_DEPTH), axis=1)
@@ -655,7 +690,9 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
         both = used[0] & used[1]
         angle = np.where(both & np.isfinite(angle), angle, 0.0)
 
-        ok = finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
+        # as _finish: rays on one line to rounding, or from one centre, give no depth (valid with an angle of 0)
+        ok = (finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
+              & (angle >= MIN_RAY_ANGLE_FLOOR_DEG) & _distinct_centres(P, Minv)[0, 1])
         safe = np.where(ok[:, None], points, 0.0)
         ph = safe @ M.transpose(0, 2, 1) + P[:, None, :, 3]  # (2, J, 3)
         depth = ph[..., 2] * (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]

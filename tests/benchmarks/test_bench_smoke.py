@@ -73,6 +73,12 @@ def test_bench_protocol(capsys, monkeypatch):
         assert re.search(rf"^{row} .* frames/s$", out, re.M), out
 
 
+def test_time_triangulation(capsys, monkeypatch):
+    out = run_script("time_triangulation", "--calls", "2", "--rounds", "1", capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^(two_views|dlt|midpoint|robust) .* +\d+\.\d$", out, re.M)
+    assert rows == ["two_views", "dlt", "dlt", "midpoint", "robust"], out
+
+
 def test_bench_sim_render(capsys, monkeypatch):
     out = run_script("bench_sim_render", "--repeats", "1", capsys=capsys, monkeypatch=monkeypatch)
     assert re.search(r"^pair 2x640x480 \(default rig\) +\d+\.\d+ +\d+\.\d+$", out, re.M), out

@@ -62,6 +62,14 @@ def test_box_block_covers_the_projected_box():
     assert box_block(cam, box + [0, 0, -10.0], 4) is None  # behind the camera
 
 
+def test_box_block_names_a_box_that_is_not_a_finite_min_max_pair():
+    """A NaN corner reached ``int(np.floor(nan))``: numpy's bare "cannot convert float NaN to integer"."""
+    cam = _cams()[0]
+    for box in ([[np.nan, -1.0, 2.0], [0.0, 0.0, 3.0]], [[0.0, -1.0, 2.0], [np.inf, 0.0, 3.0]], [[0.0, -1.0, 2.0]]):
+        with pytest.raises(ShapeError, match=r"box must be a finite \(2, 3\) array"):
+            box_block(cam, np.array(box), 4)
+
+
 def test_box_block_of_a_box_reaching_behind_or_off_the_image():
     cam = _cams()[0]
     centre, forward = cam.center, cam.R[2]  # the camera's position and optical axis (rig frame)
@@ -221,6 +229,40 @@ def test_triangulation_drops_a_joint_too_far_for_its_baseline():
     for bad in (-1.0, 91.0, float("nan")):
         with pytest.raises(ConfigError, match="min_ray_angle_deg"):
             Joints3DConfig(min_ray_angle_deg=bad)
+
+
+def test_triangulation_with_no_angle_gate_still_gives_no_joint_from_one_centre():
+    """``joints3d.min_ray_angle_deg: 0`` (accepted) turned two crop cameras at one centre into joints: the
+    two-view DLT's point for rays from one centre a hair apart is that centre, or anywhere on the ray."""
+    a = _cams()[0]
+    twin = Camera("b", 128, 128, K128, [], a.R, a.t)
+    uv = np.stack([a.project(_joints(5))[0]] * 2)
+    uv[1, :3] += [1e-6, 0.0]  # a micro-pixel apart: meeting at the centre
+    r = triangulate_joints(uv, np.full((2, 5), 0.8), np.ones((2, 5), bool), [a, twin],
+                           Joints3DConfig(min_ray_angle_deg=0.0))
+    assert not r.valid.any() and not r.points.any() and not r.confidence.any()
+
+
+def test_triangulation_names_peaks_given_joints_first_or_not_numeric():
+    """Peaks (J, C, 2) with a matching (J, C) confidence passed the shape check and failed inside the two-view
+    solver with its own names (or, for three cameras, as 25 cameras); ragged or text peaks raised numpy's bare
+    ValueError."""
+    cams = _cams()
+    uv = np.stack([c.project(_joints(25))[0] for c in cams])
+    conf, seen = np.full((25, 2), 0.8), np.ones((25, 2), bool)
+    with pytest.raises(ShapeError, match=r"uv_model has 25 views on axis 0 \(shape \(25, 2, 2\)\) but 2 cameras"):
+        triangulate_joints(uv.transpose(1, 0, 2), conf, seen, cams, Joints3DConfig())
+    with pytest.raises(ShapeError, match="uv must be a numeric array"):
+        triangulate_joints([[[1.0, 2.0]], [[1.0, 2.0, 3.0]]], np.ones((2, 1)), np.ones((2, 1), bool), cams,
+                           Joints3DConfig())
+    with pytest.raises(ShapeError, match="confidence must be a numeric array"):
+        triangulate_joints(uv, [["high"] * 25] * 2, seen.T, cams, Joints3DConfig())
+    # int and float32 pixels are pixels: the joints of the same values in float64
+    for kind in (np.float32, np.int64):
+        given = np.rint(uv).astype(kind) if kind is np.int64 else uv.astype(kind)
+        r = triangulate_joints(given, conf.T, seen.T, cams, Joints3DConfig())
+        ref = triangulate_joints(given.astype(np.float64), conf.T, seen.T, cams, Joints3DConfig())
+        assert r.valid.all() and r.points.dtype == np.float64 and np.array_equal(r.points, ref.points)
 
 
 def test_the_ray_angle_gate_keeps_every_joint_of_the_example_rig():

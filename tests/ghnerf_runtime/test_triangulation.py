@@ -556,3 +556,71 @@ def test_a_view_that_cannot_see_the_point_past_its_lens_fold_is_not_counted_as_a
     assert robust.valid.all() and robust.used[0].tolist() == [True, False, True] and robust.used[1].all()
     np.testing.assert_allclose(robust.points, points, atol=1e-9)
     assert robust.reprojection_error[0, 1] == 0.0  # not computed: that camera cannot see the point
+
+
+def _two_views(uv, cams, **kw):
+    return triangulate_two_views(uv, np.stack([c.P for c in cams]), np.ones(uv.shape[:2]), **kw)
+
+
+@pytest.mark.parametrize("solver", [triangulate_dlt, triangulate_midpoint, triangulate_robust, _two_views])
+def test_one_centre_or_one_line_is_invalid_even_with_no_angle_threshold(solver):
+    """``min_ray_angle_deg=0`` (the config accepts it) let through what no angle can: two cameras at one centre,
+    whose rays (1e-6 or 1e-3 px apart) meet only at that centre, came back valid micrometres in front of it;
+    the same pixel through both, or a point on the line through two centres, valid anywhere on that line."""
+    R, t = look_at((0.3, -1.0, 0.1), (0.0, -1.0, 4.0))
+    same = [Camera("a", 640, 480, K, np.zeros(5), R, t), Camera("b", 640, 480, K, np.zeros(5), R, t)]
+    uv = np.array([[[300.0, 200.0], [300.0, 200.0], [400.0, 300.0], [300.0, 200.0]],
+                   [[300.0, 200.0], [300.0 + 1e-6, 200.0], [400.0 + 1e-3, 300.0], [300.0 + 1e-3, 200.0]]])
+    res = solver(uv, same, min_ray_angle_deg=0.0)
+    assert not res.valid.any() and not res.points.any()
+    assert_finite(res)
+    # distinct centres, the joint on the line through them: both rays are that line
+    c1, c2 = np.array([-0.2, -1.0, 0.0]), np.array([0.1, -1.1, 0.5])
+    cams = [Camera(n, 640, 480, K, np.zeros(5), *look_at(c, c1 + 4 * (c2 - c1) + [0.2, 0.1, 0.0]))
+            for n, c in (("a", c1), ("b", c2))]
+    X = c1 + np.array([[3.0], [6.0]]) * (c2 - c1)
+    uv = np.stack([c.project(X)[0] for c in cams])
+    assert np.isfinite(uv).all()
+    res = solver(uv, cams, min_ray_angle_deg=0.0)
+    assert not res.valid.any() and not res.points.any()
+    # a real angle that small is kept: 1 mm of baseline, 1 km away (5.7e-5 degrees), noise-free
+    far = [Camera(n, 640, 480, K, np.zeros(5), *look_at((x, -1.0, 0.0), (0.0, -1.0, 1000.0)))
+           for n, x in (("a", -5e-4), ("b", 5e-4))]
+    X = np.array([[0.05, -1.02, 1000.0]])
+    res = solver(np.stack([c.project(X)[0] for c in far]), far, min_ray_angle_deg=0.0)
+    assert res.valid.all() and 0 < res.ray_angle_deg[0] < 1e-4
+    np.testing.assert_allclose(res.points, X, rtol=1e-3)
+
+
+def test_one_centre_among_more_views_takes_the_other_centre_s_view():
+    """A third view from a distinct centre restores depth: a joint is valid when two of its used views have
+    distinct centres, whatever the others share."""
+    cams, points, uv = generate_scene(2, 4)
+    twin = Camera("twin", 640, 480, K, np.zeros(5), cams[0].R, cams[0].t)
+    uv3 = np.concatenate([uv, uv[:1]])
+    w = np.ones((3, 4))
+    w[1, 2:] = 0.0  # joints 2, 3: only the two views from one centre
+    res = triangulate_dlt(uv3, [cams[0], cams[1], twin], w, min_ray_angle_deg=0.0)
+    assert res.valid.tolist() == [True, True, False, False]
+    np.testing.assert_allclose(res.points[:2], points[:2], atol=1e-9)
+
+
+@pytest.mark.parametrize("fx, size, shift", [(1e4, (8000, 6000), 0.0), (1e5, (8000, 6000), 0.0), (5.0, (8, 6), 0.0),
+                                             (0.5, (4, 3), 0.0), (600.0, (640, 480), 1e5)])
+def test_extreme_intrinsics_keep_float64_precision_for_float32_or_int_pixels(fx, size, shift):
+    """The solvers work in float64 on conditioned pixels (principal point and focal length from the camera):
+    a focal length of 1e5 px, a 4x3 image or a principal point 1e5 px off (a far crop) lose nothing; float32
+    input costs only its own rounding (1e-7 relative of the pixel, about 1e-6 m here), not the solve's."""
+    W, H = size
+    Kx = np.array([[fx, 0.0, (W - 1) / 2 - shift], [0.0, fx, (H - 1) / 2 + shift], [0.0, 0.0, 1.0]])
+    cams = [Camera(n, W, H, Kx, np.zeros(5), *look_at((x, -1.0, 0.0), TARGET)) for n, x in (("a", -0.15), ("b", 0.15))]
+    points = TARGET + np.random.default_rng(3).uniform(-0.3, 0.3, size=(25, 3))
+    uv = np.stack([c.project(points)[0] for c in cams])
+    for solver in (triangulate_dlt, _two_views):
+        np.testing.assert_allclose(solver(uv, cams).points, points, atol=1e-9)
+        single = solver(uv.astype(np.float32), cams)
+        assert single.valid.all() and single.points.dtype == np.float64
+        # the error float32 pixels carry: their rounding, magnified by depth / (focal length * sin(angle))
+        pixel_rounding = np.abs(uv.astype(np.float32).astype(np.float64) - uv).max()
+        bound = 10 * pixel_rounding * 3.0 / (fx * np.sin(np.radians(single.ray_angle_deg.min()))) + 1e-12
+        assert np.abs(single.points - points).max() < bound
