@@ -157,6 +157,15 @@ def _check_readable(folder: Path) -> None:
                              "and execute permission on it)", path=str(folder))
 
 
+def _what_is(path: Path) -> str:
+    """What ``path``, which is no regular file, is instead (for an error naming it)."""
+    if path.is_dir():
+        return "a folder"
+    if path.is_symlink() and not path.exists():
+        return "a symbolic link that leads nowhere"
+    return "no regular file (a device, a pipe or a socket)"
+
+
 def _file_name(graph: str, precision: str) -> str:
     return f"{graph}.int8.onnx" if precision == "int8" else f"{graph}.onnx"
 
@@ -341,8 +350,15 @@ class ModelSession:
                 path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or (
                     None if only_fp32 else by_meta.get((graph, "int8")))
             if path is None:
-                raise ModelLoadError(f"no file for graph {graph!r} (looked for {_file_name(graph, wanted)}, "
-                                     f"{_file_name(graph, 'fp32')} and ghnerf.graph metadata)", path=str(folder))
+                names = list(dict.fromkeys((_file_name(graph, wanted), _file_name(graph, "fp32"))))
+                # a folder (or a link to nowhere) under the graph's own name: "no file for graph" sent the user
+                # looking for a file that ls shows
+                odd = next((folder / n for n in names if (folder / n).exists() or (folder / n).is_symlink()), None)
+                if odd is not None:
+                    raise ModelLoadError(f"is not a graph file but {_what_is(odd)}: graph {graph!r} cannot be "
+                                         "loaded from it", path=str(odd))
+                raise ModelLoadError(f"no file for graph {graph!r} (looked for {', '.join(names)} and "
+                                     "ghnerf.graph metadata)", path=str(folder))
             t0 = time.perf_counter()
             sess = _open(path, config)
             load_ms = 1e3 * (time.perf_counter() - t0)
