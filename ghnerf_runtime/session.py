@@ -92,7 +92,7 @@ from ghnerf_runtime.skeleton_prior import SkeletonPrior
 log = logging.getLogger(__name__)
 
 __all__ = ["AUTO_PRECISION", "GraphFile", "LaneRunner", "ModelSession", "MODEL_CARD", "check_graph_file",
-           "resolve_model_dir", "warmup_feeds"]
+           "resolve_model_dir", "usable_cores", "warmup_feeds"]
 
 #: Optional model card next to the graphs.
 MODEL_CARD = "model_card.json"
@@ -155,6 +155,15 @@ def _check_readable(folder: Path) -> None:
     if not os.access(folder, os.R_OK | os.X_OK):
         raise ModelLoadError("cannot read the model folder: permission denied (the user this runs as needs read "
                              "and execute permission on it)", path=str(folder))
+
+
+def usable_cores() -> int:
+    """The cores this process may run on: its CPU affinity (a container's or systemd's ``CPUAffinity=``), else the
+    machine's count."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):  # no sched_getaffinity (macOS, Windows)
+        return os.cpu_count() or 1
 
 
 def _what_is(path: Path) -> str:
@@ -330,6 +339,12 @@ class ModelSession:
         unknown = [g for g in graphs if g not in GRAPH_NAMES]
         if unknown:
             raise ModelError(f"unknown graph(s) {unknown}; graphs are {list(GRAPH_NAMES)}", path=str(folder))
+        cores = usable_cores()
+        if config.threads > cores:
+            # Not an error: the config may be written for another machine. Said, as onnxruntime takes any count
+            # and its threads then only share the cores there are.
+            log.warning("session.threads is %d, more than the %d core(s) this process may run on: onnxruntime's "
+                        "threads only share those (docs/runtime.md, \"Threads\")", config.threads, cores)
         if not graphs:  # the contract comes from the graph files: none loaded, no model
             raise ModelError(f"no graphs to load; graphs are {list(GRAPH_NAMES)}", path=str(folder))
 

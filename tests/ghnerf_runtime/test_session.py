@@ -356,6 +356,22 @@ def test_a_graph_name_that_is_no_file_is_named_as_what_it_is(tmp_path, kind, sai
         assert str(path) in str(e.value) and "'encoder'" in str(e.value)
 
 
+def test_more_threads_than_cores_loads_and_warns_naming_both(tiny_model_dir, monkeypatch, caplog):
+    """session.threads past the cores this process may use (a config written for a larger machine) was taken
+    without a word; it still loads (the config may be moved back), and the log says so."""
+    import ghnerf_runtime.session as session_module
+
+    monkeypatch.setattr(session_module, "usable_cores", lambda: 2)
+    for threads, warned in ((3, True), (2, False)):
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="ghnerf_runtime.session"):
+            assert _load_encoder(tiny_model_dir, threads=threads).has("encoder")
+        said = [r.getMessage() for r in caplog.records if "session.threads" in r.getMessage()]
+        assert said == (["session.threads is 3, more than the 2 core(s) this process may run on: onnxruntime's "
+                         "threads only share those (docs/runtime.md, \"Threads\")"] if warned else [])
+    assert 1 <= session_module.usable_cores() <= (os.cpu_count() or 1)
+
+
 def test_a_relative_model_dir_that_is_not_there_names_the_folder_it_was_read_from(tmp_path, monkeypatch):
     # `ghnerf-run` outside the repository said only "models: model folder does not exist"
     monkeypatch.chdir(tmp_path)
