@@ -36,8 +36,8 @@ from ghnerf_runtime.json_keys import remember_repeats
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
-    "PRECISIONS", "MIN_CUTOFF_HZ", "THREE_D_METHODS", "SKELETON_PRIOR_MODES", "NOVEL_SILHOUETTE_STRIDES", "NOVEL_PATHS",
-    "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
+    "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES", "NOVEL_SILHOUETTE_STRIDES", "NOVEL_PATHS",
+    "MIN_CUTOFF_HZ", "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
     "PresenceConfig", "NovelViewConfig", "SmoothingConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
     "load_config", "read_json_file", "PATH_KEYS",
@@ -501,7 +501,7 @@ class SmoothingConfig:
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
-        # A cutoff below MIN_CUTOFF_HZ is a time constant of hours: the filter holds its first pair for the whole
+        # A cutoff below MIN_CUTOFF_HZ is a time constant of minutes to ages: the filter holds its first pair for the
         # stream, and below about 1e-308 Hz the time constant overflowed (numpy warned in the log on every pair).
         _number(self, "min_cutoff_hz", MIN_CUTOFF_HZ, 1000.0)
         _number(self, "beta", 0.0, 1e4)
