@@ -37,7 +37,7 @@ from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 
 __all__ = [
     "PRECISIONS", "THREE_D_METHODS", "SKELETON_PRIOR_MODES", "NOVEL_SILHOUETTE_STRIDES", "NOVEL_PATHS",
-    "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
+    "MIN_CUTOFF_HZ", "HEATMAP_SOURCES", "BEST_METHOD", "PRESENCE_MIN_CONFIDENCE", "SessionConfig",
     "RoiConfig", "TrackingConfig", "FrameCheckConfig", "RaysConfig", "HeatmapsConfig", "Joints3DConfig",
     "PresenceConfig", "NovelViewConfig", "SmoothingConfig", "EstimatorConfig", "config_from_dict", "config_to_dict",
     "load_config", "read_json_file", "PATH_KEYS",
@@ -57,6 +57,8 @@ SKELETON_PRIOR_MODES = ("auto", "on", "off")
 NOVEL_SILHOUETTE_STRIDES = (0, 1, 2, 4, 8, 16)
 #: :attr:`NovelViewConfig.path` choices: how a camera between the rig's two moves from one to the other.
 NOVEL_PATHS = ("line", "orbit", "auto")
+#: The lowest :class:`SmoothingConfig` cutoff, Hz: a time constant of 159 s, far steadier than any use wants.
+MIN_CUTOFF_HZ = 1e-3
 
 
 # ------------------------------------------------------------------ checks
@@ -487,9 +489,9 @@ class SmoothingConfig:
 
     Attributes:
         enabled: smooth the reported joints (the tracker always follows the raw ones).
-        min_cutoff_hz: the cutoff of a still joint (lower: steadier, more lag).
+        min_cutoff_hz: the cutoff of a still joint (lower: steadier, more lag); :data:`MIN_CUTOFF_HZ` at least.
         beta: how fast the cutoff rises with the joint's speed, Hz per m/s (higher: less lag when moving).
-        d_cutoff_hz: the cutoff of the speed estimate.
+        d_cutoff_hz: the cutoff of the speed estimate; :data:`MIN_CUTOFF_HZ` at least.
         max_gap_s: a longer gap between pairs restarts every joint.
     """
 
@@ -501,9 +503,11 @@ class SmoothingConfig:
 
     def __post_init__(self) -> None:
         _boolean(self, "enabled")
-        _number(self, "min_cutoff_hz", 0.0, 1000.0, lo_open=True)
+        # A cutoff below MIN_CUTOFF_HZ is a time constant of minutes to ages: the filter holds its first pair for the
+        # stream, and below about 1e-308 Hz the time constant overflowed (numpy warned in the log on every pair).
+        _number(self, "min_cutoff_hz", MIN_CUTOFF_HZ, 1000.0)
         _number(self, "beta", 0.0, 1e4)
-        _number(self, "d_cutoff_hz", 0.0, 1000.0, lo_open=True)
+        _number(self, "d_cutoff_hz", MIN_CUTOFF_HZ, 1000.0)
         _number(self, "max_gap_s", 0.0, 60.0, lo_open=True)
 
 

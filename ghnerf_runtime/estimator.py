@@ -300,6 +300,16 @@ def _warn_if_not_levelled(rig: Rig) -> None:
                     "it first with calibration.level.level_rig (docs/rig-file.md)", rig.rig_id, fmt)
 
 
+def _finite_time(value) -> bool:
+    """Whether ``value`` is a finite number (a capture time): an integer past the float range (10**400) is not,
+    nor is what is no number (a string): ``math.isfinite`` raised OverflowError or TypeError for them, which the
+    daemon's loop (it skips a pair on a FrameError) did not expect."""
+    try:
+        return math.isfinite(value)
+    except (OverflowError, TypeError):
+        return False
+
+
 def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
     """Add the milliseconds since ``t0`` to ``timing[stage]`` (a cold start's second pass adds to the first)."""
     timing[stage] = timing.get(stage, 0.0) + 1e3 * (time.perf_counter() - t0)
@@ -593,7 +603,7 @@ class Estimator:
                 has none (``PairResult.novel_view`` is ``None``): nothing is rendered.
 
         Raises:
-            FrameError: an image has the wrong size or type for its camera; ``timestamp_s`` is not finite.
+            FrameError: an image has the wrong size or type for its camera; ``timestamp_s`` is not a finite number.
             ModelError: a novel view was requested but not enabled; a graph failed.
         """
         result, finish = self.estimate_then_view(images, sequence=sequence, novel_view=novel_view,
@@ -618,7 +628,7 @@ class Estimator:
             sequence = self._sequence
         self._sequence = sequence + 1
         self._check_images(images)
-        if timestamp_s is not None and not math.isfinite(timestamp_s):
+        if timestamp_s is not None and not _finite_time(timestamp_s):
             # NaN compares false with every time: the track and the smoothing would restart on this pair and the next
             raise FrameError(f"timestamp_s must be a finite capture time (seconds), got {timestamp_s!r}")
         if novel_view is not None and not self.config.novel_view.enabled:

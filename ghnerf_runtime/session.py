@@ -92,7 +92,7 @@ from ghnerf_runtime.skeleton_prior import SkeletonPrior
 log = logging.getLogger(__name__)
 
 __all__ = ["AUTO_PRECISION", "GraphFile", "LaneRunner", "ModelSession", "MODEL_CARD", "check_graph_file",
-           "resolve_model_dir", "warmup_feeds"]
+           "resolve_model_dir", "usable_cores", "warmup_feeds"]
 
 #: Optional model card next to the graphs.
 MODEL_CARD = "model_card.json"
@@ -155,6 +155,24 @@ def _check_readable(folder: Path) -> None:
     if not os.access(folder, os.R_OK | os.X_OK):
         raise ModelLoadError("cannot read the model folder: permission denied (the user this runs as needs read "
                              "and execute permission on it)", path=str(folder))
+
+
+def usable_cores() -> int:
+    """The cores this process may run on: its CPU affinity (a container's or systemd's ``CPUAffinity=``), else the
+    machine's count."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):  # no sched_getaffinity (macOS, Windows)
+        return os.cpu_count() or 1
+
+
+def _what_is(path: Path) -> str:
+    """What ``path``, which is no regular file, is instead (for an error naming it)."""
+    if path.is_dir():
+        return "a folder"
+    if path.is_symlink() and not path.exists():
+        return "a symbolic link that leads nowhere"
+    return "no regular file (a device, a pipe or a socket)"
 
 
 def _file_name(graph: str, precision: str) -> str:
@@ -321,6 +339,12 @@ class ModelSession:
         unknown = [g for g in graphs if g not in GRAPH_NAMES]
         if unknown:
             raise ModelError(f"unknown graph(s) {unknown}; graphs are {list(GRAPH_NAMES)}", path=str(folder))
+        cores = usable_cores()
+        if config.threads > cores:
+            # Not an error: the config may be written for another machine. Said, as onnxruntime takes any count
+            # and its threads then only share the cores there are.
+            log.warning("session.threads is %d, more than the %d core(s) this process may run on: onnxruntime's "
+                        "threads only share those (docs/runtime.md, \"Threads\")", config.threads, cores)
         if not graphs:  # the contract comes from the graph files: none loaded, no model
             raise ModelError(f"no graphs to load; graphs are {list(GRAPH_NAMES)}", path=str(folder))
 
@@ -341,8 +365,15 @@ class ModelSession:
                 path = by_meta.get((graph, wanted)) or by_meta.get((graph, "fp32")) or (
                     None if only_fp32 else by_meta.get((graph, "int8")))
             if path is None:
-                raise ModelLoadError(f"no file for graph {graph!r} (looked for {_file_name(graph, wanted)}, "
-                                     f"{_file_name(graph, 'fp32')} and ghnerf.graph metadata)", path=str(folder))
+                names = list(dict.fromkeys((_file_name(graph, wanted), _file_name(graph, "fp32"))))
+                # a folder (or a link to nowhere) under the graph's own name: "no file for graph" sent the user
+                # looking for a file that ls shows
+                odd = next((folder / n for n in names if (folder / n).exists() or (folder / n).is_symlink()), None)
+                if odd is not None:
+                    raise ModelLoadError(f"is not a graph file but {_what_is(odd)}: graph {graph!r} cannot be "
+                                         "loaded from it", path=str(odd))
+                raise ModelLoadError(f"no file for graph {graph!r} (looked for {', '.join(names)} and "
+                                     "ghnerf.graph metadata)", path=str(folder))
             t0 = time.perf_counter()
             sess = _open(path, config)
             load_ms = 1e3 * (time.perf_counter() - t0)

@@ -176,6 +176,18 @@ def _read_image(path: str) -> np.ndarray:
     return img
 
 
+class _TimedPair(tuple):
+    """Two frames and ``time_s``, the first video's presentation time of them (seconds; ``None``: unknown)."""
+
+    time_s: float | None = None
+
+
+def _pair_time(cap) -> float | None:
+    """The presentation time of the frame ``cap`` just read, seconds; ``None`` where the backend gives none."""
+    t = cap.get(cv2.CAP_PROP_POS_MSEC) / 1e3
+    return t if math.isfinite(t) else None
+
+
 def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     if args.images:
         yield _read_image(args.images[0]), _read_image(args.images[1])
@@ -196,7 +208,9 @@ def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
             if not all(ok):
                 log.warning("videos end at different frames; stopping at pair %d", n)
                 return
-            yield frames[0][1], frames[1][1]
+            pair = _TimedPair((frames[0][1], frames[1][1]))
+            pair.time_s = _pair_time(caps[0])
+            yield pair
             n += 1
     finally:
         for cap in caps:
@@ -314,10 +328,16 @@ def _run(args) -> int:
         # second: docs/runtime.md, "The novel view alongside the keypoints"); without one, a pair comes out at once.
         with NovelViewPipeline(estimator) as pipe:
             try:
+                t = None
                 for seq, images in enumerate(_pairs(args)):
                     held[seq] = images
+                    # the frames' own presentation time where the video gives one after the last pair's: a variable
+                    # frame rate (a phone's video), or a container whose rate reads 1000 fps, made seq / fps a wrong
+                    # step, and smoothing (tracking.max_gap_s too) runs on the step; else the last time plus a frame
+                    shown = getattr(images, "time_s", None)
+                    t = shown if shown is not None and (t is None or shown > t) else 0.0 if t is None else t + 1 / fps
                     try:
-                        finished = pipe.submit(images, sequence=seq, novel_view=request, timestamp_s=seq / fps)
+                        finished = pipe.submit(images, sequence=seq, novel_view=request, timestamp_s=t)
                     except FrameError as e:
                         names = args.images or args.videos
                         raise UsageError(f"{names[0]}, {names[1]}: {e}") from e

@@ -651,6 +651,44 @@ def test_a_video_without_a_usable_frame_rate_is_timed_at_30_fps(monkeypatch, tmp
     assert times == pytest.approx([0.0, 1 / 30, 2 / 30])
 
 
+def test_video_pairs_are_timed_by_their_frames_presentation_times(monkeypatch, tmp_path):
+    """A variable frame rate (a phone's video), or a container whose rate reads 1000 fps for 30: frame number / fps
+    made every step wrong (1 ms for 33: the smoothing then lagged a moving subject by most of each step). The
+    frames' own times are used where they follow the last pair's, the last plus a frame at the rate where not (a
+    backend that gives none, a time that stands still)."""
+    pts_ms = [0.0, 33.0, 70.0, float("nan"), 140.0, 140.0, 210.0]
+    times = []
+
+    class _Cap:
+        def __init__(self, path):
+            self.k = -1
+
+        def isOpened(self):
+            return True
+
+        def read(self):
+            self.k += 1
+            return self.k < len(pts_ms), np.zeros((4, 4, 3), np.uint8)
+
+        def get(self, prop):
+            return 1000.0 if prop == cv2.CAP_PROP_FPS else pts_ms[self.k]
+
+        def release(self):
+            pass
+
+    class _Timed(_StubEstimator):
+        def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
+            times.append(timestamp_s)
+            return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
+                                              timestamp_s=timestamp_s)
+
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _Cap)
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
+    assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
+    assert times == pytest.approx([0.0, 0.033, 0.070, 0.071, 0.140, 0.141, 0.210])
+
+
 def test_the_novel_alpha_help_names_the_path_and_the_orbit_s_limit():
     """``--novel-alpha``'s help says what docs/runtime.md does since ``novel_view.path``: the view moves on the
     line or an orbit, and an orbit's extrapolated distance to its pivot is refused too (it named the focal

@@ -340,6 +340,38 @@ def test_missing_file_and_folder_refused(tiny_model_dir, tmp_path):
         _load_encoder(tmp_path / "nowhere")
 
 
+@pytest.mark.parametrize(("kind", "said"), [("folder", "a folder"), ("dangling", "a symbolic link that leads nowhere")])
+def test_a_graph_name_that_is_no_file_is_named_as_what_it_is(tmp_path, kind, said):
+    """A folder (an unpacked archive) or a link to nowhere under encoder.onnx said "no file for graph 'encoder'"
+    of the folder, sending the user looking for the file that ls shows."""
+    path = tmp_path / "encoder.onnx"
+    if kind == "folder":
+        path.mkdir()
+    else:
+        path.symlink_to(tmp_path / "gone.onnx")
+    for precision in ("fp32", "auto"):  # (auto looks for encoder.int8.onnx first)
+        with pytest.raises(ModelLoadError) as e:
+            _load_encoder(tmp_path, precision=precision)
+        assert e.value.path == str(path) and f"is not a graph file but {said}" in str(e.value)
+        assert str(path) in str(e.value) and "'encoder'" in str(e.value)
+
+
+def test_more_threads_than_cores_loads_and_warns_naming_both(tiny_model_dir, monkeypatch, caplog):
+    """session.threads past the cores this process may use (a config written for a larger machine) was taken
+    without a word; it still loads (the config may be moved back), and the log says so."""
+    import ghnerf_runtime.session as session_module
+
+    monkeypatch.setattr(session_module, "usable_cores", lambda: 2)
+    for threads, warned in ((3, True), (2, False)):
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="ghnerf_runtime.session"):
+            assert _load_encoder(tiny_model_dir, threads=threads).has("encoder")
+        said = [r.getMessage() for r in caplog.records if "session.threads" in r.getMessage()]
+        assert said == (["session.threads is 3, more than the 2 core(s) this process may run on: onnxruntime's "
+                         "threads only share those (docs/runtime.md, \"Threads\")"] if warned else [])
+    assert 1 <= session_module.usable_cores() <= (os.cpu_count() or 1)
+
+
 def test_a_relative_model_dir_that_is_not_there_names_the_folder_it_was_read_from(tmp_path, monkeypatch):
     # `ghnerf-run` outside the repository said only "models: model folder does not exist"
     monkeypatch.chdir(tmp_path)

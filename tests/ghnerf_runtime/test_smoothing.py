@@ -4,12 +4,13 @@ smooths what is reported and leaves the tracker on the raw joints."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 
-from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, TrackingConfig, \
-    config_from_dict
+from ghnerf_runtime.config import MIN_CUTOFF_HZ, ConfigError, EstimatorConfig, Joints3DConfig, SmoothingConfig, \
+    TrackingConfig, config_from_dict
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.smoothing import OneEuroJoints, smoothing_alpha
 
@@ -81,6 +82,20 @@ def test_the_config_is_validated_by_its_dotted_path():
                      ({"bta": 3}, "smoothing.bta")):
         with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
             config_from_dict({"smoothing": bad})
+
+
+@pytest.mark.parametrize("key", ["min_cutoff_hz", "d_cutoff_hz"])
+def test_a_cutoff_below_the_lowest_is_refused_and_the_lowest_filters_quietly(key):
+    """A cutoff of 1e-310 Hz was taken: its time constant overflowed (numpy warned on every pair) and the filter
+    held its first pair for the whole stream."""
+    for tiny in (1e-310, 5e-324, MIN_CUTOFF_HZ / 2):
+        with pytest.raises(ConfigError, match=rf"smoothing\.{key}.*got {tiny!r}"):
+            config_from_dict({"smoothing": {key: tiny}})
+    f = OneEuroJoints(SmoothingConfig(min_cutoff_hz=MIN_CUTOFF_HZ, d_cutoff_hz=MIN_CUTOFF_HZ, beta=1e4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no overflow on the device's log
+        outs = [f(i / FPS, np.full((2, 3), 0.1 * i), np.ones(2, bool)) for i in range(5)]
+    assert np.isfinite(outs).all() and 0 < outs[-1][0, 0] <= 0.4
 
 
 def test_the_estimator_smooths_the_reported_joints_and_tracks_the_raw_ones():
