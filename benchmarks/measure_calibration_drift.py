@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/measure_calibration_drift.py [--model-dir models] [--sequences 4] [--frames 10]
                                                              [--degrees 0.25,0.5,1,2] [--axes tilt,pan,roll]
+                                                             [--window 10] [--max-floor-m 0.1]
 
 The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe: held-out motions,
 random rig placements) through the true rig; the estimator is given that rig with the second camera turned
