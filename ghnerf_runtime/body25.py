@@ -33,5 +33,9 @@ BODY_PARTS: dict[str, tuple[int, ...]] = {
     "feet": tuple(JOINT_INDEX[n] for n in ("LBigToe", "LSmallToe", "LHeel", "RBigToe", "RSmallToe", "RHeel")),
 }
 
+#: The joints nearest the floor of a person standing, walking or sitting: the ankles and the feet. The
+#: daemon's floor check (firmware_host.daemon.calibration_watch) watches the lowest one triangulated.
+FLOOR_JOINTS: tuple[int, ...] = tuple(JOINT_INDEX[n] for n in ("RAnkle", "LAnkle")) + BODY_PARTS["feet"]
+
 # Torso joints used for the PCK reference length (see docs/metrics.md).
 NECK, MID_HIP = JOINT_INDEX["Neck"], JOINT_INDEX["MidHip"]

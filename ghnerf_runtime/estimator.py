@@ -57,7 +57,7 @@ from typing import Any, Callable, Sequence
 import cv2
 import numpy as np
 
-from ghnerf_runtime.body25 import JOINT_NAMES
+from ghnerf_runtime.body25 import FLOOR_JOINTS, JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -68,6 +68,7 @@ from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projec
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
+    lowest_height_m, \
     query_grid, triangulate_joints, triangulate_joints_checked, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
@@ -101,6 +102,12 @@ _PRIOR_CONFIDENCE_SCALE_M = 0.1
 _NOTED_ROLL_DEG = 1.0
 #: Skeleton prior: the crop follows the prior's joints expected within this (m), whatever is reported.
 _PRIOR_FOLLOW_MAX_ERROR_M = 0.25
+#: The floor check's foot joints (PairResult.lowest_foot_m) lie at least this share of the crop window's side inside
+#: each frame: with the feet cut off by the frame's edge the model still puts their peaks at that edge, both views
+#: agree, and the "feet" triangulate far above the floor (on a simulated take whose frames were cut at 60-70 % of
+#: their height such peaks lay 0-35 px inside the edge, the crops 176-250 px: tests/ghnerf_runtime/
+#: test_view_agreement.py keeps them out).
+_FLOOR_EDGE_FRAC = 0.2
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_heat", "decode_2d", "joints_3d")
 #: Stage keys of the novel view.
@@ -158,6 +165,14 @@ class PairResult:
             ``joints3d.method``. It grows when a camera has moved since calibration (the daemon watches it:
             docs/daemon.md). ``None``: too few such joints, a frame rejected, or two people in view (each view's
             peak may be another person's).
+        lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lowest ankle, heel or toe
+            (:data:`ghnerf_runtime.body25.FLOOR_JOINTS`) triangulated from peaks of at least the presence threshold
+            in both views, kept by the reprojection and box gates and shown by both frames at least a fifth of the
+            crop window's side inside their edges (a foot cut off by the frame gets a peak at its edge), whatever
+            ``joints3d.method`` and the skeleton prior report (the prior keeps its feet near the floor): near 0
+            for a person standing or walking, it moves when a camera turned since calibration (a pan, which
+            ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no such joint (feet out of
+            view or near a frame's edge), nobody, a frame rejected, or two people in view.
     """
 
     sequence: int
@@ -180,6 +195,7 @@ class PairResult:
     several_people: bool = False
     single_view: str | None = None
     reprojection_px_median: float | None = None
+    lowest_foot_m: float | None = None
 
     def __post_init__(self) -> None:
         reasons = self.frame_reason
@@ -207,6 +223,9 @@ class PairResult:
         if px is not None and not (isinstance(px, numbers.Real) and math.isfinite(px) and px >= 0):
             # to_json promises JSON without NaN: a median of pixel distances is a finite number >= 0, or null
             raise ValueError(f"PairResult.reprojection_px_median must be a finite number >= 0 or None, got {px!r}")
+        foot = self.lowest_foot_m
+        if foot is not None and not (isinstance(foot, numbers.Real) and math.isfinite(foot)):
+            raise ValueError(f"PairResult.lowest_foot_m must be a finite number or None, got {foot!r}")
 
     @property
     def num_found(self) -> int:
@@ -240,6 +259,8 @@ class PairResult:
             # the views' agreement before the reprojection gate (since session 53): null where not measured
             "reprojection_px_median": None if self.reprojection_px_median is None
             else r(self.reprojection_px_median, 3),
+            # the lowest triangulated foot joint's height (since session 54): null where none was triangulated
+            "lowest_foot_m": None if self.lowest_foot_m is None else r(self.lowest_foot_m, 4),
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
 
@@ -334,6 +355,7 @@ class _Pass:
     several_people: bool = False  # two people in view: only the tracked subject's joints kept (PairResult's)
     single_view: str | None = None  # the camera whose 2D joints alone are the answer (PairResult.single_view)
     reprojection_px_median: float | None = None  # the views' agreement before the gate (PairResult's)
+    lowest_foot_m: float | None = None  # the lowest triangulated foot joint's height (PairResult's)
 
     @property
     def frame_ok(self) -> dict:
@@ -457,6 +479,7 @@ class Estimator:
         self._prior_follow: Joints3D | None = None
         self._prior_check: tuple[float | None, bool] = (None, False)  # this pair's (disagreement, fell back)
         self._agreement: ViewAgreement | None = None  # this pair's, set by _joints_3d
+        self._lowest_foot: float | None = None  # this pair's, set by _joints_3d
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
@@ -679,7 +702,8 @@ class Estimator:
                             self.config.joints3d.method, frame_reason=dict(p.frame_reason),
                             prior_disagreement_m=p.prior_disagreement_m, prior_fallback=p.prior_fallback,
                             several_people=p.several_people,
-                            single_view=p.single_view, reprojection_px_median=p.reprojection_px_median)
+                            single_view=p.single_view, reprojection_px_median=p.reprojection_px_median,
+                            lowest_foot_m=p.lowest_foot_m)
         if novel_view is None or not all(p.frame_ok.values()) or not p.someone:
             # A single-view pair has no novel view, nor has a pair that found nobody: there is no subject to
             # view, and rendering the working volume's box for nothing was the dearest part of an empty room.
@@ -890,9 +914,11 @@ class Estimator:
         _add_ms(timing, "joints_3d", t)
         # two people: each view's peak may be either person's, so the views' disagreement says nothing of the rig
         agreement = None if several or self._agreement is None else self._agreement.median_px
+        # the triangulation's feet (not the prior's placed ones): two people's peaks, or nobody's, say nothing of it
+        foot = None if several or nobody else self._lowest_foot
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
-                     None if seen_by is None else self.camera_names[seen_by], agreement)
+                     None if seen_by is None else self.camera_names[seen_by], agreement, foot)
 
     def _several_people(self, kp: Keypoints2D) -> bool:
         """Two people in view: at least ``second_person_min_joints`` joints whose maps show a second peak of at
@@ -1130,6 +1156,7 @@ class Estimator:
         tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg,
                                                           pres.threshold(self.config.heatmaps.source),
                                                           pres.min_joints)
+        self._lowest_foot = self._lowest_foot_m(self._gate_to_boxes(tri, regions), kp, regions)
 
         def centroid() -> Joints3D:
             g = self.grid
@@ -1164,6 +1191,24 @@ class Estimator:
         feeds["points"] = np.ascontiguousarray(np.broadcast_to(points, (2,) + points.shape))
         q = self.session.run("query", feeds)
         return volumetric_joints(q["joint_heat"], points, shape, cfg)
+
+    def _lowest_foot_m(self, tri: Joints3D, kp: Keypoints2D, regions: Regions) -> float | None:
+        """The lowest foot joint's height above the floor, of the joints triangulated from peaks strong in both views
+        (the presence threshold) that both frames show well inside their edges (``_FLOOR_EDGE_FRAC``): not the
+        prior's (it keeps placed feet near the floor, whatever the calibration), nor guesses at a frame's edge."""
+        strong = self.config.presence.threshold(self.config.heatmaps.source)
+        feet = np.zeros(len(tri.valid), bool)
+        feet[list(FLOOR_JOINTS)] = True
+        feet &= tri.valid & np.all(kp.valid & (kp.confidence >= strong), axis=0)
+        for st, roi in zip(self._cams, regions.rois):
+            if not feet.any():
+                return None
+            cam, margin = st.camera, _FLOOR_EDGE_FRAC * roi.size
+            uv = cam.project(np.where(feet[:, None], tri.points, 0.0))[0]  # (a NaN uv: behind or off the lens)
+            with np.errstate(invalid="ignore"):
+                feet &= ((uv[:, 0] >= margin) & (uv[:, 0] <= cam.width - 1 - margin)
+                         & (uv[:, 1] >= margin) & (uv[:, 1] <= cam.height - 1 - margin))
+        return lowest_height_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FLOOR_JOINTS)
 
     def _with_prior(self, tri: Joints3D, uv_model: np.ndarray, kp: Keypoints2D, crops: list[Camera]) -> Joints3D:
         """The skeleton prior's joints: refined where triangulated, placed where hidden; a joint whose

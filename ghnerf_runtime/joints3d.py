@@ -30,7 +30,7 @@ from ghnerf_runtime.geometry.triangulation import triangulate_robust, triangulat
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
 __all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "triangulate_joints",
-           "triangulate_joints_checked", "grid_shape", "query_grid", "volumetric_joints", "depth_centroid_joints"]
+           "triangulate_joints_checked", "lowest_height_m", "grid_shape", "query_grid", "volumetric_joints", "depth_centroid_joints"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,6 +139,22 @@ class ViewAgreement:
     median_px: float | None
     joints: int
     gated: int
+
+
+def lowest_height_m(j3: Joints3D, joints: Sequence[int]) -> float | None:
+    """The height above the floor of the lowest of ``joints`` that ``j3`` has (the rig frame is levelled: y down,
+    the floor at y = 0, docs/rig-file.md), in metres; ``None`` when it has none of them.
+
+    Example:
+        >>> j3 = Joints3D(np.array([[0, -1.5, 3], [0, -0.04, 3], [0, 0.5, 3]]), np.ones(3), np.array([True, True, False]),
+        ...               np.zeros((3, 2)))
+        >>> round(lowest_height_m(j3, [0, 1, 2]), 3), lowest_height_m(j3, [2])
+        (0.04, None)
+    """
+    idx = [int(j) for j in joints if j3.valid[j]]
+    if not idx:
+        return None
+    return float(-np.max(j3.points[idx, 1]))  # y down: the lowest joint has the largest y
 
 
 def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig) -> Joints3D:

@@ -26,7 +26,8 @@ from drivers.backends.replay import MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.calibration_watch import CLEAR_RATIO
-from firmware_host.daemon.config import CALIBRATION_MAX_PX, CALIBRATION_WINDOW, DAEMON_PATH_KEYS
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW, \
+    DAEMON_PATH_KEYS
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
@@ -154,6 +155,9 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"the {CALIBRATION_MAX_PX:g} px limit is"),
     ("docs/calibration.md", f"under {'three quarters' if CLEAR_RATIO == 0.75 else CLEAR_RATIO} of the limit"),
     ("docs/daemon.md", f"under {'three quarters' if CLEAR_RATIO == 0.75 else CLEAR_RATIO} of it (`CLEAR_RATIO`)"),
+    # session 54: the floor check's default, quoted where it is explained and in the config table
+    ("docs/calibration.md", f"`health.calibration_max_floor_m` ({CALIBRATION_MAX_FLOOR_M:g} m)"),
+    ("docs/daemon.md", f"| `health.calibration_max_floor_m` | {CALIBRATION_MAX_FLOOR_M:g} |"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read

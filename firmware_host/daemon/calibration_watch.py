@@ -2,13 +2,23 @@
 
 A camera knocked on its mount after calibration leaves the rig file describing a camera that is no
 longer there: the 3D joints go wrong (or every joint fails the reprojection gate and the pairs show
-nobody), silently. Each pair says how far its two views' confident peaks are from meeting in 3D
-(``PairResult.reprojection_px_median``, measured before the gate); a tilt of either camera raises it for
-every pair at once, while a moving person, a pose or a noisy peak raises it for a few. So the watch
-takes the median over the last ``window`` measured pairs (pairs without one, an empty room, do not
-count) and calls the calibration suspect above ``max_px``, and fits again once that median is back
-under ``CLEAR_RATIO`` of it (no flapping near the limit). Measured on the simulated rig with the shipped
-model: ``benchmarks/measure_calibration_drift.py``, docs/calibration.md "When the rig no longer fits".
+nobody), silently. Two symptoms are watched, each over the last ``window`` pairs that measured it, each with
+its own limit and the same hysteresis (suspect above the limit, fits again once back under ``CLEAR_RATIO`` of
+it: no flapping near the limit):
+
+* :class:`CalibrationWatch`: how far each pair's two views' confident peaks are from meeting in 3D
+  (``PairResult.reprojection_px_median``, measured before the gate). A tilt of either camera raises it for
+  every pair at once, while a moving person, a pose or a noisy peak raises it for a few: the median over the
+  window, above ``max_px``.
+* :class:`FloorWatch`: the height above the floor of each pair's lowest triangulated foot joint
+  (``PairResult.lowest_foot_m``; the rig frame is levelled, the floor at y = 0). A camera panned (turned about
+  its vertical axis) moves the peaks along the epipolar lines of a level rig, where the views still meet and
+  only the depth changes: the px check cannot see it, but the person's feet leave the floor (float above it
+  or sink below it). The median over the window, further than ``max_floor_m`` from the floor either way.
+
+Pairs without the figure (an empty room; for the floor, feet out of view) do not count. Measured on the
+simulated rig with the shipped model: ``benchmarks/measure_calibration_drift.py``, docs/calibration.md "When the
+rig no longer fits".
 """
 from __future__ import annotations
 
@@ -17,13 +27,80 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["CalibrationWatch", "CLEAR_RATIO"]
+__all__ = ["CalibrationWatch", "FloorWatch", "CLEAR_RATIO", "status_words"]
 
-#: A suspect calibration fits again once the median is under this share of ``max_px``.
+#: A suspect calibration fits again once the median (its distance from the floor) is under this share of
+#: the limit.
 CLEAR_RATIO = 0.75
 
 
-class CalibrationWatch:
+def status_words(checks) -> str:
+    """The STATUS= line's words for the checks that are suspect, each symptom named (empty when none is)."""
+    symptoms = [c.symptom() for c in checks if c.suspect]
+    return "; calibration suspect: recalibrate (ghcal), " + ", ".join(symptoms) if symptoms else ""
+
+
+class _RollingCheck:
+    """The median of the last ``window`` figures of one symptom, and whether it is past ``limit`` (``None``: never).
+
+    Subclasses say how far a median is from fitting (:meth:`_distance`) and name things for their reports.
+    """
+
+    def __init__(self, window: int, limit: Optional[float]) -> None:
+        self.window = int(window)
+        self.limit = limit
+        self.values: deque[float] = deque(maxlen=self.window)
+        self.suspect = False
+
+    def configure(self, window: int, limit: Optional[float]) -> Optional[bool]:
+        """New settings (a reload), keeping the newest values that fit; returns :meth:`add`'s answer for them."""
+        self.window, self.limit = int(window), limit
+        self.values = deque(self.values, maxlen=self.window)
+        return self._judge()
+
+    def reset(self) -> None:
+        """Forget every value (another calibration or model: the old pairs say nothing of it)."""
+        self.values.clear()
+        self.suspect = False
+
+    @property
+    def median(self) -> Optional[float]:
+        return float(np.median(self.values)) if self.values else None
+
+    def add(self, value: Optional[float]) -> Optional[bool]:
+        """One pair's figure (``None``: not measured, not counted). Returns the new state when it changes (True: now
+        suspect, False: fits again), else ``None``: the caller logs transitions."""
+        if value is None or not np.isfinite(value):
+            return None
+        self.values.append(float(value))
+        return self._judge()
+
+    def _distance(self, median: float) -> float:
+        return median
+
+    def symptom(self) -> str:
+        raise NotImplementedError
+
+    def status(self) -> str:
+        """The STATUS= line's words while suspect (empty otherwise)."""
+        return status_words([self]) if self.suspect else ""
+
+    def _judge(self) -> Optional[bool]:
+        median = self.median
+        if self.limit is None or median is None:
+            now = False
+        elif len(self.values) < self.window:
+            now = self.suspect  # too few pairs to change the verdict
+        else:
+            far = self._distance(median)
+            now = far > self.limit if not self.suspect else far >= CLEAR_RATIO * self.limit
+        if now == self.suspect:
+            return None
+        self.suspect = now
+        return now
+
+
+class CalibrationWatch(_RollingCheck):
     """The rolling median of the pairs' view agreement, and whether it says the rig has moved.
 
     Args:
@@ -39,55 +116,74 @@ class CalibrationWatch:
     """
 
     def __init__(self, window: int, max_px: Optional[float]) -> None:
-        self.window = int(window)
-        self.max_px = max_px
-        self.values: deque[float] = deque(maxlen=self.window)
-        self.suspect = False
+        super().__init__(window, max_px)
 
     def configure(self, window: int, max_px: Optional[float]) -> Optional[bool]:
-        """New settings (a reload), keeping the newest values that fit; returns :meth:`add`'s answer for them."""
-        self.window, self.max_px = int(window), max_px
-        self.values = deque(self.values, maxlen=self.window)
-        return self._judge()
+        return super().configure(window, max_px)
 
-    def reset(self) -> None:
-        """Forget every value (another calibration or model: the old pairs say nothing of it)."""
-        self.values.clear()
-        self.suspect = False
+    @property
+    def max_px(self) -> Optional[float]:
+        return self.limit
 
     @property
     def median_px(self) -> Optional[float]:
-        return float(np.median(self.values)) if self.values else None
-
-    def add(self, px: Optional[float]) -> Optional[bool]:
-        """One estimated pair's ``reprojection_px_median`` (``None``: not measured, not counted). Returns the new
-        state when it changes (True: now suspect, False: fits again), else ``None``: the caller logs transitions."""
-        if px is None or not np.isfinite(px):
-            return None
-        self.values.append(float(px))
-        return self._judge()
-
-    def _judge(self) -> Optional[bool]:
-        median = self.median_px
-        if self.max_px is None or median is None:
-            now = False
-        elif len(self.values) < self.window:
-            now = self.suspect  # too few pairs to change the verdict
-        else:
-            now = median > self.max_px if not self.suspect else median >= CLEAR_RATIO * self.max_px
-        if now == self.suspect:
-            return None
-        self.suspect = now
-        return now
+        return self.median
 
     def report(self) -> dict[str, Any]:
-        """The status file's ``calibration`` object."""
+        """The status file's ``calibration`` object (its view agreement's keys)."""
         median = self.median_px
         return {"reprojection_px_median": None if median is None else round(median, 3), "pairs": len(self.values),
                 "window": self.window, "max_px": self.max_px, "suspect": self.suspect}
 
-    def status(self) -> str:
-        """The STATUS= line's words while suspect (empty otherwise)."""
-        if not self.suspect:
-            return ""
-        return f"; calibration suspect: recalibrate (ghcal), {self.median_px:.2f} px > {self.max_px:g}"
+    def symptom(self) -> str:
+        """What is wrong while suspect, for the STATUS= line: ``1.46 px > 0.8`` (empty otherwise)."""
+        return f"{self.median_px:.2f} px > {self.max_px:g}" if self.suspect else ""
+
+
+class FloorWatch(_RollingCheck):
+    """The rolling median of the pairs' lowest triangulated foot joint's height, and whether the feet have left
+    the floor (a camera turned since calibration, a pan above all).
+
+    Args:
+        window: pairs with a triangulated foot joint the median is taken over; none is judged before it is full.
+        max_floor_m: how far from the floor (metres, above or below) the median may be before the calibration is
+            suspect; ``None``: never (people standing on a stage or lying on a bed are not on the rig's floor).
+
+    Example:
+        >>> watch = FloorWatch(window=3, max_floor_m=0.1)
+        >>> [watch.add(h) for h in (0.02, -0.2, None, -0.19, -0.22, 0.01, 0.03, 0.0)]
+        [None, None, None, True, None, None, False, None]
+        >>> watch.report()
+        {'lowest_foot_m_median': 0.01, 'floor_pairs': 3, 'max_floor_m': 0.1, 'floor_suspect': False}
+    """
+
+    def __init__(self, window: int, max_floor_m: Optional[float]) -> None:
+        super().__init__(window, max_floor_m)
+
+    def configure(self, window: int, max_floor_m: Optional[float]) -> Optional[bool]:
+        return super().configure(window, max_floor_m)
+
+    @property
+    def max_floor_m(self) -> Optional[float]:
+        return self.limit
+
+    def _distance(self, median: float) -> float:
+        return abs(median)  # floating above the floor or sunk below it: the depth is wrong either way
+
+    def words(self) -> str:
+        """Where the feet are, for the log and the STATUS line: ``feet 0.18 m below the floor``."""
+        median = self.median
+        if median is None:
+            return "no feet seen"
+        return f"feet {abs(median):.2f} m {'above' if median >= 0 else 'below'} the floor"
+
+    def report(self) -> dict[str, Any]:
+        """The status file's ``calibration`` object's floor keys."""
+        median = self.median
+        return {"lowest_foot_m_median": None if median is None else round(median, 3), "floor_pairs": len(self.values),
+                "max_floor_m": self.max_floor_m, "floor_suspect": self.suspect}
+
+    def symptom(self) -> str:
+        """What is wrong while suspect, for the STATUS= line: ``feet 0.18 m below the floor > 0.1 m`` (empty
+        otherwise)."""
+        return f"{self.words()} > {self.max_floor_m:g} m" if self.suspect else ""

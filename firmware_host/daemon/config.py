@@ -48,6 +48,10 @@ LOOP_MARGIN_S = 5.0
 #: docs/calibration.md).
 CALIBRATION_WINDOW = 30
 CALIBRATION_MAX_PX = 0.8
+#: The floor check's default (HealthConfig.calibration_max_floor_m): on the simulated rig the true rig's 30-pair
+#: medians of the lowest triangulated foot joint stayed within 0.07 m of the floor; a camera panned 2 degrees took
+#: 16 of 19 windows past 0.1 m, 1 degree 6 of 18 (benchmarks/measure_calibration_drift.py, docs/calibration.md).
+CALIBRATION_MAX_FLOOR_M = 0.1
 
 
 class DaemonConfigError(FirmwareHostError, ValueError):
@@ -142,6 +146,11 @@ class HealthConfig:
         calibration_max_px: that median, in model-input pixels, above which the status file and systemd's
             STATUS line say the calibration is suspect (a camera moved since calibration: recalibrate); ``null``:
             no check. Measured defaults (``benchmarks/measure_calibration_drift.py``, docs/calibration.md).
+        calibration_max_floor_m: how far from the floor (metres, above or below) the median over
+            ``calibration_window`` pairs of the lowest triangulated foot joint (``PairResult.lowest_foot_m``) may be
+            before the calibration is suspect: a panned camera, which the view agreement does not show, moves the
+            feet off the floor. ``null``: no floor check (people standing on a stage, lying on a bed: not on the
+            rig's floor at y = 0).
     """
 
     status_file: str | None = None
@@ -151,6 +160,7 @@ class HealthConfig:
     slow_estimate_s: float = 1.0
     calibration_window: int = CALIBRATION_WINDOW
     calibration_max_px: float | None = CALIBRATION_MAX_PX
+    calibration_max_floor_m: float | None = CALIBRATION_MAX_FLOOR_M
 
     def __post_init__(self) -> None:
         if self.status_file is not None and (not isinstance(self.status_file, str) or not self.status_file):
@@ -167,6 +177,12 @@ class HealthConfig:
             if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not 0 < limit <= 100:
                 _fail("calibration_max_px", "must be a number of pixels in (0, 100], or null for no check", limit)
             object.__setattr__(self, "calibration_max_px", float(limit))
+        if self.calibration_max_floor_m is not None:
+            limit = self.calibration_max_floor_m
+            if isinstance(limit, bool) or not isinstance(limit, (int, float)) or not 0 < limit <= 10:
+                _fail("calibration_max_floor_m", "must be a number of metres in (0, 10], or null for no floor check",
+                      limit)
+            object.__setattr__(self, "calibration_max_floor_m", float(limit))
 
 
 @dataclass(frozen=True)

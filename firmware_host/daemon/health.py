@@ -20,8 +20,8 @@ from typing import Any, Iterable, Optional
 import numpy as np
 
 from drivers.url import redact_url
-from firmware_host.daemon.calibration_watch import CalibrationWatch
-from firmware_host.daemon.config import CALIBRATION_MAX_PX, CALIBRATION_WINDOW
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, status_words
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from ghnerf_runtime.frame_reasons import REASONS
 
 __all__ = ["State", "Health", "write_status_file", "sink_keys"]
@@ -93,6 +93,8 @@ class Health:
     estimate_times: deque = field(default_factory=lambda: deque(maxlen=WINDOW))
     calibration: CalibrationWatch = field(default_factory=lambda: CalibrationWatch(CALIBRATION_WINDOW,
                                                                                     CALIBRATION_MAX_PX))
+    # the calibration's second symptom: the feet off the floor (a pan, which the view agreement does not show)
+    floor: FloorWatch = field(default_factory=lambda: FloorWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_FLOOR_M))
 
     def __post_init__(self) -> None:
         self.started = self.state_since = self.clock()
@@ -100,6 +102,21 @@ class Health:
     def enter(self, state: str) -> None:
         if state != self.state:
             self.state, self.state_since = state, self.clock()
+
+    @property
+    def calibration_suspect(self) -> bool:
+        """Either check says the rig no longer fits (the CALIBRATION_SUSPECT flag)."""
+        return bool(self.calibration.suspect or self.floor.suspect)
+
+    def _calibration_report(self) -> dict[str, Any]:
+        """The status file's ``calibration``: each check's figures, ``suspect`` for either (``px_suspect`` and
+        ``floor_suspect`` say which)."""
+        px = self.calibration.report()
+        return {**px, "px_suspect": px["suspect"], **self.floor.report(), "suspect": self.calibration_suspect}
+
+    def _calibration_status(self) -> str:
+        """The STATUS= line's words while either check is suspect, naming each symptom (empty otherwise)."""
+        return status_words((self.calibration, self.floor))
 
     def estimated(self, total_ms: float, found: float) -> None:
         now = self.clock()
@@ -148,7 +165,7 @@ class Health:
                           "joints_found": round(float(np.mean(self.found_fraction)), 3)
                           if self.found_fraction else None,
                           "window": len(lat)},
-            "calibration": self.calibration.report(),
+            "calibration": self._calibration_report(),
             "last_error": self.last_error,
             "config": {"reloads": self.reloads, "reload_failures": self.reload_failures,
                        "reload_error": self.reload_error},
@@ -173,9 +190,10 @@ class Health:
             line = f"waiting for the rig: {self.last_error}"
         else:
             line = self.state
-        # a rig that no longer fits its calibration is said whatever else the line holds (about 55 characters),
+        # a rig that no longer fits its calibration is said whatever else the line holds (about 55 characters,
+        # 95 with both symptoms),
         # and so is a refused reload, cut to leave the state its STATUS_KEEP
-        calibration = self.calibration.status()
+        calibration = self._calibration_status()
         room = min(120, STATUS_MAX - STATUS_KEEP - len(calibration))
         refused = calibration + (f"; {self.reload_error}"[:room] if self.reload_error else "")
         down = _sinks_down(sinks or {}, STATUS_MAX - len(refused) - min(len(line), STATUS_KEEP))

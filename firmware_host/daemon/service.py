@@ -20,9 +20,11 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   skipped (``MAX_FAILED_RUNS`` failures of the model in a row stop the daemon, exit 1, for systemd to
   restart it with the model loaded afresh); an estimate slower than
   ``health.slow_estimate_s`` flags ``ESTIMATOR_STALLED``;
-* **a camera moved since calibration** (knocked on its mount): the pairs' views stop meeting in 3D; once
-  the median over ``health.calibration_window`` pairs passes ``health.calibration_max_px`` the status file
-  and systemd's STATUS say "calibration suspect: recalibrate (ghcal)", and the log warns once
+* **a camera moved since calibration** (knocked on its mount): the pairs' views stop meeting in 3D (a tilt),
+  or the person's feet leave the floor (a pan, which the views' agreement does not show); once the median
+  over ``health.calibration_window`` pairs passes ``health.calibration_max_px`` (or, for the lowest
+  triangulated foot joint, ``health.calibration_max_floor_m`` from the floor) the status file and systemd's
+  STATUS say "calibration suspect: recalibrate (ghcal)" with the symptom, and the log warns once
   (:mod:`firmware_host.daemon.calibration_watch`); the joints still flow;
 * **a hang** of the loop itself: :class:`~firmware_host.daemon.notify.HangWatchdog` stops systemd's
   watchdog pings and systemd restarts the service;
@@ -201,6 +203,7 @@ class Daemon:
         self.notifier = notifier if notifier is not None else SystemdNotifier()
         self.health = Health(clock=clock, rig_url=redact_url(config.rig.url))
         self.health.calibration.configure(config.health.calibration_window, config.health.calibration_max_px)
+        self.health.floor.configure(config.health.calibration_window, config.health.calibration_max_floor_m)
         # Woken often enough to flag a stuck estimate within about half of slow_estimate_s.
         self.watchdog = HangWatchdog(self.notifier, config.health.loop_allowance_s, clock=clock,
                                      interval_s=min(config.health.slow_estimate_s / 2, 1.0),
@@ -322,8 +325,7 @@ class Daemon:
             except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the runtime cannot use
                 raise DaemonStartError(f"the model does not fit rig {rig.rig_id!r}: {e}") from None
             self._rig_text = text
-            self.health.calibration.reset()  # the pairs of another calibration say nothing of this one
-            self._sync_calibration()
+            self._reset_calibration()  # the pairs of another calibration say nothing of this one
         else:
             self._estimator.reset()  # the subject may have moved while the camera was away
         return self._estimator
@@ -477,12 +479,13 @@ class Daemon:
             self.health.estimated(result.timing_ms["total"], float(np.mean(~np.asarray(result.missing, bool))))
             self.health.frames_checked(result.frame_reason)
             self._calibration_changed(self.health.calibration.add(result.reprojection_px_median))
+            self._floor_changed(self.health.floor.add(result.lowest_foot_m))
             self._sync_calibration()
             self.health.estimator_stalled = took > self.config.health.slow_estimate_s
             self.health.camera_fault = False
             self._set_fault(Fault.ESTIMATOR_STALLED if self.health.estimator_stalled else Fault.OK)
             frame = estimate_frame(pair, result, sequence=self._frame_numbers.take(),
-                                   calibration_suspect=self.health.calibration.suspect)
+                                   calibration_suspect=self.health.calibration_suspect)
             for sink in self._sinks.values():
                 sink.send(frame)
         return False
@@ -499,6 +502,27 @@ class Daemon:
         elif suspect is not None:
             _log.info("calibration fits again: the views' peaks are %.2f px apart over the last %d pairs",
                       watch.median_px if watch.median_px is not None else 0.0, len(watch.values))
+
+    def _floor_changed(self, suspect: Optional[bool]) -> None:
+        """Log the floor check's verdict when it changes, in words that say which symptom (the px check's are
+        :meth:`_calibration_changed`'s)."""
+        watch = self.health.floor
+        if suspect:
+            _log.warning("calibration suspect: %s (the lowest triangulated foot joint, median over the last %d pairs "
+                         "with feet in view; health.calibration_max_floor_m %g): a camera has turned since "
+                         "calibration (a pan moves the depth, not the views' agreement); recalibrate (ghcal, "
+                         "docs/calibration.md) and restart. Where people stand above the floor (a stage, a bed), set "
+                         "health.calibration_max_floor_m null", watch.words(), len(watch.values), watch.max_floor_m)
+        elif suspect is not None and watch.max_floor_m is None:
+            _log.info("calibration floor check off (health.calibration_max_floor_m null)")
+        elif suspect is not None:
+            _log.info("calibration fits the floor again: %s over the last %d pairs", watch.words(), len(watch.values))
+
+    def _reset_calibration(self) -> None:
+        """Both calibration checks start afresh (another calibration, model or settings), and the sinks hear it."""
+        self.health.calibration.reset()
+        self.health.floor.reset()
+        self._sync_calibration()
 
     def _lost(self, why: str) -> None:
         self.health.rig_lost += 1
@@ -667,8 +691,7 @@ class Daemon:
             replaced = session is not self._session
             self._session, self._estimator = session, estimator  # None: built when the next rig opens
             self._rig_text = dumps_rig(estimator.rig) if estimator is not None else None
-            self.health.calibration.reset()  # another model or settings: its peaks are judged afresh
-            self._sync_calibration()
+            self._reset_calibration()  # another model or settings: its peaks are judged afresh
             if replaced:  # the old model's sessions are free now: hand their pages back (firmware_host.daemon.memory)
                 return_freed_memory()
         with self._fault_lock:
@@ -679,6 +702,8 @@ class Daemon:
         if "health" in changed:
             self._calibration_changed(self.health.calibration.configure(new.health.calibration_window,
                                                                         new.health.calibration_max_px))
+            self._floor_changed(self.health.floor.configure(new.health.calibration_window,
+                                                            new.health.calibration_max_floor_m))
             self._sync_calibration()
             self.watchdog.configure(new.health.loop_allowance_s, interval_s=min(new.health.slow_estimate_s / 2, 1.0))
             self._next_status = 0.0
@@ -730,7 +755,7 @@ class Daemon:
         """Tell the sinks' STATUS (header flag CALIBRATION_SUSPECT) the calibration check's verdict when it
         changed: a receiver learns it while no frame flows too, not from the status file alone."""
         with self._fault_lock:
-            suspect = bool(self.health.calibration.suspect)
+            suspect = self.health.calibration_suspect
             if suspect != self._calibration_sent:
                 self._calibration_sent = suspect
                 for sink in self._sinks.values():

@@ -75,10 +75,10 @@ def test_the_json_carries_the_reason_and_keeps_the_old_keys(shot):
     r = _estimate(shot, (np.zeros_like(pair[0]), pair[1]), truth=False)
     obj = json.loads(json.dumps(r.to_json(), allow_nan=False))
     # additive: every earlier key is still there (the skeleton prior's check came in session 52, the two-people
-    # flag, single_view and the views' agreement in 53)
+    # flag, single_view and the views' agreement in 53, the lowest foot in 54)
     assert set(obj) == KEYS_BEFORE | {"frame_reason", "prior_disagreement_m", "prior_fallback", "several_people",
-                                      "single_view", "reprojection_px_median"}
-    assert obj["reprojection_px_median"] is None  # a frame rejected: nothing measured
+                                      "single_view", "reprojection_px_median", "lowest_foot_m"}
+    assert obj["reprojection_px_median"] is None and obj["lowest_foot_m"] is None  # a frame rejected: nothing measured
     assert obj["single_view"] is None  # (the oracle's heatmaps are zeros here: nobody in the good camera either)
     assert obj["frame_reason"] == {left: FLAT, right: None}  # null: the frame passed
     assert list(obj["frame_reason"]) == list(obj["frame_ok"]) == [left, right]  # rig order
@@ -148,3 +148,13 @@ def test_the_session_53_fields_hold_only_what_the_json_can_say():
             _result({"a": True, "b": True}, reprojection_px_median=bad)
     with pytest.raises(ValueError, match=r"single_view 'a' with several_people"):
         _result({"a": True, "b": True}, single_view="a", several_people=True)
+
+
+def test_the_lowest_foot_holds_only_what_the_json_can_say():
+    """``lowest_foot_m`` is a finite number (below the floor is negative) or None, rounded to 0.1 mm in the JSON."""
+    ok = _result({"a": True, "b": True}, lowest_foot_m=np.float64(-0.12345))
+    assert json.loads(json.dumps(ok.to_json(), allow_nan=False))["lowest_foot_m"] == -0.1235
+    assert _result({"a": True, "b": True}).to_json()["lowest_foot_m"] is None
+    for bad in (float("nan"), float("inf"), "0.3", [0.1]):
+        with pytest.raises(ValueError, match=r"lowest_foot_m must be a finite number or None"):
+            _result({"a": True, "b": True}, lowest_foot_m=bad)

@@ -1,6 +1,6 @@
 """The two views' agreement before the reprojection gate (``joints3d.triangulate_joints_checked``,
-``PairResult.reprojection_px_median``): what tells the daemon that a camera moved since calibration
-(docs/calibration.md, "When the rig no longer fits")."""
+``PairResult.reprojection_px_median``) and the lowest triangulated foot joint (``PairResult.lowest_foot_m``):
+what tells the daemon that a camera moved since calibration (docs/calibration.md, "When the rig no longer fits")."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from benchmarks.measure_calibration_drift import turned
+from ghnerf_runtime.body25 import FLOOR_JOINTS, JOINT_INDEX
 from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, SessionConfig
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.geometry.triangulation import triangulate_two_views
-from ghnerf_runtime.joints3d import triangulate_joints, triangulate_joints_checked
+from ghnerf_runtime.joints3d import Joints3D, lowest_height_m, triangulate_joints, triangulate_joints_checked
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -109,3 +110,55 @@ def test_the_shipped_model_s_pairs_tell_a_tilted_rig_file_from_the_true_one():
         medians[name] = float(np.median([res.reprojection_px_median for res in results]))
         assert np.mean([res.num_found for res in results]) > 15  # silently wrong, not missing
     assert medians["true"] < 0.5 < 1.5 < medians["tilted"], medians
+
+
+def test_the_lowest_foot_is_the_largest_y_of_the_foot_joints_found():
+    points = np.zeros((25, 3))
+    points[:, 1] = -1.0  # the rig frame: y down, the floor at y = 0
+    points[JOINT_INDEX["LHeel"], 1], points[JOINT_INDEX["RBigToe"], 1] = 0.03, -0.05
+    points[JOINT_INDEX["Nose"], 1] = 0.5  # lower than any foot, but no foot joint
+    valid = np.ones(25, bool)
+    j3 = Joints3D(points, np.ones(25, np.float32), valid, np.zeros((25, 2)))
+    assert lowest_height_m(j3, FLOOR_JOINTS) == pytest.approx(-0.03)  # 3 cm below the floor
+    valid[JOINT_INDEX["LHeel"]] = False
+    assert lowest_height_m(Joints3D(points, np.ones(25, np.float32), valid, np.zeros((25, 2))), FLOOR_JOINTS) == pytest.approx(0.05)
+    valid[list(FLOOR_JOINTS)] = False
+    assert lowest_height_m(Joints3D(points, np.ones(25, np.float32), valid, np.zeros((25, 2))), FLOOR_JOINTS) is None
+
+
+@pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model: models/model_card.json")
+def test_the_shipped_model_s_triangulated_feet_tell_a_panned_rig_file_and_cut_feet_say_nothing():
+    """Through the true rig the lowest triangulated foot stands on the floor; with the second camera's rig entry
+    panned 2 degrees the views still meet (reprojection_px_median as low) but the feet sink 0.1 m or more below
+    it, or float above it panned the other way. The reported joints are the skeleton prior's, whose feet stay
+    near the floor whatever the calibration: the figure is the triangulation's. Frames that cut the feet off
+    (the model puts their peaks at the frame's edge, up to 0.8 m above the floor) give no figure."""
+    sim = pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.estimator import Estimator, load_session
+    from ghnerf_runtime.geometry import Rig
+
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
+    session = load_session(cfg)
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
+    shots = [[scene.render(c, t, with_truth=False)[0] for c in rig.pair] for t in (0.0, 0.1, 0.2, 0.3)]
+    feet, reported, px = {}, {}, {}
+    for name, r in (("true", rig), ("pan", turned(rig, 1, "pan", 2.0)), ("pan back", turned(rig, 1, "pan", -2.0))):
+        with Estimator(session, r, cfg) as est:
+            results = [est.estimate(images, timestamp_s=0.1 * k) for k, images in enumerate(shots)]
+        assert all(res.lowest_foot_m is not None for res in results)
+        feet[name] = float(np.median([res.lowest_foot_m for res in results]))
+        px[name] = float(np.median([res.reprojection_px_median for res in results]))
+        reported[name] = float(np.median([-res.joints_3d[[j for j in FLOOR_JOINTS if not res.missing[j]], 1].max()
+                                          for res in results]))
+    assert abs(feet["true"]) < 0.05 and feet["pan"] < -0.08 and feet["pan back"] > 0.1, feet
+    assert px["pan"] < 0.5 and px["pan back"] < 0.5, px  # the views still meet: the px check is blind to it
+    assert abs(reported["pan"]) < 0.05, reported  # the prior's feet hide the pan
+    for keep in (0.7, 0.6):  # the lower 30 or 40 % of each frame gone: the feet just out of view, or far
+        rows = int(keep * rig.pair[0].height)
+        cams = tuple(type(c)(c.name, c.width, rows, c.K, c.dist, c.R, c.t) for c in rig.cameras)
+        with Estimator(session, Rig(cams, rig.volume, rig.rig_id), cfg) as est:
+            results = [est.estimate([np.ascontiguousarray(im[:rows]) for im in images], timestamp_s=0.1 * k)
+                       for k, images in enumerate(shots)]
+        assert all(res.num_found > 10 for res in results)  # someone is there, feet placed by the prior or not
+        assert all(res.lowest_foot_m is None for res in results), (keep, [res.lowest_foot_m for res in results])

@@ -1,19 +1,20 @@
 """The daemon's calibration check (``firmware_host.daemon.calibration_watch``): the rule on synthetic sequences
-of the pairs' view agreement, its config keys, and what the status file and systemd's STATUS line say."""
+of the pairs' view agreement and of their lowest foot joint's height, its config keys, and what the status file
+and systemd's STATUS line say."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from firmware_host.daemon import DaemonConfigError, daemon_config_from_dict
-from firmware_host.daemon.calibration_watch import CLEAR_RATIO, CalibrationWatch
-from firmware_host.daemon.config import CALIBRATION_MAX_PX, CALIBRATION_WINDOW
+from firmware_host.daemon.calibration_watch import CLEAR_RATIO, CalibrationWatch, FloorWatch
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from firmware_host.daemon.health import STATUS_KEEP, STATUS_MAX, Health, State
 
 SINK = "memory://"
 
 
-def _feed(watch: CalibrationWatch, values) -> list[tuple[int, bool]]:
+def _feed(watch, values) -> list[tuple[int, bool]]:
     """The transitions ``(index, new state)`` over ``values``."""
     return [(k, change) for k, v in enumerate(values) if (change := watch.add(v)) is not None]
 
@@ -82,7 +83,8 @@ def test_the_status_file_and_line_say_it():
         health.calibration.add(1.46)
     report = health.report()
     assert report["calibration"] == {"reprojection_px_median": 1.46, "pairs": 3, "window": 3, "max_px": 0.8,
-                                     "suspect": True}
+                                     "suspect": True, "px_suspect": True, "lowest_foot_m_median": None,
+                                     "floor_pairs": 0, "max_floor_m": CALIBRATION_MAX_FLOOR_M, "floor_suspect": False}
     assert "; calibration suspect: recalibrate (ghcal), 1.46 px > 0.8" in health.status_line()
     # a refused reload and a long state keep the warning whole, and the state its STATUS_KEEP
     health.reload_error = "reload refused: " + "x" * 300
@@ -104,3 +106,83 @@ def test_the_config_keys_and_their_checks():
                        ("calibration_max_px", 0), ("calibration_max_px", "1"), ("calibration_max_px", float("nan"))):
         with pytest.raises(DaemonConfigError, match=f"^health.{key}: .*got {value!r}"):
             daemon_config_from_dict({"sinks": [SINK], "health": {key: value}})
+
+
+def _true_floor(n: int, seed: int = 0) -> np.ndarray:
+    """Per-pair lowest foot heights as the true rig gave them (benchmarks/measure_calibration_drift.py: within a
+    few cm of the floor, a rig's own offset up to 0.07 m), with a few pairs a foot joint put far off."""
+    rng = np.random.default_rng(seed)
+    v = 0.05 + rng.normal(0.0, 0.04, n)
+    v[rng.choice(n, n // 20, replace=False)] = -0.4
+    return v
+
+
+def test_the_true_rig_s_feet_never_raise_the_floor_check():
+    watch = FloorWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_FLOOR_M)
+    assert _feed(watch, _true_floor(3000)) == []
+    assert not watch.suspect and abs(watch.report()["lowest_foot_m_median"]) < CLEAR_RATIO * CALIBRATION_MAX_FLOOR_M
+
+
+@pytest.mark.parametrize("sign, words", [(-1, "below"), (1, "above")])
+def test_feet_off_the_floor_raise_it_once_either_way_and_a_fixed_rig_clears_it_once(sign, words):
+    """A panned camera moves the depth one way or the other: the feet sink below the floor or float above it
+    (0.1-0.26 m for a 2 degree pan). Flagged once after half the window, said with the side; cleared once."""
+    watch = FloorWatch(30, 0.1)
+    panned = sign * np.random.default_rng(1).uniform(0.15, 0.25, 200)
+    changes = _feed(watch, np.concatenate([_true_floor(100) - 0.05, panned, _true_floor(200, seed=2) - 0.05]))
+    assert [state for _, state in changes] == [True, False]
+    (up, _), (down, _) = changes
+    assert 100 + 10 <= up <= 100 + 16 and 300 + 10 <= down <= 300 + 16
+    watch = FloorWatch(3, 0.1)
+    _feed(watch, sign * np.full(3, 0.18))
+    assert watch.symptom() == f"feet 0.18 m {words} the floor > 0.1 m"
+    assert watch.status() == f"; calibration suspect: recalibrate (ghcal), feet 0.18 m {words} the floor > 0.1 m"
+
+
+def test_pairs_without_feet_do_not_count_and_null_turns_the_floor_check_off():
+    watch = FloorWatch(5, 0.1)
+    assert _feed(watch, [-0.3, None, None, -0.3, float("nan"), -0.3, -0.3]) == []  # 4 feet of 5 pairs: not judged
+    assert watch.report() == {"lowest_foot_m_median": -0.3, "floor_pairs": 4, "max_floor_m": 0.1,
+                              "floor_suspect": False}
+    assert watch.add(-0.3) is True
+    assert watch.configure(5, None) is False and _feed(watch, [0.9] * 10) == []  # a stage, a bed: no floor check
+    watch.reset()
+    assert watch.report()["floor_pairs"] == 0 and watch.words() == "no feet seen"
+
+
+def test_either_symptom_makes_the_calibration_suspect_and_the_line_names_each():
+    health = Health(clock=lambda: 0.0)
+    health.calibration.configure(3, 0.8)
+    health.floor.configure(3, 0.1)
+    health.enter(State.RUNNING)
+    for _ in range(3):
+        health.estimated(100.0, 1.0)
+        health.calibration.add(0.2)  # the views meet: a pan
+        health.floor.add(-0.184)
+    calibration = health.report()["calibration"]
+    assert calibration["suspect"] and calibration["floor_suspect"] and not calibration["px_suspect"]
+    assert calibration["lowest_foot_m_median"] == -0.184 and calibration["floor_pairs"] == 3
+    assert health.calibration_suspect
+    line = health.status_line()
+    assert line.endswith("; calibration suspect: recalibrate (ghcal), feet 0.18 m below the floor > 0.1 m"), line
+    for _ in range(3):
+        health.calibration.add(1.46)
+    line = health.status_line()
+    assert line.endswith("; calibration suspect: recalibrate (ghcal), 1.46 px > 0.8, feet 0.18 m below the floor > "
+                         "0.1 m") and len(line) <= STATUS_MAX, line
+    health.floor.reset()
+    health.calibration.reset()
+    assert not health.calibration_suspect and "calibration" not in health.status_line()
+
+
+def test_the_floor_key_and_its_checks():
+    cfg = daemon_config_from_dict({"sinks": [SINK]})
+    assert cfg.health.calibration_max_floor_m == CALIBRATION_MAX_FLOOR_M == 0.1
+    off = daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_floor_m": None}})
+    assert off.health.calibration_max_floor_m is None
+    assert daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_floor_m": 1}}
+                                   ).health.calibration_max_floor_m == 1.0
+    for value in (0, -0.1, 11, "0.1", True, float("nan"), float("inf")):
+        with pytest.raises(DaemonConfigError, match=f"^health.calibration_max_floor_m: must be a number of metres in "
+                                                    rf"\(0, 10\], or null for no floor check, got {value!r}"):
+            daemon_config_from_dict({"sinks": [SINK], "health": {"calibration_max_floor_m": value}})
