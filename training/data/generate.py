@@ -126,8 +126,9 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
 
     Raises:
         DataConfigError: a bad argument (the message names it).
-        DatasetError: ``out`` holds an incompatible dataset (the message names the manifest), or another
-            process is writing it (the message names ``cache.WRITER_LOCK``).
+        DatasetError: ``out`` holds an incompatible dataset (the message names the manifest), another
+            process is writing it (the message names ``cache.WRITER_LOCK`` and its holder), or a shard or the
+            manifest could not be written (a full disk says so; no partial shard is left, the run resumes).
     """
     check_dataset_seed(dataset_seed)
     if isinstance(shard_size, bool) or not isinstance(shard_size, int) or not 1 <= shard_size <= 100_000:
@@ -203,9 +204,12 @@ def _generate(out: Path, counts: Mapping[str, int], config: SyntheticConfig, dat
     except BaseException:
         if pool is not None:
             # Ctrl-C or a failed shard: stop the workers now (close() would wait for every queued shard); a
-            # shard cut short is only a *.tmp-* folder, which the next run removes
+            # shard cut short is only a *.tmp-* folder
             pool.terminate()
             pool.join()
+        for split in counts:  # ours (the lock is held): free their space now, a full disk above all
+            if (out / split).is_dir():
+                remove_stale_temporaries(out / split)
         raise
     if pool is not None:
         pool.close()
