@@ -518,3 +518,31 @@ def test_a_full_disk_during_generation_exits_2_naming_the_folder_and_the_rerun_r
     assert main(["--out", str(out), "--train", "2", *_SMALL]) == 0
     assert "1 shards (1 samples) to render, 1 already complete" in caplog.text
     assert len(ShardedSplit(out, "train")) == 2
+
+
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--seed", "4", "dataset_seed 0, now 4 (--seed)"),
+    ("--freestyle-share", "0.5", "synthetic.freestyle_share absent, now 0.5 (--freestyle-share)"),
+    ("--cold-start", "0.5", "synthetic.cold_start_fraction 0.2, now 0.5 (--cold-start)"),
+    ("--res", "40", "resolution (32, now 40)"),
+])
+def test_a_rerun_with_other_options_on_an_interrupted_folder_is_refused_naming_the_option(tmp_path, caplog, option,
+                                                                                        value, says):
+    # a first run stopped before its manifest recorded any split: the rerun must not mix two recipes either
+    out = tmp_path / "ds"
+    assert main(["--out", str(out), "--train", "1", *_SMALL]) == 0
+    manifest = read_manifest(out)
+    manifest["splits"] = {}  # as the run left it when stopped before its end
+    write_manifest(out, manifest)
+    args = ["--out", str(out), "--train", "2", *_SMALL]
+    if option in args:
+        args[args.index(option) + 1] = value
+    else:
+        args += [option, value]
+    caplog.set_level("INFO")
+    caplog.clear()
+    assert main(args) == 2
+    error = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert len(error) == 1 and says in error[0] and str(out / MANIFEST) in error[0], error
+    assert sorted(p.name for p in (out / "train").iterdir()) == ["shard_000000"]  # nothing rendered
