@@ -609,6 +609,16 @@ def main(argv: list[str] | None = None) -> int:
                      f"(drop --card, or write {FILE_NAME})")
     if not 0.0 <= args.tilt_share <= 1.0:  # before minutes of collecting
         ap.error(f"--tilt-share must be a share from 0 to 1, not {args.tilt_share!r}")
+    from training.data.cache import ShardedSplit
+    from training.data.errors import DataError
+
+    try:  # every split read, opened first (manifest, shards, array headers): the val split is read only after
+        # minutes of collecting the training ones, and a damaged one was a traceback
+        for data in [args.data, *args.extra_data]:
+            ShardedSplit(data, args.train_split)
+        ShardedSplit(args.data, args.val_split)
+    except DataError as e:
+        ap.error(str(e))
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
                               members=args.members, tilt_share=args.tilt_share, tilt_mode=args.tilt_mode)
     t0 = time.monotonic()

@@ -106,13 +106,12 @@ def test_missing_shard_names_its_metadata_file(tmp_path):
 
 
 def test_wrong_array_shape_names_the_array_file(tmp_path):
+    # found when the split opens (headers only), not when a DataLoader worker first reads the shard
     root = _dataset(tmp_path / "ds")
     path = root / "train" / "shard_000002" / "depth.npy"
     np.save(path, np.zeros((1, V, S, S + 1), np.float16))
-    data = ShardedSplit(root, "train")
-    data.arrays(0)  # other shards are fine
     with pytest.raises(DatasetError, match="expected") as err:
-        data.arrays(4)
+        ShardedSplit(root, "train")
     assert err.value.path == str(path)
 
 
@@ -186,3 +185,223 @@ def test_only_the_last_shard_may_hold_more_than_its_split_reads(tmp_path):
         with pytest.raises(DatasetError, match=rf"shard holds samples from {expected}") as err:
             ShardedSplit(root, "train")
         assert err.value.path.endswith("meta.json")
+
+
+# ------------------------------------------------------------------ damage found at open, writes that fail
+@pytest.mark.parametrize("cut", [0, 100, -1])
+def test_a_cut_array_of_any_shard_is_named_when_the_split_opens(tmp_path, cut):
+    # a shard cut by a power cut (or a bad copy) used to open fine and fail only when a sample of it was read:
+    # inside a DataLoader worker, an hour into training; -1: one byte short, header whole
+    root = _dataset(tmp_path / "ds")
+    path = root / "train" / "shard_000002" / "images.npy"
+    data = path.read_bytes()
+    path.write_bytes(data[:cut] if cut >= 0 else data[:-1])
+    with pytest.raises(DatasetError, match="unreadable array|cut short") as err:
+        ShardedSplit(root, "train")
+    assert err.value.path == str(path)
+
+
+def test_a_missing_array_file_is_named_when_the_split_opens(tmp_path):
+    root = _dataset(tmp_path / "ds")
+    path = root / "train" / "shard_000001" / "K.npy"
+    path.unlink()
+    with pytest.raises(DatasetError, match="missing") as err:
+        ShardedSplit(root, "train")
+    assert err.value.path == str(path)
+
+
+def test_an_empty_split_is_refused_naming_the_manifest(tmp_path):
+    # readers would see no scene: training, the prior's collection and evaluation would run on nothing
+    root = _dataset(tmp_path / "ds")
+    manifest = json.loads((root / MANIFEST).read_text())
+    manifest["splits"]["val"] = {"count": 0, "shard_size": 2}
+    (root / MANIFEST).write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="'val' holds no samples") as err:
+        ShardedSplit(root, "val")
+    assert err.value.path == str(root / MANIFEST)
+    assert len(ShardedSplit(root, "train")) == 5
+
+
+def test_a_newer_schema_version_says_the_code_is_older(tmp_path):
+    root = _dataset(tmp_path / "ds")
+    manifest = json.loads((root / MANIFEST).read_text())
+    manifest["schema_version"] = 2
+    (root / MANIFEST).write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="written by a newer version of this code") as err:
+        ShardedSplit(root, "train")
+    assert err.value.path == str(root / MANIFEST)
+
+
+def _fail_on_save(monkeypatch, errno_: int, after: int = 1):
+    # np.save writes the shard's arrays: the second one hits a full disk halfway
+    import os
+
+    real, calls = np.save, []
+
+    def save(file, arr, *args, **kwargs):
+        calls.append(file)
+        if len(calls) > after:
+            if hasattr(file, "write"):
+                file.write(b"\x93NUMPY")
+            else:  # (a path: how the writer called it before)
+                Path(file).write_bytes(b"\x93NUMPY")
+            raise OSError(errno_, os.strerror(errno_))
+        return real(file, arr, *args, **kwargs)
+
+    monkeypatch.setattr(np, "save", save)
+
+
+def test_a_full_disk_during_a_shard_write_says_so_and_leaves_no_partial_shard(tmp_path, monkeypatch):
+    import errno
+
+    root = _dataset(tmp_path / "ds")
+    folder = root / "train" / "shard_000003"
+    _fail_on_save(monkeypatch, errno.ENOSPC)
+    with pytest.raises(DatasetError, match="no space left on the device") as err:
+        write_shard(folder, [_sample(7)], 6)
+    assert err.value.path == str(folder) and str(root) in str(err.value)
+    assert sorted(p.name for p in (root / "train").iterdir()) == ["shard_000000", "shard_000001", "shard_000002"]
+    # the shard it would have replaced is kept whole
+    with pytest.raises(DatasetError, match="no space"):
+        write_shard(root / "train" / "shard_000001", [_sample(2), _sample(3)], 2)
+    assert len(ShardedSplit(root, "train")) == 5 and ShardedSplit(root, "train").metadata(3) == {"seed": 3}
+
+
+def test_a_full_disk_writing_the_manifest_keeps_the_old_one(tmp_path, monkeypatch):
+    import builtins
+    import errno
+
+    root = _dataset(tmp_path / "ds")
+    before = (root / MANIFEST).read_text()
+    real_open = builtins.open
+
+    class _Full:
+        def __init__(self, fh):
+            self.fh = fh
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+        def write(self, text):
+            self.fh.write(text[:10])
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    def opening(file, mode="r", *args, **kwargs):
+        fh = real_open(file, mode, *args, **kwargs)
+        return _Full(fh) if str(file).endswith(".json.tmp") else fh
+
+    monkeypatch.setattr(builtins, "open", opening)
+    manifest = json.loads(before)
+    manifest["splits"]["val"] = {"count": 1, "shard_size": 1}
+    with pytest.raises(DatasetError, match="no space left on the device") as err:
+        write_manifest(root, manifest)
+    monkeypatch.undo()
+    assert err.value.path == str(root / MANIFEST)
+    assert (root / MANIFEST).read_text() == before and not list(root.glob("*.tmp"))
+
+
+def test_a_shard_and_its_rename_are_flushed_to_disk_before_and_after_the_rename(tmp_path, monkeypatch):
+    # without fsync a power cut after the rename can leave shard_* folders of empty or short files (ext4's delayed
+    # allocation), which a resume would have to find; with it the rename only ever shows whole files
+    import os
+
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        return real_fsync(fd)
+
+    def replace(src, dst):
+        events.append(("replace", str(dst)))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+    folder = tmp_path / "train" / "shard_000000"
+    write_shard(folder, [_sample(0)], 0)
+    at = events.index(("replace", str(folder)))
+    synced_before = {Path(p).name for kind, p in events[:at] if kind == "fsync"}
+    assert synced_before >= {f"{name}.npy" for name in FIELDS} | {"meta.json", f"shard_000000.tmp-{os.getpid()}"}
+    assert ("fsync", str(folder.parent)) in events[at:]
+
+
+def test_dataset_errors_survive_the_trip_from_a_generate_worker():
+    # the pool pickles a worker's exception to its parent; unpickling called __init__(message) and failed in the
+    # pool's result thread, which then waited forever for that shard
+    import pickle
+
+    from training.data.errors import DataConfigError
+
+    err = pickle.loads(pickle.dumps(DatasetError("/data/ds/train/shard_000003", "no space left")))
+    assert isinstance(err, DatasetError) and err.path == "/data/ds/train/shard_000003"
+    assert str(err) == "/data/ds/train/shard_000003: no space left"
+    cfg = pickle.loads(pickle.dumps(DataConfigError("SyntheticConfig.resolution", "must be a multiple of 8")))
+    assert cfg.field == "SyntheticConfig.resolution" and str(cfg).endswith("multiple of 8")
+
+
+# ------------------------------------------------------------------ the writer's lock names its holder
+def _hold(root: Path, line: str | None):
+    """Hold ``root``'s writer lock on a separate open file (as another process would), with ``line`` in it."""
+    import fcntl
+
+    fh = open(root / "dataset.lock", "a+")
+    fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    if line is not None:
+        fh.truncate(0)
+        fh.write(line)
+        fh.flush()
+    return fh
+
+
+def test_a_held_lock_names_the_folder_the_live_holder_and_how_to_clear_it(tmp_path):
+    import os
+
+    from training.data.cache import writer_lock
+
+    root = tmp_path / "ds"
+    root.mkdir()
+    with writer_lock(root):
+        line = (root / "dataset.lock").read_text().split()
+        assert line[0] == str(os.getpid())
+        with pytest.raises(DatasetError) as err:
+            with writer_lock(root):
+                pass
+    msg = str(err.value)
+    assert err.value.path == str(root / "dataset.lock")
+    assert f"writing dataset {root}" in msg and f"pid {os.getpid()}" in msg and f"kill {os.getpid()}" in msg
+    assert (root / "dataset.lock").read_text() == ""  # emptied on the way out: folders made alike stay identical
+    with writer_lock(root):  # and free again
+        pass
+
+
+def test_a_lock_held_from_another_host_or_by_a_dead_pids_child_says_so(tmp_path):
+    import socket
+    import subprocess
+    import sys
+
+    from training.data.cache import writer_lock
+
+    root = tmp_path / "ds"
+    root.mkdir()
+    fh = _hold(root, "4242 render-box-7 2026-12-05T00:00:00+0000\n")
+    try:
+        with pytest.raises(DatasetError, match="pid 4242 on host render-box-7.*file server when render-box-7 is down"):
+            with writer_lock(root):
+                pass
+    finally:
+        fh.close()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    fh = _hold(root, f"{int(dead.stdout)} {socket.gethostname()} 2026-12-05T00:00:00+0000\n")
+    try:
+        with pytest.raises(DatasetError, match=f"pid {int(dead.stdout)} .*has ended.*fuser -v"):
+            with writer_lock(root):
+                pass
+    finally:
+        fh.close()
+    # a killed holder's line stays, but its lock went with it: the next writer just takes the folder
+    with writer_lock(root):
+        pass

@@ -467,3 +467,82 @@ def test_a_smaller_count_shrinks_a_split_without_rendering_and_a_larger_one_reus
     report = generate(root, {"train": 6}, CONFIG, dataset_seed=3, workers=1, shard_size=4)
     assert (report.shards_written, report.samples_rendered) == (0, 0)
     assert _digest(root / "train") == before and len(ShardedSplit(root, "train")) == 6
+
+
+# ------------------------------------------------------------------ damage, a full disk
+_SMALL = ["--res", "32", "--novel-views", "0", "--supersample", "1", "--shard-size", "1", "--workers", "1"]
+
+
+def test_a_damaged_or_half_written_shard_is_rendered_again_not_trusted(tmp_path, caplog):
+    out = tmp_path / "ds"
+    assert main(["--out", str(out), "--train", "3", *_SMALL]) == 0
+    whole = _digest(out)
+    images = out / "train" / "shard_000000" / "images.npy"
+    images.write_bytes(images.read_bytes()[:-1])  # a power cut before the data reached the disk
+    (out / "train" / "shard_000001" / "meta.json").write_text("")
+    (out / "train" / "shard_000002.tmp-99999").mkdir()  # a killed run's unfinished shard
+    with pytest.raises(DatasetError, match="cut short"):
+        ShardedSplit(out, "train")  # readers refuse it, naming the file ...
+    caplog.set_level("INFO")
+    assert main(["--out", str(out), "--train", "3", *_SMALL]) == 0  # ... and a rerun renders it again
+    assert "2 shards (2 samples) to render, 1 already complete" in caplog.text
+    assert _digest(out) == whole
+
+
+def test_a_full_disk_during_generation_exits_2_naming_the_folder_and_the_rerun_resumes(tmp_path, monkeypatch,
+                                                                                          caplog):
+    import errno
+
+    out = tmp_path / "ds"
+    real, calls = np.save, []
+
+    def save(file, arr, *args, **kwargs):  # the second shard's third array meets a full disk halfway
+        calls.append(1)
+        if len(calls) == len(FIELDS) + 3:
+            if hasattr(file, "write"):
+                file.write(b"\x93NUMPY")
+            else:  # (a path: how the writer called it before)
+                Path(file).write_bytes(b"\x93NUMPY")
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(file, arr, *args, **kwargs)
+
+    monkeypatch.setattr(np, "save", save)
+    caplog.set_level("INFO")
+    assert main(["--out", str(out), "--train", "2", *_SMALL]) == 2  # was an OSError traceback
+    error = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert len(error) == 1 and "no space left on the device" in error[0], error
+    assert str(out / "train" / "shard_000001") in error[0] and "run the same command again" in error[0]
+    assert sorted(p.name for p in (out / "train").iterdir()) == ["shard_000000"]  # no partial shard, no temporary
+    monkeypatch.undo()
+    caplog.clear()
+    assert main(["--out", str(out), "--train", "2", *_SMALL]) == 0
+    assert "1 shards (1 samples) to render, 1 already complete" in caplog.text
+    assert len(ShardedSplit(out, "train")) == 2
+
+
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--seed", "4", "dataset_seed 0, now 4 (--seed)"),
+    ("--freestyle-share", "0.5", "synthetic.freestyle_share absent, now 0.5 (--freestyle-share)"),
+    ("--cold-start", "0.5", "synthetic.cold_start_fraction 0.2, now 0.5 (--cold-start)"),
+    ("--res", "40", "resolution (32, now 40)"),
+])
+def test_a_rerun_with_other_options_on_an_interrupted_folder_is_refused_naming_the_option(tmp_path, caplog, option,
+                                                                                        value, says):
+    # a first run stopped before its manifest recorded any split: the rerun must not mix two recipes either
+    out = tmp_path / "ds"
+    assert main(["--out", str(out), "--train", "1", *_SMALL]) == 0
+    manifest = read_manifest(out)
+    manifest["splits"] = {}  # as the run left it when stopped before its end
+    write_manifest(out, manifest)
+    args = ["--out", str(out), "--train", "2", *_SMALL]
+    if option in args:
+        args[args.index(option) + 1] = value
+    else:
+        args += [option, value]
+    caplog.set_level("INFO")
+    caplog.clear()
+    assert main(args) == 2
+    error = [r.getMessage() for r in caplog.records if r.levelname == "ERROR"]
+    assert len(error) == 1 and says in error[0] and str(out / MANIFEST) in error[0], error
+    assert sorted(p.name for p in (out / "train").iterdir()) == ["shard_000000"]  # nothing rendered

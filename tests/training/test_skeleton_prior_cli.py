@@ -300,6 +300,9 @@ def test_the_models_folder_is_read_as_the_runtime_reads_it_and_a_stopped_run_lea
     (["--tilt-share", "1.5"], "--tilt-share must be a share from 0 to 1, not 1.5"),
     (["--tilt-share", "nan"], "--tilt-share must be a share from 0 to 1, not nan"),
     (["--tilt-mode", "rig"], "argument --tilt-mode: invalid choice: 'rig'"),
+    # a split or dataset that cannot be read: named before collecting (the val split was read only after)
+    (["--val-split", "val_seen_motions"], "dataset.json: has no split 'val_seen_motions'"),
+    (["--extra-data", "{models}"], "dataset.json: no dataset manifest here"),
 ])
 def test_runs_whose_figures_would_mislead_are_refused_before_collecting(tmp_path, data64, capsys, more, says):
     """A negative ``--limit``; held-out scenes that are training scenes (the same split, or the same folder

@@ -10,27 +10,31 @@ Layout::
                                          the shard's samples (leading axis)
         meta.json                        {"first_index", "count", "samples": [metadata...]}
     <root>/<split>/shard_000001/ ...
-    <root>/dataset.lock                  the one writer's lock (``writer_lock``; empty)
+    <root>/dataset.lock                  the one writer's lock (``writer_lock``; its pid line while held)
 
-A shard folder is written under a temporary name and renamed when complete, so a
-folder named ``shard_*`` is always whole; an interrupted run leaves only ``*.tmp-*``
-folders, which the next run deletes. Shard ``k`` holds samples
+A shard folder is written under a temporary name, fsynced, and renamed when complete, so a
+folder named ``shard_*`` is always whole, a power cut included; an interrupted run leaves only
+``*.tmp-*`` folders, which the next run deletes. Shard ``k`` holds samples
 ``[k * shard_size, min((k + 1) * shard_size, count))``; since samples are deterministic per
 index, a larger ``count`` regenerates only the missing or short shards. After a smaller ``count``
 (``generate`` asked for fewer) the last shard may hold more samples than the split's: readers use
 its first ones, and the shards past the count stay on disk unread (a larger count reuses them).
 
-Reading memory-maps the arrays (``np.load(mmap_mode="r")``): opening a split reads only
-the manifest and the shards' ``meta.json``; a sample costs one page-in of its slices. At
+Reading memory-maps the arrays (``np.load(mmap_mode="r")``): opening a split reads the
+manifest, the shards' ``meta.json`` and each array file's header and size (a damaged shard is
+named then, not inside a DataLoader worker); a sample costs one page-in of its slices. At
 most ``max_open_shards`` shards stay mapped (LRU), bounding file descriptors.
 """
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import logging
 import os
 import shutil
+import socket
+import time
 from collections import OrderedDict
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -48,7 +52,7 @@ FORMAT = "ghnerf-multiview"
 SCHEMA_VERSION = 1
 MANIFEST = "dataset.json"
 SHARD_META = "meta.json"
-#: Held (``flock``) by the one process writing a dataset folder (an empty file; ``writer_lock``).
+#: Held (``flock``) by the one process writing a dataset folder, which writes its pid line into it (``writer_lock``).
 WRITER_LOCK = "dataset.lock"
 
 
@@ -68,8 +72,12 @@ def read_manifest(root: str | Path) -> dict:
         raise DatasetError(path, f"unreadable manifest: {e}") from e
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise DatasetError(path, f"not a {FORMAT} manifest (format {manifest.get('format') if isinstance(manifest, dict) else None!r})")
-    if manifest.get("schema_version") != SCHEMA_VERSION:
-        raise DatasetError(path, f"schema_version {manifest.get('schema_version')!r}; this code reads {SCHEMA_VERSION}")
+    version = manifest.get("schema_version")
+    if version != SCHEMA_VERSION:
+        newer = _is_count(version) and version > SCHEMA_VERSION
+        raise DatasetError(path, f"schema_version {version!r}; this code reads {SCHEMA_VERSION}" + (
+            ": the dataset was written by a newer version of this code; update the code, or generate the dataset "
+            "again with this one into a new folder" if newer else ""))
     for key in ("resolution", "view_names", "splits"):
         if key not in manifest:
             raise DatasetError(path, f"manifest lacks {key!r}")
@@ -105,10 +113,41 @@ def generator_version(manifest: Mapping[str, Any]) -> int:
 
 
 def write_manifest(root: str | Path, manifest: dict) -> None:
+    """Replace ``root``'s manifest atomically and durably (a power cut leaves the old one or the new one).
+
+    Raises:
+        DatasetError: the write failed (a full disk says so); the old manifest is left as it was.
+    """
     path = Path(root) / MANIFEST
     tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, sort_keys=True))
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w") as fh:
+            fh.write(json.dumps(manifest, indent=1, sort_keys=True))
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise _write_error(path, "the manifest", e) from e
+
+
+def _fsync_dir(folder: Path) -> None:
+    """Make a rename in ``folder`` durable: without it a power cut can undo the rename after later writes
+    reached the disk."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _write_error(path: Path, what: str, e: OSError) -> DatasetError:
+    if e.errno in (errno.ENOSPC, errno.EDQUOT):
+        return DatasetError(path, f"no space left on the device (or quota) writing {what} of dataset "
+                                  f"{path.parent if what == 'the manifest' else path.parent.parent}: nothing partial "
+                                  "was kept; free space, then run the same command again (it resumes)")
+    return DatasetError(path, f"could not write {what}: {e}; nothing partial was kept")
 
 
 def new_manifest(*, resolution: int, view_names: Sequence[str], source: str, source_config: dict) -> dict:
@@ -125,43 +164,99 @@ def writer_lock(root: str | Path) -> Iterator[None]:
     Two writers at once break a folder: each one's start deletes the other's unfinished ``*.tmp-*`` shards
     (taken for a crash's leftovers), a shard renamed over one being renamed fails, and both rewrite the
     manifest from what they read before (the last one drops the other's splits). So a second writer is
-    refused, naming the lock file. The lock goes with the process (``flock``): a killed writer leaves none
-    behind. The file stays, empty (two folders made alike stay byte-identical).
+    refused, naming the lock file and the holder (its pid, host and start, which the holder writes into the
+    file). The lock goes with the process (``flock``): a killed writer leaves none behind, so there is no
+    stale lock to clear; a killed one's pid line is stale but harmless. The file is emptied on the way out
+    (two folders made alike stay byte-identical).
 
     Raises:
         DatasetError: another process holds the lock.
     """
     path = Path(root) / WRITER_LOCK
-    fh = open(path, "a")
+    fh = open(path, "a+")
     try:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise DatasetError(path, "another process holds this lock: it is writing this dataset (generate or a "
-                                     "conversion); wait for it to finish, then run the command again (it "
-                                     "resumes)") from None
-        yield
+            raise DatasetError(path, _held_message(Path(root), path)) from None
+        fh.truncate(0)
+        fh.write(f"{os.getpid()} {socket.gethostname()} {time.strftime('%Y-%m-%dT%H:%M:%S%z')}\n")
+        fh.flush()
+        try:
+            yield
+        finally:
+            fh.truncate(0)
     finally:
         fh.close()  # releases the lock
 
 
+def _held_message(root: Path, path: Path) -> str:
+    """Why ``root`` is refused, naming the holder when its line in ``path`` says who it is."""
+    head = f"another process holds this lock: it is writing dataset {root} (generate or a conversion)"
+    try:
+        pid_s, host, since = path.read_text().split()
+        pid = int(pid_s)
+    except (OSError, ValueError):  # an older writer's empty file, or the holder has not written its line yet
+        return (f"{head}; wait for it to finish, then run the command again (it resumes); `fuser -v {path}` "
+                "names the holder on this machine")
+    if host != socket.gethostname():
+        return (f"{head}: pid {pid} on host {host}, since {since}. Wait for it or stop it there, then run the "
+                "command again (it resumes); the lock is released when that process ends, or by the file "
+                f"server when {host} is down")
+    try:
+        os.kill(pid, 0)
+        alive = True
+    except ProcessLookupError:
+        alive = False
+    except PermissionError:  # another user's live process
+        alive = True
+    if alive:
+        return (f"{head}: pid {pid}, since {since}. Wait for it to finish or stop it (kill {pid}), then run the "
+                "command again (it resumes); the lock is released when that process ends, nothing to delete")
+    return (f"{head}: pid {pid} (since {since}) has ended, but a process it started still holds the lock; "
+            f"`fuser -v {path}` names it: stop it, then run the command again (it resumes)")
+
+
 def write_shard(folder: str | Path, samples: Sequence[Sample], first_index: int) -> Path:
-    """Write ``samples`` (indices ``first_index ..``) as the complete shard ``folder`` (atomic rename)."""
+    """Write ``samples`` (indices ``first_index ..``) as the complete shard ``folder`` (atomic rename).
+
+    Every file is fsynced before the rename, and the rename itself after it: a power cut leaves the
+    old shard, no shard, or the whole new one, never a ``shard_*`` folder of empty or short files.
+    A failed write (a full disk) removes what it wrote.
+
+    Raises:
+        DatasetError: the write failed; it names the shard and, on a full disk, says so.
+    """
     folder = Path(folder)
     if not samples:
         raise ValueError("a shard needs at least one sample")
     tmp = folder.with_name(f"{folder.name}.tmp-{os.getpid()}")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
-    records = [sample_to_arrays(s) for s in samples]
-    for name in FIELDS:
-        np.save(tmp / f"{name}.npy", np.stack([r[name] for r in records]))
-    meta = {"first_index": int(first_index), "count": len(samples), "samples": [s.metadata for s in samples]}
-    (tmp / SHARD_META).write_text(json.dumps(meta, default=_json_default))
-    if folder.exists():
-        shutil.rmtree(folder)
-    os.replace(tmp, folder)
+    try:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        tmp.mkdir(parents=True)
+        records = [sample_to_arrays(s) for s in samples]
+        for name in FIELDS:
+            with open(tmp / f"{name}.npy", "wb") as fh:
+                np.save(fh, np.stack([r[name] for r in records]))
+                fh.flush()
+                os.fsync(fh.fileno())
+        meta = {"first_index": int(first_index), "count": len(samples), "samples": [s.metadata for s in samples]}
+        with open(tmp / SHARD_META, "w") as fh:
+            fh.write(json.dumps(meta, default=_json_default))
+            fh.flush()
+            os.fsync(fh.fileno())
+        _fsync_dir(tmp)
+        if folder.exists():
+            shutil.rmtree(folder)
+        os.replace(tmp, folder)
+        _fsync_dir(folder.parent)
+    except OSError as e:
+        shutil.rmtree(tmp, ignore_errors=True)  # on a full disk above all: a partial shard would hold space
+        raise _write_error(folder, "this shard", e) from e
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     return folder
 
 
@@ -231,6 +326,36 @@ def remove_stale_temporaries(split_dir: Path) -> None:
 
 
 # ------------------------------------------------------------------ reading
+def _check_array_file(path: Path, shape: tuple[int, ...], dtype: np.dtype) -> None:
+    """``path`` is a whole ``.npy`` of ``shape`` and ``dtype``, from its header and its size (no data read).
+
+    Checked when a split opens, in the process that opens it: a cut or wrong file found only when a sample
+    of it is read would stop a training run midway, inside a DataLoader worker (which turns the error into a
+    RuntimeError holding a traceback).
+    """
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                got_shape, fortran, got_dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                got_shape, fortran, got_dtype = np.lib.format.read_array_header_2_0(fh)
+            else:
+                raise ValueError(f"unsupported .npy version {version}")
+            data_at = fh.tell()
+        size = path.stat().st_size
+    except FileNotFoundError:
+        raise DatasetError(path, "missing from its shard (regenerate or resume)") from None
+    except (OSError, ValueError, EOFError) as e:  # EOFError / ValueError: an empty or cut header
+        raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
+    if tuple(got_shape) != tuple(shape) or got_dtype != dtype or fortran:
+        raise DatasetError(path, f"has shape {tuple(got_shape)} {got_dtype}, expected {tuple(shape)} {dtype}")
+    want = data_at + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if size != want:
+        raise DatasetError(path, f"holds {size} bytes, its header says {want}: the file is cut short or damaged "
+                                 "(regenerate, or resume: generate renders such a shard again)")
+
+
 @dataclass(frozen=True)
 class _ShardInfo:
     folder: Path
@@ -261,6 +386,9 @@ class ShardedSplit:
             raise DatasetError(self.root / MANIFEST, f"has no split {split!r}; splits: {sorted(splits)}")
         self.split = split
         self.info = splits[split]
+        if not self.info["count"]:  # every reader would see no scene: training would start and learn nothing
+            raise DatasetError(self.root / MANIFEST, f"split {split!r} holds no samples (count 0); generate it "
+                                                     "with a count above 0")
         self.resolution = int(self.manifest["resolution"])
         self.view_names = tuple(self.manifest["view_names"])
         self.num_views = len(self.view_names)
@@ -291,6 +419,8 @@ class ShardedSplit:
                 want = f"{i0} x {n}" if n == shard_size else f"{i0} x {n} to {shard_size}"
                 raise DatasetError(meta_path, f"shard holds samples from {meta.get('first_index')} x {meta.get('count')}, "
                                               f"expected {want}")
+            for name, (shape_fn, dtype) in FIELDS.items():
+                _check_array_file(folder / f"{name}.npy", (stored, *shape_fn(self.num_views, self.resolution)), dtype)
             shards.append(_ShardInfo(folder, i0, n, stored, meta["samples"][:n]))
         return shards
 

@@ -14,6 +14,12 @@ class DataConfigError(DataError, ValueError):
     def __init__(self, field: str, message: str) -> None:
         super().__init__(f"{field}: {message}")
         self.field = field
+        self.message = message
+
+    def __reduce__(self):
+        # pickled from a generate worker to its parent: the default (cls, args) would call __init__ with the
+        # one formatted string, and the pool's result thread, failing to unpickle it, would hang the run
+        return type(self), (self.field, self.message)
 
 
 class DatasetError(DataError, ValueError):
@@ -22,3 +28,7 @@ class DatasetError(DataError, ValueError):
     def __init__(self, path: str | Path, message: str) -> None:
         super().__init__(f"{path}: {message}")
         self.path = str(path)
+        self.message = message
+
+    def __reduce__(self):  # see DataConfigError.__reduce__
+        return type(self), (self.path, self.message)

@@ -87,8 +87,32 @@ def _check_compatible(manifest: dict, fresh: dict, path: Path) -> None:
                                  "samples would differ from the stored ones; generate into a new --out folder")
     for key in ("resolution", "view_names", "source", "source_config"):
         if manifest.get(key) != fresh[key]:
-            raise DatasetError(path, f"was generated with a different {key} ({manifest.get(key)!r}, now {fresh[key]!r}); "
-                                     f"use a new --out folder or the original settings")
+            said = f"({manifest.get(key)!r}, now {fresh[key]!r})"
+            if key == "source_config" and isinstance(manifest.get(key), dict):
+                said = ": " + "; ".join(_differences(manifest[key], fresh[key]))  # the whole dicts hide the one
+            raise DatasetError(path, f"was generated with a different {key} {said}; use a new --out folder or the "
+                                     "original settings")
+
+
+#: The option of ``generate`` that sets each key of a synthetic ``source_config`` (named in a refusal).
+_OPTION_OF = {"dataset_seed": "--seed", "synthetic.resolution": "--res", "synthetic.novel_views": "--novel-views",
+              "synthetic.supersample": "--supersample", "synthetic.cold_start_fraction": "--cold-start",
+              "synthetic.freestyle_share": "--freestyle-share"}
+
+
+def _differences(old: Mapping, new: Mapping, prefix: str = "") -> list[str]:
+    """``key old, now new (--option)`` for each leaf that differs between two ``source_config`` dicts."""
+    out = []
+    for key in sorted(set(old) | set(new), key=str):
+        a, b, name = old.get(key), new.get(key), f"{prefix}{key}"
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            out += _differences(a, b, f"{name}.")
+        elif a != b:
+            # a key absent from one side is its default there (freestyle_share 0 is left out of manifests)
+            option = f" ({_OPTION_OF[name]})" if name in _OPTION_OF else ""
+            out.append(f"{name} {'absent' if key not in old else repr(a)}, now "
+                       f"{'absent' if key not in new else repr(b)}{option}")
+    return out
 
 
 def source_config(config: SyntheticConfig, dataset_seed: int) -> dict:
@@ -126,8 +150,9 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
 
     Raises:
         DataConfigError: a bad argument (the message names it).
-        DatasetError: ``out`` holds an incompatible dataset (the message names the manifest), or another
-            process is writing it (the message names ``cache.WRITER_LOCK``).
+        DatasetError: ``out`` holds an incompatible dataset (the message names the manifest), another
+            process is writing it (the message names ``cache.WRITER_LOCK`` and its holder), or a shard or the
+            manifest could not be written (a full disk says so; no partial shard is left, the run resumes).
     """
     check_dataset_seed(dataset_seed)
     if isinstance(shard_size, bool) or not isinstance(shard_size, int) or not 1 <= shard_size <= 100_000:
@@ -203,9 +228,12 @@ def _generate(out: Path, counts: Mapping[str, int], config: SyntheticConfig, dat
     except BaseException:
         if pool is not None:
             # Ctrl-C or a failed shard: stop the workers now (close() would wait for every queued shard); a
-            # shard cut short is only a *.tmp-* folder, which the next run removes
+            # shard cut short is only a *.tmp-* folder
             pool.terminate()
             pool.join()
+        for split in counts:  # ours (the lock is held): free their space now, a full disk above all
+            if (out / split).is_dir():
+                remove_stale_temporaries(out / split)
         raise
     if pool is not None:
         pool.close()
