@@ -11,9 +11,9 @@ is given to them as a whole: either the straight pairings (peak with peak, runne
 crossed ones, each going to the nearer centre; a pairing may also go unused (the joint missing for that person).
 That is a 2-means constrained per joint, started from each torso joint's two-person options in turn (every joint's
 where no torso joint has them), the start of the lowest cost kept: no start needs to be right, one of a torso
-joint's is (they stand nearest their person's centre). The centres settled, each joint is given
-again along the limbs from the neck out (:data:`~ghnerf_runtime.body25.LIMBS`), to whichever person's joint it
-hangs from is nearer: a waving hand reaches as far from its own person's centre as from the other's (on the
+joint's is (they stand nearest their person's centre). The centres settled, each joint is given again along the
+limbs from the neck out (:data:`~ghnerf_runtime.body25.LIMBS`), to whichever person's joint it hangs from is
+nearer: a waving hand reaches as far from its own person's centre as from the other's (on the
 oracle, one person's wrist 0.70 m from their centre and the other's 0.36 m from it), never as far from its own
 elbow. Pure numpy, arrays in and out.
 """
@@ -120,8 +120,8 @@ def _along_limbs(points: np.ndarray, allowed: np.ndarray, chosen: np.ndarray, ce
 
 def _settle(xz: np.ndarray, allowed: np.ndarray, centres: np.ndarray) -> tuple[float, np.ndarray]:
     """From two centres (moved in place): give each joint its cheapest option, move the centres to the medians of
-    what they got, again until nothing changes. Returns the cost (the distances of the joints given to each centre, and
-    :data:`BODY_RADIUS_M` for each joint a person went without) and the ``(2, J)`` pairings."""
+    what they got, again until nothing changes. Returns the cost (the distances of the joints given to each centre,
+    and :data:`BODY_RADIUS_M` for each joint a person went without) and the ``(2, J)`` pairings."""
     J = xz.shape[1]
     j = np.arange(J)
     choice = None
@@ -166,7 +166,8 @@ def centre_of(points: np.ndarray, chosen: np.ndarray) -> np.ndarray | None:
     return np.median(floor_xz(points[chosen[mine], np.flatnonzero(mine)]), axis=0)
 
 
-def pick_person(centres: list[np.ndarray | None], origin_xz: np.ndarray, facing_xz: np.ndarray, rule: str) -> int | None:
+def pick_person(centres: list[np.ndarray | None], origin_xz: np.ndarray, facing_xz: np.ndarray,
+                rule: str) -> int | None:
     """Which person is the subject, by ``rule`` (``Joints3DConfig.pick_subject``):
 
     * ``"centre_line"``: the one nearest the rig's centre line (``origin_xz``, the floor point below the cameras'

@@ -156,8 +156,8 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"`nearest` | the one nearest the cameras (the floor point below their midpoint); within "
                         f"{TIE_M:g} m, the one nearer the centre line |"),
     ("docs/runtime.md", f"hence the {TIE_M:g} m within which two distances count as equal"),
-    ("docs/runtime.md", f"stay flagged while at least {'one' if STILL_SEVERAL_MIN_JOINTS == 1 else STILL_SEVERAL_MIN_JOINTS}"
-                        f" joint shows twice in both views"),
+    ("docs/runtime.md", f"stay flagged while at least "
+                        f"{'one' if STILL_SEVERAL_MIN_JOINTS == 1 else STILL_SEVERAL_MIN_JOINTS} joint shows twice"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

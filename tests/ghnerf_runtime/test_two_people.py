@@ -17,7 +17,7 @@ from benchmarks.bench_runtime_common import edge128_contract
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, config_from_dict
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime import two_people as T
-from ghnerf_runtime.two_people import BODY_RADIUS_M, TIE_M, pick_person, split_people
+from ghnerf_runtime.two_people import TIE_M, pick_person, split_people
 
 sim = pytest.importorskip("drivers.sim")
 
@@ -247,7 +247,6 @@ def test_pick_person_rules_ties_and_nobody():
     assert pick_person([near_line, near_cams], origin, facing, "none") is None
     with pytest.raises(ValueError, match="rule"):
         pick_person([near_line], origin, facing, "tallest")
-    assert BODY_RADIUS_M > 0.9  # an arm's reach from the centre (the split leaves out what lies further)
 
 
 def test_pick_subject_is_checked():
@@ -279,3 +278,33 @@ def test_a_pass_following_two_people_s_subject_stays_flagged_while_a_joint_shows
     for seed in (3, 4):
         _follows(_scene(seed, alone=0, pairs=6), 0, rig)
         assert _split(_scene(seed, alone=0, pairs=6))[1] == 0
+
+
+def test_two_people_from_the_first_pair_with_the_skeleton_prior_give_the_picked_person_s_joints():
+    """With the skeleton prior (stubbed: fed both people's peaks, it answers a skeleton between them, sure of it),
+    the picked person's pairings are reported, not the prior's skeleton, and the track follows that person."""
+    from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+
+    rig = sim.RigPlacement().build()
+    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=NEAR_THE_LINE[0]))
+    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=NEAR_THE_LINE[1]))
+    oracle = TwoPeopleOracle(edge128_contract())
+    calls = []
+
+    def between(*args, **kwargs):
+        calls.append(1)
+        a, b = oracle.people
+        return SkeletonEstimate(0.5 * (a + b), np.full(len(a), 0.02), np.ones(len(a), bool))
+
+    oracle.skeleton_prior = type("StubPrior", (), {"estimate": staticmethod(between)})()
+    config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on"))
+    results = []
+    with Estimator(oracle, rig, config) as est:
+        for i in range(4):
+            t = i / 30.0
+            a, b = first.joints_3d(t), other.joints_3d(t)
+            oracle.set_people(a, b)
+            r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+            results.append((r, a, b))
+    assert calls  # (the prior ran)
+    _follows(results, 0, rig)
