@@ -65,13 +65,14 @@ class TwoPeopleOracle(OracleSession):
 PLACES = ((-0.5, 3.0), (0.5, 3.4))
 
 
-def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False
-            ) -> tuple[dict[str, int], int]:
+def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
+            places: tuple = PLACES) -> tuple[dict[str, int], int]:
     """Counts over every pair with both people in view (the first ``alone`` pairs of each scene show the first
     person only and are not counted): joints reported, at the first person's, the second's, neither; pairs flagged
     ``several_people``; scenes whose pairs followed the first person, the second, and those that followed one
     person throughout (``stable``: every pair that reports joints has most of them at the same person, none
-    at the other). ``swap``: each person stands at the other's place. Returns ``(counts, pairs counted)``."""
+    at the other). ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each
+    at the other's place. Returns ``(counts, pairs counted)``."""
     import drivers.sim as sim
 
     rig = sim.RigPlacement().build()
@@ -79,9 +80,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
               "followed_first": 0, "followed_second": 0, "stable": 0}
     counted = 0
     for seed in range(1, scenes + 1):
-        places = PLACES[::-1] if swap else PLACES
-        first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=places[0]))
-        second = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=places[1]))
+        here = places[::-1] if swap else places
+        first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=here[0]))
+        second = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=here[1]))
         oracle = TwoPeopleOracle(edge128_contract())
         whose: list[int] = []  # each reporting pair's person: 0 the first, 1 the second
         mixed = False  # a pair reported joints at both people
@@ -156,6 +157,17 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     return out
 
 
+def _places(text: str) -> tuple:
+    """``--places``: four numbers, the first person's x and z, then the second's."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 4 or not all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"--places needs four numbers X0,Z0,X1,Z1 (metres), got {text!r}")
+    return (values[0], values[1]), (values[2], values[3])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
@@ -167,6 +179,9 @@ def main(argv=None) -> int:
     ap.add_argument("--swap", action="store_true",
                     help="each person at the other's place (the first person 0.5 m right of the centre line, 3.4 m "
                          "ahead; the second 0.5 m left, 3.0 m ahead)")
+    ap.add_argument("--places", type=_places, default=PLACES, metavar="X0,Z0,X1,Z1",
+                    help="where the first and the second person stand (rig frame, metres; default "
+                         f"{','.join(f'{v:g}' for p in PLACES for v in p)})")
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
@@ -189,9 +204,10 @@ def main(argv=None) -> int:
                                  f"{args.pairs * args.scenes} pairs"))
     config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
     for alone, what in runs:
-        counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap)
+        counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places)
         n = max(counts["reported"], 1)
-        print(f"{what}{', swapped' if args.swap else ''}, the oracle's heatmaps, the defaults, pick_subject "
+        where = "" if args.places == PLACES else " at " + " and ".join(f"({x:g}, {z:g})" for x, z in args.places)
+        print(f"{what}{where}{', swapped' if args.swap else ''}, the oracle's heatmaps, the defaults, pick_subject "
               f"{args.pick_subject}: "
               f"{counts['reported'] / pairs:.1f} joints reported per pair; of them {counts['first'] / n:.0%} at the "
               f"first person's, {counts['second'] / n:.0%} at the second's, {counts['neither'] / n:.0%} at neither "
