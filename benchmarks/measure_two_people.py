@@ -1,6 +1,6 @@
 """Two people in the working volume: whose joints does the runtime report?
 
-    .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10]
+    .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10] [--pick-subject centre_line]
     .venv/bin/python benchmarks/measure_two_people.py --one-person-model models [--sequences 30] [--frames 10]
 
 The runtime follows one subject and its model answers one peak per joint per view. With two people in view,
@@ -9,7 +9,10 @@ person. This runs the oracle session (``bench_runtime_common.OracleSession``: he
 model would give) with both people's Gaussians in every heatmap (their maximum), the estimator at its defaults,
 over simulated scenes of two people a metre apart side by side, and prints, over every pair, the joints
 reported and how many lie within 5 cm of the first person's, of the second's, or of neither (a point
-triangulated from one person's peak in one view and the other's in the other).
+triangulated from one person's peak in one view and the other's in the other), and whom each scene's pairs
+followed: a pair's person is the one most of its joints are at, and a scene is stable when every pair that
+reports joints has the same person. ``--pick-subject`` sets ``joints3d.pick_subject`` (``none``: session 53's
+rule, nobody without a track).
 
 With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
 folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghnerf-bench runtime``'s,
@@ -32,7 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
-from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import PICK_SUBJECT_RULES, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
 
 #: A reported joint this close to a person's is theirs (m).
@@ -57,20 +60,33 @@ class TwoPeopleOracle(OracleSession):
         return np.max(maps, axis=0)
 
 
-def measure(scenes: int, pairs: int, alone: int) -> tuple[dict[str, int], int]:
+#: Where the two people stand (x, z in the rig frame, metres): side by side a metre apart, each 0.5 m off the
+#: rig's centre line, the first nearer the cameras.
+PLACES = ((-0.5, 3.0), (0.5, 3.4))
+
+
+def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
+            places: tuple = PLACES) -> tuple[dict[str, int], int]:
     """Counts over every pair with both people in view (the first ``alone`` pairs of each scene show the first
     person only and are not counted): joints reported, at the first person's, the second's, neither; pairs flagged
-    ``several_people``. Returns ``(counts, pairs counted)``."""
+    ``several_people``; scenes whose pairs followed the first person, the second, and those that followed one
+    person throughout (``stable``: every pair that reports joints has most of them at the same person, none
+    at the other). ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each
+    at the other's place. Returns ``(counts, pairs counted)``."""
     import drivers.sim as sim
 
     rig = sim.RigPlacement().build()
-    counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "flagged": 0}
+    counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "flagged": 0,
+              "followed_first": 0, "followed_second": 0, "stable": 0}
     counted = 0
     for seed in range(1, scenes + 1):
-        first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(-0.5, 3.0)))
-        second = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=(0.5, 3.4)))
+        here = places[::-1] if swap else places
+        first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=here[0]))
+        second = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=here[1]))
         oracle = TwoPeopleOracle(edge128_contract())
-        with Estimator(oracle, rig, EstimatorConfig()) as est:
+        whose: list[int] = []  # each reporting pair's person: 0 the first, 1 the second
+        mixed = False  # a pair reported joints at both people
+        with Estimator(oracle, rig, config) as est:
             for i in range(alone + pairs):
                 t = i / 30.0
                 a, b = first.joints_3d(t), second.joints_3d(t)
@@ -89,6 +105,13 @@ def measure(scenes: int, pairs: int, alone: int) -> tuple[dict[str, int], int]:
                 counts["neither"] += int((found & ~near_a & ~near_b).sum())
                 counts["flagged"] += int(r.several_people)
                 counted += 1
+                at_a, at_b = int((found & near_a).sum()), int((found & near_b & ~near_a).sum())
+                if at_a or at_b:
+                    whose.append(0 if at_a >= at_b else 1)
+                    mixed |= at_a > 0 and at_b > 0
+        if whose:
+            counts["followed_first" if whose[0] == 0 else "followed_second"] += 1
+            counts["stable"] += int(len(set(whose)) == 1 and not mixed)
     return counts, counted
 
 
@@ -134,12 +157,31 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     return out
 
 
+def _places(text: str) -> tuple:
+    """``--places``: four numbers, the first person's x and z, then the second's."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 4 or not all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"--places needs four numbers X0,Z0,X1,Z1 (metres), got {text!r}")
+    return (values[0], values[1]), (values[2], values[3])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scenes", type=int, default=8, help="scene pairs (seeds 1..N for the first person)")
     ap.add_argument("--pairs", type=int, default=10, help="pairs per scene with both people, at 30 fps")
     ap.add_argument("--alone", type=int, default=3,
                     help="second run: pairs of the first person alone before the second joins (0: no second run)")
+    ap.add_argument("--pick-subject", default=EstimatorConfig().joints3d.pick_subject, choices=PICK_SUBJECT_RULES,
+                    help="joints3d.pick_subject: whom two people without a track report (none: nobody)")
+    ap.add_argument("--swap", action="store_true",
+                    help="each person at the other's place (the first person 0.5 m right of the centre line, 3.4 m "
+                         "ahead; the second 0.5 m left, 3.0 m ahead)")
+    ap.add_argument("--places", type=_places, default=PLACES, metavar="X0,Z0,X1,Z1",
+                    help="where the first and the second person stand (rig frame, metres; default "
+                         f"{','.join(f'{v:g}' for p in PLACES for v in p)})")
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
@@ -160,13 +202,18 @@ def main(argv=None) -> int:
     if args.alone:
         runs.append((args.alone, f"the second person joining after {args.alone} pairs of the first alone, the next "
                                  f"{args.pairs * args.scenes} pairs"))
+    config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
     for alone, what in runs:
-        counts, pairs = measure(args.scenes, args.pairs, alone)
+        counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places)
         n = max(counts["reported"], 1)
-        print(f"{what}, the oracle's heatmaps, the defaults: "
+        where = "" if args.places == PLACES else " at " + " and ".join(f"({x:g}, {z:g})" for x, z in args.places)
+        print(f"{what}{where}{', swapped' if args.swap else ''}, the oracle's heatmaps, the defaults, pick_subject "
+              f"{args.pick_subject}: "
               f"{counts['reported'] / pairs:.1f} joints reported per pair; of them {counts['first'] / n:.0%} at the "
               f"first person's, {counts['second'] / n:.0%} at the second's, {counts['neither'] / n:.0%} at neither "
-              f"(> {NEAR_M * 100:.0f} cm from both); {counts['flagged'] / pairs:.0%} of pairs flagged several_people")
+              f"(> {NEAR_M * 100:.0f} cm from both); {counts['flagged'] / pairs:.0%} of pairs flagged several_people; "
+              f"scenes following the first person {counts['followed_first']}, the second {counts['followed_second']}, "
+              f"one person throughout {counts['stable']} of {args.scenes}")
     return 0
 
 

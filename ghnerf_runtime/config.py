@@ -52,6 +52,8 @@ PRECISIONS = ("fp32", "int8", "auto")
 THREE_D_METHODS = ("triangulate", "volumetric", "depth_centroid")
 #: :attr:`Joints3DConfig.skeleton_prior` choices.
 SKELETON_PRIOR_MODES = ("auto", "on", "off")
+#: :attr:`Joints3DConfig.pick_subject` choices: which of two people seen without a track becomes the subject.
+PICK_SUBJECT_RULES = ("centre_line", "nearest", "none")
 #: :attr:`NovelViewConfig.silhouette_stride` choices: the powers of two up to 16, which divide the model
 #: resolutions in use (64, 128); :class:`~ghnerf_runtime.estimator.Estimator` checks them against its model's.
 NOVEL_SILHOUETTE_STRIDES = (0, 1, 2, 4, 8, 16)
@@ -391,6 +393,13 @@ class Joints3DConfig:
             for it (the previous pair's) is missing: it is the other person's, or triangulated from one person's
             peak in one view and the other's in the other. With the triangulation, the pairing of the views' peaks
             and runner-ups (``Keypoints2D.runner_up_uv``) nearest the track within this is reported instead.
+        pick_subject: a ``several_people`` pair without a track (two people from the first pair, or the track lost
+            while both are there), with the triangulation: the two people are separated
+            (:mod:`ghnerf_runtime.two_people`) and one is reported, and then tracked: ``"centre_line"`` (the
+            default) the one nearest the rig's centre line (the floor line from below the cameras' midpoint
+            through the working volume's centre), within 0.2 m of each other the one nearer the cameras;
+            ``"nearest"`` the one nearest the cameras, within 0.2 m the one nearer the centre line; ``"none"``
+            nobody until one is alone (session 53's rule).
     """
 
     method: str = "triangulate"
@@ -410,6 +419,7 @@ class Joints3DConfig:
     second_person_ratio: float = 0.5
     second_person_min_joints: int = 6
     max_track_step_m: float = 0.15
+    pick_subject: str = "centre_line"
 
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)
@@ -432,6 +442,7 @@ class Joints3DConfig:
         _number(self, "second_person_ratio", 0.0, 1.0, lo_open=True)
         _integer(self, "second_person_min_joints", 0, 25)
         _number(self, "max_track_step_m", 0.0, 10.0, lo_open=True)
+        _choice(self, "pick_subject", PICK_SUBJECT_RULES)
 
     def uses_skeleton_prior(self, available: bool) -> bool:
         """Whether the skeleton prior runs, given whether the model folder has one (``on`` without one is the

@@ -89,6 +89,7 @@ from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
+from ghnerf_runtime.two_people import PAIRINGS, attached, centre_of, floor_xz, pick_person, split_people
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -96,6 +97,9 @@ __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_ST
 
 log = logging.getLogger(__name__)
 
+#: A pass following a ``several_people`` pass's subject stays flagged with this many joints shown twice in both
+#: views (:meth:`Estimator._several_people`).
+STILL_SEVERAL_MIN_JOINTS = 1
 #: Skeleton prior: confidence = exp(-expected error / this).
 _PRIOR_CONFIDENCE_SCALE_M = 0.1
 #: A source camera's picture rolled more than this from upright is said in the log (rotated or not).
@@ -151,10 +155,13 @@ class PairResult:
         prior_fallback: the prior ran but its skeleton disagreed with the triangulation by more than
             ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior).
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
-            both views (two people in view): only the joints within ``joints3d.max_track_step_m`` of the tracked
-            subject's are reported (3D and 2D), none without a track (docs/runtime.md, "Two people in the
-            working volume"). With the triangulation each is the pairing of the views' peaks and runner-ups
-            nearest the track, and each camera's 2D joint the peak it came from.
+            both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject):
+            only the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
+            2D); without a track, the joints of the person ``joints3d.pick_subject`` names, whom the track then
+            follows (none with ``pick_subject: none``; docs/runtime.md, "Two people in the working volume").
+            With the triangulation each is the pairing of the views' peaks and runner-ups nearest the track (or
+            the subject's, where the two people are separated), and each camera's 2D joint the peak it came
+            from.
         single_view: the camera whose 2D joints alone are the pair's answer (``frame_check.single_view_2d``):
             a person seen by that camera only, or the other camera's frame rejected. Every 3D joint is then
             missing, and so is every 2D joint of the other camera. ``None``: a pair with 3D joints, or nobody.
@@ -491,6 +498,7 @@ class Estimator:
         self._sequence = 0
         self._last_timestamp_s: float | None = None
         self._last_pair_cold = False
+        self._several_track = False  # the track is a several_people pass's subject (_several_people's hysteresis)
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
         self._between: dict[tuple, Camera] = {}  # (alpha, pivot) -> interpolated camera (the rig does not move)
@@ -548,6 +556,7 @@ class Estimator:
     def reset(self) -> None:
         """Forget the tracked subject (the next pair starts from the working volume) and the smoothing."""
         self.tracker.reset()
+        self._several_track = False
         if self._smoother is not None:
             self._smoother.reset()
 
@@ -671,8 +680,10 @@ class Estimator:
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         if (p.j3 is not None and not p.regions.tracked and tcfg.refine_cold_start
                 and self.tracker.track is not None):
-            # Cold start that found the subject: run again on its crop and box, in this pair.
-            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
+            # Cold start that found the subject: run again on its crop and box, in this pair (which two people
+            # stay: :meth:`_finish_pass`'s cold_several).
+            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
+                           cold_several=p.several_people)
         if p.j3 is None:
             if self._smoother is not None:
                 self._smoother.reset()
@@ -761,12 +772,13 @@ class Estimator:
             self.tracker.reset()
 
     def _pass(self, images: Sequence[np.ndarray], regions: Regions, sequence: int, timing: dict,
-              novel_view: NovelViewRequest | None = None) -> "_Pass":
+              novel_view: NovelViewRequest | None = None, cold_several: bool | None = None) -> "_Pass":
         """Stages 1-6 on one set of regions; stage times are added to ``timing``; updates the track.
 
         ``novel_view``: compute the image features too (``encoder`` rather than ``human``) for a novel
         view; on a tracked pair with ``novel_view.overlap`` the view is started in the worker once the
-        graphs of the keypoint path have run (``_Pass.novel``).
+        graphs of the keypoint path have run (``_Pass.novel``). ``cold_several``: this pass refines this pair's
+        cold pass, which was ``several_people`` or not (:meth:`_finish_pass`); ``None``: it refines none.
         """
         cfg = self.config
         S = self.size
@@ -841,15 +853,21 @@ class Estimator:
                 _add_ms(timing, "render_heat", t)
             if novel_view is not None and cfg.novel_view.overlap and regions.tracked and job is None:
                 job = self._start_novel(novel_view, env, regions.box)  # once the keypoint graphs have run
-            return self._finish_pass(env, out, blocks, crops, regions, frame_reason, sequence, timing, job)
+            return self._finish_pass(env, out, blocks, crops, regions, frame_reason, sequence, timing, job,
+                                     cold_several)
         except BaseException:
             if job is not None:  # leave no render running behind an error
                 job.abandon()
             raise
 
     def _finish_pass(self, env: dict, out: dict, blocks, crops: list[Camera], regions: Regions, frame_reason: dict,
-                     sequence: int, timing: dict, job: _NovelJob | None) -> "_Pass":
-        """Stages 5-6 of :meth:`_pass`."""
+                     sequence: int, timing: dict, job: _NovelJob | None, cold_several: bool | None = None
+                     ) -> "_Pass":
+        """Stages 5-6 of :meth:`_pass`. ``cold_several`` (a pass refining this pair's cold pass): that pass was
+        ``several_people``, so this one is, whatever its own maps show (its crop frames the picked subject and
+        may show fewer of the other's joints twice, the same two people in view); or it was not, but this one is:
+        the cold pass, whose crop is the whole working volume, showed two people too small to tell, its skeleton
+        (the track) is both people's, and a subject is picked as without a track."""
         cfg = self.config
         S, g = self.size, self.grid
 
@@ -870,10 +888,10 @@ class Estimator:
         t = time.perf_counter()
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
         j3 = self._gate_to_boxes(j3, regions)
-        several = self._several_people(kp)
+        several = self._several_people(kp) or cold_several is True
         subject = j3  # a several_people pair's joints of the tracked subject that the views' peaks gave
         if several:  # before the presence gate: the subject's joints alone must make someone
-            j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions)
+            j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions, cold_several)
             if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
                 joints_2d, conf_2d, missing_2d = self._image_joints(*chosen, crops)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
@@ -908,6 +926,7 @@ class Estimator:
         # encoder's peaks are both people's)
         follow = j3 if several else self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
+        self._several_track = several and self.tracker.track is not None
         if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
@@ -925,67 +944,148 @@ class Estimator:
         least ``second_person_ratio`` of the first in both views. Each view's peak is then whichever person's is
         stronger there, and the two views need not pick the same person; the triangulation of a mixed pair often
         passes the reprojection gate (people side by side: the error lies along the epipolar lines), so the maps
-        are what tells. On one person no joint came near it in both views (docs/runtime.md)."""
+        are what tells. On one person no joint came near it in both views (docs/runtime.md).
+
+        Once a pass is flagged, the passes that follow its subject stay flagged while any joint shows twice
+        (:data:`STILL_SEVERAL_MIN_JOINTS`): the subject's own crop shows fewer of the other person's joints (on the
+        oracle 2 to 5 in the passes that fell below 6), and a pass not flagged lets the other's peaks into the
+        track. One person is never flagged, so never held."""
         cfg = self.config.joints3d
         if cfg.second_person_min_joints == 0:
             return False
-        return joints_shown_twice(kp, cfg.second_person_ratio) >= cfg.second_person_min_joints
+        twice = joints_shown_twice(kp, cfg.second_person_ratio)
+        held = self._several_track and self.tracker.track is not None
+        return twice >= (STILL_SEVERAL_MIN_JOINTS if held else cfg.second_person_min_joints)
 
     def _keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                              regions: Regions) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+                              regions: Regions, cold_several: bool | None = None
+                              ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """Of a ``several_people`` pair's joints, those within ``max_track_step_m`` of the tracked subject's place
-        for them; all missing without a track (whose joints would these be?). Returns them; where the pairings of
-        peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D joints come from
-        (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks); and the subject's joints
-        that the peaks gave (those pairings'; with the skeleton prior the rest are the prior's), which the
-        presence gate counts with the prior as it counts the reported joints without it."""
+        for them; without a track, one of the two people's (:meth:`_picked_subject`; with ``pick_subject: none``
+        or another 3D method than the triangulation, none: whose joints would they be?). Returns them; where the
+        pairings of peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D
+        joints come from (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks); and
+        the subject's joints that the peaks gave (those pairings'; with the skeleton prior the rest are the
+        prior's), which the presence gate counts with the prior as it counts the reported joints without it.
+        ``cold_several`` (this pass refines this pair's cold pass, :meth:`_finish_pass`; where the subject is
+        picked): ``False``, the track is a cold pass's that did not tell two people apart (both people's joints,
+        mixed): picked as without a track; ``True``, the cold pass picked the subject from its coarse crop: split
+        again on this pass's finer one, and the person nearer the track's centre is the subject (the cold split
+        may have given a joint wrongly)."""
         track = self.tracker.track
-        if track is None:
+        cfg = self.config.joints3d
+        picks = cfg.method == "triangulate" and cfg.pick_subject != "none"
+        if track is None or (picks and cold_several is not None):
             none = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
-            return none, None, none
+            if not picks:
+                return none, None, none
+            near = centre_of(track.joints[None], np.where(track.valid, 0, -1)) if cold_several else None
+            return self._picked_subject(none, kp, uv_model, crops, regions, near)
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
-        near = track.valid & (step <= self.config.joints3d.max_track_step_m)
+        near = track.valid & (step <= cfg.max_track_step_m)
         kept = Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
-        if self.config.joints3d.method != "triangulate":  # the 3D joint is no peaks' triangulation (nor the prior's)
+        if cfg.method != "triangulate":  # the 3D joint is no peaks' triangulation (nor the prior's)
             return kept, None, kept
         return self._tracked_candidates(kept, kp, uv_model, crops, regions, track.joints, track.valid)
+
+    def _pairings(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera], regions: Regions
+                  ) -> tuple[Joints3D, np.ndarray, np.ndarray, np.ndarray]:
+        """Each joint's four pairings of the two views' peaks (:data:`~ghnerf_runtime.two_people.PAIRINGS`: the
+        decoded peak or the runner-up in view 0 with either in view 1), triangulated through the usual gates
+        (reprojection, ray angle, boxes): the ``(4 * J)`` joints, pairing after pairing, and each option's model
+        pixels, values and validity ``(option, view, J, ...)``. A runner-up exists only where another region
+        passes the decoder's threshold."""
+        J = kp.uv.shape[-2]
+        ru_model = heatmap_to_model_pixels(kp.runner_up_uv, self.grid, self.size)
+        uv_opt = np.stack([uv_model, ru_model])  # (peak | runner-up, view, J, 2)
+        conf_opt = np.stack([kp.confidence, kp.runner_up])
+        valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a region above the threshold
+
+        def paired(opt: np.ndarray) -> np.ndarray:  # (4 * J, ...) of each view, the pairings one after the other
+            return np.stack([opt[PAIRINGS[:, v], v].reshape((4 * J,) + opt.shape[3:]) for v in range(2)])
+
+        tri = self._gate_to_boxes(triangulate_joints(paired(uv_opt), paired(conf_opt), paired(valid_opt), crops,
+                                                     self.config.joints3d), regions)
+        return tri, uv_opt, conf_opt, valid_opt
 
     def _tracked_candidates(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                             regions: Regions, track_joints: np.ndarray, track_valid: np.ndarray
                             ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """A ``several_people`` pair's joints from whichever peaks are the tracked subject's: each view's map of a
         joint holds both people's peaks, the decoded one (the stronger) and the runner-up, so the subject's joint
-        is one of the four pairings across the views. Each is triangulated (reprojection and ray-angle gates, the
-        box gates) and the one nearest the track's joint, within ``max_track_step_m``, is reported; a joint with
-        none keeps ``kept``'s answer (the skeleton prior's or the depth centroid's, when they gave it). The third
-        value is the found joints alone (:meth:`_keep_tracked_subject`)."""
+        is one of the four pairings across the views (:meth:`_pairings`), and the one nearest the track's joint,
+        within ``max_track_step_m``, is reported; a joint with none keeps ``kept``'s answer (the skeleton prior's
+        or the depth centroid's, when they gave it). The third value is the found joints alone
+        (:meth:`_keep_tracked_subject`)."""
         cfg = self.config.joints3d
         J = len(track_joints)
-        ru_model = heatmap_to_model_pixels(kp.runner_up_uv, self.grid, self.size)
-        uv_opt = np.stack([uv_model, ru_model])  # (peak | runner-up, view, J, 2)
-        conf_opt = np.stack([kp.confidence, kp.runner_up])
-        valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a region above the threshold
-        combos = np.array([[0, 0], [0, 1], [1, 0], [1, 1]])  # (view 0's, view 1's) option; first the decoded peaks
-
-        def paired(opt: np.ndarray) -> np.ndarray:  # (4 * J, ...) of each view, the combos one after the other
-            return np.stack([opt[combos[:, v], v].reshape((4 * J,) + opt.shape[3:]) for v in range(2)])
-
-        tri = self._gate_to_boxes(triangulate_joints(paired(uv_opt), paired(conf_opt), paired(valid_opt), crops, cfg),
-                                  regions)
-        points = tri.points.reshape(4, J, 3)
+        pairs = self._pairings(kp, uv_model, crops, regions)
+        points, valid = pairs[0].points.reshape(4, J, 3), pairs[0].valid.reshape(4, J)
         dist = np.linalg.norm(points - track_joints, axis=-1)
-        ok = tri.valid.reshape(4, J) & track_valid & (dist <= cfg.max_track_step_m)
-        best = np.argmin(np.where(ok, dist, np.inf), axis=0)
-        found = ok.any(axis=0)
+        ok = valid & track_valid & (dist <= cfg.max_track_step_m)
+        best, found = np.argmin(np.where(ok, dist, np.inf), axis=0), ok.any(axis=0)
+        lost = ~found & ~kept.valid
+        if lost.any() and found.any():
+            # a joint missing from the track (the previous pair's), or moved further than the step: the subject's is
+            # the pairing that the split (two_people.split_people) gives the person who has the joints found near
+            # the track
+            people = split_people(points, valid)
+            agree = [int(np.count_nonzero((p == best) & found)) for p in people]
+            who = int(np.argmax(agree))
+            if agree[who] > agree[1 - who]:
+                # only where it hangs from a joint found near the track (a sparse split may misgive a joint)
+                add = lost & (people[who] >= 0) & attached(points[np.maximum(people[who], 0), np.arange(J)],
+                                                           points[best, np.arange(J)], found)
+                best, found = np.where(add, people[who], best), found | add
+        return self._from_pairings(kept, kp, pairs, best, found)
+
+    def _picked_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
+                        regions: Regions, near: np.ndarray | None = None
+                        ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+        """A ``several_people`` pair without a track: the pairings (:meth:`_pairings`) split into two people
+        (:func:`~ghnerf_runtime.two_people.split_people`), and the one ``joints3d.pick_subject`` names
+        (:func:`~ghnerf_runtime.two_people.pick_person`) of those with enough joints to pass the presence gate
+        (``presence.min_joints``) is reported, as :meth:`_tracked_candidates` reports the tracked subject's; the
+        track then follows that person. Nobody (``kept``) where neither has enough. ``near`` (a floor point,
+        x and z): the person whose centre is nearer it instead of the rule's."""
+        J = len(kept.valid)
+        pairs = self._pairings(kp, uv_model, crops, regions)
+        points = pairs[0].points.reshape(4, J, 3)
+        people = split_people(points, pairs[0].valid.reshape(4, J))
+        pres = self.config.presence
+        need = pres.min_joints if pres.enabled else 1
+        centres = [centre_of(points, p) if np.count_nonzero(p >= 0) >= need else None for p in people]
+        below = floor_xz(0.5 * (self.rig.pair[0].center + self.rig.pair[1].center))  # the cameras' midpoint
+        towards = floor_xz(self.rig.volume.center) - below
+        if not np.linalg.norm(towards) > 1e-6:  # the volume centred above the cameras: the rig's forward, z
+            towards = np.array([0.0, 1.0])
+        if near is not None:
+            away = [np.inf if c is None else float(np.linalg.norm(c - near)) for c in centres]
+            who = int(np.argmin(away)) if np.isfinite(min(away)) else None
+        else:
+            who = pick_person(centres, below, towards, self.config.joints3d.pick_subject)
+        if who is None:
+            return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
+        return self._from_pairings(kept, kp, pairs, np.maximum(people[who], 0), people[who] >= 0)
+
+    def _from_pairings(self, kept: Joints3D, kp: Keypoints2D, pairs: tuple, best: np.ndarray, found: np.ndarray
+                       ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+        """The subject's joints: pairing ``best[j]`` of :meth:`_pairings` where ``found``, ``kept``'s elsewhere;
+        each view's 2D joint is the peak the joint was triangulated from, with that peak's value (the decoded peak
+        where the joint kept ``kept``'s answer); and the found joints alone. ``None`` for the peaks where nothing
+        was found."""
+        tri, uv_opt, conf_opt, valid_opt = pairs
+        J = len(kept.valid)
         if not found.any():
             return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
         j = np.arange(J)
+        points = tri.points.reshape(4, J, 3)
         j3 = Joints3D(np.where(found[:, None], points[best, j], kept.points),
                       np.where(found, tri.confidence.reshape(4, J)[best, j], kept.confidence).astype(np.float32),
                       found | kept.valid,
                       np.where(found[:, None], tri.reprojection_px.reshape(4, J, -1)[best, j], kept.reprojection_px))
         # each view's option of the chosen pairing (the decoded peak where a joint kept its old answer)
-        opt = np.where(found, combos[best].T, 0)  # (2, J)
+        opt = np.where(found, PAIRINGS[best].T, 0)  # (2, J)
         v = np.arange(2)[:, None]
         chosen = Keypoints2D(np.where(opt[..., None] == 1, kp.runner_up_uv, kp.uv),
                              conf_opt[opt, v, j], valid_opt[opt, v, j], kp.runner_up, kp.runner_up_uv)

@@ -41,7 +41,8 @@ from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
-from ghnerf_runtime.estimator import _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, PairResult
+from ghnerf_runtime.estimator import (_PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, STILL_SEVERAL_MIN_JOINTS,
+                                      PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
@@ -51,6 +52,7 @@ from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_RAY_ANGL
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
+from ghnerf_runtime.two_people import BODY_RADIUS_M, MAX_LIMB_M, MIN_APART_M, TIE_M
 from training.data.errors import DatasetError
 from training.data.zju import MIN_CAMERA_SPREAD_M, parse_cameras
 from training.export.calibration import MIN_FRAMES
@@ -171,6 +173,17 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"`--max-px` (default {CheckLimits.max_px:g} px rms)"),
     ("docs/calibration.md", f"`--max-scale-error` (default {100 * CheckLimits.max_scale_error:g} %)"),
     ("docs/calibration.md", f"`--max-floor-mm` off the floor (default {CheckLimits.max_floor_mm:g} mm)"),
+    # session 54: two people without a track, separated and one picked (ghnerf_runtime/two_people.py)
+    ("docs/runtime.md", f"further than {BODY_RADIUS_M:g} m from a centre costs as much as none"),
+    ("docs/runtime.md", f"two centres nearer than {MIN_APART_M:g} m are one column counted twice"),
+    ("docs/runtime.md", f"nearer, within {MAX_LIMB_M:g} m: a waving hand"),
+    ("docs/runtime.md", f"within a limb's length ({MAX_LIMB_M:g} m)"),
+    ("docs/runtime.md", f"within {TIE_M:g} m of each other, the one nearer the cameras |"),
+    ("docs/runtime.md", f"`nearest` | the one nearest the cameras (the floor point below their midpoint); within "
+                        f"{TIE_M:g} m, the one nearer the centre line |"),
+    ("docs/runtime.md", f"hence the {TIE_M:g} m within which two distances count as equal"),
+    ("docs/runtime.md", f"stay flagged while at least "
+                        f"{'one' if STILL_SEVERAL_MIN_JOINTS == 1 else STILL_SEVERAL_MIN_JOINTS} joint shows twice"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

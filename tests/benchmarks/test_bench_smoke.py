@@ -307,11 +307,15 @@ def test_measure_presence_with_the_flip_test_and_its_timing(model, capsys, monke
 
 def test_measure_two_people(capsys, monkeypatch):
     out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", capsys=capsys, monkeypatch=monkeypatch)
-    assert re.search(r"^2 pairs of two people \(1 scenes\), .* [\d.]+ joints reported per pair; of them \d+% at the "
-                     r"first person's, \d+% at the second's, \d+% at neither .*; \d+% of pairs flagged several_people$",
-                     out, re.M), out
+    followed = r"; scenes following the first person \d, the second \d, one person throughout \d of 1$"
+    assert re.search(r"^2 pairs of two people \(1 scenes\), .* pick_subject centre_line: [\d.]+ joints reported per "
+                     r"pair; of them \d+% at the first person's, \d+% at the second's, \d+% at neither .*; \d+% of "
+                     r"pairs flagged several_people" + followed, out, re.M), out
     assert re.search(r"^the second person joining after 3 pairs of the first alone, the next 2 pairs, .* [\d.]+ joints "
-                     r"reported per pair; .*; \d+% of pairs flagged several_people$", out, re.M), out
+                     r"reported per pair; .*; \d+% of pairs flagged several_people" + followed, out, re.M), out
+    # the picked person's joints from the first pair (session 54; session 53 reported none without a track)
+    assert re.search(r"^2 pairs of two people .*: 2[0-5]\.\d joints reported per pair; of them 100% at the first", out,
+                     re.M), out
 
 
 def test_measure_two_people_one_person(model, capsys, monkeypatch):

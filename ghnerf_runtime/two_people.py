@@ -1,0 +1,199 @@
+"""Two people in view and no track yet: separate them and choose one (docs/runtime.md, "Two people in the
+working volume").
+
+Each view's map of a joint holds both people's peaks: the decoded one (the stronger there) and the runner-up
+(``Keypoints2D.runner_up_uv``). Of the four pairings across the two views (:data:`PAIRINGS`), two are the people's
+joints and two are mixed (one person's peak in one view, the other's in the other), and the mixed ones often pass
+the reprojection gate. What tells them apart is where they lie: a person's joints stand in a column around the
+person's centre, while the mixed points of people side by side lie together between them, nearer the cameras
+(on the oracle: about 1.4 m from either person). So the people are two centres on the floor plane and each joint
+is given to them as a whole: either the straight pairings (peak with peak, runner-up with runner-up) or the
+crossed ones, each going to the nearer centre; a pairing may also go unused (the joint missing for that person).
+That is a 2-means constrained per joint, started from each torso joint's two-person options in turn (every joint's
+where no torso joint has them), the start of the lowest cost kept: no start needs to be right, one of a torso
+joint's is (they stand nearest their person's centre). The centres settled, each joint is given again along the
+limbs from the neck out (:data:`~ghnerf_runtime.body25.LIMBS`), to whichever person's joint it hangs from is
+nearer: a waving hand reaches as far from its own person's centre as from the other's (on the
+oracle, one person's wrist 0.70 m from their centre and the other's 0.36 m from it), never as far from its own
+elbow. Pure numpy, arrays in and out.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ghnerf_runtime.body25 import BODY_PARTS, LIMBS
+from ghnerf_runtime.config import PICK_SUBJECT_RULES
+from ghnerf_runtime.errors import ShapeError
+
+#: The four pairings of the two views' peaks: (view 0's option, view 1's), 0 the decoded peak, 1 the runner-up.
+PAIRINGS = np.array([[0, 0], [0, 1], [1, 0], [1, 1]])
+#: A joint lies within this of its person's centre on the floor plane (arm span about 1.8 m): a joint further off
+#: costs as much as no joint, so it is left out rather than given to that person.
+BODY_RADIUS_M = 1.0
+#: Two people's centres are at least this far apart (a body's depth): two centres that settle nearer are one
+#: column of points taken twice, such as the mixed points' (each joint's two mixed pairings may lie together).
+MIN_APART_M = 0.4
+#: BODY_25's longest limb (the neck to the mid-hip: up to 0.62 m in the simulator's people, the thigh 0.5 m) with
+#: room for the triangulation's error: a joint further from every joint it shares a limb with is not that
+#: person's (:func:`attached`, and the split along the limbs).
+MAX_LIMB_M = 0.75
+#: Two people whose distances (centre line or cameras) differ by less than this are as near as each other (the
+#: rule's second distance decides): a waving person's centre (:func:`centre_of`) strays up to about 0.09 m from
+#: where they stand (the oracle's scenes, benchmarks/measure_two_people.py), so two people standing equally far
+#: off differ by up to about twice that.
+TIE_M = 0.2
+#: Assignment rounds per start: a start that has not settled by then is kept as it stands.
+_ROUNDS = 8
+
+# Each joint's options: the pairing given to person 0 and to person 1 (-1: none). Two pairings go together only
+# when they use different peaks in both views: straight (0 with 3) or crossed (1 with 2).
+_OPTIONS = np.array([(a, b) for a, b in ((0, 3), (3, 0), (1, 2), (2, 1))]
+                    + [(k, -1) for k in range(4)] + [(-1, k) for k in range(4)] + [(-1, -1)])
+_BOTH = 4  # the first four options give the joint to both people
+
+
+def floor_xz(points: np.ndarray) -> np.ndarray:
+    """The floor-plane coordinates (x, z) of rig-frame points (y is down)."""
+    return np.asarray(points)[..., [0, 2]]
+
+
+def split_people(points: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Two people's joints among the four pairings of each joint (module docstring).
+
+    Args:
+        points: ``(4, J, 3)`` the pairings' triangulated joints (rig frame), in :data:`PAIRINGS` order.
+        valid: ``(4, J)`` which passed the gates.
+
+    Returns:
+        ``(2, J)`` int: each person's pairing of each joint, -1 where that person has none; -1 throughout where no
+        joint has two people's pairings (nobody to tell apart). ``J`` is BODY_25's 25 (the limbs are its).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    valid = np.asarray(valid, dtype=bool)
+    if points.ndim != 3 or points.shape[0] != 4 or points.shape[2] != 3 or valid.shape != points.shape[:2]:
+        raise ShapeError(f"split_people: points must be (4, J, 3) and valid (4, J), got {points.shape} and "
+                         f"{valid.shape}")
+    J = points.shape[1]
+    xz = floor_xz(points)
+    allowed = np.ones((len(_OPTIONS), J), bool)
+    for o, (a, b) in enumerate(_OPTIONS):
+        for k in (a, b):
+            if k >= 0:
+                allowed[o] &= valid[k]
+    best_cost, best, centres = np.inf, np.full((2, J), -1), None
+    two = [(j, a, b) for j in range(J) for a, b in _OPTIONS[:_BOTH:2]  # (0, 3) and (1, 2): either order
+           if valid[a, j] and valid[b, j]]
+    torso = [start for start in two if start[0] in BODY_PARTS["torso"]]
+    for j, a, b in torso or two:  # (a start costs about 0.5 ms on a 2-core host: 12 at most from the torso)
+        start = np.stack([xz[a, j], xz[b, j]])
+        cost, chosen = _settle(xz, allowed, start)  # (start: the centres where it settled)
+        if np.linalg.norm(start[0] - start[1]) >= MIN_APART_M and cost < best_cost:
+            best_cost, best, centres = cost, chosen, start
+    if centres is None:
+        return best
+    return _along_limbs(points, allowed, best, centres)
+
+
+def _along_limbs(points: np.ndarray, allowed: np.ndarray, chosen: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """``chosen`` (the settled split) given again from the neck out (module docstring): each joint's option is the
+    cheapest by the 3D distance of each person's pairing from that person's joint it hangs from (none further than
+    :data:`MAX_LIMB_M`), or from their centre on the floor plane (``centres``) where they have none, capped and
+    costed as :func:`_settle`'s."""
+    chosen = chosen.copy()
+    J = points.shape[1]
+    for parent, child in LIMBS:
+        if child >= J:
+            continue
+        cost = np.zeros(len(_OPTIONS))
+        for person in range(2):
+            k = _OPTIONS[:, person]
+            here = points[np.maximum(k, 0), child]  # (options, 3)
+            if chosen[person, parent] >= 0:  # no limb is longer than MAX_LIMB_M: further is another's joint
+                dist = np.linalg.norm(here - points[chosen[person, parent], parent], axis=-1)
+                dist = np.where(dist <= MAX_LIMB_M, dist, np.inf)
+            else:
+                dist = np.minimum(np.linalg.norm(floor_xz(here) - centres[person], axis=-1), BODY_RADIUS_M)
+            cost += np.where(k >= 0, dist, BODY_RADIUS_M)
+        chosen[:, child] = _OPTIONS[np.argmin(np.where(allowed[:, child], cost, np.inf))]
+    return chosen
+
+
+def _settle(xz: np.ndarray, allowed: np.ndarray, centres: np.ndarray) -> tuple[float, np.ndarray]:
+    """From two centres (moved in place): give each joint its cheapest option, move the centres to the medians of
+    what they got, again until nothing changes. Returns the cost (the distances of the joints given to each centre,
+    and :data:`BODY_RADIUS_M` for each joint a person went without) and the ``(2, J)`` pairings."""
+    J = xz.shape[1]
+    j = np.arange(J)
+    choice = None
+    for _ in range(_ROUNDS):
+        dist = np.linalg.norm(xz[:, :, None, :] - centres[None, None], axis=-1)  # (4, J, 2)
+        dist = np.minimum(dist, BODY_RADIUS_M)  # (never cheaper than going without: the option without is there)
+        cost = np.zeros((len(_OPTIONS), J))
+        for person in range(2):
+            k = _OPTIONS[:, person]
+            cost += np.where(k[:, None] >= 0, dist[np.maximum(k, 0)][:, j, person], BODY_RADIUS_M)
+        cost = np.where(allowed, cost, np.inf)
+        pick = np.argmin(cost, axis=0)
+        total = float(cost[pick, j].sum())
+        if choice is not None and np.array_equal(pick, choice):
+            break
+        choice = pick
+        chosen = _OPTIONS[pick].T  # (2, J)
+        for person in range(2):
+            mine = chosen[person] >= 0
+            if mine.any():  # a centre with no joint stays where it was
+                centres[person] = np.median(xz[chosen[person][mine], j[mine]], axis=0)
+    return total, _OPTIONS[choice].T.copy()
+
+
+def attached(candidates: np.ndarray, joints: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """``(J,)`` which of ``candidates`` (``(J, 3)``, one per joint) lie within :data:`MAX_LIMB_M` of a ``found``
+    joint of ``joints`` (``(J, 3)``) they share a limb with (:data:`~ghnerf_runtime.body25.LIMBS`)."""
+    near = np.zeros(len(candidates), bool)
+    for a, b in LIMBS:
+        for j, other in ((a, b), (b, a)):
+            if j < len(candidates) and other < len(candidates) and found[other]:
+                near[j] |= bool(np.linalg.norm(candidates[j] - joints[other]) <= MAX_LIMB_M)
+    return near
+
+
+def centre_of(points: np.ndarray, chosen: np.ndarray) -> np.ndarray | None:
+    """A person's centre on the floor plane: the median (x, z) of their joints (``points`` ``(4, J, 3)``, ``chosen``
+    ``(J,)`` pairings, -1 none; a waving arm moves it little), or None without a joint."""
+    mine = chosen >= 0
+    if not mine.any():
+        return None
+    return np.median(floor_xz(points[chosen[mine], np.flatnonzero(mine)]), axis=0)
+
+
+def pick_person(centres: list[np.ndarray | None], origin_xz: np.ndarray, facing_xz: np.ndarray,
+                rule: str) -> int | None:
+    """Which person is the subject, by ``rule`` (``Joints3DConfig.pick_subject``):
+
+    * ``"centre_line"``: the one nearest the rig's centre line (``origin_xz``, the floor point below the cameras'
+      midpoint, along ``facing_xz``, towards the working volume's centre), on the floor plane; within
+      :data:`TIE_M` of each other, the one nearer the cameras (``origin_xz``).
+    * ``"nearest"``: the one nearest the cameras; within :data:`TIE_M`, the one nearer the centre line.
+    * ``"none"``: nobody.
+
+    Where both distances tie, the first. ``centres``: each person's floor centre, None for a person left out
+    (too few joints). Returns the index, or None (nobody to pick)."""
+    if rule not in PICK_SUBJECT_RULES:
+        raise ValueError(f"pick_person: rule must be one of {list(PICK_SUBJECT_RULES)}, got {rule!r}")
+    present = [i for i, c in enumerate(centres) if c is not None]
+    if rule == "none" or not present:
+        return None
+    facing = np.asarray(facing_xz, dtype=np.float64)
+    facing = facing / np.linalg.norm(facing)
+    keys = {}
+    for i in present:
+        d = np.asarray(centres[i], dtype=np.float64) - origin_xz
+        off_line = abs(d[0] * facing[1] - d[1] * facing[0])  # the 2D cross product: distance from the line
+        away = float(np.linalg.norm(d))
+        keys[i] = (off_line, away) if rule == "centre_line" else (away, off_line)
+    pick = present[0]
+    for i in present[1:]:
+        a, b = keys[i], keys[pick]
+        if a[0] < b[0] - TIE_M or (abs(a[0] - b[0]) <= TIE_M and a[1] < b[1]):
+            pick = i
+    return pick
