@@ -39,10 +39,10 @@ from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
-from ghnerf_runtime.config import Joints3DConfig, TrackingConfig
+from ghnerf_runtime.config import MIN_CUTOFF_HZ, Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
-from ghnerf_runtime.estimator import (_PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M, STILL_SEVERAL_MIN_JOINTS,
-                                      PairResult)
+from ghnerf_runtime.estimator import (_FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M,
+                                      STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
@@ -184,6 +184,13 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"hence the {TIE_M:g} m within which two distances count as equal"),
     ("docs/runtime.md", f"stay flagged while at least "
                         f"{'one' if STILL_SEVERAL_MIN_JOINTS == 1 else STILL_SEVERAL_MIN_JOINTS} joint shows twice"),
+    # session 54: the smoothing's lowest cutoff and the floor check's frame-edge margin (estimator._FLOOR_EDGE_FRAC)
+    ("docs/runtime.md", f"{MIN_CUTOFF_HZ:g} Hz at least (`config.MIN_CUTOFF_HZ`, a time constant of "
+                        f"{1 / (2 * math.pi * MIN_CUTOFF_HZ):.0f} s"),
+    ("docs/runtime.md", f"shown by both frames at least {'a fifth' if _FLOOR_EDGE_FRAC == 0.2 else _FLOOR_EDGE_FRAC} "
+                        "of the crop window's side inside their edges"),
+    ("docs/calibration.md", f"both frames show it at least {'a fifth' if _FLOOR_EDGE_FRAC == 0.2 else _FLOOR_EDGE_FRAC}"
+                            " of the crop's side inside their edges"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

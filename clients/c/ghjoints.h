@@ -71,10 +71,10 @@ extern "C" {
  * older sender's HELLO has 0: it cannot say). Other bits are reserved: ignore them. */
 #define GHJ_FLAG_DECIMATED 0x01u           /* sender skips frames on purpose to fit the link */
 #define GHJ_FLAG_DROPPED 0x02u             /* sender dropped frames since the previous JOINTS */
-#define GHJ_FLAG_SEVERAL_PEOPLE 0x04u      /* two people in view: the tracked subject's joints only */
+#define GHJ_FLAG_SEVERAL_PEOPLE 0x04u      /* two people in view: one person's joints only */
 #define GHJ_FLAG_PRIOR_FALLBACK 0x08u      /* the skeleton prior disagreed: triangulated joints sent */
 #define GHJ_FLAG_SINGLE_VIEW 0x10u         /* one camera only: every 3D joint missing, that camera's 2D */
-#define GHJ_FLAG_CALIBRATION_SUSPECT 0x20u /* the views no longer agree (a camera moved): recalibrate */
+#define GHJ_FLAG_CALIBRATION_SUSPECT 0x20u /* views disagree or feet left the floor: recalibrate */
 #define GHJ_SCENE_FLAGS 0x3Cu              /* the four above */
 
 /* STATUS fault codes. */

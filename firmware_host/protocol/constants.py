@@ -45,14 +45,16 @@ class Flags(enum.IntFlag):
     # Bits 2-5 say what the estimate is (set on the frame's JOINTS and JOINTS_2D; docs/protocol.md section 3).
     # Header bits, not appended payload bytes: they cost no link budget, and decoders of before session 53
     # already pass unknown bits through ("ignore when reading").
-    # Two people in view: the joints are the tracked subject's only (all missing while none is tracked).
+    # Two people in view: the joints are one person's only, the tracked subject's or, without a track, the one
+    # joints3d.pick_subject picks (all missing with pick_subject "none", the rule before session 54).
     SEVERAL_PEOPLE = 0x04
     # The skeleton prior disagreed with the triangulation, which was sent instead.
     PRIOR_FALLBACK = 0x08
     # One camera alone saw the person: no 3D (every JOINTS joint missing), only that camera's JOINTS_2D.
     SINGLE_VIEW = 0x10
-    # The daemon's calibration check finds the views no longer agree (a camera moved): 3D may be off. Also set
-    # in the STATUS header while it lasts, so it reaches a receiver while no frame flows.
+    # The daemon's calibration check finds the views no longer agree or the feet have left the floor (a camera
+    # moved since calibration): 3D may be off. Also set in the STATUS header while it lasts, so it reaches a
+    # receiver while no frame flows.
     CALIBRATION_SUSPECT = 0x20
 
 

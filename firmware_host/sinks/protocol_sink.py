@@ -112,8 +112,9 @@ class ProtocolSink(Sink):
 
     def set_calibration_suspect(self, suspect: bool) -> None:
         """Say in every STATUS (header flag CALIBRATION_SUSPECT) whether the daemon's calibration check finds
-        the views no longer agree. A flag, not a fault code: it lasts until a recalibration, and as fault 6 it
-        would have hidden RATE_LIMITED..CAMERA_FAULT all that time (or been hidden by them)."""
+        the rig file no longer fits (the views no longer agree, or the feet have left the floor). A flag, not a
+        fault code: it lasts until a recalibration, and as fault 6 it would have hidden RATE_LIMITED..CAMERA_FAULT
+        all that time (or been hidden by them)."""
         with self._cond:
             self._calibration_suspect = bool(suspect)
 
