@@ -170,9 +170,14 @@ def _config(args) -> EstimatorConfig:
 
 
 def _read_image(path: str) -> np.ndarray:
+    # checked first: for a missing file OpenCV prints a "findDecoder" warning of its own above the error
+    if not os.path.exists(path):
+        raise UsageError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise UsageError(f"{path}: a folder, not an image")
     img = cv2.imread(path, cv2.IMREAD_COLOR)
     if img is None:
-        raise UsageError(f"{path}: cannot read the image (missing file or unknown format)")
+        raise UsageError(f"{path}: cannot read the image (not a format OpenCV reads, or unreadable)")
     return img
 
 
@@ -302,11 +307,17 @@ def _run(args) -> int:
     frames: list[dict] = []
     done = False
     held: dict[int, list[np.ndarray]] = {}  # the pairs in flight, for their overlay
+    # each video pair's time as given to the estimator, written beside its joints: with a variable frame rate the
+    # sequence number does not say when a pair was filmed (a still pair has none: null)
+    times: dict[int, float | None] = {}
 
     def emit(result) -> None:
         images = held.pop(result.sequence)
         nonlocal out
         obj = result.to_json()
+        pair_time = times.pop(result.sequence, None)
+        obj = {"sequence": obj["sequence"],
+               "time_s": None if pair_time is None else round(float(pair_time), 6), **obj}
         if as_list:
             frames.append(obj)
         else:
@@ -336,6 +347,7 @@ def _run(args) -> int:
                     # step, and smoothing (tracking.max_gap_s too) runs on the step; else the last time plus a frame
                     shown = getattr(images, "time_s", None)
                     t = shown if shown is not None and (t is None or shown > t) else 0.0 if t is None else t + 1 / fps
+                    times[seq] = t if args.videos else None
                     try:
                         finished = pipe.submit(images, sequence=seq, novel_view=request, timestamp_s=t)
                     except FrameError as e:

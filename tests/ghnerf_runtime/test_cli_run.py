@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import cv2
@@ -68,6 +69,7 @@ def test_run_on_a_sim_pair_writes_the_documented_json(sim_pair, tiny_model_dir, 
     frames = json.loads(out.read_text())
     rig = load_rig(sim_pair["rig"])
     assert isinstance(frames, list) and len(frames) == 1
+    assert frames[0]["time_s"] is None  # a still pair was filmed at no time the run knows
     _check_frame(frames[0], rig.names[:2], *rig.pair[0].size)
     assert "novel_volume" in frames[0]["timing_ms"]
     img = cv2.imread(str(novel))
@@ -110,10 +112,26 @@ def test_a_video_run_with_a_novel_view_writes_every_pair_in_order(tiny_model_dir
     assert outputs["piped"] == outputs["again"]  # deterministic: nothing of one pair leaks into the next
 
 
+def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):
+    """A mistyped image path gave OpenCV's own "[ WARN:0@0.5] global loadsave.cpp ... findDecoder imread_" line
+    above ghnerf-run's error, and the error said "missing file or unknown format" without saying which: a missing
+    file, a folder and a file that is no image are each named, with nothing from OpenCV."""
+    not_image = tmp_path / "notes.png"
+    not_image.write_text("not a picture")
+    cases = {str(tmp_path / "absent.png"): "absent.png: no such file",
+             str(tmp_path): f"{tmp_path}: a folder, not an image",
+             str(not_image): "notes.png: cannot read the image (not a format OpenCV reads"}
+    for path, said in cases.items():
+        with pytest.raises(cli_run.UsageError, match=re.escape(said)):
+            cli_run._read_image(path)
+    captured = capfd.readouterr()
+    assert "findDecoder" not in captured.err + captured.out
+
+
 def test_errors_exit_2_and_name_the_problem(sim_pair, tiny_model_dir, tmp_path, capsys):  # noqa: F811
     args = ["--rig", sim_pair["rig"], "--model-dir", str(tiny_model_dir)]
     assert cli_run.main(args + ["--images", sim_pair["left"], str(tmp_path / "absent.png")]) == 2
-    assert "absent.png: cannot read the image" in capsys.readouterr().err
+    assert "absent.png: no such file" in capsys.readouterr().err
     small = tmp_path / "small.png"
     cv2.imwrite(str(small), np.zeros((10, 10, 3), np.uint8))
     assert cli_run.main(args + ["--images", sim_pair["left"], str(small)]) == 2
@@ -495,7 +513,7 @@ def test_a_json_output_keeps_the_pairs_finished_before_an_error(monkeypatch, tmp
     out.write_text("an earlier run's list\n")
     rc, _ = _stub_run(monkeypatch, out, fail_at=2, fail=ModelRunError("render_heat failed"))
     assert rc == 2  # before: the file was truncated at the start and the two finished pairs lost
-    assert json.loads(out.read_text()) == [{"sequence": 0}, {"sequence": 1}]
+    assert json.loads(out.read_text()) == [{"sequence": 0, "time_s": 0.0}, {"sequence": 1, "time_s": 0.033333}]
     err = capsys.readouterr().err
     assert "render_heat failed" in err and "2 pair(s) finished" in err
     assert [p.name for p in tmp_path.iterdir()] == ["joints.json"]  # no temporary file left behind
@@ -557,7 +575,7 @@ def test_a_json_output_is_left_as_it_was_when_no_pair_finished(monkeypatch, tmp_
 def test_a_json_output_keeps_the_pairs_finished_before_ctrl_c(monkeypatch, tmp_path, capsys):
     out = tmp_path / "joints.json"
     rc, _ = _stub_run(monkeypatch, out, fail_at=1, fail=KeyboardInterrupt())
-    assert rc == 130 and json.loads(out.read_text()) == [{"sequence": 0}]
+    assert rc == 130 and json.loads(out.read_text()) == [{"sequence": 0, "time_s": 0.0}]
     err = capsys.readouterr().err
     assert "ghnerf-run: stopped (SIGINT)" in err and "Traceback" not in err  # was a 25-line traceback
     rc, _ = _stub_run(monkeypatch, out)  # a whole run replaces it
@@ -687,6 +705,40 @@ def test_video_pairs_are_timed_by_their_frames_presentation_times(monkeypatch, t
     monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
     assert times == pytest.approx([0.0, 0.033, 0.070, 0.071, 0.140, 0.141, 0.210])
+
+
+def test_each_video_pair_s_output_says_when_it_was_filmed(monkeypatch, tmp_path):
+    """With a variable frame rate the sequence number does not say when a pair was filmed: each pair's object
+    carries ``time_s``, the time the estimator was given (the first video's presentation time, else the last
+    plus a frame), so a user can line the joints up with the video. Before, the output had no time at all."""
+    pts_ms = [0.0, 40.0, 70.0, float("nan"), 150.0]
+
+    class _Cap:
+        def __init__(self, path):
+            self.k = -1
+
+        def isOpened(self):
+            return True
+
+        def read(self):
+            self.k += 1
+            return self.k < len(pts_ms), np.zeros((4, 4, 3), np.uint8)
+
+        def get(self, prop):
+            return 25.0 if prop == cv2.CAP_PROP_FPS else pts_ms[self.k]
+
+        def release(self):
+            pass
+
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _Cap)
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
+    out = tmp_path / "j.jsonl"
+    assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(out)]) == 0
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [line["sequence"] for line in lines] == [0, 1, 2, 3, 4]
+    # the fourth frame gives no time: the third's plus a frame at 25 fps
+    assert [line["time_s"] for line in lines] == pytest.approx([0.0, 0.04, 0.07, 0.11, 0.15])
 
 
 def test_the_novel_alpha_help_names_the_path_and_the_orbit_s_limit():
