@@ -194,7 +194,10 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
         L.append(f"The encoder's flip-tested int8 2D joints of {p.get('scenes')} held-out scenes "
                  f"({p.get('split')}), through the learnt skeleton prior ({_networks(p['config'].get('members', 1))} "
                  f"of {p['config'].get('steps')} steps on "
-                 f"{p.get('train_scenes')} training scenes, {p.get('train_s')} s), against the runtime's gated "
+                 f"{p.get('train_scenes')} training scenes"
+                 + (f" and {p['tilted_scenes']} copies of them with the {p['config'].get('tilt_mode')} turned to any "
+                    f"angle (`--tilt-share {p['config'].get('tilt_share'):g}`)" if p.get("tilted_scenes") else "")
+                 + f", {p.get('train_s')} s), against the runtime's gated "
                  f"triangulation of the same joints: {_fmt(tri.get('mean_mm'), 1)} mean / "
                  f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints. "
                  "The prior answers for every joint, with its flip test (the runtime's default); its expected "

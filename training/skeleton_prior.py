@@ -515,8 +515,9 @@ def card_summary(folder: str | Path) -> dict | None:
         return None
     r = json.loads(path.read_text())
     return {k: r.get(k) for k in ("command", "split", "scenes", "train_scenes", "trained_on", "encoder_file",
-                                  "flip_test", "config", "collect_s", "train_s", "metrics", "trained_beside")
-            if k in r or k != "trained_beside"}
+                                  "flip_test", "config", "collect_s", "train_s", "metrics", "trained_beside",
+                                  "tilted_scenes")
+            if k in r or k not in ("trained_beside", "tilted_scenes")}  # newer keys: absent from older files
 
 
 def add_to_card(card_dir: str | Path, out: Path) -> Path:

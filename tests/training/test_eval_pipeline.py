@@ -130,6 +130,12 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     pmd = render_markdown({**card, "skeleton_prior": {"ghnerf": prior, "baseline": None}})
     assert "### Skeleton prior (`ghnerf/skeleton_prior.onnx`)" in pmd and "73.4 mean / 34.1 median mm over 72 %" in pmd
     assert "| 0.05 m | 37.3 | 26.8 | 70.0 | 95 % |" in pmd and "| inf | 47.2 | 28.1 | n/a | 100 % |" in pmd
+    assert "copies" not in pmd  # no turned copies: the line says nothing of them
+    # a prior trained with --tilt-share says how many turned copies it learnt from, and what turned
+    tilted = {**prior, "tilted_scenes": 3, "config": {"steps": 4, "tilt_share": 0.25, "tilt_mode": "body"}}
+    tmd = render_markdown({**card, "skeleton_prior": {"ghnerf": tilted}})
+    assert ("on 12 training scenes and 3 copies of them with the body turned to any angle (`--tilt-share 0.25`), "
+            "3.5 s)") in tmd
     from training.pipeline import motion_mix
     assert motion_mix({"motions": ["a", "b"], "motion_weights": [1.0, 3.0]}) == "a 25 %, b 75 %"
     assert motion_mix({"motions": ["a", "b"]}) == "a, b"

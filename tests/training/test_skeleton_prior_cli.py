@@ -49,7 +49,10 @@ def test_collect_train_export_score_and_card(tmp_path, data64):
     card = json.loads((models / "model_card.json").read_text())
     assert card["files"]["ghnerf/skeleton_prior.onnx"]["sha256"] == result["sha256"]
     assert card["skeleton_prior"]["ghnerf"]["metrics"] == result["metrics"]
-    assert "### Skeleton prior (`ghnerf/skeleton_prior.onnx`)" in (models / "MODEL_CARD.md").read_text()
+    assert card["skeleton_prior"]["ghnerf"]["tilted_scenes"] == 3  # the card says it learnt from turned copies
+    card_md = (models / "MODEL_CARD.md").read_text()
+    assert "### Skeleton prior (`ghnerf/skeleton_prior.onnx`)" in card_md
+    assert "6 training scenes and 3 copies of them with the body turned to any angle (`--tilt-share 0.5`)" in card_md
     est = prior.estimate(arrays["uv"], arrays["confidence"], arrays["valid"], arrays["P"])
     assert np.isfinite(est.points).all() and est.points.shape == (3, 25, 3)
 
