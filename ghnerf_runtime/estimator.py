@@ -1256,7 +1256,8 @@ class Estimator:
         tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg,
                                                           pres.threshold(self.config.heatmaps.source),
                                                           pres.min_joints)
-        self._lowest_foot = self._lowest_foot_m(self._gate_to_boxes(tri, regions), kp, regions)
+        in_boxes = self._gate_to_boxes(tri, regions)  # the floor check's and the presence gate's
+        self._lowest_foot = self._lowest_foot_m(in_boxes, kp, regions)
 
         def centroid() -> Joints3D:
             g = self.grid
@@ -1268,7 +1269,7 @@ class Estimator:
                 # Someone there? Asked of the peaks (the presence gate's thresholds are the peaks'), never of
                 # the prior, which was trained on people only and places a skeleton in any noise.
                 pres = self.config.presence
-                if pres.enabled and not gate_presence(self._gate_to_boxes(tri, regions), pres.min_joints,
+                if pres.enabled and not gate_presence(in_boxes, pres.min_joints,
                                                       pres.threshold(self.config.heatmaps.source)).valid.any():
                     return Joints3D.missing(len(tri.valid), tri.reprojection_px.shape[-1])
                 return self._with_prior(tri, uv_model, kp, crops)
@@ -1301,13 +1302,14 @@ class Estimator:
         feet[list(FLOOR_JOINTS)] = True
         feet &= tri.valid & np.all(kp.valid & (kp.confidence >= strong), axis=0)
         for st, roi in zip(self._cams, regions.rois):
-            if not feet.any():
+            idx = np.flatnonzero(feet)  # only the candidates are projected (8 of 25 at most)
+            if not idx.size:
                 return None
             cam, margin = st.camera, _FLOOR_EDGE_FRAC * roi.size
-            uv = cam.project(np.where(feet[:, None], tri.points, 0.0))[0]  # (a NaN uv: behind or off the lens)
+            uv = cam.project(tri.points[idx])[0]  # (a NaN uv: behind or off the lens)
             with np.errstate(invalid="ignore"):
-                feet &= ((uv[:, 0] >= margin) & (uv[:, 0] <= cam.width - 1 - margin)
-                         & (uv[:, 1] >= margin) & (uv[:, 1] <= cam.height - 1 - margin))
+                feet[idx] = ((uv[:, 0] >= margin) & (uv[:, 0] <= cam.width - 1 - margin)
+                             & (uv[:, 1] >= margin) & (uv[:, 1] <= cam.height - 1 - margin))
         return lowest_height_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FLOOR_JOINTS)
 
     def _with_prior(self, tri: Joints3D, uv_model: np.ndarray, kp: Keypoints2D, crops: list[Camera]) -> Joints3D:
