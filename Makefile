@@ -39,9 +39,11 @@ test: $(DEV_STAMP)
 # The recipe follows the machine (`--recipe auto`): where torch sees a GPU, the shipped (tenth) model's,
 # ~25 min of one H100 (and ~30 min on two cores for its two-network skeleton prior);
 # on CPU the two-core recipe (the trunk at 128x128, 44000 pretraining steps in bfloat16 where the CPU has it, the
-# first 17600 at 64x64; a skeleton prior of two networks): about 1 h 56 min from nothing on a fast AVX-512 2-core
-# host by its stages' measured times, about 2 h 45 min on session 35's EPYC (its first three stages timed),
-# well over two hours on an Intel Xeon host, about 4 h on the slowest seen
+# first 17600 at 64x64; a skeleton prior of two networks). Both train the prior as the shipped one was, bodies
+# at any angle (--tilt-share 0.3 --tilt-mode body; docs/training.md, "Bodies at any angle"). The two-core
+# recipe: about 1 h 56 min from nothing on a fast AVX-512 2-core host by its stages' measured times, about
+# 2 h 45 min on session 35's EPYC (its first three stages timed), well over two hours on an Intel Xeon host,
+# about 4 h on the slowest seen
 # (docs/training.md, "The tenth model", "Progressive resizing in the two-core pretraining" and "Two prior
 # networks in the cpu recipe").
 # RECIPE=cpu or RECIPE=gpu picks one.

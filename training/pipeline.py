@@ -18,9 +18,10 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
    is set aside as ``model_card.stale.json`` (with ``MODEL_CARD.md`` and ``metrics.json``): until the card stage
    writes a new one, no card describes the replaced model with the new files' names.
 6. ``prior_ghnerf``: the skeleton prior, trained on the exported int8 encoder's 2D errors over the training
-   split (``training.skeleton_prior``; the recipe sets its steps, extra scenes and networks, ``--prior-set``
-   overrides them: the ``cpu`` recipe's, about 27 min on the fast two-core host with its 20000 extra scenes, as
-   ``--recipe``'s help says) into ``ghnerf/skeleton_prior.onnx``,
+   split (``training.skeleton_prior``; the recipe sets its steps, extra scenes, networks and the share of
+   scenes added with the body turned to any angle, ``--prior-set`` overrides them: the ``cpu`` recipe's, about
+   27 min on the fast two-core host with its 20000 extra scenes, as ``--recipe``'s help says) into
+   ``ghnerf/skeleton_prior.onnx``,
    with its held-out figures (``skeleton_prior.json``). On CPU with the ``cpu`` recipe's lanes it was trained
    already, beside the joint run, from the pretrained encoder (``training.early_prior``): the stage takes
    that prior when it learnt from the same keypoint graphs (sha256) for the same request.
@@ -72,9 +73,12 @@ STAGES = ("data", "pretrain_ghnerf", *(f"{k}_{v}" for k in ("train", "export", "
           "prior_ghnerf", *(f"eval_{v}" for v in VARIANTS), "card")
 #: Variants that get a skeleton prior (it learns from the human encoder's heatmaps).
 PRIOR_VARIANTS = ("ghnerf",)
-#: ``--prior-set`` keys: the ``PipelineConfig`` field each sets, and its smallest value.
+#: ``--prior-set`` keys: the ``PipelineConfig`` field each sets, and its smallest value (a whole number), or for
+#: ``tilt_share`` ``"share"`` (a number from 0 to 1) and for ``tilt_mode`` ``"mode"`` (one of
+#: ``training.skeleton_prior.TILT_MODES``).
 PRIOR_SET_KEYS = {"steps": ("prior_steps", 1), "extra_train": ("prior_extra_train", 0),
-                  "members": ("prior_members", 1)}
+                  "members": ("prior_members", 1), "tilt_share": ("prior_tilt_share", "share"),
+                  "tilt_mode": ("prior_tilt_mode", "mode")}
 #: Pretraining keys that do not change the result; ignored when matching a finished pretraining run.
 PRETRAIN_RUNTIME_KEYS = ("threads", "device", "max_minutes", "stop_at", "log_every", "eval_every", "eval_scenes",
                          "checkpoint_every", "loader_workers")
@@ -98,6 +102,10 @@ class Recipe:
     """Scenes of the skeleton prior's second training set (``PipelineConfig.prior_extra_train``)."""
     prior_members: int = 1
     """Networks averaged in the skeleton prior (``PipelineConfig.prior_members``)."""
+    prior_tilt_share: float = 0.0
+    """Share of the prior's training scenes added turned to another angle (``PipelineConfig.prior_tilt_share``)."""
+    prior_tilt_mode: str = "body"
+    """What those copies turn (``PipelineConfig.prior_tilt_mode``)."""
     shared_pretrain_steps: int = 0
     """Pretraining steps at half the cores beside the baseline (``PipelineConfig.shared_pretrain_steps``)."""
 
@@ -129,17 +137,21 @@ RECIPES = {
                   "float32 on that host, 0.30 against 0.21 on session 38's Intel Xeon, which then runs "
                   "float32, 0.11 against 0.25 on session 39's AMX Xeon); skeleton prior: two networks of "
                   "30000 steps on 25000 scenes (about 27 min on the fast host, about 4.5 of them making its "
-                  "20000 extra scenes)",
+                  "20000 extra scenes), a share of 0.3 of its training scenes added with the body turned to "
+                  "any angle (--tilt-share 0.3 --tilt-mode body, the shipped prior's)",
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=44000", "lr_decay_every=8800", "coarse_steps=17600",
                                       'precision="auto"'),
-                  prior_steps=30000, prior_extra_train=20000, prior_members=2, shared_pretrain_steps=17600),
+                  prior_steps=30000, prior_extra_train=20000, prior_members=2, prior_tilt_share=0.3,
+                  prior_tilt_mode="body", shared_pretrain_steps=17600),
     "gpu": Recipe("one GPU, ~25 min on an H100: encoder trunk at 128x128, 27000 pretraining steps of 4 scenes; "
-                  "skeleton prior: two networks of 30000 steps on 25000 scenes (~30 min on two cores, where "
-                  "the export runs)",
+                  "skeleton prior: two networks of 30000 steps on 25000 scenes, a share of 0.3 of them added "
+                  "with the body turned to any angle (--tilt-share 0.3 --tilt-mode body; ~30 min on two cores "
+                  "before the turned copies, where the export runs)",
                   train_overrides=("model.human.input_scale=1.0",),
                   pretrain_overrides=("iterations=27000", "lr_decay_every=4500", "scenes_per_step=4"),
-                  loader_workers=12, workers=16, prior_steps=30000, prior_extra_train=20000, prior_members=2),
+                  loader_workers=12, workers=16, prior_steps=30000, prior_extra_train=20000, prior_members=2,
+                  prior_tilt_share=0.3, prior_tilt_mode="body"),
 }
 
 
@@ -181,6 +193,12 @@ class PipelineConfig:
     prior_members: int = 1
     """Networks averaged in the skeleton prior (``training.skeleton_prior --members``; side by side as far as
     ``threads`` goes, each one after that takes the training time again)."""
+    prior_tilt_share: float = 0.0
+    """Share (0-1) of the prior's training scenes added again turned to a random angle (``training.skeleton_prior
+    --tilt-share``), so it learns bodies lying or upside down; 0: upright bodies only, the priors before session 54."""
+    prior_tilt_mode: str = "body"
+    """What a turned copy turns (``--tilt-mode``, one of ``training.skeleton_prior.TILT_MODES``): ``body``, the
+    shipped prior's, before the same cameras; ``scene``, cameras too. No effect while ``prior_tilt_share`` is 0."""
     quick: bool = False
     accept_stopped: bool = False
     parity_check: bool = True
@@ -223,19 +241,38 @@ class PipelineConfig:
             self.workers = max(1, min(r.workers, cores))
         self.prior_steps, self.prior_extra_train, self.prior_members = (r.prior_steps, r.prior_extra_train,
                                                                         r.prior_members)
+        self.prior_tilt_share, self.prior_tilt_mode = r.prior_tilt_share, r.prior_tilt_mode
         self.shared_pretrain_steps = r.shared_pretrain_steps
 
     def apply_prior_overrides(self, items: list[str]) -> None:
         """``KEY=VALUE`` overrides of the skeleton prior's recipe (``PRIOR_SET_KEYS``), after the recipe's.
 
         Raises:
-            ValueError: an unknown key, a value that is not a whole number, or one below the key's minimum.
+            ValueError: an unknown key, a value that is not a whole number, or one below the key's minimum; a
+                ``tilt_share`` that is not a number from 0 to 1, a ``tilt_mode`` that is not one of ``TILT_MODES``.
         """
+        from training.skeleton_prior import TILT_MODES
+
         for item in items:
             key, sep, value = item.partition("=")
             if not sep or key not in PRIOR_SET_KEYS:
                 raise ValueError(f"--prior-set {item!r}: expected KEY=VALUE with KEY one of {sorted(PRIOR_SET_KEYS)}")
             field_name, minimum = PRIOR_SET_KEYS[key]
+            if minimum == "share":
+                try:
+                    share = float(value)
+                except ValueError:
+                    share = float("nan")
+                if not 0.0 <= share <= 1.0:  # (nan too) refused here, not after hours of the stages before the prior
+                    raise ValueError(f"--prior-set {item!r}: {key} must be a number from 0 to 1, got {value!r}")
+                setattr(self, field_name, share)
+                continue
+            if minimum == "mode":
+                if value not in TILT_MODES:
+                    raise ValueError(f"--prior-set {item!r}: {key} must be one of {', '.join(TILT_MODES)}, "
+                                     f"got {value!r}")
+                setattr(self, field_name, value)
+                continue
             try:
                 number = int(value)
             except ValueError:
@@ -1035,6 +1072,8 @@ def prior_argv(cfg: PipelineConfig, model_dir: Path, out: Path, threads: int) ->
             "--steps", str(cfg.prior_steps), "--threads", str(threads), "--out", str(out)]
     if cfg.prior_members > 1:
         argv += ["--members", str(cfg.prior_members)]
+    if cfg.prior_tilt_share:  # (none: the upright-only prior, whatever the mode)
+        argv += ["--tilt-share", str(cfg.prior_tilt_share), "--tilt-mode", cfg.prior_tilt_mode]
     if cfg.prior_scenes:
         argv += ["--limit", str(cfg.prior_scenes)]
     if cfg.prior_extra_train:
@@ -1145,9 +1184,14 @@ def prior_stage_inputs(cfg: PipelineConfig, graphs: dict, data: Any = None) -> d
     so training the NeRF branch again (longer, on another machine) leaves the prior as it is."""
     from ghnerf_runtime.skeleton_prior import FEATURE_VERSION  # a new feature set retrains the prior
 
-    return {"keypoints": keypoint_graphs(graphs), "data": data, "steps": cfg.prior_steps,
-            "scenes": cfg.prior_scenes, "split": cfg.eval_split, "extra": cfg.prior_extra_train,
-            "members": cfg.prior_members, "features": FEATURE_VERSION}
+    inputs = {"keypoints": keypoint_graphs(graphs), "data": data, "steps": cfg.prior_steps,
+              "scenes": cfg.prior_scenes, "split": cfg.eval_split, "extra": cfg.prior_extra_train,
+              "members": cfg.prior_members, "features": FEATURE_VERSION}
+    # only when there are turned copies: the stamps and early-prior requests of the upright priors before these
+    # keys (tilt share 0, any mode) still match, and a tilted recipe never matches one of them
+    if cfg.prior_tilt_share:
+        inputs["tilt"] = {"share": cfg.prior_tilt_share, "mode": cfg.prior_tilt_mode}
+    return inputs
 
 
 def motion_mix(spec: dict) -> str:
@@ -1417,9 +1461,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="override of the human-encoder pretraining (a PretrainConfig key, e.g. iterations=12000)")
     ap.add_argument("--prior-set", action="append", default=[], metavar="KEY=VALUE",
                     help="override of the skeleton prior's recipe: steps, extra_train (scenes of the second "
-                         "training set), members (networks averaged), e.g. --recipe cpu --prior-set "
-                         "extra_train=0 --prior-set steps=15000 --prior-set members=1: session 17's smaller prior, "
-                         "about 23 min sooner (docs/training.md, `make model`)")
+                         "training set), members (networks averaged), tilt_share (0-1: training scenes added "
+                         "turned to any angle; 0: upright only) and tilt_mode (body or scene: what turns), e.g. "
+                         "--recipe cpu --prior-set extra_train=0 --prior-set steps=15000 --prior-set members=1: "
+                         "session 17's smaller prior, about 23 min sooner (docs/training.md, `make model`)")
     ap.add_argument("--workers", type=int, default=None,
                     help=f"dataset generation processes (default {PipelineConfig.workers}; "
                          + "".join(f"the {k} recipe's {r.workers}, at most the cores; " for k, r in RECIPES.items()

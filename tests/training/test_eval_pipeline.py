@@ -364,6 +364,9 @@ def test_shared_lanes_put_the_baseline_beside_the_pretraining_and_the_prior_besi
     assert argv[argv.index("--model-dir") + 1] == str(early_prior_dir(cfg, "ghnerf"))
     assert argv[argv.index("--threads") + 1] == "1" and argv[argv.index("--members") + 1] == "2"
     assert job["request"]["data"] == data_key and job["request"]["members"] == 2
+    # the early prior is the shipped kind too: bodies at any angle, and its request says so
+    assert argv[argv.index("--tilt-share") + 1] == "0.3" and argv[argv.index("--tilt-mode") + 1] == "body"
+    assert job["request"]["tilt"] == {"share": 0.3, "mode": "body"}
 
     # a pretraining resumed at or past the shared steps: the baseline and extra scenes finish with both cores
     log_file = cfg.runs / "edge128_human" / "log.jsonl"
@@ -431,6 +434,74 @@ def test_the_early_prior_is_adopted_only_for_the_same_keypoint_graphs_and_reques
     assert (folder / "skeleton_prior.onnx").read_bytes() == b"prior"
     report = json.loads((folder / "skeleton_prior.json").read_text())
     assert report["file"] == str(folder / "skeleton_prior.onnx") and report["trained_in"] == str(prior)
+
+
+def test_an_early_prior_of_another_tilt_is_not_adopted(tmp_path):
+    """A prior trained upright only (the request of the code before the tilt keys: none) or with another share or
+    mode of turned bodies is not the tilted recipe's: the stage trains its own. An upright recipe still takes the
+    upright priors recorded before the keys existed (a missing tilt is a share of 0)."""
+    from training.early_prior import REQUEST_FILE
+    from training.pipeline import adopt_early_prior, early_prior_dir, early_prior_request
+
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", data=tmp_path / "data")
+    data_key = {"request": {"train": 12}, "manifest": {"dataset.json": "abc"}}
+    folder, staged = cfg.out / "ghnerf", early_prior_dir(cfg, "ghnerf")
+    folder.mkdir(parents=True)
+    staged.mkdir(parents=True)
+    for name, body in (("human.onnx", b"fp32"), ("human.int8.onnx", b"int8")):
+        (folder / name).write_bytes(body)
+    graphs = {n: sha256(folder / n) for n in ("human.onnx", "human.int8.onnx")}
+    prior = staged / "skeleton_prior.onnx"
+    prior.write_bytes(b"prior")
+    prior.with_suffix(".json").write_text(json.dumps({"file": str(prior), "metrics": {}}))
+
+    def record(share, mode="body", legacy=False):
+        trained = PipelineConfig(out=cfg.out, runs=cfg.runs, data=cfg.data, prior_tilt_share=share,
+                                 prior_tilt_mode=mode)
+        request = early_prior_request(trained, graphs, data_key, cfg.threads)
+        if legacy:  # written before the tilt keys: no "tilt" at all
+            request = {k: v for k, v in request.items() if k != "tilt"}
+        (staged / REQUEST_FILE).write_text(json.dumps({"request": request, "prior": str(prior),
+                                                        "prior_sha256": sha256(prior)}))
+
+    cfg.prior_tilt_share, cfg.prior_tilt_mode = 0.3, "body"  # the recipes' prior
+    for share, mode, legacy in ((0.0, "body", True), (0.0, "body", False), (0.3, "scene", False),
+                                (0.5, "body", False)):
+        record(share, mode, legacy)
+        assert not adopt_early_prior(cfg, "ghnerf", data_key), (share, mode, legacy)
+        assert not (folder / "skeleton_prior.onnx").exists()
+    record(0.3, "body")
+    assert adopt_early_prior(cfg, "ghnerf", data_key)
+    (folder / "skeleton_prior.onnx").unlink()
+    cfg.prior_tilt_share = 0.0  # upright only: the mode does not matter, and the older requests still match
+    for mode in ("scene", "body"):
+        cfg.prior_tilt_mode = mode
+        record(0.0, legacy=True)
+        assert adopt_early_prior(cfg, "ghnerf", data_key)
+
+
+def test_the_recipes_train_the_prior_with_bodies_at_any_angle(tmp_path):
+    """``cpu`` and ``gpu`` train the prior as the shipped one (``--tilt-share 0.3 --tilt-mode body``); the quick
+    and default configs stay upright only (no tilt flags, the stage inputs of the priors before); a prior stage
+    stamped for another tilt is not reused."""
+    from training.pipeline import PipelineConfig, prior_argv, prior_stage_inputs
+
+    graphs = {"m/ghnerf/human.int8.onnx": "h2"}
+    plain = PipelineConfig(out=tmp_path)
+    for name in ("cpu", "gpu"):
+        cfg = PipelineConfig(out=tmp_path)
+        cfg.apply_recipe(name, cores=2)
+        argv = prior_argv(cfg, tmp_path / "ghnerf", tmp_path / "p.onnx", 2)
+        assert argv[argv.index("--tilt-share") + 1] == "0.3" and argv[argv.index("--tilt-mode") + 1] == "body"
+        assert prior_stage_inputs(cfg, graphs) != prior_stage_inputs(plain, graphs)  # an upright stamp: retrained
+        scene = PipelineConfig(out=tmp_path)
+        scene.apply_recipe(name, cores=2)
+        scene.prior_tilt_mode = "scene"
+        assert prior_stage_inputs(scene, graphs) != prior_stage_inputs(cfg, graphs)
+    for cfg in (plain, PipelineConfig.quick_defaults(tmp_path)):
+        argv = prior_argv(cfg, tmp_path / "ghnerf", tmp_path / "p.onnx", 2)
+        assert "--tilt-share" not in argv and "--tilt-mode" not in argv
+        assert "tilt" not in prior_stage_inputs(cfg, graphs)  # the keys of the stamps written before them
 
 
 def test_an_early_prior_already_done_for_the_finished_pretraining_is_not_planned_again(tmp_path):
@@ -591,8 +662,20 @@ def test_prior_set_overrides_the_recipes_prior_and_the_card_records_it(tmp_path,
     assert "--prior-set extra_train=0 --prior-set steps=15000 --prior-set members=1" in cfg.command
     q = {"ghnerf/human.int8.onnx": "ab"}
     assert pipeline.prior_stage_inputs(cfg, q) != pipeline.prior_stage_inputs(plain, q)  # a new prior is trained
+    assert (plain.prior_tilt_share, plain.prior_tilt_mode) == (0.3, "body")
+    pipeline.main([*out, "--prior-set", "tilt_share=0.5", "--prior-set", "tilt_mode=scene"])
+    tilted = seen[-1]
+    assert (tilted.prior_tilt_share, tilted.prior_tilt_mode) == (0.5, "scene")
+    assert pipeline.prior_stage_inputs(tilted, q) != pipeline.prior_stage_inputs(plain, q)
+    argv = pipeline.prior_argv(tilted, tmp_path / "m" / "ghnerf", tmp_path / "p.onnx", 2)
+    assert argv[argv.index("--tilt-share") + 1] == "0.5" and argv[argv.index("--tilt-mode") + 1] == "scene"
+    pipeline.main([*out, "--prior-set", "tilt_share=0"])  # the upright-only prior: no tilt flags
+    assert "--tilt-share" not in pipeline.prior_argv(seen[-1], tmp_path / "m" / "ghnerf", tmp_path / "p.onnx", 2)
     for bad, says in (("epochs=3", "KEY one of"), ("steps=many", "whole number"), ("members=0", "at least 1"),
-                      ("extra_train", "KEY=VALUE")):
+                      ("extra_train", "KEY=VALUE"), ("tilt_share=1.5", "tilt_share must be a number from 0 to 1"),
+                      ("tilt_share=-0.1", "from 0 to 1, got '-0.1'"), ("tilt_share=nan", "from 0 to 1"),
+                      ("tilt_share=lots", "got 'lots'"), ("tilt_mode=sideways", "tilt_mode must be one of"),
+                      ("tilt_mode=", "got ''")):
         with pytest.raises(SystemExit):
             pipeline.main([*out, "--prior-set", bad])
         assert says in capsys.readouterr().err
