@@ -669,13 +669,9 @@ def test_a_video_without_a_usable_frame_rate_is_timed_at_30_fps(monkeypatch, tmp
     assert times == pytest.approx([0.0, 1 / 30, 2 / 30])
 
 
-def test_video_pairs_are_timed_by_their_frames_presentation_times(monkeypatch, tmp_path):
-    """A variable frame rate (a phone's video), or a container whose rate reads 1000 fps for 30: frame number / fps
-    made every step wrong (1 ms for 33: the smoothing then lagged a moving subject by most of each step). The
-    frames' own times are used where they follow the last pair's, the last plus a frame at the rate where not (a
-    backend that gives none, a time that stands still)."""
-    pts_ms = [0.0, 33.0, 70.0, float("nan"), 140.0, 140.0, 210.0]
-    times = []
+def _video_with_times(pts_ms, fps):
+    """A stand-in for ``cv2.VideoCapture``: 4x4 frames whose presentation times are ``pts_ms`` (NaN: the backend
+    gives none), at the container rate ``fps``."""
 
     class _Cap:
         def __init__(self, path):
@@ -689,10 +685,21 @@ def test_video_pairs_are_timed_by_their_frames_presentation_times(monkeypatch, t
             return self.k < len(pts_ms), np.zeros((4, 4, 3), np.uint8)
 
         def get(self, prop):
-            return 1000.0 if prop == cv2.CAP_PROP_FPS else pts_ms[self.k]
+            return fps if prop == cv2.CAP_PROP_FPS else pts_ms[self.k]
 
         def release(self):
             pass
+
+    return _Cap
+
+
+def test_video_pairs_are_timed_by_their_frames_presentation_times(monkeypatch, tmp_path):
+    """A variable frame rate (a phone's video), or a container whose rate reads 1000 fps for 30: frame number / fps
+    made every step wrong (1 ms for 33: the smoothing then lagged a moving subject by most of each step). The
+    frames' own times are used where they follow the last pair's, the last plus a frame at the rate where not (a
+    backend that gives none, a time that stands still)."""
+    pts_ms = [0.0, 33.0, 70.0, float("nan"), 140.0, 140.0, 210.0]
+    times = []
 
     class _Timed(_StubEstimator):
         def estimate_then_view(self, images, *, sequence, novel_view=None, timestamp_s=None):
@@ -700,7 +707,7 @@ def test_video_pairs_are_timed_by_their_frames_presentation_times(monkeypatch, t
             return super().estimate_then_view(images, sequence=sequence, novel_view=novel_view,
                                               timestamp_s=timestamp_s)
 
-    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _Cap)
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _video_with_times(pts_ms, 1000.0))
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
     monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _Timed())
     assert cli_run.main(["--rig", "r.json", "--videos", "a.mp4", "b.mp4", "--out", str(tmp_path / "j.jsonl")]) == 0
@@ -713,24 +720,7 @@ def test_each_video_pair_s_output_says_when_it_was_filmed(monkeypatch, tmp_path)
     plus a frame), so a user can line the joints up with the video. Before, the output had no time at all."""
     pts_ms = [0.0, 40.0, 70.0, float("nan"), 150.0]
 
-    class _Cap:
-        def __init__(self, path):
-            self.k = -1
-
-        def isOpened(self):
-            return True
-
-        def read(self):
-            self.k += 1
-            return self.k < len(pts_ms), np.zeros((4, 4, 3), np.uint8)
-
-        def get(self, prop):
-            return 25.0 if prop == cv2.CAP_PROP_FPS else pts_ms[self.k]
-
-        def release(self):
-            pass
-
-    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _Cap)
+    monkeypatch.setattr(cli_run.cv2, "VideoCapture", _video_with_times(pts_ms, 25.0))
     monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
     monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
     out = tmp_path / "j.jsonl"

@@ -284,25 +284,32 @@ class _SceneEstimator(_CountingEstimator):
                        reprojection_px_median=3.0 if self.n >= 6 else 0.2)
 
 
-def test_what_the_status_file_says_of_a_frame_reaches_the_receiver(sim_url, tmp_path, monkeypatch):
-    """A robot reads only the joint stream: the pairs with two people in view or a prior fallback reach it as
-    JOINTS flagged SEVERAL_PEOPLE / PRIOR_FALLBACK, the suspect calibration as CALIBRATION_SUSPECT on the JOINTS
-    and on every STATUS from then on, and HELLO announces the flags (docs/protocol.md section 3). Nothing of it
-    left the daemon: the flags were 0."""
+def _flags_on_the_link(estimator, sim_url, tmp_path, monkeypatch):
+    """Run the daemon on ``estimator`` (calibration window 3, 1 px) for 14 pairs; its memory sink's messages and the
+    JOINTS' scene flags by sequence number (seq k is the k-th estimate, no pair rejected: keyed by it, a frame the
+    sink dropped cannot shift the rest)."""
     import firmware_host.daemon.service as service
 
     monkeypatch.setattr(service, "load_session", lambda config: object())
-    monkeypatch.setattr(service, "Estimator", _SceneEstimator)
+    monkeypatch.setattr(service, "Estimator", estimator)
     cfg = _config({"url": sim_url}, tmp_path, calibration_window=3, calibration_max_px=1.0)
     with _Running(cfg, tmp_path) as run:
         wait_until(lambda: run.daemon.health.pairs_estimated >= 14, timeout=60, what="14 estimated pairs")
         sink = run.daemon.sinks["memory://?status_s=0.05"]
         assert run.finish() == 0
     messages = messages_of(sink.read())
-    # seq k is the k-th estimate (no pair rejected); keyed by it, a frame the sink dropped cannot shift the rest
     flags = {m.header.seq: m.header.flags & ~(Flags.DROPPED | Flags.DECIMATED)
              for m in messages if isinstance(m, Joints)}
     assert set(range(10)) <= set(flags), sorted(flags)
+    return run, messages, flags
+
+
+def test_what_the_status_file_says_of_a_frame_reaches_the_receiver(sim_url, tmp_path, monkeypatch):
+    """A robot reads only the joint stream: the pairs with two people in view or a prior fallback reach it as
+    JOINTS flagged SEVERAL_PEOPLE / PRIOR_FALLBACK, the suspect calibration as CALIBRATION_SUSPECT on the JOINTS
+    and on every STATUS from then on, and HELLO announces the flags (docs/protocol.md section 3). Nothing of it
+    left the daemon: the flags were 0."""
+    run, messages, flags = _flags_on_the_link(_SceneEstimator, sim_url, tmp_path, monkeypatch)
     expected = {2: Flags.SEVERAL_PEOPLE, 3: Flags.SEVERAL_PEOPLE, 4: Flags.PRIOR_FALLBACK}
     assert all(f & ~Flags.CALIBRATION_SUSPECT == expected.get(seq, 0) for seq, f in flags.items()), flags
     suspect = {seq: bool(f & Flags.CALIBRATION_SUSPECT) for seq, f in flags.items()}
@@ -332,19 +339,7 @@ def test_feet_off_the_floor_flag_the_calibration_on_the_link(sim_url, tmp_path, 
     """A panned camera: the views still meet, but the feet sink below the floor. The pairs without feet do not
     count; once the floor check's window of 3 has its median 0.3 m below the floor the JOINTS and every STATUS
     carry CALIBRATION_SUSPECT, and the status file says which symptom (docs/protocol.md, docs/daemon.md)."""
-    import firmware_host.daemon.service as service
-
-    monkeypatch.setattr(service, "load_session", lambda config: object())
-    monkeypatch.setattr(service, "Estimator", _PannedEstimator)
-    cfg = _config({"url": sim_url}, tmp_path, calibration_window=3, calibration_max_px=1.0)
-    with _Running(cfg, tmp_path) as run:
-        wait_until(lambda: run.daemon.health.pairs_estimated >= 14, timeout=60, what="14 estimated pairs")
-        sink = run.daemon.sinks["memory://?status_s=0.05"]
-        assert run.finish() == 0
-    messages = messages_of(sink.read())
-    flags = {m.header.seq: m.header.flags & ~(Flags.DROPPED | Flags.DECIMATED)
-             for m in messages if isinstance(m, Joints)}
-    assert set(range(10)) <= set(flags), sorted(flags)
+    run, messages, flags = _flags_on_the_link(_PannedEstimator, sim_url, tmp_path, monkeypatch)
     assert {seq: bool(f & Flags.CALIBRATION_SUSPECT) for seq, f in flags.items()} == {seq: seq >= 7 for seq in flags}
     assert [m for m in messages if isinstance(m, Status)][-1].header.flags == Flags.CALIBRATION_SUSPECT
     calibration = run.daemon.health.report()["calibration"]
