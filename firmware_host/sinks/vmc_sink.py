@@ -9,6 +9,11 @@ render at display rate; 60 is plenty). Host names are resolved like udp://
 (IPv4 first, looked up again every ``resolve_s``, default 30, at least 1). ``facing`` (``away``, the default, or
 ``camera``) and ``mirror`` (0, the default, or 1) choose how the avatar shows the person (``vmc_view``).
 
+A frame the daemon flags CALIBRATION_SUSPECT (its ``scene_flags``: the rig's calibration no longer fits) also
+carries ``/ghnerf/calibration_suspect 1`` after /VMC/Ext/OK, whose calibration state stays 3 (``vmc_osc`` says
+why); ``calibration_flag=0`` leaves it out, for a receiver that refuses addresses it does not know (EVMC4U's
+StrictMode stops receiving at the first one).
+
 The binary protocol's options (``send_2d``, ``status_s``, ``joint_count``, ``rig_id``, ``cameras``)
 mean nothing to VMC: in the URL they are errors, so no one expects them to work. As keywords they are
 accepted and unused, because the daemon hands every sink the rig's id and camera names.
@@ -20,6 +25,7 @@ from typing import Any, Optional
 import numpy as np
 
 from firmware_host.errors import SinkConfigError
+from firmware_host.protocol.constants import Flags
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks.base import Sink
 from firmware_host.sinks.options import SinkOptions, reject_unknown_kw
@@ -47,9 +53,10 @@ class VmcSink(Sink):
     scheme = "vmc"
 
     def __init__(self, url: str, host: str, port: int, options: SinkOptions, resolve_s: float = RESOLVE_S,
-                 view: AvatarView = AvatarView()) -> None:
+                 view: AvatarView = AvatarView(), calibration_flag: bool = True) -> None:
         super().__init__(url, options)
         self.view = view
+        self.calibration_flag = calibration_flag  # send /ghnerf/calibration_suspect with a suspect frame
         self._link = DatagramLink(url, host, port, resolve_s)
         self._t0_us: Optional[int] = None
         self._last_rotations: dict[str, np.ndarray] = {}  # by bone name: the sign sent last (keep_hemisphere)
@@ -61,11 +68,12 @@ class VmcSink(Sink):
         resolve_s = take_resolve_s(u, kw)
         view = AvatarView(facing=u.take("facing", one_of(*FACINGS), FACINGS[0], kw),
                           mirror=u.take("mirror", boolean, False, kw))
+        calibration_flag = u.take("calibration_flag", boolean, True, kw)
         _reject_protocol_options(u)
         options = SinkOptions.take(u, kw)
         u.reject_leftovers()
         reject_unknown_kw(url, kw)
-        return cls(url, host, port, options, resolve_s, view)
+        return cls(url, host, port, options, resolve_s, view, calibration_flag)
 
     def _connect(self) -> None:
         self._link.open()
@@ -80,5 +88,6 @@ class VmcSink(Sink):
         # (about 1 ms resolution after an hour, 2 ms after four).
         t = (frame.capture_time_us - self._t0_us) / 1e6
         pose = keep_hemisphere(solve_pose(self.view.apply(frame.joints_3d)), self._last_rotations)
-        for datagram in build_datagrams(pose, t):  # two bundles of all bones: one would fragment
+        suspect = self.calibration_flag and bool(frame.scene_flags & Flags.CALIBRATION_SUSPECT)
+        for datagram in build_datagrams(pose, t, calibration_suspect=suspect):  # two bundles: one would fragment
             self._link.send(datagram)

@@ -76,6 +76,8 @@ def test_importing_sinks_loads_no_backend_library() -> None:
         ("vmc://127.0.0.1?mirror=maybe", {}, "mirror", "maybe"),
         ("vmc://127.0.0.1?mirror=1&facing=camera", {"mirror": "2"}, "mirror", "2"),
         ("udp://127.0.0.1:9870?mirror=1", {}, "mirror", "1"),
+        ("vmc://127.0.0.1?calibration_flag=maybe", {}, "calibration_flag", "maybe"),
+        ("udp://127.0.0.1:9870?calibration_flag=0", {}, "calibration_flag", "0"),
         ("memory://?facing=camera", {}, "facing", "camera"),
     ],
 )

@@ -1,13 +1,17 @@
 """vmc:// on 127.0.0.1, decoded by the small OSC parser below (not the library that encodes it)."""
 from __future__ import annotations
 
+import hashlib
 import socket
 import struct
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from firmware_host.protocol.constants import Flags
 from firmware_host.sinks import open_sink
+from firmware_host.sinks.vmc_osc import CALIBRATION_SUSPECT_ADDRESS
 from firmware_host.sinks.vmc_pose import BONE_PARENTS, FORWARD, quat_mul, quat_rotate, rig_to_unity, solve_pose
 from firmware_host.sinks.vmc_view import AvatarView
 from ghnerf_runtime.body25 import JOINT_INDEX as J
@@ -257,3 +261,49 @@ def test_mirror_and_facing_round_trip_the_solved_pose_through_osc() -> None:
         np.testing.assert_allclose(sent[name][:3], bone.local_position, atol=1e-5)
         q = sent[name][3:]
         assert min(np.abs(q - bone.local_rotation).max(), np.abs(q + bone.local_rotation).max()) < 1e-6
+
+
+# ---- the calibration flag (CALIBRATION_SUSPECT) -------------------------------------------------------------
+
+#: sha256 of the datagrams of three frames (facing the cameras, hips lost, facing the cameras) as vmc:// sent them
+#: before the calibration flag: a frame whose calibration fits must still go out byte for byte the same.
+_FITTING_DIGEST = "7628cf020abb1c582f2ddc1015f65170cfefa58b6ffed079bda34b039d75c261"
+
+
+def _three_frames(scene_flags: int = 0) -> list:
+    lost = t_pose_rig()
+    lost[J["MidHip"], 3] = 0.0
+    joints = (t_pose_rig(facing_camera=True), lost, t_pose_rig(facing_camera=True))
+    return [replace(make_frame(i, joints=j), scene_flags=scene_flags) for i, j in enumerate(joints)]
+
+
+@pytest.mark.parametrize("scene_flags", [0, int(Flags.SEVERAL_PEOPLE | Flags.PRIOR_FALLBACK)],
+                         ids=["no-flags", "other-scene-flags"])
+def test_a_frame_whose_calibration_fits_is_sent_byte_for_byte_as_before(scene_flags: int) -> None:
+    _, dgrams = _receive(_three_frames(scene_flags))
+    assert hashlib.sha256(b"".join(dgrams)).hexdigest() == _FITTING_DIGEST
+
+
+def test_a_suspect_calibration_adds_its_own_message_and_keeps_ok_calibrated() -> None:
+    # A game used to hear /VMC/Ext/OK 1 3 0 1 ("calibrated") from a rig whose calibration the daemon flags. OK
+    # still says calibrated and tracked (a state 0-2 or tracking 0 stops or hides the avatar in receivers), and
+    # /ghnerf/calibration_suspect 1 follows it, in the first datagram, on every suspect frame and only on those.
+    suspect = int(Flags.CALIBRATION_SUSPECT)
+    frames = _three_frames(suspect) + [make_frame(3, joints=t_pose_rig(facing_camera=True))]
+    (tracked, lost, tracked_again, fits), dgrams = _receive(frames)
+    assert [a for a, _ in tracked[:3]] == ["/VMC/Ext/OK", CALIBRATION_SUSPECT_ADDRESS, "/VMC/Ext/T"]
+    assert tracked[0][1] == [1, 3, 0, 1] and tracked[1][1] == [1]
+    assert [p[0] for a, p in tracked if a == "/VMC/Ext/Bone/Pos"] == list(BONE_PARENTS)  # the whole pose still
+    assert [a for a, _ in lost] == ["/VMC/Ext/OK", CALIBRATION_SUSPECT_ADDRESS, "/VMC/Ext/T"]
+    assert lost[0][1] == [1, 3, 0, 0] and lost[1][1] == [1]
+    assert tracked_again[1] == (CALIBRATION_SUSPECT_ADDRESS, [1])
+    assert CALIBRATION_SUSPECT_ADDRESS not in [a for a, _ in fits]  # the flag cleared: gone at once
+    assert all(len(d) <= 1232 for d in dgrams), [len(d) for d in dgrams]
+    first_datagrams = [d for d in dgrams if _osc_packet(d)[0][0] == "/VMC/Ext/OK"]
+    assert all(_osc_packet(d)[1][0] == CALIBRATION_SUSPECT_ADDRESS for d in first_datagrams[:3])
+
+
+def test_calibration_flag_0_sends_a_suspect_frame_as_one_that_fits() -> None:
+    # For a receiver that refuses addresses it does not know (EVMC4U in StrictMode stops receiving at the first).
+    _, dgrams = _receive(_three_frames(int(Flags.CALIBRATION_SUSPECT)), "&calibration_flag=0")
+    assert hashlib.sha256(b"".join(dgrams)).hexdigest() == _FITTING_DIGEST
