@@ -17,8 +17,15 @@ rig delivers:
   (median and p99 of ``PairResult.timing_ms["total"]``), the fraction of joints found
   and, when the frames carry the simulator's ground truth, the accuracy of the estimates
   against it (MPJPE in mm over the joints found; 2D PCK@0.2 over both views);
+* the daemon's calibration check (``firmware_host.daemon.calibration_watch``, at the
+  daemon's default ``health`` settings) runs on the estimates: while it finds the rig's
+  calibration suspect (the views no longer meet in 3D, or the feet have left the floor) the
+  frames streamed carry ``CALIBRATION_SUSPECT`` as the daemon's do, the console says when the
+  verdict changes, with the symptom's words, and the summary says how it stands at the end
+  (or that too few pairs were measured to judge);
 * the last estimated pair is written as a PNG (``OUT/sim_pair.png``) with the estimated
-  2D joints (magenta crosses and limbs) over the ground truth (dots, yellow limbs), and
+  2D joints (magenta crosses and limbs) over the ground truth (dots, yellow limbs), a red
+  band with the symptoms across its foot while the calibration is suspect, and
   its estimated 3D joints are printed next to the ground truth.
 
 Without a model in the model folder the demo stops with a one-line error naming the
@@ -42,6 +49,8 @@ import numpy as np
 import drivers
 from drivers.sim.demo import draw_truth
 from drivers.url import redact_url
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch
+from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
@@ -56,6 +65,10 @@ from ghnerf_runtime.estimator import Estimator, PairResult
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
 #: Colour of the estimated joints in the PNG (BGR magenta; the ground truth is red/blue/green + yellow).
 ESTIMATE_BGR = (255, 0, 255)
+#: The band across the PNG's foot while the calibration is suspect (BGR red, white words on it).
+SUSPECT_BGR = (0, 0, 255)
+#: Height in pixels of that band (two lines of words).
+SUSPECT_BAND_PX = 46
 #: The console script (pyproject.toml [project.scripts]) and the module run (``make demo``): usage lines and
 #: errors name the one the user ran, so the command they show can be typed again as it is.
 SCRIPT = "ghnerf-demo"
@@ -167,6 +180,64 @@ class _Tally:
         return lines
 
 
+# ------------------------------------------------------------------ calibration check
+class _CalibrationCheck:
+    """The daemon's two calibration checks (the views' agreement, the feet on the floor) over the demo's estimates,
+    with the daemon's default window and limits: a demo run on a rig of one's own is where a camera knocked since
+    ``ghcal`` shows first, and its stream should say so as the daemon's would."""
+
+    def __init__(self, window: int) -> None:
+        self.view = CalibrationWatch(window, CALIBRATION_MAX_PX)
+        self.floor = FloorWatch(window, CALIBRATION_MAX_FLOOR_M)
+        self.flagged = 0  # estimates streamed with CALIBRATION_SUSPECT
+
+    @property
+    def suspect(self) -> bool:
+        return bool(self.view.suspect or self.floor.suspect)
+
+    def symptoms(self) -> str:
+        """The suspect checks' words (``1.46 px > 0.8, feet 0.18 m below the floor > 0.1 m``); empty when none is."""
+        return ", ".join(c.symptom() for c in (self.view, self.floor) if c.suspect)
+
+    def add(self, pair_sequence: int, result: PairResult) -> str | None:
+        """Count one estimate; returns the line to print when the verdict changes (else None)."""
+        was = self.suspect
+        self.view.add(result.reprojection_px_median)
+        self.floor.add(result.lowest_foot_m)
+        if self.suspect:
+            self.flagged += 1
+        if self.suspect == was:
+            return None
+        if self.suspect:
+            return (f"pair {pair_sequence}: CALIBRATION SUSPECT ({self.symptoms()}): the frames streamed from here "
+                    f"carry CALIBRATION_SUSPECT; recalibrate (ghcal; docs/calibration.md, \"When the rig no longer "
+                    f"fits\")")
+        return f"pair {pair_sequence}: the calibration fits again"
+
+    def _state(self, check: CalibrationWatch | FloorWatch, figure: str, limit: str) -> str:
+        n = len(check.values)
+        if n < check.window:  # no verdict before the window is full, as in the daemon
+            return f"{n} of the {check.window} pairs it needs, not judged"
+        return f"{figure} (median of the last {n} pairs, limit {limit})"
+
+    def report(self, estimated: int) -> str:
+        """The summary line: the verdict at the end, each check's figure, how many frames were flagged."""
+        view = self.view
+        parts = [
+            "views' agreement: " + self._state(view, f"peaks {view.median_px or 0.0:.2f} px apart", f"{view.max_px:g} px"),
+            "feet: " + self._state(self.floor, self.floor.words(), f"{self.floor.max_floor_m:g} m"),
+        ]
+        if self.suspect:
+            verdict = f"SUSPECT ({self.symptoms()}): recalibrate (ghcal; docs/calibration.md)"
+        elif any(len(c.values) >= c.window for c in (self.view, self.floor)):
+            verdict = "fits"
+        else:
+            verdict = "not judged (too few pairs measured; run longer with --seconds)"
+        flagged = (f"; {self.flagged} of the {estimated} frames streamed carry CALIBRATION_SUSPECT"
+                   if self.flagged else "")
+        return f"calibration check: {verdict}; {'; '.join(parts)}{flagged}"
+
+
 # ------------------------------------------------------------------ pictures and tables
 def _draw_estimate(image: np.ndarray, uv: np.ndarray, missing: np.ndarray) -> None:
     """Draw estimated joints in place: magenta limbs between found joints, a tilted cross per joint."""
@@ -179,7 +250,18 @@ def _draw_estimate(image: np.ndarray, uv: np.ndarray, missing: np.ndarray) -> No
             cv2.drawMarker(image, (int(u), int(v)), ESTIMATE_BGR, cv2.MARKER_TILTED_CROSS, 10, 2, cv2.LINE_AA)
 
 
-def _annotated(pair: drivers.FramePair, result: PairResult | None = None) -> np.ndarray:
+def _draw_suspect(panel: np.ndarray, symptoms: str) -> None:
+    """A red band across the foot of ``panel`` (in place) saying the calibration is suspect, and why."""
+    h = panel.shape[0]
+    cv2.rectangle(panel, (0, h - SUSPECT_BAND_PX), (panel.shape[1] - 1, h - 1), SUSPECT_BGR, cv2.FILLED)
+    for k, text in enumerate(("CALIBRATION SUSPECT: recalibrate (ghcal)", symptoms)):
+        cv2.putText(panel, text, (10, h - SUSPECT_BAND_PX + 18 + 20 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
+                    (255, 255, 255), 1, cv2.LINE_AA)
+
+
+def _annotated(pair: drivers.FramePair, result: PairResult | None = None, suspect: str = "") -> np.ndarray:
+    """Both views side by side with what was drawn on them; ``suspect``: the calibration check's symptoms while it
+    finds the calibration suspect (a red band across each view's foot), empty otherwise."""
     panels = []
     for frame in pair.frames:
         panel = draw_truth(frame.image, frame.truth) if frame.truth is not None else frame.image.copy()
@@ -195,6 +277,8 @@ def _annotated(pair: drivers.FramePair, result: PairResult | None = None) -> np.
         if frame.truth is not None:
             cv2.putText(panel, "ground truth: dots, yellow limbs", (10, y), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
                         (0, 255, 255), 2, cv2.LINE_AA)
+        if suspect:
+            _draw_suspect(panel, suspect)
         panels.append(panel)
     return np.hstack(panels)
 
@@ -282,6 +366,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
             estimator = _load_estimator(source.rig, cfg)
         latest = source.pairing.policy is drivers.DropPolicy.LATEST
         tally = _Tally(live=source.live_timestamps)
+        calibration = _CalibrationCheck(CALIBRATION_WINDOW)
         delivered, skipped, skews = 0, 0, []
         last_pair, last_result = None, None
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
@@ -314,7 +399,12 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         result = estimator.estimate(pair.images, sequence=pair.sequence,
                                                     timestamp_s=pair.timestamps_ns[0] * 1e-9)
                         tally.add(pair, result, time.monotonic_ns())
-                        frame, last_result = estimate_frame(pair, result, sequence=numbers.take()), result
+                        change = calibration.add(pair.sequence, result)
+                        if change is not None:
+                            print(change)
+                        frame = estimate_frame(pair, result, sequence=numbers.take(),
+                                               calibration_suspect=calibration.suspect)
+                        last_result = result
                 except KeyboardInterrupt:
                     print("stopping: Ctrl-C")
                     break
@@ -348,14 +438,18 @@ def _run(args: argparse.Namespace, prog: str) -> int:
             print(f"before pairing the rig lost {lost_frames} camera frames (see the driver counters)")
         for line in tally.report():
             print(line)
+        print(calibration.report(estimated))
     # read again after close: a recorder (record+) writes what it still holds queued as it closes, and the
     # counters read before it showed frames_written short of what the take's manifest records
     print(f"driver counters: {source.stats}")
     print(f"sink {redact_url(sink_url)}: {sink_stats}")
     png = args.out / "sim_pair.png"
-    if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result)):
+    suspect = calibration.symptoms() if estimator is not None else ""  # as the check stood at the last estimate
+    if last_pair is not None and cv2.imwrite(str(png), _annotated(last_pair, last_result, suspect)):
         what = ("estimated 2D joints (magenta) over the ground truth (dots)" if last_result is not None
                 else "its ground-truth 2D joints")
+        if suspect:
+            what += ", marked CALIBRATION SUSPECT"
         print(f"wrote {png} (pair {last_pair.sequence} with {what})")
     if last_pair is not None:
         _print_joints(last_pair, last_result)

@@ -5,11 +5,14 @@ The estimate tests use the shipped model (models/) and skip until it exists
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
+import cv2
 import numpy as np
 import pytest
 
@@ -87,6 +90,9 @@ def test_streams_estimated_joints_and_prints_the_summary(tmp_path, capsys, sim_u
         assert np.all(joints[~missing, 3] >= 1)  # found: confidence 1..255
         np.testing.assert_allclose(joints[~missing, :3], 1000 * result.joints_3d[~result.missing], atol=0.51)
     assert sum(r.num_found for r in recorded) > 0  # the shipped model finds about half the joints
+    # The true simulated rig: the calibration check never flags it (judged or not in so short a run).
+    assert re.search(r"^calibration check: (fits|not judged)", out, re.M), out
+    assert not any(r["flags"] & 0x20 for r in rows)  # CALIBRATION_SUSPECT
 
 
 @needs_model
@@ -116,6 +122,64 @@ def test_a_slow_estimator_skips_to_the_newest_pair(tmp_path, capsys, sim_url, mo
     steps = np.diff([r["capture_us"] for r in rows])
     assert len(steps) >= 2, rows
     assert np.median(steps) >= 2.5 * period_us, steps.tolist()
+
+
+@needs_model
+def test_a_suspect_calibration_is_streamed_printed_and_drawn(tmp_path, capsys, sim_url, monkeypatch):
+    # The demo ran no calibration check: a rig whose camera was knocked since ghcal streamed and printed as if
+    # all fitted, where the daemon flags CALIBRATION_SUSPECT. Here every estimate's views miss by 2 px.
+    original = Estimator.estimate
+    results = []
+
+    def drifted(self, *args, **kwargs):
+        result = dataclasses.replace(original(self, *args, **kwargs), reprojection_px_median=2.0,
+                                     lowest_foot_m=0.03)  # the feet stay on the floor: one symptom only
+        results.append(result)
+        return result
+
+    monkeypatch.setattr(Estimator, "estimate", drifted)
+    monkeypatch.setattr(demo, "CALIBRATION_WINDOW", 3)  # the daemon's 30 pairs would need a longer run
+    rc = demo.main(["--url", sim_url, "--seconds", "1.5", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    estimated = _summary(out)[1]
+    assert estimated == len(results) >= 3, out
+    rows = _joints_rows(tmp_path / "joints.jsonl")
+    # judged from the third estimate on (a full window), as the daemon would: every frame from there is flagged
+    assert [bool(r["flags"] & 0x20) for r in rows] == [False, False] + [True] * (estimated - 2)
+    changes = re.findall(r"^pair (\d+): CALIBRATION SUSPECT \(2\.00 px > 0\.8\): the frames streamed from here "
+                         r"carry CALIBRATION_SUSPECT; recalibrate \(ghcal", out, re.M)
+    assert changes == [str(results[2].sequence)], out
+    assert re.search(rf"^calibration check: SUSPECT \(2\.00 px > 0\.8\): recalibrate \(ghcal; docs/calibration.md\); "
+                     rf"views' agreement: peaks 2\.00 px apart \(median of the last 3 pairs, limit 0\.8 px\); feet: "
+                     rf"feet 0\.03 m above the floor .*; {estimated - 2} of the {estimated} frames streamed carry "
+                     rf"CALIBRATION_SUSPECT$", out, re.M), out
+    assert "marked CALIBRATION SUSPECT" in out
+    band = cv2.imread(str(tmp_path / "sim_pair.png"))[-demo.SUSPECT_BAND_PX:]
+    red = np.all(band == demo.SUSPECT_BGR, axis=-1).mean()
+    assert red > 0.8, red  # the red band across both views' foot (white words on it)
+
+
+def test_the_calibration_check_says_when_it_changes_and_how_it_stands():
+    check = demo._CalibrationCheck(window=3)
+    assert check.report(0).startswith("calibration check: not judged (too few pairs measured; run longer")
+    pair = lambda px, foot: SimpleNamespace(reprojection_px_median=px, lowest_foot_m=foot)  # noqa: E731
+    assert [check.add(k, pair(0.3, 0.02)) for k in range(3)] == [None] * 3
+    assert check.report(3) == ("calibration check: fits; views' agreement: peaks 0.30 px apart (median of the last 3 "
+                               "pairs, limit 0.8 px); feet: feet 0.02 m above the floor (median of the last 3 pairs, "
+                               "limit 0.1 m)")
+    # a pan: the views still meet, the feet sink below the floor (the floor check's symptom, in its words)
+    lines = [check.add(k, pair(0.3, -0.2)) for k in range(3, 6)]
+    assert lines[0] is None and lines[2] is None
+    assert lines[1] is not None and lines[1].startswith(
+        "pair 4: CALIBRATION SUSPECT (feet 0.20 m below the floor > 0.1 m): the frames streamed from here")
+    assert check.suspect and check.flagged == 2
+    assert check.report(6).startswith("calibration check: SUSPECT (feet 0.20 m below the floor > 0.1 m): recalibrate")
+    assert check.report(6).endswith("; 2 of the 6 frames streamed carry CALIBRATION_SUSPECT")
+    # None (feet out of view) does not count; back on the floor it clears
+    lines = [check.add(k, pair(0.3, None if k == 6 else 0.01)) for k in range(6, 10)]
+    assert lines == [None, None, "pair 8: the calibration fits again", None]
+    assert not check.suspect and check.flagged == 4  # pairs 4 to 7
 
 
 @pytest.mark.parametrize("make", [False, True], ids=["absent", "empty"])
