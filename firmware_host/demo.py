@@ -222,11 +222,10 @@ class _CalibrationCheck:
 
     def report(self, estimated: int) -> str:
         """The summary line: the verdict at the end, each check's figure, how many frames were flagged."""
-        view = self.view
-        parts = [
-            "views' agreement: " + self._state(view, f"peaks {view.median_px or 0.0:.2f} px apart", f"{view.max_px:g} px"),
-            "feet: " + self._state(self.floor, self.floor.words(), f"{self.floor.max_floor_m:g} m"),
-        ]
+        view, floor = self.view, self.floor
+        peaks = f"peaks {view.median_px or 0.0:.2f} px apart"  # used only once the window is full
+        parts = [f"views' agreement: {self._state(view, peaks, f'{view.max_px:g} px')}",
+                 f"feet: {self._state(floor, floor.words(), f'{floor.max_floor_m:g} m')}"]
         if self.suspect:
             verdict = f"SUSPECT ({self.symptoms()}): recalibrate (ghcal; docs/calibration.md)"
         elif any(len(c.values) >= c.window for c in (self.view, self.floor)):
