@@ -348,6 +348,41 @@ def test_feet_off_the_floor_flag_the_calibration_on_the_link(sim_url, tmp_path, 
     assert "feet 0.30 m below the floor > 0.1 m" in run.daemon.health.status_line()
 
 
+def test_a_vmc_receiver_hears_the_suspect_calibration_too(sim_url, tmp_path, monkeypatch):
+    """vmc:// has no header flags: a game heard /VMC/Ext/OK "calibrated" from a rig the daemon flagged suspect. The
+    daemon's frames reach it with /ghnerf/calibration_suspect from the pair the check turns suspect on (pair 7, as on
+    the binary link), and without it before (docs/protocol.md section 8)."""
+    import firmware_host.daemon.service as service
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+    vmc_url = f"vmc://127.0.0.1:{rx.getsockname()[1]}?queue=64"
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _SceneEstimator)
+    cfg = _config({"url": sim_url}, tmp_path, sinks=(vmc_url,), calibration_window=3, calibration_max_px=1.0)
+    try:
+        with _Running(cfg, tmp_path) as run:
+            wait_until(lambda: run.daemon.health.pairs_estimated >= 10, timeout=60, what="10 estimated pairs")
+            sink = run.daemon.sinks[vmc_url]
+            assert run.finish() == 0
+        stats = sink.stats()
+        rx.setblocking(False)
+        dgrams: list[bytes] = []
+        while True:
+            try:
+                dgrams.append(rx.recv(65536))
+            except BlockingIOError:
+                break
+    finally:
+        rx.close()
+    assert stats.dropped == stats.decimated == 0, stats  # so the k-th frame heard is the k-th estimate
+    firsts = [d for d in dgrams if b"/VMC/Ext/OK\0" in d]  # each frame's first datagram
+    assert len(firsts) == stats.sent >= 10
+    heard = [b"/ghnerf/calibration_suspect\0" in d for d in firsts]
+    assert heard == [k >= 7 for k in range(len(firsts))], heard
+
+
 class _FailingRunsEstimator(_CountingEstimator):
     """onnxruntime failing (ModelRunError) on the 4th pair, and on every pair from the 10th on if ``always``;
     the others all joints found (no FrameError)."""
