@@ -8,11 +8,11 @@ A suspect calibration gets a message of its own rather than another /VMC/Ext/OK
 calibration state: the VMC states (0 uncalibrated, 1 waiting for calibration,
 2 calibrating, 3 calibrated) describe a sender's own calibration procedure, and
 none says "calibrated, but the joints may be off". 0-2 tell a receiver the pose
-is not usable yet (the T-pose of an uncalibrated VirtualMotionCapture), and the
-tracking status 0 reads "lost": either would stop or hide an avatar that is
-still tracked, only less accurately. So OK stays ``1 3 0 tracked`` and
-receivers that do not know the extra address ignore it (docs/protocol.md
-section 8).
+is not usable yet (VirtualMotionCapture's own avatar before its calibration), and
+the tracking status 0 reads "lost": either could stop or hide an avatar that is
+still tracked, only less accurately. So OK stays ``1 3 0 tracked``; a receiver
+passes over an address it does not handle (EVMC4U does, unless its StrictMode
+is on: the sink's ``calibration_flag=0`` is for those; docs/protocol.md section 8).
 
 All 17 bones make a bundle of about 1460 bytes: over the 1452 an IPv6 packet
 carries on Ethernet, and over what a VPN or PPPoE link (MTU 1400-1420) carries
