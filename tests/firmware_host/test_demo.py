@@ -139,7 +139,8 @@ def test_a_suspect_calibration_is_streamed_printed_and_drawn(tmp_path, capsys, s
 
     monkeypatch.setattr(Estimator, "estimate", drifted)
     monkeypatch.setattr(demo, "CALIBRATION_WINDOW", 3)  # the daemon's 30 pairs would need a longer run
-    rc = demo.main(["--url", sim_url, "--seconds", "1.5", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    # 3 s, not the other tests' 1.5 s: a full window of 3 estimates must fit even on a loaded 2-core host
+    rc = demo.main(["--url", sim_url, "--seconds", "3", "--out", str(tmp_path), "--model-dir", str(MODELS)])
     out = capsys.readouterr().out
     assert rc == 0, out
     estimated = _summary(out)[1]
