@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10] [--pick-subject centre_line]
     .venv/bin/python benchmarks/measure_two_people.py --one-person-model models [--sequences 30] [--frames 10]
+    .venv/bin/python benchmarks/measure_two_people.py --calibration 0,2,-2 [--axis pan] [--scenes 4] [--pairs 10]
 
 The runtime follows one subject and its model answers one peak per joint per view. With two people in view,
 each view's peak of a joint is whichever person's is stronger there, and the two views need not pick the same
@@ -21,6 +22,11 @@ It prints the pairs flagged ``several_people``, whether the joints came out iden
 the truth (mean over the joints found, and the share found), and, over every pass of the checked estimator
 (a cold pass and its refined one are two), how many joints were shown twice in both views. A tool, not a
 test: docs/runtime.md, "Two people in the working volume".
+
+With ``--calibration`` it measures the daemon's calibration figures (``lowest_foot_m``, ``reprojection_px_median``)
+on two people's pairs against the reported person's alone at the same instants, the rig file's second camera turned
+by each angle given about ``--axis`` while the oracle films through the true rig (``measure_calibration``;
+docs/calibration.md, "Two people in view").
 """
 from __future__ import annotations
 
@@ -57,6 +63,35 @@ class TwoPeopleOracle(OracleSession):
             self.truth = joints
             maps.append(super()._source_heatmaps(src_P))
         self.truth = self.people[0]
+        return np.max(maps, axis=0)
+
+
+class FilmedTwoPeopleOracle(TwoPeopleOracle):
+    """The two-people oracle filmed by the true rig's cameras while the estimator holds ``held``, a rig file with a
+    camera turned since (``measure_calibration_drift.turned``): each crop's projection, built on the held camera,
+    is composed with the held-to-true camera change (exact for a turn about the camera's centre, the lens model
+    being the same). ``hidden``: ``(view, joints)`` the second person shows no peak of in that view (their feet
+    behind something, say)."""
+
+    def __init__(self, contract, true_rig, held_rig, hidden: tuple = ()) -> None:
+        super().__init__(contract)
+        self.to_true = []
+        for held, true in zip(held_rig.pair, true_rig.pair):
+            M = np.eye(4)  # [R_held | t_held] @ M = [R_true | t_true]
+            M[:3, :3], M[:3, 3] = held.R.T @ true.R, held.R.T @ (true.t - held.t)
+            self.to_true.append(M)
+        self.hidden = hidden
+
+    def _source_heatmaps(self, src_P: np.ndarray) -> np.ndarray:
+        src_P = np.stack([P @ M for P, M in zip(src_P, self.to_true)])
+        maps = []
+        for k, joints in enumerate(self.people):
+            self.truth = joints
+            self.visible = np.ones((len(src_P), len(joints)), bool)
+            if k == 1 and self.hidden:
+                self.visible[self.hidden[0], list(self.hidden[1])] = False
+            maps.append(OracleSession._source_heatmaps(self, src_P))
+        self.truth, self.visible = self.people[0], None
         return np.max(maps, axis=0)
 
 
@@ -113,6 +148,71 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
             counts["followed_first" if whose[0] == 0 else "followed_second"] += 1
             counts["stable"] += int(len(set(whose)) == 1 and not mixed)
     return counts, counted
+
+
+def measure_calibration(scenes: int, pairs: int, alone: int, degrees: float,
+                        config: EstimatorConfig = EstimatorConfig(), places: tuple = PLACES, axis: str = "pan") -> dict:
+    """The calibration checks' figures (``lowest_foot_m``, ``reprojection_px_median``) on two people's pairs
+    against the reported subject's alone at the same instants (``--calibration``): the rig file's second camera
+    turned ``degrees`` about its ``axis`` (``pan``, ``tilt``, ``roll``) since calibration
+    (:class:`FilmedTwoPeopleOracle`). Each scene runs three estimators (the first person alone, the second alone,
+    both after ``alone`` pairs of the first); a two-people pair is compared
+    with the alone run of whichever person its joints lie nearer. Returns ``pairs`` (counted), ``flagged``,
+    ``foot``/``px`` (two-people pairs with the figure), ``foot_alone``/``px_alone`` (the subject alone),
+    ``foot_diff``/``px_diff`` (absolute differences where both have it), ``px_values``/``px_values_alone`` (the
+    px figures themselves), ``windows`` (each scene's median of the
+    two-people pairs' ``lowest_foot_m``) and ``windows_alone`` (the first person alone's)."""
+    import drivers.sim as sim
+    from benchmarks.measure_calibration_drift import turned
+
+    true = sim.RigPlacement().build()
+    held = turned(true, 1, axis, degrees)
+    out = {"pairs": 0, "flagged": 0, "foot": 0, "px": 0, "foot_alone": 0, "px_alone": 0, "foot_diff": [],
+           "px_diff": [], "px_values": [], "px_values_alone": [], "windows": [], "windows_alone": []}
+    for seed in range(1, scenes + 1):
+        people = [sim.SimScene(sim.SceneConfig(seed=seed + 1000 * k, motion="wave", position_xz=places[k]))
+                  for k in (0, 1)]
+        runs = {}
+        for who in ("first", "second", "both"):
+            oracle = FilmedTwoPeopleOracle(edge128_contract(), true, held)
+            runs[who] = []
+            with Estimator(oracle, held, config) as est:
+                for i in range(alone + pairs):
+                    t = i / 30.0
+                    a, b = (p.joints_3d(t) for p in people)
+                    if who == "both" and i >= alone:
+                        oracle.set_people(a, b)
+                    else:
+                        oracle.set_people(b if who == "second" else a)
+                    images = tuple(people[0].render(c, t, with_truth=False)[0] for c in true.pair)
+                    r = est.estimate(images, timestamp_s=t)
+                    if i >= alone:
+                        runs[who].append((r, a, b))
+        feet, feet_alone = [], []
+        for (r, a, b), first, second in zip(runs["both"], runs["first"], runs["second"]):
+            out["pairs"] += 1
+            out["flagged"] += int(r.several_people)
+            if first[0].lowest_foot_m is not None:
+                feet_alone.append(first[0].lowest_foot_m)
+            found = ~r.missing
+            near_a = np.linalg.norm(r.joints_3d - a, axis=-1)[found].mean() if found.any() else 0.0
+            near_b = np.linalg.norm(r.joints_3d - b, axis=-1)[found].mean() if found.any() else 1.0
+            alone_r = (first if near_a <= near_b else second)[0]  # nobody reported: the first person's
+            for key, mine, theirs in (("foot", r.lowest_foot_m, alone_r.lowest_foot_m),
+                                      ("px", r.reprojection_px_median, alone_r.reprojection_px_median)):
+                out[key] += int(mine is not None)
+                out[key + "_alone"] += int(theirs is not None)
+                if mine is not None and theirs is not None:
+                    out[key + "_diff"].append(abs(mine - theirs))
+            out["px_values"] += [] if r.reprojection_px_median is None else [r.reprojection_px_median]
+            out["px_values_alone"] += [] if alone_r.reprojection_px_median is None else [alone_r.reprojection_px_median]
+            if r.lowest_foot_m is not None:
+                feet.append(r.lowest_foot_m)
+        if feet:
+            out["windows"].append(float(np.median(feet)))
+        if feet_alone:
+            out["windows_alone"].append(float(np.median(feet_alone)))
+    return out
 
 
 def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
@@ -186,7 +286,34 @@ def main(argv=None) -> int:
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
     ap.add_argument("--frames", type=int, default=10, help="with --one-person-model: pairs per sequence")
+    ap.add_argument("--calibration", metavar="DEGREES",
+                    help="instead: the calibration checks' figures on two people against the subject's alone, the "
+                         "rig file's second camera turned by each of these angles (comma-separated, 0: the true "
+                         "rig) about --axis, the second person joining after --alone pairs")
+    ap.add_argument("--axis", default="pan", choices=("pan", "tilt", "roll"),
+                    help="with --calibration: the axis the second camera is turned about")
     args = ap.parse_args(argv)
+    if args.calibration:
+        config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
+        from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M as limit  # the daemon's floor check
+        for deg in (float(v) for v in args.calibration.split(",")):
+            m = measure_calibration(args.scenes, args.pairs, args.alone, deg, config, args.places, args.axis)
+
+            def spread(v, d=3):
+                return f"median {np.median(v):.{d}f}, max {np.max(v):.{d}f}" if v else "none"
+
+            def windows(v):
+                return (f"{min(v):+.3f} to {max(v):+.3f} m, {sum(abs(w) > limit for w in v)} of {len(v)} past "
+                        f"{limit:g} m") if v else "none"
+
+            print(f"{args.axis} {deg:g} deg, {m['pairs']} pairs of two people ({args.scenes} scenes, {args.alone} "
+                  f"pairs of the first alone before each), pick_subject {args.pick_subject}: {m['flagged']} flagged; "
+                  f"lowest_foot_m on {m['foot']} (the subject alone {m['foot_alone']}), |two - alone| "
+                  f"{spread(m['foot_diff'])} m; reprojection_px_median on {m['px']} (alone {m['px_alone']}), "
+                  f"|two - alone| {spread(m['px_diff'])} px (the figure: two people {spread(m['px_values'], 2)}, alone "
+                  f"{spread(m['px_values_alone'], 2)}); scene medians of lowest_foot_m: two people "
+                  f"{windows(m['windows'])}, the first alone {windows(m['windows_alone'])}")
+        return 0
     if args.one_person_model:
         m = measure_one_person(args.one_person_model, args.sequences, args.frames)
         shown = ", ".join(f"{n} joints: {k}" for n, k in m["shown_twice"].items())

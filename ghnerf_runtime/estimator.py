@@ -170,8 +170,9 @@ class PairResult:
             threshold in both views (at least ``presence.min_joints`` of them) of the larger of the views'
             reprojection errors, in model-input pixels (:class:`ghnerf_runtime.joints3d.ViewAgreement`), whatever
             ``joints3d.method``. It grows when a camera has moved since calibration (the daemon watches it:
-            docs/daemon.md). ``None``: too few such joints, a frame rejected, or two people in view (each view's
-            peak may be another person's).
+            docs/daemon.md). ``None``: too few such joints, a frame rejected, or two people in view not told apart.
+            A ``several_people`` pair measures the reported subject's own pairings (each view's peak may be the
+            other person's), those the gate kept (:meth:`Estimator._subject_figures`).
         lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lowest ankle, heel or toe
             (:data:`ghnerf_runtime.body25.FLOOR_JOINTS`) triangulated from peaks of at least the presence threshold
             in both views, kept by the reprojection and box gates and shown by both frames at least a fifth of the
@@ -179,7 +180,8 @@ class PairResult:
             ``joints3d.method`` and the skeleton prior report (the prior keeps its feet near the floor): near 0
             for a person standing or walking, it moves when a camera turned since calibration (a pan, which
             ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no such joint (feet out of
-            view or near a frame's edge), nobody, a frame rejected, or two people in view.
+            view or near a frame's edge), nobody, a frame rejected, or two people in view not told apart (a
+            ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`).
     """
 
     sequence: int
@@ -890,6 +892,7 @@ class Estimator:
         j3 = self._gate_to_boxes(j3, regions)
         several = self._several_people(kp) or cold_several is True
         subject = j3  # a several_people pair's joints of the tracked subject that the views' peaks gave
+        chosen = None  # and the peaks each of them was triangulated from (_from_pairings)
         if several:  # before the presence gate: the subject's joints alone must make someone
             j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions, cold_several)
             if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
@@ -931,13 +934,42 @@ class Estimator:
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
         _add_ms(timing, "joints_3d", t)
-        # two people: each view's peak may be either person's, so the views' disagreement says nothing of the rig
-        agreement = None if several or self._agreement is None else self._agreement.median_px
-        # the triangulation's feet (not the prior's placed ones): two people's peaks, or nobody's, say nothing of it
-        foot = None if several or nobody else self._lowest_foot
+        if several:
+            # each view's decoded peak may be either person's, so the pair's own figures say nothing of the rig:
+            # the subject's own pairings do (_subject_figures)
+            agreement, foot = (None, None) if nobody else self._subject_figures(subject, chosen, crops, regions)
+        else:
+            agreement = None if self._agreement is None else self._agreement.median_px
+            # the triangulation's feet (not the prior's placed ones): nobody's peaks say nothing of it
+            foot = None if nobody else self._lowest_foot
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
                      None if seen_by is None else self.camera_names[seen_by], agreement, foot)
+
+    def _subject_figures(self, subject: Joints3D, chosen: tuple[Keypoints2D, np.ndarray] | None,
+                         crops: list[Camera], regions: Regions) -> tuple[float | None, float | None]:
+        """A ``several_people`` pair's calibration figures (``reprojection_px_median``, ``lowest_foot_m``) from the
+        reported subject's own pairings (``subject``, the found joints, and ``chosen``, each view's peak they were
+        triangulated from: :meth:`_from_pairings`), by the one-person rules (the presence threshold in both views,
+        ``presence.min_joints`` joints for the px figure, the frames' edges for the feet). Only joints whose maps
+        show two peaks apart in both views count: where a view shows one, it may be the other person's (the
+        subject's hidden) or both people's merged. ``(None, None)`` where nobody was picked or tracked (the split
+        failed, ``pick_subject: none``, or the 3D method is not the triangulation: ``chosen`` is ``None``).
+
+        The px figure differs from one person's: the pairings passed ``joints3d.max_reprojection_px`` to be chosen
+        (:meth:`_pairings`), so a joint past that gate is not measured; a camera turned that far reports nobody
+        and gives no figure here, where one person's pair still gives one (docs/calibration.md)."""
+        if chosen is None or not subject.valid.any():
+            return None, None
+        kp, uv_model = chosen
+        use = subject.valid & np.all(kp.runner_up > 0, axis=0)  # a runner-up is a second region in that view
+        pres = self.config.presence
+        strong = pres.threshold(self.config.heatmaps.source)
+        _, agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid & use, crops,
+                                                  self.config.joints3d, strong, pres.min_joints)
+        foot = self._lowest_foot_m(Joints3D(subject.points, subject.confidence, use, subject.reprojection_px), kp,
+                                   regions)
+        return agreement.median_px, foot
 
     def _several_people(self, kp: Keypoints2D) -> bool:
         """Two people in view: at least ``second_person_min_joints`` joints whose maps show a second peak of at

@@ -16,8 +16,9 @@ it: no flapping near the limit):
   only the depth changes: the px check cannot see it, but the person's feet leave the floor (float above it
   or sink below it). The median over the window, further than ``max_floor_m`` from the floor either way.
 
-Pairs without the figure (an empty room, a frame rejected, two people in view; for the floor, feet out of view
-or near a frame's edge) do not count. Measured on the
+Pairs without the figure (an empty room, a frame rejected, two people in view not told apart; for the floor,
+feet out of view or near a frame's edge) do not count. Two people told apart give the reported subject's own
+figures (since session 55: docs/calibration.md). Measured on the
 simulated rig with the shipped model: ``benchmarks/measure_calibration_drift.py``, docs/calibration.md "When the
 rig no longer fits".
 """

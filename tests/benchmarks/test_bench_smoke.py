@@ -318,6 +318,20 @@ def test_measure_two_people(capsys, monkeypatch):
                      re.M), out
 
 
+def test_measure_two_people_calibration(capsys, monkeypatch):
+    # the two-people calibration figures of docs/calibration.md come from this mode (session 55)
+    out = run_script("measure_two_people", "--calibration", "0,2", "--scenes", "1", "--pairs", "2", "--alone", "1",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    lines = re.findall(r"^pan (0|2) deg, 2 pairs of two people \(1 scenes, 1 pairs of the first alone before each\), "
+                       r"pick_subject centre_line: 2 flagged; lowest_foot_m on 2 \(the subject alone 2\), \|two - "
+                       r"alone\| median [\d.]+, max ([\d.]+) m; reprojection_px_median on 2 \(alone 2\), .*; scene "
+                       r"medians of lowest_foot_m: two people ([-+][\d.]+) to [-+][\d.]+ m, (\d) of 1 past 0.1 m, "
+                       r"the first alone .*$", out, re.M)
+    assert [line[0] for line in lines] == ["0", "2"], out
+    assert all(float(line[1]) <= 0.02 for line in lines), out  # the subject's own feet, as alone
+    assert [line[3] for line in lines] == ["0", "1"], out  # the 2 degree pan's feet below the floor
+
+
 def test_measure_two_people_one_person(model, capsys, monkeypatch):
     # the one-person figures of docs/runtime.md ("Two people in the working volume") come from this mode
     out = run_script("measure_two_people", "--one-person-model", model, *SIZES, capsys=capsys, monkeypatch=monkeypatch)
