@@ -150,3 +150,18 @@ def test_generate_resumes_an_old_dataset_keeping_its_whole_shards_and_checksummi
     assert len(caplog.records) == 1 and "carry no checksums" in caplog.records[0].getMessage()
     _flip_byte(data / "val" / "shard_000000" / "images.npy", row=2)
     assert verify([str(data)]) == 1
+
+
+def test_the_trainer_stops_on_a_damaged_sample_with_one_line_naming_it(data, tmp_path, capsys):
+    pytest.importorskip("torch")
+    from training.train import main as train_main
+
+    for row in range(3):  # every train scene: whichever the trainer reads first
+        _flip_byte(data / "train" / "shard_000000" / "images.npy", row=row)
+    config = {"preset": "tiny", "data": str(data), "iterations": 1, "targets_per_iter": 2, "heat_rays": 32,
+              "patch_size": 8, "threads": 2}
+    (tmp_path / "c.json").write_text(json.dumps(config))
+    assert train_main(["--config", str(tmp_path / "c.json"), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert f"ghnerf-train: data error: {data / 'train' / 'shard_000000' / 'images.npy'}: sample " in err
+    assert "does not match its checksum" in err and "Traceback" not in err
