@@ -75,16 +75,17 @@ def _verify(root: Path, manifest: dict, names: list[str], report: VerifyReport, 
             report.shards += 1
             try:
                 shard = scan_shard(root / split, k, first, n, shard_size, num_views, resolution)
+                bad = damaged_rows(shard)
+            except DatasetError as e:  # missing, cut short, malformed: damaged too, and the next shard is checked
+                line = f"{e}; {repair_hint(manifest, root, split, root / split / shard_name(k))}"
+            else:
                 if shard.checksums is None:
+                    # (outside the try: a failed rewrite, a full disk, stops the command; it is no damaged shard)
                     if record_missing and record_missing_checksums(shard):
                         report.recorded.append(shard.folder)
                     else:
                         report.unchecked.append(shard.folder)
                     continue
-                bad = damaged_rows(shard)
-            except DatasetError as e:  # missing, cut short, malformed: damaged too, and the next shard is checked
-                line = f"{e}; {repair_hint(manifest, root, split, root / split / shard_name(k))}"
-            else:
                 report.checked += 1
                 report.bytes_read += sum(p.stat().st_size for p in shard.folder.glob("*.npy"))
                 if not bad:
