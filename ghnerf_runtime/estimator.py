@@ -57,7 +57,7 @@ from typing import Any, Callable, Sequence
 import cv2
 import numpy as np
 
-from ghnerf_runtime.body25 import FLOOR_JOINTS, JOINT_NAMES
+from ghnerf_runtime.body25 import BODY_PARTS, FLOOR_JOINTS, JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -112,6 +112,12 @@ _PRIOR_FOLLOW_MAX_ERROR_M = 0.25
 #: their height such peaks lay 0-35 px inside the edge, the crops 176-250 px: tests/ghnerf_runtime/
 #: test_view_agreement.py keeps them out).
 _FLOOR_EDGE_FRAC = 0.2
+#: The floor check counts a person on their feet only: a pair whose torso joints triangulated from strong peaks (their
+#: median height; none such: no figure) are less than this (m) above the lowest foot joint gives no figure. A
+#: handstand's feet are 1.6-1.9 m up and those of a person lying about 0.2 m (benchmarks/measure_lying_rendered.py
+#: --turned-crops); standing the torso is about 1.1 m above the feet, squatting or sat on a chair 0.7 m or more.
+_FLOOR_MIN_TORSO_M = 0.5
+_TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_heat", "decode_2d", "joints_3d")
 #: Stage keys of the novel view.
@@ -180,8 +186,10 @@ class PairResult:
             ``joints3d.method`` and the skeleton prior report (the prior keeps its feet near the floor): near 0
             for a person standing or walking, it moves when a camera turned since calibration (a pan, which
             ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no such joint (feet out of
-            view or near a frame's edge), nobody, a frame rejected, or two people in view not told apart (a
-            ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`).
+            view or near a frame's edge), nobody, a frame rejected, two people in view not told apart (a
+            ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`),
+            or a person not on their feet (the torso joints triangulated likewise less than 0.5 m above that foot,
+            or none: upside down, lying).
     """
 
     sequence: int
@@ -1328,11 +1336,15 @@ class Estimator:
     def _lowest_foot_m(self, tri: Joints3D, kp: Keypoints2D, regions: Regions) -> float | None:
         """The lowest foot joint's height above the floor, of the joints triangulated from peaks strong in both views
         (the presence threshold) that both frames show well inside their edges (``_FLOOR_EDGE_FRAC``): not the
-        prior's (it keeps placed feet near the floor, whatever the calibration), nor guesses at a frame's edge."""
+        prior's (it keeps placed feet near the floor, whatever the calibration), nor guesses at a frame's edge.
+        ``None`` too unless the torso joints so triangulated stand ``_FLOOR_MIN_TORSO_M`` above that foot (their
+        median height): a person upside down or lying is not standing on the floor with their feet (a window of
+        handstands would otherwise read as a camera turned)."""
         strong = self.config.presence.threshold(self.config.heatmaps.source)
+        seen = tri.valid & np.all(kp.valid & (kp.confidence >= strong), axis=0)
         feet = np.zeros(len(tri.valid), bool)
         feet[list(FLOOR_JOINTS)] = True
-        feet &= tri.valid & np.all(kp.valid & (kp.confidence >= strong), axis=0)
+        feet &= seen
         for st, roi in zip(self._cams, regions.rois):
             idx = np.flatnonzero(feet)  # only the candidates are projected (8 of 25 at most)
             if not idx.size:
@@ -1342,7 +1354,11 @@ class Estimator:
             with np.errstate(invalid="ignore"):
                 feet[idx] = ((uv[:, 0] >= margin) & (uv[:, 0] <= cam.width - 1 - margin)
                              & (uv[:, 1] >= margin) & (uv[:, 1] <= cam.height - 1 - margin))
-        return lowest_height_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FLOOR_JOINTS)
+        lowest = lowest_height_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FLOOR_JOINTS)
+        torso = [j for j in _TORSO if seen[j]]
+        if lowest is None or not torso or -np.median(tri.points[torso, 1]) - lowest < _FLOOR_MIN_TORSO_M:
+            return None  # not seen on their feet (y down: a height is -y)
+        return lowest
 
     def _with_prior(self, tri: Joints3D, uv_model: np.ndarray, kp: Keypoints2D, crops: list[Camera]) -> Joints3D:
         """The skeleton prior's joints: refined where triangulated, placed where hidden; a joint whose

@@ -32,8 +32,8 @@ from ghnerf_runtime.rig_file import dumps_rig, loads_rig, save_rig
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SEED_BASE", "HELD_OUT_MOTIONS", "SEEN_MOTIONS", "Sequence", "load_sequences", "Accuracy",
-           "default_cache_dir", "write_sim_example", "percentiles", "depth_per_disparity_px"]
+__all__ = ["SEED_BASE", "HELD_OUT_MOTIONS", "SEEN_MOTIONS", "Sequence", "load_sequences", "bench_rig_and_scene",
+           "Accuracy", "default_cache_dir", "write_sim_example", "percentiles", "depth_per_disparity_px"]
 
 #: Scene seeds of the bench sequences: 3 * 2**50 + k, outside every dataset split's range.
 SEED_BASE = 3 * 2 ** 50
@@ -74,8 +74,10 @@ class Sequence:
         return len(self.images)
 
 
-def _render_sequence(k: int, frames: int, fps: float, width: int, height: int, motions: tuple[str, ...],
-                     seed_base: int) -> Sequence:
+def bench_rig_and_scene(k: int, width: int = 640, height: int = 480, motions: tuple[str, ...] = HELD_OUT_MOTIONS,
+                        seed_base: int = SEED_BASE):
+    """The rig, scene, first instant and rig placement of bench sequence ``k`` (what :func:`load_sequences`
+    renders), for tools that render the same scenes otherwise (``benchmarks/measure_lying_rendered.py``)."""
     from drivers.sim import RigPlacement, random_scene  # tool only: the runtime library never imports drivers
 
     seed = seed_base + k
@@ -85,6 +87,13 @@ def _render_sequence(k: int, frames: int, fps: float, width: int, height: int, m
     rig = placement.build(rig_id=f"bench-{k}")
     scene = random_scene(seed, volume=rig.volume, motions=motions)
     t0 = float(rng.uniform(0.0, scene.period_s))
+    return rig, scene, t0, placement
+
+
+def _render_sequence(k: int, frames: int, fps: float, width: int, height: int, motions: tuple[str, ...],
+                     seed_base: int) -> Sequence:
+    rig, scene, t0, placement = bench_rig_and_scene(k, width, height, motions, seed_base)
+    seed = seed_base + k
     imgs = np.empty((frames, 2, height, width, 3), np.uint8)
     j3 = np.empty((frames, 25, 3))
     j2 = np.empty((frames, 2, 25, 2))

@@ -1,0 +1,232 @@
+"""People lying on the floor and upside down, rendered and run through the runtime with the shipped model.
+
+    .venv/bin/python benchmarks/measure_lying_rendered.py [--model-dir models] [--scenes 12] [--frames 3]
+        [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops]
+
+``benchmarks/measure_prior_out_of_range.py`` measures the skeleton prior on turned bodies through a noise
+model (exact projections plus Gaussian pixels, the bodies turned as the prior's training copies are). This
+renders them instead: the bench's held-out-like scenes (``ghnerf_runtime.cli.simdata.bench_rig_and_scene``: the
+rig, room, person and motion of ``ghnerf-bench runtime``'s sequence k), the posed body turned rigidly about its
+box's centre, set on the floor (the rig frame is y down, the floor at y = 0: the body's lowest surface point at
+y = 0) and moved into the working volume where it fits (:func:`turned`), rendered by the simulator
+(``BodyRenderer.render`` with the scene's sensor), and each pair run through the real
+:class:`~ghnerf_runtime.estimator.Estimator` at the runtime's defaults (the model folder's int8 graphs, encoder
+heatmaps, flip tests), ``--frames`` consecutive pairs at 30 fps per scene and pose (the first cold, the next
+tracked), once with the skeleton prior (``joints3d.skeleton_prior`` ``auto``, the default) and once without
+(``off``: gated triangulation). Poses:
+
+* ``upright``: the scene as the bench renders it (the reference);
+* ``lying_x``: turned 90 deg about the rig's x axis (lying along the line of sight, head or feet nearest);
+* ``lying_z``: turned 90 deg about the rig's z axis (lying across the view);
+* ``upside_down``: turned 180 deg about z, resting on its head or hands (a handstand's silhouette; the
+  motion's arms are not those of a real handstand).
+
+Per pose and prior: pairs, pairs with no joint, PCK@0.2 of the 2D joints, MPJPE over the joints found and the
+share found, the median confidence of the joints found, the median of ``PairResult.prior_disagreement_m`` (what
+``joints3d.max_prior_disagreement_m`` checks) and of ``PairResult.lowest_foot_m`` (the daemon's floor check,
+``FloorWatch``) over the pairs that give one, and the share of the true joints more than
+``joints3d.max_outside_box_m`` outside the rig's working volume (joints the runtime drops wherever it sees
+them: a lying body can be longer than a small volume is wide). ``--turned-crops`` adds, for the poses a
+turn of the picture can right, the prior with both crops turned with the body (:func:`turn_crops`, an oracle:
+the runtime does not know how a person lies): what a search over crop rotations could give at best.
+Deterministic (scene seeds, sensor noise seeded by scene, camera and time). A tool, not a test:
+docs/runtime.md, "The skeleton prior".
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+
+FPS = 30.0
+#: pose name -> (rig axis turned about: 0 x, 2 z; degrees); ``None``: as rendered by the bench.
+POSES: dict[str, tuple[int, float] | None] = {
+    "upright": None,
+    "lying_x": (0, 90.0),
+    "lying_z": (2, 90.0),
+    "upside_down": (2, 180.0),
+}
+#: pose -> the crops' extra rotation (degrees counterclockwise, as ``roi.upright``'s) that shows the turned body
+#: upright to a level camera (``--turned-crops``); a body lying along the line of sight has none.
+CROP_TURN_DEG = {"lying_z": 90.0, "upside_down": 180.0}
+
+
+def rotation(axis: int, deg: float) -> np.ndarray:
+    """The 3x3 rotation by ``deg`` about rig axis ``axis`` (0 x, 1 y, 2 z)."""
+    a = np.radians(deg)
+    c, s = np.cos(a), np.sin(a)
+    i, j = [k for k in range(3) if k != axis]
+    R = np.eye(3)
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return R
+
+
+def turned(posed, axis: int, deg: float, volume=None):
+    """``posed`` (a ``drivers.sim.body.PosedBody`` in the rig frame) turned by ``deg`` about rig axis ``axis``
+    through its box's centre, then moved up or down so that its lowest surface point is on the floor (the rig
+    frame's y points down, the floor is y = 0: the box's largest y becomes 0). Given the rig's working
+    ``volume`` (a ``WorkingVolume``), it is also moved the least in x and z that puts its box inside the volume
+    (centred on it along an axis where it is longer than the volume): a person 1.7 m long lying where an upright
+    one stood near the volume's side would otherwise stick out of it, and the runtime drops joints more than
+    ``joints3d.max_outside_box_m`` outside it; that is the volume's size, not the pose, at work."""
+    lo, hi = posed.bounding_box()
+    centre = 0.5 * (lo + hi)
+    R = rotation(axis, deg)
+    body = posed.transformed(R, centre - R @ centre)
+    lo, hi = body.bounding_box()
+    shift = np.array([0.0, -hi[1], 0.0])
+    if volume is not None:
+        for a in (0, 2):
+            vlo, vhi = volume.min_corner[a], volume.max_corner[a]
+            if hi[a] - lo[a] > vhi - vlo:
+                shift[a] = 0.5 * (vlo + vhi) - 0.5 * (lo[a] + hi[a])
+            else:
+                shift[a] = max(vlo - lo[a], 0.0) + min(vhi - hi[a], 0.0)
+    return body.transformed(np.eye(3), shift)
+
+
+def posed_as(posed, pose: str, volume=None):
+    """``posed`` in pose ``pose`` (a key of :data:`POSES`; ``volume``: :func:`turned`'s)."""
+    if pose not in POSES:
+        raise ValueError(f"unknown pose {pose!r}; choose from {', '.join(POSES)}")
+    how = POSES[pose]
+    return posed if how is None else turned(posed, *how, volume=volume)
+
+
+def render_pair(scene, rig, posed, t: float):
+    """The two cameras' pictures of ``posed`` in ``scene``'s room with its sensor, and the truth per camera:
+    ``(images (BGR uint8, rig order), joints_2d (2, 25, 2), visible (2, 25))``."""
+    images, j2, vis = [], [], []
+    sensor = scene.config.sensor
+    for cam in rig.pair:
+        radiance, truth = scene.renderer.render(posed, cam)
+        images.append(sensor.capture(radiance, sensor.rng(int(scene.config.seed), cam.name, float(t))))
+        j2.append(truth.joints_2d)
+        vis.append(truth.visible)
+    return tuple(images), np.array(j2), np.array(vis)
+
+
+def turn_crops(est, deg: float) -> None:
+    """Make ``est`` crop both cameras turned ``deg`` more than ``roi.upright`` does (as if each camera were mounted
+    rolled by ``-deg``): the crops then show a body turned by ``deg`` in the picture upright. An oracle for
+    ``--turned-crops``, reaching into the estimator's per-camera state; the runtime has no such search."""
+    from ghnerf_runtime.estimator import _CameraState
+    from ghnerf_runtime.tracking import SubjectTracker
+
+    est._cams = [_CameraState(c.camera, c.roll_deg + deg) for c in est._cams]
+    est.tracker = SubjectTracker(est.rig, est.config.tracking, est.config.roi, tuple(c.roll_deg for c in est._cams))
+
+
+def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_scene: int = 0,
+            turned_crops: bool = False, log=print) -> dict[tuple[str, str], dict]:
+    """``{(pose, "prior" | "no prior" | "turned crops"): Accuracy summary + pairs, empty pairs, lowest feet}``
+    (module docstring); ``turned crops`` (with ``turned_crops``, for the poses of :data:`CROP_TURN_DEG`): the prior
+    on, the crops turned with the body (:func:`turn_crops`)."""
+    from ghnerf_runtime.cli.simdata import Accuracy, bench_rig_and_scene
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    on = EstimatorConfig(session=SessionConfig(model_dir=model_dir))
+    off = replace(on, joints3d=replace(on.joints3d, skeleton_prior="off"))
+    with_prior = load_session(on)
+    configs = {"prior": (on, with_prior), "no prior": (off, load_session(off))}
+    if turned_crops:
+        configs["turned crops"] = (on, with_prior)
+    runs = [(p, c) for p in poses for c in configs if c != "turned crops" or p in CROP_TURN_DEG]
+    acc = {key: Accuracy() for key in runs}
+    extra = {key: {"pairs": 0, "empty": 0, "feet": [], "confidence": [], "apart": []} for key in runs}
+    outside = {p: [] for p in poses}  # per pose: each pair's share of true joints the box gate would drop
+    margin = on.joints3d.max_outside_box_m
+    for k in range(first_scene, first_scene + scenes):
+        start = time.perf_counter()
+        rig, scene, t0, _ = bench_rig_and_scene(k)
+        lo, hi = rig.volume.min_corner - margin, rig.volume.max_corner + margin
+        for pose in poses:
+            shots = []
+            for i in range(frames):
+                t = t0 + i / FPS
+                posed = posed_as(scene.posed(t), pose, rig.volume)
+                shots.append((t, posed.joints.copy()) + render_pair(scene, rig, posed, t))
+                outside[pose].append(float(np.mean(np.any((posed.joints < lo) | (posed.joints > hi), axis=1))))
+            for name, (cfg, session) in configs.items():
+                if (pose, name) not in acc:
+                    continue
+                with Estimator(session, rig, cfg) as est:
+                    if name == "turned crops":
+                        turn_crops(est, CROP_TURN_DEG[pose])
+                    for i, (t, j3, images, j2, vis) in enumerate(shots):
+                        r = est.estimate(images, sequence=i, timestamp_s=t - t0)
+                        acc[pose, name].add_truth(r, j3, j2, vis, frame=(k, i))
+                        e = extra[pose, name]
+                        e["pairs"] += 1
+                        e["empty"] += int(r.missing.all())
+                        e["confidence"].extend(r.confidence[~r.missing].tolist())
+                        if r.prior_disagreement_m is not None:
+                            e["apart"].append(r.prior_disagreement_m)
+                        if r.lowest_foot_m is not None:
+                            e["feet"].append(r.lowest_foot_m)
+        log(f"scene {k} ({scene.config.motion}): {time.perf_counter() - start:.1f} s")
+    out = {}
+    for key in acc:
+        s = acc[key].summary()
+        e = extra[key]
+        s.update(pairs=e["pairs"], empty=e["empty"], feet_pairs=len(e["feet"]),
+                 outside_frac=float(np.mean(outside[key[0]])),
+                 disagreement_median_m=float(np.median(e["apart"])) if e["apart"] else float("nan"),
+                 confidence_median=float(np.median(e["confidence"])) if e["confidence"] else float("nan"),
+                 feet_median_m=float(np.median(e["feet"])) if e["feet"] else float("nan"))
+        out[key] = s
+    return out
+
+
+PRIOR_WORDS = {"prior": "on", "no prior": "off", "turned crops": "on, crops turned with the body (oracle)"}
+
+
+def table(results: dict[tuple[str, str], dict]) -> str:
+    """The results as a Markdown table (one row per pose and prior)."""
+    rows = ["| pose | skeleton prior | pairs (none found) | PCK@0.2 | MPJPE over the joints found | found | "
+            "their confidence (median) | prior disagreement (median) | lowest foot (median, pairs) | true joints "
+            "outside the volume |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for (pose, prior), s in results.items():
+        conf = f"{s['confidence_median']:.2f}" if np.isfinite(s["confidence_median"]) else "-"
+        mp = f"{s['mpjpe_mm']:.1f} mm" if np.isfinite(s["mpjpe_mm"]) else "-"
+        apart = f"{1e3 * s['disagreement_median_m']:.0f} mm" if np.isfinite(s["disagreement_median_m"]) else "-"
+        feet = f"{s['feet_median_m']:.2f} m ({s['feet_pairs']})" if s["feet_pairs"] else "none"
+        rows.append(f"| {pose} | {PRIOR_WORDS[prior]} | {s['pairs']} ({s['empty']}) | "
+                    f"{s.get('pck@0.2', float('nan')):.3f} | {mp} | {100 * s['found_3d_frac']:.1f} % | "
+                    f"{conf} | {apart} | {feet} | {100 * s['outside_frac']:.1f} % |")
+    return "\n".join(rows)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--scenes", type=int, default=12, help="bench scenes (ghnerf-bench runtime's sequences)")
+    ap.add_argument("--first-scene", type=int, default=0, help="the first bench scene's number")
+    ap.add_argument("--frames", type=int, default=3, help="consecutive pairs per scene and pose, at 30 fps")
+    ap.add_argument("--poses", default=",".join(POSES), help=f"comma list of {', '.join(POSES)}")
+    ap.add_argument("--turned-crops", action="store_true",
+                    help="also run the prior with the crops turned with the body (lying across the view: 90 deg, "
+                         "upside down: 180), what a search over crop rotations could give at best")
+    args = ap.parse_args(argv)
+    poses = [p.strip() for p in args.poses.split(",") if p.strip()]
+    bad = [p for p in poses if p not in POSES]
+    if bad or not poses:
+        ap.error(f"--poses: unknown {bad or args.poses!r}; choose from {', '.join(POSES)}")
+    if args.scenes < 1 or args.frames < 1 or args.first_scene < 0:
+        ap.error("--scenes and --frames must be at least 1, --first-scene at least 0")
+    results = measure(args.model_dir, args.scenes, args.frames, poses, args.first_scene, args.turned_crops,
+                      log=lambda m: print(m, file=sys.stderr))
+    print(table(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""``benchmarks/measure_lying_rendered.py``: the poses it renders are the ones it names (a lying body on the floor
+with its height axis horizontal, an upside-down one head down), so that it cannot silently measure upright
+people; and its command line gets through to its table."""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from benchmarks.measure_lying_rendered import POSES, posed_as, render_pair, rotation
+from ghnerf_runtime.body25 import JOINT_INDEX
+from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401  (module fixture)
+from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
+
+NECK, MID_HIP = JOINT_INDEX["Neck"], JOINT_INDEX["MidHip"]
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    """Three bench scenes at their first instant: (rig, scene, upright posed body)."""
+    out = []
+    for k in range(3):
+        rig, scene, t0, _ = bench_rig_and_scene(k)
+        out.append((rig, scene, scene.posed(t0)))
+    return out
+
+
+def _spine(posed) -> np.ndarray:
+    """The unit vector from the mid hip to the neck (the body's height axis, pointing to the head)."""
+    v = posed.joints[NECK] - posed.joints[MID_HIP]
+    return v / np.linalg.norm(v)
+
+
+def test_rotation_is_a_proper_rotation_about_its_axis():
+    for axis in (0, 1, 2):
+        R = rotation(axis, 90.0)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        np.testing.assert_allclose(R[:, axis], np.eye(3)[axis], atol=1e-12)  # the axis stays put
+
+
+def test_turned_bodies_rest_on_the_floor_with_the_height_axis_the_pose_names(scenes):
+    up = np.array([0.0, -1.0, 0.0])  # the rig frame's y points down: up is -y
+    for rig, _, upright in scenes:
+        assert _spine(upright) @ up > 0.9  # the bench's people stand
+        for pose in POSES:
+            body = posed_as(upright, pose, rig.volume)
+            lo, hi = body.bounding_box()
+            spine = _spine(body)
+            if pose == "upright":
+                assert body is upright
+                continue
+            assert hi[1] == pytest.approx(0.0, abs=1e-9), pose  # its lowest surface point on the floor (y = 0)
+            assert lo[1] < -0.1, pose  # and the rest above it
+            # a rigid turn: the joints keep their distances
+            d0 = np.linalg.norm(upright.joints[:, None] - upright.joints[None], axis=-1)
+            d1 = np.linalg.norm(body.joints[:, None] - body.joints[None], axis=-1)
+            np.testing.assert_allclose(d1, d0, atol=1e-9)
+            if pose == "upside_down":
+                assert spine @ up < -0.9, pose  # head down
+            else:
+                assert abs(spine @ up) < 0.45, (pose, spine)  # lying: the height axis near horizontal
+                along = 2 if pose == "lying_x" else 0  # along the line of sight, or across the view
+                assert abs(spine[along]) > 0.85, (pose, spine)
+
+
+def test_a_lying_body_is_moved_into_the_working_volume_where_it_fits(scenes):
+    for rig, _, upright in scenes:
+        for pose in ("lying_x", "lying_z"):
+            lo, hi = posed_as(upright, pose, rig.volume).bounding_box()
+            vlo, vhi = rig.volume.min_corner, rig.volume.max_corner
+            for a in (0, 2):
+                if hi[a] - lo[a] <= vhi[a] - vlo[a]:
+                    assert vlo[a] - 1e-9 <= lo[a] and hi[a] <= vhi[a] + 1e-9, (pose, a)
+                else:  # longer than the volume: centred on it
+                    assert 0.5 * (lo[a] + hi[a]) == pytest.approx(0.5 * (vlo[a] + vhi[a])), (pose, a)
+
+
+def test_the_pictures_show_the_turned_body(scenes):
+    """The rendered truth is the turned body's: its 2D joints are the projections of the turned joints."""
+    rig, scene, upright = scenes[1]
+    body = posed_as(upright, "upside_down", rig.volume)
+    images, j2, vis = render_pair(scene, rig, body, 0.0)
+    assert len(images) == 2 and images[0].shape == (rig.pair[0].height, rig.pair[0].width, 3)
+    for c, cam in enumerate(rig.pair):
+        np.testing.assert_allclose(j2[c], cam.project(body.joints)[0], atol=1e-6)
+    head_row, hip_row = j2[0, JOINT_INDEX["Nose"], 1], j2[0, MID_HIP, 1]
+    assert head_row > hip_row  # the head below the hips in the picture
+
+
+def test_unknown_pose_is_refused():
+    with pytest.raises(ValueError, match="unknown pose 'sitting'"):
+        posed_as(None, "sitting")
+
+
+def test_command_line_prints_a_row_per_pose_and_prior(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                       monkeypatch):
+    out = run_script("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--scenes", "1", "--frames",
+                     "1", "--turned-crops", capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^\| (\w+) \| (on|off|on, crops turned with the body \(oracle\)) \| 1 \(\d\) \|", out, re.M)
+    assert rows == [("upright", "on"), ("upright", "off"), ("lying_x", "on"), ("lying_x", "off"),
+                    ("lying_z", "on"), ("lying_z", "off"), ("lying_z", "on, crops turned with the body (oracle)"),
+                    ("upside_down", "on"), ("upside_down", "off"),
+                    ("upside_down", "on, crops turned with the body (oracle)")], out
