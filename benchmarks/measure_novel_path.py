@@ -8,9 +8,12 @@ the working volume's centre, as on a cold pair) and how far it is from the subje
 the cameras are placed round; else the working volume's centre), where the orbit's halfway camera is (which
 way round the view turns), the path ``"auto"`` takes, and at each ``--alphas``: how far the orbit camera's centre is from the
 line camera's (mm), the angle between their rotations (degrees; both are slerped, so 0 by construction), how
-far the view of the subject turns between them (the angle at the working volume's centre, degrees), and both
-cameras' distance to that centre (mm). Pure geometry, milliseconds; the cameras as in the rig file (a rig with
-a camera on its side or upside down turns it upright first in the estimator; not here).
+far the view of the subject turns between them (the angle at the working volume's centre, degrees), both
+cameras' distance to that centre (mm), and how far off the orbit camera's optical axis it lies (degrees; 0 in
+the middle of the picture; the ends at alpha 0 and 1 are the rig's cameras). Pure geometry, milliseconds; the
+cameras as in the rig file (a rig with a camera on its side or upside down turns it upright first in the
+estimator; not here). The orbit's pivot is the subject's centre where the axes cross away from it (cameras side
+by side toed in past 60 degrees: ``--sim 90``; :func:`ghnerf_runtime.geometry.orbit.orbit_pivot`).
 
     .venv/bin/python benchmarks/measure_novel_path.py [RIG.json ...] [--sim aimed,60,120] [--around 90,180]
         [--height 1.3] [--aim-off 0] [--alphas 0.25,0.5,0.75]
@@ -59,8 +62,8 @@ def rig_rows(name: str, rig: Rig, alphas: list[float], aimed_at: np.ndarray | No
     lines = [f"{name}: optical axes {axes_angle_deg(a, b):.3f} deg apart, baseline "
              f"{1e3 * np.linalg.norm(a.center - b.center):.1f} mm; pivot {where}; auto takes the {auto}",
              "| alpha | orbit vs line: centre mm | rotation deg | view of the subject turns deg | "
-             "to the subject, line / orbit mm |",
-             "|---|---|---|---|---|"]
+             "to the subject, line / orbit mm | the subject off the orbit view's axis deg |",
+             "|---|---|---|---|---|---|"]
     for alpha in alphas:
         line = interpolate_camera(a, b, alpha)
         orbit = line if pivot is None else interpolate_camera(a, b, alpha, pivot=pivot)
@@ -68,7 +71,8 @@ def rig_rows(name: str, rig: Rig, alphas: list[float], aimed_at: np.ndarray | No
                      f"{_rotation_deg(orbit.R, line.R):.6f} | "
                      f"{_angle_deg(subject - orbit.center, subject - line.center):.5f} | "
                      f"{1e3 * np.linalg.norm(subject - line.center):.1f} / "
-                     f"{1e3 * np.linalg.norm(subject - orbit.center):.1f} |")
+                     f"{1e3 * np.linalg.norm(subject - orbit.center):.1f} | "
+                     f"{_angle_deg(subject - orbit.center, orbit.R[2]):.2f} |")
     return lines
 
 

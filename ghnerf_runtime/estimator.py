@@ -1401,7 +1401,7 @@ class Estimator:
 
     def _novel_camera(self, request: NovelViewRequest, box: np.ndarray) -> Camera:
         """The ``S x S`` camera of ``request``'s view cropped to ``box`` (whose centre is the subject's, the orbit's
-        pivot when the rig's optical axes give none: ``novel_view.path``)."""
+        pivot when the rig's optical axes give none or cross away from it: ``novel_view.path``)."""
         full = request.camera
         if full is None:
             if self._between_pair is None:

@@ -34,7 +34,7 @@ from ghnerf_runtime.config import NOVEL_PATHS, NovelViewConfig
 from ghnerf_runtime.contract import near_far_from_box, target_inputs
 from ghnerf_runtime.errors import ConfigError, DepthRangeError, GeometryError
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre, subject_pivot
+from ghnerf_runtime.geometry.orbit import axes_angle_deg, axes_pivot, in_front, orbit_centre, orbit_pivot
 from ghnerf_runtime.preprocess import crop_camera, roi_from_volume
 from ghnerf_runtime.rays import (
     block_ray_uv,
@@ -200,10 +200,12 @@ def novel_pivot(cam_a: Camera, cam_b: Camera, path: str, subject: np.ndarray | N
     :data:`AUTO_ORBIT_MIN_ANGLE_DEG` apart, then as ``"orbit"``: given ``subject`` (the subject's centre, rig
     frame), the point nearest both optical axes and, along the direction they fix badly, nearest the subject
     (:func:`~ghnerf_runtime.geometry.orbit.subject_pivot`: on the subject for axes near antiparallel, where
-    the axes' nearest point runs metres along them for an axis a centimetre off); without it, the axes' nearest
-    point (:func:`~ghnerf_runtime.geometry.orbit.axes_pivot`; none for parallel axes). When that point is behind
-    either camera, ``subject``; when that is missing or behind one too, ``None`` (the line: no orbit has the
-    subject in front of both ends).
+    the axes' nearest point runs metres along them for an axis a centimetre off), moved onto the subject when it
+    is not at it (:func:`~ghnerf_runtime.geometry.orbit.orbit_pivot`: over 0.5 m from it, wholly from 1 m, as
+    for cameras side by side toed in past 60 degrees, whose axes cross in front of the subject); without it, the
+    axes' nearest point (:func:`~ghnerf_runtime.geometry.orbit.axes_pivot`; none for parallel axes). When that
+    point is behind either camera, ``subject``; when that is missing or behind one too, ``None`` (the line: no
+    orbit has the subject in front of both ends).
 
     Raises:
         ConfigError: ``path`` is not one of ``"line"``, ``"orbit"``, ``"auto"`` (named as ``novel_view.path``).
@@ -212,7 +214,7 @@ def novel_pivot(cam_a: Camera, cam_b: Camera, path: str, subject: np.ndarray | N
         raise ConfigError(f"must be one of {list(NOVEL_PATHS)}, got {path!r}", key="novel_view.path")
     if path == "line" or (path == "auto" and not axes_angle_deg(cam_a, cam_b) > AUTO_ORBIT_MIN_ANGLE_DEG):
         return None
-    axes = axes_pivot(cam_a, cam_b) if subject is None else subject_pivot(cam_a, cam_b, subject)
+    axes = axes_pivot(cam_a, cam_b) if subject is None else orbit_pivot(cam_a, cam_b, subject)
     for point in (axes, subject):
         if point is not None and in_front(cam_a, point) and in_front(cam_b, point):
             return np.array(point, dtype=np.float64)

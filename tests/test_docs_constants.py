@@ -45,7 +45,7 @@ from ghnerf_runtime.estimator import (_FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_
                                       STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
-from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
+from ghnerf_runtime.geometry.orbit import AXES_PIVOT_DROP_M, AXES_PIVOT_HOLD_M, PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
 from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
 from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_RAY_ANGLE_FLOOR_DEG
@@ -86,6 +86,8 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"more than {AUTO_ORBIT_MIN_ANGLE_DEG:g} degrees apart (`AUTO_ORBIT_MIN_ANGLE_DEG`)"),
     ("docs/runtime.md", f"within {PARALLEL_AXES_DEG:g} degrees (`PARALLEL_AXES_DEG`)"),
     ("docs/runtime.md", f"k = 1 - cos {PIVOT_CONDITION_DEG:g} degrees, `PIVOT_CONDITION_DEG`"),
+    ("docs/runtime.md", f"within {AXES_PIVOT_HOLD_M:g} m (`AXES_PIVOT_HOLD_M`)"),
+    ("docs/runtime.md", f"from {AXES_PIVOT_DROP_M:g} m (`AXES_PIVOT_DROP_M`)"),
     ("docs/runtime.md", f"within {HALF_TURN_BAND_DEG:g} degree (`HALF_TURN_BAND_DEG`)"),
     ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),

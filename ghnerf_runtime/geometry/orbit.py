@@ -5,7 +5,9 @@ must not move on the straight line between their centres: that line passes by or
 Round a pivot, the camera keeps its distance (lerped between the two cameras') and its view of the pivot
 (:func:`orbit_centre`). The pivot is the point nearest both optical axes (:func:`axes_pivot`), where a
 converging rig aims; with the subject known, the point nearest both axes and, along the direction the axes
-fix badly (along them when they are near parallel or antiparallel), nearest the subject (:func:`subject_pivot`).
+fix badly (along them when they are near parallel or antiparallel), nearest the subject (:func:`subject_pivot`);
+and where that point is not at the subject (side-by-side cameras toed in past 60 degrees cross their axes between
+themselves and the subject), the subject's centre (:func:`orbit_pivot`).
 
 Pure numpy; rig frame (metres), cameras as :class:`~ghnerf_runtime.geometry.camera.Camera`.
 """
@@ -16,8 +18,8 @@ import numpy as np
 from ghnerf_runtime.errors import GeometryError
 from ghnerf_runtime.geometry.camera import Camera
 
-__all__ = ["PARALLEL_AXES_DEG", "PIVOT_CONDITION_DEG", "axes_angle_deg", "axes_pivot", "subject_pivot", "in_front",
-           "orbit_centre"]
+__all__ = ["AXES_PIVOT_HOLD_M", "AXES_PIVOT_DROP_M", "PARALLEL_AXES_DEG", "PIVOT_CONDITION_DEG", "axes_angle_deg",
+           "axes_pivot", "subject_pivot", "orbit_pivot", "in_front", "orbit_centre"]
 
 #: Optical axes within this angle of parallel (or of antiparallel: collinear cameras facing each other) have
 #: no pivot. Nearer, the nearest point runs off along the axes (the solve divides by sin^2 of the angle,
@@ -31,6 +33,20 @@ PARALLEL_AXES_DEG = 0.1
 #: nearest point moves by an axis's offset over the tangent of that angle (0.57 m for 1 cm at 1 degree), where
 #: the subject's centre is known to centimetres.
 PIVOT_CONDITION_DEG = 10.0
+
+#: :func:`orbit_pivot`: the axes' point (:func:`subject_pivot`) within this of the subject's centre is the pivot as
+#: it is. The rigs the docs measure put it at most 0.15 m off (docs/examples/rig.json 147 mm, cameras aimed at the
+#: subject 75 mm: the volume's centre above the aim), and a person's pose moves their box's centre by a few tenths
+#: (arms raised, a crouch), which must not move an orbit the calibration fixes.
+AXES_PIVOT_HOLD_M = 0.5
+
+#: :func:`orbit_pivot`: the axes' point this far or further from the subject's centre is not at the subject (a
+#: standing adult's joints lie within about 0.9 m of their centre) and the subject's centre is the pivot; between
+#: the two distances it moves from the one to the other (twice as fast as the subject), so a person walking off
+#: the axes' crossing does not make the view jump. Side-by-side cameras toed in past 60 degrees cross their axes
+#: 1.2 m or more in front of a subject 2.2 m or more away (the simulator's 1.2 m baseline; 2.4 m at 90 degrees
+#: and 3 m).
+AXES_PIVOT_DROP_M = 1.0
 
 
 def _axis(camera: Camera) -> np.ndarray:
@@ -114,6 +130,43 @@ def subject_pivot(cam_a: Camera, cam_b: Camera, subject: np.ndarray) -> np.ndarr
         b += across @ camera.center
     k = 1.0 - np.cos(np.radians(PIVOT_CONDITION_DEG))
     return subject + np.linalg.solve(A @ A + k * k * np.eye(3), A @ (b - A @ subject))
+
+
+def orbit_pivot(cam_a: Camera, cam_b: Camera, subject: np.ndarray) -> np.ndarray:
+    """The pivot of an orbit between two cameras round ``subject`` (the subject's centre, rig frame): the axes'
+    point (:func:`subject_pivot`) where it is at the subject, else the subject's centre.
+
+    The orbit keeps the view as far from its pivot as the two cameras are and looks at it as they do; round a point
+    away from the subject it swings the view about empty space (two cameras side by side toed in 90 degrees cross
+    their axes 2.4 m in front of the subject, and the halfway view stood 6 % further from it than the cameras).
+    Within :data:`AXES_PIVOT_HOLD_M` of ``subject`` the axes' point is kept (fixed by the calibration, not by the
+    pose); from :data:`AXES_PIVOT_DROP_M` on, ``subject``; between, on the way from the one to the other, moved
+    twice the subject's distance past :data:`AXES_PIVOT_HOLD_M` (continuous: a person walking off the crossing
+    moves the pivot at most twice as fast, never by a jump). The point may lie behind a camera (:func:`in_front`).
+
+    Example:
+        >>> from ghnerf_runtime.geometry.camera import intrinsics_from_fov, look_at
+        >>> K = intrinsics_from_fov(64, 64, 60.0)
+        >>> a = Camera("a", 64, 64, K, [], *look_at((-0.6, -1, 0), (0, -1, 0.6)))  # toed in 90 degrees
+        >>> b = Camera("b", 64, 64, K, [], *look_at((0.6, -1, 0), (0, -1, 0.6)))
+        >>> np.round(subject_pivot(a, b, np.array([0.0, -1.0, 3.0])), 2).tolist()  # near where the axes cross
+        [0.0, -1.0, 0.6]
+        >>> np.round(orbit_pivot(a, b, np.array([0.0, -1.0, 3.0])), 2).tolist()  # that is 2.4 m from the subject
+        [0.0, -1.0, 3.0]
+        >>> np.round(orbit_pivot(a, b, np.array([0.0, -1.0, 1.4])), 2).tolist()  # 0.8 m: moved 2 x 0.3 m
+        [0.0, -1.0, 1.2]
+        >>> np.round(orbit_pivot(a, b, np.array([0.0, -1.0, 0.9])), 2).tolist()  # 0.3 m: the axes' point
+        [0.0, -1.0, 0.6]
+    """
+    subject = np.asarray(subject, dtype=np.float64)
+    point = subject_pivot(cam_a, cam_b, subject)
+    off = float(np.linalg.norm(point - subject))
+    if not off > AXES_PIVOT_HOLD_M:  # (also a subject on the point: no direction to move in)
+        return point
+    # the pivot leaves the point by DROP / (DROP - HOLD) (2) times the subject's distance past HOLD: the steadiest
+    # way from standing still (at HOLD) to the subject itself (at DROP)
+    moved = AXES_PIVOT_DROP_M * (off - AXES_PIVOT_HOLD_M) / (AXES_PIVOT_DROP_M - AXES_PIVOT_HOLD_M)
+    return point + min(moved / off, 1.0) * (subject - point)
 
 
 def in_front(camera: Camera, point: np.ndarray) -> bool:

@@ -103,13 +103,17 @@ def test_measure_pairing(capsys, monkeypatch):
 
 
 def test_measure_novel_path(capsys, monkeypatch):
-    out = run_script("measure_novel_path", "--sim", "aimed", "--around", "180", "--alphas", "0.5",
+    out = run_script("measure_novel_path", "--sim", "aimed,90", "--around", "180", "--alphas", "0.5",
                      capsys=capsys, monkeypatch=monkeypatch)
     assert "docs/examples/rig.json: optical axes 0.318 deg apart" in out and "auto takes the line" in out
     assert "around 180 (1.3 m high, aimed 0 cm off): optical axes 166.691 deg apart" in out
     assert "auto takes the orbit" in out
     assert re.search(r"^around 180 .*; pivot \(0\.000, -0\.950, 3\.000\) m, .* 0\.0 mm from the subject;", out, re.M), out
     assert "| 0.5 | 3000.0000 | 0.000000 |" in out  # the orbit 3 m out where the line is at the subject
+    # toed in 90 degrees: the axes cross 2.4 m in front of the subject; the orbit goes round the subject, the halfway
+    # view as far from it as the cameras (3071.7 mm; 3260.0 round the crossing, before session 55)
+    assert re.search(r"^sim 90: .*; pivot \(0\.000, -1\.025, 3\.000\) m, .* 0\.0 mm from the subject;", out, re.M), out
+    assert "| 3012.6 / 3071.7 | 0.49 |" in out
 
 
 def test_measure_pair_outliers(capsys, monkeypatch):

@@ -10,7 +10,8 @@ import pytest
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, NovelViewConfig, config_from_dict
 from ghnerf_runtime.errors import GeometryError
 from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at
-from ghnerf_runtime.geometry.orbit import PARALLEL_AXES_DEG, axes_angle_deg, axes_pivot, in_front, subject_pivot
+from ghnerf_runtime.geometry.orbit import (AXES_PIVOT_DROP_M, AXES_PIVOT_HOLD_M, PARALLEL_AXES_DEG, axes_angle_deg,
+                                           axes_pivot, in_front, subject_pivot)
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG, interpolate_camera, novel_pivot
 from ghnerf_runtime.rig_file import load_rig
 
@@ -155,6 +156,81 @@ def test_the_pivot_keeps_the_axes_nearest_point_where_it_is_well_conditioned():
     a = _cam("a", (-3.0, -1.2, 3.0), (0.0, -1.0, 3.0))
     b = _cam("b", (0.0, -1.4, 0.0), (0.1, -0.9, 3.0))
     np.testing.assert_allclose(subject_pivot(a, b, np.array([0.5, -0.3, 3.6])), axes_pivot(a, b), atol=1e-3)
+
+
+def _toed_in(convergence_deg: float, baseline_m: float = 1.2):
+    """Two cameras side by side (``baseline_m`` apart on x, 1.3 m high), each toed in by half ``convergence_deg``
+    and pitched at 0.95 m high 3 m along its axis (the simulator's ``sim://?convergence=``)."""
+    cams = []
+    for name, sign in (("a", -1.0), ("b", 1.0)):
+        eye = np.array([sign * baseline_m / 2, -1.3, 0.0])
+        yaw = -sign * np.radians(convergence_deg) / 2
+        target = eye + 3.0 * np.array([np.sin(yaw), 0.0, np.cos(yaw)])
+        target[1] = -0.95
+        cams.append(_cam(name, eye, target))
+    return cams
+
+
+@pytest.mark.parametrize("convergence_deg", [75.0, 90.0, 120.0])
+def test_side_by_side_cameras_toed_in_past_60_degrees_orbit_the_subject_not_their_axes_crossing(convergence_deg):
+    """Toed in past 60 degrees, the axes cross 1-1.6 m in front of the cameras, 2.4 m or so before a subject 3 m
+    out; round that point the view swung out, 6-9 % further from the subject than the cameras (3.26 m for 3.07 at
+    90 degrees, halfway). Round the subject, every view between is as far from it as the cameras and sees it as
+    the slerp of how they do: in the middle of the picture halfway."""
+    a, b = _toed_in(convergence_deg)
+    subject = np.array([0.0, -0.95, 3.0])
+    assert axes_angle_deg(a, b) > AUTO_ORBIT_MIN_ANGLE_DEG
+    crossing = axes_pivot(a, b)
+    assert crossing[2] < 1.1 and np.linalg.norm(crossing - subject) > 1.9  # between the cameras and the subject
+    pivot = novel_pivot(a, b, "auto", subject)
+    np.testing.assert_allclose(pivot, subject, atol=1e-12)
+    ends = np.linalg.norm(a.center - subject)
+    assert np.linalg.norm(b.center - subject) == pytest.approx(ends, abs=1e-12)
+    for alpha in (0.25, 0.5, 0.75):
+        cam = interpolate_camera(a, b, alpha, pivot=pivot)
+        assert np.linalg.norm(cam.center - subject) == pytest.approx(ends, abs=1e-9), alpha
+    half = interpolate_camera(a, b, 0.5, pivot=pivot)
+    uv, depth = half.project(subject[None], distort=False)
+    (uv_a,), _ = a.project(subject[None], distort=False)
+    assert abs(uv_a[0] - K[0, 2]) > 20  # the rig's cameras see it well to the side (27-60 degrees)
+    assert uv[0][0] == pytest.approx(K[0, 2], abs=1e-6)  # halfway: across the middle of the picture
+    assert abs(uv[0][1] - K[1, 2]) <= abs(uv_a[1] - K[1, 2]) + 1e-6  # and as high as the cameras see it
+    assert depth[0] > 0.99 * ends
+
+
+def test_the_pivot_leaves_the_axes_crossing_for_the_subject_between_half_a_metre_and_a_metre():
+    """Toed in 90 degrees (axes crossing at z 0.6 m): a subject within AXES_PIVOT_HOLD_M of the crossing leaves the
+    pivot on it; from AXES_PIVOT_DROP_M on the pivot is the subject; between, it leaves the crossing at twice the
+    subject's pace, so a subject walking away from the crossing moves the pivot without a jump."""
+    a, b = _toed_in(90.0)
+    crossing = axes_pivot(a, b)
+    away = np.array([0.0, 0.0, 1.0])
+    previous = None
+    for off in np.linspace(0.0, 2.0, 81):  # 2.5 cm steps
+        subject = crossing + off * away
+        pivot = novel_pivot(a, b, "auto", subject)
+        point = subject_pivot(a, b, subject)  # the crossing, damped by 0.02 % of the way to the subject
+        assert np.linalg.norm(point - crossing) < 1e-3 * max(off, 1.0)
+        off = np.linalg.norm(point - subject)
+        if off <= AXES_PIVOT_HOLD_M:
+            np.testing.assert_allclose(pivot, point, atol=1e-12)
+        elif off >= AXES_PIVOT_DROP_M:
+            np.testing.assert_allclose(pivot, subject, atol=1e-12)
+        else:
+            moved = AXES_PIVOT_DROP_M * (off - AXES_PIVOT_HOLD_M) / (AXES_PIVOT_DROP_M - AXES_PIVOT_HOLD_M)
+            np.testing.assert_allclose(pivot, point + moved * (subject - point) / off, atol=1e-12)
+        if previous is not None:  # 2.5 cm of the subject moves the pivot by at most 5 cm (the blend's slope)
+            assert np.linalg.norm(pivot - previous) <= 0.025 * 2 + 1e-9
+        previous = pivot
+
+
+def test_axes_crossing_at_the_subject_keep_their_pivot_while_the_box_centre_moves_with_the_pose():
+    """Cameras 90 degrees round the subject, aimed at it: a box centre moved 0.4 m (arms raised, a crouch) leaves
+    the pivot where the axes cross, as before session 55."""
+    subject = np.array([0.0, -0.95, 3.0])
+    a, b = _around(90.0)
+    for centre in (subject, subject + [0.0, -0.4, 0.0], subject + [0.25, 0.2, -0.25]):
+        np.testing.assert_allclose(novel_pivot(a, b, "auto", centre), subject, atol=1e-3)
 
 
 def _halfway_side(yaw_b: float, tilt: float = 0.0, roll_b: float = 0.0) -> float:
