@@ -53,7 +53,7 @@ def cut_for(seq, share: float) -> int:
 
 def padded_share(roi, width: int, height: int) -> float:
     """Share of a square crop window (undistorted pixels) outside ``[0, width) x [0, height)``; the lens'
-    footprint is ignored (the bench rigs' distortion is mild)."""
+    footprint is ignored (the bench rigs have no lens distortion: `RigPlacement.random`)."""
     inside_x = max(0, min(roi.x0 + roi.size, width) - max(roi.x0, 0))
     inside_y = max(0, min(roi.y0 + roi.size, height) - max(roi.y0, 0))
     return 1.0 - inside_x * inside_y / roi.size ** 2

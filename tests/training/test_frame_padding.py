@@ -109,6 +109,7 @@ def test_edge_cut_shows_a_source_as_the_runtime_crops_a_person_at_the_frame_edge
             if np.allclose(apply_crop_maps(np.ones((480, cut.width), np.float32), maps), out[FRAME_KEY][i]):
                 break
         else:
-            raise AssertionError(f"view {i}: no frame cut near column {first if cols[0] == 0 else last} gives its padding")
+            near = first if cols[0] == 0 else last
+            raise AssertionError(f"view {i}: no frame cut near column {near} gives its padding")
     plain = model_inputs(record, S, TargetConfig(heatmap_stride=0, frame_padding=True), index=3)
     assert np.all(plain[FRAME_KEY] == 1)
