@@ -54,9 +54,9 @@ from training.augment import AugmentConfig, augment_views
 from training.model_card import write_atomic
 from training import pretrain_checkpoint
 from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
-    learning_rate, load_config_file, mirrored, model_config_of, refuse_another_config, refuse_another_model, \
-    refuse_existing_run, refuse_live_lock, require_resume_keys, save_atomic, scene_order, seed_everything, \
-    take_lock, truncate_log
+    encoder_views_images, learning_rate, load_config_file, mirrored, model_config_of, padding_config, \
+    refuse_another_config, refuse_another_model, refuse_existing_run, refuse_live_lock, require_resume_keys, \
+    save_atomic, scene_order, seed_everything, take_lock, truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -76,6 +76,12 @@ class PretrainConfig(Config):
     """Scenes per step; each gives all its views (sources and targets) and, with ``flip``, their mirrors."""
     flip: bool = True
     """Also train on the mirror images (left/right joint channels swapped)."""
+    frame_padding: bool = False
+    """Black out what each crop shows past its camera's frame, as the runtime pads it
+    (``TargetConfig.frame_padding``); a train config's own ``frame_padding`` is the default of its block."""
+    edge_cut: float = 0.0
+    """The share of source views whose frame is cut at the person (``TargetConfig.edge_cut``; needs
+    ``frame_padding``); a train config's own ``edge_cut`` is the default of its block."""
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     """Random rotation / scale / shift of every image (``training.augment``), before the mirroring."""
     lr: float = 1e-3
@@ -147,6 +153,10 @@ class PretrainConfig(Config):
         if not 0 < self.lr_decay_gamma <= 1:
             fail("lr_decay_gamma", f"must be in (0, 1], got {self.lr_decay_gamma}")
         self.augment.validate("pretrain_human.augment")
+        try:
+            padding_config(self.frame_padding, self.edge_cut)
+        except ConfigError as e:
+            raise ConfigError(f"pretrain_human.{e}") from e
         mcfg = self.model_config()
         if not (mcfg.use_human_encoder and mcfg.human.aux_heatmaps):
             fail("preset", f"{self.preset!r} has no human encoder with an auxiliary heatmap head")
@@ -176,7 +186,7 @@ def view_batch(items: list[dict], flip: bool, augment: AugmentConfig | None = No
                generator: torch.Generator | None = None) -> tuple[Tensor, Tensor]:
     """Every view of ``items`` (randomly transformed with ``augment``; and their mirrors, ``train.mirrored``):
     images ``(N, 3, H, W)`` and heatmap grids ``(N, J, h, w)``."""
-    images = torch.cat([it["tgt_images"] for it in items])
+    images = torch.cat([encoder_views_images(it) for it in items])  # padded past the frame where the items say
     heat = torch.cat([it["tgt_heatmaps"] for it in items])
     if augment is not None and augment.enabled:
         stride = images.shape[-1] // heat.shape[-1]
@@ -467,7 +477,7 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
     elif not resume:
         _refuse_existing_pretraining(out)  # a new run never overwrites another's config.json and last.pt
     mcfg = cfg.model_config()
-    targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride)
+    targets = TargetConfig(heatmap_stride=mcfg.heatmap_stride, **padding_config(cfg.frame_padding, cfg.edge_cut))
     # the dataset and its splits are opened (a missing one named) before anything is written
     ds = dataset or MultiViewDataset(cfg.data, cfg.split, targets)
     if len(ds) < cfg.scenes_per_step:
@@ -601,11 +611,14 @@ def _pretrain(cfg: PretrainConfig, out: Path, start: tuple[Path, dict] | None, q
 
 
 def config_from_train_config(data: dict, overrides: list[str] = ()) -> PretrainConfig:
-    """The ``PretrainConfig`` of a train config's ``pretrain_human`` block (its preset, model and data come
-    from the train config), or of a bare ``PretrainConfig`` dict; ``overrides`` are ``key=value`` strings."""
+    """The ``PretrainConfig`` of a train config's ``pretrain_human`` block (its preset, model, data,
+    ``frame_padding`` and ``edge_cut`` come from the train config), or of a bare ``PretrainConfig`` dict;
+    ``overrides`` are ``key=value`` strings."""
     if "pretrain_human" in data:
         data = {"preset": data.get("preset", "edge128"), "model": data.get("model", {}),
-                "data": data.get("data", "data/edge128"), **(data["pretrain_human"] or {})}
+                "data": data.get("data", "data/edge128"), "frame_padding": data.get("frame_padding", False),
+                "edge_cut": data.get("edge_cut", 0.0),
+                **(data["pretrain_human"] or {})}
     return PretrainConfig.from_dict(apply_overrides(data, list(overrides)))
 
 

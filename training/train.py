@@ -113,6 +113,15 @@ class TrainConfig(Config):
     encoder_flip: bool = False
     """Also supervise the auxiliary head on the mirrored images (left/right joints swapped): twice the
     images per step, and the left/right distinction taught by contrast."""
+    frame_padding: bool = False
+    """Show the model's inputs the runtime's black padding where a crop reaches past its camera's frame
+    (``training.data.frame_padding``; the targets keep the whole picture). Also the ``pretrain_human``
+    stage's, unless its block says otherwise. Off when a config does not say it: configs made before it
+    keep training as they did."""
+    edge_cut: float = 0.0
+    """With ``frame_padding``: the share of source views shown as if the person stood at the frame's edge, the
+    frame cut so that 25-50 % of the crop is black (``TargetConfig.edge_cut``). Also the ``pretrain_human``
+    stage's, unless its block says otherwise. 0: none."""
     loss: LossConfig = field(default_factory=LossConfig)
     """Loss weights (``l_col + 0.5 l_heat + ssim_weight * (1 - SSIM) [+ coord_weight * l_coord]
     [+ mask_weight * l_mask] [+ depth_weight * l_depth]``)."""
@@ -177,6 +186,7 @@ class TrainConfig(Config):
             fail("loss.ssim_window", "must be >= 1")
         if not self.data:
             fail("data", "must name the dataset folder")
+        padding_config(self.frame_padding, self.edge_cut)  # named here, before a dataset is opened
         if not isinstance(self.model, Mapping):
             fail("model", f"must be a mapping of ModelConfig overrides, got {self.model!r}")
         if not isinstance(self.pretrain_human, Mapping):
@@ -481,18 +491,41 @@ def aux_encoder_batch(item: dict, cfg: TrainConfig) -> dict[str, Tensor]:
     are swapped left for right (``FLIP_INDEX``).
     """
     src = item["tgt_is_source"]
+    seen = encoder_views_images(item)
     images, heat = [], []
     if cfg.encoder_views == "all" and (~src).any():
-        images.append(item["tgt_images"][~src])
+        images.append(seen[~src])
         heat.append(item["tgt_heatmaps"][~src])
     if cfg.encoder_flip:
         views = slice(None) if cfg.encoder_views == "all" else src
-        m_images, m_heat = mirrored(item["tgt_images"][views], item["tgt_heatmaps"][views])
+        m_images, m_heat = mirrored(seen[views], item["tgt_heatmaps"][views])
         images.append(m_images)
         heat.append(m_heat)
     if not images:
         return {}
     return {"aux_images": torch.cat(images), "aux_heatmaps": torch.cat(heat)}
+
+
+def padding_config(frame_padding: bool, edge_cut: float) -> dict:
+    """``TargetConfig``'s frame padding keywords, checked (a bad value raises :class:`ConfigError` naming it)."""
+    from training.data.errors import DataConfigError
+    from training.data.targets import TargetConfig
+
+    try:
+        TargetConfig(frame_padding=frame_padding, edge_cut=edge_cut)
+    except DataConfigError as e:
+        raise ConfigError(str(e).replace("TargetConfig.", "")) from e
+    return {"frame_padding": frame_padding, "edge_cut": edge_cut}
+
+
+def encoder_views_images(item: dict) -> Tensor:
+    """Every view's image ``(V, 3, S, S)`` as the encoder is shown it: ``tgt_images`` with the runtime's black
+    padding past each camera's frame where the item has it (``TargetConfig.frame_padding``)."""
+    from training.data.targets import FRAME_KEY
+
+    if FRAME_KEY not in item:
+        return item["tgt_images"]
+    return item["tgt_images"] * item[FRAME_KEY][:, None]
 
 
 def mirrored(images: Tensor, heatmaps: Tensor) -> tuple[Tensor, Tensor]:
@@ -935,7 +968,8 @@ def open_dataset(cfg: TrainConfig, world: int = 1):
     from training.data.torch_dataset import MultiViewDataset
 
     mcfg = cfg.model_config()
-    ds = MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=mcfg.heatmap_stride))
+    ds = MultiViewDataset(cfg.data, cfg.split, TargetConfig(heatmap_stride=mcfg.heatmap_stride,
+                                                          **padding_config(cfg.frame_padding, cfg.edge_cut)))
     if ds.resolution != mcfg.height or ds.resolution != mcfg.width:
         raise ConfigError(f"data: {cfg.data} holds {ds.resolution} px scenes, the {cfg.preset!r} model takes "
                           f"{mcfg.width}x{mcfg.height}: use a dataset of its resolution or another preset")

@@ -5,6 +5,12 @@ losses take, under the model contract's names (``ghnerf_runtime.contract``), wit
 contract's own host-side helpers for every camera matrix. Heatmaps are made here, on
 the fly, from the stored 2D joints (``ghnerf_runtime.metrics.gaussian_heatmaps``); they
 are never stored. See :data:`KEYS` for shapes, dtypes and units.
+
+With ``TargetConfig.frame_padding`` the source images (``images``, the model's inputs) show the runtime's
+black padding where their crop reaches past the camera's frame (``training.data.frame_padding``), and
+``frame`` (:data:`FRAME_KEY`) holds every view's share of frame, for the encoder's other inputs
+(``training.train.aux_encoder_batch``, ``training.pretrain_human.view_batch``); the targets
+(``tgt_images`` and the rest) keep the whole picture.
 """
 from __future__ import annotations
 
@@ -18,7 +24,9 @@ import numpy as np
 from ghnerf_runtime import contract as C
 from ghnerf_runtime.keypoints import model_to_heatmap_pixels
 from ghnerf_runtime.metrics import gaussian_heatmaps
+from ghnerf_runtime.preprocess import Roi
 from training.data.errors import DataConfigError
+from training.data.frame_padding import cut_frame, frame_coverage
 from training.data.sample import NUM_SOURCES
 
 #: Output keys: shape (V views incl. the 2 sources, S resolution, h = S / heatmap_stride), dtype, meaning.
@@ -45,6 +53,15 @@ KEYS: dict[str, tuple[str, str, str]] = {
                                   "ZJU-MoCap: the joints' box grown by bbox_margin_m)"),
 }
 
+#: With ``TargetConfig.frame_padding`` only: ``(V, S, S)`` float32, each pixel's share of its camera's frame
+#: (0 in the runtime's black padding past the frame's edge, 1 inside; ``frame_padding.frame_coverage``).
+FRAME_KEY = "frame"
+#: Seed stream of ``TargetConfig.edge_cut``'s draws (with the sample index).
+EDGE_CUT_STREAM = 55
+#: Range of the share of the crop's side a cut puts past the frame: 0.25, the person's box at the edge, to 0.5,
+#: through its middle (``benchmarks/measure_edge_padding.py``: the runtime's crops there are 34-38 % black).
+EDGE_CUT_BAND = (0.25, 0.5)
+
 
 @dataclass(frozen=True)
 class TargetConfig:
@@ -57,11 +74,20 @@ class TargetConfig:
             6 model pixels, ~5% of a 128 crop).
         near_far_margin_m: metres added around the subject box before taking its depth range
             (ENeRF uses 0.1 on ZJU-MoCap).
+        frame_padding: black out what each crop shows past its camera's frame in the model's inputs,
+            as the runtime pads such a crop (module docstring). Off by default: a config that does not
+            say it trains as before.
+        edge_cut: with ``frame_padding``, the share of source views whose frame is cut on its left or
+            right so that 25-50 % of the crop lies past it (``frame_padding.cut_frame``): the person at the
+            frame's edge, which the training scenes never place there. The draw is a function of the
+            sample's index (:data:`EDGE_CUT_STREAM`), the same in every epoch. 0: none.
     """
 
     heatmap_stride: int = 4
     heatmap_sigma: float = 1.5
     near_far_margin_m: float = 0.1
+    frame_padding: bool = False
+    edge_cut: float = 0.0
 
     def __post_init__(self) -> None:
         s = self.heatmap_stride
@@ -73,6 +99,14 @@ class TargetConfig:
         m = self.near_far_margin_m
         if isinstance(m, bool) or not isinstance(m, (int, float)) or not (math.isfinite(m) and 0 <= m <= 2):
             raise DataConfigError("TargetConfig.near_far_margin_m", f"must be a number in [0, 2], got {m!r}")
+        if not isinstance(self.frame_padding, (bool, np.bool_)):
+            raise DataConfigError("TargetConfig.frame_padding", f"must be true or false, got {self.frame_padding!r}")
+        e = self.edge_cut
+        if isinstance(e, bool) or not isinstance(e, (int, float)) or not (math.isfinite(e) and 0 <= e <= 1):
+            raise DataConfigError("TargetConfig.edge_cut", f"must be a number in [0, 1], got {e!r}")
+        if e and not self.frame_padding:
+            raise DataConfigError("TargetConfig.edge_cut",
+                                  f"{e} needs frame_padding (a cut frame is shown by its padding)")
 
 
 def _box_corners(bbox: np.ndarray) -> np.ndarray:
@@ -90,8 +124,10 @@ def view_heatmaps(joints_2d: np.ndarray, visible: np.ndarray, resolution: int, c
     return gaussian_heatmaps(uv, visible, h, config.heatmap_sigma)
 
 
-def model_inputs(record: Mapping[str, np.ndarray], resolution: int, config: TargetConfig | None = None) -> dict[str, np.ndarray]:
-    """Every key of :data:`KEYS` for one stored record (``ShardedSplit.arrays(i)``)."""
+def model_inputs(record: Mapping[str, np.ndarray], resolution: int, config: TargetConfig | None = None, *,
+                 index: int = 0) -> dict[str, np.ndarray]:
+    """Every key of :data:`KEYS` for one stored record (``ShardedSplit.arrays(i)``); ``index``: the sample's,
+    which seeds ``TargetConfig.edge_cut``."""
     config = config or TargetConfig()
     S = int(resolution)
     V = int(record["images"].shape[0])
@@ -123,7 +159,21 @@ def model_inputs(record: Mapping[str, np.ndarray], resolution: int, config: Targ
     }
     if config.heatmap_stride:
         out["tgt_heatmaps"] = view_heatmaps(out["tgt_joints_2d"], out["tgt_visible"], S, config)
+    if config.frame_padding:
+        frame = np.ones((V, S, S), np.float32)
+        rng = np.random.default_rng([EDGE_CUT_STREAM, int(index)])
+        for i in range(V):
+            K, size, roi = record["full_K"][i], record["full_size"][i], Roi(*(int(c) for c in record["roi"][i]))
+            if i < NUM_SOURCES and config.edge_cut:
+                cut, side, band = rng.uniform(), rng.integers(2), rng.uniform(*EDGE_CUT_BAND)  # 3 draws a view, always
+                if cut < config.edge_cut:
+                    K, size, roi = cut_frame(K, size, roi, ("left", "right")[side], band)
+            share = frame_coverage(K, size, roi, S)
+            if share is not None:
+                frame[i] = share
+        out["images"] *= frame[:NUM_SOURCES, None]
+        out[FRAME_KEY] = frame
     return out
 
 
-__all__ = ["KEYS", "TargetConfig", "model_inputs", "view_heatmaps"]
+__all__ = ["KEYS", "FRAME_KEY", "EDGE_CUT_STREAM", "EDGE_CUT_BAND", "TargetConfig", "model_inputs", "view_heatmaps"]

@@ -10,6 +10,7 @@ the keys, shapes and dtypes of :data:`training.data.targets.KEYS`, plus ``index`
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ class MultiViewDataset(torch.utils.data.Dataset):
     Args:
         root: dataset folder (``dataset.json``).
         split: split name.
-        targets: heatmap and near/far settings.
+        targets: heatmap, near/far and frame padding settings (frame padding: synthetic data only, below).
         max_open_shards: shards kept memory-mapped per process.
     """
 
@@ -33,6 +34,10 @@ class MultiViewDataset(torch.utils.data.Dataset):
                  max_open_shards: int = 16) -> None:
         self.split = ShardedSplit(root, split, max_open_shards=max_open_shards)
         self.targets = targets or TargetConfig()
+        if self.targets.frame_padding and self.split.manifest.get("source") != "synthetic":
+            # Recorded crops (ZJU-MoCap) are cut from the real frames by the runtime's own maps, lens included
+            # (zju_samples.py): they hold the padding already, where a pinhole redo would misplace its edge.
+            self.targets = replace(self.targets, frame_padding=False, edge_cut=0.0)
         self.resolution = self.split.resolution
         self.view_names = self.split.view_names
 
@@ -40,7 +45,7 @@ class MultiViewDataset(torch.utils.data.Dataset):
         return len(self.split)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        arrays = model_inputs(self.split.arrays(index), self.resolution, self.targets)
+        arrays = model_inputs(self.split.arrays(index), self.resolution, self.targets, index=int(index) % len(self))
         out = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in arrays.items()}
         out["index"] = torch.tensor(int(index) % len(self), dtype=torch.int64)
         return out
