@@ -40,7 +40,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
-from ghnerf_runtime.config import PICK_SUBJECT_RULES, EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
 
 #: A reported joint this close to a person's is theirs (m).
@@ -75,7 +75,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
     """Counts over every pair with both people in view (the first ``alone`` pairs of each scene show the first
     person only and are not counted): joints reported, at the first person's, the second's, neither, and their
     distances from the nearer person's (``nearer_mm``, summed; a model's error beside a mix-up); pairs flagged
-    ``several_people``; scenes whose pairs followed the first person, the second, and those that followed one
+    ``several_people``, their joints and those joints' summed distances (``flagged_joints``, ``flagged_mm``); scenes whose pairs followed the first person, the second, and those that followed one
     person throughout (``stable``: every pair that reports joints has most of them at the same person, none
     at the other). ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each
     at the other's place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
@@ -91,6 +91,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         config = replace(config, session=replace(config.session, model_dir=model_dir))
         session = load_session(config)  # once: every scene's estimator shares it
     counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "nearer_mm": 0.0, "flagged": 0,
+              "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0}
     counted = 0
     for seed in range(1, scenes + 1):
@@ -126,6 +127,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 nearer = np.minimum(np.linalg.norm(r.joints_3d - a, axis=-1), np.linalg.norm(r.joints_3d - b, axis=-1))
                 counts["nearer_mm"] += float(nearer[found].sum()) * 1000.0
                 counts["flagged"] += int(r.several_people)
+                if r.several_people:  # such a pair reports the pairings' triangulated joints, not the prior's
+                    counts["flagged_joints"] += int(found.sum())
+                    counts["flagged_mm"] += float(nearer[found].sum()) * 1000.0
                 counted += 1
                 at_a, at_b = int((found & near_a).sum()), int((found & near_b & ~near_a).sum())
                 if at_a or at_b:
@@ -207,6 +211,9 @@ def main(argv=None) -> int:
     ap.add_argument("--model-dir", metavar="DIR",
                     help="a trained model (this folder's, at the runtime's defaults) on the two people rendered "
                          "together, instead of the oracle's heatmaps")
+    ap.add_argument("--skeleton-prior", default=EstimatorConfig().joints3d.skeleton_prior,
+                    choices=SKELETON_PRIOR_MODES, help="joints3d.skeleton_prior (with --model-dir: off shows the "
+                                                       "triangulation's own error, what a flagged pair reports)")
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
@@ -230,19 +237,24 @@ def main(argv=None) -> int:
     if args.model_dir is not None:  # a model's own error puts some of one person's joints past NEAR_M too
         runs.insert(0, (0, False, f"reference: the first person alone, {args.pairs * args.scenes} pairs "
                                   f"({args.scenes} scenes)"))
-    config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
+    config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
+                                              skeleton_prior=args.skeleton_prior))
     for alone, second, what in runs:
         counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places, args.model_dir,
                                 second)
         n = max(counts["reported"], 1)
         where = "" if args.places == PLACES else " at " + " and ".join(f"({x:g}, {z:g})" for x, z in args.places)
         maps = "the oracle's heatmaps" if args.model_dir is None else f"{args.model_dir} on the rendered pairs"
+        if args.skeleton_prior != EstimatorConfig().joints3d.skeleton_prior:
+            maps += f", skeleton_prior {args.skeleton_prior}"
+        flagged_mm = (f"the flagged pairs' {counts['flagged_mm'] / counts['flagged_joints']:.1f}"
+                      if counts["flagged_joints"] else "no flagged pair's joints")
         print(f"{what}{where}{', swapped' if args.swap else ''}, {maps}, the defaults, pick_subject "
               f"{args.pick_subject}: "
               f"{counts['reported'] / pairs:.1f} joints reported per pair; of them {counts['first'] / n:.0%} at the "
               f"first person's, {counts['second'] / n:.0%} at the second's, {counts['neither'] / n:.0%} at neither "
-              f"(> {NEAR_M * 100:.0f} cm from both); {counts['nearer_mm'] / n:.1f} mm from the nearer person's (mean); "
-              f"{counts['flagged'] / pairs:.0%} of pairs flagged several_people; "
+              f"(> {NEAR_M * 100:.0f} cm from both); {counts['nearer_mm'] / n:.1f} mm from the nearer person's (mean; "
+              f"{flagged_mm}); {counts['flagged'] / pairs:.0%} of pairs flagged several_people; "
               f"scenes following the first person {counts['followed_first']}, the second {counts['followed_second']}, "
               f"one person throughout {counts['stable']} of {args.scenes}")
     return 0
