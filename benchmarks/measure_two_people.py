@@ -17,7 +17,10 @@ rule, nobody without a track).
 
 With ``--model-dir`` the heatmaps are instead a trained model's (the folder's, at the runtime's defaults) on the
 two people rendered together (``drivers.sim.render_people``: each person by their own renderer over the first
-person's room, the nearer one's pixel where they overlap), the same figures printed (since session 55).
+person's room, the nearer one's pixel where they overlap), the same figures printed (since session 55), after a
+reference row: the first person alone on the same scenes (a model's own error puts some joints past 5 cm). Each
+row also gives the reported joints' mean distance from the nearer person's, and the flagged pairs' alone;
+``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are its pairings').
 
 With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
 folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghnerf-bench runtime``'s,
@@ -71,18 +74,19 @@ PLACES = ((-0.5, 3.0), (0.5, 3.4))
 
 
 def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
-            places: tuple = PLACES, model_dir: str | None = None, second: bool = True) -> tuple[dict[str, int], int]:
+            places: tuple = PLACES, model_dir: str | None = None,
+            second: bool = True) -> tuple[dict[str, float], int]:
     """Counts over every pair with both people in view (the first ``alone`` pairs of each scene show the first
     person only and are not counted): joints reported, at the first person's, the second's, neither, and their
     distances from the nearer person's (``nearer_mm``, summed; a model's error beside a mix-up); pairs flagged
-    ``several_people``, their joints and those joints' summed distances (``flagged_joints``, ``flagged_mm``); scenes whose pairs followed the first person, the second, and those that followed one
-    person throughout (``stable``: every pair that reports joints has most of them at the same person, none
-    at the other). ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each
-    at the other's place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
+    ``several_people``, their joints and those joints' summed distances (``flagged_joints``, ``flagged_mm``);
+    scenes whose pairs followed the first person, the second, and those that followed one person throughout
+    (``stable``: every pair that reports joints has most of them at the same person, none at the other).
+    ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each at the other's
+    place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
     two people rendered together (``drivers.sim.render_people``) instead of the oracle. ``second``: False shows
     the first person alone throughout (the reference: how many of one person's joints a model puts within
-    :data:`NEAR_M` of the truth). Returns
-    ``(counts, pairs counted)``."""
+    :data:`NEAR_M` of the truth). Returns ``(counts, pairs counted)``."""
     import drivers.sim as sim
 
     rig = sim.RigPlacement().build()
