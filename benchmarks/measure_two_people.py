@@ -1,6 +1,7 @@
 """Two people in the working volume: whose joints does the runtime report?
 
     .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10] [--pick-subject centre_line]
+    .venv/bin/python benchmarks/measure_two_people.py --model-dir models [--scenes 8] [--pairs 10] [--places ...]
     .venv/bin/python benchmarks/measure_two_people.py --one-person-model models [--sequences 30] [--frames 10]
     .venv/bin/python benchmarks/measure_two_people.py --calibration 0,2,-2 [--axis pan] [--scenes 4] [--pairs 10]
 
@@ -14,6 +15,13 @@ triangulated from one person's peak in one view and the other's in the other), a
 followed: a pair's person is the one most of its joints are at, and a scene is stable when every pair that
 reports joints has the same person. ``--pick-subject`` sets ``joints3d.pick_subject`` (``none``: session 53's
 rule, nobody without a track).
+
+With ``--model-dir`` the heatmaps are instead a trained model's (the folder's, at the runtime's defaults) on the
+two people rendered together (``drivers.sim.render_people``: each person by their own renderer over the first
+person's room, the nearer one's pixel where they overlap), the same figures printed (since session 55), after a
+reference row: the first person alone on the same scenes (a model's own error puts some joints past 5 cm). Each
+row also gives the reported joints' mean distance from the nearer person's, and the flagged pairs' alone;
+``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are its pairings').
 
 With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
 folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghnerf-bench runtime``'s,
@@ -41,7 +49,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
-from ghnerf_runtime.config import PICK_SUBJECT_RULES, EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
 
 #: A reported joint this close to a person's is theirs (m).
@@ -101,33 +109,50 @@ PLACES = ((-0.5, 3.0), (0.5, 3.4))
 
 
 def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
-            places: tuple = PLACES) -> tuple[dict[str, int], int]:
+            places: tuple = PLACES, model_dir: str | None = None,
+            second: bool = True) -> tuple[dict[str, float], int]:
     """Counts over every pair with both people in view (the first ``alone`` pairs of each scene show the first
-    person only and are not counted): joints reported, at the first person's, the second's, neither; pairs flagged
-    ``several_people``; scenes whose pairs followed the first person, the second, and those that followed one
-    person throughout (``stable``: every pair that reports joints has most of them at the same person, none
-    at the other). ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each
-    at the other's place. Returns ``(counts, pairs counted)``."""
+    person only and are not counted): joints reported, at the first person's, the second's, neither, and their
+    distances from the nearer person's (``nearer_mm``, summed; a model's error beside a mix-up); pairs flagged
+    ``several_people``, their joints and those joints' summed distances (``flagged_joints``, ``flagged_mm``);
+    scenes whose pairs followed the first person, the second, and those that followed one person throughout
+    (``stable``: every pair that reports joints has most of them at the same person, none at the other).
+    ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each at the other's
+    place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
+    two people rendered together (``drivers.sim.render_people``) instead of the oracle. ``second``: False shows
+    the first person alone throughout (the reference: how many of one person's joints a model puts within
+    :data:`NEAR_M` of the truth). Returns ``(counts, pairs counted)``."""
     import drivers.sim as sim
 
     rig = sim.RigPlacement().build()
-    counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "flagged": 0,
+    session = None
+    if model_dir is not None:
+        config = replace(config, session=replace(config.session, model_dir=model_dir))
+        session = load_session(config)  # once: every scene's estimator shares it
+    counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "nearer_mm": 0.0, "flagged": 0,
+              "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0}
     counted = 0
     for seed in range(1, scenes + 1):
         here = places[::-1] if swap else places
         first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=here[0]))
-        second = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=here[1]))
-        oracle = TwoPeopleOracle(edge128_contract())
+        other = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=here[1]))
+        oracle = TwoPeopleOracle(edge128_contract()) if session is None else None
         whose: list[int] = []  # each reporting pair's person: 0 the first, 1 the second
         mixed = False  # a pair reported joints at both people
-        with Estimator(oracle, rig, config) as est:
+        with Estimator(oracle or session, rig, config) as est:
             for i in range(alone + pairs):
                 t = i / 30.0
-                a, b = first.joints_3d(t), second.joints_3d(t)
-                oracle.set_people(a) if i < alone else oracle.set_people(a, b)
-                # the frames only pass the frame check here: the oracle's heatmaps come from the joints
-                images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+                a, b = first.joints_3d(t), other.joints_3d(t)
+                together = second and i >= alone
+                if oracle is not None:
+                    oracle.set_people(a, b) if together else oracle.set_people(a)
+                    # the frames only pass the frame check here: the oracle's heatmaps come from the joints
+                    images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+                elif not together:
+                    images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
+                else:  # the model sees both: each person over the first's room, the nearer one's pixel in front
+                    images = tuple(sim.render_people((first, other), c, t) for c in rig.pair)
                 r = est.estimate(images, timestamp_s=t)
                 if i < alone:
                     continue
@@ -138,7 +163,12 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 counts["first"] += int((found & near_a).sum())
                 counts["second"] += int((found & near_b & ~near_a).sum())
                 counts["neither"] += int((found & ~near_a & ~near_b).sum())
+                nearer = np.minimum(np.linalg.norm(r.joints_3d - a, axis=-1), np.linalg.norm(r.joints_3d - b, axis=-1))
+                counts["nearer_mm"] += float(nearer[found].sum()) * 1000.0
                 counts["flagged"] += int(r.several_people)
+                if r.several_people:  # such a pair reports the pairings' triangulated joints, not the prior's
+                    counts["flagged_joints"] += int(found.sum())
+                    counts["flagged_mm"] += float(nearer[found].sum()) * 1000.0
                 counted += 1
                 at_a, at_b = int((found & near_a).sum()), int((found & near_b & ~near_a).sum())
                 if at_a or at_b:
@@ -282,6 +312,12 @@ def main(argv=None) -> int:
     ap.add_argument("--places", type=_places, default=PLACES, metavar="X0,Z0,X1,Z1",
                     help="where the first and the second person stand (rig frame, metres; default "
                          f"{','.join(f'{v:g}' for p in PLACES for v in p)})")
+    ap.add_argument("--model-dir", metavar="DIR",
+                    help="a trained model (this folder's, at the runtime's defaults) on the two people rendered "
+                         "together, instead of the oracle's heatmaps")
+    ap.add_argument("--skeleton-prior", default=EstimatorConfig().joints3d.skeleton_prior,
+                    choices=SKELETON_PRIOR_MODES, help="joints3d.skeleton_prior (with --model-dir: off shows the "
+                                                       "triangulation's own error, what a flagged pair reports)")
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
@@ -325,20 +361,31 @@ def main(argv=None) -> int:
         print(f"passes by joints shown twice in both views at {EstimatorConfig().joints3d.second_person_ratio}: "
               f"{shown} ({m['passes']} passes)")
         return 0
-    runs = [(0, f"{args.pairs * args.scenes} pairs of two people ({args.scenes} scenes)")]
+    runs = [(0, True, f"{args.pairs * args.scenes} pairs of two people ({args.scenes} scenes)")]
     if args.alone:
-        runs.append((args.alone, f"the second person joining after {args.alone} pairs of the first alone, the next "
-                                 f"{args.pairs * args.scenes} pairs"))
-    config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
-    for alone, what in runs:
-        counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places)
+        runs.append((args.alone, True, f"the second person joining after {args.alone} pairs of the first alone, the "
+                                       f"next {args.pairs * args.scenes} pairs"))
+    if args.model_dir is not None:  # a model's own error puts some of one person's joints past NEAR_M too
+        runs.insert(0, (0, False, f"reference: the first person alone, {args.pairs * args.scenes} pairs "
+                                  f"({args.scenes} scenes)"))
+    config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
+                                              skeleton_prior=args.skeleton_prior))
+    for alone, second, what in runs:
+        counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places, args.model_dir,
+                                second)
         n = max(counts["reported"], 1)
         where = "" if args.places == PLACES else " at " + " and ".join(f"({x:g}, {z:g})" for x, z in args.places)
-        print(f"{what}{where}{', swapped' if args.swap else ''}, the oracle's heatmaps, the defaults, pick_subject "
+        maps = "the oracle's heatmaps" if args.model_dir is None else f"{args.model_dir} on the rendered pairs"
+        if args.skeleton_prior != EstimatorConfig().joints3d.skeleton_prior:
+            maps += f", skeleton_prior {args.skeleton_prior}"
+        flagged_mm = (f"the flagged pairs' {counts['flagged_mm'] / counts['flagged_joints']:.1f}"
+                      if counts["flagged_joints"] else "no flagged pair's joints")
+        print(f"{what}{where}{', swapped' if args.swap else ''}, {maps}, the defaults, pick_subject "
               f"{args.pick_subject}: "
               f"{counts['reported'] / pairs:.1f} joints reported per pair; of them {counts['first'] / n:.0%} at the "
               f"first person's, {counts['second'] / n:.0%} at the second's, {counts['neither'] / n:.0%} at neither "
-              f"(> {NEAR_M * 100:.0f} cm from both); {counts['flagged'] / pairs:.0%} of pairs flagged several_people; "
+              f"(> {NEAR_M * 100:.0f} cm from both); {counts['nearer_mm'] / n:.1f} mm from the nearer person's (mean; "
+              f"{flagged_mm}); {counts['flagged'] / pairs:.0%} of pairs flagged several_people; "
               f"scenes following the first person {counts['followed_first']}, the second {counts['followed_second']}, "
               f"one person throughout {counts['stable']} of {args.scenes}")
     return 0

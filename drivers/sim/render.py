@@ -244,3 +244,22 @@ def _cone_normal(p: np.ndarray, body: PosedBody, i: int) -> tuple[np.ndarray, np
     side = s * w + c * radial / np.maximum(q, 1e-12)
     n = np.where((h < ra * s)[:, None], ap, np.where((h > length + rb * s)[:, None], p - b, side))
     return n, h / length
+
+
+def composite_nearest(images, depths) -> np.ndarray:
+    """People rendered apart (one :class:`BodyRenderer` each, same camera), as one image: each pixel is the layer's
+    whose surface is nearest there (``depths``: each layer's ``CameraTruth.depth``, ``inf`` where it shows only
+    its background), so a nearer person hides a farther one; where no layer shows anyone, the first layer's pixel
+    (its room). ``images``: ``(H, W, C)`` arrays of one shape and dtype; returns a new one."""
+    images, depths = list(images), list(depths)
+    if not images or len(images) != len(depths):
+        raise SimConfigError("composite_nearest", f"needs one depth map per image and at least one image, got "
+                             f"{len(images)} images and {len(depths)} depth maps")
+    shape = images[0].shape
+    for i, (image, depth) in enumerate(zip(images, depths)):
+        if image.shape != shape or image.dtype != images[0].dtype or np.shape(depth) != shape[:2]:
+            raise SimConfigError(f"composite_nearest[{i}]", f"image {image.shape} {image.dtype} and depth "
+                                 f"{np.shape(depth)} do not match the first image's {shape} {images[0].dtype}")
+    # argmin keeps the first layer on ties, which is every background pixel (all inf)
+    nearest = np.argmin(np.stack([np.asarray(d) for d in depths]), axis=0)
+    return np.take_along_axis(np.stack(images), nearest[None, :, :, None], axis=0)[0]

@@ -24,7 +24,7 @@ from drivers.sim.background import RoomStyle
 from drivers.sim.body import BodyModel, PosedBody
 from drivers.sim.errors import SimConfigError
 from drivers.sim.motions import MOTION_NAMES, Motion, MotionParams, make_motion
-from drivers.sim.render import BodyRenderer, Lighting
+from drivers.sim.render import BodyRenderer, Lighting, composite_nearest
 from drivers.sim.retarget import BvhMotion
 from drivers.sim.rotations import rot_y
 from drivers.sim.sensor import SensorModel
@@ -207,6 +207,20 @@ class SimScene:
         """Render several cameras at one time; the pose is computed once."""
         self.posed(t)
         return [self.render(cam, t, with_truth=with_truth) for cam in cameras]
+
+
+def render_people(scenes: Sequence[SimScene], camera: Camera, t: float) -> np.ndarray:
+    """Several people in one room: each scene's person rendered by its own renderer (its own body and look), put
+    together per pixel by depth (the nearer person's pixel where two overlap, :func:`composite_nearest`) over the
+    first scene's room, and captured by the first scene's sensor (its noise seed). ``(H, W, 3)`` uint8 BGR, as
+    :meth:`SimScene.render`. The other scenes' rooms and sensors are not used; no ground truth (each scene's
+    :meth:`SimScene.joints_3d` is its person's)."""
+    if not scenes:
+        raise SimConfigError("render_people", "needs at least one scene")
+    layers = [scene.renderer.render(scene.posed(t), camera) for scene in scenes]
+    radiance = composite_nearest([image for image, _ in layers], [truth.depth for _, truth in layers])
+    first = scenes[0].config
+    return first.sensor.capture(radiance, first.sensor.rng(int(first.seed), camera.name, float(t)))
 
 
 def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Sequence[str] = MOTION_NAMES,

@@ -336,6 +336,19 @@ def test_measure_two_people_calibration(capsys, monkeypatch):
     assert [line[3] for line in lines] == ["0", "1"], out  # the 2 degree pan's feet below the floor
 
 
+def test_measure_two_people_through_a_model(model, capsys, monkeypatch):
+    # the trained model's rows of docs/runtime.md ("Two people in the working volume") come from this mode; the tiny
+    # model finds nobody, so only the rows and their order are checked
+    out = run_script("measure_two_people", "--model-dir", model, "--scenes", "1", "--pairs", "1", "--alone", "1",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^(reference: the first person alone, 1 pairs|1 pairs of two people|the second person joining "
+                      r"after 1 pairs of the first alone, the next 1 pairs)[ ,].* on the rendered pairs, the "
+                      r"defaults, pick_subject centre_line: [\d.]+ joints reported per pair; .* mm from the nearer "
+                      r"person's \(mean; [^)]*\); \d+% of pairs flagged several_people; ", out, re.M)
+    assert rows == ["reference: the first person alone, 1 pairs", "1 pairs of two people",
+                    "the second person joining after 1 pairs of the first alone, the next 1 pairs"], out
+
+
 def test_measure_two_people_one_person(model, capsys, monkeypatch):
     # the one-person figures of docs/runtime.md ("Two people in the working volume") come from this mode
     out = run_script("measure_two_people", "--one-person-model", model, *SIZES, capsys=capsys, monkeypatch=monkeypatch)

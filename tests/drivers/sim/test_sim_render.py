@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from drivers.sim import Lighting, RigPlacement, RoomStyle, SceneConfig, SensorModel, SimScene
+from drivers.sim import Lighting, RigPlacement, RoomStyle, SceneConfig, SensorModel, SimConfigError, SimScene
 from drivers.sim.demo import main
 from ghnerf_runtime.geometry import Camera, intrinsics_from_fov, look_at
 
@@ -75,3 +75,40 @@ def test_demo_writes_a_pair(tmp_path, capsys):
     assert image.shape == (480, 1280, 3)
     printed = capsys.readouterr().out
     assert "RBigToe" in printed and "wrote" in printed
+
+
+def test_composite_nearest_the_nearer_layer_wins_and_the_first_keeps_the_room():
+    from drivers.sim.render import composite_nearest
+
+    room, person_a, person_b = (np.full((2, 3, 3), v, np.float32) for v in (0.1, 0.5, 0.9))
+    inf = np.inf
+    depth_a = np.array([[2.0, 2.0, inf], [inf, 3.0, inf]], np.float32)
+    depth_b = np.array([[3.0, inf, 2.5], [inf, 2.5, inf]], np.float32)
+    image_a = np.where(np.isfinite(depth_a)[..., None], person_a, room)
+    image_b = np.where(np.isfinite(depth_b)[..., None], person_b, room + 0.05)  # its own room, never shown
+    out = composite_nearest([image_a, image_b], [depth_a, depth_b])
+    expected = np.array([[0.5, 0.5, 0.9],    # both (A nearer), A only, B only
+                         [0.1, 0.9, 0.1]])   # nobody (the first's room), both (B nearer), nobody
+    np.testing.assert_array_equal(out[..., 0], expected.astype(np.float32))
+    with pytest.raises(SimConfigError, match=r"composite_nearest\[1\]"):
+        composite_nearest([image_a, image_b[:, :2]], [depth_a, depth_b[:, :2]])
+
+
+def test_render_people_shows_each_person_where_only_they_are_and_the_nearer_where_both(cam):
+    from drivers.sim import render_people
+
+    near = SimScene(_config(position_xz=(-0.2, 2.8)))
+    far = SimScene(SceneConfig(seed=9, motion="stand", position_xz=(0.2, 3.6), sensor=SensorModel(read_noise=0.0)))
+    both = render_people([near, far], cam, 0.0)
+    own_near, truth_near = near.render(cam, 0.0)
+    own_far, truth_far = far.renderer.render(far.posed(0.0), cam)
+    # the far person through the near scene's sensor (exposure and noise seed), as render_people captures them
+    own_far = near.config.sensor.capture(own_far, near.config.sensor.rng(8, cam.name, 0.0))
+    only_near, only_far = truth_near.mask & ~truth_far.mask, truth_far.mask & ~truth_near.mask
+    overlap = truth_near.mask & truth_far.mask
+    assert only_near.sum() > 100 and only_far.sum() > 100 and overlap.sum() > 100  # the places make all three
+    np.testing.assert_array_equal(both[only_near], own_near[only_near])
+    np.testing.assert_array_equal(both[only_far], own_far[only_far])
+    np.testing.assert_array_equal(both[overlap], own_near[overlap])  # the nearer one hides the other
+    nobody = ~truth_near.mask & ~truth_far.mask
+    np.testing.assert_array_equal(both[nobody], own_near[nobody])  # the first scene's room
