@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from benchmarks.measure_two_people import NEAR_M, FilmedTwoPeopleOracle, TwoPeopleOracle
-from benchmarks.bench_runtime_common import edge128_contract
+from benchmarks.bench_runtime_common import OracleSession, edge128_contract
 from benchmarks.measure_calibration_drift import turned
 from firmware_host.daemon.calibration_watch import FloorWatch
-from ghnerf_runtime.body25 import FLOOR_JOINTS
+from ghnerf_runtime.body25 import FLOOR_JOINTS, JOINT_NAMES
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, config_from_dict
 from ghnerf_runtime.estimator import Estimator
 from ghnerf_runtime import two_people as T
@@ -315,12 +315,13 @@ class _PeaksPrior:
         return SkeletonEstimate(points, np.where(ok, 0.02, np.inf), ok)
 
 
-def _two_from_the_first_pair(config: EstimatorConfig, prior, pairs: int = 4):
-    """``pairs`` pairs of the NEAR_THE_LINE people from the first pair through the oracle with ``prior``."""
+def _two_from_the_first_pair(config: EstimatorConfig, prior, pairs: int = 4, oracle: TwoPeopleOracle | None = None):
+    """``pairs`` pairs of the NEAR_THE_LINE people from the first pair through ``oracle`` (default: the
+    two-people oracle) with ``prior``."""
     rig = sim.RigPlacement().build()
     first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=NEAR_THE_LINE[0]))
     other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=NEAR_THE_LINE[1]))
-    oracle = TwoPeopleOracle(edge128_contract())
+    oracle = TwoPeopleOracle(edge128_contract()) if oracle is None else oracle
     oracle.skeleton_prior = prior
     results, last_call = [], []
     with Estimator(oracle, rig, config) as est:
@@ -360,6 +361,54 @@ def test_two_people_from_the_first_pair_with_the_skeleton_prior_report_the_prior
         assert np.array_equal(~r.missing, fed & ~r.missing)
         assert np.abs(r.joints_3d[~r.missing] - prior.answers[k][~r.missing]).max() < 1e-5  # (float32)
         assert r.prior_disagreement_m == pytest.approx(0.01, abs=1e-6)
+
+
+class _SubjectHiddenOracle(TwoPeopleOracle):
+    """The two-people oracle where the first person shows no peak of ``hidden`` joints in view 0 (behind the other
+    person's arm, say): that view's map of them holds the second person's peak alone."""
+
+    def __init__(self, contract, hidden: tuple[int, ...]) -> None:
+        super().__init__(contract)
+        self.hidden = hidden
+
+    def _source_heatmaps(self, src_P: np.ndarray) -> np.ndarray:
+        maps = []
+        for k, joints in enumerate(self.people):
+            self.truth = joints
+            self.visible = np.ones((len(src_P), len(joints)), bool)
+            if k == 0:
+                self.visible[0, list(self.hidden)] = False
+            maps.append(OracleSession._source_heatmaps(self, src_P))
+        self.truth, self.visible = self.people[0], None
+        return np.max(maps, axis=0)
+
+
+def test_a_joint_the_subject_s_prior_places_without_a_pairing_has_no_2d_joint():
+    """A flagged pair's joint that no pairing of the subject's gives (its peak hidden in one view, where the map
+    holds the other person's alone) is placed by the prior, and reported in 3D only: neither view's peak of it is
+    the subject's known one (each camera's decoded peak would be: in view 0 the other person's). Before session 55's
+    subject prior it was missing (no pairing, and the track, the reported joints, never had it)."""
+    wrist = JOINT_NAMES.index("LWrist")
+
+    class Truth(_PeaksPrior):  # sure of the first person's every joint, whatever it is fed
+        def estimate(self, uv_model, confidence, valid, P, flip_test=True):
+            from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+            a = oracle.people[0]
+            return SkeletonEstimate(a + self.shift, np.full(len(a), 0.02), np.ones(len(a), bool))
+
+    oracle = _SubjectHiddenOracle(edge128_contract(), (wrist,))
+    rig, results, _ = _two_from_the_first_pair(EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on")),
+                                               Truth(), pairs=4, oracle=oracle)
+    for r, a, b in results:
+        assert r.several_people and not r.missing[wrist]  # placed by the prior
+        assert np.linalg.norm(r.joints_3d[wrist] - a[wrist]) < NEAR_M
+        assert r.num_found >= 20
+        for cam in rig.pair:
+            assert r.missing_2d[cam.name][wrist] and r.confidence_2d[cam.name][wrist] == 0.0
+            shown = ~r.missing_2d[cam.name]
+            assert shown.sum() >= 20
+            off = np.linalg.norm(r.joints_2d[cam.name] - cam.project(a)[0], axis=-1)
+            assert off[shown].max() < 1.0, (cam.name, np.flatnonzero(shown & (off >= 1.0)))
 
 
 def test_a_flagged_pair_whose_subject_prior_disagrees_reports_the_subject_s_pairings():
