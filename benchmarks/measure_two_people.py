@@ -21,7 +21,8 @@ two people rendered together (``drivers.sim.render_people``: each person by thei
 person's room, the nearer one's pixel where they overlap), the same figures printed (since session 55), after a
 reference row: the first person alone on the same scenes (a model's own error puts some joints past 5 cm). Each
 row also gives the reported joints' mean distance from the nearer person's, and the flagged pairs' alone;
-``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are its pairings').
+``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are then its pairings'; with
+the prior, since session 55, the prior's fed the subject's own peaks).
 
 With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
 folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghnerf-bench runtime``'s,
@@ -166,7 +167,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 nearer = np.minimum(np.linalg.norm(r.joints_3d - a, axis=-1), np.linalg.norm(r.joints_3d - b, axis=-1))
                 counts["nearer_mm"] += float(nearer[found].sum()) * 1000.0
                 counts["flagged"] += int(r.several_people)
-                if r.several_people:  # such a pair reports the pairings' triangulated joints, not the prior's
+                if r.several_people:  # the subject's alone: its pairings' (the prior's fed their peaks, with it)
                     counts["flagged_joints"] += int(found.sum())
                     counts["flagged_mm"] += float(nearer[found].sum()) * 1000.0
                 counted += 1
@@ -317,7 +318,8 @@ def main(argv=None) -> int:
                          "together, instead of the oracle's heatmaps")
     ap.add_argument("--skeleton-prior", default=EstimatorConfig().joints3d.skeleton_prior,
                     choices=SKELETON_PRIOR_MODES, help="joints3d.skeleton_prior (with --model-dir: off shows the "
-                                                       "triangulation's own error, what a flagged pair reports)")
+                                                       "triangulation's own error, a flagged pair's pairings "
+                                                       "unrefined)")
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")

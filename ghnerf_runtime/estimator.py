@@ -157,7 +157,8 @@ class PairResult:
             pair that has no subject to view: a frame rejected, or nobody found).
         prior_disagreement_m: the skeleton prior's distance from the triangulation (the median over the
             triangulated joints, :func:`ghnerf_runtime.skeleton_prior.disagreement_m`); ``None`` where the prior
-            did not run or too few joints were triangulated to tell.
+            did not run or too few joints were triangulated to tell. A ``several_people`` pair whose subject was
+            picked or tracked measures the prior fed that subject's peaks against the subject's pairings.
         prior_fallback: the prior ran but its skeleton disagreed with the triangulation by more than
             ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior).
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
@@ -167,7 +168,9 @@ class PairResult:
             follows (none with ``pick_subject: none``; docs/runtime.md, "Two people in the working volume").
             With the triangulation each is the pairing of the views' peaks and runner-ups nearest the track (or
             the subject's, where the two people are separated), and each camera's 2D joint the peak it came
-            from.
+            from; with the skeleton prior (since session 55) the 3D joints are then the prior's, fed those peaks
+            alone (:meth:`Estimator._subject_prior`), and a joint the prior places without a pairing of the
+            subject's has no 2D joint (neither view's peak of it is known to be the subject's).
         single_view: the camera whose 2D joints alone are the pair's answer (``frame_check.single_view_2d``):
             a person seen by that camera only, or the other camera's frame rejected. Every 3D joint is then
             missing, and so is every 2D joint of the other camera. ``None``: a pair with 3D joints, or nobody.
@@ -927,6 +930,13 @@ class Estimator:
             elif nobody:
                 joints_2d, conf_2d, missing_2d, seen_by = self._seen_by_one_view(env, kp, uv_model, crops,
                                                                                  (joints_2d, conf_2d, missing_2d))
+        if several and not nobody and self.skeleton_prior is not None and chosen is not None:
+            j3 = self._subject_prior(j3, subject, chosen, crops, regions)
+            if not self._prior_check[1]:
+                # the prior places joints no pairing of the subject's found: neither view's peak of them is known
+                # to be the subject's
+                for name in missing_2d:
+                    missing_2d[name] = missing_2d[name] | ~subject.valid
         if several:
             # a camera's peak of a dropped joint may be the other person's: the 2D joints go with the 3D ones
             for name in joints_2d:
@@ -979,6 +989,22 @@ class Estimator:
                                    regions)
         return agreement.median_px, foot
 
+    def _subject_prior(self, reported: Joints3D, subject: Joints3D, chosen: tuple[Keypoints2D, np.ndarray],
+                       crops: list[Camera], regions: Regions) -> Joints3D:
+        """A ``several_people`` pair's joints from the skeleton prior fed the picked or tracked subject's own peaks:
+        in each view, the peak each of ``subject``'s joints was triangulated from (``chosen``, :meth:`_from_pairings`),
+        every other joint not decoded. The pair's decoded peaks, which :meth:`_joints_3d` fed it, are whichever
+        person's is the stronger in each view: its skeleton from them lies between the two people. The gates are
+        one person's (:meth:`_with_prior`, its disagreement measured against ``subject``), then the boxes; where the
+        prior disagrees, ``reported`` (the subject's pairings, as without this step) stands. Sets the pair's
+        ``_prior_check``; not ``_prior_follow``'s use: the track of two people follows what is reported."""
+        kp, uv_model = chosen
+        fed = replace(kp, valid=kp.valid & subject.valid[None])  # the decoded peak where no pairing was found
+        est = self._with_prior(subject, uv_model, fed, crops)
+        if self._prior_check[1]:
+            return reported
+        return self._gate_to_boxes(est, regions)
+
     def _several_people(self, kp: Keypoints2D) -> bool:
         """Two people in view: at least ``second_person_min_joints`` joints whose maps show a second peak of at
         least ``second_person_ratio`` of the first in both views. Each view's peak is then whichever person's is
@@ -1006,7 +1032,8 @@ class Estimator:
         pairings of peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D
         joints come from (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks); and
         the subject's joints that the peaks gave (those pairings'; with the skeleton prior the rest are the
-        prior's), which the presence gate counts with the prior as it counts the reported joints without it.
+        prior's, fed both people's peaks), which the presence gate counts with the prior as it counts the reported
+        joints without it, and which the prior is then fed alone (:meth:`_subject_prior`).
         ``cold_several`` (this pass refines this pair's cold pass, :meth:`_finish_pass`; where the subject is
         picked): ``False``, the track is a cold pass's that did not tell two people apart (both people's joints,
         mixed): picked as without a track; ``True``, the cold pass picked the subject from its coarse crop: split
