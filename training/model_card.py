@@ -470,4 +470,77 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     return "\n".join(L)
 
 
-__all__ = ["sha256", "hardware", "strict_json", "write_card", "render_markdown"]
+#: The metric keys of ``ghnerf-eval`` that score the model folder's skeleton prior (the only ones a new prior moves).
+PRIOR_METRIC_PREFIX = "skeleton_prior_"
+
+
+class CardUpdateError(ValueError):
+    """An eval report that cannot update a card: another dataset or split, or a model the card does not list."""
+
+
+def update_prior_metrics(card_dir: str | Path, eval_report: str | Path) -> list[Path]:
+    """Copy the ``skeleton_prior_*`` keys of a ``ghnerf-eval --out`` report into ``card_dir``'s ``metrics.json``,
+    ``metrics_<variant>.json`` and ``model_card.json``, and re-render ``MODEL_CARD.md``; returns the files written.
+
+    For a new skeleton prior beside unchanged graphs: only the prior's columns are rescored, so the card's other
+    figures keep the run that measured them (a full ``ghnerf-eval`` on another host moves int8 figures slightly).
+
+    Raises:
+        CardUpdateError: the report scored another dataset or split than the card's, or a model the card lacks.
+    """
+    card_dir, eval_report = Path(card_dir), Path(eval_report)
+    report = json.loads(eval_report.read_text())
+    card = json.loads((card_dir / "model_card.json").read_text())
+    scored, listed = (report.get("data"), report.get("split")), (card["data"]["path"], card["data"]["eval_split"])
+    if scored != listed:
+        raise CardUpdateError(f"{eval_report}: scored {scored[0]} ({scored[1]}), the card in {card_dir} "
+                              f"{listed[0]} ({listed[1]}): rerun ghnerf-eval on the card's dataset and split")
+    models = report.get("models") or {}
+    unknown = sorted(set(models) - set(card["metrics"]))
+    if not models or unknown:
+        raise CardUpdateError(f"{eval_report}: models {unknown or '(none)'} are not in {card_dir / 'model_card.json'} "
+                              f"(it lists {sorted(card['metrics'])})")
+    prior_keys = {label: {k: v for k, v in m.items() if k.startswith(PRIOR_METRIC_PREFIX)} for label, m in models.items()}
+    written = []
+    for path in [card_dir / "metrics.json", *sorted(card_dir.glob("metrics_*.json"))]:
+        if not path.is_file():
+            continue
+        doc = json.loads(path.read_text())
+        hit = [label for label in prior_keys if label in doc.get("models", {})]
+        for label in hit:
+            doc["models"][label].update(prior_keys[label])
+        if hit:
+            written.append(write_atomic(path, strict_json(doc)))
+    for label, keys in prior_keys.items():
+        card["metrics"][label].update(keys)
+    written.extend(write_card(card_dir, card))
+    return written
+
+
+__all__ = ["sha256", "hardware", "strict_json", "write_card", "render_markdown", "update_prior_metrics",
+           "CardUpdateError", "PRIOR_METRIC_PREFIX"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m training.model_card",
+                                 description="Rescore a model card's skeleton-prior columns from a ghnerf-eval report "
+                                             "(a new prior beside unchanged graphs).")
+    ap.add_argument("--card-dir", default="models", help="the folder with model_card.json (default models)")
+    ap.add_argument("--prior-metrics", required=True, metavar="EVAL_JSON",
+                    help="ghnerf-eval --out report of the card's dataset and split")
+    args = ap.parse_args(argv)
+    try:
+        written = update_prior_metrics(args.card_dir, args.prior_metrics)
+    except (OSError, KeyError, json.JSONDecodeError, CardUpdateError) as exc:
+        print(f"python -m training.model_card: error: {exc}", file=sys.stderr)
+        return 2
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
+
