@@ -216,13 +216,15 @@ class StepBatches(torch.utils.data.Dataset):
 def step_batches(ds, cfg: PretrainConfig, start: int):
     """``(images, heat)`` of the steps from ``start`` to ``cfg.iterations``, made ahead by ``cfg.loader_workers``
     processes (or here, one at a time, with none)."""
+    from training.data.torch_dataset import load_in_workers
+
     batches = StepBatches(ds, cfg)
     steps = range(start, cfg.iterations)
     if not cfg.loader_workers:
         return (batches[s] for s in steps)
-    return iter(torch.utils.data.DataLoader(batches, batch_size=None, sampler=steps, num_workers=cfg.loader_workers,
-                                            prefetch_factor=4, pin_memory=torch.cuda.is_available(),
-                                            worker_init_fn=_one_thread))
+    # a damaged sample read in a worker is raised here as the same DatasetError as in-process (one line, exit 2)
+    return load_in_workers(batches, batch_size=None, sampler=steps, num_workers=cfg.loader_workers, prefetch_factor=4,
+                           pin_memory=torch.cuda.is_available(), worker_init_fn=_one_thread)
 
 
 def _one_thread(_worker: int) -> None:

@@ -686,7 +686,9 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
 class Progress:
     """One status line: ``\\r``-updated on a terminal, one line per update otherwise (log files)."""
 
-    def __init__(self, total: int, start: int, stream=sys.stderr, enabled: bool = True):
+    def __init__(self, total: int, start: int, stream=None, enabled: bool = True):
+        # sys.stderr as it is now, not as it was when this module was imported (a redirected or closed stream)
+        stream = sys.stderr if stream is None else stream
         self.total, self.start, self.stream, self.enabled = total, start, stream, enabled
         self.t0 = time.monotonic()
         self.tty = hasattr(stream, "isatty") and stream.isatty()
