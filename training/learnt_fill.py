@@ -586,7 +586,14 @@ def _config_problem(cfg: FillTrainConfig) -> str | None:
 def _export_cli(args) -> int:
     import hashlib  # noqa: PLC0415
 
-    net = load_net(args.net)
+    try:  # every input read before anything is written: a bad --net or cache was a traceback (the caches' after
+        # the painter was written)
+        net = load_net(args.net)
+        calib = load_cache(args.calib_cache) if args.calib_cache is not None else None
+        val = load_cache(args.val_cache) if args.val_cache is not None else None
+    except ValueError as e:  # load_net's or a FillCacheError: the message names the file
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     # The checkpoint's own record; the score.json beside it lends its held-out rows only if it is this
     # net's (another run's may sit in the folder a net was copied into).
     trained = dict(net.trained)
@@ -607,10 +614,9 @@ def _export_cli(args) -> int:
               "train_views": trained.get("train_views"), "train_s": trained.get("seconds"),
               "hardware": trained.get("hardware"), "held_out": trained.get("rows")}
     outs = [out]
-    if args.calib_cache is not None:
-        outs.append(quantize_painter(out, out.with_suffix(".int8.onnx"), load_cache(args.calib_cache)))
-    if args.val_cache is not None:
-        val = load_cache(args.val_cache)
+    if calib is not None:
+        outs.append(quantize_painter(out, out.with_suffix(".int8.onnx"), calib))
+    if val is not None:
         if not report["held_out"]:  # no score.json of this net: the torch net's own figures on this cache
             report["held_out"] = score_rows(val, *paintings(net, val))
             report["held_out_cache"] = str(args.val_cache)

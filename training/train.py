@@ -913,16 +913,25 @@ def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> N
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 
 
+class RunFolderInUse(ConfigError, RuntimeError):
+    """Another live process holds the run folder's ``train.pid``. A ConfigError (of ``--out``), so the command
+    lines report it in one line with exit 2 (it was a bare RuntimeError: a traceback); still a RuntimeError for
+    the callers that caught it as one."""
+
+
 def refuse_live_lock(path: Path) -> None:
-    """One training process per run folder: refuse when ``path`` names another live process."""
-    if path.exists():
-        try:
-            pid = int(path.read_text().strip())
-            os.kill(pid, 0)
-            if pid != os.getpid():
-                raise RuntimeError(f"{path.parent}: another training process ({pid}) is using this run folder")
-        except (ValueError, ProcessLookupError, PermissionError):
-            pass  # stale lock
+    """One training process per run folder: refuse (:class:`RunFolderInUse`) when ``path`` names another live
+    process."""
+    if not path.exists():
+        return
+    try:
+        pid = int(path.read_text().strip())
+        os.kill(pid, 0)
+    except (ValueError, ProcessLookupError, PermissionError):
+        return  # stale lock
+    if pid != os.getpid():
+        raise RunFolderInUse(f"{path.parent}: another training process ({pid}) is using this run folder; wait for "
+                             "it or stop it, or give another --out")
 
 
 def take_lock(path: Path) -> None:
