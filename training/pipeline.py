@@ -1539,6 +1539,15 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(str(e))
     from training.model.config import ConfigError  # (lazy: it imports torch)
 
+    try:  # each variant's train config and pretraining config, --set / --pretrain-set applied: a mistyped key or a
+        # bad value was found by the train or pretrain stage, after the dataset (an hour on two cores) was made
+        for variant in cfg.variants:
+            train_inputs(cfg, VARIANTS[variant])
+            if pretrain_block(cfg, variant):
+                pretrain_inputs(cfg, variant)
+    except ConfigError as e:
+        ap.error(str(e))
+
     cfg.command = shlex.join(["python", "-m", "training.pipeline",
                               *_recipe_args(argv if argv is not None else sys.argv[1:]), *recipe_flag])
     try:

@@ -152,6 +152,11 @@ def test_painter_export_names_a_missing_net_or_cache_before_writing(tmp_path, ca
     (["--eval-limit", "-1"], "--eval-limit: must be at least 0 (0: every held-out scene), got -1"),
     (["--threads", "0"], "--threads: must be at least 1, got 0"),
     (["--freestyle-share", "2"], "--freestyle-share: must be a share from 0 to 1, got 2.0"),
+    # the train and pretraining configs: checked by the train / pretrain stage, after the dataset was made
+    (["--set", "itterations=3"], "itterations: unknown key for TrainConfig"),
+    (["--set", "lr=-1"], "lr: must be a positive number, got -1"),
+    (["--pretrain-set", "lr=-1"], "pretrain_human.lr: must be a finite number > 0, got -1"),
+    (["--pretrain-set", "loader_workers=-2"], "pretrain_human.loader_workers: must be >= 0, got -2"),
 ])
 def test_pipeline_refuses_out_of_range_numbers_before_any_stage(tmp_path, capsys, monkeypatch, more, says):
     """These were used hours in (the eval limit, the export's threads) or raised a traceback from the dataset's
