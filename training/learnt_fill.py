@@ -573,6 +573,7 @@ def _config_problem(cfg: FillTrainConfig) -> str | None:
         ("around_weight", cfg.around_weight >= 0 and math.isfinite(cfg.around_weight), "must be a finite number >= 0"),
         ("net.width", cfg.net.width >= 8 and cfg.net.width % 8 == 0, "must be a multiple of 8 (GroupNorm's groups)"),
         ("net.levels", cfg.net.levels >= 1, "must be at least 1"),
+        ("device", cfg.device in ("auto", "cpu", "cuda"), "must be auto, cpu or cuda"),  # (torch's RuntimeError)
         ("net.joint_sigma_px", cfg.net.joint_sigma_px > 0 and math.isfinite(cfg.net.joint_sigma_px),
          "must be a positive number"),
     )
@@ -693,6 +694,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.cmd == "cache" and args.joints and not args.model:  # cache_split's ValueError, a traceback
         ap.error("--joints: takes --model too (the model's picture is the one repainted)")
+    if getattr(args, "device", None) == "cuda" and not torch.cuda.is_available():  # pick_device's RuntimeError
+        ap.error("--device cuda: torch sees no GPU")
     # the cache, the training and the export take minutes to hours: where they go is settled first
     if args.cmd == "train":
         args.out = ready_output_arg(ap, args.out, "--out", kind="folder")
@@ -729,6 +732,8 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     if args.device:
         cfg = replace(cfg, device=args.device)
+    if cfg.device == "cuda" and not torch.cuda.is_available():  # (--set device=cuda: pick_device's RuntimeError)
+        ap.error("device cuda: torch sees no GPU")
     try:
         train, val = _held_out_pair(args.train_cache, args.val_cache, cfg)
     except FillCacheError as e:

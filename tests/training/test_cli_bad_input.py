@@ -192,3 +192,28 @@ def test_generate_names_an_out_that_is_a_file(tmp_path, caplog):
                  "--workers", "1"]) == 2
     assert f"{afile}: is a file; --out names the dataset folder" in caplog.text
     assert afile.read_text() == "x"
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["score", "--val-cache", "v.npz", "--net", "n.pt", "--device", "tpu"], "argument --device: invalid choice: 'tpu'"),
+    (["train", "--train-cache", "t.npz", "--val-cache", "v.npz", "--out", "{tmp}/r", "--device", "tpu"],
+     "argument --device: invalid choice: 'tpu'"),
+    (["train", "--train-cache", "t.npz", "--val-cache", "v.npz", "--out", "{tmp}/r", "--set", "device=tpu"],
+     "--set device: must be auto, cpu or cuda, got tpu"),
+])
+def test_the_fill_net_device_is_checked_before_anything_is_read(tmp_path, capsys, argv, says):
+    """``--device tpu`` was torch's RuntimeError (a traceback) once the caches were loaded."""
+    from training.learnt_fill import main
+
+    rc, err = run(main, [a.format(tmp=tmp_path) for a in argv], capsys)
+    assert rc == 2 and says in one_error_line(err)
+
+
+def test_fill_net_device_cuda_without_a_gpu_is_a_usage_error(tmp_path, capsys, monkeypatch):
+    import torch
+
+    from training.learnt_fill import main
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    rc, err = run(main, ["score", "--val-cache", "v.npz", "--net", "n.pt", "--device", "cuda"], capsys)
+    assert rc == 2 and "--device cuda: torch sees no GPU" in one_error_line(err)
