@@ -27,6 +27,7 @@ import numpy as np
 
 from ghnerf_runtime.body_proxy import ProxyTemplate, proxy_body, proxy_depth
 from ghnerf_runtime.geometry.camera import Camera
+from training.cli import at_least
 
 __all__ = ["ProxyTemplate", "proxy_body", "proxy_depth", "view_camera", "iou", "fit_scale", "proxy_scene", "tune"]
 
@@ -126,19 +127,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("command", choices=["tune", "score"])
     ap.add_argument("--data", required=True)
     ap.add_argument("--split", default="train")
-    ap.add_argument("--limit", type=int, default=32)
+    ap.add_argument("--limit", type=at_least(1), default=32)
     ap.add_argument("--joints", default=None, help="build from these joints (training.device_joints) instead of "
                                                    "the true ones")
-    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--rounds", type=at_least(1), default=2)
     args = ap.parse_args(argv)
+    from training.data.errors import DataError  # noqa: PLC0415
     from training.data.torch_dataset import MultiViewDataset  # noqa: PLC0415
+    from training.device_joints import JointsCacheError, load_joints  # noqa: PLC0415
 
-    ds = MultiViewDataset(args.data, split=args.split)
-    scenes = [{k: v.numpy() for k, v in ds[i].items()} for i in range(min(args.limit, len(ds)))]
-    if args.joints:
-        from training.device_joints import load_joints  # noqa: PLC0415
-
-        joints = load_joints(args.joints, len(scenes))
+    try:  # a missing dataset, split or joints cache: one line naming it (were tracebacks)
+        ds = MultiViewDataset(args.data, split=args.split)
+        scenes = [{k: v.numpy() for k, v in ds[i].items()} for i in range(min(args.limit, len(ds)))]
+        joints = load_joints(args.joints, len(scenes)) if args.joints else None
+    except (DataError, JointsCacheError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if joints is not None:
         scenes = [{**s, "joints_3d": joints[i], "joints_3d_valid": np.ones(25, bool)} for i, s in enumerate(scenes)]
     t0 = time.monotonic()
     if args.command == "tune":

@@ -20,6 +20,7 @@ if __name__ == "__main__":  # python -m: the arguments are parsed before torch l
 
     raise SystemExit(_cli_main())
 
+import pickle
 import sys
 from pathlib import Path
 
@@ -65,8 +66,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         ck = torch.load(str(src), map_location="cpu", weights_only=False)
+    # a file that is no torch checkpoint: pickle's and EOFError were tracebacks
+    except (OSError, RuntimeError, ValueError, EOFError, pickle.UnpicklingError) as e:
+        print(f"convert_norm: {src}: not a readable checkpoint ({type(e).__name__}: {e})", file=sys.stderr)
+        return 2
+    try:
+        if not isinstance(ck, dict):
+            raise ValueError(f"holds a {type(ck).__name__}, not a checkpoint dict")
         converted = to_scene_norm(ck)
-    except (OSError, RuntimeError, ValueError) as e:
+    except ValueError as e:
         print(f"convert_norm: {src}: {e}", file=sys.stderr)
         return 2
     dst.parent.mkdir(parents=True, exist_ok=True)

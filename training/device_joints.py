@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ghnerf_runtime.cli.output_path import ready_output_arg
+from training.cli import at_least
 from training.model_card import sha256, write_atomic
 
 
@@ -167,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--limit", type=int, default=0, help="first N scenes (0: all)")
     ap.add_argument("--model", default="models/ghnerf", help="a model folder with a skeleton prior")
     ap.add_argument("--precision", choices=["fp32", "int8"], default="int8")
-    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--threads", type=at_least(1), default=1)
     ap.add_argument("--truth", action="store_true", help="cache the dataset's true joints instead (an oracle)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args(argv)
@@ -175,12 +176,16 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--limit must be 0 (all scenes) or more, not {args.limit}")
     # a pass over every scene comes first: where its file goes (with the name savez writes) is settled now
     args.out = ready_output_arg(ap, args.out, "--out", suffix=".npz")
-    if args.truth:
-        cache_true_joints(args.data, args.split, args.out, args.limit)
-        return 0
-    try:
-        cache_joints(args.data, args.split, args.model, args.out, args.limit, args.precision, args.threads)
-    except (JointsCacheError, FileNotFoundError) as e:
+    from ghnerf_runtime.errors import RuntimeErrorBase  # noqa: PLC0415
+    from training.data.errors import DataError  # noqa: PLC0415
+    from training.evaluate import EvalInputError  # noqa: PLC0415
+
+    try:  # a missing dataset or split, a model folder without its graphs or prior: one line naming it (were tracebacks)
+        if args.truth:
+            cache_true_joints(args.data, args.split, args.out, args.limit)
+        else:
+            cache_joints(args.data, args.split, args.model, args.out, args.limit, args.precision, args.threads)
+    except (JointsCacheError, FileNotFoundError, DataError, EvalInputError, RuntimeErrorBase) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0

@@ -71,10 +71,13 @@ def main(argv: list[str] | None = None) -> int:
     from training.pipeline import early_prior_current
 
     job_path = Path(args.job)
-    job = json.loads(job_path.read_text())
+    try:  # a missing, cut or foreign job file: one line naming it (was a traceback)
+        job = json.loads(job_path.read_text())
+        prior = Path(job["prior_argv"][job["prior_argv"].index("--out") + 1])
+        human = Path(job["train_config"]["human_init"])
+    except (OSError, ValueError, KeyError, TypeError, IndexError) as e:  # (json's errors are ValueErrors)
+        ap.error(f"JOB {job_path}: not a readable {JOB_FILE} of the pipeline ({type(e).__name__}: {e})")
     folder = job_path.parent
-    prior = Path(job["prior_argv"][job["prior_argv"].index("--out") + 1])
-    human = Path(job["train_config"]["human_init"])
     if early_prior_current(folder, job["request"], human):  # a pipeline run again after a stop
         print(f"early prior: {prior} is up to date", file=sys.stderr)
         return 0

@@ -573,6 +573,7 @@ def _config_problem(cfg: FillTrainConfig) -> str | None:
         ("around_weight", cfg.around_weight >= 0 and math.isfinite(cfg.around_weight), "must be a finite number >= 0"),
         ("net.width", cfg.net.width >= 8 and cfg.net.width % 8 == 0, "must be a multiple of 8 (GroupNorm's groups)"),
         ("net.levels", cfg.net.levels >= 1, "must be at least 1"),
+        ("device", cfg.device in ("auto", "cpu", "cuda"), "must be auto, cpu or cuda"),  # (torch's RuntimeError)
         ("net.joint_sigma_px", cfg.net.joint_sigma_px > 0 and math.isfinite(cfg.net.joint_sigma_px),
          "must be a positive number"),
     )
@@ -586,7 +587,14 @@ def _config_problem(cfg: FillTrainConfig) -> str | None:
 def _export_cli(args) -> int:
     import hashlib  # noqa: PLC0415
 
-    net = load_net(args.net)
+    try:  # every input read before anything is written: a bad --net or cache was a traceback (the caches' after
+        # the painter was written)
+        net = load_net(args.net)
+        calib = load_cache(args.calib_cache) if args.calib_cache is not None else None
+        val = load_cache(args.val_cache) if args.val_cache is not None else None
+    except ValueError as e:  # load_net's or a FillCacheError: the message names the file
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     # The checkpoint's own record; the score.json beside it lends its held-out rows only if it is this
     # net's (another run's may sit in the folder a net was copied into).
     trained = dict(net.trained)
@@ -607,10 +615,9 @@ def _export_cli(args) -> int:
               "train_views": trained.get("train_views"), "train_s": trained.get("seconds"),
               "hardware": trained.get("hardware"), "held_out": trained.get("rows")}
     outs = [out]
-    if args.calib_cache is not None:
-        outs.append(quantize_painter(out, out.with_suffix(".int8.onnx"), load_cache(args.calib_cache)))
-    if args.val_cache is not None:
-        val = load_cache(args.val_cache)
+    if calib is not None:
+        outs.append(quantize_painter(out, out.with_suffix(".int8.onnx"), calib))
+    if val is not None:
         if not report["held_out"]:  # no score.json of this net: the torch net's own figures on this cache
             report["held_out"] = score_rows(val, *paintings(net, val))
             report["held_out_cache"] = str(args.val_cache)
@@ -687,6 +694,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.cmd == "cache" and args.joints and not args.model:  # cache_split's ValueError, a traceback
         ap.error("--joints: takes --model too (the model's picture is the one repainted)")
+    if getattr(args, "device", None) == "cuda" and not torch.cuda.is_available():  # pick_device's RuntimeError
+        ap.error("--device cuda: torch sees no GPU")
     # the cache, the training and the export take minutes to hours: where they go is settled first
     if args.cmd == "train":
         args.out = ready_output_arg(ap, args.out, "--out", kind="folder")
@@ -723,6 +732,8 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     if args.device:
         cfg = replace(cfg, device=args.device)
+    if cfg.device == "cuda" and not torch.cuda.is_available():  # (--set device=cuda: pick_device's RuntimeError)
+        ap.error("device cuda: torch sees no GPU")
     try:
         train, val = _held_out_pair(args.train_cache, args.val_cache, cfg)
     except FillCacheError as e:

@@ -1490,6 +1490,14 @@ def main(argv: list[str] | None = None) -> int:
         cfg.data = Path(args.data)
     if args.runs:
         cfg.runs = Path(args.runs)
+    # out-of-range numbers named now: they were used hours in (the eval stage's limit, the export's threads) or
+    # raised a traceback from the dataset's config (the freestyle share)
+    if args.eval_limit is not None and args.eval_limit < 0:
+        ap.error(f"--eval-limit: must be at least 0 (0: every held-out scene), got {args.eval_limit}")
+    if args.threads < 1:
+        ap.error(f"--threads: must be at least 1, got {args.threads}")
+    if args.freestyle_share is not None and not 0.0 <= args.freestyle_share <= 1.0:
+        ap.error(f"--freestyle-share: must be a share from 0 to 1, got {args.freestyle_share!r}")
     if args.eval_limit is not None:
         cfg.eval_limit = args.eval_limit
     cfg.force = tuple(args.force)
@@ -1530,6 +1538,15 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         ap.error(str(e))
     from training.model.config import ConfigError  # (lazy: it imports torch)
+
+    try:  # each variant's train config and pretraining config, --set / --pretrain-set applied: a mistyped key or a
+        # bad value was found by the train or pretrain stage, after the dataset (an hour on two cores) was made
+        for variant in cfg.variants:
+            train_inputs(cfg, VARIANTS[variant])
+            if pretrain_block(cfg, variant):
+                pretrain_inputs(cfg, variant)
+    except ConfigError as e:
+        ap.error(str(e))
 
     cfg.command = shlex.join(["python", "-m", "training.pipeline",
                               *_recipe_args(argv if argv is not None else sys.argv[1:]), *recipe_flag])

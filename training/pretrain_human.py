@@ -226,13 +226,15 @@ class StepBatches(torch.utils.data.Dataset):
 def step_batches(ds, cfg: PretrainConfig, start: int):
     """``(images, heat)`` of the steps from ``start`` to ``cfg.iterations``, made ahead by ``cfg.loader_workers``
     processes (or here, one at a time, with none)."""
+    from training.data.torch_dataset import load_in_workers
+
     batches = StepBatches(ds, cfg)
     steps = range(start, cfg.iterations)
     if not cfg.loader_workers:
         return (batches[s] for s in steps)
-    return iter(torch.utils.data.DataLoader(batches, batch_size=None, sampler=steps, num_workers=cfg.loader_workers,
-                                            prefetch_factor=4, pin_memory=torch.cuda.is_available(),
-                                            worker_init_fn=_one_thread))
+    # a damaged sample read in a worker is raised here as the same DatasetError as in-process (one line, exit 2)
+    return load_in_workers(batches, batch_size=None, sampler=steps, num_workers=cfg.loader_workers, prefetch_factor=4,
+                           pin_memory=torch.cuda.is_available(), worker_init_fn=_one_thread)
 
 
 def _one_thread(_worker: int) -> None:
@@ -346,8 +348,9 @@ def save_human(path: Path, model: GHNeRF, step: int) -> None:
     save_atomic(state, path)
 
 
-def load_human(model: GHNeRF, path: str | Path) -> int:
-    """Load a ``human.pt`` into ``model.human``; returns the pretraining step.
+def load_human(model: GHNeRF, path: str | Path, what: str = "human_init") -> int:
+    """Load a ``human.pt`` into ``model.human``; returns the pretraining step. ``what``: the setting or option
+    that named the file (``human_init``, ``--score``), which the errors name.
 
     Raises:
         ConfigError: the file is missing or unreadable, or its encoder does not fit this model's
@@ -357,24 +360,24 @@ def load_human(model: GHNeRF, path: str | Path) -> int:
     try:
         state = torch.load(str(p), map_location="cpu", weights_only=True)
     except FileNotFoundError as e:
-        raise ConfigError(f"human_init: cannot read {p}: no such file") from e
+        raise ConfigError(f"{what}: cannot read {p}: no such file") from e
     except Exception as e:  # noqa: BLE001 - torch raises several types (pickle, zip, runtime) for a bad file
-        raise ConfigError(f"human_init: cannot read {p}: {type(e).__name__}: {str(e).splitlines()[0]}") from e
+        raise ConfigError(f"{what}: cannot read {p}: {type(e).__name__}: {str(e).splitlines()[0]}") from e
     if not isinstance(state, dict) or "human" not in state:
-        raise ConfigError(f"human_init: {p} is not a human-encoder checkpoint (no 'human' weights)")
+        raise ConfigError(f"{what}: {p} is not a human-encoder checkpoint (no 'human' weights)")
     if model.human is None:
-        raise ConfigError("human_init: the model has no human encoder")
+        raise ConfigError(f"{what}: the model has no human encoder")
     theirs = ModelConfig.from_dict(state.get("model_config", {})).human if state.get("model_config") else None
     if theirs is not None:
         ours = model.config.human
         for f in fields(ours):
             if f.name != "init" and getattr(theirs, f.name) != getattr(ours, f.name):
-                raise ConfigError(f"human_init: {p} was pretrained with human.{f.name}="
+                raise ConfigError(f"{what}: {p} was pretrained with human.{f.name}="
                                   f"{getattr(theirs, f.name)!r}, this model has {getattr(ours, f.name)!r}")
     try:
         model.human.load_state_dict(state["human"], strict=True)
     except RuntimeError as e:
-        raise ConfigError(f"human_init: {p} does not fit this model's human encoder: {e}") from e
+        raise ConfigError(f"{what}: {p} does not fit this model's human encoder: {e}") from e
     return int(state.get("step", 0))
 
 
@@ -470,6 +473,8 @@ def pretrain(cfg: PretrainConfig, out_dir: str | Path, *, resume: bool = False, 
               f"step feeds the trunk at input scale {cfg.coarse_input_scale}, none at the model's "
               f"({cfg.model_config().human.input_scale})", file=sys.stderr)
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():  # (mkdir below raised FileExistsError: a traceback)
+        raise ConfigError(f"{out}: is a file; --out names the run folder")
     refuse_live_lock(out / "train.pid")  # a folder in use is named first, whatever else is wrong
     start = pretrain_checkpoint.resume_point(out) if resume else None  # last.pt, else prev.pt
     if start is not None:
@@ -633,7 +638,7 @@ def score_human(path: str | Path, data: str | Path, split: str = "val", scenes: 
     except Exception:  # noqa: BLE001 - load_human below reports the unreadable file by name
         mc = None
     model = GHNeRF(ModelConfig.from_dict(mc) if mc else model_config_of("edge128", {}))
-    step = load_human(model, path)
+    step = load_human(model, path, "--score")
     ds = MultiViewDataset(data, split, TargetConfig(heatmap_stride=model.config.heatmap_stride))
     n = min(scenes, len(ds)) if scenes else len(ds)
     return {"human": str(path), "step": step, "split": split, "scenes": n,
@@ -645,12 +650,14 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = build_parser()
     args = ap.parse_args(argv)
+    from training.data.errors import DataError
+
     if args.score:
         if args.threads:
             torch.set_num_threads(args.threads)
         try:
             print(json.dumps(score_human(args.score, args.data or "data/edge128", args.split, args.scenes), indent=1))
-        except ConfigError as e:
+        except (ConfigError, DataError) as e:  # the file, or a missing dataset or split (was a traceback)
             print(f"error: {e}", file=sys.stderr)
             return 2
         return 0
@@ -663,8 +670,6 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    from training.data.errors import DataError
-
     try:
         summary = pretrain(cfg, args.out, resume=args.resume, quiet=args.quiet)
     except (ConfigError, DataError) as e:  # while starting: a run folder in use, a resume under another config,

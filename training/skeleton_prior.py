@@ -49,6 +49,7 @@ from ghnerf_runtime.skeleton_prior import (
     mirror_inputs,
     prior_inputs,
 )
+from training.cli import at_least
 from training.model_card import write_atomic
 
 #: What a tilted training copy turns (``PriorTrainConfig.tilt_mode``).
@@ -553,8 +554,8 @@ def main(argv: list[str] | None = None) -> int:
                          "made by python -m training.data.generate with another --seed; --novel-views 0 suffices)")
     ap.add_argument("--val-split", default="val")
     ap.add_argument("--limit", type=int, default=0, help="scenes per split (0: all)")
-    ap.add_argument("--steps", type=int, default=PriorTrainConfig.steps)
-    ap.add_argument("--hidden", type=int, default=PriorTrainConfig.hidden)
+    ap.add_argument("--steps", type=at_least(1), default=PriorTrainConfig.steps)
+    ap.add_argument("--hidden", type=at_least(1), default=PriorTrainConfig.hidden)
     ap.add_argument("--lr", type=float, default=PriorTrainConfig.lr)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--members", type=int, default=1,
@@ -568,7 +569,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="scene: the copies turn the whole scene, cameras too (the peaks stay exact); body: the "
                          "body alone, before the same cameras (crop refitted, the encoder's 2D errors carried over)")
     ap.add_argument("--no-flip-test", action="store_true", help="collect without the flip test")
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=at_least(1), default=2)
     ap.add_argument("--card", help="a model card folder (models) to record the prior in (model_card.json, "
                                    "MODEL_CARD.md); the pipeline's card stage does it for new models")
     args = ap.parse_args(argv)
@@ -610,6 +611,8 @@ def main(argv: list[str] | None = None) -> int:
                      f"(drop --card, or write {FILE_NAME})")
     if not 0.0 <= args.tilt_share <= 1.0:  # before minutes of collecting
         ap.error(f"--tilt-share must be a share from 0 to 1, not {args.tilt_share!r}")
+    if not (math.isfinite(args.lr) and args.lr > 0):  # (a NaN or negative rate trained minutes for nothing)
+        ap.error(f"--lr must be a finite number above 0, not {args.lr!r}")
     from training.data.cache import ShardedSplit
     from training.data.errors import DataError
 
@@ -620,6 +623,12 @@ def main(argv: list[str] | None = None) -> int:
         ShardedSplit(args.data, args.val_split)
     except DataError as e:
         ap.error(str(e))
+    from ghnerf_runtime.errors import RuntimeErrorBase
+
+    try:  # the keypoint graph, loaded as collect() loads it: a folder without it was a traceback (ModelLoadError)
+        _heatmap_session(model_dir, args.threads)
+    except RuntimeErrorBase as e:  # a ModelLoadError, or the graph against the model contract
+        ap.error(f"--model-dir: {e}")  # (the message names the folder)
     config = PriorTrainConfig(steps=args.steps, hidden=args.hidden, lr=args.lr, seed=args.seed,
                               members=args.members, tilt_share=args.tilt_share, tilt_mode=args.tilt_mode)
     t0 = time.monotonic()

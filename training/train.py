@@ -719,7 +719,9 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
 class Progress:
     """One status line: ``\\r``-updated on a terminal, one line per update otherwise (log files)."""
 
-    def __init__(self, total: int, start: int, stream=sys.stderr, enabled: bool = True):
+    def __init__(self, total: int, start: int, stream=None, enabled: bool = True):
+        # sys.stderr as it is now, not as it was when this module was imported (a redirected or closed stream)
+        stream = sys.stderr if stream is None else stream
         self.total, self.start, self.stream, self.enabled = total, start, stream, enabled
         self.t0 = time.monotonic()
         self.tty = hasattr(stream, "isatty") and stream.isatty()
@@ -944,16 +946,25 @@ def check_resumable(cfg: TrainConfig, last: Path, world: int | None = None) -> N
         refuse_another_model(last, ck["model_config"], cfg.model_config())
 
 
+class RunFolderInUse(ConfigError, RuntimeError):
+    """Another live process holds the run folder's ``train.pid``. A ConfigError (of ``--out``), so the command
+    lines report it in one line with exit 2 (it was a bare RuntimeError: a traceback); still a RuntimeError for
+    the callers that caught it as one."""
+
+
 def refuse_live_lock(path: Path) -> None:
-    """One training process per run folder: refuse when ``path`` names another live process."""
-    if path.exists():
-        try:
-            pid = int(path.read_text().strip())
-            os.kill(pid, 0)
-            if pid != os.getpid():
-                raise RuntimeError(f"{path.parent}: another training process ({pid}) is using this run folder")
-        except (ValueError, ProcessLookupError, PermissionError):
-            pass  # stale lock
+    """One training process per run folder: refuse (:class:`RunFolderInUse`) when ``path`` names another live
+    process."""
+    if not path.exists():
+        return
+    try:
+        pid = int(path.read_text().strip())
+        os.kill(pid, 0)
+    except (ValueError, ProcessLookupError, PermissionError):
+        return  # stale lock
+    if pid != os.getpid():
+        raise RunFolderInUse(f"{path.parent}: another training process ({pid}) is using this run folder; wait for "
+                             "it or stop it, or give another --out")
 
 
 def take_lock(path: Path) -> None:

@@ -165,3 +165,24 @@ def test_the_trainer_stops_on_a_damaged_sample_with_one_line_naming_it(data, tmp
     err = capsys.readouterr().err
     assert f"ghnerf-train: data error: {data / 'train' / 'shard_000000' / 'images.npy'}: sample " in err
     assert "does not match its checksum" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("workers", [0, 1])
+def test_pretraining_stops_on_a_damaged_sample_with_one_line_naming_it_with_or_without_loader_workers(
+        data, tmp_path, capsys, workers):
+    """A sample read in a DataLoader worker (``loader_workers``) is reported as one read in-process: torch's own
+    re-raise turned the DatasetError into a RuntimeError holding the worker's traceback (exit 1, many lines)."""
+    pytest.importorskip("torch")
+    from training.pretrain_human import main as pretrain_main
+
+    for row in range(3):
+        _flip_byte(data / "train" / "shard_000000" / "images.npy", row=row)
+    argv = ["--out", str(tmp_path / "run"), "--data", str(data), "--iterations", "1", "--threads", "1", "--quiet",
+            "--set", 'preset="tiny"', "--set", "scenes_per_step=1", "--set", "eval_every=0",
+            "--set", f"loader_workers={workers}"]
+    assert pretrain_main(argv) == 2
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"error: {data / 'train' / 'shard_000000' / 'images.npy'}: sample ")
+    assert "does not match its checksum" in lines[0] and "Traceback" not in err

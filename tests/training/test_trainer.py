@@ -589,3 +589,17 @@ def test_a_ctrl_c_during_a_checkpoint_write_stops_after_it_with_the_checkpoint_w
     import signal
 
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Python's own handler is back
+
+
+def test_progress_writes_to_the_stderr_of_the_moment_not_of_the_import(monkeypatch):
+    """``Progress``'s stream defaulted to the ``sys.stderr`` of ``training.train``'s import: a run after that
+    stream was replaced and closed (a test's capture, a redirection) failed in ``isatty`` before its first step."""
+    import io
+    import sys
+
+    from training.train import Progress
+
+    now = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", now)
+    Progress(2, 0).update(1, {"loss": 0.5})
+    assert "loss" in now.getvalue()

@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--val-cache", required=True, type=Path)
     t.add_argument("--out", required=True, type=Path, help="folder for fill_net.pt and score.md")
     t.add_argument("--train-views", type=at_least(0), default=0, help="train on the cache's first N views (0: all)")
-    t.add_argument("--device", default=None, help="auto (default), cpu or cuda")
+    t.add_argument("--device", default=None, choices=("auto", "cpu", "cuda"), help="auto (default), cpu or cuda")
     t.add_argument("--threads", type=at_least(0), default=0, help="torch CPU threads (0: torch's default)")
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="FillTrainConfig override (steps, batch, lr, ..., net.width, net.levels)")
@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a fill_net.pt; given more than once, the nets' mean picture is scored (an ensemble)")
     s.add_argument("--flip-test", action="store_true",
                    help="average each net's picture with its picture of the mirrored views")
-    s.add_argument("--device", default="auto")
+    s.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
     e = sub.add_parser("export", help="the runtime's painter: novel_painter.onnx (and its figures) from a fill net")
     e.add_argument("--net", required=True, type=Path, help="a fill_net.pt trained with net.relit_input=false, "
                                                            "net.shown_input=true")

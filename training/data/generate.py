@@ -162,6 +162,8 @@ def generate(out: str | Path, counts: Mapping[str, int], config: SyntheticConfig
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
             raise DataConfigError(f"counts.{split}", f"must be a non-negative int, got {n!r}")
     out = Path(out)
+    if out.exists() and not out.is_dir():  # (mkdir raised FileExistsError: a traceback)
+        raise DatasetError(out, "is a file; --out names the dataset folder")
     out.mkdir(parents=True, exist_ok=True)
     with writer_lock(out):  # one writer per folder (cache.writer_lock says why)
         return _generate(out, counts, config, dataset_seed, workers, shard_size)

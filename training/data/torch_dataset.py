@@ -7,9 +7,15 @@ the keys, shapes and dtypes of :data:`training.data.targets.KEYS`, plus ``index`
 
     ds = MultiViewDataset("data/synth128", "train")
     loader = torch.utils.data.DataLoader(ds, batch_size=None, shuffle=True)  # num_workers=0: ~5 ms per item
+
+Loaded in worker processes, go through :func:`load_in_workers`: a data error raised in a worker then reaches the
+trainer as itself (the same type, file and message as in-process), not as torch's ``RuntimeError`` holding the
+worker's traceback, so the command line reports it in the same one line.
 """
 from __future__ import annotations
 
+import pickle
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,6 +23,7 @@ import numpy as np
 import torch
 
 from training.data.cache import ShardedSplit
+from training.data.errors import DataError
 from training.data.targets import TargetConfig, model_inputs
 
 
@@ -54,4 +61,45 @@ class MultiViewDataset(torch.utils.data.Dataset):
         return self.split.metadata(index)
 
 
-__all__ = ["MultiViewDataset"]
+class _CarriedError:
+    """A data error raised in a DataLoader worker, sent to the parent as the item instead of raised there."""
+
+    def __init__(self, error: DataError) -> None:
+        self.error = error
+
+
+class _CarryDataErrors(torch.utils.data.Dataset):
+    """``dataset``, with a :class:`DataError` of an item returned as a :class:`_CarriedError`.
+
+    torch re-raises a worker's exception as ``type(e)(message_with_traceback)``; a ``DatasetError`` takes
+    ``(path, message)``, so the parent got a ``RuntimeError`` with a traceback in it. The error object itself
+    pickles with its fields (``DataError`` subclasses define ``__reduce__``), so it travels as data instead."""
+
+    def __init__(self, dataset) -> None:
+        self.dataset = dataset
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def __getitem__(self, index):
+        try:
+            return self.dataset[index]
+        except DataError as e:
+            try:  # one that would not survive the trip (a subclass without __reduce__) keeps torch's report
+                pickle.loads(pickle.dumps(e))
+            except Exception:  # noqa: BLE001 - any pickling failure: raise the original below
+                raise e from None
+            return _CarriedError(e)
+
+
+def load_in_workers(dataset, **loader_args) -> Iterator:
+    """The items of ``torch.utils.data.DataLoader(dataset, **loader_args)``; a :class:`DataError` raised by
+    ``dataset`` in a worker process is raised here as itself (type, ``path`` / ``field`` and message), as the
+    in-process loop would raise it. Other exceptions keep torch's report (a bug's traceback is worth reading)."""
+    for item in torch.utils.data.DataLoader(_CarryDataErrors(dataset), **loader_args):
+        if isinstance(item, _CarriedError):
+            raise item.error  # leaving the loop ends the loader: its workers are shut down
+        yield item
+
+
+__all__ = ["MultiViewDataset", "load_in_workers"]
