@@ -425,6 +425,24 @@ def test_a_flagged_pair_whose_subject_prior_disagrees_reports_the_subject_s_pair
         assert np.abs(r.joints_3d - p.joints_3d).max() < 1e-5
 
 
+def test_a_flagged_pair_s_calibration_figures_are_its_pairings_whatever_the_subject_s_prior_answers():
+    """The subject's prior (session 55) and the two-people calibration figures (session 55) came in on separate
+    branches: the figures must stay the pairings' (docs/calibration.md, "Two people in view"), as one person's are
+    the triangulation's, not the prior's, which keeps its feet near the floor whatever the calibration. A stand-in
+    prior 3 cm lower than its fed peaks: the figures are those without the prior, to the float."""
+    on = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on"))
+    off = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="off"))
+    lower = np.array([0.0, 0.03, 0.0])  # y down
+    _, refined, _ = _two_from_the_first_pair(on, _PeaksPrior(lower), pairs=3)
+    _, plain, _ = _two_from_the_first_pair(off, _PeaksPrior(lower), pairs=3)
+    for (r, a, _), (p, *_) in zip(refined, plain, strict=True):
+        assert r.several_people and not r.prior_fallback
+        assert np.abs(r.joints_3d[~r.missing] - p.joints_3d[~r.missing]).max() > 0.02  # the prior's answer reported
+        assert r.lowest_foot_m is not None and r.reprojection_px_median is not None
+        assert r.lowest_foot_m == pytest.approx(p.lowest_foot_m, abs=1e-6)
+        assert r.reprojection_px_median == pytest.approx(p.reprojection_px_median, abs=1e-6)
+
+
 def _same_figures(two, one, foot_m: float = 0.02, px: float = 0.05) -> None:
     """Each two-people pair gives both calibration figures (docs/calibration.md), each near the same subject's
     alone at the same instant: ``foot_m`` metres for ``lowest_foot_m``, ``px`` for ``reprojection_px_median``."""
