@@ -157,10 +157,13 @@ class PairResult:
             pair that has no subject to view: a frame rejected, or nobody found).
         prior_disagreement_m: the skeleton prior's distance from the triangulation (the median over the
             triangulated joints, :func:`ghnerf_runtime.skeleton_prior.disagreement_m`); ``None`` where the prior
-            did not run or too few joints were triangulated to tell. A ``several_people`` pair whose subject was
-            picked or tracked measures the prior fed that subject's peaks against the subject's pairings.
+            did not run, too few joints were triangulated to tell, or nobody is reported (also a ``several_people``
+            pair whose subject's peaks make nobody, since session 55: the prior's first run there was fed both
+            people's). A ``several_people`` pair whose subject was picked or tracked measures the prior fed that
+            subject's peaks against the subject's pairings.
         prior_fallback: the prior ran but its skeleton disagreed with the triangulation by more than
-            ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior).
+            ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior);
+            never on a pair that reports nobody.
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
             both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject):
             only the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
@@ -923,6 +926,9 @@ class Estimator:
                     nobody = True
                     j3 = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
             if nobody and several:  # two people in view: one view's joints alone would be no one's in particular
+                # nor is the prior's first run, on both people's peaks, a verdict on anyone reported (one person's
+                # empty pair carries none either: _joints_3d skips the prior)
+                self._prior_check = (None, False)
                 for name in joints_2d:
                     joints_2d[name] = np.zeros_like(joints_2d[name])
                     conf_2d[name] = np.zeros_like(conf_2d[name])
