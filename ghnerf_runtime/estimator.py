@@ -1037,9 +1037,10 @@ class Estimator:
         or another 3D method than the triangulation, none: whose joints would they be?). Returns them; where the
         pairings of peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D
         joints come from (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks); and
-        the subject's joints that the peaks gave (those pairings'; with the skeleton prior the rest are the
-        prior's, fed both people's peaks), which the presence gate counts with the prior as it counts the reported
-        joints without it, and which the prior is then fed alone (:meth:`_subject_prior`).
+        the subject's joints that the peaks gave, alone (those pairings'; the first value's other joints are
+        ``j3``'s, with the skeleton prior the prior's fed both people's peaks), which the presence gate counts with
+        the prior as it counts the reported joints without it, whose peaks alone the prior is then fed
+        (:meth:`_subject_prior`), and which give the calibration figures (:meth:`_subject_figures`).
         ``cold_several`` (this pass refines this pair's cold pass, :meth:`_finish_pass`; where the subject is
         picked): ``False``, the track is a cold pass's that did not tell two people apart (both people's joints,
         mixed): picked as without a track; ``True``, the cold pass picked the subject from its coarse crop: split
