@@ -334,8 +334,8 @@ def main(argv=None) -> int:
     # --calibration and --one-person-model run their own sessions (the oracle filmed through a turned rig; the
     # bench sequences at the runtime's defaults): a model or prior asked for there would be silently left out
     for mode, given in (("--calibration", args.calibration), ("--one-person-model", args.one_person_model)):
-        ignored = [name for name, value in (("--model-dir", args.model_dir), ("--skeleton-prior", args.skeleton_prior))
-                   if value is not None]
+        ignored = [name for name, value in (("--model-dir", args.model_dir), ("--skeleton-prior", args.skeleton_prior),
+                                            ("--swap", args.swap or None)) if value is not None]
         if given and ignored:
             ap.error(f"{mode} does not use {' or '.join(ignored)} (it runs "
                      f"{'the oracle session' if mode == '--calibration' else 'that folder at the defaults'}); "

@@ -350,6 +350,7 @@ def test_measure_two_people_calibration(capsys, monkeypatch):
     (("--calibration", "0"), ("--model-dir", "models")),
     (("--calibration", "0"), ("--skeleton-prior", "off")),
     (("--one-person-model", "models"), ("--skeleton-prior", "on")),
+    (("--calibration", "0"), ("--swap",)),  # (--places is what it takes)
 ])
 def test_measure_two_people_refuses_options_its_mode_does_not_use(mode, ignored, capsys, monkeypatch):
     # --model-dir and --skeleton-prior (the trained model's rows) came in beside --calibration and
