@@ -20,7 +20,8 @@ rig delivers:
 * the daemon's calibration check (``firmware_host.daemon.calibration_watch``, at the
   daemon's default ``health`` settings) runs on the estimates: while it finds the rig's
   calibration suspect (the views no longer meet in 3D, or the feet have left the floor) the
-  frames streamed carry ``CALIBRATION_SUSPECT`` as the daemon's do, the console says when the
+  frames streamed (and a protocol sink's STATUS packets) carry ``CALIBRATION_SUSPECT`` as the daemon's do, the
+  console says when the
   verdict changes, with the symptom's words, and the summary says how it stands at the end
   (or that too few pairs were measured to judge);
 * the last estimated pair is written as a PNG (``OUT/sim_pair.png``) with the estimated
@@ -401,6 +402,11 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         change = calibration.add(pair.sequence, result)
                         if change is not None:
                             print(change)
+                            # a protocol sink's STATUS packets carry the flag too, as the daemon's do (its
+                            # _sync_calibration); vmc:// has no STATUS
+                            set_suspect = getattr(sink, "set_calibration_suspect", None)
+                            if set_suspect is not None:
+                                set_suspect(calibration.suspect)
                         frame = estimate_frame(pair, result, sequence=numbers.take(),
                                                calibration_suspect=calibration.suspect)
                         last_result = result
