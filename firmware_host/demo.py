@@ -50,7 +50,7 @@ import numpy as np
 import drivers
 from drivers.sim.demo import draw_truth
 from drivers.url import redact_url
-from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, symptoms
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
@@ -198,7 +198,7 @@ class _CalibrationCheck:
 
     def symptoms(self) -> str:
         """The suspect checks' words (``1.46 px > 0.8, feet 0.18 m below the floor > 0.1 m``); empty when none is."""
-        return ", ".join(c.symptom() for c in (self.view, self.floor) if c.suspect)
+        return symptoms((self.view, self.floor))
 
     def add(self, pair_sequence: int, result: PairResult) -> str | None:
         """Count one estimate; returns the line to print when the verdict changes (else None)."""
