@@ -105,10 +105,9 @@ def render_pair(scene, rig, posed, t: float):
     """The two cameras' pictures of ``posed`` in ``scene``'s room with its sensor, and the truth per camera:
     ``(images (BGR uint8, rig order), joints_2d (2, 25, 2), visible (2, 25))``."""
     images, j2, vis = [], [], []
-    sensor = scene.config.sensor
     for cam in rig.pair:
         radiance, truth = scene.renderer.render(posed, cam)
-        images.append(sensor.capture(radiance, sensor.rng(int(scene.config.seed), cam.name, float(t))))
+        images.append(scene.capture(radiance, cam, t))
         j2.append(truth.joints_2d)
         vis.append(truth.visible)
     return tuple(images), np.array(j2), np.array(vis)

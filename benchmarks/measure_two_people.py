@@ -316,10 +316,10 @@ def main(argv=None) -> int:
     ap.add_argument("--model-dir", metavar="DIR",
                     help="a trained model (this folder's, at the runtime's defaults) on the two people rendered "
                          "together, instead of the oracle's heatmaps")
-    ap.add_argument("--skeleton-prior", default=EstimatorConfig().joints3d.skeleton_prior,
-                    choices=SKELETON_PRIOR_MODES, help="joints3d.skeleton_prior (with --model-dir: off shows the "
-                                                       "triangulation's own error, a flagged pair's pairings "
-                                                       "unrefined)")
+    ap.add_argument("--skeleton-prior", choices=SKELETON_PRIOR_MODES,
+                    help="joints3d.skeleton_prior (default: the runtime's, "
+                         f"{EstimatorConfig().joints3d.skeleton_prior}; with --model-dir: off shows the "
+                         "triangulation's own error, a flagged pair's pairings unrefined)")
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
@@ -331,6 +331,17 @@ def main(argv=None) -> int:
     ap.add_argument("--axis", default="pan", choices=("pan", "tilt", "roll"),
                     help="with --calibration: the axis the second camera is turned about")
     args = ap.parse_args(argv)
+    # --calibration and --one-person-model run their own sessions (the oracle filmed through a turned rig; the
+    # bench sequences at the runtime's defaults): a model or prior asked for there would be silently left out
+    for mode, given in (("--calibration", args.calibration), ("--one-person-model", args.one_person_model)):
+        ignored = [name for name, value in (("--model-dir", args.model_dir), ("--skeleton-prior", args.skeleton_prior),
+                                            ("--swap", args.swap or None)) if value is not None]
+        if given and ignored:
+            ap.error(f"{mode} does not use {' or '.join(ignored)} (it runs "
+                     f"{'the oracle session' if mode == '--calibration' else 'that folder at the defaults'}); "
+                     f"leave {'it' if len(ignored) == 1 else 'them'} out")
+    if args.skeleton_prior is None:
+        args.skeleton_prior = EstimatorConfig().joints3d.skeleton_prior
     if args.calibration:
         config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
         from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M as limit  # the daemon's floor check

@@ -20,7 +20,8 @@ rig delivers:
 * the daemon's calibration check (``firmware_host.daemon.calibration_watch``, at the
   daemon's default ``health`` settings) runs on the estimates: while it finds the rig's
   calibration suspect (the views no longer meet in 3D, or the feet have left the floor) the
-  frames streamed carry ``CALIBRATION_SUSPECT`` as the daemon's do, the console says when the
+  frames streamed (and a protocol sink's STATUS packets) carry ``CALIBRATION_SUSPECT`` as the daemon's do, the
+  console says when the
   verdict changes, with the symptom's words, and the summary says how it stands at the end
   (or that too few pairs were measured to judge);
 * the last estimated pair is written as a PNG (``OUT/sim_pair.png``) with the estimated
@@ -49,7 +50,7 @@ import numpy as np
 import drivers
 from drivers.sim.demo import draw_truth
 from drivers.url import redact_url
-from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch
+from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, symptoms
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
@@ -197,7 +198,7 @@ class _CalibrationCheck:
 
     def symptoms(self) -> str:
         """The suspect checks' words (``1.46 px > 0.8, feet 0.18 m below the floor > 0.1 m``); empty when none is."""
-        return ", ".join(c.symptom() for c in (self.view, self.floor) if c.suspect)
+        return symptoms((self.view, self.floor))
 
     def add(self, pair_sequence: int, result: PairResult) -> str | None:
         """Count one estimate; returns the line to print when the verdict changes (else None)."""
@@ -401,6 +402,11 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         change = calibration.add(pair.sequence, result)
                         if change is not None:
                             print(change)
+                            # a protocol sink's STATUS packets carry the flag too, as the daemon's do (its
+                            # _sync_calibration); vmc:// has no STATUS
+                            set_suspect = getattr(sink, "set_calibration_suspect", None)
+                            if set_suspect is not None:
+                                set_suspect(calibration.suspect)
                         frame = estimate_frame(pair, result, sequence=numbers.take(),
                                                calibration_suspect=calibration.suspect)
                         last_result = result

@@ -157,10 +157,13 @@ class PairResult:
             pair that has no subject to view: a frame rejected, or nobody found).
         prior_disagreement_m: the skeleton prior's distance from the triangulation (the median over the
             triangulated joints, :func:`ghnerf_runtime.skeleton_prior.disagreement_m`); ``None`` where the prior
-            did not run or too few joints were triangulated to tell. A ``several_people`` pair whose subject was
-            picked or tracked measures the prior fed that subject's peaks against the subject's pairings.
+            did not run, too few joints were triangulated to tell, or nobody is reported (also a ``several_people``
+            pair whose subject's peaks make nobody, since session 55: the prior's first run there was fed both
+            people's). A ``several_people`` pair whose subject was picked or tracked measures the prior fed that
+            subject's peaks against the subject's pairings.
         prior_fallback: the prior ran but its skeleton disagreed with the triangulation by more than
-            ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior).
+            ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior);
+            never on a pair that reports nobody.
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
             both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject):
             only the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
@@ -923,6 +926,9 @@ class Estimator:
                     nobody = True
                     j3 = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
             if nobody and several:  # two people in view: one view's joints alone would be no one's in particular
+                # nor is the prior's first run, on both people's peaks, a verdict on anyone reported (one person's
+                # empty pair carries none either: _joints_3d skips the prior)
+                self._prior_check = (None, False)
                 for name in joints_2d:
                     joints_2d[name] = np.zeros_like(joints_2d[name])
                     conf_2d[name] = np.zeros_like(conf_2d[name])
@@ -1031,9 +1037,10 @@ class Estimator:
         or another 3D method than the triangulation, none: whose joints would they be?). Returns them; where the
         pairings of peaks and runner-ups gave joints (:meth:`_tracked_candidates`), the peaks each view's 2D
         joints come from (a :class:`Keypoints2D` and its model pixels), else ``None`` (the decoded peaks); and
-        the subject's joints that the peaks gave (those pairings'; with the skeleton prior the rest are the
-        prior's, fed both people's peaks), which the presence gate counts with the prior as it counts the reported
-        joints without it, and which the prior is then fed alone (:meth:`_subject_prior`).
+        the subject's joints that the peaks gave, alone (those pairings'; the first value's other joints are
+        ``j3``'s, with the skeleton prior the prior's fed both people's peaks), which the presence gate counts with
+        the prior as it counts the reported joints without it, whose peaks alone the prior is then fed
+        (:meth:`_subject_prior`), and which give the calibration figures (:meth:`_subject_figures`).
         ``cold_several`` (this pass refines this pair's cold pass, :meth:`_finish_pass`; where the subject is
         picked): ``False``, the track is a cold pass's that did not tell two people apart (both people's joints,
         mixed): picked as without a track; ``True``, the cold pass picked the subject from its coarse crop: split

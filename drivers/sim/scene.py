@@ -199,9 +199,14 @@ class SimScene:
             (background depth is ``inf``; everything else is finite).
         """
         radiance, truth = self.renderer.render(self.posed(t), camera, with_truth=with_truth)
+        return self.capture(radiance, camera, t), truth
+
+    def capture(self, radiance: np.ndarray, camera: Camera, t: float) -> np.ndarray:
+        """``radiance`` (a renderer's picture for ``camera`` at scene time ``t``) through this scene's sensor, its
+        noise seeded by the scene's seed, the camera's name and ``t``: what :meth:`render` returns for it, also for
+        pictures composed or posed otherwise (:func:`render_people`, ``benchmarks/measure_lying_rendered.py``)."""
         sensor = self.config.sensor
-        image = sensor.capture(radiance, sensor.rng(int(self.config.seed), camera.name, float(t)))
-        return image, truth
+        return sensor.capture(radiance, sensor.rng(int(self.config.seed), camera.name, float(t)))
 
     def render_batch(self, cameras: Sequence[Camera], t: float, *, with_truth: bool = True) -> list[tuple[np.ndarray, CameraTruth | None]]:
         """Render several cameras at one time; the pose is computed once."""
@@ -219,8 +224,7 @@ def render_people(scenes: Sequence[SimScene], camera: Camera, t: float) -> np.nd
         raise SimConfigError("render_people", "needs at least one scene")
     layers = [scene.renderer.render(scene.posed(t), camera) for scene in scenes]
     radiance = composite_nearest([image for image, _ in layers], [truth.depth for _, truth in layers])
-    first = scenes[0].config
-    return first.sensor.capture(radiance, first.sensor.rng(int(first.seed), camera.name, float(t)))
+    return scenes[0].capture(radiance, camera, t)
 
 
 def random_scene(seed: int, *, volume: WorkingVolume | None = None, motions: Sequence[str] = MOTION_NAMES,

@@ -29,17 +29,23 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["CalibrationWatch", "FloorWatch", "CLEAR_RATIO", "status_words"]
+__all__ = ["CalibrationWatch", "FloorWatch", "CLEAR_RATIO", "status_words", "symptoms"]
 
 #: A suspect calibration fits again once the median (its distance from the floor) is under this share of
 #: the limit.
 CLEAR_RATIO = 0.75
 
 
+def symptoms(checks) -> str:
+    """The suspect checks' symptoms, comma-separated (``1.46 px > 0.8, feet 0.18 m below the floor > 0.1 m``;
+    empty when none is): the daemon's STATUS= line and ``ghnerf-demo``'s verdict say them alike."""
+    return ", ".join(c.symptom() for c in checks if c.suspect)
+
+
 def status_words(checks) -> str:
     """The STATUS= line's words for the checks that are suspect, each symptom named (empty when none is)."""
-    symptoms = [c.symptom() for c in checks if c.suspect]
-    return "; calibration suspect: recalibrate (ghcal), " + ", ".join(symptoms) if symptoms else ""
+    named = symptoms(checks)
+    return "; calibration suspect: recalibrate (ghcal), " + named if named else ""
 
 
 class _RollingCheck:

@@ -65,6 +65,16 @@ def run_script(name: str, *args: str, capsys, monkeypatch) -> str:
     return capsys.readouterr().out
 
 
+def run_script_failing(name: str, *args: str, capsys, monkeypatch) -> str:
+    """Run ``benchmarks/<name>.py`` with ``args``, expecting a usage error (exit 2); its standard error."""
+    path = BENCH / f"{name}.py"
+    monkeypatch.setattr(sys, "argv", [str(path), *args])
+    with pytest.raises(SystemExit) as info:
+        runpy.run_path(str(path), run_name="__main__")
+    assert info.value.code == 2
+    return capsys.readouterr().err
+
+
 # ------------------------------------------------------------------------------------------- no model
 def test_bench_protocol(capsys, monkeypatch):
     out = run_script("bench_protocol", "--frames", "20", "--repeats", "1", capsys=capsys, monkeypatch=monkeypatch)
@@ -334,6 +344,19 @@ def test_measure_two_people_calibration(capsys, monkeypatch):
     assert [line[0] for line in lines] == ["0", "2"], out
     assert all(float(line[1]) <= 0.02 for line in lines), out  # the subject's own feet, as alone
     assert [line[3] for line in lines] == ["0", "1"], out  # the 2 degree pan's feet below the floor
+
+
+@pytest.mark.parametrize("mode, ignored", [
+    (("--calibration", "0"), ("--model-dir", "models")),
+    (("--calibration", "0"), ("--skeleton-prior", "off")),
+    (("--one-person-model", "models"), ("--skeleton-prior", "on")),
+    (("--calibration", "0"), ("--swap",)),  # (--places is what it takes)
+])
+def test_measure_two_people_refuses_options_its_mode_does_not_use(mode, ignored, capsys, monkeypatch):
+    # --model-dir and --skeleton-prior (the trained model's rows) came in beside --calibration and
+    # --one-person-model, which ran on without them and printed figures that looked like the model's or prior's
+    out = run_script_failing("measure_two_people", *mode, *ignored, capsys=capsys, monkeypatch=monkeypatch)
+    assert f"{mode[0]} does not use {ignored[0]}" in out, out
 
 
 def test_measure_two_people_through_a_model(model, capsys, monkeypatch):

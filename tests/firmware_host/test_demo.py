@@ -140,7 +140,10 @@ def test_a_suspect_calibration_is_streamed_printed_and_drawn(tmp_path, capsys, s
     monkeypatch.setattr(Estimator, "estimate", drifted)
     monkeypatch.setattr(demo, "CALIBRATION_WINDOW", 3)  # the daemon's 30 pairs would need a longer run
     # 3 s, not the other tests' 1.5 s: a full window of 3 estimates must fit even on a loaded 2-core host
-    rc = demo.main(["--url", sim_url, "--seconds", "3", "--out", str(tmp_path), "--model-dir", str(MODELS)])
+    # STATUS every 50 ms: the file sink's STATUS lines must say it too, as the daemon's do
+    sink = (tmp_path / "joints.jsonl").as_uri() + "?status_s=0.05"
+    rc = demo.main(["--url", sim_url, "--seconds", "3", "--out", str(tmp_path), "--model-dir", str(MODELS),
+                    "--sink", sink])
     out = capsys.readouterr().out
     assert rc == 0, out
     estimated = _summary(out)[1]
@@ -148,6 +151,11 @@ def test_a_suspect_calibration_is_streamed_printed_and_drawn(tmp_path, capsys, s
     rows = _joints_rows(tmp_path / "joints.jsonl")
     # judged from the third estimate on (a full window), as the daemon would: every frame from there is flagged
     assert [bool(r["flags"] & 0x20) for r in rows] == [False, False] + [True] * (estimated - 2)
+    lines = [json.loads(line) for line in (tmp_path / "joints.jsonl").read_text().splitlines()]
+    first = next(k for k, m in enumerate(lines) if m["type"] == "JOINTS" and m["flags"] & 0x20)
+    later = [m for m in lines[first + 1:] if m["type"] == "STATUS"]
+    # (before: the demo flagged its JOINTS only, its STATUS said the calibration fitted throughout)
+    assert later and all(m["flags"] & 0x20 for m in later), [m["flags"] for m in later]
     changes = re.findall(r"^pair (\d+): CALIBRATION SUSPECT \(2\.00 px > 0\.8\): the frames streamed from here "
                          r"carry CALIBRATION_SUSPECT; recalibrate \(ghcal", out, re.M)
     assert changes == [str(results[2].sequence)], out

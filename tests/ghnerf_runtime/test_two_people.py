@@ -315,12 +315,13 @@ class _PeaksPrior:
         return SkeletonEstimate(points, np.where(ok, 0.02, np.inf), ok)
 
 
-def _two_from_the_first_pair(config: EstimatorConfig, prior, pairs: int = 4, oracle: TwoPeopleOracle | None = None):
-    """``pairs`` pairs of the NEAR_THE_LINE people from the first pair through ``oracle`` (default: the
-    two-people oracle) with ``prior``."""
+def _two_from_the_first_pair(config: EstimatorConfig, prior, pairs: int = 4, oracle: TwoPeopleOracle | None = None,
+                             where: tuple = NEAR_THE_LINE):
+    """``pairs`` pairs of two people standing at ``where`` (default: NEAR_THE_LINE) from the first pair through
+    ``oracle`` (default: the two-people oracle) with ``prior``."""
     rig = sim.RigPlacement().build()
-    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=NEAR_THE_LINE[0]))
-    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=NEAR_THE_LINE[1]))
+    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=where[0]))
+    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=where[1]))
     oracle = TwoPeopleOracle(edge128_contract()) if oracle is None else oracle
     oracle.skeleton_prior = prior
     results, last_call = [], []
@@ -423,6 +424,44 @@ def test_a_flagged_pair_whose_subject_prior_disagrees_reports_the_subject_s_pair
         assert r.prior_fallback and r.prior_disagreement_m == pytest.approx(0.2, abs=1e-6)
         assert np.array_equal(r.missing, p.missing)
         assert np.abs(r.joints_3d - p.joints_3d).max() < 1e-5
+
+
+def test_a_flagged_pair_s_calibration_figures_are_its_pairings_whatever_the_subject_s_prior_answers():
+    """The subject's prior (session 55) and the two-people calibration figures (session 55) came in on separate
+    branches: the figures must stay the pairings' (docs/calibration.md, "Two people in view"), as one person's are
+    the triangulation's, not the prior's, which keeps its feet near the floor whatever the calibration. A stand-in
+    prior 3 cm lower than its fed peaks: the figures are those without the prior, to the float."""
+    on = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on"))
+    off = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="off"))
+    lower = np.array([0.0, 0.03, 0.0])  # y down
+    _, refined, _ = _two_from_the_first_pair(on, _PeaksPrior(lower), pairs=3)
+    _, plain, _ = _two_from_the_first_pair(off, _PeaksPrior(lower), pairs=3)
+    for (r, a, _), (p, *_) in zip(refined, plain, strict=True):
+        assert r.several_people and not r.prior_fallback
+        assert np.abs(r.joints_3d[~r.missing] - p.joints_3d[~r.missing]).max() > 0.02  # the prior's answer reported
+        assert r.lowest_foot_m is not None and r.reprojection_px_median is not None
+        assert r.lowest_foot_m == pytest.approx(p.lowest_foot_m, abs=1e-6)
+        assert r.reprojection_px_median == pytest.approx(p.reprojection_px_median, abs=1e-6)
+
+
+def test_a_flagged_pair_that_reports_nobody_carries_no_prior_verdict():
+    """Two people and no subject (``pick_subject: none``): the pair reports nobody, and, as a pair one person's
+    peaks call empty, no prior figure either. Before, it carried the prior's first run's verdict on both people's
+    peaks mixed (here ``prior_fallback``, so the stream flagged PRIOR_FALLBACK on a frame without joints), though
+    since session 55 a flagged pair's figure is said to be its subject's prior's."""
+    from firmware_host.joint_frames import scene_flags
+    from firmware_host.protocol.constants import Flags
+
+    nobody = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on", pick_subject="none",
+                                                     max_prior_disagreement_m=0.05))
+    # (side by side, as test_two_people_from_the_first_pair_with_pick_subject_none_report_nobody: the cold pass is
+    # flagged too, so no mixed track is made)
+    _, results, _ = _two_from_the_first_pair(nobody, _PeaksPrior(np.array([0.0, 0.2, 0.0])), pairs=2,
+                                             where=SIDE_BY_SIDE)
+    for r, *_ in results:
+        assert r.several_people and r.num_found == 0
+        assert r.prior_disagreement_m is None and not r.prior_fallback
+        assert not scene_flags(r) & Flags.PRIOR_FALLBACK
 
 
 def _same_figures(two, one, foot_m: float = 0.02, px: float = 0.05) -> None:
