@@ -195,8 +195,8 @@ class RoiConfig:
             people lying across the view or upside down, whom the encoder (trained on upright people) misses
             upright; tracked pairs never search (docs/runtime.md, "Lying and upside down, rendered").
         turn_search_below: the found joints' median confidence under which a cold pass that found someone
-            still searches (an upside-down person is read upright at about 0.4; upright people's cold passes
-            0.6-0.85).
+            still searches (through upright crops an upside-down person is read standing at 0.38 median, upright
+            people at 0.79: docs/runtime.md, "Lying and upside down, rendered"; not tuned beyond that).
     """
 
     volume_margin_m: float = 0.0

@@ -433,14 +433,15 @@ class _CameraState:
 
 
 #: roi.turn_search: how much more a turned crop's view score (:func:`_view_score`) must be than upright's, and a
-#: turned pass's median joint confidence than the upright pass's, to be taken. Upright people's crops turned score
-#: lower than upright; lying across the view a quarter turn scores 0.25-0.5 higher, upside down a half turn 0.15-0.25
-#: (the bench's first scenes; benchmarks/measure_lying_rendered.py --turn-search measures the whole).
+#: turned pass's median joint confidence than the upright pass's, to be taken. In a one-off look at the first four
+#: bench scenes' view scores, lying across the view a quarter turn scored 0.25-0.5 higher than upright, upside down
+#: a half turn 0.15-0.25; benchmarks/measure_lying_rendered.py --turn-search measures the search as a whole.
 _TURN_MARGIN = 0.1
 #: roi.turn_search: a weak cold pair searches only when one view's ``presence.min_joints``-th strongest joint peak
 #: (:func:`~ghnerf_runtime.flip_test.presence_peak` of that view) reaches this: upright crops of people lying or
-#: upside down reach 0.16-0.7, empty rooms stay under 0.01 (both views together; benchmarks/measure_presence.py
-#: --time --turn-search counts the empty-room pairs that still search).
+#: upside down reached 0.16-0.7 in a one-off look at four bench scenes, empty rooms stay under 0.01 (both views
+#: together: benchmarks/measure_presence.py --flip-test; with --time --turn-search it counts the empty-room pairs
+#: that still search).
 _TURN_SEARCH_FLOOR = 0.1
 
 

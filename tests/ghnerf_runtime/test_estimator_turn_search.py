@@ -42,6 +42,34 @@ def test_view_score_is_the_median_joint_peak_per_view():
     np.testing.assert_allclose(_view_score(heat), [0.5, 0.0])
 
 
+class _Scored:
+    """Stands in for the estimator in :meth:`Estimator._turn_candidates`: given view scores per turn."""
+
+    def __init__(self, scores: dict[int, list[float]]) -> None:
+        self.scores = scores
+
+    def _turn_scores(self, images, turn, timing):
+        return np.array(self.scores[turn])
+
+
+@pytest.mark.parametrize("scores, expected", [
+    # cameras facing each other: the body rolled one way in one view, the other way in the other (then the common
+    # turn of the best summed score)
+    ({90: [0.6, 0.1], 180: [0.2, 0.2], 270: [0.1, 0.7]}, [(90, 270), (270, 270)]),
+    # one view clearly better turned, the other only a little: its own turn first, then the common one
+    ({90: [0.1, 0.1], 180: [0.7, 0.34], 270: [0.1, 0.1]}, [(180, 0), (180, 180)]),
+    # both alike: one candidate
+    ({90: [0.1, 0.1], 180: [0.6, 0.6], 270: [0.1, 0.1]}, [(180, 180)]),
+    # no turn clearly better than upright: nothing to try
+    ({90: [0.35, 0.3], 180: [0.3, 0.35], 270: [0.1, 0.1]}, []),
+])
+def test_turn_candidates_are_per_view_then_common(scores, expected):
+    from ghnerf_runtime.estimator import Estimator
+
+    base = np.array([0.3, 0.3])  # the upright crops' view scores
+    assert Estimator._turn_candidates(_Scored(scores), None, base, {}) == expected
+
+
 @pytest.fixture(scope="module")
 def session():
     from ghnerf_runtime.estimator import load_session
