@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/measure_lying_rendered.py [--model-dir models] [--scenes 12] [--frames 3]
         [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops] [--turn-search]
+        [--turn-search-every 5]
 
 ``benchmarks/measure_prior_out_of_range.py`` measures the skeleton prior on turned bodies through a noise
 model (exact projections plus Gaussian pixels, the bodies turned as the prior's training copies are). This
@@ -31,7 +32,8 @@ turn of the picture can right, the prior with both crops turned with the body (:
 the runtime does not know how a person lies): what a search over crop rotations could give at best.
 ``--turn-search`` adds, for every pose, the prior with ``roi.turn_search`` on (the runtime's search: a weak cold
 pass tries each view's crop turned 90, 180 and 270 degrees), with how many pairs searched and how many kept the
-turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``).
+turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``);
+``--turn-search-every`` sets ``roi.turn_search_every`` for those rows.
 Deterministic (scene seeds, sensor noise seeded by scene, camera and time). A tool, not a test:
 docs/runtime.md, "The skeleton prior".
 """
@@ -129,11 +131,13 @@ def turn_crops(est, deg: float) -> None:
 
 
 def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_scene: int = 0,
-            turned_crops: bool = False, log=print, turn_search: bool = False) -> dict[tuple[str, str], dict]:
+            turned_crops: bool = False, log=print, turn_search: bool = False,
+            turn_search_every: int | None = None) -> dict[tuple[str, str], dict]:
     """``{(pose, "prior" | "no prior" | "turned crops" | "turn search"): Accuracy summary + pairs, empty pairs,
     lowest feet, turn searches}`` (module docstring); ``turned crops`` (with ``turned_crops``, for the poses of
     :data:`CROP_TURN_DEG`): the prior on, the crops turned with the body (:func:`turn_crops`); ``turn search``
-    (with ``turn_search``, every pose): the prior on and ``roi.turn_search`` on."""
+    (with ``turn_search``, every pose): the prior on and ``roi.turn_search`` on (``turn_search_every``: its
+    ``roi.turn_search_every``, ``None`` the default)."""
     from ghnerf_runtime.cli.simdata import Accuracy, bench_rig_and_scene
     from ghnerf_runtime.estimator import Estimator, load_session
 
@@ -144,7 +148,9 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
     if turned_crops:
         configs["turned crops"] = (on, with_prior)
     if turn_search:
-        configs["turn search"] = (replace(on, roi=replace(on.roi, turn_search=True)), with_prior)
+        every = on.roi.turn_search_every if turn_search_every is None else turn_search_every
+        configs["turn search"] = (replace(on, roi=replace(on.roi, turn_search=True, turn_search_every=every)),
+                                  with_prior)
     runs = [(p, c) for p in poses for c in configs if c != "turned crops" or p in CROP_TURN_DEG]
     acc = {key: Accuracy() for key in runs}
     extra = {key: {"pairs": 0, "empty": 0, "feet": [], "confidence": [], "apart": [], "searches": 0, "kept": 0,
@@ -241,6 +247,8 @@ def main(argv=None) -> int:
                          "upside down: 180), what a search over crop rotations could give at best")
     ap.add_argument("--turn-search", action="store_true",
                     help="also run the prior with roi.turn_search on (the runtime's search over crop turns)")
+    ap.add_argument("--turn-search-every", type=int, default=None,
+                    help="roi.turn_search_every for --turn-search (default: the config's)")
     args = ap.parse_args(argv)
     poses = [p.strip() for p in args.poses.split(",") if p.strip()]
     bad = [p for p in poses if p not in POSES]
@@ -249,7 +257,8 @@ def main(argv=None) -> int:
     if args.scenes < 1 or args.frames < 1 or args.first_scene < 0:
         ap.error("--scenes and --frames must be at least 1, --first-scene at least 0")
     results = measure(args.model_dir, args.scenes, args.frames, poses, args.first_scene, args.turned_crops,
-                      log=lambda m: print(m, file=sys.stderr), turn_search=args.turn_search)
+                      log=lambda m: print(m, file=sys.stderr), turn_search=args.turn_search,
+                      turn_search_every=args.turn_search_every)
     print(table(results))
     return 0
 

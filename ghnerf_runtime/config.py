@@ -197,6 +197,9 @@ class RoiConfig:
         turn_search_below: the found joints' median confidence under which a cold pass that found someone
             still searches (through upright crops an upside-down person is read standing at 0.38 median, upright
             people at 0.79: docs/runtime.md, "Lying and upside down, rendered"; not tuned beyond that).
+        turn_search_every: after a search that kept no turn, only every this-many-th weak cold pair searches
+            (until someone is found well): a person no turn rights (lying along the line of sight) otherwise
+            makes every cold pair pay three encoder runs and up to two passes more for nothing; 1: every one.
     """
 
     volume_margin_m: float = 0.0
@@ -209,11 +212,13 @@ class RoiConfig:
     supersample: int = 2
     turn_search: bool = False
     turn_search_below: float = 0.5
+    turn_search_every: int = 5
 
     def __post_init__(self) -> None:
         _boolean(self, "upright")
         _boolean(self, "turn_search")
         _number(self, "turn_search_below", 0.0, 1.0)
+        _integer(self, "turn_search_every", 1, 1000)
         _integer(self, "supersample", 1, 4)
         _number(self, "volume_margin_m", 0.0, 2.0)
         _number(self, "joint_margin_frac", 0.0, 2.0)

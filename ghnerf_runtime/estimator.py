@@ -542,6 +542,7 @@ class Estimator:
         self._turned_trackers: dict[tuple[int, int], SubjectTracker] = {(0, 0): self.tracker}
         self.turn_searches = 0  # cold passes that searched the turns, and those whose turned pass was kept
         self.turns_kept = 0
+        self._turn_search_wait = 0  # weak cold pairs left that do not search (roi.turn_search_every)
         # smooths what is reported; the tracker follows the raw joints
         self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
         self._levels = _levels_per_unit(self.contract.normalisation)
@@ -608,6 +609,7 @@ class Estimator:
         """Forget the tracked subject (the next pair starts from the working volume) and the smoothing."""
         self.tracker.reset()
         self._several_track = False
+        self._turn_search_wait = 0
         if self._smoother is not None:
             self._smoother.reset()
 
@@ -735,9 +737,16 @@ class Estimator:
         p = self._refined(images, p, sequence, timing, novel_view)
         if cold_pass and self._weak_pass(p):
             # A cold pair that found nobody, or someone weakly (refined or not): someone lying or upside down?
-            turned = self._turn_search(images, p, sequence, timing, novel_view)
-            if turned is not p:
-                p = self._refined(images, turned, sequence, timing, novel_view)
+            if self._turn_search_wait > 0:  # a search found no turn lately: someone no turn rights, most likely
+                self._turn_search_wait -= 1
+            else:
+                turned = self._turn_search(images, p, sequence, timing, novel_view)
+                if turned is not p:
+                    p = self._refined(images, turned, sequence, timing, novel_view)
+                else:
+                    self._turn_search_wait = self.config.roi.turn_search_every - 1
+        elif p.someone:
+            self._turn_search_wait = 0  # someone found well: the next weak cold pair searches at once
         if p.j3 is None:
             if self._smoother is not None:
                 self._smoother.reset()

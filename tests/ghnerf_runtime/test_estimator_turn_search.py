@@ -28,6 +28,9 @@ def test_turn_search_keys_are_validated():
     for bad in (-0.1, 1.5, float("nan"), None):
         with pytest.raises(ConfigError, match="turn_search_below"):
             RoiConfig(turn_search_below=bad)
+    for bad in (0, 2.5, True, 1001):
+        with pytest.raises(ConfigError, match="turn_search_every"):
+            RoiConfig(turn_search_every=bad)
 
 
 def test_view_score_is_the_median_joint_peak_per_view():
@@ -92,11 +95,12 @@ def _shots(k: int, pose: str, frames: int = 3):
     return rig, out
 
 
-def _run(session, rig, shots, search: bool):
+def _run(session, rig, shots, search: bool, every: int = 5):
     """Each pair's (result, 3D error of the found joints in mm, the search count after it) and the estimator."""
     from ghnerf_runtime.estimator import Estimator
 
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")), roi=RoiConfig(turn_search=search))
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                          roi=RoiConfig(turn_search=search, turn_search_every=every))
     est = Estimator(session, rig, cfg)
     out = []
     for t, images, truth in shots:
@@ -146,3 +150,15 @@ def test_a_lost_turned_track_looks_upright_first(session):
     est.reset()
     r = est.estimate(upright[0][1], timestamp_s=1.0)
     assert est._turns == (0, 0) and est.turn_searches == 1 and (~r.missing).sum() >= 20
+
+
+@needs_model
+def test_a_person_no_turn_rights_is_searched_for_every_few_pairs(session):
+    """Lying along the line of sight no turn shows an upright person: after a search that kept nothing, only
+    every ``turn_search_every``-th weak cold pair searches again."""
+    rig, shots = _shots(1, "lying_x", frames=7)
+    every, _ = _run(session, rig, shots, search=True, every=1)
+    assert [n for _, _, n in every] == [1, 2, 3, 4, 5, 6, 7]
+    fifth, est = _run(session, rig, shots, search=True, every=5)
+    assert [n for _, _, n in fifth] == [1, 1, 1, 1, 1, 2, 2] and est.turns_kept == 0
+    assert all(r.missing.all() for r, _, _ in every + fifth)  # nobody found either way: the searches cost only
