@@ -723,7 +723,6 @@ class Estimator:
             raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
         timing: dict[str, float] = {}
         self._forget_a_stale_track(timestamp_s)
-        tcfg = self.config.tracking
         if self.tracker.track is None and self.tracker.view_track is None:
             self._use_turns((0, 0))  # a turned track was lost: a cold pass looks upright first (and searches again)
         p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
