@@ -1,7 +1,8 @@
 """People lying on the floor and upside down, rendered and run through the runtime with the shipped model.
 
     .venv/bin/python benchmarks/measure_lying_rendered.py [--model-dir models] [--scenes 12] [--frames 3]
-        [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops]
+        [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops] [--turn-search]
+        [--turn-search-every 5]
 
 ``benchmarks/measure_prior_out_of_range.py`` measures the skeleton prior on turned bodies through a noise
 model (exact projections plus Gaussian pixels, the bodies turned as the prior's training copies are). This
@@ -29,6 +30,10 @@ share found, the median confidence of the joints found, the median of ``PairResu
 them: a lying body can be longer than a small volume is wide). ``--turned-crops`` adds, for the poses a
 turn of the picture can right, the prior with both crops turned with the body (:func:`turn_crops`, an oracle:
 the runtime does not know how a person lies): what a search over crop rotations could give at best.
+``--turn-search`` adds, for every pose, the prior with ``roi.turn_search`` on (the runtime's search: a weak cold
+pass tries each view's crop turned 90, 180 and 270 degrees), with how many pairs searched and how many kept the
+turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``);
+``--turn-search-every`` sets ``roi.turn_search_every`` for those rows.
 Deterministic (scene seeds, sensor noise seeded by scene, camera and time). A tool, not a test:
 docs/runtime.md, "The skeleton prior".
 """
@@ -125,10 +130,13 @@ def turn_crops(est, deg: float) -> None:
 
 
 def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_scene: int = 0,
-            turned_crops: bool = False, log=print) -> dict[tuple[str, str], dict]:
-    """``{(pose, "prior" | "no prior" | "turned crops"): Accuracy summary + pairs, empty pairs, lowest feet}``
-    (module docstring); ``turned crops`` (with ``turned_crops``, for the poses of :data:`CROP_TURN_DEG`): the prior
-    on, the crops turned with the body (:func:`turn_crops`)."""
+            turned_crops: bool = False, log=print, turn_search: bool = False,
+            turn_search_every: int | None = None) -> dict[tuple[str, str], dict]:
+    """``{(pose, "prior" | "no prior" | "turned crops" | "turn search"): Accuracy summary + pairs, empty pairs,
+    lowest feet, turn searches}`` (module docstring); ``turned crops`` (with ``turned_crops``, for the poses of
+    :data:`CROP_TURN_DEG`): the prior on, the crops turned with the body (:func:`turn_crops`); ``turn search``
+    (with ``turn_search``, every pose): the prior on and ``roi.turn_search`` on (``turn_search_every``: its
+    ``roi.turn_search_every``, ``None`` the default)."""
     from ghnerf_runtime.cli.simdata import Accuracy, bench_rig_and_scene
     from ghnerf_runtime.estimator import Estimator, load_session
 
@@ -138,9 +146,14 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
     configs = {"prior": (on, with_prior), "no prior": (off, load_session(off))}
     if turned_crops:
         configs["turned crops"] = (on, with_prior)
+    if turn_search:
+        every = on.roi.turn_search_every if turn_search_every is None else turn_search_every
+        configs["turn search"] = (replace(on, roi=replace(on.roi, turn_search=True, turn_search_every=every)),
+                                  with_prior)
     runs = [(p, c) for p in poses for c in configs if c != "turned crops" or p in CROP_TURN_DEG]
     acc = {key: Accuracy() for key in runs}
-    extra = {key: {"pairs": 0, "empty": 0, "feet": [], "confidence": [], "apart": []} for key in runs}
+    extra = {key: {"pairs": 0, "empty": 0, "feet": [], "confidence": [], "apart": [], "searches": 0, "kept": 0,
+                   "tracked_searches": 0, "ms": []} for key in runs}
     outside = {p: [] for p in poses}  # per pose: each pair's share of true joints the box gate would drop
     margin = on.joints3d.max_outside_box_m
     for k in range(first_scene, first_scene + scenes):
@@ -161,22 +174,31 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
                     if name == "turned crops":
                         turn_crops(est, CROP_TURN_DEG[pose])
                     for i, (t, j3, images, j2, vis) in enumerate(shots):
+                        searched = est.turn_searches
+                        tracked_before = est.tracker.track is not None
                         r = est.estimate(images, sequence=i, timestamp_s=t - t0)
                         acc[pose, name].add_truth(r, j3, j2, vis, frame=(k, i))
                         e = extra[pose, name]
+                        # a pair that came with a track and still searched (its tracked pass lost the subject)
+                        e["tracked_searches"] += int(tracked_before and est.turn_searches > searched)
                         e["pairs"] += 1
+                        e["ms"].append(r.timing_ms["total"])
                         e["empty"] += int(r.missing.all())
                         e["confidence"].extend(r.confidence[~r.missing].tolist())
                         if r.prior_disagreement_m is not None:
                             e["apart"].append(r.prior_disagreement_m)
                         if r.lowest_foot_m is not None:
                             e["feet"].append(r.lowest_foot_m)
+                    e = extra[pose, name]
+                    e["searches"] += est.turn_searches
+                    e["kept"] += est.turns_kept
         log(f"scene {k} ({scene.config.motion}): {time.perf_counter() - start:.1f} s")
     out = {}
     for key in acc:
         s = acc[key].summary()
         e = extra[key]
-        s.update(pairs=e["pairs"], empty=e["empty"], feet_pairs=len(e["feet"]),
+        s.update(pairs=e["pairs"], empty=e["empty"], feet_pairs=len(e["feet"]), turn_searches=e["searches"],
+                 turns_kept=e["kept"], tracked_searches=e["tracked_searches"], ms_median=float(np.median(e["ms"])),
                  outside_frac=float(np.mean(outside[key[0]])),
                  disagreement_median_m=float(np.median(e["apart"])) if e["apart"] else float("nan"),
                  confidence_median=float(np.median(e["confidence"])) if e["confidence"] else float("nan"),
@@ -185,14 +207,20 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
     return out
 
 
-PRIOR_WORDS = {"prior": "on", "no prior": "off", "turned crops": "on, crops turned with the body (oracle)"}
+PRIOR_WORDS = {"prior": "on", "no prior": "off", "turned crops": "on, crops turned with the body (oracle)",
+               "turn search": "on, `roi.turn_search` on"}
 
 
 def table(results: dict[tuple[str, str], dict]) -> str:
-    """The results as a Markdown table (one row per pose and prior)."""
+    """The results as a Markdown table (one row per pose and prior; with ``turn search`` rows, two last columns:
+    the pairs that searched the turns, those that kept the turned pass, and those that came tracked; and the
+    median of the pairs' ``timing_ms["total"]``, the whole estimate, on whatever else the host runs)."""
+    searched = any(prior == "turn search" for _, prior in results)
     rows = ["| pose | skeleton prior | pairs (none found) | PCK@0.2 | MPJPE over the joints found | found | "
             "their confidence (median) | prior disagreement (median) | lowest foot (median, pairs) | true joints "
-            "outside the volume |", "|---|---|---|---|---|---|---|---|---|---|"]
+            "outside the volume |" + (" turn searches (kept, on tracked pairs) | ms per pair (median) |"
+                                      if searched else ""),
+            "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|" if searched else "")]
     for (pose, prior), s in results.items():
         conf = f"{s['confidence_median']:.2f}" if np.isfinite(s["confidence_median"]) else "-"
         mp = f"{s['mpjpe_mm']:.1f} mm" if np.isfinite(s["mpjpe_mm"]) else "-"
@@ -200,7 +228,9 @@ def table(results: dict[tuple[str, str], dict]) -> str:
         feet = f"{s['feet_median_m']:.2f} m ({s['feet_pairs']})" if s["feet_pairs"] else "none"
         rows.append(f"| {pose} | {PRIOR_WORDS[prior]} | {s['pairs']} ({s['empty']}) | "
                     f"{s.get('pck@0.2', float('nan')):.3f} | {mp} | {100 * s['found_3d_frac']:.1f} % | "
-                    f"{conf} | {apart} | {feet} | {100 * s['outside_frac']:.1f} % |")
+                    f"{conf} | {apart} | {feet} | {100 * s['outside_frac']:.1f} % |"
+                    + ((f" {s['turn_searches']} ({s['turns_kept']}, {s['tracked_searches']}) |" if prior == "turn search"
+                        else " - |") + f" {s['ms_median']:.1f} |" if searched else ""))
     return "\n".join(rows)
 
 
@@ -214,6 +244,10 @@ def main(argv=None) -> int:
     ap.add_argument("--turned-crops", action="store_true",
                     help="also run the prior with the crops turned with the body (lying across the view: 90 deg, "
                          "upside down: 180), what a search over crop rotations could give at best")
+    ap.add_argument("--turn-search", action="store_true",
+                    help="also run the prior with roi.turn_search on (the runtime's search over crop turns)")
+    ap.add_argument("--turn-search-every", type=int, default=None,
+                    help="roi.turn_search_every for --turn-search (default: the config's)")
     args = ap.parse_args(argv)
     poses = [p.strip() for p in args.poses.split(",") if p.strip()]
     bad = [p for p in poses if p not in POSES]
@@ -222,7 +256,8 @@ def main(argv=None) -> int:
     if args.scenes < 1 or args.frames < 1 or args.first_scene < 0:
         ap.error("--scenes and --frames must be at least 1, --first-scene at least 0")
     results = measure(args.model_dir, args.scenes, args.frames, poses, args.first_scene, args.turned_crops,
-                      log=lambda m: print(m, file=sys.stderr))
+                      log=lambda m: print(m, file=sys.stderr), turn_search=args.turn_search,
+                      turn_search_every=args.turn_search_every)
     print(table(results))
     return 0
 

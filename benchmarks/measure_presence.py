@@ -1,7 +1,7 @@
 """Confidence of phantom joints in empty rooms vs joints of real people (sets the presence gate).
 
     .venv/bin/python benchmarks/measure_presence.py [--model-dir models] [--rooms 8] [--flip-test] [--time]
-                                                    [--novel-view]
+                                                    [--novel-view] [--turn-search]
 
 The trained model has only ever seen views with a person in them, so for an empty room it still
 answers "someone", with weaker peaks. For each heatmap source (with its best 3D method) this
@@ -15,7 +15,9 @@ statistic ``heatmaps.flip_test_skip_below`` is compared with (``flip_test.presen
 before the mirrored run); its default belongs between the two as well. ``--time`` then times the runtime's
 defaults (the frame check off, as for a textured room) on the empty rooms, ``flip_test_skip_below`` at its
 default and at 0 (both run the flip test), the pairs interleaved: median ms per pair; with ``--novel-view``
-also the defaults with a novel view requested on every pair (none is rendered for a pair that shows nobody).
+also the defaults with a novel view requested on every pair (none is rendered for a pair that shows nobody);
+with ``--turn-search`` the defaults with ``roi.turn_search`` on (every empty-room pair is a cold pair that finds
+nobody, so each one searches the turns: its cost, and the pairs where a turned crop reported a phantom person).
 A tool, not a test.
 """
 from __future__ import annotations
@@ -67,6 +69,8 @@ def main(argv=None) -> int:
                     help="also time the empty rooms with the defaults, heatmaps.flip_test_skip_below default vs 0")
     ap.add_argument("--novel-view", action="store_true",
                     help="with --time: also time the defaults with a novel view requested on every pair")
+    ap.add_argument("--turn-search", action="store_true",
+                    help="with --time: also time the defaults with roi.turn_search on")
     args = ap.parse_args(argv)
     import drivers.sim as sim
 
@@ -102,14 +106,16 @@ def main(argv=None) -> int:
             print(f"{'':>8} before the mirrored run (heatmaps.flip_test_skip_below): empty rooms max "
                   f"{max(empty_peaks):.3f} | with a person min {min(_PeakRecorder.peaks):.3f}")
     if args.time:
-        time_empty_rooms(args.model_dir, args.rooms, novel=args.novel_view)
+        time_empty_rooms(args.model_dir, args.rooms, novel=args.novel_view, turn_search=args.turn_search)
     return 0
 
 
-def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool = False) -> None:
+def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool = False,
+                     turn_search: bool = False) -> None:
     """Median ms per empty-room pair with the defaults (frame check off), skipping the flip test's mirrored
     run where nobody may be (the default) against running it always (``flip_test_skip_below`` 0); ``novel``:
-    also the defaults with a novel view (alpha 0.5) requested on every pair."""
+    also the defaults with a novel view (alpha 0.5) requested on every pair; ``turn_search``: also the
+    defaults with ``roi.turn_search`` on (and how many pairs searched, and reported someone)."""
     import time
     from dataclasses import replace
 
@@ -126,8 +132,11 @@ def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool 
     order = [("skipped", skip, None), ("always", always, None)]
     if novel:
         order.append(("novel", Estimator(skip.session, rig, base), NovelViewRequest(alpha=0.5)))
+    if turn_search:
+        searcher = Estimator(skip.session, rig, replace(base, roi=replace(base.roi, turn_search=True)))
+        order.append(("turn search", searcher, None))
     times: dict[str, list[float]] = {name: [] for name, _, _ in order}
-    views = 0
+    views = phantoms = 0
     for seed in range(1, rooms + 1):
         room = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(40.0, 3.0)))
         pair = tuple(room.render(c, 0.2, with_truth=False)[0] for c in rig.pair)
@@ -138,6 +147,7 @@ def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool 
                 if rep:  # the first of each room warms the caches
                     times[name].append((time.perf_counter() - t) * 1e3)
                     views += r.novel_view is not None
+                    phantoms += name == "turn search" and bool((~r.missing).any())
     a, b = (float(np.median(times[k])) for k in ("skipped", "always"))
     print(f"empty rooms, the defaults (frame check off): {a:.2f} ms median per pair with the mirrored run skipped, "
           f"{b:.2f} ms with it (flip_test_skip_below 0): {a / b:.2f}x ({len(times['skipped'])} pairs each)")
@@ -145,6 +155,11 @@ def time_empty_rooms(model_dir: str, rooms: int, repeats: int = 10, novel: bool 
         print(f"empty rooms, the defaults with a novel view requested on every pair: "
               f"{np.median(times['novel']):.2f} ms median per pair, {views} of {len(times['novel'])} pairs with a "
               f"novel view")
+    if turn_search:
+        n = len(times["turn search"])
+        print(f"empty rooms, the defaults with roi.turn_search on: {np.median(times['turn search']):.2f} ms median per "
+              f"pair ({np.median(times['turn search']) / a:.2f}x the defaults), {searcher.turn_searches} of {n + rooms} "
+              f"pairs searched, {phantoms} of {n} reported someone")
 
 
 if __name__ == "__main__":

@@ -187,6 +187,19 @@ class RoiConfig:
             of the frame, as the synthetic training crops were rendered at 2x and box-reduced
             (``preprocess``, "Supersampling"); 1: the one-sample remap, blurrier than training by a
             Gaussian of sigma 0.4-0.7 model pixels on the bench rigs' crops.
+        turn_search: on a cold pass (no track) whose result is weak (nobody found, or the found joints'
+            median confidence under ``turn_search_below``), try each camera's crop turned 90, 180 and 270
+            degrees more (one encoder run per turn for both views), take per view the turn whose heatmap peaks
+            are clearly stronger than upright's, run the pass again with those crops and keep it when it finds
+            someone more confidently; the turn stays with the track (upright again once it is lost). For
+            people lying across the view or upside down, whom the encoder (trained on upright people) misses
+            upright; tracked pairs never search (docs/runtime.md, "Lying and upside down, rendered").
+        turn_search_below: the found joints' median confidence under which a cold pass that found someone
+            still searches (through upright crops an upside-down person is read standing at 0.38 median, upright
+            people at 0.79: docs/runtime.md, "Lying and upside down, rendered"; not tuned beyond that).
+        turn_search_every: after a search that kept no turn, only every this-many-th weak cold pair searches
+            (until someone is found well): a person no turn rights (lying along the line of sight) otherwise
+            makes every cold pair pay three encoder runs and up to two passes more for nothing; 1: every one.
     """
 
     volume_margin_m: float = 0.0
@@ -197,9 +210,15 @@ class RoiConfig:
     map_cache_size: int = 32
     upright: bool = True
     supersample: int = 2
+    turn_search: bool = False
+    turn_search_below: float = 0.5
+    turn_search_every: int = 5
 
     def __post_init__(self) -> None:
         _boolean(self, "upright")
+        _boolean(self, "turn_search")
+        _number(self, "turn_search_below", 0.0, 1.0)
+        _integer(self, "turn_search_every", 1, 1000)
         _integer(self, "supersample", 1, 4)
         _number(self, "volume_margin_m", 0.0, 2.0)
         _number(self, "joint_margin_frac", 0.0, 2.0)

@@ -119,7 +119,8 @@ _FLOOR_EDGE_FRAC = 0.2
 _FLOOR_MIN_TORSO_M = 0.5
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
-KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "volume", "render_heat", "decode_2d", "joints_3d")
+KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
+                   "joints_3d")
 #: Stage keys of the novel view.
 NOVEL_STAGES = ("novel_volume", "novel_render", "novel_compose")
 #: With ``novel_view.proxy_blend`` only.
@@ -417,7 +418,13 @@ class _CameraState:
 
     camera: Camera
     roll_deg: float = 0.0  # the crops' rotation that shows them upright (RoiConfig.upright)
+    turn_deg: float = 0.0  # and the turn search's on top of it (RoiConfig.turn_search: a person lying, upside down)
     cache: "OrderedDict[Roi, tuple[CropMaps, Camera]]" = field(default_factory=OrderedDict)
+
+    @property
+    def crop_roll_deg(self) -> float:
+        """The crops' whole rotation, counterclockwise degrees (:func:`build_undistort_crop_maps`' ``roll_deg``)."""
+        return self.roll_deg + self.turn_deg
 
     @property
     def upright_pinhole(self) -> Camera:
@@ -429,6 +436,33 @@ class _CameraState:
         pinhole = self.camera.without_distortion()
         # a skewed camera cannot be quarter-turned exactly: rotated about its centre, its size kept
         return pinhole.rotated(90.0 * turns) if turns % 2 and pinhole.K[0, 1] != 0.0 else pinhole.quarter_turned(turns)
+
+
+#: roi.turn_search: how much more a turned crop's view score (:func:`_view_score`) must be than upright's, and a
+#: turned pass's median joint confidence than the upright pass's, to be taken. In a one-off look at the first four
+#: bench scenes' view scores, lying across the view a quarter turn scored 0.25-0.5 higher than upright, upside down
+#: a half turn 0.15-0.25; benchmarks/measure_lying_rendered.py --turn-search measures the search as a whole.
+_TURN_MARGIN = 0.1
+#: roi.turn_search: a weak cold pair searches only when one view's ``presence.min_joints``-th strongest joint peak
+#: (:func:`~ghnerf_runtime.flip_test.presence_peak` of that view) reaches this: upright crops of people lying or
+#: upside down reached 0.16-0.7 in a one-off look at four bench scenes, empty rooms stay under 0.01 (both views
+#: together: benchmarks/measure_presence.py --flip-test; with --time --turn-search it counts the empty-room pairs
+#: that still search).
+_TURN_SEARCH_FLOOR = 0.1
+
+
+def _view_score(heat: np.ndarray) -> np.ndarray:
+    """Per view of ``(2, J, h, w)`` heatmaps, the median over the joints of each joint's map maximum (clipped to
+    0..1; a non-finite map counts 0): how much of a body the view's crop shows strongly, a few phantom peaks
+    aside. What ``roi.turn_search`` compares the turns with."""
+    maps = np.asarray(heat, np.float64).reshape(heat.shape[0], heat.shape[1], -1)
+    peaks = np.where(np.isfinite(maps).all(-1), np.clip(maps.max(-1), 0.0, 1.0), 0.0)
+    return np.median(peaks, axis=1)
+
+
+def _median_confidence(j3: Joints3D) -> float:
+    """The median confidence of ``j3``'s found joints (0 with none)."""
+    return float(np.median(j3.confidence[j3.valid])) if j3.valid.any() else 0.0
 
 
 def joints_shown_twice(kp: Keypoints2D, ratio: float) -> int:
@@ -507,6 +541,14 @@ class Estimator:
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
                                       (self._cams[0].roll_deg, self._cams[1].roll_deg))
+        # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
+        # state (its own remap tables) and per pair of turns a tracker (volume crops sized for that turn)
+        self._turns: tuple[int, int] = (0, 0)
+        self._turned_cams: dict[tuple[int, int], _CameraState] = {(i, 0): st for i, st in enumerate(self._cams)}
+        self._turned_trackers: dict[tuple[int, int], SubjectTracker] = {(0, 0): self.tracker}
+        self.turn_searches = 0  # cold passes that searched the turns, and those whose turned pass was kept
+        self.turns_kept = 0
+        self._turn_search_wait = 0  # weak cold pairs left that do not search (roi.turn_search_every)
         # smooths what is reported; the tracker follows the raw joints
         self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
         self._levels = _levels_per_unit(self.contract.normalisation)
@@ -573,6 +615,7 @@ class Estimator:
         """Forget the tracked subject (the next pair starts from the working volume) and the smoothing."""
         self.tracker.reset()
         self._several_track = False
+        self._turn_search_wait = 0
         if self._smoother is not None:
             self._smoother.reset()
 
@@ -594,9 +637,9 @@ class Estimator:
         """Remap tables and the pinhole crop camera of one window (building both costs ~0.8 ms)."""
         entry = state.cache.get(roi)
         if entry is None:
-            entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.roll_deg,
+            entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.crop_roll_deg,
                                                supersample=self.config.roi.supersample).compact(),
-                     crop_camera(state.camera, roi, self.size, state.roll_deg))
+                     crop_camera(state.camera, roi, self.size, state.crop_roll_deg))
             state.cache[roi] = entry
             while len(state.cache) > self.config.roi.map_cache_size:
                 state.cache.popitem(last=False)
@@ -686,20 +729,29 @@ class Estimator:
             raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
         timing: dict[str, float] = {}
         self._forget_a_stale_track(timestamp_s)
-        tcfg = self.config.tracking
+        if self.tracker.track is None and self.tracker.view_track is None:
+            self._use_turns((0, 0))  # a turned track was lost: a cold pass looks upright first (and searches again)
         p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if self._lost_on_a_tracked_pass(p):
             # The tracked crop found nobody: the subject may have left it. Look at the working volume now.
             if p.novel is not None:
                 p.novel.abandon()
+            self._use_turns((0, 0))
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
-        if (p.j3 is not None and not p.regions.tracked and tcfg.refine_cold_start
-                and self.tracker.track is not None):
-            # Cold start that found the subject: run again on its crop and box, in this pair (which two people
-            # stay: :meth:`_finish_pass`'s cold_several).
-            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
-                           cold_several=p.several_people)
+        p = self._refined(images, p, sequence, timing, novel_view)
+        if cold_pass and self._weak_pass(p):
+            # A cold pair that found nobody, or someone weakly (refined or not): someone lying or upside down?
+            if self._turn_search_wait > 0:  # a search found no turn lately: someone no turn rights, most likely
+                self._turn_search_wait -= 1
+            else:
+                turned = self._turn_search(images, p, sequence, timing, novel_view)
+                if turned is not p:
+                    p = self._refined(images, turned, sequence, timing, novel_view)
+                else:
+                    self._turn_search_wait = self.config.roi.turn_search_every - 1
+        elif p.someone:
+            self._turn_search_wait = 0  # someone found well: the next weak cold pair searches at once
         if p.j3 is None:
             if self._smoother is not None:
                 self._smoother.reset()
@@ -763,6 +815,113 @@ class Estimator:
         if inputs is not None:
             nv = self._over_proxy(nv, p, timing, inputs)
         return self._compose_novel(request, nv, p.j3, timing)
+
+    # -------------------------------------------------------------- turned crops (roi.turn_search)
+    def _use_turns(self, turns: tuple[int, int], fresh: bool = True) -> None:
+        """Crop camera ``i`` turned ``turns[i]`` degrees (counterclockwise) more than ``roi.upright`` does, with a
+        tracker of those turns, reset (a track's crops are sized for the turn it was found with) unless not
+        ``fresh`` (back to the tracker as the turn search found it)."""
+        if turns == self._turns:
+            return
+        for i, turn in enumerate(turns):
+            if (i, turn) not in self._turned_cams:
+                st = self._turned_cams[i, 0]
+                self._turned_cams[i, turn] = _CameraState(st.camera, st.roll_deg, float(turn))
+        self._cams = [self._turned_cams[i, turn] for i, turn in enumerate(turns)]
+        tracker = self._turned_trackers.get(turns)
+        if tracker is None:
+            tracker = SubjectTracker(self.rig, self.config.tracking, self.config.roi,
+                                     tuple(st.crop_roll_deg for st in self._cams))
+            self._turned_trackers[turns] = tracker
+        if fresh:
+            tracker.reset()
+            self._several_track = False
+        self.tracker = tracker
+        self._turns = turns
+
+    def _refined(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
+                 novel_view: NovelViewRequest | None) -> "_Pass":
+        """``p``, or after a cold start that found the subject (``tracking.refine_cold_start``) the pass run again
+        on its crop and box, in this pair (which two people stay: :meth:`_finish_pass`'s cold_several)."""
+        if (p.j3 is not None and not p.regions.tracked and self.config.tracking.refine_cold_start
+                and self.tracker.track is not None):
+            return self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
+                              cold_several=p.several_people)
+        return p
+
+    def _weak_pass(self, p: "_Pass") -> bool:
+        """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not; the
+        caller sees to that: pairs that came tracked never search): two frames that passed the frame check, and
+        nobody found, or someone at a median joint confidence under ``roi.turn_search_below`` (an upside-down
+        person read as an upright one); and a view whose ``presence.min_joints``-th strongest joint peak reaches
+        :data:`_TURN_SEARCH_FLOOR` (someone may be there: an empty room does not search)."""
+        roi = self.config.roi
+        if not roi.turn_search or p.j3 is None or p.env is None or not all(p.frame_ok.values()):
+            return False
+        if p.someone and _median_confidence(p.j3) >= roi.turn_search_below:
+            return False
+        rank = self.config.presence.min_joints
+        return any(presence_peak(p.env["encoder_heatmaps"], (v,), rank) >= _TURN_SEARCH_FLOOR for v in (0, 1))
+
+    def _turn_scores(self, images: Sequence[np.ndarray], turn: int, timing: dict) -> np.ndarray:
+        """Per view, :func:`_view_score` of the encoder heatmaps of its working-volume crop turned ``turn``
+        degrees more than upright (one encoder run for both views, no flip test)."""
+        self._use_turns((turn, turn))
+        S = self.size
+        t = time.perf_counter()
+        batch = np.empty((2, 3, S, S), np.float32)
+        crops = []
+        for i, (img, st, roi) in enumerate(zip(images, self._cams, self.tracker.regions().rois)):
+            maps, crop = self._crop(st, roi)
+            crops.append(crop)
+            batch[i] = preprocess_image(img, maps, self.contract.normalisation)
+        feeds = {"images": batch, "src_P": source_projections(crops, S, S)}
+        graph = "human" if self.session.has("human") else "encoder"
+        heat = self.session.run(graph, feeds)["encoder_heatmaps"]
+        _add_ms(timing, "turn_search", t)
+        return _view_score(heat)
+
+    def _turn_candidates(self, images: Sequence[np.ndarray], base: np.ndarray, timing: dict
+                         ) -> list[tuple[int, int]]:
+        """The views' turns for :meth:`_turn_search` to try, given the upright crops' :func:`_view_score`
+        ``base``: each view's best turn that scores :data:`_TURN_MARGIN` above upright (0 where none does; per
+        view, as two cameras facing each other see a body's roll opposite ways), then, when the views differ
+        (one view's peaks are not clearly stronger turned), the one turn for both whose summed score is best and
+        :data:`_TURN_MARGIN` above upright's (cameras facing one way see the body rolled alike)."""
+        scores = {0: base}
+        for turn in (90, 180, 270):
+            scores[turn] = self._turn_scores(images, turn, timing)
+        per_view = tuple(max((t for t in scores if scores[t][v] >= base[v] + _TURN_MARGIN),
+                             key=lambda t: scores[t][v], default=0) for v in (0, 1))
+        candidates = [per_view] if per_view != (0, 0) else []
+        both = max((90, 180, 270), key=lambda t: scores[t].sum())
+        if scores[both].sum() >= base.sum() + _TURN_MARGIN and (both, both) not in candidates:
+            candidates.append((both, both))
+        return candidates
+
+    def _turn_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
+                     novel_view: NovelViewRequest | None) -> "_Pass":
+        """``roi.turn_search`` after the weak pass ``p`` of a cold pair (upright crops): the views' turns to try
+        (:meth:`_turn_candidates`), each a cold pass with those crops, the first kept that finds someone where
+        ``p`` did not, or at a median confidence :data:`_TURN_MARGIN` higher; else ``p`` and its track stand."""
+        self.turn_searches += 1
+        several_track = self._several_track
+        for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing):
+            self._use_turns(turns)
+            q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
+            if q.j3 is not None and q.someone and (
+                    not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
+                if p.novel is not None:
+                    p.novel.abandon()
+                self.turns_kept += 1
+                log.debug("pair %d: crops turned %s degrees found the subject", sequence, turns)
+                return q
+            if q.novel is not None:
+                q.novel.abandon()
+        # upright stands, with the track its pass left
+        self._use_turns((0, 0), fresh=False)
+        self._several_track = several_track
+        return p
 
     def _lost_on_a_tracked_pass(self, p: "_Pass") -> bool:
         """Whether ``tracking.retry_cold`` runs the pair again from the working volume: a tracked pass that

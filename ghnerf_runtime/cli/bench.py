@@ -49,7 +49,7 @@ __all__ = ["main", "run_runtime_bench", "STAGE_GROUPS"]
 #: Printed columns: the issue's stage names -> estimator stage keys.
 STAGE_GROUPS = {
     "preprocess": ("preprocess",),
-    "encoders": ("encoder", "encoder_flip"),
+    "encoders": ("encoder", "encoder_flip", "turn_search"),
     "depth (volume)": ("volume",),
     "rendering (heat)": ("render_heat",),
     "decoding (2D+3D)": ("decode_2d", "joints_3d"),

@@ -104,3 +104,14 @@ def test_command_line_prints_a_row_per_pose_and_prior(tiny_model_dir, scratch_ca
                     ("lying_z", "on"), ("lying_z", "off"), ("lying_z", "on, crops turned with the body (oracle)"),
                     ("upside_down", "on"), ("upside_down", "off"),
                     ("upside_down", "on, crops turned with the body (oracle)")], out
+
+
+def test_turn_search_adds_a_row_per_pose_with_its_searches(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                          monkeypatch):
+    out = run_script("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--scenes", "1", "--frames",
+                     "1", "--poses", "upright,lying_z", "--turn-search", capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^\| (\w+) \| ([^|]+) \| 1 \(\d\) \|.*\| (- |\d+ \(\d+, \d+\) )\| [\d.]+ \|$", out, re.M)
+    assert [(pose, prior) for pose, prior, _ in rows] == [
+        ("upright", "on"), ("upright", "off"), ("upright", "on, `roi.turn_search` on"),
+        ("lying_z", "on"), ("lying_z", "off"), ("lying_z", "on, `roi.turn_search` on")], out
+    assert [searches != "- " for _, _, searches in rows] == [False, False, True] * 2

@@ -1,0 +1,164 @@
+"""``roi.turn_search``: a cold pair that finds nobody, or someone weakly, tries each camera's crop turned.
+
+The encoder learnt upright people only: through upright crops the shipped model finds nobody lying across the view
+and reads an upside-down person as an upright one, feet where the head is (docs/runtime.md, "Lying and upside
+down, rendered"). Renders bench scenes with the body turned (``benchmarks/measure_lying_rendered.py``'s poses) and
+runs the shipped model with the search off and on; upright people must not pay for it.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.config import EstimatorConfig, RoiConfig, SessionConfig
+from ghnerf_runtime.errors import ConfigError
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+needs_model = pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model in models/")
+FPS = 30.0
+
+
+def test_turn_search_keys_are_validated():
+    assert RoiConfig().turn_search is False  # measured, then chosen: docs/runtime.md
+    with pytest.raises(ConfigError, match="turn_search"):
+        RoiConfig(turn_search="yes")
+    for bad in (-0.1, 1.5, float("nan"), None):
+        with pytest.raises(ConfigError, match="turn_search_below"):
+            RoiConfig(turn_search_below=bad)
+    for bad in (0, 2.5, True, 1001):
+        with pytest.raises(ConfigError, match="turn_search_every"):
+            RoiConfig(turn_search_every=bad)
+
+
+def test_view_score_is_the_median_joint_peak_per_view():
+    from ghnerf_runtime.estimator import _view_score
+
+    heat = np.zeros((2, 5, 4, 4), np.float32)
+    heat[0, :, 1, 2] = [0.9, 0.2, 0.5, 1.7, 0.1]  # a peak above 1 counts 1; median 0.5
+    heat[1, :, 0, 0] = [0.3, 0.8, 0.8, 0.8, 0.8]
+    heat[1, 0, 3, 3] = np.nan  # a map with a non-finite value has no peak (the decoder drops that joint)
+    np.testing.assert_allclose(_view_score(heat), [0.5, 0.8])
+    heat[1, 3:, 3, 3] = np.inf  # not a full-strength peak either
+    np.testing.assert_allclose(_view_score(heat), [0.5, 0.0])
+
+
+class _Scored:
+    """Stands in for the estimator in :meth:`Estimator._turn_candidates`: given view scores per turn."""
+
+    def __init__(self, scores: dict[int, list[float]]) -> None:
+        self.scores = scores
+
+    def _turn_scores(self, images, turn, timing):
+        return np.array(self.scores[turn])
+
+
+@pytest.mark.parametrize("scores, expected", [
+    # cameras facing each other: the body rolled one way in one view, the other way in the other (then the common
+    # turn of the best summed score)
+    ({90: [0.6, 0.1], 180: [0.2, 0.2], 270: [0.1, 0.7]}, [(90, 270), (270, 270)]),
+    # one view clearly better turned, the other only a little: its own turn first, then the common one
+    ({90: [0.1, 0.1], 180: [0.7, 0.34], 270: [0.1, 0.1]}, [(180, 0), (180, 180)]),
+    # both alike: one candidate
+    ({90: [0.1, 0.1], 180: [0.6, 0.6], 270: [0.1, 0.1]}, [(180, 180)]),
+    # no turn clearly better than upright: nothing to try
+    ({90: [0.35, 0.3], 180: [0.3, 0.35], 270: [0.1, 0.1]}, []),
+])
+def test_turn_candidates_are_per_view_then_common(scores, expected):
+    from ghnerf_runtime.estimator import Estimator
+
+    base = np.array([0.3, 0.3])  # the upright crops' view scores
+    assert Estimator._turn_candidates(_Scored(scores), None, base, {}) == expected
+
+
+@pytest.fixture(scope="module")
+def session():
+    from ghnerf_runtime.estimator import load_session
+
+    return load_session(EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf"), warmup=False)))
+
+
+def _shots(k: int, pose: str, frames: int = 3):
+    """``frames`` consecutive pairs at 30 fps of bench scene ``k`` with the body in ``pose``: (rig, [(t, images,
+    true 3D joints)])."""
+    from benchmarks.measure_lying_rendered import posed_as, render_pair
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+
+    rig, scene, t0, _ = bench_rig_and_scene(k)
+    out = []
+    for i in range(frames):
+        posed = posed_as(scene.posed(t0 + i / FPS), pose, rig.volume)
+        images, _, _ = render_pair(scene, rig, posed, t0 + i / FPS)
+        out.append((i / FPS, images, posed.joints.copy()))
+    return rig, out
+
+
+def _run(session, rig, shots, search: bool, every: int = 5):
+    """Each pair's (result, 3D error of the found joints in mm, the search count after it) and the estimator."""
+    from ghnerf_runtime.estimator import Estimator
+
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                          roi=RoiConfig(turn_search=search, turn_search_every=every))
+    est = Estimator(session, rig, cfg)
+    out = []
+    for t, images, truth in shots:
+        r = est.estimate(images, timestamp_s=t)
+        ok = ~r.missing
+        err = 1e3 * np.linalg.norm(r.joints_3d[ok] - truth[ok], axis=1)
+        out.append((r, float(np.mean(err)) if ok.any() else np.inf, est.turn_searches))
+    return out, est
+
+
+@needs_model
+@pytest.mark.parametrize("pose, turn", [("lying_z", 90), ("upside_down", 180)])
+def test_the_search_finds_a_person_lying_or_upside_down_and_keeps_the_turn(session, pose, turn):
+    rig, shots = _shots(1, pose)
+    off, _ = _run(session, rig, shots, search=False)
+    on, est = _run(session, rig, shots, search=True)
+    # upright crops: nobody, or a skeleton the wrong way up (a metre off)
+    assert all(r.missing.sum() > 20 or err > 500 for r, err, _ in off), [(int((~r.missing).sum()), e) for r, e, _ in off]
+    for r, err, _ in on:
+        assert (~r.missing).sum() >= 20 and err < 150, (pose, int((~r.missing).sum()), err)
+    assert est._turns == (turn, turn)
+    # searched on the cold pair only: the next pairs come tracked, with the turned crops
+    assert [n for _, _, n in on] == [1, 1, 1] and est.turns_kept == 1
+    assert [r.tracked for r, _, _ in on] == [True, True, True]
+
+
+@needs_model
+def test_upright_people_do_not_search_and_get_the_same_joints(session):
+    for k in (0, 1, 2):
+        rig, shots = _shots(k, "upright")
+        off, _ = _run(session, rig, shots, search=False)
+        on, est = _run(session, rig, shots, search=True)
+        assert est.turn_searches == 0 and est._turns == (0, 0)
+        for (a, _, _), (b, _, _) in zip(off, on):
+            np.testing.assert_array_equal(a.missing, b.missing)
+            np.testing.assert_array_equal(a.joints_3d, b.joints_3d)
+
+
+@needs_model
+def test_a_lost_turned_track_looks_upright_first(session):
+    """Once the turned track is lost (here: forgotten), the next cold pass is upright, and an upright person
+    there is found without a search."""
+    rig, lying = _shots(1, "lying_z", frames=1)
+    _, upright = _shots(1, "upright", frames=1)
+    on, est = _run(session, rig, lying, search=True)
+    assert est._turns == (90, 90)
+    est.reset()
+    r = est.estimate(upright[0][1], timestamp_s=1.0)
+    assert est._turns == (0, 0) and est.turn_searches == 1 and (~r.missing).sum() >= 20
+
+
+@needs_model
+def test_a_person_no_turn_rights_is_searched_for_every_few_pairs(session):
+    """Lying along the line of sight no turn shows an upright person: after a search that kept nothing, only
+    every ``turn_search_every``-th weak cold pair searches again."""
+    rig, shots = _shots(1, "lying_x", frames=7)
+    every, _ = _run(session, rig, shots, search=True, every=1)
+    assert [n for _, _, n in every] == [1, 2, 3, 4, 5, 6, 7]
+    fifth, est = _run(session, rig, shots, search=True, every=5)
+    assert [n for _, _, n in fifth] == [1, 1, 1, 1, 1, 2, 2] and est.turns_kept == 0
+    assert all(r.missing.all() for r, _, _ in every + fifth)  # nobody found either way: the searches cost only
