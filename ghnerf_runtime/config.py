@@ -178,7 +178,8 @@ class RoiConfig:
             inside it and is at least ``1 - keep_frac`` of its size (the subject is still fully
             in view, not much smaller), so crops are stable and remap tables are reused; 0
             disables.
-        map_cache_size: remap tables kept per camera (least recently used are dropped).
+        map_cache_size: remap tables kept per camera (least recently used are dropped), its crop turns
+            (``turn_search``) together.
         upright: rotate each camera's crop so that the rig's down (gravity) is the picture's down, as
             in training: a camera mounted upside down (a ceiling mount), on its side or crooked. The
             angle comes from the rig file's R; free at run time (it is in the remap tables). False:

@@ -414,12 +414,13 @@ class _ProxyInputs:
 
 @dataclass
 class _CameraState:
-    """Per source camera: remap tables and crop camera per crop window (LRU)."""
+    """Per source camera and crop turn: remap tables and crop camera per crop window and turn (LRU)."""
 
     camera: Camera
     roll_deg: float = 0.0  # the crops' rotation that shows them upright (RoiConfig.upright)
     turn_deg: float = 0.0  # and the turn search's on top of it (RoiConfig.turn_search: a person lying, upside down)
-    cache: "OrderedDict[Roi, tuple[CropMaps, Camera]]" = field(default_factory=OrderedDict)
+    # one camera's turns share it (Estimator._use_turns), so roi.map_cache_size bounds the tables per camera
+    cache: "OrderedDict[tuple[Roi, float], tuple[CropMaps, Camera]]" = field(default_factory=OrderedDict)
 
     @property
     def crop_roll_deg(self) -> float:
@@ -635,16 +636,17 @@ class Estimator:
     # -------------------------------------------------------------- helpers
     def _crop(self, state: _CameraState, roi: Roi) -> tuple[CropMaps, Camera]:
         """Remap tables and the pinhole crop camera of one window (building both costs ~0.8 ms)."""
-        entry = state.cache.get(roi)
+        key = (roi, state.turn_deg)
+        entry = state.cache.get(key)
         if entry is None:
             entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.crop_roll_deg,
                                                supersample=self.config.roi.supersample).compact(),
                      crop_camera(state.camera, roi, self.size, state.crop_roll_deg))
-            state.cache[roi] = entry
+            state.cache[key] = entry
             while len(state.cache) > self.config.roi.map_cache_size:
                 state.cache.popitem(last=False)
         else:
-            state.cache.move_to_end(roi)
+            state.cache.move_to_end(key)
         return entry
 
     def _ray_uv(self, blocks: tuple, stride: int) -> np.ndarray:
@@ -826,7 +828,8 @@ class Estimator:
         for i, turn in enumerate(turns):
             if (i, turn) not in self._turned_cams:
                 st = self._turned_cams[i, 0]
-                self._turned_cams[i, turn] = _CameraState(st.camera, st.roll_deg, float(turn))
+                # the upright state's cache: a turn's tables count in the camera's roi.map_cache_size
+                self._turned_cams[i, turn] = _CameraState(st.camera, st.roll_deg, float(turn), st.cache)
         self._cams = [self._turned_cams[i, turn] for i, turn in enumerate(turns)]
         tracker = self._turned_trackers.get(turns)
         if tracker is None:

@@ -162,3 +162,34 @@ def test_a_person_no_turn_rights_is_searched_for_every_few_pairs(session):
     fifth, est = _run(session, rig, shots, search=True, every=5)
     assert [n for _, _, n in fifth] == [1, 1, 1, 1, 1, 2, 2] and est.turns_kept == 0
     assert all(r.missing.all() for r, _, _ in every + fifth)  # nobody found either way: the searches cost only
+
+
+@needs_model
+def test_the_turns_share_each_cameras_remap_table_cache(session):
+    """``roi.map_cache_size`` bounds the remap tables kept per camera whatever the crop turns: each turn kept its
+    own cache of that size, so a device searching the turns could hold four times the tables (each 2S x 2S at
+    ``roi.supersample`` 2; docs/daemon.md measured the upright caches' fill at about 50 MB)."""
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.estimator import Estimator
+    from ghnerf_runtime.preprocess import Roi
+
+    rig, _, _, _ = bench_rig_and_scene(0)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                          roi=RoiConfig(turn_search=True, map_cache_size=3))
+    est = Estimator(session, rig, cfg)
+    rois = [Roi(8 * k, 8 * k, 128) for k in range(4)]
+    crops = {}
+    for turns in ((0, 0), (90, 90), (180, 270), (270, 90)):
+        est._use_turns(turns)
+        for roi in rois:
+            for i, st in enumerate(est._cams):
+                crops[i, turns[i], roi] = est._crop(st, roi)[1]
+    for i in (0, 1):
+        tables = {id(entry) for (cam, _), st in est._turned_cams.items() if cam == i for entry in st.cache.values()}
+        assert len(tables) <= 3, (i, len(tables))
+    # a turn's tables are its own: the same window turned another way is another crop (its camera rolled)
+    est._use_turns((0, 90))
+    upright, turned = (est._crop(st, rois[0])[1] for st in est._cams)
+    np.testing.assert_allclose(upright.K, crops[0, 0, rois[0]].K)
+    np.testing.assert_allclose(turned.R, crops[1, 90, rois[0]].R)
+    assert not np.allclose(turned.R, crops[1, 0, rois[0]].R)
