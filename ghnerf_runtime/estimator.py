@@ -520,6 +520,11 @@ class Estimator:
             if self.contract.strides.get("human_feat") != self.contract.heatmap_stride:
                 raise ModelError(f"encoder heatmaps at stride {self.contract.strides.get('human_feat')} do not match "
                                  f"the heatmap grid's stride {self.contract.heatmap_stride}")
+        if self.config.roi.turn_search and not getattr(self.contract, "encoder_heatmaps", False):
+            # said at load: the search scores each turn by these maps, and a weak pair found them missing
+            raise ModelError("roi.turn_search scores the turned crops by the encoder heatmaps (the human encoder's "
+                             "auxiliary head; contract key ghnerf.encoder_heatmaps); this model has none: set "
+                             "roi.turn_search = false")
         self.skeleton_prior = self._prior_of(session)
         self.novel_painter = self._painter_of(session)
         # the flip test's two human-graph runs side by side on tracked pairs (heatmaps.flip_test_side_by_side)

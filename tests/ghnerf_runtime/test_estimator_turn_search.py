@@ -193,3 +193,22 @@ def test_the_turns_share_each_cameras_remap_table_cache(session):
     np.testing.assert_allclose(upright.K, crops[0, 0, rois[0]].K)
     np.testing.assert_allclose(turned.R, crops[1, 90, rois[0]].R)
     assert not np.allclose(turned.R, crops[1, 0, rois[0]].R)
+
+
+@pytest.mark.skipif(not (MODELS / "baseline").is_dir(), reason="no baseline model in models/")
+def test_a_model_without_encoder_heatmaps_is_refused_at_load():
+    """The search scores the turns by the encoder heatmaps: with the baseline (which has none) each weak cold
+    pair raised KeyError('encoder_heatmaps') mid-stream; now the estimator (and so the daemon's config check)
+    says so when built."""
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.config import HeatmapsConfig
+    from ghnerf_runtime.errors import ModelError
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    rig, _, _, _ = bench_rig_and_scene(0)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "baseline"), warmup=False),
+                          heatmaps=HeatmapsConfig(source="rendered"))
+    baseline = load_session(cfg)
+    Estimator(baseline, rig, cfg).close()  # the search off: the baseline serves
+    with pytest.raises(ModelError, match=r"roi\.turn_search .*encoder_heatmaps.* roi\.turn_search = false"):
+        Estimator(baseline, rig, replace(cfg, roi=RoiConfig(turn_search=True)))
