@@ -747,6 +747,15 @@ class Estimator:
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         p = self._refined(images, p, sequence, timing, novel_view)
+        if cold_pass and self._turns != (0, 0) and self._weak_pass(p):
+            # A cold pass through a kept turn's crops (a single-view track keeps the turn) that is weak: the subject
+            # may have got up. Upright first, as after a lost track: the search below scores its turns against the
+            # upright crops, and took these for them (a standing person kept through upside-down crops).
+            if p.novel is not None:
+                p.novel.abandon()
+            self._use_turns((0, 0))
+            p = self._refined(images, self._pass(images, self.tracker.regions(), sequence, timing, novel_view),
+                              sequence, timing, novel_view)
         if cold_pass and self._weak_pass(p):
             # A cold pair that found nobody, or someone weakly (refined or not): someone lying or upside down?
             if self._turn_search_wait > 0:  # a search found no turn lately: someone no turn rights, most likely

@@ -212,3 +212,28 @@ def test_a_model_without_encoder_heatmaps_is_refused_at_load():
     Estimator(baseline, rig, cfg).close()  # the search off: the baseline serves
     with pytest.raises(ModelError, match=r"roi\.turn_search .*encoder_heatmaps.* roi\.turn_search = false"):
         Estimator(baseline, rig, replace(cfg, roi=RoiConfig(turn_search=True)))
+
+
+@needs_model
+def test_a_weak_cold_pass_through_a_kept_turn_looks_upright_first(session):
+    """A kept turn stays with a single-view track too (one camera's frame failed the check): the next pair's cold
+    pass crops turned. When that pass is weak (the person got up) the search took the turned crops for the upright
+    ones, never tried upright, and kept the upside-down crops of a standing person: 1.2 m off, then tracked so.
+    Now such a pass is run again upright first, as after a lost track."""
+    rig, lying = _shots(1, "lying_z", frames=2)
+    _, upright = _shots(1, "upright", frames=4)
+    t, images, _ = lying[1]
+    blinded = (t, [images[0], np.zeros_like(images[1])], None)  # one camera's frame rejected (flat)
+    pairs = [lying[0], blinded, upright[2], upright[3]]
+    from ghnerf_runtime.estimator import Estimator
+
+    est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                                                  roi=RoiConfig(turn_search=True)))
+    for k, (t, images, truth) in enumerate(pairs):
+        r = est.estimate(images, timestamp_s=t)
+        if k == 1:
+            assert r.single_view is not None and est._turns == (90, 90)  # the view track keeps the turn
+        if k >= 2:
+            ok = ~r.missing
+            err = 1e3 * float(np.mean(np.linalg.norm(r.joints_3d[ok] - truth[ok], axis=1)))
+            assert est._turns == (0, 0) and ok.sum() >= 20 and err < 150, (k, est._turns, int(ok.sum()), err)
