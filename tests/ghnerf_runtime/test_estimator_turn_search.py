@@ -237,3 +237,26 @@ def test_a_weak_cold_pass_through_a_kept_turn_looks_upright_first(session):
             ok = ~r.missing
             err = 1e3 * float(np.mean(np.linalg.norm(r.joints_3d[ok] - truth[ok], axis=1)))
             assert est._turns == (0, 0) and ok.sum() >= 20 and err < 150, (k, est._turns, int(ok.sum()), err)
+
+
+@needs_model
+@pytest.mark.parametrize("degrees", [30, 90])
+def test_the_turns_compose_with_a_rolled_cameras_upright_crops(session, degrees):
+    """A turn is on top of ``roi.upright``'s roll: a rig mounted rolled finds an upside-down person with the same
+    half turn as the upright rig (integration review: found so in a one-off look at 0/30/90/180 degrees)."""
+    from benchmarks.measure_lying_rendered import posed_as, render_pair
+    from benchmarks.measure_mounting import rolled
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.estimator import Estimator
+
+    base, scene, t0, _ = bench_rig_and_scene(1)
+    rig = rolled(base, degrees)
+    posed = posed_as(scene.posed(t0), "upside_down", base.volume)
+    images, _, _ = render_pair(scene, rig, posed, t0)
+    est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                                                  roi=RoiConfig(turn_search=True)))
+    r = est.estimate(images, timestamp_s=0.0)
+    ok = ~r.missing
+    err = 1e3 * float(np.mean(np.linalg.norm(r.joints_3d[ok] - posed.joints[ok], axis=1)))
+    np.testing.assert_allclose([st.roll_deg for st in est._cams], -degrees, atol=1e-6)
+    assert est._turns == (180, 180) and ok.sum() >= 20 and err < 150, (est._turns, int(ok.sum()), err)
