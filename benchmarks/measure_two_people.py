@@ -131,7 +131,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
     over the passes of the pairs counted (a cold pass and its refined one are two), ``passes`` and the joints
     shown twice (a runner-up of at least ``second_person_ratio`` of the peak) in view 0, in view 1 and in both
     (``twice_view0``, ``twice_view1``, ``twice_both``, summed): a view whose two people's peaks of a joint share a
-    region showed none there before session 55's fourth change (docs/runtime.md, "Two people 0.6 m apart").
+    region showed none there before the runner-up in a region (session 55) (docs/runtime.md, "Two people 0.6 m apart").
     ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each at the other's
     place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
     two people rendered together (``drivers.sim.render_people``) instead of the oracle. ``second``: False shows
