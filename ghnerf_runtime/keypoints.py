@@ -316,11 +316,11 @@ RUNNER_UP_DIP = 0.5
 _DIP_SAMPLES = 16
 
 
-def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_top: np.ndarray, iy: np.ndarray,
-                         ix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_top: np.ndarray, top: np.ndarray,
+                         iy: np.ndarray, ix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each map's highest local maximum of ``filtered`` inside its best region (``in_top``) other than the peak
-    (``iy``, ``ix``) with a valley between them (:data:`RUNNER_UP_DIP`): ``(value, y, x)`` per map, value 0 where
-    none. The regions are thresholded, so two peaks a little apart share one; the other region's maximum alone
+    (``iy``, ``ix``; ``top`` its region's label, 0 where no region passes the threshold) with a valley between them
+    (:data:`RUNNER_UP_DIP`): ``(value, y, x)`` per map, value 0 where none. The regions are thresholded, so two peaks a little apart share one; the other region's maximum alone
     missed the second person standing near the first (docs/runtime.md, "Two people in the working volume")."""
     n, h, w = filtered.shape
     values = np.zeros(n, np.float32)
@@ -328,7 +328,8 @@ def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_
     # the 3x3 neighbourhood's maximum (the zero border of ``padded`` around each map; pad >= 1)
     neighbours = np.max([padded[:, pad + dy:pad + dy + h, pad + dx:pad + dx + w]
                          for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx], axis=0)
-    local = in_top & (filtered >= neighbours)
+    # in_top is the pixels below the threshold where no peak passes it (top label 0): a bump there is no peak
+    local = in_top & (top > 0)[:, None, None] & (filtered >= neighbours)
     local[np.arange(n), iy, ix] = False
     m, y, x = np.nonzero(local)
     if not len(m):
@@ -410,7 +411,7 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     # Runner-up peak: only maps with another region need the (full-map) masked max, taken where it is.
     others = above & ~in_top
     runner_up = np.zeros(n, np.float32)
-    inner, inner_y, inner_x = _runner_up_in_region(filtered, padded, pad, in_top, iy, ix)
+    inner, inner_y, inner_x = _runner_up_in_region(filtered, padded, pad, in_top, top, iy, ix)
     multi = np.flatnonzero(others.any(axis=(1, 2)) | (inner > 0))
     which = np.arange(n)
     if len(multi):

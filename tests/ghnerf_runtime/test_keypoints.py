@@ -172,6 +172,10 @@ def test_a_second_peak_in_the_best_region_is_the_runner_up():
     # a second maximum (0.57 filtered, 5 cells off) whose valley (0.47) is no dip: one blob's shoulder, not a peak
     shoulder = (blob(12.0, 15.0) + blob(17.0, 15.0, 0.8))[None].astype(np.float32)
     assert decode_keypoints(shoulder).runner_up[0] == 0.0
+    # two bumps below the threshold: no peak, and no runner-up (a runner-up is a peak above it, the pairings' rule)
+    faint = (0.1 * np.maximum(blob(10.0, 15.0), blob(20.0, 15.0, 0.9)))[None].astype(np.float32)
+    kp = decode_keypoints(faint)
+    assert not kp.valid[0] and kp.runner_up[0] == 0.0
 
 
 def test_rendered_blocks_place_the_runner_up_in_the_grid_s_cells():
