@@ -214,8 +214,9 @@ CLOSE = ((-0.3, 3.0), (0.3, 3.4))
 def test_two_people_0_6_m_apart_are_flagged_and_split_though_their_peaks_share_a_region():
     """Before, the decoder's runner-up was another region's maximum only: 0.6 m apart one view showed fewer than 6
     joints twice, the pair was not flagged and reported the decoded peaks, a mix of both people (seeds 2 and 4:
-    no pair flagged, 2-6 joints at the first person). The second maximum past a valley inside the region is the
-    runner-up now (``keypoints.RUNNER_UP_DIP``): every pair flagged, the nearer person's joints reported."""
+    no pair of ten flagged, 1-6 joints of 13-21 at the first person). The second maximum past a valley inside the
+    region is the runner-up now (``keypoints.RUNNER_UP_DIP``): every pair flagged, the nearer person's joints
+    reported."""
     rig = sim.RigPlacement().build()
     for seed in (2, 4):
         _follows(_scene(seed, alone=0, pairs=4, where=CLOSE), 0, rig)
