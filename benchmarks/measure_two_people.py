@@ -58,9 +58,12 @@ NEAR_M = 0.05
 
 
 class TwoPeopleOracle(OracleSession):
-    """The oracle, its 2D heatmaps the maximum of two people's (``set_people``)."""
+    """The oracle, its 2D heatmaps the maximum of two people's (``set_people``). ``apart``: the last maps' distance
+    between the two people's projections of each joint in each view, in heatmap cells (``(S, J)``; None with one
+    person): two peaks a few cells apart share one region above the decoder's threshold."""
 
     people: tuple[np.ndarray, ...] = ()
+    apart: np.ndarray | None = None
 
     def set_people(self, *joints_3d: np.ndarray) -> None:
         self.people = tuple(np.asarray(j, np.float64) for j in joints_3d)
@@ -72,6 +75,13 @@ class TwoPeopleOracle(OracleSession):
             self.truth = joints
             maps.append(super()._source_heatmaps(src_P))
         self.truth = self.people[0]
+        self.apart = None
+        if len(self.people) == 2:
+            uv = []
+            for joints in self.people:
+                p = np.concatenate([joints, np.ones((len(joints), 1))], axis=1) @ np.swapaxes(src_P, 1, 2)
+                uv.append(p[..., :2] / p[..., 2:])
+            self.apart = np.linalg.norm(uv[0] - uv[1], axis=-1) / self.contract.heatmap_stride
         return np.max(maps, axis=0)
 
 
@@ -117,7 +127,11 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
     distances from the nearer person's (``nearer_mm``, summed; a model's error beside a mix-up); pairs flagged
     ``several_people``, their joints and those joints' summed distances (``flagged_joints``, ``flagged_mm``);
     scenes whose pairs followed the first person, the second, and those that followed one person throughout
-    (``stable``: every pair that reports joints has most of them at the same person, none at the other).
+    (``stable``: every pair that reports joints has most of them at the same person, none at the other); and
+    over the passes of the pairs counted (a cold pass and its refined one are two), ``passes`` and the joints
+    shown twice (a runner-up of at least ``second_person_ratio`` of the peak) in view 0, in view 1 and in both
+    (``twice_view0``, ``twice_view1``, ``twice_both``, summed): a view whose two people's peaks of a joint share a
+    region showed none there before the runner-up in a region (session 55) (docs/runtime.md, "Two people 0.6 m apart").
     ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each at the other's
     place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
     two people rendered together (``drivers.sim.render_people``) instead of the oracle. ``second``: False shows
@@ -132,7 +146,10 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         session = load_session(config)  # once: every scene's estimator shares it
     counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "nearer_mm": 0.0, "flagged": 0,
               "flagged_joints": 0, "flagged_mm": 0.0,
-              "followed_first": 0, "followed_second": 0, "stable": 0}
+              "followed_first": 0, "followed_second": 0, "stable": 0,
+              "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0}
+    ratio = config.joints3d.second_person_ratio
+    apart: list[np.ndarray] = []  # the oracle's (view, joint) cells between the people, each pass counted
     counted = 0
     for seed in range(1, scenes + 1):
         here = places[::-1] if swap else places
@@ -142,10 +159,25 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         whose: list[int] = []  # each reporting pair's person: 0 the first, 1 the second
         mixed = False  # a pair reported joints at both people
         with Estimator(oracle or session, rig, config) as est:
+            decide, counting_now = est._several_people, [False]  # every pass asks it once: counted beside it
+
+            def counting(kp, decide=decide, counting_now=counting_now):
+                if counting_now[0]:
+                    twice = kp.valid & (kp.runner_up >= ratio * kp.confidence)  # (view, J), as joints_shown_twice
+                    counts["passes"] += 1
+                    counts["twice_view0"] += int(twice[0].sum())
+                    counts["twice_view1"] += int(twice[1].sum())
+                    counts["twice_both"] += joints_shown_twice(kp, ratio)
+                    if oracle is not None and oracle.apart is not None:
+                        apart.append(oracle.apart)
+                return decide(kp)
+
+            est._several_people = counting
             for i in range(alone + pairs):
                 t = i / 30.0
                 a, b = first.joints_3d(t), other.joints_3d(t)
                 together = second and i >= alone
+                counting_now[0] = i >= alone
                 if oracle is not None:
                     oracle.set_people(a, b) if together else oracle.set_people(a)
                     # the frames only pass the frame check here: the oracle's heatmaps come from the joints
@@ -178,6 +210,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         if whose:
             counts["followed_first" if whose[0] == 0 else "followed_second"] += 1
             counts["stable"] += int(len(set(whose)) == 1 and not mixed)
+    for v in range(2):  # the middle 80 % of the passes' joints (the oracle only)
+        lo, hi = np.percentile([a[v] for a in apart], [10, 90]) if apart else (np.nan, np.nan)
+        counts[f"apart_view{v}"] = f"{lo:.1f}-{hi:.1f}"
     return counts, counted
 
 
@@ -401,6 +436,13 @@ def main(argv=None) -> int:
               f"{flagged_mm}); {counts['flagged'] / pairs:.0%} of pairs flagged several_people; "
               f"scenes following the first person {counts['followed_first']}, the second {counts['followed_second']}, "
               f"one person throughout {counts['stable']} of {args.scenes}")
+        passes = max(counts["passes"], 1)
+        print(f"  {counts['passes']} passes: joints shown twice at {config.joints3d.second_person_ratio} per pass, "
+              f"view 0 {counts['twice_view0'] / passes:.1f}, view 1 {counts['twice_view1'] / passes:.1f}, both "
+              f"{counts['twice_both'] / passes:.1f}"
+              + ("" if args.model_dir is not None else
+                 f"; the people's peaks of a joint {counts['apart_view0']} cells apart in view 0, "
+                 f"{counts['apart_view1']} in view 1 (10th-90th percentile)"))
     return 0
 
 

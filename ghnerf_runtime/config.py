@@ -402,10 +402,10 @@ class Joints3DConfig:
             with a small expected error. ``0``, the default, turns the check off: on tracked sequences it also sends
             pairs whose triangulation is wrong to it (docs/runtime.md, "The skeleton prior"); 0.25 catches a
             person upside down.
-        second_person_ratio: a view's joint map whose second-strongest peak (another region's, the decoder's
-            ``runner_up``) reaches this fraction of its strongest shows that joint twice: two people in view. On one
-            person the shipped model's maps stay below 0.44 in at least one of the two views (docs/runtime.md,
-            "Two people in the working volume").
+        second_person_ratio: a view's joint map whose second-strongest peak (the decoder's ``runner_up``: another
+            region's, or a second maximum past a valley in the same one) reaches this fraction of its strongest
+            shows that joint twice: two people in view. On one person the shipped model's maps stay below 0.44 in
+            at least one of the two views (docs/runtime.md, "Two people in the working volume").
         second_person_min_joints: a pair with at least this many joints shown twice in *both* views
             (``second_person_ratio``) is ``several_people`` (``PairResult``): its joints are kept only near the
             tracked subject's (``max_track_step_m``), or, without a track, none. ``0`` turns the check off.

@@ -467,7 +467,7 @@ def _median_confidence(j3: Joints3D) -> float:
 
 
 def joints_shown_twice(kp: Keypoints2D, ratio: float) -> int:
-    """How many joints' maps show, in *both* views, a second peak (another region's: ``kp.runner_up``) of at
+    """How many joints' maps show, in *both* views, a second peak (the decoder's ``kp.runner_up``) of at
     least ``ratio`` of the first: what ``joints3d.second_person_min_joints`` is compared with (the
     ``several_people`` check; ``ratio`` is ``joints3d.second_person_ratio``)."""
     twice = kp.valid & (kp.runner_up >= ratio * kp.confidence)  # (2, J)
@@ -1162,7 +1162,7 @@ class Estimator:
         if chosen is None or not subject.valid.any():
             return None, None
         kp, uv_model = chosen
-        use = subject.valid & np.all(kp.runner_up > 0, axis=0)  # a runner-up is a second region in that view
+        use = subject.valid & np.all(kp.runner_up > 0, axis=0)  # a runner-up is a second peak apart in that view
         pres = self.config.presence
         strong = pres.threshold(self.config.heatmaps.source)
         _, agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid & use, crops,
@@ -1249,7 +1249,7 @@ class Estimator:
         ru_model = heatmap_to_model_pixels(kp.runner_up_uv, self.grid, self.size)
         uv_opt = np.stack([uv_model, ru_model])  # (peak | runner-up, view, J, 2)
         conf_opt = np.stack([kp.confidence, kp.runner_up])
-        valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a region above the threshold
+        valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a second peak above the threshold
 
         def paired(opt: np.ndarray) -> np.ndarray:  # (4 * J, ...) of each view, the pairings one after the other
             return np.stack([opt[PAIRINGS[:, v], v].reshape((4 * J,) + opt.shape[3:]) for v in range(2)])

@@ -11,8 +11,11 @@ Algorithm, per joint map (a single person is assumed):
    peak (saturated, flat or noise-flooded map): the joint is missing.
 4. Subpixel refinement of that peak (below), confidence = filtered peak value.
 5. The runner-up: the highest filtered value outside the best region (so the peak of another
-   region above the threshold), and where it is, refined as the peak is (``runner_up``,
-   ``runner_up_uv``): with two people in view, the other person's peak of that joint.
+   region above the threshold), or, where higher, a second local maximum inside the best region
+   with a valley between it and the peak (the map dipping to at most :data:`RUNNER_UP_DIP` of it
+   on the line between them: two blobs a few cells apart join into one region above the
+   threshold), and where it is, refined as the peak is (``runner_up``, ``runner_up_uv``): with
+   two people in view, the other person's peak of that joint.
 
 Threshold and confidence are both in *filtered* units (as in OpenPose). The filter
 lowers peaks: a unit-height Gaussian blob of sigma ``s`` peaks at about
@@ -142,7 +145,8 @@ class Keypoints2D:
             not valid.
         confidence: ``(..., J)`` float32 filtered peak value; 0 where not valid.
         valid: ``(..., J)`` bool.
-        runner_up: ``(..., J)`` float32 highest peak of any *other* region (0 if none): a
+        runner_up: ``(..., J)`` float32 highest peak of any *other* region, or second peak past a valley
+            in the best one (module docstring, 5; 0 if none): a
             value close to ``confidence`` flags an ambiguous joint (e.g. left/right).
         runner_up_uv: ``(..., J, 2)`` float64 where that peak is, in the coordinates of ``uv`` and
             refined as it is; :data:`MISSING_FILL` where ``runner_up`` is 0.
@@ -303,6 +307,47 @@ def _refine_centroid(padded: np.ndarray, pad: int, labels: np.ndarray, top: np.n
     return np.stack([dx, dy], axis=-1)
 
 
+#: A second maximum inside the best region is a peak of its own (a runner-up) when the filtered map dips, on the
+#: straight line from the best peak to it, to at most this fraction of its value. Two people 0.6 m apart at 3 m
+#: show a joint's peaks 5.5-8.3 heatmap cells apart in one view, which (the oracle's sigma 1.5, the decoder's 1.0)
+#: join above the threshold into one region with a deep valley between them; a blob's shoulder dips little
+#: (docs/runtime.md, "Two people 0.6 m apart"; tests/ghnerf_runtime/test_keypoints.py).
+RUNNER_UP_DIP = 0.5
+#: Points sampled along that line (the maps are at most a few dozen cells across).
+_DIP_SAMPLES = 16
+
+
+def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_top: np.ndarray, top: np.ndarray,
+                         iy: np.ndarray, ix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each map's highest local maximum of ``filtered`` inside its best region (``in_top``) other than the peak
+    (``iy``, ``ix``; ``top`` its region's label, 0 where no region passes the threshold) with a valley between them
+    (:data:`RUNNER_UP_DIP`): ``(value, y, x)`` per map, value 0 where none. The regions are thresholded, so two
+    peaks a little apart share one; the other region's maximum alone missed a second person standing near the first
+    (docs/runtime.md, "Two people 0.6 m apart")."""
+    n, h, w = filtered.shape
+    values = np.zeros(n, np.float32)
+    out_y, out_x = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    # the 3x3 neighbourhood's maximum (the zero border of ``padded`` around each map; pad >= 1)
+    neighbours = np.max([padded[:, pad + dy:pad + dy + h, pad + dx:pad + dx + w]
+                         for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx], axis=0)
+    # in_top is the pixels below the threshold where no peak passes it (top label 0): a bump there is no peak
+    local = in_top & (top > 0)[:, None, None] & (filtered >= neighbours)
+    local[np.arange(n), iy, ix] = False
+    m, y, x = np.nonzero(local)
+    if not len(m):
+        return values, out_y, out_x
+    t = np.linspace(0.0, 1.0, _DIP_SAMPLES)[None, 1:-1]
+    sy = np.rint(iy[m, None] + (y - iy[m])[:, None] * t).astype(np.int64)
+    sx = np.rint(ix[m, None] + (x - ix[m])[:, None] * t).astype(np.int64)
+    valley = filtered[m[:, None], sy, sx].min(axis=1)
+    value = filtered[m, y, x]
+    keep = valley <= RUNNER_UP_DIP * value
+    m, y, x, value = m[keep], y[keep], x[keep], value[keep]
+    order = np.argsort(value, kind="stable")  # the highest last: its assignment wins
+    values[m[order]], out_y[m[order]], out_x[m[order]] = value[order], y[order], x[order]
+    return values, out_y, out_x
+
+
 def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None = None) -> Keypoints2D:
     """Decode one keypoint per joint heatmap (single person).
 
@@ -368,12 +413,17 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     # Runner-up peak: only maps with another region need the (full-map) masked max, taken where it is.
     others = above & ~in_top
     runner_up = np.zeros(n, np.float32)
-    multi = np.flatnonzero(others.any(axis=(1, 2)))
+    inner, inner_y, inner_x = _runner_up_in_region(filtered, padded, pad, in_top, top, iy, ix)
+    multi = np.flatnonzero(others.any(axis=(1, 2)) | (inner > 0))
     which = np.arange(n)
     if len(multi):
         masked = (filtered[multi] * others[multi]).reshape(len(multi), -1)
         ry, rx = np.divmod(masked.argmax(axis=1), w)
         runner_up[multi] = masked[np.arange(len(multi)), ry * w + rx]
+        # a second peak inside the best region, where higher than any other region's (module docstring, 5)
+        use = inner[multi] > runner_up[multi]
+        ry, rx = np.where(use, inner_y[multi], ry), np.where(use, inner_x[multi], rx)
+        runner_up[multi] = np.maximum(runner_up[multi], inner[multi])
         # refined in the peaks' own call, after them: one set of numpy calls whatever the number of maps
         which, iy, ix = np.concatenate([which, multi]), np.concatenate([iy, ry]), np.concatenate([ix, rx])
         top = np.concatenate([top, labels[multi, ry, rx]])

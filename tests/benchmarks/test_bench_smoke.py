@@ -332,6 +332,12 @@ def test_measure_two_people(capsys, monkeypatch):
     # the picked person's joints from the first pair (session 54; session 53 reported none without a track)
     assert re.search(r"^2 pairs of two people .*: 2[0-5]\.\d joints reported per pair; of them 100% at the first", out,
                      re.M), out
+    # each row's passes: the joints shown twice per view and the people's cell distances (docs/runtime.md, "Two
+    # people 0.6 m apart")
+    twice = re.findall(r"^  (\d+) passes: joints shown twice at 0\.5 per pass, view 0 [\d.]+, view 1 [\d.]+, both "
+                       r"[\d.]+; the people's peaks of a joint [\d.]+-[\d.]+ cells apart in view 0, [\d.]+-[\d.]+ in "
+                       r"view 1 \(10th-90th percentile\)$", out, re.M)
+    assert len(twice) == 2 and all(int(n) >= 2 for n in twice), out
 
 
 def test_measure_two_people_calibration(capsys, monkeypatch):

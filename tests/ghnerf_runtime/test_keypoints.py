@@ -149,6 +149,35 @@ def test_runner_up_is_located_as_the_peak_is(refine):
                 np.testing.assert_allclose(kp.runner_up_uv[view, j], weak[k], atol=0.01)
 
 
+def test_a_second_peak_in_the_best_region_is_the_runner_up():
+    """Two people 0.6 m apart: their peaks of a joint lie 6-8 cells apart in one view (the oracle's sigma 1.5),
+    and above the threshold the two blobs join into one region, so another region's maximum found no runner-up
+    and the pair was not flagged (docs/runtime.md, "Two people in the working volume"). The second maximum past
+    a valley is the runner-up, located as the peak is; a blob with a shoulder (no valley) has none."""
+    yy, xx = np.mgrid[:32, :32]
+
+    def blob(x, y, height=1.0, sigma=1.5):
+        return height * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * sigma ** 2))
+
+    for sep in (6.0, 7.0):
+        pair = np.maximum(blob(12.3, 15.6), blob(12.3 + sep, 15.6, 0.9))[None].astype(np.float32)
+        kp = decode_keypoints(pair)
+        assert kp.valid[0]
+        above = keypoints._filter(pair, 1.0)[0][0] > 0.1  # (one region: the case the old decoder missed)
+        assert keypoints._regions(above[None]).max() == 1
+        alone = decode_keypoints(blob(12.3 + sep, 15.6, 0.9)[None].astype(np.float32))
+        assert kp.runner_up[0] == pytest.approx(alone.confidence[0], rel=0.02)
+        np.testing.assert_allclose(kp.runner_up_uv[0], [12.3 + sep, 15.6], atol=0.1)
+        np.testing.assert_allclose(kp.uv[0], [12.3, 15.6], atol=0.1)
+    # a second maximum (0.57 filtered, 5 cells off) whose valley (0.47) is no dip: one blob's shoulder, not a peak
+    shoulder = (blob(12.0, 15.0) + blob(17.0, 15.0, 0.8))[None].astype(np.float32)
+    assert decode_keypoints(shoulder).runner_up[0] == 0.0
+    # two bumps below the threshold: no peak, and no runner-up (a runner-up is a peak above it, the pairings' rule)
+    faint = (0.1 * np.maximum(blob(10.0, 15.0), blob(20.0, 15.0, 0.9)))[None].astype(np.float32)
+    kp = decode_keypoints(faint)
+    assert not kp.valid[0] and kp.runner_up[0] == 0.0
+
+
 def test_rendered_blocks_place_the_runner_up_in_the_grid_s_cells():
     from ghnerf_runtime.keypoints import decode_blocks
 
