@@ -162,3 +162,29 @@ def test_a_person_no_turn_rights_is_searched_for_every_few_pairs(session):
     fifth, est = _run(session, rig, shots, search=True, every=5)
     assert [n for _, _, n in fifth] == [1, 1, 1, 1, 1, 2, 2] and est.turns_kept == 0
     assert all(r.missing.all() for r, _, _ in every + fifth)  # nobody found either way: the searches cost only
+
+
+@pytest.mark.parametrize("fill", ["black", "edge"])
+def test_the_estimator_crops_with_roi_pad_fill(session, fill):
+    """``roi.pad_fill`` reaches the estimator's remap tables: past the frame's edge its crop shows zeros or the
+    frame's edge (docs/runtime.md, "Other crops, other fills")."""
+    from ghnerf_runtime.estimator import Estimator
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.preprocess import Roi, apply_crop_maps
+
+    rig = bench_rig_and_scene(0)[0]
+    est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                                                  roi=RoiConfig(pad_fill=fill)))
+    try:
+        state = est._cams[0]
+        maps, _ = est._crop(state, Roi(-200, 100, 300))
+        frame = np.full((state.camera.height, state.camera.width, 3), 120, np.uint8)
+        crop = apply_crop_maps(frame, maps)
+        assert maps.inside is not None and not maps.inside.all()
+        past = crop[~maps.inside]
+        if fill == "edge":
+            assert np.all(past == 120)
+        else:  # (but for bilinear taps into the frame along its edge)
+            assert np.mean(past == 0) > 0.8
+    finally:
+        est.close()
