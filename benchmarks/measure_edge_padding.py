@@ -157,9 +157,11 @@ def training_crops(samples: int, resolution: int = 128) -> None:
 def table(session, cfg, sequences, visible, args) -> None:
     """One table: the uncut reference and each share of ``args.outside``, at ``cfg``."""
     ref = run(session, cfg, sequences, None)
-    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {cfg.roi.pad_fill!r}: {args.sequences} held-out-like sequences x {args.frames} pairs, "
+    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {cfg.roi.pad_fill!r}: {args.sequences} held-out-like "
+          f"sequences x {args.frames} pairs, "
           "runtime defaults otherwise; camera 0's frame cut on the left so that a share of the person's box lies "
-          "outside it; [uncut]: the same joints in the uncut reference run")
+          f"outside it{f' (kept whole, those columns filled {args.blacken})' if args.blacken else ''}; [uncut]: the "
+          "same joints in the uncut reference run")
     print("| box outside cam 0 | cam 0 crop padded | 3D MPJPE mm [uncut] | 3D found [uncut] | cam 0 2D err px, "
           "joints in the cut frame [uncut] | found [uncut] | cut-off joints: 2D err px [uncut] | found (n) |")
     print("|---|---|---|---|---|---|---|---|")

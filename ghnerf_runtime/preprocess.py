@@ -572,7 +572,8 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
     map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32)
     size = ((x1 - x0) // factor, (y1 - y0) // factor)
     if pad_fill == "edge":
-        shown = (np.where(past, _OUTSIDE, map_x), np.where(past, _OUTSIDE, map_y)) if past is not None else (map_x, map_y)
+        # `inside` as under black: the window's edge-repeating padding is not frame
+        shown = (map_x, map_y) if past is None else (np.where(past, _OUTSIDE, map_x), np.where(past, _OUTSIDE, map_y))
         inside = _inside(*shown, size, f)
         map_x, map_y = _clamped(map_x, map_y, lost, size)
     else:
