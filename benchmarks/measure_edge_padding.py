@@ -3,6 +3,8 @@
 
     .venv/bin/python benchmarks/measure_edge_padding.py [--model-dir models] [--sequences 10] [--frames 30]
                                                         [--outside 0,0.1,0.25,0.5] [--training-samples 300]
+                                                        [--edge-crop clip,centre,shift] [--pad-fill black|edge]
+                                                        [--blacken black|grey|replicate|reflect]
 
 The comparison: the held-out-like bench sequences (``ghnerf-bench runtime``'s) are run as rendered (640x480,
 the person in full view: the reference, no padding), and again with camera 0's frame cut on its left side,
@@ -18,7 +20,14 @@ camera 0's 2D error (median, pixels of the rendered frame) and share found of it
 those inside the cut frame (the model sees them in both runs: a change there is the cost of the black band
 itself) and those cut off (no training can bring back what the frame does not show; they are what a wider
 camera would have seen). With ``--training-samples N`` it first counts how the synthetic ``train`` split's
-source crops cross their frame (what ``TargetConfig.frame_padding`` alone shows the model). A tool, not a test.
+source crops cross their frame (what ``TargetConfig.frame_padding`` alone shows the model). ``--edge-crop``
+runs the whole table once per tracked-crop policy (``roi.edge_crop``: ``clip`` the box to the frame and square
+what is left, ``centre`` the square on the whole box with the part past the frame black, ``shift`` the whole
+box's square inside the frame); the reference run is each policy's own. ``--pad-fill`` sets ``roi.pad_fill``
+(``edge``: the frame's edge repeated past it instead of black). ``--blacken FILL`` keeps camera 0's frame whole and
+fills its columns left of the cut instead (``fill_columns``): the crops are then the uncut run's, so the table
+shows what the lost pixels alone cost, and with a fill other than ``black`` what another padding would. A tool,
+not a test.
 """
 from __future__ import annotations
 
@@ -59,24 +68,51 @@ def padded_share(roi, width: int, height: int) -> float:
     return 1.0 - inside_x * inside_y / roi.size ** 2
 
 
-def run(session, cfg, sequences, share: float | None) -> dict:
-    """One estimator per sequence over every pair; camera 0's frame cut for ``share`` (``None``: uncut).
+def fill_columns(frame: np.ndarray, m: int, fill: str) -> np.ndarray:
+    """``frame`` with its columns ``0..m-1`` replaced: ``black`` 0, ``grey`` the rest's mean colour, ``replicate``
+    column ``m`` repeated, ``reflect`` the columns after ``m`` mirrored (what a padding other than black would
+    show the model)."""
+    if m <= 0:
+        return frame
+    if fill == "black":
+        frame[:, :m] = 0
+    elif fill == "grey":
+        frame[:, :m] = frame[:, m:].reshape(-1, frame.shape[-1]).mean(axis=0).round().astype(frame.dtype)
+    elif fill == "replicate":
+        frame[:, :m] = frame[:, m:m + 1]
+    elif fill == "reflect":
+        idx = m + np.abs(np.arange(m) - m + 1) % (2 * (frame.shape[1] - m) - 1)
+        frame[:, :m] = frame[:, np.minimum(idx, frame.shape[1] - 1)]
+    else:
+        raise ValueError(f"--fill must be black, grey, replicate or reflect, got {fill!r}")
+    return frame
+
+
+def run(session, cfg, sequences, share: float | None, blacken: str | None = None) -> dict:
+    """One estimator per sequence over every pair; camera 0's frame cut for ``share`` (``None``: uncut), or with
+    ``blacken`` (a ``fill_columns`` fill) kept whole with those columns filled (the runtime crops as it would
+    uncut).
     Per pair: camera 0's 2D error (rendered frame's pixels) and found flags, the 3D error and found flags."""
     e2, f2, e3, f3, pads, cuts = [], [], [], [], [], []
     for seq in sequences:
         m = 0 if share is None else max(0, cut_for(seq, share))
         cuts.append(m)
-        rig = seq.rig if m == 0 else cut_rig(seq.rig, m)
+        rig = seq.rig if m == 0 or blacken else cut_rig(seq.rig, m)
         est = Estimator(session, rig, cfg)
         name = rig.cameras[0].name
         for i in range(len(seq)):
-            r = est.estimate([np.ascontiguousarray(seq.images[i, 0, :, m:]), np.array(seq.images[i, 1])], sequence=i)
+            if blacken:  # the whole frame, its columns 0..m-1 filled: the crops as uncut, only the pixels lost
+                frame = fill_columns(np.array(seq.images[i, 0]), m, blacken)
+            else:
+                frame = np.ascontiguousarray(seq.images[i, 0, :, m:])
+            r = est.estimate([frame, np.array(seq.images[i, 1])], sequence=i)
             e3.append(np.linalg.norm(r.joints_3d - seq.joints_3d[i], axis=-1) * 1000)
             f3.append(~r.missing)
             roi = r.rois.get(name)
-            if roi is not None:
-                pads.append(padded_share(roi, rig.cameras[0].width, rig.cameras[0].height))
-            pred = r.joints_2d[name] + [m, 0]  # back to the rendered frame's pixels
+            if roi is not None:  # (blackened: the share of the crop on the black columns)
+                pads.append(padded_share(roi if not blacken else replace(roi, x0=roi.x0 - m),
+                                         rig.cameras[0].width - (m if blacken else 0), rig.cameras[0].height))
+            pred = r.joints_2d[name] + [0 if blacken else m, 0]  # back to the rendered frame's pixels
             e2.append(np.linalg.norm(pred - seq.joints_2d[i, 0], axis=-1))
             f2.append(~r.missing_2d[name])
         est.close()
@@ -118,27 +154,14 @@ def training_crops(samples: int, resolution: int = 128) -> None:
           f"{np.mean(padded > 0.1):.1%} by more than 10 %; the most padded {padded.max():.1%}")
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--model-dir", default="models")
-    ap.add_argument("--sequences", type=int, default=10)
-    ap.add_argument("--frames", type=int, default=30)
-    ap.add_argument("--outside", default="0,0.1,0.25,0.5", type=lambda s: [float(v) for v in s.split(",") if v],
-                    help="shares of the person's box outside camera 0's cut frame")
-    ap.add_argument("--training-samples", type=int, default=0,
-                    help="also count how the synthetic train split's source crops cross their frame (0: skip)")
-    args = ap.parse_args(argv)
-    if args.training_samples:
-        training_crops(args.training_samples)
-    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
-    session = load_session(cfg)
-    sequences = load_sequences(args.sequences, args.frames)
-    visible = np.concatenate([np.asarray(seq.visible[:, 0]) for seq in sequences])
-    start = time.perf_counter()
+def table(session, cfg, sequences, visible, args) -> None:
+    """One table: the uncut reference and each share of ``args.outside``, at ``cfg``."""
     ref = run(session, cfg, sequences, None)
-    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs, runtime defaults; camera 0's frame cut "
-          "on the left so that a share of the person's box lies outside it; [uncut]: the same joints in the "
-          "uncut reference run")
+    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {cfg.roi.pad_fill!r}: {args.sequences} held-out-like "
+          f"sequences x {args.frames} pairs, "
+          "runtime defaults otherwise; camera 0's frame cut on the left so that a share of the person's box lies "
+          f"outside it{f' (kept whole, those columns filled {args.blacken})' if args.blacken else ''}; [uncut]: the "
+          "same joints in the uncut reference run")
     print("| box outside cam 0 | cam 0 crop padded | 3D MPJPE mm [uncut] | 3D found [uncut] | cam 0 2D err px, "
           "joints in the cut frame [uncut] | found [uncut] | cut-off joints: 2D err px [uncut] | found (n) |")
     print("|---|---|---|---|---|---|---|---|")
@@ -146,7 +169,7 @@ def main(argv=None) -> int:
     print(f"| uncut (reference) | {ref['pad']:.1%} | {e3_ref:.1f} | {ref['f3'].mean():.3f} | "
           f"{stats(ref, visible)[0]:.1f} | {stats(ref, visible)[1]:.3f} | - | - |", flush=True)
     for share in args.outside:
-        s = run(session, cfg, sequences, share)
+        s = run(session, cfg, sequences, share, args.blacken)
         inside = in_frame(sequences, s["cuts"])
         e_in, f_in, _ = stats(s, visible & inside)
         r_in, rf_in, _ = stats(ref, visible & inside)
@@ -155,6 +178,35 @@ def main(argv=None) -> int:
         print(f"| {share:.0%} | {s['pad']:.1%} | {s['e3'][s['f3']].mean():.1f} [{e3_ref:.1f}] | "
               f"{s['f3'].mean():.3f} [{ref['f3'].mean():.3f}] | {e_in:.1f} [{r_in:.1f}] | {f_in:.3f} [{rf_in:.3f}] | "
               f"{e_out:.1f} [{r_out:.1f}] | {f_out:.3f} ({n_out}) |", flush=True)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model-dir", default="models")
+    ap.add_argument("--sequences", type=int, default=10)
+    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--outside", default="0,0.1,0.25,0.5", type=lambda s: [float(v) for v in s.split(",") if v],
+                    help="shares of the person's box outside camera 0's cut frame")
+    ap.add_argument("--edge-crop", default=None, type=lambda s: [v for v in s.split(",") if v],
+                    help="roi.edge_crop policies to run, comma-separated (default: the runtime's default only)")
+    ap.add_argument("--pad-fill", default=None, choices=("black", "edge"),
+                    help="roi.pad_fill (default: the runtime's default)")
+    ap.add_argument("--blacken", default=None, choices=("black", "grey", "replicate", "reflect"),
+                    help="instead of cutting camera 0's frame, fill its cut columns so (the crops stay as uncut)")
+    ap.add_argument("--training-samples", type=int, default=0,
+                    help="also count how the synthetic train split's source crops cross their frame (0: skip)")
+    args = ap.parse_args(argv)
+    if args.training_samples:
+        training_crops(args.training_samples)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
+    if args.pad_fill:
+        cfg = replace(cfg, roi=replace(cfg.roi, pad_fill=args.pad_fill))
+    session = load_session(cfg)
+    sequences = load_sequences(args.sequences, args.frames)
+    visible = np.concatenate([np.asarray(seq.visible[:, 0]) for seq in sequences])
+    start = time.perf_counter()
+    for policy in args.edge_crop or [cfg.roi.edge_crop]:
+        table(session, replace(cfg, roi=replace(cfg.roi, edge_crop=policy)), sequences, visible, args)
     print(f"({time.perf_counter() - start:.0f} s)")
     return 0
 

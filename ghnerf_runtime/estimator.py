@@ -645,7 +645,8 @@ class Estimator:
         entry = state.cache.get(key)
         if entry is None:
             entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.crop_roll_deg,
-                                               supersample=self.config.roi.supersample).compact(),
+                                               supersample=self.config.roi.supersample,
+                                               pad_fill=self.config.roi.pad_fill).compact(),
                      crop_camera(state.camera, roi, self.size, state.crop_roll_deg))
             state.cache[key] = entry
             while len(state.cache) > self.config.roi.map_cache_size:

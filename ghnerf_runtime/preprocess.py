@@ -20,6 +20,15 @@ Clamp / pad policy
     honest; shifting the square back inside the image would be an alternative,
     but it moves the subject off-centre for no gain.
 
+    Both are choices (``RoiConfig.edge_crop`` and ``pad_fill``; docs/runtime.md,
+    "A person at the frame's edge"): a tracked box may instead be squared whole
+    (``"centre"``: the person centred, more black) or that square moved inside
+    the image (``"shift"``); and the padding may repeat the frame's nearest edge
+    pixel (``pad_fill="edge"``, a clamp of the remap tables) instead of zeros.
+    Measured with the shipped model, the framing changes little and the black
+    itself is what costs; neither is better at every cut, so the defaults are
+    the policy above.
+
 Anti-aliasing
     Bilinear remapping aliases when the ROI is much larger than ``out_size``.
     When the scale ``roi.size / out_size`` is ``s``, the touched window of the
@@ -74,8 +83,13 @@ from ghnerf_runtime.geometry.rig import WorkingVolume
 __all__ = [
     "Roi", "CropMaps", "roi_from_volume", "roi_from_joints", "crop_camera", "build_undistort_crop_maps",
     "apply_crop_maps", "preprocess_image", "undistorted_image_bounds", "upright_roll_deg",
-    "camera_normalized",
+    "camera_normalized", "EDGE_CROPS", "PAD_FILLS",
 ]
+
+#: How a tracked box past the image's edge is cropped (``roi_from_joints``; module docstring).
+EDGE_CROPS = ("clip", "centre", "shift")
+#: What a crop shows past the frame's edge (``build_undistort_crop_maps``; module docstring).
+PAD_FILLS = ("black", "edge")
 
 #: Nearest camera depth (metres) used when clipping a box that reaches behind the camera.
 NEAR_PLANE = 0.05
@@ -204,24 +218,41 @@ def _square(centre: np.ndarray, side: float, min_size: int = 1) -> Roi:
     return Roi(x0, y0, size)
 
 
+def _check_edge_crop(edge_crop: str) -> str:
+    if edge_crop not in EDGE_CROPS:
+        raise GeometryError(f"edge_crop must be one of {EDGE_CROPS}, got {edge_crop!r}")
+    return edge_crop
+
+
 def _roi_of_points(uv: np.ndarray, camera: Camera, *, margin_frac: float = 0.0, min_size: int = 1,
-                   roll_deg: float = 0.0) -> Roi:
+                   roll_deg: float = 0.0, edge_crop: str = "clip") -> Roi:
     """The square ROI showing the undistorted pixels ``uv`` ``(N, 2)``, its box grown by ``margin_frac``
     of its longer side. With ``roll_deg`` the crop is rotated so about its centre (``crop_camera``), so
     the square is sized and centred on the points' extent seen that way: a body standing upright in the
-    rotated crop fits it, where the sensor's own box would cut its head and feet."""
+    rotated crop fits it, where the sensor's own box would cut its head and feet. ``edge_crop``: how a box
+    past the image's edge is cropped (module docstring, "Clamp / pad policy")."""
+    _check_edge_crop(edge_crop)
     lo, hi = uv.min(axis=0), uv.max(axis=0)
-    if roll_deg % 360.0 == 0.0:
+    img_lo, img_hi = _cached_image_bounds(camera)
+    if roll_deg % 360.0 == 0.0 and edge_crop == "clip":
         grow = margin_frac * float(np.max(hi - lo))
         return _square_roi(lo - grow, hi + grow, camera, min_size=min_size)
-    img_lo, img_hi = _cached_image_bounds(camera)
     if np.any(np.minimum(hi, img_hi) < np.maximum(lo, img_lo)):
         raise GeometryError(f"camera {camera.name!r}: the region {lo.tolist()}..{hi.tolist()} lies outside the image")
     turn = image_rotation(roll_deg)  # as Camera.rotated turns the crop
-    seen = np.clip(uv, img_lo, img_hi) @ turn.T  # nothing outside the image can be seen
+    # "clip": nothing outside the image can be seen, so the box is what the image shows of the points;
+    # otherwise the whole box, as the training crops frame the whole person (training/data/synthetic.py)
+    seen = (np.clip(uv, img_lo, img_hi) if edge_crop == "clip" else uv) @ turn.T
     lo, hi = seen.min(axis=0), seen.max(axis=0)
-    extent = float(np.max(hi - lo))
-    return _square(turn.T @ (0.5 * (lo + hi)), extent * (1 + 2 * margin_frac), min_size)
+    side = float(np.max(hi - lo)) * (1 + 2 * margin_frac)
+    centre = turn.T @ (0.5 * (lo + hi))
+    if edge_crop == "shift":
+        # the rotated square's axis-aligned half-extent; moved inward only as far as the image allows
+        half = 0.5 * side * np.abs(turn).sum(axis=1)
+        room_lo, room_hi = img_lo + half, img_hi - half
+        centre = np.where(room_lo <= room_hi, np.clip(centre, room_lo, np.maximum(room_lo, room_hi)),
+                          0.5 * (img_lo + img_hi))
+    return _square(centre, side, min_size)
 
 
 def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: float = 0.0, *,
@@ -282,7 +313,7 @@ def roi_from_volume(camera: Camera, volume: WorkingVolume | np.ndarray, margin: 
 
 def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray, margin_frac: float = 0.2,
                     min_size: int = 64, *, min_confidence: float = 0.0, min_joints: int = 3,
-                    roll_deg: float = 0.0) -> Roi | None:
+                    roll_deg: float = 0.0, edge_crop: str = "clip") -> Roi | None:
     """A square ROI around joints of the previous frame (tracking).
 
     Args:
@@ -297,6 +328,9 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
         min_confidence: see ``confidences``.
         min_joints: fewer usable joints than this gives ``None``.
         roll_deg: the crop will be rotated so (``crop_camera``): size the square for it.
+        edge_crop: a box past the image's edge: ``"clip"`` (clipped to the image, squared round what is
+            left), ``"centre"`` (squared round the whole box, the part past the edge black) or ``"shift"``
+            (the whole box's square moved inside the image); module docstring, "Clamp / pad policy".
 
     Returns:
         A :class:`Roi`, or ``None`` when too few joints are usable or they lie outside the
@@ -313,6 +347,7 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
     if not np.isfinite(min_size):  # was a bare "cannot convert float NaN to integer"
         raise GeometryError(f"min_size must be a finite number of pixels, got {min_size}")
     image_rotation(roll_deg)  # a roll that is not finite is named here: the None below means "too few joints"
+    _check_edge_crop(edge_crop)
 
     ok = (conf > min_confidence) & np.all(np.isfinite(joints), axis=1)
     if joints.shape[1] == 3:
@@ -324,7 +359,8 @@ def roi_from_joints(camera: Camera, joints: np.ndarray, confidences: np.ndarray,
     if int(ok.sum()) < max(int(min_joints), 1):
         return None
     try:
-        return _roi_of_points(uv[ok], camera, margin_frac=margin_frac, min_size=min_size, roll_deg=roll_deg)
+        return _roi_of_points(uv[ok], camera, margin_frac=margin_frac, min_size=min_size, roll_deg=roll_deg,
+                              edge_crop=edge_crop)
     except GeometryError:
         return None
 
@@ -473,7 +509,7 @@ def _aligned_span(lo: int, hi: int, limit: int, factor: int) -> tuple[int, int]:
 
 
 def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antialias: bool = True,
-                              roll_deg: float = 0.0, supersample: int = 1) -> CropMaps:
+                              roll_deg: float = 0.0, supersample: int = 1, pad_fill: str = "black") -> CropMaps:
     """Maps for one ``cv2.remap`` that undistorts, crops and resizes a frame in one pass.
 
     Each model-input pixel centre goes through :func:`crop_camera` to normalised
@@ -491,13 +527,19 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
             ``crop_camera(..., roll_deg)`` does its camera.
         supersample: sample the crop at ``supersample x`` the resolution and box-reduce it, as the
             synthetic training crops were made (module docstring); 1: one sample per pixel.
+        pad_fill: what the crop shows past the frame's edge: ``"black"`` (zeros) or ``"edge"`` (the frame's
+            nearest edge pixel repeated outward); module docstring, "Clamp / pad policy". ``inside`` is the
+            same either way.
 
     Returns:
         :class:`CropMaps` for :func:`apply_crop_maps` / :func:`preprocess_image`.
     """
     out_size = _check_out_size(out_size)
     f = _check_out_size(supersample)
+    if pad_fill not in PAD_FILLS:
+        raise GeometryError(f"pad_fill must be one of {PAD_FILLS}, got {pad_fill!r}")
     map_x, map_y = _lens_maps(camera, crop_camera(camera, roi, out_size * f, roll_deg))
+    lost = map_x <= _OUTSIDE / 2  # past the lens model's reach: black under either fill
 
     if not antialias:
         level = 0
@@ -507,8 +549,11 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
         level = max(0, int(math.floor(math.log2(roi.size / (out_size * f)))))
     factor = 2 ** level
     if level == 0 or min(camera.width, camera.height) < factor:
+        inside = _inside(map_x, map_y, camera.size, f)
+        if pad_fill == "edge":
+            map_x, map_y = _clamped(map_x, map_y, lost, camera.size)
         return CropMaps(map_x, map_y, 0, (0, 0, camera.width, camera.height), camera.size,
-                        cv2.convertMaps(map_x, map_y, cv2.CV_16SC2), _inside(map_x, map_y, camera.size, f), f)
+                        cv2.convertMaps(map_x, map_y, cv2.CV_16SC2), inside, f)
 
     # Reduce only the touched window (+ one reduced pixel of context for the bilinear taps).
     pad = 2 * factor
@@ -518,15 +563,33 @@ def build_undistort_crop_maps(camera: Camera, roi: Roi, out_size: int, *, antial
     tx, ty = map_x[touched], map_y[touched]
     x0, x1 = _aligned_span(int(np.floor(tx.min())) - pad, int(np.ceil(tx.max())) + pad + 1, camera.width, factor)
     y0, y1 = _aligned_span(int(np.floor(ty.min())) - pad, int(np.ceil(ty.max())) + pad + 1, camera.height, factor)
+    past = None
     if x1 > camera.width or y1 > camera.height:
         # The window's edge-repeating padding is not frame: what lies past the frame's edge shows zeros, as
-        # everywhere else outside it.
+        # everywhere else outside it (with the "edge" fill, the clamp below shows the frame's edge there).
         past = (map_x > camera.width - 0.5) | (map_y > camera.height - 0.5)
-        map_x[past] = map_y[past] = _OUTSIDE
     map_x = ((map_x - x0 + 0.5) / factor - 0.5).astype(np.float32)
     map_y = ((map_y - y0 + 0.5) / factor - 0.5).astype(np.float32)
+    size = ((x1 - x0) // factor, (y1 - y0) // factor)
+    if pad_fill == "edge":
+        # `inside` as under black: the window's edge-repeating padding is not frame
+        shown = (map_x, map_y) if past is None else (np.where(past, _OUTSIDE, map_x), np.where(past, _OUTSIDE, map_y))
+        inside = _inside(*shown, size, f)
+        map_x, map_y = _clamped(map_x, map_y, lost, size)
+    else:
+        if past is not None:
+            map_x[past] = map_y[past] = _OUTSIDE
+        inside = _inside(map_x, map_y, size, f)
     return CropMaps(map_x, map_y, level, (x0, y0, x1, y1), camera.size, cv2.convertMaps(map_x, map_y, cv2.CV_16SC2),
-                    _inside(map_x, map_y, ((x1 - x0) // factor, (y1 - y0) // factor), f), f)
+                    inside, f)
+
+
+def _clamped(map_x: np.ndarray, map_y: np.ndarray, lost: np.ndarray, size: tuple[int, int]):
+    """The maps with every sample the lens reaches moved onto the nearest pixel of the ``(width, height)``
+    source: past the frame's edge the crop repeats that edge (the "edge" pad fill) instead of showing 0."""
+    cx = np.where(lost, map_x, np.clip(map_x, 0, size[0] - 1)).astype(np.float32)
+    cy = np.where(lost, map_y, np.clip(map_y, 0, size[1] - 1)).astype(np.float32)
+    return cx, cy
 
 
 def _inside(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int], supersample: int = 1) -> np.ndarray | None:

@@ -174,7 +174,8 @@ def plan_regions(rig: Rig, track: Track | None, roi_config: RoiConfig,
         rois = []
         for k, cam in enumerate(cams):
             roi = roi_from_joints(cam, track.joints, np.where(track.valid, 1.0, 0.0), roi_config.joint_margin_frac,
-                                  roi_config.min_size_px, min_confidence=0.5, min_joints=3, roll_deg=rolls[k])
+                                  roi_config.min_size_px, min_confidence=0.5, min_joints=3, roll_deg=rolls[k],
+                                  edge_crop=roi_config.edge_crop)
             if roi is None:
                 break
             roi = snap_roi(roi, roi_config.snap_px)
@@ -283,7 +284,7 @@ class SubjectTracker:
         counted = np.where(conf >= cfg.min_confidence, conf, 0.0)
         roi = roi_from_joints(self.rig.pair[camera], joints_2d, counted, rc.joint_margin_frac, rc.min_size_px,
                               min_confidence=0.0, min_joints=cfg.min_joints,
-                              roll_deg=self.rolls[camera]) if cfg.enabled else None
+                              roll_deg=self.rolls[camera], edge_crop=rc.edge_crop) if cfg.enabled else None
         self.view_track = None if roi is None else (camera, keep_roi(previous, snap_roi(roi, rc.snap_px),
                                                                      rc.keep_frac))
         return self.view_track is not None

@@ -493,3 +493,22 @@ def test_a_skewed_camera_on_its_side_still_gives_an_upright_pinhole():
     for roll in (90.0, -90.0, 180.0):
         upright = _CameraState(cam, roll).upright_pinhole
         assert not upright.has_distortion and np.allclose(upright.center, cam.center)
+
+
+def test_the_tracked_crop_follows_roi_edge_crop():
+    """A track running past camera 0's left edge: ``roi.edge_crop`` "centre" keeps the whole projected box's
+    square (the crop centred on the person, more of it past the frame), "clip" squares what the frame shows."""
+    sim = pytest.importorskip("drivers.sim")
+    from ghnerf_runtime.tracking import plan_regions
+
+    rig = sim.RigPlacement().build()
+    cam = rig.pair[0]
+    joints = _joints() - 2.4 * np.asarray(cam.R)[0]  # moved along the camera's x: part of it past u = 0
+    uv = cam.project(joints, distort=False)[0]
+    assert uv[:, 0].min() < 0 < uv[:, 0].max()
+    track = track_from_joints(joints, np.full(25, 0.9), np.ones(25, bool), TrackingConfig(min_joints=6))
+    rois = {e: plan_regions(rig, track, RoiConfig(edge_crop=e, snap_px=1)).rois[0] for e in ("clip", "centre")}
+    mid = {e: r.x0 + (r.size - 1) / 2 for e, r in rois.items()}
+    box_mid = 0.5 * (uv[:, 0].min() + uv[:, 0].max())
+    assert abs(mid["centre"] - box_mid) <= 1.0 < mid["clip"] - box_mid
+    assert abs(rois["centre"].size - rois["clip"].size) <= 1  # the same scale

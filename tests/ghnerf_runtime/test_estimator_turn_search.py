@@ -260,3 +260,30 @@ def test_the_turns_compose_with_a_rolled_cameras_upright_crops(session, degrees)
     err = 1e3 * float(np.mean(np.linalg.norm(r.joints_3d[ok] - posed.joints[ok], axis=1)))
     np.testing.assert_allclose([st.roll_deg for st in est._cams], -degrees, atol=1e-6)
     assert est._turns == (180, 180) and ok.sum() >= 20 and err < 150, (est._turns, int(ok.sum()), err)
+
+
+@needs_model
+@pytest.mark.parametrize("fill", ["black", "edge"])
+def test_the_estimator_crops_with_roi_pad_fill(session, fill):
+    """``roi.pad_fill`` reaches the estimator's remap tables: past the frame's edge its crop shows zeros or the
+    frame's edge (docs/runtime.md, "Other crops, other fills")."""
+    from ghnerf_runtime.estimator import Estimator
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.preprocess import Roi, apply_crop_maps
+
+    rig = bench_rig_and_scene(0)[0]
+    est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                                                  roi=RoiConfig(pad_fill=fill)))
+    try:
+        state = est._cams[0]
+        maps, _ = est._crop(state, Roi(-200, 100, 300))
+        frame = np.full((state.camera.height, state.camera.width, 3), 120, np.uint8)
+        crop = apply_crop_maps(frame, maps)
+        assert maps.inside is not None and not maps.inside.all()
+        past = crop[~maps.inside]
+        if fill == "edge":
+            assert np.all(past == 120)
+        else:  # (but for bilinear taps into the frame along its edge)
+            assert np.mean(past == 0) > 0.8
+    finally:
+        est.close()

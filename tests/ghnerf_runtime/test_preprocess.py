@@ -568,3 +568,77 @@ def test_a_gaussian_peak_round_trips_through_crops_that_pass_the_frame_edge():
         if roi.size > 64:  # (a billion pixels off, the rays graze the image plane: 3D points lose precision)
             origin, direction = pinhole.rays(roi.model_to_image(uv, 128))  # points on those pixels' rays
             np.testing.assert_allclose(crop.project(origin + 2.0 * direction)[0], uv, atol=1e-6)
+
+
+def _body_px(x_centre: float) -> np.ndarray:
+    """A standing person's joints (pixels of a lens-free camera): 300 px tall, 100 px wide."""
+    ys = np.linspace(100.0, 400.0, 12)
+    return np.concatenate([np.stack([np.full(12, x_centre), ys], axis=1), [[x_centre - 50, 180], [x_centre + 50, 180]]])
+
+
+@pytest.mark.parametrize("roll", [0.0, 30.0])
+def test_a_box_past_the_frame_edge_is_cropped_as_the_policy_says(roll):
+    """A person whose box runs past the frame's left edge: ``clip`` squares what the frame shows (the person
+    off-centre), ``centre`` keeps the whole box's square (the person at the crop's centre, the size the same as
+    inside the frame), ``shift`` moves that square inside the frame (no black)."""
+    cam = make_camera(dist=np.zeros(5))
+    lo, hi = undistorted_image_bounds(cam)
+    inside = {e: roi_from_joints(cam, _body_px(320.0), np.ones(14), 0.125, 8, roll_deg=roll, edge_crop=e)
+              for e in ("clip", "centre", "shift")}
+    assert len(set(inside.values())) == 1  # a box well inside the frame: all three policies agree
+    body = _body_px(20.0)  # its left 30 px (and the margin) past the frame
+    rois = {e: roi_from_joints(cam, body, np.ones(14), 0.125, 8, roll_deg=roll, edge_crop=e)
+            for e in ("clip", "centre", "shift")}
+    turned = body @ preprocess.image_rotation(roll).T  # the box as the turned crop sees it
+    centre = preprocess.image_rotation(roll).T @ (0.5 * (turned.min(axis=0) + turned.max(axis=0)))
+    for e, roi in rois.items():
+        assert abs(roi.size - inside["clip"].size) <= 1, e  # the same scale as inside the frame
+        off = np.abs(np.array([roi.x0, roi.y0]) + (roi.size - 1) / 2 - centre)
+        if e == "centre":
+            assert np.all(off <= 1.0)
+        elif e == "shift" or roll == 0.0:  # (turned 30 degrees, clipping the one joint out moves little)
+            assert off[0] > 20.0, e  # moved inward, the person off-centre
+    turn = np.abs(preprocess.image_rotation(roll)).sum(axis=1) * rois["shift"].size / 2  # half-extent
+    mid = np.array([rois["shift"].x0, rois["shift"].y0]) + (rois["shift"].size - 1) / 2
+    assert mid[0] - turn[0] >= lo[0] - 1.0  # the shifted square leaves the frame nowhere on the left
+    assert rois["centre"].x0 <= rois["clip"].x0 < rois["shift"].x0
+
+
+def test_the_edge_crop_policy_is_checked():
+    with pytest.raises(GeometryError, match="edge_crop"):
+        roi_from_joints(make_camera(), _body_px(320.0), np.ones(14), edge_crop="pad")
+
+
+@pytest.mark.parametrize("roi, supersample", [(Roi(-60, 100, 200), 1), (Roi(-300, -50, 700), 1),
+                                              (Roi(-300, -50, 700), 2), (Roi(500, 300, 260), 2)])
+def test_the_edge_pad_fill_repeats_the_frame_edge_past_it(roi, supersample):
+    """``pad_fill="edge"``: where the crop runs past the frame, it shows the frame's nearest edge pixel, not 0
+    (the shipped model reads a black band as much worse than that: docs/runtime.md, "A person at the frame's
+    edge"); what lies inside the frame, and ``inside``, are as with black padding."""
+    cam = make_camera(dist=np.zeros(5))
+    image = np.full((480, 640, 3), 40, np.uint8)
+    image[:, :8] = (200, 150, 100)  # a bright left edge, a dim bottom-right corner
+    image[-8:, -8:] = (10, 20, 30)
+    black = build_undistort_crop_maps(cam, roi, 64, supersample=supersample)
+    edge = build_undistort_crop_maps(cam, roi, 64, supersample=supersample, pad_fill="edge")
+    assert black.inside is not None and np.array_equal(black.inside, edge.inside)
+    a, b = apply_crop_maps(image, black), apply_crop_maps(image, edge)
+    assert np.array_equal(a[black.inside], b[black.inside])
+    out = ~black.inside
+    assert np.mean(a[out] == 0) > 0.8  # black (but for bilinear taps into the frame along its edge)
+    assert np.all(b[out].min(axis=-1) >= 10)  # the frame's edge, not 0
+    if roi.x0 < 0:
+        assert np.all(b[16:-16, 1] == (200, 150, 100))  # left of the frame: its left edge repeated
+    else:
+        assert np.all(b[-2, -2] == (10, 20, 30))  # past the bottom-right corner: the corner pixel
+
+
+def test_the_edge_pad_fill_changes_nothing_inside_the_frame():
+    cam = make_camera()
+    image = smooth_image()
+    black = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2)
+    edge = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2, pad_fill="edge")
+    assert black.inside is None and edge.inside is None
+    assert np.array_equal(apply_crop_maps(image, black), apply_crop_maps(image, edge))
+    with pytest.raises(GeometryError, match="pad_fill"):
+        build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, pad_fill="mirror")
