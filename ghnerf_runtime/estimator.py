@@ -1244,8 +1244,9 @@ class Estimator:
         """Each joint's four pairings of the two views' peaks (:data:`~ghnerf_runtime.two_people.PAIRINGS`: the
         decoded peak or the runner-up in view 0 with either in view 1), triangulated through the usual gates
         (reprojection, ray angle, boxes): the ``(4 * J)`` joints, pairing after pairing, and each option's model
-        pixels, values and validity ``(option, view, J, ...)``. A runner-up exists only where another region
-        passes the decoder's threshold."""
+        pixels, values and validity ``(option, view, J, ...)``. A runner-up exists only where the map shows a
+        second peak above the decoder's threshold: another region's, or one of the peak's own region past a valley
+        (:data:`~ghnerf_runtime.keypoints.RUNNER_UP_DIP`)."""
         J = kp.uv.shape[-2]
         ru_model = heatmap_to_model_pixels(kp.runner_up_uv, self.grid, self.size)
         uv_opt = np.stack([uv_model, ru_model])  # (peak | runner-up, view, J, 2)

@@ -410,7 +410,8 @@ def decode_keypoints(heatmaps: np.ndarray, config: KeypointDecoderConfig | None 
     area = in_top.sum(axis=(1, 2))
     valid = finite & (peak > cfg.threshold) & (area <= cfg.max_region_frac * h * w)
 
-    # Runner-up peak: only maps with another region need the (full-map) masked max, taken where it is.
+    # Runner-up peak: only maps with another region (or a second peak inside the peak's own) need the (full-map)
+    # masked max, taken where it is.
     others = above & ~in_top
     runner_up = np.zeros(n, np.float32)
     inner, inner_y, inner_x = _runner_up_in_region(filtered, padded, pad, in_top, top, iy, ix)
