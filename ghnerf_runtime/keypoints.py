@@ -327,9 +327,10 @@ def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_
     n, h, w = filtered.shape
     values = np.zeros(n, np.float32)
     out_y, out_x = np.zeros(n, np.int64), np.zeros(n, np.int64)
-    # the 3x3 neighbourhood's maximum (the zero border of ``padded`` around each map; pad >= 1)
-    neighbours = np.max([padded[:, pad + dy:pad + dy + h, pad + dx:pad + dx + w]
-                         for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx], axis=0)
+    # the 3x3 neighbourhood's maximum, the pixel included (so >= it is a local maximum): one dilation of the tall
+    # stack of tiles, each map's own border around it (pad >= 1), a third of the time of eight numpy slices
+    tall = padded.reshape(n * padded.shape[1], padded.shape[2])
+    neighbours = cv2.dilate(tall, np.ones((3, 3), np.uint8)).reshape(padded.shape)[:, pad:pad + h, pad:pad + w]
     # in_top is the pixels below the threshold where no peak passes it (top label 0): a bump there is no peak
     local = in_top & (top > 0)[:, None, None] & (filtered >= neighbours)
     local[np.arange(n), iy, ix] = False
