@@ -1,6 +1,7 @@
 """Shared helpers for the joint-stream tests (frames, poses, waiting, decoding)."""
 from __future__ import annotations
 
+import socket
 import time
 from typing import Callable
 
@@ -71,3 +72,15 @@ def messages_of(data: bytes) -> list[Message]:
 
 def joints_seqs(messages: list[Message]) -> list[int]:
     return [m.header.seq for m in messages if type(m).__name__ == "Joints"]
+
+
+def queued_datagrams(sock: socket.socket) -> list[bytes]:
+    """Every datagram already queued on ``sock`` (left non-blocking): on loopback a sent datagram is queued on the
+    receiver within ``sendto``, so once the sender is drained all of them are here."""
+    sock.setblocking(False)
+    datagrams: list[bytes] = []
+    while True:
+        try:
+            datagrams.append(sock.recv(65536))
+        except BlockingIOError:
+            return datagrams

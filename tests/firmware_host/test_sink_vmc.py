@@ -15,7 +15,7 @@ from firmware_host.sinks.vmc_osc import CALIBRATION_SUSPECT_ADDRESS
 from firmware_host.sinks.vmc_pose import BONE_PARENTS, FORWARD, quat_mul, quat_rotate, rig_to_unity, solve_pose
 from firmware_host.sinks.vmc_view import AvatarView
 from ghnerf_runtime.body25 import JOINT_INDEX as J
-from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, t_pose_rig
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, make_frame, queued_datagrams, t_pose_rig
 
 Msg = tuple[str, list]
 
@@ -77,13 +77,7 @@ def _receive(frames: list, query: str = "") -> tuple[list[list[Msg]], list[bytes
         assert sink.wait_drained(5)
         stats = sink.close()
         # loopback queues a datagram on the receiver within sendto: all of them are here now
-        rx.setblocking(False)
-        dgrams: list[bytes] = []
-        while True:
-            try:
-                dgrams.append(rx.recv(65536))
-            except BlockingIOError:
-                break
+        dgrams = queued_datagrams(rx)
     finally:
         sink.close()
         rx.close()

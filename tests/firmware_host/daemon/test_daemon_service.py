@@ -30,7 +30,7 @@ from firmware_host.listen import Tally
 from firmware_host.protocol.constants import Fault, Flags
 from firmware_host.protocol.messages import Hello, Joints, Status
 from tests.firmware_host.daemon.test_daemon_memory import glibc_only_reason, probe_big_block
-from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, messages_of, wait_until
+from tests.firmware_host.joint_stream_helpers import FAST_BACKOFF, messages_of, queued_datagrams, wait_until
 
 REPO = Path(__file__).resolve().parents[3]
 MODELS = REPO / "models"
@@ -367,13 +367,7 @@ def test_a_vmc_receiver_hears_the_suspect_calibration_too(sim_url, tmp_path, mon
             sink = run.daemon.sinks[vmc_url]
             assert run.finish() == 0
         stats = sink.stats()
-        rx.setblocking(False)
-        dgrams: list[bytes] = []
-        while True:
-            try:
-                dgrams.append(rx.recv(65536))
-            except BlockingIOError:
-                break
+        dgrams = queued_datagrams(rx)
     finally:
         rx.close()
     assert stats.dropped == stats.decimated == 0, stats  # so the k-th frame heard is the k-th estimate
