@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -66,6 +67,30 @@ def test_shards_read_back_in_order(tmp_path):
         assert data.metadata(i) == {"seed": i % 5}
     with pytest.raises(IndexError):
         data.arrays(5)
+
+
+def test_reads_keep_the_files_of_max_open_shards_open_and_match_without_preadv(tmp_path, monkeypatch):
+    """The shards are read through open files (no maps): the LRU bound closes the files of the shards it drops,
+    and a platform without ``os.preadv`` reads the same bytes (as arrays the caller may write to)."""
+    if not Path("/proc/self/fd").is_dir():
+        pytest.skip("counts the open files in /proc/self/fd")
+    root = _dataset(tmp_path / "ds")  # 3 shards
+
+    def open_files() -> int:
+        return sum(str(root) in os.path.realpath(fd) for fd in Path("/proc/self/fd").iterdir())
+
+    data = ShardedSplit(root, "train", max_open_shards=1)
+    for i in range(len(data)):  # every shard in turn
+        data.arrays(i)
+    assert open_files() == len(FIELDS)  # the last shard's files alone
+    del data
+    assert open_files() == 0
+    monkeypatch.delattr("os.preadv")
+    data = ShardedSplit(root, "train", max_open_shards=0)  # (0: the shard being read stays open all the same)
+    for i in (4, 0, 3):
+        got, expect = data.arrays(i), sample_to_arrays(_sample(i))
+        assert all(np.array_equal(got[k], expect[k]) and got[k].flags.writeable for k in FIELDS)
+    assert open_files() == len(FIELDS)
 
 
 def test_bad_sample_shape_is_refused():

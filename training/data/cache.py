@@ -1,4 +1,4 @@
-"""On-disk sample cache: memory-mapped ``.npy`` shards, one folder per split.
+"""On-disk sample cache: ``.npy`` shards, one folder per split, read a sample's rows at a time.
 
 Layout::
 
@@ -21,10 +21,13 @@ index, a larger ``count`` regenerates only the missing or short shards. After a 
 (``generate`` asked for fewer) the last shard may hold more samples than the split's: readers use
 its first ones, and the shards past the count stay on disk unread (a larger count reuses them).
 
-Reading memory-maps the arrays (``np.load(mmap_mode="r")``): opening a split reads the
-manifest, the shards' ``meta.json`` and each array file's header and size (a damaged shard is
-named then, not inside a DataLoader worker); a sample costs one page-in of its slices. At
-most ``max_open_shards`` shards stay mapped (LRU), bounding file descriptors.
+Reading: opening a split reads the manifest, the shards' ``meta.json`` and each array file's
+header and size (a damaged shard is named then, not inside a DataLoader worker); a sample costs
+one positioned read (``os.preadv``) of its slice of each array, into the array the caller gets.
+Not memory maps: a file cut short after the split opened (another process truncating or
+rewriting it) gives a short read, a ``DatasetError`` naming the file and the sample, where a
+mapped page past the new end killed the process (or a DataLoader worker) with SIGBUS. At most
+``max_open_shards`` shards stay open (LRU), bounding file descriptors.
 
 Checksums: ``write_shard`` records the CRC-32 of each sample's slice of each array (``CHECKSUMS`` in
 ``meta.json``), and reading a sample checks the slices it copies anyway (no extra disk read; 0.25-0.5 ms of
@@ -285,7 +288,8 @@ def write_shard(folder: str | Path, samples: Sequence[Sample], first_index: int)
 
 
 def row_checksums(array: np.ndarray) -> list[int]:
-    """The CRC-32 of each ``array[j]`` (one sample's slice; C-contiguous rows of a C-contiguous or mapped array)."""
+    """The CRC-32 of each ``array[j]`` (one sample's slice; the rows of a C-contiguous array, as ``np.save`` writes
+    them)."""
     return [zlib.crc32(row) for row in array]
 
 
@@ -402,8 +406,50 @@ def _check_array_file(path: Path, shape: tuple[int, ...], dtype: np.dtype) -> No
     of it is read would stop a training run midway, inside a DataLoader worker (which turns the error into a
     RuntimeError holding a traceback).
     """
-    try:
-        with open(path, "rb") as fh:
+    _ArrayRows(path, shape, dtype).close()
+
+
+class _PastEnd(Exception):
+    """A row reaches past the end of its file: the file was cut after it was checked."""
+
+    def __init__(self, size: int, end: int) -> None:
+        super().__init__(f"the file holds {size} bytes, the row ends at byte {end}")
+        self.size, self.end = size, end
+
+
+class _ArrayRows:
+    """One stored array file, open, read one row (one sample's slice) at a time by positioned reads.
+
+    Not memory-mapped: a file cut short after it was checked (another process truncating or rewriting it in
+    place) then gives a short read, which becomes a named error, where touching a mapped page past the new end
+    of the file killed the process with SIGBUS (a DataLoader worker too). Positioned reads leave the file offset
+    alone, so DataLoader workers forked with the file open share it safely.
+
+    Raises (on open):
+        DatasetError: the file is missing, its header unreadable, of another shape or dtype, or its size is
+            not the header's (named).
+    """
+
+    def __init__(self, path: Path, shape: tuple[int, ...], dtype: np.dtype) -> None:
+        self.path = path
+        try:
+            self._file = open(path, "rb", buffering=0)
+        except FileNotFoundError:
+            raise DatasetError(path, "missing from its shard (regenerate or resume)") from None
+        except OSError as e:
+            raise DatasetError(path, f"unreadable array: {e}") from e
+        try:
+            self._data_at = self._check(shape, dtype)
+        except BaseException:
+            self._file.close()
+            raise
+        self.row_shape, self.dtype = tuple(shape[1:]), dtype
+        self.row_bytes = int(np.prod(self.row_shape, dtype=np.int64)) * dtype.itemsize
+
+    def _check(self, shape: tuple[int, ...], dtype: np.dtype) -> int:
+        """The offset of the data, once the header and the size are the expected ones."""
+        fh, path = self._file, self.path
+        try:
             version = np.lib.format.read_magic(fh)
             if version == (1, 0):
                 got_shape, fortran, got_dtype = np.lib.format.read_array_header_1_0(fh)
@@ -412,17 +458,45 @@ def _check_array_file(path: Path, shape: tuple[int, ...], dtype: np.dtype) -> No
             else:
                 raise ValueError(f"unsupported .npy version {version}")
             data_at = fh.tell()
-        size = path.stat().st_size
-    except FileNotFoundError:
-        raise DatasetError(path, "missing from its shard (regenerate or resume)") from None
-    except (OSError, ValueError, EOFError) as e:  # EOFError / ValueError: an empty or cut header
-        raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
-    if tuple(got_shape) != tuple(shape) or got_dtype != dtype or fortran:
-        raise DatasetError(path, f"has shape {tuple(got_shape)} {got_dtype}, expected {tuple(shape)} {dtype}")
-    want = data_at + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
-    if size != want:
-        raise DatasetError(path, f"holds {size} bytes, its header says {want}: the file is cut short or damaged "
-                                 "(regenerate, or resume: generate renders such a shard again)")
+            size = os.fstat(fh.fileno()).st_size
+        except (OSError, ValueError, EOFError) as e:  # EOFError / ValueError: an empty or cut header
+            raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
+        if tuple(got_shape) != tuple(shape) or got_dtype != dtype or fortran:
+            raise DatasetError(path, f"has shape {tuple(got_shape)} {got_dtype}, expected {tuple(shape)} {dtype}")
+        want = data_at + int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        if size != want:
+            raise DatasetError(path, f"holds {size} bytes, its header says {want}: the file is cut short or damaged "
+                                     "(regenerate, or resume: generate renders such a shard again)")
+        return data_at
+
+    def row(self, j: int) -> np.ndarray:
+        """A new array holding row ``j``, read from the file now.
+
+        Raises:
+            _PastEnd: the file ends before the row does (cut after it was checked).
+            OSError: the read failed (a bad disk).
+        """
+        out = np.empty(self.row_shape, self.dtype)
+        buf = out.reshape(-1).view(np.uint8)  # (writes into ``out``: no second copy)
+        at, got = self._data_at + j * self.row_bytes, 0
+        while got < self.row_bytes:  # a regular file reads short only at its end; loop all the same
+            n = _pread_into(self._file.fileno(), buf[got:], at + got)
+            if n == 0:
+                raise _PastEnd(os.fstat(self._file.fileno()).st_size, at + self.row_bytes)
+            got += n
+        return out
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _pread_into(fd: int, buf: np.ndarray, offset: int) -> int:
+    """Read into ``buf`` from byte ``offset`` of ``fd`` without moving its offset; the bytes read."""
+    if hasattr(os, "preadv"):
+        return os.preadv(fd, [buf], offset)
+    data = os.pread(fd, len(buf), offset)  # (a platform without preadv: one copy more)
+    buf[:len(data)] = np.frombuffer(data, np.uint8)
+    return len(data)
 
 
 @dataclass(frozen=True)
@@ -435,6 +509,11 @@ class ShardInfo:
     stored: int  # the samples in its files: more than count in the last shard of a split made smaller
     metadata: list
     checksums: dict[str, np.ndarray] | None  # per array, one CRC-32 per stored sample; None: written without
+    shapes: dict[str, tuple[int, ...]]  # per array, the file's shape (stored samples first), as checked
+
+    def array_rows(self, name: str) -> "_ArrayRows":
+        """Array ``name`` of this shard, open (its header and size checked again: it may have changed since)."""
+        return _ArrayRows(self.folder / f"{name}.npy", self.shapes[name], FIELDS[name][1])
 
 
 def scan_shard(split_dir: Path, k: int, first: int, n: int, shard_size: int, num_views: int,
@@ -463,9 +542,10 @@ def scan_shard(split_dir: Path, k: int, first: int, n: int, shard_size: int, num
         want = f"{first} x {n}" if n == shard_size else f"{first} x {n} to {shard_size}"
         raise DatasetError(meta_path, f"shard holds samples from {meta.get('first_index')} x {meta.get('count')}, "
                                       f"expected {want}")
-    for name, (shape_fn, dtype) in FIELDS.items():
-        _check_array_file(folder / f"{name}.npy", (stored, *shape_fn(num_views, resolution)), dtype)
-    return ShardInfo(folder, first, n, stored, meta["samples"][:n], _checksums(meta, meta_path, stored))
+    shapes = {name: (stored, *shape_fn(num_views, resolution)) for name, (shape_fn, _) in FIELDS.items()}
+    for name, (_, dtype) in FIELDS.items():
+        _check_array_file(folder / f"{name}.npy", shapes[name], dtype)
+    return ShardInfo(folder, first, n, stored, meta["samples"][:n], _checksums(meta, meta_path, stored), shapes)
 
 
 def damaged_rows(shard: ShardInfo) -> dict[str, list[int]]:
@@ -479,11 +559,7 @@ def damaged_rows(shard: ShardInfo) -> dict[str, list[int]]:
         return {}
     bad = {}
     for name in FIELDS:
-        path = shard.folder / f"{name}.npy"
-        try:
-            got = row_checksums(np.load(path, mmap_mode="r"))
-        except (OSError, ValueError, EOFError) as e:
-            raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
+        got = _file_checksums(shard, name)
         rows = [j for j, (a, b) in enumerate(zip(got, shard.checksums[name])) if a != int(b)]
         if rows:
             bad[name] = rows
@@ -502,13 +578,7 @@ def record_missing_checksums(shard: ShardInfo) -> bool:
         return False
     meta_path = shard.folder / SHARD_META
     meta = json.loads(meta_path.read_text())
-    sums = {}
-    for name in FIELDS:
-        path = shard.folder / f"{name}.npy"
-        try:
-            sums[name] = row_checksums(np.load(path, mmap_mode="r"))
-        except (OSError, ValueError, EOFError) as e:
-            raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
+    sums = {name: _file_checksums(shard, name) for name in FIELDS}
     meta[CHECKSUMS] = sums
     try:
         _replace_text(meta_path, json.dumps(meta, default=_json_default))
@@ -517,13 +587,32 @@ def record_missing_checksums(shard: ShardInfo) -> bool:
     return True
 
 
+def _file_checksums(shard: ShardInfo, name: str) -> list[int]:
+    """The CRC-32 of each stored row of ``shard``'s array ``name``, read a row at a time (no whole shard in memory,
+    no map: a file cut meanwhile is named, not a SIGBUS).
+
+    Raises:
+        DatasetError: the file is unreadable, not as scanned, or cut while it is read (named).
+    """
+    path = shard.folder / f"{name}.npy"
+    rows = shard.array_rows(name)
+    try:
+        return [zlib.crc32(rows.row(j)) for j in range(shard.stored)]
+    except _PastEnd as e:
+        raise DatasetError(path, f"{e}: it was cut short while being read; run the check again") from None
+    except OSError as e:
+        raise DatasetError(path, f"unreadable array: {e}") from e
+    finally:
+        rows.close()
+
+
 class ShardedSplit:
     """Read-only, random-access view of one split of a cached dataset (numpy, torch-free).
 
     Args:
         root: the dataset folder (holding ``dataset.json``).
         split: split name (``"train"``, ``"val"``...).
-        max_open_shards: shards kept memory-mapped at once.
+        max_open_shards: shards whose array files are kept open at once (at least the one being read).
 
     Raises:
         DatasetError: the manifest, a shard folder, an array file or its shape is missing or
@@ -545,7 +634,7 @@ class ShardedSplit:
         self.view_names = tuple(self.manifest["view_names"])
         self.num_views = len(self.view_names)
         self._max_open = int(max_open_shards)
-        self._open: OrderedDict[int, dict[str, np.ndarray]] = OrderedDict()
+        self._open: OrderedDict[int, dict[str, _ArrayRows]] = OrderedDict()
         count, shard_size = int(self.info["count"]), int(self.info["shard_size"])
         self._shards = [scan_shard(self.root / split, k, i0, n, shard_size, self.num_views, self.resolution)
                         for k, i0, n in shard_plan(count, shard_size)]
@@ -566,46 +655,55 @@ class ShardedSplit:
         k = int(np.searchsorted(self._starts, index, side="right") - 1)
         return k, index - self._shards[k].first_index
 
-    def _arrays(self, k: int) -> dict[str, np.ndarray]:
+    def _files(self, k: int) -> dict[str, _ArrayRows]:
         if k in self._open:
             self._open.move_to_end(k)
             return self._open[k]
-        shard = self._shards[k]
-        arrays = {}
-        for name, (shape_fn, dtype) in FIELDS.items():
-            path = shard.folder / f"{name}.npy"
-            try:
-                a = np.load(path, mmap_mode="r")
-            except (OSError, ValueError, EOFError) as e:  # EOFError: an empty file (a stop mid-write)
-                raise DatasetError(path, f"unreadable array: {e or type(e).__name__}") from e
-            expect = (shard.stored, *shape_fn(self.num_views, self.resolution))
-            if a.shape != expect or a.dtype != dtype:
-                raise DatasetError(path, f"has shape {a.shape} {a.dtype}, expected {expect} {dtype}")
-            arrays[name] = a[:shard.count]  # (a view: still memory-mapped)
-        self._open[k] = arrays
-        while len(self._open) > self._max_open:
-            self._open.popitem(last=False)
-        return arrays
+        shard, files = self._shards[k], {}
+        try:
+            for name in FIELDS:
+                files[name] = shard.array_rows(name)
+        except DatasetError:
+            for f in files.values():
+                f.close()
+            raise
+        self._open[k] = files
+        while len(self._open) > max(self._max_open, 1):  # (the shard about to be read stays open: it is the last)
+            for f in self._open.popitem(last=False)[1].values():
+                f.close()
+        return files
 
     def arrays(self, index: int) -> dict[str, np.ndarray]:
-        """The stored record of sample ``index`` (copies; masks still bit-packed), checked against the checksums
+        """The stored record of sample ``index`` (new arrays; masks still bit-packed), checked against the checksums
         its shard recorded.
 
         Raises:
-            DatasetError: a slice's bytes differ from its checksum; names the array file, the sample, both
-                checksums and how to make the shard again.
+            DatasetError: a slice's bytes differ from its checksum, or its file was cut short (or could not be
+                read) after the split opened; names the array file, the sample and how to make the shard again.
         """
         k, j = self._locate(index)
         shard = self._shards[k]
         out = {}
-        for name, a in self._arrays(k).items():
-            row = np.array(a[j])  # the copy the caller gets: checking it reads nothing more from the disk
+        for name, rows in self._files(k).items():
+            try:
+                row = rows.row(j)  # the copy the caller gets: checking it reads nothing more from the disk
+            except _PastEnd as e:
+                raise DatasetError(rows.path, self._cut_message(shard, j, e)) from None
+            except OSError as e:  # a bad disk: EIO
+                raise DatasetError(rows.path, f"sample {shard.first_index + j} (row {j} of the shard) could not "
+                                              f"be read: {e}") from e
             if shard.checksums is not None:
                 got, want = zlib.crc32(row), int(shard.checksums[name][j])
                 if got != want:
-                    raise DatasetError(shard.folder / f"{name}.npy", self._damage_message(shard, j, got, want))
+                    raise DatasetError(rows.path, self._damage_message(shard, j, got, want))
             out[name] = row
         return out
+
+    def _cut_message(self, shard: ShardInfo, j: int, e: _PastEnd) -> str:
+        return (f"sample {shard.first_index + j} (row {j} of the shard) is past the file's end ({e}): the file was "
+                "cut short after the split was opened (another process copying over it or rewriting it in place "
+                f"while the run reads it). {repair_hint(self.manifest, self.root, self.split, shard.folder)}; "
+                f"`python -m training.data.verify {self.root}` lists every damaged shard")
 
     def _damage_message(self, shard: ShardInfo, j: int, got: int, want: int) -> str:
         return (f"sample {shard.first_index + j} (row {j} of the shard) does not match its checksum: CRC-32 "
@@ -625,7 +723,7 @@ class ShardedSplit:
         return arrays_to_sample(self.arrays(index), self.view_names, self.metadata(index))
 
     def __getstate__(self) -> dict:
-        # Memory maps do not pickle (DataLoader workers with spawn): reopen lazily.
+        # Open files do not pickle (DataLoader workers with spawn): reopen lazily.
         state = self.__dict__.copy()
         state["_open"] = OrderedDict()
         return state

@@ -34,7 +34,7 @@ class MultiViewDataset(torch.utils.data.Dataset):
         root: dataset folder (``dataset.json``).
         split: split name.
         targets: heatmap, near/far and frame padding settings (frame padding: synthetic data only, below).
-        max_open_shards: shards kept memory-mapped per process.
+        max_open_shards: shards whose files are kept open per process.
     """
 
     def __init__(self, root: str | Path, split: str, targets: TargetConfig | None = None, *,
