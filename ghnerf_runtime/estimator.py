@@ -89,7 +89,8 @@ from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
-from ghnerf_runtime.two_people import PAIRINGS, attached, centre_of, floor_xz, pick_person, split_people
+from ghnerf_runtime.two_people import PAIRINGS, attached, centre_of, floor_xz, matched_errors, pick_person, \
+    split_people
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -183,9 +184,11 @@ class PairResult:
             threshold in both views (at least ``presence.min_joints`` of them) of the larger of the views'
             reprojection errors, in model-input pixels (:class:`ghnerf_runtime.joints3d.ViewAgreement`), whatever
             ``joints3d.method``. It grows when a camera has moved since calibration (the daemon watches it:
-            docs/daemon.md). ``None``: too few such joints, a frame rejected, or two people in view not told apart.
-            A ``several_people`` pair measures the reported subject's own pairings (each view's peak may be the
-            other person's), those the gate kept (:meth:`Estimator._subject_figures`).
+            docs/daemon.md). ``None``: too few such joints, or a frame rejected. A ``several_people`` pair measures
+            the reported subject's own pairings (each view's peak may be the other person's), those the gate kept
+            (:meth:`Estimator._subject_figures`); where they give none (nobody picked: a camera knocked past the gate
+            leaves no pairing to pick from; ``pick_subject: none``), since session 56 both people's peaks paired one
+            to one, before the gate (:meth:`Estimator._matched_px`).
         lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lowest ankle, heel or toe
             (:data:`ghnerf_runtime.body25.FLOOR_JOINTS`) triangulated from peaks of at least the presence threshold
             in both views, kept by the reprojection and box gates and shown by both frames at least a fifth of the
@@ -472,6 +475,14 @@ def joints_shown_twice(kp: Keypoints2D, ratio: float) -> int:
     ``several_people`` check; ``ratio`` is ``joints3d.second_person_ratio``)."""
     twice = kp.valid & (kp.runner_up >= ratio * kp.confidence)  # (2, J)
     return int(np.count_nonzero(twice.all(axis=0)))
+
+
+def _paired(*options: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Each ``(option, view, J, ...)`` array as the two views' ``(view, 4 * J, ...)``: the four pairings
+    (:data:`~ghnerf_runtime.two_people.PAIRINGS`) one after the other, for one triangulation of them all."""
+    J = options[0].shape[2]
+    return tuple(np.stack([opt[PAIRINGS[:, v], v].reshape((len(PAIRINGS) * J,) + opt.shape[3:]) for v in range(2)])
+                 for opt in options)
 
 
 class Estimator:
@@ -1139,6 +1150,8 @@ class Estimator:
             # each view's decoded peak may be either person's, so the pair's own figures say nothing of the rig:
             # the subject's own pairings do (_subject_figures)
             agreement, foot = (None, None) if nobody else self._subject_figures(subject, chosen, crops, regions)
+            if agreement is None:  # no subject's pairings to measure (a camera knocked past the gate leaves none):
+                agreement = self._matched_px(kp, uv_model, crops)  # both people's peaks, paired one to one
         else:
             agreement = None if self._agreement is None else self._agreement.median_px
             # the triangulation's feet (not the prior's placed ones): nobody's peaks say nothing of it
@@ -1159,7 +1172,8 @@ class Estimator:
 
         The px figure differs from one person's: the pairings passed ``joints3d.max_reprojection_px`` to be chosen
         (:meth:`_pairings`), so a joint past that gate is not measured; a camera turned that far reports nobody
-        and gives no figure here, where one person's pair still gives one (docs/calibration.md)."""
+        and gives no figure here, and the pair's px figure is then both people's peaks' (:meth:`_matched_px`), as
+        one person's pair still gives one (docs/calibration.md)."""
         if chosen is None or not subject.valid.any():
             return None, None
         kp, uv_model = chosen
@@ -1247,18 +1261,42 @@ class Estimator:
         pixels, values and validity ``(option, view, J, ...)``. A runner-up exists only where the map shows a
         second peak above the decoder's threshold: another region's, or one of the peak's own region past a valley
         (:data:`~ghnerf_runtime.keypoints.RUNNER_UP_DIP`)."""
-        J = kp.uv.shape[-2]
+        uv_opt, conf_opt, valid_opt = self._peak_options(kp, uv_model)
+        tri = self._gate_to_boxes(triangulate_joints(*_paired(uv_opt, conf_opt, valid_opt), crops,
+                                                     self.config.joints3d), regions)
+        return tri, uv_opt, conf_opt, valid_opt
+
+    def _peak_options(self, kp: Keypoints2D, uv_model: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each view's two options of each joint, the decoded peak and the runner-up: their model pixels, values and
+        validity, ``(option, view, J, ...)``."""
         ru_model = heatmap_to_model_pixels(kp.runner_up_uv, self.grid, self.size)
         uv_opt = np.stack([uv_model, ru_model])  # (peak | runner-up, view, J, 2)
         conf_opt = np.stack([kp.confidence, kp.runner_up])
         valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a second peak above the threshold
+        return uv_opt, conf_opt, valid_opt
 
-        def paired(opt: np.ndarray) -> np.ndarray:  # (4 * J, ...) of each view, the pairings one after the other
-            return np.stack([opt[PAIRINGS[:, v], v].reshape((4 * J,) + opt.shape[3:]) for v in range(2)])
-
-        tri = self._gate_to_boxes(triangulate_joints(paired(uv_opt), paired(conf_opt), paired(valid_opt), crops,
-                                                     self.config.joints3d), regions)
-        return tri, uv_opt, conf_opt, valid_opt
+    def _matched_px(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera]) -> float | None:
+        """A ``several_people`` pair's px figure from both people's peaks, where the subject's own pairings give
+        none (:meth:`_subject_figures`): each joint whose map shows two peaks apart in both views, each at least the
+        presence threshold, is measured as its four pairings' errors before the ``joints3d.max_reprojection_px``
+        gate (as one person's figure is), the views' peaks paired one to one the way that fits best
+        (:func:`~ghnerf_runtime.two_people.matched_errors`: one of the two ways is the people's own joints); the
+        median of the two people's errors over at least ``presence.min_joints`` such joints, else ``None``. Nobody
+        need be picked: a camera knocked past the gate leaves no pairing to pick from, and this is what still
+        shows it (docs/calibration.md, "Two people in view"). No floor figure comes from it: which of a way's
+        two points is whose foot, and whether that person stands, is not known (one person's feet past the gate
+        are not measured either)."""
+        pres = self.config.presence
+        strong = pres.threshold(self.config.heatmaps.source)
+        options = self._peak_options(kp, uv_model)
+        _, agreement = triangulate_joints_checked(*_paired(*options), crops, self.config.joints3d, strong, 1)
+        if agreement.worst_px is None:  # (an agreement built without its joints' errors: nothing to pair)
+            return None
+        errors = matched_errors(agreement.worst_px.reshape(len(PAIRINGS), -1))
+        measured = np.isfinite(errors).all(axis=0)
+        if int(measured.sum()) < max(pres.min_joints, 1):
+            return None
+        return float(np.median(errors[:, measured]))
 
     def _tracked_candidates(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                             regions: Regions, track_joints: np.ndarray, track_valid: np.ndarray

@@ -18,7 +18,7 @@ Every result is finite: missing joints are 0 with confidence 0.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -134,11 +134,15 @@ class ViewAgreement:
             (nobody, or too little seen in both views to tell).
         joints: joints measured: triangulated, with a peak of at least ``min_confidence`` in both views.
         gated: of those, how many the ``max_reprojection_px`` gate dropped.
+        worst_px: ``(J,)`` each measured joint's larger view error (the values ``median_px`` is the median of),
+            NaN for a joint not measured; ``None`` where not given. Two people's pairings are measured joint by
+            joint from it (``two_people.matched_errors``).
     """
 
     median_px: float | None
     joints: int
     gated: int
+    worst_px: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 def lowest_height_m(j3: Joints3D, joints: Sequence[int]) -> float | None:
@@ -240,7 +244,7 @@ def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Ca
     measured = solved & np.all(conf >= min_confidence, axis=0) & np.isfinite(worst)
     n = int(measured.sum())
     median = float(np.median(worst[measured])) if n >= max(min_joints, 1) else None
-    return joints, ViewAgreement(median, n, int((gated & measured).sum()))
+    return joints, ViewAgreement(median, n, int((gated & measured).sum()), np.where(measured, worst, np.nan))
 
 
 # ----------------------------------------------------------------- volumetric

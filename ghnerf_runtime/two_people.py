@@ -146,6 +146,35 @@ def _settle(xz: np.ndarray, allowed: np.ndarray, centres: np.ndarray) -> tuple[f
     return total, _OPTIONS[choice].T.copy()
 
 
+def matched_errors(errors: np.ndarray) -> np.ndarray:
+    """Each joint's two people's errors, ``(2, J)``, from its four pairings' (``errors``, ``(4, J)`` in
+    :data:`PAIRINGS` order, NaN for a pairing not measured): of the two ways to pair the views' peaks one to one,
+    straight (pairings 0 and 3) or crossed (1 and 2), the one whose larger error is the smaller, a way with a
+    pairing not measured losing to one with both; NaN for a joint with neither way measured whole.
+
+    One of the ways is the people's own joints, the other the mixed points; both views' peaks are used once, so a
+    knocked camera's error shows in both of the people's pairings, while a mixed pairing's may happen to cancel it
+    (the one person's image lower than the other's by as much): the lowest of the four would read low. A mixed
+    pairing may also fail to meet at all (its rays cross behind a camera: a camera panned 8 degrees on the oracle
+    of benchmarks/measure_two_people.py); a peak too weak to measure leaves both ways short (it is in each).
+
+    Example (joint 0: the straight way fits, a crossed pairing happens to fit better still; joint 1: a crossed
+    pairing not measured; joint 2: a straight one and a crossed one not measured):
+        >>> nan = np.nan
+        >>> matched_errors(np.array([[2.0, 1.0, nan], [0.5, nan, nan], [4.0, 1.0, 1.0], [2.2, 1.1, 1.0]])).tolist()
+        [[2.0, 1.0, nan], [2.2, 1.1, nan]]
+    """
+    e = np.asarray(errors, dtype=np.float64)
+    if e.ndim != 2 or e.shape[0] != len(PAIRINGS):
+        raise ShapeError(f"matched_errors: errors must be ({len(PAIRINGS)}, J), one row per pairing, got shape "
+                         f"{e.shape}")
+    straight, crossed = e[[0, 3]], e[[1, 2]]
+    # a way's larger error, +inf where a pairing of it was not measured (np.max spreads the NaN)
+    worse_straight, worse_crossed = (np.nan_to_num(w.max(axis=0), nan=np.inf) for w in (straight, crossed))
+    chosen = np.where(worse_crossed < worse_straight, crossed, straight)
+    return np.where(np.isfinite(np.minimum(worse_straight, worse_crossed)), chosen, np.nan)
+
+
 def attached(candidates: np.ndarray, joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     """``(J,)`` which of ``candidates`` (``(J, 3)``, one per joint) lie within :data:`MAX_LIMB_M` of a ``found``
     joint of ``joints`` (``(J, 3)``) they share a limb with (:data:`~ghnerf_runtime.body25.LIMBS`)."""
