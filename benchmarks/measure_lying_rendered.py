@@ -227,9 +227,10 @@ PRIOR_WORDS = {"prior": "on", "no prior": "off", "turned crops": "on, crops turn
 
 
 def table(results: dict[tuple[str, str], dict]) -> str:
-    """The results as a Markdown table (one row per pose and prior; with ``turn search`` rows, two last columns:
+    """The results as a Markdown table (one row per pose and prior; with ``turn search`` rows, three last columns:
     the pairs that searched the turns, those that kept the turned pass, and those that came tracked; the tracked
-    pairs through a kept turn run again upright, and those that left the turn so; and the median of the pairs' ``timing_ms["total"]``, the whole estimate, on whatever else the host runs)."""
+    pairs through a kept turn run again upright, and those that left the turn so; and the median of the pairs'
+    ``timing_ms["total"]``, the whole estimate, on whatever else the host runs)."""
     searched = any(prior == "turn search" for _, prior in results)
     rows = ["| pose | skeleton prior | pairs (none found) | PCK@0.2 | MPJPE over the joints found | found | "
             "their confidence (median) | prior disagreement (median) | lowest foot (median, pairs) | true joints "

@@ -785,7 +785,7 @@ class Estimator:
                     self._turn_search_wait = self.config.roi.turn_search_every - 1
                 p = turned
         elif p.someone:
-            self._turn_search_wait = 0  # someone found well: the next weak cold pair searches at once
+            self._turn_search_wait = 0  # someone found well: the next weak pair searches at once
         if p.j3 is None:
             if self._smoother is not None:
                 self._smoother.reset()
@@ -889,8 +889,8 @@ class Estimator:
         return p
 
     def _weak_pass(self, p: "_Pass") -> bool:
-        """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not; the
-        caller sees to that: pairs that came tracked never search): two frames that passed the frame check, and
+        """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not) or a
+        tracked pass through upright crops (the caller sees to which): two frames that passed the frame check, and
         nobody found, or someone at a median joint confidence under ``roi.turn_search_below`` (an upside-down
         person read as an upright one); and a view whose ``presence.min_joints``-th strongest joint peak reaches
         :data:`_TURN_SEARCH_FLOOR` (someone may be there: an empty room does not search)."""
@@ -977,10 +977,11 @@ class Estimator:
         under ``roi.turn_search_below``), or ``roi.turn_search_every`` tracked turned pairs after the last check,
         the pass again through upright crops of the track ``p`` left, kept when it finds someone at a median
         confidence :data:`_TURN_MARGIN` higher (the person got up: through the turned crops a standing person is
-        read upside down, 1.1-1.3 m off, at 0.44-0.57; upright at 0.7-0.8), the turn dropped with it; else ``p``
-        and the turned track stand. The tracked turned passes of someone still lying reach confidences as low as
-        the misread's, so the weak ones compare rather than drop; the periodic check catches a misread over the
-        bar. One pass more on a checked pair; an upright track pays nothing."""
+        read upside down, 1.1-1.3 m off, at 0.44-0.57; upright at 0.7-0.9, in a one-off look at four bench
+        scenes), the turn dropped with it; else ``p`` and the turned track stand. The tracked turned passes of
+        someone still lying reach confidences as low as the misread's, so the weak ones compare rather than drop;
+        the periodic check catches a misread over the bar. One pass more on a checked pair (docs/runtime.md,
+        "Getting up and lying down while tracked")."""
         track = self.tracker.track
         if track is None or p.j3 is None:
             return p  # no track: the next pair is cold, and upright first

@@ -11,7 +11,8 @@ import pytest
 from benchmarks.measure_lying_rendered import POSES, posed_as, render_pair, rotation
 from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.cli.simdata import bench_rig_and_scene
-from tests.benchmarks.test_bench_smoke import run_script, run_script_failing, scratch_cache  # noqa: F401  (module fixture)
+from tests.benchmarks.test_bench_smoke import (  # noqa: F401  (scratch_cache: a module fixture)
+    run_script, run_script_failing, scratch_cache)
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 NECK, MID_HIP = JOINT_INDEX["Neck"], JOINT_INDEX["MidHip"]
@@ -110,8 +111,8 @@ def test_turn_search_adds_a_row_per_pose_with_its_searches(tiny_model_dir, scrat
                                                           monkeypatch):
     out = run_script("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--scenes", "1", "--frames",
                      "1", "--poses", "upright,lying_z", "--turn-search", capsys=capsys, monkeypatch=monkeypatch)
-    rows = re.findall(r"^\| (\w+) \| ([^|]+) \| 1 \(\d\) \|.*\| (- |\d+ \(\d+, \d+\) )\| (- |\d+ \(\d+\) )\| [\d.]+ \|$",
-                      out, re.M)
+    searches, checks = r"(- |\d+ \(\d+, \d+\) )", r"(- |\d+ \(\d+\) )"
+    rows = re.findall(rf"^\| (\w+) \| ([^|]+) \| 1 \(\d\) \|.*\| {searches}\| {checks}\| [\d.]+ \|$", out, re.M)
     assert [(pose, prior) for pose, prior, _, _ in rows] == [
         ("upright", "on"), ("upright", "off"), ("upright", "on, `roi.turn_search` on"),
         ("lying_z", "on"), ("lying_z", "off"), ("lying_z", "on, `roi.turn_search` on")], out
