@@ -338,3 +338,22 @@ def test_a_tracked_person_upside_down_is_searched_for_on_the_track(session, k):
     for turns, tracked, found, err in out[2:]:
         assert turns == (180, 180) and tracked and found >= 20 and err < 150, out
     assert est.turn_searches == 1 and est.turns_kept == 1
+
+
+@needs_model
+def test_a_strong_turned_track_is_checked_upright_every_few_pairs_and_keeps_its_turn(session):
+    """A tracked turned pass that is not weak is still checked upright every ``turn_search_every``-th tracked pair
+    (a misread over ``turn_search_below``); a person still lying keeps the turn through the checks."""
+    from ghnerf_runtime.estimator import Estimator
+
+    rig, shots = _shots(1, "lying_z", frames=7)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                          roi=RoiConfig(turn_search=True, turn_search_every=2, turn_search_below=0.0))
+    est = Estimator(session, rig, cfg)
+    checks = []
+    for t, images, truth in shots:
+        r = est.estimate(images, timestamp_s=t)
+        checks.append(est.turn_checks)
+        assert est._turns == (90, 90) and r.tracked and (~r.missing).sum() >= 18, (est._turns, checks)
+    # the search compared the turn with upright on the cold pair: the first check two tracked pairs later
+    assert checks == [0, 0, 1, 1, 2, 2, 3] and est.turns_left == 0 and est.turn_searches == 1
