@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/measure_lying_rendered.py [--model-dir models] [--scenes 12] [--frames 3]
         [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops] [--turn-search]
-        [--turn-search-every 5]
+        [--turn-search-every 5] [--then POSE [--change-at N]]
 
 ``benchmarks/measure_prior_out_of_range.py`` measures the skeleton prior on turned bodies through a noise
 model (exact projections plus Gaussian pixels, the bodies turned as the prior's training copies are). This
@@ -33,7 +33,11 @@ the runtime does not know how a person lies): what a search over crop rotations 
 ``--turn-search`` adds, for every pose, the prior with ``roi.turn_search`` on (the runtime's search: a weak cold
 pass tries each view's crop turned 90, 180 and 270 degrees), with how many pairs searched and how many kept the
 turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``);
-``--turn-search-every`` sets ``roi.turn_search_every`` for those rows.
+``--turn-search-every`` sets ``roi.turn_search_every`` for those rows; their ``upright checks`` column counts the
+tracked pairs through a kept turn that were run again through upright crops (``Estimator.turn_checks``) and those
+that left the turn so (``turns_left``). ``--then POSE`` changes each scene's body to ``POSE`` from pair
+``--change-at`` (default: half the ``--frames``) on, in every row (the pose column says ``lying_z, then upright``):
+a person who gets up, or lies down, while tracked.
 Deterministic (scene seeds, sensor noise seeded by scene, camera and time). A tool, not a test:
 docs/runtime.md, "The skeleton prior".
 """
@@ -131,12 +135,14 @@ def turn_crops(est, deg: float) -> None:
 
 def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_scene: int = 0,
             turned_crops: bool = False, log=print, turn_search: bool = False,
-            turn_search_every: int | None = None) -> dict[tuple[str, str], dict]:
+            turn_search_every: int | None = None, then: str | None = None,
+            change_at: int | None = None) -> dict[tuple[str, str], dict]:
     """``{(pose, "prior" | "no prior" | "turned crops" | "turn search"): Accuracy summary + pairs, empty pairs,
     lowest feet, turn searches}`` (module docstring); ``turned crops`` (with ``turned_crops``, for the poses of
     :data:`CROP_TURN_DEG`): the prior on, the crops turned with the body (:func:`turn_crops`); ``turn search``
     (with ``turn_search``, every pose): the prior on and ``roi.turn_search`` on (``turn_search_every``: its
-    ``roi.turn_search_every``, ``None`` the default)."""
+    ``roi.turn_search_every``, ``None`` the default). ``then``: the pose every scene's body takes from pair
+    ``change_at`` (default ``frames // 2``) on; the rows' pose is then ``"<pose>, then <then>"``."""
     from ghnerf_runtime.cli.simdata import Accuracy, bench_rig_and_scene
     from ghnerf_runtime.estimator import Estimator, load_session
 
@@ -150,10 +156,14 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
         every = on.roi.turn_search_every if turn_search_every is None else turn_search_every
         configs["turn search"] = (replace(on, roi=replace(on.roi, turn_search=True, turn_search_every=every)),
                                   with_prior)
+    if then is not None:
+        if then not in POSES:  # refused before any rendering
+            raise ValueError(f"unknown pose {then!r} for then; choose from {', '.join(POSES)}")
+        change_at = frames // 2 if change_at is None else change_at
     runs = [(p, c) for p in poses for c in configs if c != "turned crops" or p in CROP_TURN_DEG]
     acc = {key: Accuracy() for key in runs}
     extra = {key: {"pairs": 0, "empty": 0, "feet": [], "confidence": [], "apart": [], "searches": 0, "kept": 0,
-                   "tracked_searches": 0, "ms": []} for key in runs}
+                   "tracked_searches": 0, "checks": 0, "left": 0, "ms": []} for key in runs}
     outside = {p: [] for p in poses}  # per pose: each pair's share of true joints the box gate would drop
     margin = on.joints3d.max_outside_box_m
     for k in range(first_scene, first_scene + scenes):
@@ -164,7 +174,8 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
             shots = []
             for i in range(frames):
                 t = t0 + i / FPS
-                posed = posed_as(scene.posed(t), pose, rig.volume)
+                now = pose if then is None or i < change_at else then
+                posed = posed_as(scene.posed(t), now, rig.volume)
                 shots.append((t, posed.joints.copy()) + render_pair(scene, rig, posed, t))
                 outside[pose].append(float(np.mean(np.any((posed.joints < lo) | (posed.joints > hi), axis=1))))
             for name, (cfg, session) in configs.items():
@@ -179,7 +190,8 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
                         r = est.estimate(images, sequence=i, timestamp_s=t - t0)
                         acc[pose, name].add_truth(r, j3, j2, vis, frame=(k, i))
                         e = extra[pose, name]
-                        # a pair that came with a track and still searched (its tracked pass lost the subject)
+                        # a pair that came with a track and still searched (its tracked pass lost the subject,
+                        # or was weak through upright crops)
                         e["tracked_searches"] += int(tracked_before and est.turn_searches > searched)
                         e["pairs"] += 1
                         e["ms"].append(r.timing_ms["total"])
@@ -192,18 +204,21 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
                     e = extra[pose, name]
                     e["searches"] += est.turn_searches
                     e["kept"] += est.turns_kept
+                    e["checks"] += est.turn_checks
+                    e["left"] += est.turns_left
         log(f"scene {k} ({scene.config.motion}): {time.perf_counter() - start:.1f} s")
     out = {}
     for key in acc:
         s = acc[key].summary()
         e = extra[key]
         s.update(pairs=e["pairs"], empty=e["empty"], feet_pairs=len(e["feet"]), turn_searches=e["searches"],
-                 turns_kept=e["kept"], tracked_searches=e["tracked_searches"], ms_median=float(np.median(e["ms"])),
+                 turns_kept=e["kept"], tracked_searches=e["tracked_searches"], turn_checks=e["checks"],
+                 turns_left=e["left"], ms_median=float(np.median(e["ms"])),
                  outside_frac=float(np.mean(outside[key[0]])),
                  disagreement_median_m=float(np.median(e["apart"])) if e["apart"] else float("nan"),
                  confidence_median=float(np.median(e["confidence"])) if e["confidence"] else float("nan"),
                  feet_median_m=float(np.median(e["feet"])) if e["feet"] else float("nan"))
-        out[key] = s
+        out[key if then is None else (f"{key[0]}, then {then}", key[1])] = s
     return out
 
 
@@ -212,15 +227,16 @@ PRIOR_WORDS = {"prior": "on", "no prior": "off", "turned crops": "on, crops turn
 
 
 def table(results: dict[tuple[str, str], dict]) -> str:
-    """The results as a Markdown table (one row per pose and prior; with ``turn search`` rows, two last columns:
-    the pairs that searched the turns, those that kept the turned pass, and those that came tracked; and the
-    median of the pairs' ``timing_ms["total"]``, the whole estimate, on whatever else the host runs)."""
+    """The results as a Markdown table (one row per pose and prior; with ``turn search`` rows, three last columns:
+    the pairs that searched the turns, those that kept the turned pass, and those that came tracked; the tracked
+    pairs through a kept turn run again upright, and those that left the turn so; and the median of the pairs'
+    ``timing_ms["total"]``, the whole estimate, on whatever else the host runs)."""
     searched = any(prior == "turn search" for _, prior in results)
     rows = ["| pose | skeleton prior | pairs (none found) | PCK@0.2 | MPJPE over the joints found | found | "
             "their confidence (median) | prior disagreement (median) | lowest foot (median, pairs) | true joints "
-            "outside the volume |" + (" turn searches (kept, on tracked pairs) | ms per pair (median) |"
-                                      if searched else ""),
-            "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|" if searched else "")]
+            "outside the volume |" + (" turn searches (kept, on tracked pairs) | upright checks (turn left) | "
+                                      "ms per pair (median) |" if searched else ""),
+            "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if searched else "")]
     for (pose, prior), s in results.items():
         conf = f"{s['confidence_median']:.2f}" if np.isfinite(s["confidence_median"]) else "-"
         mp = f"{s['mpjpe_mm']:.1f} mm" if np.isfinite(s["mpjpe_mm"]) else "-"
@@ -229,8 +245,9 @@ def table(results: dict[tuple[str, str], dict]) -> str:
         rows.append(f"| {pose} | {PRIOR_WORDS[prior]} | {s['pairs']} ({s['empty']}) | "
                     f"{s.get('pck@0.2', float('nan')):.3f} | {mp} | {100 * s['found_3d_frac']:.1f} % | "
                     f"{conf} | {apart} | {feet} | {100 * s['outside_frac']:.1f} % |"
-                    + ((f" {s['turn_searches']} ({s['turns_kept']}, {s['tracked_searches']}) |" if prior == "turn search"
-                        else " - |") + f" {s['ms_median']:.1f} |" if searched else ""))
+                    + ((f" {s['turn_searches']} ({s['turns_kept']}, {s['tracked_searches']}) |"
+                         f" {s['turn_checks']} ({s['turns_left']}) |" if prior == "turn search" else " - | - |")
+                       + f" {s['ms_median']:.1f} |" if searched else ""))
     return "\n".join(rows)
 
 
@@ -248,6 +265,10 @@ def main(argv=None) -> int:
                     help="also run the prior with roi.turn_search on (the runtime's search over crop turns)")
     ap.add_argument("--turn-search-every", type=int, default=None,
                     help="roi.turn_search_every for --turn-search (default: the config's)")
+    ap.add_argument("--then", default=None, help=f"change every body to this pose (one of {', '.join(POSES)}) "
+                                                  "at --change-at")
+    ap.add_argument("--change-at", type=int, default=None, help="with --then: the first pair in that pose "
+                                                                 "(default: half the --frames)")
     args = ap.parse_args(argv)
     poses = [p.strip() for p in args.poses.split(",") if p.strip()]
     bad = [p for p in poses if p not in POSES]
@@ -255,9 +276,13 @@ def main(argv=None) -> int:
         ap.error(f"--poses: unknown {bad or args.poses!r}; choose from {', '.join(POSES)}")
     if args.scenes < 1 or args.frames < 1 or args.first_scene < 0:
         ap.error("--scenes and --frames must be at least 1, --first-scene at least 0")
+    if args.then is not None and args.then not in POSES:
+        ap.error(f"--then: unknown {args.then!r}; choose from {', '.join(POSES)}")
+    if args.change_at is not None and (args.then is None or not 0 <= args.change_at <= args.frames):
+        ap.error(f"--change-at needs --then and must lie within 0..--frames ({args.frames}), got {args.change_at}")
     results = measure(args.model_dir, args.scenes, args.frames, poses, args.first_scene, args.turned_crops,
                       log=lambda m: print(m, file=sys.stderr), turn_search=args.turn_search,
-                      turn_search_every=args.turn_search_every)
+                      turn_search_every=args.turn_search_every, then=args.then, change_at=args.change_at)
     print(table(results))
     return 0
 

@@ -88,7 +88,7 @@ from ghnerf_runtime.preprocess import (
 from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
-from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
+from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
 from ghnerf_runtime.two_people import PAIRINGS, attached, centre_of, floor_xz, matched_errors, pick_person, \
     split_people
 
@@ -563,9 +563,12 @@ class Estimator:
         self._turns: tuple[int, int] = (0, 0)
         self._turned_cams: dict[tuple[int, int], _CameraState] = {(i, 0): st for i, st in enumerate(self._cams)}
         self._turned_trackers: dict[tuple[int, int], SubjectTracker] = {(0, 0): self.tracker}
-        self.turn_searches = 0  # cold passes that searched the turns, and those whose turned pass was kept
+        self.turn_searches = 0  # weak passes that searched the turns, and those whose turned pass was kept
         self.turns_kept = 0
-        self._turn_search_wait = 0  # weak cold pairs left that do not search (roi.turn_search_every)
+        self._turn_search_wait = 0  # weak pairs left that do not search (roi.turn_search_every)
+        self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
+        self.turns_left = 0
+        self._turn_check_wait = 0  # strong tracked turned pairs left before the next check (_turn_check)
         # smooths what is reported; the tracker follows the raw joints
         self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
         self._levels = _levels_per_unit(self.contract.normalisation)
@@ -758,6 +761,7 @@ class Estimator:
             self._use_turns((0, 0))
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
+        turns_read = self._turns  # the crops' turns this pair's tracked pass read (a change resets the smoothing)
         p = self._refined(images, p, sequence, timing, novel_view)
         if cold_pass and self._turns != (0, 0) and self._weak_pass(p):
             # A cold pass through a kept turn's crops (a single-view track keeps the turn) that is weak: the subject
@@ -778,8 +782,21 @@ class Estimator:
                     p = self._refined(images, turned, sequence, timing, novel_view)
                 else:
                     self._turn_search_wait = self.config.roi.turn_search_every - 1
+        elif not cold_pass and self._turns != (0, 0):
+            # tracked through a kept turn: the person may have got up (_turn_check)
+            p = self._turn_check(images, p, sequence, timing, novel_view)
+        elif not cold_pass and self._weak_pass(p) and self.tracker.track is not None:
+            # tracked upright and weak: the person may have lain down or be upside down, read as someone standing
+            # (a strong pass, the usual tracked pair, pays nothing); the turns are tried on the track's crops
+            if self._turn_search_wait > 0:
+                self._turn_search_wait -= 1
+            else:
+                turned = self._turn_search(images, p, sequence, timing, novel_view, self.tracker.track)
+                if turned is p:
+                    self._turn_search_wait = self.config.roi.turn_search_every - 1
+                p = turned
         elif p.someone:
-            self._turn_search_wait = 0  # someone found well: the next weak cold pair searches at once
+            self._turn_search_wait = 0  # someone found well: the next weak pair searches at once
         if p.j3 is None:
             if self._smoother is not None:
                 self._smoother.reset()
@@ -799,6 +816,10 @@ class Estimator:
                     # The track was lost since the last reported pair (retry_cold: the subject left the tracked
                     # crop): whoever the working volume shows now (refined or not) is not pulled toward where the
                     # track was.
+                    self._smoother.reset()
+                elif self._turns != turns_read:
+                    # a tracked pair whose crops turned (_turn_check, a tracked search): the pairs before were read
+                    # through the other turn (a standing person upside down, 1.2 m off), not to be pulled toward
                     self._smoother.reset()
                 points = self._smoother(float(timestamp_s), p.j3.points, p.j3.valid)  # missing joints stay 0
         self._last_pair_cold = not p.regions.tracked
@@ -879,8 +900,8 @@ class Estimator:
         return p
 
     def _weak_pass(self, p: "_Pass") -> bool:
-        """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not; the
-        caller sees to that: pairs that came tracked never search): two frames that passed the frame check, and
+        """Whether ``roi.turn_search`` tries turned crops after ``p``, a cold pair's pass (refined or not) or a
+        tracked pass through upright crops (the caller sees to which): two frames that passed the frame check, and
         nobody found, or someone at a median joint confidence under ``roi.turn_search_below`` (an upside-down
         person read as an upright one); and a view whose ``presence.min_joints``-th strongest joint peak reaches
         :data:`_TURN_SEARCH_FLOOR` (someone may be there: an empty room does not search)."""
@@ -892,10 +913,13 @@ class Estimator:
         rank = self.config.presence.min_joints
         return any(presence_peak(p.env["encoder_heatmaps"], (v,), rank) >= _TURN_SEARCH_FLOOR for v in (0, 1))
 
-    def _turn_scores(self, images: Sequence[np.ndarray], turn: int, timing: dict) -> np.ndarray:
-        """Per view, :func:`_view_score` of the encoder heatmaps of its working-volume crop turned ``turn``
-        degrees more than upright (one encoder run for both views, no flip test)."""
+    def _turn_scores(self, images: Sequence[np.ndarray], turn: int, timing: dict,
+                     track: Track | None = None) -> np.ndarray:
+        """Per view, :func:`_view_score` of the encoder heatmaps of its working-volume crop (``track``'s crop
+        when given) turned ``turn`` degrees more than upright (one encoder run for both views, no flip test)."""
         self._use_turns((turn, turn))
+        if track is not None:
+            self.tracker.follow(track)
         S = self.size
         t = time.perf_counter()
         batch = np.empty((2, 3, S, S), np.float32)
@@ -910,16 +934,17 @@ class Estimator:
         _add_ms(timing, "turn_search", t)
         return _view_score(heat)
 
-    def _turn_candidates(self, images: Sequence[np.ndarray], base: np.ndarray, timing: dict
-                         ) -> list[tuple[int, int]]:
+    def _turn_candidates(self, images: Sequence[np.ndarray], base: np.ndarray, timing: dict,
+                         track: Track | None = None) -> list[tuple[int, int]]:
         """The views' turns for :meth:`_turn_search` to try, given the upright crops' :func:`_view_score`
         ``base``: each view's best turn that scores :data:`_TURN_MARGIN` above upright (0 where none does; per
         view, as two cameras facing each other see a body's roll opposite ways), then, when the views differ
         (one view's peaks are not clearly stronger turned), the one turn for both whose summed score is best and
-        :data:`_TURN_MARGIN` above upright's (cameras facing one way see the body rolled alike)."""
+        :data:`_TURN_MARGIN` above upright's (cameras facing one way see the body rolled alike). ``track``: the
+        crops are that track's (a tracked pass's search), else the working volume's."""
         scores = {0: base}
         for turn in (90, 180, 270):
-            scores[turn] = self._turn_scores(images, turn, timing)
+            scores[turn] = self._turn_scores(images, turn, timing, track)
         per_view = tuple(max((t for t in scores if scores[t][v] >= base[v] + _TURN_MARGIN),
                              key=lambda t: scores[t][v], default=0) for v in (0, 1))
         candidates = [per_view] if per_view != (0, 0) else []
@@ -929,26 +954,68 @@ class Estimator:
         return candidates
 
     def _turn_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
-                     novel_view: NovelViewRequest | None) -> "_Pass":
-        """``roi.turn_search`` after the weak pass ``p`` of a cold pair (upright crops): the views' turns to try
-        (:meth:`_turn_candidates`), each a cold pass with those crops, the first kept that finds someone where
-        ``p`` did not, or at a median confidence :data:`_TURN_MARGIN` higher; else ``p`` and its track stand."""
+                     novel_view: NovelViewRequest | None, track: Track | None = None) -> "_Pass":
+        """``roi.turn_search`` after the weak pass ``p`` through upright crops: the views' turns to try
+        (:meth:`_turn_candidates`), each a pass with those crops, the first kept that finds someone where ``p``
+        did not, or at a median confidence :data:`_TURN_MARGIN` higher; else ``p`` and its track stand. The passes
+        are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
+        is followed through the turned crops, the same window about the person as ``p``'s."""
         self.turn_searches += 1
         several_track = self._several_track
-        for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing):
+        for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing, track):
             self._use_turns(turns)
+            if track is not None:
+                self.tracker.follow(track)
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
             if q.j3 is not None and q.someone and (
                     not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
                 if p.novel is not None:
                     p.novel.abandon()
                 self.turns_kept += 1
+                self._turn_check_wait = self.config.roi.turn_search_every - 1  # just compared with upright
                 log.debug("pair %d: crops turned %s degrees found the subject", sequence, turns)
                 return q
             if q.novel is not None:
                 q.novel.abandon()
         # upright stands, with the track its pass left
         self._use_turns((0, 0), fresh=False)
+        self._several_track = several_track
+        return p
+
+    def _turn_check(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
+                    novel_view: NovelViewRequest | None) -> "_Pass":
+        """After ``p``, a tracked pass through a kept turn's crops: when it is weak (a median joint confidence
+        under ``roi.turn_search_below``), or ``roi.turn_search_every`` tracked turned pairs after the last check,
+        the pass again through upright crops of the track ``p`` left, kept when it finds someone at a median
+        confidence :data:`_TURN_MARGIN` higher (the person got up: through the turned crops a standing person is
+        read upside down, 1.1-1.3 m off, at 0.44-0.57; upright at 0.7-0.9, in a one-off look at four bench
+        scenes), the turn dropped with it; else ``p`` and the turned track stand. The tracked turned passes of
+        someone still lying reach confidences as low as the misread's, so the weak ones compare rather than drop;
+        the periodic check catches a misread over the bar. One pass more on a checked pair (docs/runtime.md,
+        "Getting up and lying down while tracked")."""
+        track = self.tracker.track
+        if track is None or p.j3 is None:
+            return p  # no track: the next pair is cold, and upright first
+        weak = not p.someone or _median_confidence(p.j3) < self.config.roi.turn_search_below
+        if not weak and self._turn_check_wait > 0:
+            self._turn_check_wait -= 1
+            return p
+        self._turn_check_wait = self.config.roi.turn_search_every - 1
+        self.turn_checks += 1
+        turns, several_track = self._turns, self._several_track
+        self._use_turns((0, 0))
+        self.tracker.follow(track)
+        q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
+        if q.j3 is not None and q.someone and (
+                not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
+            if p.novel is not None:
+                p.novel.abandon()
+            self.turns_left += 1
+            log.debug("pair %d: upright crops found the subject better than crops turned %s degrees", sequence, turns)
+            return q
+        if q.novel is not None:
+            q.novel.abandon()
+        self._use_turns(turns, fresh=False)  # the turn stands, with the track its pass left
         self._several_track = several_track
         return p
 

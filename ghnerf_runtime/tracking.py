@@ -289,6 +289,15 @@ class SubjectTracker:
                                                                      rc.keep_frac))
         return self.view_track is not None
 
+    def follow(self, track: Track) -> None:
+        """Take ``track``, another tracker's (the same subject seen through crops turned otherwise: the estimator's
+        ``roi.turn_search``), as this one's: the next :meth:`regions` plans this tracker's crops around it anew (the
+        other's windows were sized for its own rolls)."""
+        self.track = track
+        self.view_track = None
+        self._last_rois = None
+        self._used = None
+
     def reset(self) -> None:
         """Forget the subject (next pair starts from the working volume)."""
         self.track = None

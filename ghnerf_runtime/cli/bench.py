@@ -166,9 +166,11 @@ def run_runtime_bench(args) -> dict:
         prior_flips = (args.prior_flip_tests or [None]) if cfg.joints3d.method == "triangulate" else [None]
         smooths = args.smoothing or [None]
         presences = args.presence_gates or [None]
+        # the search scores the turns by the encoder heatmaps: a model without them refuses it (no row)
+        searches = (args.turn_searches or [None]) if getattr(session.contract, "encoder_heatmaps", False) else [None]
         sides = (args.flip_side_by_side or [None]) if source == "encoder" else [None]
-        for mode, flip, follow, prior, prior_flip, smooth, side, presence in itertools.product(
-                args.modes, flips, follows, priors, prior_flips, smooths, sides, presences):
+        for mode, flip, follow, prior, prior_flip, smooth, side, presence, search in itertools.product(
+                args.modes, flips, follows, priors, prior_flips, smooths, sides, presences, searches):
             if flip is False and side is not None and side != sides[0]:
                 continue  # without the flip test there is nothing to run side by side: one row
             if prior is False and prior_flip is not None and prior_flip != prior_flips[0]:
@@ -187,6 +189,8 @@ def run_runtime_bench(args) -> dict:
                 flip_cfg = replace(flip_cfg, presence=replace(flip_cfg.presence, enabled=presence))
             if side is not None:
                 flip_cfg = replace(flip_cfg, heatmaps=replace(flip_cfg.heatmaps, flip_test_side_by_side=side))
+            if search is not None:
+                flip_cfg = replace(flip_cfg, roi=replace(flip_cfg.roi, turn_search=search))
             novel_rows = itertools.product(args.novel_interior_strides or [None], args.proxy_blends or [None],
                                            args.painters or [None], args.novel_pipelines or [None],
                                            args.novel_lanes or [None]) \
@@ -205,7 +209,7 @@ def run_runtime_bench(args) -> dict:
                              "flip_label": flip is not None, "follow_label": follow is not None,
                              "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
                              "smoothing_label": smooth is not None, "proxy_label": blend is not None,
-                             "presence_label": presence is not None,
+                             "presence_label": presence is not None, "turn_search_label": search is not None,
                              "side_label": side is not None,
                              "painter_label": paint is not None,
                              "pipeline": bool(piped), "pipeline_label": piped is not None,
@@ -247,6 +251,7 @@ def run_runtime_bench(args) -> dict:
                "prior_flip_label": row["prior_flip_label"],
                "smoothing": cfg.smoothing.enabled, "smoothing_label": row["smoothing_label"],
                "presence": cfg.presence.enabled, "presence_label": row["presence_label"],
+               "turn_search": cfg.roi.turn_search, "turn_search_label": row["turn_search_label"],
                "flip_side_by_side": cfg.heatmaps.flip_test_side_by_side, "side_label": row["side_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
                    "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"],
@@ -280,6 +285,8 @@ def _print_row(row: dict) -> None:
         tracked += " smooth" if row["smoothing"] else " no-smooth"
     if row.get("presence_label"):
         tracked += " presence" if row["presence"] else " no-presence"
+    if row.get("turn_search_label"):
+        tracked += " turn-search" if row["turn_search"] else " no-turn-search"
     if row.get("side_label") and row.get("flip_test"):
         tracked += " flip-side-by-side" if row["flip_side_by_side"] else " flip-in-turn"
     if row.get("proxy_label"):
@@ -365,6 +372,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--presence-gates", default=None, type=_on_off_list,
                     help="comma list of presence.enabled values (on,off), one row each (interleaved; default: the "
                          "config's, on). A pair the gate says shows nobody has no novel view: off views every pair")
+    rt.add_argument("--turn-searches", default=None, type=_on_off_list,
+                    help="comma list of roi.turn_search values (on,off), one row each (interleaved; default: the "
+                         "config's, off); a model without encoder heatmaps gets no such rows")
     rt.add_argument("--flip-side-by-side", default=None, type=_on_off_list,
                     help="comma list of heatmaps.flip_test_side_by_side values (on,off), one row each for the "
                          "encoder heatmaps with the flip test (interleaved; default: the config's, on)")

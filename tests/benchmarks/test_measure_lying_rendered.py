@@ -11,7 +11,8 @@ import pytest
 from benchmarks.measure_lying_rendered import POSES, posed_as, render_pair, rotation
 from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.cli.simdata import bench_rig_and_scene
-from tests.benchmarks.test_bench_smoke import run_script, scratch_cache  # noqa: F401  (module fixture)
+from tests.benchmarks.test_bench_smoke import (  # noqa: F401  (scratch_cache: a module fixture)
+    run_script, run_script_failing, scratch_cache)
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 NECK, MID_HIP = JOINT_INDEX["Neck"], JOINT_INDEX["MidHip"]
@@ -110,8 +111,22 @@ def test_turn_search_adds_a_row_per_pose_with_its_searches(tiny_model_dir, scrat
                                                           monkeypatch):
     out = run_script("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--scenes", "1", "--frames",
                      "1", "--poses", "upright,lying_z", "--turn-search", capsys=capsys, monkeypatch=monkeypatch)
-    rows = re.findall(r"^\| (\w+) \| ([^|]+) \| 1 \(\d\) \|.*\| (- |\d+ \(\d+, \d+\) )\| [\d.]+ \|$", out, re.M)
-    assert [(pose, prior) for pose, prior, _ in rows] == [
+    searches, checks = r"(- |\d+ \(\d+, \d+\) )", r"(- |\d+ \(\d+\) )"
+    rows = re.findall(rf"^\| (\w+) \| ([^|]+) \| 1 \(\d\) \|.*\| {searches}\| {checks}\| [\d.]+ \|$", out, re.M)
+    assert [(pose, prior) for pose, prior, _, _ in rows] == [
         ("upright", "on"), ("upright", "off"), ("upright", "on, `roi.turn_search` on"),
         ("lying_z", "on"), ("lying_z", "off"), ("lying_z", "on, `roi.turn_search` on")], out
-    assert [searches != "- " for _, _, searches in rows] == [False, False, True] * 2
+    assert [searches != "- " for _, _, searches, _ in rows] == [False, False, True] * 2
+    assert [checks != "- " for _, _, _, checks in rows] == [False, False, True] * 2
+
+
+def test_then_changes_every_body_at_change_at(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811
+    out = run_script("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--scenes", "1", "--frames",
+                     "2", "--poses", "upside_down", "--then", "upright", "--turn-search", capsys=capsys,
+                     monkeypatch=monkeypatch)
+    rows = re.findall(r"^\| ([\w, ]+) \| ([^|]+) \| 2 \(\d\) \|", out, re.M)
+    assert rows == [("upside_down, then upright", "on"), ("upside_down, then upright", "off"),
+                    ("upside_down, then upright", "on, `roi.turn_search` on")], out
+    err = run_script_failing("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--then", "sitting",
+                             capsys=capsys, monkeypatch=monkeypatch)
+    assert "--then: unknown 'sitting'" in err

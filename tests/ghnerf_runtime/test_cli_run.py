@@ -259,6 +259,23 @@ def test_bench_runtime_interleaves_every_row_over_every_sequence(tiny_model_dir,
         assert "jitter_mm" in row["accuracy"] and row["smoothing"] is True  # the config's default
 
 
+def test_bench_runtime_rows_with_the_turn_search_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    """``--turn-searches on,off``: one keypoint row each, labelled, the search set in each row's config (the bench
+    took no such row: roi.turn_search could not be benched on the whole sequences)."""
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    code = bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "2",
+                       "--precisions", "fp32", "--heatmap-sources", "encoder", "--modes", "keypoints", "--warmup",
+                       "0", "--turn-searches", "on,off", "--cache", str(tmp_path / "cache"), "--json",
+                       str(report_path)])
+    assert code == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    assert [(r["turn_search"], r["turn_search_label"]) for r in runs] == [(True, True), (False, True)]
+    out = capsys.readouterr().out
+    assert " turn-search " in out and " no-turn-search " in out
+
+
 def test_bench_accuracy_counts_left_right_swaps_per_view():
     """A pair whose shoulders are exchanged in view 1 only: swapped there, not in view 0, not in both."""
     from types import SimpleNamespace

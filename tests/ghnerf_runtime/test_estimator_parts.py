@@ -189,6 +189,26 @@ def test_a_2d_joint_at_exactly_min_confidence_counts_for_the_view_track():
     assert not tracker.update_view(1, uv, conf)
 
 
+def test_a_tracker_follows_another_trackers_track_with_its_own_crops():
+    """``SubjectTracker.follow`` (``roi.turn_search`` checking another turn of a tracked person): the other
+    tracker's track, its crops planned for this tracker's rolls, nothing kept of this tracker's own view track or
+    last crops."""
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    upright = SubjectTracker(rig, TrackingConfig(min_joints=6), RoiConfig())
+    turned = SubjectTracker(rig, TrackingConfig(min_joints=6), RoiConfig(), (90.0, 90.0))
+    assert turned.update(_joints(), np.full(25, 0.9), np.ones(25, bool))
+    uv, _ = rig.pair[1].project(_joints())
+    upright.update_view(1, uv, np.full(25, 0.9))
+    upright.follow(turned.track)
+    assert upright.track is turned.track and upright.view_track is None
+    mine, theirs = upright.regions(), turned.regions()
+    assert mine.tracked and np.array_equal(mine.box, theirs.box)
+    fresh = SubjectTracker(rig, TrackingConfig(min_joints=6), RoiConfig())
+    fresh.track = turned.track
+    assert fresh.regions().rois == mine.rois  # as if the track were its own: planned for its own rolls
+
+
 # ------------------------------------------------------------------ 3D methods
 def test_triangulation_gates_views_that_disagree():
     cams = _cams()

@@ -51,7 +51,7 @@ class _Scored:
     def __init__(self, scores: dict[int, list[float]]) -> None:
         self.scores = scores
 
-    def _turn_scores(self, images, turn, timing):
+    def _turn_scores(self, images, turn, timing, track=None):
         return np.array(self.scores[turn])
 
 
@@ -287,3 +287,73 @@ def test_the_estimator_crops_with_roi_pad_fill(session, fill):
             assert np.mean(past == 0) > 0.8
     finally:
         est.close()
+
+
+def _changing(session, k: int, before: str, after: str, n_before: int, n_after: int):
+    """Bench scene ``k`` at 30 fps, the body in pose ``before`` for ``n_before`` pairs, then in ``after``, run
+    with the search on: per pair (the crops' turns after it, tracked, joints found, 3D error in mm) and the
+    estimator."""
+    from benchmarks.measure_lying_rendered import posed_as, render_pair
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.estimator import Estimator
+
+    rig, scene, t0, _ = bench_rig_and_scene(k)
+    est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                                                  roi=RoiConfig(turn_search=True)))
+    out = []
+    for i in range(n_before + n_after):
+        posed = posed_as(scene.posed(t0 + i / FPS), before if i < n_before else after, rig.volume)
+        images, _, _ = render_pair(scene, rig, posed, t0 + i / FPS)
+        r = est.estimate(images, timestamp_s=i / FPS)
+        ok = ~r.missing
+        err = 1e3 * float(np.mean(np.linalg.norm(r.joints_3d[ok] - posed.joints[ok], axis=1))) if ok.any() else np.inf
+        out.append((est._turns, r.tracked, int(ok.sum()), round(err)))
+    return out, est
+
+
+@needs_model
+@pytest.mark.parametrize("k", [1, 2])
+def test_a_tracked_person_who_gets_up_leaves_the_turn(session, k):
+    """Upside down for two pairs (found by the search, then tracked through half-turned crops), then standing: the
+    track held, and a tracked pair never searched, so the turned crops read the standing person upside down, 1.1-1.3
+    m off, at median confidences of 0.44-0.57, for all four pairs (the code before, in these scenes). Now a weak
+    tracked turned pass (or every ``turn_search_every``-th) is run again through upright crops of its track, and the
+    turn is left when upright finds the person more confidently."""
+    out, est = _changing(session, k, "upside_down", "upright", 2, 4)
+    assert all(turns == (180, 180) and err < 150 for turns, _, _, err in out[:2]), out
+    # within two pairs of getting up (one here), read upright, and tracked throughout
+    for turns, tracked, found, err in out[3:]:
+        assert turns == (0, 0) and tracked and found >= 20 and err < 150, out
+    assert est.turns_left == 1 and est.turn_checks >= 1 and est.turn_searches == 1
+
+
+@needs_model
+@pytest.mark.parametrize("k", [2, 3])
+def test_a_tracked_person_upside_down_is_searched_for_on_the_track(session, k):
+    """Standing for two pairs (tracked upright), then upside down: the upright tracked crops read a standing person,
+    0.7-1.4 m off at 0.31-0.43 median confidence, whom the track kept, for all four pairs (the code before, in
+    these scenes). Now a weak tracked upright pass searches the turns on its track's crops."""
+    out, est = _changing(session, k, "upright", "upside_down", 2, 4)
+    assert all(turns == (0, 0) and err < 60 for turns, _, _, err in out[:2]), out
+    for turns, tracked, found, err in out[2:]:
+        assert turns == (180, 180) and tracked and found >= 20 and err < 150, out
+    assert est.turn_searches == 1 and est.turns_kept == 1
+
+
+@needs_model
+def test_a_strong_turned_track_is_checked_upright_every_few_pairs_and_keeps_its_turn(session):
+    """A tracked turned pass that is not weak is still checked upright every ``turn_search_every``-th tracked pair
+    (a misread over ``turn_search_below``); a person still lying keeps the turn through the checks."""
+    from ghnerf_runtime.estimator import Estimator
+
+    rig, shots = _shots(1, "lying_z", frames=7)
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                          roi=RoiConfig(turn_search=True, turn_search_every=2, turn_search_below=0.0))
+    est = Estimator(session, rig, cfg)
+    checks = []
+    for t, images, truth in shots:
+        r = est.estimate(images, timestamp_s=t)
+        checks.append(est.turn_checks)
+        assert est._turns == (90, 90) and r.tracked and (~r.missing).sum() >= 18, (est._turns, checks)
+    # the search compared the turn with upright on the cold pair: the first check two tracked pairs later
+    assert checks == [0, 0, 1, 1, 2, 2, 3] and est.turns_left == 0 and est.turn_searches == 1
