@@ -563,6 +563,7 @@ class Estimator:
         self._last_timestamp_s: float | None = None
         self._last_pair_cold = False
         self._several_track = False  # the track is a several_people pass's subject (_several_people's hysteresis)
+        self._behind_track: int | None = None  # and the view that showed one peak, where that pass was _behind_view's
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
         self._between: dict[tuple, Camera] = {}  # (alpha, pivot) -> interpolated camera (the rig does not move)
@@ -621,6 +622,7 @@ class Estimator:
         """Forget the tracked subject (the next pair starts from the working volume) and the smoothing."""
         self.tracker.reset()
         self._several_track = False
+        self._behind_track = None
         self._turn_search_wait = 0
         if self._smoother is not None:
             self._smoother.reset()
@@ -1082,10 +1084,14 @@ class Estimator:
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
         j3 = self._gate_to_boxes(j3, regions)
         several = self._several_people(kp) or cold_several is True
+        # one person behind the other in this view (a cold pass's crop, the whole working volume, draws two people
+        # too small to tell one peak hidden from two merged: the pass refining it decides)
+        behind = None if several or not regions.tracked else self._behind_view(kp)
+        several |= behind is not None
         subject = j3  # a several_people pair's joints of the tracked subject that the views' peaks gave
         chosen = None  # and the peaks each of them was triangulated from (_from_pairings)
         if several:  # before the presence gate: the subject's joints alone must make someone
-            j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions, cold_several)
+            j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions, cold_several, behind)
             if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
                 joints_2d, conf_2d, missing_2d = self._image_joints(*chosen, crops)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
@@ -1131,6 +1137,7 @@ class Estimator:
         follow = j3 if several else self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         self._several_track = several and self.tracker.track is not None
+        self._behind_track = behind if self._several_track else None
         if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
@@ -1203,11 +1210,31 @@ class Estimator:
         if cfg.second_person_min_joints == 0:
             return False
         twice = joints_shown_twice(kp, cfg.second_person_ratio)
-        held = self._several_track and self.tracker.track is not None
+        held = self._several_track and self.tracker.track is not None and self._behind_track is None
         return twice >= (STILL_SEVERAL_MIN_JOINTS if held else cfg.second_person_min_joints)
 
+    def _behind_view(self, kp: Keypoints2D) -> int | None:
+        """One person behind the other as one camera sees them (docs/runtime.md, "One person behind the other"):
+        the view that shows one peak where the other shows two, or None. Where the pair shows fewer than
+        ``second_person_min_joints`` joints twice in both views, a view showing that many twice by itself (the other
+        view then the one peak's) makes the pair ``several_people`` all the same: the hidden person's peaks are
+        behind the other's in one view, beside them in the other. One person through the shipped model showed at
+        most 4 joints twice in a view (the bench's 30 sequences of 10 pairs, 330 passes; docs/runtime.md). Passes following such
+        a pass's subject stay so while that view shows any joint twice (:data:`STILL_SEVERAL_MIN_JOINTS`). Asked of
+        tracked passes that :meth:`_several_people` did not flag (:meth:`_finish_pass`)."""
+        cfg = self.config.joints3d
+        if cfg.second_person_min_joints == 0 or joints_shown_twice(kp, cfg.second_person_ratio) >= \
+                cfg.second_person_min_joints:
+            return None
+        per_view = np.count_nonzero(kp.valid & (kp.runner_up >= cfg.second_person_ratio * kp.confidence), axis=-1)
+        if self._behind_track is not None and self._several_track and self.tracker.track is not None:
+            seen, need = 1 - self._behind_track, STILL_SEVERAL_MIN_JOINTS
+        else:
+            seen, need = int(np.argmax(per_view)), cfg.second_person_min_joints
+        return 1 - seen if per_view[seen] >= need else None
+
     def _keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                              regions: Regions, cold_several: bool | None = None
+                              regions: Regions, cold_several: bool | None = None, behind: int | None = None
                               ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """Of a ``several_people`` pair's joints, those within ``max_track_step_m`` of the tracked subject's place
         for them; without a track, one of the two people's (:meth:`_picked_subject`; with ``pick_subject: none``
@@ -1222,7 +1249,10 @@ class Estimator:
         picked): ``False``, the track is a cold pass's that did not tell two people apart (both people's joints,
         mixed): picked as without a track; ``True``, the cold pass picked the subject from its coarse crop: split
         again on this pass's finer one, and the person nearer the track's centre is the subject (the cold split
-        may have given a joint wrongly)."""
+        may have given a joint wrongly). ``behind``: the view that shows one peak where the other shows two
+        (:meth:`_behind_view`): picked as without a track, the person that view sees is the subject
+        (:meth:`_seen_subject`); a tracked pass keeps the pairings nearest the track as for any flagged pass (two
+        of them are that view's one peak with each of the other view's two)."""
         track = self.tracker.track
         cfg = self.config.joints3d
         picks = cfg.method == "triangulate" and cfg.pick_subject != "none"
@@ -1230,6 +1260,8 @@ class Estimator:
             none = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
             if not picks:
                 return none, None, none
+            if behind is not None:
+                return self._seen_subject(none, kp, uv_model, crops, regions, behind)
             near = centre_of(track.joints[None], np.where(track.valid, 0, -1)) if cold_several else None
             return self._picked_subject(none, kp, uv_model, crops, regions, near)
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
@@ -1319,6 +1351,29 @@ class Estimator:
         if who is None:
             return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
         return self._from_pairings(kept, kp, pairs, np.maximum(people[who], 0), people[who] >= 0)
+
+    def _seen_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
+                      regions: Regions, behind: int) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+        """One person behind the other in view ``behind`` (:meth:`_behind_view`) and no track: the person that view
+        sees is reported, as :meth:`_picked_subject` reports the picked one. Its one peak of a joint is theirs (the
+        other's is hidden behind them, or merged with theirs), so their joint is that peak paired with one of the
+        other view's two, both on its ray: where one pairing passes the gates (:meth:`_pairings`; the other, the
+        hidden person's peak with the seen one's, mostly fails the reprojection gate) that one, where both do the
+        nearer that view's camera (the other lies about as far off as the hidden person). The split of two people
+        (:func:`~ghnerf_runtime.two_people.split_people`) has little to work on here: the pairings with the other
+        person's peak in both views are missing. Nobody (``kept``) with fewer than ``presence.min_joints`` joints.
+        ``pick_subject`` is not asked: the hidden person's joints would be triangulated from the seen one's peak."""
+        J = len(kept.valid)
+        pairs = self._pairings(kp, uv_model, crops, regions)
+        points, valid = pairs[0].points.reshape(4, J, 3), pairs[0].valid.reshape(4, J)
+        mine = np.flatnonzero(PAIRINGS[:, behind] == 0)  # that view's peak with either of the other view's
+        depth = np.linalg.norm(points[mine] - self.rig.pair[behind].center, axis=-1)
+        best = mine[np.argmin(np.where(valid[mine], depth, np.inf), axis=0)]
+        found = valid[mine].any(axis=0)
+        pres = self.config.presence
+        if np.count_nonzero(found) < (pres.min_joints if pres.enabled else 1):
+            return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
+        return self._from_pairings(kept, kp, pairs, best, found)
 
     def _from_pairings(self, kept: Joints3D, kp: Keypoints2D, pairs: tuple, best: np.ndarray, found: np.ndarray
                        ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
