@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10] [--pick-subject centre_line]
     .venv/bin/python benchmarks/measure_two_people.py --model-dir models [--scenes 8] [--pairs 10] [--places ...]
+    .venv/bin/python benchmarks/measure_two_people.py --places=0,2.5,0,0 --behind 1.0 [--occlude] [--model-dir ...]
     .venv/bin/python benchmarks/measure_two_people.py --one-person-model models [--sequences 30] [--frames 10]
     .venv/bin/python benchmarks/measure_two_people.py --calibration 0,2,-2 [--axis pan] [--scenes 4] [--pairs 10]
 
@@ -23,6 +24,11 @@ reference row: the first person alone on the same scenes (a model's own error pu
 row also gives the reported joints' mean distance from the nearer person's, and the flagged pairs' alone;
 ``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are then its pairings'; with
 the prior, since session 55, the prior's fed the subject's own peaks).
+
+``--behind METRES`` puts the second person that far behind the first along view 0's line of sight (the first's
+place from ``--places``), and ``--occlude`` has the oracle hide each person's joints behind the other's body in a
+view (:func:`hidden_behind`; the rendered people of ``--model-dir`` hide each other already): docs/runtime.md,
+"One person behind the other" (session 56).
 
 With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
 folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghnerf-bench runtime``'s,

@@ -166,8 +166,10 @@ class PairResult:
             ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior);
             never on a pair that reports nobody.
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
-            both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject):
-            only the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
+            both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject),
+            or, on a tracked pass, in one view alone (one person behind the other as the other camera sees them,
+            since session 56: without a track the person that camera sees is reported, whatever the rule): only
+            the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
             2D); without a track, the joints of the person ``joints3d.pick_subject`` names, whom the track then
             follows (none with ``pick_subject: none``; docs/runtime.md, "Two people in the working volume").
             With the triangulation each is the pairing of the views' peaks and runner-ups nearest the track (or
@@ -1205,7 +1207,8 @@ class Estimator:
         Once a pass is flagged, the passes that follow its subject stay flagged while any joint shows twice
         (:data:`STILL_SEVERAL_MIN_JOINTS`): the subject's own crop shows fewer of the other person's joints (on the
         oracle 2 to 5 in the passes that fell below 6), and a pass not flagged lets the other's peaks into the
-        track. One person is never flagged, so never held."""
+        track. One person is never flagged, so never held. A track that follows a pass flagged by one view alone
+        (:meth:`_behind_view`) is held by that rule instead."""
         cfg = self.config.joints3d
         if cfg.second_person_min_joints == 0:
             return False
