@@ -89,7 +89,8 @@ from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, box_corners
-from ghnerf_runtime.two_people import PAIRINGS, attached, centre_of, floor_xz, pick_person, split_people
+from ghnerf_runtime.two_people import (PAIRINGS, attached, centre_of, floor_xz, one_body, pick_person,
+                                       split_people)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -1362,7 +1363,9 @@ class Estimator:
         other's is hidden behind them, or merged with theirs), so their joint is that peak paired with one of the
         other view's two, both on its ray: where one pairing passes the gates (:meth:`_pairings`; the other, the
         hidden person's peak with the seen one's, mostly fails the reprojection gate) that one, where both do the
-        nearer that view's camera (the other lies about as far off as the hidden person). The split of two people
+        nearer that view's camera (the other lies about as far off as the hidden person); then only the joints that
+        make one body (:func:`~ghnerf_runtime.two_people.one_body`: where the other view's two peaks merged, its one
+        peak may be the hidden person's, and the pairing lies at their joint). The split of two people
         (:func:`~ghnerf_runtime.two_people.split_people`) has little to work on here: the pairings with the other
         person's peak in both views are missing. Nobody (``kept``) with fewer than ``presence.min_joints`` joints.
         ``pick_subject`` is not asked: the hidden person's joints would be triangulated from the seen one's peak."""
@@ -1372,7 +1375,9 @@ class Estimator:
         mine = np.flatnonzero(PAIRINGS[:, behind] == 0)  # that view's peak with either of the other view's
         depth = np.linalg.norm(points[mine] - self.rig.pair[behind].center, axis=-1)
         best = mine[np.argmin(np.where(valid[mine], depth, np.inf), axis=0)]
-        found = valid[mine].any(axis=0)
+        # where the other view's two peaks merged, the one pairing may be the hidden person's peak with the seen
+        # one's, lying at the hidden person's joint: its limbs break there (two_people.one_body)
+        found = one_body(points[best, np.arange(J)], valid[mine].any(axis=0))
         pres = self.config.presence
         if np.count_nonzero(found) < (pres.min_joints if pres.enabled else 1):
             return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
