@@ -1223,9 +1223,10 @@ class Estimator:
         ``second_person_min_joints`` joints twice in both views, a view showing that many twice by itself (the other
         view then the one peak's) makes the pair ``several_people`` all the same: the hidden person's peaks are
         behind the other's in one view, beside them in the other. One person through the shipped model showed at
-        most 4 joints twice in a view (the bench's 30 sequences of 10 pairs, 330 passes; docs/runtime.md). Passes following such
-        a pass's subject stay so while that view shows any joint twice (:data:`STILL_SEVERAL_MIN_JOINTS`). Asked of
-        tracked passes that :meth:`_several_people` did not flag (:meth:`_finish_pass`)."""
+        most 4 joints twice in a view (the bench's 30 sequences of 10 pairs, 330 passes; docs/runtime.md). Passes
+        following such a pass's subject stay so while that view shows any joint twice
+        (:data:`STILL_SEVERAL_MIN_JOINTS`). Asked of tracked passes that :meth:`_several_people` did not flag
+        (:meth:`_finish_pass`)."""
         cfg = self.config.joints3d
         if cfg.second_person_min_joints == 0 or joints_shown_twice(kp, cfg.second_person_ratio) >= \
                 cfg.second_person_min_joints:
@@ -1357,7 +1358,8 @@ class Estimator:
         return self._from_pairings(kept, kp, pairs, np.maximum(people[who], 0), people[who] >= 0)
 
     def _seen_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                      regions: Regions, behind: int) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+                      regions: Regions, behind: int
+                      ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """One person behind the other in view ``behind`` (:meth:`_behind_view`) and no track: the person that view
         sees is reported, as :meth:`_picked_subject` reports the picked one. Its one peak of a joint is theirs (the
         other's is hidden behind them, or merged with theirs), so their joint is that peak paired with one of the
