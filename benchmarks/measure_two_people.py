@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/measure_two_people.py [--scenes 8] [--pairs 10] [--pick-subject centre_line]
     .venv/bin/python benchmarks/measure_two_people.py --model-dir models [--scenes 8] [--pairs 10] [--places ...]
+    .venv/bin/python benchmarks/measure_two_people.py --places=0,2.5,0,0 --behind 1.0 [--occlude] [--model-dir ...]
     .venv/bin/python benchmarks/measure_two_people.py --one-person-model models [--sequences 30] [--frames 10]
     .venv/bin/python benchmarks/measure_two_people.py --calibration 0,2,-2 [--axis pan] [--scenes 4] [--pairs 10]
 
@@ -23,6 +24,11 @@ reference row: the first person alone on the same scenes (a model's own error pu
 row also gives the reported joints' mean distance from the nearer person's, and the flagged pairs' alone;
 ``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are then its pairings'; with
 the prior, since session 55, the prior's fed the subject's own peaks).
+
+``--behind METRES`` puts the second person that far behind the first along view 0's line of sight (the first's
+place from ``--places``), and ``--occlude`` has the oracle hide each person's joints behind the other's body in a
+view (:func:`hidden_behind`; the rendered people of ``--model-dir`` hide each other already): docs/runtime.md,
+"One person behind the other" (session 56).
 
 With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
 folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghnerf-bench runtime``'s,
@@ -50,20 +56,45 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
+from ghnerf_runtime.body25 import LIMBS  # noqa: E402
 from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
 
 #: A reported joint this close to a person's is theirs (m).
 NEAR_M = 0.05
+#: ``--occlude``: a body hides what lies within this of its limbs' segments (m, at the body's depth), behind it.
+BODY_HALF_WIDTH_M = 0.15
+
+
+def hidden_behind(front: np.ndarray, back: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """``(J,)`` which of ``back``'s joints (``(J, 3)``) the camera ``P`` (``(3, 4)``) sees behind ``front``'s body:
+    projected within :data:`BODY_HALF_WIDTH_M` (at ``front``'s depth) of one of its limbs' segments, and farther from
+    the camera than ``front``'s median joint. A crude body (sticks of that half-width), enough to hide a person
+    standing behind another (``--occlude``)."""
+    p = [np.concatenate([j, np.ones((len(j), 1))], axis=1) @ P.T for j in (front, back)]
+    uv = [q[:, :2] / q[:, 2:] for q in p]
+    depth = float(np.median(p[0][:, 2]))
+    # pixels per metre at the front body's depth: its neck to mid-hip, projected over its length
+    px_per_m = np.linalg.norm(uv[0][1] - uv[0][8]) / max(float(np.linalg.norm(front[1] - front[8])), 1e-6)
+    a, b = uv[0][[i for i, _ in LIMBS]], uv[0][[k for _, k in LIMBS]]  # (L, 2) each limb's ends
+    ab = b - a
+    t = np.clip(np.einsum("jld,ld->jl", uv[1][:, None] - a[None], ab) / np.maximum((ab * ab).sum(-1), 1e-9), 0, 1)
+    gap = np.linalg.norm(uv[1][:, None] - (a[None] + t[..., None] * ab[None]), axis=-1).min(axis=1)
+    return (gap <= BODY_HALF_WIDTH_M * px_per_m) & (p[1][:, 2] > depth)
 
 
 class TwoPeopleOracle(OracleSession):
     """The oracle, its 2D heatmaps the maximum of two people's (``set_people``). ``apart``: the last maps' distance
     between the two people's projections of each joint in each view, in heatmap cells (``(S, J)``; None with one
-    person): two peaks a few cells apart share one region above the decoder's threshold."""
+    person): two peaks a few cells apart share one region above the decoder's threshold. ``occlude``: a person's
+    joint behind the other's body in a view (:func:`hidden_behind`) shows no peak there, as a camera would not
+    see it (else every joint shows, at full strength, whatever stands in front); ``hidden_share``: the last maps'
+    share of the second person's joints so hidden in each view (``(S,)``)."""
 
     people: tuple[np.ndarray, ...] = ()
     apart: np.ndarray | None = None
+    occlude: bool = False
+    hidden_share: np.ndarray | None = None
 
     def set_people(self, *joints_3d: np.ndarray) -> None:
         self.people = tuple(np.asarray(j, np.float64) for j in joints_3d)
@@ -71,10 +102,15 @@ class TwoPeopleOracle(OracleSession):
 
     def _source_heatmaps(self, src_P: np.ndarray) -> np.ndarray:
         maps = []
-        for joints in self.people:
+        two = len(self.people) == 2
+        for k, joints in enumerate(self.people):
             self.truth = joints
+            if self.occlude and two:
+                self.visible = np.stack([~hidden_behind(self.people[1 - k], joints, P) for P in src_P])
+                if k == 1:
+                    self.hidden_share = 1.0 - self.visible.mean(axis=1)
             maps.append(super()._source_heatmaps(src_P))
-        self.truth = self.people[0]
+        self.truth, self.visible = self.people[0], None
         self.apart = None
         if len(self.people) == 2:
             uv = []
@@ -121,7 +157,7 @@ PLACES = ((-0.5, 3.0), (0.5, 3.4))
 
 def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
             places: tuple = PLACES, model_dir: str | None = None,
-            second: bool = True) -> tuple[dict[str, float], int]:
+            second: bool = True, occlude: bool = False) -> tuple[dict[str, float], int]:
     """Counts over every pair with both people in view (the first ``alone`` pairs of each scene show the first
     person only and are not counted): joints reported, at the first person's, the second's, neither, and their
     distances from the nearer person's (``nearer_mm``, summed; a model's error beside a mix-up); pairs flagged
@@ -136,7 +172,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
     place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
     two people rendered together (``drivers.sim.render_people``) instead of the oracle. ``second``: False shows
     the first person alone throughout (the reference: how many of one person's joints a model puts within
-    :data:`NEAR_M` of the truth). Returns ``(counts, pairs counted)``."""
+    :data:`NEAR_M` of the truth). ``occlude``: the oracle hides a person's joints behind the other's body
+    (:attr:`TwoPeopleOracle.occlude`; ``hidden_view0``/``hidden_view1``: the second person's joints so hidden, summed
+    over the passes counted). Returns ``(counts, pairs counted)``."""
     import drivers.sim as sim
 
     rig = sim.RigPlacement().build()
@@ -147,7 +185,8 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
     counts = {"reported": 0, "first": 0, "second": 0, "neither": 0, "nearer_mm": 0.0, "flagged": 0,
               "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0,
-              "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0}
+              "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0, "hidden_view0": 0.0,
+              "hidden_view1": 0.0}
     ratio = config.joints3d.second_person_ratio
     apart: list[np.ndarray] = []  # the oracle's (view, joint) cells between the people, each pass counted
     counted = 0
@@ -156,6 +195,8 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=here[0]))
         other = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=here[1]))
         oracle = TwoPeopleOracle(edge128_contract()) if session is None else None
+        if oracle is not None:
+            oracle.occlude = occlude
         whose: list[int] = []  # each reporting pair's person: 0 the first, 1 the second
         mixed = False  # a pair reported joints at both people
         with Estimator(oracle or session, rig, config) as est:
@@ -170,6 +211,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                     counts["twice_both"] += joints_shown_twice(kp, ratio)
                     if oracle is not None and oracle.apart is not None:
                         apart.append(oracle.apart)
+                    if oracle is not None and oracle.hidden_share is not None:
+                        counts["hidden_view0"] += float(oracle.hidden_share[0])
+                        counts["hidden_view1"] += float(oracle.hidden_share[1])
                 return decide(kp)
 
             est._several_people = counting
@@ -323,6 +367,17 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     return out
 
 
+def behind_place(place: tuple, metres: float, view: int = 0) -> tuple[float, float]:
+    """The floor point ``metres`` farther than ``place`` (x, z) along the line of sight of the benchmark rig's camera
+    ``view`` through it (``--behind``): a second person there stands behind the first as that camera sees them."""
+    import drivers.sim as sim
+
+    eye = np.asarray(sim.RigPlacement().build().pair[view].center)[[0, 2]]
+    ahead = np.asarray(place, np.float64) - eye
+    x, z = np.asarray(place, np.float64) + metres * ahead / np.linalg.norm(ahead)
+    return round(float(x), 3), round(float(z), 3)
+
+
 def _places(text: str) -> tuple:
     """``--places``: four numbers, the first person's x and z, then the second's."""
     try:
@@ -348,6 +403,12 @@ def main(argv=None) -> int:
     ap.add_argument("--places", type=_places, default=PLACES, metavar="X0,Z0,X1,Z1",
                     help="where the first and the second person stand (rig frame, metres; default "
                          f"{','.join(f'{v:g}' for p in PLACES for v in p)})")
+    ap.add_argument("--behind", type=float, metavar="METRES",
+                    help="the second person this far behind the first along the first camera's (view 0's) line of "
+                         "sight through the first's place (--places' first; the second's is replaced)")
+    ap.add_argument("--occlude", action="store_true",
+                    help="the oracle: a person's joints behind the other's body in a view show no peak there "
+                         "(a camera would not see them; without it every joint shows at full strength)")
     ap.add_argument("--model-dir", metavar="DIR",
                     help="a trained model (this folder's, at the runtime's defaults) on the two people rendered "
                          "together, instead of the oracle's heatmaps")
@@ -377,6 +438,13 @@ def main(argv=None) -> int:
                      f"leave {'it' if len(ignored) == 1 else 'them'} out")
     if args.skeleton_prior is None:
         args.skeleton_prior = EstimatorConfig().joints3d.skeleton_prior
+    if args.occlude and (args.model_dir or args.calibration or args.one_person_model):
+        ap.error("--occlude is the oracle's (the rendered people hide each other already; --calibration and "
+                 "--one-person-model film no hidden joints): leave it out")
+    if args.behind is not None:
+        if not (np.isfinite(args.behind) and args.behind > 0):
+            ap.error(f"--behind needs a distance above 0 m, got {args.behind!r}")
+        args.places = (args.places[0], behind_place(args.places[0], args.behind))
     if args.calibration:
         config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
         from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M as limit  # the daemon's floor check
@@ -420,10 +488,12 @@ def main(argv=None) -> int:
                                               skeleton_prior=args.skeleton_prior))
     for alone, second, what in runs:
         counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places, args.model_dir,
-                                second)
+                                second, args.occlude)
         n = max(counts["reported"], 1)
         where = "" if args.places == PLACES else " at " + " and ".join(f"({x:g}, {z:g})" for x, z in args.places)
         maps = "the oracle's heatmaps" if args.model_dir is None else f"{args.model_dir} on the rendered pairs"
+        if args.occlude:
+            maps += ", each person's joints behind the other's body hidden"
         if args.skeleton_prior != EstimatorConfig().joints3d.skeleton_prior:
             maps += f", skeleton_prior {args.skeleton_prior}"
         flagged_mm = (f"the flagged pairs' {counts['flagged_mm'] / counts['flagged_joints']:.1f}"
@@ -442,7 +512,9 @@ def main(argv=None) -> int:
               f"{counts['twice_both'] / passes:.1f}"
               + ("" if args.model_dir is not None else
                  f"; the people's peaks of a joint {counts['apart_view0']} cells apart in view 0, "
-                 f"{counts['apart_view1']} in view 1 (10th-90th percentile)"))
+                 f"{counts['apart_view1']} in view 1 (10th-90th percentile)")
+              + (f"; the second person's joints hidden per pass, view 0 {counts['hidden_view0'] / passes:.0%}, view 1 "
+                 f"{counts['hidden_view1'] / passes:.0%}" if args.occlude else ""))
     return 0
 
 

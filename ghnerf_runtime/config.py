@@ -427,7 +427,9 @@ class Joints3DConfig:
             at least one of the two views (docs/runtime.md, "Two people in the working volume").
         second_person_min_joints: a pair with at least this many joints shown twice in *both* views
             (``second_person_ratio``) is ``several_people`` (``PairResult``): its joints are kept only near the
-            tracked subject's (``max_track_step_m``), or, without a track, none. ``0`` turns the check off.
+            tracked subject's (``max_track_step_m``), or, without a track, none. So is, since session 56, a pair
+            whose tracked crop shows this many twice in one view alone (one person behind the other as the other
+            camera sees them; docs/runtime.md, "One person behind the other"). ``0`` turns the check off.
         max_track_step_m: in a ``several_people`` pair, a joint further than this from the tracked subject's place
             for it (the previous pair's) is missing: it is the other person's, or triangulated from one person's
             peak in one view and the other's in the other. With the triangulation, the pairing of the views' peaks

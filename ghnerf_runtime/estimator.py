@@ -89,8 +89,8 @@ from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
-from ghnerf_runtime.two_people import PAIRINGS, attached, centre_of, floor_xz, matched_errors, pick_person, \
-    split_people
+from ghnerf_runtime.two_people import (PAIRINGS, attached, centre_of, floor_xz, matched_errors, one_body,
+                                       pick_person, split_people)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -167,8 +167,10 @@ class PairResult:
             ``joints3d.max_prior_disagreement_m``, so the joints are the triangulated ones (as without the prior);
             never on a pair that reports nobody.
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
-            both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject):
-            only the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
+            both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject),
+            or, on a tracked pass, in one view alone (one person behind the other as the other camera sees them,
+            since session 56: without a track the person that camera sees is reported, whatever the rule): only
+            the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
             2D); without a track, the joints of the person ``joints3d.pick_subject`` names, whom the track then
             follows (none with ``pick_subject: none``; docs/runtime.md, "Two people in the working volume").
             With the triangulation each is the pairing of the views' peaks and runner-ups nearest the track (or
@@ -577,6 +579,7 @@ class Estimator:
         self._last_timestamp_s: float | None = None
         self._last_pair_cold = False
         self._several_track = False  # the track is a several_people pass's subject (_several_people's hysteresis)
+        self._behind_track: int | None = None  # and the view that showed one peak, where that pass was _behind_view's
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
         self._between: dict[tuple, Camera] = {}  # (alpha, pivot) -> interpolated camera (the rig does not move)
@@ -635,6 +638,7 @@ class Estimator:
         """Forget the tracked subject (the next pair starts from the working volume) and the smoothing."""
         self.tracker.reset()
         self._several_track = False
+        self._behind_track = None
         self._turn_search_wait = 0
         if self._smoother is not None:
             self._smoother.reset()
@@ -1160,10 +1164,14 @@ class Estimator:
         j3 = self._joints_3d(env, out, blocks, heat, kp, uv_model, crops, regions)
         j3 = self._gate_to_boxes(j3, regions)
         several = self._several_people(kp) or cold_several is True
+        # one person behind the other in this view (a cold pass's crop, the whole working volume, draws two people
+        # too small to tell one peak hidden from two merged: the pass refining it decides)
+        behind = None if several or not regions.tracked else self._behind_view(kp)
+        several |= behind is not None
         subject = j3  # a several_people pair's joints of the tracked subject that the views' peaks gave
         chosen = None  # and the peaks each of them was triangulated from (_from_pairings)
         if several:  # before the presence gate: the subject's joints alone must make someone
-            j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions, cold_several)
+            j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions, cold_several, behind)
             if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
                 joints_2d, conf_2d, missing_2d = self._image_joints(*chosen, crops)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
@@ -1209,6 +1217,7 @@ class Estimator:
         follow = j3 if several else self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         self._several_track = several and self.tracker.track is not None
+        self._behind_track = behind if self._several_track else None
         if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
@@ -1279,16 +1288,38 @@ class Estimator:
         Once a pass is flagged, the passes that follow its subject stay flagged while any joint shows twice
         (:data:`STILL_SEVERAL_MIN_JOINTS`): the subject's own crop shows fewer of the other person's joints (on the
         oracle 2 to 5 in the passes that fell below 6), and a pass not flagged lets the other's peaks into the
-        track. One person is never flagged, so never held."""
+        track. One person is never flagged, so never held. A track that follows a pass flagged by one view alone
+        (:meth:`_behind_view`) is held by that rule instead."""
         cfg = self.config.joints3d
         if cfg.second_person_min_joints == 0:
             return False
         twice = joints_shown_twice(kp, cfg.second_person_ratio)
-        held = self._several_track and self.tracker.track is not None
+        held = self._several_track and self.tracker.track is not None and self._behind_track is None
         return twice >= (STILL_SEVERAL_MIN_JOINTS if held else cfg.second_person_min_joints)
 
+    def _behind_view(self, kp: Keypoints2D) -> int | None:
+        """One person behind the other as one camera sees them (docs/runtime.md, "One person behind the other"):
+        the view that shows one peak where the other shows two, or None. Where the pair shows fewer than
+        ``second_person_min_joints`` joints twice in both views, a view showing that many twice by itself (the other
+        view then the one peak's) makes the pair ``several_people`` all the same: the hidden person's peaks are
+        behind the other's in one view, beside them in the other. One person through the shipped model showed at
+        most 4 joints twice in a view (the bench's 30 sequences of 10 pairs, 330 passes; docs/runtime.md). Passes
+        following such a pass's subject stay so while that view shows any joint twice
+        (:data:`STILL_SEVERAL_MIN_JOINTS`). Asked of tracked passes that :meth:`_several_people` did not flag
+        (:meth:`_finish_pass`)."""
+        cfg = self.config.joints3d
+        if cfg.second_person_min_joints == 0 or joints_shown_twice(kp, cfg.second_person_ratio) >= \
+                cfg.second_person_min_joints:
+            return None
+        per_view = np.count_nonzero(kp.valid & (kp.runner_up >= cfg.second_person_ratio * kp.confidence), axis=-1)
+        if self._behind_track is not None and self._several_track and self.tracker.track is not None:
+            seen, need = 1 - self._behind_track, STILL_SEVERAL_MIN_JOINTS
+        else:
+            seen, need = int(np.argmax(per_view)), cfg.second_person_min_joints
+        return 1 - seen if per_view[seen] >= need else None
+
     def _keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                              regions: Regions, cold_several: bool | None = None
+                              regions: Regions, cold_several: bool | None = None, behind: int | None = None
                               ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """Of a ``several_people`` pair's joints, those within ``max_track_step_m`` of the tracked subject's place
         for them; without a track, one of the two people's (:meth:`_picked_subject`; with ``pick_subject: none``
@@ -1303,7 +1334,10 @@ class Estimator:
         picked): ``False``, the track is a cold pass's that did not tell two people apart (both people's joints,
         mixed): picked as without a track; ``True``, the cold pass picked the subject from its coarse crop: split
         again on this pass's finer one, and the person nearer the track's centre is the subject (the cold split
-        may have given a joint wrongly)."""
+        may have given a joint wrongly). ``behind``: the view that shows one peak where the other shows two
+        (:meth:`_behind_view`): picked as without a track, the person that view sees is the subject
+        (:meth:`_seen_subject`); a tracked pass keeps the pairings nearest the track as for any flagged pass (two
+        of them are that view's one peak with each of the other view's two)."""
         track = self.tracker.track
         cfg = self.config.joints3d
         picks = cfg.method == "triangulate" and cfg.pick_subject != "none"
@@ -1311,6 +1345,8 @@ class Estimator:
             none = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
             if not picks:
                 return none, None, none
+            if behind is not None:
+                return self._seen_subject(none, kp, uv_model, crops, regions, behind)
             near = centre_of(track.joints[None], np.where(track.valid, 0, -1)) if cold_several else None
             return self._picked_subject(none, kp, uv_model, crops, regions, near)
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
@@ -1424,6 +1460,34 @@ class Estimator:
         if who is None:
             return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
         return self._from_pairings(kept, kp, pairs, np.maximum(people[who], 0), people[who] >= 0)
+
+    def _seen_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
+                      regions: Regions, behind: int
+                      ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
+        """One person behind the other in view ``behind`` (:meth:`_behind_view`) and no track: the person that view
+        sees is reported, as :meth:`_picked_subject` reports the picked one. Its one peak of a joint is theirs (the
+        other's is hidden behind them, or merged with theirs), so their joint is that peak paired with one of the
+        other view's two, both on its ray: where one pairing passes the gates (:meth:`_pairings`; the other, the
+        hidden person's peak with the seen one's, mostly fails the reprojection gate) that one, where both do the
+        nearer that view's camera (the other lies about as far off as the hidden person); then only the joints that
+        make one body (:func:`~ghnerf_runtime.two_people.one_body`: where the other view's two peaks merged, its one
+        peak may be the hidden person's, and the pairing lies at their joint). The split of two people
+        (:func:`~ghnerf_runtime.two_people.split_people`) has little to work on here: the pairings with the other
+        person's peak in both views are missing. Nobody (``kept``) with fewer than ``presence.min_joints`` joints.
+        ``pick_subject`` is not asked: the hidden person's joints would be triangulated from the seen one's peak."""
+        J = len(kept.valid)
+        pairs = self._pairings(kp, uv_model, crops, regions)
+        points, valid = pairs[0].points.reshape(4, J, 3), pairs[0].valid.reshape(4, J)
+        mine = np.flatnonzero(PAIRINGS[:, behind] == 0)  # that view's peak with either of the other view's
+        depth = np.linalg.norm(points[mine] - self.rig.pair[behind].center, axis=-1)
+        best = mine[np.argmin(np.where(valid[mine], depth, np.inf), axis=0)]
+        # where the other view's two peaks merged, the one pairing may be the hidden person's peak with the seen
+        # one's, lying at the hidden person's joint: its limbs break there (two_people.one_body)
+        found = one_body(points[best, np.arange(J)], valid[mine].any(axis=0))
+        pres = self.config.presence
+        if np.count_nonzero(found) < (pres.min_joints if pres.enabled else 1):
+            return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
+        return self._from_pairings(kept, kp, pairs, best, found)
 
     def _from_pairings(self, kept: Joints3D, kp: Keypoints2D, pairs: tuple, best: np.ndarray, found: np.ndarray
                        ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:

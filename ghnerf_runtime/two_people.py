@@ -42,6 +42,10 @@ MAX_LIMB_M = 0.75
 #: where they stand (the oracle's scenes, benchmarks/measure_two_people.py), so two people standing equally far
 #: off differ by up to about twice that.
 TIE_M = 0.2
+#: :func:`one_body`: a group of joints whose floor centre lies further than this from the largest group's is another
+#: person's: half the 1 m between two people one behind the other, more than a limb's group strays from its body's
+#: centre (an arm held out: its shoulder, elbow and wrist's median about 0.4 m off).
+SAME_BODY_M = 0.5
 #: Assignment rounds per start: a start that has not settled by then is kept as it stands.
 _ROUNDS = 8
 
@@ -184,6 +188,38 @@ def attached(candidates: np.ndarray, joints: np.ndarray, found: np.ndarray) -> n
             if j < len(candidates) and other < len(candidates) and found[other]:
                 near[j] |= bool(np.linalg.norm(candidates[j] - joints[other]) <= MAX_LIMB_M)
     return near
+
+
+def one_body(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """``(J,)`` which ``found`` joints of ``joints`` (``(J, 3)``) make one body: the joints are grouped along the
+    limbs (:data:`~ghnerf_runtime.body25.LIMBS`, two joints of a limb in one group where within :data:`MAX_LIMB_M`),
+    and a group is kept where its floor centre lies within :data:`SAME_BODY_M` of the largest group's. A joint
+    triangulated from another person's peak lies at that person's and breaks its limbs there: its group is theirs."""
+    joints = np.asarray(joints, dtype=np.float64)
+    found = np.asarray(found, dtype=bool)
+    J = len(found)
+    group = np.arange(J)  # union-find over the found joints
+
+    def root(j: int) -> int:
+        while group[j] != j:
+            group[j] = group[group[j]]
+            j = int(group[j])
+        return j
+
+    for a, b in LIMBS:
+        if a < J and b < J and found[a] and found[b] and np.linalg.norm(joints[a] - joints[b]) <= MAX_LIMB_M:
+            group[root(a)] = root(b)
+    roots = np.array([root(j) for j in range(J)])
+    if not found.any():
+        return found.copy()
+    sizes = np.bincount(roots[found], minlength=J)
+    largest = roots == int(np.argmax(sizes))
+    centre = np.median(floor_xz(joints[largest & found]), axis=0)
+    keep = np.zeros(J, bool)
+    for r in np.unique(roots[found]):
+        mine = found & (roots == r)
+        keep |= mine & bool(np.linalg.norm(np.median(floor_xz(joints[mine]), axis=0) - centre) <= SAME_BODY_M)
+    return keep
 
 
 def centre_of(points: np.ndarray, chosen: np.ndarray) -> np.ndarray | None:

@@ -390,3 +390,19 @@ def test_measure_two_people_one_person(model, capsys, monkeypatch):
     assert hist, out
     counts = [int(c) for c in re.findall(r"\d+ joints: (\d+)", hist.group(1))]
     assert counts and sum(counts) == int(hist.group(2)) >= 3, out  # every pass counted, at least one a pair
+
+
+def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
+    # docs/runtime.md, "One person behind the other" (session 56): --behind places the second person along view 0's
+    # line of sight through the first, --occlude hides what is behind a body; the rows say both
+    out = run_script("measure_two_people", "--places=0,2.5,0,0", "--behind", "1", "--occlude", "--scenes", "1",
+                     "--pairs", "1", "--alone", "0", capsys=capsys, monkeypatch=monkeypatch)
+    assert re.search(r"^1 pairs of two people \(1 scenes\) at \(0, 2\.5\) and \(0\.233, 3\.472\), the oracle's "
+                     r"heatmaps, each person's joints behind the other's body hidden, ", out, re.M), out
+    hidden = re.search(r"the second person's joints hidden per pass, view 0 (\d+)%, view 1 (\d+)%$", out, re.M)
+    assert hidden and int(hidden.group(1)) >= 90 and int(hidden.group(2)) < 90, out  # behind as view 0 sees it
+    out = run_script_failing("measure_two_people", "--occlude", "--model-dir", "models", capsys=capsys,
+                             monkeypatch=monkeypatch)
+    assert "--occlude is the oracle's" in out, out
+    out = run_script_failing("measure_two_people", "--behind", "0", capsys=capsys, monkeypatch=monkeypatch)
+    assert "--behind needs a distance above 0 m" in out, out
