@@ -347,7 +347,7 @@ def test_measure_two_people_calibration(capsys, monkeypatch):
     lines = re.findall(r"^pan (0|2) deg, 2 pairs of two people \(1 scenes, 1 pairs of the first alone before each\), "
                        r"pick_subject centre_line: 2 flagged; lowest_foot_m on 2 \(the subject alone 2\), \|two - "
                        r"alone\| median [\d.]+, max ([\d.]+) m; reprojection_px_median on 2 \(alone 2\), .*; scene "
-                       r"medians of lowest_foot_m: two people ([-+][\d.]+) to [-+][\d.]+ m, (\d) of 1 past 0.1 m, "
+                       r"medians of lowest_foot_m: two people ([-+][\d.]+) to [-+][\d.]+ m, (\d) of 1 past 0.05 m, "
                        r"the first alone .*$", out, re.M)
     assert [line[0] for line in lines] == ["0", "2"], out
     assert all(float(line[1]) <= 0.02 for line in lines), out  # the subject's own feet, as alone
