@@ -6,8 +6,8 @@
 
 The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe: held-out motions,
 random rig placements) through the true rig; the estimator is given that rig with the second camera (``--camera
-0``: the first) turned by each angle about one of its own axes (``tilt``: about its x axis, the picture moves up or down; ``pan``:
-about its y axis, sideways, along the epipolar lines of a level rig; ``roll``: about its optical axis), as
+0``: the first) turned by each angle about one of its own axes (``tilt``: about its x axis, the picture moves up
+or down; ``pan``: about its y axis, sideways, along the epipolar lines of a level rig; ``roll``: about its optical axis), as
 a rig file that no longer fits a camera knocked on its mount. Per setting it prints, over the pairs that
 were measured (``PairResult.reprojection_px_median`` not None), the per-pair median reprojection error
 before the gate (model-input pixels): its median, 90th percentile and largest; the median over
@@ -154,7 +154,8 @@ def main(argv=None) -> int:
                  else f"{'-':>7} {'-':>6} {'-':>6}")
         past = " | ".join(f"{int((np.abs(roll) > v).sum()):4d}/{roll.size:<4d}" for v in limits)
         rolled = (f"{roll.min():6.3f} {roll.max():6.3f} | {' ' * 9}{np.abs(roll).max():6.3f} | {past}"
-                  if roll.size else f"{'-':>6} {'-':>6} | {' ' * 9}{'-':>6} | " + " | ".join(f"{'-':>9}" for _ in limits))
+                  if roll.size else f"{'-':>6} {'-':>6} | {' ' * 9}{'-':>6} | "
+                  + " | ".join(f"{'-':>9}" for _ in limits))
         print(f"  {name:>14} | {foot.size:5d}/{acc['pairs']:<5d} | {' ' * 9}{stats} | {' ' * 4}{rolled}")
     return 0
 

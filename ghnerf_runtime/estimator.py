@@ -196,12 +196,13 @@ class PairResult:
         lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lower foot (since session 56:
             the median height of its ankle, heel and toes, :data:`ghnerf_runtime.body25.FEET`, at least two of them,
             less ``FOOT_STANDING_M``, their median on a foot flat on the floor; before, the lowest such joint),
-            of the joints triangulated from peaks of at least the presence threshold in both views, kept by the reprojection and box gates and shown by both frames at least a fifth of the
-            crop window's side inside their edges (a foot cut off by the frame gets a peak at its edge), whatever
-            ``joints3d.method`` and the skeleton prior report (the prior keeps its feet near the floor): near 0
-            for a person standing or walking (a foot lifted is the higher one), it moves when a camera turned since calibration (a pan, which
-            ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no such joint (feet out of
-            view or near a frame's edge), nobody, a frame rejected, two people in view not told apart (a
+            of the joints triangulated from peaks of at least the presence threshold in both views, kept by the
+            reprojection and box gates and shown by both frames at least a fifth of the crop window's side inside
+            their edges (a foot cut off by the frame gets a peak at its edge), whatever ``joints3d.method`` and the
+            skeleton prior report (the prior keeps its feet near the floor): near 0 for a person standing or walking
+            (a foot lifted is the higher one), it moves when a camera turned since calibration (a pan, which
+            ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no foot with two such joints
+            (feet out of view or near a frame's edge), nobody, a frame rejected, two people in view not told apart (a
             ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`),
             or a person not on their feet (the torso joints triangulated likewise less than 0.5 m above that foot,
             or none: upside down, lying).

@@ -30,7 +30,8 @@ from ghnerf_runtime.geometry.triangulation import triangulate_robust, triangulat
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
 __all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "triangulate_joints",
-           "triangulate_joints_checked", "lowest_height_m", "lower_foot_m", "grid_shape", "query_grid", "volumetric_joints", "depth_centroid_joints"]
+           "triangulate_joints_checked", "lowest_height_m", "lower_foot_m", "grid_shape", "query_grid",
+           "volumetric_joints", "depth_centroid_joints"]
 
 
 @dataclass(frozen=True, eq=False)

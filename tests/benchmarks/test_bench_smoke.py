@@ -390,3 +390,23 @@ def test_measure_two_people_one_person(model, capsys, monkeypatch):
     assert hist, out
     counts = [int(c) for c in re.findall(r"\d+ joints: (\d+)", hist.group(1))]
     assert counts and sum(counts) == int(hist.group(2)) >= 3, out  # every pass counted, at least one a pair
+
+
+# ------------------------------------------------------------------------------- calibration drift
+@pytest.mark.parametrize("bad", ["0.05,x", "0", "0.05,-0.1", "nan"])
+def test_measure_calibration_drift_refuses_a_floor_limit_that_is_not_metres(bad, capsys, monkeypatch):
+    # --max-floor-m takes several limits since session 56 (a column each): each must be a positive number
+    err = run_script_failing("measure_calibration_drift", "--max-floor-m", bad, capsys=capsys, monkeypatch=monkeypatch)
+    assert f"--max-floor-m: {bad!r}" in err, err
+
+
+@pytest.mark.skipif(not (BENCH.parent / "models" / "model_card.json").is_file(), reason="no trained model")
+def test_measure_calibration_drift_turns_the_camera_asked_and_counts_each_limit(scratch_cache, capsys, monkeypatch):
+    # the floor check's table of docs/calibration.md comes from this script, --camera 0 for the first camera's rows
+    out = run_script("measure_calibration_drift", "--model-dir", str(BENCH.parent / "models"), "--sequences", "1",
+                     "--frames", "2", "--axes", "pan", "--degrees", "1", "--window", "2", "--camera", "0",
+                     "--max-floor-m", "0.05,0.1", capsys=capsys, monkeypatch=monkeypatch)
+    assert "the first camera's rig entry turned" in out, out
+    assert re.search(r"\| past 0\.05 m \| past 0\.1 m$", out, re.M), out
+    rows = re.findall(r"^ +(true rig|pan 1 deg) \| +\d+/2 +\|.*\| +(\d+|-)/?\d* +\| +(\d+|-)/?\d* *$", out, re.M)
+    assert [r[0] for r in rows] == ["true rig", "pan 1 deg"], out

@@ -1,5 +1,5 @@
 """The daemon's calibration check (``firmware_host.daemon.calibration_watch``): the rule on synthetic sequences
-of the pairs' view agreement and of their lowest foot joint's height, its config keys, and what the status file
+of the pairs' view agreement and of their lower foot's height, its config keys, and what the status file
 and systemd's STATUS line say."""
 from __future__ import annotations
 
