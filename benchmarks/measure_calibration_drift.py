@@ -2,23 +2,25 @@
 
     .venv/bin/python benchmarks/measure_calibration_drift.py [--model-dir models] [--sequences 4] [--frames 10]
                                                              [--degrees 0.25,0.5,1,2] [--axes tilt,pan,roll]
-                                                             [--window 10] [--max-floor-m 0.1]
+                                                             [--window 10] [--max-floor-m 0.1] [--camera 1]
 
 The simulator films the bench's held-out-like scenes (``ghnerf-bench runtime``'s recipe: held-out motions,
-random rig placements) through the true rig; the estimator is given that rig with the second camera turned
-by each angle about one of its own axes (``tilt``: about its x axis, the picture moves up or down; ``pan``:
-about its y axis, sideways, along the epipolar lines of a level rig; ``roll``: about its optical axis), as
+random rig placements) through the true rig; the estimator is given that rig with the second camera (``--camera
+0``: the first) turned by each angle about one of its own axes (``tilt``: about its x axis, the picture moves up
+or down; ``pan``: about its y axis, sideways, along the epipolar lines of a level rig; ``roll``: about its optical axis), as
 a rig file that no longer fits a camera knocked on its mount. Per setting it prints, over the pairs that
 were measured (``PairResult.reprojection_px_median`` not None), the per-pair median reprojection error
 before the gate (model-input pixels): its median, 90th percentile and largest; the median over
 ``--window`` consecutive measured pairs of one sequence (what the daemon compares with
 ``health.calibration_max_px``) at its smallest and largest; 3D joints found per pair and the MPJPE of those.
-A second table gives the floor check's figure: per pair with a triangulated foot joint
-(``PairResult.lowest_foot_m``, the lowest ankle, heel or toe's height above the floor, metres), its median, 10th
+A second table gives the floor check's figure: per pair with a triangulated foot
+(``PairResult.lowest_foot_m``, the lower foot's height above the floor: the median of its ankle, heel and toes less
+``estimator.FOOT_STANDING_M``, metres), its median, 10th
 and 90th percentiles, and the median over ``--window`` consecutive such pairs of one sequence (what the daemon
 compares with ``health.calibration_max_floor_m``) at its smallest and largest, the largest distance of that
 median from the floor (either way), and the share of those medians further than ``--max-floor-m`` from it (the
-windows the daemon would flag), next to the true lowest foot joint of the simulated people.
+windows the daemon would flag), next to the simulated people's own lower foot (the median height of its true
+joints, which ``FOOT_STANDING_M`` stands for, and the lowest true foot joint).
 A tool, not a test.
 """
 from __future__ import annotations
@@ -31,12 +33,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.body25 import FLOOR_JOINTS  # noqa: E402
+from ghnerf_runtime.body25 import FEET, FLOOR_JOINTS  # noqa: E402
 from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
-from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
+from ghnerf_runtime.estimator import FOOT_STANDING_M, Estimator, load_session  # noqa: E402
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M  # noqa: E402
 from ghnerf_runtime.geometry import Camera, Rig  # noqa: E402
+from ghnerf_runtime.joints3d import Joints3D, lower_foot_m  # noqa: E402
 
 #: Camera axis (in its own frame: x right, y down, z forward) each kind of bump turns about.
 AXES = {"tilt": 0, "pan": 1, "roll": 2}
@@ -73,10 +76,19 @@ def main(argv=None) -> int:
     ap.add_argument("--degrees", default="0.25,0.5,1,2", help="comma-separated turns of the second camera")
     ap.add_argument("--axes", default="tilt,pan,roll", help=f"comma-separated, of {list(AXES)}")
     ap.add_argument("--window", type=int, default=10, help="pairs of the rolling median")
-    ap.add_argument("--max-floor-m", type=float, default=CALIBRATION_MAX_FLOOR_M,
-                    help="the floor check's limit the windows are counted against (health.calibration_max_floor_m)")
+    ap.add_argument("--max-floor-m", default=str(CALIBRATION_MAX_FLOOR_M),
+                    help="the floor check's limit the windows are counted against (health.calibration_max_floor_m); "
+                         "comma-separated: a column each")
+    ap.add_argument("--camera", type=int, choices=(0, 1), default=1,
+                    help="the camera whose rig entry is turned (rig order: 0 the first, 1 the second)")
     ap.add_argument("--cache", help="sequence cache folder (default ~/.cache/ghnerf-bench)")
     args = ap.parse_args(argv)
+    try:
+        limits = [float(v) for v in str(args.max_floor_m).split(",")]
+    except ValueError:
+        ap.error(f"--max-floor-m: {args.max_floor_m!r} is not a comma-separated list of metres")
+    if not limits or any(not np.isfinite(v) or v <= 0 for v in limits):
+        ap.error(f"--max-floor-m: {args.max_floor_m!r}: each limit must be a positive number of metres")
     axes = args.axes.split(",")
     if unknown := [a for a in axes if a not in AXES]:
         ap.error(f"--axes: {unknown} not of {list(AXES)}")
@@ -87,12 +99,15 @@ def main(argv=None) -> int:
              for s in settings}
     # the bench's sequences (ghnerf-bench runtime's recipe and cache), filmed by the true rig
     truth_foot = []  # the simulated people's own lowest foot joint (where they stand, whatever the estimate)
+    truth_lower = []  # their lower foot's median joint height (what FOOT_STANDING_M stands for)
     for seq in load_sequences(args.sequences, args.frames, cache_dir=args.cache):
         truth_foot += list(-np.asarray(seq.joints_3d)[:, list(FLOOR_JOINTS), 1].max(axis=1))
+        truth_lower += [lower_foot_m(Joints3D(j, np.ones(len(j)), np.ones(len(j), bool), np.zeros((len(j), 2))),
+                                     FEET, 0.0) for j in np.asarray(seq.joints_3d)]
         t0, fps = float(seq.info["t0"]), float(seq.info["fps"])
         for axis, deg in settings:
             acc = tally[(axis, deg)]
-            with Estimator(session, turned(seq.rig, 1, axis, deg) if deg else seq.rig, cfg) as est:
+            with Estimator(session, turned(seq.rig, args.camera, axis, deg) if deg else seq.rig, cfg) as est:
                 seq_px, seq_foot = [], []
                 for i in range(len(seq)):
                     r = est.estimate([np.array(seq.images[i, 0]), np.array(seq.images[i, 1])],
@@ -109,7 +124,8 @@ def main(argv=None) -> int:
             acc["roll"] += rolling_medians(seq_px, args.window)  # within a sequence: the daemon's window
             acc["foot"] += seq_foot
             acc["foot_roll"] += rolling_medians(seq_foot, args.window)
-    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs, {args.model_dir}, the second camera's "
+    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs, {args.model_dir}, the "
+          f"{('first', 'second')[args.camera]} camera's "
           f"rig entry turned (model-input px, {session.contract.height} px crops):")
     print(f"  {'setting':>14} | measured | per-pair median px: median   p90    max | rolling {args.window}: min    max | "
           f"3D joints | MPJPE mm")
@@ -123,19 +139,23 @@ def main(argv=None) -> int:
         print(f"  {name:>14} | {px.size:4d}/{acc['pairs']:<3d} | {' ' * 19}{stats} | {' ' * 4}{roll} | "
               f"{np.mean(acc['found']):5.1f}/25 | {mpjpe}")
     tf = np.asarray(truth_foot, float)
-    print(f"the lowest triangulated foot joint's height above the floor (m; the floor is y = 0 of the rig frame; "
-          f"the true lowest foot joint of every pair: median {np.median(tf):.3f}, p10 {np.percentile(tf, 10):.3f}, "
+    tl = np.asarray(truth_lower, float)
+    print(f"the lower triangulated foot's height above the floor (m; the floor is y = 0 of the rig frame; the median "
+          f"of its joints less FOOT_STANDING_M {FOOT_STANDING_M:g}; of every pair, the true lower foot's median joint "
+          f"height: median {np.median(tl):.3f}, p10 {np.percentile(tl, 10):.3f}, p90 {np.percentile(tl, 90):.3f}; "
+          f"the true lowest foot joint: median {np.median(tf):.3f}, p10 {np.percentile(tf, 10):.3f}, "
           f"p90 {np.percentile(tf, 90):.3f}):")
     print(f"  {'setting':>14} | with a foot | per-pair: median    p10    p90 | rolling {args.window}: min    max"
-          f" | furthest from 0 | past {args.max_floor_m:g} m")
+          f" | furthest from 0 | " + " | ".join(f"past {v:g} m" for v in limits))
     for (axis, deg), acc in tally.items():
         foot, roll = np.asarray(acc["foot"], float), np.asarray(acc["foot_roll"], float)
         name = axis if not deg else f"{axis} {deg:g} deg"
         stats = (f"{np.median(foot):7.3f} {np.percentile(foot, 10):6.3f} {np.percentile(foot, 90):6.3f}" if foot.size
                  else f"{'-':>7} {'-':>6} {'-':>6}")
-        past = int((np.abs(roll) > args.max_floor_m).sum())
-        rolled = (f"{roll.min():6.3f} {roll.max():6.3f} | {' ' * 9}{np.abs(roll).max():6.3f} | {past:4d}/{roll.size:<4d}"
-                  if roll.size else f"{'-':>6} {'-':>6} | {' ' * 9}{'-':>6} | {'-':>9}")
+        past = " | ".join(f"{int((np.abs(roll) > v).sum()):4d}/{roll.size:<4d}" for v in limits)
+        rolled = (f"{roll.min():6.3f} {roll.max():6.3f} | {' ' * 9}{np.abs(roll).max():6.3f} | {past}"
+                  if roll.size else f"{'-':>6} {'-':>6} | {' ' * 9}{'-':>6} | "
+                  + " | ".join(f"{'-':>9}" for _ in limits))
         print(f"  {name:>14} | {foot.size:5d}/{acc['pairs']:<5d} | {' ' * 9}{stats} | {' ' * 4}{rolled}")
     return 0
 

@@ -36,6 +36,10 @@ BODY_PARTS: dict[str, tuple[int, ...]] = {
 #: The joints nearest the floor of a person standing, walking or sitting: the ankles and the feet. The
 #: daemon's floor check (firmware_host.daemon.calibration_watch) watches the lowest one triangulated.
 FLOOR_JOINTS: tuple[int, ...] = tuple(JOINT_INDEX[n] for n in ("RAnkle", "LAnkle")) + BODY_PARTS["feet"]
+#: The floor joints of each foot, the right then the left: the floor check measures the lower foot's height by the
+#: median of its joints (ghnerf_runtime.joints3d.lower_foot_m).
+FEET: tuple[tuple[int, ...], tuple[int, ...]] = tuple(
+    tuple(JOINT_INDEX[side + n] for n in ("Ankle", "BigToe", "SmallToe", "Heel")) for side in "RL")
 
 # Torso joints used for the PCK reference length (see docs/metrics.md).
 NECK, MID_HIP = JOINT_INDEX["Neck"], JOINT_INDEX["MidHip"]

@@ -57,7 +57,7 @@ from typing import Any, Callable, Sequence
 import cv2
 import numpy as np
 
-from ghnerf_runtime.body25 import BODY_PARTS, FLOOR_JOINTS, JOINT_NAMES
+from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -68,7 +68,7 @@ from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projec
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
-    lowest_height_m, \
+    lower_foot_m, \
     query_grid, triangulate_joints, triangulate_joints_checked, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
@@ -114,10 +114,17 @@ _PRIOR_FOLLOW_MAX_ERROR_M = 0.25
 #: test_view_agreement.py keeps them out).
 _FLOOR_EDGE_FRAC = 0.2
 #: The floor check counts a person on their feet only: a pair whose torso joints triangulated from strong peaks (their
-#: median height; none such: no figure) are less than this (m) above the lowest foot joint gives no figure. A
+#: median height; none such: no figure) are less than this (m) above the lower foot gives no figure. A
 #: handstand's feet are 1.6-1.9 m up and those of a person lying about 0.2 m (benchmarks/measure_lying_rendered.py
 #: --turned-crops); standing the torso is about 1.1 m above the feet, squatting or sat on a chair 0.7 m or more.
 _FLOOR_MIN_TORSO_M = 0.5
+#: The floor check's foot height (PairResult.lowest_foot_m) is the median height of a foot's triangulated joints (at
+#: least _FLOOR_MIN_FOOT_JOINTS of its ankle, toes and heel) less this, that median on a foot flat on the floor: the
+#: simulated people's true lower foot read 0.038 m (p10 to p90 0.033 to 0.044 over the 900 pairs of
+#: benchmarks/measure_calibration_drift.py --sequences 30 --frames 30; their ankles stand about 0.075 m high, toes
+#: 0.04, heels 0.02). A foot lifted reads higher: the lower foot is the one measured.
+FOOT_STANDING_M = 0.04
+_FLOOR_MIN_FOOT_JOINTS = 2
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
@@ -191,14 +198,16 @@ class PairResult:
             (:meth:`Estimator._subject_figures`); where they give none (nobody picked: a camera knocked past the gate
             leaves no pairing to pick from; ``pick_subject: none``), since session 56 both people's peaks paired one
             to one, before the gate (:meth:`Estimator._matched_px`).
-        lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lowest ankle, heel or toe
-            (:data:`ghnerf_runtime.body25.FLOOR_JOINTS`) triangulated from peaks of at least the presence threshold
-            in both views, kept by the reprojection and box gates and shown by both frames at least a fifth of the
-            crop window's side inside their edges (a foot cut off by the frame gets a peak at its edge), whatever
-            ``joints3d.method`` and the skeleton prior report (the prior keeps its feet near the floor): near 0
-            for a person standing or walking, it moves when a camera turned since calibration (a pan, which
-            ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no such joint (feet out of
-            view or near a frame's edge), nobody, a frame rejected, two people in view not told apart (a
+        lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lower foot (since session 56:
+            the median height of its ankle, heel and toes, :data:`ghnerf_runtime.body25.FEET`, at least two of them,
+            less ``FOOT_STANDING_M``, their median on a foot flat on the floor; before, the lowest such joint),
+            of the joints triangulated from peaks of at least the presence threshold in both views, kept by the
+            reprojection and box gates and shown by both frames at least a fifth of the crop window's side inside
+            their edges (a foot cut off by the frame gets a peak at its edge), whatever ``joints3d.method`` and the
+            skeleton prior report (the prior keeps its feet near the floor): near 0 for a person standing or walking
+            (a foot lifted is the higher one), it moves when a camera turned since calibration (a pan, which
+            ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no foot with two such joints
+            (feet out of view or near a frame's edge), nobody, a frame rejected, two people in view not told apart (a
             ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`),
             or a person not on their feet (the torso joints triangulated likewise less than 0.5 m above that foot,
             or none: upside down, lying).
@@ -288,7 +297,7 @@ class PairResult:
             # the views' agreement before the reprojection gate (since session 53): null where not measured
             "reprojection_px_median": None if self.reprojection_px_median is None
             else r(self.reprojection_px_median, 3),
-            # the lowest triangulated foot joint's height (since session 54): null where none was triangulated
+            # the lower triangulated foot's height (since session 54): null where none was triangulated
             "lowest_foot_m": None if self.lowest_foot_m is None else r(self.lowest_foot_m, 4),
             "timing_ms": {k: r(v, 3) for k, v in self.timing_ms.items()},
         }
@@ -384,7 +393,7 @@ class _Pass:
     several_people: bool = False  # two people in view: only the tracked subject's joints kept (PairResult's)
     single_view: str | None = None  # the camera whose 2D joints alone are the answer (PairResult.single_view)
     reprojection_px_median: float | None = None  # the views' agreement before the gate (PairResult's)
-    lowest_foot_m: float | None = None  # the lowest triangulated foot joint's height (PairResult's)
+    lowest_foot_m: float | None = None  # the lower triangulated foot's height (PairResult's)
 
     @property
     def frame_ok(self) -> dict:
@@ -1715,9 +1724,11 @@ class Estimator:
         return volumetric_joints(q["joint_heat"], points, shape, cfg)
 
     def _lowest_foot_m(self, tri: Joints3D, kp: Keypoints2D, regions: Regions) -> float | None:
-        """The lowest foot joint's height above the floor, of the joints triangulated from peaks strong in both views
-        (the presence threshold) that both frames show well inside their edges (``_FLOOR_EDGE_FRAC``): not the
-        prior's (it keeps placed feet near the floor, whatever the calibration), nor guesses at a frame's edge.
+        """The lower foot's height above the floor (:func:`~ghnerf_runtime.joints3d.lower_foot_m`: the median of its
+        joints less ``FOOT_STANDING_M``, a foot with ``_FLOOR_MIN_FOOT_JOINTS`` of them), of the joints triangulated
+        from peaks strong in both views (the presence threshold) that both frames show well inside their edges
+        (``_FLOOR_EDGE_FRAC``): not the prior's (it keeps placed feet near the floor, whatever the calibration), nor
+        guesses at a frame's edge.
         ``None`` too unless the torso joints so triangulated stand ``_FLOOR_MIN_TORSO_M`` above that foot (their
         median height): a person upside down or lying is not standing on the floor with their feet (a window of
         handstands would otherwise read as a camera turned)."""
@@ -1735,7 +1746,8 @@ class Estimator:
             with np.errstate(invalid="ignore"):
                 feet[idx] = ((uv[:, 0] >= margin) & (uv[:, 0] <= cam.width - 1 - margin)
                              & (uv[:, 1] >= margin) & (uv[:, 1] <= cam.height - 1 - margin))
-        lowest = lowest_height_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FLOOR_JOINTS)
+        lowest = lower_foot_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FEET, FOOT_STANDING_M,
+                              _FLOOR_MIN_FOOT_JOINTS)
         torso = [j for j in _TORSO if seen[j]]
         if lowest is None or not torso or -np.median(tri.points[torso, 1]) - lowest < _FLOOR_MIN_TORSO_M:
             return None  # not seen on their feet (y down: a height is -y)

@@ -30,7 +30,8 @@ from ghnerf_runtime.geometry.triangulation import triangulate_robust, triangulat
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
 __all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "triangulate_joints",
-           "triangulate_joints_checked", "lowest_height_m", "grid_shape", "query_grid", "volumetric_joints", "depth_centroid_joints"]
+           "triangulate_joints_checked", "lowest_height_m", "lower_foot_m", "grid_shape", "query_grid",
+           "volumetric_joints", "depth_centroid_joints"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,6 +160,27 @@ def lowest_height_m(j3: Joints3D, joints: Sequence[int]) -> float | None:
     if not idx:
         return None
     return float(-np.max(j3.points[idx, 1]))  # y down: the lowest joint has the largest y
+
+
+def lower_foot_m(j3: Joints3D, feet: Sequence[Sequence[int]], standing_m: float, min_joints: int = 2) -> float | None:
+    """How far the lower of ``feet`` stands above the floor (metres; the rig frame is levelled, y down, the floor at
+    y = 0): per foot with at least ``min_joints`` of its joints in ``j3``, the median height of those joints less
+    ``standing_m`` (that median on a foot flat on the floor: an ankle stands higher than a heel); the lower foot's.
+    ``None`` when no foot has enough joints.
+
+    The median of a foot's joints, not the lowest joint: the lowest of several noisy joints reads below the floor
+    by more where the peaks are noisier (a far or foreshortened person), an offset of its own for each placement
+    that hid a camera's pan (docs/calibration.md, "The feet on the floor"); a lone joint is not a foot's height.
+
+    Example:
+        >>> P = np.zeros((4, 3)); P[:, 1] = [-0.08, -0.04, -0.03, -0.30]  # a foot flat on the floor, one lifted
+        >>> j3 = Joints3D(P, np.ones(4), np.array([True, True, True, True]), np.zeros((4, 2)))
+        >>> round(lower_foot_m(j3, [(0, 1, 2), (3,)], 0.04), 3), lower_foot_m(j3, [(3,)], 0.04)
+        (0.0, None)
+    """
+    heights = [[-j3.points[j, 1] for j in foot if j3.valid[j]] for foot in feet]  # y down: a height is -y
+    medians = [float(np.median(h)) for h in heights if len(h) >= max(1, min_joints)]
+    return min(medians) - standing_m if medians else None
 
 
 def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig) -> Joints3D:

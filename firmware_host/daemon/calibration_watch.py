@@ -10,8 +10,8 @@ it: no flapping near the limit):
   (``PairResult.reprojection_px_median``, measured before the gate). A tilt of either camera raises it for
   every pair at once, while a moving person, a pose or a noisy peak raises it for a few: the median over the
   window, above ``max_px``.
-* :class:`FloorWatch`: the height above the floor of each pair's lowest triangulated foot joint
-  (``PairResult.lowest_foot_m``; the rig frame is levelled, the floor at y = 0). A camera panned (turned about
+* :class:`FloorWatch`: the height above the floor of each pair's lower triangulated foot (the median of its
+  joints, ``PairResult.lowest_foot_m``; the rig frame is levelled, the floor at y = 0). A camera panned (turned about
   its vertical axis) moves the peaks along the epipolar lines of a level rig, where the views still meet and
   only the depth changes: the px check cannot see it, but the person's feet leave the floor (float above it
   or sink below it). The median over the window, further than ``max_floor_m`` from the floor either way.
@@ -149,7 +149,7 @@ class CalibrationWatch(_RollingCheck):
 
 
 class FloorWatch(_RollingCheck):
-    """The rolling median of the pairs' lowest triangulated foot joint's height, and whether the feet have left
+    """The rolling median of the pairs' lower triangulated foot's height, and whether the feet have left
     the floor (a camera turned since calibration, a pan above all).
 
     Args:

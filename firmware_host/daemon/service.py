@@ -508,7 +508,7 @@ class Daemon:
         :meth:`_calibration_changed`'s)."""
         watch = self.health.floor
         if suspect:
-            _log.warning("calibration suspect: %s (the lowest triangulated foot joint, median over the last %d pairs "
+            _log.warning("calibration suspect: %s (the lower triangulated foot, median over the last %d pairs "
                          "with feet in view; health.calibration_max_floor_m %g): a camera has turned since "
                          "calibration (a pan moves the depth, not the views' agreement); recalibrate (ghcal, "
                          "docs/calibration.md) and restart. Where people stand above the floor (a stage, a bed), set "

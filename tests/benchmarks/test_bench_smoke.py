@@ -347,7 +347,7 @@ def test_measure_two_people_calibration(capsys, monkeypatch):
     lines = re.findall(r"^pan (0|2) deg, 2 pairs of two people \(1 scenes, 1 pairs of the first alone before each\), "
                        r"pick_subject centre_line: 2 flagged; lowest_foot_m on 2 \(the subject alone 2\), \|two - "
                        r"alone\| median [\d.]+, max ([\d.]+) m; reprojection_px_median on 2 \(alone 2\), .*; scene "
-                       r"medians of lowest_foot_m: two people ([-+][\d.]+) to [-+][\d.]+ m, (\d) of 1 past 0.1 m, "
+                       r"medians of lowest_foot_m: two people ([-+][\d.]+) to [-+][\d.]+ m, (\d) of 1 past 0.05 m, "
                        r"the first alone .*$", out, re.M)
     assert [line[0] for line in lines] == ["0", "2"], out
     assert all(float(line[1]) <= 0.02 for line in lines), out  # the subject's own feet, as alone
@@ -406,3 +406,23 @@ def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
     assert "--occlude is the oracle's" in out, out
     out = run_script_failing("measure_two_people", "--behind", "0", capsys=capsys, monkeypatch=monkeypatch)
     assert "--behind needs a distance above 0 m" in out, out
+
+
+# ------------------------------------------------------------------------------- calibration drift
+@pytest.mark.parametrize("bad", ["0.05,x", "0", "0.05,-0.1", "nan"])
+def test_measure_calibration_drift_refuses_a_floor_limit_that_is_not_metres(bad, capsys, monkeypatch):
+    # --max-floor-m takes several limits since session 56 (a column each): each must be a positive number
+    err = run_script_failing("measure_calibration_drift", "--max-floor-m", bad, capsys=capsys, monkeypatch=monkeypatch)
+    assert f"--max-floor-m: {bad!r}" in err, err
+
+
+@pytest.mark.skipif(not (BENCH.parent / "models" / "model_card.json").is_file(), reason="no trained model")
+def test_measure_calibration_drift_turns_the_camera_asked_and_counts_each_limit(scratch_cache, capsys, monkeypatch):
+    # the floor check's table of docs/calibration.md comes from this script, --camera 0 for the first camera's rows
+    out = run_script("measure_calibration_drift", "--model-dir", str(BENCH.parent / "models"), "--sequences", "1",
+                     "--frames", "2", "--axes", "pan", "--degrees", "1", "--window", "2", "--camera", "0",
+                     "--max-floor-m", "0.05,0.1", capsys=capsys, monkeypatch=monkeypatch)
+    assert "the first camera's rig entry turned" in out, out
+    assert re.search(r"\| past 0\.05 m \| past 0\.1 m$", out, re.M), out
+    rows = re.findall(r"^ +(true rig|pan 1 deg) \| +\d+/2 +\|.*\| +(\d+|-)/?\d* +\| +(\d+|-)/?\d* *$", out, re.M)
+    assert [r[0] for r in rows] == ["true rig", "pan 1 deg"], out

@@ -176,14 +176,14 @@ def test_the_calibration_check_says_when_it_changes_and_how_it_stands():
     assert [check.add(k, pair(0.3, 0.02)) for k in range(3)] == [None] * 3
     assert check.report(3) == ("calibration check: fits; views' agreement: peaks 0.30 px apart (median of the last 3 "
                                "pairs, limit 0.8 px); feet: feet 0.02 m above the floor (median of the last 3 pairs, "
-                               "limit 0.1 m)")
+                               "limit 0.05 m)")
     # a pan: the views still meet, the feet sink below the floor (the floor check's symptom, in its words)
     lines = [check.add(k, pair(0.3, -0.2)) for k in range(3, 6)]
     assert lines[0] is None and lines[2] is None
     assert lines[1] is not None and lines[1].startswith(
-        "pair 4: CALIBRATION SUSPECT (feet 0.20 m below the floor > 0.1 m): the frames streamed from here")
+        "pair 4: CALIBRATION SUSPECT (feet 0.20 m below the floor > 0.05 m): the frames streamed from here")
     assert check.suspect and check.flagged == 2
-    assert check.report(6).startswith("calibration check: SUSPECT (feet 0.20 m below the floor > 0.1 m): recalibrate")
+    assert check.report(6).startswith("calibration check: SUSPECT (feet 0.20 m below the floor > 0.05 m): recalibrate")
     assert check.report(6).endswith("; 2 of the 6 frames streamed carry CALIBRATION_SUSPECT")
     # None (feet out of view) does not count; back on the floor it clears
     lines = [check.add(k, pair(0.3, None if k == 6 else 0.01)) for k in range(6, 10)]

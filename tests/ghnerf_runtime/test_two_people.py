@@ -499,7 +499,10 @@ def test_a_flagged_pair_s_calibration_figures_are_its_pairings_whatever_the_subj
     """The subject's prior (session 55) and the two-people calibration figures (session 55) came in on separate
     branches: the figures must stay the pairings' (docs/calibration.md, "Two people in view"), as one person's are
     the triangulation's, not the prior's, which keeps its feet near the floor whatever the calibration. A stand-in
-    prior 3 cm lower than its fed peaks: the figures are those without the prior, to the float."""
+    prior 3 cm lower than its fed peaks: the figures are those without the prior, to the float for the px figure and
+    within 0.1 mm for the foot's (the crops follow the prior's joints after the first pair, which moves the decoded
+    peaks by a few micrometres; since session 56 the foot's figure is the median of its joints, the toes' among
+    them, not the heel alone, whose peak lay where it did either way)."""
     on = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on"))
     off = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="off"))
     lower = np.array([0.0, 0.03, 0.0])  # y down
@@ -509,7 +512,7 @@ def test_a_flagged_pair_s_calibration_figures_are_its_pairings_whatever_the_subj
         assert r.several_people and not r.prior_fallback
         assert np.abs(r.joints_3d[~r.missing] - p.joints_3d[~r.missing]).max() > 0.02  # the prior's answer reported
         assert r.lowest_foot_m is not None and r.reprojection_px_median is not None
-        assert r.lowest_foot_m == pytest.approx(p.lowest_foot_m, abs=1e-6)
+        assert r.lowest_foot_m == pytest.approx(p.lowest_foot_m, abs=1e-4)  # the prior's 3 cm would be 0.03
         assert r.reprojection_px_median == pytest.approx(p.reprojection_px_median, abs=1e-6)
 
 

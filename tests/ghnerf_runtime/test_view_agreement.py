@@ -1,5 +1,5 @@
 """The two views' agreement before the reprojection gate (``joints3d.triangulate_joints_checked``,
-``PairResult.reprojection_px_median``) and the lowest triangulated foot joint (``PairResult.lowest_foot_m``):
+``PairResult.reprojection_px_median``) and the lower triangulated foot (``PairResult.lowest_foot_m``):
 what tells the daemon that a camera moved since calibration (docs/calibration.md, "When the rig no longer fits")."""
 from __future__ import annotations
 
@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from benchmarks.measure_calibration_drift import turned
-from ghnerf_runtime.body25 import FLOOR_JOINTS, JOINT_INDEX
+from ghnerf_runtime.body25 import FEET, FLOOR_JOINTS, JOINT_INDEX
 from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig, SessionConfig
 from ghnerf_runtime.geometry import Camera, look_at
 from ghnerf_runtime.geometry.triangulation import triangulate_two_views
-from ghnerf_runtime.joints3d import Joints3D, lowest_height_m, triangulate_joints, triangulate_joints_checked
+from ghnerf_runtime.joints3d import Joints3D, lower_foot_m, lowest_height_m, triangulate_joints, \
+    triangulate_joints_checked
 
 REPO = Path(__file__).resolve().parents[2]
 MODELS = REPO / "models"
@@ -126,11 +127,61 @@ def test_the_lowest_foot_is_the_largest_y_of_the_foot_joints_found():
     assert lowest_height_m(Joints3D(points, np.ones(25, np.float32), valid, np.zeros((25, 2))), FLOOR_JOINTS) is None
 
 
+def test_the_lower_foot_is_the_median_of_its_joints_and_a_lone_joint_is_no_foot():
+    """The floor check's figure since session 56: per foot the median height of its joints (two at least), less
+    their median on a foot flat on the floor; the lower foot's. One noisy joint far below the floor moves the
+    lowest joint, not the median of three; a foot lifted or seen by one joint only is not measured."""
+    points = np.zeros((25, 3))
+    points[:, 1] = -1.0
+    for name, h in (("RAnkle", 0.075), ("RBigToe", 0.04), ("RSmallToe", 0.04), ("RHeel", 0.02)):
+        points[JOINT_INDEX[name], 1] = -h  # flat on the floor: y down
+    points[JOINT_INDEX["RHeel"], 1] = 0.12  # one noisy joint 12 cm below the floor
+    for name in ("LAnkle", "LBigToe", "LSmallToe", "LHeel"):
+        points[JOINT_INDEX[name], 1] = -0.3  # lifted
+    valid = np.ones(25, bool)
+    j3 = lambda v: Joints3D(points, np.ones(25, np.float32), v, np.zeros((25, 2)))  # noqa: E731
+    assert lower_foot_m(j3(valid), FEET, 0.04) == pytest.approx(0.0)  # the right foot's median: 0.04
+    assert lowest_height_m(j3(valid), FLOOR_JOINTS) == pytest.approx(-0.12)  # what the figure was before
+    valid[[JOINT_INDEX[n] for n in ("RAnkle", "RBigToe", "RSmallToe")]] = False  # the right foot: the heel alone
+    assert lower_foot_m(j3(valid), FEET, 0.04) == pytest.approx(0.26)  # the lifted left foot, not a lone joint
+    valid[[JOINT_INDEX[n] for n in ("LAnkle", "LBigToe", "LSmallToe")]] = False
+    assert lower_foot_m(j3(valid), FEET, 0.04) is None
+
+
+@pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model: models/model_card.json")
+def test_a_one_degree_pan_is_flagged_within_the_window_and_the_true_rig_is_not():
+    """The daemon's floor check on a simulated take through the shipped model: with the second camera's rig entry
+    panned 1 degree, or the first camera's -1 degree, the median over ``calibration_window`` (30) pairs of
+    ``lowest_foot_m`` is past ``calibration_max_floor_m`` (0.05 m) by the window's last pair (0.09 and 0.08 m below
+    the floor); through the true rig it is not (0.01 m below). Before session 56 the figure was the lowest foot joint,
+    against 0.1 m: on this take 0.03 m above the floor through the true rig, 0.05 and 0.04 m below for these pans,
+    under the limit. (The pans the other way read 0.045 and 0.05 m above the floor here, at the limit: a 1 degree
+    pan is caught in most placements, not all: docs/calibration.md, "The feet on the floor".)"""
+    sim = pytest.importorskip("drivers.sim")
+    from firmware_host.daemon.calibration_watch import FloorWatch
+    from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_WINDOW
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS), warmup=False))
+    session = load_session(cfg)
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
+    shots = [[scene.render(c, 0.1 * k, with_truth=False)[0] for c in rig.pair] for k in range(CALIBRATION_WINDOW)]
+    for camera, degrees in ((1, 0.0), (1, 1.0), (0, -1.0)):
+        watch = FloorWatch(CALIBRATION_WINDOW, CALIBRATION_MAX_FLOOR_M)
+        with Estimator(session, turned(rig, camera, "pan", degrees), cfg) as est:
+            feet = [est.estimate(images, timestamp_s=0.1 * k).lowest_foot_m for k, images in enumerate(shots)]
+        for foot in feet:
+            watch.add(foot)
+        assert len(watch.values) == CALIBRATION_WINDOW, feet  # every pair measured its feet: one window
+        assert watch.suspect is (degrees != 0), (camera, degrees, watch.median)
+
+
 @pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model: models/model_card.json")
 def test_the_shipped_model_s_triangulated_feet_tell_a_panned_rig_file_and_cut_feet_say_nothing():
-    """Through the true rig the lowest triangulated foot stands on the floor; with the second camera's rig entry
-    panned 2 degrees the views still meet (reprojection_px_median as low) but the feet sink 0.1 m or more below
-    it, or float above it panned the other way. The reported joints are the skeleton prior's, whose feet stay
+    """Through the true rig the lower triangulated foot stands on the floor; with the second camera's rig entry
+    panned 2 degrees the views still meet (reprojection_px_median as low) but the feet sink 0.08 m or more below
+    it, or float as far above it panned the other way. The reported joints are the skeleton prior's, whose feet stay
     near the floor whatever the calibration: the figure is the triangulation's. Frames that cut the feet off
     (the model puts their peaks at the frame's edge, up to 0.8 m above the floor) give no figure."""
     sim = pytest.importorskip("drivers.sim")
@@ -151,7 +202,7 @@ def test_the_shipped_model_s_triangulated_feet_tell_a_panned_rig_file_and_cut_fe
         px[name] = float(np.median([res.reprojection_px_median for res in results]))
         reported[name] = float(np.median([-res.joints_3d[[j for j in FLOOR_JOINTS if not res.missing[j]], 1].max()
                                           for res in results]))
-    assert abs(feet["true"]) < 0.05 and feet["pan"] < -0.08 and feet["pan back"] > 0.1, feet
+    assert abs(feet["true"]) < 0.05 and feet["pan"] < -0.08 and feet["pan back"] > 0.08, feet
     assert px["pan"] < 0.5 and px["pan back"] < 0.5, px  # the views still meet: the px check is blind to it
     assert abs(reported["pan"]) < 0.05, reported  # the prior's feet hide the pan
     for keep in (0.7, 0.6):  # the lower 30 or 40 % of each frame gone: the feet just out of view, or far
