@@ -1,9 +1,11 @@
-"""What a crop padded with black at the frame's edge costs the shipped model (the runtime's padding policy,
-``ghnerf_runtime/preprocess.py``: the square crop is kept where it leaves the frame, those pixels are 0).
+"""What a crop padded at the frame's edge costs the shipped model (the runtime's padding policy,
+``ghnerf_runtime/preprocess.py``: the square crop is kept where it leaves the frame, those pixels show
+``roi.pad_fill``: 0 under "black", the frame's edge fading into the crop's mean under "fade", the default).
 
     .venv/bin/python benchmarks/measure_edge_padding.py [--model-dir models] [--sequences 10] [--frames 30]
                                                         [--outside 0,0.1,0.25,0.5] [--training-samples 300]
-                                                        [--edge-crop clip,centre,shift] [--pad-fill black|edge]
+                                                        [--edge-crop clip,centre,shift]
+                                                        [--pad-fill black|edge|fade] [--pad-fade 0.1]
                                                         [--blacken black|grey|replicate|reflect]
 
 The comparison: the held-out-like bench sequences (``ghnerf-bench runtime``'s) are run as rendered (640x480,
@@ -11,8 +13,8 @@ the person in full view: the reference, no padding), and again with camera 0's f
 so that a share ``p`` of the person's box (the true 2D joints' box in camera 0, its median left edge and width
 over the sequence) lies outside the cut frame. The cut frame is the rendered one's columns ``m..639`` and its
 camera ``Camera.cropped(m, 0, ...)``: the same pixels, the same lens, the same person, only less frame, so the
-runtime's crop reaches past the edge and is padded with black exactly as a camera with that field of view
-would give it. Everything else is the runtime's defaults (``EstimatorConfig()``), one estimator per run.
+runtime's crop reaches past the edge and is padded exactly as a camera with that field of view would give
+it. Everything else is the runtime's defaults (``EstimatorConfig()``), one estimator per run.
 
 Printed per run: the share of camera 0's model-input pixels that are padding (from the crop window used,
 ``PairResult.rois``, against the cut frame), the 3D MPJPE over the joints found and the share found, and
@@ -24,7 +26,8 @@ source crops cross their frame (what ``TargetConfig.frame_padding`` alone shows 
 runs the whole table once per tracked-crop policy (``roi.edge_crop``: ``clip`` the box to the frame and square
 what is left, ``centre`` the square on the whole box with the part past the frame black, ``shift`` the whole
 box's square inside the frame); the reference run is each policy's own. ``--pad-fill`` sets ``roi.pad_fill``
-(``edge``: the frame's edge repeated past it instead of black). ``--blacken FILL`` keeps camera 0's frame whole and
+(``black``: zeros; ``edge``: the frame's edge repeated past it; ``fade``: that edge fading into the crop's mean
+over ``--pad-fade`` crop sides, ``roi.pad_fade``). ``--blacken FILL`` keeps camera 0's frame whole and
 fills its columns left of the cut instead (``fill_columns``): the crops are then the uncut run's, so the table
 shows what the lost pixels alone cost, and with a fill other than ``black`` what another padding would. A tool,
 not a test.
@@ -45,6 +48,7 @@ from ghnerf_runtime.cli.simdata import load_sequences  # noqa: E402
 from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, load_session  # noqa: E402
 from ghnerf_runtime.geometry import Rig  # noqa: E402
+from ghnerf_runtime.preprocess import PAD_FILLS  # noqa: E402
 
 
 def cut_rig(rig: Rig, m: int) -> Rig:
@@ -157,7 +161,8 @@ def training_crops(samples: int, resolution: int = 128) -> None:
 def table(session, cfg, sequences, visible, args) -> None:
     """One table: the uncut reference and each share of ``args.outside``, at ``cfg``."""
     ref = run(session, cfg, sequences, None)
-    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {cfg.roi.pad_fill!r}: {args.sequences} held-out-like "
+    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {cfg.roi.pad_fill!r} (pad_fade {cfg.roi.pad_fade}): "
+          f"{args.sequences} held-out-like "
           f"sequences x {args.frames} pairs, "
           "runtime defaults otherwise; camera 0's frame cut on the left so that a share of the person's box lies "
           f"outside it{f' (kept whole, those columns filled {args.blacken})' if args.blacken else ''}; [uncut]: the "
@@ -189,8 +194,10 @@ def main(argv=None) -> int:
                     help="shares of the person's box outside camera 0's cut frame")
     ap.add_argument("--edge-crop", default=None, type=lambda s: [v for v in s.split(",") if v],
                     help="roi.edge_crop policies to run, comma-separated (default: the runtime's default only)")
-    ap.add_argument("--pad-fill", default=None, choices=("black", "edge"),
+    ap.add_argument("--pad-fill", default=None, choices=PAD_FILLS,
                     help="roi.pad_fill (default: the runtime's default)")
+    ap.add_argument("--pad-fade", default=None, type=float,
+                    help="roi.pad_fade, crop sides (default: the runtime's default)")
     ap.add_argument("--blacken", default=None, choices=("black", "grey", "replicate", "reflect"),
                     help="instead of cutting camera 0's frame, fill its cut columns so (the crops stay as uncut)")
     ap.add_argument("--training-samples", type=int, default=0,
@@ -201,6 +208,8 @@ def main(argv=None) -> int:
     cfg = EstimatorConfig(session=SessionConfig(model_dir=args.model_dir))
     if args.pad_fill:
         cfg = replace(cfg, roi=replace(cfg.roi, pad_fill=args.pad_fill))
+    if args.pad_fade is not None:
+        cfg = replace(cfg, roi=replace(cfg.roi, pad_fade=args.pad_fade))
     session = load_session(cfg)
     sequences = load_sequences(args.sequences, args.frames)
     visible = np.concatenate([np.asarray(seq.visible[:, 0]) for seq in sequences])

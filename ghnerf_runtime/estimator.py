@@ -323,8 +323,8 @@ def check_crop(plane: np.ndarray, levels_per_unit: float, config: FrameCheckConf
     0.008-0.08), ``"non-finite"`` for NaN/inf, else ``""``.
 
     ``inside`` (``CropMaps.inside``) limits the statistics to the pixels that show the frame: the
-    zero padding of a crop reaching past the frame's edge would otherwise give a saturated frame
-    the contrast of a real one. A crop with no such pixel is ``"flat"``.
+    padding of a crop reaching past the frame's edge (zeros, or the faded edge of ``roi.pad_fill``) would
+    otherwise give a saturated frame the contrast of a real one. A crop with no such pixel is ``"flat"``.
     """
     if not config.enabled:
         return True, ""
@@ -673,7 +673,8 @@ class Estimator:
         if entry is None:
             entry = (build_undistort_crop_maps(state.camera, roi, self.size, roll_deg=state.crop_roll_deg,
                                                supersample=self.config.roi.supersample,
-                                               pad_fill=self.config.roi.pad_fill).compact(),
+                                               pad_fill=self.config.roi.pad_fill,
+                                               pad_fade=self.config.roi.pad_fade).compact(),
                      crop_camera(state.camera, roi, self.size, state.crop_roll_deg))
             state.cache[key] = entry
             while len(state.cache) > self.config.roi.map_cache_size:

@@ -263,10 +263,11 @@ def test_the_turns_compose_with_a_rolled_cameras_upright_crops(session, degrees)
 
 
 @needs_model
-@pytest.mark.parametrize("fill", ["black", "edge"])
+@pytest.mark.parametrize("fill", ["black", "edge", "fade"])
 def test_the_estimator_crops_with_roi_pad_fill(session, fill):
-    """``roi.pad_fill`` reaches the estimator's remap tables: past the frame's edge its crop shows zeros or the
-    frame's edge (docs/runtime.md, "Other crops, other fills")."""
+    """``roi.pad_fill`` reaches the estimator's remap tables: past the frame's edge its crop shows zeros, the
+    frame's edge, or that edge fading into the crop's mean over ``roi.pad_fade`` (docs/runtime.md, "A person at
+    the frame's edge")."""
     from ghnerf_runtime.estimator import Estimator
     from ghnerf_runtime.cli.simdata import bench_rig_and_scene
     from ghnerf_runtime.preprocess import Roi, apply_crop_maps
@@ -283,6 +284,13 @@ def test_the_estimator_crops_with_roi_pad_fill(session, fill):
         past = crop[~maps.inside]
         if fill == "edge":
             assert np.all(past == 120)
+        elif fill == "fade":  # a uniform frame: its edge and its mean are the same colour
+            assert maps.fade is not None and np.all(past == 120)
+            frame[:, :4] = 250  # a bright left edge: repeated beside the frame, faded into the mean further out
+            crop = apply_crop_maps(frame, maps)
+            side = maps.inside.shape[0]
+            band = crop[side // 4: -side // 4, : int(np.flatnonzero(~maps.inside[side // 2]).max()) + 1, 0]
+            assert np.all(band[:, -1] > 200) and np.all(band[:, 0] < 160) and np.all(np.diff(band.astype(int)) >= -1)
         else:  # (but for bilinear taps into the frame along its edge)
             assert np.mean(past == 0) > 0.8
     finally:

@@ -642,3 +642,69 @@ def test_the_edge_pad_fill_changes_nothing_inside_the_frame():
     assert np.array_equal(apply_crop_maps(image, black), apply_crop_maps(image, edge))
     with pytest.raises(GeometryError, match="pad_fill"):
         build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, pad_fill="mirror")
+
+
+@pytest.mark.parametrize("roi, supersample", [(Roi(-60, 100, 200), 1), (Roi(-300, -50, 700), 1),
+                                              (Roi(-300, -50, 700), 2), (Roi(500, 300, 260), 2)])
+def test_the_fade_pad_fill_fades_the_frame_edge_into_the_crop_mean(roi, supersample):
+    """``pad_fill="fade"``: inside the frame the crop (and ``inside``) is black padding's; past the edge it shows
+    the frame's edge pixel, blended into the crop's in-frame mean colour by ``pad_fade`` crop sides out (the
+    shipped model reads that as much better than black or the edge alone: docs/runtime.md, "A person at the
+    frame's edge")."""
+    cam = make_camera(dist=np.zeros(5))
+    image = np.full((480, 640, 3), 40, np.uint8)
+    image[:, :8] = (200, 150, 100)  # a bright left edge, a dim bottom-right corner
+    image[-8:, -8:] = (10, 20, 30)
+    black = build_undistort_crop_maps(cam, roi, 64, supersample=supersample)
+    fade = build_undistort_crop_maps(cam, roi, 64, supersample=supersample, pad_fill="fade", pad_fade=0.1)
+    assert black.inside is not None and np.array_equal(black.inside, fade.inside)
+    a, b = apply_crop_maps(image, black), apply_crop_maps(image, fade)
+    assert b.shape == a.shape and b.dtype == np.uint8
+    assert np.array_equal(a[black.inside], b[black.inside])  # the frame itself untouched
+    mean = a[black.inside].reshape(-1, 3).mean(axis=0)
+    # Model pixel centres and their distance past the frame, in crop sides (no lens: undistorted = frame pixels).
+    u = roi.x0 + (np.arange(64) + 0.5) * roi.size / 64 - 0.5
+    v = roi.y0 + (np.arange(64) + 0.5) * roi.size / 64 - 0.5
+    dx = np.maximum(np.maximum(-u, u - 639), 0)[None, :]
+    dy = np.maximum(np.maximum(-v, v - 479), 0)[:, None]
+    beyond = np.hypot(dx, dy) / roi.size
+    far = beyond > 0.1 + 2 / 64  # wholly faded, bilinear taps and box means included
+    assert far.sum() > 100 and np.all(np.abs(b[far] - mean) <= 1.0)
+    if roi.x0 < 0:  # just left of the frame: nearly its left edge, fading towards the mean further out
+        col = int(np.flatnonzero(~black.inside[32]).max())  # the model column nearest the frame's left edge
+        near = b[16:-16, col].astype(float)
+        assert np.all(np.abs(near - (200, 150, 100)) < np.abs(near - mean))
+        row = b[32, : col + 1, 0].astype(int)
+        assert np.all(np.diff(row) >= -1) and row[-1] > row[0] + 50
+    else:  # past the bottom-right corner: the corner pixel, fading into the mean
+        assert np.all(np.abs(b[-1, -1].astype(int) - mean) < np.abs(np.array((10, 20, 30)) - mean))
+
+
+def test_the_fade_pad_fill_at_zero_shows_the_crop_mean_past_the_edge_in_any_frame_type():
+    cam = make_camera(dist=np.zeros(5))
+    roi = Roi(-300, -50, 700)
+    maps = build_undistort_crop_maps(cam, roi, 64, supersample=2, pad_fill="fade", pad_fade=0.0)
+    image = smooth_image()
+    for frame in (image, image[:, :, :1], image[:, :, 0], image.astype(np.float32), image.astype(np.uint16)):
+        black = apply_crop_maps(frame, build_undistort_crop_maps(cam, roi, 64, supersample=2))
+        out = apply_crop_maps(frame, maps)
+        assert out.shape == black.shape and out.dtype == frame.dtype
+        inside = maps.inside
+        np.testing.assert_array_equal(out[inside], black[inside])
+        far = np.zeros_like(inside)
+        far[:, : 64 * 300 // 700 - 2] = True  # left of the frame, clear of the boundary's box means
+        mean = black[inside].reshape(int(inside.sum()), -1).astype(np.float64).mean(axis=0)
+        np.testing.assert_allclose(out[far].reshape(int(far.sum()), -1), np.broadcast_to(mean, (int(far.sum()),
+                                   mean.size)), atol=1.0)
+
+
+def test_the_fade_pad_fill_changes_nothing_inside_the_frame_and_its_reach_is_checked():
+    cam = make_camera()
+    image = smooth_image()
+    black = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2)
+    fade = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2, pad_fill="fade")
+    assert fade.inside is None and fade.fade is None
+    assert np.array_equal(apply_crop_maps(image, black), apply_crop_maps(image, fade))
+    for bad in (-0.1, 1.5, float("nan"), "0.1"):
+        with pytest.raises(GeometryError, match="pad_fade"):
+            build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, pad_fill="fade", pad_fade=bad)

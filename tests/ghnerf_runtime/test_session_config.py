@@ -11,6 +11,7 @@ from ghnerf_runtime.config import (
     HeatmapsConfig,
     Joints3DConfig,
     NovelViewConfig,
+    RoiConfig,
     SessionConfig,
     config_from_dict,
     config_to_dict,
@@ -50,11 +51,28 @@ def test_unknown_keys_are_named(data, key):
     ({"decoder": {"sigma": 10**400}}, "decoder.sigma"),  # np.isfinite raised a bare TypeError
     ({"decoder": {"max_region_frac": float("inf")}}, "decoder.max_region_frac"),
     ({"roi": []}, "roi"),
+    ({"roi": {"pad_fill": "mirror"}}, "roi.pad_fill"),
+    ({"roi": {"pad_fade": 1.5}}, "roi.pad_fade"),
 ])
 def test_bad_values_are_named(data, key):
     with pytest.raises(ConfigError) as e:
         config_from_dict(data)
     assert e.value.key == key, str(e.value)
+
+
+def test_roi_pad_fill_fades_by_default_and_a_bad_fill_or_reach_is_named_with_its_value():
+    """``roi.pad_fill`` "fade" (the repeated frame edge fading into the crop's mean over ``pad_fade`` crop sides)
+    is the default since session 56 (docs/runtime.md, "A person at the frame's edge")."""
+    assert (RoiConfig().pad_fill, RoiConfig().pad_fade) == ("fade", 0.1)
+    assert RoiConfig(pad_fill="black").pad_fill == "black" and RoiConfig(pad_fade=0.0).pad_fade == 0.0
+    for kwargs, key, shown in (({"pad_fill": "mirror"}, "RoiConfig.pad_fill", "'mirror'"),
+                               ({"pad_fade": -0.1}, "RoiConfig.pad_fade", "-0.1"),
+                               ({"pad_fade": "0.1"}, "RoiConfig.pad_fade", "'0.1'")):
+        with pytest.raises(ConfigError) as e:
+            RoiConfig(**kwargs)
+        assert e.value.key == key and shown in str(e.value), str(e.value)
+    with pytest.raises(ConfigError, match="fade"):  # the message lists the fills it takes
+        RoiConfig(pad_fill="mean")
 
 
 def test_required_graphs_follow_the_config():

@@ -1,7 +1,8 @@
 """The runtime's black padding of a crop that reaches past its camera's frame, for training crops.
 
-The runtime keeps a crop square where it leaves the frame and shows zeros there
-(``ghnerf_runtime/preprocess.py``, "Clamp / pad policy"). The synthetic training crops are rendered
+The runtime keeps a crop square where it leaves the frame and shows zeros there under
+``roi.pad_fill="black"`` (``ghnerf_runtime/preprocess.py``, "Clamp / pad policy"; the runtime's default
+since session 56 is ``"fade"``, which this does not imitate: a model trained with it runs under "black"). The synthetic training crops are rendered
 directly at the crop camera (``training/data/views.py``), so the simulator fills those pixels with the
 room: the model never saw the black band it meets at run time (``docs/runtime.md``, "Known gaps").
 
