@@ -68,7 +68,7 @@ from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projec
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
-    lowest_height_m, \
+    lowest_height_m, near_the_body, \
     query_grid, triangulate_joints, triangulate_joints_checked, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
@@ -118,6 +118,12 @@ _FLOOR_EDGE_FRAC = 0.2
 #: handstand's feet are 1.6-1.9 m up and those of a person lying about 0.2 m (benchmarks/measure_lying_rendered.py
 #: --turned-crops); standing the torso is about 1.1 m above the feet, squatting or sat on a chair 0.7 m or more.
 _FLOOR_MIN_TORSO_M = 0.5
+#: The floor check's foot joints lie within this (m, across the floor) of the median of the person's triangulated
+#: joints, which replaces the working volume's box gates for it (a camera panned far takes the whole person out of
+#: the box). On the true rig the shipped model's feet paired with a wrong peak lay 1.9-6 m off the body, and those the
+#: box gates kept a median 0.16 m, 99 % within 0.63 m, all within 0.94 m (10 x 30 pairs of
+#: benchmarks/measure_calibration_drift.py's sequences; docs/calibration.md, "A camera panned far").
+_FLOOR_BODY_M = 1.0
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
@@ -191,12 +197,15 @@ class PairResult:
             to one, before the gate (:meth:`Estimator._matched_px`).
         lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lowest ankle, heel or toe
             (:data:`ghnerf_runtime.body25.FLOOR_JOINTS`) triangulated from peaks of at least the presence threshold
-            in both views, kept by the reprojection and box gates and shown by both frames at least a fifth of the
+            in both views, kept by the reprojection gate, within 1 m across the floor of the median of the person's
+            triangulated joints (since session 56 in place of the working volume's box gates, which a camera panned
+            far takes the whole person out of: docs/calibration.md) and shown by both frames at least a fifth of the
             crop window's side inside their edges (a foot cut off by the frame gets a peak at its edge), whatever
             ``joints3d.method`` and the skeleton prior report (the prior keeps its feet near the floor): near 0
             for a person standing or walking, it moves when a camera turned since calibration (a pan, which
             ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no such joint (feet out of
-            view or near a frame's edge), nobody, a frame rejected, two people in view not told apart (a
+            view or near a frame's edge), nobody by the peaks (the presence gate; since session 56 a person the box
+            gates leave nobody of still counts), a frame rejected, two people in view not told apart (a
             ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`),
             or a person not on their feet (the torso joints triangulated likewise less than 0.5 m above that foot,
             or none: upside down, lying).
@@ -1154,8 +1163,9 @@ class Estimator:
                 agreement = self._matched_px(kp, uv_model, crops)  # both people's peaks, paired one to one
         else:
             agreement = None if self._agreement is None else self._agreement.median_px
-            # the triangulation's feet (not the prior's placed ones): nobody's peaks say nothing of it
-            foot = None if nobody else self._lowest_foot
+            # the triangulation's feet (not the prior's placed ones), whether or not the box gates left someone to
+            # report (_joints_3d: the presence gate asked of the joints before them)
+            foot = self._lowest_foot
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
                      None if seen_by is None else self.camera_names[seen_by], agreement, foot)
@@ -1546,8 +1556,15 @@ class Estimator:
         tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg,
                                                           pres.threshold(self.config.heatmaps.source),
                                                           pres.min_joints)
-        in_boxes = self._gate_to_boxes(tri, regions)  # the floor check's and the presence gate's
-        self._lowest_foot = self._lowest_foot_m(in_boxes, kp, regions)
+        in_boxes = self._gate_to_boxes(tri, regions)  # the presence gate's
+        # The floor check's feet are not box-gated (as the px figure is taken before the reprojection gate): a camera
+        # panned far moves the whole triangulated person out of the working volume (8 degrees on the oracle: 3 m away
+        # read as 4.8 m, the feet 0.8 m under the floor), and the box gates dropped exactly the joints that show it.
+        # A joint far from the person's own body is dropped instead (a foot paired with the wrong peak lies metres
+        # off), and someone must be there by the peaks (the presence gate, on those joints), not by the boxes.
+        someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints,
+                                                             pres.threshold(self.config.heatmaps.source))
+        self._lowest_foot = self._lowest_foot_m(near_the_body(someone, _FLOOR_BODY_M), kp, regions)
 
         def centroid() -> Joints3D:
             g = self.grid
