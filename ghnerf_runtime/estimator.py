@@ -120,9 +120,10 @@ _FLOOR_EDGE_FRAC = 0.2
 _FLOOR_MIN_TORSO_M = 0.5
 #: The floor check's foot joints lie within this (m, across the floor) of the median of the person's triangulated
 #: joints, which replaces the working volume's box gates for it (a camera panned far takes the whole person out of
-#: the box). On the true rig the shipped model's feet paired with a wrong peak lay 1.9-6 m off the body, and those the
-#: box gates kept a median 0.16 m, 99 % within 0.63 m, all within 0.94 m (10 x 30 pairs of
-#: benchmarks/measure_calibration_drift.py's sequences; docs/calibration.md, "A camera panned far").
+#: the box). On the true rig the shipped model's foot joints the box gates kept lay a median 0.16 m off it, 99 % within
+#: 0.62 m, all within 0.98 m; 17 of the 20 they dropped 1.8-6.5 m off (a wrong pair of peaks), 3 at 0.93-0.98 m
+#: (benchmarks/measure_foot_spread.py; docs/calibration.md, "A camera panned far"). A dropped foot of a kick or a
+#: lunge costs one joint, not the pair's figure; a stray one kept would be the lowest.
 _FLOOR_BODY_M = 1.0
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
