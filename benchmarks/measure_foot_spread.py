@@ -72,8 +72,8 @@ def main(argv=None) -> int:
             kept += est.kept
             dropped += est.dropped
     k = np.asarray(kept, float)
-    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs, {args.model_dir}, the true rig: foot joints' "
-          f"distance across the floor from the median of the person's triangulated joints (m; the floor check keeps "
+    print(f"{args.sequences} held-out-like sequences x {args.frames} pairs, {args.model_dir}, the true rig: foot "
+          f"joints' distance across the floor from the median of the person's triangulated joints (m; the floor check keeps "
           f"those within {_FLOOR_BODY_M:g}):")
     if k.size:
         print(f"  kept by the box gates: {k.size}, median {np.median(k):.2f}, p99 {np.percentile(k, 99):.2f}, "
