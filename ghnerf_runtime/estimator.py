@@ -68,7 +68,7 @@ from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projec
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
-    lower_foot_m, \
+    lower_foot_m, near_the_body, \
     query_grid, triangulate_joints, triangulate_joints_checked, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
@@ -125,6 +125,13 @@ _FLOOR_MIN_TORSO_M = 0.5
 #: 0.04, heels 0.02). A foot lifted reads higher: the lower foot is the one measured.
 FOOT_STANDING_M = 0.04
 _FLOOR_MIN_FOOT_JOINTS = 2
+#: The floor check's foot joints lie within this (m, across the floor) of the median of the person's triangulated
+#: joints, which replaces the working volume's box gates for it (a camera panned far takes the whole person out of
+#: the box). On the true rig the shipped model's foot joints the box gates kept lay a median 0.16 m off it, 99 % within
+#: 0.62 m, all within 0.98 m; 17 of the 20 they dropped 1.8-6.5 m off (a wrong pair of peaks), 3 at 0.93-0.98 m
+#: (benchmarks/measure_foot_spread.py; docs/calibration.md, "A camera panned far"). A dropped foot of a kick or a
+#: lunge costs one joint, not the pair's figure; a stray one kept would be the lowest.
+_FLOOR_BODY_M = 1.0
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
@@ -202,12 +209,15 @@ class PairResult:
             the median height of its ankle, heel and toes, :data:`ghnerf_runtime.body25.FEET`, at least two of them,
             less ``FOOT_STANDING_M``, their median on a foot flat on the floor; before, the lowest such joint),
             of the joints triangulated from peaks of at least the presence threshold in both views, kept by the
-            reprojection and box gates and shown by both frames at least a fifth of the crop window's side inside
+            reprojection gate, within 1 m across the floor of the median of the person's triangulated joints (since
+            session 56 in place of the working volume's box gates, which a camera panned far takes the whole person
+            out of: docs/calibration.md) and shown by both frames at least a fifth of the crop window's side inside
             their edges (a foot cut off by the frame gets a peak at its edge), whatever ``joints3d.method`` and the
             skeleton prior report (the prior keeps its feet near the floor): near 0 for a person standing or walking
             (a foot lifted is the higher one), it moves when a camera turned since calibration (a pan, which
             ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no foot with two such joints
-            (feet out of view or near a frame's edge), nobody, a frame rejected, two people in view not told apart (a
+            (feet out of view or near a frame's edge), nobody by the peaks (the presence gate; since session 56 a
+            person the box gates leave nobody of still counts), a frame rejected, two people in view not told apart (a
             ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`),
             or a person not on their feet (the torso joints triangulated likewise less than 0.5 m above that foot,
             or none: upside down, lying).
@@ -1240,8 +1250,9 @@ class Estimator:
                 agreement = self._matched_px(kp, uv_model, crops)  # both people's peaks, paired one to one
         else:
             agreement = None if self._agreement is None else self._agreement.median_px
-            # the triangulation's feet (not the prior's placed ones): nobody's peaks say nothing of it
-            foot = None if nobody else self._lowest_foot
+            # the triangulation's feet (not the prior's placed ones), whether or not the box gates left someone to
+            # report (_joints_3d: the presence gate asked of the joints before them)
+            foot = self._lowest_foot
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
                      None if seen_by is None else self.camera_names[seen_by], agreement, foot)
@@ -1687,8 +1698,15 @@ class Estimator:
         tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg,
                                                           pres.threshold(self.config.heatmaps.source),
                                                           pres.min_joints)
-        in_boxes = self._gate_to_boxes(tri, regions)  # the floor check's and the presence gate's
-        self._lowest_foot = self._lowest_foot_m(in_boxes, kp, regions)
+        in_boxes = self._gate_to_boxes(tri, regions)  # the presence gate's
+        # The floor check's feet are not box-gated (as the px figure is taken before the reprojection gate): a camera
+        # panned far moves the whole triangulated person out of the working volume (8 degrees on the oracle: 3 m away
+        # read as 4.8 m, the feet 0.8 m under the floor), and the box gates dropped exactly the joints that show it.
+        # A joint far from the person's own body is dropped instead (a foot paired with the wrong peak lies metres
+        # off), and someone must be there by the peaks (the presence gate, on those joints), not by the boxes.
+        someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints,
+                                                             pres.threshold(self.config.heatmaps.source))
+        self._lowest_foot = self._lowest_foot_m(near_the_body(someone, _FLOOR_BODY_M), kp, regions)
 
         def centroid() -> Joints3D:
             g = self.grid

@@ -29,7 +29,7 @@ from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.triangulation import triangulate_robust, triangulate_two_views
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
-__all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "triangulate_joints",
+__all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "near_the_body", "triangulate_joints",
            "triangulate_joints_checked", "lowest_height_m", "lower_foot_m", "grid_shape", "query_grid",
            "volumetric_joints", "depth_centroid_joints"]
 
@@ -95,6 +95,25 @@ def gate_to_box(joints: Joints3D, box: np.ndarray, margin: float) -> Joints3D:
     box = np.asarray(box, dtype=np.float64)
     inside = np.all((joints.points >= box[0] - margin) & (joints.points <= box[1] + margin), axis=-1)
     return Joints3D(joints.points, joints.confidence, joints.valid & inside, joints.reprojection_px).sanitised()
+
+
+def near_the_body(joints: Joints3D, max_m: float) -> Joints3D:
+    """Joints further than ``max_m`` metres across the floor (x, z of the levelled rig frame) from the median of the
+    valid joints become missing: a joint triangulated from a wrong pair of peaks lies metres off the body, while a
+    body read too far or too near (a camera panned since calibration) keeps its joints together, wherever it lies.
+
+    Example:
+        >>> pts = np.array([[0.0, -1.5, 4.8], [0.1, 0.8, 4.9], [0.0, -1.0, 4.7], [0.0, 1.2, 8.5]])
+        >>> j = Joints3D(pts, np.ones(4, np.float32), np.ones(4, bool), np.zeros((4, 2)))
+        >>> near_the_body(j, 1.0).valid.tolist()
+        [True, True, True, False]
+    """
+    if not joints.valid.any():
+        return joints
+    centre = np.median(joints.points[joints.valid][:, [0, 2]], axis=0)
+    with np.errstate(invalid="ignore"):  # (a missing joint's point may be NaN: it stays missing)
+        near = np.linalg.norm(joints.points[:, [0, 2]] - centre, axis=-1) <= max_m
+    return Joints3D(joints.points, joints.confidence, joints.valid & near, joints.reprojection_px).sanitised()
 
 
 def _numeric(name: str, value, dtype) -> np.ndarray:

@@ -41,7 +41,8 @@ from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import MIN_CUTOFF_HZ, Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
-from ghnerf_runtime.estimator import (_FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M,
+from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_M,
+                                      _PRIOR_FOLLOW_MAX_ERROR_M,
                                       STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
@@ -193,6 +194,10 @@ def _doc(name: str) -> str:
                         "of the crop window's side inside their edges"),
     ("docs/calibration.md", f"both frames show it at least {'a fifth' if _FLOOR_EDGE_FRAC == 0.2 else _FLOOR_EDGE_FRAC}"
                             " of the crop's side inside their edges"),
+    # session 56: the floor check's feet near the person's own body, in place of the box gates (estimator._FLOOR_BODY_M)
+    ("docs/calibration.md", f"within {_FLOOR_BODY_M:g} m across the floor (x, z) of the"),
+    ("docs/runtime.md", f"within {_FLOOR_BODY_M:g} m across the floor of the median of the person's triangulated "
+                        "joints"),
 ])
 def test_the_docs_quote_the_constants(doc, phrase):
     assert phrase in _doc(doc), f"{doc} does not say {phrase!r}: the code's value changed, or the doc's wording"

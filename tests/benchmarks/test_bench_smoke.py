@@ -162,6 +162,12 @@ def test_compare_3d_methods(model, tmp_path, capsys, monkeypatch):
     assert [row["method"] for row in report["rows"]] == ["triangulate", "depth_centroid"]
 
 
+def test_measure_foot_spread(model, capsys, monkeypatch):
+    out = run_script("measure_foot_spread", "--model-dir", model, *SIZES, capsys=capsys, monkeypatch=monkeypatch)
+    assert "1 held-out-like sequences x 3 pairs" in out and "the floor check keeps those within 1)" in out, out
+    assert re.search(r"^  dropped by the box gates: \d+: ", out, re.M), out
+
+
 def test_measure_mounting(model, capsys, monkeypatch):
     out = run_script("measure_mounting", "--model-dir", model, "--sequences", "1", "--frames", "2", "--rolls", "0,90",
                      capsys=capsys, monkeypatch=monkeypatch)
