@@ -1,6 +1,7 @@
 """What a crop padded at the frame's edge costs the shipped model (the runtime's padding policy,
 ``ghnerf_runtime/preprocess.py``: the square crop is kept where it leaves the frame, those pixels show
-``roi.pad_fill``: 0 under "black", the frame's edge fading into the crop's mean under "fade", the default).
+``roi.pad_fill``: 0 under "black", the frame's edge fading into the crop's mean under "fade", the default for a
+model trained without frame padding).
 
     .venv/bin/python benchmarks/measure_edge_padding.py [--model-dir models] [--sequences 10] [--frames 30]
                                                         [--outside 0,0.1,0.25,0.5] [--training-samples 300]
@@ -161,7 +162,8 @@ def training_crops(samples: int, resolution: int = 128) -> None:
 def table(session, cfg, sequences, visible, args) -> None:
     """One table: the uncut reference and each share of ``args.outside``, at ``cfg``."""
     ref = run(session, cfg, sequences, None)
-    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {cfg.roi.pad_fill!r} (pad_fade {cfg.roi.pad_fade}): "
+    fill = cfg.beside_model(session.contract.frame_padding).roi.pad_fill  # as the estimator runs it: unset, the model's
+    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {fill!r} (pad_fade {cfg.roi.pad_fade}): "
           f"{args.sequences} held-out-like "
           f"sequences x {args.frames} pairs, "
           "runtime defaults otherwise; camera 0's frame cut on the left so that a share of the person's box lies "
@@ -195,7 +197,7 @@ def main(argv=None) -> int:
     ap.add_argument("--edge-crop", default=None, type=lambda s: [v for v in s.split(",") if v],
                     help="roi.edge_crop policies to run, comma-separated (default: the runtime's default only)")
     ap.add_argument("--pad-fill", default=None, choices=PAD_FILLS,
-                    help="roi.pad_fill (default: the runtime's default)")
+                    help="roi.pad_fill (default: the model's, fade for one trained without frame padding)")
     ap.add_argument("--pad-fade", default=None, type=float,
                     help="roi.pad_fade, crop sides (default: the runtime's default)")
     ap.add_argument("--blacken", default=None, choices=("black", "grey", "replicate", "reflect"),

@@ -126,7 +126,8 @@ def _load_estimator(rig, cfg: EstimatorConfig) -> Estimator:
     d = estimator.session.describe()
     folder = Path(next(iter(d["files"].values()))["path"]).parent
     print(f"model {folder} ({d['variant']} {d['resolution']}, graphs {', '.join(d['files'])}; "
-          f"3D method {cfg.joints3d.method}) loaded in {time.monotonic() - t0:.2f} s")
+          f"3D method {cfg.joints3d.method}, crops padded {estimator.config.roi.pad_fill!r} past the frame) loaded "
+          f"in {time.monotonic() - t0:.2f} s")
     return estimator
 
 

@@ -214,8 +214,12 @@ class RoiConfig:
             framing changes little with the shipped model (docs/runtime.md, "A person at the frame's edge").
         pad_fill: what a crop shows past the frame's edge: ``"fade"`` (the frame's edge pixel repeated,
             fading linearly into the crop's in-frame mean colour by ``pad_fade`` crop sides out), ``"black"``
-            (zeros, what a model trained with ``frame_padding`` learnt: set it for one) or ``"edge"`` (the
-            edge pixel repeated all the way). With the shipped model, 3D error with 0 / 10 / 25 / 50 % of the
+            (zeros, what a model trained with ``frame_padding`` learnt) or ``"edge"`` (the edge pixel repeated
+            all the way). None (the default): the model's own, resolved when the estimator loads it
+            (:meth:`fill_for`): ``"black"`` for a model whose contract says it was trained on black frame
+            padding (``ghnerf.frame_padding``), ``"fade"`` for any other (the shipped model, every export
+            before contract 1.3.0); a fill set here wins, and the load logs it when it is not the model's.
+            With the shipped model, 3D error with 0 / 10 / 25 / 50 % of the
             person's box outside camera 0: fade 39.7 / 40.3 / 46.5 / 110.9 mm, black 54.3 / 55.9 / 64.0 / 170.6,
             edge 35.3 / 48.2 / 66.5 / 144.8 (30.6 uncut), and fade finds more joints than black at each
             (``benchmarks/measure_edge_padding.py --pad-fill fade|black|edge``; docs/runtime.md, "A person at
@@ -236,12 +240,13 @@ class RoiConfig:
     turn_search_below: float = 0.5
     turn_search_every: int = 5
     edge_crop: str = "clip"
-    pad_fill: str = "fade"
+    pad_fill: str | None = None
     pad_fade: float = 0.1
 
     def __post_init__(self) -> None:
         _choice(self, "edge_crop", EDGE_CROPS)
-        _choice(self, "pad_fill", PAD_FILLS)
+        if self.pad_fill is not None:  # None: the model's (fill_for)
+            _choice(self, "pad_fill", PAD_FILLS)
         _number(self, "pad_fade", 0.0, 1.0)
         _boolean(self, "upright")
         _boolean(self, "turn_search")
@@ -254,6 +259,21 @@ class RoiConfig:
         _integer(self, "snap_px", 1, 64)
         _number(self, "keep_frac", 0.0, 0.9)
         _integer(self, "map_cache_size", 1, 4096)
+
+    @staticmethod
+    def model_fill(frame_padding: str) -> str:
+        """The fill a model is fed by default, from what its training crops showed past the frame (its
+        contract's ``frame_padding``): black for black (what it learnt), fade for a model whose crops never
+        reached past the frame (fade measured best for the shipped one: docs/runtime.md, "A person at the
+        frame's edge")."""
+        return "black" if frame_padding == "black" else "fade"
+
+    def fill_for(self, frame_padding: str) -> "RoiConfig":
+        """This config with ``pad_fill`` resolved for a model trained with ``frame_padding`` (its contract's):
+        the fill set here, else :meth:`model_fill`'s."""
+        if self.pad_fill is not None:
+            return self
+        return dataclasses.replace(self, pad_fill=self.model_fill(frame_padding))
 
 
 @dataclass(frozen=True)
@@ -824,6 +844,12 @@ class EstimatorConfig:
         if j.single_view_fallback and j.uses_skeleton_prior(prior_available):
             return dataclasses.replace(self, joints3d=dataclasses.replace(j, single_view_fallback=False))
         return self
+
+    def beside_model(self, frame_padding: str) -> "EstimatorConfig":
+        """This configuration as it runs with a model trained with ``frame_padding`` (its contract's): an unset
+        ``roi.pad_fill`` becomes the model's own (:meth:`RoiConfig.fill_for`)."""
+        roi = self.roi.fill_for(frame_padding)
+        return self if roi is self.roi else dataclasses.replace(self, roi=roi)
 
     def required_graphs(self, human_graph: bool = False) -> tuple[str, ...]:
         """The graphs this configuration runs (the session loads only these).

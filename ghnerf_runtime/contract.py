@@ -54,13 +54,19 @@ from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.errors import DepthRangeError, GeometryError, RuntimeErrorBase
 
 #: Contract format version. A different *major* is refused by :meth:`ModelContract.from_metadata`.
-CONTRACT_VERSION = "1.2.0"
+CONTRACT_VERSION = "1.3.0"
 """1.1.0: optional ``encoder_heatmaps`` output of the encoder graph (1.0.0 files read as without it).
-1.2.0: optional ``human`` graph (images -> ``encoder_heatmaps`` only; older files read as without it)."""
+1.2.0: optional ``human`` graph (images -> ``encoder_heatmaps`` only; older files read as without it).
+1.3.0: optional ``frame_padding`` key (what the training crops showed past a camera's frame; older files read as
+``"none"``)."""
 #: Prefix of every metadata key the contract writes.
 META_PREFIX = "ghnerf."
 #: Graph names in pipeline order.
 GRAPH_NAMES = ("encoder", "human", "volume", "render", "render_heat", "render_rgb", "query")
+#: What a model's training crops showed past a camera's frame (``ModelContract.frame_padding``): ``"none"`` (the
+#: crops never reached past it: the shipped model, and every export before contract 1.3.0) or ``"black"`` (zeros,
+#: ``TrainConfig.frame_padding``). The runtime's default ``roi.pad_fill`` follows it (``RoiConfig.pad_fill``).
+FRAME_PADDINGS = ("none", "black")
 #: ImageNet statistics, applied in the encoder graph after ``images`` (RGB, [0, 1]).
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -236,6 +242,11 @@ class ModelContract:
     without the image feature network. onnxruntime runs every node of a graph whatever outputs are
     asked for, so a keypoint-only pass that needs no cost volume runs this graph instead of
     ``encoder`` and skips the feature network (docs/runtime.md)."""
+    frame_padding: str = "none"
+    """What the training crops showed past a camera's frame (:data:`FRAME_PADDINGS`): ``"black"`` for a model
+    trained with ``frame_padding`` (it learnt black bands, so the runtime pads its crops black by default),
+    ``"none"`` for one whose crops never reached past the frame. Written as ``ghnerf.frame_padding``; a file
+    without the key (contract < 1.3.0) reads as ``"none"``."""
 
     # ------------------------------------------------------------------ build
     @classmethod
@@ -370,6 +381,8 @@ class ModelContract:
             fail("encoder_heatmaps", "encoder heatmaps need the human encoder (variant 'ghnerf')")
         if self.human_graph and not self.encoder_heatmaps:
             fail("human_graph", "the human graph outputs the encoder heatmaps; encoder_heatmaps must be true")
+        if self.frame_padding not in FRAME_PADDINGS:
+            fail("frame_padding", f"frame padding must be one of {list(FRAME_PADDINGS)}, got {self.frame_padding!r}")
 
     # --------------------------------------------------------------- metadata
     def to_metadata(self, graph: str | None = None, precision: str = "fp32") -> dict[str, str]:
@@ -394,6 +407,7 @@ class ModelContract:
             p + "precision": precision,
             p + "encoder_heatmaps": "true" if self.encoder_heatmaps else "false",
             p + "human_graph": "true" if self.human_graph else "false",
+            p + "frame_padding": self.frame_padding,
         }
         if graph is not None:
             if graph not in GRAPH_NAMES:
@@ -472,6 +486,8 @@ class ModelContract:
             encoder_heatmaps=parse("encoder_heatmaps", _boolean) if p + "encoder_heatmaps" in props else False,
             # optional since 1.2.0
             human_graph=parse("human_graph", _boolean) if p + "human_graph" in props else False,
+            # optional since 1.3.0: older exports were all trained on crops inside the frame
+            frame_padding=get("frame_padding") if p + "frame_padding" in props else "none",
         )
         contract.validate()
         expected = contract._derive_graphs()
@@ -693,7 +709,8 @@ def ray_grid(height: int, width: int, stride: int = 1) -> np.ndarray:
 
 
 __all__ = [
-    "CONTRACT_VERSION", "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "MAX_DEPTH_M", "MAX_NEAR_FAR_MARGIN_M", "IMAGE_FEATURES",
+    "CONTRACT_VERSION", "FRAME_PADDINGS",
+    "GRAPH_NAMES", "DEPTH_STATS_CHANNELS", "MAX_DEPTH_M", "MAX_NEAR_FAR_MARGIN_M", "IMAGE_FEATURES",
     "IMAGENET_MEAN", "IMAGENET_STD",
     "WEIGHTS_ID_KEY", "weights_id_of",
     "ContractError", "TensorSpec", "GraphSpec", "LevelSpec", "Normalisation", "ModelContract",

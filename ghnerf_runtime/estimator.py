@@ -58,7 +58,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES
-from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig
+from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
     target_inputs, target_projections
@@ -526,6 +526,13 @@ class Estimator:
         self.config = config.beside_prior(getattr(session, "skeleton_prior", None) is not None)
         if self.config is not config:
             log.info("joints3d.single_view_fallback is off: the skeleton prior places the joints it would")
+        # an unset roi.pad_fill pads the crops as the model's training crops were (its contract says how)
+        padding = getattr(session.contract, "frame_padding", "none")
+        self.config = self.config.beside_model(padding)
+        learnt = RoiConfig.model_fill(padding)
+        if self.config.roi.pad_fill != learnt:
+            log.info("roi.pad_fill %r as configured; the model's own would be %r (trained with frame padding %r)",
+                     self.config.roi.pad_fill, learnt, padding)
         if problem := rig.baseline_problem():  # a rig file says so on load; a camera's own readback may not
             raise GeometryError(f"rig {rig.rig_id!r}: {problem}")
         self.session = session

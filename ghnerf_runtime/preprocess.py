@@ -31,8 +31,10 @@ Clamp / pad policy
     framing changes little and the black itself is what costs: the edge alone
     helps beside the person but not once the edge cuts through the body (it
     smears the body across the band); faded into the mean it helps at every cut,
-    so the runtime's default (``RoiConfig.pad_fill``) is ``"fade"``; these
-    functions keep zeros unless asked (the training crops' ``frame_padding``).
+    so the runtime's default (``RoiConfig.pad_fill``) is ``"fade"`` for a model
+    trained without frame padding and ``"black"`` for one trained with it (its
+    contract's ``frame_padding``); these functions keep zeros unless asked (the
+    training crops' ``frame_padding``).
 
 Anti-aliasing
     Bilinear remapping aliases when the ROI is much larger than ``out_size``.

@@ -655,6 +655,7 @@ class ModelSession:
         c = self.contract
         return {"resolution": f"{c.width}x{c.height}", "variant": c.variant, "model_version": c.model_version,
                 "contract_version": c.version, "weights_id": self.weights_id,
+                "frame_padding": c.frame_padding,  # what its training crops showed past the frame
                 "files": {g: {"path": str(f.path), "precision": f.precision} for g, f in self.files.items()},
                 "card": bool(self.card)}
 

@@ -966,20 +966,23 @@ def stage_export(cfg: PipelineConfig, trained: dict[str, Path]) -> tuple[list[Pa
     failed check or a crash leaves the model folder's files as they were."""
     import torch
 
-    from training.export.export import example_inputs, export_all
+    from training.export.export import example_inputs, export_all, trained_frame_padding
     from training.export.parity import check_fp32_parity, torch_vs_ort
     from training.train import load_model
 
     outputs, info = [], {}
     for variant, ckpt in trained.items():
         model, ck = load_model(ckpt)
+        # the contract says what the crops showed past the frame in training: the runtime pads to match
+        padding = trained_frame_padding(ck)
         folder = cfg.out / variant
         staging = _staging(folder)
         try:
             weights = staging / f"{variant}.pt"
-            torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": ck["step"]},
-                       weights)  # weights only: loads with torch.load(weights_only=True)
-            paths = export_all(model, staging, inputs=example_inputs(model))
+            torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": ck["step"],
+                        "frame_padding": padding},
+                       weights)  # weights only: loads with torch.load(weights_only=True); a re-export reads padding
+            paths = export_all(model, staging, inputs=example_inputs(model), frame_padding=padding)
             info[variant] = {"fp32_parity_torch_vs_ort": torch_vs_ort(
                 model, paths, example_inputs(model, targets=3, ray_stride=4, seed=1))}
             if cfg.parity_check:

@@ -216,8 +216,10 @@ def check_model(config: DaemonConfig) -> str:
     parts = list(session.graphs) + [name for name, part in (("skeleton prior", session.skeleton_prior),
                                                             ("novel-view painter", session.novel_painter))
                                     if part is not None]
+    # the fill the estimator runs (an unset roi.pad_fill is the model's): the config printed says null there
+    fill = config.estimator.beside_model(contract.frame_padding).roi.pad_fill
     return (f"model: {files[0].path.parent} ({contract.variant}, {precision}, {contract.width}x{contract.height}; "
-            f"{', '.join(parts)}) loaded, the estimator settings fit it")
+            f"{', '.join(parts)}) loaded, the estimator settings fit it (roi.pad_fill {fill})")
 
 
 def read_checked_config(path: str) -> DaemonConfig:

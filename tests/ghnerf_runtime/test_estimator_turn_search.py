@@ -297,6 +297,51 @@ def test_the_estimator_crops_with_roi_pad_fill(session, fill):
         est.close()
 
 
+@needs_model
+@pytest.mark.parametrize("padding, configured, expected", [
+    ("black", None, "black"),  # trained on black bands (TrainConfig.frame_padding): black crops by default
+    ("none", None, "fade"),  # the shipped model's contract (its files have no ghnerf.frame_padding)
+    ("black", "fade", "fade"),  # a fill the config sets wins, said once at load
+    ("none", "black", "black"),
+])
+def test_an_unset_pad_fill_pads_the_crops_as_the_model_was_trained(session, caplog, padding, configured, expected):
+    """``roi.pad_fill`` unset: the estimator's crops show what the model's training crops showed past the frame
+    (its contract's ``frame_padding``), zeros for a model trained on black bands, fade for the shipped model; a
+    fill in the config wins, and the load logs it when it is not the model's (docs/runtime.md, "A person at the
+    frame's edge")."""
+    import logging
+
+    from ghnerf_runtime.estimator import Estimator
+    from ghnerf_runtime.cli.simdata import bench_rig_and_scene
+    from ghnerf_runtime.preprocess import Roi, apply_crop_maps
+
+    shipped = session.contract
+    assert shipped.frame_padding == "none"
+    rig = bench_rig_and_scene(0)[0]
+    session.contract = replace(shipped, frame_padding=padding)  # the same graphs, trained as said
+    try:
+        with caplog.at_level(logging.INFO, logger="ghnerf_runtime.estimator"):
+            est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                                                          roi=RoiConfig(pad_fill=configured)))
+    finally:
+        session.contract = shipped
+    try:
+        assert est.config.roi.pad_fill == expected
+        state = est._cams[0]
+        maps, _ = est._crop(state, Roi(-200, 100, 300))
+        crop = apply_crop_maps(np.full((state.camera.height, state.camera.width, 3), 120, np.uint8), maps)
+        past = crop[~maps.inside]
+        if expected == "black":  # (but for bilinear taps into the frame along its edge)
+            assert np.mean(past == 0) > 0.8
+        else:  # a uniform frame: its faded edge is its colour
+            assert maps.fade is not None and np.all(past == 120)
+        said = [r.getMessage() for r in caplog.records if "roi.pad_fill" in r.getMessage()]
+        differs = configured is not None and configured != RoiConfig.model_fill(padding)
+        assert len(said) == differs and all(repr(padding) in m and repr(configured) in m for m in said), said
+    finally:
+        est.close()
+
+
 def _changing(session, k: int, before: str, after: str, n_before: int, n_after: int):
     """Bench scene ``k`` at 30 fps, the body in pose ``before`` for ``n_before`` pairs, then in ``after``, run
     with the search on: per pair (the crops' turns after it, tracked, joints found, 3D error in mm) and the

@@ -197,6 +197,22 @@ def test_files_found_by_metadata_when_renamed(tiny_model_dir, tmp_path):
     assert _load_encoder(folder).files["encoder"].path.name == "ghnerf-enc-v1.onnx"
 
 
+def test_the_files_say_what_the_model_was_trained_on_past_the_frame(tiny_model_dir, tmp_path):
+    """``ghnerf.frame_padding`` reaches the session's contract (the estimator's default ``roi.pad_fill`` follows
+    it) and its summary; a folder exported before contract 1.3.0, without the key, reads as "none"."""
+    assert _load_encoder(tiny_model_dir).contract.frame_padding == "none"  # random weights: trained on nothing
+    folder = _copy(tiny_model_dir, tmp_path / "m")
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, "ghnerf.frame_padding": "black"})
+    black = _load_encoder(folder)
+    assert black.contract.frame_padding == "black" and black.describe()["frame_padding"] == "black"
+    _edit_metadata(folder / "encoder.onnx", lambda p: {k: v for k, v in p.items() if k != "ghnerf.frame_padding"})
+    assert _load_encoder(folder).contract.frame_padding == "none"
+    _edit_metadata(folder / "encoder.onnx", lambda p: {**p, "ghnerf.frame_padding": "grey"})
+    with pytest.raises(ModelContractError) as e:
+        _load_encoder(folder)
+    assert e.value.key == "ghnerf.frame_padding" and "'grey'" in str(e.value) and "encoder.onnx" in str(e.value)
+
+
 # --------------------------------------------------------------------------- refusals
 def test_wrong_contract_version_refused(tiny_model_dir, tmp_path):
     folder = _copy(tiny_model_dir, tmp_path / "m")

@@ -60,12 +60,23 @@ def test_bad_values_are_named(data, key):
     assert e.value.key == key, str(e.value)
 
 
-def test_roi_pad_fill_fades_by_default_and_a_bad_fill_or_reach_is_named_with_its_value():
-    """``roi.pad_fill`` "fade" (the repeated frame edge fading into the crop's mean over ``pad_fade`` crop sides)
-    is the default since session 56 (docs/runtime.md, "A person at the frame's edge")."""
-    assert (RoiConfig().pad_fill, RoiConfig().pad_fade) == ("fade", 0.1)
+def test_roi_pad_fill_follows_the_model_unless_set_and_a_bad_fill_or_reach_is_named_with_its_value():
+    """An unset ``roi.pad_fill`` is the model's: "black" for a model trained on black frame padding (its
+    contract's ``frame_padding``: what it learnt), "fade" (the repeated frame edge fading into the crop's mean over
+    ``pad_fade`` crop sides) for one trained without, as the shipped model and older exports read; a fill set in
+    the config wins over either (docs/runtime.md, "A person at the frame's edge")."""
+    assert (RoiConfig().pad_fill, RoiConfig().pad_fade) == (None, 0.1)
+    assert config_from_dict({"roi": {"pad_fill": None}}).roi.pad_fill is None  # null in a file: the model's
+    assert RoiConfig().fill_for("black").pad_fill == "black" and RoiConfig().fill_for("none").pad_fill == "fade"
+    for fill in ("black", "edge", "fade"):
+        for padding in ("none", "black"):
+            assert RoiConfig(pad_fill=fill).fill_for(padding).pad_fill == fill
+    resolved = EstimatorConfig().beside_model("black")
+    assert resolved.roi.pad_fill == "black" and resolved.roi.pad_fade == 0.1  # the rest of the tree as it was
+    assert config_to_dict(resolved)["roi"]["pad_fill"] == "black"  # the effective config shows it
     assert RoiConfig(pad_fill="black").pad_fill == "black" and RoiConfig(pad_fade=0.0).pad_fade == 0.0
     for kwargs, key, shown in (({"pad_fill": "mirror"}, "RoiConfig.pad_fill", "'mirror'"),
+                               ({"pad_fill": ""}, "RoiConfig.pad_fill", "''"),
                                ({"pad_fade": -0.1}, "RoiConfig.pad_fade", "-0.1"),
                                ({"pad_fade": "0.1"}, "RoiConfig.pad_fade", "'0.1'")):
         with pytest.raises(ConfigError) as e:

@@ -98,6 +98,8 @@ def test_metadata_round_trip():
     ("ghnerf.normalisation", json.dumps({**make().normalisation.to_json(), "value_range": [1.0, 1.0]})),
     ("ghnerf.normalisation", json.dumps({**make().normalisation.to_json(), "mean": [0.5, "nan", 0.5]})),
     ("ghnerf.background", "nan"),
+    ("ghnerf.frame_padding", "grey"),  # a fill the training never shows: not taken for "none"
+    ("ghnerf.frame_padding", ""),
 ])
 def test_bad_metadata_names_the_key(key, value):
     meta = make().to_metadata()
@@ -106,6 +108,23 @@ def test_bad_metadata_names_the_key(key, value):
         ModelContract.from_metadata(meta)
     assert err.value.key == key
     assert key in str(err.value)
+
+
+def test_frame_padding_round_trips_and_reads_as_none_where_a_file_has_none():
+    """``ghnerf.frame_padding`` (contract 1.3.0): what the training crops showed past the frame, for the runtime's
+    default ``roi.pad_fill``. A file exported before it (the shipped model's) has no key: its crops never
+    reached past the frame ("none"), so it keeps the runtime's fade."""
+    black = make(frame_padding="black")
+    meta = black.to_metadata(graph="encoder")
+    assert meta["ghnerf.frame_padding"] == "black" and make().to_metadata()["ghnerf.frame_padding"] == "none"
+    assert ModelContract.from_metadata(meta).frame_padding == "black"
+    assert not ModelContract.from_metadata(meta).same_model(make())  # graphs of two trainings are not mixed
+    del meta["ghnerf.frame_padding"]
+    old = ModelContract.from_metadata(meta)
+    assert old.frame_padding == "none" and old.same_model(make())
+    with pytest.raises(ContractError) as err:
+        make(frame_padding="edge")
+    assert err.value.key == "ghnerf.frame_padding" and "'edge'" in str(err.value)
 
 
 def test_missing_key_is_named():

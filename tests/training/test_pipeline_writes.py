@@ -87,12 +87,17 @@ def _old_folder(cfg: PipelineConfig) -> tuple[Path, dict[str, bytes]]:
     return folder, old
 
 
-def _fake_export(monkeypatch, max_abs: float, fail_after: str | None = None):
+def _fake_export(monkeypatch, max_abs: float, fail_after: str | None = None, checkpoint: dict | None = None,
+                 padded: list | None = None):
+    """``stage_export`` with torch's side faked: ``checkpoint`` is what the trained checkpoint holds beside its
+    weights (the step alone by default); ``padded`` collects each export's contract ``frame_padding``."""
     import training.export.export as export
     import training.export.parity as parity
     import training.train as train
 
-    def export_all(model, out_dir, inputs=None):
+    def export_all(model, out_dir, inputs=None, frame_padding="none"):
+        if padded is not None:
+            padded.append(frame_padding)
         paths = {}
         for g in GRAPHS:
             if g == fail_after:
@@ -101,7 +106,7 @@ def _fake_export(monkeypatch, max_abs: float, fail_after: str | None = None):
             paths[g].write_bytes(b"volume" if g == "volume" else b"new encoder")  # the volume graph as it was
         return paths
 
-    monkeypatch.setattr(train, "load_model", lambda ckpt: (_Model(), {"step": 6}))
+    monkeypatch.setattr(train, "load_model", lambda ckpt: (_Model(), {"step": 6, **(checkpoint or {})}))
     monkeypatch.setattr(export, "example_inputs", lambda model, **kw: None)
     monkeypatch.setattr(export, "export_all", export_all)
     monkeypatch.setattr(parity, "torch_vs_ort", lambda model, paths, inputs: {
@@ -308,6 +313,42 @@ def test_new_graphs_moving_in_set_the_card_aside_until_the_card_stage_writes_it_
     assert sorted(p.name for p in cfg.out.glob("*.stale*")) == []
 
 
+@pytest.mark.parametrize("checkpoint, padding", [
+    ({"config": {"frame_padding": True, "edge_cut": 0.05}}, "black"),  # edge128.json's recipe: black bands
+    ({"config": {"frame_padding": False}}, "none"),
+    ({}, "none"),  # a checkpoint of before the option (or a bare state dict): the shipped model's
+    ({"frame_padding": "black"}, "black"),  # a weights file the export stage wrote, exported again
+])
+def test_the_export_stage_records_the_training_padding_in_the_contract_and_the_weights_file(
+        tmp_path, monkeypatch, checkpoint, padding):
+    """A model trained on black bands past the frame (``TrainConfig.frame_padding``) is exported with
+    ``frame_padding "black"`` in its contract, which the runtime's default ``roi.pad_fill`` follows, and its
+    weights file keeps it for a later export (``python -m training.export --checkpoint models/ghnerf/ghnerf.pt``)."""
+    torch = pytest.importorskip("torch")
+    from training.export.export import trained_frame_padding
+
+    cfg = PipelineConfig(out=tmp_path / "models")
+    _old_folder(cfg)
+    padded: list = []
+    _fake_export(monkeypatch, max_abs=0.0, checkpoint=checkpoint, padded=padded)
+    pipeline.stage_export(cfg, {"ghnerf": tmp_path / "last.pt"})
+    weights = torch.load(cfg.out / "ghnerf" / "ghnerf.pt", weights_only=True)
+    assert padded == [padding] and weights["frame_padding"] == padding
+    assert trained_frame_padding(weights) == padding
+
+
+def test_a_checkpoint_padding_of_another_kind_is_refused_by_key():
+    pytest.importorskip("torch")
+    from ghnerf_runtime.contract import ContractError
+    from training.export.export import trained_frame_padding
+
+    for checkpoint, key, shown in (({"frame_padding": "grey"}, "frame_padding", "'grey'"),
+                                   ({"config": {"frame_padding": "yes"}}, "config.frame_padding", "'yes'")):
+        with pytest.raises(ContractError) as e:
+            trained_frame_padding(checkpoint)
+        assert e.value.key == key and shown in str(e.value), str(e.value)
+
+
 # ------------------------------------------------------------------------------------- python -m training.export
 def test_the_export_cli_stages_its_graphs_and_moves_them_in_only_after_the_parity_check(tmp_path, monkeypatch,
                                                                                         capsys, caplog):
@@ -320,7 +361,8 @@ def test_the_export_cli_stages_its_graphs_and_moves_them_in_only_after_the_parit
     staging = cfg.out / "ghnerf.staging"
     got = {}
 
-    def export_all(model, out_dir, graphs, opset, inputs):
+    def export_all(model, out_dir, graphs, opset, inputs, frame_padding):
+        assert frame_padding == "none"  # random weights (no --checkpoint): trained on nothing
         paths = {g: Path(out_dir) / f"{g}.onnx" for g in graphs}
         for g, p in paths.items():
             p.write_bytes(b"volume" if g == "volume" else b"new encoder")  # the volume graph as it was
@@ -351,6 +393,31 @@ def test_the_export_cli_stages_its_graphs_and_moves_them_in_only_after_the_parit
     assert (folder / "volume.int8.onnx").read_bytes() == b"volume int8"  # its fp32 graph is unchanged
     assert not (cfg.out / "model_card.json").exists() and (cfg.out / "model_card.stale.json").is_file()
     assert "set aside as model_card.stale.json" in caplog.text
+
+
+def test_the_export_cli_writes_the_checkpoints_training_padding_into_the_contract(tmp_path, capsys):
+    """``python -m training.export --checkpoint``: a checkpoint whose train config set ``frame_padding`` gives
+    graphs whose contract says "black" (the runtime's unset ``roi.pad_fill`` follows it); a padding record of
+    another kind is a usage error naming the file and the key (tiny preset, one graph: real export)."""
+    torch = pytest.importorskip("torch")
+    import training.export.cli as cli
+    from ghnerf_runtime.session import check_graph_file
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    model = GHNeRF(preset("tiny"))
+    ckpt = tmp_path / "last.pt"
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": 1,
+                "config": {"frame_padding": True, "edge_cut": 0.05}}, ckpt)
+    out = tmp_path / "m"
+    argv = ["--preset", "tiny", "--checkpoint", str(ckpt), "--graphs", "encoder", "--out", str(out)]
+    assert cli.main(argv) == 0
+    assert check_graph_file(out / "encoder.onnx", "encoder", "fp32").frame_padding == "black"
+    assert json.loads(capsys.readouterr().out)["contract"]["frame_padding"] == "black"
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "frame_padding": "grey"}, ckpt)
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{ckpt}: frame_padding:" in err and "'grey'" in err, err
 
 
 # ----------------------------------------------------------------------------------------- strict JSON

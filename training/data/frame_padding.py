@@ -2,9 +2,11 @@
 
 The runtime keeps a crop square where it leaves the frame and shows zeros there under
 ``roi.pad_fill="black"`` (``ghnerf_runtime/preprocess.py``, "Clamp / pad policy"; the runtime's default
-since session 56 is ``"fade"``, which this does not imitate: a model trained with it runs under "black"). The synthetic training crops are rendered
-directly at the crop camera (``training/data/views.py``), so the simulator fills those pixels with the
-room: the model never saw the black band it meets at run time (``docs/runtime.md``, "Known gaps").
+since session 56 is ``"fade"``, which this does not imitate: a model trained with it is exported with
+``frame_padding: "black"`` in its contract, and an unset ``roi.pad_fill`` then gives it "black").
+The synthetic training crops are rendered directly at the crop camera (``training/data/views.py``), so the
+simulator fills those pixels with the room: the model never saw the black band it meets at run time
+(``docs/runtime.md``, "Known gaps").
 
 :func:`frame_coverage` is the runtime's own crop (its remap tables and ``apply_crop_maps``) of a frame of
 ones: each model pixel's share of frame, 1 inside, 0 past the edge, and in between on the one-pixel fade

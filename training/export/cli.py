@@ -139,14 +139,21 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
 
+    frame_padding = "none"  # random weights learnt nothing of the frame's edge
     if args.checkpoint:
+        from ghnerf_runtime.contract import ContractError
+        from training.export.export import trained_frame_padding
         from training.model.config import ConfigError
         from training.train import load_model  # lazy: the trainer is not needed for random weights
 
         try:
-            model, _ = load_model(args.checkpoint, default_config=preset(args.preset))
+            model, ck = load_model(args.checkpoint, default_config=preset(args.preset))
+            frame_padding = trained_frame_padding(ck)  # into the contract: the runtime pads crops as trained
         except ConfigError as e:  # a damaged or foreign file, named
             print(f"python -m training.export: error: {e}", file=sys.stderr)
+            return 2
+        except ContractError as e:  # a padding record that is none the contract knows, keyed
+            print(f"python -m training.export: error: {args.checkpoint}: {e}", file=sys.stderr)
             return 2
     else:
         log.warning("no --checkpoint: exporting random weights (to test the export, not to run)")
@@ -167,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     # parity checks pass (training.export.staging)
     staging = staging_dir(out)
     try:
-        fp32, int8 = _export_and_check(args, model, graphs, staging, calib_frames)
+        fp32, int8 = _export_and_check(args, model, graphs, staging, calib_frames, frame_padding)
     except ParityError as e:
         try:
             rejected(out, staging, e)
@@ -184,10 +191,12 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str, ...], staging: Path,
-                      calib_frames: list[np.ndarray] | None = None) -> tuple[dict[str, Path], dict[str, Path]]:
+                      calib_frames: list[np.ndarray] | None = None,
+                      frame_padding: str = "none") -> tuple[dict[str, Path], dict[str, Path]]:
     """Export (and quantize, time) into ``staging``, print and write the report, then check the parity (unless
     ``--no-parity-check``): a :class:`ParityError` names the graph. ``calib_frames``: the checked ``--calib-npz``
-    frames (None: random ones). Returns the staged fp32 and int8 files."""
+    frames (None: random ones); ``frame_padding``: the contract's (the checkpoint's training padding). Returns
+    the staged fp32 and int8 files."""
     import torch  # noqa: PLC0415
 
     from training.export.export import example_inputs, export_all  # noqa: PLC0415
@@ -195,8 +204,10 @@ def _export_and_check(args: argparse.Namespace, model: GHNeRF, graphs: tuple[str
     from training.export.quantize import calibration_feeds, quantize_all  # noqa: PLC0415
 
     report: dict = {"preset": args.preset, "parameters": model.parameter_counts(),
-                    "contract": {"resolution": f"{model.config.width}x{model.config.height}"}}
-    fp32 = export_all(model, staging, graphs=graphs, opset=args.opset, inputs=example_inputs(model))
+                    "contract": {"resolution": f"{model.config.width}x{model.config.height}",
+                                 "frame_padding": frame_padding}}
+    fp32 = export_all(model, staging, graphs=graphs, opset=args.opset, inputs=example_inputs(model),
+                      frame_padding=frame_padding)
     report["fp32_parity"] = torch_vs_ort(model, fp32, example_inputs(model, targets=3, ray_stride=2, seed=1))
     int8 = {}
     if args.int8:

@@ -23,13 +23,15 @@ import logging
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 import onnx
 import torch
 from torch import Tensor, nn
 
-from ghnerf_runtime.contract import GRAPH_NAMES, WEIGHTS_ID_KEY, GraphSpec, ModelContract, ray_grid
+from ghnerf_runtime.contract import FRAME_PADDINGS, GRAPH_NAMES, WEIGHTS_ID_KEY, ContractError, GraphSpec, \
+    ModelContract, ray_grid
 from ghnerf_runtime.session import check_graph_file
 from training.export.opsets import DEFAULT_OPSET
 from training.model.camera_inputs import box_corners, orbit_camera, scene_inputs, synthetic_rig
@@ -159,6 +161,27 @@ def weights_id(model: nn.Module) -> str:
     return h.hexdigest()
 
 
+def trained_frame_padding(checkpoint: Mapping[str, Any]) -> str:
+    """What the model of ``checkpoint`` was shown past a camera's frame in training, as the contract records it
+    (``ModelContract.frame_padding``): ``"black"`` when its train config set ``frame_padding`` (a trainer
+    checkpoint's ``config``), or as a weights file ``make model`` ships says (its ``frame_padding`` key);
+    ``"none"`` for a checkpoint that says neither (trained before the option, or a bare state dict).
+
+    Raises:
+        ContractError: naming the key, when the checkpoint holds a value that is not one of these.
+    """
+    if "frame_padding" in checkpoint:  # the weights file's own record, written by the export stage
+        value = checkpoint["frame_padding"]
+        if value not in FRAME_PADDINGS:
+            raise ContractError(f"expected one of {list(FRAME_PADDINGS)}, got {value!r}", key="frame_padding")
+        return value
+    config = checkpoint.get("config")
+    padded = config.get("frame_padding", False) if isinstance(config, Mapping) else False
+    if not isinstance(padded, bool):
+        raise ContractError(f"expected true or false, got {padded!r}", key="config.frame_padding")
+    return "black" if padded else "none"
+
+
 def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precision: str, *,
                    weights_id: str | None) -> None:
     """Write the contract and ``weights_id`` (:func:`weights_id`; None: a graph of unknown weights, say a
@@ -180,9 +203,10 @@ def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precis
 
 
 def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInputs | None = None,
-                 opset: int = DEFAULT_OPSET, weights: str | None = None) -> Path:
+                 opset: int = DEFAULT_OPSET, weights: str | None = None, frame_padding: str = "none") -> Path:
     """Export one graph (fp32) to ``path`` with the contract and the weights id stamped in (``weights``: the
-    model's :func:`weights_id`, computed here when not given).
+    model's :func:`weights_id`, computed here when not given; ``frame_padding``: the contract's, what the
+    training crops showed past the frame, :func:`trained_frame_padding`).
 
     Raises:
         ModelContractError: the file written is one the runtime would refuse (its inputs or outputs differ from
@@ -192,7 +216,7 @@ def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInp
         raise ValueError(f"unknown graph {graph!r}; graphs: {GRAPH_NAMES}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    contract = model.contract(opset=opset)
+    contract = model.contract(opset=opset, frame_padding=frame_padding)
     spec = contract.graph(graph)
     inputs = inputs or example_inputs(model)
     wrapper = GRAPH_MODULES[graph](model, spec).eval()
@@ -224,15 +248,18 @@ def export_graph(model: GHNeRF, graph: str, path: str | Path, inputs: ExampleInp
 
 
 def export_all(model: GHNeRF, out_dir: str | Path, graphs: tuple[str, ...] | None = None,
-               opset: int = DEFAULT_OPSET, inputs: ExampleInputs | None = None) -> dict[str, Path]:
+               opset: int = DEFAULT_OPSET, inputs: ExampleInputs | None = None,
+               frame_padding: str = "none") -> dict[str, Path]:
     """Export ``graphs`` (default: every graph of the model's contract) as ``<out_dir>/<graph>.onnx`` (fp32), each
-    with the model's :func:`weights_id`. Returns graph -> path."""
+    with the model's :func:`weights_id` and ``frame_padding`` in its contract (:func:`trained_frame_padding`).
+    Returns graph -> path."""
     out_dir = Path(out_dir)
     graphs = model.contract(opset=opset).graph_names if graphs is None else graphs
     inputs = inputs or example_inputs(model)
     weights = weights_id(model)
-    return {g: export_graph(model, g, out_dir / f"{g}.onnx", inputs, opset, weights) for g in graphs}
+    return {g: export_graph(model, g, out_dir / f"{g}.onnx", inputs, opset, weights, frame_padding) for g in graphs}
 
 
 __all__ = ["export_all", "export_graph", "example_inputs", "ExampleInputs", "stamp_metadata", "weights_id",
+           "trained_frame_padding",
            "GRAPH_MODULES", "DEFAULT_OPSET"]

@@ -412,8 +412,10 @@ class GHNeRF(nn.Module):
             c["human_feat"] = self.human.out_channels
         return c
 
-    def contract(self, opset: int = 17) -> ModelContract:
-        """The runtime contract of this model (``ghnerf_runtime.contract``)."""
+    def contract(self, opset: int = 17, frame_padding: str = "none") -> ModelContract:
+        """The runtime contract of this model (``ghnerf_runtime.contract``). ``frame_padding``: what its training
+        crops showed past a camera's frame (``ModelContract.frame_padding``; the weights do not say, the
+        checkpoint's train config does: ``training.export.export.trained_frame_padding``)."""
         cfg = self.config
         strides = dict(FEATURE_STRIDES)
         if self.human is not None:
@@ -427,6 +429,7 @@ class GHNeRF(nn.Module):
             model_version=cfg.model_version,
             encoder_heatmaps=self.human is not None and self.human.heat_head is not None,
             human_graph=self.human is not None and self.human.heat_head is not None,
+            frame_padding=frame_padding,
         )
 
 

@@ -107,7 +107,7 @@ def test_validate_config_passes_what_the_model_serves_and_says_what_it_checked(t
     out, err = capsys.readouterr()
     assert json.loads(out)["estimator"]["heatmaps"]["source"] == "rendered"  # stdout stays the config alone
     assert err == (f"ghnerf-daemon: {path}: ok; model: {BASELINE} (baseline, fp32+int8, 128x128; encoder, volume, "
-                   "render_heat) loaded, the estimator settings fit it\n")
+                   "render_heat) loaded, the estimator settings fit it (roi.pad_fill fade)\n")
 
 
 @needs_baseline
