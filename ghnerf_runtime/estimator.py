@@ -965,11 +965,14 @@ class Estimator:
         are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
         is followed through the turned crops, the same window about the person as ``p``'s."""
         self.turn_searches += 1
-        several_track = self._several_track
+        held = self._several_track, self._behind_track
         for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing, track):
             self._use_turns(turns)
             if track is not None:
                 self.tracker.follow(track)
+                # the same subject through other crops: a flagged track's hold (_several_people, _behind_view) goes
+                # with it, or the turned pass lets the other person's peaks into the joints and the track
+                self._several_track, self._behind_track = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
             if q.j3 is not None and q.someone and (
                     not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
@@ -983,7 +986,7 @@ class Estimator:
                 q.novel.abandon()
         # upright stands, with the track its pass left
         self._use_turns((0, 0), fresh=False)
-        self._several_track = several_track
+        self._several_track, self._behind_track = held
         return p
 
     def _turn_check(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
@@ -1006,9 +1009,10 @@ class Estimator:
             return p
         self._turn_check_wait = self.config.roi.turn_search_every - 1
         self.turn_checks += 1
-        turns, several_track = self._turns, self._several_track
+        turns, held = self._turns, (self._several_track, self._behind_track)
         self._use_turns((0, 0))
         self.tracker.follow(track)
+        self._several_track, self._behind_track = held  # the same subject: a flagged track's hold goes with it
         q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if q.j3 is not None and q.someone and (
                 not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
@@ -1020,7 +1024,7 @@ class Estimator:
         if q.novel is not None:
             q.novel.abandon()
         self._use_turns(turns, fresh=False)  # the turn stands, with the track its pass left
-        self._several_track = several_track
+        self._several_track, self._behind_track = held
         return p
 
     def _lost_on_a_tracked_pass(self, p: "_Pass") -> bool:
