@@ -1225,7 +1225,6 @@ class Estimator:
         if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
-        _add_ms(timing, "joints_3d", t)
         if several:
             # each view's decoded peak may be either person's, so the pair's own figures say nothing of the rig:
             # the subject's own pairings do (_subject_figures)
@@ -1236,6 +1235,7 @@ class Estimator:
             agreement = None if self._agreement is None else self._agreement.median_px
             # the triangulation's feet (not the prior's placed ones): nobody's peaks say nothing of it
             foot = None if nobody else self._lowest_foot
+        _add_ms(timing, "joints_3d", t)  # (the figures too: _matched_px triangulates every pairing again)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
                      None if seen_by is None else self.camera_names[seen_by], agreement, foot)
