@@ -992,11 +992,14 @@ class Estimator:
         are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
         is followed through the turned crops, the same window about the person as ``p``'s."""
         self.turn_searches += 1
-        several_track = self._several_track
+        held = self._several_track, self._behind_track
         for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing, track):
             self._use_turns(turns)
             if track is not None:
                 self.tracker.follow(track)
+                # the same subject through other crops: a flagged track's hold (_several_people, _behind_view) goes
+                # with it, or the turned pass lets the other person's peaks into the joints and the track
+                self._several_track, self._behind_track = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
             if q.j3 is not None and q.someone and (
                     not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
@@ -1010,7 +1013,7 @@ class Estimator:
                 q.novel.abandon()
         # upright stands, with the track its pass left
         self._use_turns((0, 0), fresh=False)
-        self._several_track = several_track
+        self._several_track, self._behind_track = held
         return p
 
     def _turn_check(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
@@ -1033,9 +1036,10 @@ class Estimator:
             return p
         self._turn_check_wait = self.config.roi.turn_search_every - 1
         self.turn_checks += 1
-        turns, several_track = self._turns, self._several_track
+        turns, held = self._turns, (self._several_track, self._behind_track)
         self._use_turns((0, 0))
         self.tracker.follow(track)
+        self._several_track, self._behind_track = held  # the same subject: a flagged track's hold goes with it
         q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if q.j3 is not None and q.someone and (
                 not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
@@ -1047,7 +1051,7 @@ class Estimator:
         if q.novel is not None:
             q.novel.abandon()
         self._use_turns(turns, fresh=False)  # the turn stands, with the track its pass left
-        self._several_track = several_track
+        self._several_track, self._behind_track = held
         return p
 
     def _lost_on_a_tracked_pass(self, p: "_Pass") -> bool:
@@ -1248,7 +1252,6 @@ class Estimator:
         if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
-        _add_ms(timing, "joints_3d", t)
         if several:
             # each view's decoded peak may be either person's, so the pair's own figures say nothing of the rig:
             # the subject's own pairings do (_subject_figures)
@@ -1260,6 +1263,7 @@ class Estimator:
             # the triangulation's feet (not the prior's placed ones), whether or not the box gates left someone to
             # report (_joints_3d: the presence gate asked of the joints before them)
             foot = self._lowest_foot
+        _add_ms(timing, "joints_3d", t)  # (the figures too: _matched_px triangulates every pairing again)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
                      None if seen_by is None else self.camera_names[seen_by], agreement, foot)

@@ -410,3 +410,58 @@ def test_a_strong_turned_track_is_checked_upright_every_few_pairs_and_keeps_its_
         assert est._turns == (90, 90) and r.tracked and (~r.missing).sum() >= 18, (est._turns, checks)
     # the search compared the turn with upright on the cold pair: the first check two tracked pairs later
     assert checks == [0, 0, 1, 1, 2, 2, 3] and est.turns_left == 0 and est.turn_searches == 1
+
+
+def _held_track_estimator(turns: tuple[int, int]):
+    """An estimator on the oracle session (no model) crops turned ``turns``, with a track of one scene's person;
+    ``_pass`` is replaced by a spy that records the hold it is asked with (``_several_track``, ``_behind_track``,
+    the crops' turns) and, as an unflagged pass's ``_finish_pass`` would, clears the hold and finds nobody."""
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.estimator import Estimator, _Pass
+    from ghnerf_runtime.joints3d import Joints3D
+
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    est = Estimator(OracleSession(edge128_contract()), rig, EstimatorConfig(roi=RoiConfig(turn_search=True)))
+    joints = sim.SimScene(sim.SceneConfig(seed=1)).joints_3d(0.0)
+    est._use_turns(turns)
+    assert est.tracker.update(joints, np.ones(len(joints), np.float32), np.ones(len(joints), bool), 0)
+    asked = []
+    frame_ok = {n: None for n in est.camera_names}
+
+    def spy(images, regions, sequence, timing, novel_view=None, cold_several=None):
+        asked.append((est._several_track, est._behind_track, est._turns))
+        est._several_track, est._behind_track = False, None
+        return _Pass(regions, frame_ok, j3=Joints3D.missing(len(joints)), someone=False)
+
+    est._pass = spy
+    weak = _Pass(est.tracker.regions(), frame_ok, env={"encoder_heatmaps": np.zeros((2, len(joints), 4, 4))},
+                 j3=Joints3D.missing(len(joints)), someone=False)
+    return est, weak, asked
+
+
+@pytest.mark.parametrize("held", [(True, None), (True, 1)])
+def test_a_turn_check_reruns_a_flagged_track_upright_with_its_hold_and_keeps_it(held):
+    """Integration review (session 56): a tracked pass through a kept turn whose track follows a ``several_people``
+    pass (flagged in both views, or by one view alone: ``_behind_view``) is checked upright on that track. The
+    upright rerun was asked with the hold dropped (``_use_turns`` resets it for a new track), so its subject's crop,
+    showing fewer of the other person's joints twice, went unflagged and let their peaks into the joints (kept when
+    more confident); and where the turn stood, the one-view hold's view was lost (``_several_track`` restored,
+    ``_behind_track`` left as the rerun's). Now the rerun follows the track with its hold, and the hold stands."""
+    est, weak, asked = _held_track_estimator((180, 180))
+    est._several_track, est._behind_track = held
+    assert est._turn_check([None, None], weak, 0, {}, None) is weak
+    assert asked == [(*held, (0, 0))]
+    assert (est._several_track, est._behind_track, est._turns) == (*held, (180, 180))
+
+
+@pytest.mark.parametrize("held", [(True, None), (True, 0)])
+def test_a_tracked_turn_search_follows_a_flagged_track_with_its_hold_and_keeps_it(held):
+    """As the turn check: a weak tracked upright pass of a flagged track searches the turns on that track, each
+    turned pass asked with the track's hold; upright (no turn kept) stands with it."""
+    est, weak, asked = _held_track_estimator((0, 0))
+    est._turn_candidates = lambda images, base, timing, track=None: [(180, 180)]
+    est._several_track, est._behind_track = held
+    assert est._turn_search([None, None], weak, 0, {}, None, est.tracker.track) is weak
+    assert asked == [(*held, (180, 180))]
+    assert (est._several_track, est._behind_track, est._turns) == (*held, (0, 0))

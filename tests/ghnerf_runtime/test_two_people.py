@@ -674,3 +674,25 @@ def test_matched_errors_pairs_each_view_s_peaks_once_and_leaves_out_a_way_not_me
     assert np.array_equal(np.isnan(got), np.isnan(expect)) and np.allclose(got[~np.isnan(got)], expect[~np.isnan(expect)])
     with pytest.raises(ShapeError, match=r"\(4, J\)"):
         T.matched_errors(np.zeros((3, 2)))
+
+
+def test_the_matched_px_figure_s_time_counts_in_the_joints_3d_stage(monkeypatch):
+    """Integration review (session 56): ``_matched_px`` triangulates every pairing of both views' peaks again, after
+    the ``joints_3d`` stage's clock had stopped: its time was in no stage of ``timing_ms`` (only ``total``). Made
+    slow here (0.3 s) to be told from the stage's own work: a flagged pair that reports nobody (``pick_subject:
+    none``) measures it, and its ``joints_3d`` stage holds it."""
+    import time
+
+    pause_s, measured = 0.3, []
+    real = Estimator._matched_px
+
+    def slow(self, *args):
+        measured.append(1)
+        time.sleep(pause_s)
+        return real(self, *args)
+
+    monkeypatch.setattr(Estimator, "_matched_px", slow)
+    results = _scene(4, alone=0, pairs=2, config=NOBODY)
+    assert measured and all(r.several_people for r, *_ in results)
+    assert all(r.timing_ms["joints_3d"] >= 1e3 * pause_s for r, *_ in results), \
+        [r.timing_ms["joints_3d"] for r, *_ in results]
