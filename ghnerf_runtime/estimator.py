@@ -1709,7 +1709,7 @@ class Estimator:
         in_boxes = self._gate_to_boxes(tri, regions)  # the presence gate's
         # The floor check's feet are not box-gated (as the px figure is taken before the reprojection gate): a camera
         # panned far moves the whole triangulated person out of the working volume (8 degrees on the oracle: 3 m away
-        # read as 4.8 m, the feet 0.8 m under the floor), and the box gates dropped exactly the joints that show it.
+        # read as 4.8 m, the feet 0.7-0.8 m under the floor), and the box gates dropped exactly the joints that show it.
         # A joint far from the person's own body is dropped instead (a foot paired with the wrong peak lies metres
         # off), and someone must be there by the peaks (the presence gate, on those joints), not by the boxes.
         someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints,
