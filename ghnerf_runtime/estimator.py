@@ -130,7 +130,8 @@ _FLOOR_MIN_FOOT_JOINTS = 2
 #: the box). On the true rig the shipped model's foot joints the box gates kept lay a median 0.16 m off it, 99 % within
 #: 0.62 m, all within 0.98 m; 17 of the 20 they dropped 1.8-6.5 m off (a wrong pair of peaks), 3 at 0.93-0.98 m
 #: (benchmarks/measure_foot_spread.py; docs/calibration.md, "A camera panned far"). A dropped foot of a kick or a
-#: lunge costs one joint, not the pair's figure; a stray one kept would be the lowest.
+#: lunge costs one joint, not the pair's figure; stray ones kept would pull their foot's median down (two of its four
+#: joints, or one of a foot with two seen: tests/ghnerf_runtime/test_floor_big_pan.py).
 _FLOOR_BODY_M = 1.0
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
@@ -1712,7 +1713,7 @@ class Estimator:
         in_boxes = self._gate_to_boxes(tri, regions)  # the presence gate's
         # The floor check's feet are not box-gated (as the px figure is taken before the reprojection gate): a camera
         # panned far moves the whole triangulated person out of the working volume (8 degrees on the oracle: 3 m away
-        # read as 4.8 m, the feet 0.8 m under the floor), and the box gates dropped exactly the joints that show it.
+        # read as 4.8 m, the feet 0.7-0.8 m under the floor), and the box gates dropped exactly the joints that show it.
         # A joint far from the person's own body is dropped instead (a foot paired with the wrong peak lies metres
         # off), and someone must be there by the peaks (the presence gate, on those joints), not by the boxes.
         someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints,
