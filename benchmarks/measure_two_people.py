@@ -406,6 +406,10 @@ def main(argv=None) -> int:
     ap.add_argument("--behind", type=float, metavar="METRES",
                     help="the second person this far behind the first along the first camera's (view 0's) line of "
                          "sight through the first's place (--places' first; the second's is replaced)")
+    ap.add_argument("--behind-min-joints", type=int, default=EstimatorConfig().joints3d.behind_min_joints,
+                    metavar="N", help="joints3d.behind_min_joints: a tracked pass showing N joints twice in one view "
+                                      "alone is several_people (0, the default: off; docs/runtime.md, \"One person "
+                                      "behind the other\", measured with 6)")
     ap.add_argument("--occlude", action="store_true",
                     help="the oracle: a person's joints behind the other's body in a view show no peak there "
                          "(a camera would not see them; without it every joint shows at full strength)")
@@ -441,12 +445,15 @@ def main(argv=None) -> int:
     if args.occlude and (args.model_dir or args.calibration or args.one_person_model):
         ap.error("--occlude is the oracle's (the rendered people hide each other already; --calibration and "
                  "--one-person-model film no hidden joints): leave it out")
+    if not 0 <= args.behind_min_joints <= 25:
+        ap.error(f"--behind-min-joints needs 0 to 25 joints, got {args.behind_min_joints}")
     if args.behind is not None:
         if not (np.isfinite(args.behind) and args.behind > 0):
             ap.error(f"--behind needs a distance above 0 m, got {args.behind!r}")
         args.places = (args.places[0], behind_place(args.places[0], args.behind))
     if args.calibration:
-        config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject))
+        config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
+                                                  behind_min_joints=args.behind_min_joints))
         from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M as limit  # the daemon's floor check
         for deg in (float(v) for v in args.calibration.split(",")):
             m = measure_calibration(args.scenes, args.pairs, args.alone, deg, config, args.places, args.axis)
@@ -485,7 +492,8 @@ def main(argv=None) -> int:
         runs.insert(0, (0, False, f"reference: the first person alone, {args.pairs * args.scenes} pairs "
                                   f"({args.scenes} scenes)"))
     config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
-                                              skeleton_prior=args.skeleton_prior))
+                                              skeleton_prior=args.skeleton_prior,
+                                              behind_min_joints=args.behind_min_joints))
     for alone, second, what in runs:
         counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places, args.model_dir,
                                 second, args.occlude)
@@ -496,6 +504,8 @@ def main(argv=None) -> int:
             maps += ", each person's joints behind the other's body hidden"
         if args.skeleton_prior != EstimatorConfig().joints3d.skeleton_prior:
             maps += f", skeleton_prior {args.skeleton_prior}"
+        if args.behind_min_joints:
+            maps += f", behind_min_joints {args.behind_min_joints}"
         flagged_mm = (f"the flagged pairs' {counts['flagged_mm'] / counts['flagged_joints']:.1f}"
                       if counts["flagged_joints"] else "no flagged pair's joints")
         print(f"{what}{where}{', swapped' if args.swap else ''}, {maps}, the defaults, pick_subject "

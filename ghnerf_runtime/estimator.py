@@ -183,8 +183,9 @@ class PairResult:
             never on a pair that reports nobody.
         several_people: at least ``joints3d.second_person_min_joints`` joint maps showed a second strong peak in
             both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject),
-            or, on a tracked pass, in one view alone (one person behind the other as the other camera sees them,
-            since session 56: without a track the person that camera sees is reported, whatever the rule): only
+            or, on a tracked pass with ``joints3d.behind_min_joints`` set (off by default), in one view alone (one
+            person behind the other as the other camera sees them, since session 56: without a track the person
+            that camera sees is reported, whatever the rule): only
             the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
             2D); without a track, the joints of the person ``joints3d.pick_subject`` names, whom the track then
             follows (none with ``pick_subject: none``; docs/runtime.md, "Two people in the working volume").
@@ -1333,22 +1334,22 @@ class Estimator:
     def _behind_view(self, kp: Keypoints2D) -> int | None:
         """One person behind the other as one camera sees them (docs/runtime.md, "One person behind the other"):
         the view that shows one peak where the other shows two, or None. Where the pair shows fewer than
-        ``second_person_min_joints`` joints twice in both views, a view showing that many twice by itself (the other
-        view then the one peak's) makes the pair ``several_people`` all the same: the hidden person's peaks are
-        behind the other's in one view, beside them in the other. One person through the shipped model showed at
-        most 4 joints twice in a view (the bench's 30 sequences of 10 pairs, 330 passes; docs/runtime.md). Passes
+        ``second_person_min_joints`` joints twice in both views, a view showing ``behind_min_joints`` twice by itself
+        (the other view then the one peak's) makes the pair ``several_people`` all the same: the hidden person's
+        peaks are behind the other's in one view, beside them in the other. Off by default (``behind_min_joints``
+        0): one person alone through the shipped model reaches 6 on some pairs (docs/runtime.md). Passes
         following such a pass's subject stay so while that view shows any joint twice
         (:data:`STILL_SEVERAL_MIN_JOINTS`). Asked of tracked passes that :meth:`_several_people` did not flag
         (:meth:`_finish_pass`)."""
         cfg = self.config.joints3d
-        if cfg.second_person_min_joints == 0 or joints_shown_twice(kp, cfg.second_person_ratio) >= \
-                cfg.second_person_min_joints:
+        if cfg.behind_min_joints == 0 or cfg.second_person_min_joints == 0 or \
+                joints_shown_twice(kp, cfg.second_person_ratio) >= cfg.second_person_min_joints:
             return None
         per_view = np.count_nonzero(kp.valid & (kp.runner_up >= cfg.second_person_ratio * kp.confidence), axis=-1)
         if self._behind_track is not None and self._several_track and self.tracker.track is not None:
             seen, need = 1 - self._behind_track, STILL_SEVERAL_MIN_JOINTS
         else:
-            seen, need = int(np.argmax(per_view)), cfg.second_person_min_joints
+            seen, need = int(np.argmax(per_view)), cfg.behind_min_joints
         return 1 - seen if per_view[seen] >= need else None
 
     def _keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
