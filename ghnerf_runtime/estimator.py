@@ -524,6 +524,8 @@ class Estimator:
     """
 
     def __init__(self, session: Any, rig: Rig, config: EstimatorConfig | None = None) -> None:
+        if problem := rig.baseline_problem():  # a rig file says so on load; a camera's own readback may not
+            raise GeometryError(f"rig {rig.rig_id!r}: {problem}")
         config = config or EstimatorConfig()
         self.config = config.beside_prior(getattr(session, "skeleton_prior", None) is not None)
         if self.config is not config:
@@ -535,8 +537,6 @@ class Estimator:
         if self.config.roi.pad_fill != learnt:
             log.info("roi.pad_fill %r as configured; the model's own would be %r (trained with frame padding %r)",
                      self.config.roi.pad_fill, learnt, padding)
-        if problem := rig.baseline_problem():  # a rig file says so on load; a camera's own readback may not
-            raise GeometryError(f"rig {rig.rig_id!r}: {problem}")
         self.session = session
         self.rig = rig
         self.contract = session.contract

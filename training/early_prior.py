@@ -38,7 +38,7 @@ def export_keypoint_graph(train_config: dict, data: str | Path, calib_scenes: in
     ``human_init``, calibrated as the pipeline's quantize stage calibrates (the same scenes and inputs)."""
     from training.data.targets import TargetConfig
     from training.data.torch_dataset import MultiViewDataset
-    from training.export.export import example_inputs, export_graph
+    from training.export.export import example_inputs, export_graph, trained_frame_padding
     from training.export.quantize import calibration_feeds, quantize_all
     from training.model import GHNeRF
     from training.pipeline import CALIB_RAY_STRIDE, CALIB_RAYS_PER_TARGET, _scene_inputs, calibration_items
@@ -51,7 +51,10 @@ def export_keypoint_graph(train_config: dict, data: str | Path, calib_scenes: in
     model = GHNeRF(tc.model_config()).eval()
     load_human(model, tc.human_init)
     out = Path(out_dir)
-    fp32 = {graph: export_graph(model, graph, out / f"{graph}.onnx", example_inputs(model))}
+    # the contract's frame padding as the export stage will write it from the joint run's checkpoint (the same
+    # train config): otherwise the graphs' hashes differ and the pipeline trains the prior again
+    padding = trained_frame_padding({"config": train_config})
+    fp32 = {graph: export_graph(model, graph, out / f"{graph}.onnx", example_inputs(model), frame_padding=padding)}
     calib_ds = MultiViewDataset(data, "train", TargetConfig())
     # calibrated as the quantize stage calibrates (its constants), so the int8 file comes out the same
     calib = [_scene_inputs(model, item, ray_stride=CALIB_RAY_STRIDE, seed=i)
