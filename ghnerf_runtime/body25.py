@@ -33,8 +33,8 @@ BODY_PARTS: dict[str, tuple[int, ...]] = {
     "feet": tuple(JOINT_INDEX[n] for n in ("LBigToe", "LSmallToe", "LHeel", "RBigToe", "RSmallToe", "RHeel")),
 }
 
-#: The joints nearest the floor of a person standing, walking or sitting: the ankles and the feet. The
-#: daemon's floor check (firmware_host.daemon.calibration_watch) watches the lowest one triangulated.
+#: The joints nearest the floor of a person standing, walking or sitting: the ankles and the feet (FEET's, both
+#: feet together). The daemon's floor check (firmware_host.daemon.calibration_watch) reads them by foot (FEET).
 FLOOR_JOINTS: tuple[int, ...] = tuple(JOINT_INDEX[n] for n in ("RAnkle", "LAnkle")) + BODY_PARTS["feet"]
 #: The floor joints of each foot, the right then the left: the floor check measures the lower foot's height by the
 #: median of its joints (ghnerf_runtime.joints3d.lower_foot_m).

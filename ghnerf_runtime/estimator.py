@@ -492,6 +492,14 @@ def _median_confidence(j3: Joints3D) -> float:
     return float(np.median(j3.confidence[j3.valid])) if j3.valid.any() else 0.0
 
 
+def _finds_better(q: "_Pass", p: "_Pass") -> bool:
+    """Whether ``q``, a pass through other crop turns (:meth:`Estimator._turn_search`, :meth:`Estimator._turn_check`),
+    is kept over ``p``: it finds someone where ``p`` did not, or at a median joint confidence :data:`_TURN_MARGIN`
+    higher."""
+    return q.j3 is not None and q.someone and (
+        not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN)
+
+
 def joints_shown_twice(kp: Keypoints2D, ratio: float) -> int:
     """How many joints' maps show, in *both* views, a second peak (the decoder's ``kp.runner_up``) of at
     least ``ratio`` of the first: what ``joints3d.second_person_min_joints`` is compared with (the
@@ -1003,8 +1011,7 @@ class Estimator:
                 # with it, or the turned pass lets the other person's peaks into the joints and the track
                 self._several_track, self._behind_track = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
-            if q.j3 is not None and q.someone and (
-                    not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
+            if _finds_better(q, p):
                 if p.novel is not None:
                     p.novel.abandon()
                 self.turns_kept += 1
@@ -1043,8 +1050,7 @@ class Estimator:
         self.tracker.follow(track)
         self._several_track, self._behind_track = held  # the same subject: a flagged track's hold goes with it
         q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
-        if q.j3 is not None and q.someone and (
-                not p.someone or _median_confidence(q.j3) >= _median_confidence(p.j3) + _TURN_MARGIN):
+        if _finds_better(q, p):
             if p.novel is not None:
                 p.novel.abandon()
             self.turns_left += 1

@@ -633,15 +633,23 @@ def test_the_edge_pad_fill_repeats_the_frame_edge_past_it(roi, supersample):
         assert np.all(b[-2, -2] == (10, 20, 30))  # past the bottom-right corner: the corner pixel
 
 
-def test_the_edge_pad_fill_changes_nothing_inside_the_frame():
+@pytest.mark.parametrize("fill", ["edge", "fade"])
+def test_a_pad_fill_changes_nothing_for_a_crop_inside_the_frame(fill):
     cam = make_camera()
     image = smooth_image()
     black = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2)
-    edge = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2, pad_fill="edge")
-    assert black.inside is None and edge.inside is None
-    assert np.array_equal(apply_crop_maps(image, black), apply_crop_maps(image, edge))
+    filled = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2, pad_fill=fill)
+    assert black.inside is None and filled.inside is None and filled.fade is None
+    assert np.array_equal(apply_crop_maps(image, black), apply_crop_maps(image, filled))
+
+
+def test_the_pad_fill_and_the_fade_s_reach_are_checked():
+    cam = make_camera()
     with pytest.raises(GeometryError, match="pad_fill"):
         build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, pad_fill="mirror")
+    for bad in (-0.1, 1.5, float("nan"), "0.1"):
+        with pytest.raises(GeometryError, match="pad_fade"):
+            build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, pad_fill="fade", pad_fade=bad)
 
 
 @pytest.mark.parametrize("roi, supersample", [(Roi(-60, 100, 200), 1), (Roi(-300, -50, 700), 1),
@@ -696,15 +704,3 @@ def test_the_fade_pad_fill_at_zero_shows_the_crop_mean_past_the_edge_in_any_fram
         mean = black[inside].reshape(int(inside.sum()), -1).astype(np.float64).mean(axis=0)
         np.testing.assert_allclose(out[far].reshape(int(far.sum()), -1), np.broadcast_to(mean, (int(far.sum()),
                                    mean.size)), atol=1.0)
-
-
-def test_the_fade_pad_fill_changes_nothing_inside_the_frame_and_its_reach_is_checked():
-    cam = make_camera()
-    image = smooth_image()
-    black = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2)
-    fade = build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, supersample=2, pad_fill="fade")
-    assert fade.inside is None and fade.fade is None
-    assert np.array_equal(apply_crop_maps(image, black), apply_crop_maps(image, fade))
-    for bad in (-0.1, 1.5, float("nan"), "0.1"):
-        with pytest.raises(GeometryError, match="pad_fade"):
-            build_undistort_crop_maps(cam, Roi(200, 100, 200), 64, pad_fill="fade", pad_fade=bad)
