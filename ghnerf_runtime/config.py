@@ -398,6 +398,16 @@ class RaysConfig:
         _integer(self, "align_cells", 1, 64)
 
 
+#: The floor check's standing foot (Joints3DConfig.foot_standing_m) by default: the median height of a foot's
+#: triangulated joints (at least two of its ankle, toes and heel) on a foot flat on the floor; the simulated people's
+#: true lower foot read 0.038 m (p10 to p90 0.033 to 0.044 over the 900 pairs of
+#: benchmarks/measure_calibration_drift.py --sequences 30 --frames 30; their ankles stand about 0.075 m high, toes
+#: 0.04, heels 0.02). Bare feet: shoes or a mat raise it (docs/calibration.md, "Shoes, mats: the standing foot").
+FOOT_STANDING_M = 0.04
+#: The largest foot_standing_m accepted (metres).
+MAX_FOOT_STANDING_M = 0.3
+
+
 @dataclass(frozen=True)
 class Joints3DConfig:
     """How 3D joints are made from the model outputs (:mod:`ghnerf_runtime.joints3d`).
@@ -474,6 +484,12 @@ class Joints3DConfig:
             through the working volume's centre), within 0.2 m of each other the one nearer the cameras;
             ``"nearest"`` the one nearest the cameras, within 0.2 m the one nearer the centre line; ``"none"``
             nobody until one is alone (session 53's rule).
+        foot_standing_m: the floor check's foot height (``PairResult.lowest_foot_m``, the daemon's ``FloorWatch``) is
+            the median height of the lower foot's triangulated joints less this (metres): that median on a foot
+            standing flat on this install's floor. The default is the simulated people's bare feet
+            (:data:`FOOT_STANDING_M`); shoes' soles or a mat raise it by their thickness, which the floor check's
+            limit (``health.calibration_max_floor_m``, 0.05 m) would otherwise absorb: ``ghnerf-daemon --config
+            FILE --measure-floor`` measures it on the rig (docs/calibration.md, "Shoes, mats: the standing foot").
     """
 
     method: str = "triangulate"
@@ -495,6 +511,7 @@ class Joints3DConfig:
     behind_min_joints: int = 0
     max_track_step_m: float = 0.15
     pick_subject: str = "centre_line"
+    foot_standing_m: float = FOOT_STANDING_M
 
     def __post_init__(self) -> None:
         _choice(self, "method", THREE_D_METHODS)
@@ -519,6 +536,8 @@ class Joints3DConfig:
         _integer(self, "behind_min_joints", 0, 25)
         _number(self, "max_track_step_m", 0.0, 10.0, lo_open=True)
         _choice(self, "pick_subject", PICK_SUBJECT_RULES)
+        # up to 0.3 m: bare feet to a thick mat under thick soles; more is a floor the rig file has wrong
+        _number(self, "foot_standing_m", 0.0, MAX_FOOT_STANDING_M)
 
     def uses_skeleton_prior(self, available: bool) -> bool:
         """Whether the skeleton prior runs, given whether the model folder has one (``on`` without one is the

@@ -119,11 +119,9 @@ _FLOOR_EDGE_FRAC = 0.2
 #: --turned-crops); standing the torso is about 1.1 m above the feet, squatting or sat on a chair 0.7 m or more.
 _FLOOR_MIN_TORSO_M = 0.5
 #: The floor check's foot height (PairResult.lowest_foot_m) is the median height of a foot's triangulated joints (at
-#: least _FLOOR_MIN_FOOT_JOINTS of its ankle, toes and heel) less this, that median on a foot flat on the floor: the
-#: simulated people's true lower foot read 0.038 m (p10 to p90 0.033 to 0.044 over the 900 pairs of
-#: benchmarks/measure_calibration_drift.py --sequences 30 --frames 30; their ankles stand about 0.075 m high, toes
-#: 0.04, heels 0.02). A foot lifted reads higher: the lower foot is the one measured.
-FOOT_STANDING_M = 0.04
+#: least _FLOOR_MIN_FOOT_JOINTS of its ankle, toes and heel) less ``joints3d.foot_standing_m`` (config.FOOT_STANDING_M
+#: by default, the simulated bare feet), that median on a foot flat on the floor. A foot lifted reads higher: the lower
+#: foot is the one measured.
 _FLOOR_MIN_FOOT_JOINTS = 2
 #: The floor check's foot joints lie within this (m, across the floor) of the median of the person's triangulated
 #: joints, which replaces the working volume's box gates for it (a camera panned far takes the whole person out of
@@ -209,7 +207,8 @@ class PairResult:
             to one, before the gate (:meth:`Estimator._matched_px`).
         lowest_foot_m: the height above the floor (the rig frame's ``-y``, metres) of the lower foot (since session 56:
             the median height of its ankle, heel and toes, :data:`ghnerf_runtime.body25.FEET`, at least two of them,
-            less ``FOOT_STANDING_M``, their median on a foot flat on the floor; before, the lowest such joint),
+            less ``joints3d.foot_standing_m``, their median on a foot flat on the floor, 0.04 m by default; before,
+            the lowest such joint),
             of the joints triangulated from peaks of at least the presence threshold in both views, kept by the
             reprojection gate, within 1 m across the floor of the median of the person's triangulated joints (since
             session 56 in place of the working volume's box gates, which a camera panned far takes the whole person
@@ -1763,9 +1762,9 @@ class Estimator:
 
     def _lowest_foot_m(self, tri: Joints3D, kp: Keypoints2D, regions: Regions) -> float | None:
         """The lower foot's height above the floor (:func:`~ghnerf_runtime.joints3d.lower_foot_m`: the median of its
-        joints less ``FOOT_STANDING_M``, a foot with ``_FLOOR_MIN_FOOT_JOINTS`` of them), of the joints triangulated
-        from peaks strong in both views (the presence threshold) that both frames show well inside their edges
-        (``_FLOOR_EDGE_FRAC``): not the prior's (it keeps placed feet near the floor, whatever the calibration), nor
+        joints less ``joints3d.foot_standing_m``, a foot with ``_FLOOR_MIN_FOOT_JOINTS`` of them), of the joints
+        triangulated from peaks strong in both views (the presence threshold) that both frames show well inside their
+        edges (``_FLOOR_EDGE_FRAC``): not the prior's (it keeps placed feet near the floor, whatever the calibration), nor
         guesses at a frame's edge.
         ``None`` too unless the torso joints so triangulated stand ``_FLOOR_MIN_TORSO_M`` above that foot (their
         median height): a person upside down or lying is not standing on the floor with their feet (a window of
@@ -1784,8 +1783,8 @@ class Estimator:
             with np.errstate(invalid="ignore"):
                 feet[idx] = ((uv[:, 0] >= margin) & (uv[:, 0] <= cam.width - 1 - margin)
                              & (uv[:, 1] >= margin) & (uv[:, 1] <= cam.height - 1 - margin))
-        lowest = lower_foot_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FEET, FOOT_STANDING_M,
-                              _FLOOR_MIN_FOOT_JOINTS)
+        lowest = lower_foot_m(Joints3D(tri.points, tri.confidence, feet, tri.reprojection_px), FEET,
+                              self.config.joints3d.foot_standing_m, _FLOOR_MIN_FOOT_JOINTS)
         torso = [j for j in _TORSO if seen[j]]
         if lowest is None or not torso or -np.median(tri.points[torso, 1]) - lowest < _FLOOR_MIN_TORSO_M:
             return None  # not seen on their feet (y down: a height is -y)

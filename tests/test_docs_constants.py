@@ -28,6 +28,7 @@ from drivers.url_paths import FILE_PARTS
 from firmware_host.daemon.calibration_watch import CLEAR_RATIO
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW, \
     DAEMON_PATH_KEYS
+from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, READS_PER_PAIR
 from firmware_host.daemon.memory import MMAP_THRESHOLD
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
@@ -39,7 +40,7 @@ from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
-from ghnerf_runtime.config import MIN_CUTOFF_HZ, Joints3DConfig, TrackingConfig
+from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_M,
                                       _PRIOR_FOLLOW_MAX_ERROR_M,
@@ -163,6 +164,14 @@ def _doc(name: str) -> str:
     # session 54: the floor check's default, quoted where it is explained and in the config table
     ("docs/calibration.md", f"`health.calibration_max_floor_m` ({CALIBRATION_MAX_FLOOR_M:g} m)"),
     ("docs/daemon.md", f"| `health.calibration_max_floor_m` | {CALIBRATION_MAX_FLOOR_M:g} |"),
+    # session 57: the floor check's standing foot (a setting since), its default, range and --measure-floor's pairs
+    ("docs/calibration.md", f"`estimator.joints3d.foot_standing_m` ({FOOT_STANDING_M:g} m by default"),
+    ("docs/daemon.md", f"`estimator.joints3d.foot_standing_m` ({FOOT_STANDING_M:g} m, bare feet)"),
+    ("docs/runtime.md", f"less `joints3d.foot_standing_m` ({FOOT_STANDING_M:g} m by default"),
+    ("docs/calibration.md", f"outside 0 to {MAX_FOOT_STANDING_M:g} m (the setting's range"),
+    ("docs/calibration.md", f"runs pairs until {DEFAULT_PAIRS} of them (`--measure-floor PAIRS`)"),
+    ("docs/calibration.md", f"fewer than PAIRS of {dict([(5, 'five')]).get(READS_PER_PAIR)} times as many"),
+    ("docs/daemon.md", f"until PAIRS ({DEFAULT_PAIRS}) of them"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read

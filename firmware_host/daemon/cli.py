@@ -6,6 +6,7 @@ Examples::
     ghnerf-daemon --config daemon.json --validate-config      # check it (the model loaded too), print it, exit
     ghnerf-daemon --config daemon.json --validate-config --no-model   # the same, the model folder's names only
     ghnerf-daemon --print-example-config > daemon.json        # a starting point (sim:// rig, UDP sink)
+    ghnerf-daemon --config daemon.json --measure-floor        # the floor check's standing foot on this rig, exit
 
 Under systemd (``systemd/ghnerf.service``, ``Type=notify``) it reports ``READY=1`` once the model
 is loaded, keeps a one-line ``STATUS=`` (``systemctl status ghnerf``), pings the watchdog while its
@@ -15,6 +16,12 @@ main loop progresses and logs without timestamps (the journal adds its own).
 built for a stand-in rig) without opening the rig or a sink, so a config it passes does not exit 2 at start
 (bar a rig the model cannot run on, known when it opens). ``--no-model`` leaves the model unloaded, for a
 machine without it.
+
+``--measure-floor [PAIRS]`` (default 60) opens the rig and the model as the start does (no sink), runs pairs with
+someone standing until PAIRS of them measured the lower foot (``PairResult.lowest_foot_m``), prints the measurement
+as JSON with the ``estimator.joints3d.foot_standing_m`` to set (shoes' soles, a mat: docs/calibration.md, "Shoes,
+mats: the standing foot") and exits: 0 measured, 1 not (too few feet seen, or feet off any floor), 2 a bad config.
+Stop the service first (it holds the cameras).
 
 SIGHUP (``systemctl reload ghnerf``) reads the config file again: a file that passes every check of
 ``--validate-config`` (and whose model loads) is applied without a restart, touching only what
@@ -48,6 +55,7 @@ from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.url import RigUrl
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
+from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, FloorMeasureError, measure_floor_of_config
 from firmware_host.daemon.sandbox import rig_url_hint, sandbox_warnings, service_hint
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_estimator, check_sink_urls, load_model
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
@@ -84,6 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="with --validate-config: do not load the model, check only its folder's file names "
                          "(a machine without the model, or where it lives elsewhere)")
     ap.add_argument("--print-example-config", action="store_true", help="print a config to start from, exit")
+    ap.add_argument("--measure-floor", type=int, nargs="?", const=DEFAULT_PAIRS, default=None, metavar="PAIRS",
+                    help=f"with someone standing in view: measure the lower foot's height over PAIRS pairs "
+                         f"(default {DEFAULT_PAIRS}) through the config's rig and model, print it with the "
+                         f"estimator.joints3d.foot_standing_m to set (shoes, a mat), exit (the service stopped)")
     ap.add_argument("--max-seconds", type=float, default=None,
                     help="stop after this long (a bounded run for trials; default: until SIGTERM)")
     return ap
@@ -331,6 +343,27 @@ def _validate(path: str, *, with_model: bool) -> int:
     return status
 
 
+def _measure_floor(path: str, pairs: int) -> int:
+    """``--measure-floor``: the measurement as JSON on stdout, what to set on stderr; 1 when it could not be taken.
+
+    :raises DaemonConfigError: naming the file and the key (a bad config, a model that does not load).
+    """
+    config = read_checked_config(path)
+    try:
+        m = measure_floor_of_config(config, pairs, load_model=load_model)
+    except DaemonConfigError as e:
+        raise DaemonConfigError(str(e), key=str(path)) from None
+    except (FloorMeasureError, drivers.DriverError) as e:
+        print(f"{PROG}: {path}: {e}", file=sys.stderr)
+        return 1
+    status = _print_json(m.to_json())
+    print(f"{PROG}: {path}: the lower foot's joints stood a median {m.median_m:.3f} m above the floor over "
+          f"{len(m.heights_m)} pairs (the floor check read {m.median_m - m.foot_standing_m:+.3f} m with "
+          f"estimator.joints3d.foot_standing_m {m.foot_standing_m:g}): set it to {m.suggested_m:g}",
+          file=sys.stderr)
+    return status
+
+
 def _main(argv: Sequence[str] | None) -> int:
     args = build_parser().parse_args(argv)
     if args.print_example_config:
@@ -344,6 +377,13 @@ def _main(argv: Sequence[str] | None) -> int:
         print(f"{PROG}: error: --max-seconds must be > 0 and at most {threading.TIMEOUT_MAX:g}, "
               f"got {args.max_seconds}", file=sys.stderr)
         return 2
+    if args.measure_floor is not None and (args.validate_config or args.max_seconds is not None):
+        print(f"{PROG}: error: --measure-floor runs on its own (not with --validate-config or --max-seconds)",
+              file=sys.stderr)
+        return 2
+    if args.measure_floor is not None and args.measure_floor < 1:
+        print(f"{PROG}: error: --measure-floor: PAIRS must be at least 1, got {args.measure_floor}", file=sys.stderr)
+        return 2
     if args.no_model and not args.validate_config:
         print(f"{PROG}: error: --no-model goes with --validate-config (the daemon itself needs its model)",
               file=sys.stderr)
@@ -351,6 +391,8 @@ def _main(argv: Sequence[str] | None) -> int:
     try:
         if args.validate_config:
             return _validate(args.config, with_model=not args.no_model)
+        if args.measure_floor is not None:
+            return _measure_floor(args.config, args.measure_floor)
         early_sighup.take()  # a SIGHUP until now: the file is read now
         config = read_checked_config(args.config)  # as a reload checks it: what starts also reloads
     except DaemonConfigError as e:

@@ -153,7 +153,8 @@ class HealthConfig:
             ``calibration_window`` pairs of the lower triangulated foot's height (``PairResult.lowest_foot_m``) may be
             before the calibration is suspect: a panned camera, which the view agreement does not show, moves the
             feet off the floor. ``null``: no floor check (people standing on a stage, lying on a bed: not on the
-            rig's floor at y = 0).
+            rig's floor at y = 0). The foot's height counts from ``estimator.joints3d.foot_standing_m`` (bare feet by
+            default); shoes' soles or a mat: ``ghnerf-daemon --measure-floor`` measures the value to set.
     """
 
     status_file: str | None = None

@@ -432,3 +432,24 @@ def test_measure_calibration_drift_turns_the_camera_asked_and_counts_each_limit(
     assert re.search(r"\| past 0\.05 m \| past 0\.1 m$", out, re.M), out
     rows = re.findall(r"^ +(true rig|pan 1 deg) \| +\d+/2 +\|.*\| +(\d+|-)/?\d* +\| +(\d+|-)/?\d* *$", out, re.M)
     assert [r[0] for r in rows] == ["true rig", "pan 1 deg"], out
+
+
+@pytest.mark.parametrize("bad", ["0.01,x", "-0.01", "0.5", "nan"])
+def test_measure_calibration_drift_refuses_a_lift_that_is_not_metres(bad, capsys, monkeypatch):
+    err = run_script_failing("measure_calibration_drift", "--lift-m", bad, capsys=capsys, monkeypatch=monkeypatch)
+    assert f"--lift-m: {bad!r}" in err, err
+
+
+@pytest.mark.skipif(not (BENCH.parent / "models" / "model_card.json").is_file(), reason="no trained model")
+def test_measure_calibration_drift_raises_the_person_through_the_true_rig(scratch_cache, capsys, monkeypatch):
+    # docs/calibration.md, "Shoes, mats: the standing foot": a row per lift, the turns not run, and the windows
+    # counted again with the standing foot set to the default plus the lift
+    out = run_script("measure_calibration_drift", "--model-dir", str(BENCH.parent / "models"), "--sequences", "1",
+                     "--frames", "2", "--window", "2", "--lift-m", "0,0.03", "--max-floor-m", "0.05",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert "the person raised above the floor, the true rig" in out, out
+    assert re.search(r"\| short \| past 0\.05 m \| set 0\.04\+lift: past 0\.05 m$", out, re.M), out
+    rows = re.findall(r"^ +(lifted [\d.]+ m) \| +(\d+)/2 +\| +([-\d.]+) .*\| +(\d+|-)/?\d* +\| +(\d+|-)/?\d* *$",
+                      out, re.M)
+    assert [r[0] for r in rows] == ["lifted 0 m", "lifted 0.03 m"], out  # the floor table's rows
+    assert not re.search(r"^ +(true rig|tilt|pan|roll)\b", out, re.M), out

@@ -41,3 +41,35 @@ def test_a_standing_person_s_feet_are_on_the_floor():
 @pytest.mark.parametrize("pose", ["upside_down", "lying_z"])
 def test_a_person_not_on_their_feet_gives_no_floor_figure(pose):
     assert _feet(pose) == [None, None, None]
+
+
+def test_the_figure_takes_the_standing_foot_from_the_config():
+    """Soles or a mat raise every foot joint: the person rendered 3 cm above the floor reads 3 cm higher, and with
+    ``joints3d.foot_standing_m`` raised by those 3 cm (what ``ghnerf-daemon --measure-floor`` has a user set) reads
+    as the person on the floor at the default; the figure of the same pairs moves by exactly the setting's change."""
+    from dataclasses import replace
+
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=2, motion="wave"))
+    oracle = OracleSession(edge128_contract())
+    default = EstimatorConfig()
+    raised_by = default.joints3d.foot_standing_m + 0.03
+    soles = replace(default, joints3d=replace(default.joints3d, foot_standing_m=raised_by))
+
+    def feet(lift_m: float, config: EstimatorConfig) -> np.ndarray:
+        out = []
+        with Estimator(oracle, rig, config) as est:
+            for k in range(3):
+                t = 0.1 * k
+                body = scene.posed(t).transformed(np.eye(3), np.array([0.0, -lift_m, 0.0]))  # y down: raised
+                oracle.set_truth(body.joints)
+                images, _, _ = render_pair(scene, rig, body, t)
+                out.append(est.estimate(images, timestamp_s=t).lowest_foot_m)
+        assert all(f is not None for f in out), out
+        return np.array(out, float)
+
+    on_floor, raised, raised_soles = feet(0.0, default), feet(0.03, default), feet(0.03, soles)
+    assert np.allclose(raised - raised_soles, 0.03, atol=1e-9)  # the setting alone: the same pairs, 3 cm less
+    assert np.allclose(raised - on_floor, 0.03, atol=0.01), (raised, on_floor)  # the oracle sees the lift
+    assert np.allclose(raised_soles, on_floor, atol=0.01), (raised_soles, on_floor)

@@ -1,0 +1,148 @@
+"""``ghnerf-daemon --config FILE --measure-floor [PAIRS]``: this install's standing foot, measured.
+
+The floor check (:class:`~firmware_host.daemon.calibration_watch.FloorWatch`) compares the lower foot's height
+(``PairResult.lowest_foot_m``: the median height of its triangulated joints less ``joints3d.foot_standing_m``) with
+the floor. The default standing foot (0.04 m) is the simulated people's bare feet; shoes' soles or a mat raise every
+foot joint by their thickness, which would eat into ``health.calibration_max_floor_m`` (docs/calibration.md, "Shoes,
+mats: the standing foot"). This opens the config's rig and model as the daemon does, runs pairs through the estimator
+until ``PAIRS`` of them gave a foot figure, and says the median height of the lower foot's joints: the value of
+``estimator.joints3d.foot_standing_m`` that puts this person's feet on the floor. Run it right after calibrating (a
+camera panned since would be measured as a sole), with someone standing in their usual shoes, both feet in view.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Optional, Protocol
+
+import numpy as np
+
+import drivers
+from firmware_host.daemon.config import DaemonConfig
+from firmware_host.errors import FirmwareHostError
+from ghnerf_runtime.config import MAX_FOOT_STANDING_M
+from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
+
+__all__ = ["FloorMeasureError", "FloorMeasurement", "measure_floor", "measure_floor_of_config",
+           "DEFAULT_PAIRS", "READS_PER_PAIR"]
+
+#: Pairs with a foot figure measured when ``--measure-floor`` names no number (two seconds at 30 fps).
+DEFAULT_PAIRS = 60
+#: Pairs read per pair wanted before giving up: a person with their feet out of view, or nobody, gives no figure.
+READS_PER_PAIR = 5
+
+
+class FloorMeasureError(FirmwareHostError):
+    """The standing foot could not be measured (too few pairs showed a foot, or it reads off any floor)."""
+
+
+class _Estimates(Protocol):
+    def estimate(self, images: Any, *, sequence: Any = ..., timestamp_s: Optional[float] = ...) -> Any: ...
+
+
+class _Reads(Protocol):
+    def read(self, timeout_s: float = ...) -> Any: ...
+
+
+@dataclass(frozen=True)
+class FloorMeasurement:
+    """What ``--measure-floor`` measured.
+
+    Attributes:
+        pairs_read: pairs the rig delivered and the estimator ran.
+        heights_m: per pair with a foot figure, the median height of the lower foot's triangulated joints (the figure
+            plus the standing foot it was taken with).
+        foot_standing_m: the config's ``joints3d.foot_standing_m``, the figures were taken with.
+    """
+
+    pairs_read: int
+    heights_m: tuple[float, ...]
+    foot_standing_m: float
+
+    @property
+    def median_m(self) -> float:
+        return float(np.median(self.heights_m))
+
+    @property
+    def suggested_m(self) -> float:
+        """``joints3d.foot_standing_m`` to set: the median height, to the millimetre."""
+        return round(self.median_m, 3)
+
+    def to_json(self) -> dict:
+        h = np.asarray(self.heights_m, float)
+        return {
+            "pairs_read": self.pairs_read,
+            "pairs_with_a_foot": int(h.size),
+            "foot_height_m": {"median": round(self.median_m, 4), "p10": round(float(np.percentile(h, 10)), 4),
+                              "p90": round(float(np.percentile(h, 90)), 4)},
+            "foot_standing_m": self.foot_standing_m,
+            # what the floor check reads now: the median figure with the config's standing foot
+            "lowest_foot_m_median": round(self.median_m - self.foot_standing_m, 4),
+            "set": {"estimator": {"joints3d": {"foot_standing_m": self.suggested_m}}},
+        }
+
+
+def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float, pairs: int = DEFAULT_PAIRS, *,
+                  read_timeout_s: float = 5.0, max_reads: Optional[int] = None) -> FloorMeasurement:
+    """Read pairs from the open ``source`` through ``estimator`` (whose config's ``joints3d.foot_standing_m`` is
+    ``foot_standing_m``) until ``pairs`` of them gave a foot figure (``PairResult.lowest_foot_m``).
+
+    ``max_reads`` (default ``READS_PER_PAIR * pairs``): pairs read before giving up. A pair the estimator rejects
+    (a frame check) counts as read; the end of a recording ends the reading.
+
+    :raises FloorMeasureError: fewer than ``pairs`` figures within ``max_reads`` pairs (or the recording's end), or a
+        median height outside ``[0, MAX_FOOT_STANDING_M]`` (not a foot standing on this rig's floor).
+    :raises drivers.DriverError: the rig failed (not a timeout: a slow pair is waited for again).
+    """
+    if isinstance(pairs, bool) or not isinstance(pairs, int) or pairs < 1:
+        raise ValueError(f"measure_floor: pairs must be a whole number >= 1, got {pairs!r}")
+    limit = READS_PER_PAIR * pairs if max_reads is None else max_reads
+    heights: list[float] = []
+    read = 0
+    while len(heights) < pairs and read < limit:
+        try:
+            pair = source.read(timeout_s=read_timeout_s)
+        except drivers.EndOfStream:
+            break
+        except drivers.RigTimeoutError:
+            read += 1  # a rig that delivers nothing must not keep it waiting for ever
+            continue
+        read += 1
+        try:
+            result = estimator.estimate(pair.images, sequence=pair.sequence, timestamp_s=pair.timestamps_ns[0] * 1e-9)
+        except FrameError:
+            continue
+        if result.lowest_foot_m is not None:
+            heights.append(float(result.lowest_foot_m) + foot_standing_m)
+    if len(heights) < pairs:
+        raise FloorMeasureError(
+            f"--measure-floor: {len(heights)} of {read} pairs read gave a foot figure, {pairs} wanted: stand on the "
+            f"floor, both feet in view of both cameras and away from the frames' edges (someone lying, sitting on the "
+            f"floor or upside down gives none)")
+    m = FloorMeasurement(read, tuple(heights), foot_standing_m)
+    if not 0.0 <= m.median_m <= MAX_FOOT_STANDING_M:
+        raise FloorMeasureError(
+            f"--measure-floor: the lower foot's joints read a median {m.median_m:.3f} m above the floor, outside "
+            f"[0, {MAX_FOOT_STANDING_M:g}] m for joints3d.foot_standing_m: not a person standing on this rig's floor "
+            f"in shoes or on a mat. A camera moved since calibration reads so too (ghcal check); so does a rig file "
+            f"whose floor is off (docs/rig-file.md)")
+    return m
+
+
+def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
+                            load_model: Callable[[DaemonConfig], Any],
+                            rig_kwargs: Optional[dict[str, Any]] = None) -> FloorMeasurement:
+    """:func:`measure_floor` on the rig of ``config.rig.url`` and the model and estimator settings of
+    ``config.estimator``, opened as the daemon opens them (``load_model``: the daemon's, raising
+    ``DaemonConfigError``; ``rig_kwargs`` to :func:`drivers.create_rig_source`, tests pass a clock)."""
+    from ghnerf_runtime.estimator import Estimator  # the model's runtime: only once the config checked out
+
+    session = load_model(config)
+    with drivers.create_rig_source(config.rig.url, **(rig_kwargs or {})) as source:  # (entering opens it)
+        try:
+            est = Estimator(session, source.rig, config.estimator)
+        except (RuntimeErrorBase, ValueError) as e:  # as the daemon's start: a rig the model cannot run on
+            raise FloorMeasureError(f"--measure-floor: the model does not fit rig {source.rig.rig_id!r}: {e}") from None
+        with est:
+            return measure_floor(source, est, config.estimator.joints3d.foot_standing_m, pairs,
+                                 read_timeout_s=config.rig.read_timeout_s)
