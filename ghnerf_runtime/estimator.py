@@ -523,6 +523,9 @@ class Estimator:
             same ``contract`` / ``run`` / ``has`` interface works.
         rig: the calibrated rig; its first two cameras are the sources, in the pair's order.
         config: the estimator configuration (its ``session`` part is not used here).
+        log_settings: log, at info, how the settings were resolved against the model where that is not what they
+            say (a ``roi.pad_fill`` not the model's own; ``single_view_fallback`` turned off by the prior). The
+            daemon passes False for the rig's estimator: its settings check, built on the same config, said it.
 
     Raises:
         ModelError: the session lacks a graph the configuration needs.
@@ -530,18 +533,19 @@ class Estimator:
         GeometryError: the rig's two cameras stand at one point (no baseline to triangulate over).
     """
 
-    def __init__(self, session: Any, rig: Rig, config: EstimatorConfig | None = None) -> None:
+    def __init__(self, session: Any, rig: Rig, config: EstimatorConfig | None = None, *,
+                 log_settings: bool = True) -> None:
         if problem := rig.baseline_problem():  # a rig file says so on load; a camera's own readback may not
             raise GeometryError(f"rig {rig.rig_id!r}: {problem}")
         config = config or EstimatorConfig()
         self.config = config.beside_prior(getattr(session, "skeleton_prior", None) is not None)
-        if self.config is not config:
+        if self.config is not config and log_settings:
             log.info("joints3d.single_view_fallback is off: the skeleton prior places the joints it would")
         # an unset roi.pad_fill pads the crops as the model's training crops were (its contract says how)
         padding = getattr(session.contract, "frame_padding", "none")
         self.config = self.config.beside_model(padding)
         learnt = RoiConfig.model_fill(padding)
-        if self.config.roi.pad_fill != learnt:
+        if self.config.roi.pad_fill != learnt and log_settings:
             log.info("roi.pad_fill %r as configured; the model's own would be %r (trained with frame padding %r)",
                      self.config.roi.pad_fill, learnt, padding)
         self.session = session

@@ -321,7 +321,9 @@ class Daemon:
                 _log.warning("rig %s has another calibration than the estimator's: estimator rebuilt", rig.rig_id)
                 self._estimator.close()
             try:
-                self._estimator = Estimator(self._session, rig, self.config.estimator)
+                # quiet: the settings check of this config (the start's, or the reload's) logged how its
+                # settings resolve against the model; the rig's estimator would say it a second time
+                self._estimator = Estimator(self._session, rig, self.config.estimator, log_settings=False)
             except (RuntimeErrorBase, ValueError) as e:  # ModelError, a rig the runtime cannot use
                 raise DaemonStartError(f"the model does not fit rig {rig.rig_id!r}: {e}") from None
             self._rig_text = text

@@ -220,7 +220,7 @@ def _assert_seqs_number_the_frames_sent(messages: list, sink) -> None:
 class _CountingEstimator:
     """Stands in for the model: every third pair rejected (FrameError), the others all joints found."""
 
-    def __init__(self, session, rig, config) -> None:
+    def __init__(self, session, rig, config, **options) -> None:
         self.rig, self.calls, self.sequences = rig, 0, []
 
     def estimate(self, images, *, sequence: int, timestamp_s: float):
@@ -895,6 +895,36 @@ def test_a_reload_with_another_rig_url_opens_it(sim_url, tmp_path):
         assert run.daemon._estimator.rig.pair[0].width == 256  # rebuilt for the new calibration
         assert run.finish() == 0
     assert run.daemon.health.rig_lost == 0 and run.daemon.health.rig_url == other
+
+
+def test_a_fill_not_the_models_is_logged_once_at_the_start_and_once_by_a_reload_that_changes_it(sim_url, tmp_path,
+                                                                                                 caplog):
+    """The start built two estimators (its settings check's on a stand-in rig, then the rig's) and each logged
+    the fill line, so the journal said it twice; a reload that also changed rig.url did the same (its check on a
+    stand-in, then the new rig's). Said by the check, once per config that sets it."""
+    def fill_lines(fill: str) -> int:
+        return sum(1 for r in caplog.records if r.getMessage().startswith(f"roi.pad_fill {fill!r} as configured"))
+
+    def with_fill(url: str, fill: str):
+        data = _config_dict(url, tmp_path)
+        data["estimator"]["roi"] = {"pad_fill": fill}  # the shipped model's own is 'fade'
+        return daemon_config_from_dict(data)
+
+    configs = _Configs()
+    with caplog.at_level(logging.INFO, logger="ghnerf_runtime.estimator"), \
+            _Running(with_fill(sim_url, "black"), tmp_path, reload_config=configs) as run:
+        wait_until(lambda: run.daemon.health.pairs_estimated >= 3, timeout=60, what="3 estimated pairs")
+        assert run.daemon._estimator.config.roi.pad_fill == "black"
+        assert fill_lines("black") == 1
+        other = sim_url.replace("width=320&height=240", "width=256&height=192")
+        configs.next = with_fill(other, "edge")
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.rig_opens == 2, timeout=60, what="the new rig opened")
+        seen = run.daemon.health.pairs_estimated
+        wait_until(lambda: run.daemon.health.pairs_estimated > seen + 2, timeout=60, what="pairs from the new rig")
+        assert run.daemon._estimator.config.roi.pad_fill == "edge"  # the new rig's estimator runs the new fill
+        assert run.finish() == 0
+    assert (fill_lines("black"), fill_lines("edge")) == (1, 1)
 
 
 def test_a_reload_while_waiting_for_an_absent_rig_opens_the_new_one(sim_url, tmp_path):
