@@ -1460,14 +1460,20 @@ def data_stage_key(d: dict) -> dict:
     return {"request": d["inputs"], "manifest": d["outputs"]}
 
 
+def _pretrain_result_keys(cfg: PipelineConfig, variant: str) -> dict:
+    """The pretraining config without ``PRETRAIN_RUNTIME_KEYS``: the ``gpu`` recipe sizes ``loader_workers`` by
+    the machine's cores, which stamped the pretraining and the joint run again on every other machine."""
+    return {k: v for k, v in pretrain_inputs(cfg, variant).items() if k not in PRETRAIN_RUNTIME_KEYS}
+
+
 def pretrain_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict) -> dict:
-    return {"data": data_key, "config": pretrain_inputs(cfg, variant)}
+    return {"data": data_key, "config": _pretrain_result_keys(cfg, variant)}
 
 
 def train_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict) -> dict:
     return {"data": data_key, "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
             "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped,
-            "pretrain": pretrain_inputs(cfg, variant) if pretrain_block(cfg, variant) else None}
+            "pretrain": _pretrain_result_keys(cfg, variant) if pretrain_block(cfg, variant) else None}
 
 
 def export_stage_inputs(train_stamp: dict) -> dict:

@@ -116,3 +116,15 @@ def test_a_reused_run_is_only_stamped_again_and_the_stages_after_it_keep_theirs(
                                         "pretrain.frame_padding (<absent> -> true); the finished run in "
                                         f"{cfg.runs / 'edge128'} is reused: only its stamp is written again")
     assert [s for s, r in rows.items() if r.runs] == ["pretrain_ghnerf", "train_ghnerf", "train_baseline", "card"]
+
+
+def test_the_machine_s_cores_change_no_stamp_input():
+    """The ``gpu`` recipe sizes the pretraining's loader workers by the cores (12 on 16, none on 2): a runtime key,
+    which made the pretrain and train stages' inputs differ on every machine but the one that trained."""
+    def inputs(cores):
+        cfg = PipelineConfig(out=pipeline.Path("models"))
+        cfg.apply_recipe("gpu", cores=cores)
+        assert ("loader_workers=12" in cfg.pretrain_overrides) == (cores == 16)
+        return [f(cfg, "ghnerf", {}) for f in (pipeline.pretrain_stage_inputs, pipeline.train_stage_inputs)]
+
+    assert inputs(2) == inputs(16)
