@@ -41,6 +41,10 @@ a stamp that cannot be read counts as not done.
 the machine (``RECIPES``); ``--set`` / ``--pretrain-set`` come after them and win.
 
 ``--quick``: a smoke test (a few scenes, a few iterations, a few eval scenes) into the same layout.
+
+``--status``: run nothing and write nothing; list each stage the same command would run or skip, and why (the
+input that changed, named where the stamp records its inputs; an output gone or changed; a stage before it
+that runs).
 """
 from __future__ import annotations
 
@@ -298,12 +302,31 @@ def _digest(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-class Stages:
-    """Stamp files ``<out>/.stages/<stage>.json``: the inputs' digest, outputs with sha256, wall time."""
+_ABSENT = "<absent>"
 
-    def __init__(self, out: Path, force: tuple[str, ...]):
+
+def _flat(obj: Any, prefix: str = "") -> dict[str, Any]:
+    """A JSON value's leaves by dotted path (list items by index), to name the stamp inputs that changed."""
+    if isinstance(obj, dict) and obj:
+        return {k: v for key, value in obj.items() for k, v in _flat(value, f"{prefix}{key}.").items()}
+    if isinstance(obj, list) and obj:
+        return {k: v for i, value in enumerate(obj) for k, v in _flat(value, f"{prefix}{i}.").items()}
+    return {prefix[:-1] or "(all)": obj}
+
+
+def _short(value: Any) -> str:
+    text = value if value == _ABSENT else json.dumps(value, default=str)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+class Stages:
+    """Stamp files ``<out>/.stages/<stage>.json``: the inputs' digest and the inputs (``request``), outputs with
+    sha256, wall time."""
+
+    def __init__(self, out: Path, force: tuple[str, ...], create: bool = True):
         self.dir = out / ".stages"
-        self.dir.mkdir(parents=True, exist_ok=True)
+        if create:  # (not for ``--status``, which writes nothing)
+            self.dir.mkdir(parents=True, exist_ok=True)
         self.force = {s for f in force for s in STAGES if s == f or s.startswith(f + "_")}
         self._warned: set[Path] = set()
 
@@ -325,17 +348,33 @@ class Stages:
 
     def done(self, name: str, inputs: Any) -> dict | None:
         """The stamp when the stage is finished for these inputs and its outputs are intact."""
+        return None if self.why_not_done(name, inputs) else self.stamp(name)
+
+    def why_not_done(self, name: str, inputs: Any) -> str | None:
+        """Why the stage would run for these inputs (None: it is done): forced, no stamp, which inputs changed
+        (named where the stamp records them, since session 57), or which output went or changed."""
         from training.model_card import sha256
 
         if name in self.force:
-            return None
+            return "forced (--force)"
         s = self.stamp(name)
-        if not s or s.get("inputs") != _digest(inputs):
-            return None
+        if not s:
+            return "no stamp"
+        if s.get("inputs") != _digest(inputs):
+            if not isinstance(s.get("request"), (dict, list)):
+                return "inputs changed (the stamp predates recorded inputs: the digest alone differs)"
+            now = _flat(json.loads(json.dumps(inputs, sort_keys=True, default=str)))
+            then = _flat(s["request"])
+            keys = sorted(k for k in now.keys() | then.keys() if now.get(k, _ABSENT) != then.get(k, _ABSENT))
+            return "inputs changed: " + ", ".join(
+                f"{k} ({_short(then.get(k, _ABSENT))} -> {_short(now.get(k, _ABSENT))})" for k in keys[:6]) + (
+                f" and {len(keys) - 6} more" if len(keys) > 6 else "")
         for path, digest in s.get("outputs", {}).items():
-            if not Path(path).exists() or (digest and sha256(path) != digest):
-                return None
-        return s
+            if not Path(path).exists():
+                return f"output {path} is missing"
+            if digest and sha256(path) != digest:
+                return f"output {path} changed since the stamp (sha256 {sha256(path)[:12]}, stamped {digest[:12]})"
+        return None
 
     def run(self, name: str, inputs: Any, fn: Callable[[], tuple[list[Path], dict]]) -> dict:
         from training.model_card import sha256
@@ -347,7 +386,9 @@ class Stages:
         log.info("stage %s: running", name)
         t0 = time.monotonic()
         outputs, info = fn()
-        s = {"inputs": _digest(inputs), "outputs": {str(p): sha256(p) for p in outputs},
+        # the inputs themselves too (small JSON), so --status can name the one that changed
+        s = {"inputs": _digest(inputs), "request": json.loads(json.dumps(inputs, sort_keys=True, default=str)),
+             "outputs": {str(p): sha256(p) for p in outputs},
              "wall_s": round(time.monotonic() - t0, 1), "info": info,
              "finished": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
         write_atomic(self.dir / f"{name}.json", json.dumps(s, indent=1, default=str))
@@ -1367,14 +1408,10 @@ def run(cfg: PipelineConfig) -> dict | None:
     d = st.run("data", data_in, lambda: stage_data(cfg))
     if cfg.until == "data":
         return None
-    # What the training stages read: the request *and* the manifest's hash, so a dataset regenerated
-    # under another recipe (same folder and counts, say a new training motion) retrains the models.
-    data_key = {"request": d["inputs"], "manifest": d["outputs"]}
+    data_key = data_stage_key(d)
 
     def train_in(variant: str) -> dict:
-        return {"data": data_key, "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
-                "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped,
-                "pretrain": pretrain_inputs(cfg, variant) if pretrain_block(cfg, variant) else None}
+        return train_stage_inputs(cfg, variant, data_key)
 
     for v in cfg.variants:  # a run stopped at its max_minutes cap is resumed, whatever its stamp says
         if cfg.until != "pretrain" and not _run_finished(cfg, v):
@@ -1386,7 +1423,7 @@ def run(cfg: PipelineConfig) -> dict | None:
         train_side_by_side(cfg, todo, data_key)  # (it trains too: not when only the pretraining is asked for)
     for variant in cfg.variants:
         if pretrain_block(cfg, variant):
-            st.run(f"pretrain_{variant}", {"data": data_key, "config": pretrain_inputs(cfg, variant)},
+            st.run(f"pretrain_{variant}", pretrain_stage_inputs(cfg, variant, data_key),
                    lambda v=variant: stage_pretrain(cfg, v))
         if cfg.until == "pretrain":
             continue
@@ -1395,18 +1432,16 @@ def run(cfg: PipelineConfig) -> dict | None:
             continue
         ckpt = {variant: Path(next(iter(t["outputs"])))}
         # the exporter's and quantizer's own settings too: another policy or opset remakes the files
-        e = st.run(f"export_{variant}", {"checkpoint": t["outputs"], "settings": export_settings()},
+        e = st.run(f"export_{variant}", export_stage_inputs(t),
                    lambda c=ckpt: stage_export(cfg, c))
-        q = st.run(f"quantize_{variant}", {"export": e["outputs"], "calib": cfg.calib_scenes,
-                                           "settings": quantize_settings()},
+        q = st.run(f"quantize_{variant}", quantize_stage_inputs(cfg, e),
                    lambda c=ckpt: stage_quantize(cfg, c))
-        eval_in = {"q": q["outputs"], "e": e["outputs"], "split": cfg.eval_split, "limit": cfg.eval_limit,
-                   "runtimes": EVAL_RUNTIMES[variant]}
+        p = None
         if variant in PRIOR_VARIANTS:  # before the eval, which scores it: a new prior re-evaluates
             p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key),
                        lambda v=variant: stage_prior(cfg, v, data_key, adopt=f"prior_{v}" not in st.force))
-            eval_in["prior"] = {k: v for k, v in p["outputs"].items() if k.endswith(".onnx")}  # not its report
-        st.run(f"eval_{variant}", eval_in, lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
+        st.run(f"eval_{variant}", eval_stage_inputs(cfg, variant, e, q, p),
+               lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
     if cfg.until:
         log.info("stopped after the %s stages (--until)", cfg.until)
         return None
@@ -1414,10 +1449,150 @@ def run(cfg: PipelineConfig) -> dict | None:
         log.info("card: waiting for %s", [v for v in VARIANTS if st.stamp(f"eval_{v}") is None])
         return None
     st.force.add("card")  # always rewritten: cheap, and it records the command and the stamps
-    st.run("card", [st.stamp(f"eval_{v}")["outputs"] for v in VARIANTS] + [st.stamp(f"prior_{v}")["outputs"]
-                                                                           for v in PRIOR_VARIANTS],
-           lambda: stage_card(cfg, st))
+    st.run("card", card_stage_inputs(st), lambda: stage_card(cfg, st))
     return json.loads((cfg.out / "model_card.json").read_text())
+
+
+# ------------------------------------------------------------------------------ stage inputs (stamps)
+def data_stage_key(d: dict) -> dict:
+    """What the training stages read of the data stage's stamp: the request *and* the manifest's hash, so a
+    dataset regenerated under another recipe (same folder and counts, say a new training motion) retrains."""
+    return {"request": d["inputs"], "manifest": d["outputs"]}
+
+
+def _pretrain_result_keys(cfg: PipelineConfig, variant: str) -> dict:
+    """The pretraining config without ``PRETRAIN_RUNTIME_KEYS``: the ``gpu`` recipe sizes ``loader_workers`` by
+    the machine's cores, which stamped the pretraining and the joint run again on every other machine."""
+    return {k: v for k, v in pretrain_inputs(cfg, variant).items() if k not in PRETRAIN_RUNTIME_KEYS}
+
+
+def pretrain_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict) -> dict:
+    return {"data": data_key, "config": _pretrain_result_keys(cfg, variant)}
+
+
+def train_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict) -> dict:
+    return {"data": data_key, "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
+            "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped,
+            "pretrain": _pretrain_result_keys(cfg, variant) if pretrain_block(cfg, variant) else None}
+
+
+def export_stage_inputs(train_stamp: dict) -> dict:
+    # the exporter's own settings too: another opset or contract remakes the files
+    return {"checkpoint": train_stamp["outputs"], "settings": export_settings()}
+
+
+def quantize_stage_inputs(cfg: PipelineConfig, export_stamp: dict) -> dict:
+    return {"export": export_stamp["outputs"], "calib": cfg.calib_scenes, "settings": quantize_settings()}
+
+
+def eval_stage_inputs(cfg: PipelineConfig, variant: str, export_stamp: dict, quantize_stamp: dict,
+                      prior_stamp: dict | None) -> dict:
+    inputs = {"q": quantize_stamp["outputs"], "e": export_stamp["outputs"], "split": cfg.eval_split,
+              "limit": cfg.eval_limit, "runtimes": EVAL_RUNTIMES[variant]}
+    if prior_stamp is not None:  # the graph, not its report
+        inputs["prior"] = {k: v for k, v in prior_stamp["outputs"].items() if k.endswith(".onnx")}
+    return inputs
+
+
+def card_stage_inputs(st: Stages) -> list:
+    return ([st.stamp(f"eval_{v}")["outputs"] for v in VARIANTS]
+            + [st.stamp(f"prior_{v}")["outputs"] for v in PRIOR_VARIANTS])
+
+
+class StageStatus(NamedTuple):
+    """One row of ``--status``: the stage, whether ``make model`` would run it now, and why."""
+
+    stage: str
+    runs: bool
+    why: str
+
+
+def status(cfg: PipelineConfig) -> list[StageStatus]:
+    """What :func:`run` would do now, stage by stage, without running or writing anything.
+
+    Each stage is judged on its own stamp against inputs made from the stamps before it (what :func:`run`
+    reads when those stages are skipped). A stage after one that runs is listed as running after it even when
+    its own stamp matches: the files that one writes are its inputs. A train stage is also judged as
+    :func:`run` judges it: a run folder without a finished run of this config trains (or resumes) there."""
+    st = Stages(cfg.out, cfg.force, create=False)
+    rows: list[StageStatus] = []
+
+    def judge(name: str, inputs: Any, after: list[str], why: str | None = None) -> bool:
+        """Add the stage's row; whether it runs."""
+        why = why or st.why_not_done(name, inputs)
+        note = f"after {', '.join(after)}, whose files are its inputs" if after else ""
+        if why is None and not after:
+            rows.append(StageStatus(name, False, "up to date"))
+            return False
+        rows.append(StageStatus(name, True, "; ".join(filter(None, [why, note]))))
+        return True
+
+    def waiting(names: list[str], on: str) -> None:
+        rows.extend(StageStatus(n, True, f"waits for {on} (no stamp: its inputs are not known yet)") for n in names)
+
+    d = st.stamp("data")
+    data_runs = judge("data", data_request(cfg), [])
+    if cfg.until == "data":
+        return rows
+    if d is None:
+        waiting([n for n in STAGES[1:] if n != "card"], "data")
+        return rows
+    data_key = data_stage_key(d)
+    for variant in cfg.variants:
+        # the training stages reuse a finished run of the same config: then only the stamp is written again,
+        # with the same checkpoint, and the stages after them keep theirs (their inputs are its files)
+        after = ["data"] if data_runs else []
+        if pretrain_block(cfg, variant):
+            reused = "; the finished pretraining there is reused: only its stamp is written again" \
+                if _pretrain_finished(cfg, variant) else ""
+            if judge(f"pretrain_{variant}", pretrain_stage_inputs(cfg, variant, data_key), after) and reused:
+                rows[-1] = rows[-1]._replace(why=rows[-1].why + reused)
+        if cfg.until == "pretrain":
+            continue
+        unfinished = None if _run_finished(cfg, variant) else (
+            f"{cfg.runs / VARIANTS[variant]} holds no finished run of this config: it trains (or resumes) there")
+        if judge(f"train_{variant}", train_stage_inputs(cfg, variant, data_key), after, unfinished) \
+                and not unfinished:
+            rows[-1] = rows[-1]._replace(why=rows[-1].why + f"; the finished run in {cfg.runs / VARIANTS[variant]} "
+                                                              "is reused: only its stamp is written again")
+        if cfg.until == "train":
+            continue
+        after = [f"train_{variant}"] if unfinished else []
+        later = [f"export_{variant}", f"quantize_{variant}",
+                 *([f"prior_{variant}"] if variant in PRIOR_VARIANTS else []), f"eval_{variant}"]
+        t, e, q = (st.stamp(f"{k}_{variant}") for k in ("train", "export", "quantize"))
+        if t is None:
+            waiting(later, f"train_{variant}")
+            continue
+        if judge(f"export_{variant}", export_stage_inputs(t), after):
+            after = [f"export_{variant}"]
+        if e is None:
+            waiting(later[1:], f"export_{variant}")
+            continue
+        if judge(f"quantize_{variant}", quantize_stage_inputs(cfg, e), after):
+            after = [*after, f"quantize_{variant}"]
+        if q is None:
+            waiting(later[2:], f"quantize_{variant}")
+            continue
+        p = None
+        if variant in PRIOR_VARIANTS:
+            p = st.stamp(f"prior_{variant}")
+            if judge(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key), after):
+                after = [*after, f"prior_{variant}"]
+            if p is None:
+                waiting([f"eval_{variant}"], f"prior_{variant}")
+                continue
+        judge(f"eval_{variant}", eval_stage_inputs(cfg, variant, e, q, p), after)
+    if not cfg.until:
+        rows.append(StageStatus("card", True, "always rewritten once every variant is evaluated (it records the "
+                                              "command and the stamps)"))
+    return rows
+
+
+def print_status(rows: list[StageStatus]) -> None:
+    width = max(len(r.stage) for r in rows)
+    for r in rows:
+        print(f"{r.stage:<{width}}  {'runs' if r.runs else 'skip'}  {r.why}")
 
 
 def _recipe_args(argv: list[str]) -> list[str]:
@@ -1482,6 +1657,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--freestyle-share", type=float, default=None,
                     help="share of train scenes moving 'freestyle' (default: PipelineConfig's, a half; another "
                          "value makes another dataset: pass a new --data folder)")
+    ap.add_argument("--status", action="store_true",
+                    help="run nothing, write nothing: list each stage this command would run or skip, and why (a "
+                         "changed input, named where its stamp records it; an output gone or changed; a stage "
+                         "before it that runs)")
     ap.add_argument("--recipe", default="auto", choices=("auto", *RECIPES),
                     help="training recipe: " + "; ".join(f"{k}: {r.about}" for k, r in RECIPES.items())
                          + "; auto (default): gpu where torch sees one, else cpu. Ignored with --quick")
@@ -1554,6 +1733,9 @@ def main(argv: list[str] | None = None) -> int:
     cfg.command = shlex.join(["python", "-m", "training.pipeline",
                               *_recipe_args(argv if argv is not None else sys.argv[1:]), *recipe_flag])
     try:
+        if args.status:
+            print_status(status(cfg))
+            return 0
         card = run(cfg)
     except (RuntimeError, subprocess.CalledProcessError, ConfigError) as e:
         # the stage that failed has said why (a refused run folder, a damaged checkpoint named with what to do,
