@@ -131,6 +131,13 @@ _FLOOR_MIN_FOOT_JOINTS = 2
 #: lunge costs one joint, not the pair's figure; stray ones kept would pull their foot's median down (two of its four
 #: joints, or one of a foot with two seen: tests/ghnerf_runtime/test_floor_big_pan.py).
 _FLOOR_BODY_M = 1.0
+#: Two people's floor figure (:meth:`Estimator._matched_foot`) leaves out a joint (foot or torso) whose peak lies
+#: within this many heatmap cells of its map's edge in either view: the crop frames the subject or the working volume,
+#: not each person, and a joint beyond the crop's edge puts its maximum on the map's last cells (on the oracle, a
+#: person 4 m off beside one 2.5 m off: the far one's feet 1.9 cells past view 1's edge peaked on its last cell at
+#: 0.13-0.46, and paired with view 0's peaks read 0.04-0.06 m up on the true rig, where each person's own feet read
+#: within 0.005 m: tests/ghnerf_runtime/test_two_people.py).
+_CROP_EDGE_CELLS = 2.0
 _TORSO = BODY_PARTS["torso"]
 #: Stage keys of the keypoint path, in order.
 KEYPOINT_STAGES = ("preprocess", "encoder", "encoder_flip", "turn_search", "volume", "render_heat", "decode_2d",
@@ -219,9 +226,10 @@ class PairResult:
             ``reprojection_px_median`` does not show: docs/calibration.md). ``None``: no foot with two such joints
             (feet out of view or near a frame's edge), nobody by the peaks (the presence gate; since session 56 a
             person the box gates leave nobody of still counts), a frame rejected, two people in view not told apart (a
-            ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`),
-            or a person not on their feet (the torso joints triangulated likewise less than 0.5 m above that foot,
-            or none: upside down, lying).
+            ``several_people`` pair measures the reported subject's own pairings: :meth:`Estimator._subject_figures`;
+            where they give none, since session 57 each person's own feet, both people's pairings split into two
+            people before the box gates: :meth:`Estimator._matched_foot`), or a person not on their feet (the torso
+            joints triangulated likewise less than 0.5 m above that foot, or none: upside down, lying).
     """
 
     sequence: int
@@ -1267,8 +1275,13 @@ class Estimator:
             # each view's decoded peak may be either person's, so the pair's own figures say nothing of the rig:
             # the subject's own pairings do (_subject_figures)
             agreement, foot = (None, None) if nobody else self._subject_figures(subject, chosen, crops, regions)
-            if agreement is None:  # no subject's pairings to measure (a camera knocked past the gate leaves none):
-                agreement = self._matched_px(kp, uv_model, crops)  # both people's peaks, paired one to one
+            if agreement is None or foot is None:  # no subject's pairings to measure (a camera knocked past the
+                # gate, or panned far enough to take both people out of the box gates, leaves none): both people's
+                pairs, matched = self._both_people(kp, uv_model, crops)
+                if agreement is None:
+                    agreement = self._matched_px(matched)  # both people's peaks, paired one to one
+                if foot is None:
+                    foot = self._matched_foot(kp, pairs, regions)  # each person's feet, before the box gates
         else:
             agreement = None if self._agreement is None else self._agreement.median_px
             # the triangulation's feet (not the prior's placed ones), whether or not the box gates left someone to
@@ -1421,21 +1434,30 @@ class Estimator:
         valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a second peak above the threshold
         return uv_opt, conf_opt, valid_opt
 
-    def _matched_px(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera]) -> float | None:
+    def _both_people(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera]
+                     ) -> tuple[tuple, ViewAgreement]:
+        """A ``several_people`` pair's four pairings of each joint (:meth:`_pairings`' tuple) triangulated through
+        the reprojection gate but not the box gates, and their agreement before the gate, of the peaks at least the
+        presence threshold in both views: what both people's calibration figures are taken from where the
+        subject's own pairings give none (:meth:`_matched_px`, :meth:`_matched_foot`)."""
+        strong = self.config.presence.threshold(self.config.heatmaps.source)
+        uv_opt, conf_opt, valid_opt = self._peak_options(kp, uv_model)
+        tri, agreement = triangulate_joints_checked(*_paired(uv_opt, conf_opt, valid_opt), crops,
+                                                    self.config.joints3d, strong, 1)
+        return (tri, uv_opt, conf_opt, valid_opt), agreement
+
+    def _matched_px(self, agreement: ViewAgreement) -> float | None:
         """A ``several_people`` pair's px figure from both people's peaks, where the subject's own pairings give
         none (:meth:`_subject_figures`): each joint whose map shows two peaks apart in both views, each at least the
         presence threshold, is measured as its four pairings' errors before the ``joints3d.max_reprojection_px``
-        gate (as one person's figure is), the views' peaks paired one to one the way that fits best
-        (:func:`~ghnerf_runtime.two_people.matched_errors`: one of the two ways is the people's own joints); the
-        median of the two people's errors over at least ``presence.min_joints`` such joints, else ``None``. Nobody
-        need be picked: a camera knocked past the gate leaves no pairing to pick from, and this is what still
-        shows it (docs/calibration.md, "Two people in view"). No floor figure comes from it: which of a way's
-        two points is whose foot, and whether that person stands, is not known (one person's feet past the gate
-        are not measured either)."""
+        gate (``agreement``, :meth:`_both_people`; as one person's figure is), the views' peaks paired one to one
+        the way that fits best (:func:`~ghnerf_runtime.two_people.matched_errors`: one of the two ways is the
+        people's own joints); the median of the two people's errors over at least ``presence.min_joints`` such
+        joints, else ``None``. Nobody need be picked: a camera knocked past the gate leaves no pairing to pick
+        from, and this is what still shows it (docs/calibration.md, "Two people in view"). Its floor figure is
+        :meth:`_matched_foot`'s, from the people the pairings split into (a way's two points are not known to be
+        whose)."""
         pres = self.config.presence
-        strong = pres.threshold(self.config.heatmaps.source)
-        options = self._peak_options(kp, uv_model)
-        _, agreement = triangulate_joints_checked(*_paired(*options), crops, self.config.joints3d, strong, 1)
         if agreement.worst_px is None:  # (an agreement built without its joints' errors: nothing to pair)
             return None
         errors = matched_errors(agreement.worst_px.reshape(len(PAIRINGS), -1))
@@ -1443,6 +1465,43 @@ class Estimator:
         if int(measured.sum()) < max(pres.min_joints, 1):
             return None
         return float(np.median(errors[:, measured]))
+
+    def _matched_foot(self, kp: Keypoints2D, pairs: tuple, regions: Regions) -> float | None:
+        """A ``several_people`` pair's floor figure where the subject's own pairings give none (nobody picked: a
+        camera panned far takes both people out of the working volume's box, which the pairings the subject is
+        picked from pass; ``pick_subject: none``; the subject's feet not seen): the pairings before the box gates
+        (``pairs``, :meth:`_both_people`) split into two people (:func:`~ghnerf_runtime.two_people.split_people`,
+        as a subject is picked from), and each person's lower foot by the one-person rules
+        (:meth:`_lowest_foot_m`, of the joints shown twice in both views, as :meth:`_subject_figures` takes them;
+        ``presence.min_joints`` of them at the presence threshold to be someone; within ``_FLOOR_BODY_M`` of that
+        person's own median, :func:`~ghnerf_runtime.joints3d.near_the_body`; each joint's peaks ``_CROP_EDGE_CELLS``
+        inside both maps' edges, as the crops need not frame that person). The median of the people's figures
+        (one person's where the other gives none), else ``None``. A split that tells nobody apart gives none: a
+        foot is never measured from a pairing not given to one person (docs/calibration.md, "Two people in
+        view")."""
+        tri = pairs[0]
+        J = len(kp.valid[0])
+        people = split_people(tri.points.reshape(len(PAIRINGS), J, 3), tri.valid.reshape(len(PAIRINGS), J))
+        twice = np.all(kp.runner_up > 0, axis=0)  # a runner-up is a second peak apart in that view
+        pres = self.config.presence
+        strong = pres.threshold(self.config.heatmaps.source)
+        none = Joints3D.missing(J, tri.reprojection_px.shape[-1])
+        feet = []
+        for person in people:
+            _, peaks, found = self._from_pairings(none, kp, pairs, np.maximum(person, 0), (person >= 0) & twice)
+            if peaks is None:
+                continue
+            # (2, J, 2) heatmap cells of the peaks each joint was triangulated from: one past the crop's edge peaks
+            # on the map's last cells, and is left out before it counts for someone, their median or their torso
+            uv = peaks[0].uv
+            inside = np.all((uv >= _CROP_EDGE_CELLS) & (uv <= self.grid - 1 - _CROP_EDGE_CELLS), axis=(0, 2))
+            found = Joints3D(found.points, found.confidence, found.valid & inside, found.reprojection_px).sanitised()
+            if pres.enabled:
+                found = gate_presence(found, pres.min_joints, strong)
+            foot = self._lowest_foot_m(near_the_body(found, _FLOOR_BODY_M), peaks[0], regions)
+            if foot is not None:
+                feet.append(foot)
+        return float(np.median(feet)) if feet else None
 
     def _tracked_candidates(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                             regions: Regions, track_joints: np.ndarray, track_valid: np.ndarray

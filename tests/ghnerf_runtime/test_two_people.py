@@ -85,9 +85,10 @@ def test_two_people_from_the_first_pair_with_pick_subject_none_report_nobody():
             assert obj["several_people"] is True
             # each view's peak may be either person's: their disagreement says nothing of the rig (the daemon's
             # calibration check must not count it); since session 56 the px figure is both people's peaks paired
-            # one to one, as small as one person's on this true rig, and there is no floor figure
+            # one to one, as small as one person's on this true rig, and since session 57 the floor figure each
+            # person's own feet, the pairings split into two people (before, none)
             assert obj["reprojection_px_median"] is not None and r.reprojection_px_median < 0.05
-            assert r.lowest_foot_m is None and obj["lowest_foot_m"] is None
+            assert obj["lowest_foot_m"] is not None and abs(r.lowest_foot_m) < 0.01
             assert r.single_view is None and obj["single_view"] is None
     # the old estimator on the same pairs: a mixed skeleton, most of it off the first person
     reported, off_first = _split(_scene(1, alone=0, pairs=4, config=UNCHECKED))
@@ -596,14 +597,17 @@ def test_a_2_degree_pan_is_still_seen_with_two_people_in_view(pan_deg):
         assert [watch.add(r.lowest_foot_m) for r, *_ in two][-1] is True
 
 
-def test_two_people_s_figures_leave_out_a_split_that_failed_and_a_joint_shown_once():
-    """No subject (``pick_subject: none``: the two people not told apart) gives no floor figure, and the px figure
-    of both people's peaks paired one to one (session 56; before, none), as small as one person's on the true rig;
-    and a subject's foot joint whose map shows one peak in a view (the other person's foot hidden there, or the two
-    merged) is not measured: that peak may be either person's. The px figure, from the joints shown twice, stays."""
+def test_two_people_s_figures_without_a_subject_and_leaving_out_a_joint_shown_once():
+    """No subject (``pick_subject: none``) gives the px figure of both people's peaks paired one to one (session 56;
+    before, none) and the floor figure of both people's own feet (session 57: the pairings split into two people;
+    before, none), each as small as one person's on the true rig; and a foot joint whose map shows one peak in a
+    view (the other person's foot hidden there, or the two merged) is not measured, neither as the subject's nor
+    as either person's of the split: that peak may be either person's. The px figure, from the joints shown twice,
+    stays."""
     for seed in (1, 2):
         for r, *_ in _scene(seed, alone=0, pairs=2, config=NOBODY):
-            assert r.several_people and r.num_found == 0 and r.lowest_foot_m is None
+            assert r.several_people and r.num_found == 0
+            assert r.lowest_foot_m is not None and abs(r.lowest_foot_m) < 0.01
             assert r.reprojection_px_median is not None and r.reprojection_px_median < 0.05
         one = _scene(seed, alone=3, pairs=3, second=False)
         for view in (0, 1):
@@ -613,6 +617,60 @@ def test_two_people_s_figures_leave_out_a_split_that_failed_and_a_joint_shown_on
                 assert r.lowest_foot_m is None and alone.lowest_foot_m is not None
                 assert r.reprojection_px_median is not None
                 assert abs(r.reprojection_px_median - alone.reprojection_px_median) <= 0.05
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_an_8_degree_pan_that_takes_both_people_out_of_the_volume_is_flagged_by_the_floor_check(seed):
+    """The rig file's second camera panned 8 degrees, the way that reads both people 1.6 times too far: every
+    pairing of their peaks lies past the working volume's box, so nobody is picked or reported, and the px figure
+    stays under its limit (a pan moves the peaks along the epipolar lines). Alone, the floor check sees it from the
+    feet taken before the box gates (session 56, tests/ghnerf_runtime/test_floor_big_pan.py); with two people in
+    view the pair gave no floor figure until session 57, and a room that always held two people never flagged it.
+    Now both people's pairings, split into two people before the box gates, give each person's feet: below the
+    floor as the person's alone (the median of the two people's, the second person further off and read lower),
+    and the daemon's ``FloorWatch`` flags it from the two-people pairs alone."""
+    from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX
+
+    one = _scene(seed, alone=3, pairs=4, second=False, pan_deg=8.0)
+    two = _scene(seed, alone=3, pairs=4, pan_deg=8.0)
+    for (r, *_), (alone, *_) in zip(two, one, strict=True):
+        assert r.several_people and r.num_found == 0 and alone.num_found == 0
+        assert r.reprojection_px_median is not None and r.reprojection_px_median < CALIBRATION_MAX_PX
+        assert r.lowest_foot_m is not None and r.lowest_foot_m < -0.5, r.lowest_foot_m
+        assert abs(r.lowest_foot_m - alone.lowest_foot_m) <= 0.1, (r.lowest_foot_m, alone.lowest_foot_m)
+    watch = FloorWatch(window=len(two), max_floor_m=CALIBRATION_MAX_FLOOR_M)
+    assert [watch.add(r.lowest_foot_m) for r, *_ in two][-1] is True
+
+
+class _BothPeoplesFeet(Estimator):
+    """The floor figure of both people's split pairings (``Estimator._matched_foot``) on every flagged pair: the
+    subject's own feet left out."""
+
+    def _subject_figures(self, *args):
+        return super()._subject_figures(*args)[0], None
+
+
+def test_two_people_s_floor_figure_leaves_out_feet_past_the_crop_s_edge():
+    """Both people's floor figure on the true rig, one person 2.5 m off and the other 4 m: the crops frame the
+    subject, and the far person's feet fall past view 1's crop, where each map's maximum is its last cell (a
+    runner-up of 0.13-0.46); paired with view 0's peaks of that person they read 0.04-0.06 m up, and the pair's
+    figure 0.024-0.029 m (the near person's 0.002-0.005) before the crop's edge was kept out
+    (``_CROP_EDGE_CELLS``). Every pair's figure is now each person's own feet's, within 0.01 m of the floor."""
+    rig = sim.RigPlacement().build()
+    figures = []
+    for seed in (1, 2):
+        first = sim.SimScene(sim.SceneConfig(seed=seed, motion="wave", position_xz=(-0.5, 2.5)))
+        other = sim.SimScene(sim.SceneConfig(seed=seed + 1000, motion="wave", position_xz=(0.5, 4.0)))
+        oracle = TwoPeopleOracle(edge128_contract())
+        with _BothPeoplesFeet(oracle, rig, EstimatorConfig()) as est:
+            for i in range(8):
+                t = i / 30.0
+                oracle.set_people(first.joints_3d(t), other.joints_3d(t))
+                r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+                assert r.several_people
+                figures.append(r.lowest_foot_m)
+    assert all(f is not None for f in figures), figures
+    assert max(abs(f) for f in figures) < 0.01, figures
 
 
 @pytest.mark.parametrize("tilt_deg", [4.0, -4.0])
