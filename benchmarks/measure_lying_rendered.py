@@ -32,7 +32,8 @@ turn of the picture can right, the prior with both crops turned with the body (:
 the runtime does not know how a person lies): what a search over crop rotations could give at best.
 ``--turn-search`` adds, for every pose, the prior with ``roi.turn_search`` on (the runtime's search: a weak cold
 pass tries each view's crop turned 90, 180 and 270 degrees), with how many pairs searched and how many kept the
-turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``);
+turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``), and the turned passes
+refused because their body lay as no turn rights (``turns_refused``: ``ghnerf_runtime.estimator.lies_as_turned``);
 ``--turn-search-every`` sets ``roi.turn_search_every`` for those rows; their ``upright checks`` column counts the
 tracked pairs through a kept turn that were run again through upright crops (``Estimator.turn_checks``) and those
 that left the turn so (``turns_left``). ``--then POSE`` changes each scene's body to ``POSE`` from pair
@@ -163,7 +164,7 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
     runs = [(p, c) for p in poses for c in configs if c != "turned crops" or p in CROP_TURN_DEG]
     acc = {key: Accuracy() for key in runs}
     extra = {key: {"pairs": 0, "empty": 0, "feet": [], "confidence": [], "apart": [], "searches": 0, "kept": 0,
-                   "tracked_searches": 0, "checks": 0, "left": 0, "ms": []} for key in runs}
+                   "tracked_searches": 0, "checks": 0, "left": 0, "refused": 0, "ms": []} for key in runs}
     outside = {p: [] for p in poses}  # per pose: each pair's share of true joints the box gate would drop
     margin = on.joints3d.max_outside_box_m
     for k in range(first_scene, first_scene + scenes):
@@ -204,6 +205,7 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
                     e = extra[pose, name]
                     e["searches"] += est.turn_searches
                     e["kept"] += est.turns_kept
+                    e["refused"] += est.turns_refused
                     e["checks"] += est.turn_checks
                     e["left"] += est.turns_left
         log(f"scene {k} ({scene.config.motion}): {time.perf_counter() - start:.1f} s")
@@ -212,8 +214,8 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
         s = acc[key].summary()
         e = extra[key]
         s.update(pairs=e["pairs"], empty=e["empty"], feet_pairs=len(e["feet"]), turn_searches=e["searches"],
-                 turns_kept=e["kept"], tracked_searches=e["tracked_searches"], turn_checks=e["checks"],
-                 turns_left=e["left"], ms_median=float(np.median(e["ms"])),
+                 turns_kept=e["kept"], turns_refused=e["refused"], tracked_searches=e["tracked_searches"],
+                 turn_checks=e["checks"], turns_left=e["left"], ms_median=float(np.median(e["ms"])),
                  outside_frac=float(np.mean(outside[key[0]])),
                  disagreement_median_m=float(np.median(e["apart"])) if e["apart"] else float("nan"),
                  confidence_median=float(np.median(e["confidence"])) if e["confidence"] else float("nan"),
@@ -227,16 +229,17 @@ PRIOR_WORDS = {"prior": "on", "no prior": "off", "turned crops": "on, crops turn
 
 
 def table(results: dict[tuple[str, str], dict]) -> str:
-    """The results as a Markdown table (one row per pose and prior; with ``turn search`` rows, three last columns:
-    the pairs that searched the turns, those that kept the turned pass, and those that came tracked; the tracked
-    pairs through a kept turn run again upright, and those that left the turn so; and the median of the pairs'
+    """The results as a Markdown table (one row per pose and prior; with ``turn search`` rows, four last columns:
+    the pairs that searched the turns, those that kept the turned pass, and those that came tracked; the turned
+    passes that found someone better but were refused, their body lying as no turn rights (``turns_refused``); the
+    tracked pairs through a kept turn run again upright, and those that left the turn so; and the median of the pairs'
     ``timing_ms["total"]``, the whole estimate, on whatever else the host runs)."""
     searched = any(prior == "turn search" for _, prior in results)
     rows = ["| pose | skeleton prior | pairs (none found) | PCK@0.2 | MPJPE over the joints found | found | "
             "their confidence (median) | prior disagreement (median) | lowest foot (median, pairs) | true joints "
-            "outside the volume |" + (" turn searches (kept, on tracked pairs) | upright checks (turn left) | "
-                                      "ms per pair (median) |" if searched else ""),
-            "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|" if searched else "")]
+            "outside the volume |" + (" turn searches (kept, on tracked pairs) | turned passes refused | "
+                                      "upright checks (turn left) | ms per pair (median) |" if searched else ""),
+            "|---|---|---|---|---|---|---|---|---|---|" + ("---|---|---|---|" if searched else "")]
     for (pose, prior), s in results.items():
         conf = f"{s['confidence_median']:.2f}" if np.isfinite(s["confidence_median"]) else "-"
         mp = f"{s['mpjpe_mm']:.1f} mm" if np.isfinite(s["mpjpe_mm"]) else "-"
@@ -246,7 +249,8 @@ def table(results: dict[tuple[str, str], dict]) -> str:
                     f"{s.get('pck@0.2', float('nan')):.3f} | {mp} | {100 * s['found_3d_frac']:.1f} % | "
                     f"{conf} | {apart} | {feet} | {100 * s['outside_frac']:.1f} % |"
                     + ((f" {s['turn_searches']} ({s['turns_kept']}, {s['tracked_searches']}) |"
-                         f" {s['turn_checks']} ({s['turns_left']}) |" if prior == "turn search" else " - | - |")
+                         f" {s['turns_refused']} | {s['turn_checks']} ({s['turns_left']}) |"
+                         if prior == "turn search" else " - | - | - |")
                        + f" {s['ms_median']:.1f} |" if searched else ""))
     return "\n".join(rows)
 

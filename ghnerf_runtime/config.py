@@ -193,13 +193,15 @@ class RoiConfig:
             median confidence under ``turn_search_below``), try each camera's crop turned 90, 180 and 270
             degrees more (one encoder run per turn for both views), take per view the turn whose heatmap peaks
             are clearly stronger than upright's, run the pass again with those crops and keep it when it finds
-            someone more confidently; the turn stays with the track (upright again once it is lost). For
-            people lying across the view or upside down, whom the encoder (trained on upright people) misses
-            upright. While tracked: a weak tracked pass through upright crops searches the turns on its
-            track's crops (someone who lay down); a tracked pass through a kept turn's crops, when weak or every
-            ``turn_search_every``-th tracked pair, is run again through upright crops and the turn left when
-            that finds the person more confidently (someone who got up); a strong upright tracked pass, the usual
-            pair, pays nothing (docs/runtime.md, "Lying and upside down, rendered").
+            someone more confidently, lying level or upside down across the views (``estimator.lies_as_turned``:
+            what no turn rights, a body along a line of sight, is refused); the turn stays with the track
+            (upright again once it is lost). For people lying across the view or upside down, whom the encoder
+            (trained on upright people) misses upright. While tracked: a weak tracked pass through upright
+            crops searches the turns on its track's crops (someone who lay down); a tracked pass through a kept
+            turn's crops, when weak or every ``turn_search_every``-th tracked pair, is run again through upright
+            crops and the turn left when that finds the person more confidently (someone who got up); a strong
+            upright tracked pass, the usual pair, pays nothing (docs/runtime.md, "Lying and upside down,
+            rendered").
         turn_search_below: the found joints' median confidence under which a pass that found someone is weak:
             a cold or upright tracked one searches, a turned tracked one is checked upright (through upright crops
             an upside-down person is read standing at 0.38 median, upright people at 0.79: docs/runtime.md,

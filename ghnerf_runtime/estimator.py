@@ -57,7 +57,7 @@ from typing import Any, Callable, Sequence
 import cv2
 import numpy as np
 
-from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES
+from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_INDEX, JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -485,6 +485,61 @@ _TURN_MARGIN = 0.1
 _TURN_SEARCH_FLOOR = 0.1
 
 
+#: roi.turn_search: a turned pass is kept only when its body lies as a turn can right (:func:`lies_as_turned`):
+#: level or upside down within this many degrees (its body axis against gravity). In a one-off look at the 30 bench
+#: scenes (benchmarks/measure_lying_rendered.py's poses, 15 pairs each), the turned passes the search kept of people
+#: lying across the view were 83-97 degrees from upright, upside down 170-179; 5 of the 10 it kept of people lying
+#: along the line of sight 124-150, 0.55-1.2 m off (the encoder's upright person across the picture, rising off the
+#: floor toward the cameras). docs/runtime.md, "Refusing what no turn rights".
+_TURN_LIE_TOLERANCE_DEG = 20.0
+#: roi.turn_search: and at least this many degrees from each camera's line of sight to it: a body along a view's line
+#: of sight shows that view no length to turn upright. The kept passes above: 61-89 degrees from the nearer line of
+#: sight lying across and upside down (an upright body is 90 less the view's pitch), 4 of those lying along 19-31
+#: (level, 0.24-0.42 m off).
+_TURN_MIN_FROM_SIGHT_DEG = 45.0
+#: the joints whose centroids give a body's axis (:func:`body_axis`): the head and shoulders, the hips and legs
+_AXIS_UPPER = tuple(JOINT_INDEX[n] for n in ("Nose", "Neck", "RShoulder", "LShoulder", "REye", "LEye", "REar",
+                                             "LEar"))
+_AXIS_LOWER = tuple(JOINT_INDEX[n] for n in ("MidHip", "RHip", "LHip", "RKnee", "LKnee", "RAnkle", "LAnkle"))
+
+
+def body_axis(j3: Joints3D) -> np.ndarray | None:
+    """The unit vector from the centroid of ``j3``'s found lower-body joints (hips, knees, ankles) to that of its
+    found upper-body joints (head, neck, shoulders): which way the body points. ``None`` without a found joint in
+    either group, or with the two centroids together."""
+    upper = [j for j in _AXIS_UPPER if j3.valid[j]]
+    lower = [j for j in _AXIS_LOWER if j3.valid[j]]
+    if not upper or not lower:
+        return None
+    d = j3.points[upper].mean(axis=0) - j3.points[lower].mean(axis=0)
+    n = float(np.linalg.norm(d))
+    return d / n if n > 1e-6 else None
+
+
+def lies_as_turned(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
+    """Whether ``j3``, a turned pass's joints (``roi.turn_search``), lie as a crop turn rights a body: the body axis
+    (:func:`body_axis`) level or upside down within :data:`_TURN_LIE_TOLERANCE_DEG` (the rig frame's y is down,
+    along gravity), and at least :data:`_TURN_MIN_FROM_SIGHT_DEG` from each camera's line of sight to the found
+    joints' centroid (``centres``: the cameras' centres). A turn shows the encoder someone lying across a view or
+    upside down as upright; a body it does not right (lying along the line of sight) it reads as an upright person
+    across the picture, a skeleton that stands tilted off the floor or runs along a view's line of sight, 0.24-1.2 m
+    off (docs/runtime.md, "Refusing what no turn rights"). No axis (no head and shoulders, or no hips and legs found):
+    nothing says how the body lies, and the pass is not taken."""
+    axis = body_axis(j3)
+    if axis is None:
+        return False
+    from_up = math.degrees(math.acos(float(np.clip(-axis[1], -1.0, 1.0))))
+    if abs(from_up - 90.0) > _TURN_LIE_TOLERANCE_DEG and from_up < 180.0 - _TURN_LIE_TOLERANCE_DEG:
+        return False  # neither lying nor upside down: tilted halfway, no body a turn rights
+    centroid = j3.points[j3.valid].mean(axis=0)
+    for c in centres:
+        sight = centroid - np.asarray(c, np.float64)
+        n = float(np.linalg.norm(sight))
+        if n > 1e-6 and math.degrees(math.acos(min(1.0, abs(float(sight @ axis)) / n))) < _TURN_MIN_FROM_SIGHT_DEG:
+            return False
+    return True
+
+
 def _view_score(heat: np.ndarray) -> np.ndarray:
     """Per view of ``(2, J, h, w)`` heatmaps, the median over the joints of each joint's map maximum (clipped to
     0..1; a non-finite map counts 0): how much of a body the view's crop shows strongly, a few phantom peaks
@@ -614,6 +669,7 @@ class Estimator:
         self._turned_trackers: dict[tuple[int, int], SubjectTracker] = {(0, 0): self.tracker}
         self.turn_searches = 0  # weak passes that searched the turns, and those whose turned pass was kept
         self.turns_kept = 0
+        self.turns_refused = 0  # turned passes that found someone better but lay as no turn rights (lies_as_turned)
         self._turn_search_wait = 0  # weak pairs left that do not search (roi.turn_search_every)
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
         self.turns_left = 0
@@ -1009,7 +1065,8 @@ class Estimator:
                      novel_view: NovelViewRequest | None, track: Track | None = None) -> "_Pass":
         """``roi.turn_search`` after the weak pass ``p`` through upright crops: the views' turns to try
         (:meth:`_turn_candidates`), each a pass with those crops, the first kept that finds someone where ``p``
-        did not, or at a median confidence :data:`_TURN_MARGIN` higher; else ``p`` and its track stand. The passes
+        did not, or at a median confidence :data:`_TURN_MARGIN` higher, and lies as a turn rights a body
+        (:func:`lies_as_turned`; else it counts in ``turns_refused``); else ``p`` and its track stand. The passes
         are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
         is followed through the turned crops, the same window about the person as ``p``'s."""
         self.turn_searches += 1
@@ -1023,12 +1080,16 @@ class Estimator:
                 self._several_track, self._behind_track = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
             if _finds_better(q, p):
-                if p.novel is not None:
-                    p.novel.abandon()
-                self.turns_kept += 1
-                self._turn_check_wait = self.config.roi.turn_search_every - 1  # just compared with upright
-                log.debug("pair %d: crops turned %s degrees found the subject", sequence, turns)
-                return q
+                if lies_as_turned(q.j3, [st.camera.center for st in self._cams]):
+                    if p.novel is not None:
+                        p.novel.abandon()
+                    self.turns_kept += 1
+                    self._turn_check_wait = self.config.roi.turn_search_every - 1  # just compared with upright
+                    log.debug("pair %d: crops turned %s degrees found the subject", sequence, turns)
+                    return q
+                # the encoder's guess at a body no turn rights (lying along the line of sight): not taken
+                self.turns_refused += 1
+                log.debug("pair %d: crops turned %s degrees found a body that does not lie as turned", sequence, turns)
             if q.novel is not None:
                 q.novel.abandon()
         # upright stands, with the track its pass left

@@ -111,13 +111,16 @@ def test_turn_search_adds_a_row_per_pose_with_its_searches(tiny_model_dir, scrat
                                                           monkeypatch):
     out = run_script("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--scenes", "1", "--frames",
                      "1", "--poses", "upright,lying_z", "--turn-search", capsys=capsys, monkeypatch=monkeypatch)
-    searches, checks = r"(- |\d+ \(\d+, \d+\) )", r"(- |\d+ \(\d+\) )"
-    rows = re.findall(rf"^\| (\w+) \| ([^|]+) \| 1 \(\d\) \|.*\| {searches}\| {checks}\| [\d.]+ \|$", out, re.M)
-    assert [(pose, prior) for pose, prior, _, _ in rows] == [
+    searches, refused, checks = r"(- |\d+ \(\d+, \d+\) )", r"(- |\d+ )", r"(- |\d+ \(\d+\) )"
+    rows = re.findall(rf"^\| (\w+) \| ([^|]+) \| 1 \(\d\) \|.*\| {searches}\| {refused}\| {checks}\| [\d.]+ \|$",
+                      out, re.M)
+    assert [(pose, prior) for pose, prior, _, _, _ in rows] == [
         ("upright", "on"), ("upright", "off"), ("upright", "on, `roi.turn_search` on"),
         ("lying_z", "on"), ("lying_z", "off"), ("lying_z", "on, `roi.turn_search` on")], out
-    assert [searches != "- " for _, _, searches, _ in rows] == [False, False, True] * 2
-    assert [checks != "- " for _, _, _, checks in rows] == [False, False, True] * 2
+    assert [searches != "- " for _, _, searches, _, _ in rows] == [False, False, True] * 2
+    # the turned passes refused (lies_as_turned), a count on the search's rows only
+    assert [refused != "- " for _, _, _, refused, _ in rows] == [False, False, True] * 2
+    assert [checks != "- " for _, _, _, _, checks in rows] == [False, False, True] * 2
 
 
 def test_then_changes_every_body_at_change_at(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811

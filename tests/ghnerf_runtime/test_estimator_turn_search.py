@@ -465,3 +465,75 @@ def test_a_tracked_turn_search_follows_a_flagged_track_with_its_hold_and_keeps_i
     assert est._turn_search([None, None], weak, 0, {}, None, est.tracker.track) is weak
     assert asked == [(*held, (180, 180))]
     assert (est._several_track, est._behind_track, est._turns) == (*held, (0, 0))
+
+
+def _turned_body(axis: int, degrees: float, at=(0.0, 0.0, 3.0)):
+    """A standing person's joints (drivers.sim, rig frame, y down) turned ``degrees`` about rig axis ``axis`` through
+    their centroid, moved there: a body 3 m ahead of cameras at the rig's origin."""
+    from benchmarks.measure_lying_rendered import rotation
+    from ghnerf_runtime.joints3d import Joints3D
+
+    sim = pytest.importorskip("drivers.sim")
+    joints = sim.SimScene(sim.SceneConfig(seed=1)).joints_3d(0.0)
+    centre = joints.mean(axis=0)
+    points = (joints - centre) @ rotation(axis, degrees).T + np.asarray(at)
+    n = len(points)
+    return Joints3D(points, np.ones(n, np.float32), np.ones(n, bool), np.zeros((n, 2), np.float32))
+
+
+CAMERA_CENTRES = [np.array([-0.1, -1.2, 0.0]), np.array([0.1, -1.2, 0.0])]  # a pair 1.2 m up, looking along +z
+
+
+@pytest.mark.parametrize("axis, degrees, lies", [
+    (2, 90.0, True),  # lying across the view (a quarter turn rights it)
+    (2, -90.0, True),
+    (2, 180.0, True),  # upside down (a half turn)
+    (2, 170.0, True),  # a handstand leaning 10 degrees
+    (0, 90.0, False),  # lying along the line of sight: level, but no view shows its length
+    (0, -90.0, False),
+    (0, 135.0, False),  # head down, tilted halfway: the encoder's upright person across the picture (lying_x)
+    (2, 125.0, False),
+    (2, 0.0, False),  # standing: no turn was needed to read it
+])
+def test_a_turned_pass_is_taken_only_lying_or_upside_down_across_the_views(axis, degrees, lies):
+    """``lies_as_turned``: what a turned pass's body must look like to be kept. Lying along the line of sight (no turn
+    rights it) the old search kept a half-turned pass's skeleton level along the line of sight, or one tilted off
+    the floor toward the cameras (0.25-1.2 m off: docs/runtime.md, "Searching the crop turns")."""
+    from ghnerf_runtime.estimator import lies_as_turned
+
+    assert lies_as_turned(_turned_body(axis, degrees), CAMERA_CENTRES) is lies
+
+
+def test_a_turned_pass_that_does_not_show_how_the_body_lies_is_not_taken():
+    """No head and shoulders, or no hips and legs found: no body axis, so nothing says the turn righted anyone."""
+    from dataclasses import replace as dc_replace
+
+    from ghnerf_runtime.body25 import JOINT_INDEX
+    from ghnerf_runtime.estimator import body_axis, lies_as_turned
+
+    j3 = _turned_body(2, 180.0)
+    np.testing.assert_allclose(body_axis(j3), [0.0, 1.0, 0.0], atol=0.1)  # upside down: the head below (y down)
+    for group in (("Nose", "Neck", "RShoulder", "LShoulder", "REye", "LEye", "REar", "LEar"),
+                  ("MidHip", "RHip", "LHip", "RKnee", "LKnee", "RAnkle", "LAnkle")):
+        valid = j3.valid.copy()
+        valid[[JOINT_INDEX[n] for n in group]] = False
+        headless = dc_replace(j3, valid=valid)
+        assert body_axis(headless) is None and not lies_as_turned(headless, CAMERA_CENTRES)
+
+
+@needs_model
+@pytest.mark.parametrize("k, frames", [(17, 1), (0, 6)])
+def test_a_turned_pass_of_someone_lying_along_the_line_of_sight_is_refused(session, k, frames):
+    """Lying along the line of sight no turn rights the body, but a half-turned pass found someone more confidently
+    than upright and was kept: in scene 17 at its first pair, a skeleton level along the line of sight 0.25 m off;
+    in scene 0 at pair 5, one standing tilted head down off the floor, 0.63 m off, then tracked (the code before).
+    Now such a pass is refused (``lies_as_turned``) and upright, which found nobody, stands, as with the search
+    off."""
+    rig, shots = _shots(k, "lying_x", frames=frames)
+    off, _ = _run(session, rig, shots, search=False)
+    on, est = _run(session, rig, shots, search=True)
+    assert est.turns_kept == 0 and est._turns == (0, 0), (est.turns_kept, est._turns)
+    for (a, _, _), (b, _, _) in zip(off, on):  # what the search off reports
+        np.testing.assert_array_equal(a.missing, b.missing)
+        np.testing.assert_array_equal(a.joints_3d, b.joints_3d)
+    assert est.turns_refused >= 1 and est.turn_searches >= 1
