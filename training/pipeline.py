@@ -33,7 +33,10 @@ Stages (each skipped when its outputs exist and its stamp's inputs still match; 
    --card-dir``) is kept while its files are unchanged.
 
 Stamps, cards and the JSON files the pipeline writes are replaced whole (a temporary file and ``os.replace``);
-a stamp that cannot be read counts as not done.
+a stamp that cannot be read counts as not done. A stamp's inputs hold the output digests of the stages the
+stage reads from (the joint run: the pretraining's ``human.pt``; quantize, prior and eval: the dataset's), so a
+changed output reruns what reads it; a joint run folder records the ``human.pt`` it started from
+(:data:`HUMAN_MARKER`), so a finished run from another encoder is not taken as it is.
 
 ``--variants baseline`` takes one variant through its stages now (e.g. while the other still trains).
 
@@ -418,6 +421,39 @@ def _mark_data(cfg: PipelineConfig, run: Path) -> None:
     write_atomic(run / DATA_MARKER, _dataset_sha(cfg) + "\n")
 
 
+#: Written into a joint run folder the pipeline starts with a ``human_init``: the sha256 of the ``human.pt`` the
+#: run started from. The config names only the path, which a pretraining done again overwrites.
+HUMAN_MARKER = "human_init.sha256"
+
+
+def _human_init_mismatch(run: Path, tc: dict) -> str | None:
+    """Why the run in ``run`` did not start from the ``human_init`` file that ``tc`` names now (None: it did, or
+    the run has no marker: runs made before it existed are taken on trust, as for the dataset)."""
+    from training.model_card import sha256
+
+    marker, init = run / HUMAN_MARKER, tc.get("human_init")
+    if not init or not marker.exists():
+        return None
+    started = marker.read_text().strip()
+    now = sha256(init) if Path(init).is_file() else None
+    if now == started:
+        return None
+    return (f"it started from another {init} ({HUMAN_MARKER} {started[:12]}, the file now "
+            f"{now[:12] if now else 'missing'})")
+
+
+def _mark_human_init(run: Path, tc: dict) -> None:
+    """Record the ``human_init`` a fresh run starts from; a resumed run keeps its marker (its checkpoint holds
+    the weights it started from, whatever the file holds now)."""
+    from training.model_card import sha256
+
+    init = tc.get("human_init")
+    if not init or not Path(init).is_file() or (run / "last.pt").exists() or (run / "prev.pt").exists():
+        return  # (a missing file: the trainer names it)
+    run.mkdir(parents=True, exist_ok=True)
+    write_atomic(run / HUMAN_MARKER, sha256(init) + "\n")
+
+
 def _train_cmd(cfg: PipelineConfig, preset: str, run: Path, extra: list[str] = ()) -> list[str]:
     cmd = [sys.executable, "-m", "training.train", "--config", str(CONFIG_DIR / f"{preset}.json"),
            "--out", str(run), "--resume", "--data", str(cfg.data)]
@@ -444,12 +480,15 @@ def _pretrain_cmd(cfg: PipelineConfig, variant: str, extra: list[str] = ()) -> l
 class LaneStep(NamedTuple):
     """One command of a lane and its log; ``run_folder``: it trains in the log's folder, which is marked with the
     dataset's hash first (:func:`_mark_data`); ``optional``: a failure is reported and the lane goes on (what the
-    step saves time on is done by a later stage anyway)."""
+    step saves time on is done by a later stage anyway); ``train_config``: a joint run's config, whose
+    ``human_init`` is marked when the step starts (:func:`_mark_human_init`: the pretraining may run in an
+    earlier phase)."""
 
     cmd: list[str]
     log: Path
     run_folder: bool = True
     optional: bool = False
+    train_config: dict | None = None
 
 
 def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
@@ -485,7 +524,8 @@ def side_by_side_plan(cfg: PipelineConfig, variants: list[str], cores: int,
 
     def joint(v: str, threads: int) -> LaneStep:
         run = cfg.runs / VARIANTS[v]
-        return LaneStep(_train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"]), run / "train.log")
+        return LaneStep(_train_cmd(cfg, VARIANTS[v], run, [f"threads={threads}"]), run / "train.log",
+                        train_config=train_inputs(cfg, VARIANTS[v]))
 
     def pretrain(v: str, extra: list[str]) -> LaneStep:
         return LaneStep(_pretrain_cmd(cfg, v, extra), pretrain_dir(cfg, v) / "train.log")
@@ -590,6 +630,8 @@ def train_side_by_side(cfg: PipelineConfig, variants: list[str], data: Any = Non
             step.log.parent.mkdir(parents=True, exist_ok=True)
             if step.run_folder:
                 _mark_data(cfg, step.log.parent)
+            if step.train_config is not None:
+                _mark_human_init(step.log.parent, step.train_config)
             log.info("$ %s &", shlex.join(step.cmd))
             with open(step.log, "a") as fh:
                 if subprocess.run(step.cmd, cwd=REPO, env=env, stdout=fh, stderr=subprocess.STDOUT).returncode != 0:
@@ -796,6 +838,18 @@ def _check_pretrain_folder(cfg: PipelineConfig, variant: str) -> None:
     if held and not _data_marker_ok(cfg, run):
         raise RuntimeError(f"{run} holds a pretraining run on another dataset ({DATA_MARKER} differs from "
                            f"{cfg.data}/dataset.json); move it away or pass --runs")
+    if joint := _joint_run_before(cfg, variant):
+        raise RuntimeError(f"{joint} holds a joint run started from an earlier pretraining: the pretraining about "
+                           f"to run replaces its human.pt; --force train_{variant} sets that run aside, or move it "
+                           "away or pass --runs")
+
+
+def _joint_run_before(cfg: PipelineConfig, variant: str) -> Path | None:
+    """The variant's joint run folder when it holds a checkpoint while its pretraining is yet to finish: that run
+    started from an earlier encoder (the joint run starts only from a finished one). Refused before the
+    pretraining, since runs made before :data:`HUMAN_MARKER` carry no record of which encoder they began from."""
+    joint = cfg.runs / VARIANTS[variant]
+    return joint if (joint / "last.pt").exists() or (joint / "prev.pt").exists() else None
 
 
 def stage_pretrain(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
@@ -873,6 +927,8 @@ def _run_finished(cfg: PipelineConfig, variant: str) -> bool:
         return False
     if not _data_marker_ok(cfg, run):
         return False
+    if _human_init_mismatch(run, tc):  # a pretraining done again since: the run learnt from the old encoder
+        return False
     sm = json.loads(summary_p.read_text())
     return sm.get("steps", 0) >= tc["iterations"] or bool(cfg.accept_stopped and sm.get("stopped_early"))
 
@@ -897,6 +953,9 @@ def _check_run_folder(cfg: PipelineConfig, variant: str) -> None:
     if (run / "last.pt").exists() and not _data_marker_ok(cfg, run):
         raise RuntimeError(f"{run} holds a run on another dataset ({DATA_MARKER} differs from "
                            f"{cfg.data}/dataset.json); move it away or pass --runs")
+    if ((run / "last.pt").exists() or (run / "prev.pt").exists()) and (why := _human_init_mismatch(run, tc)):
+        raise RuntimeError(f"{run} holds a run of another pretraining: {why}; --force train_{variant} sets it "
+                           "aside, or move it away or pass --runs")
 
 
 def stage_train(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
@@ -908,6 +967,7 @@ def stage_train(cfg: PipelineConfig, variant: str) -> tuple[list[Path], dict]:
     if not _run_finished(cfg, variant):
         _check_run_folder(cfg, variant)
         _mark_data(cfg, run)
+        _mark_human_init(run, train_inputs(cfg, preset))
         _sh(_train_cmd(cfg, preset, run), run / "train.log")
     summary = json.loads(summary_p.read_text())
     if summary.get("stopped_early"):
@@ -1410,37 +1470,39 @@ def run(cfg: PipelineConfig) -> dict | None:
         return None
     data_key = data_stage_key(d)
 
-    def train_in(variant: str) -> dict:
-        return train_stage_inputs(cfg, variant, data_key)
+    def train_in(variant: str, pretrained: dict | None) -> dict:
+        return train_stage_inputs(cfg, variant, data_key, (pretrained or {}).get("outputs"))
 
     for v in cfg.variants:  # a run stopped at its max_minutes cap is resumed, whatever its stamp says
         if cfg.until != "pretrain" and not _run_finished(cfg, v):
             st.force.add(f"train_{v}")
-    todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v)) is None and not _run_finished(cfg, v)]
+    todo = [v for v in cfg.variants if st.done(f"train_{v}", train_in(v, st.stamp(f"pretrain_{v}"))) is None
+            and not _run_finished(cfg, v)]
     # lanes: two trainings to share the cores, or (the shared plan) one beside the early prior
     lanes = len(todo) > 1 or (todo and cfg.shared_pretrain_steps and (os.cpu_count() or 1) >= 2)
     if cfg.until != "pretrain" and cfg.parallel_train and lanes and not torch.cuda.is_available():
         train_side_by_side(cfg, todo, data_key)  # (it trains too: not when only the pretraining is asked for)
     for variant in cfg.variants:
+        pre = None
         if pretrain_block(cfg, variant):
-            st.run(f"pretrain_{variant}", pretrain_stage_inputs(cfg, variant, data_key),
-                   lambda v=variant: stage_pretrain(cfg, v))
+            pre = st.run(f"pretrain_{variant}", pretrain_stage_inputs(cfg, variant, data_key),
+                         lambda v=variant: stage_pretrain(cfg, v))
         if cfg.until == "pretrain":
             continue
-        t = st.run(f"train_{variant}", train_in(variant), lambda v=variant: stage_train(cfg, v))
+        t = st.run(f"train_{variant}", train_in(variant, pre), lambda v=variant: stage_train(cfg, v))
         if cfg.until == "train":
             continue
         ckpt = {variant: Path(next(iter(t["outputs"])))}
         # the exporter's and quantizer's own settings too: another policy or opset remakes the files
         e = st.run(f"export_{variant}", export_stage_inputs(t),
                    lambda c=ckpt: stage_export(cfg, c))
-        q = st.run(f"quantize_{variant}", quantize_stage_inputs(cfg, e),
+        q = st.run(f"quantize_{variant}", quantize_stage_inputs(cfg, e, data_key),
                    lambda c=ckpt: stage_quantize(cfg, c))
         p = None
         if variant in PRIOR_VARIANTS:  # before the eval, which scores it: a new prior re-evaluates
             p = st.run(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key),
                        lambda v=variant: stage_prior(cfg, v, data_key, adopt=f"prior_{v}" not in st.force))
-        st.run(f"eval_{variant}", eval_stage_inputs(cfg, variant, e, q, p),
+        st.run(f"eval_{variant}", eval_stage_inputs(cfg, variant, e, q, p, data_key),
                lambda v=variant, c=ckpt[variant]: stage_eval(cfg, v, c))
     if cfg.until:
         log.info("stopped after the %s stages (--until)", cfg.until)
@@ -1470,10 +1532,15 @@ def pretrain_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict) -> 
     return {"data": data_key, "config": _pretrain_result_keys(cfg, variant)}
 
 
-def train_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict) -> dict:
+def train_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict, pretrain_outputs: dict | None) -> dict:
+    """``pretrain_outputs``: the pretrain stage's stamped outputs (``human.pt`` and its sha256; None before it has
+    a stamp): a pretraining done again with the same config is another encoder to start from."""
+    block = pretrain_block(cfg, variant)
     return {"data": data_key, "config": _result_keys(train_inputs(cfg, VARIANTS[variant])),
             "model": expected_model(cfg, variant), "runs": str(cfg.runs), "accept_stopped": cfg.accept_stopped,
-            "pretrain": _pretrain_result_keys(cfg, variant) if pretrain_block(cfg, variant) else None}
+            "pretrain": _pretrain_result_keys(cfg, variant) if block else None,
+            # (a variant without a pretraining gets no key: its stamps made before the key keep matching)
+            **({"pretrain_outputs": pretrain_outputs} if block else {})}
 
 
 def export_stage_inputs(train_stamp: dict) -> dict:
@@ -1481,14 +1548,17 @@ def export_stage_inputs(train_stamp: dict) -> dict:
     return {"checkpoint": train_stamp["outputs"], "settings": export_settings()}
 
 
-def quantize_stage_inputs(cfg: PipelineConfig, export_stamp: dict) -> dict:
-    return {"export": export_stamp["outputs"], "calib": cfg.calib_scenes, "settings": quantize_settings()}
+def quantize_stage_inputs(cfg: PipelineConfig, export_stamp: dict, data_key: dict) -> dict:
+    # the dataset too: it calibrates on the training split's scenes and checks parity on a held-out one
+    return {"export": export_stamp["outputs"], "calib": cfg.calib_scenes, "settings": quantize_settings(),
+            "data": data_key}
 
 
 def eval_stage_inputs(cfg: PipelineConfig, variant: str, export_stamp: dict, quantize_stamp: dict,
-                      prior_stamp: dict | None) -> dict:
+                      prior_stamp: dict | None, data_key: dict) -> dict:
+    # the dataset too: the held-out scenes it scores are the data stage's
     inputs = {"q": quantize_stamp["outputs"], "e": export_stamp["outputs"], "split": cfg.eval_split,
-              "limit": cfg.eval_limit, "runtimes": EVAL_RUNTIMES[variant]}
+              "limit": cfg.eval_limit, "runtimes": EVAL_RUNTIMES[variant], "data": data_key}
     if prior_stamp is not None:  # the graph, not its report
         inputs["prior"] = {k: v for k, v in prior_stamp["outputs"].items() if k.endswith(".onnx")}
     return inputs
@@ -1514,6 +1584,8 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
     reads when those stages are skipped). A stage after one that runs is listed as running after it even when
     its own stamp matches: the files that one writes are its inputs. A train stage is also judged as
     :func:`run` judges it: a run folder without a finished run of this config trains (or resumes) there."""
+    from training.model_card import sha256
+
     st = Stages(cfg.out, cfg.force, create=False)
     rows: list[StageStatus] = []
 
@@ -1538,21 +1610,42 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
         waiting([n for n in STAGES[1:] if n != "card"], "data")
         return rows
     data_key = data_stage_key(d)
+    data_after = ["data"] if data_runs else []  # (the stages that read the dataset itself)
     for variant in cfg.variants:
         # the training stages reuse a finished run of the same config: then only the stamp is written again,
         # with the same checkpoint, and the stages after them keep theirs (their inputs are its files)
-        after = ["data"] if data_runs else []
+        after = list(data_after)
+        # what run() gives the train stage: the pretraining's stamped outputs, as that stage leaves them
+        pretrained = (st.stamp(f"pretrain_{variant}") or {}).get("outputs")
+        train_after = after
         if pretrain_block(cfg, variant):
-            reused = "; the finished pretraining there is reused: only its stamp is written again" \
-                if _pretrain_finished(cfg, variant) else ""
-            if judge(f"pretrain_{variant}", pretrain_stage_inputs(cfg, variant, data_key), after) and reused:
-                rows[-1] = rows[-1]._replace(why=rows[-1].why + reused)
+            finished = _pretrain_finished(cfg, variant)
+            if judge(f"pretrain_{variant}", pretrain_stage_inputs(cfg, variant, data_key), after):
+                if finished:  # the same human.pt, stamped again
+                    human = pretrain_dir(cfg, variant) / "human.pt"
+                    pretrained = {str(human): sha256(human)}
+                    rows[-1] = rows[-1]._replace(why=rows[-1].why + "; the finished pretraining there is reused: "
+                                                                    "only its stamp is written again")
+                else:  # a new human.pt: the joint run starts from it
+                    train_after = [*after, f"pretrain_{variant}"]
+                    if joint := _joint_run_before(cfg, variant):
+                        rows[-1] = rows[-1]._replace(why=rows[-1].why + f"; make model stops first: {joint} holds "
+                                                     f"a joint run of an earlier pretraining (--force train_{variant}"
+                                                     " sets it aside)")
         if cfg.until == "pretrain":
             continue
-        unfinished = None if _run_finished(cfg, variant) else (
-            f"{cfg.runs / VARIANTS[variant]} holds no finished run of this config: it trains (or resumes) there")
-        if judge(f"train_{variant}", train_stage_inputs(cfg, variant, data_key), after, unfinished) \
-                and not unfinished:
+        joint = cfg.runs / VARIANTS[variant]
+        if train_after != after:
+            unfinished = f"it trains in {joint} from the new pretraining's human.pt"
+        elif why := _human_init_mismatch(joint, train_inputs(cfg, VARIANTS[variant])):
+            unfinished = (f"{joint} holds a run of another pretraining ({why}): make model stops there "
+                          f"(--force train_{variant} sets it aside)")
+        elif not _run_finished(cfg, variant):
+            unfinished = f"{joint} holds no finished run of this config: it trains (or resumes) there"
+        else:
+            unfinished = None
+        if judge(f"train_{variant}", train_stage_inputs(cfg, variant, data_key, pretrained), train_after,
+                 unfinished) and not unfinished:
             rows[-1] = rows[-1]._replace(why=rows[-1].why + f"; the finished run in {cfg.runs / VARIANTS[variant]} "
                                                               "is reused: only its stamp is written again")
         if cfg.until == "train":
@@ -1569,7 +1662,7 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
         if e is None:
             waiting(later[1:], f"export_{variant}")
             continue
-        if judge(f"quantize_{variant}", quantize_stage_inputs(cfg, e), after):
+        if judge(f"quantize_{variant}", quantize_stage_inputs(cfg, e, data_key), [*data_after, *after]):
             after = [*after, f"quantize_{variant}"]
         if q is None:
             waiting(later[2:], f"quantize_{variant}")
@@ -1577,12 +1670,13 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
         p = None
         if variant in PRIOR_VARIANTS:
             p = st.stamp(f"prior_{variant}")
-            if judge(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key), after):
+            if judge(f"prior_{variant}", prior_stage_inputs(cfg, {**e["outputs"], **q["outputs"]}, data_key),
+                     [*data_after, *after]):
                 after = [*after, f"prior_{variant}"]
             if p is None:
                 waiting([f"eval_{variant}"], f"prior_{variant}")
                 continue
-        judge(f"eval_{variant}", eval_stage_inputs(cfg, variant, e, q, p), after)
+        judge(f"eval_{variant}", eval_stage_inputs(cfg, variant, e, q, p, data_key), [*data_after, *after])
     if not cfg.until:
         rows.append(StageStatus("card", True, "always rewritten once every variant is evaluated (it records the "
                                               "command and the stamps)"))
