@@ -98,11 +98,12 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
     (a frame check) counts as read, and so does one with two people in view (``several_people``), which gives no
     figure here: its figure may be the other person's feet, or both people's. The end of a recording ends the
     reading. A read that times out is waited for again, until no pair came for ``stall_s`` (the daemon's
-    ``rig.stall_s``: a camera open but silent).
+    ``rig.stall_s``: a camera open but silent); a read that fails (``RigOperationError``: a corrupt frame of a
+    recording) is read past once, as the daemon reads past it, and raised when the next read fails too.
 
     :raises FloorMeasureError: fewer than ``pairs`` figures within ``max_reads`` pairs (or the recording's end, or a
         silent rig), or a median height outside ``[0, MAX_FOOT_STANDING_M]`` (not a foot standing on this rig's floor).
-    :raises drivers.DriverError: the rig failed (not a timeout: a slow pair is waited for again).
+    :raises drivers.DriverError: the rig failed (not a timeout: a slow pair is waited for again; not one failed read).
     """
     if isinstance(pairs, bool) or not isinstance(pairs, int) or pairs < 1:
         raise ValueError(f"measure_floor: pairs must be a whole number >= 1, got {pairs!r}")
@@ -110,6 +111,7 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
     heights: list[float] = []
     read = two_people = 0
     last_pair = clock()
+    read_failed = False  # the last read raised a RigOperationError and no pair came since
     while len(heights) < pairs and read < limit:
         try:
             pair = source.read(timeout_s=read_timeout_s)
@@ -124,6 +126,14 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
                     f"--measure-floor: no pair for {silent:.1f} s (rig.stall_s {stall_s:g}) after {read} pairs read: "
                     f"a camera is silent (unplugged, or held by another process: stop the service first)") from None
             continue
+        except drivers.RigDisconnectedError:
+            raise  # unplugged, a device reset: the rig is gone
+        except drivers.RigOperationError:
+            if read_failed:  # twice before a pair: the rig itself failed
+                raise
+            read_failed = True
+            continue
+        read_failed = False
         last_pair = clock()
         read += 1
         try:

@@ -29,15 +29,18 @@ class _Pair:
 
 
 class _Source:
-    """Pairs until ``end`` (then the end of a recording), a timeout at the reads listed in ``timeouts``."""
+    """Pairs until ``end`` (then the end of a recording), a timeout at the reads listed in ``timeouts``, a failed
+    read (a corrupt frame) at those in ``failures``."""
 
-    def __init__(self, end: int = 10 ** 6, timeouts: tuple[int, ...] = ()) -> None:
-        self.reads, self.end, self.timeouts = 0, end, timeouts
+    def __init__(self, end: int = 10 ** 6, timeouts: tuple[int, ...] = (), failures: tuple[int, ...] = ()) -> None:
+        self.reads, self.end, self.timeouts, self.failures = 0, end, timeouts, failures
 
     def read(self, timeout_s: float = 1.0) -> _Pair:
         self.reads += 1
         if self.reads in self.timeouts:
             raise drivers.RigTimeoutError("no pair")
+        if self.reads in self.failures:
+            raise drivers.RigOperationError(f"frame {self.reads}: a corrupt image")
         if self.reads > self.end:
             raise drivers.EndOfStream("the recording ended")
         return _Pair(sequence=self.reads)
@@ -134,6 +137,15 @@ def test_a_silent_rig_is_given_up_after_the_stall_time_not_after_every_read_allo
         measure_floor(rig, _Estimator([0.03, 0.03]), 0.04, pairs=60, read_timeout_s=1.0, stall_s=10.0,
                       clock=rig.clock)
     assert rig.reads == 2 + 10 and rig.now == 10.0
+
+
+def test_one_failed_read_is_read_past_as_the_daemon_does_two_in_a_row_are_the_rig_failing():
+    """A recording with a corrupt frame (``RigOperationError``, raised once by ``RigSource.read``) ended the
+    measurement (exit 1) where the daemon reads on past it; two failed reads before a pair are the rig failing."""
+    m = measure_floor(_Source(failures=(2,)), _Estimator([0.03] * 3), 0.04, pairs=3)
+    assert m.heights_m == pytest.approx((0.07, 0.07, 0.07)) and m.pairs_read == 3
+    with pytest.raises(drivers.RigOperationError, match="frame 3: a corrupt image"):
+        measure_floor(_Source(failures=(2, 3)), _Estimator([0.03] * 3), 0.04, pairs=3)
 
 
 def test_ctrl_c_stops_measure_floor_with_a_line_not_a_traceback(tmp_path, capsys, monkeypatch):
