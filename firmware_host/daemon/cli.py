@@ -20,7 +20,8 @@ machine without it.
 ``--measure-floor [PAIRS]`` (default 60) opens the rig and the model as the start does (no sink), runs pairs with
 someone standing until PAIRS of them measured the lower foot (``PairResult.lowest_foot_m``), prints the measurement
 as JSON with the ``estimator.joints3d.foot_standing_m`` to set (shoes' soles, a mat: docs/calibration.md, "Shoes,
-mats: the standing foot") and exits: 0 measured, 1 not (too few feet seen, or feet off any floor), 2 a bad config.
+mats: the standing foot") and exits: 0 measured, 1 not (too few feet seen, feet off any floor, no pair for
+``rig.stall_s``, a rig that failed), 2 a bad config, 130 on Ctrl-C. Pairs with two people in view are read past.
 Stop the service first (it holds the cameras).
 
 SIGHUP (``systemctl reload ghnerf``) reads the config file again: a file that passes every check of
@@ -356,6 +357,10 @@ def _measure_floor(path: str, pairs: int) -> int:
     except (FloorMeasureError, drivers.DriverError) as e:
         print(f"{PROG}: {path}: {e}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # run from a shell: Ctrl-C is how it is stopped, not a crash (the rig is closed)
+        print(f"{PROG}: {path}: --measure-floor interrupted before {pairs} pairs measured a foot: nothing to set",
+              file=sys.stderr)
+        return 130
     status = _print_json(m.to_json())
     print(f"{PROG}: {path}: the lower foot's joints stood a median {m.median_m:.3f} m above the floor over "
           f"{len(m.heights_m)} pairs (the floor check read {m.median_m - m.foot_standing_m:+.3f} m with "

@@ -7,10 +7,13 @@ foot joint by their thickness, which would eat into ``health.calibration_max_flo
 mats: the standing foot"). This opens the config's rig and model as the daemon does, runs pairs through the estimator
 until ``PAIRS`` of them gave a foot figure, and says the median height of the lower foot's joints: the value of
 ``estimator.joints3d.foot_standing_m`` that puts this person's feet on the floor. Run it right after calibrating (a
-camera panned since would be measured as a sole), with someone standing in their usual shoes, both feet in view.
+camera panned since would be measured as a sole), with someone standing in their usual shoes, both feet in view,
+alone: a pair with two people in view (``PairResult.several_people``) is read past, as whose feet its figure is (the
+subject's, or since session 57 both people's) is not this person's alone.
 """
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Optional, Protocol
@@ -53,11 +56,13 @@ class FloorMeasurement:
         heights_m: per pair with a foot figure, the median height of the lower foot's triangulated joints (the figure
             plus the standing foot it was taken with).
         foot_standing_m: the config's ``joints3d.foot_standing_m``, the figures were taken with.
+        pairs_two_people: pairs read past for showing two people (``several_people``), a foot figure or not.
     """
 
     pairs_read: int
     heights_m: tuple[float, ...]
     foot_standing_m: float
+    pairs_two_people: int = 0
 
     @property
     def median_m(self) -> float:
@@ -73,6 +78,7 @@ class FloorMeasurement:
         return {
             "pairs_read": self.pairs_read,
             "pairs_with_a_foot": int(h.size),
+            "pairs_with_two_people": self.pairs_two_people,
             "foot_height_m": {"median": round(self.median_m, 4), "p10": round(float(np.percentile(h, 10)), 4),
                               "p90": round(float(np.percentile(h, 90)), 4)},
             "foot_standing_m": self.foot_standing_m,
@@ -83,43 +89,69 @@ class FloorMeasurement:
 
 
 def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float, pairs: int = DEFAULT_PAIRS, *,
-                  read_timeout_s: float = 5.0, max_reads: Optional[int] = None) -> FloorMeasurement:
+                  read_timeout_s: float = 5.0, max_reads: Optional[int] = None, stall_s: float = 10.0,
+                  clock: Callable[[], float] = time.monotonic) -> FloorMeasurement:
     """Read pairs from the open ``source`` through ``estimator`` (whose config's ``joints3d.foot_standing_m`` is
     ``foot_standing_m``) until ``pairs`` of them gave a foot figure (``PairResult.lowest_foot_m``).
 
     ``max_reads`` (default ``READS_PER_PAIR * pairs``): pairs read before giving up. A pair the estimator rejects
-    (a frame check) counts as read; the end of a recording ends the reading.
+    (a frame check) counts as read, and so does one with two people in view (``several_people``), which gives no
+    figure here: its figure may be the other person's feet, or both people's. The end of a recording ends the
+    reading. A read that times out is waited for again, until no pair came for ``stall_s`` (the daemon's
+    ``rig.stall_s``: a camera open but silent); a read that fails (``RigOperationError``: a corrupt frame of a
+    recording) is read past once, as the daemon reads past it, and raised when the next read fails too.
 
-    :raises FloorMeasureError: fewer than ``pairs`` figures within ``max_reads`` pairs (or the recording's end), or a
-        median height outside ``[0, MAX_FOOT_STANDING_M]`` (not a foot standing on this rig's floor).
-    :raises drivers.DriverError: the rig failed (not a timeout: a slow pair is waited for again).
+    :raises FloorMeasureError: fewer than ``pairs`` figures within ``max_reads`` pairs (or the recording's end, or a
+        silent rig), or a median height outside ``[0, MAX_FOOT_STANDING_M]`` (not a foot standing on this rig's floor).
+    :raises drivers.DriverError: the rig failed (not a timeout: a slow pair is waited for again; not one failed read).
     """
     if isinstance(pairs, bool) or not isinstance(pairs, int) or pairs < 1:
         raise ValueError(f"measure_floor: pairs must be a whole number >= 1, got {pairs!r}")
     limit = READS_PER_PAIR * pairs if max_reads is None else max_reads
     heights: list[float] = []
-    read = 0
+    read = two_people = 0
+    last_pair = clock()
+    read_failed = False  # the last read raised a RigOperationError and no pair came since
     while len(heights) < pairs and read < limit:
         try:
             pair = source.read(timeout_s=read_timeout_s)
         except drivers.EndOfStream:
             break
         except drivers.RigTimeoutError:
-            read += 1  # a rig that delivers nothing must not keep it waiting for ever
+            # no pair is no pair read; counted as one, a silent rig kept it waiting READS_PER_PAIR * pairs timeouts
+            # (five minutes for the default 60 at rig.read_timeout_s 1) and then said nobody stood in view
+            silent = clock() - last_pair
+            if silent >= stall_s:
+                raise FloorMeasureError(
+                    f"--measure-floor: no pair for {silent:.1f} s (rig.stall_s {stall_s:g}) after {read} pairs read: "
+                    f"a camera is silent (unplugged, or held by another process: stop the service first)") from None
             continue
+        except drivers.RigDisconnectedError:
+            raise  # unplugged, a device reset: the rig is gone
+        except drivers.RigOperationError:
+            if read_failed:  # twice before a pair: the rig itself failed
+                raise
+            read_failed = True
+            continue
+        read_failed = False
+        last_pair = clock()
         read += 1
         try:
             result = estimator.estimate(pair.images, sequence=pair.sequence, timestamp_s=pair.timestamps_ns[0] * 1e-9)
         except FrameError:
             continue
+        if result.several_people:  # whose feet the figure is (the subject's, or both people's) is not known here
+            two_people += 1
+            continue
         if result.lowest_foot_m is not None:
             heights.append(float(result.lowest_foot_m) + foot_standing_m)
     if len(heights) < pairs:
+        crowded = f"; {two_people} of them showed two people, read past: one person alone in view" if two_people else ""
         raise FloorMeasureError(
-            f"--measure-floor: {len(heights)} of {read} pairs read gave a foot figure, {pairs} wanted: stand on the "
-            f"floor, both feet in view of both cameras and away from the frames' edges (someone lying, sitting on the "
-            f"floor or upside down gives none)")
-    m = FloorMeasurement(read, tuple(heights), foot_standing_m)
+            f"--measure-floor: {len(heights)} of {read} pairs read gave a foot figure, {pairs} wanted{crowded}: stand "
+            f"on the floor, both feet in view of both cameras and away from the frames' edges (someone lying, sitting "
+            f"on the floor or upside down gives none)")
+    m = FloorMeasurement(read, tuple(heights), foot_standing_m, two_people)
     if not 0.0 <= m.median_m <= MAX_FOOT_STANDING_M:
         raise FloorMeasureError(
             f"--measure-floor: the lower foot's joints read a median {m.median_m:.3f} m above the floor, outside "
@@ -145,4 +177,4 @@ def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
             raise FloorMeasureError(f"--measure-floor: the model does not fit rig {source.rig.rig_id!r}: {e}") from None
         with est:
             return measure_floor(source, est, config.estimator.joints3d.foot_standing_m, pairs,
-                                 read_timeout_s=config.rig.read_timeout_s)
+                                 read_timeout_s=config.rig.read_timeout_s, stall_s=config.rig.stall_s)

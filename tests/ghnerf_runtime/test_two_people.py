@@ -642,6 +642,18 @@ def test_an_8_degree_pan_that_takes_both_people_out_of_the_volume_is_flagged_by_
     assert [watch.add(r.lowest_foot_m) for r, *_ in two][-1] is True
 
 
+def test_both_people_s_floor_figure_counts_from_the_configured_standing_foot():
+    """Both people's floor figure (``Estimator._matched_foot``, session 57) and the setting it counts from
+    (``joints3d.foot_standing_m``, session 57) were made on two branches: shoes or a mat set there move the two
+    people's figure as they move one person's (tests/ghnerf_runtime/test_floor_on_feet.py), not the bare feet's
+    constant. The same pairs with the standing foot raised 3 cm read exactly 3 cm lower."""
+    shod = replace(NOBODY, joints3d=replace(NOBODY.joints3d, foot_standing_m=NOBODY.joints3d.foot_standing_m + 0.03))
+    bare = [r.lowest_foot_m for r, *_ in _scene(1, alone=0, pairs=2, config=NOBODY)]
+    soles = [r.lowest_foot_m for r, *_ in _scene(1, alone=0, pairs=2, config=shod)]
+    assert None not in bare and None not in soles, (bare, soles)
+    assert np.allclose(np.subtract(bare, soles), 0.03, atol=1e-9), (bare, soles)
+
+
 class _BothPeoplesFeet(Estimator):
     """The floor figure of both people's split pairings (``Estimator._matched_foot``) on every flagged pair: the
     subject's own feet left out."""

@@ -841,6 +841,47 @@ def test_a_reload_of_the_estimator_and_health_keeps_the_rig_open(sim_url, tmp_pa
     assert run.daemon.health.rig_opens == 1 and run.daemon.health.rig_lost == 0
 
 
+class _ShodEstimator(_CountingEstimator):
+    """Someone in 6 cm soles: the foot joints' median 0.1 m up, every pair's floor figure that less the configured
+    ``joints3d.foot_standing_m`` (0.06 m at the default 0.04: past the 0.05 m limit), the views meeting."""
+
+    def __init__(self, session, rig, config, **options) -> None:
+        super().__init__(session, rig, config, **options)
+        self.standing = config.joints3d.foot_standing_m
+
+    def estimate(self, images, *, sequence: int, timestamp_s: float):
+        from dataclasses import replace
+
+        self.calls = 0  # the parent's third call is a FrameError: never reached
+        result = super().estimate(images, sequence=sequence, timestamp_s=timestamp_s)
+        return replace(result, reprojection_px_median=0.2, lowest_foot_m=round(0.1 - self.standing, 6))
+
+
+def test_a_reload_that_sets_the_standing_foot_starts_the_floor_check_afresh(sim_url, tmp_path, monkeypatch):
+    """``ghnerf-daemon --measure-floor`` says which ``estimator.joints3d.foot_standing_m`` to set, and
+    docs/calibration.md says to reload: the floor check's window, of figures taken with the old standing foot,
+    starts afresh with the new estimator (not a window mixing both, nor a false alarm held until it fills again)."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _ShodEstimator)
+    configs, at_reload = _Configs(), []
+    with _Running(_config({"url": sim_url}, tmp_path, calibration_window=3), tmp_path, reload_config=configs,
+                  on_reload=lambda new: at_reload.append(list(run.daemon.health.floor.values))) as run:
+        floor = run.daemon.health.floor
+        wait_until(lambda: floor.suspect, timeout=60, what="the soles read 0.06 m above the floor")
+        data = _config_dict(sim_url, tmp_path)
+        data["health"]["calibration_window"] = 3
+        data["estimator"]["joints3d"] = {"foot_standing_m": 0.1}
+        configs.next = daemon_config_from_dict(data)
+        run.daemon.request_reload()
+        wait_until(lambda: run.daemon.health.reloads == 1, timeout=60, what="the reload")
+        assert at_reload == [[]]  # (taken on the daemon's thread as the reload was applied)
+        wait_until(lambda: len(floor.values) == 3, timeout=60, what="a window of the new figures")
+        assert run.finish() == 0
+    assert list(floor.values) == [0.0, 0.0, 0.0] and not floor.suspect
+
+
 def test_a_reload_that_loads_the_model_again_hands_the_old_ones_pages_back(sim_url, tmp_path, monkeypatch):
     """A reload that replaces the session trims the heap once (each left the daemon megabytes larger:
     docs/daemon.md, "Reloaded again and again"); one that keeps it does not."""
