@@ -25,6 +25,9 @@ row also gives the reported joints' mean distance from the nearer person's, and 
 ``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are then its pairings'; with
 the prior, since session 55, the prior's fed the subject's own peaks).
 
+``--no-refine`` turns ``tracking.refine_cold_start`` off: a cold pass is not run again on the crop of what it found
+(docs/runtime.md, "A track of both people's joints", session 57's review).
+
 ``--behind METRES`` puts the second person that far behind the first along view 0's line of sight (the first's
 place from ``--places``), and ``--occlude`` has the oracle hide each person's joints behind the other's body in a
 view (:func:`hidden_behind`; the rendered people of ``--model-dir`` hide each other already): docs/runtime.md,
@@ -430,6 +433,9 @@ def main(argv=None) -> int:
                          "rig) about --axis, the second person joining after --alone pairs")
     ap.add_argument("--axis", default="pan", choices=("pan", "tilt", "roll"),
                     help="with --calibration: the axis the second camera is turned about")
+    ap.add_argument("--no-refine", action="store_true",
+                    help="tracking.refine_cold_start off: a cold pass (the working volume's crop) is not run again "
+                         "on the crop of what it found (docs/runtime.md, \"A track of both people's joints\")")
     args = ap.parse_args(argv)
     # --calibration and --one-person-model run their own sessions (the oracle filmed through a turned rig; the
     # bench sequences at the runtime's defaults): a model or prior asked for there would be silently left out
@@ -445,15 +451,18 @@ def main(argv=None) -> int:
     if args.occlude and (args.model_dir or args.calibration or args.one_person_model):
         ap.error("--occlude is the oracle's (the rendered people hide each other already; --calibration and "
                  "--one-person-model film no hidden joints): leave it out")
+    if args.no_refine and args.one_person_model:
+        ap.error("--one-person-model runs that folder at the defaults: leave --no-refine out")
     if not 0 <= args.behind_min_joints <= 25:
         ap.error(f"--behind-min-joints needs 0 to 25 joints, got {args.behind_min_joints}")
     if args.behind is not None:
         if not (np.isfinite(args.behind) and args.behind > 0):
             ap.error(f"--behind needs a distance above 0 m, got {args.behind!r}")
         args.places = (args.places[0], behind_place(args.places[0], args.behind))
+    tracking = replace(EstimatorConfig().tracking, refine_cold_start=not args.no_refine)
     if args.calibration:
         config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
-                                                  behind_min_joints=args.behind_min_joints))
+                                                  behind_min_joints=args.behind_min_joints), tracking=tracking)
         from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M as limit  # the daemon's floor check
         for deg in (float(v) for v in args.calibration.split(",")):
             m = measure_calibration(args.scenes, args.pairs, args.alone, deg, config, args.places, args.axis)
@@ -493,7 +502,7 @@ def main(argv=None) -> int:
                                   f"({args.scenes} scenes)"))
     config = EstimatorConfig(joints3d=replace(EstimatorConfig().joints3d, pick_subject=args.pick_subject,
                                               skeleton_prior=args.skeleton_prior,
-                                              behind_min_joints=args.behind_min_joints))
+                                              behind_min_joints=args.behind_min_joints), tracking=tracking)
     for alone, second, what in runs:
         counts, pairs = measure(args.scenes, args.pairs, alone, config, args.swap, args.places, args.model_dir,
                                 second, args.occlude)
@@ -506,6 +515,8 @@ def main(argv=None) -> int:
             maps += f", skeleton_prior {args.skeleton_prior}"
         if args.behind_min_joints:
             maps += f", behind_min_joints {args.behind_min_joints}"
+        if args.no_refine:
+            maps += ", refine_cold_start off"
         flagged_mm = (f"the flagged pairs' {counts['flagged_mm'] / counts['flagged_joints']:.1f}"
                       if counts["flagged_joints"] else "no flagged pair's joints")
         print(f"{what}{where}{', swapped' if args.swap else ''}, {maps}, the defaults, pick_subject "

@@ -683,6 +683,10 @@ class Estimator:
         self._last_pair_cold = False
         self._several_track = False  # the track is a several_people pass's subject (_several_people's hysteresis)
         self._behind_track: int | None = None  # and the view that showed one peak, where that pass was _behind_view's
+        # the track is a cold pass's that was not several_people but showed a joint twice: two people in its crop
+        # (the working volume's, too coarse to tell them apart) may have left both people's joints mixed in it
+        # (_keep_tracked_subject)
+        self._track_unsorted = False
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
         self._between: dict[tuple, Camera] = {}  # (alpha, pivot) -> interpolated camera (the rig does not move)
@@ -742,6 +746,7 @@ class Estimator:
         self.tracker.reset()
         self._several_track = False
         self._behind_track = None
+        self._track_unsorted = False
         self._turn_search_wait = 0
         if self._smoother is not None:
             self._smoother.reset()
@@ -867,7 +872,10 @@ class Estimator:
             if p.novel is not None:
                 p.novel.abandon()
             self._use_turns((0, 0))
-            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
+            # a tracked pass that showed two people and reported nobody of them: the working volume's crop shows the
+            # same two, maybe too small to tell apart, and its joints would be both people's mixed
+            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
+                           cold_several=True if p.several_people else None)
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         turns_read = self._turns  # the crops' turns this pair's tracked pass read (a change resets the smoothing)
         p = self._refined(images, p, sequence, timing, novel_view)
@@ -994,6 +1002,7 @@ class Estimator:
         if fresh:
             tracker.reset()
             self._several_track = False
+            self._track_unsorted = False
         self.tracker = tracker
         self._turns = turns
 
@@ -1070,14 +1079,14 @@ class Estimator:
         are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
         is followed through the turned crops, the same window about the person as ``p``'s."""
         self.turn_searches += 1
-        held = self._several_track, self._behind_track
+        held = self._several_track, self._behind_track, self._track_unsorted
         for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing, track):
             self._use_turns(turns)
             if track is not None:
                 self.tracker.follow(track)
                 # the same subject through other crops: a flagged track's hold (_several_people, _behind_view) goes
                 # with it, or the turned pass lets the other person's peaks into the joints and the track
-                self._several_track, self._behind_track = held
+                self._several_track, self._behind_track, self._track_unsorted = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
             if _finds_better(q, p):
                 if lies_as_turned(q.j3, [st.camera.center for st in self._cams]):
@@ -1094,7 +1103,7 @@ class Estimator:
                 q.novel.abandon()
         # upright stands, with the track its pass left
         self._use_turns((0, 0), fresh=False)
-        self._several_track, self._behind_track = held
+        self._several_track, self._behind_track, self._track_unsorted = held
         return p
 
     def _turn_check(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
@@ -1117,10 +1126,11 @@ class Estimator:
             return p
         self._turn_check_wait = self.config.roi.turn_search_every - 1
         self.turn_checks += 1
-        turns, held = self._turns, (self._several_track, self._behind_track)
+        turns, held = self._turns, (self._several_track, self._behind_track, self._track_unsorted)
         self._use_turns((0, 0))
         self.tracker.follow(track)
-        self._several_track, self._behind_track = held  # the same subject: a flagged track's hold goes with it
+        # the same subject: a flagged track's hold goes with it
+        self._several_track, self._behind_track, self._track_unsorted = held
         q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         if _finds_better(q, p):
             if p.novel is not None:
@@ -1131,7 +1141,7 @@ class Estimator:
         if q.novel is not None:
             q.novel.abandon()
         self._use_turns(turns, fresh=False)  # the turn stands, with the track its pass left
-        self._several_track, self._behind_track = held
+        self._several_track, self._behind_track, self._track_unsorted = held
         return p
 
     def _lost_on_a_tracked_pass(self, p: "_Pass") -> bool:
@@ -1164,7 +1174,8 @@ class Estimator:
         ``novel_view``: compute the image features too (``encoder`` rather than ``human``) for a novel
         view; on a tracked pair with ``novel_view.overlap`` the view is started in the worker once the
         graphs of the keypoint path have run (``_Pass.novel``). ``cold_several``: this pass refines this pair's
-        cold pass, which was ``several_people`` or not (:meth:`_finish_pass`); ``None``: it refines none.
+        cold pass, which was ``several_people`` or not (:meth:`_finish_pass`); or (``True`` only) it is the cold pass
+        that ``tracking.retry_cold`` runs after a tracked pass that was; ``None``: neither.
         """
         cfg = self.config
         S = self.size
@@ -1329,6 +1340,10 @@ class Estimator:
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         self._several_track = several and self.tracker.track is not None
         self._behind_track = behind if self._several_track else None
+        # a cold pass not flagged that showed a joint twice in both views: maybe two people too small to tell apart
+        # in its crop, the working volume's (one person alone through the shipped model: 15 of 330 passes)
+        self._track_unsorted = (not regions.tracked and not several and self.tracker.track is not None and
+                                joints_shown_twice(kp, cfg.joints3d.second_person_ratio) >= STILL_SEVERAL_MIN_JOINTS)
         if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
@@ -1449,7 +1464,8 @@ class Estimator:
         (:meth:`_subject_prior`), and which give the calibration figures (:meth:`_subject_figures`).
         ``cold_several`` (this pass refines this pair's cold pass, :meth:`_finish_pass`; where the subject is
         picked): ``False``, the track is a cold pass's that did not tell two people apart (both people's joints,
-        mixed): picked as without a track; ``True``, the cold pass picked the subject from its coarse crop: split
+        mixed): picked as without a track (nobody with ``pick_subject: none``: the mixed track is not followed);
+        ``True``, the cold pass picked the subject from its coarse crop: split
         again on this pass's finer one, and the person nearer the track's centre is the subject (the cold split
         may have given a joint wrongly). ``behind``: the view that shows one peak where the other shows two
         (:meth:`_behind_view`): picked as without a track, the person that view sees is the subject
@@ -1458,13 +1474,20 @@ class Estimator:
         track = self.tracker.track
         cfg = self.config.joints3d
         picks = cfg.method == "triangulate" and cfg.pick_subject != "none"
-        if track is None or (picks and cold_several is not None):
+        # a cold pass's track not flagged (cold_several False: this pair's, refined; with refine_cold_start off, the
+        # pair before's) is both people's joints mixed: nobody's to follow, whether or not a subject is picked
+        # (followed, it streamed a skeleton of both people's joints and of points between them as the subject, and
+        # measured its feet: docs/runtime.md, "A track of both people's joints")
+        unsorted = cold_several is False or (cold_several is None and self._track_unsorted)
+        if track is None or unsorted or (picks and cold_several is not None):
             none = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
             if not picks:
                 return none, None, none
             if behind is not None:
                 return self._seen_subject(none, kp, uv_model, crops, regions, behind)
-            near = centre_of(track.joints[None], np.where(track.valid, 0, -1)) if cold_several else None
+            # (no track: a cold pass retried after a several_people tracked pass, picked as without a track)
+            near = (centre_of(track.joints[None], np.where(track.valid, 0, -1)) if cold_several and track is not None
+                    else None)
             return self._picked_subject(none, kp, uv_model, crops, regions, near)
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
         near = track.valid & (step <= cfg.max_track_step_m)

@@ -229,6 +229,55 @@ def test_two_people_0_6_m_apart_are_flagged_and_split_though_their_peaks_share_a
         _follows(_scene(seed, alone=0, pairs=4, where=CLOSE), 0, rig)
 
 
+@pytest.mark.parametrize("pan_deg", [0.0, 2.0])
+def test_two_people_0_6_m_apart_with_pick_subject_none_report_nobody_and_both_people_s_feet(pan_deg):
+    """0.6 m apart the cold pass (the working volume's coarse crop) shows 1-2 joints twice, is not flagged, and its
+    track is both people's joints mixed; the pass refining it, on that track's crop, is flagged. With
+    ``pick_subject: none`` that pass followed the mixed track until session 57's review: 22-24 joints a pair
+    streamed, a third of them at neither person (``measure_two_people.py --pick-subject none --alone 0
+    --places=-0.3,3.0,0.3,3.4``), and its floor figure was the mixed skeleton's feet: +0.03 m on the true rig,
+    +0.11 m at a 2 degree pan whose people's feet read -0.13 m. Now the mixed track is nobody's to follow: nobody
+    reported, and the floor figure is both people's own feet (``Estimator._matched_foot``), which the daemon's
+    ``FloorWatch`` flags at the 2 degree pan as alone."""
+    for seed in (1, 2):
+        one = _scene(seed, alone=0, pairs=3, second=False, where=CLOSE, pan_deg=pan_deg)
+        two = _scene(seed, alone=0, pairs=3, config=NOBODY, where=CLOSE, pan_deg=pan_deg)
+        for (r, *_), (alone, *_) in zip(two, one, strict=True):
+            assert r.several_people and r.num_found == 0, r.num_found
+            assert all(m.all() for m in r.missing_2d.values())
+            assert r.lowest_foot_m is not None and alone.lowest_foot_m is not None
+            assert abs(r.lowest_foot_m - alone.lowest_foot_m) < 0.02, (r.lowest_foot_m, alone.lowest_foot_m)
+        if pan_deg:
+            assert all(r.lowest_foot_m < -0.1 for r, *_ in two), [r.lowest_foot_m for r, *_ in two]
+            watch = FloorWatch(window=len(two), max_floor_m=0.1)
+            assert [watch.add(r.lowest_foot_m) for r, *_ in two][-1] is True
+
+
+@pytest.mark.parametrize("pick", ["centre_line", "none"])
+def test_without_the_refined_pass_a_cold_track_of_two_people_mixed_is_not_followed(pick):
+    """``tracking.refine_cold_start`` off: the first pair's cold pass, 0.6 m apart, cannot tell the two people apart
+    (not flagged: 1-2 joints shown twice in both views) and reports their joints mixed, unavoidably; its track was
+    then followed by every flagged pass after it, the pairings nearest it kept: 22-23 joints a pair, 9 of them at
+    neither person, for as long as the two stood there, whether or not a subject is picked. Now a flagged pass after
+    a cold pass that showed a joint twice picks as without a track (the first person's joints alone from the second
+    pair on), or with ``pick_subject: none`` reports nobody; and the pass that the lost track's pair retries from
+    the working volume is flagged as the tracked one was."""
+    config = EstimatorConfig(joints3d=Joints3DConfig(pick_subject=pick))
+    config = replace(config, tracking=replace(config.tracking, refine_cold_start=False))
+    for seed in (1, 2):
+        results = _scene(seed, alone=0, pairs=4, config=config, where=CLOSE)
+        assert not results[0][0].several_people and results[0][0].num_found > 0  # (the cold pass: both, mixed)
+        later = results[1:]
+        if pick == "none":
+            assert any(r.several_people and r.num_found == 0 for r, *_ in later)
+            # a flagged pair reports nobody; one not flagged is a cold pass again (the track dropped), mixed
+            assert all(r.num_found == 0 for r, *_ in later if r.several_people)
+        else:
+            assert all(r.several_people for r, *_ in later)
+            reported, off_first = _split(later)
+            assert reported >= 3 * 20 and off_first == 0, (reported, off_first)
+
+
 def test_split_people_keeps_each_joint_s_pairings_together_and_leaves_out_the_mixed_ones():
     """Each joint's straight pairings (0 and 3) or crossed ones (1 and 2) are the two people's; the others are
     mixed points between them nearer the cameras (as on the oracle, about 1.4 m from both). The split gives each
