@@ -12,7 +12,8 @@ box's centre, set on the floor (the rig frame is y down, the floor at y = 0: the
 y = 0) and moved into the working volume where it fits (:func:`turned`), rendered by the simulator
 (``BodyRenderer.render`` with the scene's sensor), and each pair run through the real
 :class:`~ghnerf_runtime.estimator.Estimator` at the runtime's defaults (the model folder's int8 graphs, encoder
-heatmaps, flip tests), ``--frames`` consecutive pairs at 30 fps per scene and pose (the first cold, the next
+heatmaps, flip tests; ``roi.turn_search`` off, though on by default since session 57, except in the
+``--turn-search`` rows), ``--frames`` consecutive pairs at 30 fps per scene and pose (the first cold, the next
 tracked), once with the skeleton prior (``joints3d.skeleton_prior`` ``auto``, the default) and once without
 (``off``: gated triangulation). Poses:
 
@@ -54,7 +55,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ghnerf_runtime.config import EstimatorConfig, SessionConfig  # noqa: E402
+from ghnerf_runtime.config import EstimatorConfig, RoiConfig, SessionConfig  # noqa: E402
 
 FPS = 30.0
 #: pose name -> (rig axis turned about: 0 x, 2 z; degrees); ``None``: as rendered by the bench.
@@ -147,7 +148,8 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
     from ghnerf_runtime.cli.simdata import Accuracy, bench_rig_and_scene
     from ghnerf_runtime.estimator import Estimator, load_session
 
-    on = EstimatorConfig(session=SessionConfig(model_dir=model_dir))
+    # the search set off (it is on by default since session 57): the rows without it are what upright crops give
+    on = EstimatorConfig(session=SessionConfig(model_dir=model_dir), roi=RoiConfig(turn_search=False))
     off = replace(on, joints3d=replace(on.joints3d, skeleton_prior="off"))
     with_prior = load_session(on)
     configs = {"prior": (on, with_prior), "no prior": (off, load_session(off))}

@@ -189,7 +189,10 @@ class RoiConfig:
             of the frame, as the synthetic training crops were rendered at 2x and box-reduced
             (``preprocess``, "Supersampling"); 1: the one-sample remap, blurrier than training by a
             Gaussian of sigma 0.4-0.7 model pixels on the bench rigs' crops.
-        turn_search: on a cold pass (no track) whose result is weak (nobody found, or the found joints'
+        turn_search: (on by default since session 57: None, resolved by :meth:`search_for` when the estimator
+            loads the model, is on for a model with encoder heatmaps, the shipped one, and off for one without,
+            the baseline, which cannot score the turns; true refuses such a model, false is the opt-out.)
+            On a cold pass (no track) whose result is weak (nobody found, or the found joints'
             median confidence under ``turn_search_below``), try each camera's crop turned 90, 180 and 270
             degrees more (one encoder run per turn for both views), take per view the turn whose heatmap peaks
             are clearly stronger than upright's, run the pass again with those crops and keep it when it finds
@@ -238,7 +241,7 @@ class RoiConfig:
     map_cache_size: int = 32
     upright: bool = True
     supersample: int = 2
-    turn_search: bool = False
+    turn_search: bool | None = None
     turn_search_below: float = 0.5
     turn_search_every: int = 5
     edge_crop: str = "clip"
@@ -251,7 +254,8 @@ class RoiConfig:
             _choice(self, "pad_fill", PAD_FILLS)
         _number(self, "pad_fade", 0.0, 1.0)
         _boolean(self, "upright")
-        _boolean(self, "turn_search")
+        if self.turn_search is not None:  # None: on where the model can score the turns (search_for)
+            _boolean(self, "turn_search")
         _number(self, "turn_search_below", 0.0, 1.0)
         _integer(self, "turn_search_every", 1, 1000)
         _integer(self, "supersample", 1, 4)
@@ -276,6 +280,14 @@ class RoiConfig:
         if self.pad_fill is not None:
             return self
         return dataclasses.replace(self, pad_fill=self.model_fill(frame_padding))
+
+    def search_for(self, encoder_heatmaps: bool) -> "RoiConfig":
+        """This config with ``turn_search`` resolved for a model with or without encoder heatmaps (its contract's
+        ``encoder_heatmaps``): the value set here, else on where the model has them (the turns are scored by them;
+        without, the search cannot run, and only an explicit true is refused)."""
+        if self.turn_search is not None:
+            return self
+        return dataclasses.replace(self, turn_search=bool(encoder_heatmaps))
 
 
 @dataclass(frozen=True)
@@ -873,10 +885,13 @@ class EstimatorConfig:
             return dataclasses.replace(self, joints3d=dataclasses.replace(j, single_view_fallback=False))
         return self
 
-    def beside_model(self, frame_padding: str) -> "EstimatorConfig":
+    def beside_model(self, frame_padding: str, encoder_heatmaps: bool | None = None) -> "EstimatorConfig":
         """This configuration as it runs with a model trained with ``frame_padding`` (its contract's): an unset
-        ``roi.pad_fill`` becomes the model's own (:meth:`RoiConfig.fill_for`)."""
+        ``roi.pad_fill`` becomes the model's own (:meth:`RoiConfig.fill_for`); given ``encoder_heatmaps`` (whether
+        the model has them, its contract's), an unset ``roi.turn_search`` too (:meth:`RoiConfig.search_for`)."""
         roi = self.roi.fill_for(frame_padding)
+        if encoder_heatmaps is not None:
+            roi = roi.search_for(encoder_heatmaps)
         return self if roi is self.roi else dataclasses.replace(self, roi=roi)
 
     def required_graphs(self, human_graph: bool = False) -> tuple[str, ...]:

@@ -604,9 +604,10 @@ class Estimator:
         self.config = config.beside_prior(getattr(session, "skeleton_prior", None) is not None)
         if self.config is not config and log_settings:
             log.info("joints3d.single_view_fallback is off: the skeleton prior places the joints it would")
-        # an unset roi.pad_fill pads the crops as the model's training crops were (its contract says how)
+        # an unset roi.pad_fill pads the crops as the model's training crops were (its contract says how); an unset
+        # roi.turn_search searches where the model has the encoder heatmaps that score the turns
         padding = getattr(session.contract, "frame_padding", "none")
-        self.config = self.config.beside_model(padding)
+        self.config = self.config.beside_model(padding, getattr(session.contract, "encoder_heatmaps", False))
         learnt = RoiConfig.model_fill(padding)
         if self.config.roi.pad_fill != learnt and log_settings:
             log.info("roi.pad_fill %r as configured; the model's own would be %r (trained with frame padding %r)",

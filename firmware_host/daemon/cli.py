@@ -229,10 +229,12 @@ def check_model(config: DaemonConfig) -> str:
     parts = list(session.graphs) + [name for name, part in (("skeleton prior", session.skeleton_prior),
                                                             ("novel-view painter", session.novel_painter))
                                     if part is not None]
-    # the fill the estimator runs (an unset roi.pad_fill is the model's): the config printed says null there
-    fill = config.estimator.beside_model(contract.frame_padding).roi.pad_fill
+    # the fill and the crop turn search the estimator runs (an unset roi.pad_fill is the model's, an unset
+    # roi.turn_search on where the model has encoder heatmaps): the config printed says null there
+    roi = config.estimator.beside_model(contract.frame_padding, contract.encoder_heatmaps).roi
     return (f"model: {files[0].path.parent} ({contract.variant}, {precision}, {contract.width}x{contract.height}; "
-            f"{', '.join(parts)}) loaded, the estimator settings fit it (roi.pad_fill {fill})")
+            f"{', '.join(parts)}) loaded, the estimator settings fit it (roi.pad_fill {roi.pad_fill}, "
+            f"roi.turn_search {'on' if roi.turn_search else 'off'})")
 
 
 def read_checked_config(path: str) -> DaemonConfig:

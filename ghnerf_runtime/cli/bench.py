@@ -251,7 +251,9 @@ def run_runtime_bench(args) -> dict:
                "prior_flip_label": row["prior_flip_label"],
                "smoothing": cfg.smoothing.enabled, "smoothing_label": row["smoothing_label"],
                "presence": cfg.presence.enabled, "presence_label": row["presence_label"],
-               "turn_search": cfg.roi.turn_search, "turn_search_label": row["turn_search_label"],
+               # as the estimator ran it: unset (the default), on where the model has encoder heatmaps
+               "turn_search": cfg.roi.search_for(getattr(session.contract, "encoder_heatmaps", False)).turn_search,
+               "turn_search_label": row["turn_search_label"],
                "flip_side_by_side": cfg.heatmaps.flip_test_side_by_side, "side_label": row["side_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
                    "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"],
@@ -374,7 +376,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "config's, on). A pair the gate says shows nobody has no novel view: off views every pair")
     rt.add_argument("--turn-searches", default=None, type=_on_off_list,
                     help="comma list of roi.turn_search values (on,off), one row each (interleaved; default: the "
-                         "config's, off); a model without encoder heatmaps gets no such rows")
+                         "config's: on, or off for a model without encoder heatmaps, which gets no such rows)")
     rt.add_argument("--flip-side-by-side", default=None, type=_on_off_list,
                     help="comma list of heatmaps.flip_test_side_by_side values (on,off), one row each for the "
                          "encoder heatmaps with the flip test (interleaved; default: the config's, on)")

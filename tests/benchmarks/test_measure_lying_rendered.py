@@ -4,6 +4,7 @@ people; and its command line gets through to its table."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -121,6 +122,21 @@ def test_turn_search_adds_a_row_per_pose_with_its_searches(tiny_model_dir, scrat
     # the turned passes refused (lies_as_turned), a count on the search's rows only
     assert [refused != "- " for _, _, _, refused, _ in rows] == [False, False, True] * 2
     assert [checks != "- " for _, _, _, _, checks in rows] == [False, False, True] * 2
+
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+
+
+@pytest.mark.skipif(not (MODELS / "model_card.json").is_file(), reason="no trained model in models/")
+def test_only_the_turn_search_rows_search(scratch_cache):  # noqa: F811
+    """roi.turn_search is on by default since session 57: the rows without it (the prior on and off, the oracle's
+    turned crops) set it off, so that they still say what upright crops give a person lying across the view."""
+    from benchmarks.measure_lying_rendered import measure
+
+    out = measure(str(MODELS), scenes=1, frames=1, poses=["lying_z"], turned_crops=True, turn_search=True,
+                  log=lambda _: None)
+    assert {name: s["turn_searches"] for (_, name), s in out.items()} == {
+        "prior": 0, "no prior": 0, "turned crops": 0, "turn search": 1}
 
 
 def test_then_changes_every_body_at_change_at(tiny_model_dir, scratch_cache, capsys, monkeypatch):  # noqa: F811

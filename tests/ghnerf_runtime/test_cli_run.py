@@ -276,6 +276,23 @@ def test_bench_runtime_rows_with_the_turn_search_on_and_off(tiny_model_dir, tmp_
     assert " turn-search " in out and " no-turn-search " in out
 
 
+@pytest.mark.skipif(not (Path(__file__).resolve().parents[2] / "models" / "baseline").is_dir(),
+                    reason="no models/baseline")
+def test_bench_runs_a_model_without_encoder_heatmaps_with_the_turn_search_off(tmp_path):
+    """roi.turn_search is on by default (session 57) and refuses a model without encoder heatmaps: the bench's
+    rows of the baseline run with it off, unlabelled (before, they took the default, off)."""
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    code = bench.main(["runtime", "--model-dir", str(Path(__file__).resolve().parents[2] / "models" / "baseline"),
+                       "--sequences", "1", "--frames", "2", "--precisions", "int8", "--heatmap-sources", "rendered",
+                       "--modes", "keypoints", "--warmup", "0", "--turn-searches", "on,off",
+                       "--cache", str(tmp_path / "cache"), "--json", str(report_path)])
+    assert code == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    assert [(r["turn_search"], r["turn_search_label"]) for r in runs] == [(False, False)]
+
+
 def test_bench_accuracy_counts_left_right_swaps_per_view():
     """A pair whose shoulders are exchanged in view 1 only: swapped there, not in view 0, not in both."""
     from types import SimpleNamespace

@@ -14,7 +14,7 @@ import pytest
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, NovelViewConfig, \
-    PresenceConfig, SessionConfig, TrackingConfig
+    PresenceConfig, RoiConfig, SessionConfig, TrackingConfig
 from ghnerf_runtime.contract import GRAPH_NAMES
 from ghnerf_runtime.errors import ConfigError, FrameError, ModelError
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
@@ -60,6 +60,11 @@ def scene_rig():
 @pytest.fixture(scope="module")
 def full_session(tiny_model_dir):  # noqa: F811
     return ModelSession.load(SessionConfig(model_dir=str(tiny_model_dir)), GRAPH_NAMES)
+
+
+#: Random weights find nobody, or someone weakly, and such a pass tries the crop turns (roi.turn_search, on by
+#: default since session 57: three encoder runs more); the tests that count one pass's graph runs set it off.
+NO_TURN_SEARCH = RoiConfig(turn_search=False)
 
 
 def _all_finite(result) -> bool:
@@ -156,7 +161,7 @@ def test_one_bad_camera_gives_the_other_cameras_2d_joints_only(full_session, sce
 def test_novel_view_off_never_runs_or_loads_a_colour_graph(tiny_model_dir, scene_rig):  # noqa: F811
     rig, frames = scene_rig
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)), heatmaps=HeatmapsConfig("rendered"),
-                          joints3d=Joints3DConfig(method="depth_centroid"))
+                          joints3d=Joints3DConfig(method="depth_centroid"), roi=NO_TURN_SEARCH)
     est = Estimator.from_config(rig, cfg)
     assert est.session.graphs == ("encoder", "volume", "render_heat")  # colour graphs not even loaded
     rec = Recorder(est.session)
@@ -315,7 +320,7 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
 def test_encoder_heatmaps_skip_volume_and_rendering(tiny_model_dir, scene_rig):  # noqa: F811
     rig, frames = scene_rig
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)), heatmaps=HeatmapsConfig("encoder", flip_test=False),
-                          joints3d=Joints3DConfig(method="triangulate"))
+                          joints3d=Joints3DConfig(method="triangulate"), roi=NO_TURN_SEARCH)
     assert cfg.required_graphs() == ("encoder",)  # a model without the human graph
     assert cfg.required_graphs(human_graph=True) == ("human",)
     assert ModelSession.has_graph_file(tiny_model_dir, "human")
@@ -356,8 +361,9 @@ class _FlipAveragingSession:
 def test_the_flip_test_averages_a_second_pass_over_the_mirrored_crops(full_session, scene_rig):
     rig, frames = scene_rig
     flip = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=True),
-                           joints3d=Joints3DConfig(method="triangulate"))
-    plain = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"))
+                           joints3d=Joints3DConfig(method="triangulate"), roi=NO_TURN_SEARCH)
+    plain = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"),
+                            roi=NO_TURN_SEARCH)
     assert flip.heatmaps.flip_test and flip.flips_encoder_heatmaps and not plain.flips_encoder_heatmaps
     assert not EstimatorConfig(heatmaps=HeatmapsConfig("rendered")).flips_encoder_heatmaps  # rendered: no effect
     seen = _FlipAveragingSession(full_session)
@@ -412,7 +418,7 @@ def test_novel_view_pairs_run_the_encoder_other_pairs_the_human_graph(full_sessi
     # the cold start not refined: the pass itself reads the image features (the default: below)
     cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method="triangulate"),
                           novel_view=NovelViewConfig(enabled=True), presence=NOBODY_UNDECIDED,
-                          tracking=TrackingConfig(refine_cold_start=False))
+                          tracking=TrackingConfig(refine_cold_start=False), roi=NO_TURN_SEARCH)
     assert cfg.required_graphs(human_graph=True) == ("encoder", "human", "volume", "render_rgb")
     rec = Recorder(full_session)
     est = Estimator(rec, rig, cfg)
@@ -476,7 +482,8 @@ class _Without:
                                             ("volumetric", ("encoder", "volume", "query"))])
 def test_encoder_heatmaps_run_what_the_3d_method_reads(full_session, scene_rig, method, graphs):
     rig, frames = scene_rig
-    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method=method))
+    cfg = EstimatorConfig(heatmaps=HeatmapsConfig("encoder", flip_test=False), joints3d=Joints3DConfig(method=method),
+                          roi=NO_TURN_SEARCH)
     assert cfg.required_graphs() == cfg.required_graphs(human_graph=True) == graphs
     # the flip test's mirrored pass runs the human graph when the model has one
     flip = replace(cfg, heatmaps=HeatmapsConfig("encoder", flip_test=True))
@@ -512,7 +519,7 @@ def test_an_empty_room_with_rendered_heatmaps_renders_them_to_ask_whether_someon
     ran = {}
     for source in ("rendered", "encoder"):
         rec = Recorder(full_session)
-        est = Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source, flip_test=False)))
+        est = Estimator(rec, rig, EstimatorConfig(heatmaps=HeatmapsConfig(source, flip_test=False), roi=NO_TURN_SEARCH))
         for pair in frames:
             r = est.estimate(pair)
             assert all(r.frame_ok.values()) and r.missing.all() and not r.tracked and _all_finite(r)

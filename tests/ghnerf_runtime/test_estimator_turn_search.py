@@ -22,7 +22,11 @@ FPS = 30.0
 
 
 def test_turn_search_keys_are_validated():
-    assert RoiConfig().turn_search is False  # measured, then chosen: docs/runtime.md
+    # on by default since session 57 (off before; docs/runtime.md): unset, on where the model has encoder heatmaps
+    assert RoiConfig().turn_search is None
+    assert RoiConfig().search_for(True).turn_search is True and RoiConfig().search_for(False).turn_search is False
+    for value in (True, False):  # set: as set, whatever the model (true refuses one without: below)
+        assert RoiConfig(turn_search=value).search_for(not value).turn_search is value
     with pytest.raises(ConfigError, match="turn_search"):
         RoiConfig(turn_search="yes")
     for bad in (-0.1, 1.5, float("nan"), None):
@@ -128,6 +132,23 @@ def test_the_search_finds_a_person_lying_or_upside_down_and_keeps_the_turn(sessi
 
 
 @needs_model
+def test_the_defaults_right_an_upside_down_person(session):
+    """The search is on by default (session 57): an estimator built with the default config reads an upside-down
+    person through crops turned 180 degrees, where upright crops read them standing, a metre off."""
+    from ghnerf_runtime.estimator import Estimator
+
+    rig, shots = _shots(1, "upside_down")
+    est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf"))))
+    assert est.config.roi.turn_search is True
+    for t, images, truth in shots:
+        r = est.estimate(images, timestamp_s=t)
+        ok = ~r.missing
+        err = 1e3 * float(np.mean(np.linalg.norm(r.joints_3d[ok] - truth[ok], axis=1))) if ok.any() else np.inf
+        assert ok.sum() >= 20 and err < 150, (int(ok.sum()), err)
+    assert est._turns == (180, 180) and est.turn_searches == 1 and est.turns_kept == 1
+
+
+@needs_model
 def test_upright_people_do_not_search_and_get_the_same_joints(session):
     for k in (0, 1, 2):
         rig, shots = _shots(k, "upright")
@@ -209,7 +230,10 @@ def test_a_model_without_encoder_heatmaps_is_refused_at_load():
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "baseline"), warmup=False),
                           heatmaps=HeatmapsConfig(source="rendered"))
     baseline = load_session(cfg)
-    Estimator(baseline, rig, cfg).close()  # the search off: the baseline serves
+    Estimator(baseline, rig, replace(cfg, roi=RoiConfig(turn_search=False))).close()  # the search off: it serves
+    # unset (the default, on since session 57) it is off for a model that cannot score the turns: it serves too
+    with Estimator(baseline, rig, cfg) as est:
+        assert est.config.roi.turn_search is False
     with pytest.raises(ModelError, match=r"roi\.turn_search .*encoder_heatmaps.* roi\.turn_search = false"):
         Estimator(baseline, rig, replace(cfg, roi=RoiConfig(turn_search=True)))
 

@@ -107,7 +107,14 @@ def test_validate_config_passes_what_the_model_serves_and_says_what_it_checked(t
     out, err = capsys.readouterr()
     assert json.loads(out)["estimator"]["heatmaps"]["source"] == "rendered"  # stdout stays the config alone
     assert err == (f"ghnerf-daemon: {path}: ok; model: {BASELINE} (baseline, fp32+int8, 128x128; encoder, volume, "
-                   "render_heat) loaded, the estimator settings fit it (roi.pad_fill fade)\n")
+                   "render_heat) loaded, the estimator settings fit it (roi.pad_fill fade, roi.turn_search off)\n")
+    # the crop turn search, on by default (session 57), is off for a model without the encoder heatmaps it needs;
+    # the shipped model has them
+    if (MODELS / "ghnerf" / "model_card.json").is_file() or (MODELS / "model_card.json").is_file():
+        path = _write(tmp_path, {"rig": {"url": "sim://"}, "sinks": ["udp://127.0.0.1:9870"],
+                                 "estimator": {"session": {"model_dir": str(MODELS)}}})
+        assert cli.main(["--config", str(path), "--validate-config"]) == 0
+        assert capsys.readouterr().err.endswith("(roi.pad_fill fade, roi.turn_search on)\n")
 
 
 @needs_baseline
