@@ -20,9 +20,11 @@ machine without it.
 ``--measure-floor [PAIRS]`` (default 60) opens the rig and the model as the start does (no sink), runs pairs with
 someone standing until PAIRS of them measured the lower foot (``PairResult.lowest_foot_m``), prints the measurement
 as JSON with the ``estimator.joints3d.foot_standing_m`` to set (shoes' soles, a mat: docs/calibration.md, "Shoes,
-mats: the standing foot") and exits: 0 measured, 1 not (too few feet seen, feet off any floor, no pair for
-``rig.stall_s``, a rig that failed), 2 a bad config, 130 on Ctrl-C. Pairs with two people in view are read past.
-Stop the service first (it holds the cameras).
+mats: the standing foot") and exits: 0 measured; 1 not (too few feet seen, feet off any floor, no pair for
+``rig.stall_s``, a rig that did not open or failed); 2 for what the start exits 2 for (a bad config, a model that does
+not load, a rig URL its backend refuses, a rig the model cannot run on); 130 after Ctrl-C, 143 after SIGTERM (stopped
+as the daemon stops, between two reads: the rig and the estimator closed, one line). Pairs with two people in view
+are read past. Stop the service first (it holds the cameras).
 
 SIGHUP (``systemctl reload ghnerf``) reads the config file again: a file that passes every check of
 ``--validate-config`` (and whose model loads) is applied without a restart, touching only what
@@ -56,7 +58,8 @@ from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.url import RigUrl
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
-from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, FloorMeasureError, measure_floor_of_config
+from firmware_host.daemon.measure_floor import (DEFAULT_PAIRS, FloorMeasureError, FloorMeasureStopped,
+                                                measure_floor_of_config)
 from firmware_host.daemon.sandbox import rig_url_hint, sandbox_warnings, service_hint
 from firmware_host.daemon.service import Daemon, DaemonStartError, check_estimator, check_sink_urls, load_model
 from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
@@ -271,6 +274,8 @@ class _StopOnSignal:
 
     def __init__(self, stop: threading.Event, signums: Sequence[int] = (signal.SIGTERM, signal.SIGINT)) -> None:
         self._stop = stop
+        #: the first signal received (set before ``stop``), for a caller whose exit status names it
+        self.received: int | None = None
         self._signums = tuple(signums)
         self._previous: dict[int, object] = {}
         self._read_fd, self._write_fd = os.pipe()
@@ -300,6 +305,8 @@ class _StopOnSignal:
         while data := os.read(self._read_fd, 64):
             for signum in data:
                 logging.getLogger("ghnerf.daemon").info("%s received: stopping", signal.Signals(signum).name)
+                if self.received is None:
+                    self.received = signum
             self._stop.set()
 
 
@@ -347,22 +354,29 @@ def _validate(path: str, *, with_model: bool) -> int:
 
 
 def _measure_floor(path: str, pairs: int) -> int:
-    """``--measure-floor``: the measurement as JSON on stdout, what to set on stderr; 1 when it could not be taken.
+    """``--measure-floor``: the measurement as JSON on stdout, what to set on stderr; 1 when it could not be taken,
+    128 + the signal's number when SIGTERM or SIGINT stopped it (130 Ctrl-C, 143 SIGTERM: the shell's figures).
 
-    :raises DaemonConfigError: naming the file and the key (a bad config, a model that does not load).
+    :raises DaemonConfigError: naming the file and the key (a bad config, a model that does not load, a rig the
+        model cannot run on: what the start exits 2 for).
     """
     config = read_checked_config(path)
-    try:
-        m = measure_floor_of_config(config, pairs, load_model=load_model)
-    except DaemonConfigError as e:
-        raise DaemonConfigError(str(e), key=str(path)) from None
-    except (FloorMeasureError, drivers.DriverError) as e:
-        print(f"{PROG}: {path}: {e}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:  # run from a shell: Ctrl-C is how it is stopped, not a crash (the rig is closed)
-        print(f"{PROG}: {path}: --measure-floor interrupted before {pairs} pairs measured a foot: nothing to set",
-              file=sys.stderr)
-        return 130
+    stop = threading.Event()
+    # as the daemon stops: the signal sets ``stop``, looked at between two reads, so the rig and the estimator
+    # close by their ``with`` (a SIGTERM from systemd or timeout killed it with neither closed; Ctrl-C's
+    # KeyboardInterrupt could land inside a close)
+    with _StopOnSignal(stop) as signals:
+        try:
+            m = measure_floor_of_config(config, pairs, load_model=load_model, stop=stop)
+        except DaemonConfigError as e:
+            raise DaemonConfigError(str(e), key=str(path)) from None
+        except FloorMeasureStopped as e:
+            signum = signals.received or signal.SIGTERM  # (set before stop: never None here)
+            print(f"{PROG}: {path}: {signal.Signals(signum).name} received: {e}", file=sys.stderr)
+            return 128 + signum
+        except (FloorMeasureError, drivers.DriverError) as e:
+            print(f"{PROG}: {path}: {e}", file=sys.stderr)
+            return 1
     status = _print_json(m.to_json())
     print(f"{PROG}: {path}: the lower foot's joints stood a median {m.median_m:.3f} m above the floor over "
           f"{len(m.heights_m)} pairs (the floor check read {m.median_m - m.foot_standing_m:+.3f} m with "

@@ -10,23 +10,29 @@ until ``PAIRS`` of them gave a foot figure, and says the median height of the lo
 camera panned since would be measured as a sole), with someone standing in their usual shoes, both feet in view,
 alone: a pair with two people in view (``PairResult.several_people``) is read past, as whose feet its figure is (the
 subject's, or since session 57 both people's) is not this person's alone.
+
+Errors follow the daemon's start: what the config, the model or the rig file must fix is a ``DaemonConfigError``
+(the CLI's exit 2, as the start's); a measurement taken that gave no value is a :class:`FloorMeasureError` (exit 1);
+``stop`` set (SIGTERM, SIGINT in the CLI) a :class:`FloorMeasureStopped` (exit 128 + the signal's number).
 """
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any, Optional, Protocol
 
 import numpy as np
 
 import drivers
-from firmware_host.daemon.config import DaemonConfig
+from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.config import MAX_FOOT_STANDING_M
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
 
-__all__ = ["FloorMeasureError", "FloorMeasurement", "measure_floor", "measure_floor_of_config",
+__all__ = ["FloorMeasureError", "FloorMeasureStopped", "FloorMeasurement", "measure_floor", "measure_floor_of_config",
            "DEFAULT_PAIRS", "READS_PER_PAIR"]
 
 #: Pairs with a foot figure measured when ``--measure-floor`` names no number (two seconds at 30 fps).
@@ -37,6 +43,15 @@ READS_PER_PAIR = 5
 
 class FloorMeasureError(FirmwareHostError):
     """The standing foot could not be measured (too few pairs showed a foot, or it reads off any floor)."""
+
+
+class FloorMeasureStopped(FloorMeasureError):
+    """``stop`` was set (SIGTERM, Ctrl-C) before the pairs wanted measured a foot; ``pairs_read``, ``feet``: so far."""
+
+    def __init__(self, pairs_wanted: int, pairs_read: int = 0, feet: int = 0) -> None:
+        super().__init__(f"--measure-floor stopped before {pairs_wanted} pairs measured a foot ({feet} did, of "
+                         f"{pairs_read} read): nothing to set")
+        self.pairs_read, self.feet = pairs_read, feet
 
 
 class _Estimates(Protocol):
@@ -90,7 +105,8 @@ class FloorMeasurement:
 
 def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float, pairs: int = DEFAULT_PAIRS, *,
                   read_timeout_s: float = 5.0, max_reads: Optional[int] = None, stall_s: float = 10.0,
-                  clock: Callable[[], float] = time.monotonic) -> FloorMeasurement:
+                  clock: Callable[[], float] = time.monotonic,
+                  stop: Optional[threading.Event] = None) -> FloorMeasurement:
     """Read pairs from the open ``source`` through ``estimator`` (whose config's ``joints3d.foot_standing_m`` is
     ``foot_standing_m``) until ``pairs`` of them gave a foot figure (``PairResult.lowest_foot_m``).
 
@@ -99,10 +115,12 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
     figure here: its figure may be the other person's feet, or both people's. The end of a recording ends the
     reading. A read that times out is waited for again, until no pair came for ``stall_s`` (the daemon's
     ``rig.stall_s``: a camera open but silent); a read that fails (``RigOperationError``: a corrupt frame of a
-    recording) is read past once, as the daemon reads past it, and raised when the next read fails too.
+    recording) is read past once, as the daemon reads past it, and raised when the next read fails too. ``stop``
+    is looked at before each read, as the daemon's loop does (a read waits ``read_timeout_s`` at most).
 
     :raises FloorMeasureError: fewer than ``pairs`` figures within ``max_reads`` pairs (or the recording's end, or a
         silent rig), or a median height outside ``[0, MAX_FOOT_STANDING_M]`` (not a foot standing on this rig's floor).
+    :raises FloorMeasureStopped: ``stop`` was set first.
     :raises drivers.DriverError: the rig failed (not a timeout: a slow pair is waited for again; not one failed read).
     """
     if isinstance(pairs, bool) or not isinstance(pairs, int) or pairs < 1:
@@ -113,6 +131,8 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
     last_pair = clock()
     read_failed = False  # the last read raised a RigOperationError and no pair came since
     while len(heights) < pairs and read < limit:
+        if stop is not None and stop.is_set():
+            raise FloorMeasureStopped(pairs, read, len(heights))
         try:
             pair = source.read(timeout_s=read_timeout_s)
         except drivers.EndOfStream:
@@ -163,18 +183,35 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
 
 def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
                             load_model: Callable[[DaemonConfig], Any],
-                            rig_kwargs: Optional[dict[str, Any]] = None) -> FloorMeasurement:
+                            rig_kwargs: Optional[dict[str, Any]] = None,
+                            stop: Optional[threading.Event] = None) -> FloorMeasurement:
     """:func:`measure_floor` on the rig of ``config.rig.url`` and the model and estimator settings of
     ``config.estimator``, opened as the daemon opens them (``load_model``: the daemon's, raising
-    ``DaemonConfigError``; ``rig_kwargs`` to :func:`drivers.create_rig_source`, tests pass a clock)."""
+    ``DaemonConfigError``; ``rig_kwargs`` to :func:`drivers.create_rig_source`, tests pass a clock). ``stop`` set
+    while the model loads: the rig is not opened. The rig and the estimator are closed however it ends.
+
+    :raises DaemonConfigError: as the daemon's start exits 2 for it: the model does not load (``load_model``), a
+        rig URL its backend refuses once opened (keyed ``rig.url``), a rig the model cannot run on.
+    :raises FloorMeasureError: as :func:`measure_floor` (:class:`FloorMeasureStopped` for ``stop``).
+    :raises drivers.DriverError: the rig did not open, or failed.
+    """
     from ghnerf_runtime.estimator import Estimator  # the model's runtime: only once the config checked out
 
     session = load_model(config)
-    with drivers.create_rig_source(config.rig.url, **(rig_kwargs or {})) as source:  # (entering opens it)
+    if stop is not None and stop.is_set():  # SIGTERM while the model loaded: no camera opened for nothing
+        raise FloorMeasureStopped(pairs)
+    with ExitStack() as closing:
+        try:
+            source = drivers.create_rig_source(config.rig.url, **(rig_kwargs or {}))
+            closing.push(source)  # closed on the way out, an open that failed half way too (as the daemon does)
+            source.open()
+        except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
+            # the daemon's start exits 2 for these (no reopen fixes them); other driver errors are the rig's
+            raise DaemonConfigError(str(e), key="rig.url") from None
         try:
             est = Estimator(session, source.rig, config.estimator)
-        except (RuntimeErrorBase, ValueError) as e:  # as the daemon's start: a rig the model cannot run on
-            raise FloorMeasureError(f"--measure-floor: the model does not fit rig {source.rig.rig_id!r}: {e}") from None
-        with est:
-            return measure_floor(source, est, config.estimator.joints3d.foot_standing_m, pairs,
-                                 read_timeout_s=config.rig.read_timeout_s, stall_s=config.rig.stall_s)
+        except (RuntimeErrorBase, ValueError) as e:  # as the daemon's start: a rig the model cannot run on (exit 2)
+            raise DaemonConfigError(f"the model does not fit rig {source.rig.rig_id!r}: {e}") from None
+        closing.enter_context(est)
+        return measure_floor(source, est, config.estimator.joints3d.foot_standing_m, pairs,
+                             read_timeout_s=config.rig.read_timeout_s, stall_s=config.rig.stall_s, stop=stop)

@@ -3,8 +3,13 @@ on the configured rig (docs/calibration.md, "Shoes, mats: the standing foot").""
 from __future__ import annotations
 
 import json
+import os
+import signal
+import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,8 +17,9 @@ import pytest
 import drivers
 from firmware_host.daemon import cli
 from firmware_host.daemon.config import DaemonConfigError, daemon_config_from_dict
-from firmware_host.daemon.measure_floor import FloorMeasureError, measure_floor
-from ghnerf_runtime.errors import FrameError
+from firmware_host.daemon.measure_floor import (FloorMeasureError, FloorMeasureStopped, measure_floor,
+                                                measure_floor_of_config)
+from ghnerf_runtime.errors import FrameError, ModelError
 
 REPO = Path(__file__).resolve().parents[3]
 MODELS = REPO / "models"
@@ -148,25 +154,160 @@ def test_one_failed_read_is_read_past_as_the_daemon_does_two_in_a_row_are_the_ri
         measure_floor(_Source(failures=(2, 3)), _Estimator([0.03] * 3), 0.04, pairs=3)
 
 
-def test_ctrl_c_stops_measure_floor_with_a_line_not_a_traceback(tmp_path, capsys, monkeypatch):
-    """Run from a shell, Ctrl-C is how a measurement is stopped: exit 130 with one line (the rig and the estimator
-    are closed by their ``with``), not a KeyboardInterrupt traceback."""
+class _RigSource:
+    """What ``drivers.create_rig_source`` gives, for the CLI's tests: ``signum`` sent to this process at read
+    ``signal_at`` (SIGTERM from systemd or ``timeout``, Ctrl-C's SIGINT), after which no pair comes (each read times
+    out); ``open_error`` raised by ``open``. Says whether it was opened and closed."""
+
+    def __init__(self, signum: int | None = None, signal_at: int = 2,
+                 open_error: Exception | None = None) -> None:
+        self.rig = SimpleNamespace(rig_id="bench")
+        self.signum, self.signal_at, self.open_error = signum, signal_at, open_error
+        self.reads, self.opened, self.closed = 0, False, False
+
+    def open(self) -> "_RigSource":
+        self.opened = True
+        if self.open_error is not None:
+            raise self.open_error
+        return self
+
+    def close(self) -> None:
+        self.closed = True
+
+    def __enter__(self) -> "_RigSource":
+        return self.open()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def read(self, timeout_s: float = 1.0) -> _Pair:
+        self.reads += 1
+        if self.signum is not None and self.reads >= self.signal_at:
+            if self.reads == self.signal_at:
+                os.kill(os.getpid(), self.signum)
+            time.sleep(timeout_s)
+            raise drivers.RigTimeoutError("no pair")
+        return _Pair(sequence=self.reads)
+
+
+class _RigEstimator(_Estimator):
+    """The runtime's ``Estimator`` as ``measure_floor_of_config`` builds it: a foot 0.03 m up in every pair, or
+    ``error`` raised when built (a rig the model cannot run on). Says whether it was closed."""
+
+    error: Exception | None = None
+    built: list["_RigEstimator"] = []
+
+    def __init__(self, session, rig, config) -> None:
+        if self.error is not None:
+            raise self.error
+        super().__init__([0.03] * 100)
+        self.closed = False
+        _RigEstimator.built.append(self)
+
+    def close(self) -> None:
+        self.closed = True
+
+    def __enter__(self) -> "_RigEstimator":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@pytest.fixture
+def cli_rig(tmp_path, monkeypatch):
+    """``cli.main`` on a config whose rig, model and estimator are the stand-ins above (a read times out in 0.05 s,
+    a silent rig is given up after 0.5 s); returns (config path, a function taking the ``_RigSource`` to open)."""
+    import ghnerf_runtime.estimator
+
     path = tmp_path / "daemon.json"
-    path.write_text(json.dumps({"rig": {"url": "sim://"}, "sinks": ["memory://"]}))
+    path.write_text(json.dumps({"rig": {"url": "sim://", "read_timeout_s": 0.05, "stall_s": 0.5},
+                                "sinks": ["memory://"]}))
     monkeypatch.setattr(cli, "read_checked_config", lambda p: daemon_config_from_dict(json.loads(Path(p).read_text())))
+    monkeypatch.setattr(cli, "load_model", lambda config: "session")
+    monkeypatch.setattr(ghnerf_runtime.estimator, "Estimator", _RigEstimator)
+    monkeypatch.setattr(_RigEstimator, "error", None)
+    monkeypatch.setattr(_RigEstimator, "built", [])
 
-    def interrupted(config, pairs, **kwargs):
-        raise KeyboardInterrupt
+    def rig(source: _RigSource) -> None:
+        monkeypatch.setattr(drivers, "create_rig_source", lambda url, **kwargs: source)
 
-    monkeypatch.setattr(cli, "measure_floor_of_config", interrupted)
+    return path, rig
+
+
+@pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_sigterm_or_ctrl_c_stops_measure_floor_as_the_daemon_stops(cli_rig, capsys, signum, status):
+    """Under systemd or ``timeout`` a SIGTERM killed ``--measure-floor`` outright (the rig and the estimator not
+    closed); Ctrl-C raised a KeyboardInterrupt wherever it landed. Now both set the daemon's stop
+    (``_StopOnSignal``), looked at between two reads: the rig and the estimator are closed, one line says what
+    stopped it, exit 128 + the signal's number (143, 130), and the handlers that were there are put back."""
+    path, rig = cli_rig
+    source = _RigSource(signum=signum, signal_at=2)
+    rig(source)
+    caught: list[int] = []
+
+    def guard(got: int, _frame) -> None:  # where the old code left the signal: not killed, no KeyboardInterrupt
+        caught.append(got)
+
+    previous = {s: signal.signal(s, guard) for s in (signal.SIGTERM, signal.SIGINT)}
     try:
-        status = cli.main(["--config", str(path), "--measure-floor", "5"])
-    except KeyboardInterrupt:  # (not let through: it would stop the test session)
-        pytest.fail("Ctrl-C came out of ghnerf-daemon --measure-floor as a KeyboardInterrupt (a traceback)")
-    assert status == 130
+        got = cli.main(["--config", str(path), "--measure-floor", "5"])
+        handlers_after = [signal.getsignal(s) for s in previous]
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    assert caught == [], f"{signal.Signals(signum).name} reached the handler from before: --measure-floor left it"
+    assert got == status
+    assert handlers_after == [guard, guard]
     captured = capsys.readouterr()
-    assert "--measure-floor interrupted before 5 pairs measured a foot: nothing to set" in captured.err
     assert captured.out == ""
+    assert captured.err.strip() == (f"ghnerf-daemon: {path}: {signal.Signals(signum).name} received: --measure-floor "
+                                    f"stopped before 5 pairs measured a foot (1 did, of 1 read): nothing to set")
+    assert source.closed and [e.closed for e in _RigEstimator.built] == [True]
+    assert source.reads < 5  # stopped at the next read, not given up after rig.stall_s (10 reads)
+
+
+@pytest.mark.parametrize("estimator_error, open_error, message", [
+    (ModelError("the model is 256x192, this rig's cameras 320x240", path="models/ghnerf"), None,
+     "the model does not fit rig 'bench': models/ghnerf: the model is 256x192, this rig's cameras 320x240"),
+    (None, drivers.RigConfigError("rig URL 'opencv://0,1?rig=r.json': camera 0 gives 640x480, rig file 320x240"),
+     "rig.url: rig URL 'opencv://0,1?rig=r.json': camera 0 gives 640x480, rig file 320x240"),
+])
+def test_a_model_or_rig_that_the_start_refuses_exits_2_as_the_start_does(cli_rig, capsys, estimator_error,
+                                                                          open_error, message):
+    """The daemon's start exits 2 for a rig the model cannot run on, or a rig URL its backend refuses when it
+    opens (what the config, model or rig file must fix; systemd does not restart it): ``--measure-floor`` exited 1
+    for them, its code for "measured, no value". The rig is closed all the same."""
+    path, rig = cli_rig
+    source = _RigSource(open_error=open_error)
+    rig(source)
+    _RigEstimator.error = estimator_error
+    assert cli.main(["--config", str(path), "--measure-floor", "5"]) == 2
+    assert capsys.readouterr().err.strip() == f"ghnerf-daemon: error: {path}: {message}"
+    assert source.opened and source.closed and source.reads == 0
+
+
+def test_stop_set_ends_the_measurement_before_the_next_read_or_before_the_rig_opens(monkeypatch):
+    stop = threading.Event()
+
+    class _Stops(_Source):
+        def read(self, timeout_s: float = 1.0) -> _Pair:
+            if self.reads == 2:
+                stop.set()
+            return super().read(timeout_s)
+
+    source = _Stops()  # stop set while the third pair is read: that pair is measured, no fourth read
+    with pytest.raises(FloorMeasureStopped, match=r"stopped before 5 pairs measured a foot \(3 did, of 3 read\)") \
+            as e:
+        measure_floor(source, _Estimator([0.03] * 5), 0.04, pairs=5, stop=stop)
+    assert (e.value.pairs_read, e.value.feet, source.reads) == (3, 3, 3)
+    # a SIGTERM while the model loaded: no camera is opened for a measurement nobody waits for
+    opened: list[str] = []
+    monkeypatch.setattr(drivers, "create_rig_source", lambda url, **kwargs: opened.append(url))
+    config = daemon_config_from_dict({"rig": {"url": "sim://"}, "sinks": ["memory://"]})
+    with pytest.raises(FloorMeasureStopped, match=r"\(0 did, of 0 read\)"):
+        measure_floor_of_config(config, 5, load_model=lambda c: "session", stop=stop)
+    assert opened == []
 
 
 def test_measure_floor_refuses_a_pair_count_that_is_no_count():
