@@ -670,7 +670,9 @@ class Estimator:
         self._turned_trackers: dict[tuple[int, int], SubjectTracker] = {(0, 0): self.tracker}
         self.turn_searches = 0  # weak passes that searched the turns, and those whose turned pass was kept
         self.turns_kept = 0
-        self.turns_refused = 0  # turned passes that found someone better but lay as no turn rights (lies_as_turned)
+        # turned passes that lay as no turn rights (lies_as_turned): a search's that found someone better than
+        # upright, and a kept turn's passes of someone found (_turn_misreads)
+        self.turns_refused = 0
         self._turn_search_wait = 0  # weak pairs left that do not search (roi.turn_search_every)
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
         self.turns_left = 0
@@ -877,13 +879,23 @@ class Estimator:
             # same two, maybe too small to tell apart, and its joints would be both people's mixed
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
                            cold_several=True if p.several_people else None)
+        elif p.regions.tracked and self._turns != (0, 0) and self._turn_misreads(p):
+            # A tracked pass through a kept turn whose body lies as no turn rights (the person rolled onto a line
+            # of sight): the search would not keep it, nor is it kept here, nor is its track, which the crops would
+            # follow. The pair is read as after a lost track: cold, upright first, then searched when weak (the
+            # upright pass on this track's crops read a skeleton about 1 m off, tracked, in bench scene 10).
+            if p.novel is not None:
+                p.novel.abandon()
+            self._use_turns((0, 0))
+            p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         turns_read = self._turns  # the crops' turns this pair's tracked pass read (a change resets the smoothing)
         p = self._refined(images, p, sequence, timing, novel_view)
-        if cold_pass and self._turns != (0, 0) and self._weak_pass(p):
+        if cold_pass and self._turns != (0, 0) and (self._weak_pass(p) or self._turn_misreads(p)):
             # A cold pass through a kept turn's crops (a single-view track keeps the turn) that is weak: the subject
             # may have got up. Upright first, as after a lost track: the search below scores its turns against the
-            # upright crops, and took these for them (a standing person kept through upside-down crops).
+            # upright crops, and took these for them (a standing person kept through upside-down crops). So too
+            # when its body lies as no turn rights (the person rolled onto a line of sight): not kept over upright.
             if p.novel is not None:
                 p.novel.abandon()
             self._use_turns((0, 0))
@@ -1107,6 +1119,16 @@ class Estimator:
         self._several_track, self._behind_track, self._track_unsorted = held
         return p
 
+    def _turn_misreads(self, p: "_Pass") -> bool:
+        """Whether ``p``, a pass through a kept turn's crops, found someone whose body lies as no turn rights
+        (:func:`lies_as_turned`; counted in ``turns_refused``): a person who lay across the view and rolled onto a
+        view's line of sight is read through the turned crops as the encoder's upright person across the picture,
+        the skeleton the search refuses. Geometry only: no model run."""
+        if p.j3 is None or not p.someone or lies_as_turned(p.j3, [st.camera.center for st in self._cams]):
+            return False
+        self.turns_refused += 1
+        return True
+
     def _turn_check(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
                     novel_view: NovelViewRequest | None) -> "_Pass":
         """After ``p``, a tracked pass through a kept turn's crops: when it is weak (a median joint confidence
@@ -1117,7 +1139,8 @@ class Estimator:
         scenes), the turn dropped with it; else ``p`` and the turned track stand. The tracked turned passes of
         someone still lying reach confidences as low as the misread's, so the weak ones compare rather than drop;
         the periodic check catches a misread over the bar. One pass more on a checked pair (docs/runtime.md,
-        "Getting up and lying down while tracked")."""
+        "Getting up and lying down while tracked"). A ``p`` whose body lies as no turn rights does not come here
+        (:meth:`_turn_misreads`: the pair is read cold instead)."""
         track = self.tracker.track
         if track is None or p.j3 is None:
             return p  # no track: the next pair is cold, and upright first

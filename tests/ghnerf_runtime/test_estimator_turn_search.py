@@ -384,7 +384,7 @@ def _changing(session, k: int, before: str, after: str, n_before: int, n_after: 
         r = est.estimate(images, timestamp_s=i / FPS)
         ok = ~r.missing
         err = 1e3 * float(np.mean(np.linalg.norm(r.joints_3d[ok] - posed.joints[ok], axis=1))) if ok.any() else np.inf
-        out.append((est._turns, r.tracked, int(ok.sum()), round(err)))
+        out.append((est._turns, r.tracked, int(ok.sum()), round(err) if ok.any() else err))  # inf: nobody
     return out, est
 
 
@@ -561,3 +561,79 @@ def test_a_turned_pass_of_someone_lying_along_the_line_of_sight_is_refused(sessi
         np.testing.assert_array_equal(a.missing, b.missing)
         np.testing.assert_array_equal(a.joints_3d, b.joints_3d)
     assert est.turns_refused >= 1 and est.turn_searches >= 1
+
+
+@needs_model
+def test_a_tracked_person_who_rolls_onto_the_line_of_sight_is_not_kept_turned(session):
+    """Lying across the view for three pairs (found by the search, tracked through quarter-turned crops), then lying
+    along the line of sight: the tracked turned pass read the encoder's upright person across the picture, 16 joints
+    0.65 m off, and held it (the code before, bench scene 21: the rule of ``lies_as_turned`` was asked of a search's
+    passes only). Now a kept turn's pass whose body lies as no turn rights is refused too, and the pair is read as
+    after a lost track, upright first: nobody, as with the search off."""
+    out, est = _changing(session, 21, "lying_z", "lying_x", 3, 2)
+    assert all(turns == (90, 90) and found >= 20 and err < 150 for turns, _, found, err in out[:3]), out
+    for turns, _, found, err in out[3:]:
+        assert turns == (0, 0) and (found == 0 or err < 150), out
+    assert est.turns_refused >= 1 and est.turns_kept == 1, (est.turns_refused, est.turns_kept)
+
+
+def _lying_along_sight(est, joints: np.ndarray):
+    """``joints`` (a standing person's, rig frame) turned about their centroid so that their body axis runs along
+    the estimator's first camera's line of sight to them: a body no crop turn rights."""
+    from ghnerf_runtime.estimator import body_axis
+    from ghnerf_runtime.joints3d import Joints3D
+
+    n = len(joints)
+    standing = Joints3D(joints, np.ones(n, np.float32), np.ones(n, bool), np.zeros((n, 2), np.float32))
+    centre = joints.mean(axis=0)
+    a = body_axis(standing)
+    d = centre - est._cams[0].camera.center
+    d = d / np.linalg.norm(d)
+    v, c = np.cross(a, d), float(a @ d)  # the rotation taking a onto d (Rodrigues; a is nowhere near -d here)
+    vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    R = np.eye(3) + vx + vx @ vx / (1.0 + c)
+    return replace(standing, points=(joints - centre) @ R.T + centre)
+
+
+@pytest.mark.parametrize("single_view_track", [False, True])
+def test_a_kept_turns_pass_of_a_body_no_turn_rights_is_read_cold_upright(single_view_track):
+    """A pass through a kept turn (quarter-turned crops) that is strong but whose body lies along a view's line of
+    sight: before, it was kept with its skeleton and track: a tracked one (``_turn_check`` compared only confidences,
+    and a strong pass between checks was not even compared), and the cold one of a single-view track (which keeps
+    the turn; only a weak one went upright). Now it is refused (``turns_refused``) and the pair read as after a lost
+    track: a cold pass through upright crops, whose answer (nobody, here) is reported."""
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.estimator import Estimator, _Pass, lies_as_turned
+
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    est = Estimator(OracleSession(edge128_contract()), rig, EstimatorConfig(roi=RoiConfig(turn_search=True)))
+    joints = sim.SimScene(sim.SceneConfig(seed=1)).joints_3d(0.0)
+    est._use_turns((90, 90))
+    assert est.tracker.update(joints, np.ones(len(joints), np.float32), np.ones(len(joints), bool), 0)
+    est._turn_check_wait = 3  # a strong pass between checks: the code before did not look at it at all
+    if single_view_track:  # one camera's frame was rejected last pair: the turned tracker holds that view's crop
+        est.tracker.reset()
+        est.tracker.view_track = (1, est.tracker.regions().rois[1])
+    along = _lying_along_sight(est, joints)
+    assert not lies_as_turned(along, [st.camera.center for st in est._cams])
+    names = est.camera_names
+    J = len(joints)
+    frame_reason = {n: None for n in names}
+    asked = []
+
+    def spy(images, regions, sequence, timing, novel_view=None, cold_several=None):
+        asked.append((est._turns, regions.tracked))
+        if est._turns == (90, 90):  # the turned crops: the misread body, found confidently
+            return _Pass(regions, frame_reason, j3=along, someone=True,
+                         joints_2d={n: np.zeros((J, 2)) for n in names},
+                         conf_2d={n: np.ones(J, np.float32) for n in names},
+                         missing_2d={n: np.zeros(J, bool) for n in names})
+        return _Pass(regions, frame_reason)  # upright, from the working volume: nobody (no joints)
+
+    est._pass = spy
+    images = [np.zeros((c.size[1], c.size[0], 3), np.uint8) for c in rig.pair]
+    r = est.estimate(images)
+    assert asked == [((90, 90), not single_view_track), ((0, 0), False)], asked
+    assert r.missing.all() and not r.tracked
+    assert est._turns == (0, 0) and est.turns_refused == 1 and est.tracker.track is None
