@@ -1034,14 +1034,36 @@ class Estimator:
         tracked pass through upright crops (the caller sees to which): two frames that passed the frame check, and
         nobody found, or someone at a median joint confidence under ``roi.turn_search_below`` (an upside-down
         person read as an upright one); and a view whose ``presence.min_joints``-th strongest joint peak reaches
-        :data:`_TURN_SEARCH_FLOOR` (someone may be there: an empty room does not search)."""
+        :data:`_TURN_SEARCH_FLOOR` (someone may be there: an empty room does not search); and not a person seen by
+        one camera only whom no turn can help (:meth:`_one_view_needs_no_search`)."""
         roi = self.config.roi
         if not roi.turn_search or p.j3 is None or p.env is None or not all(p.frame_ok.values()):
             return False
         if p.someone and _median_confidence(p.j3) >= roi.turn_search_below:
             return False
+        if self._one_view_needs_no_search(p):
+            return False
         rank = self.config.presence.min_joints
         return any(presence_peak(p.env["encoder_heatmaps"], (v,), rank) >= _TURN_SEARCH_FLOOR for v in (0, 1))
+
+    def _one_view_needs_no_search(self, p: "_Pass") -> bool:
+        """Whether ``p`` is a person seen by one camera only (``p.single_view``: nobody in 3D, one view's own 2D
+        joints) that no crop turn can help: a kept turn must find someone in 3D, so the other view must show the
+        body. Not when that view reads them well (its found joints' median confidence at ``roi.turn_search_below``
+        or above, the bar a 3D pass's joints clear): a body a view sees well upright is upright, or lies along its
+        line of sight, which :func:`lies_as_turned` refuses. Nor when the other view's ``presence.min_joints``-th
+        strongest joint peak is under :data:`_TURN_SEARCH_FLOOR` (nobody there for a turn to find, as an empty
+        room's views). Before, such a pair searched every ``roi.turn_search_every``-th time for nothing: three
+        encoder runs and up to two passes (docs/runtime.md, "A person seen by one camera only"). A weakly read
+        view beside another that may show someone is the misread the search exists for (someone lying across
+        both views, one under the per-view rule), and still searches."""
+        if p.single_view is None:
+            return False
+        found = ~p.missing_2d[p.single_view]
+        if found.any() and float(np.median(p.conf_2d[p.single_view][found])) >= self.config.roi.turn_search_below:
+            return True
+        other = 1 - self.camera_names.index(p.single_view)
+        return presence_peak(p.env["encoder_heatmaps"], (other,), self.config.presence.min_joints) < _TURN_SEARCH_FLOOR
 
     def _turn_scores(self, images: Sequence[np.ndarray], turn: int, timing: dict,
                      track: Track | None = None) -> np.ndarray:

@@ -253,6 +253,7 @@ def test_measure_one_camera(model, capsys, monkeypatch):
                      capsys=capsys, monkeypatch=monkeypatch)
     assert "3 pairs of 1 held-out-like sequences" in out, out
     assert re.search(r"^  camera 1 alone: camera 1 PCK@0.2 ", out, re.M), out
+    assert re.search(r"^  camera 1 alone: \d+ of 3 pairs searched the crop turns, [\d.]+ ms per pair", out, re.M), out
     assert "the same rooms without anyone, both cameras: " in out and "1 empty rooms: " in out, out
 
 

@@ -293,8 +293,9 @@ def test_shipped_model_with_one_camera_covered():
 def test_shipped_model_with_a_person_seen_by_one_camera_only():
     """Someone seen by one camera, the other showing the same room without them (both frames pass, the model
     runs on both: the frame check off, as the simulator's plain walls would fail it): no 3D joint, the seeing
-    camera's 2D joints (``single_view`` names it), as accurate as a covered camera's other view; the same rooms
-    without anyone report nobody (benchmarks/measure_one_camera.py measures the bench's 300 pairs)."""
+    camera's 2D joints (``single_view`` names it), as accurate as a covered camera's other view, and no pair
+    searches the crop turns; the same rooms without anyone report nobody (benchmarks/measure_one_camera.py measures
+    the bench's 300 pairs)."""
     pytest.importorskip("drivers.sim")
     from benchmarks.measure_one_camera import empty_counterpart
     from ghnerf_runtime.cli.simdata import load_sequences
@@ -321,6 +322,9 @@ def test_shipped_model_with_a_person_seen_by_one_camera_only():
                 true.append(seq.joints_2d[i, seen])
                 visible.append(seq.visible[i, seen])
                 found.append(~r.missing_2d[name])
+            # roi.turn_search (on by default): the view reads them well, and a turn cannot find them in 3D (the
+            # other view is empty); before session 57's fix every fifth pair searched, 8 of these 40 per camera
+            assert est.turn_searches == 0, (seen, est.turn_searches)
         score = pck(np.array(pred), np.array(true), np.array(visible), pred_valid=np.array(found))
         assert score.value >= SINGLE_VIEW_PCK_MIN and answered == len(pred), (seen, score, answered)
     for seq, room in zip(sequences, rooms):

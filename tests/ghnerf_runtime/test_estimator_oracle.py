@@ -368,9 +368,9 @@ def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_
     camera 0's 2D joints; the next such pair starts from there, one pass."""
     rig, frames, truth, visible, *_ = clip
     oracle = OracleSession(edge128_contract())
-    # the search off (on by default): a pass that finds nobody in 3D would also try the crop turns (counted below)
-    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False),
-                                                 roi=RoiConfig(turn_search=False)))
+    # roi.turn_search at its default, on: the view reads them well, so no pair searches the crop turns (counted
+    # below; test_a_person_seen_well_by_one_camera_only_does_not_search_the_turns)
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False)))
     oracle.set_truth(truth[0], visible[0])
     assert est.estimate(frames[0]).num_found > 10 and est.tracker.track is not None
     for k in (1, 2):
@@ -380,6 +380,71 @@ def test_a_tracked_person_leaving_one_cameras_view_is_looked_for_again_and_kept_
         assert r.single_view == est.camera_names[0] and r.missing.all() and not r.tracked
         assert oracle.run_counts["encoder"] - runs == (2 if k == 1 else 1)  # the tracked pass, then the retry
         assert est.tracker.track is None and est.tracker.view_track[0] == 0
+
+
+@pytest.mark.parametrize("k", [0, 1])
+def test_a_person_seen_well_by_one_camera_only_does_not_search_the_turns(clip, k):
+    """``roi.turn_search`` at its default (on for this model): a person seen by one camera only finds nobody in
+    3D, but the view that sees them reads them well, so no crop turn could be kept (a kept turn must find them in
+    3D, in the other view too): no pair searches, tracked before or cold, over more pairs than
+    ``roi.turn_search_every``. Each pair runs the encoder as with the search off (the tracked pass and the retry,
+    then one); before, the first such pair ran it 5 times (three turns), and every fifth after it again."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = OracleSession(edge128_contract())
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False)))
+    assert est.config.roi.turn_search and est.config.roi.turn_search_every == 5
+    oracle.set_truth(truth[0], visible[0])
+    assert est.estimate(frames[0]).num_found > 10 and est.tracker.track is not None
+    for cold in (False, True):
+        if cold:
+            est.reset()
+        for i in range(7):
+            f = 1 + i % 4
+            oracle.set_truth(truth[f], _seen_by(visible[f], k))
+            runs = oracle.run_counts["encoder"]
+            r = est.estimate(frames[f])
+            assert r.single_view == est.camera_names[k] and r.missing.all()
+            assert oracle.run_counts["encoder"] - runs == (2 if i == 0 and not cold else 1), (cold, i)
+            assert "turn_search" not in r.timing_ms
+    assert est.turn_searches == 0
+
+
+class ScaledViews(OracleSession):
+    """The oracle, each view's encoder heatmaps scaled by its factor in ``scale``: a view that reads the person
+    weakly (as upright crops read someone lying across them), or not at all (0)."""
+
+    def __init__(self, scale: tuple[float, float]):
+        super().__init__(edge128_contract())
+        self.scale = scale
+
+    def _source_heatmaps(self, src_P):
+        maps = super()._source_heatmaps(src_P)
+        return maps * np.asarray(self.scale, maps.dtype)[:, None, None, None]
+
+
+@pytest.mark.parametrize("scale, searches", [
+    ((1.0, 0.0), 0),  # seen well, the other view empty
+    ((1.0, 0.25), 0),  # seen well, the other view faint
+    ((0.6, 0.0), 0),  # read weakly, the other view empty: nobody there for a turn to find in 3D
+    ((0.6, 0.25), 1),  # read weakly beside a view that may show them: the misread the search exists for
+])
+def test_a_one_camera_pair_searches_the_turns_only_where_a_turn_could_find_the_person(clip, scale, searches):
+    """Camera 0's view passes the per-view presence rule, camera 1's does not (nobody in 3D: a one-camera pair).
+    It searches the crop turns only when camera 0 reads the person under ``roi.turn_search_below`` (0.5) median
+    and camera 1's 6th-strongest peak reaches the search's floor (0.1): someone lying across both views, misread
+    upright. Before, all four searched."""
+    rig, frames, truth, visible, *_ = clip
+    oracle = ScaledViews(scale)
+    est = Estimator(oracle, rig, EstimatorConfig(heatmaps=HeatmapsConfig(flip_test=False)))
+    oracle.set_truth(truth[0], visible[0])
+    r = est.estimate(frames[0])
+    names = est.camera_names
+    assert r.single_view == names[0] and r.missing.all()
+    found = ~r.missing_2d[names[0]]
+    seen = float(np.median(r.confidence_2d[names[0]][found]))
+    assert (seen >= 0.5) == (scale[0] == 1.0) and seen >= 0.35, seen
+    assert est.turn_searches == searches
+    assert ("turn_search" in r.timing_ms) == bool(searches)
 
 
 def test_a_person_seen_by_one_camera_only_is_nobody_with_single_view_2d_off(clip):
