@@ -162,9 +162,11 @@ def training_crops(samples: int, resolution: int = 128) -> None:
 def table(session, cfg, sequences, visible, args) -> None:
     """One table: the uncut reference and each share of ``args.outside``, at ``cfg``."""
     ref = run(session, cfg, sequences, None)
-    fill = cfg.beside_model(session.contract.frame_padding).roi.pad_fill  # as the estimator runs it: unset, the model's
-    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {fill!r} (pad_fade {cfg.roi.pad_fade}): "
-          f"{args.sequences} held-out-like "
+    # as the estimator runs them: an unset fill is the model's, an unset turn search on where it has encoder
+    # heatmaps (since session 57: the tables before it were measured with the search off)
+    roi = cfg.beside_model(session.contract.frame_padding, session.contract.encoder_heatmaps).roi
+    print(f"\nroi.edge_crop {cfg.roi.edge_crop!r}, roi.pad_fill {roi.pad_fill!r} (pad_fade {cfg.roi.pad_fade}), "
+          f"roi.turn_search {'on' if roi.turn_search else 'off'}: {args.sequences} held-out-like "
           f"sequences x {args.frames} pairs, "
           "runtime defaults otherwise; camera 0's frame cut on the left so that a share of the person's box lies "
           f"outside it{f' (kept whole, those columns filled {args.blacken})' if args.blacken else ''}; [uncut]: the "

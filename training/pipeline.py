@@ -1618,8 +1618,11 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
         # what run() gives the train stage: the pretraining's stamped outputs, as that stage leaves them
         pretrained = (st.stamp(f"pretrain_{variant}") or {}).get("outputs")
         train_after = after
+        # what run() sets aside before any stage (_set_aside_forced): a forced stage's folder is made again, not
+        # reused, and a forced joint run's folder no longer stops a pretraining
+        joint_set_aside = f"train_{variant}" in st.force and cfg.until not in ("data", "pretrain")
         if pretrain_block(cfg, variant):
-            finished = _pretrain_finished(cfg, variant)
+            finished = _pretrain_finished(cfg, variant) and f"pretrain_{variant}" not in st.force
             if judge(f"pretrain_{variant}", pretrain_stage_inputs(cfg, variant, data_key), after):
                 if finished:  # the same human.pt, stamped again
                     human = pretrain_dir(cfg, variant) / "human.pt"
@@ -1628,7 +1631,7 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
                                                                     "only its stamp is written again")
                 else:  # a new human.pt: the joint run starts from it
                     train_after = [*after, f"pretrain_{variant}"]
-                    if joint := _joint_run_before(cfg, variant):
+                    if not joint_set_aside and (joint := _joint_run_before(cfg, variant)):
                         rows[-1] = rows[-1]._replace(why=rows[-1].why + f"; make model stops first: {joint} holds "
                                                      f"a joint run of an earlier pretraining (--force train_{variant}"
                                                      " sets it aside)")
@@ -1637,6 +1640,8 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
         joint = cfg.runs / VARIANTS[variant]
         if train_after != after:
             unfinished = f"it trains in {joint} from the new pretraining's human.pt"
+        elif joint_set_aside:
+            unfinished = None  # forced: "forced (--force)", in a folder made again (the old one moved aside)
         elif why := _human_init_mismatch(joint, train_inputs(cfg, VARIANTS[variant])):
             unfinished = (f"{joint} holds a run of another pretraining ({why}): make model stops there "
                           f"(--force train_{variant} sets it aside)")
@@ -1645,12 +1650,12 @@ def status(cfg: PipelineConfig) -> list[StageStatus]:
         else:
             unfinished = None
         if judge(f"train_{variant}", train_stage_inputs(cfg, variant, data_key, pretrained), train_after,
-                 unfinished) and not unfinished:
+                 unfinished) and not unfinished and not joint_set_aside:
             rows[-1] = rows[-1]._replace(why=rows[-1].why + f"; the finished run in {cfg.runs / VARIANTS[variant]} "
                                                               "is reused: only its stamp is written again")
         if cfg.until == "train":
             continue
-        after = [f"train_{variant}"] if unfinished else []
+        after = [f"train_{variant}"] if unfinished or joint_set_aside else []  # (a new checkpoint)
         later = [f"export_{variant}", f"quantize_{variant}",
                  *([f"prior_{variant}"] if variant in PRIOR_VARIANTS else []), f"eval_{variant}"]
         t, e, q = (st.stamp(f"{k}_{variant}") for k in ("train", "export", "quantize"))

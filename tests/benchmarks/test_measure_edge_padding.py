@@ -13,7 +13,13 @@ def test_the_fade_fill_and_its_reach_reach_the_table(tiny_model_dir, scratch_cac
     out = run_script("measure_edge_padding", "--model-dir", str(tiny_model_dir), "--sequences", "1", "--frames", "2",
                      "--outside", "0.5", "--pad-fill", "fade", "--pad-fade", "0.05", capsys=capsys,
                      monkeypatch=monkeypatch)
-    assert "roi.pad_fill 'fade' (pad_fade 0.05)" in out, out
+    # the crop turn search as the estimator runs it (on by default since session 57 where the model has encoder
+    # heatmaps): the header said "runtime defaults" alone, the same before and after the default changed
+    from ghnerf_runtime.config import EstimatorConfig, SessionConfig
+    from ghnerf_runtime.estimator import load_session
+
+    heat = load_session(EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)))).contract.encoder_heatmaps
+    assert f"roi.pad_fill 'fade' (pad_fade 0.05), roi.turn_search {'on' if heat else 'off'}:" in out, out
     assert re.search(r"^\| uncut \(reference\) \|", out, re.M) and re.search(r"^\| 50% \| \d+\.\d%", out, re.M), out
     err = run_script_failing("measure_edge_padding", "--pad-fill", "mirror", capsys=capsys, monkeypatch=monkeypatch)
     assert "mirror" in err and "fade" in err  # argparse names the value and the fills it takes

@@ -278,6 +278,27 @@ def test_without_the_refined_pass_a_cold_track_of_two_people_mixed_is_not_follow
             assert reported >= 3 * 20 and off_first == 0, (reported, off_first)
 
 
+def test_a_turn_search_after_a_cold_track_of_two_people_mixed_leaves_it_unfollowed():
+    """The crop turn search (``roi.turn_search``, on by default since session 57) runs after a weak cold pass and
+    scores each turn through a fresh tracker, which clears the estimator's note that the cold pass's track is both
+    people's joints mixed (``_track_unsorted``); with no turn kept, upright stands with that note restored
+    (``Estimator._turn_search``'s ``held``). Made to search after every cold pass (``turn_search_below`` 1: every
+    pass that found someone is weak; ``turn_search_every`` 1), ``tracking.refine_cold_start`` off and
+    ``pick_subject: none``, 0.6 m apart: the pairs after the first search (the oracle's turned maps are no stronger,
+    so no turn is kept) and a flagged pair reports nobody, as without the search; with the note lost, the flagged
+    passes followed the mixed track (22-23 joints a pair, 51-54 of 66-69 off the first person and 33-42 off the
+    second, session 57's review L, the restore taken out)."""
+    config = EstimatorConfig(joints3d=Joints3DConfig(pick_subject="none"))
+    config = replace(config, tracking=replace(config.tracking, refine_cold_start=False),
+                     roi=replace(config.roi, turn_search=True, turn_search_below=1.0, turn_search_every=1))
+    for seed in (1, 2):
+        results = _scene(seed, alone=0, pairs=4, config=config, where=CLOSE)
+        assert not results[0][0].several_people and results[0][0].num_found > 0  # (the cold pass: both, mixed)
+        later = [r for r, *_ in results[1:]]
+        assert any(r.several_people for r in later)
+        assert all(r.num_found == 0 for r in later if r.several_people), [r.num_found for r in later]
+
+
 def test_split_people_keeps_each_joint_s_pairings_together_and_leaves_out_the_mixed_ones():
     """Each joint's straight pairings (0 and 3) or crossed ones (1 and 2) are the two people's; the others are
     mixed points between them nearer the cameras (as on the oracle, about 1.4 m from both). The split gives each

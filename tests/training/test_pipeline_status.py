@@ -270,3 +270,34 @@ def test_a_lane_records_the_encoder_when_the_joint_run_starts(tmp_path, monkeypa
     monkeypatch.setattr(pipeline, "side_by_side_plan", lambda *a: plan)
     pipeline.train_side_by_side(cfg, [])
     assert (run / pipeline.HUMAN_MARKER).read_text().strip() == sha256(human)
+
+
+def test_status_under_force_says_what_run_sets_aside_first(tmp_path, stand_ins):
+    """``run()`` moves a forced stage's folder aside before any stage (``_set_aside_forced``): a forced pretraining
+    is made again, not the finished one reused, so the joint run starts from a new encoder, and a joint run folder
+    from the earlier one stops ``make model`` unless ``--force train_ghnerf`` sets it aside too. ``--status`` judged
+    the folders as they lie (it moves nothing): a forced pretraining read "reused: only its stamp is written
+    again" and its joint run as before, ``--force train_ghnerf`` read "the finished run ... is reused", and with
+    both forced it said ``make model`` would stop on the joint run's folder."""
+    cfg = PipelineConfig(out=tmp_path / "models", runs=tmp_path / "runs", parallel_train=False)
+    pipeline.run(cfg)
+    stand_ins.setattr(pipeline, "_pretrain_finished", lambda cfg, v: True)  # the finished folder, still there
+    joint = cfg.runs / "edge128"
+    joint.mkdir(parents=True, exist_ok=True)
+    (joint / "last.pt").write_bytes(b"the joint run of the pretraining before")
+
+    def rows(*force):
+        return _rows(PipelineConfig(out=cfg.out, runs=cfg.runs, parallel_train=False, force=force))
+
+    new_encoder = f"it trains in {joint} from the new pretraining's human.pt; after pretrain_ghnerf, whose files are its inputs"
+    r = rows("pretrain_ghnerf")
+    assert r["pretrain_ghnerf"].why == (f"forced (--force); make model stops first: {joint} holds a joint run of an "
+                                        "earlier pretraining (--force train_ghnerf sets it aside)")
+    assert r["train_ghnerf"].why == new_encoder
+    r = rows("pretrain_ghnerf", "train_ghnerf")
+    assert r["pretrain_ghnerf"].why == "forced (--force)"
+    assert r["train_ghnerf"].why == new_encoder
+    r = rows("train_ghnerf")
+    assert not r["pretrain_ghnerf"].runs
+    assert r["train_ghnerf"].why == "forced (--force)"
+    assert r["export_ghnerf"].why == "after train_ghnerf, whose files are its inputs"
