@@ -25,6 +25,10 @@ row also gives the reported joints' mean distance from the nearer person's, and 
 ``--skeleton-prior off`` shows the triangulation's own error (a flagged pair's joints are then its pairings'; with
 the prior, since session 55, the prior's fed the subject's own peaks).
 
+Each row ends with the crop turn searches (``roi.turn_search``, on by default since session 57) its estimators ran,
+``Estimator.turn_searches`` summed (since session 57's review N: two people with nobody picked search only where a
+view reads weakly).
+
 ``--no-refine`` turns ``tracking.refine_cold_start`` off: a cold pass is not run again on the crop of what it found
 (docs/runtime.md, "A track of both people's joints", session 57's review).
 
@@ -189,7 +193,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
               "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0,
               "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0, "hidden_view0": 0.0,
-              "hidden_view1": 0.0}
+              "hidden_view1": 0.0, "turn_searches": 0}
     ratio = config.joints3d.second_person_ratio
     apart: list[np.ndarray] = []  # the oracle's (view, joint) cells between the people, each pass counted
     counted = 0
@@ -254,6 +258,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 if at_a or at_b:
                     whose.append(0 if at_a >= at_b else 1)
                     mixed |= at_a > 0 and at_b > 0
+            counts["turn_searches"] += est.turn_searches  # (the alone pairs' too: none search, one person standing)
         if whose:
             counts["followed_first" if whose[0] == 0 else "followed_second"] += 1
             counts["stable"] += int(len(set(whose)) == 1 and not mixed)
@@ -535,7 +540,8 @@ def main(argv=None) -> int:
                  f"; the people's peaks of a joint {counts['apart_view0']} cells apart in view 0, "
                  f"{counts['apart_view1']} in view 1 (10th-90th percentile)")
               + (f"; the second person's joints hidden per pass, view 0 {counts['hidden_view0'] / passes:.0%}, view 1 "
-                 f"{counts['hidden_view1'] / passes:.0%}" if args.occlude else ""))
+                 f"{counts['hidden_view1'] / passes:.0%}" if args.occlude else "")
+              + f"; roi.turn_search searches {counts['turn_searches']}")
     return 0
 
 

@@ -745,12 +745,16 @@ class Estimator:
         return self._cams[0].camera.name, self._cams[1].camera.name
 
     def reset(self) -> None:
-        """Forget the tracked subject (the next pair starts from the working volume) and the smoothing."""
-        self.tracker.reset()
+        """Forget the tracked subject (the next pair starts from the working volume, through upright crops: a kept
+        crop turn goes with the track, ``roi.turn_search``) and the smoothing. The counters
+        (``turn_searches``, ``turns_kept``, ...) are statistics over the estimator's life and stay."""
+        self.tracker.reset()  # the kept turn's tracker (the upright one is reset as the crops return upright)
+        self._use_turns((0, 0))
         self._several_track = False
         self._behind_track = None
         self._track_unsorted = False
         self._turn_search_wait = 0
+        self._turn_check_wait = 0
         if self._smoother is not None:
             self._smoother.reset()
 
@@ -1035,13 +1039,14 @@ class Estimator:
         nobody found, or someone at a median joint confidence under ``roi.turn_search_below`` (an upside-down
         person read as an upright one); and a view whose ``presence.min_joints``-th strongest joint peak reaches
         :data:`_TURN_SEARCH_FLOOR` (someone may be there: an empty room does not search); and not a person seen by
-        one camera only whom no turn can help (:meth:`_one_view_needs_no_search`)."""
+        one camera only whom no turn can help (:meth:`_one_view_needs_no_search`); nor two people in view with nobody
+        to pick (:meth:`_two_people_report_nobody`)."""
         roi = self.config.roi
         if not roi.turn_search or p.j3 is None or p.env is None or not all(p.frame_ok.values()):
             return False
         if p.someone and _median_confidence(p.j3) >= roi.turn_search_below:
             return False
-        if self._one_view_needs_no_search(p):
+        if self._one_view_needs_no_search(p) or self._two_people_report_nobody(p):
             return False
         rank = self.config.presence.min_joints
         return any(presence_peak(p.env["encoder_heatmaps"], (v,), rank) >= _TURN_SEARCH_FLOOR for v in (0, 1))
@@ -1064,6 +1069,28 @@ class Estimator:
             return True
         other = 1 - self.camera_names.index(p.single_view)
         return presence_peak(p.env["encoder_heatmaps"], (other,), self.config.presence.min_joints) < _TURN_SEARCH_FLOOR
+
+    def _two_people_report_nobody(self, p: "_Pass") -> bool:
+        """Whether ``p`` is a ``several_people`` pass that reports nobody where no subject is picked
+        (``pick_subject: none``, or another 3D method than the triangulation: :meth:`_picks_subject`), both views
+        reading bodies strongly (each :func:`_view_score` at ``roi.turn_search_below`` or above): two people upright,
+        nobody reported by design until one is alone. No turn changes that: a turned pass of the same working
+        volume that is flagged reports nobody too, and one that is not (a turn that reads one of them weakly) would
+        report and track one of two people, or both mixed, which that rule refuses. Before, every
+        ``roi.turn_search_every``-th such pair searched for nothing (three encoder runs; docs/runtime.md,
+        "Searching the crop turns"). A weakly read view still searches: one person lying across the view shows
+        joints twice through upright crops and is flagged (bench scene 11, views at 0.30 and 0.26), and the turned
+        crops find them. Where a subject is picked, a flagged pair whose pick made nobody may be someone lying, and
+        searches as before."""
+        if not p.several_people or p.someone or self._picks_subject():
+            return False
+        return bool((_view_score(p.env["encoder_heatmaps"]) >= self.config.roi.turn_search_below).all())
+
+    def _picks_subject(self) -> bool:
+        """Whether a ``several_people`` pass without a track reports one of the two people (``pick_subject``, with
+        the triangulation: :meth:`_keep_tracked_subject`)."""
+        cfg = self.config.joints3d
+        return cfg.method == "triangulate" and cfg.pick_subject != "none"
 
     def _turn_scores(self, images: Sequence[np.ndarray], turn: int, timing: dict,
                      track: Track | None = None) -> np.ndarray:
@@ -1519,7 +1546,7 @@ class Estimator:
         of them are that view's one peak with each of the other view's two)."""
         track = self.tracker.track
         cfg = self.config.joints3d
-        picks = cfg.method == "triangulate" and cfg.pick_subject != "none"
+        picks = self._picks_subject()
         # a cold pass's track not flagged (cold_several False: this pair's, refined; with refine_cold_start off, the
         # pair before's) is both people's joints mixed: nobody's to follow, whether or not a subject is picked
         # (followed, it streamed a skeleton of both people's joints and of points between them as the subject, and

@@ -174,6 +174,32 @@ def test_a_lost_turned_track_looks_upright_first(session):
 
 
 @needs_model
+def test_one_person_lying_flagged_as_two_with_pick_subject_none_is_still_searched_for(session):
+    """Session 57's review: with ``pick_subject: none`` a flagged pair that reported nobody no longer searches when
+    both views read bodies strongly (two people upright: no turn helps, nobody is picked). The upright crops of one
+    person lying across the view in bench scene 11 show 6 joints twice, flagged as two people (each view's median
+    joint peak 0.26-0.30): that pair still searches, and the turned crops find them."""
+    from ghnerf_runtime.config import Joints3DConfig
+    from ghnerf_runtime.estimator import Estimator
+
+    rig, shots = _shots(11, "lying_z", frames=1)
+    est = Estimator(session, rig, EstimatorConfig(session=SessionConfig(model_dir=str(MODELS / "ghnerf")),
+                                                  joints3d=Joints3DConfig(pick_subject="none")))
+    flagged = []
+    upright = est._finish_pass
+
+    def spy(*args, **kwargs):
+        p = upright(*args, **kwargs)
+        flagged.append((est._turns, p.several_people))
+        return p
+
+    est._finish_pass = spy
+    r = est.estimate(shots[0][1], timestamp_s=0.0)
+    assert flagged[0] == ((0, 0), True)  # (the upright cold pass: one person read as two)
+    assert not r.several_people and r.num_found >= 20 and est._turns == (90, 90) and est.turns_kept == 1
+
+
+@needs_model
 def test_a_person_no_turn_rights_is_searched_for_every_few_pairs(session):
     """Lying along the line of sight no turn shows an upright person: after a search that kept nothing, only
     every ``turn_search_every``-th weak cold pair searches again."""
@@ -489,6 +515,20 @@ def test_a_tracked_turn_search_follows_a_flagged_track_with_its_hold_and_keeps_i
     assert est._turn_search([None, None], weak, 0, {}, None, est.tracker.track) is weak
     assert asked == [(*held, (180, 180))]
     assert (est._several_track, est._behind_track, est._turns) == (*held, (0, 0))
+
+
+def test_reset_returns_to_upright_crops_with_the_turn_state_cleared():
+    """Integration review (session 57): ``reset()`` forgot the kept turn's track but left the crops turned and the
+    turn check's count (harmless: the next pair, cold, went upright); a fresh start is upright crops with both
+    cleared, every tracker forgotten. The search's counters are statistics over the estimator's life and stay."""
+    est, _, _ = _held_track_estimator((180, 90))
+    est._turn_check_wait, est.turn_searches, est.turns_kept, est.turn_checks = 3, 2, 1, 4
+    turned = est.tracker
+    est.reset()
+    assert est._turns == (0, 0) and [st.turn_deg for st in est._cams] == [0.0, 0.0]
+    assert est.tracker is est._turned_trackers[0, 0] and est.tracker.track is None and turned.track is None
+    assert est._turn_check_wait == 0 and est._turn_search_wait == 0
+    assert (est.turn_searches, est.turns_kept, est.turn_checks) == (2, 1, 4)
 
 
 def _turned_body(axis: int, degrees: float, at=(0.0, 0.0, 3.0)):

@@ -299,6 +299,51 @@ def test_a_turn_search_after_a_cold_track_of_two_people_mixed_leaves_it_unfollow
         assert all(r.num_found == 0 for r in later if r.several_people), [r.num_found for r in later]
 
 
+def test_two_people_with_pick_subject_none_do_not_search_the_crop_turns():
+    """Integration review (session 57): with ``pick_subject: none`` two people in view make every pair flagged and
+    nobody reported, and a pair that found nobody was weak, so every ``roi.turn_search_every``-th such pair searched
+    the crop turns (three encoder runs) for nothing: the benchmark's 4 scenes 0.6 m apart, 8 searches in 40 pairs,
+    the side-by-side default places 16 in 80 (benchmarks/measure_two_people.py --pick-subject none); nobody is
+    reported by design until one person is alone, which no turn changes. Now none search, the pairs as before."""
+    for seed in (1, 2):
+        rig = sim.RigPlacement().build()
+        people = [sim.SimScene(sim.SceneConfig(seed=seed + 1000 * k, motion="wave", position_xz=CLOSE[k]))
+                  for k in (0, 1)]
+        oracle = TwoPeopleOracle(edge128_contract())
+        with Estimator(oracle, rig, NOBODY) as est:
+            assert est.config.roi.turn_search  # (on by default for a model with encoder heatmaps)
+            for i in range(6):  # the old rule searched on the first and the sixth
+                t = i / 30.0
+                oracle.set_people(*(p.joints_3d(t) for p in people))
+                r = est.estimate(tuple(people[0].render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+                assert r.several_people and r.num_found == 0
+            assert est.turn_searches == 0
+
+
+@pytest.mark.parametrize("config, peak, weak", [
+    (NOBODY, 0.9, False), (EstimatorConfig(), 0.9, True),
+    (EstimatorConfig(joints3d=Joints3DConfig(method="volumetric")), 0.9, False), (NOBODY, 0.3, True)])
+def test_a_flagged_pair_that_reported_nobody_searches_only_where_a_turn_may_find_someone(config, peak, weak):
+    """Where a subject is picked (the triangulation, ``pick_subject`` not none), a flagged pair that reported nobody
+    may have picked someone lying, whom a turn can right: it still searches; where nobody is picked, it does not
+    when both views read bodies strongly (two people upright), and does where a view reads weakly (one person lying
+    across the view flagged by its own muddled maps: bench scene 11, the turn search test's). One person's nobody
+    (not flagged) searches either way."""
+    from ghnerf_runtime.estimator import _Pass
+    from ghnerf_runtime.joints3d import Joints3D
+
+    J = len(JOINT_NAMES)
+    est = Estimator(OracleSession(edge128_contract()), sim.RigPlacement().build(), config)
+    frame = {n: None for n in est.camera_names}
+    # every joint's peak in both views: over the search's floor (someone may be there), under or over
+    # roi.turn_search_below (0.5)
+    heat = {"encoder_heatmaps": np.full((2, J, 4, 4), peak, np.float32)}
+    flagged = _Pass(est.tracker.regions(), frame, env=heat, j3=Joints3D.missing(J), several_people=True)
+    alone = _Pass(est.tracker.regions(), frame, env=heat, j3=Joints3D.missing(J))
+    assert est._weak_pass(flagged) is weak
+    assert est._weak_pass(alone) is True
+
+
 def test_split_people_keeps_each_joint_s_pairings_together_and_leaves_out_the_mixed_ones():
     """Each joint's straight pairings (0 and 3) or crossed ones (1 and 2) are the two people's; the others are
     mixed points between them nearer the cameras (as on the oracle, about 1.4 m from both). The split gives each
