@@ -105,7 +105,9 @@ class OracleSession:
         self.run_counts[graph] += 1
         spec = self.contract.graph(graph)
         J = self.contract.num_joints
-        if graph == "encoder":
+        # "human" too: the turn search scores a turn's crops through the human graph where there is one, and
+        # reads only its encoder heatmaps (which the oracle draws from the crops' projections, as for "encoder")
+        if graph in ("encoder", "human"):
             out = {t.name: self._zeros(t) for t in spec.outputs}
             if "encoder_heatmaps" in out and self.truth is not None:
                 out["encoder_heatmaps"] = self._source_heatmaps(np.asarray(feeds["src_P"], np.float64))
