@@ -1151,7 +1151,7 @@ class Estimator:
                 self._several_track, self._behind_track, self._track_unsorted = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
             if _finds_better(q, p):
-                if lies_as_turned(q.j3, [st.camera.center for st in self._cams]):
+                if self._lies_as_turned(q.j3):
                     if p.novel is not None:
                         p.novel.abandon()
                     self.turns_kept += 1
@@ -1168,12 +1168,16 @@ class Estimator:
         self._several_track, self._behind_track, self._track_unsorted = held
         return p
 
+    def _lies_as_turned(self, j3: Joints3D) -> bool:
+        """:func:`lies_as_turned` of ``j3`` seen by this rig's two cameras (the turn search's and the kept turn's rule)."""
+        return lies_as_turned(j3, [st.camera.center for st in self._cams])
+
     def _turn_misreads(self, p: "_Pass") -> bool:
         """Whether ``p``, a pass through a kept turn's crops, found someone whose body lies as no turn rights
         (:func:`lies_as_turned`; counted in ``turns_refused``): a person who lay across the view and rolled onto a
         view's line of sight is read through the turned crops as the encoder's upright person across the picture,
         the skeleton the search refuses. Geometry only: no model run."""
-        if p.j3 is None or not p.someone or lies_as_turned(p.j3, [st.camera.center for st in self._cams]):
+        if p.j3 is None or not p.someone or self._lies_as_turned(p.j3):
             return False
         self.turns_refused += 1
         return True

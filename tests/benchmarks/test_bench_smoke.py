@@ -421,11 +421,13 @@ def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
 
 
 # ------------------------------------------------------------------------------- calibration drift
-@pytest.mark.parametrize("bad", ["0.05,x", "0", "0.05,-0.1", "nan"])
-def test_measure_calibration_drift_refuses_a_floor_limit_that_is_not_metres(bad, capsys, monkeypatch):
-    # --max-floor-m takes several limits since session 56 (a column each): each must be a positive number
-    err = run_script_failing("measure_calibration_drift", "--max-floor-m", bad, capsys=capsys, monkeypatch=monkeypatch)
-    assert f"--max-floor-m: {bad!r}" in err, err
+@pytest.mark.parametrize("option, bad", [("--max-floor-m", b) for b in ("0.05,x", "0", "0.05,-0.1", "nan")]
+                         + [("--lift-m", b) for b in ("0.01,x", "-0.01", "0.5", "nan")])
+def test_measure_calibration_drift_refuses_metres_that_are_not(option, bad, capsys, monkeypatch):
+    # --max-floor-m takes several limits since session 56 (a column each): each must be a positive number;
+    # --lift-m several heights of the person above the floor, each in [0, 0.3] m
+    err = run_script_failing("measure_calibration_drift", option, bad, capsys=capsys, monkeypatch=monkeypatch)
+    assert f"{option}: {bad!r}" in err, err
 
 
 @pytest.mark.skipif(not (BENCH.parent / "models" / "model_card.json").is_file(), reason="no trained model")
@@ -438,12 +440,6 @@ def test_measure_calibration_drift_turns_the_camera_asked_and_counts_each_limit(
     assert re.search(r"\| past 0\.05 m \| past 0\.1 m$", out, re.M), out
     rows = re.findall(r"^ +(true rig|pan 1 deg) \| +\d+/2 +\|.*\| +(\d+|-)/?\d* +\| +(\d+|-)/?\d* *$", out, re.M)
     assert [r[0] for r in rows] == ["true rig", "pan 1 deg"], out
-
-
-@pytest.mark.parametrize("bad", ["0.01,x", "-0.01", "0.5", "nan"])
-def test_measure_calibration_drift_refuses_a_lift_that_is_not_metres(bad, capsys, monkeypatch):
-    err = run_script_failing("measure_calibration_drift", "--lift-m", bad, capsys=capsys, monkeypatch=monkeypatch)
-    assert f"--lift-m: {bad!r}" in err, err
 
 
 @pytest.mark.skipif(not (BENCH.parent / "models" / "model_card.json").is_file(), reason="no trained model")
