@@ -15,9 +15,10 @@ frame of take no number), late JOINTS (reordered: a seq up to :data:`LATE_WINDOW
 that fills a gap takes it back out of the gaps) and duplicates, the latest STATUS (its fault code,
 docs/protocol.md, and CALIBRATION SUSPECT when its flag says so) and HELLO, the JOINTS flagged with each scene
 flag (``3 several people``: the robot should not follow them), and the decoder's error counts (a noisy
-serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Exit
-status: 0; 2 for a bad URL or a port that cannot be opened (named), or one that fails while read (an
-unplugged serial port: the totals of what arrived until then are still printed).
+serial line shows as ``crc``/``cobs`` errors). A seq further back is a restarted sender, not a gap. Ctrl-C,
+SIGTERM or ``--seconds`` ends it with the totals on stderr. Exit status: 0; 2 for a bad URL or a port that
+cannot be opened (named), or one that fails while read (an unplugged serial port: the totals of what arrived
+until then are still printed).
 """
 from __future__ import annotations
 
@@ -27,10 +28,12 @@ import json
 import math
 import os
 import select
+import signal
 import socket
 import statistics
 import struct
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -401,6 +404,10 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     return tally
 
 
+def _interrupt(_signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt  # read by listen() as Ctrl-C: the end of the session, the totals kept
+
+
 def _positive_seconds(raw: str) -> float:
     """``--seconds``: a finite number > 0 (``-1`` or ``nan`` would end the listening before it began)."""
     try:
@@ -419,8 +426,8 @@ def main(argv: Sequence[str] | None = None) -> int:
               "gap stepped over leaves the lost frames) and 'N duplicate'; JOINTS flagged 'N several people', "
               "'N prior fallback', 'N single view', 'N calibration suspect' (docs/protocol.md, section 3); "
               "the sender's last STATUS fault (', CALIBRATION SUSPECT' when flagged) and HELLO; "
-              "decode errors. Ctrl-C or --seconds ends it with the totals. Counters: docs/daemon.md; protocol: "
-              "docs/protocol.md")
+              "decode errors. Ctrl-C, SIGTERM or --seconds ends it with the totals. Counters: docs/daemon.md; "
+              "protocol: docs/protocol.md")
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0], epilog=epilog)
     ap.add_argument("url", help="udp://[HOST]:PORT (no HOST: every interface, IPv4 and IPv6; a multicast HOST, "
                                 "udp://239.255.0.1:PORT, is joined) or serial:///dev/DEVICE?baud=N (three "
@@ -435,6 +442,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
     tally, status = Tally(), 0
+    # SIGTERM (`timeout`, systemd, a supervisor on the robot) ends it as Ctrl-C does, with the totals: its default
+    # action killed the process with nothing said
+    previous = signal.signal(signal.SIGTERM, _interrupt) \
+        if threading.current_thread() is threading.main_thread() else None
     try:
         listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout, tally=tally)
     except BrokenPipeError:  # `ghnerf-listen ... | head`: the reader has what it wanted
@@ -444,6 +455,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         status = 2
     finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
         port.close()
     print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps (lost), {tally.total_late} late "
           f"(reordered), {tally.total_duplicates} duplicate", file=sys.stderr)

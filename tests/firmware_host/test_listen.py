@@ -398,3 +398,36 @@ def test_the_line_says_when_a_sender_cannot_report_scene_flags():
     tally = listen.Tally()
     tally.add(Hello(make_header(MsgType.HELLO, 0, 0, 0), 1, 0, 25, 0, 0, "old", ("left", "right")))
     assert "rig 'old' cameras ['left', 'right'] (sends no scene flags)" in tally.line(1.0, {})
+
+
+def test_sigterm_ends_the_listener_with_the_totals_as_ctrl_c_does():
+    """``timeout 10 ghnerf-listen ...`` or a supervisor on the robot stops it with SIGTERM: its default action killed
+    the process with no totals (status -15), where Ctrl-C printed them and exited 0."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    number = probe.getsockname()[1]
+    probe.close()  # the listener binds it next (a free port picked the only way a subprocess can be told it)
+    proc = subprocess.Popen([sys.executable, "-m", "firmware_host.listen", f"udp://127.0.0.1:{number}"], cwd=repo,
+                            env={**os.environ, "PYTHONPATH": str(repo)}, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert "JOINTS/s" in proc.stdout.readline()  # its first summary line: listening, handler installed
+        with open_sink(f"udp://127.0.0.1:{number}?queue=16", backoff=FAST_BACKOFF, rig_id="bench") as sink:
+            for seq in (0, 1, 3):
+                sink.send(make_frame(seq))
+        time.sleep(0.5)  # the three datagrams read
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert err.splitlines()[-1] == "3 JOINTS messages, 1 sequence gaps (lost), 0 late (reordered), 0 duplicate"
