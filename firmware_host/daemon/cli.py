@@ -41,6 +41,8 @@ an unexpected error, which it restarts.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import ctypes
 import faulthandler
 import json
 import logging
@@ -48,7 +50,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import Any
 from pathlib import Path
 
@@ -332,18 +334,47 @@ def _print_json(data: Any) -> int:
     return 0
 
 
+@contextlib.contextmanager
+def _stdout_for_the_json_alone() -> Iterator[None]:
+    """File descriptor 1 points at stderr while the checks run, so stdout carries the JSON printed after them and
+    nothing else: depthai's logger writes to the process's stdout as it loads and opens a device (in a container
+    without USB, ``[depthai] [warning] USB protocol not available ...``), and ``--validate-config > full.json`` or
+    ``--measure-floor | jq`` read that line first, not JSON. A closed stdout or stderr is left as it is."""
+    saved: int | None = None
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+        os.dup2(2, 1)
+    except (OSError, ValueError):  # fd 1 or 2 closed, or sys.stdout a closed file: nothing to guard
+        if saved is not None:
+            os.close(saved)
+        saved = None
+    try:
+        yield
+    finally:
+        if saved is not None:
+            # what was buffered meanwhile goes out now, to stderr, not after the switch back: Python's and C's stdio
+            with contextlib.suppress(OSError, ValueError):
+                sys.stdout.flush()
+            with contextlib.suppress(OSError, AttributeError):  # no C library to ask (not Linux or macOS)
+                ctypes.CDLL(None).fflush(None)
+            os.dup2(saved, 1)
+            os.close(saved)
+
+
 def _validate(path: str, *, with_model: bool) -> int:
     """``--validate-config``: the config in full on stdout (JSON), then on stderr one line saying what was checked.
 
     :raises DaemonConfigError: naming the file and the key.
     """
-    config = read_checked_config(path)
-    checked = "model: not loaded (--no-model), its folder holds graph files"
-    if with_model:
-        try:
-            checked = check_model(config)
-        except DaemonConfigError as e:
-            raise DaemonConfigError(str(e), key=str(path)) from None
+    with _stdout_for_the_json_alone():  # a depthai:// URL loads depthai, which may log to stdout
+        config = read_checked_config(path)
+        checked = "model: not loaded (--no-model), its folder holds graph files"
+        if with_model:
+            try:
+                checked = check_model(config)
+            except DaemonConfigError as e:
+                raise DaemonConfigError(str(e), key=str(path)) from None
     status = _print_json(config_to_dict(config))
     # this runs outside the unit's sandbox, so it sees paths the service will not: say so, but pass (the config
     # may be meant for a run from a shell)
@@ -360,14 +391,16 @@ def _measure_floor(path: str, pairs: int) -> int:
     :raises DaemonConfigError: naming the file and the key (a bad config, a model that does not load, a rig the
         model cannot run on: what the start exits 2 for).
     """
-    config = read_checked_config(path)
+    with _stdout_for_the_json_alone():  # a depthai:// URL loads depthai, which may log to stdout
+        config = read_checked_config(path)
     stop = threading.Event()
     # as the daemon stops: the signal sets ``stop``, looked at between two reads, so the rig and the estimator
     # close by their ``with`` (a SIGTERM from systemd or timeout killed it with neither closed; Ctrl-C's
     # KeyboardInterrupt could land inside a close)
     with _StopOnSignal(stop) as signals:
         try:
-            m = measure_floor_of_config(config, pairs, load_model=load_model, stop=stop)
+            with _stdout_for_the_json_alone():  # and as it opens and runs the device
+                m = measure_floor_of_config(config, pairs, load_model=load_model, stop=stop)
         except DaemonConfigError as e:
             raise DaemonConfigError(str(e), key=str(path)) from None
         except FloorMeasureStopped as e:

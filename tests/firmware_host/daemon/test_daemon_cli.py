@@ -37,6 +37,29 @@ def test_validate_config_prints_the_full_tree(tmp_path, capsys):
     assert printed["estimator"]["joints3d"]["method"]  # the runtime's defaults spelled out
 
 
+def test_validate_config_keeps_what_a_rig_library_prints_out_of_the_json(tmp_path, monkeypatch, capfd):
+    """``depthai://`` loads depthai, whose logger writes to the process's stdout (file descriptor 1) on import (in a
+    container without USB: ``[depthai] [warning] USB protocol not available ...``): ``--validate-config > full.json``
+    then held that line before the JSON. It goes to stderr now; stdout is the config alone."""
+    import drivers
+
+    real = drivers.create_rig_source
+
+    def chatty(url, **kwargs):
+        os.write(1, b"[depthai] [warning] USB protocol not available\n")  # below Python, as a C++ logger writes
+        return real(url, **kwargs)
+
+    monkeypatch.setattr(drivers, "create_rig_source", chatty)
+    path = _write(tmp_path, {"rig": {"url": "sim://?fps=15"}, "sinks": ["udp://127.0.0.1:9870"],
+                             "estimator": {"session": {"model_dir": str(MODELS)}}})
+    assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == 0
+    captured = capfd.readouterr()
+    assert json.loads(captured.out)["rig"]["url"] == "sim://?fps=15"
+    assert "[depthai] [warning] USB protocol not available" in captured.err
+    print("after", flush=True)  # stdout is stdout again once the checks are over
+    assert capfd.readouterr().out == "after\n"
+
+
 @pytest.mark.parametrize("data, message", [
     ({"sinks": ["udp://127.0.0.1:9870"], "rig": {"url": "sim://", "stall": 3}}, "rig.stall: unknown key"),
     ({"sinks": ["udp://127.0.0.1:9870?fps=fast"], "rig": {"url": "sim://"}}, "sinks[0]: "),

@@ -352,3 +352,20 @@ def test_measure_floor_on_the_simulated_rig_prints_the_standing_foot_to_set(tmp_
     assert out["foot_height_m"]["p10"] <= out["foot_height_m"]["median"] <= out["foot_height_m"]["p90"]
     assert np.isclose(out["lowest_foot_m_median"], out["foot_height_m"]["median"] - 0.04, atol=1e-3)
     assert f"set it to {standing:g}" in captured.err
+
+
+def test_what_the_rig_s_library_prints_on_stdout_does_not_land_in_the_json(cli_rig, capfd):
+    """depthai's logger writes to the process's stdout (file descriptor 1) as it opens a device: ``--measure-floor |
+    jq`` read its line before the JSON. It goes to stderr now, and stdout holds the measurement alone."""
+    path, rig = cli_rig
+
+    class _Chatty(_RigSource):
+        def open(self) -> "_RigSource":
+            os.write(1, b"[depthai] [warning] USB protocol not available\n")  # below Python, as a C++ logger writes
+            return super().open()
+
+    rig(_Chatty())
+    assert cli.main(["--config", str(path), "--measure-floor", "5"]) == 0
+    captured = capfd.readouterr()
+    assert json.loads(captured.out)["pairs_with_a_foot"] == 5
+    assert "[depthai] [warning] USB protocol not available" in captured.err
