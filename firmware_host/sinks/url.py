@@ -195,18 +195,25 @@ def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]
     except LocationError as e:
         raise SinkConfigError(u.url, e.field, e.value, e.why) from None
     hint = ipv6_hint(parts, u.scheme, 9000)
+    # the port as written, after the host (past an IPv6 literal's brackets): the errors named the whole location
+    after_host = parts.netloc.rpartition("]")[2]
+    port_text = after_host.rpartition(":")[2] if ":" in after_host else ""
     if not host:
-        raise SinkConfigError(u.url, "host", u.netloc, "missing host" + hint)
+        # udp://:9870 is the listener's form (every interface), copied into a sink's config: say what a sink takes
+        listener = " (udp://:PORT, every interface, is how ghnerf-listen listens)" if u.scheme == "udp" else ""
+        hint = hint or f"; a sink sends to one receiver, e.g. {u.scheme}://127.0.0.1:{port_text or 9870}{listener}"
+        raise SinkConfigError(u.url, "host", "", "missing host" + hint)
     problem = host_name_problem(host)
     if problem:
         raise SinkConfigError(u.url, "host", host, problem)
     try:
         port = parts.port
     except ValueError as e:
-        raise SinkConfigError(u.url, "port", u.netloc, str(e) + hint) from e
+        raise SinkConfigError(u.url, "port", port_text, str(e) + hint) from e
     if port is None:
         if default_port is None:
-            raise SinkConfigError(u.url, "port", u.netloc, "missing port")
+            raise SinkConfigError(u.url, "port", port_text,
+                                  f"missing port: write {u.scheme}://{parts.netloc.rstrip(':')}:PORT, the receiver's")
         port = default_port
     if port == 0:
         raise SinkConfigError(u.url, "port", port, "must be 1..65535")

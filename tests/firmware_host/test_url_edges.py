@@ -117,6 +117,24 @@ def test_an_unbracketed_ipv6_address_gets_a_hint():
     assert "missing host" in plain and "brackets" not in plain
 
 
+@pytest.mark.parametrize("url, field, value, says", [
+    # the listener's form (every interface) copied into a sink: said what a sink takes (the value was ':9870')
+    ("udp://:9870", "host", "", "missing host; a sink sends to one receiver, e.g. udp://127.0.0.1:9870 "
+                                "(udp://:PORT, every interface, is how ghnerf-listen listens)"),
+    ("vmc://:39539", "host", "", "missing host; a sink sends to one receiver, e.g. vmc://127.0.0.1:39539"),
+    # the port as written, not the whole location ('127.0.0.1:98700', '127.0.0.1')
+    ("udp://127.0.0.1:98700", "port", "98700", "out of range"),
+    ("udp://[::1]:99999", "port", "99999", "out of range"),
+    ("vmc://robot.local:x", "port", "x", "integer"),
+    ("udp://127.0.0.1", "port", "", "missing port: write udp://127.0.0.1:PORT, the receiver's"),
+    ("udp://127.0.0.1:", "port", "", "missing port: write udp://127.0.0.1:PORT, the receiver's"),
+])
+def test_a_missing_or_bad_host_or_port_names_what_was_written_and_what_to_write(url, field, value, says):
+    e = _refused(url)
+    assert (e.field, e.value) == (field, value)
+    assert says in str(e) and f"invalid {field}={value!r}" in str(e)
+
+
 def test_host_port_decodes_a_zone_and_takes_a_trailing_slash():
     assert host_port(parse_url("udp://[fe80::1%25Eth0]:9000")) == ("fe80::1%Eth0", 9000)
     assert host_port(parse_url("udp://[::1]:9000")) == ("::1", 9000)
