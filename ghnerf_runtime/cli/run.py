@@ -39,7 +39,7 @@ import numpy as np
 from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config
-from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
+from ghnerf_runtime.errors import FrameError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
@@ -287,7 +287,13 @@ def _run(args) -> int:
     to_stdout = args.out == "-"
     out_path = None if to_stdout else _ready(args.out, "--out")
     rig = load_rig(args.rig)
-    estimator = Estimator.from_config(rig, cfg)
+    try:
+        estimator = Estimator.from_config(rig, cfg)
+    except ModelLoadError as e:
+        if args.model_dir or args.config or Path(cfg.session.model_dir).exists():
+            raise
+        # the default ./models, run from outside the repository: say which option names the folder
+        raise UsageError(f"{e}; pass --model-dir (the repository's models/ holds the shipped model)") from None
     log.info("model %s", json.dumps(estimator.session.describe()))
     request = NovelViewRequest(alpha=args.novel_alpha, overlay=args.novel_overlay) if args.novel_view else None
     fps = 30.0

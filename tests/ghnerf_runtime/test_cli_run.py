@@ -145,6 +145,16 @@ def test_errors_exit_2_and_name_the_problem(sim_pair, tiny_model_dir, tmp_path, 
     assert "model folder does not exist" in capsys.readouterr().err
 
 
+def test_the_default_model_folder_missing_names_the_option_that_gives_one(sim_pair, tmp_path, monkeypatch, capsys):
+    """Run from outside the repository (the README's commands, from another folder), ``./models`` is not there: the
+    error said where it looked, not how to name the folder."""
+    monkeypatch.chdir(tmp_path)
+    assert cli_run.main(["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"]]) == 2
+    err = capsys.readouterr().err
+    assert f"model folder does not exist (read from the current directory {tmp_path})" in err
+    assert err.rstrip().endswith("; pass --model-dir (the repository's models/ holds the shipped model)")
+
+
 def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
     cfg = tmp_path / "cfg.json"
     cfg.write_text('{"joints3d": {"method": "volumetric"}}')
