@@ -431,3 +431,43 @@ def test_sigterm_ends_the_listener_with_the_totals_as_ctrl_c_does():
             proc.wait()
     assert proc.returncode == 0, err
     assert err.splitlines()[-1] == "3 JOINTS messages, 1 sequence gaps (lost), 0 late (reordered), 0 duplicate"
+
+
+def test_the_readme_s_python_receiver_decodes_what_a_udp_sink_sends(monkeypatch):
+    """The README's receiver for a robot's Linux computer, run as written on the datagrams a sink sends (one frame
+    each, a cut one among them), its socket a stand-in that ends the endless loop once they are read."""
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "StreamDecoder" in b)
+    sink = open_sink("memory://", rig_id="bench", cameras=("left", "right"))
+    for seq in (0, 1):
+        sink.send(make_frame(seq))
+    sink.close()
+    frames = [f + b"\x00" for f in sink.read().split(b"\x00") if f]
+    datagrams = frames[:1] + [frames[1][:-9]] + frames[1:]  # a datagram cut short before a whole one
+
+    class _Read(Exception):
+        pass
+
+    class _Socket:
+        def __init__(self, *args) -> None:
+            self.bound = None
+
+        def bind(self, address) -> None:
+            self.bound = address
+
+        def recv(self, size: int) -> bytes:
+            if not datagrams:
+                raise _Read
+            return datagrams.pop(0)
+
+    monkeypatch.setattr(socket, "socket", _Socket)
+    names: dict = {}
+    with pytest.raises(_Read):
+        exec(block, names)
+    assert names["sock"].bound == ("", 9870)
+    assert names["xyz_mm"].shape == (25, 3) and names["missing"].shape == (25,) and not names["missing"].any()
+    stats = names["decoder"].stats
+    assert stats.messages == len(frames) and sum(stats.errors.values()) == 1  # the cut datagram, and only it
