@@ -940,7 +940,7 @@ def test_a_skeleton_of_two_people_whose_maps_show_no_joint_twice_is_flagged_and_
     """Each view's peak of a joint is whichever person's is stronger there, and both views may agree on it: the
     first person's body with the second's left leg, 0.6 m aside, one peak per joint (no joint shown twice, nothing
     for the reprojection gate). Before, never flagged: 25 joints a pair reported, the left leg's at the second
-    person's, and its track followed. Now its torso (the mid-hip to the left hip 0.6 m and more) is two people's
+    person's, and its track followed. Now its torso (the mid-hip to the left hip about 0.7 m) is two people's
     (``two_people.mixed_torso``): flagged, and with nobody to split it into, no joint reported. Without the refined
     pass a cold pass still reports it (its coarse crop cannot tell, as for a cold pass showing a joint twice) and the
     tracked pass after it, flagged, nobody; the track dropped, the next pair is cold again."""
