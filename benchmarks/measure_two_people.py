@@ -173,7 +173,8 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
     (``stable``: every pair that reports joints has most of them at the same person, none at the other); and
     over the passes of the pairs counted (a cold pass and its refined one are two), ``passes`` and the joints
     shown twice (a runner-up of at least ``second_person_ratio`` of the peak) in view 0, in view 1 and in both
-    (``twice_view0``, ``twice_view1``, ``twice_both``, summed): a view whose two people's peaks of a joint share a
+    (``twice_view0``, ``twice_view1``, ``twice_both``, summed), and those whose peaks made a torso of two people
+    (``torso_mixed``: ``two_people.mixed_torso``, docs/runtime.md, "A torso of two people"): a view whose two people's peaks of a joint share a
     region showed none there before the runner-up in a region (session 55) (docs/runtime.md, "Two people 0.6 m apart").
     ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each at the other's
     place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
@@ -193,7 +194,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
               "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0,
               "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0, "hidden_view0": 0.0,
-              "hidden_view1": 0.0, "turn_searches": 0}
+              "hidden_view1": 0.0, "turn_searches": 0, "torso_mixed": 0}
     ratio = config.joints3d.second_person_ratio
     apart: list[np.ndarray] = []  # the oracle's (view, joint) cells between the people, each pass counted
     counted = 0
@@ -209,13 +210,14 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         with Estimator(oracle or session, rig, config) as est:
             decide, counting_now = est._several_people, [False]  # every pass asks it once: counted beside it
 
-            def counting(kp, decide=decide, counting_now=counting_now):
+            def counting(kp, decide=decide, counting_now=counting_now, est=est):
                 if counting_now[0]:
                     twice = kp.valid & (kp.runner_up >= ratio * kp.confidence)  # (view, J), as joints_shown_twice
                     counts["passes"] += 1
                     counts["twice_view0"] += int(twice[0].sum())
                     counts["twice_view1"] += int(twice[1].sum())
                     counts["twice_both"] += joints_shown_twice(kp, ratio)
+                    counts["torso_mixed"] += int(est._torso_mixed)  # (set by this pass's 3D stage, before this)
                     if oracle is not None and oracle.apart is not None:
                         apart.append(oracle.apart)
                     if oracle is not None and oracle.hidden_share is not None:
@@ -337,7 +339,8 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     """One person (module docstring, ``--one-person-model``): ``pairs``, ``flagged``, ``identical`` (every pair's
     joints and missing flags equal with the check on and off), ``found`` and ``joints`` (joints found, of all),
     ``error_mm`` (mean over those found; NaN with none), ``passes`` and ``shown_twice`` (passes by the number of
-    joints shown twice in both views, at the defaults' ``second_person_ratio``)."""
+    joints shown twice in both views, at the defaults' ``second_person_ratio``), ``torso_mixed`` (passes whose peaks
+    made a torso of two people, ``two_people.mixed_torso``)."""
     from ghnerf_runtime.cli.simdata import load_sequences
 
     on = EstimatorConfig(session=SessionConfig(model_dir=model_dir))
@@ -345,14 +348,15 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     session = load_session(on)
     ratio = on.joints3d.second_person_ratio
     shown: Counter[int] = Counter()
-    out = {"pairs": 0, "flagged": 0, "identical": True, "found": 0, "joints": 0}
+    out = {"pairs": 0, "flagged": 0, "identical": True, "found": 0, "joints": 0, "torso_mixed": 0}
     errors: list[float] = []
     for seq in load_sequences(sequences, frames):
         with Estimator(session, seq.rig, on) as checked, Estimator(session, seq.rig, off) as unchecked:
             decide = checked._several_people  # every pass asks it once: counted beside its answer
 
-            def counting(kp, decide=decide):
+            def counting(kp, decide=decide, checked=checked):
                 shown[joints_shown_twice(kp, ratio)] += 1
+                out["torso_mixed"] += int(checked._torso_mixed)  # (set by this pass's 3D stage, before this)
                 return decide(kp)
 
             checked._several_people = counting
@@ -496,7 +500,8 @@ def main(argv=None) -> int:
               f"{m['error_mm']:.2f} mm over {100.0 * m['found'] / max(m['joints'], 1):.2f} % of joints "
               f"(against the truth)")
         print(f"passes by joints shown twice in both views at {EstimatorConfig().joints3d.second_person_ratio}: "
-              f"{shown} ({m['passes']} passes)")
+              f"{shown} ({m['passes']} passes); a torso of two people (two_people.mixed_torso) on "
+              f"{m['torso_mixed']} of them")
         return 0
     runs = [(0, True, f"{args.pairs * args.scenes} pairs of two people ({args.scenes} scenes)")]
     if args.alone:
@@ -541,6 +546,7 @@ def main(argv=None) -> int:
                  f"{counts['apart_view1']} in view 1 (10th-90th percentile)")
               + (f"; the second person's joints hidden per pass, view 0 {counts['hidden_view0'] / passes:.0%}, view 1 "
                  f"{counts['hidden_view1'] / passes:.0%}" if args.occlude else "")
+              + f"; a torso of two people (two_people.mixed_torso) on {counts['torso_mixed']} passes"
               + f"; roi.turn_search searches {counts['turn_searches']}")
     return 0
 

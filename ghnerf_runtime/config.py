@@ -481,7 +481,9 @@ class Joints3DConfig:
             at least one of the two views (docs/runtime.md, "Two people in the working volume").
         second_person_min_joints: a pair with at least this many joints shown twice in *both* views
             (``second_person_ratio``) is ``several_people`` (``PairResult``): its joints are kept only near the
-            tracked subject's (``max_track_step_m``), or, without a track, none. ``0`` turns the check off.
+            tracked subject's (``max_track_step_m``), or, without a track, none. So is a tracked pass whose peaks
+            make a torso of two people (:func:`ghnerf_runtime.two_people.mixed_torso`; since session 58,
+            docs/runtime.md, "A torso of two people"). ``0`` turns the check off, that rule with it.
         behind_min_joints: a pair whose tracked crop shows at least this many joints twice in one view alone (one
             person behind the other as the other camera sees them; docs/runtime.md, "One person behind the other")
             is ``several_people`` too; ``0`` (the default) leaves that rule out. Off because one person alone

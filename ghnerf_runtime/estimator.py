@@ -89,8 +89,8 @@ from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
-from ghnerf_runtime.two_people import (PAIRINGS, attached, centre_of, floor_xz, matched_errors, one_body,
-                                       pick_person, split_people)
+from ghnerf_runtime.two_people import (PAIRINGS, attached, centre_of, floor_xz, matched_errors, mixed_torso,
+                                       one_body, pick_person, split_people)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -190,7 +190,9 @@ class PairResult:
             both views (two people in view; fewer, down to one, while the pairs follow a flagged pair's subject),
             or, on a tracked pass with ``joints3d.behind_min_joints`` set (off by default), in one view alone (one
             person behind the other as the other camera sees them, since session 56: without a track the person
-            that camera sees is reported, whatever the rule): only
+            that camera sees is reported, whatever the rule), or, on a tracked pass (since session 58), the peaks
+            strong in both views make a torso no one body has (:func:`~ghnerf_runtime.two_people.mixed_torso`: one
+            person's mid-hip, the other's hip): only
             the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
             2D); without a track, the joints of the person ``joints3d.pick_subject`` names, whom the track then
             follows (none with ``pick_subject: none``; docs/runtime.md, "Two people in the working volume").
@@ -659,6 +661,7 @@ class Estimator:
         self._prior_check: tuple[float | None, bool] = (None, False)  # this pair's (disagreement, fell back)
         self._agreement: ViewAgreement | None = None  # this pair's, set by _joints_3d
         self._lowest_foot: float | None = None  # this pair's, set by _joints_3d
+        self._torso_mixed = False  # this pass's, set by _joints_3d (_finish_pass)
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
@@ -686,9 +689,9 @@ class Estimator:
         self._last_pair_cold = False
         self._several_track = False  # the track is a several_people pass's subject (_several_people's hysteresis)
         self._behind_track: int | None = None  # and the view that showed one peak, where that pass was _behind_view's
-        # the track is a cold pass's that was not several_people but showed a joint twice: two people in its crop
-        # (the working volume's, too coarse to tell them apart) may have left both people's joints mixed in it
-        # (_keep_tracked_subject)
+        # the track is a cold pass's that was not several_people but showed a joint twice, or a torso of two people
+        # (two_people.mixed_torso): two people in its crop (the working volume's, too coarse to tell them apart) may
+        # have left both people's joints mixed in it (_keep_tracked_subject)
         self._track_unsorted = False
         self._rays_cache: dict[tuple, np.ndarray] = {}
         self._grid_points: dict[tuple, tuple[np.ndarray, tuple[int, int, int]]] = {}
@@ -1367,6 +1370,13 @@ class Estimator:
         # too small to tell one peak hidden from two merged: the pass refining it decides)
         behind = None if several or not regions.tracked else self._behind_view(kp)
         several |= behind is not None
+        # a torso of two people (both views read one person's mid-hip and the other's hip): two people too near
+        # for the maps to show a joint twice, or the views' peaks agreeing on the wrong person (docs/runtime.md,
+        # "A torso of two people"); the two-people check off (second_person_min_joints 0) leaves it out too. A cold
+        # pass's crop (the whole working volume) draws them too small to split: its track is both people's, unsorted
+        # (below), and the pass refining it decides, as after a cold pass that showed a joint twice
+        torso = self._torso_mixed and cfg.joints3d.second_person_min_joints > 0
+        several |= torso and regions.tracked
         subject = j3  # a several_people pair's joints of the tracked subject that the views' peaks gave
         chosen = None  # and the peaks each of them was triangulated from (_from_pairings)
         if several:  # before the presence gate: the subject's joints alone must make someone
@@ -1417,10 +1427,12 @@ class Estimator:
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         self._several_track = several and self.tracker.track is not None
         self._behind_track = behind if self._several_track else None
-        # a cold pass not flagged that showed a joint twice in both views: maybe two people too small to tell apart
-        # in its crop, the working volume's (one person alone through the shipped model: 15 of 330 passes)
+        # a cold pass not flagged that showed a joint twice in both views (one person alone through the shipped
+        # model: 15 of 330 passes), or a torso of two people: maybe two people too small to tell apart in its crop,
+        # the working volume's
         self._track_unsorted = (not regions.tracked and not several and self.tracker.track is not None and
-                                joints_shown_twice(kp, cfg.joints3d.second_person_ratio) >= STILL_SEVERAL_MIN_JOINTS)
+                                (torso or joints_shown_twice(kp, cfg.joints3d.second_person_ratio)
+                                 >= STILL_SEVERAL_MIN_JOINTS))
         if seen_by is not None:  # its next crop follows the person; the other camera's stays on the volume
             self.tracker.update_view(seen_by, joints_2d[self.camera_names[seen_by]],
                                      conf_2d[self.camera_names[seen_by]])
@@ -1949,6 +1961,10 @@ class Estimator:
         someone = tri if not pres.enabled else gate_presence(tri, pres.min_joints,
                                                              pres.threshold(self.config.heatmaps.source))
         self._lowest_foot = self._lowest_foot_m(near_the_body(someone, _FLOOR_BODY_M), kp, regions)
+        # two people's joints in one skeleton (two_people.mixed_torso), from the peaks strong in both views (a weak
+        # peak may be noise's): asked whatever the 3D method, as the maps' second peaks are (_finish_pass)
+        strong = np.all(kp.confidence >= pres.threshold(self.config.heatmaps.source), axis=0)
+        self._torso_mixed = mixed_torso(tri.points, tri.valid & strong)
 
         def centroid() -> Joints3D:
             g = self.grid

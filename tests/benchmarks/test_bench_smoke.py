@@ -346,9 +346,11 @@ def test_measure_two_people(capsys, monkeypatch):
     # people 0.6 m apart")
     twice = re.findall(r"^  (\d+) passes: joints shown twice at 0\.5 per pass, view 0 [\d.]+, view 1 [\d.]+, both "
                        r"[\d.]+; the people's peaks of a joint [\d.]+-[\d.]+ cells apart in view 0, [\d.]+-[\d.]+ in "
-                       r"view 1 \(10th-90th percentile\); roi\.turn_search searches (\d+)$", out, re.M)
-    # and the crop turn searches its estimators ran (session 57's review N): two people standing, picked, none
-    assert len(twice) == 2 and all(int(n) >= 2 and s == "0" for n, s in twice), out
+                       r"view 1 \(10th-90th percentile\); a torso of two people \(two_people\.mixed_torso\) on (\d+) "
+                       r"passes; roi\.turn_search searches (\d+)$", out, re.M)
+    # and the crop turn searches its estimators ran (session 57's review N): two people standing, picked, none; and
+    # the passes whose peaks made a torso of two people (session 58), at most every pass
+    assert len(twice) == 2 and all(int(n) >= 2 and int(t) <= int(n) and s == "0" for n, t, s in twice), out
 
 
 def test_measure_two_people_calibration(capsys, monkeypatch):
@@ -397,10 +399,12 @@ def test_measure_two_people_one_person(model, capsys, monkeypatch):
     assert re.search(r"^one person, .* at the defaults, 1 bench sequences of 3 pairs: \d+ of 3 pairs flagged "
                      r"several_people; joints (identical|DIFFERENT) with the check on and off; "
                      r"(nan|[\d.]+) mm over [\d.]+ % of joints \(against the truth\)$", out, re.M), out
-    hist = re.search(r"^passes by joints shown twice in both views at 0\.5: (.*) \((\d+) passes\)$", out, re.M)
+    hist = re.search(r"^passes by joints shown twice in both views at 0\.5: (.*) \((\d+) passes\); a torso of two "
+                     r"people \(two_people\.mixed_torso\) on (\d+) of them$", out, re.M)
     assert hist, out
     counts = [int(c) for c in re.findall(r"\d+ joints: (\d+)", hist.group(1))]
     assert counts and sum(counts) == int(hist.group(2)) >= 3, out  # every pass counted, at least one a pair
+    assert int(hist.group(3)) <= int(hist.group(2)), out  # (session 58: docs/runtime.md, "A torso of two people")
 
 
 def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
@@ -410,8 +414,8 @@ def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
                      "--pairs", "1", "--alone", "0", capsys=capsys, monkeypatch=monkeypatch)
     assert re.search(r"^1 pairs of two people \(1 scenes\) at \(0, 2\.5\) and \(0\.233, 3\.472\), the oracle's "
                      r"heatmaps, each person's joints behind the other's body hidden, ", out, re.M), out
-    hidden = re.search(r"the second person's joints hidden per pass, view 0 (\d+)%, view 1 (\d+)%; "
-                       r"roi\.turn_search searches \d+$", out, re.M)
+    hidden = re.search(r"the second person's joints hidden per pass, view 0 (\d+)%, view 1 (\d+)%; a torso of two "
+                       r"people \(two_people\.mixed_torso\) on \d+ passes; roi\.turn_search searches \d+$", out, re.M)
     assert hidden and int(hidden.group(1)) >= 90 and int(hidden.group(2)) < 90, out  # behind as view 0 sees it
     out = run_script_failing("measure_two_people", "--occlude", "--model-dir", "models", capsys=capsys,
                              monkeypatch=monkeypatch)
