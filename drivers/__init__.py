@@ -11,6 +11,7 @@ from drivers.errors import (
     BackendNotAvailableError,
     DriverError,
     EndOfStream,
+    FrameSizeError,
     RigConfigError,
     RigDisconnectedError,
     RigInitializationError,
@@ -23,7 +24,7 @@ from drivers.registry import BACKENDS, create_rig_source, open_rig
 
 __all__ = [
     "BACKENDS", "BackendNotAvailableError", "CameraTruth", "DriverError", "DropPolicy", "EndOfStream",
-    "Frame", "FramePair", "ManualClock", "MonotonicClock", "PairingConfig", "PairingStats",
+    "Frame", "FramePair", "FrameSizeError", "ManualClock", "MonotonicClock", "PairingConfig", "PairingStats",
     "RigConfigError", "RigDisconnectedError", "RigInitializationError", "RigOperationError",
     "RigSource", "RigTimeoutError", "create_rig_source", "open_rig",
 ]

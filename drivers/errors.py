@@ -32,3 +32,21 @@ class RigTimeoutError(DriverError, TimeoutError):
 
 class EndOfStream(RigDisconnectedError):
     """A finite source (a recording) has no more frames."""
+
+
+class FrameSizeError(RigInitializationError, RigOperationError):
+    """A camera delivers frames of another size than its rig camera's (the rig file's calibration).
+
+    At :meth:`~drivers.base.RigSource.open` (the first frames) it fails the open; while streaming it is a
+    failed read. Both bases, so that code catching either goes on as before; ``camera``, ``expected`` (the rig's
+    ``(width, height)``) and ``delivered`` let a caller tell a wrong rig file (the same wrong size at every open)
+    from a camera that changed size for a while. ``args`` are all four, so ``type(e)(*e.args)`` copies it.
+    """
+
+    def __init__(self, message: str, camera: str, expected: tuple[int, int], delivered: tuple[int, int]) -> None:
+        super().__init__(message, camera, tuple(expected), tuple(delivered))
+        self.message, self.camera = message, camera
+        self.expected, self.delivered = tuple(expected), tuple(delivered)
+
+    def __str__(self) -> str:
+        return self.message

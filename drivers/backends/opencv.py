@@ -23,9 +23,11 @@ Options:
   enough for ``ghcal capture``, not for 3D joints (the daemon refuses it).
 * ``width``, ``height`` (without ``rig``): the size asked of live cameras and required of every
   frame, videos' too; ``fps``, ``fourcc``: the rate and format asked of live cameras (two webcams on
-  one USB bus usually need ``fourcc=MJPG``). A size a camera does not deliver is an error at
-  :meth:`open`; a rate or format it does not take is a warning. ``fps`` is also the pace of a video
-  whose file does not state its rate.
+  one USB bus usually need ``fourcc=MJPG``). A size a camera does not deliver (``width``/``height``
+  or the rig file's) is an error at :meth:`open` (:class:`~drivers.errors.FrameSizeError`; against a
+  rig file it says whether the file looks calibrated at another resolution: :func:`rig_size_message`);
+  a rate or format it does not take is a warning. ``fps`` is also the pace of a video whose file does
+  not state its rate.
 * ``api``: OpenCV's capture backend: ``any`` (default), ``v4l2``, ``ffmpeg``, ``gstreamer``,
   ``dshow``, ``msmf``, ``avfoundation``.
 * ``names``, ``hfov`` (without ``rig``): the nominal rig's camera names (default ``left,right``) and
@@ -92,6 +94,7 @@ from drivers.base import RigSource
 from drivers.clock import Clock, MonotonicClock
 from drivers.errors import (
     EndOfStream,
+    FrameSizeError,
     RigConfigError,
     RigDisconnectedError,
     RigInitializationError,
@@ -350,14 +353,12 @@ class _Camera:
                 return
             undecodable = 0
             image = _bgr(image)
-            if image is None or (self.size is not None and (image.shape[1], image.shape[0]) != self.size):
-                got = "an image that is not 8-bit colour or grey" if image is None else \
-                    f"{image.shape[1]}x{image.shape[0]}"
-                want = "" if self.size is None else {
-                    "rig": f", but its rig camera is {self.size[0]}x{self.size[1]}",
-                    "asked": f", not the width={self.size[0]}&height={self.size[1]} asked",
-                    "first": f", not the {self.size[0]}x{self.size[1]} of its first frame"}[self.size_from]
-                src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}) delivered {got}{want}"))
+            if image is None:
+                src._fail(RigOperationError(f"camera {self.name!r} ({self.shown}) delivered an image that is not "
+                                            f"8-bit colour or grey"))
+                return
+            if self.size is not None and (image.shape[1], image.shape[0]) != self.size:
+                src._fail(self._size_error((image.shape[1], image.shape[0])))
                 return
             if self.size is None:
                 self.size = (image.shape[1], image.shape[0])
@@ -372,6 +373,18 @@ class _Camera:
                 return
             self.index += 1
 
+
+    def _size_error(self, delivered: tuple[int, int]) -> FrameSizeError:
+        """A frame of ``delivered`` (width, height), not this camera's size; worded by where that size came from."""
+        got, (w, h) = f"{delivered[0]}x{delivered[1]}", self.size  # type: ignore[misc]
+        if self.size_from == "rig":
+            message = rig_size_message(self.name, self.shown, delivered, (w, h),
+                                       rig_file=self.source.options.rig_path, live=not self.video)
+        elif self.size_from == "asked":
+            message = f"camera {self.name!r} ({self.shown}) delivered {got}, not the width={w}&height={h} asked"
+        else:
+            message = f"camera {self.name!r} ({self.shown}) delivered {got}, not the {w}x{h} of its first frame"
+        return FrameSizeError(message, self.name, (w, h), delivered)
 
     def _live_stamp(self, grabbed_ns: int) -> int:
         """The frame's driver stamp where the source uses them (module docstring, Timing), else the grab's."""
@@ -390,6 +403,41 @@ class _Camera:
                     "ms at the grab, %.3f ms at its previous frame): both cameras' frames are stamped at their grab "
                     "from now on", self.name, self.shown, ms, grabbed_ns / 1e6, self.last_stamp_ns / 1e6)
         return grabbed_ns
+
+
+def rig_size_message(camera: str, shown: str, delivered: tuple[int, int], expected: tuple[int, int], *,
+                     rig_file: str | None, live: bool) -> str:
+    """Why camera ``camera`` (``shown``: its device or file) delivering ``delivered`` (width, height) does not fit its
+    rig camera of ``expected``, and what to do: the same shape at another scale is most likely a rig file calibrated
+    at another resolution of this camera; another shape, another sensor mode or camera. No rig file is rescaled
+    here: a mode of another resolution may also crop the sensor differently, and ghcal has no command for it."""
+    (dw, dh), (rw, rh) = delivered, expected
+    where = f"its rig camera in {rig_file}" if rig_file else "its rig camera"
+    message = f"camera {camera!r} ({shown}) delivered {dw}x{dh}, but {where} is {rw}x{rh}"
+    if abs(dw * rh - dh * rw) <= 0.01 * rw * rh:  # the same aspect ratio, to 1 % (854x480 against 1280x720)
+        message += (f": the same shape at {dw / rw:.3g} times the size, so the rig file was most likely calibrated "
+                    f"at another resolution of this camera")
+    else:
+        message += (f": another shape ({dw / dh:.3g}:1 against {rw / rh:.3g}:1), so another mode of the sensor "
+                    f"(cropped) or another camera than the one calibrated")
+    again = f"calibrate again at {dw}x{dh} (ghcal, docs/calibration.md)"
+    if live:  # it was asked for the rig's size and did not take it
+        mjpg = " (a webcam offers its larger sizes only compressed: add fourcc=MJPG to the URL)" if rw * rh > dw * dh \
+            else ""
+        return message + f"; have the camera deliver {rw}x{rh}{mjpg} or {again}"
+    return message + f"; {again}, or use videos recorded at {rw}x{rh}"
+
+
+def video_size(spec: str) -> tuple[int, int] | None:
+    """The frame size a video file's container states (nothing decoded), None where OpenCV cannot say."""
+    capture = cv2.VideoCapture(spec)
+    try:
+        if not capture.isOpened():
+            return None
+        size = int(capture.get(cv2.CAP_PROP_FRAME_WIDTH) or 0), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT) or 0)
+    finally:
+        capture.release()
+    return size if size[0] > 0 and size[1] > 0 else None
 
 
 def _pass_mismatch(videos: list[tuple[_Camera, int]]) -> str | None:
@@ -530,6 +578,8 @@ class OpenCVRigSource(RigSource):
         with self._cond:
             while True:
                 for item in self._queue:
+                    if isinstance(item, FrameSizeError):  # typed: the daemon tells a wrong rig file by it
+                        raise type(item)(*item.args) from None
                     if isinstance(item, Exception):
                         raise RigInitializationError(str(item)) from None
                 if self._delivered >= set(self._per_camera):

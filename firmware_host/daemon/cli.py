@@ -55,9 +55,9 @@ from typing import Any
 from pathlib import Path
 
 import drivers
-from drivers.backends.opencv import is_nominal_rig
+from drivers.backends.opencv import is_nominal_rig, is_video_file, rig_size_message, video_size
 from drivers.backends.recording_format import MANIFEST, read_manifest
-from drivers.url import RigUrl
+from drivers.url import RigUrl, redact_url
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
 from firmware_host.daemon.measure_floor import (DEFAULT_PAIRS, FloorMeasureError, FloorMeasureStopped,
@@ -68,6 +68,7 @@ from firmware_host.protocol.constants import MAX_CAMERA_NAME_LEN, MAX_RIG_ID_LEN
 from ghnerf_runtime.config import config_to_dict
 from ghnerf_runtime.config_paths import config_folder
 from ghnerf_runtime.errors import ModelLoadError, RuntimeErrorBase
+from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.novel_painter import FILE_NAME as PAINTER_FILE
 from ghnerf_runtime.novel_painter import NovelPainter
 from ghnerf_runtime.rig_file import load_rig
@@ -197,6 +198,24 @@ def _check_rig_url(text: str) -> None:
             if not (0 < len(name) <= limit and name.isascii() and name.isprintable()):
                 raise DaemonConfigError(f"{rig_file}: its {what} {name!r} cannot go in the joint stream's HELLO "
                                         f"(printable ASCII, at most {limit} characters)", key="rig.url")
+        if url.scheme == "opencv":
+            _check_video_sizes(url, rig_file, rig)
+
+
+def _check_video_sizes(url: RigUrl, rig_file: str, rig: Rig) -> None:
+    """``opencv://`` videos against the rig file: a video's size, which its container states, is known without
+    opening a camera, and no retry changes it (the daemon would stop on it at the rig's third open). Live cameras
+    are judged when they open (the daemon's ``SIZE_MISMATCH_OPENS``).
+
+    :raises DaemonConfigError: keyed ``rig.url``, naming the video, the rig file and both sizes.
+    """
+    for camera, spec in zip(rig.pair, (url.options.get("first"), url.options.get("second"))):
+        if not spec or not is_video_file(spec) or not os.path.isfile(spec):
+            continue  # a device, a stream, an image sequence, a missing file (the open names it)
+        size = video_size(spec)
+        if size is not None and size != (camera.width, camera.height):
+            raise DaemonConfigError(rig_size_message(camera.name, redact_url(spec), size, (camera.width, camera.height),
+                                                     rig_file=rig_file, live=False), key="rig.url")
 
 
 def _where_url_read(why: str, source: str | os.PathLike | None) -> str:

@@ -8,7 +8,10 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
 
 * **a rig that cannot be opened** (OAK not plugged in yet, USB reset): retried forever with a
   backoff from ``rig.reopen_min_s`` doubling to ``rig.reopen_max_s``; state ``waiting``; so is one lost
-  before its pairs flowed for ``rig.stall_s`` (a device that flaps);
+  before its pairs flowed for ``rig.stall_s`` (a device that flaps); but not cameras that deliver another size
+  than the rig file's on ``SIZE_MISMATCH_OPENS`` opens in a row and never the rig's (a rig file calibrated at
+  another resolution): that stops the daemon as a bad config does (exit 2); once they delivered the rig's size, a
+  camera that changes size is retried as any failed open;
 * **a camera that vanishes** (``RigDisconnectedError``) or **falls silent** for ``rig.stall_s``:
   the rig is closed and opened again, and the tracker restarts from the working volume; the sinks
   flag ``CAMERA_FAULT`` in their STATUS until pairs flow again;
@@ -50,7 +53,8 @@ health, log level) applies from the next pass.
 
 What stops it: ``stop`` being set (SIGTERM / SIGINT in the CLI), a finite source ending when
 ``rig.exit_at_end`` is on, or an error no retry can fix (a model that will not load, or estimator settings it
-cannot serve: raised as :class:`DaemonStartError` before the loop starts).
+cannot serve: raised as :class:`DaemonStartError` before the loop starts; a rig file whose size the cameras
+never deliver: raised from the loop).
 """
 from __future__ import annotations
 
@@ -132,6 +136,12 @@ def _lingering(source: drivers.RigSource) -> tuple[str, ...]:
 #: The model failing on this many pairs in a row (no estimate between) is no longer one bad pair: the daemon
 #: stops with the error (exit 1) and systemd restarts it, the model loaded afresh.
 MAX_FAILED_RUNS = 30
+
+#: Opens in a row that fail on a camera delivering a size not its rig camera's (each camera the same one), before
+#: the cameras of this rig.url ever delivered the rig's size: a rig file that does not fit (calibrated at another
+#: resolution), which no retry fixes. The daemon stops (exit 2) instead of waiting for ever; one or two such opens
+#: are retried, for a webcam that comes up in another mode before it takes the size asked of it.
+SIZE_MISMATCH_OPENS = 3
 
 
 class DaemonStartError(FirmwareHostError):
@@ -218,6 +228,11 @@ class Daemon:
         self._sinks_for: Optional[tuple[str, tuple[str, ...]]] = None  # (rig_id, camera names)
         self._backoff_s = config.rig.reopen_min_s
         self._steady = False  # the open rig has delivered pairs for rig.stall_s (the backoff was reset)
+        # The cameras of this rig.url have delivered the rig's size (an open passed their first frames): a wrong
+        # size after that is a camera that changed mode, retried; before it, a rig file that does not fit them.
+        self._size_fitted = False
+        # Opens in a row failed so, and each camera's (rig size, size) in them (either camera may be the one named)
+        self._size_mismatches: tuple[dict[str, tuple], int] = ({}, 0)
         self._next_status = 0.0
         self._fault = int(Fault.OK)
         self._calibration_sent = False  # what the sinks' STATUS says of the calibration (CALIBRATION_SUSPECT)
@@ -355,6 +370,7 @@ class Daemon:
             except drivers.DriverError as e:
                 self._close_rig(source)
                 self.health.rig_open_failures += 1
+                self._check_size_mismatch(e)
                 self.health.last_error = f"cannot open {self.health.rig_url}: {e}{rig_url_hint(rig_cfg.url)}"
                 self.health.enter(State.WAITING)
                 _log.warning("%s; retrying in %.1f s", self.health.last_error, self._backoff_s)
@@ -365,10 +381,35 @@ class Daemon:
                 self._close_rig(source)
                 raise
             self.health.rig_opens += 1
+            self._size_fitted, self._size_mismatches = True, ({}, 0)
             self.health.cameras = tuple(c.name for c in source.rig.pair)
             _log.info("rig open: cameras %s, baseline %.3f m", list(self.health.cameras), source.rig.baseline)
             return source
         return None
+
+    def _check_size_mismatch(self, error: drivers.DriverError) -> None:
+        """After an open failed with ``error``: ``SIZE_MISMATCH_OPENS`` opens in a row failed on a camera delivering
+        another size than its rig camera's (the same size each time for each camera; which camera the driver names
+        first is a race), before this rig.url's cameras ever delivered the rig's size, is a rig file that does not
+        fit them, which no retry fixes: the start's error (exit 2), not a wait for ever. Cameras that delivered the
+        rig's size once (an open passed) and then another (a webcam renegotiating) are retried as before.
+
+        :raises DaemonStartError: naming the rig URL (its rig file), the camera, both sizes and what to do.
+        """
+        if self._size_fitted or not isinstance(error, drivers.FrameSizeError):
+            self._size_mismatches = ({}, 0)
+            return
+        sizes, count = self._size_mismatches
+        seen = (error.expected, error.delivered)
+        if sizes.get(error.camera, seen) != seen:  # this camera came with another size: not one fixed mismatch
+            sizes, count = {}, 0
+        sizes, count = {**sizes, error.camera: seen}, count + 1
+        self._size_mismatches = (sizes, count)
+        if count >= SIZE_MISMATCH_OPENS:
+            raise DaemonStartError(
+                f"rig.url {self.health.rig_url!r}: {error} (the same on {count} opens in a row, the cameras never "
+                f"having delivered the rig's size: a rig file that does not fit them, which no restart fixes)"
+            ) from None
 
     def _close_rig(self, source: Optional[drivers.RigSource]) -> None:
         if source is None:
@@ -718,6 +759,7 @@ class Daemon:
                         _log.warning("cannot remove the old status file %s: %s", old_status_file, e)
         if "rig.url" in changed:
             self._backoff_s = new.rig.reopen_min_s  # a new rig is tried at once, then from the start of its backoff
+            self._size_fitted, self._size_mismatches = False, ({}, 0)  # its cameras and rig file are judged afresh
         elif "rig" in changed:
             self._backoff_s = min(max(self._backoff_s, new.rig.reopen_min_s), new.rig.reopen_max_s)
         if self._on_reload is not None:

@@ -21,6 +21,7 @@ import pytest
 
 from drivers import (
     EndOfStream,
+    FrameSizeError,
     RigOperationError,
     ManualClock,
     RigConfigError,
@@ -166,9 +167,15 @@ def test_a_missing_video_or_a_size_the_rig_does_not_have_is_refused_at_open(take
     other = tmp_path / "rig.json"
     loaded = load_rig(rig)
     save_rig(Rig(tuple(c.resized(320, 240) for c in loaded.cameras), loaded.volume, rig_id="big"), other)
-    with pytest.raises(RigInitializationError,
-                       match=r"camera '(left|right)' .* delivered 160x120, but its rig camera is 320x240"):
+    with pytest.raises(FrameSizeError, match=rf"camera '(left|right)' .* delivered 160x120, but its rig camera in "
+                                             rf"{other} is 320x240: the same shape at 0.5 times the size, so the rig "
+                                             rf"file was most likely calibrated at another resolution of this camera; "
+                                             rf"calibrate again at 160x120 \(ghcal, docs/calibration.md\), or use "
+                                             rf"videos recorded at 320x240$") as caught:
         open_rig(f"opencv://?first={first}&second={second}&rig={other}")
+    assert isinstance(caught.value, RigInitializationError)  # as before: an open that failed
+    assert (caught.value.expected, caught.value.delivered) == ((320, 240), (160, 120))
+    assert caught.value.camera in ("left", "right")
 
 
 class _Webcam:
@@ -392,6 +399,22 @@ def test_a_size_the_camera_does_not_deliver_is_refused_at_open(webcam):
     webcam.make = staticmethod(lambda w, h: np.zeros((480, 640, 3), np.uint8))  # ignores the size asked
     with pytest.raises(RigInitializationError, match=r"delivered 640x480, not the width=1280&height=720 asked"):
         open_rig("opencv://?first=0&second=1&width=1280&height=720", capture_factory=webcam)
+
+
+def test_a_webcam_of_another_shape_than_its_rig_camera_fails_the_open_saying_so(takes, webcam, tmp_path):
+    """A rig file of another aspect ratio than the frames is not a resolution's rescale: another sensor mode or
+    another camera (fourcc=MJPG is suggested only for a rig size larger than delivered: the daemon's test)."""
+    loaded = load_rig(takes[0][2])
+    wide = tmp_path / "wide.json"
+    save_rig(Rig(tuple(c.resized(480, 300) for c in loaded.cameras), loaded.volume, rig_id="wide"), wide)
+    webcam.make = staticmethod(lambda w, h: np.zeros((480, 640, 3), np.uint8))  # ignores the size asked
+    with pytest.raises(FrameSizeError, match=r"delivered 640x480, but its rig camera in .*wide\.json is 480x300: "
+                                              r"another shape \(1\.33:1 against 1\.6:1\), so another mode of the "
+                                              r"sensor \(cropped\) or another camera than the one calibrated; have "
+                                              r"the camera deliver 480x300 or calibrate again at 640x480 "
+                                              r"\(ghcal, docs/calibration\.md\)$") as caught:
+        open_rig(f"opencv://?first=0&second=1&rig={wide}", capture_factory=webcam)
+    assert (caught.value.expected, caught.value.delivered) == ((480, 300), (640, 480))
 
 
 def test_a_camera_that_delivers_nothing_fails_the_open_naming_it(webcam):

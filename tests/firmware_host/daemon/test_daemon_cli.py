@@ -12,6 +12,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from firmware_host.daemon import cli
@@ -625,3 +626,37 @@ def test_printing_the_example_config_into_a_closed_pipe_is_no_error():
     finally:
         os.close(write_end)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr, proc.stderr
+
+
+def test_validate_config_and_the_start_refuse_videos_of_another_size_than_the_rig_file(tmp_path, capsys):
+    """opencv:// videos (640x480 here) with a rig file calibrated at another resolution (1280x960): a video's size is
+    in its container, so --validate-config and the start say it at once (they passed, and the daemon then retried the
+    open for ever); the same videos with a rig file of their size pass."""
+    import cv2
+
+    from drivers.sim.placement import RigPlacement
+    from ghnerf_runtime.rig_file import save_rig
+
+    videos = []
+    for name in ("left", "right"):
+        videos.append(tmp_path / f"{name}.avi")
+        writer = cv2.VideoWriter(str(videos[-1]), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (640, 480))
+        assert writer.isOpened(), "this OpenCV cannot write MJPG"
+        writer.write(np.zeros((480, 640, 3), np.uint8))
+        writer.release()
+    for size, rc in (((1280, 960), 2), ((640, 480), 0)):
+        rig = tmp_path / f"rig{size[0]}.json"
+        save_rig(RigPlacement(width=size[0], height=size[1]).build(rig_id="desk"), rig)
+        path = _write(tmp_path, {"rig": {"url": f"opencv://?first={videos[0]}&second={videos[1]}&rig={rig}"},
+                                 "sinks": ["udp://127.0.0.1:9870"],
+                                 "estimator": {"session": {"model_dir": str(MODELS)}}})
+        assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == rc
+        if rc:  # the start reads the config as --validate-config does: stopped before the model loads
+            assert cli.main(["--config", str(path)]) == rc
+        err = capsys.readouterr().err
+        if rc:
+            assert (f"ghnerf-daemon: error: {path}: rig.url: camera 'left' ({videos[0]}) delivered 640x480, but "
+                    f"its rig camera in {rig} is 1280x960: the same shape at 0.5 times the size, so the rig file was "
+                    f"most likely calibrated at another resolution of this camera; calibrate again at 640x480 (ghcal, "
+                    f"docs/calibration.md), or use videos recorded at 1280x960") in err
+            assert err.count("ghnerf-daemon: error:") == 2  # --validate-config, then the start: one line each

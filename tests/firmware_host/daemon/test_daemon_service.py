@@ -18,6 +18,7 @@ import stat
 import threading
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import pytest
@@ -1566,3 +1567,91 @@ def test_a_rig_file_that_no_longer_fits_its_cameras_is_said(sim_url, tmp_path, c
         assert calibration["suspect"] and calibration["floor_suspect"] and calibration["lowest_foot_m_median"] < -0.1
         assert said and "the floor > 0.05 m" in said[-1] and " px > " not in said[-1]
         assert len(warned) == 1 and "m below the floor" in warned[0]
+
+
+class _SizedWebcam:
+    """A stand-in ``cv2.VideoCapture`` of a live camera that delivers the size ``sizes`` gives for its open (the
+    rig's opens number 0, 1, ...: two captures each), whatever size was asked of it, 30 frames a second."""
+
+    sizes: Callable[[int], tuple[int, int]] = staticmethod(lambda k: (640, 480))
+    made = 0
+
+    def __init__(self, target, api) -> None:
+        self.size = _SizedWebcam.sizes(_SizedWebcam.made // 2)
+        _SizedWebcam.made += 1
+        self.props: dict = {}
+
+    def isOpened(self) -> bool:  # noqa: N802 - OpenCV's name
+        return True
+
+    def set(self, prop, value) -> bool:
+        self.props[prop] = value
+        return True
+
+    def get(self, prop) -> float:
+        return float(self.props.get(prop, 0.0))
+
+    def grab(self) -> bool:
+        time.sleep(1 / 30)
+        return True
+
+    def retrieve(self):
+        return True, np.full((self.size[1], self.size[0], 3), 100, np.uint8)
+
+    def release(self) -> None:
+        pass
+
+
+def _webcam_rig(tmp_path: Path, monkeypatch, sizes) -> tuple[object, Path]:
+    """A daemon config on two stand-in webcams (``_SizedWebcam`` delivering ``sizes(open)``) with a 640x480 rig file,
+    the model stood in for; and the rig file."""
+    import firmware_host.daemon.service as service
+    from drivers.sim.placement import RigPlacement
+    from ghnerf_runtime.rig_file import save_rig
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    monkeypatch.setattr(_SizedWebcam, "sizes", staticmethod(sizes))
+    monkeypatch.setattr(_SizedWebcam, "made", 0)
+    rig_file = tmp_path / "rig.json"
+    save_rig(RigPlacement(width=640, height=480).build(rig_id="desk"), rig_file)
+    cfg = _config({"url": f"opencv://?first=0&second=1&rig={rig_file}&open_timeout_s=2", "reopen_min_s": 0.01,
+                   "reopen_max_s": 0.05}, tmp_path)
+    return cfg, rig_file
+
+
+def test_cameras_that_never_deliver_the_rig_files_size_stop_the_daemon_as_a_bad_config(tmp_path, monkeypatch):
+    """A rig file calibrated at another resolution (640x480 here, the webcams stream 320x240) was retried for ever
+    (state waiting) with a warning, where a bad config exits 2: no restart fixes it. The same size on three opens in
+    a row, the cameras never having delivered the rig's, stops the daemon with one message naming the rig file, the
+    camera, both sizes and the likely cause, kept in the status file."""
+    cfg, rig_file = _webcam_rig(tmp_path, monkeypatch, lambda k: (320, 240))
+    with _Running(cfg, tmp_path, rig_kwargs={"capture_factory": _SizedWebcam}) as run:
+        run.thread.join(timeout=20)
+        assert not run.thread.is_alive(), "still retrying a rig file that does not fit the cameras"
+    error = run.rc[0]
+    assert isinstance(error, DaemonStartError)
+    message = str(error)
+    assert message.startswith(f"rig.url 'opencv://?first=0&second=1&rig={rig_file}&open_timeout_s=2': camera ")
+    assert f"delivered 320x240, but its rig camera in {rig_file} is 640x480: the same shape at 0.5 times the size, " \
+           "so the rig file was most likely calibrated at another resolution of this camera" in message
+    assert "have the camera deliver 640x480 (a webcam offers its larger sizes only compressed: add fourcc=MJPG to " \
+           "the URL) or calibrate again at 320x240 (ghcal, docs/calibration.md)" in message
+    assert "the same on 3 opens in a row" in message
+    assert run.daemon.health.rig_open_failures == 3 and run.daemon.health.rig_opens == 0
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert report["last_error"] == f"stopped by DaemonStartError: {message}"
+
+
+def test_a_camera_that_changes_size_is_retried_once_it_delivered_the_rigs(tmp_path, monkeypatch):
+    """What stays retried: a webcam that comes up once in another mode (open 0), and cameras that delivered the rig's
+    size (open 1 streamed) and then another at every open (a webcam renegotiating, a camera swapped mid-run)."""
+    cfg, _ = _webcam_rig(tmp_path, monkeypatch, lambda k: (640, 480) if k == 1 else (320, 240))
+    with _Running(cfg, tmp_path, rig_kwargs={"capture_factory": _SizedWebcam}) as run:
+        wait_until(lambda: run.daemon.health.pairs_read >= 3, timeout=20, what="pairs once the camera took the size")
+        # the open cameras switch to 320x240 (the rig is lost), as every later open's do
+        monkeypatch.setattr(_SizedWebcam, "retrieve", lambda self: (True, np.zeros((240, 320, 3), np.uint8)))
+        wait_until(lambda: run.daemon.health.rig_open_failures >= 5, timeout=20, what="reopens of the resized camera")
+        assert run.thread.is_alive() and run.daemon.health.state == State.WAITING
+        assert run.finish() == 0
+    assert run.daemon.health.rig_opens == 1 and "delivered 320x240" in run.daemon.health.last_error
