@@ -3,6 +3,8 @@
     .venv/bin/python benchmarks/measure_lying_rendered.py [--model-dir models] [--scenes 12] [--frames 3]
         [--first-scene 0] [--poses upright,lying_x,lying_z,upside_down] [--turned-crops] [--turn-search]
         [--turn-search-every 5] [--then POSE [--change-at N]]
+    .venv/bin/python benchmarks/measure_lying_rendered.py --rolls roll_down,roll_up,cartwheel [--frames 30]
+        [--scenes 12] [--first-scene 0] [--turn-search-every 5] [--far-m 0.3]
 
 ``benchmarks/measure_prior_out_of_range.py`` measures the skeleton prior on turned bodies through a noise
 model (exact projections plus Gaussian pixels, the bodies turned as the prior's training copies are). This
@@ -35,18 +37,31 @@ the runtime does not know how a person lies): what a search over crop rotations 
 pass tries each view's crop turned 90, 180 and 270 degrees), with how many pairs searched and how many kept the
 turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``), and the turned passes
 refused because their body lay as no turn rights (``turns_refused``: ``ghnerf_runtime.estimator.lies_as_turned``,
-asked of a search's passes and of a kept turn's); ``--turn-search-every`` sets ``roi.turn_search_every`` for
-those rows; their ``upright checks`` column counts the tracked pairs through a kept turn that were run again
-through upright crops (``Estimator.turn_checks``) and those that left the turn so (``turns_left``). ``--then
-POSE`` changes each scene's body to ``POSE`` from pair
+asked of a search's passes, and ``lies_as_kept_turn`` of a kept turn's); ``--turn-search-every`` sets
+``roi.turn_search_every`` for those rows; their ``upright checks`` column counts the tracked pairs through a kept
+turn that were run again through upright crops (``Estimator.turn_checks``) and those that left the turn so
+(``turns_left``). ``--then POSE`` changes each scene's body to ``POSE`` from pair
 ``--change-at`` (default: half the ``--frames``) on, in every row (the pose column says ``lying_z, then upright``):
 a person who gets up, or lies down, while tracked.
+
+``--rolls`` measures gradual rolls instead (:func:`measure_rolls`; the poses' options do not apply): over the
+``--frames`` pairs of each scene the body turns about the rig's z axis (across the view), by an angle that moves
+evenly from the roll's first to its last (:data:`ROLLS`: ``roll_down`` 0 to 90 degrees, lying down across the
+view; ``roll_up`` 90 to 0, getting up; ``cartwheel`` 0 to 180, upright to upside down; ``cartwheel_back`` 180 to
+0), a few degrees a pair (30 pairs: 3 degrees a pair lying down, 6 in a cartwheel), each pose turned, set on the
+floor and moved into the volume as :func:`turned` does. Two rows per roll and 30-degree band of the turn (the
+pairs whose angle lies in it): the prior with ``roi.turn_search`` off and on. Per row: pairs (none found),
+PCK@0.2, MPJPE over the joints found, the share found, the share of the joints found more than ``--far-m`` (0.3 m)
+from the truth (reported far off), and with the search on its searches (kept), turned passes refused, upright
+checks (turn left), the pairs read through turned crops and the pairs whose crops' turn changed from the pair
+before (flicker).
 Deterministic (scene seeds, sensor noise seeded by scene, camera and time). A tool, not a test:
 docs/runtime.md, "The skeleton prior".
 """
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from dataclasses import replace
@@ -69,6 +84,16 @@ POSES: dict[str, tuple[int, float] | None] = {
 #: pose -> the crops' extra rotation (degrees counterclockwise, as ``roi.upright``'s) that shows the turned body
 #: upright to a level camera (``--turned-crops``); a body lying along the line of sight has none.
 CROP_TURN_DEG = {"lying_z": 90.0, "upside_down": 180.0}
+#: gradual roll name -> (first, last) turn about the rig's z axis (degrees; ``--rolls``): the body's turn moves
+#: evenly from one to the other over the ``--frames`` pairs.
+ROLLS: dict[str, tuple[float, float]] = {
+    "roll_down": (0.0, 90.0),
+    "roll_up": (90.0, 0.0),
+    "cartwheel": (0.0, 180.0),
+    "cartwheel_back": (180.0, 0.0),
+}
+#: ``--rolls``: the rows' bands of the body's turn (degrees)
+ROLL_BAND_DEG = 30.0
 
 
 def rotation(axis: int, deg: float) -> np.ndarray:
@@ -227,6 +252,108 @@ def measure(model_dir: str, scenes: int, frames: int, poses: list[str], first_sc
     return out
 
 
+def roll_angles(roll: str, frames: int) -> np.ndarray:
+    """The body's turn about the rig's z axis (degrees) at each of ``frames`` pairs of roll ``roll`` (a key of
+    :data:`ROLLS`): evenly from its first angle at the first pair to its last at the last."""
+    if roll not in ROLLS:
+        raise ValueError(f"unknown roll {roll!r}; choose from {', '.join(ROLLS)}")
+    if frames < 2:
+        raise ValueError(f"a roll needs at least 2 frames (its first and last angle), got {frames}")
+    return np.linspace(*ROLLS[roll], frames)
+
+
+def roll_band(deg: float, roll: str) -> tuple[float, float]:
+    """The :data:`ROLL_BAND_DEG` band of turn ``deg`` within roll ``roll``'s range (the last band closed)."""
+    top = max(ROLLS[roll])
+    lo = min(math.floor(deg / ROLL_BAND_DEG), math.ceil(top / ROLL_BAND_DEG) - 1) * ROLL_BAND_DEG
+    return lo, lo + ROLL_BAND_DEG
+
+
+def measure_rolls(model_dir: str, scenes: int, frames: int, rolls: list[str], first_scene: int = 0,
+                  log=print, turn_search_every: int | None = None, far_m: float = 0.3
+                  ) -> dict[tuple[str, tuple[float, float], str], dict]:
+    """``{(roll, band, "search off" | "search on"): Accuracy summary + pairs, empty pairs, far-off share, turn
+    counts}`` (the module docstring's ``--rolls``): each scene's ``frames`` pairs with the body turned about the rig's
+    z axis by :func:`roll_angles`, run once with ``roi.turn_search`` off and once on (``turn_search_every``: its
+    ``roi.turn_search_every``, ``None`` the default), the prior on; each pair counted in the band of its angle.
+    ``far_m``: a found joint further than this from the truth is reported far off."""
+    from ghnerf_runtime.cli.simdata import Accuracy, bench_rig_and_scene
+    from ghnerf_runtime.estimator import Estimator, load_session
+
+    for roll in rolls:
+        roll_angles(roll, frames)  # refused before any rendering
+    off = EstimatorConfig(session=SessionConfig(model_dir=model_dir), roi=RoiConfig(turn_search=False))
+    every = off.roi.turn_search_every if turn_search_every is None else turn_search_every
+    on = replace(off, roi=replace(off.roi, turn_search=True, turn_search_every=every))
+    session = load_session(off)
+    configs = {"search off": off, "search on": on}
+    counts = ("searches", "kept", "refused", "checks", "left")
+    acc: dict = {}
+    extra: dict = {}
+    for k in range(first_scene, first_scene + scenes):
+        start = time.perf_counter()
+        rig, scene, t0, _ = bench_rig_and_scene(k)
+        for roll in rolls:
+            shots = []
+            for i, deg in enumerate(roll_angles(roll, frames)):
+                t = t0 + i / FPS
+                posed = turned(scene.posed(t), 2, float(deg), rig.volume)
+                shots.append((t, roll_band(float(deg), roll), posed.joints.copy()) + render_pair(scene, rig, posed, t))
+            for name, cfg in configs.items():
+                with Estimator(session, rig, cfg) as est:
+                    before_turns = est._turns
+                    for i, (t, band, j3, images, j2, vis) in enumerate(shots):
+                        key = (roll, band, name)
+                        if key not in acc:
+                            acc[key] = Accuracy()
+                            extra[key] = {"pairs": 0, "empty": 0, "found": 0, "far": 0, "turned": 0, "changes": 0,
+                                          **{c: 0 for c in counts}}
+                        was = (est.turn_searches, est.turns_kept, est.turns_refused, est.turn_checks,
+                               est.turns_left)
+                        r = est.estimate(images, sequence=i, timestamp_s=t - t0)
+                        acc[key].add_truth(r, j3, j2, vis, frame=((k, roll), i))
+                        e = extra[key]
+                        now = (est.turn_searches, est.turns_kept, est.turns_refused, est.turn_checks, est.turns_left)
+                        for c, a, b in zip(counts, was, now):
+                            e[c] += b - a
+                        ok = ~r.missing
+                        e["pairs"] += 1
+                        e["empty"] += int(r.missing.all())
+                        e["found"] += int(ok.sum())
+                        e["far"] += int((np.linalg.norm(r.joints_3d[ok] - j3[ok], axis=1) > far_m).sum())
+                        # the crops' turn this pair's answer was read through (est._turns: the search's state)
+                        e["turned"] += int(est._turns != (0, 0) and not r.missing.all())
+                        e["changes"] += int(i > 0 and est._turns != before_turns)
+                        before_turns = est._turns
+        log(f"scene {k} ({scene.config.motion}): {time.perf_counter() - start:.1f} s")
+    out = {}
+    for key in sorted(acc, key=lambda q: (rolls.index(q[0]), q[1][0] if ROLLS[q[0]][0] <= ROLLS[q[0]][1]
+                                                                     else -q[1][0], q[2])):
+        s = acc[key].summary()
+        e = extra[key]
+        s.update(e, far_frac=e["far"] / e["found"] if e["found"] else float("nan"))
+        out[key] = s
+    return out
+
+
+def roll_table(results: dict[tuple[str, tuple[float, float], str], dict], far_m: float = 0.3) -> str:
+    """:func:`measure_rolls`'s results as a Markdown table, a row per roll, band and search setting, in the roll's
+    order."""
+    rows = ["| roll | turn (degrees) | `roi.turn_search` | pairs (none found) | PCK@0.2 | "
+            f"MPJPE over the joints found | found | found but over {far_m:g} m off | searches (kept) | "
+            "turned passes refused | upright checks (turn left) | pairs read turned | turn changes |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for (roll, (lo, hi), name), s in results.items():
+        mp = f"{s['mpjpe_mm']:.1f} mm" if np.isfinite(s["mpjpe_mm"]) else "-"
+        far = f"{100 * s['far_frac']:.1f} %" if np.isfinite(s["far_frac"]) else "-"
+        counts = (f" {s['searches']} ({s['kept']}) | {s['refused']} | {s['checks']} ({s['left']}) | {s['turned']} |"
+                  f" {s['changes']} |" if name == "search on" else " - | - | - | - | - |")
+        rows.append(f"| {roll} | {lo:.0f}-{hi:.0f} | {name.split()[1]} | {s['pairs']} ({s['empty']}) | "
+                    f"{s.get('pck@0.2', float('nan')):.3f} | {mp} | {100 * s['found_3d_frac']:.1f} % | {far} |"
+                    + counts)
+    return "\n".join(rows)
+
+
 PRIOR_WORDS = {"prior": "on", "no prior": "off", "turned crops": "on, crops turned with the body (oracle)",
                "turn search": "on, `roi.turn_search` on"}
 
@@ -276,7 +403,32 @@ def main(argv=None) -> int:
                                                   "at --change-at")
     ap.add_argument("--change-at", type=int, default=None, help="with --then: the first pair in that pose "
                                                                  "(default: half the --frames)")
+    ap.add_argument("--rolls", default=None,
+                    help=f"comma list of gradual rolls ({', '.join(ROLLS)}) to measure instead of the poses, over "
+                         "--frames pairs a scene, with the turn search off and on")
+    ap.add_argument("--far-m", type=float, default=None,
+                    help="with --rolls: a found joint further than this from the truth (metres) is far off (0.3)")
     args = ap.parse_args(argv)
+    if args.far_m is not None and args.rolls is None:
+        ap.error("--far-m needs --rolls")
+    if args.rolls is not None:
+        args.far_m = 0.3 if args.far_m is None else args.far_m
+        rolls = [r.strip() for r in args.rolls.split(",") if r.strip()]
+        bad = [r for r in rolls if r not in ROLLS]
+        if bad or not rolls:
+            ap.error(f"--rolls: unknown {bad or args.rolls!r}; choose from {', '.join(ROLLS)}")
+        if args.frames < 2 or args.scenes < 1 or args.first_scene < 0:
+            ap.error(f"--rolls needs --frames of at least 2 (got {args.frames}), --scenes at least 1, "
+                     "--first-scene at least 0")
+        if args.then is not None or args.turned_crops or args.turn_search:
+            ap.error("--rolls runs the search off and on by itself: without --then, --turned-crops, --turn-search")
+        if not (math.isfinite(args.far_m) and args.far_m > 0):
+            ap.error(f"--far-m must be a positive distance in metres, got {args.far_m}")
+        results = measure_rolls(args.model_dir, args.scenes, args.frames, rolls, args.first_scene,
+                                log=lambda m: print(m, file=sys.stderr), turn_search_every=args.turn_search_every,
+                                far_m=args.far_m)
+        print(roll_table(results, args.far_m))
+        return 0
     poses = [p.strip() for p in args.poses.split(",") if p.strip()]
     bad = [p for p in poses if p not in POSES]
     if bad or not poses:

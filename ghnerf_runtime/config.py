@@ -198,11 +198,12 @@ class RoiConfig:
             are clearly stronger than upright's, run the pass again with those crops and keep it when it finds
             someone more confidently, lying level or upside down across the views (``estimator.lies_as_turned``:
             what no turn rights, a body along a line of sight, is refused); the turn stays with the track
-            (upright again once it is lost). For people lying across the view or upside down, whom the encoder
-            (trained on upright people) misses upright. A person seen by one camera only (nobody in 3D) searches
-            only where a turn could find them in 3D: that view reads them weakly and the other may show them.
-            While tracked: a weak tracked pass through upright
-            crops searches the turns on its track's crops (someone who lay down); a tracked pass through a kept
+            (upright again once it is lost) while its passes lie so, or roll on from the last one within 45
+            degrees of the turn (``estimator.lies_as_kept_turn``: someone getting up, a cartwheel). For people
+            lying across the view or upside down, whom the encoder (trained on upright people) misses upright.
+            A person seen by one camera only (nobody in 3D) searches only where a turn could find them in 3D:
+            that view reads them weakly and the other may show them. While tracked: a weak tracked pass through
+            upright crops searches the turns on its track's crops (someone who lay down); a tracked pass through a kept
             turn's crops, when weak or every ``turn_search_every``-th tracked pair, is run again through upright
             crops and the turn left when that finds the person more confidently (someone who got up); a strong
             upright tracked pass, the usual pair, pays nothing (docs/runtime.md, "Lying and upside down,

@@ -499,6 +499,16 @@ _TURN_LIE_TOLERANCE_DEG = 20.0
 #: sight lying across and upside down (an upright body is 90 less the view's pitch), 4 of those lying along 19-31
 #: (level, 0.24-0.42 m off).
 _TURN_MIN_FROM_SIGHT_DEG = 45.0
+#: roi.turn_search: a kept turn's passes (:func:`lies_as_kept_turn`) keep it while the body's tilt from upright lies
+#: within this many degrees of the turn: half of a quarter turn, where the next turn (or upright) would show it as
+#: upright. benchmarks/measure_lying_rendered.py --rolls measures it (docs/runtime.md, "Gradual rolls").
+_KEPT_TURN_SECTOR_DEG = 45.0
+#: roi.turn_search: and only while its body axis moves at most this many degrees from the last pass kept through the
+#: turn (a roll, not a jump). In benchmarks/measure_lying_rendered.py --rolls (30 pairs, 3-6 degrees a pair) the
+#: passes only the looser rule keeps moved 0-18 degrees from the pass before (a one-off look, docs/runtime.md); the
+#: turned pass of a person rolled rigidly from across the view onto a line of sight (bench scene 21,
+#: tests/ghnerf_runtime/test_estimator_turn_search.py) 44.
+_KEPT_TURN_STEP_DEG = 25.0
 #: the joints whose centroids give a body's axis (:func:`body_axis`): the head and shoulders, the hips and legs
 _AXIS_UPPER = tuple(JOINT_INDEX[n] for n in ("Nose", "Neck", "RShoulder", "LShoulder", "REye", "LEye", "REar",
                                              "LEar"))
@@ -518,6 +528,24 @@ def body_axis(j3: Joints3D) -> np.ndarray | None:
     return d / n if n > 1e-6 else None
 
 
+def _tilt_from_up_deg(axis: np.ndarray) -> float:
+    """How far body axis ``axis`` (a unit vector, rig frame: y down along gravity) points from straight up (0
+    standing, 90 level, 180 upside down)."""
+    return math.degrees(math.acos(float(np.clip(-axis[1], -1.0, 1.0))))
+
+
+def _across_the_views(axis: np.ndarray, centroid: np.ndarray, centres: Sequence[np.ndarray]) -> bool:
+    """Whether body axis ``axis`` at ``centroid`` lies at least :data:`_TURN_MIN_FROM_SIGHT_DEG` from each camera's
+    line of sight to it (``centres``: the cameras' centres): a body along a view's line of sight shows that view no
+    length for a crop turn to right."""
+    for c in centres:
+        sight = centroid - np.asarray(c, np.float64)
+        n = float(np.linalg.norm(sight))
+        if n > 1e-6 and math.degrees(math.acos(min(1.0, abs(float(sight @ axis)) / n))) < _TURN_MIN_FROM_SIGHT_DEG:
+            return False
+    return True
+
+
 def lies_as_turned(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
     """Whether ``j3``, a turned pass's joints (``roi.turn_search``), lie as a crop turn rights a body: the body axis
     (:func:`body_axis`) level or upside down within :data:`_TURN_LIE_TOLERANCE_DEG` (the rig frame's y is down,
@@ -530,16 +558,36 @@ def lies_as_turned(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
     axis = body_axis(j3)
     if axis is None:
         return False
-    from_up = math.degrees(math.acos(float(np.clip(-axis[1], -1.0, 1.0))))
+    from_up = _tilt_from_up_deg(axis)
     if abs(from_up - 90.0) > _TURN_LIE_TOLERANCE_DEG and from_up < 180.0 - _TURN_LIE_TOLERANCE_DEG:
         return False  # neither lying nor upside down: tilted halfway, no body a turn rights
-    centroid = j3.points[j3.valid].mean(axis=0)
-    for c in centres:
-        sight = centroid - np.asarray(c, np.float64)
-        n = float(np.linalg.norm(sight))
-        if n > 1e-6 and math.degrees(math.acos(min(1.0, abs(float(sight @ axis)) / n))) < _TURN_MIN_FROM_SIGHT_DEG:
-            return False
-    return True
+    return _across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
+
+
+def lies_as_kept_turn(j3: Joints3D, centres: Sequence[np.ndarray], turns: Sequence[int],
+                      last_axis: np.ndarray | None) -> bool:
+    """Whether ``j3``, a pass through a kept turn's crops (``turns``: each view's, degrees), still lies as that
+    turn rights a body: as :func:`lies_as_turned` asks (how the turn was found), or rolled on from the last pass
+    kept through it (``last_axis``, its :func:`body_axis`; ``None``: none) by at most :data:`_KEPT_TURN_STEP_DEG`,
+    across the views, and tilted from upright within :data:`_KEPT_TURN_SECTOR_DEG` of some view's turn (a quarter
+    turn either way 45-135 degrees, a half turn 135-180: the turn still shows the body nearer upright than upright
+    crops or the next turn would). A person kept turned who rolls on (up onto an elbow, through a cartwheel) passes
+    a few degrees a pair through tilts the search's windows refuse, and the turn reads them better than upright
+    crops; refused there, the pair went cold through upright crops, whose search refused its turned passes too.
+    A pass that jumps there (a person lying across the view who rolled onto a line of sight, read through the
+    turned crops as the encoder's upright person across the picture: 44 degrees in one pair in bench scene 21) is
+    not kept (docs/runtime.md, "Gradual rolls")."""
+    if lies_as_turned(j3, centres):
+        return True
+    axis = body_axis(j3)
+    if axis is None or last_axis is None:
+        return False
+    if math.degrees(math.acos(float(np.clip(axis @ last_axis, -1.0, 1.0)))) > _KEPT_TURN_STEP_DEG:
+        return False  # not rolled on from the last pass: a jump
+    from_up = _tilt_from_up_deg(axis)
+    if not any(abs(from_up - min(t % 360, 360 - t % 360)) <= _KEPT_TURN_SECTOR_DEG for t in turns if t % 360):
+        return False  # nearer upright or another turn: not this turn's body
+    return _across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
 
 
 def _view_score(heat: np.ndarray) -> np.ndarray:
@@ -680,6 +728,7 @@ class Estimator:
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
         self.turns_left = 0
         self._turn_check_wait = 0  # strong tracked turned pairs left before the next check (_turn_check)
+        self._kept_axis: np.ndarray | None = None  # the body axis of the last pass kept through a turn
         # smooths what is reported; the tracker follows the raw joints
         self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
         self._levels = _levels_per_unit(self.contract.normalisation)
@@ -758,6 +807,7 @@ class Estimator:
         self._track_unsorted = False
         self._turn_search_wait = 0
         self._turn_check_wait = 0
+        self._kept_axis = None
         if self._smoother is not None:
             self._smoother.reset()
 
@@ -1158,6 +1208,7 @@ class Estimator:
                     if p.novel is not None:
                         p.novel.abandon()
                     self.turns_kept += 1
+                    self._kept_axis = body_axis(q.j3)  # (the rule just asked: it has one)
                     self._turn_check_wait = self.config.roi.turn_search_every - 1  # just compared with upright
                     log.debug("pair %d: crops turned %s degrees found the subject", sequence, turns)
                     return q
@@ -1172,15 +1223,19 @@ class Estimator:
         return p
 
     def _lies_as_turned(self, j3: Joints3D) -> bool:
-        """:func:`lies_as_turned` of ``j3`` seen by this rig's two cameras (the turn search's and the kept turn's rule)."""
+        """:func:`lies_as_turned` of ``j3`` seen by this rig's two cameras (the turn search's rule; a kept turn's passes
+        are asked :func:`lies_as_kept_turn`, :meth:`_turn_misreads`)."""
         return lies_as_turned(j3, [st.camera.center for st in self._cams])
 
     def _turn_misreads(self, p: "_Pass") -> bool:
-        """Whether ``p``, a pass through a kept turn's crops, found someone whose body lies as no turn rights
-        (:func:`lies_as_turned`; counted in ``turns_refused``): a person who lay across the view and rolled onto a
-        view's line of sight is read through the turned crops as the encoder's upright person across the picture,
-        the skeleton the search refuses. Geometry only: no model run."""
-        if p.j3 is None or not p.someone or self._lies_as_turned(p.j3):
+        """Whether ``p``, a pass through a kept turn's crops, found someone whose body lies as the turn does not
+        right (:func:`lies_as_kept_turn`; counted in ``turns_refused``): a person who lay across the view and
+        rolled onto a view's line of sight is read through the turned crops as the encoder's upright person across
+        the picture, the skeleton the search refuses. Geometry only: no model run."""
+        if p.j3 is None or not p.someone:
+            return False
+        if lies_as_kept_turn(p.j3, [st.camera.center for st in self._cams], self._turns, self._kept_axis):
+            self._kept_axis = body_axis(p.j3)  # where the next pass rolls on from
             return False
         self.turns_refused += 1
         return True

@@ -149,3 +149,62 @@ def test_then_changes_every_body_at_change_at(tiny_model_dir, scratch_cache, cap
     err = run_script_failing("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--then", "sitting",
                              capsys=capsys, monkeypatch=monkeypatch)
     assert "--then: unknown 'sitting'" in err
+
+
+def test_roll_angles_move_evenly_from_the_first_angle_to_the_last():
+    from benchmarks.measure_lying_rendered import ROLLS, roll_angles, roll_band
+
+    np.testing.assert_allclose(roll_angles("roll_down", 4), [0.0, 30.0, 60.0, 90.0])
+    np.testing.assert_allclose(roll_angles("cartwheel_back", 3), [180.0, 90.0, 0.0])
+    assert set(ROLLS) == {"roll_down", "roll_up", "cartwheel", "cartwheel_back"}
+    # 30-degree bands of the roll's range, the last one closed: lying flat counts in 60-90, not a band of its own
+    assert [roll_band(d, "roll_down") for d in (0.0, 29.9, 30.0, 89.0, 90.0)] == [
+        (0.0, 30.0), (0.0, 30.0), (30.0, 60.0), (60.0, 90.0), (60.0, 90.0)]
+    assert roll_band(90.0, "cartwheel") == (90.0, 120.0) and roll_band(180.0, "cartwheel") == (150.0, 180.0)
+    with pytest.raises(ValueError, match="unknown roll 'somersault'"):
+        roll_angles("somersault", 10)
+    with pytest.raises(ValueError, match="at least 2 frames"):
+        roll_angles("roll_down", 1)
+
+
+def test_a_rolled_body_rests_on_the_floor_turned_across_the_view(scenes):
+    """``--rolls`` turns the body about the rig's z axis (across the view) by the roll's angle: halfway down a roll
+    its height axis leans sideways by that angle, and it rests on the floor."""
+    from benchmarks.measure_lying_rendered import turned
+
+    def tilt(posed) -> float:  # the height axis's angle from straight up (the rig frame's -y), degrees
+        return float(np.degrees(np.arccos(np.clip(-_spine(posed)[1], -1.0, 1.0))))
+
+    for rig, _, upright in scenes:
+        for deg in (45.0, 135.0):
+            body = turned(upright, 2, deg, rig.volume)
+            assert body.bounding_box()[1][1] == pytest.approx(0.0, abs=1e-9)
+            # turned by deg, give or take how far the bench's standing person leans
+            assert abs(tilt(body) - deg) <= tilt(upright) + 1.0, (deg, tilt(body), tilt(upright))
+            assert abs(_spine(body)[2]) < 0.45  # across the view, not along the line of sight
+
+
+def test_rolls_print_a_row_per_band_with_the_search_off_and_on(tiny_model_dir, scratch_cache, capsys,  # noqa: F811
+                                                              monkeypatch):
+    out = run_script("measure_lying_rendered", "--model-dir", str(tiny_model_dir), "--scenes", "1", "--frames",
+                     "4", "--rolls", "roll_up,cartwheel", capsys=capsys, monkeypatch=monkeypatch)
+    rows = re.findall(r"^\| (\w+) \| (\d+-\d+) \| (off|on) \| (\d+) \(\d+\) \|.*\| ([^|]+) \| ([^|]+) \|$", out, re.M)
+    # roll_up 90, 60, 30, 0 degrees: its bands in the roll's order; the cartwheel 0, 60, 120, 180
+    assert [(roll, band, search, int(pairs)) for roll, band, search, pairs, _, _ in rows] == [
+        ("roll_up", "60-90", "off", 2), ("roll_up", "60-90", "on", 2),
+        ("roll_up", "30-60", "off", 1), ("roll_up", "30-60", "on", 1),
+        ("roll_up", "0-30", "off", 1), ("roll_up", "0-30", "on", 1),
+        ("cartwheel", "0-30", "off", 1), ("cartwheel", "0-30", "on", 1),
+        ("cartwheel", "60-90", "off", 1), ("cartwheel", "60-90", "on", 1),
+        ("cartwheel", "120-150", "off", 1), ("cartwheel", "120-150", "on", 1),
+        ("cartwheel", "150-180", "off", 1), ("cartwheel", "150-180", "on", 1)], out
+    # the turn counts (pairs read turned, turn changes) on the search's rows only
+    assert all((turned == "-") == (search == "off") for _, _, search, _, turned, _ in rows), out
+    for bad, said in ((["--rolls", "somersault"], "--rolls: unknown ['somersault']"),
+                      (["--rolls", "roll_up", "--frames", "1"], "--frames of at least 2"),
+                      (["--rolls", "roll_up", "--turn-search"], "without --then, --turned-crops, --turn-search"),
+                      (["--rolls", "roll_up", "--far-m", "0"], "--far-m must be a positive distance"),
+                      (["--far-m", "0.5"], "--far-m needs --rolls")):
+        err = run_script_failing("measure_lying_rendered", "--model-dir", str(tiny_model_dir), *bad, capsys=capsys,
+                                 monkeypatch=monkeypatch)
+        assert said in err, err

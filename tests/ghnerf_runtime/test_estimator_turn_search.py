@@ -523,11 +523,12 @@ def test_reset_returns_to_upright_crops_with_the_turn_state_cleared():
     cleared, every tracker forgotten. The search's counters are statistics over the estimator's life and stay."""
     est, _, _ = _held_track_estimator((180, 90))
     est._turn_check_wait, est.turn_searches, est.turns_kept, est.turn_checks = 3, 2, 1, 4
+    est._kept_axis = np.array([1.0, 0.0, 0.0])  # the last pass kept through the turn lay across the view
     turned = est.tracker
     est.reset()
     assert est._turns == (0, 0) and [st.turn_deg for st in est._cams] == [0.0, 0.0]
     assert est.tracker is est._turned_trackers[0, 0] and est.tracker.track is None and turned.track is None
-    assert est._turn_check_wait == 0 and est._turn_search_wait == 0
+    assert est._turn_check_wait == 0 and est._turn_search_wait == 0 and est._kept_axis is None
     assert (est.turn_searches, est.turns_kept, est.turn_checks) == (2, 1, 4)
 
 
@@ -677,3 +678,104 @@ def test_a_kept_turns_pass_of_a_body_no_turn_rights_is_read_cold_upright(single_
     assert asked == [((90, 90), not single_view_track), ((0, 0), False)], asked
     assert r.missing.all() and not r.tracked
     assert est._turns == (0, 0) and est.turns_refused == 1 and est.tracker.track is None
+
+
+@pytest.mark.parametrize("turns, axis, degrees, kept", [
+    ((90, 90), 2, 90.0, True),  # lying across: what the quarter turn was kept for
+    ((90, 90), 2, 60.0, True),  # rolling up on an elbow: still nearer the quarter turn than upright
+    ((90, 90), 2, 125.0, True),  # rolling on over (a cartwheel): nearer the quarter turn than the half
+    ((270, 270), 2, -55.0, True),  # the other way round
+    ((90, 90), 2, 30.0, False),  # nearly up: upright crops show it better
+    ((90, 90), 2, 150.0, False),  # nearer upside down: the half turn's body, not the quarter's
+    ((180, 180), 2, 145.0, True),  # a handstand leaning 35 degrees
+    ((180, 180), 2, 115.0, False),  # nearer level: the quarter turn's
+    ((90, 90), 0, 90.0, False),  # lying along the line of sight: no turn rights it, kept or not
+    ((90, 270), 2, 60.0, True),  # per-view turns (cameras facing each other see the roll opposite ways)
+])
+def test_a_kept_turn_holds_while_the_body_rolls_on_nearer_it_than_upright_or_the_next_turn(turns, axis, degrees,
+                                                                                            kept):
+    """``lies_as_kept_turn``: a kept turn's passes that roll on from the last one (its axis a few degrees away) are
+    asked whether the body lies within 45 degrees of the turn (and across the views), not within the search's
+    20-degree windows: a person rolling up from lying, or on over into a cartwheel, passes a few degrees a pair
+    through tilts those windows refuse (docs/runtime.md, "Gradual rolls"). The same body jumped to from lying
+    across the view (a rigid roll: the encoder's misread), or with no pass before, is asked the search's rule."""
+    from ghnerf_runtime.estimator import body_axis, lies_as_kept_turn, lies_as_turned
+
+    body = _turned_body(axis, degrees)
+    step = -5.0 if degrees > 0 else 5.0  # the pass before: 5 degrees less rolled
+    before = body_axis(_turned_body(axis, degrees + step))
+    assert lies_as_kept_turn(body, CAMERA_CENTRES, turns, before) is kept
+    strict = lies_as_turned(body, CAMERA_CENTRES)
+    assert lies_as_kept_turn(body, CAMERA_CENTRES, turns, None) is strict
+    if abs(abs(degrees) - 90.0) >= 30.0:  # 30 degrees or more from lying across in one pair: a jump
+        assert lies_as_kept_turn(body, CAMERA_CENTRES, turns, body_axis(_turned_body(2, 90.0))) is strict
+    if 20.0 < abs(degrees) % 90.0 < 70.0:  # tilted halfway: what the search itself still refuses
+        assert not strict
+
+
+def _kept_turn_estimator(turns: tuple[int, int], degrees: float):
+    """An oracle-session estimator tracking a person through crops turned ``turns``, and that person's joints
+    turned ``degrees`` about the rig's z axis (across the views) through their centroid: (estimator, rig, joints)."""
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from benchmarks.measure_lying_rendered import rotation
+    from ghnerf_runtime.estimator import Estimator
+    from ghnerf_runtime.joints3d import Joints3D
+
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    est = Estimator(OracleSession(edge128_contract()), rig, EstimatorConfig(roi=RoiConfig(turn_search=True)))
+    joints = sim.SimScene(sim.SceneConfig(seed=1)).joints_3d(0.0)
+    est._use_turns(turns)
+    assert est.tracker.update(joints, np.ones(len(joints), np.float32), np.ones(len(joints), bool), 0)
+    est._turn_check_wait = 3  # a strong pass between the upright checks
+    centre = joints.mean(axis=0)
+    n = len(joints)
+
+    def rolled(deg: float) -> Joints3D:
+        points = (joints - centre) @ rotation(2, deg).T + centre
+        return Joints3D(points, np.ones(n, np.float32), np.ones(n, bool), np.zeros((n, 2), np.float32))
+
+    return est, rig, rolled(degrees), rolled
+
+
+@pytest.mark.parametrize("turns, degrees, before, kept", [
+    ((90, 90), 60.0, 65.0, True), ((180, 180), 140.0, 145.0, True),
+    ((90, 90), 25.0, 30.0, False),  # nearly up: upright crops read it better
+    ((90, 90), 125.0, 90.0, False),  # 35 degrees in a pair from lying across: a jump, not a roll
+    ((90, 90), 60.0, None, False),  # no pass kept through the turn to roll on from
+])
+def test_a_tracked_person_rolling_on_through_a_kept_turn_keeps_it(turns, degrees, before, kept):
+    """A strong tracked pass through a kept turn of a person rolled 60 degrees from upright, 5 degrees more upright
+    than the pass before (getting up from lying across the view), or 140 (a cartwheel through a half turn): before,
+    the search's windows (level or upside down within 20 degrees) refused it as a misread, and the pair was read cold
+    through upright crops, which read such a person worse (benchmarks/measure_lying_rendered.py --rolls). Now the
+    turn holds while the body rolls on within 45 degrees of it; one nearly up, one jumped to, is still read cold
+    upright."""
+    from ghnerf_runtime.estimator import _Pass, body_axis
+
+    est, rig, body, rolled = _kept_turn_estimator(turns, degrees)
+    est._kept_axis = None if before is None else body_axis(rolled(before))
+    names = est.camera_names
+    J = len(body.points)
+    frame_reason = {n: None for n in names}
+    asked = []
+
+    def spy(images, regions, sequence, timing, novel_view=None, cold_several=None):
+        asked.append((est._turns, regions.tracked))
+        if est._turns == turns:  # the turned crops: the rolled person, found confidently
+            return _Pass(regions, frame_reason, j3=body, someone=True,
+                         joints_2d={n: np.zeros((J, 2)) for n in names},
+                         conf_2d={n: np.ones(J, np.float32) for n in names},
+                         missing_2d={n: np.zeros(J, bool) for n in names})
+        return _Pass(regions, frame_reason)  # upright, from the working volume: nobody
+
+    est._pass = spy
+    images = [np.zeros((c.size[1], c.size[0], 3), np.uint8) for c in rig.pair]
+    r = est.estimate(images)
+    if kept:
+        assert asked == [(turns, True)], asked
+        assert not r.missing.any() and r.tracked and est._turns == turns and est.turns_refused == 0
+        np.testing.assert_allclose(est._kept_axis, body_axis(body))  # the next pass rolls on from this one
+    else:
+        assert asked == [(turns, True), ((0, 0), False)], asked
+        assert r.missing.all() and est._turns == (0, 0) and est.turns_refused == 1
