@@ -50,7 +50,7 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from typing import Any
 from pathlib import Path
 
@@ -59,7 +59,7 @@ from drivers.backends.opencv import is_nominal_rig, is_video_file, rig_size_mess
 from drivers.backends.recording_format import MANIFEST, read_manifest
 from drivers.url import RigUrl, redact_url
 from firmware_host.daemon import early_sighup
-from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config
+from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config_noting_paths
 from firmware_host.daemon.measure_floor import (DEFAULT_PAIRS, FloorMeasureError, FloorMeasureStopped,
                                                 measure_floor_of_config)
 from firmware_host.daemon.sandbox import rig_url_hint, sandbox_warnings, service_hint
@@ -108,21 +108,25 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) -> None:
+def check_config(config: DaemonConfig, source: str | os.PathLike | None = None,
+                 from_folder: Collection[str] = ()) -> None:
     """What can be checked without hardware or the model: the URLs parse for their backends, the model folder holds
     graphs (and the skeleton prior or painter the config turns ``on``). It loads no model: the start and every
     reload run these checks and then load it themselves (once), and build the estimator on it, which checks the
     rest of what the settings need of the model (``heatmaps.source`` 'encoder': encoder heatmaps) before READY;
     ``--validate-config`` does the same after it (:func:`check_model`).
 
-    ``source``: the config file ``config`` was read from, for the hint on where its relative paths point.
+    ``source``: the config file ``config`` was read from, and ``from_folder`` the paths that were relative in it
+    (:func:`~firmware_host.daemon.config.load_daemon_config_noting_paths`), for the hint on where they were read
+    from: given only where the value that fails is one of them.
 
     :raises DaemonConfigError: naming the key.
     """
     try:
         _check_rig_url(config.rig.url)
     except DaemonConfigError as e:  # a file it names, read from the config file's folder: say so, as for models
-        raise DaemonConfigError(e.message + _where_url_read(e.message, source), key="rig.url") from None
+        raise DaemonConfigError(e.message + _where_url_read(e.message, config.rig.url, source, from_folder),
+                                key="rig.url") from None
     check_sink_urls(config.sinks)
     try:
         model_dir = resolve_model_dir(config.estimator.session.model_dir)
@@ -134,7 +138,8 @@ def check_config(config: DaemonConfig, source: str | os.PathLike | None = None) 
         # "models", read from another folder than the repository's, sent the user to a two-hour build
         what = ("not a folder" if model_dir.exists() else "no such folder" if not model_dir.is_symlink()
                 else "a symbolic link that leads to no folder (dangling, or a loop)")
-        raise DaemonConfigError(f"{model_dir}: {what}{_where_read(model_dir, source)}{service_hint(model_dir)}",
+        raise DaemonConfigError(f"{model_dir}: {what}{_where_read(model_dir, source, from_folder)}"
+                                f"{service_hint(model_dir)}",
                                 key="estimator.session.model_dir")
     if not any(model_dir.glob("*.onnx")):
         raise DaemonConfigError(f"{model_dir} holds no *.onnx graphs (make model builds ./models)",
@@ -218,20 +223,23 @@ def _check_video_sizes(url: RigUrl, rig_file: str, rig: Rig) -> None:
                                                      rig_file=rig_file, live=False), key="rig.url")
 
 
-def _where_url_read(why: str, source: str | os.PathLike | None) -> str:
-    """The hint of :func:`_where_read` for a rig URL's error that names a path in the config file's folder
-    (``drivers.url_paths`` read a relative one from there)."""
-    if source is not None and f"{config_folder(source)}{os.sep}" in why:
+def _where_url_read(why: str, url: str, source: str | os.PathLike | None, from_folder: Collection[str]) -> str:
+    """The hint of :func:`_where_read` for the error ``why`` of the rig URL ``url`` when it names a path written
+    relative in the config file (``drivers.url_paths`` read it from the file's folder), outside the URL it quotes
+    (which holds all of them). Not for one written absolute: a config under /etc/ghnerf was told of relative paths it
+    did not have."""
+    named = why.replace(redact_url(url), "").replace(url, "")
+    if source is not None and any(path in named for path in from_folder):
         return f" (a relative path in {source} is read from its folder, {config_folder(source)})"
     return ""
 
 
-def _where_read(folder: Path, source: str | os.PathLike | None) -> str:
+def _where_read(folder: Path, source: str | os.PathLike | None, from_folder: Collection[str]) -> str:
     """Where a model folder that is not there was looked for, when that is not plain from the path."""
     if not folder.is_absolute():  # not from a file (the default, where the file leaves model_dir out)
         return (f", read from the current directory {Path.cwd()}: give the folder in the config file (a relative "
                 "path there is read from the file's folder) or an absolute one")
-    if source is not None and folder.is_relative_to(config_folder(source)):
+    if source is not None and any(folder == Path(path) for path in from_folder):  # written relative, not absolute
         return f" (a relative path in {source} is read from its folder, {config_folder(source)})"
     return ""
 
@@ -263,9 +271,9 @@ def check_model(config: DaemonConfig) -> str:
 
 def read_checked_config(path: str) -> DaemonConfig:
     """Load the config file and run :func:`check_config` on it; every error names the file and the key."""
-    config = load_daemon_config(path)
+    config, from_folder = load_daemon_config_noting_paths(path)
     try:
-        check_config(config, path)
+        check_config(config, path, from_folder)
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None
     return config

@@ -26,13 +26,14 @@ from urllib.parse import unquote, urlsplit
 
 from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
-from drivers.url import redact_url
+from drivers.errors import RigConfigError
+from drivers.url import RigUrl, redact_url
 from drivers.url_paths import rig_url_from_folder
 from ghnerf_runtime.config_paths import paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
 
 __all__ = ["DaemonConfigError", "RigConfig", "HealthConfig", "DaemonConfig", "daemon_config_from_dict",
-           "load_daemon_config", "LOG_LEVELS"]
+           "load_daemon_config", "load_daemon_config_noting_paths", "LOG_LEVELS"]
 
 LOG_LEVELS = ("debug", "info", "warning", "error")
 #: The keys holding file-system paths: a relative one written in the config file is read from the file's folder.
@@ -297,10 +298,46 @@ def load_daemon_config(path: str | os.PathLike) -> DaemonConfig:
     ``rig=``, ``bvh=``...) are read from the file's folder, whatever the current directory
     (:mod:`ghnerf_runtime.config_paths`). (The tree back to plain data, for ``--validate-config``, is the
     runtime's ``config_to_dict``: it walks any dataclass tree.)"""
-    data = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
-    data = values_from_file(paths_from_file(data, DAEMON_PATH_KEYS, path), DAEMON_RIG_URL_KEYS, path,
+    return load_daemon_config_noting_paths(path)[0]
+
+
+def load_daemon_config_noting_paths(path: str | os.PathLike) -> tuple[DaemonConfig, frozenset[str]]:
+    """:func:`load_daemon_config`, and the paths that were relative in the file, as read from its folder (absolute):
+    an error naming one of them may say where it was read from, one naming a path written absolute must not."""
+    written = read_json_file(path, lambda message: DaemonConfigError(message, key=str(path)), "the config file")
+    data = values_from_file(paths_from_file(written, DAEMON_PATH_KEYS, path), DAEMON_RIG_URL_KEYS, path,
                             rig_url_from_folder)
     try:
-        return daemon_config_from_dict(data)
+        config = daemon_config_from_dict(data)
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None
+    return config, _made_absolute(written, data)
+
+
+def _made_absolute(written: Any, read: Any) -> frozenset[str]:
+    """The values :func:`load_daemon_config` changed from ``written`` (the file's data) to ``read``: relative paths,
+    made absolute; in a rig URL, its target or option values (as the backend reads them), not the whole URL."""
+    found: set[str] = set()
+    for key in DAEMON_PATH_KEYS + DAEMON_RIG_URL_KEYS:
+        before, after = _at(written, key), _at(read, key)
+        if not isinstance(before, str) or not isinstance(after, str) or before == after:
+            continue
+        if key not in DAEMON_RIG_URL_KEYS:
+            found.add(after)
+            continue
+        try:
+            old, new = RigUrl.parse(before), RigUrl.parse(after)
+        except RigConfigError:  # changed, so it parsed for rig_url_from_folder; the check names what is wrong
+            continue
+        if new.target != old.target:
+            found.add(new.target)
+        found.update(value for name, value in new.options.items() if old.options.get(name) != value)
+    return frozenset(found)
+
+
+def _at(data: Any, key: tuple[str, ...]) -> Any:
+    for part in key:
+        if not isinstance(data, Mapping):
+            return None
+        data = data.get(part)
+    return data

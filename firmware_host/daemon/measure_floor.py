@@ -121,6 +121,8 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
     :raises FloorMeasureError: fewer than ``pairs`` figures within ``max_reads`` pairs (or the recording's end, or a
         silent rig), or a median height outside ``[0, MAX_FOOT_STANDING_M]`` (not a foot standing on this rig's floor).
     :raises FloorMeasureStopped: ``stop`` was set first.
+    :raises DaemonConfigError: keyed ``rig.url``: frames of another size than the rig's before any pair
+        (``drivers.FrameSizeError``), a rig that does not fit the cameras.
     :raises drivers.DriverError: the rig failed (not a timeout: a slow pair is waited for again; not one failed read).
     """
     if isinstance(pairs, bool) or not isinstance(pairs, int) or pairs < 1:
@@ -148,7 +150,11 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
             continue
         except drivers.RigDisconnectedError:
             raise  # unplugged, a device reset: the rig is gone
-        except drivers.RigOperationError:
+        except drivers.RigOperationError as e:
+            if isinstance(e, drivers.FrameSizeError) and read == 0:
+                # no pair yet of the rig's size (depthai:// checks it as frames are read, after its open): a rig that
+                # does not fit the cameras, as at an open (measure_floor_of_config); the daemon stops on it (exit 2)
+                raise DaemonConfigError(str(e), key="rig.url") from None
             if read_failed:  # twice before a pair: the rig itself failed
                 raise
             read_failed = True
@@ -191,7 +197,8 @@ def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
     while the model loads: the rig is not opened. The rig and the estimator are closed however it ends.
 
     :raises DaemonConfigError: as the daemon's start exits 2 for it: the model does not load (``load_model``), a
-        rig URL its backend refuses once opened (keyed ``rig.url``), a rig the model cannot run on.
+        rig URL its backend refuses once opened, cameras that deliver another size than the rig's (both keyed
+        ``rig.url``), a rig the model cannot run on.
     :raises FloorMeasureError: as :func:`measure_floor` (:class:`FloorMeasureStopped` for ``stop``).
     :raises drivers.DriverError: the rig did not open, or failed.
     """
@@ -205,8 +212,9 @@ def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
             source = drivers.create_rig_source(config.rig.url, **(rig_kwargs or {}))
             closing.push(source)  # closed on the way out, an open that failed half way too (as the daemon does)
             source.open()
-        except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
-            # the daemon's start exits 2 for these (no reopen fixes them); other driver errors are the rig's
+        except (drivers.RigConfigError, drivers.BackendNotAvailableError, drivers.FrameSizeError) as e:
+            # the daemon's start exits 2 for these (no reopen fixes them: for cameras that deliver another size than
+            # the rig file's, once three opens in a row said so; this opens once); other driver errors are the rig's
             raise DaemonConfigError(str(e), key="rig.url") from None
         try:
             est = Estimator(session, source.rig, config.estimator)

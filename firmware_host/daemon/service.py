@@ -10,8 +10,9 @@ What it rides out, and how (each is counted in the health report, ``docs/daemon.
   backoff from ``rig.reopen_min_s`` doubling to ``rig.reopen_max_s``; state ``waiting``; so is one lost
   before its pairs flowed for ``rig.stall_s`` (a device that flaps); but not cameras that deliver another size
   than the rig file's on ``SIZE_MISMATCH_OPENS`` opens in a row and never the rig's (a rig file calibrated at
-  another resolution): that stops the daemon as a bad config does (exit 2); once they delivered the rig's size, a
-  camera that changes size is retried as any failed open;
+  another resolution; for ``depthai://``, which opens before its first frames, the first read of each open): that
+  stops the daemon as a bad config does (exit 2); once they delivered the rig's size (a pair), a camera that changes
+  size is retried as any failed open;
 * **a camera that vanishes** (``RigDisconnectedError``) or **falls silent** for ``rig.stall_s``:
   the rig is closed and opened again, and the tracker restarts from the working volume; the sinks
   flag ``CAMERA_FAULT`` in their STATUS until pairs flow again;
@@ -228,8 +229,9 @@ class Daemon:
         self._sinks_for: Optional[tuple[str, tuple[str, ...]]] = None  # (rig_id, camera names)
         self._backoff_s = config.rig.reopen_min_s
         self._steady = False  # the open rig has delivered pairs for rig.stall_s (the backoff was reset)
-        # The cameras of this rig.url have delivered the rig's size (an open passed their first frames): a wrong
-        # size after that is a camera that changed mode, retried; before it, a rig file that does not fit them.
+        # The cameras of this rig.url have delivered the rig's size (a pair was read): a wrong size after that is a
+        # camera that changed mode, retried; before it, a rig file that does not fit them. Not set by an open that
+        # passed: depthai:// opens before its first frames, and checks their size as they are read.
         self._size_fitted = False
         # Opens in a row failed so, and each camera's (rig size, size) in them (either camera may be the one named)
         self._size_mismatches: tuple[dict[str, tuple], int] = ({}, 0)
@@ -381,7 +383,6 @@ class Daemon:
                 self._close_rig(source)
                 raise
             self.health.rig_opens += 1
-            self._size_fitted, self._size_mismatches = True, ({}, 0)
             self.health.cameras = tuple(c.name for c in source.rig.pair)
             _log.info("rig open: cameras %s, baseline %.3f m", list(self.health.cameras), source.rig.baseline)
             return source
@@ -392,7 +393,8 @@ class Daemon:
         another size than its rig camera's (the same size each time for each camera; which camera the driver names
         first is a race), before this rig.url's cameras ever delivered the rig's size, is a rig file that does not
         fit them, which no retry fixes: the start's error (exit 2), not a wait for ever. Cameras that delivered the
-        rig's size once (an open passed) and then another (a webcam renegotiating) are retried as before.
+        rig's size once (a pair was read) and then another (a webcam renegotiating) are retried as before. Also
+        called by :meth:`_stream` for a first read failing so (``depthai://`` checks sizes as frames are read).
 
         :raises DaemonStartError: naming the rig URL (its rig file), the camera, both sizes and what to do.
         """
@@ -476,6 +478,12 @@ class Daemon:
                 self._lost(f"the rig failed: {e}")
                 return False
             except drivers.RigOperationError as e:
+                if isinstance(e, drivers.FrameSizeError) and not self._size_fitted:
+                    # a first frame of another size than the rig's (depthai:// checks them as they are read, after
+                    # its open): as an open failing on it, counted towards SIZE_MISMATCH_OPENS
+                    self._check_size_mismatch(e)
+                    self._lost(f"the rig failed: {e}", size_counted=True)
+                    return False
                 # A frame the backend could not deliver (a corrupt image in a recording, a malformed device
                 # message) is raised once and the next read goes on (RigSource.read): reopening for it played a
                 # replay:// from its start again, for ever. Raised again before a pair: the rig itself failed.
@@ -492,6 +500,8 @@ class Daemon:
                 self._lost(f"the rig failed: {e}")
                 return False
             read_failed = False
+            if not self._size_fitted:  # the cameras deliver the rig's size: a wrong one later is retried
+                self._size_fitted, self._size_mismatches = True, ({}, 0)
             last_pair = self._clock()
             self.health.pairs_read += 1
             self.health.pairs_dropped = self._dropped_closed + source.stats.pairs_dropped
@@ -567,7 +577,10 @@ class Daemon:
         self.health.floor.reset()
         self._sync_calibration()
 
-    def _lost(self, why: str) -> None:
+    def _lost(self, why: str, *, size_counted: bool = False) -> None:
+        """The open rig failed (``why``); ``size_counted``: on a frame size, counted by :meth:`_check_size_mismatch`."""
+        if not self._size_fitted and not size_counted:  # lost for another reason: the opens in a row start again
+            self._size_mismatches = ({}, 0)
         self.health.rig_lost += 1
         self.health.last_error = why
         self.health.enter(State.WAITING)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from drivers import (
+    FrameSizeError,
     RigConfigError,
     RigDisconnectedError,
     RigInitializationError,
@@ -31,7 +32,7 @@ from drivers.backends.depthai.convert import (
 from drivers.backends.depthai.link import StereoRequest
 from drivers.backends.depthai.options import DepthaiOptions
 from drivers.url import RigUrl
-from tests.drivers.depthai_host import HostPipelineLink, ScriptedLink, stamp
+from tests.drivers.depthai_host import HostPipelineLink, ScriptedLink, image_group, stamp
 
 URL = "depthai://?width=160&height=100&mount_height=1.2"
 
@@ -90,11 +91,15 @@ def test_colour_img_frame_keeps_its_colours(rig):
     assert np.array_equal(frame_from_img(message, "right", rig).image, bgr)
 
 
-def test_wrong_size_image_is_an_operation_error(rig):
+def test_wrong_size_image_is_a_typed_operation_error(rig):
+    """Typed (session 58): the daemon tells cameras that never deliver the rig's size by it (it was a plain
+    RigOperationError, retried for ever); still a RigOperationError, so readers that read past one go on."""
     message = dai.ImgFrame()
     message.setCvFrame(np.zeros((10, 16), np.uint8), dai.ImgFrame.Type.GRAY8)
-    with pytest.raises(RigOperationError, match="16x10"):
+    with pytest.raises(FrameSizeError, match="16x10") as caught:
         frame_from_img(message, "left", rig)
+    assert isinstance(caught.value, RigOperationError)
+    assert (caught.value.camera, caught.value.expected, caught.value.delivered) == ("left", (160, 100), (16, 10))
 
 
 def test_group_without_both_cameras_is_an_operation_error(rig):
@@ -444,3 +449,39 @@ def test_timeouts_run_on_the_injected_clock():
         with pytest.raises(RigTimeoutError):
             source.read(timeout_s=0.2)
         assert clock.now_ns() - t0 == 200_000_000
+
+
+class _OtherSize(ScriptedLink):
+    """A device that streams ``size`` whatever width=/height= it was asked for."""
+
+    def __init__(self, size: tuple[int, int]) -> None:
+        super().__init__([(k, k) for k in range(4)])
+        self.size = size
+
+    def start(self, request: StereoRequest) -> None:
+        super().start(request)
+        self.groups = [image_group(ix, self.size) for ix in self.indices]
+
+
+def test_frames_of_another_size_than_the_rig_file_name_the_device_camera_file_and_both_sizes(tmp_path, rig):
+    """A frame of another size mid-stream was a plain RigOperationError naming neither the rig file nor the URL:
+    now a FrameSizeError (camera, both sizes) whose message names the device, the rig file and what to do."""
+    from ghnerf_runtime.rig_file import save_rig
+
+    save_rig(rig, tmp_path / "rig.json")
+    url = f"depthai://?width=160&height=100&rig={tmp_path / 'rig.json'}"
+    with open_rig(url, link_factory=lambda: _OtherSize((320, 200))) as source:
+        with pytest.raises(FrameSizeError) as caught:
+            source.read(timeout_s=1.0)
+    assert (caught.value.camera, caught.value.expected, caught.value.delivered) == ("left", (160, 100), (320, 200))
+    assert str(caught.value) == (
+        f"depthai device 14442C10D1 ({url}) at 1.3, cameras left (CAM_B) and right (CAM_C): camera 'left' delivered "
+        f"320x200, but its rig camera in {tmp_path / 'rig.json'} is 160x100, the size the device was asked for "
+        f"(width=160&height=100): ask for a size its sensors deliver (width=/height=) with a rig file calibrated at "
+        f"it (ghcal, docs/calibration.md)")
+    with open_rig(URL, link_factory=lambda: _OtherSize((320, 200))) as source:  # the device's calibration
+        with pytest.raises(FrameSizeError, match=r"camera 'left' delivered 320x200, but its rig camera \(the "
+                                                 r"device's calibration, at the width=/height= asked\) is 160x100, "
+                                                 r"the size the device was asked for \(width=160&height=100\): ask "
+                                                 r"for another width=/height=, one its sensors deliver$"):
+            source.read(timeout_s=1.0)

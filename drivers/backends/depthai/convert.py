@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import cv2
 import depthai as dai
 
-from drivers.errors import DriverError, RigDisconnectedError, RigOperationError
+from drivers.errors import DriverError, FrameSizeError, RigDisconnectedError, RigOperationError
 from drivers.frames import Frame
 from ghnerf_runtime.geometry import Rig
 
@@ -33,16 +33,18 @@ def frame_from_img(message: dai.ImgFrame, camera: str, rig: Rig) -> Frame:
     """One ``dai.ImgFrame`` as a :class:`Frame` of ``camera``: BGR image, host-monotonic timestamp.
 
     Raises:
-        RigOperationError: the image does not have the rig camera's size (the rig would be wrong).
+        FrameSizeError: the image does not have the rig camera's size (the rig would be wrong); typed, so that
+            the daemon tells cameras that never deliver the rig's size (a rig that does not fit) from a bad frame.
     """
     image = message.getCvFrame()  # BGR for colour types, 2-D for GRAY8/RAW8 (mono sensors)
     if image.ndim == 2:
         image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     cam = rig.camera(camera)
     if image.shape[:2] != (cam.height, cam.width):
-        raise RigOperationError(
+        raise FrameSizeError(
             f"depthai delivered a {image.shape[1]}x{image.shape[0]} image for camera {camera!r}, "
-            f"the rig says {cam.width}x{cam.height}"
+            f"the rig says {cam.width}x{cam.height}",
+            camera, (cam.width, cam.height), (image.shape[1], image.shape[0]),
         )
     return Frame(
         camera=camera,
@@ -57,6 +59,7 @@ def frames_from_group(group: dai.MessageGroup, rig: Rig) -> tuple[Frame, Frame]:
 
     Raises:
         RigOperationError: the group lacks one of the Sync inputs or holds something else than images.
+        FrameSizeError: an image does not have its rig camera's size (:func:`frame_from_img`).
     """
     names = set(group.getMessageNames())
     frames = []

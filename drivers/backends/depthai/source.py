@@ -12,7 +12,8 @@ from drivers.backends.depthai.link import DaiDeviceLink, DeviceLink, StereoReque
 from drivers.backends.depthai.options import DEFAULT_MOUNT_HEIGHT_M, DepthaiOptions, board_socket
 from drivers.base import RigSource
 from drivers.clock import Clock
-from drivers.errors import RigConfigError, RigDisconnectedError, RigInitializationError, RigOperationError
+from drivers.errors import (FrameSizeError, RigConfigError, RigDisconnectedError, RigInitializationError,
+                            RigOperationError)
 from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig
 from drivers.url import RigUrl
@@ -235,14 +236,33 @@ class DepthaiRigSource(RigSource):
                 return
 
     def _frames(self, group: dai.MessageGroup) -> tuple[Frame, Frame]:
-        """A group's frames; whole groups lost before it (both indices jumped by as many) are noted on the first."""
-        first, second = frames_from_group(group, self.rig)
+        """A group's frames; whole groups lost before it (both indices jumped by as many) are noted on the first.
+
+        :raises FrameSizeError: a frame of another size than its rig camera's, naming the device, the camera, the rig
+            file (or the device's calibration) and both sizes, as ``opencv://`` names them.
+        """
+        try:
+            first, second = frames_from_group(group, self.rig)
+        except FrameSizeError as e:
+            raise FrameSizeError(self._size_message(e), e.camera, e.expected, e.delivered) from None
         if self._last_indices is not None:
             lost = min(first.index - self._last_indices[0], second.index - self._last_indices[1]) - 1
             if lost > 0:  # the non-blocking host queue dropped them (or Sync found no partner for either)
                 self._lost_before[first] = lost
         self._last_indices = (first.index, second.index)
         return first, second
+
+    def _size_message(self, error: FrameSizeError) -> str:
+        """Why ``error``'s frame does not fit, and what to do. The stream was asked for the rig's size (a rig file of
+        another size than width=/height= is refused when the URL is read; the device's calibration is converted to
+        the size asked), so the device did not deliver what it was asked for: no rig file is rescaled here."""
+        (dw, dh), (rw, rh) = error.delivered, error.expected
+        rig_path = self.options.rig_path
+        origin = f"in {rig_path}" if rig_path else "(the device's calibration, at the width=/height= asked)"
+        remedy = (f"ask for a size its sensors deliver (width=/height=) with a rig file calibrated at it (ghcal, "
+                  f"docs/calibration.md)" if rig_path else "ask for another width=/height=, one its sensors deliver")
+        return (f"{self._where()}: camera {error.camera!r} delivered {dw}x{dh}, but its rig camera {origin} is "
+                f"{rw}x{rh}, the size the device was asked for (width={rw}&height={rh}): {remedy}")
 
     def _served(self, frame: Frame) -> Frame:
         self._lost = self._lost_before.pop(frame, 0)

@@ -311,6 +311,39 @@ def test_a_missing_file_in_the_rig_url_names_its_resolved_path_and_the_config_fi
     assert str(e.value).endswith(f" (a relative path in {path} is read from its folder, {folder})")
 
 
+def test_the_relative_path_note_comes_only_where_the_failing_value_was_written_relative(tmp_path, monkeypatch):
+    """A config under /etc/ghnerf written with absolute paths was told "(a relative path in ... is read from its
+    folder ...)" for a missing model folder or rig file in that folder: the note went by the folder a path is in, not
+    by how it was written. Now it comes where the value that fails was relative in the file; a rig URL's message
+    quotes the whole URL (with its other paths), which does not count."""
+    from firmware_host.daemon.cli import read_checked_config
+
+    folder = tmp_path / "etc"
+    (folder / "models").mkdir(parents=True)
+    (folder / "models" / "x.onnx").write_bytes(b"")
+    (folder / "left.avi").write_bytes(b"")
+    path = folder / "daemon.json"
+    monkeypatch.chdir(tmp_path)
+    note = f" (a relative path in {path} is read from its folder, {folder})"
+
+    def error(url: str, model_dir: str) -> str:
+        path.write_text(json.dumps({"rig": {"url": url}, "sinks": [SINK],
+                                    "estimator": {"session": {"model_dir": model_dir}}}))
+        with pytest.raises(DaemonConfigError) as e:
+            read_checked_config(str(path))
+        return str(e.value)
+
+    sim = "sim://?fps=30"
+    assert error(sim, str(folder / "nomodels")) == f"{path}: estimator.session.model_dir: {folder / 'nomodels'}: " \
+                                                   f"no such folder"
+    assert error(sim, "nomodels").endswith(f"{folder / 'nomodels'}: no such folder{note}")
+    missing = folder / "missing.json"
+    said = error(f"opencv://?first=left.avi&second=1&rig={missing}", "models")  # the video relative, the rig not
+    assert f"file {missing}: cannot read rig file" in said and f"first={folder / 'left.avi'}" in said
+    assert not said.endswith(note), said
+    assert error("opencv://?first=0&second=1&rig=missing.json", "models").endswith(note)
+
+
 def test_check_config_reads_a_plus_in_the_rig_file_as_the_backend_does(tmp_path):
     # parse_qs read rig=/etc/rig+1.json as '/etc/rig 1.json', which the backend (a '+' is a plus) never opens
     models = tmp_path / "models"

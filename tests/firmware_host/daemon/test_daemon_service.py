@@ -1655,3 +1655,51 @@ def test_a_camera_that_changes_size_is_retried_once_it_delivered_the_rigs(tmp_pa
         assert run.thread.is_alive() and run.daemon.health.state == State.WAITING
         assert run.finish() == 0
     assert run.daemon.health.rig_opens == 1 and "delivered 320x240" in run.daemon.health.last_error
+
+
+def _depthai_rig(tmp_path: Path, monkeypatch, sizes: Callable[[int], tuple[int, int]]):
+    """A daemon config on a ``depthai://`` stand-in (no device: tests/drivers/depthai_host.py) whose open number k
+    (0, 1, ...) streams a few groups of ``sizes(k)``, whatever size it was asked for, then nothing; the model stood
+    in for. Returns the config and the link factory."""
+    import firmware_host.daemon.service as service
+    from tests.drivers.depthai_host import ScriptedLink, image_group
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    opens = []
+
+    class Sized(ScriptedLink):
+        def start(self, request) -> None:
+            opens.append(sizes(len(opens)))
+            self.groups = [image_group(ix, opens[-1]) for ix in self.indices]
+
+    cfg = _config({"url": "depthai://?width=160&height=100&mount_height=1.2", "reopen_min_s": 0.01,
+                   "reopen_max_s": 0.05, "read_timeout_s": 0.05, "stall_s": 0.3}, tmp_path)
+    return cfg, lambda: Sized([(k, k) for k in range(6)])
+
+
+def test_a_depthai_device_that_never_delivers_the_rigs_size_stops_the_daemon_too(tmp_path, monkeypatch):
+    """depthai:// opens before its first frames and checks their size as they are read: its wrong size was a plain
+    RigOperationError, and the daemon reopened the device for ever. Now the first read of three opens in a row
+    failing on the same size stops it (exit 2) as opencv://'s opens do, with the driver's message."""
+    cfg, link = _depthai_rig(tmp_path, monkeypatch, lambda k: (320, 200))
+    with _Running(cfg, tmp_path, rig_kwargs={"link_factory": link}) as run:
+        run.thread.join(timeout=20)
+        assert not run.thread.is_alive(), "still reopening a device that never delivers the rig's size"
+    error = run.rc[0]
+    assert isinstance(error, DaemonStartError)
+    assert str(error).startswith("rig.url 'depthai://?width=160&height=100&mount_height=1.2': depthai device ")
+    assert "camera 'left' delivered 320x200, but its rig camera (the device's calibration, at the width=/height= " \
+           "asked) is 160x100" in str(error) and "the same on 3 opens in a row" in str(error)
+    assert run.daemon.health.rig_opens == 3 and run.daemon.health.pairs_read == 0
+
+
+def test_a_depthai_device_that_delivered_the_rigs_size_is_reopened_when_it_changes(tmp_path, monkeypatch):
+    """Once a pair of the rig's size was read (open 0), frames of another size at every later open are retried, as
+    for opencv://: the daemon waits, it does not stop."""
+    cfg, link = _depthai_rig(tmp_path, monkeypatch, lambda k: (160, 100) if k == 0 else (320, 200))
+    with _Running(cfg, tmp_path, rig_kwargs={"link_factory": link}) as run:
+        wait_until(lambda: run.daemon.health.rig_opens >= 6, timeout=20, what="reopens of the resized device")
+        assert run.thread.is_alive()
+        assert run.finish() == 0
+    assert run.daemon.health.pairs_read >= 1 and "delivered 320x200" in run.daemon.health.last_error

@@ -154,6 +154,26 @@ def test_one_failed_read_is_read_past_as_the_daemon_does_two_in_a_row_are_the_ri
         measure_floor(_Source(failures=(2, 3)), _Estimator([0.03] * 3), 0.04, pairs=3)
 
 
+def test_frames_of_another_size_before_any_pair_are_a_rig_that_does_not_fit_after_one_a_failed_read():
+    """depthai:// opens before its first frames and checks their size as they are read: a FrameSizeError before
+    any pair is the open's fault (a rig that does not fit the cameras: the CLI's exit 2, keyed rig.url), where it was
+    read past and then raised (exit 1); after a pair of the rig's size it is a failed read, read past once as before."""
+
+    class _Sized(_Source):
+        def read(self, timeout_s: float = 1.0) -> _Pair:
+            if self.reads + 1 in self.failures:
+                self.reads += 1
+                raise drivers.FrameSizeError("camera 'left' delivered 320x200, but its rig camera is 160x100", "left",
+                                             (160, 100), (320, 200))
+            return super().read(timeout_s)
+
+    with pytest.raises(DaemonConfigError, match=r"^rig\.url: camera 'left' delivered 320x200, but its rig camera is "
+                                                r"160x100$"):
+        measure_floor(_Sized(failures=(1,)), _Estimator([0.03] * 3), 0.04, pairs=3)
+    m = measure_floor(_Sized(failures=(2,)), _Estimator([0.03] * 3), 0.04, pairs=3)
+    assert m.heights_m == pytest.approx((0.07, 0.07, 0.07)) and m.pairs_read == 3
+
+
 class _RigSource:
     """What ``drivers.create_rig_source`` gives, for the CLI's tests: ``signum`` sent to this process at read
     ``signal_at`` (SIGTERM from systemd or ``timeout``, Ctrl-C's SIGINT), after which no pair comes (each read times
@@ -272,6 +292,10 @@ def test_sigterm_or_ctrl_c_stops_measure_floor_as_the_daemon_stops(cli_rig, caps
      "the model does not fit rig 'bench': models/ghnerf: the model is 256x192, this rig's cameras 320x240"),
     (None, drivers.RigConfigError("rig URL 'opencv://0,1?rig=r.json': camera 0 gives 640x480, rig file 320x240"),
      "rig.url: rig URL 'opencv://0,1?rig=r.json': camera 0 gives 640x480, rig file 320x240"),
+    # since session 58: the daemon stops on it (exit 2), where --measure-floor exited 1
+    (None, drivers.FrameSizeError("camera 'left' (/dev/video0) delivered 640x400, but its rig camera in r.json is "
+                                  "1280x800", "left", (1280, 800), (640, 400)),
+     "rig.url: camera 'left' (/dev/video0) delivered 640x400, but its rig camera in r.json is 1280x800"),
 ])
 def test_a_model_or_rig_that_the_start_refuses_exits_2_as_the_start_does(cli_rig, capsys, estimator_error,
                                                                           open_error, message):
