@@ -155,6 +155,33 @@ def test_bench_runtime_regions(model, capsys, monkeypatch):
     assert re.search(r"^  encoder heatmaps: \+ novel view stride 1 .* [\d.]+/s$", out, re.M), out
 
 
+def test_time_demo_stages(model, tmp_path, capsys, monkeypatch):
+    # the demo's scene, small and slow (a loop of 6 frames a camera, rendered once into tmp_path)
+    url = f"sim://?fps=5&seed=0&motion=wave&policy=all&width=160&height=120&workers=1&cache={tmp_path}"
+    out = run_script("time_demo_stages", "--model-dir", model, "--pairs", "3", "--url", url,
+                     capsys=capsys, monkeypatch=monkeypatch)
+    assert f"3 pairs of {url} through {model} (runtime defaults); load average" in out, out
+    rows = set(re.findall(r"^(\w+) +3 +[\d.]+ +[\d.]+$", out, re.M))
+    assert {"preprocess", "encoder", "uncovered", "total"} <= rows, out
+    assert re.search(r"^wall [\d.]+ s for the estimates \([\d.]+ pairs/s\); CPU per pair [\d.]+ ms, all threads "
+                     r"\([\d.]+ ms the calling thread's\); joints checksum -?[\d.]+$", out, re.M), out
+    if sys.platform.startswith("linux"):  # each thread's CPU, from /proc
+        assert re.search(r"^CPU per pair by thread \(ms; \d+ threads, \d+ ran\): [\d.]+", out, re.M), out
+
+
+def test_time_demo_stages_counts_what_no_stage_covers():
+    from benchmarks.time_demo_stages import summarise
+
+    timings = [{"preprocess": 1.0, "encoder": 10.0, "total": 12.0},
+               {"preprocess": 2.0, "encoder": 20.0, "encoder_flip": 5.0, "total": 30.0},
+               {"preprocess": 1.0, "encoder": 12.0, "total": 14.5}]
+    rows = {key: (count, med) for key, count, med, _ in summarise(timings)}
+    assert rows["uncovered"] == (3, 1.5)  # 1.0, 3.0 and 1.5 ms outside the stages
+    assert rows["encoder_flip"] == (1, 0.0)  # run on one pair of three: the others count 0 ms
+    assert rows["total"] == (3, 14.5)
+    assert [key for key, *_ in summarise(timings)][:2] == ["encoder", "preprocess"]  # the stages by median
+
+
 def test_compare_3d_methods(model, tmp_path, capsys, monkeypatch):
     run_script("compare_3d_methods", "--model-dir", model, *SIZES, "--methods", "triangulate,depth_centroid",
                "--json", str(tmp_path / "r.json"), capsys=capsys, monkeypatch=monkeypatch)
