@@ -52,9 +52,9 @@ SAME_BODY_M = 0.5
 TORSO_LIMBS_M: dict[tuple[int, int], float] = {(1, 8): 0.55, (8, 9): 0.12, (8, 12): 0.12}
 #: :func:`mixed_torso`: a torso limb this much longer than one body's (its part along the line of sight discounted
 #: past :data:`SLACK_DEPTH_BASELINES` baselines from the cameras, :func:`torso_excess`) is two people's joints. One
-#: person through the shipped model, strong peaks in both views, came to at most 0.16 m over on the bench sequences and 0.23 m at the working
-#: volume's near end; two people 0.6 m apart whose left side was read from the other person, 0.69 m over (the median)
-#: (benchmarks/measure_two_people.py, docs/runtime.md "A torso of two people").
+#: person through the shipped model, strong peaks in both views, came to at most 0.16 m over on the bench sequences
+#: and 0.23 m at the working volume's near end; two people 0.6 m apart whose left side was read from the other
+#: person, 0.69 m over (the median) (benchmarks/measure_two_people.py, docs/runtime.md "A torso of two people").
 MIXED_TORSO_SLACK_M = 0.5
 #: :func:`depth_scale`: past this many baselines from the cameras, a limb's part along the line of sight is divided by
 #: its depth over these baselines: the benchmark rig's working volume centre, 3 m with 1.2 m between the cameras,

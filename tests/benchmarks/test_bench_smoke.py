@@ -360,8 +360,9 @@ def test_measure_two_people(capsys, monkeypatch):
 #: mid-hip's and the hips' max, and the rule's reading with the passes over the slack (and the margin, with none).
 TORSO_SPREAD = (r"^  the torso's largest excess over one body's \(two_people\.torso_excess\) on \d+ passes: median "
                 r"[-+][\d.]+, p90 [-+][\d.]+, max [-+][\d.]+ m \(neck to mid-hip max ([-+][\d.]+|none), a hip max "
-                r"([-+][\d.]+|none)\); as mixed_torso reads it \(along the line of sight over two_people\.depth_scale\): "
-                r"median [-+][\d.]+, max [-+][\d.]+ m, \d+ over the 0\.5 m slack(, the least margin under it [\d.]+ m)?$"
+                r"([-+][\d.]+|none)\); as mixed_torso reads it \(along the line of sight over "
+                r"two_people\.depth_scale\): median [-+][\d.]+, max [-+][\d.]+ m, \d+ over the 0\.5 m slack"
+                r"(, the least margin under it [\d.]+ m)?$"
                 r"|^  the torso's excess over one body's: no pass with a torso limb strong in both views$")
 
 
@@ -425,8 +426,8 @@ def test_measure_two_people_one_person_at_the_working_volume_s_ends(model, capsy
     # (test_model_extremes' places), each place's flags and torso excess (session 58's review F)
     out = run_script("measure_two_people", "--one-person-model", model, "--ends", "--scenes", "1", "--frames", "2",
                      "--motions", "wave,squat", capsys=capsys, monkeypatch=monkeypatch)
-    places = re.findall(r"^one person at \(([-\d.]+), ([\d.]+)\), .* at the defaults, 1 scenes of wave/squat x 2 pairs: "
-                        r"\d+ of 4 pairs flagged several_people, [\d.]+ % of joints found; ", out, re.M)
+    places = re.findall(r"^one person at \(([-\d.]+), ([\d.]+)\), .* at the defaults, 1 scenes of wave/squat x 2 "
+                        r"pairs: \d+ of 4 pairs flagged several_people, [\d.]+ % of joints found; ", out, re.M)
     assert places == [("0", "2"), ("0", "4"), ("-0.8", "2"), ("0.8", "2"), ("-0.8", "4"), ("0.8", "4")], out
     spread = TORSO_SPREAD.replace("^  ", "; ")
     assert len(re.findall(spread, out, re.M)) == 6, out

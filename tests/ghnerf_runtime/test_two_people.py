@@ -960,10 +960,10 @@ def test_mixed_torso_discounts_the_depth_error_at_the_working_volume_s_far_end()
     """One person through the shipped model at the working volume's far corners (4 m, 1.2 m between the cameras)
     puts a hip up to 0.43 m over one body's, 0.07 m under the 0.5 m slack, and 0.26 m once its part along the line of
     sight is discounted (``measure_two_people.py --one-person-model models --ends``): the triangulation's depth error,
-    which grows as depth over baseline. A hip 0.7 m off along the line of sight there is no longer two people's (it was, on
-    the slack alone), while the same 0.7 m at the volume's near end (2 m, nearer than the slack's 3 m) still is, and
-    0.6 m across the line of sight at 4 m; with cameras half as far apart, 3 m is as far as 6 m is for the benchmark
-    rig."""
+    which grows as depth over baseline. A hip 0.7 m off along the line of sight there is no longer two people's (it
+    was, on the slack alone), while the same 0.7 m at the volume's near end (2 m, nearer than the slack's 3 m) still
+    is, and 0.6 m across the line of sight at 4 m; with cameras half as far apart, 3 m is as far as 6 m is for the
+    benchmark rig."""
     found = np.ones(25, bool)
     far = _hip_along_the_line_of_sight((-0.8, 4.0), 0.7)
     assert not T.mixed_torso(far, found, RIG_CENTRES)
