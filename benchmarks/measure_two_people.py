@@ -4,6 +4,7 @@
     .venv/bin/python benchmarks/measure_two_people.py --model-dir models [--scenes 8] [--pairs 10] [--places ...]
     .venv/bin/python benchmarks/measure_two_people.py --places=0,2.5,0,0 --behind 1.0 [--occlude] [--model-dir ...]
     .venv/bin/python benchmarks/measure_two_people.py --one-person-model models [--sequences 30] [--frames 10]
+    .venv/bin/python benchmarks/measure_two_people.py --one-person-model models --ends [--scenes 8] [--motions ...]
     .venv/bin/python benchmarks/measure_two_people.py --calibration 0,2,-2 [--axis pan] [--scenes 4] [--pairs 10]
 
 The runtime follows one subject and its model answers one peak per joint per view. With two people in view,
@@ -45,6 +46,14 @@ the truth (mean over the joints found, and the share found), and, over every pas
 (a cold pass and its refined one are two), how many joints were shown twice in both views. A tool, not a
 test: docs/runtime.md, "Two people in the working volume".
 
+With ``--ends`` as well, the one person is instead rendered alone at the working volume's ends and corners (the
+places of ``test_model_extremes``' ``test_estimator_with_the_subject_at_the_ends_of_the_working_volume``), ``--scenes``
+seeds of each of ``--motions``, ``--frames`` pairs each, a row per place. Every row, of every mode but
+``--calibration``, is followed by the spread of each pass's largest torso excess over one body's
+(``two_people.torso_excess``), as measured and as ``two_people.mixed_torso`` reads it (the part along the line of
+sight discounted for the depth error), against ``MIXED_TORSO_SLACK_M``: docs/runtime.md, "A torso of two people"
+(session 58's review).
+
 With ``--calibration`` it measures the daemon's calibration figures (``lowest_foot_m``, ``reprojection_px_median``)
 on two people's pairs against the reported person's alone at the same instants, the rig file's second camera turned
 by each angle given about ``--axis`` while the oracle films through the true rig (``measure_calibration``;
@@ -66,11 +75,39 @@ from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # n
 from ghnerf_runtime.body25 import LIMBS  # noqa: E402
 from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
+from ghnerf_runtime.two_people import MIXED_TORSO_SLACK_M, TORSO_LIMBS_M  # noqa: E402
 
 #: A reported joint this close to a person's is theirs (m).
 NEAR_M = 0.05
 #: ``--occlude``: a body hides what lies within this of its limbs' segments (m, at the body's depth), behind it.
 BODY_HALF_WIDTH_M = 0.15
+#: The torso limbs' rows of ``Estimator._torso_excess`` (``two_people.TORSO_LIMBS_M``' order): the neck to the
+#: mid-hip, then the mid-hip to either hip.
+_NECK_MIDHIP = list(TORSO_LIMBS_M).index((1, 8))
+_HIPS = [k for k, limb in enumerate(TORSO_LIMBS_M) if limb != (1, 8)]
+
+
+def torso_spread(excess: list) -> str:
+    """The spread over passes of each pass's largest torso excess over one body's (``excess``: each pass's
+    ``Estimator._torso_excess``, as measured then as ``two_people.mixed_torso`` reads it, NaN where a limb's joints
+    were not both strong), the neck to mid-hip's and the hips' largest alone, and the rule's reading: its largest,
+    the passes over ``MIXED_TORSO_SLACK_M`` and the least margin under it."""
+    rows = np.array([e for e in excess if np.isfinite(e).any()]).reshape(-1, 2, len(TORSO_LIMBS_M))
+    if not len(rows):
+        return "the torso's excess over one body's: no pass with a torso limb strong in both views"
+    largest, read = np.nanmax(rows[:, 0], axis=1), np.nanmax(rows[:, 1], axis=1)
+    over = int((read > MIXED_TORSO_SLACK_M).sum())
+
+    def top(v):
+        v = v[np.isfinite(v)]
+        return f"{v.max():+.2f}" if len(v) else "none"
+
+    return (f"the torso's largest excess over one body's (two_people.torso_excess) on {len(rows)} passes: median "
+            f"{np.median(largest):+.2f}, p90 {np.percentile(largest, 90):+.2f}, max {largest.max():+.2f} m "
+            f"(neck to mid-hip max {top(rows[:, 0, _NECK_MIDHIP])}, a hip max {top(rows[:, 0, _HIPS].ravel())}); as "
+            f"mixed_torso reads it (along the line of sight over two_people.depth_scale): median {np.median(read):+.2f}"
+            f", max {read.max():+.2f} m, {over} over the {MIXED_TORSO_SLACK_M:g} m slack"
+            + ("" if over else f", the least margin under it {MIXED_TORSO_SLACK_M - read.max():.2f} m"))
 
 
 def hidden_behind(front: np.ndarray, back: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -194,7 +231,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
               "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0,
               "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0, "hidden_view0": 0.0,
-              "hidden_view1": 0.0, "turn_searches": 0, "torso_mixed": 0}
+              "hidden_view1": 0.0, "turn_searches": 0, "torso_mixed": 0, "torso_excess": []}
     ratio = config.joints3d.second_person_ratio
     apart: list[np.ndarray] = []  # the oracle's (view, joint) cells between the people, each pass counted
     counted = 0
@@ -218,6 +255,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                     counts["twice_view1"] += int(twice[1].sum())
                     counts["twice_both"] += joints_shown_twice(kp, ratio)
                     counts["torso_mixed"] += int(est._torso_mixed)  # (set by this pass's 3D stage, before this)
+                    counts["torso_excess"].append(est._torso_excess.copy())
                     if oracle is not None and oracle.apart is not None:
                         apart.append(oracle.apart)
                     if oracle is not None and oracle.hidden_share is not None:
@@ -348,7 +386,7 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     session = load_session(on)
     ratio = on.joints3d.second_person_ratio
     shown: Counter[int] = Counter()
-    out = {"pairs": 0, "flagged": 0, "identical": True, "found": 0, "joints": 0, "torso_mixed": 0}
+    out = {"pairs": 0, "flagged": 0, "identical": True, "found": 0, "joints": 0, "torso_mixed": 0, "torso_excess": []}
     errors: list[float] = []
     for seq in load_sequences(sequences, frames):
         with Estimator(session, seq.rig, on) as checked, Estimator(session, seq.rig, off) as unchecked:
@@ -357,6 +395,7 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
             def counting(kp, decide=decide, checked=checked):
                 shown[joints_shown_twice(kp, ratio)] += 1
                 out["torso_mixed"] += int(checked._torso_mixed)  # (set by this pass's 3D stage, before this)
+                out["torso_excess"].append(checked._torso_excess.copy())
                 return decide(kp)
 
             checked._several_people = counting
@@ -377,6 +416,56 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     out["passes"] = sum(shown.values())
     out["shown_twice"] = dict(sorted(shown.items()))
     return out
+
+
+def volume_ends() -> list[tuple[float, float]]:
+    """The working volume's ends and corners on the floor (x, z), as ``tests/ghnerf_runtime/test_model_extremes.py``
+    names them (``test_estimator_with_the_subject_at_the_ends_of_the_working_volume``): the near and far ends on the
+    centre line, then the four corners, far ones last (``--ends``; the benchmark rig's volume)."""
+    import drivers.sim as sim
+
+    lo, hi = sim.RigPlacement().build().volume.min_corner, sim.RigPlacement().build().volume.max_corner
+    x0, x1, z0, z1 = float(lo[0]), float(hi[0]), float(lo[2]), float(hi[2])
+    return [(0.0, z0), (0.0, z1), (x0, z0), (x1, z0), (x0, z1), (x1, z1)]
+
+
+def measure_one_person_at(model_dir: str, places: list, scenes: int, frames: int, motions: tuple) -> list[dict]:
+    """One person alone, a trained model (the folder's, at the runtime's defaults) on the rendered scenes (``--ends``):
+    at each of ``places`` ((x, z), rig frame), ``scenes`` seeds of each of ``motions``, ``frames`` pairs each at 30 fps
+    (from 0.2 s, as test_model_extremes). Per place: ``place``, ``pairs``, ``flagged`` (``several_people``),
+    ``found`` and ``joints``, ``torso_mixed`` (passes whose peaks made a torso of two people) and ``torso_excess``
+    (each pass's ``Estimator._torso_excess``; a cold pass and its refined one are two)."""
+    import drivers.sim as sim
+
+    config = EstimatorConfig(session=SessionConfig(model_dir=model_dir))
+    session = load_session(config)  # once: every scene's estimator shares it
+    rig = sim.RigPlacement().build()
+    rows = []
+    for place in places:
+        row = {"place": place, "pairs": 0, "flagged": 0, "found": 0, "joints": 0, "torso_mixed": 0,
+               "torso_excess": []}
+        for motion in motions:
+            for seed in range(1, scenes + 1):
+                scene = sim.SimScene(sim.SceneConfig(seed=seed, motion=motion, position_xz=place))
+                with Estimator(session, rig, config) as est:
+                    decide = est._several_people  # every pass asks it once: counted beside its answer
+
+                    def counting(kp, decide=decide, est=est, row=row):
+                        row["torso_mixed"] += int(est._torso_mixed)  # (set by this pass's 3D stage, before this)
+                        row["torso_excess"].append(est._torso_excess.copy())
+                        return decide(kp)
+
+                    est._several_people = counting
+                    for i in range(frames):
+                        t = 0.2 + i / 30.0
+                        images = tuple(scene.render(c, t, with_truth=False)[0] for c in rig.pair)
+                        r = est.estimate(images, timestamp_s=t)
+                        row["pairs"] += 1
+                        row["flagged"] += int(r.several_people)
+                        row["found"] += int((~r.missing).sum())
+                        row["joints"] += r.missing.size
+        rows.append(row)
+    return rows
 
 
 def behind_place(place: tuple, metres: float, view: int = 0) -> tuple[float, float]:
@@ -435,6 +524,12 @@ def main(argv=None) -> int:
     ap.add_argument("--one-person-model", metavar="DIR",
                     help="instead: what the check costs on one person, this model folder on the bench sequences")
     ap.add_argument("--sequences", type=int, default=30, help="with --one-person-model: bench sequences")
+    ap.add_argument("--ends", action="store_true",
+                    help="with --one-person-model: instead of the bench sequences, one person rendered at the working "
+                         "volume's ends and corners (test_model_extremes' places), --scenes seeds of each of "
+                         "--motions, --frames pairs each")
+    ap.add_argument("--motions", default="wave", metavar="NAMES",
+                    help="with --ends: the scenes' motions, comma-separated (drivers.sim.MOTION_NAMES)")
     ap.add_argument("--frames", type=int, default=10, help="with --one-person-model: pairs per sequence")
     ap.add_argument("--calibration", metavar="DEGREES",
                     help="instead: the calibration checks' figures on two people against the subject's alone, the "
@@ -491,6 +586,22 @@ def main(argv=None) -> int:
                   f"{spread(m['px_values_alone'], 2)}); scene medians of lowest_foot_m: two people "
                   f"{windows(m['windows'])}, the first alone {windows(m['windows_alone'])}")
         return 0
+    if args.ends and not args.one_person_model:
+        ap.error("--ends places one person through a model: give --one-person-model DIR")
+    if args.one_person_model and args.ends:
+        from drivers.sim import MOTION_NAMES
+
+        motions = tuple(m for m in args.motions.split(",") if m)
+        unknown = [m for m in motions if m not in MOTION_NAMES]
+        if unknown or not motions:
+            ap.error(f"--motions: {','.join(unknown) or repr(args.motions)} not among {', '.join(MOTION_NAMES)}")
+        for row in measure_one_person_at(args.one_person_model, volume_ends(), args.scenes, args.frames, motions):
+            x, z = row["place"]
+            print(f"one person at ({x:g}, {z:g}), {args.one_person_model} at the defaults, {args.scenes} scenes of "
+                  f"{'/'.join(motions)} x {args.frames} pairs: {row['flagged']} of {row['pairs']} pairs flagged "
+                  f"several_people, {100.0 * row['found'] / max(row['joints'], 1):.1f} % of joints found; "
+                  f"{torso_spread(row['torso_excess'])}")
+        return 0
     if args.one_person_model:
         m = measure_one_person(args.one_person_model, args.sequences, args.frames)
         shown = ", ".join(f"{n} joints: {k}" for n, k in m["shown_twice"].items())
@@ -502,6 +613,7 @@ def main(argv=None) -> int:
         print(f"passes by joints shown twice in both views at {EstimatorConfig().joints3d.second_person_ratio}: "
               f"{shown} ({m['passes']} passes); a torso of two people (two_people.mixed_torso) on "
               f"{m['torso_mixed']} of them")
+        print(f"  {torso_spread(m['torso_excess'])}")
         return 0
     runs = [(0, True, f"{args.pairs * args.scenes} pairs of two people ({args.scenes} scenes)")]
     if args.alone:
@@ -548,6 +660,7 @@ def main(argv=None) -> int:
                  f"{counts['hidden_view1'] / passes:.0%}" if args.occlude else "")
               + f"; a torso of two people (two_people.mixed_torso) on {counts['torso_mixed']} passes"
               + f"; roi.turn_search searches {counts['turn_searches']}")
+        print(f"  {torso_spread(counts['torso_excess'])}")
     return 0
 
 

@@ -89,8 +89,8 @@ from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
-from ghnerf_runtime.two_people import (PAIRINGS, attached, centre_of, floor_xz, matched_errors, mixed_torso,
-                                       one_body, pick_person, split_people)
+from ghnerf_runtime.two_people import (PAIRINGS, TORSO_LIMBS_M, attached, centre_of, floor_xz, matched_errors,
+                                       mixed_torso, one_body, pick_person, split_people, torso_excess)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -710,6 +710,8 @@ class Estimator:
         self._agreement: ViewAgreement | None = None  # this pair's, set by _joints_3d
         self._lowest_foot: float | None = None  # this pair's, set by _joints_3d
         self._torso_mixed = False  # this pass's, set by _joints_3d (_finish_pass)
+        # and its torso limbs' excess over one body's, as measured and as mixed_torso reads it (benchmarks)
+        self._torso_excess = np.full((2, len(TORSO_LIMBS_M)), np.nan)
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
@@ -2019,7 +2021,12 @@ class Estimator:
         # two people's joints in one skeleton (two_people.mixed_torso), from the peaks strong in both views (a weak
         # peak may be noise's): asked whatever the 3D method, as the maps' second peaks are (_finish_pass)
         strong = np.all(kp.confidence >= pres.threshold(self.config.heatmaps.source), axis=0)
-        self._torso_mixed = mixed_torso(tri.points, tri.valid & strong)
+        centres = np.stack([c.center for c in self.rig.pair])  # (the depth error grows with depth over baseline)
+        self._torso_mixed = mixed_torso(tri.points, tri.valid & strong, centres)
+        # each torso limb's excess over one body's, as measured and as the rule reads it (two_people.torso_excess):
+        # what the benchmarks print
+        self._torso_excess = np.stack([torso_excess(tri.points, tri.valid & strong),
+                                       torso_excess(tri.points, tri.valid & strong, centres)])
 
         def centroid() -> Joints3D:
             g = self.grid

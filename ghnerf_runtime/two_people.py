@@ -50,11 +50,17 @@ SAME_BODY_M = 0.5
 #: lengths, metres: ``proxy_matte.BONE_M``'s generous average adult (the simulator's people up to 0.59 m and 0.10 m).
 #: A torso holds its shape whatever the pose, unlike the arms, whose left and right one view may swap.
 TORSO_LIMBS_M: dict[tuple[int, int], float] = {(1, 8): 0.55, (8, 9): 0.12, (8, 12): 0.12}
-#: :func:`mixed_torso`: a torso limb this much longer than one body's is two people's joints. One person through the
-#: shipped model, strong peaks in both views, came to at most 0.16 m over on the 330 passes of the bench sequences,
-#: 0.40 m at the working volume's far corners (a hip 0.52 m from the mid-hip, 4 m away); two people 0.6 m apart whose
-#: left side was read from the other person, 0.66 m over (the median of the tracked passes).
+#: :func:`mixed_torso`: a torso limb this much longer than one body's (its part along the line of sight discounted
+#: past :data:`SLACK_DEPTH_BASELINES` baselines from the cameras, :func:`torso_excess`) is two people's joints. One
+#: person through the shipped model, strong peaks in both views, came to at most 0.16 m over on the bench sequences
+#: and 0.23 m at the working volume's near end; two people 0.6 m apart whose left side was read from the other
+#: person, 0.69 m over (the median) (benchmarks/measure_two_people.py, docs/runtime.md "A torso of two people").
 MIXED_TORSO_SLACK_M = 0.5
+#: :func:`depth_scale`: past this many baselines from the cameras, a limb's part along the line of sight is divided by
+#: its depth over these baselines: the benchmark rig's working volume centre, 3 m with 1.2 m between the cameras,
+#: where :data:`MIXED_TORSO_SLACK_M` was measured. At its far corners (4 m), one person's hip came up to 0.43 m over
+#: one body's (0.07 m under the slack), 0.26 m with its part along the line of sight so discounted.
+SLACK_DEPTH_BASELINES = 2.5
 #: Assignment rounds per start: a start that has not settled by then is kept as it stands.
 _ROUNDS = 8
 
@@ -231,31 +237,80 @@ def one_body(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     return keep
 
 
-def mixed_torso(joints: np.ndarray, found: np.ndarray) -> bool:
+def mixed_torso(joints: np.ndarray, found: np.ndarray, centres: np.ndarray) -> bool:
     """Whether ``found`` joints of ``joints`` (``(J, 3)``, rig frame) hold a torso limb (:data:`TORSO_LIMBS_M`) longer
-    than one body's by more than :data:`MIXED_TORSO_SLACK_M`: the joints are two people's, each view's peak of a joint
-    being whichever person's is stronger there and the views agreeing on it (the mid-hip one person's, a hip the
-    other's), which no reprojection gate sees and no joint shown twice may tell (docs/runtime.md, "A torso of two
-    people").
+    than one body's by more than :data:`MIXED_TORSO_SLACK_M`, its part along the line of sight discounted for the
+    triangulation's depth error (:func:`torso_excess` with ``centres``, the two cameras' ``(2, 3)``): the joints are
+    two people's, each view's peak of a joint being whichever person's is stronger there and the views agreeing on it
+    (the mid-hip one person's, a hip the other's), which no reprojection gate sees and no joint shown twice may tell
+    (docs/runtime.md, "A torso of two people").
 
-    Example (a mid-hip and its hips 0.1 m apart, then the left hip 0.7 m off):
+    Example (cameras 1.2 m apart; a mid-hip and its hips 0.1 m apart 3 m away, then the left hip 0.7 m aside; then
+    the hip 0.7 m behind the mid-hip at 4.5 m, within one body's depth error there):
+        >>> c = np.array([[-0.6, 0, 0], [0.6, 0, 0]])
         >>> j = np.zeros((25, 3)); j[1] = (0, -1.0, 3); j[8] = (0, -0.5, 3); j[9] = (-0.1, -0.5, 3)
         >>> j[12] = (0.1, -0.5, 3); found = np.zeros(25, bool); found[[1, 8, 9, 12]] = True
-        >>> mixed_torso(j, found)
+        >>> mixed_torso(j, found, c)
         False
-        >>> j[12] = (0.7, -0.5, 3); mixed_torso(j, found)
+        >>> j[12] = (0.7, -0.5, 3); mixed_torso(j, found, c)
         True
+        >>> j[:, 2] = 4.5; j[12] = j[8] * (1 + 0.7 / np.linalg.norm(j[8])); mixed_torso(j, found, c)
+        False
     """
+    excess = torso_excess(joints, found, centres, caller="mixed_torso")
+    return bool(np.any(excess[np.isfinite(excess)] > MIXED_TORSO_SLACK_M))
+
+
+def depth_scale(point: np.ndarray, centres: np.ndarray, caller: str = "depth_scale") -> float:
+    """How much larger the triangulation's depth error is at ``point`` (rig frame) than where
+    :data:`MIXED_TORSO_SLACK_M` was measured: its distance from the cameras' midpoint (``centres``, the two cameras'
+    ``(2, 3)``) over :data:`SLACK_DEPTH_BASELINES` baselines, at least 1. The crop frames the person, so the model's
+    error is a steady share of the body, and a share of the body in the image triangulates to a depth error that grows
+    as depth over baseline (along the line of sight only: across it, the error stays that share of the body).
+
+    Example (cameras 1.2 m apart: 3 m is where the slack was measured, 6 m twice as far):
+        >>> c = np.array([[-0.6, 0, 0], [0.6, 0, 0]])
+        >>> depth_scale(np.array([0, 0, 2.0]), c), depth_scale(np.array([0, 0, 6.0]), c)
+        (1.0, 2.0)
+    """
+    centres = np.asarray(centres, dtype=np.float64)
+    if centres.shape != (2, 3) or not np.isfinite(centres).all():
+        raise ShapeError(f"{caller}: centres must be the two cameras' finite (2, 3) centres, got shape "
+                         f"{centres.shape}")
+    baseline = float(np.linalg.norm(centres[1] - centres[0]))
+    if baseline <= 0.0:
+        raise ShapeError(f"{caller}: centres must be two cameras apart, got both at {centres[0].tolist()}")
+    depth = float(np.linalg.norm(np.asarray(point, dtype=np.float64) - centres.mean(axis=0)))
+    return max(1.0, depth / (SLACK_DEPTH_BASELINES * baseline))
+
+
+def torso_excess(joints: np.ndarray, found: np.ndarray, centres: np.ndarray | None = None,
+                 caller: str = "torso_excess") -> np.ndarray:
+    """``(len(TORSO_LIMBS_M),)`` how much longer each torso limb (:data:`TORSO_LIMBS_M`, in its order) of ``found``
+    joints of ``joints`` (``(J, 3)``) is than one body's, metres (negative: shorter); NaN where a joint of it is not
+    found. With ``centres`` (the two cameras' ``(2, 3)``), the limb's part along the line of sight through its
+    midpoint is first divided by :func:`depth_scale` there: what :func:`mixed_torso` holds against
+    :data:`MIXED_TORSO_SLACK_M`. One person through the shipped model at the working volume's far corners (4 m) put a
+    hip up to 0.43 m over one body's, 0.26 m as read so: the most of it along the line of sight; two people side by
+    side lie across it (benchmarks/measure_two_people.py prints both readings, docs/runtime.md "A torso of two
+    people"). ``caller``: the function a shape error names."""
     joints = np.asarray(joints, dtype=np.float64)
     found = np.asarray(found, dtype=bool)
     if joints.ndim != 2 or joints.shape[1] != 3 or found.shape != joints.shape[:1]:
-        raise ShapeError(f"mixed_torso: joints must be (J, 3) and found (J,), got {joints.shape} and {found.shape}")
+        raise ShapeError(f"{caller}: joints must be (J, 3) and found (J,), got {joints.shape} and {found.shape}")
     J = len(found)
-    for (a, b), length in TORSO_LIMBS_M.items():
-        if a < J and b < J and found[a] and found[b] and \
-                np.linalg.norm(joints[a] - joints[b]) > length + MIXED_TORSO_SLACK_M:
-            return True
-    return False
+    excess = np.full(len(TORSO_LIMBS_M), np.nan)
+    for k, ((a, b), length) in enumerate(TORSO_LIMBS_M.items()):
+        if a < J and b < J and found[a] and found[b]:
+            limb = joints[b] - joints[a]
+            if centres is not None:
+                middle = (joints[a] + joints[b]) / 2.0
+                sight = middle - np.asarray(centres, dtype=np.float64).mean(axis=0)
+                sight = sight / max(float(np.linalg.norm(sight)), 1e-9)
+                along = float(limb @ sight)
+                limb = limb + (along / depth_scale(middle, centres, caller) - along) * sight
+            excess[k] = float(np.linalg.norm(limb)) - length
+    return excess
 
 
 def centre_of(points: np.ndarray, chosen: np.ndarray) -> np.ndarray | None:

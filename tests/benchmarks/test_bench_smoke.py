@@ -378,6 +378,19 @@ def test_measure_two_people(capsys, monkeypatch):
     # and the crop turn searches its estimators ran (session 57's review N): two people standing, picked, none; and
     # the passes whose peaks made a torso of two people (session 58), at most every pass
     assert len(twice) == 2 and all(int(n) >= 2 and int(t) <= int(n) and s == "0" for n, t, s in twice), out
+    # and each row's torso excess over one body's, as measured and as the rule reads it (docs/runtime.md, "A torso of
+    # two people": the figures came from a script outside the repository before session 58's review F)
+    assert len(re.findall(TORSO_SPREAD, out, re.M)) == 2, out
+
+
+#: A row's torso line (``measure_two_people.torso_spread``): the passes, the excess's median, p90 and max, the neck to
+#: mid-hip's and the hips' max, and the rule's reading with the passes over the slack (and the margin, with none).
+TORSO_SPREAD = (r"^  the torso's largest excess over one body's \(two_people\.torso_excess\) on \d+ passes: median "
+                r"[-+][\d.]+, p90 [-+][\d.]+, max [-+][\d.]+ m \(neck to mid-hip max ([-+][\d.]+|none), a hip max "
+                r"([-+][\d.]+|none)\); as mixed_torso reads it \(along the line of sight over "
+                r"two_people\.depth_scale\): median [-+][\d.]+, max [-+][\d.]+ m, \d+ over the 0\.5 m slack"
+                r"(, the least margin under it [\d.]+ m)?$"
+                r"|^  the torso's excess over one body's: no pass with a torso limb strong in both views$")
 
 
 def test_measure_two_people_calibration(capsys, monkeypatch):
@@ -432,6 +445,24 @@ def test_measure_two_people_one_person(model, capsys, monkeypatch):
     counts = [int(c) for c in re.findall(r"\d+ joints: (\d+)", hist.group(1))]
     assert counts and sum(counts) == int(hist.group(2)) >= 3, out  # every pass counted, at least one a pair
     assert int(hist.group(3)) <= int(hist.group(2)), out  # (session 58: docs/runtime.md, "A torso of two people")
+    assert re.search(TORSO_SPREAD, out, re.M), out
+
+
+def test_measure_two_people_one_person_at_the_working_volume_s_ends(model, capsys, monkeypatch):
+    # docs/runtime.md, "A torso of two people": one person at the ends and corners of the working volume
+    # (test_model_extremes' places), each place's flags and torso excess (session 58's review F)
+    out = run_script("measure_two_people", "--one-person-model", model, "--ends", "--scenes", "1", "--frames", "2",
+                     "--motions", "wave,squat", capsys=capsys, monkeypatch=monkeypatch)
+    places = re.findall(r"^one person at \(([-\d.]+), ([\d.]+)\), .* at the defaults, 1 scenes of wave/squat x 2 "
+                        r"pairs: \d+ of 4 pairs flagged several_people, [\d.]+ % of joints found; ", out, re.M)
+    assert places == [("0", "2"), ("0", "4"), ("-0.8", "2"), ("0.8", "2"), ("-0.8", "4"), ("0.8", "4")], out
+    spread = TORSO_SPREAD.replace("^  ", "; ")
+    assert len(re.findall(spread, out, re.M)) == 6, out
+    out = run_script_failing("measure_two_people", "--ends", capsys=capsys, monkeypatch=monkeypatch)
+    assert "--ends places one person through a model: give --one-person-model DIR" in out, out
+    out = run_script_failing("measure_two_people", "--one-person-model", model, "--ends", "--motions", "wave,hop",
+                             capsys=capsys, monkeypatch=monkeypatch)
+    assert "--motions: hop not among stand, walk, wave" in out, out
 
 
 def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
