@@ -1637,7 +1637,8 @@ def test_cameras_that_never_deliver_the_rig_files_size_stop_the_daemon_as_a_bad_
            "so the rig file was most likely calibrated at another resolution of this camera" in message
     assert "have the camera deliver 640x480 (a webcam offers its larger sizes only compressed: add fourcc=MJPG to " \
            "the URL) or calibrate again at 320x240 (ghcal, docs/calibration.md)" in message
-    assert "the same on 3 opens in a row" in message
+    assert message.endswith("(the same on 3 opens in a row, the cameras never having delivered the rig's size: a rig "
+                            "file that does not fit them, which no restart fixes)"), message
     assert run.daemon.health.rig_open_failures == 3 and run.daemon.health.rig_opens == 0
     report = json.loads((tmp_path / "status.json").read_text())
     assert report["last_error"] == f"stopped by DaemonStartError: {message}"
@@ -1691,7 +1692,15 @@ def test_a_depthai_device_that_never_delivers_the_rigs_size_stops_the_daemon_too
     assert str(error).startswith("rig.url 'depthai://?width=160&height=100&mount_height=1.2': depthai device ")
     assert "camera 'left' delivered 320x200, but its rig camera (the device's calibration, at the width=/height= " \
            "asked) is 160x100" in str(error) and "the same on 3 opens in a row" in str(error)
+    # no rig= in the URL: the size asked is at fault, not a rig file (the stop blamed one the URL did not name)
+    assert str(error).endswith("never having delivered the rig's size: a size asked that they do not deliver, which "
+                               "no restart fixes)"), str(error)
+    assert "rig file" not in str(error)
     assert run.daemon.health.rig_opens == 3 and run.daemon.health.pairs_read == 0
+    # each of the three opens lost at its first read, the last too (it read 2: the stop came before it was counted)
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert (report["rig"]["opens"], report["rig"]["lost"], report["rig"]["open_failures"]) == (3, 3, 0)
+    assert report["last_error"] == f"stopped by DaemonStartError: {error}"
 
 
 def test_a_depthai_device_that_delivered_the_rigs_size_is_reopened_when_it_changes(tmp_path, monkeypatch):
