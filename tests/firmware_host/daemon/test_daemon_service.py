@@ -9,6 +9,7 @@ for events, never asserting how long something took.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -18,7 +19,7 @@ import stat
 import threading
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Optional
 
 import numpy as np
 import pytest
@@ -1658,10 +1659,11 @@ def test_a_camera_that_changes_size_is_retried_once_it_delivered_the_rigs(tmp_pa
     assert run.daemon.health.rig_opens == 1 and "delivered 320x240" in run.daemon.health.last_error
 
 
-def _depthai_rig(tmp_path: Path, monkeypatch, sizes: Callable[[int], tuple[int, int]]):
+def _depthai_rig(tmp_path: Path, monkeypatch, sizes: Callable[[int], Optional[tuple[int, int]]], **rig):
     """A daemon config on a ``depthai://`` stand-in (no device: tests/drivers/depthai_host.py) whose open number k
-    (0, 1, ...) streams a few groups of ``sizes(k)``, whatever size it was asked for, then nothing; the model stood
-    in for. Returns the config and the link factory."""
+    (0, 1, ...) streams a few groups of ``sizes(k)`` (None: none, a silent device), whatever size it was asked for,
+    then nothing; the model stood in for; ``rig``: more of the config's rig section. Returns the config and the
+    link factory."""
     import firmware_host.daemon.service as service
     from tests.drivers.depthai_host import ScriptedLink, image_group
 
@@ -1672,10 +1674,10 @@ def _depthai_rig(tmp_path: Path, monkeypatch, sizes: Callable[[int], tuple[int, 
     class Sized(ScriptedLink):
         def start(self, request) -> None:
             opens.append(sizes(len(opens)))
-            self.groups = [image_group(ix, opens[-1]) for ix in self.indices]
+            self.groups = [] if opens[-1] is None else [image_group(ix, opens[-1]) for ix in self.indices]
 
     cfg = _config({"url": "depthai://?width=160&height=100&mount_height=1.2", "reopen_min_s": 0.01,
-                   "reopen_max_s": 0.05, "read_timeout_s": 0.05, "stall_s": 0.3}, tmp_path)
+                   "reopen_max_s": 0.05, "read_timeout_s": 0.05, "stall_s": 0.3, **rig}, tmp_path)
     return cfg, lambda: Sized([(k, k) for k in range(6)])
 
 
@@ -1712,3 +1714,33 @@ def test_a_depthai_device_that_delivered_the_rigs_size_is_reopened_when_it_chang
         assert run.thread.is_alive()
         assert run.finish() == 0
     assert run.daemon.health.pairs_read >= 1 and "delivered 320x200" in run.daemon.health.last_error
+
+
+def test_the_opens_in_a_row_start_again_after_a_rig_lost_otherwise_or_a_new_rig_url(tmp_path, monkeypatch):
+    """SIZE_MISMATCH_OPENS counts opens in a row: a device lost for another reason between them (silent for
+    rig.stall_s) starts the count again, and so does a reload that sets another rig.url (its cameras and rig file are
+    judged afresh); a reload that leaves rig.url as it was keeps it. Sizes 320x200 where 160x100 is asked."""
+    wrong = (320, 200)
+    # opens 0, 1 of the wrong size, 2 silent, then the wrong size again: three more opens before the stop
+    cfg, link = _depthai_rig(tmp_path, monkeypatch, lambda k: None if k == 2 else wrong)
+    with _Running(cfg, tmp_path, rig_kwargs={"link_factory": link}) as run:
+        run.thread.join(timeout=20)
+        assert not run.thread.is_alive()
+    assert isinstance(run.rc[0], DaemonStartError) and "the same on 3 opens in a row" in str(run.rc[0])
+    assert run.daemon.health.rig_opens == 6 and run.daemon.health.rig_lost == 6
+
+    for new_url, opens in ((False, 3), (True, 2 + 3)):
+        # a second's backoff, for the reload to land between opens 1 and 2; the reloaded config's is short
+        folder = tmp_path / f"reload_{new_url}"  # a notify socket and status file of its own
+        folder.mkdir()
+        cfg, link = _depthai_rig(folder, monkeypatch, lambda k: wrong, reopen_min_s=1.0, reopen_max_s=1.0)
+        reloaded = dataclasses.replace(cfg, rig=dataclasses.replace(
+            cfg.rig, reopen_min_s=0.01, reopen_max_s=0.05,
+            url="depthai://?width=160&height=100&mount_height=1.3" if new_url else cfg.rig.url))
+        with _Running(cfg, folder, rig_kwargs={"link_factory": link}, reload_config=lambda: reloaded) as run:
+            wait_until(lambda: run.daemon.health.rig_lost >= 2, timeout=20, what="two opens of the wrong size")
+            run.daemon.request_reload()
+            run.thread.join(timeout=20)
+            assert not run.thread.is_alive()
+        assert isinstance(run.rc[0], DaemonStartError), run.rc
+        assert run.daemon.health.reloads == 1 and run.daemon.health.rig_opens == opens, reloaded.rig.url
