@@ -30,6 +30,7 @@ from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX
     DAEMON_PATH_KEYS
 from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, READS_PER_PAIR
 from firmware_host.daemon.memory import MMAP_THRESHOLD
+from firmware_host.daemon.service import SIZE_MISMATCH_OPENS
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STALL_S, MAX_STATUS_S, MIN_STALL_S, MIN_STATUS_S, SinkOptions
@@ -172,6 +173,9 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"runs pairs until {DEFAULT_PAIRS} of them (`--measure-floor PAIRS`)"),
     ("docs/calibration.md", f"fewer than PAIRS of {dict([(5, 'five')]).get(READS_PER_PAIR)} times as many"),
     ("docs/daemon.md", f"until PAIRS ({DEFAULT_PAIRS}) of them"),
+    # session 58: the opens in a row that stop the daemon on frames of another size than the rig file's
+    ("docs/daemon.md", f"the same size on `SIZE_MISMATCH_OPENS` ({SIZE_MISMATCH_OPENS}) opens"),
+    ("docs/daemon.md", f"(the same on {SIZE_MISMATCH_OPENS} opens in a row"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read

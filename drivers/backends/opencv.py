@@ -414,7 +414,9 @@ def rig_size_message(camera: str, shown: str, delivered: tuple[int, int], expect
     (dw, dh), (rw, rh) = delivered, expected
     where = f"its rig camera in {rig_file}" if rig_file else "its rig camera"
     message = f"camera {camera!r} ({shown}) delivered {dw}x{dh}, but {where} is {rw}x{rh}"
-    if abs(dw * rh - dh * rw) <= 0.01 * rw * rh:  # the same aspect ratio, to 1 % (854x480 against 1280x720)
+    # the same aspect ratio, to 1 % of the rig's (854x480 against 1280x720): |dw/dh - rw/rh| <= 0.01 rw/rh, times
+    # dh*rh. Measured against rw*rh the tolerance grew with the scale down (4 % at a quarter of the size)
+    if abs(dw * rh - dh * rw) <= 0.01 * dh * rw:
         message += (f": the same shape at {dw / rw:.3g} times the size, so the rig file was most likely calibrated "
                     f"at another resolution of this camera")
     else:

@@ -14,15 +14,17 @@ main loop progresses and logs without timestamps (the journal adds its own).
 
 ``--validate-config`` runs the checks the start runs before READY (the model loaded and the estimator
 built for a stand-in rig) without opening the rig or a sink, so a config it passes does not exit 2 at start
-(bar a rig the model cannot run on, known when it opens). ``--no-model`` leaves the model unloaded, for a
-machine without it.
+(bar a rig the model cannot run on, and live cameras that never deliver the rig file's size: known when they open;
+``opencv://`` videos of another size it refuses). ``--no-model`` leaves the model unloaded, for a machine without
+it.
 
 ``--measure-floor [PAIRS]`` (default 60) opens the rig and the model as the start does (no sink), runs pairs with
 someone standing until PAIRS of them measured the lower foot (``PairResult.lowest_foot_m``), prints the measurement
 as JSON with the ``estimator.joints3d.foot_standing_m`` to set (shoes' soles, a mat: docs/calibration.md, "Shoes,
 mats: the standing foot") and exits: 0 measured; 1 not (too few feet seen, feet off any floor, no pair for
 ``rig.stall_s``, a rig that did not open or failed); 2 for what the start exits 2 for (a bad config, a model that does
-not load, a rig URL its backend refuses, a rig the model cannot run on); 130 after Ctrl-C, 143 after SIGTERM (stopped
+not load, a rig URL its backend refuses, a rig the model cannot run on, cameras that deliver another size than the
+rig's before any pair: one open, where the start tries three); 130 after Ctrl-C, 143 after SIGTERM (stopped
 as the daemon stops, between two reads: the rig and the estimator closed, one line). Pairs with two people in view
 are read past. Stop the service first (it holds the cameras).
 
@@ -35,7 +37,8 @@ met by that read, one after it becomes a reload once the daemon runs.
 
 Exit status: 0 after SIGTERM / SIGINT or the end of a recording; 2 for what a restart cannot fix
 (a bad config, a sink URL, a model that does not load or cannot serve the estimator's settings: the
-message names the file or part and the key), which the unit file keeps systemd from restarting; 1 for
+message names the file or part and the key; a rig the model cannot run on, or cameras that never deliver the rig
+file's size, once the rig opens: ``SIZE_MISMATCH_OPENS``), which the unit file keeps systemd from restarting; 1 for
 an unexpected error, which it restarts.
 """
 from __future__ import annotations
@@ -416,7 +419,8 @@ def _measure_floor(path: str, pairs: int) -> int:
     128 + the signal's number when SIGTERM or SIGINT stopped it (130 Ctrl-C, 143 SIGTERM: the shell's figures).
 
     :raises DaemonConfigError: naming the file and the key (a bad config, a model that does not load, a rig the
-        model cannot run on: what the start exits 2 for).
+        model cannot run on, cameras that deliver another size than the rig's before any pair: what the start exits
+        2 for).
     """
     with _stdout_for_the_json_alone():  # a depthai:// URL loads depthai, which may log to stdout
         config = read_checked_config(path)

@@ -72,7 +72,7 @@ from typing import TYPE_CHECKING, Any, Callable, Optional
 import numpy as np
 
 import drivers
-from drivers.url import redact_url
+from drivers.url import RigUrl, redact_url
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
 from firmware_host.daemon.health import Health, State, write_status_file
 from firmware_host.daemon.memory import pin_mmap_threshold, return_freed_memory
@@ -408,9 +408,13 @@ class Daemon:
         sizes, count = {**sizes, error.camera: seen}, count + 1
         self._size_mismatches = (sizes, count)
         if count >= SIZE_MISMATCH_OPENS:
+            # without rig= (depthai:// on the device's calibration, at the width=/height= asked) no rig file is at
+            # fault: the size asked is one the cameras do not deliver
+            named = RigUrl.parse(self.config.rig.url).options.get("rig")
+            fault = "a rig file that does not fit them" if named else "a size asked that they do not deliver"
             raise DaemonStartError(
                 f"rig.url {self.health.rig_url!r}: {error} (the same on {count} opens in a row, the cameras never "
-                f"having delivered the rig's size: a rig file that does not fit them, which no restart fixes)"
+                f"having delivered the rig's size: {fault}, which no restart fixes)"
             ) from None
 
     def _close_rig(self, source: Optional[drivers.RigSource]) -> None:
@@ -480,9 +484,10 @@ class Daemon:
             except drivers.RigOperationError as e:
                 if isinstance(e, drivers.FrameSizeError) and not self._size_fitted:
                     # a first frame of another size than the rig's (depthai:// checks them as they are read, after
-                    # its open): as an open failing on it, counted towards SIZE_MISMATCH_OPENS
-                    self._check_size_mismatch(e)
+                    # its open): as an open failing on it, counted towards SIZE_MISMATCH_OPENS. Lost first, so that
+                    # the status file's rig.lost counts the last of them too, as rig.open_failures does opencv://'s
                     self._lost(f"the rig failed: {e}", size_counted=True)
+                    self._check_size_mismatch(e)
                     return False
                 # A frame the backend could not deliver (a corrupt image in a recording, a malformed device
                 # message) is raised once and the next read goes on (RigSource.read): reopening for it played a

@@ -201,7 +201,10 @@ def host_port(u: SinkUrl, default_port: Optional[int] = None) -> tuple[str, int]
     if not host:
         # udp://:9870 is the listener's form (every interface), copied into a sink's config: say what a sink takes
         listener = " (udp://:PORT, every interface, is how ghnerf-listen listens)" if u.scheme == "udp" else ""
-        hint = hint or f"; a sink sends to one receiver, e.g. {u.scheme}://127.0.0.1:{port_text or 9870}{listener}"
+        # the port as written where it is one, else the scheme's own (vmc://'s 39539, not the joint stream's 9870)
+        example = port_text if port_text.isascii() and port_text.isdigit() and 0 < int(port_text) <= 65535 \
+            else default_port or 9870
+        hint = hint or f"; a sink sends to one receiver, e.g. {u.scheme}://127.0.0.1:{example}{listener}"
         raise SinkConfigError(u.url, "host", "", "missing host" + hint)
     problem = host_name_problem(host)
     if problem:

@@ -417,6 +417,21 @@ def test_a_webcam_of_another_shape_than_its_rig_camera_fails_the_open_saying_so(
     assert (caught.value.expected, caught.value.delivered) == ((480, 300), (640, 480))
 
 
+@pytest.mark.parametrize("delivered, expected, same", [
+    ((854, 480), (1280, 720), True),  # 1.779 against 1.778: a resolution of the same sensor
+    ((640, 400), (1280, 800), True),
+    # 1.82:1 against 1.78:1 (2.3 % apart) at a quarter of the size: read as the same shape while the tolerance was 1 %
+    # of the rig's width times height, which grew with the scale down
+    ((320, 176), (1280, 720), False),
+    ((160, 100), (1920, 1080), False),  # 1.6:1 against 1.78:1, a twelfth of the size
+])
+def test_the_same_shape_means_the_same_aspect_ratio_to_1_percent_at_any_scale(delivered, expected, same):
+    from drivers.backends.opencv import rig_size_message
+
+    said = rig_size_message("left", "/dev/video0", delivered, expected, rig_file="rig.json", live=True)
+    assert (": the same shape at " in said) is same and (": another shape (" in said) is not same, said
+
+
 def test_a_camera_that_delivers_nothing_fails_the_open_naming_it(webcam):
     webcam.frames = 0
     with pytest.raises(RigInitializationError, match=r"opened but delivered no frame .*fourcc=MJPG"):

@@ -2,6 +2,7 @@
 named, never taken as something else (a relative path, a random port, one of two bauds) or ignored."""
 from __future__ import annotations
 
+import re
 from urllib.parse import urlsplit
 
 import pytest
@@ -133,6 +134,20 @@ def test_a_missing_or_bad_host_or_port_names_what_was_written_and_what_to_write(
     e = _refused(url)
     assert (e.field, e.value) == (field, value)
     assert says in str(e) and f"invalid {field}={value!r}" in str(e)
+
+
+@pytest.mark.parametrize("url, example", [
+    ("vmc://", "vmc://127.0.0.1:39539"),  # VMC's port, not the joint stream's 9870
+    ("vmc://:", "vmc://127.0.0.1:39539"),
+    ("udp://:abc", "udp://127.0.0.1:9870"),  # not a port: the example was udp://127.0.0.1:abc
+    ("udp://:98700", "udp://127.0.0.1:9870"),  # out of range: the example was udp://127.0.0.1:98700
+    ("udp://:9871", "udp://127.0.0.1:9871"),  # the port as written, where it is one
+])
+def test_a_missing_host_s_example_is_a_url_the_sink_takes(url, example):
+    e = _refused(url)
+    assert (e.field, e.value) == ("host", "")
+    assert re.search(rf"a sink sends to one receiver, e\.g\. {re.escape(example)}( |$)", str(e)), str(e)
+    open_sink(example).close(0.5)  # a URL the sink takes (UDP: nothing need listen)
 
 
 def test_host_port_decodes_a_zone_and_takes_a_trailing_slash():

@@ -9,6 +9,7 @@ for events, never asserting how long something took.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -18,7 +19,7 @@ import stat
 import threading
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Optional
 
 import numpy as np
 import pytest
@@ -1637,7 +1638,8 @@ def test_cameras_that_never_deliver_the_rig_files_size_stop_the_daemon_as_a_bad_
            "so the rig file was most likely calibrated at another resolution of this camera" in message
     assert "have the camera deliver 640x480 (a webcam offers its larger sizes only compressed: add fourcc=MJPG to " \
            "the URL) or calibrate again at 320x240 (ghcal, docs/calibration.md)" in message
-    assert "the same on 3 opens in a row" in message
+    assert message.endswith("(the same on 3 opens in a row, the cameras never having delivered the rig's size: a rig "
+                            "file that does not fit them, which no restart fixes)"), message
     assert run.daemon.health.rig_open_failures == 3 and run.daemon.health.rig_opens == 0
     report = json.loads((tmp_path / "status.json").read_text())
     assert report["last_error"] == f"stopped by DaemonStartError: {message}"
@@ -1657,10 +1659,11 @@ def test_a_camera_that_changes_size_is_retried_once_it_delivered_the_rigs(tmp_pa
     assert run.daemon.health.rig_opens == 1 and "delivered 320x240" in run.daemon.health.last_error
 
 
-def _depthai_rig(tmp_path: Path, monkeypatch, sizes: Callable[[int], tuple[int, int]]):
+def _depthai_rig(tmp_path: Path, monkeypatch, sizes: Callable[[int], Optional[tuple[int, int]]], **rig):
     """A daemon config on a ``depthai://`` stand-in (no device: tests/drivers/depthai_host.py) whose open number k
-    (0, 1, ...) streams a few groups of ``sizes(k)``, whatever size it was asked for, then nothing; the model stood
-    in for. Returns the config and the link factory."""
+    (0, 1, ...) streams a few groups of ``sizes(k)`` (None: none, a silent device), whatever size it was asked for,
+    then nothing; the model stood in for; ``rig``: more of the config's rig section. Returns the config and the
+    link factory."""
     import firmware_host.daemon.service as service
     from tests.drivers.depthai_host import ScriptedLink, image_group
 
@@ -1671,10 +1674,10 @@ def _depthai_rig(tmp_path: Path, monkeypatch, sizes: Callable[[int], tuple[int, 
     class Sized(ScriptedLink):
         def start(self, request) -> None:
             opens.append(sizes(len(opens)))
-            self.groups = [image_group(ix, opens[-1]) for ix in self.indices]
+            self.groups = [] if opens[-1] is None else [image_group(ix, opens[-1]) for ix in self.indices]
 
     cfg = _config({"url": "depthai://?width=160&height=100&mount_height=1.2", "reopen_min_s": 0.01,
-                   "reopen_max_s": 0.05, "read_timeout_s": 0.05, "stall_s": 0.3}, tmp_path)
+                   "reopen_max_s": 0.05, "read_timeout_s": 0.05, "stall_s": 0.3, **rig}, tmp_path)
     return cfg, lambda: Sized([(k, k) for k in range(6)])
 
 
@@ -1691,7 +1694,15 @@ def test_a_depthai_device_that_never_delivers_the_rigs_size_stops_the_daemon_too
     assert str(error).startswith("rig.url 'depthai://?width=160&height=100&mount_height=1.2': depthai device ")
     assert "camera 'left' delivered 320x200, but its rig camera (the device's calibration, at the width=/height= " \
            "asked) is 160x100" in str(error) and "the same on 3 opens in a row" in str(error)
+    # no rig= in the URL: the size asked is at fault, not a rig file (the stop blamed one the URL did not name)
+    assert str(error).endswith("never having delivered the rig's size: a size asked that they do not deliver, which "
+                               "no restart fixes)"), str(error)
+    assert "rig file" not in str(error)
     assert run.daemon.health.rig_opens == 3 and run.daemon.health.pairs_read == 0
+    # each of the three opens lost at its first read, the last too (it read 2: the stop came before it was counted)
+    report = json.loads((tmp_path / "status.json").read_text())
+    assert (report["rig"]["opens"], report["rig"]["lost"], report["rig"]["open_failures"]) == (3, 3, 0)
+    assert report["last_error"] == f"stopped by DaemonStartError: {error}"
 
 
 def test_a_depthai_device_that_delivered_the_rigs_size_is_reopened_when_it_changes(tmp_path, monkeypatch):
@@ -1703,3 +1714,33 @@ def test_a_depthai_device_that_delivered_the_rigs_size_is_reopened_when_it_chang
         assert run.thread.is_alive()
         assert run.finish() == 0
     assert run.daemon.health.pairs_read >= 1 and "delivered 320x200" in run.daemon.health.last_error
+
+
+def test_the_opens_in_a_row_start_again_after_a_rig_lost_otherwise_or_a_new_rig_url(tmp_path, monkeypatch):
+    """SIZE_MISMATCH_OPENS counts opens in a row: a device lost for another reason between them (silent for
+    rig.stall_s) starts the count again, and so does a reload that sets another rig.url (its cameras and rig file are
+    judged afresh); a reload that leaves rig.url as it was keeps it. Sizes 320x200 where 160x100 is asked."""
+    wrong = (320, 200)
+    # opens 0, 1 of the wrong size, 2 silent, then the wrong size again: three more opens before the stop
+    cfg, link = _depthai_rig(tmp_path, monkeypatch, lambda k: None if k == 2 else wrong)
+    with _Running(cfg, tmp_path, rig_kwargs={"link_factory": link}) as run:
+        run.thread.join(timeout=20)
+        assert not run.thread.is_alive()
+    assert isinstance(run.rc[0], DaemonStartError) and "the same on 3 opens in a row" in str(run.rc[0])
+    assert run.daemon.health.rig_opens == 6 and run.daemon.health.rig_lost == 6
+
+    for new_url, opens in ((False, 3), (True, 2 + 3)):
+        # a second's backoff, for the reload to land between opens 1 and 2; the reloaded config's is short
+        folder = tmp_path / f"reload_{new_url}"  # a notify socket and status file of its own
+        folder.mkdir()
+        cfg, link = _depthai_rig(folder, monkeypatch, lambda k: wrong, reopen_min_s=1.0, reopen_max_s=1.0)
+        reloaded = dataclasses.replace(cfg, rig=dataclasses.replace(
+            cfg.rig, reopen_min_s=0.01, reopen_max_s=0.05,
+            url="depthai://?width=160&height=100&mount_height=1.3" if new_url else cfg.rig.url))
+        with _Running(cfg, folder, rig_kwargs={"link_factory": link}, reload_config=lambda: reloaded) as run:
+            wait_until(lambda: run.daemon.health.rig_lost >= 2, timeout=20, what="two opens of the wrong size")
+            run.daemon.request_reload()
+            run.thread.join(timeout=20)
+            assert not run.thread.is_alive()
+        assert isinstance(run.rc[0], DaemonStartError), run.rc
+        assert run.daemon.health.reloads == 1 and run.daemon.health.rig_opens == opens, reloaded.rig.url
