@@ -176,6 +176,9 @@ def _doc(name: str) -> str:
     # session 58: the opens in a row that stop the daemon on frames of another size than the rig file's
     ("docs/daemon.md", f"the same size on `SIZE_MISMATCH_OPENS` ({SIZE_MISMATCH_OPENS}) opens"),
     ("docs/daemon.md", f"(the same on {SIZE_MISMATCH_OPENS} opens in a row"),
+    ("docs/daemon.md", f"before any pair on `SIZE_MISMATCH_OPENS` ({SIZE_MISMATCH_OPENS}) opens in a row, as the "
+                       f"daemon"),
+    ("docs/daemon.md", f"then \"(on {SIZE_MISMATCH_OPENS} opens in a row, ...)\""),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read

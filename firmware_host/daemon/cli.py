@@ -24,7 +24,7 @@ as JSON with the ``estimator.joints3d.foot_standing_m`` to set (shoes' soles, a 
 mats: the standing foot") and exits: 0 measured; 1 not (too few feet seen, feet off any floor, no pair for
 ``rig.stall_s``, a rig that did not open or failed); 2 for what the start exits 2 for (a bad config, a model that does
 not load, a rig URL its backend refuses, a rig the model cannot run on, cameras that deliver another size than the
-rig's before any pair: one open, where the start tries three); 130 after Ctrl-C, 143 after SIGTERM (stopped
+rig's before any pair on the start's ``SIZE_MISMATCH_OPENS`` opens); 130 after Ctrl-C, 143 after SIGTERM (stopped
 as the daemon stops, between two reads: the rig and the estimator closed, one line). Pairs with two people in view
 are read past. Stop the service first (it holds the cameras).
 

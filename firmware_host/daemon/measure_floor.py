@@ -28,6 +28,7 @@ import numpy as np
 
 import drivers
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError
+from firmware_host.daemon.service import SIZE_MISMATCH_OPENS, size_mismatch_fault
 from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.config import MAX_FOOT_STANDING_M
 from ghnerf_runtime.errors import FrameError, RuntimeErrorBase
@@ -52,6 +53,16 @@ class FloorMeasureStopped(FloorMeasureError):
         super().__init__(f"--measure-floor stopped before {pairs_wanted} pairs measured a foot ({feet} did, of "
                          f"{pairs_read} read): nothing to set")
         self.pairs_read, self.feet = pairs_read, feet
+
+
+class _FramesOfAnotherSize(DaemonConfigError):
+    """Keyed ``rig.url``: ``error`` (a ``drivers.FrameSizeError``) before any pair of the rig's size, at the open or
+    at the first read (``depthai://``); :func:`measure_floor_of_config` opens again on it, as the daemon's start
+    does."""
+
+    def __init__(self, error: drivers.FrameSizeError) -> None:
+        super().__init__(str(error), key="rig.url")
+        self.error = error
 
 
 class _Estimates(Protocol):
@@ -153,8 +164,9 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
         except drivers.RigOperationError as e:
             if isinstance(e, drivers.FrameSizeError) and read == 0:
                 # no pair yet of the rig's size (depthai:// checks it as frames are read, after its open): a rig that
-                # does not fit the cameras, as at an open (measure_floor_of_config); the daemon stops on it (exit 2)
-                raise DaemonConfigError(str(e), key="rig.url") from None
+                # does not fit the cameras, as at an open (measure_floor_of_config, which opens again on it, as the
+                # daemon does, up to SIZE_MISMATCH_OPENS); the daemon stops on it then (exit 2)
+                raise _FramesOfAnotherSize(e) from None
             if read_failed:  # twice before a pair: the rig itself failed
                 raise
             read_failed = True
@@ -196,28 +208,55 @@ def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,
     ``DaemonConfigError``; ``rig_kwargs`` to :func:`drivers.create_rig_source`, tests pass a clock). ``stop`` set
     while the model loads: the rig is not opened. The rig and the estimator are closed however it ends.
 
+    Cameras that deliver another size than the rig's before any pair (``drivers.FrameSizeError`` at the open, or at
+    the first read for ``depthai://``) are opened again, after the daemon's backoff (``rig.reopen_min_s`` doubling
+    to ``rig.reopen_max_s``), up to the daemon's ``SIZE_MISMATCH_OPENS`` opens in all: a webcam that comes up in
+    another mode before it takes the size asked is not a rig file that does not fit.
+
     :raises DaemonConfigError: as the daemon's start exits 2 for it: the model does not load (``load_model``), a
-        rig URL its backend refuses once opened, cameras that deliver another size than the rig's (both keyed
-        ``rig.url``), a rig the model cannot run on.
+        rig URL its backend refuses once opened, cameras that deliver another size than the rig's on
+        ``SIZE_MISMATCH_OPENS`` opens in a row (both keyed ``rig.url``), a rig the model cannot run on.
     :raises FloorMeasureError: as :func:`measure_floor` (:class:`FloorMeasureStopped` for ``stop``).
     :raises drivers.DriverError: the rig did not open, or failed.
     """
     from ghnerf_runtime.estimator import Estimator  # the model's runtime: only once the config checked out
 
     session = load_model(config)
-    if stop is not None and stop.is_set():  # SIGTERM while the model loaded: no camera opened for nothing
-        raise FloorMeasureStopped(pairs)
+    stop = threading.Event() if stop is None else stop  # waited on between opens
+    backoff_s = config.rig.reopen_min_s
+    for opens in range(1, SIZE_MISMATCH_OPENS + 1):
+        if stop.is_set():  # SIGTERM while the model loaded, or between opens: no camera opened for nothing
+            raise FloorMeasureStopped(pairs)
+        try:
+            return _measure_on_one_open(config, pairs, session, Estimator, rig_kwargs, stop)
+        except _FramesOfAnotherSize as e:
+            if opens == SIZE_MISMATCH_OPENS:
+                raise DaemonConfigError(
+                    f"{e.error} (on {opens} opens in a row, the cameras never having delivered the rig's size: "
+                    f"{size_mismatch_fault(config.rig.url)})", key="rig.url") from None
+            stop.wait(backoff_s)
+            backoff_s = min(backoff_s * 2, config.rig.reopen_max_s)
+    raise AssertionError("unreachable: the last open returns or raises")
+
+
+def _measure_on_one_open(config: DaemonConfig, pairs: int, session: Any, estimator_class: Any,
+                         rig_kwargs: Optional[dict[str, Any]], stop: threading.Event) -> FloorMeasurement:
+    """One open of the rig and one estimator for :func:`measure_floor_of_config`, both closed however it ends.
+
+    :raises _FramesOfAnotherSize: cameras of another size than the rig's, before any pair.
+    """
     with ExitStack() as closing:
         try:
             source = drivers.create_rig_source(config.rig.url, **(rig_kwargs or {}))
             closing.push(source)  # closed on the way out, an open that failed half way too (as the daemon does)
             source.open()
-        except (drivers.RigConfigError, drivers.BackendNotAvailableError, drivers.FrameSizeError) as e:
-            # the daemon's start exits 2 for these (no reopen fixes them: for cameras that deliver another size than
-            # the rig file's, once three opens in a row said so; this opens once); other driver errors are the rig's
+        except drivers.FrameSizeError as e:  # reopened by the caller, as the daemon's start reopens
+            raise _FramesOfAnotherSize(e) from None
+        except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:
+            # the daemon's start exits 2 for these (no reopen fixes them); other driver errors are the rig's
             raise DaemonConfigError(str(e), key="rig.url") from None
         try:
-            est = Estimator(session, source.rig, config.estimator)
+            est = estimator_class(session, source.rig, config.estimator)
         except (RuntimeErrorBase, ValueError) as e:  # as the daemon's start: a rig the model cannot run on (exit 2)
             raise DaemonConfigError(f"the model does not fit rig {source.rig.rig_id!r}: {e}") from None
         closing.enter_context(est)

@@ -94,7 +94,7 @@ from ghnerf_runtime.rig_file import dumps_rig
 if TYPE_CHECKING:  # onnxruntime is imported with the session, when a model loads
     from ghnerf_runtime.session import ModelSession
 
-__all__ = ["Daemon", "DaemonStartError", "check_sink_urls", "load_model", "check_estimator"]
+__all__ = ["Daemon", "DaemonStartError", "check_sink_urls", "load_model", "check_estimator", "size_mismatch_fault"]
 
 
 #: The parts of the config a reload tells apart ("rig": its fields but the url).
@@ -143,6 +143,14 @@ MAX_FAILED_RUNS = 30
 #: resolution), which no retry fixes. The daemon stops (exit 2) instead of waiting for ever; one or two such opens
 #: are retried, for a webcam that comes up in another mode before it takes the size asked of it.
 SIZE_MISMATCH_OPENS = 3
+
+
+def size_mismatch_fault(rig_url: str) -> str:
+    """What cameras that never delivered the rig's size on ``SIZE_MISMATCH_OPENS`` opens of ``rig_url`` blame (the
+    daemon's stop, ``--measure-floor``'s): without ``rig=`` (``depthai://`` on the device's calibration, at the
+    ``width=``/``height=`` asked) no rig file is at fault, the size asked is one the cameras do not deliver."""
+    named = RigUrl.parse(rig_url).options.get("rig")
+    return "a rig file that does not fit them" if named else "a size asked that they do not deliver"
 
 
 class DaemonStartError(FirmwareHostError):
@@ -408,13 +416,9 @@ class Daemon:
         sizes, count = {**sizes, error.camera: seen}, count + 1
         self._size_mismatches = (sizes, count)
         if count >= SIZE_MISMATCH_OPENS:
-            # without rig= (depthai:// on the device's calibration, at the width=/height= asked) no rig file is at
-            # fault: the size asked is one the cameras do not deliver
-            named = RigUrl.parse(self.config.rig.url).options.get("rig")
-            fault = "a rig file that does not fit them" if named else "a size asked that they do not deliver"
             raise DaemonStartError(
                 f"rig.url {self.health.rig_url!r}: {error} (the same on {count} opens in a row, the cameras never "
-                f"having delivered the rig's size: {fault}, which no restart fixes)"
+                f"having delivered the rig's size: {size_mismatch_fault(self.config.rig.url)}, which no restart fixes)"
             ) from None
 
     def _close_rig(self, source: Optional[drivers.RigSource]) -> None:

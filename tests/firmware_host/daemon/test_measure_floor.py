@@ -241,7 +241,8 @@ def cli_rig(tmp_path, monkeypatch):
     import ghnerf_runtime.estimator
 
     path = tmp_path / "daemon.json"
-    path.write_text(json.dumps({"rig": {"url": "sim://", "read_timeout_s": 0.05, "stall_s": 0.5},
+    path.write_text(json.dumps({"rig": {"url": "sim://", "read_timeout_s": 0.05, "stall_s": 0.5,
+                                        "reopen_min_s": 0.01},
                                 "sinks": ["memory://"]}))
     monkeypatch.setattr(cli, "read_checked_config", lambda p: daemon_config_from_dict(json.loads(Path(p).read_text())))
     monkeypatch.setattr(cli, "load_model", lambda config: "session")
@@ -292,10 +293,12 @@ def test_sigterm_or_ctrl_c_stops_measure_floor_as_the_daemon_stops(cli_rig, caps
      "the model does not fit rig 'bench': models/ghnerf: the model is 256x192, this rig's cameras 320x240"),
     (None, drivers.RigConfigError("rig URL 'opencv://0,1?rig=r.json': camera 0 gives 640x480, rig file 320x240"),
      "rig.url: rig URL 'opencv://0,1?rig=r.json': camera 0 gives 640x480, rig file 320x240"),
-    # since session 58: the daemon stops on it (exit 2), where --measure-floor exited 1
+    # since session 58: the daemon stops on it (exit 2), where --measure-floor exited 1; on the third open, as the
+    # daemon (sim:// has no rig=: the size asked is at fault)
     (None, drivers.FrameSizeError("camera 'left' (/dev/video0) delivered 640x400, but its rig camera in r.json is "
                                   "1280x800", "left", (1280, 800), (640, 400)),
-     "rig.url: camera 'left' (/dev/video0) delivered 640x400, but its rig camera in r.json is 1280x800"),
+     "rig.url: camera 'left' (/dev/video0) delivered 640x400, but its rig camera in r.json is 1280x800 (on 3 opens "
+     "in a row, the cameras never having delivered the rig's size: a size asked that they do not deliver)"),
 ])
 def test_a_model_or_rig_that_the_start_refuses_exits_2_as_the_start_does(cli_rig, capsys, estimator_error,
                                                                           open_error, message):
@@ -309,6 +312,81 @@ def test_a_model_or_rig_that_the_start_refuses_exits_2_as_the_start_does(cli_rig
     assert cli.main(["--config", str(path), "--measure-floor", "5"]) == 2
     assert capsys.readouterr().err.strip() == f"ghnerf-daemon: error: {path}: {message}"
     assert source.opened and source.closed and source.reads == 0
+
+
+class _ComesUpInAnotherMode(_RigSource):
+    """A webcam whose first ``wrong`` opens deliver another size than the rig's (``at_read``: at the first read of
+    the open, as ``depthai://`` checks them; else at the open, as ``opencv://``), then the rig's. Counts opens."""
+
+    def __init__(self, wrong: int, at_read: bool = False) -> None:
+        super().__init__()
+        self.wrong, self.at_read, self.opens, self.closes = wrong, at_read, 0, 0
+
+    def _size_error(self) -> drivers.FrameSizeError:
+        return drivers.FrameSizeError("camera 'left' (/dev/video0) delivered 640x480, but its rig camera in r.json is "
+                                      "1280x800", "left", (1280, 800), (640, 480))
+
+    def open(self) -> "_RigSource":
+        self.opens += 1
+        self.opened = True
+        if self.opens <= self.wrong and not self.at_read:
+            raise self._size_error()
+        return self
+
+    def close(self) -> None:
+        self.closes += 1
+        super().close()
+
+    def read(self, timeout_s: float = 1.0) -> _Pair:
+        if self.opens <= self.wrong and self.at_read:
+            raise self._size_error()
+        return super().read(timeout_s)
+
+
+@pytest.mark.parametrize("at_read", [False, True], ids=["at the open", "at the first read"])
+def test_a_camera_of_another_size_on_the_first_open_only_is_opened_again_and_measured(cli_rig, capsys, at_read):
+    """The daemon's start opens again on frames of another size (up to ``SIZE_MISMATCH_OPENS``) before it blames the
+    rig file: a webcam may come up in another mode first. ``--measure-floor`` blamed the rig file (exit 2) on the
+    first such open; now it opens again, after the daemon's backoff, and measures."""
+    path, rig = cli_rig
+    source = _ComesUpInAnotherMode(wrong=1, at_read=at_read)
+    rig(source)
+    assert cli.main(["--config", str(path), "--measure-floor", "5"]) == 0
+    assert json.loads(capsys.readouterr().out)["pairs_with_a_foot"] == 5
+    assert (source.opens, source.closes) == (2, 2)  # the first open closed before the second
+
+
+@pytest.mark.parametrize("at_read", [False, True], ids=["at the open", "at the first read"])
+def test_a_camera_of_another_size_on_every_open_exits_2_after_the_daemon_s_opens(cli_rig, capsys, at_read):
+    from firmware_host.daemon.service import SIZE_MISMATCH_OPENS
+
+    path, rig = cli_rig
+    source = _ComesUpInAnotherMode(wrong=10 ** 6, at_read=at_read)
+    rig(source)
+    assert cli.main(["--config", str(path), "--measure-floor", "5"]) == 2
+    assert source.opens == source.closes == SIZE_MISMATCH_OPENS
+    assert capsys.readouterr().err.strip() == (
+        f"ghnerf-daemon: error: {path}: rig.url: camera 'left' (/dev/video0) delivered 640x480, but its rig camera in "
+        f"r.json is 1280x800 (on {SIZE_MISMATCH_OPENS} opens in a row, the cameras never having delivered the rig's "
+        f"size: a size asked that they do not deliver)")
+
+
+def test_a_stop_set_while_waiting_to_open_again_opens_no_more(monkeypatch):
+    stop = threading.Event()
+    source = _ComesUpInAnotherMode(wrong=10 ** 6)
+    created: list[str] = []
+
+    def create(url, **kwargs):
+        created.append(url)
+        stop.set()  # SIGTERM during the first open: the backoff ends at once and no second open comes
+        return source
+
+    monkeypatch.setattr(drivers, "create_rig_source", create)
+    config = daemon_config_from_dict({"rig": {"url": "sim://", "reopen_min_s": 30}, "sinks": ["memory://"]})
+    t0 = time.monotonic()
+    with pytest.raises(FloorMeasureStopped, match=r"\(0 did, of 0 read\)"):
+        measure_floor_of_config(config, 5, load_model=lambda c: "session", stop=stop)
+    assert created == ["sim://"] and source.opens == 1 and time.monotonic() - t0 < 10
 
 
 def test_stop_set_ends_the_measurement_before_the_next_read_or_before_the_rig_opens(monkeypatch):
