@@ -38,8 +38,8 @@ import numpy as np
 
 from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
-    load_config
-from ghnerf_runtime.errors import FrameError, ModelLoadError, RuntimeErrorBase
+    load_config, read_json_file
+from ghnerf_runtime.errors import ConfigError, FrameError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
@@ -279,6 +279,16 @@ def _ready(path: str, flag: str) -> str:
         raise UsageError(str(e)) from None
 
 
+def _config_names_model_dir(path: str | None) -> bool:
+    """Whether the config file at ``path`` (None: no ``--config``) names ``session.model_dir``; it was read already
+    (:func:`_config`), so an error reading it again is one ``ConfigError`` naming it."""
+    if not path:
+        return False
+    data = read_json_file(path, lambda message: ConfigError(message, key=str(path)))
+    session = data.get("session") if isinstance(data, dict) else None
+    return isinstance(session, dict) and "model_dir" in session
+
+
 def _run(args) -> int:
     cfg = _config(args)
     if args.validate_config:
@@ -290,10 +300,12 @@ def _run(args) -> int:
     try:
         estimator = Estimator.from_config(rig, cfg)
     except ModelLoadError as e:
-        if args.model_dir or args.config or Path(cfg.session.model_dir).exists():
+        if args.model_dir or Path(cfg.session.model_dir).exists() or _config_names_model_dir(args.config):
             raise
-        # the default ./models, run from outside the repository: say which option names the folder
-        raise UsageError(f"{e}; pass --model-dir (the repository's models/ holds the shipped model)") from None
+        # the default ./models (no --model-dir, no session.model_dir in --config), run from outside the repository:
+        # say which option names the folder
+        also = f" or session.model_dir in {args.config}" if args.config else ""
+        raise UsageError(f"{e}; pass --model-dir{also} (the repository's models/ holds the shipped model)") from None
     log.info("model %s", json.dumps(estimator.session.describe()))
     request = NovelViewRequest(alpha=args.novel_alpha, overlay=args.novel_overlay) if args.novel_view else None
     fps = 30.0

@@ -155,6 +155,25 @@ def test_the_default_model_folder_missing_names_the_option_that_gives_one(sim_pa
     assert err.rstrip().endswith("; pass --model-dir (the repository's models/ holds the shipped model)")
 
 
+def test_the_default_model_folder_missing_under_a_config_naming_none_names_the_option_too(sim_pair, tmp_path,
+                                                                                          monkeypatch, capsys):
+    """``--config FILE`` without ``session.model_dir`` reads the default ``./models`` as no config does: the hint to
+    pass ``--model-dir`` was left out for any ``--config``. A config that names a folder is at fault itself: no hint."""
+    monkeypatch.chdir(tmp_path)
+    cfg = tmp_path / "cfg.json"
+    cfg.write_text('{"joints3d": {"method": "volumetric"}}')
+    pair = ["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"], "--config", str(cfg)]
+    assert cli_run.main(pair) == 2
+    err = capsys.readouterr().err
+    assert f"model folder does not exist (read from the current directory {tmp_path})" in err
+    assert err.rstrip().endswith(f"; pass --model-dir or session.model_dir in {cfg} (the repository's models/ holds "
+                                 f"the shipped model)")
+    cfg.write_text('{"session": {"model_dir": "elsewhere"}}')
+    assert cli_run.main(pair) == 2
+    err = capsys.readouterr().err
+    assert str(tmp_path / "elsewhere") in err and "model folder does not exist" in err and "--model-dir" not in err
+
+
 def test_validate_config_prints_the_resolved_tree(tmp_path, capsys):
     cfg = tmp_path / "cfg.json"
     cfg.write_text('{"joints3d": {"method": "volumetric"}}')
