@@ -471,3 +471,37 @@ def test_the_readme_s_python_receiver_decodes_what_a_udp_sink_sends(monkeypatch)
     assert names["xyz_mm"].shape == (25, 3) and names["missing"].shape == (25,) and not names["missing"].any()
     stats = names["decoder"].stats
     assert stats.messages == len(frames) and sum(stats.errors.values()) == 1  # the cut datagram, and only it
+
+
+def test_the_readme_s_receiver_names_the_ipv6_socket_a_udp_sink_to_an_ipv6_host_needs():
+    """The README's receiver binds IPv4 only, which hears nothing from a udp:// sink to an IPv6 literal (or an
+    IPv6-only host), and did not say so; its comment's variant, run on a real socket, hears that sink."""
+    import re
+    from pathlib import Path
+
+    from firmware_host.protocol.decoder import StreamDecoder
+    from firmware_host.protocol.messages import Joints
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "StreamDecoder" in b)
+    assert re.search(r"^# IPv4 only: .*IPv6", block, re.M), "the receiver does not say it binds IPv4 only"
+    variant = re.search(r"socket\.(AF_INET6) and bind\(\(\"(::)\", 9870\)\)", block)
+    assert variant, "the receiver's comment names no IPv6 variant"
+    if not socket.has_ipv6:
+        pytest.skip("no IPv6 here: the variant cannot be run")
+    try:
+        rx = socket.socket(getattr(socket, variant[1]), socket.SOCK_DGRAM)
+    except OSError as e:
+        pytest.skip(f"no IPv6 socket here: {e}")
+    with rx:
+        try:
+            rx.bind((variant[2], 0))  # the README's port, 9870, may be taken on this machine
+        except OSError as e:
+            pytest.skip(f"cannot bind IPv6 here: {e}")
+        rx.settimeout(5.0)
+        with open_sink(f"udp://[::1]:{rx.getsockname()[1]}", rig_id="bench", cameras=("left", "right")) as sink:
+            sink.send(make_frame(0))
+        decoder, joints = StreamDecoder(), []
+        while not joints:
+            joints = [e.message for e in decoder.feed(rx.recv(2048) + b"\0") if isinstance(e.message, Joints)]
+    assert joints[0].xyz_mm.shape == (25, 3)
