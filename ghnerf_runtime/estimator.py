@@ -56,6 +56,9 @@ from typing import Any, Callable, Sequence
 
 import cv2
 import numpy as np
+# np.median (joints3d.triangulate_joints_checked, every pair) imports numpy.ma on its first call: 10-70 ms on
+# session 58's host, paid by the first pair a daemon streams unless imported here, at load
+import numpy.ma  # noqa: F401
 
 from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_INDEX, JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
