@@ -56,6 +56,9 @@ from typing import Any, Callable, Sequence
 
 import cv2
 import numpy as np
+# np.median (joints3d.triangulate_joints_checked, every pair) imports numpy.ma on its first call: 10-70 ms on
+# session 58's host, paid by the first pair a daemon streams unless imported here, at load
+import numpy.ma  # noqa: F401
 
 from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_INDEX, JOINT_NAMES
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
@@ -714,6 +717,9 @@ class Estimator:
         self._torso_excess = np.full((2, len(TORSO_LIMBS_M)), np.nan)
         _warn_if_not_levelled(rig)
         self._cams = [_CameraState(c, self._upright_roll(c)) for c in rig.pair]
+        # the two cameras' centres, (2, 3): the lines of sight of the turn rules and the torso rule's depth (a crop's
+        # turn or roll changes no camera's centre)
+        self._centres = np.stack([c.center for c in rig.pair]).astype(np.float64)
         self.tracker = SubjectTracker(rig, self.config.tracking, self.config.roi,
                                       (self._cams[0].roll_deg, self._cams[1].roll_deg))
         # roi.turn_search: each camera's crop turn (degrees on top of roi.upright's) and, per turn, the camera
@@ -723,8 +729,8 @@ class Estimator:
         self._turned_trackers: dict[tuple[int, int], SubjectTracker] = {(0, 0): self.tracker}
         self.turn_searches = 0  # weak passes that searched the turns, and those whose turned pass was kept
         self.turns_kept = 0
-        # turned passes that lay as no turn rights (lies_as_turned): a search's that found someone better than
-        # upright, and a kept turn's passes of someone found (_turn_misreads)
+        # turned passes that lay as no turn rights: a search's that found someone better than upright
+        # (lies_as_turned), and a kept turn's passes of someone found (lies_as_kept_turn, _turn_misreads)
         self.turns_refused = 0
         self._turn_search_wait = 0  # weak pairs left that do not search (roi.turn_search_every)
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
@@ -939,10 +945,11 @@ class Estimator:
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
                            cold_several=True if p.several_people else None)
         elif p.regions.tracked and self._turns != (0, 0) and self._turn_misreads(p):
-            # A tracked pass through a kept turn whose body lies as no turn rights (the person rolled onto a line
-            # of sight): the search would not keep it, nor is it kept here, nor is its track, which the crops would
-            # follow. The pair is read as after a lost track: cold, upright first, then searched when weak (the
-            # upright pass on this track's crops read a skeleton about 1 m off, tracked, in bench scene 10).
+            # A tracked pass through a kept turn whose body lies as the turn does not right (lies_as_kept_turn: the
+            # person rolled onto a line of sight): the search would not keep it, nor is it kept here, nor is its
+            # track, which the crops would follow. The pair is read as after a lost track: cold, upright first, then
+            # searched when weak (the upright pass on this track's crops read a skeleton about 1 m off, tracked, in
+            # bench scene 10).
             if p.novel is not None:
                 p.novel.abandon()
             self._use_turns((0, 0))
@@ -1227,7 +1234,7 @@ class Estimator:
     def _lies_as_turned(self, j3: Joints3D) -> bool:
         """:func:`lies_as_turned` of ``j3`` seen by this rig's two cameras (the turn search's rule; a kept turn's passes
         are asked :func:`lies_as_kept_turn`, :meth:`_turn_misreads`)."""
-        return lies_as_turned(j3, [st.camera.center for st in self._cams])
+        return lies_as_turned(j3, self._centres)
 
     def _turn_misreads(self, p: "_Pass") -> bool:
         """Whether ``p``, a pass through a kept turn's crops, found someone whose body lies as the turn does not
@@ -1236,7 +1243,7 @@ class Estimator:
         the picture, the skeleton the search refuses. Geometry only: no model run."""
         if p.j3 is None or not p.someone:
             return False
-        if lies_as_kept_turn(p.j3, [st.camera.center for st in self._cams], self._turns, self._kept_axis):
+        if lies_as_kept_turn(p.j3, self._centres, self._turns, self._kept_axis):
             self._kept_axis = body_axis(p.j3)  # where the next pass rolls on from
             return False
         self.turns_refused += 1
@@ -1252,8 +1259,9 @@ class Estimator:
         scenes), the turn dropped with it; else ``p`` and the turned track stand. The tracked turned passes of
         someone still lying reach confidences as low as the misread's, so the weak ones compare rather than drop;
         the periodic check catches a misread over the bar. One pass more on a checked pair (docs/runtime.md,
-        "Getting up and lying down while tracked"). A ``p`` whose body lies as no turn rights does not come here
-        (:meth:`_turn_misreads`: the pair is read cold instead)."""
+        "Getting up and lying down while tracked"). A ``p`` whose body lies as the turn does not right (neither as
+        the search keeps a turn nor rolled on from the last pass kept through it, :func:`lies_as_kept_turn`) does not
+        come here (:meth:`_turn_misreads`: the pair is read cold instead)."""
         track = self.tracker.track
         if track is None or p.j3 is None:
             return p  # no track: the next pair is cold, and upright first
@@ -2021,7 +2029,7 @@ class Estimator:
         # two people's joints in one skeleton (two_people.mixed_torso), from the peaks strong in both views (a weak
         # peak may be noise's): asked whatever the 3D method, as the maps' second peaks are (_finish_pass)
         strong = np.all(kp.confidence >= pres.threshold(self.config.heatmaps.source), axis=0)
-        centres = np.stack([c.center for c in self.rig.pair])  # (the depth error grows with depth over baseline)
+        centres = self._centres  # (the depth error grows with depth over baseline)
         self._torso_mixed = mixed_torso(tri.points, tri.valid & strong, centres)
         # each torso limb's excess over one body's, as measured and as the rule reads it (two_people.torso_excess):
         # what the benchmarks print

@@ -532,3 +532,16 @@ def test_the_tracked_crop_follows_roi_edge_crop():
     box_mid = 0.5 * (uv[:, 0].min() + uv[:, 0].max())
     assert abs(mid["centre"] - box_mid) <= 1.0 < mid["clip"] - box_mid
     assert abs(rois["centre"].size - rois["clip"].size) <= 1  # the same scale
+
+
+def test_the_estimator_s_import_loads_numpy_ma_before_the_first_pair():
+    """``np.median`` (the views' agreement, every pair) imports ``numpy.ma`` on its first call: 10-70 ms that
+    ``benchmarks/time_demo_stages.py`` found on the first pair. Importing the estimator loads it, so the model's load
+    pays it rather than the first pair a daemon streams (a fresh interpreter: this one's tests may have loaded it)."""
+    import subprocess
+    import sys
+
+    code = "import sys, ghnerf_runtime.estimator; print('numpy.ma' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "True", out.stdout
