@@ -43,8 +43,8 @@ from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
-from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_M,
-                                      _PRIOR_FOLLOW_MAX_ERROR_M,
+from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _KEPT_TURN_SECTOR_DEG, _KEPT_TURN_STEP_DEG,
+                                      _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M,
                                       STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
@@ -55,7 +55,8 @@ from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_RAY_ANGL
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
-from ghnerf_runtime.two_people import BODY_RADIUS_M, MAX_LIMB_M, MIN_APART_M, TIE_M
+from ghnerf_runtime.two_people import BODY_RADIUS_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
+    SLACK_DEPTH_BASELINES, TIE_M, TORSO_LIMBS_M
 from training.data.errors import DatasetError
 from training.data.zju import MIN_CAMERA_SPREAD_M, parse_cameras
 from training.export.calibration import MIN_FRAMES
@@ -179,6 +180,19 @@ def _doc(name: str) -> str:
     ("docs/daemon.md", f"before any pair on `SIZE_MISMATCH_OPENS` ({SIZE_MISMATCH_OPENS}) opens in a row, as the "
                        f"daemon"),
     ("docs/daemon.md", f"then \"(on {SIZE_MISMATCH_OPENS} opens in a row, ...)\""),
+    # session 58's docs review: the same count in words where README.md and the daemon's step 2 say it
+    ("docs/daemon.md", f"size than the rig file's on {'three' if SIZE_MISMATCH_OPENS == 3 else SIZE_MISMATCH_OPENS} "
+                       "opens in a row before they ever delivered its size"),
+    ("README.md", f"on {'three' if SIZE_MISMATCH_OPENS == 3 else SIZE_MISMATCH_OPENS} opens in a row before they "
+                  "ever delivered its size"),
+    # session 58: the torso of two people (ghnerf_runtime/two_people.py) and the kept turn's rolls (estimator.py)
+    ("docs/runtime.md", f"`TORSO_LIMBS_M` ({' and '.join(f'{v:g}' for v in sorted(set(TORSO_LIMBS_M.values()), reverse=True))}"
+                        f" m, `proxy_matte.BONE_M`'s generous adult) by more than `MIXED_TORSO_SLACK_M` "
+                        f"({MIXED_TORSO_SLACK_M:g} m)"),
+    ("docs/runtime.md", f"Past {SLACK_DEPTH_BASELINES:g} baselines from the cameras, the limb's part along the line"),
+    ("docs/runtime.md", f"`SLACK_DEPTH_BASELINES` ({SLACK_DEPTH_BASELINES:g}) baselines"),
+    ("docs/runtime.md", f"at most {_KEPT_TURN_STEP_DEG:g} degrees from that pass's (`_KEPT_TURN_STEP_DEG`)"),
+    ("docs/runtime.md", f"within {_KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`_KEPT_TURN_SECTOR_DEG`"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
