@@ -506,9 +506,10 @@ _TURN_MIN_FROM_SIGHT_DEG = 45.0
 #: within this many degrees of the turn: half of a quarter turn, where the next turn (or upright) would show it as
 #: upright. benchmarks/measure_lying_rendered.py --rolls measures it (docs/runtime.md, "Gradual rolls").
 _KEPT_TURN_SECTOR_DEG = 45.0
-#: roi.turn_search: and only while its body axis moves at most this many degrees from the last pass kept through the
-#: turn (a roll, not a jump). In benchmarks/measure_lying_rendered.py --rolls (30 pairs, 3-6 degrees a pair) the
-#: passes only the looser rule keeps moved 0-18 degrees from the pass before (a one-off look, docs/runtime.md); the
+#: roi.turn_search: and only while its body axis moves at most this many degrees from the pass kept through the turn
+#: the pair before (a roll, not a jump; a pair that kept none drops the axis, Estimator._kept_turn_axis). In
+#: benchmarks/measure_lying_rendered.py --rolls (30 pairs, 3-6 degrees a pair) the passes only the looser rule keeps
+#: moved 0-18 degrees from the pass before (a one-off look, docs/runtime.md); the
 #: turned pass of a person rolled rigidly from across the view onto a line of sight (bench scene 21,
 #: tests/ghnerf_runtime/test_estimator_turn_search.py) 44.
 _KEPT_TURN_STEP_DEG = 25.0
@@ -736,7 +737,8 @@ class Estimator:
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
         self.turns_left = 0
         self._turn_check_wait = 0  # strong tracked turned pairs left before the next check (_turn_check)
-        self._kept_axis: np.ndarray | None = None  # the body axis of the last pass kept through a turn
+        # the body axis of the last pair's pass kept through a turn, None if it kept none (_kept_turn_axis)
+        self._kept_axis: np.ndarray | None = None
         # smooths what is reported; the tracker follows the raw joints
         self._smoother = OneEuroJoints(self.config.smoothing) if self.config.smoothing.enabled else None
         self._levels = _levels_per_unit(self.contract.normalisation)
@@ -945,6 +947,7 @@ class Estimator:
             p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view,
                            cold_several=True if p.several_people else None)
         elif p.regions.tracked and self._turns != (0, 0) and self._turn_misreads(p):
+            self.turns_refused += 1
             # A tracked pass through a kept turn whose body lies as the turn does not right (lies_as_kept_turn: the
             # person rolled onto a line of sight): the search would not keep it, nor is it kept here, nor is its
             # track, which the crops would follow. The pair is read as after a lost track: cold, upright first, then
@@ -957,7 +960,11 @@ class Estimator:
         cold_pass = not p.regions.tracked  # (the refined pass below is tracked: the subject was found cold)
         turns_read = self._turns  # the crops' turns this pair's tracked pass read (a change resets the smoothing)
         p = self._refined(images, p, sequence, timing, novel_view)
-        if cold_pass and self._turns != (0, 0) and (self._weak_pass(p) or self._turn_misreads(p)):
+        leave_turn = cold_pass and self._turns != (0, 0) and self._weak_pass(p)
+        if cold_pass and self._turns != (0, 0) and not leave_turn and self._turn_misreads(p):
+            self.turns_refused += 1
+            leave_turn = True
+        if leave_turn:
             # A cold pass through a kept turn's crops (a single-view track keeps the turn) that is weak: the subject
             # may have got up. Upright first, as after a lost track: the search below scores its turns against the
             # upright crops, and took these for them (a standing person kept through upside-down crops). So too
@@ -992,6 +999,7 @@ class Estimator:
                 p = turned
         elif p.someone:
             self._turn_search_wait = 0  # someone found well: the next weak pair searches at once
+        self._kept_axis = self._kept_turn_axis(p)
         if p.j3 is None:
             if self._smoother is not None:
                 self._smoother.reset()
@@ -1217,7 +1225,6 @@ class Estimator:
                     if p.novel is not None:
                         p.novel.abandon()
                     self.turns_kept += 1
-                    self._kept_axis = body_axis(q.j3)  # (the rule just asked: it has one)
                     self._turn_check_wait = self.config.roi.turn_search_every - 1  # just compared with upright
                     log.debug("pair %d: crops turned %s degrees found the subject", sequence, turns)
                     return q
@@ -1238,16 +1245,26 @@ class Estimator:
 
     def _turn_misreads(self, p: "_Pass") -> bool:
         """Whether ``p``, a pass through a kept turn's crops, found someone whose body lies as the turn does not
-        right (:func:`lies_as_kept_turn`; counted in ``turns_refused``): a person who lay across the view and
-        rolled onto a view's line of sight is read through the turned crops as the encoder's upright person across
-        the picture, the skeleton the search refuses. Geometry only: no model run."""
+        right (:func:`lies_as_kept_turn`, rolled on from the last pair's kept pass, :meth:`_kept_turn_axis`): a
+        person who lay across the view and rolled onto a view's line of sight is read through the turned crops as
+        the encoder's upright person across the picture, the skeleton the search refuses. Geometry only: no model
+        run, and no state changed (the caller that refuses ``p`` counts it in ``turns_refused``; the axis the next
+        pass rolls on from is set where the pair's pass is kept)."""
         if p.j3 is None or not p.someone:
             return False
-        if lies_as_kept_turn(p.j3, self._centres, self._turns, self._kept_axis):
-            self._kept_axis = body_axis(p.j3)  # where the next pass rolls on from
-            return False
-        self.turns_refused += 1
-        return True
+        return not lies_as_kept_turn(p.j3, self._centres, self._turns, self._kept_axis)
+
+    def _kept_turn_axis(self, p: "_Pass") -> np.ndarray | None:
+        """The body axis (:func:`body_axis`) that the next pair's pass through a kept turn rolls on from
+        (:func:`lies_as_kept_turn`): that of ``p``, the pass this pair keeps, when it was read through a turn and
+        found someone; else ``None``. A pair that keeps no such pass (a view's frame rejected, nobody found, the
+        turn left) breaks the roll: the rule's step limit (:data:`_KEPT_TURN_STEP_DEG`) is one pair's, and
+        against an axis some pairs old a real roll looks like a jump, while a limit grown with the pairs would
+        let the jump through (docs/runtime.md, "Gradual rolls"); the next pass through the turn is asked the
+        search's rule instead."""
+        if self._turns == (0, 0) or p.j3 is None or not p.someone:
+            return None
+        return body_axis(p.j3)
 
     def _turn_check(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
                     novel_view: NovelViewRequest | None) -> "_Pass":

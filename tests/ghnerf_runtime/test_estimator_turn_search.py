@@ -779,3 +779,68 @@ def test_a_tracked_person_rolling_on_through_a_kept_turn_keeps_it(turns, degrees
     else:
         assert asked == [(turns, True), ((0, 0), False)], asked
         assert r.missing.all() and est._turns == (0, 0) and est.turns_refused == 1
+
+
+def _found(est, regions, j3):
+    """A pass over ``regions`` that found the person ``j3`` confidently in both views."""
+    from ghnerf_runtime.estimator import _Pass
+
+    names = est.camera_names
+    J = len(j3.points)
+    return _Pass(regions, {n: None for n in names}, j3=j3, someone=True,
+                 joints_2d={n: np.zeros((J, 2)) for n in names},
+                 conf_2d={n: np.ones(J, np.float32) for n in names},
+                 missing_2d={n: np.zeros(J, bool) for n in names})
+
+
+@pytest.mark.parametrize("degrees, misreads", [(60.0, False), (125.0, True)])
+def test_asking_whether_a_kept_turns_pass_misreads_changes_nothing(degrees, misreads):
+    """``Estimator._turn_misreads`` only answers: before, a pass it let through moved the stored axis the next pass
+    rolls on from (and one it refused counted in ``turns_refused``) as the question was asked, so a caller that
+    asked without keeping the pass, or asked twice, changed what the next pair is measured against. Now the axis is
+    set once a pair, from the pass it keeps (``_kept_turn_axis``), and the refusal is counted where it is made.
+    60 degrees rolls on 5 from the pass before; 125 jumps 35 from lying across (refused)."""
+    from ghnerf_runtime.estimator import body_axis
+
+    est, rig, body, rolled = _kept_turn_estimator((90, 90), degrees)
+    before = body_axis(rolled(65.0 if degrees == 60.0 else 90.0))
+    est._kept_axis = before.copy()
+    p = _found(est, est.tracker.regions(), body)
+    assert [est._turn_misreads(p), est._turn_misreads(p)] == [misreads, misreads]
+    np.testing.assert_array_equal(est._kept_axis, before)
+    assert est.turns_refused == 0
+
+
+def test_a_kept_turns_roll_is_not_measured_against_a_pass_pairs_old():
+    """The step limit of a kept turn's roll (25 degrees, ``_KEPT_TURN_STEP_DEG``) was measured pair to pair. Before,
+    a pair through the kept turn that kept no pass (one camera's frame rejected, here) left the stored axis as it
+    was, and the next pass was measured against one two pairs old (or many, after a stretch seen by one camera) as
+    if it were the last pair's: a limit of one pair's roll over several, which a real roll may pass and a misread
+    may not. Now a pair that keeps no pass through the turn drops the axis, and the next pass is asked the search's
+    rule (a body tilted 60 degrees fails its windows: refused, the pair read cold upright, as with no pass before)."""
+    from ghnerf_runtime.estimator import _Pass, body_axis
+
+    est, rig, body, rolled = _kept_turn_estimator((90, 90), 60.0)
+    est._kept_axis = body_axis(rolled(65.0))  # the pair before kept the person 5 degrees less rolled
+    names = est.camera_names
+    asked, passes = [], iter([
+        lambda regions: _Pass(regions, {names[0]: None, names[1]: "flat"}),  # this pair: one view rejected
+        lambda regions: _found(est, regions, body),  # the next: the person rolled on, seen by both
+    ])
+    nobody = {n: None for n in names}
+
+    def spy(images, regions, sequence, timing, novel_view=None, cold_several=None):
+        asked.append((est._turns, regions.tracked))
+        if est._turns == (90, 90):
+            return next(passes)(regions)
+        return _Pass(regions, nobody)  # upright, from the working volume: nobody
+
+    est._pass = spy
+    images = [np.zeros((c.size[1], c.size[0], 3), np.uint8) for c in rig.pair]
+    r = est.estimate(images)
+    assert asked == [((90, 90), True)] and r.missing.all() and est._turns == (90, 90)
+    assert est._kept_axis is None  # the pair kept no pass through the turn
+    asked.clear()
+    r = est.estimate(images)
+    assert asked == [((90, 90), True), ((0, 0), False)], asked
+    assert r.missing.all() and est._turns == (0, 0) and est.turns_refused == 1
