@@ -262,7 +262,9 @@ def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method, mon
     # The random weights give flat heatmaps and query responses (peaks ~0.6 over most of the map): the
     # default decoder and the volumetric flood check call every joint missing, and all-zero outputs are
     # finite trivially. Here the flood checks are off, and the presence gate too, so each method's own
-    # estimate is what comes out.
+    # estimate is what comes out. The two-people check is off as well: those flat maps' peaks pass the presence
+    # threshold anywhere, so their torso is no one body's (two_people.mixed_torso) and a tracked pass was read as
+    # two people's, whose subject split left no joint.
     import ghnerf_runtime.joints3d as joints3d
     from ghnerf_runtime.keypoints import KeypointDecoderConfig
 
@@ -270,7 +272,8 @@ def test_every_3d_method_runs_and_is_finite(full_session, scene_rig, method, mon
     rig, frames = scene_rig
 
     def estimator(m):
-        cfg = EstimatorConfig(joints3d=Joints3DConfig(method=m), presence=PresenceConfig(enabled=False),
+        cfg = EstimatorConfig(joints3d=Joints3DConfig(method=m, second_person_min_joints=0),
+                                  presence=PresenceConfig(enabled=False),
                               decoder=KeypointDecoderConfig(max_region_frac=1.0),
                               tracking=TrackingConfig(refine_cold_start=False))  # graph runs counted per pair
         est = Estimator(full_session, rig, cfg)
