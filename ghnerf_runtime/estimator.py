@@ -93,7 +93,7 @@ from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_blo
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
 from ghnerf_runtime.two_people import (PAIRINGS, TORSO_LIMBS_M, attached, centre_of, floor_xz, matched_errors,
-                                       mixed_torso, one_body, pick_person, split_people, torso_excess)
+                                       one_body, pick_person, reads_as_two_people, split_people, torso_excess)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -2045,13 +2045,12 @@ class Estimator:
         self._lowest_foot = self._lowest_foot_m(near_the_body(someone, _FLOOR_BODY_M), kp, regions)
         # two people's joints in one skeleton (two_people.mixed_torso), from the peaks strong in both views (a weak
         # peak may be noise's): asked whatever the 3D method, as the maps' second peaks are (_finish_pass)
-        strong = np.all(kp.confidence >= pres.threshold(self.config.heatmaps.source), axis=0)
-        centres = self._centres  # (the depth error grows with depth over baseline)
-        self._torso_mixed = mixed_torso(tri.points, tri.valid & strong, centres)
-        # each torso limb's excess over one body's, as measured and as the rule reads it (two_people.torso_excess):
-        # what the benchmarks print
-        self._torso_excess = np.stack([torso_excess(tri.points, tri.valid & strong),
-                                       torso_excess(tri.points, tri.valid & strong, centres)])
+        strong = tri.valid & np.all(kp.confidence >= pres.threshold(self.config.heatmaps.source), axis=0)
+        # each torso limb's excess over one body's, as the rule reads it (its part along the line of sight discounted:
+        # the depth error grows with depth over baseline) and as measured (what the benchmarks print beside it)
+        read = torso_excess(tri.points, strong, self._centres)
+        self._torso_mixed = reads_as_two_people(read)
+        self._torso_excess = np.stack([torso_excess(tri.points, strong), read])
 
         def centroid() -> Joints3D:
             g = self.grid

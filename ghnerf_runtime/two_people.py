@@ -257,7 +257,14 @@ def mixed_torso(joints: np.ndarray, found: np.ndarray, centres: np.ndarray) -> b
         >>> j[:, 2] = 4.5; j[12] = j[8] * (1 + 0.7 / np.linalg.norm(j[8])); mixed_torso(j, found, c)
         False
     """
-    excess = torso_excess(joints, found, centres, caller="mixed_torso")
+    return reads_as_two_people(torso_excess(joints, found, centres, caller="mixed_torso"))
+
+
+def reads_as_two_people(excess: np.ndarray) -> bool:
+    """Whether torso limbs' ``excess`` as :func:`mixed_torso` reads it (:func:`torso_excess` with the cameras'
+    centres; NaN: a limb not found) passes :data:`MIXED_TORSO_SLACK_M` anywhere: for a caller that keeps the
+    excess too (the estimator, for the benchmarks), so that it is measured once."""
+    excess = np.asarray(excess, dtype=np.float64)
     return bool(np.any(excess[np.isfinite(excess)] > MIXED_TORSO_SLACK_M))
 
 

@@ -462,13 +462,11 @@ def test_a_strong_turned_track_is_checked_upright_every_few_pairs_and_keeps_its_
     assert checks == [0, 0, 1, 1, 2, 2, 3] and est.turns_left == 0 and est.turn_searches == 1
 
 
-def _held_track_estimator(turns: tuple[int, int]):
-    """An estimator on the oracle session (no model) crops turned ``turns``, with a track of one scene's person;
-    ``_pass`` is replaced by a spy that records the hold it is asked with (``_several_track``, ``_behind_track``,
-    the crops' turns) and, as an unflagged pass's ``_finish_pass`` would, clears the hold and finds nobody."""
+def _tracked_through(turns: tuple[int, int]):
+    """An estimator on the oracle session (no model, the turn search on) tracking one scene's person through crops
+    turned ``turns``: (estimator, rig, that person's joints)."""
     from benchmarks.bench_runtime_common import OracleSession, edge128_contract
-    from ghnerf_runtime.estimator import Estimator, _Pass
-    from ghnerf_runtime.joints3d import Joints3D
+    from ghnerf_runtime.estimator import Estimator
 
     sim = pytest.importorskip("drivers.sim")
     rig = sim.RigPlacement().build()
@@ -476,6 +474,17 @@ def _held_track_estimator(turns: tuple[int, int]):
     joints = sim.SimScene(sim.SceneConfig(seed=1)).joints_3d(0.0)
     est._use_turns(turns)
     assert est.tracker.update(joints, np.ones(len(joints), np.float32), np.ones(len(joints), bool), 0)
+    return est, rig, joints
+
+
+def _held_track_estimator(turns: tuple[int, int]):
+    """An estimator on the oracle session (no model) crops turned ``turns``, with a track of one scene's person;
+    ``_pass`` is replaced by a spy that records the hold it is asked with (``_several_track``, ``_behind_track``,
+    the crops' turns) and, as an unflagged pass's ``_finish_pass`` would, clears the hold and finds nobody."""
+    from ghnerf_runtime.estimator import _Pass
+    from ghnerf_runtime.joints3d import Joints3D
+
+    est, _, joints = _tracked_through(turns)
     asked = []
     frame_ok = {n: None for n in est.camera_names}
 
@@ -716,17 +725,10 @@ def test_a_kept_turn_holds_while_the_body_rolls_on_nearer_it_than_upright_or_the
 def _kept_turn_estimator(turns: tuple[int, int], degrees: float):
     """An oracle-session estimator tracking a person through crops turned ``turns``, and that person's joints
     turned ``degrees`` about the rig's z axis (across the views) through their centroid: (estimator, rig, joints)."""
-    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
     from benchmarks.measure_lying_rendered import rotation
-    from ghnerf_runtime.estimator import Estimator
     from ghnerf_runtime.joints3d import Joints3D
 
-    sim = pytest.importorskip("drivers.sim")
-    rig = sim.RigPlacement().build()
-    est = Estimator(OracleSession(edge128_contract()), rig, EstimatorConfig(roi=RoiConfig(turn_search=True)))
-    joints = sim.SimScene(sim.SceneConfig(seed=1)).joints_3d(0.0)
-    est._use_turns(turns)
-    assert est.tracker.update(joints, np.ones(len(joints), np.float32), np.ones(len(joints), bool), 0)
+    est, rig, joints = _tracked_through(turns)
     est._turn_check_wait = 3  # a strong pass between the upright checks
     centre = joints.mean(axis=0)
     n = len(joints)

@@ -1345,10 +1345,8 @@ def test_hello_and_status_carry_the_last_frames_seq_also_on_a_reopened_sink(tmp_
         assert announced <= {(seq - 1) & U32_MAX}, (announced, seq)
 
 
-class _HungWebcam:
-    """A stand-in ``cv2.VideoCapture`` whose every grab hangs until ``release_all`` is set: a wedged UVC stream."""
-
-    release_all = threading.Event()
+class _StandInWebcam:
+    """What every stand-in ``cv2.VideoCapture`` here shares: opened, properties kept as set, nothing to release."""
 
     def __init__(self, target, api) -> None:
         self.props: dict = {}
@@ -1363,15 +1361,21 @@ class _HungWebcam:
     def get(self, prop) -> float:
         return float(self.props.get(prop, 0.0))
 
+    def release(self) -> None:
+        pass
+
+
+class _HungWebcam(_StandInWebcam):
+    """A stand-in ``cv2.VideoCapture`` whose every grab hangs until ``release_all`` is set: a wedged UVC stream."""
+
+    release_all = threading.Event()
+
     def grab(self) -> bool:
         self.release_all.wait()
         return False
 
     def retrieve(self):
         return False, None
-
-    def release(self) -> None:
-        pass
 
 
 def test_a_camera_stuck_past_its_rigs_close_stops_the_watchdog_pings(tmp_path, monkeypatch):
@@ -1570,7 +1574,7 @@ def test_a_rig_file_that_no_longer_fits_its_cameras_is_said(sim_url, tmp_path, c
         assert len(warned) == 1 and "m below the floor" in warned[0]
 
 
-class _SizedWebcam:
+class _SizedWebcam(_StandInWebcam):
     """A stand-in ``cv2.VideoCapture`` of a live camera that delivers the size ``sizes`` gives for its open (the
     rig's opens number 0, 1, ...: two captures each), whatever size was asked of it, 30 frames a second."""
 
@@ -1578,19 +1582,9 @@ class _SizedWebcam:
     made = 0
 
     def __init__(self, target, api) -> None:
+        super().__init__(target, api)
         self.size = _SizedWebcam.sizes(_SizedWebcam.made // 2)
         _SizedWebcam.made += 1
-        self.props: dict = {}
-
-    def isOpened(self) -> bool:  # noqa: N802 - OpenCV's name
-        return True
-
-    def set(self, prop, value) -> bool:
-        self.props[prop] = value
-        return True
-
-    def get(self, prop) -> float:
-        return float(self.props.get(prop, 0.0))
 
     def grab(self) -> bool:
         time.sleep(1 / 30)
@@ -1598,9 +1592,6 @@ class _SizedWebcam:
 
     def retrieve(self):
         return True, np.full((self.size[1], self.size[0], 3), 100, np.uint8)
-
-    def release(self) -> None:
-        pass
 
 
 def _webcam_rig(tmp_path: Path, monkeypatch, sizes) -> tuple[object, Path]:
