@@ -369,6 +369,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         tally = _Tally(live=source.live_timestamps)
         calibration = _CalibrationCheck(CALIBRATION_WINDOW)
         delivered, skipped, skews = 0, 0, []
+        read_failed, failed_reads, first_failure = False, 0, ""  # a failed read since the last pair; all of them
         last_pair, last_result = None, None
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
         # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO, with the
@@ -393,6 +394,18 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                     except (drivers.RigTimeoutError, drivers.RigDisconnectedError) as e:
                         print(f"stopping: {e}")
                         break
+                    except drivers.RigOperationError as e:
+                        # A frame the rig could not deliver (a corrupt image in a take, one of another size among
+                        # the rig's) is raised once and the next read goes on, as the daemon reads on: one such
+                        # frame ended the whole run. Again before a pair, or cameras of another size than the
+                        # rig's (FrameSizeError): the rig itself failed.
+                        if read_failed or isinstance(e, drivers.FrameSizeError):
+                            raise
+                        read_failed, failed_reads = True, failed_reads + 1
+                        first_failure = first_failure or str(e)
+                        print(f"skipped a frame: {e}")
+                        continue
+                    read_failed = False
                     delivered += 1
                     if estimator is None:
                         frame = truth_frame(pair, sequence=numbers.take()) if pair.joints_3d is not None else None
@@ -431,6 +444,8 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     rate = delivered / elapsed
     skew = f"median skew {statistics.median(skews):.2f} ms" if skews else "no pairs"
     print(f"the rig delivered {delivered} pairs in {elapsed:.1f} s ({rate:.1f} pairs/s), {skew}")
+    if failed_reads:
+        print(f"{failed_reads} frame(s) the rig could not deliver were skipped, the first: {first_failure}")
     if estimator is None:
         print("no model (--truth-only): every joint streamed and printed is GROUND TRUTH")
     else:

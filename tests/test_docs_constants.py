@@ -185,6 +185,9 @@ def _doc(name: str) -> str:
                        "opens in a row before they ever delivered its size"),
     ("README.md", f"on {'three' if SIZE_MISMATCH_OPENS == 3 else SIZE_MISMATCH_OPENS} opens in a row before they "
                   "ever delivered its size"),
+    # session 59: a replay:// take whose images are not its rig's size, refused at open like those cameras
+    ("docs/recording-format.md", f"stops after {'three' if SIZE_MISMATCH_OPENS == 3 else SIZE_MISMATCH_OPENS} opens "
+                                 "(exit 2)"),
     # session 58: the torso of two people (ghnerf_runtime/two_people.py) and the kept turn's rolls (estimator.py)
     ("docs/runtime.md", f"`TORSO_LIMBS_M` ({' and '.join(f'{v:g}' for v in sorted(set(TORSO_LIMBS_M.values()), reverse=True))}"
                         f" m, `proxy_matte.BONE_M`'s generous adult) by more than `MIXED_TORSO_SLACK_M` "

@@ -31,6 +31,13 @@ per-camera index span (last - first + 1), so both keep increasing per camera. A 
 whose files are missing, empty or cut short
 (:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
 validation: docs/recording-format.md.
+
+Image sizes: a take whose images are not its rig's size throughout (a camera's first, middle and last images,
+decoded at :meth:`~ReplayRigSource.open`, all of another size) is refused at open with
+:class:`~drivers.errors.FrameSizeError`, as the other backends refuse cameras delivering another size than their
+rig file's (:meth:`ReplayRigSource.size_error`). A single image of another size among images of the rig's size
+(a corrupted or edited file) is a corrupt frame: ``read()`` raises :class:`~drivers.errors.RigOperationError`
+naming it once, and the next read goes on.
 """
 from __future__ import annotations
 
@@ -44,6 +51,7 @@ import numpy as np
 
 from drivers.backends.recording_format import (
     FRAMES,
+    MANIFEST,
     FrameRow,
     Manifest,
     drop_broken_rows,
@@ -55,7 +63,13 @@ from drivers.backends.recording_format import (
 )
 from drivers.base import RigSource
 from drivers.clock import Clock
-from drivers.errors import EndOfStream, RigConfigError, RigInitializationError, RigOperationError
+from drivers.errors import (
+    EndOfStream,
+    FrameSizeError,
+    RigConfigError,
+    RigInitializationError,
+    RigOperationError,
+)
 from drivers.frames import CameraTruth, Frame
 from drivers.pairing import MAX_TOLERANCE_MS, DropPolicy, FramePairer, PairingConfig
 from drivers.url import RigUrl
@@ -268,7 +282,50 @@ class ReplayRigSource(RigSource):
                 f"recording {self.directory}: {len(broken)} file(s) listed in {FRAMES} are missing or empty, "
                 f"first: {self.directory / rel} ({self.directory / FRAMES} line {row.line})"
             )
+        size_error = self.size_error()
+        if size_error is not None:
+            raise size_error
         log.info("replaying %s: %d frames, speed %s", self.directory, len(self._rows), self.speed or "free")
+
+    def size_error(self) -> FrameSizeError | None:
+        """The error of a take whose images are not its rig's size, else ``None``: a camera whose first, middle
+        and last images (in recorded order; those that decode) all have another size than its rig camera's.
+
+        Every image wrong is a take recorded at another size than the rig it carries, its images resized by a
+        tool after, or its manifest's rig replaced: refused at :meth:`open`, as no frame of it would play (each
+        read failed on an image; the daemon, taking two failed reads before a pair for a failed rig, reopened the
+        take from its start for ever). Three
+        images, not every one: decoding all of an hour's take would take minutes at open. One image of another
+        size among the rig's (a corrupted or edited file) is not this: it fails its read (:meth:`_load`).
+        Public for ``ghnerf-daemon --validate-config``, which refuses such a take before any open.
+        """
+        order = recorded_order(self._rows)
+        for cam in self.rig.cameras:
+            mine = order.get(cam.name)
+            if not mine:
+                continue
+            expected = (cam.width, cam.height)
+            found: list[tuple[Path, tuple[int, int]]] = []
+            for i in dict.fromkeys((mine[0], mine[len(mine) // 2], mine[-1])):
+                path = self.directory / self._rows[i].image
+                try:
+                    image = load_image(path)
+                except RigOperationError:
+                    continue  # corrupt: not a size; its read names it
+                found.append((path, (image.shape[1], image.shape[0])))
+            if found and all(size != expected for _, size in found):
+                path, (w, h) = found[0]
+                checked = f"its only image, {path}" if len(mine) == 1 else \
+                    f"checked at open: the first, middle and last of its {len(mine)}, the first {path}"
+                message = (
+                    f"recording {self.directory}: camera {cam.name!r}'s images are {w}x{h} ({checked}), but its rig "
+                    f"camera in {self.directory / MANIFEST} is {cam.width}x{cam.height}: the take was recorded at "
+                    f"another size than the rig it carries, its images were resized after, or its manifest's rig was "
+                    f"replaced; play it with the images and manifest.json it was recorded with "
+                    f"(docs/recording-format.md, 'Image sizes')"
+                )
+                return FrameSizeError(message, cam.name, expected, (w, h))
+        return None
 
     def _next(self) -> tuple[FrameRow, int] | None:
         """The row played next and its loop pass's timestamp shift; ``None`` at the end (no loop)."""
@@ -387,9 +444,13 @@ class ReplayRigSource(RigSource):
         image = load_image(path)
         cam = self.rig.camera(row.camera)
         if image.shape != (cam.height, cam.width, 3):
+            # Not a FrameSizeError: the take's images checked at open have the rig's size (size_error), so this
+            # one file was corrupted or edited, a corrupt frame the next read goes past. Typed as a size, it would
+            # read to a daemon as a rig that does not fit: the take reopened from its start, then a stop.
             raise RigOperationError(
                 f"recording image {path} is {image.shape[1]}x{image.shape[0]}, but the rig's camera "
-                f"{row.camera!r} is {cam.width}x{cam.height}"
+                f"{row.camera!r} is {cam.width}x{cam.height} as the take's images checked at open are: this file "
+                f"was corrupted or edited, a corrupt frame (the next read goes on)"
             )
         truth, joints_3d = load_truth(self.directory / row.truth) if row.truth is not None else (None, None)
         return self._frame(row, shift_ns, image, truth, joints_3d)

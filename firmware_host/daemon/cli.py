@@ -60,6 +60,7 @@ from pathlib import Path
 import drivers
 from drivers.backends.opencv import is_nominal_rig, is_video_file, rig_size_message, video_size
 from drivers.backends.recording_format import MANIFEST, read_manifest
+from drivers.backends.replay import ReplayRigSource
 from drivers.url import RigUrl, redact_url
 from firmware_host.daemon import early_sighup
 from firmware_host.daemon.config import DaemonConfig, DaemonConfigError, load_daemon_config_noting_paths
@@ -172,8 +173,9 @@ def _check_rig_url(text: str) -> None:
 
     :raises DaemonConfigError: keyed ``rig.url``.
     """
+    source = None
     try:
-        drivers.create_rig_source(text)  # parses and checks the options; opens nothing
+        source = drivers.create_rig_source(text)  # parses and checks the options; opens nothing
     except (drivers.RigConfigError, drivers.BackendNotAvailableError) as e:  # a rig file it cannot read, too
         raise DaemonConfigError(f"{e}{rig_url_hint(text)}", key="rig.url") from None
     except drivers.DriverError:
@@ -195,6 +197,11 @@ def _check_rig_url(text: str) -> None:
             raise DaemonConfigError(f"{manifest}: the take was recorded from opencv:// cameras without their "
                                     "calibration (rig 'opencv-uncalibrated'): its 3D joints would be wrong; record "
                                     "again with rig=/path/to/rig.json (ghcal solve)", key="rig.url")
+    if isinstance(source, ReplayRigSource):
+        # A take's images never change size: refused now, not at the rig's third open (as opencv:// videos are)
+        size_error = source.size_error()
+        if size_error is not None:
+            raise DaemonConfigError(str(size_error), key="rig.url")
     if rig_file:  # a calibration of our own (ghcal): the stream announces its id and camera names
         try:
             rig = load_rig(rig_file)

@@ -148,9 +148,12 @@ SIZE_MISMATCH_OPENS = 3
 def size_mismatch_fault(rig_url: str) -> str:
     """What cameras that never delivered the rig's size on ``SIZE_MISMATCH_OPENS`` opens of ``rig_url`` blame (the
     daemon's stop, ``--measure-floor``'s): without ``rig=`` (``depthai://`` on the device's calibration, at the
-    ``width=``/``height=`` asked) no rig file is at fault, the size asked is one the cameras do not deliver."""
-    named = RigUrl.parse(rig_url).options.get("rig")
-    return "a rig file that does not fit them" if named else "a size asked that they do not deliver"
+    ``width=``/``height=`` asked) no rig file is at fault, the size asked is one the cameras do not deliver; a
+    ``replay://`` take carries its rig in its manifest, and no file of it changes size."""
+    url = RigUrl.parse(rig_url)
+    if url.scheme == "replay":
+        return "a take whose images are not the size of the rig in its manifest"
+    return "a rig file that does not fit them" if url.options.get("rig") else "a size asked that they do not deliver"
 
 
 class DaemonStartError(FirmwareHostError):

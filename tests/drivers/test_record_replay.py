@@ -10,6 +10,7 @@ import pytest
 
 from drivers import (
     EndOfStream,
+    FrameSizeError,
     ManualClock,
     RigConfigError,
     RigInitializationError,
@@ -701,6 +702,70 @@ def test_image_of_the_wrong_size_is_named(copy_of_take):
     with open_rig(f"replay://{copy_of_take}?speed=free") as source:
         with pytest.raises(RigOperationError, match="10x10"):
             source.read(timeout_s=1.0)
+
+
+def resize_images(take, camera, size):
+    """Every image of ``camera`` in ``take`` rescaled to ``size`` (width, height), as an image tool would."""
+    import cv2
+
+    for path in sorted((take / "images" / camera).iterdir()):
+        cv2.imwrite(str(path), cv2.resize(cv2.imread(str(path)), size))
+
+
+def test_a_take_resized_throughout_is_refused_at_open_naming_a_file_and_both_sizes(copy_of_take):
+    """Every image of a camera at another size than the take's rig (resized by a tool after recording): each read
+    failed on its image, so nothing played, and a reader going past failed frames (the daemon) reopened the take for
+    ever. Refused at open, typed as the other backends' cameras of another size than their rig file's."""
+    resize_images(copy_of_take, "right", (20, 15))
+    source = create_rig_source(f"replay://{copy_of_take}?speed=free")
+    with pytest.raises(FrameSizeError) as info:
+        source.open()
+    error = info.value
+    assert isinstance(error, RigInitializationError)  # an open that failed, as the registry's contract has it
+    assert (error.camera, error.expected, error.delivered) == ("right", (40, 30), (20, 15))
+    message = str(error)
+    first = min((copy_of_take / "images" / "right").iterdir())
+    assert f"camera 'right''s images are 20x15 (checked at open: the first, middle and last of its " in message
+    assert f"the first {first}), but its rig camera in {copy_of_take / MANIFEST} is 40x30" in message
+    assert not source.is_open
+
+
+def test_a_take_whose_manifest_rig_was_replaced_by_one_of_another_size_is_refused_at_open(copy_of_take):
+    """The rig in manifest.json swapped for one calibrated at twice the size: every image is of another size."""
+    import dataclasses
+
+    from ghnerf_runtime.rig_file import rig_to_dict
+
+    rig = read_manifest(copy_of_take).rig
+    bigger = dataclasses.replace(rig, cameras=tuple(cam.resized(80, 60) for cam in rig.cameras))
+    edit_manifest(copy_of_take, lambda m: m.__setitem__("rig", rig_to_dict(bigger)))
+    with pytest.raises(FrameSizeError) as info:
+        create_rig_source(f"replay://{copy_of_take}").open()
+    assert (info.value.camera, info.value.expected, info.value.delivered) == ("left", (80, 60), (40, 30))
+    assert "images are 40x30" in str(info.value) and "is 80x60" in str(info.value)
+
+
+def test_one_image_of_another_size_mid_take_is_a_corrupt_frame_and_the_take_plays_on(copy_of_take):
+    """One file edited among images of the rig's size is not a take of another size: its read fails once, naming
+    it, not as a FrameSizeError (a daemon stops on those), and the next read goes on to the end."""
+    import cv2
+
+    edited = sorted((copy_of_take / "images" / "left").iterdir())[10]
+    cv2.imwrite(str(edited), np.zeros((10, 10, 3), np.uint8))
+    errors, pairs = [], 0
+    with open_rig(f"replay://{copy_of_take}?speed=free&policy=all") as source:
+        while True:
+            try:
+                source.read(timeout_s=1.0)
+                pairs += 1
+            except EndOfStream:
+                break
+            except RigOperationError as e:
+                errors.append(e)
+    assert [type(e) for e in errors] == [RigOperationError]
+    assert str(errors[0]).startswith(f"recording image {edited} is 10x10, but the rig's camera 'left' is 40x30 as the "
+                                     "take's images checked at open are: this file was corrupted or edited")
+    assert pairs >= 20
 
 
 def test_replay_option_errors():

@@ -443,3 +443,45 @@ def test_ctrl_c_before_the_first_pair_exits_130_without_a_traceback(tmp_path, ca
     monkeypatch.setattr(drivers, "create_rig_source", source)
     assert _main_no_escape(["--truth-only", "--url", sim_url, "--out", str(tmp_path)]) == 130
     assert "stopped (Ctrl-C)" in capsys.readouterr().err
+
+
+@pytest.fixture
+def small_take(tmp_path):
+    """A 12-pair take of 40x30 images (no truth of another size involved), recorded faster than real time."""
+    import drivers
+
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&policy=all&cache={tmp_path / 'cache'}&out={take}&lossless=1"
+    with drivers.open_rig(url, clock=drivers.ManualClock()) as source:
+        for _ in range(12):
+            source.read(timeout_s=5.0)
+    return take
+
+
+def test_one_image_of_another_size_in_a_replay_is_skipped_and_counted(tmp_path, capsys, small_take):
+    """One edited image mid-take is a corrupt frame: raised once by the read, and the next read goes on, as the daemon
+    reads on. It ended the whole run (exit 2) at the first such frame."""
+    edited = sorted((small_take / "images" / "left").iterdir())[5]
+    cv2.imwrite(str(edited), np.zeros((10, 10, 3), np.uint8))
+    rc = demo.main(["--truth-only", "--url", f"replay://{small_take}?speed=free", "--seconds", "30",
+                    "--out", str(tmp_path / "out")])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert f"skipped a frame: recording image {edited} is 10x10, but the rig's camera 'left' is 40x30" in out
+    assert "the rig's stream ended" in out
+    assert re.search(r"^1 frame\(s\) the rig could not deliver were skipped, the first: recording image ", out, re.M)
+
+
+def test_a_replay_resized_throughout_is_a_one_line_error_at_open(tmp_path, capsys, small_take):
+    """Every image of a camera at another size than the take's rig: refused at open, naming a file and both sizes
+    (the run failed on the first read, naming one image, as if that one file were broken)."""
+    for path in sorted((small_take / "images" / "right").iterdir()):
+        cv2.imwrite(str(path), cv2.resize(cv2.imread(str(path)), (20, 15)))
+    rc = demo.main(["--truth-only", "--url", f"replay://{small_take}?speed=free", "--seconds", "30",
+                    "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2, captured.out
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and f": error: recording {small_take}: camera 'right''s images are 20x15 (checked at " \
+        "open: " in lines[0], lines
+    assert "is 40x30: the take was recorded at another size than the rig it carries" in lines[0]

@@ -660,3 +660,37 @@ def test_validate_config_and_the_start_refuse_videos_of_another_size_than_the_ri
                     f"most likely calibrated at another resolution of this camera; calibrate again at 640x480 (ghcal, "
                     f"docs/calibration.md), or use videos recorded at 1280x960") in err
             assert err.count("ghnerf-daemon: error:") == 2  # --validate-config, then the start: one line each
+
+
+def test_validate_config_and_the_start_refuse_a_take_of_another_size_than_its_rig(tmp_path, capsys):
+    """A replay:// take whose images are all of another size than the rig in its manifest (resized after recording)
+    passed --validate-config and the start, then the daemon reopened it for ever (each read failed on an image). A
+    take's files never change size, so the check says it at once, keyed rig.url, as for opencv:// videos; the same
+    take as recorded passes."""
+    import cv2
+
+    import drivers
+
+    takes = {}
+    for name in ("resized", "as-recorded"):
+        takes[name] = tmp_path / name
+        url = f"record+sim://?width=40&height=30&seed=3&cache={tmp_path / 'cache'}&out={takes[name]}&lossless=1"
+        with drivers.open_rig(url, clock=drivers.ManualClock()) as source:
+            for _ in range(6):
+                source.read(timeout_s=5.0)
+    for path in sorted((takes["resized"] / "images" / "left").iterdir()):
+        cv2.imwrite(str(path), cv2.resize(cv2.imread(str(path)), (80, 60)))
+    for name, rc in (("resized", 2), ("as-recorded", 0)):
+        path = _write(tmp_path, {"rig": {"url": f"replay://{takes[name]}"}, "sinks": ["udp://127.0.0.1:9870"],
+                                 "estimator": {"session": {"model_dir": str(MODELS)}}})
+        assert cli.main(["--config", str(path), "--validate-config", "--no-model"]) == rc
+        if rc:  # the start reads the config as --validate-config does: stopped before the model loads
+            assert cli.main(["--config", str(path)]) == rc
+        err = capsys.readouterr().err
+        if rc:
+            first = min((takes[name] / "images" / "left").iterdir())
+            assert (f"ghnerf-daemon: error: {path}: rig.url: recording {takes[name]}: camera 'left''s images are 80x60 "
+                    f"(checked at open: the first, middle and last of its 6, the first {first}), but its rig camera in "
+                    f"{takes[name] / 'manifest.json'} is 40x30: the take was recorded at another size than the rig it "
+                    "carries") in err
+            assert err.count("ghnerf-daemon: error:") == 2  # --validate-config, then the start: one line each

@@ -447,16 +447,23 @@ def test_an_absent_rig_is_waited_for_then_a_recording_plays_to_its_end(sim_url, 
     assert run.daemon.health.rig_opens == 1
 
 
-def test_a_corrupt_frame_in_a_recording_is_skipped_and_the_recording_plays_to_its_end(sim_url, tmp_path):
+@pytest.mark.parametrize("damage", ["garbage", "resized"])
+def test_a_corrupt_frame_in_a_recording_is_skipped_and_the_recording_plays_to_its_end(sim_url, tmp_path, damage):
     """A frame a backend cannot deliver is raised once and the next read goes on (RigSource.read): the
     daemon counts it and reads on. (It took it for a failed rig: the replay was reopened from its start,
-    hit the same frame, and played its first pairs for ever, never reaching the end.)"""
+    hit the same frame, and played its first pairs for ever, never reaching the end.) One image of another size
+    among the rig's (an edited file) is such a frame, not cameras of another size than the rig file's."""
+    import cv2
+
     take = tmp_path / "take"
     with drivers.open_rig(f"record+{sim_url}&policy=all&out={take}") as rig:
         for _ in range(16):
             rig.read(timeout_s=5)
     corrupt = sorted((take / "images" / "left").iterdir())[5]
-    corrupt.write_bytes(b"not a png")
+    if damage == "garbage":
+        corrupt.write_bytes(b"not a png")
+    else:
+        cv2.imwrite(str(corrupt), np.zeros((120, 160, 3), np.uint8))
     cfg = _config({"url": f"replay://{take}", "reopen_min_s": 0.01, "reopen_max_s": 0.01}, tmp_path)
     with _Running(cfg, tmp_path) as run:
         run.thread.join(timeout=20)  # rig.exit_at_end: the daemon stops by itself at the recording's end
@@ -467,6 +474,33 @@ def test_a_corrupt_frame_in_a_recording_is_skipped_and_the_recording_plays_to_it
     assert health.read_errors == 1 and health.pairs_estimated >= 12
     report = json.loads((tmp_path / "status.json").read_text())
     assert report["pairs"]["read_errors"] == 1
+
+
+def test_a_take_of_another_size_than_its_rig_stops_the_daemon_naming_it(sim_url, tmp_path):
+    """Every image of a camera resized (320x240 recorded, 160x120 now): each read failed on the image, two before a
+    pair were taken for a failed rig, and the take was reopened from its start for ever (state waiting). Its open
+    refuses it now (drivers.FrameSizeError), and three such opens stop the daemon (exit 2), as for cameras that never
+    deliver their rig file's size, blaming the take."""
+    import cv2
+
+    take = tmp_path / "take"
+    with drivers.open_rig(f"record+{sim_url}&policy=all&out={take}") as rig:
+        for _ in range(8):
+            rig.read(timeout_s=5)
+    for path in sorted((take / "images" / "left").iterdir()):
+        cv2.imwrite(str(path), cv2.resize(cv2.imread(str(path)), (160, 120)))
+    cfg = _config({"url": f"replay://{take}", "reopen_min_s": 0.01, "reopen_max_s": 0.01}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        run.thread.join(timeout=20)
+        assert not run.thread.is_alive(), f"still reopening the take after {run.daemon.health.rig_lost} losses"
+    error = run.rc[0]
+    assert isinstance(error, DaemonStartError)
+    message = str(error)
+    assert message.startswith(f"rig.url 'replay://{take}': recording {take}: camera 'left''s images are 160x120 ")
+    assert f"but its rig camera in {take / 'manifest.json'} is 320x240" in message
+    assert message.endswith("(the same on 3 opens in a row, the cameras never having delivered the rig's size: a take "
+                            "whose images are not the size of the rig in its manifest, which no restart fixes)")
+    assert run.daemon.health.rig_open_failures == 3 and run.daemon.health.rig_opens == 0
 
 
 def test_a_replay_streams_capture_times_on_the_daemons_clock(sim_url, tmp_path):
