@@ -24,9 +24,9 @@ the program parses (no parser copied here, no ``--help`` subprocess; the trainin
 
 Placeholders (``<net>``, ``FILE``, ``$OUT``, ``benchmarks/NAME.py``), ``...``, ``[optional]`` brackets, ``\\``
 continuations, a block's shell variables (``P="--out ..."`` then ``python -m training.pipeline $P``), env-var
-prefixes, ``/usr/bin/time -v``-style wrappers and prose's ``--a/--b``, ``--[no-]x``, ``--novel-*`` are allowed
-for; a span that only names a program checks that the program exists. About 18 s on two cores (session 53), most
-of it importing each program's module once.
+prefixes, ``/usr/bin/time -v``-style wrappers, ``sudo -u USER`` and prose's ``--a/--b``, ``--[no-]x``,
+``--novel-*`` are allowed for; a span that only names a program checks that the program exists. About 18 s on
+two cores (session 53), most of it importing each program's module once.
 """
 from __future__ import annotations
 
@@ -247,6 +247,8 @@ def _command(words: list[str], where: str, project: Project, head_of_span: bool)
             pass
         elif word in ("-f", "-o") and i > 0 and words[i - 1] in ("time", "/usr/bin/time"):
             i += 1  # time -f FORMAT, -o FILE
+        elif word in ("-u", "-g") and i > 0 and words[i - 1] == "sudo":
+            i += 1  # sudo -u ghnerf: the user, not the program (docs/bring-up.md runs the checks as the service's)
         elif word.startswith("-") and i > 0 and words[i - 1] in WRAPPERS:
             pass  # time -v, env -i
         elif word in ("timeout", "taskset") and i + 1 < len(words):
@@ -756,3 +758,12 @@ def test_a_program_is_found_as_python_runs_it():
         _main_of_module("training.no_such_module")
     assert _main_of_module("training.train") == ("training.cli.train", "main")  # parsed before torch loads
     assert _main_of_module("training.export") == ("training.export.cli", "main")  # a package's __main__.py
+
+
+def test_a_command_run_as_another_user_is_checked(programs):
+    """`sudo -u ghnerf PROGRAM ...` (docs/bring-up.md runs the device's checks as the service's user): the program
+    is the word after the user. The user was taken for the program, so the line was passed over unchecked."""
+    found = commands_in("sudo -u ghnerf /opt/ghnerf/venv/bin/ghnerf-daemon --config d.json --measure-flor", "x",
+                        programs.project)
+    assert [(c.kind, c.program) for c in found] == [("console", "ghnerf-daemon")]
+    assert problems_of(found[0], programs) == ["x: ghnerf-daemon: unknown option --measure-flor"]
