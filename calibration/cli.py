@@ -147,6 +147,18 @@ def _existing_capture(out: Path) -> Path | None:
     return None
 
 
+def _output_folder(out: Path, what: str) -> None:
+    """``--out`` of ``board``, ``synth`` and ``capture``: a folder that is, or can be made, and takes new files.
+    Checked before the work (``synth`` renders for half a minute, ``capture`` opens the cameras), and said with
+    the flag: a file given for it stopped them after that work with OSError's bare ``[Errno 17] File exists``."""
+    base = existing_ancestor(out)
+    if not base.is_dir():
+        raise UsageError(f"--out {out}: {base} is a file; give a folder for {what}")
+    reason = unwritable_reason(base)
+    if reason is not None:
+        raise UsageError(f"--out {out}: cannot write {what} in {base} ({reason})")
+
+
 def _volume(text: str | None) -> WorkingVolume | None:
     if text is None:
         return None
@@ -173,6 +185,7 @@ def _cameras(text: str | None) -> list[str] | None:
 def cmd_board(args: argparse.Namespace) -> int:
     board = _board(args.board)
     out = Path(args.out)
+    _output_folder(out, "the board")
     out.mkdir(parents=True, exist_ok=True)
     px = int(round(board.square_m / 0.0254 * args.dpi))
     if px < MIN_PX_PER_SQUARE:  # the markers' cells would not be drawn
@@ -220,10 +233,14 @@ def cmd_synth(args: argparse.Namespace) -> int:
     for cam in rig.pair:
         check_camera_name(cam.name)
     out = Path(args.out)
+    _output_folder(out, "the views")  # before the half minute of rendering
     found = _existing_capture(out)
     if found is not None and not args.force:  # real captures, or their measured board.json, overwritten
         raise UsageError(f"{out} already holds views or a board ({found}): render into a new folder "
                          "(--out synth/), or pass --force to write over it")
+    for camera in (cam.name for cam in rig.pair):  # a camera's folder taken by a file, found before rendering too
+        if (out / camera).exists() and not (out / camera).is_dir():
+            raise UsageError(f"--out {out}: {out / camera} is a file, where the views of camera {camera!r} go")
     t0 = time.monotonic()
     views = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=args.seed)
     for camera, images in views.items():
@@ -311,12 +328,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     # marker at all, and the capture ran its --max-seconds without a word
     board_seen, mismatch_check_at = False, -math.inf
     # before the cameras are opened (seconds for an OAK): a folder it cannot write, or another session's views
-    base = existing_ancestor(out)
-    if not base.is_dir():
-        raise UsageError(f"--out {out}: {base} is a file; give a folder for the views")
-    reason = unwritable_reason(base)
-    if reason is not None:
-        raise UsageError(f"--out {out}: cannot write the views in {base} ({reason})")
+    _output_folder(out, "the views")
     earlier = earlier_views(out)
     if earlier and not args.floor and not args.append:
         # mixed silently with a session from before the rig was moved, its pairs were dropped by the

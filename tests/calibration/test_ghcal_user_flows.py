@@ -103,6 +103,33 @@ def test_capture_refuses_a_folder_it_cannot_write_before_opening_the_cameras(tmp
     assert f"cannot write the views in {refusing} (" in capsys.readouterr().err
 
 
+def _no_rendering(*args, **kwargs):
+    raise AssertionError("the views were rendered before the output was checked")
+
+
+def test_board_and_synth_refuse_an_output_they_cannot_write_before_the_work(tmp_path, capsys, monkeypatch):
+    # a file given for the folder stopped synth after its half minute of rendering, and both said only
+    # OSError's "[Errno 17] File exists: ..." without the flag
+    monkeypatch.setattr(cli, "calibration_views", _no_rendering)
+    taken = tmp_path / "rig.json"
+    taken.write_text("{}")
+    for command, what in (("board", "the board"), ("synth", "the views")):
+        assert cli.main([command, "--out", str(taken)]) == 2
+        assert capsys.readouterr().err == f"ghcal: error: --out {taken}: {taken} is a file; give a folder for {what}\n"
+    assert taken.read_text() == "{}"
+    # a file where a camera's folder goes
+    (tmp_path / "synth").mkdir()
+    (tmp_path / "synth" / "left").write_text("notes")
+    assert cli.main(["synth", "--out", str(tmp_path / "synth")]) == 2
+    assert (f"{tmp_path / 'synth' / 'left'} is a file, where the views of camera 'left' go"
+            in capsys.readouterr().err)
+    # last: skipped where no folder refuses a new file
+    refusing = _refusing_folder()
+    for command, what in (("board", "the board"), ("synth", "the views")):
+        assert cli.main([command, "--out", str(refusing / "new")]) == 2
+        assert f"ghcal: error: --out {refusing / 'new'}: cannot write {what} in {refusing} (" in capsys.readouterr().err
+
+
 def test_capture_into_an_earlier_sessions_folder_needs_append(truth, one_view, tmp_path, capsys):
     take = _take(tmp_path / "take", truth, one_view)
     board = _board_file(tmp_path)
