@@ -37,7 +37,7 @@ from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
                                  earlier_views, next_view_number, read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
-from calibration.detect import BoardDetector, BoardView, board_mismatch
+from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view
 from calibration.errors import CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
@@ -87,6 +87,10 @@ def _stream_name(text: str, limit: int, what: str) -> str:
 def _board(path: str | None) -> BoardSpec:
     """``board``, ``synth``, ``capture``: the given board, else the default (they print, render or detect it)."""
     return load_board(path) if path else BoardSpec()
+
+
+def _board_source(path: str | None) -> str:
+    return path if path else "the default board (no --board)"
 
 
 def _describe(board: BoardSpec) -> str:
@@ -327,6 +331,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     # until the board is first seen, every STALL_NOTE_S: a board file with another marker dictionary finds no
     # marker at all, and the capture ran its --max-seconds without a word
     board_seen, mismatch_check_at = False, -math.inf
+    markers_said = False  # the board's markers seen, the board never: said once
     # before the cameras are opened (seconds for an OAK): a folder it cannot write, or another session's views
     _output_folder(out, "the views")
     earlier = earlier_views(out)
@@ -388,6 +393,15 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 for cam, image in zip(cams, pair.images):
                     if (error := board_mismatch(board, image)) is not None:
                         raise CaptureError(f"{shown_url}, camera {cam!r}: {error}") from error
+                    markers = 0 if markers_said else markers_in_view(board, image)
+                    if markers >= PATTERN_CHECK_MARKERS:
+                        # a board file with another number of squares than the print (8x6 for 9x6) finds
+                        # the markers and no corner: the capture waited out --max-seconds without a word
+                        print(f"{PROG}: camera {cam!r} sees {markers} {board.dictionary} markers but not the board "
+                              f"{_board_source(args.board)} describes ({_describe(board)}): does it describe the "
+                              "print? (squares_x counts the squares along board.png's width; waiting up to "
+                              "--max-seconds, Ctrl-C ends the capture)", file=sys.stderr)
+                        markers_said = True
             if args.floor:
                 # Both cameras, and the board lying still: not the board carried into place.
                 if all(_still_since(v, r) for v, r in zip(found, resting)):
@@ -435,7 +449,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
     finally:
         source.close()
     if kept < count:
-        why = "the stream ended" if ended else "--max-seconds ran out"
+        why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
+                                                                          ", and the board was in no image")
         print(f"{PROG}: kept {kept} of {count} views: {why}", file=sys.stderr)
         return 2 if kept == 0 else 0
     print(f"kept {kept} view(s) in {out}")
