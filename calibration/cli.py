@@ -38,7 +38,7 @@ from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, c
                                  earlier_views, next_view_number, read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
 from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view
-from calibration.errors import CalibrationError, CaptureError
+from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
@@ -386,13 +386,18 @@ def cmd_capture(args: argparse.Namespace) -> int:
                                       "with --append once the camera is back" if kept else "no view was kept")) from e
             last_pair_at, stall_said = time.monotonic(), False
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
-            found = [detector.detect(image) for image in pair.images]
+            found = []
+            for cam, image in zip(cams, pair.images):
+                try:
+                    found.append(detector.detect(image))
+                except BoardError as e:  # squares swapped, or the other pattern: said with the camera and the file
+                    raise CaptureError(f"{shown_url}, camera {cam!r}: {_board_source(args.board)}: {e}") from e
             board_seen = board_seen or any(v is not None for v in found)
             if not board_seen and now >= mismatch_check_at:
                 mismatch_check_at = now + STALL_NOTE_S
                 for cam, image in zip(cams, pair.images):
                     if (error := board_mismatch(board, image)) is not None:
-                        raise CaptureError(f"{shown_url}, camera {cam!r}: {error}") from error
+                        raise CaptureError(f"{shown_url}, camera {cam!r}: {_board_source(args.board)}: {error}") from error
                     markers = 0 if markers_said else markers_in_view(board, image)
                     if markers >= PATTERN_CHECK_MARKERS:
                         # a board file with another number of squares than the print (8x6 for 9x6) finds
