@@ -35,7 +35,7 @@ import numpy as np
 
 from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
-                                 earlier_views, next_view_number, read_camera_order, write_camera_order)
+                                 earlier_size, earlier_views, next_view_number, read_camera_order, write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
 from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view
 from calibration.errors import BoardError, CalibrationError, CaptureError
@@ -355,6 +355,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
         for folder in folders:
             folder.mkdir(parents=True, exist_ok=True)
         number = next_view_number(folders)
+        replaced = {FLOOR_VIEW} if args.floor and args.force else set()
+        # the views already there (--append, --floor): one of another size is another rig or resolution
+        sizes = [earlier_size(folder, skip=replaced) for folder in folders]
         print(f"capturing from {shown_url} (cameras {cams}) into {out}"
               + (f", after the {len({p.stem for p in earlier})} views there (numbered from {number:03d})"
                  if earlier and not args.floor
@@ -385,6 +388,13 @@ def cmd_capture(args: argparse.Namespace) -> int:
                                    + (f"the {kept} view(s) kept before it are whole pairs in {out}: capture the rest "
                                       "with --append once the camera is back" if kept else "no view was kept")) from e
             last_pair_at, stall_said = time.monotonic(), False
+            for cam, image, earlier in zip(cams, pair.images, sizes):
+                if earlier is not None and (image.shape[1], image.shape[0]) != earlier[1]:
+                    # views of another rig or resolution: the solve refused the mix after the session
+                    raise CaptureError(
+                        f"{earlier[0]} is {earlier[1][0]}x{earlier[1][1]}, but camera {cam!r} of {shown_url} delivers "
+                        f"{image.shape[1]}x{image.shape[0]}: the views in {out} are of another rig or resolution, and "
+                        "the solve refuses a camera's images at two sizes: capture into a new folder")
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
             found = []
             for cam, image in zip(cams, pair.images):
@@ -404,8 +414,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
                         # the markers and no corner: the capture waited out --max-seconds without a word
                         print(f"{PROG}: camera {cam!r} sees {markers} {board.dictionary} markers but not the board "
                               f"{_board_source(args.board)} describes ({_describe(board)}): does it describe the "
-                              "print? (squares_x counts the squares along board.png's width; waiting up to "
-                              "--max-seconds, Ctrl-C ends the capture)", file=sys.stderr)
+                              "print (squares_x counts the squares along board.png's width)? Is the board near and "
+                              "sharp enough? (waiting up to --max-seconds; Ctrl-C ends the capture)", file=sys.stderr)
                         markers_said = True
             if args.floor:
                 # Both cameras, and the board lying still: not the board carried into place.

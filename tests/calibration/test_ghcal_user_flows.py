@@ -149,6 +149,33 @@ def test_capture_into_an_earlier_sessions_folder_needs_append(truth, one_view, t
     assert (out / "left" / "floor.png").exists()
 
 
+def test_views_added_at_another_size_are_refused_before_any_is_kept(truth, one_view, tmp_path, capsys):
+    # another rig's cameras, or these opened at another resolution: --append and --floor kept them without a word,
+    # and the solve then refused the camera's images at two sizes, the session lost
+    board = _board_file(tmp_path)
+    out = tmp_path / "capture"
+    base = ["--board", str(board), "--out", str(out), "--count", "1", "--interval-s", "0", "--still-s", "0"]
+    take = _take(tmp_path / "take", truth, one_view)
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free"] + base) == 0
+    small = Rig(tuple(c.resized(640, 400) for c in truth.cameras), truth.volume, rig_id="small")
+    other = _take(tmp_path / "other", small, calibration_views(small, BOARD, count=1, edge_count=0, seed=5,
+                                                               floor_view=False))
+    capsys.readouterr()
+    before = {p: p.read_bytes() for p in out.glob("*/*")}
+    for extra in (["--append"], ["--floor", "--steady-s", "0"]):
+        assert cli.main(["capture", "--url", f"replay://{other}?speed=free"] + base + extra) == 2
+        assert (f"ghcal: error: {out / 'left' / '000.png'} is 800x500, but camera 'left' of replay://{other}?speed=free "
+                "delivers 640x400: the views in" in capsys.readouterr().err)
+        assert {p: p.read_bytes() for p in out.glob("*/*")} == before  # nothing added
+    # a floor view replaced (--force) is no reference: the views it joins are
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free"] + base + ["--floor", "--steady-s", "0"]) == 0
+    (out / "left" / "000.png").unlink()
+    (out / "right" / "000.png").unlink()
+    assert cli.main(["capture", "--url", f"replay://{other}?speed=free"] + base
+                    + ["--floor", "--steady-s", "0", "--force"]) == 0
+    assert cv2.imread(str(out / "left" / "floor.png")).shape[:2] == (400, 640)
+
+
 def _failing_after(real, reads: int, error: Exception):
     def create(url, **kwargs):
         source = real(url, **kwargs)
