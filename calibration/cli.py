@@ -35,7 +35,8 @@ import numpy as np
 
 from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
-                                 earlier_size, earlier_views, next_view_number, read_camera_order, write_camera_order)
+                                 earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
+                                 write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
 from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view
 from calibration.errors import BoardError, CalibrationError, CaptureError
@@ -794,7 +795,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
-                raise UsageError(f"{args.images}/{cam.name}/{name}: the image is {view.image_size[0]}x"
+                path = list_images(Path(args.images) / cam.name)[name]  # the file as named, suffix and all
+                raise UsageError(f"{path}: the image is {view.image_size[0]}x"
                                  f"{view.image_size[1]}, camera {cam.name!r} of {args.rig} {cam.width}x{cam.height}")
     floor_taken = any(floor_view in views[c] or floor_view in missed[c] for c in views)
     if args.floor_view is not None and not floor_taken:

@@ -469,7 +469,9 @@ def test_check_refuses_views_of_another_size(capture, truth, tmp_path, capsys):
     save_rig(small, tmp_path / "small.json")
     assert cli.main(["check", "--rig", str(tmp_path / "small.json"), "--board", str(capture / "board.json"),
                      "--images", str(capture)]) == 2
-    assert "the image is 800x500, camera 'left'" in capsys.readouterr().err
+    # the file as it is named (it said ".../left/000", no such file)
+    err = capsys.readouterr().err
+    assert f"ghcal: error: {capture / 'left' / '000.png'}: the image is 800x500, camera 'left'" in err
 
 
 def test_one_unsynchronised_pair_is_dropped_alone(views):
