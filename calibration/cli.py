@@ -758,14 +758,21 @@ def cmd_export(args: argparse.Namespace) -> int:
     out = _output_path(args.out, "--out", "export")
     if out.exists() and out.resolve() == Path(args.rig).resolve():
         raise UsageError(f"--out {out} is the rig file (--rig): give the export another path")
+    # kept as import and solve keep theirs: an export over the anipose or OpenCV file a rig was imported from
+    # replaced the other tool's own calibration, in its own frame, without a copy
+    previous = {out: _previous_path(out, "--out")}
+    _check_kept_apart(previous, {"--rig": Path(args.rig)})
     fmt = _format_of(out, args.format, "--out")
     if fmt == "anipose":
         if args.units_to_metres is None:
             raise UsageError("anipose files do not record the unit of their translations: pass --units-to-metres "
                              "(0.001 to write millimetres, 1 for metres), the unit the reading tool expects")
+    kept = {out: _keep_previous(out, previous[out])}
+    if fmt == "anipose":
         write_anipose_toml(rig, out, units_to_metres=args.units_to_metres)
     else:
         write_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres)
+    _say_kept(kept)
     print(f"wrote {out} ({fmt}, cameras {', '.join(repr(c.name) for c in rig.cameras)})")
     return 0
 
