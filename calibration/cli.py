@@ -216,7 +216,9 @@ def cmd_board(args: argparse.Namespace) -> int:
     ok, encoded = cv2.imencode(".png", image)
     if not ok:
         raise UsageError(f"{png}: cannot encode the image")
-    png.write_bytes(png_with_dpi(encoded.tobytes(), args.dpi))  # the PNG says its dpi: printed at 100 %, to scale
+    # the PNG says its dpi (printed at 100 %, to scale); written aside and renamed, so a Ctrl-C while the print's
+    # megabytes are written leaves the earlier board.png, not a cut-off one
+    write_bytes_atomic(png, png_with_dpi(encoded.tobytes(), args.dpi))
     write_text_atomic(spec, json.dumps(board.to_dict(), indent=2) + "\n")
     w_cm, h_cm = (100 * image.shape[1] / args.dpi * 0.0254, 100 * image.shape[0] / args.dpi * 0.0254)
     # a square is a whole number of pixels: at a low dpi the print's squares differ from square_m

@@ -298,3 +298,23 @@ def test_a_lens_that_folds_is_said_in_degrees_off_the_axis():
                  np.array([-0.2, 0, 0, 0, 0]))
     text = fold_warning(cam)
     assert "folds over inside the image, 52 degrees off the optical axis (normalised radius 1.29)" in text, text
+
+
+def test_ctrl_c_while_the_board_is_written_leaves_the_earlier_print(tmp_path, capsys, monkeypatch):
+    # board.png was written in place: stopped halfway, the folder held a cut-off print beside its board.json
+    assert cli.main(["board", "--out", str(tmp_path), "--dpi", "72"]) == 0
+    earlier = (tmp_path / "board.png").read_bytes()
+
+    def half_then_stop(self, data):  # a write in place, stopped halfway
+        with open(self, "wb") as fh:
+            fh.write(data[: len(data) // 2])
+        raise KeyboardInterrupt
+
+    def stop(*args, **kwargs):  # a write aside, stopped before its rename
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Path, "write_bytes", half_then_stop)
+    monkeypatch.setattr(os, "replace", stop)
+    assert cli.main(["board", "--out", str(tmp_path), "--dpi", "100"]) == 130
+    assert (tmp_path / "board.png").read_bytes() == earlier
+    assert not list(tmp_path.glob(".*tmp"))
