@@ -25,11 +25,14 @@ import numpy as np
 
 from calibration.errors import BoardError
 
-__all__ = ["BoardSpec", "load_board", "png_with_dpi", "DICTIONARIES", "MIN_CORNERS"]
+__all__ = ["BoardSpec", "load_board", "png_with_dpi", "DICTIONARIES", "MIN_CORNERS", "REQUIRED_KEYS"]
 
 #: Fewest corners a view needs to constrain a pose (and not all on one line); a board with fewer inner
 #: corners could never be found.
 MIN_CORNERS = 6
+
+#: The keys a board file must give: every one but ``legacy_pattern`` (false unless set, for old prints).
+REQUIRED_KEYS = ("squares_x", "squares_y", "square_m", "marker_m", "dictionary")
 
 #: ArUco dictionaries a board may use (OpenCV's predefined ones, by name).
 DICTIONARIES = tuple(sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and "APRILTAG" not in n
@@ -148,6 +151,12 @@ class BoardSpec:
         for key in data:
             if key not in names:
                 raise BoardError(f"unknown key; a board has {sorted(names)}", key=str(key), path=path)
+        for key in REQUIRED_KEYS:
+            if key not in data:
+                # filled in from the defaults, a square_m deleted while typing in the measured size gave the
+                # default board's 80 mm squares, and the rig was scaled by them without a word
+                raise BoardError(f"missing; a board file gives {', '.join(REQUIRED_KEYS)} ('ghcal board' writes "
+                                 "them all; square_m and marker_m as measured on the print)", key=key, path=path)
         try:
             return cls(**data)
         except BoardError as e:

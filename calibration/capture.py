@@ -28,7 +28,7 @@ from calibration.errors import BoardError, CaptureError
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
-           "earlier_views", "next_view_number", "read_camera_order", "write_camera_order"]
+           "earlier_views", "earlier_size", "next_view_number", "read_camera_order", "write_camera_order"]
 
 CAMERAS_FILE = "cameras.json"
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -62,6 +62,24 @@ def earlier_views(root: str | os.PathLike) -> list[Path]:
         return []
     return sorted(p for folder in root.iterdir() if folder.is_dir() and not folder.name.startswith(".")
                   for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and _NUMBERED.match(p.stem))
+
+
+def earlier_size(folder: Path, *, skip: Iterable[str] = ()) -> tuple[Path, tuple[int, int]] | None:
+    """An image already in a camera's ``folder`` and its ``(width, height)``; None when it holds none.
+
+    A session appended (or a floor view added) at another size than the views there was kept without a word, and
+    the solve then refused the mix ("its images differ in size"): the cameras of another rig, or opened at
+    another resolution. One image stands for the folder: the solve names every size found. Views named in
+    ``skip`` do not count (a floor view being replaced).
+    """
+    images = list_images(folder) if folder.is_dir() else {}
+    for name, path in images.items():
+        if name in skip:
+            continue
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if image is not None:  # an unreadable one is the solve's to name
+            return path, (int(image.shape[1]), int(image.shape[0]))
+    return None
 
 
 def write_camera_order(root: str | os.PathLike, names: Iterable[str], *, replace: bool = False) -> None:

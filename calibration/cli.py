@@ -35,10 +35,11 @@ import numpy as np
 
 from calibration.board import BoardSpec, load_board, png_with_dpi
 from calibration.capture import (CAMERAS_FILE, IMAGE_SUFFIXES, camera_folders, check_camera_name, detect_folder,
-                                 earlier_views, next_view_number, read_camera_order, write_camera_order)
+                                 earlier_size, earlier_views, list_images, next_view_number, read_camera_order,
+                                 write_camera_order)
 from calibration.check import FLOOR_VIEW, CheckLimits, check_failures, check_rig, floor_unmeasured
-from calibration.detect import BoardDetector, BoardView, board_mismatch
-from calibration.errors import CalibrationError, CaptureError
+from calibration.detect import PATTERN_CHECK_MARKERS, BoardDetector, BoardView, board_mismatch, markers_in_view
+from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
@@ -87,6 +88,10 @@ def _stream_name(text: str, limit: int, what: str) -> str:
 def _board(path: str | None) -> BoardSpec:
     """``board``, ``synth``, ``capture``: the given board, else the default (they print, render or detect it)."""
     return load_board(path) if path else BoardSpec()
+
+
+def _board_source(path: str | None) -> str:
+    return path if path else "the default board (no --board)"
 
 
 def _describe(board: BoardSpec) -> str:
@@ -147,6 +152,18 @@ def _existing_capture(out: Path) -> Path | None:
     return None
 
 
+def _output_folder(out: Path, what: str) -> None:
+    """``--out`` of ``board``, ``synth`` and ``capture``: a folder that is, or can be made, and takes new files.
+    Checked before the work (``synth`` renders for half a minute, ``capture`` opens the cameras), and said with
+    the flag: a file given for it stopped them after that work with OSError's bare ``[Errno 17] File exists``."""
+    base = existing_ancestor(out)
+    if not base.is_dir():
+        raise UsageError(f"--out {out}: {base} is a file; give a folder for {what}")
+    reason = unwritable_reason(base)
+    if reason is not None:
+        raise UsageError(f"--out {out}: cannot write {what} in {base} ({reason})")
+
+
 def _volume(text: str | None) -> WorkingVolume | None:
     if text is None:
         return None
@@ -173,6 +190,7 @@ def _cameras(text: str | None) -> list[str] | None:
 def cmd_board(args: argparse.Namespace) -> int:
     board = _board(args.board)
     out = Path(args.out)
+    _output_folder(out, "the board")
     out.mkdir(parents=True, exist_ok=True)
     px = int(round(board.square_m / 0.0254 * args.dpi))
     if px < MIN_PX_PER_SQUARE:  # the markers' cells would not be drawn
@@ -198,7 +216,9 @@ def cmd_board(args: argparse.Namespace) -> int:
     ok, encoded = cv2.imencode(".png", image)
     if not ok:
         raise UsageError(f"{png}: cannot encode the image")
-    png.write_bytes(png_with_dpi(encoded.tobytes(), args.dpi))  # the PNG says its dpi: printed at 100 %, to scale
+    # the PNG says its dpi (printed at 100 %, to scale); written aside and renamed, so a Ctrl-C while the print's
+    # megabytes are written leaves the earlier board.png, not a cut-off one
+    write_bytes_atomic(png, png_with_dpi(encoded.tobytes(), args.dpi))
     write_text_atomic(spec, json.dumps(board.to_dict(), indent=2) + "\n")
     w_cm, h_cm = (100 * image.shape[1] / args.dpi * 0.0254, 100 * image.shape[0] / args.dpi * 0.0254)
     # a square is a whole number of pixels: at a low dpi the print's squares differ from square_m
@@ -220,10 +240,14 @@ def cmd_synth(args: argparse.Namespace) -> int:
     for cam in rig.pair:
         check_camera_name(cam.name)
     out = Path(args.out)
+    _output_folder(out, "the views")  # before the half minute of rendering
     found = _existing_capture(out)
     if found is not None and not args.force:  # real captures, or their measured board.json, overwritten
         raise UsageError(f"{out} already holds views or a board ({found}): render into a new folder "
                          "(--out synth/), or pass --force to write over it")
+    for camera in (cam.name for cam in rig.pair):  # a camera's folder taken by a file, found before rendering too
+        if (out / camera).exists() and not (out / camera).is_dir():
+            raise UsageError(f"--out {out}: {out / camera} is a file, where the views of camera {camera!r} go")
     t0 = time.monotonic()
     views = calibration_views(rig, board, count=args.count, edge_count=args.edge_count, seed=args.seed)
     for camera, images in views.items():
@@ -310,13 +334,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
     # until the board is first seen, every STALL_NOTE_S: a board file with another marker dictionary finds no
     # marker at all, and the capture ran its --max-seconds without a word
     board_seen, mismatch_check_at = False, -math.inf
+    markers_said = False  # the board's markers seen, the board never: said once
     # before the cameras are opened (seconds for an OAK): a folder it cannot write, or another session's views
-    base = existing_ancestor(out)
-    if not base.is_dir():
-        raise UsageError(f"--out {out}: {base} is a file; give a folder for the views")
-    reason = unwritable_reason(base)
-    if reason is not None:
-        raise UsageError(f"--out {out}: cannot write the views in {base} ({reason})")
+    _output_folder(out, "the views")
     earlier = earlier_views(out)
     if earlier and not args.floor and not args.append:
         # mixed silently with a session from before the rig was moved, its pairs were dropped by the
@@ -338,6 +358,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
         for folder in folders:
             folder.mkdir(parents=True, exist_ok=True)
         number = next_view_number(folders)
+        replaced = {FLOOR_VIEW} if args.floor and args.force else set()
+        # the views already there (--append, --floor): one of another size is another rig or resolution
+        sizes = [earlier_size(folder, skip=replaced) for folder in folders]
         print(f"capturing from {shown_url} (cameras {cams}) into {out}"
               + (f", after the {len({p.stem for p in earlier})} views there (numbered from {number:03d})"
                  if earlier and not args.floor
@@ -368,14 +391,35 @@ def cmd_capture(args: argparse.Namespace) -> int:
                                    + (f"the {kept} view(s) kept before it are whole pairs in {out}: capture the rest "
                                       "with --append once the camera is back" if kept else "no view was kept")) from e
             last_pair_at, stall_said = time.monotonic(), False
+            for cam, image, earlier in zip(cams, pair.images, sizes):
+                if earlier is not None and (image.shape[1], image.shape[0]) != earlier[1]:
+                    # views of another rig or resolution: the solve refused the mix after the session
+                    raise CaptureError(
+                        f"{earlier[0]} is {earlier[1][0]}x{earlier[1][1]}, but camera {cam!r} of {shown_url} delivers "
+                        f"{image.shape[1]}x{image.shape[0]}: the views in {out} are of another rig or resolution, and "
+                        "the solve refuses a camera's images at two sizes: capture into a new folder")
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
-            found = [detector.detect(image) for image in pair.images]
+            found = []
+            for cam, image in zip(cams, pair.images):
+                try:
+                    found.append(detector.detect(image))
+                except BoardError as e:  # squares swapped, or the other pattern: said with the camera and the file
+                    raise CaptureError(f"{shown_url}, camera {cam!r}: {_board_source(args.board)}: {e}") from e
             board_seen = board_seen or any(v is not None for v in found)
             if not board_seen and now >= mismatch_check_at:
                 mismatch_check_at = now + STALL_NOTE_S
                 for cam, image in zip(cams, pair.images):
                     if (error := board_mismatch(board, image)) is not None:
-                        raise CaptureError(f"{shown_url}, camera {cam!r}: {error}") from error
+                        raise CaptureError(f"{shown_url}, camera {cam!r}: {_board_source(args.board)}: {error}") from error
+                    markers = 0 if markers_said else markers_in_view(board, image)
+                    if markers >= PATTERN_CHECK_MARKERS:
+                        # a board file with another number of squares than the print (8x6 for 9x6) finds
+                        # the markers and no corner: the capture waited out --max-seconds without a word
+                        print(f"{PROG}: camera {cam!r} sees {markers} {board.dictionary} markers but not the board "
+                              f"{_board_source(args.board)} describes ({_describe(board)}): does it describe the "
+                              "print (squares_x counts the squares along board.png's width)? Is the board near and "
+                              "sharp enough? (waiting up to --max-seconds; Ctrl-C ends the capture)", file=sys.stderr)
+                        markers_said = True
             if args.floor:
                 # Both cameras, and the board lying still: not the board carried into place.
                 if all(_still_since(v, r) for v, r in zip(found, resting)):
@@ -423,7 +467,8 @@ def cmd_capture(args: argparse.Namespace) -> int:
     finally:
         source.close()
     if kept < count:
-        why = "the stream ended" if ended else "--max-seconds ran out"
+        why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
+                                                                          ", and the board was in no image")
         print(f"{PROG}: kept {kept} of {count} views: {why}", file=sys.stderr)
         return 2 if kept == 0 else 0
     print(f"kept {kept} view(s) in {out}")
@@ -715,14 +760,21 @@ def cmd_export(args: argparse.Namespace) -> int:
     out = _output_path(args.out, "--out", "export")
     if out.exists() and out.resolve() == Path(args.rig).resolve():
         raise UsageError(f"--out {out} is the rig file (--rig): give the export another path")
+    # kept as import and solve keep theirs: an export over the anipose or OpenCV file a rig was imported from
+    # replaced the other tool's own calibration, in its own frame, without a copy
+    previous = {out: _previous_path(out, "--out")}
+    _check_kept_apart(previous, {"--rig": Path(args.rig)})
     fmt = _format_of(out, args.format, "--out")
     if fmt == "anipose":
         if args.units_to_metres is None:
             raise UsageError("anipose files do not record the unit of their translations: pass --units-to-metres "
                              "(0.001 to write millimetres, 1 for metres), the unit the reading tool expects")
+    kept = {out: _keep_previous(out, previous[out])}
+    if fmt == "anipose":
         write_anipose_toml(rig, out, units_to_metres=args.units_to_metres)
     else:
         write_opencv_rig(rig, out, units_to_metres=1.0 if args.units_to_metres is None else args.units_to_metres)
+    _say_kept(kept)
     print(f"wrote {out} ({fmt}, cameras {', '.join(repr(c.name) for c in rig.cameras)})")
     return 0
 
@@ -752,7 +804,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     for cam in rig.pair:
         for name, view in views[cam.name].items():
             if view.image_size != cam.size:
-                raise UsageError(f"{args.images}/{cam.name}/{name}: the image is {view.image_size[0]}x"
+                path = list_images(Path(args.images) / cam.name)[name]  # the file as named, suffix and all
+                raise UsageError(f"{path}: the image is {view.image_size[0]}x"
                                  f"{view.image_size[1]}, camera {cam.name!r} of {args.rig} {cam.width}x{cam.height}")
     floor_taken = any(floor_view in views[c] or floor_view in missed[c] for c in views)
     if args.floor_view is not None and not floor_taken:

@@ -10,7 +10,7 @@ import numpy as np
 from calibration.board import DICTIONARIES, MIN_CORNERS, BoardSpec
 from calibration.errors import BoardError, CaptureError
 
-__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS", "grey8", "fixes_a_pose", "board_mismatch"]
+__all__ = ["BoardView", "BoardDetector", "MIN_CORNERS", "grey8", "fixes_a_pose", "board_mismatch", "markers_in_view"]
 
 #: Markers seen, with no corners found, before the detector tries the board's other chessboard pattern
 #: (a print from OpenCV before 4.6, or from it since, read with the other ``legacy_pattern``).
@@ -208,3 +208,15 @@ def board_mismatch(board: BoardSpec, image: np.ndarray, *, min_corners: int = MI
                           f"({found}), not {board.dictionary}'s: set \"dictionary\": \"{spec.dictionary}\" in the "
                           f"board file{also}", key="dictionary")
     return None
+
+
+def markers_in_view(board: BoardSpec, image: np.ndarray) -> int:
+    """How many markers of ``board``'s dictionary ``image`` shows, whether or not they make up ``board``.
+
+    Markers seen and no board found (and no :func:`board_mismatch`) is a board file with another number of
+    squares than the print (8x6 typed for 9x6): OpenCV places no marker on the board described, and a
+    capture ran its --max-seconds without a word.
+    """
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, board.dictionary))
+    _, ids, _ = cv2.aruco.ArucoDetector(dictionary).detectMarkers(grey8(image))
+    return 0 if ids is None else int(len(ids))

@@ -137,8 +137,27 @@ def test_markers_too_small_to_draw_are_named_not_an_opencv_traceback(tmp_path, c
 def test_the_file_is_named_before_the_key_and_the_whole_message(tmp_path):
     # the file's name is put before the message as raised (BoardError.detail), colons in it kept
     path = tmp_path / "board.json"
-    path.write_text(json.dumps({"squares_x": 3, "squares_y": 3}))
+    path.write_text(json.dumps({**BoardSpec().to_dict(), "squares_x": 3, "squares_y": 3}))
     with pytest.raises(BoardError) as e:
         load_board(path)
     assert str(e.value) == (f"{path}: squares_x: a 3x3 board has 4 inner corners; a view needs at least 6, so it "
                             "could never be found: add squares")
+
+
+@pytest.mark.parametrize("key", ["square_m", "marker_m", "squares_x", "squares_y", "dictionary"])
+def test_a_key_left_out_of_the_board_file_is_named_not_taken_from_the_default_board(tmp_path, key):
+    # the measured square_m deleted while editing: the default board's 80 mm squares scaled the rig silently
+    measured = {**BoardSpec(square_m=0.0787, marker_m=0.059).to_dict()}
+    del measured[key]
+    path = tmp_path / "board.json"
+    path.write_text(json.dumps(measured))
+    with pytest.raises(BoardError) as e:
+        load_board(path)
+    assert e.value.key == key and str(e.value).startswith(f"{path}: {key}: missing")
+
+
+def test_a_board_file_without_legacy_pattern_reads_as_a_print_of_today(tmp_path):
+    board = BoardSpec(square_m=0.0787, marker_m=0.059)
+    path = tmp_path / "board.json"
+    path.write_text(json.dumps({k: v for k, v in board.to_dict().items() if k != "legacy_pattern"}))
+    assert load_board(path) == board

@@ -396,7 +396,9 @@ def test_capture_of_a_board_printed_with_the_other_pattern_stops_naming_the_sett
     board.write_text(json.dumps({**printed.to_dict(), "legacy_pattern": False}))
     assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board),
                      "--out", str(tmp_path / "out")]) == 2
-    assert 'set "legacy_pattern": true in the board file' in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert 'set "legacy_pattern": true in the board file' in err
+    assert f"camera 'left': {board}: legacy_pattern: the board in view is printed with the other" in err  # which file
 
 
 def test_a_view_dropped_from_the_intrinsics_is_not_used_for_the_pair(views):
@@ -467,7 +469,9 @@ def test_check_refuses_views_of_another_size(capture, truth, tmp_path, capsys):
     save_rig(small, tmp_path / "small.json")
     assert cli.main(["check", "--rig", str(tmp_path / "small.json"), "--board", str(capture / "board.json"),
                      "--images", str(capture)]) == 2
-    assert "the image is 800x500, camera 'left'" in capsys.readouterr().err
+    # the file as it is named (it said ".../left/000", no such file)
+    err = capsys.readouterr().err
+    assert f"ghcal: error: {capture / 'left' / '000.png'}: the image is 800x500, camera 'left'" in err
 
 
 def test_one_unsynchronised_pair_is_dropped_alone(views):

@@ -243,3 +243,21 @@ def test_import_refuses_to_keep_the_previous_rig_over_the_file_it_imports(rig_fi
     assert cli.main(["import", str(source), "--out", str(out)]) == 2
     assert f"FILE {source} is where the previous {out} is kept" in capsys.readouterr().err
     assert source.read_text() == text and out.read_text() == "an earlier rig\n"
+
+
+def test_exporting_over_a_file_keeps_the_previous_one(rig_file, tmp_path, capsys):
+    # an export over the anipose file a rig was imported from replaced the other tool's calibration, without a copy
+    theirs = tmp_path / "calibration.toml"
+    theirs.write_text("# anipose's own calibration\n")
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(theirs), "--units-to-metres", "0.001"]) == 0
+    prev = tmp_path / "calibration.prev.toml"
+    assert f"kept the previous {theirs} as {prev}" in capsys.readouterr().out
+    assert prev.read_text() == "# anipose's own calibration\n" and "[metadata]" in theirs.read_text()
+    # nor is a rig file given as --rig kept over: where the copy would go, refused before anything is written
+    (tmp_path / "lab.json").write_text("an export of another rig\n")
+    kept = tmp_path / "lab.prev.json"
+    save_rig(example_rig(), kept)
+    before = kept.read_bytes()
+    assert cli.main(["export", "--rig", str(kept), "--out", str(tmp_path / "lab.json")]) == 2
+    assert f"--rig {kept} is where the previous {tmp_path / 'lab.json'} is kept" in capsys.readouterr().err
+    assert kept.read_bytes() == before and (tmp_path / "lab.json").read_text() == "an export of another rig\n"

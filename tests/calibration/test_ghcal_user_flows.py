@@ -103,6 +103,33 @@ def test_capture_refuses_a_folder_it_cannot_write_before_opening_the_cameras(tmp
     assert f"cannot write the views in {refusing} (" in capsys.readouterr().err
 
 
+def _no_rendering(*args, **kwargs):
+    raise AssertionError("the views were rendered before the output was checked")
+
+
+def test_board_and_synth_refuse_an_output_they_cannot_write_before_the_work(tmp_path, capsys, monkeypatch):
+    # a file given for the folder stopped synth after its half minute of rendering, and both said only
+    # OSError's "[Errno 17] File exists: ..." without the flag
+    monkeypatch.setattr(cli, "calibration_views", _no_rendering)
+    taken = tmp_path / "rig.json"
+    taken.write_text("{}")
+    for command, what in (("board", "the board"), ("synth", "the views")):
+        assert cli.main([command, "--out", str(taken)]) == 2
+        assert capsys.readouterr().err == f"ghcal: error: --out {taken}: {taken} is a file; give a folder for {what}\n"
+    assert taken.read_text() == "{}"
+    # a file where a camera's folder goes
+    (tmp_path / "synth").mkdir()
+    (tmp_path / "synth" / "left").write_text("notes")
+    assert cli.main(["synth", "--out", str(tmp_path / "synth")]) == 2
+    assert (f"{tmp_path / 'synth' / 'left'} is a file, where the views of camera 'left' go"
+            in capsys.readouterr().err)
+    # last: skipped where no folder refuses a new file
+    refusing = _refusing_folder()
+    for command, what in (("board", "the board"), ("synth", "the views")):
+        assert cli.main([command, "--out", str(refusing / "new")]) == 2
+        assert f"ghcal: error: --out {refusing / 'new'}: cannot write {what} in {refusing} (" in capsys.readouterr().err
+
+
 def test_capture_into_an_earlier_sessions_folder_needs_append(truth, one_view, tmp_path, capsys):
     take = _take(tmp_path / "take", truth, one_view)
     board = _board_file(tmp_path)
@@ -120,6 +147,33 @@ def test_capture_into_an_earlier_sessions_folder_needs_append(truth, one_view, t
     # the floor view joins the session it belongs to without --append
     assert cli.main(argv[:-6] + ["--floor", "--steady-s", "0"]) == 0
     assert (out / "left" / "floor.png").exists()
+
+
+def test_views_added_at_another_size_are_refused_before_any_is_kept(truth, one_view, tmp_path, capsys):
+    # another rig's cameras, or these opened at another resolution: --append and --floor kept them without a word,
+    # and the solve then refused the camera's images at two sizes, the session lost
+    board = _board_file(tmp_path)
+    out = tmp_path / "capture"
+    base = ["--board", str(board), "--out", str(out), "--count", "1", "--interval-s", "0", "--still-s", "0"]
+    take = _take(tmp_path / "take", truth, one_view)
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free"] + base) == 0
+    small = Rig(tuple(c.resized(640, 400) for c in truth.cameras), truth.volume, rig_id="small")
+    other = _take(tmp_path / "other", small, calibration_views(small, BOARD, count=1, edge_count=0, seed=5,
+                                                               floor_view=False))
+    capsys.readouterr()
+    before = {p: p.read_bytes() for p in out.glob("*/*")}
+    for extra in (["--append"], ["--floor", "--steady-s", "0"]):
+        assert cli.main(["capture", "--url", f"replay://{other}?speed=free"] + base + extra) == 2
+        assert (f"ghcal: error: {out / 'left' / '000.png'} is 800x500, but camera 'left' of replay://{other}?speed=free "
+                "delivers 640x400: the views in" in capsys.readouterr().err)
+        assert {p: p.read_bytes() for p in out.glob("*/*")} == before  # nothing added
+    # a floor view replaced (--force) is no reference: the views it joins are
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free"] + base + ["--floor", "--steady-s", "0"]) == 0
+    (out / "left" / "000.png").unlink()
+    (out / "right" / "000.png").unlink()
+    assert cli.main(["capture", "--url", f"replay://{other}?speed=free"] + base
+                    + ["--floor", "--steady-s", "0", "--force"]) == 0
+    assert cv2.imread(str(out / "left" / "floor.png")).shape[:2] == (400, 640)
 
 
 def _failing_after(real, reads: int, error: Exception):
@@ -244,3 +298,23 @@ def test_a_lens_that_folds_is_said_in_degrees_off_the_axis():
                  np.array([-0.2, 0, 0, 0, 0]))
     text = fold_warning(cam)
     assert "folds over inside the image, 52 degrees off the optical axis (normalised radius 1.29)" in text, text
+
+
+def test_ctrl_c_while_the_board_is_written_leaves_the_earlier_print(tmp_path, capsys, monkeypatch):
+    # board.png was written in place: stopped halfway, the folder held a cut-off print beside its board.json
+    assert cli.main(["board", "--out", str(tmp_path), "--dpi", "72"]) == 0
+    earlier = (tmp_path / "board.png").read_bytes()
+
+    def half_then_stop(self, data):  # a write in place, stopped halfway
+        with open(self, "wb") as fh:
+            fh.write(data[: len(data) // 2])
+        raise KeyboardInterrupt
+
+    def stop(*args, **kwargs):  # a write aside, stopped before its rename
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Path, "write_bytes", half_then_stop)
+    monkeypatch.setattr(os, "replace", stop)
+    assert cli.main(["board", "--out", str(tmp_path), "--dpi", "100"]) == 130
+    assert (tmp_path / "board.png").read_bytes() == earlier
+    assert not list(tmp_path.glob(".*tmp"))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
 import cv2
@@ -167,5 +168,31 @@ def test_a_capture_with_another_dictionary_says_so_at_once(tmp_path, capsys):
     rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
                    "--count", "1", "--interval-s", "0", "--still-s", "0"])
     err = capsys.readouterr().err
-    assert rc == 2 and "camera 'left': dictionary: the board in view has the markers of another ArUco dictionary" in err
+    assert rc == 2 and f"camera 'left': {board}: dictionary: the board in view has the markers of another" in err
     assert 'set "dictionary": "DICT_5X5_50"' in err and not list(out.glob("*/*.png"))
+
+
+def test_a_capture_with_another_number_of_squares_says_so_and_why_nothing_was_kept(tmp_path, capsys):
+    # the board file of an 8x5 board, a 7x5 print in view: its markers are found, OpenCV places none of them
+    # on the board described, and the capture ran its --max-seconds (10 minutes) without a word
+    from calibration.render import calibration_views
+    from ghnerf_runtime.geometry.rig import Rig
+    from tests.calibration.test_ghcal_user_flows import _take
+
+    rig = example_rig()
+    truth = Rig(tuple(c.resized(800, 500) for c in rig.cameras), rig.volume, rig_id="truth")
+    printed = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
+    one_view = calibration_views(truth, printed, count=1, edge_count=0, seed=5, floor_view=False)
+    take = _take(tmp_path / "take", truth, one_view)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(dataclasses.replace(printed, squares_x=8).to_dict()))
+    out = tmp_path / "capture"
+    rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
+                   "--count", "1", "--interval-s", "0", "--still-s", "0"])
+    err = capsys.readouterr().err
+    assert rc == 2 and not list(out.glob("*/*.png"))
+    said = [line for line in err.splitlines() if "markers but not the board" in line]
+    assert len(said) == 1  # once, not every few seconds
+    assert re.match(rf"ghcal: camera 'left' sees 1[0-7] DICT_5X5_100 markers but not the board {re.escape(str(board))} "
+                    r"describes \(8x5 squares of 120 mm", said[0])  # 17 on the print, a few may be missed
+    assert "kept 0 of 1 views: the stream ended, and the board was in no image" in err
