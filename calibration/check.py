@@ -12,12 +12,15 @@ found. :func:`check_failures` turns the report into the reasons a rig does not f
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
-from typing import Any, Mapping
+from pathlib import Path
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from calibration.board import BoardSpec
+from calibration.capture import list_images
 from calibration.detect import MIN_CORNERS, BoardView
 from ghnerf_runtime.geometry.rig import Rig
 from ghnerf_runtime.geometry.triangulation import triangulate_dlt
@@ -138,18 +141,40 @@ def check_failures(report: Mapping[str, Any], limits: CheckLimits = CheckLimits(
     return reasons
 
 
+def _expected_image(root: str | os.PathLike | None, camera: str, other: str, name: str) -> str:
+    """Where ``camera``'s image ``name`` would be: beside ``other``'s, with the suffix ``other``'s has."""
+    folder = None if root is None else Path(root) / other
+    # a .jpg capture expects a .jpg
+    suffix = list_images(folder).get(name, Path(".png")).suffix if folder is not None and folder.is_dir() else ".png"
+    return f"{camera}/{name}{suffix}" if root is None else str(Path(root) / camera / f"{name}{suffix}")
+
+
 def floor_unmeasured(report: Mapping[str, Any], views: Mapping[str, Mapping[str, BoardView]],
-                     floor_view: str = FLOOR_VIEW) -> str | None:
+                     floor_view: str = FLOOR_VIEW, *, missed: Mapping[str, Sequence[str]] | None = None,
+                     root: str | os.PathLike | None = None) -> str | None:
     """Why the floor view in ``views`` gave ``report`` (from :func:`check_rig`) no height; None where it gave one
     or where no camera found the board in it (the caller knows whether it was taken at all).
 
+    ``missed`` (camera -> names of images without the board, from
+    :func:`~calibration.capture.detect_folder`) tells a camera whose floor image is missing from one that did
+    not find the board in it; ``root``, the images' folder, names the missing file.
+
     ``ghcal check`` said "the board was not found in both cameras' floor view" whatever the reason, also
     where both found it and its corners did not triangulate (a camera turned far: the fix is to calibrate
-    again, not to retake the floor view).
+    again, not to retake the floor view); and "only camera 'left' found the board" where the right camera had
+    no floor image at all (copied without it: the fix is the file, not the board's place).
     """
     if "floor" in report:
         return None
     seen = [camera for camera, named in views.items() if floor_view in named]
+    if missed is not None:
+        imaged = [c for c in views if floor_view in views[c] or floor_view in missed.get(c, ())]
+        absent = [c for c in views if c not in imaged]
+        if imaged and absent:
+            return (f"camera {absent[0]!r} has no floor image "
+                    f"({_expected_image(root, absent[0], imaged[0], floor_view)} is missing; camera {imaged[0]!r} "
+                    + ("found the board in its own" if imaged[0] in seen else "has one, without the board found")
+                    + "): take the floor view again (ghcal capture --floor --force)")
     if floor_view in report.get("per_view", {}):
         entry = report["per_view"][floor_view]
         return (f"none of the {entry['corners']} corners both cameras found in floor view {floor_view!r} "

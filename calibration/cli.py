@@ -17,7 +17,8 @@ out) through ``ghcal import`` / ``ghcal export`` (OpenCV FileStorage YAML/XML/JS
     ghcal export --rig rig.json --out rig.yml
 
 Exit status: 0 on success (warnings are printed, not fatal), 2 for an error the user fixes (the
-message names the file, folder, camera or key).
+message names the file, folder, camera or key); 130 after Ctrl-C, 143 after SIGTERM, each with one line
+(``capture``: 0 when it kept views, as its normal end).
 """
 from __future__ import annotations
 
@@ -25,7 +26,9 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -125,6 +128,22 @@ def _calibration_record(rig) -> dict:
 def _recorded_board(rig, rig_path: str) -> BoardSpec | None:
     data = _calibration_record(rig).get("board")
     return None if data is None else BoardSpec.from_dict(data, path=f"{rig_path}: metadata.calibration.board")
+
+
+def _recorded_floor_view(rig, rig_path: str) -> str | None:
+    """The floor view ``solve`` levelled from (``metadata.calibration.floor_view``), None where it recorded none
+    (levelled with --camera-height) or the rig is not ghcal's. A value that is no view name is refused: it fell
+    back to ``floor`` without a word, so the levelling was checked on another view than the rig's, or not at
+    all, and the floor is the only figure a rig tilted on its mount shows in (``--floor-view`` overrides it)."""
+    record = _calibration_record(rig)
+    value = record.get("floor_view")
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value or any(c in value for c in "/\\"):
+        raise RigFileError(f"{value!r} is not a view name (a file name without its suffix, as given to 'ghcal "
+                           "solve --floor-view'; null for a rig levelled with --camera-height): correct the rig "
+                           "file, or pass --floor-view NAME", path=rig_path, field="metadata.calibration.floor_view")
+    return value
 
 
 def _recorded_thickness(rig) -> float:
@@ -458,11 +477,12 @@ def cmd_capture(args: argparse.Namespace) -> int:
             kept += 1
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): the cameras are closed below either way
+        how = "" if _stop_signal(e) == signal.SIGINT else f" ({_stopped_by(e)})"
         if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
-            print(f"{PROG}: stopped before any view was kept in {out}", file=sys.stderr)
-            return 130
-        print(f"stopped: kept {kept} view(s) in {out}")
+            print(f"{PROG}: stopped{how} before any view was kept in {out}", file=sys.stderr)
+            return 128 + _stop_signal(e).value
+        print(f"stopped{how}: kept {kept} view(s) in {out}")
         return 0
     finally:
         source.close()
@@ -789,8 +809,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         raise UsageError(f"the board from {where} has squares of {1000 * board.square_m:g} mm, but {args.rig} was "
                          f"solved with squares of {1000 * recorded.square_m:g} mm (metadata.calibration.board): check "
                          "with the board it was solved with, or calibrate again")
-    record_floor = _calibration_record(rig).get("floor_view")
-    floor_view = args.floor_view or (record_floor if isinstance(record_floor, str) else FLOOR_VIEW)
+    record_floor = None if args.floor_view is not None else _recorded_floor_view(rig, args.rig)
+    floor_view = args.floor_view or record_floor or FLOOR_VIEW
     thickness = args.board_thickness if args.board_thickness is not None else _recorded_thickness(rig)
     print(f"board: {where}: {_describe(board)}", file=sys.stderr if args.json else sys.stdout)
     names = [c.name for c in rig.pair]
@@ -807,19 +827,29 @@ def cmd_check(args: argparse.Namespace) -> int:
                 path = list_images(Path(args.images) / cam.name)[name]  # the file as named, suffix and all
                 raise UsageError(f"{path}: the image is {view.image_size[0]}x"
                                  f"{view.image_size[1]}, camera {cam.name!r} of {args.rig} {cam.width}x{cam.height}")
-    floor_taken = any(floor_view in views[c] or floor_view in missed[c] for c in views)
+
+    def taken(name: str) -> bool:
+        return any(name in views[c] or name in missed[c] for c in views)
+
+    floor_taken = taken(floor_view)
     if args.floor_view is not None and not floor_taken:
         # a mistyped name passed silently, and with it a rig tilted on its mount, which only the floor shows
         raise UsageError(f"--floor-view {args.floor_view!r}: neither camera's folder in {args.images} has an image "
                          "of that name")
+    recorded_where = f"{args.rig}: metadata.calibration.floor_view {record_floor!r}, the view solve levelled from"
+    if record_floor is not None and not floor_taken and taken(FLOOR_VIEW):
+        # the floor view that 'ghcal capture --floor' takes was there, and went unmeasured behind a note
+        raise UsageError(f"{recorded_where}, names no image in {args.images}, which has a floor view {FLOOR_VIEW!r}: "
+                         f"pass --floor-view {FLOOR_VIEW} to measure it (or --floor-view NAME for another)")
     report = check_rig(rig, board, views, board_thickness_m=thickness, floor_view=floor_view)
     if not report["pairs"]:
         raise UsageError(f"{args.images}: no image pair in which both cameras found the board")
     if "floor" not in report:
         print(f"note: the levelling is not checked (a rig tilted on its mount passes): "
-              + ((floor_unmeasured(report, views, floor_view)
+              + ((floor_unmeasured(report, views, floor_view, missed=missed, root=args.images)
                   or f"neither camera found the board in floor view {floor_view!r}") if floor_taken else
-                 f"no floor view {floor_view!r} in {args.images} (--floor-view NAME names another)"),
+                 f"no floor view {floor_view!r} in {args.images} ("
+                 + (f"{recorded_where}; " if record_floor is not None else "") + "--floor-view NAME names another)"),
               file=sys.stderr if args.json else sys.stdout)
     rms = report["reprojection_px_rms"]
     print(json.dumps(report, indent=1, allow_nan=False) if args.json else
@@ -988,17 +1018,35 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _stop_on_sigterm(signum: int, _frame) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _stop_signal(e: KeyboardInterrupt) -> signal.Signals:
+    """The signal that stopped a command: SIGTERM where :func:`_stop_on_sigterm` raised ``e``, else Ctrl-C's."""
+    return signal.SIGTERM if str(e) == signal.SIGTERM.name else signal.SIGINT
+
+
+def _stopped_by(e: KeyboardInterrupt) -> str:
+    return "Ctrl-C" if _stop_signal(e) == signal.SIGINT else _stop_signal(e).name
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    # SIGTERM (timeout, a wrapper's stop button, systemd) stops every command as Ctrl-C does: the capture closes
+    # its cameras and says what it kept, the others say they did not finish; by default it killed them without
+    # a word (exit 143 from the shell, the cameras never closed)
+    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm) \
+        if threading.current_thread() is threading.main_thread() else None
     try:
         return int(args.run(args))
     except (CalibrationError, RuntimeErrorBase, OSError) as e:
         # RuntimeErrorBase: a bad rig file (RigFileError) or geometry; OSError: a folder we cannot write
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # synth renders for about half a minute, solve detects and solves: no traceback
-        print(f"{PROG}: stopped (Ctrl-C); the {args.command} did not finish", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:  # synth renders for about half a minute, solve detects and solves: no traceback
+        print(f"{PROG}: stopped ({_stopped_by(e)}); the {args.command} did not finish", file=sys.stderr)
+        return 128 + _stop_signal(e).value  # the shell's figures for a death by the signal: 130, 143
     except Exception as e:  # noqa: BLE001 - a driver error in capture: one line, not a traceback
         import drivers
 
@@ -1006,6 +1054,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{PROG}: error: {e}", file=sys.stderr)
             return 2
         raise
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -839,6 +839,114 @@ def test_capture_stopped_by_ctrl_c_succeeds_only_with_views_kept(truth, tmp_path
     assert (tmp_path / "some" / truth.pair[0].name / "000.png").exists()
 
 
+def test_capture_stopped_by_sigterm_closes_the_cameras_and_ends_as_ctrl_c_does(truth, tmp_path, capsys,
+                                                                               monkeypatch):
+    """SIGTERM (a wrapper's stop button, timeout) killed the capture by the default action: no line, the cameras
+    never closed, exit 143 that the docs did not name. Now it ends the capture as Ctrl-C does: 0 with the views
+    kept, 143 (and a line) with none."""
+    import os
+    import signal
+    import time
+
+    import drivers
+
+    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_recording(take, truth, {cam: {"0": v["000"], "1": v["000"]} for cam, v in images.items()}, period_s=1.0)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    real = drivers.create_rig_source
+    closed = []
+
+    class Escaped(Exception):
+        pass
+
+    def outer(signum, frame):  # stands for the default action, which would end the test run
+        raise Escaped
+
+    def terminated_after(reads: int):
+        def create(url, **kwargs):
+            source = real(url, **kwargs)
+            read, close, calls = source.read, source.close, []
+
+            def read_then_terminate(*args, **kw):
+                calls.append(1)
+                if len(calls) > reads:
+                    os.kill(os.getpid(), signal.SIGTERM)
+                    time.sleep(5)  # the handler runs here
+                return read(*args, **kw)
+
+            def close_and_count():
+                closed.append(1)
+                close()
+            source.read, source.close = read_then_terminate, close_and_count
+            return source
+        return create
+
+    argv = ["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--count", "5",
+            "--interval-s", "0", "--still-s", "0"]
+    previous = signal.signal(signal.SIGTERM, outer)
+    try:
+        monkeypatch.setattr(drivers, "create_rig_source", terminated_after(0))
+        assert cli.main(argv + ["--out", str(tmp_path / "none")]) == 143
+        captured = capsys.readouterr()
+        assert "ghcal: stopped (SIGTERM) before any view was kept" in captured.err and closed == [1]
+        monkeypatch.setattr(drivers, "create_rig_source", terminated_after(2))
+        assert cli.main(argv + ["--out", str(tmp_path / "some")]) == 0
+        assert "stopped (SIGTERM): kept 1 view(s)" in capsys.readouterr().out and closed == [1, 1]
+    except Escaped:
+        pytest.fail("SIGTERM was left to the default action: the capture died without a word, its cameras open")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert (tmp_path / "some" / truth.pair[0].name / "000.png").exists()
+
+
+def test_a_floor_view_the_rig_records_that_is_no_name_is_refused(truth, capture, tmp_path, capsys):
+    # a number (or a list) there fell back to 'floor' without a word: the levelling was checked on a view the
+    # rig was not levelled from, or not at all
+    rig_path = tmp_path / "rig.json"
+    save_rig(Rig(truth.cameras, truth.volume, metadata={"calibration": {"board": BOARD.to_dict(), "floor_view": 42}}),
+             rig_path)
+    argv = ["check", "--rig", str(rig_path), "--images", str(capture)]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"file {rig_path}, field 'metadata.calibration.floor_view': 42 is not a view name" in err, err
+    assert "--floor-view NAME" in err
+    assert cli.main(argv + ["--floor-view", "floor"]) == 0  # the option overrides the record
+    assert "floor view 'floor'" in capsys.readouterr().out
+
+
+def test_a_recorded_floor_view_the_images_lack_is_said_with_the_rig_file(truth, capture, tmp_path, capsys):
+    rig_path = tmp_path / "rig.json"
+    record = {"board": BOARD.to_dict(), "floor_view": "ground"}
+    save_rig(Rig(truth.cameras, truth.volume, metadata={"calibration": record}), rig_path)
+    # the folder has the floor view 'ghcal capture --floor' takes: it went unmeasured behind a note, exit 0
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(capture)]) == 2
+    err = capsys.readouterr().err
+    assert (f"{rig_path}: metadata.calibration.floor_view 'ground', the view solve levelled from, names no image in "
+            f"{capture}, which has a floor view 'floor': pass --floor-view floor") in err, err
+    # no floor view at all (a check capture may have none): a note, naming where the name came from
+    images = _copy_capture(capture, tmp_path / "capture", rename={"floor": "999"})
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(images)]) == 0
+    out = capsys.readouterr().out
+    assert (f"no floor view 'ground' in {images} ({rig_path}: metadata.calibration.floor_view 'ground', the view "
+            "solve levelled from; --floor-view NAME names another)") in out, out
+
+
+def test_check_names_a_cameras_missing_floor_image(truth, capture, tmp_path, capsys):
+    # it said "only camera 'left' found the board in floor view 'floor'", sending the user to move the board
+    rig_path = tmp_path / "rig.json"
+    save_rig(truth, rig_path)
+    images = _copy_capture(capture, tmp_path / "capture")
+    (images / "right" / "floor.png").unlink()
+    assert cli.main(["check", "--rig", str(rig_path), "--images", str(images)]) == 0
+    out = capsys.readouterr().out
+    assert (f"camera 'right' has no floor image ({images / 'right' / 'floor.png'} is missing; camera 'left' found "
+            "the board in its own): take the floor view again (ghcal capture --floor --force)") in out, out
+    assert "only camera" not in out
+
+
 # ------------------------------------------------------------------ review 51: levelling and the printed figures
 def test_a_measured_pitch_read_from_the_vertical_is_warned_about(views):
     # --pitch 80 from a level app that reads from the vertical (10 degrees down) levelled the rig looking at

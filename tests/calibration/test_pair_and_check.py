@@ -382,6 +382,16 @@ def test_why_the_floor_view_was_not_measured_is_said(level_rig, level_views):
     assert floor_unmeasured(check_rig(level_rig, BOARD, one), one) == "only camera 'left' found the board in floor view 'floor'"
     none = {cam: {n: v for n, v in named.items() if n != "floor"} for cam, named in level_views.items()}
     assert floor_unmeasured(check_rig(level_rig, BOARD, none), none) is None  # the caller says whether it was taken
+    # the right camera's floor image missing, not merely without the board: said as the file it is
+    report = check_rig(level_rig, BOARD, one)
+    assert floor_unmeasured(report, one, missed={"left": [], "right": []}, root="cap") == (
+        "camera 'right' has no floor image (cap/right/floor.png is missing; camera 'left' found the board in its "
+        "own): take the floor view again (ghcal capture --floor --force)")
+    assert floor_unmeasured(report, one, missed={"left": [], "right": ["floor"]}) == (
+        "only camera 'left' found the board in floor view 'floor'")
+    assert floor_unmeasured(check_rig(level_rig, BOARD, none), none, missed={"left": ["floor"], "right": []}) == (
+        "camera 'right' has no floor image (right/floor.png is missing; camera 'left' has one, without the board "
+        "found): take the floor view again (ghcal capture --floor --force)")
 
 
 def test_the_board_file_measured_on_the_print_is_not_overwritten(tmp_path, capsys):
