@@ -30,6 +30,10 @@ Each row ends with the crop turn searches (``roi.turn_search``, on by default si
 ``Estimator.turn_searches`` summed (since session 57's review N: two people with nobody picked search only where a
 view reads weakly).
 
+``--by-joint`` adds to each row, joint by joint, the pairs that reported it, their mean distance from the nearer
+person's, and of them those a flagged pair reported without a pairing of the subject's (the skeleton prior's place,
+read off ``Estimator._keep_tracked_subject``): docs/runtime.md, "Fewer, right joints" (session 59).
+
 ``--no-refine`` turns ``tracking.refine_cold_start`` off: a cold pass is not run again on the crop of what it found
 (docs/runtime.md, "A track of both people's joints", session 57's review).
 
@@ -72,7 +76,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract  # noqa: E402
-from ghnerf_runtime.body25 import LIMBS  # noqa: E402
+from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS  # noqa: E402
 from ghnerf_runtime.config import PICK_SUBJECT_RULES, SKELETON_PRIOR_MODES, EstimatorConfig, SessionConfig  # noqa: E402
 from ghnerf_runtime.estimator import Estimator, joints_shown_twice, load_session  # noqa: E402
 from ghnerf_runtime.two_people import MIXED_TORSO_SLACK_M, TORSO_LIMBS_M  # noqa: E402
@@ -231,7 +235,10 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
               "flagged_joints": 0, "flagged_mm": 0.0,
               "followed_first": 0, "followed_second": 0, "stable": 0,
               "passes": 0, "twice_view0": 0, "twice_view1": 0, "twice_both": 0, "hidden_view0": 0.0,
-              "hidden_view1": 0.0, "turn_searches": 0, "torso_mixed": 0, "torso_excess": []}
+              "hidden_view1": 0.0, "turn_searches": 0, "torso_mixed": 0, "torso_excess": [],
+              # per joint: pairs reporting it, their mm from the nearer person's, and of them those a flagged pair
+              # reported without a pairing of the subject's (the skeleton prior's place, or the pass's answer)
+              "joint_reported": np.zeros(25, int), "joint_mm": np.zeros(25), "joint_unpaired": np.zeros(25, int)}
     ratio = config.joints3d.second_person_ratio
     apart: list[np.ndarray] = []  # the oracle's (view, joint) cells between the people, each pass counted
     counted = 0
@@ -264,6 +271,14 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 return decide(kp)
 
             est._several_people = counting
+            keep, paired = est._keep_tracked_subject, [None]  # the subject's joints from their own pairings
+
+            def keeping(*a, keep=keep, paired=paired, **k):
+                out = keep(*a, **k)
+                paired[0] = out[2].valid.copy()
+                return out
+
+            est._keep_tracked_subject = keeping
             for i in range(alone + pairs):
                 t = i / 30.0
                 a, b = first.joints_3d(t), other.joints_3d(t)
@@ -277,6 +292,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                     images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
                 else:  # the model sees both: each person over the first's room, the nearer one's pixel in front
                     images = tuple(sim.render_people((first, other), c, t) for c in rig.pair)
+                paired[0] = None
                 r = est.estimate(images, timestamp_s=t)
                 if i < alone:
                     continue
@@ -289,6 +305,10 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 counts["neither"] += int((found & ~near_a & ~near_b).sum())
                 nearer = np.minimum(np.linalg.norm(r.joints_3d - a, axis=-1), np.linalg.norm(r.joints_3d - b, axis=-1))
                 counts["nearer_mm"] += float(nearer[found].sum()) * 1000.0
+                counts["joint_reported"][:len(found)] += found
+                counts["joint_mm"][:len(found)] += np.where(found, nearer, 0.0) * 1000.0
+                if r.several_people and paired[0] is not None:
+                    counts["joint_unpaired"][:len(found)] += found & ~paired[0]
                 counts["flagged"] += int(r.several_people)
                 if r.several_people:  # the subject's alone: its pairings' (the prior's fed their peaks, with it)
                     counts["flagged_joints"] += int(found.sum())
@@ -537,6 +557,10 @@ def main(argv=None) -> int:
                          "rig) about --axis, the second person joining after --alone pairs")
     ap.add_argument("--axis", default="pan", choices=("pan", "tilt", "roll"),
                     help="with --calibration: the axis the second camera is turned about")
+    ap.add_argument("--by-joint", action="store_true",
+                    help="each row also per joint: the pairs reporting it, their mean mm from the nearer person's, "
+                         "and of them those a flagged pair reported without a pairing of the subject's (the skeleton "
+                         "prior's place; docs/runtime.md, \"Fewer, right joints\")")
     ap.add_argument("--no-refine", action="store_true",
                     help="tracking.refine_cold_start off: a cold pass (the working volume's crop) is not run again "
                          "on the crop of what it found (docs/runtime.md, \"A track of both people's joints\")")
@@ -661,6 +685,11 @@ def main(argv=None) -> int:
               + f"; a torso of two people (two_people.mixed_torso) on {counts['torso_mixed']} passes"
               + f"; roi.turn_search searches {counts['turn_searches']}")
         print(f"  {torso_spread(counts['torso_excess'])}")
+        if args.by_joint:
+            print("  by joint (pairs reporting it, mean mm from the nearer person's, of them without a subject's "
+                  "pairing): " + ", ".join(
+                      f"{JOINT_NAMES[j]} {k} {counts['joint_mm'][j] / k:.0f} ({counts['joint_unpaired'][j]})"
+                      if k else f"{JOINT_NAMES[j]} 0" for j, k in enumerate(counts["joint_reported"])))
     return 0
 
 

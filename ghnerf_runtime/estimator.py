@@ -60,7 +60,7 @@ import numpy as np
 # session 58's host, paid by the first pair a daemon streams unless imported here, at load
 import numpy.ma  # noqa: F401
 
-from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_INDEX, JOINT_NAMES
+from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_INDEX, JOINT_NAMES, LIMBS
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -1492,20 +1492,36 @@ class Estimator:
                                                                                  (joints_2d, conf_2d, missing_2d))
         if several and not nobody and self.skeleton_prior is not None and chosen is not None:
             j3 = self._subject_prior(j3, subject, chosen, crops, regions)
-            if not self._prior_check[1]:
-                # the prior places joints no pairing of the subject's found: neither view's peak of them is known
-                # to be the subject's
-                for name in missing_2d:
-                    missing_2d[name] = missing_2d[name] | ~subject.valid
+        framed = j3  # what the crop follows on a several_people pair: the subject's skeleton, guesses and all
+        if several and chosen is not None:
+            # a joint no pairing of the subject's found, whose map shows a peak in a view, is not reported: that peak
+            # is someone's and not the subject's (else a pairing would hold it), the other person's or both people's
+            # merged, the subject's own hidden there; the skeleton prior's place for it (fed none of its peaks), or
+            # the pass's answer near the track, is a guess beside the other person (two people 0.6 m apart through
+            # the shipped model: the subject's side facing the other, 112-314 mm off; docs/runtime.md, "Fewer,
+            # right joints"). A joint no view shows a peak of is hidden from both cameras: the prior places it from
+            # the subject's body, as for one person, where it hangs from a joint the subject's pairings found (a heel
+            # from its ankle); one hanging from nothing found lay 186 mm off there (the left heel, its foot's peaks
+            # the other person's).
+            hangs = np.zeros(len(subject.valid), bool)
+            for a, b in LIMBS:
+                hangs[a] |= bool(subject.valid[b])
+                hangs[b] |= bool(subject.valid[a])
+            guessed = ~subject.valid & (kp.valid.any(axis=0) | ~hangs)
+            j3 = Joints3D(j3.points, j3.confidence, j3.valid & ~guessed, j3.reprojection_px).sanitised()
         if several:
             # a camera's peak of a dropped joint may be the other person's: the 2D joints go with the 3D ones
             for name in joints_2d:
                 missing_2d[name] = missing_2d[name] | ~j3.valid
                 joints_2d[name] = np.where(missing_2d[name][:, None], 0.0, joints_2d[name])
                 conf_2d[name] = np.where(missing_2d[name], 0.0, conf_2d[name]).astype(np.float32)
-        # two people: the crop follows what is reported, the subject's joints (the prior's skeleton and the
-        # encoder's peaks are both people's)
-        follow = j3 if several else self._track_joints(env, crops, regions, j3)
+        # two people: the crop follows the subject's joints (the prior's skeleton and the encoder's peaks are both
+        # people's), the guessed ones not reported among them, and the next pair looks for the subject's pairings
+        # near them all, as before: a track without the guesses framed the subject without the side the other
+        # person hides, and a track that held them for the crop only found fewer of the subject's joints (tried,
+        # two people a metre apart: 62 % of the pairs flagged instead of 50 %, the joints 27.8 and 27.2 mm off
+        # instead of 23.8; docs/runtime.md, "Fewer, right joints")
+        follow = framed if several else self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         self._several_track = several and self.tracker.track is not None
         self._behind_track = behind if self._several_track else None
@@ -1573,7 +1589,8 @@ class Estimator:
         person's is the stronger in each view: its skeleton from them lies between the two people. The gates are
         one person's (:meth:`_with_prior`, its disagreement measured against ``subject``), then the boxes; where the
         prior disagrees, ``reported`` (the subject's pairings, as without this step) stands. Sets the pair's
-        ``_prior_check``; not ``_prior_follow``'s use: the track of two people follows what is reported."""
+        ``_prior_check``; not ``_prior_follow``'s use: the track of two people follows this skeleton, the joints
+        :meth:`_finish_pass` does not report among them."""
         kp, uv_model = chosen
         fed = replace(kp, valid=kp.valid & subject.valid[None])  # the decoded peak where no pairing was found
         est = self._with_prior(subject, uv_model, fed, crops)

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ghnerf_runtime.body25 import JOINT_NAMES
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks"
@@ -381,6 +382,20 @@ def test_measure_two_people(capsys, monkeypatch):
     # and each row's torso excess over one body's, as measured and as the rule reads it (docs/runtime.md, "A torso of
     # two people": the figures came from a script outside the repository before session 58's review F)
     assert len(re.findall(TORSO_SPREAD, out, re.M)) == 2, out
+
+
+def test_measure_two_people_by_joint(capsys, monkeypatch):
+    # the joint-by-joint figures of docs/runtime.md ("Fewer, right joints", session 59) come from this option: each
+    # row's 25 joints, the pairs reporting each and of them those without a subject's pairing (at most as many)
+    out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--alone", "0", "--by-joint",
+                     capsys=capsys, monkeypatch=monkeypatch)
+    lines = re.findall(r"^  by joint \(pairs reporting it, mean mm from the nearer person's, of them without a "
+                       r"subject's pairing\): (.*)$", out, re.M)
+    assert len(lines) == 1, out
+    joints = re.findall(r"(\w+) (\d+)(?: [\d.]+ \((\d+)\))?(?:, |$)", lines[0])
+    assert [name for name, *_ in joints] == list(JOINT_NAMES), lines[0]
+    assert all(int(k) <= 2 and int(without or 0) <= int(k) for _, k, without in joints), lines[0]
+    assert sum(int(k) for _, k, _ in joints) >= 2 * 20, lines[0]  # the oracle's picked person, nearly whole
 
 
 #: A row's torso line (``measure_two_people.torso_spread``): the passes, the excess's median, p90 and max, the neck to
