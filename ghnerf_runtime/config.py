@@ -215,6 +215,9 @@ class RoiConfig:
         turn_search_every: after a search that kept no turn, only every this-many-th weak pair searches
             (until someone is found well): a person no turn rights (lying along the line of sight) otherwise
             makes every such pair pay three encoder runs and up to two passes more for nothing; 1: every one.
+            A pair between that finds nobody where the search's pass found someone searches too, once
+            (someone rolling on past what upright crops read: docs/runtime.md, "An early search after a
+            failed one").
             Also how often a tracked pass through a kept turn that is not weak is checked upright.
         edge_crop: a tracked box past the frame's edge: ``"clip"`` it to the frame and square what is left,
             ``"centre"`` square the whole box (the person centred, the part past the frame padded) or

@@ -734,6 +734,8 @@ class Estimator:
         # (lies_as_turned), and a kept turn's passes of someone found (lies_as_kept_turn, _turn_misreads)
         self.turns_refused = 0
         self._turn_search_wait = 0  # weak pairs left that do not search (roi.turn_search_every)
+        # whether the upright pass the last search that kept no turn was run after found someone (_searches_early)
+        self._failed_search_found = False
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
         self.turns_left = 0
         self._turn_check_wait = 0  # strong tracked turned pairs left before the next check (_turn_check)
@@ -816,6 +818,7 @@ class Estimator:
         self._behind_track = None
         self._track_unsorted = False
         self._turn_search_wait = 0
+        self._failed_search_found = False
         self._turn_check_wait = 0
         self._kept_axis = None
         if self._smoother is not None:
@@ -976,26 +979,26 @@ class Estimator:
                               sequence, timing, novel_view)
         if cold_pass and self._weak_pass(p):
             # A cold pair that found nobody, or someone weakly (refined or not): someone lying or upside down?
-            if self._turn_search_wait > 0:  # a search found no turn lately: someone no turn rights, most likely
-                self._turn_search_wait -= 1
+            if self._turn_search_wait > 0 and not self._searches_early(p):
+                self._turn_search_wait -= 1  # a search found no turn lately: someone no turn rights, most likely
             else:
                 turned = self._turn_search(images, p, sequence, timing, novel_view)
                 if turned is not p:
                     p = self._refined(images, turned, sequence, timing, novel_view)
                 else:
-                    self._turn_search_wait = self.config.roi.turn_search_every - 1
+                    self._wait_after_search(p)
         elif not cold_pass and self._turns != (0, 0):
             # tracked through a kept turn: the person may have got up (_turn_check)
             p = self._turn_check(images, p, sequence, timing, novel_view)
         elif not cold_pass and self._weak_pass(p) and self.tracker.track is not None:
             # tracked upright and weak: the person may have lain down or be upside down, read as someone standing
             # (a strong pass, the usual tracked pair, pays nothing); the turns are tried on the track's crops
-            if self._turn_search_wait > 0:
+            if self._turn_search_wait > 0 and not self._searches_early(p):
                 self._turn_search_wait -= 1
             else:
                 turned = self._turn_search(images, p, sequence, timing, novel_view, self.tracker.track)
                 if turned is p:
-                    self._turn_search_wait = self.config.roi.turn_search_every - 1
+                    self._wait_after_search(p)
                 p = turned
         elif p.someone:
             self._turn_search_wait = 0  # someone found well: the next weak pair searches at once
@@ -1237,6 +1240,30 @@ class Estimator:
         self._use_turns((0, 0), fresh=False)
         self._several_track, self._behind_track, self._track_unsorted = held
         return p
+
+    def _wait_after_search(self, p: "_Pass") -> None:
+        """After a search that kept no turn over ``p``, its weak upright pass: the next ``roi.turn_search_every - 1``
+        weak pairs do not search (someone no turn rights, most likely: a person lying along a line of sight reads
+        weakly pair after pair, three encoder runs and up to two passes a search for nothing), unless one loses the
+        person ``p`` found (:meth:`_searches_early`). A search such a pair makes early lets the wait run on as it
+        would have: it never puts off the search the wait would have made."""
+        if self._turn_search_wait > 0:  # an early search
+            self._turn_search_wait -= 1
+        else:
+            self._turn_search_wait = self.config.roi.turn_search_every - 1
+        self._failed_search_found = bool(p.someone)
+
+    def _searches_early(self, p: "_Pass") -> bool:
+        """Whether ``p``, a weak pass in the wait after a search that kept no turn (:meth:`_wait_after_search`),
+        searches all the same: the search's upright pass found someone and ``p`` finds nobody. A person lying down
+        or turning a cartwheel is read weakly by upright crops up to 60-70 degrees from upright, then lost, about
+        where a quarter turn begins to read them; the search on the weak pass before found no turn, and the wait
+        put the next off by up to four pairs (docs/runtime.md, "An early search after a failed one"). Once for
+        each such search: the early search's own pass found nobody, so the passes after it wait (at most one
+        early search for each search the wait follows). A body that stays found or stays lost waits as before.
+        (A body axis turned more than 10-15 degrees since the failed search was tried as a trigger too: more
+        searches in the rolls, no turn found sooner.)"""
+        return self._failed_search_found and not p.someone
 
     def _lies_as_turned(self, j3: Joints3D) -> bool:
         """:func:`lies_as_turned` of ``j3`` seen by this rig's two cameras (the turn search's rule; a kept turn's passes
