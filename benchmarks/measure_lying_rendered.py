@@ -36,7 +36,7 @@ the runtime does not know how a person lies): what a search over crop rotations 
 ``--turn-search`` adds, for every pose, the prior with ``roi.turn_search`` on (the runtime's search: a weak cold
 pass tries each view's crop turned 90, 180 and 270 degrees), with how many pairs searched and how many kept the
 turned pass (the ``turn searches`` column; ``Estimator.turn_searches`` and ``turns_kept``), and the turned passes
-refused because their body lay as no turn rights (``turns_refused``: ``ghnerf_runtime.estimator.lies_as_turned``,
+refused because their body lay as no turn rights (``turns_refused``: ``ghnerf_runtime.body_lie.lies_as_turned``,
 asked of a search's passes, and ``lies_as_kept_turn`` of a kept turn's); ``--turn-search-every`` sets
 ``roi.turn_search_every`` for those rows; their ``upright checks`` column counts the tracked pairs through a kept
 turn that were run again through upright crops (``Estimator.turn_checks``) and those that left the turn so

@@ -196,10 +196,10 @@ class RoiConfig:
             median confidence under ``turn_search_below``), try each camera's crop turned 90, 180 and 270
             degrees more (one encoder run per turn for both views), take per view the turn whose heatmap peaks
             are clearly stronger than upright's, run the pass again with those crops and keep it when it finds
-            someone more confidently, lying level or upside down across the views (``estimator.lies_as_turned``:
+            someone more confidently, lying level or upside down across the views (``body_lie.lies_as_turned``:
             what no turn rights, a body along a line of sight, is refused); the turn stays with the track
             (upright again once it is lost) while its passes lie so, or roll on from the last one within 45
-            degrees of the turn (``estimator.lies_as_kept_turn``: someone getting up, a cartwheel). For people
+            degrees of the turn (``body_lie.lies_as_kept_turn``: someone getting up, a cartwheel). For people
             lying across the view or upside down, whom the encoder (trained on upright people) misses upright.
             A person seen by one camera only (nobody in 3D) searches only where a turn could find them in 3D:
             that view reads them weakly and the other may show them. While tracked: a weak tracked pass through

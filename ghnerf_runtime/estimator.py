@@ -60,7 +60,8 @@ import numpy as np
 # session 58's host, paid by the first pair a daemon streams unless imported here, at load
 import numpy.ma  # noqa: F401
 
-from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_INDEX, JOINT_NAMES, LIMBS
+from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES, LIMBS
+from ghnerf_runtime.body_lie import body_axis, lies_as_kept_turn, lies_as_turned
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -488,110 +489,6 @@ _TURN_MARGIN = 0.1
 #: together: benchmarks/measure_presence.py --flip-test; with --time --turn-search it counts the empty-room pairs
 #: that still search).
 _TURN_SEARCH_FLOOR = 0.1
-
-
-#: roi.turn_search: a turned pass is kept only when its body lies as a turn can right (:func:`lies_as_turned`):
-#: level or upside down within this many degrees (its body axis against gravity). In a one-off look at the 30 bench
-#: scenes (benchmarks/measure_lying_rendered.py's poses, 15 pairs each), the turned passes the search kept of people
-#: lying across the view were 83-97 degrees from upright, upside down 170-179; 5 of the 10 it kept of people lying
-#: along the line of sight 124-150, 0.55-1.2 m off (the encoder's upright person across the picture, rising off the
-#: floor toward the cameras). docs/runtime.md, "Refusing what no turn rights".
-_TURN_LIE_TOLERANCE_DEG = 20.0
-#: roi.turn_search: and at least this many degrees from each camera's line of sight to it: a body along a view's line
-#: of sight shows that view no length to turn upright. The kept passes above: 61-89 degrees from the nearer line of
-#: sight lying across and upside down (an upright body is 90 less the view's pitch), 4 of those lying along 19-31
-#: (level, 0.24-0.42 m off).
-_TURN_MIN_FROM_SIGHT_DEG = 45.0
-#: roi.turn_search: a kept turn's passes (:func:`lies_as_kept_turn`) keep it while the body's tilt from upright lies
-#: within this many degrees of the turn: half of a quarter turn, where the next turn (or upright) would show it as
-#: upright. benchmarks/measure_lying_rendered.py --rolls measures it (docs/runtime.md, "Gradual rolls").
-_KEPT_TURN_SECTOR_DEG = 45.0
-#: roi.turn_search: and only while its body axis moves at most this many degrees from the pass kept through the turn
-#: the pair before (a roll, not a jump; a pair that kept none drops the axis, Estimator._kept_turn_axis). In
-#: benchmarks/measure_lying_rendered.py --rolls (30 pairs, 3-6 degrees a pair) the passes only the looser rule keeps
-#: moved 0-18 degrees from the pass before (a one-off look, docs/runtime.md); the
-#: turned pass of a person rolled rigidly from across the view onto a line of sight (bench scene 21,
-#: tests/ghnerf_runtime/test_estimator_turn_search.py) 44.
-_KEPT_TURN_STEP_DEG = 25.0
-#: the joints whose centroids give a body's axis (:func:`body_axis`): the head and shoulders, the hips and legs
-_AXIS_UPPER = tuple(JOINT_INDEX[n] for n in ("Nose", "Neck", "RShoulder", "LShoulder", "REye", "LEye", "REar",
-                                             "LEar"))
-_AXIS_LOWER = tuple(JOINT_INDEX[n] for n in ("MidHip", "RHip", "LHip", "RKnee", "LKnee", "RAnkle", "LAnkle"))
-
-
-def body_axis(j3: Joints3D) -> np.ndarray | None:
-    """The unit vector from the centroid of ``j3``'s found lower-body joints (hips, knees, ankles) to that of its
-    found upper-body joints (head, neck, shoulders): which way the body points. ``None`` without a found joint in
-    either group, or with the two centroids together."""
-    upper = [j for j in _AXIS_UPPER if j3.valid[j]]
-    lower = [j for j in _AXIS_LOWER if j3.valid[j]]
-    if not upper or not lower:
-        return None
-    d = j3.points[upper].mean(axis=0) - j3.points[lower].mean(axis=0)
-    n = float(np.linalg.norm(d))
-    return d / n if n > 1e-6 else None
-
-
-def _tilt_from_up_deg(axis: np.ndarray) -> float:
-    """How far body axis ``axis`` (a unit vector, rig frame: y down along gravity) points from straight up (0
-    standing, 90 level, 180 upside down)."""
-    return math.degrees(math.acos(float(np.clip(-axis[1], -1.0, 1.0))))
-
-
-def _across_the_views(axis: np.ndarray, centroid: np.ndarray, centres: Sequence[np.ndarray]) -> bool:
-    """Whether body axis ``axis`` at ``centroid`` lies at least :data:`_TURN_MIN_FROM_SIGHT_DEG` from each camera's
-    line of sight to it (``centres``: the cameras' centres): a body along a view's line of sight shows that view no
-    length for a crop turn to right."""
-    for c in centres:
-        sight = centroid - np.asarray(c, np.float64)
-        n = float(np.linalg.norm(sight))
-        if n > 1e-6 and math.degrees(math.acos(min(1.0, abs(float(sight @ axis)) / n))) < _TURN_MIN_FROM_SIGHT_DEG:
-            return False
-    return True
-
-
-def lies_as_turned(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
-    """Whether ``j3``, a turned pass's joints (``roi.turn_search``), lie as a crop turn rights a body: the body axis
-    (:func:`body_axis`) level or upside down within :data:`_TURN_LIE_TOLERANCE_DEG` (the rig frame's y is down,
-    along gravity), and at least :data:`_TURN_MIN_FROM_SIGHT_DEG` from each camera's line of sight to the found
-    joints' centroid (``centres``: the cameras' centres). A turn shows the encoder someone lying across a view or
-    upside down as upright; a body it does not right (lying along the line of sight) it reads as an upright person
-    across the picture, a skeleton that stands tilted off the floor or runs along a view's line of sight, 0.24-1.2 m
-    off (docs/runtime.md, "Refusing what no turn rights"). No axis (no head and shoulders, or no hips and legs found):
-    nothing says how the body lies, and the pass is not taken."""
-    axis = body_axis(j3)
-    if axis is None:
-        return False
-    from_up = _tilt_from_up_deg(axis)
-    if abs(from_up - 90.0) > _TURN_LIE_TOLERANCE_DEG and from_up < 180.0 - _TURN_LIE_TOLERANCE_DEG:
-        return False  # neither lying nor upside down: tilted halfway, no body a turn rights
-    return _across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
-
-
-def lies_as_kept_turn(j3: Joints3D, centres: Sequence[np.ndarray], turns: Sequence[int],
-                      last_axis: np.ndarray | None) -> bool:
-    """Whether ``j3``, a pass through a kept turn's crops (``turns``: each view's, degrees), still lies as that
-    turn rights a body: as :func:`lies_as_turned` asks (how the turn was found), or rolled on from the last pass
-    kept through it (``last_axis``, its :func:`body_axis`; ``None``: none) by at most :data:`_KEPT_TURN_STEP_DEG`,
-    across the views, and tilted from upright within :data:`_KEPT_TURN_SECTOR_DEG` of some view's turn (a quarter
-    turn either way 45-135 degrees, a half turn 135-180: the turn still shows the body nearer upright than upright
-    crops or the next turn would). A person kept turned who rolls on (up onto an elbow, through a cartwheel) passes
-    a few degrees a pair through tilts the search's windows refuse, and the turn reads them better than upright
-    crops; refused there, the pair went cold through upright crops, whose search refused its turned passes too.
-    A pass that jumps there (a person lying across the view who rolled onto a line of sight, read through the
-    turned crops as the encoder's upright person across the picture: 44 degrees in one pair in bench scene 21) is
-    not kept (docs/runtime.md, "Gradual rolls")."""
-    if lies_as_turned(j3, centres):
-        return True
-    axis = body_axis(j3)
-    if axis is None or last_axis is None:
-        return False
-    if math.degrees(math.acos(float(np.clip(axis @ last_axis, -1.0, 1.0)))) > _KEPT_TURN_STEP_DEG:
-        return False  # not rolled on from the last pass: a jump
-    from_up = _tilt_from_up_deg(axis)
-    if not any(abs(from_up - min(t % 360, 360 - t % 360)) <= _KEPT_TURN_SECTOR_DEG for t in turns if t % 360):
-        return False  # nearer upright or another turn: not this turn's body
-    return _across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
 
 
 def _view_score(heat: np.ndarray) -> np.ndarray:
@@ -1285,10 +1182,10 @@ class Estimator:
         """The body axis (:func:`body_axis`) that the next pair's pass through a kept turn rolls on from
         (:func:`lies_as_kept_turn`): that of ``p``, the pass this pair keeps, when it was read through a turn and
         found someone; else ``None``. A pair that keeps no such pass (a view's frame rejected, nobody found, the
-        turn left) breaks the roll: the rule's step limit (:data:`_KEPT_TURN_STEP_DEG`) is one pair's, and
-        against an axis some pairs old a real roll looks like a jump, while a limit grown with the pairs would
-        let the jump through (docs/runtime.md, "Gradual rolls"); the next pass through the turn is asked the
-        search's rule instead."""
+        turn left) breaks the roll: the rule's step limit (:data:`~ghnerf_runtime.body_lie.KEPT_TURN_STEP_DEG`)
+        is one pair's, and against an axis some pairs old a real roll looks like a jump, while a limit grown with
+        the pairs would let the jump through (docs/runtime.md, "Gradual rolls"); the next pass through the turn is
+        asked the search's rule instead."""
         if self._turns == (0, 0) or p.j3 is None or not p.someone:
             return None
         return body_axis(p.j3)

@@ -43,9 +43,10 @@ from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
-from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _KEPT_TURN_SECTOR_DEG, _KEPT_TURN_STEP_DEG,
-                                      _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M,
-                                      STILL_SEVERAL_MIN_JOINTS, PairResult)
+from ghnerf_runtime.body_lie import KEPT_TURN_SECTOR_DEG, KEPT_TURN_STEP_DEG, TURN_LIE_TOLERANCE_DEG, \
+    TURN_MIN_FROM_SIGHT_DEG
+from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_M,
+                                      _PRIOR_FOLLOW_MAX_ERROR_M, STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import AXES_PIVOT_DROP_M, AXES_PIVOT_HOLD_M, PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
@@ -194,8 +195,11 @@ def _doc(name: str) -> str:
                         f"({MIXED_TORSO_SLACK_M:g} m)"),
     ("docs/runtime.md", f"Past {SLACK_DEPTH_BASELINES:g} baselines from the cameras, the limb's part along the line"),
     ("docs/runtime.md", f"`SLACK_DEPTH_BASELINES` ({SLACK_DEPTH_BASELINES:g}) baselines"),
-    ("docs/runtime.md", f"at most {_KEPT_TURN_STEP_DEG:g} degrees from that pass's (`_KEPT_TURN_STEP_DEG`)"),
-    ("docs/runtime.md", f"within {_KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`_KEPT_TURN_SECTOR_DEG`"),
+    ("docs/runtime.md", f"at most {KEPT_TURN_STEP_DEG:g} degrees from that pass's (`KEPT_TURN_STEP_DEG`)"),
+    ("docs/runtime.md", f"within {KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`KEPT_TURN_SECTOR_DEG`"),
+    # session 57's rule for a search's turned pass (ghnerf_runtime/body_lie.py), quoted since session 59
+    ("docs/runtime.md", f"upside down within {TURN_LIE_TOLERANCE_DEG:g} degrees (`TURN_LIE_TOLERANCE_DEG`;"),
+    ("docs/runtime.md", f"least {TURN_MIN_FROM_SIGHT_DEG:g} degrees (`TURN_MIN_FROM_SIGHT_DEG`) from each camera's"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read

@@ -575,7 +575,7 @@ def test_a_turned_pass_is_taken_only_lying_or_upside_down_across_the_views(axis,
     """``lies_as_turned``: what a turned pass's body must look like to be kept. Lying along the line of sight (no turn
     rights it) the old search kept a half-turned pass's skeleton level along the line of sight, or one tilted off
     the floor toward the cameras (0.25-1.2 m off: docs/runtime.md, "Searching the crop turns")."""
-    from ghnerf_runtime.estimator import lies_as_turned
+    from ghnerf_runtime.body_lie import lies_as_turned
 
     assert lies_as_turned(_turned_body(axis, degrees), CAMERA_CENTRES) is lies
 
@@ -585,7 +585,7 @@ def test_a_turned_pass_that_does_not_show_how_the_body_lies_is_not_taken():
     from dataclasses import replace as dc_replace
 
     from ghnerf_runtime.body25 import JOINT_INDEX
-    from ghnerf_runtime.estimator import body_axis, lies_as_turned
+    from ghnerf_runtime.body_lie import body_axis, lies_as_turned
 
     j3 = _turned_body(2, 180.0)
     np.testing.assert_allclose(body_axis(j3), [0.0, 1.0, 0.0], atol=0.1)  # upside down: the head below (y down)
@@ -632,7 +632,7 @@ def test_a_tracked_person_who_rolls_onto_the_line_of_sight_is_not_kept_turned(se
 def _lying_along_sight(est, joints: np.ndarray):
     """``joints`` (a standing person's, rig frame) turned about their centroid so that their body axis runs along
     the estimator's first camera's line of sight to them: a body no crop turn rights."""
-    from ghnerf_runtime.estimator import body_axis
+    from ghnerf_runtime.body_lie import body_axis
     from ghnerf_runtime.joints3d import Joints3D
 
     n = len(joints)
@@ -655,7 +655,8 @@ def test_a_kept_turns_pass_of_a_body_no_turn_rights_is_read_cold_upright(single_
     the turn; only a weak one went upright). Now it is refused (``turns_refused``) and the pair read as after a lost
     track: a cold pass through upright crops, whose answer (nobody, here) is reported."""
     from benchmarks.bench_runtime_common import OracleSession, edge128_contract
-    from ghnerf_runtime.estimator import Estimator, _Pass, lies_as_turned
+    from ghnerf_runtime.body_lie import lies_as_turned
+    from ghnerf_runtime.estimator import Estimator, _Pass
 
     sim = pytest.importorskip("drivers.sim")
     rig = sim.RigPlacement().build()
@@ -710,7 +711,7 @@ def test_a_kept_turn_holds_while_the_body_rolls_on_nearer_it_than_upright_or_the
     20-degree windows: a person rolling up from lying, or on over into a cartwheel, passes a few degrees a pair
     through tilts those windows refuse (docs/runtime.md, "Gradual rolls"). The same body jumped to from lying
     across the view (a rigid roll: the encoder's misread), or with no pass before, is asked the search's rule."""
-    from ghnerf_runtime.estimator import body_axis, lies_as_kept_turn, lies_as_turned
+    from ghnerf_runtime.body_lie import body_axis, lies_as_kept_turn, lies_as_turned
 
     body = _turned_body(axis, degrees)
     step = -5.0 if degrees > 0 else 5.0  # the pass before: 5 degrees less rolled
@@ -755,7 +756,8 @@ def test_a_tracked_person_rolling_on_through_a_kept_turn_keeps_it(turns, degrees
     through upright crops, which read such a person worse (benchmarks/measure_lying_rendered.py --rolls). Now the
     turn holds while the body rolls on within 45 degrees of it; one nearly up, one jumped to, is still read cold
     upright."""
-    from ghnerf_runtime.estimator import _Pass, body_axis
+    from ghnerf_runtime.body_lie import body_axis
+    from ghnerf_runtime.estimator import _Pass
 
     est, rig, body, rolled = _kept_turn_estimator(turns, degrees)
     est._kept_axis = None if before is None else body_axis(rolled(before))
@@ -804,7 +806,7 @@ def test_asking_whether_a_kept_turns_pass_misreads_changes_nothing(degrees, misr
     asked without keeping the pass, or asked twice, changed what the next pair is measured against. Now the axis is
     set once a pair, from the pass it keeps (``_kept_turn_axis``), and the refusal is counted where it is made.
     60 degrees rolls on 5 from the pass before; 125 jumps 35 from lying across (refused)."""
-    from ghnerf_runtime.estimator import body_axis
+    from ghnerf_runtime.body_lie import body_axis
 
     est, rig, body, rolled = _kept_turn_estimator((90, 90), degrees)
     before = body_axis(rolled(65.0 if degrees == 60.0 else 90.0))
@@ -816,13 +818,14 @@ def test_asking_whether_a_kept_turns_pass_misreads_changes_nothing(degrees, misr
 
 
 def test_a_kept_turns_roll_is_not_measured_against_a_pass_pairs_old():
-    """The step limit of a kept turn's roll (25 degrees, ``_KEPT_TURN_STEP_DEG``) was measured pair to pair. Before,
+    """The step limit of a kept turn's roll (25 degrees, ``KEPT_TURN_STEP_DEG``) was measured pair to pair. Before,
     a pair through the kept turn that kept no pass (one camera's frame rejected, here) left the stored axis as it
     was, and the next pass was measured against one two pairs old (or many, after a stretch seen by one camera) as
     if it were the last pair's: a limit of one pair's roll over several, which a real roll may pass and a misread
     may not. Now a pair that keeps no pass through the turn drops the axis, and the next pass is asked the search's
     rule (a body tilted 60 degrees fails its windows: refused, the pair read cold upright, as with no pass before)."""
-    from ghnerf_runtime.estimator import _Pass, body_axis
+    from ghnerf_runtime.body_lie import body_axis
+    from ghnerf_runtime.estimator import _Pass
 
     est, rig, body, rolled = _kept_turn_estimator((90, 90), 60.0)
     est._kept_axis = body_axis(rolled(65.0))  # the pair before kept the person 5 degrees less rolled
