@@ -909,3 +909,16 @@ def test_a_recorded_stream_url_keeps_no_password_in_the_manifest(tmp_path, sim_c
     assert "hunter2" in inner_urls[0]  # the stream itself is opened with its credentials
     shown = read_manifest(tmp_path / "take").source
     assert "hunter2" not in shown and "rtsp%3A%2F%2Fadmin%3A***%40cam1" in shown and "token%3D***" in shown
+
+
+def test_a_resized_take_whose_first_image_is_corrupt_names_the_image_it_measured(copy_of_take):
+    """The first image undecodable, the rest resized: the message named the middle image it measured as 'the first'
+    (a reader then looked at a file that was not the take's first). It says which of the three it is."""
+    images = sorted((copy_of_take / "images" / "right").iterdir())
+    resize_images(copy_of_take, "right", (20, 15))
+    images[0].write_bytes(b"not a png")
+    with pytest.raises(FrameSizeError) as info:
+        create_rig_source(f"replay://{copy_of_take}?speed=free").open()
+    middle = images[len(images) // 2]
+    assert f"the first, middle and last of its {len(images)}, the middle {middle})" in str(info.value)
+    assert info.value.delivered == (20, 15)
