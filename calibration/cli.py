@@ -410,11 +410,11 @@ def cmd_capture(args: argparse.Namespace) -> int:
                                    + (f"the {kept} view(s) kept before it are whole pairs in {out}: capture the rest "
                                       "with --append once the camera is back" if kept else "no view was kept")) from e
             last_pair_at, stall_said = time.monotonic(), False
-            for cam, image, earlier in zip(cams, pair.images, sizes):
-                if earlier is not None and (image.shape[1], image.shape[0]) != earlier[1]:
+            for cam, image, there in zip(cams, pair.images, sizes):  # (not `earlier`: the views listed above)
+                if there is not None and (image.shape[1], image.shape[0]) != there[1]:
                     # views of another rig or resolution: the solve refused the mix after the session
                     raise CaptureError(
-                        f"{earlier[0]} is {earlier[1][0]}x{earlier[1][1]}, but camera {cam!r} of {shown_url} delivers "
+                        f"{there[0]} is {there[1][0]}x{there[1][1]}, but camera {cam!r} of {shown_url} delivers "
                         f"{image.shape[1]}x{image.shape[0]}: the views in {out} are of another rig or resolution, and "
                         "the solve refuses a camera's images at two sizes: capture into a new folder")
             now = pair.timestamps_ns[0] * 1e-9  # capture time: a replay may run faster than real time
@@ -1018,13 +1018,18 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where Ctrl-C raises KeyboardInterrupt, so that every ``except KeyboardInterrupt`` (capture's
+    closing of its cameras, :func:`main`'s one line) handles it alike; its own type tells the two apart."""
+
+
 def _stop_on_sigterm(signum: int, _frame) -> None:
-    raise KeyboardInterrupt(signal.Signals(signum).name)
+    raise _Terminated(signal.Signals(signum).name)
 
 
 def _stop_signal(e: KeyboardInterrupt) -> signal.Signals:
     """The signal that stopped a command: SIGTERM where :func:`_stop_on_sigterm` raised ``e``, else Ctrl-C's."""
-    return signal.SIGTERM if str(e) == signal.SIGTERM.name else signal.SIGINT
+    return signal.SIGTERM if isinstance(e, _Terminated) else signal.SIGINT
 
 
 def _stopped_by(e: KeyboardInterrupt) -> str:

@@ -12,6 +12,7 @@ from drivers.errors import (
     DriverError,
     EndOfStream,
     FrameSizeError,
+    RecordingError,
     RigConfigError,
     RigDisconnectedError,
     RigInitializationError,
@@ -25,6 +26,6 @@ from drivers.registry import BACKENDS, create_rig_source, open_rig
 __all__ = [
     "BACKENDS", "BackendNotAvailableError", "CameraTruth", "DriverError", "DropPolicy", "EndOfStream",
     "Frame", "FramePair", "FrameSizeError", "ManualClock", "MonotonicClock", "PairingConfig", "PairingStats",
-    "RigConfigError", "RigDisconnectedError", "RigInitializationError", "RigOperationError",
+    "RecordingError", "RigConfigError", "RigDisconnectedError", "RigInitializationError", "RigOperationError",
     "RigSource", "RigTimeoutError", "create_rig_source", "open_rig",
 ]

@@ -26,6 +26,12 @@ class RigDisconnectedError(RigOperationError):
     """A camera vanished (unplugged, device reset, end of a recording)."""
 
 
+class RecordingError(RigOperationError):
+    """A ``record+`` recorder could not write the take (disk full...): raised once from the next read, the
+    frames passing through unrecorded after it. Its own type, so that a reader that goes past a frame the rig
+    could not deliver (``ghnerf-demo``) can tell a take that stopped being written from a lost frame."""
+
+
 class RigTimeoutError(DriverError, TimeoutError):
     """No frame pair arrived within the requested timeout."""
 

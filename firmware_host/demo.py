@@ -398,8 +398,10 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         # A frame the rig could not deliver (a corrupt image in a take, one of another size among
                         # the rig's) is raised once and the next read goes on, as the daemon reads on: one such
                         # frame ended the whole run. Again before a pair, or cameras of another size than the
-                        # rig's (FrameSizeError): the rig itself failed.
-                        if read_failed or isinstance(e, drivers.FrameSizeError):
+                        # rig's (FrameSizeError): the rig itself failed. A record+ take that can no longer be
+                        # written (RecordingError, disk full) is no lost frame: run on, the demo (the documented
+                        # way to record a take) streamed for its --seconds while recording nothing.
+                        if read_failed or isinstance(e, (drivers.FrameSizeError, drivers.RecordingError)):
                             raise
                         read_failed, failed_reads = True, failed_reads + 1
                         first_failure = first_failure or str(e)

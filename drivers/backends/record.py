@@ -27,7 +27,8 @@ bounded queue drained by writer threads; when it is full the frame is not
 recorded and counted in ``stats.writes_dropped``. Every frame the inner camera delivered is recorded,
 paired or not, so a replay meets the same pairing situations. A write failure
 (disk full...) is raised once from the next ``read()`` as
-:class:`RigOperationError`; after that frames pass through unrecorded.
+:class:`~drivers.errors.RecordingError` (a :class:`RigOperationError`); after that frames pass through
+unrecorded.
 
 Durability: files are not fsynced per frame on the read path (too slow for small
 disks): the writer threads fsync them in batches of :data:`SYNC_BATCH` files as
@@ -62,7 +63,7 @@ from drivers.backends.recording_format import (
     write_manifest,
     write_truth,
 )
-from drivers.errors import RigConfigError, RigInitializationError, RigOperationError
+from drivers.errors import RecordingError, RigConfigError, RigInitializationError, RigOperationError
 from drivers.frames import Frame
 from drivers.pairing import PairingStats
 from drivers.url import RigUrl, redact_url
@@ -403,7 +404,7 @@ class RecordingRigSource(RigSource):
         assert writer is not None
         if writer.error is not None and not self._reported_error:
             self._reported_error = True
-            raise RigOperationError(f"recording to {writer.directory} failed: {writer.error}") from writer.error
+            raise RecordingError(f"recording to {writer.directory} failed: {writer.error}") from writer.error
         frame = self.inner._read_frame(timeout_s)
         if frame is not None:
             writer.submit(frame)

@@ -294,9 +294,9 @@ class ReplayRigSource(RigSource):
         Every image wrong is a take recorded at another size than the rig it carries, its images resized by a
         tool after, or its manifest's rig replaced: refused at :meth:`open`, as no frame of it would play (each
         read failed on an image; the daemon, taking two failed reads before a pair for a failed rig, reopened the
-        take from its start for ever). Three
-        images, not every one: decoding all of an hour's take would take minutes at open. One image of another
-        size among the rig's (a corrupted or edited file) is not this: it fails its read (:meth:`_load`).
+        take from its start for ever). Three images, not every one: decoding all of an hour's take would take
+        minutes at open. One image of another size among the rig's (a corrupted or edited file) is not this: it
+        fails its read (:meth:`_load`).
         Public for ``ghnerf-daemon --validate-config``, which refuses such a take before any open.
         """
         order = recorded_order(self._rows)
@@ -305,18 +305,20 @@ class ReplayRigSource(RigSource):
             if not mine:
                 continue
             expected = (cam.width, cam.height)
-            found: list[tuple[Path, tuple[int, int]]] = []
-            for i in dict.fromkeys((mine[0], mine[len(mine) // 2], mine[-1])):
+            found: list[tuple[str, Path, tuple[int, int]]] = []
+            # row -> its place in the camera's take, in recorded order (a short take's rows named once)
+            sampled = {mine[0]: "first", mine[len(mine) // 2]: "middle", mine[-1]: "last"}
+            for i, which in sampled.items():
                 path = self.directory / self._rows[i].image
                 try:
                     image = load_image(path)
                 except RigOperationError:
                     continue  # corrupt: not a size; its read names it
-                found.append((path, (image.shape[1], image.shape[0])))
-            if found and all(size != expected for _, size in found):
-                path, (w, h) = found[0]
+                found.append((which, path, (image.shape[1], image.shape[0])))
+            if found and all(size != expected for _, _, size in found):
+                which, path, (w, h) = found[0]  # the first that decodes: a corrupt first image is not the one named
                 checked = f"its only image, {path}" if len(mine) == 1 else \
-                    f"checked at open: the first, middle and last of its {len(mine)}, the first {path}"
+                    f"checked at open: the first, middle and last of its {len(mine)}, the {which} {path}"
                 message = (
                     f"recording {self.directory}: camera {cam.name!r}'s images are {w}x{h} ({checked}), but its rig "
                     f"camera in {self.directory / MANIFEST} is {cam.width}x{cam.height}: the take was recorded at "

@@ -12,6 +12,7 @@ from drivers import (
     EndOfStream,
     FrameSizeError,
     ManualClock,
+    RecordingError,
     RigConfigError,
     RigInitializationError,
     RigOperationError,
@@ -303,8 +304,9 @@ def test_a_failing_writer_is_reported_once_then_frames_pass_through(tmp_path, si
         deadline = time.monotonic() + 2
         while source._writer.error is None and time.monotonic() < deadline:
             time.sleep(0.01)
-        with pytest.raises(RigOperationError, match="No space left"):
+        with pytest.raises(RecordingError, match="No space left") as info:
             source.read(timeout_s=1.0)
+        assert isinstance(info.value, RigOperationError)  # readers catching the base go on as before
         source.read(timeout_s=1.0)  # the camera keeps working
     assert read_manifest(out).complete is False
 
@@ -907,3 +909,16 @@ def test_a_recorded_stream_url_keeps_no_password_in_the_manifest(tmp_path, sim_c
     assert "hunter2" in inner_urls[0]  # the stream itself is opened with its credentials
     shown = read_manifest(tmp_path / "take").source
     assert "hunter2" not in shown and "rtsp%3A%2F%2Fadmin%3A***%40cam1" in shown and "token%3D***" in shown
+
+
+def test_a_resized_take_whose_first_image_is_corrupt_names_the_image_it_measured(copy_of_take):
+    """The first image undecodable, the rest resized: the message named the middle image it measured as 'the first'
+    (a reader then looked at a file that was not the take's first). It says which of the three it is."""
+    images = sorted((copy_of_take / "images" / "right").iterdir())
+    resize_images(copy_of_take, "right", (20, 15))
+    images[0].write_bytes(b"not a png")
+    with pytest.raises(FrameSizeError) as info:
+        create_rig_source(f"replay://{copy_of_take}?speed=free").open()
+    middle = images[len(images) // 2]
+    assert f"the first, middle and last of its {len(images)}, the middle {middle})" in str(info.value)
+    assert info.value.delivered == (20, 15)

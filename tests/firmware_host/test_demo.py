@@ -485,3 +485,25 @@ def test_a_replay_resized_throughout_is_a_one_line_error_at_open(tmp_path, capsy
     assert len(lines) == 1 and f": error: recording {small_take}: camera 'right''s images are 20x15 (checked at " \
         "open: " in lines[0], lines
     assert "is 40x30: the take was recorded at another size than the rig it carries" in lines[0]
+
+
+def test_a_take_that_cannot_be_written_ends_the_run_and_is_not_counted_as_a_skipped_frame(tmp_path, capsys,
+                                                                                         monkeypatch):
+    """ghnerf-demo is the documented way to record a take (record+...). Since the demo went past a failed read, the
+    recorder's disk-full error (raised once, the frames passing through unrecorded after it) was printed as
+    'skipped a frame' and the run streamed on for its --seconds recording nothing, its summary blaming 'the rig'.
+    It ends the run again, one error line, exit 2."""
+    import drivers.backends.record as record_module
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(record_module, "encode_image", full_disk)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    rc = demo.main(["--truth-only", "--url", url, "--seconds", "20", "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2, captured.out
+    assert "skipped a frame" not in captured.out and "could not deliver" not in captured.out
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and f"error: recording to {take} failed: [Errno 28] No space left on device" in lines[0]
