@@ -146,12 +146,19 @@ def _recorded_floor_view(rig, rig_path: str) -> str | None:
     return value
 
 
-def _recorded_thickness(rig) -> float:
-    """The floor board's thickness ``solve`` levelled with (0 for other rigs): checked with another, the floor
-    view of the very images solved from lay that difference off the floor, and a 30 mm board failed the check."""
+def _recorded_thickness(rig, rig_path: str) -> float:
+    """The floor board's thickness ``solve`` levelled with (0 where it recorded none: other rigs): checked with
+    another, the floor view of the very images solved from lay that difference off the floor, and a 30 mm board
+    failed the check. A value that is no thickness ``solve`` takes is refused: it was read as 0 without a word,
+    so a rig levelled on a 30 mm board (typed "0.03", or 30 for millimetres) was blamed for lying 30 mm off."""
     value = _calibration_record(rig).get("board_thickness_m")
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 0.1:
+    if value is None:
         return 0.0
+    if (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)
+            or not 0.0 <= value <= 0.1):
+        raise RigFileError(f"{value!r} is not a board thickness (a number of metres in [0, 0.1], as given to 'ghcal "
+                           "solve --board-thickness'; 0 for a board lying flat): correct the rig file, or pass "
+                           "--board-thickness METRES", path=rig_path, field="metadata.calibration.board_thickness_m")
     return float(value)
 
 
@@ -811,7 +818,7 @@ def cmd_check(args: argparse.Namespace) -> int:
                          "with the board it was solved with, or calibrate again")
     record_floor = None if args.floor_view is not None else _recorded_floor_view(rig, args.rig)
     floor_view = args.floor_view or record_floor or FLOOR_VIEW
-    thickness = args.board_thickness if args.board_thickness is not None else _recorded_thickness(rig)
+    thickness = args.board_thickness if args.board_thickness is not None else _recorded_thickness(rig, args.rig)
     print(f"board: {where}: {_describe(board)}", file=sys.stderr if args.json else sys.stdout)
     names = [c.name for c in rig.pair]
     missing = [n for n in names if not (Path(args.images) / n).is_dir()]

@@ -131,9 +131,14 @@ class RigUrl:
         return RigConfigError(f"rig URL {self.url!r}: option {name}={value!r} must be {expected}")
 
     def take_str(self, name: str, default: str | None = None, choices: tuple[str, ...] | None = None) -> str | None:
+        """The option's text, ``default`` when it is absent. An empty value (``rig=``) is refused: backends read
+        it as absent, so depthai://?rig= ran on the device's own calibration and sim://?cache= on the default
+        cache, without a word that the file or folder meant was never named."""
         value = self.options.pop(name, None)
         if value is None:
             return default
+        if value == "":
+            raise RigConfigError(f"rig URL {self.url!r}: option {name}= is empty: give a value, or leave the option out")
         if choices is not None and value not in choices:
             raise self._error(name, value, f"one of {list(choices)}")
         return value

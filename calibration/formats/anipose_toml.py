@@ -17,7 +17,7 @@ sorted section order (as aniposelib's ``CameraGroup.load``), plus an optional ``
 
 Keys read per camera table: ``name`` (string or integer; default the table name),
 ``size``, ``matrix``, ``distortions``, ``rotation``, ``translation`` (all required) and
-``fisheye`` (if true the file is rejected: the fisheye model is not supported). Other
+``fisheye`` (true or false; if true the file is rejected: the fisheye model is not supported). Other
 keys are ignored. Every top-level table except ``metadata`` is a camera; from
 ``metadata`` an optional ``rig_id`` string, our ``working_volume_min``/``max``, our
 ``units_to_metres`` (checked against the argument) and our ``levelled_*`` keys (the first
@@ -140,7 +140,11 @@ def read_anipose_toml(
 
 
 def _camera(path, section: str, table: dict, units: float):
-    if table.get("fisheye", False):
+    fisheye = table.get("fisheye", False)
+    if not isinstance(fisheye, bool):
+        # read by truth, an empty string or list passed as pinhole, and "false" was refused as a fisheye
+        raise fail(path, f"{section}.fisheye", f"must be true or false (as aniposelib writes it), got {show(fisheye)}")
+    if fisheye:
         raise fail(path, f"{section}.fisheye", "the fisheye model is not supported (only the OpenCV pinhole model)")
     for key in _CAMERA_KEYS:
         if key not in table:

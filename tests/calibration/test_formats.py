@@ -477,6 +477,11 @@ TOML_ERRORS = {
     "size": (_toml_with("cam_0", "size", "[1920]"), "cam_0.size", "[1920]"),
     "size string": (_toml_with("cam_0", "size", '["1920", 1080]'), "cam_0.size", "'1920'"),
     "fisheye": (ANIPOSE_TOML.replace('name = "B"', 'name = "B"\nfisheye = true'), "cam_1.fisheye", "fisheye"),
+    # read by truth, an empty string passed as pinhole (and "false" was refused as a fisheye)
+    "fisheye empty": (ANIPOSE_TOML.replace('name = "B"', 'name = "B"\nfisheye = ""'), "cam_1.fisheye",
+                      "must be true or false (as aniposelib writes it), got ''"),
+    "fisheye zero": (ANIPOSE_TOML.replace('name = "B"', 'name = "B"\nfisheye = 0'), "cam_1.fisheye",
+                     "must be true or false"),
     "name bool": (_toml_with("cam_0", "name", "false"), "cam_0.name", "False"),
     "duplicate name": (_toml_with("cam_1", "name", '"A"'), "cam_1.name", "duplicate camera name 'A'"),
     "stray value": ("scale = 2\n" + ANIPOSE_TOML, "scale", "camera table"),

@@ -751,6 +751,26 @@ def test_check_measures_the_floor_with_the_board_thickness_solve_was_given(views
     assert json.loads(capsys.readouterr().out)["floor"]["height_mm_median"] > 25
 
 
+def test_a_board_thickness_the_rig_records_that_is_no_thickness_is_refused(truth, capture, tmp_path, capsys):
+    # a string, 30 typed for millimetres, or a negative value there was read as 0 without a word: a rig levelled
+    # on a 30 mm board was measured against the bare floor and failed the check
+    rig_path = tmp_path / "rig.json"
+    argv = ["check", "--rig", str(rig_path), "--images", str(capture)]
+    for value in ("0.03", 30, -0.01, True):
+        record = {"board": BOARD.to_dict(), "floor_view": "floor", "board_thickness_m": value}
+        save_rig(Rig(truth.cameras, truth.volume, metadata={"calibration": record}), rig_path)
+        assert cli.main(argv) == 2, value
+        err = capsys.readouterr().err
+        assert (f"file {rig_path}, field 'metadata.calibration.board_thickness_m': {value!r} is not a board "
+                "thickness") in err, err
+        assert "--board-thickness METRES" in err
+    assert cli.main(argv + ["--board-thickness", "0"]) == 0  # the option overrides the record
+    capsys.readouterr()
+    record = {"board": BOARD.to_dict(), "floor_view": "floor", "board_thickness_m": None}  # none recorded: 0
+    save_rig(Rig(truth.cameras, truth.volume, metadata={"calibration": record}), rig_path)
+    assert cli.main(argv) == 0
+
+
 def test_check_says_when_the_floor_is_not_checked(truth, capture, tmp_path, capsys):
     # a mistyped --floor-view, or a capture without a floor view, passed with no word that the
     # levelling (the only figure a rig tilted on its mount shows in) went unchecked

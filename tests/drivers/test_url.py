@@ -181,3 +181,23 @@ def test_a_parsed_rig_url_shows_no_password_but_keeps_it_to_open():
     with pytest.raises(RigConfigError) as info:
         RigUrl.parse(STREAM + "&fps=1&fps=2")
     assert "hunter2" not in str(info.value)
+
+
+@pytest.mark.parametrize("option", ["rig", "cache", "out", "speed"])
+def test_an_empty_text_option_is_refused_not_read_as_absent(option):
+    # depthai://?rig= ran on the device's calibration and sim://?cache= on the default cache: the file or folder
+    # meant (a variable left unset in a config) was never named, and nothing said so
+    url = RigUrl.parse(f"sim://?fps=30&{option}=")
+    with pytest.raises(RigConfigError) as info:
+        url.take_str(option, "default")
+    assert f"option {option}= is empty" in str(info.value) and "sim://?fps=30" in str(info.value)
+
+
+def test_an_empty_rig_file_option_is_refused_by_the_backends():
+    from drivers.backends.sim import SimOptions
+
+    with pytest.raises(RigConfigError, match="option cache= is empty"):
+        SimOptions.from_url(RigUrl.parse("sim://?cache="))
+    depthai_options = pytest.importorskip("drivers.backends.depthai.options")
+    with pytest.raises(RigConfigError, match="option rig= is empty"):
+        depthai_options.DepthaiOptions.from_url(RigUrl.parse("depthai://?rig="))
