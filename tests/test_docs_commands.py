@@ -106,8 +106,9 @@ def doc_files(repo: Path = REPO) -> list[Path]:
 
 
 def code_spans(text: str) -> list[tuple[int, str]]:
-    """(line number, text) of each fenced block's logical line (continuations joined) and each inline span, in
-    the order of the doc."""
+    """(line number, text) of each fenced block's logical line (continuations joined), each line of an indented
+    code block (four spaces, after a blank line, not a list item's paragraph) and each inline span, in the order of
+    the doc."""
     return sorted(_code_spans(text), key=lambda span: span[0])
 
 
@@ -117,6 +118,10 @@ def _code_spans(text: str) -> Iterator[tuple[int, str]]:
     fence: str | None = None
     shell = False
     pending: tuple[int, str] | None = None
+    # an indented code block: docs/runtime.md quotes its benchmark commands so, and they went unchecked
+    indented = False  # within one
+    after_blank = True  # the line before was blank (or there was none)
+    in_list = False  # the last prose line was a list item's or its continuation's: its indented lines are prose
     for number, line in enumerate(lines, start=1):
         opening = re.match(r"\s*(`{3,}|~{3,})\s*([\w+-]*)", line)
         if fence is None and opening:
@@ -144,6 +149,17 @@ def _code_spans(text: str) -> Iterator[tuple[int, str]]:
                 if not _assign(joined, variables):
                     yield start, joined
             continue
+        if not line.strip():
+            after_blank = True
+            prose.append(line)
+            continue
+        if re.match(r"( {4}|\t)", line) and (indented or (after_blank and not in_list)):
+            indented, after_blank = True, False
+            prose.append("")
+            yield number, re.sub(r"^\$\s+", "", line.strip())
+            continue
+        indented, after_blank = False, False
+        in_list = bool(re.match(r"\s*([*+-]|\d+[.)])\s", line)) or (line[:1].isspace() and in_list)
         prose.append(line)
     # inline spans: within one paragraph, a run of n backticks closed by the next run of exactly n
     paragraph_start = 1
@@ -749,6 +765,12 @@ def test_the_checker_names_each_bad_option_script_target_and_variable(tmp_path, 
 def test_code_spans_join_continuations_and_skip_code_blocks():
     text = "a `x --y`\n\n```python\nmake model\n```\n```\nmake \\\n  demo  # the demo\n```\n``with ` tick``\n"
     assert code_spans(text) == [(1, "x --y"), (7, "make demo  # the demo"), (10, "with ` tick")]
+
+
+def test_code_spans_read_indented_code_blocks_but_not_a_list_item_s_paragraphs():
+    text = ("Rerun:\n\n    make demo\n    make `model`\n\nprose `a`\n\n* an item\n\n    its second paragraph, `b`\n"
+            "\nmore prose\n    a wrapped line\n")
+    assert code_spans(text) == [(3, "make demo"), (4, "make `model`"), (6, "a"), (10, "b")]
 
 
 def test_a_program_is_found_as_python_runs_it():
