@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import importlib
 import importlib.util
 import inspect
@@ -789,3 +790,38 @@ def test_a_command_run_as_another_user_is_checked(programs):
                         programs.project)
     assert [(c.kind, c.program) for c in found] == [("console", "ghnerf-daemon")]
     assert problems_of(found[0], programs) == ["x: ghnerf-daemon: unknown option --measure-flor"]
+
+
+@functools.lru_cache(maxsize=None)
+def _tests_defined(root: Path) -> frozenset[str]:
+    """The test functions defined under ``root``/tests and the test files' stems."""
+    names = set()
+    for path in (root / "tests").rglob("test_*.py"):
+        names.add(path.stem)
+        names.update(re.findall(r"^\s*def (test_\w+)", path.read_text(encoding="utf-8"), flags=re.M))
+    return frozenset(names)
+
+
+def quoted_test_problems(text: str, where: str, root: Path = REPO) -> list[str]:
+    """Every ``test_...`` name the doc quotes in a code span that is neither a test function defined under tests/
+    nor a test file's stem: a doc that names the test behind a figure or a rule must not point at one renamed."""
+    defined = _tests_defined(root)
+    problems = []
+    for line, span in code_spans(text):
+        for name in re.findall(r"(?<![\w/.])(test_\w+)(?![\w/.])", span):
+            if name not in defined:
+                problems.append(f"{where}:{line}: {name}: no such test function or file under tests/")
+    return problems
+
+
+@pytest.mark.parametrize("doc", DOCS)
+def test_every_test_the_doc_names_is_defined(doc):
+    problems = quoted_test_problems((REPO / doc).read_text(encoding="utf-8"), doc)
+    assert not problems, "\n".join(problems)
+
+
+def test_a_renamed_test_the_doc_names_is_caught():
+    named = "`test_a_joint_no_view_shows_a_peak_of_is_placed_by_the_subject_s_prior_where_it_hangs_from_a_found_one`"
+    assert not quoted_test_problems(f"see {named} and `tests/ghnerf_runtime/test_two_people.py`", "x.md")
+    (problem,) = quoted_test_problems(f"see {named.replace('found_one', 'found')}", "x.md")
+    assert problem.startswith("x.md:1: test_a_joint_no_view") and "no such test" in problem
