@@ -22,6 +22,9 @@ from calibration.cli import STALL_NOTE_S
 from calibration.capture import MISMATCH_TRIES
 from calibration.consensus import CONSENSUS_DEG, CONSENSUS_MM
 from calibration.solve import COVERAGE_GRID, MIN_VIEWS, USUAL_PITCH_DEG
+from calibration.detect import PATTERN_CHECK_MARKERS
+from drivers.backends.depthai.options import DEFAULT_MOUNT_HEIGHT_M, DepthaiOptions
+from drivers.backends.depthai.source import SLOW_SHARE
 from drivers.backends.replay import MIN_SPEED
 from drivers.url import whole_number
 from drivers.url_paths import FILE_PARTS
@@ -30,7 +33,8 @@ from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX
     DAEMON_PATH_KEYS
 from firmware_host.daemon.measure_floor import DEFAULT_PAIRS, READS_PER_PAIR
 from firmware_host.daemon.memory import MMAP_THRESHOLD
-from firmware_host.daemon.service import SIZE_MISMATCH_OPENS
+from firmware_host.daemon.sandbox import HOME_FOLDERS, PRIVATE_TMP_FOLDERS
+from firmware_host.daemon.service import MAX_FAILED_RUNS, SIZE_MISMATCH_OPENS
 from firmware_host.listen import LATE_WINDOW
 from firmware_host.protocol.constants import MAX_JOINTS, NO_FRAME_SEQ
 from firmware_host.sinks.options import MAX_QUEUE, MAX_STALL_S, MAX_STATUS_S, MIN_STALL_S, MIN_STATUS_S, SinkOptions
@@ -41,7 +45,8 @@ from firmware_host.sinks.url import MAX_HOST_NAME
 from firmware_host.sinks.vmc_pose import MAX_COORD_M
 from firmware_host.sinks.vmc_view import FACINGS
 from ghnerf_runtime.body25 import JOINT_NAMES
-from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, TrackingConfig
+from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTOFF_HZ, Joints3DConfig, RoiConfig, \
+    TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.body_lie import KEPT_TURN_SECTOR_DEG, KEPT_TURN_STEP_DEG, TURN_LIE_TOLERANCE_DEG, \
     TURN_MIN_FROM_SIGHT_DEG
@@ -69,6 +74,17 @@ DISAGREE = Joints3DConfig().max_prior_disagreement_m
 PRIOR_GATE = Joints3DConfig().max_prior_error_m
 TRACK_CONF = TrackingConfig().min_confidence
 SOLVER_RAY = inspect.signature(triangulate_dlt).parameters["min_ray_angle_deg"].default
+
+
+def _unit_setting(key: str) -> str:
+    """``key``'s value in the shipped unit file, systemd/ghnerf.service."""
+    (value,) = re.findall(rf"^{key}=(.*)$", (REPO / "systemd" / "ghnerf.service").read_text(), flags=re.M)
+    return value.strip()
+
+
+def _words(n: int) -> str:
+    """``n`` as the docs write a small count in words."""
+    return {3: "three", 4: "four", 5: "five"}.get(n, str(n))
 
 
 def _exp(value: float) -> str:
@@ -199,9 +215,24 @@ def _doc(name: str) -> str:
     ("docs/runtime.md", f"within {KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`KEPT_TURN_SECTOR_DEG`"),
     # session 57's rule for a search's turned pass (ghnerf_runtime/body_lie.py), quoted since session 59
     ("docs/runtime.md", f"upside down within {TURN_LIE_TOLERANCE_DEG:g} degrees (`TURN_LIE_TOLERANCE_DEG`;"),
+    # the wait after a failed turn search, which an early search (session 59) runs on from
+    ("docs/runtime.md", f"`roi.turn_search_every` - 1 ({RoiConfig().turn_search_every - 1}) weak pairs that do not "
+                        "search"),
     ("docs/runtime.md", f"least {TURN_MIN_FROM_SIGHT_DEG:g} degrees (`TURN_MIN_FROM_SIGHT_DEG`) from each camera's"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
+    # session 59's review: docs/bring-up.md, the checklist a user follows on hardware nobody here could try
+    ("docs/bring-up.md", f"under {100 * SLOW_SHARE:g} % of `fps`"),
+    ("docs/bring-up.md", f"`width` and `height` ({DepthaiOptions().width}x{DepthaiOptions().height} by default)"),
+    ("docs/bring-up.md", f"({DepthaiOptions().width}x{DepthaiOptions().height} when `depthai://` names none)"),
+    ("docs/bring-up.md", f"`mount_height` metres above the floor ({DEFAULT_MOUNT_HEIGHT_M:.1f} when not given"),
+    ("docs/bring-up.md", f"It measures {DEFAULT_PAIRS} pairs by default (`--measure-floor PAIRS`"),
+    ("docs/bring-up.md", f"the model failing on {MAX_FAILED_RUNS} pairs in a row"),
+    ("docs/bring-up.md", f"cameras never delivered the rig file's size, {_words(SIZE_MISMATCH_OPENS)} opens in a row"),
+    ("docs/bring-up.md", "a path under " + ", ".join(f"`{f}`" for f in (HOME_FOLDERS + PRIVATE_TMP_FOLDERS)[:-1])
+                         + f" or `{PRIVATE_TMP_FOLDERS[-1]}` means"),
+    ("docs/bring-up.md", f"Expect `Type={_unit_setting('Type')}`, `WatchdogUSec={_unit_setting('WatchdogSec')}s`"),
+    ("docs/calibration.md", f"shows {PATTERN_CHECK_MARKERS} or more (`PATTERN_CHECK_MARKERS`)"),
     # session 53: a udp:// or vmc:// host no lookup can answer is refused when the URL is read
     ("docs/protocol.md", f"a name past {MAX_HOST_NAME} characters), named when the sink opens"),
     # session 54: the board, consensus and check constants docs/calibration.md explains

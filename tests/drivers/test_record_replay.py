@@ -922,3 +922,23 @@ def test_a_resized_take_whose_first_image_is_corrupt_names_the_image_it_measured
     middle = images[len(images) // 2]
     assert f"the first, middle and last of its {len(images)}, the middle {middle})" in str(info.value)
     assert info.value.delivered == (20, 15)
+
+
+def test_the_recording_doc_quotes_the_refusal_of_a_resized_take_as_open_words_it(copy_of_take):
+    """docs/recording-format.md, "Image sizes", quotes the refusal for a made-up take (/data/take1, 900 images a
+    camera, 320x240 for 640x480): with this take's path, count and sizes put in, it is the message open gives."""
+    import re
+
+    resize_images(copy_of_take, "right", (20, 15))
+    source = create_rig_source(f"replay://{copy_of_take}?speed=free")
+    with pytest.raises(FrameSizeError) as info:
+        source.open()
+    images = sorted((copy_of_take / "images" / "right").iterdir())
+    doc = re.sub(r"\s+", " ", (Path(__file__).resolve().parents[2] / "docs" / "recording-format.md").read_text())
+    (quoted,) = re.findall(r"`(recording /data/take1: .*?)`", doc)
+    for made_up, here in [("/data/take1/images/left/00000000.png", str(images[0])), ("/data/take1", str(copy_of_take)),
+                          ("'left'", "'right'"), ("320x240", "20x15"), ("640x480", "40x30"),
+                          ("of its 900,", f"of its {len(images)},")]:
+        assert made_up in quoted, made_up
+        quoted = quoted.replace(made_up, here)
+    assert quoted == str(info.value)
