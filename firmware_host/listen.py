@@ -183,6 +183,11 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
         parts = urlsplit(url)
     except ValueError as e:  # e.g. "Invalid IPv6 URL": an unclosed [
         raise ListenError(f"{shown}: cannot be parsed: {e}") from None
+    if "#" in url:
+        # urlsplit drops a fragment, and with it what followed: serial:///dev/by-id/x#1?baud=9600 opened
+        # /dev/by-id/x at 115200. The sinks refuse it too (firmware_host.sinks.url.parse_url)
+        raise ListenError(f"{shown}: a '#' ends the URL (the rest, {parts.fragment!r}, would be ignored); write a "
+                          "'#' in a device path as %23")
     scheme = parts.scheme.lower()  # UDP:// is udp:// (as for the sinks)
     query = parse_qs(parts.query, keep_blank_values=True)
     if scheme in _ACCEPTED:  # another scheme is refused as such below

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 from firmware_host.errors import SinkConfigError
 from firmware_host.sinks.backoff import BackoffPolicy
@@ -26,6 +26,46 @@ MAX_QUEUE = 4096
 #: Shortest and longest ``stall_s``: below a few frames' time at 30 fps one late write would read as a stall; an
 #: hour is as long as a STATUS period may be.
 MIN_STALL_S, MAX_STALL_S = 0.1, 3600.0
+
+
+def rig_id_text(raw: str) -> str:
+    """The ``rig_id`` option: given empty (``rig_id=``) it is refused rather than read as the default (none
+    announced), which hid a config whose value was left out."""
+    if raw == "":
+        raise ValueError("empty: give the id HELLO announces, or leave rig_id out")
+    return raw
+
+
+def camera_names_problem(names: Sequence[object]) -> str:
+    """Why ``names`` cannot be the cameras HELLO announces, ``""`` when they can: JOINTS_2D numbers a camera by
+    its place in the list, so an empty name (``a,,b``) or a name given twice (the second camera sent as the
+    first) is refused."""
+    seen: set[str] = set()
+    for k, name in enumerate(names):
+        if not isinstance(name, str):
+            continue  # left to HELLO's encoder, which refuses a name that is not text
+        if name == "":
+            return f"camera {k} has an empty name (each comma separates two names)"
+        if name in seen:
+            return f"camera name {name!r} is given twice (JOINTS_2D numbers a camera by its place in the list)"
+        seen.add(name)
+    return ""
+
+
+def camera_names(raw: str) -> list[str]:
+    """The ``cameras`` option as text: comma-separated names, in index order (:func:`camera_names_problem`).
+    A name written with spaces around it (``left, right``) is refused too: ' right' is no camera's name, and its
+    2D joints would never be sent. (A keyword's tuple, a rig's own names, is taken as named.)"""
+    if raw == "":
+        raise ValueError("empty: give the camera names in index order (e.g. cameras=left,right), or leave "
+                         "cameras out")
+    names = raw.split(",")
+    problem = camera_names_problem(names) or next(
+        (f"camera {k}'s name {name!r} has spaces around it (write the names without them)"
+         for k, name in enumerate(names) if name != name.strip()), "")
+    if problem:
+        raise ValueError(problem)
+    return names
 
 
 @dataclass(frozen=True)
@@ -64,12 +104,15 @@ class SinkOptions:
             status_s=u.take("status_s", positive_float, cls.status_s, kw),
             stall_s=u.take("stall_s", positive_float, cls.stall_s, kw),
             send_2d=u.take("send_2d", boolean, cls.send_2d, kw),
-            rig_id=u.take("rig_id", str, cls.rig_id, kw),
-            cameras=tuple(u.take("cameras", lambda s: [c for c in s.split(",") if c], (), kw)),
+            rig_id=u.take("rig_id", rig_id_text, cls.rig_id, kw),
+            cameras=tuple(u.take("cameras", camera_names, (), kw)),
             joint_count=u.take("joint_count", positive_int, cls.joint_count, kw),
             backoff=kw.pop("backoff", BackoffPolicy()),
             clock_us=kw.pop("clock_us", monotonic_us),
         )
+        problem = camera_names_problem(opts.cameras)  # a keyword's tuple of names: the query's are checked above
+        if problem:
+            raise SinkConfigError(u.url, "cameras", opts.cameras, problem)
         if opts.max_fps is not None and opts.max_fps < MIN_MAX_FPS:
             # RateLimiter refuses it at start(); refused here it is named with its URL, at open_sink()
             raise SinkConfigError(u.url, "max_fps", opts.max_fps, f"must be at least {MIN_MAX_FPS:.6g} "

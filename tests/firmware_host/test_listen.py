@@ -97,6 +97,10 @@ def test_serial_json_lines_over_a_pty():
     # ignored: the port opened at 115200, the user believing 921600
     ("serial:///dev/null?baudrate=921600", "unknown parameter baudrate; it takes baud"),
     ("udp://127.0.0.1:0?baud=9600&x=", "unknown parameter baud, x; it takes none"),
+    # a fragment was dropped, and what followed it: /dev/null opened at 115200 for ?baud=9600, and a by-id
+    # name's '#' cut the device path short (the sinks refuse it too)
+    ("serial:///dev/null#1?baud=9600", "a '#' ends the URL (the rest, '1?baud=9600', would be ignored)"),
+    ("udp://127.0.0.1:9870#robot", "write a '#' in a device path as %23"),
 ])
 def test_bad_urls_are_one_line_exit_2(url, message, capsys):
     assert listen.main([url, "--seconds", "0.1"]) == 2

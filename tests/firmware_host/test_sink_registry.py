@@ -79,6 +79,19 @@ def test_importing_sinks_loads_no_backend_library() -> None:
         ("vmc://127.0.0.1?calibration_flag=maybe", {}, "calibration_flag", "maybe"),
         ("udp://127.0.0.1:9870?calibration_flag=0", {}, "calibration_flag", "0"),
         ("memory://?facing=camera", {}, "facing", "camera"),
+        # given empty or with an empty item, read without a word: cameras=a,,b dropped the empty name (b announced
+        # as camera 1, not 2), rig_id= and cameras= read as left out; a name twice sent the second camera as the first
+        ("memory://?cameras=a,,b", {}, "cameras", "a,,b"),
+        ("memory://?cameras=left,", {}, "cameras", "left,"),
+        ("memory://?cameras=", {}, "cameras", ""),
+        ("memory://?cameras", {}, "cameras", ""),
+        ("memory://?send_2d=1&cameras=left,left", {}, "cameras", "left,left"),
+        ("memory://?cameras=left,%20right", {}, "cameras", "left, right"),
+        ("memory://", {"cameras": ("left", "")}, "cameras", ("left", "")),
+        ("memory://", {"cameras": ("left", "left")}, "cameras", ("left", "left")),
+        ("memory://?rig_id=", {}, "rig_id", ""),
+        ("memory://?rig_id", {}, "rig_id", ""),
+        ("memory://", {"rig_id": ""}, "rig_id", ""),
     ],
 )
 def test_config_errors_name_url_field_and_value(url: str, kw: dict, field: str, value: object) -> None:
@@ -114,6 +127,35 @@ def test_an_integer_that_does_not_parse_says_what_is_expected(url: str, field: s
         open_sink(url)
     assert (info.value.field, info.value.value) == (field, value)
     assert says in str(info.value) and "base 0" not in str(info.value)
+
+
+@pytest.mark.parametrize("url, says", [
+    ("memory://?cameras=a,,b", "camera 1 has an empty name"),
+    ("memory://?cameras=", "empty: give the camera names in index order"),
+    ("memory://?cameras=left,left", "camera name 'left' is given twice"),
+    ("memory://?cameras=left,%20right", "name ' right' has spaces around it"),
+    ("memory://?rig_id=", "empty: give the id HELLO announces, or leave rig_id out"),
+])
+def test_an_empty_or_malformed_name_says_what_is_wrong(url: str, says: str) -> None:
+    with pytest.raises(SinkConfigError) as info:
+        open_sink(url)
+    assert says in str(info.value)
+
+
+def test_camera_names_and_rig_id_given_well_are_taken_in_order() -> None:
+    """The refusals above leave names as they were: in order, a space inside a name kept."""
+    sink = open_sink("memory://?send_2d=1&cameras=left,cam%202,right&rig_id=bench%201")
+    try:
+        assert sink.options.cameras == ("left", "cam 2", "right")
+        assert sink.options.rig_id == "bench 1"
+    finally:
+        sink.close()
+    # a keyword's names (the rig's own, as the daemon passes them) are taken as named, spaces and all
+    sink = open_sink("memory://", cameras=(" left", "right"))
+    try:
+        assert sink.options.cameras == (" left", "right")
+    finally:
+        sink.close()
 
 
 def test_a_full_queue_stays_within_its_memory_bound() -> None:

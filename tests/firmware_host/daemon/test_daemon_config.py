@@ -144,6 +144,9 @@ def test_check_config_names_bad_urls_and_models(tmp_path, monkeypatch):
     with pytest.raises(DaemonConfigError, match=r"^sinks\[0\]: .*cameras="):
         check_config(cfg(sinks=[SINK + "?send_2d=1&cameras=a,b"]))
     check_config(cfg(sinks=[SINK + "?send_2d=1"]))  # the daemon fills in the camera names
+    # rig_id= given empty kept the daemon from adding the rig's id: HELLO announced none, without a word
+    with pytest.raises(DaemonConfigError, match=r"^sinks\[0\]: .*invalid rig_id='': empty"):
+        check_config(cfg(sinks=[SINK + "?rig_id="]))
     check_config(cfg(rig={"url": f"replay://{tmp_path / 'later'}"}))  # a recording the daemon will wait for
     empty = tmp_path / "empty"
     empty.mkdir()
