@@ -28,7 +28,6 @@ import math
 import os
 import signal
 import sys
-import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -46,6 +45,7 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_bytes_atomic, write_text_atomic
@@ -485,10 +485,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): the cameras are closed below either way
-        how = "" if _stop_signal(e) == signal.SIGINT else f" ({_stopped_by(e)})"
+        how = "" if stop_signal(e) == signal.SIGINT else f" ({_stopped_by(e)})"
         if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
             print(f"{PROG}: stopped{how} before any view was kept in {out}", file=sys.stderr)
-            return 128 + _stop_signal(e).value
+            return exit_status(e)
         print(f"stopped{how}: kept {kept} view(s) in {out}")
         return 0
     finally:
@@ -1025,22 +1025,8 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where Ctrl-C raises KeyboardInterrupt, so that every ``except KeyboardInterrupt`` (capture's
-    closing of its cameras, :func:`main`'s one line) handles it alike; its own type tells the two apart."""
-
-
-def _stop_on_sigterm(signum: int, _frame) -> None:
-    raise _Terminated(signal.Signals(signum).name)
-
-
-def _stop_signal(e: KeyboardInterrupt) -> signal.Signals:
-    """The signal that stopped a command: SIGTERM where :func:`_stop_on_sigterm` raised ``e``, else Ctrl-C's."""
-    return signal.SIGTERM if isinstance(e, _Terminated) else signal.SIGINT
-
-
 def _stopped_by(e: KeyboardInterrupt) -> str:
-    return "Ctrl-C" if _stop_signal(e) == signal.SIGINT else _stop_signal(e).name
+    return "Ctrl-C" if stop_signal(e) == signal.SIGINT else stop_signal(e).name
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -1048,17 +1034,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     # SIGTERM (timeout, a wrapper's stop button, systemd) stops every command as Ctrl-C does: the capture closes
     # its cameras and says what it kept, the others say they did not finish; by default it killed them without
     # a word (exit 143 from the shell, the cameras never closed)
-    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm) \
-        if threading.current_thread() is threading.main_thread() else None
     try:
-        return int(args.run(args))
+        with sigterm_as_interrupt():
+            return int(args.run(args))
     except (CalibrationError, RuntimeErrorBase, OSError) as e:
         # RuntimeErrorBase: a bad rig file (RigFileError) or geometry; OSError: a folder we cannot write
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:  # synth renders for about half a minute, solve detects and solves: no traceback
         print(f"{PROG}: stopped ({_stopped_by(e)}); the {args.command} did not finish", file=sys.stderr)
-        return 128 + _stop_signal(e).value  # the shell's figures for a death by the signal: 130, 143
+        return exit_status(e)  # the shell's figures for a death by the signal: 130, 143
     except Exception as e:  # noqa: BLE001 - a driver error in capture: one line, not a traceback
         import drivers
 
@@ -1066,9 +1051,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{PROG}: error: {e}", file=sys.stderr)
             return 2
         raise
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -29,6 +29,10 @@ rig delivers:
   band with the symptoms across its foot while the calibration is suspect, and
   its estimated 3D joints are printed next to the ground truth.
 
+Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeout``, ``kill``: how a
+``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
+line. Either before the first pair (the motion loop's first render, the model load) exits 130 or 143.
+
 Without a model in the model folder the demo stops with a one-line error naming the
 folder and the command that builds it. ``--truth-only`` skips the model: the simulator's
 ground-truth joints are streamed and printed instead, every one labelled ground truth.
@@ -37,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import statistics
 import sys
 import time
@@ -58,6 +63,7 @@ from firmware_host.protocol.constants import MAX_RIG_ID_LEN
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ModelError
@@ -371,6 +377,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         delivered, skipped, skews = 0, 0, []
         read_failed, failed_reads, first_failure = False, 0, ""  # a failed read since the last pair; all of them
         last_pair, last_result = None, None
+        stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
         # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO, with the
         # rig's id as the daemon does (unless the URL names one, or the id does not fit HELLO: then none).
@@ -426,8 +433,9 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         frame = estimate_frame(pair, result, sequence=numbers.take(),
                                                calibration_suspect=calibration.suspect)
                         last_result = result
-                except KeyboardInterrupt:
-                    print("stopping: Ctrl-C")
+                except KeyboardInterrupt as e:  # SIGTERM too (main's sigterm_as_interrupt)
+                    stopped = e
+                    print(f"stopping: {_stop_words(e)}")
                     break
                 if frame is not None:
                     sink.send(frame)
@@ -441,7 +449,10 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         skipped = stats.pairs_dropped
         delivered += skipped
     finally:
-        source.close()
+        # a SIGTERM that lands in the close (timeout's, as --seconds ran out) waits for it: a recorder writes what
+        # it holds queued and rewrites its manifest complete: true, which the signal raised there tore
+        with sigterm_deferred():
+            source.close()
 
     rate = delivered / elapsed
     skew = f"median skew {statistics.median(skews):.2f} ms" if skews else "no pairs"
@@ -481,21 +492,33 @@ def _run(args: argparse.Namespace, prog: str) -> int:
               f"({sink_stats.connect_failures} failed connects; last error: {sink_stats.last_error})",
               file=sys.stderr)
         return 2
+    if stopped is not None and stop_signal(stopped) == signal.SIGTERM:
+        # Ctrl-C is a user ending the run and reading its summary (0); SIGTERM came from outside (timeout, a
+        # supervisor), and its caller reads the shell's figure for it, as the other tools give it
+        print(f"{prog}: stopped (SIGTERM); the summary above is of the pairs read until then", file=sys.stderr)
+        return exit_status(stopped)
     return 0
+
+
+def _stop_words(e: KeyboardInterrupt) -> str:
+    return "Ctrl-C" if stop_signal(e) == signal.SIGINT else stop_signal(e).name
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     prog = prog_name()
     args = build_parser(prog).parse_args(argv)
     try:
-        return _run(args, prog)
+        # SIGTERM stops it as Ctrl-C does: its default action killed it outright, a record+ take left
+        # complete: false and the frames still queued for the recorder lost
+        with sigterm_as_interrupt():
+            return _run(args, prog)
     except (DemoError, drivers.DriverError, FirmwareHostError, OSError) as e:
         # a wrong --url / --sink / --out, a camera that is not there: one line, not a traceback
         print(f"{prog}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # before the pairs (the motion loop's first render, the model load) or after them
-        print(f"{prog}: stopped (Ctrl-C)", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:  # before the pairs (the motion loop's first render, the model load) or after them
+        print(f"{prog}: stopped ({_stop_words(e)})", file=sys.stderr)
+        return exit_status(e)
 
 
 if __name__ == "__main__":

@@ -28,12 +28,10 @@ import json
 import math
 import os
 import select
-import signal
 import socket
 import statistics
 import struct
 import sys
-import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -47,6 +45,7 @@ from firmware_host.protocol.constants import NO_FRAME_SEQ, SCENE_FLAGS, Fault, F
 from firmware_host.protocol.decoder import StreamDecoder
 from firmware_host.protocol.messages import Hello, Joints, Message, Status
 from firmware_host.sinks.url import LocationError, host_name_problem, integer, ipv6_hint, location_host
+from ghnerf_runtime.cli.sigterm import sigterm_as_interrupt
 
 __all__ = ["main", "open_port", "Tally", "ListenError"]
 
@@ -409,10 +408,6 @@ def listen(port: Any, *, seconds: Optional[float], as_json: bool, out: TextIO, e
     return tally
 
 
-def _interrupt(_signum: int, _frame: object) -> None:
-    raise KeyboardInterrupt  # read by listen() as Ctrl-C: the end of the session, the totals kept
-
-
 def _positive_seconds(raw: str) -> float:
     """``--seconds``: a finite number > 0 (``-1`` or ``nan`` would end the listening before it began)."""
     try:
@@ -447,12 +442,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
     tally, status = Tally(), 0
-    # SIGTERM (`timeout`, systemd, a supervisor on the robot) ends it as Ctrl-C does, with the totals: its default
-    # action killed the process with nothing said
-    previous = signal.signal(signal.SIGTERM, _interrupt) \
-        if threading.current_thread() is threading.main_thread() else None
+    # SIGTERM (`timeout`, systemd, a supervisor on the robot) ends it as Ctrl-C does, with the totals (listen()
+    # reads either as the end of the session): its default action killed the process with nothing said
     try:
-        listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout, tally=tally)
+        with sigterm_as_interrupt():
+            listen(port, seconds=args.seconds, as_json=args.json, out=sys.stdout, tally=tally)
     except BrokenPipeError:  # `ghnerf-listen ... | head`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
@@ -460,8 +454,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         status = 2
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
         port.close()
     print(f"{tally.total_joints} JOINTS messages, {tally.total_gaps} sequence gaps (lost), {tally.total_late} late "
           f"(reordered), {tally.total_duplicates} duplicate", file=sys.stderr)

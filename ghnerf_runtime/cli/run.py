@@ -26,9 +26,7 @@ import json
 import logging
 import math
 import os
-import signal
 import sys
-import threading
 from dataclasses import replace
 from pathlib import Path
 from typing import Iterator
@@ -37,6 +35,7 @@ import cv2
 import numpy as np
 
 from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config, read_json_file
 from ghnerf_runtime.errors import ConfigError, FrameError, ModelLoadError, RuntimeErrorBase
@@ -417,10 +416,6 @@ def _write_list(path: str, frames: list[dict], done: bool) -> None:
         print(f"ghnerf-run: stopped early; the {len(frames)} pair(s) finished are in {path}", file=sys.stderr)
 
 
-def _interrupt(signum: int, _frame) -> None:
-    raise KeyboardInterrupt(signal.Signals(signum).name)
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -428,23 +423,18 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     # SIGTERM (timeout, systemd, docker) stops a run as Ctrl-C does: the outputs are closed whole
-    previous = signal.signal(signal.SIGTERM, _interrupt) if threading.current_thread() is threading.main_thread() \
-        else None
     try:
-        return _run(args)
+        with sigterm_as_interrupt():
+            return _run(args)
     except KeyboardInterrupt as e:
-        name = str(e) or "SIGINT"
-        print(f"ghnerf-run: stopped ({name}); the outputs hold the pairs finished", file=sys.stderr)
-        return 128 + signal.Signals[name].value  # the shell's figure for a death by that signal: 130, 143
+        print(f"ghnerf-run: stopped ({stop_signal(e).name}); the outputs hold the pairs finished", file=sys.stderr)
+        return exit_status(e)  # the shell's figure for a death by that signal: 130, 143
     except BrokenPipeError:  # `ghnerf-run ... | head`: the reader has what it wanted
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         return 0
     except (RuntimeErrorBase, OSError) as e:
         print(f"ghnerf-run: error: {e}", file=sys.stderr)
         return 2
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

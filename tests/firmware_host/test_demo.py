@@ -507,3 +507,127 @@ def test_a_take_that_cannot_be_written_ends_the_run_and_is_not_counted_as_a_skip
     assert "skipped a frame" not in captured.out and "could not deliver" not in captured.out
     lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and f"error: recording to {take} failed: [Errno 28] No space left on device" in lines[0]
+
+
+# A recorder slower than the rig (frames still queued when the signal comes), then the demo itself, as its console
+# script runs it: the test's own process cannot take a real SIGTERM without ending pytest.
+_SLOW_RECORDER_DEMO = """
+import sys, time
+from drivers.backends import record
+real = record.encode_image
+def slow(*args, **kwargs):
+    time.sleep(0.05)
+    return real(*args, **kwargs)
+record.encode_image = slow
+from firmware_host import demo
+sys.exit(demo.main(sys.argv[1:]))
+"""
+
+
+def test_sigterm_ends_a_recording_run_with_a_complete_take_its_summary_and_143(tmp_path):
+    """``timeout 60 ghnerf-demo --url record+...`` or ``kill``: SIGTERM's default action killed the demo outright, the
+    take left ``complete: false`` and the frames queued for the recorder lost, with no summary."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    proc = subprocess.Popen([sys.executable, "-c", _SLOW_RECORDER_DEMO, "--truth-only", "--url", url,
+                             "--seconds", "120", "--out", str(tmp_path / "out")], cwd=REPO,
+                            env={**os.environ, "PYTHONPATH": str(REPO)}, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    journal = take / "frames.jsonl"
+    try:
+        deadline = time.monotonic() + 90
+        while not (journal.is_file() and len(journal.read_text().splitlines()) >= 10):
+            assert proc.poll() is None and time.monotonic() < deadline, "the demo recorded no 10 frames"
+            time.sleep(0.1)
+        rows_before = len(journal.read_text().splitlines())
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 143, (proc.returncode, err)
+    assert "stopping: SIGTERM" in out and "the rig delivered" in out, out  # the summary
+    # one line (the prog of a -c run is the module's, as for make demo)
+    assert err.strip().splitlines() == [f"{demo.MODULE}: stopped (SIGTERM); the summary above is of the pairs read "
+                                        "until then"], err
+    manifest = json.loads((take / "manifest.json").read_text())
+    assert manifest["complete"] is True
+    rows = [json.loads(line) for line in journal.read_text().splitlines()]
+    assert len(rows) > rows_before  # the frames still queued at the signal were written as it closed
+    assert manifest["counters"]["frames_written"] == len(rows)
+    on_disk = {str(p.relative_to(take)) for p in (take / "images").rglob("*.png")}
+    assert on_disk == {row["image"] for row in rows}
+    assert all((take / row["image"]).stat().st_size > 0 for row in rows)
+    m = re.search(r"frames_written=(\d+)", out)
+    assert m and int(m[1]) == len(rows), out
+
+
+class _Escaped(Exception):
+    """SIGTERM reached the handler around the demo: the demo left it to the default action, a death without a word."""
+
+
+def _outer_sigterm_handler(signum, frame):
+    raise _Escaped
+
+
+def test_sigterm_before_the_first_pair_exits_143_with_one_line_and_restores_the_handler(tmp_path, capsys,
+                                                                                      sim_url, monkeypatch):
+    # the handler installed here stands for SIGTERM's default action, which would end the test run itself
+    import os
+    import signal
+
+    import drivers
+
+    def source(url):  # the first open of sim:// renders the motion loop: a while, as the model load is
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the signal's Python handler runs here, in the main thread
+        pytest.fail("SIGTERM was not delivered")
+
+    monkeypatch.setattr(drivers, "create_rig_source", source)
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
+    try:
+        rc = _main_no_escape(["--truth-only", "--url", sim_url, "--out", str(tmp_path)])
+        restored = signal.getsignal(signal.SIGTERM)
+    except _Escaped:
+        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert rc == 143 and capsys.readouterr().err.splitlines() == [f"{demo.prog_name()}: stopped (SIGTERM)"]
+    assert restored is _outer_sigterm_handler
+
+
+def test_a_sigterm_in_the_recorder_s_close_waits_for_the_take_to_be_complete(tmp_path, capsys, monkeypatch):
+    """``timeout`` sends its SIGTERM when the run's own --seconds end at about the same time: one that landed in the
+    recorder's close (fsyncing the take, rewriting its manifest) tore it, the take left ``complete: false``."""
+    import os
+    import signal
+
+    from drivers.backends import record
+
+    real_close = record.RecordingWriter.close
+
+    def close(self, counters):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.5)  # the signal's Python handler runs here, in the main thread, before the take is closed
+        real_close(self, counters)
+
+    monkeypatch.setattr(record.RecordingWriter, "close", close)
+    take = tmp_path / "take"
+    url = f"record+sim://?width=40&height=30&seed=8&cache={tmp_path / 'cache'}&out={take}"
+    previous = signal.signal(signal.SIGTERM, _outer_sigterm_handler)
+    try:
+        rc = _main_no_escape(["--truth-only", "--url", url, "--seconds", "0.3", "--out", str(tmp_path / "out")])
+    except _Escaped:
+        pytest.fail("SIGTERM was left to the default action: the demo died without a word")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert rc == 143 and capsys.readouterr().err.splitlines() == [f"{demo.prog_name()}: stopped (SIGTERM)"]
+    manifest = json.loads((take / "manifest.json").read_text())
+    assert manifest["complete"] is True
+    assert manifest["counters"]["frames_written"] == len((take / "frames.jsonl").read_text().splitlines()) > 0

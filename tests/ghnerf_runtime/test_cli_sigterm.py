@@ -1,0 +1,91 @@
+"""``ghnerf_runtime.cli.sigterm``: the SIGTERM handling ghnerf-run, ghnerf-listen, ghcal and ghnerf-demo share."""
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import pytest
+
+from ghnerf_runtime.cli.sigterm import Terminated, exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal
+
+
+def _outer(signum, frame):  # stands for whatever handler the caller had (the default would end pytest)
+    raise AssertionError("SIGTERM reached the handler outside the block")
+
+
+def _deliver_sigterm() -> None:
+    os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(5)  # the handler runs here, in the main thread
+    pytest.fail("SIGTERM was not delivered")
+
+
+def test_sigterm_raises_terminated_inside_the_block_and_the_handler_before_is_put_back():
+    previous = signal.signal(signal.SIGTERM, _outer)
+    try:
+        with pytest.raises(Terminated) as caught:
+            with sigterm_as_interrupt():
+                assert signal.getsignal(signal.SIGTERM) is not _outer  # installed
+                _deliver_sigterm()
+        assert signal.getsignal(signal.SIGTERM) is _outer  # put back after the signal
+        with sigterm_as_interrupt():
+            pass
+        assert signal.getsignal(signal.SIGTERM) is _outer  # and after a block that ended as usual
+        with pytest.raises(ValueError):
+            with sigterm_as_interrupt():
+                raise ValueError("any error")
+        assert signal.getsignal(signal.SIGTERM) is _outer
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    e = caught.value
+    assert isinstance(e, KeyboardInterrupt)  # every `except KeyboardInterrupt` written for Ctrl-C catches it
+    assert (stop_signal(e), exit_status(e)) == (signal.SIGTERM, 143)
+
+
+def test_a_plain_keyboard_interrupt_is_ctrl_c():
+    assert (stop_signal(KeyboardInterrupt()), exit_status(KeyboardInterrupt())) == (signal.SIGINT, 130)
+
+
+def test_nothing_is_installed_outside_the_main_thread():
+    """signal.signal raises ValueError outside the main thread: a tool's main() run from a worker must still run,
+    leaving the process's handler as it was."""
+    previous = signal.signal(signal.SIGTERM, _outer)
+    seen: list[object] = []
+    errors: list[BaseException] = []
+
+    def worker() -> None:
+        try:
+            with sigterm_as_interrupt():
+                seen.append(signal.getsignal(signal.SIGTERM))
+        except BaseException as e:  # noqa: BLE001 - reported to the test's thread
+            errors.append(e)
+
+    try:
+        thread = threading.Thread(target=worker)
+        thread.start()
+        thread.join(10)
+        after = signal.getsignal(signal.SIGTERM)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert not errors and seen == [_outer] and after is _outer
+
+
+def test_a_deferred_sigterm_lets_the_block_finish_then_raises():
+    previous = signal.signal(signal.SIGTERM, _outer)
+    finished = []
+    try:
+        with pytest.raises(Terminated):
+            with sigterm_as_interrupt():
+                with sigterm_deferred():
+                    os.kill(os.getpid(), signal.SIGTERM)
+                    time.sleep(0.2)  # the handler runs here: noted, not raised
+                    finished.append("block")
+                finished.append("after")  # not reached: raised as the block ended
+        assert signal.getsignal(signal.SIGTERM) is _outer
+        with sigterm_deferred():  # no signal: nothing raised, the handler put back
+            pass
+        assert signal.getsignal(signal.SIGTERM) is _outer
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert finished == ["block"]
