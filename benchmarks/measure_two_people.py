@@ -32,7 +32,8 @@ view reads weakly).
 
 ``--by-joint`` adds to each row, joint by joint, the pairs that reported it, their mean distance from the nearer
 person's, and of them those a flagged pair reported without a pairing of the subject's (the skeleton prior's place,
-read off ``Estimator._keep_tracked_subject``): docs/runtime.md, "Fewer, right joints" (session 59).
+read off ``Estimator._keep_tracked_subject`` on the pass reported: :class:`SubjectPairings`): docs/runtime.md,
+"Fewer, right joints" (session 59).
 
 ``--no-refine`` turns ``tracking.refine_cold_start`` off: a cold pass is not run again on the crop of what it found
 (docs/runtime.md, "A track of both people's joints", session 57's review).
@@ -203,6 +204,41 @@ class FilmedTwoPeopleOracle(TwoPeopleOracle):
 PLACES = ((-0.5, 3.0), (0.5, 3.4))
 
 
+class SubjectPairings:
+    """The joints a flagged pass found from the subject's own pairings (``Estimator._keep_tracked_subject``'s third
+    value), pass by pass (``Estimator._finish_pass``): a pair may run several (a cold pass and its refined one, a
+    ``tracking.retry_cold`` rerun, a turn search's candidates), and the last to pick a subject need not be the one
+    reported. Installs itself on ``est``; clear :attr:`passes` before each pair. Before session 59's review the
+    benchmark kept the pair's last call, whichever pass made it."""
+
+    def __init__(self, est) -> None:
+        #: this pair's passes so far: (the pass, its subject's found joints, ``(J,)`` bool, or None where the pass
+        #: did not look for the subject's pairings)
+        self.passes: list[tuple[object, np.ndarray | None]] = []
+        keep, finish, found = est._keep_tracked_subject, est._finish_pass, [None]
+
+        def keeping(*a, **k):
+            out = keep(*a, **k)
+            found[0] = out[2].valid.copy()
+            return out
+
+        def finishing(*a, **k):
+            found[0] = None
+            p = finish(*a, **k)
+            self.passes.append((p, found[0]))
+            return p
+
+        est._keep_tracked_subject, est._finish_pass = keeping, finishing
+
+    def of(self, result) -> np.ndarray | None:
+        """The found joints of the pass ``result`` (a ``PairResult`` of this pair) reports: the one whose 2D
+        confidences it holds (the same dict; its 3D joints may be smoothed)."""
+        for p, found in self.passes:
+            if p.conf_2d is result.confidence_2d:
+                return found
+        raise LookupError(f"pair {result.sequence}: none of its {len(self.passes)} passes is the one reported")
+
+
 def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = EstimatorConfig(), swap: bool = False,
             places: tuple = PLACES, model_dir: str | None = None,
             second: bool = True, occlude: bool = False) -> tuple[dict[str, float], int]:
@@ -271,14 +307,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 return decide(kp)
 
             est._several_people = counting
-            keep, paired = est._keep_tracked_subject, [None]  # the subject's joints from their own pairings
-
-            def keeping(*a, keep=keep, paired=paired, **k):
-                out = keep(*a, **k)
-                paired[0] = out[2].valid.copy()
-                return out
-
-            est._keep_tracked_subject = keeping
+            pairings = SubjectPairings(est)  # the subject's joints from their own pairings, the reported pass's
             for i in range(alone + pairs):
                 t = i / 30.0
                 a, b = first.joints_3d(t), other.joints_3d(t)
@@ -292,7 +321,7 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                     images = tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair)
                 else:  # the model sees both: each person over the first's room, the nearer one's pixel in front
                     images = tuple(sim.render_people((first, other), c, t) for c in rig.pair)
-                paired[0] = None
+                pairings.passes.clear()
                 r = est.estimate(images, timestamp_s=t)
                 if i < alone:
                     continue
@@ -307,8 +336,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                 counts["nearer_mm"] += float(nearer[found].sum()) * 1000.0
                 counts["joint_reported"][:len(found)] += found
                 counts["joint_mm"][:len(found)] += np.where(found, nearer, 0.0) * 1000.0
-                if r.several_people and paired[0] is not None:
-                    counts["joint_unpaired"][:len(found)] += found & ~paired[0]
+                paired = pairings.of(r) if r.several_people else None
+                if paired is not None:
+                    counts["joint_unpaired"][:len(found)] += found & ~paired
                 counts["flagged"] += int(r.several_people)
                 if r.several_people:  # the subject's alone: its pairings' (the prior's fed their peaks, with it)
                     counts["flagged_joints"] += int(found.sum())

@@ -1385,15 +1385,24 @@ class Estimator:
         several |= torso and regions.tracked
         subject = j3  # a several_people pair's joints of the tracked subject that the views' peaks gave
         chosen = None  # and the peaks each of them was triangulated from (_from_pairings)
+        guessed = None  # a flagged pair's joints not reported: no pairing of the subject's gave them (below)
         if several:  # before the presence gate: the subject's joints alone must make someone
             j3, chosen, subject = self._keep_tracked_subject(j3, kp, uv_model, crops, regions, cold_several, behind)
             if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
                 joints_2d, conf_2d, missing_2d = self._image_joints(*chosen, crops)
+                guessed = self._guessed_joints(subject, kp)
         nobody = False  # (the presence gate off: nothing decides that nobody is there)
         seen_by = None  # the one view that shows someone when the pair shows nobody in 3D
         if cfg.presence.enabled:
             if self.skeleton_prior is None:
-                j3 = gate_presence(j3, cfg.presence.min_joints, cfg.presence.threshold(cfg.heatmaps.source))
+                # the gate counts what the pair reports: on a flagged pair not the joints left out below (guessed),
+                # so the subject's own pairings, as with the prior. Counted, 4 pairings and 3 joints of the decoded
+                # peaks near the track passed presence.min_joints 6 and reported 4 (before session 59's review)
+                counted = j3 if guessed is None else Joints3D(j3.points, j3.confidence, j3.valid & ~guessed,
+                                                              j3.reprojection_px)
+                if not gate_presence(counted, cfg.presence.min_joints,
+                                     cfg.presence.threshold(cfg.heatmaps.source)).valid.any():
+                    j3 = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])
                 nobody = not j3.valid.any()
             else:  # decided on the triangulation (_joints_3d); the prior's error gate may still leave no joint
                 nobody = self._prior_follow is None
@@ -1417,21 +1426,7 @@ class Estimator:
         if several and not nobody and self.skeleton_prior is not None and chosen is not None:
             j3 = self._subject_prior(j3, subject, chosen, crops, regions)
         framed = j3  # what the crop follows on a several_people pair: the subject's skeleton, guesses and all
-        if several and chosen is not None:
-            # a joint no pairing of the subject's found, whose map shows a peak in a view, is not reported: that peak
-            # is someone's and not the subject's (else a pairing would hold it), the other person's or both people's
-            # merged, the subject's own hidden there; the skeleton prior's place for it (fed none of its peaks), or
-            # the pass's answer near the track, is a guess beside the other person (two people 0.6 m apart through
-            # the shipped model: the subject's side facing the other, 112-314 mm off; docs/runtime.md, "Fewer,
-            # right joints"). A joint no view shows a peak of is hidden from both cameras: the prior places it from
-            # the subject's body, as for one person, where it hangs from a joint the subject's pairings found (a heel
-            # from its ankle); one hanging from nothing found lay 186 mm off there (the left heel, its foot's peaks
-            # the other person's).
-            hangs = np.zeros(len(subject.valid), bool)
-            for a, b in LIMBS:
-                hangs[a] |= bool(subject.valid[b])
-                hangs[b] |= bool(subject.valid[a])
-            guessed = ~subject.valid & (kp.valid.any(axis=0) | ~hangs)
+        if guessed is not None:  # (several, and the subject's pairings were looked for: _guessed_joints)
             j3 = Joints3D(j3.points, j3.confidence, j3.valid & ~guessed, j3.reprojection_px).sanitised()
         if several:
             # a camera's peak of a dropped joint may be the other person's: the 2D joints go with the 3D ones
@@ -1478,6 +1473,24 @@ class Estimator:
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
                      None if seen_by is None else self.camera_names[seen_by], agreement, foot)
+
+    @staticmethod
+    def _guessed_joints(subject: Joints3D, kp: Keypoints2D) -> np.ndarray:
+        """A flagged pair's joints that :meth:`_finish_pass` does not report, ``(J,)``: of those no pairing of the
+        subject's found (``subject``, :meth:`_keep_tracked_subject`), each whose map shows a peak in a view (``kp``,
+        the pass's decoded peaks): that peak is someone's and not the subject's (else a pairing would hold it), the
+        other person's or both people's merged, the subject's own hidden there; the skeleton prior's place for it
+        (fed none of its peaks), or the pass's answer near the track, is a guess beside the other person (two people
+        0.6 m apart through the shipped model: the subject's side facing the other, 112-314 mm off; docs/runtime.md,
+        "Fewer, right joints"). A joint no view shows a peak of is hidden from both cameras: the prior places it
+        from the subject's body, as for one person, where it hangs from a joint the subject's pairings found (a
+        heel from its ankle); one hanging from nothing found lay 186 mm off there (the left heel, its foot's peaks
+        the other person's)."""
+        hangs = np.zeros(len(subject.valid), bool)
+        for a, b in LIMBS:
+            hangs[a] |= bool(subject.valid[b])
+            hangs[b] |= bool(subject.valid[a])
+        return ~subject.valid & (kp.valid.any(axis=0) | ~hangs)
 
     def _subject_figures(self, subject: Joints3D, chosen: tuple[Keypoints2D, np.ndarray] | None,
                          crops: list[Camera], regions: Regions) -> tuple[float | None, float | None]:

@@ -21,6 +21,7 @@ import re
 import runpy
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -396,6 +397,43 @@ def test_measure_two_people_by_joint(capsys, monkeypatch):
     assert [name for name, *_ in joints] == list(JOINT_NAMES), lines[0]
     assert all(int(k) <= 2 and int(without or 0) <= int(k) for _, k, without in joints), lines[0]
     assert sum(int(k) for _, k, _ in joints) >= 2 * 20, lines[0]  # the oracle's picked person, nearly whole
+
+
+class _TwoPasses:
+    """A stand-in estimator whose pair runs two passes that each look for the subject's pairings, the first
+    reported and the second not (a turn search's candidate that is not kept, say), and a third that does not look
+    (a pass not flagged)."""
+
+    def _keep_tracked_subject(self, found):
+        from ghnerf_runtime.joints3d import Joints3D
+        n = len(found)
+        return None, None, Joints3D(np.zeros((n, 3)), np.ones(n, np.float32), found, np.zeros((n, 2)))
+
+    def _finish_pass(self, found):
+        if found is not None:
+            self._keep_tracked_subject(found)
+        return SimpleNamespace(conf_2d={})  # a dict of its own, as each pass's
+
+    def estimate(self):
+        reported = self._finish_pass(np.array([True, False, True]))
+        self._finish_pass(np.array([False, True, True]))
+        unflagged = self._finish_pass(None)
+        return (SimpleNamespace(sequence=7, confidence_2d=reported.conf_2d),
+                SimpleNamespace(sequence=7, confidence_2d=unflagged.conf_2d))
+
+
+def test_measure_two_people_by_joint_takes_the_reported_pass_s_pairings():
+    # --by-joint's "without a subject's pairing" counts are the reported pass's (session 59's review): until then the
+    # pair's last _keep_tracked_subject call was taken, here the second pass's, not reported
+    from benchmarks.measure_two_people import SubjectPairings
+    est = _TwoPasses()
+    pairings = SubjectPairings(est)
+    flagged, unflagged = est.estimate()
+    assert pairings.of(flagged).tolist() == [True, False, True]
+    assert pairings.of(unflagged) is None  # the pass did not look for the subject's pairings
+    pairings.passes.clear()  # the next pair's: this pair's passes are not among them
+    with pytest.raises(LookupError, match="pair 7: none of its 0 passes is the one reported"):
+        pairings.of(flagged)
 
 
 #: A row's torso line (``measure_two_people.torso_spread``): the passes, the excess's median, p90 and max, the neck to

@@ -659,6 +659,44 @@ def test_a_joint_no_view_shows_a_peak_of_is_placed_by_the_subject_s_prior_where_
             assert off[shown].max() < 1.0, (cam.name, np.flatnonzero(shown & (off >= 1.0)))
 
 
+class _FewPairingsEstimator(Estimator):
+    """An estimator whose flagged passes' subject pairings (:meth:`Estimator._keep_tracked_subject`'s third value)
+    are cut to the first ``kept`` joints they found: the subject's other joints then come from the pass's decoded
+    peaks alone (its first value keeps them), as on a tracked pair whose pairings found few joints near the track."""
+
+    kept = 4
+
+    def _keep_tracked_subject(self, *args, **kwargs):
+        j3, chosen, subject = super()._keep_tracked_subject(*args, **kwargs)
+        few = np.zeros_like(subject.valid)
+        few[np.flatnonzero(subject.valid)[:self.kept]] = True
+        return j3, chosen, replace(subject, valid=subject.valid & few).sanitised()
+
+
+@pytest.mark.parametrize("prior", ["off", "on"])
+def test_a_flagged_pair_with_fewer_subject_pairings_than_the_presence_gate_asks_reports_nobody(prior):
+    """A flagged pair reports no joint that no pairing of the subject's gave where a view shows a peak of it
+    (session 59), so the presence gate counts the subject's pairings: with 4 of them (``presence.min_joints`` 6)
+    the pair reports nobody, in 3D and 2D. Without the skeleton prior the gate counted the joints before that rule
+    left any out (the decoded peaks' near the track with them), and the pair reported 4 joints; with the prior it
+    already counted the pairings (session 55)."""
+    config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior=prior))
+    assert config.presence.min_joints > _FewPairingsEstimator.kept
+    rig = sim.RigPlacement().build()
+    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=NEAR_THE_LINE[0]))
+    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=NEAR_THE_LINE[1]))
+    oracle = TwoPeopleOracle(edge128_contract())
+    oracle.skeleton_prior = _PeaksPrior() if prior == "on" else None
+    with _FewPairingsEstimator(oracle, rig, config) as est:
+        for i in range(3):
+            t = i / 30.0
+            oracle.set_people(first.joints_3d(t), other.joints_3d(t))
+            r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+            assert r.several_people and r.num_found == 0, (i, r.num_found)
+            for cam in rig.pair:
+                assert r.missing_2d[cam.name].all() and not r.confidence_2d[cam.name].any()
+
+
 def test_a_flagged_pair_whose_subject_prior_disagrees_reports_the_subject_s_pairings():
     """The one-person gate holds for a flagged pair: a prior skeleton further than ``max_prior_disagreement_m`` from
     the subject's pairings gives those pairings (``prior_fallback``), as without the prior."""
