@@ -19,7 +19,12 @@ from drivers.errors import RigConfigError
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
-_LEADING_ZERO = re.compile(r"[+-]?0[0-9_]*[1-9][0-9_]*")
+#: What :func:`whole_number` takes, ASCII only (``[0-9]``, not ``\d``, which matches other scripts' digits);
+#: "00" is 0 in every reading, so it is not refused as a leading zero.
+_WHOLE = re.compile(r"0+|[1-9][0-9]*|0[xX][0-9a-fA-F]+|0[oO][0-7]+|0[bB][01]+")
+_LEADING_ZERO = re.compile(r"0+[1-9][0-9]*")
+#: What :func:`decimal_number` takes: strtod's plain decimals (no hex floats, no nan/inf words).
+_DECIMAL = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
 #: Query keys whose values are secrets (lower-cased): a password or token given as an option.
 _SECRET_KEY = re.compile(r"(.*[_-])?(password|passwd|pass|pwd|token|secret|api[_-]?key|access[_-]?key|auth|credentials?)")
 #: What a secret is shown as.
@@ -71,20 +76,67 @@ def is_secret_key(key: str) -> bool:
 
 
 def whole_number(raw: str) -> int:
-    """A whole number as a URL writes it: decimal digits, or hex, octal or binary with its prefix (``0x10``,
-    ``0o17``, ``0b101``). A leading zero (``08``, ``010``) is refused with that said, not guessed at: C reads 010
-    as octal 8, and a user who typed 08 meant something. Camera URLs (here) and sink URLs
+    """A whole number as a URL writes it: ASCII decimal digits, or hex, octal or binary with its prefix (``0x10``,
+    ``0o17``, ``0b101``), and nothing else: no sign (no whole-number option is negative), no spaces, no ``_``, no
+    other script's digits, all of which Python's ``int`` takes (``queue=%205`` and ``queue=1_0`` were read as 5
+    and 10). A leading zero (``08``, ``010``) is refused with that said, not
+    guessed at: C reads 010 as octal 8, and a user who typed 08 meant something. Camera URLs (here) and sink URLs
     (``firmware_host.sinks.url.integer``) share this rule. Raises ValueError with the reason."""
-    try:
+    if _WHOLE.fullmatch(raw):
         return int(raw, 0)
-    except ValueError:
-        pass
-    text = raw.strip()
-    if _LEADING_ZERO.fullmatch(text):
-        sign = text[0] if text[0] in "+-" else ""
-        raise ValueError(f"decimal digits expected, without a leading zero (write {sign}{text.lstrip('+-0_')}; "
-                         "hex as 0x..)")
-    raise ValueError("expected a whole number: decimal digits, or hex as 0x..")
+    raise ValueError(_not_whole(raw))
+
+
+def _not_whole(raw: str) -> str:
+    """Why ``raw`` is not a whole number :func:`whole_number` takes, what to write instead where that is clear."""
+    if raw != raw.strip() or any(ch.isspace() for ch in raw):
+        return "decimal digits expected, without spaces (a space is not part of a number)"
+    if "_" in raw:
+        return "decimal digits expected, without '_' (a separator Python takes; C and the docs do not)"
+    if not raw.isascii():
+        odd = next(ch for ch in raw if not ch.isascii())
+        return f"ASCII digits 0-9 expected, not {odd!r}"
+    if raw[:1] in ("+", "-") and raw[1:2].isdigit():
+        rest = raw[1:]
+        plain = rest if _WHOLE.fullmatch(rest) else rest.lstrip("0") if _LEADING_ZERO.fullmatch(rest) else ""
+        write = f" (write {plain})" if raw[0] == "+" and plain else ""
+        return f"decimal digits expected, without a sign: no whole-number option is negative{write}"
+    if _LEADING_ZERO.fullmatch(raw):
+        return f"decimal digits expected, without a leading zero (write {raw.lstrip('0')}; hex as 0x..)"
+    return "expected a whole number: decimal digits, or hex as 0x.."
+
+
+def decimal_number(raw: str) -> float:
+    """A number with a fraction as a URL writes it: ASCII digits with one optional ``.``, an optional sign and
+    exponent (``-2.5``, ``.05``, ``1e-3``; ``str(float)`` writes a keyword's 1e-05 so), as C's ``strtod`` reads
+    them, a leading zero as decimal (``fps=030`` is 30). Python's ``float`` also takes spaces around it, ``_``
+    between digits and other scripts' digits (``fps=3_0`` ran at 30 without a word): those are refused, as are
+    the words nan and inf (no option takes them). Raises ValueError with the reason."""
+    if _DECIMAL.fullmatch(raw):
+        return float(raw)
+    # worded to follow "option fps='3_0' ", as take_float and the sinks' messages show it
+    if raw != raw.strip() or any(ch.isspace() for ch in raw):
+        raise ValueError("must be a number, without spaces (a space is not part of a number)")
+    if "_" in raw:
+        raise ValueError("must be a number, without '_' (a fraction is written with '.', e.g. 3.0)")
+    if not raw.isascii():
+        odd = next(ch for ch in raw if not ch.isascii())
+        raise ValueError(f"must be a number in ASCII digits 0-9 (not {odd!r})")
+    if raw.lstrip("+-").lower() in ("nan", "inf", "infinity"):
+        raise ValueError("must be a finite number")
+    raise ValueError("must be a number: digits, with one '.' and an exponent if need be (e.g. 2.5, 1e-3)")
+
+
+def yes_no(raw: str) -> bool:
+    """A yes/no option's word: 1/0, true/false, yes/no or on/off, in any case (``Yes`` is plain), nothing around
+    it (``send_2d=%20yes`` was read as yes in sink URLs, refused in rig URLs: both refuse it now).
+    Raises ValueError with the reason."""
+    if raw.isascii() and raw.lower() in _TRUE:
+        return True
+    if raw.isascii() and raw.lower() in _FALSE:
+        return False
+    spaces = " (without spaces)" if raw != raw.strip() else ""
+    raise ValueError(f"expected a boolean: 1/0, true/false, yes/no or on/off{spaces}")
 
 
 @dataclass
@@ -148,9 +200,9 @@ class RigUrl:
         if raw is None:
             return default
         try:
-            value = float(raw)
-        except ValueError:
-            raise self._error(name, raw, "a number") from None
+            value = decimal_number(raw)
+        except ValueError as e:  # the reason names what is wrong (fps=3_0: a '_', not a fraction)
+            raise RigConfigError(f"rig URL {self.url!r}: option {name}={raw!r} {e}") from None
         if not math.isfinite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
             raise self._error(name, raw, f"in [{lo}, {hi}]")
         return value
@@ -171,11 +223,12 @@ class RigUrl:
         raw = self.options.pop(name, None)
         if raw is None:
             return default
-        if raw.lower() in _TRUE or raw == "":
+        if raw == "":  # a bare key (?loop) means yes
             return True
-        if raw.lower() in _FALSE:
-            return False
-        raise self._error(name, raw, "a boolean (1/0, true/false)")
+        try:
+            return yes_no(raw)
+        except ValueError as e:
+            raise RigConfigError(f"rig URL {self.url!r}: option {name}={raw!r}: {e}") from None
 
     def finish(self) -> None:
         """Raise if options remain that no one consumed."""

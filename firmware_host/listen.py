@@ -188,7 +188,8 @@ def open_port(url: str, *, ephemeral: bool = False) -> "_UdpPort | _SerialPort":
         raise ListenError(f"{shown}: a '#' ends the URL (the rest, {parts.fragment!r}, would be ignored); write a "
                           "'#' in a device path as %23")
     scheme = parts.scheme.lower()  # UDP:// is udp:// (as for the sinks)
-    query = parse_qs(parts.query, keep_blank_values=True)
+    # '+' is a plus, as the sinks read it (a form's '+' for a space made baud=%2B9600 read ' 9600'); a space is %20
+    query = parse_qs(parts.query.replace("+", "%2B"), keep_blank_values=True)
     if scheme in _ACCEPTED:  # another scheme is refused as such below
         _reject_unknown_keys(shown, query, _ACCEPTED[scheme])
         _refuse_repeats(shown, query)

@@ -72,7 +72,7 @@ from drivers.errors import (
 )
 from drivers.frames import CameraTruth, Frame
 from drivers.pairing import MAX_TOLERANCE_MS, DropPolicy, FramePairer, PairingConfig
-from drivers.url import RigUrl
+from drivers.url import RigUrl, decimal_number
 
 log = logging.getLogger(__name__)
 
@@ -90,9 +90,10 @@ def _parse_speed(url: RigUrl) -> float | None:
     if raw == "free":
         return None
     try:
-        speed = float(raw)  # type: ignore[arg-type]
-    except ValueError:
-        speed = float("nan")
+        speed = decimal_number(raw)  # type: ignore[arg-type]  # as take_float: speed=1_0 is refused, not read as 10
+    except ValueError as e:
+        raise RigConfigError(f"rig URL {url.url!r}: option speed={raw!r} must be 'recorded', 'free' or a number >= "
+                             f"{MIN_SPEED:g} ({e})") from None
     # A floor: a frame's due time is its recorded offset / speed in integer nanoseconds, and speed=1e-320
     # made that infinite (an OverflowError from read); at 1/1000 an hour's take already plays for six weeks.
     if not MIN_SPEED <= speed < float("inf"):

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
 
-from drivers.url import whole_number
+from drivers.url import decimal_number, whole_number, yes_no
 from firmware_host.errors import SinkConfigError
 
 T = TypeVar("T")
@@ -76,8 +76,8 @@ def parse_url(url: str) -> SinkUrl:
     return SinkUrl(url, parts.scheme.lower(), parts.netloc, parts.path, query)
 
 
-# A whole number: decimal digits, or hex/octal/binary with its prefix; a leading zero (08, 010) is refused with
-# that said (C reads 010 as octal 8). One rule for sink and camera URLs, written in drivers.url.
+# A whole number: ASCII decimal digits, or hex/octal/binary with its prefix, no sign, spaces or '_'; a leading zero
+# (08, 010) is refused with that said (C reads 010 as octal 8). One rule for sink and camera URLs, in drivers.url.
 integer = whole_number
 
 
@@ -106,7 +106,7 @@ def non_negative_int(raw: str) -> int:
 
 
 def positive_float(raw: str) -> float:
-    v = float(raw)
+    v = decimal_number(raw)  # as camera URLs read it: fps=1_0 or %2010 refused, not read as 10
     if not (v > 0 and math.isfinite(v)):
         raise ValueError("must be a finite number > 0")
     return v
@@ -122,12 +122,9 @@ def one_of(*choices: str) -> Callable[[str], str]:
 
 
 def boolean(raw: str) -> bool:
-    low = raw.strip().lower()
-    if low in ("1", "true", "yes", "on"):
-        return True
-    if low in ("0", "false", "no", "off"):
-        return False
-    raise ValueError("expected 0/1, true/false, yes/no or on/off")
+    """A yes/no option: camera URLs' words (:func:`drivers.url.yes_no`), any case, nothing around them
+    (``send_2d=%20yes`` was read as yes). Given empty it is refused (a rig URL's bare ``?loop`` means yes)."""
+    return yes_no(raw)
 
 
 class LocationError(ValueError):

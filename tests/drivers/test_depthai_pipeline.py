@@ -393,8 +393,9 @@ def test_record_a_depthai_source_and_replay_it(tmp_path):
         ("depthai://?left=CAM_Z", "left"),
         ("depthai://?fps=0", "fps"),
         ("depthai://?fps=-30", r"fps='-30' must be in \[1.0, 240.0\]"),
-        ("depthai://?fps=nan", r"fps='nan' must be in"),
-        ("depthai://?fps=inf", r"fps='inf' must be in"),
+        ("depthai://?fps=nan", r"fps='nan' must be a finite number"),
+        ("depthai://?fps=inf", r"fps='inf' must be a finite number"),
+        ("depthai://?fps=3_0", r"fps='3_0' must be a number, without '_'"),  # a typo for 3.0 ran at 30
         ("depthai://?fps=abc", r"fps='abc' must be a number"),
         ("depthai://?right=cam_c", r"right='cam_c' must be one of \['CAM_A'"),
         ("depthai://?left=RGB", r"left='RGB' must be one of"),

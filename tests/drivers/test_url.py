@@ -26,8 +26,76 @@ def test_typed_getters_convert_and_consume():
 
 
 def test_prefixed_bases_are_whole_numbers():
-    url = RigUrl.parse("sim://?a=0x10&b=0o17&c=0b101&d=0&e=00&f=1_000&g=-7")
-    assert [url.take_int(k, -1) for k in "abcdefg"] == [16, 15, 5, 0, 0, 1000, -7]
+    url = RigUrl.parse("sim://?a=0x10&b=0o17&c=0b101&d=0&e=00&f=0X1f")
+    assert [url.take_int(k, -1) for k in "abcdef"] == [16, 15, 5, 0, 0, 31]
+
+
+@pytest.mark.parametrize(("raw", "says"), [
+    # Python's int() took all of these: queue=%205 read 5, seed=1_0 read 10, other scripts' digits their value
+    ("%205", "without spaces"),
+    ("5%20", "without spaces"),
+    ("1_0", "without '_'"),
+    ("0x_1f", "without '_'"),
+    ("%D9%A1%D9%A2", "ASCII digits 0-9 expected, not '\u0661'"),  # Arabic-Indic 12
+    ("%EF%BC%91", "ASCII digits 0-9 expected"),  # fullwidth 1
+    ("%2B5", "without a sign: no whole-number option is negative (write 5)"),
+    ("-7", "without a sign: no whole-number option is negative"),
+])
+def test_a_whole_number_is_ascii_digits_only(raw, says):
+    """The docs say decimal digits (or a 0x/0o/0b prefix): spaces, '_', a sign and other digits are refused by
+    name in rig and sink URLs alike, not read as a number."""
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks import open_sink
+
+    with pytest.raises(RigConfigError) as rig:
+        RigUrl.parse(f"sim://?seed={raw}").take_int("seed", 0)
+    with pytest.raises(SinkConfigError) as sink:
+        open_sink(f"memory://?queue={raw}")
+    assert "option seed=" in str(rig.value) and says in str(rig.value)
+    assert sink.value.field == "queue" and says in str(sink.value)
+
+
+@pytest.mark.parametrize(("raw", "says"), [
+    ("3_0", "must be a number, without '_'"),  # a typo for 3.0 ran at 30
+    ("%2030", "must be a number, without spaces"),
+    ("30%20", "without spaces"),
+    ("%D9%A3", "must be a number in ASCII digits 0-9 (not '\u0663')"),
+    ("nan", "must be a finite number"),
+    ("-inf", "must be a finite number"),
+    ("0x1e", "must be a number: digits, with one '.'"),
+])
+def test_a_number_with_a_fraction_is_a_plain_ascii_decimal(raw, says):
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks import open_sink
+
+    with pytest.raises(RigConfigError) as rig:
+        RigUrl.parse(f"sim://?fps={raw}").take_float("fps", 30.0)
+    with pytest.raises(SinkConfigError) as sink:
+        open_sink(f"memory://?fps={raw}")
+    assert "option fps=" in str(rig.value) and says in str(rig.value)
+    assert sink.value.field == "fps" and says in str(sink.value)
+    with pytest.raises(RigConfigError) as speed:  # replay's speed= reads a number the same way
+        create_rig_source(f"replay:///nonexistent?speed={raw}")
+    assert "option speed=" in str(speed.value) and says in str(speed.value)
+
+
+def test_decimals_as_strtod_writes_them_are_taken():
+    url = RigUrl.parse("sim://?a=1e-3&b=%2B2.5&c=-1.5E%2B2&d=5.&e=.5")
+    assert [url.take_float(k, 0.0) for k in "abcde"] == [1e-3, 2.5, -150.0, 5.0, 0.5]
+
+
+def test_a_yes_no_word_takes_any_case_but_no_spaces():
+    from firmware_host.errors import SinkConfigError
+    from firmware_host.sinks import open_sink
+
+    url = RigUrl.parse("sim://?a=Yes&b=OFF")
+    assert (url.take_bool("a", False), url.take_bool("b", True)) == (True, False)
+    for raw in ("%20yes", "yes%20", "%EF%BD%99es"):  # a space around it (was yes in sink URLs); a fullwidth y
+        with pytest.raises(RigConfigError, match="option loop="):
+            RigUrl.parse(f"sim://?loop={raw}").take_bool("loop", False)
+        with pytest.raises(SinkConfigError) as sink:
+            open_sink(f"memory://?send_2d={raw}")
+        assert sink.value.field == "send_2d" and "yes/no" in str(sink.value)
 
 
 @pytest.mark.parametrize(
@@ -53,7 +121,8 @@ def test_camera_and_sink_urls_give_one_reason_for_a_leading_zero():
     from firmware_host.errors import SinkConfigError
     from firmware_host.sinks import open_sink
 
-    for raw, write in (("010", "write 10;"), ("-025", "write -25;"), ("+08", "write +8;")):
+    for raw, write in (("010", "write 10;"), ("-025", "without a sign"), ("+08", "without a sign: no whole-number "
+                                                                            "option is negative (write 8)")):
         with pytest.raises(RigConfigError) as rig:
             RigUrl.parse(f"sim://?offset={raw.replace('+', '%2B')}").take_int("offset", 0)
         with pytest.raises(SinkConfigError) as sink:

@@ -117,7 +117,8 @@ def test_the_bounds_of_status_s_and_queue_are_named_and_their_ends_accepted() ->
 @pytest.mark.parametrize("url, field, value, says", [
     ("memory://?queue=08", "queue", "08", "decimal digits expected, without a leading zero (write 8;"),
     ("memory://?queue=010", "queue", "010", "(write 10;"),
-    ("memory://?joint_count=-025", "joint_count", "-025", "(write -25;"),
+    ("memory://?joint_count=025", "joint_count", "025", "(write 25;"),
+    ("memory://?joint_count=-025", "joint_count", "-025", "without a sign"),
     ("usb://1209:0001?ep=01", "ep", "01", "without a leading zero (write 1; hex as 0x..)"),
     ("memory://?queue=1e3", "queue", "1e3", "expected a whole number: decimal digits, or hex as 0x.."),
 ])

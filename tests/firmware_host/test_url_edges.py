@@ -253,3 +253,16 @@ def test_listen_reads_a_baud_as_the_serial_sink_does(capsys):
     # a leading zero, refused by the sink (C reads 010 as octal 8), was taken as decimal 9600
     err = _listen_fails(capsys, "serial:///dev/null?baud=09600", "--seconds", "0.1")
     assert "baud must be a whole number: decimal digits expected, without a leading zero" in err
+
+
+@pytest.mark.parametrize("raw, says", [
+    ("9_600", "without '_'"),  # Python's int() read 9600 at both ends
+    ("%209600", "without spaces"),
+    ("%2B9600", "without a sign: no whole-number option is negative (write 9600)"),
+    ("+9600", "without a sign: no whole-number option is negative (write 9600)"),  # '+' is a plus, as in sink URLs
+])
+def test_listen_and_the_serial_sink_refuse_a_baud_that_is_not_plain_digits(capsys, raw, says):
+    err = _listen_fails(capsys, f"serial:///dev/null?baud={raw}", "--seconds", "0.1")
+    assert "baud must be a whole number: " in err and says in err
+    e = _refused(f"serial:///dev/ttyACM0?baud={raw}")
+    assert e.field == "baud" and says in str(e)
