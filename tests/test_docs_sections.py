@@ -1,7 +1,8 @@
 """Every reference to a doc section names a section that is there.
 
-Code, error messages and docs send the reader to a section as ``docs/runtime.md, "Section title"`` (error
-messages use single quotes: ``docs/recording-format.md, 'Image sizes'``), and a doc to one of its own sections as
+Code, error messages and docs send the reader to a section as ``docs/runtime.md, "Section title"`` or
+``docs/runtime.md ("Section title")`` (error messages use single quotes:
+``docs/recording-format.md, 'Image sizes'``), and a doc to one of its own sections as
 ``"Section title" below`` or ``above``. A section is a markdown heading or a bold paragraph lead (``**Title.**``,
 ``**Title** (session N).``), or a paragraph that opens with the title and a stop (``Frame check (per camera``,
 ``Errors: a failed start``, ``Checked at load, each``). Nothing tied the two together, so a section renamed or
@@ -36,8 +37,10 @@ SELF = "tests/test_docs_sections.py"
 SKIPPED_DIRS = {".venv", ".git", "__pycache__", "build", "dist", "node_modules", ".pytest_cache", ".hypothesis"}
 
 # docs/<name>.md, "<title>" or 'title'; the title may run onto the next lines (a comment or docstring wrapped).
-# (a Python string may end just before the title's quote and the next one start with it: "docs/daemon.md, "\n"'udev'")
-_DOC_REF = re.compile(r"""docs/(?P<doc>[A-Za-z0-9_-]+\.md), (?:"[ \t]*\n[ \t]*")?(?P<q>["'])""")
+# Also docs/<name>.md ("<title>"), and with the line broken after the comma (the next line's comment marker
+# skipped); a Python string may end just before the title's quote and the next start with it (usb_select.py).
+_DOC_REF = re.compile(r"""docs/(?P<doc>[A-Za-z0-9_-]+\.md)(?:,(?: |[ \t]*\n[ \t]*(?:(?:#+:?|//|\*)[ \t]*)?)| \()"""
+                      r"""(?:"[ \t]*\n[ \t]*")?(?P<q>["'])""")
 # "<title>" below / above, inside one doc; a wrapped title has at most one line break.
 _LOCAL_REF = re.compile(r'"(?P<title>[A-Z0-9`][^"\n]*(?:\n[^"\n]+)?)" (?P<dir>below|above)\b')
 _HEADING = re.compile(r"^#{1,6}\s+(?P<title>.+?)\s*#*\s*$")
@@ -183,9 +186,11 @@ def test_the_references_are_found():
     # the check holds only if it sees the references: the wrapped and the single-quoted forms included
     refs = [r for path in _scanned_files(REPO) for r in references(path.read_text(encoding="utf-8"))]
     assert len(refs) > 250
-    text = 'x (docs/runtime.md, "A person at\n    # the frame\'s edge") y docs/recording-format.md, \'Image sizes\''
+    text = ('x (docs/runtime.md, "A person at\n    # the frame\'s edge") y docs/recording-format.md, \'Image sizes\''
+            ' docs/runtime.md,\n  # "Smoothing" and docs/runtime.md ("Output"; docs/daemon.md, "\n   "\'udev\'')
     assert references(text) == [(1, "runtime.md", "A person at the frame's edge"),
-                                (2, "recording-format.md", "Image sizes")]
+                                (2, "recording-format.md", "Image sizes"), (2, "runtime.md", "Smoothing"),
+                                (3, "runtime.md", "Output"), (3, "daemon.md", "udev")]
 
 
 def _fake_repo(tmp_path: Path, code: str, doc: str) -> Path:
