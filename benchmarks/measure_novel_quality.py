@@ -17,7 +17,7 @@ opacity on the rays of the coarse pass (every 4th pixel of the subject box, stri
 the simulator's mask: a clean model is opaque on the subject (1) and empty around it (0); black fog
 around the subject costs the colour loss nothing over a black background, and fog in front of it dims
 it. ``--proxy-blend off,on``, ``--painter off,auto`` and ``--matte off,on`` compare the recolouring over
-the body proxy, the learnt painter and the fog matte (docs/runtime.md); the ``whole view`` column is the
+the body proxy, the learnt painter and the fog matte (docs/novel-view.md); the ``whole view`` column is the
 PSNR over every pixel of the view (the truth over the background), which sees the fog around the subject
 that the masked PSNR does not. Not a test.
 """

@@ -43,7 +43,7 @@ def _floats(text: str) -> list[float]:
 def cleared(rgb: np.ndarray, acc: np.ndarray, background: float, opaque_at: float, clear_below: float) -> np.ndarray:
     """The runtime's picture (``opaque_colour``) with an opacity floor the runtime does not have: a ray at
     most ``clear_below`` opaque shows the background, and its colour fades in linearly up to ``opaque_at``
-    (0: the runtime's picture exactly). docs/runtime.md, "Matting out the fog", has why it is not there."""
+    (0: the runtime's picture exactly). docs/novel-view.md, "Matting out the fog", has why it is not there."""
     if clear_below <= 0.0:
         return opaque_colour(rgb, acc, background, opaque_at)
     acc = np.clip(np.nan_to_num(acc, nan=0.0), 0.0, 1.0)[:, None]

@@ -716,7 +716,7 @@ class NovelViewConfig:
             lerped (the subject box's centre when the axes are parallel or that point lies behind a camera;
             the line when that is behind one too); ``"auto"``: the orbit when the optical axes are more than
             ``novel_view.AUTO_ORBIT_MIN_ANGLE_DEG`` (60) degrees apart, else the line. Its rotation is
-            slerped either way (docs/runtime.md, "Between the cameras: a line or an orbit").
+            slerped either way (docs/novel-view.md, "Between the cameras: a line or an orbit").
         silhouette_stride: coarse-to-fine in the image: a first pass renders every
             ``silhouette_stride``-th pixel of the box, and only the cells where it finds the subject (plus
             ``silhouette_dilate`` cells around them) are rendered at ``stride``; the rest is
@@ -761,20 +761,20 @@ class NovelViewConfig:
             by how near each source's ray is to the view's; the rest keep the rendered picture. The
             proxy's depth is nearer the truth than the model's: on by default since session 29, +0.5
             to +2.1 dB median against the simulator's picture, at about 12 ms per view on a 2-core
-            host (docs/runtime.md, "Recolouring from the body proxy"). Off: the rendered picture alone.
+            host (docs/novel-view.md, "Recolouring from the body proxy"). Off: the rendered picture alone.
         proxy_tolerance_m: with ``proxy_blend``, a source sees a surface point when the proxy's own
             depth in that source is this close to the point's (metres).
         proxy_max_angle_deg: with ``proxy_blend``, a pixel is recoloured only when a source that sees its
             point looks at it within this angle of the view's ray: views from far round the subject
             are better left to the network, and to the painter (30 since session 30, 60 before:
-            docs/runtime.md, "The learnt painter").
+            docs/novel-view.md, "The learnt painter").
         painter: repaint the subject with the learnt painter (``novel_painter.onnx`` in the model
             folder, :mod:`ghnerf_runtime.novel_painter`) over the body proxy of the pair's joints,
             before ``proxy_blend``: ``"auto"`` when the model folder has one, ``"on"`` (a folder
-            without one is an error) or ``"off"`` (docs/runtime.md, "The learnt painter").
+            without one is an error) or ``"off"`` (docs/novel-view.md, "The learnt painter").
         painter_min_angle_deg: the painter runs only on views at least this far (degrees, at the
             subject's centre) from the nearest source camera: nearer, the sources see nearly all the
-            view sees and the proxy blend does as well at a fraction of its cost (docs/runtime.md, "The
+            view sees and the proxy blend does as well at a fraction of its cost (docs/novel-view.md, "The
             learnt painter"). 0: every view.
         matte: fade the view to the background away from the body proxy of the pair's joints
             (``ghnerf_runtime.proxy_matte``): the coloured fog the model leaves around the subject goes,
@@ -782,7 +782,7 @@ class NovelViewConfig:
             session 31: held out, PSNR over the whole view +1.4 dB at the rig's cameras and +2.0 dB on
             ``ghnerf-eval``'s views round the subject, masked PSNR -0.3 and -0.17 dB; on the device's
             views through the runtime +0.7 to +0.8 dB whole, -0.07 to -0.19 dB masked (medians;
-            docs/runtime.md, "Matting out the fog"). The parts of joints not found are kept within their
+            docs/novel-view.md, "Matting out the fog"). The parts of joints not found are kept within their
             reach; where the picture disagrees with the proxy (wrong joints), nothing is matted.
         matte_margin_m: with ``matte``, pixels within this distance (metres, at the proxy's depth) of
             the proxy's silhouette keep the picture.

@@ -16,7 +16,7 @@ that reads what the device knows at the view, all placed by the body proxy of th
 :func:`painter_planes` builds the image planes here in numpy exactly as the training caches hold
 them (``training.fill_features``: the same rounding to 8 bits, normals to int8, depth to float16),
 so the network sees on the device what it saw in training; a test checks the two agree. Measured in
-docs/runtime.md, "The learnt painter".
+docs/novel-view.md, "The learnt painter".
 
 onnxruntime and numpy only; never torch.
 """
@@ -45,7 +45,7 @@ __all__ = ["FEATURE_VERSION", "FILE_NAME", "INT8_FILE_NAME", "META_PREFIX", "INP
 #: Bump when a plane's meaning changes: a file trained on other planes is refused.
 FEATURE_VERSION = 1
 FILE_NAME = "novel_painter.onnx"
-#: Its static int8 QDQ twin (the convolutions), about twice as fast on two cores (docs/runtime.md).
+#: Its static int8 QDQ twin (the convolutions), about twice as fast on two cores (docs/novel-view.md).
 INT8_FILE_NAME = "novel_painter.int8.onnx"
 META_PREFIX = "ghnerf_painter."
 #: ``planes`` ``(N, 12, H, W)`` in this order, and ``joints`` ``(N, 25, 3)`` (u, v, valid); ``rgb`` out.

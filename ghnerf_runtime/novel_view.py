@@ -56,7 +56,7 @@ __all__ = ["AUTO_ORBIT_MIN_ANGLE_DEG", "HALF_TURN_BAND_DEG", "NovelViewRequest",
 #: the line's halfway camera is 13 % nearer the pivot than the two ends (1 - cos 30 degrees; 29 % at 90, 50 % at
 #: 120, all the way at 180), and every rig the documented novel-view figures come from is below it (the
 #: simulator's default 23, ``RigPlacement.random``'s at most 45, docs/examples/rig.json 0.3), so they keep the
-#: line (docs/runtime.md, "Between the cameras: a line or an orbit").
+#: line (docs/novel-view.md, "Between the cameras: a line or an orbit").
 AUTO_ORBIT_MIN_ANGLE_DEG = 60.0
 
 #: Two cameras whose rotations are within this many degrees of a half turn apart (two upright cameras facing each

@@ -16,7 +16,7 @@ by those sources' pixels, averaged with weights that favour the source whose ray
 nearest the view's own (``1 / (angle + 1 degree)``, as unstructured lumigraph rendering weighs its
 cameras). At a rig camera's own viewpoint its pixels are copied whatever the proxy's depth error;
 halfway between the cameras both count alike. Every other pixel keeps the rendered picture.
-Measured in docs/runtime.md, "Recolouring from the body proxy".
+Measured in docs/novel-view.md, "Recolouring from the body proxy".
 
 numpy, OpenCV.
 """

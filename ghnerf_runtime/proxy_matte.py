@@ -13,7 +13,7 @@ head), so the matte also keeps a sphere around the nearest found joint up its ch
 average adult's part hanging below it can reach (:func:`reach_spheres`). Where the proxy and the
 picture disagree (less than ``min_support`` of the proxy's pixels show the subject in the picture,
 as when the joints are wrong) nothing is matted, nor without the neck and the mid-hip.
-Measured in docs/runtime.md, "Matting out the fog".
+Measured in docs/novel-view.md, "Matting out the fog".
 
 numpy, OpenCV.
 """

@@ -104,12 +104,12 @@ def _doc(name: str) -> str:
     ("docs/recording-format.md", f"twice real time; at least {MIN_SPEED:g})"),
     ("docs/protocol.md", f"a coordinate beyond ±{MAX_COORD_M:.3f} m"),
     ("docs/runtime.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} degrees"),
-    ("docs/runtime.md", f"more than {AUTO_ORBIT_MIN_ANGLE_DEG:g} degrees apart (`AUTO_ORBIT_MIN_ANGLE_DEG`)"),
-    ("docs/runtime.md", f"within {PARALLEL_AXES_DEG:g} degrees (`PARALLEL_AXES_DEG`)"),
-    ("docs/runtime.md", f"k = 1 - cos {PIVOT_CONDITION_DEG:g} degrees, `PIVOT_CONDITION_DEG`"),
-    ("docs/runtime.md", f"within {AXES_PIVOT_HOLD_M:g} m (`AXES_PIVOT_HOLD_M`)"),
-    ("docs/runtime.md", f"from {AXES_PIVOT_DROP_M:g} m (`AXES_PIVOT_DROP_M`)"),
-    ("docs/runtime.md", f"within {HALF_TURN_BAND_DEG:g} degree (`HALF_TURN_BAND_DEG`)"),
+    ("docs/novel-view.md", f"more than {AUTO_ORBIT_MIN_ANGLE_DEG:g} degrees apart (`AUTO_ORBIT_MIN_ANGLE_DEG`)"),
+    ("docs/novel-view.md", f"within {PARALLEL_AXES_DEG:g} degrees (`PARALLEL_AXES_DEG`)"),
+    ("docs/novel-view.md", f"k = 1 - cos {PIVOT_CONDITION_DEG:g} degrees, `PIVOT_CONDITION_DEG`"),
+    ("docs/novel-view.md", f"within {AXES_PIVOT_HOLD_M:g} m (`AXES_PIVOT_HOLD_M`)"),
+    ("docs/novel-view.md", f"from {AXES_PIVOT_DROP_M:g} m (`AXES_PIVOT_DROP_M`)"),
+    ("docs/novel-view.md", f"within {HALF_TURN_BAND_DEG:g} degree (`HALF_TURN_BAND_DEG`)"),
     ("docs/geometry.md", f"`joints3d.min_ray_angle_deg` ({RAY:g} deg by default"),
     ("docs/geometry.md", f"The default `min_ray_angle_deg = {SOLVER_RAY:g}`"),
     ("docs/geometry.md", f"`MIN_RAY_ANGLE_FLOOR_DEG` = {_exp(MIN_RAY_ANGLE_FLOOR_DEG)} degrees"),
@@ -130,7 +130,7 @@ def _doc(name: str) -> str:
     # session 51's limits, quoted where the docs describe them
     ("docs/protocol.md", f"of more than {MAX_JOINTS} joints (`MAX_JOINTS`"),
     ("docs/protocol.md", f"`max_fps` extra cap, at least 1/{round(1 / MIN_MAX_FPS)} (a frame an hour)"),
-    ("docs/runtime.md", f"`RASTER_CHUNK` ({RASTER_CHUNK})"),
+    ("docs/novel-view.md", f"`RASTER_CHUNK` ({RASTER_CHUNK})"),
     # session 52: the crop's follow gate under the skeleton prior
     ("docs/runtime.md", f"its joints expected within {_PRIOR_FOLLOW_MAX_ERROR_M:g} m, or the report gate if looser: "
                         "`_PRIOR_FOLLOW_MAX_ERROR_M`"),

@@ -1,6 +1,6 @@
 """Float joints -> wire integers (pure numpy).
 
-Rules (docs/protocol.md, "Quantisation"):
+Rules (docs/protocol.md, "Rig frame and quantisation"):
 - coordinates are rounded to the nearest millimetre (3D) or quarter pixel (2D);
 - a joint is missing when any coordinate or its confidence is NaN, its
   confidence is <= 0, or a coordinate does not fit in int16; a missing joint is

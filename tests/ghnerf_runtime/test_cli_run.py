@@ -795,7 +795,7 @@ def test_each_video_pair_s_output_says_when_it_was_filmed(monkeypatch, tmp_path)
 
 
 def test_the_novel_alpha_help_names_the_path_and_the_orbit_s_limit():
-    """``--novel-alpha``'s help says what docs/runtime.md does since ``novel_view.path``: the view moves on the
+    """``--novel-alpha``'s help says what docs/novel-view.md does since ``novel_view.path``: the view moves on the
     line or an orbit, and an orbit's extrapolated distance to its pivot is refused too (it named the focal
     length only)."""
     action = next(a for a in cli_run.build_parser()._actions if "--novel-alpha" in a.option_strings)

@@ -414,9 +414,9 @@ def test_shipped_models_novel_view_against_the_simulators_picture():
     assert len(shown) == len(raw) >= 6, psnr  # a view for nearly every scored pair
     assert np.median(shown) >= NOVEL_PSNR_MEDIAN_MIN, psnr
     assert np.all(shown > raw), psnr  # un-dimming the translucent subject helps every view
-    assert np.median(psnr["proxy"]) > np.median(shown) + 0.5, psnr  # the proxy's colours help (docs/runtime.md)
+    assert np.median(psnr["proxy"]) > np.median(shown) + 0.5, psnr  # the proxy's colours help (docs/novel-view.md)
     # the learnt painter (novel_painter.onnx), forced on at the rig's viewpoint where it is not needed: it runs,
-    # and costs at most a little there (held out, 30 sequences: 28.55 -> 28.24 dB median; docs/runtime.md)
+    # and costs at most a little there (held out, 30 sequences: 28.55 -> 28.24 dB median; docs/novel-view.md)
     assert all(painted) and len(psnr["painter"]) == len(shown)  # it ran on those views, and only there
     assert np.median(psnr["painter"]) > np.median(psnr["proxy"]) - 1.0, psnr
     # over the whole view the painter leaves the fog around the subject dark (session 30's painted it brighter)

@@ -497,7 +497,7 @@ def test_an_empty_room_and_two_views_that_do_not_meet_stay_nobody(clip):
     assert r.single_view is None and r.missing.all()
     assert all(r.missing_2d[n].all() for n in rig.names[:2]) and est.tracker.view_track is None
     # nobody reported, but the views' disagreement is measured before the gate: what the daemon's calibration
-    # check reads for a camera knocked far off (docs/daemon.md, "calibration")
+    # check reads for a camera knocked far off (docs/daemon.md, "The status file": its `calibration` row)
     assert r.reprojection_px_median is not None and r.reprojection_px_median > 6.0
     oracle.drop = 0.0  # the same pair with views that agree: the person, in 3D
     est.reset()

@@ -315,7 +315,7 @@ def test_an_extrapolated_distance_that_is_not_positive_is_an_error_naming_alpha(
 
 # ------------------------------------------------------------------ auto and the config
 def test_auto_orbits_only_past_the_threshold():
-    assert AUTO_ORBIT_MIN_ANGLE_DEG == 60.0  # the figure docs/runtime.md justifies
+    assert AUTO_ORBIT_MIN_ANGLE_DEG == 60.0  # the figure docs/novel-view.md justifies
     narrow, wide = _around(50.0), _around(70.0)
     assert axes_angle_deg(*narrow) < AUTO_ORBIT_MIN_ANGLE_DEG < axes_angle_deg(*wide)
     assert novel_pivot(*narrow, "auto") is None and novel_pivot(*narrow, "orbit") is not None
