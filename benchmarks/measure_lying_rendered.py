@@ -56,7 +56,7 @@ from the truth (reported far off), and with the search on its searches (kept), t
 checks (turn left), the pairs read through turned crops and the pairs whose crops' turn changed from the pair
 before (flicker).
 Deterministic (scene seeds, sensor noise seeded by scene, camera and time). A tool, not a test:
-docs/runtime.md, "The skeleton prior".
+docs/turn-search.md, "Lying and upside down, rendered" and "Gradual rolls" (the search's figures all come from it).
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 
 A crop turn shows the encoder someone lying across a view, or upside down, as upright; a body it does not right
 (lying along a line of sight, tilted halfway) the encoder reads as an upright person across the picture, a wrong
-skeleton (docs/runtime.md, "Refusing what no turn rights" and "Gradual rolls"). Whether a skeleton lies as a turn
+skeleton (docs/turn-search.md, "Refusing what no turn rights" and "Gradual rolls"). Whether a skeleton lies as a turn
 rights a body is geometry alone: joints in the rig frame (y down, along gravity) and the cameras' centres in, a
 yes or no out, no estimator state and no model. It lives here, apart from the estimator, so that it reads and is
 tested on its own.
@@ -26,7 +26,7 @@ __all__ = ["KEPT_TURN_SECTOR_DEG", "KEPT_TURN_STEP_DEG", "TURN_LIE_TOLERANCE_DEG
 #: scenes (benchmarks/measure_lying_rendered.py's poses, 15 pairs each), the turned passes the search kept of people
 #: lying across the view were 83-97 degrees from upright, upside down 170-179; 5 of the 10 it kept of people lying
 #: along the line of sight 124-150, 0.55-1.2 m off (the encoder's upright person across the picture, rising off the
-#: floor toward the cameras). docs/runtime.md, "Refusing what no turn rights".
+#: floor toward the cameras). docs/turn-search.md, "Refusing what no turn rights".
 TURN_LIE_TOLERANCE_DEG = 20.0
 #: roi.turn_search: and at least this many degrees from each camera's line of sight to it: a body along a view's line
 #: of sight shows that view no length to turn upright. The kept passes above: 61-89 degrees from the nearer line of
@@ -35,12 +35,12 @@ TURN_LIE_TOLERANCE_DEG = 20.0
 TURN_MIN_FROM_SIGHT_DEG = 45.0
 #: roi.turn_search: a kept turn's passes (:func:`lies_as_kept_turn`) keep it while the body's tilt from upright lies
 #: within this many degrees of the turn: half of a quarter turn, where the next turn (or upright) would show it as
-#: upright. benchmarks/measure_lying_rendered.py --rolls measures it (docs/runtime.md, "Gradual rolls").
+#: upright. benchmarks/measure_lying_rendered.py --rolls measures it (docs/turn-search.md, "Gradual rolls").
 KEPT_TURN_SECTOR_DEG = 45.0
 #: roi.turn_search: and only while its body axis moves at most this many degrees from the pass kept through the turn
 #: the pair before (a roll, not a jump; a pair that kept none drops the axis, Estimator._kept_turn_axis). In
 #: benchmarks/measure_lying_rendered.py --rolls (30 pairs, 3-6 degrees a pair) the passes only the looser rule keeps
-#: moved 0-18 degrees from the pass before (a one-off look, docs/runtime.md); the
+#: moved 0-18 degrees from the pass before (a one-off look, docs/turn-search.md); the
 #: turned pass of a person rolled rigidly from across the view onto a line of sight (bench scene 21,
 #: tests/ghnerf_runtime/test_estimator_turn_search.py) 44.
 KEPT_TURN_STEP_DEG = 25.0
@@ -88,7 +88,7 @@ def lies_as_turned(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
     joints' centroid (``centres``: the cameras' centres). A turn shows the encoder someone lying across a view or
     upside down as upright; a body it does not right (lying along the line of sight) it reads as an upright person
     across the picture, a skeleton that stands tilted off the floor or runs along a view's line of sight, 0.24-1.2 m
-    off (docs/runtime.md, "Refusing what no turn rights"). No axis (no head and shoulders, or no hips and legs found):
+    off (docs/turn-search.md, "Refusing what no turn rights"). No axis (no head and shoulders, or no hips and legs found):
     nothing says how the body lies, and the pass is not taken."""
     axis = body_axis(j3)
     if axis is None:
@@ -111,7 +111,7 @@ def lies_as_kept_turn(j3: Joints3D, centres: Sequence[np.ndarray], turns: Sequen
     crops; refused there, the pair went cold through upright crops, whose search refused its turned passes too.
     A pass that jumps there (a person lying across the view who rolled onto a line of sight, read through the
     turned crops as the encoder's upright person across the picture: 44 degrees in one pair in bench scene 21) is
-    not kept (docs/runtime.md, "Gradual rolls")."""
+    not kept (docs/turn-search.md, "Gradual rolls")."""
     if lies_as_turned(j3, centres):
         return True
     axis = body_axis(j3)

@@ -206,18 +206,18 @@ class RoiConfig:
             upright crops searches the turns on its track's crops (someone who lay down); a tracked pass through a kept
             turn's crops, when weak or every ``turn_search_every``-th tracked pair, is run again through upright
             crops and the turn left when that finds the person more confidently (someone who got up); a strong
-            upright tracked pass, the usual pair, pays nothing (docs/runtime.md, "Lying and upside down,
-            rendered").
+            upright tracked pass, the usual pair, pays nothing (docs/turn-search.md, "Lying and upside
+            down, rendered").
         turn_search_below: the found joints' median confidence under which a pass that found someone is weak:
             a cold or upright tracked one searches, a turned tracked one is checked upright (through upright crops
-            an upside-down person is read standing at 0.38 median, upright people at 0.79: docs/runtime.md,
+            an upside-down person is read standing at 0.38 median, upright people at 0.79: docs/turn-search.md,
             "Lying and upside down, rendered"; not tuned beyond that).
         turn_search_every: after a search that kept no turn, only every this-many-th weak pair searches
             (until someone is found well): a person no turn rights (lying along the line of sight) otherwise
             makes every such pair pay three encoder runs and up to two passes more for nothing; 1: every one.
             A pair between that finds nobody where the search's pass found someone searches too, once
-            (someone rolling on past what upright crops read: docs/runtime.md, "An early search after a
-            failed one").
+            (someone rolling on past what upright crops read: docs/turn-search.md, "An early search after
+            a failed one").
             Also how often a tracked pass through a kept turn that is not weak is checked upright.
         edge_crop: a tracked box past the frame's edge: ``"clip"`` it to the frame and square what is left,
             ``"centre"`` square the whole box (the person centred, the part past the frame padded) or

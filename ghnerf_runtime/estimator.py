@@ -1047,7 +1047,7 @@ class Estimator:
         nobody reported by design until one is alone. No turn changes that: a turned pass of the same working
         volume that is flagged reports nobody too, and one that is not (a turn that reads one of them weakly) would
         report and track one of two people, or both mixed, which that rule refuses. Before, every
-        ``roi.turn_search_every``-th such pair searched for nothing (three encoder runs; docs/runtime.md,
+        ``roi.turn_search_every``-th such pair searched for nothing (three encoder runs; docs/turn-search.md,
         "Searching the crop turns"). A weakly read view still searches: one person lying across the view shows
         joints twice through upright crops and is flagged (bench scene 11, views at 0.30 and 0.26), and the turned
         crops find them. Where a subject is picked, a flagged pair whose pick made nobody may be someone lying, and
@@ -1155,7 +1155,7 @@ class Estimator:
         searches all the same: the search's upright pass found someone and ``p`` finds nobody. A person lying down
         or turning a cartwheel is read weakly by upright crops up to 60-70 degrees from upright, then lost, about
         where a quarter turn begins to read them; the search on the weak pass before found no turn, and the wait
-        put the next off by up to four pairs (docs/runtime.md, "An early search after a failed one"). Once for
+        put the next off by up to four pairs (docs/turn-search.md, "An early search after a failed one"). Once for
         each such search: the early search's own pass found nobody, so the passes after it wait (at most one
         early search for each search the wait follows). A body that stays found or stays lost waits as before.
         (A body axis turned more than 10-15 degrees since the failed search was tried as a trigger too: more
@@ -1184,7 +1184,7 @@ class Estimator:
         found someone; else ``None``. A pair that keeps no such pass (a view's frame rejected, nobody found, the
         turn left) breaks the roll: the rule's step limit (:data:`~ghnerf_runtime.body_lie.KEPT_TURN_STEP_DEG`)
         is one pair's, and against an axis some pairs old a real roll looks like a jump, while a limit grown with
-        the pairs would let the jump through (docs/runtime.md, "Gradual rolls"); the next pass through the turn is
+        the pairs would let the jump through (docs/turn-search.md, "Gradual rolls"); the next pass through the turn is
         asked the search's rule instead."""
         if self._turns == (0, 0) or p.j3 is None or not p.someone:
             return None
@@ -1199,7 +1199,7 @@ class Estimator:
         read upside down, 1.1-1.3 m off, at 0.44-0.57; upright at 0.7-0.9, in a one-off look at four bench
         scenes), the turn dropped with it; else ``p`` and the turned track stand. The tracked turned passes of
         someone still lying reach confidences as low as the misread's, so the weak ones compare rather than drop;
-        the periodic check catches a misread over the bar. One pass more on a checked pair (docs/runtime.md,
+        the periodic check catches a misread over the bar. One pass more on a checked pair (docs/turn-search.md,
         "Getting up and lying down while tracked"). A ``p`` whose body lies as the turn does not right (neither as
         the search keeps a turn nor rolled on from the last pass kept through it, :func:`lies_as_kept_turn`) does not
         come here (:meth:`_turn_misreads`: the pair is read cold instead)."""

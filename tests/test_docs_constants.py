@@ -205,20 +205,21 @@ def _doc(name: str) -> str:
     # session 59: a replay:// take whose images are not its rig's size, refused at open like those cameras
     ("docs/recording-format.md", f"stops after {'three' if SIZE_MISMATCH_OPENS == 3 else SIZE_MISMATCH_OPENS} opens "
                                  "(exit 2)"),
-    # session 58: the torso of two people (ghnerf_runtime/two_people.py) and the kept turn's rolls (estimator.py)
+    # session 58: the torso of two people (ghnerf_runtime/two_people.py) and the kept turn's rolls (estimator.py;
+    # since session 59 in docs/turn-search.md, as the turn search's other constants below)
     ("docs/runtime.md", f"`TORSO_LIMBS_M` ({' and '.join(f'{v:g}' for v in sorted(set(TORSO_LIMBS_M.values()), reverse=True))}"
                         f" m, `proxy_matte.BONE_M`'s generous adult) by more than `MIXED_TORSO_SLACK_M` "
                         f"({MIXED_TORSO_SLACK_M:g} m)"),
     ("docs/runtime.md", f"Past {SLACK_DEPTH_BASELINES:g} baselines from the cameras, the limb's part along the line"),
     ("docs/runtime.md", f"`SLACK_DEPTH_BASELINES` ({SLACK_DEPTH_BASELINES:g}) baselines"),
-    ("docs/runtime.md", f"at most {KEPT_TURN_STEP_DEG:g} degrees from that pass's (`KEPT_TURN_STEP_DEG`)"),
-    ("docs/runtime.md", f"within {KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`KEPT_TURN_SECTOR_DEG`"),
+    ("docs/turn-search.md", f"at most {KEPT_TURN_STEP_DEG:g} degrees from that pass's (`KEPT_TURN_STEP_DEG`)"),
+    ("docs/turn-search.md", f"within {KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`KEPT_TURN_SECTOR_DEG`"),
     # session 57's rule for a search's turned pass (ghnerf_runtime/body_lie.py), quoted since session 59
-    ("docs/runtime.md", f"upside down within {TURN_LIE_TOLERANCE_DEG:g} degrees (`TURN_LIE_TOLERANCE_DEG`;"),
+    ("docs/turn-search.md", f"upside down within {TURN_LIE_TOLERANCE_DEG:g} degrees (`TURN_LIE_TOLERANCE_DEG`;"),
     # the wait after a failed turn search, which an early search (session 59) runs on from
-    ("docs/runtime.md", f"`roi.turn_search_every` - 1 ({RoiConfig().turn_search_every - 1}) weak pairs that do not "
-                        "search"),
-    ("docs/runtime.md", f"least {TURN_MIN_FROM_SIGHT_DEG:g} degrees (`TURN_MIN_FROM_SIGHT_DEG`) from each camera's"),
+    ("docs/turn-search.md", f"`roi.turn_search_every` - 1 ({RoiConfig().turn_search_every - 1}) weak pairs that do not "
+                            "search"),
+    ("docs/turn-search.md", f"least {TURN_MIN_FROM_SIGHT_DEG:g} degrees (`TURN_MIN_FROM_SIGHT_DEG`) from each camera's"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 59's review: docs/bring-up.md, the checklist a user follows on hardware nobody here could try
@@ -342,3 +343,29 @@ def test_the_runtime_doc_names_every_key_of_a_pair_s_json():
     output = text.split("**Output**: one object per frame pair", 1)[1].split("\n## ", 1)[0]
     unnamed = [k for k in result.to_json() if f'"{k}"' not in output and f"`{k}`" not in output]
     assert not unnamed, f"docs/runtime.md, Output, does not name {unnamed}"
+
+
+def test_the_turn_search_page_names_its_keys_and_the_code_it_points_at():
+    """docs/turn-search.md (the crop turn search's page, split from docs/runtime.md in session 59) is where
+    ``roi.turn_search``'s readers are sent: it names every ``roi.turn_search*`` key, and the files, estimator
+    methods and ``body_lie`` functions its opening points at exist (a rename would leave it pointing at nothing)."""
+    import dataclasses
+
+    from ghnerf_runtime import body_lie
+    from ghnerf_runtime.estimator import Estimator
+
+    page = (REPO / "docs/turn-search.md").read_text(encoding="utf-8")
+    keys = [f.name for f in dataclasses.fields(RoiConfig) if f.name.startswith("turn_search")]
+    assert len(keys) >= 3, keys  # turn_search, turn_search_below, turn_search_every at least
+    unnamed = [k for k in keys if f"`roi.{k}`" not in page]
+    assert not unnamed, f"docs/turn-search.md does not name {unnamed}"
+    # the opening: what comes before the first section's bold lead
+    opening = page.split("\n**", 1)[0]
+    files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", opening)
+    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", opening)
+    functions = re.findall(r"`(lies_as_\w+)`", opening)
+    assert len(files) >= 5 and len(methods) >= 3 and len(functions) >= 2, (files, methods, functions)
+    missing = [f for f in files if not (REPO / f).is_file()]
+    missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
+    missing += [f"body_lie.{f}" for f in functions if not hasattr(body_lie, f)]
+    assert not missing, f"docs/turn-search.md's opening points at what is not there: {missing}"

@@ -345,7 +345,7 @@ def test_measure_presence(model, capsys, monkeypatch):
 def test_measure_presence_with_the_flip_test_and_its_timing(model, capsys, monkeypatch):
     """The documented ``--flip-test`` run (its recorder's ``_flip_test`` lacked the estimator's ``beside``
     argument: a TypeError on the first pair) and ``--time --novel-view`` (docs/runtime.md, "Compute only what
-    the scene requires"), and ``--turn-search`` ("Lying and upside down, rendered")."""
+    the scene requires"), and ``--turn-search`` (docs/turn-search.md, "Lying and upside down, rendered")."""
     out = run_script("measure_presence", "--model-dir", model, "--rooms", "1", "--flip-test", "--time",
                      "--novel-view", "--turn-search", capsys=capsys, monkeypatch=monkeypatch)
     assert re.search(r"^ *encoder heatmaps \(triangulate, flip test\): empty rooms", out, re.M), out

@@ -1,5 +1,5 @@
 """``ghnerf_runtime.body_lie``: how a skeleton lies against gravity and the cameras' lines of sight, the rule the
-crop turn search keeps a turned pass by (docs/runtime.md, "Refusing what no turn rights", "Gradual rolls").
+crop turn search keeps a turned pass by (docs/turn-search.md, "Refusing what no turn rights", "Gradual rolls").
 
 Synthetic stick bodies: the head-and-shoulders joints half a metre one way along an axis from a centre, the hips
 and legs half a metre the other, every other joint missing. The rig frame's y is down (along gravity), so standing

@@ -1,7 +1,7 @@
 """``roi.turn_search``: a cold pair that finds nobody, or someone weakly, tries each camera's crop turned.
 
 The encoder learnt upright people only: through upright crops the shipped model finds nobody lying across the view
-and reads an upside-down person as an upright one, feet where the head is (docs/runtime.md, "Lying and upside
+and reads an upside-down person as an upright one, feet where the head is (docs/turn-search.md, "Lying and upside
 down, rendered"). Renders bench scenes with the body turned (``benchmarks/measure_lying_rendered.py``'s poses) and
 runs the shipped model with the search off and on; upright people must not pay for it.
 """
@@ -22,7 +22,7 @@ FPS = 30.0
 
 
 def test_turn_search_keys_are_validated():
-    # on by default since session 57 (off before; docs/runtime.md): unset, on where the model has encoder heatmaps
+    # on by default since session 57 (off before; docs/turn-search.md, "On by default"): unset, on where the model has encoder heatmaps
     assert RoiConfig().turn_search is None
     assert RoiConfig().search_for(True).turn_search is True and RoiConfig().search_for(False).turn_search is False
     for value in (True, False):  # set: as set, whatever the model (true refuses one without: below)
@@ -574,7 +574,7 @@ CAMERA_CENTRES = [np.array([-0.1, -1.2, 0.0]), np.array([0.1, -1.2, 0.0])]  # a 
 def test_a_turned_pass_is_taken_only_lying_or_upside_down_across_the_views(axis, degrees, lies):
     """``lies_as_turned``: what a turned pass's body must look like to be kept. Lying along the line of sight (no turn
     rights it) the old search kept a half-turned pass's skeleton level along the line of sight, or one tilted off
-    the floor toward the cameras (0.25-1.2 m off: docs/runtime.md, "Searching the crop turns")."""
+    the floor toward the cameras (0.25-1.2 m off: docs/turn-search.md, "Searching the crop turns")."""
     from ghnerf_runtime.body_lie import lies_as_turned
 
     assert lies_as_turned(_turned_body(axis, degrees), CAMERA_CENTRES) is lies
@@ -709,7 +709,7 @@ def test_a_kept_turn_holds_while_the_body_rolls_on_nearer_it_than_upright_or_the
     """``lies_as_kept_turn``: a kept turn's passes that roll on from the last one (its axis a few degrees away) are
     asked whether the body lies within 45 degrees of the turn (and across the views), not within the search's
     20-degree windows: a person rolling up from lying, or on over into a cartwheel, passes a few degrees a pair
-    through tilts those windows refuse (docs/runtime.md, "Gradual rolls"). The same body jumped to from lying
+    through tilts those windows refuse (docs/turn-search.md, "Gradual rolls"). The same body jumped to from lying
     across the view (a rigid roll: the encoder's misread), or with no pass before, is asked the search's rule."""
     from ghnerf_runtime.body_lie import body_axis, lies_as_kept_turn, lies_as_turned
 
