@@ -45,7 +45,7 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal, stop_words
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_bytes_atomic, write_text_atomic
@@ -492,7 +492,10 @@ def cmd_capture(args: argparse.Namespace) -> int:
         print(f"stopped{how}: kept {kept} view(s) in {out}")
         return 0
     finally:
-        source.close()
+        # a SIGTERM that lands in the close (timeout's, as --max-seconds ran out) waits for it, as ghnerf-demo's
+        # does: raised there it tore the close, a depthai device or a record+ take's manifest left half-closed
+        with sigterm_deferred():
+            source.close()
     if kept < count:
         why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
                                                                           ", and the board was in no image")
