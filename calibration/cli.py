@@ -45,7 +45,7 @@ from calibration.errors import BoardError, CalibrationError, CaptureError
 from calibration.render import calibration_views, example_rig
 from calibration.solve import LENS_MODELS, MIN_VIEWS, solve_rig, typed_pitch_warning
 from ghnerf_runtime.cli.output_path import existing_ancestor, unwritable_reason
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, stop_words
 from ghnerf_runtime.errors import RigFileError, RuntimeErrorBase
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.rig_file import load_rig, save_rig, write_bytes_atomic, write_text_atomic
@@ -485,14 +485,17 @@ def cmd_capture(args: argparse.Namespace) -> int:
             last_kept_at = now
             print(f"  {name}: " + ", ".join(f"{cam} {0 if v is None else len(v)} corners" for cam, v in zip(cams, found)))
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): the cameras are closed below either way
-        how = "" if stop_signal(e) == signal.SIGINT else f" ({_stopped_by(e)})"
+        how = "" if stop_signal(e) == signal.SIGINT else f" ({stop_words(e)})"
         if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
             print(f"{PROG}: stopped{how} before any view was kept in {out}", file=sys.stderr)
             return exit_status(e)
         print(f"stopped{how}: kept {kept} view(s) in {out}")
         return 0
     finally:
-        source.close()
+        # a SIGTERM that lands in the close (timeout's, as --max-seconds ran out) waits for it, as ghnerf-demo's
+        # does: raised there it tore the close, a depthai device or a record+ take's manifest left half-closed
+        with sigterm_deferred():
+            source.close()
     if kept < count:
         why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
                                                                           ", and the board was in no image")
@@ -1025,10 +1028,6 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _stopped_by(e: KeyboardInterrupt) -> str:
-    return "Ctrl-C" if stop_signal(e) == signal.SIGINT else stop_signal(e).name
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     # SIGTERM (timeout, a wrapper's stop button, systemd) stops every command as Ctrl-C does: the capture closes
@@ -1042,7 +1041,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:  # synth renders for about half a minute, solve detects and solves: no traceback
-        print(f"{PROG}: stopped ({_stopped_by(e)}); the {args.command} did not finish", file=sys.stderr)
+        print(f"{PROG}: stopped ({stop_words(e)}); the {args.command} did not finish", file=sys.stderr)
         return exit_status(e)  # the shell's figures for a death by the signal: 130, 143
     except Exception as e:  # noqa: BLE001 - a driver error in capture: one line, not a traceback
         import drivers

@@ -63,7 +63,7 @@ from firmware_host.protocol.constants import MAX_RIG_ID_LEN
 from firmware_host.sinks import open_sink
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
-from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, stop_words
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
 from ghnerf_runtime.errors import ConfigError, ModelError
@@ -435,7 +435,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         last_result = result
                 except KeyboardInterrupt as e:  # SIGTERM too (main's sigterm_as_interrupt)
                     stopped = e
-                    print(f"stopping: {_stop_words(e)}")
+                    print(f"stopping: {stop_words(e)}")
                     break
                 if frame is not None:
                     sink.send(frame)
@@ -500,10 +500,6 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     return 0
 
 
-def _stop_words(e: KeyboardInterrupt) -> str:
-    return "Ctrl-C" if stop_signal(e) == signal.SIGINT else stop_signal(e).name
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     prog = prog_name()
     args = build_parser(prog).parse_args(argv)
@@ -517,7 +513,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{prog}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:  # before the pairs (the motion loop's first render, the model load) or after them
-        print(f"{prog}: stopped ({_stop_words(e)})", file=sys.stderr)
+        print(f"{prog}: stopped ({stop_words(e)})", file=sys.stderr)
         return exit_status(e)
 
 

@@ -117,7 +117,9 @@ class RecordingStats(PairingStats):
 def inner_url_text(url: RigUrl) -> str:
     """The URL text for what is left of ``url`` once the recorder took its options."""
     text = f"{url.scheme}://{quote(url.target, safe='/:,@')}"
-    return f"{text}?{urlencode(url.options)}" if url.options else text
+    # quote, not urlencode's default quote_plus: a rig URL reads '+' as a plus (drivers.url), so a space written
+    # '+' came back a plus (record+opencv://?first=/v/my%20take.mp4 opened /v/my+take.mp4)
+    return f"{text}?{urlencode(url.options, quote_via=quote)}" if url.options else text
 
 
 class RecordingWriter:

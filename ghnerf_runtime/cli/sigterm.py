@@ -6,7 +6,7 @@ no ``finally`` runs, so a tool's outputs are left half-written (a ``record+`` ta
 and nothing is said. Inside :func:`sigterm_as_interrupt` the signal raises :class:`Terminated`, a
 :class:`KeyboardInterrupt`, in the main thread, where Ctrl-C raises its own: every ``except KeyboardInterrupt``
 and ``finally`` a tool has for Ctrl-C handles SIGTERM too, and :func:`stop_signal` tells the two apart for the
-exit status (128 + the signal's number: 130, 143, the shell's figures) and the message. :func:`sigterm_deferred`
+exit status (128 + the signal's number: 130, 143, the shell's figures) and the message (:func:`stop_words`). :func:`sigterm_deferred`
 holds one back over a close that must finish (a recorder rewriting its manifest ``complete: true``).
 
 The daemon does not use it: a handler that raises can land anywhere in its loop, inside a lock its threads share
@@ -32,6 +32,12 @@ def _raise_terminated(signum: int, _frame: object) -> None:
 def stop_signal(e: KeyboardInterrupt) -> signal.Signals:
     """The signal that stopped a command: SIGTERM where :func:`sigterm_as_interrupt` raised ``e``, else Ctrl-C's."""
     return signal.SIGTERM if isinstance(e, Terminated) else signal.SIGINT
+
+
+def stop_words(e: KeyboardInterrupt) -> str:
+    """How a tool's message names the stop: ``Ctrl-C`` for a user's, the signal's name (``SIGTERM``) for one from
+    outside, which the user did not type."""
+    return "Ctrl-C" if stop_signal(e) == signal.SIGINT else stop_signal(e).name
 
 
 def exit_status(e: KeyboardInterrupt) -> int:

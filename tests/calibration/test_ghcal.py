@@ -922,6 +922,55 @@ def test_capture_stopped_by_sigterm_closes_the_cameras_and_ends_as_ctrl_c_does(t
     assert (tmp_path / "some" / truth.pair[0].name / "000.png").exists()
 
 
+def test_a_sigterm_in_the_capture_s_close_waits_for_the_close(truth, tmp_path, capsys, monkeypatch):
+    """``timeout`` sends its SIGTERM when the capture's own --max-seconds end at about the same time: one that landed
+    in the source's close (a depthai device's, a record+ take rewriting its manifest) raised there and tore it. Now
+    the close finishes first, then the capture stops as SIGTERM stops it (143, one line)."""
+    import os
+    import signal
+    import time
+
+    import drivers
+
+    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_recording(take, truth, {cam: {"0": v["000"]} for cam, v in images.items()}, period_s=1.0)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    real, closed = drivers.create_rig_source, []
+
+    class Escaped(Exception):
+        pass
+
+    def outer(signum, frame):  # stands for the default action, which would end the test run
+        raise Escaped
+
+    def create(url, **kwargs):
+        source = real(url, **kwargs)
+        close = source.close
+
+        def close_under_sigterm():
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.5)  # the signal's Python handler runs here, in the main thread, before the close's work
+            close()
+            closed.append(1)
+        source.close = close_under_sigterm
+        return source
+
+    monkeypatch.setattr(drivers, "create_rig_source", create)
+    previous = signal.signal(signal.SIGTERM, outer)
+    try:
+        rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--count", "1",
+                       "--interval-s", "0", "--still-s", "0", "--out", str(tmp_path / "views")])
+    except Escaped:
+        pytest.fail("SIGTERM was left to the default action: the capture died without a word")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert closed == [1]  # the close ran to its end
+    assert rc == 143 and "ghcal: stopped (SIGTERM); the capture did not finish" in capsys.readouterr().err
+
+
 def test_a_floor_view_the_rig_records_that_is_no_name_is_refused(truth, capture, tmp_path, capsys):
     # a number (or a list) there fell back to 'floor' without a word: the levelling was checked on a view the
     # rig was not levelled from, or not at all

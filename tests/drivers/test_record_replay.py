@@ -256,6 +256,15 @@ def test_recorder_options_never_reach_the_inner_backend(tmp_path):
         create_rig_source(f"record+sim://?out={tmp_path}&image_format=tiff")
 
 
+def test_the_inner_url_keeps_option_values_as_written():
+    """The recorder hands the inner backend a URL rebuilt from the options left: urlencode wrote a space as '+',
+    which a rig URL reads as a plus, so record+opencv://?first=/v/my%20take.mp4 opened /v/my+take.mp4."""
+    url = RigUrl.parse("opencv://?first=/v/my%20take.mp4&second=/v/a%2Bb%26c%3Dd%25e%23f.mp4&out=/tmp/x")
+    record_module.RecordOptions.take_from(url)
+    inner = RigUrl.parse(inner_url_text(url))
+    assert inner.options == {"first": "/v/my take.mp4", "second": "/v/a+b&c=d%e#f.mp4"}
+
+
 def test_out_keyword_and_non_empty_directory(tmp_path, sim_cache):
     source = create_rig_source(f"record+sim://?width=32&height=24&cache={sim_cache}", out=tmp_path / "kw",
                                clock=ManualClock())

@@ -8,7 +8,8 @@ import time
 
 import pytest
 
-from ghnerf_runtime.cli.sigterm import Terminated, exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal
+from ghnerf_runtime.cli.sigterm import Terminated, exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, \
+    stop_words
 
 
 def _outer(signum, frame):  # stands for whatever handler the caller had (the default would end pytest)
@@ -40,11 +41,12 @@ def test_sigterm_raises_terminated_inside_the_block_and_the_handler_before_is_pu
         signal.signal(signal.SIGTERM, previous)
     e = caught.value
     assert isinstance(e, KeyboardInterrupt)  # every `except KeyboardInterrupt` written for Ctrl-C catches it
-    assert (stop_signal(e), exit_status(e)) == (signal.SIGTERM, 143)
+    assert (stop_signal(e), exit_status(e), stop_words(e)) == (signal.SIGTERM, 143, "SIGTERM")
 
 
 def test_a_plain_keyboard_interrupt_is_ctrl_c():
-    assert (stop_signal(KeyboardInterrupt()), exit_status(KeyboardInterrupt())) == (signal.SIGINT, 130)
+    e = KeyboardInterrupt()
+    assert (stop_signal(e), exit_status(e), stop_words(e)) == (signal.SIGINT, 130, "Ctrl-C")
 
 
 def test_nothing_is_installed_outside_the_main_thread():
