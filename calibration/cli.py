@@ -352,6 +352,7 @@ def cmd_capture(args: argparse.Namespace) -> int:
     out = Path(args.out)
     count = 1 if args.floor else args.count
     kept, ended, last_kept_at = 0, False, -1e9
+    skipped, read_failed = 0, False  # frames the rig could not deliver; one since the last pair
     last_views: list[BoardView | None] = [None, None]
     steady_since = 0.0  # when the board came to rest (read only once ``resting`` is set)
     resting: list[BoardView | None] = [None, None]  # --floor: the views where the board came to rest
@@ -413,9 +414,24 @@ def cmd_capture(args: argparse.Namespace) -> int:
                 ended = True
                 break
             except drivers.DriverError as e:  # a camera unplugged or failed: say what the session kept
-                raise CaptureError(f"{shown_url}: {e}; "
+                # A frame the rig could not deliver (a corrupt image in a replay:// take) is raised once and the
+                # next read goes on, as ghnerf-demo and the daemon read on: one such frame ended the capture and
+                # lost the take's views after it. A camera gone (RigDisconnectedError: the live backends' unplug),
+                # cameras of another size than the rig's (FrameSizeError), a record+ take no longer written
+                # (RecordingError) or a second failure before a pair (a backend that failed for good raises
+                # its error at every read) still end it.
+                if (isinstance(e, drivers.RigOperationError) and not read_failed
+                        and not isinstance(e, (drivers.RigDisconnectedError, drivers.FrameSizeError,
+                                               drivers.RecordingError))):
+                    read_failed, skipped = True, skipped + 1
+                    print(f"{PROG}: skipped a frame the rig could not deliver: {e}", file=sys.stderr)
+                    continue
+                again = " (the second frame in a row the rig could not deliver)" if read_failed else ""
+                raise CaptureError(f"{shown_url}: {e}{again}; "
                                    + (f"the {kept} view(s) kept before it are whole pairs in {out}: capture the rest "
-                                      "with --append once the camera is back" if kept else "no view was kept")) from e
+                                      "with --append once the camera is back" if kept else "no view was kept")
+                                   + _skipped_note(skipped)) from e
+            read_failed = False
             last_pair_at, stall_said = time.monotonic(), False
             for cam, image, there in zip(cams, pair.images, sizes):  # (not `earlier`: the views listed above)
                 if there is not None and (image.shape[1], image.shape[0]) != there[1]:
@@ -487,9 +503,9 @@ def cmd_capture(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (main): the cameras are closed below either way
         how = "" if stop_signal(e) == signal.SIGINT else f" ({stop_words(e)})"
         if kept == 0:  # stopping a capture is its normal end, but one that kept nothing did not succeed
-            print(f"{PROG}: stopped{how} before any view was kept in {out}", file=sys.stderr)
+            print(f"{PROG}: stopped{how} before any view was kept in {out}{_skipped_note(skipped)}", file=sys.stderr)
             return exit_status(e)
-        print(f"stopped{how}: kept {kept} view(s) in {out}")
+        print(f"stopped{how}: kept {kept} view(s) in {out}{_skipped_note(skipped)}")
         return 0
     finally:
         # a SIGTERM that lands in the close (timeout's, as --max-seconds ran out) waits for it, as ghnerf-demo's
@@ -499,10 +515,15 @@ def cmd_capture(args: argparse.Namespace) -> int:
     if kept < count:
         why = ("the stream ended" if ended else "--max-seconds ran out") + ("" if board_seen else
                                                                           ", and the board was in no image")
-        print(f"{PROG}: kept {kept} of {count} views: {why}", file=sys.stderr)
+        print(f"{PROG}: kept {kept} of {count} views: {why}{_skipped_note(skipped)}", file=sys.stderr)
         return 2 if kept == 0 else 0
-    print(f"kept {kept} view(s) in {out}")
+    print(f"kept {kept} view(s) in {out}{_skipped_note(skipped)}")
     return 0
+
+
+def _skipped_note(skipped: int) -> str:
+    """The capture's last line's count of the frames it went past (each named on stderr as it came)."""
+    return f"; skipped {skipped} frame(s) the rig could not deliver" if skipped else ""
 
 
 # ------------------------------------------------------------------ solve

@@ -1,5 +1,5 @@
 """``ghcal`` from a user's side: outputs it cannot write, sessions mixed in one folder, a camera lost or
-stalled mid-capture, Ctrl-C while a view is written, views of another rig, and the units of what it prints."""
+stalled mid-capture, a corrupt frame in a take, Ctrl-C while a view is written, views of another rig, and the units of what it prints."""
 from __future__ import annotations
 
 import json
@@ -207,6 +207,77 @@ def test_a_camera_unplugged_mid_capture_says_what_was_kept(truth, one_view, tmp_
     for cam in truth.pair:  # and they are
         assert np.array_equal(cv2.imread(str(out / cam.name / "000.png"), cv2.IMREAD_GRAYSCALE),
                               one_view[cam.name]["000"])
+
+
+@pytest.fixture(scope="module")
+def three_views(truth):
+    return calibration_views(truth, BOARD, count=3, edge_count=0, seed=5, floor_view=False)
+
+
+def _three_pose_take(root: Path, truth: Rig, three_views) -> Path:
+    """Each of three board poses in three pairs in a row (frames 0-2, 3-5, 6-8): a pose stays kept after its
+    first pair is lost (the next holds it still, the third is kept)."""
+    root.mkdir()
+    _write_recording(root, truth, {cam: {f"{name}{k}": image for name, image in views.items() for k in range(3)}
+                                   for cam, views in three_views.items()}, period_s=1.0)
+    return root
+
+
+def test_a_corrupt_image_mid_take_is_skipped_and_the_views_after_it_kept(truth, three_views, tmp_path, capsys):
+    """One image of a replay:// take that does not decode is a frame the rig could not deliver, raised once by the
+    read, the next going on (docs/recording-format.md, "Image sizes"). The capture stopped there (exit 2) and lost
+    the take's views after it; it goes past it as ghnerf-demo does, naming it once, and counts it at the end."""
+    take = _three_pose_take(tmp_path / "take", truth, three_views)
+    corrupt = take / "images" / "left" / "00000003.png"  # the second pose's first pair (not one checked at open)
+    corrupt.write_bytes(b"not a png")
+    out = tmp_path / "capture"
+    rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(_board_file(tmp_path)),
+                   "--out", str(out), "--count", "3", "--interval-s", "0", "--still-s", "0"])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert captured.err == (f"ghcal: skipped a frame the rig could not deliver: recording image {corrupt} is corrupt "
+                            "(OpenCV cannot decode it)\n")
+    assert captured.out.splitlines()[-1] == f"kept 3 view(s) in {out}; skipped 1 frame(s) the rig could not deliver"
+    for cam in truth.pair:  # the poses before and after it, each a whole pair
+        for k, name in enumerate(sorted(three_views[cam.name])):
+            assert np.array_equal(cv2.imread(str(out / cam.name / f"{k:03d}.png"), cv2.IMREAD_GRAYSCALE),
+                                  three_views[cam.name][name])
+
+
+def test_two_frames_the_rig_could_not_deliver_in_a_row_end_the_capture(truth, three_views, tmp_path, capsys):
+    """Both cameras' images of one instant corrupt: a second failed read before a pair is a failed rig, as for
+    ghnerf-demo and the daemon. It ends the capture as a lost camera does, saying what was kept."""
+    take = _three_pose_take(tmp_path / "take", truth, three_views)
+    for cam in truth.pair:
+        (take / "images" / cam.name / "00000003.png").write_bytes(b"not a png")
+    out = tmp_path / "capture"
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(_board_file(tmp_path)),
+                     "--out", str(out), "--count", "3", "--interval-s", "0", "--still-s", "0"]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2 and lines[0].startswith("ghcal: skipped a frame the rig could not deliver: "), lines
+    assert f"{take / 'images' / 'right' / '00000003.png'} is corrupt (OpenCV cannot decode it) (the second frame " \
+        "in a row the rig could not deliver); the 1 view(s) kept before it are whole pairs in" in lines[1], lines
+    assert lines[1].endswith("; skipped 1 frame(s) the rig could not deliver"), lines
+    assert sorted(p.name for p in (out / "left").iterdir()) == ["000.png"]
+
+
+@pytest.mark.parametrize("kind", ["size", "recording"])
+def test_a_rig_of_another_size_or_a_take_not_written_ends_the_capture_at_once(truth, one_view, tmp_path, capsys,
+                                                                              monkeypatch, kind):
+    """Not frames to go past: cameras delivering another size than the rig's (FrameSizeError), a record+ take that
+    can no longer be written (RecordingError), as for ghnerf-demo; nor a camera gone (the test above)."""
+    import drivers
+
+    take = _take(tmp_path / "take", truth, one_view)
+    error = (drivers.FrameSizeError("camera 'left' delivers 640x480, its rig camera is 800x500", "left",
+                                    (800, 500), (640, 480)) if kind == "size"
+             else drivers.RecordingError("recording to /data/take failed: [Errno 28] No space left on device"))
+    monkeypatch.setattr(drivers, "create_rig_source", _failing_after(drivers.create_rig_source, 2, error))
+    assert cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(_board_file(tmp_path)),
+                     "--out", str(tmp_path / "c"), "--count", "5", "--interval-s", "0", "--still-s", "0"]) == 2
+    err = capsys.readouterr().err
+    assert f"{error}; the 1 view(s) kept before it are whole pairs in" in err and err.count("\n") == 1, err
+    assert "skipped" not in err
 
 
 def test_a_sim_camera_unplugged_before_any_view_is_kept(tmp_path, capsys):
