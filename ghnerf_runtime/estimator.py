@@ -94,7 +94,8 @@ from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_blo
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
 from ghnerf_runtime.two_people import (PAIRINGS, TORSO_LIMBS_M, attached, centre_of, floor_xz, matched_errors,
-                                       one_body, pick_person, reads_as_two_people, split_people, torso_excess)
+                                       one_body, one_skeleton, pick_person, reads_as_two_people, split_people,
+                                       torso_excess)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -1741,6 +1742,9 @@ class Estimator:
                 add = lost & (people[who] >= 0) & attached(points[np.maximum(people[who], 0), np.arange(J)],
                                                            points[best, np.arange(J)], found)
                 best, found = np.where(add, people[who], best), found | add
+        # a pairing off its limbs' reach of the subject's other joints is not the subject's (one view's peak of each
+        # person, or the other's in both, near a track's joint gone astray): two_people.one_skeleton
+        found = one_skeleton(points[best, np.arange(J)], found)
         return self._from_pairings(kept, kp, pairs, best, found)
 
     def _picked_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
@@ -1770,7 +1774,9 @@ class Estimator:
             who = pick_person(centres, below, towards, self.config.joints3d.pick_subject)
         if who is None:
             return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
-        return self._from_pairings(kept, kp, pairs, np.maximum(people[who], 0), people[who] >= 0)
+        best = np.maximum(people[who], 0)
+        # the split gives a joint to the person it hangs nearest, within MAX_LIMB_M: held to each limb's own length
+        return self._from_pairings(kept, kp, pairs, best, one_skeleton(points[best, np.arange(J)], people[who] >= 0))
 
     def _seen_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                       regions: Regions, behind: int

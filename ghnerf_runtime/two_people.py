@@ -21,9 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ghnerf_runtime.body25 import BODY_PARTS, LIMBS
+from ghnerf_runtime.body25 import BODY_PARTS, JOINT_NAMES, LIMBS
 from ghnerf_runtime.config import PICK_SUBJECT_RULES
 from ghnerf_runtime.errors import ShapeError
+from ghnerf_runtime.proxy_matte import BONE_M
 
 #: The four pairings of the two views' peaks: (view 0's option, view 1's), 0 the decoded peak, 1 the runner-up.
 PAIRINGS = np.array([[0, 0], [0, 1], [1, 0], [1, 1]])
@@ -50,6 +51,16 @@ SAME_BODY_M = 0.5
 #: lengths, metres: ``proxy_matte.BONE_M``'s generous average adult (the simulator's people up to 0.59 m and 0.10 m).
 #: A torso holds its shape whatever the pose, unlike the arms, whose left and right one view may swap.
 TORSO_LIMBS_M: dict[tuple[int, int], float] = {(1, 8): 0.55, (8, 9): 0.12, (8, 12): 0.12}
+#: :func:`one_skeleton`: a limb (:data:`~ghnerf_runtime.body25.LIMBS`) of one body is at most its
+#: ``proxy_matte.BONE_M`` length (a generous average adult) times this, for a taller person, plus
+#: :data:`BONE_SLACK_M` for the triangulation's error (each end's pulled peaks: the shipped model's subject 0.6 m from
+#: another person, a right shoulder 108 mm off on average). The left shoulders read from the other person's peaks
+#: there lay 0.62 m from the subject's neck (bound 0.49 m; one body's 0.18 m) (docs/runtime.md, "Fewer, right joints").
+BONE_SCALE = 1.2
+#: :func:`one_skeleton`: metres added to each limb's bound (:data:`BONE_SCALE`). 0.15 m dropped some of the shipped
+#: model's pulled peaks of the subject (ears 132-267 mm off, an elbow 18 mm off beside its shoulder) and, two people a
+#: metre apart, the track that followed then flagged 68 % of the pairs instead of 50 % (25.9 mm against 23.8).
+BONE_SLACK_M = 0.25
 #: :func:`mixed_torso`: a torso limb this much longer than one body's (its part along the line of sight discounted
 #: past :data:`SLACK_DEPTH_BASELINES` baselines from the cameras, :func:`torso_excess`) is two people's joints. One
 #: person through the shipped model, strong peaks in both views, came to at most 0.16 m over on the bench sequences
@@ -203,6 +214,63 @@ def attached(candidates: np.ndarray, joints: np.ndarray, found: np.ndarray) -> n
             if j < len(candidates) and other < len(candidates) and found[other]:
                 near[j] |= bool(np.linalg.norm(candidates[j] - joints[other]) <= MAX_LIMB_M)
     return near
+
+
+def limb_bound_m(parent: int, child: int) -> float:
+    """The longest one body's limb ``(parent, child)`` of :data:`~ghnerf_runtime.body25.LIMBS` may be read as,
+    metres (:data:`BONE_SCALE`, :data:`BONE_SLACK_M`); a chain of limbs through joints not found, the sum of its
+    bones times :data:`BONE_SCALE` plus :data:`BONE_SLACK_M` once (the slack is its two ends' error)."""
+    return BONE_SCALE * BONE_M[JOINT_NAMES[child]] + BONE_SLACK_M
+
+
+def one_skeleton(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """``(J,)`` which ``found`` joints of ``joints`` (``(J, 3)``, rig frame) make one skeleton: two found joints are
+    linked where the limbs between them (:data:`~ghnerf_runtime.body25.LIMBS`, through joints not found, a tree's
+    one path) are long enough to reach (:func:`limb_bound_m`); the largest group so linked is kept (of
+    groups as large, the one with the lowest joint, the neck before the limbs). A joint triangulated from another
+    person's peaks, or from one view's peak of each person, lies off its own limbs' reach: its group is the
+    smaller. Unlike :func:`one_body` (:data:`MAX_LIMB_M`, the longest limb's, for every limb: a left shoulder
+    0.62 m from its neck passes), each limb is held to its own length."""
+    joints = np.asarray(joints, dtype=np.float64)
+    found = np.asarray(found, dtype=bool)
+    if joints.shape != (len(found), 3):
+        raise ShapeError(f"one_skeleton: joints must be ({len(found)}, 3) for {len(found)} found flags, "
+                         f"got {joints.shape}")
+    J = len(found)
+    near: dict[int, list[tuple[int, float]]] = {j: [] for j in range(J)}  # each joint's limbs and their lengths
+    for a, b in LIMBS:
+        if a < J and b < J:
+            bone = BONE_SCALE * BONE_M[JOINT_NAMES[b]]
+            near[a].append((b, bone))
+            near[b].append((a, bone))
+    group = np.arange(J)  # union-find over the found joints
+
+    def root(j: int) -> int:
+        while group[j] != j:
+            group[j] = group[group[j]]
+            j = int(group[j])
+        return j
+
+    for start in np.flatnonzero(found):
+        # walk the tree out from ``start`` through joints not found, to the first found joint on each path
+        stack, seen = [(int(start), 0.0)], {int(start)}
+        while stack:
+            j, reach = stack.pop()
+            for k, bound in near[j]:
+                if k in seen:
+                    continue
+                seen.add(k)
+                if not found[k]:
+                    stack.append((k, reach + bound))
+                elif np.linalg.norm(joints[k] - joints[start]) <= reach + bound + BONE_SLACK_M:  # (the ends' error)
+                    group[root(k)] = root(int(start))
+    roots = np.array([root(j) for j in range(J)])
+    if not found.any():
+        return found.copy()
+    sizes = np.bincount(roots[found], minlength=J)
+    # of the largest groups, the one holding the lowest found joint (the first found joint in such a group)
+    keep = roots[np.flatnonzero(found & (sizes[roots] == sizes.max()))[0]]
+    return found & (roots == keep)
 
 
 def one_body(joints: np.ndarray, found: np.ndarray) -> np.ndarray:

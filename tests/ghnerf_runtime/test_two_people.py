@@ -697,6 +697,69 @@ def test_a_flagged_pair_with_fewer_subject_pairings_than_the_presence_gate_asks_
                 assert r.missing_2d[cam.name].all() and not r.confidence_2d[cam.name].any()
 
 
+class _DisplacedOracle(TwoPeopleOracle):
+    """The two-people oracle drawing the first person's ``moved`` joints ``by`` (m, rig frame) off where they are
+    in both views: peaks a pairing takes for the subject's joint, off its limbs' reach (as the shipped model's left
+    shoulders 0.6 m from another person, read from that person's peaks and lying 0.62 m from the subject's neck)."""
+
+    def __init__(self, contract, moved: tuple[int, ...], by: np.ndarray) -> None:
+        super().__init__(contract)
+        self.moved, self.by = list(moved), np.asarray(by, np.float64)
+
+    def set_people(self, *joints_3d: np.ndarray) -> None:
+        first = np.array(joints_3d[0], np.float64)
+        first[self.moved] += self.by
+        super().set_people(first, *joints_3d[1:])
+
+
+@pytest.mark.parametrize("prior", ["off", "on"])
+def test_a_flagged_pair_reports_no_subject_pairing_off_its_limbs_reach(prior):
+    """A flagged pair's pairing of the subject's that lies further from a found joint it hangs from than one body's
+    limb (``two_people.one_skeleton``: ``proxy_matte.BONE_M`` x 1.2 + 0.25 m) is not the subject's and is not
+    reported, in 3D or 2D: here the subject's left shoulder drawn 0.6 m above itself in both views (about 0.62 m
+    from the neck, as the shipped model's were, whose limb reaches 0.49 m). Before session 59's review the split gave it to the subject (within
+    ``MAX_LIMB_M``, 0.75 m, of the neck), the track held it, and each pair reported it 0.6 m off (through the
+    shipped model 0.6 m apart, 4 left shoulders 332 mm from either person: docs/runtime.md, "Fewer, right
+    joints"). The subject's other joints stay reported, each at the subject's."""
+    shoulder = JOINT_NAMES.index("LShoulder")
+    oracle = _DisplacedOracle(edge128_contract(), (shoulder,), np.array([0.0, -0.6, 0.0]))  # y down: above
+    config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior=prior))
+    rig, results, _ = _two_from_the_first_pair(config, _PeaksPrior(), pairs=4, oracle=oracle)
+    for r, a, b in results:
+        assert r.several_people and r.missing[shoulder], (r.joints_3d[shoulder], a[shoulder])
+        found = ~r.missing
+        assert r.num_found >= 18, r.num_found
+        assert np.linalg.norm(r.joints_3d[found] - a[found], axis=-1).max() < NEAR_M
+        for cam in rig.pair:
+            assert r.missing_2d[cam.name][shoulder] and r.confidence_2d[cam.name][shoulder] == 0.0
+
+
+def test_one_skeleton_keeps_the_largest_group_its_limbs_reach():
+    """``one_skeleton`` links found joints whose limbs reach (each limb ``BONE_M`` x 1.2, through joints not found,
+    plus 0.25 m once) and keeps the largest group: one person's skeleton whole, whatever joints are missing; a
+    shoulder moved 0.6 m above itself leaves with the arm that hangs from it (fewer, right joints); two groups as
+    large keep the one with the lowest joint; the shapes are checked."""
+    scene = sim.SimScene(sim.SceneConfig(seed=3, motion="wave", position_xz=(0.0, 3.0)))
+    a = scene.joints_3d(0.2)
+    everything = np.ones(25, bool)
+    assert T.one_skeleton(a, everything).all()
+    some = everything.copy()
+    some[[JOINT_NAMES.index(n) for n in ("Neck", "LElbow", "RKnee")]] = False  # reached through them
+    assert np.array_equal(T.one_skeleton(a, some), some)
+    moved = a.copy()
+    moved[JOINT_NAMES.index("LShoulder")] += [0.0, -0.6, 0.0]
+    kept = T.one_skeleton(moved, everything)
+    assert sorted(JOINT_NAMES[j] for j in np.flatnonzero(~kept)) == ["LElbow", "LShoulder", "LWrist"]
+    two = np.zeros(25, bool)
+    two[[JOINT_NAMES.index("RWrist"), JOINT_NAMES.index("LWrist")]] = True  # (the arms between them reach 2.19 m)
+    spread = a.copy()
+    spread[JOINT_NAMES.index("LWrist")] = spread[JOINT_NAMES.index("RWrist")] + [3.0, 0.0, 0.0]
+    assert np.flatnonzero(T.one_skeleton(spread, two)).tolist() == [JOINT_NAMES.index("RWrist")]
+    assert not T.one_skeleton(a, np.zeros(25, bool)).any()
+    with pytest.raises(ShapeError, match="one_skeleton"):
+        T.one_skeleton(a[:24], everything)
+
+
 def test_a_flagged_pair_whose_subject_prior_disagrees_reports_the_subject_s_pairings():
     """The one-person gate holds for a flagged pair: a prior skeleton further than ``max_prior_disagreement_m`` from
     the subject's pairings gives those pairings (``prior_fallback``), as without the prior."""
