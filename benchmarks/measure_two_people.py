@@ -32,15 +32,15 @@ view reads weakly).
 
 ``--by-joint`` adds to each row, joint by joint, the pairs that reported it, their mean distance from the nearer
 person's, and of them those a flagged pair reported without a pairing of the subject's (the skeleton prior's place,
-read off ``Estimator._keep_tracked_subject`` on the pass reported: :class:`SubjectPairings`): docs/runtime.md,
+read off ``Estimator._keep_tracked_subject`` on the pass reported: :class:`SubjectPairings`): docs/two-people.md,
 "Fewer, right joints" (session 59).
 
 ``--no-refine`` turns ``tracking.refine_cold_start`` off: a cold pass is not run again on the crop of what it found
-(docs/runtime.md, "A track of both people's joints", session 57's review).
+(docs/two-people.md, "A track of both people's joints", session 57's review).
 
 ``--behind METRES`` puts the second person that far behind the first along view 0's line of sight (the first's
 place from ``--places``), and ``--occlude`` has the oracle hide each person's joints behind the other's body in a
-view (:func:`hidden_behind`; the rendered people of ``--model-dir`` hide each other already): docs/runtime.md,
+view (:func:`hidden_behind`; the rendered people of ``--model-dir`` hide each other already): docs/two-people.md,
 "One person behind the other" (session 56).
 
 With ``--one-person-model`` it measures instead what the check costs on one person: a trained model (the
@@ -49,14 +49,14 @@ folder's, at the runtime's defaults) on the held-out-like bench sequences (``ghn
 It prints the pairs flagged ``several_people``, whether the joints came out identical, their error against
 the truth (mean over the joints found, and the share found), and, over every pass of the checked estimator
 (a cold pass and its refined one are two), how many joints were shown twice in both views. A tool, not a
-test: docs/runtime.md, "Two people in the working volume".
+test: docs/two-people.md, "Two people in the working volume".
 
 With ``--ends`` as well, the one person is instead rendered alone at the working volume's ends and corners (the
 places of ``test_model_extremes``' ``test_estimator_with_the_subject_at_the_ends_of_the_working_volume``), ``--scenes``
 seeds of each of ``--motions``, ``--frames`` pairs each, a row per place. Every row, of every mode but
 ``--calibration``, is followed by the spread of each pass's largest torso excess over one body's
 (``two_people.torso_excess``), as measured and as ``two_people.mixed_torso`` reads it (the part along the line of
-sight discounted for the depth error), against ``MIXED_TORSO_SLACK_M``: docs/runtime.md, "A torso of two people"
+sight discounted for the depth error), against ``MIXED_TORSO_SLACK_M``: docs/two-people.md, "A torso of two people"
 (session 58's review).
 
 With ``--calibration`` it measures the daemon's calibration figures (``lowest_foot_m``, ``reprojection_px_median``)
@@ -251,8 +251,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
     over the passes of the pairs counted (a cold pass and its refined one are two), ``passes`` and the joints
     shown twice (a runner-up of at least ``second_person_ratio`` of the peak) in view 0, in view 1 and in both
     (``twice_view0``, ``twice_view1``, ``twice_both``, summed), and those whose peaks made a torso of two people
-    (``torso_mixed``: ``two_people.mixed_torso``, docs/runtime.md, "A torso of two people"): a view whose two people's peaks of a joint share a
-    region showed none there before the runner-up in a region (session 55) (docs/runtime.md, "Two people 0.6 m apart").
+    (``torso_mixed``: ``two_people.mixed_torso``, docs/two-people.md, "A torso of two people"): a view whose two
+    people's peaks of a joint share a region showed none there before the runner-up in a region (session 55)
+    (docs/two-people.md, "Two people 0.6 m apart").
     ``places``: where the first and the second person stand, ``((x, z), (x, z))``; ``swap``: each at the other's
     place. ``model_dir``: the trained model of that folder (``config``'s session otherwise) on the
     two people rendered together (``drivers.sim.render_people``) instead of the oracle. ``second``: False shows
@@ -559,7 +560,7 @@ def main(argv=None) -> int:
                          "sight through the first's place (--places' first; the second's is replaced)")
     ap.add_argument("--behind-min-joints", type=int, default=EstimatorConfig().joints3d.behind_min_joints,
                     metavar="N", help="joints3d.behind_min_joints: a tracked pass showing N joints twice in one view "
-                                      "alone is several_people (0, the default: off; docs/runtime.md, \"One person "
+                                      "alone is several_people (0, the default: off; docs/two-people.md, \"One person "
                                       "behind the other\", measured with 6)")
     ap.add_argument("--occlude", action="store_true",
                     help="the oracle: a person's joints behind the other's body in a view show no peak there "
@@ -590,10 +591,10 @@ def main(argv=None) -> int:
     ap.add_argument("--by-joint", action="store_true",
                     help="each row also per joint: the pairs reporting it, their mean mm from the nearer person's, "
                          "and of them those a flagged pair reported without a pairing of the subject's (the skeleton "
-                         "prior's place; docs/runtime.md, \"Fewer, right joints\")")
+                         "prior's place; docs/two-people.md, \"Fewer, right joints\")")
     ap.add_argument("--no-refine", action="store_true",
                     help="tracking.refine_cold_start off: a cold pass (the working volume's crop) is not run again "
-                         "on the crop of what it found (docs/runtime.md, \"A track of both people's joints\")")
+                         "on the crop of what it found (docs/two-people.md, \"A track of both people's joints\")")
     args = ap.parse_args(argv)
     # --calibration and --one-person-model run their own sessions (the oracle filmed through a turned rig; the
     # bench sequences at the runtime's defaults): a model or prior asked for there would be silently left out

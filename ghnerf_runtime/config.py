@@ -482,14 +482,14 @@ class Joints3DConfig:
         second_person_ratio: a view's joint map whose second-strongest peak (the decoder's ``runner_up``: another
             region's, or a second maximum past a valley in the same one) reaches this fraction of its strongest
             shows that joint twice: two people in view. On one person the shipped model's maps stay below 0.44 in
-            at least one of the two views (docs/runtime.md, "Two people in the working volume").
+            at least one of the two views (docs/two-people.md, "Two people in the working volume").
         second_person_min_joints: a pair with at least this many joints shown twice in *both* views
             (``second_person_ratio``) is ``several_people`` (``PairResult``): its joints are kept only near the
             tracked subject's (``max_track_step_m``), or, without a track, none. So is a tracked pass whose peaks
             make a torso of two people (:func:`ghnerf_runtime.two_people.mixed_torso`; since session 58,
-            docs/runtime.md, "A torso of two people"). ``0`` turns the check off, that rule with it.
+            docs/two-people.md, "A torso of two people"). ``0`` turns the check off, that rule with it.
         behind_min_joints: a pair whose tracked crop shows at least this many joints twice in one view alone (one
-            person behind the other as the other camera sees them; docs/runtime.md, "One person behind the other")
+            person behind the other as the other camera sees them; docs/two-people.md, "One person behind the other")
             is ``several_people`` too; ``0`` (the default) leaves that rule out. Off because one person alone
             reaches it: through the shipped model 5 of the bench's 300 pairs (10 sequences) were flagged with 6,
             PCK@0.2 0.981 -> 0.979, and a person lying or upside down read through upright crops on up to 11 of 72
@@ -505,7 +505,7 @@ class Joints3DConfig:
             default) the one nearest the rig's centre line (the floor line from below the cameras' midpoint
             through the working volume's centre), within 0.2 m of each other the one nearer the cameras;
             ``"nearest"`` the one nearest the cameras, within 0.2 m the one nearer the centre line; ``"none"``
-            nobody until one is alone (session 53's rule).
+            nobody until one is alone (session 53's rule; docs/two-people.md, "Two people without a track").
         foot_standing_m: the floor check's foot height (``PairResult.lowest_foot_m``, the daemon's ``FloorWatch``) is
             the median height of the lower foot's triangulated joints less this (metres): that median on a foot
             standing flat on this install's floor. The default is the simulated people's bare feet

@@ -200,7 +200,7 @@ class PairResult:
             person's mid-hip, the other's hip): only
             the joints within ``joints3d.max_track_step_m`` of the tracked subject's are reported (3D and
             2D); without a track, the joints of the person ``joints3d.pick_subject`` names, whom the track then
-            follows (none with ``pick_subject: none``; docs/runtime.md, "Two people in the working volume").
+            follows (none with ``pick_subject: none``; docs/two-people.md, "Two people in the working volume").
             With the triangulation each is the pairing of the views' peaks and runner-ups nearest the track (or
             the subject's, where the two people are separated), and each camera's 2D joint the peak it came
             from; with the skeleton prior (since session 55) the 3D joints are then the prior's, fed those peaks
@@ -1378,7 +1378,7 @@ class Estimator:
         behind = None if several or not regions.tracked else self._behind_view(kp)
         several |= behind is not None
         # a torso of two people (both views read one person's mid-hip and the other's hip): two people too near
-        # for the maps to show a joint twice, or the views' peaks agreeing on the wrong person (docs/runtime.md,
+        # for the maps to show a joint twice, or the views' peaks agreeing on the wrong person (docs/two-people.md,
         # "A torso of two people"); the two-people check off (second_person_min_joints 0) leaves it out too. A cold
         # pass's crop (the whole working volume) draws them too small to split: its track is both people's, unsorted
         # (below), and the pass refining it decides, as after a cold pass that showed a joint twice
@@ -1440,7 +1440,7 @@ class Estimator:
         # near them all, as before: a track without the guesses framed the subject without the side the other
         # person hides, and a track that held them for the crop only found fewer of the subject's joints (tried,
         # two people a metre apart: 62 % of the pairs flagged instead of 50 %, the joints 27.8 and 27.2 mm off
-        # instead of 23.8; docs/runtime.md, "Fewer, right joints")
+        # instead of 23.8; docs/two-people.md, "Fewer, right joints")
         follow = framed if several else self._track_joints(env, crops, regions, j3)
         self.tracker.update(follow.points, follow.confidence, follow.valid, sequence)
         self._several_track = several and self.tracker.track is not None
@@ -1482,7 +1482,7 @@ class Estimator:
         the pass's decoded peaks): that peak is someone's and not the subject's (else a pairing would hold it), the
         other person's or both people's merged, the subject's own hidden there; the skeleton prior's place for it
         (fed none of its peaks), or the pass's answer near the track, is a guess beside the other person (two people
-        0.6 m apart through the shipped model: the subject's side facing the other, 112-314 mm off; docs/runtime.md,
+        0.6 m apart through the shipped model: the subject's side facing the other, 112-314 mm off; docs/two-people.md,
         "Fewer, right joints"). A joint no view shows a peak of is hidden from both cameras: the prior places it
         from the subject's body, as for one person, where it hangs from a joint the subject's pairings found (a
         heel from its ankle); one hanging from nothing found lay 186 mm off there (the left heel, its foot's peaks
@@ -1541,7 +1541,7 @@ class Estimator:
         least ``second_person_ratio`` of the first in both views. Each view's peak is then whichever person's is
         stronger there, and the two views need not pick the same person; the triangulation of a mixed pair often
         passes the reprojection gate (people side by side: the error lies along the epipolar lines), so the maps
-        are what tells. On one person no joint came near it in both views (docs/runtime.md).
+        are what tells. On one person no joint came near it in both views (docs/two-people.md).
 
         Once a pass is flagged, the passes that follow its subject stay flagged while any joint shows twice
         (:data:`STILL_SEVERAL_MIN_JOINTS`): the subject's own crop shows fewer of the other person's joints (on the
@@ -1556,12 +1556,12 @@ class Estimator:
         return twice >= (STILL_SEVERAL_MIN_JOINTS if held else cfg.second_person_min_joints)
 
     def _behind_view(self, kp: Keypoints2D) -> int | None:
-        """One person behind the other as one camera sees them (docs/runtime.md, "One person behind the other"):
+        """One person behind the other as one camera sees them (docs/two-people.md, "One person behind the other"):
         the view that shows one peak where the other shows two, or None. Where the pair shows fewer than
         ``second_person_min_joints`` joints twice in both views, a view showing ``behind_min_joints`` twice by itself
         (the other view then the one peak's) makes the pair ``several_people`` all the same: the hidden person's
         peaks are behind the other's in one view, beside them in the other. Off by default (``behind_min_joints``
-        0): one person alone through the shipped model reaches 6 on some pairs (docs/runtime.md). Passes
+        0): one person alone through the shipped model reaches 6 on some pairs (docs/two-people.md). Passes
         following such a pass's subject stay so while that view shows any joint twice
         (:data:`STILL_SEVERAL_MIN_JOINTS`). Asked of tracked passes that :meth:`_several_people` did not flag
         (:meth:`_finish_pass`)."""
@@ -1603,7 +1603,7 @@ class Estimator:
         # a cold pass's track not flagged (cold_several False: this pair's, refined; with refine_cold_start off, the
         # pair before's) is both people's joints mixed: nobody's to follow, whether or not a subject is picked
         # (followed, it streamed a skeleton of both people's joints and of points between them as the subject, and
-        # measured its feet: docs/runtime.md, "A track of both people's joints")
+        # measured its feet: docs/two-people.md, "A track of both people's joints")
         unsorted = cold_several is False or (cold_several is None and self._track_unsorted)
         if track is None or unsorted or (picks and cold_several is not None):
             none = Joints3D.missing(len(j3.valid), j3.reprojection_px.shape[-1])

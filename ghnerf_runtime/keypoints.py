@@ -311,7 +311,7 @@ def _refine_centroid(padded: np.ndarray, pad: int, labels: np.ndarray, top: np.n
 #: straight line from the best peak to it, to at most this fraction of its value. Two people 0.6 m apart at 3 m
 #: show a joint's peaks 5.5-8.3 heatmap cells apart in one view, which (the oracle's sigma 1.5, the decoder's 1.0)
 #: join above the threshold into one region with a deep valley between them; a blob's shoulder dips little
-#: (docs/runtime.md, "Two people 0.6 m apart"; tests/ghnerf_runtime/test_keypoints.py).
+#: (docs/two-people.md, "Two people 0.6 m apart"; tests/ghnerf_runtime/test_keypoints.py).
 RUNNER_UP_DIP = 0.5
 #: Points sampled along that line (the maps are at most a few dozen cells across).
 _DIP_SAMPLES = 16
@@ -323,7 +323,7 @@ def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_
     (``iy``, ``ix``; ``top`` its region's label, 0 where no region passes the threshold) with a valley between them
     (:data:`RUNNER_UP_DIP`): ``(value, y, x)`` per map, value 0 where none. The regions are thresholded, so two
     peaks a little apart share one; the other region's maximum alone missed a second person standing near the first
-    (docs/runtime.md, "Two people 0.6 m apart")."""
+    (docs/two-people.md, "Two people 0.6 m apart")."""
     n, h, w = filtered.shape
     values = np.zeros(n, np.float32)
     out_y, out_x = np.zeros(n, np.int64), np.zeros(n, np.int64)

@@ -1,4 +1,4 @@
-"""Two people in view and no track yet: separate them and choose one (docs/runtime.md, "Two people in the
+"""Two people in view and no track yet: separate them and choose one (docs/two-people.md, "Two people in the
 working volume").
 
 Each view's map of a joint holds both people's peaks: the decoded one (the stronger there) and the runner-up
@@ -55,7 +55,8 @@ TORSO_LIMBS_M: dict[tuple[int, int], float] = {(1, 8): 0.55, (8, 9): 0.12, (8, 1
 #: ``proxy_matte.BONE_M`` length (a generous average adult) times this, for a taller person, plus
 #: :data:`BONE_SLACK_M` for the triangulation's error (each end's pulled peaks: the shipped model's subject 0.6 m from
 #: another person, a right shoulder 108 mm off on average). The left shoulders read from the other person's peaks
-#: there lay 0.62 m from the subject's neck (bound 0.49 m; one body's 0.18 m) (docs/runtime.md, "Fewer, right joints").
+#: there lay 0.62 m from the subject's neck (bound 0.49 m; one body's 0.18 m) (docs/two-people.md,
+#: "Fewer, right joints").
 BONE_SCALE = 1.2
 #: :func:`one_skeleton`: metres added to each limb's bound (:data:`BONE_SCALE`). 0.15 m dropped some of the shipped
 #: model's pulled peaks of the subject (ears 132-267 mm off, an elbow 18 mm off beside its shoulder) and, two people a
@@ -65,7 +66,7 @@ BONE_SLACK_M = 0.25
 #: past :data:`SLACK_DEPTH_BASELINES` baselines from the cameras, :func:`torso_excess`) is two people's joints. One
 #: person through the shipped model, strong peaks in both views, came to at most 0.16 m over on the bench sequences
 #: and 0.23 m at the working volume's near end; two people 0.6 m apart whose left side was read from the other
-#: person, 0.69 m over (the median) (benchmarks/measure_two_people.py, docs/runtime.md "A torso of two people").
+#: person, 0.69 m over (the median) (benchmarks/measure_two_people.py, docs/two-people.md "A torso of two people").
 MIXED_TORSO_SLACK_M = 0.5
 #: :func:`depth_scale`: past this many baselines from the cameras, a limb's part along the line of sight is divided by
 #: its depth over these baselines: the benchmark rig's working volume centre, 3 m with 1.2 m between the cameras,
@@ -311,7 +312,7 @@ def mixed_torso(joints: np.ndarray, found: np.ndarray, centres: np.ndarray) -> b
     triangulation's depth error (:func:`torso_excess` with ``centres``, the two cameras' ``(2, 3)``): the joints are
     two people's, each view's peak of a joint being whichever person's is stronger there and the views agreeing on it
     (the mid-hip one person's, a hip the other's), which no reprojection gate sees and no joint shown twice may tell
-    (docs/runtime.md, "A torso of two people").
+    (docs/two-people.md, "A torso of two people").
 
     Example (cameras 1.2 m apart; a mid-hip and its hips 0.1 m apart 3 m away, then the left hip 0.7 m aside; then
     the hip 0.7 m behind the mid-hip at 4.5 m, within one body's depth error there):
@@ -367,7 +368,7 @@ def torso_excess(joints: np.ndarray, found: np.ndarray, centres: np.ndarray | No
     midpoint is first divided by :func:`depth_scale` there: what :func:`mixed_torso` holds against
     :data:`MIXED_TORSO_SLACK_M`. One person through the shipped model at the working volume's far corners (4 m) put a
     hip up to 0.43 m over one body's, 0.26 m as read so: the most of it along the line of sight; two people side by
-    side lie across it (benchmarks/measure_two_people.py prints both readings, docs/runtime.md "A torso of two
+    side lie across it (benchmarks/measure_two_people.py prints both readings, docs/two-people.md "A torso of two
     people"). ``caller``: the function a shape error names."""
     joints = np.asarray(joints, dtype=np.float64)
     found = np.asarray(found, dtype=bool)

@@ -205,13 +205,14 @@ def _doc(name: str) -> str:
     # session 59: a replay:// take whose images are not its rig's size, refused at open like those cameras
     ("docs/recording-format.md", f"stops after {'three' if SIZE_MISMATCH_OPENS == 3 else SIZE_MISMATCH_OPENS} opens "
                                  "(exit 2)"),
-    # session 58: the torso of two people (ghnerf_runtime/two_people.py) and the kept turn's rolls (estimator.py;
-    # since session 59 in docs/turn-search.md, as the turn search's other constants below)
-    ("docs/runtime.md", f"`TORSO_LIMBS_M` ({' and '.join(f'{v:g}' for v in sorted(set(TORSO_LIMBS_M.values()), reverse=True))}"
-                        f" m, `proxy_matte.BONE_M`'s generous adult) by more than `MIXED_TORSO_SLACK_M` "
-                        f"({MIXED_TORSO_SLACK_M:g} m)"),
-    ("docs/runtime.md", f"Past {SLACK_DEPTH_BASELINES:g} baselines from the cameras, the limb's part along the line"),
-    ("docs/runtime.md", f"`SLACK_DEPTH_BASELINES` ({SLACK_DEPTH_BASELINES:g}) baselines"),
+    # session 58: the torso of two people (ghnerf_runtime/two_people.py; since session 59 in docs/two-people.md) and
+    # the kept turn's rolls (estimator.py; since session 59 in docs/turn-search.md, as the turn search's other
+    # constants below)
+    ("docs/two-people.md", f"`TORSO_LIMBS_M` ({' and '.join(f'{v:g}' for v in sorted(set(TORSO_LIMBS_M.values()), reverse=True))}"
+                           f" m, `proxy_matte.BONE_M`'s generous adult) by more than `MIXED_TORSO_SLACK_M` "
+                           f"({MIXED_TORSO_SLACK_M:g} m)"),
+    ("docs/two-people.md", f"Past {SLACK_DEPTH_BASELINES:g} baselines from the cameras, the limb's part along the line"),
+    ("docs/two-people.md", f"`SLACK_DEPTH_BASELINES` ({SLACK_DEPTH_BASELINES:g}) baselines"),
     ("docs/turn-search.md", f"at most {KEPT_TURN_STEP_DEG:g} degrees from that pass's (`KEPT_TURN_STEP_DEG`)"),
     ("docs/turn-search.md", f"within {KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`KEPT_TURN_SECTOR_DEG`"),
     # session 57's rule for a search's turned pass (ghnerf_runtime/body_lie.py), quoted since session 59
@@ -245,17 +246,17 @@ def _doc(name: str) -> str:
     ("docs/calibration.md", f"`--max-px` (default {CheckLimits.max_px:g} px rms)"),
     ("docs/calibration.md", f"`--max-scale-error` (default {100 * CheckLimits.max_scale_error:g} %)"),
     ("docs/calibration.md", f"`--max-floor-mm` off the floor (default {CheckLimits.max_floor_mm:g} mm)"),
-    # session 54: two people without a track, separated and one picked (ghnerf_runtime/two_people.py)
-    ("docs/runtime.md", f"further than {BODY_RADIUS_M:g} m from a centre costs as much as none"),
-    ("docs/runtime.md", f"two centres nearer than {MIN_APART_M:g} m are one column counted twice"),
-    ("docs/runtime.md", f"nearer, within {MAX_LIMB_M:g} m: a waving hand"),
-    ("docs/runtime.md", f"within a limb's length ({MAX_LIMB_M:g} m)"),
-    ("docs/runtime.md", f"within {TIE_M:g} m of each other, the one nearer the cameras |"),
-    ("docs/runtime.md", f"`nearest` | the one nearest the cameras (the floor point below their midpoint); within "
-                        f"{TIE_M:g} m, the one nearer the centre line |"),
-    ("docs/runtime.md", f"hence the {TIE_M:g} m within which two distances count as equal"),
-    ("docs/runtime.md", f"stay flagged while at least "
-                        f"{'one' if STILL_SEVERAL_MIN_JOINTS == 1 else STILL_SEVERAL_MIN_JOINTS} joint shows twice"),
+    # session 54: two people without a track, separated and one picked (ghnerf_runtime/two_people.py; docs/two-people.md)
+    ("docs/two-people.md", f"further than {BODY_RADIUS_M:g} m from a centre costs as much as none"),
+    ("docs/two-people.md", f"two centres nearer than {MIN_APART_M:g} m are one column counted twice"),
+    ("docs/two-people.md", f"nearer, within {MAX_LIMB_M:g} m: a waving hand"),
+    ("docs/two-people.md", f"within a limb's length ({MAX_LIMB_M:g} m)"),
+    ("docs/two-people.md", f"within {TIE_M:g} m of each other, the one nearer the cameras |"),
+    ("docs/two-people.md", f"`nearest` | the one nearest the cameras (the floor point below their midpoint); within "
+                           f"{TIE_M:g} m, the one nearer the centre line |"),
+    ("docs/two-people.md", f"hence the {TIE_M:g} m within which two distances count as equal"),
+    ("docs/two-people.md", f"stay flagged while at least "
+                           f"{'one' if STILL_SEVERAL_MIN_JOINTS == 1 else STILL_SEVERAL_MIN_JOINTS} joint shows twice"),
     # session 54: the smoothing's lowest cutoff and the floor check's frame-edge margin (estimator._FLOOR_EDGE_FRAC)
     ("docs/runtime.md", f"{MIN_CUTOFF_HZ:g} Hz at least (`config.MIN_CUTOFF_HZ`, a time constant of "
                         f"{1 / (2 * math.pi * MIN_CUTOFF_HZ):.0f} s"),
@@ -369,3 +370,39 @@ def test_the_turn_search_page_names_its_keys_and_the_code_it_points_at():
     missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
     missing += [f"body_lie.{f}" for f in functions if not hasattr(body_lie, f)]
     assert not missing, f"docs/turn-search.md's opening points at what is not there: {missing}"
+
+
+#: The estimator keys of two people in view (``Joints3DConfig``), named on docs/two-people.md.
+TWO_PEOPLE_KEYS = ("second_person_ratio", "second_person_min_joints", "behind_min_joints", "max_track_step_m",
+                   "pick_subject")
+
+
+def test_the_two_people_page_names_its_keys_and_the_code_it_points_at():
+    """docs/two-people.md (two people in view, split from docs/runtime.md in session 59) is where
+    ``several_people``'s readers are sent: it names the two-people ``joints3d`` keys and every ``pick_subject``
+    rule, and the files, estimator methods and ``two_people`` functions its opening points at exist (a rename
+    would leave it pointing at nothing)."""
+    import dataclasses
+
+    from ghnerf_runtime import two_people
+    from ghnerf_runtime.config import PICK_SUBJECT_RULES
+    from ghnerf_runtime.estimator import Estimator
+
+    page = (REPO / "docs/two-people.md").read_text(encoding="utf-8")
+    fields = {f.name for f in dataclasses.fields(Joints3DConfig)}
+    assert set(TWO_PEOPLE_KEYS) <= fields, set(TWO_PEOPLE_KEYS) - fields
+    unnamed = [k for k in TWO_PEOPLE_KEYS if f"`joints3d.{k}`" not in page]
+    unnamed += [f"pick_subject {r}" for r in PICK_SUBJECT_RULES if f"`{r}`" not in page]
+    assert not unnamed, f"docs/two-people.md does not name {unnamed}"
+    # the opening: what comes before the first section's heading
+    opening = page.split("\n## ", 1)[0]
+    files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", opening)
+    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", opening)
+    # the two_people functions: those named in the parentheses after its file, before the estimator's
+    named = opening.split("`ghnerf_runtime/two_people.py` (", 1)[-1].split("`ghnerf_runtime/estimator.py`", 1)[0]
+    functions = re.findall(r"`(\w+)`", named)
+    assert len(files) >= 5 and len(methods) >= 8 and len(functions) >= 5, (files, methods, functions)
+    missing = [f for f in files if not (REPO / f).is_file()]
+    missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
+    missing += [f"two_people.{f}" for f in functions if not hasattr(two_people, f)]
+    assert not missing, f"docs/two-people.md's opening points at what is not there: {missing}"

@@ -371,7 +371,7 @@ def test_measure_two_people(capsys, monkeypatch):
     # the picked person's joints from the first pair (session 54; session 53 reported none without a track)
     assert re.search(r"^2 pairs of two people .*: 2[0-5]\.\d joints reported per pair; of them 100% at the first", out,
                      re.M), out
-    # each row's passes: the joints shown twice per view and the people's cell distances (docs/runtime.md, "Two
+    # each row's passes: the joints shown twice per view and the people's cell distances (docs/two-people.md, "Two
     # people 0.6 m apart")
     twice = re.findall(r"^  (\d+) passes: joints shown twice at 0\.5 per pass, view 0 [\d.]+, view 1 [\d.]+, both "
                        r"[\d.]+; the people's peaks of a joint [\d.]+-[\d.]+ cells apart in view 0, [\d.]+-[\d.]+ in "
@@ -380,13 +380,13 @@ def test_measure_two_people(capsys, monkeypatch):
     # and the crop turn searches its estimators ran (session 57's review N): two people standing, picked, none; and
     # the passes whose peaks made a torso of two people (session 58), at most every pass
     assert len(twice) == 2 and all(int(n) >= 2 and int(t) <= int(n) and s == "0" for n, t, s in twice), out
-    # and each row's torso excess over one body's, as measured and as the rule reads it (docs/runtime.md, "A torso of
+    # and each row's torso excess over one body's, as measured and as the rule reads it (docs/two-people.md, "A torso of
     # two people": the figures came from a script outside the repository before session 58's review F)
     assert len(re.findall(TORSO_SPREAD, out, re.M)) == 2, out
 
 
 def test_measure_two_people_by_joint(capsys, monkeypatch):
-    # the joint-by-joint figures of docs/runtime.md ("Fewer, right joints", session 59) come from this option: each
+    # the joint-by-joint figures of docs/two-people.md ("Fewer, right joints", session 59) come from this option: each
     # row's 25 joints, the pairs reporting each and of them those without a subject's pairing (at most as many)
     out = run_script("measure_two_people", "--scenes", "1", "--pairs", "2", "--alone", "0", "--by-joint",
                      capsys=capsys, monkeypatch=monkeypatch)
@@ -474,7 +474,7 @@ def test_measure_two_people_refuses_options_its_mode_does_not_use(mode, ignored,
 
 
 def test_measure_two_people_through_a_model(model, capsys, monkeypatch):
-    # the trained model's rows of docs/runtime.md ("Two people in the working volume") come from this mode; the tiny
+    # the trained model's rows of docs/two-people.md ("Two people in the working volume") come from this mode; the tiny
     # model finds nobody, so only the rows and their order are checked
     out = run_script("measure_two_people", "--model-dir", model, "--scenes", "1", "--pairs", "1", "--alone", "1",
                      capsys=capsys, monkeypatch=monkeypatch)
@@ -487,7 +487,7 @@ def test_measure_two_people_through_a_model(model, capsys, monkeypatch):
 
 
 def test_measure_two_people_one_person(model, capsys, monkeypatch):
-    # the one-person figures of docs/runtime.md ("Two people in the working volume") come from this mode
+    # the one-person figures of docs/two-people.md ("Two people in the working volume") come from this mode
     out = run_script("measure_two_people", "--one-person-model", model, *SIZES, capsys=capsys, monkeypatch=monkeypatch)
     assert re.search(r"^one person, .* at the defaults, 1 bench sequences of 3 pairs: \d+ of 3 pairs flagged "
                      r"several_people; joints (identical|DIFFERENT) with the check on and off; "
@@ -497,12 +497,12 @@ def test_measure_two_people_one_person(model, capsys, monkeypatch):
     assert hist, out
     counts = [int(c) for c in re.findall(r"\d+ joints: (\d+)", hist.group(1))]
     assert counts and sum(counts) == int(hist.group(2)) >= 3, out  # every pass counted, at least one a pair
-    assert int(hist.group(3)) <= int(hist.group(2)), out  # (session 58: docs/runtime.md, "A torso of two people")
+    assert int(hist.group(3)) <= int(hist.group(2)), out  # (session 58: docs/two-people.md, "A torso of two people")
     assert re.search(TORSO_SPREAD, out, re.M), out
 
 
 def test_measure_two_people_one_person_at_the_working_volume_s_ends(model, capsys, monkeypatch):
-    # docs/runtime.md, "A torso of two people": one person at the ends and corners of the working volume
+    # docs/two-people.md, "A torso of two people": one person at the ends and corners of the working volume
     # (test_model_extremes' places), each place's flags and torso excess (session 58's review F)
     out = run_script("measure_two_people", "--one-person-model", model, "--ends", "--scenes", "1", "--frames", "2",
                      "--motions", "wave,squat", capsys=capsys, monkeypatch=monkeypatch)
@@ -519,7 +519,7 @@ def test_measure_two_people_one_person_at_the_working_volume_s_ends(model, capsy
 
 
 def test_measure_two_people_behind_and_occluded(capsys, monkeypatch):
-    # docs/runtime.md, "One person behind the other" (session 56): --behind places the second person along view 0's
+    # docs/two-people.md, "One person behind the other" (session 56): --behind places the second person along view 0's
     # line of sight through the first, --occlude hides what is behind a body; the rows say both
     out = run_script("measure_two_people", "--places=0,2.5,0,0", "--behind", "1", "--occlude", "--scenes", "1",
                      "--pairs", "1", "--alone", "0", capsys=capsys, monkeypatch=monkeypatch)

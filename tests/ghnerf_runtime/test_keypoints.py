@@ -152,7 +152,7 @@ def test_runner_up_is_located_as_the_peak_is(refine):
 def test_a_second_peak_in_the_best_region_is_the_runner_up():
     """Two people 0.6 m apart: their peaks of a joint lie 6-8 cells apart in one view (the oracle's sigma 1.5),
     and above the threshold the two blobs join into one region, so another region's maximum found no runner-up
-    and the pair was not flagged (docs/runtime.md, "Two people in the working volume"). The second maximum past
+    and the pair was not flagged (docs/two-people.md, "Two people in the working volume"). The second maximum past
     a valley is the runner-up, located as the peak is; a blob with a shoulder (no valley) has none."""
     yy, xx = np.mgrid[:32, :32]
 

@@ -1,4 +1,4 @@
-"""Two people in the working volume (docs/runtime.md, "Two people in the working volume"): a pair whose joint
+"""Two people in the working volume (docs/two-people.md, "Two people in the working volume"): a pair whose joint
 maps show a second strong peak in both views is flagged ``several_people`` and reports only the tracked subject's
 joints; without a track it separates the two people and reports the one ``joints3d.pick_subject`` names (none
 with ``pick_subject: none``), whom the track then follows; one person is never flagged and loses nothing.
@@ -424,7 +424,7 @@ def test_a_joint_missing_from_the_track_is_looked_for_near_the_subject(monkeypat
 
 #: One person 1 m behind the other along the first camera's (view 0's) line of sight: view 0 sees the first only.
 BEHIND = ((0.0, 2.5), behind_place((0.0, 2.5), 1.0))
-#: The one-view rule (``joints3d.behind_min_joints``, off by default) at the figure docs/runtime.md measured it with.
+#: The one-view rule (``joints3d.behind_min_joints``, off by default) at the figure docs/two-people.md measured it with.
 BEHIND_RULE = EstimatorConfig(joints3d=Joints3DConfig(behind_min_joints=6))
 
 
@@ -542,7 +542,7 @@ def test_two_people_from_the_first_pair_with_the_skeleton_prior_report_the_prior
     peaks (in each view the peak each joint was triangulated from, nothing of the other person), and the track
     follows that person. Before session 55 the prior was fed the pair's decoded peaks only (each view's stronger
     person's, both people mixed) and the picked person's pairings were reported unrefined (through the shipped model
-    35.3 mm from the person against 28.7 mm through the prior so fed: docs/runtime.md)."""
+    35.3 mm from the person against 28.7 mm through the prior so fed: docs/two-people.md)."""
     prior = _PeaksPrior()
     rig, results, last_call = _two_from_the_first_pair(EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on")),
                                                        prior)
@@ -588,7 +588,7 @@ class _SubjectHiddenOracle(TwoPeopleOracle):
 
 #: :class:`_PlacingPrior`'s guess of a joint hidden from it, metres from the first person's towards the second's:
 #: about where the shipped prior put the subject's joints whose only peak in a view was the other person's, 0.6 m
-#: apart (those joints 112-314 mm off on average, joint by joint; docs/runtime.md, "Fewer, right joints").
+#: apart (those joints 112-314 mm off on average, joint by joint; docs/two-people.md, "Fewer, right joints").
 _GUESS_TOWARDS_M = 0.2
 
 
@@ -615,7 +615,7 @@ def test_a_joint_whose_only_peak_in_a_view_is_the_other_person_s_is_not_reported
     """A flagged pair's joint that no pairing of the subject's gives, where a view's map holds the other person's
     peak alone (the subject's hidden behind them), is not reported, in 3D or 2D, wherever the prior places it: fed
     none of its peaks, the prior guesses. Through the shipped model two people 0.6 m apart lose the subject's side
-    facing the other so, and the prior's places for it lay 112-314 mm off (docs/runtime.md, "Fewer, right
+    facing the other so, and the prior's places for it lay 112-314 mm off (docs/two-people.md, "Fewer, right
     joints"). Before, it was reported in 3D (since session 55's subject prior): here 0.2 m towards the other person
     where the prior guesses so. The crops still follow it (the track holds the prior's place): the subject's other
     joints stay found, pair after pair."""
@@ -642,7 +642,7 @@ def test_a_joint_no_view_shows_a_peak_of_is_placed_by_the_subject_s_prior_where_
     saw it; session 55's subject prior), where it hangs from a joint the subject's pairings found: the elbow from
     the shoulder. The wrist, hidden too, hangs from that placed elbow only: since session 59 not reported (through
     the shipped model 0.6 m apart such a joint, the left heel below a left foot whose peaks were the other person's,
-    lay 186 mm off; docs/runtime.md, "Fewer, right joints"). Before, both were reported."""
+    lay 186 mm off; docs/two-people.md, "Fewer, right joints"). Before, both were reported."""
     elbow, wrist = JOINT_NAMES.index("LElbow"), JOINT_NAMES.index("LWrist")
     oracle = _SubjectHiddenOracle(edge128_contract(), (elbow, wrist), views=(0, 1), people=(0, 1))
     rig, results, _ = _two_from_the_first_pair(EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on")),
@@ -719,7 +719,7 @@ def test_a_flagged_pair_reports_no_subject_pairing_off_its_limbs_reach(prior):
     reported, in 3D or 2D: here the subject's left shoulder drawn 0.6 m above itself in both views (about 0.62 m
     from the neck, as the shipped model's were, whose limb reaches 0.49 m). Before session 59's review the split gave it to the subject (within
     ``MAX_LIMB_M``, 0.75 m, of the neck), the track held it, and each pair reported it 0.6 m off (through the
-    shipped model 0.6 m apart, 4 left shoulders 332 mm from either person: docs/runtime.md, "Fewer, right
+    shipped model 0.6 m apart, 4 left shoulders 332 mm from either person: docs/two-people.md, "Fewer, right
     joints"). The subject's other joints stay reported, each at the subject's."""
     shoulder = JOINT_NAMES.index("LShoulder")
     oracle = _DisplacedOracle(edge128_contract(), (shoulder,), np.array([0.0, -0.6, 0.0]))  # y down: above
@@ -1056,8 +1056,8 @@ RIG_CENTRES = np.stack([c.center for c in sim.RigPlacement().build().pair])
 
 def test_mixed_torso_tells_a_torso_of_two_people_from_one_body():
     """One body's torso (neck to mid-hip, mid-hip to either hip) holds whatever the pose; the left leg of a person
-    0.6 m aside (the shipped model's reading, docs/runtime.md, "A torso of two people"), or the neck or a hip of one a
-    metre aside, breaks it, at the working volume's far end too (side by side: across the line of sight, where the
+    0.6 m aside (the shipped model's reading, docs/two-people.md, "A torso of two people"), or the neck or a hip of
+    one a metre aside, breaks it, at the working volume's far end too (side by side: across the line of sight, where the
     depth's discount does not reach). An arm does not count (a view may swap one person's left and right arms), nor a
     limb with a joint not found."""
     neck, r_hip = JOINT_NAMES.index("Neck"), JOINT_NAMES.index("RHip")
@@ -1096,7 +1096,7 @@ def test_mixed_torso_tells_a_torso_of_two_people_from_one_body():
 def _hip_along_the_line_of_sight(place: tuple, metres: float, centres: np.ndarray = RIG_CENTRES) -> np.ndarray:
     """A simulated person's joints at ``place`` with the left hip pushed ``metres`` further from the cameras along the
     line of sight through it: how one person's hip triangulates where a view's peak of it is off along the epipolar
-    line (the shipped model at the working volume's far corners, docs/runtime.md, "A torso of two people")."""
+    line (the shipped model at the working volume's far corners, docs/two-people.md, "A torso of two people")."""
     joints = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=place)).joints_3d(0.5)
     l_hip = JOINT_NAMES.index("LHip")
     sight = joints[l_hip] - centres.mean(axis=0)
@@ -1221,7 +1221,7 @@ def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_joint_whose_peak_in_
     places for those joints lay 112-314 mm off. Before, reported: this scene's first three pairs 20-24 joints a
     pair, 89-121 mm from the subject's (110 mm over the three). Now left out: 15-16 joints a pair, 65 mm over the
     three (``measure_two_people.py --model-dir models --alone 0 --places=-0.3,3.0,0.3,3.4``: 98.9 mm before, 55.8
-    now; docs/runtime.md, "Fewer, right joints"), none at the other person's."""
+    now; docs/two-people.md, "Fewer, right joints"), none at the other person's."""
     from ghnerf_runtime.estimator import load_session
 
     root = Path(__file__).resolve().parents[2]
