@@ -19,6 +19,8 @@ elbow. Pure numpy, arrays in and out.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from ghnerf_runtime.body25 import BODY_PARTS, JOINT_NAMES, LIMBS
@@ -224,6 +226,22 @@ def limb_bound_m(parent: int, child: int) -> float:
     return BONE_SCALE * BONE_M[JOINT_NAMES[child]] + BONE_SLACK_M
 
 
+def _group_roots(count: int, links: Sequence[tuple[int, int]]) -> np.ndarray:
+    """``(count,)`` each item's group, as the id of one of its members, after joining each pair of ``links`` in
+    order (union-find; ``a``'s group joins ``b``'s, so which member names a group follows the links' order)."""
+    group = np.arange(count)
+
+    def root(j: int) -> int:
+        while group[j] != j:
+            group[j] = group[group[j]]
+            j = int(group[j])
+        return j
+
+    for a, b in links:
+        group[root(a)] = root(b)
+    return np.array([root(j) for j in range(count)])
+
+
 def one_skeleton(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     """``(J,)`` which ``found`` joints of ``joints`` (``(J, 3)``, rig frame) make one skeleton: two found joints are
     linked where the limbs between them (:data:`~ghnerf_runtime.body25.LIMBS`, through joints not found, a tree's
@@ -244,14 +262,7 @@ def one_skeleton(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
             bone = BONE_SCALE * BONE_M[JOINT_NAMES[b]]
             near[a].append((b, bone))
             near[b].append((a, bone))
-    group = np.arange(J)  # union-find over the found joints
-
-    def root(j: int) -> int:
-        while group[j] != j:
-            group[j] = group[group[j]]
-            j = int(group[j])
-        return j
-
+    links: list[tuple[int, int]] = []
     for start in np.flatnonzero(found):
         # walk the tree out from ``start`` through joints not found, to the first found joint on each path
         stack, seen = [(int(start), 0.0)], {int(start)}
@@ -264,8 +275,8 @@ def one_skeleton(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
                 if not found[k]:
                     stack.append((k, reach + bound))
                 elif np.linalg.norm(joints[k] - joints[start]) <= reach + bound + BONE_SLACK_M:  # (the ends' error)
-                    group[root(k)] = root(int(start))
-    roots = np.array([root(j) for j in range(J)])
+                    links.append((k, int(start)))
+    roots = _group_roots(J, links)
     if not found.any():
         return found.copy()
     sizes = np.bincount(roots[found], minlength=J)
@@ -282,18 +293,8 @@ def one_body(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     joints = np.asarray(joints, dtype=np.float64)
     found = np.asarray(found, dtype=bool)
     J = len(found)
-    group = np.arange(J)  # union-find over the found joints
-
-    def root(j: int) -> int:
-        while group[j] != j:
-            group[j] = group[group[j]]
-            j = int(group[j])
-        return j
-
-    for a, b in LIMBS:
-        if a < J and b < J and found[a] and found[b] and np.linalg.norm(joints[a] - joints[b]) <= MAX_LIMB_M:
-            group[root(a)] = root(b)
-    roots = np.array([root(j) for j in range(J)])
+    roots = _group_roots(J, [(a, b) for a, b in LIMBS if a < J and b < J and found[a] and found[b]
+                             and np.linalg.norm(joints[a] - joints[b]) <= MAX_LIMB_M])
     if not found.any():
         return found.copy()
     sizes = np.bincount(roots[found], minlength=J)

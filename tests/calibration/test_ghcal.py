@@ -258,6 +258,19 @@ def _write_recording(root: Path, rig: Rig, images: dict[str, dict[str, np.ndarra
     write_manifest(root, Manifest(rig, "png", source="test", created_utc="2026-11-28T00:00:00Z", complete=True))
 
 
+def _one_view_take(tmp_path: Path, truth: Rig, *, instants: int = 2) -> tuple[Path, Path]:
+    """A take (``tmp_path/take``) that shows ``truth``'s one board view at each of ``instants`` instants a second
+    apart, and the board's file (``tmp_path/board.json``)."""
+    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
+    take = tmp_path / "take"
+    take.mkdir()
+    _write_recording(take, truth,
+                     {cam: {str(k): v["000"] for k in range(instants)} for cam, v in images.items()}, period_s=1.0)
+    board = tmp_path / "board.json"
+    board.write_text(json.dumps(BOARD.to_dict()))
+    return take, board
+
+
 def test_capture_from_a_recording_keeps_views_that_moved(truth, tmp_path, capsys):
     images = calibration_views(truth, BOARD, count=3, edge_count=0, seed=5, floor_view=False)
     # every view twice in a row: the second copy has not moved and is skipped
@@ -825,12 +838,7 @@ def test_capture_stopped_by_ctrl_c_succeeds_only_with_views_kept(truth, tmp_path
     kept none, so a script does not go on to solve an empty folder."""
     import drivers
 
-    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
-    take = tmp_path / "take"
-    take.mkdir()
-    _write_recording(take, truth, {cam: {"0": v["000"], "1": v["000"]} for cam, v in images.items()}, period_s=1.0)
-    board = tmp_path / "board.json"
-    board.write_text(json.dumps(BOARD.to_dict()))
+    take, board = _one_view_take(tmp_path, truth)
     real = drivers.create_rig_source
 
     def interrupted_after(reads: int):
@@ -870,12 +878,7 @@ def test_capture_stopped_by_sigterm_closes_the_cameras_and_ends_as_ctrl_c_does(t
 
     import drivers
 
-    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
-    take = tmp_path / "take"
-    take.mkdir()
-    _write_recording(take, truth, {cam: {"0": v["000"], "1": v["000"]} for cam, v in images.items()}, period_s=1.0)
-    board = tmp_path / "board.json"
-    board.write_text(json.dumps(BOARD.to_dict()))
+    take, board = _one_view_take(tmp_path, truth)
     real = drivers.create_rig_source
     closed = []
 
@@ -932,12 +935,7 @@ def test_a_sigterm_in_the_capture_s_close_waits_for_the_close(truth, tmp_path, c
 
     import drivers
 
-    images = calibration_views(truth, BOARD, count=1, edge_count=0, seed=5, floor_view=False)
-    take = tmp_path / "take"
-    take.mkdir()
-    _write_recording(take, truth, {cam: {"0": v["000"]} for cam, v in images.items()}, period_s=1.0)
-    board = tmp_path / "board.json"
-    board.write_text(json.dumps(BOARD.to_dict()))
+    take, board = _one_view_take(tmp_path, truth, instants=1)
     real, closed = drivers.create_rig_source, []
 
     class Escaped(Exception):

@@ -150,9 +150,10 @@ def test_hidden_files_beside_the_images_are_not_views(image, tmp_path):
     assert sorted(views["left"]) == ["000"] and missed == {"left": [], "right": []}
 
 
-def test_a_capture_with_another_dictionary_says_so_at_once(tmp_path, capsys):
-    # the board file of a DICT_4X4 board, a DICT_5X5 print in view: no marker in any frame, and the capture
-    # ran its --max-seconds (10 minutes) without a word
+def _capture_a_7x5_print(tmp_path: Path, **board_file) -> tuple[int, Path, Path]:
+    """``ghcal capture`` of a replay take that shows one view of a 7x5 DICT_5X5_100 print, with a board file that
+    differs from the print by ``board_file`` (BoardSpec fields): its exit status, the board file, the capture
+    folder."""
     from calibration.render import calibration_views
     from ghnerf_runtime.geometry.rig import Rig
     from tests.calibration.test_ghcal_user_flows import _take
@@ -163,10 +164,17 @@ def test_a_capture_with_another_dictionary_says_so_at_once(tmp_path, capsys):
     one_view = calibration_views(truth, printed, count=1, edge_count=0, seed=5, floor_view=False)
     take = _take(tmp_path / "take", truth, one_view)
     board = tmp_path / "board.json"
-    board.write_text(json.dumps(dataclasses.replace(printed, dictionary="DICT_4X4_50").to_dict()))
+    board.write_text(json.dumps(dataclasses.replace(printed, **board_file).to_dict()))
     out = tmp_path / "capture"
     rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
                    "--count", "1", "--interval-s", "0", "--still-s", "0"])
+    return rc, board, out
+
+
+def test_a_capture_with_another_dictionary_says_so_at_once(tmp_path, capsys):
+    # the board file of a DICT_4X4 board, a DICT_5X5 print in view: no marker in any frame, and the capture
+    # ran its --max-seconds (10 minutes) without a word
+    rc, board, out = _capture_a_7x5_print(tmp_path, dictionary="DICT_4X4_50")
     err = capsys.readouterr().err
     assert rc == 2 and f"camera 'left': {board}: dictionary: the board in view has the markers of another" in err
     assert 'set "dictionary": "DICT_5X5_50"' in err and not list(out.glob("*/*.png"))
@@ -175,20 +183,7 @@ def test_a_capture_with_another_dictionary_says_so_at_once(tmp_path, capsys):
 def test_a_capture_with_another_number_of_squares_says_so_and_why_nothing_was_kept(tmp_path, capsys):
     # the board file of an 8x5 board, a 7x5 print in view: its markers are found, OpenCV places none of them
     # on the board described, and the capture ran its --max-seconds (10 minutes) without a word
-    from calibration.render import calibration_views
-    from ghnerf_runtime.geometry.rig import Rig
-    from tests.calibration.test_ghcal_user_flows import _take
-
-    rig = example_rig()
-    truth = Rig(tuple(c.resized(800, 500) for c in rig.cameras), rig.volume, rig_id="truth")
-    printed = BoardSpec(squares_x=7, squares_y=5, square_m=0.12, marker_m=0.09)
-    one_view = calibration_views(truth, printed, count=1, edge_count=0, seed=5, floor_view=False)
-    take = _take(tmp_path / "take", truth, one_view)
-    board = tmp_path / "board.json"
-    board.write_text(json.dumps(dataclasses.replace(printed, squares_x=8).to_dict()))
-    out = tmp_path / "capture"
-    rc = cli.main(["capture", "--url", f"replay://{take}?speed=free", "--board", str(board), "--out", str(out),
-                   "--count", "1", "--interval-s", "0", "--still-s", "0"])
+    rc, board, out = _capture_a_7x5_print(tmp_path, squares_x=8)
     err = capsys.readouterr().err
     assert rc == 2 and not list(out.glob("*/*.png"))
     said = [line for line in err.splitlines() if "markers but not the board" in line]
