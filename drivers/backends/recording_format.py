@@ -16,10 +16,12 @@ from __future__ import annotations
 import json
 import math
 import re
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import cv2
 import numpy as np
@@ -310,6 +312,109 @@ def load_image(path: Path) -> np.ndarray:
     if image is None:
         raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
     return image
+
+
+#: The first bytes of the two formats :func:`header_size` reads (the two the recorder writes, IMAGE_FORMATS).
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_JPEG_START = b"\xff\xd8"
+#: PNG chunks before the image data after which the decoded size may not be IHDR's: EXIF (OpenCV turns the image
+#: by its orientation) and APNG's animation control (the frame decoded need not be IHDR's size).
+_PNG_SIZE_CHANGERS = (b"eXIf", b"acTL")
+#: JPEG start-of-frame markers (SOF0-SOF15 but DHT, JPG and DAC, which share the range), where the size is.
+_JPEG_FRAMES = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+_JPEG_APP1, _JPEG_SOS, _JPEG_TEM = 0xE1, 0xDA, 0x01
+_JPEG_RST = range(0xD0, 0xD8)
+
+
+def header_size(path: Path) -> tuple[int, int] | None:
+    """A PNG or JPEG image's ``(width, height)`` read from its header, without decoding it; ``None`` where the
+    header cannot say which size :func:`load_image` would decode: another format, a header cut short or malformed
+    (a bad IHDR checksum, a segment running past the end), or EXIF (OpenCV turns the image by its orientation).
+
+    Strict on purpose: ``None`` is never a size, and the caller decodes the file instead (:func:`image_size`).
+    """
+    try:
+        with open(path, "rb") as f:
+            start = f.read(len(_PNG_SIGNATURE))
+            if start == _PNG_SIGNATURE:
+                return _png_size(f)
+            if start[:2] == _JPEG_START:
+                f.seek(len(_JPEG_START))
+                return _jpeg_size(f)
+    except OSError:
+        pass  # unreadable: its read names it
+    return None
+
+
+def _png_size(f: BinaryIO) -> tuple[int, int] | None:
+    """IHDR's size, once the chunks up to the image data (IDAT) show nothing that changes it."""
+    ihdr = f.read(8 + 13 + 4)  # length, type; width, height, depth, colour type, compression, filter, interlace; CRC
+    if len(ihdr) < 25 or ihdr[:8] != b"\x00\x00\x00\x0dIHDR" or \
+            struct.unpack(">I", ihdr[21:])[0] != zlib.crc32(ihdr[4:21]):
+        return None
+    width, height = struct.unpack(">II", ihdr[8:16])
+    if not (0 < width < 2**31 and 0 < height < 2**31):  # the PNG limits; libpng refuses 0 and beyond
+        return None
+    while True:  # each pass moves on by at least a chunk header: it ends at IDAT or the end of the file
+        head = f.read(8)
+        if len(head) < 8:
+            return None  # no image data: not decodable
+        length, kind = struct.unpack(">I4s", head)
+        if kind == b"IDAT":
+            return width, height
+        if kind in _PNG_SIZE_CHANGERS:
+            return None
+        f.seek(length + 4, 1)  # the data and its CRC
+
+
+def _jpeg_size(f: BinaryIO) -> tuple[int, int] | None:
+    """The frame header's size, once the markers up to the first scan (SOS) show one frame header and no EXIF."""
+    size = None
+    while True:
+        head = f.read(2)
+        if len(head) < 2 or head[0] != 0xFF:
+            return None
+        marker = head[1]
+        while marker == 0xFF:  # fill bytes before a marker
+            byte = f.read(1)
+            if not byte:
+                return None
+            marker = byte[0]
+        if marker == _JPEG_SOS:
+            return size
+        if marker == _JPEG_TEM or marker in _JPEG_RST:
+            continue  # standalone: no length
+        if marker in (0x00, 0xD8, 0xD9):
+            return None  # a stuffed byte, a second start or an end before the first scan: malformed
+        raw = f.read(2)
+        if len(raw) < 2 or struct.unpack(">H", raw)[0] < 2:
+            return None
+        length = struct.unpack(">H", raw)[0] - 2
+        if marker == _JPEG_APP1:
+            return None  # EXIF (or XMP): the decoded image may be turned; decoded instead
+        if marker in _JPEG_FRAMES:
+            body = f.read(length)
+            if size is not None or length < 5 or len(body) < length:
+                return None  # two frame headers, or one cut short
+            height, width = struct.unpack(">HH", body[1:5])
+            if not (width and height):
+                return None  # height 0: given after the first scan (DNL), which OpenCV's decoder refuses anyway
+            size = (width, height)
+        else:
+            f.seek(length, 1)
+
+
+def image_size(path: Path) -> tuple[int, int] | None:
+    """A recorded image's ``(width, height)``: from its header (:func:`header_size`), else decoded (another
+    format, a header it cannot read); ``None`` for one that does not decode (corrupt: its read names it)."""
+    size = header_size(path)
+    if size is not None:
+        return size
+    try:
+        image = load_image(path)
+    except RigOperationError:
+        return None
+    return image.shape[1], image.shape[0]
 
 
 def write_truth(path: Path, truth: CameraTruth | None, joints_3d: np.ndarray | None) -> None:

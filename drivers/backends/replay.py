@@ -32,18 +32,18 @@ whose files are missing, empty or cut short
 (:func:`~drivers.backends.recording_format.drop_broken_rows`). Layout and
 validation: docs/recording-format.md.
 
-Image sizes: a take whose images are not its rig's size throughout (a camera's first, middle and last images,
-decoded at :meth:`~ReplayRigSource.open`, all of another size) is refused at open with
-:class:`~drivers.errors.FrameSizeError`, as the other backends refuse cameras delivering another size than their
-rig file's (:meth:`ReplayRigSource.size_error`). A single image of another size among images of the rig's size
-(a corrupted or edited file) is a corrupt frame: ``read()`` raises :class:`~drivers.errors.RigOperationError`
-naming it once, and the next read goes on.
+Image sizes: a take with any image of another size than its rig camera's (every image measured at
+:meth:`~ReplayRigSource.open`, from its PNG or JPEG header: :func:`~drivers.backends.recording_format.image_size`)
+is refused at open with :class:`~drivers.errors.FrameSizeError`, as the other backends refuse cameras delivering
+another size than their rig file's (:meth:`ReplayRigSource.size_error`). An image that does not decode (a header
+cut short or corrupt) is no size: it is a corrupt frame, as is an image whose size changed after the open:
+``read()`` raises :class:`~drivers.errors.RigOperationError` naming it once, and the next read goes on.
 """
 from __future__ import annotations
 
 import logging
 import statistics
-from collections import deque
+from collections import Counter, deque
 from dataclasses import replace
 from pathlib import Path, PurePosixPath
 
@@ -56,6 +56,7 @@ from drivers.backends.recording_format import (
     Manifest,
     drop_broken_rows,
     file_is_whole,
+    image_size,
     load_image,
     load_truth,
     read_manifest,
@@ -78,6 +79,8 @@ log = logging.getLogger(__name__)
 
 #: The slowest ``speed=`` played.
 MIN_SPEED = 0.001
+#: How many of a camera's images of another size than its rig camera's the refusal at open names.
+SIZE_NAMES_SHOWN = 3
 #: The image of a frame pushed by :meth:`ReplayRigSource._catch_up` before its file is decoded.
 _NOT_LOADED = np.empty((0, 0, 3), np.uint8)
 
@@ -289,46 +292,48 @@ class ReplayRigSource(RigSource):
         log.info("replaying %s: %d frames, speed %s", self.directory, len(self._rows), self.speed or "free")
 
     def size_error(self) -> FrameSizeError | None:
-        """The error of a take whose images are not its rig's size, else ``None``: a camera whose first, middle
-        and last images (in recorded order; those that decode) all have another size than its rig camera's.
+        """The error of a take whose images are not all its rig's size, else ``None``: the first camera (in the
+        rig's order) with an image of another size than its rig camera's.
 
-        Every image wrong is a take recorded at another size than the rig it carries, its images resized by a
-        tool after, or its manifest's rig replaced: refused at :meth:`open`, as no frame of it would play (each
-        read failed on an image; the daemon, taking two failed reads before a pair for a failed rig, reopened the
-        take from its start for ever). Three images, not every one: decoding all of an hour's take would take
-        minutes at open. One image of another size among the rig's (a corrupted or edited file) is not this: it
-        fails its read (:meth:`_load`).
+        Every image is measured at :meth:`open`, from its header (:func:`image_size`: a PNG's or JPEG's size
+        read without decoding it; an image in another format, or whose header cannot be read, decoded instead).
+        An image that does not decode is no size: left to its read, a corrupt frame. Images of another size are
+        a take recorded at another size than the rig it carries, its images (all or some) resized by a tool
+        after, or its manifest's rig replaced: refused, as each such frame would fail its read (a take resized
+        in part played with every such frame skipped; one resized throughout played nothing, and the daemon,
+        taking two failed reads before a pair for a failed rig, reopened it from its start for ever).
         Public for ``ghnerf-daemon --validate-config``, which refuses such a take before any open.
         """
         order = recorded_order(self._rows)
         for cam in self.rig.cameras:
-            mine = order.get(cam.name)
-            if not mine:
-                continue
-            expected = (cam.width, cam.height)
-            found: list[tuple[str, Path, tuple[int, int]]] = []
-            # row -> its place in the camera's take, in recorded order (a short take's rows named once)
-            sampled = {mine[0]: "first", mine[len(mine) // 2]: "middle", mine[-1]: "last"}
-            for i, which in sampled.items():
-                path = self.directory / self._rows[i].image
-                try:
-                    image = load_image(path)
-                except RigOperationError:
-                    continue  # corrupt: not a size; its read names it
-                found.append((which, path, (image.shape[1], image.shape[0])))
-            if found and all(size != expected for _, _, size in found):
-                which, path, (w, h) = found[0]  # the first that decodes: a corrupt first image is not the one named
-                checked = f"its only image, {path}" if len(mine) == 1 else \
-                    f"checked at open: the first, middle and last of its {len(mine)}, the {which} {path}"
-                message = (
-                    f"recording {self.directory}: camera {cam.name!r}'s images are {w}x{h} ({checked}), but its rig "
-                    f"camera in {self.directory / MANIFEST} is {cam.width}x{cam.height}: the take was recorded at "
-                    f"another size than the rig it carries, its images were resized after, or its manifest's rig was "
-                    f"replaced; play it with the images and manifest.json it was recorded with "
-                    f"(docs/recording-format.md, 'Image sizes')"
-                )
-                return FrameSizeError(message, cam.name, expected, (w, h))
+            mine = [self._rows[i].image for i in order.get(cam.name, [])]
+            wrong = self._images_of_another_size(mine, (cam.width, cam.height))
+            if wrong:
+                return self._size_refusal(cam.name, (cam.width, cam.height), len(mine), wrong)
         return None
+
+    def _images_of_another_size(self, images: list[str],
+                                expected: tuple[int, int]) -> list[tuple[str, tuple[int, int]]]:
+        """Those of ``images`` (paths in the take) whose size is not ``expected``, with their size, in order."""
+        sizes = ((rel, image_size(self.directory / rel)) for rel in images)
+        return [(rel, size) for rel, size in sizes if size is not None and size != expected]
+
+    def _size_refusal(self, camera: str, expected: tuple[int, int], count: int,
+                      wrong: list[tuple[str, tuple[int, int]]]) -> FrameSizeError:
+        """The error naming the take, ``camera``, how many of its ``count`` images are of another size (which
+        sizes, the first few files) and its rig camera's size in the manifest."""
+        found = Counter(size for _, size in wrong)  # in order of first appearance
+        sizes = " and ".join(f"{w}x{h}" + (f" ({n})" if len(found) > 1 else "") for (w, h), n in found.items())
+        names = ", ".join(rel for rel, _ in wrong[:SIZE_NAMES_SHOWN]) + (", ..." * (len(wrong) > SIZE_NAMES_SHOWN))
+        verb = "is" if len(wrong) == 1 else "are"
+        message = (
+            f"recording {self.directory}: camera {camera!r}: {len(wrong)} of its {count} images {verb} {sizes} "
+            f"({names}; read from each image's header at open), but its rig camera in {self.directory / MANIFEST} is "
+            f"{expected[0]}x{expected[1]}: the take was recorded at another size than the rig it carries, its images "
+            f"(all or some) were resized after, or its manifest's rig was replaced; play it with the images and "
+            f"manifest.json it was recorded with (docs/recording-format.md, 'Image sizes')"
+        )
+        return FrameSizeError(message, camera, expected, wrong[0][1])
 
     def _next(self) -> tuple[FrameRow, int] | None:
         """The row played next and its loop pass's timestamp shift; ``None`` at the end (no loop)."""
@@ -447,13 +452,13 @@ class ReplayRigSource(RigSource):
         image = load_image(path)
         cam = self.rig.camera(row.camera)
         if image.shape != (cam.height, cam.width, 3):
-            # Not a FrameSizeError: the take's images checked at open have the rig's size (size_error), so this
-            # one file was corrupted or edited, a corrupt frame the next read goes past. Typed as a size, it would
-            # read to a daemon as a rig that does not fit: the take reopened from its start, then a stop.
+            # Not a FrameSizeError: every image of the take had the rig's size at open (size_error), so this one
+            # file changed since, a corrupt frame the next read goes past. Typed as a size, it would read to a
+            # daemon as a rig that does not fit: the take reopened from its start, then a stop.
             raise RigOperationError(
                 f"recording image {path} is {image.shape[1]}x{image.shape[0]}, but the rig's camera "
-                f"{row.camera!r} is {cam.width}x{cam.height} as the take's images checked at open are: this file "
-                f"was corrupted or edited, a corrupt frame (the next read goes on)"
+                f"{row.camera!r} is {cam.width}x{cam.height} as the take's images were at open: this file was "
+                f"corrupted or edited since, a corrupt frame (the next read goes on)"
             )
         truth, joints_3d = load_truth(self.directory / row.truth) if row.truth is not None else (None, None)
         return self._frame(row, shift_ns, image, truth, joints_3d)

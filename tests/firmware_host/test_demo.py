@@ -458,18 +458,34 @@ def small_take(tmp_path):
     return take
 
 
-def test_one_image_of_another_size_in_a_replay_is_skipped_and_counted(tmp_path, capsys, small_take):
-    """One edited image mid-take is a corrupt frame: raised once by the read, and the next read goes on, as the daemon
-    reads on. It ended the whole run (exit 2) at the first such frame."""
-    edited = sorted((small_take / "images" / "left").iterdir())[5]
-    cv2.imwrite(str(edited), np.zeros((10, 10, 3), np.uint8))
+def test_one_image_cut_short_in_a_replay_is_skipped_and_counted(tmp_path, capsys, small_take):
+    """One image mid-take cut short (its header too) is a corrupt frame: raised once by the read, and the next read
+    goes on, as the daemon reads on. It ended the whole run (exit 2) at the first such frame. (An image of another
+    size is no longer one: the open measures every image and refuses the take, below.)"""
+    cut = sorted((small_take / "images" / "left").iterdir())[5]
+    cut.write_bytes(cut.read_bytes()[:12])
     rc = demo.main(["--truth-only", "--url", f"replay://{small_take}?speed=free", "--seconds", "30",
                     "--out", str(tmp_path / "out")])
     out = capsys.readouterr().out
     assert rc == 0, out
-    assert f"skipped a frame: recording image {edited} is 10x10, but the rig's camera 'left' is 40x30" in out
+    assert f"skipped a frame: recording image {cut} is corrupt (OpenCV cannot decode it)" in out
     assert "the rig's stream ended" in out
     assert re.search(r"^1 frame\(s\) the rig could not deliver were skipped, the first: recording image ", out, re.M)
+
+
+def test_one_image_of_another_size_in_a_replay_is_a_one_line_error_at_open(tmp_path, capsys, small_take):
+    """One edited image mid-take (not a camera's first, middle or last): the open sampled those three, so the take
+    played and the image was skipped as a corrupt frame; the open reads every image's header now."""
+    edited = sorted((small_take / "images" / "left").iterdir())[5]
+    cv2.imwrite(str(edited), np.zeros((10, 10, 3), np.uint8))
+    rc = demo.main(["--truth-only", "--url", f"replay://{small_take}?speed=free", "--seconds", "30",
+                    "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2, captured.out
+    lines = captured.err.strip().splitlines()
+    rel = edited.relative_to(small_take).as_posix()
+    assert len(lines) == 1 and f": error: recording {small_take}: camera 'left': 1 of its " in lines[0], lines
+    assert f" images is 10x10 ({rel}; read from each image's header at open), but its rig camera in " in lines[0]
 
 
 def test_a_replay_resized_throughout_is_a_one_line_error_at_open(tmp_path, capsys, small_take):
@@ -482,8 +498,8 @@ def test_a_replay_resized_throughout_is_a_one_line_error_at_open(tmp_path, capsy
     captured = capsys.readouterr()
     assert rc == 2, captured.out
     lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and f": error: recording {small_take}: camera 'right''s images are 20x15 (checked at " \
-        "open: " in lines[0], lines
+    assert len(lines) == 1 and f": error: recording {small_take}: camera 'right': " in lines[0], lines
+    assert " images are 20x15 (images/right/" in lines[0]
     assert "is 40x30: the take was recorded at another size than the rig it carries" in lines[0]
 
 

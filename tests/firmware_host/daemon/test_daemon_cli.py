@@ -688,9 +688,10 @@ def test_validate_config_and_the_start_refuse_a_take_of_another_size_than_its_ri
             assert cli.main(["--config", str(path)]) == rc
         err = capsys.readouterr().err
         if rc:
-            first = min((takes[name] / "images" / "left").iterdir())
-            assert (f"ghnerf-daemon: error: {path}: rig.url: recording {takes[name]}: camera 'left''s images are 80x60 "
-                    f"(checked at open: the first, middle and last of its 6, the first {first}), but its rig camera in "
+            first = min((takes[name] / "images" / "left").iterdir()).relative_to(takes[name]).as_posix()
+            assert (f"ghnerf-daemon: error: {path}: rig.url: recording {takes[name]}: camera 'left': 6 of its 6 images "
+                    f"are 80x60 ({first}, ") in err
+            assert ("read from each image's header at open), but its rig camera in "
                     f"{takes[name] / 'manifest.json'} is 40x30: the take was recorded at another size than the rig it "
                     "carries") in err
             assert err.count("ghnerf-daemon: error:") == 2  # --validate-config, then the start: one line each

@@ -1,0 +1,114 @@
+"""What a ``replay://`` take's open costs, its image sizes checked: a long take opened by this tree's code (and,
+with ``--baseline``, by another tree's, turn about), beside reading every image's header and decoding every image.
+
+    .venv/bin/python benchmarks/time_replay_open.py [--frames 3000] [--size 320x240] [--rounds 5]
+        [--take /tmp/ghnerf-replay-open-take] [--baseline /path/to/another/checkout]
+
+Writes (once, kept for the next run) a closed take of ``--frames`` frames a camera for two cameras, PNG (as
+``record+`` writes it, compression level 1) of a smooth pattern with noise, then prints the median over
+``--rounds`` of: ``ReplayRigSource.open()`` of the take (each in a fresh process, so no run warms the next one's
+Python caches; only the open is timed), for this tree and, with ``--baseline``, the other tree's code, the opens
+taken in turn; every image's ``header_size`` (this tree); and, once, decoding every image (what checking every
+image's size by decoding would cost). The files are in the page cache (just written or read): a cold disk adds a
+read of each file's first block to the header pass. One host, whatever else runs on it.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from drivers.backends.recording_format import (  # noqa: E402
+    FRAMES, FrameRow, Manifest, encode_image, header_size, load_image, write_manifest,
+)
+from drivers.sim.placement import RigPlacement  # noqa: E402
+
+#: Run in a child process whose PYTHONPATH is the tree timed: prints the seconds its open took.
+_TIMED_OPEN = """
+import sys, time
+from drivers import create_rig_source
+source = create_rig_source("replay://" + sys.argv[1] + "?speed=free")
+start = time.perf_counter()
+source.open()
+print(time.perf_counter() - start)
+source.close()
+"""
+
+
+def write_take(take: Path, frames: int, width: int, height: int) -> None:
+    """A closed two-camera take of ``frames`` PNG frames a camera (no truth)."""
+    rig = RigPlacement(width=width, height=height).build()
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:height, 0:width]
+    rows = []
+    for n in range(frames):
+        for k, cam in enumerate(rig.pair):
+            rel = f"images/{cam.name}/{n:08d}.png"
+            (take / rel).parent.mkdir(parents=True, exist_ok=True)
+            base = (x + y + 3 * n) % 256
+            image = np.clip(base[..., None] + rng.normal(0, 8, (height, width, 3)), 0, 255).astype(np.uint8)
+            (take / rel).write_bytes(encode_image(image, "png", 95))
+            rows.append(FrameRow(cam.name, n, n * 33_333_333 + k * 1_000_000, rel))
+    (take / FRAMES).write_text("".join(row.to_json() + "\n" for row in rows))
+    write_manifest(take, Manifest(rig, "png", "benchmarks/time_replay_open.py", "", complete=True))
+
+
+def timed_open(code: Path, take: Path) -> float:
+    """Seconds ``code``'s ReplayRigSource took to open ``take``, in a fresh process."""
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    out = subprocess.run([sys.executable, "-c", _TIMED_OPEN, str(take)], env=env, cwd=code, check=True,
+                         capture_output=True, text=True).stdout
+    return float(out.split()[-1])
+
+
+def timed(action) -> float:
+    start = time.perf_counter()
+    action()
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=int, default=3000, help="frames a camera (default 3000)")
+    parser.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
+    parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--take", type=Path, default=Path("/tmp/ghnerf-replay-open-take"))
+    parser.add_argument("--baseline", type=Path, help="another checkout whose open is timed in turn with this one")
+    args = parser.parse_args()
+    width, height = (int(v) for v in args.size.split("x"))
+    take = args.take.resolve()
+    if not (take / FRAMES).is_file():
+        print(f"writing {2 * args.frames} images of {width}x{height} to {take} ...", flush=True)
+        write_take(take, args.frames, width, height)
+    images = sorted(take.glob("images/*/*.png"))
+    print(f"take {take}: {len(images)} images of {width}x{height}, {args.rounds} rounds")
+    trees = {"this tree": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
+    opens: dict[str, list[float]] = {name: [] for name in trees}
+    headers = []
+    for _ in range(args.rounds):
+        for name, code in trees.items():
+            opens[name].append(timed_open(code, take))
+        headers.append(timed(lambda: [header_size(path) for path in images]))
+    for name, code in trees.items():
+        print(f"open ({name}, {code}): median {statistics.median(opens[name]):.3f} s "
+              f"(min {min(opens[name]):.3f}, max {max(opens[name]):.3f})")
+    if args.baseline:
+        ratio = statistics.median(opens["this tree"]) / statistics.median(opens["baseline"])
+        print(f"open, this tree / baseline: {ratio:.2f}")
+    print(f"header_size of every image: median {statistics.median(headers):.3f} s "
+          f"({1e6 * statistics.median(headers) / len(images):.1f} us an image)")
+    decode = timed(lambda: [load_image(path) for path in images])
+    print(f"decoding every image (once): {decode:.3f} s ({1e6 * decode / len(images):.0f} us an image)")
+
+
+if __name__ == "__main__":
+    main()
