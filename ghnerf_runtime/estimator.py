@@ -94,8 +94,8 @@ from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_blo
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
 from ghnerf_runtime.two_people import (PAIRINGS, TORSO_LIMBS_M, attached, centre_of, floor_xz, matched_errors,
-                                       one_body, one_skeleton, pick_person, reads_as_two_people, split_people,
-                                       torso_excess)
+                                       one_body, one_side_each, one_skeleton, pick_person, reads_as_two_people,
+                                       split_people, torso_excess)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -1743,9 +1743,18 @@ class Estimator:
                                                            points[best, np.arange(J)], found)
                 best, found = np.where(add, people[who], best), found | add
         # a pairing off its limbs' reach of the subject's other joints is not the subject's (one view's peak of each
-        # person, or the other's in both, near a track's joint gone astray): two_people.one_skeleton
-        found = one_skeleton(points[best, np.arange(J)], found)
+        # person, or the other's in both, near a track's joint gone astray): two_people.one_skeleton; nor one at
+        # its twin's place that its own side does not hold (one peak read as both sides): two_people.one_side_each
+        found = self._one_skeleton_each_side(points[best, np.arange(J)], found)
         return self._from_pairings(kept, kp, pairs, best, found)
+
+    @staticmethod
+    def _one_skeleton_each_side(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
+        """Of a flagged pair's subject's ``found`` joints (``joints``, ``(J, 3)``), those that make one skeleton
+        (:func:`~ghnerf_runtime.two_people.one_skeleton`) less a limb joint at its twin's place that its own side does
+        not hold where the twin's does (:func:`~ghnerf_runtime.two_people.one_side_each`; docs/two-people.md, "One
+        peak, two sides")."""
+        return one_side_each(joints, one_skeleton(joints, found))
 
     def _picked_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                         regions: Regions, near: np.ndarray | None = None
@@ -1775,8 +1784,10 @@ class Estimator:
         if who is None:
             return kept, None, Joints3D.missing(J, kept.reprojection_px.shape[-1])
         best = np.maximum(people[who], 0)
-        # the split gives a joint to the person it hangs nearest, within MAX_LIMB_M: held to each limb's own length
-        return self._from_pairings(kept, kp, pairs, best, one_skeleton(points[best, np.arange(J)], people[who] >= 0))
+        # the split gives a joint to the person it hangs nearest, within MAX_LIMB_M: held to each limb's own length,
+        # and one peak is not read as both sides' joints
+        return self._from_pairings(kept, kp, pairs, best,
+                                   self._one_skeleton_each_side(points[best, np.arange(J)], people[who] >= 0))
 
     def _seen_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                       regions: Regions, behind: int

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ghnerf_runtime.body25 import BODY_PARTS, JOINT_NAMES, LIMBS
+from ghnerf_runtime.body25 import BODY_PARTS, FLIP_INDEX, JOINT_NAMES, LIMBS
 from ghnerf_runtime.config import PICK_SUBJECT_RULES
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.proxy_matte import BONE_M
@@ -75,6 +75,22 @@ MIXED_TORSO_SLACK_M = 0.5
 #: where :data:`MIXED_TORSO_SLACK_M` was measured. At its far corners (4 m), one person's hip came up to 0.43 m over
 #: one body's (0.07 m under the slack), 0.26 m with its part along the line of sight so discounted.
 SLACK_DEPTH_BASELINES = 2.5
+#: :func:`one_side_each`: a left limb joint and its right twin found within this of each other are one peak's evidence
+#: read twice. The shipped model's subject 0.6 m from another person, the prior off: a left wrist taken from the raised
+#: right hand's peaks in both views lay 23-39 mm from the right wrist (a metre apart, a right wrist read from the left
+#: hand 40 mm from the left wrist); the other twins of :data:`LIMB_TWINS` read 105 mm apart at the least on the four
+#: rows of docs/two-people.md, "One peak, two sides" (the big toes, each 13-68 mm from the subject's).
+TWIN_SAME_M = 0.06
+#: Each BODY_25 joint's parent along :data:`~ghnerf_runtime.body25.LIMBS` (the joint nearer the neck), -1 for the neck.
+_PARENT: tuple[int, ...] = tuple(next((a for a, b in LIMBS if b == j), -1) for j in range(len(JOINT_NAMES)))
+#: :func:`one_side_each`'s twins, ``(left, right)``: each left limb joint whose parent has a side too (the elbows,
+#: wrists, knees, ankles and feet; a shoulder or hip hangs from the neck or mid-hip, both sides' own, which tells no
+#: side) with its right twin, in :data:`~ghnerf_runtime.body25.JOINT_NAMES` order, which runs along each limb from
+#: the torso out. The face is left out: its twins sit a skull's width apart round one nose, and the shipped model
+#: read a subject's eyes 42 mm apart, as near as the wrists above.
+LIMB_TWINS: tuple[tuple[int, int], ...] = tuple(
+    (j, FLIP_INDEX[j]) for j in range(len(JOINT_NAMES))
+    if JOINT_NAMES[j].startswith("L") and j not in BODY_PARTS["head"] and FLIP_INDEX[_PARENT[j]] != _PARENT[j])
 #: Assignment rounds per start: a start that has not settled by then is kept as it stands.
 _ROUNDS = 8
 
@@ -283,6 +299,43 @@ def one_skeleton(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     # of the largest groups, the one holding the lowest found joint (the first found joint in such a group)
     keep = roots[np.flatnonzero(found & (sizes[roots] == sizes.max()))[0]]
     return found & (roots == keep)
+
+
+def side_support(joints: np.ndarray, found: np.ndarray, j: int) -> bool:
+    """Whether joint ``j`` of ``joints`` (``(J, 3)``) hangs within its limb's reach (:func:`limb_bound_m`) of its
+    parent (the joint it hangs from along :data:`~ghnerf_runtime.body25.LIMBS`), ``found``: its own side's chain from
+    the torso holds it. Only the parent counts: a left arm read from the right one's peaks holds itself together
+    (its elbow and wrist a forearm apart), but not to the left shoulder."""
+    parent = _PARENT[j]
+    if parent < 0 or not found[parent]:
+        return False
+    return bool(np.linalg.norm(joints[parent] - joints[j]) <= limb_bound_m(parent, j))
+
+
+def one_side_each(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """``(J,)`` ``found`` less, of each left limb joint and its right twin (:data:`LIMB_TWINS`) found within
+    :data:`TWIN_SAME_M` of each other, the one its own side does not hold (:func:`side_support`) where the other's
+    does, judged from the torso out (a joint so left out holds nothing further along its limb). One place is one
+    peak's evidence in each view, whichever map's: one person's maps may show a second peak of a joint on the other
+    side's limb (a left wrist's runner-up on the raised right hand, in both views), and that pairing lies at the right
+    wrist, within the arm's reach of the neck, which no bone bound (:func:`one_skeleton`) tells from the left wrist.
+    Where both sides hold theirs (hands clasped) or neither does, both stay: nothing tells which is the mistake."""
+    joints = np.asarray(joints, dtype=np.float64)
+    found = np.asarray(found, dtype=bool)
+    if joints.shape != (len(found), 3):
+        raise ShapeError(f"one_side_each: joints must be ({len(found)}, 3) for {len(found)} found flags, "
+                         f"got {joints.shape}")
+    J = len(found)
+    keep = found.copy()
+    for left, right in LIMB_TWINS:
+        if left >= J or right >= J or not (found[left] and found[right]):
+            continue
+        if np.linalg.norm(joints[left] - joints[right]) > TWIN_SAME_M:
+            continue
+        held = side_support(joints, keep, left), side_support(joints, keep, right)
+        if held[0] != held[1]:
+            keep[right if held[0] else left] = False
+    return keep
 
 
 def one_body(joints: np.ndarray, found: np.ndarray) -> np.ndarray:

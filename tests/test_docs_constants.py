@@ -62,7 +62,7 @@ from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_D
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
 from ghnerf_runtime.two_people import BODY_RADIUS_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
-    SLACK_DEPTH_BASELINES, TIE_M, TORSO_LIMBS_M
+    SLACK_DEPTH_BASELINES, TIE_M, TORSO_LIMBS_M, TWIN_SAME_M
 from training.data.errors import DatasetError
 from training.data.zju import MIN_CAMERA_SPREAD_M, parse_cameras
 from training.export.calibration import MIN_FRAMES
@@ -213,6 +213,8 @@ def _doc(name: str) -> str:
                            f"({MIXED_TORSO_SLACK_M:g} m)"),
     ("docs/two-people.md", f"Past {SLACK_DEPTH_BASELINES:g} baselines from the cameras, the limb's part along the line"),
     ("docs/two-people.md", f"`SLACK_DEPTH_BASELINES` ({SLACK_DEPTH_BASELINES:g}) baselines"),
+    # session 60: one peak read as both sides' joints (two_people.one_side_each)
+    ("docs/two-people.md", f"`two_people.TWIN_SAME_M` ({TWIN_SAME_M:g} m)"),
     ("docs/turn-search.md", f"at most {KEPT_TURN_STEP_DEG:g} degrees from that pass's (`KEPT_TURN_STEP_DEG`)"),
     ("docs/turn-search.md", f"within {KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`KEPT_TURN_SECTOR_DEG`"),
     # session 57's rule for a search's turned pass (ghnerf_runtime/body_lie.py), quoted since session 59

@@ -760,6 +760,59 @@ def test_one_skeleton_keeps_the_largest_group_its_limbs_reach():
         T.one_skeleton(a[:24], everything)
 
 
+def _twins_at_one_place(left: str, right: str, unfound: tuple[str, ...], gap_m: float = 0.03
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """One person's joints with ``left`` moved to ``gap_m`` beside ``right`` (one peak read as both sides), every
+    joint found but ``unfound``."""
+    scene = sim.SimScene(sim.SceneConfig(seed=3, motion="wave", position_xz=(0.0, 3.0)))
+    joints = scene.joints_3d(0.2)
+    joints[JOINT_NAMES.index(left)] = joints[JOINT_NAMES.index(right)] + [gap_m, 0.0, 0.0]
+    found = np.ones(25, bool)
+    found[[JOINT_NAMES.index(n) for n in unfound]] = False
+    return joints, found
+
+
+def test_one_side_each_drops_the_twin_its_own_side_does_not_hold():
+    """A left wrist read from the raised right hand's peaks lies at the right wrist, within the arm's reach of the
+    neck (``one_skeleton`` keeps it); with its left elbow unfound and the right elbow found, it is the one left out,
+    and so for a right wrist at the left one's. Both elbows found (hands clasped), or neither, nothing tells which
+    is the mistake: both stay. Twins further apart than ``TWIN_SAME_M``, and the face's (eyes a skull's width apart,
+    hanging from one nose), are not asked."""
+    lw, rw = JOINT_NAMES.index("LWrist"), JOINT_NAMES.index("RWrist")
+    joints, found = _twins_at_one_place("LWrist", "RWrist", ("LElbow",))
+    assert T.one_skeleton(joints, found)[lw]  # (the limb-reach rule lets it through)
+    assert np.flatnonzero(found & ~T.one_side_each(joints, found)).tolist() == [lw]
+    joints, found = _twins_at_one_place("RWrist", "LWrist", ("RElbow",))
+    assert np.flatnonzero(found & ~T.one_side_each(joints, found)).tolist() == [rw]
+    joints, found = _twins_at_one_place("LWrist", "RWrist", ())
+    joints[JOINT_NAMES.index("LElbow")] = joints[lw] + [0.2, 0.15, 0.0]  # the left forearm brought across: clasped
+    assert np.array_equal(T.one_side_each(joints, found), found)
+    joints, found = _twins_at_one_place("LWrist", "RWrist", ("LElbow", "RElbow"))
+    assert np.array_equal(T.one_side_each(joints, found), found)
+    joints, found = _twins_at_one_place("LWrist", "RWrist", ("LElbow",), gap_m=T.TWIN_SAME_M + 0.01)
+    assert np.array_equal(T.one_side_each(joints, found), found)
+    joints, found = _twins_at_one_place("LEye", "REye", ("LEar",))
+    assert np.array_equal(T.one_side_each(joints, found), found)
+
+
+def test_one_side_each_judges_from_the_torso_out_and_checks_its_shapes():
+    """A left arm read from the right one's peaks (the elbow and the wrist each at its right twin's place, a forearm
+    apart), the left shoulder a metre off: the elbow goes (its parent, the shoulder, does not hold it; the wrist
+    hanging from it does not count), and so the wrist, which only that elbow held. A found parent further than its
+    limb's reach holds nothing."""
+    joints, found = _twins_at_one_place("LElbow", "RElbow", ())
+    joints[JOINT_NAMES.index("LShoulder")] += [0.0, -1.0, 0.0]
+    joints[JOINT_NAMES.index("LWrist")] = joints[JOINT_NAMES.index("RWrist")] + [0.03, 0.0, 0.0]
+    dropped = found & ~T.one_side_each(joints, found)
+    assert sorted(JOINT_NAMES[j] for j in np.flatnonzero(dropped)) == ["LElbow", "LWrist"]
+    joints, found = _twins_at_one_place("LWrist", "RWrist", ())
+    joints[JOINT_NAMES.index("LElbow")] += [0.0, -1.0, 0.0]  # a metre off the wrist: past the forearm's reach
+    assert not T.side_support(joints, found, JOINT_NAMES.index("LWrist"))
+    assert np.flatnonzero(found & ~T.one_side_each(joints, found)).tolist() == [JOINT_NAMES.index("LWrist")]
+    with pytest.raises(ShapeError, match="one_side_each"):
+        T.one_side_each(joints[:24], found)
+
+
 def test_a_flagged_pair_whose_subject_prior_disagrees_reports_the_subject_s_pairings():
     """The one-person gate holds for a flagged pair: a prior skeleton further than ``max_prior_disagreement_m`` from
     the subject's pairings gives those pairings (``prior_fallback``), as without the prior."""
@@ -1240,3 +1293,31 @@ def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_joint_whose_peak_in_
             assert not (np.linalg.norm(r.joints_3d - other.joints_3d(t), axis=-1)[found] < NEAR_M).any()
             off.extend(np.linalg.norm(r.joints_3d - first.joints_3d(t), axis=-1)[found])
     assert np.mean(off) < 0.09, np.mean(off)
+
+
+@needs_model
+def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_left_wrist_read_from_the_right_hand():
+    """Through the shipped model, 0.6 m apart, the prior off: this scene's first three pairs found the subject's left
+    wrist at the raised right hand, 1.20-1.22 m from the left wrist and 23-39 mm from the right wrist reported, its
+    pairing of the two views' runner-ups within the arm's reach of the neck (the left elbow unfound), so
+    ``one_skeleton`` kept it. Now ``one_side_each`` leaves it out, and the right wrist stays
+    (``measure_two_people.py --model-dir models --alone 0 --places=-0.3,3.0,0.3,3.4 --skeleton-prior off --by-joint``:
+    docs/two-people.md, "One peak, two sides")."""
+    from ghnerf_runtime.estimator import load_session
+
+    root = Path(__file__).resolve().parents[2]
+    config = EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="off"))
+    config = replace(config, session=replace(config.session, model_dir=str(root / "models"), warmup=False))
+    rig = sim.RigPlacement().build()
+    first = sim.SimScene(sim.SceneConfig(seed=1, motion="wave", position_xz=CLOSE[0]))
+    other = sim.SimScene(sim.SceneConfig(seed=1001, motion="wave", position_xz=CLOSE[1]))
+    lw, rw = JOINT_NAMES.index("LWrist"), JOINT_NAMES.index("RWrist")
+    with Estimator(load_session(config), rig, config) as est:
+        for i in range(3):
+            t = i / 30.0
+            r = est.estimate(tuple(sim.render_people((first, other), c, t) for c in rig.pair), timestamp_s=t)
+            subject = first.joints_3d(t)
+            assert r.several_people and not r.missing[rw], (i, r.several_people)
+            assert np.linalg.norm(r.joints_3d[rw] - subject[rw]) < 0.05
+            assert r.missing[lw] or np.linalg.norm(r.joints_3d[lw] - subject[lw]) < 0.2, (
+                i, np.linalg.norm(r.joints_3d[lw] - subject[lw]))
