@@ -3,6 +3,7 @@ joints arrays of other dtypes and layouts (docs/protocol.md, "NumPy values")."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ from firmware_host.errors import SinkConfigError
 from firmware_host.protocol import Joints, Joints2D
 from firmware_host.protocol.messages import JointFrame
 from firmware_host.sinks import open_sink
+from firmware_host.sinks.backoff import BackoffPolicy
 from firmware_host.sinks.registry import sink_class
 from tests.firmware_host.joint_stream_helpers import messages_of
 
@@ -118,3 +120,12 @@ def test_joints_that_are_not_real_numbers_are_refused(joints, dtype) -> None:
         JointFrame(0, 0, 0, joints)
     with pytest.raises(ValueError, match=r"JointFrame\.joints_2d\['left'\] must hold real numbers"):
         JointFrame(0, 0, 0, _joints(), joints_2d={"left": joints[:, :3]})
+
+
+def test_a_backoff_policy_takes_numpy_numbers_and_refuses_true() -> None:
+    policy = BackoffPolicy(initial_s=np.float32(0.5), factor=np.int64(3), max_s=np.float64(4.0))
+    assert (policy.initial_s, policy.factor, policy.max_s) == (0.5, 3.0, 4.0)
+    assert all(type(v) is float for v in (policy.initial_s, policy.factor, policy.max_s))
+    for name, value in (("initial_s", True), ("factor", np.True_), ("max_s", "2")):  # True was a 1 s wait
+        with pytest.raises(ValueError, match=rf"{name} must be a number, got {re.escape(repr(value))}"):
+            BackoffPolicy(**{name: value})
