@@ -6,10 +6,13 @@ frame.
 """
 from __future__ import annotations
 
+import numbers
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
+
+import numpy as np
 
 from drivers.errors import RigConfigError
 from drivers.frames import Frame
@@ -49,19 +52,29 @@ class PairingConfig:
     max_ready: int = 64
 
     def __post_init__(self) -> None:
-        if not 0 < self.tolerance_ms <= MAX_TOLERANCE_MS:  # NaN too; int(ns) of a huge one overflowed
+        # a Python or numpy number, stored as Python's (True was 1 ms, "5" a bare TypeError); NaN is refused too,
+        # and a huge one, whose int(ns) overflowed
+        if not (_real(self.tolerance_ms) and 0 < self.tolerance_ms <= MAX_TOLERANCE_MS):
             raise RigConfigError(f"pairing tolerance_ms must be a number in (0, {MAX_TOLERANCE_MS:g}], "
-                                 f"got {self.tolerance_ms}")
+                                 f"got {self.tolerance_ms!r}")
+        object.__setattr__(self, "tolerance_ms", float(self.tolerance_ms))
         try:
             object.__setattr__(self, "policy", DropPolicy(self.policy))
         except ValueError:
             raise RigConfigError(
                 f"pairing policy must be one of {[p.value for p in DropPolicy]}, got {self.policy!r}"
             ) from None
-        if self.max_pending < 1 or self.max_ready < 1:
-            raise RigConfigError(
-                f"pairing max_pending and max_ready must be >= 1, got {self.max_pending}, {self.max_ready}"
-            )
+        for name in ("max_pending", "max_ready"):
+            value = getattr(self, name)
+            if not (isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value >= 1):
+                # 2.5 held 3 frames, True 1
+                raise RigConfigError(f"pairing {name} must be a whole number >= 1, got {value!r}")
+            object.__setattr__(self, name, int(value))
+
+
+def _real(value: object) -> bool:
+    """A real number (Python's or numpy's), not True/False."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 @dataclass

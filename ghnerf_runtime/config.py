@@ -29,6 +29,8 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
+import numpy as np
+
 from ghnerf_runtime.config_paths import paths_from_file
 from ghnerf_runtime.contract import GRAPH_NAMES, MAX_NEAR_FAR_MARGIN_M
 from ghnerf_runtime.errors import ConfigError
@@ -74,27 +76,40 @@ def _is_real(value: Any) -> bool:
             and abs(value) != float("inf"))
 
 
+def _keep_plain(obj: Any, name: str, value: Any) -> None:
+    """Store a checked value as the Python type it stands for: a NumPy scalar (np.float32, np.int64, np.bool_) kept as
+    given made :func:`config_to_dict`, documented JSON-ready, fail in ``json.dumps``."""
+    if isinstance(value, np.generic):
+        object.__setattr__(obj, name, value.item())
+
+
 def _number(obj: Any, name: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
     value = getattr(obj, name)
     ok = _is_real(value) and (value > lo if lo_open else value >= lo) and value <= hi
     if not ok:
         _fail(type(obj), name, f"must be a number in {'(' if lo_open else '['}{lo}, {hi}]", value)
+    _keep_plain(obj, name, value)
 
 
 def _integer(obj: Any, name: str, lo: int, hi: int) -> None:
     value = getattr(obj, name)
     if not (isinstance(value, numbers.Integral) and not isinstance(value, bool) and lo <= value <= hi):
         _fail(type(obj), name, f"must be an integer in [{lo}, {hi}]", value)
+    _keep_plain(obj, name, value)
 
 
 def _boolean(obj: Any, name: str) -> None:
-    if not isinstance(getattr(obj, name), bool):
-        _fail(type(obj), name, "must be true or false", getattr(obj, name))
+    value = getattr(obj, name)
+    if not isinstance(value, (bool, np.bool_)):  # numpy's True too (a comparison's result); 1 and "yes" are not
+        _fail(type(obj), name, "must be true or false", value)
+    _keep_plain(obj, name, value)
 
 
 def _choice(obj: Any, name: str, choices: tuple) -> None:
-    if getattr(obj, name) not in choices:
-        _fail(type(obj), name, f"must be one of {list(choices)}", getattr(obj, name))
+    value = getattr(obj, name)
+    if value not in choices:
+        _fail(type(obj), name, f"must be one of {list(choices)}", value)
+    _keep_plain(obj, name, value)
 
 
 # ------------------------------------------------------------------ components

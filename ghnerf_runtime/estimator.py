@@ -48,6 +48,7 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+import operator
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -388,11 +389,26 @@ def _warn_if_not_levelled(rig: Rig) -> None:
 def _finite_time(value) -> bool:
     """Whether ``value`` is a finite number (a capture time): an integer past the float range (10**400) is not,
     nor is what is no number (a string): ``math.isfinite`` raised OverflowError or TypeError for them, which the
-    daemon's loop (it skips a pair on a FrameError) did not expect."""
+    daemon's loop (it skips a pair on a FrameError) did not expect. True/False is no time (it was read as 1 s)."""
+    if isinstance(value, (bool, np.bool_)):
+        return False
     try:
         return math.isfinite(value)
     except (OverflowError, TypeError):
         return False
+
+
+def _whole_sequence(value) -> int:
+    """``estimate``'s ``sequence`` as a Python int (numpy integers too). A float was truncated in ``to_json`` (2.7 went
+    out as 2, and the running count went on 3.7, 4.7...), True was pair 1, and text failed with a bare TypeError.
+
+    :raises FrameError: not a whole number."""
+    if not isinstance(value, (bool, np.bool_)):
+        try:
+            return operator.index(value)
+        except TypeError:
+            pass
+    raise FrameError(f"sequence must be a whole number (a Python or numpy integer), got {value!r}")
 
 
 def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
@@ -821,8 +837,7 @@ class Estimator:
         runs from this call to the view's end. Arguments and errors as :meth:`estimate`'s.
         """
         t_start = time.perf_counter()
-        if sequence is None:
-            sequence = self._sequence
+        sequence = self._sequence if sequence is None else _whole_sequence(sequence)
         self._sequence = sequence + 1
         self._check_images(images)
         if timestamp_s is not None and not _finite_time(timestamp_s):

@@ -66,7 +66,7 @@ Pure functions; numpy and OpenCV only.
 from __future__ import annotations
 
 import numbers
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Literal
 
 import cv2
@@ -134,6 +134,9 @@ class KeypointDecoderConfig:
             fail("centroid_radius", "must be an int in [1, 8]")
         if not (real(self.max_region_frac) and 0 < self.max_region_frac <= 1):
             fail("max_region_frac", "must be in (0, 1]")
+        for f in fields(self):  # checked numpy scalars as Python's: config_to_dict is JSON-ready
+            if isinstance(getattr(self, f.name), np.generic):
+                object.__setattr__(self, f.name, getattr(self, f.name).item())
 
 
 @dataclass(frozen=True, eq=False)

@@ -17,14 +17,31 @@ import numpy as np
 from firmware_host.protocol.constants import MAX_JOINTS, PROTOCOL_VERSION, SCENE_FLAGS, U64_MAX, Flags, MsgType
 
 
-def _whole(name: str, value: object, lo: int | None = None, hi: int | None = None) -> None:
-    """A JointFrame field that goes on the wire as an integer (numpy integers too) within [lo, hi]."""
+def _whole(name: str, value: object, lo: int | None = None, hi: int | None = None) -> int:
+    """A JointFrame field that goes on the wire as an integer (numpy integers too) within [lo, hi], as a Python int:
+    a numpy integer kept as given failed the file:// sink's JSON in its worker, the frame lost. True/False is refused
+    (``sequence=True`` went out as frame 1)."""
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"JointFrame.{name} must be a whole number, not true/false, got {value!r}")
     try:
         number = operator.index(value)  # type: ignore[arg-type]
     except TypeError:
         raise ValueError(f"JointFrame.{name} must be a whole number, got {value!r}") from None
     if (lo is not None and number < lo) or (hi is not None and number > hi):
         raise ValueError(f"JointFrame.{name} must be in [{lo}, {hi}], got {value!r}")
+    return number
+
+
+def _joint_values(name: str, values: object, columns: int) -> None:
+    """A (J, columns) array of real numbers (integers or floats; NaN and inf are a missing joint): a bool array went
+    out as 1 m joints of confidence 1, an array of objects or text failed in the sink's worker or as missing joints,
+    and complex numbers lost their imaginary part with only a warning."""
+    a = np.asarray(values)
+    if a.ndim != 2 or a.shape[1] != columns:
+        raise ValueError(f"JointFrame.{name} must have shape (J, {columns}), got {a.shape}")
+    if a.dtype.kind not in "iuf":
+        raise ValueError(f"JointFrame.{name} must hold real numbers (an integer or float array), got dtype {a.dtype}")
+    _joint_count(name, a.shape[0])
 
 
 @dataclass(frozen=True)
@@ -53,23 +70,18 @@ class JointFrame:
     def __post_init__(self) -> None:
         # Checked here, at send(): a float or negative time failed only in the sink's worker, and was then
         # kept for every HELLO/STATUS, so the link announced nothing until a good frame came.
-        _whole("sequence", self.sequence)
-        _whole("capture_time_us", self.capture_time_us, 0, U64_MAX)
-        _whole("joint_set", self.joint_set, 0, 0xFF)
-        _whole("scene_flags", self.scene_flags, 0, 0xFF)
+        for name, lo, hi in (("sequence", None, None), ("capture_time_us", 0, U64_MAX), ("joint_set", 0, 0xFF),
+                             ("scene_flags", 0, 0xFF)):
+            object.__setattr__(self, name, _whole(name, getattr(self, name), lo, hi))
         if int(self.scene_flags) & ~SCENE_FLAGS:
             # A link bit (DECIMATED, DROPPED) or a reserved one set here would tell receivers something untrue.
             raise ValueError(f"JointFrame.scene_flags 0x{int(self.scene_flags):02x} sets bits other than the "
                              f"scene flags 0x{SCENE_FLAGS:02x} ({Flags(SCENE_FLAGS)!r})")
-        j = np.asarray(self.joints_3d)
-        if j.ndim != 2 or j.shape[1] != 4:
-            raise ValueError(f"JointFrame.joints_3d must have shape (J, 4), got {j.shape}")
-        _joint_count("joints_3d", j.shape[0])
+        _joint_values("joints_3d", self.joints_3d, 4)
         for cam, uv in self.joints_2d.items():
-            a = np.asarray(uv)
-            if a.ndim != 2 or a.shape[1] != 3:
-                raise ValueError(f"JointFrame.joints_2d[{cam!r}] must have shape (J, 3), got {a.shape}")
-            _joint_count(f"joints_2d[{cam!r}]", a.shape[0])
+            if isinstance(cam, (bool, np.bool_)):  # True indexed camera 1
+                raise ValueError(f"JointFrame.joints_2d key {cam!r}: a camera name or index, not true/false")
+            _joint_values(f"joints_2d[{cam!r}]", uv, 3)
 
 
 def _joint_count(name: str, count: int) -> None:

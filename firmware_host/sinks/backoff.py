@@ -2,8 +2,11 @@
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 from dataclasses import dataclass
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -17,6 +20,12 @@ class BackoffPolicy:
     ``threading.TIMEOUT_MAX`` (a longer wait raised OverflowError in the worker, which died)."""
 
     def __post_init__(self) -> None:
+        for name in ("initial_s", "factor", "max_s"):
+            value = getattr(self, name)
+            # a Python or numpy number, kept as a float: True was a 1 s wait, text a bare TypeError
+            if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"invalid backoff policy: {name} must be a number, got {value!r}")
+            object.__setattr__(self, name, float(value))
         if not (self.initial_s > 0 and math.isfinite(self.factor) and self.factor >= 1
                 and self.initial_s <= self.max_s <= threading.TIMEOUT_MAX):
             raise ValueError(f"invalid backoff policy {self}: want 0 < initial_s <= max_s <= "

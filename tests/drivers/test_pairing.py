@@ -1,4 +1,6 @@
 """FramePairer frame by frame: tolerance, offset cameras, drops, LATEST vs ALL, gaps and unpaired counts."""
+import re
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -340,3 +342,21 @@ def test_the_measurement_script_matches_its_offline_reference():
     gaps, waits = measure_pairing.online(a, b, 20.0)
     assert sorted(gaps) == sorted(measure_pairing.reference(a, b, 20.0)) and len(gaps) == 50
     assert max(waits) <= 40 * MS + 4 * MS  # one 25 fps frame, jitter included
+
+
+@pytest.mark.parametrize("field, value, plain", [
+    ("tolerance_ms", np.float32(5.5), 5.5), ("tolerance_ms", np.int64(5), 5.0), ("max_pending", np.int64(4), 4),
+    ("max_ready", np.uint8(16), 16),
+])
+def test_numpy_numbers_configure_pairing_as_python_ones(field, value, plain):
+    got = getattr(PairingConfig(**{field: value}), field)
+    assert got == plain and type(got) is type(plain)
+
+
+@pytest.mark.parametrize("field, value", [
+    ("tolerance_ms", True), ("tolerance_ms", np.True_), ("tolerance_ms", "5"),  # True was 1 ms, "5" a TypeError
+    ("max_pending", True), ("max_pending", 2.5), ("max_ready", np.float64(16.0)),  # 2.5 held 3 frames
+])
+def test_a_pairing_value_of_the_wrong_type_is_refused_by_name(field, value):
+    with pytest.raises(RigConfigError, match=rf"pairing {field} must be a .*, got {re.escape(repr(value))}"):
+        PairingConfig(**{field: value})
