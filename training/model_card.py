@@ -456,7 +456,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     calib = {name: c for name, c in (card.get("calibration") or {}).items() if c and c.get("scenes")}
     if calib:  # a reader of the int8 rows asks whether the held-out scenes calibrated them
         L.append("int8 calibration (static QDQ activation ranges): " + "; ".join(
-            f"{name} on {c['scenes']} scenes of the `{c.get('split')}` split{_quantizer(c)}" for name, c in calib.items())
+            f"{name} on {c['scenes']} scenes of the `{c.get('split')}` split{_quantizer(c)}"
+            for name, c in calib.items())
             + " (evenly spaced, `training.pipeline.calibration_items`), none of the held-out scenes scored above.")
         L.append("")
     files = card.get("files") or {}
