@@ -170,6 +170,13 @@ def _prior_cells(m: Mapping[str, Any]) -> str:
             f"{_fmt(m.get('skeleton_prior_gated_mpjpe_mm'), 1)}{share} |")
 
 
+def _quantizer(calibration: Mapping[str, Any]) -> str:
+    """Which quantizer made the variant's int8 graphs (``training.export.quantize.QUANTIZER_VERSION``), where the card
+    records it: the first one quantized the colour head's second call (docs/model.md)."""
+    version = calibration.get("quantizer_version")
+    return "" if version is None else f" by quantizer version {version}"
+
+
 def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
     """``(model label, heatmap source, scores)`` of every ``<prefix><key>`` the metrics hold
     (``key``: ``pck@0.2_by_view``, ``pck@0.2_by_part``, ``mpjpe_by_visibility``)."""
@@ -449,7 +456,8 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     calib = {name: c for name, c in (card.get("calibration") or {}).items() if c and c.get("scenes")}
     if calib:  # a reader of the int8 rows asks whether the held-out scenes calibrated them
         L.append("int8 calibration (static QDQ activation ranges): " + "; ".join(
-            f"{name} on {c['scenes']} scenes of the `{c.get('split')}` split" for name, c in calib.items())
+            f"{name} on {c['scenes']} scenes of the `{c.get('split')}` split{_quantizer(c)}"
+            for name, c in calib.items())
             + " (evenly spaced, `training.pipeline.calibration_items`), none of the held-out scenes scored above.")
         L.append("")
     files = card.get("files") or {}

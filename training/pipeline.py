@@ -1397,7 +1397,8 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         "metrics": metrics["models"],
         "parity": {v: q[v].get("int8_vs_fp32", {}) for v in VARIANTS},
         # which data fixed the int8 ranges: training scenes, never the held-out split the metrics score
-        "calibration": {v: {"split": "train", "scenes": q[v].get("calibration_scenes")} for v in VARIANTS},
+        "calibration": {v: {"split": "train", "scenes": q[v].get("calibration_scenes"),
+                            "quantizer_version": quantizer_version_of(st.stamp(f"quantize_{v}"))} for v in VARIANTS},
         "fp32_parity_torch_vs_ort": {v: (st.stamp(f"export_{v}") or {}).get("info", {}).get(v, {})
                                      .get("fp32_parity_torch_vs_ort") for v in VARIANTS},
         "files": files,
@@ -1546,6 +1547,14 @@ def train_stage_inputs(cfg: PipelineConfig, variant: str, data_key: dict, pretra
 def export_stage_inputs(train_stamp: dict) -> dict:
     # the exporter's own settings too: another opset or contract remakes the files
     return {"checkpoint": train_stamp["outputs"], "settings": export_settings()}
+
+
+def quantizer_version_of(quantize_stamp: dict | None) -> int | None:
+    """The ``QUANTIZER_VERSION`` a quantize stamp's request records (None: no stamp, or one made before it recorded
+    its inputs)."""
+    request = (quantize_stamp or {}).get("request")
+    settings = request.get("settings") if isinstance(request, dict) else None
+    return settings.get("version") if isinstance(settings, dict) else None
 
 
 def quantize_stage_inputs(cfg: PipelineConfig, export_stamp: dict, data_key: dict) -> dict:

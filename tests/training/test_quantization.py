@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import collections
 import re
+from pathlib import Path
 
 import pytest
 
@@ -198,3 +199,28 @@ def test_quantize_refuses_a_source_the_runtime_would_refuse(tmp_path):
             with pytest.raises(error, match=rf"^{re.escape(str(source))}: .*{what}"):
                 quantize_graph(source, out, feeds, policy, graph)
             assert not out.exists()
+
+
+SHIPPED = Path(__file__).resolve().parents[2] / "models"
+
+
+@pytest.mark.skipif(not (SHIPPED / "model_card.json").is_file(),
+                    reason="no trained model yet: models/model_card.json does not exist")
+@pytest.mark.parametrize("variant", ["ghnerf", "baseline"])
+@pytest.mark.parametrize("graph", ["render", "render_rgb", "render_heat", "query"])
+def test_the_shipped_int8_graphs_keep_every_head_output_layer_float(variant, graph):
+    """The shipped ``<graph>.int8.onnx`` files were made by today's quantizer (QUANTIZER_VERSION 2): each head's
+    output layer, the colour head's second call (``/g_c_out_1/``) included, reads float weights. Files of the first
+    quantizer quantized both colour calls' weights (their shared ``g_c_out``) to int8."""
+    from training.export.quantize import HEAD_OUTPUT_LAYERS, _name_matcher
+
+    path = SHIPPED / variant / f"{graph}.int8.onnx"
+    m = onnx.load(str(path))
+    producers = {o: n for n in m.graph.node for o in n.output}
+    matcher = _name_matcher(HEAD_OUTPUT_LAYERS)
+    heads = [n for n in m.graph.node if n.op_type == "Conv" and matcher.search(n.name)]
+    assert heads, f"{path}: no head output layer named as HEAD_OUTPUT_LAYERS names them"
+    int8_heads = [n.name for n in heads
+                  if any(producers.get(i) is not None and producers[i].op_type == "DequantizeLinear"
+                         for i in n.input[1:])]
+    assert not int8_heads, f"{path}: head output layers with int8 weights {int8_heads} (requantize it)"
