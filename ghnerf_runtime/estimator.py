@@ -94,9 +94,9 @@ from ghnerf_runtime.skeleton_prior import disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
-from ghnerf_runtime.two_people import (PAIRINGS, TORSO_LIMBS_M, attached, centre_of, floor_xz, matched_errors,
-                                       one_body, one_side_each, one_skeleton, pick_person, reads_as_two_people,
-                                       split_people, torso_excess)
+from ghnerf_runtime.two_people import (PAIRINGS, TORSO_LIMBS_M, attached, centre_of, floor_xz, held_apart,
+                                       matched_errors, one_body, one_side_each, one_skeleton, pick_person,
+                                       reads_as_two_people, split_people, torso_excess)
 
 __all__ = ["Estimator", "PairResult", "check_crop", "load_session", "KEYPOINT_STAGES", "NOVEL_STAGES",
            "NOVEL_PROXY_STAGE", "NOVEL_PAINT_STAGE",
@@ -1753,9 +1753,12 @@ class Estimator:
             agree = [int(np.count_nonzero((p == best) & found)) for p in people]
             who = int(np.argmax(agree))
             if agree[who] > agree[1 - who]:
-                # only where it hangs from a joint found near the track (a sparse split may misgive a joint)
-                add = lost & (people[who] >= 0) & attached(points[np.maximum(people[who], 0), np.arange(J)],
-                                                           points[best, np.arange(J)], found)
+                # only where it hangs from a joint found near the track (a sparse split may misgive a joint), and
+                # not nearer its found twin than the torso holds them (that twin's peak read again: a left
+                # shoulder at the right one's place hangs within its bone's reach of the neck as well)
+                candidates, tracked = points[np.maximum(people[who], 0), np.arange(J)], points[best, np.arange(J)]
+                add = (lost & (people[who] >= 0) & attached(candidates, tracked, found)
+                       & held_apart(candidates, tracked, found))
                 best, found = np.where(add, people[who], best), found | add
         # a pairing off its limbs' reach of the subject's other joints is not the subject's (one view's peak of each
         # person, or the other's in both, near a track's joint gone astray): two_people.one_skeleton; nor one at

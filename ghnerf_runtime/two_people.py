@@ -91,6 +91,28 @@ _PARENT: tuple[int, ...] = tuple(next((a for a, b in LIMBS if b == j), -1) for j
 LIMB_TWINS: tuple[tuple[int, int], ...] = tuple(
     (j, FLIP_INDEX[j]) for j in range(len(JOINT_NAMES))
     if JOINT_NAMES[j].startswith("L") and j not in BODY_PARTS["head"] and FLIP_INDEX[_PARENT[j]] != _PARENT[j])
+#: :func:`held_apart`: the left and right joints the torso holds apart, ``(left, right)``, each with the least
+#: distance one body's may read, metres: the two bones between them (``proxy_matte.BONE_M``, each from the neck or
+#: the mid-hip they share, nearly in line across the torso) less :data:`BONE_SLACK_M` for the two ends' error. The
+#: shoulders 0.15 m (the shipped model's subject's, found, read 0.33 m apart at the least on the four rows of
+#: docs/two-people.md, "Fewer, right joints"; a left shoulder read from the right one's peaks, 0.10 m); the hips'
+#: bound, 0.24 - 0.25 m, holds nothing (the model's pulled hips read 0.085 m apart), so they are not asked.
+def _torso_twins_apart() -> dict[tuple[int, int], float]:
+    """:data:`TORSO_TWINS_APART_M`: each left joint hanging from a joint without a side (the neck, the mid-hip; the
+    face's from the nose left out, as :data:`LIMB_TWINS` leaves it) with its right twin, where the bound is above 0."""
+    apart = {}
+    for left in range(len(JOINT_NAMES)):
+        parent, right = _PARENT[left], FLIP_INDEX[left]
+        if not JOINT_NAMES[left].startswith("L") or parent < 0 or FLIP_INDEX[parent] != parent \
+                or left in BODY_PARTS["head"]:
+            continue
+        least = BONE_M[JOINT_NAMES[left]] + BONE_M[JOINT_NAMES[right]] - BONE_SLACK_M
+        if least > 0.0:
+            apart[(left, right)] = round(least, 3)
+    return apart
+
+
+TORSO_TWINS_APART_M: dict[tuple[int, int], float] = _torso_twins_apart()
 #: Assignment rounds per start: a start that has not settled by then is kept as it stands.
 _ROUNDS = 8
 
@@ -233,6 +255,26 @@ def attached(candidates: np.ndarray, joints: np.ndarray, found: np.ndarray) -> n
             if j < len(candidates) and other < len(candidates) and found[other]:
                 near[j] |= bool(np.linalg.norm(candidates[j] - joints[other]) <= MAX_LIMB_M)
     return near
+
+
+def held_apart(candidates: np.ndarray, joints: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """``(J,)`` which of ``candidates`` (``(J, 3)``, one per joint) lie at least :data:`TORSO_TWINS_APART_M` from
+    their twin where ``found`` in ``joints`` (``(J, 3)``); True for a joint the torso does not hold apart from its twin,
+    or whose twin is not found. A shoulder nearer its found twin than the torso allows is that twin's peak read again
+    (a left shoulder map's runner-up on the right shoulder): bound from above alone (:func:`attached`,
+    :func:`one_skeleton`), it lies within its bone's reach of the neck."""
+    candidates = np.asarray(candidates, dtype=np.float64)
+    joints = np.asarray(joints, dtype=np.float64)
+    found = np.asarray(found, dtype=bool)
+    if candidates.shape != joints.shape or joints.shape != (len(found), 3):
+        raise ShapeError(f"held_apart: candidates and joints must be ({len(found)}, 3) for {len(found)} found flags, "
+                         f"got {candidates.shape} and {joints.shape}")
+    apart = np.ones(len(found), bool)
+    for (left, right), least in TORSO_TWINS_APART_M.items():
+        for j, twin in ((left, right), (right, left)):
+            if j < len(found) and twin < len(found) and found[twin]:
+                apart[j] = bool(np.linalg.norm(candidates[j] - joints[twin]) >= least)
+    return apart
 
 
 def limb_bound_m(parent: int, child: int) -> float:
