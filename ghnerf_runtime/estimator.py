@@ -61,7 +61,7 @@ import numpy as np
 import numpy.ma  # noqa: F401
 
 from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES, LIMBS
-from ghnerf_runtime.body_lie import body_axis, lies_as_kept_turn, lies_as_turned
+from ghnerf_runtime.body_lie import body_axis, lies_as_kept_turn, lies_as_turned, nears_a_turned_lie
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -634,6 +634,9 @@ class Estimator:
         self._turn_search_wait = 0  # weak pairs left that do not search (roi.turn_search_every)
         # whether the upright pass the last search that kept no turn was run after found someone (_searches_early)
         self._failed_search_found = False
+        # whether the last search that kept no turn refused a body nearly lying (nears_a_turned_lie; _searches_early)
+        self._failed_search_nears_lie = False
+        self._search_refused_near_lie = False  # the search now running refused one
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
         self.turns_left = 0
         self._turn_check_wait = 0  # strong tracked turned pairs left before the next check (_turn_check)
@@ -717,6 +720,7 @@ class Estimator:
         self._track_unsorted = False
         self._turn_search_wait = 0
         self._failed_search_found = False
+        self._failed_search_nears_lie = False
         self._turn_check_wait = 0
         self._kept_axis = None
         if self._smoother is not None:
@@ -882,6 +886,7 @@ class Estimator:
             else:
                 turned = self._turn_search(images, p, sequence, timing, novel_view)
                 if turned is not p:
+                    self._end_wait()
                     p = self._refined(images, turned, sequence, timing, novel_view)
                 else:
                     self._wait_after_search(p)
@@ -897,9 +902,11 @@ class Estimator:
                 turned = self._turn_search(images, p, sequence, timing, novel_view, self.tracker.track)
                 if turned is p:
                     self._wait_after_search(p)
+                else:
+                    self._end_wait()
                 p = turned
         elif p.someone:
-            self._turn_search_wait = 0  # someone found well: the next weak pair searches at once
+            self._end_wait()  # someone found well: the next weak pair searches at once
         self._kept_axis = self._kept_turn_axis(p)
         if p.j3 is None:
             if self._smoother is not None:
@@ -1112,6 +1119,7 @@ class Estimator:
         are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
         is followed through the turned crops, the same window about the person as ``p``'s."""
         self.turn_searches += 1
+        self._search_refused_near_lie = False
         held = self._several_track, self._behind_track, self._track_unsorted
         for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing, track):
             self._use_turns(turns)
@@ -1131,6 +1139,8 @@ class Estimator:
                     return q
                 # the encoder's guess at a body no turn rights (lying along the line of sight): not taken
                 self.turns_refused += 1
+                # or a person lying down, a few degrees short of the window: _searches_early
+                self._search_refused_near_lie |= nears_a_turned_lie(q.j3, self._centres)
                 log.debug("pair %d: crops turned %s degrees found a body that does not lie as turned", sequence, turns)
             if q.novel is not None:
                 q.novel.abandon()
@@ -1144,12 +1154,25 @@ class Estimator:
         weak pairs do not search (someone no turn rights, most likely: a person lying along a line of sight reads
         weakly pair after pair, three encoder runs and up to two passes a search for nothing), unless one loses the
         person ``p`` found (:meth:`_searches_early`). A search such a pair makes early lets the wait run on as it
-        would have: it never puts off the search the wait would have made."""
-        if self._turn_search_wait > 0:  # an early search
+        would have: it never puts off the search the wait would have made, nor makes another early one."""
+        early = self._turn_search_wait > 0
+        if early:
             self._turn_search_wait -= 1
         else:
             self._turn_search_wait = self.config.roi.turn_search_every - 1
-        self._failed_search_found = bool(p.someone)
+        self._failed_search_found = not early and bool(p.someone)
+        self._failed_search_nears_lie = not early and self._search_refused_near_lie
+
+    def _end_wait(self) -> None:
+        """Someone found well, upright or through a turn a search just kept: the wait after a failed search
+        (:meth:`_wait_after_search`) is over, and the next weak pair searches at once. A search the wait let through
+        early (:meth:`_searches_early`) that kept a turn left the wait running, and with it the early search's
+        trigger: the tracked pairs through the turn never end it, so the search after the turn was lost counted as
+        an early one, and the wait it set ran from the old search (the cartwheel past 150 degrees, a one-off look
+        with benchmarks/measure_lying_rendered.py --rolls: docs/turn-search.md, "A body nearly lying")."""
+        self._turn_search_wait = 0
+        self._failed_search_found = False
+        self._failed_search_nears_lie = False
 
     def _searches_early(self, p: "_Pass") -> bool:
         """Whether ``p``, a weak pass in the wait after a search that kept no turn (:meth:`_wait_after_search`),
@@ -1160,8 +1183,11 @@ class Estimator:
         each such search: the early search's own pass found nobody, so the passes after it wait (at most one
         early search for each search the wait follows). A body that stays found or stays lost waits as before.
         (A body axis turned more than 10-15 degrees since the failed search was tried as a trigger too: more
-        searches in the rolls, no turn found sooner.)"""
-        return self._failed_search_found and not p.someone
+        searches in the rolls, no turn found sooner.) Or, found or not, when the failed search refused a turned
+        pass of a body a few degrees short of lying (:func:`nears_a_turned_lie`): its upright pass had found
+        nobody, but the turn read the body rolling toward the window (docs/turn-search.md, "A body nearly lying");
+        once too, as the early search leaves no trigger (:meth:`_wait_after_search`)."""
+        return (self._failed_search_found and not p.someone) or self._failed_search_nears_lie
 
     def _lies_as_turned(self, j3: Joints3D) -> bool:
         """:func:`lies_as_turned` of ``j3`` seen by this rig's two cameras (the turn search's rule; a kept turn's passes
