@@ -19,8 +19,8 @@ from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.joints3d import Joints3D
 
 __all__ = ["KEPT_TURN_SECTOR_DEG", "KEPT_TURN_STEP_DEG", "TURN_LIE_TOLERANCE_DEG", "TURN_MIN_FROM_SIGHT_DEG",
-           "TURN_NEAR_LIE_DEG", "across_the_views", "body_axis", "lies_as_kept_turn", "lies_as_turned",
-           "nears_a_turned_lie", "tilt_from_up_deg"]
+           "TURN_NEAR_LIE_DEG", "across_the_views", "body_axis", "degrees_short_of_lying", "lies_as_kept_turn",
+           "lies_as_turned", "nears_a_turned_lie", "tilt_from_up_deg"]
 
 #: roi.turn_search: a turned pass is kept only when its body lies as a turn can right (:func:`lies_as_turned`):
 #: level or upside down within this many degrees (its body axis against gravity). In a one-off look at the 30 bench
@@ -107,20 +107,28 @@ def lies_as_turned(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
     return across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
 
 
+def degrees_short_of_lying(j3: Joints3D, centres: Sequence[np.ndarray]) -> float | None:
+    """How many degrees (over 0, at most :data:`TURN_NEAR_LIE_DEG`) short of the lying window ``j3`` lies when
+    :func:`nears_a_turned_lie`; else ``None``."""
+    axis = body_axis(j3)
+    if axis is None:
+        return None
+    short_of_lying = (90.0 - TURN_LIE_TOLERANCE_DEG) - tilt_from_up_deg(axis)
+    if not 0.0 < short_of_lying <= TURN_NEAR_LIE_DEG:
+        return None
+    if not across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres):
+        return None
+    return short_of_lying
+
+
 def nears_a_turned_lie(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
     """Whether ``j3``, a turned pass's joints that :func:`lies_as_turned` refused, lie across the views and tilted
     from upright toward lying, short of the window by at most :data:`TURN_NEAR_LIE_DEG`: a person lying down, read
     through the turn at the tilt the turned pass gives (in the rolls the refused passes' tilt was the body's within
     a few degrees), who a few degrees more of roll brings into the window. Only the side from upright: the bands
     short of upside down, and past lying toward it, hold the readings of people lying along a line of sight
-    (127-160 degrees, across the views), whom no turn rights."""
-    axis = body_axis(j3)
-    if axis is None:
-        return False
-    short_of_lying = (90.0 - TURN_LIE_TOLERANCE_DEG) - tilt_from_up_deg(axis)
-    if not 0.0 < short_of_lying <= TURN_NEAR_LIE_DEG:
-        return False
-    return across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
+    (127-160 degrees, across the views), whom no turn rights. How far short: :func:`degrees_short_of_lying`."""
+    return degrees_short_of_lying(j3, centres) is not None
 
 
 def lies_as_kept_turn(j3: Joints3D, centres: Sequence[np.ndarray], turns: Sequence[int],

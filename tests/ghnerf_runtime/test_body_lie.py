@@ -209,13 +209,15 @@ def test_a_roll_onto_a_line_of_sight_is_not_kept():
     (65.0, (0.0, 0.0, -1.0), False),  # tilted along the line of sight: no turn rights it, however far it rolls
 ])
 def test_a_refused_body_nearly_lying_across_the_views(degrees, towards, near):
-    """``nears_a_turned_lie``: a refused turned pass of a person lying down, up to ``TURN_NEAR_LIE_DEG`` short of
-    the lying window (the search's early retry after a failed search, docs/turn-search.md, "A body nearly
-    lying")."""
-    from ghnerf_runtime.body_lie import TURN_NEAR_LIE_DEG, nears_a_turned_lie
+    """``nears_a_turned_lie`` (``degrees_short_of_lying``: how far): a refused turned pass of a person lying down,
+    up to ``TURN_NEAR_LIE_DEG`` short of the lying window (the search's early retry after a failed search,
+    docs/turn-search.md, "A body nearly lying")."""
+    from ghnerf_runtime.body_lie import TURN_NEAR_LIE_DEG, degrees_short_of_lying, nears_a_turned_lie
 
     assert TURN_NEAR_LIE_DEG == 10.0
     j3 = _stick(_tilted(degrees, towards))
     assert nears_a_turned_lie(j3, CENTRES) is near
+    short = degrees_short_of_lying(j3, CENTRES)  # how far short: the early searches' "rolling in" compares it
+    assert short is None if not near else short == pytest.approx(90.0 - TURN_LIE_TOLERANCE_DEG - degrees)
     if near:
         assert not lies_as_turned(j3, CENTRES)  # only ever asked of a refused pass

@@ -534,13 +534,13 @@ def test_reset_returns_to_upright_crops_with_the_turn_state_cleared():
     est._turn_check_wait, est.turn_searches, est.turns_kept, est.turn_checks = 3, 2, 1, 4
     est._kept_axis = np.array([1.0, 0.0, 0.0])  # the last pass kept through the turn lay across the view
     est._failed_search_found = True  # a search that kept no turn, over a pass that found someone
-    est._failed_search_nears_lie = True  # and that refused a body nearly lying
+    est._failed_search_short = 5.0  # and that refused a body 5 degrees short of lying
     turned = est.tracker
     est.reset()
     assert est._turns == (0, 0) and [st.turn_deg for st in est._cams] == [0.0, 0.0]
     assert est.tracker is est._turned_trackers[0, 0] and est.tracker.track is None and turned.track is None
     assert est._turn_check_wait == 0 and est._turn_search_wait == 0 and est._kept_axis is None
-    assert not est._failed_search_found and not est._failed_search_nears_lie
+    assert not est._failed_search_found and est._failed_search_short is None
     assert (est.turn_searches, est.turns_kept, est.turn_checks) == (2, 1, 4)
 
 
@@ -959,9 +959,13 @@ def _searches_with_turned_reads(turned_reads):
 
 @pytest.mark.parametrize("turned_reads, searched", [
     # lying down, lost by the upright crops, read through the quarter turn 65 degrees from upright (5 short of the
-    # lying window): refused, but the next pair searches at once; once only, the wait runs on from the failed search
-    # (a body that stays there, propped on an elbow, searches twice in five pairs, not every pair)
-    ([65, 68, 68, 68, 68, 68, 68], [1, 2, 6, 7]),
+    # lying window): refused, but the next pair searches at once; the wait runs on from the failed search
+    ([65, 68, 68, 68, 68, 68, 68], [1, 2, 3, 6, 7]),
+    # ... and again while each early search reads the body at least 2 degrees nearer the window (rolling in: 3 degrees
+    # a pair lying down), not when it stays
+    ([62, 65, 68, 69, 69, 69, 69, 69], [1, 2, 3, 4, 6, 7]),
+    # a body that stays there (propped on an elbow) searches twice in five pairs, not every pair
+    ([66, 66, 66, 66, 66, 66, 66], [1, 2, 6, 7]),
     # further from lying (still bending over): the wait as before
     ([50, 52, 54, 56, 58, 59, 59], [1, 6]),
     # the turned reads of a person lying along a line of sight (past lying toward upside down, across the views):
@@ -973,7 +977,8 @@ def test_a_failed_search_that_refused_a_body_nearly_lying_searches_again_at_once
     its turned pass read the body 54-69 degrees from upright and was refused (not yet level within
     ``TURN_LIE_TOLERANCE_DEG``), and the next four weak pairs waited, the body rolling into the window meanwhile
     (benchmarks/measure_lying_rendered.py --rolls: docs/turn-search.md, "A body nearly lying"). Now the next weak
-    pair searches at once, once for each failed search."""
+    pair searches at once, and the next after it while the body rolls nearer the window (by at least 2 degrees
+    from search to search)."""
     assert _searches_with_turned_reads(turned_reads) == searched
 
 
