@@ -19,7 +19,8 @@ from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.joints3d import Joints3D
 
 __all__ = ["KEPT_TURN_SECTOR_DEG", "KEPT_TURN_STEP_DEG", "TURN_LIE_TOLERANCE_DEG", "TURN_MIN_FROM_SIGHT_DEG",
-           "across_the_views", "body_axis", "lies_as_kept_turn", "lies_as_turned", "tilt_from_up_deg"]
+           "TURN_NEAR_LIE_DEG", "across_the_views", "body_axis", "degrees_short_of_lying", "lies_as_kept_turn",
+           "lies_as_turned", "nears_a_turned_lie", "tilt_from_up_deg"]
 
 #: roi.turn_search: a turned pass is kept only when its body lies as a turn can right (:func:`lies_as_turned`):
 #: level or upside down within this many degrees (its body axis against gravity). In a one-off look at the 30 bench
@@ -44,6 +45,13 @@ KEPT_TURN_SECTOR_DEG = 45.0
 #: turned pass of a person rolled rigidly from across the view onto a line of sight (bench scene 21,
 #: tests/ghnerf_runtime/test_estimator_turn_search.py) 44.
 KEPT_TURN_STEP_DEG = 25.0
+#: roi.turn_search: a refused turned pass whose body lies across the views tilted up to this many degrees short of
+#: lying (:func:`nears_a_turned_lie`) marks a person lying down who may roll into the window at the next pair. In
+#: benchmarks/measure_lying_rendered.py --rolls (a one-off look, docs/turn-search.md, "A body nearly lying") the
+#: searches that failed on a person lying down refused their turned pass at 54-69 degrees from upright, those kept
+#: read 71-86 (one 100); the refused passes of people lying along a line of sight that lay across the views read
+#: 127-160.
+TURN_NEAR_LIE_DEG = 10.0
 #: the joints whose centroids give a body's axis (:func:`body_axis`): the head and shoulders, the hips and legs
 _AXIS_UPPER = tuple(JOINT_INDEX[n] for n in ("Nose", "Neck", "RShoulder", "LShoulder", "REye", "LEye", "REar",
                                              "LEar"))
@@ -97,6 +105,30 @@ def lies_as_turned(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
     if abs(from_up - 90.0) > TURN_LIE_TOLERANCE_DEG and from_up < 180.0 - TURN_LIE_TOLERANCE_DEG:
         return False  # neither lying nor upside down: tilted halfway, no body a turn rights
     return across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
+
+
+def degrees_short_of_lying(j3: Joints3D, centres: Sequence[np.ndarray]) -> float | None:
+    """How many degrees (over 0, at most :data:`TURN_NEAR_LIE_DEG`) short of the lying window ``j3`` lies when
+    :func:`nears_a_turned_lie`; else ``None``."""
+    axis = body_axis(j3)
+    if axis is None:
+        return None
+    short_of_lying = (90.0 - TURN_LIE_TOLERANCE_DEG) - tilt_from_up_deg(axis)
+    if not 0.0 < short_of_lying <= TURN_NEAR_LIE_DEG:
+        return None
+    if not across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres):
+        return None
+    return short_of_lying
+
+
+def nears_a_turned_lie(j3: Joints3D, centres: Sequence[np.ndarray]) -> bool:
+    """Whether ``j3``, a turned pass's joints that :func:`lies_as_turned` refused, lie across the views and tilted
+    from upright toward lying, short of the window by at most :data:`TURN_NEAR_LIE_DEG`: a person lying down, read
+    through the turn at the tilt the turned pass gives (in the rolls the refused passes' tilt was the body's within
+    a few degrees), who a few degrees more of roll brings into the window. Only the side from upright: the bands
+    short of upside down, and past lying toward it, hold the readings of people lying along a line of sight
+    (127-160 degrees, across the views), whom no turn rights. How far short: :func:`degrees_short_of_lying`."""
+    return degrees_short_of_lying(j3, centres) is not None
 
 
 def lies_as_kept_turn(j3: Joints3D, centres: Sequence[np.ndarray], turns: Sequence[int],

@@ -62,7 +62,7 @@ import numpy as np
 import numpy.ma  # noqa: F401
 
 from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES, LIMBS
-from ghnerf_runtime.body_lie import body_axis, lies_as_kept_turn, lies_as_turned
+from ghnerf_runtime.body_lie import body_axis, degrees_short_of_lying, lies_as_kept_turn, lies_as_turned
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -500,6 +500,12 @@ class _CameraState:
 #: bench scenes' view scores, lying across the view a quarter turn scored 0.25-0.5 higher than upright, upside down
 #: a half turn 0.15-0.25; benchmarks/measure_lying_rendered.py --turn-search measures the search as a whole.
 _TURN_MARGIN = 0.1
+#: roi.turn_search: an early search (Estimator._searches_early) that refused a body nearly lying again lets the next
+#: weak pair search too when the body lies at least this many degrees nearer the lying window than at the search
+#: before (rolling in: at most TURN_NEAR_LIE_DEG / this many such searches in a row; one that stays, none). Lying down
+#: at 3 degrees a pair, the pair after a failed search is still short of the window (docs/turn-search.md, "A body
+#: nearly lying").
+_NEAR_LIE_STEP_DEG = 2.0
 #: roi.turn_search: a weak cold pair searches only when one view's ``presence.min_joints``-th strongest joint peak
 #: (:func:`~ghnerf_runtime.flip_test.presence_peak` of that view) reaches this: upright crops of people lying or
 #: upside down reached 0.16-0.7 in a one-off look at four bench scenes, empty rooms stay under 0.01 (both views
@@ -650,6 +656,10 @@ class Estimator:
         self._turn_search_wait = 0  # weak pairs left that do not search (roi.turn_search_every)
         # whether the upright pass the last search that kept no turn was run after found someone (_searches_early)
         self._failed_search_found = False
+        # how far short of lying the body lay that the last search that kept no turn refused (degrees_short_of_lying;
+        # None: none such) while it may still make the next weak pair search (_searches_early)
+        self._failed_search_short: float | None = None
+        self._search_refused_short: float | None = None  # the same, of the search now running
         self.turn_checks = 0  # tracked passes through a kept turn run again upright, and those that left the turn
         self.turns_left = 0
         self._turn_check_wait = 0  # strong tracked turned pairs left before the next check (_turn_check)
@@ -733,6 +743,7 @@ class Estimator:
         self._track_unsorted = False
         self._turn_search_wait = 0
         self._failed_search_found = False
+        self._failed_search_short = None
         self._turn_check_wait = 0
         self._kept_axis = None
         if self._smoother is not None:
@@ -897,6 +908,7 @@ class Estimator:
             else:
                 turned = self._turn_search(images, p, sequence, timing, novel_view)
                 if turned is not p:
+                    self._end_wait()
                     p = self._refined(images, turned, sequence, timing, novel_view)
                 else:
                     self._wait_after_search(p)
@@ -912,9 +924,11 @@ class Estimator:
                 turned = self._turn_search(images, p, sequence, timing, novel_view, self.tracker.track)
                 if turned is p:
                     self._wait_after_search(p)
+                else:
+                    self._end_wait()
                 p = turned
         elif p.someone:
-            self._turn_search_wait = 0  # someone found well: the next weak pair searches at once
+            self._end_wait()  # someone found well: the next weak pair searches at once
         self._kept_axis = self._kept_turn_axis(p)
         if p.j3 is None:
             if self._smoother is not None:
@@ -1127,6 +1141,7 @@ class Estimator:
         are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
         is followed through the turned crops, the same window about the person as ``p``'s."""
         self.turn_searches += 1
+        self._search_refused_short = None
         held = self._several_track, self._behind_track, self._track_unsorted
         for turns in self._turn_candidates(images, _view_score(p.env["encoder_heatmaps"]), timing, track):
             self._use_turns(turns)
@@ -1146,6 +1161,10 @@ class Estimator:
                     return q
                 # the encoder's guess at a body no turn rights (lying along the line of sight): not taken
                 self.turns_refused += 1
+                # or a person lying down, a few degrees short of the window: _searches_early
+                short = degrees_short_of_lying(q.j3, self._centres)
+                if short is not None and (self._search_refused_short is None or short < self._search_refused_short):
+                    self._search_refused_short = short
                 log.debug("pair %d: crops turned %s degrees found a body that does not lie as turned", sequence, turns)
             if q.novel is not None:
                 q.novel.abandon()
@@ -1159,12 +1178,38 @@ class Estimator:
         weak pairs do not search (someone no turn rights, most likely: a person lying along a line of sight reads
         weakly pair after pair, three encoder runs and up to two passes a search for nothing), unless one loses the
         person ``p`` found (:meth:`_searches_early`). A search such a pair makes early lets the wait run on as it
-        would have: it never puts off the search the wait would have made."""
-        if self._turn_search_wait > 0:  # an early search
+        would have: it never puts off the search the wait would have made, nor makes another early one, but for a
+        body nearly lying that rolled nearer the window since the search before (:data:`_NEAR_LIE_STEP_DEG`)."""
+        early = self._turn_search_wait > 0
+        if early:
             self._turn_search_wait -= 1
         else:
             self._turn_search_wait = self.config.roi.turn_search_every - 1
-        self._failed_search_found = bool(p.someone)
+        self._failed_search_found = not early and bool(p.someone)
+        self._failed_search_short = self._near_lie_trigger(early)
+
+    def _near_lie_trigger(self, early: bool) -> float | None:
+        """After a search that kept no turn: how far short of lying the body it refused lay, when that lets the next
+        weak pair search (:meth:`_searches_early`): after the wait's own search, any body nearly lying; after an
+        early one, only one at least :data:`_NEAR_LIE_STEP_DEG` nearer the window than at the search before (rolling
+        in; else the early searches end, as session 59's did after one)."""
+        now, before = self._search_refused_short, self._failed_search_short
+        if not early:
+            return now
+        if now is not None and before is not None and now <= before - _NEAR_LIE_STEP_DEG:
+            return now
+        return None
+
+    def _end_wait(self) -> None:
+        """Someone found well, upright or through a turn a search just kept: the wait after a failed search
+        (:meth:`_wait_after_search`) is over, and the next weak pair searches at once. A search the wait let through
+        early (:meth:`_searches_early`) that kept a turn left the wait running, and with it the early search's
+        trigger: the tracked pairs through the turn never end it, so the search after the turn was lost counted as
+        an early one, and the wait it set ran from the old search (the cartwheel past 150 degrees, a one-off look
+        with benchmarks/measure_lying_rendered.py --rolls: docs/turn-search.md, "A body nearly lying")."""
+        self._turn_search_wait = 0
+        self._failed_search_found = False
+        self._failed_search_short = None
 
     def _searches_early(self, p: "_Pass") -> bool:
         """Whether ``p``, a weak pass in the wait after a search that kept no turn (:meth:`_wait_after_search`),
@@ -1175,8 +1220,12 @@ class Estimator:
         each such search: the early search's own pass found nobody, so the passes after it wait (at most one
         early search for each search the wait follows). A body that stays found or stays lost waits as before.
         (A body axis turned more than 10-15 degrees since the failed search was tried as a trigger too: more
-        searches in the rolls, no turn found sooner.)"""
-        return self._failed_search_found and not p.someone
+        searches in the rolls, no turn found sooner.) Or, found or not, when the failed search refused a turned
+        pass of a body a few degrees short of lying (:func:`nears_a_turned_lie`): its upright pass had found
+        nobody, but the turn read the body rolling toward the window (docs/turn-search.md, "A body nearly lying");
+        once too, unless the early search's turned pass read the body rolled nearer the window
+        (:meth:`_near_lie_trigger`)."""
+        return (self._failed_search_found and not p.someone) or self._failed_search_short is not None
 
     def _lies_as_turned(self, j3: Joints3D) -> bool:
         """:func:`lies_as_turned` of ``j3`` seen by this rig's two cameras (the turn search's rule; a kept turn's passes

@@ -49,9 +49,10 @@ from ghnerf_runtime.config import FOOT_STANDING_M, MAX_FOOT_STANDING_M, MIN_CUTO
     TrackingConfig
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, WEIGHTS_ID_KEY
 from ghnerf_runtime.body_lie import KEPT_TURN_SECTOR_DEG, KEPT_TURN_STEP_DEG, TURN_LIE_TOLERANCE_DEG, \
-    TURN_MIN_FROM_SIGHT_DEG
-from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _PRIOR_CONFIDENCE_SCALE_M,
-                                      _PRIOR_FOLLOW_MAX_ERROR_M, STILL_SEVERAL_MIN_JOINTS, PairResult)
+    TURN_MIN_FROM_SIGHT_DEG, TURN_NEAR_LIE_DEG
+from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _NEAR_LIE_STEP_DEG,
+                                      _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M,
+                                      STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
 from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import AXES_PIVOT_DROP_M, AXES_PIVOT_HOLD_M, PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
@@ -223,6 +224,10 @@ def _doc(name: str) -> str:
     ("docs/turn-search.md", f"`roi.turn_search_every` - 1 ({RoiConfig().turn_search_every - 1}) weak pairs that do not "
                             "search"),
     ("docs/turn-search.md", f"least {TURN_MIN_FROM_SIGHT_DEG:g} degrees (`TURN_MIN_FROM_SIGHT_DEG`) from each camera's"),
+    # session 60: a failed search's refused turned pass nearly lying lets the next weak pair search
+    ("docs/turn-search.md", f"at most `TURN_NEAR_LIE_DEG` ({TURN_NEAR_LIE_DEG:g}) degrees short of level (60-70 "
+                            "degrees from upright"),
+    ("docs/turn-search.md", f"at least `_NEAR_LIE_STEP_DEG` ({_NEAR_LIE_STEP_DEG:g}) degrees nearer the window"),
     ("docs/rig-file.md", f"runtime may add ({MAX_NEAR_FAR_MARGIN_M:g} m, `contract.MAX_NEAR_FAR_MARGIN_M`"),
     ("docs/rig-file.md", f"within {MAX_DEPTH_M:g} m (`contract.MAX_DEPTH_M`) of every camera"),
     # session 59's review: docs/bring-up.md, the checklist a user follows on hardware nobody here could try

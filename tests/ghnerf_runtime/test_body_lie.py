@@ -197,3 +197,27 @@ def test_a_roll_onto_a_line_of_sight_is_not_kept():
     assert not lies_as_kept_turn(body, CENTRES, (90, 90), _tilted(127.0, towards=(0.0, 0.0, 1.0)))
     # the same roll across the views is kept
     assert lies_as_kept_turn(_stick(_tilted(130.0)), CENTRES, (90, 90), _tilted(127.0))
+
+
+@pytest.mark.parametrize("degrees, towards, near", [
+    (65.0, (1.0, 0.0, 0.0), True),  # lying down across the views, 5 degrees short of the window
+    (61.0, (1.0, 0.0, 0.0), True),  # 9 short
+    (55.0, (1.0, 0.0, 0.0), False),  # 15 short: still bending over
+    (75.0, (1.0, 0.0, 0.0), False),  # in the window: lies_as_turned keeps it, nothing to be near
+    (115.0, (1.0, 0.0, 0.0), False),  # past lying toward upside down: where people along a sight line read
+    (150.0, (1.0, 0.0, 0.0), False),  # short of upside down: the same
+    (65.0, (0.0, 0.0, -1.0), False),  # tilted along the line of sight: no turn rights it, however far it rolls
+])
+def test_a_refused_body_nearly_lying_across_the_views(degrees, towards, near):
+    """``nears_a_turned_lie`` (``degrees_short_of_lying``: how far): a refused turned pass of a person lying down,
+    up to ``TURN_NEAR_LIE_DEG`` short of the lying window (the search's early retry after a failed search,
+    docs/turn-search.md, "A body nearly lying")."""
+    from ghnerf_runtime.body_lie import TURN_NEAR_LIE_DEG, degrees_short_of_lying, nears_a_turned_lie
+
+    assert TURN_NEAR_LIE_DEG == 10.0
+    j3 = _stick(_tilted(degrees, towards))
+    assert nears_a_turned_lie(j3, CENTRES) is near
+    short = degrees_short_of_lying(j3, CENTRES)  # how far short: the early searches' "rolling in" compares it
+    assert short is None if not near else short == pytest.approx(90.0 - TURN_LIE_TOLERANCE_DEG - degrees)
+    if near:
+        assert not lies_as_turned(j3, CENTRES)  # only ever asked of a refused pass

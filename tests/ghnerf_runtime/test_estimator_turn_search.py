@@ -534,12 +534,13 @@ def test_reset_returns_to_upright_crops_with_the_turn_state_cleared():
     est._turn_check_wait, est.turn_searches, est.turns_kept, est.turn_checks = 3, 2, 1, 4
     est._kept_axis = np.array([1.0, 0.0, 0.0])  # the last pass kept through the turn lay across the view
     est._failed_search_found = True  # a search that kept no turn, over a pass that found someone
+    est._failed_search_short = 5.0  # and that refused a body 5 degrees short of lying
     turned = est.tracker
     est.reset()
     assert est._turns == (0, 0) and [st.turn_deg for st in est._cams] == [0.0, 0.0]
     assert est.tracker is est._turned_trackers[0, 0] and est.tracker.track is None and turned.track is None
     assert est._turn_check_wait == 0 and est._turn_search_wait == 0 and est._kept_axis is None
-    assert not est._failed_search_found
+    assert not est._failed_search_found and est._failed_search_short is None
     assert (est.turn_searches, est.turns_kept, est.turn_checks) == (2, 1, 4)
 
 
@@ -853,11 +854,12 @@ def test_a_kept_turns_roll_is_not_measured_against_a_pass_pairs_old():
     assert r.missing.all() and est._turns == (0, 0) and est.turns_refused == 1
 
 
-def _weak_cold_pairs(reads):
+def _weak_cold_pairs(reads, keeps=()):
     """An oracle-session estimator (no model, the turn search on at ``turn_search_every`` 5) whose upright passes
     read, pair after pair, ``reads``: a body's joints (someone found, weakly: every pass here is weak) or ``None``
-    (nobody found); no pass leaves a track, so every pair is cold, and every search keeps no turn. Returns the
-    pairs (1-based) that searched."""
+    (nobody found); no pass leaves a track, so every pair is cold, and every search keeps no turn but those of the
+    pairs (1-based) in ``keeps``, which keep a pass that found the body lying. Returns the pairs (1-based) that
+    searched."""
     from benchmarks.bench_runtime_common import OracleSession, edge128_contract
     from ghnerf_runtime.estimator import Estimator, _Pass
 
@@ -874,6 +876,8 @@ def _weak_cold_pairs(reads):
 
     def search(images, p, sequence, timing, novel_view, track=None):
         searched.append(sequence + 1)
+        if sequence + 1 in keeps:
+            return _found(est, p.regions, _tilted(90.0))  # a turn kept
         return p  # no turn kept
 
     est._turn_search = search
@@ -912,3 +916,77 @@ def test_a_weak_pair_in_the_wait_searches_when_it_lost_the_failed_searchs_person
     pair in the wait that finds nobody where the failed search's pass found someone searches at once."""
     reads = [None if d is None else _tilted(d) for d in reads]
     assert _weak_cold_pairs(reads) == searched
+
+
+def _searches_with_turned_reads(turned_reads):
+    """An oracle-session estimator (no model, the turn search on at ``turn_search_every`` 5) whose upright passes
+    find nobody, pair after pair, and whose turned passes (the one turn ``(90, 90)`` the search tries) read, pair
+    after pair, a body rolled ``turned_reads[i]`` degrees across the view (about the rig's z axis): the search's own
+    code runs, with its body-lie rule and its refusals. Returns the pairs (1-based) that searched."""
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime.estimator import Estimator, _Pass
+
+    sim = pytest.importorskip("drivers.sim")
+    rig = sim.RigPlacement().build()
+    est = Estimator(OracleSession(edge128_contract()), rig, EstimatorConfig(roi=RoiConfig(turn_search=True)))
+    assert est.config.roi.turn_search_every == 5
+    names = est.camera_names
+    heat = {"encoder_heatmaps": np.zeros((2, 25, 4, 4), np.float32)}
+    now, searched = {}, []
+
+    def one_pass(images, regions, *a, **k):
+        if est._turns == (0, 0):
+            return _Pass(regions, {n: None for n in names}, env=heat)  # nobody found upright
+        return replace(_found(est, regions, _tilted(now["deg"])), env=heat)
+
+    est._pass = one_pass
+    est._weak_pass = lambda p: True
+    est._turn_candidates = lambda images, base, timing, track=None: [(90, 90)]
+    search = est._turn_search
+
+    def counted(images, p, sequence, *a, **k):
+        searched.append(sequence + 1)
+        return search(images, p, sequence, *a, **k)
+
+    est._turn_search = counted
+    images = [np.zeros((c.size[1], c.size[0], 3), np.uint8) for c in rig.pair]
+    for i, deg in enumerate(turned_reads):
+        now["deg"] = deg
+        est.estimate(images, sequence=i)
+    assert est.turns_kept == 0
+    return searched
+
+
+@pytest.mark.parametrize("turned_reads, searched", [
+    # lying down, lost by the upright crops, read through the quarter turn 65 degrees from upright (5 short of the
+    # lying window): refused, but the next pair searches at once; the wait runs on from the failed search
+    ([65, 68, 68, 68, 68, 68, 68], [1, 2, 3, 6, 7]),
+    # ... and again while each early search reads the body at least 2 degrees nearer the window (rolling in: 3 degrees
+    # a pair lying down), not when it stays
+    ([62, 65, 68, 69, 69, 69, 69, 69], [1, 2, 3, 4, 6, 7]),
+    # a body that stays there (propped on an elbow) searches twice in five pairs, not every pair
+    ([66, 66, 66, 66, 66, 66, 66], [1, 2, 6, 7]),
+    # further from lying (still bending over): the wait as before
+    ([50, 52, 54, 56, 58, 59, 59], [1, 6]),
+    # the turned reads of a person lying along a line of sight (past lying toward upside down, across the views):
+    # the wait as before
+    ([135, 135, 135, 135, 135, 135, 135], [1, 6]),
+])
+def test_a_failed_search_that_refused_a_body_nearly_lying_searches_again_at_once(turned_reads, searched):
+    """The search's upright pass found nobody (a person lying down, lost by the upright crops past 60-70 degrees),
+    its turned pass read the body 54-69 degrees from upright and was refused (not yet level within
+    ``TURN_LIE_TOLERANCE_DEG``), and the next four weak pairs waited, the body rolling into the window meanwhile
+    (benchmarks/measure_lying_rendered.py --rolls: docs/turn-search.md, "A body nearly lying"). Now the next weak
+    pair searches at once, and the next after it while the body rolls nearer the window (by at least 2 degrees
+    from search to search)."""
+    assert _searches_with_turned_reads(turned_reads) == searched
+
+
+def test_a_turn_kept_by_an_early_search_ends_the_wait():
+    """A search the wait let through early (``_searches_early``) that kept a turn left the wait running, and its
+    trigger set: the tracked pairs through the turn never ended it, so when the turn was lost the next search counted
+    as an early one, and the wait it left ran from the old search, not its own (the cartwheel past 150 degrees in
+    benchmarks/measure_lying_rendered.py --rolls: docs/turn-search.md, "A body nearly lying"). A kept turn ends the
+    wait, as a pair that finds someone well does: the search after it starts a wait of its own, four weak pairs."""
+    reads = [_tilted(45.0)] + [None] * 7  # found weakly, then lost: the second pair searches early, and keeps a turn
+    assert _weak_cold_pairs(reads, keeps={2}) == [1, 2, 3, 8]
