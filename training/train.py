@@ -48,7 +48,7 @@ import sys
 import threading
 import time
 import tomllib
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Iterator, Literal, Mapping
@@ -59,6 +59,8 @@ import torch.distributed as dist
 import torch.nn.functional as F
 from torch import Tensor
 
+from ghnerf_runtime.cli.sigterm import (exit_status, sigterm_as_interrupt, sigterm_deferred, sigterm_raises,
+                                        stop_words)
 from ghnerf_runtime.contract import ray_grid
 from training.configs import PRESETS, preset
 from training.losses import LossConfig, compute_losses
@@ -642,22 +644,24 @@ class CheckpointWriteError(OSError):
 
 @contextmanager
 def ctrl_c_after() -> Iterator[None]:
-    """Hold a Ctrl-C (SIGINT) that comes during the block until the block is done, then raise it.
+    """Hold a Ctrl-C (SIGINT) or a SIGTERM that comes during the block until the block is done, then raise it.
 
     A checkpoint write takes a second or so: a KeyboardInterrupt raised inside torch's writer came out as a
     RuntimeError ("unexpected pos"), reported as a failed write with advice to free space, and the step's
-    checkpoint was lost. Only in the main thread with Python's own handler installed (elsewhere: no change).
+    checkpoint was lost. SIGINT only in the main thread with Python's own handler installed, SIGTERM only where
+    the command line made it raise (``sigterm_as_interrupt``); elsewhere no change.
     """
-    if threading.current_thread() is not threading.main_thread() \
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
-        yield
-        return
+    hold_int = threading.current_thread() is threading.main_thread() \
+        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
     caught: list[int] = []
-    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    if hold_int:
+        signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
     try:
-        yield
+        with sigterm_deferred() if sigterm_raises() else nullcontext():
+            yield
     finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        if hold_int:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     if caught:
         raise KeyboardInterrupt
 
@@ -1182,7 +1186,8 @@ def main(argv: list[str] | None = None) -> int:
     from training.data.errors import DataError
 
     try:
-        summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
+        with sigterm_as_interrupt():  # `timeout`, `kill`, a job scheduler: stopped as Ctrl-C stops it
+            summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
     except (ConfigError, DataError) as e:  # of the run itself: its folder, a checkpoint, the dataset or split
         kind = "config error" if isinstance(e, ConfigError) else "data error"
         print(f"ghnerf-train: {kind}: {e}", file=sys.stderr)
@@ -1195,10 +1200,10 @@ def main(argv: list[str] | None = None) -> int:
         if dist.is_initialized():
             dist.destroy_process_group()
         return 1
-    except KeyboardInterrupt:  # Ctrl-C: the checkpoints are whole (save_checkpoint), so say how to go on
-        print(f"ghnerf-train: stopped (Ctrl-C); `--resume --out {out}` continues from its last checkpoint",
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: the checkpoints are whole (save_checkpoint): say how to go on
+        print(f"ghnerf-train: stopped ({stop_words(e)}); `--resume --out {out}` continues from its last checkpoint",
               file=sys.stderr)
-        return 130
+        return exit_status(e)
     if int(os.environ.get("RANK", "0")) == 0:
         print(json.dumps(summary))
     if dist.is_initialized():

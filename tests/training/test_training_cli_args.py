@@ -77,6 +77,26 @@ def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeyp
     assert rc == 130 and f"`--resume --out {tmp_path / 'run'}` continues" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("module", ["training.train", "training.pretrain_human"])
+def test_a_sigterm_stops_training_as_ctrl_c_does_with_143_and_how_to_resume(tmp_path, capsys, monkeypatch, module):
+    """``timeout``, ``kill`` or a job scheduler's stop: SIGTERM (raised as ``Terminated`` under the command line's
+    ``sigterm_as_interrupt``) is named as such and exits 143, the shell's figure; it was reported as a Ctrl-C, and
+    outside a test it killed the process silently, leaving its ``.tmp`` checkpoint and ``train.pid``."""
+    import importlib
+
+    from ghnerf_runtime.cli.sigterm import Terminated
+
+    tool = importlib.import_module(module)
+
+    def terminated(*a, **k):
+        raise Terminated("SIGTERM")
+
+    monkeypatch.setattr(tool, "train" if module == "training.train" else "pretrain", terminated)
+    rc = tool.main(["--data", str(tmp_path), "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert rc == 143 and "stopped (SIGTERM); `--resume --out" in err and "Ctrl-C" not in err
+
+
 # ------------------------------------------------------------------ python -m training.export
 @pytest.mark.parametrize(("extra", "words"), [
     (["--threads", "0"], "--threads: must be at least 1, got 0"),  # was torch's RuntimeError
