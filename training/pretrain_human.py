@@ -55,9 +55,9 @@ from training.model_card import write_atomic
 from training import pretrain_checkpoint
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
-    encoder_views_images, learning_rate, load_config_file, mirrored, model_config_of, padding_config, \
-    refuse_another_config, refuse_another_model, refuse_existing_run, refuse_live_lock, require_resume_keys, \
-    save_atomic, scene_order, seed_everything, take_lock, truncate_log
+    encoder_views_images, holds_more_than_weights, learning_rate, load_config_file, load_error_words, mirrored, \
+    model_config_of, padding_config, refuse_another_config, refuse_another_model, refuse_existing_run, \
+    refuse_live_lock, require_resume_keys, save_atomic, scene_order, seed_everything, take_lock, truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -363,7 +363,10 @@ def load_human(model: GHNeRF, path: str | Path, what: str = "human_init") -> int
     except FileNotFoundError as e:
         raise ConfigError(f"{what}: cannot read {p}: no such file") from e
     except Exception as e:  # noqa: BLE001 - torch raises several types (pickle, zip, runtime) for a bad file
-        raise ConfigError(f"{what}: cannot read {p}: {type(e).__name__}: {str(e).splitlines()[0]}") from e
+        if holds_more_than_weights(e):
+            raise ConfigError(f"{what}: {p} is not a human-encoder checkpoint (it holds more than weights: a "
+                              "training run's last.pt or ckpt_*.pt?); give the pretraining's human.pt") from e
+        raise ConfigError(f"{what}: cannot read {p}: {load_error_words(e)}") from e
     if not isinstance(state, dict) or "human" not in state:
         raise ConfigError(f"{what}: {p} is not a human-encoder checkpoint (no 'human' weights)")
     if model.human is None:

@@ -42,6 +42,7 @@ import argparse
 import json
 import math
 import os
+import pickle
 import random
 import signal
 import sys
@@ -791,6 +792,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         for key in ("init", "human_init"):
             if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
+        check_start_weights(cfg)
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -1021,6 +1023,59 @@ def truncate_log(path: Path, step: int) -> None:
     write_atomic(path, "".join(kept))
 
 
+def holds_more_than_weights(e: BaseException) -> bool:
+    """Whether ``torch.load(..., weights_only=True)`` refused a whole pickle for holding other objects (a training
+    checkpoint's numpy RNG state), not a damaged file: torch words both as a page of advice, the first naming the
+    ``Unsupported global``."""
+    return isinstance(e, pickle.UnpicklingError) and "Unsupported global" in str(e)
+
+
+def load_error_words(e: BaseException) -> str:
+    """Why ``torch.load`` could not read a file, in a few words: a file that is no pickle at all is a page of
+    advice on ``weights_only`` to torch, which says nothing of the file."""
+    if isinstance(e, pickle.UnpicklingError):
+        return "UnpicklingError: not a file torch.save wrote, or a damaged one"
+    words = " ".join(str(e).split())[:200] or ("the file ends before its first record (empty?)"
+                                               if isinstance(e, EOFError) else "no message")
+    return f"{type(e).__name__}: {words}"
+
+
+def load_init_weights(model: GHNeRF, path: str) -> None:
+    """``init``: torchvision's resnet18 weights into the human encoder's trunk; a file that is not such weights is a
+    ConfigError naming it (torch's errors came out as a traceback)."""
+    if model.human is None:
+        raise ConfigError("init: the preset has no human encoder")
+    from training.model.human_encoder import load_torchvision_resnet18
+
+    try:
+        load_torchvision_resnet18(model.human.trunk, path)
+    except Exception as e:  # noqa: BLE001 - torch raises several types (zip, EOF, a key or shape mismatch)
+        if holds_more_than_weights(e):
+            raise ConfigError(f"init: {path}: holds more than weights (a training run's last.pt or ckpt_*.pt?); "
+                              "init takes torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
+        raise ConfigError(f"init: {path}: not torchvision resnet18 weights this encoder takes "
+                          f"({load_error_words(e)})") from e
+
+
+def load_start_weights(model: GHNeRF, cfg: TrainConfig) -> None:
+    """The weights a new run starts from: ``init`` (torchvision), then ``human_init`` (the pretraining's
+    ``human.pt``); each file that does not fit is a ConfigError naming the setting and the file."""
+    if cfg.init:
+        load_init_weights(model, cfg.init)
+    if cfg.human_init:
+        from training.pretrain_human import load_human
+
+        load_human(model, cfg.human_init)
+
+
+def check_start_weights(cfg: TrainConfig) -> None:
+    """Load ``init`` / ``human_init`` into a throwaway model before the run folder is written: a file that is no
+    such weights, or of another encoder, was found after ``config.json`` was (``init``'s as a traceback). The run
+    reseeds before it builds its own model, so this changes none of its numbers."""
+    if cfg.init or cfg.human_init:
+        load_start_weights(GHNeRF(cfg.model_config()), cfg)
+
+
 def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device, *, start: Path | None,
            resume: bool, quiet: bool, dataset) -> tuple[dict, GHNeRF]:
     mcfg = cfg.model_config()
@@ -1028,16 +1083,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
 
     seed_everything(cfg.seed)  # same initial weights on every rank
     model = GHNeRF(mcfg).to(device).train()
-    if cfg.init and start is None:  # (a resume's checkpoint holds the weights these files gave its start)
-        if model.human is None:
-            raise ConfigError("init: the preset has no human encoder")
-        from training.model.human_encoder import load_torchvision_resnet18
-        load_torchvision_resnet18(model.human.trunk, cfg.init)
-    if cfg.human_init:
-        if start is None:
-            from training.pretrain_human import load_human
-            load_human(model, cfg.human_init)
-    elif cfg.pretrain_human and info.main and not resume:
+    if start is None:  # (a resume's checkpoint holds the weights these files gave its start)
+        load_start_weights(model, cfg)
+    if not cfg.human_init and cfg.pretrain_human and info.main and not resume:
         print("warning: the config has a pretrain_human block but no human_init: the human encoder starts from "
               "scratch (run `python -m training.pretrain_human` first and pass its human.pt, or `make model`)",
               file=sys.stderr)

@@ -63,6 +63,61 @@ def test_train_refuses_a_file_for_its_run_folder_and_a_missing_init_before_writi
     assert not run.exists()  # was a FileNotFoundError traceback after run/config.json was written
 
 
+def _a_training_checkpoint(path):
+    """A file shaped as a run's last.pt: weights beside numpy RNG state, which torch's weights-only load refuses."""
+    import numpy as np
+    import torch
+
+    torch.save({"model": {"w": torch.zeros(2)}, "rng": {"numpy": np.random.get_state()}}, path)
+    return path
+
+
+@pytest.mark.parametrize(("key", "make", "words"), [
+    # a traceback (torch's zip reader) after run/config.json was written
+    ("init", lambda p: p.write_bytes(b"PK\x03\x04 cut short") and p,
+     "init: {f}: not torchvision resnet18 weights this encoder takes (RuntimeError: "),
+    # a traceback: a page of torch's advice on trusting the file, in ANSI bold
+    ("init", _a_training_checkpoint,
+     "init: {f}: holds more than weights (a training run's last.pt or ckpt_*.pt?); init takes torchvision's"),
+    # torch's advice on weights_only, which says nothing of the file, and after run/config.json was written
+    ("human_init", lambda p: p.write_text("x") and p,
+     "human_init: cannot read {f}: UnpicklingError: not a file torch.save wrote, or a damaged one"),
+    ("init", lambda p: p.write_bytes(b"") or p, "init: {f}: not torchvision resnet18 weights this encoder takes "
+                                                "(EOFError: the file ends before its first record (empty?))"),
+    # one line, but torch's page of advice cut to its first line, and after run/config.json was written
+    ("human_init", _a_training_checkpoint,
+     "human_init: {f} is not a human-encoder checkpoint (it holds more than weights: a training run's last.pt"),
+])
+def test_train_refuses_start_weights_that_are_not_such_weights_before_writing(data64, tmp_path, capsys, key, make,
+                                                                             words):
+    from training.train import main
+
+    weights = make(tmp_path / "weights.pth")
+    run = tmp_path / "run"
+    assert main(["--preset", "tiny", "--data", str(data64), "--out", str(run), "--iterations", "1",
+                 "--set", f"{key}={json.dumps(str(weights))}"]) == 2
+    assert words.format(f=weights) in capsys.readouterr().err
+    assert not run.exists()
+
+
+def test_train_refuses_a_human_pt_of_another_encoder_before_writing(data64, tmp_path, capsys):
+    import torch
+
+    from training.configs import preset
+    from training.model import GHNeRF
+    from training.train import main
+
+    other = preset("tiny")
+    other.human.num_layers = 3
+    human = tmp_path / "human.pt"
+    torch.save({"human": GHNeRF(other).human.state_dict(), "model_config": other.to_dict(), "step": 5}, human)
+    run = tmp_path / "run"
+    assert main(["--preset", "tiny", "--data", str(data64), "--out", str(run), "--iterations", "1",
+                 "--set", f"human_init={json.dumps(str(human))}"]) == 2
+    assert f"human_init: {human} was pretrained with human.num_layers=3, this model has 2" in capsys.readouterr().err
+    assert not run.exists()  # its config.json was written first
+
+
 def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeypatch):
     import training.train as tr
 
