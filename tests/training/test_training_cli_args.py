@@ -3,6 +3,7 @@ before the work, Ctrl-C exits 130 with a line, never a traceback."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -177,6 +178,23 @@ def test_export_refuses_bad_values_before_the_export(tmp_path, capsys, extra, wo
         main(["--preset", "tiny", *out, *extra])
     assert e.value.code == 2 and words in capsys.readouterr().err
     assert not (tmp_path / "m.staging").exists()
+
+
+@pytest.mark.parametrize("where", ["under a file", "on /proc"])
+def test_export_refuses_an_out_whose_folder_cannot_take_it_before_the_export(tmp_path, capsys, where):
+    """Was a traceback after the model was built: under a file, one that blamed "a cut-short move" (the staging
+    folder's moving.json could not be read), on /proc a FileNotFoundError of OUT.staging."""
+    from training.export.cli import main
+
+    if where == "on /proc" and not Path("/proc/self").exists():
+        pytest.skip("no /proc here")
+    (tmp_path / "afile").write_text("")
+    out = tmp_path / "afile" / "m" if where == "under a file" else Path("/proc/ghnerf-no-such-model")
+    words = (f"--out {out}: {tmp_path / 'afile'} is a file, not a folder" if where == "under a file" else
+             f"--out {out}: the folder /proc is not writable (")
+    with pytest.raises(SystemExit) as e:
+        main(["--preset", "tiny", "--out", str(out)])
+    assert e.value.code == 2 and words in capsys.readouterr().err
 
 
 def test_the_opset_range_is_what_torch_exports():
