@@ -706,6 +706,9 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
     ck = load_checkpoint(path, map_location, hint=READ_HINT)
     if not isinstance(ck, Mapping):
         raise ConfigError(f"{path}: not a model checkpoint (a {type(ck).__name__}); {READ_HINT}")
+    if "human" in ck and "model" not in ck:  # was "its weights do not fit", listing the missing tensors
+        raise ConfigError(f"{path}: a human-encoder pretraining checkpoint (the encoder's weights alone, the start "
+                          f"of a joint run's human_init), not a model; {READ_HINT}")
     if "model_config" in ck:
         mcfg = ModelConfig.from_dict(ck["model_config"], "model_config")
     elif default_config is not None:

@@ -197,6 +197,29 @@ def test_export_refuses_an_out_whose_folder_cannot_take_it_before_the_export(tmp
     assert e.value.code == 2 and words in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("tool", ["export", "eval"])
+def test_a_pretraining_s_human_pt_given_as_a_model_is_named_as_such(data64, tmp_path, capsys, tool):
+    """The pretraining's human.pt (or its last.pt) given to export or ghnerf-eval was "its weights do not fit its
+    model config" and a list of missing tensors."""
+    import torch
+
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    cfg = preset("tiny")
+    human = tmp_path / "human.pt"
+    torch.save({"human": GHNeRF(cfg).human.state_dict(), "model_config": cfg.to_dict(), "step": 3}, human)
+    words = f"{human}: a human-encoder pretraining checkpoint (the encoder's weights alone, the start of a joint run's"
+    if tool == "export":
+        from training.export.cli import main
+
+        rc = main(["--checkpoint", str(human), "--out", str(tmp_path / "m")])
+    else:
+        rc = evaluate.main(["--data", str(data64), "--model", str(human), "--limit", "1", "--no-novel"])
+    assert rc == 2 and words in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
+
+
 def test_the_opset_range_is_what_torch_exports():
     """``training.export.opsets``: 16 needs GridSample (ONNX 16), 20 is the TorchScript exporter's newest here."""
     from torch.onnx import _constants
