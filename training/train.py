@@ -889,9 +889,10 @@ def checkpoint_world_size(ck: dict) -> int:
 def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...]) -> None:
     """Refuse to resume ``last`` (whose run had config ``was``) under ``now``: the rest of the run would
     silently mix two. Only the keys in ``may_change`` may differ."""
-    differ = sorted(k for k in set(was) | set(now) if k not in may_change and was.get(k) != now.get(k))
+    differ = [f"{p} {a!r} in the run, {b!r} now" for k in sorted(set(was) | set(now)) if k not in may_change
+              for p, a, b in _differences(was.get(k), now.get(k), k)]
     if differ:
-        raise ConfigError(f"{last}: resuming under another config ({', '.join(differ)} differ from the run's); "
+        raise ConfigError(f"{last}: resuming under another config ({'; '.join(differ)}); "
                           "resume changes only " + ", ".join(may_change) + ": start a new run (--out) "
                           "for another config")
 
@@ -912,14 +913,19 @@ def require_resume_keys(ck: Any, path: Path, keys: tuple[str, ...] = RESUME_KEYS
                           "last.pt, or start a new run (another --out)")
 
 
+def _differences(was: Any, now: Any, path: str = "") -> list[tuple[str, Any, Any]]:
+    """``(dotted path, was, now)`` where two JSON-like trees differ (``levels[0].samples``)."""
+    if isinstance(was, dict) and isinstance(now, dict):
+        return [d for k in sorted(set(was) | set(now), key=str)
+                for d in _differences(was.get(k), now.get(k), f"{path}.{k}" if path else str(k))]
+    if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
+        return [d for i, (a, b) in enumerate(zip(was, now)) for d in _differences(a, b, f"{path}[{i}]")]
+    return [] if was == now else [(path or "(root)", was, now)]
+
+
 def _differing_paths(was: Any, now: Any, path: str = "") -> list[str]:
     """Dotted paths (``levels[0].samples``) where two JSON-like trees differ."""
-    if isinstance(was, dict) and isinstance(now, dict):
-        return [p for k in sorted(set(was) | set(now), key=str)
-                for p in _differing_paths(was.get(k), now.get(k), f"{path}.{k}" if path else str(k))]
-    if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
-        return [p for i, (a, b) in enumerate(zip(was, now)) for p in _differing_paths(a, b, f"{path}[{i}]")]
-    return [] if was == now else [path or "(root)"]
+    return [p for p, _, _ in _differences(was, now, path)]
 
 
 def refuse_another_model(last: Path, stored: Any, now: ModelConfig) -> None:

@@ -148,7 +148,7 @@ def test_pretraining_resume_refuses_another_config(data64, tmp_path):
     from training.model.config import ConfigError
 
     pretrain(tiny_pretrain(data64, iterations=1), tmp_path / "p", quiet=True)
-    with pytest.raises(ConfigError, match="lr, seed differ"):
+    with pytest.raises(ConfigError, match=r"\(lr 0\.001 in the run, 0\.5 now; seed 0 in the run, 9 now\)"):
         pretrain(tiny_pretrain(data64, lr=0.5, seed=9), tmp_path / "p", resume=True, quiet=True)
     assert pretrain(tiny_pretrain(data64, max_minutes=5.0), tmp_path / "p", resume=True, quiet=True)["steps"] == 2
     # without --resume a folder holding a run is refused before anything in it is overwritten

@@ -359,6 +359,18 @@ def _resume_run(data64, tmp_path):
     return run, (run / "config.json").read_text()
 
 
+def test_resume_under_another_config_names_each_setting_with_both_values(data64, tmp_path):
+    """It named the keys alone (``loss, lr differ from the run's``): which loss weight, and what it was, had to be
+    dug out of config.json."""
+    run, before = _resume_run(data64, tmp_path)
+    with pytest.raises(ConfigError) as e:
+        train(tiny_cfg(data64, pck_every=0, lr=1e-3, loss={"coord_weight": 0.01, "heat_weight": 1.0}), run,
+              resume=True, quiet=True)
+    assert "resuming under another config (loss.heat_weight 0.5 in the run, 1.0 now; lr 0.0005 in the run, " \
+           "0.001 now); resume changes only iterations" in str(e.value)
+    assert (run / "config.json").read_text() == before
+
+
 def test_resume_refuses_another_model_config_and_a_weights_only_file(data64, tmp_path):
     run, before = _resume_run(data64, tmp_path)
     last = run / "last.pt"
