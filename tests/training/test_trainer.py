@@ -199,7 +199,7 @@ def test_resume_refuses_another_config_and_names_a_damaged_checkpoint(data64, tm
 
     train(tiny_cfg(data64, iterations=1), tmp_path / "r", quiet=True)
     before = (tmp_path / "r" / "config.json").read_text()
-    with pytest.raises(ConfigError, match=r"lr, seed differ"):
+    with pytest.raises(ConfigError, match=r"\(lr 0\.0005 in the run, 0\.1 now; seed 0 in the run, 5 now\)"):
         train(tiny_cfg(data64, lr=0.1, seed=5), tmp_path / "r", resume=True, quiet=True)
     assert (tmp_path / "r" / "config.json").read_text() == before  # the run's record untouched
     last = tmp_path / "r" / "last.pt"
