@@ -53,10 +53,11 @@ from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
 from training.model_card import write_atomic
 from training import pretrain_checkpoint
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from training.train import HEATMAP_SIGMA_HM_PX, CheckpointWriteError, DistInfo, Progress, apply_overrides, \
-    encoder_views_images, learning_rate, load_config_file, mirrored, model_config_of, padding_config, \
-    refuse_another_config, refuse_another_model, refuse_existing_run, refuse_live_lock, require_resume_keys, \
-    save_atomic, scene_order, seed_everything, take_lock, truncate_log
+    encoder_views_images, holds_more_than_weights, learning_rate, load_config_file, load_error_words, mirrored, \
+    model_config_of, padding_config, refuse_another_config, refuse_another_model, refuse_existing_run, \
+    refuse_live_lock, require_resume_keys, save_atomic, scene_order, seed_everything, take_lock, truncate_log
 
 HUMAN_CHECKPOINT_VERSION = 1
 
@@ -362,7 +363,10 @@ def load_human(model: GHNeRF, path: str | Path, what: str = "human_init") -> int
     except FileNotFoundError as e:
         raise ConfigError(f"{what}: cannot read {p}: no such file") from e
     except Exception as e:  # noqa: BLE001 - torch raises several types (pickle, zip, runtime) for a bad file
-        raise ConfigError(f"{what}: cannot read {p}: {type(e).__name__}: {str(e).splitlines()[0]}") from e
+        if holds_more_than_weights(e):
+            raise ConfigError(f"{what}: {p} is not a human-encoder checkpoint (it holds more than weights: a "
+                              "training run's last.pt or ckpt_*.pt?); give the pretraining's human.pt") from e
+        raise ConfigError(f"{what}: cannot read {p}: {load_error_words(e)}") from e
     if not isinstance(state, dict) or "human" not in state:
         raise ConfigError(f"{what}: {p} is not a human-encoder checkpoint (no 'human' weights)")
     if model.human is None:
@@ -671,7 +675,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     try:
-        summary = pretrain(cfg, args.out, resume=args.resume, quiet=args.quiet)
+        with sigterm_as_interrupt():  # `timeout`, `kill`, a job scheduler: stopped as Ctrl-C stops it
+            summary = pretrain(cfg, args.out, resume=args.resume, quiet=args.quiet)
     except (ConfigError, DataError) as e:  # while starting: a run folder in use, a resume under another config,
         print(f"error: {e}", file=sys.stderr)  # a file that is no checkpoint, a missing dataset or split
         return 2
@@ -679,9 +684,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {'diverged' if isinstance(e, FloatingPointError) else 'checkpoint not written'}: {e}",
               file=sys.stderr)
         return 1
-    except KeyboardInterrupt:  # Ctrl-C: the checkpoints are whole (save_atomic), so say how to go on
-        print(f"stopped (Ctrl-C); `--resume --out {args.out}` continues from its last checkpoint", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: the checkpoints are whole (save_atomic): say how to go on
+        print(f"stopped ({stop_words(e)}); `--resume --out {args.out}` continues from its last checkpoint",
+              file=sys.stderr)
+        return exit_status(e)
     print(json.dumps(summary, indent=1))
     return 0
 

@@ -42,13 +42,14 @@ import argparse
 import json
 import math
 import os
+import pickle
 import random
 import signal
 import sys
 import threading
 import time
 import tomllib
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Iterator, Literal, Mapping
@@ -59,6 +60,8 @@ import torch.distributed as dist
 import torch.nn.functional as F
 from torch import Tensor
 
+from ghnerf_runtime.cli.sigterm import (exit_status, sigterm_as_interrupt, sigterm_deferred, sigterm_raises,
+                                        stop_words)
 from ghnerf_runtime.contract import ray_grid
 from training.configs import PRESETS, preset
 from training.losses import LossConfig, compute_losses
@@ -642,22 +645,24 @@ class CheckpointWriteError(OSError):
 
 @contextmanager
 def ctrl_c_after() -> Iterator[None]:
-    """Hold a Ctrl-C (SIGINT) that comes during the block until the block is done, then raise it.
+    """Hold a Ctrl-C (SIGINT) or a SIGTERM that comes during the block until the block is done, then raise it.
 
     A checkpoint write takes a second or so: a KeyboardInterrupt raised inside torch's writer came out as a
     RuntimeError ("unexpected pos"), reported as a failed write with advice to free space, and the step's
-    checkpoint was lost. Only in the main thread with Python's own handler installed (elsewhere: no change).
+    checkpoint was lost. SIGINT only in the main thread with Python's own handler installed, SIGTERM only where
+    the command line made it raise (``sigterm_as_interrupt``); elsewhere no change.
     """
-    if threading.current_thread() is not threading.main_thread() \
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
-        yield
-        return
+    hold_int = threading.current_thread() is threading.main_thread() \
+        and signal.getsignal(signal.SIGINT) is signal.default_int_handler
     caught: list[int] = []
-    signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    if hold_int:
+        signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
     try:
-        yield
+        with sigterm_deferred() if sigterm_raises() else nullcontext():
+            yield
     finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        if hold_int:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
     if caught:
         raise KeyboardInterrupt
 
@@ -701,6 +706,9 @@ def load_model(path: str | Path, map_location: str | torch.device = "cpu",
     ck = load_checkpoint(path, map_location, hint=READ_HINT)
     if not isinstance(ck, Mapping):
         raise ConfigError(f"{path}: not a model checkpoint (a {type(ck).__name__}); {READ_HINT}")
+    if "human" in ck and "model" not in ck:  # was "its weights do not fit", listing the missing tensors
+        raise ConfigError(f"{path}: a human-encoder pretraining checkpoint (the encoder's weights alone, the start "
+                          f"of a joint run's human_init), not a model; {READ_HINT}")
     if "model_config" in ck:
         mcfg = ModelConfig.from_dict(ck["model_config"], "model_config")
     elif default_config is not None:
@@ -787,6 +795,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, *, resume: bool = False, quiet:
         for key in ("init", "human_init"):
             if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise ConfigError(f"{key}: {getattr(cfg, key)}: no such file")
+        check_start_weights(cfg)
     if info.main:
         refuse_live_lock(out_dir / "train.pid")  # a folder in use is named first, whatever else is wrong
     # a missing dataset or split, or one of another resolution: named before anything is written
@@ -880,9 +889,10 @@ def checkpoint_world_size(ck: dict) -> int:
 def refuse_another_config(last: Path, was: dict, now: dict, may_change: tuple[str, ...]) -> None:
     """Refuse to resume ``last`` (whose run had config ``was``) under ``now``: the rest of the run would
     silently mix two. Only the keys in ``may_change`` may differ."""
-    differ = sorted(k for k in set(was) | set(now) if k not in may_change and was.get(k) != now.get(k))
+    differ = [f"{p} {a!r} in the run, {b!r} now" for k in sorted(set(was) | set(now)) if k not in may_change
+              for p, a, b in _differences(was.get(k), now.get(k), k)]
     if differ:
-        raise ConfigError(f"{last}: resuming under another config ({', '.join(differ)} differ from the run's); "
+        raise ConfigError(f"{last}: resuming under another config ({'; '.join(differ)}); "
                           "resume changes only " + ", ".join(may_change) + ": start a new run (--out) "
                           "for another config")
 
@@ -903,14 +913,19 @@ def require_resume_keys(ck: Any, path: Path, keys: tuple[str, ...] = RESUME_KEYS
                           "last.pt, or start a new run (another --out)")
 
 
+def _differences(was: Any, now: Any, path: str = "") -> list[tuple[str, Any, Any]]:
+    """``(dotted path, was, now)`` where two JSON-like trees differ (``levels[0].samples``)."""
+    if isinstance(was, dict) and isinstance(now, dict):
+        return [d for k in sorted(set(was) | set(now), key=str)
+                for d in _differences(was.get(k), now.get(k), f"{path}.{k}" if path else str(k))]
+    if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
+        return [d for i, (a, b) in enumerate(zip(was, now)) for d in _differences(a, b, f"{path}[{i}]")]
+    return [] if was == now else [(path or "(root)", was, now)]
+
+
 def _differing_paths(was: Any, now: Any, path: str = "") -> list[str]:
     """Dotted paths (``levels[0].samples``) where two JSON-like trees differ."""
-    if isinstance(was, dict) and isinstance(now, dict):
-        return [p for k in sorted(set(was) | set(now), key=str)
-                for p in _differing_paths(was.get(k), now.get(k), f"{path}.{k}" if path else str(k))]
-    if isinstance(was, list) and isinstance(now, list) and len(was) == len(now):
-        return [p for i, (a, b) in enumerate(zip(was, now)) for p in _differing_paths(a, b, f"{path}[{i}]")]
-    return [] if was == now else [path or "(root)"]
+    return [p for p, _, _ in _differences(was, now, path)]
 
 
 def refuse_another_model(last: Path, stored: Any, now: ModelConfig) -> None:
@@ -1017,6 +1032,59 @@ def truncate_log(path: Path, step: int) -> None:
     write_atomic(path, "".join(kept))
 
 
+def holds_more_than_weights(e: BaseException) -> bool:
+    """Whether ``torch.load(..., weights_only=True)`` refused a whole pickle for holding other objects (a training
+    checkpoint's numpy RNG state), not a damaged file: torch words both as a page of advice, the first naming the
+    ``Unsupported global``."""
+    return isinstance(e, pickle.UnpicklingError) and "Unsupported global" in str(e)
+
+
+def load_error_words(e: BaseException) -> str:
+    """Why ``torch.load`` could not read a file, in a few words: a file that is no pickle at all is a page of
+    advice on ``weights_only`` to torch, which says nothing of the file."""
+    if isinstance(e, pickle.UnpicklingError):
+        return "UnpicklingError: not a file torch.save wrote, or a damaged one"
+    words = " ".join(str(e).split())[:200] or ("the file ends before its first record (empty?)"
+                                               if isinstance(e, EOFError) else "no message")
+    return f"{type(e).__name__}: {words}"
+
+
+def load_init_weights(model: GHNeRF, path: str) -> None:
+    """``init``: torchvision's resnet18 weights into the human encoder's trunk; a file that is not such weights is a
+    ConfigError naming it (torch's errors came out as a traceback)."""
+    if model.human is None:
+        raise ConfigError("init: the preset has no human encoder")
+    from training.model.human_encoder import load_torchvision_resnet18
+
+    try:
+        load_torchvision_resnet18(model.human.trunk, path)
+    except Exception as e:  # noqa: BLE001 - torch raises several types (zip, EOF, a key or shape mismatch)
+        if holds_more_than_weights(e):
+            raise ConfigError(f"init: {path}: holds more than weights (a training run's last.pt or ckpt_*.pt?); "
+                              "init takes torchvision's resnet18 state dict (resnet18-f37072fd.pth)") from e
+        raise ConfigError(f"init: {path}: not torchvision resnet18 weights this encoder takes "
+                          f"({load_error_words(e)})") from e
+
+
+def load_start_weights(model: GHNeRF, cfg: TrainConfig) -> None:
+    """The weights a new run starts from: ``init`` (torchvision), then ``human_init`` (the pretraining's
+    ``human.pt``); each file that does not fit is a ConfigError naming the setting and the file."""
+    if cfg.init:
+        load_init_weights(model, cfg.init)
+    if cfg.human_init:
+        from training.pretrain_human import load_human
+
+        load_human(model, cfg.human_init)
+
+
+def check_start_weights(cfg: TrainConfig) -> None:
+    """Load ``init`` / ``human_init`` into a throwaway model before the run folder is written: a file that is no
+    such weights, or of another encoder, was found after ``config.json`` was (``init``'s as a traceback). The run
+    reseeds before it builds its own model, so this changes none of its numbers."""
+    if cfg.init or cfg.human_init:
+        load_start_weights(GHNeRF(cfg.model_config()), cfg)
+
+
 def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device, *, start: Path | None,
            resume: bool, quiet: bool, dataset) -> tuple[dict, GHNeRF]:
     mcfg = cfg.model_config()
@@ -1024,16 +1092,9 @@ def _train(cfg: TrainConfig, out_dir: Path, info: DistInfo, device: torch.device
 
     seed_everything(cfg.seed)  # same initial weights on every rank
     model = GHNeRF(mcfg).to(device).train()
-    if cfg.init and start is None:  # (a resume's checkpoint holds the weights these files gave its start)
-        if model.human is None:
-            raise ConfigError("init: the preset has no human encoder")
-        from training.model.human_encoder import load_torchvision_resnet18
-        load_torchvision_resnet18(model.human.trunk, cfg.init)
-    if cfg.human_init:
-        if start is None:
-            from training.pretrain_human import load_human
-            load_human(model, cfg.human_init)
-    elif cfg.pretrain_human and info.main and not resume:
+    if start is None:  # (a resume's checkpoint holds the weights these files gave its start)
+        load_start_weights(model, cfg)
+    if not cfg.human_init and cfg.pretrain_human and info.main and not resume:
         print("warning: the config has a pretrain_human block but no human_init: the human encoder starts from "
               "scratch (run `python -m training.pretrain_human` first and pass its human.pt, or `make model`)",
               file=sys.stderr)
@@ -1182,7 +1243,8 @@ def main(argv: list[str] | None = None) -> int:
     from training.data.errors import DataError
 
     try:
-        summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
+        with sigterm_as_interrupt():  # `timeout`, `kill`, a job scheduler: stopped as Ctrl-C stops it
+            summary, _ = train(cfg, out, resume=args.resume, quiet=args.quiet)
     except (ConfigError, DataError) as e:  # of the run itself: its folder, a checkpoint, the dataset or split
         kind = "config error" if isinstance(e, ConfigError) else "data error"
         print(f"ghnerf-train: {kind}: {e}", file=sys.stderr)
@@ -1195,10 +1257,10 @@ def main(argv: list[str] | None = None) -> int:
         if dist.is_initialized():
             dist.destroy_process_group()
         return 1
-    except KeyboardInterrupt:  # Ctrl-C: the checkpoints are whole (save_checkpoint), so say how to go on
-        print(f"ghnerf-train: stopped (Ctrl-C); `--resume --out {out}` continues from its last checkpoint",
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: the checkpoints are whole (save_checkpoint): say how to go on
+        print(f"ghnerf-train: stopped ({stop_words(e)}); `--resume --out {out}` continues from its last checkpoint",
               file=sys.stderr)
-        return 130
+        return exit_status(e)
     if int(os.environ.get("RANK", "0")) == 0:
         print(json.dumps(summary))
     if dist.is_initialized():

@@ -1,5 +1,5 @@
-"""SIGTERM stops a command-line tool as Ctrl-C does: one helper for ``ghnerf-run``, ``ghnerf-listen``, ``ghcal``
-and ``ghnerf-demo``.
+"""SIGTERM stops a command-line tool as Ctrl-C does: one helper for ``ghnerf-run``, ``ghnerf-listen``, ``ghcal``,
+``ghnerf-demo``, ``ghnerf-train`` and the human-encoder pretraining.
 
 SIGTERM's default action (``timeout``, ``kill``, a wrapper's stop button, systemd) kills the process outright:
 no ``finally`` runs, so a tool's outputs are left half-written (a ``record+`` take stays ``complete: false``)
@@ -43,6 +43,12 @@ def stop_words(e: KeyboardInterrupt) -> str:
 def exit_status(e: KeyboardInterrupt) -> int:
     """The shell's figure for a death by the signal that raised ``e``: 130 (Ctrl-C), 143 (SIGTERM)."""
     return 128 + stop_signal(e).value
+
+
+def sigterm_raises() -> bool:
+    """Whether a SIGTERM would raise :class:`Terminated` now (inside :func:`sigterm_as_interrupt`): a write that
+    must finish (a training checkpoint) holds it back only then, and leaves a library caller's handling alone."""
+    return signal.getsignal(signal.SIGTERM) is _raise_terminated
 
 
 @contextlib.contextmanager

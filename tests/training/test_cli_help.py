@@ -79,3 +79,12 @@ def test_a_tool_without_a_console_script_names_the_command_the_docs_give(module)
     ``learnt_fill.py`` (argparse's file name), a command that does not run from the repository root."""
     r = _run("-m", module, "--help")
     assert r.returncode == 0 and r.stdout.startswith(f"usage: python -m {module} "), r.stdout[:200]
+
+
+@pytest.mark.parametrize("module", ["training.cli.train", "training.cli.evaluate", "training.cli.pretrain_human",
+                                    "training.cli.convert_norm", "training.cli.learnt_fill"])
+def test_the_modules_pyproject_names_run_the_tool_through_python_m(module):
+    """``python -m training.cli.train`` (the module behind ``ghnerf-train`` in pyproject) exited 0 having run
+    nothing: no usage line, no error, no run."""
+    r = _run("-m", module, "--help")
+    assert r.returncode == 0 and r.stdout.startswith("usage:"), (r.returncode, r.stdout[:200])

@@ -3,6 +3,7 @@ before the work, Ctrl-C exits 130 with a line, never a traceback."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -63,6 +64,61 @@ def test_train_refuses_a_file_for_its_run_folder_and_a_missing_init_before_writi
     assert not run.exists()  # was a FileNotFoundError traceback after run/config.json was written
 
 
+def _a_training_checkpoint(path):
+    """A file shaped as a run's last.pt: weights beside numpy RNG state, which torch's weights-only load refuses."""
+    import numpy as np
+    import torch
+
+    torch.save({"model": {"w": torch.zeros(2)}, "rng": {"numpy": np.random.get_state()}}, path)
+    return path
+
+
+@pytest.mark.parametrize(("key", "make", "words"), [
+    # a traceback (torch's zip reader) after run/config.json was written
+    ("init", lambda p: p.write_bytes(b"PK\x03\x04 cut short") and p,
+     "init: {f}: not torchvision resnet18 weights this encoder takes (RuntimeError: "),
+    # a traceback: a page of torch's advice on trusting the file, in ANSI bold
+    ("init", _a_training_checkpoint,
+     "init: {f}: holds more than weights (a training run's last.pt or ckpt_*.pt?); init takes torchvision's"),
+    # torch's advice on weights_only, which says nothing of the file, and after run/config.json was written
+    ("human_init", lambda p: p.write_text("x") and p,
+     "human_init: cannot read {f}: UnpicklingError: not a file torch.save wrote, or a damaged one"),
+    ("init", lambda p: p.write_bytes(b"") or p, "init: {f}: not torchvision resnet18 weights this encoder takes "
+                                                "(EOFError: the file ends before its first record (empty?))"),
+    # one line, but torch's page of advice cut to its first line, and after run/config.json was written
+    ("human_init", _a_training_checkpoint,
+     "human_init: {f} is not a human-encoder checkpoint (it holds more than weights: a training run's last.pt"),
+])
+def test_train_refuses_start_weights_that_are_not_such_weights_before_writing(data64, tmp_path, capsys, key, make,
+                                                                             words):
+    from training.train import main
+
+    weights = make(tmp_path / "weights.pth")
+    run = tmp_path / "run"
+    assert main(["--preset", "tiny", "--data", str(data64), "--out", str(run), "--iterations", "1",
+                 "--set", f"{key}={json.dumps(str(weights))}"]) == 2
+    assert words.format(f=weights) in capsys.readouterr().err
+    assert not run.exists()
+
+
+def test_train_refuses_a_human_pt_of_another_encoder_before_writing(data64, tmp_path, capsys):
+    import torch
+
+    from training.configs import preset
+    from training.model import GHNeRF
+    from training.train import main
+
+    other = preset("tiny")
+    other.human.num_layers = 3
+    human = tmp_path / "human.pt"
+    torch.save({"human": GHNeRF(other).human.state_dict(), "model_config": other.to_dict(), "step": 5}, human)
+    run = tmp_path / "run"
+    assert main(["--preset", "tiny", "--data", str(data64), "--out", str(run), "--iterations", "1",
+                 "--set", f"human_init={json.dumps(str(human))}"]) == 2
+    assert f"human_init: {human} was pretrained with human.num_layers=3, this model has 2" in capsys.readouterr().err
+    assert not run.exists()  # its config.json was written first
+
+
 def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeypatch):
     import training.train as tr
 
@@ -75,6 +131,26 @@ def test_train_ctrl_c_exits_130_and_says_how_to_resume(tmp_path, capsys, monkeyp
     except KeyboardInterrupt:
         pytest.fail("Ctrl-C escaped ghnerf-train: the user saw a traceback")
     assert rc == 130 and f"`--resume --out {tmp_path / 'run'}` continues" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("module", ["training.train", "training.pretrain_human"])
+def test_a_sigterm_stops_training_as_ctrl_c_does_with_143_and_how_to_resume(tmp_path, capsys, monkeypatch, module):
+    """``timeout``, ``kill`` or a job scheduler's stop: SIGTERM (raised as ``Terminated`` under the command line's
+    ``sigterm_as_interrupt``) is named as such and exits 143, the shell's figure; it was reported as a Ctrl-C, and
+    outside a test it killed the process silently, leaving its ``.tmp`` checkpoint and ``train.pid``."""
+    import importlib
+
+    from ghnerf_runtime.cli.sigterm import Terminated
+
+    tool = importlib.import_module(module)
+
+    def terminated(*a, **k):
+        raise Terminated("SIGTERM")
+
+    monkeypatch.setattr(tool, "train" if module == "training.train" else "pretrain", terminated)
+    rc = tool.main(["--data", str(tmp_path), "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert rc == 143 and "stopped (SIGTERM); `--resume --out" in err and "Ctrl-C" not in err
 
 
 # ------------------------------------------------------------------ python -m training.export
@@ -102,6 +178,46 @@ def test_export_refuses_bad_values_before_the_export(tmp_path, capsys, extra, wo
         main(["--preset", "tiny", *out, *extra])
     assert e.value.code == 2 and words in capsys.readouterr().err
     assert not (tmp_path / "m.staging").exists()
+
+
+@pytest.mark.parametrize("where", ["under a file", "on /proc"])
+def test_export_refuses_an_out_whose_folder_cannot_take_it_before_the_export(tmp_path, capsys, where):
+    """Was a traceback after the model was built: under a file, one that blamed "a cut-short move" (the staging
+    folder's moving.json could not be read), on /proc a FileNotFoundError of OUT.staging."""
+    from training.export.cli import main
+
+    if where == "on /proc" and not Path("/proc/self").exists():
+        pytest.skip("no /proc here")
+    (tmp_path / "afile").write_text("")
+    out = tmp_path / "afile" / "m" if where == "under a file" else Path("/proc/ghnerf-no-such-model")
+    words = (f"--out {out}: {tmp_path / 'afile'} is a file, not a folder" if where == "under a file" else
+             f"--out {out}: the folder /proc is not writable (")
+    with pytest.raises(SystemExit) as e:
+        main(["--preset", "tiny", "--out", str(out)])
+    assert e.value.code == 2 and words in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("tool", ["export", "eval"])
+def test_a_pretraining_s_human_pt_given_as_a_model_is_named_as_such(data64, tmp_path, capsys, tool):
+    """The pretraining's human.pt (or its last.pt) given to export or ghnerf-eval was "its weights do not fit its
+    model config" and a list of missing tensors."""
+    import torch
+
+    from training.configs import preset
+    from training.model import GHNeRF
+
+    cfg = preset("tiny")
+    human = tmp_path / "human.pt"
+    torch.save({"human": GHNeRF(cfg).human.state_dict(), "model_config": cfg.to_dict(), "step": 3}, human)
+    words = f"{human}: a human-encoder pretraining checkpoint (the encoder's weights alone, the start of a joint run's"
+    if tool == "export":
+        from training.export.cli import main
+
+        rc = main(["--checkpoint", str(human), "--out", str(tmp_path / "m")])
+    else:
+        rc = evaluate.main(["--data", str(data64), "--model", str(human), "--limit", "1", "--no-novel"])
+    assert rc == 2 and words in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
 
 
 def test_the_opset_range_is_what_torch_exports():

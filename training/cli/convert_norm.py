@@ -16,3 +16,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     return parse_then_run(build_parser, "training.convert_norm", argv)
+
+
+if __name__ == "__main__":  # `python -m training.cli.convert_norm`, the module pyproject names: it ran nothing, exit 0
+    raise SystemExit(main())

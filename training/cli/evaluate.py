@@ -25,3 +25,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """The ``ghnerf-eval`` console script."""
     return parse_then_run(build_parser, "training.evaluate", argv)
+
+
+if __name__ == "__main__":  # `python -m training.cli.evaluate`, the module pyproject names: it ran nothing, exit 0
+    raise SystemExit(main())

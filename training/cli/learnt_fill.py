@@ -55,3 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     return parse_then_run(build_parser, "training.learnt_fill", argv)
+
+
+if __name__ == "__main__":  # `python -m training.cli.learnt_fill`, the module pyproject names: it ran nothing, exit 0
+    raise SystemExit(main())

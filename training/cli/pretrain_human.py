@@ -28,3 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     return parse_then_run(build_parser, "training.pretrain_human", argv)
+
+
+if __name__ == "__main__":  # `python -m training.cli.pretrain_human`, the module pyproject names: it ran nothing, exit 0
+    raise SystemExit(main())

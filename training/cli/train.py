@@ -31,3 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """The ``ghnerf-train`` console script."""
     return parse_then_run(build_parser, "training.train", argv)
+
+
+if __name__ == "__main__":  # `python -m training.cli.train`, the module pyproject names: it ran nothing, exit 0
+    raise SystemExit(main())

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ghnerf_runtime.cli.output_path import ready_output_arg
+from ghnerf_runtime.cli.output_path import existing_ancestor, ready_output_arg, unwritable_reason
 from ghnerf_runtime.contract import GRAPH_NAMES
 from training.configs import PRESETS, preset
 from training.export.calibration import MIN_FRAMES
@@ -110,6 +110,24 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def model_folder_place_problem(out: Path) -> str | None:
+    """Why the folder that holds ``out`` cannot take ``out`` and ``<out>.staging``, where the graphs are written
+    first (None: it can). An --out under a file or on a read-only or virtual file system was a traceback after the
+    model was built, and under a file it blamed a "cut-short move" that never happened."""
+    parent = Path(os.path.abspath(out)).parent
+    found = existing_ancestor(parent)
+    if not found.is_dir():
+        return f"{found} is a file, not a folder"
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        return f"cannot make the folder {parent} ({e.strerror or e})"
+    reason = unwritable_reason(parent)
+    if reason is not None:
+        return f"the folder {parent} is not writable ({reason}); {out.name} and {out.name}.staging are made there"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
@@ -124,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
                  f"got {args.calib_frames}")
     if Path(args.out).exists() and not Path(args.out).is_dir():
         ap.error(f"--out {args.out}: is a file; give the model folder")
+    if problem := model_folder_place_problem(Path(args.out)):
+        ap.error(f"--out {args.out}: {problem}")
     if args.calib_npz and not args.int8:  # calibration frames are only read for int8: ignoring them misleads
         ap.error("--calib-npz calibrates the int8 graphs: give --int8 with it")
     if args.report:  # written after the export, parity, int8 and timings: its place is settled first
