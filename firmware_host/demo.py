@@ -402,8 +402,8 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         print(f"stopping: {e}")
                         break
                     except drivers.RigOperationError as e:
-                        # A frame the rig could not deliver (a corrupt image in a take, one of another size among
-                        # the rig's) is raised once and the next read goes on, as the daemon reads on: one such
+                        # A frame the rig could not deliver (a corrupt image in a take, one resized since its open)
+                        # is raised once and the next read goes on, as the daemon reads on: one such
                         # frame ended the whole run. Again before a pair, or cameras of another size than the
                         # rig's (FrameSizeError): the rig itself failed. A record+ take that can no longer be
                         # written (RecordingError, disk full) is no lost frame: run on, the demo (the documented

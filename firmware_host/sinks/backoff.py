@@ -25,11 +25,20 @@ class BackoffPolicy:
             # a Python or numpy number, kept as a float: True was a 1 s wait, text a bare TypeError
             if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
                 raise ValueError(f"invalid backoff policy: {name} must be a number, got {value!r}")
-            object.__setattr__(self, name, float(value))
+            object.__setattr__(self, name, _as_float(value))
         if not (self.initial_s > 0 and math.isfinite(self.factor) and self.factor >= 1
                 and self.initial_s <= self.max_s <= threading.TIMEOUT_MAX):
             raise ValueError(f"invalid backoff policy {self}: want 0 < initial_s <= max_s <= "
                              f"{threading.TIMEOUT_MAX:g} s and a finite factor >= 1")
+
+
+def _as_float(value: numbers.Real) -> float:
+    """``value`` as a float; an integer past the float range (10**400) as the infinity of its sign, which the policy's
+    bounds refuse by name (``float()`` raised a bare OverflowError)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 class Backoff:

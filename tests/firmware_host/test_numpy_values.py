@@ -129,3 +129,12 @@ def test_a_backoff_policy_takes_numpy_numbers_and_refuses_true() -> None:
     for name, value in (("initial_s", True), ("factor", np.True_), ("max_s", "2")):  # True was a 1 s wait
         with pytest.raises(ValueError, match=rf"{name} must be a number, got {re.escape(repr(value))}"):
             BackoffPolicy(**{name: value})
+
+
+@pytest.mark.parametrize("policy", [dict(initial_s=10**400), dict(max_s=10**400), dict(initial_s=-10**400),
+                                    dict(factor=10**400)])
+def test_a_backoff_policy_past_the_float_range_is_refused_by_name(policy: dict) -> None:
+    """An integer past the float range is refused as out of bounds, a ValueError naming the policy; kept as floats,
+    the fields raised a bare OverflowError from float() (and factor from math.isfinite before that)."""
+    with pytest.raises(ValueError, match=r"invalid backoff policy BackoffPolicy\(.*inf"):
+        BackoffPolicy(**policy)
