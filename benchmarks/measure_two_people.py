@@ -32,7 +32,7 @@ view reads weakly).
 
 ``--by-joint`` adds to each row, joint by joint, the pairs that reported it, their mean distance from the nearer
 person's, and of them those a flagged pair reported without a pairing of the subject's (the skeleton prior's place,
-read off ``Estimator._keep_tracked_subject`` on the pass reported: :class:`SubjectPairings`): docs/two-people.md,
+read off ``SubjectSelector.keep_tracked_subject`` on the pass reported: :class:`SubjectPairings`): docs/two-people.md,
 "Fewer, right joints" (session 59).
 
 ``--no-refine`` turns ``tracking.refine_cold_start`` off: a cold pass is not run again on the crop of what it found
@@ -205,7 +205,7 @@ PLACES = ((-0.5, 3.0), (0.5, 3.4))
 
 
 class SubjectPairings:
-    """The joints a flagged pass found from the subject's own pairings (``Estimator._keep_tracked_subject``'s third
+    """The joints a flagged pass found from the subject's own pairings (``SubjectSelector.keep_tracked_subject``'s third
     value), pass by pass (``Estimator._finish_pass``): a pair may run several (a cold pass and its refined one, a
     ``tracking.retry_cold`` rerun, a turn search's candidates), and the last to pick a subject need not be the one
     reported. Installs itself on ``est``; clear :attr:`passes` before each pair. Before session 59's review the
@@ -215,7 +215,8 @@ class SubjectPairings:
         #: this pair's passes so far: (the pass, its subject's found joints, ``(J,)`` bool, or None where the pass
         #: did not look for the subject's pairings)
         self.passes: list[tuple[object, np.ndarray | None]] = []
-        keep, finish, found = est._keep_tracked_subject, est._finish_pass, [None]
+        selector = est.subject_selector
+        keep, finish, found = selector.keep_tracked_subject, est._finish_pass, [None]
 
         def keeping(*a, **k):
             out = keep(*a, **k)
@@ -228,7 +229,7 @@ class SubjectPairings:
             self.passes.append((p, found[0]))
             return p
 
-        est._keep_tracked_subject, est._finish_pass = keeping, finishing
+        selector.keep_tracked_subject, est._finish_pass = keeping, finishing
 
     def of(self, result) -> np.ndarray | None:
         """The found joints of the pass ``result`` (a ``PairResult`` of this pair) reports: the one whose 2D
@@ -289,9 +290,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
         whose: list[int] = []  # each reporting pair's person: 0 the first, 1 the second
         mixed = False  # a pair reported joints at both people
         with Estimator(oracle or session, rig, config) as est:
-            decide, counting_now = est._several_people, [False]  # every pass asks it once: counted beside it
+            decide, counting_now = est.subject_selector.several_people, [False]  # every pass asks it once: counted
 
-            def counting(kp, decide=decide, counting_now=counting_now, est=est):
+            def counting(kp, held, decide=decide, counting_now=counting_now, est=est):
                 if counting_now[0]:
                     twice = kp.valid & (kp.runner_up >= ratio * kp.confidence)  # (view, J), as joints_shown_twice
                     counts["passes"] += 1
@@ -305,9 +306,9 @@ def measure(scenes: int, pairs: int, alone: int, config: EstimatorConfig = Estim
                     if oracle is not None and oracle.hidden_share is not None:
                         counts["hidden_view0"] += float(oracle.hidden_share[0])
                         counts["hidden_view1"] += float(oracle.hidden_share[1])
-                return decide(kp)
+                return decide(kp, held)
 
-            est._several_people = counting
+            est.subject_selector.several_people = counting
             pairings = SubjectPairings(est)  # the subject's joints from their own pairings, the reported pass's
             for i in range(alone + pairs):
                 t = i / 30.0
@@ -441,15 +442,15 @@ def measure_one_person(model_dir: str, sequences: int, frames: int) -> dict:
     errors: list[float] = []
     for seq in load_sequences(sequences, frames):
         with Estimator(session, seq.rig, on) as checked, Estimator(session, seq.rig, off) as unchecked:
-            decide = checked._several_people  # every pass asks it once: counted beside its answer
+            decide = checked.subject_selector.several_people  # every pass asks it once: counted beside its answer
 
-            def counting(kp, decide=decide, checked=checked):
+            def counting(kp, held, decide=decide, checked=checked):
                 shown[joints_shown_twice(kp, ratio)] += 1
                 out["torso_mixed"] += int(checked._torso_mixed)  # (set by this pass's 3D stage, before this)
                 out["torso_excess"].append(checked._torso_excess.copy())
-                return decide(kp)
+                return decide(kp, held)
 
-            checked._several_people = counting
+            checked.subject_selector.several_people = counting
             for i in range(len(seq)):
                 images = (np.array(seq.images[i, 0]), np.array(seq.images[i, 1]))
                 when = dict(sequence=i, timestamp_s=i / float(seq.info.get("fps", 30.0)))  # as ghnerf-bench runtime
@@ -499,14 +500,14 @@ def measure_one_person_at(model_dir: str, places: list, scenes: int, frames: int
             for seed in range(1, scenes + 1):
                 scene = sim.SimScene(sim.SceneConfig(seed=seed, motion=motion, position_xz=place))
                 with Estimator(session, rig, config) as est:
-                    decide = est._several_people  # every pass asks it once: counted beside its answer
+                    decide = est.subject_selector.several_people  # every pass asks it once: counted beside it
 
-                    def counting(kp, decide=decide, est=est, row=row):
+                    def counting(kp, held, decide=decide, est=est, row=row):
                         row["torso_mixed"] += int(est._torso_mixed)  # (set by this pass's 3D stage, before this)
                         row["torso_excess"].append(est._torso_excess.copy())
-                        return decide(kp)
+                        return decide(kp, held)
 
-                    est._several_people = counting
+                    est.subject_selector.several_people = counting
                     for i in range(frames):
                         t = 0.2 + i / 30.0
                         images = tuple(scene.render(c, t, with_truth=False)[0] for c in rig.pair)

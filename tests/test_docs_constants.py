@@ -387,11 +387,12 @@ TWO_PEOPLE_KEYS = ("second_person_ratio", "second_person_min_joints", "behind_mi
 def test_the_two_people_page_names_its_keys_and_the_code_it_points_at():
     """docs/two-people.md (two people in view, split from docs/runtime.md in session 59) is where
     ``several_people``'s readers are sent: it names the two-people ``joints3d`` keys and every ``pick_subject``
-    rule, and the files, estimator methods and ``two_people`` functions its opening points at exist (a rename
-    would leave it pointing at nothing)."""
+    rule, and the files, estimator and subject selector methods and ``two_people`` functions its opening points at
+    exist (a rename would leave it pointing at nothing; session 60 moved the subject selection to
+    ``ghnerf_runtime/subject.py``)."""
     import dataclasses
 
-    from ghnerf_runtime import two_people
+    from ghnerf_runtime import subject, two_people
     from ghnerf_runtime.config import PICK_SUBJECT_RULES
     from ghnerf_runtime.estimator import Estimator
 
@@ -404,12 +405,16 @@ def test_the_two_people_page_names_its_keys_and_the_code_it_points_at():
     # the opening: what comes before the first section's heading
     opening = page.split("\n## ", 1)[0]
     files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", opening)
-    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", opening)
-    # the two_people functions: those named in the parentheses after its file, before the estimator's
-    named = opening.split("`ghnerf_runtime/two_people.py` (", 1)[-1].split("`ghnerf_runtime/estimator.py`", 1)[0]
+    # each file's names: those in the parentheses after it, before the next file's (two_people, subject, estimator)
+    named = opening.split("`ghnerf_runtime/two_people.py` (", 1)[-1].split("`ghnerf_runtime/subject.py`", 1)[0]
     functions = re.findall(r"`(\w+)`", named)
-    assert len(files) >= 5 and len(methods) >= 8 and len(functions) >= 5, (files, methods, functions)
+    selected = opening.split("`ghnerf_runtime/subject.py` (", 1)[-1].split("`ghnerf_runtime/estimator.py`", 1)[0]
+    selector = re.findall(r"`(?:SubjectSelector\.)?([a-z_]\w*)`", selected)
+    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", opening.split("`ghnerf_runtime/estimator.py` (", 1)[-1])
+    assert len(files) >= 6 and len(functions) >= 5 and len(selector) >= 8 and len(methods) >= 2, \
+        (files, functions, selector, methods)
     missing = [f for f in files if not (REPO / f).is_file()]
-    missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
     missing += [f"two_people.{f}" for f in functions if not hasattr(two_people, f)]
+    missing += [f"subject.{m}" for m in selector if not hasattr(subject.SubjectSelector, m) and not hasattr(subject, m)]
+    missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
     assert not missing, f"docs/two-people.md's opening points at what is not there: {missing}"

@@ -404,6 +404,9 @@ class _TwoPasses:
     reported and the second not (a turn search's candidate that is not kept, say), and a third that does not look
     (a pass not flagged)."""
 
+    def __init__(self):
+        self.subject_selector = SimpleNamespace(keep_tracked_subject=self._keep_tracked_subject)
+
     def _keep_tracked_subject(self, found):
         from ghnerf_runtime.joints3d import Joints3D
         n = len(found)
@@ -411,7 +414,7 @@ class _TwoPasses:
 
     def _finish_pass(self, found):
         if found is not None:
-            self._keep_tracked_subject(found)
+            self.subject_selector.keep_tracked_subject(found)
         return SimpleNamespace(conf_2d={})  # a dict of its own, as each pass's
 
     def estimate(self):
@@ -424,7 +427,7 @@ class _TwoPasses:
 
 def test_measure_two_people_by_joint_takes_the_reported_pass_s_pairings():
     # --by-joint's "without a subject's pairing" counts are the reported pass's (session 59's review): until then the
-    # pair's last _keep_tracked_subject call was taken, here the second pass's, not reported
+    # pair's last keep_tracked_subject call was taken, here the second pass's, not reported
     from benchmarks.measure_two_people import SubjectPairings
     est = _TwoPasses()
     pairings = SubjectPairings(est)

@@ -502,8 +502,8 @@ def _held_track_estimator(turns: tuple[int, int]):
 @pytest.mark.parametrize("held", [(True, None), (True, 1)])
 def test_a_turn_check_reruns_a_flagged_track_upright_with_its_hold_and_keeps_it(held):
     """Integration review (session 56): a tracked pass through a kept turn whose track follows a ``several_people``
-    pass (flagged in both views, or by one view alone: ``_behind_view``) is checked upright on that track. The
-    upright rerun was asked with the hold dropped (``_use_turns`` resets it for a new track), so its subject's crop,
+    pass (flagged in both views, or by one view alone: ``SubjectSelector.behind_view``) is checked upright on that
+    track. The upright rerun was asked with the hold dropped (``_use_turns`` resets it for a new track), so its subject's crop,
     showing fewer of the other person's joints twice, went unflagged and let their peaks into the joints (kept when
     more confident); and where the turn stood, the one-view hold's view was lost (``_several_track`` restored,
     ``_behind_track`` left as the rerun's). Now the rerun follows the track with its hold, and the hold stands."""

@@ -607,6 +607,7 @@ def test_two_people_the_subject_s_own_peaks_must_make_someone_with_the_prior_as_
     pair's triangulation is the subject's for ``subject_joints`` joints and a second person's 0.3 m off elsewhere
     (all strong: the pair shows someone), and the pairings of peaks and runner-ups add nothing."""
     from ghnerf_runtime import estimator as estimator_module
+    from ghnerf_runtime import subject as subject_module
     from ghnerf_runtime.estimator import Estimator, load_session
     from ghnerf_runtime.joints3d import Joints3D, ViewAgreement
     from ghnerf_runtime.skeleton_prior import SkeletonEstimate
@@ -630,8 +631,9 @@ def test_two_people_the_subject_s_own_peaks_must_make_someone_with_the_prior_as_
         tri = pairings(uv) if np.shape(uv)[1] == 4 * NUM_JOINTS else pair["tri"]
         return tri, ViewAgreement(None, 0, 0)
 
-    monkeypatch.setattr(estimator_module, "triangulate_joints_checked", checked)
-    monkeypatch.setattr(estimator_module, "triangulate_joints", pairings)
+    for module in (estimator_module, subject_module):  # the pair's peaks, and the subject's pairings
+        monkeypatch.setattr(module, "triangulate_joints_checked", checked)
+        monkeypatch.setattr(module, "triangulate_joints", pairings)
     found = {}
     for mode in ("on", "off"):
         cfg = _config(model_with_prior, skeleton_prior=mode)
@@ -640,7 +642,7 @@ def test_two_people_the_subject_s_own_peaks_must_make_someone_with_the_prior_as_
         if mode == "on":
             session.skeleton_prior.estimate = lambda *a, **k: SkeletonEstimate(truth, np.full(NUM_JOINTS, 0.02), every)
         est = Estimator(session, rig, cfg)
-        monkeypatch.setattr(est, "_several_people", lambda kp: pair["several"])
+        monkeypatch.setattr(est.subject_selector, "several_people", lambda kp, held: pair["several"])
         pair.update(tri=alone, several=False)
         assert est.estimate(frames, sequence=0).num_found == NUM_JOINTS and est.tracker.track is not None
         pair.update(tri=Joints3D(mixed, strong, every, np.zeros((NUM_JOINTS, 2))), several=True)

@@ -21,6 +21,7 @@ from ghnerf_runtime.body25 import FLOOR_JOINTS, JOINT_NAMES
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, Joints3DConfig, config_from_dict
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.estimator import Estimator
+from ghnerf_runtime.subject import SubjectSelector
 from ghnerf_runtime import two_people as T
 from ghnerf_runtime.two_people import TIE_M, pick_person, split_people
 
@@ -238,7 +239,7 @@ def test_two_people_0_6_m_apart_with_pick_subject_none_report_nobody_and_both_pe
     streamed, a third of them at neither person (``measure_two_people.py --pick-subject none --alone 0
     --places=-0.3,3.0,0.3,3.4``), and its floor figure was the mixed skeleton's feet: +0.03 m on the true rig,
     +0.11 m at a 2 degree pan whose people's feet read -0.13 m. Now the mixed track is nobody's to follow: nobody
-    reported, and the floor figure is both people's own feet (``Estimator._matched_foot``), which the daemon's
+    reported, and the floor figure is both people's own feet (``SubjectSelector.matched_foot``), which the daemon's
     ``FloorWatch`` flags at the 2 degree pan as alone."""
     for seed in (1, 2):
         one = _scene(seed, alone=0, pairs=3, second=False, where=CLOSE, pan_deg=pan_deg)
@@ -414,7 +415,7 @@ def test_a_joint_missing_from_the_track_is_looked_for_near_the_subject(monkeypat
         results = _scene(seed, alone=3, pairs=7, config=BEHIND_RULE)
         assert all(r.several_people and r.num_found == 25 for r, *_ in results), [r.num_found for r, *_ in results]
         assert _split(results)[1] == 0
-    monkeypatch.setattr(Estimator, "_behind_view", lambda self, kp: None)
+    monkeypatch.setattr(SubjectSelector, "behind_view", lambda self, kp, held_view: None)
     for seed in (4, 7):
         results = _scene(seed, alone=3, pairs=7)
         assert min(r.num_found for r, *_ in results) < 25  # (the scene does lose them)
@@ -660,17 +661,24 @@ def test_a_joint_no_view_shows_a_peak_of_is_placed_by_the_subject_s_prior_where_
 
 
 class _FewPairingsEstimator(Estimator):
-    """An estimator whose flagged passes' subject pairings (:meth:`Estimator._keep_tracked_subject`'s third value)
-    are cut to the first ``kept`` joints they found: the subject's other joints then come from the pass's decoded
-    peaks alone (its first value keeps them), as on a tracked pair whose pairings found few joints near the track."""
+    """An estimator whose flagged passes' subject pairings (:meth:`SubjectSelector.keep_tracked_subject`'s third
+    value) are cut to the first ``kept`` joints they found: the subject's other joints then come from the pass's
+    decoded peaks alone (its first value keeps them), as on a tracked pair whose pairings found few joints near the
+    track."""
 
     kept = 4
 
-    def _keep_tracked_subject(self, *args, **kwargs):
-        j3, chosen, subject = super()._keep_tracked_subject(*args, **kwargs)
-        few = np.zeros_like(subject.valid)
-        few[np.flatnonzero(subject.valid)[:self.kept]] = True
-        return j3, chosen, replace(subject, valid=subject.valid & few).sanitised()
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        keep = self.subject_selector.keep_tracked_subject
+
+        def fewer(*args, **kwargs):
+            j3, chosen, subject = keep(*args, **kwargs)
+            few = np.zeros_like(subject.valid)
+            few[np.flatnonzero(subject.valid)[:self.kept]] = True
+            return j3, chosen, replace(subject, valid=subject.valid & few).sanitised()
+
+        self.subject_selector.keep_tracked_subject = fewer
 
 
 @pytest.mark.parametrize("prior", ["off", "on"])
@@ -978,7 +986,7 @@ def test_an_8_degree_pan_that_takes_both_people_out_of_the_volume_is_flagged_by_
 
 
 def test_both_people_s_floor_figure_counts_from_the_configured_standing_foot():
-    """Both people's floor figure (``Estimator._matched_foot``, session 57) and the setting it counts from
+    """Both people's floor figure (``SubjectSelector.matched_foot``, session 57) and the setting it counts from
     (``joints3d.foot_standing_m``, session 57) were made on two branches: shoes or a mat set there move the two
     people's figure as they move one person's (tests/ghnerf_runtime/test_floor_on_feet.py), not the bare feet's
     constant. The same pairs with the standing foot raised 3 cm read exactly 3 cm lower."""
@@ -990,11 +998,13 @@ def test_both_people_s_floor_figure_counts_from_the_configured_standing_foot():
 
 
 class _BothPeoplesFeet(Estimator):
-    """The floor figure of both people's split pairings (``Estimator._matched_foot``) on every flagged pair: the
+    """The floor figure of both people's split pairings (``SubjectSelector.matched_foot``) on every flagged pair: the
     subject's own feet left out."""
 
-    def _subject_figures(self, *args):
-        return super()._subject_figures(*args)[0], None
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        figures = self.subject_selector.subject_figures
+        self.subject_selector.subject_figures = lambda *args: (figures(*args)[0], None)
 
 
 def test_two_people_s_floor_figure_leaves_out_feet_past_the_crop_s_edge():
@@ -1054,8 +1064,10 @@ def test_two_people_s_matched_px_figure_on_the_true_rig_and_below_the_gate_is_th
     alone, not the matching, read about the daemon's 0.8 px limit there, tried in session 56, where the person
     alone reads over 3: a mixed pairing can cancel the knock). Forced here by leaving the subject's figure out."""
     class MatchedOnly(Estimator):
-        def _subject_figures(self, *args):
-            return None, super()._subject_figures(*args)[1]
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            figures = self.subject_selector.subject_figures
+            self.subject_selector.subject_figures = lambda *args: (None, figures(*args)[1])
 
     for tilt_deg, near in ((0.0, 0.05), (2.0, 0.2)):
         rig = sim.RigPlacement().build()
@@ -1096,21 +1108,21 @@ def test_matched_errors_pairs_each_view_s_peaks_once_and_leaves_out_a_way_not_me
 
 
 def test_the_matched_px_figure_s_time_counts_in_the_joints_3d_stage(monkeypatch):
-    """Integration review (session 56): ``_matched_px`` triangulates every pairing of both views' peaks again, after
-    the ``joints_3d`` stage's clock had stopped: its time was in no stage of ``timing_ms`` (only ``total``). Made
-    slow here (0.3 s) to be told from the stage's own work: a flagged pair that reports nobody (``pick_subject:
+    """Integration review (session 56): ``SubjectSelector.matched_px`` triangulates every pairing of both views' peaks
+    again, after the ``joints_3d`` stage's clock had stopped: its time was in no stage of ``timing_ms`` (only
+    ``total``). Made slow here (0.3 s) to be told from the stage's own work: a flagged pair that reports nobody (``pick_subject:
     none``) measures it, and its ``joints_3d`` stage holds it."""
     import time
 
     pause_s, measured = 0.3, []
-    real = Estimator._matched_px
+    real = SubjectSelector.matched_px
 
     def slow(self, *args):
         measured.append(1)
         time.sleep(pause_s)
         return real(self, *args)
 
-    monkeypatch.setattr(Estimator, "_matched_px", slow)
+    monkeypatch.setattr(SubjectSelector, "matched_px", slow)
     results = _scene(4, alone=0, pairs=2, config=NOBODY)
     assert measured and all(r.several_people for r, *_ in results)
     assert all(r.timing_ms["joints_3d"] >= 1e3 * pause_s for r, *_ in results), \

@@ -102,7 +102,7 @@ def test_too_few_feet_or_feet_off_any_floor_are_refused_with_why(source, figures
 
 def test_pairs_with_two_people_in_view_are_read_past_not_measured():
     """A second person in view (a passer-by mid-stride, someone on another mat): the pair's figure is the subject's
-    own feet or, since session 57, the median of both people's (``Estimator._matched_foot``), not the measured
+    own feet or, since session 57, the median of both people's (``SubjectSelector.matched_foot``), not the measured
     person's alone. Such pairs are counted, not measured; before, their figures (here 0.2 m up) went into the
     median, which here they would have set to 0.24 m."""
     figures = [0.03, ("two", 0.2), ("two", 0.2), 0.03, ("two", 0.2), ("two", 0.2), 0.03]
