@@ -1126,8 +1126,9 @@ class Estimator:
             self._use_turns(turns)
             if track is not None:
                 self.tracker.follow(track)
-                # the same subject through other crops: a flagged track's hold (_several_people, _behind_view) goes
-                # with it, or the turned pass lets the other person's peaks into the joints and the track
+                # the same subject through other crops: a flagged track's hold (SubjectSelector.several_people,
+                # .behind_view) goes with it, or the turned pass lets the other person's peaks into the joints and
+                # the track
                 self._several_track, self._behind_track, self._track_unsorted = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
             if _finds_better(q, p):
@@ -1759,8 +1760,8 @@ class Estimator:
         """The lower foot's height above the floor (:func:`~ghnerf_runtime.joints3d.lower_foot_m`: the median of its
         joints less ``joints3d.foot_standing_m``, a foot with ``_FLOOR_MIN_FOOT_JOINTS`` of them), of the joints
         triangulated from peaks strong in both views (the presence threshold) that both frames show well inside their
-        edges (``_FLOOR_EDGE_FRAC``): not the prior's (it keeps placed feet near the floor, whatever the calibration), nor
-        guesses at a frame's edge.
+        edges (``_FLOOR_EDGE_FRAC``): not the prior's (it keeps placed feet near the floor, whatever the calibration),
+        nor guesses at a frame's edge.
         ``None`` too unless the torso joints so triangulated stand ``_FLOOR_MIN_TORSO_M`` above that foot (their
         median height): a person upside down or lying is not standing on the floor with their feet (a window of
         handstands would otherwise read as a camera turned)."""
