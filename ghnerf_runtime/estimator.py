@@ -809,6 +809,7 @@ class Estimator:
         Raises:
             FrameError: an image has the wrong size or type for its camera; ``timestamp_s`` is not a finite number.
             ModelError: a novel view was requested but not enabled; a graph failed.
+            A call refused for its arguments leaves the estimator as it was (the running count too).
         """
         result, finish = self.estimate_then_view(images, sequence=sequence, novel_view=novel_view,
                                                  timestamp_s=timestamp_s)
@@ -829,7 +830,6 @@ class Estimator:
         """
         t_start = time.perf_counter()
         sequence = self._sequence if sequence is None else _whole_sequence(sequence)
-        self._sequence = sequence + 1
         self._check_images(images)
         if timestamp_s is not None and not _finite_time(timestamp_s):
             # NaN compares false with every time: the track and the smoothing would restart on this pair and the next
@@ -839,6 +839,7 @@ class Estimator:
                              "not loaded)")
         if novel_view is not None and novel_view.overlay == "heatmap" and not self.config.novel_view.heatmaps:
             raise ModelError("overlay='heatmap' needs novel_view.heatmaps = true (the 'render' graph)")
+        self._sequence = sequence + 1  # after the checks: a refused call leaves the running count as it was
         timing: dict[str, float] = {}
         self._forget_a_stale_track(timestamp_s)
         if self.tracker.track is None and self.tracker.view_track is None:

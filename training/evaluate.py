@@ -72,6 +72,7 @@ from torch import Tensor
 
 from ghnerf_runtime.body25 import BODY_PARTS, MID_HIP, NECK
 from ghnerf_runtime.cli.output_path import ready_output_arg
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images
@@ -719,6 +720,15 @@ def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple
     return out
 
 
+def _kept_words(finished: list[str], saved: list[str], out: str | None) -> str:
+    """What a stopped ``ghnerf-eval`` kept: the models it finished and, with ``--out``, the ones that file holds
+    (the last finished one is not in it when the stop came during its write). A rerun evaluates every model again."""
+    words = f"models finished: {', '.join(finished) or 'none'}"
+    if out and saved:
+        words += "; " + (f"{out} holds them" if saved == finished else f"{out} holds {', '.join(saved)}")
+    return words
+
+
 def main(argv: list[str] | None = None) -> int:
     from training.cli.evaluate import build_parser  # noqa: PLC0415
 
@@ -745,17 +755,19 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     results: dict = {"data": args.data, "split": args.split, "pck_alpha": PCK_ALPHA,
                      "pck_reference": "neck--mid-hip distance (fallback: torso box diagonal)", "models": {}}
+    saved: list[str] = []  # the models --out holds: a stop inside a write leaves the file before it (write_atomic)
     try:
-        for label, renderer, desc, ds in runs:
-            print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
-            results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
-            if args.out:  # each finished model kept, whole, whatever happens to the next
-                write_atomic(args.out, strict_json(results))
-    except KeyboardInterrupt:  # Ctrl-C: a line saying what was kept, not a traceback
-        done = ", ".join(results["models"]) or "none"
-        kept = f"; {args.out} holds them" if args.out and results["models"] else ""
-        print(f"ghnerf-eval: stopped (Ctrl-C); models finished: {done}{kept}", file=sys.stderr)
-        return 130
+        with sigterm_as_interrupt():  # `timeout`, `kill`, a job scheduler: stopped as Ctrl-C stops it
+            for label, renderer, desc, ds in runs:
+                print(f"evaluating {label} ({desc['kind']}) on {args.split}", file=sys.stderr, flush=True)
+                results["models"][label] = {**desc, **evaluate(renderer, ds, args.limit, not args.no_novel)}
+                if args.out:  # each finished model kept, whole, whatever happens to the next
+                    write_atomic(args.out, strict_json(results))
+                    saved = list(results["models"])
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: a line saying what was kept, not a traceback
+        print(f"ghnerf-eval: stopped ({stop_words(e)}); {_kept_words(list(results['models']), saved, args.out)}",
+              file=sys.stderr)
+        return exit_status(e)
     print(strict_json(results))
     return 0
 

@@ -66,6 +66,7 @@ from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
 from training.model_card import write_atomic  # stamps and requests whole: half a one would stop every later run
+from training.run_lock import lock_holder
 
 log = logging.getLogger("training.pipeline")
 
@@ -707,13 +708,6 @@ def dataset_matches(cfg: PipelineConfig) -> bool:
     return True
 
 
-def _pid_alive(path: Path) -> bool:
-    """Whether ``path`` (a run's ``train.pid``) names a live process (a crashed run leaves a stale one)."""
-    try:
-        os.kill(int(path.read_text().strip()), 0)
-    except (OSError, ValueError):
-        return False
-    return True
 
 
 def _set_aside_forced(cfg: PipelineConfig, forced: set[str]) -> None:
@@ -731,10 +725,9 @@ def _set_aside_forced(cfg: PipelineConfig, forced: set[str]) -> None:
         # The trainer and the pretraining hold train.pid while they run and remove it on the way out (Ctrl-C);
         # after a kill it names a dead process. A fresh log.jsonl without summary.json also counted as in use,
         # so --force right after a Ctrl-C was refused for three minutes.
-        if _pid_alive(folder / "train.pid"):
-            raise RuntimeError(f"--force {stage}: {folder} is in use by a training run (process "
-                               f"{(folder / 'train.pid').read_text().strip()} holds its train.pid); wait for it or "
-                               "stop it first")
+        if (pid := lock_holder(folder / "train.pid")) is not None:
+            raise RuntimeError(f"--force {stage}: {folder} is in use by a training run (process {pid} holds its "
+                               "train.pid); wait for it or stop it first")
         aside = folder.with_name(f"{folder.name}.replaced-{stamp}")
         n = 1
         while aside.exists():
@@ -828,8 +821,7 @@ def _check_pretrain_folder(cfg: PipelineConfig, variant: str) -> None:
     """Refuse to resume a pretraining run of another config or on another dataset (``--resume`` would
     carry on from its checkpoint)."""
     run = pretrain_dir(cfg, variant)
-    if _pid_alive(run / "train.pid"):  # (the pretraining holds it as the trainer does)
-        pid = (run / "train.pid").read_text().strip()
+    if (pid := lock_holder(run / "train.pid")) is not None:  # (the pretraining holds it as the trainer does)
         raise RuntimeError(f"{run}: a pretraining run is in progress (process {pid} holds its train.pid); wait for "
                            "it or stop it")
     held = (run / "last.pt").exists() or (run / "prev.pt").exists()  # prev.pt alone: resumed from it
@@ -940,9 +932,9 @@ def _check_run_folder(cfg: PipelineConfig, variant: str) -> None:
     # The trainer holds train.pid while it runs and removes it on the way out (Ctrl-C too); after a kill -9 it
     # names a dead process. A fresh log.jsonl alone used to count as a run in progress, so running the command
     # again just after a Ctrl-C was refused for three minutes.
-    if _pid_alive(run / "train.pid"):
-        raise RuntimeError(f"{run}: a training run is in progress (process {(run / 'train.pid').read_text().strip()} "
-                           "holds its train.pid); wait for it or stop it")
+    if (pid := lock_holder(run / "train.pid")) is not None:
+        raise RuntimeError(f"{run}: a training run is in progress (process {pid} holds its train.pid); wait for it "
+                           "or stop it")
     tc = train_inputs(cfg, VARIANTS[variant])
     if (run / "last.pt").exists() and cfg_p.exists() and \
             _result_keys(_run_config(cfg_p)) != _result_keys(tc):

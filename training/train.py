@@ -69,6 +69,7 @@ from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.model_card import write_atomic
 from training.run_clock import RunClock
+from training.run_lock import lock_holder, lock_text
 from training.step_guard import TrainingDiverged
 
 CHECKPOINT_VERSION = 1
@@ -969,22 +970,17 @@ class RunFolderInUse(ConfigError, RuntimeError):
 
 def refuse_live_lock(path: Path) -> None:
     """One training process per run folder: refuse (:class:`RunFolderInUse`) when ``path`` names another live
-    process."""
-    if not path.exists():
-        return
-    try:
-        pid = int(path.read_text().strip())
-        os.kill(pid, 0)
-    except (ValueError, ProcessLookupError, PermissionError):
-        return  # stale lock
-    if pid != os.getpid():
+    process that holds it (a stale file, whose number another process has since been given, is not one:
+    ``training.run_lock``)."""
+    pid = lock_holder(path)
+    if pid is not None and pid != os.getpid():
         raise RunFolderInUse(f"{path.parent}: another training process ({pid}) is using this run folder; wait for "
                              "it or stop it, or give another --out")
 
 
 def take_lock(path: Path) -> None:
     refuse_live_lock(path)
-    path.write_text(str(os.getpid()))
+    path.write_text(lock_text(os.getpid()))
 
 
 def open_dataset(cfg: TrainConfig, world: int = 1):

@@ -1,5 +1,5 @@
 """SIGTERM stops a command-line tool as Ctrl-C does: one helper for ``ghnerf-run``, ``ghnerf-listen``, ``ghcal``,
-``ghnerf-demo``, ``ghnerf-train`` and the human-encoder pretraining.
+``ghnerf-demo``, ``ghnerf-train``, the human-encoder pretraining, ``ghnerf-eval`` and the dataset generator.
 
 SIGTERM's default action (``timeout``, ``kill``, a wrapper's stop button, systemd) kills the process outright:
 no ``finally`` runs, so a tool's outputs are left half-written (a ``record+`` take stays ``complete: false``)

@@ -210,6 +210,30 @@ def test_validate_config_needs_no_rig_or_images(tmp_path, capsys):
     assert "not UTF-8" in capsys.readouterr().err
 
 
+def test_a_corrupt_graph_the_config_does_not_run_is_not_loaded_nor_checked(sim_pair, tiny_model_dir, tmp_path,  # noqa: F811
+                                                                           capsys):
+    """The runtime loads only the graphs the configuration runs ("Compute only what the scene requires"): with
+    ``heatmaps.source`` "rendered" the ``human`` graph is not run, so a damaged ``human`` file is not read and the
+    run goes on; the default source runs it and is refused, naming the file. ``--validate-config`` checks the
+    config alone and loads no graph (docs/runtime.md, "The model folder; switching models": decided in session 60)."""
+    import shutil
+
+    folder = shutil.copytree(tiny_model_dir, tmp_path / "model")
+    damaged = sorted(folder.glob("human*.onnx"))
+    assert damaged, "the tiny model has a human graph"
+    for path in damaged:
+        path.write_bytes(path.read_bytes()[:1000])  # cut short: onnxruntime cannot load it
+    args = ["--rig", sim_pair["rig"], "--images", sim_pair["left"], sim_pair["right"], "--model-dir", str(folder)]
+    out = tmp_path / "joints.json"
+    assert cli_run.main([*args, "--heatmap-source", "rendered", "--out", str(out)]) == 0
+    assert len(json.loads(out.read_text())) == 1
+    capsys.readouterr()
+    assert cli_run.main([*args, "--out", str(tmp_path / "refused.json")]) == 2  # the default runs the human graph
+    err = capsys.readouterr().err
+    assert f"{folder / 'human'}" in err and "onnxruntime cannot load the graph file" in err, err
+    assert cli_run.main(["--model-dir", str(folder), "--validate-config"]) == 0
+
+
 @pytest.mark.parametrize(("extra", "words"), [
     ([], ["--rig"]),
     (["--rig", "r.json"], ["--images", "--videos"]),

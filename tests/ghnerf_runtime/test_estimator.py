@@ -320,6 +320,23 @@ def test_wrong_frames_and_missing_graphs_are_errors(full_session, tiny_model_dir
         Estimator(small, rig, EstimatorConfig(joints3d=Joints3DConfig(method="volumetric")))
 
 
+def test_a_refused_call_leaves_the_running_count_as_it_was(full_session, scene_rig):
+    """A bad image, time or novel-view request is refused before the pair is read: the next pair keeps the number
+    it would have had (the count was advanced before the checks, so a refused call left a gap in the sequence)."""
+    rig, frames = scene_rig
+    est = Estimator(full_session, rig)
+    assert est.estimate(frames[0]).sequence == 0
+    with pytest.raises(FrameError, match="expected 2 images"):
+        est.estimate((frames[1][0],))
+    with pytest.raises(FrameError, match=rig.names[1]):
+        est.estimate((frames[1][0], None), sequence=40)
+    with pytest.raises(FrameError, match="timestamp_s"):
+        est.estimate(frames[1], timestamp_s=float("nan"))
+    with pytest.raises(ModelError, match="novel view was requested"):
+        est.estimate_then_view(frames[1], novel_view=NovelViewRequest())
+    assert est.estimate(frames[1]).sequence == 1
+
+
 def test_encoder_heatmaps_skip_volume_and_rendering(tiny_model_dir, scene_rig):  # noqa: F811
     rig, frames = scene_rig
     cfg = EstimatorConfig(session=SessionConfig(model_dir=str(tiny_model_dir)), heatmaps=HeatmapsConfig("encoder", flip_test=False),

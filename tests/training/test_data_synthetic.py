@@ -489,6 +489,64 @@ def test_a_damaged_or_half_written_shard_is_rendered_again_not_trusted(tmp_path,
     assert _digest(out) == whole
 
 
+def test_a_sigterm_stops_generation_with_143_a_line_and_no_half_written_shard(tmp_path, monkeypatch, caplog):
+    """``timeout`` or ``kill`` mid-run: one line saying the finished shards are kept and how to resume, exit 143,
+    the lock freed and no ``*.tmp-*`` shard left; the rerun renders only what is missing. SIGTERM killed the
+    generator silently before (exit 143, nothing said, the cut shard's temporary folder left)."""
+    import os
+    import signal
+    import time
+
+    import training.data.generate as gen
+    from ghnerf_runtime.cli.sigterm import sigterm_raises
+
+    out = tmp_path / "ds"
+    real, calls = gen._render_shard, []
+
+    def render(task):
+        calls.append(1)
+        if len(calls) == 2:
+            if not sigterm_raises():
+                pytest.fail("the generator renders under SIGTERM's default action: a kill ends it silently")
+            (task[4].parent / f"{task[4].name}.tmp-{os.getpid()}").mkdir()  # the shard being written when it came
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)  # (the handler raises at the next bytecode)
+        return real(task)
+
+    monkeypatch.setattr(gen, "_render_shard", render)
+    caplog.set_level("INFO")
+    assert main(["--out", str(out), "--train", "3", *_SMALL]) == 143
+    assert "stopped (SIGTERM): the finished shards are kept; run the same command again to resume" in caplog.text
+    assert sorted(p.name for p in (out / "train").iterdir()) == ["shard_000000"]
+    assert (out / "dataset.lock").read_text() == ""  # freed: the holder's line is emptied on the way out
+    assert not sigterm_raises()  # the handler before it is back
+    monkeypatch.setattr(gen, "_render_shard", real)
+    caplog.clear()
+    assert main(["--out", str(out), "--train", "3", *_SMALL]) == 0
+    assert "2 shards (2 samples) to render, 1 already complete" in caplog.text
+
+
+def test_a_stop_inside_the_manifest_write_leaves_the_old_manifest_and_no_temporary(tmp_path, monkeypatch):
+    """A Ctrl-C or SIGTERM landing in the manifest's write (its fsync, say) left ``manifest.json.tmp`` behind: only
+    an OSError removed it."""
+    import json
+    import os
+
+    from ghnerf_runtime.cli.sigterm import Terminated
+
+    write_manifest(tmp_path, {"old": True})
+
+    def stopped(*a):
+        raise Terminated("SIGTERM")
+
+    monkeypatch.setattr(os, "replace", stopped)
+    with pytest.raises(Terminated):
+        write_manifest(tmp_path, {"new": True})
+    monkeypatch.undo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [MANIFEST]
+    assert json.loads((tmp_path / MANIFEST).read_text()) == {"old": True}
+
+
 def test_a_full_disk_during_generation_exits_2_naming_the_folder_and_the_rerun_resumes(tmp_path, monkeypatch,
                                                                                           caplog):
     import errno

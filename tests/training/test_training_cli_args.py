@@ -50,6 +50,59 @@ def test_ctrl_c_exits_130_and_keeps_the_models_finished(tmp_path, capsys, monkey
     assert list(json.loads(out.read_text())["models"]) == ["a"]
 
 
+def test_a_sigterm_stops_eval_with_143_and_a_line_naming_what_out_holds(tmp_path, capsys, monkeypatch):
+    """``timeout`` or ``kill``: a real SIGTERM mid-model stops ghnerf-eval as Ctrl-C does (it killed the process
+    silently, exit 143 with no word of what --out held)."""
+    import os
+    import signal
+    import time
+
+    from ghnerf_runtime.cli.sigterm import sigterm_raises
+
+    runs = [(label, object(), {"kind": "stub"}, None) for label in ("a", "b")]
+    monkeypatch.setattr(evaluate, "prepare", lambda *a: runs)
+    calls = []
+
+    def scores(renderer, ds, limit, novel):
+        calls.append(1)
+        if len(calls) == 2:
+            if not sigterm_raises():
+                pytest.fail("ghnerf-eval runs its models under SIGTERM's default action: a kill ends it silently")
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)  # (the handler raises at the next bytecode)
+        return {"pck@0.2": 0.5}
+
+    monkeypatch.setattr(evaluate, "evaluate", scores)
+    out = tmp_path / "m.json"
+    rc = evaluate.main(["--data", str(tmp_path), "--model", "a=x.pt", "--model", "b=y.pt", "--out", str(out)])
+    assert rc == 143
+    assert f"ghnerf-eval: stopped (SIGTERM); models finished: a; {out} holds them" in capsys.readouterr().err
+    assert list(json.loads(out.read_text())["models"]) == ["a"]
+    assert [p.name for p in tmp_path.iterdir()] == ["m.json"]  # no write_atomic temporary left
+    assert signal.getsignal(signal.SIGTERM) is not None and not sigterm_raises()  # the handler before is back
+
+
+def test_a_stop_inside_the_write_of_out_names_only_the_models_the_file_holds(tmp_path, capsys, monkeypatch):
+    """The stop lands in the write of the second model's scores: the file keeps the first model alone, whole, and
+    the line says so (it said the file held both)."""
+    runs = [(label, object(), {"kind": "stub"}, None) for label in ("a", "b")]
+    monkeypatch.setattr(evaluate, "prepare", lambda *a: runs)
+    monkeypatch.setattr(evaluate, "evaluate", lambda *a: {"pck@0.2": 0.5})
+    real, writes = evaluate.write_atomic, []
+
+    def write_atomic(path, data):
+        writes.append(1)
+        if len(writes) == 2:
+            raise KeyboardInterrupt
+        return real(path, data)
+
+    monkeypatch.setattr(evaluate, "write_atomic", write_atomic)
+    out = tmp_path / "m.json"
+    assert evaluate.main(["--data", str(tmp_path), "--model", "a=x.pt", "--model", "b=y.pt", "--out", str(out)]) == 130
+    assert f"stopped (Ctrl-C); models finished: a, b; {out} holds a" in capsys.readouterr().err
+    assert list(json.loads(out.read_text())["models"]) == ["a"]
+
+
 # ------------------------------------------------------------------ ghnerf-train (same kind of checks)
 def test_train_refuses_a_file_for_its_run_folder_and_a_missing_init_before_writing(tmp_path, capsys):
     from training.train import main

@@ -150,7 +150,7 @@ def _replace_text(path: Path, text: str) -> None:
             os.fsync(fh.fileno())
         os.replace(tmp, path)
         _fsync_dir(path.parent)
-    except OSError:
+    except BaseException:  # a Ctrl-C or SIGTERM (generate's Terminated) in the write too: no manifest.json.tmp left
         tmp.unlink(missing_ok=True)
         raise
 

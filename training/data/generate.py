@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
+from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from training.data.cache import (
     MANIFEST, generator_version, new_manifest, read_manifest, remove_stale_temporaries, shard_is_complete, shard_name,
     shard_plan, stored_count, write_manifest, write_shard, writer_lock,
@@ -229,7 +230,7 @@ def _generate(out: Path, counts: Mapping[str, int], config: SyntheticConfig, dat
                      done / elapsed)
     except BaseException:
         if pool is not None:
-            # Ctrl-C or a failed shard: stop the workers now (close() would wait for every queued shard); a
+            # Ctrl-C, SIGTERM or a failed shard: stop the workers now (close() would wait for every queued shard); a
             # shard cut short is only a *.tmp-* folder
             pool.terminate()
             pool.join()
@@ -278,14 +279,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = SyntheticConfig(resolution=args.res, novel_views=args.novel_views, supersample=args.supersample,
                                  cold_start_fraction=args.cold_start, freestyle_share=args.freestyle_share)
         counts = {"train": args.train, "val": args.val, "val_seen_motions": args.val_seen_motions}
-        report = generate(args.out, counts, config, dataset_seed=args.seed, workers=args.workers,
-                          shard_size=args.shard_size)
+        with sigterm_as_interrupt():  # `timeout`, `kill`, a job scheduler: stopped as Ctrl-C stops it
+            report = generate(args.out, counts, config, dataset_seed=args.seed, workers=args.workers,
+                              shard_size=args.shard_size)
     except (DataConfigError, DatasetError) as e:
         log.error("%s", e)
         return 2
-    except KeyboardInterrupt:
-        log.error("interrupted: the finished shards are kept; run the same command again to resume")
-        return 130
+    except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM: the workers are stopped and no shard is left half-written
+        log.error("stopped (%s): the finished shards are kept; run the same command again to resume", stop_words(e))
+        return exit_status(e)
     log.info("rendered %d samples in %.1f s (%.2f samples/s); %d shards written, %d skipped; %.0f bytes/sample on disk",
              report.samples_rendered, report.seconds, report.samples_per_s, report.shards_written, report.shards_skipped,
              report.bytes_per_sample)
