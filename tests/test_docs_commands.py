@@ -17,6 +17,8 @@ that start one of the project's programs, and checks each against the program it
   (some program's ``cache`` subcommand) takes each; a span that is a project file's path (`tests/test_x.py`):
   the file is there;
 * the commands the Makefile's recipes and ``training/*.sh`` run, as the docs' are.
+* a doc's fenced Python blocks: each ``from PACKAGE.module import name`` of a project package names a module
+  and an attribute that exist (docs/training.md's quantize snippet, the runtime's and the README's examples).
 
 The parser is taken from the program's own ``main`` without running it: ``ArgumentParser.parse_args`` is
 replaced, for the call, by one that stops with the parser it was called on, so what is checked is exactly what
@@ -825,3 +827,64 @@ def test_a_renamed_test_the_doc_names_is_caught():
     assert not quoted_test_problems(f"see {named} and `tests/ghnerf_runtime/test_two_people.py`", "x.md")
     (problem,) = quoted_test_problems(f"see {named.replace('found_one', 'found')}", "x.md")
     assert problem.startswith("x.md:1: test_a_joint_no_view") and "no such test" in problem
+
+
+# ------------------------------------------------------------------------ the names a doc's Python blocks import
+
+def python_blocks(text: str) -> list[tuple[int, str]]:
+    """(line number of its first line, source) of each fenced ``python`` / ``py`` block of a doc."""
+    blocks = []
+    for match in re.finditer(r"^[ \t]*```(?:python|py)[ \t]*\n(.*?)^[ \t]*```", text, flags=re.M | re.S):
+        blocks.append((text.count("\n", 0, match.start(1)) + 1, match.group(1)))
+    return blocks
+
+
+def _project_packages(root: Path) -> frozenset[str]:
+    return frozenset(p.parent.name for p in root.glob("*/__init__.py"))
+
+
+def imported_name_problems(text: str, where: str, root: Path = REPO) -> list[str]:
+    """Each ``from PACKAGE.module import name`` of a project package in a doc's Python blocks whose module or name
+    is not there: a snippet a user pastes (the shipped model's graphs quantized again, the estimator's example)
+    must not stop at its first line because a function was renamed. Only the project's own packages are imported;
+    a block that is not whole Python (an excerpt) is read line by line."""
+    packages = _project_packages(root)
+    problems = []
+    for first, source in python_blocks(text):
+        try:
+            statements = [(first + node.lineno - 1, node) for node in ast.walk(ast.parse(source))
+                          if isinstance(node, ast.ImportFrom)]
+        except SyntaxError:
+            statements = []
+            for offset, line in enumerate(source.splitlines()):
+                try:
+                    statements += [(first + offset, node) for node in ast.parse(line.strip()).body
+                                   if isinstance(node, ast.ImportFrom)]
+                except SyntaxError:
+                    continue
+        for line, node in statements:
+            if node.level or not node.module or node.module.split(".")[0] not in packages:
+                continue
+            try:
+                module = importlib.import_module(node.module)
+            except ImportError as e:
+                problems.append(f"{where}:{line}: {node.module}: cannot be imported ({e})")
+                continue
+            problems += [f"{where}:{line}: {node.module} has no {alias.name}" for alias in node.names
+                         if alias.name != "*" and not hasattr(module, alias.name)]
+    return problems
+
+
+@pytest.mark.parametrize("doc", DOCS)
+def test_every_name_a_doc_s_python_block_imports_is_there(doc):
+    problems = imported_name_problems((REPO / doc).read_text(encoding="utf-8"), doc)
+    assert not problems, "\n".join(problems)
+
+
+def test_a_renamed_function_a_python_block_imports_is_caught():
+    block = "text\n\n```python\nfrom pathlib import Path\nfrom training.pipeline import Stages, {}\n```\n"
+    assert not imported_name_problems(block.format("stage_quantize"), "x.md")
+    (problem,) = imported_name_problems(block.format("stage_quantise"), "x.md")
+    assert problem == "x.md:5: training.pipeline has no stage_quantise"
+    (problem,) = imported_name_problems(block.format("x").replace("training.pipeline", "training.pipe_line"), "x.md")
+    assert problem.startswith("x.md:5: training.pipe_line: cannot be imported")

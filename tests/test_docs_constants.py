@@ -62,8 +62,9 @@ from ghnerf_runtime.geometry.triangulation import CENTRE_TOLERANCE, MIN_RAY_ANGL
 from ghnerf_runtime.novel_view import AUTO_ORBIT_MIN_ANGLE_DEG, HALF_TURN_BAND_DEG
 from ghnerf_runtime.rig_file import MAX_DISTORTION, MAX_RIG_FILE_BYTES
 from ghnerf_runtime.skeleton_prior import MIN_CHECK_JOINTS
-from ghnerf_runtime.two_people import BODY_RADIUS_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
-    SLACK_DEPTH_BASELINES, TIE_M, TORSO_LIMBS_M, TWIN_SAME_M
+from ghnerf_runtime.proxy_matte import BONE_M
+from ghnerf_runtime.two_people import BODY_RADIUS_M, BONE_SLACK_M, MAX_LIMB_M, MIN_APART_M, MIXED_TORSO_SLACK_M, \
+    SLACK_DEPTH_BASELINES, TIE_M, TORSO_LIMBS_M, TORSO_TWINS_APART_M, TWIN_SAME_M
 from training.data.errors import DatasetError
 from training.data.zju import MIN_CAMERA_SPREAD_M, parse_cameras
 from training.export.calibration import MIN_FRAMES
@@ -216,6 +217,13 @@ def _doc(name: str) -> str:
     ("docs/two-people.md", f"`SLACK_DEPTH_BASELINES` ({SLACK_DEPTH_BASELINES:g}) baselines"),
     # session 60: one peak read as both sides' joints (two_people.one_side_each)
     ("docs/two-people.md", f"`two_people.TWIN_SAME_M` ({TWIN_SAME_M:g} m)"),
+    # session 60's review: the split's shoulder held the torso's width from its found twin (two_people.held_apart)
+    ("docs/two-people.md", f"the two bones (`proxy_matte.BONE_M`, {BONE_M['LShoulder']:.2f} m each) less `BONE_SLACK_M` "
+                           f"({BONE_SLACK_M:g} m) for the ends' error, as `one_skeleton` allows it: "
+                           f"{TORSO_TWINS_APART_M[(JOINT_NAMES.index('LShoulder'), JOINT_NAMES.index('RShoulder'))]:g} "
+                           f"m for the shoulders"),
+    ("docs/two-people.md", f"The hips' bound (2 x {BONE_M['LHip']:g} - {BONE_SLACK_M:g} m = "
+                           f"{2 * BONE_M['LHip'] - BONE_SLACK_M:.2f} m) is below zero, so hips are not checked"),
     ("docs/turn-search.md", f"at most {KEPT_TURN_STEP_DEG:g} degrees from that pass's (`KEPT_TURN_STEP_DEG`)"),
     ("docs/turn-search.md", f"within {KEPT_TURN_SECTOR_DEG:g} degrees of the turn (`KEPT_TURN_SECTOR_DEG`"),
     # session 57's rule for a search's turned pass (ghnerf_runtime/body_lie.py), quoted since session 59
@@ -371,8 +379,8 @@ def test_the_turn_search_page_names_its_keys_and_the_code_it_points_at():
     opening = page.split("\n**", 1)[0]
     files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", opening)
     methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", opening)
-    functions = re.findall(r"`(lies_as_\w+)`", opening)
-    assert len(files) >= 5 and len(methods) >= 3 and len(functions) >= 2, (files, methods, functions)
+    functions = re.findall(r"`(lies_as_\w+|nears_a_\w+)`", opening)
+    assert len(files) >= 5 and len(methods) >= 3 and len(functions) >= 3, (files, methods, functions)
     missing = [f for f in files if not (REPO / f).is_file()]
     missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
     missing += [f"body_lie.{f}" for f in functions if not hasattr(body_lie, f)]
