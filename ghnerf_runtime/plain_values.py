@@ -1,0 +1,30 @@
+"""NumPy values where a Python one is asked for: one place for the checks the configs, the wire messages and the sink
+URLs share (numpy only, so ``drivers`` and ``firmware_host`` import it without the runtime's heavier modules).
+
+A NumPy scalar (np.int64, np.float32, np.bool_) comes from arrays and comparisons; kept as given it failed
+``json.dumps`` later (a config's ``config_to_dict``, the file:// sink's worker), and ``np.True_`` is no ``bool`` to
+``isinstance``, so a flag's check let it through as the number 1.
+"""
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+__all__ = ["is_real_number", "is_true_false", "plain_scalar"]
+
+
+def plain_scalar(value: object) -> object:
+    """A NumPy scalar as the Python value it holds (np.int64 -> int, np.float32 -> float, np.bool_ -> bool), anything
+    else as it is."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def is_true_false(value: object) -> bool:
+    """Whether ``value`` is True/False, Python's or NumPy's: what a number's check refuses (True was read as 1)."""
+    return isinstance(value, (bool, np.bool_))
+
+
+def is_real_number(value: object) -> bool:
+    """A real number, Python's or NumPy's, not True/False (finite or not: the caller bounds it)."""
+    return isinstance(value, numbers.Real) and not is_true_false(value)

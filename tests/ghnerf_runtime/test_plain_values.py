@@ -1,0 +1,44 @@
+"""``ghnerf_runtime.plain_values``: the NumPy-value checks the configs, wire messages and sink URLs share."""
+from __future__ import annotations
+
+import math
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from ghnerf_runtime.plain_values import is_real_number, is_true_false, plain_scalar
+
+
+@pytest.mark.parametrize("value, plain", [(np.int64(7), 7), (np.float32(2.5), 2.5), (np.True_, True),
+                                          (np.str_("a"), "a")])
+def test_a_numpy_scalar_comes_back_as_the_python_value_it_holds(value, plain):
+    out = plain_scalar(value)
+    assert out == plain and type(out) is type(plain)
+
+
+@pytest.mark.parametrize("value", [7, 2.5, True, "a", None, (1, 2)])
+def test_anything_else_comes_back_as_it_is(value):
+    assert plain_scalar(value) is value
+
+
+def test_an_array_is_not_a_scalar_and_comes_back_as_it_is():
+    a = np.arange(3)
+    assert plain_scalar(a) is a
+
+
+@pytest.mark.parametrize("value, expected", [(True, True), (np.False_, True), (1, False), (np.int8(0), False),
+                                             ("yes", False), (None, False)])
+def test_true_false_is_python_or_numpy_bool_alone(value, expected):
+    assert is_true_false(value) is expected
+
+
+@pytest.mark.parametrize("value", [3, -2.5, math.inf, math.nan, np.float32(0.5), np.uint16(9), Fraction(1, 3),
+                                   10 ** 400])
+def test_real_numbers_of_either_kind_are_real(value):
+    assert is_real_number(value)
+
+
+@pytest.mark.parametrize("value", [True, np.True_, "5", None, 1j, np.complex64(1), np.array([1.0])])
+def test_true_false_text_complex_and_arrays_are_not(value):
+    assert not is_real_number(value)
