@@ -10,10 +10,9 @@ from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
 
-import numpy as np
-
 from drivers.url import decimal_number, whole_number, yes_no
 from firmware_host.errors import SinkConfigError
+from ghnerf_runtime.plain_values import plain_scalar
 
 T = TypeVar("T")
 
@@ -32,7 +31,9 @@ class SinkUrl:
         Keyword values that are strings or numbers go through the same check as
         query values (``None`` counts as not given; ``True``/``False`` only for a
         yes/no option); other objects (tuples, policies) are taken as they are.
-        NumPy scalars count as the Python value they hold (:func:`plain_scalar`).
+        NumPy scalars count as the Python value they hold (:func:`~ghnerf_runtime.plain_values.plain_scalar`): a
+        keyword's np.int64 or np.float32 was taken as an object and skipped every check (baud=np.int64(-5) and
+        queue=np.float32(8.5) were accepted, np.True_ was a baud of 1).
         """
         raw: object = self.query.pop(key, None)
         if kw is not None and kw.get(key) is None:
@@ -57,13 +58,6 @@ class SinkUrl:
         if self.query:
             key = sorted(self.query)[0]
             raise SinkConfigError(self.url, key, self.query[key], "unknown parameter")
-
-
-def plain_scalar(value: object) -> object:
-    """A NumPy scalar as the Python value it holds (np.int64 -> int, np.float32 -> float, np.bool_ -> bool), anything
-    else as it is: a keyword's np.int64 or np.float32 was taken as an object and skipped every check (baud=np.int64(-5)
-    and queue=np.float32(8.5) were accepted, np.True_ was a baud of 1)."""
-    return value.item() if isinstance(value, np.generic) else value
 
 
 def parse_url(url: str) -> SinkUrl:
