@@ -29,13 +29,12 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-import numpy as np
-
 from ghnerf_runtime.config_paths import paths_from_file
 from ghnerf_runtime.contract import GRAPH_NAMES, MAX_NEAR_FAR_MARGIN_M
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.json_keys import remember_repeats
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
+from ghnerf_runtime.plain_values import is_true_false, plain_scalar
 from ghnerf_runtime.preprocess import EDGE_CROPS, PAD_FILLS
 
 __all__ = [
@@ -79,8 +78,7 @@ def _is_real(value: Any) -> bool:
 def _keep_plain(obj: Any, name: str, value: Any) -> None:
     """Store a checked value as the Python type it stands for: a NumPy scalar (np.float32, np.int64, np.bool_) kept as
     given made :func:`config_to_dict`, documented JSON-ready, fail in ``json.dumps``."""
-    if isinstance(value, np.generic):
-        object.__setattr__(obj, name, value.item())
+    object.__setattr__(obj, name, plain_scalar(value))
 
 
 def _number(obj: Any, name: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
@@ -100,7 +98,7 @@ def _integer(obj: Any, name: str, lo: int, hi: int) -> None:
 
 def _boolean(obj: Any, name: str) -> None:
     value = getattr(obj, name)
-    if not isinstance(value, (bool, np.bool_)):  # numpy's True too (a comparison's result); 1 and "yes" are not
+    if not is_true_false(value):  # numpy's True too (a comparison's result); 1 and "yes" are not
         _fail(type(obj), name, "must be true or false", value)
     _keep_plain(obj, name, value)
 
