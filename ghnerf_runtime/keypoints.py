@@ -74,6 +74,7 @@ import numpy as np
 
 from ghnerf_runtime.errors import RuntimeErrorBase, ShapeError
 from ghnerf_runtime.geometry.camera import Camera, check_last_dim
+from ghnerf_runtime.plain_values import plain_scalar
 from ghnerf_runtime.preprocess import Roi, camera_normalized, crop_camera
 
 __all__ = [
@@ -135,8 +136,7 @@ class KeypointDecoderConfig:
         if not (real(self.max_region_frac) and 0 < self.max_region_frac <= 1):
             fail("max_region_frac", "must be in (0, 1]")
         for f in fields(self):  # checked numpy scalars as Python's: config_to_dict is JSON-ready
-            if isinstance(getattr(self, f.name), np.generic):
-                object.__setattr__(self, f.name, getattr(self, f.name).item())
+            object.__setattr__(self, f.name, plain_scalar(getattr(self, f.name)))
 
 
 @dataclass(frozen=True, eq=False)
