@@ -12,10 +12,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 
-import numpy as np
-
 from drivers.errors import RigConfigError
 from drivers.frames import Frame
+from ghnerf_runtime.plain_values import is_real_number, is_true_false
 
 
 class DropPolicy(str, Enum):
@@ -54,7 +53,7 @@ class PairingConfig:
     def __post_init__(self) -> None:
         # a Python or numpy number, stored as Python's (True was 1 ms, "5" a bare TypeError); NaN is refused too,
         # and a huge one, whose int(ns) overflowed
-        if not (_real(self.tolerance_ms) and 0 < self.tolerance_ms <= MAX_TOLERANCE_MS):
+        if not (is_real_number(self.tolerance_ms) and 0 < self.tolerance_ms <= MAX_TOLERANCE_MS):
             raise RigConfigError(f"pairing tolerance_ms must be a number in (0, {MAX_TOLERANCE_MS:g}], "
                                  f"got {self.tolerance_ms!r}")
         object.__setattr__(self, "tolerance_ms", float(self.tolerance_ms))
@@ -66,15 +65,10 @@ class PairingConfig:
             ) from None
         for name in ("max_pending", "max_ready"):
             value = getattr(self, name)
-            if not (isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)) and value >= 1):
+            if not (isinstance(value, numbers.Integral) and not is_true_false(value) and value >= 1):
                 # 2.5 held 3 frames, True 1
                 raise RigConfigError(f"pairing {name} must be a whole number >= 1, got {value!r}")
             object.__setattr__(self, name, int(value))
-
-
-def _real(value: object) -> bool:
-    """A real number (Python's or numpy's), not True/False."""
-    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
 @dataclass
