@@ -6,7 +6,7 @@ import numbers
 import threading
 from dataclasses import dataclass
 
-import numpy as np
+from ghnerf_runtime.plain_values import is_real_number
 
 
 @dataclass(frozen=True)
@@ -23,7 +23,7 @@ class BackoffPolicy:
         for name in ("initial_s", "factor", "max_s"):
             value = getattr(self, name)
             # a Python or numpy number, kept as a float: True was a 1 s wait, text a bare TypeError
-            if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+            if not is_real_number(value):
                 raise ValueError(f"invalid backoff policy: {name} must be a number, got {value!r}")
             object.__setattr__(self, name, _as_float(value))
         if not (self.initial_s > 0 and math.isfinite(self.factor) and self.factor >= 1
