@@ -8,10 +8,11 @@ A NumPy scalar (np.int64, np.float32, np.bool_) comes from arrays and comparison
 from __future__ import annotations
 
 import numbers
+import operator
 
 import numpy as np
 
-__all__ = ["is_real_number", "is_true_false", "plain_scalar"]
+__all__ = ["is_real_number", "is_true_false", "plain_scalar", "whole_number_or_none"]
 
 
 def plain_scalar(value: object) -> object:
@@ -28,3 +29,14 @@ def is_true_false(value: object) -> bool:
 def is_real_number(value: object) -> bool:
     """A real number, Python's or NumPy's, not True/False (finite or not: the caller bounds it)."""
     return isinstance(value, numbers.Real) and not is_true_false(value)
+
+
+def whole_number_or_none(value: object) -> int | None:
+    """``value`` as a Python int where it is a whole number (a Python or NumPy integer: what ``operator.index``
+    takes), not True/False; else None (a float, text: the caller says why in its own words)."""
+    if is_true_false(value):
+        return None
+    try:
+        return operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        return None

@@ -7,7 +7,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from ghnerf_runtime.plain_values import is_real_number, is_true_false, plain_scalar
+from ghnerf_runtime.plain_values import is_real_number, is_true_false, plain_scalar, whole_number_or_none
 
 
 @pytest.mark.parametrize("value, plain", [(np.int64(7), 7), (np.float32(2.5), 2.5), (np.True_, True),
@@ -42,3 +42,14 @@ def test_real_numbers_of_either_kind_are_real(value):
 @pytest.mark.parametrize("value", [True, np.True_, "5", None, 1j, np.complex64(1), np.array([1.0])])
 def test_true_false_text_complex_and_arrays_are_not(value):
     assert not is_real_number(value)
+
+
+@pytest.mark.parametrize("value, whole", [(3, 3), (-7, -7), (np.int64(5), 5), (np.uint8(255), 255), (10 ** 30, 10 ** 30)])
+def test_whole_numbers_of_either_kind_come_back_as_python_ints(value, whole):
+    out = whole_number_or_none(value)
+    assert out == whole and type(out) is int
+
+
+@pytest.mark.parametrize("value", [True, np.False_, 2.0, np.float32(2), "2", None, Fraction(4, 2)])
+def test_true_false_floats_and_text_are_no_whole_number(value):
+    assert whole_number_or_none(value) is None
