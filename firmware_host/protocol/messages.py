@@ -7,7 +7,6 @@ used by the test vectors).
 """
 from __future__ import annotations
 
-import operator
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Union
@@ -15,18 +14,18 @@ from typing import Any, Union
 import numpy as np
 
 from firmware_host.protocol.constants import MAX_JOINTS, PROTOCOL_VERSION, SCENE_FLAGS, U64_MAX, Flags, MsgType
+from ghnerf_runtime.plain_values import is_true_false, whole_number_or_none
 
 
 def _whole(name: str, value: object, lo: int | None = None, hi: int | None = None) -> int:
     """A JointFrame field that goes on the wire as an integer (numpy integers too) within [lo, hi], as a Python int:
     a numpy integer kept as given failed the file:// sink's JSON in its worker, the frame lost. True/False is refused
     (``sequence=True`` went out as frame 1)."""
-    if isinstance(value, (bool, np.bool_)):
+    if is_true_false(value):
         raise ValueError(f"JointFrame.{name} must be a whole number, not true/false, got {value!r}")
-    try:
-        number = operator.index(value)  # type: ignore[arg-type]
-    except TypeError:
-        raise ValueError(f"JointFrame.{name} must be a whole number, got {value!r}") from None
+    number = whole_number_or_none(value)
+    if number is None:
+        raise ValueError(f"JointFrame.{name} must be a whole number, got {value!r}")
     if (lo is not None and number < lo) or (hi is not None and number > hi):
         raise ValueError(f"JointFrame.{name} must be in [{lo}, {hi}], got {value!r}")
     return number
@@ -79,7 +78,7 @@ class JointFrame:
                              f"scene flags 0x{SCENE_FLAGS:02x} ({Flags(SCENE_FLAGS)!r})")
         _joint_values("joints_3d", self.joints_3d, 4)
         for cam, uv in self.joints_2d.items():
-            if isinstance(cam, (bool, np.bool_)):  # True indexed camera 1
+            if is_true_false(cam):  # True indexed camera 1
                 raise ValueError(f"JointFrame.joints_2d key {cam!r}: a camera name or index, not true/false")
             _joint_values(f"joints_2d[{cam!r}]", uv, 3)
 
