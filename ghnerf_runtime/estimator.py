@@ -48,7 +48,6 @@ from __future__ import annotations
 import logging
 import math
 import numbers
-import operator
 import time
 from collections import OrderedDict
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -79,6 +78,7 @@ from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoint
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
     novel_pivot, novel_target, render_novel_view, skeleton_overlay
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
+from ghnerf_runtime.plain_values import is_true_false, whole_number_or_none
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
 from ghnerf_runtime.preprocess import (
@@ -381,7 +381,7 @@ def _finite_time(value) -> bool:
     """Whether ``value`` is a finite number (a capture time): an integer past the float range (10**400) is not,
     nor is what is no number (a string): ``math.isfinite`` raised OverflowError or TypeError for them, which the
     daemon's loop (it skips a pair on a FrameError) did not expect. True/False is no time (it was read as 1 s)."""
-    if isinstance(value, (bool, np.bool_)):
+    if is_true_false(value):
         return False
     try:
         return math.isfinite(value)
@@ -394,12 +394,10 @@ def _whole_sequence(value) -> int:
     out as 2, and the running count went on 3.7, 4.7...), True was pair 1, and text failed with a bare TypeError.
 
     :raises FrameError: not a whole number."""
-    if not isinstance(value, (bool, np.bool_)):
-        try:
-            return operator.index(value)
-        except TypeError:
-            pass
-    raise FrameError(f"sequence must be a whole number (a Python or numpy integer), got {value!r}")
+    number = whole_number_or_none(value)
+    if number is None:
+        raise FrameError(f"sequence must be a whole number (a Python or numpy integer), got {value!r}")
+    return number
 
 
 def _add_ms(timing: dict[str, float], stage: str, t0: float) -> None:
