@@ -494,11 +494,10 @@ def test_a_sigterm_stops_generation_with_143_a_line_and_no_half_written_shard(tm
     the lock freed and no ``*.tmp-*`` shard left; the rerun renders only what is missing. SIGTERM killed the
     generator silently before (exit 143, nothing said, the cut shard's temporary folder left)."""
     import os
-    import signal
-    import time
 
     import training.data.generate as gen
     from ghnerf_runtime.cli.sigterm import sigterm_raises
+    from tests.sigterm_here import sigterm_here
 
     out = tmp_path / "ds"
     real, calls = gen._render_shard, []
@@ -506,11 +505,8 @@ def test_a_sigterm_stops_generation_with_143_a_line_and_no_half_written_shard(tm
     def render(task):
         calls.append(1)
         if len(calls) == 2:
-            if not sigterm_raises():
-                pytest.fail("the generator renders under SIGTERM's default action: a kill ends it silently")
             (task[4].parent / f"{task[4].name}.tmp-{os.getpid()}").mkdir()  # the shard being written when it came
-            os.kill(os.getpid(), signal.SIGTERM)
-            time.sleep(5)  # (the handler raises at the next bytecode)
+            sigterm_here("the generator renders")
         return real(task)
 
     monkeypatch.setattr(gen, "_render_shard", render)

@@ -53,11 +53,10 @@ def test_ctrl_c_exits_130_and_keeps_the_models_finished(tmp_path, capsys, monkey
 def test_a_sigterm_stops_eval_with_143_and_a_line_naming_what_out_holds(tmp_path, capsys, monkeypatch):
     """``timeout`` or ``kill``: a real SIGTERM mid-model stops ghnerf-eval as Ctrl-C does (it killed the process
     silently, exit 143 with no word of what --out held)."""
-    import os
     import signal
-    import time
 
     from ghnerf_runtime.cli.sigterm import sigterm_raises
+    from tests.sigterm_here import sigterm_here
 
     runs = [(label, object(), {"kind": "stub"}, None) for label in ("a", "b")]
     monkeypatch.setattr(evaluate, "prepare", lambda *a: runs)
@@ -66,10 +65,7 @@ def test_a_sigterm_stops_eval_with_143_and_a_line_naming_what_out_holds(tmp_path
     def scores(renderer, ds, limit, novel):
         calls.append(1)
         if len(calls) == 2:
-            if not sigterm_raises():
-                pytest.fail("ghnerf-eval runs its models under SIGTERM's default action: a kill ends it silently")
-            os.kill(os.getpid(), signal.SIGTERM)
-            time.sleep(5)  # (the handler raises at the next bytecode)
+            sigterm_here("ghnerf-eval runs its models")
         return {"pck@0.2": 0.5}
 
     monkeypatch.setattr(evaluate, "evaluate", scores)
