@@ -1051,7 +1051,7 @@ class Estimator:
 
     def _two_people_report_nobody(self, p: "_Pass") -> bool:
         """Whether ``p`` is a ``several_people`` pass that reports nobody where no subject is picked
-        (``pick_subject: none``, or another 3D method than the triangulation: :meth:`_picks_subject`), both views
+        (``pick_subject: none``, or another 3D method than the triangulation: :func:`picks_subject`), both views
         reading bodies strongly (each :func:`_view_score` at ``roi.turn_search_below`` or above): two people upright,
         nobody reported by design until one is alone. No turn changes that: a turned pass of the same working
         volume that is flagged reports nobody too, and one that is not (a turn that reads one of them weakly) would
@@ -1061,14 +1061,9 @@ class Estimator:
         joints twice through upright crops and is flagged (bench scene 11, views at 0.30 and 0.26), and the turned
         crops find them. Where a subject is picked, a flagged pair whose pick made nobody may be someone lying, and
         searches as before."""
-        if not p.several_people or p.someone or self._picks_subject():
+        if not p.several_people or p.someone or picks_subject(self.config.joints3d):
             return False
         return bool((_view_score(p.env["encoder_heatmaps"]) >= self.config.roi.turn_search_below).all())
-
-    def _picks_subject(self) -> bool:
-        """Whether a ``several_people`` pass without a track reports one of the two people (``pick_subject``, with
-        the triangulation: :func:`~ghnerf_runtime.subject.picks_subject`)."""
-        return picks_subject(self.config.joints3d)
 
     def _turn_scores(self, images: Sequence[np.ndarray], turn: int, timing: dict,
                      track: Track | None = None) -> np.ndarray:
