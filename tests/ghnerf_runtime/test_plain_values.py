@@ -44,7 +44,8 @@ def test_true_false_text_complex_and_arrays_are_not(value):
     assert not is_real_number(value)
 
 
-@pytest.mark.parametrize("value, whole", [(3, 3), (-7, -7), (np.int64(5), 5), (np.uint8(255), 255), (10 ** 30, 10 ** 30)])
+@pytest.mark.parametrize("value, whole", [(3, 3), (-7, -7), (np.int64(5), 5), (np.uint8(255), 255),
+                                          (10 ** 30, 10 ** 30)])
 def test_whole_numbers_of_either_kind_come_back_as_python_ints(value, whole):
     out = whole_number_or_none(value)
     assert out == whole and type(out) is int
