@@ -32,7 +32,8 @@ class SinkUrl:
         Keyword values that are strings or numbers go through the same check as
         query values (``None`` counts as not given; ``True``/``False`` only for a
         yes/no option); other objects (tuples, policies) are taken as they are.
-        NumPy scalars count as the Python value they hold (:func:`plain_scalar`).
+        NumPy scalars and 0-d arrays count as the Python value they hold (:func:`plain_scalar`); complex numbers
+        are refused.
         """
         raw: object = self.query.pop(key, None)
         if kw is not None and kw.get(key) is None:
@@ -43,6 +44,8 @@ class SinkUrl:
                 if convert is boolean:
                     return raw  # type: ignore[return-value]
                 raise SinkConfigError(self.url, key, raw, "must be a value, not true/false")
+            if isinstance(raw, complex):  # an object skipped every check: a baud of (-5+0j) reached the port
+                raise SinkConfigError(self.url, key, raw, "must be a real number, not complex")
             if not isinstance(raw, (str, int, float)):
                 return raw  # type: ignore[return-value]
         if raw is None:
@@ -60,10 +63,11 @@ class SinkUrl:
 
 
 def plain_scalar(value: object) -> object:
-    """A NumPy scalar as the Python value it holds (np.int64 -> int, np.float32 -> float, np.bool_ -> bool), anything
-    else as it is: a keyword's np.int64 or np.float32 was taken as an object and skipped every check (baud=np.int64(-5)
-    and queue=np.float32(8.5) were accepted, np.True_ was a baud of 1)."""
-    return value.item() if isinstance(value, np.generic) else value
+    """A NumPy scalar or 0-d array as the Python value it holds (np.int64 -> int, np.float32 -> float, np.bool_ ->
+    bool, np.array(-5) -> -5), anything else as it is: a keyword's np.int64 or np.float32 was taken as an object and
+    skipped every check (baud=np.int64(-5) and queue=np.float32(8.5) were accepted, np.True_ was a baud of 1)."""
+    zero_d = isinstance(value, np.ndarray) and value.ndim == 0
+    return value.item() if isinstance(value, np.generic) or zero_d else value
 
 
 def parse_url(url: str) -> SinkUrl:
