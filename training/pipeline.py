@@ -1545,14 +1545,19 @@ def card_quantizer_version(variant_dir: Path) -> int | dict[str, int] | None:
     """Which ``QUANTIZER_VERSION`` made the int8 graphs in ``variant_dir``, read from the files themselves (not the
     quantize stamp: a file replaced since, as session 60's render graphs, keeps the stamp's word stale): the
     version when every graph that shows one agrees, ``{graph: version}`` when they differ, None when none shows
-    one (``training.export.quantize.quantizer_version_of_file``)."""
+    one (``training.export.quantize.quantizer_version_of_file``). A file it cannot read shows none, with a warning
+    naming it: the card still records its hash, and the runtime refuses it by name."""
     from ghnerf_runtime.contract import GRAPH_NAMES
     from training.export.quantize import quantizer_version_of_file
 
     found = {}
     for graph in GRAPH_NAMES:
         path = variant_dir / f"{graph}.int8.onnx"
-        version = quantizer_version_of_file(path) if path.is_file() else None
+        try:
+            version = quantizer_version_of_file(path) if path.is_file() else None
+        except ValueError as e:
+            log.warning("the card names no quantizer version for it: %s", e)
+            continue
         if version is not None:
             found[graph] = version
     if len(set(found.values())) > 1:

@@ -237,6 +237,10 @@ def test_an_int8_file_names_the_quantizer_version_that_made_it(quantized, tmp_pa
     onnx.save(bad, str(tmp_path / "bad.onnx"))
     with pytest.raises(ValueError, match=rf"bad\.onnx: {QUANTIZER_VERSION_KEY} is 'two', not a positive integer"):
         quantizer_version_of_file(tmp_path / "bad.onnx")
+    (folder / "query.int8.onnx").write_bytes(b"\xff torn")  # shows no version: the card names the others'
+    with pytest.raises(ValueError, match=r"query\.int8\.onnx: not an ONNX model"):
+        quantizer_version_of_file(folder / "query.int8.onnx")
+    assert card_quantizer_version(folder) == {"render": 1, "render_rgb": 2}
 
 
 def _render_fp32(model, tmp_path):

@@ -31,6 +31,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 import onnx
+from google.protobuf.message import DecodeError
 from onnxruntime.quantization import (
     CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static,
 )
@@ -194,9 +195,10 @@ def quantizer_version_of_file(path: str | Path) -> int | None:
     stamp and no later call of a head output layer (both versions make that graph alike), or a float file.
 
     Raises:
-        ValueError: the stamp is not a positive integer (the message names the file and the value).
+        ValueError: the file is no ONNX model, or its stamp is not a positive integer (the message names the file
+            and the value).
     """
-    model = onnx.load(str(path), load_external_data=False)
+    model = _onnx_model(path)
     props = {p.key: p.value for p in model.metadata_props}
     if QUANTIZER_VERSION_KEY in props:
         return _stamped_version(path, props[QUANTIZER_VERSION_KEY])
@@ -214,6 +216,13 @@ def _reads_int8(model: onnx.ModelProto, node: onnx.NodeProto) -> bool:
     """Whether an input of ``node`` is a DequantizeLinear's output (a quantized activation or weight)."""
     dequantized = {o for n in model.graph.node if n.op_type == "DequantizeLinear" for o in n.output}
     return any(i in dequantized for i in node.input)
+
+
+def _onnx_model(path: str | Path) -> onnx.ModelProto:
+    try:
+        return onnx.load(str(path), load_external_data=False)
+    except DecodeError as e:  # a bare protobuf error would not say which file
+        raise ValueError(f"{path}: not an ONNX model ({e})") from e
 
 
 def _stamped_version(path: str | Path, raw: str) -> int:
@@ -256,4 +265,6 @@ def calibration_feeds(model, frames: Iterable, graphs: Sequence[str], rays_per_t
     return feeds
 
 
-__all__ = ["FeedsReader", "QuantPolicy", "POLICIES", "HEAD_OUTPUT_LAYERS", "ENCODER_FLOAT_LAYERS", "quantize_graph", "quantize_all", "calibration_feeds"]
+__all__ = ["FeedsReader", "QuantPolicy", "POLICIES", "HEAD_OUTPUT_LAYERS", "ENCODER_FLOAT_LAYERS", "quantize_graph",
+           "quantize_all", "calibration_feeds", "QUANTIZER_VERSION", "QUANTIZER_VERSION_KEY",
+           "quantizer_version_of_file"]
