@@ -226,7 +226,7 @@ def _onnx_model(path: str | Path) -> onnx.ModelProto:
 
 
 def _stamped_version(path: str | Path, raw: str) -> int:
-    if not raw.isdigit() or int(raw) < 1:
+    if not (raw.isascii() and raw.isdigit()) or int(raw) < 1:  # "²" is a digit to isdigit, not to int
         raise ValueError(f"{path}: {QUANTIZER_VERSION_KEY} is {raw!r}, not a positive integer")
     return int(raw)
 
