@@ -32,6 +32,12 @@ class DropPolicy(str, Enum):
 #: Frames more than this apart (10 s) are never one moment, whatever the source.
 MAX_TOLERANCE_MS = 10_000.0
 
+#: Largest ``max_pending`` and ``max_ready``. The pairer holds up to ``2 * (max_pending + max_ready)`` frames, 1024
+#: at this bound: 0.9 GiB of 640x480 BGR frames, 5.9 GiB of 1920x1080, 192 GiB of the largest frame a backend
+#: makes (8192x8192, 192 MiB each), where the defaults' 144 frames are already 27 GiB. So the bound only stops a
+#: count no memory holds at any size (10**400 was taken); 256 pairs are 8.5 s of a stalled 30 fps reader.
+MAX_HELD = 256
+
 
 @dataclass(frozen=True)
 class PairingConfig:
@@ -41,8 +47,8 @@ class PairingConfig:
         tolerance_ms: largest capture-time difference for two frames to form a pair.
             Default: a third of a 30 fps frame period.
         policy: see :class:`DropPolicy`.
-        max_pending: frames kept per camera while waiting for a partner.
-        max_ready: complete pairs queued for the reader (``ALL`` policy).
+        max_pending: frames kept per camera while waiting for a partner (1 to :data:`MAX_HELD`).
+        max_ready: complete pairs queued for the reader (``ALL`` policy; 1 to :data:`MAX_HELD`).
     """
 
     tolerance_ms: float = 11.0
@@ -65,9 +71,11 @@ class PairingConfig:
             ) from None
         for name in ("max_pending", "max_ready"):
             value = getattr(self, name)
-            if not (isinstance(value, numbers.Integral) and not is_true_false(value) and value >= 1):
-                # 2.5 held 3 frames, True 1
-                raise RigConfigError(f"pairing {name} must be a whole number >= 1, got {value!r}")
+            if not (isinstance(value, numbers.Integral) and not is_true_false(value)
+                    and 1 <= value <= MAX_HELD):
+                # 2.5 held 3 frames, True 1; 10**400 was taken, a queue no memory holds
+                raise RigConfigError(f"pairing {name} must be a whole number in [1, {MAX_HELD}] "
+                                     f"(frames held in memory), got {value!r}")
             object.__setattr__(self, name, int(value))
 
 

@@ -16,9 +16,10 @@ __all__ = ["is_real_number", "is_true_false", "plain_scalar", "whole_number_or_n
 
 
 def plain_scalar(value: object) -> object:
-    """A NumPy scalar as the Python value it holds (np.int64 -> int, np.float32 -> float, np.bool_ -> bool), anything
-    else as it is."""
-    return value.item() if isinstance(value, np.generic) else value
+    """A NumPy scalar or 0-d array as the Python value it holds (np.int64 -> int, np.float32 -> float, np.bool_ ->
+    bool, np.array(-5) -> -5), anything else as it is."""
+    zero_d = isinstance(value, np.ndarray) and value.ndim == 0
+    return value.item() if isinstance(value, np.generic) or zero_d else value
 
 
 def is_true_false(value: object) -> bool:

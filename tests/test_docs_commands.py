@@ -26,9 +26,10 @@ the program parses (no parser copied here, no ``--help`` subprocess; the trainin
 
 Placeholders (``<net>``, ``FILE``, ``$OUT``, ``benchmarks/NAME.py``), ``...``, ``[optional]`` brackets, ``\\``
 continuations, a block's shell variables (``P="--out ..."`` then ``python -m training.pipeline $P``), env-var
-prefixes, ``/usr/bin/time -v``-style wrappers, ``sudo -u USER`` and prose's ``--a/--b``, ``--[no-]x``,
-``--novel-*`` are allowed for; a span that only names a program checks that the program exists. About 18 s on
-two cores (session 53), most of it importing each program's module once.
+prefixes, ``/usr/bin/time -v``-style wrappers (``nice -n 5``, ``timeout --preserve-status -s TERM 25``),
+``sudo -u USER`` and prose's ``--a/--b``, ``--[no-]x``, ``--novel-*`` are allowed for; a span that only names a
+program checks that the program exists. About 18 s on two cores (session 53), most of it importing each program's
+module once.
 """
 from __future__ import annotations
 
@@ -255,6 +256,19 @@ def commands_in(span: str, where: str, project: Project) -> list[Command]:
     return found
 
 
+#: GNU timeout's options that take a value as the next word (``-s TERM``, ``--kill-after 5``)
+TIMEOUT_VALUE_OPTIONS = {"-s", "--signal", "-k", "--kill-after"}
+
+
+def _after_timeout(words: list[str], i: int) -> int:
+    """The index of the program ``timeout`` runs, ``words[i:]`` being what follows the word ``timeout``: its options
+    (``--preserve-status``, ``-s TERM``, ``--signal=TERM``, ``-k5``), then its duration. The first option was taken
+    for the duration and the next word for the program, so such a line went unchecked."""
+    while i < len(words) and words[i].startswith("-"):
+        i += 2 if words[i] in TIMEOUT_VALUE_OPTIONS else 1
+    return i + 1  # past the duration
+
+
 def _command(words: list[str], where: str, project: Project, head_of_span: bool) -> Command | None:
     env: list[str] = []
     i = 0
@@ -268,12 +282,14 @@ def _command(words: list[str], where: str, project: Project, head_of_span: bool)
             i += 1  # time -f FORMAT, -o FILE
         elif word in ("-u", "-g") and i > 0 and words[i - 1] == "sudo":
             i += 1  # sudo -u ghnerf: the user, not the program (docs/bring-up.md runs the checks as the service's)
+        elif word == "-n" and i > 0 and words[i - 1] == "nice":
+            i += 1  # its niceness (after `time -v`'s branch below, `nice -n 5` took the 5 for the program)
         elif word.startswith("-") and i > 0 and words[i - 1] in WRAPPERS:
             pass  # time -v, env -i
-        elif word in ("timeout", "taskset") and i + 1 < len(words):
-            i += 1  # its duration, its CPU list
-        elif word == "-n" and i > 0 and words[i - 1] == "nice":
-            i += 1
+        elif word == "timeout":
+            i = _after_timeout(words, i + 1) - 1  # its options and duration
+        elif word == "taskset" and i + 1 < len(words):
+            i += 1  # its CPU list
         else:
             break
         i += 1
@@ -792,6 +808,19 @@ def test_a_command_run_as_another_user_is_checked(programs):
                         programs.project)
     assert [(c.kind, c.program) for c in found] == [("console", "ghnerf-daemon")]
     assert problems_of(found[0], programs) == ["x: ghnerf-daemon: unknown option --measure-flor"]
+
+
+@pytest.mark.parametrize("wrapper", ["timeout 25", "timeout --preserve-status -s TERM 25", "timeout -k 5 -v 1m",
+                                     "timeout --signal=INT --foreground 2h", "timeout -sKILL 10",
+                                     "nice -n 5 timeout --preserve-status 25", "nice -n 5"])
+def test_a_command_run_under_timeout_is_checked(wrapper, programs):
+    """``timeout`` with its options runs the rest of the line as ``time`` and ``nice`` do: the program is the word
+    after its duration (``--preserve-status`` was taken for the duration, ``-s`` for the program). ``nice -n 5``'s
+    5 was taken for the program too."""
+    found = commands_in(f"{wrapper} ghnerf-daemon --config d.json --measure-flor", "x", programs.project)
+    assert [(c.kind, c.program) for c in found] == [("console", "ghnerf-daemon")]
+    assert problems_of(found[0], programs) == ["x: ghnerf-daemon: unknown option --measure-flor"]
+    assert commands_in(wrapper, "x", programs.project) == []  # timeout alone, quoted in prose: no program
 
 
 @functools.lru_cache(maxsize=None)

@@ -172,8 +172,11 @@ def _prior_cells(m: Mapping[str, Any]) -> str:
 
 def _quantizer(calibration: Mapping[str, Any]) -> str:
     """Which quantizer made the variant's int8 graphs (``training.export.quantize.QUANTIZER_VERSION``), where the card
-    records it: the first one quantized the colour head's second call (docs/model.md)."""
+    records it: the first one quantized the colour head's second call (docs/model.md). A mix (``{graph: version}``)
+    names each graph's."""
     version = calibration.get("quantizer_version")
+    if isinstance(version, Mapping):
+        return " by quantizer versions " + ", ".join(f"{v} (`{g}`)" for g, v in version.items())
     return "" if version is None else f" by quantizer version {version}"
 
 

@@ -1390,7 +1390,7 @@ def stage_card(cfg: PipelineConfig, st: Stages) -> tuple[list[Path], dict]:
         "parity": {v: q[v].get("int8_vs_fp32", {}) for v in VARIANTS},
         # which data fixed the int8 ranges: training scenes, never the held-out split the metrics score
         "calibration": {v: {"split": "train", "scenes": q[v].get("calibration_scenes"),
-                            "quantizer_version": quantizer_version_of(st.stamp(f"quantize_{v}"))} for v in VARIANTS},
+                            "quantizer_version": card_quantizer_version(cfg.out / v)} for v in VARIANTS},
         "fp32_parity_torch_vs_ort": {v: (st.stamp(f"export_{v}") or {}).get("info", {}).get(v, {})
                                      .get("fp32_parity_torch_vs_ort") for v in VARIANTS},
         "files": files,
@@ -1541,12 +1541,28 @@ def export_stage_inputs(train_stamp: dict) -> dict:
     return {"checkpoint": train_stamp["outputs"], "settings": export_settings()}
 
 
-def quantizer_version_of(quantize_stamp: dict | None) -> int | None:
-    """The ``QUANTIZER_VERSION`` a quantize stamp's request records (None: no stamp, or one made before it recorded
-    its inputs)."""
-    request = (quantize_stamp or {}).get("request")
-    settings = request.get("settings") if isinstance(request, dict) else None
-    return settings.get("version") if isinstance(settings, dict) else None
+def card_quantizer_version(variant_dir: Path) -> int | dict[str, int] | None:
+    """Which ``QUANTIZER_VERSION`` made the int8 graphs in ``variant_dir``, read from the files themselves (not the
+    quantize stamp: a file replaced since, as session 60's render graphs, keeps the stamp's word stale): the
+    version when every graph that shows one agrees, ``{graph: version}`` when they differ, None when none shows
+    one (``training.export.quantize.quantizer_version_of_file``). A file it cannot read shows none, with a warning
+    naming it: the card still records its hash, and the runtime refuses it by name."""
+    from ghnerf_runtime.contract import GRAPH_NAMES
+    from training.export.quantize import quantizer_version_of_file
+
+    found = {}
+    for graph in GRAPH_NAMES:
+        path = variant_dir / f"{graph}.int8.onnx"
+        try:
+            version = quantizer_version_of_file(path) if path.is_file() else None
+        except ValueError as e:
+            log.warning("the card names no quantizer version for it: %s", e)
+            continue
+        if version is not None:
+            found[graph] = version
+    if len(set(found.values())) > 1:
+        return found
+    return next(iter(found.values()), None)
 
 
 def quantize_stage_inputs(cfg: PipelineConfig, export_stamp: dict, data_key: dict) -> dict:

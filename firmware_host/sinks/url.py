@@ -31,9 +31,10 @@ class SinkUrl:
         Keyword values that are strings or numbers go through the same check as
         query values (``None`` counts as not given; ``True``/``False`` only for a
         yes/no option); other objects (tuples, policies) are taken as they are.
-        NumPy scalars count as the Python value they hold (:func:`~ghnerf_runtime.plain_values.plain_scalar`): a
-        keyword's np.int64 or np.float32 was taken as an object and skipped every check (baud=np.int64(-5) and
-        queue=np.float32(8.5) were accepted, np.True_ was a baud of 1).
+        NumPy scalars and 0-d arrays count as the Python value they hold
+        (:func:`~ghnerf_runtime.plain_values.plain_scalar`): a keyword's np.int64 or np.float32 was taken as an
+        object and skipped every check (baud=np.int64(-5) and queue=np.float32(8.5) were accepted, np.True_ was a
+        baud of 1); complex numbers are refused.
         """
         raw: object = self.query.pop(key, None)
         if kw is not None and kw.get(key) is None:
@@ -44,6 +45,8 @@ class SinkUrl:
                 if convert is boolean:
                     return raw  # type: ignore[return-value]
                 raise SinkConfigError(self.url, key, raw, "must be a value, not true/false")
+            if isinstance(raw, complex):  # an object skipped every check: a baud of (-5+0j) reached the port
+                raise SinkConfigError(self.url, key, raw, "must be a real number, not complex")
             if not isinstance(raw, (str, int, float)):
                 return raw  # type: ignore[return-value]
         if raw is None:

@@ -360,3 +360,15 @@ def test_numpy_numbers_configure_pairing_as_python_ones(field, value, plain):
 def test_a_pairing_value_of_the_wrong_type_is_refused_by_name(field, value):
     with pytest.raises(RigConfigError, match=rf"pairing {field} must be a .*, got {re.escape(repr(value))}"):
         PairingConfig(**{field: value})
+
+
+@pytest.mark.parametrize("field", ["max_pending", "max_ready"])
+def test_a_pairing_queue_past_its_bound_is_refused_by_name(field):
+    """``max_pending`` / ``max_ready`` are at most MAX_HELD (256): 10**400 was taken, a queue no memory holds."""
+    from drivers.pairing import MAX_HELD
+
+    assert getattr(PairingConfig(**{field: MAX_HELD}), field) == MAX_HELD
+    for value in (MAX_HELD + 1, 10**400, np.int64(2**62), 0):
+        with pytest.raises(RigConfigError, match=rf"pairing {field} must be a whole number in \[1, 256\] "
+                                                 rf"\(frames held in memory\), got {re.escape(repr(value))}"):
+            PairingConfig(**{field: value})

@@ -38,6 +38,9 @@ def _wire_joints(frame: JointFrame, **kw) -> list:
     ("memory://", "max_fps", np.float32(30.0), 30.0),
     ("memory://", "status_s", np.float32(0.5), 0.5),
     ("memory://", "send_2d", np.True_, True),
+    ("serial:///dev/null", "baud", np.array(9600), 9600),  # a 0-d array: the value it holds
+    ("memory://", "max_fps", np.array(30.0, np.float32), 30.0),
+    ("memory://", "send_2d", np.array(True), True),
 ])
 def test_a_numpy_keyword_is_taken_as_the_python_value_it_holds(url, key, value, plain) -> None:
     kw = {key: value, "cameras": ("left", "right")} if key == "send_2d" else {key: value}
@@ -54,6 +57,12 @@ def test_a_numpy_keyword_is_taken_as_the_python_value_it_holds(url, key, value, 
     ("memory://", "queue", np.True_, "not true/false"),
     ("memory://", "fps", np.float32(np.inf), "finite"),
     ("memory://", "max_bytes", np.int64(0), "> 0"),
+    # a 0-d array or a complex number was taken as an object and skipped every check
+    ("serial:///dev/null", "baud", np.array(-5), "without a sign"),
+    ("memory://", "queue", np.array(True), "not true/false"),
+    ("serial:///dev/null", "baud", np.complex128(9600), "must be a real number, not complex"),
+    ("serial:///dev/null", "baud", 9600 + 0j, "must be a real number, not complex"),
+    ("memory://", "fps", np.array(30 + 0j), "must be a real number, not complex"),
 ])
 def test_a_numpy_keyword_is_checked_as_a_python_one(url, key, value, why) -> None:
     # such values were taken as objects and skipped every check: baud=np.int64(-5) reached the serial port

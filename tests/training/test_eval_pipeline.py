@@ -993,8 +993,6 @@ def test_a_damaged_checkpoint_in_a_run_folder_is_one_line_and_exit_2(tmp_path, m
 def test_card_names_the_quantizer_version_that_made_the_int8_graphs():
     """The calibration line says which ``QUANTIZER_VERSION`` made each variant's int8 graphs, where the card records
     it (the first quantized the colour head's second call): a card made before the record reads as it did."""
-    from training.pipeline import quantizer_version_of
-
     base = {"name": "test", "summary": "s", "quick": True, "command": "c"}
     recorded = {**base, "calibration": {"ghnerf": {"split": "train", "scenes": 16, "quantizer_version": 2},
                                         "baseline": {"split": "train", "scenes": 16, "quantizer_version": None}}}
@@ -1003,7 +1001,8 @@ def test_card_names_the_quantizer_version_that_made_the_int8_graphs():
             "version 2; baseline on 16 scenes of the `train` split (evenly spaced,") in md
     older = {**base, "calibration": {"ghnerf": {"split": "train", "scenes": 16}}}
     assert "ghnerf on 16 scenes of the `train` split (evenly spaced," in render_markdown(older)
-    # the card stage reads it from the quantize stamp's recorded request; stamps made before requests: None
-    assert quantizer_version_of({"request": {"settings": {"version": 2}}}) == 2
-    for stamp in (None, {}, {"inputs": "9057e6033ef3527a"}, {"request": {"settings": None}}):
-        assert quantizer_version_of(stamp) is None
+    # int8 graphs of several versions (the card stage reads each file, training.pipeline.card_quantizer_version)
+    mixed = {**base, "calibration": {"ghnerf": {"split": "train", "scenes": 16,
+                                                "quantizer_version": {"render": 1, "render_rgb": 2}}}}
+    assert ("ghnerf on 16 scenes of the `train` split by quantizer versions 1 (`render`), 2 (`render_rgb`) "
+            "(evenly spaced,") in render_markdown(mixed)

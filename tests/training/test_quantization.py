@@ -201,7 +201,72 @@ def test_quantize_refuses_a_source_the_runtime_would_refuse(tmp_path):
             assert not out.exists()
 
 
+def test_an_int8_file_names_the_quantizer_version_that_made_it(quantized, tmp_path):
+    """The card's quantizer version comes from the int8 files: their stamp, else (files made before it) their
+    graph: version 1 quantized a head output layer's later call (``/g_c_out_1/``), version 2 none. A folder of
+    both versions reads as the mix, graph by graph."""
+    from training.export.quantize import (
+        POLICIES, QUANTIZER_VERSION, QUANTIZER_VERSION_KEY, QuantPolicy, quantize_graph, quantizer_version_of_file,
+    )
+    from training.pipeline import card_quantizer_version
+
+    model, fp32, int8 = quantized
+    props = {p.key: p.value for p in onnx.load(str(int8["render_rgb"])).metadata_props}
+    assert props[QUANTIZER_VERSION_KEY] == str(QUANTIZER_VERSION)
+    assert QUANTIZER_VERSION_KEY not in {p.key for p in onnx.load(str(int8["volume"])).metadata_props}  # a copy
+    assert quantizer_version_of_file(int8["volume"]) is None
+    assert quantizer_version_of_file(int8["render_heat"]) == QUANTIZER_VERSION
+
+    folder = tmp_path / "variant"
+    folder.mkdir()
+    unstamped = _without_key(int8["render_rgb"], folder / "render_rgb.int8.onnx", QUANTIZER_VERSION_KEY)
+    assert quantizer_version_of_file(unstamped) == 2
+    assert card_quantizer_version(folder) == 2
+    # version 1's filter named the colour head's first call only
+    first_call_only = tuple(p + "Conv" if p == "/g_c_out/" else p for p in POLICIES["render_rgb"].exclude_name_contains)
+    feeds = calibration_feeds(model, [torch.rand(2, 3, 64, 64)], ("render",))["render"]
+    v1 = quantize_graph(_render_fp32(model, tmp_path), tmp_path / "v1.onnx", feeds,
+                        QuantPolicy(exclude_name_contains=first_call_only), "render")
+    _without_key(v1, folder / "render.int8.onnx", QUANTIZER_VERSION_KEY)
+    assert quantizer_version_of_file(folder / "render.int8.onnx") == 1
+    assert card_quantizer_version(folder) == {"render": 1, "render_rgb": 2}
+    assert card_quantizer_version(tmp_path / "none") is None
+
+    bad = onnx.load(str(int8["render_rgb"]))
+    onnx.helper.set_model_props(bad, {QUANTIZER_VERSION_KEY: "two"})
+    onnx.save(bad, str(tmp_path / "bad.onnx"))
+    with pytest.raises(ValueError, match=rf"bad\.onnx: {QUANTIZER_VERSION_KEY} is 'two', not a positive integer"):
+        quantizer_version_of_file(tmp_path / "bad.onnx")
+    (folder / "query.int8.onnx").write_bytes(b"\xff torn")  # shows no version: the card names the others'
+    with pytest.raises(ValueError, match=r"query\.int8\.onnx: not an ONNX model"):
+        quantizer_version_of_file(folder / "query.int8.onnx")
+    assert card_quantizer_version(folder) == {"render": 1, "render_rgb": 2}
+
+
+def _render_fp32(model, tmp_path):
+    return export_all(model, tmp_path / "fp32", graphs=("render",), inputs=example_inputs(model))["render"]
+
+
+def _without_key(source: Path, dest: Path, key: str) -> Path:
+    m = onnx.load(str(source))
+    kept = [p for p in m.metadata_props if p.key != key]
+    del m.metadata_props[:]
+    m.metadata_props.extend(kept)
+    onnx.save(m, str(dest))
+    return dest
+
+
 SHIPPED = Path(__file__).resolve().parents[2] / "models"
+
+
+@pytest.mark.skipif(not (SHIPPED / "model_card.json").is_file(),
+                    reason="no trained model yet: models/model_card.json does not exist")
+def test_the_shipped_int8_graphs_are_quantizer_version_2():
+    """Session 60 made the render graphs again with version 2; the rest show no version (both make them alike)."""
+    from training.pipeline import card_quantizer_version
+
+    for variant in ("ghnerf", "baseline"):
+        assert card_quantizer_version(SHIPPED / variant) == 2
 
 
 @pytest.mark.skipif(not (SHIPPED / "model_card.json").is_file(),

@@ -183,15 +183,15 @@ def trained_frame_padding(checkpoint: Mapping[str, Any]) -> str:
 
 
 def stamp_metadata(path: str | Path, contract: ModelContract, graph: str, precision: str, *,
-                   weights_id: str | None) -> None:
+                   weights_id: str | None, extra: Mapping[str, str] | None = None) -> None:
     """Write the contract and ``weights_id`` (:func:`weights_id`; None: a graph of unknown weights, say a
     quantization of a file exported before there were ids) into ``metadata_props`` of the ONNX file at ``path``
-    (in place)."""
+    (in place), with ``extra`` keys (the quantizer's version)."""
     m = onnx.load(str(path))
     # the id first: a copy cut short in the metadata (they end the file) then loses a contract key, which the
     # runtime refuses as a file cut short, before it could lose the id alone and pass for an older export
     props = {**({WEIGHTS_ID_KEY: weights_id} if weights_id is not None else {}),
-             **contract.to_metadata(graph=graph, precision=precision)}
+             **contract.to_metadata(graph=graph, precision=precision), **(extra or {})}
     # an id already in the file (a copied source's) never outlives a restamp, whatever replaces it
     keep = [p for p in m.metadata_props if p.key not in props and p.key != WEIGHTS_ID_KEY]
     del m.metadata_props[:]

@@ -31,6 +31,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 import onnx
+from google.protobuf.message import DecodeError
 from onnxruntime.quantization import (
     CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static,
 )
@@ -85,6 +86,10 @@ ENCODER_FLOAT_LAYERS = ("/feature_net/stage0/stage0.0/",)
 #: Raised whenever what the quantizer makes changes in a way :data:`POLICIES` does not show (a pipeline stamp
 #: input: 2 since the filter takes a module's later calls, :func:`_name_matcher`).
 QUANTIZER_VERSION = 2
+
+#: Metadata key of the :data:`QUANTIZER_VERSION` that made an int8 file (written since version 2; older files
+#: are read by their graph, :func:`quantizer_version_of_file`).
+QUANTIZER_VERSION_KEY = "ghnerf.quantizer_version"
 
 #: Default policy per graph; ``None`` = stays float.
 POLICIES: dict[str, QuantPolicy | None] = {
@@ -175,10 +180,55 @@ def quantize_graph(fp32_path: str | Path, out_path: str | Path, feeds: Sequence[
         shutil.copyfile(fp32_path, out_path)
     else:
         quantize_qdq(fp32_path, out_path, feeds, policy, graph)
-    stamp_metadata(out_path, contract, graph, precision, weights_id=weights)
+    # a copied float graph is not the quantizer's making: only int8 files name its version
+    made_by = {} if policy is None else {QUANTIZER_VERSION_KEY: str(QUANTIZER_VERSION)}
+    stamp_metadata(out_path, contract, graph, precision, weights_id=weights, extra=made_by)
     check_graph_file(out_path, graph, precision)
     log.info("quantized %s -> %s (%s)", graph, out_path, precision)
     return out_path
+
+
+def quantizer_version_of_file(path: str | Path) -> int | None:
+    """The :data:`QUANTIZER_VERSION` that made the int8 graph at ``path``: its :data:`QUANTIZER_VERSION_KEY`, else
+    (a file made before the key) read from the graph, the one thing versions 1 and 2 make differently: version 1
+    quantized a head output layer's later calls (``/g_c_out_1/``), version 2 leaves every call float. None: no
+    stamp and no later call of a head output layer (both versions make that graph alike), or a float file.
+
+    Raises:
+        ValueError: the file is no ONNX model, or its stamp is not a positive integer (the message names the file
+            and the value).
+    """
+    model = _onnx_model(path)
+    props = {p.key: p.value for p in model.metadata_props}
+    if QUANTIZER_VERSION_KEY in props:
+        return _stamped_version(path, props[QUANTIZER_VERSION_KEY])
+    later_calls = [n for n in model.graph.node if _LATER_HEAD_CALL.search(n.name)]
+    if not later_calls or not any(n.op_type == "DequantizeLinear" for n in model.graph.node):
+        return None
+    return 1 if any(_reads_int8(model, n) for n in later_calls) else 2
+
+
+#: A head output layer's second or later call (``/g_c_out_1/Conv``): the nodes version 1 quantized.
+_LATER_HEAD_CALL = re.compile("|".join(re.escape(p[:-1]) + r"_\d+/" for p in HEAD_OUTPUT_LAYERS))
+
+
+def _reads_int8(model: onnx.ModelProto, node: onnx.NodeProto) -> bool:
+    """Whether an input of ``node`` is a DequantizeLinear's output (a quantized activation or weight)."""
+    dequantized = {o for n in model.graph.node if n.op_type == "DequantizeLinear" for o in n.output}
+    return any(i in dequantized for i in node.input)
+
+
+def _onnx_model(path: str | Path) -> onnx.ModelProto:
+    try:
+        return onnx.load(str(path), load_external_data=False)
+    except DecodeError as e:  # a bare protobuf error would not say which file
+        raise ValueError(f"{path}: not an ONNX model ({e})") from e
+
+
+def _stamped_version(path: str | Path, raw: str) -> int:
+    if not (raw.isascii() and raw.isdigit()) or int(raw) < 1:  # "²" is a digit to isdigit, not to int
+        raise ValueError(f"{path}: {QUANTIZER_VERSION_KEY} is {raw!r}, not a positive integer")
+    return int(raw)
 
 
 def quantize_all(fp32_paths: dict[str, Path], out_dir: str | Path, feeds: dict[str, list[dict[str, np.ndarray]]],
@@ -215,4 +265,6 @@ def calibration_feeds(model, frames: Iterable, graphs: Sequence[str], rays_per_t
     return feeds
 
 
-__all__ = ["FeedsReader", "QuantPolicy", "POLICIES", "HEAD_OUTPUT_LAYERS", "ENCODER_FLOAT_LAYERS", "quantize_graph", "quantize_all", "calibration_feeds"]
+__all__ = ["FeedsReader", "QuantPolicy", "POLICIES", "HEAD_OUTPUT_LAYERS", "ENCODER_FLOAT_LAYERS", "quantize_graph",
+           "quantize_all", "calibration_feeds", "QUANTIZER_VERSION", "QUANTIZER_VERSION_KEY",
+           "quantizer_version_of_file"]
