@@ -91,12 +91,8 @@ _PARENT: tuple[int, ...] = tuple(next((a for a, b in LIMBS if b == j), -1) for j
 LIMB_TWINS: tuple[tuple[int, int], ...] = tuple(
     (j, FLIP_INDEX[j]) for j in range(len(JOINT_NAMES))
     if JOINT_NAMES[j].startswith("L") and j not in BODY_PARTS["head"] and FLIP_INDEX[_PARENT[j]] != _PARENT[j])
-#: :func:`held_apart`: the left and right joints the torso holds apart, ``(left, right)``, each with the least
-#: distance one body's may read, metres: the two bones between them (``proxy_matte.BONE_M``, each from the neck or
-#: the mid-hip they share, nearly in line across the torso) less :data:`BONE_SLACK_M` for the two ends' error. The
-#: shoulders 0.15 m (the shipped model's subject's, found, read 0.33 m apart at the least on the four rows of
-#: docs/two-people.md, "Fewer, right joints"; a left shoulder read from the right one's peaks, 0.10 m); the hips'
-#: bound, 0.24 - 0.25 m, holds nothing (the model's pulled hips read 0.085 m apart), so they are not asked.
+
+
 def _torso_twins_apart() -> dict[tuple[int, int], float]:
     """:data:`TORSO_TWINS_APART_M`: each left joint hanging from a joint without a side (the neck, the mid-hip; the
     face's from the nose left out, as :data:`LIMB_TWINS` leaves it) with its right twin, where the bound is above 0."""
@@ -112,6 +108,12 @@ def _torso_twins_apart() -> dict[tuple[int, int], float]:
     return apart
 
 
+#: :func:`held_apart`: the left and right joints the torso holds apart, ``(left, right)``, each with the least
+#: distance one body's may read, metres: the two bones between them (``proxy_matte.BONE_M``, each from the neck or
+#: the mid-hip they share, nearly in line across the torso) less :data:`BONE_SLACK_M` for the two ends' error. The
+#: shoulders 0.15 m (the shipped model's subject's, found, read 0.33 m apart at the least on the four rows of
+#: docs/two-people.md, "Fewer, right joints"; a left shoulder read from the right one's peaks, 0.10 m); the hips'
+#: bound, 0.24 - 0.25 m, holds nothing (the model's pulled hips read 0.085 m apart), so they are not asked.
 TORSO_TWINS_APART_M: dict[tuple[int, int], float] = _torso_twins_apart()
 #: Assignment rounds per start: a start that has not settled by then is kept as it stands.
 _ROUNDS = 8
