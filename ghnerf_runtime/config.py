@@ -34,7 +34,7 @@ from ghnerf_runtime.contract import GRAPH_NAMES, MAX_NEAR_FAR_MARGIN_M
 from ghnerf_runtime.errors import ConfigError
 from ghnerf_runtime.json_keys import remember_repeats
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
-from ghnerf_runtime.plain_values import is_true_false, plain_scalar
+from ghnerf_runtime.plain_values import is_finite_number, is_true_false, plain_scalar
 from ghnerf_runtime.preprocess import EDGE_CROPS, PAD_FILLS
 
 __all__ = [
@@ -70,11 +70,6 @@ def _fail(cls: type, name: str, why: str, value: Any) -> None:
     raise ConfigError(f"{why}, got {value!r}", key=f"{cls.__name__}.{name}")
 
 
-def _is_real(value: Any) -> bool:
-    return (isinstance(value, numbers.Real) and not isinstance(value, bool) and value == value
-            and abs(value) != float("inf"))
-
-
 def _keep_plain(obj: Any, name: str, value: Any) -> None:
     """Store a checked value as the Python type it stands for: a NumPy scalar (np.float32, np.int64, np.bool_) kept as
     given made :func:`config_to_dict`, documented JSON-ready, fail in ``json.dumps``."""
@@ -83,7 +78,7 @@ def _keep_plain(obj: Any, name: str, value: Any) -> None:
 
 def _number(obj: Any, name: str, lo: float, hi: float, *, lo_open: bool = False) -> None:
     value = getattr(obj, name)
-    ok = _is_real(value) and (value > lo if lo_open else value >= lo) and value <= hi
+    ok = is_finite_number(value) and (value > lo if lo_open else value >= lo) and value <= hi
     if not ok:
         _fail(type(obj), name, f"must be a number in {'(' if lo_open else '['}{lo}, {hi}]", value)
     _keep_plain(obj, name, value)

@@ -74,7 +74,7 @@ import numpy as np
 
 from ghnerf_runtime.errors import RuntimeErrorBase, ShapeError
 from ghnerf_runtime.geometry.camera import Camera, check_last_dim
-from ghnerf_runtime.plain_values import plain_scalar
+from ghnerf_runtime.plain_values import is_finite_number, plain_scalar
 from ghnerf_runtime.preprocess import Roi, camera_normalized, crop_camera
 
 __all__ = [
@@ -119,21 +119,16 @@ class KeypointDecoderConfig:
         def fail(field: str, why: str) -> None:
             raise KeypointConfigError(f"KeypointDecoderConfig.{field}: {why}, got {getattr(self, field)!r}", field)
 
-        def real(value) -> bool:
-            # not np.isfinite: an integer beyond float64 (10**400, from a JSON config) raised its TypeError
-            return (isinstance(value, numbers.Real) and not isinstance(value, bool) and value == value
-                    and abs(value) != float("inf"))
-
-        if not (real(self.sigma) and 0 <= self.sigma <= 20):
+        if not (is_finite_number(self.sigma) and 0 <= self.sigma <= 20):
             fail("sigma", "must be a number in [0, 20]")
-        if not (real(self.threshold) and 0 < self.threshold < 1):
+        if not (is_finite_number(self.threshold) and 0 < self.threshold < 1):
             fail("threshold", "must be in (0, 1)")
         if self.refine not in ("quadratic", "centroid", "none"):
             fail("refine", "must be 'quadratic', 'centroid' or 'none'")
         if not (isinstance(self.centroid_radius, numbers.Integral) and not isinstance(self.centroid_radius, bool)
                 and 1 <= self.centroid_radius <= 8):
             fail("centroid_radius", "must be an int in [1, 8]")
-        if not (real(self.max_region_frac) and 0 < self.max_region_frac <= 1):
+        if not (is_finite_number(self.max_region_frac) and 0 < self.max_region_frac <= 1):
             fail("max_region_frac", "must be in (0, 1]")
         for f in fields(self):  # checked numpy scalars as Python's: config_to_dict is JSON-ready
             object.__setattr__(self, f.name, plain_scalar(getattr(self, f.name)))

@@ -12,7 +12,7 @@ import operator
 
 import numpy as np
 
-__all__ = ["is_real_number", "is_true_false", "plain_scalar", "whole_number_or_none"]
+__all__ = ["is_finite_number", "is_real_number", "is_true_false", "plain_scalar", "whole_number_or_none"]
 
 
 def plain_scalar(value: object) -> object:
@@ -30,6 +30,12 @@ def is_true_false(value: object) -> bool:
 def is_real_number(value: object) -> bool:
     """A real number, Python's or NumPy's, not True/False (finite or not: the caller bounds it)."""
     return isinstance(value, numbers.Real) and not is_true_false(value)
+
+
+def is_finite_number(value: object) -> bool:
+    """A real number (:func:`is_real_number`) that is neither NaN nor infinite. Not ``math.isfinite`` or
+    ``np.isfinite``: an integer beyond float64 (10**400, from a JSON config) made them raise; it is finite."""
+    return is_real_number(value) and value == value and abs(value) != float("inf")  # type: ignore[operator, arg-type]
 
 
 def whole_number_or_none(value: object) -> int | None:

@@ -83,35 +83,44 @@ SLACK_DEPTH_BASELINES = 2.5
 TWIN_SAME_M = 0.06
 #: Each BODY_25 joint's parent along :data:`~ghnerf_runtime.body25.LIMBS` (the joint nearer the neck), -1 for the neck.
 _PARENT: tuple[int, ...] = tuple(next((a for a, b in LIMBS if b == j), -1) for j in range(len(JOINT_NAMES)))
+
+
+def _left_joints(parent_has_side: bool) -> tuple[int, ...]:
+    """The left joints off the face, in :data:`~ghnerf_runtime.body25.JOINT_NAMES` order, whose parent
+    (:data:`_PARENT`) has a side (``parent_has_side``: an elbow, a knee) or has none (the neck or the mid-hip,
+    both sides' own: a shoulder, a hip). The face is left out (its twins sit round one nose: see
+    :data:`LIMB_TWINS`)."""
+    return tuple(j for j in range(len(JOINT_NAMES))
+                 if JOINT_NAMES[j].startswith("L") and j not in BODY_PARTS["head"] and _PARENT[j] >= 0
+                 and (FLIP_INDEX[_PARENT[j]] != _PARENT[j]) == parent_has_side)
+
+
 #: :func:`one_side_each`'s twins, ``(left, right)``: each left limb joint whose parent has a side too (the elbows,
 #: wrists, knees, ankles and feet; a shoulder or hip hangs from the neck or mid-hip, both sides' own, which tells no
 #: side) with its right twin, in :data:`~ghnerf_runtime.body25.JOINT_NAMES` order, which runs along each limb from
 #: the torso out. The face is left out: its twins sit a skull's width apart round one nose, and the shipped model
 #: read a subject's eyes 42 mm apart, as near as the wrists above.
-LIMB_TWINS: tuple[tuple[int, int], ...] = tuple(
-    (j, FLIP_INDEX[j]) for j in range(len(JOINT_NAMES))
-    if JOINT_NAMES[j].startswith("L") and j not in BODY_PARTS["head"] and FLIP_INDEX[_PARENT[j]] != _PARENT[j])
-#: :func:`held_apart`: the left and right joints the torso holds apart, ``(left, right)``, each with the least
-#: distance one body's may read, metres: the two bones between them (``proxy_matte.BONE_M``, each from the neck or
-#: the mid-hip they share, nearly in line across the torso) less :data:`BONE_SLACK_M` for the two ends' error. The
-#: shoulders 0.15 m (the shipped model's subject's, found, read 0.33 m apart at the least on the four rows of
-#: docs/two-people.md, "Fewer, right joints"; a left shoulder read from the right one's peaks, 0.10 m); the hips'
-#: bound, 0.24 - 0.25 m, holds nothing (the model's pulled hips read 0.085 m apart), so they are not asked.
+LIMB_TWINS: tuple[tuple[int, int], ...] = tuple((j, FLIP_INDEX[j]) for j in _left_joints(parent_has_side=True))
+
+
 def _torso_twins_apart() -> dict[tuple[int, int], float]:
     """:data:`TORSO_TWINS_APART_M`: each left joint hanging from a joint without a side (the neck, the mid-hip; the
     face's from the nose left out, as :data:`LIMB_TWINS` leaves it) with its right twin, where the bound is above 0."""
     apart = {}
-    for left in range(len(JOINT_NAMES)):
-        parent, right = _PARENT[left], FLIP_INDEX[left]
-        if not JOINT_NAMES[left].startswith("L") or parent < 0 or FLIP_INDEX[parent] != parent \
-                or left in BODY_PARTS["head"]:
-            continue
+    for left in _left_joints(parent_has_side=False):
+        right = FLIP_INDEX[left]
         least = BONE_M[JOINT_NAMES[left]] + BONE_M[JOINT_NAMES[right]] - BONE_SLACK_M
         if least > 0.0:
             apart[(left, right)] = round(least, 3)
     return apart
 
 
+#: :func:`held_apart`: the left and right joints the torso holds apart, ``(left, right)``, each with the least
+#: distance one body's may read, metres: the two bones between them (``proxy_matte.BONE_M``, each from the neck or
+#: the mid-hip they share, nearly in line across the torso) less :data:`BONE_SLACK_M` for the two ends' error. The
+#: shoulders 0.15 m (the shipped model's subject's, found, read 0.33 m apart at the least on the four rows of
+#: docs/two-people.md, "Fewer, right joints"; a left shoulder read from the right one's peaks, 0.10 m); the hips'
+#: bound, 0.24 - 0.25 m, holds nothing (the model's pulled hips read 0.085 m apart), so they are not asked.
 TORSO_TWINS_APART_M: dict[tuple[int, int], float] = _torso_twins_apart()
 #: Assignment rounds per start: a start that has not settled by then is kept as it stands.
 _ROUNDS = 8

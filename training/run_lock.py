@@ -10,6 +10,9 @@ system), or for a file written before the record existed, the number alone decid
 
 The first line stays the number alone; the record is one word that is not a number (a ``kill $(cat train.pid)``
 still stops the holder and no other process).
+
+A dataset folder's ``dataset.lock`` (``training.data.cache.writer_lock``) records its holder the same way, on the
+second line of its file, and :func:`is_recorded_process` judges it.
 """
 from __future__ import annotations
 
@@ -48,7 +51,16 @@ def lock_holder(path: Path) -> int | None:
     except (OSError, ValueError, IndexError):  # PermissionError too: another user's process, not a run of ours
         return None
     recorded = words[1] if len(words) > 1 else None
-    now = process_identity(pid)
-    if recorded is not None and now is not None and recorded != now:
+    if not is_recorded_process(pid, recorded):
         return None  # the number was given to another process since the holder wrote it
     return pid
+
+
+def is_recorded_process(pid: int, recorded: str | None) -> bool:
+    """Whether the live process ``pid`` is the one whose :func:`process_identity` a holder recorded as
+    ``recorded``. With no record (an older file) or no ``/proc`` to compare against, the number alone decides:
+    True."""
+    if recorded is None:
+        return True
+    now = process_identity(pid)
+    return now is None or now == recorded

@@ -105,13 +105,6 @@ def int_in(lo: int, hi: int, why: str = "") -> Callable[[str], int]:
     return convert
 
 
-def non_negative_int(raw: str) -> int:
-    v = integer(raw)
-    if v < 0:
-        raise ValueError("must be >= 0")
-    return v
-
-
 def positive_float(raw: str) -> float:
     v = decimal_number(raw)  # as camera URLs read it: fps=1_0 or %2010 refused, not read as 10
     if not (v > 0 and math.isfinite(v)):

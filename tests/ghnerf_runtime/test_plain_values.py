@@ -7,7 +7,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from ghnerf_runtime.plain_values import is_real_number, is_true_false, plain_scalar, whole_number_or_none
+from ghnerf_runtime.plain_values import is_finite_number, is_real_number, is_true_false, plain_scalar, \
+    whole_number_or_none
 
 
 @pytest.mark.parametrize("value, plain", [(np.int64(7), 7), (np.float32(2.5), 2.5), (np.True_, True),
@@ -54,3 +55,14 @@ def test_whole_numbers_of_either_kind_come_back_as_python_ints(value, whole):
 @pytest.mark.parametrize("value", [True, np.False_, 2.0, np.float32(2), "2", None, Fraction(4, 2)])
 def test_true_false_floats_and_text_are_no_whole_number(value):
     assert whole_number_or_none(value) is None
+
+
+@pytest.mark.parametrize("value", [3, -2.5, np.float32(0.5), np.uint16(9), Fraction(1, 3), 10 ** 400, -(10 ** 400)])
+def test_finite_numbers_of_either_kind_are_finite_an_integer_beyond_float64_too(value):
+    assert is_finite_number(value)
+
+
+@pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan, np.float32("nan"), np.float64("-inf"), True,
+                                   np.True_, "5", None, 1j, np.array([1.0])])
+def test_non_finite_numbers_and_what_is_no_real_number_are_not_finite(value):
+    assert not is_finite_number(value)

@@ -430,3 +430,69 @@ def test_a_lock_held_from_another_host_or_by_a_dead_pids_child_says_so(tmp_path)
     # a killed holder's line stays, but its lock went with it: the next writer just takes the folder
     with writer_lock(root):
         pass
+
+
+@pytest.fixture
+def other_process():
+    """A live process that is not this one (the number a stale lock line may name now)."""
+    import subprocess
+
+    proc = subprocess.Popen(["sleep", "60"])
+    try:
+        yield proc.pid
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def _holder_lines(root: Path) -> list[str]:
+    """The lines this process writes into ``root``'s lock while it holds it."""
+    from training.data.cache import writer_lock
+
+    with writer_lock(root):
+        return (root / "dataset.lock").read_text().splitlines()
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="the holder's identity needs Linux /proc")
+def test_a_lock_line_whose_number_another_live_process_has_now_is_not_named_as_the_holder(tmp_path, other_process):
+    """The holder was killed with -9 while a child it started kept the lock; its number went to another process.
+    The message said that process was the holder, to be stopped (``kill <its number>``): the wrong process."""
+    from training.data.cache import writer_lock
+
+    root = tmp_path / "ds"
+    root.mkdir()
+    first, *rest = _holder_lines(root)  # as the holder (this process) writes it ...
+    stale = "\n".join([" ".join([str(other_process), *first.split()[1:]]), *rest, ""])  # ... its number now another's
+    fh = _hold(root, stale)
+    try:
+        with pytest.raises(DatasetError) as err:
+            with writer_lock(root):
+                pass
+    finally:
+        fh.close()
+    assert f"kill {other_process}" not in str(err.value)  # not the holder: not one to stop
+    assert f"pid {other_process} " in str(err.value) and "has ended" in str(err.value)
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="the holder's identity needs Linux /proc")
+def test_a_live_holder_with_its_identity_or_an_older_one_line_lock_is_named(tmp_path, other_process):
+    """The identity written by the holder itself matches; a line of the older one-line form (no identity) is
+    judged by its number alone, as before."""
+    import socket
+
+    from training.data.cache import writer_lock
+    from training.run_lock import process_identity
+
+    root = tmp_path / "ds"
+    root.mkdir()
+    first, identity = _holder_lines(root)
+    assert first.split()[0] == str(os.getpid()) and identity == process_identity(os.getpid())  # who it is
+    line = f"{other_process} {socket.gethostname()} 2026-12-05T00:00:00+0000\n"
+    for text in (f"{line}{process_identity(other_process)}\n", line):
+        fh = _hold(root, text)
+        try:
+            with pytest.raises(DatasetError, match=f"pid {other_process}, since .*kill {other_process}"):
+                with writer_lock(root):
+                    pass
+        finally:
+            fh.close()

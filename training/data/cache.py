@@ -11,7 +11,8 @@ Layout::
         meta.json                        {"first_index", "count", "samples": [metadata...],
                                           "crc32": {array name: [CRC-32 of each stored sample's slice]}}
     <root>/<split>/shard_000001/ ...
-    <root>/dataset.lock                  the one writer's lock (``writer_lock``; its pid line while held)
+    <root>/dataset.lock                  the one writer's lock (``writer_lock``; its pid line and identity
+                                         while held)
 
 A shard folder is written under a temporary name, fsynced, and renamed when complete, so a
 folder named ``shard_*`` is always whole, a power cut included; an interrupted run leaves only
@@ -56,6 +57,7 @@ import numpy as np
 
 from training.data.errors import DatasetError
 from training.data.sample import FIELDS, Sample, arrays_to_sample, sample_to_arrays
+from training.run_lock import is_recorded_process, process_identity
 
 log = logging.getLogger(__name__)
 
@@ -188,9 +190,10 @@ def writer_lock(root: str | Path) -> Iterator[None]:
     (taken for a crash's leftovers), a shard renamed over one being renamed fails, and both rewrite the
     manifest from what they read before (the last one drops the other's splits). So a second writer is
     refused, naming the lock file and the holder (its pid, host and start, which the holder writes into the
-    file). The lock goes with the process (``flock``): a killed writer leaves none behind, so there is no
-    stale lock to clear; a killed one's pid line is stale but harmless. The file is emptied on the way out
-    (two folders made alike stay byte-identical).
+    file, then on a second line its identity, ``training.run_lock``). The lock goes with the process
+    (``flock``): a killed writer leaves none behind, so there is no stale lock to clear; a killed one's pid
+    line is stale but harmless, and a number since given to another process is not named as the holder (the
+    identity differs). The file is emptied on the way out (two folders made alike stay byte-identical).
 
     Raises:
         DatasetError: another process holds the lock.
@@ -203,7 +206,7 @@ def writer_lock(root: str | Path) -> Iterator[None]:
         except BlockingIOError:
             raise DatasetError(path, _held_message(Path(root), path)) from None
         fh.truncate(0)
-        fh.write(f"{os.getpid()} {socket.gethostname()} {time.strftime('%Y-%m-%dT%H:%M:%S%z')}\n")
+        fh.write(_holder_text())
         fh.flush()
         try:
             yield
@@ -213,12 +216,43 @@ def writer_lock(root: str | Path) -> Iterator[None]:
         fh.close()  # releases the lock
 
 
+def _holder_text() -> str:
+    """What the holder writes into the lock file: ``<pid> <host> <start>``, then its identity
+    (``run_lock.process_identity``) on a second line where ``/proc`` gives one."""
+    pid = os.getpid()
+    line = f"{pid} {socket.gethostname()} {time.strftime('%Y-%m-%dT%H:%M:%S%z')}\n"
+    identity = process_identity(pid)
+    return f"{line}{identity}\n" if identity else line
+
+
+def _read_holder(path: Path) -> tuple[int, str, str, str | None]:
+    """The pid, host, start and identity that the holder wrote into ``path`` (identity None in a file of the older
+    one-line form). Raises OSError or ValueError where the file does not say (empty, not written yet)."""
+    lines = path.read_text().splitlines()
+    if not lines:
+        raise ValueError(f"{path} is empty")
+    pid_s, host, since = lines[0].split()
+    recorded = lines[1].strip() if len(lines) > 1 else ""
+    return int(pid_s), host, since, recorded or None
+
+
+def _holder_alive(pid: int, recorded: str | None) -> bool:
+    """Whether the process that wrote the lock line (number ``pid``, identity ``recorded``) still runs here."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process: alive, and the identity says whether it is the holder
+        pass
+    # a killed holder's number may since belong to another process: not the holder, and not one to kill
+    return is_recorded_process(pid, recorded)
+
+
 def _held_message(root: Path, path: Path) -> str:
     """Why ``root`` is refused, naming the holder when its line in ``path`` says who it is."""
     head = f"another process holds this lock: it is writing dataset {root} (generate or a conversion)"
     try:
-        pid_s, host, since = path.read_text().split()
-        pid = int(pid_s)
+        pid, host, since, recorded = _read_holder(path)
     except (OSError, ValueError):  # an older writer's empty file, or the holder has not written its line yet
         return (f"{head}; wait for it to finish, then run the command again (it resumes); `fuser -v {path}` "
                 "names the holder on this machine")
@@ -226,14 +260,7 @@ def _held_message(root: Path, path: Path) -> str:
         return (f"{head}: pid {pid} on host {host}, since {since}. Wait for it or stop it there, then run the "
                 "command again (it resumes); the lock is released when that process ends, or by the file "
                 f"server when {host} is down")
-    try:
-        os.kill(pid, 0)
-        alive = True
-    except ProcessLookupError:
-        alive = False
-    except PermissionError:  # another user's live process
-        alive = True
-    if alive:
+    if _holder_alive(pid, recorded):
         return (f"{head}: pid {pid}, since {since}. Wait for it to finish or stop it (kill {pid}), then run the "
                 "command again (it resumes); the lock is released when that process ends, nothing to delete")
     return (f"{head}: pid {pid} (since {since}) has ended, but a process it started still holds the lock; "
