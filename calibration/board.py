@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import struct
 import zlib
@@ -24,6 +23,7 @@ import cv2
 import numpy as np
 
 from calibration.errors import BoardError
+from ghnerf_runtime.plain_values import is_finite_number
 
 __all__ = ["BoardSpec", "load_board", "png_with_dpi", "DICTIONARIES", "MIN_CORNERS", "REQUIRED_KEYS"]
 
@@ -37,10 +37,6 @@ REQUIRED_KEYS = ("squares_x", "squares_y", "square_m", "marker_m", "dictionary")
 #: ArUco dictionaries a board may use (OpenCV's predefined ones, by name).
 DICTIONARIES = tuple(sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and "APRILTAG" not in n
                             and "ARUCO_ORIGINAL" not in n and "MIP" not in n))
-
-
-def _is_real(value: Any) -> bool:
-    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
 
 
 @dataclass(frozen=True)
@@ -75,10 +71,12 @@ class BoardSpec:
                              key="squares_x")
         for key in ("square_m", "marker_m"):
             value = getattr(self, key)
-            if not _is_real(value) or not 0.001 <= value <= 2.0:
+            # a NumPy scalar is a length like any number (np.float32(0.03) was refused as out of range); an
+            # integer past float64 is refused by name, not with an OverflowError
+            if not is_finite_number(value) or not 0.001 <= value <= 2.0:
                 # a size typed in millimetres (80 for 0.08) is said as such, not only as out of range
                 mm = (f" (millimetres? {value:g} mm is {value / 1000:g} m)"
-                      if _is_real(value) and 2.0 < value and 0.001 <= value / 1000 <= 2.0 else "")
+                      if is_finite_number(value) and 2.0 < value <= 2000.0 else "")
                 raise BoardError(f"must be a length in metres in [0.001, 2], got {value!r}{mm}", key=key)
             object.__setattr__(self, key, float(value))
         if not self.marker_m < self.square_m:

@@ -161,3 +161,10 @@ def test_a_board_file_without_legacy_pattern_reads_as_a_print_of_today(tmp_path)
     path = tmp_path / "board.json"
     path.write_text(json.dumps({k: v for k, v in board.to_dict().items() if k != "legacy_pattern"}))
     assert load_board(path) == board
+
+
+def test_a_numpy_length_is_a_length_and_a_huge_integer_is_refused_by_name():
+    # np.float32(0.04) was refused as out of range though inside it; 10**400 raised a bare OverflowError
+    assert BoardSpec(square_m=np.float32(0.04), marker_m=np.float64(0.03)).square_m == pytest.approx(0.04)
+    with pytest.raises(BoardError, match="square_m"):
+        BoardSpec(square_m=10 ** 400, marker_m=0.03)

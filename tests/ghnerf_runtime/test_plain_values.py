@@ -66,3 +66,10 @@ def test_finite_numbers_of_either_kind_are_finite_an_integer_beyond_float64_too(
                                    np.True_, "5", None, 1j, np.array([1.0])])
 def test_non_finite_numbers_and_what_is_no_real_number_are_not_finite(value):
     assert not is_finite_number(value)
+
+
+@pytest.mark.parametrize("value, plain", [(np.array(-5), -5), (np.array(2.5, dtype=np.float32), 2.5),
+                                          (np.array(True), True)])
+def test_a_zero_d_array_comes_back_as_the_python_value_it_holds(value, plain):
+    out = plain_scalar(value)
+    assert out == plain and type(out) is type(plain)
