@@ -74,8 +74,9 @@ class BoardSpec:
             # a NumPy scalar is a length like any number (np.float32(0.03) was refused as out of range); an
             # integer past float64 is refused by name, not with an OverflowError
             if not is_finite_number(value) or not 0.001 <= value <= 2.0:
-                # a size typed in millimetres (80 for 0.08) is said as such, not only as out of range
-                mm = (f" (millimetres? {value:g} mm is {value / 1000:g} m)"
+                # a size typed in millimetres (80 for 0.08) is said as such, not only as out of range; as a float,
+                # since every real number is taken now and a Fraction has no :g format before Python 3.12
+                mm = (f" (millimetres? {float(value):g} mm is {float(value) / 1000:g} m)"
                       if is_finite_number(value) and 2.0 < value <= 2000.0 else "")
                 raise BoardError(f"must be a length in metres in [0.001, 2], got {value!r}{mm}", key=key)
             object.__setattr__(self, key, float(value))

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import re
+from fractions import Fraction
 
 import cv2
 import numpy as np
@@ -168,3 +169,11 @@ def test_a_numpy_length_is_a_length_and_a_huge_integer_is_refused_by_name():
     assert BoardSpec(square_m=np.float32(0.04), marker_m=np.float64(0.03)).square_m == pytest.approx(0.04)
     with pytest.raises(BoardError, match="square_m"):
         BoardSpec(square_m=10 ** 400, marker_m=0.03)
+
+
+def test_a_fraction_in_millimetres_is_refused_by_name_not_a_format_error():
+    # any real number is a length since plain_values.is_finite_number; the millimetres hint formatted the value
+    # itself with :g, which a Fraction refuses (Python 3.11): a bare TypeError instead of the BoardError
+    with pytest.raises(BoardError, match=r"square_m: .*millimetres\? 80 mm is 0\.08 m"):
+        BoardSpec(square_m=Fraction(80), marker_m=0.03)
+    assert BoardSpec(square_m=Fraction(1, 25), marker_m=0.03).square_m == pytest.approx(0.04)
