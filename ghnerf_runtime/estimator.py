@@ -78,7 +78,7 @@ from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoint
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
     novel_pivot, novel_target, render_novel_view, skeleton_overlay
 from ghnerf_runtime.novel_painter import angle_from_sources_deg
-from ghnerf_runtime.plain_values import is_true_false, whole_number_or_none
+from ghnerf_runtime.plain_values import is_true_false, plain_scalar, whole_number_or_none
 from ghnerf_runtime.proxy_blend import model_input_to_rgb, proxy_blend, subject_region
 from ghnerf_runtime.proxy_matte import proxy_matte
 from ghnerf_runtime.preprocess import (
@@ -380,8 +380,10 @@ def _warn_if_not_levelled(rig: Rig) -> None:
 def _finite_time(value) -> bool:
     """Whether ``value`` is a finite number (a capture time): an integer past the float range (10**400) is not,
     nor is what is no number (a string): ``math.isfinite`` raised OverflowError or TypeError for them, which the
-    daemon's loop (it skips a pair on a FrameError) did not expect. True/False is no time (it was read as 1 s)."""
-    if is_true_false(value):
+    daemon's loop (it skips a pair on a FrameError) did not expect. True/False is no time (it was read as 1 s), nor
+    is a 0-d array holding one (``math.isfinite`` takes it; the rest of the runtime reads a 0-d array as its value,
+    :func:`~ghnerf_runtime.plain_values.plain_scalar`)."""
+    if is_true_false(plain_scalar(value)):
         return False
     try:
         return math.isfinite(value)

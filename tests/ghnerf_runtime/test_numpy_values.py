@@ -92,7 +92,7 @@ def test_a_sequence_that_is_not_a_whole_number_is_refused(estimator_and_pair, se
         est.estimate(pair, sequence=sequence)
 
 
-@pytest.mark.parametrize("flag", [True, np.True_])
+@pytest.mark.parametrize("flag", [True, np.True_, np.array(True)])  # a 0-d array of True was read as 1 s
 def test_true_is_no_capture_time(estimator_and_pair, flag) -> None:
     est, pair = estimator_and_pair
     with pytest.raises(FrameError, match=r"timestamp_s must be a finite capture time.*got " + re.escape(repr(flag))):
