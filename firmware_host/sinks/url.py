@@ -37,10 +37,10 @@ class SinkUrl:
         baud of 1); complex numbers are refused.
         """
         raw: object = self.query.pop(key, None)
-        if kw is not None and kw.get(key) is None:
-            kw.pop(key, None)  # not given: the query's value, else the default
-        elif kw is not None:
-            raw = plain_scalar(kw.pop(key))
+        # unwrapped before the None test: a 0-d array holding None is not given either (it came back as the value)
+        given = plain_scalar(kw.pop(key, None)) if kw is not None else None
+        if given is not None:  # else not given: the query's value, else the default
+            raw = given
             if isinstance(raw, bool):  # ep=True was endpoint 1
                 if convert is boolean:
                     return raw  # type: ignore[return-value]

@@ -71,6 +71,12 @@ def test_a_numpy_keyword_is_checked_as_a_python_one(url, key, value, why) -> Non
     assert err.value.field == key
 
 
+def test_a_keyword_of_a_0d_array_holding_none_is_not_given() -> None:
+    # None counts as not given; the same None in a 0-d array came back as the value, unchecked (baud None)
+    url = "serial:///dev/null?baud=19200"
+    assert sink_class(url).from_url(url, baud=np.array(None, dtype=object)).baud == 19200
+
+
 def test_joints_of_another_dtype_or_layout_go_out_as_float64_ones() -> None:
     joints = _joints()
     sent = _wire_joints(JointFrame(0, 0, 0, joints))
