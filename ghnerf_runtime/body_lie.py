@@ -19,8 +19,9 @@ from ghnerf_runtime.body25 import JOINT_INDEX
 from ghnerf_runtime.joints3d import Joints3D
 
 __all__ = ["KEPT_TURN_SECTOR_DEG", "KEPT_TURN_STEP_DEG", "TURN_LIE_TOLERANCE_DEG", "TURN_MIN_FROM_SIGHT_DEG",
-           "TURN_NEAR_LIE_DEG", "across_the_views", "body_axis", "degrees_short_of_lying", "lies_as_kept_turn",
-           "lies_as_turned", "nears_a_turned_lie", "tilt_from_up_deg"]
+           "TURN_FLIPPED_READ_DEG", "TURN_NEAR_LIE_DEG", "across_the_views", "another_turn_may_hold",
+           "axis_angle_deg", "body_axis", "degrees_short_of_lying", "lies_as_kept_turn", "lies_as_turned",
+           "nears_a_turned_lie", "reads_flipped", "tilt_from_up_deg"]
 
 #: roi.turn_search: a turned pass is kept only when its body lies as a turn can right (:func:`lies_as_turned`):
 #: level or upside down within this many degrees (its body axis against gravity). In a one-off look at the 30 bench
@@ -52,6 +53,13 @@ KEPT_TURN_STEP_DEG = 25.0
 #: read 71-86 (one 100); the refused passes of people lying along a line of sight that lay across the views read
 #: 127-160.
 TURN_NEAR_LIE_DEG = 10.0
+#: roi.turn_search: an upright pass whose body axis lies more than this many degrees from that of the last pass kept
+#: through a turn the pair lost reads the body turned over (:func:`reads_flipped`): no body turns so far in one pair.
+#: In benchmarks/measure_lying_rendered.py --rolls (a one-off look, docs/turn-search.md, "A turn lost past 135
+#: degrees") the upright passes after a lost turn that found someone read 11-17 degrees from the kept pass, but the
+#: cartwheel's past 150 degrees (bench scene 10), the upside-down body read as someone standing: 150. Over 90,
+#: not 90: someone lying across the view who stands up in a pair reads about 90 from the kept pass.
+TURN_FLIPPED_READ_DEG = 120.0
 #: the joints whose centroids give a body's axis (:func:`body_axis`): the head and shoulders, the hips and legs
 _AXIS_UPPER = tuple(JOINT_INDEX[n] for n in ("Nose", "Neck", "RShoulder", "LShoulder", "REye", "LEye", "REar",
                                              "LEar"))
@@ -149,9 +157,42 @@ def lies_as_kept_turn(j3: Joints3D, centres: Sequence[np.ndarray], turns: Sequen
     axis = body_axis(j3)
     if axis is None or last_axis is None:
         return False
-    if math.degrees(math.acos(float(np.clip(axis @ last_axis, -1.0, 1.0)))) > KEPT_TURN_STEP_DEG:
+    if axis_angle_deg(axis, last_axis) > KEPT_TURN_STEP_DEG:
         return False  # not rolled on from the last pass: a jump
     from_up = tilt_from_up_deg(axis)
     if not any(abs(from_up - min(t % 360, 360 - t % 360)) <= KEPT_TURN_SECTOR_DEG for t in turns if t % 360):
         return False  # nearer upright or another turn: not this turn's body
     return across_the_views(axis, j3.points[j3.valid].mean(axis=0), centres)
+
+
+def axis_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle between two unit body axes (:func:`body_axis`), degrees (0-180)."""
+    return math.degrees(math.acos(float(np.clip(a @ b, -1.0, 1.0))))
+
+
+def reads_flipped(j3: Joints3D, last_axis: np.ndarray) -> bool:
+    """Whether ``j3``, an upright pass's joints in the pair that lost a kept turn, reads the body turned over against
+    ``last_axis`` (the :func:`body_axis` of the last pass kept through that turn): more than
+    :data:`TURN_FLIPPED_READ_DEG` from it. No body turns over in one pair; upright crops read a body past 135 degrees
+    (the cartwheel toward upside down) as someone standing, strongly, feet where the head is (docs/turn-search.md,
+    "A turn lost past 135 degrees"). No axis (no head and shoulders, or no hips and legs found): no."""
+    axis = body_axis(j3)
+    return axis is not None and axis_angle_deg(axis, last_axis) > TURN_FLIPPED_READ_DEG
+
+
+def _turn_tilt_deg(turn: int) -> int:
+    """The tilt from upright (0-180 degrees) of a body that a crop turn of ``turn`` degrees shows upright."""
+    t = turn % 360
+    return min(t, 360 - t)
+
+
+def another_turn_may_hold(last_axis: np.ndarray, lost: Sequence[int]) -> bool:
+    """Whether a turn other than the views' ``lost`` ones could keep a pass rolled on from ``last_axis``, the last pass
+    kept through them, as :func:`lies_as_kept_turn` asks (a step of at most :data:`KEPT_TURN_STEP_DEG`, within
+    :data:`KEPT_TURN_SECTOR_DEG` of that turn's tilt): the cartwheel that lost the quarter turn at 135 degrees, near
+    the half turn's sector. Not someone lying across the view (90) or upside down (175) who got up: no other turn
+    lies that near."""
+    lost_tilts = {_turn_tilt_deg(t) for t in lost if t % 360}
+    tilt = tilt_from_up_deg(last_axis)
+    return any(abs(tilt - other) <= KEPT_TURN_SECTOR_DEG + KEPT_TURN_STEP_DEG
+               for other in (90, 180) if other not in lost_tilts)

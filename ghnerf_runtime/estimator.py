@@ -61,7 +61,8 @@ import numpy as np
 import numpy.ma  # noqa: F401
 
 from ghnerf_runtime.body25 import BODY_PARTS, FEET, FLOOR_JOINTS, JOINT_NAMES
-from ghnerf_runtime.body_lie import body_axis, degrees_short_of_lying, lies_as_kept_turn, lies_as_turned
+from ghnerf_runtime.body_lie import another_turn_may_hold, body_axis, degrees_short_of_lying, lies_as_kept_turn, \
+    lies_as_turned, reads_flipped
 from ghnerf_runtime.config import EstimatorConfig, FrameCheckConfig, RoiConfig
 from ghnerf_runtime.body_proxy import BodyProxy, proxy_body, proxy_depth
 from ghnerf_runtime.contract import Normalisation, near_far_from_box, source_centers, source_projections, \
@@ -842,6 +843,8 @@ class Estimator:
         self._sequence = sequence + 1  # after the checks: a refused call leaves the running count as it was
         timing: dict[str, float] = {}
         self._forget_a_stale_track(timestamp_s)
+        # the kept turn this pair may lose, and the last pass kept through it (_turn_lost_flipped)
+        rolled_from = (self._turns, self._kept_axis) if self._turns != (0, 0) and self._kept_axis is not None else None
         if self.tracker.track is None and self.tracker.view_track is None:
             self._use_turns((0, 0))  # a turned track was lost: a cold pass looks upright first (and searches again)
         p = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
@@ -882,12 +885,16 @@ class Estimator:
             self._use_turns((0, 0))
             p = self._refined(images, self._pass(images, self.tracker.regions(), sequence, timing, novel_view),
                               sequence, timing, novel_view)
-        if cold_pass and self._weak_pass(p):
-            # A cold pair that found nobody, or someone weakly (refined or not): someone lying or upside down?
+        if not (cold_pass and self._turns == (0, 0) and rolled_from is not None
+                and self._turn_lost_flipped(p, *rolled_from)):
+            rolled_from = None  # the pair kept its turn, or its upright pass does not read the body turned over
+        if cold_pass and (self._weak_pass(p) or rolled_from is not None):
+            # A cold pair that found nobody, or someone weakly (refined or not): someone lying or upside down? Or
+            # strongly, turned over against the turn this pair lost (_turn_lost_flipped).
             if self._turn_search_wait > 0 and not self._searches_early(p):
                 self._turn_search_wait -= 1  # a search found no turn lately: someone no turn rights, most likely
             else:
-                turned = self._turn_search(images, p, sequence, timing, novel_view)
+                turned = self._turn_search(images, p, sequence, timing, novel_view, rolled_from=rolled_from)
                 if turned is not p:
                     self._end_wait()
                     p = self._refined(images, turned, sequence, timing, novel_view)
@@ -1108,13 +1115,17 @@ class Estimator:
         return candidates
 
     def _turn_search(self, images: Sequence[np.ndarray], p: "_Pass", sequence: int, timing: dict,
-                     novel_view: NovelViewRequest | None, track: Track | None = None) -> "_Pass":
+                     novel_view: NovelViewRequest | None, track: Track | None = None,
+                     rolled_from: tuple[tuple[int, int], np.ndarray] | None = None) -> "_Pass":
         """``roi.turn_search`` after the weak pass ``p`` through upright crops: the views' turns to try
         (:meth:`_turn_candidates`), each a pass with those crops, the first kept that finds someone where ``p``
         did not, or at a median confidence :data:`_TURN_MARGIN` higher, and lies as a turn rights a body
         (:func:`lies_as_turned`; else it counts in ``turns_refused``); else ``p`` and its track stand. The passes
         are cold (the working volume's crops) after a cold ``p``; after a tracked one, ``track`` (what ``p`` left)
-        is followed through the turned crops, the same window about the person as ``p``'s."""
+        is followed through the turned crops, the same window about the person as ``p``'s. ``rolled_from``: the kept
+        turn this pair lost and the last pass kept through it, which ``p`` reads turned over
+        (:meth:`_turn_lost_flipped`); a pass through another turn that rolled on from that pass is kept too
+        (:meth:`_rolls_on_from_lost_turn`), more confident than ``p`` or not."""
         self.turn_searches += 1
         self._search_refused_short = None
         held = self._several_track, self._behind_track, self._track_unsorted
@@ -1127,8 +1138,9 @@ class Estimator:
                 # the track
                 self._several_track, self._behind_track, self._track_unsorted = held
             q = self._pass(images, self.tracker.regions(), sequence, timing, novel_view)
-            if _finds_better(q, p):
-                if self._lies_as_turned(q.j3):
+            rolled_on = self._rolls_on_from_lost_turn(q, turns, rolled_from)
+            if rolled_on or _finds_better(q, p):
+                if rolled_on or self._lies_as_turned(q.j3):
                     if p.novel is not None:
                         p.novel.abandon()
                     self.turns_kept += 1
@@ -1148,6 +1160,33 @@ class Estimator:
         self._use_turns((0, 0), fresh=False)
         self._several_track, self._behind_track, self._track_unsorted = held
         return p
+
+    def _turn_lost_flipped(self, p: "_Pass", lost: tuple[int, int], last_axis: np.ndarray) -> bool:
+        """Whether ``p``, the cold upright pass of a pair that lost the kept turn ``lost``, found someone (both frames
+        passing the frame check) whose body reads turned over against ``last_axis``, the last pass kept through the
+        turn (:func:`reads_flipped`): a misread, however strong; and another turn could keep the body rolled on from
+        that pass (:func:`another_turn_may_hold`; else the search could keep only what it keeps after a weak pass,
+        and someone upside down who got up searched for nothing, once a scene in
+        benchmarks/measure_lying_rendered.py --poses upside_down --then upright). A cartwheel kept through the
+        quarter turn past 135 degrees loses it, and the upright crops read the body nearly upside down as someone
+        standing, at a median joint confidence of 0.50 (bench scene 10), so no weak pass searched, and a weak one
+        later kept no turn: the half turn read it at 0.53, not 0.1 higher (docs/turn-search.md, "A turn lost past
+        135 degrees")."""
+        if not self.config.roi.turn_search or p.j3 is None or not p.someone or p.env is None:
+            return False
+        return (all(p.frame_ok.values()) and another_turn_may_hold(last_axis, lost)
+                and reads_flipped(p.j3, last_axis))
+
+    def _rolls_on_from_lost_turn(self, q: "_Pass", turns: tuple[int, int],
+                                 rolled_from: tuple[tuple[int, int], np.ndarray] | None) -> bool:
+        """Whether ``q``, a search's pass through ``turns``, found the body rolled on from the last pass kept through
+        the turn this pair lost (``rolled_from``: that turn and that pass's axis; :func:`lies_as_kept_turn`, the rule
+        a kept turn's passes are asked) into another turn's sector: the same body, read through the turn that now
+        shows it nearer upright. Not through the lost turn itself: a person getting up from it reads turned over
+        upright, and through that turn as they lay."""
+        if rolled_from is None or turns == rolled_from[0] or q.j3 is None or not q.someone:
+            return False
+        return lies_as_kept_turn(q.j3, self._centres, turns, rolled_from[1])
 
     def _wait_after_search(self, p: "_Pass") -> None:
         """After a search that kept no turn over ``p``, its weak upright pass: the next ``roi.turn_search_every - 1``

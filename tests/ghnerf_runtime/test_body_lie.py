@@ -221,3 +221,42 @@ def test_a_refused_body_nearly_lying_across_the_views(degrees, towards, near):
     assert short is None if not near else short == pytest.approx(90.0 - TURN_LIE_TOLERANCE_DEG - degrees)
     if near:
         assert not lies_as_turned(j3, CENTRES)  # only ever asked of a refused pass
+
+
+@pytest.mark.parametrize("last_deg, read_deg, flipped", [
+    (135.0, -15.0, True),  # the cartwheel's lost quarter turn, read upright as someone standing: 150 degrees
+    (175.0, 0.0, True),  # upside down, read standing
+    (135.0, 155.0, False),  # rolled on 20 degrees
+    (90.0, 0.0, False),  # lying across, then standing: 90, not turned over
+    (90.0, -25.0, False),  # 115: under the 120-degree bar
+])
+def test_an_upright_read_turned_over_against_the_last_kept_pass(last_deg, read_deg, flipped):
+    """``reads_flipped``: no body turns over in one pair, so an upright read more than 120 degrees
+    (``TURN_FLIPPED_READ_DEG``) from the last pass kept through a lost turn is a misread."""
+    from ghnerf_runtime.body_lie import reads_flipped
+
+    assert reads_flipped(_stick(_tilted(read_deg)), _tilted(last_deg)) is flipped
+
+
+def test_a_read_without_a_body_axis_is_not_turned_over():
+    """No head and shoulders found: no axis, nothing to say the body turned over."""
+    from ghnerf_runtime.body_lie import reads_flipped
+
+    assert not reads_flipped(_stick(_tilted(0.0), upper=()), _tilted(135.0))
+
+
+@pytest.mark.parametrize("last_deg, lost, may", [
+    (135.0, (90, 90), True),  # the cartwheel leaving the quarter turn: 45 degrees from the half turn
+    (110.0, (90, 270), True),  # 70: within a step and a sector
+    (100.0, (90, 90), False),  # 80: no
+    (90.0, (90, 90), False),  # lying across
+    (175.0, (180, 180), False),  # upside down: 85 from the quarter turn
+    (135.0, (180, 180), True),  # leaving the half turn toward lying
+    (135.0, (90, 180), False),  # both other turns lost (views turned differently)
+])
+def test_another_turn_may_hold_a_body_rolled_on_from_a_lost_turn(last_deg, lost, may):
+    """``another_turn_may_hold``: a turn other than the lost ones within a step (25 degrees) and a sector (45) of the
+    last kept pass's tilt, as ``lies_as_kept_turn`` could keep."""
+    from ghnerf_runtime.body_lie import another_turn_may_hold
+
+    assert another_turn_may_hold(_tilted(last_deg), lost) is may

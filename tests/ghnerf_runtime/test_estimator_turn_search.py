@@ -874,7 +874,7 @@ def _weak_cold_pairs(reads, keeps=()):
                                                   else _found(est, regions, now["j3"]))
     est._weak_pass = lambda p: True  # weakly read (or nobody), someone may be there
 
-    def search(images, p, sequence, timing, novel_view, track=None):
+    def search(images, p, sequence, timing, novel_view, track=None, rolled_from=None):
         searched.append(sequence + 1)
         if sequence + 1 in keeps:
             return _found(est, p.regions, _tilted(90.0))  # a turn kept
@@ -990,3 +990,66 @@ def test_a_turn_kept_by_an_early_search_ends_the_wait():
     wait, as a pair that finds someone well does: the search after it starts a wait of its own, four weak pairs."""
     reads = [_tilted(45.0)] + [None] * 7  # found weakly, then lost: the second pair searches early, and keeps a turn
     assert _weak_cold_pairs(reads, keeps={2}) == [1, 2, 3, 8]
+
+
+def _lost_turn_pair(lost: tuple[int, int], kept_deg: float, upright_deg: float, tried: tuple[int, int],
+                    tried_deg: float):
+    """One pair of an oracle-session estimator (no model, the turn search on) tracking a person through crops turned
+    ``lost``, the last pass kept through them ``kept_deg`` from upright (rolled across the views, about the rig's z
+    axis). This pair's tracked pass through them finds nobody and drops the track; the cold upright pass finds the
+    body read ``upright_deg`` from upright, strongly (every joint at confidence 1: not a weak pass); a search tries
+    ``tried`` only, whose pass reads it ``tried_deg``, as confidently. Returns (estimator, the searches run)."""
+    from ghnerf_runtime.body_lie import body_axis
+    from ghnerf_runtime.estimator import _Pass
+
+    est, rig, body, rolled = _kept_turn_estimator(lost, kept_deg)
+    est._kept_axis = body_axis(body)
+    heat = {"encoder_heatmaps": np.zeros((2, 25, 4, 4), np.float32)}
+    searched = []
+
+    def one_pass(images, regions, *a, **k):
+        if est._turns == lost and regions.tracked:
+            est.tracker.reset()  # the turned track lost the person
+            return _Pass(regions, {n: None for n in est.camera_names}, env=heat)
+        deg = upright_deg if est._turns == (0, 0) else tried_deg
+        return replace(_found(est, regions, rolled(deg)), env=heat)
+
+    est._pass = one_pass
+    est._turn_candidates = lambda images, base, timing, track=None: [tried]
+    search = est._turn_search
+
+    def counted(*a, **k):
+        searched.append(est._turns)
+        return search(*a, **k)
+
+    est._turn_search = counted
+    est.estimate([np.zeros((c.size[1], c.size[0], 3), np.uint8) for c in rig.pair])
+    return est, searched
+
+
+@pytest.mark.parametrize("lost, kept_deg, upright_deg, tried, tried_deg, searched, turns", [
+    # the cartwheel past 135 degrees loses the quarter turn; upright reads it standing, feet where the head is (150
+    # degrees from the kept pass): a search, and the half turn that reads it rolled on 20 degrees is kept
+    ((90, 90), 135.0, -15.0, (180, 180), 155.0, True, (180, 180)),
+    # the half turn reads it 120 degrees from upright: outside that turn's sector (135-180), and short of the
+    # search's windows, so upright stands
+    ((90, 90), 135.0, -15.0, (180, 180), 120.0, True, (0, 0)),
+    # upright reads the body as the turn left it (20 degrees on): no misread, a strong pass, no search
+    ((90, 90), 135.0, 155.0, (180, 180), 155.0, False, (0, 0)),
+    # someone lying across the view who stood up: 90 degrees from the kept pass, not turned over, no search
+    ((90, 90), 90.0, 0.0, (90, 90), 90.0, False, (0, 0)),
+    # getting up from upside down: read turned over upright, but no other turn lies near enough to keep a roll on
+    # from 175 degrees (the quarter turn's sector ends at 135): a strong pass, no search
+    ((180, 180), 175.0, 0.0, (180, 180), 178.0, False, (0, 0)),
+])
+def test_a_strong_upright_read_turned_over_against_a_lost_turn_searches(lost, kept_deg, upright_deg, tried,
+                                                                         tried_deg, searched, turns):
+    """A cartwheel kept through the quarter turn past 135 degrees lost it; the upright crops read the body nearly
+    upside down as someone standing at a median confidence of 0.50 (bench scene 10 in
+    benchmarks/measure_lying_rendered.py --rolls cartwheel), a strong pass, so nothing searched, and a later weak
+    pair's search refused the half turn, which read the body no 0.1 more confidently (docs/turn-search.md, "A turn
+    lost past 135 degrees"). Now an upright pass turned over against the lost turn's last kept pass searches, and a
+    pass through another turn that rolled on from that pass is kept."""
+    est, runs = _lost_turn_pair(lost, kept_deg, upright_deg, tried, tried_deg)
+    assert bool(runs) is searched and est._turns == turns
+    assert est.turns_kept == (turns != (0, 0))
