@@ -1,8 +1,28 @@
-"""Fixtures shared by the novel-view tests over the body proxy (``test_proxy_blend``, ``test_novel_painter``)."""
+"""Fixtures shared by the novel-view tests over the body proxy (``test_proxy_blend``, ``test_novel_painter``), and
+every estimator a test makes closed at its end."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
+
+@pytest.fixture(autouse=True)
+def _estimators_closed(monkeypatch):
+    """Close every :class:`~ghnerf_runtime.estimator.Estimator` a test made: one left to the garbage collector
+    kept its novel-view worker thread alive into later tests (a full run once failed a test that counts them)."""
+    from ghnerf_runtime.estimator import Estimator
+
+    made = []
+    build = Estimator.__init__
+
+    def build_and_keep(self, *args, **kwargs):
+        build(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(Estimator, "__init__", build_and_keep)
+    yield
+    for est in made:
+        est.close()
+
 
 #: The simulated moment of :func:`shot` (seconds into the motion).
 SHOT_T = 0.1
