@@ -309,6 +309,16 @@ def _group_roots(count: int, links: Sequence[tuple[int, int]]) -> np.ndarray:
     return np.array([root(j) for j in range(count)])
 
 
+def _joints_and_found(caller: str, joints: np.ndarray, found: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``joints`` as ``(J, 3)`` float64 and ``found`` as ``(J,)`` bool, or a :class:`ShapeError` naming ``caller``."""
+    joints = np.asarray(joints, dtype=np.float64)
+    found = np.asarray(found, dtype=bool)
+    if joints.shape != (len(found), 3):
+        raise ShapeError(f"{caller}: joints must be ({len(found)}, 3) for {len(found)} found flags, "
+                         f"got {joints.shape}")
+    return joints, found
+
+
 def one_skeleton(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     """``(J,)`` which ``found`` joints of ``joints`` (``(J, 3)``, rig frame) make one skeleton: two found joints are
     linked where the limbs between them (:data:`~ghnerf_runtime.body25.LIMBS`, through joints not found, a tree's
@@ -317,11 +327,7 @@ def one_skeleton(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     person's peaks, or from one view's peak of each person, lies off its own limbs' reach: its group is the
     smaller. Unlike :func:`one_body` (:data:`MAX_LIMB_M`, the longest limb's, for every limb: a left shoulder
     0.62 m from its neck passes), each limb is held to its own length."""
-    joints = np.asarray(joints, dtype=np.float64)
-    found = np.asarray(found, dtype=bool)
-    if joints.shape != (len(found), 3):
-        raise ShapeError(f"one_skeleton: joints must be ({len(found)}, 3) for {len(found)} found flags, "
-                         f"got {joints.shape}")
+    joints, found = _joints_and_found("one_skeleton", joints, found)
     J = len(found)
     near: dict[int, list[tuple[int, float]]] = {j: [] for j in range(J)}  # each joint's limbs and their lengths
     for a, b in LIMBS:
@@ -371,11 +377,7 @@ def one_side_each(joints: np.ndarray, found: np.ndarray) -> np.ndarray:
     side's limb (a left wrist's runner-up on the raised right hand, in both views), and that pairing lies at the right
     wrist, within the arm's reach of the neck, which no bone bound (:func:`one_skeleton`) tells from the left wrist.
     Where both sides hold theirs (hands clasped) or neither does, both stay: nothing tells which is the mistake."""
-    joints = np.asarray(joints, dtype=np.float64)
-    found = np.asarray(found, dtype=bool)
-    if joints.shape != (len(found), 3):
-        raise ShapeError(f"one_side_each: joints must be ({len(found)}, 3) for {len(found)} found flags, "
-                         f"got {joints.shape}")
+    joints, found = _joints_and_found("one_side_each", joints, found)
     J = len(found)
     keep = found.copy()
     for left, right in LIMB_TWINS:

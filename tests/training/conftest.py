@@ -105,3 +105,16 @@ def disk_full_at(monkeypatch):
     """``disk_full_at(folder, name)``: from then on in the test, writes to ``folder``'s files named like ``name``
     stop halfway with ENOSPC (:class:`_DiskFullAt`)."""
     return lambda folder, name: _DiskFullAt(monkeypatch, Path(folder), name)
+
+
+@pytest.fixture
+def other_process():
+    """A live process that is not this one: the number a stale lock (``train.pid``, ``dataset.lock``) may name now."""
+    import subprocess
+
+    proc = subprocess.Popen(["sleep", "60"])
+    try:
+        yield proc.pid
+    finally:
+        proc.kill()
+        proc.wait()

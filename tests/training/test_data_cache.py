@@ -432,19 +432,6 @@ def test_a_lock_held_from_another_host_or_by_a_dead_pids_child_says_so(tmp_path)
         pass
 
 
-@pytest.fixture
-def other_process():
-    """A live process that is not this one (the number a stale lock line may name now)."""
-    import subprocess
-
-    proc = subprocess.Popen(["sleep", "60"])
-    try:
-        yield proc.pid
-    finally:
-        proc.kill()
-        proc.wait()
-
-
 def _holder_lines(root: Path) -> list[str]:
     """The lines this process writes into ``root``'s lock while it holds it."""
     from training.data.cache import writer_lock

@@ -14,17 +14,6 @@ from training.train import RunFolderInUse, refuse_live_lock, take_lock
 linux_proc = pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="the record needs Linux /proc")
 
 
-@pytest.fixture
-def other_process():
-    """A live process that is not this one (the number a stale train.pid may name now)."""
-    proc = subprocess.Popen(["sleep", "60"])
-    try:
-        yield proc.pid
-    finally:
-        proc.kill()
-        proc.wait()
-
-
 def _boot_id() -> str:
     return Path("/proc/sys/kernel/random/boot_id").read_text().strip()
 
