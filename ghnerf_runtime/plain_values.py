@@ -1,5 +1,6 @@
-"""NumPy values where a Python one is asked for: one place for the checks the configs, the wire messages and the sink
-URLs share (numpy only, so ``drivers`` and ``firmware_host`` import it without the runtime's heavier modules).
+"""NumPy values where a Python one is asked for: one place for the checks the configs, the wire messages, the sink
+URLs and the sizes share, and the JSON default of the training files (numpy only, so ``drivers`` and ``firmware_host``
+import it without the runtime's heavier modules).
 
 A NumPy scalar (np.int64, np.float32, np.bool_) comes from arrays and comparisons; kept as given it failed
 ``json.dumps`` later (a config's ``config_to_dict``, the file:// sink's worker), and ``np.True_`` is no ``bool`` to
@@ -12,8 +13,8 @@ import operator
 
 import numpy as np
 
-__all__ = ["is_finite_number", "is_real_number", "is_true_false", "numpy_for_json", "plain_scalar", "whole_number_or_none",
-           "whole_valued_or_none"]
+__all__ = ["is_finite_number", "is_real_number", "is_true_false", "numpy_for_json", "plain_scalar",
+           "whole_number_or_none", "whole_valued_or_none"]
 
 
 def plain_scalar(value: object) -> object:
