@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from calibration.errors import BoardError
-from ghnerf_runtime.plain_values import is_finite_number
+from ghnerf_runtime.plain_values import is_finite_number, whole_number_or_none
 
 __all__ = ["BoardSpec", "load_board", "png_with_dpi", "DICTIONARIES", "MIN_CORNERS", "REQUIRED_KEYS"]
 
@@ -63,8 +63,12 @@ class BoardSpec:
     def __post_init__(self) -> None:
         for key in ("squares_x", "squares_y"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int) or not 3 <= value <= 64:
+            # a NumPy integer counts (np.int64(9) was refused as no whole number); stored as a Python int for
+            # to_dict's JSON
+            squares = whole_number_or_none(value)
+            if squares is None or not 3 <= squares <= 64:
                 raise BoardError(f"must be a whole number of squares in [3, 64], got {value!r}", key=key)
+            object.__setattr__(self, key, squares)
         if self.corner_count < MIN_CORNERS:
             raise BoardError(f"a {self.squares_x}x{self.squares_y} board has {self.corner_count} inner corners; a view "
                              f"needs at least {MIN_CORNERS}, so it could never be found: add squares",

@@ -52,6 +52,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import JOINT_NAMES
 from ghnerf_runtime.errors import DepthRangeError, GeometryError, RuntimeErrorBase
+from ghnerf_runtime.plain_values import whole_number_or_none
 
 #: Contract format version. A different *major* is refused by :meth:`ModelContract.from_metadata`.
 CONTRACT_VERSION = "1.3.0"
@@ -563,10 +564,12 @@ def _missing_why(props: Mapping[str, str]) -> str:
 
 
 def _whole(value: Any) -> int:
-    """A JSON integer: not a bool, not 8.7 (which ``int`` would truncate to 8 without a word)."""
-    if isinstance(value, bool) or not isinstance(value, int):
+    """A JSON integer: not a bool, not 8.7 (which ``int`` would truncate to 8 without a word). Not 8.0 either,
+    as a size elsewhere may be: the exporter writes integers, so a float here is a wrong or hand-edited file."""
+    whole = whole_number_or_none(value)
+    if whole is None:
         raise ValueError(f"expected an integer, got {value!r}")
-    return value
+    return whole
 
 
 def _json_boolean(value: Any) -> bool:

@@ -1,5 +1,6 @@
-"""NumPy values where a Python one is asked for: one place for the checks the configs, the wire messages and the sink
-URLs share (numpy only, so ``drivers`` and ``firmware_host`` import it without the runtime's heavier modules).
+"""NumPy values where a Python one is asked for: one place for the checks the configs, the wire messages, the sink
+URLs and the sizes share, and the JSON default of the training files (numpy only, so ``drivers`` and ``firmware_host``
+import it without the runtime's heavier modules).
 
 A NumPy scalar (np.int64, np.float32, np.bool_) comes from arrays and comparisons; kept as given it failed
 ``json.dumps`` later (a config's ``config_to_dict``, the file:// sink's worker), and ``np.True_`` is no ``bool`` to
@@ -12,7 +13,8 @@ import operator
 
 import numpy as np
 
-__all__ = ["is_finite_number", "is_real_number", "is_true_false", "plain_scalar", "whole_number_or_none"]
+__all__ = ["is_finite_number", "is_real_number", "is_true_false", "numpy_for_json", "plain_scalar",
+           "whole_number_or_none", "whole_valued_or_none"]
 
 
 def plain_scalar(value: object) -> object:
@@ -47,3 +49,29 @@ def whole_number_or_none(value: object) -> int | None:
         return operator.index(value)  # type: ignore[arg-type]
     except TypeError:
         return None
+
+
+def whole_valued_or_none(value: object) -> int | None:
+    """``value`` as a Python int where it is a number without a fraction (640, 640.0, np.int64(640),
+    np.float32(640)), not True/False; else None (640.5, NaN, infinity, text). Wider than
+    :func:`whole_number_or_none`: for sizes and pixel positions computed in floating point."""
+    if is_true_false(value):
+        return None
+    try:
+        whole = int(value)  # type: ignore[call-overload]
+    except (TypeError, ValueError, OverflowError):  # None, text that is no number, NaN, infinity
+        return None
+    return whole if whole == value else None  # int("640") == "640" is False: text is refused
+
+
+def numpy_for_json(value: object) -> object:
+    """A ``json.dumps`` default: a NumPy scalar as its Python value, an array as (nested) lists (a 0-d one as its
+    value).
+
+    :raises TypeError: for anything else, as ``json.dumps`` does without a default.
+    """
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

@@ -87,6 +87,7 @@ from ghnerf_runtime.contract import Normalisation
 from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera, check_last_dim, image_rotation
 from ghnerf_runtime.geometry.rig import WorkingVolume
+from ghnerf_runtime.plain_values import whole_valued_or_none
 
 __all__ = [
     "Roi", "CropMaps", "roi_from_volume", "roi_from_joints", "crop_camera", "build_undistort_crop_maps",
@@ -127,9 +128,10 @@ class Roi:
     def __post_init__(self) -> None:
         for name in ("x0", "y0", "size"):
             value = getattr(self, name)
-            if isinstance(value, (bool, np.bool_)) or not _whole(value):
+            whole = whole_valued_or_none(value)  # 100.0 taken: windows are placed in floating point
+            if whole is None:
                 raise GeometryError(f"Roi.{name} must be an integer, got {value!r}")
-            object.__setattr__(self, name, int(value))
+            object.__setattr__(self, name, whole)
         if self.size < 1:
             raise GeometryError(f"Roi.size must be >= 1, got {self.size}")
 
@@ -160,18 +162,11 @@ class Roi:
         return (uv + 0.5) / s - 0.5 + [self.x0, self.y0]
 
 
-def _whole(value) -> bool:
-    """Whether ``value`` is a whole number (``int`` of NaN, infinity or None raises instead of saying no)."""
-    try:
-        return int(value) == value
-    except (TypeError, ValueError, OverflowError):
-        return False
-
-
 def _check_out_size(out_size: int) -> int:
-    if isinstance(out_size, (bool, np.bool_)) or not _whole(out_size) or out_size < 1:
+    whole = whole_valued_or_none(out_size)
+    if whole is None or whole < 1:
         raise GeometryError(f"out_size must be a positive integer, got {out_size!r}")
-    return int(out_size)
+    return whole
 
 
 def undistorted_image_bounds(camera: Camera, samples_per_side: int = 64) -> tuple[np.ndarray, np.ndarray]:

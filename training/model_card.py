@@ -108,15 +108,13 @@ def _fmt(v: Any, digits: int = 3) -> str:
 def _json_default(value: Any) -> Any:
     """A value ``json`` cannot write: numpy scalars as Python numbers (``default=str`` wrote a float32 2.5 as the
     string ``"2.5"``), arrays as lists (non-finite entries ``None``), anything else (a path) as text."""
-    import numpy as np
-
     from ghnerf_runtime.metrics import finite_or_none
+    from ghnerf_runtime.plain_values import numpy_for_json
 
-    if isinstance(value, np.generic):
-        return finite_or_none(value.item())
-    if isinstance(value, np.ndarray):
-        return finite_or_none(value.tolist())
-    return str(value)
+    try:
+        return finite_or_none(numpy_for_json(value))
+    except TypeError:  # not NumPy (a path): the card is read by people, so as text
+        return str(value)
 
 
 def strict_json(report: Any, indent: int | None = 1) -> str:

@@ -34,7 +34,7 @@ class SinkUrl:
         NumPy scalars and 0-d arrays count as the Python value they hold
         (:func:`~ghnerf_runtime.plain_values.plain_scalar`): a keyword's np.int64 or np.float32 was taken as an
         object and skipped every check (baud=np.int64(-5) and queue=np.float32(8.5) were accepted, np.True_ was a
-        baud of 1); complex numbers are refused.
+        baud of 1); complex numbers and bytes (Python's or NumPy's: text to decode first) are refused.
         """
         raw: object = self.query.pop(key, None)
         # unwrapped before the None test: a 0-d array holding None is not given either (it came back as the value)
@@ -47,6 +47,8 @@ class SinkUrl:
                 raise SinkConfigError(self.url, key, raw, "must be a value, not true/false")
             if isinstance(raw, complex):  # an object skipped every check: a baud of (-5+0j) reached the port
                 raise SinkConfigError(self.url, key, raw, "must be a real number, not complex")
+            if isinstance(raw, (bytes, bytearray)):  # an object too: send_2d=b"no" was yes, queue=b"8" a TypeError
+                raise SinkConfigError(self.url, key, raw, "must be text or a number, not bytes (decode them first)")
             if not isinstance(raw, (str, int, float)):
                 return raw  # type: ignore[return-value]
         if raw is None:

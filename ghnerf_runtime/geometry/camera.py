@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ghnerf_runtime.errors import GeometryError, ShapeError
+from ghnerf_runtime.plain_values import whole_valued_or_none
 
 #: Distortion coefficient counts OpenCV's models take (and :class:`Camera` accepts).
 DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
@@ -48,14 +49,10 @@ def _as_dist(coefficients) -> np.ndarray:
 
 
 def _whole_positive(value) -> bool:
-    """Whether ``value`` is a positive whole number (``640``, ``640.0``, ``np.int64(640)``; not ``True`` or ``"640"``)."""
-    if isinstance(value, (bool, str, bytes)):
-        return False
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        return False
-    return math.isfinite(number) and number >= 1 and number == int(number)
+    """Whether ``value`` is a positive whole number (``640``, ``640.0``, ``np.int64(640)``; not ``True``,
+    ``np.True_`` or ``"640"``): 640.0 is taken, as a size read from a file or scaled in floating point."""
+    whole = whole_valued_or_none(value)
+    return whole is not None and whole >= 1
 
 
 def image_rotation(degrees: float) -> np.ndarray:

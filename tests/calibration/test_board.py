@@ -18,6 +18,8 @@ from calibration.errors import BoardError
     ({"squares_x": 2}, "squares_x"),
     ({"squares_y": 3.5}, "squares_y"),
     ({"squares_x": True}, "squares_x"),
+    ({"squares_y": np.True_}, "squares_y"),
+    ({"squares_x": np.float64(9)}, "squares_x"),
     ({"square_m": 0}, "square_m"),
     ({"square_m": float("nan")}, "square_m"),
     ({"marker_m": 0.09}, "marker_m"),  # not smaller than the 0.08 square
@@ -169,6 +171,14 @@ def test_a_numpy_length_is_a_length_and_a_huge_integer_is_refused_by_name():
     assert BoardSpec(square_m=np.float32(0.04), marker_m=np.float64(0.03)).square_m == pytest.approx(0.04)
     with pytest.raises(BoardError, match="square_m"):
         BoardSpec(square_m=10 ** 400, marker_m=0.03)
+
+
+def test_numpy_square_counts_are_counts_kept_as_python_ints():
+    # np.int64(9) was refused as "not a whole number of squares"
+    board = BoardSpec(squares_x=np.int64(9), squares_y=np.uint8(6))
+    assert (board.squares_x, board.squares_y) == (9, 6)
+    assert type(board.squares_x) is int and type(board.squares_y) is int
+    assert json.loads(json.dumps(board.to_dict()))["squares_x"] == 9
 
 
 def test_a_fraction_in_millimetres_is_refused_by_name_not_a_format_error():

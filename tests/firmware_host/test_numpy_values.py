@@ -41,6 +41,8 @@ def _wire_joints(frame: JointFrame, **kw) -> list:
     ("serial:///dev/null", "baud", np.array(9600), 9600),  # a 0-d array: the value it holds
     ("memory://", "max_fps", np.array(30.0, np.float32), 30.0),
     ("memory://", "send_2d", np.array(True), True),
+    ("serial:///dev/null", "baud", np.str_("9600"), 9600),  # NumPy text is read as text is
+    ("memory://", "send_2d", np.array("yes"), True),
 ])
 def test_a_numpy_keyword_is_taken_as_the_python_value_it_holds(url, key, value, plain) -> None:
     kw = {key: value, "cameras": ("left", "right")} if key == "send_2d" else {key: value}
@@ -63,6 +65,12 @@ def test_a_numpy_keyword_is_taken_as_the_python_value_it_holds(url, key, value, 
     ("serial:///dev/null", "baud", np.complex128(9600), "must be a real number, not complex"),
     ("serial:///dev/null", "baud", 9600 + 0j, "must be a real number, not complex"),
     ("memory://", "fps", np.array(30 + 0j), "must be a real number, not complex"),
+    # bytes, Python's or NumPy's, were taken as objects too: queue=b"8" failed later with a bare TypeError,
+    # max_bytes=np.bytes_(b"5") failed every write, send_2d=b"no" was read as yes (a non-empty object)
+    ("memory://", "queue", b"8", "not bytes"),
+    ("memory://", "max_bytes", np.bytes_(b"5"), "not bytes"),
+    ("memory://", "send_2d", np.array(b"no"), "not bytes"),
+    ("serial:///dev/null", "baud", bytearray(b"9600"), "not bytes"),
 ])
 def test_a_numpy_keyword_is_checked_as_a_python_one(url, key, value, why) -> None:
     # such values were taken as objects and skipped every check: baud=np.int64(-5) reached the serial port

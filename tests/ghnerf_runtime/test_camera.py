@@ -132,6 +132,7 @@ def test_cropped_and_resized_are_consistent():
         (dict(width=640.7), "image size"),  # was cut to 640
         (dict(height=float("nan")), "image size"),  # was a bare ValueError of int()
         (dict(width="640"), "image size"),
+        (dict(width=np.True_), "image size"),  # was a width of 1 (np.True_ is no bool to isinstance)
         (dict(name=""), "name"),
     ],
 )

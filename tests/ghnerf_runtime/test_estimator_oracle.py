@@ -8,6 +8,7 @@ tracking -- without torch or a trained model.
 from __future__ import annotations
 
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -272,6 +273,40 @@ def test_novel_view_overlap_renders_in_the_worker_and_changes_no_joint(clip):
         assert nv is not None and nv.rays > 0 and (nv.image > 0).any()
         assert set(NOVEL_STAGES) <= set(r.timing_ms)
     assert not _novel_workers() - earlier  # closed
+
+
+def test_close_stops_the_novel_view_worker_before_it_returns(clip, monkeypatch):
+    """``close()`` shuts the worker down and joins its thread. The test keeps the estimator and its executor
+    referenced, so the garbage collector cannot end the thread in ``close()``'s place: the overlap test above
+    passed with the shutdown taken out of ``close()``, the executor it dropped ending its thread soon after."""
+    import ghnerf_runtime.estimator as estimator_module
+
+    made: list[ThreadPoolExecutor] = []
+
+    class KeptExecutor(ThreadPoolExecutor):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            made.append(self)
+
+    monkeypatch.setattr(estimator_module, "ThreadPoolExecutor", KeptExecutor)
+    rig, frames, truth, visible, *_ = clip
+    oracle = ThreadRecorder()
+    est = Estimator(oracle, rig, EstimatorConfig(novel_view=NovelViewConfig(enabled=True, overlap=True),
+                                                 tracking=COLD))
+    earlier = _novel_workers()
+    try:
+        for pair, j3, vis in zip(frames[:2], truth[:2], visible[:2]):  # the tracked second pair uses the worker
+            oracle.set_truth(j3, vis)
+            est.estimate(pair, novel_view=NovelViewRequest())
+        started = _novel_workers() - earlier
+        assert len(made) == 1 and len(started) == 1
+        est.close()
+        assert not [t.name for t in started if t.is_alive()]  # joined, not left to end later
+        with pytest.raises(RuntimeError, match="after shutdown"):
+            made[0].submit(int)
+    finally:
+        for executor in made:  # a failed check leaves no thread behind for later tests
+            executor.shutdown(wait=True)
 
 
 def test_a_failing_novel_view_in_the_worker_is_raised_and_the_estimator_goes_on(clip):

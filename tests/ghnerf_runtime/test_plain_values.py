@@ -7,8 +7,8 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from ghnerf_runtime.plain_values import is_finite_number, is_real_number, is_true_false, plain_scalar, \
-    whole_number_or_none
+from ghnerf_runtime.plain_values import is_finite_number, is_real_number, is_true_false, numpy_for_json, \
+    plain_scalar, whole_number_or_none, whole_valued_or_none
 
 
 @pytest.mark.parametrize("value, plain", [(np.int64(7), 7), (np.float32(2.5), 2.5), (np.True_, True),
@@ -73,3 +73,28 @@ def test_non_finite_numbers_and_what_is_no_real_number_are_not_finite(value):
 def test_a_zero_d_array_comes_back_as_the_python_value_it_holds(value, plain):
     out = plain_scalar(value)
     assert out == plain and type(out) is type(plain)
+
+
+@pytest.mark.parametrize("value, whole", [(640, 640), (640.0, 640), (np.int64(-3), -3), (np.float32(8), 8),
+                                          (10 ** 400, 10 ** 400), (Fraction(4, 2), 2)])
+def test_numbers_without_a_fraction_come_back_as_python_ints(value, whole):
+    out = whole_valued_or_none(value)
+    assert out == whole and type(out) is int
+
+
+@pytest.mark.parametrize("value", [True, np.True_, 640.5, math.nan, math.inf, "640", b"640", np.str_("640"), None,
+                                   1j])
+def test_true_false_fractions_non_finite_numbers_and_text_are_not_whole_valued(value):
+    assert whole_valued_or_none(value) is None
+
+
+@pytest.mark.parametrize("value, plain", [(np.float32(2.5), 2.5), (np.int64(7), 7), (np.bool_(True), True),
+                                          (np.array(3), 3), (np.arange(3), [0, 1, 2])])
+def test_numpy_values_are_written_to_json_as_python_values(value, plain):
+    out = numpy_for_json(value)
+    assert out == plain and type(out) is type(plain)
+
+
+def test_what_is_not_numpy_is_left_to_json_to_refuse():
+    with pytest.raises(TypeError, match="not JSON serialisable: object"):
+        numpy_for_json(object())

@@ -55,6 +55,7 @@ from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from ghnerf_runtime.plain_values import numpy_for_json
 from training.data.errors import DatasetError
 from training.data.sample import FIELDS, Sample, arrays_to_sample, sample_to_arrays
 from training.run_lock import is_recorded_process, process_identity
@@ -297,7 +298,7 @@ def write_shard(folder: str | Path, samples: Sequence[Sample], first_index: int)
         meta = {"first_index": int(first_index), "count": len(samples), "samples": [s.metadata for s in samples],
                 CHECKSUMS: checksums}
         with open(tmp / SHARD_META, "w") as fh:
-            fh.write(json.dumps(meta, default=_json_default))
+            fh.write(json.dumps(meta, default=numpy_for_json))
             fh.flush()
             os.fsync(fh.fileno())
         _fsync_dir(tmp)
@@ -352,14 +353,6 @@ def repair_hint(manifest: Mapping[str, Any], root: Path, split: str, folder: Pat
         return (f"convert split {split!r} again (`python -m training.data.convert_zju SUBJECT --out {root} --split "
                 f"{split} ...`): it rewrites the split")
     return f"write split {split!r} again"
-
-
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def shard_plan(count: int, shard_size: int) -> list[tuple[int, int, int]]:
@@ -608,7 +601,7 @@ def record_missing_checksums(shard: ShardInfo) -> bool:
     sums = {name: _file_checksums(shard, name) for name in FIELDS}
     meta[CHECKSUMS] = sums
     try:
-        _replace_text(meta_path, json.dumps(meta, default=_json_default))
+        _replace_text(meta_path, json.dumps(meta, default=numpy_for_json))
     except OSError as e:
         raise _write_error(meta_path, "this shard's metadata", e) from e
     return True
