@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from calibration.errors import BoardError
-from ghnerf_runtime.plain_values import is_finite_number, whole_number_or_none
+from ghnerf_runtime.plain_values import is_finite_number, is_true_false, whole_number_or_none
 
 __all__ = ["BoardSpec", "load_board", "png_with_dpi", "DICTIONARIES", "MIN_CORNERS", "REQUIRED_KEYS"]
 
@@ -90,8 +90,9 @@ class BoardSpec:
         if self.dictionary not in DICTIONARIES:
             raise BoardError(f"must be one of OpenCV's ArUco dictionaries ({', '.join(DICTIONARIES[:4])}, ...), "
                              f"got {self.dictionary!r}", key="dictionary")
-        if not isinstance(self.legacy_pattern, bool):
+        if not is_true_false(self.legacy_pattern):  # np.True_ counts (a comparison's result); 1 does not
             raise BoardError(f"must be true or false, got {self.legacy_pattern!r}", key="legacy_pattern")
+        object.__setattr__(self, "legacy_pattern", bool(self.legacy_pattern))  # to_dict's JSON
         markers = (self.squares_x * self.squares_y) // 2
         available = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary)).bytesList.shape[0]
         if markers > available:

@@ -48,11 +48,18 @@ def _as_dist(coefficients) -> np.ndarray:
     return full
 
 
-def _whole_positive(value) -> bool:
-    """Whether ``value`` is a positive whole number (``640``, ``640.0``, ``np.int64(640)``; not ``True``,
-    ``np.True_`` or ``"640"``): 640.0 is taken, as a size read from a file or scaled in floating point."""
+#: Largest width or height a :class:`Camera` takes: OpenCV's image sizes are C ints. A model's camera may be larger
+#: than a rig file holds (``rig_file.MAX_CAMERA_SIDE``: an imported calibration is refused when saved, by name); this
+#: bound keeps absurd sizes (10**400, which ``int`` takes) out of the float arithmetic.
+MAX_CAMERA_SIDE = 2**31 - 1
+
+
+def _image_side(value) -> bool:
+    """Whether ``value`` is a whole number of pixels in [1, :data:`MAX_CAMERA_SIDE`] (``640``, ``640.0``,
+    ``np.int64(640)``; not ``True``, ``np.True_``, ``"640"`` or ``10**400``): 640.0 is taken, as a size read from a
+    file or scaled in floating point."""
     whole = whole_valued_or_none(value)
-    return whole is not None and whole >= 1
+    return whole is not None and 1 <= whole <= MAX_CAMERA_SIDE
 
 
 def image_rotation(degrees: float) -> np.ndarray:
@@ -129,8 +136,9 @@ class Camera:
         where = f"camera {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
             raise GeometryError(f"camera name must be a non-empty string, got {self.name!r}")
-        if not all(_whole_positive(v) for v in (self.width, self.height)):  # int() cut 640.7 to 640, failed on NaN
-            raise GeometryError(f"{where}: image size must be positive whole pixels, got {self.width!r}x{self.height!r}")
+        if not all(_image_side(v) for v in (self.width, self.height)):  # int() cut 640.7 to 640, failed on NaN
+            raise GeometryError(f"{where}: image size must be whole pixels in [1, {MAX_CAMERA_SIDE}], "
+                                f"got {self.width!r}x{self.height!r}")
         K = np.asarray(self.K, dtype=np.float64)
         R = np.asarray(self.R, dtype=np.float64)
         t = np.asarray(self.t, dtype=np.float64).reshape(-1)

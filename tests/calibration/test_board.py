@@ -181,6 +181,13 @@ def test_numpy_square_counts_are_counts_kept_as_python_ints():
     assert json.loads(json.dumps(board.to_dict()))["squares_x"] == 9
 
 
+def test_a_numpy_true_is_a_legacy_pattern_flag_kept_as_a_python_bool():
+    # np.True_ (a comparison's result) was refused as "must be true or false"
+    board = BoardSpec(legacy_pattern=np.True_)
+    assert board.legacy_pattern is True
+    assert json.loads(json.dumps(board.to_dict()))["legacy_pattern"] is True
+
+
 def test_a_fraction_in_millimetres_is_refused_by_name_not_a_format_error():
     # any real number is a length since plain_values.is_finite_number; the millimetres hint formatted the value
     # itself with :g, which a Fraction refuses (Python 3.11): a bare TypeError instead of the BoardError
