@@ -2,10 +2,14 @@
 with ``--baseline``, by another tree's, turn about), beside reading every image's header and decoding every image.
 
     .venv/bin/python benchmarks/time_replay_open.py [--frames 3000] [--size 320x240] [--rounds 5]
-        [--take /tmp/ghnerf-replay-open-take] [--baseline /path/to/another/checkout]
+        [--format png|exif-jpg] [--take /tmp/ghnerf-replay-open-take[-exif-jpg]]
+        [--baseline /path/to/another/checkout]
 
-Writes (once, kept for the next run) a closed take of ``--frames`` frames a camera for two cameras, PNG (as
-``record+`` writes it, compression level 1) of a smooth pattern with noise, then prints the median over
+Writes (once, kept for the next run) a closed take of ``--frames`` frames a camera for two cameras of a smooth
+pattern with noise: PNG (``--format png``, as ``record+`` writes it, compression level 1), or JPEG as a phone or
+camera writes it (``--format exif-jpg``: quality 95, an APP1 EXIF segment holding an orientation tag of 1 and a
+160x120 thumbnail, then a comment, before the frame header; orientation 1 so that code that turns images by it
+opens the take too). Then prints the median over
 ``--rounds`` of: ``ReplayRigSource.open()`` of the take (each in a fresh process, so no run warms the next one's
 Python caches; only the open is timed), for this tree and, with ``--baseline``, the other tree's code, the opens
 taken in turn; every image's ``header_size`` (this tree); and, once, decoding every image (what checking every
@@ -17,6 +21,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import struct
 import subprocess
 import sys
 import time
@@ -28,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from drivers.backends.recording_format import (  # noqa: E402
-    FRAMES, FrameRow, Manifest, encode_image, header_size, load_image, write_manifest,
+    FRAMES, IMAGE_FORMATS, FrameRow, Manifest, encode_image, header_size, load_image, write_manifest,
 )
 from drivers.sim.placement import RigPlacement  # noqa: E402
 
@@ -44,22 +49,49 @@ source.close()
 """
 
 
-def write_take(take: Path, frames: int, width: int, height: int) -> None:
-    """A closed two-camera take of ``frames`` PNG frames a camera (no truth)."""
+#: The take's image format by ``--format``: the manifest's image_format.
+TAKE_FORMATS = {"png": "png", "exif-jpg": "jpg"}
+
+
+def jpeg_segment(marker: int, payload: bytes) -> bytes:
+    return bytes([0xFF, marker]) + struct.pack(">H", len(payload) + 2) + payload
+
+
+def phone_exif(thumbnail: bytes) -> bytes:
+    """An APP1 EXIF payload as a phone writes one, cut down: a little-endian TIFF block whose first directory
+    holds the orientation (1: as stored), its second the thumbnail's offset and length, then the thumbnail."""
+    first = struct.pack("<H", 1) + struct.pack("<HHIHH", 0x0112, 3, 1, 1, 0) + struct.pack("<I", 26)
+    second = struct.pack("<H", 2) + struct.pack("<HHII", 0x0201, 4, 1, 56) + \
+        struct.pack("<HHII", 0x0202, 4, 1, len(thumbnail)) + struct.pack("<I", 0)
+    return b"Exif\x00\x00" + b"II*\x00" + struct.pack("<I", 8) + first + second + thumbnail
+
+
+def encoded(image: np.ndarray, take_format: str, thumbnail: bytes) -> bytes:
+    if take_format == "png":
+        return encode_image(image, "png", 95)
+    data = encode_image(image, "jpg", 95)
+    return data[:2] + jpeg_segment(0xE1, phone_exif(thumbnail)) + jpeg_segment(0xFE, b"a camera app") + data[2:]
+
+
+def write_take(take: Path, frames: int, width: int, height: int, take_format: str = "png") -> None:
+    """A closed two-camera take of ``frames`` frames a camera in ``take_format`` (TAKE_FORMATS; no truth)."""
     rig = RigPlacement(width=width, height=height).build()
     rng = np.random.default_rng(0)
     y, x = np.mgrid[0:height, 0:width]
+    thumbnail = encode_image(np.full((120, 160, 3), 128, np.uint8), "jpg", 80)
+    suffix = IMAGE_FORMATS[TAKE_FORMATS[take_format]]
     rows = []
     for n in range(frames):
         for k, cam in enumerate(rig.pair):
-            rel = f"images/{cam.name}/{n:08d}.png"
+            rel = f"images/{cam.name}/{n:08d}{suffix}"
             (take / rel).parent.mkdir(parents=True, exist_ok=True)
             base = (x + y + 3 * n) % 256
             image = np.clip(base[..., None] + rng.normal(0, 8, (height, width, 3)), 0, 255).astype(np.uint8)
-            (take / rel).write_bytes(encode_image(image, "png", 95))
+            (take / rel).write_bytes(encoded(image, take_format, thumbnail))
             rows.append(FrameRow(cam.name, n, n * 33_333_333 + k * 1_000_000, rel))
     (take / FRAMES).write_text("".join(row.to_json() + "\n" for row in rows))
-    write_manifest(take, Manifest(rig, "png", "benchmarks/time_replay_open.py", "", complete=True))
+    write_manifest(take, Manifest(rig, TAKE_FORMATS[take_format], "benchmarks/time_replay_open.py", "",
+                                  complete=True))
 
 
 def timed_open(code: Path, take: Path) -> float:
@@ -81,16 +113,21 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=3000, help="frames a camera (default 3000)")
     parser.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
     parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--take", type=Path, default=Path("/tmp/ghnerf-replay-open-take"))
+    parser.add_argument("--format", choices=sorted(TAKE_FORMATS), default="png",
+                        help="png as record+ writes it (default), or exif-jpg as a phone writes it")
+    parser.add_argument("--take", type=Path,
+                        help="where the take is kept (default /tmp/ghnerf-replay-open-take, -exif-jpg appended "
+                             "for that format)")
     parser.add_argument("--baseline", type=Path, help="another checkout whose open is timed in turn with this one")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
-    take = args.take.resolve()
+    default = "/tmp/ghnerf-replay-open-take" + ("" if args.format == "png" else f"-{args.format}")
+    take = (args.take or Path(default)).resolve()
     if not (take / FRAMES).is_file():
         print(f"writing {2 * args.frames} images of {width}x{height} to {take} ...", flush=True)
-        write_take(take, args.frames, width, height)
-    images = sorted(take.glob("images/*/*.png"))
-    print(f"take {take}: {len(images)} images of {width}x{height}, {args.rounds} rounds")
+        write_take(take, args.frames, width, height, args.format)
+    images = sorted(take.glob(f"images/*/*{IMAGE_FORMATS[TAKE_FORMATS[args.format]]}"))
+    print(f"take {take} ({args.format}): {len(images)} images of {width}x{height}, {args.rounds} rounds")
     trees = {"this tree": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     opens: dict[str, list[float]] = {name: [] for name in trees}
     headers = []

@@ -298,8 +298,18 @@ def encode_image(image: np.ndarray, image_format: str, jpeg_quality: int) -> byt
     return buf.tobytes()
 
 
+#: How a recorded image is decoded: 8-bit BGR, its pixels as stored. The EXIF orientation (a phone's or camera's
+#: display hint, set per shot from its gravity sensor) is ignored on purpose: the rig's calibration describes the
+#: sensor's pixel grid, the frames the live backends and the recorder deliver. Turned by its tag, a take from a
+#: phone held upright decoded every frame turned against its calibration (refused at open for its size), a tag
+#: of 3 (half a turn) kept the size and played upside down against the intrinsics (wrong joints, no error), and a
+#: phone turned mid-take changed size mid-take. It also makes the header's size the decoded size (header_size).
+_DECODE_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION
+
+
 def load_image(path: Path) -> np.ndarray:
-    """Decode a recorded image as ``(H, W, 3)`` uint8 BGR.
+    """Decode a recorded image as ``(H, W, 3)`` uint8 BGR, its pixels as stored (EXIF orientation ignored:
+    :data:`_DECODE_FLAGS`).
 
     Raises:
         RigOperationError: naming the file when it is missing or cannot be decoded.
@@ -308,28 +318,40 @@ def load_image(path: Path) -> np.ndarray:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as e:
         raise RigOperationError(f"recording image {path} cannot be read: {e.strerror or e}") from e
-    image = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+    try:
+        image = cv2.imdecode(data, _DECODE_FLAGS) if data.size else None
+    except cv2.error:  # a header beyond OpenCV's size limits (CV_IO_MAX_IMAGE_*) raises rather than fails
+        image = None
     if image is None:
         raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
     return image
 
 
-#: The first bytes of the two formats :func:`header_size` reads (the two the recorder writes, IMAGE_FORMATS).
+#: The first bytes of the formats :func:`header_size` reads: the two the recorder writes (IMAGE_FORMATS), and BMP.
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _JPEG_START = b"\xff\xd8"
-#: PNG chunks before the image data after which the decoded size may not be IHDR's: EXIF (OpenCV turns the image
-#: by its orientation) and APNG's animation control (the frame decoded need not be IHDR's size).
-_PNG_SIZE_CHANGERS = (b"eXIf", b"acTL")
+_BMP_START = b"BM"
+#: PNG chunks before the image data after which the decoded size may not be IHDR's: APNG's animation control (the
+#: frame decoded need not be IHDR's size). EXIF (eXIf) does not: load_image ignores its orientation.
+_PNG_SIZE_CHANGERS = (b"acTL",)
 #: JPEG start-of-frame markers (SOF0-SOF15 but DHT, JPG and DAC, which share the range), where the size is.
 _JPEG_FRAMES = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
-_JPEG_APP1, _JPEG_SOS, _JPEG_TEM = 0xE1, 0xDA, 0x01
+_JPEG_SOS, _JPEG_TEM = 0xDA, 0x01
 _JPEG_RST = range(0xD0, 0xD8)
+#: BMP info headers OpenCV reads the size from (BITMAPINFOHEADER, 40 bytes, and its longer versions up to V5's
+#: 124; the 12-byte OS/2 core header is decoded instead), and the pixel layouts it decodes: (bits, compression).
+_BMP_INFO_SIZES = range(40, 125)
+_BMP_LAYOUTS = frozenset({(1, 0), (4, 0), (8, 0), (24, 0), (32, 0), (16, 0), (16, 3), (32, 3), (4, 2), (8, 1)})
+#: OpenCV's default limits on a decoded image (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS): a header beyond them is
+#: decoded instead (refused there, or allowed by OPENCV_IO_MAX_IMAGE_* set higher), not taken as a size.
+_OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
 
 
 def header_size(path: Path) -> tuple[int, int] | None:
-    """A PNG or JPEG image's ``(width, height)`` read from its header, without decoding it; ``None`` where the
-    header cannot say which size :func:`load_image` would decode: another format, a header cut short or malformed
-    (a bad IHDR checksum, a segment running past the end), or EXIF (OpenCV turns the image by its orientation).
+    """A PNG, JPEG or BMP image's ``(width, height)`` read from its header, without decoding it; ``None`` where
+    the header cannot say which size :func:`load_image` would decode: another format, a header cut short or
+    malformed (a bad IHDR checksum, a segment running past the end), an animated PNG, a BMP layout OpenCV does
+    not read. EXIF does not matter: :func:`load_image` ignores its orientation, so the stored size is the decoded.
 
     Strict on purpose: ``None`` is never a size, and the caller decodes the file instead (:func:`image_size`).
     """
@@ -338,9 +360,12 @@ def header_size(path: Path) -> tuple[int, int] | None:
             start = f.read(len(_PNG_SIGNATURE))
             if start == _PNG_SIGNATURE:
                 return _png_size(f)
-            if start[:2] == _JPEG_START:
+            if start.startswith(_JPEG_START):
                 f.seek(len(_JPEG_START))
                 return _jpeg_size(f)
+            if start.startswith(_BMP_START):
+                f.seek(0)
+                return _bmp_size(f)
     except OSError:
         pass  # unreadable: its read names it
     return None
@@ -353,7 +378,7 @@ def _png_size(f: BinaryIO) -> tuple[int, int] | None:
             struct.unpack(">I", ihdr[21:])[0] != zlib.crc32(ihdr[4:21]):
         return None
     width, height = struct.unpack(">II", ihdr[8:16])
-    if not (0 < width < 2**31 and 0 < height < 2**31):  # the PNG limits; libpng refuses 0 and beyond
+    if not _decodable(width, height):
         return None
     while True:  # each pass moves on by at least a chunk header: it ends at IDAT or the end of the file
         head = f.read(8)
@@ -368,18 +393,13 @@ def _png_size(f: BinaryIO) -> tuple[int, int] | None:
 
 
 def _jpeg_size(f: BinaryIO) -> tuple[int, int] | None:
-    """The frame header's size, once the markers up to the first scan (SOS) show one frame header and no EXIF."""
+    """The frame header's size, once the marker segments up to the first scan (SOS) show exactly one frame header.
+    Any others before it (APPn as EXIF, JFIF or XMP, COM, DQT, DHT, DRI) are skipped by their lengths."""
     size = None
     while True:
-        head = f.read(2)
-        if len(head) < 2 or head[0] != 0xFF:
+        marker = _jpeg_marker(f)
+        if marker is None:
             return None
-        marker = head[1]
-        while marker == 0xFF:  # fill bytes before a marker
-            byte = f.read(1)
-            if not byte:
-                return None
-            marker = byte[0]
         if marker == _JPEG_SOS:
             return size
         if marker == _JPEG_TEM or marker in _JPEG_RST:
@@ -390,18 +410,48 @@ def _jpeg_size(f: BinaryIO) -> tuple[int, int] | None:
         if len(raw) < 2 or struct.unpack(">H", raw)[0] < 2:
             return None
         length = struct.unpack(">H", raw)[0] - 2
-        if marker == _JPEG_APP1:
-            return None  # EXIF (or XMP): the decoded image may be turned; decoded instead
         if marker in _JPEG_FRAMES:
             body = f.read(length)
             if size is not None or length < 5 or len(body) < length:
                 return None  # two frame headers, or one cut short
             height, width = struct.unpack(">HH", body[1:5])
-            if not (width and height):
+            if not _decodable(width, height):
                 return None  # height 0: given after the first scan (DNL), which OpenCV's decoder refuses anyway
             size = (width, height)
         else:
-            f.seek(length, 1)
+            f.seek(length, 1)  # past the end of a file cut short: the next read finds nothing
+
+
+def _jpeg_marker(f: BinaryIO) -> int | None:
+    """The next marker's code, past the 0xFF fill bytes before it; ``None`` at the end or where no marker is."""
+    head = f.read(2)
+    if len(head) < 2 or head[0] != 0xFF:
+        return None
+    marker = head[1]
+    while marker == 0xFF:
+        byte = f.read(1)
+        if not byte:
+            return None
+        marker = byte[0]
+    return marker
+
+
+def _bmp_size(f: BinaryIO) -> tuple[int, int] | None:
+    """The info header's width and height (negative for rows stored top-down, the height is its magnitude)
+    where OpenCV decodes its layout; the file header is 14 bytes, the info header follows."""
+    head = f.read(14 + 20)  # file header; info header's size, width, height, planes, bits, compression
+    if len(head) < 34:
+        return None
+    info_size, width, height, _planes, bits, compression = struct.unpack("<IiiHHI", head[14:34])
+    if info_size not in _BMP_INFO_SIZES or (bits, compression) not in _BMP_LAYOUTS:
+        return None
+    height = abs(height)  # negative: rows stored top-down
+    return (width, height) if _decodable(width, height) else None
+
+
+def _decodable(width: int, height: int) -> bool:
+    """Whether OpenCV decodes an image of this size at its default limits (beyond them it raises)."""
+    return 0 < width <= _OPENCV_MAX_SIDE and 0 < height <= _OPENCV_MAX_SIDE and width * height <= _OPENCV_MAX_PIXELS
 
 
 def image_size(path: Path) -> tuple[int, int] | None:

@@ -33,7 +33,7 @@ whose files are missing, empty or cut short
 validation: docs/recording-format.md.
 
 Image sizes: a take with any image of another size than its rig camera's (every image measured at
-:meth:`~ReplayRigSource.open`, from its PNG or JPEG header: :func:`~drivers.backends.recording_format.image_size`)
+:meth:`~ReplayRigSource.open`, from its PNG, JPEG or BMP header: :func:`~drivers.backends.recording_format.image_size`)
 is refused at open with :class:`~drivers.errors.FrameSizeError`, as the other backends refuse cameras delivering
 another size than their rig file's (:meth:`ReplayRigSource.size_error`). An image that does not decode (a header
 cut short or corrupt) is no size: it is a corrupt frame, as is an image whose size changed after the open:
@@ -295,8 +295,9 @@ class ReplayRigSource(RigSource):
         """The error of a take whose images are not all its rig's size, else ``None``: the first camera (in the
         rig's order) with an image of another size than its rig camera's.
 
-        Every image is measured at :meth:`open`, from its header (:func:`image_size`: a PNG's or JPEG's size
-        read without decoding it; an image in another format, or whose header cannot be read, decoded instead).
+        Every image is measured at :meth:`open`, from its header (:func:`image_size`: a PNG's, JPEG's (EXIF or
+        not: its orientation is ignored, :func:`load_image`) or BMP's size read without decoding it; an image in
+        another format, or whose header cannot be read, decoded instead).
         An image that does not decode is no size: left to its read, a corrupt frame. Images of another size are
         a take recorded at another size than the rig it carries, its images (all or some) resized by a tool
         after, or its manifest's rig replaced: refused, as each such frame would fail its read (a take resized

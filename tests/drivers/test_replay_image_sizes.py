@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from drivers import EndOfStream, FrameSizeError, RigOperationError, create_rig_source, open_rig
+from drivers.backends import recording_format
 from drivers.backends.recording_format import (
     FRAMES,
     IMAGE_FORMATS,
@@ -18,6 +19,7 @@ from drivers.backends.recording_format import (
     encode_image,
     header_size,
     image_size,
+    load_image,
     write_manifest,
 )
 from drivers.sim.placement import RigPlacement
@@ -150,12 +152,16 @@ def _exif_turned(orientation: int) -> bytes:
     return b"MM\x00*\x00\x00\x00\x08" + struct.pack(">HHHIHH", 1, 0x0112, 3, 1, orientation, 0) + b"\x00" * 4
 
 
-def with_exif(data: bytes, fmt: str) -> bytes:
-    """``data`` (a PNG or JPEG) with EXIF saying the image is to be turned a quarter (orientation 6)."""
+def jpeg_segment(marker: int, payload: bytes) -> bytes:
+    return bytes([0xFF, marker]) + struct.pack(">H", len(payload) + 2) + payload
+
+
+def with_exif(data: bytes, fmt: str, orientation: int = 6) -> bytes:
+    """``data`` (a PNG or JPEG) with EXIF saying the image is to be turned (6: a quarter, as a phone held upright
+    writes it; 3: half a turn), placed as a phone writes it (a JPEG's APP1 first, before JFIF's APP0 if any)."""
     if fmt == "png":
-        return data[:33] + _png_chunk(b"eXIf", _exif_turned(6)) + data[33:]  # after the signature and IHDR
-    app1 = b"Exif\x00\x00" + _exif_turned(6)
-    return data[:2] + b"\xff\xe1" + struct.pack(">H", len(app1) + 2) + app1 + data[2:]
+        return data[:33] + _png_chunk(b"eXIf", _exif_turned(orientation)) + data[33:]  # after the signature, IHDR
+    return data[:2] + jpeg_segment(0xE1, b"Exif\x00\x00" + _exif_turned(orientation)) + data[2:]
 
 
 @pytest.mark.parametrize("image_format", sorted(IMAGE_FORMATS))
@@ -175,34 +181,174 @@ def test_a_progressive_jpeg_and_a_16_bit_png_are_read_from_their_headers(tmp_pat
     assert header_size(progressive) == header_size(deep) == (40, 30)
 
 
+@pytest.fixture
+def no_decode(monkeypatch):
+    """``image_size`` may not decode: its size must come from the header."""
+    def refused(path):
+        raise AssertionError(f"{path} was decoded to measure it")
+    monkeypatch.setattr(recording_format, "load_image", refused)
+
+
 @pytest.mark.parametrize("image_format", sorted(IMAGE_FORMATS))
-def test_an_image_with_exif_is_decoded_as_opencv_turns_it_by_its_orientation(tmp_path, image_format):
-    """OpenCV applies the EXIF orientation: a 40x30 image marked as turned decodes 30x40. The header's size would
-    be wrong, so such a file is decoded instead."""
+@pytest.mark.parametrize("orientation", [3, 6, 8])
+def test_an_image_with_exif_is_measured_from_its_header_and_decoded_as_stored(tmp_path, image_format, orientation):
+    """The EXIF orientation is ignored (load_image): a 40x30 image marked as turned decodes 40x30, its pixels as
+    stored, so its header gives its size. OpenCV turned it by its tag, and the file was decoded to measure it."""
+    image = np.zeros((30, 40, 3), np.uint8)
+    image[:10] = 255  # the top rows white: a half turn would put them at the bottom
     path = tmp_path / f"image{IMAGE_FORMATS[image_format]}"
-    path.write_bytes(with_exif(encode_image(np.zeros((30, 40, 3), np.uint8), image_format, 90), image_format))
-    assert header_size(path) is None
-    assert image_size(path) == (30, 40)
+    path.write_bytes(with_exif(encode_image(image, image_format, 90), image_format, orientation))
+    decoded = load_image(path)
+    assert decoded.shape == (30, 40, 3)
+    assert decoded[:5].min() > 200 and decoded[-5:].max() < 50
+    assert header_size(path) == (40, 30) == image_size(path)
+
+
+def test_a_jpeg_s_segments_before_its_frame_header_are_walked_past(tmp_path, no_decode):
+    """As other tools write them: JFIF's APP0, EXIF holding a thumbnail (a JPEG of another size, its own frame
+    header inside the APP1 segment), XMP, an ICC profile (APP2), comments, fill bytes before markers."""
+    thumbnail = encode_image(np.zeros((6, 8, 3), np.uint8), "jpg", 90)
+    exif = b"Exif\x00\x00" + _exif_turned(6) + thumbnail
+    data = encode_image(np.random.default_rng(3).integers(0, 256, (30, 40, 3), np.uint8), "jpg", 90)
+    segments = (jpeg_segment(0xE1, exif) + jpeg_segment(0xFE, b"a comment\xff\xd9")
+                + b"\xff\xff\xff" + jpeg_segment(0xE1, b"http://ns.adobe.com/xap/1.0/\x00<x/>")
+                + jpeg_segment(0xE2, b"ICC_PROFILE\x00" + bytes(200)) + jpeg_segment(0xFE, b""))
+    path = tmp_path / "phone.jpg"
+    path.write_bytes(data[:2] + segments + data[2:])
+    assert cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION).shape \
+        == (30, 40, 3)
+    assert header_size(path) == (40, 30) == image_size(path)
+
+
+def test_a_jpeg_cut_short_in_a_segment_before_its_frame_header_has_no_header_size(tmp_path):
+    data = encode_image(np.zeros((30, 40, 3), np.uint8), "jpg", 90)
+    whole = with_exif(data, "jpg")
+    path = tmp_path / "cut.jpg"
+    for end in (4, 6, 20, len(whole) - len(data) + 1):  # in APP1's length, its data; just past it
+        path.write_bytes(whole[:end])
+        assert header_size(path) is None and image_size(path) is None
+
+
+def bmp(image: np.ndarray, *, top_down: bool = False) -> bytes:
+    """``image`` as OpenCV writes a BMP (rows bottom-up, a positive height), or turned into one stored top-down
+    (a negative height, the rows in reading order), as some tools write them."""
+    ok, buf = cv2.imencode(".bmp", image)
+    assert ok
+    data = bytearray(buf.tobytes())
+    if top_down:
+        offset, height = struct.unpack_from("<I", data, 10)[0], struct.unpack_from("<i", data, 22)[0]
+        row = (len(data) - offset) // height
+        rows = [data[offset + i * row:offset + (i + 1) * row] for i in range(height)]
+        data[offset:] = b"".join(reversed(rows))
+        struct.pack_into("<i", data, 22, -height)
+    return bytes(data)
+
+
+@pytest.mark.parametrize("top_down", [False, True])
+@pytest.mark.parametrize(("width", "height", "channels"), [(1, 1, 3), (40, 30, 3), (41, 29, 1), (3000, 17, 4)])
+def test_a_bmp_is_measured_from_its_info_header(tmp_path, no_decode, width, height, channels, top_down):
+    image = np.random.default_rng(width).integers(0, 256, (height, width, channels), np.uint8)
+    path = tmp_path / "image.bmp"
+    path.write_bytes(bmp(image, top_down=top_down))
+    decoded = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert np.array_equal(decoded.reshape(image.shape), image)  # rows in their order either way
+    assert header_size(path) == (width, height) == image_size(path)
+
+
+def test_a_bmp_cut_short_or_of_a_layout_opencv_does_not_read_has_no_header_size(tmp_path):
+    data = bmp(np.zeros((30, 40, 3), np.uint8))
+    path = tmp_path / "image.bmp"
+    for end in range(34):
+        path.write_bytes(data[:end])
+        assert header_size(path) is None
+    for offset, field, value in [(14, "<I", 12), (28, "<H", 2), (30, "<I", 4), (18, "<i", 0), (22, "<i", 0)]:
+        changed = bytearray(data)  # an OS/2 header, 2 bits a pixel, JPEG inside, no width, no height
+        struct.pack_into(field, changed, offset, value)
+        path.write_bytes(bytes(changed))
+        assert header_size(path) is None
+
+
+def beyond_opencv_s_limits(image_format: str) -> bytes:
+    """A 40x30 image whose header says it is 2**21 wide (OpenCV's limit is 2**20), its PNG IHDR's CRC redone."""
+    if image_format == "bmp":
+        data = bytearray(bmp(np.zeros((30, 40, 3), np.uint8)))
+        struct.pack_into("<i", data, 18, 1 << 21)
+        return bytes(data)
+    data = bytearray(encode_image(np.zeros((30, 40, 3), np.uint8), "png", 90))
+    struct.pack_into(">I", data, 16, 1 << 21)
+    struct.pack_into(">I", data, 29, zlib.crc32(data[12:29]))
+    return bytes(data)
+
+
+@pytest.mark.parametrize("image_format", ["bmp", "png"])
+def test_an_image_beyond_opencv_s_size_limits_is_no_size_and_a_corrupt_frame(tmp_path, image_format):
+    """OpenCV raises (not fails) on a header beyond its limits: a BMP's escaped the open as a cv2.error, a PNG's
+    was a size (a take refused for it) where the image does not decode."""
+    path = tmp_path / f"image.{image_format}"
+    path.write_bytes(beyond_opencv_s_limits(image_format))
+    assert header_size(path) is None and image_size(path) is None
+    with pytest.raises(RigOperationError, match=f"recording image {path} is corrupt"):
+        load_image(path)
 
 
 def test_another_format_is_decoded(tmp_path):
-    path = tmp_path / "image.bmp"
+    path = tmp_path / "image.tiff"
     assert cv2.imwrite(str(path), np.zeros((30, 40, 3), np.uint8))
     assert header_size(path) is None and image_size(path) == (40, 30)
 
 
-@pytest.mark.parametrize("image_format", sorted(IMAGE_FORMATS))
+def convert_take(take: Path, image_format: str) -> None:
+    """``take``'s JPEGs as another tool leaves them: with EXIF marking them as a quarter turn (a phone held
+    upright), or converted to BMPs (the journal naming those)."""
+    for path in take.glob("images/*/*.jpg"):
+        if image_format == "jpg+exif":
+            path.write_bytes(with_exif(path.read_bytes(), "jpg"))
+        else:
+            path.with_suffix(".bmp").write_bytes(bmp(cv2.imread(str(path))))
+            path.unlink()
+    if image_format == "bmp":
+        (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", ".bmp"))
+
+
+@pytest.mark.parametrize("image_format", ["jpg+exif", "bmp"])
+def test_a_take_another_tool_wrote_opens_without_decoding_and_plays_as_stored(tmp_path, monkeypatch, image_format):
+    """Measured from the headers at open (no decode), each frame delivered at the rig's size. Before, each image
+    was decoded at every open: an EXIF one turned by OpenCV (30x40), and the take refused for its size."""
+    take = write_take(tmp_path / "take", "jpg", frames=5)
+    convert_take(take, image_format)
+    decoded = []
+    monkeypatch.setattr(recording_format, "load_image", lambda path: decoded.append(path) or load_image(path))
+    with open_rig(f"replay://{take}?speed=free&policy=all") as source:
+        assert decoded == []
+        assert [frame.image.shape for frame in source.read(timeout_s=1.0).frames] == [(HEIGHT, WIDTH, 3)] * 2
+    assert play(take) == (5, [])
+
+
+def encoded_as(image: np.ndarray, image_format: str) -> bytes:
+    """``image`` in a format of the recorder's, one with EXIF before its frame header, or a BMP."""
+    if image_format == "bmp":
+        return bmp(image)
+    if image_format == "jpg+exif":
+        return with_exif(encode_image(image, "jpg", 90), "jpg")
+    return encode_image(image, image_format, 90)
+
+
+@pytest.mark.parametrize("image_format", [*sorted(IMAGE_FORMATS), "jpg+exif", "bmp"])
 def test_a_header_cut_anywhere_or_corrupt_never_raises_and_never_gives_a_size_opencv_would_not(tmp_path, image_format):
     """Every cut of the first 200 bytes, and each byte of them set to 0x00 or 0xFF: no exception, and any size
-    read is the size OpenCV decodes (where it decodes). A PNG's IHDR is checked against its CRC."""
-    data = encode_image(np.random.default_rng(2).integers(0, 256, (30, 40, 3), np.uint8), image_format, 90)
+    read is the size OpenCV decodes (where it decodes, as load_image does). A PNG's IHDR is checked against its
+    CRC."""
+    data = encoded_as(np.random.default_rng(2).integers(0, 256, (30, 40, 3), np.uint8), image_format)
     damaged = [data[:n] for n in range(200)]
     damaged += [data[:i] + bytes([value]) + data[i + 1:] for i in range(200) for value in (0x00, 0xFF)]
-    path = tmp_path / f"image{IMAGE_FORMATS[image_format]}"
+    path = tmp_path / "image"
     for content in damaged:
         path.write_bytes(content)
         size = header_size(path)
         if size is not None:
-            decoded = cv2.imdecode(np.frombuffer(content, np.uint8), cv2.IMREAD_COLOR) if content else None
-            assert decoded is None or size == (decoded.shape[1], decoded.shape[0])
+            try:
+                decoded = load_image(path)
+            except RigOperationError:
+                continue
+            assert size == (decoded.shape[1], decoded.shape[0])
     assert header_size(tmp_path / "missing.png") is None
