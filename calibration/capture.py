@@ -165,6 +165,13 @@ def list_images(folder: Path) -> dict[str, Path]:
     return images
 
 
+#: How a board image is read: grey at the file's own depth, as stored. OpenCV turns an image by its EXIF orientation
+#: for every flag but IMREAD_UNCHANGED, so a phone's still tagged "turn a quarter" was calibrated turned while
+#: earlier_size (IMREAD_UNCHANGED) and replay:// (drivers/backends/recording_format.py) take it as stored: the
+#: calibration is of the sensor's pixel grid, which the live cameras deliver.
+READ_GREY = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_IGNORE_ORIENTATION
+
+
 def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[str] | None = None) \
         -> tuple[dict[str, dict[str, BoardView]], dict[str, list[str]]]:
     """Detect the board in every image: (camera -> view name -> view, camera -> names without the board).
@@ -184,7 +191,7 @@ def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[s
         for name, path in images.items():
             # grey at the file's own depth: IMREAD_GRAYSCALE cut a 16-bit file to its top 8 bits, all but
             # black for a 10- or 12-bit camera's frame (the detector scales it: detect.grey8)
-            image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)
+            image = cv2.imread(str(path), READ_GREY)
             if image is None:
                 raise CaptureError(f"{path}: not a readable image")
             try:
@@ -212,7 +219,7 @@ def _name_board_mismatch(board: BoardSpec, paths: list[Path]) -> None:
     """
     step = max(1, len(paths) // MISMATCH_TRIES)
     for path in paths[::step][:MISMATCH_TRIES]:
-        image = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH)
+        image = cv2.imread(str(path), READ_GREY)
         error = None if image is None else board_mismatch(board, image)
         if error is not None:
             raise CaptureError(f"{path}: {error}") from error

@@ -174,7 +174,9 @@ def _read_image(path: str) -> np.ndarray:
         raise UsageError(f"{path}: no such file")
     if os.path.isdir(path):
         raise UsageError(f"{path}: a folder, not an image")
-    img = cv2.imread(path, cv2.IMREAD_COLOR)
+    # as stored, never turned by an EXIF orientation tag: the rig's calibration is of the sensor's pixel grid (so is
+    # ghcal's and replay://'s reading of the same files)
+    img = cv2.imread(path, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     if img is None:
         raise UsageError(f"{path}: cannot read the image (not a format OpenCV reads, or unreadable)")
     return img

@@ -14,6 +14,7 @@ from calibration.capture import detect_folder
 from calibration.detect import BoardDetector, fixes_a_pose, grey8
 from calibration.errors import BoardError, CaptureError
 from calibration.render import board_pose_facing, example_rig, render_board
+from tests.exif_images import jpeg_turned
 
 BOARD = BoardSpec(squares_x=7, squares_y=6, square_m=0.12, marker_m=0.09)  # an even number of rows
 
@@ -55,6 +56,22 @@ def test_a_12_bit_frame_saved_in_a_16_bit_png_is_found_as_precisely(camera, tmp_
     view = views["left"]["000"]
     assert len(view) == BOARD.corner_count and view.image_size == (camera.width, camera.height)
     assert _rms(view, truth) < _rms(reference, truth) + 0.02
+
+
+def test_a_still_tagged_to_be_turned_is_calibrated_as_stored(camera, tmp_path):
+    # OpenCV turned it for IMREAD_ANYDEPTH: the views were 400x640 where earlier_size and replay:// read 640x400
+    image, truth = _render(BOARD, camera)
+    ok, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 98])
+    assert ok
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        (tmp_path / cam / "000.jpg").write_bytes(jpeg_turned(jpeg.tobytes(), 6))
+    assert cv2.imread(str(tmp_path / "left" / "000.jpg"), cv2.IMREAD_ANYDEPTH).shape == (camera.width, camera.height)
+    views, missed = detect_folder(BOARD, tmp_path)
+    assert missed == {"left": [], "right": []}
+    view = views["left"]["000"]
+    assert view.image_size == (camera.width, camera.height)
+    assert _rms(view, truth) < 0.5
 
 
 @pytest.mark.parametrize("convert", [

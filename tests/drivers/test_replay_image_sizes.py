@@ -23,6 +23,7 @@ from drivers.backends.recording_format import (
     write_manifest,
 )
 from drivers.sim.placement import RigPlacement
+from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned
 
 WIDTH, HEIGHT = 40, 30
 FRAMES_A_CAMERA = 50
@@ -147,21 +148,12 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
-def _exif_turned(orientation: int) -> bytes:
-    """A big-endian TIFF block holding one tag, the EXIF orientation."""
-    return b"MM\x00*\x00\x00\x00\x08" + struct.pack(">HHHIHH", 1, 0x0112, 3, 1, orientation, 0) + b"\x00" * 4
-
-
-def jpeg_segment(marker: int, payload: bytes) -> bytes:
-    return bytes([0xFF, marker]) + struct.pack(">H", len(payload) + 2) + payload
-
-
 def with_exif(data: bytes, fmt: str, orientation: int = 6) -> bytes:
     """``data`` (a PNG or JPEG) with EXIF saying the image is to be turned (6: a quarter, as a phone held upright
     writes it; 3: half a turn), placed as a phone writes it (a JPEG's APP1 first, before JFIF's APP0 if any)."""
     if fmt == "png":
-        return data[:33] + _png_chunk(b"eXIf", _exif_turned(orientation)) + data[33:]  # after the signature, IHDR
-    return data[:2] + jpeg_segment(0xE1, b"Exif\x00\x00" + _exif_turned(orientation)) + data[2:]
+        return data[:33] + _png_chunk(b"eXIf", exif_orientation(orientation)) + data[33:]  # after the signature, IHDR
+    return jpeg_turned(data, orientation)
 
 
 @pytest.mark.parametrize("image_format", sorted(IMAGE_FORMATS))
@@ -208,7 +200,7 @@ def test_a_jpeg_s_segments_before_its_frame_header_are_walked_past(tmp_path, no_
     """As other tools write them: JFIF's APP0, EXIF holding a thumbnail (a JPEG of another size, its own frame
     header inside the APP1 segment), XMP, an ICC profile (APP2), comments, fill bytes before markers."""
     thumbnail = encode_image(np.zeros((6, 8, 3), np.uint8), "jpg", 90)
-    exif = b"Exif\x00\x00" + _exif_turned(6) + thumbnail
+    exif = b"Exif\x00\x00" + exif_orientation(6) + thumbnail
     data = encode_image(np.random.default_rng(3).integers(0, 256, (30, 40, 3), np.uint8), "jpg", 90)
     segments = (jpeg_segment(0xE1, exif) + jpeg_segment(0xFE, b"a comment\xff\xd9")
                 + b"\xff\xff\xff" + jpeg_segment(0xE1, b"http://ns.adobe.com/xap/1.0/\x00<x/>")

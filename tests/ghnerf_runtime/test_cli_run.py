@@ -15,6 +15,7 @@ from ghnerf_runtime.cli import run as cli_run
 from ghnerf_runtime.config import NOVEL_PATHS, EstimatorConfig, config_to_dict
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
+from tests.exif_images import jpeg_turned
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 simdata = pytest.importorskip("ghnerf_runtime.cli.simdata")
@@ -110,6 +111,16 @@ def test_a_video_run_with_a_novel_view_writes_every_pair_in_order(tiny_model_dir
             cap.release()
         outputs[name] = [(f["joints_3d"], f["joints_2d"]) for f in frames]
     assert outputs["piped"] == outputs["again"]  # deterministic: nothing of one pair leaks into the next
+
+
+def test_an_image_tagged_to_be_turned_is_read_as_stored(tmp_path):
+    # OpenCV turned it by its EXIF orientation (6: a quarter), a 40x30 frame read as 30x40 against the rig's cameras
+    image = np.random.default_rng(0).integers(0, 256, (30, 40, 3), np.uint8)
+    ok, jpeg = cv2.imencode(".jpg", image)
+    assert ok
+    path = tmp_path / "turned.jpg"
+    path.write_bytes(jpeg_turned(jpeg.tobytes(), 6))
+    assert cli_run._read_image(str(path)).shape == (30, 40, 3)
 
 
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):

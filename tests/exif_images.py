@@ -1,0 +1,21 @@
+"""Images tagged with an EXIF orientation, as a phone writes them, built byte by byte (no files from elsewhere):
+OpenCV turns such an image by its tag for every read flag but IMREAD_UNCHANGED and IMREAD_IGNORE_ORIENTATION."""
+from __future__ import annotations
+
+import struct
+
+
+def exif_orientation(orientation: int) -> bytes:
+    """A big-endian TIFF block holding one tag, the EXIF orientation (6: turn a quarter, as a phone held upright
+    writes it; 3: half a turn)."""
+    return b"MM\x00*\x00\x00\x00\x08" + struct.pack(">HHHIHH", 1, 0x0112, 3, 1, orientation, 0) + b"\x00" * 4
+
+
+def jpeg_segment(marker: int, payload: bytes) -> bytes:
+    """One JPEG marker segment: 0xFF, ``marker``, the length (itself included), ``payload``."""
+    return bytes([0xFF, marker]) + struct.pack(">H", len(payload) + 2) + payload
+
+
+def jpeg_turned(jpeg: bytes, orientation: int = 6) -> bytes:
+    """``jpeg`` with an APP1 EXIF segment holding ``orientation``, first after its start marker."""
+    return jpeg[:2] + jpeg_segment(0xE1, b"Exif\x00\x00" + exif_orientation(orientation)) + jpeg[2:]
