@@ -9,6 +9,8 @@ This test reads README.md and docs/**/*.md, and checks each Markdown link outsid
 backtick spans): an in-page ``(#anchor)`` must be the anchor of one of the page's headings; a relative
 ``(file.md#anchor)`` must name a file that exists and, where it has an anchor, one of that file's headings; a
 relative link without an anchor must name a file that exists. Web links (``https:``, ``mailto:``) are not followed.
+The long pages with a Contents list (``CONTENTS_PAGES``) must link each of their ``##`` sections from it, so a
+section added later is not left out of the list.
 
 GitHub's anchor of a heading (:func:`github_anchor`): the heading's text as rendered (backticks, emphasis marks and
 link targets gone), lower case, every character that is not a letter, a digit, ``_``, ``-`` or a space dropped,
@@ -112,6 +114,24 @@ def test_the_links_are_found():
     assert "protocol.md#6-bandwidth" in targets
 
 
+#: the long pages that open with a Contents list (session 61); a ## section added later must be listed too
+CONTENTS_PAGES = ("docs/runtime.md", "docs/training.md", "docs/turn-search.md", "docs/two-people.md")
+
+
+def unlisted_sections(text: str) -> list[str]:
+    """The ## headings of a page that its in-page links do not point at."""
+    linked = {target[1:] for _, target in link_targets(text) if target.startswith("#")}
+    headings = [m.group("title") for _, line in _outside_fences(text)
+                if line.startswith("## ") and (m := _HEADING.match(line))]
+    return [title for title in headings if github_anchor(title) not in linked]
+
+
+@pytest.mark.parametrize("page", CONTENTS_PAGES)
+def test_the_contents_list_links_every_section(page):
+    missing = unlisted_sections((REPO / page).read_text(encoding="utf-8"))
+    assert not missing, f"{page}: add these ## sections to the Contents list at its top: {missing}"
+
+
 @pytest.mark.parametrize("heading, anchor", [
     ("8. VMC output", "8-vmc-output"),
     ("STATUS (0x02) — 16 bytes", "status-0x02--16-bytes"),
@@ -144,3 +164,8 @@ def test_made_up_broken_links_are_caught(tmp_path):
     problems = broken_links(docs / "page.md", tmp_path)
     assert [p.split(": (")[1].split(")")[0] for p in problems] == ["#bandwidth", "other.md#bandwidth", "missing.md#x"]
     assert all(p.startswith("docs/page.md:6: ") for p in problems)
+
+
+def test_a_section_missing_from_the_contents_is_named():
+    text = "# Page\n\n- [Results](#results)\n\n## Results\n\n## Known gaps\n\n### Detail\n"
+    assert unlisted_sections(text) == ["Known gaps"]
