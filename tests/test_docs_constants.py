@@ -361,10 +361,17 @@ def test_the_runtime_doc_names_every_key_of_a_pair_s_json():
     assert not unnamed, f"docs/runtime.md, Output, does not name {unnamed}"
 
 
+def _code_paragraph(page: str) -> str:
+    """A feature page's ``Code: ...`` paragraph, which names the files, methods and functions the feature lives in
+    (since session 61 a Contents list and "Today, in brief" come before it, so it is found by its lead)."""
+    return "Code: " + page.split("\nCode: ", 1)[1].split("\n\n", 1)[0]
+
+
 def test_the_turn_search_page_names_its_keys_and_the_code_it_points_at():
     """docs/turn-search.md (the crop turn search's page, split from docs/runtime.md in session 59) is where
     ``roi.turn_search``'s readers are sent: it names every ``roi.turn_search*`` key, and the files, estimator
-    methods and ``body_lie`` functions its opening points at exist (a rename would leave it pointing at nothing)."""
+    methods and ``body_lie`` functions its Code paragraph points at exist (a rename would leave it pointing at
+    nothing)."""
     import dataclasses
 
     from ghnerf_runtime import body_lie
@@ -375,16 +382,15 @@ def test_the_turn_search_page_names_its_keys_and_the_code_it_points_at():
     assert len(keys) >= 3, keys  # turn_search, turn_search_below, turn_search_every at least
     unnamed = [k for k in keys if f"`roi.{k}`" not in page]
     assert not unnamed, f"docs/turn-search.md does not name {unnamed}"
-    # the opening: what comes before the first section's bold lead
-    opening = page.split("\n**", 1)[0]
-    files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", opening)
-    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", opening)
-    functions = re.findall(r"`(lies_as_\w+|nears_a_\w+)`", opening)
+    code = _code_paragraph(page)
+    files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", code)
+    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", code)
+    functions = re.findall(r"`(lies_as_\w+|nears_a_\w+)`", code)
     assert len(files) >= 5 and len(methods) >= 3 and len(functions) >= 3, (files, methods, functions)
     missing = [f for f in files if not (REPO / f).is_file()]
     missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
     missing += [f"body_lie.{f}" for f in functions if not hasattr(body_lie, f)]
-    assert not missing, f"docs/turn-search.md's opening points at what is not there: {missing}"
+    assert not missing, f"docs/turn-search.md's Code paragraph points at what is not there: {missing}"
 
 
 #: The estimator keys of two people in view (``Joints3DConfig``), named on docs/two-people.md.
@@ -395,8 +401,8 @@ TWO_PEOPLE_KEYS = ("second_person_ratio", "second_person_min_joints", "behind_mi
 def test_the_two_people_page_names_its_keys_and_the_code_it_points_at():
     """docs/two-people.md (two people in view, split from docs/runtime.md in session 59) is where
     ``several_people``'s readers are sent: it names the two-people ``joints3d`` keys and every ``pick_subject``
-    rule, and the files, estimator and subject selector methods and ``two_people`` functions its opening points at
-    exist (a rename would leave it pointing at nothing; session 60 moved the subject selection to
+    rule, and the files, estimator and subject selector methods and ``two_people`` functions its Code paragraph
+    points at exist (a rename would leave it pointing at nothing; session 60 moved the subject selection to
     ``ghnerf_runtime/subject.py``)."""
     import dataclasses
 
@@ -410,19 +416,18 @@ def test_the_two_people_page_names_its_keys_and_the_code_it_points_at():
     unnamed = [k for k in TWO_PEOPLE_KEYS if f"`joints3d.{k}`" not in page]
     unnamed += [f"pick_subject {r}" for r in PICK_SUBJECT_RULES if f"`{r}`" not in page]
     assert not unnamed, f"docs/two-people.md does not name {unnamed}"
-    # the opening: what comes before the first section's heading
-    opening = page.split("\n## ", 1)[0]
-    files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", opening)
+    code = _code_paragraph(page)
+    files = re.findall(r"\b((?:ghnerf_runtime|benchmarks|tests)/[\w/]+\.py)\b", code)
     # each file's names: those in the parentheses after it, before the next file's (two_people, subject, estimator)
-    named = opening.split("`ghnerf_runtime/two_people.py` (", 1)[-1].split("`ghnerf_runtime/subject.py`", 1)[0]
+    named = code.split("`ghnerf_runtime/two_people.py` (", 1)[-1].split("`ghnerf_runtime/subject.py`", 1)[0]
     functions = re.findall(r"`(\w+)`", named)
-    selected = opening.split("`ghnerf_runtime/subject.py` (", 1)[-1].split("`ghnerf_runtime/estimator.py`", 1)[0]
+    selected = code.split("`ghnerf_runtime/subject.py` (", 1)[-1].split("`ghnerf_runtime/estimator.py`", 1)[0]
     selector = re.findall(r"`(?:SubjectSelector\.)?([a-z_]\w*)`", selected)
-    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", opening.split("`ghnerf_runtime/estimator.py` (", 1)[-1])
+    methods = re.findall(r"`(?:Estimator\.)?(_\w+)`", code.split("`ghnerf_runtime/estimator.py` (", 1)[-1])
     assert len(files) >= 6 and len(functions) >= 5 and len(selector) >= 8 and len(methods) >= 2, \
         (files, functions, selector, methods)
     missing = [f for f in files if not (REPO / f).is_file()]
     missing += [f"two_people.{f}" for f in functions if not hasattr(two_people, f)]
     missing += [f"subject.{m}" for m in selector if not hasattr(subject.SubjectSelector, m) and not hasattr(subject, m)]
     missing += [f"Estimator.{m}" for m in methods if not hasattr(Estimator, m)]
-    assert not missing, f"docs/two-people.md's opening points at what is not there: {missing}"
+    assert not missing, f"docs/two-people.md's Code paragraph points at what is not there: {missing}"

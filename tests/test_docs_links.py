@@ -1,0 +1,171 @@
+"""Every link into a doc's sections lands on a heading that is there.
+
+The long docs pages open with a Contents list of ``[Title](#anchor)`` links (session 61), and a few pages link to
+another's section (``[protocol.md](protocol.md#6-bandwidth)``). GitHub makes a heading's anchor from its text, so a
+heading renamed or renumbered leaves such a link pointing at the page's top without a word: ``#vmc-output`` in
+docs/protocol.md pointed at nothing since the heading became ``## 8. VMC output`` (anchor ``8-vmc-output``).
+
+This test reads README.md and docs/**/*.md, and checks each Markdown link outside code (fenced blocks and
+backtick spans): an in-page ``(#anchor)`` must be the anchor of one of the page's headings; a relative
+``(file.md#anchor)`` must name a file that exists and, where it has an anchor, one of that file's headings; a
+relative link without an anchor must name a file that exists. Web links (``https:``, ``mailto:``) are not followed.
+The long pages with a Contents list (``CONTENTS_PAGES``) must link each of their ``##`` sections from it, so a
+section added later is not left out of the list.
+
+GitHub's anchor of a heading (:func:`github_anchor`): the heading's text as rendered (backticks, emphasis marks and
+link targets gone), lower case, every character that is not a letter, a digit, ``_``, ``-`` or a space dropped,
+each space made ``-``; a second heading with the same anchor gets ``-1``, a third ``-2``. An HTML ``<a id="x">``
+(or ``name=``) in the page is an anchor too.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+#: the pages whose links are checked (globs, relative to the repository)
+DOC_GLOBS = ("README.md", "docs/**/*.md")
+
+_FENCE = re.compile(r"^\s*(```|~~~)")
+_HEADING = re.compile(r"^ {0,3}#{1,6}\s+(?P<title>.+?)\s*#*\s*$")
+_HTML_ANCHOR = re.compile(r"""<a\s+(?:id|name)\s*=\s*["'](?P<anchor>[^"']+)["']""", re.IGNORECASE)
+_CODE_SPAN = re.compile(r"(`+).*?\1")
+# ](target) or ](target "title"): the target has no space or closing parenthesis
+_LINK_TARGET = re.compile(r"\]\((?P<target><[^>]*>|[^)\s]*)(?:\s+\"[^\"]*\")?\)")
+_INLINE_LINK = re.compile(r"!?\[(?P<text>[^\]]*)\]\([^)]*\)")
+_HTML_TAG = re.compile(r"<[^>]+>")
+_NOT_IN_ANCHOR = re.compile(r"[^\w\- ]")
+_EXTERNAL = re.compile(r"^[a-z][a-z0-9+.-]*:", re.IGNORECASE)
+
+
+def github_anchor(title: str) -> str:
+    """The anchor GitHub gives a heading of this text (before a repeat's ``-N`` suffix)."""
+    text = _INLINE_LINK.sub(lambda m: m.group("text"), title)
+    text = _HTML_TAG.sub("", text).replace("`", "").replace("*", "")
+    return _NOT_IN_ANCHOR.sub("", text.strip().lower()).replace(" ", "-")
+
+
+def _outside_fences(text: str):
+    """(line number, line) of each line of ``text`` that is not inside a fenced code block."""
+    in_fence = False
+    for number, line in enumerate(text.splitlines(), 1):
+        if _FENCE.match(line):
+            in_fence = not in_fence
+        elif not in_fence:
+            yield number, line
+
+
+def anchors(text: str) -> set[str]:
+    """Every anchor a Markdown page has: its headings' (repeats numbered) and its HTML ``<a id=...>``."""
+    found: set[str] = set()
+    seen: dict[str, int] = {}
+    for _, line in _outside_fences(text):
+        m = _HEADING.match(line)
+        if m:
+            anchor = github_anchor(m.group("title"))
+            repeat = seen.get(anchor, 0)
+            seen[anchor] = repeat + 1
+            found.add(anchor if repeat == 0 else f"{anchor}-{repeat}")
+        found.update(a.group("anchor") for a in _HTML_ANCHOR.finditer(line))
+    return found
+
+
+def link_targets(text: str) -> list[tuple[int, str]]:
+    """(line, target) of each Markdown link in ``text``, outside fenced blocks and backtick spans."""
+    found = []
+    for number, line in _outside_fences(text):
+        for m in _LINK_TARGET.finditer(_CODE_SPAN.sub("", line)):
+            found.append((number, m.group("target").strip("<>")))
+    return found
+
+
+def broken_links(page: Path, root: Path) -> list[str]:
+    """One line per link of ``page`` whose file or anchor is not there."""
+    problems = []
+    where = page.relative_to(root).as_posix()
+    own = page.read_text(encoding="utf-8")
+    for line, target in link_targets(own):
+        if not target or _EXTERNAL.match(target):
+            continue
+        path_part, _, anchor = target.partition("#")
+        linked = (page.parent / path_part).resolve() if path_part else page
+        if not linked.exists():
+            problems.append(f"{where}:{line}: ({target}): no file {path_part}")
+        elif anchor and linked.suffix == ".md" and anchor not in anchors(linked.read_text(encoding="utf-8")):
+            problems.append(f"{where}:{line}: ({target}): {linked.name} has no heading with the anchor #{anchor}")
+    return problems
+
+
+def _pages(root: Path) -> list[Path]:
+    return sorted({p for pattern in DOC_GLOBS for p in root.glob(pattern)})
+
+
+def test_every_section_link_in_the_docs_lands_on_a_heading():
+    problems = [p for page in _pages(REPO) for p in broken_links(page, REPO)]
+    assert not problems, f"{len(problems)} links to sections or files that are not there:\n" + "\n".join(problems)
+
+
+def test_the_links_are_found():
+    # the check holds only if it sees the links: the Contents lists and the cross-page ones
+    targets = [t for page in _pages(REPO) for _, t in link_targets(page.read_text(encoding="utf-8"))]
+    assert sum(t.startswith("#") for t in targets) > 80
+    assert "protocol.md#6-bandwidth" in targets
+
+
+#: the long pages that open with a Contents list (session 61); a ## section added later must be listed too
+CONTENTS_PAGES = ("docs/runtime.md", "docs/training.md", "docs/turn-search.md", "docs/two-people.md")
+
+
+def unlisted_sections(text: str) -> list[str]:
+    """The ## headings of a page that its in-page links do not point at."""
+    linked = {target[1:] for _, target in link_targets(text) if target.startswith("#")}
+    headings = [m.group("title") for _, line in _outside_fences(text)
+                if line.startswith("## ") and (m := _HEADING.match(line))]
+    return [title for title in headings if github_anchor(title) not in linked]
+
+
+@pytest.mark.parametrize("page", CONTENTS_PAGES)
+def test_the_contents_list_links_every_section(page):
+    missing = unlisted_sections((REPO / page).read_text(encoding="utf-8"))
+    assert not missing, f"{page}: add these ## sections to the Contents list at its top: {missing}"
+
+
+@pytest.mark.parametrize("heading, anchor", [
+    ("8. VMC output", "8-vmc-output"),
+    ("STATUS (0x02) — 16 bytes", "status-0x02--16-bytes"),
+    ("Choosing GHJ_MAX_JOINTS", "choosing-ghj_max_joints"),
+    ("The skeleton prior (`joints3d.skeleton_prior`, on with the shipped model)",
+     "the-skeleton-prior-joints3dskeleton_prior-on-with-the-shipped-model"),
+    ("Where a pair's time goes (session 58, a 2-core AVX2 host)",
+     "where-a-pairs-time-goes-session-58-a-2-core-avx2-host"),
+    ("The novel view (docs/novel-view.md)", "the-novel-view-docsnovel-viewmd"),
+    ("See [the spec](protocol.md) **now**", "see-the-spec-now"),
+])
+def test_github_anchor(heading, anchor):
+    assert github_anchor(heading) == anchor
+
+
+def test_a_repeated_heading_is_numbered_and_fences_are_skipped():
+    text = "# Page\n\n## Results\n\n```\n## Results\n```\n\n## Results\n\n<a id=\"kept\"></a>\n"
+    assert anchors(text) == {"page", "results", "results-1", "kept"}
+
+
+def test_made_up_broken_links_are_caught(tmp_path):
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    (docs / "other.md").write_text("# Other\n\n## 2. Bandwidth\n", encoding="utf-8")
+    (docs / "page.md").write_text(
+        "# Page\n\n## Known gaps\n\n"
+        "[ok](#known-gaps) [ok](other.md#2-bandwidth) [ok](other.md) [web](https://example.com/#x)\n"
+        "[gone](#bandwidth) [gone](other.md#bandwidth) [gone](missing.md#x)\n"
+        "`[code](#not-a-link)`\n\n```\n[fenced](#not-a-link)\n```\n", encoding="utf-8")
+    problems = broken_links(docs / "page.md", tmp_path)
+    assert [p.split(": (")[1].split(")")[0] for p in problems] == ["#bandwidth", "other.md#bandwidth", "missing.md#x"]
+    assert all(p.startswith("docs/page.md:6: ") for p in problems)
+
+
+def test_a_section_missing_from_the_contents_is_named():
+    text = "# Page\n\n- [Results](#results)\n\n## Results\n\n## Known gaps\n\n### Detail\n"
+    assert unlisted_sections(text) == ["Known gaps"]
