@@ -65,7 +65,9 @@ A video is a file (a path that is not a device index, not under ``/dev/``, not a
 GStreamer pipeline, which has ``!`` between its elements and is live; an OpenCV
 image sequence such as ``seq/%04d.png`` counts): it is paced at its rate from a start
 shared by both files and stamped by its frame number, so two constant-rate videos that start at
-the same instant pair frame by frame (a phone's variable-rate video drifts). Not modelled:
+the same instant pair frame by frame (a phone's variable-rate video drifts). Its frames are read as stored: a
+rotation in its container (a phone's, held upright) is ignored, as an image's EXIF orientation is
+(:func:`ghnerf_runtime.video_files.read_as_stored`). Not modelled:
 exposure, white balance or rolling-shutter differences between the two cameras.
 
 Ends. A live camera that stops delivering (unplugged) raises :class:`RigDisconnectedError` from the
@@ -106,6 +108,7 @@ from drivers.url import RigUrl, redact_url
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.rig_file import load_rig
+from ghnerf_runtime.video_files import read_as_stored
 
 log = logging.getLogger(__name__)
 #: The rig id of the nominal rig an ``opencv://`` source without ``rig=`` makes (for ``ghcal capture`` only).
@@ -267,7 +270,9 @@ class _Camera:
                    "not plugged in, busy in another program, no permission (the video group), or not this index "
                    "(a webcam's second node is its metadata: use /dev/v4l/by-id/ paths)"))
         self.capture = capture
-        if not self.video:
+        if self.video:  # as stored, a phone's rotation ignored (a device's or a stream's frames: nothing to turn)
+            read_as_stored(capture, self.shown)
+        else:
             self.v4l2 = _backend_name(capture) == "V4L2"
             # FOURCC first: a webcam offers its larger sizes only compressed.
             if o.fourcc:
@@ -431,11 +436,13 @@ def rig_size_message(camera: str, shown: str, delivered: tuple[int, int], expect
 
 
 def video_size(spec: str) -> tuple[int, int] | None:
-    """The frame size a video file's container states (nothing decoded), None where OpenCV cannot say."""
+    """The frame size a video file's container states (nothing decoded), None where OpenCV cannot say: the size as
+    stored, as its frames are read (:func:`read_as_stored`), not turned by a rotation in its container."""
     capture = cv2.VideoCapture(spec)
     try:
         if not capture.isOpened():
             return None
+        read_as_stored(capture, redact_url(spec))
         size = int(capture.get(cv2.CAP_PROP_FRAME_WIDTH) or 0), int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT) or 0)
     finally:
         capture.release()

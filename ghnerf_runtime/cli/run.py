@@ -43,6 +43,7 @@ from ghnerf_runtime.estimator import Estimator, PairResult
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
+from ghnerf_runtime.video_files import read_as_stored
 
 log = logging.getLogger("ghnerf-run")
 
@@ -203,6 +204,7 @@ def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         cap = cv2.VideoCapture(path)
         if not cap.isOpened():
             raise UsageError(f"{path}: cannot open the video")
+        read_as_stored(cap, path)  # a phone's rotation metadata ignored, as an image's EXIF orientation is
         caps.append(cap)
     try:
         n = 0

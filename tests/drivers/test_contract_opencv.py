@@ -31,8 +31,11 @@ from drivers import (
     open_rig,
 )
 from ghnerf_runtime.geometry.rig import Rig
+from drivers.backends.opencv import video_size
 from ghnerf_runtime.rig_file import load_rig, save_rig
 from tests.drivers.contract import RigSourceContract
+from tests.rotated_videos import SIZE as PHONE_SIZE
+from tests.rotated_videos import phone_take
 
 SIZE = (160, 120)
 
@@ -178,6 +181,21 @@ def test_a_missing_video_or_a_size_the_rig_does_not_have_is_refused_at_open(take
     assert caught.value.camera in ("left", "right")
 
 
+def test_a_phone_s_video_turned_by_its_metadata_is_read_as_stored(tmp_path):
+    """A phone held upright stores its video sideways with a rotation in the container (the ``tkhd`` matrix):
+    OpenCV's FFmpeg backend turned every frame by it (``CAP_PROP_ORIENTATION_AUTO`` is on by default), a 64x48
+    video delivered 48x64, a quarter turn against the rig's calibration of the sensor's pixel grid. Read as stored,
+    like an image's EXIF orientation; the size its container states (the daemon's check) is the stored one too."""
+    turned, plain, stored = phone_take(tmp_path)
+    with open_rig(f"opencv://?first={turned}&second={plain}&policy=all") as source:
+        pairs = [source.read(timeout_s=5.0) for _ in range(len(stored))]
+        sizes = [(cam.width, cam.height) for cam in source.rig.pair]
+    assert sizes == [PHONE_SIZE, PHONE_SIZE]
+    for pair, frame in zip(pairs, stored):
+        assert np.array_equal(pair.images[0], frame) and np.array_equal(pair.images[1], frame)
+    assert video_size(str(turned)) == PHONE_SIZE
+
+
 class _Webcam:
     """A stand-in ``cv2.VideoCapture`` of a live camera: ``frames`` frames of the size it was set to (or
     ``deliver``'s), made by ``make``, a camera period apart, then nothing (``block_s``: a grab that hangs)."""
@@ -298,6 +316,39 @@ def test_a_gstreamer_pipeline_is_a_live_camera(webcam):
                   capture_factory=webcam) as source:
         source.read(timeout_s=5.0)
     assert webcam.made[0].target == pipeline and webcam.made[0].api == cv2.CAP_GSTREAMER
+
+
+def test_only_video_files_are_told_to_ignore_a_rotation(tmp_path, webcam):
+    """The rotation is a video file's (its container's): a device or a stream is never asked to ignore one."""
+    first, second, video = _fast_videos(tmp_path, 3)
+    with open_rig(f"opencv://?first={first}&second={second}&policy=all", capture_factory=video) as source:
+        source.read(timeout_s=5.0)
+    with open_rig("opencv://?first=0&second=/dev/video4&tolerance_ms=40", capture_factory=webcam) as source:
+        source.read(timeout_s=5.0)
+    videos, devices = webcam.made[:2], webcam.made[2:]
+    assert all(made.props[cv2.CAP_PROP_ORIENTATION_AUTO] == 0 for made in videos)
+    assert all(cv2.CAP_PROP_ORIENTATION_AUTO not in made.props for made in devices)
+
+
+def test_a_backend_that_keeps_turning_a_video_is_warned_of_naming_it(tmp_path, webcam, caplog):
+    """A backend that refuses ``CAP_PROP_ORIENTATION_AUTO`` and keeps it on: the video plays as it decodes (a
+    quarter turn of a non-square frame is caught by the size checks), with a warning naming the file."""
+    first, second, video = _fast_videos(tmp_path, 3)
+
+    class KeepsTurning(video):
+        def __init__(self, target, api) -> None:
+            super().__init__(target, api)
+            self.props[cv2.CAP_PROP_ORIENTATION_AUTO], self.props[cv2.CAP_PROP_ORIENTATION_META] = 1, 90
+
+        def set(self, prop, value) -> bool:
+            return prop != cv2.CAP_PROP_ORIENTATION_AUTO and super().set(prop, value)
+
+    with caplog.at_level(logging.WARNING, logger="ghnerf_runtime.video_files"):
+        with open_rig(f"opencv://?first={first}&second={second}&policy=all", capture_factory=KeepsTurning) as source:
+            source.read(timeout_s=5.0)
+    warned = [r.getMessage() for r in caplog.records if r.name == "ghnerf_runtime.video_files"]
+    assert len(warned) == 2 and all("(its container says 90 degrees)" in w for w in warned)
+    assert {w.split(":")[0] for w in warned} == {f"video {first}", f"video {second}"}
 
 
 class _V4l2Webcam(_Webcam):

@@ -16,6 +16,7 @@ from ghnerf_runtime.config import NOVEL_PATHS, EstimatorConfig, config_to_dict
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.exif_images import jpeg_turned
+from tests.rotated_videos import phone_take
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 simdata = pytest.importorskip("ghnerf_runtime.cli.simdata")
@@ -121,6 +122,17 @@ def test_an_image_tagged_to_be_turned_is_read_as_stored(tmp_path):
     path = tmp_path / "turned.jpg"
     path.write_bytes(jpeg_turned(jpeg.tobytes(), 6))
     assert cli_run._read_image(str(path)).shape == (30, 40, 3)
+
+
+def test_a_video_turned_by_its_metadata_is_read_as_stored(tmp_path):
+    # a phone's upright video: OpenCV turned its 64x48 frames by the container's rotation (48x64), like an image by
+    # its EXIF orientation, a quarter turn against the rig's cameras
+    turned, plain, stored = phone_take(tmp_path)
+    args = cli_run.build_parser().parse_args(["--rig", "r.json", "--videos", str(turned), str(plain)])
+    pairs = list(cli_run._pairs(args))
+    assert len(pairs) == len(stored)
+    for (first, second), frame in zip(pairs, stored):
+        assert np.array_equal(first, frame) and np.array_equal(second, frame)
 
 
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):
@@ -782,7 +794,12 @@ def _video_with_times(pts_ms, fps):
             self.k += 1
             return self.k < len(pts_ms), np.zeros((4, 4, 3), np.uint8)
 
+        def set(self, prop, value):
+            return prop == cv2.CAP_PROP_ORIENTATION_AUTO
+
         def get(self, prop):
+            if prop == cv2.CAP_PROP_ORIENTATION_AUTO:
+                return 0.0
             return fps if prop == cv2.CAP_PROP_FPS else pts_ms[self.k]
 
         def release(self):
