@@ -230,9 +230,11 @@ class ZjuSequence:
         return path
 
     def read_image(self, frame: int, cam: int) -> np.ndarray:
-        """``(H, W, 3)`` uint8 **BGR** (as OpenCV reads it)."""
+        """``(H, W, 3)`` uint8 **BGR** (as OpenCV reads it), its pixels as stored."""
         path = self.image_path(frame, cam)
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        # never turned by an EXIF orientation tag: the annots' calibration and the mask (IMREAD_UNCHANGED) are of
+        # the stored pixel grid, as ghcal's, ghnerf-run's and replay://'s reads are (session 61)
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
         if image is None:
             raise DatasetError(path, "missing or unreadable image")
         return image
