@@ -133,6 +133,7 @@ def test_cropped_and_resized_are_consistent():
         (dict(height=float("nan")), "image size"),  # was a bare ValueError of int()
         (dict(width="640"), "image size"),
         (dict(width=np.True_), "image size"),  # was a width of 1 (np.True_ is no bool to isinstance)
+        (dict(height=np.complex128(480)), "image size"),  # was a height of 480, its imaginary part dropped
         (dict(height=10**400), "image size"),  # was a bare OverflowError, then taken as a size
         (dict(width=2**31), r"\[1, 2147483647\]"),  # OpenCV's sizes are C ints
         (dict(name=""), "name"),
