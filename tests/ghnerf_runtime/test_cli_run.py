@@ -16,6 +16,7 @@ from ghnerf_runtime.config import NOVEL_PATHS, EstimatorConfig, config_to_dict
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.exif_images import jpeg_turned
+from tests.odd_images import bmp_beyond_opencv_s_limits
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 simdata = pytest.importorskip("ghnerf_runtime.cli.simdata")
@@ -121,6 +122,14 @@ def test_an_image_tagged_to_be_turned_is_read_as_stored(tmp_path):
     path = tmp_path / "turned.jpg"
     path.write_bytes(jpeg_turned(jpeg.tobytes(), 6))
     assert cli_run._read_image(str(path)).shape == (30, 40, 3)
+
+
+def test_an_image_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unreadable(tmp_path):
+    # cv2.imread raises for it rather than failing: ghnerf-run stopped with a cv2.error traceback
+    path = tmp_path / "huge.bmp"
+    path.write_bytes(bmp_beyond_opencv_s_limits())
+    with pytest.raises(cli_run.UsageError, match=f"{re.escape(str(path))}: cannot read the image"):
+        cli_run._read_image(str(path))
 
 
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):
