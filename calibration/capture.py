@@ -25,6 +25,7 @@ import cv2
 from calibration.board import BoardSpec
 from calibration.detect import BoardDetector, BoardView, board_mismatch
 from calibration.errors import BoardError, CaptureError
+from ghnerf_runtime.image_files import read_image_or_none
 from ghnerf_runtime.rig_file import write_text_atomic
 
 __all__ = ["IMAGE_SUFFIXES", "CAMERAS_FILE", "camera_folders", "list_images", "detect_folder", "check_camera_name",
@@ -76,7 +77,7 @@ def earlier_size(folder: Path, *, skip: Iterable[str] = ()) -> tuple[Path, tuple
     for name, path in images.items():
         if name in skip:
             continue
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        image = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
         if image is not None:  # an unreadable one is the solve's to name
             return path, (int(image.shape[1]), int(image.shape[0]))
     return None
@@ -191,7 +192,7 @@ def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[s
         for name, path in images.items():
             # grey at the file's own depth: IMREAD_GRAYSCALE cut a 16-bit file to its top 8 bits, all but
             # black for a 10- or 12-bit camera's frame (the detector scales it: detect.grey8)
-            image = cv2.imread(str(path), READ_GREY)
+            image = read_image_or_none(path, READ_GREY)
             if image is None:
                 raise CaptureError(f"{path}: not a readable image")
             try:
@@ -219,7 +220,7 @@ def _name_board_mismatch(board: BoardSpec, paths: list[Path]) -> None:
     """
     step = max(1, len(paths) // MISMATCH_TRIES)
     for path in paths[::step][:MISMATCH_TRIES]:
-        image = cv2.imread(str(path), READ_GREY)
+        image = read_image_or_none(path, READ_GREY)
         error = None if image is None else board_mismatch(board, image)
         if error is not None:
             raise CaptureError(f"{path}: {error}") from error

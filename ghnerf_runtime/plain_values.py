@@ -54,8 +54,10 @@ def whole_number_or_none(value: object) -> int | None:
 def whole_valued_or_none(value: object) -> int | None:
     """``value`` as a Python int where it is a number without a fraction (640, 640.0, np.int64(640),
     np.float32(640)), not True/False; else None (640.5, NaN, infinity, text). Wider than
-    :func:`whole_number_or_none`: for sizes and pixel positions computed in floating point."""
-    if is_true_false(value):
+    :func:`whole_number_or_none`: for sizes and pixel positions computed in floating point. A complex number,
+    Python's or NumPy's, is None too: ``int`` refuses Python's but drops a NumPy one's imaginary part (with a
+    warning), so np.complex128(640) was 640 where 640+0j was refused."""
+    if is_true_false(value) or np.iscomplexobj(value):
         return None
     try:
         whole = int(value)  # type: ignore[call-overload]

@@ -118,9 +118,20 @@ def test_the_links_are_found():
 CONTENTS_PAGES = ("docs/runtime.md", "docs/training.md", "docs/turn-search.md", "docs/two-people.md")
 
 
+def contents_list(text: str) -> str:
+    """The page's Contents list: the first list after its ``**Contents**`` lead, up to the blank line ending it
+    ("" where the page has none)."""
+    lines = text.splitlines()
+    start = next((n for n, line in enumerate(lines) if line.startswith("**Contents**")), len(lines))
+    first = next((n for n in range(start, len(lines)) if lines[n].startswith("- ")), len(lines))
+    end = next((n for n in range(first, len(lines)) if not lines[n].strip()), len(lines))
+    return "\n".join(lines[first:end])
+
+
 def unlisted_sections(text: str) -> list[str]:
-    """The ## headings of a page that its in-page links do not point at."""
-    linked = {target[1:] for _, target in link_targets(text) if target.startswith("#")}
+    """The ## headings of a page that its Contents list does not link (a link elsewhere on the page, "see
+    [Limits](#limits) below", does not list a section)."""
+    linked = {target[1:] for _, target in link_targets(contents_list(text)) if target.startswith("#")}
     headings = [m.group("title") for _, line in _outside_fences(text)
                 if line.startswith("## ") and (m := _HEADING.match(line))]
     return [title for title in headings if github_anchor(title) not in linked]
@@ -167,5 +178,13 @@ def test_made_up_broken_links_are_caught(tmp_path):
 
 
 def test_a_section_missing_from_the_contents_is_named():
-    text = "# Page\n\n- [Results](#results)\n\n## Results\n\n## Known gaps\n\n### Detail\n"
+    text = "# Page\n\n**Contents**\n\n- [Results](#results)\n\n## Results\n\n## Known gaps\n\n### Detail\n"
     assert unlisted_sections(text) == ["Known gaps"]
+
+
+def test_a_section_linked_from_the_body_but_not_the_contents_is_named():
+    # any in-page link counted as listing it: a section added later and pointed at from a paragraph passed
+    text = ("# Page\n\n**Contents** (a lead\nover two lines)\n\n- [Results](#results)\n  - [Results](#results)\n\n"
+            "## Results\n\nSee [Known gaps](#known-gaps) below.\n\n## Known gaps\n")
+    assert unlisted_sections(text) == ["Known gaps"]
+    assert unlisted_sections("# Page\n\n## Results\n\n[Results](#results)\n") == ["Results"]  # no Contents at all

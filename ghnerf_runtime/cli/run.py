@@ -40,6 +40,7 @@ from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS,
     load_config, read_json_file
 from ghnerf_runtime.errors import ConfigError, FrameError, ModelLoadError, RuntimeErrorBase
 from ghnerf_runtime.estimator import Estimator, PairResult
+from ghnerf_runtime.image_files import read_image_or_none
 from ghnerf_runtime.novel_view import NovelViewRequest, draw_skeleton
 from ghnerf_runtime.pipeline import NovelViewPipeline
 from ghnerf_runtime.rig_file import load_rig, write_text_atomic
@@ -177,7 +178,7 @@ def _read_image(path: str) -> np.ndarray:
         raise UsageError(f"{path}: a folder, not an image")
     # as stored, never turned by an EXIF orientation tag: the rig's calibration is of the sensor's pixel grid (so is
     # ghcal's and replay://'s reading of the same files)
-    img = cv2.imread(path, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    img = read_image_or_none(path, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
     if img is None:
         raise UsageError(f"{path}: cannot read the image (not a format OpenCV reads, or unreadable)")
     return img

@@ -49,7 +49,7 @@ def _as_dist(coefficients) -> np.ndarray:
 
 
 #: Largest width or height a :class:`Camera` takes: OpenCV's image sizes are C ints. A model's camera may be larger
-#: than a rig file holds (``rig_file.MAX_CAMERA_SIDE``: an imported calibration is refused when saved, by name); this
+#: than a rig file holds (``rig_file.MAX_IMAGE_SIDE``: an imported calibration is refused when saved, by name); this
 #: bound keeps absurd sizes (10**400, which ``int`` takes) out of the float arithmetic.
 MAX_CAMERA_SIDE = 2**31 - 1
 

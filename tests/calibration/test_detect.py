@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from calibration.board import BoardSpec
-from calibration.capture import detect_folder
+from calibration.capture import detect_folder, earlier_size
 from calibration.detect import BoardDetector, fixes_a_pose, grey8
 from calibration.errors import BoardError, CaptureError
 from calibration.render import board_pose_facing, example_rig, render_board
 from tests.exif_images import jpeg_turned
+from tests.odd_images import bmp_beyond_opencv_s_limits
 
 BOARD = BoardSpec(squares_x=7, squares_y=6, square_m=0.12, marker_m=0.09)  # an even number of rows
 
@@ -72,6 +73,16 @@ def test_a_still_tagged_to_be_turned_is_calibrated_as_stored(camera, tmp_path):
     view = views["left"]["000"]
     assert view.image_size == (camera.width, camera.height)
     assert _rms(view, truth) < 0.5
+
+
+def test_a_view_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unreadable(tmp_path):
+    # cv2.imread raises for it rather than failing: the solve stopped with a cv2.error naming no file
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        (tmp_path / cam / "000.bmp").write_bytes(bmp_beyond_opencv_s_limits())
+    with pytest.raises(CaptureError, match="000.bmp: not a readable image"):
+        detect_folder(BOARD, tmp_path)
+    assert earlier_size(tmp_path / "left") is None  # ghcal capture --append: an unreadable one is the solve's to name
 
 
 @pytest.mark.parametrize("convert", [

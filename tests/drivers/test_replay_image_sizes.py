@@ -24,6 +24,7 @@ from drivers.backends.recording_format import (
 )
 from drivers.sim.placement import RigPlacement
 from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned
+from tests.odd_images import bmp_beyond_opencv_s_limits
 
 WIDTH, HEIGHT = 40, 30
 FRAMES_A_CAMERA = 50
@@ -263,9 +264,7 @@ def test_a_bmp_cut_short_or_of_a_layout_opencv_does_not_read_has_no_header_size(
 def beyond_opencv_s_limits(image_format: str) -> bytes:
     """A 40x30 image whose header says it is 2**21 wide (OpenCV's limit is 2**20), its PNG IHDR's CRC redone."""
     if image_format == "bmp":
-        data = bytearray(bmp(np.zeros((30, 40, 3), np.uint8)))
-        struct.pack_into("<i", data, 18, 1 << 21)
-        return bytes(data)
+        return bmp_beyond_opencv_s_limits()
     data = bytearray(encode_image(np.zeros((30, 40, 3), np.uint8), "png", 90))
     struct.pack_into(">I", data, 16, 1 << 21)
     struct.pack_into(">I", data, 29, zlib.crc32(data[12:29]))

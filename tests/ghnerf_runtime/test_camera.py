@@ -133,6 +133,7 @@ def test_cropped_and_resized_are_consistent():
         (dict(height=float("nan")), "image size"),  # was a bare ValueError of int()
         (dict(width="640"), "image size"),
         (dict(width=np.True_), "image size"),  # was a width of 1 (np.True_ is no bool to isinstance)
+        (dict(height=np.complex128(480)), "image size"),  # was a height of 480, its imaginary part dropped
         (dict(height=10**400), "image size"),  # was a bare OverflowError, then taken as a size
         (dict(width=2**31), r"\[1, 2147483647\]"),  # OpenCV's sizes are C ints
         (dict(name=""), "name"),
@@ -404,3 +405,16 @@ def test_undistorted_pixels_are_exact_at_any_focal_length_or_refused(dist):
     assert ok.mean() > 0.4  # the folding lens loses its corners, the others nothing
     assert np.isnan(xy[~ok]).all() and cam.within_lens(xy[ok]).all()
     assert np.abs(cam.normalized_to_pixels(xy[ok]) - pixels[ok]).max() < 1.5e-4
+
+
+def test_the_camera_size_bound_names_the_rig_file_bound_that_is_there_and_within_it():
+    # the comment beside MAX_CAMERA_SIDE named rig_file.MAX_CAMERA_SIDE, which does not exist (MAX_IMAGE_SIDE does)
+    import inspect
+    import re
+
+    from ghnerf_runtime import rig_file
+    from ghnerf_runtime.geometry import camera as camera_module
+
+    named = re.findall(r"``rig_file\.(\w+)``", inspect.getsource(camera_module))
+    assert named and all(hasattr(rig_file, name) for name in named), named
+    assert rig_file.MAX_IMAGE_SIDE <= camera_module.MAX_CAMERA_SIDE  # what a rig file holds, a Camera takes

@@ -17,6 +17,7 @@ from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.rig_file import load_rig
 from tests.exif_images import jpeg_turned
 from tests.rotated_videos import phone_take
+from tests.odd_images import bmp_beyond_opencv_s_limits
 from tests.ghnerf_runtime.test_session import tiny_model_dir  # noqa: F401  (session fixture)
 
 simdata = pytest.importorskip("ghnerf_runtime.cli.simdata")
@@ -133,6 +134,14 @@ def test_a_video_turned_by_its_metadata_is_read_as_stored(tmp_path):
     assert len(pairs) == len(stored)
     for (first, second), frame in zip(pairs, stored):
         assert np.array_equal(first, frame) and np.array_equal(second, frame)
+
+
+def test_an_image_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unreadable(tmp_path):
+    # cv2.imread raises for it rather than failing: ghnerf-run stopped with a cv2.error traceback
+    path = tmp_path / "huge.bmp"
+    path.write_bytes(bmp_beyond_opencv_s_limits())
+    with pytest.raises(cli_run.UsageError, match=f"{re.escape(str(path))}: cannot read the image"):
+        cli_run._read_image(str(path))
 
 
 def test_a_missing_or_unreadable_image_is_named_without_opencv_s_warning(tmp_path, capfd):

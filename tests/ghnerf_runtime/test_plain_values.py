@@ -83,7 +83,7 @@ def test_numbers_without_a_fraction_come_back_as_python_ints(value, whole):
 
 
 @pytest.mark.parametrize("value", [True, np.True_, 640.5, math.nan, math.inf, "640", b"640", np.str_("640"), None,
-                                   1j])
+                                   1j, 640 + 0j, np.complex128(640), np.complex64(8), np.array(640 + 0j)])
 def test_true_false_fractions_non_finite_numbers_and_text_are_not_whole_valued(value):
     assert whole_valued_or_none(value) is None
 

@@ -550,3 +550,38 @@ def test_the_convert_command_names_a_missing_file_or_folder(tmp_path, subject, c
     said = _convert_fails(caplog, root, *args[:-1], "0,9")
     assert "ZjuConfig.view_sets: camera 9 does not exist (4 cameras in" in said
     assert not (out / "dataset.json").exists()  # nothing converted
+
+
+@pytest.mark.parametrize("orientation", [3, 6])
+def test_an_image_tagged_to_be_turned_is_read_as_stored_as_its_mask_and_calibration_are(tmp_path, subject,
+                                                                                          orientation):
+    # OpenCV turned it by its EXIF orientation for IMREAD_COLOR while its mask (IMREAD_UNCHANGED) and annots' K
+    # stayed on the stored pixel grid: half a turn (3) kept the size, the person upside down against both
+    import cv2
+
+    from tests.exif_images import jpeg_turned
+
+    _, cams, frames = subject
+    root = write_zju_format(tmp_path / "s", cams[:2], [ZjuFrame(f.images[:2], f.masks[:2], f.kpts2d[:2], f.joints_3d)
+                                                        for f in frames[:1]])
+    seq = ZjuSequence(root)
+    path = seq.image_path(0, 0)
+    stored = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    path.write_bytes(jpeg_turned(path.read_bytes(), orientation))
+    assert not np.array_equal(cv2.imread(str(path), cv2.IMREAD_COLOR), stored)  # OpenCV does turn it by default
+    assert np.array_equal(seq.read_image(0, 0), stored)
+
+
+def test_an_image_or_mask_whose_header_is_beyond_opencv_s_size_limits_is_named(tmp_path, subject):
+    # cv2.imread raises for it rather than failing: a conversion stopped with a cv2.error naming no file
+    from tests.odd_images import bmp_beyond_opencv_s_limits
+
+    _, cams, frames = subject
+    root = write_zju_format(tmp_path / "s", cams[:2], [ZjuFrame(frames[0].images[:2], frames[0].masks[:2])],
+                            image_ext=".png")
+    seq = ZjuSequence(root)
+    for path, read in ((seq.image_path(0, 0), seq.read_image), (seq.mask_path(0, 0), seq.read_mask)):
+        path.write_bytes(bmp_beyond_opencv_s_limits())
+        with pytest.raises(DatasetError, match="unreadable") as err:
+            read(0, 0)
+        assert err.value.path == str(path)

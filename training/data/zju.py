@@ -47,6 +47,7 @@ from ghnerf_runtime.body25 import NUM_JOINTS
 from ghnerf_runtime.geometry import Camera
 from ghnerf_runtime.geometry.camera import DIST_LENGTHS
 from ghnerf_runtime.geometry.rig import MIN_BASELINE_M
+from ghnerf_runtime.image_files import read_image_or_none
 from training.data.errors import DatasetError
 
 log = logging.getLogger(__name__)
@@ -230,9 +231,11 @@ class ZjuSequence:
         return path
 
     def read_image(self, frame: int, cam: int) -> np.ndarray:
-        """``(H, W, 3)`` uint8 **BGR** (as OpenCV reads it)."""
+        """``(H, W, 3)`` uint8 **BGR** (as OpenCV reads it), its pixels as stored."""
         path = self.image_path(frame, cam)
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        # never turned by an EXIF orientation tag: the annots' calibration and the mask (IMREAD_UNCHANGED) are of
+        # the stored pixel grid, as ghcal's, ghnerf-run's and replay://'s reads are (session 61)
+        image = read_image_or_none(path, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
         if image is None:
             raise DatasetError(path, "missing or unreadable image")
         return image
@@ -241,7 +244,7 @@ class ZjuSequence:
         """``(H, W)`` bool, True where the mask file is non-zero (its colour channels: a re-saved RGBA mask's
         opaque alpha would make it all person)."""
         path = self.mask_path(frame, cam)
-        mask = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        mask = read_image_or_none(path, cv2.IMREAD_UNCHANGED)
         if mask is None:
             raise DatasetError(path, "missing or unreadable mask")
         return (mask if mask.ndim == 2 else mask[..., :3].max(axis=-1)) != 0
