@@ -166,11 +166,9 @@ def list_images(folder: Path) -> dict[str, Path]:
     return images
 
 
-#: How a board image is read: grey at the file's own depth, as stored. OpenCV turns an image by its EXIF orientation
-#: for every flag but IMREAD_UNCHANGED, so a phone's still tagged "turn a quarter" was calibrated turned while
-#: earlier_size (IMREAD_UNCHANGED) and replay:// (drivers/backends/recording_format.py) take it as stored: the
-#: calibration is of the sensor's pixel grid, which the live cameras deliver.
-READ_GREY = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_IGNORE_ORIENTATION
+#: How a board image is read: grey at the file's own depth, as stored (image_files.read_image_or_none: a phone's
+#: still tagged "turn a quarter" was calibrated turned while earlier_size and replay:// took it as stored).
+READ_GREY = cv2.IMREAD_ANYDEPTH
 
 
 def detect_folder(board: BoardSpec, root: str | os.PathLike, cameras: Iterable[str] | None = None) \

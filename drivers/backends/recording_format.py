@@ -30,6 +30,7 @@ from drivers.errors import RigInitializationError, RigOperationError
 from drivers.frames import CameraTruth, Frame
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
+from ghnerf_runtime.image_files import AS_STORED
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
 FORMAT = "ghnerf-rig-recording"
@@ -298,13 +299,10 @@ def encode_image(image: np.ndarray, image_format: str, jpeg_quality: int) -> byt
     return buf.tobytes()
 
 
-#: How a recorded image is decoded: 8-bit BGR, its pixels as stored. The EXIF orientation (a phone's or camera's
-#: display hint, set per shot from its gravity sensor) is ignored on purpose: the rig's calibration describes the
-#: sensor's pixel grid, the frames the live backends and the recorder deliver. Turned by its tag, a take from a
-#: phone held upright decoded every frame turned against its calibration (refused at open for its size), a tag
-#: of 3 (half a turn) kept the size and played upside down against the intrinsics (wrong joints, no error), and a
-#: phone turned mid-take changed size mid-take. It also makes the header's size the decoded size (header_size).
-_DECODE_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION
+#: How a recorded image is decoded: 8-bit BGR, its pixels as stored, its EXIF orientation ignored on purpose
+#: (ghnerf_runtime.image_files says why: the rig's calibration is of the sensor's pixel grid). It also makes the
+#: header's size the decoded size (header_size).
+_DECODE_FLAGS = cv2.IMREAD_COLOR | AS_STORED
 
 
 def load_image(path: Path) -> np.ndarray:

@@ -176,9 +176,7 @@ def _read_image(path: str) -> np.ndarray:
         raise UsageError(f"{path}: no such file")
     if os.path.isdir(path):
         raise UsageError(f"{path}: a folder, not an image")
-    # as stored, never turned by an EXIF orientation tag: the rig's calibration is of the sensor's pixel grid (so is
-    # ghcal's and replay://'s reading of the same files)
-    img = read_image_or_none(path, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    img = read_image_or_none(path, cv2.IMREAD_COLOR)  # as stored, whatever its EXIF orientation (image_files)
     if img is None:
         raise UsageError(f"{path}: cannot read the image (not a format OpenCV reads, or unreadable)")
     return img

@@ -233,9 +233,9 @@ class ZjuSequence:
     def read_image(self, frame: int, cam: int) -> np.ndarray:
         """``(H, W, 3)`` uint8 **BGR** (as OpenCV reads it), its pixels as stored."""
         path = self.image_path(frame, cam)
-        # never turned by an EXIF orientation tag: the annots' calibration and the mask (IMREAD_UNCHANGED) are of
-        # the stored pixel grid, as ghcal's, ghnerf-run's and replay://'s reads are (session 61)
-        image = read_image_or_none(path, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+        # as stored, whatever its EXIF orientation (image_files): the annots' calibration and the mask are of the
+        # stored pixel grid
+        image = read_image_or_none(path, cv2.IMREAD_COLOR)
         if image is None:
             raise DatasetError(path, "missing or unreadable image")
         return image
