@@ -124,6 +124,49 @@ def _mean_heading(P: np.ndarray) -> np.ndarray:
     return np.where(n > 1e-6, d / np.maximum(n, 1e-12), [0.0, 0.0, 1.0])
 
 
+@dataclass(frozen=True)
+class _PriorCameras:
+    """What :func:`prior_inputs` derives from the ``(N, 2, 3, 4)`` crop cameras alone (read-only arrays): the camera
+    centres ``(N, 2, 3)`` and their midpoints ``(N, 3)``, the cameras' mean heading ``(N, 3)``, the inverses of the
+    left 3x3 blocks ``(N, 2, 3, 3)`` and the sign of their determinants ``(N, 2, 1, 1)`` (a ray's way to the scene)."""
+
+    centres: np.ndarray
+    mid: np.ndarray
+    heading: np.ndarray
+    inverse: np.ndarray
+    towards_scene: np.ndarray
+
+
+#: The last few camera batches' terms, by their matrices' bytes: on the device one pair's crop cameras, which a
+#: tracked crop keeps for many pairs. Cleared when full.
+_PRIOR_CAMERAS: dict[bytes, _PriorCameras] = {}
+_PRIOR_CAMERAS_KEPT = 8
+
+
+def _prior_cameras(P: np.ndarray) -> _PriorCameras:
+    """The camera terms of float64 ``(N, 2, 3, 4)`` ``P``, from the cache when the same matrices came before
+    (the shape is in the key: the bytes of other batches may be alike)."""
+    key = P.shape, P.tobytes()
+    cams = _PRIOR_CAMERAS.get(key)
+    if cams is None:
+        cams = _new_prior_cameras(P)
+        if len(_PRIOR_CAMERAS) >= _PRIOR_CAMERAS_KEPT:
+            _PRIOR_CAMERAS.clear()  # (atomic: another thread building inputs meanwhile sees a whole dict)
+        _PRIOR_CAMERAS[key] = cams
+    return cams
+
+
+def _new_prior_cameras(P: np.ndarray) -> _PriorCameras:
+    """:func:`_prior_cameras` computed (the operations :func:`prior_inputs` ran on every call)."""
+    P = P.copy()  # (the caller's array may change later; the key holds these matrices)
+    C = _centres(P)
+    M = P[..., :3]
+    cams = _PriorCameras(C, C.mean(1), _mean_heading(P), np.linalg.inv(M), np.sign(np.linalg.det(M))[..., None, None])
+    for a in (cams.centres, cams.mid, cams.heading, cams.inverse, cams.towards_scene):
+        a.setflags(write=False)  # shared by every later call with these matrices
+    return cams
+
+
 def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray, *,
                  max_joint_from_root_m: float = MAX_JOINT_FROM_ROOT_M) -> PriorInputs:
     """The prior's inputs from decoded 2D peaks.
@@ -159,9 +202,9 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     ok = ok & dec.all(1) & np.isfinite(X).all(-1)
     rep, ang = np.nan_to_num(rep), np.nan_to_num(ang)
 
-    C = _centres(P)  # (N, 2, 3)
-    mid = C.mean(1)
-    root = mid + _DEFAULT_DISTANCE_M * _mean_heading(P)  # no joint triangulated: a guess ahead of the cameras
+    cams = _prior_cameras(P)
+    C, mid = cams.centres, cams.mid
+    root = mid + _DEFAULT_DISTANCE_M * cams.heading  # no joint triangulated: a guess ahead of the cameras
     for i in range(N):
         good = ok[i] & (rep[i].max(-1) < _ROOT_MAX_REPROJECTION_PX)
         pick = good if good.sum() >= 3 else ok[i]
@@ -186,10 +229,9 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     frame = CanonicalFrame(R, origin)
 
     Xc = np.where(ok[..., None], frame.to_canonical(X), 0.0)
-    M = P[..., :3]
     uvh = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], -1)
-    rays = np.einsum("nvij,nvkj->nvki", np.linalg.inv(M), uvh)
-    rays = rays * np.sign(np.linalg.det(M))[..., None, None]  # towards the scene whatever P's scale
+    rays = np.einsum("nvij,nvkj->nvki", cams.inverse, uvh)
+    rays = rays * cams.towards_scene  # towards the scene whatever P's scale
     rays /= np.maximum(np.linalg.norm(rays, axis=-1, keepdims=True), 1e-12)
     rays = np.einsum("nij,nvkj->nvki", R, rays) * dec[..., None]
     features = np.concatenate([Xc, ok[..., None], conf.transpose(0, 2, 1),

@@ -625,6 +625,63 @@ def triangulate_robust(
     return result
 
 
+@dataclass(frozen=True)
+class _TwoViewCameras:
+    """What :func:`triangulate_two_views` derives from its two ``(2, 3, 4)`` projection matrices alone (read-only
+    arrays): their left blocks ``M``, determinants and inverses, the conditioning similarities ``T``, the
+    conditioned unit-norm matrices ``Pn``, whether the centres are distinct and each view's depth scale."""
+
+    M: np.ndarray
+    det: np.ndarray
+    Minv: np.ndarray
+    T: np.ndarray
+    Pn: np.ndarray
+    distinct: bool
+    depth_scale: np.ndarray  # (2, 1): sign(det) / |m3|, a homogeneous third coordinate -> depth
+
+
+#: The last few crop cameras' terms, by their matrices' bytes: the estimator triangulates with one pair of crop
+#: cameras twice a pair (the joints, then the skeleton prior's inputs), and a tracked crop keeps its cameras for
+#: many pairs. Cleared when full (a few dozen bytes of key and ~1 kB of arrays an entry).
+_TWO_VIEW_CAMERAS: dict[bytes, _TwoViewCameras] = {}
+_TWO_VIEW_CAMERAS_KEPT = 8
+
+
+def _two_view_cameras(P: np.ndarray) -> _TwoViewCameras:
+    """The camera terms of float64 ``(2, 3, 4)`` ``P`` (from the cache when the same matrices came before).
+
+    Raises:
+        GeometryError: a non-finite matrix or a singular left 3x3 block (checked on every call: never cached).
+    """
+    key = P.tobytes()
+    cams = _TWO_VIEW_CAMERAS.get(key)
+    if cams is None:
+        cams = _new_two_view_cameras(P)
+        if len(_TWO_VIEW_CAMERAS) >= _TWO_VIEW_CAMERAS_KEPT:
+            _TWO_VIEW_CAMERAS.clear()  # (atomic: another thread triangulating meanwhile sees a whole dict)
+        _TWO_VIEW_CAMERAS[key] = cams
+    return cams
+
+
+def _new_two_view_cameras(P: np.ndarray) -> _TwoViewCameras:
+    """:func:`_two_view_cameras` computed (the same operations :func:`triangulate_two_views` ran every call)."""
+    P = P.copy()  # the key's matrices, whatever the caller does with its array later
+    M = P[:, :, :3]  # (a view, as the solver always took it: the same memory layout, the same matmul results)
+    det = np.linalg.det(M)
+    if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
+        raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
+    with np.errstate(all="ignore"):
+        T = _conditioning_similarity(P)
+        Pn = T @ P
+        Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
+        Minv = np.linalg.inv(M)
+        distinct = bool(_distinct_centres(P, Minv)[0, 1])
+        depth_scale = (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
+    for a in (P, M, det, Minv, T, Pn, depth_scale):
+        a.setflags(write=False)  # shared by every later call with these matrices
+    return _TwoViewCameras(M, det, Minv, T, Pn, distinct, depth_scale)
+
+
 def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | None = None,
                           min_ray_angle_deg: float = 0.1) -> TriangulationResult:
     """:func:`triangulate_dlt` (and the final check of :func:`triangulate_robust`) for the common
@@ -654,20 +711,15 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
     if uv.ndim != 3 or uv.shape[0] != 2 or uv.shape[2] != 2 or w.shape != uv.shape[:2] or P.shape != (2, 3, 4):
         raise ShapeError(f"uv (2, J, 2), P (2, 3, 4) and weights (2, J) expected, got {uv.shape}, {P.shape}, "
                          f"{w.shape}")
-    M = P[:, :, :3]
-    det = np.linalg.det(M)
-    if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
-        raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
+    cams = _two_view_cameras(P)
+    M, det, T, Pn, Minv = cams.M, cams.det, cams.T, cams.Pn, cams.Minv
     J = uv.shape[1]
     with np.errstate(all="ignore"):
         used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
         w, used = _relative_weights(np.where(used, w, 0.0), used, axis=0)  # as _prepare
         x = np.where(used[..., None], uv, 0.0)
         # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
-        T = _conditioning_similarity(P)
         xn = x * T[:, 0, 0, None, None] + T[:, None, :2, 2]
-        Pn = T @ P
-        Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
         rows = xn[..., :, None] * Pn[:, None, None, 2, :] - Pn[:, None, :2, :]  # (2, J, 2, 4)
         top = w.max(axis=0)  # each joint's weights over their largest, as _dlt_solve
         A = (rows * np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)[..., None, None]).transpose(
@@ -680,7 +732,6 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
 
         # Ray angle (the conditioning figure) between the two viewing rays' lines: atan2(|a x b|, |a . b|)
         # of unit directions (unit, so that absurd pixels overflow to 0 degrees as in _rays).
-        Minv = np.linalg.inv(M)
         d = (x @ Minv[:, :, :2].transpose(0, 2, 1)) + Minv[:, None, :, 2]  # (2, J, 3)
         d /= np.sqrt(np.square(d).sum(axis=-1, keepdims=True))
         a, b = d[0], d[1]
@@ -692,10 +743,10 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
 
         # as _finish: rays on one line to rounding, or from one centre, give no depth (valid with an angle of 0)
         ok = (finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
-              & (angle >= MIN_RAY_ANGLE_FLOOR_DEG) & _distinct_centres(P, Minv)[0, 1])
+              & (angle >= MIN_RAY_ANGLE_FLOOR_DEG) & cams.distinct)
         safe = np.where(ok[:, None], points, 0.0)
         ph = safe @ M.transpose(0, 2, 1) + P[:, None, :, 3]  # (2, J, 3)
-        depth = ph[..., 2] * (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
+        depth = ph[..., 2] * cams.depth_scale
         ahead = depth > MIN_DEPTH
         ok &= ~np.any(used & ~ahead, axis=0)
         err = np.sqrt(np.square(ph[..., :2] / ph[..., 2:3] - uv).sum(axis=-1))

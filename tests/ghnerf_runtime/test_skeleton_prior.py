@@ -801,3 +801,39 @@ def test_the_out_of_range_measure_reads_the_prior_it_is_given(tiny_prior, tmp_pa
     assert len(rows) == 4 and all("mm" in r for r in rows)
     code, out = run("--prior", str(tiny_prior.path), "--held-out", str(tmp_path))
     assert code == 2 and "--held-out runs the model folder's own prior" in out.err
+
+
+def test_inputs_derive_a_pair_of_cameras_once(monkeypatch):
+    """The crop cameras' centres, heading and inverses are computed once for the same matrices (a tracked crop
+    keeps its cameras for many pairs), and the inputs built with them cached are the same to the bit."""
+    from ghnerf_runtime import skeleton_prior
+
+    P = np.stack(_rig(20.0, (0.3, -0.2)))[None]
+    rng = np.random.default_rng(1)
+    cases = []
+    for seed in range(3):
+        uv, conf, valid = _observe(list(P[0]), _skeleton(seed))
+        valid = valid & (rng.random(valid.shape) > 0.2)
+        cases.append((uv[None] + rng.normal(0, 1.0, uv.shape), conf[None] * rng.uniform(0.3, 1.0, conf.shape),
+                      valid[None]))
+    fresh = []
+    for uv, conf, valid in cases:
+        skeleton_prior._PRIOR_CAMERAS.clear()
+        fresh.append(prior_inputs(uv, conf, valid, P))
+    calls = []
+    real = skeleton_prior._centres
+    monkeypatch.setattr(skeleton_prior, "_centres", lambda p: calls.append(1) or real(p))
+    skeleton_prior._PRIOR_CAMERAS.clear()
+    for (uv, conf, valid), want in zip(cases, fresh):
+        got = prior_inputs(uv, conf, valid, P.copy())
+        for name in ("joint_features", "context", "triangulated"):
+            assert np.array_equal(getattr(got, name), getattr(want, name)), name
+        assert np.array_equal(got.frame.rotation, want.frame.rotation)
+        assert np.array_equal(got.frame.origin, want.frame.origin)
+    assert len(calls) == 1
+    moved = P.copy()
+    moved[..., 3] += 0.1  # the caller's array changed in place: other cameras
+    uv, conf, valid = cases[0]
+    got = prior_inputs(uv, conf, valid, moved)
+    skeleton_prior._PRIOR_CAMERAS.clear()
+    assert np.array_equal(got.joint_features, prior_inputs(uv, conf, valid, moved).joint_features)

@@ -624,3 +624,50 @@ def test_extreme_intrinsics_keep_float64_precision_for_float32_or_int_pixels(fx,
         pixel_rounding = np.abs(uv.astype(np.float32).astype(np.float64) - uv).max()
         bound = 10 * pixel_rounding * 3.0 / (fx * np.sin(np.radians(single.ray_angle_deg.min()))) + 1e-12
         assert np.abs(single.points - points).max() < bound
+
+
+def _solve_uncached(uv, P, w, **kwargs) -> TriangulationResult:
+    """triangulate_two_views with its camera terms computed afresh (the cache emptied before the call)."""
+    from ghnerf_runtime.geometry import triangulation
+
+    triangulation._TWO_VIEW_CAMERAS.clear()
+    return triangulate_two_views(uv, P, w, **kwargs)
+
+
+def test_two_view_solver_derives_a_pair_of_cameras_once(monkeypatch):
+    """The estimator triangulates one pair of crop cameras twice a pair (the joints, the prior's inputs), and a
+    tracked crop keeps its cameras: their terms (inverses, conditioning, centres) are computed once, and the
+    answers with them cached are the same to the bit, on other points and weights too."""
+    from ghnerf_runtime.geometry import triangulation
+
+    cams, _, uv = generate_scene(2, seed=3)
+    P = np.stack([c.P for c in cams])
+    rng = np.random.default_rng(0)
+    cases = [(uv + rng.normal(0, s, uv.shape), rng.uniform(0.05, 1.0, (2, 25))) for s in (0.0, 0.5, 4.0)]
+    fresh = [_solve_uncached(u, P, w, max_reprojection_error=3.0) for u, w in cases]
+    calls = []
+    real = triangulation._conditioning_similarity
+    monkeypatch.setattr(triangulation, "_conditioning_similarity", lambda p: calls.append(1) or real(p))
+    triangulation._TWO_VIEW_CAMERAS.clear()
+    for (u, w), want in zip(cases, fresh):
+        got = triangulate_two_views(u, P.copy(), w, max_reprojection_error=3.0)  # other arrays, the same matrices
+        for name in _FIELDS:
+            assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    assert len(calls) == 1
+
+
+def test_two_view_solver_cache_follows_the_matrices_not_the_array():
+    """A caller's array changed in place after a call is other cameras; a singular pair is refused every time."""
+    cams, points, uv = generate_scene(2, seed=4)
+    P = np.stack([c.P for c in cams])
+    triangulate_two_views(uv, P, np.ones((2, 25)))
+    P[:, 0, 3] += 60.0  # both cameras moved 0.1 m along their x axis (f = 600 px)
+    moved = triangulate_two_views(uv, P, np.ones((2, 25)))
+    want = _solve_uncached(uv, P, np.ones((2, 25)))
+    for name in _FIELDS:
+        assert np.array_equal(getattr(moved, name), getattr(want, name)), name
+    singular = P.copy()
+    singular[1, :, :3] = 0.0
+    for _ in range(2):
+        with pytest.raises(GeometryError, match="regular"):
+            triangulate_two_views(uv, singular, np.ones((2, 25)))
