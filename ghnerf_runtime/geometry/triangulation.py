@@ -682,6 +682,61 @@ def _new_two_view_cameras(P: np.ndarray) -> _TwoViewCameras:
     return _TwoViewCameras(M, det, Minv, T, Pn, distinct, depth_scale)
 
 
+#: The last solve's inputs and answer: the estimator solves one pair's peaks twice with the same weights (the
+#: joints, then the skeleton prior's inputs), with other ray-angle thresholds, which only the checks after it read.
+_LAST_TWO_VIEW_SOLUTION: tuple = (None, None)
+
+
+def _two_view_solution(uv: np.ndarray, w: np.ndarray, cams: _TwoViewCameras
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The DLT points ``(J, 3)``, whether finite ``(J,)``, the ray angles ``(J,)`` (0 where a view is not used)
+    and the views used ``(2, J)`` of :func:`triangulate_two_views` (read-only arrays; the last inputs' answer
+    is reused). Call under ``np.errstate(all="ignore")``."""
+    global _LAST_TWO_VIEW_SOLUTION
+    key = (uv.shape, uv.tobytes(), w.tobytes())
+    last_key, last = _LAST_TWO_VIEW_SOLUTION  # (one read: another thread may replace the pair meanwhile)
+    if last_key == key and last[0] is cams:  # (the same object: the same matrices' bytes, _two_view_cameras)
+        return last[1]
+    solution = _new_two_view_solution(uv, w, cams)
+    for a in solution:
+        a.setflags(write=False)
+    _LAST_TWO_VIEW_SOLUTION = (key, (cams, solution))
+    return solution
+
+
+def _new_two_view_solution(uv: np.ndarray, w: np.ndarray, cams: _TwoViewCameras
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_two_view_solution` computed."""
+    T, Pn, Minv = cams.T, cams.Pn, cams.Minv
+    J = uv.shape[1]
+    used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
+    w, used = _relative_weights(np.where(used, w, 0.0), used, axis=0)  # as _prepare
+    x = np.where(used[..., None], uv, 0.0)
+    # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
+    xn = x * T[:, 0, 0, None, None] + T[:, None, :2, 2]
+    rows = xn[..., :, None] * Pn[:, None, None, 2, :] - Pn[:, None, :2, :]  # (2, J, 2, 4)
+    top = w.max(axis=0)  # each joint's weights over their largest, as _dlt_solve
+    A = (rows * np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)[..., None, None]).transpose(
+        1, 0, 2, 3).reshape(J, 4, 4)
+    solvable = np.isfinite(A).all(axis=(-2, -1))  # (LAPACK's SVD can loop forever on an inf)
+    A = np.where(solvable[:, None, None], A, 0.0)
+    X = np.linalg.svd(A)[2][:, -1, :]
+    finite = solvable & (np.abs(X[:, 3]) > 1e-12 * np.sqrt(np.square(X[:, :3]).sum(axis=-1)))
+    points = X[:, :3] / np.where(finite, X[:, 3], 1.0)[:, None]
+
+    # Ray angle (the conditioning figure) between the two viewing rays' lines: atan2(|a x b|, |a . b|)
+    # of unit directions (unit, so that absurd pixels overflow to 0 degrees as in _rays).
+    d = (x @ Minv[:, :, :2].transpose(0, 2, 1)) + Minv[:, None, :, 2]  # (2, J, 3)
+    d /= np.sqrt(np.square(d).sum(axis=-1, keepdims=True))
+    a, b = d[0], d[1]
+    cross = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                      a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=-1)
+    angle = np.degrees(np.arctan2(np.sqrt(np.square(cross).sum(axis=-1)), np.abs((a * b).sum(axis=-1))))
+    both = used[0] & used[1]
+    angle = np.where(both & np.isfinite(angle), angle, 0.0)
+    return points, finite, angle, used
+
+
 def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | None = None,
                           min_ray_angle_deg: float = 0.1) -> TriangulationResult:
     """:func:`triangulate_dlt` (and the final check of :func:`triangulate_robust`) for the common
@@ -712,34 +767,10 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
         raise ShapeError(f"uv (2, J, 2), P (2, 3, 4) and weights (2, J) expected, got {uv.shape}, {P.shape}, "
                          f"{w.shape}")
     cams = _two_view_cameras(P)
-    M, det, T, Pn, Minv = cams.M, cams.det, cams.T, cams.Pn, cams.Minv
-    J = uv.shape[1]
     with np.errstate(all="ignore"):
-        used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
-        w, used = _relative_weights(np.where(used, w, 0.0), used, axis=0)  # as _prepare
-        x = np.where(used[..., None], uv, 0.0)
-        # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
-        xn = x * T[:, 0, 0, None, None] + T[:, None, :2, 2]
-        rows = xn[..., :, None] * Pn[:, None, None, 2, :] - Pn[:, None, :2, :]  # (2, J, 2, 4)
-        top = w.max(axis=0)  # each joint's weights over their largest, as _dlt_solve
-        A = (rows * np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)[..., None, None]).transpose(
-            1, 0, 2, 3).reshape(J, 4, 4)
-        solvable = np.isfinite(A).all(axis=(-2, -1))  # (LAPACK's SVD can loop forever on an inf)
-        A = np.where(solvable[:, None, None], A, 0.0)
-        X = np.linalg.svd(A)[2][:, -1, :]
-        finite = solvable & (np.abs(X[:, 3]) > 1e-12 * np.sqrt(np.square(X[:, :3]).sum(axis=-1)))
-        points = X[:, :3] / np.where(finite, X[:, 3], 1.0)[:, None]
-
-        # Ray angle (the conditioning figure) between the two viewing rays' lines: atan2(|a x b|, |a . b|)
-        # of unit directions (unit, so that absurd pixels overflow to 0 degrees as in _rays).
-        d = (x @ Minv[:, :, :2].transpose(0, 2, 1)) + Minv[:, None, :, 2]  # (2, J, 3)
-        d /= np.sqrt(np.square(d).sum(axis=-1, keepdims=True))
-        a, b = d[0], d[1]
-        cross = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                          a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=-1)
-        angle = np.degrees(np.arctan2(np.sqrt(np.square(cross).sum(axis=-1)), np.abs((a * b).sum(axis=-1))))
+        points, finite, angle, used = _two_view_solution(uv, w, cams)
         both = used[0] & used[1]
-        angle = np.where(both & np.isfinite(angle), angle, 0.0)
+        M = cams.M
 
         # as _finish: rays on one line to rounding, or from one centre, give no depth (valid with an angle of 0)
         ok = (finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
@@ -758,8 +789,8 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
     return TriangulationResult(
         points=np.where(ok[:, None], points, 0.0),
         reprojection_error=err.T,
-        ray_angle_deg=angle,
+        ray_angle_deg=angle.copy(),  # (the solution's arrays are shared with the next call on these inputs)
         num_views=used.sum(axis=0).astype(np.int64),
         valid=ok,
-        used=used.T,
+        used=used.copy().T,
     )

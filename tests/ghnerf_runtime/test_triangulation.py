@@ -627,10 +627,11 @@ def test_extreme_intrinsics_keep_float64_precision_for_float32_or_int_pixels(fx,
 
 
 def _solve_uncached(uv, P, w, **kwargs) -> TriangulationResult:
-    """triangulate_two_views with its camera terms computed afresh (the cache emptied before the call)."""
+    """triangulate_two_views with its camera terms and solve computed afresh (the caches emptied before the call)."""
     from ghnerf_runtime.geometry import triangulation
 
     triangulation._TWO_VIEW_CAMERAS.clear()
+    triangulation._LAST_TWO_VIEW_SOLUTION = (None, None)
     return triangulate_two_views(uv, P, w, **kwargs)
 
 
@@ -671,3 +672,36 @@ def test_two_view_solver_cache_follows_the_matrices_not_the_array():
     for _ in range(2):
         with pytest.raises(GeometryError, match="regular"):
             triangulate_two_views(uv, singular, np.ones((2, 25)))
+
+
+def test_two_view_solver_solves_the_same_peaks_once_whatever_the_thresholds(monkeypatch):
+    """The estimator solves one pair's peaks twice with the same weights and other ray-angle thresholds (the
+    joints: joints3d.min_ray_angle_deg; the prior's inputs: the default): the DLT runs once, each call's checks
+    are its own, and each result is its own (writable) arrays, equal to the bit to a fresh solve's."""
+    from ghnerf_runtime.geometry import triangulation
+
+    cams, _, uv = generate_scene(2, seed=5)
+    P = np.stack([c.P for c in cams])
+    uv = uv + np.random.default_rng(2).normal(0, 0.3, uv.shape)
+    w = np.full((2, 25), 0.7)
+    angles = triangulate_two_views(uv, P, w, min_ray_angle_deg=0.0).ray_angle_deg
+    thresholds = (0.0, float(np.median(angles)), float(angles.max()) + 1.0)  # all joints, about half, none
+    calls = []
+    real = np.linalg.svd
+    monkeypatch.setattr(np.linalg, "svd", lambda *a, **k: calls.append(1) or real(*a, **k))
+    fresh = {}
+    for angle in thresholds:
+        triangulation._LAST_TWO_VIEW_SOLUTION = (None, None)
+        fresh[angle] = triangulate_two_views(uv, P, w, min_ray_angle_deg=angle)
+    calls.clear()
+    triangulation._LAST_TWO_VIEW_SOLUTION = (None, None)
+    got = {angle: triangulate_two_views(uv.copy(), P, w.copy(), min_ray_angle_deg=angle) for angle in thresholds}
+    assert len(calls) == 1
+    assert [int(got[a].valid.sum()) for a in thresholds] == [25, 13, 0]  # each call's own threshold
+    for angle, res in got.items():
+        for name in _FIELDS:
+            assert np.array_equal(getattr(res, name), getattr(fresh[angle], name)), (angle, name)
+            getattr(res, name).flags.writeable = True  # (raises on a read-only array)
+    got[thresholds[0]].ray_angle_deg[:] = -1.0  # a caller's change reaches no later answer
+    again = triangulate_two_views(uv, P, w, min_ray_angle_deg=thresholds[1])
+    assert np.array_equal(again.ray_angle_deg, fresh[thresholds[1]].ray_angle_deg)
