@@ -53,6 +53,10 @@ CENTRE_TOLERANCE = 1e-9
 
 __all__ = [
     "TriangulationResult",
+    "TwoViewCameras",
+    "TwoViewSolution",
+    "check_two_views",
+    "solve_two_views",
     "triangulate_dlt",
     "triangulate_midpoint",
     "triangulate_robust",
@@ -625,12 +629,33 @@ def triangulate_robust(
     return result
 
 
-@dataclass(frozen=True)
-class _TwoViewCameras:
-    """What :func:`triangulate_two_views` derives from its two ``(2, 3, 4)`` projection matrices alone (read-only
-    arrays): their left blocks ``M``, determinants and inverses, the conditioning similarities ``T``, the
-    conditioned unit-norm matrices ``Pn``, whether the centres are distinct and each view's depth scale."""
+def _same_bits(kept: np.ndarray, given) -> bool:
+    """Whether ``given`` holds the same float64 values as ``kept`` to the bit (shape included): the test for
+    reusing terms or a solve, where values equal by ``==`` (0.0 and -0.0) may still be other inputs."""
+    given = np.asarray(given, dtype=np.float64)
+    return given.shape == kept.shape and given.tobytes() == kept.tobytes()
 
+
+def _read_only(*arrays: np.ndarray) -> None:
+    """Mark arrays read-only: they are shared by every later call that reuses them."""
+    for a in arrays:
+        a.setflags(write=False)
+
+
+@dataclass(frozen=True, eq=False)
+class TwoViewCameras:
+    """What the two-view solver derives from its two ``(2, 3, 4)`` projection matrices alone (read-only arrays):
+    the matrices ``P`` (a copy), their left blocks ``M``, determinants and inverses, the conditioning
+    similarities ``T``, the conditioned unit-norm matrices ``Pn``, whether the centres are distinct and each
+    view's depth scale.
+
+    Build them with :meth:`from_P` and pass them (``cameras=``) to :func:`solve_two_views` or
+    :func:`triangulate_two_views` to skip recomputing them: the estimator keeps its crop cameras' terms for as
+    long as the crop keeps its cameras (many pairs of a tracked subject). The answers are the same to the bit
+    with them or without.
+    """
+
+    P: np.ndarray
     M: np.ndarray
     det: np.ndarray
     Minv: np.ndarray
@@ -639,74 +664,103 @@ class _TwoViewCameras:
     distinct: bool
     depth_scale: np.ndarray  # (2, 1): sign(det) / |m3|, a homogeneous third coordinate -> depth
 
+    @classmethod
+    def from_P(cls, P) -> "TwoViewCameras":
+        """The terms of ``P`` (the operations :func:`triangulate_two_views` ran on every call before).
 
-#: The last few crop cameras' terms, by their matrices' bytes: the estimator triangulates with one pair of crop
-#: cameras twice a pair (the joints, then the skeleton prior's inputs), and a tracked crop keeps its cameras for
-#: many pairs. Cleared when full (a few dozen bytes of key and ~1 kB of arrays an entry).
-_TWO_VIEW_CAMERAS: dict[bytes, _TwoViewCameras] = {}
-_TWO_VIEW_CAMERAS_KEPT = 8
+        Raises:
+            ShapeError: ``P`` is not ``(2, 3, 4)``. GeometryError: a non-finite matrix or a singular left 3x3 block.
+        """
+        P = np.array(P, dtype=np.float64)  # (a copy: the caller's array may change later; these terms may not)
+        if P.shape != (2, 3, 4):
+            raise ShapeError(f"P (2, 3, 4) expected for two views' terms, got {P.shape}")
+        M = P[:, :, :3]  # (a view, as the solver always took it: the same memory layout, the same matmul results)
+        det = np.linalg.det(M)
+        if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
+            raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
+        with np.errstate(all="ignore"):
+            T = _conditioning_similarity(P)
+            Pn = T @ P
+            Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
+            Minv = np.linalg.inv(M)
+            distinct = bool(_distinct_centres(P, Minv)[0, 1])
+            depth_scale = (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
+        _read_only(P, M, det, Minv, T, Pn, depth_scale)
+        return cls(P, M, det, Minv, T, Pn, distinct, depth_scale)
+
+    def is_for(self, P) -> bool:
+        """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""
+        return _same_bits(self.P, P)
 
 
-def _two_view_cameras(P: np.ndarray) -> _TwoViewCameras:
-    """The camera terms of float64 ``(2, 3, 4)`` ``P`` (from the cache when the same matrices came before).
+@dataclass(frozen=True, eq=False)
+class TwoViewSolution:
+    """One DLT solve of two views' peaks, before any threshold (read-only arrays): the camera terms and the
+    inputs it solved (``uv`` ``(2, J, 2)``, ``weights`` ``(2, J)``, copies), the DLT points ``(J, 3)``, whether
+    each is finite ``(J,)``, the ray angles ``(J,)`` (0 where a view is not used) and the views used ``(2, J)``.
+
+    :func:`check_two_views` applies the thresholds to it: the estimator solves a pair's peaks once and checks
+    the solve for the joints and again for the skeleton prior's inputs, which differ only in their ray-angle
+    threshold (when their weights are the same: :meth:`solves` tells).
+    """
+
+    cameras: TwoViewCameras
+    uv: np.ndarray
+    weights: np.ndarray
+    points: np.ndarray
+    finite: np.ndarray
+    ray_angle_deg: np.ndarray
+    used: np.ndarray
+
+    def solves(self, uv, P, weights) -> bool:
+        """Whether this is the solve of ``uv``, ``P`` and ``weights`` (the same values to the bit)."""
+        return _same_bits(self.uv, uv) and _same_bits(self.weights, weights) and self.cameras.is_for(P)
+
+
+def _two_view_inputs(uv, P, weights) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``uv``, ``P`` and ``weights`` as float64 arrays of the two-view solver's shapes (else ShapeError)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    P = np.asarray(P, dtype=np.float64)
+    if uv.ndim != 3 or uv.shape[0] != 2 or uv.shape[2] != 2 or w.shape != uv.shape[:2] or P.shape != (2, 3, 4):
+        raise ShapeError(f"uv (2, J, 2), P (2, 3, 4) and weights (2, J) expected, got {uv.shape}, {P.shape}, "
+                         f"{w.shape}")
+    return uv, P, w
+
+
+def _terms_for(P: np.ndarray, cameras: TwoViewCameras | None) -> TwoViewCameras:
+    """``cameras`` where given (they must be ``P``'s), else ``P``'s terms computed now."""
+    if cameras is None:
+        return TwoViewCameras.from_P(P)
+    if not cameras.is_for(P):
+        raise GeometryError(f"the two-view camera terms given are those of other matrices than P = {P.tolist()} "
+                            f"(they were computed for {cameras.P.tolist()})")
+    return cameras
+
+
+def solve_two_views(uv, P, weights, *, cameras: TwoViewCameras | None = None) -> TwoViewSolution:
+    """The DLT of :func:`triangulate_two_views` before its thresholds and checks (:func:`check_two_views`).
+
+    Args:
+        uv, P, weights: as :func:`triangulate_two_views`.
+        cameras: ``TwoViewCameras.from_P(P)`` computed earlier (computed here when not given).
 
     Raises:
-        GeometryError: a non-finite matrix or a singular left 3x3 block (checked on every call: never cached).
+        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, or ``cameras`` of other
+        matrices.
     """
-    key = P.tobytes()
-    cams = _TWO_VIEW_CAMERAS.get(key)
-    if cams is None:
-        cams = _new_two_view_cameras(P)
-        if len(_TWO_VIEW_CAMERAS) >= _TWO_VIEW_CAMERAS_KEPT:
-            _TWO_VIEW_CAMERAS.clear()  # (atomic: another thread triangulating meanwhile sees a whole dict)
-        _TWO_VIEW_CAMERAS[key] = cams
-    return cams
-
-
-def _new_two_view_cameras(P: np.ndarray) -> _TwoViewCameras:
-    """:func:`_two_view_cameras` computed (the same operations :func:`triangulate_two_views` ran every call)."""
-    P = P.copy()  # the key's matrices, whatever the caller does with its array later
-    M = P[:, :, :3]  # (a view, as the solver always took it: the same memory layout, the same matmul results)
-    det = np.linalg.det(M)
-    if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
-        raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
+    uv, P, w = _two_view_inputs(uv, P, weights)
+    cams = _terms_for(P, cameras)
     with np.errstate(all="ignore"):
-        T = _conditioning_similarity(P)
-        Pn = T @ P
-        Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
-        Minv = np.linalg.inv(M)
-        distinct = bool(_distinct_centres(P, Minv)[0, 1])
-        depth_scale = (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
-    for a in (P, M, det, Minv, T, Pn, depth_scale):
-        a.setflags(write=False)  # shared by every later call with these matrices
-    return _TwoViewCameras(M, det, Minv, T, Pn, distinct, depth_scale)
+        points, finite, angle, used = _solve_two_views(uv, w, cams)
+    uv, w = uv.copy(), w.copy()  # (the caller's arrays may change later)
+    _read_only(uv, w, points, finite, angle, used)
+    return TwoViewSolution(cams, uv, w, points, finite, angle, used)
 
 
-#: The last solve's inputs and answer: the estimator solves one pair's peaks twice with the same weights (the
-#: joints, then the skeleton prior's inputs), with other ray-angle thresholds, which only the checks after it read.
-_LAST_TWO_VIEW_SOLUTION: tuple = (None, None)
-
-
-def _two_view_solution(uv: np.ndarray, w: np.ndarray, cams: _TwoViewCameras
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The DLT points ``(J, 3)``, whether finite ``(J,)``, the ray angles ``(J,)`` (0 where a view is not used)
-    and the views used ``(2, J)`` of :func:`triangulate_two_views` (read-only arrays; the last inputs' answer
-    is reused). Call under ``np.errstate(all="ignore")``."""
-    global _LAST_TWO_VIEW_SOLUTION
-    key = (uv.shape, uv.tobytes(), w.tobytes())
-    last_key, last = _LAST_TWO_VIEW_SOLUTION  # (one read: another thread may replace the pair meanwhile)
-    if last_key == key and last[0] is cams:  # (the same object: the same matrices' bytes, _two_view_cameras)
-        return last[1]
-    solution = _new_two_view_solution(uv, w, cams)
-    for a in solution:
-        a.setflags(write=False)
-    _LAST_TWO_VIEW_SOLUTION = (key, (cams, solution))
-    return solution
-
-
-def _new_two_view_solution(uv: np.ndarray, w: np.ndarray, cams: _TwoViewCameras
-                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_two_view_solution` computed."""
+def _solve_two_views(uv: np.ndarray, w: np.ndarray, cams: TwoViewCameras
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`solve_two_views`' points, finite, ray angles and views used. Call under ``np.errstate(all="ignore")``."""
     T, Pn, Minv = cams.T, cams.Pn, cams.Minv
     J = uv.shape[1]
     used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
@@ -737,43 +791,22 @@ def _new_two_view_solution(uv: np.ndarray, w: np.ndarray, cams: _TwoViewCameras
     return points, finite, angle, used
 
 
-def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | None = None,
-                          min_ray_angle_deg: float = 0.1) -> TriangulationResult:
-    """:func:`triangulate_dlt` (and the final check of :func:`triangulate_robust`) for the common
-    case of two pinhole views and one frame, in about a third of the numpy calls.
-
-    The estimator triangulates 25 joints in two crop cameras every pair, where the general
-    functions' batch and camera-count handling costs more than the arithmetic. The system,
-    its conditioning, the validity rules and the fill values are the same, so the results
-    equal :func:`triangulate_dlt`'s (``tests/ghnerf_runtime/test_triangulation.py`` checks it).
-
-    Args:
-        uv: ``(2, J, 2)`` undistorted pixels of each view.
-        P: ``(2, 3, 4)`` projection matrices (pinhole: they act on undistorted pixels).
-        weights: ``(2, J)`` confidences; ``<= 0`` or non-finite ignores the observation.
-        max_reprojection_error: if given, a joint whose error exceeds it in a used view is
-            invalid (with two views the culprit cannot be told).
-        min_ray_angle_deg: as :func:`triangulate_dlt`.
+def check_two_views(solution: TwoViewSolution, *, max_reprojection_error: float | None = None,
+                    min_ray_angle_deg: float = 0.1) -> TriangulationResult:
+    """:func:`triangulate_two_views`' answer from its solve (thresholds as there); the result's arrays are its
+    own (writable), whatever the solve shares with other checks.
 
     Raises:
-        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, or a threshold
-        that is not a number in range.
+        GeometryError: a threshold that is not a number in range.
     """
     _check_thresholds(min_ray_angle_deg, max_reprojection_error)
-    uv = np.asarray(uv, dtype=np.float64)
-    w = np.asarray(weights, dtype=np.float64)
-    P = np.asarray(P, dtype=np.float64)
-    if uv.ndim != 3 or uv.shape[0] != 2 or uv.shape[2] != 2 or w.shape != uv.shape[:2] or P.shape != (2, 3, 4):
-        raise ShapeError(f"uv (2, J, 2), P (2, 3, 4) and weights (2, J) expected, got {uv.shape}, {P.shape}, "
-                         f"{w.shape}")
-    cams = _two_view_cameras(P)
+    cams, uv, used = solution.cameras, solution.uv, solution.used
+    points, angle = solution.points, solution.ray_angle_deg
+    P, M = cams.P, cams.M
     with np.errstate(all="ignore"):
-        points, finite, angle, used = _two_view_solution(uv, w, cams)
         both = used[0] & used[1]
-        M = cams.M
-
         # as _finish: rays on one line to rounding, or from one centre, give no depth (valid with an angle of 0)
-        ok = (finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
+        ok = (solution.finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
               & (angle >= MIN_RAY_ANGLE_FLOOR_DEG) & cams.distinct)
         safe = np.where(ok[:, None], points, 0.0)
         ph = safe @ M.transpose(0, 2, 1) + P[:, None, :, 3]  # (2, J, 3)
@@ -789,8 +822,42 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
     return TriangulationResult(
         points=np.where(ok[:, None], points, 0.0),
         reprojection_error=err.T,
-        ray_angle_deg=angle.copy(),  # (the solution's arrays are shared with the next call on these inputs)
+        ray_angle_deg=angle.copy(),
         num_views=used.sum(axis=0).astype(np.int64),
         valid=ok,
         used=used.copy().T,
     )
+
+
+def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | None = None,
+                          min_ray_angle_deg: float = 0.1, cameras: TwoViewCameras | None = None,
+                          solution: TwoViewSolution | None = None) -> TriangulationResult:
+    """:func:`triangulate_dlt` (and the final check of :func:`triangulate_robust`) for the common
+    case of two pinhole views and one frame, in about a third of the numpy calls.
+
+    The estimator triangulates 25 joints in two crop cameras every pair, where the general
+    functions' batch and camera-count handling costs more than the arithmetic. The system,
+    its conditioning, the validity rules and the fill values are the same, so the results
+    equal :func:`triangulate_dlt`'s (``tests/ghnerf_runtime/test_triangulation.py`` checks it).
+    It is :func:`check_two_views` of :func:`solve_two_views`.
+
+    Args:
+        uv: ``(2, J, 2)`` undistorted pixels of each view.
+        P: ``(2, 3, 4)`` projection matrices (pinhole: they act on undistorted pixels).
+        weights: ``(2, J)`` confidences; ``<= 0`` or non-finite ignores the observation.
+        max_reprojection_error: if given, a joint whose error exceeds it in a used view is
+            invalid (with two views the culprit cannot be told).
+        min_ray_angle_deg: as :func:`triangulate_dlt`.
+        cameras: ``TwoViewCameras.from_P(P)`` computed earlier (computed here when not given).
+        solution: an earlier :func:`solve_two_views`, used where it :meth:`~TwoViewSolution.solves` these
+            ``uv``, ``P`` and ``weights`` (solved here otherwise). The answer is the same with or without either.
+
+    Raises:
+        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, ``cameras`` of other
+        matrices, or a threshold that is not a number in range.
+    """
+    _check_thresholds(min_ray_angle_deg, max_reprojection_error)  # (before the solve, as it always was)
+    if solution is None or not solution.solves(uv, P, weights):
+        solution = solve_two_views(uv, P, weights, cameras=cameras)
+    return check_two_views(solution, max_reprojection_error=max_reprojection_error,
+                           min_ray_angle_deg=min_ray_angle_deg)
