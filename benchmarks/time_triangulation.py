@@ -3,9 +3,12 @@
     .venv/bin/python benchmarks/time_triangulation.py [--calls 2000] [--rounds 5]
 
 ``two_views`` is what ``joints3d.triangulate_joints`` calls every pair (two crop cameras, projection
-matrices); ``dlt`` and ``midpoint`` are the general solvers with two and three ``Camera`` objects, and
-``robust`` the three-view one with one wrong view to drop. Each row is the median over ``--rounds`` of
-the mean per call over ``--calls`` calls, in microseconds; one host, whatever else runs on it. To compare
+matrices), every term computed on the spot; ``two_views, crop terms kept`` the same with the crop cameras'
+``TwoViewCameras`` computed once (the estimator keeps them while its crops keep their cameras), and ``two_views,
+the solve checked again`` the skeleton prior's inputs' use of the pair's solve of the same peaks (``check_two_views``
+with another ray-angle threshold: the DLT not run again); ``dlt`` and ``midpoint`` are the general solvers with
+two and three ``Camera`` objects, and ``robust`` the three-view one with one wrong view to drop. Each row is the
+median over ``--rounds`` of the mean per call over ``--calls`` calls, in microseconds; one host, whatever else runs on it. To compare
 two versions of ``ghnerf_runtime``, run this file from each checkout (it imports the package it sits beside).
 """
 from __future__ import annotations
@@ -22,6 +25,9 @@ sys.path.insert(0, str(ROOT))
 
 from ghnerf_runtime.geometry.camera import Camera, look_at  # noqa: E402
 from ghnerf_runtime.geometry.triangulation import (  # noqa: E402
+    TwoViewCameras,
+    check_two_views,
+    solve_two_views,
     triangulate_dlt,
     triangulate_midpoint,
     triangulate_robust,
@@ -67,8 +73,14 @@ def main(argv: list[str] | None = None) -> int:
     bad3 = uv3.copy()
     bad3[1, ::3] += 30.0  # every third joint wrong in the middle view: the robust solver drops it
     P2 = np.stack([c.P for c in two])
+
+    terms = TwoViewCameras.from_P(P2)
+    solution = solve_two_views(uv2, P2, conf2, cameras=terms)
     cases = {
         "two_views (2 matrices)": lambda: triangulate_two_views(uv2, P2, conf2, min_ray_angle_deg=0.5),
+        "two_views, crop terms kept": lambda: triangulate_two_views(uv2, P2, conf2, min_ray_angle_deg=0.5,
+                                                                    cameras=terms),
+        "two_views, the solve checked again": lambda: check_two_views(solution),
         "dlt (2 cameras)": lambda: triangulate_dlt(uv2, two, conf2),
         "dlt (3 cameras)": lambda: triangulate_dlt(uv3, three, conf3),
         "midpoint (3 cameras)": lambda: triangulate_midpoint(uv3, three, conf3),

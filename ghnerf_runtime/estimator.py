@@ -72,9 +72,10 @@ from ghnerf_runtime.frame_reasons import FLAT, NOISE, NON_FINITE, REASONS
 from ghnerf_runtime.flip_test import flip_averaged, mirror_images, mirror_projections, presence_peak
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
+from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution
 from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, depth_centroid_joints, gate_presence, gate_to_box, \
     lower_foot_m, near_the_body, \
-    query_grid, triangulate_joints, triangulate_joints_checked, volumetric_joints
+    query_grid, solve_two_view_peaks, triangulate_joints, triangulate_joints_checked, volumetric_joints
 from ghnerf_runtime.keypoints import Keypoints2D, decode_blocks, decode_keypoints, heatmap_to_model_pixels
 from ghnerf_runtime.novel_view import NovelView, NovelViewRequest, check_strides, heatmap_overlay, interpolate_camera, \
     novel_pivot, novel_target, render_novel_view, skeleton_overlay
@@ -91,7 +92,7 @@ from ghnerf_runtime.preprocess import (
     preprocess_image,
     upright_roll_deg,
 )
-from ghnerf_runtime.skeleton_prior import disagreement_m
+from ghnerf_runtime.skeleton_prior import PriorCameras, disagreement_m
 from ghnerf_runtime.rays import block_ray_uv, box_block, common_blocks, full_block, scatter_block
 from ghnerf_runtime.smoothing import OneEuroJoints
 from ghnerf_runtime.tracking import Regions, SubjectTracker, Track, box_corners
@@ -460,6 +461,21 @@ class _ProxyInputs:
     ms: float  # the time it took (it counts in the first stage that reads it)
 
 
+@dataclass(frozen=True, eq=False)
+class _CropTerms:
+    """The current crop cameras' own terms (inverses, conditioning, centres, heading): the two-view solver's and
+    the skeleton prior's (None without a prior). A tracked crop keeps its cameras for many pairs, and the
+    triangulation and the prior's inputs read them every pair (:meth:`Estimator._crop_terms_for`)."""
+
+    two_view: TwoViewCameras
+    prior: PriorCameras | None
+
+    @classmethod
+    def of(cls, P: np.ndarray, with_prior: bool) -> "_CropTerms":
+        """The terms of the ``(2, 3, 4)`` crop matrices ``P``."""
+        return cls(TwoViewCameras.from_P(P), PriorCameras.from_P(P[None]) if with_prior else None)
+
+
 @dataclass
 class _CameraState:
     """Per source camera and crop turn: remap tables and crop camera per crop window and turn (LRU)."""
@@ -609,6 +625,7 @@ class Estimator:
         self._prior_check: tuple[float | None, bool] = (None, False)  # this pair's (disagreement, fell back)
         self._agreement: ViewAgreement | None = None  # this pair's, set by _joints_3d
         self._lowest_foot: float | None = None  # this pair's, set by _joints_3d
+        self._crop_terms: _CropTerms | None = None  # the last crop cameras' (_crop_terms_for)
         self._torso_mixed = False  # this pass's, set by _joints_3d (_finish_pass)
         # and its torso limbs' excess over one body's, as measured and as mixed_torso reads it (benchmarks)
         self._torso_excess = np.full((2, len(TORSO_LIMBS_M)), np.nan)
@@ -727,6 +744,7 @@ class Estimator:
         self._failed_search_short = None
         self._turn_check_wait = 0
         self._kept_axis = None
+        self._crop_terms = None
         if self._smoother is not None:
             self._smoother.reset()
 
@@ -770,6 +788,14 @@ class Estimator:
                 self._rays_cache.clear()
             self._rays_cache[blocks] = rays
         return rays
+
+    def _crop_terms_for(self, crops: Sequence[Camera]) -> _CropTerms:
+        """The two crop cameras' terms: the last ones while the crops' matrices are the same (compared by value:
+        a crop window's camera is rebuilt when the window returns after leaving the map cache), else new ones."""
+        P = np.stack([np.asarray(c.P, np.float64) for c in crops])
+        if self._crop_terms is None or not self._crop_terms.two_view.is_for(P):
+            self._crop_terms = _CropTerms.of(P, self.skeleton_prior is not None)
+        return self._crop_terms
 
     def _check_images(self, images: Sequence[np.ndarray]) -> None:
         if len(images) != 2:
@@ -1736,9 +1762,12 @@ class Estimator:
         # the views' agreement, from the peaks the presence gate calls strong (phantom peaks of an empty room are
         # weaker), whatever the 3D method: it tells of the rig, not of the method
         pres = self.config.presence
+        # one DLT of the peaks for the joints and the prior's inputs, in the crop cameras' kept terms
+        solution = solve_two_view_peaks(uv_model, kp.confidence, kp.valid, crops, cfg,
+                                        terms=self._crop_terms_for(crops).two_view)
         tri, self._agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid, crops, cfg,
                                                           pres.threshold(self.config.heatmaps.source),
-                                                          pres.min_joints)
+                                                          pres.min_joints, solution=solution)
         in_boxes = self._gate_to_boxes(tri, regions)  # the presence gate's
         # The floor check's feet are not box-gated (as the px figure is taken before the reprojection gate): a camera
         # panned far moves the whole triangulated person out of the working volume (8 degrees on the oracle: 3 m away
@@ -1770,7 +1799,7 @@ class Estimator:
                 if pres.enabled and not gate_presence(in_boxes, pres.min_joints,
                                                       pres.threshold(self.config.heatmaps.source)).valid.any():
                     return Joints3D.missing(len(tri.valid), tri.reprojection_px.shape[-1])
-                return self._with_prior(tri, uv_model, kp, crops)
+                return self._with_prior(tri, uv_model, kp, crops, solution)
             if not cfg.single_view_fallback or tri.valid.all():
                 return tri
             dc = centroid()
@@ -1821,14 +1850,19 @@ class Estimator:
             return None  # not seen on their feet (y down: a height is -y)
         return lowest
 
-    def _with_prior(self, tri: Joints3D, uv_model: np.ndarray, kp: Keypoints2D, crops: list[Camera]) -> Joints3D:
+    def _with_prior(self, tri: Joints3D, uv_model: np.ndarray, kp: Keypoints2D, crops: list[Camera],
+                    solution: TwoViewSolution | None = None) -> Joints3D:
         """The skeleton prior's joints: refined where triangulated, placed where hidden; a joint whose
         expected error exceeds ``max_prior_error_m`` is missing. Confidence: ``exp(-expected error /
         0.1 m)`` (0.7 at 35 mm, 0.37 at 100 mm), so it says how far off the joint may be. A skeleton further
         than ``max_prior_disagreement_m`` from ``tri`` gives ``tri`` instead. The box gates
-        (``max_outside_box_m``) still apply after."""
+        (``max_outside_box_m``) still apply after. ``solution``: the pair's solve of these peaks
+        (:func:`~ghnerf_runtime.joints3d.solve_two_view_peaks`), which the prior's inputs reuse where their
+        weights are the joints'."""
         est = self.skeleton_prior.estimate(uv_model, kp.confidence, kp.valid, [c.P for c in crops],
-                                          self.config.joints3d.prior_flip_test)
+                                          self.config.joints3d.prior_flip_test,
+                                          cameras=self._crop_terms_for(crops).prior,
+                                          solutions=None if solution is None else [solution])
         # floored for the joints the gate keeps: past ~10.4 m of expected error the float32 score underflowed to 0,
         # and sanitised() dropped every such joint whatever the gate (max_prior_error_m may be up to 100 m)
         score = np.maximum(np.exp(-est.expected_error_m / _PRIOR_CONFIDENCE_SCALE_M), np.finfo(np.float32).tiny

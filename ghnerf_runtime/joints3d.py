@@ -26,11 +26,12 @@ import numpy as np
 from ghnerf_runtime.config import Joints3DConfig
 from ghnerf_runtime.errors import ShapeError
 from ghnerf_runtime.geometry.camera import Camera
-from ghnerf_runtime.geometry.triangulation import triangulate_robust, triangulate_two_views
+from ghnerf_runtime.geometry.triangulation import (TwoViewCameras, TwoViewSolution, solve_two_views,
+                                                  triangulate_robust, triangulate_two_views)
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
 __all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "near_the_body", "triangulate_joints",
-           "triangulate_joints_checked", "lowest_height_m", "lower_foot_m", "grid_shape", "query_grid",
+           "triangulate_joints_checked", "solve_two_view_peaks", "lowest_height_m", "lower_foot_m", "grid_shape", "query_grid",
            "volumetric_joints", "depth_centroid_joints"]
 
 
@@ -230,10 +231,43 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
     return triangulate_joints_checked(uv_model, confidence, valid, cameras, config)[0]
 
 
+def _triangulation_inputs(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig):
+    """The checked peak values ``(C, J)``, the observations used ``(C, J)``, the peaks ``(C, J, 2)`` and weights
+    ``(C, J)`` the solvers take (0 where not used) and the ``C`` projection matrices."""
+    uv, conf, ok = _check_views(uv_model, confidence, valid)
+    if len(cameras) != uv.shape[0]:  # (J, C, 2) with a matching (J, C) confidence passed _check_views
+        raise ShapeError(f"uv_model has {uv.shape[0]} views on axis 0 (shape {uv.shape}) but {len(cameras)} cameras "
+                         "were given: the peaks are (C, J, 2), views first")
+    use = ok & (conf >= config.min_view_confidence) & (conf > 0) & np.all(np.isfinite(uv), axis=-1)
+    weights = np.where(use, conf, 0.0)
+    mats = [np.asarray(c.P if isinstance(c, Camera) else c, dtype=np.float64) for c in cameras]  # pinhole: P suffices
+    return conf, use, np.where(use[..., None], uv, 0.0), weights, mats
+
+
+def solve_two_view_peaks(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig, *,
+                         terms: TwoViewCameras | None = None) -> TwoViewSolution:
+    """The two-view solve (:func:`~ghnerf_runtime.geometry.triangulation.solve_two_views`) that
+    :func:`triangulate_joints_checked` checks, of the same peaks and weights: the caller that also builds the
+    skeleton prior's inputs from these peaks passes it to both (``solution=``), so the DLT runs once.
+    ``terms``: the two crop cameras' :class:`~ghnerf_runtime.geometry.triangulation.TwoViewCameras`, where the
+    caller keeps them.
+
+    Raises:
+        ShapeError: as :func:`triangulate_joints`, or other than two views.
+    """
+    _, _, peaks, weights, mats = _triangulation_inputs(uv_model, confidence, valid, cameras, config)
+    if len(mats) != 2:
+        raise ShapeError(f"the two-view solve takes two views, got {len(mats)} cameras")
+    return solve_two_views(peaks, np.stack(mats), weights, cameras=terms)
+
+
 def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig,
-                               min_confidence: float = 0.0, min_joints: int = 1) -> tuple[Joints3D, ViewAgreement]:
+                               min_confidence: float = 0.0, min_joints: int = 1, *,
+                               solution: TwoViewSolution | None = None) -> tuple[Joints3D, ViewAgreement]:
     """:func:`triangulate_joints` and the :class:`ViewAgreement` of the joints whose peaks are at least
     ``min_confidence`` in every view (at least ``min_joints`` of them for a median), from one solve.
+    ``solution``: :func:`solve_two_view_peaks` of these arguments, computed earlier (used where it solved these
+    peaks, weights and matrices; solved here otherwise: the answer is the same).
 
     Example (the right camera's rig entry tilted by 1 degree: its peaks lie 1.7 px off where the rig puts them
     in these 128 px crops, an error the triangulation shares between the views):
@@ -250,19 +284,13 @@ def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Ca
         >>> round(triangulate_joints_checked(uv, conf, ok, bumped, Joints3DConfig())[1].median_px, 1)
         0.9
     """
-    uv, conf, ok = _check_views(uv_model, confidence, valid)
-    if len(cameras) != uv.shape[0]:  # (J, C, 2) with a matching (J, C) confidence passed _check_views
-        raise ShapeError(f"uv_model has {uv.shape[0]} views on axis 0 (shape {uv.shape}) but {len(cameras)} cameras "
-                         "were given: the peaks are (C, J, 2), views first")
-    use = ok & (conf >= config.min_view_confidence) & (conf > 0) & np.all(np.isfinite(uv), axis=-1)
-    weights = np.where(use, conf, 0.0)
-    mats = [np.asarray(c.P if isinstance(c, Camera) else c, dtype=np.float64) for c in cameras]  # pinhole: P suffices
+    conf, use, peaks, weights, mats = _triangulation_inputs(uv_model, confidence, valid, cameras, config)
     both = use.all(axis=0)
     if len(mats) == 2:  # the rig: the lean two-view solver (same results, a third of the numpy calls)
         # solved without its reprojection gate, applied below: the errors of the joints it drops are what a
         # bumped camera raises
-        res = triangulate_two_views(np.where(use[..., None], uv, 0.0), np.stack(mats), weights,
-                                    min_ray_angle_deg=config.min_ray_angle_deg)
+        res = triangulate_two_views(peaks, np.stack(mats), weights, min_ray_angle_deg=config.min_ray_angle_deg,
+                                    solution=solution)
         solved = res.valid & both
         err = np.where(solved[:, None], res.reprojection_error, 0.0)
         worst = err.max(axis=-1)
@@ -271,7 +299,7 @@ def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Ca
         reprojection = np.where(good[:, None], err, 0.0)
     else:
         # more views: the robust solver drops a disagreeing view inside its gate, so only its result is measured
-        res = triangulate_robust(np.where(use[..., None], uv, 0.0), mats, weights, undistorted=True,
+        res = triangulate_robust(peaks, mats, weights, undistorted=True,
                                  max_reprojection_error=config.max_reprojection_px,
                                  min_ray_angle_deg=config.min_ray_angle_deg)
         good = solved = res.valid & both

@@ -315,6 +315,16 @@ RUNNER_UP_DIP = 0.5
 _DIP_SAMPLES = 16
 
 
+def _nonzero_3d(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``np.nonzero`` of an ``(N, H, W)`` mask (the same index arrays, in the same order), from the flat indices:
+    numpy's nonzero of a 3-d array steps a multi-index through every element: 0.15 ms for a pair's 50 maps of
+    32 x 32 cells on session 61's host, where the flat one and two divisions take 0.005-0.015 ms."""
+    _, h, w = mask.shape
+    m, rest = np.divmod(np.flatnonzero(mask), h * w)
+    y, x = np.divmod(rest, w)
+    return m, y, x
+
+
 def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_top: np.ndarray, top: np.ndarray,
                          iy: np.ndarray, ix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each map's highest local maximum of ``filtered`` inside its best region (``in_top``) other than the peak
@@ -332,7 +342,7 @@ def _runner_up_in_region(filtered: np.ndarray, padded: np.ndarray, pad: int, in_
     # in_top is the pixels below the threshold where no peak passes it (top label 0): a bump there is no peak
     local = in_top & (top > 0)[:, None, None] & (filtered >= neighbours)
     local[np.arange(n), iy, ix] = False
-    m, y, x = np.nonzero(local)
+    m, y, x = _nonzero_3d(local)
     if not len(m):
         return values, out_y, out_x
     t = np.linspace(0.0, 1.0, _DIP_SAMPLES)[None, 1:-1]

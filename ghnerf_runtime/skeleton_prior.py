@@ -27,12 +27,12 @@ from typing import Sequence
 import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
-from ghnerf_runtime.errors import ModelContractError, ModelLoadError, ModelRunError, ShapeError
-from ghnerf_runtime.geometry.triangulation import triangulate_two_views
+from ghnerf_runtime.errors import GeometryError, ModelContractError, ModelLoadError, ModelRunError, ShapeError
+from ghnerf_runtime.geometry.triangulation import TwoViewSolution, triangulate_two_views
 from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
-           "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame",
+           "META_PREFIX", "INPUTS", "OUTPUTS", "CanonicalFrame", "PriorCameras",
            "PriorInputs", "SkeletonEstimate", "SkeletonPrior", "prior_inputs", "mirror_inputs",
            "MIN_CHECK_JOINTS", "disagreement_m"]
 
@@ -124,9 +124,72 @@ def _mean_heading(P: np.ndarray) -> np.ndarray:
     return np.where(n > 1e-6, d / np.maximum(n, 1e-12), [0.0, 0.0, 1.0])
 
 
+@dataclass(frozen=True, eq=False)
+class PriorCameras:
+    """What :func:`prior_inputs` derives from the ``(N, 2, 3, 4)`` crop cameras alone (read-only arrays): the
+    matrices ``P`` (a copy), the camera centres ``(N, 2, 3)`` and their midpoints ``(N, 3)``, the cameras' mean
+    heading ``(N, 3)``, the inverses of the left 3x3 blocks ``(N, 2, 3, 3)`` and the sign of their determinants
+    ``(N, 2, 1, 1)`` (a ray's way to the scene).
+
+    Build them with :meth:`from_P` and pass them to :func:`prior_inputs` (``cameras=``) to skip recomputing
+    them: the estimator keeps its crop cameras' for as long as the crop keeps its cameras. The inputs are the
+    same to the bit with them or without.
+    """
+
+    P: np.ndarray
+    centres: np.ndarray
+    mid: np.ndarray
+    heading: np.ndarray
+    inverse: np.ndarray
+    towards_scene: np.ndarray
+
+    @classmethod
+    def from_P(cls, P) -> "PriorCameras":
+        """The terms of ``P`` (the operations :func:`prior_inputs` ran on every call before).
+
+        Raises:
+            ShapeError: ``P`` is not ``(N, 2, 3, 4)``.
+        """
+        P = np.array(P, dtype=np.float64)  # (a copy: the caller's array may change later; these terms may not)
+        if P.ndim != 4 or P.shape[1:] != (2, 3, 4):
+            raise ShapeError(f"P (N, 2, 3, 4) expected for the prior's camera terms, got {P.shape}")
+        C = _centres(P)
+        M = P[..., :3]
+        cams = cls(P, C, C.mean(1), _mean_heading(P), np.linalg.inv(M), np.sign(np.linalg.det(M))[..., None, None])
+        for a in (cams.P, cams.centres, cams.mid, cams.heading, cams.inverse, cams.towards_scene):
+            a.setflags(write=False)  # shared by every later call with these cameras
+        return cams
+
+    def is_for(self, P) -> bool:
+        """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""
+        P = np.asarray(P, dtype=np.float64)
+        return P.shape == self.P.shape and P.tobytes() == self.P.tobytes()
+
+
+def _solve_of(solutions: Sequence[TwoViewSolution | None] | None, pairs: int) -> list[TwoViewSolution | None]:
+    """One earlier two-view solve (or None) per pair (``None``: none at all)."""
+    if solutions is None:
+        return [None] * pairs
+    if len(solutions) != pairs:
+        raise ShapeError(f"solutions: one per pair expected ({pairs}), got {len(solutions)}")
+    return list(solutions)
+
+
+def _cameras_for(P: np.ndarray, cameras: PriorCameras | None) -> PriorCameras:
+    """``cameras`` where given (they must be ``P``'s), else ``P``'s terms computed now."""
+    if cameras is None:
+        return PriorCameras.from_P(P)
+    if not cameras.is_for(P):
+        raise GeometryError(f"the prior's camera terms given are those of other matrices than P = {P.tolist()} "
+                            f"(they were computed for {cameras.P.tolist()})")
+    return cameras
+
+
 def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray, *,
-                 max_joint_from_root_m: float = MAX_JOINT_FROM_ROOT_M) -> PriorInputs:
-    """The prior's inputs from decoded 2D peaks.
+                 max_joint_from_root_m: float = MAX_JOINT_FROM_ROOT_M, cameras: PriorCameras | None = None,
+                 solutions: Sequence[TwoViewSolution | None] | None = None) -> PriorInputs:
+    """The prior's inputs from decoded 2D peaks (the same, to the bit, whether ``cameras`` and ``solutions`` are
+    given or not).
 
     Args:
         uv_model: ``(N, 2, J, 2)`` peaks in model-input (crop) pixels; anything where not ``valid``.
@@ -135,6 +198,14 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
         P: ``(N, 2, 3, 4)`` the crop cameras' pinhole projections (rig frame -> model pixels).
         max_joint_from_root_m: a DLT point farther than this from the body's robust centre is not a
             triangulation (the features of version 1 are those of ``inf``: for measuring old files only).
+        cameras: ``PriorCameras.from_P(P)`` computed earlier (computed here when not given).
+        solutions: per pair, an earlier two-view solve in these crop cameras
+            (:func:`~ghnerf_runtime.joints3d.solve_two_view_peaks`) or None: used whole where it solved the
+            peaks and weights the inputs triangulate, else for its camera terms.
+
+    Raises:
+        ShapeError: wrong shapes. GeometryError: a singular or non-finite camera, or ``cameras`` or a solve of
+        other matrices.
     """
     uv = np.asarray(uv_model, np.float64)
     conf = np.asarray(confidence, np.float64)
@@ -145,6 +216,7 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     if conf.shape != (N, 2, J) or np.shape(valid) != (N, 2, J) or P.shape != (N, 2, 3, 4):
         raise ShapeError(f"confidence/valid must be {(N, 2, J)} and P {(N, 2, 3, 4)}, got {conf.shape}, "
                          f"{np.shape(valid)}, {P.shape}")
+    solved = _solve_of(solutions, N)
     dec = np.asarray(valid, bool) & np.isfinite(uv).all(-1) & np.isfinite(conf)
     uv = np.where(dec[..., None], uv, 0.0)
     conf = np.where(dec, np.clip(conf, 0.0, 1.0), 0.0)
@@ -154,14 +226,16 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     rep, ang = np.zeros((N, J, 2)), np.zeros((N, J))
     weights = np.where(dec, np.maximum(conf, 1e-3), 0.0)
     for i in range(N):
-        r = triangulate_two_views(uv[i], P[i], weights[i])
+        earlier = solved[i]
+        r = triangulate_two_views(uv[i], P[i], weights[i], solution=earlier,
+                                  cameras=None if earlier is None else earlier.cameras)
         X[i], ok[i], rep[i], ang[i] = r.points, r.valid, r.reprojection_error, r.ray_angle_deg
     ok = ok & dec.all(1) & np.isfinite(X).all(-1)
     rep, ang = np.nan_to_num(rep), np.nan_to_num(ang)
 
-    C = _centres(P)  # (N, 2, 3)
-    mid = C.mean(1)
-    root = mid + _DEFAULT_DISTANCE_M * _mean_heading(P)  # no joint triangulated: a guess ahead of the cameras
+    cams = _cameras_for(P, cameras)  # (after the solves: a singular matrix is the solver's GeometryError)
+    C, mid = cams.centres, cams.mid
+    root = mid + _DEFAULT_DISTANCE_M * cams.heading  # no joint triangulated: a guess ahead of the cameras
     for i in range(N):
         good = ok[i] & (rep[i].max(-1) < _ROOT_MAX_REPROJECTION_PX)
         pick = good if good.sum() >= 3 else ok[i]
@@ -186,10 +260,9 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     frame = CanonicalFrame(R, origin)
 
     Xc = np.where(ok[..., None], frame.to_canonical(X), 0.0)
-    M = P[..., :3]
     uvh = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], -1)
-    rays = np.einsum("nvij,nvkj->nvki", np.linalg.inv(M), uvh)
-    rays = rays * np.sign(np.linalg.det(M))[..., None, None]  # towards the scene whatever P's scale
+    rays = np.einsum("nvij,nvkj->nvki", cams.inverse, uvh)
+    rays = rays * cams.towards_scene  # towards the scene whatever P's scale
     rays /= np.maximum(np.linalg.norm(rays, axis=-1, keepdims=True), 1e-12)
     rays = np.einsum("nij,nvkj->nvki", R, rays) * dec[..., None]
     features = np.concatenate([Xc, ok[..., None], conf.transpose(0, 2, 1),
@@ -314,8 +387,10 @@ class SkeletonPrior:
                                      path=str(self.path), key=META_PREFIX + "encoder_sha256")
 
     def estimate(self, uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray,
-                 P: Sequence | np.ndarray, flip_test: bool = True) -> SkeletonEstimate:
-        """The skeleton of ``N`` pairs (shapes as :func:`prior_inputs`; one pair may drop the ``N``).
+                 P: Sequence | np.ndarray, flip_test: bool = True, *, cameras: PriorCameras | None = None,
+                 solutions: Sequence[TwoViewSolution | None] | None = None) -> SkeletonEstimate:
+        """The skeleton of ``N`` pairs (shapes as :func:`prior_inputs`; one pair may drop the ``N``; ``cameras``
+        and ``solutions`` as there, of the ``N`` pairs: one pair's are for ``N = 1``).
 
         ``flip_test``: also run the mirrored pairs (:func:`mirror_inputs`, in the same batch) and average
         both answers, mirrored back: the network is only nearly mirror-symmetric, and the average of the two
@@ -324,7 +399,8 @@ class SkeletonPrior:
         if single:
             uv_model, confidence, valid = uv_model[None], confidence[None], valid[None]
             P = np.asarray([np.asarray(getattr(c, "P", c), np.float64) for c in P])[None]
-        out = self.answer(prior_inputs(uv_model, confidence, valid, np.asarray(P, np.float64)), flip_test)
+        out = self.answer(prior_inputs(uv_model, confidence, valid, np.asarray(P, np.float64), cameras=cameras,
+                                       solutions=solutions), flip_test)
         if single:
             return SkeletonEstimate(out.points[0], out.expected_error_m[0], out.triangulated[0])
         return out

@@ -3,6 +3,10 @@ from ghnerf_runtime.geometry.camera import Camera, intrinsics_from_fov, look_at,
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.geometry.triangulation import (
     TriangulationResult,
+    TwoViewCameras,
+    TwoViewSolution,
+    check_two_views,
+    solve_two_views,
     triangulate_dlt,
     triangulate_midpoint,
     triangulate_robust,
@@ -10,7 +14,7 @@ from ghnerf_runtime.geometry.triangulation import (
 )
 
 __all__ = [
-    "Camera", "Rig", "TriangulationResult", "WorkingVolume", "intrinsics_from_fov", "look_at",
-    "nearest_rotation",
+    "Camera", "Rig", "TriangulationResult", "TwoViewCameras", "TwoViewSolution", "WorkingVolume",
+    "check_two_views", "intrinsics_from_fov", "look_at", "nearest_rotation", "solve_two_views",
     "triangulate_dlt", "triangulate_midpoint", "triangulate_robust", "triangulate_two_views",
 ]

@@ -53,6 +53,10 @@ CENTRE_TOLERANCE = 1e-9
 
 __all__ = [
     "TriangulationResult",
+    "TwoViewCameras",
+    "TwoViewSolution",
+    "check_two_views",
+    "solve_two_views",
     "triangulate_dlt",
     "triangulate_midpoint",
     "triangulate_robust",
@@ -625,77 +629,188 @@ def triangulate_robust(
     return result
 
 
-def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | None = None,
-                          min_ray_angle_deg: float = 0.1) -> TriangulationResult:
-    """:func:`triangulate_dlt` (and the final check of :func:`triangulate_robust`) for the common
-    case of two pinhole views and one frame, in about a third of the numpy calls.
+def _same_bits(kept: np.ndarray, given) -> bool:
+    """Whether ``given`` holds the same float64 values as ``kept`` to the bit (shape included): the test for
+    reusing terms or a solve, where values equal by ``==`` (0.0 and -0.0) may still be other inputs."""
+    given = np.asarray(given, dtype=np.float64)
+    return given.shape == kept.shape and given.tobytes() == kept.tobytes()
 
-    The estimator triangulates 25 joints in two crop cameras every pair, where the general
-    functions' batch and camera-count handling costs more than the arithmetic. The system,
-    its conditioning, the validity rules and the fill values are the same, so the results
-    equal :func:`triangulate_dlt`'s (``tests/ghnerf_runtime/test_triangulation.py`` checks it).
 
-    Args:
-        uv: ``(2, J, 2)`` undistorted pixels of each view.
-        P: ``(2, 3, 4)`` projection matrices (pinhole: they act on undistorted pixels).
-        weights: ``(2, J)`` confidences; ``<= 0`` or non-finite ignores the observation.
-        max_reprojection_error: if given, a joint whose error exceeds it in a used view is
-            invalid (with two views the culprit cannot be told).
-        min_ray_angle_deg: as :func:`triangulate_dlt`.
+def _read_only(*arrays: np.ndarray) -> None:
+    """Mark arrays read-only: they are shared by every later call that reuses them."""
+    for a in arrays:
+        a.setflags(write=False)
 
-    Raises:
-        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, or a threshold
-        that is not a number in range.
+
+@dataclass(frozen=True, eq=False)
+class TwoViewCameras:
+    """What the two-view solver derives from its two ``(2, 3, 4)`` projection matrices alone (read-only arrays):
+    the matrices ``P`` (a copy), their left blocks ``M``, determinants and inverses, the conditioning
+    similarities ``T``, the conditioned unit-norm matrices ``Pn``, whether the centres are distinct and each
+    view's depth scale.
+
+    Build them with :meth:`from_P` and pass them (``cameras=``) to :func:`solve_two_views` or
+    :func:`triangulate_two_views` to skip recomputing them: the estimator keeps its crop cameras' terms for as
+    long as the crop keeps its cameras (many pairs of a tracked subject). The answers are the same to the bit
+    with them or without.
     """
-    _check_thresholds(min_ray_angle_deg, max_reprojection_error)
+
+    P: np.ndarray
+    M: np.ndarray
+    det: np.ndarray
+    Minv: np.ndarray
+    T: np.ndarray
+    Pn: np.ndarray
+    distinct: bool
+    depth_scale: np.ndarray  # (2, 1): sign(det) / |m3|, a homogeneous third coordinate -> depth
+
+    @classmethod
+    def from_P(cls, P) -> "TwoViewCameras":
+        """The terms of ``P`` (the operations :func:`triangulate_two_views` ran on every call before).
+
+        Raises:
+            ShapeError: ``P`` is not ``(2, 3, 4)``. GeometryError: a non-finite matrix or a singular left 3x3 block.
+        """
+        P = np.array(P, dtype=np.float64)  # (a copy: the caller's array may change later; these terms may not)
+        if P.shape != (2, 3, 4):
+            raise ShapeError(f"P (2, 3, 4) expected for two views' terms, got {P.shape}")
+        M = P[:, :, :3]  # (a view, as the solver always took it: the same memory layout, the same matmul results)
+        det = np.linalg.det(M)
+        if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
+            raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
+        with np.errstate(all="ignore"):
+            T = _conditioning_similarity(P)
+            Pn = T @ P
+            Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
+            Minv = np.linalg.inv(M)
+            distinct = bool(_distinct_centres(P, Minv)[0, 1])
+            depth_scale = (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
+        _read_only(P, M, det, Minv, T, Pn, depth_scale)
+        return cls(P, M, det, Minv, T, Pn, distinct, depth_scale)
+
+    def is_for(self, P) -> bool:
+        """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""
+        return _same_bits(self.P, P)
+
+
+@dataclass(frozen=True, eq=False)
+class TwoViewSolution:
+    """One DLT solve of two views' peaks, before any threshold (read-only arrays): the camera terms and the
+    inputs it solved (``uv`` ``(2, J, 2)``, ``weights`` ``(2, J)``, copies), the DLT points ``(J, 3)``, whether
+    each is finite ``(J,)``, the ray angles ``(J,)`` (0 where a view is not used) and the views used ``(2, J)``.
+
+    :func:`check_two_views` applies the thresholds to it: the estimator solves a pair's peaks once and checks
+    the solve for the joints and again for the skeleton prior's inputs, which differ only in their ray-angle
+    threshold (when their weights are the same: :meth:`solves` tells).
+    """
+
+    cameras: TwoViewCameras
+    uv: np.ndarray
+    weights: np.ndarray
+    points: np.ndarray
+    finite: np.ndarray
+    ray_angle_deg: np.ndarray
+    used: np.ndarray
+
+    def solves(self, uv, P, weights) -> bool:
+        """Whether this is the solve of ``uv``, ``P`` and ``weights`` (the same values to the bit)."""
+        return _same_bits(self.uv, uv) and _same_bits(self.weights, weights) and self.cameras.is_for(P)
+
+
+def _two_view_inputs(uv, P, weights) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``uv``, ``P`` and ``weights`` as float64 arrays of the two-view solver's shapes (else ShapeError)."""
     uv = np.asarray(uv, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     P = np.asarray(P, dtype=np.float64)
     if uv.ndim != 3 or uv.shape[0] != 2 or uv.shape[2] != 2 or w.shape != uv.shape[:2] or P.shape != (2, 3, 4):
         raise ShapeError(f"uv (2, J, 2), P (2, 3, 4) and weights (2, J) expected, got {uv.shape}, {P.shape}, "
                          f"{w.shape}")
-    M = P[:, :, :3]
-    det = np.linalg.det(M)
-    if not np.all(np.isfinite(P)) or np.any(np.abs(det) <= 1e-12 * np.linalg.norm(M, axis=(1, 2)) ** 3):
-        raise GeometryError(f"projection matrices must be finite with a regular left 3x3 block, got {P.tolist()}")
-    J = uv.shape[1]
+    return uv, P, w
+
+
+def _terms_for(P: np.ndarray, cameras: TwoViewCameras | None) -> TwoViewCameras:
+    """``cameras`` where given (they must be ``P``'s), else ``P``'s terms computed now."""
+    if cameras is None:
+        return TwoViewCameras.from_P(P)
+    if not cameras.is_for(P):
+        raise GeometryError(f"the two-view camera terms given are those of other matrices than P = {P.tolist()} "
+                            f"(they were computed for {cameras.P.tolist()})")
+    return cameras
+
+
+def solve_two_views(uv, P, weights, *, cameras: TwoViewCameras | None = None) -> TwoViewSolution:
+    """The DLT of :func:`triangulate_two_views` before its thresholds and checks (:func:`check_two_views`).
+
+    Args:
+        uv, P, weights: as :func:`triangulate_two_views`.
+        cameras: ``TwoViewCameras.from_P(P)`` computed earlier (computed here when not given).
+
+    Raises:
+        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, or ``cameras`` of other
+        matrices.
+    """
+    uv, P, w = _two_view_inputs(uv, P, weights)
+    cams = _terms_for(P, cameras)
     with np.errstate(all="ignore"):
-        used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
-        w, used = _relative_weights(np.where(used, w, 0.0), used, axis=0)  # as _prepare
-        x = np.where(used[..., None], uv, 0.0)
-        # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
-        T = _conditioning_similarity(P)
-        xn = x * T[:, 0, 0, None, None] + T[:, None, :2, 2]
-        Pn = T @ P
-        Pn /= np.sqrt(np.square(Pn).sum(axis=(1, 2)))[:, None, None]
-        rows = xn[..., :, None] * Pn[:, None, None, 2, :] - Pn[:, None, :2, :]  # (2, J, 2, 4)
-        top = w.max(axis=0)  # each joint's weights over their largest, as _dlt_solve
-        A = (rows * np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)[..., None, None]).transpose(
-            1, 0, 2, 3).reshape(J, 4, 4)
-        solvable = np.isfinite(A).all(axis=(-2, -1))  # (LAPACK's SVD can loop forever on an inf)
-        A = np.where(solvable[:, None, None], A, 0.0)
-        X = np.linalg.svd(A)[2][:, -1, :]
-        finite = solvable & (np.abs(X[:, 3]) > 1e-12 * np.sqrt(np.square(X[:, :3]).sum(axis=-1)))
-        points = X[:, :3] / np.where(finite, X[:, 3], 1.0)[:, None]
+        points, finite, angle, used = _solve_two_views(uv, w, cams)
+    uv, w = uv.copy(), w.copy()  # (the caller's arrays may change later)
+    _read_only(uv, w, points, finite, angle, used)
+    return TwoViewSolution(cams, uv, w, points, finite, angle, used)
 
-        # Ray angle (the conditioning figure) between the two viewing rays' lines: atan2(|a x b|, |a . b|)
-        # of unit directions (unit, so that absurd pixels overflow to 0 degrees as in _rays).
-        Minv = np.linalg.inv(M)
-        d = (x @ Minv[:, :, :2].transpose(0, 2, 1)) + Minv[:, None, :, 2]  # (2, J, 3)
-        d /= np.sqrt(np.square(d).sum(axis=-1, keepdims=True))
-        a, b = d[0], d[1]
-        cross = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                          a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=-1)
-        angle = np.degrees(np.arctan2(np.sqrt(np.square(cross).sum(axis=-1)), np.abs((a * b).sum(axis=-1))))
+
+def _solve_two_views(uv: np.ndarray, w: np.ndarray, cams: TwoViewCameras
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`solve_two_views`' points, finite, ray angles and views used. Call under ``np.errstate(all="ignore")``."""
+    T, Pn, Minv = cams.T, cams.Pn, cams.Minv
+    J = uv.shape[1]
+    used = np.isfinite(uv).all(axis=-1) & np.isfinite(w) & (w > 0)  # (2, J)
+    w, used = _relative_weights(np.where(used, w, 0.0), used, axis=0)  # as _prepare
+    x = np.where(used[..., None], uv, 0.0)
+    # DLT rows of H&Z 12.2 on conditioned pixels and unit-norm matrices (as _dlt_solve).
+    xn = x * T[:, 0, 0, None, None] + T[:, None, :2, 2]
+    rows = xn[..., :, None] * Pn[:, None, None, 2, :] - Pn[:, None, :2, :]  # (2, J, 2, 4)
+    top = w.max(axis=0)  # each joint's weights over their largest, as _dlt_solve
+    A = (rows * np.where(top > 0, w / np.where(top > 0, top, 1.0), 0.0)[..., None, None]).transpose(
+        1, 0, 2, 3).reshape(J, 4, 4)
+    solvable = np.isfinite(A).all(axis=(-2, -1))  # (LAPACK's SVD can loop forever on an inf)
+    A = np.where(solvable[:, None, None], A, 0.0)
+    X = np.linalg.svd(A)[2][:, -1, :]
+    finite = solvable & (np.abs(X[:, 3]) > 1e-12 * np.sqrt(np.square(X[:, :3]).sum(axis=-1)))
+    points = X[:, :3] / np.where(finite, X[:, 3], 1.0)[:, None]
+
+    # Ray angle (the conditioning figure) between the two viewing rays' lines: atan2(|a x b|, |a . b|)
+    # of unit directions (unit, so that absurd pixels overflow to 0 degrees as in _rays).
+    d = (x @ Minv[:, :, :2].transpose(0, 2, 1)) + Minv[:, None, :, 2]  # (2, J, 3)
+    d /= np.sqrt(np.square(d).sum(axis=-1, keepdims=True))
+    a, b = d[0], d[1]
+    cross = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                      a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=-1)
+    angle = np.degrees(np.arctan2(np.sqrt(np.square(cross).sum(axis=-1)), np.abs((a * b).sum(axis=-1))))
+    both = used[0] & used[1]
+    angle = np.where(both & np.isfinite(angle), angle, 0.0)
+    return points, finite, angle, used
+
+
+def check_two_views(solution: TwoViewSolution, *, max_reprojection_error: float | None = None,
+                    min_ray_angle_deg: float = 0.1) -> TriangulationResult:
+    """:func:`triangulate_two_views`' answer from its solve (thresholds as there); the result's arrays are its
+    own (writable), whatever the solve shares with other checks.
+
+    Raises:
+        GeometryError: a threshold that is not a number in range.
+    """
+    _check_thresholds(min_ray_angle_deg, max_reprojection_error)
+    cams, uv, used = solution.cameras, solution.uv, solution.used
+    points, angle = solution.points, solution.ray_angle_deg
+    P, M = cams.P, cams.M
+    with np.errstate(all="ignore"):
         both = used[0] & used[1]
-        angle = np.where(both & np.isfinite(angle), angle, 0.0)
-
         # as _finish: rays on one line to rounding, or from one centre, give no depth (valid with an angle of 0)
-        ok = (finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
-              & (angle >= MIN_RAY_ANGLE_FLOOR_DEG) & _distinct_centres(P, Minv)[0, 1])
+        ok = (solution.finite & np.isfinite(points).all(axis=-1) & both & (angle >= min_ray_angle_deg)
+              & (angle >= MIN_RAY_ANGLE_FLOOR_DEG) & cams.distinct)
         safe = np.where(ok[:, None], points, 0.0)
         ph = safe @ M.transpose(0, 2, 1) + P[:, None, :, 3]  # (2, J, 3)
-        depth = ph[..., 2] * (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
+        depth = ph[..., 2] * cams.depth_scale
         ahead = depth > MIN_DEPTH
         ok &= ~np.any(used & ~ahead, axis=0)
         err = np.sqrt(np.square(ph[..., :2] / ph[..., 2:3] - uv).sum(axis=-1))
@@ -707,8 +822,42 @@ def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | Non
     return TriangulationResult(
         points=np.where(ok[:, None], points, 0.0),
         reprojection_error=err.T,
-        ray_angle_deg=angle,
+        ray_angle_deg=angle.copy(),
         num_views=used.sum(axis=0).astype(np.int64),
         valid=ok,
-        used=used.T,
+        used=used.copy().T,
     )
+
+
+def triangulate_two_views(uv, P, weights, *, max_reprojection_error: float | None = None,
+                          min_ray_angle_deg: float = 0.1, cameras: TwoViewCameras | None = None,
+                          solution: TwoViewSolution | None = None) -> TriangulationResult:
+    """:func:`triangulate_dlt` (and the final check of :func:`triangulate_robust`) for the common
+    case of two pinhole views and one frame, in about a third of the numpy calls.
+
+    The estimator triangulates 25 joints in two crop cameras every pair, where the general
+    functions' batch and camera-count handling costs more than the arithmetic. The system,
+    its conditioning, the validity rules and the fill values are the same, so the results
+    equal :func:`triangulate_dlt`'s (``tests/ghnerf_runtime/test_triangulation.py`` checks it).
+    It is :func:`check_two_views` of :func:`solve_two_views`.
+
+    Args:
+        uv: ``(2, J, 2)`` undistorted pixels of each view.
+        P: ``(2, 3, 4)`` projection matrices (pinhole: they act on undistorted pixels).
+        weights: ``(2, J)`` confidences; ``<= 0`` or non-finite ignores the observation.
+        max_reprojection_error: if given, a joint whose error exceeds it in a used view is
+            invalid (with two views the culprit cannot be told).
+        min_ray_angle_deg: as :func:`triangulate_dlt`.
+        cameras: ``TwoViewCameras.from_P(P)`` computed earlier (computed here when not given).
+        solution: an earlier :func:`solve_two_views`, used where it :meth:`~TwoViewSolution.solves` these
+            ``uv``, ``P`` and ``weights`` (solved here otherwise). The answer is the same with or without either.
+
+    Raises:
+        ShapeError: wrong shapes. GeometryError: a non-finite or singular matrix, ``cameras`` of other
+        matrices, or a threshold that is not a number in range.
+    """
+    _check_thresholds(min_ray_angle_deg, max_reprojection_error)  # (before the solve, as it always was)
+    if solution is None or not solution.solves(uv, P, weights):
+        solution = solve_two_views(uv, P, weights, cameras=cameras)
+    return check_two_views(solution, max_reprojection_error=max_reprojection_error,
+                           min_ray_angle_deg=min_ray_angle_deg)

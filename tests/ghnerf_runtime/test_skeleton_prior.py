@@ -801,3 +801,145 @@ def test_the_out_of_range_measure_reads_the_prior_it_is_given(tiny_prior, tmp_pa
     assert len(rows) == 4 and all("mm" in r for r in rows)
     code, out = run("--prior", str(tiny_prior.path), "--held-out", str(tmp_path))
     assert code == 2 and "--held-out runs the model folder's own prior" in out.err
+
+
+def _noisy_cases(P: np.ndarray, count: int = 3) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``count`` pairs' peaks, values and decoded flags of skeletons in the cameras ``P`` ``(1, 2, 3, 4)``: noisy,
+    some joints undecoded, values from 0.24 to 0.8."""
+    rng = np.random.default_rng(1)
+    cases = []
+    for seed in range(count):
+        uv, conf, valid = _observe(list(P[0]), _skeleton(seed))
+        valid = valid & (rng.random(valid.shape) > 0.2)
+        cases.append((uv[None] + rng.normal(0, 1.0, uv.shape), conf[None] * rng.uniform(0.3, 1.0, conf.shape),
+                      valid[None]))
+    return cases
+
+
+def _same_inputs(got, want) -> None:
+    for name in ("joint_features", "context", "triangulated"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    assert np.array_equal(got.frame.rotation, want.frame.rotation)
+    assert np.array_equal(got.frame.origin, want.frame.origin)
+
+
+def test_inputs_with_the_cameras_terms_given_are_the_same_to_the_bit(monkeypatch):
+    """The crop cameras' centres, heading and inverses (PriorCameras.from_P), computed once where a tracked crop
+    keeps its cameras for many pairs, give the inputs computed without them; without them every call computes
+    them (no state kept between calls); terms of other matrices are refused by name."""
+    from ghnerf_runtime import skeleton_prior
+    from ghnerf_runtime.errors import GeometryError
+    from ghnerf_runtime.skeleton_prior import PriorCameras
+
+    P = np.stack(_rig(20.0, (0.3, -0.2)))[None]
+    cases = _noisy_cases(P)
+    calls = []
+    real = skeleton_prior._centres
+    monkeypatch.setattr(skeleton_prior, "_centres", lambda p: calls.append(1) or real(p))
+    fresh = [prior_inputs(uv, conf, valid, P) for uv, conf, valid in cases]
+    assert len(calls) == len(cases)
+    calls.clear()
+    terms = PriorCameras.from_P(P)
+    for (uv, conf, valid), want in zip(cases, fresh):
+        _same_inputs(prior_inputs(uv, conf, valid, P.copy(), cameras=terms), want)
+    assert len(calls) == 1
+    moved = P.copy()
+    moved[..., 3] += 0.1  # the caller's array changed in place: other cameras
+    assert terms.is_for(P) and not terms.is_for(moved)
+    with pytest.raises(GeometryError, match="other matrices"):
+        prior_inputs(*cases[0], moved, cameras=terms)
+
+
+def test_inputs_reuse_a_solve_of_their_own_peaks_and_the_camera_terms_of_another(monkeypatch):
+    """The estimator passes the pair's solve of the joints' peaks: where the prior's weights are the joints' (every
+    decoded peak's value in [0.001, 1]) the inputs take it whole (no DLT of their own), else they solve with its
+    camera terms; the inputs are the same to the bit either way, and a solve per pair is needed."""
+    from ghnerf_runtime.errors import ShapeError
+    from ghnerf_runtime.geometry import triangulation
+    from ghnerf_runtime.geometry.triangulation import solve_two_views
+
+    P = np.stack(_rig(-10.0, (0.1, 0.4)))[None]
+    uv, conf, valid = _noisy_cases(P, 1)[0]
+    want = prior_inputs(uv, conf, valid, P)
+    weights = np.where(valid, conf, 0.0)[0]  # the prior's weights: these values are all in [0.001, 1]
+    own = solve_two_views(np.where(valid[..., None], uv, 0.0)[0], P[0], weights)
+    other = solve_two_views(np.where(valid[..., None], uv, 0.0)[0], P[0], np.where(valid, 1.0, 0.0)[0])
+    svd, terms = [], []
+    real_svd, real_terms = triangulation._solve_two_views, triangulation.TwoViewCameras.from_P
+    monkeypatch.setattr(triangulation, "_solve_two_views", lambda *a: svd.append(1) or real_svd(*a))
+    monkeypatch.setattr(triangulation.TwoViewCameras, "from_P", lambda p: terms.append(1) or real_terms(p))
+    _same_inputs(prior_inputs(uv, conf, valid, P, solutions=[own]), want)
+    assert (len(svd), len(terms)) == (0, 0)
+    _same_inputs(prior_inputs(uv, conf, valid, P, solutions=[other]), want)
+    assert (len(svd), len(terms)) == (1, 0)
+    _same_inputs(prior_inputs(uv, conf, valid, P, solutions=[None]), want)
+    assert (len(svd), len(terms)) == (2, 1)
+    with pytest.raises(ShapeError, match="one per pair"):
+        prior_inputs(uv, conf, valid, P, solutions=[own, own])
+
+
+class _InputsPrior:
+    """A stand-in prior that records what the estimator feeds it (``fed``: the arguments of each call, the camera
+    terms and solve included) and answers the triangulation of the peaks."""
+
+    def __init__(self) -> None:
+        self.fed: list[tuple] = []
+
+    def estimate(self, uv_model, confidence, valid, P, flip_test=True, *, cameras=None, solutions=None):
+        from ghnerf_runtime.geometry.triangulation import triangulate_two_views
+        from ghnerf_runtime.skeleton_prior import SkeletonEstimate
+
+        P = np.asarray([np.asarray(p, np.float64) for p in P])
+        self.fed.append((uv_model[None], confidence[None], valid[None], P[None], cameras, solutions))
+        r = triangulate_two_views(uv_model, P, np.where(valid, confidence, 0.0), cameras=solutions[0].cameras)
+        return SkeletonEstimate(r.points, np.where(r.valid, 0.02, np.inf), r.valid)
+
+
+def test_the_estimator_keeps_the_crop_cameras_terms_while_its_crops_keep_their_cameras(monkeypatch):
+    """The estimator computes its crop cameras' terms (the two-view solver's, the prior's) when the crops' matrices
+    change, and reuses them while they stay (compared by value); reset() forgets them. One DLT a pass serves the
+    joints and the prior's inputs, and the inputs built with what the estimator passes are those built without."""
+    from benchmarks.bench_runtime_common import OracleSession, edge128_contract
+    from ghnerf_runtime import estimator as estimator_module
+    from ghnerf_runtime.estimator import Estimator
+    from ghnerf_runtime.geometry import triangulation
+    from ghnerf_runtime.geometry.triangulation import TwoViewCameras
+    from ghnerf_runtime.skeleton_prior import PriorCameras
+
+    made, made_prior, passes, solves = [], [], [], []
+    real_two, real_prior = TwoViewCameras.from_P, PriorCameras.from_P
+    monkeypatch.setattr(TwoViewCameras, "from_P", lambda p: made.append(1) or real_two(p))
+    monkeypatch.setattr(PriorCameras, "from_P", lambda p: made_prior.append(1) or real_prior(p))
+    real_peaks = estimator_module.solve_two_view_peaks
+
+    def peaks(uv, conf, valid, crops, config, *, terms):
+        passes.append((np.stack([c.P for c in crops]), terms))
+        return real_peaks(uv, conf, valid, crops, config, terms=terms)
+
+    monkeypatch.setattr(estimator_module, "solve_two_view_peaks", peaks)
+    real_solve = triangulation._solve_two_views
+    monkeypatch.setattr(triangulation, "_solve_two_views", lambda *a: solves.append(1) or real_solve(*a))
+
+    rig = sim.RigPlacement().build()
+    scene = sim.SimScene(sim.SceneConfig(seed=5, motion="wave"))
+    oracle = OracleSession(edge128_contract())
+    oracle.skeleton_prior = prior = _InputsPrior()
+    with Estimator(oracle, rig, EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on"))) as est:
+        for i in range(8):
+            t = i / 30.0
+            oracle.set_truth(scene.joints_3d(t))
+            est.estimate(tuple(scene.render(c, t, with_truth=False)[0] for c in rig.pair))
+        changes = 1 + sum(not np.array_equal(a[0], b[0]) for a, b in zip(passes, passes[1:]))
+        kept = sum(a[1] is b[1] for a, b in zip(passes, passes[1:]))
+        assert len(passes) >= 8 and 2 <= changes and kept >= 3, (len(passes), changes, kept)
+        assert len(made) == len(made_prior) == changes  # once per crop cameras' change, never per pass
+        for (P_a, terms_a), (P_b, terms_b) in zip(passes, passes[1:]):
+            assert (terms_a is terms_b) == np.array_equal(P_a, P_b)
+            assert terms_b.is_for(P_b)
+        solved = len(solves)
+        for *args, cameras, solutions in prior.fed:  # the inputs with the terms and solve passed, and without
+            _same_inputs(prior_inputs(*args, cameras=cameras, solutions=solutions), prior_inputs(*args))
+        assert len(prior.fed) == len(passes)
+        est.reset()
+        assert est._crop_terms is None
+    assert solved == 2 * len(passes)  # a pass's DLT for the joints and the prior's inputs, and the stand-in's own

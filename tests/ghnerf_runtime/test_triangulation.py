@@ -11,6 +11,9 @@ from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera, look_at
 from ghnerf_runtime.geometry.triangulation import (
     TriangulationResult,
+    TwoViewCameras,
+    check_two_views,
+    solve_two_views,
     triangulate_dlt,
     triangulate_midpoint,
     triangulate_robust,
@@ -624,3 +627,116 @@ def test_extreme_intrinsics_keep_float64_precision_for_float32_or_int_pixels(fx,
         pixel_rounding = np.abs(uv.astype(np.float32).astype(np.float64) - uv).max()
         bound = 10 * pixel_rounding * 3.0 / (fx * np.sin(np.radians(single.ray_angle_deg.min()))) + 1e-12
         assert np.abs(single.points - points).max() < bound
+
+
+def _same_results(got: TriangulationResult, want: TriangulationResult, context="") -> None:
+    for name in _FIELDS:
+        assert np.array_equal(getattr(got, name), getattr(want, name)), (context, name)
+        assert getattr(got, name).dtype == getattr(want, name).dtype, (context, name)
+
+
+def test_two_view_terms_given_or_not_the_answers_are_the_same_to_the_bit(monkeypatch):
+    """The estimator triangulates with one pair of crop cameras twice a pair (the joints, the prior's inputs), and a
+    tracked crop keeps its cameras: their terms (inverses, conditioning, centres), computed once by
+    TwoViewCameras.from_P, give the answers computed on the spot, on other points and weights too; without them,
+    every call computes them (no state kept between calls)."""
+    from ghnerf_runtime.geometry import triangulation
+
+    cams, _, uv = generate_scene(2, seed=3)
+    P = np.stack([c.P for c in cams])
+    rng = np.random.default_rng(0)
+    cases = [(uv + rng.normal(0, s, uv.shape), rng.uniform(0.05, 1.0, (2, 25))) for s in (0.0, 0.5, 4.0)]
+    calls = []
+    real = triangulation._conditioning_similarity
+    monkeypatch.setattr(triangulation, "_conditioning_similarity", lambda p: calls.append(1) or real(p))
+    fresh = [triangulate_two_views(u, P, w, max_reprojection_error=3.0) for u, w in cases]
+    assert len(calls) == len(cases)
+    calls.clear()
+    terms = TwoViewCameras.from_P(P)
+    for (u, w), want in zip(cases, fresh):
+        got = triangulate_two_views(u, P.copy(), w, max_reprojection_error=3.0, cameras=terms)  # the same matrices
+        _same_results(got, want)
+    assert len(calls) == 1
+
+
+def test_two_view_terms_are_those_of_the_matrices_not_of_the_array():
+    """The terms keep a copy of the matrices: a caller's array changed in place after from_P is other cameras, and
+    terms of other matrices are refused by name; a singular pair is refused every time."""
+    cams, _, uv = generate_scene(2, seed=4)
+    P = np.stack([c.P for c in cams])
+    terms = TwoViewCameras.from_P(P)
+    assert terms.is_for(P) and terms.is_for(P.tolist()) and not terms.P.flags.writeable
+    P[:, 0, 3] += 60.0  # both cameras moved 0.1 m along their x axis (f = 600 px)
+    assert not terms.is_for(P)
+    with pytest.raises(GeometryError, match="other matrices"):
+        triangulate_two_views(uv, P, np.ones((2, 25)), cameras=terms)
+    _same_results(triangulate_two_views(uv, P, np.ones((2, 25)), cameras=TwoViewCameras.from_P(P)),
+                  triangulate_two_views(uv, P, np.ones((2, 25))))
+    singular = P.copy()
+    singular[1, :, :3] = 0.0
+    for _ in range(2):
+        with pytest.raises(GeometryError, match="regular"):
+            triangulate_two_views(uv, singular, np.ones((2, 25)))
+    with pytest.raises(ShapeError, match=r"\(2, 3, 4\)"):
+        TwoViewCameras.from_P(P[:1])
+
+
+def _two_view_thresholds_case():
+    cams, _, uv = generate_scene(2, seed=5)
+    P = np.stack([c.P for c in cams])
+    uv = uv + np.random.default_rng(2).normal(0, 0.3, uv.shape)
+    w = np.full((2, 25), 0.7)
+    angles = triangulate_two_views(uv, P, w, min_ray_angle_deg=0.0).ray_angle_deg
+    return uv, P, w, (0.0, float(np.median(angles)), float(angles.max()) + 1.0)  # all joints, about half, none
+
+
+def test_one_solve_checked_at_several_thresholds_answers_as_fresh_solves(monkeypatch):
+    """The estimator solves one pair's peaks once (solve_two_views) and checks the solve for the joints
+    (joints3d.min_ray_angle_deg) and for the prior's inputs (the default): the DLT runs once, each check's
+    threshold is its own, and each result is its own writable arrays, equal to the bit to a fresh solve's."""
+    uv, P, w, thresholds = _two_view_thresholds_case()
+    fresh = {angle: triangulate_two_views(uv, P, w, min_ray_angle_deg=angle) for angle in thresholds}
+    calls = []
+    real = np.linalg.svd
+    monkeypatch.setattr(np.linalg, "svd", lambda *a, **k: calls.append(1) or real(*a, **k))
+    solution = solve_two_views(uv, P, w)
+    got = {angle: check_two_views(solution, min_ray_angle_deg=angle) for angle in thresholds}
+    again = triangulate_two_views(uv.copy(), P.copy(), w.copy(), min_ray_angle_deg=thresholds[1], solution=solution)
+    assert len(calls) == 1
+    assert [int(got[a].valid.sum()) for a in thresholds] == [25, 13, 0]  # each call's own threshold
+    _same_results(again, fresh[thresholds[1]])
+    for angle, res in got.items():
+        _same_results(res, fresh[angle], angle)
+        for name in _FIELDS:
+            getattr(res, name).flags.writeable = True  # (raises on a read-only array)
+    got[thresholds[0]].ray_angle_deg[:] = -1.0  # a caller's change reaches no later answer
+    assert np.array_equal(check_two_views(solution, min_ray_angle_deg=thresholds[1]).ray_angle_deg,
+                          fresh[thresholds[1]].ray_angle_deg)
+    uv[0, 0, 0] += 1.0  # and the solve keeps its own copy of the inputs: the caller's later change is other peaks
+    assert not solution.solves(uv, P, w)
+
+
+def test_a_solve_of_other_inputs_is_not_reused_and_no_call_reuses_another_s(monkeypatch):
+    """A solve passed for other peaks, weights or matrices is solved afresh (the answer is the inputs' own), and
+    the same inputs twice without a solve passed are solved twice: the module keeps no last solve."""
+    uv, P, w, thresholds = _two_view_thresholds_case()
+    solution = solve_two_views(uv, P, w)
+    other_w = w.copy()
+    other_w[1, 3] = 0.0  # the prior's inputs' weights differ from the joints' where a peak is weak
+    other_uv = uv.copy()
+    other_uv[0, 0, 0] += 0.25
+    other_P = P.copy()
+    other_P[0, 0, 3] += 1.0
+    calls = []
+    real = np.linalg.svd
+    monkeypatch.setattr(np.linalg, "svd", lambda *a, **k: calls.append(1) or real(*a, **k))
+    for u, p, weights in ((uv, P, other_w), (other_uv, P, w), (uv, other_P, w)):
+        assert not solution.solves(u, p, weights)
+        calls.clear()
+        got = triangulate_two_views(u, p, weights, solution=solution)
+        assert len(calls) == 1
+        _same_results(got, triangulate_two_views(u, p, weights))
+    calls.clear()
+    for _ in range(2):
+        triangulate_two_views(uv, P, w)
+    assert len(calls) == 2

@@ -502,7 +502,7 @@ class _PeaksPrior:
         self.fed: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.answers: list[np.ndarray] = []
 
-    def estimate(self, uv_model, confidence, valid, P, flip_test=True):
+    def estimate(self, uv_model, confidence, valid, P, flip_test=True, **reused):  # (cameras=, solutions=)
         from ghnerf_runtime.geometry.triangulation import triangulate_two_views
         from ghnerf_runtime.skeleton_prior import SkeletonEstimate
 
@@ -601,7 +601,7 @@ class _PlacingPrior(_PeaksPrior):
         super().__init__()
         self.oracle, self.placed, self.towards = oracle, list(placed), towards
 
-    def estimate(self, uv_model, confidence, valid, P, flip_test=True):
+    def estimate(self, uv_model, confidence, valid, P, flip_test=True, **reused):  # (cameras=, solutions=)
         from ghnerf_runtime.skeleton_prior import SkeletonEstimate
         a, b = self.oracle.people
         answer = a + self.shift
