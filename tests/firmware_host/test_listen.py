@@ -300,7 +300,11 @@ def test_the_listener_and_the_udp_sink_pick_a_name_s_address_by_one_rule(monkeyp
 
 def test_the_scheme_is_case_insensitive():
     port = listen.open_port("UDP://127.0.0.1:0", ephemeral=True)
-    port.close()
+    try:
+        host, number = port.address
+        assert host == "127.0.0.1" and number > 0  # bound as udp://, the system's port read back
+    finally:
+        port.close()
 
 
 @pytest.mark.parametrize("group", ["239.255.77.1", "[ff05::77]"])

@@ -203,7 +203,10 @@ def test_vmc_default_port() -> None:
 def test_vmc_takes_the_rig_s_id_and_cameras_as_keywords() -> None:
     # the daemon hands every sink the rig's id and camera names; vmc:// just does not use them
     sink = open_sink("vmc://127.0.0.1?max_fps=60", rig_id="stage", cameras=("left", "right"))
-    sink.close()
+    try:
+        assert sink.scheme == "vmc"
+    finally:
+        sink.close()
 
 
 def test_vmc_names_every_protocol_option_it_refuses() -> None:
