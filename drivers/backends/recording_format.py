@@ -340,6 +340,13 @@ _JPEG_RST = range(0xD0, 0xD8)
 #: 124; the 12-byte OS/2 core header is decoded instead), and the pixel layouts it decodes: (bits, compression).
 _BMP_INFO_SIZES = range(40, 125)
 _BMP_LAYOUTS = frozenset({(1, 0), (4, 0), (8, 0), (24, 0), (32, 0), (16, 0), (16, 3), (32, 3), (4, 2), (8, 1)})
+#: 16-bit BI_BITFIELDS: OpenCV 5.0 decodes only these colour masks (red, green, blue: 5-6-5 and 5-5-5), and reads
+#: them from the 12 bytes right after the info header whatever its size. A V4/V5 header (52 to 124 bytes) holds
+#: its masks inside it, so such a file decodes only where its writer repeated them after the header.
+_BMP_16_BIT_MASKS = (struct.pack("<III", 0xF800, 0x07E0, 0x001F), struct.pack("<III", 0x7C00, 0x03E0, 0x001F))
+_BMP_BITFIELDS = 3
+#: A palette layout (up to 8 bits) whose colours-used count is above this fails OpenCV's header check.
+_BMP_MAX_COLOURS_USED = 256
 #: OpenCV's default limits on a decoded image (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS): a header beyond them is
 #: decoded instead (refused there, or allowed by OPENCV_IO_MAX_IMAGE_* set higher), not taken as a size.
 _OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
@@ -437,14 +444,24 @@ def _jpeg_marker(f: BinaryIO) -> int | None:
 def _bmp_size(f: BinaryIO) -> tuple[int, int] | None:
     """The info header's width and height (negative for rows stored top-down, the height is its magnitude)
     where OpenCV decodes its layout; the file header is 14 bytes, the info header follows."""
-    head = f.read(14 + 20)  # file header; info header's size, width, height, planes, bits, compression
-    if len(head) < 34:
+    head = f.read(14 + 36)  # file header; info header's size, width, height, planes, bits, compression, ..., colours
+    if len(head) < 50:
         return None
     info_size, width, height, _planes, bits, compression = struct.unpack("<IiiHHI", head[14:34])
     if info_size not in _BMP_INFO_SIZES or (bits, compression) not in _BMP_LAYOUTS:
         return None
+    if bits <= 8 and struct.unpack("<I", head[46:50])[0] > _BMP_MAX_COLOURS_USED:
+        return None
+    if (bits, compression) == (16, _BMP_BITFIELDS) and not _bmp_masks_decodable(f, info_size):
+        return None
     height = abs(height)  # negative: rows stored top-down
     return (width, height) if _decodable(width, height) else None
+
+
+def _bmp_masks_decodable(f: BinaryIO, info_size: int) -> bool:
+    """Whether a 16-bit BI_BITFIELDS file has, where OpenCV reads them, colour masks it decodes."""
+    f.seek(14 + info_size)
+    return f.read(12) in _BMP_16_BIT_MASKS
 
 
 def _decodable(width: int, height: int) -> bool:

@@ -24,7 +24,7 @@ from drivers.backends.recording_format import (
 )
 from drivers.sim.placement import RigPlacement
 from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned
-from tests.odd_images import bmp_beyond_opencv_s_limits
+from tests.odd_images import bmp_beyond_opencv_s_limits, bmp_built
 
 WIDTH, HEIGHT = 40, 30
 FRAMES_A_CAMERA = 50
@@ -259,6 +259,53 @@ def test_a_bmp_cut_short_or_of_a_layout_opencv_does_not_read_has_no_header_size(
         struct.pack_into(field, changed, offset, value)
         path.write_bytes(bytes(changed))
         assert header_size(path) is None
+
+
+def bmp_variants(bits: int, compression: int):
+    """Each way a writer lays out a BMP of this layout: for BI_BITFIELDS, each set of masks inside the header (V2
+    to V5), after it, or both; for a palette, a colours-used count within OpenCV's 256 or beyond it."""
+    if compression == 3:
+        for masks in (["565", "555", "444"] if bits == 16 else ["888"]):
+            for inside, after in [(True, False), (False, True), (True, True)]:
+                yield {"masks": masks, "masks_in_header": inside, "masks_after_header": after}
+    elif bits <= 8:
+        yield from ({"colours_used": n} for n in (0, 1 << bits, 257))
+    else:
+        yield {}
+
+
+def opencv_decoded_size(path: Path) -> tuple[int, int] | None:
+    try:
+        image = load_image(path)
+    except RigOperationError:
+        return None
+    return image.shape[1], image.shape[0]
+
+
+@pytest.mark.parametrize(("bits", "compression"), sorted(recording_format._BMP_LAYOUTS))
+def test_a_bmp_s_header_gives_a_size_exactly_where_opencv_decodes_it_to_that_size(tmp_path, bits, compression):
+    """Every info header size accepted (40 to V5's 124) and every layout, built byte by byte. A 16-bit
+    BI_BITFIELDS file with a header above 40 bytes was given a size, yet OpenCV 5.0 reads its masks after the
+    header (where a V4/V5 file has its pixels) and does not decode it; nor one with 4-4-4 masks, nor a palette
+    of more than 256 colours used."""
+    path = tmp_path / "image.bmp"
+    wrong = []
+    for info_size in recording_format._BMP_INFO_SIZES:
+        for variant in bmp_variants(bits, compression):
+            if variant.get("masks_in_header") and info_size < 52:
+                continue  # no room for masks inside it
+            path.write_bytes(bmp_built(bits, compression, info_size, **variant))
+            if header_size(path) != opencv_decoded_size(path):
+                wrong.append((info_size, variant, header_size(path), opencv_decoded_size(path)))
+    assert wrong == []
+
+
+def test_a_v5_bmp_with_its_16_bit_masks_in_its_header_only_is_decoded_not_read_from_its_header(tmp_path):
+    path = tmp_path / "image.bmp"
+    path.write_bytes(bmp_built(16, 3, 124, masks="565", masks_in_header=True))
+    assert header_size(path) is None and image_size(path) is None
+    path.write_bytes(bmp_built(16, 3, 124, masks="565", masks_in_header=True, masks_after_header=True))
+    assert header_size(path) == (5, 3) == image_size(path)
 
 
 def beyond_opencv_s_limits(image_format: str) -> bytes:
