@@ -273,9 +273,12 @@ def payload_is_whole(path: Path) -> bool:
     """A file that exists, is not empty and, for an image or truth file, ends as its format ends.
 
     A power cut can leave a file with only its first blocks on disk: not empty, yet undecodable, and replay
-    would fail on it mid-take; a few bytes read from its end tell.
+    would fail on it mid-take; a few bytes read from its end tell. A JPEG another tool wrote may hold bytes after
+    its end-of-image marker (a trailer, padding, an MPF second image): it is whole where its segments and scans,
+    walked from its start, reach that marker (:func:`_jpeg_reaches_its_end`), which a file cut before it cannot.
     """
-    marker, span = _TRAILERS.get(path.suffix.lower(), (b"", 0))
+    suffix = path.suffix.lower()
+    marker, span = _TRAILERS.get(suffix, (b"", 0))
     if not span:
         return file_is_whole(path)
     try:
@@ -284,9 +287,56 @@ def payload_is_whole(path: Path) -> bool:
             if size < span:
                 return False
             f.seek(size - span)
-            return f.read(len(marker)) == marker
+            if f.read(len(marker)) == marker:
+                return True
+            if suffix != ".jpg":
+                return False
+            f.seek(0)
+            return _jpeg_reaches_its_end(f.read())  # the whole file: only those not ending at the marker
     except OSError:
         return False
+
+
+def _jpeg_reaches_its_end(data: bytes) -> bool:
+    """Whether a JPEG's marker segments, walked by their lengths, and its scans' entropy-coded data, walked to the
+    marker after each, reach an end-of-image marker. Searched for, one could be found inside a segment (an EXIF
+    thumbnail's); in entropy-coded data a 0xFF byte is followed only by 0x00 or a restart marker."""
+    if not data.startswith(_JPEG_START):
+        return False
+    pos = len(_JPEG_START)
+    while True:
+        if pos + 2 > len(data) or data[pos] != 0xFF:
+            return False
+        while pos + 1 < len(data) and data[pos + 1] == 0xFF:
+            pos += 1  # fill bytes before the marker
+        if pos + 1 >= len(data):
+            return False
+        marker, pos = data[pos + 1], pos + 2
+        if marker == _JPEG_EOI:
+            return True
+        if marker == _JPEG_TEM or marker in _JPEG_RST:
+            continue  # standalone: no length
+        if marker in (0x00, 0xD8) or pos + 2 > len(data):
+            return False  # a stuffed byte or a second start where a marker is due: malformed; or cut short
+        length = struct.unpack(">H", data[pos:pos + 2])[0]
+        if length < 2:
+            return False
+        pos += length
+        if marker == _JPEG_SOS:
+            pos = _jpeg_scan_end(data, pos)
+
+
+def _jpeg_scan_end(data: bytes, pos: int) -> int:
+    """Where the marker after a scan's entropy-coded data (from ``pos``) starts; the data's end if none does."""
+    while True:
+        pos = data.find(b"\xff", pos)
+        if pos < 0 or pos + 1 >= len(data):
+            return len(data)
+        following = data[pos + 1]
+        if following == 0x00 or following in _JPEG_RST:
+            pos += 2  # a stuffed 0xFF data byte, or a restart marker inside the scan
+        else:
+            return pos
 
 
 # ------------------------------------------------------------------ payloads
@@ -334,7 +384,7 @@ _BMP_START = b"BM"
 _PNG_SIZE_CHANGERS = (b"acTL",)
 #: JPEG start-of-frame markers (SOF0-SOF15 but DHT, JPG and DAC, which share the range), where the size is.
 _JPEG_FRAMES = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
-_JPEG_SOS, _JPEG_TEM = 0xDA, 0x01
+_JPEG_SOS, _JPEG_TEM, _JPEG_EOI = 0xDA, 0x01, 0xD9
 _JPEG_RST = range(0xD0, 0xD8)
 #: BMP info headers OpenCV reads the size from (BITMAPINFOHEADER, 40 bytes, and its longer versions up to V5's
 #: 124; the 12-byte OS/2 core header is decoded instead), and the pixel layouts it decodes: (bits, compression).

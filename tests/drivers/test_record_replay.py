@@ -5,6 +5,7 @@ import os
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -21,7 +22,14 @@ from drivers import (
 )
 from drivers.backends import record as record_module
 from drivers.backends.record import inner_url_text
-from drivers.backends.recording_format import FRAMES, MANIFEST, encode_image, read_manifest
+from drivers.backends.recording_format import (
+    FRAMES,
+    MANIFEST,
+    encode_image,
+    load_image,
+    payload_is_whole,
+    read_manifest,
+)
 from drivers.url import RigUrl
 
 SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
@@ -549,8 +557,6 @@ def test_files_a_power_cut_left_half_written_are_dropped_not_replayed(copy_of_ta
         path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
     assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 2  # no RigOperationError
     assert "dropped 2 journal row(s)" in caplog.text
-    from drivers.backends.recording_format import payload_is_whole
-
     image = np.zeros((30, 40, 3), np.uint8)
     for image_format in ("png", "jpg"):
         path = tmp_path / f"x.{image_format}"
@@ -558,6 +564,61 @@ def test_files_a_power_cut_left_half_written_are_dropped_not_replayed(copy_of_ta
         assert payload_is_whole(path)
         path.write_bytes(path.read_bytes()[:-1])
         assert not payload_is_whole(path)
+
+
+def jpegs_another_tool_writes() -> dict[str, bytes]:
+    """A 40x30 JPEG as the recorder writes it, progressive (ten scans, tables between them), and with a restart
+    marker inside its scan."""
+    image = np.random.default_rng(4).integers(0, 256, (30, 40, 3), np.uint8)
+    options = {"baseline": [], "progressive": [cv2.IMWRITE_JPEG_PROGRESSIVE, 1],
+               "restarts": [cv2.IMWRITE_JPEG_RST_INTERVAL, 1]}
+    return {name: cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 90, *extra])[1].tobytes()
+            for name, extra in options.items()}
+
+
+#: What some tools write after a JPEG's end-of-image marker: a trailer of 100 bytes (not ending as a JPEG does),
+#: padding, and an MPF ("multi-picture") second image.
+AFTER_THE_END = {"trailer": bytes(range(100)), "padding": bytes(4096),
+                 "second image": encode_image(np.zeros((6, 8, 3), np.uint8), "jpg", 90)}
+
+
+@pytest.mark.parametrize("kind", sorted(jpegs_another_tool_writes()))
+@pytest.mark.parametrize("after", sorted(AFTER_THE_END))
+def test_a_jpeg_with_bytes_after_its_end_is_whole_and_one_cut_before_its_end_is_not(tmp_path, kind, after):
+    """Cut after every byte: whole (and decoded as the image) exactly where the cut is past the end-of-image marker.
+    Before, only a file ending at the marker was whole: a phone's JPEG with a trailer was dropped from a take cut
+    short."""
+    jpeg = jpegs_another_tool_writes()[kind]
+    data = jpeg + AFTER_THE_END[after]
+    path = tmp_path / "image.jpg"
+    wrong = []
+    for end in range(1, len(data) + 1):
+        path.write_bytes(data[:end])
+        if payload_is_whole(path) != (end >= len(jpeg)):
+            wrong.append(end)
+    assert wrong == []
+    path.write_bytes(data)
+    assert np.array_equal(load_image(path), cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR))
+
+
+def as_jpeg_take(take):
+    """``take``'s PNG images converted to JPEGs (the journal and manifest naming those), as another tool would."""
+    for path in take.glob("images/*/*.png"):
+        path.with_suffix(".jpg").write_bytes(encode_image(cv2.imread(str(path)), "jpg", 90))
+        path.unlink()
+    (take / FRAMES).write_text((take / FRAMES).read_text().replace(".png", ".jpg"))
+    edit_manifest(take, lambda d: d.update(image_format="jpg"))
+
+
+def test_an_interrupted_take_plays_a_jpeg_with_a_trailer_and_drops_one_cut_in_its_scan(copy_of_take, caplog):
+    as_jpeg_take(copy_of_take)
+    rows = journal(copy_of_take)
+    with_trailer, cut = copy_of_take / rows[3]["image"], copy_of_take / rows[6]["image"]
+    with_trailer.write_bytes(with_trailer.read_bytes() + AFTER_THE_END["trailer"])
+    data = cut.read_bytes()
+    cut.write_bytes(data[:data.index(b"\xff\xda") + 40])  # its scan header and a few bytes of its scan data
+    assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 1
+    assert "dropped 1 journal row(s)" in caplog.text
 
 
 def test_complete_is_marked_only_once_the_take_is_on_disk(tmp_path, sim_cache, monkeypatch):
