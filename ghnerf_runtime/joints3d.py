@@ -31,8 +31,8 @@ from ghnerf_runtime.geometry.triangulation import (TwoViewCameras, TwoViewSoluti
 from ghnerf_runtime.keypoints import heatmap_to_model_pixels
 
 __all__ = ["Joints3D", "ViewAgreement", "gate_presence", "gate_to_box", "near_the_body", "triangulate_joints",
-           "triangulate_joints_checked", "solve_two_view_peaks", "lowest_height_m", "lower_foot_m", "grid_shape", "query_grid",
-           "volumetric_joints", "depth_centroid_joints"]
+           "triangulate_joints_checked", "solve_two_view_peaks", "lowest_height_m", "lower_foot_m", "grid_shape",
+           "query_grid", "volumetric_joints", "depth_centroid_joints"]
 
 
 @dataclass(frozen=True, eq=False)
