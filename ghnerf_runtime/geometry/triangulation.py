@@ -1,10 +1,14 @@
 """Multi-view triangulation of many joints at once: DLT, ray midpoint, view dropping.
 
-Every function takes the observations of ``J`` joints in ``C`` cameras as one
-array ``uv`` of shape ``(..., C, J, 2)`` (leading batch dimensions, e.g. frames,
-are allowed) and returns a :class:`TriangulationResult` whose arrays have the
-joint axis before the camera axis: points ``(..., J, 3)``, reprojection errors
-``(..., J, C)``.
+The general solvers (:func:`triangulate_dlt`, :func:`triangulate_midpoint`,
+:func:`triangulate_robust`) take the observations of ``J`` joints in ``C`` cameras as
+one array ``uv`` of shape ``(..., C, J, 2)`` (leading batch dimensions, e.g. frames,
+are allowed) and return a :class:`TriangulationResult` whose arrays have the joint
+axis before the camera axis: points ``(..., J, 3)``, reprojection errors
+``(..., J, C)``. The estimator's case, two views of one frame
+(:func:`triangulate_two_views`, ``uv`` ``(2, J, 2)``), comes in two halves too:
+:func:`solve_two_views` gives a :class:`TwoViewSolution`, which
+:func:`check_two_views` turns into the :class:`TriangulationResult`.
 
 Degenerate joints never raise and never produce NaN: they come back with
 ``valid == False`` and documented fill values (see :class:`TriangulationResult`).
