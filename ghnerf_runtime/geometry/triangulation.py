@@ -649,7 +649,7 @@ def _read_only(*arrays: np.ndarray) -> None:
 @dataclass(frozen=True, eq=False)
 class TwoViewCameras:
     """What the two-view solver derives from its two ``(2, 3, 4)`` projection matrices alone (read-only arrays):
-    the matrices ``P`` (a copy), their left blocks ``M``, determinants and inverses, the conditioning
+    the matrices ``P`` (a copy), their left blocks ``M`` and inverses, the conditioning
     similarities ``T``, the conditioned unit-norm matrices ``Pn``, whether the centres are distinct and each
     view's depth scale.
 
@@ -661,7 +661,6 @@ class TwoViewCameras:
 
     P: np.ndarray
     M: np.ndarray
-    det: np.ndarray
     Minv: np.ndarray
     T: np.ndarray
     Pn: np.ndarray
@@ -689,8 +688,8 @@ class TwoViewCameras:
             Minv = np.linalg.inv(M)
             distinct = bool(_distinct_centres(P, Minv)[0, 1])
             depth_scale = (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
-        _read_only(P, M, det, Minv, T, Pn, depth_scale)
-        return cls(P, M, det, Minv, T, Pn, distinct, depth_scale)
+        _read_only(P, M, Minv, T, Pn, depth_scale)
+        return cls(P, M, Minv, T, Pn, distinct, depth_scale)
 
     def is_for(self, P) -> bool:
         """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""
