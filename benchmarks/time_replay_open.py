@@ -54,6 +54,8 @@ TAKE_FORMATS = {"png": "png", "exif-jpg": "jpg"}
 
 
 def jpeg_segment(marker: int, payload: bytes) -> bytes:
+    """One JPEG marker segment: 0xFF, ``marker``, the length (itself included), ``payload`` (tests/exif_images.py
+    builds its tagged images with it too)."""
     return bytes([0xFF, marker]) + struct.pack(">H", len(payload) + 2) + payload
 
 

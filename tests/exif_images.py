@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import struct
 
+# one segment builder for these images and the benchmark's take of phone JPEGs
+from benchmarks.time_replay_open import jpeg_segment
+
+__all__ = ["exif_orientation", "jpeg_segment", "jpeg_turned"]
+
 
 def exif_orientation(orientation: int) -> bytes:
     """A big-endian TIFF block holding one tag, the EXIF orientation (6: turn a quarter, as a phone held upright
     writes it; 3: half a turn)."""
     return b"MM\x00*\x00\x00\x00\x08" + struct.pack(">HHHIHH", 1, 0x0112, 3, 1, orientation, 0) + b"\x00" * 4
-
-
-def jpeg_segment(marker: int, payload: bytes) -> bytes:
-    """One JPEG marker segment: 0xFF, ``marker``, the length (itself included), ``payload``."""
-    return bytes([0xFF, marker]) + struct.pack(">H", len(payload) + 2) + payload
 
 
 def jpeg_turned(jpeg: bytes, orientation: int = 6) -> bytes:

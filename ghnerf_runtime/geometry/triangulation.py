@@ -1,10 +1,14 @@
 """Multi-view triangulation of many joints at once: DLT, ray midpoint, view dropping.
 
-Every function takes the observations of ``J`` joints in ``C`` cameras as one
-array ``uv`` of shape ``(..., C, J, 2)`` (leading batch dimensions, e.g. frames,
-are allowed) and returns a :class:`TriangulationResult` whose arrays have the
-joint axis before the camera axis: points ``(..., J, 3)``, reprojection errors
-``(..., J, C)``.
+The general solvers (:func:`triangulate_dlt`, :func:`triangulate_midpoint`,
+:func:`triangulate_robust`) take the observations of ``J`` joints in ``C`` cameras as
+one array ``uv`` of shape ``(..., C, J, 2)`` (leading batch dimensions, e.g. frames,
+are allowed) and return a :class:`TriangulationResult` whose arrays have the joint
+axis before the camera axis: points ``(..., J, 3)``, reprojection errors
+``(..., J, C)``. The estimator's case, two views of one frame
+(:func:`triangulate_two_views`, ``uv`` ``(2, J, 2)``), comes in two halves too:
+:func:`solve_two_views` gives a :class:`TwoViewSolution`, which
+:func:`check_two_views` turns into the :class:`TriangulationResult`.
 
 Degenerate joints never raise and never produce NaN: they come back with
 ``valid == False`` and documented fill values (see :class:`TriangulationResult`).
@@ -645,7 +649,7 @@ def _read_only(*arrays: np.ndarray) -> None:
 @dataclass(frozen=True, eq=False)
 class TwoViewCameras:
     """What the two-view solver derives from its two ``(2, 3, 4)`` projection matrices alone (read-only arrays):
-    the matrices ``P`` (a copy), their left blocks ``M``, determinants and inverses, the conditioning
+    the matrices ``P`` (a copy), their left blocks ``M`` and inverses, the conditioning
     similarities ``T``, the conditioned unit-norm matrices ``Pn``, whether the centres are distinct and each
     view's depth scale.
 
@@ -657,7 +661,6 @@ class TwoViewCameras:
 
     P: np.ndarray
     M: np.ndarray
-    det: np.ndarray
     Minv: np.ndarray
     T: np.ndarray
     Pn: np.ndarray
@@ -685,8 +688,8 @@ class TwoViewCameras:
             Minv = np.linalg.inv(M)
             distinct = bool(_distinct_centres(P, Minv)[0, 1])
             depth_scale = (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
-        _read_only(P, M, det, Minv, T, Pn, depth_scale)
-        return cls(P, M, det, Minv, T, Pn, distinct, depth_scale)
+        _read_only(P, M, Minv, T, Pn, depth_scale)
+        return cls(P, M, Minv, T, Pn, distinct, depth_scale)
 
     def is_for(self, P) -> bool:
         """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""

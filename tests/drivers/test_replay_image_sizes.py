@@ -213,6 +213,22 @@ def test_a_jpeg_s_segments_before_its_frame_header_are_walked_past(tmp_path, no_
     assert header_size(path) == (40, 30) == image_size(path)
 
 
+def test_the_benchmark_s_phone_jpeg_is_measured_from_its_header_and_built_by_the_tests_segment_builder(tmp_path,
+                                                                                                      no_decode):
+    """benchmarks/time_replay_open.py --format exif-jpg times a take of these (docs/recording-format.md): each must be
+    read from its header, or the open it times decodes. Its JPEG segment builder is the tests' (tests/exif_images.py
+    had a copy of its own)."""
+    import tests.exif_images
+    from benchmarks import time_replay_open
+
+    assert tests.exif_images.jpeg_segment is time_replay_open.jpeg_segment
+    image = np.random.default_rng(5).integers(0, 256, (30, 40, 3), np.uint8)
+    path = tmp_path / "phone.jpg"
+    path.write_bytes(time_replay_open.encoded(image, "exif-jpg", encode_image(np.zeros((12, 16, 3), np.uint8),
+                                                                              "jpg", 80)))
+    assert header_size(path) == (40, 30) == image_size(path)
+
+
 def test_a_jpeg_cut_short_in_a_segment_before_its_frame_header_has_no_header_size(tmp_path):
     data = encode_image(np.zeros((30, 40, 3), np.uint8), "jpg", 90)
     whole = with_exif(data, "jpg")

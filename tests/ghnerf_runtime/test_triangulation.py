@@ -740,3 +740,19 @@ def test_a_solve_of_other_inputs_is_not_reused_and_no_call_reuses_another_s(monk
     for _ in range(2):
         triangulate_two_views(uv, P, w)
     assert len(calls) == 2
+
+
+def test_every_two_view_camera_term_is_read_by_the_solve_or_the_check():
+    """TwoViewCameras keeps what the solve and the check read, nothing else (its determinants were kept and never
+    read: their sign is in depth_scale)."""
+    import dataclasses
+    import inspect
+    import re
+
+    from ghnerf_runtime.geometry import triangulation
+
+    readers = "".join(inspect.getsource(f) for f in (triangulation._solve_two_views, triangulation.check_two_views,
+                                                     TwoViewCameras.is_for))
+    unread = [f.name for f in dataclasses.fields(TwoViewCameras)
+              if not re.search(rf"\b(?:cams|self)\.{f.name}\b", readers)]
+    assert not unread, unread
