@@ -9,7 +9,8 @@ the solve checked again`` the skeleton prior's inputs' use of the pair's solve o
 with another ray-angle threshold: the DLT not run again); ``dlt`` and ``midpoint`` are the general solvers with
 two and three ``Camera`` objects, and ``robust`` the three-view one with one wrong view to drop. Each row is the
 median over ``--rounds`` of the mean per call over ``--calls`` calls, in microseconds; one host, whatever else
-runs on it. To compare two versions of ``ghnerf_runtime``, run this file from each checkout (it imports the package it sits beside).
+runs on it. To compare two versions of ``ghnerf_runtime``, run this file from each checkout (it imports the package
+it sits beside).
 """
 from __future__ import annotations
 

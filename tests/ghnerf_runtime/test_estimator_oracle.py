@@ -15,7 +15,7 @@ import pytest
 
 from benchmarks.bench_runtime_common import OracleSession, edge128_contract
 from ghnerf_runtime.config import ConfigError, EstimatorConfig, FrameCheckConfig, HeatmapsConfig, Joints3DConfig, \
-    NovelViewConfig, PresenceConfig, RoiConfig, TrackingConfig, config_from_dict
+    NovelViewConfig, PresenceConfig, TrackingConfig, config_from_dict
 from ghnerf_runtime.errors import ModelRunError
 from ghnerf_runtime.estimator import NOVEL_STAGES, Estimator
 from ghnerf_runtime.novel_view import NovelViewRequest
