@@ -28,6 +28,7 @@ import numpy as np
 
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.errors import GeometryError, ModelContractError, ModelLoadError, ModelRunError, ShapeError
+from ghnerf_runtime.geometry.kept_terms import read_only, same_bits, terms_of
 from ghnerf_runtime.geometry.triangulation import TwoViewSolution, triangulate_two_views
 from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 
@@ -156,14 +157,12 @@ class PriorCameras:
         C = _centres(P)
         M = P[..., :3]
         cams = cls(P, C, C.mean(1), _mean_heading(P), np.linalg.inv(M), np.sign(np.linalg.det(M))[..., None, None])
-        for a in (cams.P, cams.centres, cams.mid, cams.heading, cams.inverse, cams.towards_scene):
-            a.setflags(write=False)  # shared by every later call with these cameras
+        read_only(cams.P, cams.centres, cams.mid, cams.heading, cams.inverse, cams.towards_scene)
         return cams
 
     def is_for(self, P) -> bool:
         """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""
-        P = np.asarray(P, dtype=np.float64)
-        return P.shape == self.P.shape and P.tobytes() == self.P.tobytes()
+        return same_bits(self.P, P)
 
 
 def _solve_of(solutions: Sequence[TwoViewSolution | None] | None, pairs: int) -> list[TwoViewSolution | None]:
@@ -173,16 +172,6 @@ def _solve_of(solutions: Sequence[TwoViewSolution | None] | None, pairs: int) ->
     if len(solutions) != pairs:
         raise ShapeError(f"solutions: one per pair expected ({pairs}), got {len(solutions)}")
     return list(solutions)
-
-
-def _cameras_for(P: np.ndarray, cameras: PriorCameras | None) -> PriorCameras:
-    """``cameras`` where given (they must be ``P``'s), else ``P``'s terms computed now."""
-    if cameras is None:
-        return PriorCameras.from_P(P)
-    if not cameras.is_for(P):
-        raise GeometryError(f"the prior's camera terms given are those of other matrices than P = {P.tolist()} "
-                            f"(they were computed for {cameras.P.tolist()})")
-    return cameras
 
 
 def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray, *,
@@ -233,7 +222,7 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     ok = ok & dec.all(1) & np.isfinite(X).all(-1)
     rep, ang = np.nan_to_num(rep), np.nan_to_num(ang)
 
-    cams = _cameras_for(P, cameras)  # (after the solves: a singular matrix is the solver's GeometryError)
+    cams = terms_of(P, cameras, PriorCameras.from_P, "prior's camera terms")  # (after the solves: a singular matrix is the solver's GeometryError)
     C, mid = cams.centres, cams.mid
     root = mid + _DEFAULT_DISTANCE_M * cams.heading  # no joint triangulated: a guess ahead of the cameras
     for i in range(N):

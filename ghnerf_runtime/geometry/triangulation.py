@@ -41,6 +41,7 @@ import numpy as np
 
 from ghnerf_runtime.errors import GeometryError, ShapeError
 from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.kept_terms import read_only, same_bits, terms_of
 
 CameraLike = Union[Camera, np.ndarray]
 
@@ -633,19 +634,6 @@ def triangulate_robust(
     return result
 
 
-def _same_bits(kept: np.ndarray, given) -> bool:
-    """Whether ``given`` holds the same float64 values as ``kept`` to the bit (shape included): the test for
-    reusing terms or a solve, where values equal by ``==`` (0.0 and -0.0) may still be other inputs."""
-    given = np.asarray(given, dtype=np.float64)
-    return given.shape == kept.shape and given.tobytes() == kept.tobytes()
-
-
-def _read_only(*arrays: np.ndarray) -> None:
-    """Mark arrays read-only: they are shared by every later call that reuses them."""
-    for a in arrays:
-        a.setflags(write=False)
-
-
 @dataclass(frozen=True, eq=False)
 class TwoViewCameras:
     """What the two-view solver derives from its two ``(2, 3, 4)`` projection matrices alone (read-only arrays):
@@ -688,12 +676,12 @@ class TwoViewCameras:
             Minv = np.linalg.inv(M)
             distinct = bool(_distinct_centres(P, Minv)[0, 1])
             depth_scale = (np.sign(det) / np.sqrt(np.square(M[:, 2, :]).sum(axis=-1)))[:, None]
-        _read_only(P, M, Minv, T, Pn, depth_scale)
+        read_only(P, M, Minv, T, Pn, depth_scale)
         return cls(P, M, Minv, T, Pn, distinct, depth_scale)
 
     def is_for(self, P) -> bool:
         """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""
-        return _same_bits(self.P, P)
+        return same_bits(self.P, P)
 
 
 @dataclass(frozen=True, eq=False)
@@ -717,7 +705,7 @@ class TwoViewSolution:
 
     def solves(self, uv, P, weights) -> bool:
         """Whether this is the solve of ``uv``, ``P`` and ``weights`` (the same values to the bit)."""
-        return _same_bits(self.uv, uv) and _same_bits(self.weights, weights) and self.cameras.is_for(P)
+        return same_bits(self.uv, uv) and same_bits(self.weights, weights) and self.cameras.is_for(P)
 
 
 def _two_view_inputs(uv, P, weights) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -729,16 +717,6 @@ def _two_view_inputs(uv, P, weights) -> tuple[np.ndarray, np.ndarray, np.ndarray
         raise ShapeError(f"uv (2, J, 2), P (2, 3, 4) and weights (2, J) expected, got {uv.shape}, {P.shape}, "
                          f"{w.shape}")
     return uv, P, w
-
-
-def _terms_for(P: np.ndarray, cameras: TwoViewCameras | None) -> TwoViewCameras:
-    """``cameras`` where given (they must be ``P``'s), else ``P``'s terms computed now."""
-    if cameras is None:
-        return TwoViewCameras.from_P(P)
-    if not cameras.is_for(P):
-        raise GeometryError(f"the two-view camera terms given are those of other matrices than P = {P.tolist()} "
-                            f"(they were computed for {cameras.P.tolist()})")
-    return cameras
 
 
 def solve_two_views(uv, P, weights, *, cameras: TwoViewCameras | None = None) -> TwoViewSolution:
@@ -753,11 +731,11 @@ def solve_two_views(uv, P, weights, *, cameras: TwoViewCameras | None = None) ->
         matrices.
     """
     uv, P, w = _two_view_inputs(uv, P, weights)
-    cams = _terms_for(P, cameras)
+    cams = terms_of(P, cameras, TwoViewCameras.from_P, "two-view camera terms")
     with np.errstate(all="ignore"):
         points, finite, angle, used = _solve_two_views(uv, w, cams)
     uv, w = uv.copy(), w.copy()  # (the caller's arrays may change later)
-    _read_only(uv, w, points, finite, angle, used)
+    read_only(uv, w, points, finite, angle, used)
     return TwoViewSolution(cams, uv, w, points, finite, angle, used)
 
 
