@@ -264,37 +264,96 @@ def file_is_whole(path: Path) -> bool:
         return False
 
 
-#: How each payload file ends, and how far from its end that starts: PNG's IEND chunk, JPEG's end-of-image
-#: marker, the npz's zip end-of-central-directory record (no archive comment is written).
-_TRAILERS = {".png": (b"IEND\xaeB`\x82", 8), ".jpg": (b"\xff\xd9", 2), ".npz": (b"PK\x05\x06", 22)}
+#: How each payload file ends, and how far from its end that starts: PNG's IEND chunk (empty: its length, type
+#: and CRC), JPEG's end-of-image marker, the npz's zip end-of-central-directory record (no archive comment is
+#: written). A BMP has no end mark: its header says how long it is (:func:`_bmp_is_as_long_as_its_header_says`).
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+_TRAILERS = {".png": (_PNG_END, len(_PNG_END)), ".jpg": (b"\xff\xd9", 2), ".jpeg": (b"\xff\xd9", 2),
+             ".npz": (b"PK\x05\x06", 22)}
 
 
 def payload_is_whole(path: Path) -> bool:
     """A file that exists, is not empty and, for an image or truth file, ends as its format ends.
 
     A power cut can leave a file with only its first blocks on disk: not empty, yet undecodable, and replay
-    would fail on it mid-take; a few bytes read from its end tell. A JPEG another tool wrote may hold bytes after
-    its end-of-image marker (a trailer, padding, an MPF second image): it is whole where its segments and scans,
-    walked from its start, reach that marker (:func:`_jpeg_reaches_its_end`), which a file cut before it cannot.
+    would fail on it mid-take; a few bytes read from its end tell. A PNG or JPEG another tool wrote may hold bytes
+    after its end (a trailer, padding, an MPF second image): it is whole where its chunks, or segments and scans,
+    walked from its start reach that end (:data:`_WALKS`), which a file cut before it cannot. A BMP is whole when
+    it is as long as its header says. The suffix is matched whatever its case (``.JPG``).
     """
     suffix = path.suffix.lower()
-    marker, span = _TRAILERS.get(suffix, (b"", 0))
-    if not span:
+    trailer, walk = _TRAILERS.get(suffix), _WALKS.get(suffix)
+    if trailer is None and walk is None:
         return file_is_whole(path)
     try:
         with open(path, "rb") as f:
             size = f.seek(0, 2)
-            if size < span:
-                return False
-            f.seek(size - span)
-            if f.read(len(marker)) == marker:
-                return True
-            if suffix != ".jpg":
+            if trailer is not None and _ends_with(f, size, *trailer):
+                return True  # the recorder's own files: a few bytes read
+            if walk is None:
                 return False
             f.seek(0)
-            return _jpeg_reaches_its_end(f.read())  # the whole file: only those not ending at the marker
+            return walk(f, size)  # only files not ending at their format's end mark
     except OSError:
         return False
+
+
+def _ends_with(f: BinaryIO, size: int, marker: bytes, span: int) -> bool:
+    """Whether ``marker`` starts ``span`` bytes before the end of a file of ``size`` bytes."""
+    if size < span:
+        return False
+    f.seek(size - span)
+    return f.read(len(marker)) == marker
+
+
+def _png_reaches_its_end(f: BinaryIO, size: int) -> bool:
+    """Whether a PNG's chunks, walked from its signature by their lengths (length, type, data, CRC), reach an
+    IEND chunk whose CRC is right; whatever follows it does not matter. Only the chunk headers are read."""
+    if f.read(len(_PNG_SIGNATURE)) != _PNG_SIGNATURE:
+        return False
+    while True:  # each pass moves on by at least a chunk header: it ends at IEND or the end of the file
+        head = f.read(8)
+        if len(head) < 8:
+            return False
+        length, kind = struct.unpack(">I4s", head)
+        if kind == b"IEND":
+            body = f.read(length + 4)
+            return len(body) == length + 4 and struct.unpack(">I", body[length:])[0] == zlib.crc32(kind + body[:length])
+        if f.tell() + length + 4 > size:
+            return False  # the chunk runs past the end: cut short
+        f.seek(length + 4, 1)  # the data and its CRC
+
+
+def _jpeg_file_reaches_its_end(f: BinaryIO, size: int) -> bool:
+    return _jpeg_reaches_its_end(f.read())  # the whole file: only those not ending at the marker are walked
+
+
+def _bmp_is_as_long_as_its_header_says(f: BinaryIO, size: int) -> bool:
+    """Whether a BMP holds all its header says it holds: its file size (``bfSize``, at byte 2), its info header,
+    and its pixel data (from ``bfOffBits``, at byte 10: :func:`_bmp_pixel_bytes`). A writer leaving its file size
+    0 leaves the others to tell."""
+    head = f.read(14 + 24)  # file header; info header's size, width, height, planes, bits, compression, image size
+    if len(head) < 18 or not head.startswith(_BMP_START):
+        return False
+    file_size, pixels_at, info_size = struct.unpack("<I4xII", head[2:18])
+    return size >= max(file_size, 14 + info_size, pixels_at + _bmp_pixel_bytes(head, info_size))
+
+
+def _bmp_pixel_bytes(head: bytes, info_size: int) -> int:
+    """The size of a BMP's pixel data: uncompressed, its rows'; compressed, the image size its info header
+    gives; 0 where it does not (cut short, or a compressed layout whose image size is left 0)."""
+    if info_size == 12:  # the OS/2 core header: 16-bit width and height, uncompressed
+        if len(head) < 26:
+            return 0
+        width, height, _planes, bits = struct.unpack("<HHHH", head[18:26])
+        compression, image_size = 0, 0
+    else:
+        if len(head) < 38:
+            return 0
+        width, height, _planes, bits, compression, image_size = struct.unpack("<iiHHII", head[18:38])
+    if compression not in (0, _BMP_BITFIELDS):
+        return image_size  # run-length coded (or JPEG, PNG inside): only the header's image size tells
+    return (abs(width) * bits + 31) // 32 * 4 * abs(height)  # rows padded to 4 bytes, as OpenCV reads them
 
 
 def _jpeg_reaches_its_end(data: bytes) -> bool:
@@ -337,6 +396,11 @@ def _jpeg_scan_end(data: bytes, pos: int) -> int:
             pos += 2  # a stuffed 0xFF data byte, or a restart marker inside the scan
         else:
             return pos
+
+
+#: How a payload file not ending at its format's end mark is walked from its start to tell whether it is whole.
+_WALKS = {".png": _png_reaches_its_end, ".jpg": _jpeg_file_reaches_its_end, ".jpeg": _jpeg_file_reaches_its_end,
+          ".bmp": _bmp_is_as_long_as_its_header_says}
 
 
 # ------------------------------------------------------------------ payloads

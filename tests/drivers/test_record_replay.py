@@ -2,7 +2,9 @@
 import json
 import logging
 import os
+import struct
 import time
+import zlib
 from pathlib import Path
 
 import cv2
@@ -31,6 +33,7 @@ from drivers.backends.recording_format import (
     read_manifest,
 )
 from drivers.url import RigUrl
+from tests.odd_images import bmp_built
 
 SIM = "sim://?width=40&height=30&jitter_ms=1.5&offset_ms=2&drop=0.1&seed=8&policy=all"
 
@@ -617,6 +620,74 @@ def test_an_interrupted_take_plays_a_jpeg_with_a_trailer_and_drops_one_cut_in_it
     with_trailer.write_bytes(with_trailer.read_bytes() + AFTER_THE_END["trailer"])
     data = cut.read_bytes()
     cut.write_bytes(data[:data.index(b"\xff\xda") + 40])  # its scan header and a few bytes of its scan data
+    assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 1
+    assert "dropped 1 journal row(s)" in caplog.text
+
+
+def pngs_and_bmps_another_tool_writes() -> dict[str, bytes]:
+    """A 40x30 image as PNG (as the recorder writes it, and with a text chunk after its image data) and as BMP
+    (as OpenCV writes it; with its file size left 0, so its pixel data's offset and rows tell; 8-bit with a
+    palette; run-length coded, whose image size the header gives)."""
+    image = np.random.default_rng(5).integers(0, 256, (30, 40, 3), np.uint8)
+    png = encode_image(image, "png", 90)
+    text = b"tEXtComment\x00made elsewhere"
+    text_chunk = struct.pack(">I", len(text) - 4) + text + struct.pack(">I", zlib.crc32(text))
+    bmp = cv2.imencode(".bmp", image)[1].tobytes()
+    bmp_size_left_0 = bmp[:2] + bytes(4) + bmp[6:]
+    return {"png": png, "png with a text chunk": png[:-12] + text_chunk + png[-12:], "bmp": bmp,
+            "bmp of size 0": bmp_size_left_0, "bmp 8-bit": cv2.imencode(".bmp", image[:, :, 0])[1].tobytes(),
+            "bmp rle": bmp_built(8, 1, 40, width=40, height=30)}
+
+
+@pytest.mark.parametrize("kind", sorted(pngs_and_bmps_another_tool_writes()))
+@pytest.mark.parametrize("after", sorted(AFTER_THE_END))
+def test_a_png_or_bmp_with_bytes_after_its_end_is_whole_and_one_cut_before_its_end_is_not(tmp_path, kind, after):
+    """Cut after every byte: whole (and decoded as the image) exactly where the cut is past the PNG's IEND chunk or
+    the BMP's last pixel row. Before, a PNG with a trailer was dropped from a take cut short, and a BMP cut short
+    was played (then failed to decode mid-take)."""
+    image = pngs_and_bmps_another_tool_writes()[kind]
+    data = image + AFTER_THE_END[after]
+    path = tmp_path / f"image.{kind[:3]}"
+    wrong = []
+    for end in range(1, len(data) + 1):
+        path.write_bytes(data[:end])
+        if payload_is_whole(path) != (end >= len(image)):
+            wrong.append(end)
+    assert wrong == []
+    path.write_bytes(data)
+    assert np.array_equal(load_image(path), cv2.imdecode(np.frombuffer(image, np.uint8), cv2.IMREAD_COLOR))
+
+
+@pytest.mark.parametrize("name", ["image.jpeg", "image.JPG", "image.JPEG", "image.PNG", "image.BMP"])
+def test_another_tool_s_suffixes_are_checked_whatever_their_case(tmp_path, name):
+    """A .jpeg is a JPEG; upper case is the same suffix. Before, a .jpeg or .bmp cut short was whole (not empty)."""
+    image = np.random.default_rng(6).integers(0, 256, (30, 40, 3), np.uint8)
+    kind = {"JPEG": ".jpg", "JPG": ".jpg", "PNG": ".png", "BMP": ".bmp"}[name.split(".")[1].upper()]
+    data = cv2.imencode(kind, image)[1].tobytes()
+    path = tmp_path / name
+    for cut, whole in ((data, True), (data + AFTER_THE_END["trailer"], True), (data[:-20], False)):
+        path.write_bytes(cut)
+        assert payload_is_whole(path) == whole, (len(cut), len(data))
+
+
+def as_take_of(take, suffix: str, encode):
+    """``take``'s PNG images as another tool's files (``suffix``, bytes from ``encode(image)``), the journal naming
+    them."""
+    for path in take.glob("images/*/*.png"):
+        path.with_suffix(suffix).write_bytes(encode(cv2.imread(str(path))))
+        path.unlink()
+    (take / FRAMES).write_text((take / FRAMES).read_text().replace(".png", suffix))
+
+
+@pytest.mark.parametrize("suffix", [".png", ".bmp", ".jpeg"])
+def test_an_interrupted_take_plays_other_tools_files_with_a_trailer_and_drops_one_cut_short(copy_of_take, caplog,
+                                                                                            suffix):
+    if suffix != ".png":
+        as_take_of(copy_of_take, suffix, lambda image: cv2.imencode(suffix, image)[1].tobytes())
+    rows = journal(copy_of_take)
+    with_trailer, cut = copy_of_take / rows[3]["image"], copy_of_take / rows[6]["image"]
+    with_trailer.write_bytes(with_trailer.read_bytes() + AFTER_THE_END["trailer"])
+    cut.write_bytes(cut.read_bytes()[:-30])  # its last pixels (PNG: its image data's end, CRC and IEND)
     assert _frames_played_when_interrupted(copy_of_take, caplog) == len(rows) - 1
     assert "dropped 1 journal row(s)" in caplog.text
 
