@@ -222,7 +222,8 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     ok = ok & dec.all(1) & np.isfinite(X).all(-1)
     rep, ang = np.nan_to_num(rep), np.nan_to_num(ang)
 
-    cams = terms_of(P, cameras, PriorCameras.from_P, "prior's camera terms")  # (after the solves: a singular matrix is the solver's GeometryError)
+    # (after the solves: a singular matrix is the solver's GeometryError)
+    cams = terms_of(P, cameras, PriorCameras.from_P, "prior's camera terms")
     C, mid = cams.centres, cams.mid
     root = mid + _DEFAULT_DISTANCE_M * cams.heading  # no joint triangulated: a guess ahead of the cameras
     for i in range(N):

@@ -746,7 +746,8 @@ def test_the_writers_fsync_as_they_go_so_the_backlog_stays_bounded(take, tmp_pat
     finally:
         writer.close({})
     assert read_manifest(tmp_path / "take").complete
-    assert {str(p) for p in synced if p.is_file()} == {str(tmp_path / "take" / r["image"]) for r in journal(tmp_path / "take")}
+    images = {str(tmp_path / "take" / r["image"]) for r in journal(tmp_path / "take")}
+    assert {str(p) for p in synced if p.is_file()} == images
 
 
 def test_of_two_recorders_started_on_one_empty_folder_only_one_records(take, tmp_path, monkeypatch):
