@@ -9,7 +9,8 @@ Subcommands::
 precision and for "keypoints" and "keypoints + novel view" runs the estimator over every pair
 and prints each stage's median and p99 (ms), the end-to-end median/p99 and throughput, and the
 accuracy against the simulator's truth (PCK@0.2 in both images, MPJPE in the rig frame, with
-the counts of missing joints, and the jitter of the 3D joints: ``metrics.acceleration_error``).
+the counts of missing joints, and the jitter of the 3D joints: ``metrics.acceleration_error``), and
+each sequence's first pair alone (its cold start, which ``tracking.refine_cold_start`` runs twice).
 The pairs carry their capture times (frame number / fps), as ``smoothing`` needs. The rows take
 turns sequence by sequence, so drifts in the machine's speed hit them alike. The first pairs of
 each row are warm-up and not counted. Not a timed test: the figures depend on the machine and its
@@ -61,7 +62,7 @@ STEADY = "total after the first pair"
 
 
 def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, oracle=None,
-              accuracy=None, track_from_truth: bool = False, pipeline: bool = False
+              accuracy=None, track_from_truth: bool = False, pipeline: bool = False, first_pair_accuracy=None
               ) -> tuple[dict[str, list[float]], float]:
     """Run the estimator over every pair of every sequence (a fresh track per sequence).
 
@@ -72,6 +73,9 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
     ``track_from_truth``: before each pair (but the first of a sequence), the track is set from
     the previous pair's *true* joints, as a trained model's own joints would set it; this times
     the tracked path (smaller crops, subject rays only) with untrained weights.
+
+    ``first_pair_accuracy``: scores each sequence's first pair alone (its cold start), warm-up or not: the
+    warm-up is a matter of timing, and a row's first sequence would otherwise lose its first pair.
 
     Returns per-stage lists of ms (warm-up pairs excluded) and the wall time of the counted pairs;
     ``STEADY`` holds the totals of the pairs after each sequence's first (a stream's steady state: the first
@@ -87,6 +91,8 @@ def run_pairs(estimator: Estimator, sequences, *, novel: bool, warmup: int, orac
 
     def add(k_seq: int, seq, result) -> None:
         i = result.sequence
+        if i == 0 and first_pair_accuracy is not None:
+            first_pair_accuracy.add(result, seq, i)
         if (k_seq, i) not in counted:
             return
         for k in stages:
@@ -169,8 +175,9 @@ def run_runtime_bench(args) -> dict:
         # the search scores the turns by the encoder heatmaps: a model without them refuses it (no row)
         searches = (args.turn_searches or [None]) if getattr(session.contract, "encoder_heatmaps", False) else [None]
         sides = (args.flip_side_by_side or [None]) if source == "encoder" else [None]
-        for mode, flip, follow, prior, prior_flip, smooth, side, presence, search in itertools.product(
-                args.modes, flips, follows, priors, prior_flips, smooths, sides, presences, searches):
+        refines = args.refine_cold_starts or [None]
+        for mode, flip, follow, prior, prior_flip, smooth, side, presence, search, refine in itertools.product(
+                args.modes, flips, follows, priors, prior_flips, smooths, sides, presences, searches, refines):
             if flip is False and side is not None and side != sides[0]:
                 continue  # without the flip test there is nothing to run side by side: one row
             if prior is False and prior_flip is not None and prior_flip != prior_flips[0]:
@@ -191,6 +198,8 @@ def run_runtime_bench(args) -> dict:
                 flip_cfg = replace(flip_cfg, heatmaps=replace(flip_cfg.heatmaps, flip_test_side_by_side=side))
             if search is not None:
                 flip_cfg = replace(flip_cfg, roi=replace(flip_cfg.roi, turn_search=search))
+            if refine is not None:
+                flip_cfg = replace(flip_cfg, tracking=replace(flip_cfg.tracking, refine_cold_start=refine))
             novel_rows = itertools.product(args.novel_interior_strides or [None], args.proxy_blends or [None],
                                            args.painters or [None], args.novel_pipelines or [None],
                                            args.novel_lanes or [None]) \
@@ -206,11 +215,12 @@ def run_runtime_bench(args) -> dict:
                     row_cfg = replace(row_cfg, novel_view=replace(row_cfg.novel_view, lanes=lanes))
                 rows.append({"precision": precision, "source": source, "mode": mode, "cfg": row_cfg,
                              "session": session, "stages": {}, "wall": 0.0, "accuracy": Accuracy(), "seen": 0,
+                             "first_pair_accuracy": Accuracy(),
                              "flip_label": flip is not None, "follow_label": follow is not None,
                              "prior_label": prior is not None, "prior_flip_label": prior_flip is not None,
                              "smoothing_label": smooth is not None, "proxy_label": blend is not None,
                              "presence_label": presence is not None, "turn_search_label": search is not None,
-                             "side_label": side is not None,
+                             "side_label": side is not None, "refine_label": refine is not None,
                              "painter_label": paint is not None,
                              "pipeline": bool(piped), "pipeline_label": piped is not None,
                              "lanes_label": lanes is not None})
@@ -234,7 +244,7 @@ def run_runtime_bench(args) -> dict:
             warmup = max(0, args.warmup - row["seen"])
             stages, wall = run_pairs(est, [seq], novel=(row["mode"] == "novel"), warmup=warmup,
                                      accuracy=row["accuracy"], track_from_truth=args.track_from_truth,
-                                     pipeline=row["pipeline"])
+                                     pipeline=row["pipeline"], first_pair_accuracy=row["first_pair_accuracy"])
             row["seen"] += len(seq)
             row["wall"] += wall
             for key, values in stages.items():
@@ -255,6 +265,7 @@ def run_runtime_bench(args) -> dict:
                "turn_search": cfg.roi.search_for(getattr(session.contract, "encoder_heatmaps", False)).turn_search,
                "turn_search_label": row["turn_search_label"],
                "flip_side_by_side": cfg.heatmaps.flip_test_side_by_side, "side_label": row["side_label"],
+               "refine_cold_start": cfg.tracking.refine_cold_start, "refine_label": row["refine_label"],
                **({"novel_stride": cfg.novel_view.stride, "novel_interior_stride": cfg.novel_view.interior_stride,
                    "proxy_blend": cfg.novel_view.proxy_blend, "proxy_label": row["proxy_label"],
                    "painter": cfg.novel_view.uses_painter(getattr(session, "novel_painter", None) is not None),
@@ -263,10 +274,20 @@ def run_runtime_bench(args) -> dict:
                    "novel_lanes": cfg.novel_view.lanes, "lanes_label": row["lanes_label"]}
                   if row["mode"] == "novel" else {}),
                "files": {g: f.precision for g, f in session.files.items()}, **_row(row["stages"], row["wall"]),
-               "accuracy": row["accuracy"].summary(), "load_average": float(np.mean(loads))}
+               "accuracy": row["accuracy"].summary(),
+               "accuracy_first_pair": _first_pair_summary(row["first_pair_accuracy"]),
+               "load_average": float(np.mean(loads))}
         report["runs"].append(out)
         _print_row(out)
     return report
+
+
+def _first_pair_summary(accuracy) -> dict:
+    """The first pairs' accuracy with their count (no jitter: one pair per sequence chains no frames)."""
+    summary = accuracy.summary()
+    summary.pop("jitter_mm", None)
+    summary.pop("jitter_evaluated", None)
+    return {**summary, "pairs": len(accuracy.p3)} if summary else {}
 
 
 def _print_row(row: dict) -> None:
@@ -291,6 +312,8 @@ def _print_row(row: dict) -> None:
         tracked += " turn-search" if row["turn_search"] else " no-turn-search"
     if row.get("side_label") and row.get("flip_test"):
         tracked += " flip-side-by-side" if row["flip_side_by_side"] else " flip-in-turn"
+    if row.get("refine_label"):
+        tracked += " refine-cold" if row["refine_cold_start"] else " no-refine-cold"
     if row.get("proxy_label"):
         tracked += " proxy-blend" if row["proxy_blend"] else " no-proxy-blend"
     if row.get("painter_label"):
@@ -313,6 +336,10 @@ def _print_row(row: dict) -> None:
             f"{name.replace('_', ' ')} {c['mpjpe_mm']:.1f} mm ({100 * c['share']:.0f} % of joints, "
             f"{100 * c['found']:.0f} % found, confidence median {c.get('confidence_median', float('nan')):.2f})"
             for name, c in by.items()), flush=True)
+    if first := row.get("accuracy_first_pair"):  # the cold start alone: what tracking.refine_cold_start acts on
+        print(f"      each sequence's first pair ({first['pairs']} pairs): PCK@0.2 "
+              f"{first.get('pck@0.2', float('nan')):.3f} MPJPE {first['mpjpe_mm']:.1f} mm "
+              f"(3D found {first['found_3d_frac']:.2f})", flush=True)
     if e2 := acc.get("error_2d_px"):
         print(f"      2D error of the visible joints decoded: median {e2['median']:.1f} px, p90 {e2['p90']:.1f} px "
               f"(original image pixels)", flush=True)
@@ -380,6 +407,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--flip-side-by-side", default=None, type=_on_off_list,
                     help="comma list of heatmaps.flip_test_side_by_side values (on,off), one row each for the "
                          "encoder heatmaps with the flip test (interleaved; default: the config's, on)")
+    rt.add_argument("--refine-cold-starts", default=None, type=_on_off_list,
+                    help="comma list of tracking.refine_cold_start values (on,off), one row each (interleaved; "
+                         "default: the config's, on: a cold pair that finds the subject runs again on it)")
     rt.add_argument("--proxy-blends", default=None, type=_on_off_list,
                     help="comma list of novel_view.proxy_blend values (on,off), one novel row each (default: the "
                          "config's)")

@@ -361,6 +361,28 @@ def test_bench_runtime_rows_with_the_turn_search_on_and_off(tiny_model_dir, tmp_
     assert " turn-search " in out and " no-turn-search " in out
 
 
+def test_bench_runtime_rows_with_the_cold_start_refinement_on_and_off(tiny_model_dir, tmp_path, capsys):  # noqa: F811
+    """``--refine-cold-starts on,off``: one keypoint row each, labelled, tracking.refine_cold_start set in each
+    row's config, and each row scores its sequences' first pairs (the cold starts the refinement acts on) apart:
+    the bench had no row for the knob that runs a cold first pair twice (its p99 over every pair)."""
+    from ghnerf_runtime.cli import bench
+
+    report_path = tmp_path / "bench.json"
+    code = bench.main(["runtime", "--model-dir", str(tiny_model_dir), "--sequences", "2", "--frames", "2",
+                       "--precisions", "fp32", "--heatmap-sources", "encoder", "--modes", "keypoints", "--warmup",
+                       "1", "--refine-cold-starts", "on,off", "--cache", str(tmp_path / "cache"), "--json",
+                       str(report_path)])
+    assert code == 0
+    runs = json.loads(report_path.read_text())["runs"]
+    assert [(r["refine_cold_start"], r["refine_label"]) for r in runs] == [(True, True), (False, True)]
+    # every sequence's first pair, the warm-up's too (the warm-up is a matter of timing)
+    assert [r["accuracy_first_pair"]["pairs"] for r in runs] == [2, 2]
+    assert all("jitter_mm" not in r["accuracy_first_pair"] for r in runs)
+    out = capsys.readouterr().out
+    assert " refine-cold " in out and " no-refine-cold " in out
+    assert out.count("each sequence's first pair (2 pairs): PCK@0.2 ") == 2
+
+
 @pytest.mark.skipif(not (Path(__file__).resolve().parents[2] / "models" / "baseline").is_dir(),
                     reason="no models/baseline")
 def test_bench_runs_a_model_without_encoder_heatmaps_with_the_turn_search_off(tmp_path):
