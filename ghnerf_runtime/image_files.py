@@ -28,6 +28,6 @@ def read_image_or_none(path: str | os.PathLike, flags: int) -> np.ndarray | None
     """``cv2.imread(path, flags)`` as stored (:data:`AS_STORED` added), or None where OpenCV cannot read the file,
     a size beyond its limits included."""
     try:
-        return cv2.imread(os.fspath(path), flags if flags == cv2.IMREAD_UNCHANGED else flags | AS_STORED)
+        return cv2.imread(os.fspath(path), flags | AS_STORED)  # (IMREAD_UNCHANGED is -1: it stays itself)
     except cv2.error:
         return None

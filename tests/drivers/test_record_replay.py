@@ -591,17 +591,21 @@ def test_a_jpeg_with_bytes_after_its_end_is_whole_and_one_cut_before_its_end_is_
     """Cut after every byte: whole (and decoded as the image) exactly where the cut is past the end-of-image marker.
     Before, only a file ending at the marker was whole: a phone's JPEG with a trailer was dropped from a take cut
     short."""
-    jpeg = jpegs_another_tool_writes()[kind]
-    data = jpeg + AFTER_THE_END[after]
-    path = tmp_path / "image.jpg"
+    assert_whole_exactly_past_its_end(tmp_path / "image.jpg", jpegs_another_tool_writes()[kind], AFTER_THE_END[after])
+
+
+def assert_whole_exactly_past_its_end(path, image: bytes, after: bytes) -> None:
+    """``image`` followed by ``after``, written to ``path`` cut after every byte, is whole exactly where the cut is
+    past the image's end, and whole it decodes as the image."""
+    data = image + after
     wrong = []
     for end in range(1, len(data) + 1):
         path.write_bytes(data[:end])
-        if payload_is_whole(path) != (end >= len(jpeg)):
+        if payload_is_whole(path) != (end >= len(image)):
             wrong.append(end)
     assert wrong == []
     path.write_bytes(data)
-    assert np.array_equal(load_image(path), cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR))
+    assert np.array_equal(load_image(path), cv2.imdecode(np.frombuffer(image, np.uint8), cv2.IMREAD_COLOR))
 
 
 def as_jpeg_take(take):
@@ -645,17 +649,8 @@ def test_a_png_or_bmp_with_bytes_after_its_end_is_whole_and_one_cut_before_its_e
     """Cut after every byte: whole (and decoded as the image) exactly where the cut is past the PNG's IEND chunk or
     the BMP's last pixel row. Before, a PNG with a trailer was dropped from a take cut short, and a BMP cut short
     was played (then failed to decode mid-take)."""
-    image = pngs_and_bmps_another_tool_writes()[kind]
-    data = image + AFTER_THE_END[after]
-    path = tmp_path / f"image.{kind[:3]}"
-    wrong = []
-    for end in range(1, len(data) + 1):
-        path.write_bytes(data[:end])
-        if payload_is_whole(path) != (end >= len(image)):
-            wrong.append(end)
-    assert wrong == []
-    path.write_bytes(data)
-    assert np.array_equal(load_image(path), cv2.imdecode(np.frombuffer(image, np.uint8), cv2.IMREAD_COLOR))
+    assert_whole_exactly_past_its_end(tmp_path / f"image.{kind[:3]}", pngs_and_bmps_another_tool_writes()[kind],
+                                      AFTER_THE_END[after])
 
 
 @pytest.mark.parametrize("name", ["image.jpeg", "image.JPG", "image.JPEG", "image.PNG", "image.BMP"])
