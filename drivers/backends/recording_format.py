@@ -13,6 +13,7 @@ nothing is rewritten per frame. Every load error names the file and the field.
 """
 from __future__ import annotations
 
+import io
 import json
 import math
 import re
@@ -357,32 +358,28 @@ def _bmp_pixel_bytes(head: bytes, info_size: int) -> int:
 
 
 def _jpeg_reaches_its_end(data: bytes) -> bool:
-    """Whether a JPEG's marker segments, walked by their lengths, and its scans' entropy-coded data, walked to the
-    marker after each, reach an end-of-image marker. Searched for, one could be found inside a segment (an EXIF
-    thumbnail's); in entropy-coded data a 0xFF byte is followed only by 0x00 or a restart marker."""
+    """Whether a JPEG's marker segments, walked by their lengths (as :func:`_jpeg_size` walks them), and its scans'
+    entropy-coded data, walked to the marker after each, reach an end-of-image marker. Searched for, one could be
+    found inside a segment (an EXIF thumbnail's); in entropy-coded data a 0xFF byte is followed only by 0x00 or a
+    restart marker."""
     if not data.startswith(_JPEG_START):
         return False
-    pos = len(_JPEG_START)
+    f = io.BytesIO(data)
+    f.seek(len(_JPEG_START))
     while True:
-        if pos + 2 > len(data) or data[pos] != 0xFF:
+        marker = _jpeg_marker(f)
+        if marker is None:
             return False
-        while pos + 1 < len(data) and data[pos + 1] == 0xFF:
-            pos += 1  # fill bytes before the marker
-        if pos + 1 >= len(data):
-            return False
-        marker, pos = data[pos + 1], pos + 2
         if marker == _JPEG_EOI:
             return True
         if marker == _JPEG_TEM or marker in _JPEG_RST:
             continue  # standalone: no length
-        if marker in (0x00, 0xD8) or pos + 2 > len(data):
+        length = None if marker in (0x00, 0xD8) else _jpeg_segment_length(f)
+        if length is None:
             return False  # a stuffed byte or a second start where a marker is due: malformed; or cut short
-        length = struct.unpack(">H", data[pos:pos + 2])[0]
-        if length < 2:
-            return False
-        pos += length
+        f.seek(length, 1)
         if marker == _JPEG_SOS:
-            pos = _jpeg_scan_end(data, pos)
+            f.seek(_jpeg_scan_end(data, f.tell()))
 
 
 def _jpeg_scan_end(data: bytes, pos: int) -> int:
@@ -525,10 +522,9 @@ def _jpeg_size(f: BinaryIO) -> tuple[int, int] | None:
             continue  # standalone: no length
         if marker in (0x00, 0xD8, 0xD9):
             return None  # a stuffed byte, a second start or an end before the first scan: malformed
-        raw = f.read(2)
-        if len(raw) < 2 or struct.unpack(">H", raw)[0] < 2:
+        length = _jpeg_segment_length(f)
+        if length is None:
             return None
-        length = struct.unpack(">H", raw)[0] - 2
         if marker in _JPEG_FRAMES:
             body = f.read(length)
             if size is not None or length < 5 or len(body) < length:
@@ -539,6 +535,15 @@ def _jpeg_size(f: BinaryIO) -> tuple[int, int] | None:
             size = (width, height)
         else:
             f.seek(length, 1)  # past the end of a file cut short: the next read finds nothing
+
+
+def _jpeg_segment_length(f: BinaryIO) -> int | None:
+    """The length of a marker segment's data after its two length bytes (read here); ``None`` where cut short or
+    shorter than those two bytes."""
+    raw = f.read(2)
+    if len(raw) < 2 or struct.unpack(">H", raw)[0] < 2:
+        return None
+    return struct.unpack(">H", raw)[0] - 2
 
 
 def _jpeg_marker(f: BinaryIO) -> int | None:
