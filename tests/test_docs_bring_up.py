@@ -245,3 +245,33 @@ def test_the_config_check_rehearsal_runs_as_written(tmp_path):
     assert done.returncode == 0, done.stderr
     assert "daemon.json: ok; model: " in done.stderr
     assert (tmp_path / "daemon.json").is_file()
+
+
+def folders_written_unmade(block: str) -> list[str]:
+    """The relative folders a shell redirection in ``block`` writes into that no ``mkdir -p`` of the block makes.
+
+    Each rehearsal must run on its own after step 0: a reader who skips one (5a's needs socat) must not find the
+    next one's ``> out/bringup/udp.json`` failing on a folder only the skipped block made."""
+    made: set[str] = set()
+    unmade: list[str] = []
+    for line in block.splitlines():
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        words = shlex.split(line, comments=True)
+        if words[:2] == ["mkdir", "-p"]:
+            made.update(w.rstrip("/") for w in words[2:])
+        for operator, target in zip(words, words[1:]):
+            folder = os.path.dirname(target)
+            if operator in {">", ">>"} and folder and not os.path.isabs(folder) and folder not in made:
+                unmade.append(f"{target} (no `mkdir -p {folder}` before it in its block)")
+    return unmade
+
+
+def test_every_folder_a_block_writes_into_is_made_in_that_block():
+    text = PAGE.read_text(encoding="utf-8")
+    sh_blocks = blocks(text, "sh")
+    assert any("> out/bringup/" in b for b in sh_blocks), "the rehearsals' redirections were not read"
+    problems = [p for b in sh_blocks for p in folders_written_unmade(b)]
+    assert not problems, "\n".join(problems)
+    assert folders_written_unmade("mkdir -p out/x\necho a > out/x/a.json\necho b > out/y/b.json") == [
+        "out/y/b.json (no `mkdir -p out/y` before it in its block)"]
