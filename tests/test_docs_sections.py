@@ -2,7 +2,8 @@
 
 Code, error messages and docs send the reader to a section as ``docs/runtime.md, "Section title"`` or
 ``docs/runtime.md ("Section title")`` (error messages use single quotes:
-``docs/recording-format.md, 'Image sizes'``), and a doc to one of its own sections as
+``docs/recording-format.md, 'Image sizes'``), to one of the README's as ``README, "Section title"`` or
+``README.md, "Section title"``, and a doc (the README included) to one of its own sections as
 ``"Section title" below`` or ``above``. A section is a markdown heading or a bold paragraph lead (``**Title.**``,
 ``**Title** (session N).``), or a paragraph that opens with the title and a stop (``Frame check (per camera``,
 ``Errors: a failed start``, ``Checked at load, each``). Nothing tied the two together, so a section renamed or
@@ -36,10 +37,12 @@ SCANNED_NAMES = ("Makefile",)
 SELF = "tests/test_docs_sections.py"
 SKIPPED_DIRS = {".venv", ".git", "__pycache__", "build", "dist", "node_modules", ".pytest_cache", ".hypothesis"}
 
-# docs/<name>.md, "<title>" or 'title'; the title may run onto the next lines (a comment or docstring wrapped).
+# docs/<name>.md, "<title>" or 'title' (README, "<title>" and README.md, "<title>" too: the README's sections, which
+# the docs send the reader to as often); the title may run onto the next lines (a comment or docstring wrapped).
 # Also docs/<name>.md ("<title>"), and with the line broken after the comma (the next line's comment marker
 # skipped); a Python string may end just before the title's quote and the next start with it (usb_select.py).
-_DOC_REF = re.compile(r"""docs/(?P<doc>[A-Za-z0-9_-]+\.md)(?:,(?: |[ \t]*\n[ \t]*(?:(?:#+:?|//|\*)[ \t]*)?)| \()"""
+_DOC_REF = re.compile(r"""(?:docs/(?P<doc>[A-Za-z0-9_-]+\.md)|\b(?P<readme>README)(?:\.md)?)"""
+                      r"""(?:,(?: |[ \t]*\n[ \t]*(?:(?:#+:?|//|\*)[ \t]*)?)| \()"""
                       r"""(?:"[ \t]*\n[ \t]*")?(?P<q>["'])""")
 # "<title>" below / above, inside one doc; a wrapped title has at most one line break.
 _LOCAL_REF = re.compile(r'"(?P<title>[A-Z0-9`][^"\n]*(?:\n[^"\n]+)?)" (?P<dir>below|above)\b')
@@ -55,6 +58,15 @@ _HEADING_NUMBER = re.compile(r"^[0-9]+[a-z]?\.\s+")
 # the closing and opening quotes of a Python string continued on the next line
 _WRAP_PREFIX = re.compile(r"""["']?[ \t]*\n[ \t]*(?:#+:?|//|\*(?!\*)|["'])?[ \t]*""")
 MAX_TITLE_CHARS = 200
+
+
+#: the repository's front page, referred to as ``README, "Title"`` or ``README.md, "Title"``
+README = "README.md"
+
+
+def _shown(doc: str) -> str:
+    """A doc as its references name it: docs/<name>.md, or README.md."""
+    return doc if doc == README else f"docs/{doc}"
 
 
 def _norm(title: str) -> str:
@@ -120,7 +132,8 @@ def references(text: str) -> list[tuple[int, str, str]]:
     for m in _DOC_REF.finditer(text):
         title = _title_after(text, m.end(), m.group("q"))
         line = text.count("\n", 0, m.start()) + 1
-        found.append((line, m.group("doc"), title if title is not None else ""))
+        doc = m.group("doc") or README
+        found.append((line, doc, title if title is not None else ""))
     return found
 
 
@@ -147,7 +160,7 @@ def dangling(root: Path) -> list[str]:
 
     def sections_of(doc: str) -> Sections | None:
         if doc not in sections:
-            path = root / "docs" / doc
+            path = root / doc if doc == README else root / "docs" / doc
             sections[doc] = doc_sections(path.read_text(encoding="utf-8")) if path.is_file() else None
         return sections[doc]
 
@@ -163,12 +176,12 @@ def dangling(root: Path) -> list[str]:
         for line, doc, title in references(text):
             known = sections_of(doc)
             if known is None:
-                problems.append(f'{where}:{line}: docs/{doc}, "{title}": no such doc')
+                problems.append(f'{where}:{line}: {_shown(doc)}, "{title}": no such doc')
                 continue
             why = find_section(title, known) if title else "no closing quote within reach"
             if why:
-                problems.append(f'{where}:{line}: docs/{doc}, "{title}": {why}')
-        if path.parent == root / "docs" and path.suffix == ".md":
+                problems.append(f'{where}:{line}: {_shown(doc)}, "{title}": {why}')
+        if (path.parent == root / "docs" and path.suffix == ".md") or path == root / README:
             own = doc_sections(text)
             for line, title in local_references(text):
                 why = find_section(title, own)
@@ -258,3 +271,18 @@ def test_title_normalisation(quoted, heading):
 ])
 def test_what_is_no_section(quoted, doc):
     assert find_section(quoted, doc_sections(doc)) is not None
+
+
+def test_a_reference_to_the_readme_is_checked_like_a_docs_page(tmp_path):
+    # "README, ..." and "README.md, ..." were passed over: a README section renamed left the docs' references dangling
+    root = _fake_repo(tmp_path, '# README, "Rig URLs"; README.md, "Pointing it at real\n#   cameras", step 5\n'
+                                '# README.md, "Running it on a robot"; README, "The two"\n', DOC)
+    (root / "README.md").write_text("# Project\n\n## Pointing it at real cameras\n\n## The two commands\n\n"
+                                    "Rig URLs (each backend documents its options).\n\n"
+                                    'See "Streaming joints" below.\n', encoding="utf-8")
+    problems = dangling(root)
+    assert [p.split(": ", 1)[0] for p in problems] == ["README.md:9", "tool.py:3"], problems
+    assert '"Streaming joints" below/above: no heading' in problems[0]
+    assert 'README.md, "Running it on a robot": no heading' in problems[1]
+    assert references('see README, "Rig URLs" and README.md ("Layout")') == [(1, "README.md", "Rig URLs"),
+                                                                            (1, "README.md", "Layout")]
