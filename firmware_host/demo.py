@@ -70,6 +70,9 @@ from ghnerf_runtime.errors import ConfigError, ModelError
 from ghnerf_runtime.estimator import Estimator, PairResult
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
+#: said after the docstring's first line in --help: the same run checks a real rig's cameras
+HELP_EPILOGUE = ("Any rig URL runs the same way (a real rig's cameras checked before calibrating them: "
+                 "docs/bring-up.md, step 2).")
 #: Colour of the estimated joints in the PNG (BGR magenta; the ground truth is red/blue/green + yellow).
 ESTIMATE_BGR = (255, 0, 255)
 #: The band across the PNG's foot while the calibration is suspect (BGR red, white words on it).
@@ -321,11 +324,17 @@ def _positive_seconds(text: str) -> float:
 
 def build_parser(prog: str | None = None) -> argparse.ArgumentParser:
     """The parser; ``prog`` (default :func:`prog_name`) heads its usage line and errors."""
-    parser = argparse.ArgumentParser(prog=prog or prog_name(), description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog or prog_name(), description=__doc__.splitlines()[0] + " " + HELP_EPILOGUE)
+    # the defaults are named: a rig's bring-up (docs/bring-up.md, step 2) runs this with its own --url and --out
     parser.add_argument("--url", default=DEFAULT_URL, help="rig URL (sim://, replay://DIR, depthai://, opencv://; "
-                                                            "relative files read from the current directory)")
-    parser.add_argument("--seconds", type=_positive_seconds, default=3.0, help="how long to read pairs")
-    parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder")
+                                                            "relative files read from the current directory; "
+                                                            f"default: {DEFAULT_URL.replace('%', '%%')}, the "
+                                                            "simulated rig)")
+    parser.add_argument("--seconds", type=_positive_seconds, default=3.0,
+                        help="how long to read pairs (default: %(default)s)")
+    parser.add_argument("--out", type=Path, default=Path("out/demo"),
+                        help="output folder: sim_pair.png (the last pair, whatever the rig) and the default sink's joints.jsonl "
+                             "(default: %(default)s)")
     parser.add_argument("--sink", default=None,
                         help="joint-stream sink URL (default: file://OUT/joints.jsonl, rewritten each run)")
     parser.add_argument("--model-dir", default=None,

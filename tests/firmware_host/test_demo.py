@@ -377,6 +377,15 @@ def test_usage_and_errors_name_the_command_that_was_run(tmp_path, capsys, monkey
     assert capsys.readouterr().err.startswith(f"{prog}: error: --out ")
 
 
+def test_help_names_the_defaults_and_says_any_rig_runs():
+    # a rig's bring-up (docs/bring-up.md, step 2) runs the demo with its own --url and --out: the help must say
+    # what it runs without them (README: three seconds of the simulated rig into out/demo)
+    text = " ".join(demo.build_parser("ghnerf-demo").format_help().split())
+    assert f"default: {demo.DEFAULT_URL}, the simulated rig" in text
+    assert "how long to read pairs (default: 3.0)" in text
+    assert "(default: out/demo)" in text and "sim_pair.png" in text
+    assert "Any rig URL runs the same way" in text and "docs/bring-up.md" in text
+
 def test_python_dash_m_still_runs_and_names_itself():
     import subprocess
     import sys
