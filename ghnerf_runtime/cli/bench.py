@@ -367,11 +367,15 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="ghnerf-bench", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
     rt = sub.add_parser("runtime", help="per-stage latency and accuracy of the estimator")
-    rt.add_argument("--model-dir", default="models")
+    rt.add_argument("--model-dir", default="models", help="model folder (default: %(default)s)")
     rt.add_argument("--sequences", type=int, default=10, help="held-out-like sequences (one rig and subject each)")
     rt.add_argument("--frames", type=int, default=30, help="pairs per sequence (30 fps)")
-    rt.add_argument("--precisions", default="fp32,int8,auto", type=lambda s: [p for p in s.split(",") if p])
-    rt.add_argument("--modes", default="keypoints,novel", type=lambda s: [p for p in s.split(",") if p])
+    # the defaults are named: every precision and both modes make six rows a source, which a reader should expect
+    rt.add_argument("--precisions", default="fp32,int8,auto", type=lambda s: [p for p in s.split(",") if p],
+                    help="comma list of graph precisions, one row each (default: %(default)s)")
+    rt.add_argument("--modes", default="keypoints,novel", type=lambda s: [p for p in s.split(",") if p],
+                    help="comma list of keypoints (keypoints alone), novel (keypoints and the novel view), one row "
+                         "each (default: %(default)s)")
     rt.add_argument("--method", choices=THREE_D_METHODS,
                     help="3D method (default: depth_centroid with rendered heatmaps, triangulate with encoder ones)")
     rt.add_argument("--heatmap-sources", default="rendered",
@@ -423,7 +427,7 @@ def build_parser() -> argparse.ArgumentParser:
     rt.add_argument("--novel-lanes", default=None, type=_on_off_list,
                     help="comma list of novel_view.lanes values (on,off), one novel row each (default: the config's, "
                          "on)")
-    rt.add_argument("--threads", type=int, default=2)
+    rt.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default: %(default)s)")
     rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")
     rt.add_argument("--warmup", type=int, default=10, help="pairs not counted at the start of each run")

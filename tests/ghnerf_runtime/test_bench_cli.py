@@ -42,3 +42,13 @@ def test_ctrl_c_exits_130_without_a_traceback_or_a_report(tmp_path, capsys, monk
         pytest.fail("Ctrl-C escaped ghnerf-bench: the user saw a traceback")
     assert rc == 130 and "stopped (Ctrl-C)" in capsys.readouterr().err
     assert not (tmp_path / "r.json").exists()
+
+
+def test_runtime_help_names_the_defaults_the_docs_rely_on(capsys):
+    # README's command leaves --precisions and --modes out: the help must say that this makes a row of each
+    with pytest.raises(SystemExit):
+        bench.build_parser().parse_args(["runtime", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "model folder (default: models)" in text
+    assert "(default: fp32,int8,auto)" in text and "(default: keypoints,novel)" in text
+    assert "onnxruntime intra-op threads (default: 2)" in text
