@@ -188,3 +188,27 @@ def test_a_section_linked_from_the_body_but_not_the_contents_is_named():
             "## Results\n\nSee [Known gaps](#known-gaps) below.\n\n## Known gaps\n")
     assert unlisted_sections(text) == ["Known gaps"]
     assert unlisted_sections("# Page\n\n## Results\n\n[Results](#results)\n") == ["Results"]  # no Contents at all
+
+
+#: folders of the development host that a clone of the repository does not have (the design notes)
+HOST_ONLY_FOLDERS = ("/work/shared/",)
+
+
+def host_only_references(page: Path, root: Path) -> list[str]:
+    """One line per mention in ``page`` of a file only the development host has: a reader of a clone cannot open it."""
+    where = page.relative_to(root).as_posix()
+    return [f"{where}:{number}: {folder} is not in the repository" for number, line in
+            enumerate(page.read_text(encoding="utf-8").splitlines(), 1) for folder in HOST_ONLY_FOLDERS
+            if folder in line]
+
+
+def test_no_doc_sends_the_reader_to_the_development_host():
+    # docs/model.md sent the reader to /work/shared/design/MODEL.md for its background
+    problems = [p for page in _pages(REPO) for p in host_only_references(page, REPO)]
+    assert not problems, "\n".join(problems)
+
+
+def test_a_made_up_host_only_reference_is_caught(tmp_path):
+    (tmp_path / "README.md").write_text("# R\n\nBackground: `/work/shared/design/MODEL.md`.\n", encoding="utf-8")
+    assert host_only_references(tmp_path / "README.md", tmp_path) == [
+        "README.md:3: /work/shared/ is not in the repository"]
