@@ -44,7 +44,7 @@ import shlex
 import sys
 import tomllib
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from unittest import mock
 
@@ -917,3 +917,21 @@ def test_a_renamed_function_a_python_block_imports_is_caught():
     assert problem == "x.md:5: training.pipeline has no stage_quantise"
     (problem,) = imported_name_problems(block.format("x").replace("training.pipeline", "training.pipe_line"), "x.md")
     assert problem.startswith("x.md:5: training.pipe_line: cannot be imported")
+
+
+def console_scripts_unnamed(readme: str, project: Project) -> list[str]:
+    """The console scripts of pyproject.toml that ``readme`` never names: a user finds them in .venv/bin with no word
+    on what they do."""
+    return sorted(name for name in project.scripts if not re.search(rf"(?<![\w-]){re.escape(name)}(?![\w-])", readme))
+
+
+def test_the_readme_names_every_console_script():
+    # ghnerf-sim-demo was installed beside ghnerf-demo and named on no page
+    missing = console_scripts_unnamed((REPO / "README.md").read_text(encoding="utf-8"), Project.read())
+    assert not missing, f"README.md names no {missing}: say what each does (the Layout table, or where it is used)"
+
+
+def test_a_console_script_named_only_as_part_of_another_is_caught():
+    project = replace(Project.read(), scripts={"ghnerf-demo": "a:b", "ghnerf-sim-demo": "c:d"})
+    assert console_scripts_unnamed("run `ghnerf-demo`, or make demo", project) == ["ghnerf-sim-demo"]
+    assert console_scripts_unnamed("`ghnerf-sim-demo --out x.png` draws", project) == ["ghnerf-demo"]
