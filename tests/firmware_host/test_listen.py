@@ -481,6 +481,24 @@ def test_the_readme_s_python_receiver_decodes_what_a_udp_sink_sends(monkeypatch)
     assert stats.messages == len(frames) and sum(stats.errors.values()) == 1  # the cut datagram, and only it
 
 
+def test_the_readme_s_sink_example_runs_as_written(monkeypatch):
+    """The README's sender, run as written (its udp:// sink aimed at a port of this host): it used a ``joints_xyzc``
+    it never made, a NameError for whoever pasted it."""
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "open_sink(" in b)
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    receiver.settimeout(5)
+    port = receiver.getsockname()[1]
+    names: dict = {}
+    with receiver:
+        exec(block.replace("udp://127.0.0.1:9000", f"udp://127.0.0.1:{port}"), names)
+        assert names["sink"].stats().sent == 1
+        assert receiver.recv(2048)  # HELLO first, as every sink sends
+
 def test_the_readme_s_receiver_names_the_ipv6_socket_a_udp_sink_to_an_ipv6_host_needs():
     """The README's receiver binds IPv4 only, which hears nothing from a udp:// sink to an IPv6 literal (or an
     IPv6-only host), and did not say so; its comment's variant, run on a real socket, hears that sink."""
