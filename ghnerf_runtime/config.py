@@ -1030,6 +1030,14 @@ def _plain_json(value: Any, where: str, duplicates: list[str]) -> Any:
     return value
 
 
+def _json_given_as_path(path: str | os.PathLike) -> str:
+    """What to add to "cannot read" when the path is JSON text itself (``--config '{"roi": ...}'``, as a doc's
+    "``--config`` with ``{...}``" reads), else ""."""
+    if str(path).lstrip().startswith(("{", "[")):
+        return ": a file's path is expected, not the JSON itself: write it into a file and give the file's path"
+    return ""
+
+
 def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], what: str = "config file") -> Any:
     """The JSON value in ``path``; an unreadable file, invalid JSON, non-UTF-8 text or a key given twice in one
     object (JSON keeps the last: the first would be lost without a word) raises ``fail(message)`` (the caller's
@@ -1039,7 +1047,7 @@ def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], wh
         with open(path, encoding="utf-8-sig") as fh:
             text = fh.read()
     except OSError as e:
-        raise fail(f"cannot read {what} ({e.strerror or e})") from e
+        raise fail(f"cannot read {what} ({e.strerror or e}){_json_given_as_path(path)}") from e
     except UnicodeDecodeError as e:
         raise fail(f"not UTF-8 text (byte {e.start}): {e.reason}") from e
     except ValueError as e:  # a NUL character in the path

@@ -151,6 +151,18 @@ def test_a_config_path_with_a_nul_character_is_a_config_error():
         load_config("runtime\0.json")
 
 
+@pytest.mark.parametrize("given", ['{"roi": {"turn_search": false}}', ' [1]'])
+def test_json_given_where_a_config_file_s_path_goes_is_said_so(given):
+    # README: "--config with {...}" was read as the JSON itself, and the error said only "No such file or directory"
+    with pytest.raises(ConfigError, match="a file's path is expected, not the JSON itself: write it into a file") as e:
+        load_config(given)
+    assert "cannot read config file (No such file or directory)" in str(e.value)
+
+
+def test_a_missing_config_file_s_error_says_nothing_of_json(tmp_path):
+    with pytest.raises(ConfigError, match=r"cannot read config file \(No such file or directory\)$"):
+        load_config(tmp_path / "runtime.json")
+
 def test_a_relative_model_dir_in_a_config_file_is_read_from_its_folder(tmp_path, monkeypatch):
     # read from the current directory, ghnerf-run --config / ghnerf-demo --config found it only from one folder
     (tmp_path / "conf").mkdir()
