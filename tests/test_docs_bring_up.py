@@ -11,6 +11,8 @@ page must not drift from the code unseen.
 * Every rig and sink URL on the page parses for its backend as the daemon's ``--validate-config`` parses it
   (nothing is opened); ``/etc/ghnerf/rig.json`` stands for a rig file ``ghcal solve`` wrote.
 * The first rehearsal (the example config and ``--validate-config``) runs in a scratch folder.
+* Each ``sh`` block makes (``mkdir -p``) every relative folder its redirections write into, so a rehearsal runs
+  whether or not the one before it was (5a's needs socat).
 """
 from __future__ import annotations
 
