@@ -465,15 +465,18 @@ class _ProxyInputs:
 class _CropTerms:
     """The current crop cameras' own terms (inverses, conditioning, centres, heading): the two-view solver's and
     the skeleton prior's (None without a prior). A tracked crop keeps its cameras for many pairs, and the
-    triangulation and the prior's inputs read them every pair (:meth:`Estimator._crop_terms_for`)."""
+    triangulation, a flagged pair's pairings and the prior's inputs read them every pair
+    (:meth:`Estimator._crop_terms_for`)."""
 
     two_view: TwoViewCameras
     prior: PriorCameras | None
 
     @classmethod
     def of(cls, P: np.ndarray, with_prior: bool) -> "_CropTerms":
-        """The terms of the ``(2, 3, 4)`` crop matrices ``P``."""
-        return cls(TwoViewCameras.from_P(P), PriorCameras.from_P(P[None]) if with_prior else None)
+        """The terms of the ``(2, 3, 4)`` crop matrices ``P``: the prior's built from the two-view solver's (the
+        inverses and determinants' signs computed once, and the prior's own solves made in them)."""
+        two_view = TwoViewCameras.from_P(P)
+        return cls(two_view, PriorCameras.from_two_view([two_view]) if with_prior else None)
 
 
 @dataclass
@@ -1496,8 +1499,13 @@ class Estimator:
         chosen = None  # and the peaks each of them was triangulated from (SubjectSelector.keep_tracked_subject)
         guessed = None  # a flagged pair's joints not reported: no pairing of the subject's gave them (below)
         if several:  # before the presence gate: the subject's joints alone must make someone
+            # one solve of each joint's four pairings, in the crop cameras' kept terms: the subject's pairings and,
+            # where they give no figures, both people's (below) check it (every flagged pass asks one or both)
+            terms = self._crop_terms_for(crops).two_view
+            pairings = selector.solve_pairings(kp, uv_model, crops, terms=terms)
             j3, chosen, subject = selector.keep_tracked_subject(j3, kp, uv_model, crops, regions, self.tracker.track,
-                                                                self._track_unsorted, cold_several, behind)
+                                                                self._track_unsorted, cold_several, behind,
+                                                                solution=pairings)
             if chosen is not None:  # a view's 2D joint is the peak its 3D joint was triangulated from
                 joints_2d, conf_2d, missing_2d = self._image_joints(*chosen, crops)
                 guessed = guessed_joints(subject, kp)
@@ -1566,10 +1574,11 @@ class Estimator:
         if several:
             # each view's decoded peak may be either person's, so the pair's own figures say nothing of the rig:
             # the subject's own pairings do (SubjectSelector.subject_figures)
-            agreement, foot = (None, None) if nobody else selector.subject_figures(subject, chosen, crops, regions)
+            agreement, foot = (None, None) if nobody else selector.subject_figures(subject, chosen, crops, regions,
+                                                                                   terms=terms)
             if agreement is None or foot is None:  # no subject's pairings to measure (a camera knocked past the
                 # gate, or panned far enough to take both people out of the box gates, leaves none): both people's
-                pairs, matched = selector.both_people(kp, uv_model, crops)
+                pairs, matched = selector.both_people(kp, uv_model, crops, solution=pairings)
                 if agreement is None:
                     agreement = selector.matched_px(matched)  # both people's peaks, paired one to one
                 if foot is None:
@@ -1579,7 +1588,7 @@ class Estimator:
             # the triangulation's feet (not the prior's placed ones), whether or not the box gates left someone to
             # report (_joints_3d: the presence gate asked of the joints before them)
             foot = self._lowest_foot
-        _add_ms(timing, "joints_3d", t)  # (the figures too: matched_px triangulates every pairing again)
+        _add_ms(timing, "joints_3d", t)  # (the figures too: both_people checks every pairing again)
         return _Pass(regions, frame_reason, env, j3, joints_2d, conf_2d, missing_2d, job, crops, not nobody,
                      *self._prior_check, several,
                      None if seen_by is None else self.camera_names[seen_by], agreement, foot)

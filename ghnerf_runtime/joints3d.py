@@ -203,7 +203,8 @@ def lower_foot_m(j3: Joints3D, feet: Sequence[Sequence[int]], standing_m: float,
     return min(medians) - standing_m if medians else None
 
 
-def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig) -> Joints3D:
+def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig, *,
+                       terms: TwoViewCameras | None = None, solution: TwoViewSolution | None = None) -> Joints3D:
     """Triangulate 2D peaks given in model-input pixels of the crop cameras.
 
     Args:
@@ -213,6 +214,7 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
         cameras: the C pinhole crop cameras (``preprocess.crop_camera``).
         config: ``max_reprojection_px``, ``min_view_confidence``, ``min_ray_angle_deg`` (a joint whose rays
             meet at a smaller angle is missing: nearly parallel rays give no depth worth reporting).
+        terms, solution: as :func:`triangulate_joints_checked` (the answer is the same with them or without).
 
     Returns:
         :class:`Joints3D`; confidence is the geometric mean of the views' peak values.
@@ -228,7 +230,7 @@ def triangulate_joints(uv_model, confidence, valid, cameras: Sequence[Camera], c
         >>> np.round(r.points, 6).tolist(), r.valid.tolist(), round(float(r.confidence[0]), 3)
         ([[0.1, -1.2, 3.0]], [True], 0.8)
     """
-    return triangulate_joints_checked(uv_model, confidence, valid, cameras, config)[0]
+    return triangulate_joints_checked(uv_model, confidence, valid, cameras, config, terms=terms, solution=solution)[0]
 
 
 def _triangulation_inputs(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig):
@@ -263,11 +265,14 @@ def solve_two_view_peaks(uv_model, confidence, valid, cameras: Sequence[Camera],
 
 def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Camera], config: Joints3DConfig,
                                min_confidence: float = 0.0, min_joints: int = 1, *,
-                               solution: TwoViewSolution | None = None) -> tuple[Joints3D, ViewAgreement]:
+                               terms: TwoViewCameras | None = None, solution: TwoViewSolution | None = None
+                               ) -> tuple[Joints3D, ViewAgreement]:
     """:func:`triangulate_joints` and the :class:`ViewAgreement` of the joints whose peaks are at least
     ``min_confidence`` in every view (at least ``min_joints`` of them for a median), from one solve.
     ``solution``: :func:`solve_two_view_peaks` of these arguments, computed earlier (used where it solved these
-    peaks, weights and matrices; solved here otherwise: the answer is the same).
+    peaks, weights and matrices; solved here otherwise: the answer is the same). ``terms``: the two crop cameras'
+    :class:`~ghnerf_runtime.geometry.triangulation.TwoViewCameras`, where the caller keeps them (a GeometryError
+    where they are other cameras'; two views only: more views take the robust solver, which reads no such terms).
 
     Example (the right camera's rig entry tilted by 1 degree: its peaks lie 1.7 px off where the rig puts them
     in these 128 px crops, an error the triangulation shares between the views):
@@ -290,7 +295,7 @@ def triangulate_joints_checked(uv_model, confidence, valid, cameras: Sequence[Ca
         # solved without its reprojection gate, applied below: the errors of the joints it drops are what a
         # bumped camera raises
         res = triangulate_two_views(peaks, np.stack(mats), weights, min_ray_angle_deg=config.min_ray_angle_deg,
-                                    solution=solution)
+                                    cameras=terms, solution=solution)
         solved = res.valid & both
         err = np.where(solved[:, None], res.reprojection_error, 0.0)
         worst = err.max(axis=-1)

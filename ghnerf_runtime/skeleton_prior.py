@@ -29,7 +29,7 @@ import numpy as np
 from ghnerf_runtime.body25 import FLIP_INDEX, NUM_JOINTS
 from ghnerf_runtime.errors import GeometryError, ModelContractError, ModelLoadError, ModelRunError, ShapeError
 from ghnerf_runtime.geometry.kept_terms import read_only, same_bits, terms_of
-from ghnerf_runtime.geometry.triangulation import TwoViewSolution, triangulate_two_views
+from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution, triangulate_two_views
 from ghnerf_runtime.onnx_file import open_onnx_file, ort_reason
 
 __all__ = ["FEATURE_VERSION", "MAX_JOINT_FROM_ROOT_M", "JOINT_FEATURES", "CONTEXT_FEATURES", "FILE_NAME",
@@ -107,7 +107,7 @@ def _geometric_median(points: np.ndarray, iterations: int = 20) -> np.ndarray:
     return c
 
 
-def _mean_heading(P: np.ndarray) -> np.ndarray:
+def _mean_heading(P: np.ndarray, det_sign: np.ndarray | None = None) -> np.ndarray:
     """``(N, 3)`` unit horizontal direction the two cameras of each pair look along on average (the mean of
     their principal rays, the third row of each ``P[:, :3]`` turned towards the scene, with y dropped);
     rig +z where the cameras look straight up or down, or opposite ways.
@@ -116,9 +116,13 @@ def _mean_heading(P: np.ndarray) -> np.ndarray:
     (and so the canonical frame and every feature) with it, as it does when joints are triangulated.
     The guess used to be rig +z, whatever the rig's heading. The change alters the features of such pairs
     only, and :data:`FEATURE_VERSION` stays 2 (files trained before it are still accepted): pairs with no
-    triangulated joint are rare, and the presence gate usually stops them before the prior runs."""
+    triangulated joint are rare, and the presence gate usually stops them before the prior runs.
+
+    ``det_sign``: the ``(N, 2, 1)`` signs of the left 3x3 blocks' determinants, where the caller has them."""
     M = P[..., :3]
-    axis = M[..., 2, :] * np.sign(np.linalg.det(M))[..., None]  # (N, 2, 3) towards the scene
+    if det_sign is None:
+        det_sign = np.sign(np.linalg.det(M))[..., None]
+    axis = M[..., 2, :] * det_sign  # (N, 2, 3) towards the scene
     axis = axis / np.maximum(np.linalg.norm(axis, axis=-1, keepdims=True), 1e-12)
     d = axis.mean(1) * [1.0, 0.0, 1.0]
     n = np.linalg.norm(d, axis=-1, keepdims=True)
@@ -130,11 +134,12 @@ class PriorCameras:
     """What :func:`prior_inputs` derives from the ``(N, 2, 3, 4)`` crop cameras alone (read-only arrays): the
     matrices ``P`` (a copy), the camera centres ``(N, 2, 3)`` and their midpoints ``(N, 3)``, the cameras' mean
     heading ``(N, 3)``, the inverses of the left 3x3 blocks ``(N, 2, 3, 3)`` and the sign of their determinants
-    ``(N, 2, 1, 1)`` (a ray's way to the scene).
+    ``(N, 2, 1, 1)`` (a ray's way to the scene); and, built with :meth:`from_two_view`, each pair's two-view solver
+    terms (None from :meth:`from_P`), which :func:`prior_inputs` then solves each pair's peaks in.
 
-    Build them with :meth:`from_P` and pass them to :func:`prior_inputs` (``cameras=``) to skip recomputing
-    them: the estimator keeps its crop cameras' for as long as the crop keeps its cameras. The inputs are the
-    same to the bit with them or without.
+    Build them with :meth:`from_P` (or :meth:`from_two_view`, where the caller keeps the two-view terms too) and
+    pass them to :func:`prior_inputs` (``cameras=``) to skip recomputing them: the estimator keeps its crop
+    cameras' for as long as the crop keeps its cameras. The inputs are the same to the bit with them or without.
     """
 
     P: np.ndarray
@@ -143,6 +148,7 @@ class PriorCameras:
     heading: np.ndarray
     inverse: np.ndarray
     towards_scene: np.ndarray
+    two_view: tuple[TwoViewCameras, ...] | None = None
 
     @classmethod
     def from_P(cls, P) -> "PriorCameras":
@@ -160,6 +166,28 @@ class PriorCameras:
         read_only(cams.P, cams.centres, cams.mid, cams.heading, cams.inverse, cams.towards_scene)
         return cams
 
+    @classmethod
+    def from_two_view(cls, pairs: Sequence[TwoViewCameras]) -> "PriorCameras":
+        """The terms of the pairs whose two-view solver terms are ``pairs`` (one
+        :class:`~ghnerf_runtime.geometry.triangulation.TwoViewCameras` per pair): the same to the bit as
+        :meth:`from_P` of their matrices, the inverses and the determinants' signs taken from them instead of
+        computed again, and kept for :func:`prior_inputs` to solve each pair's peaks in.
+
+        Raises:
+            ShapeError: no pair given.
+        """
+        pairs = tuple(pairs)
+        if not pairs:
+            raise ShapeError("PriorCameras.from_two_view: at least one pair's two-view terms expected, got none")
+        P = np.stack([t.P for t in pairs])
+        # depth_scale is sign(det) / |m3|, |m3| > 0 for a regular block: its sign is the determinant's
+        det_sign = np.stack([np.sign(t.depth_scale) for t in pairs])  # (N, 2, 1)
+        C = _centres(P)
+        cams = cls(P, C, C.mean(1), _mean_heading(P, det_sign), np.stack([t.Minv for t in pairs]),
+                   det_sign[..., None], pairs)
+        read_only(cams.P, cams.centres, cams.mid, cams.heading, cams.inverse, cams.towards_scene)
+        return cams
+
     def is_for(self, P) -> bool:
         """Whether these are the terms of the matrices ``P`` (the same values to the bit, whatever the array)."""
         return same_bits(self.P, P)
@@ -172,6 +200,18 @@ def _solve_of(solutions: Sequence[TwoViewSolution | None] | None, pairs: int) ->
     if len(solutions) != pairs:
         raise ShapeError(f"solutions: one per pair expected ({pairs}), got {len(solutions)}")
     return list(solutions)
+
+
+def _kept_two_view(P: np.ndarray, cameras: PriorCameras | None) -> list[TwoViewCameras | None]:
+    """The two-view terms of each pair of the ``(N, 2, 3, 4)`` ``P`` that ``cameras`` hold
+    (:meth:`PriorCameras.from_two_view`), else None for each.
+
+    Raises:
+        GeometryError: ``cameras`` of other matrices than ``P`` (asked here, before they are solved in).
+    """
+    if cameras is None or cameras.two_view is None:
+        return [None] * len(P)
+    return list(terms_of(P, cameras, PriorCameras.from_P, "prior's camera terms").two_view)
 
 
 def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray, P: np.ndarray, *,
@@ -187,7 +227,8 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
         P: ``(N, 2, 3, 4)`` the crop cameras' pinhole projections (rig frame -> model pixels).
         max_joint_from_root_m: a DLT point farther than this from the body's robust centre is not a
             triangulation (the features of version 1 are those of ``inf``: for measuring old files only).
-        cameras: ``PriorCameras.from_P(P)`` computed earlier (computed here when not given).
+        cameras: ``PriorCameras.from_P(P)`` (or ``from_two_view``) computed earlier (computed here when not
+            given); where they hold two-view terms, a pair without a solve (``solutions``) is solved in them.
         solutions: per pair, an earlier two-view solve in these crop cameras
             (:func:`~ghnerf_runtime.joints3d.solve_two_view_peaks`) or None: used whole where it solved the
             peaks and weights the inputs triangulate, else for its camera terms.
@@ -214,10 +255,11 @@ def prior_inputs(uv_model: np.ndarray, confidence: np.ndarray, valid: np.ndarray
     X, ok = np.zeros((N, J, 3)), np.zeros((N, J), bool)
     rep, ang = np.zeros((N, J, 2)), np.zeros((N, J))
     weights = np.where(dec, np.maximum(conf, 1e-3), 0.0)
+    kept = _kept_two_view(P, cameras)
     for i in range(N):
         earlier = solved[i]
         r = triangulate_two_views(uv[i], P[i], weights[i], solution=earlier,
-                                  cameras=None if earlier is None else earlier.cameras)
+                                  cameras=kept[i] if earlier is None else earlier.cameras)
         X[i], ok[i], rep[i], ang[i] = r.points, r.valid, r.reprojection_error, r.ray_angle_deg
     ok = ok & dec.all(1) & np.isfinite(X).all(-1)
     rep, ang = np.nan_to_num(rep), np.nan_to_num(ang)

@@ -24,8 +24,9 @@ from ghnerf_runtime.body25 import LIMBS
 from ghnerf_runtime.config import EstimatorConfig, Joints3DConfig
 from ghnerf_runtime.geometry.camera import Camera
 from ghnerf_runtime.geometry.rig import Rig
-from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, gate_presence, near_the_body, triangulate_joints, \
-    triangulate_joints_checked
+from ghnerf_runtime.geometry.triangulation import TwoViewCameras, TwoViewSolution
+from ghnerf_runtime.joints3d import Joints3D, ViewAgreement, gate_presence, near_the_body, solve_two_view_peaks, \
+    triangulate_joints, triangulate_joints_checked
 from ghnerf_runtime.keypoints import Keypoints2D, heatmap_to_model_pixels
 from ghnerf_runtime.tracking import Regions, Track
 from ghnerf_runtime.two_people import (PAIRINGS, attached, centre_of, floor_xz, held_apart, matched_errors, one_body,
@@ -161,7 +162,8 @@ class SubjectSelector:
 
     def keep_tracked_subject(self, j3: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
                              regions: Regions, track: Track | None, track_unsorted: bool,
-                             cold_several: bool | None = None, behind: int | None = None
+                             cold_several: bool | None = None, behind: int | None = None, *,
+                             solution: TwoViewSolution | None = None
                              ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """Of a ``several_people`` pair's joints, those within ``max_track_step_m`` of the tracked subject's place
         for them; without a track, one of the two people's (:meth:`_picked_subject`; with ``pick_subject: none``
@@ -181,7 +183,8 @@ class SubjectSelector:
         (:meth:`behind_view`): picked as without a track, the person that view sees is the subject
         (:meth:`_seen_subject`); a tracked pass keeps the pairings nearest the track as for any flagged pass (two
         of them are that view's one peak with each of the other view's two). ``track``: the tracked subject (None
-        without one); ``track_unsorted``: it is a cold pass's that showed maybe two people too small to tell apart."""
+        without one); ``track_unsorted``: it is a cold pass's that showed maybe two people too small to tell apart.
+        ``solution``: :meth:`solve_pairings` of this pass, computed earlier (the answer is the same without it)."""
         cfg = self.config.joints3d
         picks = picks_subject(self.config.joints3d)
         # a cold pass's track not flagged (cold_several False: this pair's, refined; with refine_cold_start off, the
@@ -194,29 +197,40 @@ class SubjectSelector:
             if not picks:
                 return none, None, none
             if behind is not None:
-                return self._seen_subject(none, kp, uv_model, crops, regions, behind)
+                return self._seen_subject(none, kp, uv_model, crops, regions, behind, solution)
             # (no track: a cold pass retried after a several_people tracked pass, picked as without a track)
             near = (centre_of(track.joints[None], np.where(track.valid, 0, -1)) if cold_several and track is not None
                     else None)
-            return self._picked_subject(none, kp, uv_model, crops, regions, near)
+            return self._picked_subject(none, kp, uv_model, crops, regions, near, solution)
         step = np.linalg.norm(j3.points - track.joints, axis=-1)
         near = track.valid & (step <= cfg.max_track_step_m)
         kept = Joints3D(j3.points, j3.confidence, j3.valid & near, j3.reprojection_px).sanitised()
         if cfg.method != "triangulate":  # the 3D joint is no peaks' triangulation (nor the prior's)
             return kept, None, kept
-        return self._tracked_candidates(kept, kp, uv_model, crops, regions, track.joints, track.valid)
+        return self._tracked_candidates(kept, kp, uv_model, crops, regions, track.joints, track.valid, solution)
 
-    def _pairings(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera], regions: Regions
-                  ) -> tuple[Joints3D, np.ndarray, np.ndarray, np.ndarray]:
+    def solve_pairings(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera], *,
+                       terms: TwoViewCameras | None = None) -> TwoViewSolution:
+        """One two-view solve of each joint's four pairings of the two views' peaks (:meth:`_pairings`' peaks and
+        weights), before any gate: :meth:`keep_tracked_subject` (through the box gates) and :meth:`both_people`
+        (before them) check the same solve, so the estimator solves a flagged pass's pairings once and passes it
+        to both (``solution=``). ``terms``: the crop cameras' kept
+        :class:`~ghnerf_runtime.geometry.triangulation.TwoViewCameras` (the estimator's)."""
+        return solve_two_view_peaks(*_paired(*self._peak_options(kp, uv_model)), crops, self.config.joints3d,
+                                    terms=terms)
+
+    def _pairings(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera], regions: Regions,
+                  solution: TwoViewSolution | None = None) -> tuple[Joints3D, np.ndarray, np.ndarray, np.ndarray]:
         """Each joint's four pairings of the two views' peaks (:data:`~ghnerf_runtime.two_people.PAIRINGS`: the
         decoded peak or the runner-up in view 0 with either in view 1), triangulated through the usual gates
         (reprojection, ray angle, boxes): the ``(4 * J)`` joints, pairing after pairing, and each option's model
         pixels, values and validity ``(option, view, J, ...)``. A runner-up exists only where the map shows a
         second peak above the decoder's threshold: another region's, or one of the peak's own region past a valley
-        (:data:`~ghnerf_runtime.keypoints.RUNNER_UP_DIP`)."""
+        (:data:`~ghnerf_runtime.keypoints.RUNNER_UP_DIP`). ``solution``: :meth:`solve_pairings` of these peaks
+        (used where it solved them; solved here otherwise)."""
         uv_opt, conf_opt, valid_opt = self._peak_options(kp, uv_model)
         tri = self._gate_to_boxes(triangulate_joints(*_paired(uv_opt, conf_opt, valid_opt), crops,
-                                                     self.config.joints3d), regions)
+                                                     self.config.joints3d, solution=solution), regions)
         return tri, uv_opt, conf_opt, valid_opt
 
     def _peak_options(self, kp: Keypoints2D, uv_model: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -228,20 +242,22 @@ class SubjectSelector:
         valid_opt = np.stack([kp.valid, kp.runner_up > 0])  # a runner-up is a second peak above the threshold
         return uv_opt, conf_opt, valid_opt
 
-    def both_people(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera]
-                    ) -> tuple[tuple, ViewAgreement]:
+    def both_people(self, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera], *,
+                    solution: TwoViewSolution | None = None) -> tuple[tuple, ViewAgreement]:
         """A ``several_people`` pair's four pairings of each joint (:meth:`_pairings`' tuple) triangulated through
         the reprojection gate but not the box gates, and their agreement before the gate, of the peaks at least the
         presence threshold in both views: what both people's calibration figures are taken from where the
-        subject's own pairings give none (:meth:`matched_px`, :meth:`matched_foot`)."""
+        subject's own pairings give none (:meth:`matched_px`, :meth:`matched_foot`). ``solution``:
+        :meth:`solve_pairings` of these peaks (used where it solved them; solved here otherwise)."""
         strong = self.config.presence.threshold(self.config.heatmaps.source)
         uv_opt, conf_opt, valid_opt = self._peak_options(kp, uv_model)
         tri, agreement = triangulate_joints_checked(*_paired(uv_opt, conf_opt, valid_opt), crops,
-                                                    self.config.joints3d, strong, 1)
+                                                    self.config.joints3d, strong, 1, solution=solution)
         return (tri, uv_opt, conf_opt, valid_opt), agreement
 
     def _tracked_candidates(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                            regions: Regions, track_joints: np.ndarray, track_valid: np.ndarray
+                            regions: Regions, track_joints: np.ndarray, track_valid: np.ndarray,
+                            solution: TwoViewSolution | None = None
                             ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """A ``several_people`` pair's joints from whichever peaks are the tracked subject's: each view's map of a
         joint holds both people's peaks, the decoded one (the stronger) and the runner-up, so the subject's joint
@@ -251,7 +267,7 @@ class SubjectSelector:
         (:meth:`keep_tracked_subject`)."""
         cfg = self.config.joints3d
         J = len(track_joints)
-        pairs = self._pairings(kp, uv_model, crops, regions)
+        pairs = self._pairings(kp, uv_model, crops, regions, solution)
         points, valid = pairs[0].points.reshape(4, J, 3), pairs[0].valid.reshape(4, J)
         dist = np.linalg.norm(points - track_joints, axis=-1)
         ok = valid & track_valid & (dist <= cfg.max_track_step_m)
@@ -279,7 +295,7 @@ class SubjectSelector:
         return self._from_pairings(kept, kp, pairs, best, found)
 
     def _picked_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                        regions: Regions, near: np.ndarray | None = None
+                        regions: Regions, near: np.ndarray | None = None, solution: TwoViewSolution | None = None
                         ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """A ``several_people`` pair without a track: the pairings (:meth:`_pairings`) split into two people
         (:func:`~ghnerf_runtime.two_people.split_people`), and the one ``joints3d.pick_subject`` names
@@ -288,7 +304,7 @@ class SubjectSelector:
         track then follows that person. Nobody (``kept``) where neither has enough. ``near`` (a floor point,
         x and z): the person whose centre is nearer it instead of the rule's."""
         J = len(kept.valid)
-        pairs = self._pairings(kp, uv_model, crops, regions)
+        pairs = self._pairings(kp, uv_model, crops, regions, solution)
         points = pairs[0].points.reshape(4, J, 3)
         people = split_people(points, pairs[0].valid.reshape(4, J))
         pres = self.config.presence
@@ -312,7 +328,7 @@ class SubjectSelector:
                                    one_skeleton_each_side(points[best, np.arange(J)], people[who] >= 0))
 
     def _seen_subject(self, kept: Joints3D, kp: Keypoints2D, uv_model: np.ndarray, crops: list[Camera],
-                      regions: Regions, behind: int
+                      regions: Regions, behind: int, solution: TwoViewSolution | None = None
                       ) -> tuple[Joints3D, tuple[Keypoints2D, np.ndarray] | None, Joints3D]:
         """One person behind the other in view ``behind`` (:meth:`behind_view`) and no track: the person that view
         sees is reported, as :meth:`_picked_subject` reports the picked one. Its one peak of a joint is theirs (the
@@ -326,7 +342,7 @@ class SubjectSelector:
         person's peak in both views are missing. Nobody (``kept``) with fewer than ``presence.min_joints`` joints.
         ``pick_subject`` is not asked: the hidden person's joints would be triangulated from the seen one's peak."""
         J = len(kept.valid)
-        pairs = self._pairings(kp, uv_model, crops, regions)
+        pairs = self._pairings(kp, uv_model, crops, regions, solution)
         points, valid = pairs[0].points.reshape(4, J, 3), pairs[0].valid.reshape(4, J)
         mine = np.flatnonzero(PAIRINGS[:, behind] == 0)  # that view's peak with either of the other view's
         depth = np.linalg.norm(points[mine] - self.rig.pair[behind].center, axis=-1)
@@ -364,7 +380,8 @@ class SubjectSelector:
         return j3.sanitised(), (chosen, uv_opt[opt, v, j]), peaks.sanitised()
 
     def subject_figures(self, subject: Joints3D, chosen: tuple[Keypoints2D, np.ndarray] | None,
-                        crops: list[Camera], regions: Regions) -> tuple[float | None, float | None]:
+                        crops: list[Camera], regions: Regions, *, terms: TwoViewCameras | None = None
+                        ) -> tuple[float | None, float | None]:
         """A ``several_people`` pair's calibration figures (``reprojection_px_median``, ``lowest_foot_m``) from the
         reported subject's own pairings (``subject``, the found joints, and ``chosen``, each view's peak they were
         triangulated from: :meth:`_from_pairings`), by the one-person rules (the presence threshold in both views,
@@ -376,7 +393,8 @@ class SubjectSelector:
         The px figure differs from one person's: the pairings passed ``joints3d.max_reprojection_px`` to be chosen
         (:meth:`_pairings`), so a joint past that gate is not measured; a camera turned that far reports nobody
         and gives no figure here, and the pair's px figure is then both people's peaks' (:meth:`matched_px`), as
-        one person's pair still gives one (docs/calibration.md)."""
+        one person's pair still gives one (docs/calibration.md). ``terms``: the crop cameras' kept
+        :class:`~ghnerf_runtime.geometry.triangulation.TwoViewCameras` (the estimator's)."""
         if chosen is None or not subject.valid.any():
             return None, None
         kp, uv_model = chosen
@@ -384,7 +402,7 @@ class SubjectSelector:
         pres = self.config.presence
         strong = pres.threshold(self.config.heatmaps.source)
         _, agreement = triangulate_joints_checked(uv_model, kp.confidence, kp.valid & use, crops,
-                                                  self.config.joints3d, strong, pres.min_joints)
+                                                  self.config.joints3d, strong, pres.min_joints, terms=terms)
         foot = self._lowest_foot_m(Joints3D(subject.points, subject.confidence, use, subject.reprojection_px), kp,
                                    regions)
         return agreement.median_px, foot

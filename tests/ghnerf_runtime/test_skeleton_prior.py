@@ -850,6 +850,52 @@ def test_inputs_with_the_cameras_terms_given_are_the_same_to_the_bit(monkeypatch
         prior_inputs(*cases[0], moved, cameras=terms)
 
 
+def _rigs_of_every_handedness() -> list[np.ndarray]:
+    """``(2, 3, 4)`` crop camera pairs: turned, shifted, scaled by a negative factor (a determinant's sign flipped,
+    a ray's way to the scene with it) and mirrored (one camera's)."""
+    rigs = [np.stack(_rig(yaw, shift)) for yaw, shift in ((0.0, (0.0, 0.0)), (20.0, (0.3, -0.2)), (-75.0, (1.1, 0.4)))]
+    flipped = rigs[1] * np.array([-1.0, 2.5])[:, None, None]  # (a P scaled by -1 is the same camera)
+    mirrored = rigs[2].copy()
+    mirrored[0] = mirrored[0] @ np.diag([-1.0, 1.0, 1.0, 1.0])
+    return rigs + [flipped, mirrored]
+
+
+def test_prior_terms_built_from_the_two_view_terms_are_from_p_s_to_the_bit_and_solve_in_them(monkeypatch):
+    """PriorCameras.from_two_view takes the inverses and the determinants' signs from the two-view solver's terms
+    (the estimator built both from its crop matrices, inverting them twice): every term is from_P's to the bit, the
+    inputs built with them are those built without, and each pair's peaks are solved in the kept two-view terms (none
+    computed again); terms of other matrices are refused by name, before any solve."""
+    from ghnerf_runtime.errors import GeometryError, ShapeError
+    from ghnerf_runtime.geometry import triangulation
+    from ghnerf_runtime.geometry.triangulation import TwoViewCameras
+    from ghnerf_runtime.skeleton_prior import PriorCameras
+
+    for P2 in _rigs_of_every_handedness():
+        P = P2[None]
+        kept = PriorCameras.from_two_view([TwoViewCameras.from_P(P2)])
+        fresh = PriorCameras.from_P(P)
+        for name in ("P", "centres", "mid", "heading", "inverse", "towards_scene"):
+            got, want = getattr(kept, name), getattr(fresh, name)
+            assert got.shape == want.shape and got.tobytes() == want.tobytes(), name
+            assert not got.flags.writeable, name
+        assert fresh.two_view is None and kept.two_view[0].is_for(P2)
+        terms = []
+        real_terms = triangulation.TwoViewCameras.from_P
+        monkeypatch.setattr(triangulation.TwoViewCameras, "from_P", lambda p: terms.append(1) or real_terms(p))
+        for uv, conf, valid in _noisy_cases(P, 2):
+            want = prior_inputs(uv, conf, valid, P)
+            calls = len(terms)
+            _same_inputs(prior_inputs(uv, conf, valid, P.copy(), cameras=kept), want)
+            assert len(terms) == calls  # solved in the kept terms
+        monkeypatch.undo()
+    moved = P.copy()
+    moved[..., 3] += 0.1
+    with pytest.raises(GeometryError, match="prior's camera terms .* other matrices"):
+        prior_inputs(*_noisy_cases(P, 1)[0], moved, cameras=kept)
+    with pytest.raises(ShapeError, match="from_two_view"):
+        PriorCameras.from_two_view([])
+
+
 def test_inputs_reuse_a_solve_of_their_own_peaks_and_the_camera_terms_of_another(monkeypatch):
     """The estimator passes the pair's solve of the joints' peaks: where the prior's weights are the joints' (every
     decoded peak's value in [0.001, 1]) the inputs take it whole (no DLT of their own), else they solve with its
@@ -907,9 +953,10 @@ def test_the_estimator_keeps_the_crop_cameras_terms_while_its_crops_keep_their_c
     from ghnerf_runtime.skeleton_prior import PriorCameras
 
     made, made_prior, passes, solves = [], [], [], []
-    real_two, real_prior = TwoViewCameras.from_P, PriorCameras.from_P
+    real_two, real_prior = TwoViewCameras.from_P, PriorCameras.from_two_view
     monkeypatch.setattr(TwoViewCameras, "from_P", lambda p: made.append(1) or real_two(p))
-    monkeypatch.setattr(PriorCameras, "from_P", lambda p: made_prior.append(1) or real_prior(p))
+    # (the prior's terms are built from the two-view solver's: PriorCameras.from_two_view)
+    monkeypatch.setattr(PriorCameras, "from_two_view", lambda pairs: made_prior.append(1) or real_prior(pairs))
     real_peaks = estimator_module.solve_two_view_peaks
 
     def peaks(uv, conf, valid, crops, config, *, terms):

@@ -1004,7 +1004,7 @@ class _BothPeoplesFeet(Estimator):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         figures = self.subject_selector.subject_figures
-        self.subject_selector.subject_figures = lambda *args: (figures(*args)[0], None)
+        self.subject_selector.subject_figures = lambda *args, **kw: (figures(*args, **kw)[0], None)
 
 
 def test_two_people_s_floor_figure_leaves_out_feet_past_the_crop_s_edge():
@@ -1067,7 +1067,7 @@ def test_two_people_s_matched_px_figure_on_the_true_rig_and_below_the_gate_is_th
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
             figures = self.subject_selector.subject_figures
-            self.subject_selector.subject_figures = lambda *args: (None, figures(*args)[1])
+            self.subject_selector.subject_figures = lambda *args, **kw: (None, figures(*args, **kw)[1])
 
     for tilt_deg, near in ((0.0, 0.05), (2.0, 0.2)):
         rig = sim.RigPlacement().build()
@@ -1376,3 +1376,124 @@ def test_the_shipped_model_s_subject_0_6_m_apart_reports_no_left_wrist_read_from
             assert np.linalg.norm(r.joints_3d[rw] - subject[rw]) < 0.05
             assert r.missing[lw] or np.linalg.norm(r.joints_3d[lw] - subject[lw]) < 0.2, (
                 i, np.linalg.norm(r.joints_3d[lw] - subject[lw]))
+
+
+class _InputsBuildingPrior:
+    """A stand-in skeleton prior that builds its inputs as the real one does (``prior_inputs``, with the camera
+    terms and solves the estimator passes) and answers the DLT points they hold, sure of each (0.02 m)."""
+
+    def estimate(self, uv_model, confidence, valid, P, flip_test=True, *, cameras=None, solutions=None):
+        from ghnerf_runtime.skeleton_prior import SkeletonEstimate, prior_inputs
+
+        P = np.asarray([np.asarray(p, np.float64) for p in P])
+        inputs = prior_inputs(uv_model[None], confidence[None], valid[None], P[None], cameras=cameras,
+                              solutions=solutions)
+        ok = inputs.triangulated[0]
+        points = inputs.frame.to_rig(inputs.joint_features[..., :3].astype(np.float64))[0]
+        return SkeletonEstimate(np.where(ok[:, None], points, 0.0), np.where(ok, 0.02, np.inf), ok)
+
+
+def _bits(value) -> object:
+    """``value`` (arrays, dataclasses, tuples, numbers, None) as something ``==`` compares to the bit."""
+    import dataclasses
+
+    if isinstance(value, np.ndarray):
+        return value.dtype.str, value.shape, value.tobytes()
+    if dataclasses.is_dataclass(value):
+        return type(value).__name__, tuple(_bits(getattr(value, f.name)) for f in dataclasses.fields(value))
+    if isinstance(value, (tuple, list)):
+        return tuple(_bits(v) for v in value)
+    return repr(value)
+
+
+@pytest.mark.parametrize("config, alone", [
+    (EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on")), 0),  # picked from the first pair
+    (EstimatorConfig(joints3d=Joints3DConfig(skeleton_prior="on")), 3),  # tracked when the second joins
+    (EstimatorConfig(joints3d=Joints3DConfig(pick_subject="none", skeleton_prior="on")), 0),  # both people's figures
+], ids=["picked", "tracked", "nobody-picked"])
+def test_a_flagged_pass_solves_its_pairings_once_in_the_crop_cameras_kept_terms(monkeypatch, config, alone):
+    """Session 62: a flagged pass solves each joint's four pairings once (``SubjectSelector.solve_pairings``), in
+    the crop cameras' terms the estimator keeps, and passes the solve to the subject's pairings
+    (``keep_tracked_subject``) and both people's (``both_people``), and the terms to the subject's figures
+    (``subject_figures``) and the subject's prior (its inputs' solves): no camera terms are computed but the
+    estimator's (once per crop cameras' change), the pairings are not solved again, and every answer is the one
+    computed afresh, to the bit. A solve of other peaks is not used (solved anew: the same answer); terms of other
+    cameras are refused. Before, each of them computed the terms again, and both people's solved the pairings
+    again."""
+    from ghnerf_runtime import estimator as estimator_module
+    from ghnerf_runtime.errors import GeometryError
+    from ghnerf_runtime.geometry import triangulation
+    from ghnerf_runtime.geometry.triangulation import TwoViewCameras
+
+    built, in_crop_terms, solves = [], [False], []
+    real_from_P, real_of = TwoViewCameras.from_P, estimator_module._CropTerms.of
+
+    def crop_terms(P, with_prior):
+        in_crop_terms[0] = True
+        try:
+            return real_of(P, with_prior)
+        finally:
+            in_crop_terms[0] = False
+
+    monkeypatch.setattr(TwoViewCameras, "from_P", lambda p: built.append(in_crop_terms[0]) or real_from_P(p))
+    monkeypatch.setattr(estimator_module._CropTerms, "of", crop_terms)
+    real_solve = triangulation._solve_two_views
+    monkeypatch.setattr(triangulation, "_solve_two_views", lambda *a: solves.append(1) or real_solve(*a))
+    reused: dict[str, list] = {"keep_tracked_subject": [], "both_people": [], "subject_figures": []}
+    reals = {name: getattr(SubjectSelector, name) for name in reused}
+    captured = []
+
+    def same_as_fresh(name: str):
+        real = reals[name]
+
+        def checked(self, *args, **kwargs):
+            before = len(solves)
+            got = real(self, *args, **kwargs)
+            solved = len(solves) - before
+            given = {k: kwargs.pop(k) for k in ("solution", "terms") if k in kwargs}
+            reused[name].append((given, solved))
+            if name == "both_people":
+                captured.append((self, args))
+            with monkeypatch.context() as m:  # afresh: terms computed on the spot, not counted
+                m.setattr(TwoViewCameras, "from_P", real_from_P)
+                assert _bits(real(self, *args, **kwargs)) == _bits(got), name
+            return got
+
+        monkeypatch.setattr(SubjectSelector, name, checked)
+
+    for name in reused:
+        same_as_fresh(name)
+    rig = sim.RigPlacement().build()
+    first = sim.SimScene(sim.SceneConfig(seed=2, motion="wave", position_xz=SIDE_BY_SIDE[0]))
+    other = sim.SimScene(sim.SceneConfig(seed=1002, motion="wave", position_xz=SIDE_BY_SIDE[1]))
+    oracle = TwoPeopleOracle(edge128_contract())
+    oracle.skeleton_prior = _InputsBuildingPrior()
+    flagged = 0
+    with Estimator(oracle, rig, config) as est:
+        for i in range(alone + 4):
+            t = i / 30.0
+            a, b = first.joints_3d(t), other.joints_3d(t)
+            oracle.set_people(a, b) if i >= alone else oracle.set_people(a)
+            r = est.estimate(tuple(first.render(c, t, with_truth=False)[0] for c in rig.pair), timestamp_s=t)
+            flagged += int(r.several_people)
+    assert flagged >= 2 and reused["keep_tracked_subject"] and (reused["both_people"] or reused["subject_figures"])
+    assert built and all(built), "camera terms computed outside the estimator's kept crop terms"
+    for name, calls in reused.items():
+        for given, solved in calls:
+            key = "terms" if name == "subject_figures" else "solution"
+            assert key in given and given[key] is not None, (name, given)
+            if name != "subject_figures":
+                assert solved == 0, (name, solved)  # the pairings' solve checked, not solved again
+    if not captured:
+        return
+    selector, (kp, uv_model, crops) = captured[0]
+    both_people = reals["both_people"]
+    fresh = both_people(selector, kp, uv_model, crops)
+    others = selector.solve_pairings(replace(kp, confidence=kp.confidence * 0.5), uv_model, crops)
+    before = len(solves)
+    assert _bits(both_people(selector, kp, uv_model, crops, solution=others)) == _bits(fresh)
+    assert len(solves) - before == 1  # that solve refused: these peaks solved anew
+    moved = np.stack([c.P for c in crops]).astype(np.float64)
+    moved[..., 3] += 0.1
+    with pytest.raises(GeometryError, match="other matrices"):
+        selector.solve_pairings(kp, uv_model, crops, terms=real_from_P(moved))
