@@ -235,6 +235,17 @@ def test_the_benchmark_s_phone_jpeg_is_measured_from_its_header_and_built_by_the
     assert header_size(path) == (40, 30) == image_size(path)
 
 
+@pytest.mark.parametrize("take_format", ["tiff", "webp"])
+def test_the_benchmark_s_tiff_and_webp_are_measured_from_their_headers(tmp_path, no_decode, take_format):
+    """benchmarks/time_replay_open.py --format tiff|webp times takes of these (docs/recording-format.md)."""
+    from benchmarks import time_replay_open
+
+    image = np.random.default_rng(6).integers(0, 256, (30, 40, 3), np.uint8)
+    path = tmp_path / f"image{time_replay_open.TAKE_FORMATS[take_format][1]}"
+    path.write_bytes(time_replay_open.encoded(image, take_format, b""))
+    assert header_size(path) == (40, 30) == image_size(path)
+
+
 def test_a_jpeg_cut_short_in_a_segment_before_its_frame_header_has_no_header_size(tmp_path):
     data = encode_image(np.zeros((30, 40, 3), np.uint8), "jpg", 90)
     whole = with_exif(data, "jpg")
