@@ -552,7 +552,6 @@ def header_size(path: Path) -> tuple[int, int] | None:
     try:
         with open(path, "rb") as f:
             start = f.read(_HEADER_START)
-            f.seek(0)
             for signature, read_size in _SIZE_READERS:
                 if start.startswith(signature):
                     f.seek(len(signature))
@@ -688,12 +687,11 @@ def _tiff_first_ifd_values(f: BinaryIO, layout: _TiffLayout) -> dict[int, tuple[
     if len(head) < layout.first_ifd_at - 4 or head[:len(layout.preamble)] != layout.preamble:
         return None
     (ifd_at,) = struct.unpack(layout.order + layout.offset, head[len(layout.preamble):])
-    f.seek(ifd_at)
-    raw = f.read(struct.calcsize(layout.count))
+    raw = _read_at(f, ifd_at, struct.calcsize(layout.count))
     if len(raw) < struct.calcsize(layout.count):
         return None
     (count,) = struct.unpack(layout.order + layout.count, raw)
-    entries = f.read(count * layout.entry_size)
+    entries = _read_at(f, ifd_at + len(raw), count * layout.entry_size)
     if len(entries) < count * layout.entry_size:
         return None  # a directory past the end of a file cut short
     values: dict[int, tuple[int, ...]] = {}
@@ -716,11 +714,20 @@ def _tiff_integers(f: BinaryIO, layout: _TiffLayout, kind: int, number: int, fie
         return None
     codes = layout.order + code * number
     if struct.calcsize(codes) > len(field):
-        f.seek(struct.unpack(layout.order + layout.offset, field)[0])
-        field = f.read(struct.calcsize(codes))
+        field = _read_at(f, struct.unpack(layout.order + layout.offset, field)[0], struct.calcsize(codes))
         if len(field) < struct.calcsize(codes):
             return None
     return struct.unpack_from(codes, field)
+
+
+def _read_at(f: BinaryIO, offset: int, length: int) -> bytes:
+    """``length`` bytes at ``offset``; fewer, or none, where the file ends first. A corrupt header's offsets and
+    counts can be beyond any file (a BigTIFF's are 64-bit: too large to seek to, or to read as one buffer)."""
+    end = f.seek(0, 2)
+    if offset > end:
+        return b""
+    f.seek(offset)
+    return f.read(min(length, end - offset))
 
 
 def _webp_size(f: BinaryIO) -> tuple[int, int] | None:

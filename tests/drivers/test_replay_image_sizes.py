@@ -431,6 +431,17 @@ def test_a_tiff_of_a_compression_opencv_does_not_decode_or_without_its_size_has_
         assert header_size(path) is None, changed
 
 
+def test_a_tiff_s_offsets_and_counts_beyond_any_file_give_no_size_and_raise_nothing(tmp_path):
+    """A corrupt BigTIFF's 64-bit offsets and counts: too large to seek to or read as one buffer (a ValueError or
+    OverflowError out of the open before they were read within the file's length)."""
+    big = b"II+\x00" + struct.pack("<HHQ", 8, 0, 16)
+    path = tmp_path / "image.tif"
+    for data in (b"II+\x00" + struct.pack("<HHQ", 8, 0, 2**64 - 1), big + struct.pack("<Q", 2**62),
+                 big + struct.pack("<QHHQQ", 1, 258, 3, 16, 2**64 - 1), b"II*\x00" + struct.pack("<I", 2**32 - 1)):
+        path.write_bytes(data)
+        assert header_size(path) is None
+
+
 def webp_variants() -> dict[str, bytes]:
     """A 41x30 WebP as cv2.imwrite writes it (lossy, lossless, with alpha: lossy or lossless) and extended
     (VP8X) with an EXIF orientation of 6 after its image, as a phone writes it."""
@@ -502,11 +513,13 @@ def test_a_take_another_tool_wrote_opens_without_decoding_and_plays_as_stored(tm
 
 def encoded_as(image: np.ndarray, image_format: str) -> bytes:
     """``image`` in a format of the recorder's, one with EXIF before its frame header, a BMP, a TIFF (LZW, as
-    OpenCV writes it) or a WebP (lossy; lossless as ``webp-lossless``)."""
+    OpenCV writes it; big-endian BigTIFF as ``bigtiff``) or a WebP (lossy; lossless as ``webp-lossless``)."""
     if image_format == "bmp":
         return bmp(image)
     if image_format == "tiff":
         return cv2.imencode(".tiff", image)[1].tobytes()
+    if image_format == "bigtiff":
+        return tiff_laid_out(cv2.imencode(".tiff", image)[1].tobytes(), ">", big=True)
     if image_format.startswith("webp"):
         return cv2.imencode(".webp", image, [cv2.IMWRITE_WEBP_QUALITY, 101 if "lossless" in image_format else 90]
                             )[1].tobytes()
@@ -516,14 +529,15 @@ def encoded_as(image: np.ndarray, image_format: str) -> bytes:
 
 
 @pytest.mark.parametrize("image_format",
-                         [*sorted(IMAGE_FORMATS), "jpg+exif", "bmp", "tiff", "webp", "webp-lossless"])
+                         [*sorted(IMAGE_FORMATS), "jpg+exif", "bmp", "tiff", "bigtiff", "webp", "webp-lossless"])
 def test_a_header_cut_anywhere_or_corrupt_never_raises_and_never_gives_a_size_opencv_would_not(tmp_path, image_format):
-    """Every cut of the first 200 bytes, and each byte of them set to 0x00 or 0xFF: no exception, and any size
-    read is the size OpenCV decodes (where it decodes, as load_image does). A PNG's IHDR is checked against its
-    CRC."""
+    """Every cut of the first 200 bytes (and the last 200 of a TIFF, where OpenCV writes its directory), and each
+    byte of them set to 0x00 or 0xFF: no exception, and any size read is the size OpenCV decodes (where it decodes,
+    as load_image does). A PNG's IHDR is checked against its CRC."""
     data = encoded_as(np.random.default_rng(2).integers(0, 256, (30, 40, 3), np.uint8), image_format)
-    damaged = [data[:n] for n in range(200)]
-    damaged += [data[:i] + bytes([value]) + data[i + 1:] for i in range(200) for value in (0x00, 0xFF)]
+    places = [*range(200), *(range(len(data) - 200, len(data)) if "tiff" in image_format else ())]  # its IFD last
+    damaged = [data[:n] for n in places]
+    damaged += [data[:i] + bytes([value]) + data[i + 1:] for i in places for value in (0x00, 0xFF)]
     path = tmp_path / "image"
     for content in damaged:
         path.write_bytes(content)
