@@ -492,7 +492,6 @@ _BMP_MAX_COLOURS_USED = 256
 _OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
 
 
-
 @dataclass(frozen=True)
 class _TiffLayout:
     """Where a TIFF's first image file directory is and how its entries are laid out: classic TIFF (4-byte
@@ -503,7 +502,7 @@ class _TiffLayout:
     offset: str  # the first directory's offset
     count: str  # a directory's entry count
     entry_size: int
-    integer_types: dict[int, str]  # the entry types of one unsigned integer a size is read from: struct codes
+    integer_types: dict[int, str]  # the unsigned integer entry types read (SHORT, LONG, LONG8): struct codes
 
     @property
     def first_ifd_at(self) -> int:
@@ -519,11 +518,15 @@ class _TiffLayout:
 
 
 _TIFF_SHORT, _TIFF_LONG, _TIFF_LONG8 = 3, 4, 16
-_TIFF_CLASSIC = {_TIFF_SHORT: "H", _TIFF_LONG: "I"}
+_TIFF_CLASSIC_INTEGERS = {_TIFF_SHORT: "H", _TIFF_LONG: "I"}
+_TIFF_BIG_INTEGERS = {**_TIFF_CLASSIC_INTEGERS, _TIFF_LONG8: "Q"}
+#: A TIFF's first four bytes (byte order, version: 42 classic, 43 BigTIFF) and its layout. A BigTIFF's offsets are
+#: 8 bytes long (then a reserved 0) before its first directory's offset.
 _TIFF_LAYOUTS = {
-    order: (_TiffLayout(code, b"", "I", "H", 12, _TIFF_CLASSIC),
-            _TiffLayout(code, struct.pack(code + "HH", 8, 0), "Q", "Q", 20, {**_TIFF_CLASSIC, _TIFF_LONG8: "Q"}))
-    for order, code in ((b"II", "<"), (b"MM", ">"))
+    b"II*\x00": _TiffLayout("<", b"", "I", "H", 12, _TIFF_CLASSIC_INTEGERS),
+    b"MM\x00*": _TiffLayout(">", b"", "I", "H", 12, _TIFF_CLASSIC_INTEGERS),
+    b"II+\x00": _TiffLayout("<", struct.pack("<HH", 8, 0), "Q", "Q", 20, _TIFF_BIG_INTEGERS),
+    b"MM\x00+": _TiffLayout(">", struct.pack(">HH", 8, 0), "Q", "Q", 20, _TIFF_BIG_INTEGERS),
 }
 _TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_BITS_PER_SAMPLE, _TIFF_COMPRESSION, _TIFF_ORIENTATION = 256, 257, 258, 259, 274
 _TIFF_SIZE_TAGS = frozenset({_TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_BITS_PER_SAMPLE, _TIFF_COMPRESSION, _TIFF_ORIENTATION})
@@ -798,9 +801,7 @@ _SIZE_READERS = (
     (_JPEG_START, _jpeg_size),
     (_BMP_START, _bmp_size_from_its_start),
     (b"RIFF", _webp_size),
-    *((order + version, functools.partial(_tiff_size, layout=layout))
-      for order, layouts in _TIFF_LAYOUTS.items()
-      for version, layout in zip((b"*\x00", b"+\x00") if order == b"II" else (b"\x00*", b"\x00+"), layouts)),
+    *((start, functools.partial(_tiff_size, layout=layout)) for start, layout in _TIFF_LAYOUTS.items()),
 )
 _HEADER_START = max(len(signature) for signature, _ in _SIZE_READERS)
 
