@@ -2,19 +2,20 @@
 with ``--baseline``, by another tree's, turn about), beside reading every image's header and decoding every image.
 
     .venv/bin/python benchmarks/time_replay_open.py [--frames 3000] [--size 320x240] [--rounds 5]
-        [--format png|exif-jpg] [--take /tmp/ghnerf-replay-open-take[-exif-jpg]]
+        [--format png|exif-jpg|tiff|webp] [--take /tmp/ghnerf-replay-open-take[-<format>]]
         [--baseline /path/to/another/checkout]
 
 Writes (once, kept for the next run) a closed take of ``--frames`` frames a camera for two cameras of a smooth
 pattern with noise: PNG (``--format png``, as ``record+`` writes it, compression level 1), or JPEG as a phone or
 camera writes it (``--format exif-jpg``: quality 95, an APP1 EXIF segment holding an orientation tag of 1 and a
 160x120 thumbnail, then a comment, before the frame header; orientation 1 so that code that turns images by it
-opens the take too). Then prints the median over
-``--rounds`` of: ``ReplayRigSource.open()`` of the take (each in a fresh process, so no run warms the next one's
-Python caches; only the open is timed), for this tree and, with ``--baseline``, the other tree's code, the opens
-taken in turn; every image's ``header_size`` (this tree); and, once, decoding every image (what checking every
-image's size by decoding would cost). The files are in the page cache (just written or read): a cold disk adds a
-read of each file's first block to the header pass. One host, whatever else runs on it.
+opens the take too), or as other tools write TIFF (``--format tiff``: OpenCV's, LZW) and WebP (``--format webp``:
+OpenCV's, lossy, quality 90). Then prints the median over ``--rounds`` of: ``ReplayRigSource.open()`` of the take
+(each in a fresh process, so no run warms the next one's Python caches; only the open is timed), for this tree and,
+with ``--baseline``, the other tree's code, the opens taken in turn; every image's ``header_size``, and its
+``payload_is_whole`` (what a take not closed cleanly checks too), both this tree's; and, once, decoding every image
+(what checking every image's size by decoding would cost). The files are in the page cache (just written or read):
+a cold disk adds a read of each file's first block to the header pass. One host, whatever else runs on it.
 """
 from __future__ import annotations
 
@@ -27,13 +28,14 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from drivers.backends.recording_format import (  # noqa: E402
-    FRAMES, IMAGE_FORMATS, FrameRow, Manifest, encode_image, header_size, load_image, write_manifest,
+    FRAMES, FrameRow, Manifest, encode_image, header_size, load_image, payload_is_whole, write_manifest,
 )
 from drivers.sim.placement import RigPlacement  # noqa: E402
 
@@ -49,8 +51,10 @@ source.close()
 """
 
 
-#: The take's image format by ``--format``: the manifest's image_format.
-TAKE_FORMATS = {"png": "png", "exif-jpg": "jpg"}
+#: The take's image format by ``--format``: the manifest's image_format (the recorder's formats only: TIFF and
+#: WebP takes are another tool's, the manifest naming PNG) and the images' suffix.
+TAKE_FORMATS = {"png": ("png", ".png"), "exif-jpg": ("jpg", ".jpg"), "tiff": ("png", ".tiff"),
+                "webp": ("png", ".webp")}
 
 
 def jpeg_segment(marker: int, payload: bytes) -> bytes:
@@ -71,6 +75,10 @@ def phone_exif(thumbnail: bytes) -> bytes:
 def encoded(image: np.ndarray, take_format: str, thumbnail: bytes) -> bytes:
     if take_format == "png":
         return encode_image(image, "png", 95)
+    if take_format == "tiff":
+        return cv2.imencode(".tiff", image)[1].tobytes()
+    if take_format == "webp":
+        return cv2.imencode(".webp", image, [cv2.IMWRITE_WEBP_QUALITY, 90])[1].tobytes()
     data = encode_image(image, "jpg", 95)
     return data[:2] + jpeg_segment(0xE1, phone_exif(thumbnail)) + jpeg_segment(0xFE, b"a camera app") + data[2:]
 
@@ -81,7 +89,7 @@ def write_take(take: Path, frames: int, width: int, height: int, take_format: st
     rng = np.random.default_rng(0)
     y, x = np.mgrid[0:height, 0:width]
     thumbnail = encode_image(np.full((120, 160, 3), 128, np.uint8), "jpg", 80)
-    suffix = IMAGE_FORMATS[TAKE_FORMATS[take_format]]
+    image_format, suffix = TAKE_FORMATS[take_format]
     rows = []
     for n in range(frames):
         for k, cam in enumerate(rig.pair):
@@ -92,8 +100,7 @@ def write_take(take: Path, frames: int, width: int, height: int, take_format: st
             (take / rel).write_bytes(encoded(image, take_format, thumbnail))
             rows.append(FrameRow(cam.name, n, n * 33_333_333 + k * 1_000_000, rel))
     (take / FRAMES).write_text("".join(row.to_json() + "\n" for row in rows))
-    write_manifest(take, Manifest(rig, TAKE_FORMATS[take_format], "benchmarks/time_replay_open.py", "",
-                                  complete=True))
+    write_manifest(take, Manifest(rig, image_format, "benchmarks/time_replay_open.py", "", complete=True))
 
 
 def timed_open(code: Path, take: Path) -> float:
@@ -116,10 +123,11 @@ def main() -> None:
     parser.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--format", choices=sorted(TAKE_FORMATS), default="png",
-                        help="png as record+ writes it (default), or exif-jpg as a phone writes it")
+                        help="png as record+ writes it (default), exif-jpg as a phone writes it, tiff or webp as "
+                             "OpenCV writes them")
     parser.add_argument("--take", type=Path,
-                        help="where the take is kept (default /tmp/ghnerf-replay-open-take, -exif-jpg appended "
-                             "for that format)")
+                        help="where the take is kept (default /tmp/ghnerf-replay-open-take, -<format> appended "
+                             "for a format other than png)")
     parser.add_argument("--baseline", type=Path, help="another checkout whose open is timed in turn with this one")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
@@ -128,15 +136,16 @@ def main() -> None:
     if not (take / FRAMES).is_file():
         print(f"writing {2 * args.frames} images of {width}x{height} to {take} ...", flush=True)
         write_take(take, args.frames, width, height, args.format)
-    images = sorted(take.glob(f"images/*/*{IMAGE_FORMATS[TAKE_FORMATS[args.format]]}"))
+    images = sorted(take.glob(f"images/*/*{TAKE_FORMATS[args.format][1]}"))
     print(f"take {take} ({args.format}): {len(images)} images of {width}x{height}, {args.rounds} rounds")
     trees = {"this tree": ROOT} | ({"baseline": args.baseline.resolve()} if args.baseline else {})
     opens: dict[str, list[float]] = {name: [] for name in trees}
-    headers = []
+    headers, wholes = [], []
     for _ in range(args.rounds):
         for name, code in trees.items():
             opens[name].append(timed_open(code, take))
         headers.append(timed(lambda: [header_size(path) for path in images]))
+        wholes.append(timed(lambda: [payload_is_whole(path) for path in images]))
     for name, code in trees.items():
         print(f"open ({name}, {code}): median {statistics.median(opens[name]):.3f} s "
               f"(min {min(opens[name]):.3f}, max {max(opens[name]):.3f})")
@@ -145,6 +154,8 @@ def main() -> None:
         print(f"open, this tree / baseline: {ratio:.2f}")
     print(f"header_size of every image: median {statistics.median(headers):.3f} s "
           f"({1e6 * statistics.median(headers) / len(images):.1f} us an image)")
+    print(f"payload_is_whole of every image (a take cut short's check): median {statistics.median(wholes):.3f} s "
+          f"({1e6 * statistics.median(wholes) / len(images):.1f} us an image)")
     decode = timed(lambda: [load_image(path) for path in images])
     print(f"decoding every image (once): {decode:.3f} s ({1e6 * decode / len(images):.0f} us an image)")
 

@@ -49,3 +49,75 @@ def bmp_built(bits: int, compression: int, info_size: int, *, masks: str = "", m
                        colours_used, 0)
     return b"BM" + struct.pack("<IHHI", offset + len(pixels), 0, 0, offset) + info + bytes(extra) + after + palette \
         + pixels
+
+
+#: TIFF entry types by their struct codes (BYTE, ASCII, SHORT, LONG, RATIONAL, UNDEFINED, LONG8).
+_TIFF_TYPE_CODES = {1: "B", 2: "B", 3: "H", 4: "I", 5: "II", 7: "B", 16: "Q"}
+#: The tags whose values are offsets into the file (StripOffsets, TileOffsets), moved with the data.
+_TIFF_OFFSET_TAGS = (273, 324)
+
+
+def tiff_entries(data: bytes) -> dict[int, tuple[int, tuple]]:
+    """A little-endian classic TIFF's (as OpenCV writes one) first directory: tag -> (type, values)."""
+    assert data[:4] == b"II*\x00"
+    (at,) = struct.unpack_from("<I", data, 4)
+    (count,) = struct.unpack_from("<H", data, at)
+    entries = {}
+    for n in range(count):
+        tag, kind, number, field = struct.unpack_from("<HHI4s", data, at + 2 + 12 * n)
+        codes = "<" + _TIFF_TYPE_CODES[kind] * number
+        size = struct.calcsize(codes)
+        raw = field if size <= 4 else data[struct.unpack("<I", field)[0]:][:size]
+        entries[tag] = (kind, struct.unpack_from(codes, raw))
+    return entries
+
+
+def tiff_laid_out(data: bytes, order: str = "<", big: bool = False, changed: dict | None = None) -> bytes:
+    """An 8-bit TIFF OpenCV wrote (little-endian, classic) laid out again, built byte by byte: in byte order
+    ``order`` (``"<"`` or ``">"``), as a BigTIFF where ``big``, with ``changed`` tags (tag -> (type, values);
+    None drops one). The image data stays where it was, after a header of the new length; the directory and
+    the values not fitting in it follow it."""
+    entries = tiff_entries(data)
+    for tag, entry in (changed or {}).items():
+        entries.pop(tag) if entry is None else entries.__setitem__(tag, entry)
+    (old_ifd,) = struct.unpack_from("<I", data, 4)
+    header = (b"II" if order == "<" else b"MM") + (struct.pack(order + "HHHQ", 43, 8, 0, 16) if big
+                                                    else struct.pack(order + "HI", 42, 8))
+    shift = len(header) - 8
+    body = bytearray(header + data[8:old_ifd])
+    field_size, offset_code = (8, "Q") if big else (4, "I")
+    directory = struct.pack(order + ("Q" if big else "H"), len(entries))
+    for tag in sorted(entries):
+        kind, values = entries[tag]
+        if tag in _TIFF_OFFSET_TAGS:
+            values = tuple(v + shift for v in values)
+        raw = struct.pack(order + _TIFF_TYPE_CODES[kind] * (len(values) // len(_TIFF_TYPE_CODES[kind])), *values)
+        if len(raw) > field_size:
+            body += b"\x00" * (len(body) % 2)
+            field, body = struct.pack(order + offset_code, len(body)), body + raw
+        else:
+            field = raw.ljust(field_size, b"\x00")
+        directory += struct.pack(order + ("HHQ" if big else "HHI"), tag, kind,
+                                 len(values) // len(_TIFF_TYPE_CODES[kind])) + field
+    body += b"\x00" * (len(body) % 2)
+    struct.pack_into(order + offset_code, body, len(header) - field_size, len(body))
+    return bytes(body + directory + bytes(field_size))
+
+
+def riff_chunk(kind: bytes, body: bytes) -> bytes:
+    """One RIFF chunk: its kind, length and data, padded to an even length."""
+    return kind + struct.pack("<I", len(body)) + body + b"\x00" * (len(body) % 2)
+
+
+def webp_extended(simple: bytes, *, flags: int = 0, canvas: tuple[int, int] | None = None,
+                  after: bytes = b"") -> bytes:
+    """A simple WebP (one VP8 or VP8L chunk, as OpenCV writes it) as an extended one: a VP8X chunk with ``flags``
+    and the canvas size ``canvas`` (the image's where None: read back with OpenCV), its bitstream chunk, then
+    ``after`` (chunks: EXIF, XMP)."""
+    if canvas is None:
+        decoded = cv2.imdecode(np.frombuffer(simple, np.uint8), cv2.IMREAD_UNCHANGED)
+        canvas = (decoded.shape[1], decoded.shape[0])
+    vp8x = riff_chunk(b"VP8X", bytes([flags, 0, 0, 0]) + (canvas[0] - 1).to_bytes(3, "little")
+                      + (canvas[1] - 1).to_bytes(3, "little"))
+    body = b"WEBP" + vp8x + simple[12:] + after
+    return b"RIFF" + struct.pack("<I", len(body)) + body

@@ -13,6 +13,7 @@ nothing is rewritten per frame. Every load error names the file and the field.
 """
 from __future__ import annotations
 
+import functools
 import io
 import json
 import math
@@ -279,8 +280,10 @@ def payload_is_whole(path: Path) -> bool:
     A power cut can leave a file with only its first blocks on disk: not empty, yet undecodable, and replay
     would fail on it mid-take; a few bytes read from its end tell. A PNG or JPEG another tool wrote may hold bytes
     after its end (a trailer, padding, an MPF second image): it is whole where its chunks, or segments and scans,
-    walked from its start reach that end (:data:`_WALKS`), which a file cut before it cannot. A BMP is whole when
-    it is as long as its header says. The suffix is matched whatever its case (``.JPG``).
+    walked from its start reach that end (:data:`_WALKS`), which a file cut before it cannot. A JPEG ending at its
+    end marker is whole where its segments also reach its first scan (:data:`_END_CONFIRMS`): one cut at the end
+    of an EXIF thumbnail ends at the same marker. A BMP is whole when it is as long as its header says. The suffix
+    is matched whatever its case (``.JPG``).
     """
     suffix = path.suffix.lower()
     trailer, walk = _TRAILERS.get(suffix), _WALKS.get(suffix)
@@ -290,7 +293,9 @@ def payload_is_whole(path: Path) -> bool:
         with open(path, "rb") as f:
             size = f.seek(0, 2)
             if trailer is not None and _ends_with(f, size, *trailer):
-                return True  # the recorder's own files: a few bytes read
+                confirm = _END_CONFIRMS.get(suffix)
+                f.seek(0)
+                return confirm is None or confirm(f, size)  # the recorder's own files: a few bytes, headers read
             if walk is None:
                 return False
             f.seek(0)
@@ -323,6 +328,27 @@ def _png_reaches_its_end(f: BinaryIO, size: int) -> bool:
         if f.tell() + length + 4 > size:
             return False  # the chunk runs past the end: cut short
         f.seek(length + 4, 1)  # the data and its CRC
+
+
+def _jpeg_segments_reach_a_scan(f: BinaryIO, size: int) -> bool:
+    """Whether a JPEG's marker segments, walked by their lengths from its start (only their headers read), reach its
+    first scan. A file ending at an end-of-image marker may be one cut at the end of an EXIF thumbnail, inside the
+    APP1 segment holding it: that segment then runs past the file's end. Past the first scan a cut cannot end at
+    the marker: in entropy-coded data a 0xFF byte is followed only by 0x00 or a restart marker."""
+    if f.read(len(_JPEG_START)) != _JPEG_START:
+        return False
+    while True:  # each pass moves on by at least a marker: it ends at a scan or the end of the file
+        marker = _jpeg_marker(f)
+        if marker == _JPEG_SOS:
+            return True
+        if marker is None or marker in (0x00, 0xD8, 0xD9):
+            return False  # the end of the file before any scan, or malformed
+        if marker == _JPEG_TEM or marker in _JPEG_RST:
+            continue  # standalone: no length
+        length = _jpeg_segment_length(f)
+        if length is None or f.tell() + length > size:
+            return False  # the segment runs past the end: cut short
+        f.seek(length, 1)
 
 
 def _jpeg_file_reaches_its_end(f: BinaryIO, size: int) -> bool:
@@ -395,6 +421,9 @@ def _jpeg_scan_end(data: bytes, pos: int) -> int:
             return pos
 
 
+#: What a payload file ending at its format's end mark must also show to be whole: a JPEG's segments reach its
+#: first scan (an EXIF thumbnail inside APP1 ends with the same marker as the image).
+_END_CONFIRMS = {".jpg": _jpeg_segments_reach_a_scan, ".jpeg": _jpeg_segments_reach_a_scan}
 #: How a payload file not ending at its format's end mark is walked from its start to tell whether it is whole.
 _WALKS = {".png": _png_reaches_its_end, ".jpg": _jpeg_file_reaches_its_end, ".jpeg": _jpeg_file_reaches_its_end,
           ".bmp": _bmp_is_as_long_as_its_header_says}
@@ -463,25 +492,73 @@ _BMP_MAX_COLOURS_USED = 256
 _OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
 
 
+@dataclass(frozen=True)
+class _TiffLayout:
+    """Where a TIFF's first image file directory is and how its entries are laid out: classic TIFF (4-byte
+    offsets, 12-byte entries) or BigTIFF (8-byte offsets, 20-byte entries), in either byte order."""
+
+    order: str  # struct's byte order
+    preamble: bytes  # what follows the byte order and version before the first directory's offset
+    offset: str  # the first directory's offset
+    count: str  # a directory's entry count
+    entry_size: int
+    integer_types: dict[int, str]  # the unsigned integer entry types read (SHORT, LONG, LONG8): struct codes
+
+    @property
+    def first_ifd_at(self) -> int:
+        return 4 + len(self.preamble) + struct.calcsize(self.offset)
+
+    @property
+    def entry_head(self) -> str:  # tag, type, number of values
+        return "HH" + ("Q" if self.entry_size == 20 else "I")
+
+    @property
+    def entry_head_size(self) -> int:
+        return struct.calcsize("<" + self.entry_head)
+
+
+_TIFF_SHORT, _TIFF_LONG, _TIFF_LONG8 = 3, 4, 16
+_TIFF_CLASSIC_INTEGERS = {_TIFF_SHORT: "H", _TIFF_LONG: "I"}
+_TIFF_BIG_INTEGERS = {**_TIFF_CLASSIC_INTEGERS, _TIFF_LONG8: "Q"}
+#: A TIFF's first four bytes (byte order, version: 42 classic, 43 BigTIFF) and its layout. A BigTIFF's offsets are
+#: 8 bytes long (then a reserved 0) before its first directory's offset.
+_TIFF_LAYOUTS = {
+    b"II*\x00": _TiffLayout("<", b"", "I", "H", 12, _TIFF_CLASSIC_INTEGERS),
+    b"MM\x00*": _TiffLayout(">", b"", "I", "H", 12, _TIFF_CLASSIC_INTEGERS),
+    b"II+\x00": _TiffLayout("<", struct.pack("<HH", 8, 0), "Q", "Q", 20, _TIFF_BIG_INTEGERS),
+    b"MM\x00+": _TiffLayout(">", struct.pack(">HH", 8, 0), "Q", "Q", 20, _TIFF_BIG_INTEGERS),
+}
+_TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_BITS_PER_SAMPLE, _TIFF_COMPRESSION, _TIFF_ORIENTATION = 256, 257, 258, 259, 274
+_TIFF_SIZE_TAGS = frozenset({_TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_BITS_PER_SAMPLE, _TIFF_COMPRESSION, _TIFF_ORIENTATION})
+#: The most values read of one tag (BitsPerSample has one a sample: RGB with alpha and a few extra channels).
+_TIFF_MOST_VALUES = 16
+_TIFF_BITS_DECODED = frozenset({8, 16})
+#: The TIFF compressions this OpenCV build decodes (none, LZW, JPEG, Adobe and old deflate, PackBits): another one
+#: (CCITT fax, LZMA, ...) is decoded to tell, as a BMP layout OpenCV does not read is.
+_TIFF_COMPRESSIONS = frozenset({1, 5, 7, 8, 32946, 32773})
+#: A VP8X chunk's animation flag; the chunks holding a WebP's image; a VP8 key frame's start code; VP8L's signature.
+_WEBP_ANIMATED = 0x02
+_WEBP_BITSTREAMS = (b"VP8 ", b"VP8L")
+_VP8_START_CODE, _VP8L_SIGNATURE = b"\x9d\x01\x2a", 0x2F
+
+
 def header_size(path: Path) -> tuple[int, int] | None:
-    """A PNG, JPEG or BMP image's ``(width, height)`` read from its header, without decoding it; ``None`` where
-    the header cannot say which size :func:`load_image` would decode: another format, a header cut short or
-    malformed (a bad IHDR checksum, a segment running past the end), an animated PNG, a BMP layout OpenCV does
-    not read. EXIF does not matter: :func:`load_image` ignores its orientation, so the stored size is the decoded.
+    """A PNG, JPEG, BMP, TIFF or WebP image's ``(width, height)`` read from its header, without decoding it;
+    ``None`` where the header cannot say which size :func:`load_image` would decode: another format, a header cut
+    short or malformed (a bad IHDR checksum, a segment running past the end), an animated PNG or WebP, a BMP
+    layout or TIFF compression OpenCV does not read, a TIFF orientation tag other than 1 (OpenCV's TIFF decoder
+    turns the image by it whatever the flags). EXIF does not matter: :func:`load_image` ignores its orientation,
+    so the stored size is the decoded.
 
     Strict on purpose: ``None`` is never a size, and the caller decodes the file instead (:func:`image_size`).
     """
     try:
         with open(path, "rb") as f:
-            start = f.read(len(_PNG_SIGNATURE))
-            if start == _PNG_SIGNATURE:
-                return _png_size(f)
-            if start.startswith(_JPEG_START):
-                f.seek(len(_JPEG_START))
-                return _jpeg_size(f)
-            if start.startswith(_BMP_START):
-                f.seek(0)
-                return _bmp_size(f)
+            start = f.read(_HEADER_START)
+            for signature, read_size in _SIZE_READERS:
+                if start.startswith(signature):
+                    f.seek(len(signature))
+                    return read_size(f)
     except OSError:
         pass  # unreadable: its read names it
     return None
@@ -581,6 +658,152 @@ def _bmp_masks_decodable(f: BinaryIO, info_size: int) -> bool:
     """Whether a 16-bit BI_BITFIELDS file has, where OpenCV reads them, colour masks it decodes."""
     f.seek(14 + info_size)
     return f.read(12) in _BMP_16_BIT_MASKS
+
+
+def _tiff_size(f: BinaryIO, layout: _TiffLayout) -> tuple[int, int] | None:
+    """The first image file directory's ImageWidth and ImageLength (the page OpenCV decodes), where OpenCV
+    decodes its layout (:func:`_tiff_layout_decodable`)."""
+    tags = _tiff_first_ifd_values(f, layout)
+    if tags is None or not _tiff_layout_decodable(tags):
+        return None
+    width, height = tags[_TIFF_WIDTH][0], tags[_TIFF_HEIGHT][0]
+    return (width, height) if _decodable(width, height) else None
+
+
+def _tiff_layout_decodable(tags: dict[int, tuple[int, ...]]) -> bool:
+    """Whether OpenCV decodes a TIFF of these tags, 8-bit, to its stored size: one width and height, a compression
+    it decodes, samples of 8 or 16 bits (32 and 64, integer or float, it does not decode to 8 bits), and stored
+    upright (its TIFF decoder turns the image by its orientation tag, whatever the read flags)."""
+    single = all(len(tags.get(tag, (1,))) == 1 for tag in (_TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_COMPRESSION,
+                                                             _TIFF_ORIENTATION))
+    return (single and _TIFF_WIDTH in tags and _TIFF_HEIGHT in tags
+            and tags.get(_TIFF_COMPRESSION, (1,))[0] in _TIFF_COMPRESSIONS
+            and tags.get(_TIFF_ORIENTATION, (1,))[0] == 1
+            and set(tags.get(_TIFF_BITS_PER_SAMPLE, (1,))) <= _TIFF_BITS_DECODED)
+
+
+def _tiff_first_ifd_values(f: BinaryIO, layout: _TiffLayout) -> dict[int, tuple[int, ...]] | None:
+    """The values of :data:`_TIFF_SIZE_TAGS` in the first image file directory (``f`` just past the byte order and
+    version); ``None`` where the directory or a value is cut short, or one of those tags is repeated or not of
+    unsigned integers (SHORT or LONG; in a BigTIFF, LONG8 too)."""
+    head = f.read(layout.first_ifd_at - 4)
+    if len(head) < layout.first_ifd_at - 4 or head[:len(layout.preamble)] != layout.preamble:
+        return None
+    (ifd_at,) = struct.unpack(layout.order + layout.offset, head[len(layout.preamble):])
+    raw = _read_at(f, ifd_at, struct.calcsize(layout.count))
+    if len(raw) < struct.calcsize(layout.count):
+        return None
+    (count,) = struct.unpack(layout.order + layout.count, raw)
+    entries = _read_at(f, ifd_at + len(raw), count * layout.entry_size)
+    if len(entries) < count * layout.entry_size:
+        return None  # a directory past the end of a file cut short
+    values: dict[int, tuple[int, ...]] = {}
+    for at in range(0, len(entries), layout.entry_size):
+        tag, kind, number = struct.unpack(layout.order + layout.entry_head, entries[at:at + layout.entry_head_size])
+        if tag not in _TIFF_SIZE_TAGS:
+            continue
+        value = _tiff_integers(f, layout, kind, number, entries[at + layout.entry_head_size:at + layout.entry_size])
+        if value is None or tag in values:
+            return None
+        values[tag] = value
+    return values
+
+
+def _tiff_integers(f: BinaryIO, layout: _TiffLayout, kind: int, number: int, field: bytes) -> tuple[int, ...] | None:
+    """An entry's unsigned integers: in the entry's value field where they fit (left-justified), else at the
+    offset it holds; ``None`` for another type, more than :data:`_TIFF_MOST_VALUES`, or values cut short."""
+    code = layout.integer_types.get(kind)
+    if code is None or not 1 <= number <= _TIFF_MOST_VALUES:
+        return None
+    codes = layout.order + code * number
+    if struct.calcsize(codes) > len(field):
+        field = _read_at(f, struct.unpack(layout.order + layout.offset, field)[0], struct.calcsize(codes))
+        if len(field) < struct.calcsize(codes):
+            return None
+    return struct.unpack_from(codes, field)
+
+
+def _read_at(f: BinaryIO, offset: int, length: int) -> bytes:
+    """``length`` bytes at ``offset``; fewer, or none, where the file ends first. A corrupt header's offsets and
+    counts can be beyond any file (a BigTIFF's are 64-bit: too large to seek to, or to read as one buffer)."""
+    end = f.seek(0, 2)
+    if offset > end:
+        return b""
+    f.seek(offset)
+    return f.read(min(length, end - offset))
+
+
+def _webp_size(f: BinaryIO) -> tuple[int, int] | None:
+    """A still WebP's size from its first chunk: a lossy (``VP8 ``) or lossless (``VP8L``) bitstream's header,
+    or an extended file's (``VP8X``) canvas, where it is not animated and its bitstream's header gives the same
+    size (libwebp refuses a still image of another size than its canvas)."""
+    if f.read(8)[4:] != b"WEBP":  # past the RIFF size
+        return None  # a RIFF file of another kind (a WAV, an AVI)
+    kind, length = _riff_chunk_head(f)
+    if kind != b"VP8X":
+        return _webp_bitstream_size(f, kind, length)
+    extended = f.read(10)
+    if length < 10 or len(extended) < 10 or extended[0] & _WEBP_ANIMATED:
+        return None
+    canvas = (int.from_bytes(extended[4:7], "little") + 1, int.from_bytes(extended[7:10], "little") + 1)
+    f.seek(length - 10 + length % 2, 1)
+    while kind is not None:  # the chunks before the bitstream (ALPH, ICCP) are walked past by their lengths
+        kind, length = _riff_chunk_head(f)
+        if kind in _WEBP_BITSTREAMS:
+            size = _webp_bitstream_size(f, kind, length)
+            return size if size == canvas else None
+        f.seek(length + length % 2, 1)
+    return None
+
+
+def _riff_chunk_head(f: BinaryIO) -> tuple[bytes | None, int]:
+    """The next RIFF chunk's four-character kind and data length; ``(None, 0)`` at the end of the file."""
+    head = f.read(8)
+    if len(head) < 8:
+        return None, 0
+    return head[:4], struct.unpack("<I", head[4:])[0]
+
+
+def _webp_bitstream_size(f: BinaryIO, kind: bytes | None, length: int) -> tuple[int, int] | None:
+    """The size a VP8 key frame's or a VP8L image's header gives (``f`` at the chunk's data); ``None`` for another
+    chunk, or a header libwebp would refuse (VP8: not a shown key frame, a profile above 3, a first partition not
+    inside the chunk; VP8L: not version 0)."""
+    if kind == b"VP8 ":
+        head = f.read(10)  # frame tag (3 bytes), start code (3), width and height (14 bits and a scale each)
+        if len(head) < 10 or head[3:6] != _VP8_START_CODE:
+            return None
+        tag = int.from_bytes(head[:3], "little")
+        key_frame, profile, shown, first_partition = not tag & 1, (tag >> 1) & 7, (tag >> 4) & 1, tag >> 5
+        if not key_frame or profile > 3 or not shown or first_partition >= length:
+            return None
+        width, height = (value & 0x3FFF for value in struct.unpack("<HH", head[6:10]))  # the scale: a display hint
+    elif kind == b"VP8L":
+        head = f.read(5)
+        if len(head) < 5 or head[0] != _VP8L_SIGNATURE:
+            return None
+        bits = int.from_bytes(head[1:], "little")
+        if bits >> 29:
+            return None  # a version other than 0
+        width, height = (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+    else:
+        return None
+    return (width, height) if _decodable(width, height) else None
+
+
+def _bmp_size_from_its_start(f: BinaryIO) -> tuple[int, int] | None:
+    f.seek(0)  # its offsets are counted from the file's start
+    return _bmp_size(f)
+
+
+#: Each format header_size reads: its first bytes, and the reader of its size (``f`` just past those bytes).
+_SIZE_READERS = (
+    (_PNG_SIGNATURE, _png_size),
+    (_JPEG_START, _jpeg_size),
+    (_BMP_START, _bmp_size_from_its_start),
+    (b"RIFF", _webp_size),
+    *((start, functools.partial(_tiff_size, layout=layout)) for start, layout in _TIFF_LAYOUTS.items()),
+)
+_HEADER_START = max(len(signature) for signature, _ in _SIZE_READERS)
 
 
 def _decodable(width: int, height: int) -> bool:

@@ -32,6 +32,7 @@ from drivers.backends.recording_format import (
     payload_is_whole,
     read_manifest,
 )
+from benchmarks import time_replay_open
 from drivers.url import RigUrl
 from tests.odd_images import bmp_built
 
@@ -592,6 +593,20 @@ def test_a_jpeg_with_bytes_after_its_end_is_whole_and_one_cut_before_its_end_is_
     Before, only a file ending at the marker was whole: a phone's JPEG with a trailer was dropped from a take cut
     short."""
     assert_whole_exactly_past_its_end(tmp_path / "image.jpg", jpegs_another_tool_writes()[kind], AFTER_THE_END[after])
+
+
+@pytest.mark.parametrize("after", sorted(AFTER_THE_END))
+def test_a_phone_jpeg_cut_at_its_exif_thumbnail_s_end_is_not_whole(tmp_path, after):
+    """A phone's JPEG (benchmarks/time_replay_open.py's: APP1 EXIF holding a thumbnail, a comment), cut after every
+    byte. Before, one cut right after its thumbnail (inside APP1) ended at an end-of-image marker and was whole:
+    played, then a corrupt frame mid-take."""
+    thumbnail = encode_image(np.zeros((12, 16, 3), np.uint8), "jpg", 80)
+    image = time_replay_open.encoded(np.random.default_rng(7).integers(0, 256, (30, 40, 3), np.uint8), "exif-jpg",
+                                     thumbnail)
+    path = tmp_path / "phone.jpg"
+    path.write_bytes(image[:image.index(thumbnail) + len(thumbnail)])
+    assert not payload_is_whole(path)
+    assert_whole_exactly_past_its_end(path, image, AFTER_THE_END[after])
 
 
 def assert_whole_exactly_past_its_end(path, image: bytes, after: bytes) -> None:

@@ -24,7 +24,13 @@ from drivers.backends.recording_format import (
 )
 from drivers.sim.placement import RigPlacement
 from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned
-from tests.odd_images import bmp_beyond_opencv_s_limits, bmp_built
+from tests.odd_images import (
+    bmp_beyond_opencv_s_limits,
+    bmp_built,
+    riff_chunk,
+    tiff_laid_out,
+    webp_extended,
+)
 
 WIDTH, HEIGHT = 40, 30
 FRAMES_A_CAMERA = 50
@@ -229,6 +235,17 @@ def test_the_benchmark_s_phone_jpeg_is_measured_from_its_header_and_built_by_the
     assert header_size(path) == (40, 30) == image_size(path)
 
 
+@pytest.mark.parametrize("take_format", ["tiff", "webp"])
+def test_the_benchmark_s_tiff_and_webp_are_measured_from_their_headers(tmp_path, no_decode, take_format):
+    """benchmarks/time_replay_open.py --format tiff|webp times takes of these (docs/recording-format.md)."""
+    from benchmarks import time_replay_open
+
+    image = np.random.default_rng(6).integers(0, 256, (30, 40, 3), np.uint8)
+    path = tmp_path / f"image{time_replay_open.TAKE_FORMATS[take_format][1]}"
+    path.write_bytes(time_replay_open.encoded(image, take_format, b""))
+    assert header_size(path) == (40, 30) == image_size(path)
+
+
 def test_a_jpeg_cut_short_in_a_segment_before_its_frame_header_has_no_header_size(tmp_path):
     data = encode_image(np.zeros((30, 40, 3), np.uint8), "jpg", 90)
     whole = with_exif(data, "jpg")
@@ -346,25 +363,141 @@ def test_an_image_beyond_opencv_s_size_limits_is_no_size_and_a_corrupt_frame(tmp
 
 
 def test_another_format_is_decoded(tmp_path):
-    path = tmp_path / "image.tiff"
+    path = tmp_path / "image.ppm"
     assert cv2.imwrite(str(path), np.zeros((30, 40, 3), np.uint8))
     assert header_size(path) is None and image_size(path) == (40, 30)
 
 
+#: The TIFF compressions OpenCV writes and decodes: none, LZW, JPEG, Adobe deflate, PackBits, old deflate.
+TIFF_COMPRESSIONS = (1, 5, 7, 8, 32773, 32946)
+
+
+def tiff_variants():
+    """(size, channels, dtype, compression) of TIFFs OpenCV writes: 8 and 16 bits (decoded), 32-bit float (not)."""
+    for size in ((1, 1), (41, 30), (641, 479), (3000, 17)):
+        for channels in (1, 3, 4):
+            for dtype in (np.uint8, np.uint16, np.int16, np.float16, np.float32):
+                for compression in TIFF_COMPRESSIONS:
+                    if compression != 7 or (dtype == np.uint8 and size[1] % 8 == 6):  # JPEG: 8-bit, strips of 8k
+                        yield size, channels, dtype, compression
+
+
+def test_a_tiff_s_header_gives_the_size_opencv_decodes_and_none_where_it_does_not_decode(tmp_path, no_decode):
+    """Each layout cv2.imwrite writes: the first directory's width and height, exactly where cv2.imread decodes
+    the file (as load_image: 8 bits, as stored); float samples it does not decode are no size (decoded to tell)."""
+    path, wrong, sizes = tmp_path / "image.tiff", [], 0
+    for (width, height), channels, dtype, compression in tiff_variants():
+        image = (np.random.default_rng(width).random((height, width, channels)) * 200).astype(dtype)
+        assert cv2.imwrite(str(path), image, [cv2.IMWRITE_TIFF_COMPRESSION, compression])
+        decoded = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+        size = header_size(path)
+        sizes += size is not None
+        if size != (None if decoded is None else (decoded.shape[1], decoded.shape[0])):
+            wrong.append((width, height, channels, dtype.__name__, compression, size))
+    assert wrong == [] and sizes > 200
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+@pytest.mark.parametrize(("big", "size_type"), [(False, 3), (False, 4), (True, 3), (True, 4), (True, 16)],
+                         ids=["classic-short", "classic-long", "bigtiff-short", "bigtiff-long", "bigtiff-long8"])
+def test_a_tiff_of_either_byte_order_classic_or_big_is_measured_from_its_first_directory(tmp_path, no_decode,
+                                                                                          order, big, size_type):
+    image = np.random.default_rng(7).integers(0, 256, (30, 41, 3), np.uint8)
+    data = cv2.imencode(".tiff", image, [cv2.IMWRITE_TIFF_COMPRESSION, 5])[1].tobytes()
+    path = tmp_path / "image.tif"
+    path.write_bytes(tiff_laid_out(data, order, big, {256: (size_type, (41,)), 257: (size_type, (30,))}))
+    decoded = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    assert np.array_equal(decoded, image)
+    assert header_size(path) == (41, 30) == image_size(path)
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_a_tiff_s_orientation_tag_other_than_1_is_decoded_to_measure_it(tmp_path, orientation):
+    """OpenCV's TIFF decoder turns an image by its orientation tag even with IMREAD_IGNORE_ORIENTATION (unlike
+    EXIF in a JPEG, PNG or WebP): its header's size is not sure to be the decoded one, so the file is decoded."""
+    data = cv2.imencode(".tiff", np.zeros((30, 41, 3), np.uint8))[1].tobytes()
+    path = tmp_path / "image.tiff"
+    path.write_bytes(tiff_laid_out(data, changed={274: (3, (orientation,))}))
+    decoded = load_image(path)
+    assert header_size(path) == ((41, 30) if orientation == 1 else None)
+    assert image_size(path) == (decoded.shape[1], decoded.shape[0]) == ((41, 30) if orientation < 5 else (30, 41))
+
+
+def test_a_tiff_of_a_compression_opencv_does_not_decode_or_without_its_size_has_no_header_size(tmp_path):
+    data = cv2.imencode(".tiff", np.zeros((30, 41, 3), np.uint8))[1].tobytes()
+    path = tmp_path / "image.tiff"
+    for changed in ({259: (3, (34925,))}, {256: None}, {257: (4, (30, 30))}, {258: (3, (32, 32, 32))}):
+        path.write_bytes(tiff_laid_out(data, changed=changed))
+        assert header_size(path) is None, changed
+
+
+def test_a_tiff_s_offsets_and_counts_beyond_any_file_give_no_size_and_raise_nothing(tmp_path):
+    """A corrupt BigTIFF's 64-bit offsets and counts: too large to seek to or read as one buffer (a ValueError or
+    OverflowError out of the open before they were read within the file's length)."""
+    big = b"II+\x00" + struct.pack("<HHQ", 8, 0, 16)
+    path = tmp_path / "image.tif"
+    for data in (b"II+\x00" + struct.pack("<HHQ", 8, 0, 2**64 - 1), big + struct.pack("<Q", 2**62),
+                 big + struct.pack("<QHHQQ", 1, 258, 3, 16, 2**64 - 1), b"II*\x00" + struct.pack("<I", 2**32 - 1)):
+        path.write_bytes(data)
+        assert header_size(path) is None
+
+
+def webp_variants() -> dict[str, bytes]:
+    """A 41x30 WebP as cv2.imwrite writes it (lossy, lossless, with alpha: lossy or lossless) and extended
+    (VP8X) with an EXIF orientation of 6 after its image, as a phone writes it."""
+    image = np.random.default_rng(8).integers(0, 256, (30, 41, 4), np.uint8)
+    lossy, lossless = [cv2.IMWRITE_WEBP_QUALITY, 90], [cv2.IMWRITE_WEBP_QUALITY, 101]
+    files = {"lossy": cv2.imencode(".webp", image[..., :3], lossy)[1].tobytes(),
+             "lossless": cv2.imencode(".webp", image[..., :3], lossless)[1].tobytes(),
+             "lossy with alpha": cv2.imencode(".webp", image, lossy)[1].tobytes(),
+             "lossless with alpha": cv2.imencode(".webp", image, lossless)[1].tobytes()}
+    exif = riff_chunk(b"EXIF", exif_orientation(6))
+    files |= {f"{name} with exif": webp_extended(files[name], flags=0x08, after=exif) for name in ("lossy", "lossless")}
+    return files
+
+
+@pytest.mark.parametrize("kind", sorted(webp_variants()))
+def test_a_webp_s_header_gives_the_size_opencv_decodes_as_stored(tmp_path, no_decode, kind):
+    path = tmp_path / "image.webp"
+    path.write_bytes(webp_variants()[kind])
+    decoded = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    assert decoded.shape == (30, 41, 3)
+    assert header_size(path) == (41, 30) == image_size(path)
+
+
+def test_a_webp_s_header_gives_the_size_opencv_decodes_for_many_sizes(tmp_path, no_decode):
+    path = tmp_path / "image.webp"
+    for width, height in ((1, 1), (2, 3), (641, 479), (3000, 17), (16383, 2)):
+        image = np.random.default_rng(width).integers(0, 256, (height, width, 3), np.uint8)
+        for quality in (50, 101):
+            assert cv2.imwrite(str(path), image, [cv2.IMWRITE_WEBP_QUALITY, quality])
+            decoded = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+            assert header_size(path) == (decoded.shape[1], decoded.shape[0]) == (width, height)
+
+
+def test_an_animated_webp_or_one_whose_canvas_is_not_its_image_s_size_is_decoded_to_measure_it(tmp_path):
+    simple = webp_variants()["lossy"]
+    path = tmp_path / "image.webp"
+    for data in (webp_extended(simple, flags=0x02), webp_extended(simple, canvas=(40, 30)),
+                 b"RIFF" + simple[4:8] + b"WAVE" + simple[12:]):
+        path.write_bytes(data)
+        assert header_size(path) is None
+
+
 def convert_take(take: Path, image_format: str) -> None:
     """``take``'s JPEGs as another tool leaves them: with EXIF marking them as a quarter turn (a phone held
-    upright), or converted to BMPs (the journal naming those)."""
+    upright), or converted to BMPs, TIFFs or WebPs (the journal naming those)."""
     for path in take.glob("images/*/*.jpg"):
         if image_format == "jpg+exif":
             path.write_bytes(with_exif(path.read_bytes(), "jpg"))
         else:
-            path.with_suffix(".bmp").write_bytes(bmp(cv2.imread(str(path))))
+            path.with_suffix(f".{image_format}").write_bytes(encoded_as(cv2.imread(str(path)), image_format))
             path.unlink()
-    if image_format == "bmp":
-        (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", ".bmp"))
+    if image_format != "jpg+exif":
+        (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", f".{image_format}"))
 
 
-@pytest.mark.parametrize("image_format", ["jpg+exif", "bmp"])
+@pytest.mark.parametrize("image_format", ["jpg+exif", "bmp", "tiff", "webp"])
 def test_a_take_another_tool_wrote_opens_without_decoding_and_plays_as_stored(tmp_path, monkeypatch, image_format):
     """Measured from the headers at open (no decode), each frame delivered at the rig's size. Before, each image
     was decoded at every open: an EXIF one turned by OpenCV (30x40), and the take refused for its size."""
@@ -379,22 +512,32 @@ def test_a_take_another_tool_wrote_opens_without_decoding_and_plays_as_stored(tm
 
 
 def encoded_as(image: np.ndarray, image_format: str) -> bytes:
-    """``image`` in a format of the recorder's, one with EXIF before its frame header, or a BMP."""
+    """``image`` in a format of the recorder's, one with EXIF before its frame header, a BMP, a TIFF (LZW, as
+    OpenCV writes it; big-endian BigTIFF as ``bigtiff``) or a WebP (lossy; lossless as ``webp-lossless``)."""
     if image_format == "bmp":
         return bmp(image)
+    if image_format == "tiff":
+        return cv2.imencode(".tiff", image)[1].tobytes()
+    if image_format == "bigtiff":
+        return tiff_laid_out(cv2.imencode(".tiff", image)[1].tobytes(), ">", big=True)
+    if image_format.startswith("webp"):
+        return cv2.imencode(".webp", image, [cv2.IMWRITE_WEBP_QUALITY, 101 if "lossless" in image_format else 90]
+                            )[1].tobytes()
     if image_format == "jpg+exif":
         return with_exif(encode_image(image, "jpg", 90), "jpg")
     return encode_image(image, image_format, 90)
 
 
-@pytest.mark.parametrize("image_format", [*sorted(IMAGE_FORMATS), "jpg+exif", "bmp"])
+@pytest.mark.parametrize("image_format",
+                         [*sorted(IMAGE_FORMATS), "jpg+exif", "bmp", "tiff", "bigtiff", "webp", "webp-lossless"])
 def test_a_header_cut_anywhere_or_corrupt_never_raises_and_never_gives_a_size_opencv_would_not(tmp_path, image_format):
-    """Every cut of the first 200 bytes, and each byte of them set to 0x00 or 0xFF: no exception, and any size
-    read is the size OpenCV decodes (where it decodes, as load_image does). A PNG's IHDR is checked against its
-    CRC."""
+    """Every cut of the first 200 bytes (and the last 200 of a TIFF, where OpenCV writes its directory), and each
+    byte of them set to 0x00 or 0xFF: no exception, and any size read is the size OpenCV decodes (where it decodes,
+    as load_image does). A PNG's IHDR is checked against its CRC."""
     data = encoded_as(np.random.default_rng(2).integers(0, 256, (30, 40, 3), np.uint8), image_format)
-    damaged = [data[:n] for n in range(200)]
-    damaged += [data[:i] + bytes([value]) + data[i + 1:] for i in range(200) for value in (0x00, 0xFF)]
+    places = [*range(200), *(range(len(data) - 200, len(data)) if "tiff" in image_format else ())]  # its IFD last
+    damaged = [data[:n] for n in places]
+    damaged += [data[:i] + bytes([value]) + data[i + 1:] for i in places for value in (0x00, 0xFF)]
     path = tmp_path / "image"
     for content in damaged:
         path.write_bytes(content)
