@@ -799,3 +799,17 @@ def test_extreme_rigs_give_finite_answers_and_valid_joints_only_where_the_geomet
                 ref = triangulate_dlt(uv, list(P), undistorted=True)
                 assert np.array_equal(fast.valid, ref.valid), case
                 np.testing.assert_allclose(fast.points, ref.points, rtol=1e-7, atol=1e-9 * distance, err_msg=str(case))
+
+
+@pytest.mark.parametrize("dist", [[0.0, 0.0, 0.3, 0.0], [0.1, 0.01, 0.3, -0.3, 0.01]])
+def test_a_lens_folded_by_its_tangential_terms_gives_no_valid_joint_off_its_point(dist):
+    """Distortion within the rig file's bound whose tangential terms fold the lens model inside its radial fold:
+    a point on the folded side was projected, undistorted to another point's ray, and triangulated valid and up to
+    a metre off (its reprojection error under a pixel). Now its pixel is NaN: the joint is missing or exact."""
+    Kw = np.array([[320.0, 0.0, 319.5], [0.0, 320.0, 239.5], [0.0, 0.0, 1.0]])
+    cams = [Camera(n, 640, 480, Kw, dist, *look_at((x, -1.0, 0.0), TARGET)) for n, x in (("a", -0.2), ("b", 0.2))]
+    points = TARGET + np.random.default_rng(8).uniform([-2.5, -2.0, -1.0], [2.5, 2.0, 1.0], size=(200, 3))
+    uv = np.stack([c.project(points)[0] for c in cams])
+    for res in (triangulate_dlt(uv, cams), triangulate_robust(uv, cams, max_reprojection_error=2.0)):
+        assert res.valid.sum() > 20
+        np.testing.assert_allclose(res.points[res.valid], points[res.valid], atol=1e-6)
