@@ -111,6 +111,62 @@ def fold_radius(coefficients: tuple[float, ...], r_max: float = LENS_REACH) -> f
     return float(r[int(np.argmax(falling))]) if falling.any() else math.inf
 
 
+
+def lens_jacobian_det(coefficients, xy: np.ndarray) -> np.ndarray:
+    """``(...)`` determinant of the lens model's Jacobian (d distorted / d undistorted) at normalised points
+    ``(..., 2)``: positive where :meth:`Camera.distort` keeps the orientation of a small patch, 0 on a fold."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = _as_dist(coefficients)[:12]
+    x, y = xy[..., 0], xy[..., 1]
+    r2 = x * x + y * y
+    num = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    g = num / den
+    dg = ((k1 + r2 * (2 * k2 + 3 * k3 * r2)) * den - num * (k4 + r2 * (2 * k5 + 3 * k6 * r2))) / (den * den)  # dg/dr2
+    prism_x, prism_y = s1 + 2 * s2 * r2, s3 + 2 * s4 * r2  # d(s r2 + s' r2^2)/dr2
+    shared = 2 * x * y * dg + 2 * p1 * x + 2 * p2 * y
+    dxd_dx = g + 2 * x * x * dg + 2 * p1 * y + 6 * p2 * x + 2 * x * prism_x
+    dxd_dy = shared + 2 * y * prism_x
+    dyd_dx = shared + 2 * x * prism_y
+    dyd_dy = g + 2 * y * y * dg + 6 * p1 * y + 2 * p2 * x + 2 * y * prism_y
+    return dxd_dx * dyd_dy - dxd_dy * dyd_dx
+
+
+#: Directions :func:`unfolded_radius` samples the lens model along (every 2.8 degrees).
+UNFOLD_DIRECTIONS = 128
+
+
+@functools.lru_cache(maxsize=64)
+def unfolded_radius(coefficients: tuple[float, ...], r_max: float) -> float:
+    """Normalised radius of the nearest point (within ``r_max``) where the whole lens model folds over: its
+    Jacobian's determinant (:func:`lens_jacobian_det`) is not positive; ``inf`` where none is.
+
+    :func:`fold_radius` finds where the radial part stops growing, which is the whole model's fold only without
+    tangential (p1, p2) or thin-prism (s1..s4) terms. Strong ones fold the model nearer the centre, in some
+    directions only: from p1 = 0.3 (90-degree lens) pixels there are reached from two points, and undistortion
+    returned the one on the unfolded side while projection sent the other, on the folded side, to the same pixel
+    (a ray off by tens of degrees). Real lenses' terms (about 1e-3) fold it only far outside any image.
+    Sampled on 4000 circles out to ``r_max`` or 10 (steps of 0.0025 at most), 1 % apart beyond, along
+    :data:`UNFOLD_DIRECTIONS` directions.
+    """
+    r = np.linspace(0.0, min(r_max, 10.0), 4001)[1:]
+    if r_max > 10.0:
+        r = np.concatenate([r, np.geomspace(10.0, r_max, int(math.ceil(math.log(r_max / 10.0) / math.log(1.01))) + 1)[1:]])
+    angle = np.linspace(0.0, 2 * math.pi, UNFOLD_DIRECTIONS, endpoint=False)
+    unit = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    dist = np.asarray(coefficients)
+    for start in range(0, len(r), 1024):  # nearest circles first: most models fold near or not at all
+        rings = r[start:start + 1024]
+        with np.errstate(all="ignore"):
+            det = lens_jacobian_det(dist, rings[:, None, None] * unit[None])
+        folded = ~(det > 0).all(axis=-1)
+        if folded.any():
+            return float(rings[int(np.argmax(folded))])
+    return math.inf
+
+
+#: Distortion coefficients (indices into the 14) that make the lens model other than radial.
+_ASYMMETRIC_TERMS = (2, 3, 8, 9, 10, 11)
+
 @dataclass(frozen=True, eq=False)
 class Camera:
     """One calibrated camera of the rig.
@@ -316,16 +372,21 @@ class Camera:
         :meth:`distort` is one to one. Past it the model mirrors a point to a pixel that shows
         another direction (its radial factor turns negative), so no pixel of the frame shows it.
         A lens model that does not fold is checked out to :data:`LENS_REACH` only: beyond it
-        (within 0.0001 degrees of the camera plane) points count as outside too."""
+        (within 0.0001 degrees of the camera plane) points count as outside too. Tangential or
+        thin-prism terms that fold the model nearer (:func:`unfolded_radius`) bring the limit in to there."""
         xy = check_last_dim("xy", xy, 2)
         return np.sum(xy * xy, axis=-1) < self._lens_limit() ** 2
 
     def _lens_limit(self) -> float:
-        """The normalised radius :meth:`within_lens` (and :meth:`project`) trust the lens model to."""
+        """The normalised radius :meth:`within_lens` (and :meth:`project`) trust the lens model to: its radial
+        fold, or :data:`LENS_REACH`, or nearer where tangential or thin-prism terms fold it (:func:`unfolded_radius`)."""
         if not self.has_distortion:
             return math.inf
         fold = self.fold_radius
-        return fold if math.isfinite(fold) else LENS_REACH
+        limit = fold if math.isfinite(fold) else LENS_REACH
+        if np.any(_as_dist(self.dist)[list(_ASYMMETRIC_TERMS)] != 0.0):  # (radial only: positive inside its fold)
+            limit = min(limit, unfolded_radius(tuple(self.dist.tolist()), limit))
+        return limit
 
     @property
     def fold_radius(self) -> float:

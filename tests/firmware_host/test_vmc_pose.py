@@ -173,3 +173,38 @@ def test_forward_kinematics_rebuilds_the_skeleton(seed: int) -> None:
         seg = unity[J[b]] - unity[J[a]]
         np.testing.assert_allclose(quat_rotate(world_q[bone], rest), seg / np.linalg.norm(seg), atol=1e-9)
         np.testing.assert_allclose(world_p[bone], unity[J[a]], atol=1e-9)
+
+
+@pytest.mark.parametrize("shape", ["one point", "denormal", "tiny", "coincident pairs", "one line", "one plane"])
+def test_degenerate_skeletons_give_proper_rotations_or_leave_bones_out(shape: str) -> None:
+    """Property sweep of the shapes with no direction to take: every joint at one point, joints 1e-300 m or
+    denormals apart, some joints on others, the body on a line or in a plane. No exception and no warning; every
+    bone sent has a finite unit quaternion, a finite offset and anchor, the root a finite position."""
+    import warnings
+
+    rng = np.random.default_rng(sum(map(ord, shape)))
+    for _ in range(100):
+        j = t_pose_rig()
+        if shape == "one point":
+            j[:, :3] = j[rng.integers(25), :3]
+        elif shape == "denormal":
+            j[:, :3] = rng.choice([0.0, 5e-324, 1e-310, 1e-300], (25, 3))
+        elif shape == "tiny":
+            j[:, :3] = rng.normal(size=(25, 3)) * rng.choice([1e-300, 1e-150, 1e-12])
+        elif shape == "coincident pairs":
+            j[rng.integers(0, 25, 6), :3] = j[rng.integers(25), :3]
+        elif shape == "one line":
+            j[:, :3] *= rng.permutation([1.0, 0.0, 0.0])
+        else:
+            j[:, :3] *= rng.permutation([1.0, 1.0, 0.0])
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            pose = solve_pose(j)
+        if pose is None:
+            continue
+        assert np.isfinite(pose.root_position).all()
+        for name, bone in pose.bones.items():
+            q = bone.local_rotation
+            assert np.isfinite(q).all() and abs(np.linalg.norm(q) - 1.0) < 1e-9, (shape, name, q)
+            assert np.isfinite(bone.global_rotation).all() and np.isfinite(bone.local_position).all()
+            assert np.isfinite(bone.anchor).all()

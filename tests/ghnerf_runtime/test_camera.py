@@ -418,3 +418,41 @@ def test_the_camera_size_bound_names_the_rig_file_bound_that_is_there_and_within
     named = re.findall(r"``rig_file\.(\w+)``", inspect.getsource(camera_module))
     assert named and all(hasattr(rig_file, name) for name in named), named
     assert rig_file.MAX_IMAGE_SIDE <= camera_module.MAX_CAMERA_SIDE  # what a rig file holds, a Camera takes
+
+
+@pytest.mark.parametrize("dist", [[0.0, 0.0, 0.3, 0.0], [0.0, 0.0, 0.0, -0.3], [0.0] * 8 + [1.0, 0.0, 0.0, 0.0],
+                                  [0.1, 0.01, 0.3, -0.3, 0.01]], ids=["p1", "p2", "s1", "mixed"])
+def test_a_lens_folded_by_its_tangential_or_prism_terms_sends_no_point_to_another_point_s_pixel(dist):
+    """Terms within the rig file's bound (|coefficient| <= 1000) that fold the whole lens model inside the radial
+    fold: a point past that fold was projected onto a pixel that a point on the unfolded side also reaches, and
+    undistortion gave the pixel's ray as that other point's (up to a third of a 90-degree view, rays tens of
+    degrees off; triangulated joints valid and a metre off). Such points are now outside the lens (NaN pixels),
+    and every pixel projected undistorts to its own point's ray."""
+    cam = Camera("wide", 640, 480, [[320.0, 0.0, 319.5], [0.0, 320.0, 239.5], [0.0, 0.0, 1.0]], dist)
+    x, y = np.meshgrid(np.linspace(-1.0, 1.0, 61), np.linspace(-0.75, 0.75, 47))
+    points = np.stack([x, y, np.ones_like(x)], axis=-1).reshape(-1, 3)  # camera at the rig origin: xy = x, y
+    uv, _ = cam.project(points)
+    seen = np.isfinite(uv).all(axis=-1)
+    assert 0.1 < seen.mean() < 1.0  # the folded side is flagged, the rest kept
+    back = cam.pixels_to_normalized(uv[seen])
+    np.testing.assert_allclose(back, points[seen, :2], atol=1e-6)
+    assert not cam.within_lens(points[~seen, :2]).any()
+
+
+def test_the_lens_jacobian_is_the_model_s_derivative_and_real_lenses_fold_only_far_outside_the_image():
+    from ghnerf_runtime.geometry.camera import lens_jacobian_det, unfolded_radius
+
+    rng = np.random.default_rng(5)
+    h = 1e-6
+    for _ in range(5):
+        cam = Camera("c", 640, 480, K, rng.normal(0.0, 0.3, 12))
+        xy = rng.normal(0.0, 0.5, (500, 2))
+        dx = (cam.distort(xy + [h, 0.0]) - cam.distort(xy - [h, 0.0])) / (2 * h)
+        dy = (cam.distort(xy + [0.0, h]) - cam.distort(xy - [0.0, h])) / (2 * h)
+        numeric = dx[:, 0] * dy[:, 1] - dy[:, 0] * dx[:, 1]
+        np.testing.assert_allclose(lens_jacobian_det(cam.dist, xy), numeric, rtol=1e-5, atol=1e-6)
+    # the example rig's lenses: their tangential terms fold the model only where the radial part folds anyway
+    for dist in ([-0.0412, 0.0231, 0.00018, -0.00032, -0.0041], [-0.0398, 0.0219, -0.00011, 0.00027, -0.0037]):
+        cam = Camera("c", 640, 480, K, dist)
+        assert unfolded_radius(tuple(dist), cam.fold_radius) > 0.99 * cam.fold_radius
+        assert not cam.fold_inside_image()

@@ -381,6 +381,39 @@ def test_depth_centroid_reads_no_cells_for_a_peak_off_the_map_nor_weighs_negativ
                                      Joints3DConfig()).valid.any()
 
 
+
+@pytest.mark.parametrize("seed", range(3))
+def test_hostile_model_outputs_give_finite_3d_joints_with_a_confidence_in_zero_one(seed):
+    """Property sweep of the two model-output readers: float16, float32 and float64 heatmaps, depths and grid
+    responses sprinkled with NaN, infinities, negatives, denormals and float32's largest values (a corrupt model
+    output; sometimes every cell), and peaks off the map or not finite. No warning, every point finite, every
+    confidence in [0, 1], a joint with no confidence missing."""
+    rng = np.random.default_rng(seed)
+    specials = np.array([np.nan, np.inf, -np.inf, 3.4e38, -3.4e38, 1e-40, 0.0, 2.5, -3.0, 65504.0])
+    cams, cfg = _cams(), Joints3DConfig()
+    grid, shape = query_grid(np.array([[-0.5, -1.9, 2.6], [0.5, 0.1, 3.4]]), 8)
+
+    def corrupt(a):
+        hit = rng.uniform(size=a.shape) < rng.choice([0.0, 0.05, 0.5, 1.0])
+        a[hit] = rng.choice(specials, int(hit.sum()))
+        with np.errstate(over="ignore"):  # (float32's largest is inf in float16: one more infinity)
+            return a.astype(rng.choice([np.float16, np.float32, np.float64]))
+
+    def check(r):
+        assert np.isfinite(r.points).all() and np.isfinite(r.reprojection_px).all()
+        assert np.all((r.confidence >= 0) & (r.confidence <= 1)) and not np.any(r.valid & (r.confidence == 0))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for _ in range(40):
+            heat, depth = corrupt(rng.uniform(0, 1, (2, 4, 32, 32))), corrupt(rng.uniform(1, 5, (2, 32, 32)))
+            peaks = rng.uniform(-2.0, 34.0, (2, 4, 2))
+            off = rng.uniform(size=(2, 4)) < 0.2
+            peaks[off] = rng.choice(specials, (int(off.sum()), 2))
+            check(depth_centroid_joints(heat, depth, peaks, rng.uniform(0, 1.2, (2, 4)), rng.uniform(size=(2, 4)) < 0.9,
+                                        cams, 128, cfg))
+            check(volumetric_joints(corrupt(rng.uniform(0, 1, (2, len(grid), 3))), grid, shape, cfg))
+
 def test_peak_values_outside_zero_one_give_no_3d_confidence_outside_it():
     """A peak value of 1.5 gave a triangulated confidence of 1.1 (Joints3D.confidence is in [0, 1]); inf is
     no peak at all."""

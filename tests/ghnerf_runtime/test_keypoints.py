@@ -322,6 +322,36 @@ def test_outputs_always_finite_and_consistent(hm, sigma, refine):
     assert not np.any(kp.valid & ~np.isfinite(hm).all(axis=(-2, -1)))
 
 
+_extreme_values = st.sampled_from([np.nan, np.inf, -np.inf, 0.0, 1.0, 0.5, 1e-30, 6e-8, 65504.0, 1e30, -1e30, -0.5])
+
+
+@settings(max_examples=80, deadline=None)
+@given(dtype=st.sampled_from([np.float16, np.float64]),
+       shape=st.tuples(st.integers(1, 3), st.integers(1, 9), st.integers(1, 9)),
+       data=st.data(), sigma=st.sampled_from([0.0, 1.0, 20.0]), refine=st.sampled_from(["quadratic", "centroid", "none"]),
+       threshold=st.sampled_from([1e-6, 0.1, 0.999]), max_region_frac=st.sampled_from([1e-3, 0.25, 1.0]))
+def test_half_and_double_maps_with_extreme_values_decode_finite_in_range_and_on_the_map(
+        dtype, shape, data, sigma, refine, threshold, max_region_frac):
+    """Beyond the float32 sweep above: a corrupt model output in float16 (its largest finite value, denormals) or
+    float64 (1e30, past float32's range) mixed with NaN, infinities and negatives, at the decoder's extreme
+    settings: every output finite, both confidences in [0, 1], a decoded joint on the map, a map holding a
+    non-finite value never decoded."""
+    with np.errstate(over="ignore"):  # (1e30 is inf in float16: one more infinity)
+        hm = np.array(data.draw(st.lists(_extreme_values | st.floats(0.0, 1.0), min_size=int(np.prod(shape)),
+                                         max_size=int(np.prod(shape)))), dtype=np.float64).astype(dtype).reshape(shape)
+    cfg = KeypointDecoderConfig(sigma=sigma, refine=refine, threshold=threshold, max_region_frac=max_region_frac)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        kp = decode_keypoints(hm, cfg)
+    for arr in (kp.uv, kp.confidence, kp.runner_up, kp.runner_up_uv):
+        assert np.all(np.isfinite(arr))
+    for arr in (kp.confidence, kp.runner_up):
+        assert np.all((arr >= 0) & (arr <= 1))
+    h, w = shape[-2:]
+    assert np.all(kp.uv[kp.valid] >= -0.5) and np.all(kp.uv[kp.valid] <= [w - 0.5, h - 0.5])
+    assert not np.any(kp.valid & ~np.isfinite(hm).all(axis=(-2, -1)))
+
+
 def test_a_peak_past_the_lens_fold_is_missing_not_mirrored():
     # a square crop can reach past where the lens model folds; a peak there went through the folded
     # model and came back as a confident joint on the opposite side of the frame

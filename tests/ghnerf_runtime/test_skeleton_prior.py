@@ -164,6 +164,38 @@ def test_inputs_finite_at_the_extremes():
     np.testing.assert_allclose(inp.joint_features[0], 0.0)  # nothing decoded: nothing said
 
 
+
+@pytest.mark.parametrize("focal_px", [1e-3, 1.0, 500.0, 1e5, 1e7])
+def test_inputs_finite_or_refused_by_name_for_extreme_cameras(focal_px):
+    """Property sweep of the crop cameras: focal lengths 1e-3..1e7 px, principal points up to 1e7 px off, baselines
+    1e-9..10 m, a body 1e-3..1e4 m away, peaks exact or 2 px off: the inputs are finite (and float32-finite), or
+    the two-view solve refuses the matrices by name; exact peaks whose rays meet under 0.1 degrees triangulate
+    nothing."""
+    from ghnerf_runtime.errors import GeometryError
+
+    rng = np.random.default_rng(int(focal_px * 1000) % 2**32)
+    for shift in (0.0, 1e4, 1e7):
+        K = np.array([[focal_px, 0.0, 320.0 + shift], [0.0, focal_px, 240.0 - shift], [0.0, 0.0, 1.0]])
+        for baseline in (1e-9, 1e-4, 0.1, 10.0):
+            for distance in (1e-3, 1.0, 1e4):
+                aim = np.array([0.0, 0.0, distance])
+                cams = [Camera(n, 640, 480, K, [], *look_at((x, 0.0, 0.0), aim))
+                        for n, x in (("a", -baseline / 2), ("b", baseline / 2))]
+                X = aim + rng.uniform(-0.3, 0.3, (NUM_JOINTS, 3)) * distance
+                uv = np.stack([c.project(X)[0] for c in cams])
+                uv = np.stack([uv, uv + rng.normal(0.0, 2.0, uv.shape)])  # (2 pairs, 2 views, J, 2)
+                P = np.broadcast_to(np.stack([c.P for c in cams]), (2, 2, 3, 4))
+                try:
+                    inp = prior_inputs(uv, np.full((2, 2, NUM_JOINTS), 0.9), np.ones((2, 2, NUM_JOINTS), bool), P)
+                except GeometryError as e:
+                    assert "regular left 3x3 block" in str(e)
+                    continue
+                case = (focal_px, shift, baseline, distance)
+                assert np.isfinite(inp.joint_features).all() and np.isfinite(inp.context).all(), case
+                assert np.isfinite(inp.frame.rotation).all() and np.isfinite(inp.frame.origin).all(), case
+                if baseline < 1e-3 * distance:  # the exact peaks (noisy ones may cross near the cameras)
+                    assert not inp.triangulated[0].any(), case
+
 # ------------------------------------------------------------------------------------------- the ONNX file
 @pytest.fixture(scope="module")
 def tiny_prior(tmp_path_factory) -> SimpleNamespace:

@@ -316,3 +316,41 @@ def test_a_jump_near_the_float_range_restarts_the_joint_without_a_warning():
         down = f(0.2, x - 1e308, ok)
         back = f(0.3, x, ok)
     assert np.array_equal(up, x + 1e308) and np.array_equal(down, x - 1e308) and np.array_equal(back, x)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_hostile_stream_never_poisons_the_state_and_a_clean_one_recovers(seed):
+    """Property sweep (clock skew, corrupt joints): stamps that repeat, step back, jump by hours or 1e300 s, are
+    denormal apart, NaN or infinite, and joints that are NaN, infinite, 1e308 or denormal, each reported valid or
+    not. The filter warns of nothing, answers every finite reported joint finitely, and a clean 30 Hz stream
+    afterwards brings a still joint back to its place with a finite state."""
+    rng = np.random.default_rng(seed)
+    stamps = [np.nan, np.inf, -np.inf, -1.0, 1e300, -1e300, 5e-324, 3600.0]
+    values = [np.nan, np.inf, -np.inf, 1e308, -1e308, 1e-300, 0.0]
+    for beta, max_gap_s in ((0.0, 0.25), (10.0, 60.0), (1e4, 1e-6)):
+        f = OneEuroJoints(SmoothingConfig(beta=beta, max_gap_s=max_gap_s))
+        t = 0.0
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            for _ in range(60):
+                draw = rng.uniform()
+                if draw < 0.25:
+                    stamp = float(rng.choice(stamps))
+                elif draw < 0.35:
+                    stamp = t  # the same instant again
+                else:
+                    stamp = t + float(rng.choice([1 / FPS, 1e-12, 0.3, -0.1]))
+                t = stamp if math.isfinite(stamp) else t
+                points = rng.normal(0.0, 1.0, (5, 3))
+                hostile = rng.uniform(size=points.shape) < 0.15
+                points[hostile] = rng.choice(values, int(hostile.sum()))
+                valid = rng.uniform(size=5) < 0.8
+                out = f(stamp, points, valid)
+                reported = valid & np.isfinite(points).all(axis=-1)
+                assert np.isfinite(out[reported]).all()
+            still = np.ones((5, 3))
+            for _ in range(90):
+                t += 1 / FPS
+                out = f(t, still, np.ones(5, bool))
+        np.testing.assert_allclose(out, still, atol=1e-4)
+        assert np.isfinite(f._x).all() and np.isfinite(f._dx).all() and math.isfinite(f._t)

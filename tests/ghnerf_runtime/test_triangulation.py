@@ -756,3 +756,60 @@ def test_every_two_view_camera_term_is_read_by_the_solve_or_the_check():
     unread = [f.name for f in dataclasses.fields(TwoViewCameras)
               if not re.search(rf"\b(?:cams|self)\.{f.name}\b", readers)]
     assert not unread, unread
+
+
+@pytest.mark.parametrize("focal_px", [1e-3, 1.0, 500.0, 1e5, 1e7])
+def test_extreme_rigs_give_finite_answers_and_valid_joints_only_where_the_geometry_fixes_them(focal_px):
+    """Property sweep at the extremes: focal lengths 1e-3..1e7 px, principal points up to 1e7 px outside a
+    640x480 image, baselines 1e-9..10 m, points 1e-3..1e4 m away (near-parallel rays included). Every solver
+    answers finitely; a joint it calls valid is where the noise-free rays meet, to rounding magnified by the
+    rays' angle (the pixels' rounding, 1e-16 of a pixel 1e7 px off centre, is 1e-6 focal lengths of 1e-3 px);
+    the estimator's two-view solver on the projection matrices equals the general DLT on them, or
+    both refuse those matrices by name (GeometryError: a left 3x3 block that is singular to its scale)."""
+    rng = np.random.default_rng(int(focal_px * 1000) % 2**32)
+    for shift in (0.0, 1e4, 1e7):
+        K_ = np.array([[focal_px, 0.0, 320.0 + shift], [0.0, focal_px, 240.0 - shift], [0.0, 0.0, 1.0]])
+        for baseline in (1e-9, 1e-4, 0.1, 10.0):
+            for distance in (1e-3, 1.0, 1e4):
+                aim = np.array([0.0, 0.0, distance])
+                cams = [Camera(n, 640, 480, K_, np.zeros(5), *look_at((x, 0.0, 0.0), aim))
+                        for n, x in (("a", -baseline / 2), ("b", baseline / 2))]
+                points = aim + rng.uniform(-0.3, 0.3, (25, 3)) * distance
+                uv = np.stack([c.project(points, distort=False)[0] for c in cams])
+                case = (focal_px, shift, baseline, distance)
+                for res in (triangulate_dlt(uv, cams), triangulate_midpoint(uv, cams),
+                            triangulate_robust(uv, cams, max_reprojection_error=5.0)):
+                    assert_finite(res)
+                    ok = res.valid
+                    if baseline < 1e-3 * distance:  # rays under 0.1 degrees apart: no depth, whatever they say
+                        assert not ok.any(), case
+                    error = np.linalg.norm(res.points[ok] - points[ok], axis=-1) / np.linalg.norm(points[ok], axis=-1)
+                    # the pixels' own rounding (eps * |uv|, in focal lengths) and the solve's, over the rays' angle
+                    rounding = np.finfo(float).eps * np.abs(uv).max() / focal_px + 1e-12
+                    assert np.all(error <= 1e3 * rounding / np.sin(np.radians(res.ray_angle_deg[ok]))), case
+                P = np.stack([c.P for c in cams])
+                try:
+                    fast = triangulate_two_views(uv, P, np.ones((2, 25)))
+                except GeometryError as e:
+                    assert "regular left 3x3 block" in str(e), case
+                    with pytest.raises(GeometryError, match="singular left 3x3 block"):
+                        triangulate_dlt(uv, list(P), undistorted=True)
+                    continue
+                assert_finite(fast)
+                ref = triangulate_dlt(uv, list(P), undistorted=True)
+                assert np.array_equal(fast.valid, ref.valid), case
+                np.testing.assert_allclose(fast.points, ref.points, rtol=1e-7, atol=1e-9 * distance, err_msg=str(case))
+
+
+@pytest.mark.parametrize("dist", [[0.0, 0.0, 0.3, 0.0], [0.1, 0.01, 0.3, -0.3, 0.01]])
+def test_a_lens_folded_by_its_tangential_terms_gives_no_valid_joint_off_its_point(dist):
+    """Distortion within the rig file's bound whose tangential terms fold the lens model inside its radial fold:
+    a point on the folded side was projected, undistorted to another point's ray, and triangulated valid and up to
+    a metre off (its reprojection error under a pixel). Now its pixel is NaN: the joint is missing or exact."""
+    Kw = np.array([[320.0, 0.0, 319.5], [0.0, 320.0, 239.5], [0.0, 0.0, 1.0]])
+    cams = [Camera(n, 640, 480, Kw, dist, *look_at((x, -1.0, 0.0), TARGET)) for n, x in (("a", -0.2), ("b", 0.2))]
+    points = TARGET + np.random.default_rng(8).uniform([-2.5, -2.0, -1.0], [2.5, 2.0, 1.0], size=(200, 3))
+    uv = np.stack([c.project(points)[0] for c in cams])
+    for res in (triangulate_dlt(uv, cams), triangulate_robust(uv, cams, max_reprojection_error=2.0)):
+        assert res.valid.sum() > 20
+        np.testing.assert_allclose(res.points[res.valid], points[res.valid], atol=1e-6)

@@ -77,3 +77,47 @@ def test_half_precision_densities_composite_without_nan_gradients(dtype):
     torch.testing.assert_close(w.float(), compositing_weights(sigma.detach().float()).to(dtype).float())
     (w.float() * torch.arange(3.0)).sum().backward()
     assert torch.all(torch.isfinite(sigma.grad))
+
+
+@pytest.mark.parametrize("negative", [-1.0, -1e30, float("-inf")])
+def test_negative_densities_are_empty_space_with_finite_gradients(negative):
+    """A negative density (a head without its softplus, a corrupt checkpoint) is no matter: clamped to 0, it
+    stops nothing, and backward through the clamp stays finite."""
+    sigma = torch.tensor([[negative, 2.0, negative, 1.0], [negative] * 4], requires_grad=True)
+    z = torch.linspace(2.0, 3.0, 4).expand(2, 4)
+    rgb = torch.rand(3, 2, 4, requires_grad=True)
+    out = render_rays(sigma, z, rgb, None, background=0.25, dim=-1)
+    want = compositing_weights(torch.tensor([[0.0, 2.0, 0.0, 1.0], [0.0] * 4]))
+    torch.testing.assert_close(out["weights"], want)
+    torch.testing.assert_close(out["rgb"][:, 1], torch.full((3,), 0.25))  # all-empty ray: the background
+    (out["rgb"].sum() + out["depth"].sum() + out["acc"].sum()).backward()
+    assert torch.all(torch.isfinite(sigma.grad)) and torch.all(torch.isfinite(rgb.grad))
+    assert torch.all(sigma.grad[sigma.detach() < 0] == 0)  # below the clamp: no pull either way
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
+def test_any_mix_of_extreme_densities_gives_weights_in_range_and_finite_gradients(dtype):
+    """Property sweep: rays mixing 0, negative, -inf, denormal, moderate, 1e30 and inf densities (some rays all
+    empty, some all opaque) composite to weights in [0, 1] summing to at most 1, a depth within the samples'
+    range, colour within the colours' and the background's, and finite gradients for every input."""
+    rng = torch.Generator().manual_seed(62)
+    specials = torch.tensor([0.0, -1.0, float("-inf"), 1e-40, 0.3, 5.0, 1e30, float("inf")], dtype=torch.float64)
+    for _ in range(20):
+        sigma64 = specials[torch.randint(len(specials), (16, 12), generator=rng)]
+        sigma64[0] = 0.0  # an all-empty ray
+        sigma64[1] = float("inf")  # an all-opaque one
+        sigma = sigma64.to(dtype).requires_grad_(True)
+        z = (2.0 + torch.rand(16, 12, generator=rng, dtype=torch.float64).cumsum(-1)).requires_grad_(True)
+        rgb = torch.rand(3, 16, 12, generator=rng, dtype=torch.float64).requires_grad_(True)
+        heat = torch.rand(2, 16, 12, generator=rng, dtype=torch.float64).requires_grad_(True)
+        out = render_rays(sigma, z, rgb, heat, background=0.5, dim=-1)
+        w = out["weights"].double()
+        # (<= 1 to the convention's 1e-10 per sample: ENeRF's T multiplies 1 - alpha + 1e-10, above 1 in float64)
+        assert torch.all((w >= 0) & (w <= 1 + 1e-8)) and torch.all(w.sum(-1) <= 1 + 1e-3)
+        depth = out["depth"]
+        assert torch.all((depth >= 0) & (depth <= z.max(-1).values + 1e-9))
+        assert torch.all((out["rgb"] >= -1e-6) & (out["rgb"] <= 1 + 1e-6))
+        loss = sum(v.double().sum() for v in out.values())
+        loss.backward()
+        for leaf in (sigma, z, rgb, heat):
+            assert torch.all(torch.isfinite(leaf.grad)), leaf.grad
