@@ -2,7 +2,9 @@
 
     .venv/bin/python benchmarks/bench_runtime.py --model-dir models [--precisions fp32,int8,auto] [--json out.json]
 
-Every option of ``ghnerf-bench runtime`` applies (see ``ghnerf_runtime/cli/bench.py``). Not a test.
+Every option of ``ghnerf-bench runtime`` applies (see ``ghnerf_runtime/cli/bench.py``), its defaults too: the
+runtime's own config, encoder heatmaps unless ``--heatmap-sources rendered`` (the default before session 62). Not
+a test.
 """
 from __future__ import annotations
 

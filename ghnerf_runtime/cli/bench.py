@@ -5,6 +5,10 @@ Subcommands::
     ghnerf-bench runtime [--model-dir models] [--sequences 10] [--frames 30] [--precisions fp32,int8,auto]
     ghnerf-bench sim-pair --out examples/sim       # the reproducible example of docs/runtime.md
 
+Every row runs the runtime's own defaults (``EstimatorConfig()``, what ``ghnerf-run`` and the daemon run
+without a config file: encoder heatmaps, triangulation, the flip test...) but for what its options name;
+``--heatmap-sources rendered`` scores the rendered heatmaps (with their best method, ``depth_centroid``).
+
 ``runtime`` renders the sequences once (cached in ``~/.cache/ghnerf-bench``), then for every
 precision and for "keypoints" and "keypoints + novel view" runs the estimator over every pair
 and prints each stage's median and p99 (ms), the end-to-end median/p99 and throughput, and the
@@ -33,8 +37,7 @@ from dataclasses import replace
 import numpy as np
 
 from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
-from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig, HeatmapsConfig, \
-    Joints3DConfig, NovelViewConfig, SessionConfig
+from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig
 from ghnerf_runtime.errors import RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
                                       NOVEL_STAGES, Estimator, load_session)
@@ -45,7 +48,7 @@ from ghnerf_runtime.tracking import track_from_joints
 
 log = logging.getLogger("ghnerf-bench")
 
-__all__ = ["main", "run_runtime_bench", "STAGE_GROUPS"]
+__all__ = ["main", "run_runtime_bench", "row_base_config", "STAGE_GROUPS"]
 
 #: Printed columns: the issue's stage names -> estimator stage keys.
 STAGE_GROUPS = {
@@ -141,6 +144,21 @@ def _row(stages: dict[str, list[float]], wall: float) -> dict:
     return out
 
 
+def row_base_config(args, precision: str, source: str) -> EstimatorConfig:
+    """One (precision, heatmap source) row's config before its on/off splits: the runtime's own defaults
+    (``EstimatorConfig()``, what ``ghnerf-run`` and the daemon run without a config file) with only what the
+    bench's options name set on them, so a row the options leave alone runs what the device runs."""
+    runtime = EstimatorConfig()
+    return replace(
+        runtime,
+        session=replace(runtime.session, model_dir=args.model_dir, precision=precision, threads=args.threads,
+                        thread_pool=args.thread_pool, allow_spinning=args.allow_spinning),
+        heatmaps=replace(runtime.heatmaps, source=source),
+        joints3d=replace(runtime.joints3d, method=args.method or BEST_METHOD[source]),
+        # loaded for every row, so the keypoints and novel rows of a source share one session
+        novel_view=replace(runtime.novel_view, enabled=True, stride=args.novel_stride))
+
+
 def run_runtime_bench(args) -> dict:
     """Every (precision, heatmap source, mode) row, interleaved sequence by sequence.
 
@@ -158,12 +176,7 @@ def run_runtime_bench(args) -> dict:
     model_desc = None
     rows = []
     for precision, source in itertools.product(args.precisions, args.heatmap_sources):
-        cfg = EstimatorConfig(
-            session=SessionConfig(model_dir=args.model_dir, precision=precision, threads=args.threads,
-                                  thread_pool=args.thread_pool, allow_spinning=args.allow_spinning),
-            heatmaps=HeatmapsConfig(source=source),
-            joints3d=Joints3DConfig(method=args.method or BEST_METHOD[source]),
-            novel_view=NovelViewConfig(enabled=True, stride=args.novel_stride))
+        cfg = row_base_config(args, precision, source)
         session = load_session(cfg)
         model_desc = session.describe()
         flips = (args.flip_tests or [None]) if source == "encoder" else [None]
@@ -363,7 +376,20 @@ def _on_off_list(text: str) -> list[bool]:
     return [words[p] for p in text.split(",") if p]
 
 
+def _configs(value) -> str:
+    """A default of the runtime's config as the help says it: on/off for a boolean, unset for None."""
+    if isinstance(value, bool):
+        return "the config's, " + ("on" if value else "off")
+    return "the config's, " + ("unset" if value is None else str(value))
+
+
+def _best_methods() -> str:
+    return ", ".join(f"{method} with {source} heatmaps" for source, method in BEST_METHOD.items())
+
+
 def build_parser() -> argparse.ArgumentParser:
+    # every "the config's" default below is read from the runtime's own defaults, never restated
+    runtime = EstimatorConfig()
     ap = argparse.ArgumentParser(prog="ghnerf-bench", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
     rt = sub.add_parser("runtime", help="per-stage latency and accuracy of the estimator")
@@ -377,58 +403,68 @@ def build_parser() -> argparse.ArgumentParser:
                     help="comma list of keypoints (keypoints alone), novel (keypoints and the novel view), one row "
                          "each (default: %(default)s)")
     rt.add_argument("--method", choices=THREE_D_METHODS,
-                    help="3D method (default: depth_centroid with rendered heatmaps, triangulate with encoder ones)")
-    rt.add_argument("--heatmap-sources", default="rendered",
+                    help=f"3D method (default: each source's best, {_best_methods()}; the runtime's "
+                         f"joints3d.method is {runtime.joints3d.method})")
+    rt.add_argument("--heatmap-sources", default=runtime.heatmaps.source,
                     type=lambda s: [p for p in s.split(",") if p],
-                    help="comma list of rendered,encoder (default: rendered; the runtime's default is encoder)")
-    rt.add_argument("--novel-stride", type=int, default=1, choices=(1, 2, 4))
+                    help=f"comma list of {','.join(HEATMAP_SOURCES)}, one set of rows each (default: %(default)s, "
+                         "the runtime's heatmaps.source, what the device runs; rendered scores the heatmaps "
+                         "rendered through the depth volume)")
+    rt.add_argument("--novel-stride", type=int, default=runtime.novel_view.stride, choices=(1, 2, 4))
     rt.add_argument("--novel-interior-strides", default=None,
                     type=lambda s: [int(p) for p in s.split(",") if p],
                     help="comma list of novel_view.interior_stride values, one keypoints+novel row each "
-                         "(interleaved like the other rows; default: the config's)")
+                         f"(interleaved like the other rows; default: {_configs(runtime.novel_view.interior_stride)})")
     rt.add_argument("--flip-tests", default=None,
                     type=_on_off_list,
                     help="comma list of heatmaps.flip_test values (on,off or 1,0), one row each for the encoder "
-                         "heatmaps (interleaved like the other rows; default: the config's, on)")
+                         f"heatmaps (interleaved like the other rows; default: {_configs(runtime.heatmaps.flip_test)})")
     rt.add_argument("--follow-encoder", default=None, type=_on_off_list,
                     help="comma list of tracking.follow_encoder values (on,off), one row each for the rendered "
-                         "heatmaps (interleaved; default: the config's, on)")
+                         f"heatmaps (interleaved; default: {_configs(runtime.tracking.follow_encoder)})")
     rt.add_argument("--skeleton-priors", default=None, type=_on_off_list,
                     help="comma list of joints3d.skeleton_prior values (on,off), one row each for triangulation "
-                         "(interleaved; default: the config's, auto: on when the model folder has the prior)")
+                         f"(interleaved; default: {_configs(runtime.joints3d.skeleton_prior)}; auto: on when the "
+                         "model folder has the prior)")
     rt.add_argument("--prior-flip-tests", default=None, type=_on_off_list,
                     help="comma list of joints3d.prior_flip_test values (on,off), one row each for triangulation "
-                         "with the skeleton prior (interleaved; default: the config's, on)")
+                         "with the skeleton prior (interleaved; default: "
+                         f"{_configs(runtime.joints3d.prior_flip_test)})")
     rt.add_argument("--smoothing", default=None, type=_on_off_list,
                     help="comma list of smoothing.enabled values (on,off), one row each (interleaved; default: "
-                         "the config's, on)")
+                         f"{_configs(runtime.smoothing.enabled)})")
     rt.add_argument("--presence-gates", default=None, type=_on_off_list,
-                    help="comma list of presence.enabled values (on,off), one row each (interleaved; default: the "
-                         "config's, on). A pair the gate says shows nobody has no novel view: off views every pair")
+                    help="comma list of presence.enabled values (on,off), one row each (interleaved; default: "
+                         f"{_configs(runtime.presence.enabled)}). A pair the gate says shows nobody has no novel "
+                         "view: off views every pair")
     rt.add_argument("--turn-searches", default=None, type=_on_off_list,
-                    help="comma list of roi.turn_search values (on,off), one row each (interleaved; default: the "
-                         "config's: on, or off for a model without encoder heatmaps, which gets no such rows)")
+                    help="comma list of roi.turn_search values (on,off), one row each (interleaved; default: "
+                         f"{_configs(runtime.roi.turn_search)}: on for a model with encoder heatmaps, off for one "
+                         "without, which gets no such rows)")
     rt.add_argument("--flip-side-by-side", default=None, type=_on_off_list,
                     help="comma list of heatmaps.flip_test_side_by_side values (on,off), one row each for the "
-                         "encoder heatmaps with the flip test (interleaved; default: the config's, on)")
+                         "encoder heatmaps with the flip test (interleaved; default: "
+                         f"{_configs(runtime.heatmaps.flip_test_side_by_side)})")
     rt.add_argument("--refine-cold-starts", default=None, type=_on_off_list,
                     help="comma list of tracking.refine_cold_start values (on,off), one row each (interleaved; "
-                         "default: the config's, on: a cold pair that finds the subject runs again on it)")
+                         f"default: {_configs(runtime.tracking.refine_cold_start)}: a cold pair that finds the "
+                         "subject runs again on it)")
     rt.add_argument("--proxy-blends", default=None, type=_on_off_list,
-                    help="comma list of novel_view.proxy_blend values (on,off), one novel row each (default: the "
-                         "config's)")
+                    help="comma list of novel_view.proxy_blend values (on,off), one novel row each (default: "
+                         f"{_configs(runtime.novel_view.proxy_blend)})")
     rt.add_argument("--painters", default=None, type=_on_off_list,
                     help="comma list of novel_view.painter values (on,off), one novel row each; on needs the model "
-                         "folder's novel_painter.onnx (default: the config's, auto)")
+                         f"folder's novel_painter.onnx (default: {_configs(runtime.novel_view.painter)})")
     rt.add_argument("--novel-pipelines", default=None, type=_on_off_list,
                     help="comma list of on,off: one novel row each run through ghnerf_runtime.pipeline."
                          "NovelViewPipeline (each pair's view finished while the next pair is estimated) or "
                          "one pair at a time (default: one at a time)")
     rt.add_argument("--novel-lanes", default=None, type=_on_off_list,
-                    help="comma list of novel_view.lanes values (on,off), one novel row each (default: the config's, "
-                         "on)")
-    rt.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default: %(default)s)")
-    rt.add_argument("--thread-pool", default="per_session", choices=("per_session", "global"))
+                    help="comma list of novel_view.lanes values (on,off), one novel row each (default: "
+                         f"{_configs(runtime.novel_view.lanes)})")
+    rt.add_argument("--threads", type=int, default=runtime.session.threads,
+                    help="onnxruntime intra-op threads (default: %(default)s)")
+    rt.add_argument("--thread-pool", default=runtime.session.thread_pool, choices=("per_session", "global"))
     rt.add_argument("--allow-spinning", action="store_true", help="per-session pools whose workers spin")
     rt.add_argument("--warmup", type=int, default=10, help="pairs not counted at the start of each run")
     rt.add_argument("--track-from-truth", action="store_true",

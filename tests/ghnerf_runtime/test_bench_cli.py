@@ -1,9 +1,13 @@
 """``ghnerf-bench runtime``'s argument errors and Ctrl-C, without a model or a rendered sequence."""
 from __future__ import annotations
 
+from dataclasses import replace
+from types import SimpleNamespace
+
 import pytest
 
 from ghnerf_runtime.cli import bench, simdata
+from ghnerf_runtime.config import EstimatorConfig
 
 
 @pytest.fixture
@@ -52,3 +56,34 @@ def test_runtime_help_names_the_defaults_the_docs_rely_on(capsys):
     assert "model folder (default: models)" in text
     assert "(default: fp32,int8,auto)" in text and "(default: keypoints,novel)" in text
     assert "onnxruntime intra-op threads (default: 2)" in text
+    # a bare run measures what the device runs: the help says which source that is, read from the config
+    assert f"(default: {EstimatorConfig().heatmaps.source}, the runtime's heatmaps.source" in text
+
+
+class _RowsBuilt(Exception):
+    """Raised where the bench would render its sequences: every row's config is built by then."""
+
+
+def test_the_default_rows_run_what_the_device_runs_by_default(capsys, monkeypatch):
+    """A bare ``ghnerf-bench runtime`` scored the rendered heatmaps (119.6 mm MPJPE against 32.1 mm for the
+    encoder ones on two sequences, session 62) while the device runs the encoder ones: a new user took the
+    device to be that far off. Its rows now start from the runtime's own ``EstimatorConfig()``."""
+    built = []
+
+    def recorded_session(cfg):
+        built.append(cfg)
+        return SimpleNamespace(describe=lambda: {}, contract=SimpleNamespace(encoder_heatmaps=True))
+
+    def rows_built(*args, **kwargs):
+        raise _RowsBuilt
+
+    monkeypatch.setattr(bench, "load_session", recorded_session)
+    monkeypatch.setattr(simdata, "load_sequences", rows_built)
+    with pytest.raises(_RowsBuilt):  # --precisions auto: the runtime's precision too
+        bench.main(["runtime", "--precisions", "auto", "--cache", "off"])
+    runtime = EstimatorConfig()
+    assert [(cfg.heatmaps.source, cfg.joints3d.method) for cfg in built] == \
+        [(runtime.heatmaps.source, runtime.joints3d.method)]
+    # the rest of the config too, but the novel view's graphs, loaded for the novel rows
+    (cfg,) = built
+    assert replace(cfg, novel_view=replace(cfg.novel_view, enabled=runtime.novel_view.enabled)) == runtime
