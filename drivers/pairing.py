@@ -334,3 +334,20 @@ class FramePairer:
         self._newest_ns.clear()
         for intervals in self._intervals.values():
             intervals.clear()
+
+
+def why_no_pair(before: PairingStats, after: PairingStats, config: PairingConfig) -> str:
+    """What the counters say of a stretch with no pair (``before``: at the last pair or the open): a camera that
+    delivered nothing, or frames of both cameras that never paired. The two need different remedies (a cable,
+    against the cameras' sync or a lagging transport), and "no pair" alone sent the operator to the cable."""
+    came = {cam: after.frames_in.get(cam, 0) - before.frames_in.get(cam, 0) for cam in after.frames_in}
+    silent = [cam for cam, n in came.items() if n == 0]
+    if len(silent) == len(came):
+        return "neither camera delivered a frame"
+    if silent:
+        others = ", ".join(f"{cam}: {n}" for cam, n in came.items() if n)
+        return f"camera {silent[0]!r} delivered no frame ({others})"
+    counts = ", ".join(f"{cam} {n}" for cam, n in came.items())
+    return (f"frames came from both cameras ({counts}) but none paired within the pairing tolerance of "
+            f"{config.tolerance_ms:g} ms: the cameras do not capture together, or one camera's frames arrive "
+            f"{config.max_pending} or more frames behind the other's")

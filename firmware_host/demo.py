@@ -29,6 +29,11 @@ rig delivers:
   band with the symptoms across its foot while the calibration is suspect, and
   its estimated 3D joints are printed next to the ground truth.
 
+A camera that vanishes or falls silent (no pair within a second) mid-run ends the reading too: the summary of the
+pairs before it, then one line, ``error: the rig failed after N pairs: ...`` naming the camera, exit status 2 (until
+session 62 only ``stopping: ...`` among the summary's lines, exit 0: a loose cable passed the bring-up's camera
+check). A recording that ends (``replay://``) is no failure.
+
 Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeout``, ``kill``: how a
 ``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
 line. Either before the first pair (the motion loop's first render, the model load) exits 130 or 143.
@@ -387,6 +392,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         read_failed, failed_reads, first_failure = False, 0, ""  # a failed read since the last pair; all of them
         last_pair, last_result = None, None
         stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
+        rig_failed: drivers.DriverError | None = None  # a camera that vanished or fell silent mid-run
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
         # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO, with the
         # rig's id as the daemon does (unless the URL names one, or the id does not fit HELLO: then none).
@@ -409,6 +415,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         break
                     except (drivers.RigTimeoutError, drivers.RigDisconnectedError) as e:
                         print(f"stopping: {e}")
+                        rig_failed = e  # the summary first, then the run fails (a loose cable in a camera check)
                         break
                     except drivers.RigOperationError as e:
                         # A frame the rig could not deliver (a corrupt image in a take, one resized since its open)
@@ -496,10 +503,16 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         print(f"wrote {png} (pair {last_pair.sequence} with {what})")
     if last_pair is not None:
         _print_joints(last_pair, last_result)
+    failed = False
+    if rig_failed is not None:
+        print(f"{prog}: error: the rig failed after {delivered} pairs: {rig_failed}", file=sys.stderr)
+        failed = True
     if sink_stats.submitted and not sink_stats.sent:  # a sink that never connected: say so in the status too
         print(f"{prog}: error: the sink {redact_url(sink_url)} sent none of the {sink_stats.submitted} frames "
               f"({sink_stats.connect_failures} failed connects; last error: {sink_stats.last_error})",
               file=sys.stderr)
+        failed = True
+    if failed:
         return 2
     if stopped is not None and stop_signal(stopped) == signal.SIGTERM:
         # Ctrl-C is a user ending the run and reading its summary (0); SIGTERM came from outside (timeout, a

@@ -462,6 +462,7 @@ class Daemon:
         """Read and estimate pairs until the rig is lost (False) or ends (True) or ``stop`` is set (False)."""
         self.health.enter(State.RUNNING)
         last_pair = opened_at = self._clock()
+        stats_at_pair = source.stats  # what came since: why no pair formed, when none does for rig.stall_s
         read_failed = False  # the last read raised a RigOperationError and no pair came since
         failed_runs = 0  # pairs in a row the model failed on (ModelRunError)
         while not stop.is_set():
@@ -482,7 +483,9 @@ class Daemon:
                 self._set_fault(Fault.CAMERA_FAULT)
                 silent = self._clock() - last_pair
                 if silent >= rig_cfg.stall_s:
-                    self._lost(f"no pair for {silent:.1f} s (rig.stall_s {rig_cfg.stall_s:g}): reopening the rig")
+                    why = drivers.why_no_pair(stats_at_pair, source.stats, source.pairing)
+                    self._lost(f"no pair for {silent:.1f} s (rig.stall_s {rig_cfg.stall_s:g}), {why}: reopening "
+                               f"the rig")
                     return False
                 continue
             except drivers.RigDisconnectedError as e:  # unplugged, device reset
@@ -515,6 +518,7 @@ class Daemon:
             if not self._size_fitted:  # the cameras deliver the rig's size: a wrong one later is retried
                 self._size_fitted, self._size_mismatches = True, ({}, 0)
             last_pair = self._clock()
+            stats_at_pair = source.stats
             self.health.pairs_read += 1
             self.health.pairs_dropped = self._dropped_closed + source.stats.pairs_dropped
             if not self._steady and last_pair - opened_at >= rig_cfg.stall_s:

@@ -7,7 +7,11 @@ by one, not fsynced (a stopped or killed daemon leaves whole lines; a power cut 
 had not written back); a failed write (disk full, removed medium) closes the file and reopens it in
 append mode with backoff, first ending a line the failed write cut short, so the one broken line stays
 on its own. A path that cannot be opened (a folder, no permission, a named pipe no program reads yet) is
-retried like an absent device.
+retried like an absent device. A regular file removed, or renamed away, while open (its folder deleted, a USB
+stick's mount point remade, logrotate's default rename) is seen at the next write: that frame is dropped and
+counted, the file at the path reopened (or created) with backoff, a HELLO first, and the frame after it carries
+DROPPED. (Until session 62 the sink wrote on into the removed file, ``up``, every frame counted ``sent`` and none
+on any disk.)
 
 A named pipe (or /dev/stdout on one) whose reader stops reading fills the pipe's buffer: each write then waits
 for room (select, no CPU) at most ``write_timeout_ms`` (default 100, at most 60000), and the frame is dropped
@@ -62,6 +66,7 @@ class FileSink(ProtocolSink):
         self.path = path
         self.write_timeout_s = write_timeout_s
         self._fd: Optional[int] = None
+        self._opened: Optional[tuple[int, int]] = None  # (st_dev, st_ino) of a regular file opened; None: not one
         self._cut_line = False  # a write timed out inside a line: the next write starts with a newline
 
     @classmethod
@@ -77,6 +82,7 @@ class FileSink(ProtocolSink):
     def _connect(self) -> None:
         try:
             self._fd = _open_append(self.path)
+            self._opened = _regular_file_id(self._fd)
             self._cut_line = False  # a new reader of a pipe starts at the next line; a file is checked below
             self._end_cut_line()
         except OSError as e:
@@ -100,6 +106,7 @@ class FileSink(ProtocolSink):
 
     def _disconnect(self) -> None:
         fd, self._fd = self._fd, None
+        self._opened = None
         if fd is not None:
             try:
                 os.close(fd)
@@ -123,6 +130,22 @@ class FileSink(ProtocolSink):
                                            f"({written} of {len(data)} bytes out; the reader is not reading)")
         return False
 
+    def _check_still_at_path(self) -> None:
+        """The open regular file must still be the one at ``path``: written past its removal, lines land in an
+        inode no one can read. A pipe or /dev/stdout is left alone (its reader gets the lines either way).
+
+        :raises SinkUnavailableError: the path names no file, or another one, now; the sink reopens it.
+        """
+        if self._opened is None:
+            return
+        try:
+            st = os.stat(self.path)
+            now_there: Optional[tuple[int, int]] = (st.st_dev, st.st_ino)
+        except OSError:
+            now_there = None
+        if now_there != self._opened:
+            raise SinkUnavailableError(self.url, f"{self.path} was removed or replaced while open; reopening it")
+
     def _write_bytes(self, data: bytes) -> None:
         raise NotImplementedError("the file sink writes JSON lines, not frames")
 
@@ -130,10 +153,17 @@ class FileSink(ProtocolSink):
         """Write ``data`` as far as it goes within ``write_timeout_s`` (a regular file: all of it)."""
         if self._fd is None:
             raise SinkUnavailableError(self.url, "file not open")
+        self._check_still_at_path()
         try:
             return write_within(self._fd, data, self.write_timeout_s)
         except OSError as e:
             raise SinkUnavailableError(self.url, f"write to {self.path} failed: {e}") from e
+
+
+def _regular_file_id(fd: int) -> Optional[tuple[int, int]]:
+    """(st_dev, st_ino) of a regular file's descriptor, to tell when its path names another file; None for a pipe."""
+    st = os.fstat(fd)
+    return (st.st_dev, st.st_ino) if stat.S_ISREG(st.st_mode) else None
 
 
 def _local_path(url: str, u: SinkUrl) -> str:

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from drivers import DropPolicy, PairingConfig, RigConfigError
 from drivers.frames import Frame
-from drivers.pairing import FramePairer
+from drivers.pairing import FramePairer, PairingStats, why_no_pair
 
 MS = 1_000_000
 PERIOD = 33_333_333
@@ -372,3 +372,28 @@ def test_a_pairing_queue_past_its_bound_is_refused_by_name(field):
         with pytest.raises(RigConfigError, match=rf"pairing {field} must be a whole number in \[1, 256\] "
                                                  rf"\(frames held in memory\), got {re.escape(repr(value))}"):
             PairingConfig(**{field: value})
+
+
+def test_a_camera_that_delivers_nothing_is_named():
+    before = PairingStats(frames_in={"left": 10, "right": 10}, unpaired={"left": 0, "right": 0})
+    after = PairingStats(frames_in={"left": 40, "right": 10}, unpaired={"left": 22, "right": 0})
+    assert why_no_pair(before, after, PairingConfig()) == "camera 'right' delivered no frame (left: 30)"
+    assert why_no_pair(before, before, PairingConfig()) == "neither camera delivered a frame"
+
+
+def test_a_camera_whose_frames_arrive_max_pending_frames_behind_is_said_to_lag():
+    # every frame of both cameras came, none paired: what the daemon logs when it gives the rig up (rig.stall_s)
+    config = PairingConfig()
+    pairer = FramePairer(("left", "right"), config)
+    before = pairer.stats.snapshot()
+    image = np.zeros((2, 2, 3), np.uint8)
+    period = 33_333_333
+    for i in range(60):
+        pairer.push(Frame("left", image, i * period, i))
+        if i >= config.max_pending:
+            j = i - config.max_pending
+            pairer.push(Frame("right", image, j * period + 1000, j))
+        assert pairer.pop() is None
+    assert why_no_pair(before, pairer.stats, config) == (
+        "frames came from both cameras (left 60, right 52) but none paired within the pairing tolerance of 11 ms: "
+        "the cameras do not capture together, or one camera's frames arrive 8 or more frames behind the other's")

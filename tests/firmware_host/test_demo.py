@@ -351,6 +351,24 @@ def test_a_sink_that_sent_nothing_fails_the_run(tmp_path, capsys, sim_url):
     assert rc == 2 and "sent none of the" in err and "No such file or directory" in err
 
 
+def test_a_camera_that_vanishes_mid_run_fails_the_run_naming_it(tmp_path, capsys, sim_url):
+    # a loose cable in the bring-up's camera check: 'stopping: ...' among the summary's lines and exit status 0
+    rc = demo.main(["--truth-only", "--url", f"{sim_url}&unplug_after_s=0.3", "--seconds", "3",
+                    "--out", str(tmp_path)])
+    captured = capsys.readouterr()
+    assert rc == 2, captured.out
+    assert "the rig delivered" in captured.out  # the summary of the pairs before it
+    assert re.search(r": error: the rig failed after \d+ pairs: sim camera 'right' unplugged 0.3 s after open",
+                     captured.err), captured.err
+    assert _joints_rows(tmp_path / "joints.jsonl")  # what came before it was streamed
+
+
+def test_a_stream_that_ends_is_no_failure(tmp_path, capsys, small_take):
+    rc = demo.main(["--truth-only", "--url", f"replay://{small_take}", "--seconds", "30", "--out", str(tmp_path)])
+    captured = capsys.readouterr()
+    assert rc == 0 and "the rig's stream ended" in captured.out and "error" not in captured.err
+
+
 def test_seconds_and_out_are_checked_by_name(tmp_path, capsys):
     for seconds in ("-1", "nan", "0"):
         with pytest.raises(SystemExit) as e:

@@ -132,6 +132,58 @@ def test_file_sink_reopens_after_the_file_goes_away(tmp_path: Path) -> None:
     assert '"seq":0' in (folder / "joints.jsonl").read_text()
 
 
+def test_file_sink_whose_folder_is_removed_mid_run_is_down_then_writes_the_new_file(tmp_path: Path) -> None:
+    # The open descriptor kept writing into the removed file's inode: 'up', every frame counted 'sent', nothing on
+    # any disk, and nothing written once the folder came back (a USB stick's mount point removed and remade).
+    import shutil
+
+    folder = tmp_path / "usb-stick"
+    folder.mkdir()
+    path = folder / "joints.jsonl"
+    sink = open_sink(path.as_uri() + "?status_s=3600", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        shutil.rmtree(folder)
+        sink.send(make_frame(1))
+        wait_until(lambda: sink.stats().state == "down", what="the sink down once its file is gone")
+        stats = sink.stats()
+        assert stats.sent == 1 and stats.dropped_error == 1
+        assert "removed or replaced" in (stats.last_error or "") or "No such file" in (stats.last_error or "")
+        folder.mkdir()
+        assert sink.wait_connected(5)
+        sink.send(make_frame(2))
+        assert sink.wait_drained(5)
+    finally:
+        sink.close()
+    lines = [json.loads(line) for line in path.read_text().splitlines()]
+    assert [ln["type"] for ln in lines] == ["HELLO", "STATUS", "JOINTS"] and lines[2]["seq"] == 2
+    assert lines[2]["flags"] & 0x02  # DROPPED: the frame the removed file swallowed is a gap the reader sees
+
+
+def test_file_sink_follows_its_path_when_the_file_is_renamed_away(tmp_path: Path) -> None:
+    # logrotate without copytruncate renames the file: the next lines go to a new file at the path, not the old one
+    path = tmp_path / "joints.jsonl"
+    sink = open_sink(path.as_uri() + "?status_s=3600", backoff=FAST_BACKOFF)
+    try:
+        assert sink.wait_connected(5)
+        sink.send(make_frame(0))
+        assert sink.wait_drained(5)
+        path.rename(tmp_path / "joints.jsonl.1")
+        sink.send(make_frame(1))
+        wait_until(lambda: sink.stats().connects == 2, what="the new file opened")
+        sink.send(make_frame(2))
+        assert sink.wait_drained(5)
+    finally:
+        sink.close()
+    old = [json.loads(line) for line in (tmp_path / "joints.jsonl.1").read_text().splitlines()]
+    new = [json.loads(line) for line in path.read_text().splitlines()]
+    assert [ln.get("seq") for ln in old if ln["type"] == "JOINTS"] == [0]
+    assert [ln["type"] for ln in new][:2] == ["HELLO", "STATUS"]
+    assert [ln.get("seq") for ln in new if ln["type"] == "JOINTS"][-1] == 2
+
+
 def test_file_sink_on_a_read_only_path_says_how_the_service_may_write_there(tmp_path: Path,
                                                                           monkeypatch: pytest.MonkeyPatch) -> None:
     """The unit's ProtectSystem=strict makes every folder but /run/ghnerf and /var/lib/ghnerf read-only, which

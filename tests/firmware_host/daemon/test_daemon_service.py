@@ -1769,3 +1769,23 @@ def test_the_opens_in_a_row_start_again_after_a_rig_lost_otherwise_or_a_new_rig_
             assert not run.thread.is_alive()
         assert isinstance(run.rc[0], DaemonStartError), run.rc
         assert run.daemon.health.reloads == 1 and run.daemon.health.rig_opens == opens, reloaded.rig.url
+
+
+def test_frames_that_come_but_never_pair_are_said_so_not_a_silent_camera(sim_url, tmp_path, monkeypatch):
+    """Cameras half a frame apart (or one whose frames arrive many frames behind the other's) deliver every frame,
+    but none pairs within the tolerance: the daemon said only 'no pair for 0.3 s', as for a camera that fell
+    silent, and the operator looked for a dead camera. It now says frames came from both and why none paired."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    cfg = _config({"url": f"{sim_url}&offset_ms=16.6", "reopen_min_s": 0.05, "read_timeout_s": 0.05,
+                   "stall_s": 0.3}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.rig_lost >= 1, timeout=60, what="the rig given up on")
+        assert run.finish() == 0
+    why = run.daemon.health.last_error
+    assert why.startswith("no pair for ") and "frames came from both cameras" in why, why
+    assert "none paired within the pairing tolerance of 11 ms" in why, why
+    assert run.daemon.health.pairs_read == 0
+
