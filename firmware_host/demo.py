@@ -29,7 +29,7 @@ rig delivers:
   band with the symptoms across its foot while the calibration is suspect, and
   its estimated 3D joints are printed next to the ground truth.
 
-A camera that vanishes or falls silent (no pair within a second) mid-run ends the reading too: the summary of the
+A camera that vanishes or falls silent (no pair within a second; five for the first pair) mid-run ends the reading too: the summary of the
 pairs before it, then one line, ``error: the rig failed after N pairs: ...`` naming the camera, exit status 2 (until
 session 62 only ``stopping: ...`` among the summary's lines, exit 0: a loose cable passed the bring-up's camera
 check). A recording that ends (``replay://``) is no failure.
@@ -75,6 +75,10 @@ from ghnerf_runtime.errors import ConfigError, ModelError
 from ghnerf_runtime.estimator import Estimator, PairResult
 
 DEFAULT_URL = "sim://?fps=30&seed=0&motion=wave"
+#: How long the first pair is waited for, and each one after it: an OAK streams a second or two after its
+#: open, so a camera silent for a second before its first pair has not failed yet (the daemon waits rig.stall_s).
+FIRST_PAIR_TIMEOUT_S = 5.0
+PAIR_TIMEOUT_S = 1.0
 #: said after the docstring's first line in --help: the same run checks a real rig's cameras
 HELP_EPILOGUE = ("Any rig URL runs the same way (a real rig's cameras checked before calibrating them: "
                  "docs/bring-up.md, step 2).")
@@ -409,7 +413,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                 # in the read (the estimate is most of a pair's time), so it is caught around both.
                 try:
                     try:
-                        pair = source.read(timeout_s=1.0)
+                        pair = source.read(timeout_s=PAIR_TIMEOUT_S if delivered else FIRST_PAIR_TIMEOUT_S)
                     except drivers.EndOfStream:
                         print("the rig's stream ended")
                         break

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
+import drivers
 from firmware_host import demo
 from ghnerf_runtime.estimator import Estimator
 
@@ -361,6 +362,28 @@ def test_a_camera_that_vanishes_mid_run_fails_the_run_naming_it(tmp_path, capsys
     assert re.search(r": error: the rig failed after \d+ pairs: sim camera 'right' unplugged 0.3 s after open",
                      captured.err), captured.err
     assert _joints_rows(tmp_path / "joints.jsonl")  # what came before it was streamed
+
+
+def test_the_first_pair_is_waited_for_longer_than_the_pairs_after_it(tmp_path, monkeypatch, sim_url):
+    # an OAK streams a second or two after its open: a 1 s wait for the first pair failed a healthy camera
+    asked = []
+    open_rig = drivers.create_rig_source
+
+    def recording_waits(url):
+        source = open_rig(url)
+        read = source.read
+
+        def read_recording_wait(timeout_s):
+            asked.append(timeout_s)
+            return read(timeout_s=timeout_s)
+
+        source.read = read_recording_wait
+        return source
+
+    monkeypatch.setattr(drivers, "create_rig_source", recording_waits)
+    assert demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path)]) == 0
+    assert len(asked) > 2 and asked[0] == demo.FIRST_PAIR_TIMEOUT_S >= 5.0
+    assert set(asked[1:]) == {demo.PAIR_TIMEOUT_S}
 
 
 def test_a_stream_that_ends_is_no_failure(tmp_path, capsys, small_take):
