@@ -30,9 +30,10 @@ import numpy as np
 
 from drivers.errors import RigInitializationError, RigOperationError
 from drivers.frames import CameraTruth, Frame
+from ghnerf_runtime import tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
-from ghnerf_runtime.image_files import AS_STORED
+from ghnerf_runtime.image_files import decode_image_or_none
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
 FORMAT = "ghnerf-rig-recording"
@@ -439,15 +440,15 @@ def encode_image(image: np.ndarray, image_format: str, jpeg_quality: int) -> byt
     return buf.tobytes()
 
 
-#: How a recorded image is decoded: 8-bit BGR, its pixels as stored, its EXIF orientation ignored on purpose
-#: (ghnerf_runtime.image_files says why: the rig's calibration is of the sensor's pixel grid). It also makes the
-#: header's size the decoded size (header_size).
-_DECODE_FLAGS = cv2.IMREAD_COLOR | AS_STORED
+#: How a recorded image is decoded: 8-bit BGR, its pixels as stored, its orientation (EXIF, or a TIFF's tag)
+#: ignored on purpose (ghnerf_runtime.image_files says why: the rig's calibration is of the sensor's pixel grid).
+#: It also makes the header's size the decoded size (header_size).
+_DECODE_FLAGS = cv2.IMREAD_COLOR
 
 
 def load_image(path: Path) -> np.ndarray:
-    """Decode a recorded image as ``(H, W, 3)`` uint8 BGR, its pixels as stored (EXIF orientation ignored:
-    :data:`_DECODE_FLAGS`).
+    """Decode a recorded image as ``(H, W, 3)`` uint8 BGR, its pixels as stored (its orientation ignored:
+    ``ghnerf_runtime.image_files.decode_image_or_none``).
 
     Raises:
         RigOperationError: naming the file when it is missing or cannot be decoded.
@@ -456,10 +457,7 @@ def load_image(path: Path) -> np.ndarray:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as e:
         raise RigOperationError(f"recording image {path} cannot be read: {e.strerror or e}") from e
-    try:
-        image = cv2.imdecode(data, _DECODE_FLAGS) if data.size else None
-    except cv2.error:  # a header beyond OpenCV's size limits (CV_IO_MAX_IMAGE_*) raises rather than fails
-        image = None
+    image = decode_image_or_none(data, _DECODE_FLAGS) if data.size else None
     if image is None:
         raise RigOperationError(f"recording image {path} is corrupt (OpenCV cannot decode it)")
     return image
@@ -490,48 +488,9 @@ _BMP_MAX_COLOURS_USED = 256
 #: OpenCV's default limits on a decoded image (CV_IO_MAX_IMAGE_WIDTH/HEIGHT/PIXELS): a header beyond them is
 #: decoded instead (refused there, or allowed by OPENCV_IO_MAX_IMAGE_* set higher), not taken as a size.
 _OPENCV_MAX_SIDE, _OPENCV_MAX_PIXELS = 1 << 20, 1 << 30
-
-
-@dataclass(frozen=True)
-class _TiffLayout:
-    """Where a TIFF's first image file directory is and how its entries are laid out: classic TIFF (4-byte
-    offsets, 12-byte entries) or BigTIFF (8-byte offsets, 20-byte entries), in either byte order."""
-
-    order: str  # struct's byte order
-    preamble: bytes  # what follows the byte order and version before the first directory's offset
-    offset: str  # the first directory's offset
-    count: str  # a directory's entry count
-    entry_size: int
-    integer_types: dict[int, str]  # the unsigned integer entry types read (SHORT, LONG, LONG8): struct codes
-
-    @property
-    def first_ifd_at(self) -> int:
-        return 4 + len(self.preamble) + struct.calcsize(self.offset)
-
-    @property
-    def entry_head(self) -> str:  # tag, type, number of values
-        return "HH" + ("Q" if self.entry_size == 20 else "I")
-
-    @property
-    def entry_head_size(self) -> int:
-        return struct.calcsize("<" + self.entry_head)
-
-
-_TIFF_SHORT, _TIFF_LONG, _TIFF_LONG8 = 3, 4, 16
-_TIFF_CLASSIC_INTEGERS = {_TIFF_SHORT: "H", _TIFF_LONG: "I"}
-_TIFF_BIG_INTEGERS = {**_TIFF_CLASSIC_INTEGERS, _TIFF_LONG8: "Q"}
-#: A TIFF's first four bytes (byte order, version: 42 classic, 43 BigTIFF) and its layout. A BigTIFF's offsets are
-#: 8 bytes long (then a reserved 0) before its first directory's offset.
-_TIFF_LAYOUTS = {
-    b"II*\x00": _TiffLayout("<", b"", "I", "H", 12, _TIFF_CLASSIC_INTEGERS),
-    b"MM\x00*": _TiffLayout(">", b"", "I", "H", 12, _TIFF_CLASSIC_INTEGERS),
-    b"II+\x00": _TiffLayout("<", struct.pack("<HH", 8, 0), "Q", "Q", 20, _TIFF_BIG_INTEGERS),
-    b"MM\x00+": _TiffLayout(">", struct.pack(">HH", 8, 0), "Q", "Q", 20, _TIFF_BIG_INTEGERS),
-}
-_TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_BITS_PER_SAMPLE, _TIFF_COMPRESSION, _TIFF_ORIENTATION = 256, 257, 258, 259, 274
-_TIFF_SIZE_TAGS = frozenset({_TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_BITS_PER_SAMPLE, _TIFF_COMPRESSION, _TIFF_ORIENTATION})
-#: The most values read of one tag (BitsPerSample has one a sample: RGB with alpha and a few extra channels).
-_TIFF_MOST_VALUES = 16
+#: The tags the size reader reads from a TIFF's first directory.
+_TIFF_SIZE_TAGS = frozenset({tiff_header.WIDTH, tiff_header.HEIGHT, tiff_header.BITS_PER_SAMPLE,
+                             tiff_header.COMPRESSION})
 _TIFF_BITS_DECODED = frozenset({8, 16})
 #: The TIFF compressions this OpenCV build decodes (none, LZW, JPEG, Adobe and old deflate, PackBits): another one
 #: (CCITT fax, LZMA, ...) is decoded to tell, as a BMP layout OpenCV does not read is.
@@ -546,9 +505,8 @@ def header_size(path: Path) -> tuple[int, int] | None:
     """A PNG, JPEG, BMP, TIFF or WebP image's ``(width, height)`` read from its header, without decoding it;
     ``None`` where the header cannot say which size :func:`load_image` would decode: another format, a header cut
     short or malformed (a bad IHDR checksum, a segment running past the end), an animated PNG or WebP, a BMP
-    layout or TIFF compression OpenCV does not read, a TIFF orientation tag other than 1 (OpenCV's TIFF decoder
-    turns the image by it whatever the flags). EXIF does not matter: :func:`load_image` ignores its orientation,
-    so the stored size is the decoded.
+    layout or TIFF compression OpenCV does not read. Orientation does not matter: :func:`load_image` decodes the
+    pixels as stored, ignoring an EXIF orientation and a TIFF's Orientation tag, so the stored size is the decoded.
 
     Strict on purpose: ``None`` is never a size, and the caller decodes the file instead (:func:`image_size`).
     """
@@ -660,77 +618,28 @@ def _bmp_masks_decodable(f: BinaryIO, info_size: int) -> bool:
     return f.read(12) in _BMP_16_BIT_MASKS
 
 
-def _tiff_size(f: BinaryIO, layout: _TiffLayout) -> tuple[int, int] | None:
+def _tiff_size(f: BinaryIO, layout: tiff_header.TiffLayout) -> tuple[int, int] | None:
     """The first image file directory's ImageWidth and ImageLength (the page OpenCV decodes), where OpenCV
-    decodes its layout (:func:`_tiff_layout_decodable`)."""
-    tags = _tiff_first_ifd_values(f, layout)
-    if tags is None or not _tiff_layout_decodable(tags):
+    decodes its layout (:func:`_tiff_layout_decodable`). Its Orientation does not matter: :func:`load_image`
+    decodes the pixels as stored (ghnerf_runtime.image_files sets the tag to 1 first)."""
+    entries = tiff_header.first_directory(f, layout, _TIFF_SIZE_TAGS)
+    if entries is None:
         return None
-    width, height = tags[_TIFF_WIDTH][0], tags[_TIFF_HEIGHT][0]
+    tags = {tag: entry.values for tag, entry in entries.items()}
+    if not _tiff_layout_decodable(tags):
+        return None
+    width, height = tags[tiff_header.WIDTH][0], tags[tiff_header.HEIGHT][0]
     return (width, height) if _decodable(width, height) else None
 
 
 def _tiff_layout_decodable(tags: dict[int, tuple[int, ...]]) -> bool:
     """Whether OpenCV decodes a TIFF of these tags, 8-bit, to its stored size: one width and height, a compression
-    it decodes, samples of 8 or 16 bits (32 and 64, integer or float, it does not decode to 8 bits), and stored
-    upright (its TIFF decoder turns the image by its orientation tag, whatever the read flags)."""
-    single = all(len(tags.get(tag, (1,))) == 1 for tag in (_TIFF_WIDTH, _TIFF_HEIGHT, _TIFF_COMPRESSION,
-                                                             _TIFF_ORIENTATION))
-    return (single and _TIFF_WIDTH in tags and _TIFF_HEIGHT in tags
-            and tags.get(_TIFF_COMPRESSION, (1,))[0] in _TIFF_COMPRESSIONS
-            and tags.get(_TIFF_ORIENTATION, (1,))[0] == 1
-            and set(tags.get(_TIFF_BITS_PER_SAMPLE, (1,))) <= _TIFF_BITS_DECODED)
-
-
-def _tiff_first_ifd_values(f: BinaryIO, layout: _TiffLayout) -> dict[int, tuple[int, ...]] | None:
-    """The values of :data:`_TIFF_SIZE_TAGS` in the first image file directory (``f`` just past the byte order and
-    version); ``None`` where the directory or a value is cut short, or one of those tags is repeated or not of
-    unsigned integers (SHORT or LONG; in a BigTIFF, LONG8 too)."""
-    head = f.read(layout.first_ifd_at - 4)
-    if len(head) < layout.first_ifd_at - 4 or head[:len(layout.preamble)] != layout.preamble:
-        return None
-    (ifd_at,) = struct.unpack(layout.order + layout.offset, head[len(layout.preamble):])
-    raw = _read_at(f, ifd_at, struct.calcsize(layout.count))
-    if len(raw) < struct.calcsize(layout.count):
-        return None
-    (count,) = struct.unpack(layout.order + layout.count, raw)
-    entries = _read_at(f, ifd_at + len(raw), count * layout.entry_size)
-    if len(entries) < count * layout.entry_size:
-        return None  # a directory past the end of a file cut short
-    values: dict[int, tuple[int, ...]] = {}
-    for at in range(0, len(entries), layout.entry_size):
-        tag, kind, number = struct.unpack(layout.order + layout.entry_head, entries[at:at + layout.entry_head_size])
-        if tag not in _TIFF_SIZE_TAGS:
-            continue
-        value = _tiff_integers(f, layout, kind, number, entries[at + layout.entry_head_size:at + layout.entry_size])
-        if value is None or tag in values:
-            return None
-        values[tag] = value
-    return values
-
-
-def _tiff_integers(f: BinaryIO, layout: _TiffLayout, kind: int, number: int, field: bytes) -> tuple[int, ...] | None:
-    """An entry's unsigned integers: in the entry's value field where they fit (left-justified), else at the
-    offset it holds; ``None`` for another type, more than :data:`_TIFF_MOST_VALUES`, or values cut short."""
-    code = layout.integer_types.get(kind)
-    if code is None or not 1 <= number <= _TIFF_MOST_VALUES:
-        return None
-    codes = layout.order + code * number
-    if struct.calcsize(codes) > len(field):
-        field = _read_at(f, struct.unpack(layout.order + layout.offset, field)[0], struct.calcsize(codes))
-        if len(field) < struct.calcsize(codes):
-            return None
-    return struct.unpack_from(codes, field)
-
-
-def _read_at(f: BinaryIO, offset: int, length: int) -> bytes:
-    """``length`` bytes at ``offset``; fewer, or none, where the file ends first. A corrupt header's offsets and
-    counts can be beyond any file (a BigTIFF's are 64-bit: too large to seek to, or to read as one buffer)."""
-    end = f.seek(0, 2)
-    if offset > end:
-        return b""
-    f.seek(offset)
-    return f.read(min(length, end - offset))
+    it decodes, and samples of 8 or 16 bits (32 and 64, integer or float, it does not decode to 8 bits)."""
+    single = all(len(tags.get(tag, (1,))) == 1
+                 for tag in (tiff_header.WIDTH, tiff_header.HEIGHT, tiff_header.COMPRESSION))
+    return (single and tiff_header.WIDTH in tags and tiff_header.HEIGHT in tags
+            and tags.get(tiff_header.COMPRESSION, (1,))[0] in _TIFF_COMPRESSIONS
+            and set(tags.get(tiff_header.BITS_PER_SAMPLE, (1,))) <= _TIFF_BITS_DECODED)
 
 
 def _webp_size(f: BinaryIO) -> tuple[int, int] | None:
@@ -801,7 +710,7 @@ _SIZE_READERS = (
     (_JPEG_START, _jpeg_size),
     (_BMP_START, _bmp_size_from_its_start),
     (b"RIFF", _webp_size),
-    *((start, functools.partial(_tiff_size, layout=layout)) for start, layout in _TIFF_LAYOUTS.items()),
+    *((start, functools.partial(_tiff_size, layout=layout)) for start, layout in tiff_header.LAYOUTS.items()),
 )
 _HEADER_START = max(len(signature) for signature, _ in _SIZE_READERS)
 

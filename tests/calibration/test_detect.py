@@ -15,7 +15,7 @@ from calibration.detect import BoardDetector, fixes_a_pose, grey8
 from calibration.errors import BoardError, CaptureError
 from calibration.render import board_pose_facing, example_rig, render_board
 from tests.exif_images import jpeg_turned
-from tests.odd_images import bmp_beyond_opencv_s_limits
+from tests.odd_images import bmp_beyond_opencv_s_limits, tiff_laid_out
 
 BOARD = BoardSpec(squares_x=7, squares_y=6, square_m=0.12, marker_m=0.09)  # an even number of rows
 
@@ -73,6 +73,20 @@ def test_a_still_tagged_to_be_turned_is_calibrated_as_stored(camera, tmp_path):
     view = views["left"]["000"]
     assert view.image_size == (camera.width, camera.height)
     assert _rms(view, truth) < 0.5
+
+
+def test_a_16_bit_tiff_tagged_half_a_turn_is_calibrated_as_stored(camera, tmp_path):
+    # OpenCV's TIFF decoder turns by the tag whatever the flags: the board was found upside down (same size, each
+    # corner at another's pixel, no error) until image_files set the tag to 1 before decoding
+    image, truth = _render(BOARD, camera)
+    tiff = cv2.imencode(".tiff", image.astype(np.uint16) * 257)[1].tobytes()
+    for cam in ("left", "right"):
+        (tmp_path / cam).mkdir()
+        (tmp_path / cam / "000.tiff").write_bytes(tiff_laid_out(tiff, changed={274: (3, (3,))}))
+    views, missed = detect_folder(BOARD, tmp_path)
+    assert missed == {"left": [], "right": []}
+    assert views["left"]["000"].image_size == (camera.width, camera.height)
+    assert _rms(views["left"]["000"], truth) < 0.5
 
 
 def test_a_view_whose_header_is_beyond_opencv_s_size_limits_is_named_as_unreadable(tmp_path):

@@ -23,7 +23,7 @@ from drivers.backends.recording_format import (
     write_manifest,
 )
 from drivers.sim.placement import RigPlacement
-from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned
+from tests.exif_images import exif_orientation, jpeg_segment, jpeg_turned, png_turned
 from tests.odd_images import (
     bmp_beyond_opencv_s_limits,
     bmp_built,
@@ -151,15 +151,11 @@ def test_an_image_resized_after_the_open_is_a_corrupt_frame_and_the_take_plays_o
 
 
 # ------------------------------------------------------------------ the size reader
-def _png_chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-
 def with_exif(data: bytes, fmt: str, orientation: int = 6) -> bytes:
     """``data`` (a PNG or JPEG) with EXIF saying the image is to be turned (6: a quarter, as a phone held upright
     writes it; 3: half a turn), placed as a phone writes it (a JPEG's APP1 first, before JFIF's APP0 if any)."""
     if fmt == "png":
-        return data[:33] + _png_chunk(b"eXIf", exif_orientation(orientation)) + data[33:]  # after the signature, IHDR
+        return png_turned(data, orientation)
     return jpeg_turned(data, orientation)
 
 
@@ -412,15 +408,17 @@ def test_a_tiff_of_either_byte_order_classic_or_big_is_measured_from_its_first_d
 
 
 @pytest.mark.parametrize("orientation", range(1, 9))
-def test_a_tiff_s_orientation_tag_other_than_1_is_decoded_to_measure_it(tmp_path, orientation):
-    """OpenCV's TIFF decoder turns an image by its orientation tag even with IMREAD_IGNORE_ORIENTATION (unlike
-    EXIF in a JPEG, PNG or WebP): its header's size is not sure to be the decoded one, so the file is decoded."""
-    data = cv2.imencode(".tiff", np.zeros((30, 41, 3), np.uint8))[1].tobytes()
+def test_a_tiff_tagged_with_any_orientation_is_measured_from_its_header_and_decoded_as_stored(tmp_path, no_decode,
+                                                                                           orientation):
+    """OpenCV's TIFF decoder turns an image by its Orientation tag even with IMREAD_IGNORE_ORIENTATION (unlike EXIF
+    in a JPEG, PNG or WebP); load_image decodes it with the tag set to 1 (ghnerf_runtime.image_files), so the
+    stored pixels are delivered and the header's size is theirs. Session 62 decoded such a file at every open to
+    measure it, and delivered it turned (30x41 for tags 5 to 8)."""
+    image = np.random.default_rng(orientation).integers(0, 256, (30, 41, 3), np.uint8)
     path = tmp_path / "image.tiff"
-    path.write_bytes(tiff_laid_out(data, changed={274: (3, (orientation,))}))
-    decoded = load_image(path)
-    assert header_size(path) == ((41, 30) if orientation == 1 else None)
-    assert image_size(path) == (decoded.shape[1], decoded.shape[0]) == ((41, 30) if orientation < 5 else (30, 41))
+    path.write_bytes(tiff_laid_out(cv2.imencode(".tiff", image)[1].tobytes(), changed={274: (3, (orientation,))}))
+    assert np.array_equal(load_image(path), image)
+    assert header_size(path) == (41, 30) == image_size(path)
 
 
 def test_a_tiff_of_a_compression_opencv_does_not_decode_or_without_its_size_has_no_header_size(tmp_path):
@@ -484,23 +482,30 @@ def test_an_animated_webp_or_one_whose_canvas_is_not_its_image_s_size_is_decoded
         assert header_size(path) is None
 
 
+#: The file suffix of a format ``encoded_as`` writes, where it is not the format's name.
+SUFFIXES = {"tiff-turned": "tif"}
+
+
 def convert_take(take: Path, image_format: str) -> None:
     """``take``'s JPEGs as another tool leaves them: with EXIF marking them as a quarter turn (a phone held
-    upright), or converted to BMPs, TIFFs or WebPs (the journal naming those)."""
+    upright), or converted to BMPs, TIFFs (one tagged as a quarter turn as ``tiff-turned``) or WebPs (the journal
+    naming those)."""
+    suffix = SUFFIXES.get(image_format, image_format)
     for path in take.glob("images/*/*.jpg"):
         if image_format == "jpg+exif":
             path.write_bytes(with_exif(path.read_bytes(), "jpg"))
         else:
-            path.with_suffix(f".{image_format}").write_bytes(encoded_as(cv2.imread(str(path)), image_format))
+            path.with_suffix(f".{suffix}").write_bytes(encoded_as(cv2.imread(str(path)), image_format))
             path.unlink()
     if image_format != "jpg+exif":
-        (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", f".{image_format}"))
+        (take / FRAMES).write_text((take / FRAMES).read_text().replace(".jpg", f".{suffix}"))
 
 
-@pytest.mark.parametrize("image_format", ["jpg+exif", "bmp", "tiff", "webp"])
+@pytest.mark.parametrize("image_format", ["jpg+exif", "bmp", "tiff", "tiff-turned", "webp"])
 def test_a_take_another_tool_wrote_opens_without_decoding_and_plays_as_stored(tmp_path, monkeypatch, image_format):
     """Measured from the headers at open (no decode), each frame delivered at the rig's size. Before, each image
-    was decoded at every open: an EXIF one turned by OpenCV (30x40), and the take refused for its size."""
+    was decoded at every open: an EXIF one turned by OpenCV (30x40), and the take refused for its size; and (in
+    session 62) a TIFF tagged as a quarter turn, decoded at open and refused for its size too."""
     take = write_take(tmp_path / "take", "jpg", frames=5)
     convert_take(take, image_format)
     decoded = []
@@ -513,13 +518,16 @@ def test_a_take_another_tool_wrote_opens_without_decoding_and_plays_as_stored(tm
 
 def encoded_as(image: np.ndarray, image_format: str) -> bytes:
     """``image`` in a format of the recorder's, one with EXIF before its frame header, a BMP, a TIFF (LZW, as
-    OpenCV writes it; big-endian BigTIFF as ``bigtiff``) or a WebP (lossy; lossless as ``webp-lossless``)."""
+    OpenCV writes it; big-endian BigTIFF as ``bigtiff``; tagged as a quarter turn as ``tiff-turned``) or a WebP
+    (lossy; lossless as ``webp-lossless``)."""
     if image_format == "bmp":
         return bmp(image)
     if image_format == "tiff":
         return cv2.imencode(".tiff", image)[1].tobytes()
     if image_format == "bigtiff":
         return tiff_laid_out(cv2.imencode(".tiff", image)[1].tobytes(), ">", big=True)
+    if image_format == "tiff-turned":  # its Orientation a quarter turn, as a camera held upright may tag it
+        return tiff_laid_out(cv2.imencode(".tiff", image)[1].tobytes(), changed={274: (3, (6,))})
     if image_format.startswith("webp"):
         return cv2.imencode(".webp", image, [cv2.IMWRITE_WEBP_QUALITY, 101 if "lossless" in image_format else 90]
                             )[1].tobytes()
@@ -529,7 +537,8 @@ def encoded_as(image: np.ndarray, image_format: str) -> bytes:
 
 
 @pytest.mark.parametrize("image_format",
-                         [*sorted(IMAGE_FORMATS), "jpg+exif", "bmp", "tiff", "bigtiff", "webp", "webp-lossless"])
+                         [*sorted(IMAGE_FORMATS), "jpg+exif", "bmp", "tiff", "bigtiff", "tiff-turned", "webp",
+                          "webp-lossless"])
 def test_a_header_cut_anywhere_or_corrupt_never_raises_and_never_gives_a_size_opencv_would_not(tmp_path, image_format):
     """Every cut of the first 200 bytes (and the last 200 of a TIFF, where OpenCV writes its directory), and each
     byte of them set to 0x00 or 0xFF: no exception, and any size read is the size OpenCV decodes (where it decodes,
