@@ -83,6 +83,7 @@ from ghnerf_runtime.metrics import (capped_psnr, heatmap_mse, masked_psnr, maske
                                     pck, scorable_images)
 from ghnerf_runtime.novel_painter import angle_from_centres_deg
 from training.model_card import strict_json, write_atomic
+from training.run_limits import threads_problem
 
 PCK_ALPHA = 0.2
 
@@ -736,8 +737,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.limit < 0:
         ap.error(f"--limit: must be >= 0 (0: every scene), got {args.limit}")
-    if args.threads < 1:  # torch.set_num_threads raised a RuntimeError traceback
-        ap.error(f"--threads: must be at least 1, got {args.threads}")
+    if problem := threads_problem(args.threads, 1):  # torch.set_num_threads: a traceback for 0 and past a C int
+        ap.error(f"--threads: {problem}")
     labels = [_label(item) for item in args.model]
     if dup := sorted({label for label in labels if labels.count(label) > 1}):
         # two runs' last.pt are both "last": the second model's scores replaced the first's in the JSON
