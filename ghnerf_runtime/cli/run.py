@@ -34,7 +34,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config, read_json_file
@@ -129,6 +129,14 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
             ap.error("--max-frames applies to --videos (--images is one pair)")
         if args.max_frames < 1:
             ap.error(f"--max-frames must be at least 1, got {args.max_frames}")
+    clash = output_clash({"--out": None if args.out in (None, "-") else args.out, "--overlay": args.overlay,
+                          "--novel-view": args.novel_view},
+                         {"--rig": args.rig, "--config": args.config,
+                          **{f"{flag} ({which})": path for flag, pair in (("--images", args.images),
+                                                                           ("--videos", args.videos))
+                             for which, path in zip(("first", "second"), pair or ())}})
+    if clash:  # --out rig.json replaced the calibration with the joints, --overlay left.png the capture
+        ap.error(clash)
     if args.novel_alpha is None:
         args.novel_alpha = 0.5
     if args.novel_overlay is None:

@@ -286,6 +286,26 @@ def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
     assert all(w in err for w in words), err
 
 
+@pytest.mark.parametrize(("extra", "said"), [
+    # each ran and replaced the file: the calibration by the joints, a captured image by its overlay
+    (["--images", "a.png", "b.png", "--out", "r.json"], "--out r.json is the file --rig reads"),
+    (["--images", "a.png", "b.png", "--overlay", "./sub/../a.png"],
+     "--overlay ./sub/../a.png is the file --images (first) reads"),
+    (["--videos", "a.mp4", "b.mp4", "--novel-view", "b.mp4"], "--novel-view b.mp4 is the file --videos (second) reads"),
+    (["--images", "a.png", "b.png", "--config", "c.json", "--out", "c.json"], "--out c.json is the file --config reads"),
+    # the later writer replaced the earlier one's file
+    (["--images", "a.png", "b.png", "--overlay", "v.png", "--novel-view", "v.png"],
+     "--novel-view v.png is where --overlay writes too"),
+])
+def test_an_output_that_is_an_input_or_another_output_is_refused(tmp_path, monkeypatch, capsys, extra, said):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r.json").write_text("{}")
+    with pytest.raises(SystemExit) as e:
+        cli_run.main(["--rig", "r.json", *extra])
+    assert e.value.code == 2 and f"error: {said}: " in capsys.readouterr().err
+    assert (tmp_path / "r.json").read_text() == "{}" and not (tmp_path / "v.png").exists()
+
+
 @pytest.mark.parametrize("path", ["line", "orbit", "auto"])
 def test_novel_path_sets_the_configs_path(path, capsys):
     args = ["--rig", "unused.json", "--images", "a", "b", "--novel-view", "n.png", "--validate-config"]
