@@ -42,3 +42,12 @@ def test_ctrl_c_exits_130_without_a_traceback_or_a_report(tmp_path, capsys, monk
         pytest.fail("Ctrl-C escaped ghnerf-bench: the user saw a traceback")
     assert rc == 130 and "stopped (Ctrl-C)" in capsys.readouterr().err
     assert not (tmp_path / "r.json").exists()
+
+
+def test_a_cache_that_is_a_file_is_named_before_anything_runs(tmp_path, capsys, no_render, monkeypatch):
+    monkeypatch.setattr(bench, "load_session", lambda cfg: pytest.fail("the model was loaded"))
+    (tmp_path / "afile").write_text("")
+    rc = bench.main(["runtime", "--sequences", "1", "--frames", "2", "--warmup", "0",
+                     "--cache", str(tmp_path / "afile")])
+    # was "[Errno 20] Not a directory: '<it>/seq-...'" after the model had loaded, naming no flag
+    assert rc == 2 and f"--cache {tmp_path / 'afile'}: is a file; give a folder" in capsys.readouterr().err
