@@ -204,3 +204,18 @@ def test_a_camera_order_file_past_the_parser_is_named(tmp_path, text, says):
     with pytest.raises(CaptureError) as e:
         read_camera_order(tmp_path)
     assert str(e.value).startswith(f"{tmp_path / 'cameras.json'}: cannot read the camera order {says}")
+
+
+@pytest.mark.parametrize("argv, said", [
+    # argparse named the parser functions: "invalid _positive_int value: '1.5'", "invalid parse value: 'abc'"
+    (["board", "--out", "b", "--dpi", "1.5"], "argument --dpi: expected a whole number, got '1.5'"),
+    (["synth", "--out", "s", "--seed", "x"], "argument --seed: expected a whole number, got 'x'"),
+    (["check", "--rig", "r.json", "--images", "i", "--max-px", "abc"],
+     "argument --max-px: expected a number, got 'abc'"),
+    (["capture", "--url", "sim://", "--out", "c", "--still-s", "soon"],
+     "argument --still-s: expected a number, got 'soon'"),
+])
+def test_a_number_that_is_not_one_is_said_so(argv, said, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(argv)
+    assert e.value.code == 2 and said in capsys.readouterr().err
