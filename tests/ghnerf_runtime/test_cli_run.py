@@ -306,6 +306,31 @@ def test_an_output_that_is_an_input_or_another_output_is_refused(tmp_path, monke
     assert (tmp_path / "r.json").read_text() == "{}" and not (tmp_path / "v.png").exists()
 
 
+@pytest.mark.parametrize("flag", ["--images", "--videos"])
+def test_one_file_for_both_cameras_is_refused(tmp_path, monkeypatch, capsys, flag):
+    """Each camera's view in one picture: the run went on and reported joints, wrong."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        cli_run.main(["--rig", "r.json", flag, "a", "./a", "--out", "o.json"])
+    assert e.value.code == 2 and f"error: {flag}: a and ./a are one file; give each camera's own" in \
+        capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("make", "said"), [
+    (lambda p: None, "no such file"),
+    (lambda p: p.mkdir(), "a folder, not a video"),
+    (lambda p: p.write_bytes(b"not a video"), "cannot open the video (not a format OpenCV reads, or unreadable)"),
+])
+def test_a_video_that_cannot_be_opened_says_why(tmp_path, monkeypatch, capsys, make, said):
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    make(tmp_path / "a.mp4")
+    (tmp_path / "b.mp4").write_bytes(b"")
+    assert cli_run.main(["--rig", "r.json", "--videos", str(tmp_path / "a.mp4"), str(tmp_path / "b.mp4"),
+                         "--out", str(tmp_path / "o.json")]) == 2
+    assert f"{tmp_path / 'a.mp4'}: {said}" in capsys.readouterr().err  # was "cannot open the video", whatever why
+
+
 @pytest.mark.parametrize("path", ["line", "orbit", "auto"])
 def test_novel_path_sets_the_configs_path(path, capsys):
     args = ["--rig", "unused.json", "--images", "a", "b", "--novel-view", "n.png", "--validate-config"]
