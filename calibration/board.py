@@ -182,7 +182,13 @@ def load_board(path: str | os.PathLike) -> BoardSpec:
         raise BoardError("the file is empty", path=str(path))
     try:
         data = json.loads(text, object_pairs_hook=_refuse_repeats(str(path)))
+    except BoardError:  # a key given twice (the hook's): a ValueError too, said as it is
+        raise
     except json.JSONDecodeError as e:
+        raise BoardError(f"not a JSON file: {e}", path=str(path)) from e
+    except RecursionError as e:  # arrays nested thousands deep: a traceback from ghcal before
+        raise BoardError("not a JSON file: nested too deeply", path=str(path)) from e
+    except ValueError as e:  # an integer of more digits than Python converts (4300): a traceback too
         raise BoardError(f"not a JSON file: {e}", path=str(path)) from e
     return BoardSpec.from_dict(data, path=str(path))
 

@@ -110,8 +110,10 @@ def read_camera_order(root: str | os.PathLike, *, check_folders: bool = True) ->
         return None
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+    except (OSError, ValueError) as e:  # ValueError: not UTF-8, not JSON, an integer past 4300 digits
         raise CaptureError(f"{path}: cannot read the camera order ({e})") from e
+    except RecursionError as e:  # both were a traceback from ghcal solve and check
+        raise CaptureError(f"{path}: cannot read the camera order (JSON nested too deeply)") from e
     names = data.get("cameras") if isinstance(data, dict) else None
     if (not isinstance(names, list) or len(names) != 2 or not all(isinstance(n, str) for n in names)
             or len(set(names)) != 2):  # strings first: a list entry is unhashable

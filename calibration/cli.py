@@ -902,15 +902,31 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------ main
+def _whole_number(text: str) -> int:
+    """``text`` as an int, or argparse's usage error saying so (a bare ValueError read "invalid _count value")."""
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+
+
+def _number(text: str) -> float:
+    """``text`` as a float, or argparse's usage error saying so (a bare ValueError read "invalid parse value")."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+
+
 def _positive_int(text: str) -> int:
-    value = int(text)
+    value = _whole_number(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
     return value
 
 
 def _count(text: str) -> int:
-    value = int(text)
+    value = _whole_number(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
     return value
@@ -918,7 +934,7 @@ def _count(text: str) -> int:
 
 def _finite(lo: float, hi: float):
     def parse(text: str) -> float:
-        value = float(text)
+        value = _number(text)
         if not (math.isfinite(value) and lo <= value <= hi):
             raise argparse.ArgumentTypeError(f"must be a number in [{lo:g}, {hi:g}], got {text}")
         return value
@@ -926,7 +942,7 @@ def _finite(lo: float, hi: float):
 
 
 def _seconds(text: str) -> float:
-    value = float(text)
+    value = _number(text)
     if not (math.isfinite(value) and value >= 0):
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
     return value

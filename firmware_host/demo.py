@@ -526,9 +526,21 @@ def _run(args: argparse.Namespace, prog: str) -> int:
     return 0
 
 
+def _refuse_ignored_flags(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """--truth-only runs no model: a --config or --model-dir given with it was neither read nor used (a config
+    holding a NaN, or a folder that is not there, ran and exited 0)."""
+    if not args.truth_only:
+        return
+    given = [flag for flag, value in (("--config", args.config), ("--model-dir", args.model_dir)) if value is not None]
+    if given:
+        parser.error(f"{' and '.join(given)} with --truth-only: no model runs, so there is nothing to apply it to")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     prog = prog_name()
-    args = build_parser(prog).parse_args(argv)
+    parser = build_parser(prog)
+    args = parser.parse_args(argv)
+    _refuse_ignored_flags(parser, args)
     try:
         # SIGTERM stops it as Ctrl-C does: its default action killed it outright, a record+ take left
         # complete: false and the frames still queued for the recorder lost

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["KeysObject", "remember_repeats"]
+__all__ = ["KeysObject", "first_repeat", "remember_repeats"]
 
 
 class KeysObject(dict):
@@ -33,3 +33,18 @@ def remember_repeats(pairs: list[tuple[str, Any]]) -> KeysObject:
         obj[key] = value
     obj.duplicates = tuple(repeated)
     return obj
+
+
+def first_repeat(value: Any, where: str = "") -> str | None:
+    """The path (``rig.cameras[0].K``) of the first key given twice anywhere in ``value`` (parsed with
+    :func:`remember_repeats`), or ``None``."""
+    if isinstance(value, dict):
+        repeated = getattr(value, "duplicates", ())
+        if repeated:
+            return f"{where}.{repeated[0]}" if where else repeated[0]
+        items = ((f"{where}.{k}" if where else str(k), v) for k, v in value.items())
+    elif isinstance(value, list):
+        items = ((f"{where}[{i}]", v) for i, v in enumerate(value))
+    else:
+        return None
+    return next((found for path, v in items if (found := first_repeat(v, path)) is not None), None)

@@ -71,7 +71,7 @@ import torch
 from torch import Tensor
 
 from ghnerf_runtime.body25 import BODY_PARTS, MID_HIP, NECK
-from ghnerf_runtime.cli.output_path import ready_output_arg
+from ghnerf_runtime.cli.output_path import output_clash, ready_output_arg
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_words
 from ghnerf_runtime.contract import ModelContract, ray_grid
 from ghnerf_runtime.config import Joints3DConfig
@@ -83,6 +83,7 @@ from ghnerf_runtime.metrics import (capped_psnr, heatmap_mse, masked_psnr, maske
                                     pck, scorable_images)
 from ghnerf_runtime.novel_painter import angle_from_centres_deg
 from training.model_card import strict_json, write_atomic
+from training.run_limits import threads_problem
 
 PCK_ALPHA = 0.2
 
@@ -708,6 +709,12 @@ def _label(item: str) -> str:
     return label if sep else Path(item).stem
 
 
+def _spec_path(item: str) -> str:
+    """The checkpoint file or graph folder a ``--model`` item reads (without its label and ``#int8``)."""
+    _, sep, spec = item.partition("=")
+    return (spec if sep else item).partition("#")[0]
+
+
 def prepare(specs: list[str], data: str, split: str, threads: int) -> list[tuple[str, Renderer, dict, object]]:
     """``(label, renderer, description, dataset)`` of every ``--model``: all loaded and checked before the first
     scene is rendered, so a bad spec fails in seconds, not after the models before it were scored."""
@@ -736,13 +743,17 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.limit < 0:
         ap.error(f"--limit: must be >= 0 (0: every scene), got {args.limit}")
-    if args.threads < 1:  # torch.set_num_threads raised a RuntimeError traceback
-        ap.error(f"--threads: must be at least 1, got {args.threads}")
+    if problem := threads_problem(args.threads, 1):  # torch.set_num_threads: a traceback for 0 and past a C int
+        ap.error(f"--threads: {problem}")
     labels = [_label(item) for item in args.model]
     if dup := sorted({label for label in labels if labels.count(label) > 1}):
         # two runs' last.pt are both "last": the second model's scores replaced the first's in the JSON
         ap.error(f"--model: the label {', '.join(dup)} is given twice; name each model, e.g. --model a=runs/a/last.pt")
     if args.out:  # written after minutes of evaluation: its place is settled first
+        # --out x.pt beside --model x.pt replaced the checkpoint with the scores, after the evaluation
+        clash = output_clash({"--out": args.out}, {f"--model {item}": _spec_path(item) for item in args.model})
+        if clash:
+            ap.error(clash)
         args.out = ready_output_arg(ap, args.out, "--out")
     torch.set_num_threads(args.threads)
     from training.data.errors import DataError

@@ -48,6 +48,7 @@ from torch import Tensor
 from training.configs import PRESETS
 from training.losses import positive_weighted_mse, window_centroid_loss
 from training.run_clock import RunClock
+from training.run_limits import seed_problem, threads_problem
 from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.augment import AugmentConfig, augment_views
@@ -147,6 +148,9 @@ class PretrainConfig(Config):
         for key in ("lr_decay_every", "eval_every", "threads", "loader_workers", "coarse_steps", "stop_at"):
             if getattr(self, key) < 0:
                 fail(key, f"must be >= 0, got {getattr(self, key)}")
+        for key, problem in (("seed", seed_problem(self.seed)), ("threads", threads_problem(self.threads, 0))):
+            if problem:  # torch takes both as C integers: past them the run failed after its first files
+                fail(key, problem)
         for key in ("lr", "lr_min", "heat_positive_weight", "centroid_weight", "max_minutes"):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0) or (key == "lr" and v == 0):

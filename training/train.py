@@ -52,7 +52,7 @@ import tomllib
 from contextlib import contextmanager, nullcontext
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Iterator, Literal, Mapping
+from typing import Any, Callable, Iterator, Literal, Mapping
 
 import numpy as np
 import torch
@@ -62,6 +62,7 @@ from torch import Tensor
 
 from ghnerf_runtime.cli.sigterm import (exit_status, sigterm_as_interrupt, sigterm_deferred, sigterm_raises,
                                         stop_words)
+from ghnerf_runtime.config import read_json_file
 from ghnerf_runtime.contract import ray_grid
 from training.configs import PRESETS, preset
 from training.losses import LossConfig, compute_losses
@@ -69,6 +70,7 @@ from training.model import GHNeRF, ModelConfig
 from training.model.config import Config, ConfigError
 from training.model_card import write_atomic
 from training.run_clock import RunClock
+from training.run_limits import seed_problem, threads_problem
 from training.run_lock import lock_holder, lock_text
 from training.step_guard import TrainingDiverged
 
@@ -168,6 +170,9 @@ class TrainConfig(Config):
         for key in ("patch_size", "lr_decay_every", "threads", "pck_every"):
             if getattr(self, key) < 0:
                 fail(key, f"must be >= 0, got {getattr(self, key)}")
+        for key, problem in (("seed", seed_problem(self.seed)), ("threads", threads_problem(self.threads, 0))):
+            if problem:  # torch takes both as C integers: past them the run failed after config.json was written
+                fail(key, problem)
         if self.patch_size == 1:
             fail("patch_size", "must be 0 (off) or >= 2")
         if not 0.0 <= self.mask_fraction <= 1.0:
@@ -282,25 +287,38 @@ def _missing_keys(template: Mapping[str, Any], entry: Mapping[str, Any], prefix:
 
 
 def load_config_file(path: str | Path) -> dict:
-    """A JSON or TOML (``.toml``) file as a dict."""
+    """A JSON or TOML (``.toml``) file as a dict. JSON is read as the runtime reads its configs
+    (:func:`ghnerf_runtime.config.read_json_file`): a key given twice is refused by name (JSON kept the last,
+    silently undoing the first), as are an empty file and one nested too deeply (a RecursionError traceback)."""
     path = Path(path)
-    try:
-        if path.suffix == ".toml":
-            with open(path, "rb") as fh:
-                return tomllib.load(fh)
-        data = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise ConfigError(f"config file {path}: {e}") from e
+
+    def fail(message: str) -> ConfigError:
+        return ConfigError(f"config file {path}: {message}")
+
+    data = _read_toml(path, fail) if path.suffix == ".toml" else read_json_file(path, fail, what="file")
     if not isinstance(data, dict):
         raise ConfigError(f"config file {path}: must hold a JSON object of settings, got a {type(data).__name__}")
     return data
 
 
-def _parse_value(text: str) -> Any:
+def _read_toml(path: Path, fail: Callable[[str], ConfigError]) -> dict:
+    """A TOML file as a dict (tomllib refuses a key given twice itself)."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except (OSError, ValueError) as e:
+        raise fail(str(e)) from e
+    except RecursionError as e:  # arrays or tables nested thousands deep
+        raise fail("not valid TOML (nested too deeply)") from e
+
+
+def _parse_value(key: str, text: str) -> Any:
     try:
         return json.loads(text)
     except ValueError:
         return text
+    except RecursionError:  # brackets thousands deep: a traceback before this
+        raise ConfigError(f"{key}: the value is nested too deeply to be a setting") from None
 
 
 def apply_overrides(data: dict, overrides: list[str]) -> dict:
@@ -312,11 +330,14 @@ def apply_overrides(data: dict, overrides: list[str]) -> dict:
         key, value = item.split("=", 1)
         node = out
         parts = key.strip().split(".")
+        if not all(parts):  # '=1', 'loss..heat_weight': said as an unknown key named '' before
+            raise ConfigError(f"{item}: override key {key.strip()!r} has an empty part; keys are dotted names such "
+                              f"as loss.heat_weight")
         for p in parts[:-1]:
             node = node.setdefault(p, {})
             if not isinstance(node, dict):
                 raise ConfigError(f"{key}: {p} is not a section")
-        node[parts[-1]] = _parse_value(value)
+        node[parts[-1]] = _parse_value(key.strip(), value)
     return out
 
 

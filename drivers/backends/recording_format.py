@@ -34,6 +34,7 @@ from ghnerf_runtime import tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.image_files import decode_image_or_none
+from ghnerf_runtime.json_keys import first_repeat, remember_repeats
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
 FORMAT = "ghnerf-rig-recording"
@@ -136,16 +137,19 @@ def read_manifest(directory: Path) -> Manifest:
             wrong format or version, invalid rig).
     """
     path = directory / MANIFEST
+    if directory.exists() and not directory.is_dir():  # said "does not exist" of a file that does
+        raise RigInitializationError(f"recording directory {directory} is a file, not a folder: replay:// takes "
+                                     f"the folder holding {MANIFEST}")
     if not directory.is_dir():
         raise RigInitializationError(f"recording directory {directory} does not exist")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = _json_value(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise _fail(path, None, "missing: not a recording directory (no manifest.json)") from None
     except (OSError, UnicodeDecodeError) as e:
         raise _fail(path, None, f"cannot read: {e}") from e
-    except json.JSONDecodeError as e:
-        raise _fail(path, None, f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from e
+    except ValueError as e:
+        raise _fail(path, None, str(e)) from e
     if not isinstance(data, dict):
         raise _fail(path, None, f"must be a JSON object, got {type(data).__name__}")
     if data.get("format") != FORMAT:
@@ -239,11 +243,29 @@ def _parse_line(line: bytes) -> Any:
     if b"\0" in line:
         raise ValueError("NUL bytes (a write the disk never completed)")
     try:
-        return json.loads(line.decode("utf-8"))
+        return _json_value(line.decode("utf-8"))
     except UnicodeDecodeError as e:
         raise ValueError(f"not UTF-8: {e.reason}") from e
-    except json.JSONDecodeError as e:
-        raise ValueError(f"invalid JSON: {e.msg}") from e
+
+
+def _json_value(text: str) -> Any:
+    """``text`` as JSON, or a ValueError saying why not. Besides invalid JSON: nesting too deep and an integer
+    of more digits than Python converts (a RecursionError or ValueError traceback from a replay's open, and from
+    the daemon's config check), and a key given twice in one object (JSON keeps the last: a hand-edited
+    manifest's first value was lost without a word)."""
+    try:
+        value = json.loads(text, object_pairs_hook=remember_repeats)
+    except json.JSONDecodeError as e:  # a journal line is one line: its column says where
+        where = f"column {e.colno}" if "\n" not in text.strip() else f"line {e.lineno}, column {e.colno}"
+        raise ValueError(f"invalid JSON at {where}: {e.msg}") from e
+    except RecursionError as e:
+        raise ValueError("invalid JSON: nested too deeply") from e
+    except ValueError as e:  # Python's 4300-digit limit on integers
+        raise ValueError(f"invalid JSON: {e}") from e
+    repeated = first_repeat(value)
+    if repeated is not None:
+        raise ValueError(f"duplicate key {repeated!r} (JSON keeps only its last value)")
+    return value
 
 
 def drop_broken_rows(directory: Path, rows: list[FrameRow]) -> tuple[list[FrameRow], int]:

@@ -28,7 +28,7 @@ from firmware_host.errors import FirmwareHostError
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
 from drivers.url import RigUrl, redact_url
-from drivers.url_paths import rig_url_from_folder
+from drivers.url_paths import FILE_PARTS, rig_url_from_folder
 from ghnerf_runtime.config_paths import paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
 
@@ -211,6 +211,8 @@ class DaemonConfig:
             _fail("sinks", "lists a URL twice", [redact_url(url) for url in sinks])  # the journal keeps no password
         _one_sink_per_destination(sinks)
         object.__setattr__(self, "sinks", tuple(sinks))
+        if isinstance(self.rig, RigConfig) and isinstance(self.health, HealthConfig):
+            _outputs_apart(_outputs(self), _rig_inputs(self.rig.url))
         if self.log_level not in LOG_LEVELS:
             _fail("log_level", f"must be one of {list(LOG_LEVELS)}", self.log_level)
         # One pass of the loop is a read (up to read_timeout_s) and an estimate: the watchdog must not
@@ -248,6 +250,56 @@ def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:
                                  "with all its options", redact_url(url))  # shown as the sinks show it: no password
         if place is not None:
             seen[place] = k
+
+
+def _same_file(a: str, b: str) -> bool:
+    """``a`` and ``b`` name one file (through links, ``..`` and the current directory), whether or not it exists."""
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def _outputs(config: "DaemonConfig") -> list[tuple[str, str]]:
+    """The files the daemon writes, as ``(key, path)``: the status file (replaced whole every few seconds) and the
+    ``file://`` sinks (appended to)."""
+    found = [("health.status_file", config.health.status_file)] if config.health.status_file else []
+    for k, url in enumerate(config.sinks):
+        place = _destination(url)
+        if place is not None and place[0] == "file" and place[2]:
+            found.append((f"sinks[{k}]", place[2]))
+    return found
+
+
+def _rig_inputs(url: str) -> list[tuple[str, str]]:
+    """The files ``rig.url`` reads (its ``rig=`` calibration, a ``bvh=`` motion, ``opencv://`` videos), as
+    ``(what, path)``; none for a URL that does not parse, which the rig's own check reports."""
+    try:
+        parsed = RigUrl.parse(url)
+    except RigConfigError:
+        return []
+    parts = FILE_PARTS.get(parsed.scheme)
+    if parts is None:
+        return []
+    return [(f"rig.url's {name}= file", value) for name, names_file in parts.options.items()
+            if (value := parsed.options.get(name)) and names_file(value)]
+
+
+def _outputs_apart(outputs: list[tuple[str, str]], inputs: list[tuple[str, str]]) -> None:
+    """Refuse a file the daemon writes that is one it reads, or that it also writes another way: the status file
+    set to the rig file replaced the calibration with a health report at the first beat, and a ``file://`` sink
+    on it appended joint lines to it; a status file that is also a sink interleaved the two writers."""
+    for i, (key, path) in enumerate(outputs):
+        for what, source in inputs:
+            if _same_file(path, source):
+                _fail(key, f"is {what} ({source}), which the daemon reads: writing there would destroy it; give "
+                           "another path", path)
+        for other, other_path in outputs[:i]:
+            if _same_file(path, other_path):
+                _fail(key, f"is where {other} writes too: two writers would mix in one file; give another path", path)
+
+
+def outputs_apart_from_config_file(config: "DaemonConfig", config_path: str | os.PathLike) -> None:
+    """Refuse a status file or ``file://`` sink that is the config file itself: the first status beat replaced the
+    config with a health report (the next start then failed), a sink appended joint lines to it."""
+    _outputs_apart(_outputs(config), [("the config file itself", os.fspath(config_path))])
 
 
 def _build(cls: type, data: Any, path: str) -> Any:
@@ -309,6 +361,7 @@ def load_daemon_config_noting_paths(path: str | os.PathLike) -> tuple[DaemonConf
                             rig_url_from_folder)
     try:
         config = daemon_config_from_dict(data)
+        outputs_apart_from_config_file(config, path)
     except DaemonConfigError as e:
         raise DaemonConfigError(str(e), key=str(path)) from None
     return config, _made_absolute(written, data)

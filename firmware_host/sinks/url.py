@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ipaddress
 import math
+import socket
 from dataclasses import dataclass
 from typing import Callable, Optional, TypeVar
 from urllib.parse import SplitResult, parse_qs, unquote, urlsplit
@@ -170,6 +171,8 @@ def host_name_problem(host: str) -> str:
         pass
     if any(ch.isspace() or not ch.isprintable() for ch in host):
         return "a host name has no spaces or control characters"
+    if host.removesuffix(".").rpartition(".")[2].isdecimal():
+        return _numeric_host_problem(host)
     try:
         encoded = host.encode("idna")  # what getaddrinfo does with it
     except UnicodeError as e:  # the codec's own reason is on its cause ("label empty or too long")
@@ -177,6 +180,19 @@ def host_name_problem(host: str) -> str:
     if len(encoded.removesuffix(b".")) > MAX_HOST_NAME:
         return f"not a host name: {len(encoded.removesuffix(b'.'))} characters, at most {MAX_HOST_NAME}"
     return ""
+
+
+def _numeric_host_problem(host: str) -> str:
+    """Why a host of numbers that is no dotted-quad IPv4 address (``ipaddress`` refused it) is refused: no host name
+    ends in an all-digit label (RFC 1123), so getaddrinfo either fails it for ever (``192.168.1.300``) or reads it
+    the C library's old way and sends elsewhere: leading zeros as octal (``192.168.001.010`` is 192.168.1.8), missing
+    parts as zeros (``10.1`` is 10.0.0.1)."""
+    try:
+        as_read = socket.inet_ntoa(socket.inet_aton(host))
+    except OSError:
+        return "not an IPv4 address (four numbers 0 to 255) nor a host name (whose last label is not all digits)"
+    return (f"not a dotted-quad IPv4 address: it would be read as {as_read} (leading zeros are octal, missing parts "
+            f"zeros); write the address meant as four numbers 0 to 255 without leading zeros")
 
 
 def ipv6_hint(parts: SplitResult, scheme: str, port: int) -> str:

@@ -526,6 +526,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         if args.json:  # written after the whole bench: its place is settled first
             args.json = ready_output(args.json, "--json")
+        if args.cache and args.cache != "off":  # a file there was "[Errno 20] Not a directory: '<it>/seq-...'"
+            ready_output(args.cache, "--cache", "folder")
         print(f"load average {os.getloadavg()}, {os.cpu_count()} CPUs; model {args.model_dir}", flush=True)
         report = run_runtime_bench(args)
         if args.json:

@@ -75,6 +75,30 @@ def existing_ancestor(path: Path) -> Path:
     return path
 
 
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """``a`` and ``b`` name one file (through links, ``..`` and the current directory), whether or not it exists."""
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def output_clash(outputs: dict[str, str | os.PathLike | None],
+                 inputs: dict[str, str | os.PathLike | None]) -> str | None:
+    """Why one of ``outputs`` (flag -> path; ``None`` for one not given) cannot be written: it is one of ``inputs``
+    (replaced by what the tool writes: the rig file by the joints, a captured image by its overlay) or another
+    output (one of the two lost); ``None`` when every output has a file of its own."""
+    written: list[tuple[str, str | os.PathLike]] = []
+    for flag, path in outputs.items():
+        if path is None:
+            continue
+        for other, source in inputs.items():
+            if source is not None and same_file(path, source):
+                return f"{flag} {path} is the file {other} reads: writing it would destroy it; give another path"
+        for other, other_path in written:
+            if same_file(path, other_path):
+                return f"{flag} {path} is where {other} writes too: one of them would be lost; give another path"
+        written.append((flag, path))
+    return None
+
+
 def ready_output_arg(ap: argparse.ArgumentParser, path: str | os.PathLike, flag: str,
                      kind: Literal["file", "folder"] = "file", suffix: str | None = None) -> Path:
     """:func:`ready_output` for a parsed argument: a bad path ends the tool as argparse ends it (the usage

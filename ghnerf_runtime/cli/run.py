@@ -34,7 +34,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output, same_file
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, stop_signal
 from ghnerf_runtime.config import HEATMAP_SOURCES, NOVEL_PATHS, THREE_D_METHODS, EstimatorConfig, config_to_dict, \
     load_config, read_json_file
@@ -129,6 +129,18 @@ def _check_args(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
             ap.error("--max-frames applies to --videos (--images is one pair)")
         if args.max_frames < 1:
             ap.error(f"--max-frames must be at least 1, got {args.max_frames}")
+    pair = args.images or args.videos
+    if pair and same_file(*pair):  # each camera's view in one picture: the joints came out, wrong
+        ap.error(f"{'--images' if args.images else '--videos'}: {pair[0]} and {pair[1]} are one file; give each "
+                 "camera's own, in the rig file's camera order")
+    clash = output_clash({"--out": None if args.out in (None, "-") else args.out, "--overlay": args.overlay,
+                          "--novel-view": args.novel_view},
+                         {"--rig": args.rig, "--config": args.config,
+                          **{f"{flag} ({which})": path for flag, pair in (("--images", args.images),
+                                                                           ("--videos", args.videos))
+                             for which, path in zip(("first", "second"), pair or ())}})
+    if clash:  # --out rig.json replaced the calibration with the joints, --overlay left.png the capture
+        ap.error(clash)
     if args.novel_alpha is None:
         args.novel_alpha = 0.5
     if args.novel_overlay is None:
@@ -170,12 +182,17 @@ def _config(args) -> EstimatorConfig:
     return cfg
 
 
-def _read_image(path: str) -> np.ndarray:
-    # checked first: for a missing file OpenCV prints a "findDecoder" warning of its own above the error
+def _check_input_file(path: str, kind: str) -> None:
+    """A missing file or a folder said as such: OpenCV prints a "findDecoder" warning of its own for a missing
+    image, and a video it cannot open was only "cannot open the video", whatever the reason."""
     if not os.path.exists(path):
         raise UsageError(f"{path}: no such file")
     if os.path.isdir(path):
-        raise UsageError(f"{path}: a folder, not an image")
+        raise UsageError(f"{path}: a folder, not {kind}")
+
+
+def _read_image(path: str) -> np.ndarray:
+    _check_input_file(path, "an image")
     img = read_image_or_none(path, cv2.IMREAD_COLOR)  # as stored, whatever its EXIF orientation (image_files)
     if img is None:
         raise UsageError(f"{path}: cannot read the image (not a format OpenCV reads, or unreadable)")
@@ -201,8 +218,9 @@ def _pairs(args) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     caps = []
     for path in args.videos:
         cap = cv2.VideoCapture(path)
-        if not cap.isOpened():
-            raise UsageError(f"{path}: cannot open the video")
+        if not cap.isOpened():  # why, checked only now: OpenCV also opens image-sequence patterns (left_%04d.png)
+            _check_input_file(path, "a video")
+            raise UsageError(f"{path}: cannot open the video (not a format OpenCV reads, or unreadable)")
         read_as_stored(cap, path)  # a phone's rotation metadata ignored, as an image's EXIF orientation is
         caps.append(cap)
     try:

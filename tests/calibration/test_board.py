@@ -194,3 +194,15 @@ def test_a_fraction_in_millimetres_is_refused_by_name_not_a_format_error():
     with pytest.raises(BoardError, match=r"square_m: .*millimetres\? 80 mm is 0\.08 m"):
         BoardSpec(square_m=Fraction(80), marker_m=0.03)
     assert BoardSpec(square_m=Fraction(1, 25), marker_m=0.03).square_m == pytest.approx(0.04)
+
+
+@pytest.mark.parametrize("text, says", [
+    ("[" * 100_000 + "]" * 100_000, "not a JSON file: nested too deeply"),  # was a RecursionError traceback
+    ('{"squares_x": 1' + "0" * 5000 + "}", "not a JSON file: Exceeds the limit (4300 digits)"),  # a ValueError one
+])
+def test_board_json_past_the_parser_names_the_file(tmp_path, text, says):
+    path = tmp_path / "board.json"
+    path.write_text(text)
+    with pytest.raises(BoardError) as e:
+        load_board(path)
+    assert str(e.value).startswith(f"{path}: {says}")

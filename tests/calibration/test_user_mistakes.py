@@ -191,3 +191,31 @@ def test_a_capture_with_another_number_of_squares_says_so_and_why_nothing_was_ke
     assert re.match(rf"ghcal: camera 'left' sees 1[0-7] DICT_5X5_100 markers but not the board {re.escape(str(board))} "
                     r"describes \(8x5 squares of 120 mm", said[0])  # 17 on the print, a few may be missed
     assert "kept 0 of 1 views: the stream ended, and the board was in no image" in err
+
+
+@pytest.mark.parametrize("text, says", [
+    ("[" * 100_000 + "]" * 100_000, "(JSON nested too deeply)"),  # was a RecursionError traceback from ghcal solve
+    ('{"cameras": 1' + "0" * 5000 + "}", "(Exceeds the limit (4300 digits)"),  # a ValueError traceback
+])
+def test_a_camera_order_file_past_the_parser_is_named(tmp_path, text, says):
+    from calibration.capture import read_camera_order
+
+    (tmp_path / "cameras.json").write_text(text)
+    with pytest.raises(CaptureError) as e:
+        read_camera_order(tmp_path)
+    assert str(e.value).startswith(f"{tmp_path / 'cameras.json'}: cannot read the camera order {says}")
+
+
+@pytest.mark.parametrize("argv, said", [
+    # argparse named the parser functions: "invalid _positive_int value: '1.5'", "invalid parse value: 'abc'"
+    (["board", "--out", "b", "--dpi", "1.5"], "argument --dpi: expected a whole number, got '1.5'"),
+    (["synth", "--out", "s", "--seed", "x"], "argument --seed: expected a whole number, got 'x'"),
+    (["check", "--rig", "r.json", "--images", "i", "--max-px", "abc"],
+     "argument --max-px: expected a number, got 'abc'"),
+    (["capture", "--url", "sim://", "--out", "c", "--still-s", "soon"],
+     "argument --still-s: expected a number, got 'soon'"),
+])
+def test_a_number_that_is_not_one_is_said_so(argv, said, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(argv)
+    assert e.value.code == 2 and said in capsys.readouterr().err

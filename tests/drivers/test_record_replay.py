@@ -437,6 +437,41 @@ def test_not_a_recording(tmp_path):
         create_rig_source(f"replay://{tmp_path}")
 
 
+def test_a_file_for_the_take_is_named_as_a_file(tmp_path):
+    (tmp_path / "take.json").write_text("{}")
+    with pytest.raises(RigInitializationError) as info:  # was "does not exist"
+        create_rig_source(f"replay://{tmp_path / 'take.json'}")
+    assert f"recording directory {tmp_path / 'take.json'} is a file, not a folder" in str(info.value)
+
+
+@pytest.mark.parametrize("text, says", [
+    # each was a RecursionError or ValueError traceback from the replay's open (and the daemon's config check)
+    ("[" * 100_000 + "]" * 100_000, "invalid JSON: nested too deeply"),
+    ('{"version": 1' + "0" * 5000 + "}", "invalid JSON: Exceeds the limit (4300 digits)"),
+    # JSON keeps the last: a hand-edited manifest's first value was lost without a word
+    ('{"format": "ghnerf-rig-recording", "version": 1, "version": 1}', "duplicate key 'version'"),
+    ('{"rig": {"cameras": [{"K": 1, "K": 2}]}}', "duplicate key 'rig.cameras[0].K'"),
+])
+def test_manifest_json_past_the_parser_names_the_file(copy_of_take, text, says):
+    (copy_of_take / MANIFEST).write_text(text)
+    with pytest.raises(RigInitializationError) as info:
+        create_rig_source(f"replay://{copy_of_take}")
+    assert f"recording file {copy_of_take / MANIFEST}: {says}" in str(info.value)
+
+
+@pytest.mark.parametrize("line, says", [
+    ("[" * 100_000 + "]" * 100_000, "invalid JSON: nested too deeply"),  # was a RecursionError traceback
+    ('{"camera": "left", "index": 0, "index": 7}', "duplicate key 'index'"),
+])
+def test_journal_line_past_the_parser_names_file_and_line(copy_of_take, line, says):
+    lines = (copy_of_take / FRAMES).read_text().splitlines()
+    lines[4] = line
+    (copy_of_take / FRAMES).write_text("\n".join(lines) + "\n")
+    with pytest.raises(RigInitializationError) as info:
+        create_rig_source(f"replay://{copy_of_take}")
+    assert f"recording file {copy_of_take / FRAMES}: line 5: {says}" in str(info.value)
+
+
 def test_manifest_that_is_not_json_names_the_file_and_line(copy_of_take):
     (copy_of_take / MANIFEST).write_text('{"format": "ghnerf-rig-recording",\n "version": }')
     with pytest.raises(RigInitializationError) as info:

@@ -259,9 +259,9 @@ def test_a_sink_url_is_printed_without_its_password(tmp_path, capsys, sim_url):
     assert "sink memory://viewer:***@here: " in captured.out and "s3cret" not in captured.out + captured.err
 
 
-def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_url):
-    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path),
-                    "--model-dir", str(tmp_path / "no-model")])
+def test_truth_only_streams_ground_truth_without_a_model(tmp_path, capsys, sim_url, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no ./models (a --model-dir with --truth-only is refused: it would be ignored)
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.5", "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "GROUND TRUTH" in out and "estimated" not in out
@@ -301,7 +301,7 @@ def test_the_counters_of_a_recording_are_those_of_the_finished_take(tmp_path, ca
     monkeypatch.setattr(record, "encode_image", slow)
     take = tmp_path / "take"
     rc = demo.main(["--truth-only", "--url", f"record+{sim_url}&out={take}", "--seconds", "0.5",
-                    "--out", str(tmp_path / "out"), "--model-dir", str(tmp_path / "no-model")])
+                    "--out", str(tmp_path / "out")])
     out = capsys.readouterr().out
     assert rc == 0, out
     counters = json.loads((take / "manifest.json").read_text())["counters"]
@@ -317,7 +317,7 @@ def test_a_replay_prints_no_capture_latency_and_no_loop_note(tmp_path, capsys, s
     # run's clock) and "the first open pre-renders the motion loop", which only sim:// does
     take = tmp_path / "take"
     assert demo.main(["--truth-only", "--url", f"record+{sim_url}&out={take}&lossless=1", "--seconds", "0.4",
-                      "--out", str(tmp_path / "rec"), "--model-dir", str(tmp_path / "no-model")]) == 0
+                      "--out", str(tmp_path / "rec")]) == 0
     assert "pre-renders the motion loop" in capsys.readouterr().out
     rc = demo.main(["--url", f"replay://{take}?speed=free", "--out", str(tmp_path / "out"),
                     "--model-dir", str(MODELS)])
@@ -337,8 +337,7 @@ def test_a_replay_prints_no_capture_latency_and_no_loop_note(tmp_path, capsys, s
 def test_the_default_sink_writes_into_an_out_folder_with_a_space_and_a_hash(tmp_path, capsys, sim_url):
     # file://{path} unescaped: the "#" began a fragment and the joints went to a file called "my run"
     out = tmp_path / "my run#2"
-    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(out),
-                    "--model-dir", str(tmp_path / "no-model")])
+    rc = demo.main(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(out)])
     printed = capsys.readouterr().out
     assert rc == 0, printed
     assert _joints_rows(out / "joints.jsonl") and not (tmp_path / "my run").exists()
@@ -400,6 +399,20 @@ def test_seconds_and_out_are_checked_by_name(tmp_path, capsys):
     (tmp_path / "afile").write_text("")
     assert demo.main(["--truth-only", "--out", str(tmp_path / "afile")]) == 2
     assert f"--out {tmp_path / 'afile'}: is a file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flags, named", [
+    (["--config", "CONFIG"], "--config with --truth-only"),  # the config was neither read nor used: exit 0
+    (["--model-dir", "nowhere"], "--model-dir with --truth-only"),
+    (["--config", "CONFIG", "--model-dir", "nowhere"], "--config and --model-dir with --truth-only"),
+])
+def test_model_flags_with_truth_only_are_refused(tmp_path, capsys, flags, named):
+    (tmp_path / "c.json").write_text('{"joints3d": {"max_prior_error_m": NaN}}')
+    flags = [str(tmp_path / "c.json") if f == "CONFIG" else f for f in flags]
+    with pytest.raises(SystemExit) as e:
+        demo.main(["--truth-only", "--seconds", "0.2", "--out", str(tmp_path / "out"), *flags])
+    assert e.value.code == 2 and f"error: {named}: no model runs" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()  # refused before anything is opened or written
 
 
 @pytest.mark.parametrize("argv0, prog", [

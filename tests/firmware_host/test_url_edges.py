@@ -231,7 +231,26 @@ def test_udp_and_vmc_refuse_a_host_that_can_never_be_looked_up(url, host):
     assert "host name" in str(e)
 
 
-@pytest.mark.parametrize("host", ["robot.local", "robot.local.", "été.local", "a." * 126 + "a", "127.0.0.1",
+@pytest.mark.parametrize("url, host, says", [
+    # getaddrinfo read these the C library's old way: the frames went to another address, without a word
+    ("udp://192.168.001.010:5005", "192.168.001.010", "would be read as 192.168.1.8"),
+    ("vmc://10.1:39539", "10.1", "would be read as 10.0.0.1"),
+    # no name ends in an all-digit label: retried for ever as "Name or service not known"
+    ("udp://192.168.1.300:5005", "192.168.1.300", "not an IPv4 address (four numbers 0 to 255) nor a host name"),
+    ("udp://1.2.3.4.5:5005", "1.2.3.4.5", "not an IPv4 address"),
+])
+def test_udp_and_vmc_refuse_a_number_that_is_no_dotted_quad(url, host, says):
+    e = _refused(url)
+    assert (e.field, e.value, e.url) == ("host", host, url)
+    assert says in str(e)
+
+
+def test_listen_refuses_a_number_that_is_no_dotted_quad(capsys):
+    err = _listen_fails(capsys, "udp://239.255.000.001:9870", "--seconds", "0.1")
+    assert "bad host '239.255.000.001'" in err and "would be read as 239.255.0.1" in err
+
+
+@pytest.mark.parametrize("host", ["robot.local", "robot.local.", "été.local", "host1.lan", "10.0.0.1", "::1", "a." * 126 + "a", "127.0.0.1",
                                   "fe80::1%Eth0", "r" * 63])
 def test_host_names_dns_can_carry_are_taken(host):
     from firmware_host.sinks.url import host_name_problem

@@ -87,3 +87,12 @@ def test_the_default_rows_run_what_the_device_runs_by_default(capsys, monkeypatc
     # the rest of the config too, but the novel view's graphs, loaded for the novel rows
     (cfg,) = built
     assert replace(cfg, novel_view=replace(cfg.novel_view, enabled=runtime.novel_view.enabled)) == runtime
+
+
+def test_a_cache_that_is_a_file_is_named_before_anything_runs(tmp_path, capsys, no_render, monkeypatch):
+    monkeypatch.setattr(bench, "load_session", lambda cfg: pytest.fail("the model was loaded"))
+    (tmp_path / "afile").write_text("")
+    rc = bench.main(["runtime", "--sequences", "1", "--frames", "2", "--warmup", "0",
+                     "--cache", str(tmp_path / "afile")])
+    # was "[Errno 20] Not a directory: '<it>/seq-...'" after the model had loaded, naming no flag
+    assert rc == 2 and f"--cache {tmp_path / 'afile'}: is a file; give a folder" in capsys.readouterr().err

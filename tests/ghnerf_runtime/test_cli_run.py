@@ -286,6 +286,51 @@ def test_flags_that_would_be_ignored_are_refused(extra, words, capsys):
     assert all(w in err for w in words), err
 
 
+@pytest.mark.parametrize(("extra", "said"), [
+    # each ran and replaced the file: the calibration by the joints, a captured image by its overlay
+    (["--images", "a.png", "b.png", "--out", "r.json"], "--out r.json is the file --rig reads"),
+    (["--images", "a.png", "b.png", "--overlay", "./sub/../a.png"],
+     "--overlay ./sub/../a.png is the file --images (first) reads"),
+    (["--videos", "a.mp4", "b.mp4", "--novel-view", "b.mp4"], "--novel-view b.mp4 is the file --videos (second) reads"),
+    (["--images", "a.png", "b.png", "--config", "c.json", "--out", "c.json"], "--out c.json is the file --config reads"),
+    # the later writer replaced the earlier one's file
+    (["--images", "a.png", "b.png", "--overlay", "v.png", "--novel-view", "v.png"],
+     "--novel-view v.png is where --overlay writes too"),
+])
+def test_an_output_that_is_an_input_or_another_output_is_refused(tmp_path, monkeypatch, capsys, extra, said):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r.json").write_text("{}")
+    with pytest.raises(SystemExit) as e:
+        cli_run.main(["--rig", "r.json", *extra])
+    assert e.value.code == 2 and f"error: {said}: " in capsys.readouterr().err
+    assert (tmp_path / "r.json").read_text() == "{}" and not (tmp_path / "v.png").exists()
+
+
+@pytest.mark.parametrize("flag", ["--images", "--videos"])
+def test_one_file_for_both_cameras_is_refused(tmp_path, monkeypatch, capsys, flag):
+    """Each camera's view in one picture: the run went on and reported joints, wrong."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        cli_run.main(["--rig", "r.json", flag, "a", "./a", "--out", "o.json"])
+    assert e.value.code == 2 and f"error: {flag}: a and ./a are one file; give each camera's own" in \
+        capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("make", "said"), [
+    (lambda p: None, "no such file"),
+    (lambda p: p.mkdir(), "a folder, not a video"),
+    (lambda p: p.write_bytes(b"not a video"), "cannot open the video (not a format OpenCV reads, or unreadable)"),
+])
+def test_a_video_that_cannot_be_opened_says_why(tmp_path, monkeypatch, capsys, make, said):
+    monkeypatch.setattr(cli_run.Estimator, "from_config", lambda rig, cfg: _StubEstimator())
+    monkeypatch.setattr(cli_run, "load_rig", lambda path: None)
+    make(tmp_path / "a.mp4")
+    (tmp_path / "b.mp4").write_bytes(b"")
+    assert cli_run.main(["--rig", "r.json", "--videos", str(tmp_path / "a.mp4"), str(tmp_path / "b.mp4"),
+                         "--out", str(tmp_path / "o.json")]) == 2
+    assert f"{tmp_path / 'a.mp4'}: {said}" in capsys.readouterr().err  # was "cannot open the video", whatever why
+
+
 @pytest.mark.parametrize("path", ["line", "orbit", "auto"])
 def test_novel_path_sets_the_configs_path(path, capsys):
     args = ["--rig", "unused.json", "--images", "a", "b", "--novel-view", "n.png", "--validate-config"]

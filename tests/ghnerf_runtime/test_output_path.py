@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
+from ghnerf_runtime.cli.output_path import OutputPathError, output_clash, ready_output
 
 
 def test_a_missing_folder_is_made_and_the_path_returned(tmp_path):
@@ -47,3 +47,16 @@ def test_a_folder_or_file_without_write_permission_is_refused(tmp_path, monkeypa
     monkeypatch.setattr(op.os, "access", lambda path, mode: str(path) == str(tmp_path))
     with pytest.raises(OutputPathError, match="the file exists and is not writable"):
         ready_output(tmp_path / "r.json", "--out")
+
+
+def test_output_clash_sees_one_file_however_it_is_spelled(tmp_path):
+    (tmp_path / "rig.json").write_text("{}")
+    (tmp_path / "link.json").symlink_to(tmp_path / "rig.json")
+    inputs = {"--rig": str(tmp_path / "rig.json"), "--config": None}
+    assert output_clash({"--out": str(tmp_path / "link.json")}, inputs).startswith(
+        f"--out {tmp_path / 'link.json'} is the file --rig reads")
+    assert output_clash({"--out": str(tmp_path / "sub" / ".." / "rig.json")}, inputs) is not None
+    assert output_clash({"--out": str(tmp_path / "a.json"), "--overlay": None,
+                         "--novel-view": str(tmp_path / "a.json")}, inputs).startswith(
+        f"--novel-view {tmp_path / 'a.json'} is where --out writes too")
+    assert output_clash({"--out": str(tmp_path / "a.json"), "--overlay": str(tmp_path / "a.png")}, inputs) is None

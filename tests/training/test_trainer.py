@@ -38,6 +38,12 @@ def tiny_cfg(data, **kw):
     ({"grad_clip": float("nan")}, "grad_clip"),
     ({"max_minutes": float("nan")}, "max_minutes"),
     ({"max_minutes": -1.0}, "max_minutes"),
+    # torch takes these as C integers: accepted here, they failed the run after config.json was written
+    ({"seed": -1}, "seed"),
+    ({"seed": 2 ** 63}, "seed"),
+    ({"threads": 2 ** 31}, "threads"),
+    ({"pretrain_human": {"seed": 2 ** 63}}, "pretrain_human.seed"),
+    ({"pretrain_human": {"threads": 2 ** 31}}, "pretrain_human.threads"),
     ({"loss": {"level_weights": [-1.0, 2.0]}}, "loss.level_weights"),
     ({"loss": {"level_weights": [1.0, 1.0, 1.0]}}, "loss.level_weights"),  # edge128 has 2 levels
 ])
@@ -55,6 +61,38 @@ def test_config_files_and_overrides(tmp_path):
         ("tiny", 5, 0.25, 0.0, "x")
     for name in ("edge128", "edge128_baseline"):  # the shipped schedules validate
         build_config(load_config_file(f"training/train_configs/{name}.json"))
+
+
+def test_seed_and_threads_at_their_limits_validate():
+    from training.run_limits import MAX_SEED, MAX_THREADS
+
+    cfg = build_config({"seed": MAX_SEED, "threads": MAX_THREADS, "pretrain_human": {"seed": MAX_SEED}})
+    assert (cfg.seed, cfg.threads) == (MAX_SEED, MAX_THREADS)
+
+
+@pytest.mark.parametrize("name, text, says", [
+    ("deep.json", "[" * 100_000 + "]" * 100_000, "not valid JSON (nested too deeply)"),  # was a RecursionError
+    ("deep.toml", "x = " + "[" * 100_000 + "]" * 100_000, "not valid TOML (nested too deeply)"),
+    # the 5 was taken silently
+    ("twice.json", '{"iterations": 100, "iterations": 5}', "duplicate key 'iterations' (JSON keeps only its last value)"),
+    ("empty.json", "", "file is empty"),
+])
+def test_config_file_errors_name_the_file(tmp_path, name, text, says):
+    (tmp_path / name).write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_config_file(tmp_path / name)
+    assert str(e.value) == f"config file {tmp_path / name}: {says}"
+
+
+@pytest.mark.parametrize("item, says", [
+    ("=1", "=1: override key '' has an empty part"),  # was "': unknown key for TrainConfig"
+    ("loss..heat_weight=1", "override key 'loss..heat_weight' has an empty part"),
+    ("model=" + "[" * 50_000 + "]" * 50_000, "model: the value is nested too deeply"),  # was a RecursionError
+])
+def test_bad_overrides_are_config_errors(item, says):
+    with pytest.raises(ConfigError) as e:
+        apply_overrides({}, [item])
+    assert says in str(e.value)
 
 
 def test_cli_reports_config_error(tmp_path, capsys):

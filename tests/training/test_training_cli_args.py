@@ -19,6 +19,25 @@ def test_threads_below_one_is_a_usage_error(tmp_path, capsys):
     assert "--threads: must be at least 1, got 0" in capsys.readouterr().err
 
 
+def test_threads_past_a_c_int_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        evaluate.main(["--data", str(tmp_path), "--model", "m=x.pt", "--threads", str(2 ** 31)])
+    assert e.value.code == 2  # was torch's "ValueError: Overflow when unpacking long" traceback
+    assert f"--threads: must be at most 1024, got {2 ** 31}" in capsys.readouterr().err
+
+
+def test_an_out_that_is_a_models_checkpoint_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    """It was replaced by the scores' JSON once the evaluation had run."""
+    monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))
+    ckpt = tmp_path / "last.pt"
+    ckpt.write_bytes(b"weights")
+    with pytest.raises(SystemExit) as e:
+        evaluate.main(["--data", str(tmp_path), "--model", f"a={ckpt}", "--out", str(ckpt)])
+    assert e.value.code == 2
+    assert f"--out {ckpt} is the file --model a={ckpt} reads" in capsys.readouterr().err
+    assert ckpt.read_bytes() == b"weights"
+
+
 def test_two_models_with_one_label_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
     """Two runs' ``last.pt`` are both labelled "last": the second's scores replaced the first's in the JSON."""
     monkeypatch.setattr(evaluate, "prepare", lambda *a: pytest.fail("the models were loaded"))

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from training.cli import doc_of, parse_then_run
+from training.run_limits import MAX_THREADS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -17,7 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "LABEL its own (without LABEL=, the file's or folder's name)")
     ap.add_argument("--limit", type=int, default=0, help="first N scenes only (0: all)")
     ap.add_argument("--no-novel", action="store_true", help="skip the novel-view PSNR/SSIM")
-    ap.add_argument("--threads", type=int, default=2, help="torch and onnxruntime threads (at least 1)")
+    ap.add_argument("--threads", type=int, default=2, help=f"torch and onnxruntime threads (1 to {MAX_THREADS})")
     ap.add_argument("--out", help="write the JSON here (also printed)")
     return ap
 

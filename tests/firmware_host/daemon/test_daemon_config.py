@@ -94,6 +94,40 @@ def test_sinks_to_different_destinations_are_kept(sinks):
     assert daemon_config_from_dict({"sinks": sinks}).sinks == tuple(sinks)
 
 
+@pytest.mark.parametrize("change, said", [
+    # the status file is replaced whole at every beat: the calibration became a health report
+    (lambda d, t: d["health"].update(status_file=f"{t}/rig.json"),
+     "health.status_file: is rig.url's rig= file ({t}/rig.json), which the daemon reads"),
+    (lambda d, t: d["health"].update(status_file=f"{t}/sub/../rig.json"),  # one file, spelled another way
+     "health.status_file: is rig.url's rig= file ({t}/rig.json), which the daemon reads"),
+    # a file:// sink appends joint lines to it
+    (lambda d, t: d.update(sinks=[f"file://{t}/rig.json"]), "sinks[0]: is rig.url's rig= file ({t}/rig.json)"),
+    (lambda d, t: d.update(sinks=[SINK, f"file://{t}/status.json"]),
+     "sinks[1]: is where health.status_file writes too: two writers would mix in one file"),
+    (lambda d, t: d.update(sinks=[f"file://{t}/j.jsonl", f"file://localhost{t}/j.jsonl?write_timeout_ms=5"]),
+     "sinks[1]: is where sinks[0] writes too"),
+])
+def test_a_file_the_daemon_writes_is_no_file_it_reads_or_writes_otherwise(tmp_path, change, said):
+    data = {"rig": {"url": f"opencv://?first=0&second=1&rig={tmp_path}/rig.json"}, "sinks": [SINK],
+            "health": {"status_file": str(tmp_path / "status.json")}}
+    change(data, tmp_path)
+    assert said.format(t=tmp_path) in _error(data)
+
+
+def test_the_status_file_or_a_file_sink_is_not_the_config_file(tmp_path):
+    """The first status beat replaced the config with a health report (the next start failed); a file:// sink
+    appended joint lines to it."""
+    path = tmp_path / "ghnerf.json"
+    for change in ({"health": {"status_file": "ghnerf.json"}}, {"sinks": [f"file://{path}"]}):
+        path.write_text(json.dumps({"rig": {"url": "sim://"}, "sinks": [SINK], **change}))
+        with pytest.raises(DaemonConfigError) as e:
+            load_daemon_config(path)
+        assert f"is the config file itself ({path}), which the daemon reads" in str(e.value)
+        assert str(e.value).startswith(str(path))
+    path.write_text(json.dumps({"rig": {"url": "sim://"}, "sinks": [SINK], "health": {"status_file": "status.json"}}))
+    assert load_daemon_config(path).health.status_file == str(tmp_path / "status.json")  # beside it: fine
+
+
 def test_round_trip_and_example_is_valid():
     cfg = daemon_config_from_dict(EXAMPLE_CONFIG)
     assert daemon_config_from_dict(json.loads(json.dumps(config_to_dict(cfg)))) == cfg
