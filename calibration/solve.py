@@ -545,10 +545,16 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
 
 def fold_warning(cam: Camera) -> str:
     """The warning for a lens model that folds over inside the image, the fold said as an angle off the
-    optical axis (its normalised radius, the tangent of that angle, meant nothing to a reader)."""
-    return (f"{cam.name}: the solved lens model folds over inside the image, "
-            f"{math.degrees(math.atan(cam.fold_radius)):.0f} degrees off the optical axis (normalised radius "
-            f"{cam.fold_radius:.2f}): views did not reach the image corners; capture some there, or use --lens narrow")
+    optical axis (its normalised radius, the tangent of that angle, meant nothing to a reader), naming the
+    tangential or thin-prism coefficients where they fold it (:meth:`Camera.fold_terms`)."""
+    limit = cam.lens_limit
+    where = (f"{cam.name}: the solved lens model folds over inside the image, {math.degrees(math.atan(limit)):.0f} "
+             f"degrees off the optical axis (normalised radius {limit:.2f})")
+    if terms := cam.fold_terms():
+        named = ", ".join(f"{name} = {value:g}" for name, value in terms)
+        return (f"{where}, by its tangential or thin-prism terms ({named}; a real lens's are about 0.001): the "
+                "fit went wrong; capture views that cover the whole frame, corners too, and solve again")
+    return f"{where}: views did not reach the image corners; capture some there, or use --lens narrow"
 
 
 def typed_pitch_warning(pitch_deg: float, camera: str) -> str | None:

@@ -85,7 +85,7 @@ import numpy as np
 
 from ghnerf_runtime.contract import Normalisation
 from ghnerf_runtime.errors import GeometryError, ShapeError
-from ghnerf_runtime.geometry.camera import Camera, check_last_dim, image_rotation
+from ghnerf_runtime.geometry.camera import LENS_REACH, Camera, check_last_dim, image_rotation
 from ghnerf_runtime.geometry.rig import WorkingVolume
 from ghnerf_runtime.plain_values import whole_valued_or_none
 
@@ -471,7 +471,8 @@ _FRAME_DTYPES = (np.uint8, np.uint16, np.int16, np.float32, np.float64)
 
 def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
     """Distorted frame pixels ``(S, S)`` x2 sampled by each pixel of the pinhole ``crop`` camera."""
-    skewed, folds = camera.K[0, 1] != 0.0, math.isfinite(camera.fold_radius)
+    # the limit within_lens and project use (radial fold, or nearer by tangential/prism terms; cached per lens)
+    skewed, folds = camera.K[0, 1] != 0.0, camera.lens_limit < LENS_REACH
     # each crop pixel's ray in the camera's normalised coordinates (the crop is a pinhole: exact)
     xy = camera_normalized(crop.pixels_to_normalized(crop.pixel_grid()), crop, camera) if skewed or folds else None
     if not skewed:
@@ -485,8 +486,9 @@ def _lens_maps(camera: Camera, crop: Camera) -> tuple[np.ndarray, np.ndarray]:
         map_x, map_y = src[..., 0].astype(np.float32), src[..., 1].astype(np.float32)
     if folds:
         # Past the lens model's fold, the forward model maps back onto the image (a mirrored ring of
-        # the picture): show nothing there instead, as outside the frame.
-        outside = np.sum(xy * xy, axis=-1) >= camera.fold_radius**2
+        # the picture, or duplicated content where tangential or prism terms fold it): show nothing there
+        # instead, as outside the frame.
+        outside = ~camera.within_lens(xy)
         map_x[outside] = map_y[outside] = _OUTSIDE
     # A crop far off the frame (or a short focal length) sends the lens polynomial past float32: inf or NaN,
     # which the window below cannot round to a pixel (OverflowError). Nothing of the frame is seen there.

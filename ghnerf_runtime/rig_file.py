@@ -38,7 +38,7 @@ import numpy as np
 
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, box_reach
 from ghnerf_runtime.errors import GeometryError, RigFileError
-from ghnerf_runtime.geometry.camera import Camera, nearest_rotation
+from ghnerf_runtime.geometry.camera import DISTORTION_NAMES, Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.json_keys import remember_repeats
 
@@ -67,8 +67,6 @@ FOCAL_RANGE = (0.01, 100.0)
 #: Past it a file holds a typo or a fit that diverged: k1 = 1e308 loaded (the lens fold check only warned), and
 #: the projection overflowed to inf/NaN pixels.
 MAX_DISTORTION = 1e3
-#: Names of the OpenCV coefficients, in file order, for error messages.
-DISTORTION_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tx", "ty")
 #: Largest rig file read, bytes: the example rig (docs/examples/rig.json) is 1.5 KB, so this holds hundreds of cameras
 #: with their metadata; anything larger (a log, an image, /dev/zero named by mistake) is refused before it is read.
 MAX_RIG_FILE_BYTES = 1 << 20
@@ -97,6 +95,7 @@ __all__ = [
     "focal_length_problem",
     "distortion_problem",
     "volume_reach_problem",
+    "lens_fold_warning",
     "PRINCIPAL_POINT_TOLERANCE",
     "MAX_DISTORTION",
     "MAX_RIG_FILE_BYTES",
@@ -333,13 +332,21 @@ def _rig_from_dict(data: Any, *, path: str | os.PathLike | None, warn: bool) -> 
         chk._raise("working_volume", too_far)
     for cam in cameras if warn else ():
         if cam.fold_inside_image():
-            log.warning(
-                "%scamera %r: its lens model folds over %.2f (normalised radius) from the centre, before the "
-                "image corners: pixels beyond it count as outside the image. A calibration with the rational "
-                "model (8 coefficients) usually covers the whole frame", f"{path}: " if path else "", cam.name,
-                cam.fold_radius,
-            )
+            log.warning("%s%s", f"{path}: " if path else "", lens_fold_warning(cam))
     return rig
+
+
+def lens_fold_warning(cam: Camera) -> str:
+    """What loading says of a camera whose lens model folds over inside its image (:meth:`Camera.fold_inside_image`),
+    naming the coefficients at fault where its tangential or thin-prism terms fold it (:meth:`Camera.fold_terms`)."""
+    where = f"camera {cam.name!r}: its lens model folds over {cam.lens_limit:.2f} (normalised radius) from the centre"
+    if terms := cam.fold_terms():
+        named = ", ".join(f"{name} = {value:g}" for name, value in terms)
+        return (f"{where}, inside the image, by its tangential or thin-prism terms ({named}; a real lens's are "
+                "about 0.001): pixels beyond it count as outside the image. A calibration that went wrong "
+                "(views that did not cover the frame?): calibrate again")
+    return (f"{where}, before the image corners: pixels beyond it count as outside the image. A calibration with "
+            "the rational model (8 coefficients) usually covers the whole frame")
 
 
 def volume_reach_problem(rig: Rig) -> str | None:

@@ -54,7 +54,7 @@ from ghnerf_runtime.estimator import (_FLOOR_BODY_M, _FLOOR_EDGE_FRAC, _NEAR_LIE
                                       _PRIOR_CONFIDENCE_SCALE_M, _PRIOR_FOLLOW_MAX_ERROR_M,
                                       STILL_SEVERAL_MIN_JOINTS, PairResult)
 from ghnerf_runtime.geometry import triangulate_dlt
-from ghnerf_runtime.geometry.camera import UNDISTORT_POLISH
+from ghnerf_runtime.geometry.camera import REACH_RIM_POINTS, UNDISTORT_POLISH
 from ghnerf_runtime.geometry.orbit import AXES_PIVOT_DROP_M, AXES_PIVOT_HOLD_M, PARALLEL_AXES_DEG, PIVOT_CONDITION_DEG
 from ghnerf_runtime.geometry.raycast import RASTER_CHUNK
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M
@@ -117,6 +117,7 @@ def _doc(name: str) -> str:
     ("docs/geometry.md", f"`MIN_RAY_ANGLE_FLOOR_DEG` = {_exp(MIN_RAY_ANGLE_FLOOR_DEG)} degrees"),
     ("docs/geometry.md", f"(`CENTRE_TOLERANCE`: centres within {_exp(CENTRE_TOLERANCE)} of their distance"),
     ("docs/geometry.md", f"`UNDISTORT_POLISH` = {_exp(UNDISTORT_POLISH)}, so"),
+    ("docs/geometry.md", f"in {REACH_RIM_POINTS} points (`REACH_RIM_POINTS`)"),
     ("docs/protocol.md", f"at most {LATE_WINDOW} (`LATE_WINDOW`) behind the newest"),
     ("docs/daemon.md", f"at most {LATE_WINDOW} behind the newest (`LATE_WINDOW`)"),
     ("docs/rig-file.md", f"at most {MAX_DISTORTION:g} in magnitude (`MAX_DISTORTION`"),

@@ -27,6 +27,8 @@ from ghnerf_runtime.plain_values import whole_valued_or_none
 
 #: Distortion coefficient counts OpenCV's models take (and :class:`Camera` accepts).
 DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
+#: Names of OpenCV's distortion coefficients, in their order (messages name the coefficient at fault).
+DISTORTION_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4", "tx", "ty")
 
 
 def check_last_dim(name: str, array: np.ndarray, size: int) -> np.ndarray:
@@ -166,6 +168,34 @@ def unfolded_radius(coefficients: tuple[float, ...], r_max: float) -> float:
 
 #: Distortion coefficients (indices into the 14) that make the lens model other than radial.
 _ASYMMETRIC_TERMS = (2, 3, 8, 9, 10, 11)
+
+#: Points :meth:`Camera.fold_inside_image` traces the rim of the lens model's reach with (every 0.09 degrees).
+REACH_RIM_POINTS = 4096
+
+
+def _segments_meet_box(start: np.ndarray, end: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Whether any segment ``start[i] -> end[i]`` (``(N, 2)`` each) touches the box ``[lo, hi]`` (clipped
+    against its two slabs: the segment's parameter range inside both is not empty)."""
+    step = end - start
+    moving = step != 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_lo, t_hi = (lo - start) / step, (hi - start) / step
+    within = (start >= lo) & (start <= hi)  # a segment parallel to a slab: inside it throughout, or never
+    enter = np.where(moving, np.minimum(t_lo, t_hi), np.where(within, -np.inf, np.inf))
+    leave = np.where(moving, np.maximum(t_lo, t_hi), np.where(within, np.inf, -np.inf))
+    first, last = np.maximum(enter.max(axis=-1), 0.0), np.minimum(leave.min(axis=-1), 1.0)
+    return bool(np.any(first <= last))
+
+
+def _winding_number(polygon: np.ndarray, point: np.ndarray) -> int:
+    """How many times the closed polygon ``(N, 2)`` winds around ``point`` (which it must not pass through), in
+    the sense its angle (``arctan2``) grows: each straight edge turns by less than half a turn."""
+    offset = polygon - point
+    angle = np.arctan2(offset[:, 1], offset[:, 0])
+    turn = np.diff(np.append(angle, angle[0]))
+    turn = (turn + math.pi) % (2 * math.pi) - math.pi
+    return int(round(float(turn.sum()) / (2 * math.pi)))
+
 
 @dataclass(frozen=True, eq=False)
 class Camera:
@@ -354,32 +384,61 @@ class Camera:
         return xy
 
     def fold_inside_image(self) -> bool:
-        """Whether the lens model folds before the image's farthest corner (:attr:`fold_radius`):
-        pixels beyond its reach then undistort to NaN and count as outside the image."""
-        r = self.fold_radius
-        if not math.isfinite(r):
+        """Whether some pixel of the image is not reached exactly once from inside the lens model's unfolded
+        disc (:attr:`lens_limit`, where it folds: radially, or nearer by its tangential or thin-prism terms).
+
+        Such a pixel is beyond the fold's reach (undistortion has no solution there: NaN, outside the image) or
+        reached twice (ambiguous). The disc's rim, traced through the lens (:data:`REACH_RIM_POINTS` points),
+        bounds what it reaches; each pixel is reached as many times as the rim winds around it (the model keeps
+        orientation inside the disc). So every pixel is reached once exactly when the rim stays off the image
+        (the box out to its pixels' outer edges) and winds once around its centre. With radial terms only the
+        rim is a circle and this is the old test: the farthest corner beyond the fold's distorted radius. With
+        asymmetric terms it is not a circle, and the nearest fold need not be seen in the image at all.
+        A model that does not fold within :data:`LENS_REACH` reaches every pixel once."""
+        limit = self.lens_limit
+        if not limit < LENS_REACH:
             return False
-        reach = _distorted_radius(self.dist, r)
-        corners = np.array([[-0.5, -0.5], [self.width - 0.5, -0.5], [-0.5, self.height - 0.5],
-                            [self.width - 0.5, self.height - 0.5]])
-        fx, fy, cx, cy, skew = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2], self.K[0, 1]
-        y = (corners[:, 1] - cy) / fy
-        x = (corners[:, 0] - cx - skew * y) / fx
-        return bool(np.max(np.hypot(x, y)) > reach)
+        angle = np.linspace(0.0, 2 * math.pi, REACH_RIM_POINTS, endpoint=False)
+        with np.errstate(all="ignore"):
+            rim = self.normalized_to_pixels(limit * np.stack([np.cos(angle), np.sin(angle)], axis=-1))
+        if not np.all(np.isfinite(rim)):  # a rational model's pole on the rim: its reach cannot be traced
+            return True
+        lo, hi = np.array([-0.5, -0.5]), np.array([self.width - 0.5, self.height - 0.5])
+        if _segments_meet_box(rim, np.roll(rim, -1, axis=0), lo, hi):
+            return True
+        return _winding_number(rim, 0.5 * (lo + hi)) != 1
+
+    def fold_terms(self) -> tuple[tuple[str, float], ...]:
+        """The tangential and thin-prism coefficients ``(name, value)``, largest first, when they are why the
+        lens model folds inside the image (:meth:`fold_inside_image`, while its radial terms alone would not
+        fold there); ``()`` otherwise. Real lenses' are about 1e-3: ones that fold the model inside its own
+        image are a calibration that went wrong, which a message should name."""
+        dist = _as_dist(self.dist)
+        terms = [(DISTORTION_NAMES[i], float(dist[i])) for i in _ASYMMETRIC_TERMS if dist[i] != 0.0]
+        if not terms or not self.fold_inside_image():
+            return ()
+        radial = dist.copy()
+        radial[list(_ASYMMETRIC_TERMS)] = 0.0
+        if self._derived(dist=radial).fold_inside_image():
+            return ()
+        return tuple(sorted(terms, key=lambda term: -abs(term[1])))
 
     def within_lens(self, xy: np.ndarray) -> np.ndarray:
-        """``(...)`` bool: normalised coordinates ``(..., 2)`` inside :attr:`fold_radius`, where
+        """``(...)`` bool: normalised coordinates ``(..., 2)`` inside :attr:`lens_limit` (:attr:`fold_radius`), where
         :meth:`distort` is one to one. Past it the model mirrors a point to a pixel that shows
         another direction (its radial factor turns negative), so no pixel of the frame shows it.
         A lens model that does not fold is checked out to :data:`LENS_REACH` only: beyond it
         (within 0.0001 degrees of the camera plane) points count as outside too. Tangential or
         thin-prism terms that fold the model nearer (:func:`unfolded_radius`) bring the limit in to there."""
         xy = check_last_dim("xy", xy, 2)
-        return np.sum(xy * xy, axis=-1) < self._lens_limit() ** 2
+        return np.sum(xy * xy, axis=-1) < self.lens_limit ** 2
 
-    def _lens_limit(self) -> float:
-        """The normalised radius :meth:`within_lens` (and :meth:`project`) trust the lens model to: its radial
-        fold, or :data:`LENS_REACH`, or nearer where tangential or thin-prism terms fold it (:func:`unfolded_radius`)."""
+    @property
+    def lens_limit(self) -> float:
+        """The normalised radius the lens model is trusted to (:meth:`within_lens`, :meth:`project`, undistortion,
+        the crop warp's mask): its radial fold, or nearer where tangential or thin-prism terms fold it
+        (:func:`unfolded_radius`); :data:`LENS_REACH` for a model that does not fold that far; ``inf`` without
+        distortion."""
         if not self.has_distortion:
             return math.inf
         fold = self.fold_radius
@@ -444,7 +503,7 @@ class Camera:
             seen = z > 1e-9
             xy = pc[..., :2] / np.where(seen, z, 1.0)[..., None]
             if distort and self.has_distortion:
-                seen &= np.sum(xy * xy, axis=-1) < self._lens_limit() ** 2  # within_lens; False for NaN, inf
+                seen &= np.sum(xy * xy, axis=-1) < self.lens_limit ** 2  # within_lens; False for NaN, inf
             everywhere = bool(seen.all())
             if not everywhere:  # flagged points go through the lens model at the axis: no overflow from them
                 xy = np.where(seen[..., None], xy, 0.0)

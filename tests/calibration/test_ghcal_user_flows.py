@@ -371,6 +371,16 @@ def test_a_lens_that_folds_is_said_in_degrees_off_the_axis():
     assert "folds over inside the image, 52 degrees off the optical axis (normalised radius 1.29)" in text, text
 
 
+def test_a_lens_folded_by_its_tangential_terms_is_said_so_naming_the_term():
+    from calibration.solve import fold_warning  # was: "folds over inside the image, 90 degrees (radius inf)"
+
+    cam = Camera("left", 800, 500, np.array([[300.0, 0, 400], [0, 300, 250], [0, 0, 1]]),
+                 np.array([-0.01, 0, 0, -0.3, 0]))
+    text = fold_warning(cam)
+    assert text.startswith("left: the solved lens model folds over inside the image, 29 degrees off the optical axis "
+                           "(normalised radius 0.55), by its tangential or thin-prism terms (p2 = -0.3;"), text
+
+
 def test_ctrl_c_while_the_board_is_written_leaves_the_earlier_print(tmp_path, capsys, monkeypatch):
     # board.png was written in place: stopped halfway, the folder held a cut-off print beside its board.json
     assert cli.main(["board", "--out", str(tmp_path), "--dpi", "72"]) == 0

@@ -456,3 +456,43 @@ def test_the_lens_jacobian_is_the_model_s_derivative_and_real_lenses_fold_only_f
         cam = Camera("c", 640, 480, K, dist)
         assert unfolded_radius(tuple(dist), cam.fold_radius) > 0.99 * cam.fold_radius
         assert not cam.fold_inside_image()
+
+
+@pytest.mark.parametrize("dist, terms, lost_share", [
+    ([0.0, 0.0, 0.3, 0.0], (("p1", 0.3),), 0.67),
+    ([0.0, 0.0, 0.0, -0.3], (("p2", -0.3),), 0.66),
+    ([0.0] * 8 + [1.0, 0.0, 0.0, 0.0], (("s1", 1.0),), 0.74),
+    ([0.1, 0.01, 0.3, -0.3, 0.01], (("p1", 0.3), ("p2", -0.3)), 0.80),
+    ([0.0, 0.0, 0.1, 0.0], (("p1", 0.1),), 0.02),  # folds outside the image, yet its reach's rim crosses it
+    ([0.0, 0.0, 0.05, 0.0], None, 0.0),  # folds past the image
+    ([-0.0412, 0.0231, 0.00018, -0.00032, -0.0041], None, 0.0),  # the example rig's lens
+    ([-0.2, 0.0, 0.0, 0.0, 0.0], (), 0.27),  # folds radially inside the corners
+    ([-0.2, 0.0, 0.001, 0.0, 0.0], (), 0.27),  # the same: its tiny p1 is not why
+], ids=["p1", "p2", "s1", "mixed", "p1-edge", "p1-outside", "example", "radial", "radial+p1"])
+def test_fold_inside_image_answers_for_the_whole_lens_model_as_undistortion_finds_it(dist, terms, lost_share):
+    """fold_inside_image looked at the radial fold only: a lens folded inside its image by its tangential or
+    thin-prism terms (p1 = 0.3 at a 90-degree view: two thirds of it undistorted to NaN) was said to cover its
+    frame, and nothing warned. Now it is True exactly when some pixel (out to the image's outer edges) has no ray,
+    and fold_terms names the coefficients at fault when they, not the radial terms, fold it inside the image.
+    ``lost_share``: the share of the image without a ray (docs/geometry.md, docs/rig-file.md quote it)."""
+    cam = Camera("wide", 640, 480, [[320.0, 0.0, 319.5], [0.0, 320.0, 239.5], [0.0, 0.0, 1.0]], dist)
+    u, v = np.meshgrid(np.linspace(-0.5, 639.5, 321), np.linspace(-0.5, 479.5, 241))
+    lost = np.isnan(cam.pixels_to_normalized(np.stack([u, v], axis=-1))).any(axis=-1)
+    assert cam.fold_inside_image() == (terms is not None) == lost.any()
+    assert cam.fold_terms() == (terms or ())
+    assert round(float(lost.mean()), 2) == lost_share
+
+
+def test_a_lens_whose_reach_misses_the_image_or_covers_it_twice_folds_inside_it():
+    """The reach's rim (the unfolded disc through the lens) off the image is not enough: the image may lie wholly
+    outside it (no pixel reached) or inside a rim that winds twice (every pixel reached twice)."""
+    from ghnerf_runtime.geometry.camera import _winding_number
+
+    angle = np.linspace(0.0, 2 * np.pi, 400, endpoint=False)
+    circle = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+    twice = np.stack([np.cos(2 * angle), np.sin(2 * angle)], axis=-1)
+    assert _winding_number(circle, np.zeros(2)) == 1 and _winding_number(circle[::-1], np.zeros(2)) == -1
+    assert _winding_number(twice, np.zeros(2)) == 2 and _winding_number(circle, np.array([3.0, 0.0])) == 0
+    far = Camera("far", 640, 480, [[320.0, 0.0, 3000.0], [0.0, 320.0, 239.5], [0.0, 0.0, 1.0]],
+                 [0.0, 0.0, 0.3, 0.0])  # its principal point far right of the image: the image beyond the reach
+    assert far.fold_inside_image() and np.isnan(far.pixels_to_normalized(far.pixel_grid(8))).all()

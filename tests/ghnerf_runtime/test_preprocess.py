@@ -391,6 +391,27 @@ def test_a_wide_lens_that_folds_inside_the_image_still_gets_a_footprint_and_blan
     assert centre.any() and np.all(out[centre] == 200)
 
 
+@pytest.mark.parametrize("skew", [0.0, 2.0], ids=["opencv-maps", "skewed"])
+@pytest.mark.parametrize("dist", [[0.0, 0.0, 0.3, 0.0], [0.0] * 8 + [1.0, 0.0, 0.0, 0.0]], ids=["p1", "s1"])
+def test_a_crop_of_a_lens_folded_by_its_tangential_or_prism_terms_samples_nothing_beyond_the_fold(dist, skew):
+    """The crop warp masked past the radial fold only: crop pixels past the nearer fold of strong tangential or
+    thin-prism terms sampled frame pixels that a ray on the unfolded side shows (duplicated picture, over half
+    of this crop). Now every crop pixel that samples the frame has its ray within the lens (Camera.within_lens,
+    the limit project and undistortion use), and samples the pixel that undistorts to that ray."""
+    R, t = look_at((0.3, -1.2, -0.4), (0.0, -0.9, 3.0))
+    cam = Camera("wide", 640, 480, [[320.0, skew, 319.5], [0.0, 320.0, 239.5], [0.0, 0.0, 1.0]], dist, R, t)
+    roi = Roi(80, 0, 480)  # the middle of the frame: half of it past the fold
+    crop = crop_camera(cam, roi, 96)
+    xy = crop.pixels_to_normalized(crop.pixel_grid())
+    maps = build_undistort_crop_maps(cam, roi, 96, antialias=False)
+    sampled = maps.map_x > -1e5  # not sent off every frame
+    seen = sampled & (maps.map_x >= 0) & (maps.map_x <= 639) & (maps.map_y >= 0) & (maps.map_y <= 479)
+    assert seen.sum() > 1000 and (~cam.within_lens(xy)).sum() > 1000
+    assert cam.within_lens(xy[sampled]).all()
+    rays = cam.pixels_to_normalized(np.stack([maps.map_x[seen], maps.map_y[seen]], axis=-1).astype(np.float64))
+    np.testing.assert_allclose(rays, xy[seen], atol=1e-3)  # float32 maps, at the fold's nearly flat edge: 6e-5
+
+
 @pytest.mark.parametrize("mounted_deg", [0, 10, 180, -170, 90, -90, -80])
 def test_upright_roll_undoes_the_mounting_roll(mounted_deg):
     """A camera rolled about its optical axis: the crop rotation that shows the rig's down as the picture's down."""

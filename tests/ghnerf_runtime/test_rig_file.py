@@ -349,6 +349,24 @@ def test_a_lens_model_that_folds_inside_the_image_loads_with_a_warning_naming_th
     assert not caplog.records  # the shipped example's lens covers its frame
 
 
+def test_a_lens_folded_inside_its_image_by_its_tangential_terms_loads_with_a_warning_naming_the_term(example_dict,
+                                                                                                     caplog):
+    """p1 = 0.3 (within MAX_DISTORTION) folds a 90-degree lens model over inside its image (two thirds lost): loading
+    said nothing (the fold check was radial only). It loads, as a radial fold does, with a warning naming the file,
+    the camera and the coefficient: the runtime counts the pixels beyond as outside, so the rig still works."""
+    for cam in example_dict["cameras"]:
+        cam["K"] = [[640.0, 0.0, 639.5], [0.0, 640.0, 399.5], [0.0, 0.0, 1.0]]
+        cam["width"], cam["height"] = 1280, 800
+    example_dict["cameras"][0]["distortion"]["coefficients"] = [-0.01, 0.0, 0.3, 0.0001, 0.0]
+    with caplog.at_level("WARNING"):
+        rig = rig_from_dict(example_dict, path="tangential.json")
+    assert rig.cameras[0].fold_inside_image() and not rig.cameras[1].fold_inside_image()
+    messages = [r.getMessage() for r in caplog.records]
+    assert len(messages) == 1, messages
+    assert messages[0].startswith(f"tangential.json: camera {rig.cameras[0].name!r}: its lens model folds over 0.55")
+    assert "by its tangential or thin-prism terms (p1 = 0.3, p2 = 0.0001; a real lens's are about 0.001)" in messages[0]
+
+
 def test_a_rotation_printed_with_six_decimals_loads_snapped_and_a_wrong_one_does_not(example_dict):
     # about a quarter of rotations rounded to six decimals missed the old 1e-6 tolerance
     from calibration.render import example_rig
