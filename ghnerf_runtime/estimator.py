@@ -766,7 +766,8 @@ class Estimator:
 
     # -------------------------------------------------------------- helpers
     def _crop(self, state: _CameraState, roi: Roi) -> tuple[CropMaps, Camera]:
-        """Remap tables and the pinhole crop camera of one window (building both costs ~0.8 ms)."""
+        """Remap tables and the pinhole crop camera of one window (building both costs ~0.7 ms for a lens without
+        distortion, ~3 ms for the example rig's: session 62, 128 px crops)."""
         key = (roi, state.turn_deg)
         entry = state.cache.get(key)
         if entry is None:
