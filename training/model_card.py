@@ -214,6 +214,14 @@ def _other_run_of_the_triangulation(card: Mapping[str, Any], variant: str, prior
             "versions)")
 
 
+def _prior_time(prior: Mapping[str, Any]) -> str:
+    """The prior run's wall time as its report splits it: training, after collecting the encoder's 2D joints of its
+    training and held-out scenes (``collect_s``: a third of the shipped prior's run, which the bare training time
+    left out)."""
+    train = f"trained in {prior.get('train_s')} s"
+    return train if prior.get("collect_s") is None else f"{train} after {prior['collect_s']} s collecting its 2D joints"
+
+
 def _networks(n: int) -> str:
     return "one network" if n == 1 else f"the mean of {n} networks"
 
@@ -234,7 +242,7 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
                  f"{p.get('train_scenes')} training scenes"
                  + (f" and {p['tilted_scenes']} copies of them with the {p['config'].get('tilt_mode')} turned to any "
                     f"angle (`--tilt-share {p['config'].get('tilt_share'):g}`)" if p.get("tilted_scenes") else "")
-                 + f", {p.get('train_s')} s), against the runtime's gated "
+                 + f", {_prior_time(p)}), against the runtime's gated "
                  f"triangulation of the same joints, scored in the prior's own run: {_fmt(tri.get('mean_mm'), 1)} mean / "
                  f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints"
                  + _other_run_of_the_triangulation(card, variant, p) + ". "

@@ -135,7 +135,10 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     tilted = {**prior, "tilted_scenes": 3, "config": {"steps": 4, "tilt_share": 0.25, "tilt_mode": "body"}}
     tmd = render_markdown({**card, "skeleton_prior": {"ghnerf": tilted}})
     assert ("on 12 training scenes and 3 copies of them with the body turned to any angle (`--tilt-share 0.25`), "
-            "3.5 s)") in tmd
+            "trained in 3.5 s)") in tmd
+    # the run's other part, where the report has it: the encoder's joints of every training scene, collected first
+    timed = render_markdown({**card, "skeleton_prior": {"ghnerf": {**prior, "collect_s": 1.25}}})
+    assert "on 12 training scenes, trained in 3.5 s after 1.25 s collecting its 2D joints)" in timed
     from training.pipeline import motion_mix
     assert motion_mix({"motions": ["a", "b"], "motion_weights": [1.0, 3.0]}) == "a 25 %, b 75 %"
     assert motion_mix({"motions": ["a", "b"]}) == "a, b"
