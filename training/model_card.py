@@ -142,11 +142,16 @@ _HEATMAP_PREFIXES = (("rendered", ""), ("encoder", "encoder_heatmaps_"),
 
 def _gated(m: Mapping[str, Any], prefix: str) -> str:
     """``"<mean> / <median> (<share kept> %)"`` of the gated MPJPE, ``n/a`` when the metrics predate it."""
-    mm, found = m.get(f"{prefix}mpjpe_gated_mm"), m.get(f"{prefix}mpjpe_gated_found")
-    if mm is None or found is None:
+    return _mean_median_share(m.get(f"{prefix}mpjpe_gated_mm"), m.get(f"{prefix}mpjpe_gated_median_mm"),
+                              m.get(f"{prefix}mpjpe_gated_found"))
+
+
+def _mean_median_share(mean: Any, median: Any, found: Any) -> str:
+    """``"<mean> / <median> (<share> %)"`` (mm, one decimal; no median where there is none), ``n/a`` without a
+    mean or a share."""
+    if mean is None or found is None:
         return "n/a"
-    median = m.get(f"{prefix}mpjpe_gated_median_mm")
-    return f"{_fmt(mm, 1)}{'' if median is None else ' / ' + _fmt(median, 1)} ({100 * found:.0f} %)"
+    return f"{_fmt(mean, 1)}{'' if median is None else ' / ' + _fmt(median, 1)} ({100 * found:.0f} %)"
 
 
 def _plain(m: Mapping[str, Any], prefix: str) -> str:
@@ -185,6 +190,38 @@ def _breakdown(card: dict, key: str) -> list[tuple[str, str, object]]:
             for src, prefix in _HEATMAP_PREFIXES if m.get(f"{prefix}{key}")]
 
 
+#: The encoder table's gated-triangulation columns, by whether their 2D joints were flip-tested: (metric prefix, title).
+_ENCODER_GATED_COLUMNS = {True: ("encoder_heatmaps_flip_", "MPJPE mm, flip test, gated"),
+                          False: ("encoder_heatmaps_", "MPJPE mm, gated")}
+
+
+def _other_run_of_the_triangulation(card: Mapping[str, Any], variant: str, prior: Mapping[str, Any]) -> str:
+    """Where the encoder table scored the prior's input joints (the row of the prior's encoder precision, the
+    column of its flip test) with the same gated triangulation to other digits: a clause naming that cell, so a
+    reader of two figures for one calculation knows which run wrote each; empty where they agree or there is none.
+    The prior's run (``training.skeleton_prior``) and the evaluation's (``ghnerf-eval``) run the same code on the
+    same joints, but int8 figures move in their last digits between hosts and code versions."""
+    precision = "int8" if ".int8." in str(prior.get("encoder_file") or "") else "fp32"
+    label = f"{variant}_{precision}"
+    prefix, column = _ENCODER_GATED_COLUMNS[bool(prior.get("flip_test", True))]
+    table_cell = _gated((card.get("metrics") or {}).get(label) or {}, prefix)
+    tri = (prior.get("metrics") or {}).get("triangulation_gated") or {}
+    own_cell = _mean_median_share(tri.get("mean_mm"), tri.get("median_mm"), tri.get("found"))
+    if "n/a" in (table_cell, own_cell) or table_cell == own_cell:
+        return ""
+    return (f" (the encoder table's `{label}` row, `{column}`, has {table_cell} from the evaluation's run of the "
+            "same triangulation on the same joints; int8 figures move in their last digit between hosts and code "
+            "versions)")
+
+
+def _prior_time(prior: Mapping[str, Any]) -> str:
+    """The prior run's wall time as its report splits it: training, after collecting the encoder's 2D joints of its
+    training and held-out scenes (``collect_s``: a third of the shipped prior's run, which the bare training time
+    left out)."""
+    train = f"trained in {prior.get('train_s')} s"
+    return train if prior.get("collect_s") is None else f"{train} after {prior['collect_s']} s collecting its 2D joints"
+
+
 def _networks(n: int) -> str:
     return "one network" if n == 1 else f"the mean of {n} networks"
 
@@ -205,9 +242,10 @@ def _prior_lines(card: Mapping[str, Any]) -> list[str]:
                  f"{p.get('train_scenes')} training scenes"
                  + (f" and {p['tilted_scenes']} copies of them with the {p['config'].get('tilt_mode')} turned to any "
                     f"angle (`--tilt-share {p['config'].get('tilt_share'):g}`)" if p.get("tilted_scenes") else "")
-                 + f", {p.get('train_s')} s), against the runtime's gated "
-                 f"triangulation of the same joints: {_fmt(tri.get('mean_mm'), 1)} mean / "
-                 f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints. "
+                 + f", {_prior_time(p)}), against the runtime's gated "
+                 f"triangulation of the same joints, scored in the prior's own run: {_fmt(tri.get('mean_mm'), 1)} mean / "
+                 f"{_fmt(tri.get('median_mm'), 1)} median mm over {100 * (tri.get('found') or 0):.0f} % of the joints"
+                 + _other_run_of_the_triangulation(card, variant, p) + ". "
                  "The prior answers for every joint, with its flip test (the runtime's default); its expected "
                  "error gates them (the runtime's `joints3d.max_prior_error_m`)"
                  + (f"; without the flip test {_fmt(m['all_without_flip_test'].get('mean_mm'), 1)} mm over every "

@@ -135,10 +135,55 @@ def test_card_renders_metrics_and_missing_values(tmp_path):
     tilted = {**prior, "tilted_scenes": 3, "config": {"steps": 4, "tilt_share": 0.25, "tilt_mode": "body"}}
     tmd = render_markdown({**card, "skeleton_prior": {"ghnerf": tilted}})
     assert ("on 12 training scenes and 3 copies of them with the body turned to any angle (`--tilt-share 0.25`), "
-            "3.5 s)") in tmd
+            "trained in 3.5 s)") in tmd
+    # the run's other part, where the report has it: the encoder's joints of every training scene, collected first
+    timed = render_markdown({**card, "skeleton_prior": {"ghnerf": {**prior, "collect_s": 1.25}}})
+    assert "on 12 training scenes, trained in 3.5 s after 1.25 s collecting its 2D joints)" in timed
     from training.pipeline import motion_mix
     assert motion_mix({"motions": ["a", "b"], "motion_weights": [1.0, 3.0]}) == "a 25 %, b 75 %"
     assert motion_mix({"motions": ["a", "b"]}) == "a, b"
+
+
+def _prior_card(flip_gated: dict, triangulation: dict, encoder_file: str = "human.int8.onnx") -> dict:
+    """A card whose ghnerf_int8 row scored the flip-tested encoder joints' gated triangulation (``flip_gated``: mean,
+    median, found) and whose prior's own run scored the same (``triangulation``)."""
+    row = {f"encoder_heatmaps_flip_mpjpe_gated_{k}": v for k, v in
+           (("mm", flip_gated["mean"]), ("median_mm", flip_gated["median"]), ("found", flip_gated["found"]))}
+    prior = {"split": "val", "scenes": 256, "train_scenes": 25000, "train_s": 1580.5, "config": {"steps": 30000},
+             "encoder_file": encoder_file, "flip_test": True,
+             "metrics": {"triangulation_gated": {"mean_mm": triangulation["mean"], "median_mm": triangulation["median"],
+                                                 "found": triangulation["found"]},
+                         "gated": {"inf": {"mean_mm": 37.8, "median_mm": 23.7, "p90_mm": 69.5, "found": 1.0}}}}
+    return {"data": {"eval_split": "val"}, "metrics": {"ghnerf_int8": {"kind": "onnx-int8", **row}},
+            "skeleton_prior": {"ghnerf": prior}}
+
+
+def test_the_prior_section_names_the_run_of_its_triangulation_figure_and_the_tables_other_run():
+    # session 62: the prior's section said 73.4 / 33.9 mm and the encoder table 73.4 / 34.1 mm for "the runtime's
+    # gated triangulation of the same joints", with nothing to say they were two runs (two hosts) of one calculation
+    md = render_markdown(_prior_card({"mean": 73.374, "median": 34.107, "found": 0.7214},
+                                     {"mean": 73.433, "median": 33.899, "found": 0.7214}))
+    assert ("against the runtime's gated triangulation of the same joints, scored in the prior's own run: "
+            "73.4 mean / 33.9 median mm over 72 % of the joints (the encoder table's `ghnerf_int8` row, "
+            "`MPJPE mm, flip test, gated`, has 73.4 / 34.1 (72 %) from the evaluation's run of the same "
+            "triangulation on the same joints;") in md
+    # one run's figures (a pipeline's prior stage and eval stage on one host): nothing to tell apart
+    same = render_markdown(_prior_card({"mean": 73.374, "median": 34.107, "found": 0.7214},
+                                       {"mean": 73.38, "median": 34.11, "found": 0.7214}))
+    assert "scored in the prior's own run: 73.4 mean / 34.1 median mm over 72 % of the joints. The prior" in same
+    assert "evaluation's run" not in same
+    # a prior on the fp32 encoder is compared with the fp32 row, which this card lacks: no clause
+    fp32 = render_markdown(_prior_card({"mean": 73.374, "median": 34.107, "found": 0.7214},
+                                       {"mean": 73.433, "median": 33.899, "found": 0.7214}, "human.onnx"))
+    assert "evaluation's run" not in fp32
+
+
+def test_the_shipped_card_is_what_the_writer_renders_from_its_json():
+    # a hand-edited MODEL_CARD.md would be lost at the next --card or --prior-metrics, and a regenerated card
+    # must carry the labels the shipped one shows
+    models = Path(__file__).resolve().parents[2] / "models"
+    card = json.loads((models / "model_card.json").read_text())
+    assert (models / "MODEL_CARD.md").read_text() == render_markdown(card)
 
 
 def test_a_finished_run_is_reused_only_for_the_same_config_and_architecture(tmp_path):
