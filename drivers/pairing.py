@@ -336,11 +336,21 @@ class FramePairer:
             intervals.clear()
 
 
+def frames_since(before: PairingStats, after: PairingStats) -> dict[str, int]:
+    """Frames each camera delivered between two snapshots of the counters."""
+    return {cam: after.frames_in.get(cam, 0) - before.frames_in.get(cam, 0) for cam in after.frames_in}
+
+
+def silent_cameras(before: PairingStats, after: PairingStats) -> list[str]:
+    """The cameras that delivered no frame between two snapshots of the counters."""
+    return [cam for cam, n in frames_since(before, after).items() if n == 0]
+
+
 def why_no_pair(before: PairingStats, after: PairingStats, config: PairingConfig) -> str:
     """What the counters say of a stretch with no pair (``before``: at the last pair or the open): a camera that
     delivered nothing, or frames of both cameras that never paired. The two need different remedies (a cable,
     against the cameras' sync or a lagging transport), and "no pair" alone sent the operator to the cable."""
-    came = {cam: after.frames_in.get(cam, 0) - before.frames_in.get(cam, 0) for cam in after.frames_in}
+    came = frames_since(before, after)
     silent = [cam for cam, n in came.items() if n == 0]
     if len(silent) == len(came):
         return "neither camera delivered a frame"
