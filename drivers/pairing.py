@@ -358,7 +358,7 @@ def why_no_pair(before: PairingStats, after: PairingStats, config: PairingConfig
     ``max_pending`` frames of one camera for the other's (a lagging transport). Each needs its own remedy (a cable,
     the cameras' sync, ``max_pending``), and "no pair" alone sent the operator to the cable."""
     came = frames_since(before, after)
-    silent = [cam for cam, n in came.items() if n == 0]
+    silent = silent_cameras(before, after)
     if len(silent) == len(came):
         return "neither camera delivered a frame"
     if silent:
