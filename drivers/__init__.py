@@ -20,12 +20,12 @@ from drivers.errors import (
     RigTimeoutError,
 )
 from drivers.frames import CameraTruth, Frame, FramePair
-from drivers.pairing import DropPolicy, PairingConfig, PairingStats, why_no_pair
+from drivers.pairing import DropPolicy, PairingConfig, PairingStats, silent_cameras, why_no_pair
 from drivers.registry import BACKENDS, create_rig_source, open_rig
 
 __all__ = [
     "BACKENDS", "BackendNotAvailableError", "CameraTruth", "DriverError", "DropPolicy", "EndOfStream",
     "Frame", "FramePair", "FrameSizeError", "ManualClock", "MonotonicClock", "PairingConfig", "PairingStats",
     "RecordingError", "RigConfigError", "RigDisconnectedError", "RigInitializationError", "RigOperationError",
-    "RigSource", "RigTimeoutError", "create_rig_source", "open_rig", "why_no_pair",
+    "RigSource", "RigTimeoutError", "create_rig_source", "open_rig", "silent_cameras", "why_no_pair",
 ]

@@ -92,10 +92,14 @@ class PairingStats:
     # index gaps: frames the camera skipped, or the backend lost one camera at a time before pairing
     # (a backend counter says so: sim's and opencv's ``overruns``)
     camera_gaps: dict[str, int] = field(default_factory=dict)
+    # of ``unpaired``: frames dropped because their camera already held ``max_pending`` waiting for the other's (the
+    # other silent, or its frames arriving that many frames behind): says when ``max_pending`` is what stops pairs
+    overflowed: dict[str, int] = field(default_factory=dict)
 
     def snapshot(self) -> "PairingStats":
         return PairingStats(
-            dict(self.frames_in), self.pairs_out, dict(self.unpaired), self.pairs_dropped, dict(self.camera_gaps)
+            dict(self.frames_in), self.pairs_out, dict(self.unpaired), self.pairs_dropped, dict(self.camera_gaps),
+            dict(self.overflowed),
         )
 
 
@@ -135,7 +139,8 @@ class FramePairer:
         self._ready: deque[tuple[int, Frame, Frame]] = deque()
         self._formed = 0  # pairs formed so far: the sequence number of the next pair
         self.stats = PairingStats(
-            frames_in={c: 0 for c in cameras}, unpaired={c: 0 for c in cameras}, camera_gaps={c: 0 for c in cameras}
+            frames_in={c: 0 for c in cameras}, unpaired={c: 0 for c in cameras}, camera_gaps={c: 0 for c in cameras},
+            overflowed={c: 0 for c in cameras},
         )
 
     def push(self, frame: Frame) -> None:
@@ -162,9 +167,10 @@ class FramePairer:
         queue = self._pending[cam]
         queue.append(frame)
         self._settle()
-        while len(queue) > self.config.max_pending:  # the other camera is silent: bounded memory
+        while len(queue) > self.config.max_pending:  # the other camera is silent or lags: bounded memory
             queue.popleft()
             self.stats.unpaired[cam] += 1
+            self.stats.overflowed[cam] += 1
             self._settle()
 
     def flush(self) -> None:
@@ -336,18 +342,42 @@ class FramePairer:
             intervals.clear()
 
 
+def frames_since(before: PairingStats, after: PairingStats) -> dict[str, int]:
+    """Frames each camera delivered between two snapshots of the counters."""
+    return {cam: after.frames_in.get(cam, 0) - before.frames_in.get(cam, 0) for cam in after.frames_in}
+
+
+def silent_cameras(before: PairingStats, after: PairingStats) -> list[str]:
+    """The cameras that delivered no frame between two snapshots of the counters."""
+    return [cam for cam, n in frames_since(before, after).items() if n == 0]
+
+
 def why_no_pair(before: PairingStats, after: PairingStats, config: PairingConfig) -> str:
     """What the counters say of a stretch with no pair (``before``: at the last pair or the open): a camera that
-    delivered nothing, or frames of both cameras that never paired. The two need different remedies (a cable,
-    against the cameras' sync or a lagging transport), and "no pair" alone sent the operator to the cable."""
-    came = {cam: after.frames_in.get(cam, 0) - before.frames_in.get(cam, 0) for cam in after.frames_in}
-    silent = [cam for cam, n in came.items() if n == 0]
+    delivered nothing, or frames of both cameras that never paired: within the tolerance, or while the pairer held
+    ``max_pending`` frames of one camera for the other's (a lagging transport). Each needs its own remedy (a cable,
+    the cameras' sync, ``max_pending``), and "no pair" alone sent the operator to the cable."""
+    came = frames_since(before, after)
+    silent = silent_cameras(before, after)
     if len(silent) == len(came):
         return "neither camera delivered a frame"
     if silent:
         others = ", ".join(f"{cam}: {n}" for cam, n in came.items() if n)
         return f"camera {silent[0]!r} delivered no frame ({others})"
     counts = ", ".join(f"{cam} {n}" for cam, n in came.items())
+    waited_out = _overflowed_since(before, after)
+    if any(waited_out.values()):
+        # the pairer's wait ran out (max_pending): the other camera's frames were still to come when these went
+        ahead = max(waited_out, key=waited_out.__getitem__)
+        behind = next(cam for cam in came if cam != ahead)
+        return (f"frames came from both cameras ({counts}) but none paired: camera {ahead!r} held max_pending="
+                f"{config.max_pending} frames waiting for {behind!r}'s and dropped {waited_out[ahead]} more, so "
+                f"{behind!r}'s frames arrive {config.max_pending} or more frames behind (a slower transport: raise "
+                f"the rig URL's max_pending, at most {MAX_HELD}), or its clock is behind")
     return (f"frames came from both cameras ({counts}) but none paired within the pairing tolerance of "
-            f"{config.tolerance_ms:g} ms: the cameras do not capture together, or one camera's frames arrive "
-            f"{config.max_pending} or more frames behind the other's")
+            f"{config.tolerance_ms:g} ms: the cameras do not capture together")
+
+
+def _overflowed_since(before: PairingStats, after: PairingStats) -> dict[str, int]:
+    """Frames each camera dropped for ``max_pending`` between two snapshots of the counters."""
+    return {cam: after.overflowed.get(cam, 0) - before.overflowed.get(cam, 0) for cam in after.frames_in}

@@ -45,10 +45,12 @@ class SinkConfigError(SinkError, ValueError):
 
 class SinkUnavailableError(SinkError):
     """The link is absent or went away (unplugged, refused); the sink retries with backoff. The message names the
-    URL without its passwords; ``url`` keeps it as given."""
+    URL without its passwords; ``url`` keeps it as given, ``reason`` what went wrong without the URL (for a line
+    that names the URL already: the sink's "link lost")."""
 
     def __init__(self, url: str, reason: str) -> None:
         self.url = url
+        self.reason = reason
         super().__init__(f"{redact_url(url)}: unavailable: {reason}")
 
 

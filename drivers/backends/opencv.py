@@ -36,6 +36,9 @@ Options:
   over at the end instead of ending the stream.
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
   the cameras report and ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
+  ``max_pending`` (8, at most 256): frames held per camera while waiting for the other's: a camera
+  whose frames reach the host that many frames after the other's (a slower USB path: webcams differ
+  by 100-300 ms) never pairs unless it is raised (:mod:`drivers.pairing_options`);
   ``queue``: frames held per camera for the reader (default 4, at most 256; under ``latest`` each read
   takes in all of them and returns the newest pair; a camera whose queue is full loses its oldest
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);
@@ -104,6 +107,7 @@ from drivers.errors import (
 )
 from drivers.frames import Frame
 from drivers.pairing import DropPolicy, PairingConfig, PairingStats
+from drivers.pairing_options import PairingOptions, take_pairing_options
 from drivers.url import RigUrl, redact_url
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
@@ -141,7 +145,8 @@ class OpenCVRigStats(PairingStats):
 
 @dataclass(frozen=True)
 class OpenCVOptions:
-    """The URL's options, validated (see the module docstring). ``tolerance_ms`` None: from the cameras' rate."""
+    """The URL's options, validated (see the module docstring). ``pairing.tolerance_ms`` None: from the cameras'
+    rate."""
 
     first: str
     second: str
@@ -156,8 +161,7 @@ class OpenCVOptions:
     loop: bool = False
     queue: int = 4
     open_timeout_s: float = 10.0
-    tolerance_ms: float | None = None
-    policy: DropPolicy = DropPolicy.LATEST
+    pairing: PairingOptions = PairingOptions()
 
     @classmethod
     def from_url(cls, url: RigUrl) -> "OpenCVOptions":
@@ -193,9 +197,7 @@ class OpenCVOptions:
             loop=url.take_bool("loop", False),
             queue=url.take_int("queue", 4, lo=1, hi=256),
             open_timeout_s=url.take_float("open_timeout_s", 10.0, lo=0.1, hi=600.0),
-            tolerance_ms=url.take_float("tolerance_ms", 0.0, lo=0.001, hi=10_000.0) or None,
-            policy=DropPolicy(url.take_str("policy", DropPolicy.LATEST.value,
-                                           choices=tuple(p.value for p in DropPolicy))),
+            pairing=take_pairing_options(url),
         )
         url.finish()
         if (options.width is None) != (options.height is None):
@@ -496,10 +498,9 @@ class OpenCVRigSource(RigSource):
                  pairing: PairingConfig | None = None, clock: Clock | None = None) -> None:
         if clock is not None and not isinstance(clock, MonotonicClock):
             raise RigConfigError("opencv:// runs on the real clock (its cameras do)")
-        self._pairing_given = pairing is not None or options.tolerance_ms is not None
-        super().__init__(None, pairing=pairing or PairingConfig(
-            tolerance_ms=options.tolerance_ms or 500.0 / (options.fps or FALLBACK_FPS), policy=options.policy),
-            clock=clock)
+        self._pairing_given = pairing is not None or options.pairing.tolerance_ms is not None
+        super().__init__(None, pairing=pairing or options.pairing.config(500.0 / (options.fps or FALLBACK_FPS)),
+                         clock=clock)
         self.options = options
         self._fixed_rig = rig
         self._capture_factory = capture_factory
@@ -564,7 +565,7 @@ class OpenCVRigSource(RigSource):
                 # half a frame period at the slowest rate known: a camera's report, or fps= where that
                 # is lower (a webcam may report 30 fps and keep 15 in dim light: fps= says so)
                 rate = min(min((r for r in (cam.fps, o.fps) if r), default=FALLBACK_FPS) for cam in self._cameras)
-                self.pairing = PairingConfig(tolerance_ms=500.0 / rate, policy=o.policy)
+                self.pairing = o.pairing.config(500.0 / rate)
             self._anchor_ns = self.clock.now_ns()
             self.driver_stamps = all(cam.v4l2 for cam in self._cameras)
             for cam in self._cameras:

@@ -6,7 +6,8 @@ URL options:
   injected clock; ``free`` delivers frames as fast as they decode; a number
   (``speed=2``, at least 0.001) plays at that multiple of real time.
 * ``loop``: ``1`` starts over at the end instead of raising :class:`EndOfStream`.
-* ``tolerance_ms``, ``policy``: pairing (default policy ``all``: a recording is
+* ``tolerance_ms``, ``policy``, ``max_pending``: pairing, as every rig URL takes them
+  (:mod:`drivers.pairing_options`; default policy ``all``: a recording is
   usually processed offline, every pair counts). ``policy=latest`` with a paced
   ``speed`` plays like a live rig: each read jumps to the newest pair due, however
   far behind the reader is, and the older ones are dropped (counted, their images
@@ -72,7 +73,8 @@ from drivers.errors import (
     RigOperationError,
 )
 from drivers.frames import CameraTruth, Frame
-from drivers.pairing import MAX_TOLERANCE_MS, DropPolicy, FramePairer, PairingConfig
+from drivers.pairing import DropPolicy, FramePairer, PairingConfig
+from drivers.pairing_options import take_pairing_options
 from drivers.url import RigUrl, decimal_number
 
 log = logging.getLogger(__name__)
@@ -248,8 +250,7 @@ class ReplayRigSource(RigSource):
         speed = _parse_speed(url)
         loop = url.take_bool("loop", False)
         keep_time = url.take_bool("keep_time", False)
-        tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=MAX_TOLERANCE_MS)
-        policy = url.take_str("policy", DropPolicy.ALL.value, choices=tuple(p.value for p in DropPolicy))
+        options = take_pairing_options(url, policy=DropPolicy.ALL)
         url.finish()
         directory = Path(url.target)
         manifest = read_manifest(directory)
@@ -262,7 +263,7 @@ class ReplayRigSource(RigSource):
             log.warning("recording %s was not closed cleanly; playing the %d frames it holds", directory, len(rows))
         return cls(
             directory, manifest, rows, speed=speed, loop=loop, keep_time=keep_time,
-            pairing=pairing or PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)), clock=clock,
+            pairing=pairing or options.config(), clock=clock,
         )
 
     def _loop_spans(self) -> tuple[int, dict[str, int]]:

@@ -24,11 +24,17 @@ URL options (every one validated; unknown ones are rejected by name)::
   see the subject's hips (``convergence=120``) is a ``RigConfigError``.
 * ``jitter_ms`` (0): standard deviation of each capture instant.
 * ``offset_ms`` (0): capture offset of the second camera after the first.
+* ``latency_ms`` (0, at most 10000): the second camera's frames reach the host this long after
+  their capture, stamped with their capture time (a slower transport: USB webcams differ by
+  100-300 ms). A latency of ``max_pending`` frames or more never pairs unless ``max_pending``
+  is raised (below).
 * ``drop`` (0): probability that a camera loses a frame (per camera, per frame).
 * ``unplug_after_s``: the second camera vanishes this long after open:
   ``read()`` then raises :class:`RigDisconnectedError`, now and on every later call.
 * ``noise`` (1.5): sensor read noise, standard deviation in 8-bit levels.
-* ``tolerance_ms`` (11), ``policy`` (``latest``): pairing.
+* ``tolerance_ms`` (11, at most 1000), ``policy`` (``latest``), ``max_pending`` (8, at most 256:
+  frames held per camera while waiting for the other's): pairing
+  (:func:`drivers.pairing_options.take_pairing_options`).
 * ``cache`` (default ``$XDG_CACHE_HOME/ghnerf-sim`` or ``~/.cache/ghnerf-sim``):
   directory of the pre-rendered loop cache, or ``off``.
 * ``workers`` (CPU count): render threads.
@@ -46,13 +52,14 @@ and memory: about 2.8 MB per camera frame at 640x480 (image plus truth maps),
 ~200 MB for the 1.2 s default ``wave`` loop.
 
 Timing model (:mod:`drivers.backends.sim_timing`): each camera captures frame
-``k`` at ``open + k/fps + offset + jitter``; ``read`` sleeps on the clock until
-the next capture is due and returns frames in capture order, so with a
+``k`` at ``open + k/fps + offset + jitter``, and it reaches the host then (the
+second camera's ``latency_ms`` later); ``read`` sleeps on the clock until the
+next frame arrives and returns frames in order of arrival, so with a
 :class:`~drivers.clock.ManualClock` tests run at full speed with exact
 timestamps. With ``policy=latest`` each ``read`` first takes in every capture
 already due, so a slow reader gets the newest pair and the older ones count in
-``stats.pairs_dropped`` (sequence gaps). Captures older than a backlog of 8
-frames per camera (as a driver queue would hold) are lost before pairing: a
+``stats.pairs_dropped`` (sequence gaps). Frames that arrived longer ago than a backlog
+of 8 frames per camera (as a driver queue would hold) are lost before pairing: a
 ``policy=all`` reader that falls behind, or any reader stalled that long,
 loses them, counted as ``stats.overruns``; ``stats.simulated_drops`` counts the
 ``drop`` losses (both also show as index gaps in ``stats.camera_gaps``).
@@ -90,7 +97,8 @@ from drivers.base import RigSource
 from drivers.clock import Clock
 from drivers.errors import RigConfigError, RigDisconnectedError, RigOperationError
 from drivers.frames import Frame
-from drivers.pairing import DropPolicy, PairingConfig, PairingStats
+from drivers.pairing import PairingConfig, PairingStats
+from drivers.pairing_options import take_pairing_options
 from drivers.sim import MOTION_NAMES, MotionParams, RigPlacement, SceneConfig, SensorModel, SimScene
 from drivers.url import RigUrl
 from ghnerf_runtime.body25 import JOINT_INDEX
@@ -175,12 +183,12 @@ class SimOptions:
             fps=fps,
             offset_ms=url.take_float("offset_ms", 0.0, lo=-1000.0, hi=1000.0),
             jitter_ms=url.take_float("jitter_ms", 0.0, lo=0.0, hi=1000.0),
+            latency_ms=url.take_float("latency_ms", 0.0, lo=0.0, hi=10_000.0),
             drop=url.take_float("drop", 0.0, lo=0.0, hi=1.0),
             seed=seed,
         )
         unplug = url.take_float("unplug_after_s", -1.0, lo=0.0, hi=1e6) if "unplug_after_s" in url.options else None
-        tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=1000.0)
-        policy = url.take_str("policy", DropPolicy.LATEST.value, choices=tuple(p.value for p in DropPolicy))
+        pairing = take_pairing_options(url, max_tolerance_ms=1000.0)
         cache = url.take_str("cache")
         workers = url.take_int("workers", os.cpu_count() or 2, lo=1, hi=64)
         max_loop_mb = url.take_float("max_loop_mb", 2048.0, lo=1.0)
@@ -198,7 +206,7 @@ class SimOptions:
                 distance_m=distance, width=width, height=height, volume_depth_m=_volume_depth(distance),
             ),
             unplug_after_s=unplug,
-            pairing=PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)),
+            pairing=pairing.config(),
             cache_root=None if cache == "off" else (Path(cache) if cache else default_cache_root()),
             workers=workers,
             max_loop_mb=max_loop_mb,
@@ -356,7 +364,7 @@ class SimRigSource(RigSource):
         backlog_ns = BACKLOG_FRAMES * schedule.model.period_ns
         while True:
             capture = schedule.peek()
-            due = capture.time_ns
+            due = capture.arrival_ns
             if self._unplug_ns is not None and due >= self._unplug_ns:
                 due = self._unplug_ns  # nothing more arrives: the next event is the unplug
             if due > deadline:
@@ -374,7 +382,7 @@ class SimRigSource(RigSource):
             name = self.rig.pair[capture.camera].name
             if capture.dropped:
                 self._drops[name] += 1
-            elif self.clock.now_ns() - capture.time_ns > backlog_ns:
+            elif self.clock.now_ns() - capture.arrival_ns > backlog_ns:  # the backlog is of frames arrived
                 self._overruns[name] += 1
             else:
                 return self._frame(capture)
@@ -383,7 +391,7 @@ class SimRigSource(RigSource):
         schedule = self._schedule
         if schedule is None or self._unplugged:
             return False
-        due = schedule.peek().time_ns
+        due = schedule.peek().arrival_ns
         if self._unplug_ns is not None and due >= self._unplug_ns:
             return False  # the next event is the unplug: the next read raises it, after the pairs captured before
         return due <= self.clock.now_ns()

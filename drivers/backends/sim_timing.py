@@ -7,7 +7,10 @@ Camera ``c`` captures its frame ``k`` at::
 with ``offset`` = 0 for the first camera and ``offset_ms`` for the second, and
 ``jitter_ck`` Gaussian (standard deviation ``jitter_ms``) clipped to 45 % of a
 frame period so a camera's captures stay in order. Each capture is dropped with
-probability ``drop`` (independently per camera and frame). Random draws come from
+probability ``drop`` (independently per camera and frame). The second camera's frames
+reach the host ``latency_ms`` after their capture (a slower transport: USB webcams differ
+by 100-300 ms), the first camera's at it: frames come in order of arrival, stamped with
+their capture time. Random draws come from
 one generator per camera seeded by ``seed``, so the whole timeline is a function
 of the options, never of how fast anybody reads.
 """
@@ -29,6 +32,7 @@ class TimingModel:
     jitter_ms: float = 0.0
     drop: float = 0.0
     seed: int = 0
+    latency_ms: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0 < self.fps <= 1000:
@@ -37,6 +41,8 @@ class TimingModel:
             raise RigConfigError(f"sim timing: drop must be a probability in [0, 1], got {self.drop}")
         if self.jitter_ms < 0:
             raise RigConfigError(f"sim timing: jitter_ms must be >= 0, got {self.jitter_ms}")
+        if not self.latency_ms >= 0:
+            raise RigConfigError(f"sim timing: latency_ms must be >= 0, got {self.latency_ms}")
 
     @property
     def period_ns(self) -> float:
@@ -52,6 +58,7 @@ class Capture:
     time_ns: int  # absolute, on the source's clock
     nominal_ns: int  # the same without jitter: start + index / fps + offset
     dropped: bool
+    arrival_ns: int  # when it reaches the host: time_ns, plus latency_ms for the second camera
 
 
 class _CameraTimeline:
@@ -59,6 +66,7 @@ class _CameraTimeline:
         self._model = model
         self._camera = camera
         self._start_ns = start_ns + (int(round(model.offset_ms * 1e6)) if camera == 1 else 0)
+        self._latency_ns = int(round(model.latency_ms * 1e6)) if camera == 1 else 0
         self._rng = np.random.default_rng([model.seed, camera])
         self._limit_ns = 0.45 * model.period_ns
         self.index = 0
@@ -76,7 +84,8 @@ class _CameraTimeline:
         # Both draws are always made so jitter does not depend on drop (and vice versa).
         jitter = float(np.clip(self._rng.normal(0.0, m.jitter_ms * 1e6), -self._limit_ns, self._limit_ns))
         dropped = bool(self._rng.random() < m.drop)
-        return Capture(self._camera, index, nominal + int(round(jitter)) if m.jitter_ms else nominal, nominal, dropped)
+        time_ns = nominal + int(round(jitter)) if m.jitter_ms else nominal
+        return Capture(self._camera, index, time_ns, nominal, dropped, time_ns + self._latency_ns)
 
     def advance(self) -> Capture:
         current = self.head
@@ -86,7 +95,7 @@ class _CameraTimeline:
 
 
 class CaptureSchedule:
-    """Both cameras' captures merged in time order (ties: first camera first).
+    """Both cameras' captures merged in order of arrival at the host (ties: first camera first).
 
     Args:
         model: the timing model.
@@ -101,7 +110,7 @@ class CaptureSchedule:
     def peek(self) -> Capture:
         """The next capture (delivered or dropped), without consuming it."""
         a, b = self._timelines[0].head, self._timelines[1].head
-        return a if a.time_ns <= b.time_ns else b
+        return a if a.arrival_ns <= b.arrival_ns else b
 
     def pop(self) -> Capture:
         """Consume and return the next capture."""

@@ -70,6 +70,14 @@ class _Estimates(Protocol):
 
 
 class _Reads(Protocol):
+    """What is read of the rig (``drivers.RigSource``): its pairs, and its counters and pairing config to say why
+    none came."""
+
+    pairing: drivers.PairingConfig
+
+    @property
+    def stats(self) -> drivers.PairingStats: ...
+
     def read(self, timeout_s: float = ...) -> Any: ...
 
 
@@ -142,6 +150,7 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
     heights: list[float] = []
     read = two_people = 0
     last_pair = clock()
+    stats_at_pair = source.stats  # what came since: why no pair formed, when none does for stall_s
     read_failed = False  # the last read raised a RigOperationError and no pair came since
     while len(heights) < pairs and read < limit:
         if stop is not None and stop.is_set():
@@ -153,11 +162,11 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
         except drivers.RigTimeoutError:
             # no pair is no pair read; counted as one, a silent rig kept it waiting READS_PER_PAIR * pairs timeouts
             # (five minutes for the default 60 at rig.read_timeout_s 1) and then said nobody stood in view
-            silent = clock() - last_pair
-            if silent >= stall_s:
+            waited = clock() - last_pair
+            if waited >= stall_s:
                 raise FloorMeasureError(
-                    f"--measure-floor: no pair for {silent:.1f} s (rig.stall_s {stall_s:g}) after {read} pairs read: "
-                    f"a camera is silent (unplugged, or held by another process: stop the service first)") from None
+                    f"--measure-floor: no pair for {waited:.1f} s (rig.stall_s {stall_s:g}) after {read} pairs read: "
+                    f"{_why_no_pair(stats_at_pair, source)}") from None
             continue
         except drivers.RigDisconnectedError:
             raise  # unplugged, a device reset: the rig is gone
@@ -173,6 +182,7 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
             continue
         read_failed = False
         last_pair = clock()
+        stats_at_pair = source.stats
         read += 1
         try:
             result = estimator.estimate(pair.images, sequence=pair.sequence, timestamp_s=pair.timestamps_ns[0] * 1e-9)
@@ -197,6 +207,17 @@ def measure_floor(source: _Reads, estimator: _Estimates, foot_standing_m: float,
             f"in shoes or on a mat. A camera moved since calibration reads so too (ghcal check); so does a rig file "
             f"whose floor is off (docs/rig-file.md)")
     return m
+
+
+def _why_no_pair(stats_at_pair: drivers.PairingStats, source: _Reads) -> str:
+    """The daemon's account of a stretch with no pair (``drivers.why_no_pair``), with what a silent camera means
+    here: this command opens the cameras beside the service, which may hold them. Blaming a silent camera for any
+    such stretch sent the operator to a cable where both cameras delivered frames that never paired."""
+    stats = source.stats
+    why = drivers.why_no_pair(stats_at_pair, stats, source.pairing)
+    if drivers.silent_cameras(stats_at_pair, stats):
+        why += " (unplugged, or held by another process: stop the service first)"
+    return why
 
 
 def measure_floor_of_config(config: DaemonConfig, pairs: int = DEFAULT_PAIRS, *,

@@ -407,6 +407,10 @@ class Sink(ABC):
         else:
             _log.info("%s: %s get through again after a stall", self.shown, what_got_through)
 
+    def _log_link_lost(self, e: SinkUnavailableError) -> None:
+        # the error's own text starts with the URL too: the line named it twice
+        _log.warning("%s: link lost (%s); reconnecting", self.shown, e.reason)
+
     def _idle(self) -> None:
         started = self._write_started()
         wrote = failed = False
@@ -418,7 +422,7 @@ class Sink(ABC):
                 self._last_error = str(e)
                 self._write_failed(started)
         except SinkUnavailableError as e:
-            _log.warning("%s: link lost (%s); reconnecting", self.shown, e)
+            self._log_link_lost(e)
             self._release()
             with self._cond:
                 self._disconnects += 1
@@ -458,7 +462,7 @@ class Sink(ABC):
                 error = str(e)
             except SinkUnavailableError as e:
                 error = str(e)
-                _log.warning("%s: link lost (%s); reconnecting", self.shown, e)
+                self._log_link_lost(e)
                 self._release()
                 with self._cond:
                     self._disconnects += 1

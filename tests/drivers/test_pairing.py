@@ -381,19 +381,46 @@ def test_a_camera_that_delivers_nothing_is_named():
     assert why_no_pair(before, before, PairingConfig()) == "neither camera delivered a frame"
 
 
+def _push_lagging(pairer: FramePairer, lag: int, frames: int = 60, offset_ns: int = 1000) -> int:
+    """``frames`` of 'left' at 30 fps, each of 'right' (``offset_ns`` later in capture time) pushed ``lag`` frames
+    after its 'left' partner, as a slower transport delivers it; returns the pairs formed."""
+    image = np.zeros((2, 2, 3), np.uint8)
+    period = 33_333_333
+    pairs = 0
+    for i in range(frames):
+        pairer.push(Frame("left", image, i * period, i))
+        if i >= lag:
+            j = i - lag
+            pairer.push(Frame("right", image, j * period + offset_ns, j))
+        while pairer.pop() is not None:
+            pairs += 1
+    return pairs
+
+
 def test_a_camera_whose_frames_arrive_max_pending_frames_behind_is_said_to_lag():
     # every frame of both cameras came, none paired: what the daemon logs when it gives the rig up (rig.stall_s)
     config = PairingConfig()
     pairer = FramePairer(("left", "right"), config)
     before = pairer.stats.snapshot()
-    image = np.zeros((2, 2, 3), np.uint8)
-    period = 33_333_333
-    for i in range(60):
-        pairer.push(Frame("left", image, i * period, i))
-        if i >= config.max_pending:
-            j = i - config.max_pending
-            pairer.push(Frame("right", image, j * period + 1000, j))
-        assert pairer.pop() is None
+    assert _push_lagging(pairer, lag=config.max_pending) == 0
+    assert pairer.stats.overflowed == {"left": 52, "right": 0}
     assert why_no_pair(before, pairer.stats, config) == (
-        "frames came from both cameras (left 60, right 52) but none paired within the pairing tolerance of 11 ms: "
-        "the cameras do not capture together, or one camera's frames arrive 8 or more frames behind the other's")
+        "frames came from both cameras (left 60, right 52) but none paired: camera 'left' held max_pending=8 frames "
+        "waiting for 'right''s and dropped 52 more, so 'right''s frames arrive 8 or more frames behind (a slower "
+        "transport: raise the rig URL's max_pending, at most 256), or its clock is behind")
+
+
+def test_a_larger_max_pending_pairs_a_camera_that_lags_that_many_frames():
+    pairer = FramePairer(("left", "right"), PairingConfig(max_pending=9, policy=DropPolicy.ALL))
+    assert _push_lagging(pairer, lag=8) == 52  # every frame of the lagging camera
+    assert pairer.stats.overflowed == {"left": 0, "right": 0}
+
+
+def test_cameras_that_do_not_capture_together_are_told_from_a_lagging_one():
+    config = PairingConfig()
+    pairer = FramePairer(("left", "right"), config)
+    before = pairer.stats.snapshot()
+    assert _push_lagging(pairer, lag=1, offset_ns=16_000_000) == 0  # half a period apart, tolerance 11 ms
+    assert why_no_pair(before, pairer.stats, config) == (
+        "frames came from both cameras (left 60, right 59) but none paired within the pairing tolerance of 11 ms: "
+        "the cameras do not capture together")

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from drivers import ManualClock, RigDisconnectedError, RigTimeoutError, open_rig
+from drivers import ManualClock, RigDisconnectedError, RigTimeoutError, open_rig, why_no_pair
 from drivers.backends.sim_timing import CaptureSchedule, TimingModel
 
 START = 5_000_000_000
@@ -188,3 +188,40 @@ def test_real_clock_delivers_at_the_nominal_rate(sim_cache):
     stamps = np.array([p.frames[0].timestamp_ns for p in pairs])
     assert np.median(np.diff(stamps)) / 1e6 == pytest.approx(1000 / 60, abs=0.5)
     assert [p.sequence for p in pairs] == list(range(40))  # every pair delivered, in order
+
+
+# ----------------------------------------------------------------- a camera whose frames arrive late
+def test_schedule_latency_delays_the_second_cameras_arrival_not_its_stamps():
+    caps = captures(TimingModel(fps=30, latency_ms=100.0), 40)
+    assert [c.arrival_ns for c in caps] == sorted(c.arrival_ns for c in caps)  # in order of arrival
+    for c in caps:
+        assert c.time_ns == START + round(c.index * PERIOD)
+        assert c.arrival_ns - c.time_ns == (100_000_000 if c.camera == 1 else 0)
+    assert [(c.camera, c.index) for c in caps[:5]] == [(0, 0), (0, 1), (0, 2), (0, 3), (1, 0)]
+
+
+#: Ten frames and a bit at 30 fps: each 'right' frame arrives after 'left' captured ten more.
+LAG_10_FRAMES_MS = 340
+
+
+def test_a_camera_lagging_ten_frames_pairs_with_max_pending_above_ten(sim_cache):
+    # USB webcams' frames reach the host 100-300 ms apart; their stamps still pair, once the pairer holds enough
+    source, _ = sim(sim_cache, f"latency_ms={LAG_10_FRAMES_MS}&max_pending=11")
+    with source:
+        pairs = read_pairs(source, 30)
+        stats = source.stats
+    assert [p.frames[0].index for p in pairs] == [p.frames[1].index for p in pairs] == list(range(30))
+    assert all(p.frames[0].timestamp_ns == p.frames[1].timestamp_ns for p in pairs)
+    assert stats.overruns == {"left": 0, "right": 0} and stats.overflowed == {"left": 0, "right": 0}
+
+
+def test_a_camera_lagging_ten_frames_never_pairs_at_the_default_max_pending_and_is_said_to(sim_cache):
+    source, _ = sim(sim_cache, f"latency_ms={LAG_10_FRAMES_MS}")
+    with source:
+        before = source.stats
+        with pytest.raises(RigTimeoutError):
+            source.read(timeout_s=2.0)
+        why = why_no_pair(before, source.stats, source.pairing)
+    assert why.startswith("frames came from both cameras (left 61, right 50) but none paired: camera 'left' held "
+                          "max_pending=8 frames waiting for 'right''s")
+    assert "raise the rig URL's max_pending" in why

@@ -518,3 +518,40 @@ def test_stall_s_is_a_url_option_of_every_sink() -> None:
             assert sink.options.stall_s == 0.5, url
         finally:
             sink.close()
+
+
+class IdleFailsOnce(ScriptedSink):
+    """A link whose idle write (a STATUS with no frame to send) finds it gone, once."""
+
+    idle_error: SinkUnavailableError | None = None
+
+    def _idle_timeout_s(self) -> float:
+        return 0.01
+
+    def _on_idle(self) -> bool:
+        error, self.idle_error = self.idle_error, None
+        if error is not None:
+            raise error
+        return False
+
+
+@pytest.mark.parametrize("lost_in", ["a frame's write", "an idle write"])
+def test_a_lost_link_is_logged_naming_the_url_once(caplog: pytest.LogCaptureFixture, lost_in: str) -> None:
+    # "udp://h:9870: link lost (udp://h:9870: unavailable: sendto failed); reconnecting": the error's
+    # text starts with the URL, and the line put the sink's before it
+    sink = IdleFailsOnce()
+    lost = SinkUnavailableError(sink.url, "sendto failed")
+    with caplog.at_level(logging.WARNING, logger="firmware_host.sinks"):
+        sink.start()
+        try:
+            wait_until(lambda: sink.stats().connected, what="connected")
+            if lost_in == "a frame's write":
+                sink.fail_next.append(lost)
+                sink.send(make_frame(0))
+            else:
+                sink.idle_error = lost
+            wait_until(lambda: sink.stats().disconnects == 1, what="the link lost")
+        finally:
+            sink.close()
+    lines = [r.getMessage() for r in sink_records(caplog, logging.WARNING) if "link lost" in r.getMessage()]
+    assert lines == ["scripted://: link lost (sendto failed); reconnecting"]

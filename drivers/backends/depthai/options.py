@@ -21,7 +21,9 @@
   -90: on its side). The device calibration cannot know it; the rig frame keeps gravity down
   and the runtime shows the model upright crops (``roi.upright``).
 * ``rig``: path to a rig file to use instead of the device's calibration.
-* ``tolerance_ms``, ``policy``: pairing; the Sync node's threshold is ``tolerance_ms``.
+* ``tolerance_ms``, ``policy``, ``max_pending``: pairing (:mod:`drivers.pairing_options`); the Sync
+  node's threshold is ``tolerance_ms``. The Sync node delivers both frames of a group together, so
+  ``max_pending`` (frames held per camera while waiting for the other's) has nothing to hold here.
 * ``queue``: depth of the host output queue (default 4, at most 64; older groups are dropped).
   Under ``policy=latest`` each read drains all of it and returns the newest group (the rest
   count as ``pairs_dropped``); under ``policy=all`` it is how far a slow reader may fall behind.
@@ -37,7 +39,8 @@ from pathlib import Path
 import depthai as dai
 
 from drivers.errors import RigConfigError
-from drivers.pairing import DropPolicy, PairingConfig
+from drivers.pairing import PairingConfig
+from drivers.pairing_options import take_pairing_options
 from drivers.url import RigUrl
 
 DEFAULT_MOUNT_HEIGHT_M = 1.0
@@ -95,8 +98,7 @@ class DepthaiOptions:
                 raise RigConfigError(
                     f"rig URL {url.url!r}: give rig= (a rig file) or {name}= (with the device calibration), not both"
                 )
-        tolerance = url.take_float("tolerance_ms", PairingConfig.tolerance_ms, lo=0.001, hi=1000.0)
-        policy = url.take_str("policy", DropPolicy.LATEST.value, choices=tuple(p.value for p in DropPolicy))
+        pairing = take_pairing_options(url, max_tolerance_ms=1000.0)
         queue_size = url.take_int("queue", 4, lo=1, hi=64)
         url.finish()
         return cls(
@@ -110,6 +112,6 @@ class DepthaiOptions:
             mount_roll_deg=mount_roll,
             rig_path=Path(rig) if rig else None,
             queue_size=queue_size,
-            pairing=PairingConfig(tolerance_ms=tolerance, policy=DropPolicy(policy)),
+            pairing=pairing.config(),
             url=url.url,
         )

@@ -1789,3 +1789,28 @@ def test_frames_that_come_but_never_pair_are_said_so_not_a_silent_camera(sim_url
     assert "none paired within the pairing tolerance of 11 ms" in why, why
     assert run.daemon.health.pairs_read == 0
 
+
+def test_a_camera_whose_frames_arrive_ten_frames_late_is_said_to_need_max_pending(sim_url, tmp_path, monkeypatch):
+    """A camera whose frames reach the host 10 frames after the other's (340 ms at 30 fps: a slower USB path)
+    never pairs at the default max_pending (8): the warning says so and names the rig URL's option, not the
+    cameras' sync. With max_pending above the lag the same rig streams."""
+    import firmware_host.daemon.service as service
+
+    monkeypatch.setattr(service, "load_session", lambda config: object())
+    monkeypatch.setattr(service, "Estimator", _CountingEstimator)
+    cfg = _config({"url": f"{sim_url}&latency_ms=340", "reopen_min_s": 0.05, "read_timeout_s": 0.05,
+                   "stall_s": 1.0}, tmp_path)
+    with _Running(cfg, tmp_path) as run:
+        wait_until(lambda: run.daemon.health.rig_lost >= 1, timeout=60, what="the rig given up on")
+        assert run.finish() == 0
+    why = run.daemon.health.last_error
+    assert "frames came from both cameras" in why and "raise the rig URL's max_pending" in why, why
+    assert run.daemon.health.pairs_read == 0
+    raised = tmp_path / "raised"
+    raised.mkdir()
+    cfg = _config({"url": f"{sim_url}&latency_ms=340&max_pending=12", "read_timeout_s": 0.5, "stall_s": 1.0}, raised)
+    with _Running(cfg, raised) as run:
+        wait_until(lambda: run.daemon.health.pairs_read >= 10, timeout=60, what="pairs with max_pending=12")
+        assert run.finish() == 0
+    assert run.daemon.health.rig_lost == 0
+

@@ -34,11 +34,35 @@ class _Pair:
     timestamps_ns: tuple = (0, 0)
 
 
-class _Source:
+class _Counted:
+    """What a real source (``drivers.RigSource``) has beside ``read``: its pairing config and its counters, which say
+    why no pair came. A pair read counts a frame of each camera; ``came`` adds frames that did not pair."""
+
+    pairing = drivers.PairingConfig()
+
+    def __init__(self) -> None:
+        self._counters = drivers.PairingStats(frames_in={"left": 0, "right": 0})
+
+    @property
+    def stats(self) -> drivers.PairingStats:
+        return self._counters.snapshot()
+
+    def paired(self, pair: _Pair) -> _Pair:
+        self.came({cam: 1 for cam in self._counters.frames_in})
+        self._counters.pairs_out += 1
+        return pair
+
+    def came(self, frames: dict[str, int]) -> None:
+        for cam, n in frames.items():
+            self._counters.frames_in[cam] += n
+
+
+class _Source(_Counted):
     """Pairs until ``end`` (then the end of a recording), a timeout at the reads listed in ``timeouts``, a failed
     read (a corrupt frame) at those in ``failures``."""
 
     def __init__(self, end: int = 10 ** 6, timeouts: tuple[int, ...] = (), failures: tuple[int, ...] = ()) -> None:
+        super().__init__()
         self.reads, self.end, self.timeouts, self.failures = 0, end, timeouts, failures
 
     def read(self, timeout_s: float = 1.0) -> _Pair:
@@ -49,7 +73,7 @@ class _Source:
             raise drivers.RigOperationError(f"frame {self.reads}: a corrupt image")
         if self.reads > self.end:
             raise drivers.EndOfStream("the recording ended")
-        return _Pair(sequence=self.reads)
+        return self.paired(_Pair(sequence=self.reads))
 
 
 @dataclass
@@ -115,12 +139,14 @@ def test_pairs_with_two_people_in_view_are_read_past_not_measured():
         measure_floor(_Source(), _Estimator([("two", 0.03)] * 15), 0.04, pairs=3)
 
 
-class _SilentSource:
-    """A camera open but silent (unplugged mid-run, or held by the running service): every read times out after
-    ``timeout_s`` on the fake clock, after ``pairs`` pairs."""
+class _SilentSource(_Counted):
+    """A rig that stops pairing: every read times out after ``timeout_s`` on the fake clock, after ``pairs`` pairs,
+    while the cameras deliver ``arriving`` frames each (default none: a camera open but silent, unplugged mid-run
+    or held by the running service)."""
 
-    def __init__(self, pairs: int = 0) -> None:
-        self.now, self.reads, self.pairs = 0.0, 0, pairs
+    def __init__(self, pairs: int = 0, arriving: dict[str, int] | None = None) -> None:
+        super().__init__()
+        self.now, self.reads, self.pairs, self.arriving = 0.0, 0, pairs, arriving or {}
 
     def clock(self) -> float:
         return self.now
@@ -128,8 +154,9 @@ class _SilentSource:
     def read(self, timeout_s: float = 1.0) -> _Pair:
         self.reads += 1
         if self.reads <= self.pairs:
-            return _Pair(sequence=self.reads)
+            return self.paired(_Pair(sequence=self.reads))
         self.now += timeout_s
+        self.came(self.arriving)
         raise drivers.RigTimeoutError("no pair")
 
 
@@ -138,11 +165,31 @@ def test_a_silent_rig_is_given_up_after_the_stall_time_not_after_every_read_allo
     timeouts (300 s for the default 60 pairs at rig.read_timeout_s 1) and then said nobody stood in view. Now it
     gives up once no pair came for ``rig.stall_s``, as the daemon reopens such a rig, and says so."""
     rig = _SilentSource(pairs=2)
-    with pytest.raises(FloorMeasureError, match=r"no pair for 10\.0 s \(rig\.stall_s 10\) after 2 pairs read: a "
-                                                r"camera is silent"):
+    with pytest.raises(FloorMeasureError, match=r"no pair for 10\.0 s \(rig\.stall_s 10\) after 2 pairs read: "
+                                                r"neither camera delivered a frame \(unplugged, or held by another "
+                                                r"process: stop the service first\)"):
         measure_floor(rig, _Estimator([0.03, 0.03]), 0.04, pairs=60, read_timeout_s=1.0, stall_s=10.0,
                       clock=rig.clock)
     assert rig.reads == 2 + 10 and rig.now == 10.0
+
+
+@pytest.mark.parametrize("arriving, message", [
+    ({"left": 30}, "camera 'right' delivered no frame (left: 300) (unplugged, or held by another process: stop the "
+                   "service first)"),
+    # both cameras deliver (out of sync, or one lagging): not a camera to unplug or a service to stop
+    ({"left": 30, "right": 30}, "frames came from both cameras (left 300, right 300) but none paired within the "
+                                "pairing tolerance of 11 ms"),
+])
+def test_a_rig_that_stops_pairing_is_given_up_saying_what_came_meanwhile(arriving, message):
+    """``--measure-floor`` blamed a silent camera for any stretch with no pair, where the daemon says what the
+    counters show since the last pair (``drivers.why_no_pair``): one camera silent, or frames that never paired."""
+    rig = _SilentSource(pairs=2, arriving=arriving)
+    with pytest.raises(FloorMeasureError) as raised:
+        measure_floor(rig, _Estimator([0.03, 0.03]), 0.04, pairs=60, read_timeout_s=1.0, stall_s=10.0,
+                      clock=rig.clock)
+    text = str(raised.value)
+    assert text.startswith("--measure-floor: no pair for 10.0 s (rig.stall_s 10) after 2 pairs read: " + message)
+    assert ("stop the service" in text) == (len(arriving) == 1)
 
 
 def test_one_failed_read_is_read_past_as_the_daemon_does_two_in_a_row_are_the_rig_failing():
@@ -174,13 +221,14 @@ def test_frames_of_another_size_before_any_pair_are_a_rig_that_does_not_fit_afte
     assert m.heights_m == pytest.approx((0.07, 0.07, 0.07)) and m.pairs_read == 3
 
 
-class _RigSource:
+class _RigSource(_Counted):
     """What ``drivers.create_rig_source`` gives, for the CLI's tests: ``signum`` sent to this process at read
     ``signal_at`` (SIGTERM from systemd or ``timeout``, Ctrl-C's SIGINT), after which no pair comes (each read times
     out); ``open_error`` raised by ``open``. Says whether it was opened and closed."""
 
     def __init__(self, signum: int | None = None, signal_at: int = 2,
                  open_error: Exception | None = None) -> None:
+        super().__init__()
         self.rig = SimpleNamespace(rig_id="bench")
         self.signum, self.signal_at, self.open_error = signum, signal_at, open_error
         self.reads, self.opened, self.closed = 0, False, False
@@ -207,7 +255,7 @@ class _RigSource:
                 os.kill(os.getpid(), self.signum)
             time.sleep(timeout_s)
             raise drivers.RigTimeoutError("no pair")
-        return _Pair(sequence=self.reads)
+        return self.paired(_Pair(sequence=self.reads))
 
 
 class _RigEstimator(_Estimator):
