@@ -2,7 +2,7 @@
 
 Each backend read ``tolerance_ms`` and ``policy`` itself; a new pairing option would have had to be added four
 times, and ``max_pending`` (fixed at 8) could not be set at all, so a camera whose frames reach the host 8 or
-more frames after the other's (USB webcams differ by 100-300 ms) never paired. A backend keeps its own
+more frames after the other's (a slower USB path) never paired. A backend keeps its own
 defaults (``replay://`` delivers every pair, ``opencv://`` derives the tolerance from the cameras' rate).
 """
 from __future__ import annotations

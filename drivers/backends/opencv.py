@@ -37,8 +37,8 @@ Options:
 * ``tolerance_ms``: pairing tolerance (default: half a frame period at the slowest of the rates
   the cameras report and ``fps``, else 30 fps); ``policy``: ``latest`` (default) or ``all``;
   ``max_pending`` (8, at most 256): frames held per camera while waiting for the other's: a camera
-  whose frames reach the host that many frames after the other's (a slower USB path: webcams differ
-  by 100-300 ms) never pairs unless it is raised (:mod:`drivers.pairing_options`);
+  whose frames reach the host that many frames after the other's (a slower USB path or
+  hub) never pairs unless it is raised (:mod:`drivers.pairing_options`);
   ``queue``: frames held per camera for the reader (default 4, at most 256; under ``latest`` each read
   takes in all of them and returns the newest pair; a camera whose queue is full loses its oldest
   frame, counted in ``stats.overruns`` (and, between frames the pairer saw, in ``stats.camera_gaps``);

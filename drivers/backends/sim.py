@@ -25,8 +25,8 @@ URL options (every one validated; unknown ones are rejected by name)::
 * ``jitter_ms`` (0): standard deviation of each capture instant.
 * ``offset_ms`` (0): capture offset of the second camera after the first.
 * ``latency_ms`` (0, at most 10000): the second camera's frames reach the host this long after
-  their capture, stamped with their capture time (a slower transport: USB webcams differ by
-  100-300 ms). A latency of ``max_pending`` frames or more never pairs unless ``max_pending``
+  their capture, stamped with their capture time (a slower transport, such as a
+  USB hub). A latency of ``max_pending`` frames or more never pairs unless ``max_pending``
   is raised (below).
 * ``drop`` (0): probability that a camera loses a frame (per camera, per frame).
 * ``unplug_after_s``: the second camera vanishes this long after open:

@@ -8,8 +8,8 @@ with ``offset`` = 0 for the first camera and ``offset_ms`` for the second, and
 ``jitter_ck`` Gaussian (standard deviation ``jitter_ms``) clipped to 45 % of a
 frame period so a camera's captures stay in order. Each capture is dropped with
 probability ``drop`` (independently per camera and frame). The second camera's frames
-reach the host ``latency_ms`` after their capture (a slower transport: USB webcams differ
-by 100-300 ms), the first camera's at it: frames come in order of arrival, stamped with
+reach the host ``latency_ms`` after their capture (a slower transport, such
+as a USB hub), the first camera's at it: frames come in order of arrival, stamped with
 their capture time. Random draws come from
 one generator per camera seeded by ``seed``, so the whole timeline is a function
 of the options, never of how fast anybody reads.
