@@ -396,7 +396,8 @@ def _run(args: argparse.Namespace, prog: str) -> int:
         read_failed, failed_reads, first_failure = False, 0, ""  # a failed read since the last pair; all of them
         last_pair, last_result = None, None
         stopped: KeyboardInterrupt | None = None  # the Ctrl-C or SIGTERM that ended the reading
-        rig_failed: drivers.DriverError | None = None  # a camera that vanished or fell silent mid-run
+        rig_failed: str | None = None  # a camera that vanished or fell silent mid-run: what the rig said of it
+        stats_at_pair = source.stats  # the pairing counters at the open, then at the last pair (why_no_pair)
         numbers = FrameNumbers()  # the stream's seq: frames sent, not the pairs the rig skipped (a gap: lost)
         # The 2D joints are keyed by camera index (rig.pair order): announce those names in HELLO, with the
         # rig's id as the daemon does (unless the URL names one, or the id does not fit HELLO: then none).
@@ -419,7 +420,10 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         break
                     except (drivers.RigTimeoutError, drivers.RigDisconnectedError) as e:
                         print(f"stopping: {e}")
-                        rig_failed = e  # the summary first, then the run fails (a loose cable in a camera check)
+                        # the summary first, then the run fails (a loose cable in a camera check); a silent rig says
+                        # why, as the daemon's warning does: a camera silent, out of sync or lagging (max_pending)
+                        rig_failed = str(e) if isinstance(e, drivers.RigDisconnectedError) else (
+                            f"{e}: {drivers.why_no_pair(stats_at_pair, source.stats, source.pairing)}")
                         break
                     except drivers.RigOperationError as e:
                         # A frame the rig could not deliver (a corrupt image in a take, one resized since its open)
@@ -436,6 +440,7 @@ def _run(args: argparse.Namespace, prog: str) -> int:
                         continue
                     read_failed = False
                     delivered += 1
+                    stats_at_pair = source.stats
                     if estimator is None:
                         frame = truth_frame(pair, sequence=numbers.take()) if pair.joints_3d is not None else None
                     else:

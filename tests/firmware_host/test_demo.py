@@ -385,6 +385,16 @@ def test_the_first_pair_is_waited_for_longer_than_the_pairs_after_it(tmp_path, m
     assert set(asked[1:]) == {demo.PAIR_TIMEOUT_S}
 
 
+def test_a_rig_that_gives_no_pair_says_why_as_the_daemon_does(tmp_path, capsys, monkeypatch, sim_url):
+    # a camera 10 frames behind the other (a slower USB path) never pairs at max_pending 8: the error named only
+    # the timeout, and a lagging webcam at bring-up got no hint of the remedy
+    monkeypatch.setattr(demo, "FIRST_PAIR_TIMEOUT_S", 0.5)
+    rc = demo.main(["--truth-only", "--url", f"{sim_url}&latency_ms=340", "--seconds", "1", "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "the rig failed after 0 pairs" in err, err
+    assert "frames came from both cameras" in err and "raise the rig URL's max_pending" in err, err
+
+
 def test_a_stream_that_ends_is_no_failure(tmp_path, capsys, small_take):
     rc = demo.main(["--truth-only", "--url", f"replay://{small_take}", "--seconds", "30", "--out", str(tmp_path)])
     captured = capsys.readouterr()
