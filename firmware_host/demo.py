@@ -29,10 +29,14 @@ rig delivers:
   band with the symptoms across its foot while the calibration is suspect, and
   its estimated 3D joints are printed next to the ground truth.
 
-A camera that vanishes or falls silent (no pair within a second; five for the first pair) mid-run ends the reading too: the summary of the
-pairs before it, then one line, ``error: the rig failed after N pairs: ...`` naming the camera, exit status 2 (until
-session 62 only ``stopping: ...`` among the summary's lines, exit 0: a loose cable passed the bring-up's camera
-check). A recording that ends (``replay://``) is no failure.
+A camera that vanishes or falls silent (no pair within a second; five for the first pair) mid-run ends the
+reading too: the summary of the pairs before it, then one line, ``error: the rig failed after N pairs: ...``
+naming the camera, exit status 2 (until session 62 only ``stopping: ...`` among the summary's lines, exit 0: a
+loose cable passed the bring-up's camera check). A recording that ends (``replay://``) is no failure.
+
+A ``file://`` ``--sink`` on a file the run reads (the rig URL's ``rig=``, ``bvh=`` or video files, the ``--config``
+file) or on ``OUT/sim_pair.png`` is a usage error before anything is opened, as the daemon refuses its sinks there
+(``ghnerf_runtime.cli.output_path.output_clash``).
 
 Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeout``, ``kill``: how a
 ``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
