@@ -15,7 +15,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import quote, unquote
 
-__all__ = ["FileParts", "FILE_PARTS", "rig_url_from_folder"]
+from drivers.errors import RigConfigError
+from drivers.url import RigUrl
+
+__all__ = ["FileParts", "FILE_PARTS", "rig_url_from_folder", "url_files"]
 
 
 def _any_path(value: str) -> bool:
@@ -57,6 +60,22 @@ FILE_PARTS: Mapping[str, FileParts] = {
     "opencv": FileParts(options={"rig": _any_path, "first": _video_file, "second": _video_file}),
     "depthai": FileParts(options={"rig": _any_path}),
 }
+
+
+def url_files(url: str) -> list[tuple[str, str]]:
+    """The files (and folders) ``url`` names (:data:`FILE_PARTS`), as its backend reads them: ``(part, path)``,
+    ``part`` being ``"target"`` (``replay://takes/walk``) or the option's name (``rig``, ``bvh``, ``cache``). None
+    for a URL that does not parse (the rig's own check reports it) or of a scheme naming no file."""
+    try:
+        parsed = RigUrl.parse(url)
+    except RigConfigError:
+        return []
+    parts = FILE_PARTS.get(parsed.scheme)
+    if parts is None:
+        return []
+    files = [("target", parsed.target)] if parts.target and parsed.target else []
+    return files + [(name, value) for name, value in parsed.options.items()
+                    if name in parts.options and value and parts.options[name](value)]
 
 
 def _absolute(value: str, folder: Path) -> str | None:

@@ -29,10 +29,14 @@ rig delivers:
   band with the symptoms across its foot while the calibration is suspect, and
   its estimated 3D joints are printed next to the ground truth.
 
-A camera that vanishes or falls silent (no pair within a second; five for the first pair) mid-run ends the reading too: the summary of the
-pairs before it, then one line, ``error: the rig failed after N pairs: ...`` naming the camera, exit status 2 (until
-session 62 only ``stopping: ...`` among the summary's lines, exit 0: a loose cable passed the bring-up's camera
-check). A recording that ends (``replay://``) is no failure.
+A camera that vanishes or falls silent (no pair within a second; five for the first pair) mid-run ends the
+reading too: the summary of the pairs before it, then one line, ``error: the rig failed after N pairs: ...``
+naming the camera, exit status 2 (until session 62 only ``stopping: ...`` among the summary's lines, exit 0: a
+loose cable passed the bring-up's camera check). A recording that ends (``replay://``) is no failure.
+
+A ``file://`` ``--sink`` on a file the run reads (the rig URL's ``rig=``, ``bvh=`` or video files, the ``--config``
+file) or on ``OUT/sim_pair.png`` is a usage error before anything is opened, as the daemon refuses its sinks there
+(``ghnerf_runtime.cli.output_path.output_clash``).
 
 Ctrl-C stops the reading and still prints the summary (exit 0); SIGTERM (``timeout``, ``kill``: how a
 ``record+`` take is often ended) does the same, a recorder closing its take complete, and exits 143 with one
@@ -60,14 +64,17 @@ import numpy as np
 import drivers
 from drivers.sim.demo import draw_truth
 from drivers.url import redact_url
+from drivers.url_paths import url_files
 from firmware_host.daemon.calibration_watch import CalibrationWatch, FloorWatch, symptoms
 from firmware_host.daemon.config import CALIBRATION_MAX_FLOOR_M, CALIBRATION_MAX_PX, CALIBRATION_WINDOW
 from firmware_host.errors import FirmwareHostError
 from firmware_host.joint_frames import FrameNumbers, estimate_frame, truth_frame
 from firmware_host.protocol.constants import MAX_RIG_ID_LEN
 from firmware_host.sinks import open_sink
+from firmware_host.sinks.file_sink import FileSink
 from firmware_host.sinks.url import parse_url
 from ghnerf_runtime.body25 import JOINT_NAMES, LIMBS
+from ghnerf_runtime.cli.output_path import output_clash
 from ghnerf_runtime.cli.sigterm import exit_status, sigterm_as_interrupt, sigterm_deferred, stop_signal, stop_words
 from ghnerf_runtime.cli.simdata import Accuracy
 from ghnerf_runtime.config import EstimatorConfig, load_config
@@ -541,11 +548,35 @@ def _refuse_ignored_flags(parser: argparse.ArgumentParser, args: argparse.Namesp
         parser.error(f"{' and '.join(given)} with --truth-only: no model runs, so there is nothing to apply it to")
 
 
+def _sink_file(url: str | None) -> str | None:
+    """The file a ``file://`` ``--sink`` appends to; None for another sink, or a URL the sink's open reports."""
+    if url is None or not url.lower().startswith("file:"):
+        return None
+    try:
+        return FileSink.from_url(url).path
+    except FirmwareHostError:
+        return None
+
+
+def _refuse_clashing_outputs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """A ``file://`` --sink on a file the run reads (the rig URL's ``rig=`` calibration, its ``bvh=`` motion or
+    videos, the --config file) appended joint lines to it, and one on ``OUT/sim_pair.png`` was replaced by the
+    picture: refused before anything is opened, as the daemon refuses its sinks there
+    (:func:`ghnerf_runtime.cli.output_path.output_clash`, one check for both)."""
+    rig_files = {f"--url's {part}=": path for part, path in url_files(args.url.removeprefix("record+"))
+                 if part != "target"}
+    clash = output_clash({"--sink": _sink_file(args.sink), "--out's sim_pair.png": args.out / "sim_pair.png"},
+                         {"--config": args.config, **rig_files})
+    if clash:
+        parser.error(clash)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     prog = prog_name()
     parser = build_parser(prog)
     args = parser.parse_args(argv)
     _refuse_ignored_flags(parser, args)
+    _refuse_clashing_outputs(parser, args)
     try:
         # SIGTERM stops it as Ctrl-C does: its default action killed it outright, a record+ take left
         # complete: false and the frames still queued for the recorder lost

@@ -22,7 +22,6 @@ Tree (defaults in the classes)::
 from __future__ import annotations
 
 import dataclasses
-import json
 import numbers
 import os
 import typing
@@ -32,7 +31,7 @@ from typing import Any, Callable, Mapping
 from ghnerf_runtime.config_paths import paths_from_file
 from ghnerf_runtime.contract import GRAPH_NAMES, MAX_NEAR_FAR_MARGIN_M
 from ghnerf_runtime.errors import ConfigError
-from ghnerf_runtime.json_keys import remember_repeats
+from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.keypoints import KeypointConfigError, KeypointDecoderConfig
 from ghnerf_runtime.plain_values import is_finite_number, is_true_false, plain_scalar
 from ghnerf_runtime.preprocess import EDGE_CROPS, PAD_FILLS
@@ -1020,13 +1019,12 @@ def config_to_dict(config: Any) -> dict:
     return out
 
 
-def _plain_json(value: Any, where: str, duplicates: list[str]) -> Any:
-    """``value`` with plain dicts, the dotted path of every repeated key appended to ``duplicates``."""
+def _plain_json(value: Any) -> Any:
+    """``value`` with plain dicts for the :class:`~ghnerf_runtime.json_keys.KeysObject` the parse made."""
     if isinstance(value, dict):
-        duplicates.extend(f"{where}.{k}" if where else k for k in getattr(value, "duplicates", ()))
-        return {k: _plain_json(v, f"{where}.{k}" if where else k, duplicates) for k, v in value.items()}
+        return {k: _plain_json(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_plain_json(v, f"{where}[{i}]", duplicates) for i, v in enumerate(value)]
+        return [_plain_json(v) for v in value]
     return value
 
 
@@ -1055,17 +1053,14 @@ def read_json_file(path: str | os.PathLike, fail: Callable[[str], Exception], wh
     if not text.strip():  # said "not valid JSON (line 1, column 1: Expecting value)"
         raise fail(f"{what} is empty")
     try:
-        duplicates: list[str] = []
-        data = _plain_json(json.loads(text, object_pairs_hook=remember_repeats), "", duplicates)
-    except json.JSONDecodeError as e:
-        raise fail(f"not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
-    except ValueError as e:  # an integer of more digits than Python converts (4300)
-        raise fail(f"not valid JSON ({e})") from e
-    except RecursionError as e:
-        raise fail("not valid JSON (nested too deeply)") from e
-    if duplicates:
-        raise fail(f"duplicate key {duplicates[0]!r} (JSON keeps only its last value)")
-    return data
+        data = loads_remembering(text)
+    except JsonTextError as e:  # invalid, nested thousands deep, or an integer past 4300 digits
+        where = "" if e.line is None else f"line {e.line}, column {e.column}: "
+        raise fail(f"not valid JSON ({where}{e.reason})") from e
+    repeated = first_repeat(data)
+    if repeated is not None:
+        raise fail(f"duplicate key {repeated!r} (JSON keeps only its last value)")
+    return _plain_json(data)
 
 
 def load_config(path: str | os.PathLike) -> EstimatorConfig:

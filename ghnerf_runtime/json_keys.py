@@ -1,13 +1,25 @@
 """JSON objects that remember the keys given more than once (``json.loads(..., object_pairs_hook=)``).
 
 JSON keeps a repeated key's last value; a file that sets ``"method"`` twice loses the first without a word.
-The rig file and the config files refuse such a key, naming it: this is the hook both parse with.
+The rig file, the config files and a take's manifest refuse such a key, naming it: this is the hook they parse
+with, and :func:`loads_remembering` the one parse they share (each says its errors in its own words).
 """
 from __future__ import annotations
 
+import json
 from typing import Any
 
-__all__ = ["KeysObject", "first_repeat", "remember_repeats"]
+__all__ = ["JsonTextError", "KeysObject", "first_repeat", "loads_remembering", "remember_repeats"]
+
+
+class JsonTextError(ValueError):
+    """Text that is not JSON Python reads: ``reason`` says why, ``line`` and ``column`` where (``None`` for text
+    nested too deeply or an integer past Python's digit limit, which have no one place)."""
+
+    def __init__(self, reason: str, line: int | None = None, column: int | None = None) -> None:
+        super().__init__(f"invalid JSON at line {line}, column {column}: {reason}" if line is not None
+                         else f"invalid JSON: {reason}")
+        self.reason, self.line, self.column = reason, line, column
 
 
 class KeysObject(dict):
@@ -48,3 +60,21 @@ def first_repeat(value: Any, where: str = "") -> str | None:
     else:
         return None
     return next((found for path, v in items if (found := first_repeat(v, path)) is not None), None)
+
+
+def loads_remembering(text: str) -> Any:
+    """``text`` parsed with :func:`remember_repeats` (every object a :class:`KeysObject`).
+
+    Raises:
+        JsonTextError: invalid JSON (with its line and column), JSON nested too deeply (a RecursionError from
+            the parser) or an integer of more digits than Python converts (4300): each was a traceback from a
+            reader that caught only the first.
+    """
+    try:
+        return json.loads(text, object_pairs_hook=remember_repeats)
+    except json.JSONDecodeError as e:
+        raise JsonTextError(e.msg, e.lineno, e.colno) from e
+    except RecursionError as e:
+        raise JsonTextError("nested too deeply") from e
+    except ValueError as e:  # Python's 4300-digit limit on integers
+        raise JsonTextError(str(e)) from e

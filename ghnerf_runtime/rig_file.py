@@ -40,7 +40,7 @@ from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, box_reac
 from ghnerf_runtime.errors import GeometryError, RigFileError
 from ghnerf_runtime.geometry.camera import DISTORTION_NAMES, Camera, nearest_rotation
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
-from ghnerf_runtime.json_keys import remember_repeats
+from ghnerf_runtime.json_keys import JsonTextError, loads_remembering, remember_repeats
 
 log = logging.getLogger(__name__)
 
@@ -493,13 +493,9 @@ def loads_rig(text: str, *, path: str | os.PathLike | None = None) -> Rig:
         raise RigFileError("the file is empty", path=where)
     try:
         # NaN/Infinity literals parse to floats here and are then rejected with the field name.
-        data = json.loads(text, object_pairs_hook=remember_repeats)
-    except json.JSONDecodeError as e:
-        raise RigFileError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}", path=where) from e
-    except ValueError as e:  # an integer literal of more digits than Python converts (4300)
-        raise RigFileError(f"invalid JSON: {e}", path=where) from e
-    except RecursionError as e:  # arrays or objects nested thousands deep
-        raise RigFileError("invalid JSON: nested too deeply", path=where) from e
+        data = loads_remembering(text)
+    except JsonTextError as e:  # invalid, nested thousands deep, or an integer past 4300 digits
+        raise RigFileError(str(e), path=where) from e
     return rig_from_dict(data, path=path)
 
 

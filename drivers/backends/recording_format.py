@@ -34,7 +34,7 @@ from ghnerf_runtime import tiff_header
 from ghnerf_runtime.errors import RigFileError
 from ghnerf_runtime.geometry import Rig
 from ghnerf_runtime.image_files import decode_image_or_none
-from ghnerf_runtime.json_keys import first_repeat, remember_repeats
+from ghnerf_runtime.json_keys import JsonTextError, first_repeat, loads_remembering
 from ghnerf_runtime.rig_file import rig_from_dict, rig_to_dict, write_text_atomic
 
 FORMAT = "ghnerf-rig-recording"
@@ -254,14 +254,11 @@ def _json_value(text: str) -> Any:
     the daemon's config check), and a key given twice in one object (JSON keeps the last: a hand-edited
     manifest's first value was lost without a word)."""
     try:
-        value = json.loads(text, object_pairs_hook=remember_repeats)
-    except json.JSONDecodeError as e:  # a journal line is one line: its column says where
-        where = f"column {e.colno}" if "\n" not in text.strip() else f"line {e.lineno}, column {e.colno}"
-        raise ValueError(f"invalid JSON at {where}: {e.msg}") from e
-    except RecursionError as e:
-        raise ValueError("invalid JSON: nested too deeply") from e
-    except ValueError as e:  # Python's 4300-digit limit on integers
-        raise ValueError(f"invalid JSON: {e}") from e
+        value = loads_remembering(text)
+    except JsonTextError as e:
+        if e.line is not None and "\n" not in text.strip():  # a journal line is one line: its column says where
+            raise ValueError(f"invalid JSON at column {e.column}: {e.reason}") from e
+        raise
     repeated = first_repeat(value)
     if repeated is not None:
         raise ValueError(f"duplicate key {repeated!r} (JSON keeps only its last value)")

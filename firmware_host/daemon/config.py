@@ -25,10 +25,11 @@ from typing import Any, Mapping
 from urllib.parse import unquote, urlsplit
 
 from firmware_host.errors import FirmwareHostError
+from ghnerf_runtime.cli.output_path import first_clash
 from ghnerf_runtime.config import PATH_KEYS, EstimatorConfig, config_from_dict, read_json_file
 from drivers.errors import RigConfigError
 from drivers.url import RigUrl, redact_url
-from drivers.url_paths import FILE_PARTS, rig_url_from_folder
+from drivers.url_paths import rig_url_from_folder, url_files
 from ghnerf_runtime.config_paths import paths_from_file, values_from_file
 from ghnerf_runtime.errors import ConfigError
 
@@ -252,11 +253,6 @@ def _one_sink_per_destination(sinks: typing.Sequence[str]) -> None:
             seen[place] = k
 
 
-def _same_file(a: str, b: str) -> bool:
-    """``a`` and ``b`` name one file (through links, ``..`` and the current directory), whether or not it exists."""
-    return os.path.realpath(a) == os.path.realpath(b)
-
-
 def _outputs(config: "DaemonConfig") -> list[tuple[str, str]]:
     """The files the daemon writes, as ``(key, path)``: the status file (replaced whole every few seconds) and the
     ``file://`` sinks (appended to)."""
@@ -271,29 +267,21 @@ def _outputs(config: "DaemonConfig") -> list[tuple[str, str]]:
 def _rig_inputs(url: str) -> list[tuple[str, str]]:
     """The files ``rig.url`` reads (its ``rig=`` calibration, a ``bvh=`` motion, ``opencv://`` videos), as
     ``(what, path)``; none for a URL that does not parse, which the rig's own check reports."""
-    try:
-        parsed = RigUrl.parse(url)
-    except RigConfigError:
-        return []
-    parts = FILE_PARTS.get(parsed.scheme)
-    if parts is None:
-        return []
-    return [(f"rig.url's {name}= file", value) for name, names_file in parts.options.items()
-            if (value := parsed.options.get(name)) and names_file(value)]
+    return [(f"rig.url's {part}= file", path) for part, path in url_files(url) if part != "target"]
 
 
 def _outputs_apart(outputs: list[tuple[str, str]], inputs: list[tuple[str, str]]) -> None:
     """Refuse a file the daemon writes that is one it reads, or that it also writes another way: the status file
     set to the rig file replaced the calibration with a health report at the first beat, and a ``file://`` sink
     on it appended joint lines to it; a status file that is also a sink interleaved the two writers."""
-    for i, (key, path) in enumerate(outputs):
-        for what, source in inputs:
-            if _same_file(path, source):
-                _fail(key, f"is {what} ({source}), which the daemon reads: writing there would destroy it; give "
-                           "another path", path)
-        for other, other_path in outputs[:i]:
-            if _same_file(path, other_path):
-                _fail(key, f"is where {other} writes too: two writers would mix in one file; give another path", path)
+    clash = first_clash(outputs, inputs)
+    if clash is None:
+        return
+    if clash.other_is_input:
+        _fail(clash.output, f"is {clash.other} ({clash.other_path}), which the daemon reads: writing there would "
+                            "destroy it; give another path", clash.path)
+    _fail(clash.output, f"is where {clash.other} writes too: two writers would mix in one file; give another path",
+          clash.path)
 
 
 def outputs_apart_from_config_file(config: "DaemonConfig", config_path: str | os.PathLike) -> None:

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import os
 
-from drivers.errors import RigConfigError
-from drivers.url import RigUrl
-from drivers.url_paths import FILE_PARTS
+from drivers.url_paths import url_files
 from firmware_host.daemon.config import DaemonConfig
 from firmware_host.errors import FirmwareHostError
 from firmware_host.sinks.file_sink import FileSink
@@ -67,18 +65,9 @@ def sandbox_advice(path: str | os.PathLike, *, written: bool = False) -> str | N
 
 
 def _rig_url_files(url: str) -> list[tuple[str, bool]]:
-    """The files a rig URL names (``drivers.url_paths.FILE_PARTS``), as its backend reads them, each with whether it
-    is written (``sim://?cache=``, the folder its loop is rendered into)."""
-    try:
-        parsed = RigUrl.parse(url)
-    except RigConfigError:  # check_config names it
-        return []
-    parts = FILE_PARTS.get(parsed.scheme)
-    if parts is None:
-        return []
-    files = [(parsed.target, False)] if parts.target and parsed.target else []
-    return files + [(v, parsed.scheme == "sim" and k == "cache") for k, v in parsed.options.items()
-                    if k in parts.options and v and parts.options[k](v)]
+    """The files a rig URL names (``drivers.url_paths.url_files``), each with whether it is written (``sim://?cache=``,
+    the folder its loop is rendered into)."""
+    return [(path, part == "cache") for part, path in url_files(url)]
 
 
 def configured_paths(config: DaemonConfig) -> list[tuple[str, str, bool]]:

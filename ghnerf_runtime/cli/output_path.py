@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import os
 import tempfile
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -80,23 +82,50 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
     return os.path.realpath(a) == os.path.realpath(b)
 
 
+@dataclass(frozen=True)
+class Clash:
+    """An output that is a file already taken: ``output`` (a flag or config key) at ``path`` is ``other`` at
+    ``other_path``, an input when ``other_is_input`` (replaced by what the tool writes), else another output."""
+
+    output: str
+    path: str | os.PathLike
+    other: str
+    other_path: str | os.PathLike
+    other_is_input: bool
+
+
+def first_clash(outputs: Iterable[tuple[str, str | os.PathLike | None]],
+                inputs: Iterable[tuple[str, str | os.PathLike | None]]) -> Clash | None:
+    """The first of ``outputs`` (``(name, path)``; a ``None`` path for one not given) that is one of ``inputs`` or
+    an earlier output, however spelled (:func:`same_file`); ``None`` when every output has a file of its own.
+    Callers say it in their own words and error type (a CLI's usage error, the daemon's config key)."""
+    sources = [(name, path) for name, path in inputs if path is not None]
+    written: list[tuple[str, str | os.PathLike]] = []
+    for name, path in outputs:
+        if path is None:
+            continue
+        for other, source in sources:
+            if same_file(path, source):
+                return Clash(name, path, other, source, other_is_input=True)
+        for other, other_path in written:
+            if same_file(path, other_path):
+                return Clash(name, path, other, other_path, other_is_input=False)
+        written.append((name, path))
+    return None
+
+
 def output_clash(outputs: dict[str, str | os.PathLike | None],
                  inputs: dict[str, str | os.PathLike | None]) -> str | None:
     """Why one of ``outputs`` (flag -> path; ``None`` for one not given) cannot be written: it is one of ``inputs``
     (replaced by what the tool writes: the rig file by the joints, a captured image by its overlay) or another
     output (one of the two lost); ``None`` when every output has a file of its own."""
-    written: list[tuple[str, str | os.PathLike]] = []
-    for flag, path in outputs.items():
-        if path is None:
-            continue
-        for other, source in inputs.items():
-            if source is not None and same_file(path, source):
-                return f"{flag} {path} is the file {other} reads: writing it would destroy it; give another path"
-        for other, other_path in written:
-            if same_file(path, other_path):
-                return f"{flag} {path} is where {other} writes too: one of them would be lost; give another path"
-        written.append((flag, path))
-    return None
+    clash = first_clash(outputs.items(), inputs.items())
+    if clash is None:
+        return None
+    if clash.other_is_input:
+        return f"{clash.output} {clash.path} is the file {clash.other} reads: writing it would destroy it; give " \
+               "another path"
+    return f"{clash.output} {clash.path} is where {clash.other} writes too: one of them would be lost; give another path"
 
 
 def ready_output_arg(ap: argparse.ArgumentParser, path: str | os.PathLike, flag: str,

@@ -113,7 +113,6 @@ def fold_radius(coefficients: tuple[float, ...], r_max: float = LENS_REACH) -> f
     return float(r[int(np.argmax(falling))]) if falling.any() else math.inf
 
 
-
 def lens_jacobian_det(coefficients, xy: np.ndarray) -> np.ndarray:
     """``(...)`` determinant of the lens model's Jacobian (d distorted / d undistorted) at normalised points
     ``(..., 2)``: positive where :meth:`Camera.distort` keeps the orientation of a small patch, 0 on a fold."""

@@ -425,6 +425,38 @@ def test_model_flags_with_truth_only_are_refused(tmp_path, capsys, flags, named)
     assert not (tmp_path / "out").exists()  # refused before anything is opened or written
 
 
+def _refused(argv: list[str], capsys) -> str:
+    """The usage error ``argv`` ends in (exit 2, before anything is opened), its stderr."""
+    with pytest.raises(SystemExit) as e:
+        demo.main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2, err
+    return err
+
+
+def test_a_file_sink_on_a_file_the_run_reads_is_refused(tmp_path, capsys):
+    """As the daemon refuses it (one check, output_path.output_clash): a file:// sink on the rig URL's rig= file or
+    the --config file appended joint lines to it; nothing is opened, the file is left as it was."""
+    rig, config = tmp_path / "rig.json", tmp_path / "runtime.json"
+    rig.write_text("{}")
+    config.write_text("{}")
+    url = f"opencv://?first=0&second=1&rig={rig}"
+    err = _refused(["--url", url, "--sink", f"file://{tmp_path}/sub/../rig.json", "--out", str(tmp_path / "out")],
+                   capsys)
+    assert f"error: --sink {tmp_path}/sub/../rig.json is the file --url's rig= reads" in err
+    err = _refused(["--url", url, "--config", str(config), "--sink", f"file://localhost{config}",
+                    "--out", str(tmp_path / "out")], capsys)
+    assert f"error: --sink {config} is the file --config reads" in err
+    assert rig.read_text() == config.read_text() == "{}" and not (tmp_path / "out").exists()
+
+
+def test_a_file_sink_on_the_demo_picture_is_refused(tmp_path, capsys, sim_url):
+    """The joint lines were replaced by the PNG at the run's end (exit 0)."""
+    err = _refused(["--truth-only", "--url", sim_url, "--seconds", "0.3", "--out", str(tmp_path),
+                    "--sink", f"file://{tmp_path}/sim_pair.png"], capsys)
+    assert f"error: --out's sim_pair.png {tmp_path}/sim_pair.png is where --sink writes too" in err
+
+
 @pytest.mark.parametrize("argv0, prog", [
     ("/home/me/.venv/bin/ghnerf-demo", "ghnerf-demo"),  # the console script (pyproject.toml [project.scripts])
     ("C:/venv/Scripts/ghnerf-demo.exe", "ghnerf-demo"),
