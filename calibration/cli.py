@@ -79,6 +79,9 @@ BOARD_FILE = "board.json"
 #: at most this many megapixels (a mistyped --dpi 100000 asked for terabytes).
 MIN_PX_PER_SQUARE = 20
 MAX_BOARD_MEGAPIXELS = 400
+#: ``synth --count``/``--edge-count`` and ``capture --count``: at most this many views. 15-20 solve a pair
+#: (the defaults); a mistyped ``--count 100000000`` rendered for hours and filled the disk.
+MAX_VIEWS = 100
 
 
 def _stream_name(text: str, limit: int, what: str) -> str:
@@ -932,6 +935,16 @@ def _count(text: str) -> int:
     return value
 
 
+def _view_count(lowest: int):
+    """An argparse type: a view count from ``lowest`` to ``MAX_VIEWS``."""
+    def parse(text: str) -> int:
+        value = _whole_number(text)
+        if not lowest <= value <= MAX_VIEWS:
+            raise argparse.ArgumentTypeError(f"must be {lowest} to {MAX_VIEWS} views, got {value}")
+        return value
+    return parse
+
+
 def _finite(lo: float, hi: float):
     def parse(text: str) -> float:
         value = _number(text)
@@ -974,8 +987,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--board", help="the board to render (default: 9x6 squares of 80 mm); written to OUT/board.json")
     p.add_argument("--force", action="store_true",
                    help="write into a folder that already holds views, board.json or cameras.json")
-    p.add_argument("--count", type=_positive_int, default=15, help="views both cameras see (default 15)")
-    p.add_argument("--edge-count", type=_count, default=6, help="views per camera in its image corners (default 6)")
+    p.add_argument("--count", type=_view_count(1), default=15,
+                   help=f"views both cameras see (default 15, at most {MAX_VIEWS})")
+    p.add_argument("--edge-count", type=_view_count(0), default=6,
+                   help=f"views per camera in its image corners (default 6, at most {MAX_VIEWS})")
     p.add_argument("--seed", type=_count, default=0)
     p.set_defaults(run=cmd_synth)
 
@@ -985,7 +1000,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "still need its measured board.json")
     p.add_argument("--out", required=True, help="folder: one subfolder per camera, and cameras.json, the order "
                                                 "the rig source gives the cameras in (solve keeps it)")
-    p.add_argument("--count", type=_positive_int, default=20, help="views to keep (default 20)")
+    p.add_argument("--count", type=_view_count(1), default=20, help=f"views to keep (default 20, at most {MAX_VIEWS})")
     p.add_argument("--floor", action="store_true",
                    help="keep one view named 'floor': the board lying still on the floor, seen by both cameras")
     p.add_argument("--steady-s", type=_seconds, default=1.0, help="--floor: how long the board must lie still")
