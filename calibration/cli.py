@@ -80,7 +80,7 @@ BOARD_FILE = "board.json"
 MIN_PX_PER_SQUARE = 20
 MAX_BOARD_MEGAPIXELS = 400
 #: ``synth --count``/``--edge-count`` and ``capture --count``: at most this many views. 15-20 solve a pair
-#: (the defaults); a mistyped ``--count 100000000`` rendered for hours and filled the disk.
+#: (the defaults); a mistyped ``--count 100000000`` had no end short of a full disk.
 MAX_VIEWS = 100
 
 
