@@ -579,7 +579,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     solution = solve_rig(board, views, names, lens=args.lens, floor_view=args.floor_view,
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
-                         rig_id=args.rig_id)
+                         rig_id=args.rig_id, tangential=not args.no_tangential)
     # the previous rig and report kept first (copies: rig.prev.json, rig.report.prev.json), then the report, so
     # the rig file is never newer than its report; if save_rig then fails, the new report is left beside the old rig
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
@@ -1024,6 +1024,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the order IMAGES/cameras.json "
                                      "records, else the two subfolders, sorted)")
     p.add_argument("--lens", choices=sorted(LENS_MODELS), default="standard")
+    p.add_argument("--no-tangential", action="store_true",
+                   help="hold the tangential terms p1, p2 at exactly 0 (OpenCV's CALIB_ZERO_TANGENT_DIST), with any "
+                        "--lens: for views whose fitted p1/p2 fold the lens model inside the image")
     p.add_argument("--floor-view", help="the view (file name without suffix) of the board lying on the floor")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0, help="metres, for the floor view")
     p.add_argument("--camera-height", type=_finite(0.05, 10.0),
