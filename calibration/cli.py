@@ -730,7 +730,9 @@ def _declared_units(path: Path) -> float | None:
         meta = tomllib.loads(path.read_text(encoding="utf-8-sig")).get("metadata")  # as the reader: a BOM is skipped
     except (OSError, ValueError):
         return None  # the reader names what is wrong with it
-    if not isinstance(meta, dict) or "units_to_metres" not in meta:
+    if meta is not None and not isinstance(meta, dict):  # metadata = 5 was passed over as no unit recorded
+        raise RigFileError(f"must be a table ([metadata]), got {meta!r}", path=str(path), field="metadata")
+    if meta is None or "units_to_metres" not in meta:
         return None
     units = meta["units_to_metres"]
     # named here: the reader's own check comes after this value has been taken as the argument (an error
