@@ -79,6 +79,9 @@ BOARD_FILE = "board.json"
 #: at most this many megapixels (a mistyped --dpi 100000 asked for terabytes).
 MIN_PX_PER_SQUARE = 20
 MAX_BOARD_MEGAPIXELS = 400
+#: ``synth --count``/``--edge-count`` and ``capture --count``: at most this many views. 15-20 solve a pair
+#: (the defaults); a mistyped ``--count 100000000`` had no end short of a full disk.
+MAX_VIEWS = 100
 
 
 def _stream_name(text: str, limit: int, what: str) -> str:
@@ -576,7 +579,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     solution = solve_rig(board, views, names, lens=args.lens, floor_view=args.floor_view,
                          board_thickness_m=args.board_thickness, camera_height_m=args.camera_height,
                          pitch_deg=args.pitch or 0.0, roll_deg=args.roll or 0.0, volume=_volume(args.volume),
-                         rig_id=args.rig_id)
+                         rig_id=args.rig_id, tangential=not args.no_tangential)
     # the previous rig and report kept first (copies: rig.prev.json, rig.report.prev.json), then the report, so
     # the rig file is never newer than its report; if save_rig then fails, the new report is left beside the old rig
     kept = {path: _keep_previous(path, prev) for path, prev in previous.items()}
@@ -727,7 +730,9 @@ def _declared_units(path: Path) -> float | None:
         meta = tomllib.loads(path.read_text(encoding="utf-8-sig")).get("metadata")  # as the reader: a BOM is skipped
     except (OSError, ValueError):
         return None  # the reader names what is wrong with it
-    if not isinstance(meta, dict) or "units_to_metres" not in meta:
+    if meta is not None and not isinstance(meta, dict):  # metadata = 5 was passed over as no unit recorded
+        raise RigFileError(f"must be a table ([metadata]), got {meta!r}", path=str(path), field="metadata")
+    if meta is None or "units_to_metres" not in meta:
         return None
     units = meta["units_to_metres"]
     # named here: the reader's own check comes after this value has been taken as the argument (an error
@@ -932,6 +937,16 @@ def _count(text: str) -> int:
     return value
 
 
+def _view_count(lowest: int):
+    """An argparse type: a view count from ``lowest`` to ``MAX_VIEWS``."""
+    def parse(text: str) -> int:
+        value = _whole_number(text)
+        if not lowest <= value <= MAX_VIEWS:
+            raise argparse.ArgumentTypeError(f"must be {lowest} to {MAX_VIEWS} views, got {value}")
+        return value
+    return parse
+
+
 def _finite(lo: float, hi: float):
     def parse(text: str) -> float:
         value = _number(text)
@@ -974,8 +989,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--board", help="the board to render (default: 9x6 squares of 80 mm); written to OUT/board.json")
     p.add_argument("--force", action="store_true",
                    help="write into a folder that already holds views, board.json or cameras.json")
-    p.add_argument("--count", type=_positive_int, default=15, help="views both cameras see (default 15)")
-    p.add_argument("--edge-count", type=_count, default=6, help="views per camera in its image corners (default 6)")
+    p.add_argument("--count", type=_view_count(1), default=15,
+                   help=f"views both cameras see (default 15, at most {MAX_VIEWS})")
+    p.add_argument("--edge-count", type=_view_count(0), default=6,
+                   help=f"views per camera in its image corners (default 6, at most {MAX_VIEWS})")
     p.add_argument("--seed", type=_count, default=0)
     p.set_defaults(run=cmd_synth)
 
@@ -985,7 +1002,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "still need its measured board.json")
     p.add_argument("--out", required=True, help="folder: one subfolder per camera, and cameras.json, the order "
                                                 "the rig source gives the cameras in (solve keeps it)")
-    p.add_argument("--count", type=_positive_int, default=20, help="views to keep (default 20)")
+    p.add_argument("--count", type=_view_count(1), default=20, help=f"views to keep (default 20, at most {MAX_VIEWS})")
     p.add_argument("--floor", action="store_true",
                    help="keep one view named 'floor': the board lying still on the floor, seen by both cameras")
     p.add_argument("--steady-s", type=_seconds, default=1.0, help="--floor: how long the board must lie still")
@@ -1009,6 +1026,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", help="FIRST,SECOND: the pair in rig order (default: the order IMAGES/cameras.json "
                                      "records, else the two subfolders, sorted)")
     p.add_argument("--lens", choices=sorted(LENS_MODELS), default="standard")
+    p.add_argument("--no-tangential", action="store_true",
+                   help="hold the tangential terms p1, p2 at exactly 0 (OpenCV's CALIB_ZERO_TANGENT_DIST), with any "
+                        "--lens: for views whose fitted p1/p2 fold the lens model inside the image")
     p.add_argument("--floor-view", help="the view (file name without suffix) of the board lying on the floor")
     p.add_argument("--board-thickness", type=_finite(0.0, 0.1), default=0.0, help="metres, for the floor view")
     p.add_argument("--camera-height", type=_finite(0.05, 10.0),

@@ -125,8 +125,10 @@ def _coverage(views: Mapping[str, BoardView], image_size: tuple[int, int]) -> fl
 
 
 def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, lens: str = "standard",
-                         camera: str = "camera") -> Intrinsics:
-    """One camera's K and distortion from its views (name -> view).
+                         camera: str = "camera", tangential: bool = True) -> Intrinsics:
+    """One camera's K and distortion from its views (name -> view). ``tangential=False`` holds p1 and p2 at
+    exactly 0 (OpenCV's ``CALIB_ZERO_TANGENT_DIST``), for views whose fitted p1/p2 fold the lens model inside
+    the image (:func:`fold_warning`).
 
     :raises SolveError: fewer than :data:`MIN_VIEWS` views, mixed image sizes, an unknown lens model.
     """
@@ -150,7 +152,7 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
         names = sorted(views)
         rms, K, dist, _, _, std_intrinsics, _, per_view = cv2.calibrateCameraExtended(
             [_object_points(board, views[n]) for n in names], [_image_points(views[n]) for n in names],
-            size, None, None, flags=LENS_MODELS[lens])
+            size, None, None, flags=_intrinsics_flags(lens, tangential))
         errors = dict(zip(names, np.asarray(per_view, float).reshape(-1)))
         median = float(np.median(list(errors.values())))
         outliers = [n for n, e in errors.items() if e > max(OUTLIER_FACTOR * median, 1.0)]
@@ -173,6 +175,12 @@ def calibrate_intrinsics(board: BoardSpec, views: Mapping[str, BoardView], *, le
     return Intrinsics(K=np.asarray(K, float), dist=dist, rms_px=float(rms),
                       per_view_px={n: round(float(e), 4) for n, e in errors.items()}, dropped=tuple(dropped),
                       coverage=_coverage(views, size), image_size=size, focal_std_px=focal_std)
+
+
+def _intrinsics_flags(lens: str, tangential: bool) -> int:
+    """``cv2.calibrateCamera``'s flags for ``lens`` (:data:`LENS_MODELS`), p1 and p2 held at 0 without
+    ``tangential``."""
+    return LENS_MODELS[lens] | (0 if tangential else cv2.CALIB_ZERO_TANGENT_DIST)
 
 
 def _lens_terms_flags(*dists: np.ndarray) -> int:
@@ -440,15 +448,15 @@ def _round(a: np.ndarray, digits: int = 6) -> list:
 def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], names: tuple[str, str], *,
               lens: str = "standard", floor_view: str | None = None, board_thickness_m: float = 0.0,
               camera_height_m: float | None = None, pitch_deg: float = 0.0, roll_deg: float = 0.0,
-              volume: WorkingVolume | None = None, rig_id: str = "rig") -> RigSolution:
+              volume: WorkingVolume | None = None, rig_id: str = "rig", tangential: bool = True) -> RigSolution:
     """The levelled rig of the two cameras ``names`` from their views (camera -> view name -> view).
 
     Levelling: ``floor_view`` (a view name whose board lies on the floor, seen by the first camera,
     else the second) or ``camera_height_m`` with ``pitch_deg`` / ``roll_deg`` of the first camera.
     Views named ``floor_view`` are used for levelling only, not for the intrinsics.
 
-    The rig's ``metadata["calibration"]`` records the board, the floor view, the board's thickness and the
-    lens model.
+    The rig's ``metadata["calibration"]`` records the board, the floor view, the board's thickness, the
+    lens model and whether its tangential terms were fitted (``tangential``; False holds p1, p2 at 0).
 
     :raises SolveError: too few views, no levelling given, a floor view neither camera saw, a solved
         principal point far from the image centre.
@@ -463,7 +471,8 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     if not (math.isfinite(board_thickness_m) and 0.0 <= board_thickness_m <= 0.1):
         raise SolveError(f"the board's thickness must be between 0 and 0.1 m, got {board_thickness_m!r}")
     calib = {cam: {n: v for n, v in views[cam].items() if n != floor_view} for cam in names}
-    intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam) for cam in names}
+    intr = {cam: calibrate_intrinsics(board, calib[cam], lens=lens, camera=cam, tangential=tangential)
+            for cam in names}
     for cam in names:  # the rig file refuses such a camera: say why here, not when it is read
         problem = principal_point_problem(intr[cam].K, *intr[cam].image_size, advice=(
             "the views do not pin the lens down: add views near and far, tilted, reaching the image's corners"))
@@ -518,12 +527,14 @@ def solve_rig(board: BoardSpec, views: Mapping[str, Mapping[str, BoardView]], na
     # what ``ghcal check`` needs to measure with the same board and floor view (docs/calibration.md)
     rig = Rig(rig.cameras, rig.volume, rig_id=rig.rig_id, metadata={
         **rig.metadata, "calibration": {"tool": "ghcal", "board": board.to_dict(), "floor_view": floor_view,
-                                        "board_thickness_m": board_thickness_m, "lens_model": lens}})
+                                        "board_thickness_m": board_thickness_m, "lens_model": lens,
+                                        "tangential": tangential}})
     axes = [rig.camera(n).R[2] for n in names]
     convergence = math.degrees(math.acos(float(np.clip(axes[0] @ axes[1], -1.0, 1.0))))
     report: dict[str, Any] = {
         "board": board.to_dict(),
         "lens_model": lens,
+        "tangential": tangential,
         "cameras": {
             cam: {"image_size": list(intr[cam].image_size), "views": len(intr[cam].per_view_px),
                   "dropped_views": list(intr[cam].dropped), "rms_px": round(intr[cam].rms_px, 4),
@@ -552,8 +563,11 @@ def fold_warning(cam: Camera) -> str:
              f"degrees off the optical axis (normalised radius {limit:.2f})")
     if terms := cam.fold_terms():
         named = ", ".join(f"{name} = {value:g}" for name, value in terms)
+        # --no-tangential holds p1, p2 at 0; a thin-prism term (s1..s4) no ghcal lens model fits has no such flag
+        hold = (", or solve with --no-tangential to hold p1 and p2 at 0"
+                if any(name in ("p1", "p2") for name, _ in terms) else "")
         return (f"{where}, by its tangential or thin-prism terms ({named}; a real lens's are about 0.001): the "
-                "fit went wrong; capture views that cover the whole frame, corners too, and solve again")
+                f"fit went wrong; capture views that cover the whole frame, corners too, and solve again{hold}")
     return f"{where}: views did not reach the image corners; capture some there, or use --lens narrow"
 
 

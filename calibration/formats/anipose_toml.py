@@ -15,10 +15,12 @@ sorted section order (as aniposelib's ``CameraGroup.load``), plus an optional ``
     adjusted = false
     error = 0.31
 
-Keys read per camera table: ``name`` (string or integer; default the table name),
+Keys read per camera table: ``name`` (a string, as aniposelib writes it; default the table name; ``name = 5``
+is refused, not read as "5"),
 ``size``, ``matrix``, ``distortions``, ``rotation``, ``translation`` (all required) and
 ``fisheye`` (true or false; if true the file is rejected: the fisheye model is not supported). Other
-keys are ignored. Every top-level table except ``metadata`` is a camera; from
+keys are ignored. Every top-level table except ``metadata`` is a camera (``metadata`` must be a table too:
+``metadata = 5`` is refused, naming it); from
 ``metadata`` an optional ``rig_id`` string, our ``working_volume_min``/``max``, our
 ``units_to_metres`` (checked against the argument) and our ``levelled_*`` keys (the first
 camera's height and tilt in a levelled rig frame; :mod:`calibration.formats._frame`) are read
@@ -116,6 +118,8 @@ def read_anipose_toml(
     # aniposelib's CameraGroup.load takes the cameras in sorted key order, whatever the file's order
     for section, table in sorted(doc.items(), key=lambda item: item[0]):
         if not isinstance(table, dict):
+            if section == "metadata":  # "must be a camera table" read as if a camera were wanted there
+                raise fail(path, "metadata", f"must be a table ([metadata]), got {show(table)}")
             raise fail(path, section, f"top-level key must be a camera table, got {show(table)}")
         if section == "metadata":
             if "rig_id" in table:
@@ -150,7 +154,7 @@ def _camera(path, section: str, table: dict, units: float):
         if key not in table:
             raise fail(path, f"{section}.{key}", f"missing required key {key!r} in camera table [{section}]")
     name = table.get("name", section)
-    if isinstance(name, bool) or not isinstance(name, (str, int)) or name == "":
+    if not isinstance(name, str) or name == "":  # name = 5 was taken as "5": a file that is not aniposelib's
         raise fail(path, f"{section}.name", f"must be a non-empty string, got {show(name)}")
     size = table["size"]
     if not isinstance(size, list) or len(size) != 2:
@@ -161,7 +165,7 @@ def _camera(path, section: str, table: dict, units: float):
     t = as_array(path, f"{section}.translation", _numbers(path, f"{section}.translation", table["translation"]),
                  [(3,)], "a 3-vector")
     return make_camera(
-        path, section, name=str(name), width=size[0], height=size[1],
+        path, section, name=name, width=size[0], height=size[1],
         K=_numbers(path, f"{section}.matrix", table["matrix"]),
         dist=_numbers(path, f"{section}.distortions", table["distortions"]),
         R=R, t=t * units, K_key="matrix", dist_key="distortions", R_key="rotation", t_key="translation",

@@ -36,7 +36,8 @@ URL options (every one validated; unknown ones are rejected by name)::
   frames held per camera while waiting for the other's): pairing
   (:func:`drivers.pairing_options.take_pairing_options`).
 * ``cache`` (default ``$XDG_CACHE_HOME/ghnerf-sim`` or ``~/.cache/ghnerf-sim``):
-  directory of the pre-rendered loop cache, or ``off``.
+  directory of the pre-rendered loop cache, or ``off``. A file there (or above it) is refused
+  (``RigConfigError`` naming the option), as a ``bvh=`` that is no file is.
 * ``workers`` (CPU count): render threads.
 * ``max_loop_mb`` (2048): refuse (``RigConfigError``) a loop needing more memory
   than this, rather than exhausting the machine.
@@ -190,6 +191,8 @@ class SimOptions:
         unplug = url.take_float("unplug_after_s", -1.0, lo=0.0, hi=1e6) if "unplug_after_s" in url.options else None
         pairing = take_pairing_options(url, max_tolerance_ms=1000.0)
         cache = url.take_str("cache")
+        if cache not in (None, "off"):
+            _check_cache_folder(url, Path(cache))
         workers = url.take_int("workers", os.cpu_count() or 2, lo=1, hi=64)
         max_loop_mb = url.take_float("max_loop_mb", 2048.0, lo=1.0)
         url.finish()
@@ -211,6 +214,19 @@ class SimOptions:
             workers=workers,
             max_loop_mb=max_loop_mb,
         )
+
+
+def _check_cache_folder(url: RigUrl, folder: Path) -> None:
+    """Refuses a ``cache=`` that names a file, or a folder under one: the user named a place for the cache and a
+    file there is a mistake (it was only a warning when the loop could not be stored, every open rendering again),
+    as ``bvh=`` naming no file is. A folder not yet made is fine: the loop's first store makes it."""
+    place = folder
+    while not place.exists() and place != place.parent:  # the nearest part of the path that is there
+        place = place.parent
+    if place.exists() and not place.is_dir():
+        where = "is a file" if place == folder else f"is under {str(place)!r}, a file"
+        raise RigConfigError(f"rig URL {url.url!r}: option cache={str(folder)!r} {where}: give a folder for the "
+                             "loop cache, or cache=off")
 
 
 def _volume_depth(distance_m: float) -> float:

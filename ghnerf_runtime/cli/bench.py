@@ -38,7 +38,7 @@ import numpy as np
 
 from ghnerf_runtime.cli.output_path import OutputPathError, ready_output
 from ghnerf_runtime.config import BEST_METHOD, HEATMAP_SOURCES, THREE_D_METHODS, EstimatorConfig
-from ghnerf_runtime.errors import RuntimeErrorBase
+from ghnerf_runtime.errors import ConfigError, RuntimeErrorBase
 from ghnerf_runtime.estimator import (KEYPOINT_STAGES, NOVEL_MATTE_STAGE, NOVEL_PAINT_STAGE, NOVEL_PROXY_STAGE,
                                       NOVEL_STAGES, Estimator, load_session)
 from ghnerf_runtime.metrics import finite_or_none
@@ -156,7 +156,7 @@ def row_base_config(args, precision: str, source: str) -> EstimatorConfig:
         heatmaps=replace(runtime.heatmaps, source=source),
         joints3d=replace(runtime.joints3d, method=args.method or BEST_METHOD[source]),
         # loaded for every row, so the keypoints and novel rows of a source share one session
-        novel_view=replace(runtime.novel_view, enabled=True, stride=args.novel_stride))
+        novel_view=replace(runtime.novel_view, enabled=True, stride=args.novel_stride or runtime.novel_view.stride))
 
 
 def run_runtime_bench(args) -> dict:
@@ -376,6 +376,35 @@ def _on_off_list(text: str) -> list[bool]:
     return [words[p] for p in text.split(",") if p]
 
 
+def _int_list(text: str) -> list[int]:
+    try:
+        return [int(p) for p in text.split(",") if p]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a comma list of integers") from None
+
+
+# the options that set only the novel rows: given without a novel mode, nothing would use them
+NOVEL_ONLY_OPTIONS = ("novel_stride", "novel_interior_strides", "proxy_blends", "painters", "novel_pipelines",
+                      "novel_lanes")
+
+
+def novel_option_error(args) -> str | None:
+    """Why the novel-only options cannot run as given, or None: a novel-only option without the novel mode
+    (ghnerf-run refuses its novel options without --novel-view alike), or an interior stride the runtime's
+    config refuses. Checked before the model loads, whatever the modes: a bad value is never passed over."""
+    runtime = EstimatorConfig().novel_view
+    for interior in args.novel_interior_strides or []:
+        try:
+            replace(runtime, enabled=True, stride=args.novel_stride or runtime.stride, interior_stride=interior)
+        except ConfigError as e:
+            return f"--novel-interior-strides {interior}: {e}"
+    given = ["--" + name.replace("_", "-") for name in NOVEL_ONLY_OPTIONS if getattr(args, name) is not None]
+    if given and "novel" not in args.modes:
+        return (f"{', '.join(given)} without the novel mode (--modes {','.join(args.modes)}): there is no novel "
+                "row to apply it to; add novel to --modes")
+    return None
+
+
 def _configs(value) -> str:
     """A default of the runtime's config as the help says it: on/off for a boolean, unset for None."""
     if isinstance(value, bool):
@@ -410,9 +439,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"comma list of {','.join(HEATMAP_SOURCES)}, one set of rows each (default: %(default)s, "
                          "the runtime's heatmaps.source, what the device runs; rendered scores the heatmaps "
                          "rendered through the depth volume)")
-    rt.add_argument("--novel-stride", type=int, default=runtime.novel_view.stride, choices=(1, 2, 4))
-    rt.add_argument("--novel-interior-strides", default=None,
-                    type=lambda s: [int(p) for p in s.split(",") if p],
+    # None when not given, so a novel-only option given without a novel row is told apart from its default
+    rt.add_argument("--novel-stride", type=int, default=None, choices=(1, 2, 4),
+                    help=f"novel_view.stride of the novel rows (default: {_configs(runtime.novel_view.stride)})")
+    rt.add_argument("--novel-interior-strides", default=None, type=_int_list,
                     help="comma list of novel_view.interior_stride values, one keypoints+novel row each "
                          f"(interleaved like the other rows; default: {_configs(runtime.novel_view.interior_stride)})")
     rt.add_argument("--flip-tests", default=None,
@@ -515,6 +545,9 @@ def main(argv: list[str] | None = None) -> int:
         if (bad or not args.precisions or not args.modes
                 or any(m not in ("keypoints", "novel") for m in args.modes)):
             print("ghnerf-bench: error: precisions are fp32,int8,auto and modes keypoints,novel", file=sys.stderr)
+            return 2
+        if why := novel_option_error(args):
+            print(f"ghnerf-bench: error: {why}", file=sys.stderr)
             return 2
         if args.sequences < 1 or args.frames < 1 or args.warmup < 0:
             print("ghnerf-bench: error: --sequences and --frames must be at least 1, --warmup at least 0",

@@ -483,6 +483,9 @@ TOML_ERRORS = {
     "fisheye zero": (ANIPOSE_TOML.replace('name = "B"', 'name = "B"\nfisheye = 0'), "cam_1.fisheye",
                      "must be true or false"),
     "name bool": (_toml_with("cam_0", "name", "false"), "cam_0.name", "False"),
+    # taken as the camera "5": aniposelib writes its names as strings
+    "name integer": (_toml_with("cam_0", "name", "5"), "cam_0.name", "must be a non-empty string, got 5"),
+    "metadata not a table": ("metadata = 5\n" + ANIPOSE_TOML.split("[metadata]")[0], "metadata", "must be a table ([metadata]), got 5"),
     "duplicate name": (_toml_with("cam_1", "name", '"A"'), "cam_1.name", "duplicate camera name 'A'"),
     "stray value": ("scale = 2\n" + ANIPOSE_TOML, "scale", "camera table"),
     "K not pinhole": (_toml_with("cam_0", "matrix", "[[1.0, 0, 1], [0, 1, 1], [0, 0, 0]]"), "cam_0.matrix", "pinhole"),

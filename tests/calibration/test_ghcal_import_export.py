@@ -261,3 +261,25 @@ def test_exporting_over_a_file_keeps_the_previous_one(rig_file, tmp_path, capsys
     assert cli.main(["export", "--rig", str(kept), "--out", str(tmp_path / "lab.json")]) == 2
     assert f"--rig {kept} is where the previous {tmp_path / 'lab.json'} is kept" in capsys.readouterr().err
     assert kept.read_bytes() == before and (tmp_path / "lab.json").read_text() == "an export of another rig\n"
+
+
+@pytest.mark.parametrize("units", [[], ["--units-to-metres", "1"]])
+def test_import_of_an_anipose_file_whose_metadata_is_not_a_table_names_file_and_key(rig_file, tmp_path, capsys,
+                                                                                     units):
+    """``metadata = 5`` was passed over as a file that records no unit (asked for --units-to-metres), and with
+    one given, called 'a camera table' that was not one."""
+    foreign = tmp_path / "calibration.toml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign), "--units-to-metres", "1"]) == 0
+    foreign.write_text("metadata = 5\n" + foreign.read_text().split("[metadata]")[0])
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "back.json"), *units]) == 2
+    err = capsys.readouterr().err
+    assert str(foreign) in err and "'metadata'" in err and "must be a table ([metadata]), got 5" in err, err
+
+
+def test_import_of_an_anipose_camera_named_by_a_number_names_file_and_key(rig_file, tmp_path, capsys):
+    foreign = tmp_path / "calibration.toml"
+    assert cli.main(["export", "--rig", str(rig_file), "--out", str(foreign), "--units-to-metres", "1"]) == 0
+    foreign.write_text(foreign.read_text().replace('name = "left"', "name = 5"))
+    assert cli.main(["import", str(foreign), "--out", str(tmp_path / "back.json"), "--units-to-metres", "1"]) == 2
+    err = capsys.readouterr().err
+    assert str(foreign) in err and "cam_0.name" in err and "must be a non-empty string, got 5" in err, err

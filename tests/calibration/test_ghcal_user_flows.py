@@ -399,3 +399,41 @@ def test_ctrl_c_while_the_board_is_written_leaves_the_earlier_print(tmp_path, ca
     assert cli.main(["board", "--out", str(tmp_path), "--dpi", "100"]) == 130
     assert (tmp_path / "board.png").read_bytes() == earlier
     assert not list(tmp_path.glob(".*tmp"))
+
+
+@pytest.fixture(scope="module")
+def synth_views(tmp_path_factory) -> Path:
+    """``ghcal synth``'s folder of the example rig: 6 shared views, 1 per camera in its corners, a floor view."""
+    out = tmp_path_factory.mktemp("synth") / "views"
+    assert cli.main(["synth", "--out", str(out), "--count", "6", "--edge-count", "1", "--seed", "2"]) == 0
+    return out
+
+
+def _solved_tangential_terms(views: Path, out: Path, *extra: str) -> list[list[float]]:
+    assert cli.main(["solve", "--images", str(views), "--out", str(out), "--floor-view", "floor", *extra]) == 0
+    rig = json.loads(out.read_text())
+    return [cam["distortion"]["coefficients"][2:4] for cam in rig["cameras"]]
+
+
+def test_no_tangential_solves_p1_p2_at_exactly_zero(synth_views, tmp_path, capsys):
+    """OpenCV's CALIB_ZERO_TANGENT_DIST, for a lens whose fitted p1/p2 fold its model inside the image: ghcal had
+    no way to ask for it."""
+    fitted = _solved_tangential_terms(synth_views, tmp_path / "fitted.json")
+    held = _solved_tangential_terms(synth_views, tmp_path / "held.json", "--no-tangential")
+    assert all(p != 0.0 for terms in fitted for p in terms), fitted  # fitted, they are not zero on these views
+    assert held == [[0.0, 0.0], [0.0, 0.0]]
+    report = json.loads((tmp_path / "held.report.json").read_text())
+    rig = json.loads((tmp_path / "held.json").read_text())
+    assert report["tangential"] is False and rig["metadata"]["calibration"]["tangential"] is False
+    assert json.loads((tmp_path / "fitted.report.json").read_text())["tangential"] is True
+
+
+def test_the_tangential_fold_warning_suggests_holding_p1_p2_at_zero():
+    from calibration.solve import fold_warning
+
+    cam = Camera("left", 800, 500, np.array([[300.0, 0, 400], [0, 300, 250], [0, 0, 1]]),
+                 np.array([-0.01, 0, 0, -0.3, 0]))
+    assert fold_warning(cam).endswith("solve again, or solve with --no-tangential to hold p1 and p2 at 0")
+    radial = Camera("left", 800, 500, np.array([[300.0, 0, 400], [0, 300, 250], [0, 0, 1]]),
+                    np.array([-0.2, 0, 0, 0, 0]))
+    assert "--no-tangential" not in fold_warning(radial)  # a radial fold: p1, p2 are not at fault

@@ -219,3 +219,24 @@ def test_a_number_that_is_not_one_is_said_so(argv, said, capsys):
     with pytest.raises(SystemExit) as e:
         cli.main(argv)
     assert e.value.code == 2 and said in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, said", [
+    # no bound: --count 100000000 rendered for hours and filled the disk
+    (["synth", "--out", "s", "--count", "100000000"], "argument --count: must be 1 to 100 views, got 100000000"),
+    (["synth", "--out", "s", "--edge-count", "101"], "argument --edge-count: must be 0 to 100 views, got 101"),
+    (["synth", "--out", "s", "--count", "0"], "argument --count: must be 1 to 100 views, got 0"),
+    (["capture", "--url", "sim://", "--out", "c", "--count", "101"],
+     "argument --count: must be 1 to 100 views, got 101"),
+])
+def test_a_view_count_past_the_bound_is_refused_before_anything_runs(argv, said, capsys):
+    # the parser refuses it: nothing rendered or opened (cli.main on the old code rendered for hours)
+    with pytest.raises(SystemExit) as e:
+        cli.build_parser().parse_args(argv)
+    assert e.value.code == 2 and said in capsys.readouterr().err
+
+
+def test_the_view_bound_itself_is_taken():
+    args = cli.build_parser().parse_args(["synth", "--out", "s", "--count", str(cli.MAX_VIEWS),
+                                          "--edge-count", "0"])
+    assert (args.count, args.edge_count) == (cli.MAX_VIEWS, 0)

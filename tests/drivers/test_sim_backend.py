@@ -272,3 +272,23 @@ def test_loops_at_the_usual_rates_are_one_motion_period():
         source = create_rig_source(f"sim://?fps={fps}&{SMALL}&cache=off")
         assert (source.loop_periods, source.loop_frames) == (1, frames)
         source.close()
+
+
+@pytest.mark.parametrize("under", ["", "sub"])
+def test_a_cache_that_is_a_file_is_a_config_error_naming_the_option(tmp_path, under):
+    """A file named as the cache folder was a warning ('not stored') and every open rendered the loop again."""
+    (tmp_path / "afile").write_text("")
+    cache = tmp_path / "afile" / under if under else tmp_path / "afile"
+    with pytest.raises(RigConfigError) as info:
+        create_rig_source(f"sim://?{SMALL}&cache={cache}")
+    said = str(info.value)
+    assert f"option cache={str(cache)!r}" in said and "cache=off" in said
+    assert ("is a file" if not under else f"is under {str(tmp_path / 'afile')!r}, a file") in said
+
+
+def test_a_cache_folder_not_made_yet_is_taken(tmp_path):
+    from drivers.backends.sim import SimOptions
+    from drivers.url import RigUrl
+
+    options = SimOptions.from_url(RigUrl.parse(f"sim://?{SMALL}&cache={tmp_path / 'new' / 'cache'}"))
+    assert options.cache_root == tmp_path / "new" / "cache"

@@ -34,6 +34,35 @@ def test_a_model_or_config_error_is_said_before_the_sequences_are_rendered(tmp_p
     assert words in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("modes", ["keypoints", "keypoints,novel"])
+def test_an_invalid_interior_stride_is_refused_whatever_the_modes(capsys, no_render, monkeypatch, modes):
+    """``--modes keypoints --novel-interior-strides 3`` ran, the 3 (not a stride the runtime takes) unseen."""
+    monkeypatch.setattr(bench, "load_session", lambda cfg: pytest.fail("the model was loaded"))
+    rc = bench.main(["runtime", "--modes", modes, "--novel-interior-strides", "0,3", "--cache", "off"])
+    assert rc == 2
+    assert ("--novel-interior-strides 3: NovelViewConfig.interior_stride: must be one of [0, 1, 2, 4, 8], got 3"
+            in capsys.readouterr().err)
+
+
+@pytest.mark.parametrize("option", [["--novel-stride", "2"], ["--novel-interior-strides", "2"],
+                                    ["--proxy-blends", "on,off"], ["--painters", "off"],
+                                    ["--novel-pipelines", "on"], ["--novel-lanes", "on,off"]])
+def test_a_novel_only_option_without_the_novel_mode_is_refused(capsys, no_render, monkeypatch, option):
+    """Each was accepted with ``--modes keypoints`` and ignored: no novel row, no word said (ghnerf-run refuses
+    its novel options without --novel-view alike)."""
+    monkeypatch.setattr(bench, "load_session", lambda cfg: pytest.fail("the model was loaded"))
+    assert bench.main(["runtime", "--modes", "keypoints", *option, "--cache", "off"]) == 2
+    assert (f"{option[0]} without the novel mode (--modes keypoints): there is no novel row"
+            in capsys.readouterr().err)
+
+
+def test_novel_stride_left_out_is_the_configs():
+    args = bench.build_parser().parse_args(["runtime"])
+    assert args.novel_stride is None and bench.novel_option_error(args) is None
+    cfg = bench.row_base_config(args, "fp32", "encoder")
+    assert cfg.novel_view.stride == EstimatorConfig().novel_view.stride
+
+
 def test_ctrl_c_exits_130_without_a_traceback_or_a_report(tmp_path, capsys, monkeypatch):
     def interrupted(cfg):
         raise KeyboardInterrupt
