@@ -15,8 +15,8 @@ sorted section order (as aniposelib's ``CameraGroup.load``), plus an optional ``
     adjusted = false
     error = 0.31
 
-Keys read per camera table: ``name`` (a string, as aniposelib writes it; default the table name; ``name = 5``
-is refused, not read as "5"),
+Keys read per camera table: ``name`` (string or integer, as aniposelib writes the names it was given, numbers
+included; default the table name),
 ``size``, ``matrix``, ``distortions``, ``rotation``, ``translation`` (all required) and
 ``fisheye`` (true or false; if true the file is rejected: the fisheye model is not supported). Other
 keys are ignored. Every top-level table except ``metadata`` is a camera (``metadata`` must be a table too:
@@ -154,7 +154,8 @@ def _camera(path, section: str, table: dict, units: float):
         if key not in table:
             raise fail(path, f"{section}.{key}", f"missing required key {key!r} in camera table [{section}]")
     name = table.get("name", section)
-    if not isinstance(name, str) or name == "":  # name = 5 was taken as "5": a file that is not aniposelib's
+    # aniposelib writes the names it was given, numbered cameras (1, 2) as TOML integers: those are names too
+    if isinstance(name, bool) or not isinstance(name, (str, int)) or name == "":
         raise fail(path, f"{section}.name", f"must be a non-empty string, got {show(name)}")
     size = table["size"]
     if not isinstance(size, list) or len(size) != 2:
@@ -165,7 +166,7 @@ def _camera(path, section: str, table: dict, units: float):
     t = as_array(path, f"{section}.translation", _numbers(path, f"{section}.translation", table["translation"]),
                  [(3,)], "a 3-vector")
     return make_camera(
-        path, section, name=name, width=size[0], height=size[1],
+        path, section, name=str(name), width=size[0], height=size[1],
         K=_numbers(path, f"{section}.matrix", table["matrix"]),
         dist=_numbers(path, f"{section}.distortions", table["distortions"]),
         R=R, t=t * units, K_key="matrix", dist_key="distortions", R_key="rotation", t_key="translation",

@@ -484,7 +484,6 @@ TOML_ERRORS = {
                      "must be true or false"),
     "name bool": (_toml_with("cam_0", "name", "false"), "cam_0.name", "False"),
     # taken as the camera "5": aniposelib writes its names as strings
-    "name integer": (_toml_with("cam_0", "name", "5"), "cam_0.name", "must be a non-empty string, got 5"),
     "metadata not a table": ("metadata = 5\n" + ANIPOSE_TOML.split("[metadata]")[0], "metadata", "must be a table ([metadata]), got 5"),
     "duplicate name": (_toml_with("cam_1", "name", '"A"'), "cam_1.name", "duplicate camera name 'A'"),
     "stray value": ("scale = 2\n" + ANIPOSE_TOML, "scale", "camera table"),
