@@ -29,7 +29,7 @@ from calibration.consensus import agreeing_pairs, pair_relative_pose
 from calibration.detect import MIN_CORNERS, BoardView, fixes_a_pose
 from calibration.errors import SolveError
 from calibration.level import LEVEL_VOLUME, level_rig
-from ghnerf_runtime.geometry.camera import Camera
+from ghnerf_runtime.geometry.camera import Camera, fold_terms_text, folded_by_tangential
 from ghnerf_runtime.geometry.rig import MAX_BASELINE_M, MIN_BASELINE_M, Rig, WorkingVolume
 from ghnerf_runtime.rig_file import principal_point_problem
 
@@ -562,12 +562,9 @@ def fold_warning(cam: Camera) -> str:
     where = (f"{cam.name}: the solved lens model folds over inside the image, {math.degrees(math.atan(limit)):.0f} "
              f"degrees off the optical axis (normalised radius {limit:.2f})")
     if terms := cam.fold_terms():
-        named = ", ".join(f"{name} = {value:g}" for name, value in terms)
-        # --no-tangential holds p1, p2 at 0; a thin-prism term (s1..s4) no ghcal lens model fits has no such flag
-        hold = (", or solve with --no-tangential to hold p1 and p2 at 0"
-                if any(name in ("p1", "p2") for name, _ in terms) else "")
-        return (f"{where}, by its tangential or thin-prism terms ({named}; a real lens's are about 0.001): the "
-                f"fit went wrong; capture views that cover the whole frame, corners too, and solve again{hold}")
+        hold = ", or solve with --no-tangential to hold p1 and p2 at 0" if folded_by_tangential(terms) else ""
+        return (f"{where}, by its tangential or thin-prism terms ({fold_terms_text(terms)}): the fit went wrong; "
+                f"capture views that cover the whole frame, corners too, and solve again{hold}")
     return f"{where}: views did not reach the image corners; capture some there, or use --lens narrow"
 
 

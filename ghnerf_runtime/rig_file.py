@@ -38,7 +38,8 @@ import numpy as np
 
 from ghnerf_runtime.contract import MAX_DEPTH_M, MAX_NEAR_FAR_MARGIN_M, box_reach
 from ghnerf_runtime.errors import GeometryError, RigFileError
-from ghnerf_runtime.geometry.camera import DISTORTION_NAMES, Camera, nearest_rotation
+from ghnerf_runtime.geometry.camera import (DISTORTION_NAMES, Camera, fold_terms_text, folded_by_tangential,
+                                            nearest_rotation)
 from ghnerf_runtime.geometry.rig import Rig, WorkingVolume
 from ghnerf_runtime.json_keys import JsonTextError, loads_remembering, remember_repeats
 
@@ -341,10 +342,10 @@ def lens_fold_warning(cam: Camera) -> str:
     naming the coefficients at fault where its tangential or thin-prism terms fold it (:meth:`Camera.fold_terms`)."""
     where = f"camera {cam.name!r}: its lens model folds over {cam.lens_limit:.2f} (normalised radius) from the centre"
     if terms := cam.fold_terms():
-        named = ", ".join(f"{name} = {value:g}" for name, value in terms)
-        return (f"{where}, inside the image, by its tangential or thin-prism terms ({named}; a real lens's are "
-                "about 0.001): pixels beyond it count as outside the image. A calibration that went wrong "
-                "(views that did not cover the frame?): calibrate again")
+        hold = " (`ghcal solve --no-tangential` holds p1 and p2 at 0)" if folded_by_tangential(terms) else ""
+        return (f"{where}, inside the image, by its tangential or thin-prism terms ({fold_terms_text(terms)}): "
+                "pixels beyond it count as outside the image. A calibration that went wrong (views that did not "
+                f"cover the frame?): calibrate again{hold}")
     return (f"{where}, before the image corners: pixels beyond it count as outside the image. A calibration with "
             "the rational model (8 coefficients) usually covers the whole frame")
 

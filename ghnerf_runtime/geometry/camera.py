@@ -165,6 +165,18 @@ def unfolded_radius(coefficients: tuple[float, ...], r_max: float) -> float:
     return math.inf
 
 
+def fold_terms_text(terms: tuple[tuple[str, float], ...]) -> str:
+    """:meth:`Camera.fold_terms` as a message says them: ``p1 = 0.3, p2 = 0.0001; a real lens's are about 0.001``."""
+    named = ", ".join(f"{name} = {value:g}" for name, value in terms)
+    return f"{named}; a real lens's are about 0.001"
+
+
+def folded_by_tangential(terms: tuple[tuple[str, float], ...]) -> bool:
+    """Whether p1 or p2 are among :meth:`Camera.fold_terms`: a calibration can hold them at 0 (``ghcal solve
+    --no-tangential``); the thin-prism terms no ghcal lens model fits have no such remedy."""
+    return any(name in ("p1", "p2") for name, _ in terms)
+
+
 #: Distortion coefficients (indices into the 14) that make the lens model other than radial.
 _ASYMMETRIC_TERMS = (2, 3, 8, 9, 10, 11)
 

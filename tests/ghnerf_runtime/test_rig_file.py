@@ -365,6 +365,7 @@ def test_a_lens_folded_inside_its_image_by_its_tangential_terms_loads_with_a_war
     assert len(messages) == 1, messages
     assert messages[0].startswith(f"tangential.json: camera {rig.cameras[0].name!r}: its lens model folds over 0.55")
     assert "by its tangential or thin-prism terms (p1 = 0.3, p2 = 0.0001; a real lens's are about 0.001)" in messages[0]
+    assert "calibrate again (`ghcal solve --no-tangential` holds p1 and p2 at 0)" in messages[0]
 
 
 def test_a_rotation_printed_with_six_decimals_loads_snapped_and_a_wrong_one_does_not(example_dict):
