@@ -17,10 +17,12 @@ from typing import Callable
 
 import numpy as np
 import pytest
+from cobs import cobs
 
 from firmware_host.protocol import decode_stream, encode, encode_packet, frame_packet
 from firmware_host.protocol.encoder import seal
 from firmware_host.protocol.messages import Header, Hello, Joints, Joints2D, Message, Status
+from tests.firmware_host.joint_stream_helpers import MASK_RULES_JOINTS, mask_rules_packet
 
 U32_EDGES = (0, 1, 0x7FFF_FFFF, 0x8000_0000, 0xFFFF_FFFF)
 U64_EDGES = (0, 1, 2**32 - 1, 2**32, 2**63 - 1, 2**63, 2**64 - 1)
@@ -162,3 +164,29 @@ def test_c_decodes_the_spec_worked_example(ghj_dump: Path, tmp_path: Path) -> No
                        "send_us": 1_031_656, "fps_centi": 3000, "latency_us": 42_000, "dropped": 3,
                        "decimated": 120, "fault": 1}]
     assert stats["frames"] == stats["messages"] == 1
+
+
+def _zero_free_packet(length: int) -> bytes:
+    """A valid JOINTS packet of ``length`` bytes without a zero byte (extension bytes fill it), so its COBS
+    encoding is full 0xFF blocks: the case where encoders differ in writing a final empty block."""
+    header = bytes([1, 0x10, 1]) + b"\x01" * 20
+    for fill in range(1, 256):
+        body = header + bytes([1, 1, 1]) + b"\x07" * 7
+        packet = seal(body + bytes([fill]) * (length - 2 - len(body)))
+        if 0 not in packet:
+            return packet
+    raise AssertionError(f"no zero-free packet of {length} bytes")
+
+
+def test_c_reads_the_mask_and_cobs_rules_of_the_spec(ghj_dump: Path, tmp_path: Path) -> None:
+    """docs/protocol.md: the mask bit decides and padding bits are ignored (JOINTS); a full last COBS block with
+    or without PacketSerial's final empty block decodes alike (section 1, "COBS, byte by byte")."""
+    full_block = _zero_free_packet(254)
+    stream = (b"\x00" + frame_packet(mask_rules_packet()) + frame_packet(full_block)
+              + cobs.encode(full_block) + b"\x01\x00")
+    path = tmp_path / "rules.bin"
+    path.write_bytes(stream)
+    events, stats = _dump(ghj_dump, path, 1)
+    assert events == [e.to_json() for e in decode_stream(stream)[0]]
+    assert events[0]["joints"] == MASK_RULES_JOINTS
+    assert events[1] == events[2] and stats["messages"] == 3

@@ -84,3 +84,17 @@ def queued_datagrams(sock: socket.socket) -> list[bytes]:
             datagrams.append(sock.recv(65536))
         except BlockingIOError:
             return datagrams
+
+
+def mask_rules_packet() -> bytes:
+    """A JOINTS packet no encoder makes, for the mask rules of docs/protocol.md ("JOINTS"): 3 joints, joint 1's
+    mask bit set over non-zero coordinates, padding bits 3-7 of the mask byte set, joint 2 present with
+    confidence 0. Decoders take the mask bit as it is and ignore the padding."""
+    from firmware_host.protocol.encoder import seal
+
+    header = bytes([1, 0x10, 0]) + (7).to_bytes(4, "little") + (1).to_bytes(8, "little") + (2).to_bytes(8, "little")
+    joints = b"".join(v.to_bytes(2, "little") * 3 + bytes([c]) for v, c in ((10, 128), (5, 0), (20, 0)))
+    return seal(header + bytes([0, 3, 0b1111_1010]) + joints)
+
+
+MASK_RULES_JOINTS = [[10, 10, 10, 128, 0], [5, 5, 5, 0, 1], [20, 20, 20, 0, 0]]
